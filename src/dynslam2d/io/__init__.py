@@ -1,0 +1,1 @@
+"""Reading scans from what users have, writing what they keep."""

@@ -1,0 +1,268 @@
+"""Core value types: a laser scan, a 2D pose, and the scan-source protocol.
+
+Conventions (see ``docs`` and design.md): SI units and radians, REP-103 axes
+(x forward, y left). A scan's angles and points are in the sensor (laser)
+frame; a :class:`Pose2D` returned by SLAM is the laser pose in the map frame.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Iterator, Protocol, runtime_checkable
+
+import numpy as np
+
+from dynslam2d.errors import DynSlamError
+
+#: Tolerance, in beams, between the beam count implied by angle_min/max/increment
+#: and the number of ranges. Drivers disagree on whether angle_max is the last
+#: beam or one past it, so one beam of slack is accepted.
+ANGLE_COUNT_TOLERANCE_BEAMS = 1.01
+
+
+def wrap_angle(a: float | np.ndarray) -> float | np.ndarray:
+    """Wrap an angle (rad) or array of angles to [-pi, pi)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@dataclass(frozen=True, slots=True)
+class Pose2D:
+    """A rigid 2D pose (x, y in m, theta in rad): the pose of a child frame in a parent frame.
+
+    ``a.compose(b)`` is ``a ⊕ b`` (b expressed in a's frame, result in a's parent frame);
+    ``a.inverse()`` is ``a⁻¹``; ``a.between(b)`` is ``a⁻¹ ⊕ b``, the relative motion used
+    by the Kümmerle relations.
+    """
+
+    x: float = 0.0
+    y: float = 0.0
+    theta: float = 0.0
+
+    def compose(self, other: Pose2D) -> Pose2D:
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        return Pose2D(
+            self.x + c * other.x - s * other.y,
+            self.y + s * other.x + c * other.y,
+            float(wrap_angle(self.theta + other.theta)),
+        )
+
+    def inverse(self) -> Pose2D:
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        return Pose2D(-c * self.x - s * self.y, s * self.x - c * self.y, float(wrap_angle(-self.theta)))
+
+    def between(self, other: Pose2D) -> Pose2D:
+        """Relative pose ``self⁻¹ ⊕ other``: ``other`` expressed in ``self``'s frame."""
+        return self.inverse().compose(other)
+
+    def transform_points(self, points: np.ndarray) -> np.ndarray:
+        """Map (n, 2) points from this pose's child frame into its parent frame."""
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        pts = np.asarray(points, dtype=np.float64)
+        out = np.empty_like(pts)
+        out[:, 0] = c * pts[:, 0] - s * pts[:, 1] + self.x
+        out[:, 1] = s * pts[:, 0] + c * pts[:, 1] + self.y
+        return out
+
+    def as_array(self) -> np.ndarray:
+        return np.array([self.x, self.y, self.theta], dtype=np.float64)
+
+    def as_matrix(self) -> np.ndarray:
+        """3×3 homogeneous transform, child → parent."""
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        return np.array([[c, -s, self.x], [s, c, self.y], [0.0, 0.0, 1.0]])
+
+    @classmethod
+    def from_array(cls, a: np.ndarray | list[float] | tuple[float, float, float]) -> Pose2D:
+        return cls(float(a[0]), float(a[1]), float(a[2]))
+
+    def is_finite(self) -> bool:
+        return math.isfinite(self.x) and math.isfinite(self.y) and math.isfinite(self.theta)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Scan:
+    """One 2D laser scan, as ``sensor_msgs/LaserScan`` describes it.
+
+    Attributes:
+        stamp: acquisition time of the first beam, s (Unix time for real logs,
+            seconds since start for simulated ones).
+        angle_min: angle of beam 0 in the sensor frame, rad (counter-clockwise positive).
+        angle_increment: angle between consecutive beams, rad (may be negative).
+        ranges: (n,) float64 ranges in m. NaN, ±inf, r < range_min and r > range_max
+            are "no return" (REP-117); :meth:`valid_mask` says which beams hold a return.
+        range_min, range_max: the sensor's valid range interval, m.
+        frame_id: the sensor frame's name.
+        intensities: optional (n,) float64 intensities, sensor units.
+        angle_max: angle of the last beam as the source wrote it, rad (kept so a
+            bag round trip is lossless); defaults to ``angle_min + (n-1)·increment``.
+        time_increment, scan_time: as in LaserScan, s (0 when unknown).
+    """
+
+    stamp: float
+    angle_min: float
+    angle_increment: float
+    ranges: np.ndarray
+    range_min: float
+    range_max: float
+    frame_id: str = "laser"
+    intensities: np.ndarray | None = None
+    angle_max: float | None = None
+    time_increment: float = 0.0
+    scan_time: float = 0.0
+    _angles: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        ranges = np.ascontiguousarray(self.ranges, dtype=np.float64)
+        if ranges.ndim != 1:
+            raise DynSlamError(f"scan at stamp {self.stamp}: ranges must be 1-D, got shape {ranges.shape}")
+        object.__setattr__(self, "ranges", ranges)
+        n = ranges.shape[0]
+        if self.intensities is not None:
+            inten = np.ascontiguousarray(self.intensities, dtype=np.float64)
+            if inten.shape[0] == 0:
+                inten = None
+            elif inten.shape != ranges.shape:
+                raise DynSlamError(
+                    f"scan at stamp {self.stamp}: {inten.shape[0]} intensities for {n} ranges"
+                )
+            object.__setattr__(self, "intensities", inten)
+        for name in ("stamp", "angle_min", "angle_increment", "range_min", "range_max"):
+            if not math.isfinite(getattr(self, name)):
+                raise DynSlamError(f"scan at stamp {self.stamp}: {name} is not finite")
+        if n > 1 and self.angle_increment == 0.0:
+            raise DynSlamError(f"scan at stamp {self.stamp}: angle_increment is 0 with {n} beams")
+        if self.range_max <= self.range_min or self.range_min < 0:
+            raise DynSlamError(
+                f"scan at stamp {self.stamp}: invalid range limits [{self.range_min}, {self.range_max}]"
+            )
+        last = self.angle_min + (n - 1) * self.angle_increment
+        if self.angle_max is None:
+            object.__setattr__(self, "angle_max", float(last))
+        elif n > 1:
+            implied = (self.angle_max - self.angle_min) / self.angle_increment + 1.0
+            if not math.isfinite(implied) or abs(implied - n) > ANGLE_COUNT_TOLERANCE_BEAMS:
+                raise DynSlamError(
+                    f"scan at stamp {self.stamp}: angle metadata implies {implied:.1f} beams "
+                    f"(angle_min={self.angle_min:.6f}, angle_max={self.angle_max:.6f}, "
+                    f"increment={self.angle_increment:.6f}) but the scan has {n} ranges"
+                )
+
+    @property
+    def n_beams(self) -> int:
+        return int(self.ranges.shape[0])
+
+    @property
+    def angles(self) -> np.ndarray:
+        """(n,) beam angles in the sensor frame, rad: ``angle_min + i·angle_increment``."""
+        if self._angles is None:
+            a = self.angle_min + np.arange(self.n_beams, dtype=np.float64) * self.angle_increment
+            object.__setattr__(self, "_angles", a)
+            return a
+        return self._angles
+
+    @property
+    def fov(self) -> float:
+        """Field of view covered by the beams, rad (n·|increment|)."""
+        return abs(self.angle_increment) * self.n_beams
+
+    def valid_mask(self, min_range: float | None = None, max_range: float | None = None) -> np.ndarray:
+        """(n,) bool: beams that hold a return (finite and within [range_min, range_max]).
+
+        ``min_range``/``max_range`` tighten the sensor's own limits (for range gates).
+        """
+        lo = self.range_min if min_range is None else max(self.range_min, min_range)
+        hi = self.range_max if max_range is None else min(self.range_max, max_range)
+        r = self.ranges
+        with np.errstate(invalid="ignore"):
+            return np.isfinite(r) & (r >= lo) & (r <= hi)
+
+    def points(self, mask: np.ndarray | None = None) -> np.ndarray:
+        """(m, 2) Cartesian points in the sensor frame, m, of the beams in ``mask``
+        (default: the valid beams). Paper Eq. 4: s_i = (r_i cos α_i, r_i sin α_i)."""
+        m = self.valid_mask() if mask is None else mask
+        r = self.ranges[m]
+        a = self.angles[m]
+        return np.column_stack((r * np.cos(a), r * np.sin(a)))
+
+    def with_ranges(self, ranges: np.ndarray, stamp: float | None = None) -> Scan:
+        """A copy with new ranges (same beam geometry), e.g. a filtered scan."""
+        return Scan(
+            stamp=self.stamp if stamp is None else stamp,
+            angle_min=self.angle_min,
+            angle_increment=self.angle_increment,
+            ranges=ranges,
+            range_min=self.range_min,
+            range_max=self.range_max,
+            frame_id=self.frame_id,
+            intensities=self.intensities,
+            angle_max=self.angle_max,
+            time_increment=self.time_increment,
+            scan_time=self.scan_time,
+        )
+
+    def same_as(self, other: Scan) -> bool:
+        """Exact equality of every field, NaN == NaN (used by round-trip tests)."""
+        def arr_eq(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+            if a is None or b is None:
+                return a is None and b is None
+            return a.shape == b.shape and bool(np.array_equal(a, b, equal_nan=True))
+
+        return (
+            self.stamp == other.stamp
+            and self.angle_min == other.angle_min
+            and self.angle_increment == other.angle_increment
+            and self.angle_max == other.angle_max
+            and self.range_min == other.range_min
+            and self.range_max == other.range_max
+            and self.frame_id == other.frame_id
+            and self.time_increment == other.time_increment
+            and self.scan_time == other.scan_time
+            and arr_eq(self.ranges, other.ranges)
+            and arr_eq(self.intensities, other.intensities)
+        )
+
+
+@dataclass(slots=True)
+class SourceMeta:
+    """What a scan source holds, as far as is known before reading it all.
+
+    Attributes:
+        format: short format name ("ros1-bag", "ros2-bag", "mcap", "carmen", "sim").
+        origin: the file or folder read (or "sim:<scenario>").
+        topic: the LaserScan topic (bags) or record type (CARMEN) used.
+        count: number of scans, or None when it cannot be known without reading.
+        beams: beams per scan (of the first scan), or None if unknown.
+        fov: field of view, rad, or None.
+        rate_hz: nominal scan rate, Hz, or None.
+        frame_id: sensor frame id, or None.
+        range_min, range_max: sensor range limits, m, or None.
+        extra: format-specific details (e.g. other topics in a bag).
+    """
+
+    format: str
+    origin: str
+    topic: str | None = None
+    count: int | None = None
+    beams: int | None = None
+    fov: float | None = None
+    rate_hz: float | None = None
+    frame_id: str | None = None
+    range_min: float | None = None
+    range_max: float | None = None
+    extra: dict[str, object] = field(default_factory=dict)
+
+
+@runtime_checkable
+class ScanSource(Protocol):
+    """An iterable of :class:`Scan` in time order, with metadata.
+
+    ``len(source)`` gives the scan count where it is known (``meta.count``) and
+    raises ``TypeError`` otherwise. Iterating twice reads the input twice.
+    """
+
+    meta: SourceMeta
+
+    def __iter__(self) -> Iterator[Scan]: ...
+
+    def __len__(self) -> int: ...
