@@ -19,6 +19,9 @@ from dynslam2d.errors import DynSlamError
 #: and the number of ranges. Drivers disagree on whether angle_max is the last
 #: beam or one past it, so one beam of slack is accepted.
 ANGLE_COUNT_TOLERANCE_BEAMS = 1.01
+#: Largest |beam angle| accepted, rad. Scanners use [-π, π] or [0, 2π]; anything
+#: beyond two turns is corrupt metadata.
+MAX_ABS_ANGLE = 4.0 * math.pi
 
 
 def wrap_angle(a: float | np.ndarray) -> float | np.ndarray:
@@ -137,6 +140,11 @@ class Scan:
                 f"scan at stamp {self.stamp}: invalid range limits [{self.range_min}, {self.range_max}]"
             )
         last = self.angle_min + (n - 1) * self.angle_increment
+        if abs(self.angle_min) > MAX_ABS_ANGLE or abs(last) > MAX_ABS_ANGLE:
+            raise DynSlamError(
+                f"scan at stamp {self.stamp}: beam angles {self.angle_min:.6g} … {last:.6g} rad "
+                f"are outside ±{MAX_ABS_ANGLE:.2f} rad"
+            )
         if self.angle_max is None:
             object.__setattr__(self, "angle_max", float(last))
         elif n > 1:

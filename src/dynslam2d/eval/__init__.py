@@ -1,0 +1,1 @@
+"""Evaluation: trajectory, relation, map and detection metrics."""

@@ -1,0 +1,233 @@
+"""Planar trajectories in memory and on disk (TUM format).
+
+A :class:`Trajectory` is a time-stamped sequence of 2D poses: stamps in s, poses
+``[x, y, yaw]`` in m and rad, each the laser's pose in ``frame`` (the map frame
+unless said otherwise; design.md "Conventions").
+
+On disk it is the TUM format that ``evo`` reads (ecosystem.md §3): one pose per
+line, ``timestamp tx ty tz qx qy qz qw``, whitespace-separated, ``#`` comments.
+A planar pose is written with ``tz = 0`` and the quaternion of a pure yaw
+rotation, ``(qx, qy, qz, qw) = (0, 0, sin(yaw/2), cos(yaw/2))``. Numbers are
+written with Python's shortest round-trip representation, so a Unix stamp
+(~1.1e9 s) keeps every bit (well below 1 µs) and reading back gives exactly the
+floats that were written (the yaw to ~1e-16 rad through the quaternion).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from dynslam2d.errors import DynSlamError
+from dynslam2d.io.atomic import atomic_path
+from dynslam2d.types import Pose2D, wrap_angle
+
+#: Default tolerance on |z|, m, above which a TUM pose is "not planar".
+PLANAR_Z_TOL_M = 1e-3
+#: Default tolerance on the tilt (roll/pitch: angle between the pose's z axis and
+#: the map's z axis), rad, above which a TUM pose is "not planar".
+PLANAR_TILT_TOL_RAD = 1e-3
+#: Accepted deviation of a TUM quaternion's norm from 1 (files written with few
+#: decimals are slightly off; anything further is not a rotation).
+QUATERNION_NORM_TOL = 1e-3
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """A planar trajectory: ``n`` stamped poses.
+
+    Attributes:
+        stamps: (n,) float64 times, s (Unix time for real logs). Kept in the order
+            given; readers and metrics do not require them to be sorted.
+        poses: (n, 3) float64 ``[x, y, yaw]``: position in m, heading in rad, of
+            the laser in ``frame``.
+        frame: name of the frame the poses are expressed in ("map").
+    """
+
+    stamps: np.ndarray
+    poses: np.ndarray
+    frame: str = "map"
+
+    def __post_init__(self) -> None:
+        stamps = np.ascontiguousarray(self.stamps, dtype=np.float64)
+        poses = np.ascontiguousarray(self.poses, dtype=np.float64)
+        if stamps.ndim != 1:
+            raise DynSlamError(f"trajectory: stamps must be 1-D, got shape {stamps.shape}")
+        if poses.size == 0 and stamps.shape[0] == 0:
+            poses = poses.reshape(0, 3)
+        if poses.ndim != 2 or poses.shape[1] != 3:
+            raise DynSlamError(f"trajectory: poses must have shape (n, 3) [x, y, yaw], got {poses.shape}")
+        if poses.shape[0] != stamps.shape[0]:
+            raise DynSlamError(
+                f"trajectory: {stamps.shape[0]} stamps for {poses.shape[0]} poses"
+            )
+        if not np.all(np.isfinite(stamps)):
+            i = int(np.flatnonzero(~np.isfinite(stamps))[0])
+            raise DynSlamError(f"trajectory: stamp of pose {i} is not finite ({stamps[i]})")
+        if not np.all(np.isfinite(poses)):
+            i = int(np.flatnonzero(~np.all(np.isfinite(poses), axis=1))[0])
+            raise DynSlamError(f"trajectory: pose {i} is not finite ({poses[i].tolist()})")
+        object.__setattr__(self, "stamps", stamps)
+        object.__setattr__(self, "poses", poses)
+
+    def __len__(self) -> int:
+        return int(self.stamps.shape[0])
+
+    def pose(self, i: int) -> Pose2D:
+        """Pose ``i`` as a :class:`Pose2D` (m, m, rad)."""
+        return Pose2D.from_array(self.poses[i])
+
+    @property
+    def xy(self) -> np.ndarray:
+        """(n, 2) positions, m (a view)."""
+        return self.poses[:, :2]
+
+    @property
+    def yaw(self) -> np.ndarray:
+        """(n,) headings, rad (a view)."""
+        return self.poses[:, 2]
+
+    def subset(self, indices: np.ndarray | Sequence[int]) -> Trajectory:
+        """The poses at ``indices`` (any integer index array), same frame."""
+        idx = np.asarray(indices, dtype=np.intp)
+        return Trajectory(self.stamps[idx], self.poses[idx], self.frame)
+
+    @classmethod
+    def from_poses(
+        cls, stamps: Sequence[float] | np.ndarray, poses: Sequence[Pose2D], frame: str = "map"
+    ) -> Trajectory:
+        """Build from stamps (s) and a list of :class:`Pose2D`."""
+        arr = np.array([(p.x, p.y, p.theta) for p in poses], dtype=np.float64).reshape(-1, 3)
+        return cls(np.asarray(stamps, dtype=np.float64), arr, frame)
+
+    def same_as(self, other: Trajectory, atol: float = 0.0) -> bool:
+        """Equal stamps and poses within ``atol`` (yaw compared modulo 2π), same frame."""
+        if len(self) != len(other) or self.frame != other.frame:
+            return False
+        dyaw = np.abs(wrap_angle(self.yaw - other.yaw))
+        return bool(
+            np.all(np.abs(self.stamps - other.stamps) <= atol)
+            and np.all(np.abs(self.xy - other.xy) <= atol)
+            and np.all(dyaw <= atol)
+        )
+
+
+def _fmt(v: float) -> str:
+    # Shortest repr that round-trips exactly (a float64 has ~17 significant digits,
+    # so a 1.1e9 s stamp keeps ~1e-7 s, positions keep far below 1e-6 m).
+    return repr(float(v))
+
+
+def write_tum(
+    path: str | os.PathLike[str], traj: Trajectory, *, comment: str | None = None
+) -> Path:
+    """Write ``traj`` as a TUM file at ``path``, atomically; return the path.
+
+    One line per pose, ``stamp x y 0 0 0 sin(yaw/2) cos(yaw/2)``, in the
+    trajectory's order. ``comment`` (may span several lines) is written first as
+    ``#`` lines. The file appears under ``path`` only when complete.
+    """
+    lines: list[str] = []
+    if comment:
+        lines.extend("# " + c for c in comment.splitlines())
+    half = 0.5 * traj.yaw
+    qz = np.sin(half)
+    qw = np.cos(half)
+    for t, (x, y, _), z, w in zip(traj.stamps, traj.poses, qz, qw):
+        lines.append(f"{_fmt(t)} {_fmt(x)} {_fmt(y)} 0.0 0.0 0.0 {_fmt(z)} {_fmt(w)}")
+    text = "\n".join(lines) + "\n" if lines else ""
+    final = Path(path)
+    try:
+        with atomic_path(final) as tmp:
+            tmp.write_text(text, encoding="utf-8")
+    except OSError as e:
+        raise DynSlamError(f"{final}: cannot write trajectory: {e}") from e
+    return final
+
+
+def read_tum(
+    path: str | os.PathLike[str],
+    *,
+    max_z: float = PLANAR_Z_TOL_M,
+    max_tilt: float = PLANAR_TILT_TOL_RAD,
+    frame: str = "map",
+) -> Trajectory:
+    """Read a TUM trajectory of planar poses.
+
+    Strict: every non-blank, non-``#`` line must hold exactly 8 finite numbers
+    ``timestamp tx ty tz qx qy qz qw``; the quaternion must have norm 1 (±1e-3;
+    it is normalised); the pose must be planar: ``|tz| <= max_z`` (m) and tilt
+    ``<= max_tilt`` (rad), where tilt is the angle between the pose's z axis and
+    the frame's z axis, ``2·asin(sqrt(qx² + qy²))``. Yaw is
+    ``atan2(2(qw·qz + qx·qy), 1 − 2(qy² + qz²))``, wrapped to [-π, π).
+
+    Raises:
+        DynSlamError: naming the file and the 1-based line number, for any
+            violation; for a missing/unreadable file; for a file with no pose.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DynSlamError(f"{p}: trajectory file not found") from None
+    except IsADirectoryError:
+        raise DynSlamError(f"{p}: is a directory, expected a TUM trajectory file") from None
+    except UnicodeDecodeError as e:
+        raise DynSlamError(f"{p}: not a text file ({e.reason} at byte {e.start})") from None
+    except OSError as e:
+        raise DynSlamError(f"{p}: cannot read trajectory: {e.strerror or e}") from None
+
+    stamps: list[float] = []
+    poses: list[tuple[float, float, float]] = []
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        fields = line.split()
+        if len(fields) != 8:
+            raise DynSlamError(
+                f"{p}:{lineno}: expected 8 fields 'timestamp tx ty tz qx qy qz qw', got {len(fields)}"
+            )
+        try:
+            t, x, y, z, qx, qy, qz, qw = (float(f) for f in fields)
+        except ValueError:
+            bad = next(f for f in fields if not _is_float(f))
+            raise DynSlamError(f"{p}:{lineno}: field {bad!r} is not a number") from None
+        vals = (t, x, y, z, qx, qy, qz, qw)
+        if not all(math.isfinite(v) for v in vals):
+            raise DynSlamError(f"{p}:{lineno}: non-finite value in {line!r}")
+        norm = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
+        if abs(norm - 1.0) > QUATERNION_NORM_TOL:
+            raise DynSlamError(
+                f"{p}:{lineno}: quaternion (qx qy qz qw) = ({qx} {qy} {qz} {qw}) has norm {norm:.6g}, not 1"
+            )
+        qx, qy, qz, qw = qx / norm, qy / norm, qz / norm, qw / norm
+        if abs(z) > max_z:
+            raise DynSlamError(
+                f"{p}:{lineno}: pose is not planar: z = {z} m exceeds the tolerance {max_z} m"
+            )
+        tilt = 2.0 * math.asin(min(1.0, math.sqrt(qx * qx + qy * qy)))
+        if tilt > max_tilt:
+            raise DynSlamError(
+                f"{p}:{lineno}: pose is not planar: roll/pitch tilt {tilt:.6g} rad exceeds "
+                f"the tolerance {max_tilt} rad"
+            )
+        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        stamps.append(t)
+        poses.append((x, y, float(wrap_angle(yaw))))
+    if not stamps:
+        raise DynSlamError(f"{p}: no poses (the file is empty or holds only comments)")
+    return Trajectory(np.array(stamps), np.array(poses), frame)
+
+
+def _is_float(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
