@@ -1,0 +1,341 @@
+"""The scenario registry: named scenes with a robot, movers and a LiDAR.
+
+A :class:`Scenario` is everything needed to simulate: the static
+:class:`~dynslam2d.sim.world.World`, the movers, the scripted robot, the sensor
+model, a duration and a seed. All geometry is in the scenario's **world frame**
+(m, rad); the first laser pose is generally not the world origin.
+
+Registered scenes (``SCENARIOS``):
+
+- ``paper``, ``paper-1``, ``paper-2``, ``paper-3`` — paper §3: a ≈10 m room, the
+  robot oscillating in yaw at the centre, three boxes moving at > 0.5 m/s: a
+  1×1 m box on a small square path, a 1×1 m box on a large square path, and a
+  0.1×2 m bar back and forth on an L-shaped route. The room has a chamfered
+  corner, an alcove, a door recess, wall pilasters, a pillar and a cabinet so
+  scan matching is well constrained. The numbered variants stand in for the
+  paper's three tests: different yaw amplitude/frequency, mover speeds,
+  directions and phases.
+- ``static`` — the same room, no movers; the robot yaws at up to ≈1 rad/s and
+  shuttles a little.
+- ``crowd`` — a 14×10 m hall, six people (discs, 0.4–0.5 m) on random-waypoint
+  walks around a robot driving a rectangular circuit.
+- ``corridor`` — a 30 m corridor with door recesses and a side room; people
+  walking both ways, a cart shuttling, a person wandering in the side room;
+  the robot drives along it.
+- ``stop-and-go`` — a box arrives through a doorway and parks; a parked car
+  waits, then leaves through the doorway and parks outside; a person walks
+  back and forth with long stops at both ends.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from dynslam2d.errors import DynSlamError
+from dynslam2d.sim.movers import (
+    Circle,
+    Mover,
+    Rect,
+    ping_pong,
+    random_waypoints,
+    square_loop,
+    timeline,
+)
+from dynslam2d.sim.robot import ScriptedRobot, oscillating_in_place, waypoint_path
+from dynslam2d.sim.sensor import LidarModel
+from dynslam2d.sim.world import World, polyline_segments, rect_corners, rect_segments
+
+
+@dataclass(frozen=True, eq=False)
+class Scenario:
+    """A complete simulated scene.
+
+    Attributes:
+        name: registry name (or any label for a hand-built scene).
+        description: one line for listings.
+        world: static structure, world frame.
+        movers: moving objects (ids 1..k, the per-beam labels of their hits).
+        robot: scripted laser pose over time, world frame.
+        lidar: the sensor model.
+        duration: simulated time span, s; scans are taken at ``i / rate_hz``.
+        seed: seed of every random draw (random walks, range noise, dropout).
+    """
+
+    name: str
+    description: str
+    world: World
+    movers: tuple[Mover, ...]
+    robot: ScriptedRobot
+    lidar: LidarModel
+    duration: float
+    seed: int
+
+    @property
+    def n_scans(self) -> int:
+        """Number of scans: one every ``1/rate_hz`` s from t = 0, while t < duration."""
+        return max(1, int(math.ceil(self.duration * self.lidar.rate_hz - 1e-9)))
+
+    @property
+    def stamps(self) -> np.ndarray:
+        """(n_scans,) scan stamps, s since the start."""
+        return np.arange(self.n_scans) / self.lidar.rate_hz
+
+    def mover(self, mover_id: int) -> Mover:
+        """The mover with this id (DynSlamError if none)."""
+        for m in self.movers:
+            if m.id == mover_id:
+                return m
+        raise DynSlamError(f"scenario {self.name!r}: no mover with id {mover_id}")
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    """A registry entry: ``spec(seed=None, duration=None) -> Scenario``."""
+
+    builder: Callable[[int, float], Scenario]
+    seed: int
+    duration: float
+    description: str
+
+    def __call__(self, seed: int | None = None, duration: float | None = None) -> Scenario:
+        return self.builder(self.seed if seed is None else int(seed),
+                            self.duration if duration is None else float(duration))
+
+
+# --------------------------------------------------------------------------- rooms
+
+def _solid(cx: float, cy: float, length: float, width: float, heading: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Outline segments and polygon of a solid rectangular obstacle."""
+    return rect_segments(cx, cy, heading, length, width), rect_corners(cx, cy, heading, length, width)
+
+
+def _build_world(outline: list[tuple[float, float]], solids: list[tuple[np.ndarray, np.ndarray]],
+                 extra_segments: list[np.ndarray] | None = None,
+                 extra_interior: list[list[tuple[float, float]]] | None = None) -> World:
+    segs = [polyline_segments(outline, closed=True)] + [s for s, _ in solids] + list(extra_segments or [])
+    interior = [np.asarray(outline)] + [np.asarray(p) for p in (extra_interior or [])]
+    return World(np.vstack(segs), interior=interior, solids=[p for _, p in solids])
+
+
+#: The paper room's outline (≈10×10 m, counter-clockwise): chamfered lower-left
+#: corner, an alcove in the right wall, a door recess in the top wall.
+_PAPER_OUTLINE = [
+    (-4.0, -5.0), (5.0, -5.0), (5.0, 0.5), (5.8, 0.5), (5.8, 2.0), (5.0, 2.0), (5.0, 5.0),
+    (1.5, 5.0), (1.5, 5.6), (0.3, 5.6), (0.3, 5.0), (-5.0, 5.0), (-5.0, -4.0),
+]
+
+
+def _pilasters() -> list[tuple[np.ndarray, np.ndarray]]:
+    """Two 0.3 m wall pilasters (bottom wall at x≈0.15, left wall at y≈0.65)."""
+    return [_solid(0.15, -4.85, 0.3, 0.3), _solid(-4.85, 0.65, 0.3, 0.3)]
+
+
+def paper_room() -> World:
+    """The static room of the ``paper`` scenes, world frame centred on the room."""
+    solids = _pilasters() + [_solid(2.0, 2.2, 0.5, 0.5), _solid(-2.2, -2.4, 1.2, 0.6)]
+    return _build_world(_PAPER_OUTLINE, solids)
+
+
+def _lidar(**overrides: float) -> LidarModel:
+    return dataclasses.replace(LidarModel(), **overrides)
+
+
+# --------------------------------------------------------------------------- paper
+
+@dataclass(frozen=True)
+class _PaperVariant:
+    yaw_amplitude: float  # rad
+    yaw_period: float  # s
+    speeds: tuple[float, float, float]  # small square, large square, L bar; m/s
+    phases: tuple[float, float, float]  # fraction of each period travelled at t = 0
+    clockwise: tuple[bool, bool] = (False, False)
+    bar_pause: float = 0.0  # s at each end of the L
+    sway: tuple[tuple[float, float], ...] = ()
+    heading: float = 0.0  # robot's mean heading, rad (the first scan's frame differs from the world's)
+    yaw_phase: float = 0.0  # rad
+
+
+_PAPER_VARIANTS = {
+    "paper": _PaperVariant(0.5, 8.0, (0.6, 0.8, 0.7), (0.0, 0.0, 0.0)),
+    "paper-1": _PaperVariant(0.35, 10.0, (0.6, 0.7, 0.6), (0.1, 0.3, 0.0)),
+    "paper-2": _PaperVariant(0.8, 5.0, (0.9, 1.2, 1.0), (0.25, 0.5, 0.3), (True, False), 0.0,
+                             ((0.3, 0.2),), heading=0.3),
+    "paper-3": _PaperVariant(0.6, 7.0, (0.7, 1.0, 0.8), (0.5, 0.75, 0.6), (False, True), 0.3,
+                             heading=-0.4, yaw_phase=1.0),
+}
+
+
+def _paper_movers(v: _PaperVariant) -> tuple[Mover, ...]:
+    """Paper §3 movers: 1×1 box on a small square, 1×1 box on a large square,
+    0.1×2 bar (0.1 along x, 2 along y) back and forth on an L."""
+    small = square_loop((-2.0, 2.0), 1.4, v.speeds[0], heading=0.0, phase=v.phases[0], clockwise=v.clockwise[0])
+    large = square_loop((0.0, 0.0), 7.6, v.speeds[1], heading=0.0, phase=v.phases[1], clockwise=v.clockwise[1])
+    bar = ping_pong([(1.0, -2.0), (2.7, -2.0), (2.7, -0.5)], v.speeds[2], heading=0.0, pause=v.bar_pause,
+                    phase=v.phases[2])
+    return (
+        Mover(1, "box-small-square", Rect(1.0, 1.0), small),
+        Mover(2, "box-large-square", Rect(1.0, 1.0), large),
+        Mover(3, "bar-L-route", Rect(0.1, 2.0), bar),
+    )
+
+
+def _paper_builder(name: str) -> Callable[[int, float], Scenario]:
+    v = _PAPER_VARIANTS[name]
+
+    def build(seed: int, duration: float) -> Scenario:
+        robot = oscillating_in_place(0.0, 0.0, v.heading, v.yaw_amplitude, v.yaw_period, phase=v.yaw_phase,
+                                     sway=list(v.sway) or None)
+        return Scenario(name, _PAPER_DESCRIPTIONS[name], paper_room(), _paper_movers(v), robot, _lidar(),
+                        duration, seed)
+
+    return build
+
+
+_PAPER_DESCRIPTIONS = {
+    "paper": "paper §3 scene: robot yawing ±0.5 rad in a 10 m room, 1×1 boxes on small/large squares, "
+             "0.1×2 bar on an L",
+    "paper-1": "paper scene, test 1: gentle yaw (±0.35 rad, 10 s), slower movers",
+    "paper-2": "paper scene, test 2: fast yaw (±0.8 rad, 5 s), robot sways, fast movers, small loop clockwise",
+    "paper-3": "paper scene, test 3: ±0.6 rad / 7 s yaw, large loop clockwise, bar pauses at the L ends",
+}
+
+
+# --------------------------------------------------------------------------- static
+
+def _build_static(seed: int, duration: float) -> Scenario:
+    # max yaw rate = A·2π/T = 1.25·2π/8 ≈ 0.98 rad/s
+    robot = oscillating_in_place(0.0, 0.0, 0.0, 1.25, 8.0, sway=[(0.8, 0.4)], sway_speed=0.1)
+    return Scenario("static", "paper room without movers; robot yaws up to ≈1 rad/s and shuttles 0.9 m",
+                    paper_room(), (), robot, _lidar(), duration, seed)
+
+
+# --------------------------------------------------------------------------- crowd
+
+_HALL_OUTLINE = [
+    (-7.0, -5.0), (-1.0, -5.0), (-1.0, -5.5), (0.5, -5.5), (0.5, -5.0), (7.0, -5.0), (7.0, 3.5),
+    (5.5, 5.0), (-3.0, 5.0), (-3.0, 5.7), (-4.2, 5.7), (-4.2, 5.0), (-7.0, 5.0),
+]
+
+
+def _build_crowd(seed: int, duration: float) -> Scenario:
+    rng = np.random.default_rng([seed, 11])
+    solids = [_solid(5.6, 0.0, 0.4, 0.4), _solid(-5.6, 1.2, 0.4, 0.4), _solid(-5.6, -2.0, 0.8, 0.5, 0.4)]
+    world = _build_world(_HALL_OUTLINE, solids)
+    robot = waypoint_path([(-4.0, -2.5), (4.0, -2.5), (4.0, 2.5), (-4.0, 2.5)], speed=0.4, turn_rate=0.8,
+                          wobble_amplitude=0.1, wobble_period=3.0)
+    # walking areas never reach the robot's circuit (≥ 0.45 m clearance) nor the pillars
+    regions = [(-3.2, 3.2, -1.7, 1.7)] * 3 + [(-6.4, 5.0, 3.2, 4.4)] * 2 + [(-6.4, 6.4, -4.4, -3.2)]
+    movers = []
+    for k, region in enumerate(regions, start=1):
+        radius = float(rng.uniform(0.2, 0.25))
+        walk = random_waypoints(rng, region, duration + 5.0, speed_range=(0.6, 1.4), pause_range=(0.0, 2.0))
+        movers.append(Mover(k, f"person-{k}", Circle(radius), walk))
+    return Scenario("crowd", "14×10 m hall, six people on random-waypoint walks, robot on a rectangular circuit",
+                    world, tuple(movers), robot, _lidar(), duration, seed)
+
+
+# --------------------------------------------------------------------------- corridor
+
+_CORRIDOR_OUTLINE = [
+    (0.0, -1.25), (8.0, -1.25), (8.0, -1.65), (9.0, -1.65), (9.0, -1.25), (22.5, -1.25), (22.5, -1.65),
+    (23.5, -1.65), (23.5, -1.25), (30.0, -1.25), (30.0, 1.25), (18.2, 1.25), (18.2, 1.65), (17.0, 1.65),
+    (17.0, 1.25), (14.0, 1.25), (14.0, 3.75), (11.0, 3.75), (11.0, 1.25), (5.2, 1.25), (5.2, 1.65),
+    (4.0, 1.65), (4.0, 1.25), (0.0, 1.25),
+]
+
+
+def _build_corridor(seed: int, duration: float) -> Scenario:
+    rng = np.random.default_rng([seed, 12])
+    world = _build_world(_CORRIDOR_OUTLINE, [_solid(13.4, 3.2, 0.6, 0.6)])
+    robot = waypoint_path([(1.0, -0.55), (29.0, -0.55)], speed=0.45, loop=False, wobble_amplitude=0.08,
+                          wobble_period=2.5)
+    movers = (
+        Mover(1, "person-lane-1", Circle(0.22), ping_pong([(3.0, 0.45), (15.0, 0.45)], 1.2, heading=None,
+                                                          phase=0.3)),
+        Mover(2, "person-lane-2", Circle(0.22), ping_pong([(6.0, 0.85), (27.0, 0.85)], 0.9, heading=None,
+                                                          phase=0.6)),
+        Mover(3, "cart", Rect(1.0, 0.6), ping_pong([(17.0, 0.3), (28.0, 0.3)], 0.7, heading=None, pause=2.0)),
+        Mover(4, "person-side-room", Circle(0.2),
+              random_waypoints(rng, (11.4, 12.7, 1.8, 3.3), duration + 5.0, (0.5, 1.0), (0.5, 3.0))),
+    )
+    return Scenario("corridor", "30 m corridor with door recesses and a side room; two walkers, a cart, "
+                    "a wanderer; robot drives its length", world, movers, robot, _lidar(), duration, seed)
+
+
+# --------------------------------------------------------------------------- stop-and-go
+
+_STOPGO_OUTLINE = [
+    (-4.0, -5.0), (5.0, -5.0), (5.0, -1.0), (14.0, -1.0), (14.0, 1.0), (5.0, 1.0), (5.0, 5.0),
+    (1.5, 5.0), (1.5, 5.6), (0.3, 5.6), (0.3, 5.0), (-5.0, 5.0), (-5.0, -4.0),
+]
+
+
+def _build_stop_and_go(seed: int, duration: float) -> Scenario:
+    solids = _pilasters() + [_solid(-0.2, 3.8, 0.4, 0.4), _solid(-2.2, -2.4, 1.2, 0.6)]
+    world = _build_world(_STOPGO_OUTLINE, solids)
+    robot = oscillating_in_place(-2.0, 0.0, 0.6, 0.5, 8.0)
+    box = timeline((12.5, 0.0), [("wait", 5.0), ("go", (4.0, 0.0), 0.8), ("go", (1.5, -2.5), 0.8)], heading=0.0)
+    car = timeline((2.0, 2.5), [("wait", 28.0), ("go", (4.0, 0.0), 0.7), ("go", (13.0, 0.0), 0.9)],
+                   start_heading=0.0)
+    person = ping_pong([(-3.5, -3.0), (-3.5, 3.0)], 1.0, heading=None, pause=4.0)
+    movers = (
+        Mover(1, "box-arriving", Rect(1.0, 1.0), box),
+        Mover(2, "car-leaving", Rect(1.2, 0.8), car),
+        Mover(3, "person-stop-and-go", Circle(0.25), person),
+    )
+    return Scenario("stop-and-go", "a box arrives and parks, a parked car leaves through the doorway, "
+                    "a person walks with long stops", world, movers, robot, _lidar(), duration, seed)
+
+
+# --------------------------------------------------------------------------- registry
+
+#: name → spec; ``SCENARIOS[name](seed=None, duration=None)`` builds the scene
+#: with its fixed default seed and duration.
+SCENARIOS: dict[str, ScenarioSpec] = {
+    **{name: ScenarioSpec(_paper_builder(name), 1 + i, 60.0, _PAPER_DESCRIPTIONS[name])
+       for i, name in enumerate(_PAPER_VARIANTS)},
+    "static": ScenarioSpec(_build_static, 5, 40.0, "paper room without movers, robot yawing up to ≈1 rad/s"),
+    "crowd": ScenarioSpec(_build_crowd, 6, 60.0, "six people on random walks around a robot on a circuit"),
+    "corridor": ScenarioSpec(_build_corridor, 7, 60.0, "30 m corridor, walkers, a cart, robot driving along"),
+    "stop-and-go": ScenarioSpec(_build_stop_and_go, 8, 60.0, "objects parking and leaving; a person with stops"),
+}
+
+
+def build_scenario(
+    name: str,
+    seed: int | None = None,
+    duration: float | None = None,
+    beams: int | None = None,
+    fov: float | None = None,
+    rate_hz: float | None = None,
+    noise_sigma: float | None = None,
+    dropout: float | None = None,
+    range_min: float | None = None,
+    range_max: float | None = None,
+) -> Scenario:
+    """Build a registered scenario, overriding seed, duration (s) and sensor settings.
+
+    ``fov`` is in rad, ``rate_hz`` in Hz, ``noise_sigma``/ranges in m. Unknown
+    names raise :class:`DynSlamError` listing the available ones.
+    """
+    spec = SCENARIOS.get(name)
+    if spec is None:
+        raise DynSlamError(f"unknown scenario {name!r}; available: {', '.join(sorted(SCENARIOS))}")
+    if duration is not None and not duration > 0:
+        raise DynSlamError(f"scenario {name!r}: duration must be > 0 s, got {duration}")
+    scenario = spec(seed, duration)
+    overrides = {k: v for k, v in dict(beams=beams, fov=fov, rate_hz=rate_hz, noise_sigma=noise_sigma,
+                                       dropout=dropout, range_min=range_min, range_max=range_max).items()
+                 if v is not None}
+    if overrides:
+        try:
+            lidar = dataclasses.replace(scenario.lidar, **overrides)
+        except ValueError as exc:
+            raise DynSlamError(f"scenario {name!r}: invalid sensor settings: {exc}") from exc
+        scenario = dataclasses.replace(scenario, lidar=lidar)
+    return scenario
