@@ -115,6 +115,162 @@ def info(
     console.print(table)
 
 
+@app.command()
+def simulate(
+    scenario: Annotated[str, typer.Argument(help="Scenario name (see --list), e.g. paper, paper-1, static, crowd.")] = "paper",
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="Output folder (default: results/sim-<scenario>-<time>).")] = None,
+    seed: SeedOpt = None,
+    duration: DurationOpt = None,
+    resolution: Annotated[float, typer.Option("--map-resolution", min=0.005, help="Ground-truth map cell size, m.")] = 0.05,
+    storage: Annotated[str, typer.Option("--storage", help="Scan bag: mcap (bare .mcap), sqlite3 (ROS 2 folder) or ros1 (.bag).")] = "mcap",
+    beams: Annotated[Optional[int], typer.Option("--beams", min=1, help="Beams per scan [720].")] = None,
+    fov_deg: Annotated[Optional[float], typer.Option("--fov-deg", min=1.0, max=360.0, help="Field of view, degrees [360].")] = None,
+    rate: Annotated[Optional[float], typer.Option("--rate", min=0.1, help="Scan rate, Hz [20].")] = None,
+    noise: Annotated[Optional[float], typer.Option("--noise", min=0.0, help="Gaussian range noise σ, m [0.01].")] = None,
+    dropout: Annotated[Optional[float], typer.Option("--dropout", min=0.0, max=1.0, help="Probability a beam returns nothing [0].")] = None,
+    range_max: Annotated[Optional[float], typer.Option("--range-max", min=0.1, help="Sensor max range, m [20].")] = None,
+    list_scenarios: Annotated[bool, typer.Option("--list", help="List the scenarios and exit.")] = False,
+) -> None:
+    """Simulate a scene: scans as a bag, ground truth (map, trajectory, labels, movers), an overview PNG.
+
+    The folder can be mapped with `dynslam2d run DIR/scans.mcap` and used as `--gt DIR`.
+    """
+    from dynslam2d.sim import SCENARIOS, simulate as run_simulation
+    from dynslam2d.sim.export import write_simulation
+
+    if list_scenarios:
+        table = Table(title="scenarios", title_justify="left")
+        table.add_column("name", style="bold")
+        table.add_column("duration", justify="right")
+        table.add_column("seed", justify="right")
+        table.add_column("description")
+        for name, spec in SCENARIOS.items():
+            table.add_row(name, f"{spec.duration:g} s", str(spec.seed), spec.description)
+        console.print(table)
+        return
+    out = out or _default_out(f"sim-{scenario}")
+    with console.status(f"simulating {scenario} …", spinner="dots"):
+        sensor = {"beams": beams, "fov": math.radians(fov_deg) if fov_deg else None, "rate_hz": rate,
+                  "noise_sigma": noise, "dropout": dropout, "range_max": range_max}
+        sim = run_simulation(scenario, seed=seed, duration=duration, **{k: v for k, v in sensor.items() if v is not None})
+    with console.status(f"writing {out} …", spinner="dots"):
+        paths = write_simulation(sim, out, map_resolution=resolution, storage=storage)
+    sc = sim.scenario
+    console.print(
+        f"simulated [bold]{sc.name}[/] (seed {sc.seed}): {len(sim.scans)} scans over {sc.duration:g} s, "
+        f"{len(sc.movers)} movers"
+    )
+    for role, path in paths.items():
+        console.print(f"  {path}")
+    console.print(f"map it with: dynslam2d run {paths['scans']} --gt {out}")
+
+
+def _default_out(prefix: str) -> Path:
+    import datetime as _dt
+
+    return Path("results") / f"{prefix}-{_dt.datetime.now().strftime('%Y%m%d-%H%M%S')}"
+
+
+config_app = typer.Typer(help="Show the configuration.", no_args_is_help=True)
+app.add_typer(config_app, name="config")
+
+
+@config_app.command("dump")
+def config_dump(
+    config: Annotated[Optional[Path], typer.Option("--config", help="Start from this YAML file instead of the defaults.")] = None,
+) -> None:
+    """Print the full configuration as YAML (defaults, or a file completed with defaults)."""
+    from dynslam2d.config import Config, dump_config, load_config
+
+    cfg = load_config(config) if config else Config()
+    sys.stdout.write(dump_config(cfg))
+
+
+@app.command()
+def run(
+    input: Annotated[str, typer.Argument(help="Bag, bag folder, .mcap, CARMEN log or sim:<scenario>.")] = "sim:paper",
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="Results folder (default: results/run-<time>).")] = None,
+    topic: TopicOpt = None,
+    gt: Annotated[Optional[Path], typer.Option("--gt", help="Ground-truth folder written by 'dynslam2d simulate' (for metrics).")] = None,
+    config: Annotated[Optional[Path], typer.Option("--config", help="YAML configuration (see 'dynslam2d config dump').")] = None,
+    map_resolution: Annotated[Optional[float], typer.Option("--map-resolution", help="Finest map cell size, m [0.05].")] = None,
+    map_levels: Annotated[Optional[int], typer.Option("--map-levels", help="Map levels [3].")] = None,
+    update_distance: Annotated[Optional[float], typer.Option("--update-distance", help="Map update after this translation, m [0.4].")] = None,
+    update_angle: Annotated[Optional[float], typer.Option("--update-angle", help="Map update after this rotation, rad [0.06].")] = None,
+    laser_min_dist: Annotated[Optional[float], typer.Option("--laser-min-dist", help="Ignore returns closer than this, m [0.4].")] = None,
+    laser_max_dist: Annotated[Optional[float], typer.Option("--laser-max-dist", help="Ignore returns farther than this, m [30].")] = None,
+    seed: SeedOpt = None,
+    duration: DurationOpt = None,
+    skip_bad: SkipBadOpt = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
+) -> None:
+    """Map INPUT with Hector-style SLAM; write map, trajectory, summary (and metrics with ground truth).
+
+    Writes into OUT: map.pgm + map.yaml (map_server), map_logodds.npy, trajectory.tum,
+    config.yaml, summary.json, map.png and, with ground truth (sim: inputs or --gt), metrics.json.
+    """
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    from dynslam2d.config import Config, load_config, with_overrides
+    from dynslam2d.io.sources import open_source
+    from dynslam2d.pipeline import run as run_pipeline
+    from dynslam2d.results import ground_truth_for, write_results
+
+    cfg = load_config(config) if config else Config()
+    cfg = with_overrides(cfg, {"slam": {
+        "map_resolution": map_resolution, "map_levels": map_levels,
+        "map_update_distance_thresh": update_distance, "map_update_angle_thresh": update_angle,
+        "laser_min_dist": laser_min_dist, "laser_max_dist": laser_max_dist,
+    }})
+    source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad)
+    out = out or _default_out("run")
+    total = source.meta.count
+    show = not (quiet or as_json)
+    progress = Progress(
+        TextColumn("[bold]mapping[/]"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
+        TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=err_console, disable=not show,
+    )
+    with progress:
+        task = progress.add_task("map", total=total, rate="")
+        state = {"t0": None}
+
+        def tick(n: int, step: object) -> None:
+            import time as _time
+
+            now = _time.perf_counter()
+            if state["t0"] is None:
+                state["t0"] = now
+            if n % 10 == 0 or n == total:
+                el = now - state["t0"]
+                progress.update(task, completed=n, rate=f"{(n - 1) / el:.0f} scans/s" if el > 0 else "")
+
+        result = run_pipeline(source, cfg, progress=tick)
+        progress.update(task, completed=result.n_scans)
+    truth = ground_truth_for(source, gt, cfg.slam.map_resolution)
+    paths = write_results(result, out, truth)
+    summary = json.loads(paths["summary.json"].read_text())
+    if as_json:
+        summary["out"] = str(out)
+        sys.stdout.write(json.dumps(summary, indent=2) + "\n")
+        return
+    if quiet:
+        return
+    rows = [
+        ("scans", str(summary["scans"])),
+        ("wall time", f"{summary['wall_time_s']:.1f} s ({summary['scans_per_s']} scans/s)"),
+        ("map updates", str(summary["map_updates"])),
+        ("rejected matches", str(summary["match_failures"])),
+        ("skipped scans", str(summary["skipped_scans"])),
+        ("map", f"{summary['map_cells'][1]}×{summary['map_cells'][0]} cells at {summary['map_resolution_m']} m, "
+                f"{summary['memory_bytes'] / 2**20:.1f} MiB"),
+    ]
+    if "ate_rmse_m" in summary:
+        rows.append(("ATE RMSE", f"{summary['ate_rmse_m']:.4f} m"))
+    console.print(_stats_table(f"dynslam2d run {input}", rows))
+    console.print(f"results in [bold]{out}[/]")
+
+
 eval_app = typer.Typer(help="Evaluate trajectories: ATE, RPE, and Kümmerle relation errors.", no_args_is_help=True)
 app.add_typer(eval_app, name="eval")
 

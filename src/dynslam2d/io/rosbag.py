@@ -29,6 +29,7 @@ from a bag round-trips exactly; any other Scan is rounded to float32 on writing
 from __future__ import annotations
 
 import contextlib
+import tempfile
 import math
 import os
 from dataclasses import dataclass
@@ -157,66 +158,49 @@ def _classify(path: Path) -> _BagInput:
     )
 
 
-def _make_reader(inp: _BagInput) -> Any:
+def _make_reader(inp: _BagInput, scratch: Path) -> Any:
     """An unopened ``rosbags.highlevel.AnyReader`` for ``inp``.
 
     AnyReader picks ROS 1 vs ROS 2 and the ROS 2 storage plugin from the file name's
-    suffix; when the suffix disagrees with the content (``run.log`` holding a ROS 1
-    bag) the sub-reader is chosen by content instead.
+    suffix. When the suffix disagrees with the content (``run.log`` holding a ROS 1 bag),
+    the reader opens a symlink with the right suffix, created in ``scratch``.
     """
     from rosbags.highlevel import AnyReader
-    from rosbags.rosbag1 import Reader as Reader1
-    from rosbags.rosbag2 import Reader as Reader2
-    from rosbags.rosbag2.storage_mcap import McapReader
-    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
     from rosbags.typesys import Stores, get_typestore
 
     # Old ROS 2 bags carry no message definitions; LaserScan/poses are the same in every distro.
     default = None if inp.kind == "ros1" else get_typestore(Stores.ROS2_HUMBLE)
     path = inp.path
-    # AnyReader treats a path as ROS 1 iff its suffix is ".bag"; Reader2 picks a file's
-    # storage plugin by suffix.
     expected = {"ros1": ".bag", "mcap-file": ".mcap", "sqlite3-file": ".db3"}.get(inp.kind)
-    if path.suffix == expected or (inp.kind == "ros2-dir" and path.suffix != ".bag"):
-        return AnyReader([path], default_typestore=default)
-    # Suffix disagrees with content: set up the state AnyReader.__init__ would, with the
-    # sub-reader chosen by content (rosbags 0.11 attribute names; covered by a test).
-    reader = AnyReader.__new__(AnyReader)
-    reader.paths = [path]
-    reader.is2 = inp.kind != "ros1"
-    reader.stack = None
-    reader.connections = []
-    reader.default_typestore = default
-    reader.typestore = get_typestore(Stores.EMPTY)
-    if inp.kind == "ros1":
-        reader.readers = [Reader1(path)]
-    elif inp.kind == "ros2-dir":  # a bag folder whose name ends in .bag
-        reader.readers = [Reader2(path)]
-    else:
-        sub = Reader2.__new__(Reader2)
-        sub.path = path
-        sub.is_open = False
-        sub.storage = (McapReader if inp.kind == "mcap-file" else Sqlite3Reader)(path)
-        reader.readers = [sub]
-    return reader
+    if inp.kind == "ros2-dir":
+        if path.suffix == ".bag":  # a bag folder named *.bag would be taken for ROS 1
+            link = scratch / "bag"
+            link.symlink_to(path.resolve(), target_is_directory=True)
+            path = link
+    elif path.suffix != expected:
+        link = scratch / f"bag{expected}"
+        link.symlink_to(path.resolve())
+        path = link
+    return AnyReader([path], default_typestore=default)
 
 
 @contextlib.contextmanager
 def _open_bag(path: Path) -> Iterator[tuple[Any, _BagInput]]:
     """Open a bag for reading; every rosbags failure becomes a DynSlamError naming ``path``."""
     inp = _classify(path)
-    try:
-        reader = _make_reader(inp)
-        reader.open()
-    except DynSlamError:
-        raise
-    except Exception as err:  # rosbags raises many types (ReaderError, struct.error, apsw, …)
-        raise DynSlamError(f"{path}: cannot open {inp.format} ({type(err).__name__}: {err})") from err
-    try:
-        yield reader, inp
-    finally:
-        with contextlib.suppress(Exception):
-            reader.close()
+    with tempfile.TemporaryDirectory(prefix="dynslam2d-bag-") as scratch:
+        try:
+            reader = _make_reader(inp, Path(scratch))
+            reader.open()
+        except DynSlamError:
+            raise
+        except Exception as err:  # rosbags raises many types (ReaderError, struct.error, apsw, …)
+            raise DynSlamError(f"{path}: cannot open {inp.format} ({type(err).__name__}: {err})") from err
+        try:
+            yield reader, inp
+        finally:
+            with contextlib.suppress(Exception):
+                reader.close()
 
 
 def _topic_types(reader: Any) -> dict[str, str]:

@@ -59,9 +59,13 @@ def plot_map(
         if bar * m <= raw:
             bar *= m
             break
-    bx, by = x0 + 0.05 * width_m, y0 + 0.05 * height_m
-    ax.plot([bx, bx + bar], [by, by], color="tab:blue", lw=3)
-    ax.text(bx + bar / 2, by + 0.02 * height_m, f"{bar:g} m", color="tab:blue", ha="center", va="bottom")
+    from matplotlib.patches import Rectangle
+
+    bx, by = x0 + 0.04 * width_m, y0 + 0.04 * height_m
+    ax.add_patch(Rectangle((bx - 0.02 * width_m, by - 0.025 * height_m), bar + 0.04 * width_m, 0.09 * height_m,
+                           facecolor="white", edgecolor="0.3", alpha=0.9, zorder=4))
+    ax.plot([bx, bx + bar], [by, by], color="black", lw=3, solid_capstyle="butt", zorder=5)
+    ax.text(bx + bar / 2, by + 0.015 * height_m, f"{bar:g} m", color="black", ha="center", va="bottom", zorder=5)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_aspect("equal")

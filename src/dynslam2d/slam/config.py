@@ -1,0 +1,252 @@
+"""Configuration of the Hector-style SLAM core.
+
+Field names follow the ``hector_mapping`` ROS parameters where one exists
+(``map_resolution``, ``map_multi_res_levels`` → ``map_levels``, ``update_factor_free``, …);
+the reference defaults are quoted from ``/work/shared/reference/hector_slam.md`` §4.
+Everything that the reference hard-codes (iteration counts, the ±0.2 rad step clamp)
+is a parameter here; everything the reference lacks (damped steps, correlative
+search, bad-match rejection, bad-input handling) has its own group of fields.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+
+class SlamConfig(BaseModel):
+    """Parameters of :class:`dynslam2d.slam.HectorSlam` (units in each description)."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    # --- map (hector_slam.md §1) -------------------------------------------------------
+    map_resolution: float = Field(
+        0.05, gt=0.0, le=10.0,
+        description="Cell side of the finest map level r0, m. hector_mapping node default 0.025, "
+        "mapping_default.launch 0.05.",
+    )
+    map_levels: int = Field(
+        3, ge=1, le=8,
+        description="Number of map levels (hector 'map_multi_res_levels', node default 3); level k has "
+        "resolution map_resolution·2^k and is updated directly from the scan.",
+    )
+    update_factor_free: float = Field(
+        0.4, gt=0.0, lt=0.5,
+        description="Occupancy probability of a free observation (reference 0.4 → log-odds −0.405 per "
+        "observation), dimensionless.",
+    )
+    update_factor_occupied: float = Field(
+        0.9, gt=0.5, lt=1.0,
+        description="Occupancy probability of a hit (reference ROS default 0.9 → log-odds +2.197), "
+        "dimensionless.",
+    )
+    occupied_logodds_cap: float = Field(
+        50.0, gt=0.0,
+        description="A hit is added only while the cell's log-odds is below this value (reference 50); "
+        "the free side is unbounded as in the reference.",
+    )
+    map_growth_margin: float = Field(
+        5.0, gt=0.0,
+        description="Extra border added on the side where the map grows, m (the map grows as the robot "
+        "explores; no fixed map size). At least 25 % of the current size is added.",
+    )
+    max_map_memory_mb: float = Field(
+        2048.0, gt=0.0,
+        description="Memory limit of all map levels, MB. A scan whose integration would grow the map "
+        "beyond it is not integrated (counted as 'map_too_large') instead of exhausting memory.",
+    )
+    clear_no_return_dist: float = Field(
+        0.0, ge=0.0,
+        description="If > 0, beams without a return mark cells free along the beam up to this distance, m. "
+        "The reference never traces no-return beams (0 = off, the reference behaviour).",
+    )
+
+    # --- range gates (hector_slam.md §3.1) -------------------------------------------
+    laser_min_dist: float = Field(
+        0.4, ge=0.0,
+        description="Returns closer than this are dropped, m (reference 0.4).",
+    )
+    laser_max_dist: float = Field(
+        30.0, gt=0.0,
+        description="Returns farther than this are dropped, m (reference 30.0; also the projectLaser cut-off).",
+    )
+
+    # --- map update thresholds (hector_slam.md §3.3) -----------------------------------
+    map_update_distance_thresh: float = Field(
+        0.4, ge=0.0,
+        description="Translation since the last map update needed before a scan is integrated, m "
+        "(reference 0.4).",
+    )
+    map_update_angle_thresh: float = Field(
+        0.06, ge=0.0,
+        description="Rotation since the last map update needed before a scan is integrated, rad "
+        "(mapping_default.launch 0.06; the bare node uses 0.9).",
+    )
+
+    # --- scan matcher (hector_slam.md §2) ----------------------------------------------
+    iterations_coarse: int = Field(
+        4, ge=0, le=100,
+        description="Gauss–Newton steps on every coarse level (reference: 1 + 3 = 4).",
+    )
+    iterations_finest: int = Field(
+        6, ge=0, le=100,
+        description="Gauss–Newton steps on the finest level (reference: 1 + 5 = 6).",
+    )
+    hector_gradient_bug: bool = Field(
+        False,
+        description="Reproduce the reference's swapped bilinear gradient weights (hector_slam.md §2.2, "
+        "issue #16) for bit-faithful comparison; False = the mathematically correct gradient.",
+    )
+    step_mode: Literal["lm", "gauss_newton"] = Field(
+        "lm",
+        description="'lm': Levenberg–Marquardt with a bounded step, accepted only if the cost drops; "
+        "'gauss_newton': the reference's raw H⁻¹g step (still with the step bounds below).",
+    )
+    max_rotation_step: float = Field(
+        0.2, gt=0.0,
+        description="Clamp of the rotation part of one step, rad (reference 0.2).",
+    )
+    max_translation_step: float = Field(
+        2.0, gt=0.0,
+        description="Bound on the translation part of one step, in cells of the level being matched "
+        "(the reference has none; GN only sees about ±1 cell).",
+    )
+    lm_lambda_init: float = Field(
+        0.1, gt=0.0,
+        description="Initial Levenberg–Marquardt damping, relative to diag(H), dimensionless (÷10 after "
+        "an accepted step, ×10 after a rejected one). 0.1 converges within the reference's 4/4/6 steps "
+        "where 1e-3 (nearly plain GN) oscillates around the optimum.",
+    )
+    lm_lambda_max: float = Field(
+        1e4, gt=0.0,
+        description="Damping above which the LM iterations on a level stop, dimensionless.",
+    )
+    covariance_sigma: float | None = Field(
+        None, gt=0.0,
+        description="Scale σ of the covariance σ²·H⁻¹ (probability units). None = estimated from the "
+        "residuals of the final match (Σr²/(n−3)).",
+    )
+
+    # --- correlative search (Olson 2009, real-time correlative scan matching) ---------
+    correlative_mode: Literal["auto", "always", "never"] = Field(
+        "auto",
+        description="When to seed Gauss–Newton with a correlative search: 'auto' = after large motion, "
+        "a time gap, a rejected scan or a poor match; 'always'; 'never' (the reference).",
+    )
+    correlative_level: int = Field(
+        1, ge=0,
+        description="Map level searched by the correlative matcher (0 = finest); clipped to map_levels−1.",
+    )
+    correlative_linear_window: float = Field(
+        0.6, ge=0.0,
+        description="Half-width of the translation search window around the start estimate, m.",
+    )
+    correlative_angular_window: float = Field(
+        0.9, ge=0.0, le=math.pi,
+        description="Half-width of the rotation search window around the start estimate, rad "
+        "(the MIT CSAIL log turns up to 0.8 rad between scans).",
+    )
+    correlative_angular_step: float | None = Field(
+        None, gt=0.0,
+        description="Rotation step of the search, rad. None = Olson's rule: the farthest used point moves "
+        "at most one cell of the searched level.",
+    )
+    correlative_max_points: int = Field(
+        240, ge=10,
+        description="Points used by the correlative search (evenly subsampled), count.",
+    )
+    correlative_max_height: int = Field(
+        4, ge=0, le=10,
+        description="Number of branch-and-bound levels (translation blocks of 2^h cells).",
+    )
+    correlative_translation_weight: float = Field(
+        0.05, ge=0.0,
+        description="Penalty on the searched translation offset, score per m² (breaks ties towards the "
+        "start estimate).",
+    )
+    correlative_rotation_weight: float = Field(
+        0.05, ge=0.0,
+        description="Penalty on the searched rotation offset, score per rad².",
+    )
+    correlative_trigger_distance: float = Field(
+        0.15, ge=0.0,
+        description="'auto' mode: search when the previous inter-scan motion exceeded this translation, m.",
+    )
+    correlative_trigger_angle: float = Field(
+        0.08, ge=0.0,
+        description="'auto' mode: search when the previous inter-scan motion exceeded this rotation, rad.",
+    )
+    poor_match_ratio: float = Field(
+        0.85, ge=0.0, le=1.0,
+        description="'auto' mode: search when the match score falls below this fraction of the running "
+        "score average.",
+    )
+
+    # --- prediction -------------------------------------------------------------------
+    constant_velocity: bool = Field(
+        False,
+        description="Start estimate = previous pose advanced by the last velocity (constant-velocity model). "
+        "False = the reference's previous pose (zero-motion model).",
+    )
+
+    # --- bad match / bad input --------------------------------------------------------
+    min_points: int = Field(
+        20, ge=2,
+        description="Scans with fewer valid returns after the range gates are skipped (counted), count.",
+    )
+    reject_score_ratio: float = Field(
+        0.35, ge=0.0, le=1.0,
+        description="A match whose score is below this fraction of the running score average is not "
+        "written into the map (score collapse). Unknown cells score 0.5 and free cells ≤ 0.4, so "
+        "exploring new space alone does not trigger it.",
+    )
+    reject_score_min: float = Field(
+        0.05, ge=0.0, le=1.0,
+        description="A match whose score (mean occupancy probability at the endpoints, finest level) is "
+        "below this is not written into the map.",
+    )
+    reject_free_fraction: float = Field(
+        0.5, ge=0.0, le=1.0,
+        description="A match is not written into the map when more than this fraction of its endpoints "
+        "fall in space the map knows to be free (interpolated p < 0.45 on level 1). Good matches "
+        "measured: ≤ 0.27 on MIT CSAIL, ≤ 0.15 in the simulated crowd.",
+    )
+    max_jump_distance: float = Field(
+        1.5, gt=0.0,
+        description="A match further than this from its start estimate is rejected (pose = start estimate), m.",
+    )
+    max_jump_angle: float = Field(
+        1.3, gt=0.0,
+        description="A match rotated more than this from its start estimate is rejected, rad.",
+    )
+    max_time_gap: float = Field(
+        1.0, gt=0.0,
+        description="A gap between scan stamps above this (or a stamp going backwards) is counted as a "
+        "time gap: the velocity is reset and a correlative search is run, s.",
+    )
+    score_average_rate: float = Field(
+        0.1, gt=0.0, le=1.0,
+        description="Rate of the exponential running average of accepted match scores, dimensionless.",
+    )
+
+    @model_validator(mode="after")
+    def _check(self) -> SlamConfig:
+        if self.laser_max_dist <= self.laser_min_dist:
+            raise ValueError(
+                f"laser_max_dist ({self.laser_max_dist}) must exceed laser_min_dist ({self.laser_min_dist})"
+            )
+        return self
+
+    @property
+    def logodds_free(self) -> float:
+        """Log-odds added per free observation: logit(update_factor_free) (hector_slam.md §1.2)."""
+        p = self.update_factor_free
+        return math.log(p / (1.0 - p))
+
+    @property
+    def logodds_occupied(self) -> float:
+        """Log-odds added per hit: logit(update_factor_occupied) (hector_slam.md §1.2)."""
+        p = self.update_factor_occupied
+        return math.log(p / (1.0 - p))

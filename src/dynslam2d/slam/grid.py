@@ -1,0 +1,305 @@
+"""Growable multi-resolution log-odds occupancy grids (hector_slam.md §1).
+
+Geometry. Level k has resolution ``r_k = r0·2^k``. Integer map coordinates are cell
+centres (hector_slam.md §1.1): the cell with absolute index ``(i, j)`` is centred at world
+``(i·r_k, j·r_k)``, so the map-frame origin is a cell centre on every level. Each level
+stores a dense block of cells ``[i0, i0+W) × [j0, j0+H)`` as ``array[row=j−j0, col=i−i0]``
+(row 0 at the bottom, like :class:`~dynslam2d.gridmap.GridMap`). When a scan reaches past
+the block, the block is reallocated larger (:meth:`GridLevel.ensure`) and its content is
+copied: the map grows as the robot explores and the user never chooses a map size.
+
+"Array map coordinates" (what the numba kernels use) are ``(x, y) = (world/r_k − i0,
+world/r_k − j0)``: continuous, in cells, with array cell (col, row) centred at (col, row).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dynslam2d.gridmap import GridMap
+from dynslam2d.slam.raycast import integrate_rays
+from dynslam2d.types import Pose2D
+
+
+#: Bytes per cell: float32 log-odds + float32 probability cache + int32 update index.
+_BYTES_PER_CELL = 12
+
+
+class MapTooLargeError(RuntimeError):
+    """Integrating a scan would grow the map beyond its memory limit (the scan is not integrated)."""
+
+
+class GridLevel:
+    """One log-odds grid level.
+
+    Attributes:
+        resolution: cell side, m.
+        logodds: (H, W) float32 log-odds, 0 = unknown (hector_slam.md §1.2).
+        prob: (H, W) float32 occupancy probability cache, kept in step with ``logodds``.
+        uidx: (H, W) int32 per-cell update index (−1 = never updated), hector_slam.md §1.4.
+        i0, j0: absolute cell index of array column 0 / row 0.
+    """
+
+    def __init__(self, resolution: float, growth_margin_cells: int = 100) -> None:
+        self.resolution = float(resolution)
+        self.growth_margin_cells = max(int(growth_margin_cells), 1)
+        self.logodds = np.zeros((0, 0), dtype=np.float32)
+        self.prob = np.full((0, 0), 0.5, dtype=np.float32)
+        self.uidx = np.full((0, 0), -1, dtype=np.int32)
+        self.i0 = 0
+        self.j0 = 0
+        self.update_counter = 0  # hector's currUpdateIndex (grows by 3 per scan)
+        self.n_grows = 0
+
+    # ---- geometry -------------------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.logodds.shape  # type: ignore[return-value]
+
+    @property
+    def empty(self) -> bool:
+        return self.logodds.size == 0
+
+    def world_to_map(self, xy: np.ndarray) -> np.ndarray:
+        """(n, 2) world points, m → (n, 2) array map coordinates, cells (cell centres at integers)."""
+        xy = np.asarray(xy, dtype=np.float64)
+        out = xy / self.resolution
+        out[..., 0] -= self.i0
+        out[..., 1] -= self.j0
+        return out
+
+    def map_to_world(self, m: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`world_to_map`."""
+        m = np.asarray(m, dtype=np.float64).copy()
+        m[..., 0] += self.i0
+        m[..., 1] += self.j0
+        return m * self.resolution
+
+    def pose_to_map(self, pose: np.ndarray) -> np.ndarray:
+        """World pose (x m, y m, θ rad) → array map pose (x cells, y cells, θ rad)."""
+        return np.array(
+            [pose[0] / self.resolution - self.i0, pose[1] / self.resolution - self.j0, pose[2]],
+            dtype=np.float64,
+        )
+
+    def pose_to_world(self, mpose: np.ndarray) -> np.ndarray:
+        """Array map pose → world pose (inverse of :meth:`pose_to_map`)."""
+        return np.array(
+            [(mpose[0] + self.i0) * self.resolution, (mpose[1] + self.j0) * self.resolution, mpose[2]],
+            dtype=np.float64,
+        )
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.logodds.nbytes + self.prob.nbytes + self.uidx.nbytes)
+
+    # ---- growth -----------------------------------------------------------------------
+    def _grown_bounds(self, imin: int, jmin: int, imax: int, jmax: int) -> tuple[int, int, int, int] | None:
+        """(i0, j0, i1, j1) of the array after growing to hold [imin, imax] × [jmin, jmax], or None
+        if it already does."""
+        h, w = self.shape
+        if w > 0 and imin >= self.i0 and jmin >= self.j0 and imax < self.i0 + w and jmax < self.j0 + h:
+            return None
+        if w == 0:
+            m = self.growth_margin_cells
+            return imin - m, jmin - m, imax + m + 1, jmax + m + 1
+        mx = max(self.growth_margin_cells, w // 4)
+        my = max(self.growth_margin_cells, h // 4)
+        ni0 = min(self.i0, imin - mx) if imin < self.i0 else self.i0
+        nj0 = min(self.j0, jmin - my) if jmin < self.j0 else self.j0
+        ni1 = max(self.i0 + w, imax + 1 + mx) if imax >= self.i0 + w else self.i0 + w
+        nj1 = max(self.j0 + h, jmax + 1 + my) if jmax >= self.j0 + h else self.j0 + h
+        return ni0, nj0, ni1, nj1
+
+    def bytes_after_growth(self, imin: int, jmin: int, imax: int, jmax: int) -> int:
+        """Bytes this level would hold after :meth:`ensure` with these bounds."""
+        b = self._grown_bounds(imin, jmin, imax, jmax)
+        if b is None:
+            return self.nbytes
+        return (b[2] - b[0]) * (b[3] - b[1]) * _BYTES_PER_CELL
+
+    def ensure(self, imin: int, jmin: int, imax: int, jmax: int) -> bool:
+        """Make absolute cells [imin, imax] × [jmin, jmax] part of the array (content kept).
+
+        Grows only the sides that need it, by at least ``growth_margin_cells`` and 25 % of the
+        current size, so repeated growth is amortised. Returns True if the array was reallocated.
+        """
+        b = self._grown_bounds(imin, jmin, imax, jmax)
+        if b is None:
+            return False
+        h, w = self.shape
+        ni0, nj0, ni1, nj1 = b
+        nw, nh = ni1 - ni0, nj1 - nj0
+        logodds = np.zeros((nh, nw), dtype=np.float32)
+        prob = np.full((nh, nw), 0.5, dtype=np.float32)
+        uidx = np.full((nh, nw), -1, dtype=np.int32)
+        if w > 0:
+            c0, r0 = self.i0 - ni0, self.j0 - nj0
+            logodds[r0:r0 + h, c0:c0 + w] = self.logodds
+            prob[r0:r0 + h, c0:c0 + w] = self.prob
+            uidx[r0:r0 + h, c0:c0 + w] = self.uidx
+        self.logodds, self.prob, self.uidx = logodds, prob, uidx
+        self.i0, self.j0 = ni0, nj0
+        self.n_grows += 1
+        return True
+
+    def cell_bounds(self, origin_xy: np.ndarray, ends_xy: np.ndarray) -> tuple[int, int, int, int]:
+        """(imin, jmin, imax, jmax) absolute cells covering a ray origin and its ends (world, m)."""
+        r = self.resolution
+        s_abs = np.floor(np.asarray(origin_xy, dtype=np.float64) / r + 0.5)
+        e_abs = np.floor(np.asarray(ends_xy, dtype=np.float64) / r + 0.5)
+        return (
+            int(min(s_abs[0], e_abs[:, 0].min())), int(min(s_abs[1], e_abs[:, 1].min())),
+            int(max(s_abs[0], e_abs[:, 0].max())), int(max(s_abs[1], e_abs[:, 1].max())),
+        )
+
+    # ---- update -----------------------------------------------------------------------
+    def integrate(
+        self,
+        origin_xy: np.ndarray,
+        ends_xy: np.ndarray,
+        hit: np.ndarray,
+        l_free: float,
+        l_occ: float,
+        cap: float,
+    ) -> int:
+        """Integrate one scan: rays from world point ``origin_xy`` (2,) to ``ends_xy`` (n, 2), m.
+
+        ``hit`` (n,) bool: True = return (endpoint occupied), False = clearing ray (all free).
+        Cells are the reference's rounding of map coordinates (``floor(v + 0.5)``,
+        hector_slam.md §1.3). Grows the level first so that no ray is dropped. Returns the number
+        of rays integrated.
+        """
+        r = self.resolution
+        s_abs = np.floor(np.asarray(origin_xy, dtype=np.float64) / r + 0.5).astype(np.int64)
+        e_abs = np.floor(np.asarray(ends_xy, dtype=np.float64) / r + 0.5).astype(np.int64)
+        if e_abs.shape[0] == 0:
+            return 0
+        imin = int(min(s_abs[0], e_abs[:, 0].min()))
+        imax = int(max(s_abs[0], e_abs[:, 0].max()))
+        jmin = int(min(s_abs[1], e_abs[:, 1].min()))
+        jmax = int(max(s_abs[1], e_abs[:, 1].max()))
+        self.ensure(imin, jmin, imax, jmax)
+        free_idx = self.update_counter + 1
+        occ_idx = self.update_counter + 2
+        self.update_counter += 3
+        ex = np.ascontiguousarray(e_abs[:, 0] - self.i0)
+        ey = np.ascontiguousarray(e_abs[:, 1] - self.j0)
+        return int(
+            integrate_rays(
+                self.logodds, self.prob, self.uidx, free_idx, occ_idx,
+                int(s_abs[0] - self.i0), int(s_abs[1] - self.j0), ex, ey,
+                np.ascontiguousarray(hit, dtype=np.bool_), float(l_free), float(l_occ), float(cap),
+            )
+        )
+
+    # ---- export -----------------------------------------------------------------------
+    def known_bounds(self) -> tuple[int, int, int, int] | None:
+        """(row0, row1, col0, col1) half-open array bounds of the observed cells, or None."""
+        if self.empty:
+            return None
+        seen = self.uidx >= 0
+        rows = np.flatnonzero(seen.any(axis=1))
+        if rows.size == 0:
+            return None
+        cols = np.flatnonzero(seen.any(axis=0))
+        return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+    def corner_origin(self, row0: int = 0, col0: int = 0) -> tuple[float, float]:
+        """World (x, y) of the lower-left corner of array cell (row0, col0), m."""
+        r = self.resolution
+        return ((self.i0 + col0 - 0.5) * r, (self.j0 + row0 - 0.5) * r)
+
+
+class MultiResMap:
+    """The level pyramid: level k at ``map_resolution·2^k``, each updated from the full scan
+    at the same pose (hector_slam.md §1.5; no downsampling of maps or scans)."""
+
+    def __init__(
+        self,
+        resolution: float,
+        levels: int,
+        l_free: float,
+        l_occ: float,
+        cap: float = 50.0,
+        growth_margin: float = 5.0,
+        max_bytes: int | None = None,
+    ) -> None:
+        self.levels = [
+            GridLevel(resolution * 2**k, growth_margin_cells=math.ceil(growth_margin / (resolution * 2**k)))
+            for k in range(levels)
+        ]
+        self.l_free = float(l_free)
+        self.l_occ = float(l_occ)
+        self.cap = float(cap)
+        self.version = 0  # incremented by every integration
+        self.max_bytes = max_bytes
+
+    @property
+    def resolution(self) -> float:
+        return self.levels[0].resolution
+
+    @property
+    def empty(self) -> bool:
+        return self.levels[0].empty
+
+    @property
+    def memory_bytes(self) -> int:
+        """Bytes held by all levels (log-odds, probability cache, update indices)."""
+        return sum(lv.nbytes for lv in self.levels)
+
+    def integrate(self, pose: Pose2D, hits_laser: np.ndarray, clear_laser: np.ndarray | None = None) -> int:
+        """Integrate a scan taken at laser pose ``pose`` (map frame) into every level.
+
+        ``hits_laser``: (n, 2) returns in the laser frame, m. ``clear_laser``: (m, 2) ends of
+        free-space clearing rays in the laser frame (optional). Returns the rays integrated on
+        level 0. The caller must have checked the pose is finite.
+        """
+        ends = pose.transform_points(np.asarray(hits_laser, dtype=np.float64).reshape(-1, 2))
+        hit = np.ones(ends.shape[0], dtype=np.bool_)
+        if clear_laser is not None and len(clear_laser):
+            ends = np.vstack((ends, pose.transform_points(np.asarray(clear_laser, dtype=np.float64))))
+            hit = np.concatenate((hit, np.zeros(len(clear_laser), dtype=np.bool_)))
+        origin = np.array([pose.x, pose.y])
+        if ends.shape[0] == 0:
+            return 0
+        if self.max_bytes is not None:
+            need = sum(lv.bytes_after_growth(*lv.cell_bounds(origin, ends)) for lv in self.levels)
+            if need > self.max_bytes:
+                raise MapTooLargeError(
+                    f"integrating this scan would grow the map to {need / 1e6:.0f} MB "
+                    f"(limit {self.max_bytes / 1e6:.0f} MB)"
+                )
+        n0 = 0
+        for k, lv in enumerate(self.levels):
+            n = lv.integrate(origin, ends, hit, self.l_free, self.l_occ, self.cap)
+            if k == 0:
+                n0 = n
+        self.version += 1
+        return n0
+
+    def to_gridmap(self, level: int = 0, crop: bool = True) -> GridMap:
+        """Level ``level`` as a :class:`GridMap` of probabilities (NaN = never updated).
+
+        ``crop`` trims the array to the bounding box of observed cells.
+        """
+        lv = self.levels[level]
+        if lv.empty:
+            return GridMap(np.full((1, 1), np.nan), lv.resolution, lv.corner_origin())
+        b = lv.known_bounds() if crop else None
+        r0, r1, c0, c1 = b if b is not None else (0, lv.shape[0], 0, lv.shape[1])
+        lo = lv.logodds[r0:r1, c0:c1].astype(np.float64)
+        prob = 1.0 / (1.0 + np.exp(-lo))
+        prob[lv.uidx[r0:r1, c0:c1] < 0] = np.nan
+        return GridMap(prob, lv.resolution, lv.corner_origin(r0, c0))
+
+    def export_logodds(self, level: int = 0, crop: bool = True) -> tuple[np.ndarray, tuple[float, float]]:
+        """(log-odds (H, W) float32 copy, row 0 at the bottom; (x, y) world corner of cell (0, 0), m)."""
+        lv = self.levels[level]
+        if lv.empty:
+            return np.zeros((1, 1), dtype=np.float32), lv.corner_origin()
+        b = lv.known_bounds() if crop else None
+        r0, r1, c0, c1 = b if b is not None else (0, lv.shape[0], 0, lv.shape[1])
+        return lv.logodds[r0:r1, c0:c1].copy(), lv.corner_origin(r0, c0)

@@ -1,0 +1,295 @@
+"""Gauss–Newton / Levenberg–Marquardt scan-to-map matching (hector_slam.md §2).
+
+Objective (paper Eq. 7): ξ* = argmin Σ_i [1 − M(S_i(ξ))]², M the bilinearly interpolated
+occupancy probability of one level, S_i(ξ) = R(θ)s_i + t in that level's cells.
+Per level, H = Σ JᵀJ and g = Σ (1−M)·J with J = (Mx, My, ∇M·∂S/∂θ) (hector_slam.md §2.3).
+
+``step_mode="gauss_newton"`` takes the reference's raw step Δ = H⁻¹g (hector_slam.md §2.4,
+but with the step bounds applied); ``"lm"`` solves (H + λ·diag H)Δ = g, bounds Δ, and
+accepts the step only if the cost drops (λ ÷ 10), otherwise λ × 10 — so no single step can
+throw the pose away (the reference once took a 14 m step when people walked by).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from dynslam2d.slam.grid import GridLevel
+from dynslam2d.slam.interp import interp_value_grad
+
+
+#: An accepted LM step smaller than this (cells and rad) ends the iterations on a level early;
+#: it only saves time (the reference always runs all steps).
+_CONVERGED_CELLS = 1e-3
+_CONVERGED_RAD = 1e-5
+
+
+@njit(cache=True)
+def accumulate(prob, pts, x, y, th, swapped, H, g):  # pragma: no cover - numba
+    """Fill H (3, 3) and g (3,) at map pose (x, y, θ); return (cost, Σ M, n_inside).
+
+    cost = Σ (1−M)² over all points, out-of-bounds points counting M = 0;
+    out-of-bounds points add nothing to H, g (hector_slam.md §2.3).
+    """
+    c = math.cos(th)
+    s = math.sin(th)
+    for a in range(3):
+        g[a] = 0.0
+        for b in range(3):
+            H[a, b] = 0.0
+    cost = 0.0
+    summ = 0.0
+    n_in = 0
+    for i in range(pts.shape[0]):
+        sx = pts[i, 0]
+        sy = pts[i, 1]
+        qx = c * sx - s * sy + x
+        qy = s * sx + c * sy + y
+        m, mx, my, inside = interp_value_grad(prob, qx, qy, swapped)
+        r = 1.0 - m
+        cost += r * r
+        if not inside:
+            continue
+        summ += m
+        n_in += 1
+        dth = (-s * sx - c * sy) * mx + (c * sx - s * sy) * my  # hector_slam.md §2.3 step 3
+        g[0] += r * mx
+        g[1] += r * my
+        g[2] += r * dth
+        H[0, 0] += mx * mx
+        H[0, 1] += mx * my
+        H[0, 2] += mx * dth
+        H[1, 1] += my * my
+        H[1, 2] += my * dth
+        H[2, 2] += dth * dth
+    H[1, 0] = H[0, 1]
+    H[2, 0] = H[0, 2]
+    H[2, 1] = H[1, 2]
+    return cost, summ, n_in
+
+
+@njit(cache=True)
+def cost_at(prob, pts, x, y, th):  # pragma: no cover - numba
+    """Σ (1−M)² at map pose (x, y, θ) (out-of-bounds points count M = 0)."""
+    c = math.cos(th)
+    s = math.sin(th)
+    cost = 0.0
+    for i in range(pts.shape[0]):
+        sx = pts[i, 0]
+        sy = pts[i, 1]
+        m, _, _, _ = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, False)
+        cost += (1.0 - m) * (1.0 - m)
+    return cost
+
+
+@njit(cache=True)
+def fraction_below(prob, pts, x, y, th, thresh):  # pragma: no cover - numba
+    """Fraction of points whose interpolated probability at map pose (x, y, θ) is in bounds and
+    below ``thresh`` — endpoints that land in space the map knows to be free."""
+    c = math.cos(th)
+    s = math.sin(th)
+    n = 0
+    for i in range(pts.shape[0]):
+        sx = pts[i, 0]
+        sy = pts[i, 1]
+        m, _, _, inside = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, False)
+        if inside and m < thresh:
+            n += 1
+    return n / max(pts.shape[0], 1)
+
+
+@njit(cache=True)
+def _solve3(A, b, out):  # pragma: no cover - numba
+    """Solve the 3×3 system A·out = b by the adjugate; return False if A is (near) singular."""
+    c00 = A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]
+    c01 = A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]
+    c02 = A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]
+    det = A[0, 0] * c00 + A[0, 1] * c01 + A[0, 2] * c02
+    scale = abs(A[0, 0] * A[1, 1] * A[2, 2]) + 1e-300
+    if not (abs(det) > 1e-12 * scale) or not math.isfinite(det):
+        return False
+    inv00 = c00 / det
+    inv01 = (A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]) / det
+    inv02 = (A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]) / det
+    inv10 = c01 / det
+    inv11 = (A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]) / det
+    inv12 = (A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]) / det
+    inv20 = c02 / det
+    inv21 = (A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]) / det
+    inv22 = (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]) / det
+    out[0] = inv00 * b[0] + inv01 * b[1] + inv02 * b[2]
+    out[1] = inv10 * b[0] + inv11 * b[1] + inv12 * b[2]
+    out[2] = inv20 * b[0] + inv21 * b[1] + inv22 * b[2]
+    return math.isfinite(out[0]) and math.isfinite(out[1]) and math.isfinite(out[2])
+
+
+@njit(cache=True)
+def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans):  # pragma: no cover
+    """Run ``n_iter`` GN/LM steps on one level from map pose ``pose`` (x, y cells, θ rad).
+
+    Returns (pose (3,), number of accepted steps). Steps are bounded: |Δθ| ≤ max_rot
+    (reference ±0.2 rad clamp), |Δxy| ≤ max_trans cells. With an empty map (H00 or H11 = 0)
+    no step is taken (hector_slam.md §2.4).
+    """
+    H = np.zeros((3, 3))
+    g = np.zeros(3)
+    A = np.zeros((3, 3))
+    d = np.zeros(3)
+    x = pose[0]
+    y = pose[1]
+    th = pose[2]
+    cost, _, _ = accumulate(prob, pts, x, y, th, swapped, H, g)
+    lam = lam0
+    n_acc = 0
+    for _ in range(n_iter):
+        if H[0, 0] == 0.0 or H[1, 1] == 0.0:
+            break
+        for a in range(3):
+            for b in range(3):
+                A[a, b] = H[a, b]
+        if use_lm:
+            for a in range(3):
+                A[a, a] += lam * H[a, a] + 1e-9
+        if not _solve3(A, g, d):
+            if use_lm:
+                lam *= 10.0
+                if lam > lam_max:
+                    break
+                continue
+            break
+        # bounded step: reference rotation clamp + translation trust bound
+        if d[2] > max_rot:
+            d[2] = max_rot
+        elif d[2] < -max_rot:
+            d[2] = -max_rot
+        nt = math.sqrt(d[0] * d[0] + d[1] * d[1])
+        if nt > max_trans:
+            d[0] *= max_trans / nt
+            d[1] *= max_trans / nt
+        nx = x + d[0]
+        ny = y + d[1]
+        nth = th + d[2]
+        if use_lm:
+            new_cost = cost_at(prob, pts, nx, ny, nth)
+            if new_cost < cost:
+                x, y, th = nx, ny, nth
+                cost, _, _ = accumulate(prob, pts, x, y, th, swapped, H, g)
+                lam = max(lam * 0.1, 1e-7)
+                n_acc += 1
+                if nt < _CONVERGED_CELLS and abs(d[2]) < _CONVERGED_RAD:
+                    break
+            else:
+                lam *= 10.0
+                if lam > lam_max:
+                    break
+        else:
+            x, y, th = nx, ny, nth
+            cost, _, _ = accumulate(prob, pts, x, y, th, swapped, H, g)
+            n_acc += 1
+    out = np.empty(3)
+    out[0] = x
+    out[1] = y
+    out[2] = th
+    return out, n_acc
+
+
+@dataclass(slots=True)
+class LevelFit:
+    """Evaluation of a world pose on one level.
+
+    Attributes:
+        hessian: (3, 3) H in that level's cells / rad (hector_slam.md §2.6).
+        cost: Σ (1−M)², dimensionless.
+        score: mean interpolated occupancy probability over all points (out-of-bounds = 0).
+        n_inside: points that fell inside the map.
+    """
+
+    hessian: np.ndarray
+    cost: float
+    score: float
+    n_inside: int
+
+
+def evaluate(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, swapped: bool = False) -> LevelFit:
+    """H, cost and score of laser-frame points ``pts_m`` (n, 2, m) at ``pose_world`` on ``level``."""
+    H = np.zeros((3, 3))
+    g = np.zeros(3)
+    if level.empty or pts_m.shape[0] == 0:
+        return LevelFit(H, float(pts_m.shape[0]), 0.0, 0)
+    mp = level.pose_to_map(pose_world)
+    cost, summ, n_in = accumulate(level.prob, pts_m / level.resolution, mp[0], mp[1], mp[2], swapped, H, g)
+    return LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in))
+
+
+def match_multires(
+    levels: list[GridLevel],
+    pts_m: np.ndarray,
+    start_world: np.ndarray,
+    iterations_coarse: int,
+    iterations_finest: int,
+    swapped: bool = False,
+    use_lm: bool = True,
+    lam0: float = 0.1,
+    lam_max: float = 1e4,
+    max_rot: float = 0.2,
+    max_trans_cells: float = 2.0,
+) -> np.ndarray:
+    """Coarse-to-fine matching (hector_slam.md §2.5): from the coarsest level down to level 0,
+    each level starting at the previous level's result; θ wrapped after each level.
+
+    ``pts_m``: (n, 2) points in the laser frame, m. ``start_world``: (x m, y m, θ rad).
+    Returns the world pose (3,).
+    """
+    pose = np.asarray(start_world, dtype=np.float64).copy()
+    if pts_m.shape[0] == 0:
+        return pose
+    for k in range(len(levels) - 1, -1, -1):
+        lv = levels[k]
+        if lv.empty:
+            continue
+        n_iter = iterations_finest if k == 0 else iterations_coarse
+        if n_iter <= 0:
+            continue
+        mp = lv.pose_to_map(pose)
+        out, _ = match_level(
+            lv.prob, pts_m / lv.resolution, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells
+        )
+        if not np.all(np.isfinite(out)):
+            return np.full(3, np.nan)
+        pose = lv.pose_to_world(out)
+        pose[2] = (pose[2] + math.pi) % (2.0 * math.pi) - math.pi  # wrap after each level (§2.5)
+    return pose
+
+
+def free_fraction(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, thresh: float) -> float:
+    """Fraction of laser-frame points ``pts_m`` that fall on cells of ``level`` whose interpolated
+    occupancy probability is below ``thresh`` at ``pose_world`` (0 on an empty level)."""
+    if level.empty or pts_m.shape[0] == 0:
+        return 0.0
+    mp = level.pose_to_map(pose_world)
+    return float(fraction_below(level.prob, pts_m / level.resolution, mp[0], mp[1], mp[2], thresh))
+
+
+def covariance_world(hessian: np.ndarray, sigma2: float, resolution: float) -> np.ndarray:
+    """σ²·H⁻¹ converted from level-0 cell units to world units (hector_slam.md §2.6).
+
+    A singular or indefinite H (empty map, degenerate corridor) is guarded by flooring its
+    eigenvalues at 1e-9 of the largest, so the variance along a degenerate direction is large
+    but finite. An all-zero H gives diag(1e6 m², 1e6 m², π² rad²).
+    """
+    Hs = 0.5 * (hessian + hessian.T)
+    if not np.all(np.isfinite(Hs)):
+        return np.diag([1e6, 1e6, math.pi**2])
+    w, V = np.linalg.eigh(Hs)
+    wmax = float(w.max())
+    if not wmax > 0.0:
+        return np.diag([1e6, 1e6, math.pi**2])
+    wc = np.maximum(w, wmax * 1e-9)
+    C = (V / wc) @ V.T * sigma2
+    S = np.diag([resolution, resolution, 1.0])
+    C = S @ C @ S
+    return 0.5 * (C + C.T)

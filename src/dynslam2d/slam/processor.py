@@ -1,0 +1,425 @@
+"""Hector-style SLAM processor: one scan in, one pose out (hector_slam.md §3).
+
+``HectorSlam.process(scan)`` = :meth:`~HectorSlam.match` (pose estimate, no map change) +
+:meth:`~HectorSlam.update_map` (integrate into every level if the distance / angle
+thresholds are exceeded, always on the first scan). A pipeline that removes moving
+objects calls the two halves itself: match with the movers' points removed, then update
+the map with the filtered scan.
+
+Frames: every pose is the **laser** pose in the map frame; the map frame is the laser pose
+of the first accepted scan (or the ``predicted`` pose given with it).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dynslam2d.gridmap import GridMap
+from dynslam2d.slam.config import SlamConfig
+from dynslam2d.slam.correlative import correlative_search
+from dynslam2d.slam.grid import MapTooLargeError, MultiResMap
+from dynslam2d.slam.matcher import covariance_world, evaluate, free_fraction, match_multires
+from dynslam2d.types import Pose2D, Scan, wrap_angle
+
+#: Reasons a scan is skipped (no matching, no map update).
+SKIP_TOO_FEW_POINTS = "too_few_points"
+#: Reasons a match is rejected (pose reported, map not updated).
+REJECT_NON_FINITE = "non_finite_pose"
+REJECT_JUMP = "jump"
+REJECT_LOW_SCORE = "low_score"
+REJECT_FREE_SPACE = "endpoints_in_free_space"
+#: 'auto' correlative mode searches on the first matches, before a score average exists.
+_WARMUP_SEARCHES = 3
+#: Interpolated probability below which an endpoint counts as landing in known free space.
+FREE_SPACE_PROB = 0.45
+
+
+@dataclass(slots=True)
+class MatchResult:
+    """Result of matching one scan against the current map (the map is not changed).
+
+    Attributes:
+        pose: estimated laser pose in the map frame (m, rad). For a skipped scan or a rejected
+            jump / non-finite match this is the start estimate.
+        start: the start estimate used (m, rad).
+        covariance: (3, 3) σ²·H⁻¹ in world units (m², m·rad, rad²), order (x, y, θ).
+        hessian: (3, 3) raw Gauss–Newton Hessian at ``pose`` on level 0, in level-0 cell / rad
+            units — what hector_mapping publishes as "covariance" (hector_slam.md §2.6).
+        score: mean interpolated occupancy probability of the endpoints on level 0 at ``pose``
+            (0 … 1; 0 on an empty map).
+        n_points: valid returns used (after the range gates).
+        free_fraction: fraction of the endpoints that land in known free space (level 1) at ``pose``.
+        used_correlative: a correlative search seeded Gauss–Newton.
+        rejected: the match is not fit to be written into the map.
+        reason: why it was skipped / rejected (None if fine).
+        skipped: the scan had too little data to match (``reason`` says why).
+        time_gap: the stamp jumped by more than ``max_time_gap`` (or went backwards).
+        first: this is the first scan (the map is empty; pose = start estimate).
+        match_ms: wall time of the matching, ms.
+        points: (n, 2) the gated returns in the laser frame, m (what the map update uses).
+        clear_points: (m, 2) ends of the free-space clearing rays in the laser frame, m.
+    """
+
+    pose: Pose2D
+    start: Pose2D
+    covariance: np.ndarray
+    hessian: np.ndarray
+    score: float
+    n_points: int
+    free_fraction: float = 0.0
+    used_correlative: bool = False
+    rejected: bool = False
+    reason: str | None = None
+    skipped: bool = False
+    time_gap: bool = False
+    first: bool = False
+    match_ms: float = 0.0
+    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
+    clear_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
+
+
+@dataclass(slots=True)
+class SlamStep:
+    """What :meth:`HectorSlam.process` returns for one scan.
+
+    Attributes:
+        index: 0-based index of the scan among all scans given to this processor.
+        stamp: the scan's stamp, s.
+        pose: laser pose in the map frame (m, rad).
+        covariance: (3, 3) world-unit covariance (m², m·rad, rad²).
+        hessian: (3, 3) raw Hessian, level-0 cells / rad.
+        score: match quality (see :class:`MatchResult`).
+        free_fraction: fraction of endpoints in known free space (see :class:`MatchResult`).
+        map_updated: the scan was integrated into the map.
+        rejected: the match was judged bad and not written into the map.
+        skipped: the scan was not matched (too little data).
+        reason: skip / reject reason, or None.
+        used_correlative: a correlative search seeded the match.
+        time_gap: a stamp gap or backward stamp was seen before this scan.
+        n_points: returns used.
+        match_ms, update_ms: wall times, ms.
+    """
+
+    index: int
+    stamp: float
+    pose: Pose2D
+    covariance: np.ndarray
+    hessian: np.ndarray
+    score: float
+    free_fraction: float
+    map_updated: bool
+    rejected: bool
+    skipped: bool
+    reason: str | None
+    used_correlative: bool
+    time_gap: bool
+    n_points: int
+    match_ms: float
+    update_ms: float
+
+
+class HectorSlam:
+    """Multi-resolution log-odds mapping + scan-to-map matching, no odometry required.
+
+    >>> from dynslam2d.slam import HectorSlam, SlamConfig
+    >>> slam = HectorSlam(SlamConfig())
+    >>> # for scan in source: step = slam.process(scan)
+    """
+
+    def __init__(self, config: SlamConfig | None = None) -> None:
+        self.config = config if config is not None else SlamConfig()
+        c = self.config
+        self.map = MultiResMap(
+            c.map_resolution, c.map_levels, c.logodds_free, c.logodds_occupied,
+            c.occupied_logodds_cap, c.map_growth_margin, int(c.max_map_memory_mb * 1e6),
+        )
+        self.counts: Counter[str] = Counter()
+        self.n_scans = 0
+        self.n_map_updates = 0
+        self._last_pose: Pose2D | None = None
+        self._last_stamp: float | None = None
+        self._velocity: np.ndarray | None = None  # (vx, vy, ω) in the previous laser frame, per s
+        self._last_motion = (0.0, 0.0)  # (|Δxy| m, |Δθ| rad) between the last two poses
+        self._last_map_pose: Pose2D | None = None
+        self._score_avg: float | None = None
+        self._force_search = False
+        self._n_accepted = 0  # accepted matches against a non-empty map
+
+    # ---- properties --------------------------------------------------------------------
+    @property
+    def pose(self) -> Pose2D | None:
+        """The last estimated laser pose in the map frame, or None before the first scan."""
+        return self._last_pose
+
+    @property
+    def memory_bytes(self) -> int:
+        """Bytes held by the map levels."""
+        return self.map.memory_bytes
+
+    def gridmap(self, level: int = 0) -> GridMap:
+        """The map of ``level`` (0 = finest) as probabilities, NaN = never observed, cropped to the
+        observed area."""
+        return self.map.to_gridmap(level)
+
+    def logodds(self, level: int = 0) -> tuple[np.ndarray, tuple[float, float]]:
+        """(raw log-odds array (H, W), row 0 at the bottom; world (x, y) of the lower-left corner
+        of cell (0, 0), m) of ``level``, cropped to the observed area."""
+        return self.map.export_logodds(level)
+
+    def summary(self) -> dict[str, object]:
+        """Counters for a run summary: scans, map updates, skip/reject reasons, memory."""
+        return {
+            "scans": self.n_scans,
+            "map_updates": self.n_map_updates,
+            "reasons": dict(self.counts),
+            "memory_bytes": self.memory_bytes,
+            "map_grows": sum(lv.n_grows for lv in self.map.levels),
+        }
+
+    # ---- preprocessing -----------------------------------------------------------------
+    def scan_points(self, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
+        """(returns (n, 2), clearing-ray ends (m, 2)) in the laser frame, m.
+
+        Returns: finite ranges inside the sensor limits and strictly inside
+        (laser_min_dist, laser_max_dist) (hector_slam.md §3.1). Clearing rays (only if
+        ``clear_no_return_dist`` > 0): beams without a return, ending at that distance.
+        """
+        c = self.config
+        r = scan.ranges
+        with np.errstate(invalid="ignore"):
+            valid = scan.valid_mask() & (r > c.laser_min_dist) & (r < c.laser_max_dist)
+        pts = scan.points(valid)
+        if c.clear_no_return_dist > 0.0:
+            with np.errstate(invalid="ignore"):
+                # no return: NaN / inf / beyond the sensor's range_max (not "too close")
+                noret = ~np.isfinite(r) | (r > scan.range_max) | (r >= c.laser_max_dist)
+            a = scan.angles[noret]
+            d = c.clear_no_return_dist
+            clear = np.column_stack((d * np.cos(a), d * np.sin(a)))
+        else:
+            clear = np.zeros((0, 2))
+        return pts, clear
+
+    # ---- prediction --------------------------------------------------------------------
+    def _predict(self, stamp: float) -> tuple[Pose2D, bool]:
+        """Start estimate for a scan at ``stamp`` and whether a time gap was seen."""
+        c = self.config
+        gap = False
+        dt = None
+        if self._last_stamp is not None:
+            dt = stamp - self._last_stamp
+            if dt < 0.0 or dt > c.max_time_gap:
+                gap = True
+        if self._last_pose is None:
+            return Pose2D(), gap
+        if c.constant_velocity and not gap and self._velocity is not None and dt is not None:
+            v = self._velocity * dt
+            return self._last_pose.compose(Pose2D(float(v[0]), float(v[1]), float(v[2]))), gap
+        return self._last_pose, gap
+
+    # ---- matching ----------------------------------------------------------------------
+    def match(self, scan: Scan, predicted: Pose2D | None = None, commit: bool = True) -> MatchResult:
+        """Estimate the laser pose of ``scan`` against the current map; the map is not changed.
+
+        ``predicted`` overrides the internal start estimate (previous pose, or constant velocity).
+        With ``commit`` (default) the result becomes the processor's current pose (the start of
+        the next prediction) and the counters are updated; pass False to only look.
+        """
+        c = self.config
+        t0 = time.perf_counter()
+        pts, clear = self.scan_points(scan)
+        start, gap = self._predict(scan.stamp)
+        if predicted is not None:
+            if not predicted.is_finite():
+                predicted = None
+            else:
+                start = predicted
+        first = self.map.empty
+        zero = np.zeros((3, 3))
+        res = MatchResult(
+            pose=start, start=start, covariance=np.diag([1e6, 1e6, math.pi**2]), hessian=zero,
+            score=0.0, n_points=int(pts.shape[0]), time_gap=gap, first=first, points=pts, clear_points=clear,
+        )
+        if pts.shape[0] < c.min_points:
+            res.skipped = True
+            res.rejected = True
+            res.reason = SKIP_TOO_FEW_POINTS
+        elif first:
+            res.covariance = np.zeros((3, 3))
+        else:
+            self._match_against_map(res, pts)
+        res.match_ms = (time.perf_counter() - t0) * 1e3
+        if commit:
+            self._commit(scan.stamp, res)
+        return res
+
+    def _match_against_map(self, res: MatchResult, pts: np.ndarray) -> None:
+        c = self.config
+        levels = self.map.levels
+        start = res.start.as_array()
+
+        def refine(seed: np.ndarray) -> tuple[np.ndarray, float]:
+            p = match_multires(
+                levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
+                c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
+                c.max_translation_step,
+            )
+            if not np.all(np.isfinite(p)):
+                return p, -1.0
+            return p, evaluate(levels[0], pts, p).score
+
+        def search() -> tuple[np.ndarray, float] | None:
+            lvl = levels[min(c.correlative_level, len(levels) - 1)]
+            cr = correlative_search(
+                lvl, pts, start, c.correlative_linear_window, c.correlative_angular_window,
+                c.correlative_angular_step, c.correlative_max_points, c.correlative_max_height,
+                c.correlative_translation_weight, c.correlative_rotation_weight,
+            )
+            if cr is None:
+                return None
+            return refine(cr.pose)
+
+        mode = c.correlative_mode
+        big_motion = (
+            self._last_motion[0] > c.correlative_trigger_distance
+            or self._last_motion[1] > c.correlative_trigger_angle
+        )
+        pre_search = mode == "always" or (
+            mode == "auto"
+            and (big_motion or res.time_gap or self._force_search or self._n_accepted < _WARMUP_SEARCHES)
+        )
+        best_p, best_s = refine(start)
+        if mode != "never" and not pre_search and self._score_avg is not None:
+            pre_search = best_s < c.poor_match_ratio * self._score_avg
+        if pre_search:
+            found = search()
+            if found is not None and found[1] > best_s:
+                best_p, best_s = found
+                res.used_correlative = True
+
+        if not np.all(np.isfinite(best_p)):
+            res.rejected = True
+            res.reason = REJECT_NON_FINITE
+            return
+        pose = Pose2D(float(best_p[0]), float(best_p[1]), float(wrap_angle(best_p[2])))
+        d = res.start.between(pose)
+        if math.hypot(d.x, d.y) > c.max_jump_distance or abs(d.theta) > c.max_jump_angle:
+            res.rejected = True
+            res.reason = REJECT_JUMP
+            return
+        fit = evaluate(levels[0], pts, pose.as_array(), c.hector_gradient_bug)
+        res.pose = pose
+        res.hessian = fit.hessian
+        res.score = fit.score
+        if c.covariance_sigma is not None:
+            sigma2 = c.covariance_sigma**2
+        else:
+            sigma2 = fit.cost / max(pts.shape[0] - 3, 1)
+        res.covariance = covariance_world(fit.hessian, sigma2, self.map.resolution)
+        avg = self._score_avg
+        res.free_fraction = free_fraction(levels[min(1, len(levels) - 1)], pts, pose.as_array(), FREE_SPACE_PROB)
+        if fit.score < c.reject_score_min or (avg is not None and fit.score < c.reject_score_ratio * avg):
+            res.rejected = True
+            res.reason = REJECT_LOW_SCORE
+        elif res.free_fraction > c.reject_free_fraction:
+            res.rejected = True
+            res.reason = REJECT_FREE_SPACE
+
+    def _commit(self, stamp: float, res: MatchResult) -> None:
+        c = self.config
+        self.n_scans += 1
+        if res.time_gap:
+            self.counts["time_gap"] += 1
+            self._velocity = None
+        if res.used_correlative:
+            self.counts["correlative"] += 1
+        if res.reason is not None:
+            self.counts[res.reason] += 1
+        if res.skipped:
+            self._last_stamp = stamp
+            self._force_search = True
+            return
+        prev = self._last_pose
+        self._last_pose = res.pose
+        if prev is not None:
+            d = prev.between(res.pose)
+            self._last_motion = (math.hypot(d.x, d.y), abs(d.theta))
+            dt = stamp - self._last_stamp if self._last_stamp is not None else 0.0
+            if 0.0 < dt <= c.max_time_gap and not res.rejected:
+                self._velocity = np.array([d.x, d.y, d.theta]) / dt
+        self._last_stamp = stamp
+        self._force_search = res.rejected
+        if not res.rejected and not res.first:
+            self._n_accepted += 1
+            a = c.score_average_rate
+            self._score_avg = res.score if self._score_avg is None else (1 - a) * self._score_avg + a * res.score
+
+    # ---- map update --------------------------------------------------------------------
+    def needs_map_update(self, pose: Pose2D) -> bool:
+        """True on the first scan or once the pose moved beyond the distance / angle thresholds
+        from the last map update (hector_slam.md §3.3)."""
+        if self._last_map_pose is None or self.map.empty:
+            return True
+        d = self._last_map_pose.between(pose)
+        dist = math.hypot(pose.x - self._last_map_pose.x, pose.y - self._last_map_pose.y)
+        c = self.config
+        return dist > c.map_update_distance_thresh or abs(d.theta) > c.map_update_angle_thresh
+
+    def update_map(self, scan: Scan, pose: Pose2D, force: bool = False) -> bool:
+        """Integrate ``scan`` taken at laser pose ``pose`` into every level, if the thresholds
+        say so (or ``force``). Non-finite poses and scans with fewer than ``min_points`` returns
+        never touch the map. Returns True if the map was updated."""
+        if not pose.is_finite():
+            self.counts["update_refused_non_finite"] += 1
+            return False
+        if not (force or self.needs_map_update(pose)):
+            return False
+        pts, clear = self.scan_points(scan)
+        return self._integrate(pts, clear, pose)
+
+    def _integrate(self, pts: np.ndarray, clear: np.ndarray, pose: Pose2D) -> bool:
+        if pts.shape[0] < self.config.min_points or not pose.is_finite():
+            return False
+        if not np.all(np.isfinite(pts)):
+            pts = pts[np.all(np.isfinite(pts), axis=1)]
+        try:
+            self.map.integrate(pose, pts, clear if clear.shape[0] else None)
+        except MapTooLargeError:
+            self.counts["map_too_large"] += 1
+            return False
+        self._last_map_pose = pose
+        self.n_map_updates += 1
+        return True
+
+    # ---- both --------------------------------------------------------------------------
+    def process(self, scan: Scan, predicted: Pose2D | None = None) -> SlamStep:
+        """Match ``scan`` and, unless the match was rejected or skipped, update the map."""
+        res = self.match(scan, predicted)
+        t0 = time.perf_counter()
+        updated = False
+        if not res.rejected and self.needs_map_update(res.pose):
+            updated = self._integrate(res.points, res.clear_points, res.pose)
+        update_ms = (time.perf_counter() - t0) * 1e3
+        return SlamStep(
+            index=self.n_scans - 1,
+            stamp=scan.stamp,
+            pose=res.pose,
+            covariance=res.covariance,
+            hessian=res.hessian,
+            score=res.score,
+            free_fraction=res.free_fraction,
+            map_updated=updated,
+            rejected=res.rejected,
+            skipped=res.skipped,
+            reason=res.reason,
+            used_correlative=res.used_correlative,
+            time_gap=res.time_gap,
+            n_points=res.n_points,
+            match_ms=res.match_ms,
+            update_ms=update_ms,
+        )

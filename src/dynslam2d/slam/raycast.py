@@ -1,0 +1,158 @@
+"""Scan integration into one log-odds grid level: Bresenham rays (numba).
+
+Implements hector_slam.md §1.3–1.4 exactly:
+
+* the integer Bresenham variant of the reference (major axis = larger |Δ|, ties to x,
+  error starts at |Δa|/2, the start cell and every intermediate cell are free, the
+  endpoint cell is not marked free);
+* at most one free and one occupied update per cell per scan, occupied winning
+  (a free update made earlier in the same scan is undone), via per-cell update indices;
+* a hit is added only while the log-odds is below the cap; the free side is unbounded.
+
+Grid arrays are indexed ``[row, col]`` = ``[y, x]`` in cell units of the level.
+The probability cache (``prob``) is refreshed for every touched cell, so the matcher
+never needs a full-map recomputation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def _mark_free(logodds, prob, uidx, x, y, free_idx, l_free):  # pragma: no cover - numba
+    # hector_slam.md §1.4: at most one free update per cell per scan
+    if uidx[y, x] < free_idx:
+        v = logodds[y, x] + l_free
+        logodds[y, x] = v
+        prob[y, x] = 1.0 / (1.0 + math.exp(-v))
+        uidx[y, x] = free_idx
+
+
+@njit(cache=True)
+def _mark_occupied(logodds, prob, uidx, x, y, free_idx, occ_idx, l_free, l_occ, cap):  # pragma: no cover
+    # hector_slam.md §1.4: occupied wins; undo this scan's free update first
+    u = uidx[y, x]
+    if u < occ_idx:
+        v = logodds[y, x]
+        if u == free_idx:
+            v -= l_free
+        if v < cap:  # hector_slam.md §1.2: soft cap on the occupied side only
+            v += l_occ
+        logodds[y, x] = v
+        prob[y, x] = 1.0 / (1.0 + math.exp(-v))
+        uidx[y, x] = occ_idx
+
+
+@njit(cache=True)
+def integrate_rays(
+    logodds: np.ndarray,
+    prob: np.ndarray,
+    uidx: np.ndarray,
+    free_idx: int,
+    occ_idx: int,
+    sx: int,
+    sy: int,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    hit: np.ndarray,
+    l_free: float,
+    l_occ: float,
+    cap: float,
+) -> int:  # pragma: no cover - numba
+    """Integrate rays from cell (sx, sy) to cells (ex[k], ey[k]) into one level.
+
+    ``hit[k]`` True: a return (start + intermediate cells free, endpoint occupied);
+    False: a free-space clearing ray (every cell including the endpoint free).
+    Rays whose start or end cell lies outside the array are skipped whole
+    (hector_slam.md §1.3); rays ending in the start cell are skipped. Returns the
+    number of rays integrated.
+    """
+    h, w = logodds.shape
+    if sx < 0 or sy < 0 or sx >= w or sy >= h:
+        return 0
+    n_done = 0
+    for k in range(ex.shape[0]):
+        x1 = ex[k]
+        y1 = ey[k]
+        if x1 == sx and y1 == sy:
+            continue
+        if x1 < 0 or y1 < 0 or x1 >= w or y1 >= h:
+            continue
+        dx = x1 - sx
+        dy = y1 - sy
+        adx = abs(dx)
+        ady = abs(dy)
+        stx = 1 if dx > 0 else -1
+        sty = 1 if dy > 0 else -1
+        x = sx
+        y = sy
+        _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
+        if adx >= ady:  # major axis x (ties go to x), hector_slam.md §1.3
+            err = adx // 2
+            for _ in range(adx - 1):
+                x += stx
+                err += ady
+                if err >= adx:
+                    y += sty
+                    err -= adx
+                _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
+        else:
+            err = ady // 2
+            for _ in range(ady - 1):
+                y += sty
+                err += adx
+                if err >= ady:
+                    x += stx
+                    err -= ady
+                _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
+        if hit[k]:
+            _mark_occupied(logodds, prob, uidx, x1, y1, free_idx, occ_idx, l_free, l_occ, cap)
+        else:
+            _mark_free(logodds, prob, uidx, x1, y1, free_idx, l_free)
+        n_done += 1
+    return n_done
+
+
+@njit(cache=True)
+def bresenham_free_cells(x0: int, y0: int, x1: int, y1: int) -> np.ndarray:  # pragma: no cover - numba
+    """(m, 2) int64 (x, y) cells the reference marks free on a ray from (x0, y0) to (x1, y1):
+    the start cell and all intermediate cells, not the endpoint (hector_slam.md §1.3)."""
+    dx = x1 - x0
+    dy = y1 - y0
+    adx = abs(dx)
+    ady = abs(dy)
+    n = max(adx, ady)
+    out = np.empty((max(n, 1), 2), dtype=np.int64)
+    if n == 0:
+        return out[:0]
+    stx = 1 if dx > 0 else -1
+    sty = 1 if dy > 0 else -1
+    x = x0
+    y = y0
+    out[0, 0] = x
+    out[0, 1] = y
+    if adx >= ady:
+        err = adx // 2
+        for i in range(adx - 1):
+            x += stx
+            err += ady
+            if err >= adx:
+                y += sty
+                err -= adx
+            out[i + 1, 0] = x
+            out[i + 1, 1] = y
+    else:
+        err = ady // 2
+        for i in range(ady - 1):
+            y += sty
+            err += adx
+            if err >= ady:
+                x += stx
+                err -= ady
+            out[i + 1, 0] = x
+            out[i + 1, 1] = y
+    return out

@@ -1,0 +1,223 @@
+"""Log-odds grid levels: ray integration (hector_slam.md §1.3–1.4), Bresenham, growth, export."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dynslam2d.slam import HectorSlam, SlamConfig
+from dynslam2d.slam.grid import GridLevel, MultiResMap
+from dynslam2d.slam.raycast import bresenham_free_cells
+from dynslam2d.types import Pose2D, Scan
+
+L_FREE = math.log(0.4 / 0.6)
+L_OCC = math.log(0.9 / 0.1)
+
+
+def cell(level: GridLevel, i: int, j: int) -> float:
+    """Log-odds of the cell with absolute index (i, j)."""
+    return float(level.logodds[j - level.j0, i - level.i0])
+
+
+def touched(level: GridLevel) -> set[tuple[int, int]]:
+    rows, cols = np.nonzero(level.uidx >= 0)
+    return {(int(c) + level.i0, int(r) + level.j0) for r, c in zip(rows, cols)}
+
+
+# --------------------------------------------------------------------------- Bresenham
+
+@pytest.mark.parametrize(
+    ("end", "expected"),
+    [
+        # hand-worked with the reference variant: error starts at |Δa|//2, endpoint excluded
+        ((5, 2), [(0, 0), (1, 0), (2, 1), (3, 1), (4, 2)]),
+        ((2, 5), [(0, 0), (0, 1), (1, 2), (1, 3), (2, 4)]),
+        ((-4, -4), [(0, 0), (-1, -1), (-2, -2), (-3, -3)]),  # tie |Δx| = |Δy| → x major
+        ((3, -1), [(0, 0), (1, 0), (2, -1)]),
+        ((-5, 1), [(0, 0), (-1, 0), (-2, 0), (-3, 1), (-4, 1)]),
+        ((0, -3), [(0, 0), (0, -1), (0, -2)]),
+        ((1, 1), [(0, 0)]),
+    ],
+)
+def test_bresenham_matches_reference_variant(end, expected) -> None:
+    got = [tuple(int(v) for v in c) for c in bresenham_free_cells(0, 0, end[0], end[1])]
+    assert got == expected
+
+
+def test_bresenham_cells_hug_the_line() -> None:
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        x0, y0, x1, y1 = (int(v) for v in rng.integers(-40, 40, 4))
+        cells = bresenham_free_cells(x0, y0, x1, y1)
+        n = max(abs(x1 - x0), abs(y1 - y0))
+        assert len(cells) == n
+        if n == 0:
+            continue
+        # consecutive cells are 8-neighbours, the last one is an 8-neighbour of the endpoint
+        path = np.vstack((cells, [[x1, y1]]))
+        assert np.all(np.abs(np.diff(path, axis=0)).max(axis=1) == 1)
+        # every cell is within half a cell of the ideal line (minor-axis distance)
+        d = np.array([x1 - x0, y1 - y0], dtype=float)
+        rel = cells - [x0, y0]
+        if abs(d[0]) >= abs(d[1]):
+            dev = rel[:, 1] - rel[:, 0] * d[1] / d[0]
+        else:
+            dev = rel[:, 0] - rel[:, 1] * d[0] / d[1]
+        assert np.all(np.abs(dev) <= 0.5 + 1e-9)
+
+
+# --------------------------------------------------------------------------- integration
+
+def _level_1m() -> GridLevel:
+    lv = GridLevel(1.0, growth_margin_cells=2)
+    lv.ensure(-10, -10, 10, 10)
+    return lv
+
+
+def test_ray_integration_hand_worked_example() -> None:
+    lv = _level_1m()
+    ends = np.array([[5.0, 0.0], [3.0, 0.0], [5.0, 2.0]])
+    n = lv.integrate(np.zeros(2), ends, np.ones(3, bool), L_FREE, L_OCC, 50.0)
+    assert n == 3
+    free = {(0, 0), (1, 0), (2, 0), (4, 0), (2, 1), (3, 1), (4, 2)}
+    occ = {(3, 0), (5, 0), (5, 2)}
+    assert touched(lv) == free | occ
+    for c in free:  # crossed by up to three rays, but one free update per scan
+        assert cell(lv, *c) == pytest.approx(L_FREE, abs=1e-6)
+    for c in occ:  # (3, 0) was crossed (free) by the ray to (5, 0): the free update is undone
+        assert cell(lv, *c) == pytest.approx(L_OCC, abs=1e-6)
+    # probability cache follows the log-odds
+    j, i = 0 - lv.j0, 5 - lv.i0
+    assert lv.prob[j, i] == pytest.approx(0.9, abs=1e-6)
+    assert lv.prob[0 - lv.j0, 1 - lv.i0] == pytest.approx(0.4, abs=1e-6)
+
+    # a second scan adds exactly one more observation per cell
+    lv.integrate(np.zeros(2), ends[::-1].copy(), np.ones(3, bool), L_FREE, L_OCC, 50.0)
+    assert cell(lv, 1, 0) == pytest.approx(2 * L_FREE, abs=1e-5)
+    assert cell(lv, 3, 0) == pytest.approx(2 * L_OCC, abs=1e-5)
+
+
+def test_integration_is_order_independent_and_occupied_wins() -> None:
+    rng = np.random.default_rng(0)
+    ends = rng.uniform(-8, 8, (60, 2))
+    a, b = _level_1m(), _level_1m()
+    a.integrate(np.array([0.3, -0.2]), ends, np.ones(60, bool), L_FREE, L_OCC, 50.0)
+    perm = rng.permutation(60)
+    b.integrate(np.array([0.3, -0.2]), ends[perm], np.ones(60, bool), L_FREE, L_OCC, 50.0)
+    np.testing.assert_array_equal(a.logodds, b.logodds)
+    # set semantics: every endpoint cell has +l_occ, every other traversed cell +l_free
+    end_cells = {tuple(c) for c in np.floor(ends + 0.5).astype(int)}
+    for c in touched(a):
+        expect = L_OCC if c in end_cells else L_FREE
+        assert cell(a, *c) == pytest.approx(expect, abs=1e-6)
+
+
+def test_clearing_rays_mark_free_including_endpoint() -> None:
+    lv = _level_1m()
+    lv.integrate(np.zeros(2), np.array([[0.0, 4.0]]), np.zeros(1, bool), L_FREE, L_OCC, 50.0)
+    assert touched(lv) == {(0, 0), (0, 1), (0, 2), (0, 3), (0, 4)}
+    assert cell(lv, 0, 4) == pytest.approx(L_FREE, abs=1e-6)
+
+
+def test_occupied_cap() -> None:
+    lv = _level_1m()
+    for _ in range(30):
+        lv.integrate(np.zeros(2), np.array([[3.0, 0.0]]), np.ones(1, bool), L_FREE, L_OCC, 5.0)
+    # hits are added while l < 5: 0, 2.2, 4.4 → 6.6, then no more
+    assert cell(lv, 3, 0) == pytest.approx(3 * L_OCC, abs=1e-5)
+    assert cell(lv, 1, 0) == pytest.approx(30 * L_FREE, abs=1e-4)  # free side unbounded
+
+
+# --------------------------------------------------------------------------- growth
+
+def test_growth_keeps_content_in_every_direction() -> None:
+    lv = GridLevel(0.1, growth_margin_cells=3)
+    lv.integrate(np.zeros(2), np.array([[1.0, 0.3], [-0.4, 0.8], [0.2, -0.9]]), np.ones(3, bool),
+                 L_FREE, L_OCC, 50.0)
+    before = {c: cell(lv, *c) for c in touched(lv)}
+    shape0 = lv.shape
+    # scans far out in +x, −x, +y, −y (rays start there, so they do not cross the first scan)
+    for origin in ([30.0, 0.0], [-30.0, 0.0], [0.0, 25.0], [0.0, -25.0], [20.0, 20.0]):
+        o = np.array(origin)
+        lv.integrate(o, o + np.array([[0.5, 0.5]]), np.ones(1, bool), L_FREE, L_OCC, 50.0)
+    assert lv.n_grows >= 5
+    assert lv.shape[0] > shape0[0] + 400 and lv.shape[1] > shape0[1] + 500
+    for c, v in before.items():
+        assert cell(lv, *c) == v
+    assert cell(lv, 305, 5) == pytest.approx(L_OCC, abs=1e-6)  # endpoint of the +x scan
+    assert cell(lv, -295, 5) == pytest.approx(L_OCC, abs=1e-6)
+
+
+def test_ensure_is_noop_inside_and_world_coords_are_stable() -> None:
+    lv = GridLevel(0.05, growth_margin_cells=4)
+    assert lv.ensure(0, 0, 10, 10)
+    assert not lv.ensure(2, 3, 9, 9)
+    m_before = lv.world_to_map(np.array([[0.25, -0.1]]))
+    w_before = lv.map_to_world(m_before)
+    lv.ensure(-100, -100, 0, 0)
+    np.testing.assert_allclose(lv.map_to_world(lv.world_to_map(np.array([[0.25, -0.1]]))), w_before)
+    # world origin is the centre of absolute cell (0, 0): integer map coordinate after the shift
+    m0 = lv.world_to_map(np.zeros((1, 2)))[0]
+    np.testing.assert_allclose(m0, [-lv.i0, -lv.j0])
+
+
+# --------------------------------------------------------------------------- levels / export
+
+def _scan(ranges: np.ndarray, stamp: float = 0.0) -> Scan:
+    n = ranges.shape[0]
+    return Scan(stamp=stamp, angle_min=-math.pi, angle_increment=2 * math.pi / n, ranges=ranges,
+                range_min=0.05, range_max=20.0)
+
+
+def test_levels_are_updated_from_the_scan_not_downsampled() -> None:
+    m = MultiResMap(0.05, 3, L_FREE, L_OCC)
+    m.integrate(Pose2D(), np.array([[2.0, 0.0], [0.0, 1.5]]))
+    for k, lv in enumerate(m.levels):
+        assert lv.resolution == pytest.approx(0.05 * 2**k)
+        i = int(math.floor(2.0 / lv.resolution + 0.5))
+        assert cell(lv, i, 0) == pytest.approx(L_OCC, abs=1e-6)
+        assert cell(lv, i - 1, 0) == pytest.approx(L_FREE, abs=1e-6)
+    # a coarse cell holds one observation, not the sum/average of its fine cells
+    assert cell(m.levels[2], 5, 0) == pytest.approx(L_FREE, abs=1e-6)
+
+
+def test_gridmap_export_nan_unknown_and_origin() -> None:
+    slam = HectorSlam(SlamConfig(map_resolution=0.1, map_levels=2))
+    ranges = np.full(90, 2.0)
+    ranges[::2] = np.inf  # no return: never traced
+    slam.process(_scan(ranges))
+    gm = slam.gridmap()
+    lo, origin = slam.logodds()
+    assert gm.prob.shape == lo.shape
+    assert gm.origin == origin
+    assert np.isnan(gm.prob).any() and np.isfinite(gm.prob).any()
+    # the laser sits at world (0, 0): its cell is free; a point 2 m ahead (+x) is occupied
+    c, r = gm.world_to_cell(np.array([[0.0, 0.0], [2.0, 0.0]])).T
+    assert gm.prob[r[0], c[0]] < 0.5
+    known = np.isfinite(gm.prob)
+    np.testing.assert_allclose(gm.prob[known], 1 / (1 + np.exp(-lo[known].astype(float))), rtol=1e-6)
+    assert np.all(lo[~known] == 0)
+    # cell (0, 0)'s lower-left corner: world = corner + (col + 0.5)·r for cell centres
+    xs = gm.cell_centers()[0][0]
+    assert np.min(np.abs(xs - 0.0)) < 1e-9  # the map origin is a cell centre
+    assert slam.memory_bytes == sum(lv.nbytes for lv in slam.map.levels) > 0
+
+
+def test_clear_no_return_option() -> None:
+    ranges = np.full(180, np.inf)
+    ranges[:40] = 3.0
+    on = HectorSlam(SlamConfig(clear_no_return_dist=2.0))
+    off = HectorSlam(SlamConfig())
+    on.process(_scan(ranges))
+    off.process(_scan(ranges))
+    # beam 120 (angle ≈ +π/3) has no return: cleared to 2 m with the option, untouched without
+    a = -math.pi + 120 * 2 * math.pi / 180
+    p = np.array([[1.5 * math.cos(a), 1.5 * math.sin(a)]])
+    g_on, g_off = on.gridmap(), off.gridmap()
+    c, r = g_on.world_to_cell(p)[0]
+    assert g_on.prob[r, c] < 0.5
+    c, r = g_off.world_to_cell(p)[0]
+    inside = 0 <= r < g_off.prob.shape[0] and 0 <= c < g_off.prob.shape[1]
+    assert not inside or np.isnan(g_off.prob[r, c])
