@@ -199,6 +199,9 @@ def run(
     update_angle: Annotated[Optional[float], typer.Option("--update-angle", help="Map update after this rotation, rad [0.06].")] = None,
     laser_min_dist: Annotated[Optional[float], typer.Option("--laser-min-dist", help="Ignore returns closer than this, m [0.4].")] = None,
     laser_max_dist: Annotated[Optional[float], typer.Option("--laser-max-dist", help="Ignore returns farther than this, m [30].")] = None,
+    constant_velocity: Annotated[Optional[bool], typer.Option("--constant-velocity/--no-constant-velocity", help="Predict with constant velocity instead of the previous pose.")] = None,
+    correlative: Annotated[Optional[str], typer.Option("--correlative", help="Correlative search seed: auto, always or never [auto].")] = None,
+    hector_compat: Annotated[bool, typer.Option("--hector-compat", help="Behave like the reference hector_mapping: raw Gauss-Newton step, its swapped gradient, no correlative search.")] = False,
     seed: SeedOpt = None,
     duration: DurationOpt = None,
     skip_bad: SkipBadOpt = False,
@@ -222,7 +225,10 @@ def run(
         "map_resolution": map_resolution, "map_levels": map_levels,
         "map_update_distance_thresh": update_distance, "map_update_angle_thresh": update_angle,
         "laser_min_dist": laser_min_dist, "laser_max_dist": laser_max_dist,
+        "constant_velocity": constant_velocity, "correlative_mode": correlative,
     }})
+    if hector_compat:
+        cfg = with_overrides(cfg, {"slam": {"hector_gradient_bug": True, "step_mode": "gauss_newton", "correlative_mode": "never"}})
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad)
     out = out or _default_out("run")
     total = source.meta.count
@@ -295,19 +301,41 @@ JsonOpt = Annotated[bool, typer.Option("--json", help="Print the result as JSON 
 MaxDtOpt = Annotated[float, typer.Option("--max-dt", min=0.0, help="Largest stamp difference for associating poses, s.")]
 
 
+RefTopicOpt = Annotated[
+    Optional[str], typer.Option("--ref-topic", help="Pose topic when REFERENCE is a bag (e.g. /ego_pose).")
+]
+SensorOffsetOpt = Annotated[
+    tuple[float, float, float],
+    typer.Option("--sensor-offset", help="Laser pose in the reference body frame: x y yaw (m, m, rad)."),
+]
+
+
+def _estimate_path(estimate: Path) -> Path:
+    return estimate / "trajectory.tum" if estimate.is_dir() else estimate
+
+
 @eval_app.command("ate")
 def eval_ate(
-    reference: Annotated[Path, typer.Argument(help="Reference trajectory (TUM).")],
-    estimate: Annotated[Path, typer.Argument(help="Estimated trajectory (TUM).")],
+    reference: Annotated[Path, typer.Argument(help="Reference: TUM file, or a bag with --ref-topic.")],
+    estimate: Annotated[Path, typer.Argument(help="Estimated trajectory (TUM) or a run folder.")],
+    ref_topic: RefTopicOpt = None,
+    sensor_offset: SensorOffsetOpt = (0.0, 0.0, 0.0),
     no_align: Annotated[bool, typer.Option("--no-align", help="Do not SE(2)-align the estimate first.")] = False,
     max_dt: MaxDtOpt = 0.01,
     as_json: JsonOpt = False,
 ) -> None:
-    """Absolute trajectory error (translation), after SE(2) alignment, as evo_ape computes it."""
+    """Absolute trajectory error (translation), after SE(2) alignment, as evo_ape computes it.
+
+    Example (datmo bags, laser 0.12 m behind the motion-capture body):
+    dynslam2d eval ate parallel.bag RUN_DIR --ref-topic /ego_pose --sensor-offset -0.12 0 0
+    """
+    from dynslam2d.eval.reference import load_reference
     from dynslam2d.eval.trajectory import ate
     from dynslam2d.io.trajectory import read_tum
+    from dynslam2d.types import Pose2D
 
-    res = ate(read_tum(reference), read_tum(estimate), align=not no_align, max_dt=max_dt)
+    ref = load_reference(reference, ref_topic, Pose2D(*sensor_offset))
+    res = ate(ref, read_tum(_estimate_path(estimate)), align=not no_align, max_dt=max_dt)
     a = res.alignment
     out = {"ate": res.trans.as_dict(), "rotation_rad": res.rot.as_dict(), "alignment": [a.x, a.y, a.theta]}
     rows = [(k, f"{getattr(res.trans, k):.4f} m") for k in ("rmse", "mean", "median", "std", "max")]
@@ -332,7 +360,7 @@ def eval_rpe(
     if delta_unit not in ("frames", "m"):
         raise DynSlamError(f"--delta-unit must be 'frames' or 'm', got {delta_unit!r}")
     d: float | int = int(delta) if delta_unit == "frames" else delta
-    res = rpe(read_tum(reference), read_tum(estimate), delta=d, delta_unit=delta_unit, all_pairs=all_pairs, max_dt=max_dt)
+    res = rpe(read_tum(reference), read_tum(_estimate_path(estimate)), delta=d, delta_unit=delta_unit, all_pairs=all_pairs, max_dt=max_dt)
     out = {"translation_m": res.trans.as_dict(), "rotation_rad": res.rot.as_dict()}
     rows = [
         ("translation rmse", f"{res.trans.rmse:.4f} m"),
@@ -356,8 +384,7 @@ def eval_relations(
     from dynslam2d.io.relations import read_relations
     from dynslam2d.io.trajectory import read_tum
 
-    if estimate.is_dir():
-        estimate = estimate / "trajectory.tum"
+    estimate = _estimate_path(estimate)
     res = relation_errors_from(read_tum(estimate), read_relations(relations), tol=tol)
     out = {
         "translation_m": {"mean": res.trans_mean, "std": res.trans_std, "rmse": res.trans_rmse},
