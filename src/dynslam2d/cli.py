@@ -10,9 +10,10 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, Optional
 
 import typer
+from typer.core import TyperGroup
 from rich.console import Console
 from rich.table import Table
 
@@ -271,13 +272,26 @@ def run(
         ("map", f"{summary['map_cells'][1]}×{summary['map_cells'][0]} cells at {summary['map_resolution_m']} m, "
                 f"{summary['memory_bytes'] / 2**20:.1f} MiB"),
     ]
-    if "ate_rmse_m" in summary:
-        rows.append(("ATE RMSE", f"{summary['ate_rmse_m']:.4f} m"))
+    if "metrics.json" in paths:
+        rows += _metric_rows(json.loads(paths["metrics.json"].read_text()))
     console.print(_stats_table(f"dynslam2d run {input}", rows))
     console.print(f"results in [bold]{out}[/]")
 
 
-eval_app = typer.Typer(help="Evaluate trajectories: ATE, RPE, and Kümmerle relation errors.", no_args_is_help=True)
+class _EvalGroup(TyperGroup):
+    """``dynslam2d eval RUN_DIR --gt GT_DIR`` is short for ``dynslam2d eval run RUN_DIR --gt GT_DIR``."""
+
+    def parse_args(self, ctx, args):  # type: ignore[no-untyped-def]
+        if args and args[0] not in self.commands and not args[0].startswith("-"):
+            args = ["run", *args]
+        return super().parse_args(ctx, args)
+
+
+eval_app = typer.Typer(
+    cls=_EvalGroup,
+    help="Evaluate: a run against ground truth (eval RUN_DIR --gt GT_DIR), trajectories (ATE, RPE), relations.",
+    no_args_is_help=True,
+)
 app.add_typer(eval_app, name="eval")
 
 
@@ -312,6 +326,43 @@ SensorOffsetOpt = Annotated[
 
 def _estimate_path(estimate: Path) -> Path:
     return estimate / "trajectory.tum" if estimate.is_dir() else estimate
+
+
+@eval_app.command("run")
+def eval_run(
+    run_dir: Annotated[Path, typer.Argument(help="Results folder written by 'dynslam2d run'.")],
+    gt: Annotated[Path, typer.Option("--gt", help="Ground-truth folder written by 'dynslam2d simulate'.")],
+    as_json: JsonOpt = False,
+) -> None:
+    """Score a results folder against ground truth: ATE, map IoU / weighted RMSE / F1 / ghost area, removal.
+
+    Writes RUN_DIR/metrics.json. Formulas: docs/metrics.md.
+    """
+    from dynslam2d.io.atomic import write_text_atomic
+    from dynslam2d.results import evaluate_folder, metrics_json
+
+    metrics = evaluate_folder(run_dir, gt)
+    write_text_atomic(run_dir / "metrics.json", metrics_json(metrics))
+    _emit(metrics, as_json, _stats_table(f"{run_dir} vs {gt}", _metric_rows(metrics)))
+
+
+def _metric_rows(metrics: dict[str, Any]) -> list[tuple[str, str]]:
+    rows = [("ATE RMSE", f"{metrics['ate_rmse_m']:.4f} m ({metrics['poses_compared']} poses)")]
+    m = metrics.get("map")
+    if m:
+        rows += [
+            ("IoU (strict / 0.10 m)", f"{m['iou']:.3f} / {m['iou_tolerant']:.3f}"),
+            ("weighted RMSE", f"{m['weighted_rmse']:.4f}"),
+            ("precision / recall / F1", f"{m['precision']:.3f} / {m['recall']:.3f} / {m['f1']:.3f}"),
+            ("ghost area", f"{m['ghost_area_m2']:.3f} m²"),
+        ]
+    r = metrics.get("removal")
+    if r:
+        rows += [
+            ("removed beams: precision / recall", f"{r['precision']:.3f} / {r['recall']:.3f}"),
+            ("static beams removed", f"{100 * r['static_removed_share']:.2f} %"),
+        ]
+    return rows
 
 
 @eval_app.command("ate")

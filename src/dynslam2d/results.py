@@ -15,7 +15,11 @@ from typing import Any
 import numpy as np
 
 from dynslam2d.config import dump_config
+from dynslam2d.errors import DynSlamError
+from dynslam2d.eval.maps import map_metrics
+from dynslam2d.eval.removal import match_scans, removal_metrics
 from dynslam2d.eval.trajectory import ate
+from dynslam2d.gridmap import GridMap
 from dynslam2d.io.atomic import atomic_path, write_text_atomic
 from dynslam2d.io.groundtruth import GroundTruthFiles, read_ground_truth_folder
 from dynslam2d.io.mapfile import write_map
@@ -47,21 +51,65 @@ def ground_truth_for(source: ScanSource, gt_dir: str | os.PathLike[str] | None, 
     )
 
 
-def compute_metrics(run: RunResult, gt: GroundTruthFiles) -> dict[str, Any]:
-    """Metrics of a run against ground truth: ATE (SE(2)-aligned, evo's definition)."""
+def evaluate(
+    trajectory: Trajectory,
+    grid: GridMap,
+    gt: GroundTruthFiles,
+    removed: np.ndarray | None = None,
+    removed_stamps: np.ndarray | None = None,
+) -> dict[str, Any]:
+    """Every metric of a run against ground truth (formulas in docs/metrics.md).
+
+    - ATE (SE(2)-aligned, evo's definition) of ``trajectory`` against the GT trajectory;
+    - map metrics (paper Eq. 9 IoU, Eq. 10 weighted RMSE, tolerant precision / recall /
+      F1, ghost area) of ``grid`` against the GT static map, with the ATE alignment
+      mapping the run's map frame into the ground-truth frame;
+    - with ``removed`` ((n, beams) bool, True = beam removed by the filter) and its stamps:
+      precision / recall of removed beams against the per-beam labels.
+    """
     dt = float(np.median(np.diff(gt.trajectory.stamps))) / 2 if len(gt.trajectory) > 1 else 0.01
-    res = ate(gt.trajectory, run.trajectory, align=True, max_dt=max(dt, 1e-3))
+    res = ate(gt.trajectory, trajectory, align=True, max_dt=max(dt, 1e-3))
     a = res.alignment
-    return {
+    out: dict[str, Any] = {
         "ate_rmse_m": res.trans.rmse,
         "ate_m": res.trans.as_dict(),
         "ate_rotation_rad": res.rot.as_dict(),
         "alignment": {"x": a.x, "y": a.y, "theta": a.theta},
         "poses_compared": res.n,
+        "map": map_metrics(grid, gt.static_map, transform=a).as_dict(),
     }
+    if removed is not None and removed_stamps is not None and removed.size:
+        i_run, i_gt = match_scans(removed_stamps, gt.stamps, max_dt=max(dt, 1e-3))
+        lab = gt.labels[i_gt]
+        rem = removed[i_run]
+        if rem.shape[1] == lab.shape[1]:
+            out["removal"] = removal_metrics(rem, lab).as_dict()
+    return out
 
 
-def _json(data: Any) -> str:
+def compute_metrics(run: RunResult, gt: GroundTruthFiles) -> dict[str, Any]:
+    """:func:`evaluate` on an in-memory run."""
+    return evaluate(run.trajectory, run.grid, gt)
+
+
+def evaluate_folder(run_dir: str | os.PathLike[str], gt_dir: str | os.PathLike[str]) -> dict[str, Any]:
+    """:func:`evaluate` on a results folder (``dynslam2d eval RUN_DIR --gt GT_DIR``)."""
+    from dynslam2d.eval.maps import load_run_map
+    from dynslam2d.io.trajectory import read_tum
+
+    d = Path(run_dir)
+    if not (d / "trajectory.tum").exists():
+        raise DynSlamError(f"{d}: not a results folder (no trajectory.tum; write one with 'dynslam2d run')")
+    removed = stamps = None
+    mask_path = d / "kept_mask.npz"
+    if mask_path.exists():
+        with np.load(mask_path) as npz:
+            removed, stamps = np.asarray(npz["removed"], dtype=bool), np.asarray(npz["stamps"], dtype=np.float64)
+    return evaluate(read_tum(d / "trajectory.tum"), load_run_map(d), read_ground_truth_folder(gt_dir), removed, stamps)
+
+
+def metrics_json(data: Any) -> str:
+    """JSON text of a metrics / summary mapping (numpy values converted)."""
     def default(o: Any) -> Any:
         if isinstance(o, np.generic):
             return o.item()
@@ -89,8 +137,8 @@ def write_results(run: RunResult, out_dir: str | os.PathLike[str], gt: GroundTru
     metrics = compute_metrics(run, gt) if gt is not None else None
     if metrics is not None:
         summary["ate_rmse_m"] = metrics["ate_rmse_m"]
-        paths["metrics.json"] = write_text_atomic(out / "metrics.json", _json(metrics))
-    paths["summary.json"] = write_text_atomic(out / "summary.json", _json(summary))
+        paths["metrics.json"] = write_text_atomic(out / "metrics.json", metrics_json(metrics))
+    paths["summary.json"] = write_text_atomic(out / "summary.json", metrics_json(summary))
     ref_xy = None
     if gt is not None:
         # Draw the ground truth in the map frame of the run (inverse of the ATE alignment).
@@ -107,4 +155,4 @@ def write_results(run: RunResult, out_dir: str | os.PathLike[str], gt: GroundTru
     return paths
 
 
-__all__ = ["compute_metrics", "ground_truth_for", "read_ground_truth_folder", "write_results"]
+__all__ = ["compute_metrics", "evaluate", "evaluate_folder", "ground_truth_for", "write_results"]

@@ -1,0 +1,349 @@
+"""Dynamic-point filter: exclusion regions around the moving objects (paper §2.3, Eq. 4–8).
+
+Every object ``O_j`` of the dynamic set ``M`` defines a region ``B_j`` in its own frame
+(centre ``p_j``, heading ``θ_j``); a scan point is removed when, mapped into that frame,
+it falls inside any region (paper Eq. 8). :func:`exclusion_mask` is the geometric test
+on plain arrays; :func:`filter_scan_points` adds the configuration logic of the
+paper's configurations 1–3 and our ``default`` (:class:`FilterConfig`);
+:func:`filter_scan` applies it to one :class:`Scan` beam by beam.
+
+Frames: the test itself is frame-agnostic, but points and objects must be expressed in
+the **same** frame. The pipeline passes the scan points transformed into the map frame
+with the pose estimated for that scan (``pose.transform_points(scan.points())``) and the
+track boxes in the map frame (tracking happens in the map frame, design.md). Units: m
+and rad.
+
+Interpretation of paper Eq. 5. As printed, ``T_j = [[cos θ, sin θ, p_x], [−sin θ, cos θ,
+p_y], [0, 0, 1]]`` has its rotation block transposed relative to a standard pose matrix
+``[[cos θ, −sin θ, p_x], [sin θ, cos θ, p_y], [0, 0, 1]]`` while its translation is the
+object centre, so it is not the inverse of the pose either (that would need the
+translation ``−Rᵀp``). We read ``T_j`` as what the text says it is used for: the
+**object's pose** (box frame → map frame: heading θ_j, centre p_j), so that
+``T_j⁻¹ s = R(θ_j)ᵀ (s − p_j)`` maps a point into the box frame, whose x axis points
+along the object's heading. ``tests/test_filter.py`` checks with a square rotated by 30°
+that this removes exactly what lies inside the rotated square (the literal transposed
+matrix would rotate the square the wrong way).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from numba import njit
+from pydantic import BaseModel, ConfigDict, Field
+
+from dynslam2d.types import Pose2D, Scan
+
+FilterMode = Literal["none", "fixed", "adaptive", "default"]
+
+
+class FilterConfig(BaseModel):
+    """Parameters of the dynamic-point filter (units in each description).
+
+    Modes (paper §3):
+
+    * ``none`` — nothing is removed (configuration 1, raw scans);
+    * ``fixed`` — square of half-side ``d = fixed_d_ref · fixed_lambda / 2`` (1.5 m) around
+      every object, applied only when exactly ``expected_objects`` objects are in M
+      (configuration 2);
+    * ``adaptive`` — square of half-side ``d_j = max(w_j, l_j) · adaptive_lambda / 2``
+      (paper Eq. 6, configuration 3);
+    * ``default`` — our setting: the object's own box (``rectangle``, aligned with its
+      heading) or its enclosing square (``square``), grown by ``margin`` on every side
+      (range noise and box-fit error) plus ``speed_margin_time · |v_j|`` (motion during the
+      scan / stamp offset), each half-extent capped at ``max_half_extent``.
+    """
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    mode: FilterMode = Field(
+        "default",
+        description="Which exclusion rule to apply: 'none', 'fixed', 'adaptive' (paper configurations "
+        "1–3) or 'default' (ours).",
+    )
+    fixed_d_ref: float = Field(
+        1.5, gt=0.0,
+        description="'fixed': reference object size d_ref, m (paper §3: 1.5 m).",
+    )
+    fixed_lambda: float = Field(
+        2.0, gt=0.0,
+        description="'fixed': margin factor λ, dimensionless (paper §3: 2.0 → half-side 1.5 m).",
+    )
+    expected_objects: int = Field(
+        3, ge=0,
+        description="'fixed': the filter acts only when exactly this many objects are in M, count "
+        "(paper §3: 3).",
+    )
+    adaptive_lambda: float = Field(
+        1.0, gt=0.0,
+        description="'adaptive': margin factor λ of paper Eq. 6, dimensionless (paper §3: 1.0).",
+    )
+    default_shape: Literal["rectangle", "square"] = Field(
+        "rectangle",
+        description="'default': 'rectangle' = the object's l × w box aligned with its heading, "
+        "'square' = the square of side max(l, w) (as Eq. 6/7), each grown by the margins.",
+    )
+    margin: float = Field(
+        0.2, ge=0.0,
+        description="'default': distance added on every side of the region, m (range noise and "
+        "box-fit error; 0.15–0.25 m is the useful range).",
+    )
+    speed_margin_time: float = Field(
+        0.0, ge=0.0,
+        description="'default': extra margin per unit of object speed, s (margin += |v|·t; e.g. the "
+        "scan period when boxes are not predicted to each beam's time). 0 = off; needs velocities.",
+    )
+    max_half_extent: float | None = Field(
+        2.5, gt=0.0,
+        description="'default': cap on each half-extent of a region, m, so that a bad box fit (a track "
+        "merged with a wall) cannot erase a large part of the scan. None = no cap.",
+    )
+
+
+@njit(cache=True)
+def _exclusion_kernel(
+    pts: np.ndarray, c: np.ndarray, th: np.ndarray, ha: np.ndarray, hb: np.ndarray,
+    removed: np.ndarray, object_index: np.ndarray,
+) -> None:
+    """Fill ``removed`` / ``object_index`` in place (points × objects double loop).
+
+    A plain loop beats the vectorised numpy version ~15× on 720 points × 3 objects
+    (4 µs vs 60 µs) because it allocates no (n, k) temporaries.
+    """
+    n = pts.shape[0]
+    k = c.shape[0]
+    ct = np.cos(th)
+    st = np.sin(th)
+    for i in range(n):
+        x = pts[i, 0]
+        y = pts[i, 1]
+        best = np.inf
+        for j in range(k):
+            dx = x - c[j, 0]
+            dy = y - c[j, 1]
+            # T_j⁻¹ s_i = R(θ_j)ᵀ (s_i − p_j)  (paper Eq. 5 read as the object pose, Eq. 8)
+            u = ct[j] * dx + st[j] * dy
+            v = -st[j] * dx + ct[j] * dy
+            if abs(u) <= ha[j] and abs(v) <= hb[j]:  # paper Eq. 7 (NaN compares False: kept)
+                d2 = dx * dx + dy * dy
+                if d2 < best:  # overlapping regions: nearest centre wins, ties → lowest j
+                    best = d2
+                    object_index[i] = j
+                    removed[i] = True
+
+
+def exclusion_mask(
+    points: np.ndarray,
+    centres: np.ndarray,
+    headings: np.ndarray,
+    half_sides: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which points fall inside any object's exclusion region (paper Eq. 5–8).
+
+    Each object ``j`` has the pose ``T_j`` = (centre ``p_j``, heading ``θ_j``) — see the
+    module docstring for how Eq. 5 is read — and the region
+    ``B_j = {(u, v) : |u| ≤ a_j, |v| ≤ b_j}`` in its own frame (paper Eq. 7, a square when
+    ``a_j = b_j = d_j``; boundary included). Point ``s_i`` is removed when
+    ``T_j⁻¹ s_i ∈ B_j`` for some ``j`` (Eq. 8).
+
+    Args:
+        points: (n, 2) points ``s_i``, m, in the same frame as the objects (the pipeline
+            uses the map frame). Non-finite points (no return) are never removed.
+        centres: (k, 2) object centres ``p_j``, m.
+        headings: (k,) object headings ``θ_j``, rad (the box frame's x axis).
+        half_sides: (k,) square half-sides ``d_j``, m, or (k, 2) rectangle half-extents
+            ``(a_j, b_j)`` along and across the heading, m.
+
+    Returns:
+        ``(removed, object_index)``: (n,) bool, True where the point is removed, and (n,)
+        int64 index of the object that removed it (−1 = kept). When regions overlap, the
+        point is attributed to the object whose centre is nearest (ties: lowest index).
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    c = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
+    th = np.asarray(headings, dtype=np.float64).reshape(-1)
+    hs = np.asarray(half_sides, dtype=np.float64)
+    k = c.shape[0]
+    if th.shape[0] != k:
+        raise ValueError(f"exclusion_mask: {k} centres but {th.shape[0]} headings")
+    if hs.ndim <= 1:
+        hs = hs.reshape(-1)
+        if hs.shape[0] != k:
+            raise ValueError(f"exclusion_mask: {k} centres but {hs.shape[0]} half-sides")
+        ha, hb = hs, hs
+    elif hs.ndim == 2 and hs.shape == (k, 2):
+        ha, hb = hs[:, 0], hs[:, 1]
+    else:
+        raise ValueError(f"exclusion_mask: half_sides must be ({k},) or ({k}, 2), got {hs.shape}")
+    n = pts.shape[0]
+    removed = np.zeros(n, dtype=bool)
+    object_index = np.full(n, -1, dtype=np.int64)
+    if n == 0 or k == 0:
+        return removed, object_index
+    _exclusion_kernel(
+        np.ascontiguousarray(pts), np.ascontiguousarray(c), np.ascontiguousarray(th),
+        np.ascontiguousarray(ha), np.ascontiguousarray(hb), removed, object_index,
+    )
+    return removed, object_index
+
+
+def half_extents(
+    config: FilterConfig,
+    lengths: np.ndarray,
+    widths: np.ndarray,
+    speeds: np.ndarray | None = None,
+) -> np.ndarray:
+    """(k, 2) half-extents (along, across the heading), m, of the exclusion regions.
+
+    ``none`` gives zeros (unused: nothing is removed), ``fixed`` ``d_ref·λ/2`` for every
+    object, ``adaptive`` ``max(w, l)·λ/2`` (paper Eq. 6), ``default`` as described in
+    :class:`FilterConfig`. ``lengths`` are the box sides along the heading, ``widths``
+    across it, m; ``speeds`` are |v_j|, m/s (only used by ``default`` with
+    ``speed_margin_time > 0``; missing speeds count as 0). The ``fixed`` count rule is not
+    applied here (see :func:`filter_scan_points`).
+    """
+    l = np.abs(np.asarray(lengths, dtype=np.float64).reshape(-1))
+    w = np.abs(np.asarray(widths, dtype=np.float64).reshape(-1))
+    if l.shape != w.shape:
+        raise ValueError(f"half_extents: {l.shape[0]} lengths but {w.shape[0]} widths")
+    k = l.shape[0]
+    out = np.zeros((k, 2), dtype=np.float64)
+    mode = config.mode
+    if mode == "fixed":
+        out[:] = config.fixed_d_ref * config.fixed_lambda / 2.0  # paper §3, configuration 2
+    elif mode == "adaptive":
+        d = np.maximum(w, l) * config.adaptive_lambda / 2.0  # paper Eq. 6
+        out[:, 0] = d
+        out[:, 1] = d
+    elif mode == "default":
+        grow = np.full(k, config.margin)
+        if speeds is not None and config.speed_margin_time > 0.0:
+            sp = np.abs(np.asarray(speeds, dtype=np.float64).reshape(-1))
+            if sp.shape[0] != k:
+                raise ValueError(f"half_extents: {k} boxes but {sp.shape[0]} speeds")
+            grow = grow + config.speed_margin_time * np.nan_to_num(sp, nan=0.0)
+        if config.default_shape == "square":
+            d = np.maximum(w, l) / 2.0
+            out[:, 0] = d + grow
+            out[:, 1] = d + grow
+        else:
+            out[:, 0] = l / 2.0 + grow
+            out[:, 1] = w / 2.0 + grow
+        if config.max_half_extent is not None:
+            np.minimum(out, config.max_half_extent, out=out)
+    return out
+
+
+def half_sides(config: FilterConfig, lengths: np.ndarray, widths: np.ndarray) -> np.ndarray:
+    """(k,) square half-sides ``d_j``, m, for the square-region modes (paper Eq. 6).
+
+    Defined for ``fixed``, ``adaptive`` and ``default`` with ``default_shape='square'``
+    (without the speed margin); for ``none`` or a rectangular ``default`` region use
+    :func:`half_extents`.
+
+    Raises:
+        ValueError: when the configured region is not a square.
+    """
+    if config.mode == "none" or (config.mode == "default" and config.default_shape != "square"):
+        raise ValueError(
+            f"half_sides: mode {config.mode!r} (shape {config.default_shape!r}) has no square region; "
+            "use half_extents"
+        )
+    return half_extents(config, lengths, widths)[:, 0]
+
+
+def filter_active(config: FilterConfig, n_objects: int) -> bool:
+    """Whether the filter removes anything with ``n_objects`` objects in M.
+
+    ``none`` never; ``fixed`` only when ``n_objects == expected_objects`` (paper §3,
+    configuration 2); the others whenever ``n_objects > 0``.
+    """
+    if config.mode == "none" or n_objects == 0:
+        return False
+    if config.mode == "fixed":
+        return n_objects == config.expected_objects
+    return True
+
+
+def filter_scan_points(
+    config: FilterConfig,
+    points: np.ndarray,
+    centres: np.ndarray,
+    headings: np.ndarray,
+    lengths: np.ndarray,
+    widths: np.ndarray,
+    speeds: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Apply the configured filter to one scan's points.
+
+    Args:
+        config: the filter configuration.
+        points: (n, 2) scan points, m, in the frame of the boxes (the pipeline: map frame;
+            non-finite points are never removed, so all beams may be passed with NaN for
+            no return, keeping ``removed`` indexed by beam).
+        centres: (k, 2) box centres of the objects in M, m.
+        headings: (k,) box headings, rad.
+        lengths, widths: (k,) box sides along / across the heading, m.
+        speeds: optional (k,) object speeds |v|, m/s (``default`` speed margin).
+
+    Returns:
+        ``(removed, object_index)`` as :func:`exclusion_mask`: (n,) bool and (n,) int64
+        index into the k objects (−1 = kept).
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    c = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
+    n, k = pts.shape[0], c.shape[0]
+    if not filter_active(config, k):
+        return np.zeros(n, dtype=bool), np.full(n, -1, dtype=np.int64)
+    ext = half_extents(config, lengths, widths, speeds)
+    if ext.shape[0] != k:
+        raise ValueError(f"filter_scan_points: {k} centres but {ext.shape[0]} box sizes")
+    return exclusion_mask(pts, c, headings, ext)
+
+
+def filter_scan(
+    config: FilterConfig,
+    scan: Scan,
+    pose: Pose2D,
+    centres: np.ndarray,
+    headings: np.ndarray,
+    lengths: np.ndarray,
+    widths: np.ndarray,
+    speeds: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-beam filter of one scan, boxes given in the map frame.
+
+    The valid beams are turned into points (paper Eq. 4, :meth:`Scan.points`), mapped into
+    the map frame with ``pose`` (the laser pose estimated for this scan) and tested with
+    :func:`filter_scan_points`. Beams without a return are never removed.
+
+    Returns:
+        ``(removed, object_index)``: (beams,) bool and (beams,) int64 (−1 = kept), indexed
+        like ``scan.ranges``; ``scan.with_ranges(np.where(removed, np.nan, scan.ranges))``
+        is the filtered scan.
+    """
+    n = scan.ranges.shape[0]
+    removed = np.zeros(n, dtype=bool)
+    object_index = np.full(n, -1, dtype=np.int64)
+    c = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
+    if not filter_active(config, c.shape[0]):
+        return removed, object_index
+    valid = scan.valid_mask()
+    pts = pose.transform_points(scan.points(valid))  # paper Eq. 4, then sensor → map frame
+    r, j = filter_scan_points(config, pts, c, headings, lengths, widths, speeds)
+    removed[valid] = r
+    object_index[valid] = j
+    return removed, object_index
+
+
+__all__ = [
+    "FilterConfig",
+    "FilterMode",
+    "exclusion_mask",
+    "filter_active",
+    "filter_scan",
+    "filter_scan_points",
+    "half_extents",
+    "half_sides",
+]
