@@ -95,6 +95,15 @@ def test_simulate_then_run_with_gt_folder(tmp_path, capsys):
     metrics = json.loads((run_dir / "metrics.json").read_text())
     assert metrics["ate_rmse_m"] < 0.03 and metrics["poses_compared"] == 80
     assert len((run_dir / "trajectory.tum").read_text().splitlines()) == 81  # comment + one line per scan
+    # a static scene mapped from the centre: structure found, no ghosts
+    assert metrics["map"]["f1"] > 0.8 and metrics["map"]["ghost_area_m2"] < 0.05
+    (run_dir / "metrics.json").unlink()
+    code, out, err = cli(capsys, "eval", str(run_dir), "--gt", str(sim_dir), "--json")
+    assert code == 0, err
+    again = json.loads(out)
+    assert again["ate_rmse_m"] == pytest.approx(metrics["ate_rmse_m"], abs=1e-6)
+    assert again["map"]["f1"] == pytest.approx(metrics["map"]["f1"], abs=0.02)  # PGM+log-odds vs in-memory map
+    assert (run_dir / "metrics.json").exists()
 
 
 def test_run_options_reach_the_config(tmp_path, capsys):

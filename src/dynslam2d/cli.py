@@ -200,6 +200,7 @@ def run(
     update_angle: Annotated[Optional[float], typer.Option("--update-angle", help="Map update after this rotation, rad [0.06].")] = None,
     laser_min_dist: Annotated[Optional[float], typer.Option("--laser-min-dist", help="Ignore returns closer than this, m [0.4].")] = None,
     laser_max_dist: Annotated[Optional[float], typer.Option("--laser-max-dist", help="Ignore returns farther than this, m [30].")] = None,
+    filter_mode: Annotated[Optional[str], typer.Option("--filter", help="Dynamic-point filter: none, fixed, adaptive (the paper's configurations 1-3) or default (ours) [default].")] = None,
     constant_velocity: Annotated[Optional[bool], typer.Option("--constant-velocity/--no-constant-velocity", help="Predict with constant velocity instead of the previous pose.")] = None,
     correlative: Annotated[Optional[str], typer.Option("--correlative", help="Correlative search seed: auto, always or never [auto].")] = None,
     hector_compat: Annotated[bool, typer.Option("--hector-compat", help="Behave like the reference hector_mapping: raw Gauss-Newton step, its swapped gradient, no correlative search.")] = False,
@@ -209,10 +210,11 @@ def run(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
 ) -> None:
-    """Map INPUT with Hector-style SLAM; write map, trajectory, summary (and metrics with ground truth).
+    """Detect and remove moving objects, map the rest with Hector-style SLAM.
 
     Writes into OUT: map.pgm + map.yaml (map_server), map_logodds.npy, trajectory.tum,
-    config.yaml, summary.json, map.png and, with ground truth (sim: inputs or --gt), metrics.json.
+    tracks.csv, kept_mask.npz, config.yaml, summary.json, map.png and, with ground truth
+    (sim: inputs or --gt), metrics.json.
     """
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
@@ -228,6 +230,8 @@ def run(
         "laser_min_dist": laser_min_dist, "laser_max_dist": laser_max_dist,
         "constant_velocity": constant_velocity, "correlative_mode": correlative,
     }})
+    if filter_mode is not None:
+        cfg = with_overrides(cfg, {"filter": {"mode": filter_mode}})
     if hector_compat:
         cfg = with_overrides(cfg, {"slam": {"hector_gradient_bug": True, "step_mode": "gauss_newton", "correlative_mode": "never"}})
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad)
@@ -269,6 +273,8 @@ def run(
         ("map updates", str(summary["map_updates"])),
         ("rejected matches", str(summary["match_failures"])),
         ("skipped scans", str(summary["skipped_scans"])),
+        ("tracks (in M)", f"{summary['tracks']} ({summary['tracks_in_M']})"),
+        ("beams removed", f"{100 * summary['removed_beam_share']:.2f} % (filter {summary['filter']})"),
         ("map", f"{summary['map_cells'][1]}×{summary['map_cells'][0]} cells at {summary['map_resolution_m']} m, "
                 f"{summary['memory_bytes'] / 2**20:.1f} MiB"),
     ]
@@ -276,6 +282,28 @@ def run(
         rows += _metric_rows(json.loads(paths["metrics.json"].read_text()))
     console.print(_stats_table(f"dynslam2d run {input}", rows))
     console.print(f"results in [bold]{out}[/]")
+
+
+experiment_app = typer.Typer(help="Reproduce experiments.", no_args_is_help=True)
+app.add_typer(experiment_app, name="experiment")
+
+
+@experiment_app.command("paper")
+def experiment_paper(
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="Output folder (default: results/experiment-<time>).")] = None,
+    duration: DurationOpt = None,
+    trials: Annotated[Optional[list[str]], typer.Option("--trial", help="Trial(s) to run [paper-1 paper-2 paper-3].")] = None,
+) -> None:
+    """The paper's experiment: 3 trials × 4 filter configurations → table.md/csv/json and figure2.png."""
+    from dynslam2d.experiments import TRIALS, run_experiment, write_experiment
+
+    out = out or _default_out("experiment")
+    chosen = tuple(trials) if trials else TRIALS
+    with console.status("running …", spinner="dots") as status:
+        result = run_experiment(chosen, duration=duration, progress=lambda text: status.update(f"running {text} …"))
+        paths = write_experiment(result, out)
+    sys.stdout.write(paths["table.md"].read_text())
+    console.print(f"results in [bold]{out}[/] ({', '.join(paths)})")
 
 
 class _EvalGroup(TyperGroup):

@@ -1,7 +1,7 @@
 """The project configuration: one pydantic model per stage, YAML in and out.
 
-``Config`` nests the per-stage models (today: ``slam``; detection, tracking and
-filtering join it as they land). ``dynslam2d config dump`` prints the defaults;
+``Config`` nests the per-stage models: ``slam``, ``detect`` (segmentation, fit,
+tracker) and ``filter``. ``dynslam2d config dump`` prints the defaults;
 ``dynslam2d run --config FILE.yaml`` reads a (partial) file of the same shape,
 and ``config.yaml`` in every results folder holds the full effective values.
 """
@@ -9,13 +9,15 @@ and ``config.yaml`` in every results folder holds the full effective values.
 from __future__ import annotations
 
 import os
-from pathlib import Path
 from typing import Any
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from dynslam2d.errors import DynSlamError
+from dynslam2d.io.yamlfile import read_yaml_mapping
+from dynslam2d.detect.config import DetectConfig
+from dynslam2d.filter import FilterConfig
 from dynslam2d.slam.config import SlamConfig
 
 
@@ -25,6 +27,10 @@ class Config(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
     slam: SlamConfig = Field(default_factory=SlamConfig, description="Hector-style SLAM (map, matcher, processor).")
+    detect: DetectConfig = Field(
+        default_factory=DetectConfig, description="Segmentation, shape fit, tracking and the dynamic set M."
+    )
+    filter: FilterConfig = Field(default_factory=FilterConfig, description="Dynamic-point filter (paper Eq. 4-8).")
 
 
 def _describe(err: ValidationError) -> str:
@@ -45,17 +51,7 @@ def config_from_dict(data: dict[str, Any], origin: str = "<config>") -> Config:
 
 def load_config(path: str | os.PathLike[str]) -> Config:
     """Read a YAML configuration file (any subset of the keys ``config dump`` prints)."""
-    path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise DynSlamError(f"{path}: configuration file not found") from exc
-    except (OSError, yaml.YAMLError) as exc:
-        raise DynSlamError(f"{path}: cannot read configuration ({exc})") from exc
-    if data is None:
-        data = {}
-    if not isinstance(data, dict):
-        raise DynSlamError(f"{path}: configuration must be a YAML mapping, got {type(data).__name__}")
+    data = read_yaml_mapping(path, "configuration")
     return config_from_dict(data, origin=str(path))
 
 

@@ -1,8 +1,15 @@
-"""The per-scan pipeline and whole-log runs.
+"""The per-scan pipeline and whole-log runs (design.md, "Data flow").
 
-Today the pipeline is preprocess → match → map update (Hector-style SLAM, see
-:mod:`dynslam2d.slam`); detection, tracking and the dynamic-point filter slot in
-between matching and the map update as they land (design.md, "Data flow").
+For every scan, in time order:
+
+1. predict the laser pose (previous pose, or constant velocity);
+2. remove the points of the objects already known to move (tracks in M, advanced
+   to this scan's stamp with their velocity) and match the rest against the map;
+3. segment, fit and track in the MAP frame with the pose of this same scan
+   (a rotating robot must not make walls look like movers);
+4. build the dynamic set M (paper Eq. 3) and the exclusion zones of paper
+   Eq. 5–8 from the tracks' boxes at this stamp;
+5. update the map with the filtered scan only.
 
 ``Pipeline(config).process(scan) -> StepResult`` is the live API for any robot
 framework; :func:`run` drives it over a whole :class:`ScanSource`.
@@ -17,10 +24,12 @@ from typing import Callable
 import numpy as np
 
 from dynslam2d.config import Config
+from dynslam2d.detect.tracker import Tracker
+from dynslam2d.filter import filter_scan
 from dynslam2d.gridmap import GridMap
 from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.slam import HectorSlam
-from dynslam2d.types import Pose2D, Scan, ScanSource, SourceMeta
+from dynslam2d.types import Pose2D, Scan, ScanSource, SourceMeta, Track
 
 
 @dataclass(slots=True)
@@ -32,11 +41,14 @@ class StepResult:
         stamp: the scan's stamp, s.
         pose: laser pose in the map frame (m, rad); the map frame is the first scan's laser pose.
         score: match quality, mean occupancy probability at the scan endpoints (0 … 1).
-        map_updated: the scan was written into the map.
+        map_updated: the (filtered) scan was written into the map.
         rejected: the match was judged bad and kept out of the map (``reason`` says why).
         skipped: the scan held too little to match (``reason`` says why).
         reason: skip / reject reason, or None.
-        timings: wall time per stage, ms ("match", "map_update", "total").
+        tracks: live tracks after this scan (map frame), each with ``in_m``.
+        removed: (beams,) bool, True where the filter removed the beam from the map update.
+        removed_by: (beams,) int, id of the track whose exclusion zone removed the beam (−1 = kept).
+        timings: wall time per stage, ms ("match", "track", "filter", "map_update", "total").
     """
 
     index: int
@@ -47,31 +59,88 @@ class StepResult:
     rejected: bool
     skipped: bool
     reason: str | None
+    tracks: list[Track] = field(default_factory=list)
+    removed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    removed_by: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     timings: dict[str, float] = field(default_factory=dict)
 
 
+def _boxes(tracks: list[Track], dt: float = 0.0) -> tuple[np.ndarray, ...]:
+    """Centres (advanced by velocity·dt), headings, lengths, widths, speeds, ids of ``tracks``."""
+    if not tracks:
+        z = np.zeros(0)
+        return np.zeros((0, 2)), z, z, z, z, np.zeros(0, dtype=np.int64)
+    centres = np.array([t.box.center + t.velocity * dt for t in tracks])
+    headings = np.array([t.box.theta for t in tracks])
+    lengths = np.array([t.box.length for t in tracks])
+    widths = np.array([t.box.width for t in tracks])
+    speeds = np.array([t.speed for t in tracks])
+    ids = np.array([t.id for t in tracks], dtype=np.int64)
+    return centres, headings, lengths, widths, speeds, ids
+
+
 class Pipeline:
-    """Scans in, poses and a map out; one :meth:`process` call per scan, in time order."""
+    """Scans in; poses, tracks, removed beams and a map out. One :meth:`process` call per scan."""
 
     def __init__(self, config: Config | None = None) -> None:
         self.config = config if config is not None else Config()
         self.slam = HectorSlam(self.config.slam)
+        self.tracker = Tracker(self.config.detect)
+        self._moving: list[Track] = []  # tracks in M after the previous scan
+        self._last_stamp: float | None = None
+
+    def _exclude(self, scan: Scan, pose: Pose2D, tracks: list[Track], dt: float) -> tuple[np.ndarray, np.ndarray]:
+        centres, headings, lengths, widths, speeds, ids = _boxes(tracks, dt)
+        removed, obj = filter_scan(self.config.filter, scan, pose, centres, headings, lengths, widths, speeds)
+        by = np.where(obj >= 0, ids[np.clip(obj, 0, None)] if ids.size else -1, -1)
+        return removed, by
 
     def process(self, scan: Scan) -> StepResult:
-        """Run every stage on ``scan`` and return the result."""
+        """Run every stage on ``scan`` (scans must come in time order) and return the result."""
         t0 = time.perf_counter()
-        step = self.slam.process(scan)
-        total = (time.perf_counter() - t0) * 1e3
+        # 2. match with the known movers removed (their boxes advanced to this stamp).
+        match_scan = scan
+        if self._moving and self.config.filter.mode != "none":
+            dt = scan.stamp - self._last_stamp if self._last_stamp is not None else 0.0
+            pre_removed, _ = self._exclude(scan, self.slam.predict(scan.stamp), self._moving, dt)
+            if pre_removed.any():
+                match_scan = scan.with_ranges(np.where(pre_removed, np.nan, scan.ranges))
+        res = self.slam.match(match_scan)
+        t1 = time.perf_counter()
+        # 3. track in the map frame with this scan's pose.
+        tracks = self.tracker.update(scan, res.pose)
+        t2 = time.perf_counter()
+        # 4. the dynamic set M and its exclusion zones (paper Eq. 3, 5-8).
+        moving = [t for t in tracks if t.in_m]
+        removed, removed_by = self._exclude(scan, res.pose, moving, 0.0)
+        t3 = time.perf_counter()
+        # 5. map update with the filtered scan only.
+        updated = False
+        if not res.rejected:
+            kept = scan.with_ranges(np.where(removed, np.nan, scan.ranges)) if removed.any() else scan
+            updated = self.slam.update_map(kept, res.pose)
+        t4 = time.perf_counter()
+        self._moving = moving
+        self._last_stamp = scan.stamp
         return StepResult(
-            index=step.index,
-            stamp=step.stamp,
-            pose=step.pose,
-            score=step.score,
-            map_updated=step.map_updated,
-            rejected=step.rejected,
-            skipped=step.skipped,
-            reason=step.reason,
-            timings={"match": step.match_ms, "map_update": step.update_ms, "total": total},
+            index=self.slam.n_scans - 1,
+            stamp=scan.stamp,
+            pose=res.pose,
+            score=res.score,
+            map_updated=updated,
+            rejected=res.rejected,
+            skipped=res.skipped,
+            reason=res.reason,
+            tracks=tracks,
+            removed=removed,
+            removed_by=removed_by,
+            timings={
+                "match": (t1 - t0) * 1e3,
+                "track": (t2 - t1) * 1e3,
+                "filter": (t3 - t2) * 1e3,
+                "map_update": (t4 - t3) * 1e3,
+                "total": (t4 - t0) * 1e3,
+            },
         )
 
     def gridmap(self) -> GridMap:
@@ -79,21 +148,30 @@ class Pipeline:
         return self.slam.gridmap(0)
 
 
+#: Columns of :attr:`RunResult.track_rows` and of tracks.csv.
+TRACK_COLUMNS = ("stamp", "id", "state", "x", "y", "heading", "length", "width", "vx", "vy", "in_M")
+
+
 @dataclass(eq=False)
 class RunResult:
-    """A whole run: trajectory, map, per-scan flags and timings, counters.
+    """A whole run: trajectory, map, tracks, removed beams, per-scan flags and timings.
 
     Attributes:
         source: metadata of the input.
         config: the effective configuration.
         trajectory: one pose per processed scan, stamped with the scan's stamp (map frame).
         scores, map_updated, rejected, skipped: (n,) per-scan match score and flags.
+        removed: (n, beams) bool, True where the filter removed the beam (all False when
+            scans differ in beam count: see ``removed_rows``).
+        removed_rows: list of (beams,) bool arrays, one per scan (any beam count).
+        track_rows: one tuple per (scan, live track), fields :data:`TRACK_COLUMNS` (map frame).
         timings_ms: per-stage (n,) arrays of wall time, ms.
         grid: the final finest-level map.
-        logodds: (H, W) raw log-odds of the finest level, same cells as ``grid``.
+        logodds: (H, W) raw log-odds of the finest level, same cells and origin as ``grid``.
         wall_time_s: wall time of the whole run, s (includes reading the input).
         reasons: count of each skip / reject reason.
         memory_bytes: memory held by the map levels at the end.
+        tracker_stats: counters of the tracker (bad input, resets).
     """
 
     source: SourceMeta
@@ -103,33 +181,56 @@ class RunResult:
     map_updated: np.ndarray
     rejected: np.ndarray
     skipped: np.ndarray
+    removed_rows: list[np.ndarray]
+    track_rows: list[tuple]
     timings_ms: dict[str, np.ndarray]
     grid: GridMap
     logodds: np.ndarray
     wall_time_s: float
     reasons: dict[str, int]
     memory_bytes: int
+    tracker_stats: dict[str, int] = field(default_factory=dict)
 
     @property
     def n_scans(self) -> int:
         return len(self.trajectory)
 
+    @property
+    def removed(self) -> np.ndarray:
+        if not self.removed_rows:
+            return np.zeros((0, 0), dtype=bool)
+        widths = {r.shape[0] for r in self.removed_rows}
+        if len(widths) != 1:
+            return np.zeros((len(self.removed_rows), 0), dtype=bool)
+        return np.stack(self.removed_rows)
+
     def summary(self) -> dict[str, object]:
-        """Numbers for summary.json and the terminal: scans, time, scans/s, failures, memory."""
+        """Numbers for summary.json and the terminal: scans, time, scans/s, failures, tracks, memory."""
         n = self.n_scans
         total = self.timings_ms.get("total", np.zeros(0))
+        beams = sum(r.shape[0] for r in self.removed_rows)
+        removed = sum(int(r.sum()) for r in self.removed_rows)
+        ids = {row[1] for row in self.track_rows}
+        ids_m = {row[1] for row in self.track_rows if row[-1]}
+        stage_ms = {k: float(np.median(v)) for k, v in self.timings_ms.items() if v.size}
         return {
             "input": self.source.origin,
             "format": self.source.format,
+            "filter": self.config.filter.mode,
             "scans": n,
             "wall_time_s": round(self.wall_time_s, 3),
             "scans_per_s": round(n / self.wall_time_s, 2) if self.wall_time_s > 0 else None,
             "processing_ms_median": float(np.median(total)) if total.size else None,
             "processing_ms_p95": float(np.percentile(total, 95)) if total.size else None,
+            "stage_ms_median": stage_ms,
             "map_updates": int(self.map_updated.sum()),
             "match_failures": int(self.rejected.sum()),
             "skipped_scans": int(self.skipped.sum()),
             "reasons": dict(self.reasons),
+            "tracks": len(ids),
+            "tracks_in_M": len(ids_m),
+            "removed_beam_share": removed / beams if beams else 0.0,
+            "tracker": dict(self.tracker_stats),
             "memory_bytes": int(self.memory_bytes),
             "map_cells": list(self.grid.shape),
             "map_resolution_m": self.grid.resolution,
@@ -151,6 +252,8 @@ def run(source: ScanSource, config: Config | None = None, progress: ProgressFn |
     poses: list[Pose2D] = []
     scores: list[float] = []
     flags: list[tuple[bool, bool, bool]] = []
+    removed_rows: list[np.ndarray] = []
+    track_rows: list[tuple] = []
     timings: dict[str, list[float]] = {}
     t0 = time.perf_counter()
     for scan in source:
@@ -159,6 +262,11 @@ def run(source: ScanSource, config: Config | None = None, progress: ProgressFn |
         poses.append(step.pose)
         scores.append(step.score)
         flags.append((step.map_updated, step.rejected, step.skipped))
+        removed_rows.append(step.removed)
+        for t in step.tracks:
+            b = t.box
+            track_rows.append((step.stamp, t.id, t.state, b.px, b.py, b.theta, b.length, b.width,
+                               float(t.velocity[0]), float(t.velocity[1]), bool(t.in_m)))
         for k, v in step.timings.items():
             timings.setdefault(k, []).append(v)
         if progress is not None:
@@ -175,10 +283,13 @@ def run(source: ScanSource, config: Config | None = None, progress: ProgressFn |
         map_updated=flag_arr[:, 0],
         rejected=flag_arr[:, 1],
         skipped=flag_arr[:, 2],
+        removed_rows=removed_rows,
+        track_rows=track_rows,
         timings_ms={k: np.array(v) for k, v in timings.items()},
         grid=pipe.gridmap(),
         logodds=logodds,
         wall_time_s=wall,
         reasons=dict(summary.get("reasons", {})),  # type: ignore[arg-type]
         memory_bytes=pipe.slam.memory_bytes,
+        tracker_stats=pipe.tracker.stats.as_dict(),
     )

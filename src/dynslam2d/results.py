@@ -1,12 +1,15 @@
 """A results folder: everything a run writes, each file atomically.
 
 ``write_results(run, out_dir, gt)`` writes map.pgm + map.yaml (map_server,
-thresholds 0.65 / 0.196), map_logodds.npy, trajectory.tum, config.yaml,
+thresholds 0.65 / 0.196), map_logodds.npy, trajectory.tum, tracks.csv,
+kept_mask.npz (``stamps`` (n,), ``removed`` (n, beams) bool), config.yaml,
 summary.json, map.png and, with ground truth, metrics.json.
 """
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import os
 from pathlib import Path
@@ -24,7 +27,7 @@ from dynslam2d.io.atomic import atomic_path, write_text_atomic
 from dynslam2d.io.groundtruth import GroundTruthFiles, read_ground_truth_folder
 from dynslam2d.io.mapfile import write_map
 from dynslam2d.io.trajectory import Trajectory, write_tum
-from dynslam2d.pipeline import RunResult
+from dynslam2d.pipeline import TRACK_COLUMNS, RunResult
 from dynslam2d.types import ScanSource
 from dynslam2d.viz.mapplot import plot_map
 
@@ -89,7 +92,20 @@ def evaluate(
 
 def compute_metrics(run: RunResult, gt: GroundTruthFiles) -> dict[str, Any]:
     """:func:`evaluate` on an in-memory run."""
-    return evaluate(run.trajectory, run.grid, gt)
+    removed = run.removed
+    return evaluate(run.trajectory, run.grid, gt, removed if removed.size else None, run.trajectory.stamps)
+
+
+def tracks_csv(run: RunResult) -> str:
+    """tracks.csv text: one row per (scan, live track), columns :data:`TRACK_COLUMNS` (map frame)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(TRACK_COLUMNS)
+    for row in run.track_rows:
+        stamp, tid, state, x, y, th, ln, wd, vx, vy, in_m = row
+        w.writerow([repr(stamp), tid, state, f"{x:.4f}", f"{y:.4f}", f"{th:.4f}", f"{ln:.3f}", f"{wd:.3f}",
+                    f"{vx:.4f}", f"{vy:.4f}", int(in_m)])
+    return buf.getvalue()
 
 
 def evaluate_folder(run_dir: str | os.PathLike[str], gt_dir: str | os.PathLike[str]) -> dict[str, Any]:
@@ -133,6 +149,13 @@ def write_results(run: RunResult, out_dir: str | os.PathLike[str], gt: GroundTru
     paths["map_logodds.npy"] = out / "map_logodds.npy"
     paths["trajectory.tum"] = write_tum(out / "trajectory.tum", run.trajectory, comment="laser pose in the map frame")
     paths["config.yaml"] = write_text_atomic(out / "config.yaml", dump_config(run.config))
+    paths["tracks.csv"] = write_text_atomic(out / "tracks.csv", tracks_csv(run))
+    removed = run.removed
+    with atomic_path(out / "kept_mask.npz") as tmp:
+        with tmp.open("wb") as fh:
+            # removed[i, b] is True where the filter removed beam b of scan i (stamps[i]).
+            np.savez_compressed(fh, stamps=run.trajectory.stamps, removed=removed)
+    paths["kept_mask.npz"] = out / "kept_mask.npz"
     summary = run.summary()
     metrics = compute_metrics(run, gt) if gt is not None else None
     if metrics is not None:

@@ -274,3 +274,91 @@ class ScanSource(Protocol):
     def __iter__(self) -> Iterator[Scan]: ...
 
     def __len__(self) -> int: ...
+
+
+@dataclass(frozen=True, slots=True)
+class Box:
+    """An oriented rectangle, the paper's object state x = [p_x, p_y, θ, l, w] (paper Eq. 2).
+
+    Attributes:
+        px, py: centre, m (in whatever frame the producer states; the tracker uses the map frame).
+        theta: heading of the length axis, rad in [-π, π).
+        length: side along ``theta``, m.
+        width: side perpendicular to ``theta``, m.
+    """
+
+    px: float
+    py: float
+    theta: float
+    length: float
+    width: float
+
+    @property
+    def center(self) -> np.ndarray:
+        return np.array([self.px, self.py])
+
+    def corners(self) -> np.ndarray:
+        """(4, 2) corners, counter-clockwise from (+l/2, −w/2) in the box frame, m."""
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        hl, hw = 0.5 * self.length, 0.5 * self.width
+        local = np.array([[hl, -hw], [hl, hw], [-hl, hw], [-hl, -hw]])
+        return np.column_stack((self.px + c * local[:, 0] - s * local[:, 1],
+                                self.py + s * local[:, 0] + c * local[:, 1]))
+
+    def as_array(self) -> np.ndarray:
+        """[p_x, p_y, θ, l, w] (paper Eq. 2)."""
+        return np.array([self.px, self.py, self.theta, self.length, self.width])
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Track:
+    """A tracked object as reported after one scan (map frame, SI units).
+
+    Attributes:
+        id: track id, unique over a tracker's life (1, 2, …).
+        state: "tentative", "confirmed" or "coasting" (deleted tracks are not reported).
+        stamp: stamp of the scan this report belongs to, s.
+        box: the object's box (centre, heading, length, width), map frame.
+        velocity: (2,) centre velocity v_x, v_y, m/s, map frame.
+        covariance: (4, 4) covariance of [p_x, p_y, v_x, v_y] (m², m²/s, m²/s²).
+        age: time since the track was born, s.
+        hits: number of scans with a detection assigned.
+        misses: consecutive scans without a detection (0 when updated in this scan).
+        kind: shape model of the last detection: "rect", "circle" or "point".
+        in_m: True if the track is in the dynamic set M (paper Eq. 3).
+        m_reason: why it is or is not in M (human-readable).
+        beams: indices of the scan beams assigned to this track in this scan (empty when coasting).
+        n_points: len(beams).
+    """
+
+    id: int
+    state: str
+    stamp: float
+    box: Box
+    velocity: np.ndarray
+    covariance: np.ndarray
+    age: float
+    hits: int
+    misses: int
+    kind: str
+    in_m: bool
+    m_reason: str
+    beams: np.ndarray
+    n_points: int
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.box.center
+
+    @property
+    def heading(self) -> float:
+        return self.box.theta
+
+    @property
+    def size(self) -> tuple[float, float]:
+        """(length, width), m."""
+        return self.box.length, self.box.width
+
+    @property
+    def speed(self) -> float:
+        return float(math.hypot(self.velocity[0], self.velocity[1]))

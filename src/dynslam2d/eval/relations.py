@@ -41,6 +41,7 @@ from typing import Protocol
 import numpy as np
 
 from dynslam2d.errors import DynSlamError
+from dynslam2d.stamps import nearest_sorted
 from dynslam2d.eval.trajectory import ErrorStats
 from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.types import wrap_angle
@@ -127,17 +128,6 @@ class RelationResult:
         return math.degrees(self.rot.std)
 
 
-def _lookup(stamps_sorted: np.ndarray, t: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
-    """Index (into the sorted stamps) of the nearest stamp to each t, and whether it is within tol."""
-    k = np.searchsorted(stamps_sorted, t, side="left")
-    lo = np.clip(k - 1, 0, stamps_sorted.size - 1)
-    hi = np.clip(k, 0, stamps_sorted.size - 1)
-    d_lo = np.abs(t - stamps_sorted[lo])
-    d_hi = np.abs(stamps_sorted[hi] - t)
-    idx = np.where(d_hi < d_lo, hi, lo)
-    return idx, np.minimum(d_lo, d_hi) <= tol
-
-
 def relation_errors(
     traj: Trajectory,
     t1: np.ndarray,
@@ -183,8 +173,10 @@ def relation_errors(
     order = np.argsort(traj.stamps, kind="stable")
     stamps = traj.stamps[order]
     poses = traj.poses[order]
-    k1, ok1 = _lookup(stamps, r_t1, tol)
-    k2, ok2 = _lookup(stamps, r_t2, tol)
+    k1, d1 = nearest_sorted(stamps, r_t1)
+    ok1 = d1 <= tol
+    k2, d2 = nearest_sorted(stamps, r_t2)
+    ok2 = d2 <= tol
     used = ok1 & ok2
     if not np.any(used):
         raise DynSlamError(

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from dynslam2d.errors import DynSlamError
+from dynslam2d.stamps import match_nearest
 
 
 def _ratio(num: int, den: int) -> float:
@@ -128,16 +129,10 @@ def match_scans(
     b = np.asarray(label_stamps, dtype=np.float64).reshape(-1)
     if a.size == 0 or b.size == 0:
         raise DynSlamError(f"removal metrics: {a.size} removed-mask stamps and {b.size} label stamps")
-    order = np.argsort(b, kind="stable")
-    bs = b[order]
-    pos = np.clip(np.searchsorted(bs, a), 1, max(bs.size - 1, 1))
-    lo = np.clip(pos - 1, 0, bs.size - 1)
-    hi = np.clip(pos, 0, bs.size - 1)
-    pick = np.where(np.abs(a - bs[lo]) <= np.abs(bs[hi] - a), lo, hi)
-    ok = np.abs(bs[pick] - a) <= max_dt
-    if not ok.any():
+    i_a, i_b = match_nearest(a, b, max_dt)
+    if i_a.size == 0:
         raise DynSlamError(f"removal metrics: no removed-mask stamp within {max_dt} s of a label stamp")
-    return np.flatnonzero(ok), order[pick[ok]]
+    return i_a, i_b
 
 
 __all__ = ["RemovalMetrics", "match_scans", "removal_metrics"]

@@ -22,6 +22,7 @@ from typing import Literal
 import numpy as np
 
 from dynslam2d.errors import DynSlamError
+from dynslam2d.stamps import match_nearest
 from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.types import Pose2D, wrap_angle
 
@@ -105,7 +106,7 @@ def associate(
     est_stamps = est.stamps + offset
     est_longer = len(est) > len(ref)
     short, long_ = (ref.stamps, est_stamps) if est_longer else (est_stamps, ref.stamps)
-    i_short, i_long = _nearest(short, long_, max_dt)
+    i_short, i_long = match_nearest(short, long_, max_dt)
     if i_short.size == 0:
         raise DynSlamError(
             f"no matching stamps between reference ({len(ref)} poses, "
@@ -113,22 +114,6 @@ def associate(
             f"{est_stamps.min():.6f}..{est_stamps.max():.6f} s) within max_dt = {max_dt} s"
         )
     return (i_short, i_long) if est_longer else (i_long, i_short)
-
-
-def _nearest(query: np.ndarray, pool: np.ndarray, max_dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """For each query stamp, the index of the nearest pool stamp (ties → earlier in time);
-    keep only pairs within ``max_dt``. Returns (query indices, pool indices)."""
-    order = np.argsort(pool, kind="stable")
-    sp = pool[order]
-    k = np.searchsorted(sp, query, side="left")
-    lo = np.clip(k - 1, 0, sp.size - 1)
-    hi = np.clip(k, 0, sp.size - 1)
-    d_lo = np.abs(query - sp[lo])
-    d_hi = np.abs(sp[hi] - query)
-    pick = np.where(d_hi < d_lo, hi, lo)
-    dist = np.minimum(d_lo, d_hi)
-    ok = dist <= max_dt
-    return np.flatnonzero(ok), order[pick[ok]]
 
 
 # --------------------------------------------------------------------------- alignment

@@ -23,6 +23,7 @@ import yaml
 from dynslam2d.errors import DynSlamError
 from dynslam2d.gridmap import GridMap
 from dynslam2d.io.atomic import atomic_path, write_text_atomic
+from dynslam2d.io.yamlfile import read_yaml_mapping
 
 FREE_PIXEL = 254
 OCCUPIED_PIXEL = 0
@@ -147,14 +148,7 @@ def read_map(yaml_path: str | os.PathLike[str]) -> GridMap:
     pixels between the thresholds that equal the unknown value 205).
     """
     yaml_path = Path(yaml_path)
-    try:
-        meta = yaml.safe_load(yaml_path.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise DynSlamError(f"{yaml_path}: map file not found") from exc
-    except (OSError, yaml.YAMLError) as exc:
-        raise DynSlamError(f"{yaml_path}: cannot read map YAML ({exc})") from exc
-    if not isinstance(meta, dict):
-        raise DynSlamError(f"{yaml_path}: map YAML is not a mapping")
+    meta = read_yaml_mapping(yaml_path, "map YAML")
     for key in ("image", "resolution", "origin"):
         if key not in meta:
             raise DynSlamError(f"{yaml_path}: map YAML lacks '{key}'")

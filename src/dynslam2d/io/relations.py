@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dynslam2d.errors import DynSlamError
+from dynslam2d.stamps import nearest_sorted
 from dynslam2d.io.carmen import read_text
 
 #: Default stamp-matching tolerance, s (relation stamps are written with 6 decimals).
@@ -97,16 +98,6 @@ def _is_float(text: str) -> bool:
     return True
 
 
-def _nearest(sorted_stamps: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Index of the nearest entry of ``sorted_stamps`` for each of ``t`` (ties → earlier)."""
-    n = sorted_stamps.shape[0]
-    j = np.searchsorted(sorted_stamps, t)
-    lo = np.clip(j - 1, 0, n - 1)
-    hi = np.clip(j, 0, n - 1)
-    take_hi = np.abs(sorted_stamps[hi] - t) < np.abs(sorted_stamps[lo] - t)
-    return np.where(take_hi, hi, lo)
-
-
 def match_relation_stamps(
     relations: Relations, scan_stamps: np.ndarray, tol: float = DEFAULT_MATCH_TOL
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -128,7 +119,7 @@ def match_relation_stamps(
         raise DynSlamError("match_relation_stamps: scan stamps must be finite and sorted (non-decreasing)")
     if not (math.isfinite(tol) and tol >= 0.0):
         raise DynSlamError(f"match_relation_stamps: tol must be a non-negative number of seconds, got {tol}")
-    i1 = _nearest(s, relations.t1).astype(np.int64)
-    i2 = _nearest(s, relations.t2).astype(np.int64)
+    i1 = nearest_sorted(s, relations.t1)[0]
+    i2 = nearest_sorted(s, relations.t2)[0]
     ok = (np.abs(s[i1] - relations.t1) <= tol) & (np.abs(s[i2] - relations.t2) <= tol)
     return i1, i2, ok

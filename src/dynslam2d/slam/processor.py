@@ -206,6 +206,11 @@ class HectorSlam:
         return pts, clear
 
     # ---- prediction --------------------------------------------------------------------
+    def predict(self, stamp: float) -> Pose2D:
+        """The start estimate :meth:`match` would use for a scan at ``stamp`` (map frame):
+        the previous pose, or the constant-velocity prediction when configured."""
+        return self._predict(stamp)[0]
+
     def _predict(self, stamp: float) -> tuple[Pose2D, bool]:
         """Start estimate for a scan at ``stamp`` and whether a time gap was seen."""
         c = self.config

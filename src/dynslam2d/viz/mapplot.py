@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from dynslam2d.gridmap import GridMap
-from dynslam2d.io.atomic import atomic_path
+from dynslam2d.viz.figure import save_png
 
 
 def occupancy_image(grid: GridMap) -> np.ndarray:
@@ -74,8 +74,4 @@ def plot_map(
     if trajectory_xy is not None or reference_xy is not None:
         ax.legend(loc="upper right", fontsize="small", framealpha=0.8)
     fig.tight_layout()
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=dpi, format="png")
-    plt.close(fig)
-    return path
+    return save_png(fig, path, dpi)

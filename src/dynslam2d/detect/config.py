@@ -1,0 +1,337 @@
+"""Configuration of moving-object detection and tracking (``dynslam2d.detect``).
+
+Three stages, one pydantic model each, nested in :class:`DetectConfig`:
+
+- :class:`SegmentConfig` — breakpoint segmentation of a scan (paper Eq. 1; Borges & Aldon
+  2004 adaptive breakpoint detector, datmo.md §1.3 and §10.2; datmo's fixed gap for parity).
+- :class:`FitConfig` — search-based rectangle fitting (Zhang et al. 2017, datmo.md §2) and
+  the circle / point models for small or round clusters.
+- :class:`TrackerConfig` — constant-velocity Kalman tracking in the map frame, track
+  management, and the dynamic set M (paper Eq. 3, datmo.md §5 and §10.6–10.7).
+
+Defaults were tuned on the simulator scenes (720 beams, 20 Hz) and checked on the datmo
+bags (360 beams, 12.5 Hz); see ``dynslam2d.eval.tracking``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+
+class SegmentConfig(BaseModel):
+    """Parameters of :func:`dynslam2d.detect.segment.segment_scan` (units in each description)."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    mode: Literal["adaptive", "fixed"] = Field(
+        "adaptive",
+        description="'adaptive': breakpoint threshold D = clip(r·sin Δφ / sin(λ − Δφ) + 3σ_r, d_min, d_max) "
+        "(paper Eq. 1, Borges & Aldon 2004); 'fixed': datmo's constant gap fixed_gap (datmo.md §1.1).",
+    )
+    lambda_deg: float = Field(
+        10.0, gt=0.0, lt=90.0,
+        description="Worst-case incidence angle λ of the adaptive detector, degrees (Borges & Aldon use ≈10°).",
+    )
+    sigma_r: float = Field(
+        0.01, ge=0.0,
+        description="Range noise standard deviation σ_r, m; the adaptive threshold adds 3σ_r.",
+    )
+    d_min: float = Field(
+        0.10, ge=0.0,
+        description="Lower clamp of the adaptive threshold, m.",
+    )
+    d_max: float = Field(
+        0.30, gt=0.0,
+        description="Upper clamp of the adaptive threshold, m (datmo.md §1.3: an unclamped ABD over-merges "
+        "small objects with walls).",
+    )
+    fixed_gap: float = Field(
+        0.17, gt=0.0,
+        description="Gap of the 'fixed' mode, m (datmo code default 0.2, example.launch 0.17).",
+    )
+    max_skip_beams: int = Field(
+        3, ge=0,
+        description="Consecutive valid beams may be linked across at most this many no-return beams "
+        "(0 = only adjacent beams link); the threshold uses the real angle difference.",
+    )
+    wrap_around: Literal["auto", "always", "never"] = Field(
+        "auto",
+        description="Link the last and first beams: 'auto' when the scan covers 360° (n·|Δφ| ≥ 2π − 1.5|Δφ|).",
+    )
+    min_points: int = Field(
+        3, ge=1,
+        description="Clusters with fewer points are dropped (noise, isolated grazing returns).",
+    )
+    max_points: int = Field(
+        400, ge=2,
+        description="Clusters with more points are static structure (never tracked).",
+    )
+    max_extent: float = Field(
+        3.0, gt=0.0,
+        description="Clusters whose fitted rectangle has a side longer than this are static structure, m "
+        "(walls); the largest mover in the simulator is the 2 m bar.",
+    )
+
+
+class FitConfig(BaseModel):
+    """Parameters of the shape fit (:mod:`dynslam2d.detect.shapes`)."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    criterion: Literal["variance", "closeness", "area"] = Field(
+        "variance",
+        description="Zhang et al. 2017 criterion of the search-based rectangle fit (datmo.md §2.1): "
+        "'variance' (PythonRobotics default), 'closeness' (datmo) or 'area'.",
+    )
+    angle_step_deg: float = Field(
+        1.0, gt=0.0, le=15.0,
+        description="Step of the heading search over [0, 90°), degrees (datmo uses ≈3.6°; Zhang 1°).",
+    )
+    coarse_stride: int = Field(
+        5, ge=1,
+        description="Coarse-to-fine heading search: score every coarse_stride-th angle, then every angle "
+        "within one coarse step of the best (1 = exhaustive search over all angles).",
+    )
+    closeness_d0: float = Field(
+        0.01, gt=0.0,
+        description="Floor d0 of the distance in the closeness criterion, m (Zhang 0.01; datmo 0.001).",
+    )
+    point_max_points: int = Field(
+        4, ge=1,
+        description="Clusters with at most this many points use the point model (centroid).",
+    )
+    point_max_extent: float = Field(
+        0.08, ge=0.0,
+        description="Clusters whose two fitted sides are both below this use the point model, m.",
+    )
+    circle_min_points: int = Field(
+        5, ge=3,
+        description="Fewest points for the circle model (people, poles).",
+    )
+    circle_max_radius: float = Field(
+        0.45, gt=0.0,
+        description="Largest radius accepted by the circle model, m.",
+    )
+    circle_min_radius: float = Field(
+        0.05, gt=0.0,
+        description="Smallest radius accepted by the circle model, m.",
+    )
+    circle_residual_ratio: float = Field(
+        0.6, gt=0.0,
+        description="The circle model wins when its RMS residual is below this fraction of the rectangle's.",
+    )
+    circle_min_depth_ratio: float = Field(
+        0.5, ge=0.0,
+        description="The circle model needs the arc to be deep: the short side of the cluster's rectangle "
+        "≥ this × radius (a half circle gives ≈1; a slightly curved bumper ≈0.1).",
+    )
+    face_tolerance: float = Field(
+        0.04, gt=0.0,
+        description="A point lies on a rectangle side when within this distance of it, m (≈3–4σ_r).",
+    )
+    min_face_span: float = Field(
+        0.06, gt=0.0,
+        description="A side counts as a visible face when its points span at least this along it, m.",
+    )
+    edge_line_tolerance: float = Field(
+        0.08, gt=0.0,
+        description="A cluster end whose outside neighbour lies within this distance of the end face's "
+        "line is an artificial break of one surface (grazing wall), not an object edge, m.",
+    )
+    min_side_points: int = Field(
+        3, ge=1,
+        description="A side running away from a visible face measures the object's depth only if it has at "
+        "least this many points off the face (a grazing side shows one or two).",
+    )
+    edge_max_gap: float = Field(
+        0.12, gt=0.0,
+        description="A cluster end is a usable object edge only if the next beam would meet the end face "
+        "within this distance (r·Δφ / sin incidence), m: a grazing face may end anywhere in that gap.",
+    )
+    edge_range_jump: float = Field(
+        0.05, ge=0.0,
+        description="An outside neighbour closer than the end point by more than this occludes the end "
+        "(end not observed), m.",
+    )
+    fragment_margin: float = Field(
+        0.15, ge=0.0,
+        description="An unassigned cluster lying entirely within this distance of the box of a confirmed "
+        "track updated in the same scan is a fragment of that object: its beams join the track, no new "
+        "track is born, m.",
+    )
+    sigma_position: float = Field(
+        0.02, gt=0.0,
+        description="Standard deviation of an observed face / edge position, m.",
+    )
+    sigma_point: float = Field(
+        0.08, gt=0.0,
+        description="Standard deviation of a point-model (centroid) measurement, m.",
+    )
+    sigma_unobserved: float = Field(
+        0.5, gt=0.0,
+        description="Standard deviation, for association only, of the centre along an axis where neither "
+        "bound is observed (e.g. a wall piece whose ends are grazing breaks), m. The Kalman update gets no "
+        "position there, only a zero-velocity pseudo-measurement (sigma_unobserved_speed).",
+    )
+    sigma_unobserved_speed: float = Field(
+        0.2, gt=0.0,
+        description="Standard deviation of the zero-velocity pseudo-measurement along an unobserved axis, m/s.",
+    )
+    default_depth: float = Field(
+        0.5, gt=0.0,
+        description="Largest size assumed along an axis never fully observed (only its near face seen), m.",
+    )
+    default_depth_ratio: float = Field(
+        0.5, gt=0.0,
+        description="Assumed size along a never-observed axis as a fraction of the observed side (capped by "
+        "default_depth); 1 = square prior.",
+    )
+
+
+class TrackerConfig(BaseModel):
+    """Parameters of :class:`dynslam2d.detect.tracker.Tracker`."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    accel_noise: float = Field(
+        2.0, gt=0.0,
+        description="White-noise acceleration spectral density q of the constant-velocity model, m²/s³ "
+        "(Q = q·[[dt³/3, dt²/2], [dt²/2, dt]] per axis).",
+    )
+    init_speed_sigma: float = Field(
+        2.0, gt=0.0,
+        description="Prior standard deviation of a new track's velocity (mean 0), m/s.",
+    )
+    gate_chi2: float = Field(
+        13.8, gt=0.0,
+        description="Mahalanobis gate on the centre innovation, χ² with 2 dof (13.8 = 99.9 %).",
+    )
+    gate_distance: float = Field(
+        1.0, gt=0.0,
+        description="Euclidean gate between a cluster's centroid and a track's predicted box (distance to "
+        "the box outline), m; bounds association along unobserved axes.",
+    )
+    confirm_hits: int = Field(
+        3, ge=1,
+        description="M of the M-of-N confirmation rule: hits needed among the first confirm_window updates.",
+    )
+    confirm_window: int = Field(
+        4, ge=1,
+        description="N of the M-of-N confirmation rule, scans.",
+    )
+    max_coast_time: float = Field(
+        0.6, ge=0.0,
+        description="A confirmed track with no detection for longer than this is deleted, s.",
+    )
+    max_position_sigma: float = Field(
+        1.5, gt=0.0,
+        description="A track whose position standard deviation exceeds this is deleted (covariance blow-up), m.",
+    )
+    size_gain: float = Field(
+        0.3, gt=0.0, le=1.0,
+        description="Gain of the size filter when a side is fully observed (exponential smoothing).",
+    )
+    heading_gain: float = Field(
+        0.3, gt=0.0, le=1.0,
+        description="Gain of the box-axis heading filter (innovation wrapped to ±45°, the 90° ambiguity).",
+    )
+    v_min: float = Field(
+        0.5, ge=0.0,
+        description="Speed threshold of the dynamic set M, m/s (paper Eq. 3).",
+    )
+    v_exit_ratio: float = Field(
+        0.5, ge=0.0, le=1.0,
+        description="A track leaves M when its speed stays below v_exit_ratio·v_min for m_exit_time "
+        "(hysteresis: an object that pauses stays an object to filter); ratio 1 and time 0 = Eq. 3 "
+        "applied on every update.",
+    )
+    m_exit_time: float = Field(
+        2.5, ge=0.0,
+        description="How long the speed must stay below v_exit_ratio·v_min before a track leaves M, s.",
+    )
+    sustain_updates: int = Field(
+        5, ge=1,
+        description="Consecutive updates with speed > v_min needed to enter M (robustness to pose jitter).",
+    )
+    min_displacement: float = Field(
+        0.3, ge=0.0,
+        description="Net displacement of the centre since the track's birth needed to enter M, m.",
+    )
+    max_speed_sigma: float = Field(
+        0.8, gt=0.0,
+        description="Entering M needs the velocity standard deviation along its own direction below this, m/s.",
+    )
+    free_space_check: bool = Field(
+        True,
+        description="Entering M also needs the track's points to lie where an earlier scan saw through "
+        "(free space; leg_tracker's free-space test, datmo.md §10.7): walls never do.",
+    )
+    free_min_fraction: float = Field(
+        0.1, ge=0.0, le=1.0,
+        description="Mean fraction of a track's points on free cells, over its last sustain_updates updates, "
+        "needed to enter M.",
+    )
+    free_ref_ages: tuple[float, ...] = Field(
+        (0.3, 0.8), min_length=1,
+        description="Ages of the earlier scans the free-space test looks back to, s (the buffered scan "
+        "nearest each age); a point is on free space if one of them saw through its place.",
+    )
+    free_margin: float = Field(
+        0.15, gt=0.0,
+        description="An earlier beam must end at least this far behind a point to count as seeing through "
+        "it, m.",
+    )
+    aspect_prior: float | None = Field(
+        None, gt=0.0, le=1.0,
+        description="Width / length ratio assumed for a moving box whose other side was never seen: a side "
+        "parallel to the motion is the length, one across it the width (vehicles move along their long "
+        "axis). None = no prior (the hidden side keeps FitConfig.default_depth_ratio × the seen side).",
+    )
+    prior_min_speed: float = Field(
+        0.3, ge=0.0,
+        description="Speed above which the motion direction is trusted for aspect_prior, m/s.",
+    )
+    max_object_speed: float = Field(
+        6.0, gt=0.0,
+        description="Tracks faster than this are deleted as association errors, m/s.",
+    )
+    max_pose_speed: float = Field(
+        5.0, gt=0.0,
+        description="A laser pose moving faster than this between scans is a pose jump: all tracks are "
+        "dropped (counted), m/s.",
+    )
+    max_pose_rate: float = Field(
+        6.0, gt=0.0,
+        description="A laser pose turning faster than this between scans is a pose jump, rad/s.",
+    )
+    max_dt: float = Field(
+        1.0, gt=0.0,
+        description="A gap between scans longer than this (or time going backwards) drops all tracks, s.",
+    )
+
+
+class DetectConfig(BaseModel):
+    """Detection and tracking of moving objects: segmentation, shape fit, tracker (nest as ``detect``)."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    segment: SegmentConfig = Field(default_factory=SegmentConfig, description="Breakpoint segmentation.")
+    fit: FitConfig = Field(default_factory=FitConfig, description="Rectangle / circle / point shape fit.")
+    tracker: TrackerConfig = Field(default_factory=TrackerConfig, description="Kalman tracking and the set M.")
+
+    @model_validator(mode="after")
+    def _check(self) -> DetectConfig:
+        if self.segment.d_min > self.segment.d_max:
+            raise ValueError("segment.d_min must be ≤ segment.d_max")
+        if self.tracker.confirm_hits > self.tracker.confirm_window:
+            raise ValueError("tracker.confirm_hits must be ≤ tracker.confirm_window")
+        if self.fit.circle_min_radius >= self.fit.circle_max_radius:
+            raise ValueError("fit.circle_min_radius must be < fit.circle_max_radius")
+        return self
+
+    @property
+    def lambda_rad(self) -> float:
+        return math.radians(self.segment.lambda_deg)

@@ -1,0 +1,114 @@
+"""Free-space test: did an earlier scan see *through* the place where a point is now?
+
+An object that moves occupies space the sensor saw as free a moment ago; a wall's points lie
+where earlier beams ended, never where they passed through (leg_tracker's free-space test,
+datmo.md §7 and §10.7; the paper's §2.2 "comparison of consecutive frames"). For each point p
+(map frame) and each reference scan (a few tenths of a second old, with its own pose) the test
+projects p into that scan: bearing φ and range ρ from the reference sensor. p was in free space
+if the reference beams at φ (the nearest beam and its two neighbours, so that a grazing wall
+cannot pass) all returned farther than ρ + margin, or nothing (within range_max).
+
+Occluded places (a beam ending before ρ) and places outside the reference field of view are
+"unknown", not free. Frames: map frame; units m, rad, s.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from dynslam2d.types import Pose2D, Scan
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Ref:
+    stamp: float
+    pose: Pose2D
+    ranges: np.ndarray  # no return → +inf
+    angle_min: float
+    increment: float
+    full: bool
+    reach: float  # a no-return beam saw through everything closer than this, m
+
+
+class FreeSpaceMemory:
+    """Keeps recent scans with their poses and answers "was this point seen through?".
+
+    Args:
+        ref_ages: ages of the reference scans used, s (the buffered scan nearest each age).
+        margin: a reference beam must end at least this far behind the point, m.
+        max_age: scans older than this are forgotten, s.
+    """
+
+    def __init__(self, ref_ages: tuple[float, ...] = (0.3, 0.8), margin: float = 0.15, max_age: float = 1.5) -> None:
+        self.ref_ages = tuple(float(a) for a in ref_ages)
+        self.margin = float(margin)
+        self.max_age = max(float(max_age), max(self.ref_ages) + 0.5)
+        self._buf: deque[_Ref] = deque()
+
+    def clear(self) -> None:
+        self._buf.clear()
+
+    @staticmethod
+    def make_ref(scan: Scan, pose: Pose2D, valid: np.ndarray) -> _Ref:
+        """A reference built from ``scan`` (taken at ``pose``, map frame; ``valid`` = beams with a return)."""
+        r = np.where(valid, scan.ranges, np.inf)
+        full = scan.n_beams * abs(scan.angle_increment) >= 2.0 * math.pi - 1.5 * abs(scan.angle_increment)
+        return _Ref(float(scan.stamp), pose, r, float(scan.angle_min), float(scan.angle_increment), full,
+                    float(scan.range_max))
+
+    def add(self, scan: Scan, pose: Pose2D, valid: np.ndarray, ref: _Ref | None = None) -> None:
+        """Remember ``scan`` (taken at ``pose``, map frame); ``valid`` marks beams with a return."""
+        self._buf.append(ref if ref is not None else self.make_ref(scan, pose, valid))
+        while self._buf and scan.stamp - self._buf[0].stamp > self.max_age:
+            self._buf.popleft()
+
+    def _refs(self, now: float) -> list[_Ref]:
+        out: list[_Ref] = []
+        if not self._buf:
+            return out
+        ages = np.array([now - b.stamp for b in self._buf])
+        for a in self.ref_ages:
+            j = int(np.argmin(np.abs(ages - a)))
+            if ages[j] > 0.0 and self._buf[j] not in out:
+                out.append(self._buf[j])
+        return out
+
+    def seen_through(self, points: np.ndarray, now: float) -> np.ndarray:
+        """(n,) bool: the (n, 2) map-frame points lay in space that a reference scan saw as free."""
+        n = points.shape[0]
+        free = np.zeros(n, dtype=bool)
+        if n == 0:
+            return free
+        for ref in self._refs(now):
+            free |= self.seen_through_by(ref, points)
+        return free
+
+    def seen_through_by(self, ref: _Ref, points: np.ndarray) -> np.ndarray:
+        """(n,) bool: the scan ``ref`` saw through the (n, 2) map-frame points."""
+        n = points.shape[0]
+        free = np.zeros(n, dtype=bool)
+        if n:
+            local = ref.pose.inverse().transform_points(points)
+            rho = np.hypot(local[:, 0], local[:, 1])
+            phi = np.arctan2(local[:, 1], local[:, 0])
+            m = ref.ranges.shape[0]
+            idx = np.rint((phi - ref.angle_min) / ref.increment).astype(np.int64)
+            if ref.full:
+                idx %= m
+                inside = np.ones(n, dtype=bool)
+            else:
+                # the angle may need a turn to fall inside the fan
+                alt = np.rint((phi + 2.0 * math.pi - ref.angle_min) / ref.increment).astype(np.int64)
+                idx = np.where((idx < 0) | (idx >= m), alt, idx)
+                inside = (idx >= 1) & (idx < m - 1)
+                idx = np.clip(idx, 0, m - 1)
+            lo = (idx - 1) % m
+            hi = (idx + 1) % m
+            rmin = np.minimum(np.minimum(ref.ranges[idx], ref.ranges[lo]), ref.ranges[hi])
+            beyond = np.where(np.isinf(rmin), rho < ref.reach - self.margin, rmin > rho + self.margin)
+            free = inside & beyond
+        return free

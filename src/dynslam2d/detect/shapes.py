@@ -1,0 +1,412 @@
+"""Shape fitting of clusters: search-based rectangle (L-shape), circle, point.
+
+Rectangle (Zhang, Xu, Dong, Dolan, IV 2017; datmo.md §2.1 and §10.3): for every candidate
+axis angle θ in [0, π/2) with a 1° step, project the points on e1 = (cos θ, sin θ) and
+e2 = (−sin θ, cos θ) and score the projection with the area, closeness or variance criterion;
+the best θ gives the bounds [lo1, hi1] × [lo2, hi2] of the rectangle in (e1, e2) coordinates.
+:func:`fit_rectangle` is the numpy version vectorised over all angles at once (one (n×2)·(2×K)
+product); :func:`fit_clusters` does the same for every cluster of a scan in one numba pass.
+
+Circle: algebraic (Kåsa) fit refined by Gauss–Newton on the geometric residual — round
+movers (people) show an arc whose centroid lies ≈2R/π in front of the true centre.
+
+All coordinates are in whatever frame the points are given in (the tracker uses the map
+frame); lengths in m, angles in rad.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+CRITERIA = {"area": 0, "closeness": 1, "variance": 2}
+
+
+@dataclass(frozen=True, slots=True)
+class RectFit:
+    """Result of a rectangle fit, in the frame of the input points.
+
+    Attributes:
+        theta: axis angle of e1, rad in [0, π/2).
+        lo, hi: (2,) bounds of the points along e1 and e2, m (the rectangle's sides).
+        rms: RMS distance of the points to the nearest rectangle side, m.
+    """
+
+    theta: float
+    lo: np.ndarray
+    hi: np.ndarray
+    rms: float
+
+    @property
+    def extent(self) -> np.ndarray:
+        """(2,) side lengths along e1, e2, m."""
+        return self.hi - self.lo
+
+    def center(self) -> np.ndarray:
+        """(2,) centre of the bounding rectangle, m."""
+        u = 0.5 * (self.lo + self.hi)
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        return np.array([c * u[0] - s * u[1], s * u[0] + c * u[1]])
+
+    def corners(self) -> np.ndarray:
+        """(4, 2) corners in datmo's clockwise order c0..c3 (datmo.md §2.1):
+        (hi1, lo2), (lo1, lo2), (lo1, hi2), (hi1, hi2) in (e1, e2) coordinates."""
+        uv = np.array([[self.hi[0], self.lo[1]], [self.lo[0], self.lo[1]], [self.lo[0], self.hi[1]],
+                       [self.hi[0], self.hi[1]]])
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        return np.column_stack((c * uv[:, 0] - s * uv[:, 1], s * uv[:, 0] + c * uv[:, 1]))
+
+
+def search_angles(step_deg: float) -> np.ndarray:
+    """Candidate axis angles θ_k = k·step over [0, π/2), rad."""
+    k = int(math.ceil(90.0 / step_deg - 1e-9))
+    return np.arange(k) * math.radians(step_deg)
+
+
+def fit_rectangle(points: np.ndarray, criterion: str = "variance", step_deg: float = 1.0,
+                  d0: float = 0.01) -> RectFit:
+    """Search-based rectangle fit of (n, 2) points, vectorised over all angles.
+
+    Degenerate input never gives NaN: one point gives a zero-size rectangle at the point,
+    an empty array a zero rectangle at the origin with rms 0.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    if pts.shape[0] == 0:
+        return RectFit(0.0, np.zeros(2), np.zeros(2), 0.0)
+    th = search_angles(step_deg)
+    c, s = np.cos(th), np.sin(th)
+    c1 = pts @ np.vstack((c, s))  # (n, K) projections on e1
+    c2 = pts @ np.vstack((-s, c))  # (n, K) projections on e2
+    lo1, hi1, lo2, hi2 = c1.min(0), c1.max(0), c2.min(0), c2.max(0)
+    # Zhang: each axis' points go, as a group, to the nearer of its two parallel edges
+    a1, b1 = hi1 - c1, c1 - lo1
+    d1 = np.where((a1 * a1).sum(0) < (b1 * b1).sum(0), a1, b1)
+    a2, b2 = hi2 - c2, c2 - lo2
+    d2 = np.where((a2 * a2).sum(0) < (b2 * b2).sum(0), a2, b2)
+    if criterion == "area":
+        score = -(hi1 - lo1) * (hi2 - lo2)
+    elif criterion == "closeness":
+        score = (1.0 / np.maximum(np.minimum(d1, d2), d0)).sum(0)
+    elif criterion == "variance":
+        m1 = d1 < d2
+        n1, n2 = m1.sum(0), (~m1).sum(0)
+        e1 = np.where(m1, d1, 0.0)
+        e2 = np.where(~m1, d2, 0.0)
+        mean1 = e1.sum(0) / np.maximum(n1, 1)
+        mean2 = e2.sum(0) / np.maximum(n2, 1)
+        var1 = np.where(m1, (d1 - mean1) ** 2, 0.0).sum(0) / np.maximum(n1, 1)
+        var2 = np.where(~m1, (d2 - mean2) ** 2, 0.0).sum(0) / np.maximum(n2, 1)
+        score = -var1 - var2
+    else:
+        raise ValueError(f"unknown criterion {criterion!r}")
+    k = int(np.argmax(score))  # first maximum = smallest θ on ties (datmo.md §2.1)
+    r = np.minimum(np.minimum(a1[:, k], b1[:, k]), np.minimum(a2[:, k], b2[:, k]))  # distance to the nearest side
+    return RectFit(float(th[k]), np.array([lo1[k], lo2[k]]), np.array([hi1[k], hi2[k]]),
+                   float(np.sqrt(np.mean(r * r))))
+
+
+@njit(cache=True)
+def _score(x: np.ndarray, y: np.ndarray, c: float, s: float, criterion: int, d0: float, c1: np.ndarray,
+           c2: np.ndarray) -> float:
+    """Zhang et al. 2017 criterion of the axis angle (cos c, sin s); larger is better."""
+    n = x.shape[0]
+    lo1 = np.inf
+    hi1 = -np.inf
+    lo2 = np.inf
+    hi2 = -np.inf
+    for i in range(n):
+        u = c * x[i] + s * y[i]
+        v = -s * x[i] + c * y[i]
+        c1[i] = u
+        c2[i] = v
+        lo1 = min(lo1, u)
+        hi1 = max(hi1, u)
+        lo2 = min(lo2, v)
+        hi2 = max(hi2, v)
+    if criterion == 0:
+        return -(hi1 - lo1) * (hi2 - lo2)
+    sa1 = 0.0
+    sb1 = 0.0
+    sa2 = 0.0
+    sb2 = 0.0
+    for i in range(n):
+        sa1 += (hi1 - c1[i]) ** 2
+        sb1 += (c1[i] - lo1) ** 2
+        sa2 += (hi2 - c2[i]) ** 2
+        sb2 += (c2[i] - lo2) ** 2
+    use_hi1 = sa1 < sb1
+    use_hi2 = sa2 < sb2
+    if criterion == 1:
+        score = 0.0
+        for i in range(n):
+            d1 = hi1 - c1[i] if use_hi1 else c1[i] - lo1
+            d2 = hi2 - c2[i] if use_hi2 else c2[i] - lo2
+            score += 1.0 / max(min(d1, d2), d0)
+        return score
+    s1 = 0.0
+    q1 = 0.0
+    m1 = 0
+    s2 = 0.0
+    q2 = 0.0
+    m2 = 0
+    for i in range(n):
+        d1 = hi1 - c1[i] if use_hi1 else c1[i] - lo1
+        d2 = hi2 - c2[i] if use_hi2 else c2[i] - lo2
+        if d1 < d2:
+            s1 += d1
+            q1 += d1 * d1
+            m1 += 1
+        else:
+            s2 += d2
+            q2 += d2 * d2
+            m2 += 1
+    v1 = q1 / m1 - (s1 / m1) ** 2 if m1 > 0 else 0.0
+    v2 = q2 / m2 - (s2 / m2) ** 2 if m2 > 0 else 0.0
+    return -v1 - v2
+
+
+@njit(cache=True)
+def _fit_one(x: np.ndarray, y: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray, criterion: int,
+             d0: float, out: np.ndarray, stride: int) -> None:
+    """Best angle over ``cos_t, sin_t``: every angle (stride 1), or every stride-th angle and then
+    the angles around the best one (coarse-to-fine, datmo.md §10.3)."""
+    n = x.shape[0]
+    kk = cos_t.shape[0]
+    c1 = np.empty(n)
+    c2 = np.empty(n)
+    best = -np.inf
+    best_k = 0
+    step = max(stride, 1)
+    for k in range(0, kk, step):
+        sc = _score(x, y, cos_t[k], sin_t[k], criterion, d0, c1, c2)
+        if sc > best + 1e-12:
+            best = sc
+            best_k = k
+    if step > 1:
+        centre = best_k
+        for dk in range(-step + 1, step):
+            if dk == 0:
+                continue
+            k = (centre + dk) % kk
+            sc = _score(x, y, cos_t[k], sin_t[k], criterion, d0, c1, c2)
+            if sc > best + 1e-12 or (abs(sc - best) <= 1e-12 and k < best_k):
+                best = sc
+                best_k = k
+    c = cos_t[best_k]
+    s = sin_t[best_k]
+    lo1 = np.inf
+    hi1 = -np.inf
+    lo2 = np.inf
+    hi2 = -np.inf
+    for i in range(n):
+        u = c * x[i] + s * y[i]
+        v = -s * x[i] + c * y[i]
+        c1[i] = u
+        c2[i] = v
+        lo1 = min(lo1, u)
+        hi1 = max(hi1, u)
+        lo2 = min(lo2, v)
+        hi2 = max(hi2, v)
+    ss = 0.0
+    for i in range(n):
+        r = min(min(hi1 - c1[i], c1[i] - lo1), min(hi2 - c2[i], c2[i] - lo2))
+        ss += r * r
+    out[0] = math.atan2(s, c)
+    out[1] = lo1
+    out[2] = hi1
+    out[3] = lo2
+    out[4] = hi2
+    out[5] = math.sqrt(ss / n)
+
+
+@njit(cache=True)
+def _circle_one(x: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
+    """Kåsa algebraic circle fit + 5 Gauss–Newton steps on |p − c| − R. out = cx, cy, r, rms
+    (NaN-free: r = 0 and rms = inf when the fit is degenerate)."""
+    n = x.shape[0]
+    mx = 0.0
+    my = 0.0
+    for i in range(n):
+        mx += x[i]
+        my += y[i]
+    mx /= n
+    my /= n
+    # centred coordinates for conditioning
+    suu = 0.0
+    suv = 0.0
+    svv = 0.0
+    suuu = 0.0
+    svvv = 0.0
+    suvv = 0.0
+    svuu = 0.0
+    for i in range(n):
+        u = x[i] - mx
+        v = y[i] - my
+        suu += u * u
+        suv += u * v
+        svv += v * v
+        suuu += u * u * u
+        svvv += v * v * v
+        suvv += u * v * v
+        svuu += v * u * u
+    det = suu * svv - suv * suv
+    out[0] = mx
+    out[1] = my
+    out[2] = 0.0
+    out[3] = np.inf
+    if n < 3 or abs(det) < 1e-12:
+        return
+    b1 = 0.5 * (suuu + suvv)
+    b2 = 0.5 * (svvv + svuu)
+    uc = (b1 * svv - b2 * suv) / det
+    vc = (suu * b2 - suv * b1) / det
+    cx = uc + mx
+    cy = vc + my
+    r = math.sqrt(uc * uc + vc * vc + (suu + svv) / n)
+    for _ in range(5):  # Gauss–Newton on the geometric distance
+        h00 = 0.0
+        h01 = 0.0
+        h02 = 0.0
+        h11 = 0.0
+        h12 = 0.0
+        h22 = 0.0
+        g0 = 0.0
+        g1 = 0.0
+        g2 = 0.0
+        for i in range(n):
+            dx = x[i] - cx
+            dy = y[i] - cy
+            d = math.sqrt(dx * dx + dy * dy)
+            if d < 1e-9:
+                continue
+            j0 = -dx / d
+            j1 = -dy / d
+            res = d - r
+            h00 += j0 * j0
+            h01 += j0 * j1
+            h02 += -j0
+            h11 += j1 * j1
+            h12 += -j1
+            h22 += 1.0
+            g0 += j0 * res
+            g1 += j1 * res
+            g2 += -res
+        a = np.array([[h00, h01, h02], [h01, h11, h12], [h02, h12, h22]])
+        a[0, 0] += 1e-9
+        a[1, 1] += 1e-9
+        a[2, 2] += 1e-9
+        if abs(np.linalg.det(a)) < 1e-15:
+            break
+        step = np.linalg.solve(a, -np.array([g0, g1, g2]))
+        cx += step[0]
+        cy += step[1]
+        r += step[2]
+        if abs(step[0]) + abs(step[1]) + abs(step[2]) < 1e-6:
+            break
+    if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(r)) or r <= 0.0:
+        return
+    ss = 0.0
+    for i in range(n):
+        d = math.sqrt((x[i] - cx) ** 2 + (y[i] - cy) ** 2) - r
+        ss += d * d
+    out[0] = cx
+    out[1] = cy
+    out[2] = r
+    out[3] = math.sqrt(ss / n)
+
+
+@njit(cache=True)
+def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np.ndarray, angles: np.ndarray,
+                 criterion: int, d0: float, circle_min_points: int, stride: int = 1) -> np.ndarray:
+    """Fit every cluster ``c`` with ``fit_mask[c]`` (points ``x, y[offsets[c]:offsets[c+1]]``).
+
+    ``stride`` > 1 searches every stride-th angle first, then the neighbours of the best one.
+    Returns (k, 12): theta, lo1, hi1, lo2, hi2, rect_rms, circle cx, cy, r, circle_rms,
+    centroid x, y. Unfitted clusters hold only their centroid (other entries 0, rms inf).
+    """
+    k = offsets.shape[0] - 1
+    out = np.zeros((k, 12))
+    cos_t = np.cos(angles)
+    sin_t = np.sin(angles)
+    tmp = np.empty(6)
+    tmpc = np.empty(4)
+    for c in range(k):
+        a = offsets[c]
+        b = offsets[c + 1]
+        n = b - a
+        if n == 0:
+            out[c, 5] = np.inf
+            out[c, 9] = np.inf
+            continue
+        xs = x[a:b]
+        ys = y[a:b]
+        out[c, 10] = xs.mean()
+        out[c, 11] = ys.mean()
+        if not fit_mask[c]:
+            out[c, 5] = np.inf
+            out[c, 9] = np.inf
+            continue
+        _fit_one(xs, ys, cos_t, sin_t, criterion, d0, tmp, stride)
+        out[c, 0:6] = tmp
+        if n >= circle_min_points:
+            _circle_one(xs, ys, tmpc)
+            out[c, 6:10] = tmpc
+        else:
+            out[c, 6] = out[c, 10]
+            out[c, 7] = out[c, 11]
+            out[c, 9] = np.inf
+    return out
+
+
+def fit_circle(points: np.ndarray) -> tuple[float, float, float, float]:
+    """Circle fit of (n, 2) points: (cx, cy, r, rms) in m; r = 0, rms = inf if degenerate."""
+    pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 2))
+    out = np.empty(4)
+    if pts.shape[0] == 0:
+        return 0.0, 0.0, 0.0, math.inf
+    _circle_one(pts[:, 0].copy(), pts[:, 1].copy(), out)
+    return float(out[0]), float(out[1]), float(out[2]), float(out[3])
+
+
+@njit(cache=True)
+def circle_center_fixed_radius(x: np.ndarray, y: np.ndarray, cx: float, cy: float, r: float) -> tuple:
+    """Gauss–Newton for the centre of a circle of known radius ``r`` through the points
+    (start (cx, cy)); returns (cx, cy, rms)."""
+    n = x.shape[0]
+    for _ in range(5):
+        h00 = 1e-9
+        h01 = 0.0
+        h11 = 1e-9
+        g0 = 0.0
+        g1 = 0.0
+        for i in range(n):
+            dx = x[i] - cx
+            dy = y[i] - cy
+            d = math.sqrt(dx * dx + dy * dy)
+            if d < 1e-9:
+                continue
+            j0 = -dx / d
+            j1 = -dy / d
+            res = d - r
+            h00 += j0 * j0
+            h01 += j0 * j1
+            h11 += j1 * j1
+            g0 += j0 * res
+            g1 += j1 * res
+        det = h00 * h11 - h01 * h01
+        if abs(det) < 1e-15:
+            break
+        s0 = -(h11 * g0 - h01 * g1) / det
+        s1 = -(-h01 * g0 + h00 * g1) / det
+        cx += s0
+        cy += s1
+        if abs(s0) + abs(s1) < 1e-6:
+            break
+    ss = 0.0
+    for i in range(n):
+        d = math.sqrt((x[i] - cx) ** 2 + (y[i] - cy) ** 2) - r
+        ss += d * d
+    return cx, cy, math.sqrt(ss / max(n, 1))
