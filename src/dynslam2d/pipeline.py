@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
@@ -241,11 +241,29 @@ class RunResult:
 ProgressFn = Callable[[int, StepResult], None]
 
 
-def run(source: ScanSource, config: Config | None = None, progress: ProgressFn | None = None) -> RunResult:
+class RunObserver(Protocol):
+    """Something that watches a run scan by scan: a bag writer, an animation, a live viewer.
+
+    ``on_scan`` is called after every scan with the input scan, its result and the pipeline
+    (whose ``slam.gridmap()`` is the current map); ``on_finish`` once at the end, before
+    :func:`run` returns. Observers must not change the pipeline.
+    """
+
+    def on_scan(self, scan: Scan, step: StepResult, pipeline: Pipeline) -> None: ...
+
+    def on_finish(self, result: RunResult, pipeline: Pipeline) -> None: ...
+
+
+def run(
+    source: ScanSource,
+    config: Config | None = None,
+    progress: ProgressFn | None = None,
+    observers: Sequence[RunObserver] = (),
+) -> RunResult:
     """Run the pipeline over every scan of ``source``.
 
     ``progress(n_done, step)`` is called after every scan (the CLI draws its progress bar
-    from it).
+    from it); every observer sees every scan (see :class:`RunObserver`).
     """
     pipe = Pipeline(config)
     stamps: list[float] = []
@@ -269,13 +287,15 @@ def run(source: ScanSource, config: Config | None = None, progress: ProgressFn |
                                float(t.velocity[0]), float(t.velocity[1]), bool(t.in_m)))
         for k, v in step.timings.items():
             timings.setdefault(k, []).append(v)
+        for obs in observers:
+            obs.on_scan(scan, step, pipe)
         if progress is not None:
             progress(len(stamps), step)
     wall = time.perf_counter() - t0
     flag_arr = np.array(flags, dtype=bool).reshape(-1, 3)
     logodds, _ = pipe.slam.logodds(0)
     summary = pipe.slam.summary()
-    return RunResult(
+    result = RunResult(
         source=source.meta,
         config=pipe.config,
         trajectory=Trajectory.from_poses(np.array(stamps), poses),
@@ -293,3 +313,6 @@ def run(source: ScanSource, config: Config | None = None, progress: ProgressFn |
         memory_bytes=pipe.slam.memory_bytes,
         tracker_stats=pipe.tracker.stats.as_dict(),
     )
+    for obs in observers:
+        obs.on_finish(result, pipe)
+    return result
