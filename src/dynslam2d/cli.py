@@ -393,6 +393,86 @@ def _metric_rows(metrics: dict[str, Any]) -> list[tuple[str, str]]:
     return rows
 
 
+@eval_app.command("tracking")
+def eval_tracking(
+    scenes: Annotated[Optional[list[str]], typer.Option("--scene", help="Simulated scene(s) [paper crowd corridor static].")] = None,
+    datmo: Annotated[Optional[Path], typer.Option("--datmo", help="Folder of datmo bags (motion-capture ground truth) to score too.")] = None,
+    duration: Annotated[float, typer.Option("--duration", min=1.0, help="Simulated duration per scene, s.")] = 20.0,
+    seed: SeedOpt = None,
+    poses: Annotated[str, typer.Option("--poses", help="Laser poses for the tracker: truth (simulator) or slam.")] = "truth",
+    config: Annotated[Optional[Path], typer.Option("--config", help="YAML configuration (its 'detect' section is used).")] = None,
+    as_json: JsonOpt = False,
+) -> None:
+    """Score detection and tracking: dynamic-beam recall/precision, centre and speed errors, identity switches.
+
+    Definitions: dynslam2d.eval.tracking (module docstring) and docs/tracking.md.
+    """
+    from dynslam2d.config import Config, load_config
+    from dynslam2d.eval.tracking import evaluate_datmo_folder, evaluate_sim
+
+    if poses not in ("truth", "slam"):
+        raise DynSlamError(f"--poses must be 'truth' or 'slam', got {poses!r}")
+    detect_cfg = (load_config(config) if config else Config()).detect
+    chosen = scenes or ["paper", "crowd", "corridor", "static"]
+    sim_rows: list[dict[str, object]] = []
+    bag_rows: list[dict[str, object]] = []
+    with console.status("tracking …", spinner="dots") as status:
+        for scene in chosen:
+            status.update(f"tracking sim:{scene} …")
+            sim_rows.append(evaluate_sim(scene, seed=seed, duration=duration, config=detect_cfg, pose_source=poses).row())
+        if datmo is not None:
+            status.update(f"tracking the bags in {datmo} …")
+            bag_rows = [r.row() for r in evaluate_datmo_folder(datmo)]
+    if as_json:
+        sys.stdout.write(json.dumps({"simulated": sim_rows, "datmo": bag_rows}, indent=2, default=float) + "\n")
+        return
+    t = Table(title=f"simulated scenes ({duration:g} s, {poses} poses)", title_justify="left")
+    for col in ("scene", "recall", "precision", "FP beams", "centre err (med)", "speed err (med)", "ID switches", "static tracks in M"):
+        t.add_column(col, justify="right")
+    for r in sim_rows:
+        t.add_row(str(r["scene"]), _fmt(r["recall"]), _fmt(r["precision"]), f"{100 * float(r['fp_beam_rate']):.3f} %",
+                  _fmt(r["median_center_error"], " m"), _fmt(r["median_speed_error"], " m/s"), str(r["id_switches"]),
+                  str(r["static_tracks_in_m"]))
+    console.print(t)
+    if bag_rows:
+        b = Table(title="datmo bags (motion capture)", title_justify="left")
+        for col in ("bag", "target", "matched", "centre RMSE", "DATMO RMSE", "speed err (med)", "ID switches"):
+            b.add_column(col, justify="right")
+        for r in bag_rows:
+            b.add_row(str(r["bag"]), str(r["target"]), f"{r['n_matched']}/{r['n_with_truth']}", _fmt(r["rmse_center"], " m"),
+                      _fmt(r["datmo_rmse"], " m"), _fmt(r["median_speed_error"], " m/s"), str(r["id_switches"]))
+        console.print(b)
+
+
+@eval_app.command("stationary")
+def eval_stationary(
+    input: Annotated[str, typer.Argument(help="The recording of a sensor that never moved (bag, log).")],
+    run_dir: Annotated[Path, typer.Argument(help="Results folder of 'dynslam2d run' on that recording.")],
+    topic: TopicOpt = None,
+    as_json: JsonOpt = False,
+) -> None:
+    """Score a run of a motionless sensor: pose drift, and the occupied area that moving people left in the map.
+
+    The residue is measured against a map of the per-beam median scan (the background).
+    """
+    from dynslam2d.config import load_config
+    from dynslam2d.eval.maps import load_run_map
+    from dynslam2d.eval.stationary import background_map, median_background_scan, stationary_score
+    from dynslam2d.io.sources import open_source
+    from dynslam2d.io.trajectory import read_tum
+
+    cfg = load_config(run_dir / "config.yaml") if (run_dir / "config.yaml").exists() else None
+    bg = background_map(median_background_scan(open_source(input, topic)), cfg.slam if cfg else None)
+    score = stationary_score(read_tum(_estimate_path(run_dir)), load_run_map(run_dir), bg)
+    rows = [
+        ("drift, largest", f"{score.drift_max_m:.4f} m"),
+        ("drift, final", f"{score.drift_final_m:.4f} m"),
+        ("rotation, largest", f"{math.degrees(score.rotation_max_rad):.3f}°"),
+        ("residue of movers in the map", f"{score.residue_area_m2:.4f} m²"),
+    ]
+    _emit(score.as_dict(), as_json, _stats_table(f"{run_dir} (stationary sensor)", rows))
+
+
 @eval_app.command("ate")
 def eval_ate(
     reference: Annotated[Path, typer.Argument(help="Reference: TUM file, or a bag with --ref-topic.")],
