@@ -151,3 +151,25 @@ def test_info_opens_every_real_dataset(capsys, relative, count):
     data = json.loads(out)
     assert data["scans"] == count
     assert data["last_stamp"] > data["first_stamp"]
+
+
+def test_run_writes_a_bag_for_rviz_and_foxglove(tmp_path, capsys):
+    from dynslam2d.io.rosbag import list_topics
+
+    bag = tmp_path / "out.mcap"
+    code, out, err = cli(capsys, "run", "sim:paper", "--duration", "2", "--out", str(tmp_path / "r"), "--write-bag", str(bag))
+    assert code == 0, err
+    topics = list_topics(bag)
+    assert topics["/scan_filtered"] == "sensor_msgs/msg/LaserScan"
+    assert topics["/map"] == "nav_msgs/msg/OccupancyGrid"
+    assert topics["/tracks"] == "visualization_msgs/msg/MarkerArray"
+    assert {"/scan", "/slam_pose", "/tf"} <= set(topics)
+    code, _, err = cli(capsys, "info", str(bag), "--topic", "/scan_filtered", "--json")
+    assert code == 0, err
+
+
+def test_viewer_without_the_extra_says_how_to_install(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "rerun", None)
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", str(tmp_path / "r"), "--viewer", "rerun")
+    assert code == 2
+    assert 'pip install "dynslam2d[viewer]"' in err

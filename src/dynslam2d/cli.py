@@ -6,6 +6,7 @@ becomes one line on stderr and exit code 2. Nothing else lives here.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import sys
@@ -15,6 +16,7 @@ from typing import Annotated, Any, Optional
 import typer
 from typer.core import TyperGroup
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from dynslam2d import __version__
@@ -204,6 +206,11 @@ def run(
     constant_velocity: Annotated[Optional[bool], typer.Option("--constant-velocity/--no-constant-velocity", help="Predict with constant velocity instead of the previous pose.")] = None,
     correlative: Annotated[Optional[str], typer.Option("--correlative", help="Correlative search seed: auto, always or never [auto].")] = None,
     hector_compat: Annotated[bool, typer.Option("--hector-compat", help="Behave like the reference hector_mapping: raw Gauss-Newton step, its swapped gradient, no correlative search.")] = False,
+    write_bag: Annotated[Optional[Path], typer.Option("--write-bag", help="Also write a bag for RViz / Foxglove: .mcap (default), .db3, .bag (ROS 1) or a folder (ROS 2).")] = None,
+    bag_storage: Annotated[Optional[str], typer.Option("--bag-storage", help="ROS 2 storage for a bag folder: mcap or sqlite3.")] = None,
+    map_period: Annotated[float, typer.Option("--map-period", min=0.0, help="Seconds of scan time between /map messages (bag, viewer); 0 = every scan.")] = 1.0,
+    viewer: Annotated[str, typer.Option("--viewer", help="Live viewer: none or rerun (pip install \"dynslam2d[viewer]\").")] = "none",
+    rerun_save: Annotated[Optional[Path], typer.Option("--rerun-save", help="With --viewer rerun: save a .rrd recording instead of opening the viewer.")] = None,
     seed: SeedOpt = None,
     duration: DurationOpt = None,
     skip_bad: SkipBadOpt = False,
@@ -223,6 +230,8 @@ def run(
     from dynslam2d.pipeline import run as run_pipeline
     from dynslam2d.results import ground_truth_for, write_results
 
+    if viewer not in ("none", "rerun"):
+        raise DynSlamError(f"--viewer must be 'none' or 'rerun', got {viewer!r}")
     cfg = load_config(config) if config else Config()
     cfg = with_overrides(cfg, {"slam": {
         "map_resolution": map_resolution, "map_levels": map_levels,
@@ -242,22 +251,32 @@ def run(
         TextColumn("[bold]mapping[/]"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
         TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=err_console, disable=not show,
     )
-    with progress:
-        task = progress.add_task("map", total=total, rate="")
-        state = {"t0": None}
+    with contextlib.ExitStack() as stack:
+        observers: list[Any] = []
+        if write_bag is not None:
+            from dynslam2d.io.rosout import BagRecorder
 
-        def tick(n: int, step: object) -> None:
-            import time as _time
+            observers.append(stack.enter_context(BagRecorder(write_bag, storage=bag_storage, map_period=map_period)))
+        if viewer == "rerun":
+            from dynslam2d.viz.live import RerunViewer
 
-            now = _time.perf_counter()
-            if state["t0"] is None:
-                state["t0"] = now
-            if n % 10 == 0 or n == total:
-                el = now - state["t0"]
-                progress.update(task, completed=n, rate=f"{(n - 1) / el:.0f} scans/s" if el > 0 else "")
+            observers.append(stack.enter_context(RerunViewer(save=rerun_save, map_period=map_period)))
+        with progress:
+            task = progress.add_task("map", total=total, rate="")
+            state = {"t0": None}
 
-        result = run_pipeline(source, cfg, progress=tick)
-        progress.update(task, completed=result.n_scans)
+            def tick(n: int, step: object) -> None:
+                import time as _time
+
+                now = _time.perf_counter()
+                if state["t0"] is None:
+                    state["t0"] = now
+                if n % 10 == 0 or n == total:
+                    el = now - state["t0"]
+                    progress.update(task, completed=n, rate=f"{(n - 1) / el:.0f} scans/s" if el > 0 else "")
+
+            result = run_pipeline(source, cfg, progress=tick, observers=observers)
+            progress.update(task, completed=result.n_scans)
     truth = ground_truth_for(source, gt, cfg.slam.map_resolution)
     paths = write_results(result, out, truth)
     summary = json.loads(paths["summary.json"].read_text())
@@ -282,6 +301,8 @@ def run(
         rows += _metric_rows(json.loads(paths["metrics.json"].read_text()))
     console.print(_stats_table(f"dynslam2d run {input}", rows))
     console.print(f"results in [bold]{out}[/]")
+    if write_bag is not None:
+        console.print(f"bag for RViz / Foxglove: [bold]{write_bag}[/] (docs/ros.md)")
 
 
 experiment_app = typer.Typer(help="Reproduce experiments.", no_args_is_help=True)
@@ -569,7 +590,7 @@ def main() -> None:
     try:
         app()
     except DynSlamError as exc:
-        err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+        err_console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
         sys.exit(2)
     except KeyboardInterrupt:
         err_console.print("[yellow]interrupted[/]")

@@ -535,6 +535,24 @@ def _nested_type_names(fielddef: Any) -> list[str]:
     return names
 
 
+def _latched_qos() -> Any:
+    """The QoS a latched ROS 2 publisher offers: reliable, transient-local, keep-last 1."""
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+    never = QosTime(sec=0, nsec=0)  # rmw's "default" = no deadline / lifespan / lease
+    return Qos(
+        history=QosHistory.KEEP_LAST,
+        depth=1,
+        reliability=QosReliability.RELIABLE,
+        durability=QosDurability.TRANSIENT_LOCAL,
+        deadline=never,
+        lifespan=never,
+        liveliness=QosLiveliness.AUTOMATIC,
+        liveliness_lease_duration=never,
+        avoid_ros_namespace_conventions=False,
+    )
+
+
 class BagWriter:
     """Writes ROS messages of any type into an open bag; made by :func:`open_bag_writer`.
 
@@ -585,8 +603,15 @@ class BagWriter:
             return cls(seq=int(seq) & 0xFFFFFFFF, stamp=self.time(stamp), frame_id=frame_id)
         return cls(stamp=self.time(stamp), frame_id=frame_id)
 
-    def add_topic(self, topic: str, msgtype: str) -> None:
-        """Declare ``topic`` with ``msgtype`` (idempotent; a second type is an error)."""
+    def add_topic(self, topic: str, msgtype: str, *, latched: bool = False) -> None:
+        """Declare ``topic`` with ``msgtype`` (idempotent; a second type is an error).
+
+        ``latched=True`` marks the topic as latched so that a replay hands its last
+        message to late subscribers (e.g. ``/map``): ROS 1 → ``latching=1`` in the
+        connection header; ROS 2 → an offered QoS profile reliable / transient-local /
+        keep-last 1 (stored in metadata.yaml and in the MCAP channel / sqlite3 topic
+        table, where ``ros2 bag play`` reads it).
+        """
         if topic in self._connections:
             if self._types[topic] != msgtype:
                 raise DynSlamError(
@@ -594,8 +619,11 @@ class BagWriter:
                 )
             return
         self.msg_class(msgtype)
+        extra: dict[str, Any] = {}
+        if latched:
+            extra = {"latching": 1} if self.ros1 else {"offered_qos_profiles": [_latched_qos()]}
         try:
-            conn = self._raw.add_connection(topic, msgtype, typestore=self.typestore)
+            conn = self._raw.add_connection(topic, msgtype, typestore=self.typestore, **extra)
         except Exception as err:
             raise DynSlamError(f"{self.path}: cannot add topic {topic} ({err})") from err
         self._connections[topic] = conn
