@@ -311,6 +311,8 @@ def filter_scan(
     lengths: np.ndarray,
     widths: np.ndarray,
     speeds: np.ndarray | None = None,
+    valid: np.ndarray | None = None,
+    local_points: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-beam filter of one scan, boxes given in the map frame.
 
@@ -322,6 +324,10 @@ def filter_scan(
         ``(removed, object_index)``: (beams,) bool and (beams,) int64 (−1 = kept), indexed
         like ``scan.ranges``; ``scan.with_ranges(np.where(removed, np.nan, scan.ranges))``
         is the filtered scan.
+
+    ``valid`` (``scan.valid_mask()``) and ``local_points`` (``scan.points(valid)``, sensor frame, m)
+    may be passed when the caller already has them (the pipeline filters each scan twice); they
+    must be exactly those arrays.
     """
     n = scan.ranges.shape[0]
     removed = np.zeros(n, dtype=bool)
@@ -329,8 +335,11 @@ def filter_scan(
     c = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
     if not filter_active(config, c.shape[0]):
         return removed, object_index
-    valid = scan.valid_mask()
-    pts = pose.transform_points(scan.points(valid))  # paper Eq. 4, then sensor → map frame
+    if valid is None:
+        valid = scan.valid_mask()
+    if local_points is None:
+        local_points = scan.points(valid)  # paper Eq. 4
+    pts = pose.transform_points(local_points)  # sensor → map frame
     r, j = filter_scan_points(config, pts, c, headings, lengths, widths, speeds)
     removed[valid] = r
     object_index[valid] = j

@@ -25,7 +25,7 @@ import numpy as np
 
 from dynslam2d.config import Config
 from dynslam2d.detect.tracker import Tracker
-from dynslam2d.filter import filter_scan
+from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
 from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.slam import HectorSlam
@@ -89,20 +89,31 @@ class Pipeline:
         self._moving: list[Track] = []  # tracks in M after the previous scan
         self._last_stamp: float | None = None
 
-    def _exclude(self, scan: Scan, pose: Pose2D, tracks: list[Track], dt: float) -> tuple[np.ndarray, np.ndarray]:
+    def _exclude(self, scan: Scan, pose: Pose2D, tracks: list[Track], dt: float,
+                 cache: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """Beams of ``scan`` (at ``pose``) inside the exclusion zones of ``tracks`` advanced by ``dt``;
+        ``cache`` keeps the scan's valid mask and sensor-frame points between the two calls per scan."""
+        if not tracks:  # nothing to exclude (filter_scan would return the same)
+            n = scan.ranges.shape[0]
+            return np.zeros(n, dtype=bool), np.full(n, -1, dtype=np.int64)
         centres, headings, lengths, widths, speeds, ids = _boxes(tracks, dt)
-        removed, obj = filter_scan(self.config.filter, scan, pose, centres, headings, lengths, widths, speeds)
-        by = np.where(obj >= 0, ids[np.clip(obj, 0, None)] if ids.size else -1, -1)
+        if "valid" not in cache and filter_active(self.config.filter, len(tracks)):
+            cache["valid"] = scan.valid_mask()
+            cache["points"] = scan.points(cache["valid"])
+        removed, obj = filter_scan(self.config.filter, scan, pose, centres, headings, lengths, widths, speeds,
+                                   cache.get("valid"), cache.get("points"))
+        by = np.where(obj >= 0, ids[np.clip(obj, 0, None)], -1)
         return removed, by
 
     def process(self, scan: Scan) -> StepResult:
         """Run every stage on ``scan`` (scans must come in time order) and return the result."""
         t0 = time.perf_counter()
+        cache: dict[str, np.ndarray] = {}
         # 2. match with the known movers removed (their boxes advanced to this stamp).
         match_scan = scan
         if self._moving and self.config.filter.mode != "none":
             dt = scan.stamp - self._last_stamp if self._last_stamp is not None else 0.0
-            pre_removed, _ = self._exclude(scan, self.slam.predict(scan.stamp), self._moving, dt)
+            pre_removed, _ = self._exclude(scan, self.slam.predict(scan.stamp), self._moving, dt, cache)
             if pre_removed.any():
                 match_scan = scan.with_ranges(np.where(pre_removed, np.nan, scan.ranges))
         res = self.slam.match(match_scan)
@@ -112,7 +123,7 @@ class Pipeline:
         t2 = time.perf_counter()
         # 4. the dynamic set M and its exclusion zones (paper Eq. 3, 5-8).
         moving = [t for t in tracks if t.in_m]
-        removed, removed_by = self._exclude(scan, res.pose, moving, 0.0)
+        removed, removed_by = self._exclude(scan, res.pose, moving, 0.0, cache)
         t3 = time.perf_counter()
         # 5. map update with the filtered scan only.
         updated = False

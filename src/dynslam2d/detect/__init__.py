@@ -13,6 +13,7 @@ Modules: :mod:`~dynslam2d.detect.segment` (breakpoint segmentation, paper Eq. 1)
 :mod:`~dynslam2d.detect.shapes` (rectangle / circle fits, paper Eq. 2),
 :mod:`~dynslam2d.detect.measure` (which sides of a cluster are real → centre measurement),
 :mod:`~dynslam2d.detect.tracker` (Kalman tracking, track management, set M),
+:mod:`~dynslam2d.detect.kernels` (the tracker's per-scan numba batches),
 :mod:`~dynslam2d.detect.config` (parameters).
 """
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dynslam2d.detect.kernels import seen_through_kernel
 from dynslam2d.types import Pose2D, Scan
 
 
@@ -83,8 +84,10 @@ class FreeSpaceMemory:
         free = np.zeros(n, dtype=bool)
         if n == 0:
             return free
+        px = np.ascontiguousarray(points[:, 0])
+        py = np.ascontiguousarray(points[:, 1])
         for ref in self._refs(now):
-            free |= self.seen_through_by(ref, points)
+            self._test(ref, px, py, free)
         return free
 
     def seen_through_by(self, ref: _Ref, points: np.ndarray) -> np.ndarray:
@@ -92,23 +95,15 @@ class FreeSpaceMemory:
         n = points.shape[0]
         free = np.zeros(n, dtype=bool)
         if n:
-            local = ref.pose.inverse().transform_points(points)
-            rho = np.hypot(local[:, 0], local[:, 1])
-            phi = np.arctan2(local[:, 1], local[:, 0])
-            m = ref.ranges.shape[0]
-            idx = np.rint((phi - ref.angle_min) / ref.increment).astype(np.int64)
-            if ref.full:
-                idx %= m
-                inside = np.ones(n, dtype=bool)
-            else:
-                # the angle may need a turn to fall inside the fan
-                alt = np.rint((phi + 2.0 * math.pi - ref.angle_min) / ref.increment).astype(np.int64)
-                idx = np.where((idx < 0) | (idx >= m), alt, idx)
-                inside = (idx >= 1) & (idx < m - 1)
-                idx = np.clip(idx, 0, m - 1)
-            lo = (idx - 1) % m
-            hi = (idx + 1) % m
-            rmin = np.minimum(np.minimum(ref.ranges[idx], ref.ranges[lo]), ref.ranges[hi])
-            beyond = np.where(np.isinf(rmin), rho < ref.reach - self.margin, rmin > rho + self.margin)
-            free = inside & beyond
+            self._test(ref, np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]), free)
         return free
+
+    def _test(self, ref: _Ref, px: np.ndarray, py: np.ndarray, free: np.ndarray) -> None:
+        """OR into ``free`` the points (x ``px``, y ``py``, map frame) that ``ref`` saw through: bearing and
+        range in the reference sensor frame, the nearest beam and its two neighbours all farther than
+        ρ + margin (or no return within reach); outside a partial fan is unknown (module docstring)."""
+        if ref.increment == 0.0 or not math.isfinite(ref.increment):
+            return  # a degenerate reference scan has no beam geometry: nothing is known to be free
+        inv = ref.pose.inverse()
+        seen_through_kernel(px, py, inv.x, inv.y, inv.theta, ref.ranges, ref.angle_min, ref.increment, ref.full,
+                            ref.reach, self.margin, free)

@@ -223,6 +223,45 @@ def _fit_one(x: np.ndarray, y: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray,
 
 
 @njit(cache=True)
+def _lu_solve3(a: np.ndarray, b: np.ndarray) -> float:
+    """Solve the 3×3 system a·x = b in place (x → b; a is overwritten by its LU factors) by Gaussian
+    elimination with partial pivoting, as LAPACK getrf/getrs; returns det(a) (0 when singular, b then
+    unchanged). Allocation-free replacement of ``np.linalg.det`` + ``np.linalg.solve``."""
+    sign = 1.0
+    for c in range(3):
+        p = c
+        for q in range(c + 1, 3):
+            if abs(a[q, c]) > abs(a[p, c]):
+                p = q
+        if a[p, c] == 0.0:
+            return 0.0
+        if p != c:
+            sign = -sign
+            for q in range(3):
+                t = a[c, q]
+                a[c, q] = a[p, q]
+                a[p, q] = t
+            t = b[c]
+            b[c] = b[p]
+            b[p] = t
+        inv = 1.0 / a[c, c]
+        for q in range(c + 1, 3):
+            a[q, c] *= inv
+        for q in range(c + 1, 3):
+            for w in range(c + 1, 3):
+                a[q, w] -= a[q, c] * a[c, w]
+    det = sign * a[0, 0] * a[1, 1] * a[2, 2]
+    if det == 0.0:
+        return 0.0
+    b[1] -= a[1, 0] * b[0]
+    b[2] -= a[2, 0] * b[0] + a[2, 1] * b[1]
+    b[2] /= a[2, 2]
+    b[1] = (b[1] - a[1, 2] * b[2]) / a[1, 1]
+    b[0] = (b[0] - a[0, 1] * b[1] - a[0, 2] * b[2]) / a[0, 0]
+    return det
+
+
+@njit(cache=True)
 def _circle_one(x: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
     """Kåsa algebraic circle fit + 5 Gauss–Newton steps on |p − c| − R. out = cx, cy, r, rms
     (NaN-free: r = 0 and rms = inf when the fit is degenerate)."""
@@ -266,6 +305,8 @@ def _circle_one(x: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
     cx = uc + mx
     cy = vc + my
     r = math.sqrt(uc * uc + vc * vc + (suu + svv) / n)
+    a = np.empty((3, 3))
+    step = np.empty(3)
     for _ in range(5):  # Gauss–Newton on the geometric distance
         h00 = 0.0
         h01 = 0.0
@@ -294,13 +335,20 @@ def _circle_one(x: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
             g0 += j0 * res
             g1 += j1 * res
             g2 += -res
-        a = np.array([[h00, h01, h02], [h01, h11, h12], [h02, h12, h22]])
-        a[0, 0] += 1e-9
-        a[1, 1] += 1e-9
-        a[2, 2] += 1e-9
-        if abs(np.linalg.det(a)) < 1e-15:
+        a[0, 0] = h00 + 1e-9
+        a[0, 1] = h01
+        a[0, 2] = h02
+        a[1, 0] = h01
+        a[1, 1] = h11 + 1e-9
+        a[1, 2] = h12
+        a[2, 0] = h02
+        a[2, 1] = h12
+        a[2, 2] = h22 + 1e-9
+        step[0] = -g0
+        step[1] = -g1
+        step[2] = -g2
+        if abs(_lu_solve3(a, step)) < 1e-15:
             break
-        step = np.linalg.solve(a, -np.array([g0, g1, g2]))
         cx += step[0]
         cy += step[1]
         r += step[2]

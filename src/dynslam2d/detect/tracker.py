@@ -22,10 +22,16 @@ Per scan (datmo.md §10.4–10.8, with the fixes listed there):
 
 Frames: the pose given with a scan is the laser pose in the map frame; every reported
 quantity is in the map frame (m, rad, m/s).
+
+Speed: steps 3–5 run as one numba kernel call per scan each (:mod:`dynslam2d.detect.kernels`:
+classification and bounds of all clusters, the measurements, the gate, the Kalman updates, the
+free-space and fragment tests); only the per-track bookkeeping stays in Python (≈0.8 ms per
+720-beam scan with 10 movers, ``benchmarks/bench_detect.py``).
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import asdict, dataclass, field
 
@@ -40,10 +46,18 @@ from dynslam2d.detect.measure import (
     SIZE_LOWER,
     SIZE_MEASURED,
     Detection,
-    classify_and_bound,
-    measure,
+    Measurement,
 )
 from dynslam2d.detect.freespace import FreeSpaceMemory
+from dynslam2d.detect.kernels import (
+    classify_batch,
+    fit_params,
+    fragment_hosts,
+    gate_costs,
+    kalman_update_batch,
+    measure_batch,
+    segment_means,
+)
 from dynslam2d.detect.segment import Segmentation, segment_scan
 from dynslam2d.detect.shapes import CRITERIA, fit_clusters, search_angles
 from dynslam2d.types import Box, Pose2D, Scan, Track, wrap_angle
@@ -108,6 +122,7 @@ class _Track:
     past: list[tuple[float, np.ndarray]] = field(default_factory=list)
     slow_since: float | None = None
     probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
+    p_finite: bool = True  # every entry of P is finite (checked where P changes)
 
 
 def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
@@ -141,8 +156,13 @@ class Tracker:
         self._angles = search_angles(self.config.fit.angle_step_deg)
         tc = self.config.tracker
         self._free = FreeSpaceMemory(tc.free_ref_ages, tc.free_margin) if tc.free_space_check else None
-        self._pair_meas: dict[tuple[int, int], object] = {}
         self._cur_ref = None
+        self._fit_p = fit_params(self.config.fit)
+        self._trig_key: tuple | None = None
+        self._trig: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
+        self._batch: tuple | None = None  # per-detection arrays of the current scan (kernels)
+        self._default: tuple | None = None  # default measurements of the current scan's detections
+        self._stacked: tuple[np.ndarray, np.ndarray] | None = None  # predicted X, P of all tracks
         #: Segmentation and detections of the last processed scan (for inspection / plots).
         self.last_segmentation: Segmentation | None = None
         self.last_detections: list[Detection] = []
@@ -188,24 +208,29 @@ class Tracker:
         pairs = self._associate(dets)
         updated: set[int] = set()
         used = set()
-        vac = self._vacated([self._tracks[ti] for ti, _ in pairs], t)
-        for ti, di in pairs:
-            trk, det = self._tracks[ti], dets[di]
-            if self._update_track(trk, det, t, vac.get(trk.id, 0.0)):
-                updated.add(trk.id)
-                used.add(di)
-            else:
-                st.rejected_updates += 1
+        if pairs:
+            vac = self._vacated([self._tracks[ti] for ti, _ in pairs], t)
+            for (ti, di), ok in zip(pairs, self._update_pairs(pairs, dets, t, vac)):
+                if ok:
+                    updated.add(self._tracks[ti].id)
+                    used.add(di)
+                else:
+                    st.rejected_updates += 1
         self._manage(t, updated)
-        for di, det in enumerate(dets):
-            if di in used:
-                continue
-            host = self._host_of_fragment(det, updated)
+        unused = [di for di in range(len(dets)) if di not in used]
+        if self.config.tracker.confirm_hits > 1:  # births stay tentative: hosts can be found in one batch
+            hosts = self._hosts_of_fragments(unused, updated)
+        else:
+            hosts = [None] * len(unused)
+        for di, host in zip(unused, hosts):
+            det = dets[di]
+            if self.config.tracker.confirm_hits <= 1:
+                host = self._host_of_fragment(det, updated)
             if host is not None:  # a piece of an object already updated: its beams belong to it
                 host.beams = np.concatenate((host.beams, det.beams))
                 st.merged_fragments += 1
                 continue
-            self._birth(det, t)
+            self._birth(det, t, di)
             updated.add(self._tracks[-1].id)
         return self._report(t, updated)
 
@@ -225,6 +250,20 @@ class Tracker:
                 best, best_d = k, d
         return best
 
+    def _hosts_of_fragments(self, dets: list[int], updated: set[int]) -> list[_Track | None]:
+        """:meth:`_host_of_fragment` for several of this scan's detections (indices) in one kernel call."""
+        if not dets:
+            return []
+        cand = [k for k in self._tracks if k.id in updated and k.state == CONFIRMED]
+        if not cand:
+            return [None] * len(dets)
+        geo = np.array([(k.x[0], k.x[1], k.theta_box, k.size[0], k.size[1]) for k in cand])
+        b = self._batch
+        idx = fragment_hosts(b[6], b[7], b[8], b[9], np.array(dets, dtype=np.int64), geo[:, 0].copy(),
+                             geo[:, 1].copy(), geo[:, 2].copy(), geo[:, 3].copy(), geo[:, 4].copy(),
+                             float(self.config.fit.fragment_margin))
+        return [cand[i] if i >= 0 else None for i in idx.tolist()]
+
     # ------------------------------------------------------------------ steps
     def _is_jump(self, a: Pose2D, b: Pose2D, dt: float) -> bool:
         tc = self.config.tracker
@@ -235,6 +274,7 @@ class Tracker:
         return d / dt > tc.max_pose_speed or r / dt > tc.max_pose_rate
 
     def _predict(self, dt: float) -> None:
+        self._stacked = None
         if not self._tracks or dt <= 0.0:
             return
         F, Q = _cv_matrices(dt, self.config.tracker.accel_noise)
@@ -242,9 +282,27 @@ class Tracker:
         P = np.stack([k.P for k in self._tracks])
         X = X @ F.T
         P = F @ P @ F.T + Q
+        fin = np.isfinite(P).all(axis=(1, 2)).tolist()
         for i, k in enumerate(self._tracks):
             k.x = X[i]
             k.P = P[i]
+            k.p_finite = fin[i]
+        self._stacked = (X, P)
+
+    def _stack(self) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 4) states and (n, 4, 4) covariances of the live tracks (from the prediction when it ran)."""
+        if self._stacked is None:
+            self._stacked = (np.stack([k.x for k in self._tracks]), np.stack([k.P for k in self._tracks]))
+        return self._stacked
+
+    def _beam_trig(self, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
+        """cos / sin of the beam angles, cached per beam geometry (sensor frame)."""
+        key = (scan.n_beams, float(scan.angle_min), float(scan.angle_increment))
+        if self._trig_key != key:
+            a = scan.angles
+            self._trig = (np.cos(a), np.sin(a))
+            self._trig_key = key
+        return self._trig
 
     def _detect(self, scan: Scan, pose: Pose2D) -> list[Detection]:
         cfg = self.config
@@ -253,87 +311,86 @@ class Tracker:
         self.last_segmentation = seg
         st.clusters += seg.n_clusters
         st.dropped_small_clusters += seg.n_dropped
-        valid = scan.valid_mask() & (scan.ranges > 0.0)
-        r = np.where(valid, scan.ranges, 0.0)
-        a = scan.angles
-        pts_all = pose.transform_points(np.column_stack((r * np.cos(a), r * np.sin(a))))
-        sensor = np.array([pose.x, pose.y])
+        ranges = scan.ranges
+        valid = scan.valid_mask() & (ranges > 0.0)
+        self._batch = None
         if seg.n_clusters == 0:
             self.last_detections = []
             if self._free is not None:
                 self._free.add(scan, pose, valid)
             return []
-        pts = pts_all[seg.beams]
-        fit_mask = ~seg.structure
-        fits = fit_clusters(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), seg.offsets,
-                            fit_mask, self._angles, CRITERIA[cfg.fit.criterion], cfg.fit.closeness_d0,
-                            cfg.fit.circle_min_points, cfg.fit.coarse_stride)
+        r = np.where(valid, ranges, 0.0)
+        cos_a, sin_a = self._beam_trig(scan)
+        lx, ly = r * cos_a, r * sin_a
+        # pose.transform_points, split in x / y columns
+        c, s = math.cos(pose.theta), math.sin(pose.theta)
+        ax = c * lx - s * ly + pose.x
+        ay = s * lx + c * ly + pose.y
+        px = ax[seg.beams]
+        py = ay[seg.beams]
+        fits = fit_clusters(px, py, seg.offsets, ~seg.structure, self._angles, CRITERIA[cfg.fit.criterion],
+                            cfg.fit.closeness_d0, cfg.fit.circle_min_points, cfg.fit.coarse_stride)
+        # datmo.md §10.4: classify and bound every cluster in one pass (measure.classify_and_bound)
+        keep, kinds, lohi, rel = classify_batch(px, py, seg.beams, seg.offsets, fits, seg.structure, float(pose.x),
+                                                float(pose.y), ranges, valid, ax, ay, seg.wrapped,
+                                                int(cfg.segment.max_skip_beams), float(scan.range_max),
+                                                abs(float(scan.angle_increment)), float(cfg.segment.max_extent),
+                                                self._fit_p)
+        idx = np.flatnonzero(keep)
+        st.structure_clusters += seg.n_clusters - idx.shape[0]
+        pts = np.column_stack((px, py))
+        offsets = seg.offsets
+        beams = seg.beams
         dets: list[Detection] = []
-        max_ext = cfg.segment.max_extent
-        for c in range(seg.n_clusters):
-            if seg.structure[c]:
-                st.structure_clusters += 1
-                continue
-            row = fits[c]
-            if max(row[2] - row[1], row[4] - row[3]) > max_ext:
-                st.structure_clusters += 1
-                continue
-            a0, a1 = seg.offsets[c], seg.offsets[c + 1]
-            det = classify_and_bound(seg.beams[a0:a1], pts[a0:a1], row, sensor, scan.ranges, valid, pts_all,
-                                     seg.wrapped, cfg.segment.max_skip_beams, scan.range_max, cfg.fit,
-                                     abs(scan.angle_increment))
-            dets.append(det)
+        starts = offsets[idx]
+        npts = offsets[idx + 1] - starts
+        kinds = kinds[idx]
+        lohi = lohi[idx]
+        rel = rel[idx]
+        fits = fits[idx]
+        names = (KIND_POINT, KIND_CIRCLE, KIND_RECT)
+        for j, (a0, n, kd) in enumerate(zip(starts.tolist(), npts.tolist(), kinds.tolist())):
+            f = fits[j]
+            dets.append(Detection(beams[a0:a0 + n], pts[a0:a0 + n], f[10:12], names[kd], float(f[0]), lohi[j, 0:2],
+                                  lohi[j, 2:4], rel[j], f[6:9], n))
         if self._free is not None:
             self._cur_ref = self._free.make_ref(scan, pose, valid)
             free = self._free.seen_through(pts, float(scan.stamp))
-            for det in dets:
-                a0 = seg.offsets[seg.labels[det.beams[0]]]
-                det.free_fraction = float(free[a0:a0 + det.n_points].mean())
+            frac = segment_means(free.astype(np.float64), offsets)[idx]
+            for det, ff in zip(dets, frac.tolist()):
+                det.free_fraction = ff
             self._free.add(scan, pose, valid, self._cur_ref)
         st.detections += len(dets)
         self.last_detections = dets
+        if dets:
+            m = len(dets)
+            self._batch = (kinds, fits[:, 0].copy(), lohi, rel, fits[:, 10:12].copy(), fits[:, 6:9].copy(), px, py,
+                           starts, npts)
+            self._default = self._measure_rows(np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool),
+                                               np.full(m, -1.0), np.zeros(m))
         return dets
+
+    def _measure_rows(self, det: np.ndarray, sizes: np.ndarray, has_sizes: np.ndarray, radius: np.ndarray,
+                      size_sigma: np.ndarray) -> tuple[np.ndarray, ...]:
+        """:func:`dynslam2d.detect.measure.measure` of this scan's detections ``det`` with the given track
+        priors, batched (see :func:`dynslam2d.detect.kernels.measure_batch`)."""
+        return measure_batch(det, *self._batch, sizes, has_sizes, radius, size_sigma, self._fit_p)
 
     def _associate(self, dets: list[Detection]) -> list[tuple[int, int]]:
         n, m = len(self._tracks), len(dets)
         if n == 0 or m == 0:
             return []
         tc = self.config.tracker
-        Z = np.empty((m, 2))
-        R = np.empty((m, 2, 2))
-        C = np.empty((m, 2))
-        for j, d in enumerate(dets):
-            meas = measure(d, None, None, self.config.fit)
-            Z[j], R[j], C[j] = meas.z, meas.R, d.centroid
-        X = np.stack([k.x[:2] for k in self._tracks])
-        Pp = np.stack([k.P[:2, :2] for k in self._tracks])
-        reach = np.array([0.5 * float(k.size.max()) for k in self._tracks])
-        S = Pp[:, None, :, :] + R[None, :, :, :]  # (n, m, 2, 2)
-        e = Z[None, :, :] - X[:, None, :]
-        det_s = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            d2 = (S[..., 1, 1] * e[..., 0] ** 2 - 2.0 * S[..., 0, 1] * e[..., 0] * e[..., 1]
-                  + S[..., 0, 0] * e[..., 1] ** 2) / det_s
-        dist = np.hypot(C[None, :, 0] - X[:, None, 0], C[None, :, 1] - X[:, None, 1])
-        near = dist < tc.gate_distance + reach[:, None]
-        # a rectangle measured with the track's own sizes (a side the detection "measured" too short,
-        # e.g. a grazing side, must not break the association); kept for the update of chosen pairs
-        self._pair_meas = {}
-        for i, j in zip(*np.nonzero(near)):
-            k, d = self._tracks[i], dets[j]
-            if d.kind != KIND_RECT or not k.has_heading or k.kind != KIND_RECT:
-                continue
-            m2 = measure(d, self._sizes_in_fit_axes(k, d), None, self.config.fit, size_sigma=0.05)
-            self._pair_meas[(k.id, id(d))] = m2
-            s2 = k.P[:2, :2] + m2.R
-            e2 = m2.z - k.x[:2]
-            try:
-                alt = float(e2 @ np.linalg.solve(s2, e2))
-            except np.linalg.LinAlgError:
-                continue
-            if not d2[i, j] <= alt:
-                d2[i, j] = alt
-        ok = np.isfinite(d2) & (d2 < tc.gate_chi2) & near
+        tracks = self._tracks
+        Xs, Ps = self._stack()
+        tsize = np.array([k.size for k in tracks])
+        reach = 0.5 * tsize.max(axis=1)
+        rect_trk = np.array([k.has_heading and k.kind == KIND_RECT for k in tracks])
+        theta_box = np.array([k.theta_box for k in tracks])
+        # Mahalanobis gate and distance gate; a rectangle is measured again with the track's own sizes
+        # (a side the detection "measured" too short, e.g. a grazing side, must not break the association)
+        d2, near, ok = gate_costs(Xs, Ps, reach, rect_trk, theta_box, tsize, self._default[0], self._default[1],
+                                  float(tc.gate_distance), float(tc.gate_chi2), *self._batch, self._fit_p)
         if not ok.any():
             return []
         cost = np.where(ok, d2, _BIG)
@@ -357,34 +414,49 @@ class Tracker:
                     taken[j] = True
         return pairs
 
-    def _update_track(self, k: _Track, det: Detection, t: float, vacated: float = 0.0) -> bool:
+    def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float,
+                      vac: dict[int, float]) -> list[bool]:
+        """Kalman and shape updates of the associated (track, detection) pairs; True where applied.
+
+        The measurements (with each track's sizes / radius) and the Kalman updates run as one batch
+        (:mod:`dynslam2d.detect.kernels`); the shape bookkeeping stays per track."""
+        tracks = self._tracks
+        npair = len(pairs)
+        sizes = np.zeros((npair, 2))
+        has = np.zeros(npair, dtype=bool)
+        radius = np.full(npair, -1.0)
+        swaps = [False] * npair
+        rows = np.empty(npair, dtype=np.int64)
+        for r, (ti, di) in enumerate(pairs):
+            k, det = tracks[ti], dets[di]
+            rows[r] = di
+            if det.kind == KIND_RECT and k.has_heading:
+                sw = self._swapped(k, det)
+                swaps[r] = sw
+                sizes[r] = k.size[::-1] if sw else k.size
+                has[r] = True
+            if det.kind == KIND_CIRCLE and k.kind == KIND_CIRCLE and k.radius > 0:
+                radius[r] = k.radius
+        _, _, H, zm, Rm, size_obs, size_kind = self._measure_rows(rows, sizes, has, radius, np.full(npair, 0.05))
+        Xs, Ps = self._stack()
+        sel = np.array([ti for ti, _ in pairs], dtype=np.int64)
+        Xn, Pn, ok = kalman_update_batch(Xs[sel], Ps[sel], H, zm, Rm)
+        self._stacked = None  # the tracks change below
+        out = ok.tolist()
+        for r, (ti, di) in enumerate(pairs):
+            if out[r]:
+                k = tracks[ti]
+                self._update_track(k, dets[di], t, vac.get(k.id, 0.0), Xn[r], Pn[r], size_obs[r].tolist(),
+                                   size_kind[r].tolist(), swaps[r])
+        return out
+
+    def _update_track(self, k: _Track, det: Detection, t: float, vacated: float, x_new: np.ndarray,
+                      P_new: np.ndarray, size_obs: list[float], size_kind: list[int], swap: bool) -> None:
+        """Apply one Kalman result (``x_new``, ``P_new``) and the shape / bookkeeping update."""
         cfg = self.config
         tc = cfg.tracker
-        swap = False
-        sizes_fit = None
-        if det.kind == KIND_RECT and k.has_heading:
-            swap = self._swapped(k, det)
-            sizes_fit = self._sizes_in_fit_axes(k, det)
-        radius = k.radius if (det.kind == KIND_CIRCLE and k.kind == KIND_CIRCLE and k.radius > 0) else None
-        meas = None
-        if sizes_fit is not None and radius is None:
-            meas = self._pair_meas.get((k.id, id(det)))
-        if meas is None:
-            meas = measure(det, sizes_fit, radius, cfg.fit, size_sigma=0.05)
-        H = meas.H
-        S = H @ k.P @ H.T + meas.Rm
-        y = meas.zm - H @ k.x
-        try:
-            Sinv = np.linalg.inv(S)
-        except np.linalg.LinAlgError:
-            return False
-        K = k.P @ H.T @ Sinv
-        x_new = k.x + K @ y
-        P_new = k.P - K @ H @ k.P
-        P_new = 0.5 * (P_new + P_new.T)
-        if not (np.all(np.isfinite(x_new)) and np.all(np.isfinite(P_new))):
-            return False
         k.x, k.P = x_new, P_new
+        k.p_finite = True  # kalman_update_batch rejects non-finite results
         # shape: heading (90° ambiguity) and sizes along the track's own axes
         if det.kind == KIND_RECT:
             if not k.has_heading or k.kind != KIND_RECT:
@@ -392,14 +464,15 @@ class Tracker:
                 k.has_heading = True
                 swap = False
                 k.size = det.default_sizes(cfg.fit)
-                k.size_known = meas.size_kind == SIZE_MEASURED
+                k.size_known = np.array([size_kind[0] == SIZE_MEASURED, size_kind[1] == SIZE_MEASURED])
             else:
-                informative = det.rel.any(axis=1).all() or float(det.extent.max()) > 0.3
+                rl = det.rel.tolist()
+                informative = ((rl[0][0] or rl[0][1]) and (rl[1][0] or rl[1][1])) or float(det.extent.max()) > 0.3
                 if informative:
                     k.theta_box = float(wrap_angle(k.theta_box + tc.heading_gain * _wrap_quarter(det.theta - k.theta_box)))
                 for a in (0, 1):
                     ta = 1 - a if swap else a
-                    obs, kind = float(meas.size_obs[a]), int(meas.size_kind[a])
+                    obs, kind = size_obs[a], size_kind[a]
                     if kind == SIZE_MEASURED:
                         if k.size_known[ta]:
                             k.size[ta] += tc.size_gain * (obs - k.size[ta])
@@ -435,16 +508,11 @@ class Tracker:
             k.past.append((t, det.points))
             while k.past and t - k.past[0][0] > self._free.max_age:
                 del k.past[0]
-        return True
 
     @staticmethod
     def _swapped(k: _Track, det: Detection) -> bool:
         """True when the detection's first axis is the track's second (90° ambiguity)."""
         return int(round((det.theta - k.theta_box) / _HALF_PI)) % 2 == 1
-
-    def _sizes_in_fit_axes(self, k: _Track, det: Detection) -> np.ndarray:
-        """The track's sizes along the detection's axes e1, e2, m."""
-        return k.size[::-1].copy() if self._swapped(k, det) else k.size.copy()
 
     def _motion_prior(self, k: _Track) -> None:
         """Hidden side of a moving box whose other side is measured: a side parallel to the motion is
@@ -477,29 +545,42 @@ class Tracker:
         if self._free is None or self._cur_ref is None:
             return out
         chunks: list[np.ndarray] = []
-        owners: list[tuple[int, int]] = []
+        owners: list[int] = []
+        counts: list[int] = [0]
+        ref_ages = self._free.ref_ages
         for k in tracks:
             if not k.past:
                 continue
-            ages = np.array([t - p[0] for p in k.past])
-            for a in self._free.ref_ages:
-                j = int(np.argmin(np.abs(ages - a)))
-                if ages[j] > 0.0:
-                    chunks.append(k.past[j][1])
-                    owners.append((k.id, k.past[j][1].shape[0]))
+            past = k.past
+            npast = len(past)
+            stamps = [e[0] for e in past]
+            for a in ref_ages:
+                # the entry whose age is nearest a (first one on ties, as np.argmin): stamps grow along
+                # past, so it lies next to where t − a would be inserted
+                ins = bisect.bisect_left(stamps, t - a)
+                j, best = -1, math.inf
+                for q in range(ins - 3 if ins > 3 else 0, ins + 3 if ins + 3 < npast else npast):
+                    dev = abs((t - stamps[q]) - a)
+                    if dev < best:
+                        j, best = q, dev
+                if t - stamps[j] > 0.0:
+                    pts = past[j][1]
+                    chunks.append(pts)
+                    owners.append(k.id)
+                    counts.append(pts.shape[0])
         if not chunks:
             return out
-        free = self._free.seen_through_by(self._cur_ref, np.vstack(chunks))
-        i = 0
-        for tid, n in owners:
-            f = float(free[i:i + n].mean()) if n else 0.0
+        free = self._free.seen_through_by(self._cur_ref, np.concatenate(chunks))
+        frac = segment_means(free.astype(np.float64), np.cumsum(counts)).tolist()
+        for tid, f in zip(owners, frac):
             out[tid] = max(out.get(tid, 0.0), f)
-            i += n
         return out
 
-    def _birth(self, det: Detection, t: float) -> None:
+    def _birth(self, det: Detection, t: float, j: int) -> None:
+        """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
         cfg = self.config
-        meas = measure(det, None, None, cfg.fit)
+        d = self._default  # measure(det, None, None, cfg.fit) of every detection
+        meas = Measurement(d[0][j], d[1][j], d[5][j], d[6][j], d[2][j], d[3][j], d[4][j])
         P = np.zeros((4, 4))
         P[:2, :2] = meas.R
         P[2, 2] = P[3, 3] = cfg.tracker.init_speed_sigma ** 2
@@ -517,6 +598,7 @@ class Tracker:
                    size_known=np.asarray(known, dtype=bool), radius=float(det.circle[2]) if det.kind == KIND_CIRCLE
                    else 0.0, kind=det.kind, beams=det.beams, has_heading=det.kind == KIND_RECT,
                    free=[det.free_fraction], past=[(t, det.points)] if self._free is not None else [])
+        k.p_finite = bool(np.isfinite(P).all())
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
         self._next_id += 1
@@ -550,7 +632,7 @@ class Tracker:
                 st.tracks_deleted += 1
                 continue
             pv = k.P[:2, :2]
-            if not np.all(np.isfinite(k.P)) or math.sqrt(max(pv[0, 0], pv[1, 1])) > tc.max_position_sigma:
+            if not k.p_finite or math.sqrt(max(pv[0, 0], pv[1, 1])) > tc.max_position_sigma:
                 st.deleted_covariance += 1
                 st.tracks_deleted += 1
                 continue
@@ -567,18 +649,19 @@ class Tracker:
     def _dynamic(self, k: _Track, speed: float, t: float) -> None:
         """Paper Eq. 3 with persistence, certainty and displacement conditions."""
         tc = self.config.tracker
+        (p22, p23), (p32, p33) = k.P[2:, 2:].tolist()
         if speed > 1e-9:
-            u = k.x[2:] / speed
-            sig = math.sqrt(max(float(u @ k.P[2:, 2:] @ u), 0.0))
+            u0, u1 = float(k.x[2]) / speed, float(k.x[3]) / speed
+            sig = math.sqrt(max((u0 * p22 + u1 * p32) * u0 + (u0 * p23 + u1 * p33) * u1, 0.0))  # uᵀ P_v u
         else:
-            sig = math.sqrt(max(k.P[2, 2], k.P[3, 3]))
+            sig = math.sqrt(max(p22, p33))
         fast = speed > tc.v_min and sig < tc.max_speed_sigma
         k.fast = k.fast + 1 if fast else 0
         if speed < tc.v_exit_ratio * tc.v_min:
             k.slow_since = t if k.slow_since is None else k.slow_since
         else:
             k.slow_since = None
-        disp = float(np.hypot(*(k.x[:2] - k.birth_xy)))
+        disp = float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))
         if k.in_m and k.probation and self._free is not None and len(k.free) >= tc.sustain_updates:
             k.probation = False
             if sum(k.free) / len(k.free) < tc.free_min_fraction:
@@ -620,14 +703,15 @@ class Tracker:
     def _report(self, t: float, updated: set[int]) -> list[Track]:
         out = []
         tc = self.config.tracker
+        no_beams = np.zeros(0, dtype=np.int64)
         for k in self._tracks:
-            vx, vy = float(k.x[2]), float(k.x[3])
+            px, py, vx, vy = k.x.tolist()
             speed = math.hypot(vx, vy)
             if k.kind == KIND_CIRCLE:
                 theta = math.atan2(vy, vx) if speed > 0.5 * tc.v_min else 0.0
                 length = width = 2.0 * k.radius
             else:
-                sa, sb = float(k.size[0]), float(k.size[1])
+                sa, sb = k.size.tolist()
                 if speed > 0.5 * tc.v_min:
                     vdir = math.atan2(vy, vx)
                     q = int(round(float(wrap_angle(vdir - k.theta_box)) / _HALF_PI))
@@ -638,9 +722,9 @@ class Tracker:
                 else:
                     theta, length, width = k.theta_box, sa, sb
                 theta = float(wrap_angle(theta))
-            beams = k.beams if k.id in updated else np.zeros(0, dtype=np.int64)
+            beams = k.beams if k.id in updated else no_beams
             out.append(Track(id=k.id, state=k.state, stamp=t,
-                             box=Box(float(k.x[0]), float(k.x[1]), theta, float(length), float(width)),
+                             box=Box(px, py, theta, float(length), float(width)),
                              velocity=np.array([vx, vy]), covariance=k.P.copy(), age=t - k.born, hits=k.hits,
                              misses=k.misses, kind=k.kind, in_m=k.in_m, m_reason=k.reason, beams=beams,
                              n_points=int(beams.shape[0])))

@@ -1,0 +1,136 @@
+"""Speed of the full pipeline — detection, tracking, filter, SLAM — per stage (not run by pytest).
+
+Scenes (720 beams, 20 Hz, simulated up front so that only ``Pipeline.process`` is timed):
+
+  * ``sim:paper``  — the paper's room with its three movers,
+  * ``sim:crowd``  — the crowd hall,
+  * ``ten-movers`` — the crowd hall with 10 movers (six people, four boxes/carts; the scene of
+    ``bench_detect.py``).
+
+For each scene it reports
+
+  * warm-up separately: a throw-away pipeline over the first 60 scans, reporting the first
+    ``process`` call and the slowest later one (numba compile, or numba cache load when the
+    cache is warm; some kernels first run once tracks exist) — excluded from every
+    steady-state figure, which come from a fresh pipeline over all scans but the first,
+  * ms per stage, median and p95, from ``StepResult.timings`` (match, track, filter,
+    map_update, total),
+  * scans/s: ``1000 / median(total)`` (the issue-5 target: ≥ 400 on one core) and the
+    throughput of the whole steady-state loop (scans / wall time, includes Python overhead
+    between calls).
+
+    python benchmarks/bench_pipeline.py [--duration 30] [--scenes paper crowd ten-movers] [--cold]
+
+``--cold`` points numba at an empty cache directory first, so the first-call line measures a
+full compile instead of a cache load. Pin to one core with ``taskset -c 0`` for "one core".
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import tempfile
+import time
+
+import numpy as np
+
+STAGES = ("match", "track", "filter", "map_update", "total")
+
+
+def ten_movers(duration: float):
+    """The crowd hall with 10 movers on random walks (same scene as ``bench_detect.py``)."""
+    from dynslam2d.sim import Circle, Mover, Rect, build_scenario, random_waypoints, simulate
+
+    base = build_scenario("crowd", duration=duration)
+    rng = np.random.default_rng(42)
+    movers = []
+    regions = [(-3.2, 3.2, -1.7, 1.7)] * 4 + [(-6.0, 5.0, 3.4, 4.3)] * 3 + [(-6.0, 6.0, -4.3, -3.4)] * 3
+    for k, region in enumerate(regions, start=1):
+        walk = random_waypoints(rng, region, duration + 5.0, speed_range=(0.6, 1.4), pause_range=(0.0, 1.0))
+        shape = Circle(float(rng.uniform(0.2, 0.25))) if k % 5 not in (0, 3) else Rect(0.8, 0.5)
+        movers.append(Mover(k, f"mover-{k}", shape, walk))
+    return simulate(dataclasses.replace(base, movers=tuple(movers), name="ten-movers"))
+
+
+def _scans(name: str, duration: float) -> list:
+    from dynslam2d.sim import simulate
+
+    sim = ten_movers(duration) if name == "ten-movers" else simulate(name, duration=duration)
+    return list(sim.scans)
+
+
+def warm_up(scans: list, n: int = 60) -> tuple[float, float]:
+    """Run a throw-away ``Pipeline`` over the first ``n`` scans so that every numba kernel is compiled
+    (or loaded from the cache): some are first called only once tracks exist or are confirmed.
+    Returns (first process() call, slowest later call) in ms."""
+    from dynslam2d.pipeline import Pipeline
+
+    pipe = Pipeline()
+    times = []
+    for s in scans[:n]:
+        t0 = time.perf_counter()
+        pipe.process(s)
+        times.append((time.perf_counter() - t0) * 1e3)
+    return times[0], max(times[1:], default=0.0)
+
+
+def bench(name: str, scans: list) -> dict[str, object]:
+    """Warm up, then run a fresh ``Pipeline`` over ``scans``; return the figures (ms, scans/s).
+    The steady-state figures leave out the first scan (it only initialises the map)."""
+    from dynslam2d.pipeline import Pipeline
+
+    first_ms, warm_max_ms = warm_up(scans)
+    pipe = Pipeline()
+    pipe.process(scans[0])
+    per_stage: dict[str, list[float]] = {k: [] for k in STAGES}
+    n_tracks, n_m, removed = [], [], 0
+    t_loop = time.perf_counter()
+    for s in scans[1:]:
+        step = pipe.process(s)
+        for k in STAGES:
+            per_stage[k].append(step.timings[k])
+        n_tracks.append(len(step.tracks))
+        n_m.append(sum(t.in_m for t in step.tracks))
+        removed += int(step.removed.sum())
+    wall = time.perf_counter() - t_loop
+    stats = {k: (float(np.median(v)), float(np.percentile(v, 95))) for k, v in per_stage.items()}
+    return {
+        "scene": name, "scans": len(scans), "beams": scans[0].n_beams, "first_ms": first_ms, "warm_max_ms": warm_max_ms, "stages": stats,
+        "scans_per_s_median": 1e3 / stats["total"][0], "scans_per_s_loop": (len(scans) - 1) / wall,
+        "mean_tracks": float(np.mean(n_tracks)), "mean_in_m": float(np.mean(n_m)),
+        "removed_per_scan": removed / max(len(scans) - 1, 1),
+    }
+
+
+def report(r: dict[str, object]) -> str:
+    lines = [f"\n== {r['scene']}: {r['scans']} scans, {r['beams']} beams; "
+             f"{r['mean_tracks']:.1f} live tracks, {r['mean_in_m']:.1f} in M, "
+             f"{r['removed_per_scan']:.0f} beams removed per scan ==",
+             f"warm-up: first process() call {r['first_ms']:.0f} ms, slowest of the next 59 "
+             f"{r['warm_max_ms']:.1f} ms (numba compile or cache load; not in the figures below)",
+             f"{'stage':<11} {'median ms':>10} {'p95 ms':>9}"]
+    for k, (med, p95) in r["stages"].items():  # type: ignore[union-attr]
+        lines.append(f"{k:<11} {med:>10.3f} {p95:>9.3f}")
+    lines.append(f"scans/s: {r['scans_per_s_median']:.0f} (1000 / median total), "
+                 f"{r['scans_per_s_loop']:.0f} (whole steady-state loop)")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--duration", type=float, default=30.0)
+    ap.add_argument("--scenes", nargs="+", default=["paper", "crowd", "ten-movers"])
+    ap.add_argument("--cold", action="store_true")
+    args = ap.parse_args()
+    if args.cold:
+        os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="numba-cold-")
+    for name in args.scenes:
+        t0 = time.perf_counter()
+        scans = _scans(name, args.duration)
+        print(f"\nsimulated {name}: {len(scans)} scans in {time.perf_counter() - t0:.1f} s")
+        print(report(bench(name, scans)))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,683 @@
+"""Batched numba kernels of the tracker's per-scan work (one call per scan, not per object).
+
+The Python reference versions are :func:`dynslam2d.detect.measure.classify_and_bound`,
+:func:`dynslam2d.detect.measure.measure` and
+:meth:`dynslam2d.detect.freespace.FreeSpaceMemory.seen_through_by`; the kernels here do the
+same arithmetic for every cluster / pair / point of a scan in one pass, so that
+``Tracker.update`` pays the Python overhead once per scan instead of once per detection
+(issue 4, Speed). ``tests/test_detect_kernels.py`` checks them against the reference versions.
+
+Frames: map frame (points already transformed with the scan's pose). Units m, rad.
+Fit parameters travel as one float array built by :func:`fit_params` (fewer kernel arguments,
+less dispatch overhead).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from dynslam2d.detect.config import FitConfig
+from dynslam2d.detect.shapes import circle_center_fixed_radius
+
+#: Kind codes of the batch kernels (strings in :class:`~dynslam2d.detect.measure.Detection`).
+K_POINT, K_CIRCLE, K_RECT = 0, 1, 2
+
+# indices into the fit-parameter array
+_P_POINT_MAX_POINTS = 0
+_P_POINT_MAX_EXTENT = 1
+_P_CIRCLE_MIN_POINTS = 2
+_P_CIRCLE_MIN_RADIUS = 3
+_P_CIRCLE_MAX_RADIUS = 4
+_P_CIRCLE_RES_RATIO = 5
+_P_CIRCLE_DEPTH_RATIO = 6
+_P_FACE_TOL = 7
+_P_MIN_FACE_SPAN = 8
+_P_MIN_SIDE_POINTS = 9
+_P_EDGE_MAX_GAP = 10
+_P_EDGE_RANGE_JUMP = 11
+_P_EDGE_LINE_TOL = 12
+_P_SIGMA_POSITION = 13
+_P_SIGMA_POINT = 14
+_P_SIGMA_UNOBS = 15
+_P_SIGMA_UNOBS_SPEED = 16
+_P_DEFAULT_DEPTH = 17
+_P_DEFAULT_DEPTH_RATIO = 18
+_N_PARAMS = 19
+
+
+def fit_params(cfg: FitConfig) -> np.ndarray:
+    """The fit parameters the kernels need, packed in one float64 array."""
+    p = np.empty(_N_PARAMS)
+    p[_P_POINT_MAX_POINTS] = cfg.point_max_points
+    p[_P_POINT_MAX_EXTENT] = cfg.point_max_extent
+    p[_P_CIRCLE_MIN_POINTS] = cfg.circle_min_points
+    p[_P_CIRCLE_MIN_RADIUS] = cfg.circle_min_radius
+    p[_P_CIRCLE_MAX_RADIUS] = cfg.circle_max_radius
+    p[_P_CIRCLE_RES_RATIO] = cfg.circle_residual_ratio
+    p[_P_CIRCLE_DEPTH_RATIO] = cfg.circle_min_depth_ratio
+    p[_P_FACE_TOL] = cfg.face_tolerance
+    p[_P_MIN_FACE_SPAN] = cfg.min_face_span
+    p[_P_MIN_SIDE_POINTS] = cfg.min_side_points
+    p[_P_EDGE_MAX_GAP] = cfg.edge_max_gap
+    p[_P_EDGE_RANGE_JUMP] = cfg.edge_range_jump
+    p[_P_EDGE_LINE_TOL] = cfg.edge_line_tolerance
+    p[_P_SIGMA_POSITION] = cfg.sigma_position
+    p[_P_SIGMA_POINT] = cfg.sigma_point
+    p[_P_SIGMA_UNOBS] = cfg.sigma_unobserved
+    p[_P_SIGMA_UNOBS_SPEED] = cfg.sigma_unobserved_speed
+    p[_P_DEFAULT_DEPTH] = cfg.default_depth
+    p[_P_DEFAULT_DEPTH_RATIO] = cfg.default_depth_ratio
+    return p
+
+
+@njit(cache=True)
+def _pairwise_leaf(a: np.ndarray, lo: int, n: int) -> float:
+    """numpy's pairwise summation of a[lo:lo+n] for n ≤ 128 (8 interleaved partial sums)."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r0 = a[lo]
+    r1 = a[lo + 1]
+    r2 = a[lo + 2]
+    r3 = a[lo + 3]
+    r4 = a[lo + 4]
+    r5 = a[lo + 5]
+    r6 = a[lo + 6]
+    r7 = a[lo + 7]
+    i = 8
+    while i < n - (n % 8):
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True)
+def _pairwise_sum(a: np.ndarray, lo: int, n: int) -> float:
+    """numpy's pairwise summation of a[lo:lo+n] (same rounding as ``ndarray.sum`` / ``mean``):
+    blocks of ≤ 128 as :func:`_pairwise_leaf`, larger ranges split in two halves (n/2 rounded down
+    to a multiple of 8). Iterative with an explicit stack (numba cannot cache recursive functions)."""
+    if n <= 128:
+        return _pairwise_leaf(a, lo, n)
+    los = np.empty(64, dtype=np.int64)
+    ns = np.empty(64, dtype=np.int64)
+    state = np.zeros(64, dtype=np.int8)
+    vals = np.empty(64)
+    top = 0
+    vtop = 0
+    los[0] = lo
+    ns[0] = n
+    while top >= 0:
+        l = los[top]
+        m = ns[top]
+        if m <= 128:
+            vals[vtop] = _pairwise_leaf(a, l, m)
+            vtop += 1
+            top -= 1
+            continue
+        n2 = m // 2
+        n2 -= n2 % 8
+        if state[top] == 0:
+            state[top] = 1
+            top += 1
+            los[top], ns[top], state[top] = l, n2, 0
+        elif state[top] == 1:
+            state[top] = 2
+            top += 1
+            los[top], ns[top], state[top] = l + n2, m - n2, 0
+        else:
+            vals[vtop - 2] = vals[vtop - 2] + vals[vtop - 1]
+            vtop -= 1
+            top -= 1
+    return vals[0]
+
+
+@njit(cache=True)
+def _endpoint_real(u: np.ndarray, v: np.ndarray, pos: int, k: int, lo_k: float, hi_k: float, beam: int, step: int,
+                   ranges: np.ndarray, valid: np.ndarray, ax: np.ndarray, ay: np.ndarray, c: float, s: float,
+                   wrapped: bool, max_skip: int, range_max: float, p: np.ndarray, su: float, sv: float,
+                   dphi: float) -> bool:
+    """Kernel twin of :func:`dynslam2d.detect.measure._endpoint_real` (uv split in u, v arrays)."""
+    n = ranges.shape[0]
+    r0 = u[pos] - su
+    r1 = v[pos] - sv
+    rn = math.hypot(r0, r1)
+    if rn > 0.0:
+        sin_b = abs(r1 if k == 0 else r0) / rn
+        if rn * dphi / max(sin_b, 1e-3) > p[_P_EDGE_MAX_GAP]:
+            return False
+    j = beam
+    found = -1
+    for _ in range(max_skip + 1):
+        j += step
+        if wrapped:
+            j %= n
+        elif j < 0 or j >= n:
+            return False
+        if valid[j]:
+            found = j
+            break
+    r_e = ranges[beam]
+    if found < 0:
+        return r_e < 0.95 * range_max
+    r_j = ranges[found]
+    if r_j < r_e - p[_P_EDGE_RANGE_JUMP]:
+        return False
+    qu = c * ax[found] + s * ay[found]
+    qv = -s * ax[found] + c * ay[found]
+    qk, qo = (qu, qv) if k == 0 else (qv, qu)
+    wo = v[pos] if k == 0 else u[pos]
+    tol = p[_P_FACE_TOL]
+    if abs(qo - wo) < p[_P_EDGE_LINE_TOL] and (qk < lo_k + tol or qk > hi_k - tol):
+        return False
+    return True
+
+
+@njit(cache=True)
+def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: np.ndarray, fits: np.ndarray,
+                   structure: np.ndarray, sx: float, sy: float, ranges: np.ndarray, valid: np.ndarray,
+                   ax: np.ndarray, ay: np.ndarray, wrapped: bool, max_skip: int, range_max: float, dphi: float,
+                   max_extent: float, p: np.ndarray) -> tuple:
+    """:func:`~dynslam2d.detect.measure.classify_and_bound` for every cluster of a scan.
+
+    Args:
+        px, py: map-frame points of the clusters (concatenated like ``beams``), m.
+        beams, offsets, structure: the :class:`~dynslam2d.detect.segment.Segmentation`.
+        fits: (k, 12) rows of :func:`~dynslam2d.detect.shapes.fit_clusters`.
+        sx, sy: sensor position, map frame, m.
+        ranges, valid: the scan's ranges (m) and beams with a return.
+        ax, ay: map-frame points of all beams (0 range where invalid), m.
+        max_extent: clusters whose fitted box is longer than this are structure, m.
+        p: :func:`fit_params`.
+
+    Returns:
+        ``(keep, kind, lohi, rel)``: (k,) bool (a detection, not structure), (k,) int8 kind code,
+        (k, 4) refined bounds lo1, lo2, hi1, hi2 (m), (k, 2, 2) bool real bounds.
+    """
+    kc = offsets.shape[0] - 1
+    keep = np.zeros(kc, dtype=np.bool_)
+    kind = np.zeros(kc, dtype=np.int8)
+    lohi = np.zeros((kc, 4))
+    rel = np.zeros((kc, 2, 2), dtype=np.bool_)
+    tol = p[_P_FACE_TOL]
+    span = p[_P_MIN_FACE_SPAN]
+    nmax = 0
+    for c in range(kc):
+        nmax = max(nmax, offsets[c + 1] - offsets[c])
+    u = np.empty(nmax)
+    v = np.empty(nmax)
+    sel = np.empty(nmax)
+    for c in range(kc):
+        if structure[c]:
+            continue
+        f = fits[c]
+        if max(f[2] - f[1], f[4] - f[3]) > max_extent:
+            continue
+        keep[c] = True
+        a = offsets[c]
+        n = offsets[c + 1] - a
+        theta = f[0]
+        lo0, hi0, lo1, hi1 = f[1], f[2], f[3], f[4]
+        ext0 = hi0 - lo0
+        ext1 = hi1 - lo1
+        lohi[c, 0] = lo0
+        lohi[c, 1] = lo1
+        lohi[c, 2] = hi0
+        lohi[c, 3] = hi1
+        if n <= p[_P_POINT_MAX_POINTS] or max(ext0, ext1) < p[_P_POINT_MAX_EXTENT]:
+            kind[c] = K_POINT
+            continue
+        cr = f[8]
+        if (n >= p[_P_CIRCLE_MIN_POINTS] and p[_P_CIRCLE_MIN_RADIUS] <= cr <= p[_P_CIRCLE_MAX_RADIUS]
+                and f[9] < p[_P_CIRCLE_RES_RATIO] * f[5] and min(ext0, ext1) >= p[_P_CIRCLE_DEPTH_RATIO] * cr
+                and math.hypot(f[6] - sx, f[7] - sy) > math.hypot(f[10] - sx, f[11] - sy)):
+            kind[c] = K_CIRCLE
+            continue
+        kind[c] = K_RECT
+        cs = math.cos(theta)
+        sn = math.sin(theta)
+        for i in range(n):
+            u[i] = cs * px[a + i] + sn * py[a + i]
+            v[i] = -sn * px[a + i] + cs * py[a + i]
+        su = cs * sx + sn * sy
+        sv = -sn * sx + cs * sy
+        lo = np.array([lo0, lo1])
+        hi = np.array([hi0, hi1])
+        ext = (ext0, ext1)
+        for k in range(2):
+            wk = u if k == 0 else v
+            wo = v if k == 0 else u
+            sk = su if k == 0 else sv
+            near = -1
+            if sk < lo[k]:
+                near = 0
+            elif sk > hi[k]:
+                near = 1
+            face = False
+            face_line = 0.0
+            if near >= 0:
+                b = lo[k] if near == 0 else hi[k]
+                cnt = 0
+                omin = np.inf
+                omax = -np.inf
+                for i in range(n):
+                    if abs(wk[i] - b) < tol:
+                        sel[cnt] = wk[i]
+                        cnt += 1
+                        omin = min(omin, wo[i])
+                        omax = max(omax, wo[i])
+                if cnt >= 2:
+                    face = omax - omin >= span
+                    face_line = _pairwise_sum(sel, 0, cnt) / cnt
+                    if face:
+                        if near == 0:
+                            lo[k] = face_line
+                        else:
+                            hi[k] = face_line
+            for side in range(2):
+                b = lo[k] if side == 0 else hi[k]
+                if face and side == near:
+                    rel[c, k, side] = True
+                    continue
+                d0 = abs(wk[0] - b)
+                d1 = abs(wk[n - 1] - b)
+                if min(d0, d1) >= tol:
+                    rel[c, k, side] = (not face) and ext[k] >= span
+                    continue
+                if face and ext[k] < span:
+                    continue
+                if face:
+                    off = 0
+                    for i in range(n):
+                        if abs(wk[i] - face_line) > tol:
+                            off += 1
+                    if off < p[_P_MIN_SIDE_POINTS]:
+                        continue
+                pos = 0 if d0 <= d1 else n - 1
+                step = -1 if pos == 0 else 1
+                rel[c, k, side] = _endpoint_real(u, v, pos, k, lo[k], hi[k], beams[a + pos], step, ranges, valid,
+                                                 ax, ay, cs, sn, wrapped, max_skip, range_max, p, su, sv, dphi)
+        lohi[c, 0] = lo[0]
+        lohi[c, 1] = lo[1]
+        lohi[c, 2] = hi[0]
+        lohi[c, 3] = hi[1]
+    return keep, kind, lohi, rel
+
+
+@njit(cache=True)
+def measure_batch(det: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray,
+                  centroid: np.ndarray, circle: np.ndarray, px: np.ndarray, py: np.ndarray, start: np.ndarray,
+                  npts: np.ndarray, sizes: np.ndarray, has_sizes: np.ndarray, radius: np.ndarray,
+                  size_sigma: np.ndarray, p: np.ndarray) -> tuple:
+    """:func:`~dynslam2d.detect.measure.measure` for many (detection, track prior) rows.
+
+    Row r measures detection ``det[r]`` (indices into the per-detection arrays ``kind``,
+    ``theta``, ``lohi`` (lo1, lo2, hi1, hi2), ``rel``, ``centroid``, ``circle`` and its points
+    ``px, py[start:start+npts]``) with the track's ``sizes[r]`` along the fit axes when
+    ``has_sizes[r]`` (else the detection's default sizes), the track's ``radius[r]`` for circles
+    when > 0, and ``size_sigma[r]`` (m).
+
+    Returns:
+        ``(z, R, H, zm, Rm, size_obs, size_kind)`` with the shapes of :class:`Measurement`
+        stacked over rows: (r, 2), (r, 2, 2), (r, 2, 4), (r, 2), (r, 2, 2), (r, 2), (r, 2) int8.
+    """
+    nr = det.shape[0]
+    z = np.zeros((nr, 2))
+    R = np.zeros((nr, 2, 2))
+    H = np.zeros((nr, 2, 4))
+    zm = np.zeros((nr, 2))
+    Rm = np.zeros((nr, 2, 2))
+    size_obs = np.zeros((nr, 2))
+    size_kind = np.zeros((nr, 2), dtype=np.int8)
+    sp2 = p[_P_SIGMA_POSITION] ** 2
+    su2 = p[_P_SIGMA_UNOBS] ** 2
+    sus2 = p[_P_SIGMA_UNOBS_SPEED] ** 2
+    uv = np.zeros(2)
+    var = np.zeros(2)
+    obs = np.zeros(2, dtype=np.bool_)
+    sz = np.zeros(2)
+    for r in range(nr):
+        j = det[r]
+        kd = kind[j]
+        if kd == K_POINT:
+            s2 = p[_P_SIGMA_POINT] ** 2
+            z[r, 0] = zm[r, 0] = centroid[j, 0]
+            z[r, 1] = zm[r, 1] = centroid[j, 1]
+            R[r, 0, 0] = R[r, 1, 1] = Rm[r, 0, 0] = Rm[r, 1, 1] = s2
+            H[r, 0, 0] = H[r, 1, 1] = 1.0
+            continue
+        if kd == K_CIRCLE:
+            cx, cy, cr = circle[j, 0], circle[j, 1], circle[j, 2]
+            if radius[r] > 0:
+                a = start[j]
+                b = a + npts[j]
+                cx, cy, _ = circle_center_fixed_radius(px[a:b].copy(), py[a:b].copy(), cx, cy, radius[r])
+            s2 = (1.5 * p[_P_SIGMA_POSITION]) ** 2
+            size_obs[r, 0] = size_obs[r, 1] = 2.0 * cr
+            size_kind[r, 0] = size_kind[r, 1] = 2
+            z[r, 0] = zm[r, 0] = cx
+            z[r, 1] = zm[r, 1] = cy
+            R[r, 0, 0] = R[r, 1, 1] = Rm[r, 0, 0] = Rm[r, 1, 1] = s2
+            H[r, 0, 0] = H[r, 1, 1] = 1.0
+            continue
+        lo0, lo1, hi0, hi1 = lohi[j, 0], lohi[j, 1], lohi[j, 2], lohi[j, 3]
+        ext0 = hi0 - lo0
+        ext1 = hi1 - lo1
+        if has_sizes[r]:
+            sz[0] = sizes[r, 0]
+            sz[1] = sizes[r, 1]
+        else:  # Detection.default_sizes
+            sz[0] = ext0
+            sz[1] = ext1
+            if not (rel[j, 0, 0] and rel[j, 0, 1]):
+                sz[0] = max(ext0, min(p[_P_DEFAULT_DEPTH], p[_P_DEFAULT_DEPTH_RATIO] * max(ext1, 0.0)))
+            if not (rel[j, 1, 0] and rel[j, 1, 1]):
+                sz[1] = max(ext1, min(p[_P_DEFAULT_DEPTH], p[_P_DEFAULT_DEPTH_RATIO] * max(ext0, 0.0)))
+        for k in range(2):
+            lok = lo0 if k == 0 else lo1
+            hik = hi0 if k == 0 else hi1
+            ext_k = ext0 if k == 0 else ext1
+            rl = rel[j, k, 0]
+            rh = rel[j, k, 1]
+            size_k = max(sz[k], ext_k)
+            obs[k] = True
+            size_kind[r, k] = 1
+            if rl and rh:
+                uv[k] = 0.5 * (lok + hik)
+                var[k] = sp2
+                size_kind[r, k] = 2
+            elif rl or rh:
+                uv[k] = lok + 0.5 * size_k if rl else hik - 0.5 * size_k
+                unc = size_sigma[r] if has_sizes[r] else 0.5 * size_k
+                var[k] = sp2 + 0.25 * unc * unc
+            else:
+                uv[k] = 0.5 * (lok + hik)
+                var[k] = su2
+                obs[k] = False
+        c = math.cos(theta[j])
+        s = math.sin(theta[j])
+        z[r, 0] = c * uv[0] - s * uv[1]
+        z[r, 1] = s * uv[0] + c * uv[1]
+        v0 = var[0]
+        v1 = var[1]
+        R[r, 0, 0] = c * c * v0 + s * s * v1
+        R[r, 0, 1] = R[r, 1, 0] = c * s * (v0 - v1)
+        R[r, 1, 1] = s * s * v0 + c * c * v1
+        for k in range(2):
+            e0, e1 = (c, s) if k == 0 else (-s, c)
+            if obs[k]:
+                H[r, k, 0] = e0
+                H[r, k, 1] = e1
+                zm[r, k] = uv[k]
+                Rm[r, k, k] = var[k]
+            else:
+                H[r, k, 2] = e0
+                H[r, k, 3] = e1
+                Rm[r, k, k] = sus2
+        size_obs[r, 0] = ext0
+        size_obs[r, 1] = ext1
+    return z, R, H, zm, Rm, size_obs, size_kind
+
+
+@njit(cache=True)
+def kalman_update_batch(X: np.ndarray, P: np.ndarray, H: np.ndarray, zm: np.ndarray, Rm: np.ndarray) -> tuple:
+    """Kalman updates of many tracks with 2-row linear measurements.
+
+    ``S = H P Hᵀ + R``, ``K = P Hᵀ S⁻¹``, ``x ← x + K (z − H x)``, ``P ← sym(P − K H P)``.
+    X (r, 4), P (r, 4, 4), H (r, 2, 4), zm (r, 2), Rm (r, 2, 2). Returns ``(X_new, P_new, ok)``;
+    ok[i] is False (and row i untouched) when S is singular or the result is not finite.
+    """
+    nr = X.shape[0]
+    Xn = X.copy()
+    Pn = P.copy()
+    ok = np.zeros(nr, dtype=np.bool_)
+    PHt = np.empty((4, 2))
+    K = np.empty((4, 2))
+    KHP = np.empty((4, 4))
+    HP = np.empty((2, 4))
+    xn = np.empty(4)
+    pn = np.empty((4, 4))
+    for r in range(nr):
+        h = H[r]
+        pr = P[r]
+        for i in range(4):
+            for q in range(2):
+                acc = 0.0
+                for t in range(4):
+                    acc += pr[i, t] * h[q, t]
+                PHt[i, q] = acc
+        s00 = Rm[r, 0, 0]
+        s01 = Rm[r, 0, 1]
+        s10 = Rm[r, 1, 0]
+        s11 = Rm[r, 1, 1]
+        for t in range(4):
+            s00 += h[0, t] * PHt[t, 0]
+            s01 += h[0, t] * PHt[t, 1]
+            s10 += h[1, t] * PHt[t, 0]
+            s11 += h[1, t] * PHt[t, 1]
+        det = s00 * s11 - s01 * s10
+        if det == 0.0 or not math.isfinite(det):
+            continue
+        i00 = s11 / det
+        i01 = -s01 / det
+        i10 = -s10 / det
+        i11 = s00 / det
+        y0 = zm[r, 0]
+        y1 = zm[r, 1]
+        for t in range(4):
+            y0 -= h[0, t] * X[r, t]
+            y1 -= h[1, t] * X[r, t]
+        for i in range(4):
+            K[i, 0] = PHt[i, 0] * i00 + PHt[i, 1] * i10
+            K[i, 1] = PHt[i, 0] * i01 + PHt[i, 1] * i11
+            xn[i] = X[r, i] + K[i, 0] * y0 + K[i, 1] * y1
+        for q in range(2):
+            for i in range(4):
+                acc = 0.0
+                for t in range(4):
+                    acc += h[q, t] * pr[t, i]
+                HP[q, i] = acc
+        good = True
+        for i in range(4):
+            for q in range(4):
+                KHP[i, q] = K[i, 0] * HP[0, q] + K[i, 1] * HP[1, q]
+                pn[i, q] = pr[i, q] - KHP[i, q]
+        for i in range(4):
+            if not math.isfinite(xn[i]):
+                good = False
+            for q in range(4):
+                val = 0.5 * (pn[i, q] + pn[q, i])
+                if not math.isfinite(val):
+                    good = False
+                Pn[r, i, q] = val
+        if not good:
+            Pn[r] = P[r]
+            continue
+        Xn[r] = xn
+        ok[r] = True
+    return Xn, Pn, ok
+
+
+@njit(cache=True)
+def seen_through_kernel(px: np.ndarray, py: np.ndarray, ix: float, iy: float, ith: float, ranges: np.ndarray,
+                        angle_min: float, increment: float, full: bool, reach: float, margin: float,
+                        free: np.ndarray) -> None:
+    """OR into ``free`` the points (map frame) that a reference scan saw through.
+
+    ``(ix, iy, ith)`` is the inverse of the reference laser pose (map → reference sensor frame);
+    the rest as :meth:`dynslam2d.detect.freespace.FreeSpaceMemory.seen_through_by`.
+    """
+    n = px.shape[0]
+    m = ranges.shape[0]
+    c = math.cos(ith)
+    s = math.sin(ith)
+    for i in range(n):
+        lx = c * px[i] - s * py[i] + ix
+        ly = s * px[i] + c * py[i] + iy
+        rho = math.hypot(lx, ly)
+        phi = math.atan2(ly, lx)
+        idx = int(np.rint((phi - angle_min) / increment))
+        if full:
+            idx %= m
+        else:
+            if idx < 0 or idx >= m:
+                idx = int(np.rint((phi + 2.0 * math.pi - angle_min) / increment))
+            if not (idx >= 1 and idx < m - 1):
+                continue
+        lo = (idx - 1) % m
+        hi = (idx + 1) % m
+        rmin = min(min(ranges[idx], ranges[lo]), ranges[hi])
+        if math.isinf(rmin):
+            beyond = rho < reach - margin
+        else:
+            beyond = rmin > rho + margin
+        if beyond:
+            free[i] = True
+
+
+@njit(cache=True)
+def segment_means(values: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """(k,) mean of ``values[offsets[c]:offsets[c+1]]`` (0 for an empty segment)."""
+    k = offsets.shape[0] - 1
+    out = np.zeros(k)
+    for c in range(k):
+        n = offsets[c + 1] - offsets[c]
+        if n > 0:
+            out[c] = _pairwise_sum(values, offsets[c], n) / n
+    return out
+
+
+@njit(cache=True)
+def fragment_hosts(px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray, det: np.ndarray,
+                   tx: np.ndarray, ty: np.ndarray, tth: np.ndarray, ts0: np.ndarray, ts1: np.ndarray,
+                   margin: float) -> np.ndarray:
+    """For each detection ``det[r]`` (points ``px, py[start:start+npts]``, map frame): the index of the
+    box (centre tx, ty, axis angle tth, sizes ts0 along it and ts1 across, m) that holds every point
+    with the least overshoot, when that overshoot is below ``margin`` (m); −1 for none. The overshoot
+    of a point is max(|u| − s0/2, |v| − s1/2) in the box frame; ties keep the first box."""
+    nr = det.shape[0]
+    nt = tx.shape[0]
+    out = -np.ones(nr, dtype=np.int64)
+    for r in range(nr):
+        j = det[r]
+        a = start[j]
+        n = npts[j]
+        best_d = np.inf
+        for i in range(nt):
+            c = math.cos(tth[i])
+            s = math.sin(tth[i])
+            h0 = 0.5 * ts0[i]
+            h1 = 0.5 * ts1[i]
+            d = -np.inf
+            for q in range(a, a + n):
+                rx = px[q] - tx[i]
+                ry = py[q] - ty[i]
+                u = abs(rx * c + ry * s) - h0
+                v = abs(-rx * s + ry * c) - h1
+                d = max(d, max(u, v))
+            if d < margin and d < best_d:
+                best_d = d
+                out[r] = i
+    return out
+
+
+@njit(cache=True)
+def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.ndarray, theta_box: np.ndarray,
+               tsize: np.ndarray, Z: np.ndarray, R: np.ndarray, gate_distance: float, gate_chi2: float,
+               kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray,
+               circle: np.ndarray, px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray,
+               p: np.ndarray) -> tuple:
+    """Association costs of n tracks × m detections (datmo.md §10.5, the tracker's gate).
+
+    d2[i, j]: Mahalanobis distance² of the centre innovation (predicted track i: state Xs, covariance
+    Ps; detection j: default measurement Z, R). For a rectangle detection near a rectangle track with a
+    heading (``rect_trk``), the detection is measured again with the track's own sizes (``tsize``
+    along the track axis ``theta_box``, swapped when the fit axes are turned by 90°; size σ 0.05 m)
+    and the smaller distance counts. near[i, j]: the detection's centroid lies within
+    ``gate_distance`` + ``reach[i]`` of the track (m). ok = finite & d2 < ``gate_chi2`` & near.
+    The remaining arguments are the detections' arrays as in :func:`measure_batch`.
+    Returns ``(d2, near, ok)``.
+    """
+    n = Xs.shape[0]
+    m = Z.shape[0]
+    d2 = np.empty((n, m))
+    near = np.zeros((n, m), dtype=np.bool_)
+    pi = np.empty(n * m, dtype=np.int64)
+    pj = np.empty(n * m, dtype=np.int64)
+    npair = 0
+    for i in range(n):
+        x0 = Xs[i, 0]
+        x1 = Xs[i, 1]
+        for j in range(m):
+            s00 = Ps[i, 0, 0] + R[j, 0, 0]
+            s01 = Ps[i, 0, 1] + R[j, 0, 1]
+            s10 = Ps[i, 1, 0] + R[j, 1, 0]
+            s11 = Ps[i, 1, 1] + R[j, 1, 1]
+            e0 = Z[j, 0] - x0
+            e1 = Z[j, 1] - x1
+            det_s = s00 * s11 - s01 * s10
+            num = s11 * e0 ** 2 - 2.0 * s01 * e0 * e1 + s00 * e1 ** 2
+            if det_s != 0.0:
+                d2[i, j] = num / det_s
+            elif num != 0.0 and not math.isnan(num):
+                d2[i, j] = math.copysign(np.inf, num) * math.copysign(1.0, det_s)
+            else:
+                d2[i, j] = np.nan
+            near[i, j] = math.hypot(centroid[j, 0] - x0, centroid[j, 1] - x1) < gate_distance + reach[i]
+            if near[i, j] and rect_trk[i] and kind[j] == K_RECT:
+                pi[npair] = i
+                pj[npair] = j
+                npair += 1
+    if npair:
+        pi = pi[:npair]
+        pj = pj[:npair]
+        sizes = np.empty((npair, 2))
+        for r in range(npair):
+            i = pi[r]
+            # Tracker._swapped: round half to even, as Python's round()
+            q = np.int64(np.rint((theta[pj[r]] - theta_box[i]) / (0.5 * math.pi)))
+            if q % 2 == 1:
+                sizes[r, 0] = tsize[i, 1]
+                sizes[r, 1] = tsize[i, 0]
+            else:
+                sizes[r, 0] = tsize[i, 0]
+                sizes[r, 1] = tsize[i, 1]
+        res = measure_batch(pj, kind, theta, lohi, rel, centroid, circle, px, py, start, npts, sizes,
+                            np.ones(npair, dtype=np.bool_), np.full(npair, -1.0), np.full(npair, 0.05), p)
+        z2 = res[0]
+        R2 = res[1]
+        for r in range(npair):
+            i = pi[r]
+            j = pj[r]
+            s00 = Ps[i, 0, 0] + R2[r, 0, 0]
+            s01 = Ps[i, 0, 1] + R2[r, 0, 1]
+            s10 = Ps[i, 1, 0] + R2[r, 1, 0]
+            s11 = Ps[i, 1, 1] + R2[r, 1, 1]
+            e0 = z2[r, 0] - Xs[i, 0]
+            e1 = z2[r, 1] - Xs[i, 1]
+            dd = s00 * s11 - s01 * s10
+            if dd == 0.0:
+                continue
+            alt = (s11 * e0 ** 2 - (s01 + s10) * e0 * e1 + s00 * e1 ** 2) / dd  # e2ᵀ s2⁻¹ e2
+            if not d2[i, j] <= alt:
+                d2[i, j] = alt
+    ok = np.zeros((n, m), dtype=np.bool_)
+    for i in range(n):
+        for j in range(m):
+            ok[i, j] = math.isfinite(d2[i, j]) and d2[i, j] < gate_chi2 and near[i, j]
+    return d2, near, ok

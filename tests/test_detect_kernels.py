@@ -1,0 +1,241 @@
+"""The batched numba kernels of the tracker agree with the per-object reference code.
+
+``dynslam2d.detect.kernels`` replaces per-detection Python (classify_and_bound, measure, the
+Kalman update, the free-space test, the fragment test) by one kernel call per scan; these tests
+run both on real clusters of simulated scans and on edge cases, and require the same numbers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dynslam2d.detect import DetectConfig, Tracker, fit_clusters, search_angles, segment_scan
+from dynslam2d.detect.freespace import FreeSpaceMemory
+from dynslam2d.detect.kernels import (
+    K_CIRCLE,
+    K_POINT,
+    K_RECT,
+    _pairwise_sum,
+    classify_batch,
+    fit_params,
+    fragment_hosts,
+    kalman_update_batch,
+    measure_batch,
+    segment_means,
+)
+from dynslam2d.detect.measure import KIND_CIRCLE, KIND_POINT, KIND_RECT, classify_and_bound, measure
+from dynslam2d.detect.shapes import CRITERIA, _lu_solve3
+from dynslam2d.sim import simulate
+from dynslam2d.types import Pose2D
+
+CODES = {KIND_POINT: K_POINT, KIND_CIRCLE: K_CIRCLE, KIND_RECT: K_RECT}
+
+
+@pytest.fixture(scope="module")
+def scenes() -> list[tuple]:
+    """(scan, pose) pairs of two simulated scenes with movers, boxes and walls (720 beams)."""
+    out = []
+    for name in ("crowd", "paper"):
+        sim = simulate(name, duration=1.5)
+        poses = [Pose2D.from_array(p) for p in sim.ground_truth.poses_in("first")]
+        out += list(zip(sim.scans[::3], poses[::3]))
+    return out
+
+
+def _clusters(scan, pose, cfg):
+    seg = segment_scan(scan, cfg.segment)
+    valid = scan.valid_mask() & (scan.ranges > 0.0)
+    r = np.where(valid, scan.ranges, 0.0)
+    allpts = pose.transform_points(np.column_stack((r * np.cos(scan.angles), r * np.sin(scan.angles))))
+    pts = allpts[seg.beams]
+    px, py = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
+    fits = fit_clusters(px, py, seg.offsets, ~seg.structure, search_angles(cfg.fit.angle_step_deg),
+                        CRITERIA[cfg.fit.criterion], cfg.fit.closeness_d0, cfg.fit.circle_min_points,
+                        cfg.fit.coarse_stride)
+    return seg, valid, allpts, pts, px, py, fits
+
+
+def test_classify_and_measure_batches_match_the_reference(scenes) -> None:
+    cfg = DetectConfig()
+    p = fit_params(cfg.fit)
+    n_kind = {K_POINT: 0, K_CIRCLE: 0, K_RECT: 0}
+    n_rel = 0
+    for scan, pose in scenes:
+        seg, valid, allpts, pts, px, py, fits = _clusters(scan, pose, cfg)
+        dphi = abs(scan.angle_increment)
+        keep, kind, lohi, rel = classify_batch(px, py, seg.beams, seg.offsets, fits, seg.structure, pose.x, pose.y,
+                                               scan.ranges, valid, np.ascontiguousarray(allpts[:, 0]),
+                                               np.ascontiguousarray(allpts[:, 1]), seg.wrapped,
+                                               cfg.segment.max_skip_beams, scan.range_max, dphi,
+                                               cfg.segment.max_extent, p)
+        dets, idx = [], []
+        for c in range(seg.n_clusters):
+            row = fits[c]
+            expect_keep = not seg.structure[c] and max(row[2] - row[1], row[4] - row[3]) <= cfg.segment.max_extent
+            assert keep[c] == expect_keep
+            if not expect_keep:
+                continue
+            a0, a1 = seg.offsets[c], seg.offsets[c + 1]
+            det = classify_and_bound(seg.beams[a0:a1], pts[a0:a1], row, np.array([pose.x, pose.y]), scan.ranges,
+                                     valid, allpts, seg.wrapped, cfg.segment.max_skip_beams, scan.range_max,
+                                     cfg.fit, dphi)
+            assert kind[c] == CODES[det.kind]
+            np.testing.assert_allclose(lohi[c], [det.lo[0], det.lo[1], det.hi[0], det.hi[1]], rtol=0, atol=1e-12)
+            np.testing.assert_array_equal(rel[c], det.rel)
+            n_kind[int(kind[c])] += 1
+            n_rel += int(rel[c].sum())
+            dets.append(det)
+            idx.append(c)
+        if not dets:
+            continue
+        idx = np.array(idx)
+        m = len(dets)
+        starts, npts = seg.offsets[idx], np.diff(seg.offsets)[idx]
+        batch = (kind[idx], fits[idx, 0].copy(), lohi[idx], rel[idx], fits[idx, 10:12].copy(),
+                 fits[idx, 6:9].copy(), px, py, starts, npts)
+        # every detection three ways: defaults, with a track's sizes, with a track's radius
+        rows = np.tile(np.arange(m), 3)
+        sizes = np.vstack((np.zeros((m, 2)), np.tile([[0.9, 0.45]], (m, 1)), np.zeros((m, 2))))
+        has = np.repeat([False, True, False], m)
+        radius = np.repeat([-1.0, -1.0, 0.3], m)
+        sigma = np.repeat([0.0, 0.05, 0.05], m)
+        z, R, H, zm, Rm, size_obs, size_kind = measure_batch(rows, *batch, sizes, has, radius, sigma, p)
+        for r, j in enumerate(rows):
+            ref = measure(dets[j], sizes[r] if has[r] else None, radius[r] if radius[r] > 0 else None, cfg.fit,
+                          size_sigma=sigma[r])
+            for got, want in ((z[r], ref.z), (R[r], ref.R), (H[r], ref.H), (zm[r], ref.zm), (Rm[r], ref.Rm),
+                              (size_obs[r], ref.size_obs)):
+                np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+            np.testing.assert_array_equal(size_kind[r], ref.size_kind)
+    # the scenes exercise every kind and real bounds
+    assert min(n_kind.values()) >= 5, n_kind
+    assert n_rel >= 20
+
+
+def test_kalman_batch_matches_numpy_and_rejects_singular() -> None:
+    rng = np.random.default_rng(3)
+    n = 20
+    X = rng.normal(size=(n, 4))
+    A = rng.normal(size=(n, 4, 4))
+    P = A @ A.transpose(0, 2, 1) + 0.1 * np.eye(4)
+    H = rng.normal(size=(n, 2, 4))
+    zm = rng.normal(size=(n, 2))
+    B = rng.normal(size=(n, 2, 2))
+    Rm = B @ B.transpose(0, 2, 1) + 0.01 * np.eye(2)
+    H[-1] = 0.0  # S = R = 0: singular, the row must be left alone
+    Rm[-1] = 0.0
+    Xn, Pn, ok = kalman_update_batch(X, P, H, zm, Rm)
+    assert ok[:-1].all() and not ok[-1]
+    np.testing.assert_array_equal(Xn[-1], X[-1])
+    np.testing.assert_array_equal(Pn[-1], P[-1])
+    for i in range(n - 1):
+        S = H[i] @ P[i] @ H[i].T + Rm[i]
+        K = P[i] @ H[i].T @ np.linalg.inv(S)
+        x = X[i] + K @ (zm[i] - H[i] @ X[i])
+        Pi = P[i] - K @ H[i] @ P[i]
+        np.testing.assert_allclose(Xn[i], x, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(Pn[i], 0.5 * (Pi + Pi.T), rtol=1e-10, atol=1e-10)
+
+
+def _seen_through_numpy(ref, points: np.ndarray, margin: float) -> np.ndarray:
+    """The vectorised numpy version of the free-space test (datmo.md §7)."""
+    local = ref.pose.inverse().transform_points(points)
+    rho = np.hypot(local[:, 0], local[:, 1])
+    phi = np.arctan2(local[:, 1], local[:, 0])
+    m = ref.ranges.shape[0]
+    idx = np.rint((phi - ref.angle_min) / ref.increment).astype(np.int64)
+    if ref.full:
+        idx %= m
+        inside = np.ones(points.shape[0], dtype=bool)
+    else:
+        alt = np.rint((phi + 2.0 * math.pi - ref.angle_min) / ref.increment).astype(np.int64)
+        idx = np.where((idx < 0) | (idx >= m), alt, idx)
+        inside = (idx >= 1) & (idx < m - 1)
+        idx = np.clip(idx, 0, m - 1)
+    rmin = np.minimum(np.minimum(ref.ranges[idx], ref.ranges[(idx - 1) % m]), ref.ranges[(idx + 1) % m])
+    beyond = np.where(np.isinf(rmin), rho < ref.reach - margin, rmin > rho + margin)
+    return inside & beyond
+
+
+@pytest.mark.parametrize("fov", [None, 4.0])
+def test_free_space_kernel_matches_numpy(fov) -> None:
+    sim = simulate("crowd", duration=1.0, fov=fov) if fov else simulate("crowd", duration=1.0)
+    poses = [Pose2D.from_array(p) for p in sim.ground_truth.poses_in("first")]
+    mem = FreeSpaceMemory()
+    ref = mem.make_ref(sim.scans[0], poses[0], sim.scans[0].valid_mask())
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-8.0, 8.0, size=(5000, 2))
+    got = mem.seen_through_by(ref, pts)
+    want = _seen_through_numpy(ref, pts, mem.margin)
+    np.testing.assert_array_equal(got, want)
+    assert 200 < got.sum() < 4800  # both answers occur
+
+
+def test_fragment_hosts_match_the_per_track_test() -> None:
+    rng = np.random.default_rng(5)
+    tx, ty = rng.uniform(-3, 3, 6), rng.uniform(-3, 3, 6)
+    th, s0, s1 = rng.uniform(0, math.pi, 6), rng.uniform(0.3, 1.5, 6), rng.uniform(0.3, 1.0, 6)
+    clouds = [np.column_stack((tx[i % 6] + rng.normal(0, 0.3, 8), ty[i % 6] + rng.normal(0, 0.3, 8))) for i in range(30)]
+    px = np.concatenate([c[:, 0] for c in clouds])
+    py = np.concatenate([c[:, 1] for c in clouds])
+    npts = np.full(30, 8, dtype=np.int64)
+    start = np.arange(30, dtype=np.int64) * 8
+    margin = 0.15
+    got = fragment_hosts(px, py, start, npts, np.arange(30, dtype=np.int64), tx, ty, th, s0, s1, margin)
+    for r, cloud in enumerate(clouds):
+        best, best_d = -1, math.inf
+        for i in range(6):
+            c, s = math.cos(th[i]), math.sin(th[i])
+            rel = cloud - [tx[i], ty[i]]
+            u = np.abs(rel[:, 0] * c + rel[:, 1] * s) - 0.5 * s0[i]
+            v = np.abs(-rel[:, 0] * s + rel[:, 1] * c) - 0.5 * s1[i]
+            d = float(np.max(np.maximum(u, v)))
+            if d < margin and d < best_d:
+                best, best_d = i, d
+        assert got[r] == best
+    assert (got >= 0).sum() >= 5 and (got < 0).sum() >= 5
+
+
+def test_pairwise_sum_and_segment_means_round_like_numpy() -> None:
+    rng = np.random.default_rng(1)
+    for n in (1, 7, 8, 9, 127, 128, 129, 300, 1000, 4099):
+        x = rng.normal(size=n + 3) * 10.0 ** rng.integers(-3, 6, n + 3)
+        assert _pairwise_sum(x, 3, n) == x[3:].sum()  # bit for bit
+    off = np.array([0, 5, 5, 300, 1303], dtype=np.int64)
+    v = rng.normal(size=1303)
+    means = segment_means(v, off)
+    assert means[1] == 0.0
+    for c in (0, 2, 3):
+        assert means[c] == v[off[c]:off[c + 1]].mean()
+
+
+def test_lu_solve3_matches_lapack_and_flags_singular() -> None:
+    rng = np.random.default_rng(2)
+    for _ in range(50):
+        a = rng.normal(size=(3, 3))
+        b = rng.normal(size=3)
+        x = b.copy()
+        det = _lu_solve3(a.copy(), x)
+        np.testing.assert_allclose(det, np.linalg.det(a), rtol=1e-10)
+        np.testing.assert_allclose(x, np.linalg.solve(a, b), rtol=1e-9, atol=1e-12)
+    sing = np.array([[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 1.0, 1.0]])
+    x = np.ones(3)
+    assert _lu_solve3(sing, x) == 0.0
+
+
+def test_tracker_without_detections_or_tracks_is_cheap_and_consistent() -> None:
+    """Empty scans take the no-cluster path: no kernel input is left over from an earlier scan."""
+    sim = simulate("paper", duration=1.0)
+    poses = [Pose2D.from_array(p) for p in sim.ground_truth.poses_in("first")]
+    tr = Tracker()
+    for s, p in zip(sim.scans[:10], poses[:10]):
+        tr.update(s, p)
+    n_before = tr.n_tracks
+    assert n_before > 0
+    empty = sim.scans[10].with_ranges(np.full(sim.scans[10].n_beams, np.nan))
+    out = tr.update(empty, poses[10])
+    assert tr.last_detections == [] and tr.stats.empty_scans == 1
+    assert all(t.n_points == 0 for t in out) and len(out) == n_before
