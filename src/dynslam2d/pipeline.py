@@ -17,6 +17,8 @@ framework; :func:`run` drives it over a whole :class:`ScanSource`.
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Protocol, Sequence
@@ -29,7 +31,7 @@ from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
 from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.slam import HectorSlam
-from dynslam2d.types import Pose2D, Scan, ScanSource, SourceMeta, Track
+from dynslam2d.types import Box, Pose2D, Scan, ScanSource, SourceMeta, Track
 
 
 @dataclass(slots=True)
@@ -79,6 +81,40 @@ def _boxes(tracks: list[Track], dt: float = 0.0) -> tuple[np.ndarray, ...]:
     return centres, headings, lengths, widths, speeds, ids
 
 
+def _observed_boxes(tracks: list[Track], scan: Scan, pose: Pose2D) -> list[Track]:
+    """``tracks`` with each box grown to enclose the points assigned to it in ``scan``.
+
+    The paper's exclusion box is the rectangle fitted to the object's cluster in this scan
+    (§2.2, Eq. 2), which encloses the cluster by construction; a tracked box is smoothed
+    over time and may sit a little inside the object's surface. The union of the two keeps
+    the tracked extent where part of the object is hidden and every observed point inside.
+    """
+    out: list[Track] = []
+    for t in tracks:
+        beams = t.beams
+        if beams is None or len(beams) == 0:
+            out.append(t)
+            continue
+        r = scan.ranges[beams]
+        a = scan.angles[beams]
+        ok = np.isfinite(r)
+        if not ok.any():
+            out.append(t)
+            continue
+        pts = pose.transform_points(np.column_stack((r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok]))))
+        b = t.box
+        c, s_ = math.cos(b.theta), math.sin(b.theta)
+        d = pts - np.array([b.px, b.py])
+        u = d[:, 0] * c + d[:, 1] * s_
+        v = -d[:, 0] * s_ + d[:, 1] * c
+        u0, u1 = min(-0.5 * b.length, float(u.min())), max(0.5 * b.length, float(u.max()))
+        v0, v1 = min(-0.5 * b.width, float(v.min())), max(0.5 * b.width, float(v.max()))
+        du, dv = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
+        box = Box(b.px + c * du - s_ * dv, b.py + s_ * du + c * dv, b.theta, u1 - u0, v1 - v0)
+        out.append(dataclasses.replace(t, box=box))
+    return out
+
+
 class Pipeline:
     """Scans in; poses, tracks, removed beams and a map out. One :meth:`process` call per scan."""
 
@@ -123,7 +159,7 @@ class Pipeline:
         t2 = time.perf_counter()
         # 4. the dynamic set M and its exclusion zones (paper Eq. 3, 5-8).
         moving = [t for t in tracks if t.in_m]
-        removed, removed_by = self._exclude(scan, res.pose, moving, 0.0, cache)
+        removed, removed_by = self._exclude(scan, res.pose, _observed_boxes(moving, scan, res.pose), 0.0, cache)
         t3 = time.perf_counter()
         # 5. map update with the filtered scan only.
         updated = False
