@@ -28,6 +28,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # help texts hold literal brackets: [0.05], "dynslam2d[viewer]"
 )
 console = Console()
 err_console = Console(stderr=True)
