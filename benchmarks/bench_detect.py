@@ -21,31 +21,17 @@ full compile instead of a cache load.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import tempfile
 import time
 
 import numpy as np
+from scenes import ten_movers
 
 
 def _stats(ms: list[float]) -> str:
     a = np.asarray(ms)
     return f"median {np.median(a):.3f} ms, p95 {np.percentile(a, 95):.3f} ms, mean {a.mean():.3f} ms (n={a.size})"
-
-
-def scene(duration: float):
-    from dynslam2d.sim import Circle, Mover, Rect, build_scenario, random_waypoints, simulate
-
-    base = build_scenario("crowd", duration=duration)
-    rng = np.random.default_rng(42)
-    movers = []
-    regions = [(-3.2, 3.2, -1.7, 1.7)] * 4 + [(-6.0, 5.0, 3.4, 4.3)] * 3 + [(-6.0, 6.0, -4.3, -3.4)] * 3
-    for k, region in enumerate(regions, start=1):
-        walk = random_waypoints(rng, region, duration + 5.0, speed_range=(0.6, 1.4), pause_range=(0.0, 1.0))
-        shape = Circle(float(rng.uniform(0.2, 0.25))) if k % 5 not in (0, 3) else Rect(0.8, 0.5)
-        movers.append(Mover(k, f"mover-{k}", shape, walk))
-    return simulate(dataclasses.replace(base, movers=tuple(movers), name="bench-10-movers"))
 
 
 def main() -> None:
@@ -61,7 +47,7 @@ def main() -> None:
     from dynslam2d.types import Pose2D
 
     t0 = time.perf_counter()
-    sim = scene(args.duration)
+    sim = ten_movers(args.duration)
     print(f"simulated {len(sim.scans)} scans in {time.perf_counter() - t0:.1f} s "
           f"(10 movers, mean {(sim.ground_truth.mover_hits > 0).sum(1).mean():.1f} visible per scan)")
     poses = [Pose2D.from_array(p) for p in sim.ground_truth.poses_in("first")]
