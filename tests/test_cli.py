@@ -173,3 +173,15 @@ def test_viewer_without_the_extra_says_how_to_install(tmp_path, capsys, monkeypa
     code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", str(tmp_path / "r"), "--viewer", "rerun")
     assert code == 2
     assert 'pip install "dynslam2d[viewer]"' in err
+
+
+def test_run_animate_writes_all_figures(tmp_path, capsys):
+    from PIL import Image
+
+    out = tmp_path / "r"
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "2", "--animate", "--frame-step", "10", "--out", str(out), "-q")
+    assert code == 0, err
+    for name in ("map.png", "tracks.png", "errors.png", "run.gif"):
+        assert (out / name).stat().st_size > 5_000, name
+    with Image.open(out / "run.gif") as gif:
+        assert gif.n_frames == 5  # 40 scans at step 10: scans 0, 10, 20, 30 and the last one, 39

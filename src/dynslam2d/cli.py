@@ -207,6 +207,8 @@ def run(
     constant_velocity: Annotated[Optional[bool], typer.Option("--constant-velocity/--no-constant-velocity", help="Predict with constant velocity instead of the previous pose.")] = None,
     correlative: Annotated[Optional[str], typer.Option("--correlative", help="Correlative search seed: auto, always or never [auto].")] = None,
     hector_compat: Annotated[bool, typer.Option("--hector-compat", help="Behave like the reference hector_mapping: raw Gauss-Newton step, its swapped gradient, no correlative search.")] = False,
+    animate: Annotated[bool, typer.Option("--animate", help="Also write run.gif: scan points (kept / removed), tracked boxes, the growing map.")] = False,
+    frame_step: Annotated[int, typer.Option("--frame-step", min=1, help="With --animate: one frame every N scans.")] = 5,
     write_bag: Annotated[Optional[Path], typer.Option("--write-bag", help="Also write a bag for RViz / Foxglove: .mcap (default), .db3, .bag (ROS 1) or a folder (ROS 2).")] = None,
     bag_storage: Annotated[Optional[str], typer.Option("--bag-storage", help="ROS 2 storage for a bag folder: mcap or sqlite3.")] = None,
     map_period: Annotated[float, typer.Option("--map-period", min=0.0, help="Seconds of scan time between /map messages (bag, viewer); 0 = every scan.")] = 1.0,
@@ -221,8 +223,8 @@ def run(
     """Detect and remove moving objects, map the rest with Hector-style SLAM.
 
     Writes into OUT: map.pgm + map.yaml (map_server), map_logodds.npy, trajectory.tum,
-    tracks.csv, kept_mask.npz, config.yaml, summary.json, map.png and, with ground truth
-    (sim: inputs or --gt), metrics.json.
+    tracks.csv, kept_mask.npz, config.yaml, summary.json, map.png, tracks.png and, with
+    ground truth (sim: inputs or --gt), metrics.json and errors.png; run.gif with --animate.
     """
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
@@ -252,8 +254,15 @@ def run(
         TextColumn("[bold]mapping[/]"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
         TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=err_console, disable=not show,
     )
+    from dynslam2d.viz.collect import RemovedPointsCollector
+
+    collector = RemovedPointsCollector()
     with contextlib.ExitStack() as stack:
-        observers: list[Any] = []
+        observers: list[Any] = [collector]
+        if animate:
+            from dynslam2d.viz.animate import Animator
+
+            observers.append(Animator(out / "run.gif", frame_step=frame_step))
         if write_bag is not None:
             from dynslam2d.io.rosout import BagRecorder
 
@@ -279,7 +288,7 @@ def run(
             result = run_pipeline(source, cfg, progress=tick, observers=observers)
             progress.update(task, completed=result.n_scans)
     truth = ground_truth_for(source, gt, cfg.slam.map_resolution)
-    paths = write_results(result, out, truth)
+    paths = write_results(result, out, truth, collector)
     summary = json.loads(paths["summary.json"].read_text())
     if as_json:
         summary["out"] = str(out)

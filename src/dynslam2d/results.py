@@ -3,7 +3,7 @@
 ``write_results(run, out_dir, gt)`` writes map.pgm + map.yaml (map_server,
 thresholds 0.65 / 0.196), map_logodds.npy, trajectory.tum, tracks.csv,
 kept_mask.npz (``stamps`` (n,), ``removed`` (n, beams) bool), config.yaml,
-summary.json, map.png and, with ground truth, metrics.json.
+summary.json, map.png, tracks.png and, with ground truth, metrics.json and errors.png.
 """
 
 from __future__ import annotations
@@ -29,7 +29,8 @@ from dynslam2d.io.mapfile import write_map
 from dynslam2d.io.trajectory import Trajectory, write_tum
 from dynslam2d.pipeline import TRACK_COLUMNS, RunResult
 from dynslam2d.types import ScanSource
-from dynslam2d.viz.mapplot import plot_map
+from dynslam2d.viz.collect import RemovedPointsCollector
+from dynslam2d.viz.figures import write_figures
 
 
 def ground_truth_for(source: ScanSource, gt_dir: str | os.PathLike[str] | None, resolution: float) -> GroundTruthFiles | None:
@@ -136,8 +137,17 @@ def metrics_json(data: Any) -> str:
     return json.dumps(data, indent=2, default=default) + "\n"
 
 
-def write_results(run: RunResult, out_dir: str | os.PathLike[str], gt: GroundTruthFiles | None = None) -> dict[str, Path]:
-    """Write the results of ``run`` into ``out_dir``; return the written paths by name."""
+def write_results(
+    run: RunResult,
+    out_dir: str | os.PathLike[str],
+    gt: GroundTruthFiles | None = None,
+    collector: RemovedPointsCollector | None = None,
+) -> dict[str, Path]:
+    """Write the results of ``run`` into ``out_dir``; return the written paths by name.
+
+    ``collector``: the :class:`~dynslam2d.viz.collect.RemovedPointsCollector` that watched
+    the run (``run(..., observers=[collector])``), to draw the removed points in map.png.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Path] = {}
@@ -162,19 +172,8 @@ def write_results(run: RunResult, out_dir: str | os.PathLike[str], gt: GroundTru
         summary["ate_rmse_m"] = metrics["ate_rmse_m"]
         paths["metrics.json"] = write_text_atomic(out / "metrics.json", metrics_json(metrics))
     paths["summary.json"] = write_text_atomic(out / "summary.json", metrics_json(summary))
-    ref_xy = None
-    if gt is not None:
-        # Draw the ground truth in the map frame of the run (inverse of the ATE alignment).
-        al = metrics["alignment"] if metrics else None
-        if al is not None:
-            from dynslam2d.types import Pose2D
-
-            inv = Pose2D(al["x"], al["y"], al["theta"]).inverse()
-            ref_xy = inv.transform_points(gt.trajectory.xy)
-    title = f"{run.source.origin} — {run.n_scans} scans"
-    if metrics is not None:
-        title += f", ATE RMSE {metrics['ate_rmse_m']:.3f} m"
-    paths["map.png"] = plot_map(out / "map.png", run.grid, run.trajectory.xy, reference_xy=ref_xy, title=title)
+    # Figures: map.png, tracks.png and, with ground truth, errors.png (dynslam2d.viz.figures).
+    paths.update(write_figures(run, out, gt, collector))
     return paths
 
 

@@ -1,14 +1,19 @@
-"""The map figure: occupancy grid with trajectories on top, axes in metres."""
+"""The map figure: occupancy grid with trajectories, tracks and removed points, axes in metres."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from dynslam2d.gridmap import GridMap
+from dynslam2d.types import Box
+from dynslam2d.viz import style
 from dynslam2d.viz.figure import save_png
+from dynslam2d.viz.trackpaths import TrackPath
 
 
 def occupancy_image(grid: GridMap) -> np.ndarray:
@@ -16,6 +21,75 @@ def occupancy_image(grid: GridMap) -> np.ndarray:
     img = 1.0 - np.nan_to_num(grid.prob, nan=0.5)
     img[~grid.known()] = 0.8
     return img
+
+
+def points_overlay(
+    xy: np.ndarray, extent: tuple[float, float, float, float], cell: float, colour: str,
+    min_alpha: float = 0.35,
+) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    """An RGBA density image (row 0 at the bottom) of the points ``xy`` in ``colour``.
+
+    Every ``cell``-sized square hit by a point gets ``colour`` with an opacity that grows
+    with its count, from ``min_alpha`` (one point) to 1 (at and above the 90th percentile
+    of the counts), so busy places stand out and the exact colour appears there. Drawn with
+    ``imshow(origin="lower", interpolation="nearest")``. Args: ``xy`` (n, 2) map-frame
+    points, m; ``extent`` (xmin, xmax, ymin, ymax), m; ``cell`` square side, m.
+    Returns the image and its extent.
+    """
+    x0, x1, y0, y1 = extent
+    w = max(1, int(np.ceil((x1 - x0) / cell)))
+    h = max(1, int(np.ceil((y1 - y0) / cell)))
+    img = np.zeros((h, w, 4), dtype=np.float32)
+    if len(xy):
+        c = np.floor((xy[:, 0] - x0) / cell).astype(np.int64)
+        r = np.floor((xy[:, 1] - y0) / cell).astype(np.int64)
+        ok = (c >= 0) & (c < w) & (r >= 0) & (r < h)
+        counts = np.bincount(r[ok] * w + c[ok], minlength=h * w).reshape(h, w).astype(np.float64)
+        hit = counts > 0
+        if hit.any():
+            sat = max(float(np.percentile(counts[hit], 90)), 1.0)
+            alpha = np.clip(min_alpha + (1.0 - min_alpha) * (counts - 1.0) / max(sat - 1.0, 1e-9), min_alpha, 1.0)
+            img[hit, :3] = style.rgb01(colour)
+            img[hit, 3] = alpha[hit] if sat > 1.0 else 1.0
+    return img, (x0, x0 + w * cell, y0, y0 + h * cell)
+
+
+def scale_bar_length(width_m: float) -> float:
+    """A round length (1, 2 or 5 × 10^k m) of at most a fifth of ``width_m``."""
+    raw = width_m / 5.0
+    bar = float(10 ** np.floor(np.log10(max(raw, 1e-3))))
+    for m in (5.0, 2.0):
+        if bar * m <= raw:
+            return bar * m
+    return bar
+
+
+def draw_scale_bar(ax: Any, extent: tuple[float, float, float, float]) -> float:
+    """Draw a labelled scale bar in the lower-left corner of ``extent`` (m); return its length, m."""
+    from matplotlib.patches import Rectangle
+
+    x0, x1, y0, y1 = extent
+    width_m, height_m = x1 - x0, y1 - y0
+    bar = scale_bar_length(width_m)
+    bx, by = x0 + 0.04 * width_m, y0 + 0.04 * height_m
+    ax.add_patch(Rectangle((bx - 0.02 * width_m, by - 0.025 * height_m), bar + 0.04 * width_m, 0.09 * height_m,
+                           facecolor="white", edgecolor="0.3", alpha=0.9, zorder=6))
+    ax.plot([bx, bx + bar], [by, by], color="black", lw=3, solid_capstyle="butt", zorder=7)
+    ax.text(bx + bar / 2, by + 0.015 * height_m, f"{bar:g} m", color="black", ha="center", va="bottom", zorder=7)
+    return bar
+
+
+def map_figure_size(extent: tuple[float, float, float, float], width_in: float = 8.0) -> tuple[float, float]:
+    """Figure size (in) for a map of ``extent`` (m) with an equal-aspect axes ``width_in`` wide."""
+    x0, x1, y0, y1 = extent
+    aspect = (y1 - y0) / max(x1 - x0, 1e-9)
+    return width_in, min(max(width_in * aspect, 3.0), 12.0) + 0.6
+
+
+def draw_box(ax: Any, box: Box, colour: str, lw: float = 1.5, zorder: float = 5, **kw: Any) -> None:
+    """Outline of an oriented box (map frame, m)."""
+    c = box.corners()
+    ax.plot(np.r_[c[:, 0], c[0, 0]], np.r_[c[:, 1], c[0, 1]], color=colour, lw=lw, zorder=zorder, **kw)
 
 
 def plot_map(
@@ -26,52 +100,78 @@ def plot_map(
     reference_xy: np.ndarray | None = None,
     title: str = "",
     dpi: int = 120,
+    tracks: Sequence[TrackPath] | None = None,
+    boxes: Sequence[tuple[int, Box]] | None = None,
+    removed_xy: np.ndarray | None = None,
 ) -> Path:
-    """Write a PNG of ``grid`` with the estimated (and optionally reference) trajectory.
+    """Write a PNG of ``grid`` with trajectories, track paths and removed points.
 
     Args:
         path: PNG to write (atomically).
         grid: the map, in the map frame.
         trajectory_xy: (n, 2) estimated laser positions in the map frame, m.
         reference_xy: (n, 2) ground-truth positions already expressed in the map frame, m.
+        tracks: track paths (map frame) to draw; tracks ever in M in :data:`style.TRACK_M`,
+            others in :data:`style.TRACK_OTHER` (dashed); ids at the end of each path.
+        boxes: (id, box) of the final confirmed tracks, drawn as outlines (map frame).
+        removed_xy: (k, 2) endpoints of removed beams in the map frame, m, drawn in
+            :data:`style.REMOVED` (exact colour, one square per map cell hit).
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
-    x0, x1, y0, y1 = grid.extent
-    width_m, height_m = x1 - x0, y1 - y0
-    aspect = height_m / max(width_m, 1e-9)
-    fig_w = 8.0
-    fig, ax = plt.subplots(figsize=(fig_w, min(max(fig_w * aspect, 3.0), 12.0) + 0.6))
+    extent = grid.extent
+    fw, fh = map_figure_size(extent)
+    fig, ax = plt.subplots(figsize=(fw + 2.4, fh))
     ax.imshow(occupancy_image(grid), cmap="gray", vmin=0.0, vmax=1.0, origin="lower",
-              extent=grid.extent, interpolation="nearest")
+              extent=extent, interpolation="nearest")
+    handles: list[Any] = []
+    if removed_xy is not None and len(removed_xy):
+        # At least ~1.5 px per square at 8 in × dpi so that single points stay visible.
+        cell = max(grid.resolution, (extent[1] - extent[0]) / (8.0 * dpi / 1.5))
+        img, ext = points_overlay(np.asarray(removed_xy, dtype=np.float64), extent, cell, style.REMOVED)
+        ax.imshow(img, origin="lower", extent=ext, interpolation="nearest", zorder=2)
+        handles.append(Patch(color=style.REMOVED, label=f"removed points ({len(removed_xy)})"))
     if reference_xy is not None and len(reference_xy):
-        ax.plot(reference_xy[:, 0], reference_xy[:, 1], color="tab:green", lw=1.2, label="ground truth")
+        handles += ax.plot(reference_xy[:, 0], reference_xy[:, 1], color=style.GROUND_TRUTH, lw=1.2,
+                           label="ground truth", zorder=3)
     if trajectory_xy is not None and len(trajectory_xy):
-        ax.plot(trajectory_xy[:, 0], trajectory_xy[:, 1], color="tab:red", lw=1.0, label="estimated trajectory")
-        ax.plot(*trajectory_xy[0], marker="o", color="tab:red", ms=6, label="start")
-    # Scale bar: a round length of about a fifth of the map width.
-    raw = width_m / 5.0
-    bar = float(10 ** np.floor(np.log10(max(raw, 1e-3))))
-    for m in (5.0, 2.0):
-        if bar * m <= raw:
-            bar *= m
-            break
-    from matplotlib.patches import Rectangle
-
-    bx, by = x0 + 0.04 * width_m, y0 + 0.04 * height_m
-    ax.add_patch(Rectangle((bx - 0.02 * width_m, by - 0.025 * height_m), bar + 0.04 * width_m, 0.09 * height_m,
-                           facecolor="white", edgecolor="0.3", alpha=0.9, zorder=4))
-    ax.plot([bx, bx + bar], [by, by], color="black", lw=3, solid_capstyle="butt", zorder=5)
-    ax.text(bx + bar / 2, by + 0.015 * height_m, f"{bar:g} m", color="black", ha="center", va="bottom", zorder=5)
+        handles += ax.plot(trajectory_xy[:, 0], trajectory_xy[:, 1], color=style.TRAJECTORY, lw=1.2,
+                           label="estimated trajectory", zorder=4)
+        handles += ax.plot(*trajectory_xy[0], marker="o", color=style.TRAJECTORY, ms=6, ls="none",
+                           label="start", zorder=4)
+    if tracks:
+        any_m = any_other = False
+        for tp in tracks:
+            colour = style.TRACK_M if tp.ever_in_m else style.TRACK_OTHER
+            any_m |= tp.ever_in_m
+            any_other |= not tp.ever_in_m
+            ax.plot(tp.xy[:, 0], tp.xy[:, 1], color=colour, lw=1.3, ls="-" if tp.ever_in_m else "--",
+                    alpha=0.9, zorder=5)
+            ax.text(tp.xy[-1, 0], tp.xy[-1, 1], f" {tp.id}", color=colour, fontsize=7, fontweight="bold",
+                    ha="left", va="bottom", zorder=8, clip_on=True)
+        if any_m:
+            handles.append(Line2D([], [], color=style.TRACK_M, lw=1.3, label="track path (in M)"))
+        if any_other:
+            handles.append(Line2D([], [], color=style.TRACK_OTHER, lw=1.3, ls="--", label="track path (never in M)"))
+    if boxes:
+        for _tid, box in boxes:
+            draw_box(ax, box, "black", lw=1.2, zorder=6)
+        handles.append(Line2D([], [], color="black", lw=1.2, label="final confirmed boxes"))
+    draw_scale_bar(ax, extent)
+    ax.set_xlim(extent[0], extent[1])
+    ax.set_ylim(extent[2], extent[3])
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_aspect("equal")
     if title:
         ax.set_title(title)
-    if trajectory_xy is not None or reference_xy is not None:
-        ax.legend(loc="upper right", fontsize="small", framealpha=0.8)
+    if handles:
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small",
+                  framealpha=0.9, borderaxespad=0.0)
     fig.tight_layout()
     return save_png(fig, path, dpi)

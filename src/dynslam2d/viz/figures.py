@@ -1,0 +1,75 @@
+"""Every figure of a run in one call: map.png, tracks.png and, with ground truth, errors.png."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from dynslam2d.eval.trajectory import ate
+from dynslam2d.io.groundtruth import GroundTruthFiles
+from dynslam2d.pipeline import RunResult
+from dynslam2d.viz.collect import RemovedPointsCollector
+from dynslam2d.viz.errorsplot import map_difference, plot_errors
+from dynslam2d.viz.mapplot import plot_map
+from dynslam2d.viz.trackpaths import final_confirmed, track_paths, tracks_to_draw
+from dynslam2d.viz.tracksplot import plot_tracks
+
+
+def write_figures(
+    result: RunResult,
+    out_dir: str | os.PathLike[str],
+    gt: GroundTruthFiles | None = None,
+    collector: RemovedPointsCollector | None = None,
+    *,
+    dpi: int = 120,
+) -> dict[str, Path]:
+    """Write the figures of ``result`` into ``out_dir`` (each atomically); return paths by name.
+
+    - ``map.png``: occupancy map, estimated trajectory (and the ground truth one, mapped
+      into the run's map frame with the inverse ATE alignment), paths of the tracks that
+      were ever in M or are confirmed at the end, the final confirmed boxes, the removed
+      points (from ``collector``, if it watched the run), scale bar, axes in m;
+    - ``tracks.png``: every track that was ever confirmed, coloured by speed (m/s), in-M
+      segments solid, the rest dashed, ids labelled;
+    - ``errors.png`` (only with ``gt``): ATE over time and the map difference (ghost cells,
+      missed structure) over the ground-truth structure.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths: dict[str, Path] = {}
+    traj = result.trajectory
+    last_stamp = float(traj.stamps[-1]) if len(traj) else None
+    all_paths = track_paths(result.track_rows)
+    ate_res = None
+    ref_xy = None
+    if gt is not None and len(gt.trajectory) and len(traj):
+        # Same association and alignment as dynslam2d.results.evaluate.
+        dt = float(np.median(np.diff(gt.trajectory.stamps))) / 2 if len(gt.trajectory) > 1 else 0.01
+        ate_res = ate(gt.trajectory, traj, align=True, max_dt=max(dt, 1e-3))
+        ref_xy = ate_res.alignment.inverse().transform_points(gt.trajectory.xy)
+    title = f"{result.source.origin} — {result.n_scans} scans, filter {result.config.filter.mode}"
+    if ate_res is not None:
+        title += f", ATE RMSE {ate_res.rmse:.3f} m"
+    final = final_confirmed(all_paths, last_stamp)
+    removed_xy = collector.points() if collector is not None else None
+    paths["map.png"] = plot_map(
+        out / "map.png", result.grid, traj.xy, reference_xy=ref_xy, title=title, dpi=dpi,
+        tracks=tracks_to_draw(all_paths, last_stamp), boxes=[(p.id, p.last_box) for p in final],
+        removed_xy=removed_xy,
+    )
+    confirmed = sorted((p for p in all_paths.values() if p.ever_confirmed), key=lambda p: p.id)
+    n_m = sum(p.ever_in_m for p in confirmed)
+    paths["tracks.png"] = plot_tracks(
+        out / "tracks.png", confirmed, result.grid, dpi=dpi,
+        title=f"{result.source.origin} — {len(confirmed)} confirmed tracks ({n_m} ever in M), coloured by speed",
+    )
+    if gt is not None and ate_res is not None:
+        diff = map_difference(result.grid, gt.static_map, transform=ate_res.alignment)
+        paths["errors.png"] = plot_errors(out / "errors.png", ate_res, diff, dpi=dpi,
+                                          title=f"{result.source.origin} — filter {result.config.filter.mode}")
+    return paths
+
+
+__all__ = ["write_figures"]

@@ -1,0 +1,42 @@
+"""Colours shared by every figure and the animation (exact RGB, so tests can find them).
+
+Colour-blind-safe choices (Okabe–Ito where possible); every overlay colour is far from
+the greys of the occupancy map and from each other.
+"""
+
+from __future__ import annotations
+
+#: Estimated laser trajectory.
+TRAJECTORY = "#d55e00"
+#: Ground-truth trajectory.
+GROUND_TRUTH = "#009e73"
+#: Points of beams the filter removed from the map update.
+REMOVED = "#e6007e"
+#: Points of beams kept (animation).
+KEPT = "#0072b2"
+#: Tracks in the dynamic set M (paths in map.png, boxes in the animation).
+TRACK_M = "#1a237e"
+#: Confirmed tracks outside M.
+TRACK_OTHER = "#8c6d1f"
+#: Map difference: estimated occupied cells far from any true structure.
+GHOST = "#dc143c"
+#: Map difference: true structure the estimate observed but did not map.
+MISSED = "#1e64ff"
+#: Map difference: ground-truth structure (the outline everything is drawn over).
+TRUTH_OUTLINE = "#9a9a9a"
+#: Map difference: estimated occupied cells that match the truth.
+MATCHED = "#000000"
+#: Unknown / unobserved cells in difference images.
+UNKNOWN = "#e4e4e4"
+
+
+def rgb255(colour: str) -> tuple[int, int, int]:
+    """``"#rrggbb"`` → (r, g, b) in 0 … 255."""
+    c = colour.lstrip("#")
+    return int(c[0:2], 16), int(c[2:4], 16), int(c[4:6], 16)
+
+
+def rgb01(colour: str) -> tuple[float, float, float]:
+    """``"#rrggbb"`` → (r, g, b) in 0 … 1."""
+    r, g, b = rgb255(colour)
+    return r / 255.0, g / 255.0, b / 255.0

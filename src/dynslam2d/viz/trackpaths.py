@@ -1,0 +1,91 @@
+"""Track paths from a run's track rows (:data:`dynslam2d.pipeline.TRACK_COLUMNS`)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from dynslam2d.types import Box
+
+
+@dataclass(frozen=True, eq=False)
+class TrackPath:
+    """One track over the whole run, map frame.
+
+    Attributes:
+        id: track id.
+        stamps: (n,) stamps of the scans that reported it, s.
+        xy: (n, 2) box centres, m.
+        velocity: (n, 2) velocity, m/s.
+        in_m: (n,) bool, in the dynamic set M at that scan.
+        states: (n,) state strings ("tentative", "confirmed", "coasting").
+        last_box: the box of the last report.
+    """
+
+    id: int
+    stamps: np.ndarray
+    xy: np.ndarray
+    velocity: np.ndarray
+    in_m: np.ndarray
+    states: np.ndarray
+    last_box: Box
+
+    @property
+    def speed(self) -> np.ndarray:
+        """(n,) |v|, m/s."""
+        return np.hypot(self.velocity[:, 0], self.velocity[:, 1])
+
+    @property
+    def ever_confirmed(self) -> bool:
+        return bool((self.states == "confirmed").any())
+
+    @property
+    def ever_in_m(self) -> bool:
+        return bool(self.in_m.any())
+
+    @property
+    def length_m(self) -> float:
+        """Length of the centre path, m."""
+        if len(self.xy) < 2:
+            return 0.0
+        return float(np.hypot(*np.diff(self.xy, axis=0).T).sum())
+
+
+def track_paths(track_rows: Sequence[tuple]) -> dict[int, TrackPath]:
+    """Group ``track_rows`` (RunResult.track_rows / tracks.csv rows) by track id, in time order."""
+    by_id: dict[int, list[tuple]] = {}
+    for row in track_rows:
+        by_id.setdefault(int(row[1]), []).append(row)
+    out: dict[int, TrackPath] = {}
+    for tid, rows in by_id.items():
+        rows.sort(key=lambda r: r[0])
+        a = np.array([[r[0], r[3], r[4], r[8], r[9]] for r in rows], dtype=np.float64)
+        last = rows[-1]
+        out[tid] = TrackPath(
+            id=tid,
+            stamps=a[:, 0],
+            xy=a[:, 1:3],
+            velocity=a[:, 3:5],
+            in_m=np.array([bool(r[10]) for r in rows]),
+            states=np.array([str(r[2]) for r in rows]),
+            last_box=Box(float(last[3]), float(last[4]), float(last[5]), float(last[6]), float(last[7])),
+        )
+    return out
+
+
+def final_confirmed(paths: dict[int, TrackPath], last_stamp: float | None) -> list[TrackPath]:
+    """Tracks reported as confirmed at the last scan of the run (``last_stamp``, s)."""
+    if last_stamp is None:
+        return []
+    return [p for p in paths.values() if p.stamps[-1] == last_stamp and p.states[-1] == "confirmed"]
+
+
+def tracks_to_draw(paths: dict[int, TrackPath], last_stamp: float | None) -> list[TrackPath]:
+    """The tracks worth a path on a figure: ever in M, or confirmed at the end (sorted by id)."""
+    final = {p.id for p in final_confirmed(paths, last_stamp)}
+    return sorted((p for p in paths.values() if p.ever_in_m or p.id in final), key=lambda p: p.id)
+
+
+__all__ = ["TrackPath", "final_confirmed", "track_paths", "tracks_to_draw"]

@@ -1,0 +1,137 @@
+"""tracks.png: every track's path coloured by speed, membership in M shown."""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from dynslam2d.gridmap import GridMap
+from dynslam2d.viz.figure import save_png
+from dynslam2d.viz.mapplot import draw_scale_bar, map_figure_size, occupancy_image
+from dynslam2d.viz.trackpaths import TrackPath
+
+#: Colour map of the speed (m/s): plasma without its pale-yellow end (unreadable on white).
+SPEED_CMAP = "plasma"
+_CMAP_TOP = 0.85
+#: Labels closer than this to an already placed label are left out, in figure-width units.
+_LABEL_GAP = 0.025
+
+
+def _speed_cmap():  # type: ignore[no-untyped-def]
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import ListedColormap
+
+    return ListedColormap(plt.get_cmap(SPEED_CMAP)(np.linspace(0.0, _CMAP_TOP, 256)), name="speed")
+
+
+def display_speed(track: TrackPath, window: int = 5) -> np.ndarray:
+    """(n,) speed for display, m/s: running median over ``window`` reports (tames filter jitter)."""
+    s = track.speed
+    if len(s) < 3 or window < 2:
+        return s
+    from scipy.ndimage import median_filter
+
+    return median_filter(s, size=min(window, len(s)), mode="nearest")
+
+
+def speed_limit(tracks: Sequence[TrackPath]) -> float:
+    """Upper end of the speed colour scale, m/s: the 95th percentile of the drawn speeds,
+    rounded up to 0.5 m/s (at least 0.5), so one outlier does not wash out the scale."""
+    speeds = np.concatenate([t.speed for t in tracks]) if tracks else np.zeros(0)
+    if speeds.size == 0:
+        return 1.0
+    return max(0.5, math.ceil(float(np.percentile(speeds, 95)) * 2.0) / 2.0)
+
+
+def plot_tracks(
+    path: str | os.PathLike[str],
+    tracks: Sequence[TrackPath],
+    grid: GridMap | None = None,
+    *,
+    title: str = "",
+    dpi: int = 120,
+) -> Path:
+    """Write a PNG of the track paths (map frame, m) coloured by speed (m/s).
+
+    Segments where the track is in the dynamic set M are solid and thick, the others
+    dashed and faint; each path is labelled with its id at its last position and starts
+    with a small circle. ``grid`` (optional) is drawn faintly underneath for context.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import Normalize
+    from matplotlib.lines import Line2D
+
+    if grid is not None:
+        extent = grid.extent
+    elif tracks:
+        allxy = np.concatenate([t.xy for t in tracks])
+        lo, hi = allxy.min(axis=0) - 1.0, allxy.max(axis=0) + 1.0
+        extent = (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
+    else:
+        extent = (-1.0, 1.0, -1.0, 1.0)
+    w, h = map_figure_size(extent)
+    fig, ax = plt.subplots(figsize=(w + 1.2, h))
+    if grid is not None:
+        # Faint map: occupied cells light grey, everything else white.
+        img = 1.0 - 0.35 * (1.0 - occupancy_image(grid))
+        ax.imshow(img, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", extent=extent, interpolation="nearest")
+    vmax = speed_limit(tracks)
+    norm = Normalize(0.0, vmax)
+    cmap = _speed_cmap()
+    span = max(extent[1] - extent[0], extent[3] - extent[2])
+    placed: list[np.ndarray] = []
+    # Tracks in M last, so that they are drawn on top and labelled first.
+    order = sorted(tracks, key=lambda t: (t.ever_in_m, t.length_m))
+    for t in order:
+        if len(t.xy) >= 2:
+            seg = np.stack([t.xy[:-1], t.xy[1:]], axis=1)
+            sp = display_speed(t)
+            spd = 0.5 * (sp[:-1] + sp[1:])
+            in_m = t.in_m[1:] & t.in_m[:-1]
+            for sel, lw, alpha, ls in ((~in_m, 1.0, 0.45, (0, (2, 2))), (in_m, 2.6, 1.0, "solid")):
+                if sel.any():
+                    lc = LineCollection(seg[sel], cmap=cmap, norm=norm, linewidths=lw, alpha=alpha,
+                                        linestyles=ls, zorder=4 if lw > 2 else 3,
+                                        capstyle="round" if lw > 2 else "butt")
+                    lc.set_array(spd[sel])
+                    ax.add_collection(lc)
+        ax.plot(*t.xy[0], marker="o", ms=3.5, mfc="white", mec="0.2", mew=0.8, zorder=5)
+    # Labels: tracks in M first, then the longest paths; skip one that would overlap another.
+    for t in sorted(tracks, key=lambda t: (not t.ever_in_m, -t.length_m)):
+        end = t.xy[-1]
+        if any(np.hypot(*(end - p)) < _LABEL_GAP * span for p in placed):
+            continue
+        placed.append(end)
+        ax.annotate(str(t.id), end, xytext=(3, 3), textcoords="offset points",
+                    fontsize=8 if t.ever_in_m else 6.5, fontweight="bold" if t.ever_in_m else "normal",
+                    color="0.05" if t.ever_in_m else "0.35", zorder=6, annotation_clip=True,
+                    bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7})
+    sm = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
+    cb = fig.colorbar(sm, ax=ax, fraction=0.04, pad=0.02, extend="max")
+    cb.set_label("speed [m/s]")
+    draw_scale_bar(ax, extent)
+    ax.set_xlim(extent[0], extent[1])
+    ax.set_ylim(extent[2], extent[3])
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_aspect("equal")
+    handles = [
+        Line2D([], [], color="0.2", lw=2.6, label="in M (removed from the map)"),
+        Line2D([], [], color="0.2", lw=1.0, ls=(0, (2, 2)), alpha=0.6, label="not in M"),
+        Line2D([], [], marker="o", ms=3.5, mfc="white", mec="0.2", ls="none", label="first report"),
+    ]
+    ax.legend(handles=handles, loc="upper right", fontsize="small", framealpha=0.9).set_zorder(20)
+    ax.set_title(title or f"{len(tracks)} tracks, coloured by speed")
+    fig.tight_layout()
+    return save_png(fig, path, dpi)
+
+
+__all__ = ["SPEED_CMAP", "plot_tracks", "speed_limit"]
