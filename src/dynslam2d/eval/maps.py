@@ -166,7 +166,7 @@ def comparison_grids(
     return est, gt, res, (ox, oy)
 
 
-def _distance_to(mask: np.ndarray, resolution: float) -> np.ndarray:
+def distance_to(mask: np.ndarray, resolution: float) -> np.ndarray:
     """Euclidean distance (m) from every cell centre to the nearest cell of ``mask`` (inf if none)."""
     if not mask.any():
         return np.full(mask.shape, np.inf)
@@ -212,8 +212,8 @@ def map_metrics(
     iou = _ratio(int((A & B).sum()), int((A | B).sum()))
 
     # Tolerant matching (Euclidean distance between cell centres).
-    d_to_a = _distance_to(A, res)
-    d_to_b = _distance_to(B, res)
+    d_to_a = distance_to(A, res)
+    d_to_b = distance_to(B, res)
     a_matched = A & (d_to_b <= tolerance + _EPS)
     b_matched = B & (d_to_a <= tolerance + _EPS)
     n_am, n_bm = int(a_matched.sum()), int(b_matched.sum())
@@ -221,7 +221,7 @@ def map_metrics(
     iou_tol = _ratio(inter, inter + (n_a - n_am) + (n_b - n_bm))
 
     precision = _ratio(n_bm, n_b)
-    observable = A & (_distance_to(est_known, res) <= tolerance + _EPS)
+    observable = A & (distance_to(est_known, res) <= tolerance + _EPS)
     n_obs = int(observable.sum())
     recall = _ratio(int((a_matched & observable).sum()), n_obs)
     recall_all = _ratio(n_am, n_a)

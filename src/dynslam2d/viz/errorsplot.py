@@ -7,9 +7,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
 
-from dynslam2d.eval.maps import comparison_grids
+from dynslam2d.eval.maps import comparison_grids, distance_to
 from dynslam2d.eval.trajectory import AteResult
 from dynslam2d.gridmap import GridMap
 from dynslam2d.types import Pose2D
@@ -51,10 +50,6 @@ class MapDifference:
         return (x0, x0 + w * self.resolution, y0, y0 + h * self.resolution)
 
 
-def _dist(mask: np.ndarray, res: float) -> np.ndarray:
-    return distance_transform_edt(~mask, sampling=res) if mask.any() else np.full(mask.shape, np.inf)
-
-
 def map_difference(
     estimate: GridMap,
     truth: GridMap,
@@ -76,9 +71,9 @@ def map_difference(
         A = np.nan_to_num(gt, nan=0.0) > 0.5
         B = np.nan_to_num(est, nan=0.0) > occupied_threshold
     known = np.isfinite(est)
-    ghost = B & (_dist(A, res) > ghost_distance + eps)
-    observable = A & (_dist(known, res) <= tolerance + eps)
-    missed = observable & ~(_dist(B, res) <= tolerance + eps)
+    ghost = B & (distance_to(A, res) > ghost_distance + eps)
+    observable = A & (distance_to(known, res) <= tolerance + eps)
+    missed = observable & ~(distance_to(B, res) <= tolerance + eps)
     cls = np.full(est.shape, UNOBSERVED, dtype=np.uint8)
     cls[known] = FREE
     cls[A] = TRUTH

@@ -64,6 +64,16 @@ def scale_bar_length(width_m: float) -> float:
     return bar
 
 
+def frame_metric_axes(ax: Any, extent: tuple[float, float, float, float]) -> None:
+    """Axes in metres over ``extent`` (xmin, xmax, ymin, ymax), equal aspect, with a scale bar."""
+    draw_scale_bar(ax, extent)
+    ax.set_xlim(extent[0], extent[1])
+    ax.set_ylim(extent[2], extent[3])
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_aspect("equal")
+
+
 def draw_scale_bar(ax: Any, extent: tuple[float, float, float, float]) -> float:
     """Draw a labelled scale bar in the lower-left corner of ``extent`` (m); return its length, m."""
     from matplotlib.patches import Rectangle
@@ -162,12 +172,7 @@ def plot_map(
         for _tid, box in boxes:
             draw_box(ax, box, "black", lw=1.2, zorder=6)
         handles.append(Line2D([], [], color="black", lw=1.2, label="final confirmed boxes"))
-    draw_scale_bar(ax, extent)
-    ax.set_xlim(extent[0], extent[1])
-    ax.set_ylim(extent[2], extent[3])
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_aspect("equal")
+    frame_metric_axes(ax, extent)
     if title:
         ax.set_title(title)
     if handles:

@@ -11,7 +11,7 @@ import numpy as np
 
 from dynslam2d.gridmap import GridMap
 from dynslam2d.viz.figure import save_png
-from dynslam2d.viz.mapplot import draw_scale_bar, map_figure_size, occupancy_image
+from dynslam2d.viz.mapplot import map_figure_size, occupancy_image, frame_metric_axes
 from dynslam2d.viz.trackpaths import TrackPath
 
 #: Colour map of the speed (m/s): plasma without its pale-yellow end (unreadable on white).
@@ -117,12 +117,7 @@ def plot_tracks(
     sm = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
     cb = fig.colorbar(sm, ax=ax, fraction=0.04, pad=0.02, extend="max")
     cb.set_label("speed [m/s]")
-    draw_scale_bar(ax, extent)
-    ax.set_xlim(extent[0], extent[1])
-    ax.set_ylim(extent[2], extent[3])
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_aspect("equal")
+    frame_metric_axes(ax, extent)
     handles = [
         Line2D([], [], color="0.2", lw=2.6, label="in M (removed from the map)"),
         Line2D([], [], color="0.2", lw=1.0, ls=(0, (2, 2)), alpha=0.6, label="not in M"),
