@@ -109,15 +109,15 @@ def fit_rectangle(points: np.ndarray, criterion: str = "variance", step_deg: flo
 
 
 @njit(cache=True)
-def _score(x: np.ndarray, y: np.ndarray, c: float, s: float, criterion: int, d0: float, c1: np.ndarray,
-           c2: np.ndarray) -> float:
-    """Zhang et al. 2017 criterion of the axis angle (cos c, sin s); larger is better."""
-    n = x.shape[0]
+def _project(x: np.ndarray, y: np.ndarray, c: float, s: float, c1: np.ndarray,
+             c2: np.ndarray) -> tuple[float, float, float, float]:
+    """Project points on the axes (cos c, sin s) and its normal into ``c1``, ``c2``; return
+    their ranges (lo1, hi1, lo2, hi2), m."""
     lo1 = np.inf
     hi1 = -np.inf
     lo2 = np.inf
     hi2 = -np.inf
-    for i in range(n):
+    for i in range(x.shape[0]):
         u = c * x[i] + s * y[i]
         v = -s * x[i] + c * y[i]
         c1[i] = u
@@ -126,6 +126,15 @@ def _score(x: np.ndarray, y: np.ndarray, c: float, s: float, criterion: int, d0:
         hi1 = max(hi1, u)
         lo2 = min(lo2, v)
         hi2 = max(hi2, v)
+    return lo1, hi1, lo2, hi2
+
+
+@njit(cache=True)
+def _score(x: np.ndarray, y: np.ndarray, c: float, s: float, criterion: int, d0: float, c1: np.ndarray,
+           c2: np.ndarray) -> float:
+    """Zhang et al. 2017 criterion of the axis angle (cos c, sin s); larger is better."""
+    n = x.shape[0]
+    lo1, hi1, lo2, hi2 = _project(x, y, c, s, c1, c2)
     if criterion == 0:
         return -(hi1 - lo1) * (hi2 - lo2)
     sa1 = 0.0
@@ -197,19 +206,7 @@ def _fit_one(x: np.ndarray, y: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray,
                 best_k = k
     c = cos_t[best_k]
     s = sin_t[best_k]
-    lo1 = np.inf
-    hi1 = -np.inf
-    lo2 = np.inf
-    hi2 = -np.inf
-    for i in range(n):
-        u = c * x[i] + s * y[i]
-        v = -s * x[i] + c * y[i]
-        c1[i] = u
-        c2[i] = v
-        lo1 = min(lo1, u)
-        hi1 = max(hi1, u)
-        lo2 = min(lo2, v)
-        hi2 = max(hi2, v)
+    lo1, hi1, lo2, hi2 = _project(x, y, c, s, c1, c2)
     ss = 0.0
     for i in range(n):
         r = min(min(hi1 - c1[i], c1[i] - lo1), min(hi2 - c2[i], c2[i] - lo2))
