@@ -173,6 +173,57 @@ def distance_to(mask: np.ndarray, resolution: float) -> np.ndarray:
     return distance_transform_edt(~mask, sampling=resolution)
 
 
+@dataclass(frozen=True, eq=False)
+class CellSets:
+    """The cell sets every map metric is built from, on the comparison grid.
+
+    Attributes:
+        estimate, truth: the resampled estimate (probability, NaN unknown) and the ground truth.
+        resolution, origin: the comparison grid's cell side (m) and lower-left corner (m).
+        truth_occupied (A), estimate_occupied (B), known (estimate observed): (H, W) bool.
+        truth_matched: A cells with a B cell within the tolerance; estimate_matched: the converse.
+        observable: A cells within the tolerance of a cell the estimate observed.
+        ghost: B cells farther than the ghost distance from every A cell.
+    """
+
+    estimate: np.ndarray
+    truth: np.ndarray
+    resolution: float
+    origin: tuple[float, float]
+    truth_occupied: np.ndarray
+    estimate_occupied: np.ndarray
+    known: np.ndarray
+    truth_matched: np.ndarray
+    estimate_matched: np.ndarray
+    observable: np.ndarray
+    ghost: np.ndarray
+
+
+def cell_sets(
+    estimate: GridMap,
+    truth: GridMap,
+    transform: Pose2D | None = None,
+    tolerance: float = 0.10,
+    ghost_distance: float = 0.20,
+    occupied_threshold: float = 0.65,
+) -> CellSets:
+    """Resample ``estimate`` onto the ground truth's grid and classify the cells (see :class:`CellSets`)."""
+    est, gt, res, origin = comparison_grids(estimate, truth, transform)
+    with np.errstate(invalid="ignore"):
+        A = np.nan_to_num(gt, nan=0.0) > 0.5
+        B = np.nan_to_num(est, nan=0.0) > occupied_threshold
+    known = np.isfinite(est)
+    d_to_a = distance_to(A, res)
+    return CellSets(
+        estimate=est, truth=gt, resolution=res, origin=origin,
+        truth_occupied=A, estimate_occupied=B, known=known,
+        truth_matched=A & (distance_to(B, res) <= tolerance + _EPS),
+        estimate_matched=B & (d_to_a <= tolerance + _EPS),
+        observable=A & (distance_to(known, res) <= tolerance + _EPS),
+        ghost=B & (d_to_a > ghost_distance + _EPS),
+    )
+
+
 def map_metrics(
     estimate: GridMap,
     truth: GridMap,
@@ -201,29 +252,22 @@ def map_metrics(
         raise DynSlamError(
             f"map metrics: tolerance ({tolerance} m) and ghost distance ({ghost_distance} m) must be >= 0"
         )
-    est, gt, res, _ = comparison_grids(estimate, truth, transform)
-    with np.errstate(invalid="ignore"):
-        A = np.nan_to_num(gt, nan=0.0) > 0.5
-        B = np.nan_to_num(est, nan=0.0) > occupied_threshold
-    est_known = np.isfinite(est)
+    cs = cell_sets(estimate, truth, transform, tolerance, ghost_distance, occupied_threshold)
+    est, gt, A, B, est_known = cs.estimate, cs.truth, cs.truth_occupied, cs.estimate_occupied, cs.known
+    res = cs.resolution
     n_a, n_b = int(A.sum()), int(B.sum())
 
     # Strict IoU (paper Eq. 9).
     iou = _ratio(int((A & B).sum()), int((A | B).sum()))
 
     # Tolerant matching (Euclidean distance between cell centres).
-    d_to_a = distance_to(A, res)
-    d_to_b = distance_to(B, res)
-    a_matched = A & (d_to_b <= tolerance + _EPS)
-    b_matched = B & (d_to_a <= tolerance + _EPS)
-    n_am, n_bm = int(a_matched.sum()), int(b_matched.sum())
+    n_am, n_bm = int(cs.truth_matched.sum()), int(cs.estimate_matched.sum())
     inter = 0.5 * (n_am + n_bm)
     iou_tol = _ratio(inter, inter + (n_a - n_am) + (n_b - n_bm))
 
     precision = _ratio(n_bm, n_b)
-    observable = A & (distance_to(est_known, res) <= tolerance + _EPS)
-    n_obs = int(observable.sum())
-    recall = _ratio(int((a_matched & observable).sum()), n_obs)
+    n_obs = int(cs.observable.sum())
+    recall = _ratio(int((cs.truth_matched & cs.observable).sum()), n_obs)
     recall_all = _ratio(n_am, n_a)
     if math.isnan(precision) or math.isnan(recall):
         f1 = math.nan
@@ -233,8 +277,7 @@ def map_metrics(
         f1 = 2.0 * precision * recall / (precision + recall)
 
     # Ghost area: estimated occupied cells far from any static structure.
-    ghost = B & (d_to_a > ghost_distance + _EPS)
-    n_ghost = int(ghost.sum())
+    n_ghost = int(cs.ghost.sum())
 
     # Class-balanced weighted RMSE (paper Eq. 10): x_i = GT value, y_i = estimated
     # probability over cells known in both; σ_i = 1/(2·N_occ) on GT-occupied cells and

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dynslam2d.eval.maps import comparison_grids, distance_to
+from dynslam2d.eval.maps import cell_sets
 from dynslam2d.eval.trajectory import AteResult
 from dynslam2d.gridmap import GridMap
 from dynslam2d.types import Pose2D
@@ -65,15 +65,10 @@ def map_difference(
     MISSED cells are the observable true cells its ``recall`` counts as unmatched.
     ``transform`` is the pose of the estimate frame in the GT frame (the ATE alignment).
     """
-    est, gt, res, origin = comparison_grids(estimate, truth, transform)
-    eps = 1e-9
-    with np.errstate(invalid="ignore"):
-        A = np.nan_to_num(gt, nan=0.0) > 0.5
-        B = np.nan_to_num(est, nan=0.0) > occupied_threshold
-    known = np.isfinite(est)
-    ghost = B & (distance_to(A, res) > ghost_distance + eps)
-    observable = A & (distance_to(known, res) <= tolerance + eps)
-    missed = observable & ~(distance_to(B, res) <= tolerance + eps)
+    cs = cell_sets(estimate, truth, transform, tolerance, ghost_distance, occupied_threshold)
+    est, A, B, known, ghost = cs.estimate, cs.truth_occupied, cs.estimate_occupied, cs.known, cs.ghost
+    res, origin = cs.resolution, cs.origin
+    missed = cs.observable & ~cs.truth_matched
     cls = np.full(est.shape, UNOBSERVED, dtype=np.uint8)
     cls[known] = FREE
     cls[A] = TRUTH
