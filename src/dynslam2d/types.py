@@ -100,6 +100,11 @@ class Scan:
         angle_max: angle of the last beam as the source wrote it, rad (kept so a
             bag round trip is lossless); defaults to ``angle_min + (n-1)·increment``.
         time_increment, scan_time: as in LaserScan, s (0 when unknown).
+        odom: the LASER's pose in the odometry frame at ``stamp`` (m, rad), when the
+            recording has odometry (wheel odometry, TF ``odom → base_link`` composed with
+            ``base_link → laser``, CARMEN odometry, or dead reckoning with IMU yaw);
+            None for laser-only input. Only differences between scans are meaningful.
+        yaw_rate: the sensor's yaw rate at ``stamp`` from an IMU, rad/s, or None.
     """
 
     stamp: float
@@ -113,6 +118,8 @@ class Scan:
     angle_max: float | None = None
     time_increment: float = 0.0
     scan_time: float = 0.0
+    odom: Pose2D | None = None
+    yaw_rate: float | None = None
     _angles: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -207,6 +214,18 @@ class Scan:
             angle_max=self.angle_max,
             time_increment=self.time_increment,
             scan_time=self.scan_time,
+            odom=self.odom,
+            yaw_rate=self.yaw_rate,
+        )
+
+    def with_odometry(self, odom: Pose2D | None, yaw_rate: float | None = None) -> Scan:
+        """A copy carrying ``odom`` (laser pose in the odometry frame) and ``yaw_rate`` (rad/s)."""
+        return Scan(
+            stamp=self.stamp, angle_min=self.angle_min, angle_increment=self.angle_increment,
+            ranges=self.ranges, range_min=self.range_min, range_max=self.range_max,
+            frame_id=self.frame_id, intensities=self.intensities, angle_max=self.angle_max,
+            time_increment=self.time_increment, scan_time=self.scan_time, odom=odom,
+            yaw_rate=yaw_rate, _angles=self._angles,
         )
 
     def same_as(self, other: Scan) -> bool:
@@ -246,6 +265,8 @@ class SourceMeta:
         frame_id: sensor frame id, or None.
         range_min, range_max: sensor range limits, m, or None.
         extra: format-specific details (e.g. other topics in a bag).
+        odometry: where ``Scan.odom`` / ``Scan.yaw_rate`` come from (e.g. "/odom (nav_msgs/Odometry)",
+            "tf odom→base_link", "CARMEN ODOM", "sim"), or None when scans carry none.
     """
 
     format: str
@@ -259,6 +280,7 @@ class SourceMeta:
     range_min: float | None = None
     range_max: float | None = None
     extra: dict[str, object] = field(default_factory=dict)
+    odometry: str | None = None
 
 
 @runtime_checkable
