@@ -18,6 +18,7 @@ from typer.core import TyperGroup
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
+from rich.text import Text
 
 from dynslam2d import __version__
 from dynslam2d.errors import DynSlamError
@@ -84,12 +85,12 @@ def info(
     from dynslam2d.io.summary import summarize_source
 
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad)
-    with console.status(f"reading {input} …", spinner="dots") as status:
-        summary = summarize_source(source, progress=lambda n: status.update(f"reading {input} … {n} scans"))
+    with console.status(Text(f"reading {input} …"), spinner="dots") as status:
+        summary = summarize_source(source, progress=lambda n: status.update(Text(f"reading {input} … {n} scans")))
     if as_json:
         sys.stdout.write(json.dumps(summary.as_dict(), indent=2, default=str) + "\n")
         return
-    table = Table(title=f"{summary.origin}", show_header=False, title_justify="left")
+    table = Table(title=Text(f"{summary.origin}"), show_header=False, title_justify="left")
     table.add_column(style="bold")
     table.add_column()
     beams = str(summary.beams_max) if summary.beams_min == summary.beams_max else f"{summary.beams_min}–{summary.beams_max}"
@@ -115,7 +116,7 @@ def info(
         if summary.extra.get(key):
             rows.append((key.replace("_", " "), str(summary.extra[key])))
     for k, v in rows:
-        table.add_row(k, v)
+        table.add_row(k, Text(str(v)))
     console.print(table)
 
 
@@ -153,20 +154,20 @@ def simulate(
         console.print(table)
         return
     out = out or _default_out(f"sim-{scenario}")
-    with console.status(f"simulating {scenario} …", spinner="dots"):
+    with console.status(Text(f"simulating {scenario} …"), spinner="dots"):
         sensor = {"beams": beams, "fov": math.radians(fov_deg) if fov_deg else None, "rate_hz": rate,
                   "noise_sigma": noise, "dropout": dropout, "range_max": range_max}
         sim = run_simulation(scenario, seed=seed, duration=duration, **{k: v for k, v in sensor.items() if v is not None})
-    with console.status(f"writing {out} …", spinner="dots"):
+    with console.status(Text(f"writing {out} …"), spinner="dots"):
         paths = write_simulation(sim, out, map_resolution=resolution, storage=storage)
     sc = sim.scenario
-    console.print(
-        f"simulated [bold]{sc.name}[/] (seed {sc.seed}): {len(sim.scans)} scans over {sc.duration:g} s, "
+    console.print(Text.assemble(
+        "simulated ", (sc.name, "bold"), f" (seed {sc.seed}): {len(sim.scans)} scans over {sc.duration:g} s, "
         f"{len(sc.movers)} movers"
-    )
+    ))
     for role, path in paths.items():
-        console.print(f"  {path}")
-    console.print(f"map it with: dynslam2d run {paths['scans']} --gt {out}")
+        console.print(Text(f"  {path}"))
+    console.print(Text(f"map it with: dynslam2d run {paths['scans']} --gt {out}"))
 
 
 def _default_out(prefix: str) -> Path:
@@ -217,6 +218,9 @@ def run(
     seed: SeedOpt = None,
     duration: DurationOpt = None,
     skip_bad: SkipBadOpt = False,
+    force: Annotated[bool, typer.Option("--force", help="Replace an earlier results folder (one with run.json) at --out and a bag dynslam2d wrote at --write-bag; never anything else.")] = False,
+    checkpoint_period: Annotated[float, typer.Option("--checkpoint-period", min=0.0, help="Write the trajectory and map so far into OUT every this many seconds (0 = never).")] = 60.0,
+    checkpoint_scans: Annotated[int, typer.Option("--checkpoint-scans", min=0, help="Also checkpoint every this many scans (0 = only by time).")] = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
 ) -> None:
@@ -229,6 +233,7 @@ def run(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from dynslam2d.config import Config, load_config, with_overrides
+    from dynslam2d.io.outputs import check_bag_target, clean_stale_parts, plan_results_folder, same_or_inside
     from dynslam2d.io.sources import open_source
     from dynslam2d.pipeline import run as run_pipeline
     from dynslam2d.results import ground_truth_for, write_results
@@ -246,49 +251,79 @@ def run(
         cfg = with_overrides(cfg, {"filter": {"mode": filter_mode}})
     if hector_compat:
         cfg = with_overrides(cfg, {"slam": {"hector_gradient_bug": True, "step_mode": "gauss_newton", "correlative_mode": "never"}})
+    _check_sim_only(input, seed, duration)
+    inputs = _input_paths(input, gt, config)
+    truth_files = None
+    if gt is not None:
+        from dynslam2d.io.groundtruth import read_ground_truth_folder
+
+        truth_files = read_ground_truth_folder(gt)  # before the first scan: a bad --gt fails now
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad)
+    _check_map_size(source, cfg)
     out = out or _default_out("run")
+    folder = plan_results_folder(out, force=force, inputs=inputs)
+    if write_bag is not None:
+        check_bag_target(write_bag, force=force, inputs=inputs, out=out)
+        if folder.replace and same_or_inside(write_bag, out):
+            raise DynSlamError(f"--write-bag {write_bag}: lies inside --out {out}, which is replaced; put the bag elsewhere")
+        clean_stale_parts(write_bag)
     total = source.meta.count
     show = not (quiet or as_json)
     progress = Progress(
         TextColumn("[bold]mapping[/]"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
         TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=err_console, disable=not show,
     )
+    from dynslam2d.io.checkpoint import Checkpointer
     from dynslam2d.viz.collect import RemovedPointsCollector
 
     collector = RemovedPointsCollector()
-    with contextlib.ExitStack() as stack:
-        observers: list[Any] = [collector]
-        if animate:
-            from dynslam2d.viz.animate import Animator
+    folder.start(input=source.meta.origin)
+    checkpointer = Checkpointer(folder.work, every_s=checkpoint_period, every_scans=checkpoint_scans,
+                                info={"input": source.meta.origin})
+    old_term = _sigterm_as_interrupt()
+    try:
+        with contextlib.ExitStack() as stack:
+            observers: list[Any] = [collector, checkpointer]
+            if animate:
+                from dynslam2d.viz.animate import Animator
 
-            observers.append(Animator(out / "run.gif", frame_step=frame_step))
-        if write_bag is not None:
-            from dynslam2d.io.rosout import BagRecorder
+                observers.append(Animator(folder.work / "run.gif", frame_step=frame_step))
+            if write_bag is not None:
+                from dynslam2d.io.rosout import BagRecorder
 
-            observers.append(stack.enter_context(BagRecorder(write_bag, storage=bag_storage, map_period=map_period)))
-        if viewer == "rerun":
-            from dynslam2d.viz.live import RerunViewer
+                observers.append(stack.enter_context(BagRecorder(write_bag, storage=bag_storage, map_period=map_period)))
+            if viewer == "rerun":
+                from dynslam2d.viz.live import RerunViewer
 
-            observers.append(stack.enter_context(RerunViewer(save=rerun_save, map_period=map_period)))
-        with progress:
-            task = progress.add_task("map", total=total, rate="")
-            state = {"t0": None}
+                observers.append(stack.enter_context(RerunViewer(save=rerun_save, map_period=map_period)))
+            with progress:
+                task = progress.add_task("map", total=total, rate="")
+                state = {"t0": None}
 
-            def tick(n: int, step: object) -> None:
-                import time as _time
+                def tick(n: int, step: object) -> None:
+                    import time as _time
 
-                now = _time.perf_counter()
-                if state["t0"] is None:
-                    state["t0"] = now
-                if n % 10 == 0 or n == total:
-                    el = now - state["t0"]
-                    progress.update(task, completed=n, rate=f"{(n - 1) / el:.0f} scans/s" if el > 0 else "")
+                    now = _time.perf_counter()
+                    if state["t0"] is None:
+                        state["t0"] = now
+                    if n % 10 == 0 or n == total:
+                        el = now - state["t0"]
+                        progress.update(task, completed=n, rate=f"{(n - 1) / el:.0f} scans/s" if el > 0 else "")
 
-            result = run_pipeline(source, cfg, progress=tick, observers=observers)
-            progress.update(task, completed=result.n_scans)
-    truth = ground_truth_for(source, gt, cfg.slam.map_resolution)
-    paths = write_results(result, out, truth, collector)
+                result = run_pipeline(source, cfg, progress=tick, observers=observers)
+                progress.update(task, completed=result.n_scans)
+        _check_run_usable(result, input)
+        truth = ground_truth_for(source, truth_files, cfg.slam.map_resolution)
+        paths = write_results(result, folder.work, truth, collector)
+        folder.finish()
+    except KeyboardInterrupt:
+        _interrupted(folder, checkpointer)
+    except BaseException:
+        folder.discard()
+        raise
+    finally:
+        _restore_sigterm(old_term)
+    paths = {k: out / v.name for k, v in paths.items()}
     summary = json.loads(paths["summary.json"].read_text())
     if as_json:
         summary["out"] = str(out)
@@ -296,23 +331,119 @@ def run(
         return
     if quiet:
         return
+    skipped = summary.get("input_skipped", {})
     rows = [
         ("scans", str(summary["scans"])),
         ("wall time", f"{summary['wall_time_s']:.1f} s ({summary['scans_per_s']} scans/s)"),
         ("map updates", str(summary["map_updates"])),
         ("rejected matches", str(summary["match_failures"])),
         ("skipped scans", str(summary["skipped_scans"])),
+        ("input dropped (--skip-bad)", ", ".join(f"{v} {k.replace('skipped_', '')}" for k, v in skipped.items())
+         if summary.get("input_skipped_total") else "none"),
         ("tracks (in M)", f"{summary['tracks']} ({summary['tracks_in_M']})"),
         ("beams removed", f"{100 * summary['removed_beam_share']:.2f} % (filter {summary['filter']})"),
         ("map", f"{summary['map_cells'][1]}×{summary['map_cells'][0]} cells at {summary['map_resolution_m']} m, "
                 f"{summary['memory_bytes'] / 2**20:.1f} MiB"),
     ]
+    repairs = summary.get("stamp_repairs") or {}
+    if repairs.get("backward_steps") or repairs.get("nudged_stamps") or repairs.get("time_source") not in (None, "ipc"):
+        rows.append(("stamp repairs", "; ".join(summary.get("input_warnings", [])) or str(repairs)))
     if "metrics.json" in paths:
         rows += _metric_rows(json.loads(paths["metrics.json"].read_text()))
     console.print(_stats_table(f"dynslam2d run {input}", rows))
-    console.print(f"results in [bold]{out}[/]")
+    console.print(Text.assemble("results in ", (str(out), "bold")))
     if write_bag is not None:
-        console.print(f"bag for RViz / Foxglove: [bold]{write_bag}[/] (docs/ros.md)")
+        console.print(Text.assemble("bag for RViz / Foxglove: ", (str(write_bag), "bold"), " (docs/ros.md)"))
+
+
+def _check_sim_only(input: str, seed: Optional[int], duration: Optional[float]) -> None:
+    """--seed and --duration drive the simulator; for a recording they would be silently ignored."""
+    if not input.startswith("sim:"):
+        given = [name for name, v in (("--seed", seed), ("--duration", duration)) if v is not None]
+        if given:
+            raise DynSlamError(f"{' and '.join(given)} apply to sim:<scenario> inputs only, not to {input}; drop the option")
+
+
+def _input_paths(input: str, *more: Optional[Path]) -> list[Path]:
+    """Every file the command reads (never written over)."""
+    paths = [] if input.startswith("sim:") else [Path(input)]
+    return paths + [Path(p) for p in more if p is not None]
+
+
+def _check_map_size(source: Any, cfg: Any) -> None:
+    """Refuse a map that cannot be built, before the work: a non-finite cell size, or one at
+    which the area the first scan sees already exceeds the map memory budget (4 bytes per cell
+    is a lower bound of what a cell costs)."""
+    import numpy as np
+
+    res = cfg.slam.map_resolution
+    if not (isinstance(res, float) and math.isfinite(res) and res > 0):
+        raise DynSlamError(f"--map-resolution / slam.map_resolution must be a positive finite number of m, got {res}")
+    budget = float(getattr(cfg.slam, "max_map_memory_mb", 0.0) or 0.0) * 1e6
+    if budget <= 0:
+        return
+    first = next(iter(source), None)  # peek: sources can be iterated again from the start
+    if first is None:
+        return
+    r = first.ranges[first.valid_mask()]
+    r = r[r <= cfg.slam.laser_max_dist]
+    reach = float(r.max()) if r.size else 0.0
+    need = (2.0 * reach / res) ** 2 * 4.0
+    if need > budget:
+        raise DynSlamError(
+            f"--map-resolution {res:g} m: the first scan alone (returns up to {reach:.1f} m) needs "
+            f"{need / 1e6:.3g} MB of map, over the budget of {budget / 1e6:.0f} MB (slam.max_map_memory_mb); "
+            f"use a coarser resolution such as 0.05"
+        )
+
+
+def _check_run_usable(result: Any, input: str) -> None:
+    """A run that could not map anything is an error, not an empty map with exit 0."""
+    n = result.n_scans
+    if n and not result.map_updated.any():
+        reasons = ", ".join(f"{k} ×{v}" for k, v in sorted(result.reasons.items())) or "no reason recorded"
+        if result.reasons.get("map_too_large"):
+            raise DynSlamError(f"{input}: no scan could enter the map ({reasons}); the map is too large at "
+                               f"--map-resolution {result.config.slam.map_resolution:g} m, use a coarser one")
+        raise DynSlamError(f"{input}: none of the {n} scans has enough usable returns to map ({reasons}); "
+                           f"check the topic and the sensor's range limits")
+
+
+def _sigterm_as_interrupt() -> Any:
+    """SIGTERM behaves like Ctrl-C during a run (checkpoint, one line); returns the old handler."""
+    import signal
+
+    def handler(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    try:
+        return signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread (e.g. some test runners)
+        return None
+
+
+def _restore_sigterm(old: Any) -> None:
+    import signal
+
+    if old is not None:
+        with contextlib.suppress(ValueError):
+            signal.signal(signal.SIGTERM, old)
+
+
+def _interrupted(folder: Any, checkpointer: Any) -> None:
+    """Ctrl-C / SIGTERM during a run: write a last checkpoint, say where it is, exit 130."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not cut the checkpoint
+    try:
+        checkpointer.write()
+        where = folder.finish()
+    except Exception as exc:  # the checkpoint itself failed: say so, keep what is on disk
+        err_console.print(Text(f"interrupted after {checkpointer.n_scans} scans; the last checkpoint could not be "
+                               f"written ({exc}); earlier checkpoints in {folder.work}"), soft_wrap=True)
+        raise SystemExit(130) from None
+    err_console.print(Text(f"interrupted after {checkpointer.n_scans} scans, partial results in {where}"), soft_wrap=True)
+    raise SystemExit(130)
 
 
 experiment_app = typer.Typer(help="Reproduce experiments.", no_args_is_help=True)
@@ -334,7 +465,7 @@ def experiment_paper(
         result = run_experiment(chosen, duration=duration, progress=lambda text: status.update(f"running {text} …"))
         paths = write_experiment(result, out)
     sys.stdout.write(paths["table.md"].read_text())
-    console.print(f"results in [bold]{out}[/] ({', '.join(paths)})")
+    console.print(Text.assemble("results in ", (str(out), "bold"), f" ({', '.join(paths)})"))
 
 
 class _EvalGroup(TyperGroup):
@@ -355,11 +486,11 @@ app.add_typer(eval_app, name="eval")
 
 
 def _stats_table(title: str, rows: list[tuple[str, str]]) -> Table:
-    table = Table(title=title, show_header=False, title_justify="left")
+    table = Table(title=Text(title), show_header=False, title_justify="left")
     table.add_column(style="bold")
     table.add_column(justify="right")
     for k, v in rows:
-        table.add_row(k, v)
+        table.add_row(Text(str(k)), Text(str(v)))
     return table
 
 
@@ -590,6 +721,11 @@ def eval_relations(
     _emit(out, as_json, _stats_table(f"relations {relations.name} vs {estimate}", rows))
 
 
+def _one_line(text: str) -> str:
+    """An error message on one line (YAML and library messages may span several)."""
+    return " ".join(part.strip() for part in text.splitlines() if part.strip())
+
+
 def main() -> None:
     """Console-script entry point: run the app, turning project errors into one line.
 
@@ -600,10 +736,10 @@ def main() -> None:
     try:
         app()
     except DynSlamError as exc:
-        err_console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
+        err_console.print(Text.assemble(("error:", "bold red"), " ", _one_line(str(exc))), highlight=False, soft_wrap=True)
         sys.exit(2)
     except KeyboardInterrupt:
-        err_console.print("[yellow]interrupted[/]")
+        err_console.print(Text("interrupted", style="yellow"))
         sys.exit(130)
 
 

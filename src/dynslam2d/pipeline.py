@@ -30,6 +30,7 @@ from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
 from dynslam2d.io.trajectory import Trajectory
+from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
 from dynslam2d.types import Box, Pose2D, Scan, ScanSource, SourceMeta, Track
 
@@ -210,8 +211,10 @@ class RunResult:
         scores, map_updated, rejected, skipped: (n,) per-scan match score and flags.
         removed: (n, beams) bool, True where the filter removed the beam (all False when
             scans differ in beam count: see ``removed_rows``).
-        removed_rows: list of (beams,) bool arrays, one per scan (any beam count).
-        track_rows: one tuple per (scan, live track), fields :data:`TRACK_COLUMNS` (map frame).
+        removed_rows: one (beams,) bool array per scan (any beam count); a packed
+            :class:`~dynslam2d.records.BitRows` when built by :func:`run`.
+        track_rows: one tuple per (scan, live track), fields :data:`TRACK_COLUMNS` (map frame);
+            a compact :class:`~dynslam2d.records.TrackRows` when built by :func:`run`.
         timings_ms: per-stage (n,) arrays of wall time, ms.
         grid: the final finest-level map.
         logodds: (H, W) raw log-odds of the finest level, same cells and origin as ``grid``.
@@ -228,8 +231,8 @@ class RunResult:
     map_updated: np.ndarray
     rejected: np.ndarray
     skipped: np.ndarray
-    removed_rows: list[np.ndarray]
-    track_rows: list[tuple]
+    removed_rows: Sequence[np.ndarray]  # BitRows (packed) from run(); any sequence of bool rows
+    track_rows: Sequence[tuple]  # TrackRows (structured array) from run(); any sequence of tuples
     timings_ms: dict[str, np.ndarray]
     grid: GridMap
     logodds: np.ndarray
@@ -244,8 +247,12 @@ class RunResult:
 
     @property
     def removed(self) -> np.ndarray:
-        if not self.removed_rows:
+        if not len(self.removed_rows):
             return np.zeros((0, 0), dtype=bool)
+        if isinstance(self.removed_rows, BitRows):
+            if not self.removed_rows.uniform:
+                return np.zeros((len(self.removed_rows), 0), dtype=bool)
+            return self.removed_rows.stack()
         widths = {r.shape[0] for r in self.removed_rows}
         if len(widths) != 1:
             return np.zeros((len(self.removed_rows), 0), dtype=bool)
@@ -255,10 +262,18 @@ class RunResult:
         """Numbers for summary.json and the terminal: scans, time, scans/s, failures, tracks, memory."""
         n = self.n_scans
         total = self.timings_ms.get("total", np.zeros(0))
-        beams = sum(r.shape[0] for r in self.removed_rows)
-        removed = sum(int(r.sum()) for r in self.removed_rows)
-        ids = {row[1] for row in self.track_rows}
-        ids_m = {row[1] for row in self.track_rows if row[-1]}
+        if isinstance(self.removed_rows, BitRows):
+            beams, removed = self.removed_rows.total_bits, self.removed_rows.total_set
+        else:
+            beams = sum(r.shape[0] for r in self.removed_rows)
+            removed = sum(int(r.sum()) for r in self.removed_rows)
+        if isinstance(self.track_rows, TrackRows):
+            arr = self.track_rows.array()
+            ids = set(np.unique(arr["id"]).tolist())
+            ids_m = set(np.unique(arr["id"][arr["in_M"]]).tolist())
+        else:
+            ids = {row[1] for row in self.track_rows}
+            ids_m = {row[1] for row in self.track_rows if row[-1]}
         stage_ms = {k: float(np.median(v)) for k, v in self.timings_ms.items() if v.size}
         return {
             "input": self.source.origin,
@@ -313,18 +328,20 @@ def run(
     from it); every observer sees every scan (see :class:`RunObserver`).
     """
     pipe = Pipeline(config)
-    stamps: list[float] = []
-    poses: list[Pose2D] = []
-    scores: list[float] = []
-    flags: list[tuple[bool, bool, bool]] = []
-    removed_rows: list[np.ndarray] = []
-    track_rows: list[tuple] = []
-    timings: dict[str, list[float]] = {}
+    # Per-scan records in compact growable arrays (dynslam2d.records): a few hundred bytes
+    # per scan instead of Python objects, so long logs do not exhaust memory.
+    stamps = GrowArray(np.float64)
+    poses = GrowArray(np.float64, (3,))
+    scores = GrowArray(np.float64)
+    flags = GrowArray(np.bool_, (3,))
+    removed_rows = BitRows()
+    track_rows = TrackRows()
+    timings: dict[str, GrowArray] = {}
     t0 = time.perf_counter()
     for scan in source:
         step = pipe.process(scan)
         stamps.append(step.stamp)
-        poses.append(step.pose)
+        poses.append((step.pose.x, step.pose.y, step.pose.theta))
         scores.append(step.score)
         flags.append((step.map_updated, step.rejected, step.skipped))
         removed_rows.append(step.removed)
@@ -333,26 +350,26 @@ def run(
             track_rows.append((step.stamp, t.id, t.state, b.px, b.py, b.theta, b.length, b.width,
                                float(t.velocity[0]), float(t.velocity[1]), bool(t.in_m)))
         for k, v in step.timings.items():
-            timings.setdefault(k, []).append(v)
+            timings.setdefault(k, GrowArray(np.float32)).append(v)
         for obs in observers:
             obs.on_scan(scan, step, pipe)
         if progress is not None:
             progress(len(stamps), step)
     wall = time.perf_counter() - t0
-    flag_arr = np.array(flags, dtype=bool).reshape(-1, 3)
+    flag_arr = flags.view().copy()
     logodds, _ = pipe.slam.logodds(0)
     summary = pipe.slam.summary()
     result = RunResult(
         source=source.meta,
         config=pipe.config,
-        trajectory=Trajectory.from_poses(np.array(stamps), poses),
-        scores=np.array(scores),
+        trajectory=Trajectory(stamps.view().copy(), poses.view().copy()),
+        scores=scores.view().copy(),
         map_updated=flag_arr[:, 0],
         rejected=flag_arr[:, 1],
         skipped=flag_arr[:, 2],
         removed_rows=removed_rows,
         track_rows=track_rows,
-        timings_ms={k: np.array(v) for k, v in timings.items()},
+        timings_ms={k: v.view().astype(np.float64) for k, v in timings.items()},
         grid=pipe.gridmap(),
         logodds=logodds,
         wall_time_s=wall,

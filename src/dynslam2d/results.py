@@ -3,7 +3,8 @@
 ``write_results(run, out_dir, gt)`` writes map.pgm + map.yaml (map_server,
 thresholds 0.65 / 0.196), map_logodds.npy, trajectory.tum, tracks.csv,
 kept_mask.npz (``stamps`` (n,), ``removed`` (n, beams) bool), config.yaml,
-summary.json, map.png, tracks.png and, with ground truth, metrics.json and errors.png.
+summary.json, map.png, tracks.png and, with ground truth, metrics.json and errors.png;
+then, last, run.json (``"status": "complete"``) that marks the folder as complete.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ from dynslam2d.gridmap import GridMap
 from dynslam2d.io.atomic import atomic_path, write_text_atomic
 from dynslam2d.io.groundtruth import GroundTruthFiles, read_ground_truth_folder
 from dynslam2d.io.mapfile import write_map
+from dynslam2d.io.outputs import write_marker
+from dynslam2d.io.summary import input_report
 from dynslam2d.io.trajectory import Trajectory, write_tum
 from dynslam2d.pipeline import TRACK_COLUMNS, RunResult
 from dynslam2d.types import ScanSource
@@ -33,12 +36,14 @@ from dynslam2d.viz.collect import RemovedPointsCollector
 from dynslam2d.viz.figures import write_figures
 
 
-def ground_truth_for(source: ScanSource, gt_dir: str | os.PathLike[str] | None, resolution: float) -> GroundTruthFiles | None:
+def ground_truth_for(source: ScanSource, gt_dir: str | os.PathLike[str] | GroundTruthFiles | None, resolution: float) -> GroundTruthFiles | None:
     """Ground truth for a run: from ``gt_dir`` if given, else from a simulated source, else None.
 
     Simulated ground truth is expressed in the first-scan frame (the SLAM map frame), like
     the files ``dynslam2d simulate`` writes.
     """
+    if isinstance(gt_dir, GroundTruthFiles):  # read already (the CLI checks --gt before the run)
+        return gt_dir
     if gt_dir is not None:
         return read_ground_truth_folder(gt_dir)
     inner = getattr(source, "inner", source)
@@ -171,9 +176,14 @@ def write_results(
     if metrics is not None:
         summary["ate_rmse_m"] = metrics["ate_rmse_m"]
         paths["metrics.json"] = write_text_atomic(out / "metrics.json", metrics_json(metrics))
+    summary.update(input_report(run.source))
+    summary["status"] = "complete"
     paths["summary.json"] = write_text_atomic(out / "summary.json", metrics_json(summary))
     # Figures: map.png, tracks.png and, with ground truth, errors.png (dynslam2d.viz.figures).
     paths.update(write_figures(run, out, gt, collector))
+    # run.json LAST: a folder whose run.json does not say "complete" lacks files (docs/reliability.md).
+    paths["run.json"] = write_marker(out, "complete", scans=run.n_scans, input=run.source.origin,
+                                     files=sorted(paths))
     return paths
 
 

@@ -9,7 +9,14 @@ strictly increase, and the input is not empty.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import select
+import shutil
+import stat
+import tempfile
+import time
+import weakref
 from pathlib import Path
 from typing import Iterator
 
@@ -23,6 +30,89 @@ _MCAP_MAGIC = b"\x89MCAP"
 _GZIP_MAGIC = b"\x1f\x8b"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 _CARMEN_RECORDS = (b"FLASER", b"ROBOTLASER1", b"RLASER", b"ODOM", b"PARAM", b"VERTEX2", b"NEFF")
+
+#: How long to wait for the first byte from a pipe / FIFO before giving up, s.
+STREAM_WAIT_S = 30.0
+#: Largest stream (pipe, FIFO, /dev/stdin) copied to a temporary file, bytes.
+MAX_STREAM_BYTES = 4 * 2**30
+
+
+def is_stream(path: str | os.PathLike[str]) -> bool:
+    """True for an existing path that is neither a regular file nor a folder (pipe, FIFO, device)."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
+
+
+def spool_stream(
+    path: str | os.PathLike[str], wait_s: float | None = None, max_bytes: int | None = None
+) -> Path:
+    """Copy a pipe / FIFO / ``/dev/stdin`` into a temporary file and return its path.
+
+    Format sniffing reads the first bytes of a file and then reopens it; a pipe can be
+    read only once, so it is copied first (nothing is lost, gzip included). A FIFO with
+    no writer would block forever: if no byte arrives within ``wait_s`` seconds, a
+    DynSlamError says so. More than ``max_bytes`` bytes is refused. Defaults:
+    :data:`STREAM_WAIT_S`, :data:`MAX_STREAM_BYTES`. The caller removes
+    the file (:func:`open_source` does when the source is garbage-collected).
+    """
+    name = os.fspath(path)
+    wait_s = STREAM_WAIT_S if wait_s is None else wait_s
+    max_bytes = MAX_STREAM_BYTES if max_bytes is None else max_bytes
+    try:
+        fd = os.open(name, os.O_RDONLY | os.O_NONBLOCK)
+    except OSError as exc:
+        raise DynSlamError(f"{name}: cannot open ({exc.strerror or exc})") from None
+    tmp = None
+    try:
+        deadline = time.monotonic() + wait_s
+        first = b""
+        while not first:
+            left = deadline - time.monotonic()
+            ready, _, _ = select.select([fd], [], [], max(0.0, min(left, 0.2)))
+            if ready:
+                try:
+                    first = os.read(fd, 1 << 16)
+                except BlockingIOError:
+                    first = b""
+                if not first and _writer_gone(fd):
+                    raise DynSlamError(f"{name}: the stream ended before any data; nothing to read")
+            if not first and time.monotonic() >= deadline:
+                raise DynSlamError(
+                    f"{name}: no data within {wait_s:g} s (a FIFO with no writer?); start the writer first or pass a file"
+                )
+        os.set_blocking(fd, True)
+        out = tempfile.NamedTemporaryFile(prefix="dynslam2d-stream-", delete=False)
+        tmp = Path(out.name)
+        total = 0
+        with out:
+            chunk = first
+            while chunk:
+                total += len(chunk)
+                if total > max_bytes:
+                    raise DynSlamError(
+                        f"{name}: stream larger than {max_bytes / 2**30:g} GiB; save it to a file and pass the file"
+                    )
+                out.write(chunk)
+                chunk = os.read(fd, 1 << 20)
+        return tmp
+    except BaseException:
+        if tmp is not None:
+            tmp.unlink(missing_ok=True)
+        raise
+    finally:
+        os.close(fd)
+
+
+def _writer_gone(fd: int) -> bool:
+    """After a 0-byte read on a readable descriptor: has a writer been there and left (EOF)?
+
+    On Linux a FIFO that never had a writer does not poll readable, so a readable
+    descriptor with no data means end of stream.
+    """
+    return True
 
 
 def sniff_format(path: str | os.PathLike[str]) -> str:
@@ -126,7 +216,36 @@ def open_source(
             stopping with an error.
     Returns:
         A :class:`CheckedSource` (iterable of Scan, ``meta``, ``len()`` where known).
+
+    A pipe, FIFO or ``/dev/stdin`` is first copied to a temporary file
+    (:func:`spool_stream`), so sniffing loses nothing; ``meta.origin`` names the stream.
     """
+    spooled: Path | None = None
+    if not os.fspath(path).startswith(SIM_PREFIX) and is_stream(path):
+        spooled = spool_stream(path)
+        origin = os.fspath(path)
+        path = spooled
+    try:
+        source = _open(path, topic, seed=seed, duration=duration, skip_bad=skip_bad)
+    except BaseException:
+        if spooled is not None:
+            spooled.unlink(missing_ok=True)
+        raise
+    if spooled is not None:
+        source.meta.origin = origin
+        source.meta.extra["spooled_from"] = origin
+        weakref.finalize(source, _unlink, str(spooled))
+    return source
+
+
+def _unlink(path: str) -> None:
+    with contextlib.suppress(OSError):
+        os.unlink(path)
+
+
+def _open(
+    path: str | os.PathLike[str], topic: str | None, *, seed: int | None, duration: float | None, skip_bad: bool
+) -> CheckedSource:
     fmt = sniff_format(path)
     text = os.fspath(path)
     inner: ScanSource

@@ -110,3 +110,28 @@ def summarize_source(
         max_gap=max_gap,
         extra=dict(meta.extra),
     )
+
+
+#: Keys of ``SourceMeta.extra`` that count input records dropped by ``--skip-bad``.
+SKIP_KEYS = ("skipped_lines", "skipped_messages", "skipped_scans")
+#: Keys of ``SourceMeta.extra`` that count stamp repairs of a CARMEN log.
+REPAIR_KEYS = ("backward_steps", "nudged_stamps", "largest_nudge_s", "time_source")
+
+
+def input_report(meta: object) -> dict[str, object]:
+    """What the reader dropped or repaired, for summary.json and the terminal.
+
+    ``input_skipped``: malformed lines (CARMEN), malformed messages (bags) and scans with
+    non-increasing stamps, each counted (0 when none); ``input_skipped_total`` their sum;
+    ``stamp_repairs``: CARMEN stamp sorting / nudging / synthesis; ``input_warnings``.
+    """
+    extra = dict(getattr(meta, "extra", {}) or {})
+    skipped = {k: int(extra.get(k, 0) or 0) for k in SKIP_KEYS}
+    out: dict[str, object] = {"input_skipped": skipped, "input_skipped_total": sum(skipped.values())}
+    repairs = {k: extra[k] for k in REPAIR_KEYS if k in extra}
+    if repairs:
+        out["stamp_repairs"] = repairs
+    warnings = extra.get("warnings")
+    if warnings:
+        out["input_warnings"] = list(warnings)  # type: ignore[arg-type]
+    return out

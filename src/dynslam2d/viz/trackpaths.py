@@ -55,6 +55,10 @@ class TrackPath:
 
 def track_paths(track_rows: Sequence[tuple]) -> dict[int, TrackPath]:
     """Group ``track_rows`` (RunResult.track_rows / tracks.csv rows) by track id, in time order."""
+    from dynslam2d.records import TrackRows
+
+    if isinstance(track_rows, TrackRows):
+        return _track_paths_compact(track_rows)
     by_id: dict[int, list[tuple]] = {}
     for row in track_rows:
         by_id.setdefault(int(row[1]), []).append(row)
@@ -71,6 +75,29 @@ def track_paths(track_rows: Sequence[tuple]) -> dict[int, TrackPath]:
             in_m=np.array([bool(r[10]) for r in rows]),
             states=np.array([str(r[2]) for r in rows]),
             last_box=Box(float(last[3]), float(last[4]), float(last[5]), float(last[6]), float(last[7])),
+        )
+    return out
+
+
+def _track_paths_compact(rows: object) -> dict[int, TrackPath]:
+    """:func:`track_paths` on a :class:`~dynslam2d.records.TrackRows` (vectorised grouping)."""
+    a = rows.array()  # type: ignore[attr-defined]
+    names = np.array(rows.state_names())  # type: ignore[attr-defined]
+    out: dict[int, TrackPath] = {}
+    if len(a) == 0:
+        return out
+    a = a[np.lexsort((a["stamp"], a["id"]))]
+    ids, first = np.unique(a["id"], return_index=True)
+    last = np.r_[first[1:], len(a)]
+    xy = np.column_stack((a["x"], a["y"])).astype(np.float64)
+    vel = np.column_stack((a["vx"], a["vy"])).astype(np.float64)
+    states = names[a["state"]]
+    for tid, i, j in zip(ids.tolist(), first.tolist(), last.tolist()):
+        r = a[j - 1]
+        out[int(tid)] = TrackPath(
+            id=int(tid), stamps=a["stamp"][i:j].copy(), xy=xy[i:j], velocity=vel[i:j],
+            in_m=a["in_M"][i:j].copy(), states=states[i:j],
+            last_box=Box(float(r["x"]), float(r["y"]), float(r["heading"]), float(r["length"]), float(r["width"])),
         )
     return out
 

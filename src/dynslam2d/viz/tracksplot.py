@@ -19,6 +19,10 @@ SPEED_CMAP = "plasma"
 _CMAP_TOP = 0.85
 #: Labels closer than this to an already placed label are left out, in figure-width units.
 _LABEL_GAP = 0.025
+#: At most this many id labels per figure (in-M tracks and long paths first).
+MAX_LABELS = 60
+#: Paths with more reports are drawn through this many evenly spaced ones.
+MAX_POINTS_PER_PATH = 400
 
 
 def _speed_cmap():  # type: ignore[no-untyped-def]
@@ -58,8 +62,8 @@ def plot_tracks(
     """Write a PNG of the track paths (map frame, m) coloured by speed (m/s).
 
     Segments where the track is in the dynamic set M are solid and thick, the others
-    dashed and faint; each path is labelled with its id at its last position and starts
-    with a small circle. ``grid`` (optional) is drawn faintly underneath for context.
+    dashed and faint; up to :data:`MAX_LABELS` paths are labelled with their id at their last
+    position; each starts with a small circle. ``grid`` (optional) is drawn faintly underneath for context.
     """
     import matplotlib
 
@@ -87,29 +91,44 @@ def plot_tracks(
     norm = Normalize(0.0, vmax)
     cmap = _speed_cmap()
     span = max(extent[1] - extent[0], extent[3] - extent[2])
-    placed: list[np.ndarray] = []
-    # Tracks in M last, so that they are drawn on top and labelled first.
-    order = sorted(tracks, key=lambda t: (t.ever_in_m, t.length_m))
-    for t in order:
-        if len(t.xy) >= 2:
-            seg = np.stack([t.xy[:-1], t.xy[1:]], axis=1)
-            sp = display_speed(t)
-            spd = 0.5 * (sp[:-1] + sp[1:])
-            in_m = t.in_m[1:] & t.in_m[:-1]
-            for sel, lw, alpha, ls in ((~in_m, 1.0, 0.45, (0, (2, 2))), (in_m, 2.6, 1.0, "solid")):
-                if sel.any():
-                    lc = LineCollection(seg[sel], cmap=cmap, norm=norm, linewidths=lw, alpha=alpha,
-                                        linestyles=ls, zorder=4 if lw > 2 else 3,
-                                        capstyle="round" if lw > 2 else "butt")
-                    lc.set_array(spd[sel])
-                    ax.add_collection(lc)
-        ax.plot(*t.xy[0], marker="o", ms=3.5, mfc="white", mec="0.2", mew=0.8, zorder=5)
-    # Labels: tracks in M first, then the longest paths; skip one that would overlap another.
-    for t in sorted(tracks, key=lambda t: (not t.ever_in_m, -t.length_m)):
-        end = t.xy[-1]
-        if any(np.hypot(*(end - p)) < _LABEL_GAP * span for p in placed):
+    # All paths go into two collections (in M / not in M) and one scatter of start points:
+    # one artist per kind, not per track, so tens of thousands of tracks draw in seconds.
+    segs: dict[bool, list[np.ndarray]] = {False: [], True: []}
+    vals: dict[bool, list[np.ndarray]] = {False: [], True: []}
+    starts = np.array([t.xy[0] for t in tracks]).reshape(-1, 2)
+    for t in tracks:
+        if len(t.xy) < 2:
             continue
-        placed.append(end)
+        xy, sp, in_m_pts = t.xy, display_speed(t), t.in_m
+        if len(xy) > MAX_POINTS_PER_PATH:  # simplify: keep evenly spaced reports and the last one
+            keep = np.unique(np.r_[np.linspace(0, len(xy) - 1, MAX_POINTS_PER_PATH).astype(int), len(xy) - 1])
+            xy, sp, in_m_pts = xy[keep], sp[keep], in_m_pts[keep]
+        seg = np.stack([xy[:-1], xy[1:]], axis=1)
+        spd = 0.5 * (sp[:-1] + sp[1:])
+        in_m = in_m_pts[1:] & in_m_pts[:-1]
+        for flag in (False, True):
+            sel = in_m if flag else ~in_m
+            if sel.any():
+                segs[flag].append(seg[sel])
+                vals[flag].append(spd[sel])
+    for flag, lw, alpha, ls in ((False, 1.0, 0.45, (0, (2, 2))), (True, 2.6, 1.0, "solid")):
+        if segs[flag]:
+            lc = LineCollection(np.concatenate(segs[flag]), cmap=cmap, norm=norm, linewidths=lw, alpha=alpha,
+                                linestyles=ls, zorder=4 if flag else 3, capstyle="round" if flag else "butt")
+            lc.set_array(np.concatenate(vals[flag]))
+            ax.add_collection(lc)
+    if len(starts):
+        ax.scatter(starts[:, 0], starts[:, 1], s=12, c="white", edgecolors="0.2", linewidths=0.8, zorder=5)
+    # Labels: tracks in M first, then the longest paths; skip one that would overlap another;
+    # at most MAX_LABELS (a figure with thousands of ids is unreadable and slow).
+    placed = np.zeros((0, 2))
+    for t in sorted(tracks, key=lambda t: (not t.ever_in_m, -t.length_m)):
+        if len(placed) >= MAX_LABELS:
+            break
+        end = t.xy[-1]
+        if len(placed) and float(np.min(np.hypot(*(placed - end).T))) < _LABEL_GAP * span:
+            continue
+        placed = np.vstack((placed, end))
         ax.annotate(str(t.id), end, xytext=(3, 3), textcoords="offset points",
                     fontsize=8 if t.ever_in_m else 6.5, fontweight="bold" if t.ever_in_m else "normal",
                     color="0.05" if t.ever_in_m else "0.35", zorder=6, annotation_clip=True,

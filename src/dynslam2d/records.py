@@ -1,0 +1,187 @@
+"""Compact per-scan records of a run: memory that grows by bytes, not kilobytes, per scan.
+
+A long run keeps, for every scan, its pose, flags, timings, removed-beam mask and
+track rows. Kept as Python objects that cost ~8 KB per scan (1.5 GB at 200 000
+scans); here they live in growable numpy buffers:
+
+* :class:`GrowArray` — an (n, k) array with amortised O(1) append;
+* :class:`BitRows` — one bool row per scan (any length), stored as packed bits;
+* :class:`TrackRows` — the rows of :data:`dynslam2d.pipeline.TRACK_COLUMNS` in a
+  structured array, read back as tuples.
+
+Both row containers behave like read-only sequences (``len``, iteration, indexing),
+so code written for the former lists keeps working.
+"""
+
+from __future__ import annotations
+
+from typing import Iterator, Sequence
+
+import numpy as np
+
+
+class GrowArray:
+    """An append-only array of rows of dtype ``dtype`` and shape ``shape`` (doubling growth)."""
+
+    def __init__(self, dtype: object, shape: tuple[int, ...] = (), capacity: int = 256) -> None:
+        self._buf = np.empty((max(1, capacity), *shape), dtype=dtype)
+        self._n = 0
+
+    def __len__(self) -> int:
+        return self._n
+
+    def _reserve(self, k: int) -> None:
+        need = self._n + k
+        if need > self._buf.shape[0]:
+            cap = max(need, 2 * self._buf.shape[0])
+            new = np.empty((cap, *self._buf.shape[1:]), dtype=self._buf.dtype)
+            new[: self._n] = self._buf[: self._n]
+            self._buf = new
+
+    def append(self, row: object) -> None:
+        self._reserve(1)
+        self._buf[self._n] = row
+        self._n += 1
+
+    def extend(self, rows: np.ndarray) -> None:
+        k = len(rows)
+        if k == 0:
+            return
+        self._reserve(k)
+        self._buf[self._n : self._n + k] = rows
+        self._n += k
+
+    def view(self) -> np.ndarray:
+        """The rows so far (a view; copy it if the array keeps growing)."""
+        return self._buf[: self._n]
+
+    @property
+    def nbytes(self) -> int:
+        return int(self._buf.nbytes)
+
+
+class BitRows(Sequence[np.ndarray]):
+    """Bool rows of any length, packed 8 per byte; ``rows[i]`` is a fresh (len_i,) bool array."""
+
+    def __init__(self) -> None:
+        self._bits = GrowArray(np.uint8, capacity=4096)
+        self._start = GrowArray(np.int64)
+        self._len = GrowArray(np.int32)
+        self.total_bits = 0
+        self.total_set = 0
+        self._widths: set[int] = set()
+
+    def append(self, row: np.ndarray) -> None:
+        r = np.asarray(row, dtype=bool).ravel()
+        self._start.append(len(self._bits))
+        self._len.append(r.size)
+        self._bits.extend(np.packbits(r))
+        self.total_bits += r.size
+        self.total_set += int(np.count_nonzero(r))
+        self._widths.add(r.size)
+
+    def __len__(self) -> int:
+        return len(self._start)
+
+    def __getitem__(self, i):  # type: ignore[no-untyped-def, override]
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        n = len(self)
+        if i < 0:
+            i += n
+        if not 0 <= i < n:
+            raise IndexError(i)
+        s, k = int(self._start.view()[i]), int(self._len.view()[i])
+        return np.unpackbits(self._bits.view()[s : s + (k + 7) // 8], count=k).astype(bool)
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        for i in range(len(self)):
+            yield self[i]
+
+    @property
+    def uniform(self) -> bool:
+        """All rows have the same length."""
+        return len(self._widths) <= 1
+
+    def stack(self) -> np.ndarray:
+        """(n, width) bool when every row has the same width (see :attr:`uniform`)."""
+        n = len(self)
+        if n == 0:
+            return np.zeros((0, 0), dtype=bool)
+        if not self.uniform:
+            raise ValueError("rows differ in length")
+        width = int(self._len.view()[0])
+        per = (width + 7) // 8
+        packed = self._bits.view()[: n * per].reshape(n, per)
+        return np.unpackbits(packed, axis=1, count=width).astype(bool)
+
+    @property
+    def nbytes(self) -> int:
+        return self._bits.nbytes + self._start.nbytes + self._len.nbytes
+
+
+#: Track states, stored as small integers in :class:`TrackRows`.
+TRACK_STATES = ("tentative", "confirmed", "coasting", "deleted")
+
+_TRACK_DTYPE = np.dtype([
+    ("stamp", np.float64), ("id", np.int64), ("state", np.int8), ("x", np.float64), ("y", np.float64),
+    ("heading", np.float32), ("length", np.float32), ("width", np.float32), ("vx", np.float32),
+    ("vy", np.float32), ("in_M", np.bool_),
+])
+
+
+class TrackRows(Sequence[tuple]):
+    """Rows ``(stamp, id, state, x, y, heading, length, width, vx, vy, in_M)`` in a structured array.
+
+    Stamps and positions are float64; heading, sizes and velocities float32 (7 significant
+    digits, beyond what tracks.csv prints). Rows read back as tuples of Python values.
+    """
+
+    def __init__(self) -> None:
+        self._rows = GrowArray(_TRACK_DTYPE, capacity=1024)
+        self._state_codes: dict[str, int] = {s: i for i, s in enumerate(TRACK_STATES)}
+        self._states: list[str] = list(TRACK_STATES)
+
+    def _code(self, state: str) -> int:
+        code = self._state_codes.get(state)
+        if code is None:
+            code = len(self._states)
+            self._states.append(state)
+            self._state_codes[state] = code
+        return code
+
+    def append(self, row: Sequence[object]) -> None:
+        stamp, tid, state, x, y, th, ln, wd, vx, vy, in_m = row
+        self._rows.append((stamp, tid, self._code(str(state)), x, y, th, ln, wd, vx, vy, bool(in_m)))
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    def _tuple(self, r: np.void) -> tuple:
+        return (float(r["stamp"]), int(r["id"]), self._states[int(r["state"])], float(r["x"]), float(r["y"]),
+                float(r["heading"]), float(r["length"]), float(r["width"]), float(r["vx"]), float(r["vy"]),
+                bool(r["in_M"]))
+
+    def __getitem__(self, i):  # type: ignore[no-untyped-def, override]
+        if isinstance(i, slice):
+            return [self._tuple(r) for r in self._rows.view()[i]]
+        return self._tuple(self._rows.view()[i])
+
+    def __iter__(self) -> Iterator[tuple]:
+        for r in self._rows.view():
+            yield self._tuple(r)
+
+    def array(self) -> np.ndarray:
+        """The rows as a structured array (fields as in :data:`TRACK_COLUMNS`; ``state`` coded)."""
+        return self._rows.view()
+
+    def state_names(self) -> list[str]:
+        """State name of each code in :meth:`array`'s ``state`` field."""
+        return list(self._states)
+
+    @property
+    def nbytes(self) -> int:
+        return self._rows.nbytes
+
+
+__all__ = ["BitRows", "GrowArray", "TRACK_STATES", "TrackRows"]

@@ -1,0 +1,258 @@
+"""Issue 14: never lose a user's data, fail before the work, bounded memory.
+
+Every hostile input is generated here; each test reproduces one reported failure.
+"""
+
+from __future__ import annotations
+
+import gzip
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dynslam2d.cli import main
+from dynslam2d.io.rosbag import write_scan_bag
+from dynslam2d.sim import SimSource
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+
+
+def cli(capsys, *args: str) -> tuple[int, str, str]:
+    old = sys.argv
+    sys.argv = ["dynslam2d", *args]
+    code = 0
+    try:
+        main()
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    finally:
+        sys.argv = old
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def tree_digest(path: Path) -> dict[str, str]:
+    """Relative path -> sha1 of every file under ``path`` (or of ``path`` itself)."""
+    if path.is_file():
+        return {".": hashlib.sha1(path.read_bytes()).hexdigest()}
+    return {str(p.relative_to(path)): hashlib.sha1(p.read_bytes()).hexdigest() if p.is_file() else "dir"
+            for p in sorted(path.rglob("*"))}
+
+
+def sim_bag(path: Path, duration: float = 1.5) -> Path:
+    """A small LaserScan bag of the simulated paper scene."""
+    return write_scan_bag(path, SimSource("paper", duration=duration))
+
+
+def carmen_log(n: int = 40, beams: int = 90, t0: float = 1000.0) -> str:
+    """FLASER lines of a robot standing in a 4 m × 6 m room (ranges to the walls)."""
+    ang = -np.pi / 2 + np.pi * np.arange(beams) / (beams - 1)
+    with np.errstate(divide="ignore"):
+        rx = np.where(np.cos(ang) > 1e-9, 3.0 / np.cos(ang), np.inf)
+        ry = np.where(np.abs(np.sin(ang)) > 1e-9, 2.0 / np.abs(np.sin(ang)), np.inf)
+    r = np.minimum(rx, ry)
+    lines = []
+    for i in range(n):
+        rr = " ".join(f"{v:.3f}" for v in r)
+        t = t0 + 0.2 * i
+        lines.append(f"FLASER {beams} {rr} 0 0 0 0 0 0 {t:.6f} host {t:.6f}")
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------- item 1, 2: --write-bag
+
+
+def test_write_bag_never_deletes_an_existing_folder(tmp_path, capsys):
+    keep = tmp_path / "keep"
+    (keep / "sub").mkdir(parents=True)
+    (keep / "notes.txt").write_text("x\n")
+    before = tree_digest(keep)
+    for extra in ((), ("--force",)):
+        code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", str(tmp_path / "r"),
+                           "--write-bag", str(keep), "-q", *extra)
+        assert code == 2 and "--write-bag" in err and err.count("\n") == 1
+        assert tree_digest(keep) == before
+        assert not (tmp_path / "r").exists()  # refused before the work: no results folder either
+
+
+def test_write_bag_never_overwrites_the_input(tmp_path, capsys):
+    bag = sim_bag(tmp_path / "in.mcap")
+    before = tree_digest(bag)
+    for target in (bag, tmp_path / "." / "in.mcap"):
+        for extra in ((), ("--force",)):
+            code, _, err = cli(capsys, "run", str(bag), "--out", str(tmp_path / "r"), "--write-bag", str(target),
+                               "-q", *extra)
+            assert code == 2 and "input" in err, err
+            assert tree_digest(bag) == before
+
+
+def test_write_bag_force_replaces_only_its_own_bag_and_cleans_part_folders(tmp_path, capsys):
+    out_bag = tmp_path / "out.mcap"
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", str(tmp_path / "r1"),
+                       "--write-bag", str(out_bag), "-q")
+    assert code == 0, err
+    stale = tmp_path / ".out.mcap.x1y2.part"  # what a kill -9 during the bag write leaves
+    stale.mkdir()
+    (stale / "out.mcap").write_bytes(b"half")
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", str(tmp_path / "r2"),
+                       "--write-bag", str(out_bag), "-q")
+    assert code == 2 and "--force" in err  # exists: not replaced silently
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", str(tmp_path / "r3"),
+                       "--write-bag", str(out_bag), "-q", "--force")
+    assert code == 0, err
+    assert not stale.exists()
+    foreign = tmp_path / "foreign.mcap"
+    sim_bag(foreign, 0.5)  # a bag, but not one dynslam2d wrote (no /slam_pose)
+    before = tree_digest(foreign)
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", str(tmp_path / "r4"),
+                       "--write-bag", str(foreign), "-q", "--force")
+    assert code == 2 and "not a bag written by dynslam2d" in err
+    assert tree_digest(foreign) == before
+
+
+def test_write_bag_dot_is_one_clear_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", "r", "--write-bag", ".", "-q")
+    assert code == 2 and err.count("\n") == 1 and ".part" not in err and "--write-bag" in err
+
+
+# ---------------------------------------------------------------- item 3, 9: pipes and FIFOs
+
+
+def _run_module(args: list[str], **kw) -> subprocess.CompletedProcess:
+    env = dict(os.environ, PYTHONPATH=SRC)
+    return subprocess.run([sys.executable, "-m", "dynslam2d", *args], capture_output=True, env=env, timeout=300, **kw)
+
+
+@pytest.mark.parametrize("gz", [False, True])
+def test_carmen_log_through_a_pipe_loses_nothing(tmp_path, gz):
+    text = carmen_log(n=80, beams=180).encode()
+    assert len(text) > 4096 * 3  # the first 4 KB used to vanish while sniffing
+    data = gzip.compress(text) if gz else text
+    res = _run_module(["info", "/dev/stdin", "--json"], input=data)
+    assert res.returncode == 0, res.stderr.decode(errors="replace")
+    info = json.loads(res.stdout)
+    assert info["scans"] == 80 and info["origin"] == "/dev/stdin"
+
+
+def test_fifo_without_writer_fails_with_a_message(tmp_path, capsys, monkeypatch):
+    import dynslam2d.io.sources as sources
+
+    monkeypatch.setattr(sources, "STREAM_WAIT_S", 0.3)
+    fifo = tmp_path / "scans.fifo"
+    os.mkfifo(fifo)
+    t = time.monotonic()
+    code, _, err = cli(capsys, "info", str(fifo))
+    assert code == 2 and "no data within" in err and err.count("\n") == 1
+    assert time.monotonic() - t < 10
+
+
+def test_fifo_with_a_writer_is_read_whole(tmp_path, capsys):
+    fifo = tmp_path / "log.fifo"
+    os.mkfifo(fifo)
+    text = carmen_log(n=30).encode()
+
+    def writer() -> None:
+        with open(fifo, "wb") as fh:
+            fh.write(text)
+
+    th = threading.Thread(target=writer)
+    th.start()
+    code, out, err = cli(capsys, "info", str(fifo), "--json")
+    th.join(5)
+    assert code == 0, err
+    assert json.loads(out)["scans"] == 30
+
+
+# ---------------------------------------------------------------- item 5: the same --out twice
+
+
+def test_second_run_into_the_same_out_leaves_no_stale_files(tmp_path, capsys):
+    out = tmp_path / "r"
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1.5", "--out", str(out), "--animate",
+                       "--frame-step", "10", "-q")
+    assert code == 0, err
+    assert {"errors.png", "metrics.json", "run.gif"} <= {p.name for p in out.iterdir()}
+    bag = sim_bag(tmp_path / "in.mcap")
+    code, _, err = cli(capsys, "run", str(bag), "--out", str(out), "-q")
+    assert code == 2 and "--force" in err  # an earlier results folder is not replaced silently
+    code, _, err = cli(capsys, "run", str(bag), "--out", str(out), "-q", "--force")
+    assert code == 0, err
+    names = {p.name for p in out.iterdir()}
+    assert not names & {"errors.png", "metrics.json", "run.gif"}  # no file of the first run survives
+    assert json.loads((out / "run.json").read_text())["status"] == "complete"
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no staging left
+
+
+def test_foreign_non_empty_out_folder_is_refused_untouched(tmp_path, capsys):
+    out = tmp_path / "thesis"
+    out.mkdir()
+    (out / "chapter1.tex").write_text("precious\n")
+    before = tree_digest(out)
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", str(out), "-q", "--force")
+    assert code == 2 and "not a dynslam2d results folder" in err
+    assert tree_digest(out) == before
+
+
+# ---------------------------------------------------------------- item 4: interrupts and checkpoints
+
+
+def test_ctrl_c_leaves_a_checkpoint_and_says_where(tmp_path, capsys, monkeypatch):
+    import dynslam2d.pipeline as pipeline
+
+    real = pipeline.Pipeline.process
+    calls = {"n": 0}
+
+    def process(self, scan):
+        calls["n"] += 1
+        if calls["n"] == 31:
+            raise KeyboardInterrupt
+        return real(self, scan)
+
+    monkeypatch.setattr(pipeline.Pipeline, "process", process)
+    out = tmp_path / "r"
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "3", "--out", str(out), "-q",
+                       "--write-bag", str(tmp_path / "b.mcap"))
+    assert code == 130
+    assert err.strip().splitlines()[-1] == f"interrupted after 30 scans, partial results in {out}"
+    marker = json.loads((out / "run.json").read_text())
+    assert marker["status"] == "incomplete" and marker["scans"] == 30
+    assert json.loads((out / "summary.json").read_text())["status"] == "incomplete"
+    traj = [ln for ln in (out / "trajectory.tum").read_text().splitlines() if not ln.startswith("#")]
+    assert len(traj) == 30 and (out / "map.yaml").exists() and (out / "map.pgm").exists()
+    assert not (tmp_path / "b.mcap").exists()
+    assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".part")] == []
+
+
+def test_kill_9_leaves_the_last_checkpoint(tmp_path):
+    out = tmp_path / "r"
+    env = dict(os.environ, PYTHONPATH=SRC)
+    proc = subprocess.Popen([sys.executable, "-m", "dynslam2d", "run", "sim:paper", "--duration", "60", "--out", str(out),
+                             "-q", "--checkpoint-scans", "20"], env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline:
+            m = out / "run.json"
+            if m.exists() and json.loads(m.read_text()).get("scans", 0) >= 40:
+                break
+            time.sleep(0.2)
+        else:
+            pytest.fail("no checkpoint appeared")
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    marker = json.loads((out / "run.json").read_text())
+    assert marker["status"] == "incomplete"
+    traj = [ln for ln in (out / "trajectory.tum").read_text().splitlines() if not ln.startswith("#")]
+    assert len(traj) == marker["scans"] >= 40
+    assert (out / "map.yaml").exists()
