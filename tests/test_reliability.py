@@ -256,3 +256,165 @@ def test_kill_9_leaves_the_last_checkpoint(tmp_path):
     traj = [ln for ln in (out / "trajectory.tum").read_text().splitlines() if not ln.startswith("#")]
     assert len(traj) == marker["scans"] >= 40
     assert (out / "map.yaml").exists()
+
+
+# ---------------------------------------------------------------- item 10: every output checked first
+
+
+@pytest.mark.parametrize("make_out", [
+    lambda p: (p / "file.txt").write_text("x") and p / "file.txt",   # an existing file
+    lambda p: (p / "file.txt").write_text("x") and p / "file.txt" / "sub",  # below a file
+    lambda p: Path("/proc/dynslam2d-test"),
+    lambda p: Path("/dev/null"),
+])
+def test_bad_out_fails_before_the_first_scan(tmp_path, capsys, monkeypatch, make_out):
+    import dynslam2d.pipeline as pipeline
+
+    out = make_out(tmp_path)
+    monkeypatch.setattr(pipeline, "run", lambda *a, **k: pytest.fail("mapping started"))
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", str(out), "-q")
+    assert code == 2 and "--out" in err and err.count("\n") == 1 and "Traceback" not in err
+    code, _, err = cli(capsys, "simulate", "static", "--duration", "1", "--out", str(out))
+    assert code == 2 and "--out" in err and err.count("\n") == 1
+
+
+def test_bad_write_bag_and_gt_fail_before_the_first_scan(tmp_path, capsys, monkeypatch):
+    import dynslam2d.pipeline as pipeline
+
+    monkeypatch.setattr(pipeline, "run", lambda *a, **k: pytest.fail("mapping started"))
+    (tmp_path / "f").write_text("x")
+    for args, what in (
+        (("--write-bag", str(tmp_path / "f" / "b.mcap")), "--write-bag"),
+        (("--write-bag", "/proc/nope/b.mcap"), "--write-bag"),
+        (("--gt", str(tmp_path / "nogt")), "nogt"),
+    ):
+        code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", str(tmp_path / "r"), "-q", *args)
+        assert code == 2 and what in err and err.count("\n") == 1, err
+        assert not (tmp_path / "r").exists()
+
+
+# ---------------------------------------------------------------- item 11: user text is not markup
+
+
+def test_paths_with_rich_markup_characters_print_plainly(tmp_path, capsys):
+    d = tmp_path / "odd[" / "]name"
+    d.mkdir(parents=True)
+    log = d / "log[bold].clf"
+    log.write_text(carmen_log(n=20))
+    code, out, err = cli(capsys, "info", str(log))
+    assert code == 0, err
+    code, _, err = cli(capsys, "info", str(d / "missing[/].clf"))
+    assert code == 2 and "missing[/].clf" in err
+    out_dir = tmp_path / "r[/]x"
+    code, out, err = cli(capsys, "run", str(log), "--out", str(out_dir), "--map-resolution", "0.1")
+    assert code == 0, err
+    assert str(out_dir) in out.replace("\n", "")
+
+
+# ---------------------------------------------------------------- item 12, 19: one-line messages
+
+
+def test_wrong_message_definition_on_a_laserscan_topic_is_one_line(tmp_path, capsys):
+    import struct
+
+    from rosbags.rosbag1 import Writer
+
+    path = tmp_path / "wrong.bag"
+    w = Writer(path)
+    w.open()
+    c = w.add_connection("/scan", "sensor_msgs/msg/LaserScan", msgdef="float64 data\n",
+                         md5sum="fdb28210bfa9d7c91146260178d9a584")
+    for i in range(3):
+        w.write(c, 10**9 * (i + 1), struct.pack("<d", 1.0 + i))
+    w.close()
+    code, _, err = cli(capsys, "info", str(path))
+    assert code == 2 and err.count("\n") == 1 and "not a valid sensor_msgs/LaserScan" in err
+
+
+@pytest.mark.parametrize("content, expect", [
+    (b"slam:\n  map_resolution: 0.1 # \xe9t\xe9\n", "not UTF-8"),
+    (b"slam:\n  map_resolution: [0.1\n", "not valid YAML"),
+    (b"slam:\n  map_resolution: .nan\n", "finite number"),
+])
+def test_config_file_errors_are_one_line(tmp_path, capsys, content, expect):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_bytes(content)
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--config", str(cfg), "--out", str(tmp_path / "r"))
+    assert code == 2 and expect in err and err.count("\n") == 1 and "c.yaml" in err
+    assert not (tmp_path / "r").exists()
+
+
+def test_option_errors_are_one_line(tmp_path, capsys):
+    bag = sim_bag(tmp_path / "in.mcap", 0.5)
+    for args, expect in (
+        (("sim:paper", "--duration", "1", "--map-resolution", "nan"), "--map-resolution must be a finite number"),
+        ((str(bag), "--topic", ""), "--topic is empty"),
+        ((str(bag), "--duration", "3"), "sim:<scenario> inputs only"),
+        ((str(bag), "--seed", "3"), "sim:<scenario> inputs only"),
+    ):
+        code, _, err = cli(capsys, "run", *args, "--out", str(tmp_path / "r"))
+        assert code == 2 and expect in err and err.count("\n") == 1, err
+    code, _, err = cli(capsys, "info", str(bag), "--seed", "1")
+    assert code == 2 and "sim:<scenario> inputs only" in err
+
+
+def test_truncated_ros1_bag_suggests_reindex(tmp_path, capsys):
+    bag = write_scan_bag(tmp_path / "t.bag", SimSource("paper", duration=1.0))
+    data = bag.read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    code, _, err = cli(capsys, "run", str(cut), "--out", str(tmp_path / "r"), "-q")
+    assert code == 2 and "rosbag reindex" in err and err.count("\n") == 1
+
+
+# ---------------------------------------------------------------- item 13, 14: maps that cannot be built
+
+
+def test_absurd_map_resolution_is_an_error_not_a_1x1_map(tmp_path, capsys):
+    for res in ("1e-3", "1e-4"):
+        code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--map-resolution", res,
+                           "--out", str(tmp_path / "r"), "-q")
+        assert code == 2 and "--map-resolution" in err and err.count("\n") == 1, err
+        assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("ranges", ["0.000", "nan", "inf"])
+def test_recording_without_usable_returns_exits_non_zero(tmp_path, capsys, ranges):
+    lines = [f"FLASER 90 {' '.join([ranges] * 90)} 0 0 0 0 0 0 {100 + 0.2 * i:.3f} h {100 + 0.2 * i:.3f}"
+             for i in range(15)]
+    log = tmp_path / "empty.clf"
+    log.write_text("\n".join(lines) + "\n")
+    code, _, err = cli(capsys, "run", str(log), "--out", str(tmp_path / "r"), "-q")
+    assert code == 2 and "usable returns" in err and err.count("\n") == 1
+    assert not (tmp_path / "r").exists()
+
+
+# ---------------------------------------------------------------- item 17: eval refuses what it cannot score
+
+
+def test_eval_ate_refuses_fewer_than_three_poses(tmp_path, capsys):
+    ref = tmp_path / "ref.tum"
+    est = tmp_path / "est.tum"
+    ref.write_text("1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 0 1\n")
+    est.write_text("1.0 0 0 0 0 0 0 1\n2.0 1.5 0 0 0 0 0 1\n")
+    code, _, err = cli(capsys, "eval", "ate", str(ref), str(est))
+    assert code == 2 and "at least 3" in err and err.count("\n") == 1
+
+
+def test_eval_relations_refuses_a_tum_file(tmp_path, capsys):
+    est = tmp_path / "est.tum"
+    yaw = np.linspace(0, 2, 10)
+    est.write_text("".join(f"{100 + i:.1f} {i * 0.5:.2f} 0 0 0 0 {np.sin(y / 2):.6f} {np.cos(y / 2):.6f}\n"
+                           for i, y in enumerate(yaw)))
+    code, _, err = cli(capsys, "eval", "relations", str(est), str(est))
+    assert code == 2 and "TUM trajectory" in err and err.count("\n") == 1
+
+
+# ---------------------------------------------------------------- item 6: simulator duration
+
+
+def test_huge_simulated_duration_is_refused_at_once(capsys):
+    t = time.monotonic()
+    code, _, err = cli(capsys, "info", "sim:paper", "--duration", "1e7")
+    assert code == 2 and "limit" in err and err.count("\n") == 1
+    assert time.monotonic() - t < 20

@@ -84,6 +84,9 @@ def info(
     from dynslam2d.io.sources import open_source
     from dynslam2d.io.summary import summarize_source
 
+    _check_sim_only(input, seed, duration)
+    if topic is not None and not topic.strip():
+        raise DynSlamError(f"--topic is empty; give the LaserScan topic name (see 'dynslam2d info {input}')")
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad)
     with console.status(Text(f"reading {input} …"), spinner="dots") as status:
         summary = summarize_source(source, progress=lambda n: status.update(Text(f"reading {input} … {n} scans")))
@@ -135,6 +138,7 @@ def simulate(
     dropout: Annotated[Optional[float], typer.Option("--dropout", min=0.0, max=1.0, help="Probability a beam returns nothing [0].")] = None,
     range_max: Annotated[Optional[float], typer.Option("--range-max", min=0.1, help="Sensor max range, m [20].")] = None,
     list_scenarios: Annotated[bool, typer.Option("--list", help="List the scenarios and exit.")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Replace an earlier output folder of dynslam2d at --out (never anything else).")] = False,
 ) -> None:
     """Simulate a scene: scans as a bag, ground truth (map, trajectory, labels, movers), an overview PNG.
 
@@ -153,13 +157,25 @@ def simulate(
             table.add_row(name, f"{spec.duration:g} s", str(spec.seed), spec.description)
         console.print(table)
         return
+    from dynslam2d.io.outputs import plan_results_folder, write_marker
+
     out = out or _default_out(f"sim-{scenario}")
+    folder = plan_results_folder(out, force=force)  # before simulating: a bad --out fails at once
     with console.status(Text(f"simulating {scenario} …"), spinner="dots"):
         sensor = {"beams": beams, "fov": math.radians(fov_deg) if fov_deg else None, "rate_hz": rate,
                   "noise_sigma": noise, "dropout": dropout, "range_max": range_max}
         sim = run_simulation(scenario, seed=seed, duration=duration, **{k: v for k, v in sensor.items() if v is not None})
     with console.status(Text(f"writing {out} …"), spinner="dots"):
-        paths = write_simulation(sim, out, map_resolution=resolution, storage=storage)
+        work = folder.work
+        try:
+            folder.start(input=f"sim:{scenario}")
+            paths = write_simulation(sim, work, map_resolution=resolution, storage=storage)
+            write_marker(work, "complete", input=f"sim:{scenario}", kind="simulation")
+            folder.finish()
+        except BaseException:
+            folder.discard()
+            raise
+        paths = {k: out / Path(v).relative_to(work) for k, v in paths.items()}
     sc = sim.scenario
     console.print(Text.assemble(
         "simulated ", (sc.name, "bold"), f" (seed {sc.seed}): {len(sim.scans)} scans over {sc.duration:g} s, "
@@ -240,6 +256,13 @@ def run(
 
     if viewer not in ("none", "rerun"):
         raise DynSlamError(f"--viewer must be 'none' or 'rerun', got {viewer!r}")
+    for name, value in (("--map-resolution", map_resolution), ("--update-distance", update_distance),
+                        ("--update-angle", update_angle), ("--laser-min-dist", laser_min_dist),
+                        ("--laser-max-dist", laser_max_dist), ("--map-period", map_period)):
+        if value is not None and not math.isfinite(value):
+            raise DynSlamError(f"{name} must be a finite number, got {value}")
+    if topic is not None and not topic.strip():
+        raise DynSlamError(f"--topic is empty; give the LaserScan topic name (see 'dynslam2d info {input}')")
     cfg = load_config(config) if config else Config()
     cfg = with_overrides(cfg, {"slam": {
         "map_resolution": map_resolution, "map_levels": map_levels,
@@ -361,7 +384,8 @@ def _check_sim_only(input: str, seed: Optional[int], duration: Optional[float]) 
     if not input.startswith("sim:"):
         given = [name for name, v in (("--seed", seed), ("--duration", duration)) if v is not None]
         if given:
-            raise DynSlamError(f"{' and '.join(given)} apply to sim:<scenario> inputs only, not to {input}; drop the option")
+            verb = "applies" if len(given) == 1 else "apply"
+            raise DynSlamError(f"{' and '.join(given)} {verb} to sim:<scenario> inputs only, not to {input}; drop the option")
 
 
 def _input_paths(input: str, *more: Optional[Path]) -> list[Path]:
@@ -372,9 +396,12 @@ def _input_paths(input: str, *more: Optional[Path]) -> list[Path]:
 
 def _check_map_size(source: Any, cfg: Any) -> None:
     """Refuse a map that cannot be built, before the work: a non-finite cell size, or one at
-    which the area the first scan sees already exceeds the map memory budget (4 bytes per cell
-    is a lower bound of what a cell costs)."""
+    which the area the first scan covers already exceeds the map memory budget
+    (``slam.max_map_memory_mb``; the estimate is a lower bound: bounding box of the first
+    scan's returns, every level, no growth margin)."""
     import numpy as np
+
+    from dynslam2d.slam import grid as slam_grid
 
     res = cfg.slam.map_resolution
     if not (isinstance(res, float) and math.isfinite(res) and res > 0):
@@ -385,14 +412,15 @@ def _check_map_size(source: Any, cfg: Any) -> None:
     first = next(iter(source), None)  # peek: sources can be iterated again from the start
     if first is None:
         return
-    r = first.ranges[first.valid_mask()]
-    r = r[r <= cfg.slam.laser_max_dist]
-    reach = float(r.max()) if r.size else 0.0
-    need = (2.0 * reach / res) ** 2 * 4.0
+    valid = first.valid_mask() & (first.ranges <= cfg.slam.laser_max_dist)
+    pts = np.vstack((first.points(valid), np.zeros((1, 2))))
+    w, h = (pts.max(axis=0) - pts.min(axis=0)) / res + 1.0
+    levels = sum(4.0 ** -k for k in range(int(cfg.slam.map_levels)))
+    need = float(w * h) * levels * float(getattr(slam_grid, "_BYTES_PER_CELL", 4))
     if need > budget:
         raise DynSlamError(
-            f"--map-resolution {res:g} m: the first scan alone (returns up to {reach:.1f} m) needs "
-            f"{need / 1e6:.3g} MB of map, over the budget of {budget / 1e6:.0f} MB (slam.max_map_memory_mb); "
+            f"--map-resolution {res:g} m: the area the first scan sees ({w * res:.1f} m × {h * res:.1f} m) alone "
+            f"needs {need / 1e6:.3g} MB of map, over the budget of {budget / 1e6:.0f} MB (slam.max_map_memory_mb); "
             f"use a coarser resolution such as 0.05"
         )
 
@@ -635,6 +663,10 @@ def eval_stationary(
     _emit(score.as_dict(), as_json, _stats_table(f"{run_dir} (stationary sensor)", rows))
 
 
+#: Fewest associated poses an ATE is computed from (two points fit any SE(2) alignment exactly).
+MIN_ATE_POSES = 3
+
+
 @eval_app.command("ate")
 def eval_ate(
     reference: Annotated[Path, typer.Argument(help="Reference: TUM file, or a bag with --ref-topic.")],
@@ -657,6 +689,11 @@ def eval_ate(
 
     ref = load_reference(reference, ref_topic, Pose2D(*sensor_offset))
     res = ate(ref, read_tum(_estimate_path(estimate)), align=not no_align, max_dt=max_dt)
+    if res.n < MIN_ATE_POSES:
+        raise DynSlamError(
+            f"{estimate}: only {res.n} pose(s) associate with {reference} within --max-dt {max_dt:g} s; an ATE needs "
+            f"at least {MIN_ATE_POSES} (check the stamps' clock, or raise --max-dt)"
+        )
     a = res.alignment
     out = {"ate": res.trans.as_dict(), "rotation_rad": res.rot.as_dict(), "alignment": [a.x, a.y, a.theta]}
     rows = [(k, f"{getattr(res.trans, k):.4f} m") for k in ("rmse", "mean", "median", "std", "max")]

@@ -8,6 +8,7 @@ and ``config.yaml`` in every results folder holds the full effective values.
 
 from __future__ import annotations
 
+import math
 import os
 from typing import Any
 
@@ -37,6 +38,10 @@ def _describe(err: ValidationError) -> str:
     parts = []
     for e in err.errors():
         where = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        value = e.get("input")
+        if isinstance(value, float) and not math.isfinite(value):
+            parts.append(f"{where}: must be a finite number, got {value}")
+            continue
         parts.append(f"{where}: {e['msg']}")
     return "; ".join(parts)
 

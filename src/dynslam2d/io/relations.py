@@ -79,6 +79,11 @@ def read_relations(path: str | os.PathLike[str]) -> Relations:
     if not rows:
         raise DynSlamError(f"{p}: no relations in file")
     a = np.asarray(rows, dtype=np.float64)
+    if looks_like_tum(a):
+        raise DynSlamError(
+            f"{p}: looks like a TUM trajectory (stamp x y z qx qy qz qw with unit quaternions), not relations "
+            f"(t1 t2 x y z roll pitch yaw); pass the relations file"
+        )
     return Relations(
         t1=a[:, 0].copy(),
         t2=a[:, 1].copy(),
@@ -88,6 +93,20 @@ def read_relations(path: str | os.PathLike[str]) -> Relations:
         line=np.asarray(lines, dtype=np.int64),
         origin=str(p),
     )
+
+
+def looks_like_tum(a: np.ndarray) -> bool:
+    """True if (n, 8) rows read as relations are a TUM trajectory instead.
+
+    In TUM rows the last four numbers are a unit quaternion; in relations they are
+    ``z roll pitch yaw`` (z, roll, pitch ~0), whose norm is 1 only where |yaw| happens
+    to be ~1 rad. A TUM file also has its stamps in column 1 only: t2 (column 2) is not
+    ≥ t1 everywhere. Both must hold.
+    """
+    if a.shape[0] < 2:
+        return False
+    unit = np.abs(np.linalg.norm(a[:, 4:8], axis=1) - 1.0) < 1e-3
+    return bool(unit.all() and not np.all(a[:, 1] >= a[:, 0]))
 
 
 def _is_float(text: str) -> bool:

@@ -34,7 +34,7 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 
@@ -195,7 +195,8 @@ def _open_bag(path: Path) -> Iterator[tuple[Any, _BagInput]]:
         except DynSlamError:
             raise
         except Exception as err:  # rosbags raises many types (ReaderError, struct.error, apsw, …)
-            raise DynSlamError(f"{path}: cannot open {inp.format} ({type(err).__name__}: {err})") from err
+            hint = "; if it was cut short, 'rosbag reindex' may repair it" if inp.kind == "ros1" else ""
+            raise DynSlamError(f"{path}: cannot open {inp.format} ({type(err).__name__}: {_short(err)}){hint}") from err
         try:
             yield reader, inp
         finally:
@@ -227,27 +228,55 @@ def _iter_raw(
     *,
     start_ns: int | None = None,
     first_index: int = 0,
+    on_bad: Callable[[int], None] | None = None,
 ) -> Iterator[tuple[int, int, Any]]:
     """Yield (index, bag time ns, deserialised message) of ``topic`` in the bag's time order.
 
     ``start_ns`` skips messages recorded before that bag time; ``first_index`` is then
-    the index of the first message yielded (used in error messages only).
+    the index of the first message yielded (used in error messages only). A message
+    that cannot be decoded raises DynSlamError, or, with ``on_bad``, is passed over
+    after calling ``on_bad(index)``.
     """
     it = reader.messages(connections=connections, start=start_ns)
     index = first_index
     while True:
         try:
             conn, t_ns, raw = next(it)
-            msg = reader.deserialize(raw, conn.msgtype)
         except StopIteration:
             return
         except Exception as err:
+            hint = "; try 'rosbag reindex' on it" if path.suffix == ".bag" or _is_ros1(path) else ""
             raise DynSlamError(
                 f"{path}: cannot read message index {index} of topic {topic} "
-                f"({type(err).__name__}: {err}); the bag looks corrupt or truncated"
+                f"({type(err).__name__}: {_short(err)}); the bag looks corrupt or truncated{hint}"
             ) from err
+        try:
+            msg = reader.deserialize(raw, conn.msgtype)
+        except Exception as err:
+            if on_bad is None:
+                raise DynSlamError(
+                    f"{path}: cannot decode message index {index} of topic {topic} "
+                    f"({type(err).__name__}: {_short(err)}); use --skip-bad to drop such messages"
+                ) from err
+            on_bad(index)
+            index += 1
+            continue
         yield index, t_ns, msg
         index += 1
+
+
+def _short(err: BaseException, limit: int = 160) -> str:
+    """An exception's text on one line, at most ``limit`` characters."""
+    text = " ".join(str(err).split())
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+def _is_ros1(path: Path) -> bool:
+    try:
+        with path.open("rb") as fh:
+            return fh.read(13) == b"#ROSBAG V2.0\n"
+    except OSError:
+        return False
 
 
 def list_topics(path: str | os.PathLike[str]) -> dict[str, str]:
@@ -262,9 +291,9 @@ def list_topics(path: str | os.PathLike[str]) -> dict[str, str]:
 
 def _scan_from_msg(msg: Any, path: Path, topic: str, index: int) -> Scan:
     """LaserScan message → Scan (every field kept; empty intensities → None)."""
-    stamp = ros_time_to_stamp(msg.header.stamp.sec, msg.header.stamp.nanosec)
-    intensities = msg.intensities if len(msg.intensities) else None
     try:
+        stamp = ros_time_to_stamp(msg.header.stamp.sec, msg.header.stamp.nanosec)
+        intensities = msg.intensities if len(msg.intensities) else None
         return Scan(
             stamp=stamp,
             angle_min=float(msg.angle_min),
@@ -280,6 +309,12 @@ def _scan_from_msg(msg: Any, path: Path, topic: str, index: int) -> Scan:
         )
     except DynSlamError as err:
         raise DynSlamError(f"{path}: topic {topic}, message index {index}: {err}") from err
+    except (AttributeError, TypeError, ValueError, OverflowError) as err:
+        # The connection declares LaserScan but its message definition is another one.
+        raise DynSlamError(
+            f"{path}: topic {topic}, message index {index}: not a valid sensor_msgs/LaserScan "
+            f"({type(err).__name__}: {_short(err)}); the bag's message definition for this topic is wrong"
+        ) from err
 
 
 class RosbagSource:
@@ -289,6 +324,8 @@ class RosbagSource:
         path: a ROS 1 ``.bag``, a ROS 2 bag folder, a bare ``.mcap`` or ``.db3`` file.
         topic: the LaserScan topic; may be omitted when the bag has exactly one. A
             missing/extra leading ``/`` is tolerated (``scan`` finds ``/scan``).
+        skip_bad: pass over messages that cannot be decoded or are no valid LaserScan,
+            counting them in ``meta.extra["skipped_messages"]``, instead of raising.
 
     Scans come in the bag's time order (record time), each with ``stamp`` =
     ``header.stamp``. ``meta`` is filled on construction from the bag index and the
@@ -305,16 +342,24 @@ class RosbagSource:
             message that contradicts itself (named by its index) while iterating.
     """
 
-    def __init__(self, path: str | os.PathLike[str], topic: str | None = None) -> None:
+    def __init__(self, path: str | os.PathLike[str], topic: str | None = None, skip_bad: bool = False) -> None:
         self.path = Path(path)
+        self.skip_bad = skip_bad
+        self.skipped_messages = 0
         with _open_bag(self.path) as (reader, inp):
             topics = _topic_types(reader)
             self.topic = self._choose_topic(topics, topic)
             info = reader.topics[self.topic]
             count = int(info.msgcount)
             first: Scan | None = None
-            for _, _, msg in _iter_raw(reader, self.path, self.topic, info.connections):
-                first = _scan_from_msg(msg, self.path, self.topic, 0)
+            on_bad = (lambda i: None) if skip_bad else None
+            for index, _, msg in _iter_raw(reader, self.path, self.topic, info.connections, on_bad=on_bad):
+                try:
+                    first = _scan_from_msg(msg, self.path, self.topic, index)
+                except DynSlamError:
+                    if not skip_bad:
+                        raise
+                    continue
                 break
             rate = None
             if first is not None and count > 1:
@@ -358,6 +403,10 @@ class RosbagSource:
                     f"choose one with --topic"
                 )
             return next(iter(scans))
+        if not topic.strip():
+            raise DynSlamError(
+                f"{self.path}: --topic is empty; give one of the LaserScan topics: {', '.join(scans)}"
+            )
         name = _resolve_topic(topic, topics)
         if name is None or topics[name] != LASERSCAN:
             what = "does not exist" if name is None else f"is {topics[name]}, not a LaserScan"
@@ -388,8 +437,22 @@ class RosbagSource:
             info = reader.topics.get(self.topic)
             if info is None:  # the file changed since construction
                 raise DynSlamError(f"{self.path}: topic {self.topic} is gone")
-            for index, _, msg in _iter_raw(reader, self.path, self.topic, info.connections):
-                yield _scan_from_msg(msg, self.path, self.topic, index)
+            self.skipped_messages = 0
+            on_bad = self._count_bad if self.skip_bad else None
+            for index, _, msg in _iter_raw(reader, self.path, self.topic, info.connections, on_bad=on_bad):
+                try:
+                    scan = _scan_from_msg(msg, self.path, self.topic, index)
+                except DynSlamError:
+                    if not self.skip_bad:
+                        raise
+                    self._count_bad(index)
+                    continue
+                yield scan
+
+    def _count_bad(self, index: int) -> None:
+        """--skip-bad: one malformed message passed over (counted in ``meta.extra``)."""
+        self.skipped_messages += 1
+        self.meta.extra["skipped_messages"] = self.skipped_messages
 
 
 # --------------------------------------------------------------------------- poses

@@ -194,7 +194,9 @@ class CheckedSource:
             n += 1
             yield scan
         if n == 0:
-            raise DynSlamError(f"{self.meta.origin}: holds no usable laser scans")
+            dropped = {k: self.meta.extra.get(k) for k in ("skipped_lines", "skipped_messages", "skipped_scans")}
+            why = ", ".join(f"{v} {k.replace('skipped_', '')} skipped" for k, v in dropped.items() if v)
+            raise DynSlamError(f"{self.meta.origin}: holds no usable laser scans" + (f" ({why})" if why else ""))
 
 
 def open_source(
@@ -260,5 +262,5 @@ def _open(
     else:
         from dynslam2d.io.rosbag import RosbagSource
 
-        inner = RosbagSource(text, topic=topic)
+        inner = RosbagSource(text, topic=topic, skip_bad=skip_bad)
     return CheckedSource(inner, skip_bad=skip_bad)

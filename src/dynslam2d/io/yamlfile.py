@@ -21,8 +21,19 @@ def read_yaml_mapping(path: str | os.PathLike[str], what: str) -> dict[str, Any]
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except FileNotFoundError as exc:
         raise DynSlamError(f"{path}: {what} file not found") from exc
+    except UnicodeDecodeError as exc:
+        raise DynSlamError(
+            f"{path}: {what} file is not UTF-8 text (byte {exc.start}: {exc.object[exc.start:exc.start + 1]!r}); "
+            f"save it as UTF-8"
+        ) from None
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark
+        where = f":{mark.line + 1}:{mark.column + 1}" if mark is not None else ""
+        problem = exc.problem or exc.context or "syntax error"
+        raise DynSlamError(f"{path}{where}: cannot read {what}: not valid YAML ({problem}); fix the syntax there") from None
     except (OSError, yaml.YAMLError) as exc:
-        raise DynSlamError(f"{path}: cannot read {what} ({exc})") from exc
+        text = " ".join(str(getattr(exc, "strerror", None) or exc).split())
+        raise DynSlamError(f"{path}: cannot read {what} ({text})") from exc
     if data is None:
         return {}
     if not isinstance(data, dict):

@@ -306,6 +306,12 @@ SCENARIOS: dict[str, ScenarioSpec] = {
 }
 
 
+#: Longest simulated span, s: motion, mover states and labels are precomputed for every scan.
+MAX_SIM_DURATION_S = 3600.0
+#: Most beams (scans × beams per scan) one simulation holds as ground truth (6 bytes each).
+MAX_SIM_BEAMS = 100_000_000
+
+
 def build_scenario(
     name: str,
     seed: int | None = None,
@@ -328,6 +334,11 @@ def build_scenario(
         raise DynSlamError(f"unknown scenario {name!r}; available: {', '.join(sorted(SCENARIOS))}")
     if duration is not None and not duration > 0:
         raise DynSlamError(f"scenario {name!r}: duration must be > 0 s, got {duration}")
+    if duration is not None and not duration <= MAX_SIM_DURATION_S:
+        raise DynSlamError(
+            f"scenario {name!r}: --duration {duration:g} s is over the simulator's limit of {MAX_SIM_DURATION_S:g} s "
+            f"(motion and ground truth are precomputed); simulate a shorter span"
+        )
     scenario = spec(seed, duration)
     overrides = {k: v for k, v in dict(beams=beams, fov=fov, rate_hz=rate_hz, noise_sigma=noise_sigma,
                                        dropout=dropout, range_min=range_min, range_max=range_max).items()
@@ -338,4 +349,10 @@ def build_scenario(
         except ValueError as exc:
             raise DynSlamError(f"scenario {name!r}: invalid sensor settings: {exc}") from exc
         scenario = dataclasses.replace(scenario, lidar=lidar)
+    beams_total = scenario.n_scans * scenario.lidar.beams
+    if beams_total > MAX_SIM_BEAMS:
+        raise DynSlamError(
+            f"scenario {name!r}: {scenario.n_scans} scans × {scenario.lidar.beams} beams is over the simulator's "
+            f"limit of {MAX_SIM_BEAMS:.0e} beams (ground truth is held in memory); shorten --duration or lower the rate"
+        )
     return scenario
