@@ -418,3 +418,172 @@ def test_huge_simulated_duration_is_refused_at_once(capsys):
     code, _, err = cli(capsys, "info", "sim:paper", "--duration", "1e7")
     assert code == 2 and "limit" in err and err.count("\n") == 1
     assert time.monotonic() - t < 20
+
+
+# ---------------------------------------------------------------- item 15, 16: --skip-bad and stamp repairs
+
+
+def test_skip_bad_counts_every_kind_of_skip_in_run(tmp_path, capsys):
+    good = carmen_log(n=40).splitlines()
+    lines = list(good)
+    lines[5] = "FLASER 90 1 2 3"  # malformed
+    lines[9] = "FLASER 90 junk"  # malformed
+    lines[20] = good[19]  # same stamp as the previous scan: nudged (repaired), not dropped
+    log = tmp_path / "bad.clf"
+    log.write_text("\n".join(lines) + "\n")
+    code, _, err = cli(capsys, "run", str(log), "--out", str(tmp_path / "r"), "-q")
+    assert code == 2 and ":6:" in err  # without --skip-bad the first bad line stops the run
+    code, out, err = cli(capsys, "run", str(log), "--out", str(tmp_path / "r"), "--skip-bad", "--map-resolution", "0.1")
+    assert code == 0, err
+    flat = " ".join(out.split())
+    assert "2 malformed lines" in flat and "nudged" in flat.replace("stamps did not increase", "nudged")
+    summary = json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert summary["input_skipped"]["malformed_lines"] == 2 and summary["input_skipped_total"] == 2
+    assert summary["stamp_repairs"]["nudged_stamps"] == 1
+    assert 0 < summary["stamp_repairs"]["largest_nudge_s"] <= 2e-6
+    assert summary["scans"] == 38
+
+
+def test_skip_bad_skips_malformed_ros_messages_and_counts_them(tmp_path, capsys):
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from dynslam2d.io.rosbag import ros_time_to_stamp  # noqa: F401  (same clock as the reader)
+
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    LaserScan = ts.types["sensor_msgs/msg/LaserScan"]
+    Header = ts.types["std_msgs/msg/Header"]
+    Time = ts.types["builtin_interfaces/msg/Time"]
+    path = tmp_path / "mixed.bag"
+    w = Writer(path)
+    w.open()
+    c = w.add_connection("/scan", LaserScan.__msgtype__, typestore=ts)
+    src = list(SimSource("static", duration=1.0))
+    bad = {3, 7}
+    for i, scan in enumerate(src):
+        t_ns = int(round(scan.stamp * 1e9)) + 10**9
+        if i in bad:
+            w.write(c, t_ns, b"\x01\x02\x03")  # cut-off message
+            continue
+        msg = LaserScan(Header(seq=i, stamp=Time(sec=t_ns // 10**9, nanosec=t_ns % 10**9), frame_id="laser"),
+                        np.float32(scan.angle_min), np.float32(scan.angle_max), np.float32(scan.angle_increment),
+                        np.float32(0), np.float32(0), np.float32(scan.range_min), np.float32(scan.range_max),
+                        scan.ranges.astype(np.float32), np.zeros(0, dtype=np.float32))
+        w.write(c, t_ns, ts.serialize_ros1(msg, LaserScan.__msgtype__))
+    w.close()
+    code, _, err = cli(capsys, "run", str(path), "--out", str(tmp_path / "r"), "-q")
+    assert code == 2 and "message index 3" in err and "--skip-bad" in err
+    code, out, err = cli(capsys, "run", str(path), "--out", str(tmp_path / "r"), "--skip-bad", "--json")
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["input_skipped"]["malformed_messages"] == 2
+    assert summary["scans"] == len(src) - 2
+
+
+def test_repeated_large_stamps_move_by_the_smallest_step(tmp_path):
+    from dynslam2d.io.carmen import CarmenSource
+
+    t = 1.0e12  # float64 spacing here is 1.2e-4 s: 1 µs cannot be represented
+    lines = carmen_log(n=4, t0=t).splitlines()
+    lines[2] = lines[1]
+    log = tmp_path / "big.clf"
+    log.write_text("\n".join(lines) + "\n")
+    src = CarmenSource(log)
+    stamps = np.array([s.stamp for s in src])
+    assert np.all(np.diff(stamps) > 0)
+    assert stamps[2] == np.nextafter(stamps[1], np.inf)
+    assert src.meta.extra["largest_nudge_s"] == stamps[2] - stamps[1] < 1e-3
+
+
+# ---------------------------------------------------------------- item 7, 8: memory and figure cost
+
+
+def _room_log(path: Path, n: int) -> Path:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    try:
+        from bench_memory import write_log
+    finally:
+        sys.path.pop(0)
+    write_log(path, n)
+    return path
+
+
+def test_carmen_source_streams_instead_of_holding_the_log(tmp_path):
+    import tracemalloc
+
+    from dynslam2d.io.carmen import CarmenSource
+
+    peaks = {}
+    for n in (300, 3000):
+        log = _room_log(tmp_path / f"l{n}.clf", n)
+        tracemalloc.start()
+        src = CarmenSource(log)
+        count = sum(1 for _ in src)
+        peaks[n] = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        assert count == n == len(src)
+    # 10× the scans: the index grows by ~40 bytes per scan, the scans themselves are not kept
+    # (holding them would cost > 1.5 KB per scan, > 4 MB more for 3000 scans).
+    assert peaks[3000] - peaks[300] < 1_000_000, peaks
+
+
+def test_per_scan_records_are_compact_and_read_back_exactly():
+    from dynslam2d.records import BitRows, TrackRows
+
+    rng = np.random.default_rng(1)
+    rows = [rng.random(n) < 0.3 for n in [360] * 50 + [361, 5, 0]]
+    bits = BitRows()
+    for r in rows:
+        bits.append(r)
+    assert len(bits) == len(rows) and all(np.array_equal(a, b) for a, b in zip(bits, rows))
+    assert bits.total_set == sum(int(r.sum()) for r in rows) and not bits.uniform
+    assert bits.nbytes < 64 * 1024  # 53 rows: packed bits + indexes, not 53 numpy objects of 360 bytes
+    tracks = TrackRows()
+    want = [(100.0 + i, i % 7, ("tentative", "confirmed", "coasting")[i % 3], 1.25 * i, -0.5 * i, 0.125, 0.5, 0.25,
+             0.5, -0.25, bool(i % 2)) for i in range(20)]
+    for row in want:
+        tracks.append(row)
+    assert list(tracks) == want and tracks[3] == want[3]
+
+
+def test_run_memory_per_scan_is_small(tmp_path):
+    from dynslam2d.config import Config
+    from dynslam2d.pipeline import run
+
+    res = run(SimSource("paper", duration=2.0), Config())
+    per_scan = (res.removed_rows.nbytes + res.track_rows.nbytes) / res.n_scans
+    assert per_scan < 2048, per_scan  # a list of arrays and tuples cost ~8 KB per scan
+    assert res.removed.shape == (res.n_scans, 720) and res.summary()["scans"] == res.n_scans
+
+
+def test_tracks_figure_draws_one_collection_per_kind_and_caps_labels(tmp_path, monkeypatch):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from dynslam2d.viz import tracksplot
+    from dynslam2d.viz.trackpaths import TrackPath
+    from dynslam2d.types import Box
+
+    rng = np.random.default_rng(0)
+    tracks = []
+    for i in range(2000):
+        n = int(rng.integers(2, 30))
+        xy = np.cumsum(rng.normal(0, 0.1, (n, 2)), axis=0) + rng.uniform(-20, 20, 2)
+        tracks.append(TrackPath(i, np.arange(n, dtype=float), xy, rng.normal(0, 1, (n, 2)), rng.random(n) < 0.5,
+                                np.array(["confirmed"] * n), Box(*xy[-1], 0.0, 0.5, 0.5)))
+    seen = {}
+    real_save = tracksplot.save_png
+
+    def spy(fig, path, dpi):
+        ax = fig.axes[0]
+        seen["collections"] = len([c for c in ax.collections if type(c).__name__ == "LineCollection"])
+        seen["labels"] = len([t for t in ax.texts if type(t).__name__ == "Annotation" and t.get_text().isdigit()])
+        return real_save(fig, path, dpi)
+
+    monkeypatch.setattr(tracksplot, "save_png", spy)
+    tracksplot.plot_tracks(tmp_path / "t.png", tracks, None, dpi=40)
+    plt.close("all")
+    assert seen["collections"] <= 2 and seen["labels"] <= tracksplot.MAX_LABELS
+    assert (tmp_path / "t.png").stat().st_size > 0

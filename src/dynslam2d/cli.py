@@ -361,7 +361,7 @@ def run(
         ("map updates", str(summary["map_updates"])),
         ("rejected matches", str(summary["match_failures"])),
         ("skipped scans", str(summary["skipped_scans"])),
-        ("input dropped (--skip-bad)", ", ".join(f"{v} {k.replace('skipped_', '')}" for k, v in skipped.items())
+        ("input dropped (--skip-bad)", ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in skipped.items() if v)
          if summary.get("input_skipped_total") else "none"),
         ("tracks (in M)", f"{summary['tracks']} ({summary['tracks_in_M']})"),
         ("beams removed", f"{100 * summary['removed_beam_share']:.2f} % (filter {summary['filter']})"),

@@ -307,7 +307,12 @@ def _pose_or_none(v: np.ndarray) -> Pose2D | None:
 
 
 def _strictly_increasing(stamps: np.ndarray) -> tuple[np.ndarray, int]:
-    """Move every stamp not above its predecessor to ``previous + 1 µs``; count moves."""
+    """Move every stamp not above its predecessor to ``previous + 1 µs``; count moves.
+
+    Where 1 µs is below the float64 resolution of the stamp, the move is to the next
+    representable number above the predecessor (``np.nextafter``): the smallest step
+    that keeps the order strict.
+    """
     out = stamps.copy()
     nudged = 0
     if out.size > 1 and np.any(np.diff(out) <= 0.0):
@@ -318,11 +323,90 @@ def _strictly_increasing(stamps: np.ndarray) -> tuple[np.ndarray, int]:
     return out, nudged
 
 
-class CarmenSource:
-    """Laser scans of a CARMEN log, in strictly increasing stamp order.
+def _open_lines(path: Path) -> Iterator[bytes]:
+    """The lines of ``path`` (bytes, newline kept), gunzipping when it starts with the gzip magic."""
+    with path.open("rb") as raw:
+        gz = raw.read(2) == _GZIP_MAGIC
+    fh = gzip.open(path, "rb") if gz else path.open("rb")
+    with fh:
+        yield from fh
 
-    The whole file is parsed when the source is created (logs are small), so every
-    format error surfaces here as a DynSlamError ``"<file>:<line>: <what>"``.
+
+class _FlaserStats:
+    """What :func:`detect_no_return_threshold` needs from all FLASER readings, in O(1) memory.
+
+    Pass 1 keeps the count, maximum and count of the maximum of the considered readings
+    (finite, above :data:`DEFAULT_RANGE_MIN`); the median test of the rule needs a second
+    look at the readings only when the maximum is a repeated candidate marker.
+    """
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.top = -math.inf
+        self.top_count = 0
+
+    def add(self, ranges: np.ndarray) -> None:
+        r = ranges[np.isfinite(ranges) & (ranges > DEFAULT_RANGE_MIN)]
+        if r.size == 0:
+            return
+        self.n += r.size
+        m = float(r.max())
+        c = int(np.count_nonzero(r == m))
+        if m > self.top:
+            self.top, self.top_count = m, c
+        elif m == self.top:
+            self.top_count += c
+
+    def needs_median(self) -> bool:
+        return self.n > 0 and self.top < SICK_NO_RETURN and self.top_count >= max(10, 0.001 * self.n)
+
+
+class _MedianBelow:
+    """Decides ``median(readings) < h`` exactly from counts (numpy's median of an even count
+    is the mean of the two middle values)."""
+
+    def __init__(self, h: float) -> None:
+        self.h = h
+        self.n = 0
+        self.below = 0
+        self.max_below = -math.inf
+        self.min_above = math.inf
+
+    def add(self, ranges: np.ndarray) -> None:
+        r = ranges[np.isfinite(ranges) & (ranges > DEFAULT_RANGE_MIN)]
+        if r.size == 0:
+            return
+        lo = r < self.h
+        self.n += r.size
+        k = int(np.count_nonzero(lo))
+        self.below += k
+        if k:
+            self.max_below = max(self.max_below, float(r[lo].max()))
+        if k < r.size:
+            self.min_above = min(self.min_above, float(r[~lo].min()))
+
+    def result(self) -> bool:
+        n, c = self.n, self.below
+        if n % 2:
+            return c > n // 2
+        half = n // 2
+        if c >= half + 1:
+            return True
+        if c <= half - 1:
+            return False
+        return self.max_below + self.min_above < 2.0 * self.h
+
+
+class CarmenSource:
+    """Laser scans of a CARMEN log, in strictly increasing stamp order, read as a stream.
+
+    The constructor reads the file once (every format error surfaces there as a
+    DynSlamError ``"<file>:<line>: <what>"``) but keeps only a compact index per laser
+    record (line number, stamps: ~40 bytes), the ``ODOM`` rows and counters; iterating
+    reads the file again and yields one scan at a time, so memory does not grow with
+    the length of the log. A log whose records are not in time order is the exception:
+    its scans are parsed into memory on each iteration to be yielded sorted (such logs
+    are the small flirtlib exports).
 
     Args:
         path: a ``.clf``/``.log`` file, plain or gzipped (detected by magic bytes).
@@ -332,6 +416,7 @@ class CarmenSource:
         max_range: no-return threshold, m (``r >= max_range`` is no return) for all
             records; None = ROBOTLASER1's own field, auto-detected for FLASER.
         nominal_rate_hz: rate used to synthesize stamps when the log has none, Hz.
+        origin: the name used in messages and ``meta.origin`` (default: ``path``).
 
     Iterating yields :class:`Scan` objects; :meth:`records` yields
     :class:`CarmenRecord` (scan + poses + line) in the same order.
@@ -344,39 +429,82 @@ class CarmenSource:
         *,
         max_range: float | None = None,
         nominal_rate_hz: float = DEFAULT_NOMINAL_RATE_HZ,
+        origin: str | None = None,
     ) -> None:
         if max_range is not None and not (math.isfinite(max_range) and max_range > DEFAULT_RANGE_MIN):
             raise DynSlamError(f"max_range must be a finite number above {DEFAULT_RANGE_MIN} m, got {max_range}")
         if not (math.isfinite(nominal_rate_hz) and nominal_rate_hz > 0.0):
             raise DynSlamError(f"nominal_rate_hz must be positive, got {nominal_rate_hz}")
-        self.path, text = read_text(path)
+        p = Path(path)
+        if not p.exists():
+            raise DynSlamError(f"{p}: no such file")
+        if p.is_dir():
+            raise DynSlamError(f"{p}: is a folder, expected a file")
+        self.path = p
+        self.name = origin or str(p)
         self.skip_bad = skip_bad
-        self._records: list[CarmenRecord] = []
+        self._max_range = max_range
         self._odometry: CarmenOdometry
-        self.meta: SourceMeta = SourceMeta(format="carmen", origin=str(self.path))
-        self._load(text, max_range, nominal_rate_hz)
+        self.meta: SourceMeta = SourceMeta(format="carmen", origin=self.name)
+        self._index(max_range, nominal_rate_hz)
 
-    # -- parsing ---------------------------------------------------------------
+    # -- reading -----------------------------------------------------------------
 
-    def _load(self, text: str, max_range: float | None, nominal_rate_hz: float) -> None:
-        """Parse every line; malformed ones raise (or are skipped with ``skip_bad``)."""
-        name = str(self.path)
-        if not text.strip():
-            raise DynSlamError(f"{name}: file is empty")
-        lines = text.split("\n")
-        ends_with_newline = lines[-1] == ""
-        if ends_with_newline:
-            lines.pop()
-        lasers: list[_RawLaser] = []
-        odom_rows: list[np.ndarray] = []
-        odom_lines: list[int] = []
+    def _lines(self) -> Iterator[tuple[int, str, bool]]:
+        """``(line number, text, has newline)`` of every line; read errors become DynSlamError."""
+        try:
+            for lineno, raw in enumerate(_open_lines(self.path), start=1):
+                yield lineno, raw.decode("latin-1"), raw.endswith(b"\n")
+        except (OSError, EOFError, zlib.error) as exc:
+            if isinstance(exc, OSError) and not isinstance(exc, gzip.BadGzipFile) and exc.errno is not None:
+                raise DynSlamError(f"{self.name}: cannot read ({exc.strerror or exc})") from None
+            raise DynSlamError(f"{self.name}: corrupt or truncated gzip data ({exc})") from None
+
+    def _parse(self, kind: str, fields: list[str], lineno: int) -> _RawLaser:
+        return _parse_flaser(fields, lineno) if kind == "FLASER" else _parse_robotlaser1(fields, lineno)
+
+    def _threshold(self, raw: _RawLaser) -> float:
+        if self._max_range is not None:
+            return self._max_range
+        if raw.max_range is not None:
+            return raw.max_range
+        return self._flaser_t if self._flaser_t is not None else SICK_NO_RETURN
+
+    def _scan(self, raw: _RawLaser, stamp: float) -> Scan:
+        return Scan(
+            stamp=stamp,
+            angle_min=raw.angle_min,
+            angle_increment=raw.angle_increment,
+            ranges=raw.ranges,
+            range_min=DEFAULT_RANGE_MIN,
+            range_max=float(np.nextafter(self._threshold(raw), 0.0)),  # r >= t is no return
+            frame_id="laser",
+            intensities=raw.intensities,
+        )
+
+    def _bad(self, kind: str, lineno: int, reason: str) -> None:
+        if not self.skip_bad:
+            raise DynSlamError(f"{self.name}:{lineno}: malformed {kind} record: {reason}") from None
+
+    def _index(self, max_range: float | None, nominal_rate_hz: float) -> None:
+        """Pass 1: validate every line, keep a compact index of the good laser records."""
+        self._flaser_t: float | None = None
+        lines = GrowLines()
+        odom = GrowArrayF(8)
+        odom_lines = GrowLines()
         kinds: Counter[str] = Counter()
         skipped: list[int] = []
-        n_lines = len(lines)
-        for index, line in enumerate(lines):
+        n_skipped = 0
+        stats = _FlaserStats()
+        beam_counts: set[int] = set()
+        kind_of: list[str] = []
+        any_text = False
+        last_line_no_newline = 0
+        for lineno, line, newline in self._lines():
             fields = line.split()
             if not fields:
                 continue
+            any_text = True
             kind = fields[0]
             if kind.startswith("#"):
                 kinds["#"] += 1
@@ -384,82 +512,59 @@ class CarmenSource:
             kinds[kind] += 1
             if kind not in ("FLASER", "ROBOTLASER1", "ODOM"):
                 continue
-            lineno = index + 1
             try:
-                if kind == "FLASER":
-                    lasers.append(_parse_flaser(fields, lineno))
-                elif kind == "ROBOTLASER1":
-                    lasers.append(_parse_robotlaser1(fields, lineno))
-                else:
-                    odom_rows.append(_parse_odom(fields))
+                if kind == "ODOM":
+                    odom.append(_parse_odom(fields))
                     odom_lines.append(lineno)
+                    continue
+                raw = self._parse(kind, fields, lineno)
             except _BadLine as exc:
                 reason = str(exc)
-                if index == n_lines - 1 and not ends_with_newline:
+                if not newline:
                     reason += " (last line has no newline: file truncated?)"
-                if not self.skip_bad:
-                    raise DynSlamError(f"{name}:{lineno}: malformed {kind} record: {reason}") from None
-                skipped.append(lineno)
-        if not lasers:
-            found = ", ".join(f"{k}×{v}" for k, v in sorted(kinds.items())) or "nothing"
-            extra = f"; {len(skipped)} malformed laser/odometry lines skipped" if skipped else ""
-            raise DynSlamError(f"{name}: no FLASER or ROBOTLASER1 laser records (found {found}){extra}")
-        self._build(lasers, odom_rows, odom_lines, kinds, skipped, max_range, nominal_rate_hz)
-
-    def _build(
-        self,
-        lasers: list[_RawLaser],
-        odom_rows: list[np.ndarray],
-        odom_lines: list[int],
-        kinds: Counter[str],
-        skipped: list[int],
-        max_range: float | None,
-        nominal_rate_hz: float,
-    ) -> None:
-        warnings: list[str] = []
-        # -- no-return thresholds
-        flaser_t: float | None = None
-        rule = "max_range argument" if max_range is not None else ""
-        if max_range is None and any(r.kind == "FLASER" for r in lasers):
-            flaser_ranges = np.concatenate([r.ranges for r in lasers if r.kind == "FLASER"])
-            flaser_t, rule = detect_no_return_threshold(flaser_ranges)
-
-        # -- one scan per record (stamps provisional); geometry the Scan type rejects is a bad line
-        name = str(self.path)
-        kept: list[tuple[_RawLaser, Scan]] = []
-        for raw in lasers:
-            if max_range is not None:
-                t = max_range
-            elif raw.max_range is not None:
-                t = raw.max_range
-            else:
-                assert flaser_t is not None
-                t = flaser_t
-            try:
-                scan = Scan(
-                    stamp=raw.ipc,
-                    angle_min=raw.angle_min,
-                    angle_increment=raw.angle_increment,
-                    ranges=raw.ranges,
-                    range_min=DEFAULT_RANGE_MIN,
-                    range_max=float(np.nextafter(t, 0.0)),  # r >= t is no return
-                    frame_id="laser",
-                    intensities=raw.intensities,
-                )
-            except DynSlamError as exc:
-                if not self.skip_bad:
-                    raise DynSlamError(f"{name}:{raw.line}: malformed {raw.kind} record: {exc}") from None
-                skipped.append(raw.line)
+                self._bad(kind, lineno, reason)
+                n_skipped += 1
+                if len(skipped) < MAX_REPORTED_LINES:
+                    skipped.append(lineno)
                 continue
-            kept.append((raw, scan))
-        if not kept:
-            raise DynSlamError(f"{name}: no valid laser records ({len(skipped)} malformed lines skipped)")
-        skipped.sort()
+            try:  # geometry the Scan type rejects is a bad line too (range limit provisional here)
+                self._scan(raw, raw.ipc)
+            except DynSlamError as exc:
+                self._bad(raw.kind, lineno, str(exc))
+                n_skipped += 1
+                if len(skipped) < MAX_REPORTED_LINES:
+                    skipped.append(lineno)
+                continue
+            if raw.kind == "FLASER" and max_range is None:
+                stats.add(raw.ranges)
+            lines.append(lineno, raw.ipc, raw.logger, raw.kind == "FLASER")
+            beam_counts.add(int(raw.ranges.shape[0]))
+        if not any_text:
+            raise DynSlamError(f"{self.name}: file is empty")
+        n = len(lines)
+        if n == 0:
+            found = ", ".join(f"{k}×{v}" for k, v in sorted(kinds.items())) or "nothing"
+            extra = f"; {n_skipped} malformed laser/odometry lines skipped" if n_skipped else ""
+            if not any(kinds.get(k) for k in _LASER_KINDS):
+                raise DynSlamError(f"{self.name}: no FLASER or ROBOTLASER1 laser records (found {found}){extra}")
+            raise DynSlamError(f"{self.name}: no valid laser records ({n_skipped} malformed lines skipped)")
+        warnings: list[str] = []
+
+        # -- no-return threshold of FLASER records (detect_no_return_threshold, streamed)
+        rule = "max_range argument" if max_range is not None else ""
+        if max_range is None and lines.any_flaser():
+            if stats.n == 0:
+                self._flaser_t, rule = SICK_NO_RETURN, "default (no finite readings)"
+            elif stats.top >= SICK_NO_RETURN:
+                self._flaser_t, rule = SICK_NO_RETURN, "SICK no-return values (>= 81.83 m) present"
+            elif stats.needs_median() and stats.top > 0.1 and self._median_below(stats.top / 2.0):
+                self._flaser_t = stats.top
+                rule = f"saturation marker {stats.top:g} m repeated {stats.top_count} times"
+            else:
+                self._flaser_t, rule = SICK_NO_RETURN, "default (no saturation marker found)"
 
         # -- stamps: ipc, else logger, else synthesized
-        ipc = np.array([raw.ipc for raw, _ in kept])
-        logger = np.array([raw.logger for raw, _ in kept])
-        n = len(kept)
+        line_no, ipc, logger, is_flaser = lines.arrays()
         if n == 1 or np.ptp(ipc) > 0.0:
             time_source, stamps = "ipc", ipc
         elif np.ptp(logger) > 0.0:
@@ -477,23 +582,22 @@ class CarmenSource:
         if backward:
             warnings.append(f"{backward} backward steps in file order; scans sorted by stamp")
         sorted_stamps, nudged = _strictly_increasing(stamps[order])
+        largest_nudge = 0.0
         if nudged:
+            step = sorted_stamps - stamps[order]
+            largest_nudge = float(step.max())
             warnings.append(
                 f"{nudged} stamps did not increase after sorting; each moved to previous + "
-                f"{DUPLICATE_NUDGE_S * 1e6:g} µs"
+                f"{DUPLICATE_NUDGE_S * 1e6:g} µs (largest move {largest_nudge:.3g} s)"
             )
-
-        records: list[CarmenRecord] = []
-        for k, stamp in zip(order, sorted_stamps):
-            raw, scan = kept[int(k)]
-            scan = dataclasses.replace(scan, stamp=float(stamp))
-            odom, laser_pose = _pose_or_none(raw.odom), _pose_or_none(raw.laser_pose)
-            records.append(CarmenRecord(scan, raw.kind, raw.line, odom, laser_pose, raw.ipc, raw.logger))
-        self._records = records
+        self._order = order
+        self._stamps = sorted_stamps
+        self._lines_sorted = line_no[order]
+        self._identity = bool(np.all(order == np.arange(n)))
 
         # -- odometry on the scans' clock
-        if odom_rows:
-            arr = np.vstack(odom_rows)
+        if len(odom):
+            arr = odom.array()
             if time_source == "ipc":
                 ost = arr[:, 6].copy()
             elif time_source == "logger":
@@ -504,26 +608,27 @@ class CarmenSource:
             arr = arr[oorder]
             self._odometry = CarmenOdometry(
                 ost[oorder], arr[:, 0], arr[:, 1], arr[:, 2], arr[:, 3], arr[:, 4], arr[:, 5],
-                np.asarray(odom_lines, dtype=np.int64)[oorder],
+                odom_lines.arrays()[0][oorder],
             )
         else:
             empty = np.empty(0)
             no_lines = np.empty(0, dtype=np.int64)
             self._odometry = CarmenOdometry(empty, empty, empty, empty, empty, empty, empty, no_lines)
 
-        # -- metadata
-        first = records[0].scan
-        used = [k for k in _LASER_KINDS if any(r.kind == k for r in records)]
+        # -- metadata (from the first scan in stamp order)
+        first = next(self.records()).scan
+        used = [k for k, present in (("FLASER", bool(is_flaser.any())), ("ROBOTLASER1", bool((~is_flaser).any())))
+                if present]
         diffs = np.diff(sorted_stamps)
         median_dt = float(np.median(diffs)) if diffs.size else 0.0
         ignored = {k: v for k, v in kinds.items() if k not in ("FLASER", "ROBOTLASER1", "ODOM", "#")}
-        if skipped:
-            warnings.append(f"{len(skipped)} malformed lines skipped")
+        if n_skipped:
+            warnings.append(f"{n_skipped} malformed lines skipped")
         self.meta = SourceMeta(
             format="carmen",
-            origin=str(self.path),
+            origin=self.name,
             topic="+".join(used),
-            count=len(records),
+            count=n,
             beams=first.n_beams,
             fov=first.fov,
             rate_hz=(1.0 / median_dt) if median_dt > 0.0 else None,
@@ -534,32 +639,120 @@ class CarmenSource:
                 "records": dict(kinds),
                 "ignored_records": ignored,
                 "comments": kinds.get("#", 0),
-                "odometry_records": len(odom_rows),
-                "skipped_lines": len(skipped),
-                "skipped_line_numbers": skipped[:MAX_REPORTED_LINES],
+                "odometry_records": len(odom),
+                "skipped_lines": n_skipped,
+                "skipped_line_numbers": skipped,
                 "time_source": time_source,
                 "backward_steps": backward,
                 "nudged_stamps": nudged,
-                "beam_counts": sorted({r.scan.n_beams for r in records}),
-                "no_return_threshold": (max_range if max_range is not None else flaser_t),
+                "largest_nudge_s": largest_nudge,
+                "beam_counts": sorted(beam_counts),
+                "no_return_threshold": (max_range if max_range is not None else self._flaser_t),
                 "no_return_rule": rule or "ROBOTLASER1 max_range field",
                 "warnings": warnings,
             },
         )
 
+    def _median_below(self, h: float) -> bool:
+        """Pass over the FLASER readings again: is their median below ``h``?"""
+        med = _MedianBelow(h)
+        for lineno, line, _ in self._lines():
+            fields = line.split()
+            if not fields or fields[0] != "FLASER":
+                continue
+            try:
+                raw = _parse_flaser(fields, lineno)
+                self._scan(raw, raw.ipc)
+            except (_BadLine, DynSlamError):
+                continue
+            med.add(raw.ranges)
+        return med.result()
+
+    def _file_order_records(self) -> Iterator[tuple[int, _RawLaser]]:
+        """``(file-order index, parsed record)`` of every indexed laser record, streaming."""
+        wanted = np.sort(self._lines_sorted)
+        k = 0
+        total = wanted.shape[0]
+        for lineno, line, _ in self._lines():
+            if k >= total:
+                return
+            if lineno != wanted[k]:
+                continue
+            fields = line.split()
+            yield k, self._parse(fields[0], fields, lineno)
+            k += 1
+
+    def _record(self, raw: _RawLaser, stamp: float) -> CarmenRecord:
+        scan = self._scan(raw, float(stamp))
+        odom, laser_pose = _pose_or_none(raw.odom), _pose_or_none(raw.laser_pose)
+        return CarmenRecord(scan, raw.kind, raw.line, odom, laser_pose, raw.ipc, raw.logger)
+
     # -- ScanSource --------------------------------------------------------------
 
     def __iter__(self) -> Iterator[Scan]:
-        for record in self._records:
+        for record in self.records():
             yield record.scan
 
     def __len__(self) -> int:
-        return len(self._records)
+        return int(self._stamps.shape[0])
 
     def records(self) -> Iterator[CarmenRecord]:
         """The laser records, in the same (strictly increasing stamp) order as the scans."""
-        return iter(self._records)
+        if self._identity:
+            for k, raw in self._file_order_records():
+                yield self._record(raw, self._stamps[k])
+            return
+        # Out of time order: parse all, then yield sorted (file index -> sorted position).
+        raws = dict(self._file_order_records())
+        for pos, k in enumerate(self._order):
+            yield self._record(raws[int(k)], self._stamps[pos])
 
     def odometry(self) -> CarmenOdometry:
         """The ``ODOM`` records (empty arrays when the log has none), sorted by stamp."""
         return self._odometry
+
+
+class GrowLines:
+    """Index rows of pass 1: line number, ipc stamp, logger stamp, FLASER flag (compact arrays)."""
+
+    def __init__(self) -> None:
+        from dynslam2d.records import GrowArray
+
+        self._line = GrowArray(np.int64)
+        self._ipc = GrowArray(np.float64)
+        self._logger = GrowArray(np.float64)
+        self._flaser = GrowArray(np.bool_)
+
+    def append(self, line: int, ipc: float = 0.0, logger: float = 0.0, flaser: bool = False) -> None:
+        self._line.append(line)
+        self._ipc.append(ipc)
+        self._logger.append(logger)
+        self._flaser.append(flaser)
+
+    def __len__(self) -> int:
+        return len(self._line)
+
+    def any_flaser(self) -> bool:
+        return bool(self._flaser.view().any())
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        return (self._line.view().copy(), self._ipc.view().copy(), self._logger.view().copy(),
+                self._flaser.view().copy())
+
+
+class GrowArrayF:
+    """Rows of ``width`` float64 values (the ODOM records)."""
+
+    def __init__(self, width: int) -> None:
+        from dynslam2d.records import GrowArray
+
+        self._a = GrowArray(np.float64, (width,))
+
+    def append(self, row: np.ndarray) -> None:
+        self._a.append(row)
+
+    def __len__(self) -> int:
+        return len(self._a)
+
+    def array(self) -> np.ndarray:
+        return self._a.view().copy()

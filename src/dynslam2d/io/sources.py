@@ -223,12 +223,13 @@ def open_source(
     (:func:`spool_stream`), so sniffing loses nothing; ``meta.origin`` names the stream.
     """
     spooled: Path | None = None
-    if not os.fspath(path).startswith(SIM_PREFIX) and is_stream(path):
+    origin = os.fspath(path)
+    if not origin.startswith(SIM_PREFIX) and is_stream(path):
         spooled = spool_stream(path)
-        origin = os.fspath(path)
         path = spooled
     try:
-        source = _open(path, topic, seed=seed, duration=duration, skip_bad=skip_bad)
+        source = _open(path, topic, seed=seed, duration=duration, skip_bad=skip_bad,
+                       origin=origin if spooled is not None else None)
     except BaseException:
         if spooled is not None:
             spooled.unlink(missing_ok=True)
@@ -246,7 +247,8 @@ def _unlink(path: str) -> None:
 
 
 def _open(
-    path: str | os.PathLike[str], topic: str | None, *, seed: int | None, duration: float | None, skip_bad: bool
+    path: str | os.PathLike[str], topic: str | None, *, seed: int | None, duration: float | None, skip_bad: bool,
+    origin: str | None = None,
 ) -> CheckedSource:
     fmt = sniff_format(path)
     text = os.fspath(path)
@@ -258,7 +260,7 @@ def _open(
     elif fmt == "carmen":
         from dynslam2d.io.carmen import CarmenSource
 
-        inner = CarmenSource(text, skip_bad=skip_bad)
+        inner = CarmenSource(text, skip_bad=skip_bad, origin=origin)
     else:
         from dynslam2d.io.rosbag import RosbagSource
 

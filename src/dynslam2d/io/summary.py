@@ -114,6 +114,8 @@ def summarize_source(
 
 #: Keys of ``SourceMeta.extra`` that count input records dropped by ``--skip-bad``.
 SKIP_KEYS = ("skipped_lines", "skipped_messages", "skipped_scans")
+#: Their names in summary.json's ``input_skipped``.
+SKIP_NAMES = ("malformed_lines", "malformed_messages", "non_increasing_stamps")
 #: Keys of ``SourceMeta.extra`` that count stamp repairs of a CARMEN log.
 REPAIR_KEYS = ("backward_steps", "nudged_stamps", "largest_nudge_s", "time_source")
 
@@ -121,12 +123,12 @@ REPAIR_KEYS = ("backward_steps", "nudged_stamps", "largest_nudge_s", "time_sourc
 def input_report(meta: object) -> dict[str, object]:
     """What the reader dropped or repaired, for summary.json and the terminal.
 
-    ``input_skipped``: malformed lines (CARMEN), malformed messages (bags) and scans with
-    non-increasing stamps, each counted (0 when none); ``input_skipped_total`` their sum;
+    ``input_skipped``: ``malformed_lines`` (CARMEN), ``malformed_messages`` (bags) and
+    ``non_increasing_stamps`` (scans dropped), each counted (0 when none); ``input_skipped_total`` their sum;
     ``stamp_repairs``: CARMEN stamp sorting / nudging / synthesis; ``input_warnings``.
     """
     extra = dict(getattr(meta, "extra", {}) or {})
-    skipped = {k: int(extra.get(k, 0) or 0) for k in SKIP_KEYS}
+    skipped = {name: int(extra.get(k, 0) or 0) for k, name in zip(SKIP_KEYS, SKIP_NAMES)}
     out: dict[str, object] = {"input_skipped": skipped, "input_skipped_total": sum(skipped.values())}
     repairs = {k: extra[k] for k in REPAIR_KEYS if k in extra}
     if repairs:
