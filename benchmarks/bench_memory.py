@@ -56,11 +56,10 @@ def write_log(path: Path, n: int, seed: int = 0) -> None:
             fh.write(f"FLASER {BEAMS} {rr} {x:.4f} {y:.4f} {th:.4f} {x:.4f} {y:.4f} {th:.4f} {t:.6f} bench {t:.6f}\n")
 
 
-def measure(log: Path, out: Path, extra: list[str]) -> tuple[float, float]:
-    """(peak RSS MiB, wall s) of one ``dynslam2d run`` subprocess."""
+def measure(log: Path, out: Path, extra: list[str], src: str) -> tuple[float, float]:
+    """(peak RSS MiB, wall s) of one ``dynslam2d run`` subprocess importing dynslam2d from ``src``."""
     env = dict(os.environ)
-    src = str(Path(__file__).resolve().parents[1] / "src")
-    env["PYTHONPATH"] = src + os.pathsep + env.get("PYTHONPATH", "")
+    env["PYTHONPATH"] = src
     code = ("import resource, subprocess, sys; "
             "r = subprocess.run(sys.argv[1:]); "
             "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, file=sys.stderr); sys.exit(r.returncode)")
@@ -78,6 +77,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scans", type=int, nargs="+", default=[2000, 200000])
     ap.add_argument("--keep", action="store_true", help="keep the generated logs and results")
+    ap.add_argument("--src", default=str(Path(__file__).resolve().parents[1] / "src"),
+                    help="the dynslam2d source folder to measure (default: this checkout's src/)")
     ap.add_argument("extra", nargs="*", help="extra options for 'dynslam2d run' (after --)")
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="dynslam2d-bench-memory-"))
@@ -86,7 +87,7 @@ def main() -> None:
         for n in args.scans:
             log = work / f"room-{n}.clf"
             write_log(log, n)
-            mib, wall = measure(log, work / f"out-{n}", args.extra)
+            mib, wall = measure(log, work / f"out-{n}", args.extra, args.src)
             rows.append((n, log.stat().st_size / 2**20, mib, wall))
             print(f"{n:>8} scans  log {rows[-1][1]:8.1f} MiB  peak RSS {mib:8.1f} MiB  wall {wall:8.1f} s "
                   f"({n / wall:.0f} scans/s)", flush=True)

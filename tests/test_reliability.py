@@ -587,3 +587,89 @@ def test_tracks_figure_draws_one_collection_per_kind_and_caps_labels(tmp_path, m
     plt.close("all")
     assert seen["collections"] <= 2 and seen["labels"] <= tracksplot.MAX_LABELS
     assert (tmp_path / "t.png").stat().st_size > 0
+
+
+# ---------------------------------------------------------------- property: hostile inputs never hurt
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+_RESULT_FILES = ("map.yaml", "map.pgm", "map_logodds.npy", "trajectory.tum", "tracks.csv", "kept_mask.npz",
+                 "config.yaml", "summary.json", "map.png", "tracks.png", "run.json")
+
+
+def _corrupt(data: bytes, draw) -> bytes:
+    """Apply 1-3 random corruptions: cut, flip bytes, duplicate or drop a chunk, insert junk."""
+    for _ in range(draw(st.integers(1, 3))):
+        if not data:
+            break
+        op = draw(st.sampled_from(["cut", "flip", "dup", "drop", "junk"]))
+        i = draw(st.integers(0, len(data) - 1))
+        if op == "cut":
+            data = data[:i]
+        elif op == "flip":
+            data = data[:i] + bytes([data[i] ^ draw(st.integers(1, 255))]) + data[i + 1:]
+        elif op == "dup":
+            j = min(len(data), i + draw(st.integers(1, 400)))
+            data = data[:j] + data[i:j] + data[j:]
+        elif op == "drop":
+            data = data[:i] + data[min(len(data), i + draw(st.integers(1, 400))):]
+        else:
+            data = data[:i] + draw(st.binary(min_size=1, max_size=40)) + data[i:]
+    return data
+
+
+def _check_run_on(path: Path, skip_bad: bool, capsys) -> None:
+    base = path.parent
+    foreign = base / "notes.txt"
+    foreign.write_text("the user's own file\n")
+    before = {p.name: tree_digest(p) for p in base.iterdir()}
+    out = base / "out"
+    args = ["run", str(path), "--out", str(out), "-q", "--map-resolution", "0.1"] + (["--skip-bad"] if skip_bad else [])
+    code, _, err = cli(capsys, *args)
+    assert "Traceback" not in err
+    assert {p.name: tree_digest(p) for p in base.iterdir() if p.name != "out"} == before  # inputs untouched
+    if code == 0:
+        assert all((out / name).is_file() for name in _RESULT_FILES), sorted(p.name for p in out.iterdir())
+        assert json.loads((out / "run.json").read_text())["status"] == "complete"
+    else:
+        assert code == 2, (code, err)
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error:"), err
+        assert not out.exists()
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data(), gz=st.booleans(), skip_bad=st.booleans())
+def test_run_on_corrupted_carmen_logs_is_clean(capsys, data, gz, skip_bad):
+    import tempfile
+
+    base = Path(tempfile.mkdtemp(prefix="dynslam2d-prop-"))
+    try:
+        raw = carmen_log(n=data.draw(st.integers(3, 12)), beams=60).encode()
+        raw = gzip.compress(raw) if gz else raw
+        path = base / ("log.clf.gz" if gz else "log.clf")
+        path.write_bytes(_corrupt(raw, data.draw))
+        _check_run_on(path, skip_bad, capsys)
+    finally:
+        import shutil
+
+        shutil.rmtree(base, ignore_errors=True)
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data(), suffix=st.sampled_from([".mcap", ".bag"]), skip_bad=st.booleans())
+def test_run_on_corrupted_bags_is_clean(capsys, data, suffix, skip_bad):
+    import shutil
+    import tempfile
+
+    base = Path(tempfile.mkdtemp(prefix="dynslam2d-prop-"))
+    try:
+        clean = write_scan_bag(base / f"clean{suffix}", SimSource("static", duration=0.5, beams=60))
+        raw = clean.read_bytes()
+        clean.unlink()
+        path = base / f"scans{suffix}"
+        path.write_bytes(_corrupt(raw, data.draw))
+        _check_run_on(path, skip_bad, capsys)
+    finally:
+        shutil.rmtree(base, ignore_errors=True)

@@ -23,6 +23,8 @@ _LABEL_GAP = 0.025
 MAX_LABELS = 60
 #: Paths with more reports are drawn through this many evenly spaced ones.
 MAX_POINTS_PER_PATH = 400
+#: At most this many path segments per figure (beyond, every path is thinned evenly).
+MAX_SEGMENTS = 60_000
 
 
 def _speed_cmap():  # type: ignore[no-untyped-def]
@@ -96,12 +98,19 @@ def plot_tracks(
     segs: dict[bool, list[np.ndarray]] = {False: [], True: []}
     vals: dict[bool, list[np.ndarray]] = {False: [], True: []}
     starts = np.array([t.xy[0] for t in tracks]).reshape(-1, 2)
+    # Simplify: at most MAX_SEGMENTS segments in all (every path keeps every stride-th report
+    # and its last one) and MAX_POINTS_PER_PATH reports per path.
+    total = sum(max(len(t.xy) - 1, 0) for t in tracks)
+    stride = max(1, math.ceil(total / MAX_SEGMENTS))
     for t in tracks:
         if len(t.xy) < 2:
             continue
-        xy, sp, in_m_pts = t.xy, display_speed(t), t.in_m
-        if len(xy) > MAX_POINTS_PER_PATH:  # simplify: keep evenly spaced reports and the last one
-            keep = np.unique(np.r_[np.linspace(0, len(xy) - 1, MAX_POINTS_PER_PATH).astype(int), len(xy) - 1])
+        xy, in_m_pts = t.xy, t.in_m
+        sp = display_speed(t) if stride == 1 else t.speed  # the running median is per-report detail
+        n = len(xy)
+        step = max(stride, math.ceil(n / MAX_POINTS_PER_PATH))
+        if step > 1:
+            keep = np.unique(np.r_[np.arange(0, n, step), n - 1])
             xy, sp, in_m_pts = xy[keep], sp[keep], in_m_pts[keep]
         seg = np.stack([xy[:-1], xy[1:]], axis=1)
         spd = 0.5 * (sp[:-1] + sp[1:])
