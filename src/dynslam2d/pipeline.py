@@ -350,7 +350,7 @@ def run(
             track_rows.append((step.stamp, t.id, t.state, b.px, b.py, b.theta, b.length, b.width,
                                float(t.velocity[0]), float(t.velocity[1]), bool(t.in_m)))
         for k, v in step.timings.items():
-            timings.setdefault(k, GrowArray(np.float32)).append(v)
+            timings.setdefault(k, GrowArray(np.float64)).append(v)
         for obs in observers:
             obs.on_scan(scan, step, pipe)
         if progress is not None:
@@ -369,7 +369,7 @@ def run(
         skipped=flag_arr[:, 2],
         removed_rows=removed_rows,
         track_rows=track_rows,
-        timings_ms={k: v.view().astype(np.float64) for k, v in timings.items()},
+        timings_ms={k: v.view().copy() for k, v in timings.items()},
         grid=pipe.gridmap(),
         logodds=logodds,
         wall_time_s=wall,
