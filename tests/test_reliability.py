@@ -673,3 +673,18 @@ def test_run_on_corrupted_bags_is_clean(capsys, data, suffix, skip_bad):
         _check_run_on(path, skip_bad, capsys)
     finally:
         shutil.rmtree(base, ignore_errors=True)
+
+
+@pytest.mark.parametrize("kind", ["truncated-gzip", "binary"])
+def test_garbage_through_a_pipe_is_one_printable_line(kind):
+    rng = np.random.default_rng(3)
+    if kind == "truncated-gzip":
+        whole = gzip.compress(carmen_log(n=60).encode())
+        data = whole[: len(whole) // 2]
+    else:
+        data = b"FLASER 3 1 2 " + rng.integers(0, 256, 3000, dtype=np.uint8).tobytes()
+    res = _run_module(["info", "/dev/stdin"], input=data)
+    err = res.stderr.decode("utf-8")
+    assert res.returncode == 2 and err.count("\n") == 1 and err.startswith("error: /dev/stdin")
+    assert err.isascii() or all(ch.isprintable() or ch == "\n" for ch in err)
+    assert len(err) < 400

@@ -759,8 +759,10 @@ def eval_relations(
 
 
 def _one_line(text: str) -> str:
-    """An error message on one line (YAML and library messages may span several)."""
-    return " ".join(part.strip() for part in text.splitlines() if part.strip())
+    """An error message on one line (YAML and library messages may span several), with control
+    characters escaped so that binary junk quoted in a message cannot garble the terminal."""
+    line = " ".join(part.strip() for part in text.splitlines() if part.strip())
+    return "".join(ch if ch.isprintable() else ascii(ch)[1:-1] for ch in line)
 
 
 def main() -> None:

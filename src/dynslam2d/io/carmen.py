@@ -216,13 +216,19 @@ class _RawLaser:
     logger: float
 
 
+def _show(field: str, limit: int = 24) -> str:
+    """A field for an error message: ASCII-escaped (binary junk never reaches the terminal), short."""
+    text = ascii(field[:limit])
+    return text + ("…" if len(field) > limit else "")
+
+
 def _int_field(fields: list[str], i: int, what: str) -> int:
     if i >= len(fields):
         raise _BadLine(f"line ends before {what} (field {i + 1})")
     try:
         value = int(fields[i])
     except ValueError:
-        raise _BadLine(f"{what} {fields[i]!r} is not an integer") from None
+        raise _BadLine(f"{what} {_show(fields[i])} is not an integer") from None
     if value < 0:
         raise _BadLine(f"{what} is negative ({value})")
     return value
@@ -236,7 +242,7 @@ def _floats(fields: list[str], what: str) -> np.ndarray:
             try:
                 float(f)
             except ValueError:
-                raise _BadLine(f"non-numeric {what} field {f!r}") from None
+                raise _BadLine(f"non-numeric {what} field {_show(f)}") from None
         raise _BadLine(f"non-numeric {what} field") from None
 
 
@@ -244,7 +250,7 @@ def _stamp(field: str, what: str) -> float:
     try:
         value = float(field)
     except ValueError:
-        raise _BadLine(f"non-numeric {what} {field!r}") from None
+        raise _BadLine(f"non-numeric {what} {_show(field)}") from None
     if not math.isfinite(value):
         raise _BadLine(f"{what} is not finite ({field})")
     return value

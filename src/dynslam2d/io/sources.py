@@ -230,9 +230,11 @@ def open_source(
     try:
         source = _open(path, topic, seed=seed, duration=duration, skip_bad=skip_bad,
                        origin=origin if spooled is not None else None)
-    except BaseException:
+    except BaseException as exc:
         if spooled is not None:
             spooled.unlink(missing_ok=True)
+            if isinstance(exc, DynSlamError):  # name the stream the user gave, not the copy
+                raise DynSlamError(str(exc).replace(str(spooled), origin)) from None
         raise
     if spooled is not None:
         source.meta.origin = origin
