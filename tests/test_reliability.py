@@ -691,3 +691,42 @@ def test_garbage_through_a_pipe_is_one_printable_line(kind):
     assert res.returncode == 2 and err.count("\n") == 1 and err.startswith("error: /dev/stdin")
     assert err.isascii() or all(ch.isprintable() or ch == "\n" for ch in err)
     assert len(err) < 400
+
+
+def test_interrupt_while_writing_results_leaves_an_incomplete_marker(tmp_path, capsys, monkeypatch):
+    import dynslam2d.results as results
+
+    def boom(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(results, "write_figures", boom)
+    out = tmp_path / "r"
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", str(out), "-q")
+    assert code == 130 and "partial results in" in err
+    assert json.loads((out / "run.json").read_text())["status"] == "incomplete"
+    assert not (out / "map.png").exists()
+
+
+def test_interrupted_replacement_keeps_the_earlier_complete_results(tmp_path, capsys, monkeypatch):
+    import dynslam2d.pipeline as pipeline
+
+    out = tmp_path / "r"
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", str(out), "-q")
+    assert code == 0, err
+    before = tree_digest(out)
+    real = pipeline.Pipeline.process
+    calls = {"n": 0}
+
+    def process(self, scan):
+        calls["n"] += 1
+        if calls["n"] == 11:
+            raise KeyboardInterrupt
+        return real(self, scan)
+
+    monkeypatch.setattr(pipeline.Pipeline, "process", process)
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "2", "--out", str(out), "-q", "--force")
+    assert code == 130
+    assert tree_digest(out) == before  # the complete earlier run is still there
+    partial = [p for p in tmp_path.iterdir() if p.name.startswith("r.incomplete-")]
+    assert len(partial) == 1 and f"partial results in {partial[0]}" in " ".join(err.split())
+    assert json.loads((partial[0] / "run.json").read_text())["scans"] == 10

@@ -337,7 +337,10 @@ def run(
                 progress.update(task, completed=result.n_scans)
         _check_run_usable(result, input)
         truth = ground_truth_for(source, truth_files, cfg.slam.map_resolution)
-        paths = write_results(result, folder.work, truth, collector)
+        try:
+            paths = write_results(result, folder.work, truth, collector)
+        except OSError as exc:  # disk full, folder removed under our feet, …
+            raise DynSlamError(f"--out {out}: cannot write the results ({exc.strerror or exc}); nothing was kept") from None
         folder.finish()
     except KeyboardInterrupt:
         _interrupted(folder, checkpointer)
@@ -465,7 +468,7 @@ def _interrupted(folder: Any, checkpointer: Any) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not cut the checkpoint
     try:
         checkpointer.write()
-        where = folder.finish()
+        where = folder.keep_partial()
     except Exception as exc:  # the checkpoint itself failed: say so, keep what is on disk
         err_console.print(Text(f"interrupted after {checkpointer.n_scans} scans; the last checkpoint could not be "
                                f"written ({exc}); earlier checkpoints in {folder.work}"), soft_wrap=True)

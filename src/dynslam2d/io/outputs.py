@@ -137,6 +137,22 @@ class ResultsFolder:
         self.replace = False
         return self.final
 
+    def keep_partial(self) -> Path:
+        """After an interrupt: where the partial results stay; return that folder.
+
+        Written in place, they stay at ``final``. When an earlier complete results folder
+        was being replaced, that one is kept and the partial results are moved beside it
+        to ``<final>.incomplete-<UTC time>`` (a marked results folder, like any other).
+        """
+        if not self.replace:
+            return self.final
+        stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%d-%H%M%S")
+        target = _abs(self.final).parent / f"{self.final.name}.incomplete-{stamp}"
+        os.replace(self.work, target)
+        self.work = target
+        self.replace = False
+        return target
+
     def discard(self) -> None:
         """Remove what this run wrote: the folders it created, or its files in an empty folder it was given."""
         if self.replace or self.created:
