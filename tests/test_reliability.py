@@ -730,3 +730,17 @@ def test_interrupted_replacement_keeps_the_earlier_complete_results(tmp_path, ca
     partial = [p for p in tmp_path.iterdir() if p.name.startswith("r.incomplete-")]
     assert len(partial) == 1 and f"partial results in {partial[0]}" in " ".join(err.split())
     assert json.loads((partial[0] / "run.json").read_text())["scans"] == 10
+
+
+def test_eval_refuses_an_interrupted_results_folder(tmp_path, capsys):
+    gt = tmp_path / "gt"
+    code, _, err = cli(capsys, "simulate", "static", "--duration", "1", "--out", str(gt))
+    assert code == 0, err
+    out = tmp_path / "r"
+    code, _, err = cli(capsys, "run", str(gt / "scans.mcap"), "--out", str(out), "-q")
+    assert code == 0, err
+    marker = json.loads((out / "run.json").read_text())
+    marker["status"] = "incomplete"
+    (out / "run.json").write_text(json.dumps(marker))
+    code, _, err = cli(capsys, "eval", str(out), "--gt", str(gt))
+    assert code == 2 and "interrupted run" in err

@@ -27,7 +27,7 @@ from dynslam2d.gridmap import GridMap
 from dynslam2d.io.atomic import atomic_path, write_text_atomic
 from dynslam2d.io.groundtruth import GroundTruthFiles, read_ground_truth_folder
 from dynslam2d.io.mapfile import write_map
-from dynslam2d.io.outputs import write_marker
+from dynslam2d.io.outputs import read_marker, write_marker
 from dynslam2d.io.summary import input_report
 from dynslam2d.io.trajectory import Trajectory, write_tum
 from dynslam2d.pipeline import TRACK_COLUMNS, RunResult
@@ -122,6 +122,12 @@ def evaluate_folder(run_dir: str | os.PathLike[str], gt_dir: str | os.PathLike[s
     d = Path(run_dir)
     if not (d / "trajectory.tum").exists():
         raise DynSlamError(f"{d}: not a results folder (no trajectory.tum; write one with 'dynslam2d run')")
+    marker = read_marker(d)
+    if marker is not None and marker.get("status") != "complete":
+        raise DynSlamError(
+            f"{d}: results of an interrupted run ({marker.get('scans', '?')} scans, run.json status "
+            f"{marker.get('status')!r}); run it again to score it"
+        )
     removed = stamps = None
     mask_path = d / "kept_mask.npz"
     if mask_path.exists():

@@ -10,6 +10,9 @@ import numpy as np
 
 from dynslam2d.types import ScanSource
 
+#: Most scans whose returns feed the range median of :func:`summarize_source`.
+MAX_MEDIAN_SAMPLES = 5000
+
 
 @dataclass(slots=True)
 class SourceSummary:
@@ -47,7 +50,8 @@ def summarize_source(
 
     ``progress`` (optional) is called with the number of scans read so far, every 100 scans.
     The range median is computed on the valid returns of the first 200 scans and of
-    every 10th scan after that, to keep memory small on long logs.
+    every 10th scan after that, at most :data:`MAX_MEDIAN_SAMPLES` scans, so memory
+    stays bounded on long logs.
     """
     n = 0
     beams_min, beams_max = 1 << 30, 0
@@ -78,7 +82,7 @@ def summarize_source(
         if valid.size:
             vmin = min(vmin, float(valid.min()))
             vmax = max(vmax, float(valid.max()))
-            if len(samples) < 200 or n % 10 == 0:
+            if len(samples) < 200 or (n % 10 == 0 and len(samples) < MAX_MEDIAN_SAMPLES):
                 samples.append(valid)
         n += 1
         if progress is not None and n % 100 == 0:
