@@ -744,3 +744,19 @@ def test_eval_refuses_an_interrupted_results_folder(tmp_path, capsys):
     (out / "run.json").write_text(json.dumps(marker))
     code, _, err = cli(capsys, "eval", str(out), "--gt", str(gt))
     assert code == 2 and "interrupted run" in err
+
+
+def test_refused_force_replacement_leaves_no_staging_folder(tmp_path, capsys):
+    out = tmp_path / "r"
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", str(out), "-q")
+    assert code == 0, err
+    before = tree_digest(out)
+    keep = tmp_path / "keep"
+    keep.mkdir()
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--out", str(out), "-q", "--force",
+                       "--write-bag", str(keep))
+    assert code == 2
+    code, _, err = cli(capsys, "simulate", "nope", "--out", str(out), "--force")
+    assert code == 2
+    assert tree_digest(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep", "r"]

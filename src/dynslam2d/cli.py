@@ -166,9 +166,9 @@ def simulate(
                   "noise_sigma": noise, "dropout": dropout, "range_max": range_max}
         sim = run_simulation(scenario, seed=seed, duration=duration, **{k: v for k, v in sensor.items() if v is not None})
     with console.status(Text(f"writing {out} …"), spinner="dots"):
-        work = folder.work
         try:
             folder.start(input=f"sim:{scenario}")
+            work = folder.work
             paths = write_simulation(sim, work, map_resolution=resolution, storage=storage)
             write_marker(work, "complete", input=f"sim:{scenario}", kind="simulation")
             folder.finish()

@@ -113,6 +113,10 @@ class ResultsFolder:
 
     def start(self, **info: Any) -> None:
         """Create the folder (and missing parents) and mark it as an incomplete run."""
+        if self.replace:
+            self.work = Path(tempfile.mkdtemp(prefix=f".{self.final.name}.staging-", dir=_abs(self.final).parent))
+            write_marker(self.work, "incomplete", **info)
+            return
         missing = []
         d = _abs(self.work)
         while not d.exists():
@@ -204,8 +208,8 @@ def plan_results_folder(
             if same_or_inside(inp, p):
                 raise DynSlamError(f"--out {out}: contains the input {inp}; choose another folder")
         check_writable_location(p, "--out")
-        work = Path(tempfile.mkdtemp(prefix=f".{p.name}.staging-", dir=_abs(p).parent))
-        return ResultsFolder(p, work, replace=True, existed_empty=False)
+        # The staging folder is created by start(), beside the earlier results.
+        return ResultsFolder(p, _abs(p).parent / f".{p.name}.staging", replace=True, existed_empty=False)
     check_writable_location(p, "--out")
     return ResultsFolder(p, p, replace=False, existed_empty=False)
 
