@@ -528,7 +528,7 @@ def test_carmen_source_streams_instead_of_holding_the_log(tmp_path):
 
 
 def test_per_scan_records_are_compact_and_read_back_exactly():
-    from dynslam2d.records import BitRows, TrackRows
+    from dynslam2d.records import BitRows, GrowArray, TrackRows
 
     rng = np.random.default_rng(1)
     rows = [rng.random(n) < 0.3 for n in [360] * 50 + [361, 5, 0]]
@@ -544,6 +544,10 @@ def test_per_scan_records_are_compact_and_read_back_exactly():
     for row in want:
         tracks.append(row)
     assert list(tracks) == want and tracks[3] == want[3]
+    grow = GrowArray(np.float64, (3,))
+    for i in range(1000):
+        grow.append((i, -i, 0.5 * i))
+    assert np.array(grow).shape == (1000, 3) and grow[-1].tolist() == [999.0, -999.0, 499.5] and len(grow) == 1000
 
 
 def test_run_memory_per_scan_is_small(tmp_path):

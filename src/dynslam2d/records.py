@@ -55,6 +55,17 @@ class GrowArray:
         """The rows so far (a view; copy it if the array keeps growing)."""
         return self._buf[: self._n]
 
+    def __getitem__(self, i):  # type: ignore[no-untyped-def]
+        return self.view()[i]
+
+    def __iter__(self) -> Iterator[object]:
+        return iter(self.view())
+
+    def __array__(self, dtype: object = None, copy: object = None) -> np.ndarray:
+        """``np.array(grow)`` / ``np.asarray(grow)``: a copy of the rows so far."""
+        out = self.view().copy()
+        return out if dtype is None else out.astype(dtype)
+
     @property
     def nbytes(self) -> int:
         return int(self._buf.nbytes)
