@@ -281,14 +281,15 @@ def run(
         from dynslam2d.io.groundtruth import read_ground_truth_folder
 
         truth_files = read_ground_truth_folder(gt)  # before the first scan: a bad --gt fails now
-    source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad)
-    _check_map_size(source, cfg)
     out = out or _default_out("run")
-    folder = plan_results_folder(out, force=force, inputs=inputs)
+    folder = plan_results_folder(out, force=force, inputs=inputs)  # outputs first: reading a log can take long
     if write_bag is not None:
         check_bag_target(write_bag, force=force, inputs=inputs, out=out)
         if folder.replace and same_or_inside(write_bag, out):
             raise DynSlamError(f"--write-bag {write_bag}: lies inside --out {out}, which is replaced; put the bag elsewhere")
+    source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad)
+    _check_map_size(source, cfg)
+    if write_bag is not None:
         clean_stale_parts(write_bag)
     total = source.meta.count
     show = not (quiet or as_json)
