@@ -487,15 +487,27 @@ def experiment_paper(
     out: Annotated[Optional[Path], typer.Option("--out", "-o", help="Output folder (default: results/experiment-<time>).")] = None,
     duration: DurationOpt = None,
     trials: Annotated[Optional[list[str]], typer.Option("--trial", help="Trial(s) to run [paper-1 paper-2 paper-3].")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Replace an earlier output folder of dynslam2d at --out (never anything else).")] = False,
 ) -> None:
     """The paper's experiment: 3 trials × 4 filter configurations → table.md/csv/json and figure2.png."""
     from dynslam2d.experiments import TRIALS, run_experiment, write_experiment
+    from dynslam2d.io.outputs import plan_results_folder, write_marker
 
     out = out or _default_out("experiment")
+    folder = plan_results_folder(out, force=force)  # before the work: a bad --out fails at once
     chosen = tuple(trials) if trials else TRIALS
     with console.status("running …", spinner="dots") as status:
-        result = run_experiment(chosen, duration=duration, progress=lambda text: status.update(f"running {text} …"))
-        paths = write_experiment(result, out)
+        result = run_experiment(chosen, duration=duration, progress=lambda text: status.update(Text(f"running {text} …")))
+        try:
+            folder.start(input="experiment paper")
+            paths = write_experiment(result, folder.work)
+            write_marker(folder.work, "complete", input="experiment paper", files=sorted(paths))
+            work = folder.work
+            folder.finish()
+        except BaseException:
+            folder.discard()
+            raise
+        paths = {k: out / Path(v).relative_to(work) for k, v in paths.items()}
     sys.stdout.write(paths["table.md"].read_text())
     console.print(Text.assemble("results in ", (str(out), "bold"), f" ({', '.join(paths)})"))
 
