@@ -52,7 +52,10 @@ __all__ = [
     "TFMESSAGE",
     "DeadReckoning",
     "TfTree",
+    "imu_message",
+    "odometry_message",
     "read_bag_odometry",
+    "transform_message",
     "write_scan_bag_with_odometry",
 ]
 
@@ -515,7 +518,8 @@ def _vec3(bag: Any, x: float = 0.0, y: float = 0.0, z: float = 0.0) -> Any:
     return bag.msg_class("geometry_msgs/msg/Vector3")(x=float(x), y=float(y), z=float(z))
 
 
-def _tf_message(bag: Any, stamp: float, parent: str, child: str, pose: Pose2D, seq: int) -> Any:
+def transform_message(bag: Any, stamp: float, parent: str, child: str, pose: Pose2D, seq: int = 0) -> Any:
+    """``tf2_msgs/TFMessage`` with one planar transform ``parent → child`` (child's pose in parent)."""
     transform = bag.msg_class("geometry_msgs/msg/Transform")(
         translation=_vec3(bag, pose.x, pose.y), rotation=_quat(bag, pose.theta))
     ts = bag.msg_class("geometry_msgs/msg/TransformStamped")(
@@ -523,8 +527,9 @@ def _tf_message(bag: Any, stamp: float, parent: str, child: str, pose: Pose2D, s
     return bag.msg_class(TFMESSAGE)(transforms=[ts])
 
 
-def _odometry_message(bag: Any, stamp: float, frame: str, child: str, pose: np.ndarray,
-                      twist: tuple[float, float], seq: int) -> Any:
+def odometry_message(bag: Any, stamp: float, frame: str, child: str, pose: np.ndarray,
+                     twist: tuple[float, float] = (0.0, 0.0), seq: int = 0) -> Any:
+    """``nav_msgs/Odometry``: ``child`` at ``pose`` (x, y, yaw) in ``frame``; twist = (v m/s, ω rad/s)."""
     point = bag.msg_class("geometry_msgs/msg/Point")(x=float(pose[0]), y=float(pose[1]), z=0.0)
     pwc = bag.msg_class("geometry_msgs/msg/PoseWithCovariance")(
         pose=bag.msg_class("geometry_msgs/msg/Pose")(position=point, orientation=_quat(bag, float(pose[2]))),
@@ -535,7 +540,8 @@ def _odometry_message(bag: Any, stamp: float, frame: str, child: str, pose: np.n
     return bag.msg_class(ODOMETRY)(header=bag.header(stamp, frame, seq), child_frame_id=child, pose=pwc, twist=twc)
 
 
-def _imu_message(bag: Any, stamp: float, frame: str, yaw_rate: float, seq: int) -> Any:
+def imu_message(bag: Any, stamp: float, frame: str, yaw_rate: float, seq: int = 0) -> Any:
+    """``sensor_msgs/Imu`` with only ``angular_velocity.z`` = ``yaw_rate`` rad/s (no orientation)."""
     no_orientation = np.zeros(9, dtype=np.float64)
     no_orientation[0] = -1.0  # REP 145 / sensor_msgs/Imu: orientation not provided
     no_accel = np.zeros(9, dtype=np.float64)
@@ -592,17 +598,17 @@ def write_scan_bag_with_odometry(
         bag.add_topic("/tf_static", TFMESSAGE, latched=True)
         if imu is not None:
             bag.add_topic(imu_topic, IMU)
-        bag.write("/tf_static", _tf_message(bag, first, track.child_frame_id, laser_frame, mount, 0), first)
+        bag.write("/tf_static", transform_message(bag, first, track.child_frame_id, laser_frame, mount, 0), first)
         for stamp, _, kind, i in events:
             if kind == 0:
                 bag.write(topic, laserscan_message(bag, scans[i], seq=i), stamp)
             elif kind == 1:
                 pose = track.poses[i]
-                bag.write(odom_topic, _odometry_message(bag, stamp, track.frame_id, track.child_frame_id, pose,
+                bag.write(odom_topic, odometry_message(bag, stamp, track.frame_id, track.child_frame_id, pose,
                                                         (float(tw[i, 0]), float(tw[i, 1])), i), stamp)
-                bag.write("/tf", _tf_message(bag, stamp, track.frame_id, track.child_frame_id,
+                bag.write("/tf", transform_message(bag, stamp, track.frame_id, track.child_frame_id,
                                              Pose2D.from_array(pose), i), stamp)
             else:
                 assert imu is not None
-                bag.write(imu_topic, _imu_message(bag, stamp, imu_frame, float(imu.yaw_rate[i]), i), stamp)
+                bag.write(imu_topic, imu_message(bag, stamp, imu_frame, float(imu.yaw_rate[i]), i), stamp)
     return final

@@ -377,3 +377,30 @@ class OdometrySource:
             if o.explicit and st["with_odom"] == 0:
                 raise DynSlamError(f"{self.meta.origin}: {o.description}: no scan lies within the odometry's "
                                    f"stamps{where}; different clocks? (use --odom none for laser only)")
+
+
+def rewrite_trajectory_frame(run_dir: Any, mount: Pose2D) -> None:
+    """Turn a results folder's ``trajectory.tum`` from laser poses into base poses.
+
+    Each pose becomes ``laser_i ⊕ mount⁻¹`` (``mount`` = base_link → laser, m and rad); the
+    map frame is unchanged (the first LASER pose). ``summary.json`` gets
+    ``trajectory_frame: "base_link"`` and ``base_to_laser: [x, y, yaw]``. Both files are
+    rewritten atomically.
+    """
+    import json
+    from pathlib import Path
+
+    from dynslam2d.io.atomic import write_text_atomic
+    from dynslam2d.io.trajectory import Trajectory, read_tum, write_tum
+
+    d = Path(run_dir)
+    traj = read_tum(d / "trajectory.tum")
+    base = compose_mount(traj.poses, mount.inverse())
+    write_tum(d / "trajectory.tum", Trajectory(traj.stamps, base, traj.frame),
+              comment="base_link pose in the map frame (the map frame is the first laser pose)")
+    path = d / "summary.json"
+    if path.exists():
+        summary = json.loads(path.read_text())
+        summary["trajectory_frame"] = "base_link"
+        summary["base_to_laser"] = [mount.x, mount.y, mount.theta]
+        write_text_atomic(path, json.dumps(summary, indent=2) + "\n")
