@@ -84,7 +84,8 @@ class DeadReckoning:
         wheels: which Encoder fields to average: the undriven front wheels by default
             (the driven rear wheels spin under acceleration).
         gyro_bias: yaw-rate bias subtracted from the IMU, rad/s; None = estimate it as the
-            mean yaw rate while the wheels stand still (at least ``min_still_s``), else 0.
+            mean yaw rate during the longest stretch with every wheel at zero (at least
+            ``min_still_s`` long; 0.1 s trimmed at both ends), else 0.
     """
 
     wheel_radius: float = 0.0312
@@ -328,7 +329,8 @@ def _dead_reckon(wheels: list[tuple[float, Any]], imu: ImuTrack, model: DeadReck
                 else:
                     k += 1
             if best[0] >= model.min_still_s:
-                sel = (imu.stamps >= t[best[1]]) & (imu.stamps <= t[best[2]])
+                # trimmed by 0.1 s at both ends: the wheels may start turning between two samples
+                sel = (imu.stamps >= t[best[1]] + 0.1) & (imu.stamps <= t[best[2]] - 0.1)
                 if np.count_nonzero(sel) >= 5:
                     bias = float(np.mean(imu.yaw_rate[sel]))
     n = t.shape[0]
