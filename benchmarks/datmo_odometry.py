@@ -59,6 +59,7 @@ class _Mocap:
         self.t = ego.stamps
         self.body = np.column_stack((ego.xy, np.unwrap(ego.yaw)))
         self.laser = compose_mount(self.body, Pose2D(*LASER))
+        self.laser[:, 2] = self.body[:, 2] + LASER[2]  # unwrapped heading
 
     def laser_at(self, t: np.ndarray) -> np.ndarray:
         return np.column_stack([np.interp(t, self.t, self.laser[:, j]) for j in range(3)])
