@@ -34,6 +34,7 @@ def test_run_reports_the_odometry_source_and_frame_base_link(tmp_path, capsys):
                          "--imu", "none", "--json")
     assert code == 0, err
     assert json.loads(out)["odometry"] is None
+    assert (none_dir / "metrics.json").exists()  # stripping odometry keeps the simulator's ground truth
 
 
 def test_odometry_option_errors_are_one_line(tmp_path, capsys):

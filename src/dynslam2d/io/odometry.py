@@ -334,6 +334,12 @@ class OdometrySource:
     def __len__(self) -> int:
         return len(self.inner)
 
+    def __getattr__(self, name: str) -> object:
+        """Everything else (``ground_truth`` of a simulated source, ``path``, …) is the inner source's."""
+        if name == "inner":
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
     def __iter__(self) -> Iterator[Scan]:
         self._reset_stats()
         o = self.odometry

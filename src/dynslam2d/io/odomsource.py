@@ -127,6 +127,12 @@ class _StripOdometry:
     def __len__(self) -> int:
         return len(self.inner)
 
+    def __getattr__(self, name: str) -> object:
+        """Everything else (``ground_truth`` of a simulated source, ``path``, …) is the inner source's."""
+        if name == "inner":
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
     def __iter__(self) -> Iterator[Scan]:
         for scan in self.inner:
             yield scan.with_odometry(scan.odom if self.keep_odom else None,
