@@ -164,8 +164,14 @@ def attach_odometry(inner: ScanSource, fmt: str, *, odom: str = "auto", imu: str
     else:
         from dynslam2d.io.odombag import read_bag_odometry
 
-        info = read_bag_odometry(getattr(inner, "path", inner.meta.origin), inner.meta.frame_id,
-                                 odom=odom, imu=imu, laser_offset=laser_offset)
+        try:
+            info = read_bag_odometry(getattr(inner, "path", inner.meta.origin), inner.meta.frame_id,
+                                     odom=odom, imu=imu, laser_offset=laser_offset)
+        except DynSlamError as err:
+            if odom not in ODOM_MODES or imu not in ODOM_MODES:
+                raise
+            # nothing was asked for explicitly: a recording whose odometry cannot be read still maps
+            info = OdometryInput(warnings=[f"odometry: {err}; continuing without odometry (laser only)"])
     if info.empty and laser_offset is None:
         warnings = inner.meta.extra.setdefault("warnings", [])
         warnings.extend(w for w in info.warnings if w not in warnings)
