@@ -338,3 +338,33 @@ def test_datmo_dead_reckoning_path_length_against_motion_capture():
         ratios[name] = track.path_length() / mocap_len
     # the wheel radius (0.0312 m) was set on two_robots.bag, not on these bags
     assert all(0.95 < r < 1.06 for r in ratios.values()), ratios
+
+
+def test_unreadable_odometry_fails_only_when_asked_for(tmp_path, monkeypatch):
+    import dynslam2d.io.odombag as odombag
+
+    bag = _write_bag(tmp_path / "x.bag", scan_stamps=SCAN_T, odom=(ODOM_T, _circle(ODOM_T - ODOM_T[0])))
+
+    def broken(*args, **kwargs):
+        raise DynSlamError("x.bag: cannot read a message of /tf (struct.error)")
+
+    monkeypatch.setattr(odombag, "read_bag_odometry", broken)
+    src = open_source(bag)  # auto: the run goes on, laser only, and says why
+    assert all(s.odom is None for s in src)
+    assert any("cannot read a message of /tf" in w and "laser only" in w for w in src.meta.extra["warnings"])
+    with pytest.raises(DynSlamError, match="cannot read"):
+        open_source(bag, odom="/odom")
+
+
+def test_corrected_carmen_logs_are_not_odometry(tmp_path):
+    log = _carmen_log(tmp_path / "run.clf", Pose2D(0.2, 0.0, 0.0))
+    text = log.read_text()
+    gfs = tmp_path / "run2.clf"
+    gfs.write_text(text + "NEFF 28.3\n")  # GMapping writes its effective particle count
+    src = open_source(gfs)
+    assert src.meta.odometry is None and all(s.odom is None for s in src)
+    assert any("SLAM-corrected" in w and "1 NEFF" in w for w in src.meta.extra["warnings"])
+    assert open_source(gfs, odom="FLASER").meta.odometry == "CARMEN FLASER pose fields"
+    named = tmp_path / "intel-corrected.log"
+    named.write_text(text)
+    assert open_source(named).meta.odometry is None

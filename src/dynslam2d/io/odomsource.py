@@ -8,7 +8,10 @@
 * CARMEN logs: the laser pose fields of the laser records themselves (``FLASER`` /
   ``ROBOTLASER1`` ``x y theta`` / ``laser_x laser_y laser_theta``: the laser pose in the
   odometry frame at exactly the scan's stamp; in MIT CSAIL these are raw odometry), else
-  the ``ODOM`` records interpolated at the scan stamps. The mount (for ``--frame
+  the ``ODOM`` records interpolated at the scan stamps. In ``auto`` mode a log that is
+  SLAM output (GMapping ``NEFF`` records, a TORO graph's ``VERTEX2``/``EDGE2`` records as
+  in the flirtlib logs, "corrected" in its name, ``.gfs``) is not used: its poses are
+  corrected, not odometry. The mount (for ``--frame
   base_link``) is the median of ``odom⁻¹ ⊕ laser`` over the laser records;
 * the simulator: its own noisy odometry and IMU (``--odom auto``; ``none`` strips them).
 
@@ -64,6 +67,18 @@ def carmen_odometry(source: object, odom: str = "auto", imu: str = "auto",
         raise DynSlamError(
             f"{name}: --odom {odom}: a CARMEN log carries odometry as the laser records' pose fields "
             f"(--odom FLASER) or as ODOM records (--odom ODOM)")
+    if want == "auto":
+        extra = getattr(source, "meta", None).extra if getattr(source, "meta", None) is not None else {}
+        counts = extra.get("records") or {}
+        marks = {k: int(counts.get(k, 0)) for k in ("NEFF", "VERTEX2", "EDGE2") if counts.get(k, 0)}
+        fname = str(name).lower()
+        if marks or "corrected" in fname or fname.endswith((".gfs", ".gfs.gz")):
+            why = (", ".join(f"{v} {k}" for k, v in marks.items()) + " records (SLAM output)") if marks \
+                else "a corrected log (by its name)"
+            out.warnings.append(
+                f"odometry: not used: the log has {why}; its poses are SLAM-corrected, not odometry "
+                f"(--odom FLASER / ROBOTLASER1 / ODOM uses them anyway)")
+            return out
     records = list(source.records())  # type: ignore[attr-defined]
     kinds = sorted({r.kind for r in records})
     laser = np.array([r.laser_pose.as_array() if r.laser_pose is not None else (np.nan,) * 3 for r in records])
