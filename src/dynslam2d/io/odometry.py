@@ -379,7 +379,9 @@ class OdometrySource:
                 where = f" (odometry covers {a:.3f}…{b:.3f} s, scans {first_stamp:.3f}…{last_stamp:.3f} s)"
             msg = (f"odometry: {st['without_odom']} of {st['scans']} scans outside the odometry's time span "
                    f"or in a gap{where}; those scans are matched laser only")
-            self.meta.extra.setdefault("warnings", []).append(msg)
+            warnings = self.meta.extra.setdefault("warnings", [])
+            if msg not in warnings:
+                warnings.append(msg)
             if o.explicit and st["with_odom"] == 0:
                 raise DynSlamError(f"{self.meta.origin}: {o.description}: no scan lies within the odometry's "
                                    f"stamps{where}; different clocks? (use --odom none for laser only)")
