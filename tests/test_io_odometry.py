@@ -255,6 +255,9 @@ def test_wheel_speed_dead_reckoning_with_imu(tmp_path):
     assert any("--laser-offset" in x for x in plain.meta.extra["warnings"])
     with pytest.raises(DynSlamError, match="needs an IMU yaw rate"):
         open_source(bag, odom="/wheel_speeds", imu="none")
+    quiet = open_source(bag, imu="none")  # auto without an IMU: not used, and it says why
+    assert quiet.meta.odometry is None
+    assert any("are not used: dead reckoning needs an IMU yaw rate (--imu none)" in x for x in quiet.meta.extra["warnings"])
 
 
 # --------------------------------------------------------------------------- CARMEN

@@ -271,6 +271,9 @@ def _plan(path: Path, topics: dict[str, str], odom: str, imu: str) -> _Plan:
         if wheel_topics and plan.imu_topic:
             plan.wheel_topic = _pick(wheel_topics, ("/wheel_speeds",))[0]
             plan.kinds.append("wheels")
+        elif wheel_topics:
+            notes.append(f"odometry: wheel speeds on {', '.join(wheel_topics)} are not used: dead reckoning "
+                         f"needs an IMU yaw rate{' (--imu none)' if imu == 'none' else ''}")
         return plan
     plan.explicit_odom = True
     if odom.strip("/") == "tf":
