@@ -49,3 +49,25 @@ def test_odometry_option_errors_are_one_line(tmp_path, capsys):
         assert len(err.strip().splitlines()) == 1
     code, _, err = cli(capsys, "info", "sim:static", "--duration", "1", "--laser-offset", "1,2")
     assert code == 2 and "--laser-offset '1,2'" in err
+
+
+def test_simulate_odometry_noise_and_mount_options(tmp_path, capsys):
+    from dynslam2d.io.sources import open_source
+
+    out = tmp_path / "sim"
+    code, _, err = cli(capsys, "simulate", "crowd", "--duration", "3", "--beams", "90", "--out", str(out),
+                       "--odom-noise", "0", "--laser-mount", "0.3,0,0")
+    assert code == 0, err
+    gt = read_tum(out / "gt_trajectory.tum")
+    odom = read_tum(out / "odom.tum")
+    assert np.abs(odom.poses[:, :2] - gt.poses[:, :2]).max() < 2e-3  # perfect odometry = the true motion
+    src = open_source(out / "scans.mcap")
+    assert src.meta.extra["odometry"]["mount"] == pytest.approx([0.3, 0.0, 0.0])
+    noisy = tmp_path / "noisy"
+    code, _, err = cli(capsys, "simulate", "crowd", "--duration", "3", "--beams", "90", "--out", str(noisy),
+                       "--odom-noise", "3")
+    assert code == 0, err
+    drift = np.abs(read_tum(noisy / "odom.tum").poses[:, :2] - gt.poses[:, :2]).max()
+    assert drift > 0.02
+    code, _, err = cli(capsys, "simulate", "crowd", "--out", str(tmp_path / "x"), "--laser-mount", "a,b")
+    assert code == 2 and "--laser-mount 'a,b'" in err

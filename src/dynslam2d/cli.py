@@ -161,6 +161,8 @@ def simulate(
     dropout: Annotated[Optional[float], typer.Option("--dropout", min=0.0, max=1.0, help="Probability a beam returns nothing [0].")] = None,
     range_max: Annotated[Optional[float], typer.Option("--range-max", min=0.1, help="Sensor max range, m [20].")] = None,
     list_scenarios: Annotated[bool, typer.Option("--list", help="List the scenarios and exit.")] = False,
+    odom_noise: Annotated[float, typer.Option("--odom-noise", min=0.0, help="Multiplies every odometry/IMU noise, bias and scale error of the default model (0 = perfect odometry) [1].")] = 1.0,
+    laser_mount: Annotated[Optional[str], typer.Option("--laser-mount", help="The laser's pose on the robot base, x,y,yaw (m, m, rad) [0.15,0,0].")] = None,
 ) -> None:
     """Simulate a scene: scans as a bag, ground truth (map, trajectory, labels, movers), an overview PNG.
 
@@ -183,7 +185,16 @@ def simulate(
     with console.status(f"simulating {scenario} …", spinner="dots"):
         sensor = {"beams": beams, "fov": math.radians(fov_deg) if fov_deg else None, "rate_hz": rate,
                   "noise_sigma": noise, "dropout": dropout, "range_max": range_max}
-        sim = run_simulation(scenario, seed=seed, duration=duration, **{k: v for k, v in sensor.items() if v is not None})
+        from dynslam2d.io.odometry import parse_laser_offset
+        from dynslam2d.sim.odometry import OdometryModel
+
+        model = OdometryModel().scaled(odom_noise)
+        if laser_mount is not None:
+            import dataclasses as _dc
+
+            model = _dc.replace(model, mount=parse_laser_offset(laser_mount, "--laser-mount"))
+        sim = run_simulation(scenario, seed=seed, duration=duration, odometry_model=model,
+                             **{k: v for k, v in sensor.items() if v is not None})
     with console.status(f"writing {out} …", spinner="dots"):
         paths = write_simulation(sim, out, map_resolution=resolution, storage=storage)
     sc = sim.scenario

@@ -242,15 +242,16 @@ def compose_mount(base: np.ndarray, mount: Pose2D) -> np.ndarray:
     return out
 
 
-def parse_laser_offset(text: str) -> Pose2D:
-    """``"x,y,yaw"`` (m, m, rad; also space-separated) → the base_link → laser Pose2D."""
+def parse_laser_offset(text: str, option: str = "--laser-offset") -> Pose2D:
+    """``"x,y,yaw"`` (m, m, rad; also space-separated) → the base_link → laser Pose2D
+    (``option`` names the command-line option in the error message)."""
     parts = [p for p in text.replace(",", " ").split() if p]
     try:
         values = [float(p) for p in parts]
     except ValueError:
         values = []
     if len(values) != 3 or not all(math.isfinite(v) for v in values):
-        raise DynSlamError(f"--laser-offset {text!r}: expected three numbers x,y,yaw (m, m, rad), e.g. -0.12,0,0")
+        raise DynSlamError(f"{option} {text!r}: expected three numbers x,y,yaw (m, m, rad), e.g. -0.12,0,0")
     return Pose2D(*values)
 
 

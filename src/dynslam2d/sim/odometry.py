@@ -90,6 +90,17 @@ class OdometryModel:
             if not math.isfinite(getattr(self, name)):
                 raise DynSlamError(f"odometry model: {name} must be finite")
 
+    def scaled(self, factor: float) -> OdometryModel:
+        """This model with every noise, bias and scale-error term multiplied by ``factor``
+        (0: perfect odometry and IMU; 2: twice as bad). Rates, mount and frames are kept."""
+        import dataclasses
+
+        if not (math.isfinite(factor) and factor >= 0):
+            raise DynSlamError(f"odometry noise factor must be >= 0, got {factor}")
+        names = ("translation_noise", "rotation_noise", "rotation_per_metre", "scale_error", "yaw_scale_error",
+                 "yaw_bias_per_metre", "gyro_noise", "gyro_bias", "gyro_scale_error")
+        return dataclasses.replace(self, **{n: getattr(self, n) * factor for n in names})
+
     @classmethod
     def perfect(cls, mount: Pose2D | None = None) -> OdometryModel:
         """No noise, no bias, no scale error (for tests of the plumbing)."""
