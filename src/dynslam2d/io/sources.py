@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Iterator
 
 from dynslam2d.errors import DynSlamError
-from dynslam2d.types import Scan, ScanSource, SourceMeta
+from dynslam2d.types import Pose2D, Scan, ScanSource, SourceMeta
 
 SIM_PREFIX = "sim:"
 
@@ -206,6 +206,9 @@ def open_source(
     seed: int | None = None,
     duration: float | None = None,
     skip_bad: bool = False,
+    odom: str = "auto",
+    imu: str = "auto",
+    laser_offset: Pose2D | None = None,
 ) -> CheckedSource:
     """Open a scan source by sniffing its format.
 
@@ -216,6 +219,10 @@ def open_source(
         seed, duration: simulator seed and length in s (``sim:`` sources only).
         skip_bad: skip malformed records and non-increasing stamps (counted) instead of
             stopping with an error.
+        odom, imu: where ``Scan.odom`` / ``Scan.yaw_rate`` come from: "auto" (what the
+            recording has), "none" (laser only), or a topic / record name
+            (:mod:`dynslam2d.io.odomsource`); ``meta.odometry`` says what was used.
+        laser_offset: the base → laser transform (m, rad) when the recording has no TF.
     Returns:
         A :class:`CheckedSource` (iterable of Scan, ``meta``, ``len()`` where known).
 
@@ -229,7 +236,8 @@ def open_source(
         path = spooled
     try:
         source = _open(path, topic, seed=seed, duration=duration, skip_bad=skip_bad,
-                       origin=origin if spooled is not None else None)
+                       origin=origin if spooled is not None else None, odom=odom, imu=imu,
+                       laser_offset=laser_offset)
     except BaseException as exc:
         if spooled is not None:
             spooled.unlink(missing_ok=True)
@@ -250,7 +258,7 @@ def _unlink(path: str) -> None:
 
 def _open(
     path: str | os.PathLike[str], topic: str | None, *, seed: int | None, duration: float | None, skip_bad: bool,
-    origin: str | None = None,
+    origin: str | None = None, odom: str = "auto", imu: str = "auto", laser_offset: Pose2D | None = None,
 ) -> CheckedSource:
     fmt = sniff_format(path)
     text = os.fspath(path)
@@ -267,4 +275,7 @@ def _open(
         from dynslam2d.io.rosbag import RosbagSource
 
         inner = RosbagSource(text, topic=topic, skip_bad=skip_bad)
+    from dynslam2d.io.odomsource import attach_odometry
+
+    inner = attach_odometry(inner, fmt, odom=odom, imu=imu, laser_offset=laser_offset)
     return CheckedSource(inner, skip_bad=skip_bad)
