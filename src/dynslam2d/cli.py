@@ -405,6 +405,11 @@ def eval_run(
     _emit(metrics, as_json, _stats_table(f"{run_dir} vs {gt}", _metric_rows(metrics)))
 
 
+def _pct(value: float) -> str:
+    """A share as a percentage; NaN (an empty class) as —."""
+    return "—" if value != value else f"{100 * value:.2f} %"
+
+
 def _metric_rows(metrics: dict[str, Any]) -> list[tuple[str, str]]:
     rows = [("ATE RMSE", f"{metrics['ate_rmse_m']:.4f} m ({metrics['poses_compared']} poses)")]
     m = metrics.get("map")
@@ -420,6 +425,13 @@ def _metric_rows(metrics: dict[str, Any]) -> list[tuple[str, str]]:
         rows += [
             ("removed beams: precision / recall", f"{r['precision']:.3f} / {r['recall']:.3f}"),
             ("static beams removed", f"{100 * r['static_removed_share']:.2f} %"),
+        ]
+    mc = metrics.get("removal_by_motion")
+    if mc and mc["n_standing"] + mc["n_stopped"] > 0:
+        rows += [
+            ("walking-mover beams removed", _pct(mc["walking_recall"])),
+            ("standing-mover beams removed", _pct(mc["standing_removed_share"])),
+            ("stopped-mover beams removed", _pct(mc["stopped_removed_share"])),
         ]
     return rows
 

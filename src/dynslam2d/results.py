@@ -20,6 +20,7 @@ import numpy as np
 from dynslam2d.config import dump_config
 from dynslam2d.errors import DynSlamError
 from dynslam2d.eval.maps import map_metrics
+from dynslam2d.eval.motionclass import removal_by_motion
 from dynslam2d.eval.removal import match_scans, removal_metrics
 from dynslam2d.eval.trajectory import ate
 from dynslam2d.gridmap import GridMap
@@ -88,6 +89,9 @@ def evaluate(
         rem = removed[i_run]
         if rem.shape[1] == lab.shape[1]:
             out["removal"] = removal_metrics(rem, lab).as_dict()
+            if gt.movers is not None and gt.movers.shape[0]:
+                # walking / standing / stopped movers apart (dynslam2d.eval.motionclass)
+                out["removal_by_motion"] = removal_by_motion(rem, lab, gt.stamps[i_gt], gt.movers).as_dict()
     return out
 
 
