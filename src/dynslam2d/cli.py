@@ -556,6 +556,30 @@ def eval_people(
     _emit(m.as_dict(), as_json, _stats_table(f"{run_dir} vs people in {bag}", rows))
 
 
+@eval_app.command("foreground")
+def eval_foreground(
+    input: Annotated[str, typer.Argument(help="The recording of a motionless sensor (bag, log).")],
+    run_dir: Annotated[Path, typer.Argument(help="Results folder of 'dynslam2d run' on that recording.")],
+    topic: TopicOpt = None,
+    margin: Annotated[float, typer.Option("--margin", help="A return this far in front of the per-beam median background is foreground, m.")] = 0.3,
+    as_json: JsonOpt = False,
+) -> None:
+    """Removed foreground and background beams of a run of a motionless sensor.
+
+    Foreground: returns at least --margin in front of the per-beam median range (docs/real.md).
+    """
+    from dynslam2d.eval.foreground import evaluate_foreground
+
+    r = evaluate_foreground(input, run_dir, topic=topic, margin=margin)
+    rows = [
+        ("scans (with ≥5 foreground beams)", f"{r.scans} ({r.scans_with_foreground})"),
+        ("foreground beams removed", f"{_pct(r.foreground_removed_share)} of {r.foreground_beams}"),
+        ("background beams removed", f"{_pct(r.background_removed_share)} of {r.background_beams}"),
+        ("returns of rarely-returning beams removed", f"{_pct(r.rare_removed_share)} of {r.rare_beams}"),
+    ]
+    _emit(r.as_dict(), as_json, _stats_table(f"{run_dir} (foreground ≥ {margin:g} m in front of the background)", rows))
+
+
 @eval_app.command("ate")
 def eval_ate(
     reference: Annotated[Path, typer.Argument(help="Reference: TUM file, or a bag with --ref-topic.")],
