@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Iterator
 
 from dynslam2d.errors import DynSlamError
+from dynslam2d.io.zipbag import ZIP_MAGIC
 from dynslam2d.types import Scan, ScanSource, SourceMeta
 
 SIM_PREFIX = "sim:"
@@ -22,7 +23,6 @@ _ROS1_MAGIC = b"#ROSBAG V2.0"
 _MCAP_MAGIC = b"\x89MCAP"
 _GZIP_MAGIC = b"\x1f\x8b"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
-_ZIP_MAGIC = b"PK\x03\x04"
 _CARMEN_RECORDS = (b"FLASER", b"ROBOTLASER1", b"RLASER", b"ODOM", b"PARAM", b"VERTEX2", b"NEFF")
 
 
@@ -58,7 +58,7 @@ def sniff_format(path: str | os.PathLike[str]) -> str:
         return "ros2-bag"  # a bare .db3 (rosbags reads it with or without metadata.yaml)
     if head.startswith(_GZIP_MAGIC):
         return "carmen"
-    if head.startswith(_ZIP_MAGIC):
+    if head.startswith(ZIP_MAGIC):
         return "zip"
     for line in head.splitlines():
         word = line.strip().split(b" ", 1)[0]
@@ -140,14 +140,14 @@ def open_source(
         from dynslam2d.sim import SimSource
 
         inner = SimSource(text[len(SIM_PREFIX) :], seed=seed, duration=duration)
-    elif fmt == "carmen":
-        from dynslam2d.io.carmen import CarmenSource
-
-        inner = CarmenSource(text, skip_bad=skip_bad)
     elif fmt == "zip":
         from dynslam2d.io.zipbag import ZipBagSource
 
         inner = ZipBagSource(text, topic=topic)
+    elif fmt == "carmen":
+        from dynslam2d.io.carmen import CarmenSource
+
+        inner = CarmenSource(text, skip_bad=skip_bad)
     else:
         from dynslam2d.io.rosbag import RosbagSource
 

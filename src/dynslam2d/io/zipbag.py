@@ -15,7 +15,7 @@ import shutil
 import tempfile
 import zipfile
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 from dynslam2d.errors import DynSlamError
 from dynslam2d.types import Scan, SourceMeta
@@ -127,15 +127,16 @@ class ZipBagSource:
 
     Same as :class:`~dynslam2d.io.rosbag.RosbagSource` on the extracted bag;
     ``meta.origin`` names the archive and member, ``meta.extra["archive"]`` the zip.
-    Errors name ``<zip>:<member>`` instead of the temporary file.
+    Errors name ``<zip>:<member>`` instead of the temporary file. ``options`` go to
+    ``RosbagSource`` unchanged.
     """
 
-    def __init__(self, path: str | os.PathLike[str], topic: str | None = None) -> None:
+    def __init__(self, path: str | os.PathLike[str], topic: str | None = None, **options: Any) -> None:
         from dynslam2d.io.rosbag import RosbagSource
 
         self._bag = ExtractedBag(path)
         try:
-            self._inner = RosbagSource(self._bag.path, topic=topic)
+            self._inner = RosbagSource(self._bag.path, topic=topic, **options)
         except DynSlamError as err:
             self._bag.close()
             raise self._bag.relabel(err) from err

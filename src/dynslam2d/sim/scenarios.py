@@ -19,12 +19,6 @@ Registered scenes (``SCENARIOS``):
   shuttles a little.
 - ``crowd`` — a 14×10 m hall, six people (discs, 0.4–0.5 m) on random-waypoint
   walks around a robot driving a rectangular circuit.
-- ``corridor`` — a 30 m corridor with door recesses and a side room; people
-  walking both ways, a cart shuttling, a person wandering in the side room;
-  the robot drives along it.
-- ``stop-and-go`` — a box arrives through a doorway and parks; a parked car
-  waits, then leaves through the doorway and parks outside; a person walks
-  back and forth with long stops at both ends.
 - ``drive`` — a robot driving at ≈1 m/s along a 24 m corridor with door
   recesses, through a doorway into a room and through a second doorway into
   another corridor (walls seen at grazing angles, a 270° laser); six people
@@ -33,6 +27,12 @@ Registered scenes (``SCENARIOS``):
   standing people are movers (their beams carry their ids); whether a person
   walks at a scan is in the movers' exact velocities (``movers.csv``), which
   :mod:`dynslam2d.eval.motionclass` uses to split the removal metrics.
+- ``corridor`` — a 30 m corridor with door recesses and a side room; people
+  walking both ways, a cart shuttling, a person wandering in the side room;
+  the robot drives along it.
+- ``stop-and-go`` — a box arrives through a doorway and parks; a parked car
+  waits, then leaves through the doorway and parks outside; a person walks
+  back and forth with long stops at both ends.
 """
 
 from __future__ import annotations
@@ -276,31 +276,6 @@ def _build_corridor(seed: int, duration: float) -> Scenario:
                     "a wanderer; robot drives its length", world, movers, robot, _lidar(), duration, seed)
 
 
-# --------------------------------------------------------------------------- stop-and-go
-
-_STOPGO_OUTLINE = [
-    (-4.0, -5.0), (5.0, -5.0), (5.0, -1.0), (14.0, -1.0), (14.0, 1.0), (5.0, 1.0), (5.0, 5.0),
-    (1.5, 5.0), (1.5, 5.6), (0.3, 5.6), (0.3, 5.0), (-5.0, 5.0), (-5.0, -4.0),
-]
-
-
-def _build_stop_and_go(seed: int, duration: float) -> Scenario:
-    solids = _pilasters() + [_solid(-0.2, 3.8, 0.4, 0.4), _solid(-2.2, -2.4, 1.2, 0.6)]
-    world = _build_world(_STOPGO_OUTLINE, solids)
-    robot = oscillating_in_place(-2.0, 0.0, 0.6, 0.5, 8.0)
-    box = timeline((12.5, 0.0), [("wait", 5.0), ("go", (4.0, 0.0), 0.8), ("go", (1.5, -2.5), 0.8)], heading=0.0)
-    car = timeline((2.0, 2.5), [("wait", 28.0), ("go", (4.0, 0.0), 0.7), ("go", (13.0, 0.0), 0.9)],
-                   start_heading=0.0)
-    person = ping_pong([(-3.5, -3.0), (-3.5, 3.0)], 1.0, heading=None, pause=4.0)
-    movers = (
-        Mover(1, "box-arriving", Rect(1.0, 1.0), box),
-        Mover(2, "car-leaving", Rect(1.2, 0.8), car),
-        Mover(3, "person-stop-and-go", Circle(0.25), person),
-    )
-    return Scenario("stop-and-go", "a box arrives and parks, a parked car leaves through the doorway, "
-                    "a person walks with long stops", world, movers, robot, _lidar(), duration, seed)
-
-
 # --------------------------------------------------------------------------- drive
 
 #: Corridor A (x 0…24, y ±1.2) with door recesses, a doorway (y ±0.5, 0.15 m thick wall)
@@ -371,6 +346,31 @@ def _build_drive(seed: int, duration: float) -> Scenario:
                     lidar, duration, seed)
 
 
+# --------------------------------------------------------------------------- stop-and-go
+
+_STOPGO_OUTLINE = [
+    (-4.0, -5.0), (5.0, -5.0), (5.0, -1.0), (14.0, -1.0), (14.0, 1.0), (5.0, 1.0), (5.0, 5.0),
+    (1.5, 5.0), (1.5, 5.6), (0.3, 5.6), (0.3, 5.0), (-5.0, 5.0), (-5.0, -4.0),
+]
+
+
+def _build_stop_and_go(seed: int, duration: float) -> Scenario:
+    solids = _pilasters() + [_solid(-0.2, 3.8, 0.4, 0.4), _solid(-2.2, -2.4, 1.2, 0.6)]
+    world = _build_world(_STOPGO_OUTLINE, solids)
+    robot = oscillating_in_place(-2.0, 0.0, 0.6, 0.5, 8.0)
+    box = timeline((12.5, 0.0), [("wait", 5.0), ("go", (4.0, 0.0), 0.8), ("go", (1.5, -2.5), 0.8)], heading=0.0)
+    car = timeline((2.0, 2.5), [("wait", 28.0), ("go", (4.0, 0.0), 0.7), ("go", (13.0, 0.0), 0.9)],
+                   start_heading=0.0)
+    person = ping_pong([(-3.5, -3.0), (-3.5, 3.0)], 1.0, heading=None, pause=4.0)
+    movers = (
+        Mover(1, "box-arriving", Rect(1.0, 1.0), box),
+        Mover(2, "car-leaving", Rect(1.2, 0.8), car),
+        Mover(3, "person-stop-and-go", Circle(0.25), person),
+    )
+    return Scenario("stop-and-go", "a box arrives and parks, a parked car leaves through the doorway, "
+                    "a person walks with long stops", world, movers, robot, _lidar(), duration, seed)
+
+
 # --------------------------------------------------------------------------- registry
 
 #: name → spec; ``SCENARIOS[name](seed=None, duration=None)`` builds the scene
@@ -380,10 +380,10 @@ SCENARIOS: dict[str, ScenarioSpec] = {
        for i, name in enumerate(_PAPER_VARIANTS)},
     "static": ScenarioSpec(_build_static, 5, 40.0, "paper room without movers, robot yawing up to ≈1 rad/s"),
     "crowd": ScenarioSpec(_build_crowd, 6, 60.0, "six people on random walks around a robot on a circuit"),
+    "drive": ScenarioSpec(_build_drive, 11, 45.0, "robot at 1 m/s through corridors and doors; people walking "
+                          "past/across at 0.7–2 m/s, some standing"),
     "corridor": ScenarioSpec(_build_corridor, 7, 60.0, "30 m corridor, walkers, a cart, robot driving along"),
     "stop-and-go": ScenarioSpec(_build_stop_and_go, 8, 60.0, "objects parking and leaving; a person with stops"),
-    "drive": ScenarioSpec(_build_drive, 9, 45.0, "robot at 1 m/s through corridors and doors; people walking "
-                          "past/across at 0.7–2 m/s, some standing"),
 }
 
 
