@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Iterator
 
 from dynslam2d.errors import DynSlamError
-from dynslam2d.io.zipbag import ZIP_MAGIC
 from dynslam2d.types import Scan, ScanSource, SourceMeta
 
 SIM_PREFIX = "sim:"
@@ -23,6 +22,7 @@ _ROS1_MAGIC = b"#ROSBAG V2.0"
 _MCAP_MAGIC = b"\x89MCAP"
 _GZIP_MAGIC = b"\x1f\x8b"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
+_ZIP_MAGIC = b"PK\x03\x04"  # a zip archive holding one bag (io/zipbag.py)
 _CARMEN_RECORDS = (b"FLASER", b"ROBOTLASER1", b"RLASER", b"ODOM", b"PARAM", b"VERTEX2", b"NEFF")
 
 
@@ -58,7 +58,7 @@ def sniff_format(path: str | os.PathLike[str]) -> str:
         return "ros2-bag"  # a bare .db3 (rosbags reads it with or without metadata.yaml)
     if head.startswith(_GZIP_MAGIC):
         return "carmen"
-    if head.startswith(ZIP_MAGIC):
+    if head.startswith(_ZIP_MAGIC):
         return "zip"
     for line in head.splitlines():
         word = line.strip().split(b" ", 1)[0]
