@@ -18,7 +18,8 @@ foreground / background removals (stationary bags); tracks (born) and tracks in 
 M near robot = tracks in M whose centre stays within 0.5 m of the laser
 (:mod:`dynslam2d.eval.following`); people: removal recall on walking (and standing)
 person beams; non-person = removed share of beams that are not people (static
-structure for the simulation); to M = median time from a person's first motion to M;
+structure for the simulation); to M = median time from a person's first motion to M
+(simulation: from the first scan a mover is seen walking, ``metrics.json`` ``time_to_m``);
 ms/scan = median processing time per scan (summary.json ``processing_ms_median``; p95
 beside it) and scans/s = 1000 / that median.
 
@@ -151,6 +152,7 @@ def measure(rec: Recording, args: argparse.Namespace, env: dict[str, str], prefi
             mc = m.get("removal_by_motion", {})
             v["walking"], v["standing"] = mc.get("walking_recall"), mc.get("standing_removed_share")
             v["non_person"] = mc.get("static_removed_share", m["removal"]["static_removed_share"])
+            v["to_m"] = m.get("time_to_m", {}).get("median_delay")
     except (RuntimeError, OSError, KeyError, ValueError) as err:
         row.error = str(err)
     return row

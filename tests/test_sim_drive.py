@@ -125,3 +125,35 @@ def test_drive_removal_split_by_motion_class(drive):
     assert mc["walking_recall"] == 1.0 and mc["static_removed_share"] == 0.0
     assert mc["n_removed_standing"] == (len(standing_idx) + 1) // 2
     assert out["removal"]["recall"] < 1.0  # the unsplit recall counts standing people as movers
+    from dynslam2d.io.runfolder import TRACK_DTYPE
+
+    none_in_m = evaluate(gt.trajectory, gt.static_map, gt, removed, gt.stamps, np.zeros(0, dtype=TRACK_DTYPE))
+    assert none_in_m["time_to_m"]["seen_walking"] >= 5 and none_in_m["time_to_m"]["reached"] == 0
+
+
+def test_time_to_m_from_the_first_scan_a_mover_is_seen_walking():
+    from dynslam2d.eval.motionclass import time_to_m
+    from dynslam2d.io.runfolder import TRACK_DTYPE
+
+    stamps = np.round(np.arange(10) * 0.1, 10)
+    rows = np.zeros(20, dtype=[("stamp", "f8"), ("id", "i4"), ("x", "f8"), ("y", "f8"), ("vx", "f8"),
+                               ("vy", "f8"), ("hits", "i4")])
+    rows["stamp"] = np.repeat(stamps, 2)
+    rows["id"] = [1, 2] * 10
+    # mover 1 stands until 0.3 s, walks from 0.3 s (seen throughout); mover 2 walks, unseen until 0.5 s
+    rows["vx"] = [0.0 if (t < 0.25 and k == 1) else 1.0 for t in stamps for k in (1, 2)]
+    rows["x"] = [max(t - 0.3, 0.0) if k == 1 else 5.0 + t for t in stamps for k in (1, 2)]
+    rows["hits"] = [10 if k == 1 else (0 if t < 0.45 else 8) for t in stamps for k in (1, 2)]
+    tracks = []
+    for t in stamps:
+        if t >= 0.55:  # a track in M over mover 1 from 0.6 s, in a map frame shifted by (−1, 0)
+            tracks.append((t, 7, "confirmed", max(t - 0.3, 0.0) - 1.0 + 0.2, 0.1, 0, 0.4, 0.4, 1, 0, True))
+        tracks.append((t, 8, "confirmed", 5.0 + t - 1.0, 0.0, 0, 0.4, 0.4, 1, 0, False))  # over mover 2, not in M
+    tracks = np.array(tracks, dtype=TRACK_DTYPE)
+    r = time_to_m(rows, tracks, transform=Pose2D(1.0, 0.0, 0.0))
+    by_id = {m.id: m for m in r.movers}
+    assert by_id[1].onset == pytest.approx(0.3) and by_id[1].reached == pytest.approx(0.6)
+    assert by_id[1].delay == pytest.approx(0.3)
+    assert by_id[2].onset == pytest.approx(0.5) and by_id[2].reached is None
+    assert (r.seen_walking, r.reached, r.within_half_second) == (2, 1, 0.5)
+    assert time_to_m(rows, tracks).reached == 0  # without the frame transform the track is 1 m off

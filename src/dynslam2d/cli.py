@@ -433,6 +433,11 @@ def _metric_rows(metrics: dict[str, Any]) -> list[tuple[str, str]]:
             ("standing-mover beams removed", _pct(mc["standing_removed_share"])),
             ("stopped-mover beams removed", _pct(mc["stopped_removed_share"])),
         ]
+    tm = metrics.get("time_to_m")
+    if tm and tm["seen_walking"]:
+        delay = "—" if tm["median_delay"] != tm["median_delay"] else f"{tm['median_delay']:.2f} s"
+        rows.append(("walking movers caught by M (median delay)",
+                     f"{tm['reached']} of {tm['seen_walking']} ({delay}; {_pct(tm['within_half_second'])} within 0.5 s)"))
     return rows
 
 

@@ -150,4 +150,87 @@ def removal_by_motion(removed: np.ndarray, labels: np.ndarray, label_stamps: np.
     )
 
 
-__all__ = ["CLASS_NAMES", "MotionRemoval", "beam_classes", "mover_classes", "removal_by_motion"]
+@dataclass(frozen=True)
+class MoverTimeToM:
+    """One mover: when it was first seen walking and when a track in M first caught it (s; None = never)."""
+
+    id: int
+    onset: float | None
+    reached: float | None
+    delay: float | None
+
+
+@dataclass(frozen=True)
+class TimeToM:
+    """How fast walking movers enter the dynamic set M (issue 9: within 0.5 s of starting to move).
+
+    Attributes:
+        movers: per mover seen walking, onset / reached / delay.
+        seen_walking: movers seen walking at least once.
+        reached: of those, movers a track in M caught after their onset.
+        median_delay: median delay of the movers reached, s (NaN if none).
+        within_half_second: share of the movers seen walking that were caught within 0.5 s.
+        m_radius: a track in M with its centre this close to the mover's centre catches it, m.
+    """
+
+    movers: list[MoverTimeToM]
+    seen_walking: int
+    reached: int
+    median_delay: float
+    within_half_second: float
+    m_radius: float
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def time_to_m(mover_rows: np.ndarray, tracks: np.ndarray, transform: Any | None = None, m_radius: float = 0.5,
+              speed_threshold: float = SPEED_THRESHOLD, min_hits: int = 3) -> TimeToM:
+    """Per walking mover, the time from its *onset* — the first scan where it walks (speed >
+    ``speed_threshold``) and at least ``min_hits`` beams hit it — to the first scan from then on
+    where a track in M has its centre within ``m_radius`` m of the mover's centre.
+
+    Args:
+        mover_rows: ground-truth rows (stamp, id, x, y, vx, vy, hits; ground-truth frame).
+        tracks: tracks.csv rows (:data:`dynslam2d.io.runfolder.TRACK_DTYPE`; the run's map frame).
+        transform: maps the run's map frame into the ground-truth frame (the ATE alignment,
+            a :class:`~dynslam2d.types.Pose2D`); None = the frames coincide.
+    """
+    in_m = tracks[tracks["in_M"]] if tracks.shape[0] else tracks
+    xy = np.column_stack((in_m["x"], in_m["y"])) if in_m.shape[0] else np.zeros((0, 2))
+    if transform is not None and xy.shape[0]:
+        xy = transform.transform_points(xy)
+    order = np.argsort(in_m["stamp"], kind="stable") if in_m.shape[0] else np.zeros(0, dtype=np.int64)
+    m_stamps = in_m["stamp"][order] if in_m.shape[0] else np.zeros(0)
+    xy = xy[order]
+    out: list[MoverTimeToM] = []
+    for mid in np.unique(mover_rows["id"]):
+        rows = mover_rows[mover_rows["id"] == mid]
+        rows = rows[np.argsort(rows["stamp"], kind="stable")]
+        walking = np.hypot(rows["vx"], rows["vy"]) > speed_threshold
+        seen = rows["hits"] >= min_hits
+        start = np.flatnonzero(walking & seen)
+        if start.shape[0] == 0:
+            continue
+        onset = float(rows["stamp"][start[0]])
+        reached = None
+        for r in rows[start[0]:]:
+            lo = np.searchsorted(m_stamps, r["stamp"] - 1e-6)
+            hi = np.searchsorted(m_stamps, r["stamp"] + 1e-6)
+            if hi > lo and np.hypot(xy[lo:hi, 0] - r["x"], xy[lo:hi, 1] - r["y"]).min() <= m_radius:
+                reached = float(r["stamp"])
+                break
+        out.append(MoverTimeToM(int(mid), onset, reached, None if reached is None else reached - onset))
+    delays = [m.delay for m in out if m.delay is not None]
+    return TimeToM(
+        movers=out,
+        seen_walking=len(out),
+        reached=len(delays),
+        median_delay=float(np.median(delays)) if delays else float("nan"),
+        within_half_second=(sum(d <= 0.5 + 1e-9 for d in delays) / len(out)) if out else float("nan"),
+        m_radius=float(m_radius),
+    )
+
+
+__all__ = ["CLASS_NAMES", "MotionRemoval", "MoverTimeToM", "TimeToM", "beam_classes", "mover_classes",
+           "removal_by_motion", "time_to_m"]
