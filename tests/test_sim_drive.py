@@ -16,7 +16,7 @@ from dynslam2d.eval.motionclass import (
     removal_by_motion,
 )
 from dynslam2d.results import evaluate, ground_truth_for
-from dynslam2d.sim import SCENARIOS, SimSource, build_scenario, point_segment_distance, simulate
+from dynslam2d.sim import SCENARIOS, build_scenario, point_segment_distance, simulate
 from dynslam2d.types import Pose2D
 
 

@@ -26,7 +26,6 @@ Definitions (docs/real.md):
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -326,11 +325,6 @@ def evaluate_people(
     traj = read_run_trajectory(run_dir)
     ann = read_people_annotations(bag, scan_topic=scan_topic, people_topic=people_topic)
     return people_metrics(ann, mask.removed, mask.stamps, traj.stamps, traj.poses, tracks, p)
-
-
-def finite_or_none(value: float) -> float | None:
-    """NaN → None (for JSON consumers that reject NaN)."""
-    return None if isinstance(value, float) and math.isnan(value) else value
 
 
 __all__ = ["PeopleMetrics", "PeopleParams", "PersonResult", "evaluate_people", "people_metrics"]
