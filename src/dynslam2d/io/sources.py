@@ -276,7 +276,7 @@ def _open(
     elif fmt == "zip":
         from dynslam2d.io.zipbag import ZipBagSource
 
-        inner = ZipBagSource(text, topic=topic)
+        inner = ZipBagSource(text, topic=topic, skip_bad=skip_bad)
     elif fmt == "carmen":
         from dynslam2d.io.carmen import CarmenSource
 

@@ -144,6 +144,11 @@ class ZipBagSource:
         self.meta.origin = self._bag.label
         self.meta.extra["archive"] = str(self._bag.archive)
 
+    @property
+    def path(self) -> Path:
+        """The extracted bag (a temporary file), for readers of its other topics (odometry, TF)."""
+        return self._bag.path
+
     def __len__(self) -> int:
         return len(self._inner)
 
