@@ -128,12 +128,28 @@ def _solve3(A, b, out):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans):  # pragma: no cover
+def _prior_cost(x, y, th, prior, lam_p):  # pragma: no cover - numba
+    """(ξ − ξp)ᵀ Λp (ξ − ξp) in the level's cell / rad units."""
+    d0 = x - prior[0]
+    d1 = y - prior[1]
+    d2 = th - prior[2]
+    return (d0 * (lam_p[0, 0] * d0 + lam_p[0, 1] * d1 + lam_p[0, 2] * d2)
+            + d1 * (lam_p[1, 0] * d0 + lam_p[1, 1] * d1 + lam_p[1, 2] * d2)
+            + d2 * (lam_p[2, 0] * d0 + lam_p[2, 1] * d1 + lam_p[2, 2] * d2))
+
+
+@njit(cache=True)
+def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
+                prior, lam_p):  # pragma: no cover
     """Run ``n_iter`` GN/LM steps on one level from map pose ``pose`` (x, y cells, θ rad).
 
     Returns (pose (3,), number of accepted steps). Steps are bounded: |Δθ| ≤ max_rot
     (reference ±0.2 rad clamp), |Δxy| ≤ max_trans cells. With an empty map (H00 or H11 = 0)
     no step is taken (hector_slam.md §2.4).
+
+    ``prior`` (3,) and ``lam_p`` (3, 3) add a prior term ½(ξ−ξp)ᵀΛp(ξ−ξp) to the objective (same
+    units as ``pose``): the normal equations become (H + Λp)Δ = g + Λp(ξp − ξ). An all-zero
+    ``lam_p`` is the plain matcher.
     """
     H = np.zeros((3, 3))
     g = np.zeros(3)
@@ -142,19 +158,38 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     x = pose[0]
     y = pose[1]
     th = pose[2]
+    use_prior = False
+    for a in range(3):
+        for b in range(3):
+            if lam_p[a, b] != 0.0:
+                use_prior = True
+    gp = np.zeros(3)
     cost, _, _ = accumulate(prob, pts, x, y, th, swapped, H, g)
+    if use_prior:
+        cost += _prior_cost(x, y, th, prior, lam_p)
     lam = lam0
     n_acc = 0
     for _ in range(n_iter):
         if H[0, 0] == 0.0 or H[1, 1] == 0.0:
             break
         for a in range(3):
+            gp[a] = g[a]
             for b in range(3):
                 A[a, b] = H[a, b]
+        if use_prior:
+            # prior term in the normal equations (Zhang et al. 2016: the prior constrains the directions
+            # the measurement leaves degenerate; lam_p is zero along the well-constrained ones)
+            r0 = prior[0] - x
+            r1 = prior[1] - y
+            r2 = prior[2] - th
+            for a in range(3):
+                gp[a] += lam_p[a, 0] * r0 + lam_p[a, 1] * r1 + lam_p[a, 2] * r2
+                for b in range(3):
+                    A[a, b] += lam_p[a, b]
         if use_lm:
             for a in range(3):
-                A[a, a] += lam * H[a, a] + 1e-9
-        if not _solve3(A, g, d):
+                A[a, a] += lam * A[a, a] + 1e-9
+        if not _solve3(A, gp, d):
             if use_lm:
                 lam *= 10.0
                 if lam > lam_max:
@@ -175,9 +210,13 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
         nth = th + d[2]
         if use_lm:
             new_cost = cost_at(prob, pts, nx, ny, nth)
+            if use_prior:
+                new_cost += _prior_cost(nx, ny, nth, prior, lam_p)
             if new_cost < cost:
                 x, y, th = nx, ny, nth
                 cost, _, _ = accumulate(prob, pts, x, y, th, swapped, H, g)
+                if use_prior:
+                    cost += _prior_cost(x, y, th, prior, lam_p)
                 lam = max(lam * 0.1, 1e-7)
                 n_acc += 1
                 if nt < _CONVERGED_CELLS and abs(d[2]) < _CONVERGED_RAD:
@@ -189,6 +228,8 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
         else:
             x, y, th = nx, ny, nth
             cost, _, _ = accumulate(prob, pts, x, y, th, swapped, H, g)
+            if use_prior:
+                cost += _prior_cost(x, y, th, prior, lam_p)
             n_acc += 1
     out = np.empty(3)
     out[0] = x
@@ -237,16 +278,22 @@ def match_multires(
     lam_max: float = 1e4,
     max_rot: float = 0.2,
     max_trans_cells: float = 2.0,
+    prior_world: np.ndarray | None = None,
+    prior_info: np.ndarray | None = None,
 ) -> np.ndarray:
     """Coarse-to-fine matching (hector_slam.md §2.5): from the coarsest level down to level 0,
     each level starting at the previous level's result; θ wrapped after each level.
 
     ``pts_m``: (n, 2) points in the laser frame, m. ``start_world``: (x m, y m, θ rad).
+    ``prior_world`` (x m, y m, θ rad) with ``prior_info`` (3, 3, information in world units:
+    1/m², 1/(m·rad), 1/rad²) adds the prior term ½(ξ−ξp)ᵀΛ(ξ−ξp) on every level.
     Returns the world pose (3,).
     """
     pose = np.asarray(start_world, dtype=np.float64).copy()
     if pts_m.shape[0] == 0:
         return pose
+    zero = np.zeros((3, 3))
+    use_prior = prior_world is not None and prior_info is not None and bool(np.any(prior_info))
     for k in range(len(levels) - 1, -1, -1):
         lv = levels[k]
         if lv.empty:
@@ -255,8 +302,16 @@ def match_multires(
         if n_iter <= 0:
             continue
         mp = lv.pose_to_map(pose)
+        if use_prior:
+            pp = lv.pose_to_map(np.asarray(prior_world, dtype=np.float64))
+            pp[2] = mp[2] + (pp[2] - mp[2] + math.pi) % (2.0 * math.pi) - math.pi  # same branch as θ
+            S = np.diag([lv.resolution, lv.resolution, 1.0])  # cells → m
+            lam_k = S @ np.asarray(prior_info, dtype=np.float64) @ S
+        else:
+            pp, lam_k = mp, zero
         out, _ = match_level(
-            lv.prob, pts_m / lv.resolution, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells
+            lv.prob, pts_m / lv.resolution, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
+            pp, lam_k,
         )
         if not np.all(np.isfinite(out)):
             return np.full(3, np.nan)
@@ -293,3 +348,107 @@ def covariance_world(hessian: np.ndarray, sigma2: float, resolution: float) -> n
     S = np.diag([resolution, resolution, 1.0])
     C = S @ C @ S
     return 0.5 * (C + C.T)
+
+
+@njit(cache=True)
+def _support_kernel(prob, pts, x, y, th, thresh, inlier):  # pragma: no cover - numba
+    c = math.cos(th)
+    s = math.sin(th)
+    n = 0
+    for i in range(pts.shape[0]):
+        sx = pts[i, 0]
+        sy = pts[i, 1]
+        m, _, _, inside = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, False)
+        ok = inside and m > thresh
+        inlier[i] = ok
+        if ok:
+            n += 1
+    return n
+
+
+def inliers(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, thresh: float) -> np.ndarray:
+    """(n,) bool: laser-frame points ``pts_m`` (n, 2, m) that land on cells of ``level`` whose
+    interpolated occupancy probability exceeds ``thresh`` at ``pose_world`` — the points the
+    map confirms (all False on an empty level)."""
+    out = np.zeros(pts_m.shape[0], dtype=np.bool_)
+    if level.empty or pts_m.shape[0] == 0:
+        return out
+    mp = level.pose_to_map(pose_world)
+    _support_kernel(level.prob, pts_m / level.resolution, mp[0], mp[1], mp[2], thresh, out)
+    return out
+
+
+def angular_spread(pts_m: np.ndarray, bin_rad: float = math.radians(5.0)) -> float:
+    """Angular extent covered by the bearings of laser-frame points ``pts_m`` (n, 2), rad: the
+    number of ``bin_rad`` bearing bins holding a point times the bin width (0 … 2π)."""
+    if pts_m.shape[0] == 0:
+        return 0.0
+    b = np.arctan2(pts_m[:, 1], pts_m[:, 0])
+    nb = int(round(2.0 * math.pi / bin_rad))
+    idx = np.floor((b + math.pi) / (2.0 * math.pi) * nb).astype(np.int64) % nb
+    return float(np.unique(idx).size) * (2.0 * math.pi / nb)
+
+
+@dataclass(slots=True)
+class Degeneracy:
+    """Eigen-analysis of a match Hessian (Zhang, Kaess & Singh 2016, "On degeneracy of
+    optimization-based state estimation problems", ICRA).
+
+    The Hessian is taken in normalized units (x, y in m and θ scaled by the RMS point range ρ,
+    so a unit step in every coordinate moves the points by about 1 m) so that its eigenvalues
+    can be compared.
+
+    Attributes:
+        ratio: smallest / largest eigenvalue (0 … 1; 0 = a direction the scan cannot see at all).
+        eigenvalues: (3,) ascending, normalized units.
+        vectors: (3, 3) matching eigenvectors as columns, normalized (x m, y m, ρθ m) coordinates.
+        scale: ρ, m.
+        degenerate: (3,) bool, eigenvalue / largest below the threshold given.
+    """
+
+    ratio: float
+    eigenvalues: np.ndarray
+    vectors: np.ndarray
+    scale: float
+    degenerate: np.ndarray
+
+    @property
+    def any(self) -> bool:
+        return bool(self.degenerate.any())
+
+    def prior_information(self, weight: float, axes: np.ndarray | None = None) -> np.ndarray:
+        """(3, 3) prior information in world units (1/m², 1/(m·rad), 1/rad²) that acts only along
+        the degenerate eigenvectors, with stiffness ``weight`` × the largest eigenvalue.
+
+        ``axes`` (3,) bool limits the prior to the pose components it knows (e.g. only θ for an IMU):
+        the degenerate eigenvectors are projected onto those axes first.
+        """
+        lam = weight * float(self.eigenvalues[-1])
+        info = np.zeros((3, 3))
+        if not lam > 0.0:
+            return info
+        for j in np.flatnonzero(self.degenerate):
+            v = self.vectors[:, j].copy()
+            if axes is not None:
+                v = np.where(axes, v, 0.0)
+            info += lam * np.outer(v, v)
+        D = np.diag([1.0, 1.0, self.scale])  # normalized (m, m, ρθ) → world (m, m, rad)
+        return D @ info @ D
+
+
+def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, threshold: float) -> Degeneracy:
+    """Eigen-analysis of the level-0 Gauss–Newton Hessian ``hessian_cells`` (cells / rad units, cell
+    side ``resolution`` m) for laser-frame points ``pts_m`` (n, 2, m); directions whose eigenvalue is
+    below ``threshold`` × the largest are degenerate."""
+    rho = float(np.sqrt(np.mean(np.sum(pts_m**2, axis=1)))) if pts_m.shape[0] else 1.0
+    rho = max(rho, 1e-3)
+    D = np.diag([1.0 / resolution, 1.0 / resolution, 1.0 / rho])  # world-normalized → cells / rad
+    Hn = D @ (0.5 * (hessian_cells + hessian_cells.T)) @ D
+    if not np.all(np.isfinite(Hn)):
+        Hn = np.zeros((3, 3))
+    w, V = np.linalg.eigh(Hn)
+    w = np.maximum(w, 0.0)
+    wmax = float(w[-1])
+    ratio = float(w[0] / wmax) if wmax > 0.0 else 0.0
+    deg = w < threshold * wmax if wmax > 0.0 else np.ones(3, dtype=bool)
+    return Degeneracy(ratio, w, V, rho, deg)
