@@ -307,9 +307,18 @@ def run(
         ("map", f"{summary['map_cells'][1]}×{summary['map_cells'][0]} cells at {summary['map_resolution_m']} m, "
                 f"{summary['memory_bytes'] / 2**20:.1f} MiB"),
     ]
+    pc = summary.get("pose_confidence")
+    if pc:
+        rows.append(("pose confidence",
+                     f"{100 * pc['low_support_share']:.1f} % low support (longest {pc['longest_low_support_s']:.1f} s), "
+                     f"{100 * pc['degenerate_share']:.1f} % degenerate (longest {pc['longest_degenerate_s']:.1f} s), "
+                     f"lost {pc['lost_events']}× ({pc['lost_time_s']:.1f} s)"))
     if "metrics.json" in paths:
         rows += _metric_rows(json.loads(paths["metrics.json"].read_text()))
     console.print(_stats_table(f"dynslam2d run {input}", rows))
+    if pc and pc.get("warning"):
+        console.print(f"[bold red]warning:[/] {pc['warning']} — the map and trajectory are not reliable there "
+                      "(map.png marks the poses)")
     console.print(f"results in [bold]{out}[/]")
     if write_bag is not None:
         console.print(f"bag for RViz / Foxglove: [bold]{write_bag}[/] (docs/ros.md)")

@@ -76,12 +76,10 @@ def summarize(stamps: np.ndarray, flags: dict[str, np.ndarray], degeneracy: np.n
     share = float(out["low_support_share"])  # type: ignore[arg-type]
     longest = float(out["longest_low_support_s"])  # type: ignore[arg-type]
     reasons = []
-    if share > max_share:
-        reasons.append(f"{100 * share:.0f} % of the scans were matched with low support")
-    if longest > max_stretch:
-        reasons.append(f"the longest low-support stretch lasts {longest:.1f} s")
+    if share > max_share or longest > max_stretch:
+        reasons.append(f"{100 * share:.0f} % of scans matched with low support (longest stretch {longest:.1f} s)")
     if lost_events:
-        reasons.append(f"lost {lost_events}× ({out['lost_time_s']} s), relocalised {relocalisations}×")
+        reasons.append(f"lost {lost_events}× ({float(out['lost_time_s']):.1f} s), relocalised {relocalisations}×")
     out["trustworthy"] = not reasons
     out["warning"] = ("pose not trustworthy: " + "; ".join(reasons)) if reasons else None
     return out

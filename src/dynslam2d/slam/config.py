@@ -239,10 +239,11 @@ class SlamConfig(BaseModel):
         "the rotation prior) when they carry them. False = laser only.",
     )
     degeneracy_threshold: float = Field(
-        0.06, ge=0.0, le=1.0,
-        description="A direction of the match Hessian whose eigenvalue is below this fraction of the "
-        "largest (normalized units: x, y in m, θ times the RMS point range) is degenerate: the scan "
-        "cannot constrain it (a corridor's axis). Dimensionless; 0 = never.",
+        0.045, ge=0.0, le=1.0,
+        description="A direction of the match Hessian is degenerate (the scan cannot constrain it, e.g. a "
+        "corridor's axis) when its eigenvalue is below this fraction of the largest: translation and "
+        "rotation (scaled by the RMS point range) each with the other marginalized. Dimensionless; "
+        "measured: ≤ 0.037 in a corridor seeing only its side walls, ≥ 0.058 on every MIT CSAIL scan. 0 = never.",
     )
     prior_weight: float = Field(
         1.0, ge=0.0,
@@ -312,6 +313,11 @@ class SlamConfig(BaseModel):
     relocalise_angular_window: float = Field(
         math.pi, ge=0.0, le=math.pi,
         description="Half-width of the relocalisation search window (rotation), rad.",
+    )
+    relocalise_interval: float = Field(
+        0.3, ge=0.0,
+        description="While lost, a relocalisation search is tried at most once per this interval, s "
+        "(the wide search costs tens of ms).",
     )
     relocalise_margin: float = Field(
         0.08, ge=0.0, le=1.0,

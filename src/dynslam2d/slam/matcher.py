@@ -391,64 +391,80 @@ def angular_spread(pts_m: np.ndarray, bin_rad: float = math.radians(5.0)) -> flo
 
 @dataclass(slots=True)
 class Degeneracy:
-    """Eigen-analysis of a match Hessian (Zhang, Kaess & Singh 2016, "On degeneracy of
-    optimization-based state estimation problems", ICRA).
+    """Degeneracy analysis of a match Hessian (after Zhang, Kaess & Singh 2016, "On degeneracy of
+    optimization-based state estimation problems", ICRA: the eigenvectors of the information
+    matrix with small eigenvalues are the directions the measurement cannot constrain).
 
-    The Hessian is taken in normalized units (x, y in m and θ scaled by the RMS point range ρ,
-    so a unit step in every coordinate moves the points by about 1 m) so that its eigenvalues
-    can be compared.
+    Translation and rotation have different units, so they are analysed separately, each with the
+    other marginalized out (Schur complement): the translational block's eigenvectors give the
+    degenerate translation direction (a corridor's axis); the rotational information, scaled by
+    the RMS point range ρ² (a rotation δθ moves the points by about ρ·δθ), is compared with the
+    largest translational eigenvalue.
 
     Attributes:
-        ratio: smallest / largest eigenvalue (0 … 1; 0 = a direction the scan cannot see at all).
-        eigenvalues: (3,) ascending, normalized units.
-        vectors: (3, 3) matching eigenvectors as columns, normalized (x m, y m, ρθ m) coordinates.
+        ratio: smallest normalized eigenvalue / largest (0 … 1; 0 = a direction the scan cannot
+            see at all): min of the translational ratio and the rotational one.
+        translation_ratio: smallest / largest eigenvalue of the translational Schur complement.
+        rotation_ratio: rotational Schur complement · ρ⁻² / largest translational eigenvalue.
+        axis: (2,) unit vector (map frame) of the weakest translation direction.
         scale: ρ, m.
-        degenerate: (3,) bool, eigenvalue / largest below the threshold given.
+        lam_max: largest translational eigenvalue, 1/m² (probability² per m²).
+        translation_degenerate, rotation_degenerate: below the threshold given.
     """
 
     ratio: float
-    eigenvalues: np.ndarray
-    vectors: np.ndarray
+    translation_ratio: float
+    rotation_ratio: float
+    axis: np.ndarray
     scale: float
-    degenerate: np.ndarray
+    lam_max: float
+    translation_degenerate: bool
+    rotation_degenerate: bool
 
     @property
     def any(self) -> bool:
-        return bool(self.degenerate.any())
+        return self.translation_degenerate or self.rotation_degenerate
 
     def prior_information(self, weight: float, axes: np.ndarray | None = None) -> np.ndarray:
         """(3, 3) prior information in world units (1/m², 1/(m·rad), 1/rad²) that acts only along
-        the degenerate eigenvectors, with stiffness ``weight`` × the largest eigenvalue.
+        the degenerate directions, with stiffness ``weight`` × the largest translational eigenvalue.
 
-        ``axes`` (3,) bool limits the prior to the pose components it knows (e.g. only θ for an IMU):
-        the degenerate eigenvectors are projected onto those axes first.
+        ``axes`` (3,) bool: the pose components the prior knows (x, y, θ); e.g. only θ for an IMU.
         """
-        lam = weight * float(self.eigenvalues[-1])
+        lam = weight * self.lam_max
         info = np.zeros((3, 3))
         if not lam > 0.0:
             return info
-        for j in np.flatnonzero(self.degenerate):
-            v = self.vectors[:, j].copy()
-            if axes is not None:
-                v = np.where(axes, v, 0.0)
-            info += lam * np.outer(v, v)
-        D = np.diag([1.0, 1.0, self.scale])  # normalized (m, m, ρθ) → world (m, m, rad)
-        return D @ info @ D
+        known = np.ones(3, dtype=bool) if axes is None else np.asarray(axes, dtype=bool)
+        if self.translation_degenerate and known[0] and known[1]:
+            u = np.array([self.axis[0], self.axis[1], 0.0])
+            info += lam * np.outer(u, u)
+        if self.rotation_degenerate and known[2]:
+            info[2, 2] += lam * self.scale**2
+        return info
 
 
 def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, threshold: float) -> Degeneracy:
-    """Eigen-analysis of the level-0 Gauss–Newton Hessian ``hessian_cells`` (cells / rad units, cell
-    side ``resolution`` m) for laser-frame points ``pts_m`` (n, 2, m); directions whose eigenvalue is
-    below ``threshold`` × the largest are degenerate."""
+    """Degeneracy analysis of the level-0 Gauss–Newton Hessian ``hessian_cells`` (cells / rad units,
+    cell side ``resolution`` m) for laser-frame points ``pts_m`` (n, 2, m); a direction is
+    degenerate when its normalized eigenvalue is below ``threshold`` × the largest."""
     rho = float(np.sqrt(np.mean(np.sum(pts_m**2, axis=1)))) if pts_m.shape[0] else 1.0
     rho = max(rho, 1e-3)
-    D = np.diag([1.0 / resolution, 1.0 / resolution, 1.0 / rho])  # world-normalized → cells / rad
-    Hn = D @ (0.5 * (hessian_cells + hessian_cells.T)) @ D
-    if not np.all(np.isfinite(Hn)):
-        Hn = np.zeros((3, 3))
-    w, V = np.linalg.eigh(Hn)
-    w = np.maximum(w, 0.0)
-    wmax = float(w[-1])
-    ratio = float(w[0] / wmax) if wmax > 0.0 else 0.0
-    deg = w < threshold * wmax if wmax > 0.0 else np.ones(3, dtype=bool)
-    return Degeneracy(ratio, w, V, rho, deg)
+    D = np.diag([1.0 / resolution, 1.0 / resolution, 1.0])  # world (m, m, rad) → cells / rad
+    H = D @ (0.5 * (hessian_cells + hessian_cells.T)) @ D
+    none = Degeneracy(0.0, 0.0, 0.0, np.array([1.0, 0.0]), rho, 0.0, True, True)
+    if not np.all(np.isfinite(H)) or not H[2, 2] > 0.0 or not np.trace(H[:2, :2]) > 0.0:
+        return none
+    St = H[:2, :2] - np.outer(H[:2, 2], H[2, :2]) / H[2, 2]  # rotation marginalized
+    w, V = np.linalg.eigh(0.5 * (St + St.T))
+    lam_max = float(w[1])
+    if not lam_max > 0.0:
+        return none
+    t_ratio = max(float(w[0]), 0.0) / lam_max
+    try:
+        s_rot = float(H[2, 2] - H[2, :2] @ np.linalg.solve(H[:2, :2], H[:2, 2]))  # translation marginalized
+    except np.linalg.LinAlgError:
+        s_rot = 0.0
+    r_ratio = max(s_rot, 0.0) / (rho * rho * lam_max)
+    return Degeneracy(min(t_ratio, r_ratio), t_ratio, r_ratio, V[:, 0].copy(), rho, lam_max,
+                      t_ratio < threshold, r_ratio < threshold)

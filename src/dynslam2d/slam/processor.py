@@ -57,6 +57,8 @@ SOURCE_PREDICTION = "prediction"  # motion model / odometry only
 SOURCE_RELOCALISED = "relocalised"  # wide search after being lost
 #: 'auto' correlative mode searches on the first matches, before a score average exists.
 _WARMUP_SEARCHES = 3
+#: A degenerate direction stays degenerate while its ratio is below this × degeneracy_threshold.
+_DEGENERACY_HYSTERESIS = 1.5
 #: Interpolated probability below which an endpoint counts as landing in known free space.
 FREE_SPACE_PROB = 0.45
 
@@ -215,6 +217,8 @@ class HectorSlam:
         self._unsupported_since: float | None = None  # stamp of the first scan of the current unsupported run
         self.lost_events = 0
         self.relocalisations = 0
+        self._degenerate_prev = (False, False)  # (translation, rotation) degenerate on the last matched scan
+        self._last_relocalise: float | None = None  # stamp of the last relocalisation attempt
         self._history: deque[tuple[float, Pose2D]] = deque()  # accepted (stamp, pose) of the last velocity_window s
 
     # ---- properties --------------------------------------------------------------------
@@ -369,6 +373,7 @@ class HectorSlam:
         pts, clear = self.scan_points(scan)
         start, gap = self._predict(scan.stamp)
         prior = self._prior(scan, start, gap)
+        laser_start = start
         if prior.kind in ("odometry", "imu"):
             start = prior.pose if prior.kind == "odometry" else Pose2D(start.x, start.y, prior.pose.theta)
         if predicted is not None:
@@ -395,17 +400,37 @@ class HectorSlam:
         elif angular_spread(pts) < c.min_sector:
             self._use_prediction(res, prior, PREDICT_NARROW)
         elif self._state == STATE_LOST:
-            self._relocalise(res, pts, prior)
-        else:
-            self._match_against_map(res, pts)
-            if res.reason != REJECT_NON_FINITE and res.reason != REJECT_JUMP:
-                self._apply_prior_and_gate(res, pts, prior, scan.stamp)
+            if self._last_relocalise is None or scan.stamp - self._last_relocalise >= c.relocalise_interval \
+                    or scan.stamp < self._last_relocalise:
+                self._last_relocalise = scan.stamp
+                self._relocalise(res, pts, prior)
             else:
-                res.low_support = True  # pose = start estimate (with odometry: the odometry prediction)
+                self._use_prediction(res, prior, PREDICT_LOST)
+        else:
+            self._match_tracking(res, pts, prior, scan.stamp)
+            if res.low_support and prior.kind == "odometry" and predicted is None:
+                # odometry is a prior, not a replacement: when the odometry-seeded match finds little
+                # support (odometry slipped or glitched), try the laser-only seed too and keep the better
+                alt = MatchResult(
+                    pose=laser_start, start=laser_start, covariance=res.covariance, hessian=zero, score=0.0,
+                    n_points=res.n_points, time_gap=gap, first=first, points=pts, clear_points=clear,
+                    prior=prior.kind, state=self._state,
+                )
+                self._match_tracking(alt, pts, prior, scan.stamp)
+                if alt.support_points > res.support_points:
+                    res = alt
         res.match_ms = (time.perf_counter() - t0) * 1e3
         if commit:
             self._commit(scan, res)
         return res
+
+    def _match_tracking(self, res: MatchResult, pts: np.ndarray, prior: _Prior, stamp: float) -> None:
+        """Match from ``res.start``, then the prior along degenerate directions and the motion gate."""
+        self._match_against_map(res, pts)
+        if res.reason != REJECT_NON_FINITE and res.reason != REJECT_JUMP:
+            self._apply_prior_and_gate(res, pts, prior, stamp)
+        else:
+            res.low_support = True  # pose = start estimate (with odometry: the odometry prediction)
 
     def _too_close(self, scan: Scan) -> bool:
         """More than ``too_close_fraction`` of the valid returns are closer than laser_min_dist."""
@@ -459,6 +484,11 @@ class HectorSlam:
         """Degeneracy analysis of the match; the prior along degenerate directions; the motion gate."""
         c = self.config
         deg: Degeneracy = degeneracy(res.hessian, self.map.resolution, pts, c.degeneracy_threshold)
+        # hysteresis: a degenerate direction stays degenerate until its ratio clearly rises above the threshold
+        hi = _DEGENERACY_HYSTERESIS * c.degeneracy_threshold
+        deg.translation_degenerate |= self._degenerate_prev[0] and deg.translation_ratio < hi
+        deg.rotation_degenerate |= self._degenerate_prev[1] and deg.rotation_ratio < hi
+        self._degenerate_prev = (deg.translation_degenerate, deg.rotation_degenerate)
         res.degeneracy = deg.ratio
         res.degenerate = deg.any
         if deg.any and prior.kind is not None and c.prior_weight > 0.0 and prior.pose.is_finite():
@@ -477,13 +507,11 @@ class HectorSlam:
                 self._use_prediction(res, prior, PREDICT_UNSUPPORTED)
 
     def _relocalise(self, res: MatchResult, pts: np.ndarray, prior: _Prior) -> None:
-        """Lost: a wide correlative search around the prediction; accepted only if its score is high
-        enough and beats the best pose elsewhere (runner-up) by ``relocalise_margin``."""
+        """Lost: a wide correlative search around the prediction (on every scan that is neither too
+        close nor too narrow); accepted only if its score is high enough and beats the best pose
+        elsewhere (runner-up) by ``relocalise_margin``."""
         c = self.config
         levels = self.map.levels
-        if pts.shape[0] < c.support_min_points or angular_spread(pts) < c.support_min_spread:
-            self._use_prediction(res, prior, PREDICT_LOST)
-            return
         lvl = levels[min(c.correlative_level, len(levels) - 1)]
         cr = correlative_search(
             lvl, pts, prior.pose.as_array(), c.relocalise_linear_window, c.relocalise_angular_window,
@@ -500,9 +528,6 @@ class HectorSlam:
             return
         self._fit(res, pts, Pose2D(float(p[0]), float(p[1]), float(wrap_angle(p[2]))))
         self._support(res, pts, res.pose)
-        if res.low_support:
-            self._use_prediction(res, prior, PREDICT_LOST)
-            return
         deg = degeneracy(res.hessian, self.map.resolution, pts, c.degeneracy_threshold)
         res.degeneracy = deg.ratio
         res.degenerate = deg.any
@@ -616,7 +641,8 @@ class HectorSlam:
             self._score_avg = res.score if self._score_avg is None else (1 - a) * self._score_avg + a * res.score
 
     def _update_state(self, stamp: float, res: MatchResult) -> None:
-        """Tracking ↔ lost: lost after ``lost_after`` s of unsupported scans; found by relocalising."""
+        """Tracking ↔ lost: lost after ``lost_after`` s of scans whose match could not be accepted (the
+        pose was predicted); found by relocalising."""
         c = self.config
         if res.first:
             return
@@ -624,7 +650,7 @@ class HectorSlam:
             self._state = STATE_TRACKING
             self.relocalisations += 1
             self._unsupported_since = None
-        elif res.low_support or res.pose_source == SOURCE_PREDICTION:
+        elif res.pose_source == SOURCE_PREDICTION:
             if self._unsupported_since is None:
                 self._unsupported_since = stamp
             elif self._state == STATE_TRACKING and stamp - self._unsupported_since >= c.lost_after:
