@@ -453,9 +453,12 @@ def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, 
     D = np.diag([1.0 / resolution, 1.0 / resolution, 1.0])  # world (m, m, rad) → cells / rad
     H = D @ (0.5 * (hessian_cells + hessian_cells.T)) @ D
     none = Degeneracy(0.0, 0.0, 0.0, np.array([1.0, 0.0]), rho, 0.0, True, True)
-    if not np.all(np.isfinite(H)) or not H[2, 2] > 0.0 or not np.trace(H[:2, :2]) > 0.0:
+    if not np.all(np.isfinite(H)) or not np.trace(H[:2, :2]) > 0.0:
         return none
-    St = H[:2, :2] - np.outer(H[:2, 2], H[2, :2]) / H[2, 2]  # rotation marginalized
+    if H[2, 2] > 1e-12 * np.trace(H[:2, :2]):
+        St = H[:2, :2] - np.outer(H[:2, 2], H[2, :2]) / H[2, 2]  # rotation marginalized
+    else:  # the scan sees no rotation at all
+        St = H[:2, :2]
     w, V = np.linalg.eigh(0.5 * (St + St.T))
     lam_max = float(w[1])
     if not lam_max > 0.0:

@@ -191,7 +191,7 @@ def plot_map(
 
         ax.text(0.5, 0.98, textwrap.fill(warning, 60), transform=ax.transAxes, ha="center", va="top",
                 fontsize="small", color="white", zorder=20,
-                bbox={"facecolor": style.LOST, "edgecolor": "none", "alpha": 0.9, "boxstyle": "round,pad=0.3"})
+                bbox={"facecolor": style.LOST, "edgecolor": "none", "boxstyle": "round,pad=0.3"})
     if title:
         ax.set_title(title)
     if handles:
