@@ -26,6 +26,8 @@ from dynslam2d.slam.interp import interp_value_grad
 #: it only saves time (the reference always runs all steps).
 _CONVERGED_CELLS = 1e-3
 _CONVERGED_RAD = 1e-5
+#: The all-zero prior information (no prior).
+_ZERO3 = np.zeros((3, 3))
 
 
 @njit(cache=True)
@@ -292,7 +294,6 @@ def match_multires(
     pose = np.asarray(start_world, dtype=np.float64).copy()
     if pts_m.shape[0] == 0:
         return pose
-    zero = np.zeros((3, 3))
     use_prior = prior_world is not None and prior_info is not None and bool(np.any(prior_info))
     for k in range(len(levels) - 1, -1, -1):
         lv = levels[k]
@@ -308,7 +309,7 @@ def match_multires(
             S = np.diag([lv.resolution, lv.resolution, 1.0])  # cells → m
             lam_k = S @ np.asarray(prior_info, dtype=np.float64) @ S
         else:
-            pp, lam_k = mp, zero
+            pp, lam_k = mp, _ZERO3
         out, _ = match_level(
             lv.prob, pts_m / lv.resolution, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
             pp, lam_k,
@@ -350,43 +351,87 @@ def covariance_world(hessian: np.ndarray, sigma2: float, resolution: float) -> n
     return 0.5 * (C + C.T)
 
 
+#: Width of the bearing bins of :func:`angular_spread` / :func:`support`, rad (5°).
+SPREAD_BIN = math.radians(5.0)
+_N_BINS = 72
+#: Points evaluated by :func:`support` / :func:`angular_spread` (dense scans are subsampled).
+_SUPPORT_POINTS = 240
+
+
 @njit(cache=True)
-def _support_kernel(prob, pts, x, y, th, thresh, inlier):  # pragma: no cover - numba
+def _spread_kernel(pts, use, nb):  # pragma: no cover - numba
+    """Number of the ``nb`` bearing bins holding a point of ``pts`` (rows with ``use``)."""
+    seen = np.zeros(nb, dtype=np.bool_)
+    k = 0
+    two_pi = 2.0 * math.pi
+    for i in range(pts.shape[0]):
+        if not use[i]:
+            continue
+        b = int(math.floor((math.atan2(pts[i, 1], pts[i, 0]) + math.pi) / two_pi * nb)) % nb
+        if not seen[b]:
+            seen[b] = True
+            k += 1
+    return k
+
+
+@njit(cache=True)
+def _support_kernel(prob, pts_m, stride, inv_res, x, y, th, thresh, nb):  # pragma: no cover - numba
+    """Over every ``stride``-th laser-frame point (m): count those whose interpolated probability at
+    map pose (x cells, y cells, θ) exceeds ``thresh``; return (count, bearing bins they occupy)."""
     c = math.cos(th)
     s = math.sin(th)
+    seen = np.zeros(nb, dtype=np.bool_)
     n = 0
-    for i in range(pts.shape[0]):
-        sx = pts[i, 0]
-        sy = pts[i, 1]
+    k = 0
+    two_pi = 2.0 * math.pi
+    for i in range(0, pts_m.shape[0], stride):
+        sx = pts_m[i, 0] * inv_res
+        sy = pts_m[i, 1] * inv_res
         m, _, _, inside = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, False)
-        ok = inside and m > thresh
-        inlier[i] = ok
-        if ok:
+        if inside and m > thresh:
             n += 1
-    return n
+            b = int(math.floor((math.atan2(pts_m[i, 1], pts_m[i, 0]) + math.pi) / two_pi * nb)) % nb
+            if not seen[b]:
+                seen[b] = True
+                k += 1
+    return n, k
 
 
-def inliers(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, thresh: float) -> np.ndarray:
-    """(n,) bool: laser-frame points ``pts_m`` (n, 2, m) that land on cells of ``level`` whose
-    interpolated occupancy probability exceeds ``thresh`` at ``pose_world`` — the points the
-    map confirms (all False on an empty level)."""
-    out = np.zeros(pts_m.shape[0], dtype=np.bool_)
+@njit(cache=True)
+def close_count(ranges, lo, hi, min_dist):  # pragma: no cover - numba
+    """(valid returns, valid returns ≤ ``min_dist``) of a range array; valid = finite, in [lo, hi] (m)."""
+    n = 0
+    k = 0
+    for i in range(ranges.shape[0]):
+        r = ranges[i]
+        if math.isfinite(r) and r >= lo and r <= hi:
+            n += 1
+            if r <= min_dist:
+                k += 1
+    return n, k
+
+
+def support(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, thresh: float) -> tuple[int, float]:
+    """(count, angular spread in rad) of the laser-frame points ``pts_m`` (n, 2, m) that land on cells of
+    ``level`` whose interpolated occupancy probability exceeds ``thresh`` at ``pose_world`` — the points
+    the map confirms, and the angle (5° bins) their bearings cover. (0, 0) on an empty level.
+    Dense scans are evaluated on every k-th point (at most about 240; the count is scaled back by k)."""
     if level.empty or pts_m.shape[0] == 0:
-        return out
+        return 0, 0.0
+    stride = max(1, pts_m.shape[0] // _SUPPORT_POINTS)
     mp = level.pose_to_map(pose_world)
-    _support_kernel(level.prob, pts_m / level.resolution, mp[0], mp[1], mp[2], thresh, out)
-    return out
+    n, bins = _support_kernel(level.prob, pts_m, stride, 1.0 / level.resolution, mp[0], mp[1], mp[2], thresh,
+                              _N_BINS)
+    return int(n) * stride, bins * (2.0 * math.pi / _N_BINS)
 
 
-def angular_spread(pts_m: np.ndarray, bin_rad: float = math.radians(5.0)) -> float:
+def angular_spread(pts_m: np.ndarray) -> float:
     """Angular extent covered by the bearings of laser-frame points ``pts_m`` (n, 2), rad: the
-    number of ``bin_rad`` bearing bins holding a point times the bin width (0 … 2π)."""
+    number of 5° bearing bins holding a point times the bin width (0 … 2π)."""
     if pts_m.shape[0] == 0:
         return 0.0
-    b = np.arctan2(pts_m[:, 1], pts_m[:, 0])
-    nb = int(round(2.0 * math.pi / bin_rad))
-    idx = np.floor((b + math.pi) / (2.0 * math.pi) * nb).astype(np.int64) % nb
-    return float(np.unique(idx).size) * (2.0 * math.pi / nb)
+    sub = pts_m[:: max(1, pts_m.shape[0] // _SUPPORT_POINTS)]  # ≥ 3 points per 5° bin of a dense scan
+    return _spread_kernel(sub, np.ones(sub.shape[0], dtype=np.bool_), _N_BINS) * (2.0 * math.pi / _N_BINS)
 
 
 @dataclass(slots=True)
@@ -447,27 +492,44 @@ class Degeneracy:
 def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, threshold: float) -> Degeneracy:
     """Degeneracy analysis of the level-0 Gauss–Newton Hessian ``hessian_cells`` (cells / rad units,
     cell side ``resolution`` m) for laser-frame points ``pts_m`` (n, 2, m); a direction is
-    degenerate when its normalized eigenvalue is below ``threshold`` × the largest."""
-    rho = float(np.sqrt(np.mean(np.sum(pts_m**2, axis=1)))) if pts_m.shape[0] else 1.0
+    degenerate when its normalized eigenvalue is below ``threshold`` × the largest.
+
+    Closed-form 2×2 / scalar algebra (it runs on every scan)."""
+    n = pts_m.shape[0]
+    rho = math.sqrt(float(np.einsum("ij,ij->", pts_m, pts_m)) / n) if n else 1.0
     rho = max(rho, 1e-3)
-    D = np.diag([1.0 / resolution, 1.0 / resolution, 1.0])  # world (m, m, rad) → cells / rad
-    H = D @ (0.5 * (hessian_cells + hessian_cells.T)) @ D
+    h = hessian_cells.tolist()
+    k = 1.0 / resolution  # world (m, m, rad) → cells / rad
+    a = h[0][0] * k * k
+    b = 0.5 * (h[0][1] + h[1][0]) * k * k
+    d = h[1][1] * k * k
+    u = 0.5 * (h[0][2] + h[2][0]) * k
+    v = 0.5 * (h[1][2] + h[2][1]) * k
+    r = h[2][2]
     none = Degeneracy(0.0, 0.0, 0.0, np.array([1.0, 0.0]), rho, 0.0, True, True)
-    if not np.all(np.isfinite(H)) or not np.trace(H[:2, :2]) > 0.0:
+    if not all(math.isfinite(t) for t in (a, b, d, u, v, r)) or not a + d > 0.0:
         return none
-    if H[2, 2] > 1e-12 * np.trace(H[:2, :2]):
-        St = H[:2, :2] - np.outer(H[:2, 2], H[2, :2]) / H[2, 2]  # rotation marginalized
+    if r > 1e-12 * (a + d):  # rotation marginalized (Schur complement)
+        a2, b2, d2 = a - u * u / r, b - u * v / r, d - v * v / r
     else:  # the scan sees no rotation at all
-        St = H[:2, :2]
-    w, V = np.linalg.eigh(0.5 * (St + St.T))
-    lam_max = float(w[1])
+        a2, b2, d2 = a, b, d
+    half_tr = 0.5 * (a2 + d2)
+    disc = math.sqrt(max(0.25 * (a2 - d2) ** 2 + b2 * b2, 0.0))
+    lam_max, lam_min = half_tr + disc, half_tr - disc
     if not lam_max > 0.0:
         return none
-    t_ratio = max(float(w[0]), 0.0) / lam_max
-    try:
-        s_rot = float(H[2, 2] - H[2, :2] @ np.linalg.solve(H[:2, :2], H[:2, 2]))  # translation marginalized
-    except np.linalg.LinAlgError:
-        s_rot = 0.0
+    # eigenvector of lam_min
+    if abs(b2) > 1e-300:
+        ax, ay = lam_min - d2, b2
+    elif a2 <= d2:
+        ax, ay = 1.0, 0.0
+    else:
+        ax, ay = 0.0, 1.0
+    nrm = math.hypot(ax, ay)
+    axis = np.array([ax / nrm, ay / nrm]) if nrm > 0.0 else np.array([1.0, 0.0])
+    t_ratio = max(lam_min, 0.0) / lam_max
+    det = a * d - b * b
+    s_rot = r - (u * (d * u - b * v) + v * (a * v - b * u)) / det if det > 1e-300 * (a * d + 1e-300) else 0.0
     r_ratio = max(s_rot, 0.0) / (rho * rho * lam_max)
-    return Degeneracy(min(t_ratio, r_ratio), t_ratio, r_ratio, V[:, 0].copy(), rho, lam_max,
+    return Degeneracy(min(t_ratio, r_ratio), t_ratio, r_ratio, axis, rho, lam_max,
                       t_ratio < threshold, r_ratio < threshold)

@@ -28,10 +28,11 @@ from dynslam2d.slam.matcher import (
     angular_spread,
     covariance_world,
     degeneracy,
+    close_count,
     evaluate,
     free_fraction,
-    inliers,
     match_multires,
+    support,
 )
 from dynslam2d.types import Pose2D, Scan, wrap_angle
 
@@ -437,13 +438,9 @@ class HectorSlam:
         c = self.config
         if c.laser_min_dist <= 0.0:
             return False
-        valid = scan.valid_mask()
-        n = int(valid.sum())
-        if n == 0:
-            return False
-        with np.errstate(invalid="ignore"):
-            close = int(np.count_nonzero(scan.ranges[valid] <= c.laser_min_dist))
-        return close > c.too_close_fraction * n
+        n, close = close_count(np.ascontiguousarray(scan.ranges, dtype=np.float64), scan.range_min,
+                               scan.range_max, c.laser_min_dist)
+        return n > 0 and close > c.too_close_fraction * n
 
     def _use_prediction(self, res: MatchResult, prior: _Prior, reason: str | None) -> None:
         """Keep the predicted pose; the scan stays out of the map."""
@@ -456,9 +453,8 @@ class HectorSlam:
 
     def _support(self, res: MatchResult, pts: np.ndarray, pose: Pose2D) -> None:
         c = self.config
-        inl = inliers(self.map.levels[0], pts, pose.as_array(), c.support_probability)
-        res.support_points = int(inl.sum())
-        res.support_spread = angular_spread(pts[inl])
+        res.support_points, res.support_spread = support(self.map.levels[0], pts, pose.as_array(),
+                                                         c.support_probability)
         res.low_support = res.support_points < c.support_min_points or res.support_spread < c.support_min_spread
 
     def _refine(self, pts: np.ndarray, seed: np.ndarray, prior_pose: np.ndarray | None = None,
