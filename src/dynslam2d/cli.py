@@ -43,6 +43,22 @@ DurationOpt = Annotated[
 ]
 
 
+OdomOpt = Annotated[
+    str,
+    typer.Option("--odom", help="Odometry prior: auto (what the recording has: nav_msgs/Odometry, TF odom→base_link, "
+                 "wheel speeds + IMU, CARMEN pose fields / ODOM records, the simulator's), none (laser only), "
+                 "or a topic, 'tf', or a CARMEN record type (FLASER, ODOM)."),
+]
+ImuOpt = Annotated[
+    str, typer.Option("--imu", help="IMU yaw rate: auto (the recording's sensor_msgs/Imu), none, or a topic.")
+]
+LaserOffsetOpt = Annotated[
+    Optional[str],
+    typer.Option("--laser-offset", help="base_link → laser transform x,y,yaw (m, m, rad) when the recording has no "
+                 "TF for it, e.g. -0.12,0,0 (overrides TF)."),
+]
+
+
 def _version_callback(value: bool) -> None:
     if value:
         console.print(f"dynslam2d {__version__}")
@@ -78,12 +94,18 @@ def info(
     seed: SeedOpt = None,
     duration: DurationOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
+    odom: OdomOpt = "auto",
+    imu: ImuOpt = "auto",
+    laser_offset: LaserOffsetOpt = None,
 ) -> None:
     """Print what a scan source holds: format, topic, scans, beams, FOV, rate, duration, ranges."""
+    from dynslam2d.io.odometry import parse_laser_offset
     from dynslam2d.io.sources import open_source
     from dynslam2d.io.summary import summarize_source
 
-    source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad)
+    offset = parse_laser_offset(laser_offset) if laser_offset else None
+    source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad, odom=odom, imu=imu,
+                         laser_offset=offset)
     with console.status(f"reading {input} …", spinner="dots") as status:
         summary = summarize_source(source, progress=lambda n: status.update(f"reading {input} … {n} scans"))
     if as_json:
@@ -111,6 +133,11 @@ def info(
         ),
         ("no-return beams", f"{100 * summary.no_return_share:.1f} %"),
     ]
+    odo = source.meta.extra.get("odometry")
+    if isinstance(odo, dict):
+        rows.append(("odometry", f"{source.meta.odometry or '—'} ({odo.get('with_odom', '?')} of "
+                                 f"{odo.get('scans', '?')} scans; laser mount {odo.get('mount')} from "
+                                 f"{odo.get('mount_source')})"))
     for key in ("skipped_lines", "skipped_scans", "warnings"):
         if summary.extra.get(key):
             rows.append((key.replace("_", " "), str(summary.extra[key])))
@@ -134,6 +161,8 @@ def simulate(
     dropout: Annotated[Optional[float], typer.Option("--dropout", min=0.0, max=1.0, help="Probability a beam returns nothing [0].")] = None,
     range_max: Annotated[Optional[float], typer.Option("--range-max", min=0.1, help="Sensor max range, m [20].")] = None,
     list_scenarios: Annotated[bool, typer.Option("--list", help="List the scenarios and exit.")] = False,
+    odom_noise: Annotated[float, typer.Option("--odom-noise", min=0.0, help="Multiplies every odometry/IMU noise, bias and scale error of the default model (0 = perfect odometry) [1].")] = 1.0,
+    laser_mount: Annotated[Optional[str], typer.Option("--laser-mount", help="The laser's pose on the robot base, x,y,yaw (m, m, rad) [0.15,0,0].")] = None,
 ) -> None:
     """Simulate a scene: scans as a bag, ground truth (map, trajectory, labels, movers), an overview PNG.
 
@@ -156,7 +185,16 @@ def simulate(
     with console.status(f"simulating {scenario} …", spinner="dots"):
         sensor = {"beams": beams, "fov": math.radians(fov_deg) if fov_deg else None, "rate_hz": rate,
                   "noise_sigma": noise, "dropout": dropout, "range_max": range_max}
-        sim = run_simulation(scenario, seed=seed, duration=duration, **{k: v for k, v in sensor.items() if v is not None})
+        from dynslam2d.io.odometry import parse_laser_offset
+        from dynslam2d.sim.odometry import OdometryModel
+
+        model = OdometryModel().scaled(odom_noise)
+        if laser_mount is not None:
+            import dataclasses as _dc
+
+            model = _dc.replace(model, mount=parse_laser_offset(laser_mount, "--laser-mount"))
+        sim = run_simulation(scenario, seed=seed, duration=duration, odometry_model=model,
+                             **{k: v for k, v in sensor.items() if v is not None})
     with console.status(f"writing {out} …", spinner="dots"):
         paths = write_simulation(sim, out, map_resolution=resolution, storage=storage)
     sc = sim.scenario
@@ -167,6 +205,17 @@ def simulate(
     for role, path in paths.items():
         console.print(f"  {path}")
     console.print(f"map it with: dynslam2d run {paths['scans']} --gt {out}")
+
+
+def _laser_mount(meta: Any) -> Any:
+    """The base_link → laser Pose2D of a source (for --frame base_link), or a DynSlamError."""
+    from dynslam2d.types import Pose2D
+
+    odo = meta.extra.get("odometry")
+    if not isinstance(odo, dict) or odo.get("mount") is None:
+        raise DynSlamError(f"{meta.origin}: --frame base_link needs the base_link → laser transform, and the input "
+                           f"gives none (no odometry/TF used); give --laser-offset x,y,yaw")
+    return Pose2D(*map(float, odo["mount"]))
 
 
 def _default_out(prefix: str) -> Path:
@@ -217,6 +266,11 @@ def run(
     seed: SeedOpt = None,
     duration: DurationOpt = None,
     skip_bad: SkipBadOpt = False,
+    odom: OdomOpt = "auto",
+    imu: ImuOpt = "auto",
+    laser_offset: LaserOffsetOpt = None,
+    frame: Annotated[str, typer.Option("--frame", help="Poses in trajectory.tum: laser (default) or base_link "
+                                       "(laser pose ⊕ (base_link→laser)⁻¹; needs TF, CARMEN pose fields or --laser-offset).")] = "laser",
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
 ) -> None:
@@ -246,10 +300,21 @@ def run(
         cfg = with_overrides(cfg, {"filter": {"mode": filter_mode}})
     if hector_compat:
         cfg = with_overrides(cfg, {"slam": {"hector_gradient_bug": True, "step_mode": "gauss_newton", "correlative_mode": "never"}})
-    source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad)
+    from dynslam2d.io.odometry import parse_laser_offset
+
+    if frame not in ("laser", "base_link"):
+        raise DynSlamError(f"--frame must be 'laser' or 'base_link', got {frame!r}")
+    offset = parse_laser_offset(laser_offset) if laser_offset else None
+    source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad, odom=odom, imu=imu,
+                         laser_offset=offset)
+    mount = _laser_mount(source.meta) if frame == "base_link" else None
     out = out or _default_out("run")
     total = source.meta.count
     show = not (quiet or as_json)
+    if show:
+        err_console.print(f"odometry: {escape(source.meta.odometry or 'none (laser only)')}")
+        for w in source.meta.extra.get("warnings", []) or []:
+            err_console.print(f"[yellow]warning:[/] {escape(str(w))}")
     progress = Progress(
         TextColumn("[bold]mapping[/]"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
         TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=err_console, disable=not show,
@@ -289,6 +354,10 @@ def run(
             progress.update(task, completed=result.n_scans)
     truth = ground_truth_for(source, gt, cfg.slam.map_resolution)
     paths = write_results(result, out, truth, collector)
+    if mount is not None:
+        from dynslam2d.io.odometry import rewrite_trajectory_frame
+
+        rewrite_trajectory_frame(out, mount)
     summary = json.loads(paths["summary.json"].read_text())
     if as_json:
         summary["out"] = str(out)
@@ -296,10 +365,16 @@ def run(
         return
     if quiet:
         return
+    odo = source.meta.extra.get("odometry")
+    if isinstance(odo, dict) and (odo.get("without_odom") or 0) > 0:
+        err_console.print(f"[yellow]warning:[/] odometry: {odo['without_odom']} of {odo['scans']} scans had no "
+                          f"odometry (outside its time span or in a gap): matched laser only")
     rows = [
         ("scans", str(summary["scans"])),
         ("wall time", f"{summary['wall_time_s']:.1f} s ({summary['scans_per_s']} scans/s)"),
         ("map updates", str(summary["map_updates"])),
+        ("odometry", (f"{summary.get('odometry') or 'none (laser only)'}"
+                      + (f", {odo['with_odom']}/{odo['scans']} scans" if isinstance(odo, dict) and odo.get('scans') else ""))),
         ("rejected matches", str(summary["match_failures"])),
         ("skipped scans", str(summary["skipped_scans"])),
         ("tracks (in M)", f"{summary['tracks']} ({summary['tracks_in_M']})"),

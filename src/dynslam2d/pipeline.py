@@ -319,6 +319,9 @@ class RunResult:
             "map_cells": list(self.grid.shape),
             "map_resolution_m": self.grid.resolution,
             "map_origin_m": list(self.grid.origin),
+            "odometry": self.source.odometry,
+            "odometry_detail": self.source.extra.get("odometry"),
+            "trajectory_frame": "laser",
             "pose_confidence": self.pose_confidence(),
         }
 

@@ -52,6 +52,7 @@ __all__ = [
     "list_topics",
     "open_bag_writer",
     "read_pose_topic",
+    "read_topic_messages",
     "ros_time_to_stamp",
     "stamp_to_ros_time",
     "write_scan_bag",
@@ -255,6 +256,39 @@ def list_topics(path: str | os.PathLike[str]) -> dict[str, str]:
     p = Path(path)
     with _open_bag(p) as (reader, _):
         return _topic_types(reader)
+
+
+def read_topic_messages(path: str | os.PathLike[str], topics: Iterable[str]) -> Iterator[tuple[str, str, int, float, Any]]:
+    """Yield ``(topic, msgtype, index, bag time s, message)`` of several topics in one pass.
+
+    Messages come in the bag's time order; ``index`` counts per topic from 0. Topics
+    the bag does not hold are ignored (callers check :func:`list_topics` first). Used by
+    the odometry readers (:mod:`dynslam2d.io.odombag`) to read /odom, /tf, /tf_static and
+    an IMU together.
+    """
+    p = Path(path)
+    with _open_bag(p) as (reader, _):
+        available = _topic_types(reader)
+        names = [n for n in (_resolve_topic(t, available) for t in topics) if n is not None]
+        if not names:
+            return
+        connections = [c for n in dict.fromkeys(names) for c in reader.topics[n].connections]
+        counts: dict[str, int] = {}
+        it = reader.messages(connections=connections)
+        while True:
+            try:
+                conn, t_ns, raw = next(it)
+                msg = reader.deserialize(raw, conn.msgtype)
+            except StopIteration:
+                return
+            except Exception as err:
+                raise DynSlamError(
+                    f"{p}: cannot read a message of {', '.join(names)} ({type(err).__name__}: {err}); "
+                    f"the bag looks corrupt or truncated"
+                ) from err
+            index = counts.get(conn.topic, 0)
+            counts[conn.topic] = index + 1
+            yield conn.topic, conn.msgtype, index, t_ns * 1e-9, msg
 
 
 # --------------------------------------------------------------------------- scans

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Iterator
 
 from dynslam2d.errors import DynSlamError
-from dynslam2d.types import Scan, ScanSource, SourceMeta
+from dynslam2d.types import Pose2D, Scan, ScanSource, SourceMeta
 
 SIM_PREFIX = "sim:"
 
@@ -114,6 +114,9 @@ def open_source(
     seed: int | None = None,
     duration: float | None = None,
     skip_bad: bool = False,
+    odom: str = "auto",
+    imu: str = "auto",
+    laser_offset: Pose2D | None = None,
 ) -> CheckedSource:
     """Open a scan source by sniffing its format.
 
@@ -124,6 +127,10 @@ def open_source(
         seed, duration: simulator seed and length in s (``sim:`` sources only).
         skip_bad: skip malformed records and non-increasing stamps (counted) instead of
             stopping with an error.
+        odom, imu: where ``Scan.odom`` / ``Scan.yaw_rate`` come from: "auto" (what the
+            recording has), "none" (laser only), or a topic / record name
+            (:mod:`dynslam2d.io.odomsource`); ``meta.odometry`` says what was used.
+        laser_offset: the base → laser transform (m, rad) when the recording has no TF.
     Returns:
         A :class:`CheckedSource` (iterable of Scan, ``meta``, ``len()`` where known).
     """
@@ -142,4 +149,7 @@ def open_source(
         from dynslam2d.io.rosbag import RosbagSource
 
         inner = RosbagSource(text, topic=topic)
+    from dynslam2d.io.odomsource import attach_odometry
+
+    inner = attach_odometry(inner, fmt, odom=odom, imu=imu, laser_offset=laser_offset)
     return CheckedSource(inner, skip_bad=skip_bad)

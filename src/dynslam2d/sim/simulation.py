@@ -25,6 +25,7 @@ import numpy as np
 from dynslam2d.errors import DynSlamError
 from dynslam2d.gridmap import GridMap
 from dynslam2d.sim.movers import MoverState
+from dynslam2d.sim.odometry import SIM_ODOMETRY, OdometryModel, SimOdometry, simulate_odometry
 from dynslam2d.sim.scenarios import Scenario, build_scenario
 from dynslam2d.sim.world import LABEL_NONE, cast_rays, rect_segments
 from dynslam2d.types import Pose2D, Scan, SourceMeta, wrap_angle
@@ -163,18 +164,23 @@ class GroundTruth:
 
 @dataclass(eq=False)
 class Simulation:
-    """A finished run: the scans (in time order) and their ground truth."""
+    """A finished run: the scans (in time order) and their ground truth.
+
+    ``odometry`` is the simulated wheel odometry and IMU (:mod:`dynslam2d.sim.odometry`);
+    every scan carries its noisy ``odom`` and ``yaw_rate``.
+    """
 
     scenario: Scenario
     scans: list[Scan]
     ground_truth: GroundTruth
+    odometry: SimOdometry | None = None
 
     def __len__(self) -> int:
         return len(self.scans)
 
     def source(self) -> SimSource:
         """A :class:`SimSource` over this run (its scans and ground truth, no re-simulation)."""
-        src = SimSource(self.scenario)
+        src = SimSource(self.scenario, odometry_model=None if self.odometry is None else self.odometry.model)
         src._simulation = self
         return src
 
@@ -237,30 +243,42 @@ def _resolve(name_or_scenario: str | Scenario, seed: int | None, duration: float
     return build_scenario(str(name_or_scenario), seed=seed, duration=duration, **sensor)
 
 
+def _scenario_odometry(scenario: Scenario, model: OdometryModel | None) -> SimOdometry:
+    """The scenario's simulated odometry + IMU over its scan stamps (seeded by its seed)."""
+    stamps = scenario.stamps
+    last = float(stamps[-1]) if stamps.shape[0] else 0.0
+    return simulate_odometry(scenario.robot, last, scenario.seed, model)
+
+
 def simulate(
     name_or_scenario: str | Scenario,
     seed: int | None = None,
     duration: float | None = None,
+    *,
+    odometry_model: OdometryModel | None = None,
     **sensor: float | int | None,
 ) -> Simulation:
     """Run a scenario (registry name or :class:`Scenario`) to the end.
 
     ``sensor`` overrides LiDAR settings: beams, fov (rad), rate_hz (Hz),
     noise_sigma, dropout, range_min, range_max (m). Same seed → identical scans.
+    ``odometry_model`` sets the odometry/IMU noise and laser mount (default
+    :class:`~dynslam2d.sim.odometry.OdometryModel`); scans carry ``odom`` and ``yaw_rate``.
     """
     scenario = _resolve(name_or_scenario, seed, duration, sensor)
+    odometry = _scenario_odometry(scenario, odometry_model)
     stamps, poses, states = _sample_motion(scenario)
     n, nb = stamps.shape[0], scenario.lidar.beams
     scans: list[Scan] = []
     labels = np.empty((n, nb), dtype=np.int16)
     true_ranges = np.empty((n, nb), dtype=np.float32)
     for i, (scan, lab, dist) in enumerate(_iter_scans(scenario)):
-        scans.append(scan)
+        scans.append(odometry.attach(scan))
         labels[i] = lab
         true_ranges[i] = dist
     gt = GroundTruth(scenario, stamps, poses, labels, true_ranges,
                      np.array([m.id for m in scenario.movers], dtype=np.int32), states)
-    return Simulation(scenario, scans, gt)
+    return Simulation(scenario, scans, gt, odometry)
 
 
 class SimSource:
@@ -269,11 +287,15 @@ class SimSource:
     Scans are generated lazily while iterating (iterating twice gives identical
     scans); :attr:`ground_truth` runs the whole simulation once, on first use.
     ``meta.format == "sim"``, ``meta.origin == "sim:<name>"``, count known.
+    Every scan carries the simulated noisy ``odom`` (laser pose in the odometry frame)
+    and IMU ``yaw_rate``; ``meta.odometry == "sim"``, ``meta.extra["odometry"]`` describes
+    the model, :attr:`odometry` holds the tracks.
     """
 
     def __init__(self, name_or_scenario: str | Scenario, seed: int | None = None, duration: float | None = None,
-                 **sensor: float | int | None) -> None:
+                 *, odometry_model: OdometryModel | None = None, **sensor: float | int | None) -> None:
         self.scenario = _resolve(name_or_scenario, seed, duration, sensor)
+        self.odometry: SimOdometry = _scenario_odometry(self.scenario, odometry_model)
         lidar = self.scenario.lidar
         self.meta = SourceMeta(
             format="sim",
@@ -288,13 +310,19 @@ class SimSource:
             range_max=lidar.range_max,
             extra={"seed": self.scenario.seed, "duration": self.scenario.duration,
                    "description": self.scenario.description},
+            odometry=SIM_ODOMETRY,
         )
+        m = self.odometry.model
+        self.meta.extra["odometry"] = {
+            "source": SIM_ODOMETRY, "imu": "sim", "mount": [m.mount.x, m.mount.y, m.mount.theta],
+            "mount_source": "simulator", "rate_hz": m.rate_hz, "imu_rate_hz": m.imu_rate_hz,
+        }
         self._simulation: Simulation | None = None
 
     def __iter__(self) -> Iterator[Scan]:
         if self._simulation is not None:
             return iter(self._simulation.scans)
-        return (scan for scan, _, _ in _iter_scans(self.scenario))
+        return (self.odometry.attach(scan) for scan, _, _ in _iter_scans(self.scenario))
 
     def __len__(self) -> int:
         return self.scenario.n_scans
@@ -303,7 +331,7 @@ class SimSource:
     def simulation(self) -> Simulation:
         """The full run (computed once, then cached)."""
         if self._simulation is None:
-            self._simulation = simulate(self.scenario)
+            self._simulation = simulate(self.scenario, odometry_model=self.odometry.model)
         return self._simulation
 
     @property
