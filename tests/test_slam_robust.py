@@ -358,7 +358,7 @@ def test_confidence_stretches_and_shares() -> None:
              "degenerate": np.zeros(10, bool), "lost": np.array([0, 0, 1, 1, 0, 0, 0, 0, 0, 0], bool)}
     out = summarize(stamps, flags, np.full(10, 0.2), 1, 1, 0.05, 2.0)
     assert out["low_support_share"] == 0.4 and out["longest_low_support_s"] == 1.5
-    assert out["longest_low_support_scans"] == 3 and out["lost_time_s"] == 1.0
+    assert out["longest_low_support_scans"] == 3 and out["lost_time_s"] == 1.0 and out["tracking_time_s"] == 3.5
     assert not out["trustworthy"] and "lost 1×" in out["warning"]
 
 

@@ -65,8 +65,10 @@ def summarize(stamps: np.ndarray, flags: dict[str, np.ndarray], degeneracy: np.n
     if n > 1:
         dt = np.diff(stamps)
         out["lost_time_s"] = round(float(np.sum(dt[lost[:-1]])), 3)
+        out["tracking_time_s"] = round(float(np.sum(dt[~lost[:-1]])), 3)
     else:
         out["lost_time_s"] = 0.0
+        out["tracking_time_s"] = 0.0
     out["lost_events"] = int(lost_events)
     out["relocalisations"] = int(relocalisations)
     deg = np.asarray(degeneracy, dtype=np.float64)
