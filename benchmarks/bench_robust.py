@@ -73,11 +73,12 @@ def main() -> None:
         gt = sim.ground_truth.poses_in("first")
         stamps = sim.ground_truth.stamps
         odom = noisy_odometry(gt, args.odom_noise)
-        variants = [("laser only", list(sim.scans), Config()),
+        bare = [s.with_odometry(None, None) for s in sim.scans]  # simulated scans carry odometry + IMU
+        variants = [("laser only", bare, Config()),
                     (f"odometry ({100 * args.odom_noise:.0f} % noise)",
                      [s.with_odometry(o) for s, o in zip(sim.scans, odom)], Config())]
         if args.legacy:
-            variants.append(("laser only, guards off", list(sim.scans), with_overrides(Config(), legacy)))
+            variants.append(("laser only, guards off", bare, with_overrides(Config(), legacy)))
         print(f"\n== sim:{name}: {len(gt)} scans, ground-truth path {_path(gt):.2f} m ==")
         for label, scans, cfg in variants:
             res = run(_Source(scans, src.meta), cfg)

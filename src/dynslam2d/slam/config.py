@@ -264,12 +264,13 @@ class SlamConfig(BaseModel):
     max_linear_accel: float = Field(
         1.5, gt=0.0,
         description="Motion model: largest linear acceleration of the robot, m/s². A match that deviates "
-        "from the prediction by more than max_linear_accel·dt² + gate_distance must be backed by "
-        "enough structure.",
+        "from the prediction by more than max_linear_accel·dt·(velocity_window/2 + dt) + gate_distance "
+        "must be backed by enough structure.",
     )
     max_angular_accel: float = Field(
         3.0, gt=0.0,
-        description="Motion model: largest angular acceleration, rad/s² (gate: max_angular_accel·dt² + gate_angle).",
+        description="Motion model: largest angular acceleration, rad/s² (gate: "
+        "max_angular_accel·dt·(velocity_window/2 + dt) + gate_angle).",
     )
     gate_distance: float = Field(
         0.05, ge=0.0,
@@ -280,9 +281,9 @@ class SlamConfig(BaseModel):
         description="Deviation from the predicted heading always allowed, rad.",
     )
     support_min_points: int = Field(
-        60, ge=0,
+        30, ge=0,
         description="A match is well supported with at least this many endpoints on occupied map cells "
-        "(p > support_probability), count.",
+        "(p > support_probability), count. The datmo car's scans (100–130 returns) confirm 30–60.",
     )
     support_min_spread: float = Field(
         1.0, ge=0.0, le=2.0 * math.pi,

@@ -218,6 +218,7 @@ class HectorSlam:
         self._unsupported_since: float | None = None  # stamp of the first scan of the current unsupported run
         self.lost_events = 0
         self.relocalisations = 0
+        self._refused: tuple[float, Pose2D, int] | None = None  # (since, pose, scan number) of a refused weak match
         self._degenerate_prev = (False, False)  # (translation, rotation) degenerate on the last matched scan
         self._last_relocalise: float | None = None  # stamp of the last relocalisation attempt
         self._history: deque[tuple[float, Pose2D]] = deque()  # accepted (stamp, pose) of the last velocity_window s
@@ -348,11 +349,17 @@ class HectorSlam:
         return np.array([c * dx + s_ * dy, -s_ * dx + c * dy, float(wrap_angle(p1.theta - p0.theta))]) / dt
 
     def _gate_limits(self, dt: float) -> tuple[float, float]:
-        """Largest deviation (m, rad) from the prediction the motion model allows after ``dt`` s:
-        a velocity change of at most accel·dt held for dt, plus the fixed tolerances."""
+        """Largest deviation (m, rad) from the prediction the motion model allows ``dt`` s after the
+        last accepted pose.
+
+        The model's velocity is the mean over the last ``velocity_window`` W, so under an
+        acceleration of at most a it lags the true velocity by up to a·W/2, and the velocity can
+        change by a·dt during the step: the position may deviate by a·dt·(W/2 + dt), plus the fixed
+        tolerances."""
         c = self.config
         dt = max(dt, 0.0)
-        return c.max_linear_accel * dt * dt + c.gate_distance, c.max_angular_accel * dt * dt + c.gate_angle
+        k = dt * (0.5 * c.velocity_window + dt)
+        return c.max_linear_accel * k + c.gate_distance, c.max_angular_accel * k + c.gate_angle
 
     # ---- matching ----------------------------------------------------------------------
     def match(self, scan: Scan, predicted: Pose2D | None = None, commit: bool = True) -> MatchResult:
@@ -500,7 +507,25 @@ class HectorSlam:
             d = prior.pose.between(res.pose)
             lim_d, lim_a = self._gate_limits(stamp - self._last_stamp)
             if (math.hypot(d.x, d.y) > lim_d or abs(d.theta) > lim_a) and res.low_support:
+                refused = self._refused
+                # a weak match the previous (refused) weak match predicts is two agreeing observations:
+                # the robot did accelerate beyond the model (a car speeding up), accept it
+                if refused is not None and refused[2] == self.n_scans - 1 and self._confirms(refused, res, stamp):
+                    self._refused = None
+                    return
+                self._refused = (refused[0] if refused else stamp, res.pose, self.n_scans)
                 self._use_prediction(res, prior, PREDICT_UNSUPPORTED)
+                return
+        self._refused = None
+
+    def _confirms(self, refused: tuple[float, Pose2D, int], res: MatchResult, stamp: float) -> bool:
+        """The weak match ``res`` continues the previous refused weak match with the model's velocity."""
+        v = self._model_velocity()
+        dt = stamp - self._last_stamp if self._last_stamp is not None else 0.0
+        step = Pose2D(float(v[0] * dt), float(v[1] * dt), float(v[2] * dt)) if v is not None else Pose2D()
+        d = refused[1].compose(step).between(res.pose)
+        lim_d, lim_a = self._gate_limits(dt)
+        return math.hypot(d.x, d.y) <= lim_d and abs(d.theta) <= lim_a
 
     def _relocalise(self, res: MatchResult, pts: np.ndarray, prior: _Prior) -> None:
         """Lost: a wide correlative search around the prediction (on every scan that is neither too
