@@ -356,6 +356,8 @@ SPREAD_BIN = math.radians(5.0)
 _N_BINS = 72
 #: Points evaluated by :func:`support` / :func:`angular_spread` (dense scans are subsampled).
 _SUPPORT_POINTS = 240
+#: Points :func:`angular_spread` looks at (it only has to tell a narrow view from a wide one).
+_SPREAD_POINTS = 120
 
 
 @njit(cache=True)
@@ -430,7 +432,7 @@ def angular_spread(pts_m: np.ndarray) -> float:
     number of 5° bearing bins holding a point times the bin width (0 … 2π)."""
     if pts_m.shape[0] == 0:
         return 0.0
-    sub = pts_m[:: max(1, pts_m.shape[0] // _SUPPORT_POINTS)]  # ≥ 3 points per 5° bin of a dense scan
+    sub = pts_m[:: max(1, pts_m.shape[0] // _SPREAD_POINTS)]  # ≥ 1.6 points per 5° bin of a dense full circle
     return _spread_kernel(sub, np.ones(sub.shape[0], dtype=np.bool_), _N_BINS) * (2.0 * math.pi / _N_BINS)
 
 
