@@ -450,9 +450,18 @@ def run(
     repairs = summary.get("stamp_repairs") or {}
     if repairs.get("backward_steps") or repairs.get("nudged_stamps") or repairs.get("time_source") not in (None, "ipc"):
         rows.append(("stamp repairs", "; ".join(summary.get("input_warnings", [])) or str(repairs)))
+    pc = summary.get("pose_confidence")
+    if pc:
+        rows.append(("pose confidence",
+                     f"{100 * pc['low_support_share']:.1f} % low support (longest {pc['longest_low_support_s']:.1f} s), "
+                     f"{100 * pc['degenerate_share']:.1f} % degenerate (longest {pc['longest_degenerate_s']:.1f} s), "
+                     f"lost {pc['lost_events']}× ({pc['lost_time_s']:.1f} s)"))
     if "metrics.json" in paths:
         rows += _metric_rows(json.loads(paths["metrics.json"].read_text()))
     console.print(_stats_table(f"dynslam2d run {input}", rows))
+    if pc and pc.get("warning"):
+        console.print(Text.assemble(("warning: ", "bold red"), f"{pc['warning']} — the map and trajectory are not "
+                                    "reliable there (map.png marks the poses)"))
     console.print(Text.assemble("results in ", (str(out), "bold")))
     if write_bag is not None:
         console.print(Text.assemble("bag for RViz / Foxglove: ", (str(write_bag), "bold"), " (docs/ros.md)"))

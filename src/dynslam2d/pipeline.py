@@ -32,6 +32,8 @@ from dynslam2d.gridmap import GridMap
 from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
+from dynslam2d.slam.confidence import FLAGS
+from dynslam2d.slam.confidence import summarize as summarize_confidence
 from dynslam2d.types import Box, Pose2D, Scan, ScanSource, SourceMeta, Track
 
 
@@ -52,6 +54,13 @@ class StepResult:
         removed: (beams,) bool, True where the filter removed the beam from the map update.
         removed_by: (beams,) int, id of the track whose exclusion zone removed the beam (−1 = kept).
         timings: wall time per stage, ms ("match", "track", "filter", "map_update", "total").
+        degeneracy: smallest / largest normalized eigenvalue of the match Hessian (NaN if not matched).
+        degenerate: the scan left some direction of the pose unconstrained (a corridor's axis).
+        support_points, support_spread: endpoints confirmed by the map (count) and the angle their
+            bearings cover (rad).
+        low_support: the pose is not backed by a well-supported match.
+        pose_source: "scan", "scan+prior", "prediction" or "relocalised".
+        slam_state: "tracking" or "lost".
     """
 
     index: int
@@ -66,6 +75,13 @@ class StepResult:
     removed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     removed_by: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     timings: dict[str, float] = field(default_factory=dict)
+    degeneracy: float = math.nan
+    degenerate: bool = False
+    support_points: int = 0
+    support_spread: float = 0.0
+    low_support: bool = False
+    pose_source: str = "scan"
+    slam_state: str = "tracking"
 
 
 def _boxes(tracks: list[Track], dt: float = 0.0) -> tuple[np.ndarray, ...]:
@@ -189,6 +205,13 @@ class Pipeline:
                 "map_update": (t4 - t3) * 1e3,
                 "total": (t4 - t0) * 1e3,
             },
+            degeneracy=res.degeneracy,
+            degenerate=res.degenerate,
+            support_points=res.support_points,
+            support_spread=res.support_spread,
+            low_support=res.low_support,
+            pose_source=res.pose_source,
+            slam_state=res.state,
         )
 
     def gridmap(self) -> GridMap:
@@ -222,6 +245,9 @@ class RunResult:
         reasons: count of each skip / reject reason.
         memory_bytes: memory held by the map levels at the end.
         tracker_stats: counters of the tracker (bad input, resets).
+        confidence: per-scan (n,) arrays "low_support", "degenerate", "lost" (bool) and
+            "degeneracy" (float) — the pose confidence of every scan.
+        slam_stats: counters of the SLAM processor ("lost_events", "relocalisations").
     """
 
     source: SourceMeta
@@ -240,6 +266,17 @@ class RunResult:
     reasons: dict[str, int]
     memory_bytes: int
     tracker_stats: dict[str, int] = field(default_factory=dict)
+    confidence: dict[str, np.ndarray] = field(default_factory=dict)
+    slam_stats: dict[str, int] = field(default_factory=dict)
+
+    def pose_confidence(self) -> dict[str, object]:
+        """The ``pose_confidence`` block of summary.json (see :func:`dynslam2d.slam.confidence.summarize`)."""
+        n = self.n_scans
+        c = self.config.slam
+        flags = {k: self.confidence.get(k, np.zeros(n, dtype=bool)) for k in FLAGS}
+        return summarize_confidence(self.trajectory.stamps, flags, self.confidence.get("degeneracy", np.full(n, np.nan)),
+                                    self.slam_stats.get("lost_events", 0), self.slam_stats.get("relocalisations", 0),
+                                    c.low_confidence_share, c.low_confidence_stretch)
 
     @property
     def n_scans(self) -> int:
@@ -300,6 +337,7 @@ class RunResult:
             "odometry": self.source.odometry,
             "odometry_detail": self.source.extra.get("odometry"),
             "trajectory_frame": "laser",
+            "pose_confidence": self.pose_confidence(),
         }
 
 
@@ -340,9 +378,15 @@ def run(
     removed_rows = BitRows()
     track_rows = TrackRows()
     timings: dict[str, GrowArray] = {}
+    conf = {"low_support": GrowArray(np.bool_), "degenerate": GrowArray(np.bool_), "lost": GrowArray(np.bool_),
+            "degeneracy": GrowArray(np.float64)}
     t0 = time.perf_counter()
     for scan in source:
         step = pipe.process(scan)
+        conf["low_support"].append(step.low_support)
+        conf["degenerate"].append(step.degenerate)
+        conf["lost"].append(step.slam_state == "lost")
+        conf["degeneracy"].append(step.degeneracy)
         stamps.append(step.stamp)
         poses.append((step.pose.x, step.pose.y, step.pose.theta))
         scores.append(step.score)
@@ -379,6 +423,8 @@ def run(
         reasons=dict(summary.get("reasons", {})),  # type: ignore[arg-type]
         memory_bytes=pipe.slam.memory_bytes,
         tracker_stats=pipe.tracker.stats.as_dict(),
+        confidence={k: v.view().copy() for k, v in conf.items()},
+        slam_stats={"lost_events": pipe.slam.lost_events, "relocalisations": pipe.slam.relocalisations},
     )
     for obs in observers:
         obs.on_finish(result, pipe)

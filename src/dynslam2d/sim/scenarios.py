@@ -33,6 +33,14 @@ Registered scenes (``SCENARIOS``):
 - ``stop-and-go`` — a box arrives through a doorway and parks; a parked car
   waits, then leaves through the doorway and parks outside; a person walks
   back and forth with long stops at both ends.
+- ``long-corridor`` — a 60 m corridor, 2.4 m wide, seen by a 6 m laser while the
+  robot drives it at 1 m/s: for two stretches of more than 12 m only the two side
+  walls are in range (the scan cannot tell where along the corridor it is); two
+  people walk along it.
+- ``occlusion`` — an office (the paper room) and a 240° laser on a robot yawing in
+  place; a person walks up, stands pressed against the sensor for 1 s (over half
+  the beams blocked or too close) and then pushes through it (5 scans see nothing
+  but the person from inside).
 """
 
 from __future__ import annotations
@@ -371,6 +379,59 @@ def _build_stop_and_go(seed: int, duration: float) -> Scenario:
                     "a person walks with long stops", world, movers, robot, _lidar(), duration, seed)
 
 
+# --------------------------------------------------------------------------- long corridor
+
+#: 60 m × 2.4 m corridor: a side room and a door recess near the start, one door recess
+#: half-way, plain walls elsewhere (counter-clockwise).
+_LONG_CORRIDOR_OUTLINE = [
+    (0.0, -1.2), (30.0, -1.2), (30.0, -1.7), (31.2, -1.7), (31.2, -1.2), (60.0, -1.2), (60.0, 1.2),
+    (4.0, 1.2), (4.0, 1.6), (3.0, 1.6), (3.0, 1.2), (2.2, 1.2), (2.2, 3.2), (0.0, 3.2),
+]
+#: Range of the corridor laser, m: a short-range scanner sees only the side walls for
+#: 30 − 4 − 2·6 = 14 m and 60 − 31.2 − 4 − 2·6 ≈ 12.8 m of the drive.
+LONG_CORRIDOR_RANGE = 6.0
+
+
+def _build_long_corridor(seed: int, duration: float) -> Scenario:
+    world = _build_world(_LONG_CORRIDOR_OUTLINE, [_solid(1.0, 2.6, 0.5, 0.5)])
+    robot = waypoint_path([(1.5, -0.4), (56.5, -0.4)], speed=1.0, loop=False, wobble_amplitude=0.03,
+                          wobble_period=4.0)
+    movers = (
+        Mover(1, "person-oncoming", Circle(0.22), ping_pong([(55.0, 0.65), (6.0, 0.65)], 1.3, heading=None)),
+        Mover(2, "person-ahead", Circle(0.22), ping_pong([(14.0, 0.55), (45.0, 0.55)], 0.9, heading=None,
+                                                          phase=0.1)),
+    )
+    lidar = _lidar(range_max=LONG_CORRIDOR_RANGE)
+    return Scenario("long-corridor", "60 m corridor, 6 m laser, robot at 1 m/s: >12 m stretches where only "
+                    "the side walls are in range; two people", world, movers, robot, lidar, duration, seed)
+
+
+# --------------------------------------------------------------------------- occlusion
+
+#: Scenes where a mover touches or passes through the sensor on purpose (the occlusion event);
+#: every other scene keeps movers clear of the robot.
+SENSOR_CONTACT_SCENARIOS = frozenset({"occlusion"})
+#: Where the occlusion robot stands (world frame, m) and the person's radius, m.
+OCCLUSION_ROBOT = (-1.0, 0.0)
+_OCCLUDER_RADIUS = 0.25
+
+
+def _build_occlusion(seed: int, duration: float) -> Scenario:
+    solids = _pilasters() + [_solid(2.0, 2.2, 0.5, 0.5), _solid(-2.2, -2.4, 1.2, 0.6)]
+    world = _build_world(_PAPER_OUTLINE, solids)
+    rx, ry = OCCLUSION_ROBOT
+    robot = oscillating_in_place(rx, ry, 0.0, 0.4, 6.0)
+    r = _OCCLUDER_RADIUS
+    # stands 0.03 m from the sensor (blocks 2·asin(0.25/0.28) ≈ 126° of the 240° fan) for 1 s,
+    # then pushes through it at 2 m/s: the sensor is inside the person for 2r / 2 m/s = 0.25 s
+    person = timeline((3.0, 1.5), [("wait", 6.0), ("go", (rx + r + 0.03, ry), 1.0), ("wait", 1.0),
+                                   ("go", (rx - r - 0.03, ry), 2.0), ("go", (-3.5, -1.2), 1.0)])
+    movers = (Mover(1, "person-through-sensor", Circle(r), person),)
+    lidar = _lidar(fov=math.radians(240.0), beams=720)
+    return Scenario("occlusion", "office, 240° laser on a robot yawing in place; a person stands against "
+                    "the sensor for 1 s and pushes through it", world, movers, robot, lidar, duration, seed)
+
+
 # --------------------------------------------------------------------------- registry
 
 #: name → spec; ``SCENARIOS[name](seed=None, duration=None)`` builds the scene
@@ -384,6 +445,9 @@ SCENARIOS: dict[str, ScenarioSpec] = {
                           "past/across at 0.7–2 m/s, some standing"),
     "corridor": ScenarioSpec(_build_corridor, 7, 60.0, "30 m corridor, walkers, a cart, robot driving along"),
     "stop-and-go": ScenarioSpec(_build_stop_and_go, 8, 60.0, "objects parking and leaving; a person with stops"),
+    "long-corridor": ScenarioSpec(_build_long_corridor, 9, 55.0,
+                                  "60 m corridor, 6 m laser, only side walls in range for >12 m stretches"),
+    "occlusion": ScenarioSpec(_build_occlusion, 10, 16.0, "a person stands against and pushes through the sensor"),
 }
 
 
