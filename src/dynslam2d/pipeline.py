@@ -26,6 +26,8 @@ from typing import Callable, Protocol, Sequence
 import numpy as np
 
 from dynslam2d.config import Config
+from dynslam2d.detect.body import BodyFilter
+from dynslam2d.detect.mapevidence import MapView
 from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
@@ -51,6 +53,9 @@ class StepResult:
         removed: (beams,) bool, True where the filter removed the beam from the map update.
         removed_by: (beams,) int, id of the track whose exclusion zone removed the beam (−1 = kept).
         timings: wall time per stage, ms ("match", "track", "filter", "map_update", "total").
+        body: (beams,) bool, True where the return was the robot's own body (footprint or found
+            automatically, :mod:`dynslam2d.detect.body`): dropped before matching, tracking and
+            mapping, and not counted in ``removed``.
     """
 
     index: int
@@ -65,6 +70,7 @@ class StepResult:
     removed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     removed_by: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     timings: dict[str, float] = field(default_factory=dict)
+    body: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 def _boxes(tracks: list[Track], dt: float = 0.0) -> tuple[np.ndarray, ...]:
@@ -122,6 +128,7 @@ class Pipeline:
         self.config = config if config is not None else Config()
         self.slam = HectorSlam(self.config.slam)
         self.tracker = Tracker(self.config.detect)
+        self.body = BodyFilter(self.config.detect.footprint)
         self._moving: list[Track] = []  # tracks in M after the previous scan
         self._last_stamp: float | None = None
 
@@ -145,6 +152,11 @@ class Pipeline:
         """Run every stage on ``scan`` (scans must come in time order) and return the result."""
         t0 = time.perf_counter()
         cache: dict[str, np.ndarray] = {}
+        # 0. the robot's own body is never structure nor a mover (detect/body.py)
+        raw = scan
+        body = self.body.mask(scan)
+        if body.any():
+            scan = scan.with_ranges(np.where(body, np.nan, scan.ranges))
         # 2. match with the known movers removed (their boxes advanced to this stamp).
         match_scan = scan
         if self._moving and self.config.filter.mode != "none":
@@ -153,9 +165,10 @@ class Pipeline:
             if pre_removed.any():
                 match_scan = scan.with_ranges(np.where(pre_removed, np.nan, scan.ranges))
         res = self.slam.match(match_scan)
+        self.body.observe(raw, res.pose)
         t1 = time.perf_counter()
         # 3. track in the map frame with this scan's pose.
-        tracks = self.tracker.update(scan, res.pose)
+        tracks = self.tracker.update(scan, res.pose, MapView.of_level(self.slam.map.levels[0]))
         t2 = time.perf_counter()
         # 4. the dynamic set M and its exclusion zones (paper Eq. 3, 5-8).
         moving = [t for t in tracks if t.in_m]
@@ -181,6 +194,7 @@ class Pipeline:
             tracks=tracks,
             removed=removed,
             removed_by=removed_by,
+            body=body,
             timings={
                 "match": (t1 - t0) * 1e3,
                 "track": (t2 - t1) * 1e3,
@@ -219,6 +233,8 @@ class RunResult:
         reasons: count of each skip / reject reason.
         memory_bytes: memory held by the map levels at the end.
         tracker_stats: counters of the tracker (bad input, resets).
+        body: the robot's own returns (:meth:`dynslam2d.detect.body.BodyFilter.report`): footprint and
+            automatically found body beams, with a suggested footprint (laser frame, m).
     """
 
     source: SourceMeta
@@ -237,6 +253,7 @@ class RunResult:
     reasons: dict[str, int]
     memory_bytes: int
     tracker_stats: dict[str, int] = field(default_factory=dict)
+    body: dict[str, object] = field(default_factory=dict)
 
     @property
     def n_scans(self) -> int:
@@ -278,6 +295,7 @@ class RunResult:
             "tracks_in_M": len(ids_m),
             "removed_beam_share": removed / beams if beams else 0.0,
             "tracker": dict(self.tracker_stats),
+            "body": dict(self.body),
             "memory_bytes": int(self.memory_bytes),
             "map_cells": list(self.grid.shape),
             "map_resolution_m": self.grid.resolution,
@@ -321,8 +339,10 @@ def run(
     track_rows: list[tuple] = []
     timings: dict[str, list[float]] = {}
     t0 = time.perf_counter()
+    last_scan: Scan | None = None
     for scan in source:
         step = pipe.process(scan)
+        last_scan = scan
         stamps.append(step.stamp)
         poses.append(step.pose)
         scores.append(step.score)
@@ -359,6 +379,7 @@ def run(
         reasons=dict(summary.get("reasons", {})),  # type: ignore[arg-type]
         memory_bytes=pipe.slam.memory_bytes,
         tracker_stats=pipe.tracker.stats.as_dict(),
+        body=pipe.body.report(last_scan),
     )
     for obs in observers:
         obs.on_finish(result, pipe)

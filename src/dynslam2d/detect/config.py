@@ -284,6 +284,49 @@ class TrackerConfig(BaseModel):
         description="An earlier beam must end at least this far behind a point to count as seeing through "
         "it, m.",
     )
+    map_evidence: bool = Field(
+        True,
+        description="Entering M also needs the SLAM map's agreement (docs/tracking.md, 'Static evidence from the "
+        "map'): a mean fraction ≥ map_free_min of the track's points in cells earlier scans passed through, and "
+        "≤ map_structure_max on long-occupied cells, over its last sustain_updates updates. Only when the tracker "
+        "is given a map (the pipeline gives it the finest level).",
+    )
+    map_occupied_logodds: float = Field(
+        3.0, gt=0.0,
+        description="A point's cell is long-occupied structure at this log-odds or above (one hit adds 2.2 with "
+        "the default SLAM update factors: 3.0 needs two net hits).",
+    )
+    map_free_logodds: float = Field(
+        -0.35, lt=0.0,
+        description="A point lies in observed free space when every cell within map_free_radius has log-odds at "
+        "or below this (one free pass adds −0.405 with the default SLAM update factors).",
+    )
+    map_free_radius: int = Field(
+        1, ge=0,
+        description="Neighbourhood of the free-cell test, cells (1 = 3×3).",
+    )
+    map_free_min: float = Field(
+        0.3, ge=0.0, le=1.0,
+        description="Mean fraction of a track's points in observed free cells needed to enter M.",
+    )
+    map_structure_max: float = Field(
+        0.2, ge=0.0, le=1.0,
+        description="Largest mean fraction of a track's points on long-occupied cells that still allows entering M.",
+    )
+    map_structure_exit: float = Field(
+        0.6, ge=0.0, le=1.0,
+        description="A track in M whose mean fraction of points on long-occupied cells reaches this leaves M "
+        "(it has become part of the map's structure).",
+    )
+    ride_max_range: float = Field(
+        1.0, gt=0.0,
+        description="A track within this distance of the laser that stays fixed in the laser frame while it moves "
+        "in the map frame rides with the robot (its body) and never enters M, m.",
+    )
+    ride_tolerance: float = Field(
+        0.1, gt=0.0,
+        description="Largest spread of such a track's laser-frame centre over its last sustain_updates updates, m.",
+    )
     aspect_prior: float | None = Field(
         None, gt=0.0, le=1.0,
         description="Width / length ratio assumed for a moving box whose other side was never seen: a side "
@@ -313,6 +356,71 @@ class TrackerConfig(BaseModel):
     )
 
 
+class FootprintConfig(BaseModel):
+    """The robot's own body in the scan (:mod:`dynslam2d.detect.body`): returns dropped before detection,
+    matching and mapping."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    polygon: list[tuple[float, float]] | None = Field(
+        None,
+        description="Footprint polygon in the laser frame (x forward, y left), vertices in order, m; returns "
+        "inside it are the robot's body. None = no footprint. Must be simple with a non-zero area.",
+    )
+    auto: bool = Field(
+        True,
+        description="Find beams whose range stays fixed while the laser travels and turns (the robot's body) "
+        "and drop their returns; summary.json reports them with a suggested footprint.",
+    )
+    auto_max_range: float = Field(
+        1.0, gt=0.0,
+        description="Only returns closer than this can be the robot's body, m.",
+    )
+    auto_tolerance: float = Field(
+        0.06, gt=0.0,
+        description="A body beam's range stays within this of its first value, m (range noise of short-range "
+        "returns on Hokuyo-class sensors reaches ±4 cm).",
+    )
+    auto_min_travel: float = Field(
+        0.3, gt=0.0,
+        description="Distance the laser must travel while a beam's range stays fixed, m.",
+    )
+    auto_min_turn: float = Field(
+        0.3, gt=0.0,
+        description="Total rotation the laser must make while a beam's range stays fixed, rad (a wall seen "
+        "perpendicular keeps its range under translation, not under rotation).",
+    )
+    auto_min_scans: int = Field(
+        20, ge=1,
+        description="A body beam has returned its fixed range in at least this many scans.",
+    )
+    auto_share: float = Field(
+        0.9, gt=0.0, le=1.0,
+        description="…and in at least this share of all its returns (a wall seen briefly at a fixed range is not "
+        "the body).",
+    )
+    auto_edge_beams: int = Field(
+        4, ge=0,
+        description="Beams on either side of a body beam whose returns up to the body's range (+ 2 tolerances) "
+        "are dropped too (a body edge is seen part of the time).",
+    )
+    suggest_margin: float = Field(
+        0.05, ge=0.0,
+        description="The suggested footprint is the hull of the body returns grown by this, m.",
+    )
+
+    @model_validator(mode="after")
+    def _check_polygon(self) -> FootprintConfig:
+        if self.polygon is not None:
+            from dynslam2d.detect.body import polygon_problem
+
+            why = polygon_problem(self.polygon)
+            if why is not None:
+                raise ValueError(f"footprint polygon {why}; give the vertices in order around the robot, laser "
+                                 "frame, m")
+        return self
+
+
 class DetectConfig(BaseModel):
     """Detection and tracking of moving objects: segmentation, shape fit, tracker (nest as ``detect``)."""
 
@@ -321,6 +429,9 @@ class DetectConfig(BaseModel):
     segment: SegmentConfig = Field(default_factory=SegmentConfig, description="Breakpoint segmentation.")
     fit: FitConfig = Field(default_factory=FitConfig, description="Rectangle / circle / point shape fit.")
     tracker: TrackerConfig = Field(default_factory=TrackerConfig, description="Kalman tracking and the set M.")
+    footprint: FootprintConfig = Field(
+        default_factory=FootprintConfig, description="The robot's own body: footprint polygon, automatic detection."
+    )
 
     @model_validator(mode="after")
     def _check(self) -> DetectConfig:

@@ -49,6 +49,7 @@ from dynslam2d.detect.measure import (
     Measurement,
 )
 from dynslam2d.detect.freespace import FreeSpaceMemory
+from dynslam2d.detect.mapevidence import MapView, map_evidence
 from dynslam2d.detect.kernels import (
     classify_batch,
     fit_params,
@@ -119,6 +120,10 @@ class _Track:
     has_heading: bool = False
     size_lb: np.ndarray = field(default_factory=lambda: np.zeros(2))  # largest partial views per axis, m
     free: list[float] = field(default_factory=list)
+    mstruct: list[float] = field(default_factory=list)  # map evidence per update (mapevidence.py)
+    mfree: list[float] = field(default_factory=list)
+    laser_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the laser frame per update
+    map_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the map frame per update
     past: list[tuple[float, np.ndarray]] = field(default_factory=list)
     slow_since: float | None = None
     probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
@@ -157,6 +162,7 @@ class Tracker:
         tc = self.config.tracker
         self._free = FreeSpaceMemory(tc.free_ref_ages, tc.free_margin) if tc.free_space_check else None
         self._cur_ref = None
+        self._map: MapView | None = None  # the SLAM map given with the current scan (read only)
         self._fit_p = fit_params(self.config.fit)
         self._trig_key: tuple | None = None
         self._trig: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
@@ -178,9 +184,14 @@ class Tracker:
     def n_tracks(self) -> int:
         return len(self._tracks)
 
-    def update(self, scan: Scan, pose: Pose2D) -> list[Track]:
-        """Process one scan with the laser pose of the same scan (map frame); return the live tracks."""
+    def update(self, scan: Scan, pose: Pose2D, map_view: MapView | None = None) -> list[Track]:
+        """Process one scan with the laser pose of the same scan (map frame); return the live tracks.
+
+        ``map_view``: the SLAM map built from earlier scans (finest level, read only); with it and
+        ``tracker.map_evidence`` the set M also needs the map's agreement (docs/tracking.md)."""
         st = self.stats
+        self._map = map_view if self.config.tracker.map_evidence else None
+        self._pose = pose
         st.scans += 1
         t = float(scan.stamp)
         if pose is None or not pose.is_finite():
@@ -360,6 +371,15 @@ class Tracker:
             for det, ff in zip(dets, frac.tolist()):
                 det.free_fraction = ff
             self._free.add(scan, pose, valid, self._cur_ref)
+        if self._map is not None:
+            tc = cfg.tracker
+            mstruct, mfree = map_evidence(pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
+                                          tc.map_free_radius)
+            fs = segment_means(mstruct.astype(np.float64), offsets)[idx]
+            ff = segment_means(mfree.astype(np.float64), offsets)[idx]
+            for det, a, b in zip(dets, fs.tolist(), ff.tolist()):
+                det.map_structure = a
+                det.map_free = b
         st.detections += len(dets)
         self.last_detections = dets
         if dets:
@@ -493,6 +513,10 @@ class Tracker:
             # re-acquired after a gap: the free-space evidence must be rebuilt from this object
             k.past.clear()
             k.free.clear()
+            k.mstruct.clear()
+            k.mfree.clear()
+            k.laser_xy.clear()
+            k.map_xy.clear()
             k.fast = 0
             k.probation = k.in_m
         k.kind = det.kind
@@ -504,6 +528,21 @@ class Tracker:
         k.free.append(max(det.free_fraction, vacated))
         if len(k.free) > tc.sustain_updates:
             del k.free[0]
+        p = self._pose
+        if p is not None:
+            dx, dy = float(k.x[0]) - p.x, float(k.x[1]) - p.y
+            c, s = math.cos(p.theta), math.sin(p.theta)
+            k.laser_xy.append((c * dx + s * dy, -s * dx + c * dy))
+            k.map_xy.append((float(k.x[0]), float(k.x[1])))
+            if len(k.laser_xy) > tc.sustain_updates:
+                del k.laser_xy[0]
+                del k.map_xy[0]
+        if self._map is not None:
+            k.mstruct.append(det.map_structure)
+            k.mfree.append(det.map_free)
+            if len(k.mstruct) > tc.sustain_updates:
+                del k.mstruct[0]
+                del k.mfree[0]
         if self._free is not None:
             k.past.append((t, det.points))
             while k.past and t - k.past[0][0] > self._free.max_age:
@@ -597,7 +636,8 @@ class Tracker:
                    birth_xy=meas.z.copy(), theta_box=det.theta, size=np.asarray(size, dtype=np.float64),
                    size_known=np.asarray(known, dtype=bool), radius=float(det.circle[2]) if det.kind == KIND_CIRCLE
                    else 0.0, kind=det.kind, beams=det.beams, has_heading=det.kind == KIND_RECT,
-                   free=[det.free_fraction], past=[(t, det.points)] if self._free is not None else [])
+                   free=[det.free_fraction], mstruct=[det.map_structure] if self._map is not None else [],
+                   mfree=[det.map_free] if self._map is not None else [], past=[(t, det.points)] if self._free is not None else [])
         k.p_finite = bool(np.isfinite(P).all())
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
@@ -670,6 +710,20 @@ class Tracker:
                 k.reason = ("left M: after a gap the detections show no motion into free space "
                             "(a different, static object)")
                 return
+        if self._rides_with_laser(k):
+            if k.in_m:
+                k.in_m = False
+            k.fast = 0
+            k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
+            return
+        use_map = self._map is not None and len(k.mstruct) > 0
+        if k.in_m and use_map and len(k.mstruct) >= tc.sustain_updates and \
+                sum(k.mstruct) / len(k.mstruct) >= tc.map_structure_exit:
+            k.in_m = False
+            k.fast = 0
+            k.reason = (f"left M: {sum(k.mstruct) / len(k.mstruct):.2f} of its points on long-occupied map cells "
+                        "(structure)")
+            return
         if k.in_m:
             slow_for = 0.0 if k.slow_since is None else t - k.slow_since
             if k.slow_since is not None and slow_for >= tc.m_exit_time:
@@ -694,10 +748,31 @@ class Tracker:
         elif self._free is not None and (not k.free or sum(k.free) / len(k.free) < tc.free_min_fraction):
             k.reason = (f"not in M: points on free space {sum(k.free) / max(len(k.free), 1):.2f} < "
                         f"{tc.free_min_fraction:.2f} (static structure)")
+        elif use_map and sum(k.mfree) / len(k.mfree) < tc.map_free_min:
+            k.reason = (f"not in M: points in observed-free map cells {sum(k.mfree) / len(k.mfree):.2f} < "
+                        f"{tc.map_free_min:.2f} (no map evidence of motion)")
+        elif use_map and sum(k.mstruct) / len(k.mstruct) > tc.map_structure_max:
+            k.reason = (f"not in M: points on long-occupied map cells {sum(k.mstruct) / len(k.mstruct):.2f} > "
+                        f"{tc.map_structure_max:.2f} (structure)")
         else:
             k.in_m = True
             k.reason = (f"in M: speed {speed:.2f} m/s > v_min for {k.fast} updates, moved {disp:.2f} m "
                         "since birth")
+
+    def _rides_with_laser(self, k: _Track) -> bool:
+        """The track stays put in the LASER frame (spread below ``ride_tolerance``) within
+        ``ride_max_range`` of the laser while its map-frame centre moves more than twice that, over its
+        last ``sustain_updates`` updates: it moves with the robot (a part of the robot's body)."""
+        tc = self.config.tracker
+        if len(k.laser_xy) < tc.sustain_updates:
+            return False
+        lx = np.array(k.laser_xy)
+        if float(np.hypot(lx[:, 0], lx[:, 1]).max()) > tc.ride_max_range:
+            return False
+        spread = float(np.hypot(*(lx - lx.mean(axis=0)).T).max())
+        mx = np.array(k.map_xy)
+        moved = float(np.hypot(*(mx[-1] - mx[0])))
+        return spread < tc.ride_tolerance and moved > 2.0 * tc.ride_tolerance
 
     # ------------------------------------------------------------------ output
     def _report(self, t: float, updated: set[int]) -> list[Track]:
