@@ -314,10 +314,18 @@ class TrackerConfig(BaseModel):
         description="Largest mean fraction of a track's points on long-occupied cells that still allows entering M.",
     )
     map_structure_exit: float = Field(
-        0.6, ge=0.0, le=1.0,
+        1.0, ge=0.0, le=1.0,
         description="A track in M whose mean fraction of points on long-occupied cells reaches this leaves M "
         "(it has become part of the map's structure).",
     )
+    still_time: float = Field(
+        1.0, gt=0.0,
+        description="The laser counts as motionless when its pose stayed within still_distance / still_angle over "
+        "this long, s; then points on never-observed map cells count as free for map_free_min (a motionless "
+        "robot does not update its map, and nothing slides into view).",
+    )
+    still_distance: float = Field(0.05, ge=0.0, description="See still_time, m.")
+    still_angle: float = Field(0.03, ge=0.0, description="See still_time, rad.")
     ride_max_range: float = Field(
         1.0, gt=0.0,
         description="A track within this distance of the laser that stays fixed in the laser frame while it moves "

@@ -53,15 +53,17 @@ class MapView:
 @njit(cache=True)
 def map_evidence_kernel(px: np.ndarray, py: np.ndarray, logodds: np.ndarray, i0: int, j0: int, res: float,
                         occ_thr: float, free_thr: float, free_radius: int, structure: np.ndarray,
-                        free: np.ndarray) -> None:
+                        free: np.ndarray, unknown: np.ndarray) -> None:
     """Fill ``structure`` / ``free`` (n,) bool for the map-frame points (``px``, ``py``, m): the point's
     cell is long-occupied (log-odds ≥ ``occ_thr``); every cell within ``free_radius`` is observed free
-    (log-odds ≤ ``free_thr``). Cells outside the grid are unknown (neither)."""
+    (log-odds ≤ ``free_thr``); ``unknown``: the point's cell was never observed (log-odds 0, or outside
+    the grid)."""
     h = logodds.shape[0]
     w = logodds.shape[1]
     for i in range(px.shape[0]):
         structure[i] = False
         free[i] = False
+        unknown[i] = True
         x = px[i]
         y = py[i]
         if not (np.isfinite(x) and np.isfinite(y)):
@@ -70,6 +72,7 @@ def map_evidence_kernel(px: np.ndarray, py: np.ndarray, logodds: np.ndarray, i0:
         cy = int(np.floor(y / res + 0.5)) - j0
         if cx < 0 or cy < 0 or cx >= w or cy >= h:
             continue
+        unknown[i] = logodds[cy, cx] == 0.0
         if logodds[cy, cx] >= occ_thr:
             structure[i] = True
             continue
@@ -87,23 +90,25 @@ def map_evidence_kernel(px: np.ndarray, py: np.ndarray, logodds: np.ndarray, i0:
 
 
 def map_evidence(points: np.ndarray, view: MapView | None, occupied_logodds: float = 3.0,
-                 free_logodds: float = -0.35, free_radius: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """(structure, free): two (n,) bool arrays for the (n, 2) map-frame points (see module docstring).
+                 free_logodds: float = -0.35, free_radius: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(structure, free, unknown): three (n,) bool arrays for the (n, 2) map-frame points (module docstring;
+    unknown = the point's cell was never observed).
 
     Example:
         >>> import numpy as np
         >>> lo = np.zeros((5, 5), dtype=np.float32); lo[2, 2] = 4.0; lo[:, 4] = -1.0
-        >>> s, f = map_evidence(np.array([[0.0, 0.0], [0.15, 0.0]]), MapView(lo, -2, -2, 0.05))
-        >>> s.tolist(), f.tolist()
-        ([True, False], [False, False])
+        >>> s, f, u = map_evidence(np.array([[0.0, 0.0], [0.15, 0.0]]), MapView(lo, -2, -2, 0.05))
+        >>> s.tolist(), f.tolist(), u.tolist()
+        ([True, False], [False, False], [False, True])
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     n = pts.shape[0]
     structure = np.zeros(n, dtype=bool)
     free = np.zeros(n, dtype=bool)
+    unknown = np.ones(n, dtype=bool)
     if view is None or n == 0:
-        return structure, free
+        return structure, free, unknown
     map_evidence_kernel(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), view.logodds,
                         int(view.i0), int(view.j0), float(view.resolution), float(occupied_logodds),
-                        float(free_logodds), int(free_radius), structure, free)
-    return structure, free
+                        float(free_logodds), int(free_radius), structure, free, unknown)
+    return structure, free, unknown

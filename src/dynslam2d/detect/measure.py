@@ -53,8 +53,8 @@ class Detection:
         n_points: number of points.
         free_fraction: fraction of the points lying where an earlier scan saw through (free space,
             :mod:`dynslam2d.detect.freespace`; set by the tracker, 0 when unknown).
-        map_structure, map_free: fractions of the points on long-occupied / observed-free cells of the
-            SLAM map (:mod:`dynslam2d.detect.mapevidence`; set by the tracker, 0 without a map).
+        map_structure, map_free, map_unknown: fractions of the points on long-occupied / observed-free /
+            never observed cells of the SLAM map (:mod:`dynslam2d.detect.mapevidence`; set by the tracker, 0 without a map).
     """
 
     beams: np.ndarray
@@ -70,6 +70,7 @@ class Detection:
     free_fraction: float = 0.0
     map_structure: float = 0.0
     map_free: float = 0.0
+    map_unknown: float = 0.0
 
     @property
     def extent(self) -> np.ndarray:

@@ -32,6 +32,7 @@ free-space and fragment tests); only the per-track bookkeeping stays in Python (
 from __future__ import annotations
 
 import bisect
+from collections import deque
 import math
 from dataclasses import asdict, dataclass, field
 
@@ -122,6 +123,8 @@ class _Track:
     free: list[float] = field(default_factory=list)
     mstruct: list[float] = field(default_factory=list)  # map evidence per update (mapevidence.py)
     mfree: list[float] = field(default_factory=list)
+    munknown: list[float] = field(default_factory=list)
+    vac: list[float] = field(default_factory=list)  # vacated fraction per update (this scan sees through old points)
     laser_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the laser frame per update
     map_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the map frame per update
     past: list[tuple[float, np.ndarray]] = field(default_factory=list)
@@ -163,6 +166,9 @@ class Tracker:
         self._free = FreeSpaceMemory(tc.free_ref_ages, tc.free_margin) if tc.free_space_check else None
         self._cur_ref = None
         self._map: MapView | None = None  # the SLAM map given with the current scan (read only)
+        self._pose: Pose2D | None = None
+        self._pose_hist: deque = deque()  # (stamp, x, y, θ) of the last still_time seconds
+        self._laser_still = False
         self._fit_p = fit_params(self.config.fit)
         self._trig_key: tuple | None = None
         self._trig: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
@@ -192,6 +198,7 @@ class Tracker:
         st = self.stats
         self._map = map_view if self.config.tracker.map_evidence else None
         self._pose = pose
+        self._laser_still = self._still(float(scan.stamp), pose)
         st.scans += 1
         t = float(scan.stamp)
         if pose is None or not pose.is_finite():
@@ -373,13 +380,15 @@ class Tracker:
             self._free.add(scan, pose, valid, self._cur_ref)
         if self._map is not None:
             tc = cfg.tracker
-            mstruct, mfree = map_evidence(pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
-                                          tc.map_free_radius)
+            mstruct, mfree, munk = map_evidence(pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
+                                                tc.map_free_radius)
             fs = segment_means(mstruct.astype(np.float64), offsets)[idx]
             ff = segment_means(mfree.astype(np.float64), offsets)[idx]
-            for det, a, b in zip(dets, fs.tolist(), ff.tolist()):
+            fu = segment_means(munk.astype(np.float64), offsets)[idx]
+            for det, a, b, u in zip(dets, fs.tolist(), ff.tolist(), fu.tolist()):
                 det.map_structure = a
                 det.map_free = b
+                det.map_unknown = u
         st.detections += len(dets)
         self.last_detections = dets
         if dets:
@@ -515,6 +524,8 @@ class Tracker:
             k.free.clear()
             k.mstruct.clear()
             k.mfree.clear()
+            k.munknown.clear()
+            k.vac.clear()
             k.laser_xy.clear()
             k.map_xy.clear()
             k.fast = 0
@@ -526,8 +537,10 @@ class Tracker:
         k.history.append(True)
         k.beams = det.beams
         k.free.append(max(det.free_fraction, vacated))
+        k.vac.append(vacated)
         if len(k.free) > tc.sustain_updates:
             del k.free[0]
+            del k.vac[0]
         p = self._pose
         if p is not None:
             dx, dy = float(k.x[0]) - p.x, float(k.x[1]) - p.y
@@ -540,9 +553,11 @@ class Tracker:
         if self._map is not None:
             k.mstruct.append(det.map_structure)
             k.mfree.append(det.map_free)
+            k.munknown.append(det.map_unknown)
             if len(k.mstruct) > tc.sustain_updates:
                 del k.mstruct[0]
                 del k.mfree[0]
+                del k.munknown[0]
         if self._free is not None:
             k.past.append((t, det.points))
             while k.past and t - k.past[0][0] > self._free.max_age:
@@ -637,7 +652,8 @@ class Tracker:
                    size_known=np.asarray(known, dtype=bool), radius=float(det.circle[2]) if det.kind == KIND_CIRCLE
                    else 0.0, kind=det.kind, beams=det.beams, has_heading=det.kind == KIND_RECT,
                    free=[det.free_fraction], mstruct=[det.map_structure] if self._map is not None else [],
-                   mfree=[det.map_free] if self._map is not None else [], past=[(t, det.points)] if self._free is not None else [])
+                   mfree=[det.map_free] if self._map is not None else [],
+                   munknown=[det.map_unknown] if self._map is not None else [], past=[(t, det.points)] if self._free is not None else [])
         k.p_finite = bool(np.isfinite(P).all())
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
@@ -748,7 +764,8 @@ class Tracker:
         elif self._free is not None and (not k.free or sum(k.free) / len(k.free) < tc.free_min_fraction):
             k.reason = (f"not in M: points on free space {sum(k.free) / max(len(k.free), 1):.2f} < "
                         f"{tc.free_min_fraction:.2f} (static structure)")
-        elif use_map and sum(k.mfree) / len(k.mfree) < tc.map_free_min:
+        elif use_map and sum(k.mfree) / len(k.mfree) < tc.map_free_min and not (
+                self._laser_still and sum(k.munknown) / len(k.munknown) >= 1.0 - tc.map_free_min):
             k.reason = (f"not in M: points in observed-free map cells {sum(k.mfree) / len(k.mfree):.2f} < "
                         f"{tc.map_free_min:.2f} (no map evidence of motion)")
         elif use_map and sum(k.mstruct) / len(k.mstruct) > tc.map_structure_max:
@@ -758,6 +775,22 @@ class Tracker:
             k.in_m = True
             k.reason = (f"in M: speed {speed:.2f} m/s > v_min for {k.fast} updates, moved {disp:.2f} m "
                         "since birth")
+
+    def _still(self, t: float, pose: Pose2D | None) -> bool:
+        """The laser has stayed within ``still_distance`` / ``still_angle`` of its pose over the last
+        ``still_time`` seconds (then walls cannot slide into view, and a map that a motionless robot does
+        not update leaves the places people walk into unknown: unknown counts like free)."""
+        tc = self.config.tracker
+        if pose is None or not pose.is_finite():
+            return False
+        h = self._pose_hist
+        h.append((t, pose.x, pose.y, pose.theta))
+        while len(h) > 2 and t - h[1][0] >= tc.still_time:
+            h.popleft()
+        if t - h[0][0] < tc.still_time:
+            return False
+        return all(math.hypot(x - pose.x, y - pose.y) <= tc.still_distance
+                   and abs(float(wrap_angle(th - pose.theta))) <= tc.still_angle for _, x, y, th in h)
 
     def _rides_with_laser(self, k: _Track) -> bool:
         """The track stays put in the LASER frame (spread below ``ride_tolerance``) within
