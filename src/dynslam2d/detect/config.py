@@ -326,6 +326,16 @@ class TrackerConfig(BaseModel):
     )
     still_distance: float = Field(0.05, ge=0.0, description="See still_time, m.")
     still_angle: float = Field(0.03, ge=0.0, description="See still_time, rad.")
+    max_accel: float | None = Field(
+        4.0, gt=0.0,
+        description="Physical acceleration bound: one update changes an established track's velocity by at most "
+        "max_accel·dt, m/s² (people reach ≈1–2 m/s², carts and small robots ≈2–3). None = no bound.",
+    )
+    accel_bound_after: int = Field(
+        4, ge=1,
+        description="The acceleration bound applies from this many hits on (a new track first converges to the "
+        "speed it was seen at).",
+    )
     ride_max_range: float = Field(
         1.0, gt=0.0,
         description="A track within this distance of the laser that stays fixed in the laser frame while it moves "
@@ -333,7 +343,12 @@ class TrackerConfig(BaseModel):
     )
     ride_tolerance: float = Field(
         0.1, gt=0.0,
-        description="Largest spread of such a track's laser-frame centre over its last sustain_updates updates, m.",
+        description="Largest spread of such a track's laser-frame centre over its last ride_updates updates (and "
+        "least map-frame motion over them), m.",
+    )
+    ride_updates: int = Field(
+        3, ge=2,
+        description="Updates over which a track riding with the laser is judged.",
     )
     aspect_prior: float | None = Field(
         None, gt=0.0, le=1.0,

@@ -277,6 +277,8 @@ def measure(det: Detection, sizes: np.ndarray | None, radius: float | None, cfg:
     for k, ext_k in ((0, ext0), (1, ext1)):
         rl, rh = bool(rel[k, 0]), bool(rel[k, 1])
         size_k = max(float(sz[k]), ext_k)
+        if sizes is not None and rel[k, 0] != rel[k, 1]:
+            size_k = float(sz[k])  # anchored on the one real bound with the track's size (kernels.measure_batch)
         if rl and rh:
             uv[k] = 0.5 * (lo[k] + hi[k])
             var[k] = sp2

@@ -92,6 +92,7 @@ class TrackerStats:
     deleted_tentative: int = 0
     rejected_updates: int = 0
     merged_fragments: int = 0
+    accel_bounded: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
@@ -169,6 +170,7 @@ class Tracker:
         self._pose: Pose2D | None = None
         self._pose_hist: deque = deque()  # (stamp, x, y, θ) of the last still_time seconds
         self._laser_still = False
+        self._dt = 0.0
         self._fit_p = fit_params(self.config.fit)
         self._trig_key: tuple | None = None
         self._trig: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
@@ -216,6 +218,7 @@ class Tracker:
                 st.pose_jumps += 1
                 self.reset()
         self._last_stamp, self._last_pose = t, pose
+        self._dt = dt
         self._predict(dt)
         for k in self._tracks:
             if k.has_heading and k.kind == KIND_RECT:
@@ -470,6 +473,7 @@ class Tracker:
         Xs, Ps = self._stack()
         sel = np.array([ti for ti, _ in pairs], dtype=np.int64)
         Xn, Pn, ok = kalman_update_batch(Xs[sel], Ps[sel], H, zm, Rm)
+        self._bound_acceleration(Xs[sel], Xn, [tracks[ti] for ti, _ in pairs])
         self._stacked = None  # the tracks change below
         out = ok.tolist()
         for r, (ti, di) in enumerate(pairs):
@@ -478,6 +482,25 @@ class Tracker:
                 self._update_track(k, dets[di], t, vac.get(k.id, 0.0), Xn[r], Pn[r], size_obs[r].tolist(),
                                    size_kind[r].tolist(), swaps[r])
         return out
+
+    def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track]) -> None:
+        """Physical acceleration bound (in place on ``X_new``): once a track's velocity is established
+        (``accel_bound_after`` updates), one update may change it by at most ``max_accel``·dt — speeds no
+        longer jump from scan to scan with the shape of a partial view or a leg swinging."""
+        tc = self.config.tracker
+        if tc.max_accel is None or self._dt <= 0.0:
+            return
+        lim = tc.max_accel * self._dt
+        for r, k in enumerate(tracks):
+            if k.hits < tc.accel_bound_after:
+                continue
+            dvx = X_new[r, 2] - X_prior[r, 2]
+            dvy = X_new[r, 3] - X_prior[r, 3]
+            d = math.hypot(dvx, dvy)
+            if d > lim:
+                X_new[r, 2] = X_prior[r, 2] + dvx * lim / d
+                X_new[r, 3] = X_prior[r, 3] + dvy * lim / d
+                self.stats.accel_bounded += 1
 
     def _update_track(self, k: _Track, det: Detection, t: float, vacated: float, x_new: np.ndarray,
                       P_new: np.ndarray, size_obs: list[float], size_kind: list[int], swap: bool) -> None:
@@ -511,6 +534,16 @@ class Tracker:
                     elif kind == SIZE_LOWER:
                         k.size_lb[ta] = max(k.size_lb[ta], obs)
                         if obs > k.size[ta]:
+                            # a partial view grew past the size: the box grows away from its one real
+                            # bound, its centre moves with it, its velocity does not (item 2, docs/tracking.md)
+                            grow = obs - k.size[ta]
+                            lo_real, hi_real = bool(det.rel[a, 0]), bool(det.rel[a, 1])
+                            if lo_real != hi_real:
+                                sgn = 0.5 * grow if lo_real else -0.5 * grow
+                                th = det.theta + a * _HALF_PI
+                                k.x = k.x.copy()
+                                k.x[0] += sgn * math.cos(th)
+                                k.x[1] += sgn * math.sin(th)
                             k.size[ta] = obs
         elif det.kind == KIND_CIRCLE:
             r = float(det.circle[2])
@@ -794,18 +827,20 @@ class Tracker:
 
     def _rides_with_laser(self, k: _Track) -> bool:
         """The track stays put in the LASER frame (spread below ``ride_tolerance``) within
-        ``ride_max_range`` of the laser while its map-frame centre moves more than twice that, over its
-        last ``sustain_updates`` updates: it moves with the robot (a part of the robot's body)."""
+        ``ride_max_range`` of the laser while its map-frame centre moves more than that and more than 4×
+        the spread, over its last ``ride_updates`` updates: it moves with the robot (its body)."""
         tc = self.config.tracker
-        if len(k.laser_xy) < tc.sustain_updates:
+        n = tc.ride_updates
+        if len(k.laser_xy) < n:
             return False
-        lx = np.array(k.laser_xy)
+        lx = np.array(k.laser_xy[-n:])
         if float(np.hypot(lx[:, 0], lx[:, 1]).max()) > tc.ride_max_range:
             return False
         spread = float(np.hypot(*(lx - lx.mean(axis=0)).T).max())
-        mx = np.array(k.map_xy)
+        mx = np.array(k.map_xy[-n:])
         moved = float(np.hypot(*(mx[-1] - mx[0])))
-        return spread < tc.ride_tolerance and moved > 2.0 * tc.ride_tolerance
+        # with a motionless laser the two frames agree: only motion far beyond the laser-frame spread rides
+        return spread < tc.ride_tolerance and moved > max(tc.ride_tolerance, 4.0 * spread)
 
     # ------------------------------------------------------------------ output
     def _report(self, t: float, updated: set[int]) -> list[Track]:
