@@ -162,6 +162,19 @@ class FitConfig(BaseModel):
         "track updated in the same scan is a fragment of that object: its beams join the track, no new "
         "track is born, m.",
     )
+    person_merge: bool = Field(
+        True,
+        description="Merge two leg-sized clusters close together into one person detection (leg_tracker's leg "
+        "pairs, datmo.md §7), measured at the middle of the two legs.",
+    )
+    leg_max_extent: float = Field(
+        0.25, gt=0.0,
+        description="A leg: a cluster whose fitted sides are both at most this, m.",
+    )
+    leg_pair_distance: float = Field(
+        0.45, gt=0.0,
+        description="Two legs of one person: their centres lie at most this far apart, m.",
+    )
     sigma_position: float = Field(
         0.02, gt=0.0,
         description="Standard deviation of an observed face / edge position, m.",
@@ -256,6 +269,21 @@ class TrackerConfig(BaseModel):
         5, ge=1,
         description="Consecutive updates with speed > v_min needed to enter M (robustness to pose jitter).",
     )
+    person_sustain_updates: int = Field(
+        3, ge=1,
+        description="For a person (merged leg pair) the speed must exceed v_min for this many consecutive updates "
+        "(the rest of the test unchanged): a person who starts walking enters M within 0.5 s at 7.5 Hz.",
+    )
+    person_map_free_min: float = Field(
+        0.6, ge=0.0, le=1.0,
+        description="The person's faster confirmation needs this mean fraction of its points in observed-free map "
+        "cells (stronger than map_free_min: small clutter pairs up like legs).",
+    )
+    net_speed_ratio: float = Field(
+        0.7, ge=0.0,
+        description="Entering M also needs the net displacement over the sustained updates, divided by their time "
+        "span, to reach net_speed_ratio·v_min (a filtered speed built from jitter has no net motion).",
+    )
     min_displacement: float = Field(
         0.3, ge=0.0,
         description="Net displacement of the centre since the track's birth needed to enter M, m.",
@@ -306,7 +334,7 @@ class TrackerConfig(BaseModel):
         description="Neighbourhood of the free-cell test, cells (1 = 3×3).",
     )
     map_free_min: float = Field(
-        0.3, ge=0.0, le=1.0,
+        0.5, ge=0.0, le=1.0,
         description="Mean fraction of a track's points in observed free cells needed to enter M.",
     )
     map_structure_max: float = Field(

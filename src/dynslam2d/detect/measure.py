@@ -54,7 +54,8 @@ class Detection:
         free_fraction: fraction of the points lying where an earlier scan saw through (free space,
             :mod:`dynslam2d.detect.freespace`; set by the tracker, 0 when unknown).
         map_structure, map_free, map_unknown: fractions of the points on long-occupied / observed-free /
-            never observed cells of the SLAM map (:mod:`dynslam2d.detect.mapevidence`; set by the tracker, 0 without a map).
+            never observed cells of the SLAM map
+        person: a merged pair of legs (tracker, ``fit.person_merge``): measured at the middle of the legs (:mod:`dynslam2d.detect.mapevidence`; set by the tracker, 0 without a map).
     """
 
     beams: np.ndarray
@@ -71,6 +72,7 @@ class Detection:
     map_structure: float = 0.0
     map_free: float = 0.0
     map_unknown: float = 0.0
+    person: bool = False
 
     @property
     def extent(self) -> np.ndarray:

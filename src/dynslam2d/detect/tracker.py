@@ -92,6 +92,7 @@ class TrackerStats:
     deleted_tentative: int = 0
     rejected_updates: int = 0
     merged_fragments: int = 0
+    merged_leg_pairs: int = 0
     accel_bounded: int = 0
 
     def as_dict(self) -> dict[str, int]:
@@ -125,9 +126,12 @@ class _Track:
     mstruct: list[float] = field(default_factory=list)  # map evidence per update (mapevidence.py)
     mfree: list[float] = field(default_factory=list)
     munknown: list[float] = field(default_factory=list)
+    person: bool = False  # the last detection was a merged pair of legs
+    person_streak: int = 0  # consecutive updates with a merged pair of legs
     vac: list[float] = field(default_factory=list)  # vacated fraction per update (this scan sees through old points)
     laser_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the laser frame per update
     map_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the map frame per update
+    map_t: list[float] = field(default_factory=list)  # stamps of map_xy, s
     past: list[tuple[float, np.ndarray]] = field(default_factory=list)
     slow_since: float | None = None
     probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
@@ -392,6 +396,9 @@ class Tracker:
                 det.map_structure = a
                 det.map_free = b
                 det.map_unknown = u
+        if cfg.fit.person_merge and len(dets) > 1:
+            dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
+                                                                                 npts, px, py)
         st.detections += len(dets)
         self.last_detections = dets
         if dets:
@@ -401,6 +408,72 @@ class Tracker:
             self._default = self._measure_rows(np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool),
                                                np.full(m, -1.0), np.zeros(m))
         return dets
+
+    def _merge_legs(self, dets: list[Detection], kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray,
+                    rel: np.ndarray, starts: np.ndarray, npts: np.ndarray, px: np.ndarray, py: np.ndarray) -> tuple:
+        """People (datmo.md §7: leg_tracker pairs legs into people): two leg-sized detections (both sides
+        ≤ ``fit.leg_max_extent``) whose centres lie within ``fit.leg_pair_distance`` become one person
+        detection, measured at the middle of the two legs with the point model. A leg swinging forward while
+        the other stands does not move the person's centre by a full stride, so its speed does not jump.
+        Returns the detection list and the per-detection batch arrays, merged pairs appended at the end."""
+        fc = self.config.fit
+        small = []
+        for j, d in enumerate(dets):
+            if d.n_points >= 2 and float(max(d.hi[0] - d.lo[0], d.hi[1] - d.lo[1])) <= fc.leg_max_extent:
+                small.append(j)
+        if len(small) < 2:
+            return dets, kinds, fits, lohi, rel, starts, npts, px, py
+        cen = np.array([dets[j].centroid for j in small])
+        d2 = np.hypot(cen[:, None, 0] - cen[None, :, 0], cen[:, None, 1] - cen[None, :, 1])
+        np.fill_diagonal(d2, np.inf)
+        pairs: list[tuple[int, int]] = []
+        used: set[int] = set()
+        for flat in np.argsort(d2, axis=None).tolist():
+            a, b = divmod(flat, len(small))
+            if d2[a, b] > fc.leg_pair_distance:
+                break
+            if a in used or b in used or a > b:
+                continue
+            used.update((a, b))
+            pairs.append((small[a], small[b]))
+        if not pairs:
+            return dets, kinds, fits, lohi, rel, starts, npts, px, py
+        drop = {j for pr in pairs for j in pr}
+        keep = [j for j in range(len(dets)) if j not in drop]
+        new_dets = [dets[j] for j in keep]
+        ext_px, ext_py, new_rows = [px], [py], []
+        n0 = px.shape[0]
+        for a, b in pairs:
+            da, db = dets[a], dets[b]
+            pts = np.vstack((da.points, db.points))
+            mid = 0.5 * (da.centroid + db.centroid)
+            lo, hi = pts.min(axis=0), pts.max(axis=0)
+            na, nb = da.n_points, db.n_points
+            det = Detection(np.concatenate((da.beams, db.beams)), pts, mid, KIND_POINT, 0.0, lo, hi,
+                            np.zeros((2, 2), dtype=bool), np.array([mid[0], mid[1], 0.0]), na + nb,
+                            (na * da.free_fraction + nb * db.free_fraction) / (na + nb),
+                            (na * da.map_structure + nb * db.map_structure) / (na + nb),
+                            (na * da.map_free + nb * db.map_free) / (na + nb),
+                            (na * da.map_unknown + nb * db.map_unknown) / (na + nb))
+            det.person = True
+            new_dets.append(det)
+            row = np.zeros(fits.shape[1])
+            row[6:8] = mid
+            row[10:12] = mid
+            new_rows.append((row, np.array([lo[0], lo[1], hi[0], hi[1]]), n0, na + nb))
+            ext_px.append(pts[:, 0])
+            ext_py.append(pts[:, 1])
+            n0 += na + nb
+        self.stats.merged_leg_pairs += len(pairs)
+        ki = np.array(keep, dtype=np.int64)
+        m = len(pairs)
+        kinds = np.concatenate((kinds[ki], np.zeros(m, dtype=kinds.dtype)))
+        fits = np.vstack((fits[ki], np.array([r[0] for r in new_rows])))
+        lohi = np.vstack((lohi[ki], np.array([r[1] for r in new_rows])))
+        rel = np.concatenate((rel[ki], np.zeros((m, 2, 2), dtype=rel.dtype)))
+        starts = np.concatenate((starts[ki], np.array([r[2] for r in new_rows], dtype=starts.dtype)))
+        npts = np.concatenate((npts[ki], np.array([r[3] for r in new_rows], dtype=npts.dtype)))
+        return new_dets, kinds, fits, lohi, rel, starts, npts, np.concatenate(ext_px), np.concatenate(ext_py)
 
     def _measure_rows(self, det: np.ndarray, sizes: np.ndarray, has_sizes: np.ndarray, radius: np.ndarray,
                       size_sigma: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -561,9 +634,12 @@ class Tracker:
             k.vac.clear()
             k.laser_xy.clear()
             k.map_xy.clear()
+            k.map_t.clear()
             k.fast = 0
             k.probation = k.in_m
         k.kind = det.kind
+        k.person = det.person
+        k.person_streak = k.person_streak + 1 if det.person else 0
         k.hits += 1
         k.misses = 0
         k.last_hit = t
@@ -580,9 +656,11 @@ class Tracker:
             c, s = math.cos(p.theta), math.sin(p.theta)
             k.laser_xy.append((c * dx + s * dy, -s * dx + c * dy))
             k.map_xy.append((float(k.x[0]), float(k.x[1])))
+            k.map_t.append(t)
             if len(k.laser_xy) > tc.sustain_updates:
                 del k.laser_xy[0]
                 del k.map_xy[0]
+                del k.map_t[0]
         if self._map is not None:
             k.mstruct.append(det.map_structure)
             k.mfree.append(det.map_free)
@@ -766,6 +844,10 @@ class Tracker:
             k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
             return
         use_map = self._map is not None and len(k.mstruct) > 0
+        npu = tc.person_sustain_updates
+        fast_person = k.person_streak >= npu and (
+            not use_map or sum(k.mfree[-npu:]) / len(k.mfree[-npu:]) >= tc.person_map_free_min)
+        need = tc.person_sustain_updates if fast_person else tc.sustain_updates
         if k.in_m and use_map and len(k.mstruct) >= tc.sustain_updates and \
                 sum(k.mstruct) / len(k.mstruct) >= tc.map_structure_exit:
             k.in_m = False
@@ -790,8 +872,11 @@ class Tracker:
             k.reason = f"not in M: speed {speed:.2f} m/s ≤ v_min {tc.v_min:.2f}"
         elif sig >= tc.max_speed_sigma:
             k.reason = f"not in M: velocity uncertain (σ {sig:.2f} m/s)"
-        elif k.fast < tc.sustain_updates:
-            k.reason = f"not in M: speed > v_min for {k.fast}/{tc.sustain_updates} updates"
+        elif k.fast < need:
+            k.reason = f"not in M: speed > v_min for {k.fast}/{need} updates"
+        elif (net := self._net_speed(k, need)) is not None and net < tc.net_speed_ratio * tc.v_min:
+            k.reason = (f"not in M: net speed over the last {need} updates {net:.2f} m/s < "
+                        f"{tc.net_speed_ratio * tc.v_min:.2f} (jitter, not motion)")
         elif disp < tc.min_displacement:
             k.reason = f"not in M: moved {disp:.2f} m < {tc.min_displacement:.2f} m since birth"
         elif self._free is not None and (not k.free or sum(k.free) / len(k.free) < tc.free_min_fraction):
@@ -824,6 +909,18 @@ class Tracker:
             return False
         return all(math.hypot(x - pose.x, y - pose.y) <= tc.still_distance
                    and abs(float(wrap_angle(th - pose.theta))) <= tc.still_angle for _, x, y, th in h)
+
+    @staticmethod
+    def _net_speed(k: _Track, n: int) -> float | None:
+        """Net displacement of the track's centre over its last ``n`` updates divided by their time span, m/s
+        (None with fewer updates): pose jitter and association noise give a speed but no net motion."""
+        if len(k.map_xy) < max(n, 2):
+            return None
+        dt = k.map_t[-1] - k.map_t[-n]
+        if dt <= 0.0:
+            return None
+        (x0, y0), (x1, y1) = k.map_xy[-n], k.map_xy[-1]
+        return math.hypot(x1 - x0, y1 - y0) / dt
 
     def _rides_with_laser(self, k: _Track) -> bool:
         """The track stays put in the LASER frame (spread below ``ride_tolerance``) within
