@@ -53,7 +53,7 @@ class MapView:
 @njit(cache=True)
 def map_evidence_kernel(px: np.ndarray, py: np.ndarray, logodds: np.ndarray, i0: int, j0: int, res: float,
                         occ_thr: float, free_thr: float, free_radius: int, structure: np.ndarray,
-                        free: np.ndarray, unknown: np.ndarray) -> None:
+                        free: np.ndarray, unknown: np.ndarray, near_thr: float = 0.5) -> None:
     """Fill ``structure`` / ``free`` (n,) bool for the map-frame points (``px``, ``py``, m): the point's
     cell is long-occupied (log-odds ≥ ``occ_thr``); every cell within ``free_radius`` is observed free
     (log-odds ≤ ``free_thr``); ``unknown``: the point's cell was never observed (log-odds 0, or outside
@@ -76,12 +76,14 @@ def map_evidence_kernel(px: np.ndarray, py: np.ndarray, logodds: np.ndarray, i0:
         if logodds[cy, cx] >= occ_thr:
             structure[i] = True
             continue
-        if cx < free_radius or cy < free_radius or cx >= w - free_radius or cy >= h - free_radius:
+        if logodds[cy, cx] > free_thr:
             continue
         ok = True
         for dy in range(-free_radius, free_radius + 1):
             for dx in range(-free_radius, free_radius + 1):
-                if logodds[cy + dy, cx + dx] > free_thr:
+                yy = cy + dy
+                xx = cx + dx
+                if 0 <= yy < h and 0 <= xx < w and logodds[yy, xx] > near_thr:
                     ok = False
                     break
             if not ok:
