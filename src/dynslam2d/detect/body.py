@@ -37,10 +37,6 @@ def polygon_problem(polygon: list[tuple[float, float]] | np.ndarray) -> str | No
         return f"needs at least 3 (x, y) vertices, got {p.shape[0] if p.ndim == 2 else 0}"
     if not np.isfinite(p).all():
         return "has a non-finite vertex"
-    x, y = p[:, 0], p[:, 1]
-    area = 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))  # shoelace formula
-    if abs(area) < 1e-6:
-        return "encloses no area (it contains no points)"
     k = p.shape[0]
 
     def cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
@@ -66,6 +62,10 @@ def polygon_problem(polygon: list[tuple[float, float]] | np.ndarray) -> str | No
                 continue  # adjacent edges share a vertex
             if touch(a, b, p[j], p[(j + 1) % k]):
                 return f"is not simple: edge {i}-{(i + 1) % k} meets edge {j}-{(j + 1) % k}"
+    x, y = p[:, 0], p[:, 1]
+    area = 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))  # shoelace formula
+    if abs(area) < 1e-6:
+        return "encloses no area (it contains no points)"
     return None
 
 
