@@ -320,9 +320,10 @@ class TrackerConfig(BaseModel):
         "is given a map (the pipeline gives it the finest level).",
     )
     map_occupied_logodds: float = Field(
-        3.0, gt=0.0,
+        6.0, gt=0.0,
         description="A point's cell is long-occupied structure at this log-odds or above (one hit adds 2.2 with "
-        "the default SLAM update factors: 3.0 needs two net hits).",
+        "the default SLAM update factors: 6.0 needs three net hits; a mover's own trail, written while it was "
+        "not yet in M, rarely gets there).",
     )
     map_free_logodds: float = Field(
         -0.35, lt=0.0,

@@ -9,11 +9,12 @@ moment ago, so whatever returns from there now has moved in. A cell that was nev
 The tracker uses two per-point flags (docs/tracking.md, "Static evidence from the map"):
 
 - **structure**: the point's own cell has log-odds ≥ ``occupied_logodds`` (hector's hit adds
-  logit(0.9) = 2.2 and a free pass logit(0.4) = −0.4, so the default 3.0 needs at least two
-  net hits);
-- **free**: every cell within ``free_radius`` cells of the point has log-odds ≤
-  ``free_logodds`` (default −0.35: at least one net free observation; the neighbourhood keeps a
-  wall seen at a grazing angle, whose cells next to the line rays have cleared, from passing).
+  logit(0.9) = 2.2 and a free pass logit(0.4) = −0.4, so the tracker's default 6.0 needs at
+  least three net hits);
+- **free**: the point's own cell has log-odds ≤ ``free_logodds`` (default −0.35: at least one net
+  free observation) and no cell within ``free_radius`` cells is occupied (log-odds > 0.5): a
+  wall point that range noise put one cell in front of the wall still has the wall next to it,
+  while the hidden back of a moving object is merely unknown.
 
 Frames: map frame (the finest map level's world coordinates), units m. The map is read only.
 """
@@ -55,8 +56,8 @@ def map_evidence_kernel(px: np.ndarray, py: np.ndarray, logodds: np.ndarray, i0:
                         occ_thr: float, free_thr: float, free_radius: int, structure: np.ndarray,
                         free: np.ndarray, unknown: np.ndarray, near_thr: float = 0.5) -> None:
     """Fill ``structure`` / ``free`` (n,) bool for the map-frame points (``px``, ``py``, m): the point's
-    cell is long-occupied (log-odds ≥ ``occ_thr``); every cell within ``free_radius`` is observed free
-    (log-odds ≤ ``free_thr``); ``unknown``: the point's cell was never observed (log-odds 0, or outside
+    cell is long-occupied (log-odds ≥ ``occ_thr``); the point's cell is observed free (log-odds ≤
+    ``free_thr``) with no occupied cell (log-odds > ``near_thr``) within ``free_radius``; ``unknown``: the point's cell was never observed (log-odds 0, or outside
     the grid)."""
     h = logodds.shape[0]
     w = logodds.shape[1]
@@ -91,14 +92,14 @@ def map_evidence_kernel(px: np.ndarray, py: np.ndarray, logodds: np.ndarray, i0:
         free[i] = ok
 
 
-def map_evidence(points: np.ndarray, view: MapView | None, occupied_logodds: float = 3.0,
+def map_evidence(points: np.ndarray, view: MapView | None, occupied_logodds: float = 6.0,
                  free_logodds: float = -0.35, free_radius: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(structure, free, unknown): three (n,) bool arrays for the (n, 2) map-frame points (module docstring;
     unknown = the point's cell was never observed).
 
     Example:
         >>> import numpy as np
-        >>> lo = np.zeros((5, 5), dtype=np.float32); lo[2, 2] = 4.0; lo[:, 4] = -1.0
+        >>> lo = np.zeros((5, 5), dtype=np.float32); lo[2, 2] = 7.0; lo[:, 4] = -1.0
         >>> s, f, u = map_evidence(np.array([[0.0, 0.0], [0.15, 0.0]]), MapView(lo, -2, -2, 0.05))
         >>> s.tolist(), f.tolist(), u.tolist()
         ([True, False], [False, False], [False, True])

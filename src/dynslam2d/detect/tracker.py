@@ -128,6 +128,7 @@ class _Track:
     munknown: list[float] = field(default_factory=list)
     person: bool = False  # the last detection was a merged pair of legs
     person_streak: int = 0  # consecutive updates with a merged pair of legs
+    was_in_m: bool = False  # has been in M before (seen moving): the map's word is not needed again
     vac: list[float] = field(default_factory=list)  # vacated fraction per update (this scan sees through old points)
     laser_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the laser frame per update
     map_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the map frame per update
@@ -843,7 +844,8 @@ class Tracker:
             k.fast = 0
             k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
             return
-        use_map = self._map is not None and len(k.mstruct) > 0
+        # a track seen moving before re-enters M on the kinematic test: where it paused, the map wrote it
+        use_map = self._map is not None and len(k.mstruct) > 0 and not k.was_in_m
         npu = tc.person_sustain_updates
         fast_person = k.person_streak >= npu and (
             not use_map or sum(k.mfree[-npu:]) / len(k.mfree[-npu:]) >= tc.person_map_free_min)
@@ -891,6 +893,7 @@ class Tracker:
                         f"{tc.map_structure_max:.2f} (structure)")
         else:
             k.in_m = True
+            k.was_in_m = True
             k.reason = (f"in M: speed {speed:.2f} m/s > v_min for {k.fast} updates, moved {disp:.2f} m "
                         "since birth")
 
