@@ -227,6 +227,15 @@ class TrackerConfig(BaseModel):
         description="Euclidean gate between a cluster's centroid and a track's predicted box (distance to "
         "the box outline), m; bounds association along unobserved axes.",
     )
+    max_size_jump: float = Field(
+        0.8, gt=0.0,
+        description="A detection whose longest side exceeds max_size_jump_ratio × the track's longest side plus "
+        "this cannot update the track, m (a person track coasting past a wall must not take the wall).",
+    )
+    max_size_jump_ratio: float = Field(
+        2.0, ge=1.0,
+        description="See max_size_jump.",
+    )
     confirm_hits: int = Field(
         3, ge=1,
         description="M of the M-of-N confirmation rule: hits needed among the first confirm_window updates.",
@@ -377,7 +386,17 @@ class TrackerConfig(BaseModel):
     )
     ride_updates: int = Field(
         3, ge=2,
-        description="Updates over which a track riding with the laser is judged.",
+        description="Fewest updates over which a track riding with the laser is judged.",
+    )
+    ride_time: float = Field(
+        0.5, gt=0.0,
+        description="Time window of the riding test, s (a person overtaking the robot at 1 m/s relative speed "
+        "moves 0.5 m in it; a body part stays within the range noise).",
+    )
+    map_structure_stop: float = Field(
+        0.5, ge=0.0, le=1.0,
+        description="A track in M slower than v_min whose last two detections have at least this fraction of "
+        "points on long-occupied map cells leaves M at once (it merged with a wall; no hysteresis).",
     )
     aspect_prior: float | None = Field(
         None, gt=0.0, le=1.0,

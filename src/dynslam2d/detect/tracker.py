@@ -128,6 +128,7 @@ class _Track:
     munknown: list[float] = field(default_factory=list)
     person: bool = False  # the last detection was a merged pair of legs
     person_streak: int = 0  # consecutive updates with a merged pair of legs
+    rode: bool = False  # judged riding with the laser (its body) at the last check
     was_in_m: bool = False  # has been in M before (seen moving): the map's word is not needed again
     vac: list[float] = field(default_factory=list)  # vacated fraction per update (this scan sees through old points)
     laser_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the laser frame per update
@@ -497,6 +498,12 @@ class Tracker:
         # (a side the detection "measured" too short, e.g. a grazing side, must not break the association)
         d2, near, ok = gate_costs(Xs, Ps, reach, rect_trk, theta_box, tsize, self._default[0], self._default[1],
                                   float(tc.gate_distance), float(tc.gate_chi2), *self._batch, self._fit_p)
+        # a tracked object does not double its size from one scan to the next: a person track coasting
+        # past a wall must not take the wall's cluster (it would carry M onto the wall)
+        b = self._batch
+        det_ext = np.maximum(b[2][:, 2] - b[2][:, 0], b[2][:, 3] - b[2][:, 1])
+        grow_ok = det_ext[None, :] <= tc.max_size_jump_ratio * tsize.max(axis=1)[:, None] + tc.max_size_jump
+        ok = ok & grow_ok
         if not ok.any():
             return []
         cost = np.where(ok, d2, _BIG)
@@ -658,7 +665,7 @@ class Tracker:
             k.laser_xy.append((c * dx + s * dy, -s * dx + c * dy))
             k.map_xy.append((float(k.x[0]), float(k.x[1])))
             k.map_t.append(t)
-            if len(k.laser_xy) > tc.sustain_updates:
+            while len(k.laser_xy) > tc.sustain_updates and t - k.map_t[0] > tc.ride_time:
                 del k.laser_xy[0]
                 del k.map_xy[0]
                 del k.map_t[0]
@@ -850,12 +857,21 @@ class Tracker:
         fast_person = k.person_streak >= npu and (
             not use_map or sum(k.mfree[-npu:]) / len(k.mfree[-npu:]) >= tc.person_map_free_min)
         need = tc.person_sustain_updates if fast_person else tc.sustain_updates
-        if k.in_m and use_map and len(k.mstruct) >= tc.sustain_updates and \
+        have_map = self._map is not None and len(k.mstruct) > 0
+        if k.in_m and have_map and len(k.mstruct) >= tc.sustain_updates and \
                 sum(k.mstruct) / len(k.mstruct) >= tc.map_structure_exit:
             k.in_m = False
             k.fast = 0
             k.reason = (f"left M: {sum(k.mstruct) / len(k.mstruct):.2f} of its points on long-occupied map cells "
                         "(structure)")
+            return
+        if k.in_m and have_map and speed < tc.v_min and len(k.mstruct) >= 2 and \
+                0.5 * (k.mstruct[-1] + k.mstruct[-2]) >= tc.map_structure_stop:
+            # a mover that stops where the map has long-standing structure has merged with it (a person
+            # reaching a wall): hysteresis would carry M onto the wall
+            k.in_m = False
+            k.fast = 0
+            k.reason = "left M: slowed down on long-occupied map cells (merged with structure)"
             return
         if k.in_m:
             slow_for = 0.0 if k.slow_since is None else t - k.slow_since
@@ -928,10 +944,14 @@ class Tracker:
     def _rides_with_laser(self, k: _Track) -> bool:
         """The track stays put in the LASER frame (spread below ``ride_tolerance``) within
         ``ride_max_range`` of the laser while its map-frame centre moves more than that and more than 4×
-        the spread, over its last ``ride_updates`` updates: it moves with the robot (its body)."""
+        the spread, over its updates of the last ``ride_time`` seconds (at least ``ride_updates`` of them,
+        spanning at least half of it): it moves with the robot (its body)."""
         tc = self.config.tracker
-        n = tc.ride_updates
-        if len(k.laser_xy) < n:
+        if len(k.map_t) < tc.ride_updates:
+            return False
+        t_end = k.map_t[-1]
+        n = sum(1 for q in k.map_t if t_end - q <= tc.ride_time)
+        if n < tc.ride_updates or t_end - k.map_t[-n] < 0.5 * tc.ride_time:
             return False
         lx = np.array(k.laser_xy[-n:])
         if float(np.hypot(lx[:, 0], lx[:, 1]).max()) > tc.ride_max_range:
@@ -939,8 +959,12 @@ class Tracker:
         spread = float(np.hypot(*(lx - lx.mean(axis=0)).T).max())
         mx = np.array(k.map_xy[-n:])
         moved = float(np.hypot(*(mx[-1] - mx[0])))
-        # with a motionless laser the two frames agree: only motion far beyond the laser-frame spread rides
-        return spread < tc.ride_tolerance and moved > max(tc.ride_tolerance, 4.0 * spread)
+        # with a motionless laser the two frames agree: only motion far beyond the laser-frame spread rides;
+        # once found riding, a track keeps riding until its laser-frame spread clearly exceeds the tolerance
+        # (a circle fit replacing a rectangle shifts the centre of a body part by a few cm)
+        tol = 3.0 * tc.ride_tolerance if k.rode else tc.ride_tolerance
+        k.rode = spread < tol and (k.rode or moved > max(tc.ride_tolerance, 4.0 * spread))
+        return k.rode
 
     # ------------------------------------------------------------------ output
     def _report(self, t: float, updated: set[int]) -> list[Track]:
