@@ -175,6 +175,12 @@ class FitConfig(BaseModel):
         0.45, gt=0.0,
         description="Two legs of one person: their centres lie at most this far apart, m.",
     )
+    person_min_radius: float = Field(
+        0.1, gt=0.0,
+        description="A circle fit of radius within [person_min_radius, person_max_radius] is a person too (legs "
+        "merged by the segmentation, or a torso-height scan), m.",
+    )
+    person_max_radius: float = Field(0.35, gt=0.0, description="See person_min_radius, m.")
     sigma_position: float = Field(
         0.02, gt=0.0,
         description="Standard deviation of an observed face / edge position, m.",

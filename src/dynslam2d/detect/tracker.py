@@ -646,8 +646,11 @@ class Tracker:
             k.fast = 0
             k.probation = k.in_m
         k.kind = det.kind
-        k.person = det.person
-        k.person_streak = k.person_streak + 1 if det.person else 0
+        fc = cfg.fit
+        person = det.person or (det.kind == KIND_CIRCLE and fc.person_min_radius <= float(det.circle[2])
+                                <= fc.person_max_radius)
+        k.person = person
+        k.person_streak = k.person_streak + 1 if person else 0
         k.hits += 1
         k.misses = 0
         k.last_hit = t
