@@ -401,8 +401,13 @@ class TrackerConfig(BaseModel):
     )
     map_structure_stop: float = Field(
         0.5, ge=0.0, le=1.0,
-        description="A track in M slower than v_min whose last two detections have at least this fraction of "
+        description="A track in M slower than v_exit_ratio·v_min for map_structure_stop_time whose last two "
+        "detections have at least this fraction of "
         "points on long-occupied map cells leaves M at once (it merged with a wall; no hysteresis).",
+    )
+    map_structure_stop_time: float = Field(
+        0.5, ge=0.0,
+        description="See map_structure_stop, s (a box turning a corner of its route slows down for a moment).",
     )
     aspect_prior: float | None = Field(
         None, gt=0.0, le=1.0,

@@ -502,7 +502,10 @@ class Tracker:
         # past a wall must not take the wall's cluster (it would carry M onto the wall)
         b = self._batch
         det_ext = np.maximum(b[2][:, 2] - b[2][:, 0], b[2][:, 3] - b[2][:, 1])
-        grow_ok = det_ext[None, :] <= tc.max_size_jump_ratio * tsize.max(axis=1)[:, None] + tc.max_size_jump
+        # (only for tracks whose size is known: a bar first seen end-on may show its full length later)
+        known = np.array([bool(k.size_known.all()) or k.kind != KIND_RECT for k in tracks])
+        grow_ok = (det_ext[None, :] <= tc.max_size_jump_ratio * tsize.max(axis=1)[:, None] + tc.max_size_jump) | \
+            ~known[:, None]
         ok = ok & grow_ok
         if not ok.any():
             return []
@@ -868,7 +871,8 @@ class Tracker:
             k.reason = (f"left M: {sum(k.mstruct) / len(k.mstruct):.2f} of its points on long-occupied map cells "
                         "(structure)")
             return
-        if k.in_m and have_map and speed < tc.v_min and len(k.mstruct) >= 2 and \
+        if k.in_m and have_map and k.slow_since is not None and t - k.slow_since >= tc.map_structure_stop_time \
+                and len(k.mstruct) >= 2 and \
                 0.5 * (k.mstruct[-1] + k.mstruct[-2]) >= tc.map_structure_stop:
             # a mover that stops where the map has long-standing structure has merged with it (a person
             # reaching a wall): hysteresis would carry M onto the wall
