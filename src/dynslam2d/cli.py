@@ -307,6 +307,11 @@ def run(
         ("map", f"{summary['map_cells'][1]}×{summary['map_cells'][0]} cells at {summary['map_resolution_m']} m, "
                 f"{summary['memory_bytes'] / 2**20:.1f} MiB"),
     ]
+    body = summary.get("body") or {}
+    if body.get("footprint_dropped_returns") or body.get("auto_body_beams"):
+        rows.append(("robot's own returns dropped",
+                     f"{body.get('footprint_dropped_returns', 0) + body.get('auto_dropped_returns', 0)} "
+                     f"({body.get('auto_body_beams', 0)} body beams found; suggested footprint in summary.json)"))
     if "metrics.json" in paths:
         rows += _metric_rows(json.loads(paths["metrics.json"].read_text()))
     console.print(_stats_table(f"dynslam2d run {input}", rows))
