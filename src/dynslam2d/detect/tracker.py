@@ -956,6 +956,10 @@ class Tracker:
         tc = self.config.tracker
         if len(k.map_t) < tc.ride_updates:
             return False
+        lx_last, ly_last = k.laser_xy[-1]
+        if lx_last * lx_last + ly_last * ly_last > tc.ride_max_range * tc.ride_max_range:
+            k.rode = False
+            return False  # far from the laser (most tracks): no arrays built
         t_end = k.map_t[-1]
         n = sum(1 for q in k.map_t if t_end - q <= tc.ride_time)
         if n < tc.ride_updates or t_end - k.map_t[-n] < 0.5 * tc.ride_time:
