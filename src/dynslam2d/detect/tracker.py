@@ -502,8 +502,9 @@ class Tracker:
         # past a wall must not take the wall's cluster (it would carry M onto the wall)
         b = self._batch
         det_ext = np.maximum(b[2][:, 2] - b[2][:, 0], b[2][:, 3] - b[2][:, 1])
-        # (only for tracks whose size is known: a bar first seen end-on may show its full length later)
-        known = np.array([bool(k.size_known.all()) or k.kind != KIND_RECT for k in tracks])
+        # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
+        # later, a tracked object may touch another for a scan)
+        known = np.array([k.misses > 0 and (bool(k.size_known.all()) or k.kind != KIND_RECT) for k in tracks])
         grow_ok = (det_ext[None, :] <= tc.max_size_jump_ratio * tsize.max(axis=1)[:, None] + tc.max_size_jump) | \
             ~known[:, None]
         ok = ok & grow_ok
