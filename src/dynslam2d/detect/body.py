@@ -229,6 +229,12 @@ class BodyFilter:
             r = self._body_r[self.body]
             pts = np.column_stack((r * np.cos(a), r * np.sin(a)))
             poly = grow_polygon(convex_hull(np.vstack((pts, [[0.0, 0.0]]))), float(self.config.suggest_margin))
+            # rounded to mm, without the vertices rounding made equal or collinear: ready to paste into
+            # detect.footprint.polygon (it passes polygon_problem)
+            poly = convex_hull(np.round(poly, 3))
+            if polygon_problem(poly) is not None:
+                lo, hi = poly.min(axis=0), poly.max(axis=0)
+                poly = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
             out["suggested_footprint"] = [[round(float(x), 3), round(float(y), 3)] for x, y in poly]
             out["auto_body_beam_indices"] = np.flatnonzero(self.body).tolist()
         return out
