@@ -86,8 +86,11 @@ def test_body_is_found_automatically_and_never_follows_the_robot() -> None:
     assert not found[steps[-1][1] == 0].any()  # no wall beam taken for the body
     later = [(s, lab) for s, lab, _ in steps[60:]]
     assert np.mean([s.body[lab == 1].mean() for s, lab in later]) > 0.9
-    # no track in M anywhere near the robot, at any time
-    for step, lab, _ in steps:
+    # no track in M anywhere near the robot once the body is found (before that, only a footprint polygon
+    # protects: a car keeping pace alongside looks exactly like a bumper for a while, datmo's parallel bag)
+    first = next(i for i, (s, lab, _) in enumerate(steps) if s.body[lab == 1].mean() > 0.5)
+    assert first <= 40
+    for step, lab, _ in steps[first:]:
         for t in step.tracks:
             if t.in_m:
                 assert math.hypot(t.box.px - step.pose.x, t.box.py - step.pose.y) > 1.0

@@ -168,7 +168,8 @@ class Pipeline:
         self.body.observe(raw, res.pose)
         t1 = time.perf_counter()
         # 3. track in the map frame with this scan's pose.
-        tracks = self.tracker.update(scan, res.pose, MapView.of_level(self.slam.map.levels[0]))
+        tracks = self.tracker.update(scan, res.pose, MapView.of_level(self.slam.map.levels[0]),
+                                     self.body.body if self.config.detect.footprint.auto else None)
         t2 = time.perf_counter()
         # 4. the dynamic set M and its exclusion zones (paper Eq. 3, 5-8).
         moving = [t for t in tracks if t.in_m]

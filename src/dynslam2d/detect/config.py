@@ -394,6 +394,11 @@ class TrackerConfig(BaseModel):
         3, ge=2,
         description="Fewest updates over which a track riding with the laser is judged.",
     )
+    ride_beam_window: int = Field(
+        12, ge=0,
+        description="With the robot's body found automatically (detect.footprint.auto), only tracks on beams within "
+        "this many beams of a body beam can ride with the robot.",
+    )
     ride_time: float = Field(
         0.5, gt=0.0,
         description="Time window of the riding test, s (a person overtaking the robot at 1 m/s relative speed "

@@ -177,6 +177,7 @@ class Tracker:
         self._pose_hist: deque = deque()  # (stamp, x, y, θ) of the last still_time seconds
         self._laser_still = False
         self._dt = 0.0
+        self._body_near: np.ndarray | None = None
         self._fit_p = fit_params(self.config.fit)
         self._trig_key: tuple | None = None
         self._trig: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
@@ -198,12 +199,25 @@ class Tracker:
     def n_tracks(self) -> int:
         return len(self._tracks)
 
-    def update(self, scan: Scan, pose: Pose2D, map_view: MapView | None = None) -> list[Track]:
+    def update(self, scan: Scan, pose: Pose2D, map_view: MapView | None = None,
+               body_beams: np.ndarray | None = None) -> list[Track]:
         """Process one scan with the laser pose of the same scan (map frame); return the live tracks.
 
         ``map_view``: the SLAM map built from earlier scans (finest level, read only); with it and
-        ``tracker.map_evidence`` the set M also needs the map's agreement (docs/tracking.md)."""
+        ``tracker.map_evidence`` the set M also needs the map's agreement (docs/tracking.md).
+        ``body_beams``: (beams,) bool, the beams found to look at the robot's own body
+        (:class:`dynslam2d.detect.body.BodyFilter`); given, only tracks on beams within
+        ``tracker.ride_beam_window`` of them can be taken as riding with the robot (a car or a person
+        keeping pace elsewhere is not the body). None: every near track can."""
         st = self.stats
+        self._body_near = None
+        if body_beams is not None and body_beams.shape[0] == scan.n_beams:
+            w = self.config.tracker.ride_beam_window
+            near = body_beams.astype(bool).copy()
+            for d in range(1, w + 1):
+                near[d:] |= body_beams[:-d]
+                near[:-d] |= body_beams[d:]
+            self._body_near = near
         self._map = map_view if self.config.tracker.map_evidence else None
         self._pose = pose
         self._laser_still = self._still(float(scan.stamp), pose)
@@ -957,6 +971,9 @@ class Tracker:
         tc = self.config.tracker
         if len(k.map_t) < tc.ride_updates:
             return False
+        if self._body_near is not None and (k.beams.shape[0] == 0 or self._body_near[k.beams].mean() < 0.5):
+            k.rode = False
+            return False  # not where the robot's body was found
         lx_last, ly_last = k.laser_xy[-1]
         if lx_last * lx_last + ly_last * ly_last > tc.ride_max_range * tc.ride_max_range:
             k.rode = False
