@@ -456,6 +456,11 @@ def run(
                      f"{100 * pc['low_support_share']:.1f} % low support (longest {pc['longest_low_support_s']:.1f} s), "
                      f"{100 * pc['degenerate_share']:.1f} % degenerate (longest {pc['longest_degenerate_s']:.1f} s), "
                      f"lost {pc['lost_events']}× ({pc['lost_time_s']:.1f} s)"))
+    body = summary.get("body") or {}
+    if body.get("footprint_dropped_returns") or body.get("auto_body_beams"):
+        rows.append(("robot's own returns dropped",
+                     f"{body.get('footprint_dropped_returns', 0) + body.get('auto_dropped_returns', 0)} "
+                     f"({body.get('auto_body_beams', 0)} body beams found; suggested footprint in summary.json)"))
     if "metrics.json" in paths:
         rows += _metric_rows(json.loads(paths["metrics.json"].read_text()))
     console.print(_stats_table(f"dynslam2d run {input}", rows))
