@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import shared_file
+from conftest import ScanList, shared_file
 
 from dynslam2d.config import Config, config_from_dict
 from dynslam2d.eval.stationary import median_background_scan
@@ -19,15 +19,7 @@ from dynslam2d.io.sources import open_source
 from dynslam2d.pipeline import run
 
 
-class _Scans:
-    def __init__(self, scans, meta):
-        self.scans, self.meta = scans, meta
-
-    def __iter__(self):
-        return iter(self.scans)
-
-    def __len__(self):
-        return len(self.scans)
+_Scans = ScanList
 
 
 @pytest.mark.parametrize("topic", ["/left_scan", "/rear_scan", "/right_scan"])
