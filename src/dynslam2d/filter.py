@@ -99,6 +99,12 @@ class FilterConfig(BaseModel):
         description="'default': cap on each half-extent of a region, m, so that a bad box fit (a track "
         "merged with a wall) cannot erase a large part of the scan. None = no cap.",
     )
+    trusted_pose_only: bool = Field(
+        True,
+        description="A track joins the removal set only on a scan whose pose the SLAM trusts (a match "
+        "backed by enough map-confirmed points over a wide enough angle); tracks already removed stay "
+        "removed. Where the pose is only predicted, pose error looks like motion: walls would be removed.",
+    )
 
 
 @njit(cache=True)

@@ -190,6 +190,10 @@ class Pipeline:
         t2 = time.perf_counter()
         # 4. the dynamic set M and its exclusion zones (paper Eq. 3, 5-8).
         moving = [t for t in tracks if t.in_m]
+        if res.low_support and self.config.filter.trusted_pose_only:
+            # an untrusted pose makes structure look like motion: only movers removed before stay removed
+            known = {t.id for t in self._moving}
+            moving = [t for t in moving if t.id in known]
         removed, removed_by = self._exclude(scan, res.pose, _observed_boxes(moving, scan, res.pose), 0.0, cache)
         t3 = time.perf_counter()
         # 5. map update with the filtered scan only.
