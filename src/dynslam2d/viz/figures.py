@@ -50,7 +50,10 @@ def write_figures(
         dt = float(np.median(np.diff(gt.trajectory.stamps))) / 2 if len(gt.trajectory) > 1 else 0.01
         ate_res = ate(gt.trajectory, traj, align=True, max_dt=max(dt, 1e-3))
         ref_xy = ate_res.alignment.inverse().transform_points(gt.trajectory.xy)
-    title = f"{result.source.origin} — {result.n_scans} scans, filter {result.config.filter.mode}"
+    name = result.source.origin.replace("\\", "/").split(":")[-1].rstrip("/").split("/")[-1] or result.source.origin
+    if result.source.origin.startswith("sim:"):
+        name = result.source.origin
+    title = f"{name} — {result.n_scans} scans, filter {result.config.filter.mode}"
     if ate_res is not None:
         title += f", ATE RMSE {ate_res.rmse:.3f} m"
     final = final_confirmed(all_paths, last_stamp)
