@@ -113,6 +113,7 @@ def plot_map(
     tracks: Sequence[TrackPath] | None = None,
     boxes: Sequence[tuple[int, Box]] | None = None,
     removed_xy: np.ndarray | None = None,
+    erased: np.ndarray | None = None,
 ) -> Path:
     """Write a PNG of ``grid`` with trajectories, track paths and removed points.
 
@@ -126,6 +127,8 @@ def plot_map(
         boxes: (id, box) of the final confirmed tracks, drawn as outlines (map frame).
         removed_xy: (k, 2) endpoints of removed beams in the map frame, m, drawn in
             :data:`style.REMOVED` (exact colour, one square per map cell hit).
+        erased: (H, W) bool, same cells as ``grid``: cells the clean-up pass erased
+            (docs/maps.md), drawn in :data:`style.ERASED`.
     """
     import matplotlib
 
@@ -140,6 +143,15 @@ def plot_map(
     ax.imshow(occupancy_image(grid), cmap="gray", vmin=0.0, vmax=1.0, origin="lower",
               extent=extent, interpolation="nearest")
     handles: list[Any] = []
+    if erased is not None and erased.shape == grid.shape and erased.any():
+        from matplotlib.colors import to_rgba
+
+        over = np.zeros(erased.shape + (4,))
+        over[erased] = to_rgba(style.ERASED)
+        ax.imshow(over, origin="lower", extent=extent, interpolation="nearest", zorder=1)
+        n_er = int(erased.sum())
+        handles.append(Patch(color=style.ERASED, label=f"erased by clean-up ({n_er} cells, "
+                                                       f"{n_er * grid.resolution ** 2:.2f} m²)"))
     if removed_xy is not None and len(removed_xy):
         # At least ~1.5 px per square at 8 in × dpi so that single points stay visible.
         cell = max(grid.resolution, (extent[1] - extent[0]) / (8.0 * dpi / 1.5))

@@ -1,0 +1,375 @@
+"""Offline map clean-up: erase occupied cells that beams were seen to pass through.
+
+The 2D form of visibility-based removal (docs/maps.md): a cell that scans *hit* but
+that other scans *saw through* held something that was not always there (a parked car
+that left, a person who stood and walked on, a box that arrived). Removert (Kim & Kim,
+IROS 2020) removes map points that lie in front of a later scan's range measurement;
+Peopleremover (Schauer & Nüchter, RA-L 2018) counts, per voxel, the scans whose rays
+traverse it and removes points in traversed voxels; ERASOR (Lim et al., RA-L 2021)
+compares region-wise occupancy of the map and of each scan. Here, per map cell:
+
+* ``hits``: number of scans with a kept beam ending in the cell (beams the dynamic
+  filter removed add no hit: they belong to movers);
+* ``through``: number of scans with a beam (kept or removed: both saw free space up to
+  their endpoint) that passes through the cell *before* its endpoint minus a margin,
+  in a scan that did not also hit the cell.
+
+A cell occupied in the online map is erased when ``through ≥ min_through`` and
+``through ≥ through_ratio · hits`` (Peopleremover's count of traversing scans,
+with a ratio against the hit count to keep walls that grazing rays touch).
+
+Walls at grazing incidence: a ray that meets a surface at angle α runs within one
+cell of it for about ``resolution / sin α`` before the endpoint, so the margin grows
+to ``grazing_cells · resolution / sin α`` (α estimated per beam from the neighbouring
+endpoints); a cell counts as passed only where the ray runs near its centre
+(``ray_core``), so rays that clip the corner of a wall end or door frame do not count.
+
+Memory: the pass never keeps scans. :class:`VisibilityCounter` is fed scan by scan
+during the run (:class:`CleanupRecorder` is a pipeline observer) and holds four int32
+grids. Hector-style SLAM never changes a pose after its scan (no loop closure), so the
+pose a scan had when it was processed is its pose in the final trajectory; counting
+during the run is the same as counting after it.
+
+Frames and units: world / map frame in m; cell (i, j) of the counters is absolute
+(centre at (i·r, j·r), as the SLAM grid levels), arrays indexed [row = y, col = x].
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from dynslam2d.gridmap import GridMap
+from dynslam2d.slam.cleanconfig import CleanConfig
+from dynslam2d.slam.config import SlamConfig
+from dynslam2d.types import Pose2D, Scan
+
+#: Occupancy probability written into erased cells of the cleaned map (clearly free).
+ERASED_PROBABILITY = 0.1
+
+
+@njit(cache=True)
+def _count_scan(hits, through, switches, last_hit, last_through, scan_id, ox, oy,
+                hx, hy, cx, cy, core):  # pragma: no cover - numba
+    """One scan into the counters. Coordinates are in cell units of the arrays
+    (cell (i, j) centred on integers). ``(hx, hy)``: hit endpoints; ``(cx, cy)``: ends of
+    the clearing segments from ``(ox, oy)``. Per scan, a cell gets at most one hit and
+    one pass, and no pass if the scan hit it. ``switches`` counts changes between hit
+    and pass in each cell's sequence of scans (the later of ``last_hit`` / ``last_through``
+    is the cell's current state)."""
+    h, w = hits.shape
+    for k in range(hx.shape[0]):
+        ix = int(math.floor(hx[k] + 0.5))
+        iy = int(math.floor(hy[k] + 0.5))
+        if 0 <= ix < w and 0 <= iy < h and last_hit[iy, ix] != scan_id:
+            if last_through[iy, ix] > last_hit[iy, ix]:
+                switches[iy, ix] += 1
+            last_hit[iy, ix] = scan_id
+            hits[iy, ix] += 1
+    for k in range(cx.shape[0]):
+        dx = cx[k] - ox
+        dy = cy[k] - oy
+        if abs(dx) >= abs(dy):
+            a0 = int(math.floor(ox + 0.5))
+            a1 = int(math.floor(cx[k] + 0.5))
+            step = 1 if a1 >= a0 else -1
+            slope = dy / dx if dx != 0.0 else 0.0
+            a = a0
+            while True:
+                b = oy + slope * (a - ox)
+                ib = int(math.floor(b + 0.5))
+                if abs(b - ib) <= core and 0 <= a < w and 0 <= ib < h:
+                    if last_hit[ib, a] != scan_id and last_through[ib, a] != scan_id:
+                        if last_hit[ib, a] > last_through[ib, a]:
+                            switches[ib, a] += 1
+                        last_through[ib, a] = scan_id
+                        through[ib, a] += 1
+                if a == a1:
+                    break
+                a += step
+        else:
+            a0 = int(math.floor(oy + 0.5))
+            a1 = int(math.floor(cy[k] + 0.5))
+            step = 1 if a1 >= a0 else -1
+            slope = dx / dy
+            a = a0
+            while True:
+                b = ox + slope * (a - oy)
+                ib = int(math.floor(b + 0.5))
+                if abs(b - ib) <= core and 0 <= ib < w and 0 <= a < h:
+                    if last_hit[a, ib] != scan_id and last_through[a, ib] != scan_id:
+                        if last_hit[a, ib] > last_through[a, ib]:
+                            switches[a, ib] += 1
+                        last_through[a, ib] = scan_id
+                        through[a, ib] += 1
+                if a == a1:
+                    break
+                a += step
+
+
+@njit(cache=True)
+def _scan_geometry(ranges, angles, valid, removed, px, py, th, res, margin_m, grazing_cells,
+                   min_sin):  # pragma: no cover - numba
+    """Endpoints (ex, ey) and clearing ends (cx, cy) of one scan in world cell units (m / res),
+    with ``kept`` (valid and not removed: a hit) and ``clear`` (valid and longer than its
+    margin). Incidence: |sin α| between the beam and the local surface ``p[i+1] − p[i−1]``
+    (or the one valid neighbour; 1 without any); at a depth jump the "surface" spans both
+    sides and reads as grazing, which only makes the margin larger. Margin =
+    max(margin_m, grazing_cells·res / max(sin α, min_sin))."""
+    n = ranges.shape[0]
+    lx = np.zeros(n)
+    ly = np.zeros(n)
+    for i in range(n):
+        if valid[i]:
+            lx[i] = ranges[i] * math.cos(angles[i])
+            ly[i] = ranges[i] * math.sin(angles[i])
+    ca = math.cos(th)
+    sa = math.sin(th)
+    ex = np.empty(n)
+    ey = np.empty(n)
+    cx = np.empty(n)
+    cy = np.empty(n)
+    kept = np.zeros(n, dtype=np.bool_)
+    clear = np.zeros(n, dtype=np.bool_)
+    ox = px / res
+    oy = py / res
+    for i in range(n):
+        ex[i] = ox
+        ey[i] = oy
+        cx[i] = ox
+        cy[i] = oy
+        if not valid[i]:
+            continue
+        ax = lx[i]
+        ay = ly[i]
+        bx = lx[i]
+        by = ly[i]
+        has = False
+        if i > 0 and valid[i - 1]:
+            ax = lx[i - 1]
+            ay = ly[i - 1]
+            has = True
+        if i + 1 < n and valid[i + 1]:
+            bx = lx[i + 1]
+            by = ly[i + 1]
+            has = True
+        tx = bx - ax
+        ty = by - ay
+        tn = math.sqrt(tx * tx + ty * ty)
+        r = ranges[i]
+        sn = 1.0
+        if has and tn > 0.0 and r > 0.0:
+            sn = abs(lx[i] * ty - ly[i] * tx) / (tn * r)
+        if sn < min_sin:
+            sn = min_sin
+        margin = grazing_cells * res / sn
+        if margin < margin_m:
+            margin = margin_m
+        wx = px + ca * lx[i] - sa * ly[i]
+        wy = py + sa * lx[i] + ca * ly[i]
+        ex[i] = wx / res
+        ey[i] = wy / res
+        kept[i] = not removed[i]
+        if r > margin:
+            f = (r - margin) / r
+            cx[i] = ox + (ex[i] - ox) * f
+            cy[i] = oy + (ey[i] - oy) * f
+            clear[i] = True
+    return ex, ey, cx, cy, kept, clear
+
+
+class VisibilityCounter:
+    """Per-cell counts of scans that hit a cell and scans that passed through it.
+
+    Grows with the scans it is fed (absolute cells, resolution ``resolution`` m);
+    memory 16 bytes per cell. Feed with :meth:`add`; read with :meth:`window`.
+    """
+
+    def __init__(self, resolution: float, config: CleanConfig | None = None,
+                 slam: SlamConfig | None = None, growth_margin_m: float = 5.0) -> None:
+        self.resolution = float(resolution)
+        self.config = config if config is not None else CleanConfig()
+        self.slam = slam if slam is not None else SlamConfig(map_resolution=resolution)
+        self.margin_cells = max(int(math.ceil(growth_margin_m / self.resolution)), 1)
+        self.i0 = 0  # absolute col of array column 0
+        self.j0 = 0  # absolute row of array row 0
+        shape = (0, 0)
+        self.hits = np.zeros(shape, dtype=np.int32)
+        self.through = np.zeros(shape, dtype=np.int32)
+        self.switches = np.zeros(shape, dtype=np.int32)
+        self._last_hit = np.zeros(shape, dtype=np.int32)
+        self._last_through = np.zeros(shape, dtype=np.int32)
+        self.scans = 0
+        self.seconds = 0.0
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.hits.nbytes + self.through.nbytes + self.switches.nbytes + self._last_hit.nbytes
+                   + self._last_through.nbytes)
+
+    def _ensure(self, imin: int, jmin: int, imax: int, jmax: int) -> None:
+        h, w = self.hits.shape
+        if h and imin >= self.i0 and jmin >= self.j0 and imax < self.i0 + w and jmax < self.j0 + h:
+            return
+        if h == 0:
+            m = self.margin_cells
+            ni0, nj0, ni1, nj1 = imin - m, jmin - m, imax + m + 1, jmax + m + 1
+        else:
+            mx, my = max(self.margin_cells, w // 4), max(self.margin_cells, h // 4)
+            ni0 = min(self.i0, imin - mx) if imin < self.i0 else self.i0
+            nj0 = min(self.j0, jmin - my) if jmin < self.j0 else self.j0
+            ni1 = max(self.i0 + w, imax + mx + 1) if imax >= self.i0 + w else self.i0 + w
+            nj1 = max(self.j0 + h, jmax + my + 1) if jmax >= self.j0 + h else self.j0 + h
+        grown = []
+        for arr, fill in ((self.hits, 0), (self.through, 0), (self.switches, 0), (self._last_hit, -1),
+                          (self._last_through, -1)):
+            new = np.full((nj1 - nj0, ni1 - ni0), fill, dtype=np.int32)
+            if h:
+                new[self.j0 - nj0:self.j0 - nj0 + h, self.i0 - ni0:self.i0 - ni0 + w] = arr
+            grown.append(new)
+        self.hits, self.through, self.switches, self._last_hit, self._last_through = grown
+        self.i0, self.j0 = ni0, nj0
+
+    def add(self, scan: Scan, pose: Pose2D, removed: np.ndarray | None = None) -> None:
+        """Count one scan taken at laser pose ``pose`` (map frame); ``removed`` (beams,) bool
+        marks the beams the dynamic filter took out (no hit; they still pass through)."""
+        t0 = time.perf_counter()
+        c, s = self.config, self.slam
+        r = scan.ranges
+        with np.errstate(invalid="ignore"):
+            valid = scan.valid_mask() & (r > s.laser_min_dist) & (r < s.laser_max_dist)
+        if not valid.any():
+            self.scans += 1
+            self.seconds += time.perf_counter() - t0
+            return
+        rem = removed if removed is not None and removed.shape == valid.shape else np.zeros_like(valid)
+        res = self.resolution
+        ex, ey, cx, cy, kept, clear = _scan_geometry(
+            np.asarray(r, dtype=np.float64), scan.angles, valid, np.asarray(rem, dtype=np.bool_), pose.x, pose.y,
+            pose.theta, res, c.margin_m, c.grazing_cells, math.sin(math.radians(c.min_incidence_deg)))
+        ox, oy = pose.x / res, pose.y / res
+        ev, fv = ex[valid], ey[valid]
+        self._ensure(int(math.floor(min(ox, ev.min()) + 0.5)), int(math.floor(min(oy, fv.min()) + 0.5)),
+                     int(math.floor(max(ox, ev.max()) + 0.5)), int(math.floor(max(oy, fv.max()) + 0.5)))
+        _count_scan(self.hits, self.through, self.switches, self._last_hit, self._last_through, self.scans,
+                    ox - self.i0, oy - self.j0, ex[kept] - self.i0, ey[kept] - self.j0,
+                    cx[clear] - self.i0, cy[clear] - self.j0, float(c.ray_core))
+        self.scans += 1
+        self.seconds += time.perf_counter() - t0
+
+    def window(self, grid: GridMap) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(hits, through, switches), each shaped like ``grid`` (same cells; zeros where
+        never counted).
+
+        ``grid`` must share the counter's resolution and have its cell centres on
+        multiples of it (as the SLAM levels do)."""
+        if abs(grid.resolution - self.resolution) > 1e-9 * self.resolution:
+            raise ValueError(f"grid resolution {grid.resolution} m differs from the counter's {self.resolution} m")
+        gi0 = int(round(grid.origin[0] / self.resolution + 0.5))
+        gj0 = int(round(grid.origin[1] / self.resolution + 0.5))
+        H, W = grid.shape
+        outs = [np.zeros((H, W), dtype=np.int32) for _ in range(3)]
+        h, w = self.hits.shape
+        c0, c1 = max(gi0, self.i0), min(gi0 + W, self.i0 + w)
+        r0, r1 = max(gj0, self.j0), min(gj0 + H, self.j0 + h)
+        if c1 > c0 and r1 > r0:
+            for out, arr in zip(outs, (self.hits, self.through, self.switches)):
+                out[r0 - gj0:r1 - gj0, c0 - gi0:c1 - gi0] = arr[r0 - self.j0:r1 - self.j0, c0 - self.i0:c1 - self.i0]
+        return outs[0], outs[1], outs[2]
+
+
+@dataclass(eq=False)
+class CleanResult:
+    """The cleaned map and what the pass did.
+
+    Attributes:
+        grid: the cleaned map (erased cells at :data:`ERASED_PROBABILITY`), same cells as the online map.
+        logodds: its log-odds (same cells), or None if no online log-odds was given.
+        erased: (H, W) bool, cells occupied in the online map that the pass erased.
+        hits, through: (H, W) int32, scans that hit / passed through each cell.
+        switches: (H, W) int32, changes between hit and pass in each cell's scan sequence.
+        stats: numbers for summary.json / metrics.json (cells, m², seconds).
+    """
+
+    grid: GridMap
+    logodds: np.ndarray | None
+    erased: np.ndarray
+    hits: np.ndarray
+    through: np.ndarray
+    switches: np.ndarray
+    stats: dict[str, float | int] = field(default_factory=dict)
+
+
+def erase_rule(hits: np.ndarray, through: np.ndarray, switches: np.ndarray, config: CleanConfig) -> np.ndarray:
+    """Cells (bool, same shape) that were seen through often enough, relative to their hits,
+    in few blocks: ``T ≥ min_through``, ``T ≥ through_ratio·H`` and
+    ``S ≤ max_switches + switch_share·min(H, T)`` (module docstring)."""
+    c = config
+    return ((through >= c.min_through) & (through >= c.through_ratio * hits)
+            & (switches <= c.max_switches + c.switch_share * np.minimum(hits, through)))
+
+
+def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray | None = None,
+              occupied_threshold: float = 0.65) -> CleanResult:
+    """Erase the cells of ``online`` (occupied: p > ``occupied_threshold``) that ``counter``
+    saw through often enough (rule in the module docstring). ``logodds``: the online
+    map's raw log-odds (same cells), returned cleaned alongside."""
+    t0 = time.perf_counter()
+    c = counter.config
+    hits, through, switches = counter.window(online)
+    occ = online.occupied(occupied_threshold)
+    erased = erase_rule(hits, through, switches, c) & occ
+    prob = online.prob.copy()
+    prob[erased] = ERASED_PROBABILITY
+    lo = None
+    if logodds is not None:
+        lo = np.array(logodds, dtype=np.float64, copy=True)
+        if lo.shape == erased.shape:
+            lo[erased] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
+    area = online.resolution ** 2
+    stats: dict[str, float | int] = {
+        "occupied_cells_online": int(occ.sum()),
+        "erased_cells": int(erased.sum()),
+        "erased_area_m2": float(erased.sum() * area),
+        "scans_counted": int(counter.scans),
+        "pass_time_s": float(counter.seconds + time.perf_counter() - t0),
+        "counter_bytes": counter.nbytes,
+    }
+    return CleanResult(GridMap(prob, online.resolution, online.origin), lo, erased, hits, through, switches, stats)
+
+
+class CleanupRecorder:
+    """Pipeline observer (:class:`dynslam2d.pipeline.RunObserver`) that feeds a
+    :class:`VisibilityCounter` with every matched scan and, at the end of the run,
+    cleans the final map into :attr:`result`."""
+
+    def __init__(self, config: CleanConfig | None = None, slam: SlamConfig | None = None) -> None:
+        self.config = config if config is not None else CleanConfig()
+        self.slam = slam
+        self.counter: VisibilityCounter | None = None
+        self.result: CleanResult | None = None
+
+    def on_scan(self, scan: Scan, step: object, pipeline: object) -> None:
+        if not self.config.enabled or step.rejected or step.skipped:  # type: ignore[attr-defined]
+            return
+        if self.config.scans == "map_updates" and not step.map_updated:  # type: ignore[attr-defined]
+            return
+        if self.counter is None:
+            slam = self.slam if self.slam is not None else pipeline.config.slam  # type: ignore[attr-defined]
+            self.counter = VisibilityCounter(slam.map_resolution, self.config, slam)
+        self.counter.add(scan, step.pose, step.removed)  # type: ignore[attr-defined]
+
+    def on_finish(self, result: object, pipeline: object) -> None:
+        if not self.config.enabled:
+            return
+        if self.counter is None:
+            slam = pipeline.config.slam  # type: ignore[attr-defined]
+            self.counter = VisibilityCounter(slam.map_resolution, self.config, slam)
+        self.result = clean_map(result.grid, self.counter, result.logodds)  # type: ignore[attr-defined]
+
+
+__all__ = ["ERASED_PROBABILITY", "CleanResult", "CleanupRecorder", "VisibilityCounter", "clean_map", "erase_rule"]
