@@ -342,6 +342,31 @@ def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray |
     return CleanResult(GridMap(prob, online.resolution, online.origin), lo, erased, hits, through, switches, stats)
 
 
+def compare_online(online: GridMap, cleaned: CleanResult, tolerance: float = 0.10,
+                   occupied_threshold: float = 0.65) -> dict[str, float | int]:
+    """How much of the online map's structure the cleaned map still holds (same cells).
+
+    ``f1``: F1 of the cleaned occupied cells against the online ones, cell by cell
+    (2·|cleaned| / (|online| + |cleaned|), the cleaned set being a subset);
+    ``lost_cells`` / ``lost_area_m2``: online occupied cells farther than ``tolerance`` (m)
+    from every cleaned occupied cell, i.e. structure that disappeared rather than got
+    thinner; ``lost_share``: their share of the online occupied cells.
+    """
+    from dynslam2d.eval.maps import distance_to
+
+    occ = online.occupied(occupied_threshold)
+    kept = occ & ~cleaned.erased
+    n_o, n_k = int(occ.sum()), int(kept.sum())
+    lost = occ & (distance_to(kept, online.resolution) > tolerance + 1e-9)
+    return {
+        "f1": 2.0 * n_k / (n_o + n_k) if n_o + n_k else 1.0,
+        "lost_cells": int(lost.sum()),
+        "lost_area_m2": float(lost.sum() * online.resolution ** 2),
+        "lost_share": float(lost.sum() / n_o) if n_o else 0.0,
+        "tolerance_m": float(tolerance),
+    }
+
+
 class CleanupRecorder:
     """Pipeline observer (:class:`dynslam2d.pipeline.RunObserver`) that feeds a
     :class:`VisibilityCounter` with every matched scan and, at the end of the run,
@@ -372,4 +397,5 @@ class CleanupRecorder:
         self.result = clean_map(result.grid, self.counter, result.logodds)  # type: ignore[attr-defined]
 
 
-__all__ = ["ERASED_PROBABILITY", "CleanResult", "CleanupRecorder", "VisibilityCounter", "clean_map", "erase_rule"]
+__all__ = ["ERASED_PROBABILITY", "CleanResult", "CleanupRecorder", "VisibilityCounter", "clean_map", "compare_online",
+           "erase_rule"]

@@ -150,8 +150,7 @@ def plot_map(
         over[erased] = to_rgba(style.ERASED)
         ax.imshow(over, origin="lower", extent=extent, interpolation="nearest", zorder=1)
         n_er = int(erased.sum())
-        handles.append(Patch(color=style.ERASED, label=f"erased by clean-up ({n_er} cells, "
-                                                       f"{n_er * grid.resolution ** 2:.2f} m²)"))
+        handles.append(Patch(color=style.ERASED, label=f"erased by clean-up ({n_er * grid.resolution ** 2:.2f} m²)"))
     if removed_xy is not None and len(removed_xy):
         # At least ~1.5 px per square at 8 in × dpi so that single points stay visible.
         cell = max(grid.resolution, (extent[1] - extent[0]) / (8.0 * dpi / 1.5))
