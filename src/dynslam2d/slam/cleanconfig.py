@@ -36,7 +36,7 @@ class CleanConfig(BaseModel):
         description="Incidence angles below this are treated as this angle when the margin is computed, deg.",
     )
     ray_core: float = Field(
-        0.3, gt=0.0, le=0.5,
+        0.4, gt=0.0, le=0.5,
         description="A cell counts as passed through only where the ray runs within this distance of its "
         "centre (across the ray's major axis), cells (0.5 = every cell the line touches on that axis).",
     )
