@@ -22,6 +22,12 @@ class CleanConfig(BaseModel):
         description="Scans whose beams are counted: every matched scan (all) or only those written into the "
         "online map (map_updates). 'all' also sees objects leave while the robot stands still.",
     )
+    min_interval_s: float = Field(
+        0.1, ge=0.0,
+        description="Count at most one scan per this many seconds of scan time (map updates are always "
+        "counted), s: consecutive scans of a fast sensor see nearly the same, and the pass's cost scales "
+        "with the scans counted. 0 = every scan.",
+    )
     margin_m: float = Field(
         0.10, ge=0.0,
         description="A beam passes through cells only up to this distance before its endpoint, m.",
@@ -45,7 +51,7 @@ class CleanConfig(BaseModel):
         description="A cell is erased only if at least this many scans passed through it.",
     )
     through_ratio: float = Field(
-        0.5, gt=0.0,
+        0.2, gt=0.0,
         description="… and if scans passing through it ≥ this × scans hitting it (dimensionless).",
     )
     max_switches: int = Field(

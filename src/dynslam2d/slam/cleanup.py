@@ -377,12 +377,17 @@ class CleanupRecorder:
         self.slam = slam
         self.counter: VisibilityCounter | None = None
         self.result: CleanResult | None = None
+        self._last_stamp = -math.inf
 
     def on_scan(self, scan: Scan, step: object, pipeline: object) -> None:
         if not self.config.enabled or step.rejected or step.skipped:  # type: ignore[attr-defined]
             return
         if self.config.scans == "map_updates" and not step.map_updated:  # type: ignore[attr-defined]
             return
+        updated = bool(step.map_updated)  # type: ignore[attr-defined]
+        if not updated and scan.stamp - self._last_stamp < self.config.min_interval_s:
+            return
+        self._last_stamp = scan.stamp
         if self.counter is None:
             slam = self.slam if self.slam is not None else pipeline.config.slam  # type: ignore[attr-defined]
             self.counter = VisibilityCounter(slam.map_resolution, self.config, slam)
