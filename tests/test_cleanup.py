@@ -218,3 +218,33 @@ def test_mit_csail_cleanup_removes_no_wall(shared_data):
     lab, n = ndimage.label(lost, structure=np.ones((3, 3)))
     biggest = int(np.bincount(lab.ravel())[1:].max()) if n else 0
     assert biggest <= 15  # no lost piece longer than ~0.75 m: no wall removed
+
+
+def test_recorder_counts_one_scan_per_interval_and_every_map_update():
+    from types import SimpleNamespace
+
+    from dynslam2d.slam.cleanup import CleanupRecorder
+
+    scans = [_scan(np.full(N_BEAMS, 5.0), 0.05 * k) for k in range(40)]  # 20 Hz for 2 s
+
+    def feed(config: CleanConfig) -> int:
+        rec = CleanupRecorder(config, SlamConfig())
+        for k, s in enumerate(scans):
+            step = SimpleNamespace(rejected=k == 3, skipped=False, map_updated=k in (1, 7), pose=Pose2D(),
+                                   removed=np.zeros(N_BEAMS, dtype=bool))
+            rec.on_scan(s, step, None)
+        return rec.counter.scans
+
+    assert feed(CleanConfig(min_interval_s=0.0)) == 39  # every scan but the rejected one
+    # one per 0.1 s (0, 0.1, …, 1.9: 20 stamps; scan 1 is a map update, scan 3 rejected)
+    n = feed(CleanConfig(min_interval_s=0.1))
+    assert n == 21  # 0, 0.05 (update), 0.2, 0.3, 0.35 (update), then 0.45, 0.55, …, 1.95
+    assert feed(CleanConfig(scans="map_updates")) == 2
+
+
+def test_counter_stops_growing_at_the_memory_limit():
+    counter = VisibilityCounter(0.05, slam=SlamConfig(max_map_memory_mb=5.0))
+    counter.add(_scan(np.full(N_BEAMS, 5.0), 0.0), Pose2D())
+    assert 0 < counter.nbytes <= 5e6 and counter.scans == 1
+    counter.add(_scan(np.full(N_BEAMS, 5.0), 0.1), Pose2D(100.0, 0.0, 0.0))  # would need > 5 MB
+    assert counter.too_large == 1 and counter.nbytes <= 5e6 and counter.scans == 1

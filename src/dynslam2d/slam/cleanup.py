@@ -12,11 +12,16 @@ compares region-wise occupancy of the map and of each scan. Here, per map cell:
   filter removed add no hit: they belong to movers);
 * ``through``: number of scans with a beam (kept or removed: both saw free space up to
   their endpoint) that passes through the cell *before* its endpoint minus a margin,
-  in a scan that did not also hit the cell.
+  in a scan that did not also hit the cell;
+* ``switches``: how often the cell's sequence of scans changed between hit and pass.
 
-A cell occupied in the online map is erased when ``through ≥ min_through`` and
-``through ≥ through_ratio · hits`` (Peopleremover's count of traversing scans,
-with a ratio against the hit count to keep walls that grazing rays touch).
+A cell occupied in the online map is erased when ``through ≥ min_through``,
+``through ≥ through_ratio · hits`` (Peopleremover's count of traversing scans, with
+ERASOR's idea of a ratio against the occupancy) and ``switches ≤ max_switches +
+switch_share · min(hits, through)``: a parked object is hit in one block of scans and
+seen through in another, while glass, railings, the copies of a wall that pose drift
+put apart and wall cells clipped by grazing rays alternate (our stand-in for Removert's
+"revert" of removals caused by pose and discretisation ambiguity).
 
 Walls at grazing incidence: a ray that meets a surface at angle α runs within one
 cell of it for about ``resolution / sin α`` before the endpoint, so the margin grows
@@ -25,10 +30,11 @@ endpoints); a cell counts as passed only where the ray runs near its centre
 (``ray_core``), so rays that clip the corner of a wall end or door frame do not count.
 
 Memory: the pass never keeps scans. :class:`VisibilityCounter` is fed scan by scan
-during the run (:class:`CleanupRecorder` is a pipeline observer) and holds four int32
-grids. Hector-style SLAM never changes a pose after its scan (no loop closure), so the
-pose a scan had when it was processed is its pose in the final trajectory; counting
-during the run is the same as counting after it.
+during the run (:class:`CleanupRecorder` is a pipeline observer) and holds five int32
+grids (20 bytes per cell, growing with the scans, never beyond the SLAM's
+``max_map_memory_mb``). Hector-style SLAM never changes a pose after its scan (no loop
+closure), so the pose a scan had when it was processed is its pose in the final
+trajectory; counting during the run is the same as counting after it.
 
 Frames and units: world / map frame in m; cell (i, j) of the counters is absolute
 (centre at (i·r, j·r), as the SLAM grid levels), arrays indexed [row = y, col = x].
@@ -203,7 +209,8 @@ class VisibilityCounter:
         self.switches = np.zeros(shape, dtype=np.int32)
         self._last_hit = np.zeros(shape, dtype=np.int32)
         self._last_through = np.zeros(shape, dtype=np.int32)
-        self.scans = 0
+        self.scans = 0  # scans counted (also the id of the next scan)
+        self.too_large = 0  # scans left out: counting them would exceed the memory limit
         self.seconds = 0.0
 
     @property
@@ -211,10 +218,12 @@ class VisibilityCounter:
         return int(self.hits.nbytes + self.through.nbytes + self.switches.nbytes + self._last_hit.nbytes
                    + self._last_through.nbytes)
 
-    def _ensure(self, imin: int, jmin: int, imax: int, jmax: int) -> None:
+    def _ensure(self, imin: int, jmin: int, imax: int, jmax: int) -> bool:
+        """Grow to hold cells [imin, imax] × [jmin, jmax]; False (nothing changed) if that
+        would take more than the SLAM's map memory limit (``max_map_memory_mb``)."""
         h, w = self.hits.shape
         if h and imin >= self.i0 and jmin >= self.j0 and imax < self.i0 + w and jmax < self.j0 + h:
-            return
+            return True
         if h == 0:
             m = self.margin_cells
             ni0, nj0, ni1, nj1 = imin - m, jmin - m, imax + m + 1, jmax + m + 1
@@ -224,6 +233,8 @@ class VisibilityCounter:
             nj0 = min(self.j0, jmin - my) if jmin < self.j0 else self.j0
             ni1 = max(self.i0 + w, imax + mx + 1) if imax >= self.i0 + w else self.i0 + w
             nj1 = max(self.j0 + h, jmax + my + 1) if jmax >= self.j0 + h else self.j0 + h
+        if (nj1 - nj0) * (ni1 - ni0) * 20 > self.slam.max_map_memory_mb * 1e6:
+            return False
         grown = []
         for arr, fill in ((self.hits, 0), (self.through, 0), (self.switches, 0), (self._last_hit, -1),
                           (self._last_through, -1)):
@@ -233,6 +244,7 @@ class VisibilityCounter:
             grown.append(new)
         self.hits, self.through, self.switches, self._last_hit, self._last_through = grown
         self.i0, self.j0 = ni0, nj0
+        return True
 
     def add(self, scan: Scan, pose: Pose2D, removed: np.ndarray | None = None) -> None:
         """Count one scan taken at laser pose ``pose`` (map frame); ``removed`` (beams,) bool
@@ -253,8 +265,11 @@ class VisibilityCounter:
             pose.theta, res, c.margin_m, c.grazing_cells, math.sin(math.radians(c.min_incidence_deg)))
         ox, oy = pose.x / res, pose.y / res
         ev, fv = ex[valid], ey[valid]
-        self._ensure(int(math.floor(min(ox, ev.min()) + 0.5)), int(math.floor(min(oy, fv.min()) + 0.5)),
-                     int(math.floor(max(ox, ev.max()) + 0.5)), int(math.floor(max(oy, fv.max()) + 0.5)))
+        if not self._ensure(int(math.floor(min(ox, ev.min()) + 0.5)), int(math.floor(min(oy, fv.min()) + 0.5)),
+                            int(math.floor(max(ox, ev.max()) + 0.5)), int(math.floor(max(oy, fv.max()) + 0.5))):
+            self.too_large += 1  # the SLAM refuses such scans too ('map_too_large')
+            self.seconds += time.perf_counter() - t0
+            return
         _count_scan(self.hits, self.through, self.switches, self._last_hit, self._last_through, self.scans,
                     ox - self.i0, oy - self.j0, ex[kept] - self.i0, ey[kept] - self.j0,
                     cx[clear] - self.i0, cy[clear] - self.j0, float(c.ray_core))
@@ -336,6 +351,7 @@ def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray |
         "erased_cells": int(erased.sum()),
         "erased_area_m2": float(erased.sum() * area),
         "scans_counted": int(counter.scans),
+        "scans_too_large": int(counter.too_large),
         "pass_time_s": float(counter.seconds + time.perf_counter() - t0),
         "counter_bytes": counter.nbytes,
     }
@@ -385,7 +401,7 @@ class CleanupRecorder:
         if self.config.scans == "map_updates" and not step.map_updated:  # type: ignore[attr-defined]
             return
         updated = bool(step.map_updated)  # type: ignore[attr-defined]
-        if not updated and scan.stamp - self._last_stamp < self.config.min_interval_s:
+        if not updated and scan.stamp - self._last_stamp < self.config.min_interval_s - 1e-6:
             return
         self._last_stamp = scan.stamp
         if self.counter is None:
