@@ -58,63 +58,66 @@ from dynslam2d.types import Pose2D, Scan
 ERASED_PROBABILITY = 0.1
 
 
+#: Channels of the counter's (H, W, 5) int32 array: one cache line per visited cell.
+_HIT, _THROUGH, _SWITCH, _LAST_HIT, _LAST_THROUGH = 0, 1, 2, 3, 4
+
+
 @njit(cache=True)
-def _count_scan(hits, through, switches, last_hit, last_through, scan_id, ox, oy,
-                hx, hy, cx, cy, core):  # pragma: no cover - numba
-    """One scan into the counters. Coordinates are in cell units of the arrays
+def _count_scan(cells, scan_id, ox, oy, hx, hy, cx, cy, core):  # pragma: no cover - numba
+    """One scan into the counters ``cells`` (H, W, 5): hits, passes, switches, scan id of
+    the last hit, scan id of the last pass. Coordinates are in cell units of the array
     (cell (i, j) centred on integers). ``(hx, hy)``: hit endpoints; ``(cx, cy)``: ends of
     the clearing segments from ``(ox, oy)``. Per scan, a cell gets at most one hit and
-    one pass, and no pass if the scan hit it. ``switches`` counts changes between hit
-    and pass in each cell's sequence of scans (the later of ``last_hit`` / ``last_through``
-    is the cell's current state)."""
-    h, w = hits.shape
+    one pass, and no pass if the scan hit it. Switches count changes between hit and
+    pass in each cell's sequence of scans (the later of the two last ids is its state)."""
+    h = cells.shape[0]
+    w = cells.shape[1]
     for k in range(hx.shape[0]):
         ix = int(math.floor(hx[k] + 0.5))
         iy = int(math.floor(hy[k] + 0.5))
-        if 0 <= ix < w and 0 <= iy < h and last_hit[iy, ix] != scan_id:
-            if last_through[iy, ix] > last_hit[iy, ix]:
-                switches[iy, ix] += 1
-            last_hit[iy, ix] = scan_id
-            hits[iy, ix] += 1
+        if 0 <= ix < w and 0 <= iy < h and cells[iy, ix, 3] != scan_id:
+            if cells[iy, ix, 4] > cells[iy, ix, 3]:
+                cells[iy, ix, 2] += 1
+            cells[iy, ix, 3] = scan_id
+            cells[iy, ix, 0] += 1
     for k in range(cx.shape[0]):
         dx = cx[k] - ox
         dy = cy[k] - oy
-        if abs(dx) >= abs(dy):
+        x_major = abs(dx) >= abs(dy)
+        if x_major:
             a0 = int(math.floor(ox + 0.5))
             a1 = int(math.floor(cx[k] + 0.5))
-            step = 1 if a1 >= a0 else -1
             slope = dy / dx if dx != 0.0 else 0.0
-            a = a0
-            while True:
-                b = oy + slope * (a - ox)
-                ib = int(math.floor(b + 0.5))
-                if abs(b - ib) <= core and 0 <= a < w and 0 <= ib < h:
-                    if last_hit[ib, a] != scan_id and last_through[ib, a] != scan_id:
-                        if last_hit[ib, a] > last_through[ib, a]:
-                            switches[ib, a] += 1
-                        last_through[ib, a] = scan_id
-                        through[ib, a] += 1
-                if a == a1:
-                    break
-                a += step
+            m0 = ox
+            n0 = oy
         else:
             a0 = int(math.floor(oy + 0.5))
             a1 = int(math.floor(cy[k] + 0.5))
-            step = 1 if a1 >= a0 else -1
             slope = dx / dy
-            a = a0
-            while True:
-                b = ox + slope * (a - oy)
-                ib = int(math.floor(b + 0.5))
-                if abs(b - ib) <= core and 0 <= ib < w and 0 <= a < h:
-                    if last_hit[a, ib] != scan_id and last_through[a, ib] != scan_id:
-                        if last_hit[a, ib] > last_through[a, ib]:
-                            switches[a, ib] += 1
-                        last_through[a, ib] = scan_id
-                        through[a, ib] += 1
-                if a == a1:
-                    break
-                a += step
+            m0 = oy
+            n0 = ox
+        step = 1 if a1 >= a0 else -1
+        a = a0
+        while True:
+            b = n0 + slope * (a - m0)
+            ib = int(math.floor(b + 0.5))
+            if abs(b - ib) <= core:
+                if x_major:
+                    x = a
+                    y = ib
+                else:
+                    x = ib
+                    y = a
+                if 0 <= x < w and 0 <= y < h:
+                    lh = cells[y, x, 3]
+                    if lh != scan_id and cells[y, x, 4] != scan_id:
+                        if lh > cells[y, x, 4]:
+                            cells[y, x, 2] += 1
+                        cells[y, x, 4] = scan_id
+                        cells[y, x, 1] += 1
+            if a == a1:
+                break
+            a += step
 
 
 @njit(cache=True)
@@ -203,25 +206,34 @@ class VisibilityCounter:
         self.margin_cells = max(int(math.ceil(growth_margin_m / self.resolution)), 1)
         self.i0 = 0  # absolute col of array column 0
         self.j0 = 0  # absolute row of array row 0
-        shape = (0, 0)
-        self.hits = np.zeros(shape, dtype=np.int32)
-        self.through = np.zeros(shape, dtype=np.int32)
-        self.switches = np.zeros(shape, dtype=np.int32)
-        self._last_hit = np.zeros(shape, dtype=np.int32)
-        self._last_through = np.zeros(shape, dtype=np.int32)
+        self._cells = np.zeros((0, 0, 5), dtype=np.int32)
         self.scans = 0  # scans counted (also the id of the next scan)
         self.too_large = 0  # scans left out: counting them would exceed the memory limit
         self.seconds = 0.0
 
     @property
+    def hits(self) -> np.ndarray:
+        """(h, w) int32 view: scans that hit each cell (array cells, see :attr:`i0`, :attr:`j0`)."""
+        return self._cells[:, :, _HIT]
+
+    @property
+    def through(self) -> np.ndarray:
+        """(h, w) int32 view: scans that passed through each cell."""
+        return self._cells[:, :, _THROUGH]
+
+    @property
+    def switches(self) -> np.ndarray:
+        """(h, w) int32 view: changes between hit and pass in each cell's scan sequence."""
+        return self._cells[:, :, _SWITCH]
+
+    @property
     def nbytes(self) -> int:
-        return int(self.hits.nbytes + self.through.nbytes + self.switches.nbytes + self._last_hit.nbytes
-                   + self._last_through.nbytes)
+        return int(self._cells.nbytes)
 
     def _ensure(self, imin: int, jmin: int, imax: int, jmax: int) -> bool:
         """Grow to hold cells [imin, imax] × [jmin, jmax]; False (nothing changed) if that
         would take more than the SLAM's map memory limit (``max_map_memory_mb``)."""
-        h, w = self.hits.shape
+        h, w = self._cells.shape[:2]
         if h and imin >= self.i0 and jmin >= self.j0 and imax < self.i0 + w and jmax < self.j0 + h:
             return True
         if h == 0:
@@ -235,14 +247,11 @@ class VisibilityCounter:
             nj1 = max(self.j0 + h, jmax + my + 1) if jmax >= self.j0 + h else self.j0 + h
         if (nj1 - nj0) * (ni1 - ni0) * 20 > self.slam.max_map_memory_mb * 1e6:
             return False
-        grown = []
-        for arr, fill in ((self.hits, 0), (self.through, 0), (self.switches, 0), (self._last_hit, -1),
-                          (self._last_through, -1)):
-            new = np.full((nj1 - nj0, ni1 - ni0), fill, dtype=np.int32)
-            if h:
-                new[self.j0 - nj0:self.j0 - nj0 + h, self.i0 - ni0:self.i0 - ni0 + w] = arr
-            grown.append(new)
-        self.hits, self.through, self.switches, self._last_hit, self._last_through = grown
+        new = np.zeros((nj1 - nj0, ni1 - ni0, 5), dtype=np.int32)
+        new[:, :, _LAST_HIT:] = -1
+        if h:
+            new[self.j0 - nj0:self.j0 - nj0 + h, self.i0 - ni0:self.i0 - ni0 + w] = self._cells
+        self._cells = new
         self.i0, self.j0 = ni0, nj0
         return True
 
@@ -270,7 +279,7 @@ class VisibilityCounter:
             self.too_large += 1  # the SLAM refuses such scans too ('map_too_large')
             self.seconds += time.perf_counter() - t0
             return
-        _count_scan(self.hits, self.through, self.switches, self._last_hit, self._last_through, self.scans,
+        _count_scan(self._cells, self.scans,
                     ox - self.i0, oy - self.j0, ex[kept] - self.i0, ey[kept] - self.j0,
                     cx[clear] - self.i0, cy[clear] - self.j0, float(c.ray_core))
         self.scans += 1
@@ -288,7 +297,7 @@ class VisibilityCounter:
         gj0 = int(round(grid.origin[1] / self.resolution + 0.5))
         H, W = grid.shape
         outs = [np.zeros((H, W), dtype=np.int32) for _ in range(3)]
-        h, w = self.hits.shape
+        h, w = self._cells.shape[:2]
         c0, c1 = max(gi0, self.i0), min(gi0 + W, self.i0 + w)
         r0, r1 = max(gj0, self.j0), min(gj0 + H, self.j0 + h)
         if c1 > c0 and r1 > r0:
