@@ -64,3 +64,9 @@ class CleanConfig(BaseModel):
         0.15, ge=0.0,
         description="Extra switches allowed per scan of the rarer kind (hit or pass), dimensionless.",
     )
+    revert_neighbors: int = Field(
+        3, ge=0, le=9,
+        description="An erased cell with at least this many kept occupied cells among its 8 neighbours is "
+        "kept after all (it is the edge of a structure that stays: a pillar corner, the face of a wall); "
+        "0 = off.",
+    )

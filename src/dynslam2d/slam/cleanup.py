@@ -347,6 +347,13 @@ def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray |
     hits, through, switches = counter.window(online)
     occ = online.occupied(occupied_threshold)
     erased = erase_rule(hits, through, switches, c) & occ
+    if c.revert_neighbors > 0:
+        # Removert's "revert" step in 2D: a cell at the edge of structure that stays is kept.
+        from scipy.ndimage import convolve
+
+        kept = (occ & ~erased).astype(np.int16)
+        n_kept = convolve(kept, np.ones((3, 3), dtype=np.int16), mode="constant") - kept
+        erased &= n_kept < c.revert_neighbors
     prob = online.prob.copy()
     prob[erased] = ERASED_PROBABILITY
     lo = None
