@@ -65,7 +65,7 @@ _HIT, _THROUGH, _SWITCH, _LAST_HIT, _LAST_THROUGH = 0, 1, 2, 3, 4
 @njit(cache=True)
 def _count_scan(cells, scan_id, ox, oy, hx, hy, cx, cy, core):  # pragma: no cover - numba
     """One scan into the counters ``cells`` (H, W, 5): hits, passes, switches, scan id of
-    the last hit, scan id of the last pass. Coordinates are in cell units of the array
+    the last hit, scan id of the last pass (ids start at 1; 0 = never). Coordinates are in cell units of the array
     (cell (i, j) centred on integers). ``(hx, hy)``: hit endpoints; ``(cx, cy)``: ends of
     the clearing segments from ``(ox, oy)``. Per scan, a cell gets at most one hit and
     one pass, and no pass if the scan hit it. Switches count changes between hit and
@@ -240,7 +240,7 @@ class VisibilityCounter:
             m = self.margin_cells
             ni0, nj0, ni1, nj1 = imin - m, jmin - m, imax + m + 1, jmax + m + 1
         else:
-            mx, my = max(self.margin_cells, w // 4), max(self.margin_cells, h // 4)
+            mx, my = max(self.margin_cells, w // 2), max(self.margin_cells, h // 2)
             ni0 = min(self.i0, imin - mx) if imin < self.i0 else self.i0
             nj0 = min(self.j0, jmin - my) if jmin < self.j0 else self.j0
             ni1 = max(self.i0 + w, imax + mx + 1) if imax >= self.i0 + w else self.i0 + w
@@ -248,7 +248,6 @@ class VisibilityCounter:
         if (nj1 - nj0) * (ni1 - ni0) * 20 > self.slam.max_map_memory_mb * 1e6:
             return False
         new = np.zeros((nj1 - nj0, ni1 - ni0, 5), dtype=np.int32)
-        new[:, :, _LAST_HIT:] = -1
         if h:
             new[self.j0 - nj0:self.j0 - nj0 + h, self.i0 - ni0:self.i0 - ni0 + w] = self._cells
         self._cells = new
@@ -279,7 +278,7 @@ class VisibilityCounter:
             self.too_large += 1  # the SLAM refuses such scans too ('map_too_large')
             self.seconds += time.perf_counter() - t0
             return
-        _count_scan(self._cells, self.scans,
+        _count_scan(self._cells, self.scans + 1,
                     ox - self.i0, oy - self.j0, ex[kept] - self.i0, ey[kept] - self.j0,
                     cx[clear] - self.i0, cy[clear] - self.j0, float(c.ray_core))
         self.scans += 1
