@@ -30,3 +30,35 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"real datasets not available: {SHARED_DATA} does not exist")
     return SHARED_DATA
+
+
+class ScanList:
+    """A scan source over scans already in memory (one read of a recording for several runs)."""
+
+    def __init__(self, scans, meta):
+        self.scans, self.meta = list(scans), meta
+
+    def __iter__(self):
+        return iter(self.scans)
+
+    def __len__(self):
+        return len(self.scans)
+
+
+def run_cli(capsys, *args: str) -> tuple[int, str, str]:
+    """Run ``dynslam2d ARGS`` in-process: (exit code, stdout, stderr)."""
+    import sys
+
+    from dynslam2d.cli import main
+
+    old = sys.argv
+    sys.argv = ["dynslam2d", *args]
+    code = 0
+    try:
+        main()
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    finally:
+        sys.argv = old
+    out, err = capsys.readouterr()
+    return code, out, err

@@ -9,23 +9,13 @@ import numpy as np
 import pytest
 import yaml
 
-from dynslam2d.cli import main
 from dynslam2d.io.rosbag import write_scan_bag
 from dynslam2d.types import Scan
+from conftest import run_cli
 
 
 def cli(capsys, *args: str) -> tuple[int, str, str]:
-    old = sys.argv
-    sys.argv = ["dynslam2d", *args]
-    code = 0
-    try:
-        main()
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    finally:
-        sys.argv = old
-    out, err = capsys.readouterr()
-    return code, out, err
+    return run_cli(capsys, *args)
 
 
 def _scans(n=5, beams=90):

@@ -11,8 +11,6 @@ import pytest
 from dynslam2d.errors import DynSlamError
 from dynslam2d.io.odombag import (
     ENCODER,
-    IMU,
-    ODOMETRY,
     TFMESSAGE,
     imu_message,
     odometry_message,

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dynslam2d.cli import main
+from conftest import run_cli
 from dynslam2d.io.rosbag import write_scan_bag
 from dynslam2d.sim import SimSource
 
@@ -27,17 +27,7 @@ SRC = str(Path(__file__).resolve().parents[1] / "src")
 
 
 def cli(capsys, *args: str) -> tuple[int, str, str]:
-    old = sys.argv
-    sys.argv = ["dynslam2d", *args]
-    code = 0
-    try:
-        main()
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    finally:
-        sys.argv = old
-    out, err = capsys.readouterr()
-    return code, out, err
+    return run_cli(capsys, *args)
 
 
 def tree_digest(path: Path) -> dict[str, str]:
@@ -447,8 +437,6 @@ def test_skip_bad_counts_every_kind_of_skip_in_run(tmp_path, capsys):
 def test_skip_bad_skips_malformed_ros_messages_and_counts_them(tmp_path, capsys):
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
-
-    from dynslam2d.io.rosbag import ros_time_to_stamp  # noqa: F401  (same clock as the reader)
 
     ts = get_typestore(Stores.ROS1_NOETIC)
     LaserScan = ts.types["sensor_msgs/msg/LaserScan"]

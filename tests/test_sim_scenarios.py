@@ -179,8 +179,14 @@ def test_ground_truth_velocity_matches_positions_at_scan_rate(paper_short):
 
 
 def test_robot_never_inside_a_mover_and_movers_clear_static_structure():
+    import dataclasses
+
+    from dynslam2d.sim.scenarios import SENSOR_CONTACT_SCENARIOS
+
     for name in SCENARIOS:
         sc = build_scenario(name)
+        if name in SENSOR_CONTACT_SCENARIOS:  # the person walks through the sensor on purpose
+            sc = dataclasses.replace(sc, movers=())
         t = sc.stamps
         robot = sc.robot.sample(t)[:, :2]
         static = sc.world.segments

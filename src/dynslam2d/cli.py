@@ -466,9 +466,23 @@ def run(
     repairs = summary.get("stamp_repairs") or {}
     if repairs.get("backward_steps") or repairs.get("nudged_stamps") or repairs.get("time_source") not in (None, "ipc"):
         rows.append(("stamp repairs", "; ".join(summary.get("input_warnings", [])) or str(repairs)))
+    pc = summary.get("pose_confidence")
+    if pc:
+        rows.append(("pose confidence",
+                     f"{100 * pc['low_support_share']:.1f} % low support (longest {pc['longest_low_support_s']:.1f} s), "
+                     f"{100 * pc['degenerate_share']:.1f} % degenerate (longest {pc['longest_degenerate_s']:.1f} s), "
+                     f"lost {pc['lost_events']}× ({pc['lost_time_s']:.1f} s)"))
+    body = summary.get("body") or {}
+    if body.get("footprint_dropped_returns") or body.get("auto_body_beams"):
+        rows.append(("robot's own returns dropped",
+                     f"{body.get('footprint_dropped_returns', 0) + body.get('auto_dropped_returns', 0)} "
+                     f"({body.get('auto_body_beams', 0)} body beams found; suggested footprint in summary.json)"))
     if "metrics.json" in paths:
         rows += _metric_rows(json.loads(paths["metrics.json"].read_text()))
     console.print(_stats_table(f"dynslam2d run {input}", rows))
+    if pc and pc.get("warning"):
+        console.print(Text.assemble(("warning: ", "bold red"), f"{pc['warning']} — the map and trajectory are not "
+                                    "reliable there (map.png marks the poses)"))
     console.print(Text.assemble("results in ", (str(out), "bold")))
     if write_bag is not None:
         console.print(Text.assemble("bag for RViz / Foxglove: ", (str(write_bag), "bold"), " (docs/ros.md)"))
@@ -671,6 +685,11 @@ def eval_run(
     _emit(metrics, as_json, _stats_table(f"{run_dir} vs {gt}", _metric_rows(metrics)))
 
 
+def _pct(value: float) -> str:
+    """A share as a percentage; NaN (an empty class) as —."""
+    return "—" if value != value else f"{100 * value:.2f} %"
+
+
 def _metric_rows(metrics: dict[str, Any]) -> list[tuple[str, str]]:
     rows = [("ATE RMSE", f"{metrics['ate_rmse_m']:.4f} m ({metrics['poses_compared']} poses)")]
     m = metrics.get("map")
@@ -687,7 +706,83 @@ def _metric_rows(metrics: dict[str, Any]) -> list[tuple[str, str]]:
             ("removed beams: precision / recall", f"{r['precision']:.3f} / {r['recall']:.3f}"),
             ("static beams removed", f"{100 * r['static_removed_share']:.2f} %"),
         ]
+    mc = metrics.get("removal_by_motion")
+    if mc and mc["n_standing"] + mc["n_stopped"] > 0:
+        rows += [
+            ("walking-mover beams removed", _pct(mc["walking_recall"])),
+            ("standing-mover beams removed", _pct(mc["standing_removed_share"])),
+            ("stopped-mover beams removed", _pct(mc["stopped_removed_share"])),
+        ]
+    tm = metrics.get("time_to_m")
+    if tm and tm["seen_walking"]:
+        delay = "—" if tm["median_delay"] != tm["median_delay"] else f"{tm['median_delay']:.2f} s"
+        rows.append(("walking movers caught by M (median delay)",
+                     f"{tm['reached']} of {tm['seen_walking']} ({delay}; {_pct(tm['within_half_second'])} within 0.5 s)"))
     return rows
+
+
+@eval_app.command("people")
+def eval_people(
+    bag: Annotated[Path, typer.Argument(help="Annotated leg_tracker bag (or a .zip holding it).")],
+    run_dir: Annotated[Path, typer.Argument(help="Results folder of 'dynslam2d run' on that bag.")],
+    topic: TopicOpt = None,
+    people_topic: Annotated[str, typer.Option("--people-topic", help="Topic of the leg_tracker/Person annotations.")] = "/ground_truth_people_tracks",
+    radius: Annotated[float, typer.Option("--radius", help="Beams ending this close to an annotation are person beams, m.")] = 0.35,
+    walk_speed: Annotated[float, typer.Option("--walk-speed", help="A person moving at least this fast is walking, m/s.")] = 0.3,
+    window: Annotated[float, typer.Option("--window", help="Window of the walking speed, s.")] = 1.0,
+    m_radius: Annotated[float, typer.Option("--m-radius", help="A track in M this close to a person has caught it, m.")] = 0.5,
+    motion_frame: Annotated[str, typer.Option("--motion-frame", help="Judge walking in the 'map' frame (the run's trajectory) or the 'scan' frame (motionless sensor).")] = "map",
+    as_json: JsonOpt = False,
+) -> None:
+    """Score a run against hand-annotated people: removal recall on person beams (walking / standing),
+    non-person beams removed, and the time from a person's first motion to the dynamic set M.
+
+    Definitions: docs/real.md.
+    """
+    from dynslam2d.eval.people import PeopleParams, evaluate_people
+
+    params = PeopleParams(radius=radius, walk_speed=walk_speed, window=window, m_radius=m_radius,
+                          motion_frame=motion_frame)
+    m = evaluate_people(bag, run_dir, scan_topic=topic, people_topic=people_topic, params=params)
+    rows = [
+        ("scans (annotated)", f"{m.scans} ({m.scans_annotated})"),
+        ("people (walking)", f"{m.people} ({m.walking_people})"),
+        ("person beams removed", f"{_pct(m.recall)} of {m.person_beams}"),
+        ("walking-person beams removed", f"{_pct(m.walking_recall)} of {m.walking_beams}"),
+        ("standing-person beams removed", f"{_pct(m.standing_recall)} of {m.standing_beams}"),
+        ("non-person beams removed", f"{_pct(m.non_person_removed_share)} of {m.non_person_beams}"),
+        ("all beams removed (every scan)", _pct(m.removed_share_all)),
+        ("people reaching M", f"{m.people_reached_m} of {m.walking_people} walking"),
+        ("time from first motion to M (median)", _fmt(m.median_time_to_m, " s", 2)),
+    ]
+    for r in m.per_person:
+        delay = "never in M" if r.time_to_m is None else f"{r.time_to_m:.2f} s to M"
+        rows.append((f"  person {r.id}", f"{r.annotations} annotations, {_pct(r.recall)} removed, {delay}"))
+    _emit(m.as_dict(), as_json, _stats_table(f"{run_dir} vs people in {bag}", rows))
+
+
+@eval_app.command("foreground")
+def eval_foreground(
+    input: Annotated[str, typer.Argument(help="The recording of a motionless sensor (bag, log).")],
+    run_dir: Annotated[Path, typer.Argument(help="Results folder of 'dynslam2d run' on that recording.")],
+    topic: TopicOpt = None,
+    margin: Annotated[float, typer.Option("--margin", help="A return this far in front of the per-beam median background is foreground, m.")] = 0.3,
+    as_json: JsonOpt = False,
+) -> None:
+    """Removed foreground and background beams of a run of a motionless sensor.
+
+    Foreground: returns at least --margin in front of the per-beam median range (docs/real.md).
+    """
+    from dynslam2d.eval.foreground import evaluate_foreground
+
+    r = evaluate_foreground(input, run_dir, topic=topic, margin=margin)
+    rows = [
+        ("scans (with ≥5 foreground beams)", f"{r.scans} ({r.scans_with_foreground})"),
+        ("foreground beams removed", f"{_pct(r.foreground_removed_share)} of {r.foreground_beams}"),
+        ("background beams removed", f"{_pct(r.background_removed_share)} of {r.background_beams}"),
+        ("returns of rarely-returning beams removed", f"{_pct(r.rare_removed_share)} of {r.rare_beams}"),
+    ]
+    _emit(r.as_dict(), as_json, _stats_table(f"{run_dir} (foreground ≥ {margin:g} m in front of the background)", rows))
 
 
 @eval_app.command("tracking")

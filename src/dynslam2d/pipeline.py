@@ -26,12 +26,16 @@ from typing import Callable, Protocol, Sequence
 import numpy as np
 
 from dynslam2d.config import Config
+from dynslam2d.detect.body import BodyFilter
+from dynslam2d.detect.mapevidence import MapView
 from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
 from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
+from dynslam2d.slam.confidence import FLAGS
+from dynslam2d.slam.confidence import summarize as summarize_confidence
 from dynslam2d.types import Box, Pose2D, Scan, ScanSource, SourceMeta, Track
 
 
@@ -52,6 +56,16 @@ class StepResult:
         removed: (beams,) bool, True where the filter removed the beam from the map update.
         removed_by: (beams,) int, id of the track whose exclusion zone removed the beam (−1 = kept).
         timings: wall time per stage, ms ("match", "track", "filter", "map_update", "total").
+        degeneracy: smallest / largest normalized eigenvalue of the match Hessian (NaN if not matched).
+        degenerate: the scan left some direction of the pose unconstrained (a corridor's axis).
+        support_points, support_spread: endpoints confirmed by the map (count) and the angle their
+            bearings cover (rad).
+        low_support: the pose is not backed by a well-supported match.
+        pose_source: "scan", "scan+prior", "prediction" or "relocalised".
+        slam_state: "tracking" or "lost".
+        body: (beams,) bool, True where the return was the robot's own body (footprint or found
+            automatically, :mod:`dynslam2d.detect.body`): dropped before matching, tracking and
+            mapping, and not counted in ``removed``.
     """
 
     index: int
@@ -66,6 +80,14 @@ class StepResult:
     removed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     removed_by: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     timings: dict[str, float] = field(default_factory=dict)
+    degeneracy: float = math.nan
+    degenerate: bool = False
+    support_points: int = 0
+    support_spread: float = 0.0
+    low_support: bool = False
+    pose_source: str = "scan"
+    slam_state: str = "tracking"
+    body: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 def _boxes(tracks: list[Track], dt: float = 0.0) -> tuple[np.ndarray, ...]:
@@ -123,6 +145,7 @@ class Pipeline:
         self.config = config if config is not None else Config()
         self.slam = HectorSlam(self.config.slam)
         self.tracker = Tracker(self.config.detect)
+        self.body = BodyFilter(self.config.detect.footprint)
         self._moving: list[Track] = []  # tracks in M after the previous scan
         self._last_stamp: float | None = None
 
@@ -146,6 +169,11 @@ class Pipeline:
         """Run every stage on ``scan`` (scans must come in time order) and return the result."""
         t0 = time.perf_counter()
         cache: dict[str, np.ndarray] = {}
+        # 0. the robot's own body is never structure nor a mover (detect/body.py)
+        raw = scan
+        body = self.body.mask(scan)
+        if body.any():
+            scan = scan.with_ranges(np.where(body, np.nan, scan.ranges))
         # 2. match with the known movers removed (their boxes advanced to this stamp).
         match_scan = scan
         if self._moving and self.config.filter.mode != "none":
@@ -154,9 +182,11 @@ class Pipeline:
             if pre_removed.any():
                 match_scan = scan.with_ranges(np.where(pre_removed, np.nan, scan.ranges))
         res = self.slam.match(match_scan)
+        self.body.observe(raw, res.pose)
         t1 = time.perf_counter()
         # 3. track in the map frame with this scan's pose.
-        tracks = self.tracker.update(scan, res.pose)
+        tracks = self.tracker.update(scan, res.pose, MapView.of_level(self.slam.map.levels[0]),
+                                     self.body.body if self.config.detect.footprint.auto else None)
         t2 = time.perf_counter()
         # 4. the dynamic set M and its exclusion zones (paper Eq. 3, 5-8).
         moving = [t for t in tracks if t.in_m]
@@ -182,6 +212,7 @@ class Pipeline:
             tracks=tracks,
             removed=removed,
             removed_by=removed_by,
+            body=body,
             timings={
                 "match": (t1 - t0) * 1e3,
                 "track": (t2 - t1) * 1e3,
@@ -189,6 +220,13 @@ class Pipeline:
                 "map_update": (t4 - t3) * 1e3,
                 "total": (t4 - t0) * 1e3,
             },
+            degeneracy=res.degeneracy,
+            degenerate=res.degenerate,
+            support_points=res.support_points,
+            support_spread=res.support_spread,
+            low_support=res.low_support,
+            pose_source=res.pose_source,
+            slam_state=res.state,
         )
 
     def gridmap(self) -> GridMap:
@@ -222,6 +260,11 @@ class RunResult:
         reasons: count of each skip / reject reason.
         memory_bytes: memory held by the map levels at the end.
         tracker_stats: counters of the tracker (bad input, resets).
+        confidence: per-scan (n,) arrays "low_support", "degenerate", "lost" (bool) and
+            "degeneracy" (float) — the pose confidence of every scan.
+        slam_stats: counters of the SLAM processor ("lost_events", "relocalisations").
+        body: the robot's own returns (:meth:`dynslam2d.detect.body.BodyFilter.report`): footprint and
+            automatically found body beams, with a suggested footprint (laser frame, m).
     """
 
     source: SourceMeta
@@ -240,6 +283,18 @@ class RunResult:
     reasons: dict[str, int]
     memory_bytes: int
     tracker_stats: dict[str, int] = field(default_factory=dict)
+    confidence: dict[str, np.ndarray] = field(default_factory=dict)
+    slam_stats: dict[str, int] = field(default_factory=dict)
+
+    def pose_confidence(self) -> dict[str, object]:
+        """The ``pose_confidence`` block of summary.json (see :func:`dynslam2d.slam.confidence.summarize`)."""
+        n = self.n_scans
+        c = self.config.slam
+        flags = {k: self.confidence.get(k, np.zeros(n, dtype=bool)) for k in FLAGS}
+        return summarize_confidence(self.trajectory.stamps, flags, self.confidence.get("degeneracy", np.full(n, np.nan)),
+                                    self.slam_stats.get("lost_events", 0), self.slam_stats.get("relocalisations", 0),
+                                    c.low_confidence_share, c.low_confidence_stretch)
+    body: dict[str, object] = field(default_factory=dict)
 
     @property
     def n_scans(self) -> int:
@@ -293,6 +348,7 @@ class RunResult:
             "tracks_in_M": len(ids_m),
             "removed_beam_share": removed / beams if beams else 0.0,
             "tracker": dict(self.tracker_stats),
+            "body": dict(self.body),
             "memory_bytes": int(self.memory_bytes),
             "map_cells": list(self.grid.shape),
             "map_resolution_m": self.grid.resolution,
@@ -300,6 +356,7 @@ class RunResult:
             "odometry": self.source.odometry,
             "odometry_detail": self.source.extra.get("odometry"),
             "trajectory_frame": "laser",
+            "pose_confidence": self.pose_confidence(),
         }
 
 
@@ -340,9 +397,17 @@ def run(
     removed_rows = BitRows()
     track_rows = TrackRows()
     timings: dict[str, GrowArray] = {}
+    conf = {"low_support": GrowArray(np.bool_), "degenerate": GrowArray(np.bool_), "lost": GrowArray(np.bool_),
+            "degeneracy": GrowArray(np.float64)}
     t0 = time.perf_counter()
+    last_scan: Scan | None = None
     for scan in source:
         step = pipe.process(scan)
+        conf["low_support"].append(step.low_support)
+        conf["degenerate"].append(step.degenerate)
+        conf["lost"].append(step.slam_state == "lost")
+        conf["degeneracy"].append(step.degeneracy)
+        last_scan = scan
         stamps.append(step.stamp)
         poses.append((step.pose.x, step.pose.y, step.pose.theta))
         scores.append(step.score)
@@ -379,6 +444,9 @@ def run(
         reasons=dict(summary.get("reasons", {})),  # type: ignore[arg-type]
         memory_bytes=pipe.slam.memory_bytes,
         tracker_stats=pipe.tracker.stats.as_dict(),
+        confidence={k: v.view().copy() for k, v in conf.items()},
+        slam_stats={"lost_events": pipe.slam.lost_events, "relocalisations": pipe.slam.relocalisations},
+        body=pipe.body.report(last_scan),
     )
     for obs in observers:
         obs.on_finish(result, pipe)

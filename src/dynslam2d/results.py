@@ -21,6 +21,7 @@ import numpy as np
 from dynslam2d.config import dump_config
 from dynslam2d.errors import DynSlamError
 from dynslam2d.eval.maps import map_metrics
+from dynslam2d.eval.motionclass import removal_by_motion, time_to_m
 from dynslam2d.eval.removal import match_scans, removal_metrics
 from dynslam2d.eval.trajectory import ate
 from dynslam2d.gridmap import GridMap
@@ -67,6 +68,7 @@ def evaluate(
     gt: GroundTruthFiles,
     removed: np.ndarray | None = None,
     removed_stamps: np.ndarray | None = None,
+    tracks: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """Every metric of a run against ground truth (formulas in docs/metrics.md).
 
@@ -75,7 +77,9 @@ def evaluate(
       F1, ghost area) of ``grid`` against the GT static map, with the ATE alignment
       mapping the run's map frame into the ground-truth frame;
     - with ``removed`` ((n, beams) bool, True = beam removed by the filter) and its stamps:
-      precision / recall of removed beams against the per-beam labels.
+      precision / recall of removed beams against the per-beam labels;
+    - with ``tracks`` (tracks.csv rows, :data:`dynslam2d.io.runfolder.TRACK_DTYPE`): how fast
+      walking movers enter M (:func:`dynslam2d.eval.motionclass.time_to_m`).
     """
     dt = float(np.median(np.diff(gt.trajectory.stamps))) / 2 if len(gt.trajectory) > 1 else 0.01
     res = ate(gt.trajectory, trajectory, align=True, max_dt=max(dt, 1e-3))
@@ -94,13 +98,21 @@ def evaluate(
         rem = removed[i_run]
         if rem.shape[1] == lab.shape[1]:
             out["removal"] = removal_metrics(rem, lab).as_dict()
+            if gt.movers is not None and gt.movers.shape[0]:
+                # walking / standing / stopped movers apart (dynslam2d.eval.motionclass)
+                out["removal_by_motion"] = removal_by_motion(rem, lab, gt.stamps[i_gt], gt.movers).as_dict()
+    if tracks is not None and gt.movers is not None and gt.movers.shape[0] and "hits" in (gt.movers.dtype.names or ()):
+        out["time_to_m"] = time_to_m(gt.movers, tracks, transform=a).as_dict()
     return out
 
 
 def compute_metrics(run: RunResult, gt: GroundTruthFiles) -> dict[str, Any]:
     """:func:`evaluate` on an in-memory run."""
+    from dynslam2d.io.runfolder import TRACK_DTYPE
+
     removed = run.removed
-    return evaluate(run.trajectory, run.grid, gt, removed if removed.size else None, run.trajectory.stamps)
+    tracks = np.array([tuple(r) for r in run.track_rows], dtype=TRACK_DTYPE)
+    return evaluate(run.trajectory, run.grid, gt, removed if removed.size else None, run.trajectory.stamps, tracks)
 
 
 def tracks_csv(run: RunResult) -> str:
@@ -118,6 +130,7 @@ def tracks_csv(run: RunResult) -> str:
 def evaluate_folder(run_dir: str | os.PathLike[str], gt_dir: str | os.PathLike[str]) -> dict[str, Any]:
     """:func:`evaluate` on a results folder (``dynslam2d eval RUN_DIR --gt GT_DIR``)."""
     from dynslam2d.eval.maps import load_run_map
+    from dynslam2d.io.runfolder import read_tracks
     from dynslam2d.io.trajectory import read_tum
 
     d = Path(run_dir)
@@ -134,7 +147,9 @@ def evaluate_folder(run_dir: str | os.PathLike[str], gt_dir: str | os.PathLike[s
     if mask_path.exists():
         with np.load(mask_path) as npz:
             removed, stamps = np.asarray(npz["removed"], dtype=bool), np.asarray(npz["stamps"], dtype=np.float64)
-    return evaluate(read_tum(d / "trajectory.tum"), load_run_map(d), read_ground_truth_folder(gt_dir), removed, stamps)
+    tracks = read_tracks(d) if (d / "tracks.csv").exists() else None
+    return evaluate(read_tum(d / "trajectory.tum"), load_run_map(d), read_ground_truth_folder(gt_dir), removed, stamps,
+                    tracks)
 
 
 def metrics_json(data: Any) -> str:

@@ -162,6 +162,25 @@ class FitConfig(BaseModel):
         "track updated in the same scan is a fragment of that object: its beams join the track, no new "
         "track is born, m.",
     )
+    person_merge: bool = Field(
+        True,
+        description="Merge two leg-sized clusters close together into one person detection (leg_tracker's leg "
+        "pairs, datmo.md §7), measured at the middle of the two legs.",
+    )
+    leg_max_extent: float = Field(
+        0.25, gt=0.0,
+        description="A leg: a cluster whose fitted sides are both at most this, m.",
+    )
+    leg_pair_distance: float = Field(
+        0.45, gt=0.0,
+        description="Two legs of one person: their centres lie at most this far apart, m.",
+    )
+    person_min_radius: float = Field(
+        0.1, gt=0.0,
+        description="A circle fit of radius within [person_min_radius, person_max_radius] is a person too (legs "
+        "merged by the segmentation, or a torso-height scan), m.",
+    )
+    person_max_radius: float = Field(0.35, gt=0.0, description="See person_min_radius, m.")
     sigma_position: float = Field(
         0.02, gt=0.0,
         description="Standard deviation of an observed face / edge position, m.",
@@ -214,6 +233,15 @@ class TrackerConfig(BaseModel):
         description="Euclidean gate between a cluster's centroid and a track's predicted box (distance to "
         "the box outline), m; bounds association along unobserved axes.",
     )
+    max_size_jump: float = Field(
+        0.8, gt=0.0,
+        description="A detection whose longest side exceeds max_size_jump_ratio × the track's longest side plus "
+        "this cannot update the track, m (a person track coasting past a wall must not take the wall).",
+    )
+    max_size_jump_ratio: float = Field(
+        2.0, ge=1.0,
+        description="See max_size_jump.",
+    )
     confirm_hits: int = Field(
         3, ge=1,
         description="M of the M-of-N confirmation rule: hits needed among the first confirm_window updates.",
@@ -256,6 +284,21 @@ class TrackerConfig(BaseModel):
         5, ge=1,
         description="Consecutive updates with speed > v_min needed to enter M (robustness to pose jitter).",
     )
+    person_sustain_updates: int = Field(
+        3, ge=1,
+        description="For a person (merged leg pair) the speed must exceed v_min for this many consecutive updates "
+        "(the rest of the test unchanged): a person who starts walking enters M within 0.5 s at 7.5 Hz.",
+    )
+    person_map_free_min: float = Field(
+        0.6, ge=0.0, le=1.0,
+        description="The person's faster confirmation needs this mean fraction of its points in observed-free map "
+        "cells (stronger than map_free_min: small clutter pairs up like legs).",
+    )
+    net_speed_ratio: float = Field(
+        0.7, ge=0.0,
+        description="Entering M also needs the net displacement over the sustained updates, divided by their time "
+        "span, to reach net_speed_ratio·v_min (a filtered speed built from jitter has no net motion).",
+    )
     min_displacement: float = Field(
         0.3, ge=0.0,
         description="Net displacement of the centre since the track's birth needed to enter M, m.",
@@ -283,6 +326,93 @@ class TrackerConfig(BaseModel):
         0.15, gt=0.0,
         description="An earlier beam must end at least this far behind a point to count as seeing through "
         "it, m.",
+    )
+    map_evidence: bool = Field(
+        True,
+        description="Entering M also needs the SLAM map's agreement (docs/tracking.md, 'Static evidence from the "
+        "map'): a mean fraction ≥ map_free_min of the track's points in cells earlier scans passed through, and "
+        "≤ map_structure_max on long-occupied cells, over its last sustain_updates updates. Only when the tracker "
+        "is given a map (the pipeline gives it the finest level).",
+    )
+    map_occupied_logodds: float = Field(
+        6.0, gt=0.0,
+        description="A point's cell is long-occupied structure at this log-odds or above (one hit adds 2.2 with "
+        "the default SLAM update factors: 6.0 needs three net hits; a mover's own trail, written while it was "
+        "not yet in M, rarely gets there).",
+    )
+    map_free_logodds: float = Field(
+        -0.35, lt=0.0,
+        description="A point lies in observed free space when every cell within map_free_radius has log-odds at "
+        "or below this (one free pass adds −0.405 with the default SLAM update factors).",
+    )
+    map_free_radius: int = Field(
+        1, ge=0,
+        description="Neighbourhood of the free-cell test, cells (1 = 3×3).",
+    )
+    map_free_min: float = Field(
+        0.5, ge=0.0, le=1.0,
+        description="Mean fraction of a track's points in observed free cells needed to enter M.",
+    )
+    map_structure_max: float = Field(
+        0.2, ge=0.0, le=1.0,
+        description="Largest mean fraction of a track's points on long-occupied cells that still allows entering M.",
+    )
+    map_structure_exit: float = Field(
+        1.0, ge=0.0, le=1.0,
+        description="A track in M whose mean fraction of points on long-occupied cells reaches this leaves M "
+        "(it has become part of the map's structure).",
+    )
+    still_time: float = Field(
+        1.0, gt=0.0,
+        description="The laser counts as motionless when its pose stayed within still_distance / still_angle over "
+        "this long, s; then points on never-observed map cells count as free for map_free_min (a motionless "
+        "robot does not update its map, and nothing slides into view).",
+    )
+    still_distance: float = Field(0.05, ge=0.0, description="See still_time, m.")
+    still_angle: float = Field(0.03, ge=0.0, description="See still_time, rad.")
+    max_accel: float | None = Field(
+        4.0, gt=0.0,
+        description="Physical acceleration bound: one update changes an established track's velocity by at most "
+        "max_accel·dt, m/s² (people reach ≈1–2 m/s², carts and small robots ≈2–3). None = no bound.",
+    )
+    accel_bound_after: int = Field(
+        4, ge=1,
+        description="The acceleration bound applies from this many hits on (a new track first converges to the "
+        "speed it was seen at).",
+    )
+    ride_max_range: float = Field(
+        1.0, gt=0.0,
+        description="A track within this distance of the laser that stays fixed in the laser frame while it moves "
+        "in the map frame rides with the robot (its body) and never enters M, m.",
+    )
+    ride_tolerance: float = Field(
+        0.1, gt=0.0,
+        description="Largest spread of such a track's laser-frame centre over its last ride_updates updates (and "
+        "least map-frame motion over them), m.",
+    )
+    ride_updates: int = Field(
+        3, ge=2,
+        description="Fewest updates over which a track riding with the laser is judged.",
+    )
+    ride_beam_window: int = Field(
+        12, ge=0,
+        description="With the robot's body found automatically (detect.footprint.auto), only tracks on beams within "
+        "this many beams of a body beam can ride with the robot.",
+    )
+    ride_time: float = Field(
+        0.5, gt=0.0,
+        description="Time window of the riding test, s (a person overtaking the robot at 1 m/s relative speed "
+        "moves 0.5 m in it; a body part stays within the range noise).",
+    )
+    map_structure_stop: float = Field(
+        0.5, ge=0.0, le=1.0,
+        description="A track in M slower than v_exit_ratio·v_min for map_structure_stop_time whose last two "
+        "detections have at least this fraction of "
+        "points on long-occupied map cells leaves M at once (it merged with a wall; no hysteresis).",
+    )
+    map_structure_stop_time: float = Field(
+        0.5, ge=0.0,
+        description="See map_structure_stop, s (a box turning a corner of its route slows down for a moment).",
     )
     aspect_prior: float | None = Field(
         None, gt=0.0, le=1.0,
@@ -313,6 +443,71 @@ class TrackerConfig(BaseModel):
     )
 
 
+class FootprintConfig(BaseModel):
+    """The robot's own body in the scan (:mod:`dynslam2d.detect.body`): returns dropped before detection,
+    matching and mapping."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    polygon: list[tuple[float, float]] | None = Field(
+        None,
+        description="Footprint polygon in the laser frame (x forward, y left), vertices in order, m; returns "
+        "inside it are the robot's body. None = no footprint. Must be simple with a non-zero area.",
+    )
+    auto: bool = Field(
+        True,
+        description="Find beams whose range stays fixed while the laser travels and turns (the robot's body) "
+        "and drop their returns; summary.json reports them with a suggested footprint.",
+    )
+    auto_max_range: float = Field(
+        1.0, gt=0.0,
+        description="Only returns closer than this can be the robot's body, m.",
+    )
+    auto_tolerance: float = Field(
+        0.06, gt=0.0,
+        description="A body beam's range stays within this of its first value, m (range noise of short-range "
+        "returns on Hokuyo-class sensors reaches ±4 cm).",
+    )
+    auto_min_travel: float = Field(
+        0.3, gt=0.0,
+        description="Distance the laser must travel while a beam's range stays fixed, m.",
+    )
+    auto_min_turn: float = Field(
+        0.3, gt=0.0,
+        description="Total rotation the laser must make while a beam's range stays fixed, rad (a wall seen "
+        "perpendicular keeps its range under translation, not under rotation).",
+    )
+    auto_min_scans: int = Field(
+        20, ge=1,
+        description="A body beam has returned its fixed range in at least this many scans.",
+    )
+    auto_share: float = Field(
+        0.9, gt=0.0, le=1.0,
+        description="…and in at least this share of all its returns (a wall seen briefly at a fixed range is not "
+        "the body).",
+    )
+    auto_edge_beams: int = Field(
+        4, ge=0,
+        description="Beams on either side of a body beam whose returns up to the body's range (+ 2 tolerances) "
+        "are dropped too (a body edge is seen part of the time).",
+    )
+    suggest_margin: float = Field(
+        0.05, ge=0.0,
+        description="The suggested footprint is the hull of the body returns grown by this, m.",
+    )
+
+    @model_validator(mode="after")
+    def _check_polygon(self) -> FootprintConfig:
+        if self.polygon is not None:
+            from dynslam2d.detect.body import polygon_problem
+
+            why = polygon_problem(self.polygon)
+            if why is not None:
+                raise ValueError(f"footprint polygon {why}; give the vertices in order around the robot, laser "
+                                 "frame, m")
+        return self
+
+
 class DetectConfig(BaseModel):
     """Detection and tracking of moving objects: segmentation, shape fit, tracker (nest as ``detect``)."""
 
@@ -321,6 +516,9 @@ class DetectConfig(BaseModel):
     segment: SegmentConfig = Field(default_factory=SegmentConfig, description="Breakpoint segmentation.")
     fit: FitConfig = Field(default_factory=FitConfig, description="Rectangle / circle / point shape fit.")
     tracker: TrackerConfig = Field(default_factory=TrackerConfig, description="Kalman tracking and the set M.")
+    footprint: FootprintConfig = Field(
+        default_factory=FootprintConfig, description="The robot's own body: footprint polygon, automatic detection."
+    )
 
     @model_validator(mode="after")
     def _check(self) -> DetectConfig:

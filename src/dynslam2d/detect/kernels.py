@@ -395,6 +395,10 @@ def measure_batch(det: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np
             rl = rel[j, k, 0]
             rh = rel[j, k, 1]
             size_k = max(sz[k], ext_k)
+            if has_sizes[r] and rl != rh:
+                # one real bound: anchor on it with the track's own size; a view that grew past that size
+                # re-anchors the track (Tracker._update_track), it is no motion (docs/tracking.md)
+                size_k = sz[k]
             obs[k] = True
             size_kind[r, k] = 1
             if rl and rh:

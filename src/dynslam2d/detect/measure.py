@@ -53,6 +53,9 @@ class Detection:
         n_points: number of points.
         free_fraction: fraction of the points lying where an earlier scan saw through (free space,
             :mod:`dynslam2d.detect.freespace`; set by the tracker, 0 when unknown).
+        map_structure, map_free, map_unknown: fractions of the points on long-occupied / observed-free /
+            never observed cells of the SLAM map
+        person: a merged pair of legs (tracker, ``fit.person_merge``): measured at the middle of the legs (:mod:`dynslam2d.detect.mapevidence`; set by the tracker, 0 without a map).
     """
 
     beams: np.ndarray
@@ -66,6 +69,10 @@ class Detection:
     circle: np.ndarray
     n_points: int
     free_fraction: float = 0.0
+    map_structure: float = 0.0
+    map_free: float = 0.0
+    map_unknown: float = 0.0
+    person: bool = False
 
     @property
     def extent(self) -> np.ndarray:
@@ -272,6 +279,8 @@ def measure(det: Detection, sizes: np.ndarray | None, radius: float | None, cfg:
     for k, ext_k in ((0, ext0), (1, ext1)):
         rl, rh = bool(rel[k, 0]), bool(rel[k, 1])
         size_k = max(float(sz[k]), ext_k)
+        if sizes is not None and rel[k, 0] != rel[k, 1]:
+            size_k = float(sz[k])  # anchored on the one real bound with the track's size (kernels.measure_batch)
         if rl and rh:
             uv[k] = 0.5 * (lo[k] + hi[k])
             var[k] = sp2

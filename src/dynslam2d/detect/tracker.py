@@ -32,6 +32,7 @@ free-space and fragment tests); only the per-track bookkeeping stays in Python (
 from __future__ import annotations
 
 import bisect
+from collections import deque
 import math
 from dataclasses import asdict, dataclass, field
 
@@ -49,6 +50,7 @@ from dynslam2d.detect.measure import (
     Measurement,
 )
 from dynslam2d.detect.freespace import FreeSpaceMemory
+from dynslam2d.detect.mapevidence import MapView, map_evidence
 from dynslam2d.detect.kernels import (
     classify_batch,
     fit_params,
@@ -90,6 +92,8 @@ class TrackerStats:
     deleted_tentative: int = 0
     rejected_updates: int = 0
     merged_fragments: int = 0
+    merged_leg_pairs: int = 0
+    accel_bounded: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
@@ -119,6 +123,17 @@ class _Track:
     has_heading: bool = False
     size_lb: np.ndarray = field(default_factory=lambda: np.zeros(2))  # largest partial views per axis, m
     free: list[float] = field(default_factory=list)
+    mstruct: list[float] = field(default_factory=list)  # map evidence per update (mapevidence.py)
+    mfree: list[float] = field(default_factory=list)
+    munknown: list[float] = field(default_factory=list)
+    person: bool = False  # the last detection was a merged pair of legs
+    person_streak: int = 0  # consecutive updates with a merged pair of legs
+    rode: bool = False  # judged riding with the laser (its body) at the last check
+    was_in_m: bool = False  # has been in M before (seen moving): the map's word is not needed again
+    vac: list[float] = field(default_factory=list)  # vacated fraction per update (this scan sees through old points)
+    laser_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the laser frame per update
+    map_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the map frame per update
+    map_t: list[float] = field(default_factory=list)  # stamps of map_xy, s
     past: list[tuple[float, np.ndarray]] = field(default_factory=list)
     slow_since: float | None = None
     probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
@@ -157,6 +172,12 @@ class Tracker:
         tc = self.config.tracker
         self._free = FreeSpaceMemory(tc.free_ref_ages, tc.free_margin) if tc.free_space_check else None
         self._cur_ref = None
+        self._map: MapView | None = None  # the SLAM map given with the current scan (read only)
+        self._pose: Pose2D | None = None
+        self._pose_hist: deque = deque()  # (stamp, x, y, θ) of the last still_time seconds
+        self._laser_still = False
+        self._dt = 0.0
+        self._body_near: np.ndarray | None = None
         self._fit_p = fit_params(self.config.fit)
         self._trig_key: tuple | None = None
         self._trig: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
@@ -178,9 +199,28 @@ class Tracker:
     def n_tracks(self) -> int:
         return len(self._tracks)
 
-    def update(self, scan: Scan, pose: Pose2D) -> list[Track]:
-        """Process one scan with the laser pose of the same scan (map frame); return the live tracks."""
+    def update(self, scan: Scan, pose: Pose2D, map_view: MapView | None = None,
+               body_beams: np.ndarray | None = None) -> list[Track]:
+        """Process one scan with the laser pose of the same scan (map frame); return the live tracks.
+
+        ``map_view``: the SLAM map built from earlier scans (finest level, read only); with it and
+        ``tracker.map_evidence`` the set M also needs the map's agreement (docs/tracking.md).
+        ``body_beams``: (beams,) bool, the beams found to look at the robot's own body
+        (:class:`dynslam2d.detect.body.BodyFilter`); given, only tracks on beams within
+        ``tracker.ride_beam_window`` of them can be taken as riding with the robot (a car or a person
+        keeping pace elsewhere is not the body). None: every near track can."""
         st = self.stats
+        self._body_near = None
+        if body_beams is not None and body_beams.shape[0] == scan.n_beams:
+            w = self.config.tracker.ride_beam_window
+            near = body_beams.astype(bool).copy()
+            for d in range(1, w + 1):
+                near[d:] |= body_beams[:-d]
+                near[:-d] |= body_beams[d:]
+            self._body_near = near
+        self._map = map_view if self.config.tracker.map_evidence else None
+        self._pose = pose
+        self._laser_still = self._still(float(scan.stamp), pose)
         st.scans += 1
         t = float(scan.stamp)
         if pose is None or not pose.is_finite():
@@ -198,6 +238,7 @@ class Tracker:
                 st.pose_jumps += 1
                 self.reset()
         self._last_stamp, self._last_pose = t, pose
+        self._dt = dt
         self._predict(dt)
         for k in self._tracks:
             if k.has_heading and k.kind == KIND_RECT:
@@ -360,6 +401,20 @@ class Tracker:
             for det, ff in zip(dets, frac.tolist()):
                 det.free_fraction = ff
             self._free.add(scan, pose, valid, self._cur_ref)
+        if self._map is not None:
+            tc = cfg.tracker
+            mstruct, mfree, munk = map_evidence(pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
+                                                tc.map_free_radius)
+            fs = segment_means(mstruct.astype(np.float64), offsets)[idx]
+            ff = segment_means(mfree.astype(np.float64), offsets)[idx]
+            fu = segment_means(munk.astype(np.float64), offsets)[idx]
+            for det, a, b, u in zip(dets, fs.tolist(), ff.tolist(), fu.tolist()):
+                det.map_structure = a
+                det.map_free = b
+                det.map_unknown = u
+        if cfg.fit.person_merge and len(dets) > 1:
+            dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
+                                                                                 npts, px, py)
         st.detections += len(dets)
         self.last_detections = dets
         if dets:
@@ -369,6 +424,72 @@ class Tracker:
             self._default = self._measure_rows(np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool),
                                                np.full(m, -1.0), np.zeros(m))
         return dets
+
+    def _merge_legs(self, dets: list[Detection], kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray,
+                    rel: np.ndarray, starts: np.ndarray, npts: np.ndarray, px: np.ndarray, py: np.ndarray) -> tuple:
+        """People (datmo.md §7: leg_tracker pairs legs into people): two leg-sized detections (both sides
+        ≤ ``fit.leg_max_extent``) whose centres lie within ``fit.leg_pair_distance`` become one person
+        detection, measured at the middle of the two legs with the point model. A leg swinging forward while
+        the other stands does not move the person's centre by a full stride, so its speed does not jump.
+        Returns the detection list and the per-detection batch arrays, merged pairs appended at the end."""
+        fc = self.config.fit
+        small = []
+        for j, d in enumerate(dets):
+            if d.n_points >= 2 and float(max(d.hi[0] - d.lo[0], d.hi[1] - d.lo[1])) <= fc.leg_max_extent:
+                small.append(j)
+        if len(small) < 2:
+            return dets, kinds, fits, lohi, rel, starts, npts, px, py
+        cen = np.array([dets[j].centroid for j in small])
+        d2 = np.hypot(cen[:, None, 0] - cen[None, :, 0], cen[:, None, 1] - cen[None, :, 1])
+        np.fill_diagonal(d2, np.inf)
+        pairs: list[tuple[int, int]] = []
+        used: set[int] = set()
+        for flat in np.argsort(d2, axis=None).tolist():
+            a, b = divmod(flat, len(small))
+            if d2[a, b] > fc.leg_pair_distance:
+                break
+            if a in used or b in used or a > b:
+                continue
+            used.update((a, b))
+            pairs.append((small[a], small[b]))
+        if not pairs:
+            return dets, kinds, fits, lohi, rel, starts, npts, px, py
+        drop = {j for pr in pairs for j in pr}
+        keep = [j for j in range(len(dets)) if j not in drop]
+        new_dets = [dets[j] for j in keep]
+        ext_px, ext_py, new_rows = [px], [py], []
+        n0 = px.shape[0]
+        for a, b in pairs:
+            da, db = dets[a], dets[b]
+            pts = np.vstack((da.points, db.points))
+            mid = 0.5 * (da.centroid + db.centroid)
+            lo, hi = pts.min(axis=0), pts.max(axis=0)
+            na, nb = da.n_points, db.n_points
+            det = Detection(np.concatenate((da.beams, db.beams)), pts, mid, KIND_POINT, 0.0, lo, hi,
+                            np.zeros((2, 2), dtype=bool), np.array([mid[0], mid[1], 0.0]), na + nb,
+                            (na * da.free_fraction + nb * db.free_fraction) / (na + nb),
+                            (na * da.map_structure + nb * db.map_structure) / (na + nb),
+                            (na * da.map_free + nb * db.map_free) / (na + nb),
+                            (na * da.map_unknown + nb * db.map_unknown) / (na + nb))
+            det.person = True
+            new_dets.append(det)
+            row = np.zeros(fits.shape[1])
+            row[6:8] = mid
+            row[10:12] = mid
+            new_rows.append((row, np.array([lo[0], lo[1], hi[0], hi[1]]), n0, na + nb))
+            ext_px.append(pts[:, 0])
+            ext_py.append(pts[:, 1])
+            n0 += na + nb
+        self.stats.merged_leg_pairs += len(pairs)
+        ki = np.array(keep, dtype=np.int64)
+        m = len(pairs)
+        kinds = np.concatenate((kinds[ki], np.zeros(m, dtype=kinds.dtype)))
+        fits = np.vstack((fits[ki], np.array([r[0] for r in new_rows])))
+        lohi = np.vstack((lohi[ki], np.array([r[1] for r in new_rows])))
+        rel = np.concatenate((rel[ki], np.zeros((m, 2, 2), dtype=rel.dtype)))
+        starts = np.concatenate((starts[ki], np.array([r[2] for r in new_rows], dtype=starts.dtype)))
+        npts = np.concatenate((npts[ki], np.array([r[3] for r in new_rows], dtype=npts.dtype)))
+        return new_dets, kinds, fits, lohi, rel, starts, npts, np.concatenate(ext_px), np.concatenate(ext_py)
 
     def _measure_rows(self, det: np.ndarray, sizes: np.ndarray, has_sizes: np.ndarray, radius: np.ndarray,
                       size_sigma: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -391,6 +512,16 @@ class Tracker:
         # (a side the detection "measured" too short, e.g. a grazing side, must not break the association)
         d2, near, ok = gate_costs(Xs, Ps, reach, rect_trk, theta_box, tsize, self._default[0], self._default[1],
                                   float(tc.gate_distance), float(tc.gate_chi2), *self._batch, self._fit_p)
+        # a tracked object does not double its size from one scan to the next: a person track coasting
+        # past a wall must not take the wall's cluster (it would carry M onto the wall)
+        b = self._batch
+        det_ext = np.maximum(b[2][:, 2] - b[2][:, 0], b[2][:, 3] - b[2][:, 1])
+        # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
+        # later, a tracked object may touch another for a scan)
+        known = np.array([k.misses > 0 and (bool(k.size_known.all()) or k.kind != KIND_RECT) for k in tracks])
+        grow_ok = (det_ext[None, :] <= tc.max_size_jump_ratio * tsize.max(axis=1)[:, None] + tc.max_size_jump) | \
+            ~known[:, None]
+        ok = ok & grow_ok
         if not ok.any():
             return []
         cost = np.where(ok, d2, _BIG)
@@ -441,6 +572,7 @@ class Tracker:
         Xs, Ps = self._stack()
         sel = np.array([ti for ti, _ in pairs], dtype=np.int64)
         Xn, Pn, ok = kalman_update_batch(Xs[sel], Ps[sel], H, zm, Rm)
+        self._bound_acceleration(Xs[sel], Xn, [tracks[ti] for ti, _ in pairs])
         self._stacked = None  # the tracks change below
         out = ok.tolist()
         for r, (ti, di) in enumerate(pairs):
@@ -449,6 +581,25 @@ class Tracker:
                 self._update_track(k, dets[di], t, vac.get(k.id, 0.0), Xn[r], Pn[r], size_obs[r].tolist(),
                                    size_kind[r].tolist(), swaps[r])
         return out
+
+    def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track]) -> None:
+        """Physical acceleration bound (in place on ``X_new``): once a track's velocity is established
+        (``accel_bound_after`` updates), one update may change it by at most ``max_accel``·dt — speeds no
+        longer jump from scan to scan with the shape of a partial view or a leg swinging."""
+        tc = self.config.tracker
+        if tc.max_accel is None or self._dt <= 0.0:
+            return
+        lim = tc.max_accel * self._dt
+        for r, k in enumerate(tracks):
+            if k.hits < tc.accel_bound_after:
+                continue
+            dvx = X_new[r, 2] - X_prior[r, 2]
+            dvy = X_new[r, 3] - X_prior[r, 3]
+            d = math.hypot(dvx, dvy)
+            if d > lim:
+                X_new[r, 2] = X_prior[r, 2] + dvx * lim / d
+                X_new[r, 3] = X_prior[r, 3] + dvy * lim / d
+                self.stats.accel_bounded += 1
 
     def _update_track(self, k: _Track, det: Detection, t: float, vacated: float, x_new: np.ndarray,
                       P_new: np.ndarray, size_obs: list[float], size_kind: list[int], swap: bool) -> None:
@@ -482,6 +633,16 @@ class Tracker:
                     elif kind == SIZE_LOWER:
                         k.size_lb[ta] = max(k.size_lb[ta], obs)
                         if obs > k.size[ta]:
+                            # a partial view grew past the size: the box grows away from its one real
+                            # bound, its centre moves with it, its velocity does not (item 2, docs/tracking.md)
+                            grow = obs - k.size[ta]
+                            lo_real, hi_real = bool(det.rel[a, 0]), bool(det.rel[a, 1])
+                            if lo_real != hi_real:
+                                sgn = 0.5 * grow if lo_real else -0.5 * grow
+                                th = det.theta + a * _HALF_PI
+                                k.x = k.x.copy()
+                                k.x[0] += sgn * math.cos(th)
+                                k.x[1] += sgn * math.sin(th)
                             k.size[ta] = obs
         elif det.kind == KIND_CIRCLE:
             r = float(det.circle[2])
@@ -493,17 +654,50 @@ class Tracker:
             # re-acquired after a gap: the free-space evidence must be rebuilt from this object
             k.past.clear()
             k.free.clear()
+            k.mstruct.clear()
+            k.mfree.clear()
+            k.munknown.clear()
+            k.vac.clear()
+            k.laser_xy.clear()
+            k.map_xy.clear()
+            k.map_t.clear()
             k.fast = 0
             k.probation = k.in_m
         k.kind = det.kind
+        fc = cfg.fit
+        person = det.person or (det.kind == KIND_CIRCLE and fc.person_min_radius <= float(det.circle[2])
+                                <= fc.person_max_radius)
+        k.person = person
+        k.person_streak = k.person_streak + 1 if person else 0
         k.hits += 1
         k.misses = 0
         k.last_hit = t
         k.history.append(True)
         k.beams = det.beams
         k.free.append(max(det.free_fraction, vacated))
+        k.vac.append(vacated)
         if len(k.free) > tc.sustain_updates:
             del k.free[0]
+            del k.vac[0]
+        p = self._pose
+        if p is not None:
+            dx, dy = float(k.x[0]) - p.x, float(k.x[1]) - p.y
+            c, s = math.cos(p.theta), math.sin(p.theta)
+            k.laser_xy.append((c * dx + s * dy, -s * dx + c * dy))
+            k.map_xy.append((float(k.x[0]), float(k.x[1])))
+            k.map_t.append(t)
+            while len(k.laser_xy) > tc.sustain_updates and t - k.map_t[0] > tc.ride_time:
+                del k.laser_xy[0]
+                del k.map_xy[0]
+                del k.map_t[0]
+        if self._map is not None:
+            k.mstruct.append(det.map_structure)
+            k.mfree.append(det.map_free)
+            k.munknown.append(det.map_unknown)
+            if len(k.mstruct) > tc.sustain_updates:
+                del k.mstruct[0]
+                del k.mfree[0]
+                del k.munknown[0]
         if self._free is not None:
             k.past.append((t, det.points))
             while k.past and t - k.past[0][0] > self._free.max_age:
@@ -597,7 +791,9 @@ class Tracker:
                    birth_xy=meas.z.copy(), theta_box=det.theta, size=np.asarray(size, dtype=np.float64),
                    size_known=np.asarray(known, dtype=bool), radius=float(det.circle[2]) if det.kind == KIND_CIRCLE
                    else 0.0, kind=det.kind, beams=det.beams, has_heading=det.kind == KIND_RECT,
-                   free=[det.free_fraction], past=[(t, det.points)] if self._free is not None else [])
+                   free=[det.free_fraction], mstruct=[det.map_structure] if self._map is not None else [],
+                   mfree=[det.map_free] if self._map is not None else [],
+                   munknown=[det.map_unknown] if self._map is not None else [], past=[(t, det.points)] if self._free is not None else [])
         k.p_finite = bool(np.isfinite(P).all())
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
@@ -670,6 +866,35 @@ class Tracker:
                 k.reason = ("left M: after a gap the detections show no motion into free space "
                             "(a different, static object)")
                 return
+        if self._rides_with_laser(k):
+            if k.in_m:
+                k.in_m = False
+            k.fast = 0
+            k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
+            return
+        # a track seen moving before re-enters M on the kinematic test: where it paused, the map wrote it
+        use_map = self._map is not None and len(k.mstruct) > 0 and not k.was_in_m
+        npu = tc.person_sustain_updates
+        fast_person = k.person_streak >= npu and (
+            not use_map or sum(k.mfree[-npu:]) / len(k.mfree[-npu:]) >= tc.person_map_free_min)
+        need = tc.person_sustain_updates if fast_person else tc.sustain_updates
+        have_map = self._map is not None and len(k.mstruct) > 0
+        if k.in_m and have_map and len(k.mstruct) >= tc.sustain_updates and \
+                sum(k.mstruct) / len(k.mstruct) >= tc.map_structure_exit:
+            k.in_m = False
+            k.fast = 0
+            k.reason = (f"left M: {sum(k.mstruct) / len(k.mstruct):.2f} of its points on long-occupied map cells "
+                        "(structure)")
+            return
+        if k.in_m and have_map and k.slow_since is not None and t - k.slow_since >= tc.map_structure_stop_time \
+                and len(k.mstruct) >= 2 and \
+                0.5 * (k.mstruct[-1] + k.mstruct[-2]) >= tc.map_structure_stop:
+            # a mover that stops where the map has long-standing structure has merged with it (a person
+            # reaching a wall): hysteresis would carry M onto the wall
+            k.in_m = False
+            k.fast = 0
+            k.reason = "left M: slowed down on long-occupied map cells (merged with structure)"
+            return
         if k.in_m:
             slow_for = 0.0 if k.slow_since is None else t - k.slow_since
             if k.slow_since is not None and slow_for >= tc.m_exit_time:
@@ -687,17 +912,88 @@ class Tracker:
             k.reason = f"not in M: speed {speed:.2f} m/s ≤ v_min {tc.v_min:.2f}"
         elif sig >= tc.max_speed_sigma:
             k.reason = f"not in M: velocity uncertain (σ {sig:.2f} m/s)"
-        elif k.fast < tc.sustain_updates:
-            k.reason = f"not in M: speed > v_min for {k.fast}/{tc.sustain_updates} updates"
+        elif k.fast < need:
+            k.reason = f"not in M: speed > v_min for {k.fast}/{need} updates"
+        elif (net := self._net_speed(k, need)) is not None and net < tc.net_speed_ratio * tc.v_min:
+            k.reason = (f"not in M: net speed over the last {need} updates {net:.2f} m/s < "
+                        f"{tc.net_speed_ratio * tc.v_min:.2f} (jitter, not motion)")
         elif disp < tc.min_displacement:
             k.reason = f"not in M: moved {disp:.2f} m < {tc.min_displacement:.2f} m since birth"
         elif self._free is not None and (not k.free or sum(k.free) / len(k.free) < tc.free_min_fraction):
             k.reason = (f"not in M: points on free space {sum(k.free) / max(len(k.free), 1):.2f} < "
                         f"{tc.free_min_fraction:.2f} (static structure)")
+        elif use_map and sum(k.mfree) / len(k.mfree) < tc.map_free_min and not (
+                self._laser_still and sum(k.munknown) / len(k.munknown) >= 1.0 - tc.map_free_min):
+            k.reason = (f"not in M: points in observed-free map cells {sum(k.mfree) / len(k.mfree):.2f} < "
+                        f"{tc.map_free_min:.2f} (no map evidence of motion)")
+        elif use_map and sum(k.mstruct) / len(k.mstruct) > tc.map_structure_max:
+            k.reason = (f"not in M: points on long-occupied map cells {sum(k.mstruct) / len(k.mstruct):.2f} > "
+                        f"{tc.map_structure_max:.2f} (structure)")
         else:
             k.in_m = True
+            k.was_in_m = True
             k.reason = (f"in M: speed {speed:.2f} m/s > v_min for {k.fast} updates, moved {disp:.2f} m "
                         "since birth")
+
+    def _still(self, t: float, pose: Pose2D | None) -> bool:
+        """The laser has stayed within ``still_distance`` / ``still_angle`` of its pose over the last
+        ``still_time`` seconds (then walls cannot slide into view, and a map that a motionless robot does
+        not update leaves the places people walk into unknown: unknown counts like free)."""
+        tc = self.config.tracker
+        if pose is None or not pose.is_finite():
+            return False
+        h = self._pose_hist
+        h.append((t, pose.x, pose.y, pose.theta))
+        while len(h) > 2 and t - h[1][0] >= tc.still_time:
+            h.popleft()
+        if t - h[0][0] < tc.still_time:
+            return False
+        return all(math.hypot(x - pose.x, y - pose.y) <= tc.still_distance
+                   and abs(float(wrap_angle(th - pose.theta))) <= tc.still_angle for _, x, y, th in h)
+
+    @staticmethod
+    def _net_speed(k: _Track, n: int) -> float | None:
+        """Net displacement of the track's centre over its last ``n`` updates divided by their time span, m/s
+        (None with fewer updates): pose jitter and association noise give a speed but no net motion."""
+        if len(k.map_xy) < max(n, 2):
+            return None
+        dt = k.map_t[-1] - k.map_t[-n]
+        if dt <= 0.0:
+            return None
+        (x0, y0), (x1, y1) = k.map_xy[-n], k.map_xy[-1]
+        return math.hypot(x1 - x0, y1 - y0) / dt
+
+    def _rides_with_laser(self, k: _Track) -> bool:
+        """The track stays put in the LASER frame (spread below ``ride_tolerance``) within
+        ``ride_max_range`` of the laser while its map-frame centre moves more than that and more than 4×
+        the spread, over its updates of the last ``ride_time`` seconds (at least ``ride_updates`` of them,
+        spanning at least half of it): it moves with the robot (its body)."""
+        tc = self.config.tracker
+        if len(k.map_t) < tc.ride_updates:
+            return False
+        if self._body_near is not None and (k.beams.shape[0] == 0 or self._body_near[k.beams].mean() < 0.5):
+            k.rode = False
+            return False  # not where the robot's body was found
+        lx_last, ly_last = k.laser_xy[-1]
+        if lx_last * lx_last + ly_last * ly_last > tc.ride_max_range * tc.ride_max_range:
+            k.rode = False
+            return False  # far from the laser (most tracks): no arrays built
+        t_end = k.map_t[-1]
+        n = sum(1 for q in k.map_t if t_end - q <= tc.ride_time)
+        if n < tc.ride_updates or t_end - k.map_t[-n] < 0.5 * tc.ride_time:
+            return False
+        lx = np.array(k.laser_xy[-n:])
+        if float(np.hypot(lx[:, 0], lx[:, 1]).max()) > tc.ride_max_range:
+            return False
+        spread = float(np.hypot(*(lx - lx.mean(axis=0)).T).max())
+        mx = np.array(k.map_xy[-n:])
+        moved = float(np.hypot(*(mx[-1] - mx[0])))
+        # with a motionless laser the two frames agree: only motion far beyond the laser-frame spread rides;
+        # once found riding, a track keeps riding until its laser-frame spread clearly exceeds the tolerance
+        # (a circle fit replacing a rectangle shifts the centre of a body part by a few cm)
+        tol = 3.0 * tc.ride_tolerance if k.rode else tc.ride_tolerance
+        k.rode = spread < tol and (k.rode or moved > max(tc.ride_tolerance, 4.0 * spread))
+        return k.rode
 
     # ------------------------------------------------------------------ output
     def _report(self, t: float, updated: set[int]) -> list[Track]:

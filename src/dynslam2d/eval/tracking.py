@@ -128,12 +128,15 @@ def datmo_config() -> DetectConfig:
     Differences from the defaults, and why: ``segment.min_points = 2`` and ``fit.point_max_points = 3``
     (at 1° a car 3–4 m away returns 2–3 beams; datmo also keeps 2-point clusters, datmo.md §1.1);
     ``tracker.aspect_prior = 0.4`` (the cars move along their long axis and are seen for long
-    stretches only from behind or in front; 0.4 ≈ width / length of their side views in the scans).
+    stretches only from behind or in front; 0.4 ≈ width / length of their side views in the scans);
+    ``fit.person_merge = False`` (no people: a car's two visible sides, split into two clusters of
+    leg size, would be merged as a pair of legs).
     """
     cfg = DetectConfig()
     cfg.segment.min_points = 2
     cfg.fit.point_max_points = 3
     cfg.tracker.aspect_prior = 0.4
+    cfg.fit.person_merge = False
     return cfg
 
 

@@ -60,7 +60,6 @@ increases. Each such fallback or repair adds a string to
 
 from __future__ import annotations
 
-import dataclasses
 import gzip
 import math
 import os
@@ -503,9 +502,7 @@ class CarmenSource:
         n_skipped = 0
         stats = _FlaserStats()
         beam_counts: set[int] = set()
-        kind_of: list[str] = []
         any_text = False
-        last_line_no_newline = 0
         for lineno, line, newline in self._lines():
             fields = line.split()
             if not fields:

@@ -289,7 +289,24 @@ class OdometryInput:
         return self.track is None and self.imu is None and self.laser_poses is None
 
 
-class OdometrySource:
+class SourceWrapper:
+    """A scan source that wraps another: same ``meta`` and length; every other attribute
+    (``ground_truth`` of a simulated source, ``path`` of a bag, …) is the inner source's."""
+
+    def __init__(self, inner: ScanSource) -> None:
+        self.inner = inner
+        self.meta: SourceMeta = inner.meta
+
+    def __len__(self) -> int:
+        return len(self.inner)
+
+    def __getattr__(self, name: str) -> object:
+        if name == "inner":
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
+
+class OdometrySource(SourceWrapper):
     """Wraps a scan source; yields its scans with ``odom`` and ``yaw_rate`` attached.
 
     ``meta`` is the inner source's, with ``meta.odometry`` set to the input's description
@@ -304,9 +321,8 @@ class OdometrySource:
     """
 
     def __init__(self, inner: ScanSource, odometry: OdometryInput) -> None:
-        self.inner = inner
+        super().__init__(inner)
         self.odometry = odometry
-        self.meta: SourceMeta = inner.meta
         self.meta.odometry = odometry.description
         self.stats: dict[str, Any] = {}
         warnings = self.meta.extra.setdefault("warnings", [])
@@ -331,15 +347,6 @@ class OdometrySource:
             self.stats["span"] = list(o.track.span)
             self.stats["samples"] = len(o.track)
         self.meta.extra["odometry"] = self.stats
-
-    def __len__(self) -> int:
-        return len(self.inner)
-
-    def __getattr__(self, name: str) -> object:
-        """Everything else (``ground_truth`` of a simulated source, ``path``, …) is the inner source's."""
-        if name == "inner":
-            raise AttributeError(name)
-        return getattr(self.inner, name)
 
     def __iter__(self) -> Iterator[Scan]:
         self._reset_stats()

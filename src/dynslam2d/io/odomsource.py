@@ -29,8 +29,8 @@ from typing import Iterator
 import numpy as np
 
 from dynslam2d.errors import DynSlamError
-from dynslam2d.io.odometry import OdometryInput, OdometrySource, OdometryTrack
-from dynslam2d.types import Pose2D, Scan, ScanSource, SourceMeta, wrap_angle
+from dynslam2d.io.odometry import OdometryInput, OdometrySource, OdometryTrack, SourceWrapper
+from dynslam2d.types import Pose2D, Scan, ScanSource, wrap_angle
 
 __all__ = ["ODOM_MODES", "attach_odometry", "carmen_odometry"]
 
@@ -128,25 +128,15 @@ def carmen_odometry(source: object, odom: str = "auto", imu: str = "auto",
     return out
 
 
-class _StripOdometry:
+class _StripOdometry(SourceWrapper):
     """A simulated source with its odometry and/or IMU removed (``--odom none`` / ``--imu none``)."""
 
     def __init__(self, inner: ScanSource, keep_odom: bool, keep_imu: bool) -> None:
-        self.inner = inner
+        super().__init__(inner)
         self.keep_odom, self.keep_imu = keep_odom, keep_imu
-        self.meta: SourceMeta = inner.meta
         if not keep_odom:
             self.meta.odometry = "sim IMU" if keep_imu else None
             self.meta.extra.pop("odometry", None)
-
-    def __len__(self) -> int:
-        return len(self.inner)
-
-    def __getattr__(self, name: str) -> object:
-        """Everything else (``ground_truth`` of a simulated source, ``path``, …) is the inner source's."""
-        if name == "inner":
-            raise AttributeError(name)
-        return getattr(self.inner, name)
 
     def __iter__(self) -> Iterator[Scan]:
         for scan in self.inner:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import os
 import select
-import shutil
 import stat
 import tempfile
 import time
@@ -29,6 +28,7 @@ _ROS1_MAGIC = b"#ROSBAG V2.0"
 _MCAP_MAGIC = b"\x89MCAP"
 _GZIP_MAGIC = b"\x1f\x8b"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
+_ZIP_MAGIC = b"PK\x03\x04"  # a zip archive holding one bag (io/zipbag.py)
 _CARMEN_RECORDS = (b"FLASER", b"ROBOTLASER1", b"RLASER", b"ODOM", b"PARAM", b"VERTEX2", b"NEFF")
 
 #: How long to wait for the first byte from a pipe / FIFO before giving up, s.
@@ -116,7 +116,8 @@ def _writer_gone(fd: int) -> bool:
 
 
 def sniff_format(path: str | os.PathLike[str]) -> str:
-    """Name the format of ``path``: "sim", "ros2-bag", "ros1-bag", "mcap" or "carmen".
+    """Name the format of ``path``: "sim", "ros2-bag", "ros1-bag", "mcap", "carmen" or "zip"
+    (an archive holding one bag, see :mod:`dynslam2d.io.zipbag`).
 
     Decided by content (magic bytes, a bag folder's metadata.yaml), not by the file
     name alone. Raises DynSlamError for missing paths and unknown content.
@@ -146,13 +147,15 @@ def sniff_format(path: str | os.PathLike[str]) -> str:
         return "ros2-bag"  # a bare .db3 (rosbags reads it with or without metadata.yaml)
     if head.startswith(_GZIP_MAGIC):
         return "carmen"
+    if head.startswith(_ZIP_MAGIC):
+        return "zip"
     for line in head.splitlines():
         word = line.strip().split(b" ", 1)[0]
         if word in _CARMEN_RECORDS:
             return "carmen"
     raise DynSlamError(
         f"{p}: unknown format (expected a ROS 1 .bag, a ROS 2 bag folder, an .mcap file, "
-        f"a CARMEN log, or sim:<scenario>)"
+        f"a CARMEN log, a .zip holding one bag, or sim:<scenario>)"
     )
 
 
@@ -214,7 +217,9 @@ def open_source(
 
     Args:
         path: a ROS 1 ``.bag``, a ROS 2 bag folder (sqlite3 or MCAP), a bare ``.mcap``,
-            a CARMEN log (``.clf``/``.log``, optionally gzipped), or ``sim:<scenario>``.
+            a CARMEN log (``.clf``/``.log``, optionally gzipped), a ``.zip`` holding exactly
+            one bag (extracted to a temporary folder, removed with the source), or
+            ``sim:<scenario>``.
         topic: the LaserScan topic (bags with several); ignored for other formats.
         seed, duration: simulator seed and length in s (``sim:`` sources only).
         skip_bad: skip malformed records and non-increasing stamps (counted) instead of
@@ -267,6 +272,10 @@ def _open(
         from dynslam2d.sim import SimSource
 
         inner = SimSource(text[len(SIM_PREFIX) :], seed=seed, duration=duration)
+    elif fmt == "zip":
+        from dynslam2d.io.zipbag import ZipBagSource
+
+        inner = ZipBagSource(text, topic=topic, skip_bad=skip_bad)
     elif fmt == "carmen":
         from dynslam2d.io.carmen import CarmenSource
 

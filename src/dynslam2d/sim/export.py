@@ -21,7 +21,6 @@ import numpy as np
 
 from dynslam2d.io.groundtruth import write_ground_truth_folder
 from dynslam2d.io.odombag import write_scan_bag_with_odometry
-from dynslam2d.io.odometry import compose_mount
 from dynslam2d.io.rosbag import write_scan_bag
 from dynslam2d.io.trajectory import Trajectory, write_tum
 from dynslam2d.sim.overview import plot_overview

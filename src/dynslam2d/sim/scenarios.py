@@ -19,12 +19,28 @@ Registered scenes (``SCENARIOS``):
   shuttles a little.
 - ``crowd`` — a 14×10 m hall, six people (discs, 0.4–0.5 m) on random-waypoint
   walks around a robot driving a rectangular circuit.
+- ``drive`` — a robot driving at ≈1 m/s along a 24 m corridor with door
+  recesses, through a doorway into a room and through a second doorway into
+  another corridor (walls seen at grazing angles, a 270° laser); six people
+  walk past, towards, across and ahead of it at 0.7–2.0 m/s, four stand still
+  the whole time and one stands for 26 s (in view), then starts walking. Walking and
+  standing people are movers (their beams carry their ids); whether a person
+  walks at a scan is in the movers' exact velocities (``movers.csv``), which
+  :mod:`dynslam2d.eval.motionclass` uses to split the removal metrics.
 - ``corridor`` — a 30 m corridor with door recesses and a side room; people
   walking both ways, a cart shuttling, a person wandering in the side room;
   the robot drives along it.
 - ``stop-and-go`` — a box arrives through a doorway and parks; a parked car
   waits, then leaves through the doorway and parks outside; a person walks
   back and forth with long stops at both ends.
+- ``long-corridor`` — a 60 m corridor, 2.4 m wide, seen by a 6 m laser while the
+  robot drives it at 1 m/s: for two stretches of more than 12 m only the two side
+  walls are in range (the scan cannot tell where along the corridor it is); two
+  people walk along it.
+- ``occlusion`` — an office (the paper room) and a 240° laser on a robot yawing in
+  place; a person walks up, stands pressed against the sensor for 1 s (over half
+  the beams blocked or too close) and then pushes through it (5 scans see nothing
+  but the person from inside).
 """
 
 from __future__ import annotations
@@ -39,6 +55,7 @@ import numpy as np
 from dynslam2d.errors import DynSlamError
 from dynslam2d.sim.movers import (
     Circle,
+    Keyframes,
     Mover,
     Rect,
     ping_pong,
@@ -267,6 +284,76 @@ def _build_corridor(seed: int, duration: float) -> Scenario:
                     "a wanderer; robot drives its length", world, movers, robot, _lidar(), duration, seed)
 
 
+# --------------------------------------------------------------------------- drive
+
+#: Corridor A (x 0…24, y ±1.2) with door recesses, a doorway (y ±0.5, 0.15 m thick wall)
+#: into room B (x 24.15…32, y −4…5), a doorway (x 28.9…30.1) into corridor C
+#: (x 28.3…30.7, y 5.15…16). Counter-clockwise.
+_DRIVE_OUTLINE = [
+    (0.0, -1.2), (5.0, -1.2), (5.0, -1.5), (6.0, -1.5), (6.0, -1.2), (12.0, -1.2), (12.0, -1.8),
+    (13.0, -1.8), (13.0, -1.2), (19.0, -1.2), (19.0, -1.5), (20.0, -1.5), (20.0, -1.2), (24.0, -1.2),
+    (24.0, -0.5), (24.15, -0.5), (24.15, -4.0), (32.0, -4.0), (32.0, 5.0), (30.1, 5.0), (30.1, 5.15),
+    (30.7, 5.15), (30.7, 16.0), (28.3, 16.0), (28.3, 5.15), (28.9, 5.15), (28.9, 5.0), (24.15, 5.0),
+    (24.15, 0.5), (24.0, 0.5), (24.0, 1.2), (17.5, 1.2), (17.5, 1.5), (16.5, 1.5), (16.5, 1.2),
+    (13.0, 1.2), (13.0, 1.8), (12.0, 1.8), (12.0, 1.2), (9.0, 1.2), (9.0, 1.5), (8.0, 1.5),
+    (8.0, 1.2), (0.0, 1.2),
+]
+
+#: Radius of a simulated person (a disc at laser height), m.
+_PERSON_RADIUS = 0.22
+
+
+def _stand_then_shuttle(start: tuple[float, float], wait: float, route: list[tuple[float, float]],
+                        speed: float, until: float) -> Keyframes:
+    """Stand at ``start`` for ``wait`` s, then walk ``route`` back and forth at ``speed``
+    m/s without stopping until at least ``until`` s (so it never stands again)."""
+    steps: list[tuple] = [("wait", wait)]
+    t, there = wait, True
+    pts = [start, *route]
+    while t <= until:
+        leg = pts[1:] if there else pts[-2::-1]
+        prev = pts[0] if there else pts[-1]
+        for q in leg:
+            steps.append(("go", q, speed))
+            t += math.dist(prev, q) / speed
+            prev = q
+        there = not there
+    return timeline(start, steps, heading=None)
+
+
+def _build_drive(seed: int, duration: float) -> Scenario:
+    solids = [_solid(25.0, 4.3, 1.2, 0.5), _solid(27.5, 2.5, 0.4, 0.4), _solid(30.55, 9.0, 0.3, 0.3),
+              _solid(28.45, 13.0, 0.3, 0.3)]
+    world = _build_world(_DRIVE_OUTLINE, solids)
+    # ≈1 m/s; 0.8 rad/s turns in place at the waypoints; a slight yaw wobble of the platform
+    robot = waypoint_path([(1.0, -0.2), (23.0, -0.2), (26.0, 0.0), (29.4, 3.0), (29.4, 14.5)], speed=1.0,
+                          loop=False, wobble_amplitude=0.03, wobble_period=2.0)
+    person = Circle(_PERSON_RADIUS)
+    # phases put each walker where it passes the robot at a chosen place (checked in tests:
+    # nobody comes within 0.5 m of the laser)
+    movers = (
+        Mover(1, "walker-oncoming", person, ping_pong([(2.0, 0.6), (23.0, 0.6)], 1.3, heading=None, phase=0.5)),
+        Mover(2, "walker-overtaking", person, ping_pong([(0.5, -0.85), (18.0, -0.85)], 1.9, heading=None,
+                                                        phase=0.83)),
+        Mover(3, "walker-crossing", person, ping_pong([(12.5, -1.45), (12.5, 1.45)], 0.7, heading=None,
+                                                      phase=0.16)),
+        Mover(4, "walker-room-loop", person, ping_pong([(27.0, -3.2), (31.3, -3.2), (31.3, 4.3)], 1.0,
+                                                       heading=None, phase=0.3)),
+        Mover(5, "walker-room-across", person, ping_pong([(26.0, -2.4), (30.3, -2.4)], 1.5, heading=None)),
+        Mover(6, "walker-corridor-c", person, ping_pong([(30.05, 15.5), (30.05, 6.0)], 2.0, heading=None)),
+        Mover(7, "starts-walking", person, _stand_then_shuttle((30.6, -0.8), 26.0, [(27.0, -0.8)], 0.9,
+                                                                duration + 5.0)),
+        Mover(8, "standing-recess", person, timeline((17.0, 1.22), [])),
+        Mover(9, "standing-corridor", person, timeline((21.0, -0.9), [])),
+        Mover(10, "standing-room", person, timeline((26.0, 2.5), [])),
+        Mover(11, "standing-corridor-c", person, timeline((28.6, 11.0), [])),
+    )
+    lidar = _lidar(beams=811, fov=math.radians(270.0), rate_hz=15.0, range_min=0.05, range_max=20.0)
+    return Scenario("drive", "robot at 1 m/s through corridors, doorways and a room; six people walking "
+                    "past/across at 0.7–2 m/s, four standing, one starting to walk", world, movers, robot,
+                    lidar, duration, seed)
+
+
 # --------------------------------------------------------------------------- stop-and-go
 
 _STOPGO_OUTLINE = [
@@ -290,6 +377,59 @@ def _build_stop_and_go(seed: int, duration: float) -> Scenario:
     )
     return Scenario("stop-and-go", "a box arrives and parks, a parked car leaves through the doorway, "
                     "a person walks with long stops", world, movers, robot, _lidar(), duration, seed)
+
+
+# --------------------------------------------------------------------------- long corridor
+
+#: 60 m × 2.4 m corridor: a side room and a door recess near the start, one door recess
+#: half-way, plain walls elsewhere (counter-clockwise).
+_LONG_CORRIDOR_OUTLINE = [
+    (0.0, -1.2), (30.0, -1.2), (30.0, -1.7), (31.2, -1.7), (31.2, -1.2), (60.0, -1.2), (60.0, 1.2),
+    (4.0, 1.2), (4.0, 1.6), (3.0, 1.6), (3.0, 1.2), (2.2, 1.2), (2.2, 3.2), (0.0, 3.2),
+]
+#: Range of the corridor laser, m: a short-range scanner sees only the side walls for
+#: 30 − 4 − 2·6 = 14 m and 60 − 31.2 − 4 − 2·6 ≈ 12.8 m of the drive.
+LONG_CORRIDOR_RANGE = 6.0
+
+
+def _build_long_corridor(seed: int, duration: float) -> Scenario:
+    world = _build_world(_LONG_CORRIDOR_OUTLINE, [_solid(1.0, 2.6, 0.5, 0.5)])
+    robot = waypoint_path([(1.5, -0.4), (56.5, -0.4)], speed=1.0, loop=False, wobble_amplitude=0.03,
+                          wobble_period=4.0)
+    movers = (
+        Mover(1, "person-oncoming", Circle(0.22), ping_pong([(55.0, 0.65), (6.0, 0.65)], 1.3, heading=None)),
+        Mover(2, "person-ahead", Circle(0.22), ping_pong([(14.0, 0.55), (45.0, 0.55)], 0.9, heading=None,
+                                                          phase=0.1)),
+    )
+    lidar = _lidar(range_max=LONG_CORRIDOR_RANGE)
+    return Scenario("long-corridor", "60 m corridor, 6 m laser, robot at 1 m/s: >12 m stretches where only "
+                    "the side walls are in range; two people", world, movers, robot, lidar, duration, seed)
+
+
+# --------------------------------------------------------------------------- occlusion
+
+#: Scenes where a mover touches or passes through the sensor on purpose (the occlusion event);
+#: every other scene keeps movers clear of the robot.
+SENSOR_CONTACT_SCENARIOS = frozenset({"occlusion"})
+#: Where the occlusion robot stands (world frame, m) and the person's radius, m.
+OCCLUSION_ROBOT = (-1.0, 0.0)
+_OCCLUDER_RADIUS = 0.25
+
+
+def _build_occlusion(seed: int, duration: float) -> Scenario:
+    solids = _pilasters() + [_solid(2.0, 2.2, 0.5, 0.5), _solid(-2.2, -2.4, 1.2, 0.6)]
+    world = _build_world(_PAPER_OUTLINE, solids)
+    rx, ry = OCCLUSION_ROBOT
+    robot = oscillating_in_place(rx, ry, 0.0, 0.4, 6.0)
+    r = _OCCLUDER_RADIUS
+    # stands 0.03 m from the sensor (blocks 2·asin(0.25/0.28) ≈ 126° of the 240° fan) for 1 s,
+    # then pushes through it at 2 m/s: the sensor is inside the person for 2r / 2 m/s = 0.25 s
+    person = timeline((3.0, 1.5), [("wait", 6.0), ("go", (rx + r + 0.03, ry), 1.0), ("wait", 1.0),
+                                   ("go", (rx - r - 0.03, ry), 2.0), ("go", (-3.5, -1.2), 1.0)])
+    movers = (Mover(1, "person-through-sensor", Circle(r), person),)
+    lidar = _lidar(fov=math.radians(240.0), beams=720)
+    return Scenario("occlusion", "office, 240° laser on a robot yawing in place; a person stands against "
+                    "the sensor for 1 s and pushes through it", world, movers, robot, lidar, duration, seed)
 
 
 # --------------------------------------------------------------------------- parking
@@ -340,8 +480,13 @@ SCENARIOS: dict[str, ScenarioSpec] = {
        for i, name in enumerate(_PAPER_VARIANTS)},
     "static": ScenarioSpec(_build_static, 5, 40.0, "paper room without movers, robot yawing up to ≈1 rad/s"),
     "crowd": ScenarioSpec(_build_crowd, 6, 60.0, "six people on random walks around a robot on a circuit"),
+    "drive": ScenarioSpec(_build_drive, 11, 45.0, "robot at 1 m/s through corridors and doors; people walking "
+                          "past/across at 0.7–2 m/s, some standing"),
     "corridor": ScenarioSpec(_build_corridor, 7, 60.0, "30 m corridor, walkers, a cart, robot driving along"),
     "stop-and-go": ScenarioSpec(_build_stop_and_go, 8, 60.0, "objects parking and leaving; a person with stops"),
+    "long-corridor": ScenarioSpec(_build_long_corridor, 9, 55.0,
+                                  "60 m corridor, 6 m laser, only side walls in range for >12 m stretches"),
+    "occlusion": ScenarioSpec(_build_occlusion, 10, 16.0, "a person stands against and pushes through the sensor"),
     "parking": ScenarioSpec(_build_parking, 9, 120.0, "vehicles park and leave, people walk then stand, robot loops"),
 }
 

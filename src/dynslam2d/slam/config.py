@@ -231,6 +231,114 @@ class SlamConfig(BaseModel):
         description="Rate of the exponential running average of accepted match scores, dimensionless.",
     )
 
+    # --- motion prior, degeneracy, gating, lost / found ------------------------------
+    use_odometry: bool = Field(
+        True,
+        description="Use the scans' odometry (Scan.odom: the odometry delta between consecutive scans "
+        "seeds the match and is the prior along degenerate directions) and IMU yaw rate (Scan.yaw_rate: "
+        "the rotation prior) when they carry them. False = laser only.",
+    )
+    degeneracy_threshold: float = Field(
+        0.045, ge=0.0, le=1.0,
+        description="A direction of the match Hessian is degenerate (the scan cannot constrain it, e.g. a "
+        "corridor's axis) when its eigenvalue is below this fraction of the largest: translation and "
+        "rotation (scaled by the RMS point range) each with the other marginalized. Dimensionless; "
+        "measured: ≤ 0.037 in a corridor seeing only its side walls, ≥ 0.058 on every MIT CSAIL scan. 0 = never.",
+    )
+    prior_weight: float = Field(
+        1.0, ge=0.0,
+        description="Stiffness of the motion prior along degenerate directions, in units of the largest "
+        "Hessian eigenvalue (the prior holds there; along well-constrained directions the scan "
+        "decides). 0 = no prior.",
+    )
+    motion_prior: bool = Field(
+        True,
+        description="Without odometry, the constant-velocity prediction is the prior along degenerate "
+        "directions (and the IMU yaw rate along rotation). False = degenerate directions follow the scan alone.",
+    )
+    velocity_window: float = Field(
+        0.5, gt=0.0,
+        description="The motion model's velocity is the motion between accepted poses over the last this "
+        "many seconds, s.",
+    )
+    max_linear_accel: float = Field(
+        1.5, gt=0.0,
+        description="Motion model: largest linear acceleration of the robot, m/s². A match that deviates "
+        "from the prediction by more than max_linear_accel·dt·(velocity_window/2 + dt) + gate_distance "
+        "must be backed by enough structure.",
+    )
+    max_angular_accel: float = Field(
+        3.0, gt=0.0,
+        description="Motion model: largest angular acceleration, rad/s² (gate: "
+        "max_angular_accel·dt·(velocity_window/2 + dt) + gate_angle).",
+    )
+    gate_distance: float = Field(
+        0.05, ge=0.0,
+        description="Deviation from the predicted position always allowed (velocity estimate noise), m.",
+    )
+    gate_angle: float = Field(
+        0.05, ge=0.0,
+        description="Deviation from the predicted heading always allowed, rad.",
+    )
+    support_min_points: int = Field(
+        30, ge=0,
+        description="A match is well supported with at least this many endpoints on occupied map cells "
+        "(p > support_probability), count. The datmo car's scans (100–130 returns) confirm 30–60.",
+    )
+    support_min_spread: float = Field(
+        1.0, ge=0.0, le=2.0 * math.pi,
+        description="… whose bearings cover at least this angle (5° bins), rad.",
+    )
+    support_probability: float = Field(
+        0.6, gt=0.5, lt=1.0,
+        description="Interpolated occupancy probability above which an endpoint counts as matched.",
+    )
+    too_close_fraction: float = Field(
+        0.5, ge=0.0, le=1.0,
+        description="A scan whose returns are more than this fraction closer than laser_min_dist (something "
+        "pressed against the sensor) never moves the pose: the pose is predicted, the map not updated.",
+    )
+    min_sector: float = Field(
+        0.6, ge=0.0, le=2.0 * math.pi,
+        description="A scan whose gated returns cover less than this angle (5° bins) never moves the pose, rad.",
+    )
+    lost_after: float = Field(
+        1.0, gt=0.0,
+        description="After this long without a supported match the processor is lost: it predicts, keeps "
+        "the scans out of the map and relocalises with a wide search once structure returns, s.",
+    )
+    relocalise_linear_window: float = Field(
+        2.0, ge=0.0,
+        description="Half-width of the relocalisation search window (translation), m.",
+    )
+    relocalise_angular_window: float = Field(
+        math.pi, ge=0.0, le=math.pi,
+        description="Half-width of the relocalisation search window (rotation), rad.",
+    )
+    relocalise_interval: float = Field(
+        0.3, ge=0.0,
+        description="While lost, a relocalisation search is tried at most once per this interval, s "
+        "(the wide search costs tens of ms).",
+    )
+    relocalise_margin: float = Field(
+        0.08, ge=0.0, le=1.0,
+        description="A relocalisation is accepted only if its correlative score beats the best pose "
+        "farther than 0.5 m / 0.3 rad from it by this much (score units 0 … 1).",
+    )
+    relocalise_min_score: float = Field(
+        0.35, ge=0.0, le=1.0,
+        description="… and its correlative score is at least this (score units 0 … 1).",
+    )
+    low_confidence_share: float = Field(
+        0.05, ge=0.0, le=1.0,
+        description="Runs where more than this share of the scans is matched with low support (or lost), or "
+        "with a stretch longer than low_confidence_stretch, are reported as not trustworthy.",
+    )
+    low_confidence_stretch: float = Field(
+        2.0, gt=0.0,
+        description="Longest tolerated stretch of low-support or lost scans before the warning, s.",
+    )
+
     @model_validator(mode="after")
     def _check(self) -> SlamConfig:
         if self.laser_max_dist <= self.laser_min_dist:

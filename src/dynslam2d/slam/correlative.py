@@ -76,11 +76,13 @@ def _min_abs(lo, hi):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr):  # pragma: no cover - numba
+def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr, excl):  # pragma: no cover - numba
     """Exact best (rotation index, dx, dy, score) over rotations (qx/qy rows) and offsets in [−w, w]².
 
     ``pyr`` (Hmax+1, H, W); ``qx, qy`` (nrot, n) int64 point cells at zero offset; ``dth`` (nrot,)
-    rotation offsets, rad; penalties ``wt_cell2`` per cell², ``wr`` per rad².
+    rotation offsets, rad; penalties ``wt_cell2`` per cell², ``wr`` per rad². ``excl`` (6,) int64
+    (k0, k1, dx0, dx1, dy0, dy1): candidates with k0 ≤ k ≤ k1, dx0 ≤ dx ≤ dx1 and dy0 ≤ dy ≤ dy1
+    are left out (the runner-up search); k0 > k1 leaves nothing out.
     """
     hmax = pyr.shape[0] - 1
     nrot = qx.shape[0]
@@ -142,6 +144,8 @@ def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr):  # pragma: no cover - n
             if sc <= best:
                 continue
             if h == 0:
+                if (excl[0] <= k <= excl[1] and excl[2] <= dx <= excl[3] and excl[4] <= dy <= excl[5]):
+                    continue
                 best = sc
                 bk = k
                 bdx = dx
@@ -183,6 +187,10 @@ def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr):  # pragma: no cover - n
     return bk, bdx, bdy, best
 
 
+#: Exclusion box that leaves nothing out (k0 > k1).
+_NO_EXCL = np.array([1, 0, 0, 0, 0, 0], dtype=np.int64)
+
+
 @dataclass(slots=True)
 class CorrelativeResult:
     """Best pose of a correlative search.
@@ -191,11 +199,16 @@ class CorrelativeResult:
         pose: (3,) world pose (x m, y m, θ rad).
         score: penalised score in [0, 1] (mean smeared hit value of the points).
         n_rotations: rotations searched.
+        runner_up: best penalised score outside ±``runner_up_distance`` / ±``runner_up_angle`` of
+            the best (None unless asked for).
+        runner_up_pose: (3,) world pose of the runner-up, or None.
     """
 
     pose: np.ndarray
     score: float
     n_rotations: int
+    runner_up: float | None = None
+    runner_up_pose: np.ndarray | None = None
 
 
 def correlative_search(
@@ -209,10 +222,14 @@ def correlative_search(
     max_height: int = 4,
     translation_weight: float = 0.05,
     rotation_weight: float = 0.05,
+    runner_up_distance: float | None = None,
+    runner_up_angle: float = 0.3,
 ) -> CorrelativeResult | None:
     """Search ``level`` around ``start_world`` for the best pose of laser-frame points ``pts_m`` (n, 2, m).
 
-    Returns None if the level is empty or there are no points.
+    With ``runner_up_distance`` (m), a second branch-and-bound pass finds the best pose farther
+    than that (or than ``runner_up_angle`` rad) from the best one. Returns None if the level is
+    empty or there are no points.
     """
     if level.empty or pts_m.shape[0] == 0:
         return None
@@ -245,9 +262,18 @@ def correlative_search(
     if c1 <= c0 or r1 <= r0:
         return None
     pyr = _pyramid(_score_table(level.prob[r0:r1, c0:c1]), hmax)
-    k, dx, dy, best = branch_and_bound(
-        pyr, np.ascontiguousarray(qx - c0), np.ascontiguousarray(qy - r0), w, dth,
-        translation_weight * r * r, rotation_weight,
-    )
+    qx0 = np.ascontiguousarray(qx - c0)
+    qy0 = np.ascontiguousarray(qy - r0)
+    k, dx, dy, best = branch_and_bound(pyr, qx0, qy0, w, dth, translation_weight * r * r, rotation_weight, _NO_EXCL)
     pose_map = np.array([mp[0] + dx, mp[1] + dy, th[k]])
-    return CorrelativeResult(level.pose_to_world(pose_map), float(best), int(th.shape[0]))
+    out = CorrelativeResult(level.pose_to_world(pose_map), float(best), int(th.shape[0]))
+    if runner_up_distance is not None:
+        # the best pose outside a neighbourhood of the best: how clearly the best one wins
+        ec = int(math.ceil(runner_up_distance / r))
+        step = angular_window / max(n_half, 1)
+        ek = int(math.ceil(runner_up_angle / step)) if step > 0 else 0
+        excl = np.array([k - ek, k + ek, dx - ec, dx + ec, dy - ec, dy + ec], dtype=np.int64)
+        k2, dx2, dy2, s2 = branch_and_bound(pyr, qx0, qy0, w, dth, translation_weight * r * r, rotation_weight, excl)
+        out.runner_up = float(s2) if s2 > -1e299 else 0.0
+        out.runner_up_pose = level.pose_to_world(np.array([mp[0] + dx2, mp[1] + dy2, th[k2]]))
+    return out

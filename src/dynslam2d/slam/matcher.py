@@ -26,6 +26,8 @@ from dynslam2d.slam.interp import interp_value_grad
 #: it only saves time (the reference always runs all steps).
 _CONVERGED_CELLS = 1e-3
 _CONVERGED_RAD = 1e-5
+#: The all-zero prior information (no prior).
+_ZERO3 = np.zeros((3, 3))
 
 
 @njit(cache=True)
@@ -128,12 +130,28 @@ def _solve3(A, b, out):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans):  # pragma: no cover
+def _prior_cost(x, y, th, prior, lam_p):  # pragma: no cover - numba
+    """(ξ − ξp)ᵀ Λp (ξ − ξp) in the level's cell / rad units."""
+    d0 = x - prior[0]
+    d1 = y - prior[1]
+    d2 = th - prior[2]
+    return (d0 * (lam_p[0, 0] * d0 + lam_p[0, 1] * d1 + lam_p[0, 2] * d2)
+            + d1 * (lam_p[1, 0] * d0 + lam_p[1, 1] * d1 + lam_p[1, 2] * d2)
+            + d2 * (lam_p[2, 0] * d0 + lam_p[2, 1] * d1 + lam_p[2, 2] * d2))
+
+
+@njit(cache=True)
+def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
+                prior, lam_p):  # pragma: no cover
     """Run ``n_iter`` GN/LM steps on one level from map pose ``pose`` (x, y cells, θ rad).
 
     Returns (pose (3,), number of accepted steps). Steps are bounded: |Δθ| ≤ max_rot
     (reference ±0.2 rad clamp), |Δxy| ≤ max_trans cells. With an empty map (H00 or H11 = 0)
     no step is taken (hector_slam.md §2.4).
+
+    ``prior`` (3,) and ``lam_p`` (3, 3) add a prior term ½(ξ−ξp)ᵀΛp(ξ−ξp) to the objective (same
+    units as ``pose``): the normal equations become (H + Λp)Δ = g + Λp(ξp − ξ). An all-zero
+    ``lam_p`` is the plain matcher.
     """
     H = np.zeros((3, 3))
     g = np.zeros(3)
@@ -142,19 +160,38 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     x = pose[0]
     y = pose[1]
     th = pose[2]
+    use_prior = False
+    for a in range(3):
+        for b in range(3):
+            if lam_p[a, b] != 0.0:
+                use_prior = True
+    gp = np.zeros(3)
     cost, _, _ = accumulate(prob, pts, x, y, th, swapped, H, g)
+    if use_prior:
+        cost += _prior_cost(x, y, th, prior, lam_p)
     lam = lam0
     n_acc = 0
     for _ in range(n_iter):
         if H[0, 0] == 0.0 or H[1, 1] == 0.0:
             break
         for a in range(3):
+            gp[a] = g[a]
             for b in range(3):
                 A[a, b] = H[a, b]
+        if use_prior:
+            # prior term in the normal equations (Zhang et al. 2016: the prior constrains the directions
+            # the measurement leaves degenerate; lam_p is zero along the well-constrained ones)
+            r0 = prior[0] - x
+            r1 = prior[1] - y
+            r2 = prior[2] - th
+            for a in range(3):
+                gp[a] += lam_p[a, 0] * r0 + lam_p[a, 1] * r1 + lam_p[a, 2] * r2
+                for b in range(3):
+                    A[a, b] += lam_p[a, b]
         if use_lm:
             for a in range(3):
-                A[a, a] += lam * H[a, a] + 1e-9
-        if not _solve3(A, g, d):
+                A[a, a] += lam * A[a, a] + 1e-9
+        if not _solve3(A, gp, d):
             if use_lm:
                 lam *= 10.0
                 if lam > lam_max:
@@ -175,9 +212,13 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
         nth = th + d[2]
         if use_lm:
             new_cost = cost_at(prob, pts, nx, ny, nth)
+            if use_prior:
+                new_cost += _prior_cost(nx, ny, nth, prior, lam_p)
             if new_cost < cost:
                 x, y, th = nx, ny, nth
                 cost, _, _ = accumulate(prob, pts, x, y, th, swapped, H, g)
+                if use_prior:
+                    cost += _prior_cost(x, y, th, prior, lam_p)
                 lam = max(lam * 0.1, 1e-7)
                 n_acc += 1
                 if nt < _CONVERGED_CELLS and abs(d[2]) < _CONVERGED_RAD:
@@ -189,6 +230,8 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
         else:
             x, y, th = nx, ny, nth
             cost, _, _ = accumulate(prob, pts, x, y, th, swapped, H, g)
+            if use_prior:
+                cost += _prior_cost(x, y, th, prior, lam_p)
             n_acc += 1
     out = np.empty(3)
     out[0] = x
@@ -237,16 +280,21 @@ def match_multires(
     lam_max: float = 1e4,
     max_rot: float = 0.2,
     max_trans_cells: float = 2.0,
+    prior_world: np.ndarray | None = None,
+    prior_info: np.ndarray | None = None,
 ) -> np.ndarray:
     """Coarse-to-fine matching (hector_slam.md §2.5): from the coarsest level down to level 0,
     each level starting at the previous level's result; θ wrapped after each level.
 
     ``pts_m``: (n, 2) points in the laser frame, m. ``start_world``: (x m, y m, θ rad).
+    ``prior_world`` (x m, y m, θ rad) with ``prior_info`` (3, 3, information in world units:
+    1/m², 1/(m·rad), 1/rad²) adds the prior term ½(ξ−ξp)ᵀΛ(ξ−ξp) on every level.
     Returns the world pose (3,).
     """
     pose = np.asarray(start_world, dtype=np.float64).copy()
     if pts_m.shape[0] == 0:
         return pose
+    use_prior = prior_world is not None and prior_info is not None and bool(np.any(prior_info))
     for k in range(len(levels) - 1, -1, -1):
         lv = levels[k]
         if lv.empty:
@@ -255,8 +303,16 @@ def match_multires(
         if n_iter <= 0:
             continue
         mp = lv.pose_to_map(pose)
+        if use_prior:
+            pp = lv.pose_to_map(np.asarray(prior_world, dtype=np.float64))
+            pp[2] = mp[2] + (pp[2] - mp[2] + math.pi) % (2.0 * math.pi) - math.pi  # same branch as θ
+            S = np.diag([lv.resolution, lv.resolution, 1.0])  # cells → m
+            lam_k = S @ np.asarray(prior_info, dtype=np.float64) @ S
+        else:
+            pp, lam_k = mp, _ZERO3
         out, _ = match_level(
-            lv.prob, pts_m / lv.resolution, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells
+            lv.prob, pts_m / lv.resolution, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
+            pp, lam_k,
         )
         if not np.all(np.isfinite(out)):
             return np.full(3, np.nan)
@@ -293,3 +349,189 @@ def covariance_world(hessian: np.ndarray, sigma2: float, resolution: float) -> n
     S = np.diag([resolution, resolution, 1.0])
     C = S @ C @ S
     return 0.5 * (C + C.T)
+
+
+#: Width of the bearing bins of :func:`angular_spread` / :func:`support`, rad (5°).
+SPREAD_BIN = math.radians(5.0)
+_N_BINS = 72
+#: Points evaluated by :func:`support` / :func:`angular_spread` (dense scans are subsampled).
+_SUPPORT_POINTS = 240
+#: Points :func:`angular_spread` looks at (it only has to tell a narrow view from a wide one).
+_SPREAD_POINTS = 120
+
+
+@njit(cache=True)
+def _spread_kernel(pts, use, nb):  # pragma: no cover - numba
+    """Number of the ``nb`` bearing bins holding a point of ``pts`` (rows with ``use``)."""
+    seen = np.zeros(nb, dtype=np.bool_)
+    k = 0
+    two_pi = 2.0 * math.pi
+    for i in range(pts.shape[0]):
+        if not use[i]:
+            continue
+        b = int(math.floor((math.atan2(pts[i, 1], pts[i, 0]) + math.pi) / two_pi * nb)) % nb
+        if not seen[b]:
+            seen[b] = True
+            k += 1
+    return k
+
+
+@njit(cache=True)
+def _support_kernel(prob, pts_m, stride, inv_res, x, y, th, thresh, nb):  # pragma: no cover - numba
+    """Over every ``stride``-th laser-frame point (m): count those whose interpolated probability at
+    map pose (x cells, y cells, θ) exceeds ``thresh``; return (count, bearing bins they occupy)."""
+    c = math.cos(th)
+    s = math.sin(th)
+    seen = np.zeros(nb, dtype=np.bool_)
+    n = 0
+    k = 0
+    two_pi = 2.0 * math.pi
+    for i in range(0, pts_m.shape[0], stride):
+        sx = pts_m[i, 0] * inv_res
+        sy = pts_m[i, 1] * inv_res
+        m, _, _, inside = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, False)
+        if inside and m > thresh:
+            n += 1
+            b = int(math.floor((math.atan2(pts_m[i, 1], pts_m[i, 0]) + math.pi) / two_pi * nb)) % nb
+            if not seen[b]:
+                seen[b] = True
+                k += 1
+    return n, k
+
+
+@njit(cache=True)
+def close_count(ranges, lo, hi, min_dist):  # pragma: no cover - numba
+    """(valid returns, valid returns ≤ ``min_dist``) of a range array; valid = finite, in [lo, hi] (m)."""
+    n = 0
+    k = 0
+    for i in range(ranges.shape[0]):
+        r = ranges[i]
+        if math.isfinite(r) and r >= lo and r <= hi:
+            n += 1
+            if r <= min_dist:
+                k += 1
+    return n, k
+
+
+def support(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, thresh: float) -> tuple[int, float]:
+    """(count, angular spread in rad) of the laser-frame points ``pts_m`` (n, 2, m) that land on cells of
+    ``level`` whose interpolated occupancy probability exceeds ``thresh`` at ``pose_world`` — the points
+    the map confirms, and the angle (5° bins) their bearings cover. (0, 0) on an empty level.
+    Dense scans are evaluated on every k-th point (at most about 240; the count is scaled back by k)."""
+    if level.empty or pts_m.shape[0] == 0:
+        return 0, 0.0
+    stride = max(1, pts_m.shape[0] // _SUPPORT_POINTS)
+    mp = level.pose_to_map(pose_world)
+    n, bins = _support_kernel(level.prob, pts_m, stride, 1.0 / level.resolution, mp[0], mp[1], mp[2], thresh,
+                              _N_BINS)
+    return int(n) * stride, bins * (2.0 * math.pi / _N_BINS)
+
+
+def angular_spread(pts_m: np.ndarray) -> float:
+    """Angular extent covered by the bearings of laser-frame points ``pts_m`` (n, 2), rad: the
+    number of 5° bearing bins holding a point times the bin width (0 … 2π)."""
+    if pts_m.shape[0] == 0:
+        return 0.0
+    sub = pts_m[:: max(1, pts_m.shape[0] // _SPREAD_POINTS)]  # ≥ 1.6 points per 5° bin of a dense full circle
+    return _spread_kernel(sub, np.ones(sub.shape[0], dtype=np.bool_), _N_BINS) * (2.0 * math.pi / _N_BINS)
+
+
+@dataclass(slots=True)
+class Degeneracy:
+    """Degeneracy analysis of a match Hessian (after Zhang, Kaess & Singh 2016, "On degeneracy of
+    optimization-based state estimation problems", ICRA: the eigenvectors of the information
+    matrix with small eigenvalues are the directions the measurement cannot constrain).
+
+    Translation and rotation have different units, so they are analysed separately, each with the
+    other marginalized out (Schur complement): the translational block's eigenvectors give the
+    degenerate translation direction (a corridor's axis); the rotational information, scaled by
+    the RMS point range ρ² (a rotation δθ moves the points by about ρ·δθ), is compared with the
+    largest translational eigenvalue.
+
+    Attributes:
+        ratio: smallest normalized eigenvalue / largest (0 … 1; 0 = a direction the scan cannot
+            see at all): min of the translational ratio and the rotational one.
+        translation_ratio: smallest / largest eigenvalue of the translational Schur complement.
+        rotation_ratio: rotational Schur complement · ρ⁻² / largest translational eigenvalue.
+        axis: (2,) unit vector (map frame) of the weakest translation direction.
+        scale: ρ, m.
+        lam_max: largest translational eigenvalue, 1/m² (probability² per m²).
+        translation_degenerate, rotation_degenerate: below the threshold given.
+    """
+
+    ratio: float
+    translation_ratio: float
+    rotation_ratio: float
+    axis: np.ndarray
+    scale: float
+    lam_max: float
+    translation_degenerate: bool
+    rotation_degenerate: bool
+
+    @property
+    def any(self) -> bool:
+        return self.translation_degenerate or self.rotation_degenerate
+
+    def prior_information(self, weight: float, axes: np.ndarray | None = None) -> np.ndarray:
+        """(3, 3) prior information in world units (1/m², 1/(m·rad), 1/rad²) that acts only along
+        the degenerate directions, with stiffness ``weight`` × the largest translational eigenvalue.
+
+        ``axes`` (3,) bool: the pose components the prior knows (x, y, θ); e.g. only θ for an IMU.
+        """
+        lam = weight * self.lam_max
+        info = np.zeros((3, 3))
+        if not lam > 0.0:
+            return info
+        known = np.ones(3, dtype=bool) if axes is None else np.asarray(axes, dtype=bool)
+        if self.translation_degenerate and known[0] and known[1]:
+            u = np.array([self.axis[0], self.axis[1], 0.0])
+            info += lam * np.outer(u, u)
+        if self.rotation_degenerate and known[2]:
+            info[2, 2] += lam * self.scale**2
+        return info
+
+
+def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, threshold: float) -> Degeneracy:
+    """Degeneracy analysis of the level-0 Gauss–Newton Hessian ``hessian_cells`` (cells / rad units,
+    cell side ``resolution`` m) for laser-frame points ``pts_m`` (n, 2, m); a direction is
+    degenerate when its normalized eigenvalue is below ``threshold`` × the largest.
+
+    Closed-form 2×2 / scalar algebra (it runs on every scan)."""
+    n = pts_m.shape[0]
+    rho = math.sqrt(float(np.einsum("ij,ij->", pts_m, pts_m)) / n) if n else 1.0
+    rho = max(rho, 1e-3)
+    h = hessian_cells.tolist()
+    k = 1.0 / resolution  # world (m, m, rad) → cells / rad
+    a = h[0][0] * k * k
+    b = 0.5 * (h[0][1] + h[1][0]) * k * k
+    d = h[1][1] * k * k
+    u = 0.5 * (h[0][2] + h[2][0]) * k
+    v = 0.5 * (h[1][2] + h[2][1]) * k
+    r = h[2][2]
+    none = Degeneracy(0.0, 0.0, 0.0, np.array([1.0, 0.0]), rho, 0.0, True, True)
+    if not all(math.isfinite(t) for t in (a, b, d, u, v, r)) or not a + d > 0.0:
+        return none
+    if r > 1e-12 * (a + d):  # rotation marginalized (Schur complement)
+        a2, b2, d2 = a - u * u / r, b - u * v / r, d - v * v / r
+    else:  # the scan sees no rotation at all
+        a2, b2, d2 = a, b, d
+    half_tr = 0.5 * (a2 + d2)
+    disc = math.sqrt(max(0.25 * (a2 - d2) ** 2 + b2 * b2, 0.0))
+    lam_max, lam_min = half_tr + disc, half_tr - disc
+    if not lam_max > 0.0:
+        return none
+    # eigenvector of lam_min
+    if abs(b2) > 1e-300:
+        ax, ay = lam_min - d2, b2
+    elif a2 <= d2:
+        ax, ay = 1.0, 0.0
+    else:
+        ax, ay = 0.0, 1.0
+    nrm = math.hypot(ax, ay)
+    axis = np.array([ax / nrm, ay / nrm]) if nrm > 0.0 else np.array([1.0, 0.0])
+    t_ratio = max(lam_min, 0.0) / lam_max
+    det = a * d - b * b
+    s_rot = r - (u * (d * u - b * v) + v * (a * v - b * u)) / det if det > 1e-300 * (a * d + 1e-300) else 0.0
+    r_ratio = max(s_rot, 0.0) / (rho * rho * lam_max)
+    return Degeneracy(min(t_ratio, r_ratio), t_ratio, r_ratio, axis, rho, lam_max,
+                      t_ratio < threshold, r_ratio < threshold)

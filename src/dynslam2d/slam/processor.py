@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -23,7 +23,17 @@ from dynslam2d.gridmap import GridMap
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.correlative import correlative_search
 from dynslam2d.slam.grid import MapTooLargeError, MultiResMap
-from dynslam2d.slam.matcher import covariance_world, evaluate, free_fraction, match_multires
+from dynslam2d.slam.matcher import (
+    Degeneracy,
+    angular_spread,
+    covariance_world,
+    degeneracy,
+    close_count,
+    evaluate,
+    free_fraction,
+    match_multires,
+    support,
+)
 from dynslam2d.types import Pose2D, Scan, wrap_angle
 
 #: Reasons a scan is skipped (no matching, no map update).
@@ -33,8 +43,23 @@ REJECT_NON_FINITE = "non_finite_pose"
 REJECT_JUMP = "jump"
 REJECT_LOW_SCORE = "low_score"
 REJECT_FREE_SPACE = "endpoints_in_free_space"
+#: The pose is predicted (motion model / odometry), the scan kept out of the map (issue 10 item 3).
+PREDICT_TOO_CLOSE = "too_close"  # most returns closer than laser_min_dist: something against the sensor
+PREDICT_NARROW = "narrow_sector"  # the returns cover too small an angle to fix the pose
+PREDICT_UNSUPPORTED = "unsupported_jump"  # moved beyond the motion model without enough structure
+PREDICT_LOST = "lost"  # lost, and no relocalisation clearly better than its alternatives
+#: States of the processor.
+STATE_TRACKING = "tracking"
+STATE_LOST = "lost"
+#: Where a pose came from.
+SOURCE_SCAN = "scan"  # the scan match alone
+SOURCE_SCAN_PRIOR = "scan+prior"  # the scan along well-constrained directions, the prior along degenerate ones
+SOURCE_PREDICTION = "prediction"  # motion model / odometry only
+SOURCE_RELOCALISED = "relocalised"  # wide search after being lost
 #: 'auto' correlative mode searches on the first matches, before a score average exists.
 _WARMUP_SEARCHES = 3
+#: A degenerate direction stays degenerate while its ratio is below this × degeneracy_threshold.
+_DEGENERACY_HYSTERESIS = 1.5
 #: Interpolated probability below which an endpoint counts as landing in known free space.
 FREE_SPACE_PROB = 0.45
 
@@ -63,6 +88,16 @@ class MatchResult:
         match_ms: wall time of the matching, ms.
         points: (n, 2) the gated returns in the laser frame, m (what the map update uses).
         clear_points: (m, 2) ends of the free-space clearing rays in the laser frame, m.
+        degeneracy: smallest / largest eigenvalue of the normalized match Hessian (0 … 1; NaN when
+            not matched) — Zhang et al. 2016.
+        degenerate: some direction of the match is degenerate (below ``degeneracy_threshold``).
+        support_points: endpoints on occupied map cells at ``pose`` (count).
+        support_spread: angle covered by their bearings, rad.
+        low_support: the pose is not backed by a well-supported match (predicted, or matched with
+            fewer than ``support_min_points`` points / less than ``support_min_spread``).
+        prior: where the prediction came from: "odometry", "imu", "motion_model" or None.
+        pose_source: "scan", "scan+prior", "prediction" or "relocalised".
+        state: "tracking" or "lost" after this scan.
     """
 
     pose: Pose2D
@@ -81,6 +116,25 @@ class MatchResult:
     match_ms: float = 0.0
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
     clear_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
+    degeneracy: float = math.nan
+    degenerate: bool = False
+    support_points: int = 0
+    support_spread: float = 0.0
+    low_support: bool = False
+    prior: str | None = None
+    pose_source: str = SOURCE_SCAN
+    state: str = STATE_TRACKING
+
+
+@dataclass(slots=True)
+class _Prior:
+    """The motion prediction of one scan: pose (map frame), where it came from, which pose
+    components it knows (x, y, θ) and whether a motion model exists for gating."""
+
+    pose: Pose2D
+    kind: str | None
+    axes: np.ndarray
+    gate: bool
 
 
 @dataclass(slots=True)
@@ -103,6 +157,8 @@ class SlamStep:
         time_gap: a stamp gap or backward stamp was seen before this scan.
         n_points: returns used.
         match_ms, update_ms: wall times, ms.
+        degeneracy, degenerate, support_points, support_spread, low_support, pose_source, state:
+            pose confidence, see :class:`MatchResult`.
     """
 
     index: int
@@ -121,6 +177,13 @@ class SlamStep:
     n_points: int
     match_ms: float
     update_ms: float
+    degeneracy: float = math.nan
+    degenerate: bool = False
+    support_points: int = 0
+    support_spread: float = 0.0
+    low_support: bool = False
+    pose_source: str = SOURCE_SCAN
+    state: str = STATE_TRACKING
 
 
 class HectorSlam:
@@ -149,6 +212,16 @@ class HectorSlam:
         self._score_avg: float | None = None
         self._force_search = False
         self._n_accepted = 0  # accepted matches against a non-empty map
+        self._last_odom: Pose2D | None = None  # Scan.odom of the previous scan
+        self._last_yaw_rate: float | None = None
+        self._state = STATE_TRACKING
+        self._unsupported_since: float | None = None  # stamp of the first scan of the current unsupported run
+        self.lost_events = 0
+        self.relocalisations = 0
+        self._refused: tuple[float, Pose2D, int] | None = None  # (since, pose, scan number) of a refused weak match
+        self._degenerate_prev = (False, False)  # (translation, rotation) degenerate on the last matched scan
+        self._last_relocalise: float | None = None  # stamp of the last relocalisation attempt
+        self._history: deque[tuple[float, Pose2D]] = deque()  # accepted (stamp, pose) of the last velocity_window s
 
     # ---- properties --------------------------------------------------------------------
     @property
@@ -179,7 +252,14 @@ class HectorSlam:
             "reasons": dict(self.counts),
             "memory_bytes": self.memory_bytes,
             "map_grows": sum(lv.n_grows for lv in self.map.levels),
+            "lost_events": self.lost_events,
+            "relocalisations": self.relocalisations,
         }
+
+    @property
+    def state(self) -> str:
+        """"tracking" or "lost" (no supported match for ``lost_after`` s; see :meth:`match`)."""
+        return self._state
 
     # ---- preprocessing -----------------------------------------------------------------
     def scan_points(self, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
@@ -227,6 +307,60 @@ class HectorSlam:
             return self._last_pose.compose(Pose2D(float(v[0]), float(v[1]), float(v[2]))), gap
         return self._last_pose, gap
 
+    # ---- motion prior -------------------------------------------------------------------
+    def _prior(self, scan: Scan, start: Pose2D, gap: bool) -> _Prior:
+        """The prediction of ``scan``'s pose: the odometry delta since the previous scan
+        (prev_odom⁻¹ ⊕ odom) applied to the previous pose; else the constant-velocity motion model
+        with the IMU yaw rate for the rotation; else the motion model alone."""
+        c = self.config
+        last = self._last_pose
+        all_axes = np.ones(3, dtype=bool)
+        if last is None or gap:
+            return _Prior(start, None, all_axes, False)
+        dt = scan.stamp - self._last_stamp if self._last_stamp is not None else 0.0
+        odom = scan.odom
+        if c.use_odometry and odom is not None and self._last_odom is not None and odom.is_finite():
+            return _Prior(last.compose(self._last_odom.between(odom)), "odometry", all_axes, True)
+        v = self._model_velocity() if self._state == STATE_TRACKING else None
+        cv = last.compose(Pose2D(float(v[0] * dt), float(v[1] * dt), float(v[2] * dt))) if v is not None else last
+        w = scan.yaw_rate
+        if c.use_odometry and w is not None and math.isfinite(w) and dt > 0.0:
+            w0 = self._last_yaw_rate if self._last_yaw_rate is not None else w
+            th = float(wrap_angle(last.theta + 0.5 * (w0 + w) * dt))  # trapezoidal integration of the rate
+            axes = all_axes if c.motion_prior else np.array([False, False, True])
+            return _Prior(Pose2D(cv.x, cv.y, th), "imu", axes, v is not None)
+        if c.motion_prior:
+            return _Prior(cv, "motion_model", all_axes, v is not None)
+        return _Prior(cv, None, all_axes, v is not None)
+
+    def _model_velocity(self) -> np.ndarray | None:
+        """(vx m/s, vy m/s, ω rad/s) of the motion model in the last pose's frame: the motion between the
+        oldest and newest accepted pose of the last ``velocity_window`` s (a one-scan difference is too
+        noisy to hold along a degenerate direction for seconds)."""
+        h = self._history
+        if len(h) < 2:
+            return None
+        (t0, p0), (t1, p1) = h[0], h[-1]
+        dt = t1 - t0
+        if not dt > 0.0:
+            return None
+        c, s_ = math.cos(p1.theta), math.sin(p1.theta)
+        dx, dy = p1.x - p0.x, p1.y - p0.y
+        return np.array([c * dx + s_ * dy, -s_ * dx + c * dy, float(wrap_angle(p1.theta - p0.theta))]) / dt
+
+    def _gate_limits(self, dt: float) -> tuple[float, float]:
+        """Largest deviation (m, rad) from the prediction the motion model allows ``dt`` s after the
+        last accepted pose.
+
+        The model's velocity is the mean over the last ``velocity_window`` W, so under an
+        acceleration of at most a it lags the true velocity by up to a·W/2, and the velocity can
+        change by a·dt during the step: the position may deviate by a·dt·(W/2 + dt), plus the fixed
+        tolerances."""
+        c = self.config
+        dt = max(dt, 0.0)
+        k = dt * (0.5 * c.velocity_window + dt)
+        return c.max_linear_accel * k + c.gate_distance, c.max_angular_accel * k + c.gate_angle
+
     # ---- matching ----------------------------------------------------------------------
     def match(self, scan: Scan, predicted: Pose2D | None = None, commit: bool = True) -> MatchResult:
         """Estimate the laser pose of ``scan`` against the current map; the map is not changed.
@@ -234,11 +368,22 @@ class HectorSlam:
         ``predicted`` overrides the internal start estimate (previous pose, or constant velocity).
         With ``commit`` (default) the result becomes the processor's current pose (the start of
         the next prediction) and the counters are updated; pass False to only look.
+
+        Beyond the reference (issue 10): odometry / IMU / the motion model predict the pose;
+        the prediction holds along directions the scan cannot constrain (degenerate Hessian);
+        scans with something against the sensor, a narrow view, or a jump beyond the motion
+        model without enough structure keep the predicted pose and stay out of the map; after
+        ``lost_after`` s without a supported match the processor is lost and relocalises with a
+        wide search, accepting only a clear winner.
         """
         c = self.config
         t0 = time.perf_counter()
         pts, clear = self.scan_points(scan)
         start, gap = self._predict(scan.stamp)
+        prior = self._prior(scan, start, gap)
+        laser_start = start
+        if prior.kind in ("odometry", "imu"):
+            start = prior.pose if prior.kind == "odometry" else Pose2D(start.x, start.y, prior.pose.theta)
         if predicted is not None:
             if not predicted.is_finite():
                 predicted = None
@@ -249,19 +394,167 @@ class HectorSlam:
         res = MatchResult(
             pose=start, start=start, covariance=np.diag([1e6, 1e6, math.pi**2]), hessian=zero,
             score=0.0, n_points=int(pts.shape[0]), time_gap=gap, first=first, points=pts, clear_points=clear,
+            prior=prior.kind, state=self._state,
         )
         if pts.shape[0] < c.min_points:
             res.skipped = True
             res.rejected = True
             res.reason = SKIP_TOO_FEW_POINTS
+            self._use_prediction(res, prior, None)
         elif first:
             res.covariance = np.zeros((3, 3))
+        elif self._too_close(scan):
+            self._use_prediction(res, prior, PREDICT_TOO_CLOSE)
+        elif angular_spread(pts) < c.min_sector:
+            self._use_prediction(res, prior, PREDICT_NARROW)
+        elif self._state == STATE_LOST:
+            if self._last_relocalise is None or scan.stamp - self._last_relocalise >= c.relocalise_interval \
+                    or scan.stamp < self._last_relocalise:
+                self._last_relocalise = scan.stamp
+                self._relocalise(res, pts, prior)
+            else:
+                self._use_prediction(res, prior, PREDICT_LOST)
         else:
-            self._match_against_map(res, pts)
+            self._match_tracking(res, pts, prior, scan.stamp)
+            if res.low_support and prior.kind == "odometry" and predicted is None:
+                # odometry is a prior, not a replacement: when the odometry-seeded match finds little
+                # support (odometry slipped or glitched), try the laser-only seed too and keep the better
+                alt = MatchResult(
+                    pose=laser_start, start=laser_start, covariance=res.covariance, hessian=zero, score=0.0,
+                    n_points=res.n_points, time_gap=gap, first=first, points=pts, clear_points=clear,
+                    prior=prior.kind, state=self._state,
+                )
+                self._match_tracking(alt, pts, prior, scan.stamp)
+                if alt.support_points > res.support_points:
+                    res = alt
         res.match_ms = (time.perf_counter() - t0) * 1e3
         if commit:
-            self._commit(scan.stamp, res)
+            self._commit(scan, res)
         return res
+
+    def _match_tracking(self, res: MatchResult, pts: np.ndarray, prior: _Prior, stamp: float) -> None:
+        """Match from ``res.start``, then the prior along degenerate directions and the motion gate."""
+        self._match_against_map(res, pts)
+        if res.reason != REJECT_NON_FINITE and res.reason != REJECT_JUMP:
+            self._apply_prior_and_gate(res, pts, prior, stamp)
+        else:
+            res.low_support = True  # pose = start estimate (with odometry: the odometry prediction)
+
+    def _too_close(self, scan: Scan) -> bool:
+        """More than ``too_close_fraction`` of the valid returns are closer than laser_min_dist."""
+        c = self.config
+        if c.laser_min_dist <= 0.0:
+            return False
+        n, close = close_count(np.ascontiguousarray(scan.ranges, dtype=np.float64), scan.range_min,
+                               scan.range_max, c.laser_min_dist)
+        return n > 0 and close > c.too_close_fraction * n
+
+    def _use_prediction(self, res: MatchResult, prior: _Prior, reason: str | None) -> None:
+        """Keep the predicted pose; the scan stays out of the map."""
+        res.pose = prior.pose if prior.kind is not None or self._last_pose is not None else res.start
+        res.pose_source = SOURCE_PREDICTION
+        res.rejected = True
+        res.low_support = True
+        if reason is not None:
+            res.reason = reason
+
+    def _support(self, res: MatchResult, pts: np.ndarray, pose: Pose2D) -> None:
+        c = self.config
+        res.support_points, res.support_spread = support(self.map.levels[0], pts, pose.as_array(),
+                                                         c.support_probability)
+        res.low_support = res.support_points < c.support_min_points or res.support_spread < c.support_min_spread
+
+    def _refine(self, pts: np.ndarray, seed: np.ndarray, prior_pose: np.ndarray | None = None,
+                prior_info: np.ndarray | None = None) -> np.ndarray:
+        c = self.config
+        return match_multires(
+            self.map.levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
+            c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
+            c.max_translation_step, prior_pose, prior_info,
+        )
+
+    def _fit(self, res: MatchResult, pts: np.ndarray, pose: Pose2D) -> None:
+        """Hessian, score and covariance of ``pose`` into ``res``."""
+        c = self.config
+        fit = evaluate(self.map.levels[0], pts, pose.as_array(), c.hector_gradient_bug)
+        res.pose = pose
+        res.hessian = fit.hessian
+        res.score = fit.score
+        sigma2 = c.covariance_sigma**2 if c.covariance_sigma is not None else fit.cost / max(pts.shape[0] - 3, 1)
+        res.covariance = covariance_world(fit.hessian, sigma2, self.map.resolution)
+
+    def _apply_prior_and_gate(self, res: MatchResult, pts: np.ndarray, prior: _Prior, stamp: float) -> None:
+        """Degeneracy analysis of the match; the prior along degenerate directions; the motion gate."""
+        c = self.config
+        deg: Degeneracy = degeneracy(res.hessian, self.map.resolution, pts, c.degeneracy_threshold)
+        # hysteresis: a degenerate direction stays degenerate until its ratio clearly rises above the threshold
+        hi = _DEGENERACY_HYSTERESIS * c.degeneracy_threshold
+        deg.translation_degenerate |= self._degenerate_prev[0] and deg.translation_ratio < hi
+        deg.rotation_degenerate |= self._degenerate_prev[1] and deg.rotation_ratio < hi
+        self._degenerate_prev = (deg.translation_degenerate, deg.rotation_degenerate)
+        res.degeneracy = deg.ratio
+        res.degenerate = deg.any
+        if deg.any and prior.kind is not None and c.prior_weight > 0.0 and prior.pose.is_finite():
+            info = deg.prior_information(c.prior_weight, prior.axes)
+            if np.any(info):
+                pp = prior.pose.as_array()
+                p = self._refine(pts, pp, pp, info)
+                if np.all(np.isfinite(p)):
+                    self._fit(res, pts, Pose2D(float(p[0]), float(p[1]), float(wrap_angle(p[2]))))
+                    res.pose_source = SOURCE_SCAN_PRIOR
+        self._support(res, pts, res.pose)
+        if prior.gate and self._last_stamp is not None:
+            d = prior.pose.between(res.pose)
+            lim_d, lim_a = self._gate_limits(stamp - self._last_stamp)
+            if (math.hypot(d.x, d.y) > lim_d or abs(d.theta) > lim_a) and res.low_support:
+                refused = self._refused
+                # a weak match the previous (refused) weak match predicts is two agreeing observations:
+                # the robot did accelerate beyond the model (a car speeding up), accept it
+                if refused is not None and refused[2] == self.n_scans - 1 and self._confirms(refused, res, stamp):
+                    self._refused = None
+                    return
+                self._refused = (refused[0] if refused else stamp, res.pose, self.n_scans)
+                self._use_prediction(res, prior, PREDICT_UNSUPPORTED)
+                return
+        self._refused = None
+
+    def _confirms(self, refused: tuple[float, Pose2D, int], res: MatchResult, stamp: float) -> bool:
+        """The weak match ``res`` continues the previous refused weak match with the model's velocity."""
+        v = self._model_velocity()
+        dt = stamp - self._last_stamp if self._last_stamp is not None else 0.0
+        step = Pose2D(float(v[0] * dt), float(v[1] * dt), float(v[2] * dt)) if v is not None else Pose2D()
+        d = refused[1].compose(step).between(res.pose)
+        lim_d, lim_a = self._gate_limits(dt)
+        return math.hypot(d.x, d.y) <= lim_d and abs(d.theta) <= lim_a
+
+    def _relocalise(self, res: MatchResult, pts: np.ndarray, prior: _Prior) -> None:
+        """Lost: a wide correlative search around the prediction (on every scan that is neither too
+        close nor too narrow); accepted only if its score is high enough and beats the best pose
+        elsewhere (runner-up) by ``relocalise_margin``."""
+        c = self.config
+        levels = self.map.levels
+        lvl = levels[min(c.correlative_level, len(levels) - 1)]
+        cr = correlative_search(
+            lvl, pts, prior.pose.as_array(), c.relocalise_linear_window, c.relocalise_angular_window,
+            c.correlative_angular_step, c.correlative_max_points, c.correlative_max_height,
+            0.0, 0.0, runner_up_distance=0.5, runner_up_angle=0.3,
+        )
+        res.used_correlative = True
+        if cr is None or cr.score < c.relocalise_min_score or cr.score - (cr.runner_up or 0.0) < c.relocalise_margin:
+            self._use_prediction(res, prior, PREDICT_LOST)
+            return
+        p = self._refine(pts, cr.pose)
+        if not np.all(np.isfinite(p)):
+            self._use_prediction(res, prior, PREDICT_LOST)
+            return
+        self._fit(res, pts, Pose2D(float(p[0]), float(p[1]), float(wrap_angle(p[2]))))
+        self._support(res, pts, res.pose)
+        deg = degeneracy(res.hessian, self.map.resolution, pts, c.degeneracy_threshold)
+        res.degeneracy = deg.ratio
+        res.degenerate = deg.any
+        res.pose_source = SOURCE_RELOCALISED
+        res.rejected = True  # the first scan after relocalising is not written into the map
+        res.reason = "relocalised"
 
     def _match_against_map(self, res: MatchResult, pts: np.ndarray) -> None:
         c = self.config
@@ -317,26 +610,19 @@ class HectorSlam:
             res.rejected = True
             res.reason = REJECT_JUMP
             return
-        fit = evaluate(levels[0], pts, pose.as_array(), c.hector_gradient_bug)
-        res.pose = pose
-        res.hessian = fit.hessian
-        res.score = fit.score
-        if c.covariance_sigma is not None:
-            sigma2 = c.covariance_sigma**2
-        else:
-            sigma2 = fit.cost / max(pts.shape[0] - 3, 1)
-        res.covariance = covariance_world(fit.hessian, sigma2, self.map.resolution)
+        self._fit(res, pts, pose)
         avg = self._score_avg
         res.free_fraction = free_fraction(levels[min(1, len(levels) - 1)], pts, pose.as_array(), FREE_SPACE_PROB)
-        if fit.score < c.reject_score_min or (avg is not None and fit.score < c.reject_score_ratio * avg):
+        if res.score < c.reject_score_min or (avg is not None and res.score < c.reject_score_ratio * avg):
             res.rejected = True
             res.reason = REJECT_LOW_SCORE
         elif res.free_fraction > c.reject_free_fraction:
             res.rejected = True
             res.reason = REJECT_FREE_SPACE
 
-    def _commit(self, stamp: float, res: MatchResult) -> None:
+    def _commit(self, scan: Scan, res: MatchResult) -> None:
         c = self.config
+        stamp = scan.stamp
         self.n_scans += 1
         if res.time_gap:
             self.counts["time_gap"] += 1
@@ -345,7 +631,12 @@ class HectorSlam:
             self.counts["correlative"] += 1
         if res.reason is not None:
             self.counts[res.reason] += 1
-        if res.skipped:
+        if res.degenerate:
+            self.counts["degenerate"] += 1
+        self._last_odom = scan.odom if scan.odom is not None and scan.odom.is_finite() else None
+        self._last_yaw_rate = scan.yaw_rate if scan.yaw_rate is not None and math.isfinite(scan.yaw_rate) else None
+        self._update_state(stamp, res)
+        if res.skipped and res.pose_source != SOURCE_PREDICTION:
             self._last_stamp = stamp
             self._force_search = True
             return
@@ -359,10 +650,37 @@ class HectorSlam:
                 self._velocity = np.array([d.x, d.y, d.theta]) / dt
         self._last_stamp = stamp
         self._force_search = res.rejected
+        if res.time_gap or self._state == STATE_LOST:
+            self._history.clear()
+        if not res.rejected or res.first:
+            self._history.append((stamp, res.pose))
+            while len(self._history) > 2 and stamp - self._history[1][0] >= c.velocity_window:
+                self._history.popleft()
         if not res.rejected and not res.first:
             self._n_accepted += 1
             a = c.score_average_rate
             self._score_avg = res.score if self._score_avg is None else (1 - a) * self._score_avg + a * res.score
+
+    def _update_state(self, stamp: float, res: MatchResult) -> None:
+        """Tracking ↔ lost: lost after ``lost_after`` s of scans whose match could not be accepted (the
+        pose was predicted); found by relocalising."""
+        c = self.config
+        if res.first:
+            return
+        if res.pose_source == SOURCE_RELOCALISED:
+            self._state = STATE_TRACKING
+            self.relocalisations += 1
+            self._unsupported_since = None
+        elif res.pose_source == SOURCE_PREDICTION:
+            if self._unsupported_since is None:
+                self._unsupported_since = stamp
+            elif self._state == STATE_TRACKING and stamp - self._unsupported_since >= c.lost_after:
+                self._state = STATE_LOST
+                self.lost_events += 1
+                self._velocity = None  # hold the pose; the motion model is no longer trusted
+        else:
+            self._unsupported_since = None
+        res.state = self._state
 
     # ---- map update --------------------------------------------------------------------
     def needs_map_update(self, pose: Pose2D) -> bool:
@@ -427,4 +745,11 @@ class HectorSlam:
             n_points=res.n_points,
             match_ms=res.match_ms,
             update_ms=update_ms,
+            degeneracy=res.degeneracy,
+            degenerate=res.degenerate,
+            support_points=res.support_points,
+            support_spread=res.support_spread,
+            low_support=res.low_support,
+            pose_source=res.pose_source,
+            state=res.state,
         )

@@ -86,6 +86,7 @@ def plot_errors(
     title: str = "",
     dpi: int = 120,
     map_note: str = "",
+    intervals: dict[str, list[tuple[float, float]]] | None = None,
 ) -> Path:
     """Write errors.png: ATE (m) against time (s) on top, the map difference below (GT frame, m).
 
@@ -94,6 +95,8 @@ def plot_errors(
             trajectory (aligned); its per-pose ``errors`` are plotted.
         diff: :func:`map_difference` of the run's map against the GT map, with the same alignment.
         map_note: appended to the map panel's title (e.g. ghost area and F1 of the cleaned and online maps).
+        intervals: (start, end) stamps (s, same clock as the ATE stamps) to shade on the time axis,
+            by kind: "degenerate", "low_support", "lost".
     """
     import matplotlib
 
@@ -111,6 +114,16 @@ def plot_errors(
 
     e = ate_result.errors
     t = ate_result.stamps - ate_result.stamps[0] if len(ate_result.stamps) else ate_result.stamps
+    t_origin = float(ate_result.stamps[0]) if len(ate_result.stamps) else 0.0
+    shade = {"degenerate": (style.DEGENERATE, 0.25, "degenerate"), "low_support": (style.LOW_SUPPORT, 0.35, "low support"),
+             "lost": (style.LOST, 0.35, "lost")}
+    for kind, spans in (intervals or {}).items():
+        if kind not in shade or not spans:
+            continue
+        colour, alpha, label = shade[kind]
+        for k, (a, b) in enumerate(spans):
+            ax_t.axvspan(a - t_origin, max(b, a + 1e-3) - t_origin, color=colour, alpha=alpha, lw=0,
+                         label=f"{label} ({len(spans)}×)" if k == 0 else None)
     ax_t.plot(t, e, color=style.TRAJECTORY, lw=1.0, label="translation error")
     if len(e):
         ax_t.axhline(ate_result.rmse, color="0.3", ls="--", lw=1.0, label=f"RMSE {ate_result.rmse:.3f} m")

@@ -11,6 +11,7 @@ from dynslam2d.eval.trajectory import ate
 from dynslam2d.io.groundtruth import GroundTruthFiles
 from dynslam2d.pipeline import RunResult
 from dynslam2d.slam.cleanup import CleanResult
+from dynslam2d.slam.confidence import stretches
 from dynslam2d.viz.collect import RemovedPointsCollector
 from dynslam2d.viz.errorsplot import map_difference, plot_errors
 from dynslam2d.viz.mapplot import plot_map
@@ -61,10 +62,14 @@ def write_figures(
     final = final_confirmed(all_paths, last_stamp)
     removed_xy = collector.points() if collector is not None else None
     grid = cleaned.grid if cleaned is not None else result.grid
+    conf = result.confidence
+    pc = result.pose_confidence() if conf else {}
     paths["map.png"] = plot_map(
         out / "map.png", grid, traj.xy, reference_xy=ref_xy, title=title, dpi=dpi,
         tracks=tracks_to_draw(all_paths, last_stamp), boxes=[(p.id, p.last_box) for p in final],
         removed_xy=removed_xy, erased=cleaned.erased if cleaned is not None else None,
+        low_support=conf.get("low_support"), lost=conf.get("lost"),
+        warning=pc.get("warning"),  # type: ignore[arg-type]
     )
     confirmed = sorted((p for p in all_paths.values() if p.ever_confirmed), key=lambda p: p.id)
     n_m = sum(p.ever_in_m for p in confirmed)
@@ -74,6 +79,7 @@ def write_figures(
     )
     if gt is not None and ate_res is not None:
         diff = map_difference(grid, gt.static_map, transform=ate_res.alignment)
+        spans = {k: stretches(traj.stamps, conf[k]) for k in ("degenerate", "low_support", "lost") if k in conf}
         note = ""
         if cleaned is not None:
             from dynslam2d.eval.maps import map_metrics
@@ -84,7 +90,7 @@ def write_figures(
                     f"online map: ghost {mo.ghost_area_m2:.2f} m², F1 {mo.f1:.3f}")
         paths["errors.png"] = plot_errors(out / "errors.png", ate_res, diff, dpi=dpi,
                                           title=f"{result.source.origin} — filter {result.config.filter.mode}",
-                                          map_note=note)
+                                          intervals=spans, map_note=note)
     return paths
 
 

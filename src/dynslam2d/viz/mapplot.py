@@ -114,6 +114,9 @@ def plot_map(
     boxes: Sequence[tuple[int, Box]] | None = None,
     removed_xy: np.ndarray | None = None,
     erased: np.ndarray | None = None,
+    low_support: np.ndarray | None = None,
+    lost: np.ndarray | None = None,
+    warning: str | None = None,
 ) -> Path:
     """Write a PNG of ``grid`` with trajectories, track paths and removed points.
 
@@ -129,6 +132,9 @@ def plot_map(
             :data:`style.REMOVED` (exact colour, one square per map cell hit).
         erased: (H, W) bool, same cells as ``grid``: cells the clean-up pass erased
             (docs/maps.md), drawn in :data:`style.ERASED`.
+        low_support, lost: (n,) bool per trajectory pose: poses matched with low support are
+            marked in :data:`style.LOW_SUPPORT`, poses while lost in :data:`style.LOST`.
+        warning: a line drawn in a red box over the map (the pose cannot be trusted).
     """
     import matplotlib
 
@@ -165,6 +171,13 @@ def plot_map(
                            label="estimated trajectory", zorder=4)
         handles += ax.plot(*trajectory_xy[0], marker="o", color=style.TRAJECTORY, ms=6, ls="none",
                            label="start", zorder=4)
+    if trajectory_xy is not None and len(trajectory_xy):
+        for mask, colour, label in ((low_support, style.LOW_SUPPORT, "low-support poses"),
+                                    (lost, style.LOST, "poses while lost")):
+            if mask is not None and len(mask) == len(trajectory_xy) and np.any(mask):
+                m = np.asarray(mask, dtype=bool)
+                handles += ax.plot(trajectory_xy[m, 0], trajectory_xy[m, 1], marker=".", ms=3, ls="none",
+                                   color=colour, label=f"{label} ({int(m.sum())})", zorder=4.5)
     if tracks:
         any_m = any_other = False
         for tp in tracks:
@@ -184,6 +197,12 @@ def plot_map(
             draw_box(ax, box, "black", lw=1.2, zorder=6)
         handles.append(Line2D([], [], color="black", lw=1.2, label="final confirmed boxes"))
     frame_metric_axes(ax, extent)
+    if warning:
+        import textwrap
+
+        ax.text(0.5, 0.98, textwrap.fill(warning, 60), transform=ax.transAxes, ha="center", va="top",
+                fontsize="small", color="white", zorder=20,
+                bbox={"facecolor": style.LOST, "edgecolor": "none", "boxstyle": "round,pad=0.3"})
     if title:
         ax.set_title(title)
     if handles:

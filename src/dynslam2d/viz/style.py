@@ -28,6 +28,12 @@ TRUTH_OUTLINE = "#9a9a9a"
 MATCHED = "#000000"
 #: Unknown / unobserved cells in difference images.
 UNKNOWN = "#e4e4e4"
+#: Pose confidence: scans matched with low support (trajectory markers, time shading).
+LOW_SUPPORT = "#f0a000"
+#: Pose confidence: scans while the SLAM was lost.
+LOST = "#b40000"
+#: Pose confidence: degenerate scans (time shading).
+DEGENERATE = "#56b4e9"
 
 
 def rgb255(colour: str) -> tuple[int, int, int]:

@@ -1,0 +1,240 @@
+"""The robot's own body in the scan: a configured footprint and returns fixed in the laser frame.
+
+A laser mounted on a robot often sees parts of the robot itself (a bumper, a wheel, a mast,
+returns at a few decimetres). They move with the robot, so in the map frame they look like an
+object following it; they are never structure either. Two mechanisms drop them before
+detection, matching and mapping (docs/tracking.md, "The robot's own body"):
+
+1. **Footprint** (``detect.footprint.polygon``): a simple polygon in the laser frame (x forward,
+   y left, m); every return inside it is dropped.
+2. **Automatic**: a beam whose range stays within ``auto_tolerance`` of the same value (and
+   below ``auto_max_range``) while the laser's pose moves ``auto_min_travel`` metres and turns
+   ``auto_min_turn`` radians away from where it was when that range was first seen is looking at something that moves with the laser. Static
+   structure cannot do that: translation along a wall keeps a perpendicular range, but the
+   turn changes it. From then on, returns of that beam up to the body's range (+ tolerance)
+   are dropped. :meth:`BodyFilter.report` gives the beams and a suggested footprint (the convex
+   hull of the body returns grown by ``suggest_margin``), for summary.json.
+
+Frames: laser frame for the footprint and the body returns; the laser pose in the map frame
+only measures how far the laser travelled and turned. Units m, rad.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dynslam2d.errors import DynSlamError
+from dynslam2d.types import Pose2D, Scan, wrap_angle
+
+
+def polygon_problem(polygon: list[tuple[float, float]] | np.ndarray) -> str | None:
+    """Why ``polygon`` ((k, 2) vertices in order, m) cannot be a footprint, or None when it can.
+
+    A footprint needs at least 3 finite vertices, a non-zero area (it must contain points) and no
+    two non-adjacent edges that touch or cross (a simple polygon)."""
+    p = np.asarray(polygon, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] < 3:
+        return f"needs at least 3 (x, y) vertices, got {p.shape[0] if p.ndim == 2 else 0}"
+    if not np.isfinite(p).all():
+        return "has a non-finite vertex"
+    k = p.shape[0]
+
+    def cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+        return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
+
+    def on_seg(a: np.ndarray, b: np.ndarray, q: np.ndarray) -> bool:
+        return min(a[0], b[0]) - 1e-12 <= q[0] <= max(a[0], b[0]) + 1e-12 and \
+            min(a[1], b[1]) - 1e-12 <= q[1] <= max(a[1], b[1]) + 1e-12
+
+    def touch(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> bool:
+        d1, d2, d3, d4 = cross(c, d, a), cross(c, d, b), cross(a, b, c), cross(a, b, d)
+        if ((d1 > 0 > d2) or (d1 < 0 < d2)) and ((d3 > 0 > d4) or (d3 < 0 < d4)):
+            return True
+        return (d1 == 0 and on_seg(c, d, a)) or (d2 == 0 and on_seg(c, d, b)) or \
+            (d3 == 0 and on_seg(a, b, c)) or (d4 == 0 and on_seg(a, b, d))
+
+    for i in range(k):
+        a, b = p[i], p[(i + 1) % k]
+        if np.array_equal(a, b):
+            return f"has a repeated vertex ({a[0]:g}, {a[1]:g})"
+        for j in range(i + 1, k):
+            if j == i or (j + 1) % k == i or j == (i + 1) % k:
+                continue  # adjacent edges share a vertex
+            if touch(a, b, p[j], p[(j + 1) % k]):
+                return f"is not simple: edge {i}-{(i + 1) % k} meets edge {j}-{(j + 1) % k}"
+    x, y = p[:, 0], p[:, 1]
+    area = 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))  # shoelace formula
+    if abs(area) < 1e-6:
+        return "encloses no area (it contains no points)"
+    return None
+
+
+def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """(n,) bool: which (n, 2) points lie inside ``polygon`` ((k, 2), even-odd ray casting)."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    poly = np.asarray(polygon, dtype=np.float64)
+    x = pts[:, 0:1]
+    y = pts[:, 1:2]
+    x0, y0 = poly[:, 0], poly[:, 1]
+    x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        crosses = ((y0 > y) != (y1 > y)) & (x < (x1 - x0) * (y - y0) / (y1 - y0) + x0)
+    return (crosses.sum(axis=1) % 2 == 1) & np.isfinite(pts).all(axis=1)
+
+
+def convex_hull(points: np.ndarray) -> np.ndarray:
+    """(h, 2) convex hull of (n, 2) points, counter-clockwise (Andrew's monotone chain)."""
+    p = np.unique(np.asarray(points, dtype=np.float64).reshape(-1, 2), axis=0)
+    if p.shape[0] < 3:
+        return p
+
+    def half(seq: np.ndarray) -> list[np.ndarray]:
+        out: list[np.ndarray] = []
+        for q in seq:
+            while len(out) >= 2 and (out[-1][0] - out[-2][0]) * (q[1] - out[-2][1]) - \
+                    (out[-1][1] - out[-2][1]) * (q[0] - out[-2][0]) <= 0:
+                out.pop()
+            out.append(q)
+        return out
+
+    lower, upper = half(p), half(p[::-1])
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def grow_polygon(hull: np.ndarray, margin: float) -> np.ndarray:
+    """A convex polygon grown by ``margin`` (m): each vertex pushed out along its bisector.
+    Fewer than 3 vertices give the margin-sized square(s) around them."""
+    h = np.asarray(hull, dtype=np.float64).reshape(-1, 2)
+    if h.shape[0] == 0:
+        return h
+    if h.shape[0] < 3:
+        lo, hi = h.min(axis=0) - margin, h.max(axis=0) + margin
+        return np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+    c = h.mean(axis=0)
+    d = h - c
+    n = np.hypot(d[:, 0], d[:, 1])
+    n[n == 0] = 1.0
+    return h + d / n[:, None] * margin
+
+
+class BodyFilter:
+    """Drops the robot's own returns: footprint polygon + automatic detection (module docstring).
+
+    Use: ``drop = body.mask(scan)`` before anything else sees the scan, then
+    ``body.observe(scan, pose)`` with the laser pose estimated for it.
+    """
+
+    def __init__(self, config: object) -> None:
+        self.config = config
+        poly = getattr(config, "polygon", None)
+        self.polygon = None if poly is None else np.asarray(poly, dtype=np.float64)
+        if self.polygon is not None:
+            why = polygon_problem(self.polygon)
+            if why is not None:
+                raise DynSlamError(f"detect.footprint.polygon {why}; give the vertices in order around the robot, "
+                                   "laser frame, m")
+        self._n = -1
+        self._ref = np.zeros(0)
+        self._start = np.zeros((0, 3))
+        self.body = np.zeros(0, dtype=bool)  # beams found to look at the robot's body
+        self._body_r = np.zeros(0)
+        self._geom: tuple | None = None
+        self.footprint_dropped = 0
+        self.auto_dropped = 0
+        self.scans = 0
+
+    def _reset(self, n: int) -> None:
+        self._n = n
+        self._ref = np.full(n, np.nan)
+        self._start = np.zeros((n, 3))
+        self.body = np.zeros(n, dtype=bool)
+        self._body_r = np.zeros(n)
+        self._drop_r = np.zeros(n)
+        self._same = np.zeros(n, dtype=np.int64)
+        self._seen = np.zeros(n, dtype=np.int64)
+        self._moved = np.zeros(n, dtype=bool)
+
+    def mask(self, scan: Scan) -> np.ndarray:
+        """(beams,) bool: returns of ``scan`` to drop (inside the footprint, or on a body beam)."""
+        n = scan.n_beams
+        if n != self._n:
+            self._reset(n)
+        valid = scan.valid_mask()
+        drop = np.zeros(n, dtype=bool)
+        if self.polygon is not None and valid.any():
+            pts = scan.points(valid)
+            inside = points_in_polygon(pts, self.polygon)
+            drop[np.flatnonzero(valid)[inside]] = True
+            self.footprint_dropped += int(inside.sum())
+        if getattr(self.config, "auto", False) and self.body.any():
+            tol = float(getattr(self.config, "auto_tolerance"))
+            auto = valid & (self._drop_r > 0.0) & (scan.ranges <= self._drop_r + tol) & ~drop
+            self.auto_dropped += int(auto.sum())
+            drop |= auto
+        self.scans += 1
+        return drop
+
+    def observe(self, scan: Scan, pose: Pose2D) -> None:
+        """Update the automatic detection with ``scan`` and its laser pose (map frame)."""
+        cfg = self.config
+        if not getattr(cfg, "auto", False) or pose is None or not pose.is_finite():
+            return
+        n = scan.n_beams
+        if n != self._n:
+            self._reset(n)
+        r = scan.ranges
+        valid = scan.valid_mask()
+        near = valid & (r <= float(cfg.auto_max_range))
+        tol = float(cfg.auto_tolerance)
+        same = near & (np.abs(r - self._ref) <= tol)
+        self._seen += valid
+        self._same += same
+        # a beam whose reference range explains less than half of its returns starts over from this one
+        restart = near & ~same & (self._same < 0.5 * self._seen)
+        self._ref[restart] = r[restart]
+        self._same[restart] = 1
+        self._seen[restart] = 1
+        self._start[restart] = (pose.x, pose.y, pose.theta)
+        self._moved[restart] = False
+        # net motion away from where the range was first seen (summed increments would add up pose jitter)
+        moved = np.hypot(pose.x - self._start[:, 0], pose.y - self._start[:, 1]) >= cfg.auto_min_travel
+        turned = np.abs(wrap_angle(pose.theta - self._start[:, 2])) >= cfg.auto_min_turn
+        self._moved |= same & moved & turned
+        self.body = self._moved & (self._same >= cfg.auto_min_scans) & (self._same >= cfg.auto_share * self._seen)
+        self._body_r = np.where(self.body, self._ref, 0.0)
+        # the beams next to a body edge see it part of the time (mixed returns): they drop returns up to
+        # the nearby body range + 2 tolerances
+        self._drop_r = self._body_r.copy()
+        k = int(cfg.auto_edge_beams)
+        if k > 0 and self.body.any():
+            grown = self._body_r.copy()
+            for d in range(1, k + 1):
+                grown[d:] = np.maximum(grown[d:], self._body_r[:-d])
+                grown[:-d] = np.maximum(grown[:-d], self._body_r[d:])
+            edge = ~self.body & (grown > 0.0)
+            self._drop_r[edge] = grown[edge] + tol
+
+    def report(self, scan: Scan | None = None) -> dict[str, object]:
+        """What was dropped and, when body beams were found, a suggested footprint (laser frame, m)."""
+        out: dict[str, object] = {
+            "footprint": None if self.polygon is None else self.polygon.tolist(),
+            "footprint_dropped_returns": int(self.footprint_dropped),
+            "auto": bool(getattr(self.config, "auto", False)),
+            "auto_body_beams": int(self.body.sum()),
+            "auto_dropped_returns": int(self.auto_dropped),
+            "suggested_footprint": None,
+        }
+        if self.body.any() and scan is not None and scan.n_beams == self._n:
+            a = scan.angles[self.body]
+            r = self._body_r[self.body]
+            pts = np.column_stack((r * np.cos(a), r * np.sin(a)))
+            poly = grow_polygon(convex_hull(np.vstack((pts, [[0.0, 0.0]]))), float(self.config.suggest_margin))
+            # rounded to mm, without the vertices rounding made equal or collinear: ready to paste into
+            # detect.footprint.polygon (it passes polygon_problem)
+            poly = convex_hull(np.round(poly, 3))
+            if polygon_problem(poly) is not None:
+                lo, hi = poly.min(axis=0), poly.max(axis=0)
+                poly = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+            out["suggested_footprint"] = [[round(float(x), 3), round(float(y), 3)] for x, y in poly]
+            out["auto_body_beam_indices"] = np.flatnonzero(self.body).tolist()
+        return out

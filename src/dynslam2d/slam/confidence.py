@@ -1,0 +1,87 @@
+"""Pose confidence of a whole run (issue 9 item 5, issue 10 items 2–4): how much of the run was
+matched with low support, degenerate, or lost, and the longest such stretches.
+
+A stretch is a run of consecutive scans with the flag set; its length is measured from the stamp
+of its first scan to the stamp of the first scan after it (or its last scan), in seconds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Keys of the per-scan arrays :func:`summarize` reads.
+FLAGS = ("low_support", "degenerate", "lost")
+
+
+def longest_stretch(stamps: np.ndarray, flag: np.ndarray) -> tuple[float, int]:
+    """(duration s, scans) of the longest run of consecutive True in ``flag`` (n,) at ``stamps`` (n,) s."""
+    flag = np.asarray(flag, dtype=bool)
+    n = flag.shape[0]
+    if n == 0 or not flag.any():
+        return 0.0, 0
+    d = np.diff(np.concatenate(([0], flag.astype(np.int8), [0])))
+    starts = np.flatnonzero(d == 1)
+    ends = np.flatnonzero(d == -1)  # exclusive
+    best_t, best_n = 0.0, 0
+    for a, b in zip(starts, ends):
+        t_end = stamps[b] if b < n else stamps[b - 1]
+        dur = float(t_end - stamps[a])
+        if dur > best_t or (dur == best_t and b - a > best_n):
+            best_t, best_n = dur, int(b - a)
+    return best_t, best_n
+
+
+def stretches(stamps: np.ndarray, flag: np.ndarray) -> list[tuple[float, float]]:
+    """(start s, end s) of every run of consecutive True in ``flag`` (for figures)."""
+    flag = np.asarray(flag, dtype=bool)
+    n = flag.shape[0]
+    d = np.diff(np.concatenate(([0], flag.astype(np.int8), [0])))
+    out = []
+    for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)):
+        out.append((float(stamps[a]), float(stamps[b] if b < n else stamps[b - 1])))
+    return out
+
+
+def summarize(stamps: np.ndarray, flags: dict[str, np.ndarray], degeneracy: np.ndarray,
+              lost_events: int, relocalisations: int, max_share: float, max_stretch: float) -> dict[str, object]:
+    """The ``pose_confidence`` block of summary.json.
+
+    ``flags``: (n,) bool arrays "low_support", "degenerate", "lost"; ``degeneracy`` (n,) smallest /
+    largest normalized Hessian eigenvalue (NaN where not matched). The run is flagged
+    ``trustworthy = False`` when the share of low-support scans exceeds ``max_share`` or a
+    low-support stretch lasts longer than ``max_stretch`` s; ``warning`` then says why in one line.
+    """
+    stamps = np.asarray(stamps, dtype=np.float64)
+    n = stamps.shape[0]
+    out: dict[str, object] = {"scans": n}
+    for key in FLAGS:
+        f = np.asarray(flags.get(key, np.zeros(n, dtype=bool)), dtype=bool)
+        t, k = longest_stretch(stamps, f)
+        out[f"{key}_scans"] = int(f.sum())
+        out[f"{key}_share"] = round(float(f.mean()), 4) if n else 0.0
+        out[f"longest_{key}_s"] = round(t, 3)
+        out[f"longest_{key}_scans"] = k
+    lost = np.asarray(flags.get("lost", np.zeros(n, dtype=bool)), dtype=bool)
+    if n > 1:
+        dt = np.diff(stamps)
+        out["lost_time_s"] = round(float(np.sum(dt[lost[:-1]])), 3)
+        out["tracking_time_s"] = round(float(np.sum(dt[~lost[:-1]])), 3)
+    else:
+        out["lost_time_s"] = 0.0
+        out["tracking_time_s"] = 0.0
+    out["lost_events"] = int(lost_events)
+    out["relocalisations"] = int(relocalisations)
+    deg = np.asarray(degeneracy, dtype=np.float64)
+    fin = deg[np.isfinite(deg)]
+    out["degeneracy_median"] = round(float(np.median(fin)), 4) if fin.size else None
+    out["degeneracy_min"] = round(float(fin.min()), 4) if fin.size else None
+    share = float(out["low_support_share"])  # type: ignore[arg-type]
+    longest = float(out["longest_low_support_s"])  # type: ignore[arg-type]
+    reasons = []
+    if share > max_share or longest > max_stretch:
+        reasons.append(f"{100 * share:.0f} % of scans matched with low support (longest stretch {longest:.1f} s)")
+    if lost_events:
+        reasons.append(f"lost {lost_events}× ({float(out['lost_time_s']):.1f} s), relocalised {relocalisations}×")
+    out["trustworthy"] = not reasons
+    out["warning"] = ("pose not trustworthy: " + "; ".join(reasons)) if reasons else None
+    return out

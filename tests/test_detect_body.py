@@ -1,0 +1,115 @@
+"""The robot's own body: footprint polygon (validation, dropping), automatic body beams, riding tracks."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dynslam2d.config import Config, config_from_dict
+from dynslam2d.detect.body import BodyFilter, convex_hull, points_in_polygon, polygon_problem
+from dynslam2d.detect.config import FootprintConfig
+from dynslam2d.errors import DynSlamError
+from dynslam2d.pipeline import Pipeline
+from dynslam2d.sim import cast_rays, rect_segments
+from dynslam2d.sim.world import transform_segments
+from dynslam2d.types import Pose2D, Scan
+
+N = 720
+FOV = math.radians(270.0)
+ANGLES = -0.5 * FOV + np.arange(N) * FOV / (N - 1)
+ROOM = np.vstack([rect_segments(0.0, 0.0, 0.0, 14.0, 10.0), rect_segments(2.0, 2.5, 0.4, 1.0, 0.6),
+                  rect_segments(-3.0, -2.0, 0.0, 0.6, 0.6)])
+# a bumper and a mast seen by the laser, in the LASER frame (they move with the robot)
+BODY = np.vstack([rect_segments(-0.25, 0.3, 0.0, 0.3, 0.06), rect_segments(-0.3, -0.28, 0.0, 0.08, 0.08)])
+
+
+def drive(n_scans: int = 120, rate: float = 10.0, config: Config | None = None):
+    """A robot driving a curve at ≈0.8 m/s in a room; the laser sees BODY; yields (scan, pose, body labels)."""
+    pipe = Pipeline(config)
+    steps = []
+    for i in range(n_scans):
+        t = i / rate
+        pose = Pose2D(-4.0 + 0.8 * t, -1.0 + 1.5 * math.sin(0.25 * t), 0.4 * math.sin(0.25 * t))
+        segs = np.vstack([ROOM, transform_segments(BODY, pose)])
+        ids = np.concatenate([np.zeros(ROOM.shape[0], dtype=np.int32), np.ones(BODY.shape[0], dtype=np.int32)])
+        dist, lab = cast_rays((pose.x, pose.y), pose.theta + ANGLES, segs, ids, np.zeros((0, 3)),
+                              np.zeros(0, dtype=np.int32))
+        r = dist + np.random.default_rng(i).normal(0.0, 0.01, dist.shape)
+        scan = Scan(stamp=t, angle_min=float(ANGLES[0]), angle_increment=float(ANGLES[1] - ANGLES[0]), ranges=r,
+                    range_min=0.05, range_max=20.0)
+        steps.append((pipe.process(scan), lab, scan))
+    return pipe, steps
+
+
+@pytest.mark.parametrize("polygon, why", [
+    ([(0, 0), (1, 1), (1, 0), (0, 1)], "not simple"),
+    ([(0, 0), (1, 0), (2, 0)], "no area"),
+    ([(0, 0), (1, 0)], "at least 3"),
+])
+def test_bad_footprint_is_a_one_line_error(polygon, why) -> None:
+    assert why in polygon_problem(polygon)
+    with pytest.raises(DynSlamError) as err:
+        config_from_dict({"detect": {"footprint": {"polygon": polygon}}}, origin="robot.yaml")
+    msg = str(err.value)
+    assert "\n" not in msg and "robot.yaml" in msg and "footprint" in msg and why in msg
+    with pytest.raises(DynSlamError):
+        BodyFilter(FootprintConfig.model_construct(polygon=polygon, auto=False))
+
+
+def test_polygon_helpers() -> None:
+    square = [(-1, -1), (1, -1), (1, 1), (-1, 1)]
+    assert polygon_problem(square) is None
+    inside = points_in_polygon(np.array([[0, 0], [0.9, -0.9], [1.1, 0], [np.nan, 0]]), np.array(square))
+    assert inside.tolist() == [True, True, False, False]
+    hull = convex_hull(np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.5]]))
+    assert hull.shape == (4, 2)
+
+
+def test_footprint_returns_are_dropped_before_everything() -> None:
+    cfg = Config()
+    cfg.detect.footprint = FootprintConfig(polygon=[(-0.5, -0.45), (0.05, -0.45), (0.05, 0.45), (-0.5, 0.45)],
+                                           auto=False)
+    pipe, steps = drive(40, config=cfg)
+    for step, lab, _ in steps:
+        assert np.array_equal(step.body, lab == 1)  # exactly the body's returns, nothing else
+        assert not step.removed[lab == 1].any()
+    assert pipe.body.report()["footprint_dropped_returns"] == sum(int((lab == 1).sum()) for _, lab, _ in steps)
+
+
+def test_body_is_found_automatically_and_never_follows_the_robot() -> None:
+    pipe, steps = drive(120)
+    body_beams = np.flatnonzero(steps[-1][1] == 1)
+    found = pipe.body.body
+    assert found[body_beams].mean() > 0.8  # most body beams found
+    assert not found[steps[-1][1] == 0].any()  # no wall beam taken for the body
+    later = [(s, lab) for s, lab, _ in steps[60:]]
+    assert np.mean([s.body[lab == 1].mean() for s, lab in later]) > 0.9
+    # no track in M anywhere near the robot once the body is found (before that, only a footprint polygon
+    # protects: a car keeping pace alongside looks exactly like a bumper for a while, datmo's parallel bag)
+    first = next(i for i, (s, lab, _) in enumerate(steps) if s.body[lab == 1].mean() > 0.5)
+    assert first <= 40
+    for step, lab, _ in steps[first:]:
+        for t in step.tracks:
+            if t.in_m:
+                assert math.hypot(t.box.px - step.pose.x, t.box.py - step.pose.y) > 1.0
+    rep = pipe.body.report(Scan(stamp=0.0, angle_min=float(ANGLES[0]), angle_increment=float(ANGLES[1] - ANGLES[0]),
+                                ranges=np.ones(N), range_min=0.05, range_max=20.0))
+    poly = np.array(rep["suggested_footprint"])
+    assert polygon_problem(poly) is None
+    last_scan, last_lab = steps[-1][2], steps[-1][1]
+    seen = last_scan.points(last_lab == 1)  # the body's returns, laser frame
+    assert points_in_polygon(seen, poly).mean() > 0.9
+
+
+def test_without_the_body_filter_the_body_rides_with_the_robot() -> None:
+    """Control: with the automatic detection off the body's returns are tracked; the riding test keeps
+    them out of M (they are fixed in the laser frame while the laser moves)."""
+    cfg = Config()
+    cfg.detect.footprint.auto = False
+    pipe, steps = drive(80, config=cfg)
+    riding = [t for step, lab, _ in steps for t in step.tracks if t.n_points and (lab[t.beams] == 1).all()]
+    assert riding, "the body's returns are tracked"
+    assert any("laser frame" in t.m_reason for t in riding)
+    assert not any(t.in_m for t in riding)

@@ -1,0 +1,87 @@
+"""Static evidence from the map (Eq. 3 + the map's word) and the physical acceleration bound."""
+
+from __future__ import annotations
+
+
+import numpy as np
+import pytest
+
+from dynslam2d.detect import DetectConfig, Tracker
+from dynslam2d.detect.mapevidence import MapView, map_evidence
+from dynslam2d.types import Pose2D
+
+from test_detect_tracker import render
+
+RES = 0.05
+
+
+def grid(value_path: float, value_rest: float = -2.0) -> MapView:
+    """A map of the 16×12 m test room: ``value_rest`` everywhere, ``value_path`` on the band the box
+    drives through (y 1.0…2.0), log-odds."""
+    i0, j0 = -200, -150
+    lo = np.full((300, 400), value_rest, dtype=np.float32)
+    ys = (np.arange(300) + j0) * RES
+    lo[(ys > 1.0) & (ys < 2.0), :] = value_path
+    return MapView(lo, i0, j0, RES)
+
+
+def run(view: MapView | None, robot_speed: float = 0.0, config: DetectConfig | None = None, duration: float = 4.0,
+        jump_at: int | None = None):
+    """A 0.8×0.5 box driving along +x at 0.8 m/s (optionally jumping 0.15 m ahead at scan ``jump_at``);
+    the robot at (robot_speed·t, −2). Returns the box track per scan."""
+    tr = Tracker(config)
+    out = []
+    shift = 0.0
+    for i in range(int(duration * 20)):
+        t = i / 20.0
+        if jump_at is not None and i == jump_at:
+            shift = 0.15
+        pose = Pose2D(robot_speed * t, -2.0, 0.0)
+        scan, lab = render(pose, [(-3.0 + 0.8 * t + shift, 1.5, 0.0, 0.8, 0.5)], t, seed=i)
+        tracks = tr.update(scan, pose, view)
+        box = [k for k in tracks if k.n_points and (lab[k.beams] == 1).mean() > 0.5]
+        out.append(box[0] if box else None)
+    return out
+
+
+def test_map_evidence_flags() -> None:
+    lo = np.zeros((10, 10), dtype=np.float32)
+    lo[5, 5] = 4.0  # long-occupied
+    lo[2, 2] = -1.0  # observed free, next to nothing occupied
+    lo[7, 7] = -1.0
+    lo[7, 8] = 2.2  # once hit, next to a free cell
+    view = MapView(lo, 0, 0, 0.1)
+    pts = np.array([[0.5, 0.5], [0.2, 0.2], [0.7, 0.7], [0.0, 0.9], [5.0, 5.0]])
+    s, f, u = map_evidence(pts, view, occupied_logodds=3.0, free_logodds=-0.35, free_radius=1)
+    assert s.tolist() == [True, False, False, False, False]
+    assert f.tolist() == [False, True, False, False, False]
+    assert u.tolist() == [False, False, False, True, True]
+
+
+def test_map_decides_between_structure_and_motion() -> None:
+    """The same moving box: free map -> in M; its path on long-occupied cells -> never in M (structure);
+    never-observed cells and a moving laser -> never in M; never-observed cells and a motionless laser
+    (whose map is not updated) -> in M; no map at all -> the kinematic test alone (in M)."""
+    def in_m(out):
+        return any(k is not None and k.in_m for k in out)
+
+    assert in_m(run(grid(-2.0)))
+    structure = run(grid(5.0))
+    assert not in_m(structure)
+    assert any(k is not None and "map cells" in k.m_reason for k in structure)
+    assert not in_m(run(grid(0.0, 0.0), robot_speed=0.1))
+    assert in_m(run(grid(0.0, 0.0), robot_speed=0.0))
+    assert in_m(run(None))
+
+
+@pytest.mark.parametrize("bound", [4.0, None])
+def test_speed_respects_the_acceleration_bound(bound) -> None:
+    cfg = DetectConfig()
+    cfg.tracker.max_accel = bound
+    out = run(None, config=cfg, jump_at=40)
+    seq = [k for k in out[30:60] if k is not None]
+    dv = max(float(np.hypot(*(b.velocity - a.velocity))) for a, b in zip(seq[:-1], seq[1:]) if a.id == b.id)
+    if bound is None:
+        assert dv > 0.5  # the jump shows up as a speed jump (control)
+    else:
+        assert dv <= bound / 20.0 + 1e-9
