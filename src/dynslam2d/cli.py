@@ -293,10 +293,13 @@ def run(
                                        "(laser pose ⊕ (base_link→laser)⁻¹; needs TF, CARMEN pose fields or --laser-offset).")] = "laser",
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
+    clean: Annotated[Optional[str], typer.Option("--clean", help="Clean-up pass after the run: on (map.pgm = cleaned "
+                                                 "static map, map_online.pgm = online map) or off [on] (docs/maps.md).")] = None,
 ) -> None:
     """Detect and remove moving objects, map the rest with Hector-style SLAM.
 
-    Writes into OUT: map.pgm + map.yaml (map_server), map_logodds.npy, trajectory.tum,
+    Writes into OUT: map.pgm + map.yaml (map_server; the cleaned static map, docs/maps.md),
+    map_online.pgm + map_online.yaml (the online map; not with --clean off), map_logodds.npy, trajectory.tum,
     tracks.csv, kept_mask.npz, config.yaml, summary.json, map.png, tracks.png and, with
     ground truth (sim: inputs or --gt), metrics.json and errors.png; run.gif with --animate.
     """
@@ -326,6 +329,10 @@ def run(
     }})
     if filter_mode is not None:
         cfg = with_overrides(cfg, {"filter": {"mode": filter_mode}})
+    if clean is not None:
+        if clean not in ("on", "off"):
+            raise DynSlamError(f"--clean must be 'on' or 'off', got {clean!r}")
+        cfg = with_overrides(cfg, {"clean": {"enabled": clean == "on"}})
     if hector_compat:
         cfg = with_overrides(cfg, {"slam": {"hector_gradient_bug": True, "step_mode": "gauss_newton", "correlative_mode": "never"}})
     _check_sim_only(input, seed, duration)
@@ -366,6 +373,9 @@ def run(
     from dynslam2d.viz.collect import RemovedPointsCollector
 
     collector = RemovedPointsCollector()
+    from dynslam2d.slam.cleanup import CleanupRecorder
+
+    cleaner = CleanupRecorder(cfg.clean, cfg.slam)
     folder.start(input=source.meta.origin)
     checkpointer = Checkpointer(folder.work, every_s=checkpoint_period, every_scans=checkpoint_scans,
                                 info={"input": source.meta.origin})
@@ -373,6 +383,8 @@ def run(
     try:
         with contextlib.ExitStack() as stack:
             observers: list[Any] = [collector, checkpointer]
+            if cfg.clean.enabled:
+                observers.append(cleaner)
             if animate:
                 from dynslam2d.viz.animate import Animator
 
@@ -404,7 +416,7 @@ def run(
         _check_run_usable(result, input)
         truth = ground_truth_for(source, truth_files, cfg.slam.map_resolution)
         try:
-            paths = write_results(result, folder.work, truth, collector)
+            paths = write_results(result, folder.work, truth, collector, cleaned=cleaner.result)
             if mount is not None:
                 from dynslam2d.io.odometry import rewrite_trajectory_frame
 
@@ -447,6 +459,10 @@ def run(
         ("map", f"{summary['map_cells'][1]}×{summary['map_cells'][0]} cells at {summary['map_resolution_m']} m, "
                 f"{summary['memory_bytes'] / 2**20:.1f} MiB"),
     ]
+    cl = summary.get("cleanup")
+    if isinstance(cl, dict):
+        rows.append(("clean-up", f"erased {cl['erased_cells']} of {cl['occupied_cells_online']} occupied cells "
+                                 f"({cl['erased_area_m2']:.2f} m²) in {cl['pass_time_s']:.2f} s; online map in map_online.pgm"))
     repairs = summary.get("stamp_repairs") or {}
     if repairs.get("backward_steps") or repairs.get("nudged_stamps") or repairs.get("time_source") not in (None, "ipc"):
         rows.append(("stamp repairs", "; ".join(summary.get("input_warnings", [])) or str(repairs)))

@@ -20,6 +20,7 @@ from dynslam2d.io.yamlfile import read_yaml_mapping
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.filter import FilterConfig
 from dynslam2d.slam.config import SlamConfig
+from dynslam2d.slam.cleanconfig import CleanConfig
 
 
 class Config(BaseModel):
@@ -32,6 +33,9 @@ class Config(BaseModel):
         default_factory=DetectConfig, description="Segmentation, shape fit, tracking and the dynamic set M."
     )
     filter: FilterConfig = Field(default_factory=FilterConfig, description="Dynamic-point filter (paper Eq. 4-8).")
+    clean: CleanConfig = Field(
+        default_factory=CleanConfig, description="Offline map clean-up after the run (docs/maps.md)."
+    )
 
 
 def _describe(err: ValidationError) -> str:

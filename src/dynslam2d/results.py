@@ -32,6 +32,7 @@ from dynslam2d.io.outputs import read_marker, write_marker
 from dynslam2d.io.summary import input_report
 from dynslam2d.io.trajectory import Trajectory, write_tum
 from dynslam2d.pipeline import TRACK_COLUMNS, RunResult
+from dynslam2d.slam.cleanup import CleanResult
 from dynslam2d.types import ScanSource
 from dynslam2d.viz.collect import RemovedPointsCollector
 from dynslam2d.viz.figures import write_figures
@@ -168,21 +169,35 @@ def write_results(
     out_dir: str | os.PathLike[str],
     gt: GroundTruthFiles | None = None,
     collector: RemovedPointsCollector | None = None,
+    cleaned: CleanResult | None = None,
 ) -> dict[str, Path]:
     """Write the results of ``run`` into ``out_dir``; return the written paths by name.
 
     ``collector``: the :class:`~dynslam2d.viz.collect.RemovedPointsCollector` that watched
     the run (``run(..., observers=[collector])``), to draw the removed points in map.png.
+    ``cleaned``: the clean-up pass's result (docs/maps.md); map.pgm/map.yaml and
+    map_logodds.npy then hold the cleaned map and map_online.pgm/.yaml and
+    map_logodds_online.npy the online one; metrics.json's ``map`` scores the cleaned map
+    and ``map_online`` the online one.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Path] = {}
-    ypath, ppath = write_map(out / "map.yaml", run.grid)
+    final_grid = cleaned.grid if cleaned is not None else run.grid
+    final_lo = cleaned.logodds if cleaned is not None and cleaned.logodds is not None else run.logodds
+    ypath, ppath = write_map(out / "map.yaml", final_grid)
     paths["map.yaml"], paths["map.pgm"] = ypath, ppath
     with atomic_path(out / "map_logodds.npy") as tmp:
         with tmp.open("wb") as fh:
-            np.save(fh, run.logodds.astype(np.float32))
+            np.save(fh, final_lo.astype(np.float32))
     paths["map_logodds.npy"] = out / "map_logodds.npy"
+    if cleaned is not None:
+        ypath, ppath = write_map(out / "map_online.yaml", run.grid)
+        paths["map_online.yaml"], paths["map_online.pgm"] = ypath, ppath
+        with atomic_path(out / "map_logodds_online.npy") as tmp:
+            with tmp.open("wb") as fh:
+                np.save(fh, run.logodds.astype(np.float32))
+        paths["map_logodds_online.npy"] = out / "map_logodds_online.npy"
     paths["trajectory.tum"] = write_tum(out / "trajectory.tum", run.trajectory, comment="laser pose in the map frame")
     paths["config.yaml"] = write_text_atomic(out / "config.yaml", dump_config(run.config))
     paths["tracks.csv"] = write_text_atomic(out / "tracks.csv", tracks_csv(run))
@@ -194,6 +209,16 @@ def write_results(
     paths["kept_mask.npz"] = out / "kept_mask.npz"
     summary = run.summary()
     metrics = compute_metrics(run, gt) if gt is not None else None
+    if cleaned is not None:
+        summary["cleanup"] = dict(cleaned.stats)
+        if metrics is not None:
+            from dynslam2d.types import Pose2D
+
+            a = metrics["alignment"]
+            metrics["map_online"] = metrics["map"]
+            metrics["map"] = map_metrics(cleaned.grid, gt.static_map,  # type: ignore[union-attr]
+                                         transform=Pose2D(a["x"], a["y"], a["theta"])).as_dict()
+            metrics["cleanup"] = dict(cleaned.stats)
     if metrics is not None:
         summary["ate_rmse_m"] = metrics["ate_rmse_m"]
         paths["metrics.json"] = write_text_atomic(out / "metrics.json", metrics_json(metrics))
@@ -201,7 +226,7 @@ def write_results(
     summary["status"] = "complete"
     paths["summary.json"] = write_text_atomic(out / "summary.json", metrics_json(summary))
     # Figures: map.png, tracks.png and, with ground truth, errors.png (dynslam2d.viz.figures).
-    paths.update(write_figures(run, out, gt, collector))
+    paths.update(write_figures(run, out, gt, collector, cleaned=cleaned))
     # run.json LAST: a folder whose run.json does not say "complete" lacks files (docs/reliability.md).
     paths["run.json"] = write_marker(out, "complete", scans=run.n_scans, input=run.source.origin,
                                      files=sorted(paths))

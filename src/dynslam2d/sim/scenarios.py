@@ -432,6 +432,45 @@ def _build_occlusion(seed: int, duration: float) -> Scenario:
                     "the sensor for 1 s and pushes through it", world, movers, robot, lidar, duration, seed)
 
 
+# --------------------------------------------------------------------------- parking
+
+#: A 22×15 m hall opening on the right into a garage bay with a ramp going down (y < −6)
+#: where vehicles park out of sight; an alcove in the top wall.
+_PARKING_OUTLINE = [
+    (-11.0, -7.5), (11.0, -7.5), (11.0, -6.0), (13.0, -6.0), (13.0, -16.0), (19.0, -16.0), (19.0, 6.0),
+    (11.0, 6.0), (11.0, 7.5), (6.0, 7.5), (6.0, 8.3), (4.0, 8.3), (4.0, 7.5), (-11.0, 7.5),
+]
+
+
+def _build_parking(seed: int, duration: float) -> Scenario:
+    """Vehicles of four sizes park and leave, people walk and then stand, and the robot
+    drives a 10×4 m loop past all of them about twice (issue 11, docs/maps.md)."""
+    world = _build_world(_PARKING_OUTLINE, [_solid(-8.0, 3.2, 0.5, 0.5), _solid(8.0, -2.5, 0.5, 0.5)])
+    robot = waypoint_path([(-5.0, -2.0), (5.0, -2.0), (5.0, 2.0), (-5.0, 2.0)], speed=0.6, turn_rate=0.8,
+                          wobble_amplitude=0.05, wobble_period=3.0)
+    car = timeline((-4.0, -5.0), [("wait", 45.0), ("go", (7.0, -5.0), 1.2), ("go", (16.0, -1.0), 1.2),
+                                  ("go", (14.5, -13.5), 1.2)], start_heading=0.0)
+    van = timeline((-8.5, 0.0), [("wait", 80.0), ("go", (-8.0, -4.6), 0.8), ("go", (7.0, -4.6), 1.2),
+                                 ("go", (16.0, -1.0), 1.2), ("go", (17.5, -13.0), 1.2)], start_heading=math.pi / 2)
+    small = timeline((16.0, -10.0), [("wait", 10.0), ("go", (16.0, -1.0), 1.0), ("go", (6.5, 5.0), 1.0),
+                                     ("go", (2.0, 5.0), 0.8)], start_heading=math.pi / 2)
+    cart = timeline((-6.0, 6.3), [("wait", 30.0), ("go", (-1.5, 6.3), 0.7)], start_heading=0.0)
+    walker = timeline((9.0, 4.0), [("go", (-3.0, 4.5), 1.1)], start_heading=math.pi)
+    stander = timeline((0.0, 0.0), [("wait", 50.0), ("go", (3.5, 0.5), 0.9), ("wait", 25.0),
+                                    ("go", (-3.0, -0.5), 1.0)], start_heading=0.0)
+    movers = (
+        Mover(1, "car-leaving", Rect(4.0, 1.8), car),
+        Mover(2, "van-leaving", Rect(5.0, 2.0), van),
+        Mover(3, "small-car-arriving", Rect(2.6, 1.6), small),
+        Mover(4, "cart-stop-go-stop", Rect(1.2, 0.8), cart),
+        Mover(5, "person-walks-then-stands", Circle(0.25), walker),
+        Mover(6, "person-stands-walks-stands", Circle(0.25), stander),
+    )
+    return Scenario("parking", "hall with a garage bay: a car and a van parked then leaving, a small car and a "
+                    "cart arriving and parking, people who walk and then stand; robot loops past them",
+                    world, movers, robot, _lidar(), duration, seed)
+
+
 # --------------------------------------------------------------------------- registry
 
 #: name → spec; ``SCENARIOS[name](seed=None, duration=None)`` builds the scene
@@ -448,6 +487,7 @@ SCENARIOS: dict[str, ScenarioSpec] = {
     "long-corridor": ScenarioSpec(_build_long_corridor, 9, 55.0,
                                   "60 m corridor, 6 m laser, only side walls in range for >12 m stretches"),
     "occlusion": ScenarioSpec(_build_occlusion, 10, 16.0, "a person stands against and pushes through the sensor"),
+    "parking": ScenarioSpec(_build_parking, 9, 120.0, "vehicles park and leave, people walk then stand, robot loops"),
 }
 
 

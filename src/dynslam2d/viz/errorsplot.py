@@ -85,6 +85,7 @@ def plot_errors(
     *,
     title: str = "",
     dpi: int = 120,
+    map_note: str = "",
     intervals: dict[str, list[tuple[float, float]]] | None = None,
 ) -> Path:
     """Write errors.png: ATE (m) against time (s) on top, the map difference below (GT frame, m).
@@ -93,6 +94,7 @@ def plot_errors(
         ate_result: :func:`dynslam2d.eval.trajectory.ate` of the run against the GT
             trajectory (aligned); its per-pose ``errors`` are plotted.
         diff: :func:`map_difference` of the run's map against the GT map, with the same alignment.
+        map_note: appended to the map panel's title (e.g. ghost area and F1 of the cleaned and online maps).
         intervals: (start, end) stamps (s, same clock as the ATE stamps) to shade on the time axis,
             by kind: "degenerate", "low_support", "lost".
     """
@@ -149,7 +151,7 @@ def plot_errors(
     ax_m.set_xlabel("x [m] (ground-truth frame)")
     ax_m.set_ylabel("y [m]")
     ax_m.set_aspect("equal")
-    ax_m.set_title("map difference", fontsize="medium")
+    ax_m.set_title("map difference" + (f"\n{map_note}" if map_note else ""), fontsize="medium")
     if title:
         fig.suptitle(title)
     fig.tight_layout()

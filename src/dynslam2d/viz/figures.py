@@ -10,6 +10,7 @@ import numpy as np
 from dynslam2d.eval.trajectory import ate
 from dynslam2d.io.groundtruth import GroundTruthFiles
 from dynslam2d.pipeline import RunResult
+from dynslam2d.slam.cleanup import CleanResult
 from dynslam2d.slam.confidence import stretches
 from dynslam2d.viz.collect import RemovedPointsCollector
 from dynslam2d.viz.errorsplot import map_difference, plot_errors
@@ -25,6 +26,7 @@ def write_figures(
     collector: RemovedPointsCollector | None = None,
     *,
     dpi: int = 120,
+    cleaned: CleanResult | None = None,
 ) -> dict[str, Path]:
     """Write the figures of ``result`` into ``out_dir`` (each atomically); return paths by name.
 
@@ -36,6 +38,10 @@ def write_figures(
       segments solid, the rest dashed, ids labelled;
     - ``errors.png`` (only with ``gt``): ATE over time and the map difference (ghost cells,
       missed structure) over the ground-truth structure.
+
+    With ``cleaned`` (the clean-up pass, docs/maps.md) map.png shows the cleaned map with
+    the erased cells in :data:`style.ERASED`, and errors.png scores the cleaned map and
+    names the ghost area and F1 of both maps.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -58,12 +64,14 @@ def write_figures(
         title += f", ATE RMSE {ate_res.rmse:.3f} m"
     final = final_confirmed(all_paths, last_stamp)
     removed_xy = collector.points() if collector is not None else None
+    grid = cleaned.grid if cleaned is not None else result.grid
     conf = result.confidence
     pc = result.pose_confidence() if conf else {}
     paths["map.png"] = plot_map(
-        out / "map.png", result.grid, traj.xy, reference_xy=ref_xy, title=title, dpi=dpi,
+        out / "map.png", grid, traj.xy, reference_xy=ref_xy, title=title, dpi=dpi,
         tracks=tracks_to_draw(all_paths, last_stamp), boxes=[(p.id, p.last_box) for p in final],
-        removed_xy=removed_xy, low_support=conf.get("low_support"), lost=conf.get("lost"),
+        removed_xy=removed_xy, erased=cleaned.erased if cleaned is not None else None,
+        low_support=conf.get("low_support"), lost=conf.get("lost"),
         warning=pc.get("warning"),  # type: ignore[arg-type]
     )
     confirmed = sorted((p for p in all_paths.values() if p.ever_confirmed), key=lambda p: p.id)
@@ -73,11 +81,19 @@ def write_figures(
         title=f"{result.source.origin} — {len(confirmed)} confirmed tracks ({n_m} ever in M), coloured by speed",
     )
     if gt is not None and ate_res is not None:
-        diff = map_difference(result.grid, gt.static_map, transform=ate_res.alignment)
+        diff = map_difference(grid, gt.static_map, transform=ate_res.alignment)
         spans = {k: stretches(traj.stamps, conf[k]) for k in ("degenerate", "low_support", "lost") if k in conf}
+        note = ""
+        if cleaned is not None:
+            from dynslam2d.eval.maps import map_metrics
+
+            mc = map_metrics(cleaned.grid, gt.static_map, transform=ate_res.alignment)
+            mo = map_metrics(result.grid, gt.static_map, transform=ate_res.alignment)
+            note = (f"cleaned map (shown): ghost {mc.ghost_area_m2:.2f} m², F1 {mc.f1:.3f}; "
+                    f"online map: ghost {mo.ghost_area_m2:.2f} m², F1 {mo.f1:.3f}")
         paths["errors.png"] = plot_errors(out / "errors.png", ate_res, diff, dpi=dpi,
                                           title=f"{result.source.origin} — filter {result.config.filter.mode}",
-                                          intervals=spans)
+                                          intervals=spans, map_note=note)
     return paths
 
 

@@ -113,6 +113,7 @@ def plot_map(
     tracks: Sequence[TrackPath] | None = None,
     boxes: Sequence[tuple[int, Box]] | None = None,
     removed_xy: np.ndarray | None = None,
+    erased: np.ndarray | None = None,
     low_support: np.ndarray | None = None,
     lost: np.ndarray | None = None,
     warning: str | None = None,
@@ -129,6 +130,8 @@ def plot_map(
         boxes: (id, box) of the final confirmed tracks, drawn as outlines (map frame).
         removed_xy: (k, 2) endpoints of removed beams in the map frame, m, drawn in
             :data:`style.REMOVED` (exact colour, one square per map cell hit).
+        erased: (H, W) bool, same cells as ``grid``: cells the clean-up pass erased
+            (docs/maps.md), drawn in :data:`style.ERASED`.
         low_support, lost: (n,) bool per trajectory pose: poses matched with low support are
             marked in :data:`style.LOW_SUPPORT`, poses while lost in :data:`style.LOST`.
         warning: a line drawn in a red box over the map (the pose cannot be trusted).
@@ -146,6 +149,14 @@ def plot_map(
     ax.imshow(occupancy_image(grid), cmap="gray", vmin=0.0, vmax=1.0, origin="lower",
               extent=extent, interpolation="nearest")
     handles: list[Any] = []
+    if erased is not None and erased.shape == grid.shape and erased.any():
+        from matplotlib.colors import to_rgba
+
+        over = np.zeros(erased.shape + (4,))
+        over[erased] = to_rgba(style.ERASED)
+        ax.imshow(over, origin="lower", extent=extent, interpolation="nearest", zorder=1)
+        n_er = int(erased.sum())
+        handles.append(Patch(color=style.ERASED, label=f"erased by clean-up ({n_er * grid.resolution ** 2:.2f} m²)"))
     if removed_xy is not None and len(removed_xy):
         # At least ~1.5 px per square at 8 in × dpi so that single points stay visible.
         cell = max(grid.resolution, (extent[1] - extent[0]) / (8.0 * dpi / 1.5))

@@ -46,3 +46,5 @@ def rgb01(colour: str) -> tuple[float, float, float]:
     """``"#rrggbb"`` → (r, g, b) in 0 … 1."""
     r, g, b = rgb255(colour)
     return r / 255.0, g / 255.0, b / 255.0
+#: Cells the offline clean-up pass erased from the online map (amber; docs/maps.md).
+ERASED = "#ffb000"

@@ -1,0 +1,437 @@
+"""Offline map clean-up: erase occupied cells that beams were seen to pass through.
+
+The 2D form of visibility-based removal (docs/maps.md): a cell that scans *hit* but
+that other scans *saw through* held something that was not always there (a parked car
+that left, a person who stood and walked on, a box that arrived). Removert (Kim & Kim,
+IROS 2020) removes map points that lie in front of a later scan's range measurement;
+Peopleremover (Schauer & Nüchter, RA-L 2018) counts, per voxel, the scans whose rays
+traverse it and removes points in traversed voxels; ERASOR (Lim et al., RA-L 2021)
+compares region-wise occupancy of the map and of each scan. Here, per map cell:
+
+* ``hits``: number of scans with a kept beam ending in the cell (beams the dynamic
+  filter removed add no hit: they belong to movers);
+* ``through``: number of scans with a beam (kept or removed: both saw free space up to
+  their endpoint) that passes through the cell *before* its endpoint minus a margin,
+  in a scan that did not also hit the cell;
+* ``switches``: how often the cell's sequence of scans changed between hit and pass.
+
+A cell occupied in the online map is erased when ``through ≥ min_through``,
+``through ≥ through_ratio · hits`` (Peopleremover's count of traversing scans, with
+ERASOR's idea of a ratio against the occupancy) and ``switches ≤ max_switches +
+switch_share · min(hits, through)``: a parked object is hit in one block of scans and
+seen through in another, while glass, railings, the copies of a wall that pose drift
+put apart and wall cells clipped by grazing rays alternate (our stand-in for Removert's
+"revert" of removals caused by pose and discretisation ambiguity).
+
+Walls at grazing incidence: a ray that meets a surface at angle α runs within one
+cell of it for about ``resolution / sin α`` before the endpoint, so the margin grows
+to ``grazing_cells · resolution / sin α`` (α estimated per beam from the neighbouring
+endpoints); a cell counts as passed only where the ray runs near its centre
+(``ray_core``), so rays that clip the corner of a wall end or door frame do not count.
+
+Memory: the pass never keeps scans. :class:`VisibilityCounter` is fed scan by scan
+during the run (:class:`CleanupRecorder` is a pipeline observer) and holds five int32
+grids (20 bytes per cell, growing with the scans, never beyond the SLAM's
+``max_map_memory_mb``). Hector-style SLAM never changes a pose after its scan (no loop
+closure), so the pose a scan had when it was processed is its pose in the final
+trajectory; counting during the run is the same as counting after it.
+
+Frames and units: world / map frame in m; cell (i, j) of the counters is absolute
+(centre at (i·r, j·r), as the SLAM grid levels), arrays indexed [row = y, col = x].
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from dynslam2d.gridmap import GridMap
+from dynslam2d.slam.cleanconfig import CleanConfig
+from dynslam2d.slam.config import SlamConfig
+from dynslam2d.types import Pose2D, Scan
+
+#: Occupancy probability written into erased cells of the cleaned map (clearly free).
+ERASED_PROBABILITY = 0.1
+
+
+#: Channels of the counter's (H, W, 5) int32 array: one cache line per visited cell.
+_HIT, _THROUGH, _SWITCH, _LAST_HIT, _LAST_THROUGH = 0, 1, 2, 3, 4
+
+
+@njit(cache=True)
+def _count_scan(cells, scan_id, ox, oy, hx, hy, cx, cy, core):  # pragma: no cover - numba
+    """One scan into the counters ``cells`` (H, W, 5): hits, passes, switches, scan id of
+    the last hit, scan id of the last pass (ids start at 1; 0 = never). Coordinates are in cell units of the array
+    (cell (i, j) centred on integers). ``(hx, hy)``: hit endpoints; ``(cx, cy)``: ends of
+    the clearing segments from ``(ox, oy)``. Per scan, a cell gets at most one hit and
+    one pass, and no pass if the scan hit it. Switches count changes between hit and
+    pass in each cell's sequence of scans (the later of the two last ids is its state)."""
+    h = cells.shape[0]
+    w = cells.shape[1]
+    for k in range(hx.shape[0]):
+        ix = int(math.floor(hx[k] + 0.5))
+        iy = int(math.floor(hy[k] + 0.5))
+        if 0 <= ix < w and 0 <= iy < h and cells[iy, ix, 3] != scan_id:
+            if cells[iy, ix, 4] > cells[iy, ix, 3]:
+                cells[iy, ix, 2] += 1
+            cells[iy, ix, 3] = scan_id
+            cells[iy, ix, 0] += 1
+    for k in range(cx.shape[0]):
+        dx = cx[k] - ox
+        dy = cy[k] - oy
+        x_major = abs(dx) >= abs(dy)
+        if x_major:
+            a0 = int(math.floor(ox + 0.5))
+            a1 = int(math.floor(cx[k] + 0.5))
+            slope = dy / dx if dx != 0.0 else 0.0
+            m0 = ox
+            n0 = oy
+        else:
+            a0 = int(math.floor(oy + 0.5))
+            a1 = int(math.floor(cy[k] + 0.5))
+            slope = dx / dy
+            m0 = oy
+            n0 = ox
+        step = 1 if a1 >= a0 else -1
+        a = a0
+        while True:
+            b = n0 + slope * (a - m0)
+            ib = int(math.floor(b + 0.5))
+            if abs(b - ib) <= core:
+                if x_major:
+                    x = a
+                    y = ib
+                else:
+                    x = ib
+                    y = a
+                if 0 <= x < w and 0 <= y < h:
+                    lh = cells[y, x, 3]
+                    if lh != scan_id and cells[y, x, 4] != scan_id:
+                        if lh > cells[y, x, 4]:
+                            cells[y, x, 2] += 1
+                        cells[y, x, 4] = scan_id
+                        cells[y, x, 1] += 1
+            if a == a1:
+                break
+            a += step
+
+
+@njit(cache=True)
+def _scan_geometry(ranges, angles, valid, removed, px, py, th, res, margin_m, grazing_cells,
+                   min_sin):  # pragma: no cover - numba
+    """Endpoints (ex, ey) and clearing ends (cx, cy) of one scan in world cell units (m / res),
+    with ``kept`` (valid and not removed: a hit) and ``clear`` (valid and longer than its
+    margin). Incidence: |sin α| between the beam and the local surface ``p[i+1] − p[i−1]``
+    (or the one valid neighbour; 1 without any); at a depth jump the "surface" spans both
+    sides and reads as grazing, which only makes the margin larger. Margin =
+    max(margin_m, grazing_cells·res / max(sin α, min_sin))."""
+    n = ranges.shape[0]
+    lx = np.zeros(n)
+    ly = np.zeros(n)
+    for i in range(n):
+        if valid[i]:
+            lx[i] = ranges[i] * math.cos(angles[i])
+            ly[i] = ranges[i] * math.sin(angles[i])
+    ca = math.cos(th)
+    sa = math.sin(th)
+    ex = np.empty(n)
+    ey = np.empty(n)
+    cx = np.empty(n)
+    cy = np.empty(n)
+    kept = np.zeros(n, dtype=np.bool_)
+    clear = np.zeros(n, dtype=np.bool_)
+    ox = px / res
+    oy = py / res
+    for i in range(n):
+        ex[i] = ox
+        ey[i] = oy
+        cx[i] = ox
+        cy[i] = oy
+        if not valid[i]:
+            continue
+        ax = lx[i]
+        ay = ly[i]
+        bx = lx[i]
+        by = ly[i]
+        has = False
+        if i > 0 and valid[i - 1]:
+            ax = lx[i - 1]
+            ay = ly[i - 1]
+            has = True
+        if i + 1 < n and valid[i + 1]:
+            bx = lx[i + 1]
+            by = ly[i + 1]
+            has = True
+        tx = bx - ax
+        ty = by - ay
+        tn = math.sqrt(tx * tx + ty * ty)
+        r = ranges[i]
+        sn = 1.0
+        if has and tn > 0.0 and r > 0.0:
+            sn = abs(lx[i] * ty - ly[i] * tx) / (tn * r)
+        if sn < min_sin:
+            sn = min_sin
+        margin = grazing_cells * res / sn
+        if margin < margin_m:
+            margin = margin_m
+        wx = px + ca * lx[i] - sa * ly[i]
+        wy = py + sa * lx[i] + ca * ly[i]
+        ex[i] = wx / res
+        ey[i] = wy / res
+        kept[i] = not removed[i]
+        if r > margin:
+            f = (r - margin) / r
+            cx[i] = ox + (ex[i] - ox) * f
+            cy[i] = oy + (ey[i] - oy) * f
+            clear[i] = True
+    return ex, ey, cx, cy, kept, clear
+
+
+class VisibilityCounter:
+    """Per-cell counts of scans that hit a cell and scans that passed through it.
+
+    Grows with the scans it is fed (absolute cells, resolution ``resolution`` m);
+    memory 16 bytes per cell. Feed with :meth:`add`; read with :meth:`window`.
+    """
+
+    def __init__(self, resolution: float, config: CleanConfig | None = None,
+                 slam: SlamConfig | None = None, growth_margin_m: float = 5.0) -> None:
+        self.resolution = float(resolution)
+        self.config = config if config is not None else CleanConfig()
+        self.slam = slam if slam is not None else SlamConfig(map_resolution=resolution)
+        self.margin_cells = max(int(math.ceil(growth_margin_m / self.resolution)), 1)
+        self.i0 = 0  # absolute col of array column 0
+        self.j0 = 0  # absolute row of array row 0
+        self._cells = np.zeros((0, 0, 5), dtype=np.int32)
+        self.scans = 0  # scans counted (also the id of the next scan)
+        self.too_large = 0  # scans left out: counting them would exceed the memory limit
+        self.seconds = 0.0
+
+    @property
+    def hits(self) -> np.ndarray:
+        """(h, w) int32 view: scans that hit each cell (array cells, see :attr:`i0`, :attr:`j0`)."""
+        return self._cells[:, :, _HIT]
+
+    @property
+    def through(self) -> np.ndarray:
+        """(h, w) int32 view: scans that passed through each cell."""
+        return self._cells[:, :, _THROUGH]
+
+    @property
+    def switches(self) -> np.ndarray:
+        """(h, w) int32 view: changes between hit and pass in each cell's scan sequence."""
+        return self._cells[:, :, _SWITCH]
+
+    @property
+    def nbytes(self) -> int:
+        return int(self._cells.nbytes)
+
+    def _ensure(self, imin: int, jmin: int, imax: int, jmax: int) -> bool:
+        """Grow to hold cells [imin, imax] × [jmin, jmax]; False (nothing changed) if that
+        would take more than the SLAM's map memory limit (``max_map_memory_mb``)."""
+        h, w = self._cells.shape[:2]
+        if h and imin >= self.i0 and jmin >= self.j0 and imax < self.i0 + w and jmax < self.j0 + h:
+            return True
+        if h == 0:
+            m = self.margin_cells
+            ni0, nj0, ni1, nj1 = imin - m, jmin - m, imax + m + 1, jmax + m + 1
+        else:
+            mx, my = max(self.margin_cells, w // 2), max(self.margin_cells, h // 2)
+            ni0 = min(self.i0, imin - mx) if imin < self.i0 else self.i0
+            nj0 = min(self.j0, jmin - my) if jmin < self.j0 else self.j0
+            ni1 = max(self.i0 + w, imax + mx + 1) if imax >= self.i0 + w else self.i0 + w
+            nj1 = max(self.j0 + h, jmax + my + 1) if jmax >= self.j0 + h else self.j0 + h
+        if (nj1 - nj0) * (ni1 - ni0) * 20 > self.slam.max_map_memory_mb * 1e6:
+            return False
+        new = np.zeros((nj1 - nj0, ni1 - ni0, 5), dtype=np.int32)
+        if h:
+            new[self.j0 - nj0:self.j0 - nj0 + h, self.i0 - ni0:self.i0 - ni0 + w] = self._cells
+        self._cells = new
+        self.i0, self.j0 = ni0, nj0
+        return True
+
+    def add(self, scan: Scan, pose: Pose2D, removed: np.ndarray | None = None) -> None:
+        """Count one scan taken at laser pose ``pose`` (map frame); ``removed`` (beams,) bool
+        marks the beams the dynamic filter took out (no hit; they still pass through)."""
+        t0 = time.perf_counter()
+        c, s = self.config, self.slam
+        r = scan.ranges
+        with np.errstate(invalid="ignore"):
+            valid = scan.valid_mask() & (r > s.laser_min_dist) & (r < s.laser_max_dist)
+        if not valid.any():
+            self.scans += 1
+            self.seconds += time.perf_counter() - t0
+            return
+        rem = removed if removed is not None and removed.shape == valid.shape else np.zeros_like(valid)
+        res = self.resolution
+        ex, ey, cx, cy, kept, clear = _scan_geometry(
+            np.asarray(r, dtype=np.float64), scan.angles, valid, np.asarray(rem, dtype=np.bool_), pose.x, pose.y,
+            pose.theta, res, c.margin_m, c.grazing_cells, math.sin(math.radians(c.min_incidence_deg)))
+        ox, oy = pose.x / res, pose.y / res
+        ev, fv = ex[valid], ey[valid]
+        if not self._ensure(int(math.floor(min(ox, ev.min()) + 0.5)), int(math.floor(min(oy, fv.min()) + 0.5)),
+                            int(math.floor(max(ox, ev.max()) + 0.5)), int(math.floor(max(oy, fv.max()) + 0.5))):
+            self.too_large += 1  # the SLAM refuses such scans too ('map_too_large')
+            self.seconds += time.perf_counter() - t0
+            return
+        _count_scan(self._cells, self.scans + 1,
+                    ox - self.i0, oy - self.j0, ex[kept] - self.i0, ey[kept] - self.j0,
+                    cx[clear] - self.i0, cy[clear] - self.j0, float(c.ray_core))
+        self.scans += 1
+        self.seconds += time.perf_counter() - t0
+
+    def window(self, grid: GridMap) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(hits, through, switches), each shaped like ``grid`` (same cells; zeros where
+        never counted).
+
+        ``grid`` must share the counter's resolution and have its cell centres on
+        multiples of it (as the SLAM levels do)."""
+        if abs(grid.resolution - self.resolution) > 1e-9 * self.resolution:
+            raise ValueError(f"grid resolution {grid.resolution} m differs from the counter's {self.resolution} m")
+        gi0 = int(round(grid.origin[0] / self.resolution + 0.5))
+        gj0 = int(round(grid.origin[1] / self.resolution + 0.5))
+        H, W = grid.shape
+        outs = [np.zeros((H, W), dtype=np.int32) for _ in range(3)]
+        h, w = self._cells.shape[:2]
+        c0, c1 = max(gi0, self.i0), min(gi0 + W, self.i0 + w)
+        r0, r1 = max(gj0, self.j0), min(gj0 + H, self.j0 + h)
+        if c1 > c0 and r1 > r0:
+            for out, arr in zip(outs, (self.hits, self.through, self.switches)):
+                out[r0 - gj0:r1 - gj0, c0 - gi0:c1 - gi0] = arr[r0 - self.j0:r1 - self.j0, c0 - self.i0:c1 - self.i0]
+        return outs[0], outs[1], outs[2]
+
+
+@dataclass(eq=False)
+class CleanResult:
+    """The cleaned map and what the pass did.
+
+    Attributes:
+        grid: the cleaned map (erased cells at :data:`ERASED_PROBABILITY`), same cells as the online map.
+        logodds: its log-odds (same cells), or None if no online log-odds was given.
+        erased: (H, W) bool, cells occupied in the online map that the pass erased.
+        hits, through: (H, W) int32, scans that hit / passed through each cell.
+        switches: (H, W) int32, changes between hit and pass in each cell's scan sequence.
+        stats: numbers for summary.json / metrics.json (cells, m², seconds).
+    """
+
+    grid: GridMap
+    logodds: np.ndarray | None
+    erased: np.ndarray
+    hits: np.ndarray
+    through: np.ndarray
+    switches: np.ndarray
+    stats: dict[str, float | int] = field(default_factory=dict)
+
+
+def erase_rule(hits: np.ndarray, through: np.ndarray, switches: np.ndarray, config: CleanConfig) -> np.ndarray:
+    """Cells (bool, same shape) that were seen through often enough, relative to their hits,
+    in few blocks: ``T ≥ min_through``, ``T ≥ through_ratio·H`` and
+    ``S ≤ max_switches + switch_share·min(H, T)`` (module docstring)."""
+    c = config
+    return ((through >= c.min_through) & (through >= c.through_ratio * hits)
+            & (switches <= c.max_switches + c.switch_share * np.minimum(hits, through)))
+
+
+def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray | None = None,
+              occupied_threshold: float = 0.65) -> CleanResult:
+    """Erase the cells of ``online`` (occupied: p > ``occupied_threshold``) that ``counter``
+    saw through often enough (rule in the module docstring). ``logodds``: the online
+    map's raw log-odds (same cells), returned cleaned alongside."""
+    t0 = time.perf_counter()
+    c = counter.config
+    hits, through, switches = counter.window(online)
+    occ = online.occupied(occupied_threshold)
+    erased = erase_rule(hits, through, switches, c) & occ
+    if c.revert_neighbors > 0:
+        # Removert's "revert" step in 2D: a cell at the edge of structure that stays is kept.
+        from scipy.ndimage import convolve
+
+        kept = (occ & ~erased).astype(np.int16)
+        n_kept = convolve(kept, np.ones((3, 3), dtype=np.int16), mode="constant") - kept
+        erased &= n_kept < c.revert_neighbors
+    prob = online.prob.copy()
+    prob[erased] = ERASED_PROBABILITY
+    lo = None
+    if logodds is not None:
+        lo = np.array(logodds, dtype=np.float64, copy=True)
+        if lo.shape == erased.shape:
+            lo[erased] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
+    area = online.resolution ** 2
+    stats: dict[str, float | int] = {
+        "occupied_cells_online": int(occ.sum()),
+        "erased_cells": int(erased.sum()),
+        "erased_area_m2": float(erased.sum() * area),
+        "scans_counted": int(counter.scans),
+        "scans_too_large": int(counter.too_large),
+        "pass_time_s": float(counter.seconds + time.perf_counter() - t0),
+        "counter_bytes": counter.nbytes,
+    }
+    return CleanResult(GridMap(prob, online.resolution, online.origin), lo, erased, hits, through, switches, stats)
+
+
+def compare_online(online: GridMap, cleaned: CleanResult, tolerance: float = 0.10,
+                   occupied_threshold: float = 0.65) -> dict[str, float | int]:
+    """How much of the online map's structure the cleaned map still holds (same cells).
+
+    ``f1``: F1 of the cleaned occupied cells against the online ones, cell by cell
+    (2·|cleaned| / (|online| + |cleaned|), the cleaned set being a subset);
+    ``lost_cells`` / ``lost_area_m2``: online occupied cells farther than ``tolerance`` (m)
+    from every cleaned occupied cell, i.e. structure that disappeared rather than got
+    thinner; ``lost_share``: their share of the online occupied cells.
+    """
+    from dynslam2d.eval.maps import distance_to
+
+    occ = online.occupied(occupied_threshold)
+    kept = occ & ~cleaned.erased
+    n_o, n_k = int(occ.sum()), int(kept.sum())
+    lost = occ & (distance_to(kept, online.resolution) > tolerance + 1e-9)
+    return {
+        "f1": 2.0 * n_k / (n_o + n_k) if n_o + n_k else 1.0,
+        "lost_cells": int(lost.sum()),
+        "lost_area_m2": float(lost.sum() * online.resolution ** 2),
+        "lost_share": float(lost.sum() / n_o) if n_o else 0.0,
+        "tolerance_m": float(tolerance),
+    }
+
+
+class CleanupRecorder:
+    """Pipeline observer (:class:`dynslam2d.pipeline.RunObserver`) that feeds a
+    :class:`VisibilityCounter` with every matched scan and, at the end of the run,
+    cleans the final map into :attr:`result`."""
+
+    def __init__(self, config: CleanConfig | None = None, slam: SlamConfig | None = None) -> None:
+        self.config = config if config is not None else CleanConfig()
+        self.slam = slam
+        self.counter: VisibilityCounter | None = None
+        self.result: CleanResult | None = None
+        self._last_stamp = -math.inf
+
+    def on_scan(self, scan: Scan, step: object, pipeline: object) -> None:
+        if not self.config.enabled or step.rejected or step.skipped:  # type: ignore[attr-defined]
+            return
+        if self.config.scans == "map_updates" and not step.map_updated:  # type: ignore[attr-defined]
+            return
+        updated = bool(step.map_updated)  # type: ignore[attr-defined]
+        if not updated and scan.stamp - self._last_stamp < self.config.min_interval_s - 1e-6:
+            return
+        self._last_stamp = scan.stamp
+        if self.counter is None:
+            slam = self.slam if self.slam is not None else pipeline.config.slam  # type: ignore[attr-defined]
+            self.counter = VisibilityCounter(slam.map_resolution, self.config, slam)
+        self.counter.add(scan, step.pose, step.removed)  # type: ignore[attr-defined]
+
+    def on_finish(self, result: object, pipeline: object) -> None:
+        if not self.config.enabled:
+            return
+        if self.counter is None:
+            slam = pipeline.config.slam  # type: ignore[attr-defined]
+            self.counter = VisibilityCounter(slam.map_resolution, self.config, slam)
+        self.result = clean_map(result.grid, self.counter, result.logodds)  # type: ignore[attr-defined]
+
+
+__all__ = ["ERASED_PROBABILITY", "CleanResult", "CleanupRecorder", "VisibilityCounter", "clean_map", "compare_online",
+           "erase_rule"]

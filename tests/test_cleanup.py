@@ -1,0 +1,250 @@
+"""The offline map clean-up pass (dynslam2d.slam.cleanup, docs/maps.md)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from dynslam2d.slam import HectorSlam, SlamConfig
+from dynslam2d.slam.cleanconfig import CleanConfig
+from dynslam2d.slam.cleanup import VisibilityCounter, clean_map, compare_online
+from dynslam2d.types import Pose2D, Scan
+
+N_BEAMS = 720
+ANGLES = -math.pi + np.arange(N_BEAMS) * (2 * math.pi / N_BEAMS)
+OBJECT = (ANGLES > 0.2) & (ANGLES < 0.5)  # beams that see the object at 2 m when it is there
+
+
+def _scan(ranges: np.ndarray, stamp: float) -> Scan:
+    return Scan(stamp=stamp, angle_min=-math.pi, angle_increment=2 * math.pi / N_BEAMS,
+                ranges=np.asarray(ranges, dtype=np.float64), range_min=0.1, range_max=20.0)
+
+
+def _ring_scans(present: list[bool]) -> list[Scan]:
+    """A sensor at the origin inside a 5 m ring wall; the object (2 m away) where ``present``."""
+    out = []
+    for k, p in enumerate(present):
+        r = np.full(N_BEAMS, 5.0)
+        if p:
+            r[OBJECT] = 2.0
+        out.append(_scan(r, 0.1 * k))
+    return out
+
+
+def _online_and_counter(scans: list[Scan], poses: list[Pose2D], removed: list[np.ndarray] | None = None,
+                        config: CleanConfig | None = None) -> tuple[HectorSlam, VisibilityCounter]:
+    """The online map (every scan written, removed beams left out, as the pipeline does) and the counts."""
+    slam = HectorSlam(SlamConfig(map_levels=1))
+    counter = VisibilityCounter(0.05, config or CleanConfig(), slam.config)
+    for k, (s, p) in enumerate(zip(scans, poses)):
+        rem = removed[k] if removed is not None else np.zeros(N_BEAMS, dtype=bool)
+        slam.update_map(s.with_ranges(np.where(rem, np.nan, s.ranges)), p, force=True)
+        counter.add(s, p, rem)
+    return slam, counter
+
+
+def _cells_at(grid, xy: np.ndarray) -> np.ndarray:
+    """(row, col) index arrays of the cells of ``grid`` holding world points ``xy`` (n, 2)."""
+    cr = grid.world_to_cell(xy)
+    return cr[:, 1], cr[:, 0]
+
+
+def _object_points(r: float = 2.0) -> np.ndarray:
+    a = ANGLES[OBJECT]
+    return np.column_stack((r * np.cos(a), r * np.sin(a)))
+
+
+def test_an_object_that_left_is_erased_and_the_walls_stay():
+    scans = _ring_scans([True] * 20 + [False] * 20)
+    slam, counter = _online_and_counter(scans, [Pose2D()] * len(scans))
+    online = slam.gridmap(0)
+    rows, cols = _cells_at(online, _object_points())
+    assert online.occupied()[rows, cols].mean() > 0.9  # the online map keeps the object (a ghost)
+    res = clean_map(online, counter, slam.logodds(0)[0])
+    assert res.erased[rows, cols].mean() > 0.9
+    assert not res.grid.occupied()[rows, cols].any() or res.grid.occupied()[rows, cols].mean() < 0.1
+    ring = np.column_stack((5.0 * np.cos(ANGLES), 5.0 * np.sin(ANGLES)))
+    r_rows, r_cols = _cells_at(online, ring)
+    assert not res.erased[r_rows, r_cols].any()
+    assert res.stats["erased_cells"] == int(res.erased.sum()) > 0
+    cmp = compare_online(online, res)
+    assert cmp["lost_cells"] > 0  # the object was structure of the online map, now gone
+    assert cmp["f1"] < 1.0
+
+
+def test_an_object_that_arrived_and_parked_is_erased():
+    scans = _ring_scans([False] * 20 + [True] * 20)
+    slam, counter = _online_and_counter(scans, [Pose2D()] * len(scans))
+    res = clean_map(slam.gridmap(0), counter)
+    rows, cols = _cells_at(slam.gridmap(0), _object_points())
+    assert res.erased[rows, cols].mean() > 0.9
+
+
+def test_cells_that_alternate_between_hit_and_seen_through_are_kept():
+    # Glass, railings or the doubled wall of a drifted pass: hits and passes alternate scan by scan.
+    scans = _ring_scans([k % 2 == 0 for k in range(40)])
+    slam, counter = _online_and_counter(scans, [Pose2D()] * len(scans))
+    online = slam.gridmap(0)
+    rows, cols = _cells_at(online, _object_points())
+    assert (counter.window(online)[2][rows, cols] > 30).all()  # ~39 switches each
+    res = clean_map(online, counter)
+    assert not res.erased[rows, cols].any()
+
+
+def test_removed_beams_add_no_hit_but_still_pass_through():
+    scans = _ring_scans([True] * 20 + [False] * 20)
+    removed = [OBJECT.copy() for _ in range(20)] + [np.zeros(N_BEAMS, dtype=bool) for _ in range(20)]
+    slam, counter = _online_and_counter(scans, [Pose2D()] * len(scans), removed)
+    online = slam.gridmap(0)
+    hits, through, _ = counter.window(online)
+    rows, cols = _cells_at(online, _object_points())
+    assert (hits[rows, cols] == 0).all()
+    near = _cells_at(online, _object_points(1.0))
+    assert (through[near] == 40).all()  # every scan saw these free, the 20 removed beams included
+    # the same scans with nothing removed: the object cells are hit 20 times
+    slam2, counter2 = _online_and_counter(scans, [Pose2D()] * len(scans))
+    assert (counter2.window(slam2.gridmap(0))[0][rows, cols] >= 19).all()
+
+
+def _wall_scans() -> tuple[list[Scan], list[Pose2D]]:
+    """A sensor driving along a straight wall 1 m to its left: most beams meet it at grazing angles."""
+    scans, poses = [], []
+    for k in range(60):
+        r = np.full(N_BEAMS, np.inf)
+        s = np.sin(ANGLES)
+        ok = s > 1e-3
+        r[ok] = 1.0 / s[ok]
+        r[r > 19.0] = np.inf
+        scans.append(_scan(r, 0.1 * k))
+        poses.append(Pose2D(0.05 * k, 0.0, 0.0))
+    return scans, poses
+
+
+def test_a_wall_seen_at_grazing_angles_is_kept():
+    scans, poses = _wall_scans()
+    slam, counter = _online_and_counter(scans, poses)
+    online = slam.gridmap(0)
+    wall = online.occupied()
+    assert wall.sum() > 300
+    assert clean_map(online, counter).erased.sum() == 0
+    # Without the tolerances (no margin, whole-cell rays, no limit on switches) grazing rays eat the wall.
+    loose = CleanConfig(margin_m=0.0, grazing_cells=0.0, ray_core=0.5, max_switches=10_000, min_through=1,
+                        through_ratio=0.01)
+    _, counter_loose = _online_and_counter(scans, poses, config=loose)
+    assert clean_map(online, counter_loose).erased.sum() > 20
+
+
+def test_counter_grows_with_the_scans_and_keeps_its_counts():
+    scans = _ring_scans([False] * 3)
+    counter = VisibilityCounter(0.05)
+    counter.add(scans[0], Pose2D())
+    before = int(counter.hits.sum())
+    counter.add(scans[1], Pose2D(30.0, -12.0, 1.0))  # far away: the arrays grow on two sides
+    counter.add(scans[2], Pose2D())
+    assert int(counter.hits.sum()) > 2 * before
+    assert counter.scans == 3
+
+
+def test_cli_clean_flag_and_outputs(tmp_path, capsys):
+    from dynslam2d.cli import app
+    from dynslam2d.io.mapfile import read_map
+
+    def cli(*args: str) -> int:
+        try:
+            app(list(args), standalone_mode=False)
+        except SystemExit as exc:
+            return int(exc.code or 0)
+        return 0
+
+    out = tmp_path / "on"
+    assert cli("run", "sim:stop-and-go", "--out", str(out), "-q") == 0
+    for name in ("map.pgm", "map.yaml", "map_online.pgm", "map_online.yaml", "map_logodds_online.npy"):
+        assert (out / name).exists(), name
+    metrics = json.loads((out / "metrics.json").read_text())
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["cleanup"]["erased_cells"] > 0
+    # the parked car that left is a ghost of the online map, not of the cleaned one
+    assert metrics["map"]["ghost_area_m2"] < 0.5 * metrics["map_online"]["ghost_area_m2"]
+    assert metrics["map"]["f1"] > metrics["map_online"]["f1"]
+    cleaned, online = read_map(out / "map.yaml"), read_map(out / "map_online.yaml")
+    diff = ~((cleaned.prob == online.prob) | (np.isnan(cleaned.prob) & np.isnan(online.prob)))
+    assert diff.sum() == summary["cleanup"]["erased_cells"]
+    assert (online.prob[diff] == 1.0).all() and (cleaned.prob[diff] == 0.0).all()  # occupied → free only
+    off = tmp_path / "off"
+    assert cli("run", "sim:static", "--duration", "1", "--clean", "off", "--out", str(off), "-q") == 0
+    assert (off / "map.pgm").exists() and not (off / "map_online.pgm").exists()
+    assert "cleanup" not in json.loads((off / "summary.json").read_text())
+    from dynslam2d.errors import DynSlamError
+
+    with pytest.raises(DynSlamError, match="--clean"):
+        cli("run", "sim:static", "--duration", "1", "--clean", "maybe", "--out", str(tmp_path / "bad"), "-q")
+
+
+def test_mit_csail_cleanup_removes_no_wall(shared_data):
+    """First 900 scans of MIT CSAIL: the pass erases a little and loses no wall."""
+    from dynslam2d.config import Config
+    from dynslam2d.io.sources import open_source
+    from dynslam2d.pipeline import run
+    from dynslam2d.slam.cleanup import CleanupRecorder
+
+    src = open_source(shared_data / "mit-csail" / "mit-csail.clf")
+
+    class First:
+        meta = src.meta
+
+        def __iter__(self):
+            for k, s in enumerate(src):
+                if k >= 900:
+                    return
+                yield s
+
+    cfg = Config()
+    rec = CleanupRecorder(cfg.clean)
+    result = run(First(), cfg, observers=[rec])
+    assert rec.result is not None
+    online = result.grid
+    cmp = compare_online(online, rec.result)
+    assert rec.result.stats["erased_cells"] > 0
+    assert cmp["lost_share"] < 0.01  # thinner in places, but (almost) every structure cell keeps a neighbour
+    from scipy import ndimage
+
+    from dynslam2d.eval.maps import distance_to
+
+    kept = online.occupied() & ~rec.result.erased
+    lost = online.occupied() & (distance_to(kept, online.resolution) > 0.1 + 1e-9)
+    lab, n = ndimage.label(lost, structure=np.ones((3, 3)))
+    biggest = int(np.bincount(lab.ravel())[1:].max()) if n else 0
+    assert biggest <= 15  # no lost piece longer than ~0.75 m: no wall removed
+
+
+def test_recorder_counts_one_scan_per_interval_and_every_map_update():
+    from types import SimpleNamespace
+
+    from dynslam2d.slam.cleanup import CleanupRecorder
+
+    scans = [_scan(np.full(N_BEAMS, 5.0), 0.05 * k) for k in range(40)]  # 20 Hz for 2 s
+
+    def feed(config: CleanConfig) -> int:
+        rec = CleanupRecorder(config, SlamConfig())
+        for k, s in enumerate(scans):
+            step = SimpleNamespace(rejected=k == 3, skipped=False, map_updated=k in (1, 7), pose=Pose2D(),
+                                   removed=np.zeros(N_BEAMS, dtype=bool))
+            rec.on_scan(s, step, None)
+        return rec.counter.scans
+
+    assert feed(CleanConfig(min_interval_s=0.0)) == 39  # every scan but the rejected one
+    # one per 0.1 s (0, 0.1, …, 1.9: 20 stamps; scan 1 is a map update, scan 3 rejected)
+    n = feed(CleanConfig(min_interval_s=0.1))
+    assert n == 21  # 0, 0.05 (update), 0.2, 0.3, 0.35 (update), then 0.45, 0.55, …, 1.95
+    assert feed(CleanConfig(scans="map_updates")) == 2
+
+
+def test_counter_stops_growing_at_the_memory_limit():
+    counter = VisibilityCounter(0.05, slam=SlamConfig(max_map_memory_mb=5.0))
+    counter.add(_scan(np.full(N_BEAMS, 5.0), 0.0), Pose2D())
+    assert 0 < counter.nbytes <= 5e6 and counter.scans == 1
+    counter.add(_scan(np.full(N_BEAMS, 5.0), 0.1), Pose2D(100.0, 0.0, 0.0))  # would need > 5 MB
+    assert counter.too_large == 1 and counter.nbytes <= 5e6 and counter.scans == 1
