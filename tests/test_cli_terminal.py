@@ -97,7 +97,8 @@ def sim_run(tmp_path_factory):
     """A short simulated scene and a run of it (3 s of the static room)."""
     d = tmp_path_factory.mktemp("term")
     assert sh("simulate", "static", "--duration", "3", "--out", str(d / "sim")).returncode == 0
-    r = sh("run", str(d / "sim" / "scans.mcap"), "--gt", str(d / "sim"), "--out", str(d / "run"), "--quiet")
+    r = sh("run", str(d / "sim" / "scans.mcap"), "--gt", str(d / "sim"), "--out", str(d / "run"), "--quiet",
+           "--filter", "default")  # the old name of the filter mode 'box'
     assert r.returncode == 0, r.stderr
     return d
 
@@ -136,3 +137,17 @@ def test_eval_rpe_takes_a_bag_reference_with_ref_topic(sim_run):
     assert at_base["translation_m"]["rmse"] > 1.5 * got  # the yawing robot's base moves differently from its laser
     no_topic = sh("eval", "rpe", str(bag), str(run))
     assert no_topic.returncode == 2 and "--ref-topic" in no_topic.stderr
+
+
+def test_filter_mode_default_is_an_alias_of_box(sim_run, tmp_path):
+    from dynslam2d.config import Config, load_config, with_overrides
+
+    summary = json.loads((sim_run / "run" / "summary.json").read_text())
+    assert summary["filter"] == "box"  # run with --filter default
+    assert with_overrides(Config(), {"filter": {"mode": "default"}}) == Config()
+    assert Config().filter.mode == "box"
+    f = tmp_path / "old.yaml"
+    f.write_text("filter:\n  mode: default\n  margin: 0.3\n")
+    cfg = load_config(f)
+    assert cfg.filter.mode == "box" and cfg.filter.margin == pytest.approx(0.3)
+    assert "box (ours" in " ".join(sh("run", "-h").stdout.split())

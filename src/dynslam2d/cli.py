@@ -374,7 +374,7 @@ def run(
     update_angle: Annotated[Optional[float], typer.Option("--update-angle", help="Map update after this rotation, rad [0.06].")] = None,
     laser_min_dist: Annotated[Optional[float], typer.Option("--laser-min-dist", help="Ignore returns closer than this, m [0.4].")] = None,
     laser_max_dist: Annotated[Optional[float], typer.Option("--laser-max-dist", help="Ignore returns farther than this, m [30].")] = None,
-    filter_mode: Annotated[Optional[str], typer.Option("--filter", help="Dynamic-point filter: none, fixed, adaptive (the paper's configurations 1-3) or default (ours) [default].")] = None,
+    filter_mode: Annotated[Optional[str], typer.Option("--filter", help="Dynamic-point filter: none, fixed, adaptive (the paper's configurations 1-3) or box (ours: each moving object's box plus a margin; 'default' is its old name) [box].")] = None,
     constant_velocity: Annotated[Optional[bool], typer.Option("--constant-velocity/--no-constant-velocity", help="Predict with constant velocity instead of the previous pose.")] = None,
     correlative: Annotated[Optional[str], typer.Option("--correlative", help="Correlative search seed: auto, always or never [auto].")] = None,
     hector_compat: Annotated[bool, typer.Option("--hector-compat", help="Behave like the reference hector_mapping: raw Gauss-Newton step, its swapped gradient, no correlative search.")] = False,
