@@ -151,3 +151,80 @@ def test_filter_mode_default_is_an_alias_of_box(sim_run, tmp_path):
     cfg = load_config(f)
     assert cfg.filter.mode == "box" and cfg.filter.margin == pytest.approx(0.3)
     assert "box (ours" in " ".join(sh("run", "-h").stdout.split())
+
+
+# --- config dump: commented YAML, hector_mapping names, one family of names --------------------------
+
+
+def test_commented_dump_round_trips_to_the_same_config(tmp_path):
+    import yaml
+
+    from dynslam2d.config import Config, dump_config, load_config
+
+    custom = tmp_path / "custom.yaml"
+    custom.write_text("slam:\n  map_resolution: 0.1\n  covariance_sigma: 0.5\ndetect:\n  tracker:\n"
+                      "    free_ref_ages: [0.2, 0.9, 1.5]\nfilter:\n  mode: adaptive\n")
+    r = sh("config", "dump", "--config", str(custom))
+    assert r.returncode == 0, r.stderr
+    back = tmp_path / "back.yaml"
+    back.write_text(r.stdout)
+    want = load_config(custom)
+    assert want != Config() and load_config(back) == want
+    assert load_config(back).detect.tracker.free_ref_ages == (0.2, 0.9, 1.5)
+    assert yaml.safe_load(dump_config(Config())) == yaml.safe_load(dump_config(Config(), comments=False))
+    text = r.stdout
+    assert text.startswith("# dynslam2d configuration")
+    lines = text.splitlines()
+
+    def comment_above(key: str) -> str:
+        i = next(i for i, line in enumerate(lines) if line.strip().startswith(f"{key}:"))
+        j = i
+        while lines[j - 1].strip().startswith("#"):
+            j -= 1
+        return " ".join(line.strip().lstrip("# ") for line in lines[j:i])
+
+    assert "hector_mapping: map_update_distance_thresh" in comment_above("map_update_distance_thresh")
+    assert "option: --map-update-distance-thresh (or --update-distance)" in comment_above("map_update_distance_thresh")
+    assert ", m " in comment_above("map_update_distance_thresh")  # the unit
+    assert "hector_mapping: map_multi_res_levels" in comment_above("map_levels")
+    assert "hector_mapping: laser_min_dist" in comment_above("laser_min_dist")
+    assert "(paper Eq. 1" in comment_above("mode")  # the first 'mode' is detect.segment.mode
+    assert "option: --filter-mode (or --filter)" in " ".join(line.strip().lstrip("# ") for line in lines)
+
+
+def test_hector_mapping_names_are_accepted_in_config(tmp_path):
+    from dynslam2d.config import load_config
+    from dynslam2d.errors import DynSlamError
+
+    flat = tmp_path / "hector.yaml"  # a hector_mapping parameter file: flat ROS names
+    flat.write_text("map_resolution: 0.1\nmap_multi_res_levels: 2\nmap_update_distance_thresh: 0.2\n"
+                    "laser_max_dist: 12.0\nfilter:\n  mode: none\n")
+    cfg = load_config(flat)
+    assert (cfg.slam.map_resolution, cfg.slam.map_levels) == (0.1, 2)
+    assert cfg.slam.map_update_distance_thresh == 0.2 and cfg.slam.laser_max_dist == 12.0
+    assert cfg.filter.mode == "none"
+    nested = tmp_path / "nested.yaml"
+    nested.write_text("slam:\n  map_multi_res_levels: 4\n")
+    assert load_config(nested).slam.map_levels == 4
+    both = tmp_path / "both.yaml"
+    both.write_text("map_multi_res_levels: 2\nslam:\n  map_levels: 3\n")
+    with pytest.raises(DynSlamError, match="map_multi_res_levels.*slam.map_levels"):
+        load_config(both)
+    r = sh("config", "dump", "--config", str(flat), "--json")
+    assert json.loads(r.stdout)["slam"]["map_levels"] == 2
+
+
+def test_run_options_are_the_config_keys_with_dashes():
+    import typer.main
+
+    from dynslam2d.cli import app
+    from dynslam2d.config import Config, RUN_OPTIONS
+
+    run = typer.main.get_command(app).commands["run"]
+    names = {opt for p in run.params for opt in (*p.opts, *p.secondary_opts)}
+    data = Config().model_dump()
+    for key, (flag, short) in RUN_OPTIONS.items():
+        stage, field = key.split(".")
+        assert field in data[stage], key
+        assert flag == "--" + (field if stage == "slam" else f"{stage}-{field}").replace("_", "-"), key
+        assert flag in names and (short is None or short in names), key
