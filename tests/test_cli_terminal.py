@@ -228,3 +228,38 @@ def test_run_options_are_the_config_keys_with_dashes():
         assert field in data[stage], key
         assert flag == "--" + (field if stage == "slam" else f"{stage}-{field}").replace("_", "-"), key
         assert flag in names and (short is None or short in names), key
+
+
+# --- first run: compiling kernels, steady-state speed ---------------------------------------------------
+
+
+def test_cold_numba_cache_is_announced(tmp_path):
+    """With an empty numba cache every kernel must compile: the run says so before it starts."""
+    env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / "empty-cache")}
+    code = ("import dynslam2d.pipeline, sys\n"
+            "from dynslam2d.jitcache import kernel_cache_state\n"
+            "from dynslam2d.cli import _say_if_compiling\n"
+            "s = kernel_cache_state()\n"
+            "print(s.total, s.cached, _say_if_compiling(True))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+    assert r.returncode == 0, r.stderr
+    total, cached, cold = r.stdout.split()
+    assert int(total) >= 20 and int(cached) == 0 and cold == "True"
+    assert "compiling kernels (first run only" in r.stderr
+
+
+def test_warm_cache_is_not_cold_and_summary_reports_steady_speed(sim_run):
+    import dynslam2d.pipeline  # noqa: F401  (loads every kernel module)
+    from dynslam2d.jitcache import kernel_cache_state
+    from dynslam2d.pipeline import _steady_speed
+
+    state = kernel_cache_state()  # the fixture's run compiled (or loaded) the kernels into the default cache
+    assert state.total >= 20 and not state.cold
+    summary = json.loads((sim_run / "run" / "summary.json").read_text())
+    assert summary["steady_scans_per_s"] == pytest.approx(1e3 / summary["steady_ms_median"], abs=0.01)
+    assert summary["first_scan_ms"] > 0 and summary["scans_per_s"] > 0
+    # a first scan of 5 s (compiling), then 10 ms scans: steady 100 scans/s whatever the first scans cost
+    fake = np.array([5000.0, 900.0, 40.0] + [10.0] * 40 + [12.0] * 5)
+    s = _steady_speed(fake)
+    assert s["first_scan_ms"] == 5000.0 and s["steady_ms_median"] == 10.0 and s["steady_scans_per_s"] == 100.0
+    assert _steady_speed(np.zeros(0))["steady_scans_per_s"] is None

@@ -119,7 +119,8 @@ def _show(table: Table, con: Optional[Console] = None) -> None:
     widths = [max((cell_len(r[i]) for r in grid), default=0) for i in range(len(cols))]
     lines = [_plain(con, table.title)] if table.title else []
     for r in grid:
-        parts = [(" " * (w - cell_len(c)) + c) if col.justify == "right" else c + " " * (w - cell_len(c))
+        # right-aligned columns stay so while short (numbers); a long text column reads better left-aligned
+        parts = [(" " * (w - cell_len(c)) + c) if col.justify == "right" and w <= 24 else c + " " * (w - cell_len(c))
                  for c, w, col in zip(r, widths, cols)]
         lines.append("  ".join(parts).rstrip())
     con.file.write("\n".join(lines) + "\n")
@@ -463,6 +464,7 @@ def run(
         err_console.print(f"odometry: {escape(source.meta.odometry or 'none (laser only)')}")
         for w in source.meta.extra.get("warnings", []) or []:
             err_console.print(f"[yellow]warning:[/] {escape(str(w))}")
+    compiling = _say_if_compiling(show)
     progress = Progress(
         TextColumn("[bold]mapping[/]"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
         TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=err_console, disable=not show,
@@ -539,7 +541,9 @@ def run(
                           f"odometry (outside its time span or in a gap): matched laser only")
     rows = [
         ("scans", str(summary["scans"])),
-        ("wall time", f"{summary['wall_time_s']:.1f} s ({summary['scans_per_s']} scans/s)"),
+        ("wall time", f"{summary['wall_time_s']:.1f} s ({summary['scans_per_s']} scans/s"
+                      + (", including compiling the kernels)" if compiling else ")")),
+        *_steady_rows(summary, compiling),
         ("map updates", str(summary["map_updates"])),
         ("odometry", (f"{summary.get('odometry') or 'none (laser only)'}"
                       + (f", {odo['with_odom']}/{odo['scans']} scans" if isinstance(odo, dict) and odo.get('scans') else ""))),
@@ -575,6 +579,28 @@ def run(
     console.print(Text.assemble("results in ", (str(out), "bold")))
     if write_bag is not None:
         console.print(Text.assemble("bag for RViz / Foxglove: ", (str(write_bag), "bold"), " (docs/ros.md)"))
+
+
+def _say_if_compiling(show: bool) -> bool:
+    """Before a run: one line on stderr when numba must compile the kernels (a first run, or
+    the first after an update), whose speed would otherwise look like the program's."""
+    from dynslam2d.jitcache import kernel_cache_state
+
+    cold = kernel_cache_state().cold
+    if cold and show:
+        err_console.print(Text("compiling kernels (first run only; later runs start at once) …", style="yellow"))
+    return cold
+
+
+def _steady_rows(summary: dict[str, Any], compiling: bool) -> list[tuple[str, str]]:
+    """Steady-state speed (median per-scan processing after the first scans) beside the wall time."""
+    if summary.get("steady_scans_per_s") is None:
+        return []
+    first = summary.get("first_scan_ms") or 0.0
+    first_txt = f"{first / 1e3:.1f} s" if first >= 1e3 else f"{first:.0f} ms"
+    return [("steady speed", f"{summary['steady_scans_per_s']} scans/s (median {summary['steady_ms_median']:.1f} ms "
+                             f"per scan, processing only); first scan {first_txt}"
+                             + (" (compiling kernels)" if compiling else ""))]
 
 
 def _check_sim_only(input: str, seed: Optional[int], duration: Optional[float]) -> None:
