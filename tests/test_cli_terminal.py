@@ -263,3 +263,24 @@ def test_warm_cache_is_not_cold_and_summary_reports_steady_speed(sim_run):
     s = _steady_speed(fake)
     assert s["first_scan_ms"] == 5000.0 and s["steady_ms_median"] == 10.0 and s["steady_scans_per_s"] == 100.0
     assert _steady_speed(np.zeros(0))["steady_scans_per_s"] is None
+
+
+def test_terminal_table_keeps_its_title_on_one_line():
+    import io
+
+    from rich.console import Console
+    from rich.table import Table
+
+    from dynslam2d.cli import _show
+
+    buf = io.StringIO()
+    con = Console(file=buf, force_terminal=True, width=100, color_system=None)
+    title = "RPE (delta 1 frames) results/some-run-folder vs ground/truth/trajectory.tum"
+    t = Table(title=title, show_header=False)
+    t.add_column()
+    t.add_column(justify="right")
+    t.add_row("pairs", "59")
+    _show(t, con)
+    out = buf.getvalue().splitlines()
+    assert out[0].rstrip() == title  # longer than the table, still whole
+    assert "│ pairs │ 59 │" in buf.getvalue()

@@ -110,6 +110,9 @@ def _show(table: Table, con: Optional[Console] = None) -> None:
     width (title on its own line, columns separated by two spaces, nothing cut)."""
     con = con or console
     if con.is_terminal:
+        if table.title is not None:  # on a line of its own: rich would wrap it to the table's width
+            con.print(Text(_plain(con, table.title), style="table.title"))
+            table.title = None
         con.print(table)
         return
     cols = table.columns
