@@ -96,7 +96,10 @@ def test_json_where_tables_are_printed(tmp_path):
 def sim_run(tmp_path_factory):
     """A short simulated scene and a run of it (3 s of the static room)."""
     d = tmp_path_factory.mktemp("term")
-    assert sh("simulate", "static", "--duration", "3", "--out", str(d / "sim")).returncode == 0
+    made = sh("simulate", "static", "--duration", "3", "--out", str(d / "sim"), "--json")
+    assert made.returncode == 0, made.stderr
+    info = json.loads(made.stdout)
+    assert info["scans"] == 60 and Path(info["files"]["scans"]).name == "scans.mcap"
     r = sh("run", str(d / "sim" / "scans.mcap"), "--gt", str(d / "sim"), "--out", str(d / "run"), "--quiet",
            "--filter", "default")  # the old name of the filter mode 'box'
     assert r.returncode == 0, r.stderr
@@ -284,3 +287,11 @@ def test_terminal_table_keeps_its_title_on_one_line():
     out = buf.getvalue().splitlines()
     assert out[0].rstrip() == title  # longer than the table, still whole
     assert "│ pairs │ 59 │" in buf.getvalue()
+
+
+def test_experiment_json_names_the_filter_box(tmp_path):
+    r = sh("experiment", "paper", "--trial", "paper-1", "--duration", "3", "--out", str(tmp_path / "exp"), "--json")
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(r.stdout)["rows"]
+    assert [row["config"] for row in rows] == ["none", "fixed", "adaptive", "box"]
+    assert "| paper-1 | box |" in (tmp_path / "exp" / "table.md").read_text()
