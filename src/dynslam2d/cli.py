@@ -24,6 +24,7 @@ from rich.text import Text
 from dynslam2d import __version__
 from dynslam2d.errors import DynSlamError
 
+
 class _Console(Console):
     """A rich Console that never wraps lines when its output is not a terminal: a pipe or a
     file gets each line at full width (a terminal keeps rich's wrapping to its width)."""
