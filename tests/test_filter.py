@@ -158,7 +158,7 @@ def test_shape_errors():
 
 def test_config_defaults_and_validation():
     cfg = FilterConfig()
-    assert cfg.mode == "default"
+    assert cfg.mode == "box"
     assert cfg.fixed_d_ref * cfg.fixed_lambda / 2 == pytest.approx(1.5)
     assert cfg.expected_objects == 3 and cfg.adaptive_lambda == 1.0
     with pytest.raises(ValidationError):

@@ -14,7 +14,8 @@ from pathlib import Path
 from typing import Annotated, Any, Optional
 
 import typer
-from typer.core import TyperGroup
+from typer.core import TyperArgument, TyperCommand, TyperGroup
+from rich.cells import cell_len
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
@@ -23,16 +24,110 @@ from rich.text import Text
 from dynslam2d import __version__
 from dynslam2d.errors import DynSlamError
 
+
+class _Console(Console):
+    """A rich Console that never wraps lines when its output is not a terminal: a pipe or a
+    file gets each line at full width (a terminal keeps rich's wrapping to its width)."""
+
+    @property  # type: ignore[override]
+    def soft_wrap(self) -> bool:
+        return not self.is_terminal
+
+    @soft_wrap.setter
+    def soft_wrap(self, value: bool) -> None:  # Console.__init__ assigns it; the output decides
+        pass
+
+
+class _Command(TyperCommand):
+    """A command whose arguments read as ``INPUT`` (not ``{input}``) in the usage line and help."""
+
+    def collect_usage_pieces(self, ctx: Any) -> list[str]:
+        pieces = [self.options_metavar] if self.options_metavar else []
+        for p in self.get_params(ctx):
+            if isinstance(p, TyperArgument):
+                name = p.metavar or (p.name or "").upper()
+                name = name if p.required else f"[{name}]"
+                pieces.append(name + ("..." if p.nargs != 1 else ""))
+            else:
+                pieces.extend(p.get_usage_pieces(ctx))
+        return pieces
+
+
+class _Group(TyperGroup):
+    """A command group that prints its help on stdout with exit 0 when called bare, and lists
+    its commands with their whole first sentence (click cuts it to the terminal width)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        for cmd in self.commands.values():
+            if type(cmd) is TyperCommand:
+                cmd.__class__ = _Command  # typer builds plain TyperCommands; ours only changes the help
+                for p in cmd.params:
+                    if isinstance(p, TyperArgument) and p.metavar is None and p.name:
+                        p.metavar = p.name.upper()
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        if not args and not ctx.resilient_parsing:
+            typer.echo(ctx.get_help())
+            ctx.exit(0)
+        return super().parse_args(ctx, args)
+
+    def format_commands(self, ctx: Any, formatter: Any) -> None:
+        rows = []
+        for name in self.list_commands(ctx):
+            cmd = self.get_command(ctx, name)
+            if cmd is not None and not cmd.hidden:
+                rows.append((name, cmd.get_short_help_str(limit=10_000)))
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
+
+#: ``-h`` is help everywhere; help text up to 100 columns (click's default caps it at 80).
+CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
+
 app = typer.Typer(
     name="dynslam2d",
+    cls=_Group,
     help="2D LiDAR SLAM for scenes that move: simulate, inspect, map and evaluate.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
     rich_markup_mode=None,  # help texts hold literal brackets: [0.05], "dynslam2d[viewer]"
+    context_settings=CONTEXT,
 )
-console = Console()
-err_console = Console(stderr=True)
+console = _Console()
+err_console = _Console(stderr=True)
+
+
+def _plain(con: Console, cell: object) -> str:
+    if isinstance(cell, Text):
+        return cell.plain
+    return con.render_str(str(cell)).plain if cell is not None else ""
+
+
+def _show(table: Table, con: Optional[Console] = None) -> None:
+    """Print a table: boxed by rich on a terminal; to a pipe or file as plain text at full
+    width (title on its own line, columns separated by two spaces, nothing cut)."""
+    con = con or console
+    if con.is_terminal:
+        if table.title is not None:  # on a line of its own: rich would wrap it to the table's width
+            con.print(Text(_plain(con, table.title), style="table.title"))
+            table.title = None
+        con.print(table)
+        return
+    cols = table.columns
+    cells = [[_plain(con, c) for c in col.cells] for col in cols]
+    grid = [[_plain(con, col.header) for col in cols]] if table.show_header else []
+    grid += [list(row) for row in zip(*cells)]
+    widths = [max((cell_len(r[i]) for r in grid), default=0) for i in range(len(cols))]
+    lines = [_plain(con, table.title)] if table.title else []
+    for r in grid:
+        # right-aligned columns stay so while short (numbers); a long text column reads better left-aligned
+        parts = [(" " * (w - cell_len(c)) + c) if col.justify == "right" and w <= 24 else c + " " * (w - cell_len(c))
+                 for c, w, col in zip(r, widths, cols)]
+        lines.append("  ".join(parts).rstrip())
+    con.file.write("\n".join(lines) + "\n")
 
 TopicOpt = Annotated[Optional[str], typer.Option("--topic", help="LaserScan topic, for bags holding several.")]
 SkipBadOpt = Annotated[
@@ -147,7 +242,7 @@ def info(
             rows.append((key.replace("_", " "), str(summary.extra[key])))
     for k, v in rows:
         table.add_row(k, Text(str(v)))
-    console.print(table)
+    _show(table)
 
 
 @app.command()
@@ -168,6 +263,7 @@ def simulate(
     force: Annotated[bool, typer.Option("--force", help="Replace an earlier output folder of dynslam2d at --out (never anything else).")] = False,
     odom_noise: Annotated[float, typer.Option("--odom-noise", min=0.0, help="Multiplies every odometry/IMU noise, bias and scale error of the default model (0 = perfect odometry) [1].")] = 1.0,
     laser_mount: Annotated[Optional[str], typer.Option("--laser-mount", help="The laser's pose on the robot base, x,y,yaw (m, m, rad) [0.15,0,0].")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the scenario list (--list) or the written files as JSON on stdout.")] = False,
 ) -> None:
     """Simulate a scene: scans as a bag, ground truth (map, trajectory, labels, movers), an overview PNG.
 
@@ -176,6 +272,11 @@ def simulate(
     from dynslam2d.sim import SCENARIOS, simulate as run_simulation
     from dynslam2d.sim.export import write_simulation
 
+    if list_scenarios and as_json:
+        sys.stdout.write(json.dumps([{"name": name, "duration_s": spec.duration, "seed": spec.seed,
+                                      "description": spec.description} for name, spec in SCENARIOS.items()],
+                                    indent=2) + "\n")
+        return
     if list_scenarios:
         table = Table(title="scenarios", title_justify="left")
         table.add_column("name", style="bold")
@@ -184,7 +285,7 @@ def simulate(
         table.add_column("description")
         for name, spec in SCENARIOS.items():
             table.add_row(name, f"{spec.duration:g} s", str(spec.seed), spec.description)
-        console.print(table)
+        _show(table)
         return
     from dynslam2d.io.outputs import plan_results_folder, write_marker
 
@@ -215,6 +316,11 @@ def simulate(
             raise
         paths = {k: out / Path(v).relative_to(work) for k, v in paths.items()}
     sc = sim.scenario
+    if as_json:
+        sys.stdout.write(json.dumps({"scenario": sc.name, "seed": sc.seed, "scans": len(sim.scans),
+                                     "duration_s": sc.duration, "movers": len(sc.movers), "out": str(out),
+                                     "files": {k: str(v) for k, v in paths.items()}}, indent=2) + "\n")
+        return
     console.print(Text.assemble(
         "simulated ", (sc.name, "bold"), f" (seed {sc.seed}): {len(sim.scans)} scans over {sc.duration:g} s, "
         f"{len(sc.movers)} movers"
@@ -241,18 +347,22 @@ def _default_out(prefix: str) -> Path:
     return Path("results") / f"{prefix}-{_dt.datetime.now().strftime('%Y%m%d-%H%M%S')}"
 
 
-config_app = typer.Typer(help="Show the configuration.", no_args_is_help=True)
+config_app = typer.Typer(cls=_Group, help="Show the configuration.", no_args_is_help=True)
 app.add_typer(config_app, name="config")
 
 
 @config_app.command("dump")
 def config_dump(
     config: Annotated[Optional[Path], typer.Option("--config", help="Start from this YAML file instead of the defaults.")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the values as JSON instead of commented YAML.")] = False,
 ) -> None:
     """Print the full configuration as YAML (defaults, or a file completed with defaults)."""
     from dynslam2d.config import Config, dump_config, load_config
 
     cfg = load_config(config) if config else Config()
+    if as_json:
+        sys.stdout.write(json.dumps(cfg.model_dump(mode="json"), indent=2) + "\n")
+        return
     sys.stdout.write(dump_config(cfg))
 
 
@@ -265,13 +375,13 @@ def run(
     config: Annotated[Optional[Path], typer.Option("--config", help="YAML configuration (see 'dynslam2d config dump').")] = None,
     map_resolution: Annotated[Optional[float], typer.Option("--map-resolution", help="Finest map cell size, m [0.05].")] = None,
     map_levels: Annotated[Optional[int], typer.Option("--map-levels", help="Map levels [3].")] = None,
-    update_distance: Annotated[Optional[float], typer.Option("--update-distance", help="Map update after this translation, m [0.4].")] = None,
-    update_angle: Annotated[Optional[float], typer.Option("--update-angle", help="Map update after this rotation, rad [0.06].")] = None,
+    update_distance: Annotated[Optional[float], typer.Option("--map-update-distance-thresh", "--update-distance", help="Map update after this translation, m (slam.map_update_distance_thresh) [0.4].")] = None,
+    update_angle: Annotated[Optional[float], typer.Option("--map-update-angle-thresh", "--update-angle", help="Map update after this rotation, rad (slam.map_update_angle_thresh) [0.06].")] = None,
     laser_min_dist: Annotated[Optional[float], typer.Option("--laser-min-dist", help="Ignore returns closer than this, m [0.4].")] = None,
     laser_max_dist: Annotated[Optional[float], typer.Option("--laser-max-dist", help="Ignore returns farther than this, m [30].")] = None,
-    filter_mode: Annotated[Optional[str], typer.Option("--filter", help="Dynamic-point filter: none, fixed, adaptive (the paper's configurations 1-3) or default (ours) [default].")] = None,
+    filter_mode: Annotated[Optional[str], typer.Option("--filter-mode", "--filter", help="Dynamic-point filter (filter.mode): none, fixed, adaptive (the paper's configurations 1-3) or box (ours: each moving object's box plus a margin; 'default' is its old name) [box].")] = None,
     constant_velocity: Annotated[Optional[bool], typer.Option("--constant-velocity/--no-constant-velocity", help="Predict with constant velocity instead of the previous pose.")] = None,
-    correlative: Annotated[Optional[str], typer.Option("--correlative", help="Correlative search seed: auto, always or never [auto].")] = None,
+    correlative: Annotated[Optional[str], typer.Option("--correlative-mode", "--correlative", help="Correlative search seed: auto, always or never (slam.correlative_mode) [auto].")] = None,
     hector_compat: Annotated[bool, typer.Option("--hector-compat", help="Behave like the reference hector_mapping: raw Gauss-Newton step, its swapped gradient, no correlative search.")] = False,
     animate: Annotated[bool, typer.Option("--animate", help="Also write run.gif: scan points (kept / removed), tracked boxes, the growing map.")] = False,
     frame_step: Annotated[int, typer.Option("--frame-step", min=1, help="With --animate: one frame every N scans.")] = 5,
@@ -365,6 +475,7 @@ def run(
         err_console.print(f"odometry: {escape(source.meta.odometry or 'none (laser only)')}")
         for w in source.meta.extra.get("warnings", []) or []:
             err_console.print(f"[yellow]warning:[/] {escape(str(w))}")
+    compiling = _say_if_compiling(show)
     progress = Progress(
         TextColumn("[bold]mapping[/]"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
         TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=err_console, disable=not show,
@@ -446,7 +557,9 @@ def run(
                           f"odometry (outside its time span or in a gap): matched laser only")
     rows = [
         ("scans", str(summary["scans"])),
-        ("wall time", f"{summary['wall_time_s']:.1f} s ({summary['scans_per_s']} scans/s)"),
+        ("wall time", f"{summary['wall_time_s']:.1f} s ({summary['scans_per_s']} scans/s"
+                      + (", including compiling the kernels)" if compiling else ")")),
+        *_steady_rows(summary, compiling),
         ("map updates", str(summary["map_updates"])),
         ("odometry", (f"{summary.get('odometry') or 'none (laser only)'}"
                       + (f", {odo['with_odom']}/{odo['scans']} scans" if isinstance(odo, dict) and odo.get('scans') else ""))),
@@ -479,13 +592,35 @@ def run(
                      f"({body.get('auto_body_beams', 0)} body beams found; suggested footprint in summary.json)"))
     if "metrics.json" in paths:
         rows += _metric_rows(json.loads(paths["metrics.json"].read_text()))
-    console.print(_stats_table(f"dynslam2d run {input}", rows))
+    _show(_stats_table(f"dynslam2d run {input}", rows))
     if pc and pc.get("warning"):
         console.print(Text.assemble(("warning: ", "bold red"), f"{pc['warning']} — the map and trajectory are not "
                                     "reliable there (map.png marks the poses)"))
     console.print(Text.assemble("results in ", (str(out), "bold")))
     if write_bag is not None:
         console.print(Text.assemble("bag for RViz / Foxglove: ", (str(write_bag), "bold"), " (docs/ros.md)"))
+
+
+def _say_if_compiling(show: bool) -> bool:
+    """Before a run: one line on stderr when numba must compile the kernels (a first run, or
+    the first after an update), whose speed would otherwise look like the program's."""
+    from dynslam2d.jitcache import kernel_cache_state
+
+    cold = kernel_cache_state().cold
+    if cold and show:
+        err_console.print(Text("compiling kernels (first run only; later runs start at once) …", style="yellow"))
+    return cold
+
+
+def _steady_rows(summary: dict[str, Any], compiling: bool) -> list[tuple[str, str]]:
+    """Steady-state speed (median per-scan processing after the first scans) beside the wall time."""
+    if summary.get("steady_scans_per_s") is None:
+        return []
+    first = summary.get("first_scan_ms") or 0.0
+    first_txt = f"{first / 1e3:.1f} s" if first >= 1e3 else f"{first:.0f} ms"
+    return [("steady speed", f"{summary['steady_scans_per_s']} scans/s (median {summary['steady_ms_median']:.1f} ms "
+                             f"per scan, processing only); first scan {first_txt}"
+                             + (" (compiling kernels)" if compiling else ""))]
 
 
 def _check_sim_only(input: str, seed: Optional[int], duration: Optional[float]) -> None:
@@ -583,7 +718,7 @@ def _interrupted(folder: Any, checkpointer: Any) -> None:
     raise SystemExit(130)
 
 
-experiment_app = typer.Typer(help="Reproduce experiments.", no_args_is_help=True)
+experiment_app = typer.Typer(cls=_Group, help="Reproduce experiments.", no_args_is_help=True)
 app.add_typer(experiment_app, name="experiment")
 
 
@@ -593,6 +728,7 @@ def experiment_paper(
     duration: DurationOpt = None,
     trials: Annotated[Optional[list[str]], typer.Option("--trial", help="Trial(s) to run [paper-1 paper-2 paper-3].")] = None,
     force: Annotated[bool, typer.Option("--force", help="Replace an earlier output folder of dynslam2d at --out (never anything else).")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the table (table.json) on stdout instead of table.md.")] = False,
 ) -> None:
     """The paper's experiment: 3 trials × 4 filter configurations → table.md/csv/json and figure2.png."""
     from dynslam2d.experiments import TRIALS, run_experiment, write_experiment
@@ -613,12 +749,16 @@ def experiment_paper(
             folder.discard()
             raise
         paths = {k: out / Path(v).relative_to(work) for k, v in paths.items()}
+    if as_json:
+        sys.stdout.write(paths["table.json"].read_text())
+        return
     sys.stdout.write(paths["table.md"].read_text())
     console.print(Text.assemble("results in ", (str(out), "bold"), f" ({', '.join(paths)})"))
 
 
-class _EvalGroup(TyperGroup):
-    """``dynslam2d eval RUN_DIR --gt GT_DIR`` is short for ``dynslam2d eval run RUN_DIR --gt GT_DIR``."""
+class _EvalGroup(_Group):
+    """``dynslam2d eval RUN_DIR --gt GT_DIR`` is short for ``dynslam2d eval run RUN_DIR --gt GT_DIR``
+    (shown in the usage line and the help of ``dynslam2d eval``)."""
 
     def parse_args(self, ctx, args):  # type: ignore[no-untyped-def]
         if args and args[0] not in self.commands and not args[0].startswith("-"):
@@ -628,7 +768,10 @@ class _EvalGroup(TyperGroup):
 
 eval_app = typer.Typer(
     cls=_EvalGroup,
-    help="Evaluate: a run against ground truth (eval RUN_DIR --gt GT_DIR), trajectories (ATE, RPE), relations.",
+    help="Evaluate: a run against ground truth, trajectories (ATE, RPE), relations, tracking, people.\n\n"
+    "'dynslam2d eval RUN_DIR --gt GT_DIR' is short for 'dynslam2d eval run RUN_DIR --gt GT_DIR'.",
+    short_help="Evaluate: a run against ground truth (eval RUN_DIR --gt GT_DIR), trajectories (ATE, RPE), relations.",
+    subcommand_metavar="RUN_DIR --gt GT_DIR | COMMAND [ARGS]...",
     no_args_is_help=True,
 )
 app.add_typer(eval_app, name="eval")
@@ -647,11 +790,11 @@ def _emit(result: dict[str, object], as_json: bool, table: Table) -> None:
     if as_json:
         sys.stdout.write(json.dumps(result, indent=2) + "\n")
     else:
-        console.print(table)
+        _show(table)
 
 
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print the result as JSON on stdout.")]
-MaxDtOpt = Annotated[float, typer.Option("--max-dt", min=0.0, help="Largest stamp difference for associating poses, s.")]
+MaxDtOpt = Annotated[float, typer.Option("--max-dt", min=0.0, help="Largest stamp difference for associating poses, s (evo's --t_max_diff).")]
 
 
 RefTopicOpt = Annotated[
@@ -661,6 +804,20 @@ SensorOffsetOpt = Annotated[
     tuple[float, float, float],
     typer.Option("--sensor-offset", help="Laser pose in the reference body frame: x y yaw (m, m, rad)."),
 ]
+
+
+_BAG_SUFFIXES = (".bag", ".mcap", ".db3")
+
+
+def _check_not_swapped(command: str, reference: Path, estimate: Path) -> None:
+    """REFERENCE comes first: a run folder given as REFERENCE, or a bag given as ESTIMATE,
+    means the two arguments were swapped; say so instead of a message about --ref-topic."""
+    ref_is_run = reference.is_dir() and (reference / "trajectory.tum").is_file()
+    est_is_bag = estimate.suffix in _BAG_SUFFIXES or (estimate.is_dir() and (estimate / "metadata.yaml").is_file())
+    if ref_is_run or (est_is_bag and not (estimate.is_dir() and (estimate / "trajectory.tum").is_file())):
+        what = f"{reference} is a run folder" if ref_is_run else f"{estimate} is a bag"
+        raise DynSlamError(f"eval {command}: the arguments look swapped ({what}); the reference comes first: "
+                           f"dynslam2d eval {command} {estimate} {reference}")
 
 
 def _estimate_path(estimate: Path) -> Path:
@@ -825,7 +982,7 @@ def eval_tracking(
         t.add_row(str(r["scene"]), _fmt(r["recall"]), _fmt(r["precision"]), f"{100 * float(r['fp_beam_rate']):.3f} %",
                   _fmt(r["median_center_error"], " m"), _fmt(r["median_speed_error"], " m/s"), str(r["id_switches"]),
                   str(r["static_tracks_in_m"]))
-    console.print(t)
+    _show(t)
     if bag_rows:
         b = Table(title="datmo bags (motion capture)", title_justify="left")
         for col in ("bag", "target", "matched", "centre RMSE", "DATMO RMSE", "speed err (med)", "ID switches"):
@@ -833,7 +990,7 @@ def eval_tracking(
         for r in bag_rows:
             b.add_row(str(r["bag"]), str(r["target"]), f"{r['n_matched']}/{r['n_with_truth']}", _fmt(r["rmse_center"], " m"),
                       _fmt(r["datmo_rmse"], " m"), _fmt(r["median_speed_error"], " m/s"), str(r["id_switches"]))
-        console.print(b)
+        _show(b)
 
 
 @eval_app.command("stationary")
@@ -875,11 +1032,15 @@ def eval_ate(
     estimate: Annotated[Path, typer.Argument(help="Estimated trajectory (TUM) or a run folder.")],
     ref_topic: RefTopicOpt = None,
     sensor_offset: SensorOffsetOpt = (0.0, 0.0, 0.0),
-    no_align: Annotated[bool, typer.Option("--no-align", help="Do not SE(2)-align the estimate first.")] = False,
+    no_align: Annotated[bool, typer.Option("--no-align", help="Do not SE(2)-align the estimate first (like evo_ape without -a; the default aligns like evo_ape -a).")] = False,
     max_dt: MaxDtOpt = 0.01,
     as_json: JsonOpt = False,
 ) -> None:
-    """Absolute trajectory error (translation), after SE(2) alignment, as evo_ape computes it.
+    """Absolute trajectory error (translation) as evo_ape computes it; aligns by default.
+
+    By default the estimate is first SE(2)-aligned to the reference, as 'evo_ape tum REF EST -a'
+    does (evo without -a does not align; here that is --no-align). No scale is ever corrected
+    (evo's -s / --correct_scale); --max-dt is evo's --t_max_diff. docs/metrics.md has the table.
 
     Example (datmo bags, laser 0.12 m behind the motion-capture body):
     dynslam2d eval ate parallel.bag RUN_DIR --ref-topic /ego_pose --sensor-offset -0.12 0 0
@@ -889,6 +1050,7 @@ def eval_ate(
     from dynslam2d.io.trajectory import read_tum
     from dynslam2d.types import Pose2D
 
+    _check_not_swapped("ate", reference, estimate)
     ref = load_reference(reference, ref_topic, Pose2D(*sensor_offset))
     res = ate(ref, read_tum(_estimate_path(estimate)), align=not no_align, max_dt=max_dt)
     if res.n < MIN_ATE_POSES:
@@ -897,30 +1059,45 @@ def eval_ate(
             f"at least {MIN_ATE_POSES} (check the stamps' clock, or raise --max-dt)"
         )
     a = res.alignment
-    out = {"ate": res.trans.as_dict(), "rotation_rad": res.rot.as_dict(), "alignment": [a.x, a.y, a.theta]}
+    out = {"ate": res.trans.as_dict(), "rotation_rad": res.rot.as_dict(), "alignment": [a.x, a.y, a.theta],
+           "aligned": not no_align}
     rows = [(k, f"{getattr(res.trans, k):.4f} m") for k in ("rmse", "mean", "median", "std", "max")]
-    rows += [("poses", str(res.n)), ("alignment", f"x {a.x:.3f} m, y {a.y:.3f} m, θ {a.theta:.4f} rad")]
+    rows += [("poses", str(res.n))]
+    if no_align:
+        rows.append(("alignment", "none (--no-align; as evo_ape without -a)"))
+    else:
+        rows.append(("alignment", f"SE(2), as evo_ape -a: x {a.x:.3f} m, y {a.y:.3f} m, θ {a.theta:.4f} rad"))
     _emit(out, as_json, _stats_table(f"ATE {estimate} vs {reference}", rows))
 
 
 @eval_app.command("rpe")
 def eval_rpe(
-    reference: Annotated[Path, typer.Argument(help="Reference trajectory (TUM).")],
-    estimate: Annotated[Path, typer.Argument(help="Estimated trajectory (TUM).")],
-    delta: Annotated[float, typer.Option("--delta", min=0.0, help="Pair distance, in --delta-unit.")] = 1,
-    delta_unit: Annotated[str, typer.Option("--delta-unit", help="'frames' or 'm'.")] = "frames",
-    all_pairs: Annotated[bool, typer.Option("--all-pairs", help="Use every pair, not consecutive ones.")] = False,
+    reference: Annotated[Path, typer.Argument(help="Reference: TUM file, or a bag with --ref-topic.")],
+    estimate: Annotated[Path, typer.Argument(help="Estimated trajectory (TUM) or a run folder.")],
+    ref_topic: RefTopicOpt = None,
+    sensor_offset: SensorOffsetOpt = (0.0, 0.0, 0.0),
+    delta: Annotated[float, typer.Option("--delta", min=0.0, help="Pair distance, in --delta-unit (evo's --delta).")] = 1,
+    delta_unit: Annotated[str, typer.Option("--delta-unit", help="'frames' or 'm' (evo's --delta_unit f / m).")] = "frames",
+    all_pairs: Annotated[bool, typer.Option("--all-pairs", help="Use every pair, not consecutive ones (evo's --all_pairs).")] = False,
     max_dt: MaxDtOpt = 0.01,
     as_json: JsonOpt = False,
 ) -> None:
-    """Relative pose error (translation and rotation) as evo_rpe computes it."""
+    """Relative pose error (translation and rotation) as evo_rpe computes it; no alignment needed.
+
+    A rigid alignment does not change relative errors, so none is applied (evo_rpe's -a has no
+    effect on them either). --max-dt is evo's --t_max_diff. docs/metrics.md has the table.
+    """
+    from dynslam2d.eval.reference import load_reference
     from dynslam2d.eval.trajectory import rpe
     from dynslam2d.io.trajectory import read_tum
+    from dynslam2d.types import Pose2D
 
     if delta_unit not in ("frames", "m"):
         raise DynSlamError(f"--delta-unit must be 'frames' or 'm', got {delta_unit!r}")
+    _check_not_swapped("rpe", reference, estimate)
     d: float | int = int(delta) if delta_unit == "frames" else delta
-    res = rpe(read_tum(reference), read_tum(_estimate_path(estimate)), delta=d, delta_unit=delta_unit, all_pairs=all_pairs, max_dt=max_dt)
+    ref = load_reference(reference, ref_topic, Pose2D(*sensor_offset))
+    res = rpe(ref, read_tum(_estimate_path(estimate)), delta=d, delta_unit=delta_unit, all_pairs=all_pairs, max_dt=max_dt)
     out = {"translation_m": res.trans.as_dict(), "rotation_rad": res.rot.as_dict()}
     rows = [
         ("translation rmse", f"{res.trans.rmse:.4f} m"),
@@ -939,7 +1116,7 @@ def eval_relations(
     tol: Annotated[float, typer.Option("--tol", min=0.0, help="Largest stamp difference to match a relation to a pose, s.")] = 1e-3,
     as_json: JsonOpt = False,
 ) -> None:
-    """Relative pose error over ground-truth relations (Kümmerle et al. 2009): mean ± std."""
+    """Relative pose error over ground-truth relations, mean ± std (Kümmerle et al., 2009)."""
     from dynslam2d.eval.relations import relation_errors_from
     from dynslam2d.io.relations import read_relations
     from dynslam2d.io.trajectory import read_tum

@@ -4,7 +4,7 @@ Every object ``O_j`` of the dynamic set ``M`` defines a region ``B_j`` in its ow
 (centre ``p_j``, heading ``θ_j``); a scan point is removed when, mapped into that frame,
 it falls inside any region (paper Eq. 8). :func:`exclusion_mask` is the geometric test
 on plain arrays; :func:`filter_scan_points` adds the configuration logic of the
-paper's configurations 1–3 and our ``default`` (:class:`FilterConfig`);
+paper's configurations 1–3 and our ``box`` (:class:`FilterConfig`);
 :func:`filter_scan` applies it to one :class:`Scan` beam by beam.
 
 Frames: the test itself is frame-agnostic, but points and objects must be expressed in
@@ -31,11 +31,15 @@ from typing import Literal
 
 import numpy as np
 from numba import njit
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from dynslam2d.types import Pose2D, Scan
 
-FilterMode = Literal["none", "fixed", "adaptive", "default"]
+FilterMode = Literal["none", "fixed", "adaptive", "box"]
+
+#: Old names of filter modes, still accepted in configurations and on the command line.
+#: ``default`` was the name of ``box`` (it read like help's "[default: …]").
+MODE_ALIASES = {"default": "box"}
 
 
 class FilterConfig(BaseModel):
@@ -49,7 +53,7 @@ class FilterConfig(BaseModel):
       (configuration 2);
     * ``adaptive`` — square of half-side ``d_j = max(w_j, l_j) · adaptive_lambda / 2``
       (paper Eq. 6, configuration 3);
-    * ``default`` — our setting: the object's own box (``rectangle``, aligned with its
+    * ``box`` — our setting (formerly ``default``, still accepted): the object's own box (``rectangle``, aligned with its
       heading) or its enclosing square (``square``), grown by ``margin`` on every side
       (range noise and box-fit error) plus ``speed_margin_time · |v_j|`` (motion during the
       scan / stamp offset), each half-extent capped at ``max_half_extent``.
@@ -58,9 +62,9 @@ class FilterConfig(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
     mode: FilterMode = Field(
-        "default",
+        "box",
         description="Which exclusion rule to apply: 'none', 'fixed', 'adaptive' (paper configurations "
-        "1–3) or 'default' (ours).",
+        "1–3) or 'box' (ours: each object's own box plus a margin; 'default' is an old name of it).",
     )
     fixed_d_ref: float = Field(
         1.5, gt=0.0,
@@ -81,22 +85,22 @@ class FilterConfig(BaseModel):
     )
     default_shape: Literal["rectangle", "square"] = Field(
         "rectangle",
-        description="'default': 'rectangle' = the object's l × w box aligned with its heading, "
+        description="'box': 'rectangle' = the object's l × w box aligned with its heading, "
         "'square' = the square of side max(l, w) (as Eq. 6/7), each grown by the margins.",
     )
     margin: float = Field(
         0.2, ge=0.0,
-        description="'default': distance added on every side of the region, m (range noise and "
+        description="'box': distance added on every side of the region, m (range noise and "
         "box-fit error; 0.15–0.25 m is the useful range).",
     )
     speed_margin_time: float = Field(
         0.0, ge=0.0,
-        description="'default': extra margin per unit of object speed, s (margin += |v|·t; e.g. the "
+        description="'box': extra margin per unit of object speed, s (margin += |v|·t; e.g. the "
         "scan period when boxes are not predicted to each beam's time). 0 = off; needs velocities.",
     )
     max_half_extent: float | None = Field(
         2.5, gt=0.0,
-        description="'default': cap on each half-extent of a region, m, so that a bad box fit (a track "
+        description="'box': cap on each half-extent of a region, m, so that a bad box fit (a track "
         "merged with a wall) cannot erase a large part of the scan. None = no cap.",
     )
     trusted_pose_only: bool = Field(
@@ -105,6 +109,12 @@ class FilterConfig(BaseModel):
         "backed by enough map-confirmed points over a wide enough angle); tracks already removed stay "
         "removed. Where the pose is only predicted, pose error looks like motion: walls would be removed.",
     )
+
+    @field_validator("mode", mode="before")
+    @classmethod
+    def _old_mode_names(cls, value: object) -> object:
+        """Accept the old names of the modes (:data:`MODE_ALIASES`)."""
+        return MODE_ALIASES.get(value, value) if isinstance(value, str) else value
 
 
 @njit(cache=True)
@@ -203,9 +213,9 @@ def half_extents(
     """(k, 2) half-extents (along, across the heading), m, of the exclusion regions.
 
     ``none`` gives zeros (unused: nothing is removed), ``fixed`` ``d_ref·λ/2`` for every
-    object, ``adaptive`` ``max(w, l)·λ/2`` (paper Eq. 6), ``default`` as described in
+    object, ``adaptive`` ``max(w, l)·λ/2`` (paper Eq. 6), ``box`` as described in
     :class:`FilterConfig`. ``lengths`` are the box sides along the heading, ``widths``
-    across it, m; ``speeds`` are |v_j|, m/s (only used by ``default`` with
+    across it, m; ``speeds`` are |v_j|, m/s (only used by ``box`` with
     ``speed_margin_time > 0``; missing speeds count as 0). The ``fixed`` count rule is not
     applied here (see :func:`filter_scan_points`).
     """
@@ -222,7 +232,7 @@ def half_extents(
         d = np.maximum(w, l) * config.adaptive_lambda / 2.0  # paper Eq. 6
         out[:, 0] = d
         out[:, 1] = d
-    elif mode == "default":
+    elif mode == "box":
         grow = np.full(k, config.margin)
         if speeds is not None and config.speed_margin_time > 0.0:
             sp = np.abs(np.asarray(speeds, dtype=np.float64).reshape(-1))
@@ -244,14 +254,14 @@ def half_extents(
 def half_sides(config: FilterConfig, lengths: np.ndarray, widths: np.ndarray) -> np.ndarray:
     """(k,) square half-sides ``d_j``, m, for the square-region modes (paper Eq. 6).
 
-    Defined for ``fixed``, ``adaptive`` and ``default`` with ``default_shape='square'``
-    (without the speed margin); for ``none`` or a rectangular ``default`` region use
+    Defined for ``fixed``, ``adaptive`` and ``box`` with ``default_shape='square'``
+    (without the speed margin); for ``none`` or a rectangular ``box`` region use
     :func:`half_extents`.
 
     Raises:
         ValueError: when the configured region is not a square.
     """
-    if config.mode == "none" or (config.mode == "default" and config.default_shape != "square"):
+    if config.mode == "none" or (config.mode == "box" and config.default_shape != "square"):
         raise ValueError(
             f"half_sides: mode {config.mode!r} (shape {config.default_shape!r}) has no square region; "
             "use half_extents"
@@ -291,7 +301,7 @@ def filter_scan_points(
         centres: (k, 2) box centres of the objects in M, m.
         headings: (k,) box headings, rad.
         lengths, widths: (k,) box sides along / across the heading, m.
-        speeds: optional (k,) object speeds |v|, m/s (``default`` speed margin).
+        speeds: optional (k,) object speeds |v|, m/s (``box`` speed margin).
 
     Returns:
         ``(removed, object_index)`` as :func:`exclusion_mask`: (n,) bool and (n,) int64
