@@ -68,6 +68,7 @@ TENTATIVE = "tentative"
 CONFIRMED = "confirmed"
 COASTING = "coasting"
 _HALF_PI = 0.5 * math.pi
+_TWO_PI = 2.0 * math.pi
 _BIG = 1e12
 
 
@@ -390,10 +391,11 @@ class Tracker:
         rel = rel[idx]
         fits = fits[idx]
         names = (KIND_POINT, KIND_CIRCLE, KIND_RECT)
-        for j, (a0, n, kd) in enumerate(zip(starts.tolist(), npts.tolist(), kinds.tolist())):
-            f = fits[j]
-            dets.append(Detection(beams[a0:a0 + n], pts[a0:a0 + n], f[10:12], names[kd], float(f[0]), lohi[j, 0:2],
-                                  lohi[j, 2:4], rel[j], f[6:9], n))
+        # per-detection views, sliced once per scan (the same views as fits[j, 10:12], lohi[j, 0:2], …)
+        cen_v, circ_v, lo_v, hi_v = fits[:, 10:12], fits[:, 6:9], lohi[:, 0:2], lohi[:, 2:4]
+        for j, (a0, n, kd, th) in enumerate(zip(starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, 0].tolist())):
+            dets.append(Detection(beams[a0:a0 + n], pts[a0:a0 + n], cen_v[j], names[kd], th, lo_v[j], hi_v[j], rel[j],
+                                  circ_v[j], n))
         if self._free is not None:
             self._cur_ref = self._free.make_ref(scan, pose, valid)
             free = self._free.seen_through(pts, float(scan.stamp))
@@ -433,13 +435,13 @@ class Tracker:
         the other stands does not move the person's centre by a full stride, so its speed does not jump.
         Returns the detection list and the per-detection batch arrays, merged pairs appended at the end."""
         fc = self.config.fit
-        small = []
-        for j, d in enumerate(dets):
-            if d.n_points >= 2 and float(max(d.hi[0] - d.lo[0], d.hi[1] - d.lo[1])) <= fc.leg_max_extent:
-                small.append(j)
-        if len(small) < 2:
+        # (the detections' lo / hi / centroid are rows of lohi / fits: one vectorised test)
+        ext = np.maximum(lohi[:, 2] - lohi[:, 0], lohi[:, 3] - lohi[:, 1])
+        sel = np.flatnonzero((npts >= 2) & (ext <= fc.leg_max_extent))
+        if sel.shape[0] < 2:
             return dets, kinds, fits, lohi, rel, starts, npts, px, py
-        cen = np.array([dets[j].centroid for j in small])
+        small = sel.tolist()
+        cen = fits[sel, 10:12]
         d2 = np.hypot(cen[:, None, 0] - cen[None, :, 0], cen[:, None, 1] - cen[None, :, 1])
         np.fill_diagonal(d2, np.inf)
         pairs: list[tuple[int, int]] = []
@@ -575,11 +577,11 @@ class Tracker:
         self._bound_acceleration(Xs[sel], Xn, [tracks[ti] for ti, _ in pairs])
         self._stacked = None  # the tracks change below
         out = ok.tolist()
+        so, sk = size_obs.tolist(), size_kind.tolist()
         for r, (ti, di) in enumerate(pairs):
             if out[r]:
                 k = tracks[ti]
-                self._update_track(k, dets[di], t, vac.get(k.id, 0.0), Xn[r], Pn[r], size_obs[r].tolist(),
-                                   size_kind[r].tolist(), swaps[r])
+                self._update_track(k, dets[di], t, vac.get(k.id, 0.0), Xn[r], Pn[r], so[r], sk[r], swaps[r])
         return out
 
     def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track]) -> None:
@@ -681,10 +683,11 @@ class Tracker:
             del k.vac[0]
         p = self._pose
         if p is not None:
-            dx, dy = float(k.x[0]) - p.x, float(k.x[1]) - p.y
+            x0, x1 = float(k.x[0]), float(k.x[1])
+            dx, dy = x0 - p.x, x1 - p.y
             c, s = math.cos(p.theta), math.sin(p.theta)
             k.laser_xy.append((c * dx + s * dy, -s * dx + c * dy))
-            k.map_xy.append((float(k.x[0]), float(k.x[1])))
+            k.map_xy.append((x0, x1))
             k.map_t.append(t)
             while len(k.laser_xy) > tc.sustain_updates and t - k.map_t[0] > tc.ride_time:
                 del k.laser_xy[0]
@@ -827,8 +830,8 @@ class Tracker:
                 st.deleted_coasting += 1
                 st.tracks_deleted += 1
                 continue
-            pv = k.P[:2, :2]
-            if not k.p_finite or math.sqrt(max(pv[0, 0], pv[1, 1])) > tc.max_position_sigma:
+            P = k.P
+            if not k.p_finite or math.sqrt(max(P[0, 0], P[1, 1])) > tc.max_position_sigma:
                 st.deleted_covariance += 1
                 st.tracks_deleted += 1
                 continue
@@ -857,7 +860,6 @@ class Tracker:
             k.slow_since = t if k.slow_since is None else k.slow_since
         else:
             k.slow_since = None
-        disp = float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))
         if k.in_m and k.probation and self._free is not None and len(k.free) >= tc.sustain_updates:
             k.probation = False
             if sum(k.free) / len(k.free) < tc.free_min_fraction:
@@ -872,6 +874,11 @@ class Tracker:
             k.fast = 0
             k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
             return
+        if k.state == TENTATIVE and not k.in_m:
+            # (speed: most tracks are short-lived tentative clutter; nothing below changes them but the reason)
+            k.reason = "not in M: tentative track"
+            return
+        disp = float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))
         # a track seen moving before re-enters M on the kinematic test: where it paused, the map wrote it
         use_map = self._map is not None and len(k.mstruct) > 0 and not k.was_in_m
         npu = tc.person_sustain_updates
@@ -971,13 +978,14 @@ class Tracker:
         tc = self.config.tracker
         if len(k.map_t) < tc.ride_updates:
             return False
-        if self._body_near is not None and (k.beams.shape[0] == 0 or self._body_near[k.beams].mean() < 0.5):
-            k.rode = False
-            return False  # not where the robot's body was found
         lx_last, ly_last = k.laser_xy[-1]
         if lx_last * lx_last + ly_last * ly_last > tc.ride_max_range * tc.ride_max_range:
             k.rode = False
             return False  # far from the laser (most tracks): no arrays built
+        nb = k.beams.shape[0]
+        if self._body_near is not None and (nb == 0 or np.count_nonzero(self._body_near[k.beams]) / nb < 0.5):
+            k.rode = False
+            return False  # not where the robot's body was found
         t_end = k.map_t[-1]
         n = sum(1 for q in k.map_t if t_end - q <= tc.ride_time)
         if n < tc.ride_updates or t_end - k.map_t[-n] < 0.5 * tc.ride_time:
@@ -1010,14 +1018,14 @@ class Tracker:
                 sa, sb = k.size.tolist()
                 if speed > 0.5 * tc.v_min:
                     vdir = math.atan2(vy, vx)
-                    q = int(round(float(wrap_angle(vdir - k.theta_box)) / _HALF_PI))
+                    q = int(round(((vdir - k.theta_box + math.pi) % _TWO_PI - math.pi) / _HALF_PI))  # wrap_angle
                     theta = k.theta_box + q * _HALF_PI
                     length, width = (sa, sb) if q % 2 == 0 else (sb, sa)
                 elif sb > sa:
                     theta, length, width = k.theta_box + _HALF_PI, sb, sa
                 else:
                     theta, length, width = k.theta_box, sa, sb
-                theta = float(wrap_angle(theta))
+                theta = (float(theta) + math.pi) % _TWO_PI - math.pi  # wrap_angle
             beams = k.beams if k.id in updated else no_beams
             out.append(Track(id=k.id, state=k.state, stamp=t,
                              box=Box(px, py, theta, float(length), float(width)),
