@@ -320,8 +320,8 @@ class Tracker:
         if not self._tracks or dt <= 0.0:
             return
         F, Q = _cv_matrices(dt, self.config.tracker.accel_noise)
-        X = np.stack([k.x for k in self._tracks])
-        P = np.stack([k.P for k in self._tracks])
+        X = np.array([k.x for k in self._tracks])
+        P = np.array([k.P for k in self._tracks])
         X = X @ F.T
         P = F @ P @ F.T + Q
         fin = np.isfinite(P).all(axis=(1, 2)).tolist()
@@ -334,7 +334,7 @@ class Tracker:
     def _stack(self) -> tuple[np.ndarray, np.ndarray]:
         """(n, 4) states and (n, 4, 4) covariances of the live tracks (from the prediction when it ran)."""
         if self._stacked is None:
-            self._stacked = (np.stack([k.x for k in self._tracks]), np.stack([k.P for k in self._tracks]))
+            self._stacked = (np.array([k.x for k in self._tracks]), np.array([k.P for k in self._tracks]))
         return self._stacked
 
     def _beam_trig(self, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
@@ -592,7 +592,11 @@ class Tracker:
         if tc.max_accel is None or self._dt <= 0.0:
             return
         lim = tc.max_accel * self._dt
-        for r, k in enumerate(tracks):
+        # (speed: only rows whose velocity change comes near the bound go through the exact test below)
+        dv = X_new[:, 2:4] - X_prior[:, 2:4]
+        near = np.flatnonzero(np.einsum("ij,ij->i", dv, dv) > (0.999 * lim) ** 2).tolist()
+        for r in near:
+            k = tracks[r]
             if k.hits < tc.accel_bound_after:
                 continue
             dvx = X_new[r, 2] - X_prior[r, 2]
@@ -1008,15 +1012,16 @@ class Tracker:
         out = []
         tc = self.config.tracker
         no_beams = np.zeros(0, dtype=np.int64)
+        slow = 0.5 * tc.v_min
         for k in self._tracks:
             px, py, vx, vy = k.x.tolist()
             speed = math.hypot(vx, vy)
             if k.kind == KIND_CIRCLE:
-                theta = math.atan2(vy, vx) if speed > 0.5 * tc.v_min else 0.0
+                theta = math.atan2(vy, vx) if speed > slow else 0.0
                 length = width = 2.0 * k.radius
             else:
                 sa, sb = k.size.tolist()
-                if speed > 0.5 * tc.v_min:
+                if speed > slow:
                     vdir = math.atan2(vy, vx)
                     q = int(round(((vdir - k.theta_box + math.pi) % _TWO_PI - math.pi) / _HALF_PI))  # wrap_angle
                     theta = k.theta_box + q * _HALF_PI
