@@ -179,6 +179,8 @@ class Tracker:
         self._laser_still = False
         self._dt = 0.0
         self._body_near: np.ndarray | None = None
+        self._body_key: np.ndarray | None = None  # body beams the grown mask below was made from
+        self._body_grown: np.ndarray = np.zeros(0, dtype=bool)
         self._fit_p = fit_params(self.config.fit)
         self._trig_key: tuple | None = None
         self._trig: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
@@ -213,12 +215,16 @@ class Tracker:
         st = self.stats
         self._body_near = None
         if body_beams is not None and body_beams.shape[0] == scan.n_beams:
-            w = self.config.tracker.ride_beam_window
-            near = body_beams.astype(bool).copy()
-            for d in range(1, w + 1):
-                near[d:] |= body_beams[:-d]
-                near[:-d] |= body_beams[d:]
-            self._body_near = near
+            # the body beams rarely change: the grown mask is kept while they stay the same
+            if self._body_key is None or not np.array_equal(self._body_key, body_beams):
+                w = self.config.tracker.ride_beam_window
+                near = body_beams.astype(bool).copy()
+                for d in range(1, w + 1):
+                    near[d:] |= body_beams[:-d]
+                    near[:-d] |= body_beams[d:]
+                self._body_key = body_beams.copy()
+                self._body_grown = near
+            self._body_near = self._body_grown
         self._map = map_view if self.config.tracker.map_evidence else None
         self._pose = pose
         self._laser_still = self._still(float(scan.stamp), pose)
@@ -459,9 +465,14 @@ class Tracker:
         drop = {j for pr in pairs for j in pr}
         keep = [j for j in range(len(dets)) if j not in drop]
         new_dets = [dets[j] for j in keep]
-        ext_px, ext_py, new_rows = [px], [py], []
+        ext_px, ext_py = [px], [py]
+        m = len(pairs)
+        new_fits = np.zeros((m, fits.shape[1]))
+        new_lohi = np.empty((m, 4))
+        new_starts = np.empty(m, dtype=starts.dtype)
+        new_npts = np.empty(m, dtype=npts.dtype)
         n0 = px.shape[0]
-        for a, b in pairs:
+        for r, (a, b) in enumerate(pairs):
             da, db = dets[a], dets[b]
             pts = np.vstack((da.points, db.points))
             mid = 0.5 * (da.centroid + db.centroid)
@@ -475,22 +486,23 @@ class Tracker:
                             (na * da.map_unknown + nb * db.map_unknown) / (na + nb))
             det.person = True
             new_dets.append(det)
-            row = np.zeros(fits.shape[1])
-            row[6:8] = mid
-            row[10:12] = mid
-            new_rows.append((row, np.array([lo[0], lo[1], hi[0], hi[1]]), n0, na + nb))
+            new_fits[r, 6:8] = mid
+            new_fits[r, 10:12] = mid
+            new_lohi[r, 0:2] = lo
+            new_lohi[r, 2:4] = hi
+            new_starts[r] = n0
+            new_npts[r] = na + nb
             ext_px.append(pts[:, 0])
             ext_py.append(pts[:, 1])
             n0 += na + nb
         self.stats.merged_leg_pairs += len(pairs)
         ki = np.array(keep, dtype=np.int64)
-        m = len(pairs)
         kinds = np.concatenate((kinds[ki], np.zeros(m, dtype=kinds.dtype)))
-        fits = np.vstack((fits[ki], np.array([r[0] for r in new_rows])))
-        lohi = np.vstack((lohi[ki], np.array([r[1] for r in new_rows])))
+        fits = np.vstack((fits[ki], new_fits))
+        lohi = np.vstack((lohi[ki], new_lohi))
         rel = np.concatenate((rel[ki], np.zeros((m, 2, 2), dtype=rel.dtype)))
-        starts = np.concatenate((starts[ki], np.array([r[2] for r in new_rows], dtype=starts.dtype)))
-        npts = np.concatenate((npts[ki], np.array([r[3] for r in new_rows], dtype=npts.dtype)))
+        starts = np.concatenate((starts[ki], new_starts))
+        npts = np.concatenate((npts[ki], new_npts))
         return new_dets, kinds, fits, lohi, rel, starts, npts, np.concatenate(ext_px), np.concatenate(ext_py)
 
     def _measure_rows(self, det: np.ndarray, sizes: np.ndarray, has_sizes: np.ndarray, radius: np.ndarray,
