@@ -452,10 +452,12 @@ class Tracker:
         np.fill_diagonal(d2, np.inf)
         pairs: list[tuple[int, int]] = []
         used: set[int] = set()
+        dflat = d2.ravel().tolist()
+        ns, dmax = len(small), fc.leg_pair_distance
         for flat in np.argsort(d2, axis=None).tolist():
-            a, b = divmod(flat, len(small))
-            if d2[a, b] > fc.leg_pair_distance:
+            if dflat[flat] > dmax:
                 break
+            a, b = divmod(flat, ns)
             if a in used or b in used or a > b:
                 continue
             used.update((a, b))
@@ -552,11 +554,11 @@ class Tracker:
             if sub.size == 0:
                 continue
             rr, cc = linear_sum_assignment(sub)
-            for r, c in zip(rr, cc):
-                i, j = int(rows_idx[r]), int(cols_idx[c])
-                if ok[i, j]:
-                    pairs.append((i, j))
-                    taken[j] = True
+            ii, jj = rows_idx[rr], cols_idx[cc]
+            good = ok[ii, jj]
+            ii, jj = ii[good], jj[good]
+            pairs.extend(zip(ii.tolist(), jj.tolist()))
+            taken[jj] = True
         return pairs
 
     def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float,
@@ -586,7 +588,7 @@ class Tracker:
         Xs, Ps = self._stack()
         sel = np.array([ti for ti, _ in pairs], dtype=np.int64)
         Xn, Pn, ok = kalman_update_batch(Xs[sel], Ps[sel], H, zm, Rm)
-        self._bound_acceleration(Xs[sel], Xn, [tracks[ti] for ti, _ in pairs])
+        self._bound_acceleration(Xs[sel], Xn, tracks, pairs)
         self._stacked = None  # the tracks change below
         out = ok.tolist()
         so, sk = size_obs.tolist(), size_kind.tolist()
@@ -596,19 +598,21 @@ class Tracker:
                 self._update_track(k, dets[di], t, vac.get(k.id, 0.0), Xn[r], Pn[r], so[r], sk[r], swaps[r])
         return out
 
-    def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track]) -> None:
+    def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track],
+                            pairs: list[tuple[int, int]]) -> None:
         """Physical acceleration bound (in place on ``X_new``): once a track's velocity is established
         (``accel_bound_after`` updates), one update may change it by at most ``max_accel``·dt — speeds no
-        longer jump from scan to scan with the shape of a partial view or a leg swinging."""
+        longer jump from scan to scan with the shape of a partial view or a leg swinging. Row r of the
+        states belongs to ``tracks[pairs[r][0]]``."""
         tc = self.config.tracker
         if tc.max_accel is None or self._dt <= 0.0:
             return
         lim = tc.max_accel * self._dt
         # (speed: only rows whose velocity change comes near the bound go through the exact test below)
-        dv = X_new[:, 2:4] - X_prior[:, 2:4]
-        near = np.flatnonzero(np.einsum("ij,ij->i", dv, dv) > (0.999 * lim) ** 2).tolist()
+        dvx, dvy = X_new[:, 2] - X_prior[:, 2], X_new[:, 3] - X_prior[:, 3]
+        near = np.flatnonzero(dvx * dvx + dvy * dvy > (0.999 * lim) ** 2).tolist()
         for r in near:
-            k = tracks[r]
+            k = tracks[pairs[r][0]]
             if k.hits < tc.accel_bound_after:
                 continue
             dvx = X_new[r, 2] - X_prior[r, 2]
@@ -636,9 +640,13 @@ class Tracker:
                 k.size_known = np.array([size_kind[0] == SIZE_MEASURED, size_kind[1] == SIZE_MEASURED])
             else:
                 rl = det.rel.tolist()
-                informative = ((rl[0][0] or rl[0][1]) and (rl[1][0] or rl[1][1])) or float(det.extent.max()) > 0.3
+                informative = (rl[0][0] or rl[0][1]) and (rl[1][0] or rl[1][1])
+                if not informative:
+                    (lo0, lo1), (hi0, hi1) = det.lo.tolist(), det.hi.tolist()
+                    informative = max(hi0 - lo0, hi1 - lo1) > 0.3  # the extent's longer side, m
                 if informative:
-                    k.theta_box = float(wrap_angle(k.theta_box + tc.heading_gain * _wrap_quarter(det.theta - k.theta_box)))
+                    th = k.theta_box + tc.heading_gain * _wrap_quarter(det.theta - k.theta_box)
+                    k.theta_box = float((th + math.pi) % _TWO_PI - math.pi)  # wrap_angle
                 for a in (0, 1):
                     ta = 1 - a if swap else a
                     obs, kind = size_obs[a], size_kind[a]
@@ -733,7 +741,8 @@ class Tracker:
         along their long axis). Moves the hidden size by ``size_gain`` per update, never below the
         largest partial view."""
         tc = self.config.tracker
-        if tc.aspect_prior is None or k.state == TENTATIVE or k.size_known.all() or not k.size_known.any():
+        kn0, kn1 = k.size_known.tolist()
+        if tc.aspect_prior is None or k.state == TENTATIVE or (kn0 and kn1) or not (kn0 or kn1):
             return
         speed = math.hypot(k.x[2], k.x[3])
         if speed < tc.prior_min_speed:
