@@ -136,6 +136,7 @@ class _Track:
     map_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the map frame per update
     map_t: list[float] = field(default_factory=list)  # stamps of map_xy, s
     past: list[tuple[float, np.ndarray]] = field(default_factory=list)
+    past_t: list[float] = field(default_factory=list)  # the stamps of past, s (kept in step with it)
     slow_since: float | None = None
     probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
     p_finite: bool = True  # every entry of P is finite (checked where P changes)
@@ -679,6 +680,7 @@ class Tracker:
         if k.misses > 0:
             # re-acquired after a gap: the free-space evidence must be rebuilt from this object
             k.past.clear()
+            k.past_t.clear()
             k.free.clear()
             k.mstruct.clear()
             k.mfree.clear()
@@ -727,8 +729,10 @@ class Tracker:
                 del k.munknown[0]
         if self._free is not None:
             k.past.append((t, det.points))
+            k.past_t.append(t)
             while k.past and t - k.past[0][0] > self._free.max_age:
                 del k.past[0]
+                del k.past_t[0]
 
     @staticmethod
     def _swapped(k: _Track, det: Detection) -> bool:
@@ -775,7 +779,7 @@ class Tracker:
                 continue
             past = k.past
             npast = len(past)
-            stamps = [e[0] for e in past]
+            stamps = k.past_t
             for a in ref_ages:
                 # the entry whose age is nearest a (first one on ties, as np.argmin): stamps grow along
                 # past, so it lies next to where t − a would be inserted
@@ -821,7 +825,8 @@ class Tracker:
                    else 0.0, kind=det.kind, beams=det.beams, has_heading=det.kind == KIND_RECT,
                    free=[det.free_fraction], mstruct=[det.map_structure] if self._map is not None else [],
                    mfree=[det.map_free] if self._map is not None else [],
-                   munknown=[det.map_unknown] if self._map is not None else [], past=[(t, det.points)] if self._free is not None else [])
+                   munknown=[det.map_unknown] if self._map is not None else [], past=[(t, det.points)] if self._free is not None else [],
+                   past_t=[t] if self._free is not None else [])
         k.p_finite = bool(np.isfinite(P).all())
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
