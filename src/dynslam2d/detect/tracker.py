@@ -908,7 +908,6 @@ class Tracker:
             # (speed: most tracks are short-lived tentative clutter; nothing below changes them but the reason)
             k.reason = "not in M: tentative track"
             return
-        disp = float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))
         # a track seen moving before re-enters M on the kinematic test: where it paused, the map wrote it
         use_map = self._map is not None and len(k.mstruct) > 0 and not k.was_in_m
         npu = tc.person_sustain_updates
@@ -941,6 +940,7 @@ class Tracker:
             elif k.slow_since is not None:
                 k.reason = f"in M (hysteresis): slow ({speed:.2f} m/s) for {slow_for:.1f} s"
             else:
+                disp = float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))
                 k.reason = f"in M: speed {speed:.2f} m/s, moved {disp:.2f} m since birth"
             return
         if k.state == TENTATIVE:
@@ -954,7 +954,8 @@ class Tracker:
         elif (net := self._net_speed(k, need)) is not None and net < tc.net_speed_ratio * tc.v_min:
             k.reason = (f"not in M: net speed over the last {need} updates {net:.2f} m/s < "
                         f"{tc.net_speed_ratio * tc.v_min:.2f} (jitter, not motion)")
-        elif disp < tc.min_displacement:
+        elif (disp := float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))) < tc.min_displacement:
+            # (the net displacement since birth is computed only here: most tracks stop at a test above)
             k.reason = f"not in M: moved {disp:.2f} m < {tc.min_displacement:.2f} m since birth"
         elif self._free is not None and (not k.free or sum(k.free) / len(k.free) < tc.free_min_fraction):
             k.reason = (f"not in M: points on free space {sum(k.free) / max(len(k.free), 1):.2f} < "
