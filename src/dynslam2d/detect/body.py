@@ -197,9 +197,13 @@ class BodyFilter:
         self._start[restart] = (pose.x, pose.y, pose.theta)
         self._moved[restart] = False
         # net motion away from where the range was first seen (summed increments would add up pose jitter)
-        moved = np.hypot(pose.x - self._start[:, 0], pose.y - self._start[:, 1]) >= cfg.auto_min_travel
-        turned = np.abs(wrap_angle(pose.theta - self._start[:, 2])) >= cfg.auto_min_turn
-        self._moved |= same & moved & turned
+        # (only the beams that kept their range can become body beams: the test runs on those alone)
+        idx = np.flatnonzero(same)
+        if idx.shape[0]:
+            st = self._start[idx]
+            moved = np.hypot(pose.x - st[:, 0], pose.y - st[:, 1]) >= cfg.auto_min_travel
+            turned = np.abs(wrap_angle(pose.theta - st[:, 2])) >= cfg.auto_min_turn
+            self._moved[idx[moved & turned]] = True
         self.body = self._moved & (self._same >= cfg.auto_min_scans) & (self._same >= cfg.auto_share * self._seen)
         self._body_r = np.where(self.body, self._ref, 0.0)
         # the beams next to a body edge see it part of the time (mixed returns): they drop returns up to

@@ -68,6 +68,7 @@ TENTATIVE = "tentative"
 CONFIRMED = "confirmed"
 COASTING = "coasting"
 _HALF_PI = 0.5 * math.pi
+_TWO_PI = 2.0 * math.pi
 _BIG = 1e12
 
 
@@ -135,6 +136,7 @@ class _Track:
     map_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the map frame per update
     map_t: list[float] = field(default_factory=list)  # stamps of map_xy, s
     past: list[tuple[float, np.ndarray]] = field(default_factory=list)
+    past_t: list[float] = field(default_factory=list)  # the stamps of past, s (kept in step with it)
     slow_since: float | None = None
     probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
     p_finite: bool = True  # every entry of P is finite (checked where P changes)
@@ -178,6 +180,8 @@ class Tracker:
         self._laser_still = False
         self._dt = 0.0
         self._body_near: np.ndarray | None = None
+        self._body_key: np.ndarray | None = None  # body beams the grown mask below was made from
+        self._body_grown: np.ndarray = np.zeros(0, dtype=bool)
         self._fit_p = fit_params(self.config.fit)
         self._trig_key: tuple | None = None
         self._trig: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
@@ -212,12 +216,16 @@ class Tracker:
         st = self.stats
         self._body_near = None
         if body_beams is not None and body_beams.shape[0] == scan.n_beams:
-            w = self.config.tracker.ride_beam_window
-            near = body_beams.astype(bool).copy()
-            for d in range(1, w + 1):
-                near[d:] |= body_beams[:-d]
-                near[:-d] |= body_beams[d:]
-            self._body_near = near
+            # the body beams rarely change: the grown mask is kept while they stay the same
+            if self._body_key is None or not np.array_equal(self._body_key, body_beams):
+                w = self.config.tracker.ride_beam_window
+                near = body_beams.astype(bool).copy()
+                for d in range(1, w + 1):
+                    near[d:] |= body_beams[:-d]
+                    near[:-d] |= body_beams[d:]
+                self._body_key = body_beams.copy()
+                self._body_grown = near
+            self._body_near = self._body_grown
         self._map = map_view if self.config.tracker.map_evidence else None
         self._pose = pose
         self._laser_still = self._still(float(scan.stamp), pose)
@@ -319,8 +327,8 @@ class Tracker:
         if not self._tracks or dt <= 0.0:
             return
         F, Q = _cv_matrices(dt, self.config.tracker.accel_noise)
-        X = np.stack([k.x for k in self._tracks])
-        P = np.stack([k.P for k in self._tracks])
+        X = np.array([k.x for k in self._tracks])
+        P = np.array([k.P for k in self._tracks])
         X = X @ F.T
         P = F @ P @ F.T + Q
         fin = np.isfinite(P).all(axis=(1, 2)).tolist()
@@ -333,7 +341,7 @@ class Tracker:
     def _stack(self) -> tuple[np.ndarray, np.ndarray]:
         """(n, 4) states and (n, 4, 4) covariances of the live tracks (from the prediction when it ran)."""
         if self._stacked is None:
-            self._stacked = (np.stack([k.x for k in self._tracks]), np.stack([k.P for k in self._tracks]))
+            self._stacked = (np.array([k.x for k in self._tracks]), np.array([k.P for k in self._tracks]))
         return self._stacked
 
     def _beam_trig(self, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
@@ -390,10 +398,11 @@ class Tracker:
         rel = rel[idx]
         fits = fits[idx]
         names = (KIND_POINT, KIND_CIRCLE, KIND_RECT)
-        for j, (a0, n, kd) in enumerate(zip(starts.tolist(), npts.tolist(), kinds.tolist())):
-            f = fits[j]
-            dets.append(Detection(beams[a0:a0 + n], pts[a0:a0 + n], f[10:12], names[kd], float(f[0]), lohi[j, 0:2],
-                                  lohi[j, 2:4], rel[j], f[6:9], n))
+        # per-detection views, sliced once per scan (the same views as fits[j, 10:12], lohi[j, 0:2], …)
+        cen_v, circ_v, lo_v, hi_v = fits[:, 10:12], fits[:, 6:9], lohi[:, 0:2], lohi[:, 2:4]
+        for j, (a0, n, kd, th) in enumerate(zip(starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, 0].tolist())):
+            dets.append(Detection(beams[a0:a0 + n], pts[a0:a0 + n], cen_v[j], names[kd], th, lo_v[j], hi_v[j], rel[j],
+                                  circ_v[j], n))
         if self._free is not None:
             self._cur_ref = self._free.make_ref(scan, pose, valid)
             free = self._free.seen_through(pts, float(scan.stamp))
@@ -433,21 +442,23 @@ class Tracker:
         the other stands does not move the person's centre by a full stride, so its speed does not jump.
         Returns the detection list and the per-detection batch arrays, merged pairs appended at the end."""
         fc = self.config.fit
-        small = []
-        for j, d in enumerate(dets):
-            if d.n_points >= 2 and float(max(d.hi[0] - d.lo[0], d.hi[1] - d.lo[1])) <= fc.leg_max_extent:
-                small.append(j)
-        if len(small) < 2:
+        # (the detections' lo / hi / centroid are rows of lohi / fits: one vectorised test)
+        ext = np.maximum(lohi[:, 2] - lohi[:, 0], lohi[:, 3] - lohi[:, 1])
+        sel = np.flatnonzero((npts >= 2) & (ext <= fc.leg_max_extent))
+        if sel.shape[0] < 2:
             return dets, kinds, fits, lohi, rel, starts, npts, px, py
-        cen = np.array([dets[j].centroid for j in small])
+        small = sel.tolist()
+        cen = fits[sel, 10:12]
         d2 = np.hypot(cen[:, None, 0] - cen[None, :, 0], cen[:, None, 1] - cen[None, :, 1])
         np.fill_diagonal(d2, np.inf)
         pairs: list[tuple[int, int]] = []
         used: set[int] = set()
+        dflat = d2.ravel().tolist()
+        ns, dmax = len(small), fc.leg_pair_distance
         for flat in np.argsort(d2, axis=None).tolist():
-            a, b = divmod(flat, len(small))
-            if d2[a, b] > fc.leg_pair_distance:
+            if dflat[flat] > dmax:
                 break
+            a, b = divmod(flat, ns)
             if a in used or b in used or a > b:
                 continue
             used.update((a, b))
@@ -457,9 +468,14 @@ class Tracker:
         drop = {j for pr in pairs for j in pr}
         keep = [j for j in range(len(dets)) if j not in drop]
         new_dets = [dets[j] for j in keep]
-        ext_px, ext_py, new_rows = [px], [py], []
+        ext_px, ext_py = [px], [py]
+        m = len(pairs)
+        new_fits = np.zeros((m, fits.shape[1]))
+        new_lohi = np.empty((m, 4))
+        new_starts = np.empty(m, dtype=starts.dtype)
+        new_npts = np.empty(m, dtype=npts.dtype)
         n0 = px.shape[0]
-        for a, b in pairs:
+        for r, (a, b) in enumerate(pairs):
             da, db = dets[a], dets[b]
             pts = np.vstack((da.points, db.points))
             mid = 0.5 * (da.centroid + db.centroid)
@@ -473,22 +489,23 @@ class Tracker:
                             (na * da.map_unknown + nb * db.map_unknown) / (na + nb))
             det.person = True
             new_dets.append(det)
-            row = np.zeros(fits.shape[1])
-            row[6:8] = mid
-            row[10:12] = mid
-            new_rows.append((row, np.array([lo[0], lo[1], hi[0], hi[1]]), n0, na + nb))
+            new_fits[r, 6:8] = mid
+            new_fits[r, 10:12] = mid
+            new_lohi[r, 0:2] = lo
+            new_lohi[r, 2:4] = hi
+            new_starts[r] = n0
+            new_npts[r] = na + nb
             ext_px.append(pts[:, 0])
             ext_py.append(pts[:, 1])
             n0 += na + nb
         self.stats.merged_leg_pairs += len(pairs)
         ki = np.array(keep, dtype=np.int64)
-        m = len(pairs)
         kinds = np.concatenate((kinds[ki], np.zeros(m, dtype=kinds.dtype)))
-        fits = np.vstack((fits[ki], np.array([r[0] for r in new_rows])))
-        lohi = np.vstack((lohi[ki], np.array([r[1] for r in new_rows])))
+        fits = np.vstack((fits[ki], new_fits))
+        lohi = np.vstack((lohi[ki], new_lohi))
         rel = np.concatenate((rel[ki], np.zeros((m, 2, 2), dtype=rel.dtype)))
-        starts = np.concatenate((starts[ki], np.array([r[2] for r in new_rows], dtype=starts.dtype)))
-        npts = np.concatenate((npts[ki], np.array([r[3] for r in new_rows], dtype=npts.dtype)))
+        starts = np.concatenate((starts[ki], new_starts))
+        npts = np.concatenate((npts[ki], new_npts))
         return new_dets, kinds, fits, lohi, rel, starts, npts, np.concatenate(ext_px), np.concatenate(ext_py)
 
     def _measure_rows(self, det: np.ndarray, sizes: np.ndarray, has_sizes: np.ndarray, radius: np.ndarray,
@@ -538,11 +555,11 @@ class Tracker:
             if sub.size == 0:
                 continue
             rr, cc = linear_sum_assignment(sub)
-            for r, c in zip(rr, cc):
-                i, j = int(rows_idx[r]), int(cols_idx[c])
-                if ok[i, j]:
-                    pairs.append((i, j))
-                    taken[j] = True
+            ii, jj = rows_idx[rr], cols_idx[cc]
+            good = ok[ii, jj]
+            ii, jj = ii[good], jj[good]
+            pairs.extend(zip(ii.tolist(), jj.tolist()))
+            taken[jj] = True
         return pairs
 
     def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float,
@@ -572,25 +589,31 @@ class Tracker:
         Xs, Ps = self._stack()
         sel = np.array([ti for ti, _ in pairs], dtype=np.int64)
         Xn, Pn, ok = kalman_update_batch(Xs[sel], Ps[sel], H, zm, Rm)
-        self._bound_acceleration(Xs[sel], Xn, [tracks[ti] for ti, _ in pairs])
+        self._bound_acceleration(Xs[sel], Xn, tracks, pairs)
         self._stacked = None  # the tracks change below
         out = ok.tolist()
+        so, sk = size_obs.tolist(), size_kind.tolist()
         for r, (ti, di) in enumerate(pairs):
             if out[r]:
                 k = tracks[ti]
-                self._update_track(k, dets[di], t, vac.get(k.id, 0.0), Xn[r], Pn[r], size_obs[r].tolist(),
-                                   size_kind[r].tolist(), swaps[r])
+                self._update_track(k, dets[di], t, vac.get(k.id, 0.0), Xn[r], Pn[r], so[r], sk[r], swaps[r])
         return out
 
-    def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track]) -> None:
+    def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track],
+                            pairs: list[tuple[int, int]]) -> None:
         """Physical acceleration bound (in place on ``X_new``): once a track's velocity is established
         (``accel_bound_after`` updates), one update may change it by at most ``max_accel``·dt — speeds no
-        longer jump from scan to scan with the shape of a partial view or a leg swinging."""
+        longer jump from scan to scan with the shape of a partial view or a leg swinging. Row r of the
+        states belongs to ``tracks[pairs[r][0]]``."""
         tc = self.config.tracker
         if tc.max_accel is None or self._dt <= 0.0:
             return
         lim = tc.max_accel * self._dt
-        for r, k in enumerate(tracks):
+        # (speed: only rows whose velocity change comes near the bound go through the exact test below)
+        dvx, dvy = X_new[:, 2] - X_prior[:, 2], X_new[:, 3] - X_prior[:, 3]
+        near = np.flatnonzero(dvx * dvx + dvy * dvy > (0.999 * lim) ** 2).tolist()
+        for r in near:
+            k = tracks[pairs[r][0]]
             if k.hits < tc.accel_bound_after:
                 continue
             dvx = X_new[r, 2] - X_prior[r, 2]
@@ -618,9 +641,13 @@ class Tracker:
                 k.size_known = np.array([size_kind[0] == SIZE_MEASURED, size_kind[1] == SIZE_MEASURED])
             else:
                 rl = det.rel.tolist()
-                informative = ((rl[0][0] or rl[0][1]) and (rl[1][0] or rl[1][1])) or float(det.extent.max()) > 0.3
+                informative = (rl[0][0] or rl[0][1]) and (rl[1][0] or rl[1][1])
+                if not informative:
+                    (lo0, lo1), (hi0, hi1) = det.lo.tolist(), det.hi.tolist()
+                    informative = max(hi0 - lo0, hi1 - lo1) > 0.3  # the extent's longer side, m
                 if informative:
-                    k.theta_box = float(wrap_angle(k.theta_box + tc.heading_gain * _wrap_quarter(det.theta - k.theta_box)))
+                    th = k.theta_box + tc.heading_gain * _wrap_quarter(det.theta - k.theta_box)
+                    k.theta_box = float((th + math.pi) % _TWO_PI - math.pi)  # wrap_angle
                 for a in (0, 1):
                     ta = 1 - a if swap else a
                     obs, kind = size_obs[a], size_kind[a]
@@ -653,6 +680,7 @@ class Tracker:
         if k.misses > 0:
             # re-acquired after a gap: the free-space evidence must be rebuilt from this object
             k.past.clear()
+            k.past_t.clear()
             k.free.clear()
             k.mstruct.clear()
             k.mfree.clear()
@@ -681,10 +709,11 @@ class Tracker:
             del k.vac[0]
         p = self._pose
         if p is not None:
-            dx, dy = float(k.x[0]) - p.x, float(k.x[1]) - p.y
+            x0, x1 = float(k.x[0]), float(k.x[1])
+            dx, dy = x0 - p.x, x1 - p.y
             c, s = math.cos(p.theta), math.sin(p.theta)
             k.laser_xy.append((c * dx + s * dy, -s * dx + c * dy))
-            k.map_xy.append((float(k.x[0]), float(k.x[1])))
+            k.map_xy.append((x0, x1))
             k.map_t.append(t)
             while len(k.laser_xy) > tc.sustain_updates and t - k.map_t[0] > tc.ride_time:
                 del k.laser_xy[0]
@@ -700,8 +729,10 @@ class Tracker:
                 del k.munknown[0]
         if self._free is not None:
             k.past.append((t, det.points))
+            k.past_t.append(t)
             while k.past and t - k.past[0][0] > self._free.max_age:
                 del k.past[0]
+                del k.past_t[0]
 
     @staticmethod
     def _swapped(k: _Track, det: Detection) -> bool:
@@ -714,7 +745,8 @@ class Tracker:
         along their long axis). Moves the hidden size by ``size_gain`` per update, never below the
         largest partial view."""
         tc = self.config.tracker
-        if tc.aspect_prior is None or k.state == TENTATIVE or k.size_known.all() or not k.size_known.any():
+        kn0, kn1 = k.size_known.tolist()
+        if tc.aspect_prior is None or k.state == TENTATIVE or (kn0 and kn1) or not (kn0 or kn1):
             return
         speed = math.hypot(k.x[2], k.x[3])
         if speed < tc.prior_min_speed:
@@ -747,7 +779,7 @@ class Tracker:
                 continue
             past = k.past
             npast = len(past)
-            stamps = [e[0] for e in past]
+            stamps = k.past_t
             for a in ref_ages:
                 # the entry whose age is nearest a (first one on ties, as np.argmin): stamps grow along
                 # past, so it lies next to where t − a would be inserted
@@ -793,7 +825,8 @@ class Tracker:
                    else 0.0, kind=det.kind, beams=det.beams, has_heading=det.kind == KIND_RECT,
                    free=[det.free_fraction], mstruct=[det.map_structure] if self._map is not None else [],
                    mfree=[det.map_free] if self._map is not None else [],
-                   munknown=[det.map_unknown] if self._map is not None else [], past=[(t, det.points)] if self._free is not None else [])
+                   munknown=[det.map_unknown] if self._map is not None else [], past=[(t, det.points)] if self._free is not None else [],
+                   past_t=[t] if self._free is not None else [])
         k.p_finite = bool(np.isfinite(P).all())
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
@@ -827,8 +860,8 @@ class Tracker:
                 st.deleted_coasting += 1
                 st.tracks_deleted += 1
                 continue
-            pv = k.P[:2, :2]
-            if not k.p_finite or math.sqrt(max(pv[0, 0], pv[1, 1])) > tc.max_position_sigma:
+            P = k.P
+            if not k.p_finite or math.sqrt(max(P[0, 0], P[1, 1])) > tc.max_position_sigma:
                 st.deleted_covariance += 1
                 st.tracks_deleted += 1
                 continue
@@ -857,7 +890,6 @@ class Tracker:
             k.slow_since = t if k.slow_since is None else k.slow_since
         else:
             k.slow_since = None
-        disp = float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))
         if k.in_m and k.probation and self._free is not None and len(k.free) >= tc.sustain_updates:
             k.probation = False
             if sum(k.free) / len(k.free) < tc.free_min_fraction:
@@ -871,6 +903,10 @@ class Tracker:
                 k.in_m = False
             k.fast = 0
             k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
+            return
+        if k.state == TENTATIVE and not k.in_m:
+            # (speed: most tracks are short-lived tentative clutter; nothing below changes them but the reason)
+            k.reason = "not in M: tentative track"
             return
         # a track seen moving before re-enters M on the kinematic test: where it paused, the map wrote it
         use_map = self._map is not None and len(k.mstruct) > 0 and not k.was_in_m
@@ -904,6 +940,7 @@ class Tracker:
             elif k.slow_since is not None:
                 k.reason = f"in M (hysteresis): slow ({speed:.2f} m/s) for {slow_for:.1f} s"
             else:
+                disp = float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))
                 k.reason = f"in M: speed {speed:.2f} m/s, moved {disp:.2f} m since birth"
             return
         if k.state == TENTATIVE:
@@ -917,7 +954,8 @@ class Tracker:
         elif (net := self._net_speed(k, need)) is not None and net < tc.net_speed_ratio * tc.v_min:
             k.reason = (f"not in M: net speed over the last {need} updates {net:.2f} m/s < "
                         f"{tc.net_speed_ratio * tc.v_min:.2f} (jitter, not motion)")
-        elif disp < tc.min_displacement:
+        elif (disp := float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))) < tc.min_displacement:
+            # (the net displacement since birth is computed only here: most tracks stop at a test above)
             k.reason = f"not in M: moved {disp:.2f} m < {tc.min_displacement:.2f} m since birth"
         elif self._free is not None and (not k.free or sum(k.free) / len(k.free) < tc.free_min_fraction):
             k.reason = (f"not in M: points on free space {sum(k.free) / max(len(k.free), 1):.2f} < "
@@ -971,13 +1009,14 @@ class Tracker:
         tc = self.config.tracker
         if len(k.map_t) < tc.ride_updates:
             return False
-        if self._body_near is not None and (k.beams.shape[0] == 0 or self._body_near[k.beams].mean() < 0.5):
-            k.rode = False
-            return False  # not where the robot's body was found
         lx_last, ly_last = k.laser_xy[-1]
         if lx_last * lx_last + ly_last * ly_last > tc.ride_max_range * tc.ride_max_range:
             k.rode = False
             return False  # far from the laser (most tracks): no arrays built
+        nb = k.beams.shape[0]
+        if self._body_near is not None and (nb == 0 or np.count_nonzero(self._body_near[k.beams]) / nb < 0.5):
+            k.rode = False
+            return False  # not where the robot's body was found
         t_end = k.map_t[-1]
         n = sum(1 for q in k.map_t if t_end - q <= tc.ride_time)
         if n < tc.ride_updates or t_end - k.map_t[-n] < 0.5 * tc.ride_time:
@@ -1000,24 +1039,25 @@ class Tracker:
         out = []
         tc = self.config.tracker
         no_beams = np.zeros(0, dtype=np.int64)
+        slow = 0.5 * tc.v_min
         for k in self._tracks:
             px, py, vx, vy = k.x.tolist()
             speed = math.hypot(vx, vy)
             if k.kind == KIND_CIRCLE:
-                theta = math.atan2(vy, vx) if speed > 0.5 * tc.v_min else 0.0
+                theta = math.atan2(vy, vx) if speed > slow else 0.0
                 length = width = 2.0 * k.radius
             else:
                 sa, sb = k.size.tolist()
-                if speed > 0.5 * tc.v_min:
+                if speed > slow:
                     vdir = math.atan2(vy, vx)
-                    q = int(round(float(wrap_angle(vdir - k.theta_box)) / _HALF_PI))
+                    q = int(round(((vdir - k.theta_box + math.pi) % _TWO_PI - math.pi) / _HALF_PI))  # wrap_angle
                     theta = k.theta_box + q * _HALF_PI
                     length, width = (sa, sb) if q % 2 == 0 else (sb, sa)
                 elif sb > sa:
                     theta, length, width = k.theta_box + _HALF_PI, sb, sa
                 else:
                     theta, length, width = k.theta_box, sa, sb
-                theta = float(wrap_angle(theta))
+                theta = (float(theta) + math.pi) % _TWO_PI - math.pi  # wrap_angle
             beams = k.beams if k.id in updated else no_beams
             out.append(Track(id=k.id, state=k.state, stamp=t,
                              box=Box(px, py, theta, float(length), float(width)),
