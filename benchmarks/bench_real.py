@@ -206,7 +206,7 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data", help="the shared data folder")
     ap.add_argument("--out", type=Path, default=Path("/tmp/dynslam2d-bench-real"), help="folder for the run folders")
     ap.add_argument("--table", type=Path, default=None, help="also write the markdown table + commands here")
-    ap.add_argument("--filter", default="default", choices=("none", "fixed", "adaptive", "default"))
+    ap.add_argument("--filter", default="box", choices=("none", "fixed", "adaptive", "box", "default"))
     ap.add_argument("--config", type=Path, default=None, help="YAML configuration passed to every run")
     ap.add_argument("--only", nargs="+", default=None, help="recordings whose name contains any of these words")
     ap.add_argument("--cpu", type=int, default=None, help="pin every command to this core (taskset -c)")
