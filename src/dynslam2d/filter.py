@@ -10,7 +10,7 @@ paper's configurations 1–3 and our ``box`` (:class:`FilterConfig`);
 Frames: the test itself is frame-agnostic, but points and objects must be expressed in
 the **same** frame. The pipeline passes the scan points transformed into the map frame
 with the pose estimated for that scan (``pose.transform_points(scan.points())``) and the
-track boxes in the map frame (tracking happens in the map frame, design.md). Units: m
+track boxes in the map frame (tracking happens in the map frame, docs/architecture.md). Units: m
 and rad.
 
 Interpretation of paper Eq. 5. As printed, ``T_j = [[cos θ, sin θ, p_x], [−sin θ, cos θ,

@@ -1,4 +1,4 @@
-"""The per-scan pipeline and whole-log runs (design.md, "Data flow").
+"""The per-scan pipeline and whole-log runs (docs/architecture.md, "One scan through the pipeline").
 
 For every scan, in time order:
 

@@ -1,6 +1,6 @@
 """Core value types: a laser scan, a 2D pose, and the scan-source protocol.
 
-Conventions (see ``docs`` and design.md): SI units and radians, REP-103 axes
+Conventions (docs/architecture.md): SI units and radians, REP-103 axes
 (x forward, y left). A scan's angles and points are in the sensor (laser)
 frame; a :class:`Pose2D` returned by SLAM is the laser pose in the map frame.
 """

@@ -3,11 +3,12 @@
 Three stages, one pydantic model each, nested in :class:`DetectConfig`:
 
 - :class:`SegmentConfig` — breakpoint segmentation of a scan (paper Eq. 1; Borges & Aldon
-  2004 adaptive breakpoint detector, datmo.md §1.3 and §10.2; datmo's fixed gap for parity).
-- :class:`FitConfig` — search-based rectangle fitting (Zhang et al. 2017, datmo.md §2) and
-  the circle / point models for small or round clusters.
+  2004 adaptive breakpoint detector; the fixed gap of kostaskonkk/datmo ``Datmo::Clustering`` for parity).
+- :class:`FitConfig` — search-based rectangle fitting (Zhang et al., IV 2017; datmo's
+  ``Cluster::rectangleFitting``) and the circle / point models for small or round clusters.
 - :class:`TrackerConfig` — constant-velocity Kalman tracking in the map frame, track
-  management, and the dynamic set M (paper Eq. 3, datmo.md §5 and §10.6–10.7).
+  management, and the dynamic set M (paper Eq. 3; confirmation and free-space ideas from leg_tracker,
+  Leigh et al., ICRA 2015).
 
 Defaults were tuned on the simulator scenes (720 beams, 20 Hz) and checked on the datmo
 bags (360 beams, 12.5 Hz); see ``dynslam2d.eval.tracking``.
@@ -29,7 +30,8 @@ class SegmentConfig(BaseModel):
     mode: Literal["adaptive", "fixed"] = Field(
         "adaptive",
         description="'adaptive': breakpoint threshold D = clip(r·sin Δφ / sin(λ − Δφ) + 3σ_r, d_min, d_max) "
-        "(paper Eq. 1, Borges & Aldon 2004); 'fixed': datmo's constant gap fixed_gap (datmo.md §1.1).",
+        "(paper Eq. 1, Borges & Aldon 2004); 'fixed': datmo's constant gap fixed_gap "
+        "(datmo's code, Datmo::Clustering).",
     )
     lambda_deg: float = Field(
         10.0, gt=0.0, lt=90.0,
@@ -45,7 +47,7 @@ class SegmentConfig(BaseModel):
     )
     d_max: float = Field(
         0.30, gt=0.0,
-        description="Upper clamp of the adaptive threshold, m (datmo.md §1.3: an unclamped ABD over-merges "
+        description="Upper clamp of the adaptive threshold, m (an unclamped ABD over-merges "
         "small objects with walls).",
     )
     fixed_gap: float = Field(
@@ -83,7 +85,8 @@ class FitConfig(BaseModel):
 
     criterion: Literal["variance", "closeness", "area"] = Field(
         "variance",
-        description="Zhang et al. 2017 criterion of the search-based rectangle fit (datmo.md §2.1): "
+        description="Zhang et al. 2017 criterion of the search-based rectangle fit "
+        "(datmo's Cluster::rectangleFitting): "
         "'variance' (PythonRobotics default), 'closeness' (datmo) or 'area'.",
     )
     angle_step_deg: float = Field(
@@ -165,7 +168,7 @@ class FitConfig(BaseModel):
     person_merge: bool = Field(
         True,
         description="Merge two leg-sized clusters close together into one person detection (leg_tracker's leg "
-        "pairs, datmo.md §7), measured at the middle of the two legs.",
+        "pairs, Leigh et al. ICRA 2015), measured at the middle of the two legs.",
     )
     leg_max_extent: float = Field(
         0.25, gt=0.0,
@@ -310,7 +313,7 @@ class TrackerConfig(BaseModel):
     free_space_check: bool = Field(
         True,
         description="Entering M also needs the track's points to lie where an earlier scan saw through "
-        "(free space; leg_tracker's free-space test, datmo.md §10.7): walls never do.",
+        "(free space; leg_tracker's free-space test, Leigh et al. ICRA 2015): walls never do.",
     )
     free_min_fraction: float = Field(
         0.1, ge=0.0, le=1.0,

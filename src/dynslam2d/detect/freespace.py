@@ -2,7 +2,7 @@
 
 An object that moves occupies space the sensor saw as free a moment ago; a wall's points lie
 where earlier beams ended, never where they passed through (leg_tracker's free-space test,
-datmo.md §7 and §10.7; the paper's §2.2 "comparison of consecutive frames"). For each point p
+Leigh et al., ICRA 2015; the paper's §2.2 "comparison of consecutive frames"). For each point p
 (map frame) and each reference scan (a few tenths of a second old, with its own pose) the test
 projects p into that scan: bearing φ and range ρ from the reference sensor. p was in free space
 if the reference beams at φ (the nearest beam and its two neighbours, so that a grazing wall

@@ -606,7 +606,7 @@ def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.n
                kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray,
                circle: np.ndarray, px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray,
                p: np.ndarray) -> tuple:
-    """Association costs of n tracks × m detections (datmo.md §10.5, the tracker's gate).
+    """Association costs of n tracks × m detections (the tracker's gate, docs/tracking.md).
 
     d2[i, j]: Mahalanobis distance² of the centre innovation (predicted track i: state Xs, covariance
     Ps; detection j: default measurement Z, R). For a rectangle detection near a rectangle track with a

@@ -1,6 +1,6 @@
 """Static evidence from the SLAM map: is a point on long-occupied structure or in observed free space?
 
-The map is the strongest witness of what does not move (design.md): an endpoint on a cell
+The map is the strongest witness of what does not move (docs/architecture.md): an endpoint on a cell
 that many earlier scans hit is structure; an endpoint in a cell that earlier scans passed
 through (log-odds below zero: more free observations than hits) is space that was empty a
 moment ago, so whatever returns from there now has moved in. A cell that was never observed

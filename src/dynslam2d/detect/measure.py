@@ -13,7 +13,7 @@ fitted rectangle (e1, e2) this module decides which of the two bounds [lo_k, hi_
 The centre along k is then the middle of two real bounds, one real bound plus half the
 tracked size, or unobserved (the prediction, with a large variance). This is what keeps wall
 pieces whose ends slide with the robot from acquiring a velocity along the wall
-(design.md: a robot rotating at 1 rad/s must not make walls look like movers).
+(docs/architecture.md: a robot rotating at 1 rad/s must not make walls look like movers).
 
 Frames: everything here is in the map frame (points already transformed with the scan's
 pose); the sensor position is the laser origin in that frame. Units m, rad.

@@ -4,10 +4,10 @@ Two consecutive valid beams i, j (at most ``max_skip_beams`` no-return beams bet
 belong to the same cluster when the Euclidean gap between their points is below a threshold
 (paper Eq. 1):
 
-- adaptive (Borges & Aldon 2004, datmo.md §1.3 / §10.2):
+- adaptive (Borges & Aldon 2004; the ABD that Konstantinidis et al. 2020 describe):
   ``D = clip(r_i·sin Δφ / sin(λ − Δφ) + 3σ_r, d_min, d_max)`` with Δφ the real angle between
   the two beams (so dropped beams widen the threshold);
-- fixed (datmo's actual code, datmo.md §1.1): ``D = fixed_gap``.
+- fixed (datmo's actual code, ``Datmo::Clustering`` in kostaskonkk/datmo): ``D = fixed_gap``.
 
 On a 360° scan the last and first valid beams are compared too (wrap-around), and a cluster
 may run across the end of the scan. Clusters with fewer than ``min_points`` points are dropped;
@@ -83,13 +83,13 @@ def _link_kernel(ranges: np.ndarray, angles: np.ndarray, valid_idx: np.ndarray, 
         dphi = abs(angles[b] - angles[a])
         if dphi > math.pi:
             dphi = 2.0 * math.pi - dphi
-        gap2 = ra * ra + rb * rb - 2.0 * ra * rb * math.cos(dphi)  # law of cosines (datmo.md §1.1)
+        gap2 = ra * ra + rb * rb - 2.0 * ra * rb * math.cos(dphi)  # law of cosines (as Datmo::Clustering)
         if gap2 < 0.0:
             gap2 = 0.0
         if fixed:
             thr = fixed_gap
         else:
-            # paper Eq. 1 / Borges & Aldon ABD (datmo.md §1.3), clamped to [d_min, d_max]
+            # paper Eq. 1 / Borges & Aldon 2004 ABD, clamped to [d_min, d_max]
             if dphi >= lam:
                 thr = d_max
             else:

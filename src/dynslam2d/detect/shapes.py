@@ -1,6 +1,6 @@
 """Shape fitting of clusters: search-based rectangle (L-shape), circle, point.
 
-Rectangle (Zhang, Xu, Dong, Dolan, IV 2017; datmo.md §2.1 and §10.3): for every candidate
+Rectangle (Zhang, Xu, Dong, Dolan, IV 2017; datmo's ``Cluster::rectangleFitting``): for every candidate
 axis angle θ in [0, π/2) with a 1° step, project the points on e1 = (cos θ, sin θ) and
 e2 = (−sin θ, cos θ) and score the projection with the area, closeness or variance criterion;
 the best θ gives the bounds [lo1, hi1] × [lo2, hi2] of the rectangle in (e1, e2) coordinates.
@@ -52,7 +52,7 @@ class RectFit:
         return np.array([c * u[0] - s * u[1], s * u[0] + c * u[1]])
 
     def corners(self) -> np.ndarray:
-        """(4, 2) corners in datmo's clockwise order c0..c3 (datmo.md §2.1):
+        """(4, 2) corners in datmo's clockwise order c0..c3 (datmo's src/cluster.cpp):
         (hi1, lo2), (lo1, lo2), (lo1, hi2), (hi1, hi2) in (e1, e2) coordinates."""
         uv = np.array([[self.hi[0], self.lo[1]], [self.lo[0], self.lo[1]], [self.lo[0], self.hi[1]],
                        [self.hi[0], self.hi[1]]])
@@ -102,7 +102,7 @@ def fit_rectangle(points: np.ndarray, criterion: str = "variance", step_deg: flo
         score = -var1 - var2
     else:
         raise ValueError(f"unknown criterion {criterion!r}")
-    k = int(np.argmax(score))  # first maximum = smallest θ on ties (datmo.md §2.1)
+    k = int(np.argmax(score))  # first maximum = smallest θ on ties (as datmo's rectangleFitting)
     r = np.minimum(np.minimum(a1[:, k], b1[:, k]), np.minimum(a2[:, k], b2[:, k]))  # distance to the nearest side
     return RectFit(float(th[k]), np.array([lo1[k], lo2[k]]), np.array([hi1[k], hi2[k]]),
                    float(np.sqrt(np.mean(r * r))))
@@ -181,7 +181,7 @@ def _score(x: np.ndarray, y: np.ndarray, c: float, s: float, criterion: int, d0:
 def _fit_one(x: np.ndarray, y: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray, criterion: int,
              d0: float, out: np.ndarray, stride: int) -> None:
     """Best angle over ``cos_t, sin_t``: every angle (stride 1), or every stride-th angle and then
-    the angles around the best one (coarse-to-fine, datmo.md §10.3)."""
+    the angles around the best one (coarse-to-fine)."""
     n = x.shape[0]
     kk = cos_t.shape[0]
     c1 = np.empty(n)

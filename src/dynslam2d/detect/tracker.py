@@ -1,6 +1,8 @@
 """Tracking of moving objects in the map frame: ``Tracker(config).update(scan, pose)``.
 
-Per scan (datmo.md §10.4–10.8, with the fixes listed there):
+Per scan (after DATMO's loop, Konstantinidis et al. 2020 and ``Datmo::callback`` in
+kostaskonkk/datmo, with prediction, exclusive association and track confirmation added;
+see docs/tracking.md):
 
 1. bad input: a non-finite pose skips the scan; time going backwards, a gap > ``max_dt`` or a
    pose jump (faster than ``max_pose_speed`` / ``max_pose_rate``) drops every track; all counted
@@ -379,7 +381,7 @@ class Tracker:
         py = ay[seg.beams]
         fits = fit_clusters(px, py, seg.offsets, ~seg.structure, self._angles, CRITERIA[cfg.fit.criterion],
                             cfg.fit.closeness_d0, cfg.fit.circle_min_points, cfg.fit.coarse_stride)
-        # datmo.md §10.4: classify and bound every cluster in one pass (measure.classify_and_bound)
+        # classify and bound every cluster in one pass (measure.classify_and_bound)
         keep, kinds, lohi, rel = classify_batch(px, py, seg.beams, seg.offsets, fits, seg.structure, float(pose.x),
                                                 float(pose.y), ranges, valid, ax, ay, seg.wrapped,
                                                 int(cfg.segment.max_skip_beams), float(scan.range_max),
@@ -436,7 +438,7 @@ class Tracker:
 
     def _merge_legs(self, dets: list[Detection], kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray,
                     rel: np.ndarray, starts: np.ndarray, npts: np.ndarray, px: np.ndarray, py: np.ndarray) -> tuple:
-        """People (datmo.md §7: leg_tracker pairs legs into people): two leg-sized detections (both sides
+        """People (leg_tracker, Leigh et al. ICRA 2015, pairs legs): two leg-sized detections (both sides
         ≤ ``fit.leg_max_extent``) whose centres lie within ``fit.leg_pair_distance`` become one person
         detection, measured at the middle of the two legs with the point model. A leg swinging forward while
         the other stands does not move the person's centre by a full stride, so its speed does not jump.

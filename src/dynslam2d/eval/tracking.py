@@ -35,10 +35,10 @@ The laser pose in the map (motion-capture) frame is the ego pose interpolated at
 stamp, composed with the laser offset (−0.12, 0, 0). The target car's position is its mocap
 pose interpolated at the scan stamp, its speed the central difference over ±0.1 s. In each
 scan the **associated track** is the confirmed (or coasting) track whose box centre is nearest to
-the target, if within ``match_radius`` (1 m, as in datmo.md §9). Centre error RMSE / median,
+the target, if within ``match_radius`` (1 m, docs/tracking.md). Centre error RMSE / median,
 speed error median, and **id_switches** = number of times the associated track's id changes
 between successive associated scans. Note that the mocap marker need not be at the car's
-geometric centre; that offset is part of the error (datmo.md §9).
+geometric centre; that offset is part of the error (docs/tracking.md).
 """
 
 from __future__ import annotations
@@ -56,7 +56,8 @@ from dynslam2d.detect.tracker import CONFIRMED, COASTING, Tracker
 from dynslam2d.errors import DynSlamError
 from dynslam2d.types import Pose2D, Scan, wrap_angle
 
-#: DATMO's own logic on the datmo bags (datmo.md §9): centre RMSE, m.
+#: DATMO's own logic (kostaskonkk/datmo, re-implemented) on the datmo bags: centre RMSE, m
+#: (the "DATMO's own logic" column of docs/tracking.md).
 DATMO_RMSE = {
     "overtakes": 0.125, "overtake_ego": 0.134, "overtake_red": 0.176, "parallel": 0.112, "intersection": 0.463,
 }
@@ -126,7 +127,7 @@ def datmo_config() -> DetectConfig:
     """The detection settings used on the datmo bags (360 beams, 1°, scaled RC cars ≈0.38×0.16 m).
 
     Differences from the defaults, and why: ``segment.min_points = 2`` and ``fit.point_max_points = 3``
-    (at 1° a car 3–4 m away returns 2–3 beams; datmo also keeps 2-point clusters, datmo.md §1.1);
+    (at 1° a car 3–4 m away returns 2–3 beams; datmo's Datmo::Clustering also keeps 2-point clusters);
     ``tracker.aspect_prior = 0.4`` (the cars move along their long axis and are seen for long
     stretches only from behind or in front; 0.4 ≈ width / length of their side views in the scans);
     ``fit.person_merge = False`` (no people: a car's two visible sides, split into two clusters of

@@ -9,7 +9,7 @@
   (``evo_rpe tum ref est --delta D --delta_unit f|m [--all_pairs]``).
 
 Definitions follow evo 1.x (``evo/core/metrics.py``, ``filters.py``, ``sync.py``;
-ecosystem.md §3). Units: m and rad; statistics use the population standard
+Grupp, MichaelGrupp/evo, 2017). Units: m and rad; statistics use the population standard
 deviation (``numpy.std``, ddof=0), as evo does.
 """
 

@@ -1,6 +1,6 @@
 """Occupancy maps on disk in ROS map_server format (PGM image + YAML).
 
-Conventions (design.md, map_server): pixel 254 = free, 0 = occupied, 205 =
+Conventions (ROS map_server; docs/architecture.md): pixel 254 = free, 0 = occupied, 205 =
 unknown; image rows run top-down (row 0 = largest y), while :class:`GridMap`
 rows run bottom-up, so reading and writing flip the rows. YAML keys: ``image``
 (relative to the YAML), ``resolution`` (m/cell), ``origin`` ([x, y, yaw] of the

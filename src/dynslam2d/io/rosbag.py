@@ -1,7 +1,7 @@
 """ROS bags: read ``sensor_msgs/LaserScan`` (and ground-truth poses), write scan bags.
 
 Reading and writing go through the pure-Python ``rosbags`` library (>= 0.11, no ROS
-install needed; ecosystem.md §4.6). Supported inputs:
+install needed; https://gitlab.com/ternaris/rosbags). Supported inputs:
 
 * ROS 1 ``.bag`` files (format ``"ros1-bag"``);
 * ROS 2 bag folders (``metadata.yaml`` + sqlite3 ``.db3`` or ``.mcap`` storage,

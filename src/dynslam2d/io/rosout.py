@@ -20,7 +20,7 @@ topic          type                             content
 ============== ================================ =============================================
 
 Frames follow REP 105 loosely: SLAM here has no odometry, so ``map`` → laser is
-published directly (a pose is the laser's pose in the map frame, design.md).
+published directly (a pose is the laser's pose in the map frame, docs/architecture.md).
 ``/map`` follows map_server: ``data`` row-major from cell (0, 0) at
 ``info.origin`` (the lower-left corner of the map, identity orientation), rows
 going +y, values −1 unknown and ``round(100·p)`` for occupancy probability p.

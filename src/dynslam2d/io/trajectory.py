@@ -2,10 +2,10 @@
 
 A :class:`Trajectory` is a time-stamped sequence of 2D poses: stamps in s, poses
 ``[x, y, yaw]`` in m and rad, each the laser's pose in ``frame`` (the map frame
-unless said otherwise; design.md "Conventions").
+unless said otherwise; docs/architecture.md "Conventions").
 
-On disk it is the TUM format that ``evo`` reads (ecosystem.md §3): one pose per
-line, ``timestamp tx ty tz qx qy qz qw``, whitespace-separated, ``#`` comments.
+On disk it is the TUM format that ``evo`` reads (MichaelGrupp/evo, ``evo/tools/file_interface.py``):
+one pose per line, ``timestamp tx ty tz qx qy qz qw``, whitespace-separated, ``#`` comments.
 A planar pose is written with ``tz = 0`` and the quaternion of a pure yaw
 rotation, ``(qx, qy, qz, qw) = (0, 0, sin(yaw/2), cos(yaw/2))``. Numbers are
 written with Python's shortest round-trip representation, so a Unix stamp

@@ -5,7 +5,7 @@ Frames
 - **world frame (W)**: the scenario's own frame, in which walls, movers and the
   robot are defined. Ground truth is stored in W.
 - **first-scan frame (F)**: the laser pose at the first scan, the frame SLAM
-  output is expressed in (design.md: "the map frame is the laser pose at the
+  output is expressed in (docs/architecture.md: "the map frame is the laser pose at the
   first scan"). ``T_FW = first_pose.inverse()``; every ground-truth accessor
   takes ``frame="world"`` or ``frame="first"``.
 

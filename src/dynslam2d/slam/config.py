@@ -2,7 +2,8 @@
 
 Field names follow the ``hector_mapping`` ROS parameters where one exists
 (``map_resolution``, ``map_multi_res_levels`` → ``map_levels``, ``update_factor_free``, …);
-the reference defaults are quoted from ``/work/shared/reference/hector_slam.md`` §4.
+the reference defaults are those of hector_mapping's ``HectorMappingRos.cpp`` (``private_nh.param``)
+and ``mapping_default.launch``; docs/slam.md maps the names.
 Everything that the reference hard-codes (iteration counts, the ±0.2 rad step clamp)
 is a parameter here; everything the reference lacks (damped steps, correlative
 search, bad-match rejection, bad-input handling) has its own group of fields.
@@ -21,7 +22,7 @@ class SlamConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
-    # --- map (hector_slam.md §1) -------------------------------------------------------
+    # --- map (hector_mapping map/GridMapLogOdds.h) -------------------------------------
     map_resolution: float = Field(
         0.05, gt=0.0, le=10.0,
         description="Cell side of the finest map level r0, m. hector_mapping node default 0.025, "
@@ -63,7 +64,7 @@ class SlamConfig(BaseModel):
         "The reference never traces no-return beams (0 = off, the reference behaviour).",
     )
 
-    # --- range gates (hector_slam.md §3.1) -------------------------------------------
+    # --- range gates (HectorMappingRos.cpp) ------------------------------------------
     laser_min_dist: float = Field(
         0.4, ge=0.0,
         description="Returns closer than this are dropped, m (reference 0.4).",
@@ -73,7 +74,7 @@ class SlamConfig(BaseModel):
         description="Returns farther than this are dropped, m (reference 30.0; also the projectLaser cut-off).",
     )
 
-    # --- map update thresholds (hector_slam.md §3.3) -----------------------------------
+    # --- map update thresholds (HectorSlamProcessor::update) ---------------------------
     map_update_distance_thresh: float = Field(
         0.4, ge=0.0,
         description="Translation since the last map update needed before a scan is integrated, m "
@@ -85,7 +86,7 @@ class SlamConfig(BaseModel):
         "(mapping_default.launch 0.06; the bare node uses 0.9).",
     )
 
-    # --- scan matcher (hector_slam.md §2) ----------------------------------------------
+    # --- scan matcher (hector_mapping matcher/ScanMatcher.h) ---------------------------
     iterations_coarse: int = Field(
         4, ge=0, le=100,
         description="Gauss–Newton steps on every coarse level (reference: 1 + 3 = 4).",
@@ -96,8 +97,9 @@ class SlamConfig(BaseModel):
     )
     hector_gradient_bug: bool = Field(
         False,
-        description="Reproduce the reference's swapped bilinear gradient weights (hector_slam.md §2.2, "
-        "issue #16) for bit-faithful comparison; False = the mathematically correct gradient.",
+        description="Reproduce the reference's swapped bilinear gradient weights (OccGridMapUtil::"
+        "interpMapValueWithDerivatives, hector_slam issue #16) for bit-faithful comparison; "
+        "False = the mathematically correct gradient.",
     )
     step_mode: Literal["lm", "gauss_newton"] = Field(
         "lm",
@@ -349,12 +351,12 @@ class SlamConfig(BaseModel):
 
     @property
     def logodds_free(self) -> float:
-        """Log-odds added per free observation: logit(update_factor_free) (hector_slam.md §1.2)."""
+        """Log-odds added per free observation: logit(update_factor_free) (hector_mapping GridMapLogOdds.h)."""
         p = self.update_factor_free
         return math.log(p / (1.0 - p))
 
     @property
     def logodds_occupied(self) -> float:
-        """Log-odds added per hit: logit(update_factor_occupied) (hector_slam.md §1.2)."""
+        """Log-odds added per hit: logit(update_factor_occupied) (hector_mapping GridMapLogOdds.h)."""
         p = self.update_factor_occupied
         return math.log(p / (1.0 - p))

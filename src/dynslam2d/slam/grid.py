@@ -1,7 +1,8 @@
-"""Growable multi-resolution log-odds occupancy grids (hector_slam.md §1).
+"""Growable multi-resolution log-odds occupancy grids (Kohlbrecher et al.,
+SSRR 2011 §IV-A; hector_mapping map/).
 
 Geometry. Level k has resolution ``r_k = r0·2^k``. Integer map coordinates are cell
-centres (hector_slam.md §1.1): the cell with absolute index ``(i, j)`` is centred at world
+centres (as hector_mapping's GridMapBase.h): the cell with absolute index ``(i, j)`` is centred at world
 ``(i·r_k, j·r_k)``, so the map-frame origin is a cell centre on every level. Each level
 stores a dense block of cells ``[i0, i0+W) × [j0, j0+H)`` as ``array[row=j−j0, col=i−i0]``
 (row 0 at the bottom, like :class:`~dynslam2d.gridmap.GridMap`). When a scan reaches past
@@ -36,9 +37,9 @@ class GridLevel:
 
     Attributes:
         resolution: cell side, m.
-        logodds: (H, W) float32 log-odds, 0 = unknown (hector_slam.md §1.2).
+        logodds: (H, W) float32 log-odds, 0 = unknown (hector_mapping GridMapLogOdds.h).
         prob: (H, W) float32 occupancy probability cache, kept in step with ``logodds``.
-        uidx: (H, W) int32 per-cell update index (−1 = never updated), hector_slam.md §1.4.
+        uidx: (H, W) int32 per-cell update index (−1 = never updated), as OccGridMapBase's updateIndex.
         i0, j0: absolute cell index of array column 0 / row 0.
     """
 
@@ -169,7 +170,7 @@ class GridLevel:
 
         ``hit`` (n,) bool: True = return (endpoint occupied), False = clearing ray (all free).
         Cells are the reference's rounding of map coordinates (``floor(v + 0.5)``,
-        hector_slam.md §1.3). Grows the level first so that no ray is dropped. Returns the number
+        OccGridMapBase::updateByScan). Grows the level first so that no ray is dropped. Returns the number
         of rays integrated.
         """
         r = self.resolution
@@ -215,7 +216,8 @@ class GridLevel:
 
 class MultiResMap:
     """The level pyramid: level k at ``map_resolution·2^k``, each updated from the full scan
-    at the same pose (hector_slam.md §1.5; no downsampling of maps or scans)."""
+    at the same pose (Kohlbrecher et al., SSRR 2011 §IV-C, MapRepMultiMap; no downsampling of maps
+    or scans)."""
 
     def __init__(
         self,

@@ -1,4 +1,5 @@
-"""Bilinear interpolation of occupancy probability and its gradient (hector_slam.md §2.2).
+"""Bilinear interpolation of occupancy probability and its gradient (Kohlbrecher et al., SSRR 2011 Eqs. 4–6;
+hector_mapping OccGridMapUtil::interpMapValueWithDerivatives).
 
 Coordinates are array map coordinates of one level (cells; array cell (col, row) is
 centred at (col, row)). A point is in bounds when ``0 ≤ px ≤ W−2`` and ``0 ≤ py ≤ H−2``;
@@ -15,7 +16,8 @@ from numba import njit
 def interp_value_grad(prob, px, py, swapped):  # pragma: no cover - numba
     """(M, ∂M/∂x, ∂M/∂y, inside) at map point (px, py), gradient per cell.
 
-    ``swapped`` reproduces the reference's swapped weights (hector_slam.md §2.2, issue #16);
+    ``swapped`` reproduces the reference's swapped weights (interpMapValueWithDerivatives,
+    hector_slam issue #16);
     otherwise the exact derivative of the bilinear surface (paper Eqs. 5–6).
     """
     h, w = prob.shape

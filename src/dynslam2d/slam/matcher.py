@@ -1,13 +1,15 @@
-"""Gauss–Newton / Levenberg–Marquardt scan-to-map matching (hector_slam.md §2).
+"""Gauss–Newton / Levenberg–Marquardt scan-to-map matching (Kohlbrecher et al., SSRR 2011 §IV-B;
+hector_mapping matcher/ScanMatcher.h).
 
 Objective (paper Eq. 7): ξ* = argmin Σ_i [1 − M(S_i(ξ))]², M the bilinearly interpolated
 occupancy probability of one level, S_i(ξ) = R(θ)s_i + t in that level's cells.
-Per level, H = Σ JᵀJ and g = Σ (1−M)·J with J = (Mx, My, ∇M·∂S/∂θ) (hector_slam.md §2.3).
+Per level, H = Σ JᵀJ and g = Σ (1−M)·J with J = (Mx, My, ∇M·∂S/∂θ)
+(OccGridMapUtil::getCompleteHessianDerivs).
 
-``step_mode="gauss_newton"`` takes the reference's raw step Δ = H⁻¹g (hector_slam.md §2.4,
-but with the step bounds applied); ``"lm"`` solves (H + λ·diag H)Δ = g, bounds Δ, and
-accepts the step only if the cost drops (λ ÷ 10), otherwise λ × 10 — so no single step can
-throw the pose away (the reference once took a 14 m step when people walked by).
+``step_mode="gauss_newton"`` takes the reference's raw step Δ = H⁻¹g
+(ScanMatcher::estimateTransformationLogLh, but with the step bounds applied); ``"lm"`` solves
+(H + λ·diag H)Δ = g, bounds Δ, and accepts the step only if the cost drops (λ ÷ 10), otherwise
+λ × 10 — so no single step can throw the pose away (the reference once took a 14 m step when people walked by).
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ def accumulate(prob, pts, x, y, th, swapped, H, g):  # pragma: no cover - numba
     """Fill H (3, 3) and g (3,) at map pose (x, y, θ); return (cost, Σ M, n_inside).
 
     cost = Σ (1−M)² over all points, out-of-bounds points counting M = 0;
-    out-of-bounds points add nothing to H, g (hector_slam.md §2.3).
+    out-of-bounds points add nothing to H, g (as getCompleteHessianDerivs).
     """
     c = math.cos(th)
     s = math.sin(th)
@@ -58,7 +60,7 @@ def accumulate(prob, pts, x, y, th, swapped, H, g):  # pragma: no cover - numba
             continue
         summ += m
         n_in += 1
-        dth = (-s * sx - c * sy) * mx + (c * sx - s * sy) * my  # hector_slam.md §2.3 step 3
+        dth = (-s * sx - c * sy) * mx + (c * sx - s * sy) * my  # Kohlbrecher et al. 2011 Eq. 11
         g[0] += r * mx
         g[1] += r * my
         g[2] += r * dth
@@ -147,7 +149,7 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
 
     Returns (pose (3,), number of accepted steps). Steps are bounded: |Δθ| ≤ max_rot
     (reference ±0.2 rad clamp), |Δxy| ≤ max_trans cells. With an empty map (H00 or H11 = 0)
-    no step is taken (hector_slam.md §2.4).
+    no step is taken (as ScanMatcher::estimateTransformationLogLh).
 
     ``prior`` (3,) and ``lam_p`` (3, 3) add a prior term ½(ξ−ξp)ᵀΛp(ξ−ξp) to the objective (same
     units as ``pose``): the normal equations become (H + Λp)Δ = g + Λp(ξp − ξ). An all-zero
@@ -245,7 +247,7 @@ class LevelFit:
     """Evaluation of a world pose on one level.
 
     Attributes:
-        hessian: (3, 3) H in that level's cells / rad (hector_slam.md §2.6).
+        hessian: (3, 3) H in that level's cells / rad (what ScanMatcher::matchData returns as covMatrix).
         cost: Σ (1−M)², dimensionless.
         score: mean interpolated occupancy probability over all points (out-of-bounds = 0).
         n_inside: points that fell inside the map.
@@ -283,7 +285,8 @@ def match_multires(
     prior_world: np.ndarray | None = None,
     prior_info: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Coarse-to-fine matching (hector_slam.md §2.5): from the coarsest level down to level 0,
+    """Coarse-to-fine matching (Kohlbrecher et al., SSRR 2011 §IV-C; MapRepMultiMap::matchData):
+    from the coarsest level down to level 0,
     each level starting at the previous level's result; θ wrapped after each level.
 
     ``pts_m``: (n, 2) points in the laser frame, m. ``start_world``: (x m, y m, θ rad).
@@ -331,7 +334,9 @@ def free_fraction(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, t
 
 
 def covariance_world(hessian: np.ndarray, sigma2: float, resolution: float) -> np.ndarray:
-    """σ²·H⁻¹ converted from level-0 cell units to world units (hector_slam.md §2.6).
+    """σ²·H⁻¹ converted from level-0 cell units to world units
+    (Kohlbrecher et al., SSRR 2011 §IV: R = σ²·H⁻¹;
+    the scaling of hector_mapping's getCovMatrixWorldCoords).
 
     A singular or indefinite H (empty map, degenerate corridor) is guarded by flooring its
     eigenvalues at 1e-9 of the largest, so the variance along a degenerate direction is large

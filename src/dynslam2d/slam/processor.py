@@ -1,4 +1,5 @@
-"""Hector-style SLAM processor: one scan in, one pose out (hector_slam.md §3).
+"""Hector-style SLAM processor: one scan in, one pose out (hector_mapping
+``HectorSlamProcessor``; docs/slam.md).
 
 ``HectorSlam.process(scan)`` = :meth:`~HectorSlam.match` (pose estimate, no map change) +
 :meth:`~HectorSlam.update_map` (integrate into every level if the distance / angle
@@ -74,7 +75,7 @@ class MatchResult:
         start: the start estimate used (m, rad).
         covariance: (3, 3) σ²·H⁻¹ in world units (m², m·rad, rad²), order (x, y, θ).
         hessian: (3, 3) raw Gauss–Newton Hessian at ``pose`` on level 0, in level-0 cell / rad
-            units — what hector_mapping publishes as "covariance" (hector_slam.md §2.6).
+            units — what hector_mapping publishes as "covariance" (hector_slam issue #35).
         score: mean interpolated occupancy probability of the endpoints on level 0 at ``pose``
             (0 … 1; 0 on an empty map).
         n_points: valid returns used (after the range gates).
@@ -266,7 +267,7 @@ class HectorSlam:
         """(returns (n, 2), clearing-ray ends (m, 2)) in the laser frame, m.
 
         Returns: finite ranges inside the sensor limits and strictly inside
-        (laser_min_dist, laser_max_dist) (hector_slam.md §3.1). Clearing rays (only if
+        (laser_min_dist, laser_max_dist) (hector_mapping HectorMappingRos.cpp). Clearing rays (only if
         ``clear_no_return_dist`` > 0): beams without a return, ending at that distance.
         """
         c = self.config
@@ -685,7 +686,7 @@ class HectorSlam:
     # ---- map update --------------------------------------------------------------------
     def needs_map_update(self, pose: Pose2D) -> bool:
         """True on the first scan or once the pose moved beyond the distance / angle thresholds
-        from the last map update (hector_slam.md §3.3)."""
+        from the last map update (HectorSlamProcessor::update)."""
         if self._last_map_pose is None or self.map.empty:
             return True
         d = self._last_map_pose.between(pose)

@@ -1,6 +1,6 @@
 """Scan integration into one log-odds grid level: Bresenham rays (numba).
 
-Implements hector_slam.md §1.3–1.4 exactly:
+Implements hector_mapping's ``OccGridMapBase::updateByScan`` / ``bresenham2D`` exactly:
 
 * the integer Bresenham variant of the reference (major axis = larger |Δ|, ties to x,
   error starts at |Δa|/2, the start cell and every intermediate cell are free, the
@@ -24,7 +24,7 @@ from numba import njit
 
 @njit(cache=True)
 def _mark_free(logodds, prob, uidx, x, y, free_idx, l_free):  # pragma: no cover - numba
-    # hector_slam.md §1.4: at most one free update per cell per scan
+    # OccGridMapBase::updateSetFree: at most one free update per cell per scan
     if uidx[y, x] < free_idx:
         v = logodds[y, x] + l_free
         logodds[y, x] = v
@@ -34,13 +34,13 @@ def _mark_free(logodds, prob, uidx, x, y, free_idx, l_free):  # pragma: no cover
 
 @njit(cache=True)
 def _mark_occupied(logodds, prob, uidx, x, y, free_idx, occ_idx, l_free, l_occ, cap):  # pragma: no cover
-    # hector_slam.md §1.4: occupied wins; undo this scan's free update first
+    # OccGridMapBase::updateSetOccupied: occupied wins; undo this scan's free update first
     u = uidx[y, x]
     if u < occ_idx:
         v = logodds[y, x]
         if u == free_idx:
             v -= l_free
-        if v < cap:  # hector_slam.md §1.2: soft cap on the occupied side only
+        if v < cap:  # GridMapLogOdds.h: soft cap on the occupied side only
             v += l_occ
         logodds[y, x] = v
         prob[y, x] = 1.0 / (1.0 + math.exp(-v))
@@ -68,7 +68,7 @@ def integrate_rays(
     ``hit[k]`` True: a return (start + intermediate cells free, endpoint occupied);
     False: a free-space clearing ray (every cell including the endpoint free).
     Rays whose start or end cell lies outside the array are skipped whole
-    (hector_slam.md §1.3); rays ending in the start cell are skipped. Returns the
+    (OccGridMapBase::updateByScan); rays ending in the start cell are skipped. Returns the
     number of rays integrated.
     """
     h, w = logodds.shape
@@ -91,7 +91,7 @@ def integrate_rays(
         x = sx
         y = sy
         _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
-        if adx >= ady:  # major axis x (ties go to x), hector_slam.md §1.3
+        if adx >= ady:  # major axis x (ties go to x), as OccGridMapBase::bresenham2D
             err = adx // 2
             for _ in range(adx - 1):
                 x += stx
@@ -120,7 +120,7 @@ def integrate_rays(
 @njit(cache=True)
 def bresenham_free_cells(x0: int, y0: int, x1: int, y1: int) -> np.ndarray:  # pragma: no cover - numba
     """(m, 2) int64 (x, y) cells the reference marks free on a ray from (x0, y0) to (x1, y1):
-    the start cell and all intermediate cells, not the endpoint (hector_slam.md §1.3)."""
+    the start cell and all intermediate cells, not the endpoint (OccGridMapBase::bresenham2D)."""
     dx = x1 - x0
     dy = y1 - y0
     adx = abs(dx)
