@@ -1,6 +1,6 @@
-"""Tracking the red car of the datmo bags against motion capture (issue 4, datmo.md §9).
+"""Tracking the red car of the datmo bags against motion capture (issue 4; DATMO: Konstantinidis et al. 2020).
 
-DATMO's own logic (datmo.md §9): centre RMSE 0.125 / 0.134 / 0.176 / 0.112 m on overtakes /
+DATMO's own logic (its published evaluation on these bags): centre RMSE 0.125 / 0.134 / 0.176 / 0.112 m on overtakes /
 overtake_ego / overtake_red / parallel and 0.463 m on intersection, with up to 12 identity
 changes. Errors include the offset of the mocap marker from the car's centre (≈0.08 m along the
 car on parallel, where the car's length is fully seen).
@@ -25,7 +25,7 @@ def test_red_car_centre_speed_and_identity(bag: str) -> None:
     (r,) = evaluate_datmo_bag(path)
     assert r.target == "/red_pose" and r.datmo_rmse == DATMO_RMSE[bag]
     assert r.rmse_center <= BOUNDS[bag], r.row()
-    assert r.rmse_center < DATMO_RMSE[bag], r.row()  # beat DATMO's own logic (datmo.md §9)
+    assert r.rmse_center < DATMO_RMSE[bag], r.row()  # beat DATMO's own logic
     assert r.median_speed_error <= 0.25, r.row()  # DATMO: 0.09–0.16, 0.57 on intersection
     assert r.id_switches <= 2, r.row()  # DATMO: 0–12
     if bag != "intersection":  # there the car is mostly out of reach (≤ 2 beams) until scan 35

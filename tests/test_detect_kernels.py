@@ -141,7 +141,7 @@ def test_kalman_batch_matches_numpy_and_rejects_singular() -> None:
 
 
 def _seen_through_numpy(ref, points: np.ndarray, margin: float) -> np.ndarray:
-    """The vectorised numpy version of the free-space test (datmo.md §7)."""
+    """The vectorised numpy version of the free-space test (docs/tracking.md)."""
     local = ref.pose.inverse().transform_points(points)
     rho = np.hypot(local[:, 0], local[:, 1])
     phi = np.arctan2(local[:, 1], local[:, 0])

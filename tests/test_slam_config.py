@@ -13,7 +13,7 @@ from dynslam2d.slam import SlamConfig
 
 def test_reference_defaults() -> None:
     c = SlamConfig()
-    # hector_slam.md §4 (mapping_default.launch values where the node default is unusable)
+    # hector_mapping's mapping_default.launch (values where the node default is unusable)
     assert (c.map_resolution, c.map_levels) == (0.05, 3)
     assert (c.update_factor_free, c.update_factor_occupied) == (0.4, 0.9)
     assert (c.map_update_distance_thresh, c.map_update_angle_thresh) == (0.4, 0.06)

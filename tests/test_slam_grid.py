@@ -1,4 +1,4 @@
-"""Log-odds grid levels: ray integration (hector_slam.md §1.3–1.4), Bresenham, growth, export."""
+"""Log-odds grid levels: ray integration (Kohlbrecher et al. 2011, §IV-A), Bresenham, growth, export."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Scan matcher: interpolation and gradient, Gauss–Newton/LM convergence, correlative search,
-covariance (hector_slam.md §2)."""
+covariance (Kohlbrecher et al. 2011, §IV-B/C)."""
 
 from __future__ import annotations
 
