@@ -43,6 +43,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bench_pipeline import warm_up  # the same throw-away pipeline over the first scans
 
 STAGES = ("match", "track", "filter", "map_update", "total")
 REPO = Path(__file__).resolve().parents[1]
@@ -68,19 +69,6 @@ def load(data: Path, name: str) -> list:
     if not rel.startswith("sim:") and not Path(path).exists():
         return []
     return list(open_source(path, topic))
-
-
-def warm_up(scans: list, n: int = 60) -> tuple[float, float]:
-    """First ``process`` call and the slowest of the next ``n`` − 1, ms (throw-away pipeline)."""
-    from dynslam2d.pipeline import Pipeline
-
-    pipe = Pipeline()
-    times = []
-    for s in scans[:n]:
-        t0 = time.perf_counter()
-        pipe.process(s)
-        times.append((time.perf_counter() - t0) * 1e3)
-    return times[0], max(times[1:], default=0.0)
 
 
 def one_run(scans: list) -> dict[str, float]:

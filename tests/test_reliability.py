@@ -244,7 +244,9 @@ def test_kill_9_leaves_the_last_checkpoint(tmp_path):
     marker = json.loads((out / "run.json").read_text())
     assert marker["status"] == "incomplete"
     traj = [ln for ln in (out / "trajectory.tum").read_text().splitlines() if not ln.startswith("#")]
-    assert len(traj) == marker["scans"] >= 40
+    # run.json is written last in each checkpoint: a kill between two files of the next checkpoint
+    # leaves a trajectory that is newer than the marker, never older
+    assert len(traj) >= marker["scans"] >= 40
     assert (out / "map.yaml").exists()
 
 

@@ -219,14 +219,17 @@ class Scan:
         )
 
     def with_odometry(self, odom: Pose2D | None, yaw_rate: float | None = None) -> Scan:
-        """A copy carrying ``odom`` (laser pose in the odometry frame) and ``yaw_rate`` (rad/s)."""
-        return Scan(
-            stamp=self.stamp, angle_min=self.angle_min, angle_increment=self.angle_increment,
-            ranges=self.ranges, range_min=self.range_min, range_max=self.range_max,
-            frame_id=self.frame_id, intensities=self.intensities, angle_max=self.angle_max,
-            time_increment=self.time_increment, scan_time=self.scan_time, odom=odom,
-            yaw_rate=yaw_rate, _angles=self._angles,
-        )
+        """A copy carrying ``odom`` (laser pose in the odometry frame) and ``yaw_rate`` (rad/s).
+
+        Every other field is this (already validated) scan's, so the checks are not run again:
+        sources attach odometry to every scan of a log.
+        """
+        out = object.__new__(Scan)
+        for name in Scan.__slots__:
+            object.__setattr__(out, name, getattr(self, name))
+        object.__setattr__(out, "odom", odom)
+        object.__setattr__(out, "yaw_rate", yaw_rate)
+        return out
 
     def same_as(self, other: Scan) -> bool:
         """Exact equality of every field, NaN == NaN (used by round-trip tests)."""
