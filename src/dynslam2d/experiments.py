@@ -58,54 +58,100 @@ class ExperimentResult:
     truth: dict[str, GridMap] = field(default_factory=dict)
 
 
+@dataclass(eq=False)
+class ExperimentJob:
+    """One cell of the table: a trial mapped in one filter configuration (a batch engine job)."""
+
+    name: str
+    trial: str
+    mode: str
+    duration: float | None
+    base: Config
+
+
+#: The last trial simulated in this process: (trial, duration) → (source, simulation, ground truth).
+#: Jobs come trial by trial, so a worker simulates each trial once and reuses its scans.
+_SIMULATED: dict[tuple[str, float | None], tuple[object, object, object]] = {}
+
+
+def _simulated(trial: str, duration: float | None, resolution: float) -> tuple[object, object, object]:
+    from dynslam2d.sim import SimSource
+
+    key = (trial, duration)
+    if key not in _SIMULATED:
+        _SIMULATED.clear()
+        source = SimSource(trial, duration=duration)
+        sim = source.simulation  # simulate once, reuse the scans for every configuration
+        gt = ground_truth_for(source, None, resolution)
+        assert gt is not None
+        _SIMULATED[key] = (source, sim, gt)
+    return _SIMULATED[key]
+
+
+def run_cell(job: ExperimentJob) -> tuple[dict[str, object], GridMap, GridMap]:
+    """Map ``job.trial`` with filter ``job.mode`` and score it: (table row, map, ground-truth map)."""
+    _, sim, gt = _simulated(job.trial, job.duration, job.base.slam.map_resolution)
+    cfg = with_overrides(job.base, {"filter": {"mode": job.mode}})
+    result = run(sim.source(), cfg)  # type: ignore[attr-defined]
+    removed = result.removed
+    metrics = evaluate(result.trajectory, result.grid, gt, removed, result.trajectory.stamps)  # type: ignore[arg-type]
+    m, r = metrics["map"], metrics.get("removal", {})
+    row = {
+        "trial": job.trial,
+        "config": job.mode,
+        "iou": m["iou"],
+        "weighted_rmse": m["weighted_rmse"],
+        "iou_tolerant": m["iou_tolerant"],
+        "f1_tolerant": m["f1"],
+        "ghost_area_m2": m["ghost_area_m2"],
+        "ate_rmse_m": metrics["ate_rmse_m"],
+        "removal_precision": r.get("precision", float("nan")),
+        "removal_recall": r.get("recall", float("nan")),
+        "static_removed_share": r.get("static_removed_share", float("nan")),
+        "scans": result.n_scans,
+        "scans_per_s": result.n_scans / result.wall_time_s if result.wall_time_s > 0 else float("nan"),
+    }
+    return row, result.grid, gt.static_map  # type: ignore[attr-defined]
+
+
 def run_experiment(
     trials: tuple[str, ...] = TRIALS,
     configurations: tuple[str, ...] = CONFIGURATIONS,
     duration: float | None = None,
     base: Config | None = None,
     progress: Callable[[str], None] | None = None,
+    workers: int = 1,
+    ray: str | None = None,
 ) -> ExperimentResult:
     """Map every trial in every configuration and score it against ground truth.
+
+    The cells run through the batch engine (:func:`dynslam2d.batch.engine.map_jobs`):
+    one after the other in this process by default, on ``workers`` processes, or on Ray;
+    the table's rows are in the same order and hold the same values either way (only
+    scans/s depends on the machine's load).
 
     Args:
         duration: shorten each trial to this many seconds (None = the scenario's own 60 s).
         base: configuration the filter modes are applied to (defaults otherwise).
-        progress: called with a short text before each run.
+        progress: called with "trial / mode" as each cell finishes.
+        workers, ray: where the cells run (see :func:`dynslam2d.batch.engine.map_jobs`).
     """
-    from dynslam2d.sim import SimSource
+    from dynslam2d.batch.engine import map_jobs
+    from dynslam2d.errors import DynSlamError
 
     base = base or Config()
+    jobs = [ExperimentJob(f"{t} / {m}", t, m, duration, base) for t in trials for m in configurations]
+    outcomes = map_jobs(run_cell, jobs, workers=workers, ray=ray,
+                        on_outcome=(lambda o: progress(o.name)) if progress is not None else None)
+    _SIMULATED.clear()  # the simulated scans are not needed any more
     out = ExperimentResult()
-    for trial in trials:
-        source = SimSource(trial, duration=duration)
-        sim = source.simulation  # simulate once, reuse the scans for every configuration
-        gt = ground_truth_for(source, None, base.slam.map_resolution)
-        assert gt is not None
-        out.truth[trial] = gt.static_map
-        for mode in configurations:
-            if progress is not None:
-                progress(f"{trial} / {mode}")
-            cfg = with_overrides(base, {"filter": {"mode": mode}})
-            result = run(sim.source(), cfg)
-            removed = result.removed
-            metrics = evaluate(result.trajectory, result.grid, gt, removed, result.trajectory.stamps)
-            m, r = metrics["map"], metrics.get("removal", {})
-            out.rows.append({
-                "trial": trial,
-                "config": mode,
-                "iou": m["iou"],
-                "weighted_rmse": m["weighted_rmse"],
-                "iou_tolerant": m["iou_tolerant"],
-                "f1_tolerant": m["f1"],
-                "ghost_area_m2": m["ghost_area_m2"],
-                "ate_rmse_m": metrics["ate_rmse_m"],
-                "removal_precision": r.get("precision", float("nan")),
-                "removal_recall": r.get("recall", float("nan")),
-                "static_removed_share": r.get("static_removed_share", float("nan")),
-                "scans": result.n_scans,
-                "scans_per_s": result.n_scans / result.wall_time_s if result.wall_time_s > 0 else float("nan"),
-            })
-            out.maps[(trial, mode)] = result.grid
+    for job, o in zip(jobs, outcomes):
+        if o.status != "done":
+            raise DynSlamError(f"experiment {job.name}: {o.error}")
+        row, grid, truth = o.value
+        out.truth.setdefault(job.trial, truth)
+        out.rows.append(row)
+        out.maps[(job.trial, job.mode)] = grid
     return out
 
 
