@@ -1,0 +1,70 @@
+"""The batch engine's speed-up: the paper's experiment (3 trials × 4 filter modes) serial vs pooled.
+
+Runs ``dynslam2d.experiments.run_experiment`` — whose 12 cells go through the batch engine
+(``dynslam2d.batch.engine.map_jobs``) — once with ``workers=1`` (one cell after the other in
+this process) and once with ``--workers`` processes (default 2), in one invocation, and prints
+both wall times and their ratio. It also checks that both give the same table (every column
+but scans/s), which is the engine's promise. Not run by pytest (speed is never asserted).
+
+    python benchmarks/bench_batch.py [--workers 2] [--duration 60] [--ray]
+
+``--ray`` adds a third timing on a local Ray started in-process (``ray.init(num_cpus=workers)``).
+The kernels are warmed up first (a 2-s run) so that neither timing includes numba's compile.
+On a machine shared with other jobs, run it twice and quote the median ratio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+from dynslam2d.experiments import run_experiment
+
+
+def _table(rows: list[dict[str, object]]) -> list[dict[str, object]]:
+    return [{k: v for k, v in r.items() if k != "scans_per_s"} for r in rows]
+
+
+def _same(a: list[dict[str, object]], b: list[dict[str, object]]) -> bool:
+    def norm(v: object) -> object:
+        return "nan" if isinstance(v, float) and v != v else v
+
+    return [{k: norm(v) for k, v in r.items()} for r in _table(a)] == [{k: norm(v) for k, v in r.items()} for r in _table(b)]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--duration", type=float, default=None, help="seconds per trial (default: the trials' own 60 s)")
+    ap.add_argument("--ray", action="store_true", help="also time the same cells on a local Ray")
+    args = ap.parse_args()
+
+    run_experiment(("paper-1",), ("box",), duration=2.0)  # warm the numba cache
+    print(f"paper experiment, 3 trials x 4 filter modes, duration {args.duration or 'default (60 s)'}; "
+          f"CPUs available: {len(os.sched_getaffinity(0))}")
+    t0 = time.perf_counter()
+    serial = run_experiment(duration=args.duration, workers=1)
+    t_serial = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    pooled = run_experiment(duration=args.duration, workers=args.workers)
+    t_pool = time.perf_counter() - t0
+    print(f"serial (1 process)          {t_serial:7.1f} s")
+    print(f"pool ({args.workers} worker processes)   {t_pool:7.1f} s   ratio pool/serial {t_pool / t_serial:.2f}"
+          f"   same table: {_same(serial.rows, pooled.rows)}")
+    if args.ray:
+        import ray
+
+        ray.init(num_cpus=args.workers, include_dashboard=False, log_to_driver=False)
+        try:
+            t0 = time.perf_counter()
+            on_ray = run_experiment(duration=args.duration, ray="auto")
+            t_ray = time.perf_counter() - t0
+        finally:
+            ray.shutdown()
+        print(f"Ray ({args.workers} CPUs, in-process)   {t_ray:7.1f} s   ratio ray/serial {t_ray / t_serial:.2f}"
+              f"   same table: {_same(serial.rows, on_ray.rows)}")
+
+
+if __name__ == "__main__":
+    main()
