@@ -80,7 +80,10 @@ def measured(figure: dict[str, Any], output: str, workdir: Path) -> list[str]:
     m = re.search(spec["pattern"], text, re.MULTILINE)
     if m is None:
         raise ValueError(f"measured pattern {spec['pattern']!r} not found in {spec.get('file', 'the output')}")
-    return numbers(list(m.groups()) or [m.group(0)])
+    found = numbers(list(m.groups()) or [m.group(0)])
+    if "order" in spec:  # the doc quotes them in another order than the output prints them
+        found = [found[i] for i in spec["order"]]
+    return found
 
 
 def agrees(q: str, v: str, figure: dict[str, Any]) -> bool:
@@ -138,21 +141,34 @@ def scratch_folder(root: Path) -> Path:
     return work
 
 
-def run_entry(entry: dict[str, Any], repo: Path = REPO, keep: Path | None = None) -> EntryResult:
-    """Run an entry's commands (one bash script, stops at the first failure) and compare its figures."""
-    doc_text = (repo / entry["doc"]).read_text(encoding="utf-8")
-    root = Path(tempfile.mkdtemp(prefix=f"check-docs-{entry['id']}-", dir=keep))
+#: Commands already run in this invocation (entries of two docs often print the same commands).
+_RUNS: dict[tuple[str, ...], tuple[int, str, Path, float]] = {}
+
+
+def run_commands(commands: list[str], repo: Path = REPO, keep: Path | None = None) -> tuple[int, str, Path, float]:
+    """Run ``commands`` in one bash (stops at the first failure) in a fresh scratch folder:
+    (exit status, stdout + stderr, the folder, seconds). Cached per invocation."""
+    key = (str(repo), *commands)
+    if key in _RUNS:
+        return _RUNS[key]
+    root = Path(tempfile.mkdtemp(prefix="check-docs-", dir=keep))
     work = scratch_folder(root)
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(repo / "src"), *filter(None, [env.get("PYTHONPATH")])])
-    script = "set -e\n" + "\n".join(entry["commands"]) + "\n"
+    script = "set -e\n" + "\n".join(commands) + "\n"
     t0 = time.perf_counter()
     proc = subprocess.run(["bash", "-c", script], cwd=work, env=env, capture_output=True, text=True)
-    seconds = time.perf_counter() - t0
-    output = proc.stdout + proc.stderr
-    if proc.returncode != 0:
+    _RUNS[key] = (proc.returncode, proc.stdout + proc.stderr, work, time.perf_counter() - t0)
+    return _RUNS[key]
+
+
+def run_entry(entry: dict[str, Any], repo: Path = REPO, keep: Path | None = None) -> EntryResult:
+    """Run an entry's commands (one bash script, stops at the first failure) and compare its figures."""
+    doc_text = (repo / entry["doc"]).read_text(encoding="utf-8")
+    returncode, output, work, seconds = run_commands(entry["commands"], repo, keep)
+    if returncode != 0:
         last = [ln for ln in output.splitlines() if ln.strip()][-3:]
-        return EntryResult(entry["id"], False, seconds, problem=f"commands failed (exit {proc.returncode}): {' / '.join(last)}")
+        return EntryResult(entry["id"], False, seconds, problem=f"commands failed (exit {returncode}): {' / '.join(last)}")
     figs = [compare(f, doc_text, output, work) for f in entry["figures"]]
     return EntryResult(entry["id"], all(f.ok for f in figs), seconds, figs)
 

@@ -199,3 +199,22 @@ def test_batch_on_ray_gives_identical_metrics(serial_batch, tmp_path):
     rows = _rows(tmp_path / "r" / "batch.csv")
     assert float(rows[1]["summary.removed_beam_share"]) > 0.02  # real runs, not empty rows
     assert _reproducible(rows) == _reproducible(_rows(out / "batch.csv")[:2])
+
+
+def test_experiment_cells_run_through_the_engine_with_identical_rows():
+    from dynslam2d.experiments import run_experiment
+
+    def table(result):
+        return [{k: "nan" if v != v else v for k, v in r.items() if k != "scans_per_s"} for r in result.rows]
+
+    done: list[str] = []
+    serial = run_experiment(("paper-1",), ("none", "box"), duration=2.0, progress=done.append)
+    pooled = run_experiment(("paper-1",), ("none", "box"), duration=2.0, workers=2)
+    assert done == ["paper-1 / none", "paper-1 / box"]
+    assert table(pooled) == table(serial)
+    assert [(r["trial"], r["config"]) for r in pooled.rows] == [("paper-1", "none"), ("paper-1", "box")]
+    assert serial.rows[0]["removal_recall"] == 0.0 and serial.rows[1]["removal_recall"] > 0.2
+    import numpy as np
+
+    a, b = pooled.maps[("paper-1", "box")], serial.maps[("paper-1", "box")]
+    assert a.origin == b.origin and np.array_equal(a.prob, b.prob, equal_nan=True)
