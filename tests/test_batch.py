@@ -110,8 +110,14 @@ def test_resume_skips_finished_runs_and_reruns_an_incomplete_one(serial_batch, t
     for i, n in enumerate(names):
         changed = (out / n / "run.json").stat().st_mtime_ns != mtimes[n]
         assert changed == (i == 2)
+    # a job whose options changed since its folder was written is run again, not skipped
+    jobs = _jobs()
+    jobs[3].options = {**jobs[3].options, "skip_bad": True}
+    third = run_batch(jobs, out, workers=1)
+    assert [o.status for o in third.outcomes] == ["skipped", "skipped", "skipped", "done"]
+    run_batch(_jobs(), out, workers=1)  # back to the original job: runs once more
     after = _rows(out / "batch.csv")
-    assert [r["status"] for r in after] == ["skipped", "skipped", "done", "skipped"]
+    assert [r["status"] for r in after] == ["skipped", "skipped", "skipped", "done"]
     assert _reproducible([{**r, "status": ""} for r in after]) == _reproducible([{**r, "status": ""} for r in before])
 
 

@@ -7,8 +7,10 @@ Layout of a batch folder ``DIR`` (docs/batch.md)::
                                  every summary.json and metrics.json value
     DIR/<run name>/              a results folder exactly as ``dynslam2d run`` writes it
 
-Resumable: a run whose folder's ``run.json`` says ``"complete"`` (docs/reliability.md) is
-not run again, its summary and metrics are read from the folder. A run that fails is
+Resumable: a run whose folder's ``run.json`` says ``"complete"`` (docs/reliability.md) and
+whose ``batch_job.json`` names the same input, configuration and options is not run again;
+its summary and metrics are read from the folder (a folder of a changed job is run again
+and replaced). A run that fails is
 recorded with its one-line error (its partial folder is removed) and is tried again by the
 next invocation; it never stops the others.
 """
@@ -55,11 +57,29 @@ def _read_json(path: Path) -> dict[str, Any] | None:
     return data if isinstance(data, dict) else None
 
 
-def finished_value(folder: Path) -> dict[str, Any] | None:
-    """``{"summary", "metrics"}`` of a complete results folder (run.json says complete), else None."""
+#: Written into each run's folder before its results (so before run.json): what the run was asked
+#: to do. A complete folder is skipped on resume only if this matches the job.
+JOB_FILE = "batch_job.json"
+
+
+def _job_record(job: Job) -> dict[str, Any]:
+    return {"input": job.input, "config": job.config,
+            "options": {k: v for k, v in job.options.items() if k != "folder"}}
+
+
+def finished_value(folder: Path, job: Job | None = None) -> dict[str, Any] | None:
+    """``{"summary", "metrics"}`` of a complete results folder (run.json says complete), else None.
+
+    With ``job``: None also when the folder was made for another input, configuration or
+    options (a changed ``--config``), so that resuming never keeps a stale run.
+    """
     marker = read_marker(folder)
     if marker is None or marker.get("status") != "complete":
         return None
+    if job is not None:
+        record = _read_json(folder / JOB_FILE)
+        if record is None or record != json.loads(json.dumps(_job_record(job), default=str)):
+            return None
     summary = _read_json(folder / "summary.json")
     if summary is None:
         return None
@@ -94,6 +114,7 @@ def run_job(job: Job) -> dict[str, Any]:
     cleaner = CleanupRecorder(cfg.clean, cfg.slam)
     folder.start(input=source.meta.origin, batch_job=job.name)
     try:
+        write_text_atomic(folder.work / JOB_FILE, json.dumps(_job_record(job), indent=2, default=str) + "\n")
         observers: list[Any] = [collector] + ([cleaner] if cfg.clean.enabled else [])
         result = run_pipeline(source, cfg, observers=observers)
         if result.n_scans and not result.map_updated.any():
@@ -147,7 +168,7 @@ def run_batch(
     outcomes: dict[str, Outcome] = {}
     todo: list[Job] = []
     for job in jobs:
-        value = finished_value(root / job.name)
+        value = finished_value(root / job.name, job)
         if value is not None:
             outcomes[job.name] = Outcome(job.name, "skipped", value=value)
             if on_outcome is not None:
