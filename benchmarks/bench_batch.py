@@ -42,14 +42,15 @@ def main() -> None:
 
     run_experiment(("paper-1",), ("box",), duration=2.0)  # warm the numba cache
     print(f"paper experiment, 3 trials x 4 filter modes, duration {args.duration or 'default (60 s)'}; "
-          f"CPUs available: {len(os.sched_getaffinity(0))}")
+          f"CPUs available: {len(os.sched_getaffinity(0))}, load average {os.getloadavg()[0]:.1f}")
     t0 = time.perf_counter()
     serial = run_experiment(duration=args.duration, workers=1)
     t_serial = time.perf_counter() - t0
     t0 = time.perf_counter()
     pooled = run_experiment(duration=args.duration, workers=args.workers)
     t_pool = time.perf_counter() - t0
-    print(f"serial (1 process)          {t_serial:7.1f} s")
+    print(f"serial (1 process)          {t_serial:7.1f} s   (load average now {os.getloadavg()[0]:.1f}; "
+          f"a load above the CPU count means other programs share them and the ratio is not the engine's)")
     print(f"pool ({args.workers} worker processes)   {t_pool:7.1f} s   ratio pool/serial {t_pool / t_serial:.2f}"
           f"   same table: {_same(serial.rows, pooled.rows)}")
     if args.ray:
