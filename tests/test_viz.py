@@ -202,3 +202,19 @@ def test_gif_stream_palette_and_frame_size(tmp_path):
     back = np.asarray(im.convert("RGB"))
     np.testing.assert_array_equal(back, frame[::-1])
     assert GifStream(tmp_path / "none.gif").close() is None and not (tmp_path / "none.gif").exists()
+
+
+def test_figures_leave_the_callers_matplotlib_backend_alone(runs, tmp_path):
+    """A program that draws with its own backend keeps it after the library writes figures."""
+    import matplotlib
+
+    _, gt, out = runs
+    before = matplotlib.get_backend()
+    matplotlib.use("svg")
+    try:
+        d = out["default"]
+        paths = write_results(d["result"], tmp_path, gt, d["collector"])
+        assert matplotlib.get_backend() == "svg"
+        assert all(paths[n].stat().st_size > 10_000 for n in ("map.png", "tracks.png", "errors.png"))
+    finally:
+        matplotlib.use(before)

@@ -30,7 +30,7 @@ from dynslam2d.gridmap import GridMap
 from dynslam2d.io.atomic import write_text_atomic
 from dynslam2d.pipeline import run
 from dynslam2d.results import evaluate, ground_truth_for
-from dynslam2d.viz.figure import save_png
+from dynslam2d.viz.figure import new_figure, save_png
 
 TRIALS = ("paper-1", "paper-2", "paper-3")
 CONFIGURATIONS = ("none", "fixed", "adaptive", "box")
@@ -198,17 +198,13 @@ def plot_figure2(result: ExperimentResult, path: str | os.PathLike[str], dpi: in
     as occupancy (black occupied, white free, grey unknown) with the ground-truth outline
     in red on top, so ghosts (black off the red) and gaps (red without black) show.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from dynslam2d.viz.mapplot import occupancy_image
 
     trials = list(result.truth)
     modes = sorted({m for _, m in result.maps}, key=lambda m: CONFIGURATIONS.index(m) if m in CONFIGURATIONS else 99)
     ncol = 1 + len(modes)
-    fig, axes = plt.subplots(len(trials), ncol, figsize=(3.2 * ncol, 3.3 * len(trials) + 0.4), squeeze=False)
+    fig = new_figure((3.2 * ncol, 3.3 * len(trials) + 0.4))
+    axes = fig.subplots(len(trials), ncol, squeeze=False)
     by_key = {(r["trial"], r["config"]): r for r in result.rows}
     for i, trial in enumerate(trials):
         truth = result.truth[trial]

@@ -11,6 +11,7 @@ import numpy as np
 from dynslam2d.types import Scan, Track
 from dynslam2d.viz import style
 from dynslam2d.viz.gif import GifStream
+from dynslam2d.viz.figure import new_figure
 from dynslam2d.viz.mapplot import occupancy_image
 
 _MARGINS = {"left": 0.09, "right": 0.98, "bottom": 0.08, "top": 0.93}
@@ -90,26 +91,19 @@ class Animator:
 
     def close(self) -> Path | None:
         """Write the GIF (if any frame) and release the figure; returns the path written."""
-        import matplotlib.pyplot as plt
-
-        if self._fig is not None:
-            plt.close(self._fig)
-            self._fig = None
+        self._fig = None
         self.written = self._gif.close()
         return self.written
 
     # ---- drawing -------------------------------------------------------------------------
     def _setup(self) -> None:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
         from matplotlib.lines import Line2D
         from matplotlib.patches import Patch
 
         dpi = 100
         w, h = self.size_px
-        fig, ax = plt.subplots(figsize=(w / dpi, h / dpi), dpi=dpi)
+        fig = new_figure((w / dpi, h / dpi), dpi=dpi)
+        ax = fig.subplots()
         fig.subplots_adjust(**_MARGINS)
         a = self._artists
         a["ax"] = ax

@@ -13,7 +13,7 @@ from dynslam2d.eval.trajectory import AteResult
 from dynslam2d.gridmap import GridMap
 from dynslam2d.types import Pose2D
 from dynslam2d.viz import style
-from dynslam2d.viz.figure import save_png
+from dynslam2d.viz.figure import new_figure, save_png
 from dynslam2d.viz.mapplot import draw_scale_bar, map_figure_size
 
 # Classes of :attr:`MapDifference.classes`, painted in this order.
@@ -98,16 +98,12 @@ def plot_errors(
         intervals: (start, end) stamps (s, same clock as the ATE stamps) to shade on the time axis,
             by kind: "degenerate", "low_support", "lost".
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
 
     extent = diff.extent
     w, h = map_figure_size(extent)
-    fig = plt.figure(figsize=(w, h + 2.6))
+    fig = new_figure((w, h + 2.6))
     gs = fig.add_gridspec(2, 1, height_ratios=(2.2, h))
     ax_t = fig.add_subplot(gs[0])
     ax_m = fig.add_subplot(gs[1])

@@ -1,19 +1,32 @@
-"""Saving figures: PNG, atomically, and the figure's memory released."""
+"""Figures that never touch pyplot, and saving them: PNG, atomically.
+
+Figures are plain :class:`matplotlib.figure.Figure` objects on an Agg canvas, so drawing one
+neither switches the backend of a user's own program nor registers it with pyplot's global
+figure manager (nothing to close, nothing leaks when a caller forgets).
+"""
 
 from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 from dynslam2d.io.atomic import atomic_path
 
 
-def save_png(fig: object, path: str | os.PathLike[str], dpi: int = 120) -> Path:
-    """Write matplotlib figure ``fig`` as a PNG at ``path`` (atomically) and close it."""
-    import matplotlib.pyplot as plt
+def new_figure(figsize: tuple[float, float], dpi: float | None = None, layout: str | None = None) -> Any:
+    """A matplotlib ``Figure`` of ``figsize`` inches at ``dpi`` (``layout`` as matplotlib's), drawn by Agg."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
+    fig = Figure(figsize=figsize, dpi=dpi, layout=layout)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def save_png(fig: Any, path: str | os.PathLike[str], dpi: int = 120) -> Path:
+    """Write matplotlib figure ``fig`` as a PNG at ``path`` (atomically)."""
     path = Path(path)
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=dpi, format="png")  # type: ignore[attr-defined]
-    plt.close(fig)  # type: ignore[arg-type]
+        fig.savefig(tmp, dpi=dpi, format="png")
     return path

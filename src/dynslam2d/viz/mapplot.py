@@ -12,7 +12,7 @@ import numpy as np
 from dynslam2d.gridmap import GridMap
 from dynslam2d.types import Box
 from dynslam2d.viz import style
-from dynslam2d.viz.figure import save_png
+from dynslam2d.viz.figure import new_figure, save_png
 from dynslam2d.viz.trackpaths import TrackPath
 
 
@@ -136,16 +136,13 @@ def plot_map(
             marked in :data:`style.LOW_SUPPORT`, poses while lost in :data:`style.LOST`.
         warning: a line drawn in a red box over the map (the pose cannot be trusted).
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
     extent = grid.extent
     fw, fh = map_figure_size(extent)
-    fig, ax = plt.subplots(figsize=(fw + 2.4, fh))
+    fig = new_figure((fw + 2.4, fh))
+    ax = fig.subplots()
     ax.imshow(occupancy_image(grid), cmap="gray", vmin=0.0, vmax=1.0, origin="lower",
               extent=extent, interpolation="nearest")
     handles: list[Any] = []

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from dynslam2d.gridmap import GridMap
-from dynslam2d.viz.figure import save_png
+from dynslam2d.viz.figure import new_figure, save_png
 from dynslam2d.viz.mapplot import map_figure_size, occupancy_image, frame_metric_axes
 from dynslam2d.viz.trackpaths import TrackPath
 
@@ -28,10 +28,10 @@ MAX_SEGMENTS = 60_000
 
 
 def _speed_cmap():  # type: ignore[no-untyped-def]
-    import matplotlib.pyplot as plt
+    from matplotlib import colormaps
     from matplotlib.colors import ListedColormap
 
-    return ListedColormap(plt.get_cmap(SPEED_CMAP)(np.linspace(0.0, _CMAP_TOP, 256)), name="speed")
+    return ListedColormap(colormaps[SPEED_CMAP](np.linspace(0.0, _CMAP_TOP, 256)), name="speed")
 
 
 def display_speed(track: TrackPath, window: int = 5) -> np.ndarray:
@@ -67,10 +67,6 @@ def plot_tracks(
     dashed and faint; up to :data:`MAX_LABELS` paths are labelled with their id at their last
     position; each starts with a small circle. ``grid`` (optional) is drawn faintly underneath for context.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.collections import LineCollection
     from matplotlib.colors import Normalize
     from matplotlib.lines import Line2D
@@ -84,7 +80,8 @@ def plot_tracks(
     else:
         extent = (-1.0, 1.0, -1.0, 1.0)
     w, h = map_figure_size(extent)
-    fig, ax = plt.subplots(figsize=(w + 1.2, h))
+    fig = new_figure((w + 1.2, h))
+    ax = fig.subplots()
     if grid is not None:
         # Faint map: occupied cells light grey, everything else white.
         img = 1.0 - 0.35 * (1.0 - occupancy_image(grid))
@@ -142,7 +139,9 @@ def plot_tracks(
                     fontsize=8 if t.ever_in_m else 6.5, fontweight="bold" if t.ever_in_m else "normal",
                     color="0.05" if t.ever_in_m else "0.35", zorder=6, annotation_clip=True,
                     bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7})
-    sm = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
+    from matplotlib.cm import ScalarMappable
+
+    sm = ScalarMappable(norm=norm, cmap=cmap)
     cb = fig.colorbar(sm, ax=ax, fraction=0.04, pad=0.02, extend="max")
     cb.set_label("speed [m/s]")
     frame_metric_axes(ax, extent)
