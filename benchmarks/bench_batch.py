@@ -10,7 +10,9 @@ but scans/s), which is the engine's promise. Not run by pytest (speed is never a
 
 ``--ray`` adds a third timing on a local Ray started in-process (``ray.init(num_cpus=workers)``).
 The kernels are warmed up first (a 2-s run) so that neither timing includes numba's compile.
-On a machine shared with other jobs, run it twice and quote the median ratio.
+Besides wall times it prints CPU times (this process for the serial run, the finished workers
+for the pool), which other programs on a shared machine do not inflate: the pool's CPU time
+over the worker count, against the serial CPU time, is the wall ratio on idle CPUs.
 """
 
 from __future__ import annotations
@@ -33,6 +35,14 @@ def _same(a: list[dict[str, object]], b: list[dict[str, object]]) -> bool:
     return [{k: norm(v) for k, v in r.items()} for r in _table(a)] == [{k: norm(v) for k, v in r.items()} for r in _table(b)]
 
 
+def _children_cpu() -> float:
+    """CPU seconds (user + system) of this process's finished child processes (the pool's workers)."""
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, default=2)
@@ -43,16 +53,19 @@ def main() -> None:
     run_experiment(("paper-1",), ("box",), duration=2.0)  # warm the numba cache
     print(f"paper experiment, 3 trials x 4 filter modes, duration {args.duration or 'default (60 s)'}; "
           f"CPUs available: {len(os.sched_getaffinity(0))}, load average {os.getloadavg()[0]:.1f}")
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     serial = run_experiment(duration=args.duration, workers=1)
-    t_serial = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    t_serial, c_serial = time.perf_counter() - t0, time.process_time() - c0
+    t0, k0 = time.perf_counter(), _children_cpu()
     pooled = run_experiment(duration=args.duration, workers=args.workers)
-    t_pool = time.perf_counter() - t0
-    print(f"serial (1 process)          {t_serial:7.1f} s   (load average now {os.getloadavg()[0]:.1f}; "
-          f"a load above the CPU count means other programs share them and the ratio is not the engine's)")
-    print(f"pool ({args.workers} worker processes)   {t_pool:7.1f} s   ratio pool/serial {t_pool / t_serial:.2f}"
+    t_pool, c_pool = time.perf_counter() - t0, _children_cpu() - k0
+    print(f"serial (1 process)          {t_serial:7.1f} s wall, {c_serial:7.1f} s CPU   (load average now "
+          f"{os.getloadavg()[0]:.1f}; above the CPU count, other programs share the CPUs and the wall ratio is theirs too)")
+    print(f"pool ({args.workers} worker processes)   {t_pool:7.1f} s wall, {c_pool:7.1f} s CPU in the workers   "
+          f"ratio pool/serial {t_pool / t_serial:.2f} wall, {c_pool / c_serial:.2f} CPU"
           f"   same table: {_same(serial.rows, pooled.rows)}")
+    print(f"on {args.workers} otherwise idle CPUs the pool's wall time would be about "
+          f"{c_pool / args.workers / c_serial:.2f} × the serial one (its CPU time spread over the workers)")
     if args.ray:
         import ray
 
