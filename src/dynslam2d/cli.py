@@ -399,6 +399,7 @@ def run(
     odom: OdomOpt = "auto",
     imu: ImuOpt = "auto",
     laser_offset: LaserOffsetOpt = None,
+    range_scale: Annotated[Optional[str], typer.Option("--laser-range-scale", "--range-scale", help="Multiply every range by this (a lidar that reads short: > 1), or 'auto': estimate it from the recording's odometry (laser.range_scale) [1].")] = None,
     frame: Annotated[str, typer.Option("--frame", help="Poses in trajectory.tum: laser (default) or base_link "
                                        "(laser pose ⊕ (base_link→laser)⁻¹; needs TF, CARMEN pose fields or --laser-offset).")] = "laser",
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
@@ -439,6 +440,8 @@ def run(
     }})
     if filter_mode is not None:
         cfg = with_overrides(cfg, {"filter": {"mode": filter_mode}})
+    if range_scale is not None:
+        cfg = with_overrides(cfg, {"laser": {"range_scale": _parse_range_scale(range_scale)}})
     if clean is not None:
         if clean not in ("on", "off"):
             raise DynSlamError(f"--clean must be 'on' or 'off', got {clean!r}")
@@ -561,6 +564,7 @@ def run(
                       + (", including compiling the kernels)" if compiling else ")")),
         *_steady_rows(summary, compiling),
         ("map updates", str(summary["map_updates"])),
+        *_range_scale_row(summary),
         ("odometry", (f"{summary.get('odometry') or 'none (laser only)'}"
                       + (f", {odo['with_odom']}/{odo['scans']} scans" if isinstance(odo, dict) and odo.get('scans') else ""))),
         ("rejected matches", str(summary["match_failures"])),
@@ -599,6 +603,29 @@ def run(
     console.print(Text.assemble("results in ", (str(out), "bold")))
     if write_bag is not None:
         console.print(Text.assemble("bag for RViz / Foxglove: ", (str(write_bag), "bold"), " (docs/ros.md)"))
+
+
+def _parse_range_scale(text: str) -> float | str:
+    """``--range-scale``: 'auto' or a number."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return float(text)
+    except ValueError:
+        raise DynSlamError(f"--range-scale must be 'auto' or a number such as 1.05, got {text!r}") from None
+
+
+def _range_scale_row(summary: dict[str, Any]) -> list[tuple[str, str]]:
+    """The range scale used, with the evidence of an automatic estimate."""
+    rs = summary.get("range_scale")
+    if not isinstance(rs, dict) or (rs.get("mode") == "fixed" and rs.get("used") == 1.0):
+        return []
+    if rs.get("mode") != "auto":
+        return [("range scale", f"{rs['used']:g} (given)")]
+    if not math.isfinite(rs.get("scale") or math.nan):
+        return [("range scale", f"1 (auto: too little odometry motion, {rs['odom_distance']:.2f} m)")]
+    return [("range scale", f"{rs['used']:.4f} (auto: odometry {rs['odom_distance']:.2f} m / laser "
+                            f"{rs['slam_distance']:.2f} m over {rs['windows']} windows of the first {rs['scans']} scans)")]
 
 
 def _say_if_compiling(show: bool) -> bool:
