@@ -558,6 +558,9 @@ def run(
     if isinstance(odo, dict) and (odo.get("without_odom") or 0) > 0:
         err_console.print(f"[yellow]warning:[/] odometry: {odo['without_odom']} of {odo['scans']} scans had no "
                           f"odometry (outside its time span or in a gap): matched laser only")
+    if isinstance(odo, dict) and odo.get("imu") and odo.get("scans") and odo.get("with_yaw_rate", 0) < odo["scans"]:
+        err_console.print(f"[yellow]warning:[/] IMU: {odo['scans'] - odo['with_yaw_rate']} of {odo['scans']} scans had "
+                          f"no yaw rate (outside the IMU's time span or in a gap): no rotation prior there")
     rows = [
         ("scans", str(summary["scans"])),
         ("wall time", f"{summary['wall_time_s']:.1f} s ({summary['scans_per_s']} scans/s"
