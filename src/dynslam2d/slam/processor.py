@@ -446,12 +446,14 @@ class HectorSlam:
         along degenerate directions and the motion gate."""
         self._match_against_map(res, pts)
         if info is not None and res.reason is None and self._sigma2:
-            # odometry_prior "all": the scan's match must agree with the odometry within its noise model
-            # (Mahalanobis test, χ² 3 dof 99 %) — a wheel slip or glitch must not pull the pose — and then
-            # the two are fused: the match is refined with the prior σ²Σ⁻¹ added to the normal equations
+            # odometry_prior "all": the scan's match must agree with the odometry within their joint noise
+            # (Mahalanobis test on the difference, covariance Σ_odom + σ²H⁻¹, χ² 3 dof 99 %) — a wheel slip or
+            # glitch must not pull the pose — and then the two are fused: the match is refined with the prior
+            # σ²Σ_odom⁻¹ added to the normal equations
             d = prior.pose.between(res.pose)
             x = np.array([d.x, d.y, d.theta])
-            if float(x @ (info / self._sigma2) @ x) < _ODOMETRY_GATE_CHI2:
+            joint = np.linalg.inv(info / self._sigma2) + res.covariance
+            if float(x @ np.linalg.solve(joint, x)) < _ODOMETRY_GATE_CHI2:
                 p = self._refine(pts, res.pose.as_array(), prior.pose.as_array(), info)
                 if np.all(np.isfinite(p)):
                     self._fit(res, pts, Pose2D(float(p[0]), float(p[1]), float(wrap_angle(p[2]))))
