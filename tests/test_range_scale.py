@@ -92,3 +92,8 @@ def test_cli_range_scale_option(tmp_path, capsys) -> None:
     assert code == 0 and "range scale" in out and "1.05 (given)" in out
     summary = json.loads((tmp_path / "y" / "summary.json").read_text())
     assert summary["range_scale"] == {"mode": "fixed", "used": 1.05}
+    # auto without odometry (the IMU alone does not count): one line before anything is written
+    code, _, err = cli(capsys, "run", "sim:static", "--duration", "1", "--odom", "none", "--out", str(tmp_path / "z"),
+                       "--range-scale", "auto")
+    assert code == 2 and "--range-scale auto needs odometry" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "z").exists()

@@ -469,6 +469,10 @@ def run(
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad, odom=odom, imu=imu,
                          laser_offset=offset)
     mount = _laser_mount(source.meta) if frame == "base_link" else None
+    odo_info = source.meta.extra.get("odometry") or {}
+    if cfg.laser.range_scale == "auto" and not odo_info.get("has_odometry", bool(odo_info.get("source"))):
+        raise DynSlamError(f"{source.meta.origin}: --range-scale auto needs odometry, and the input has none "
+                           "(see --odom; or give the scale as a number)")
     _check_map_size(source, cfg)
     if write_bag is not None:
         clean_stale_parts(write_bag)

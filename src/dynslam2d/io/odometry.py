@@ -343,6 +343,7 @@ class OdometrySource(SourceWrapper):
             "with_odom": 0,
             "without_odom": 0,
             "with_yaw_rate": 0,
+            "has_odometry": o.track is not None or o.laser_poses is not None,  # not only an IMU
         }
         if o.track is not None:
             self.stats["span"] = list(o.track.span)
