@@ -399,6 +399,7 @@ def run(
     odom: OdomOpt = "auto",
     imu: ImuOpt = "auto",
     laser_offset: LaserOffsetOpt = None,
+    range_scale: Annotated[Optional[str], typer.Option("--laser-range-scale", "--range-scale", help="Multiply every range by this (a lidar that reads short: > 1), or 'auto': estimate it from the recording's odometry (laser.range_scale) [1].")] = None,
     frame: Annotated[str, typer.Option("--frame", help="Poses in trajectory.tum: laser (default) or base_link "
                                        "(laser pose ⊕ (base_link→laser)⁻¹; needs TF, CARMEN pose fields or --laser-offset).")] = "laser",
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
@@ -439,6 +440,8 @@ def run(
     }})
     if filter_mode is not None:
         cfg = with_overrides(cfg, {"filter": {"mode": filter_mode}})
+    if range_scale is not None:
+        cfg = with_overrides(cfg, {"laser": {"range_scale": _parse_range_scale(range_scale)}})
     if clean is not None:
         if clean not in ("on", "off"):
             raise DynSlamError(f"--clean must be 'on' or 'off', got {clean!r}")
@@ -466,6 +469,10 @@ def run(
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad, odom=odom, imu=imu,
                          laser_offset=offset)
     mount = _laser_mount(source.meta) if frame == "base_link" else None
+    odo_info = source.meta.extra.get("odometry") or {}
+    if cfg.laser.range_scale == "auto" and not odo_info.get("has_odometry", bool(odo_info.get("source"))):
+        raise DynSlamError(f"{source.meta.origin}: --range-scale auto needs odometry, and the input has none "
+                           "(see --odom; or give the scale as a number)")
     _check_map_size(source, cfg)
     if write_bag is not None:
         clean_stale_parts(write_bag)
@@ -555,12 +562,16 @@ def run(
     if isinstance(odo, dict) and (odo.get("without_odom") or 0) > 0:
         err_console.print(f"[yellow]warning:[/] odometry: {odo['without_odom']} of {odo['scans']} scans had no "
                           f"odometry (outside its time span or in a gap): matched laser only")
+    if isinstance(odo, dict) and odo.get("imu") and odo.get("scans") and odo.get("with_yaw_rate", 0) < odo["scans"]:
+        err_console.print(f"[yellow]warning:[/] IMU: {odo['scans'] - odo['with_yaw_rate']} of {odo['scans']} scans had "
+                          f"no yaw rate (outside the IMU's time span or in a gap): no rotation prior there")
     rows = [
         ("scans", str(summary["scans"])),
         ("wall time", f"{summary['wall_time_s']:.1f} s ({summary['scans_per_s']} scans/s"
                       + (", including compiling the kernels)" if compiling else ")")),
         *_steady_rows(summary, compiling),
         ("map updates", str(summary["map_updates"])),
+        *_range_scale_row(summary),
         ("odometry", (f"{summary.get('odometry') or 'none (laser only)'}"
                       + (f", {odo['with_odom']}/{odo['scans']} scans" if isinstance(odo, dict) and odo.get('scans') else ""))),
         ("rejected matches", str(summary["match_failures"])),
@@ -599,6 +610,29 @@ def run(
     console.print(Text.assemble("results in ", (str(out), "bold")))
     if write_bag is not None:
         console.print(Text.assemble("bag for RViz / Foxglove: ", (str(write_bag), "bold"), " (docs/ros.md)"))
+
+
+def _parse_range_scale(text: str) -> float | str:
+    """``--range-scale``: 'auto' or a number."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return float(text)
+    except ValueError:
+        raise DynSlamError(f"--range-scale must be 'auto' or a number such as 1.05, got {text!r}") from None
+
+
+def _range_scale_row(summary: dict[str, Any]) -> list[tuple[str, str]]:
+    """The range scale used, with the evidence of an automatic estimate."""
+    rs = summary.get("range_scale")
+    if not isinstance(rs, dict) or (rs.get("mode") == "fixed" and rs.get("used") == 1.0):
+        return []
+    if rs.get("mode") != "auto":
+        return [("range scale", f"{rs['used']:g} (given)")]
+    if not math.isfinite(rs.get("scale") or math.nan):
+        return [("range scale", f"1 (auto: too little odometry motion, {rs['odom_distance']:.2f} m)")]
+    return [("range scale", f"{rs['used']:.4f} (auto: odometry {rs['odom_distance']:.2f} m / laser "
+                            f"{rs['slam_distance']:.2f} m over {rs['windows']} windows of the first {rs['scans']} scans)")]
 
 
 def _say_if_compiling(show: bool) -> bool:

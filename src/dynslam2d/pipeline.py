@@ -31,6 +31,7 @@ from dynslam2d.detect.mapevidence import MapView
 from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
+from dynslam2d.io.rangescale import apply_range_scale
 from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
@@ -373,6 +374,7 @@ class RunResult:
             "map_origin_m": list(self.grid.origin),
             "odometry": self.source.odometry,
             "odometry_detail": self.source.extra.get("odometry"),
+            "range_scale": self.source.extra.get("range_scale"),
             "trajectory_frame": "laser",
             "pose_confidence": self.pose_confidence(),
         }
@@ -406,6 +408,7 @@ def run(
     from it); every observer sees every scan (see :class:`RunObserver`).
     """
     pipe = Pipeline(config)
+    source = apply_range_scale(source, pipe.config.laser, pipe.config.slam)
     # Per-scan records in compact growable arrays (dynslam2d.records): a few hundred bytes
     # per scan instead of Python objects, so long logs do not exhaust memory.
     stamps = GrowArray(np.float64)
