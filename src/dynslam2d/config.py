@@ -28,6 +28,7 @@ from dynslam2d.detect.config import DetectConfig
 from dynslam2d.filter import FilterConfig
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.cleanconfig import CleanConfig
+from dynslam2d.slam.loopconfig import LoopConfig
 
 
 #: hector_mapping ROS parameter → our ``slam`` key (hector_mapping's HectorMappingRos.cpp;
@@ -79,6 +80,10 @@ class Config(BaseModel):
     filter: FilterConfig = Field(default_factory=FilterConfig, description="Dynamic-point filter (paper Eq. 4-8).")
     clean: CleanConfig = Field(
         default_factory=CleanConfig, description="Offline map clean-up after the run (docs/maps.md)."
+    )
+    loop: LoopConfig = Field(
+        default_factory=LoopConfig, description="Loop closure and pose-graph optimisation behind the front end "
+        "(docs/slam.md, \"Loop closure\")."
     )
 
 

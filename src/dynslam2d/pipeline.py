@@ -34,8 +34,10 @@ from dynslam2d.gridmap import GridMap
 from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
+from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.confidence import FLAGS
 from dynslam2d.slam.confidence import summarize as summarize_confidence
+from dynslam2d.slam.loops import LoopCloser, LoopResult
 from dynslam2d.types import Box, Pose2D, Scan, ScanSource, SourceMeta, Track
 
 
@@ -148,6 +150,8 @@ class Pipeline:
         self.body = BodyFilter(self.config.detect.footprint)
         self._moving: list[Track] = []  # tracks in M after the previous scan
         self._last_stamp: float | None = None
+        # loop closure behind the front end (slam/loops.py); it never changes the front end's poses or map
+        self.loops = LoopCloser(self.config.loop, self.config.slam) if self.config.loop.enabled else None
 
     def _exclude(self, scan: Scan, pose: Pose2D, tracks: list[Track], dt: float,
                  cache: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -202,6 +206,9 @@ class Pipeline:
             kept = scan.with_ranges(np.where(removed, np.nan, scan.ranges)) if removed.any() else scan
             updated = self.slam.update_map(kept, res.pose)
         t4 = time.perf_counter()
+        if self.loops is not None:
+            self.loops.add(scan.stamp, res.pose, scan, removed, updated,
+                           res.low_support or res.pose_source in ("prediction", "relocalised") or res.time_gap)
         self._moving = moving
         self._last_stamp = scan.stamp
         return StepResult(
@@ -222,7 +229,8 @@ class Pipeline:
                 "track": (t2 - t1) * 1e3,
                 "filter": (t3 - t2) * 1e3,
                 "map_update": (t4 - t3) * 1e3,
-                "total": (t4 - t0) * 1e3,
+                **({"loop": (time.perf_counter() - t4) * 1e3} if self.loops is not None else {}),
+                "total": (time.perf_counter() - t0) * 1e3,
             },
             degeneracy=res.degeneracy,
             degenerate=res.degenerate,
@@ -312,6 +320,10 @@ class RunResult:
                                     self.slam_stats.get("lost_events", 0), self.slam_stats.get("relocalisations", 0),
                                     c.low_confidence_share, c.low_confidence_stretch)
     body: dict[str, object] = field(default_factory=dict)
+    #: the front end's trajectory when loop closure replaced ``trajectory`` by the optimised one (else None)
+    frontend_trajectory: Trajectory | None = None
+    #: the loop closure's result (graph, loops, counters), None with loop closure off
+    loop: LoopResult | None = None
 
     @property
     def n_scans(self) -> int:
@@ -375,7 +387,35 @@ class RunResult:
             "odometry_detail": self.source.extra.get("odometry"),
             "trajectory_frame": "laser",
             "pose_confidence": self.pose_confidence(),
+            **({"loop_closure": self.loop_summary()} if self.loop is not None else {}),
         }
+
+    def loop_summary(self) -> dict[str, object]:
+        """The ``loop_closure`` block of summary.json: counters of the loop closure and whether it
+        changed the trajectory (docs/slam.md, "Loop closure")."""
+        if self.loop is None:
+            return {"enabled": False}
+        st = self.loop.stats
+        out: dict[str, object] = {"enabled": True, "corrected": self.loop.corrected}
+        for k in ("keyframes", "submaps", "searches", "candidates", "loops_accepted", "loops_active", "loops_rejected",
+                  "optimisations"):
+            out[k] = int(st.get(k, 0))
+        out["search_ms"] = round(float(st.get("search_ms", 0.0)), 1)
+        out["optimise_ms"] = round(float(st.get("optimise_ms", 0.0)), 1)
+        if self.frontend_trajectory is not None:
+            d = self.trajectory.poses[:, :2] - self.frontend_trajectory.poses[:, :2]
+            out["max_correction_m"] = round(float(np.max(np.hypot(d[:, 0], d[:, 1]))), 4) if d.size else 0.0
+        return out
+
+
+def render_map(loop: LoopResult, slam_config: SlamConfig) -> tuple[GridMap, np.ndarray]:
+    """The map re-rendered from the optimised keyframe poses: every keyframe's kept beams (the
+    dynamic filter's removed beams stay out) integrated in order, as the front end did at its own
+    poses. Returns (finest level as probabilities, its raw log-odds)."""
+    slam = HectorSlam(slam_config)
+    for kf, p in zip(loop.keyframes, loop.node_poses):
+        slam.update_map(kf.kept(), Pose2D(float(p[0]), float(p[1]), float(p[2])), force=True)
+    return slam.gridmap(0), slam.logodds(0)[0]
 
 
 ProgressFn = Callable[[int, StepResult], None]
@@ -441,14 +481,22 @@ def run(
             obs.on_scan(scan, step, pipe)
         if progress is not None:
             progress(len(stamps), step)
-    wall = time.perf_counter() - t0
     flag_arr = flags.view().copy()
     logodds, _ = pipe.slam.logodds(0)
+    grid = pipe.gridmap()
+    trajectory = Trajectory(stamps.view().copy(), poses.view().copy())
+    frontend_trajectory = None
+    loop = pipe.loops.finish() if pipe.loops is not None else None
+    if loop is not None and loop.corrected:
+        frontend_trajectory = trajectory
+        trajectory = Trajectory(trajectory.stamps, loop.poses)
+        grid, logodds = render_map(loop, pipe.config.slam)
+    wall = time.perf_counter() - t0
     summary = pipe.slam.summary()
     result = RunResult(
         source=source.meta,
         config=pipe.config,
-        trajectory=Trajectory(stamps.view().copy(), poses.view().copy()),
+        trajectory=trajectory,
         scores=scores.view().copy(),
         map_updated=flag_arr[:, 0],
         rejected=flag_arr[:, 1],
@@ -456,7 +504,7 @@ def run(
         removed_rows=removed_rows,
         track_rows=track_rows,
         timings_ms={k: v.view().copy() for k, v in timings.items()},
-        grid=pipe.gridmap(),
+        grid=grid,
         logodds=logodds,
         wall_time_s=wall,
         reasons=dict(summary.get("reasons", {})),  # type: ignore[arg-type]
@@ -465,6 +513,8 @@ def run(
         confidence={k: v.view().copy() for k, v in conf.items()},
         slam_stats={"lost_events": pipe.slam.lost_events, "relocalisations": pipe.slam.relocalisations},
         body=pipe.body.report(last_scan),
+        frontend_trajectory=frontend_trajectory,
+        loop=loop,
     )
     for obs in observers:
         obs.on_finish(result, pipe)
