@@ -30,19 +30,28 @@ def _block_loop_world() -> World:
 
 
 def _loop_path(step: float = 0.2, laps: float = 1.35) -> np.ndarray:
-    """(n, 3) laser poses along the corridor's centre line, counter-clockwise, ``laps`` laps."""
+    """(n, 3) laser poses along the corridor's centre line, counter-clockwise, ``laps`` laps; at each
+    corner the robot turns on the spot in 0.1 rad steps."""
     corners = np.array([(1.5, 1.5), (28.5, 1.5), (28.5, 18.5), (1.5, 18.5)])
     segs = [(corners[k], corners[(k + 1) % 4]) for k in range(4)]
     lap = sum(float(np.linalg.norm(b - a)) for a, b in segs)
     out = []
     s = 0.0
+    prev = None
     while s < laps * lap:
         r = s % lap
         for a, b in segs:
             seg = float(np.linalg.norm(b - a))
             if r <= seg:
                 d = (b - a) / seg
-                out.append((*(a + d * r), math.atan2(d[1], d[0])))
+                heading = math.atan2(d[1], d[0])
+                if prev is not None:
+                    turn = math.remainder(heading - prev[2], 2 * math.pi)
+                    for k in range(1, int(abs(turn) / 0.1) + 1):
+                        out.append((prev[0], prev[1], prev[2] + math.copysign(0.1 * k, turn)))
+                pos = a + d * r
+                out.append((pos[0], pos[1], heading))
+                prev = out[-1]
                 break
             r -= seg
         s += step
