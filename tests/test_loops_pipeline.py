@@ -142,3 +142,45 @@ def test_cli_loop_closure_outputs(tmp_path, capsys) -> None:
     assert (out_off / "trajectory.tum").read_text() == (out_on / "trajectory.tum").read_text()
     code, _o, err = run_cli(capsys, "run", "sim:paper", "--out", str(tmp_path / "x"), "--loop-closure", "maybe")
     assert code != 0 and "--loop-closure must be 'on' or 'off'" in err
+
+
+@pytest.mark.shared_data
+def test_csail_false_loops_change_the_relations_by_less_than_5mm() -> None:
+    """MIT CSAIL, laser only, loop closure on: a tenth of the accepted loops replaced by wrong ones
+    (1–3 m, 0.3 rad off) changes the Kümmerle relation error by less than 5 mm."""
+    from dynslam2d.eval.relations import relation_errors_from
+    from dynslam2d.io.carmen import CarmenSource
+    from dynslam2d.io.relations import read_relations
+    from dynslam2d.io.trajectory import Trajectory
+    from dynslam2d.slam.loops import scan_poses
+    from dynslam2d.slam.posegraph import PoseGraph
+
+    source = CarmenSource(shared_file("mit-csail/mit-csail.clf"))
+    res = run(source, Config())
+    rel = read_relations(shared_file("mit-csail/mit-csail.relations"))
+    loop = res.loop
+    good = [e for e in loop.graph.edges if e.loop and e.active]
+    assert len(good) >= 50
+    node_front = loop.frontend[loop.keyframe_scans]
+    scan_node = np.searchsorted(loop.keyframe_scans, np.arange(len(loop.frontend)), side="right") - 1
+    cfg = res.config.loop
+    rng = np.random.default_rng(12)
+
+    def relations_with(bad: set[int]) -> float:
+        g = PoseGraph()
+        for p in node_front:
+            g.add_node(p)
+        for e in loop.graph.edges:
+            if not e.loop:
+                g.add_edge(e.i, e.j, e.z, e.info)
+        for k, e in enumerate(good):
+            z = e.z + (np.array([rng.uniform(1, 3) * rng.choice([-1, 1]), rng.uniform(1, 3), 0.3]) if k in bad else 0)
+            g.add_edge(e.i, e.j, z, e.info, loop=True)
+        g.optimise(cfg.kernel, cfg.kernel_scale, cfg.iterations, cfg.outlier_chi2)
+        poses = scan_poses(loop.frontend, scan_node, node_front, g.poses)
+        return relation_errors_from(Trajectory(res.trajectory.stamps, poses), rel).trans_mean
+
+    clean = relations_with(set())
+    corrupted = relations_with(set(rng.choice(len(good), size=len(good) // 10, replace=False).tolist()))
+    assert abs(corrupted - clean) < 0.005
+    assert clean < 0.035

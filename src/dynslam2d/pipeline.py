@@ -35,6 +35,7 @@ from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
 from dynslam2d.slam.config import SlamConfig
+from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.confidence import FLAGS
 from dynslam2d.slam.confidence import summarize as summarize_confidence
 from dynslam2d.slam.loops import LoopCloser, LoopResult
@@ -397,6 +398,9 @@ class RunResult:
             return {"enabled": False}
         st = self.loop.stats
         out: dict[str, object] = {"enabled": True, "corrected": self.loop.corrected}
+        for k in ("map_entropy_frontend", "map_entropy_optimised"):
+            if k in st:
+                out[k] = st[k]
         for k in ("keyframes", "submaps", "searches", "candidates", "loops_accepted", "loops_active", "loops_rejected",
                   "optimisations"):
             out[k] = int(st.get(k, 0))
@@ -416,6 +420,32 @@ def render_map(loop: LoopResult, slam_config: SlamConfig) -> tuple[GridMap, np.n
     for kf, p in zip(loop.keyframes, loop.node_poses):
         slam.update_map(kf.kept(), Pose2D(float(p[0]), float(p[1]), float(p[2])), force=True)
     return slam.gridmap(0), slam.logodds(0)[0]
+
+
+def map_entropy(logodds: np.ndarray) -> float:
+    """Total binary entropy of the observed cells of a log-odds map, nats: Σ −p ln p − (1−p) ln(1−p)
+    over cells with log-odds ≠ 0. Scans put at wrong poses blur walls into more, less certain cells,
+    so a more consistent set of poses gives a lower total (the occupancy-grid form of the mean map
+    entropy of Droeschel et al. / Razlaw et al., ECMR 2015)."""
+    lo = np.asarray(logodds, dtype=np.float64)
+    lo = lo[lo != 0.0]
+    if not lo.size:
+        return 0.0
+    p = np.clip(1.0 / (1.0 + np.exp(-lo)), 1e-12, 1.0 - 1e-12)
+    return float(-np.sum(p * np.log(p) + (1.0 - p) * np.log1p(-p)))
+
+
+def keep_optimised(loop: LoopResult, front_logodds: np.ndarray, opt_logodds: np.ndarray,
+                   config: LoopConfig) -> bool:
+    """Whether the optimised poses replace the front end's (``loop.map_check``); records the decision
+    and both entropies in ``loop.stats`` and sets ``loop.corrected`` accordingly."""
+    h_front, h_opt = map_entropy(front_logodds), map_entropy(opt_logodds)
+    loop.stats["map_entropy_frontend"] = round(h_front, 1)
+    loop.stats["map_entropy_optimised"] = round(h_opt, 1)
+    keep = not config.map_check or h_opt < h_front * (1.0 - config.map_check_margin)
+    loop.stats["kept_optimised"] = float(keep)
+    loop.corrected = keep
+    return keep
 
 
 ProgressFn = Callable[[int, StepResult], None]
@@ -488,9 +518,11 @@ def run(
     frontend_trajectory = None
     loop = pipe.loops.finish() if pipe.loops is not None else None
     if loop is not None and loop.corrected:
-        frontend_trajectory = trajectory
-        trajectory = Trajectory(trajectory.stamps, loop.poses)
-        grid, logodds = render_map(loop, pipe.config.slam)
+        grid_opt, lo_opt = render_map(loop, pipe.config.slam)
+        if keep_optimised(loop, logodds, lo_opt, pipe.config.loop):
+            frontend_trajectory = trajectory
+            trajectory = Trajectory(trajectory.stamps, loop.poses)
+            grid, logodds = grid_opt, lo_opt
     wall = time.perf_counter() - t0
     summary = pipe.slam.summary()
     result = RunResult(

@@ -75,6 +75,11 @@ class LoopConfig(BaseModel):
         description="Translation window when a loop was accepted within consistency_window keyframes (its "
         "prediction is good), m.",
     )
+    tracked_search_every: int = Field(
+        3, ge=1,
+        description="While loops keep being found (one within consistency_window keyframes), search only every "
+        "this-many-th keyframe, and only the nearest submap.",
+    )
     tracked_angular_window: float = Field(
         0.1, gt=0.0, description="Rotation window in that case, rad."
     )
@@ -156,5 +161,16 @@ class LoopConfig(BaseModel):
         20, ge=1,
         description="Optimise during the run after this many newly accepted loops (a final full optimisation "
         "always runs).",
+    )
+    map_check: bool = Field(
+        True,
+        description="Keep the optimised poses only if the map re-rendered from them is sharper than the front "
+        "end's map (lower total occupancy entropy); otherwise trajectory.tum and the map stay the front end's. "
+        "A Hector-style front end that matched every revisit against its global map is often already as "
+        "consistent as the loops can make it.",
+    )
+    map_check_margin: float = Field(
+        0.0, ge=0.0,
+        description="… sharper by at least this fraction of the front end map's entropy (dimensionless).",
     )
     iterations: int = Field(30, ge=1, description="Largest number of Gauss–Newton/LM iterations per optimisation.")

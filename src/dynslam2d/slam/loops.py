@@ -184,7 +184,8 @@ class LoopCloser:
             node = self.graph.add_node(p)
         self.keyframes.append(kf)
         self._weak_since_kf = False
-        if node % c.search_every == 0:
+        every = c.search_every * (c.tracked_search_every if self._recent_loop(node) is not None else 1)
+        if node % every == 0:
             self._search(node)
         self._confirm(node)
         if self._new_loops >= c.optimise_every or (self._new_loops >= 2 and node - self._opt_nodes >= 3 * c.optimise_every):
@@ -273,7 +274,7 @@ class LoopCloser:
             return
         if pts.shape[0] > _QUERY_POINTS:
             pts = pts[np.linspace(0, pts.shape[0] - 1, _QUERY_POINTS).astype(np.int64)]
-        for _d, s, gap in found[:_MAX_CANDIDATES]:
+        for _d, s, gap in found[:1 if recent is not None else _MAX_CANDIDATES]:
             cand = self._match(node, s, 0.0 if recent is not None else gap, pts, est, recent is not None)
             self.stats["searches"] += 1
             if cand is not None:
@@ -393,14 +394,22 @@ class LoopCloser:
         nodes = self.graph.poses.copy()
         poses = frontend.copy()
         if corrected and nodes.shape[0]:
-            idx = np.asarray(self._scan_node, dtype=np.int64)
-            has = idx >= 0
-            kf_front = np.array([k.frontend for k in self.keyframes]).reshape(-1, 3)
-            rel = relative(kf_front[idx[has]], frontend[has])
-            poses[has] = compose(nodes[idx[has]], rel)
+            poses = scan_poses(frontend, np.asarray(self._scan_node, dtype=np.int64),
+                               np.array([k.frontend for k in self.keyframes]).reshape(-1, 3), nodes)
         loops = [(self.graph.edges[k].i, self.graph.edges[k].j) for k in active]
         stats = dict(self.stats)
         stats.update({"keyframes": len(self.keyframes), "submaps": len(self.keyframes) // self.config.submap_keyframes,
                       "loops_active": len(active), "loops_rejected": len(self.loop_edges) - len(active)})
         return LoopResult(poses, frontend, np.array([k.scan_index for k in self.keyframes], dtype=np.int64),
                           nodes, self.graph, loops, corrected, stats, self.keyframes)
+
+
+def scan_poses(frontend: np.ndarray, scan_node: np.ndarray, node_frontend: np.ndarray,
+               node_poses: np.ndarray) -> np.ndarray:
+    """(n, 3) poses of every scan: its last keyframe's pose in ``node_poses`` composed with the front
+    end's relative pose from that keyframe (``scan_node`` (n,) keyframe of each scan, −1 = none yet:
+    the front end's pose is kept)."""
+    out = np.array(frontend, dtype=np.float64, copy=True)
+    has = scan_node >= 0
+    out[has] = compose(node_poses[scan_node[has]], relative(node_frontend[scan_node[has]], frontend[has]))
+    return out

@@ -25,7 +25,9 @@ def _loop_segments(result: RunResult) -> np.ndarray | None:
     if loop is None or not loop.loops:
         return None
     ij = np.asarray(loop.loops, dtype=np.int64)
-    return np.stack((loop.node_poses[ij[:, 0], :2], loop.node_poses[ij[:, 1], :2]), axis=1)
+    # drawn where the map's poses put the keyframes: optimised, or the front end's when those were kept
+    nodes = loop.node_poses if loop.corrected else loop.frontend[loop.keyframe_scans]
+    return np.stack((nodes[ij[:, 0], :2], nodes[ij[:, 1], :2]), axis=1)
 
 
 def write_figures(
