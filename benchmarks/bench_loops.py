@@ -15,6 +15,9 @@ and its peak memory.
     python benchmarks/bench_loops.py [--only csail fr079 intel] [--data ../shared/data]
         [--out /tmp/dynslam2d-bench-loops] [--cpu 0]
 
+Settings: ``off``, ``on`` (the default) and ``forced`` (on, with ``loop.map_check: false``: the
+optimised poses are used even when the map check would keep the front end's).
+
 ``--cpu N`` pins every command to core N (``taskset -c N``: "one core"). The commands are
 printed exactly as they were run (``dynslam2d`` = ``python -m dynslam2d`` with this checkout's
 ``src`` first on PYTHONPATH).
@@ -57,7 +60,8 @@ def main() -> None:
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
     ap.add_argument("--out", default="/tmp/dynslam2d-bench-loops")
     ap.add_argument("--cpu", type=int, default=None)
-    ap.add_argument("--settings", nargs="*", default=["off", "on"])
+    ap.add_argument("--settings", nargs="*", default=["off", "on", "forced"],
+                    help="off, on (default settings), forced (on, optimised poses kept whatever the map check says)")
     a = ap.parse_args()
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""))
     rows = []
@@ -65,8 +69,14 @@ def main() -> None:
         log, rel, extra = LOGS[name]
         for setting in a.settings:
             out = Path(a.out) / f"{name}-{setting}"
-            run_args = ["run", f"{a.data}/{log}", "--odom", "none", "--loop-closure", setting, "--out", str(out),
-                        "--force", "-q"]
+            run_args = ["run", f"{a.data}/{log}", "--odom", "none", "--loop-closure", "off" if setting == "off" else "on",
+                        "--out", str(out), "--force", "-q"]
+            if setting == "forced":
+                # the optimised poses whatever the map check says (loop.map_check false)
+                cfg = Path(a.out) / "forced.yaml"
+                cfg.parent.mkdir(parents=True, exist_ok=True)
+                cfg.write_text("loop:\n  map_check: false\n")
+                run_args += ["--config", str(cfg)]
             print(_show(run_args), flush=True)
             t0 = time.perf_counter()
             proc = subprocess.run(["/usr/bin/time", "-f", "%M"] + _cmd(run_args, a.cpu), env=env,

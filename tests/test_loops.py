@@ -199,3 +199,22 @@ def test_robust_kernel_shrugs_off_injected_false_loops(block_loop: tuple, kernel
     d_plain = np.hypot(*(plain[:, :2] - clean.poses[:, :2]).T).max()
     assert d_robust < 0.005
     assert d_plain > 0.05
+
+
+def test_map_check_keeps_optimised_poses_only_when_the_map_gets_sharper(block_loop: tuple) -> None:
+    """The front end drifted 2.6 m: its map holds the start area twice, the optimised one once —
+    lower total entropy, so the optimised poses are kept; the other way round they are refused."""
+    from dynslam2d.pipeline import keep_optimised, map_entropy, render_map
+
+    _gt, _front, _lc, res = block_loop
+    saved = res.node_poses
+    try:
+        res.node_poses = res.frontend[res.keyframe_scans]
+        _, lo_front = render_map(res, SlamConfig())
+    finally:
+        res.node_poses = saved
+    _, lo_opt = render_map(res, SlamConfig())
+    assert map_entropy(lo_opt) < 0.97 * map_entropy(lo_front)
+    assert not keep_optimised(res, lo_opt, lo_front, LoopConfig())
+    assert keep_optimised(res, lo_front, lo_opt, LoopConfig()) and res.corrected
+    assert res.stats["map_entropy_optimised"] < res.stats["map_entropy_frontend"]

@@ -34,6 +34,7 @@ relative pose from that keyframe. Poses are laser poses in the map frame (m, rad
 from __future__ import annotations
 
 import math
+import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
 
@@ -150,7 +151,7 @@ class LoopCloser:
         self._new_loops = 0
         self._cache: OrderedDict[int, MultiResMap] = OrderedDict()
         self.stats: dict[str, float] = {"searches": 0, "candidates": 0, "loops_accepted": 0, "optimisations": 0,
-                                        "search_ms": 0.0, "optimise_ms": 0.0}
+                                        "search_ms": 0.0, "optimise_ms": 0.0, "total_ms": 0.0}
 
     # ---- input ----------------------------------------------------------------------------
     def add(self, stamp: float, pose: Pose2D, scan: Scan, removed: np.ndarray, keyframe: bool,
@@ -158,6 +159,7 @@ class LoopCloser:
         """One scan of the run in order: its front-end laser pose; ``scan`` with the robot's body
         removed, ``removed`` the beams the dynamic filter removed; ``keyframe``: written into the
         front end's map; ``weak``: its pose was not backed by a well-supported match."""
+        t0 = time.perf_counter()
         p = np.array([pose.x, pose.y, pose.theta], dtype=np.float64)
         if self._last_pose is not None and np.all(np.isfinite(p)):
             self._path += math.hypot(p[0] - self._last_pose[0], p[1] - self._last_pose[1])
@@ -168,6 +170,7 @@ class LoopCloser:
         if keyframe and np.all(np.isfinite(p)):
             self._add_keyframe(len(self._frontend) - 1, stamp, p, scan, removed)
         self._scan_node.append(len(self.keyframes) - 1)
+        self.stats["total_ms"] += (time.perf_counter() - t0) * 1e3
 
     def _add_keyframe(self, index: int, stamp: float, p: np.ndarray, scan: Scan, removed: np.ndarray) -> None:
         c = self.config
@@ -238,8 +241,6 @@ class LoopCloser:
 
     def _search(self, node: int) -> None:
         c = self.config
-        import time
-
         t0 = time.perf_counter()
         kf = self.keyframes[node]
         est = self._estimate(node)
@@ -374,8 +375,6 @@ class LoopCloser:
 
     # ---- optimisation ---------------------------------------------------------------------
     def _optimise(self, final: bool) -> None:
-        import time
-
         c = self.config
         t0 = time.perf_counter()
         self.graph.optimise(c.kernel, c.kernel_scale, c.iterations, c.outlier_chi2)
@@ -385,6 +384,7 @@ class LoopCloser:
 
     def finish(self) -> LoopResult:
         """Final full optimisation; every scan's optimised pose."""
+        t0 = time.perf_counter()
         frontend = np.asarray(self._frontend, dtype=np.float64).reshape(-1, 3)
         active = [k for k in self.loop_edges if self.graph.edges[k].active]
         if self.loop_edges:
@@ -397,6 +397,7 @@ class LoopCloser:
             poses = scan_poses(frontend, np.asarray(self._scan_node, dtype=np.int64),
                                np.array([k.frontend for k in self.keyframes]).reshape(-1, 3), nodes)
         loops = [(self.graph.edges[k].i, self.graph.edges[k].j) for k in active]
+        self.stats["total_ms"] += (time.perf_counter() - t0) * 1e3
         stats = dict(self.stats)
         stats.update({"keyframes": len(self.keyframes), "submaps": len(self.keyframes) // self.config.submap_keyframes,
                       "loops_active": len(active), "loops_rejected": len(self.loop_edges) - len(active)})

@@ -177,11 +177,15 @@ class PoseGraph:
             # too while the drift they correct is still in the poses
             chi = self.chi2()
             loop_chi = [chi[k] for k, e in enumerate(self.edges) if e.loop and e.active]
-            wide = max(loop_chi) if loop_chi and kernel != "none" else kernel_scale
+            # after pruning, the poses are already near the solution: no need to widen again
+            wide = max(loop_chi) if loop_chi and kernel != "none" and _round == 0 else kernel_scale
             scale = max(wide if kernel == "dcs" else float(np.sqrt(wide)), kernel_scale)
             first = True
             while True:
-                it, c0, c1 = self._solve(kernel, scale, iterations, tol)
+                last = scale <= kernel_scale
+                # intermediate widths only need to move the poses into the next width's basin
+                it, c0, c1 = self._solve(kernel, scale, iterations if last else max(iterations // 3, 1),
+                                         tol if last else max(tol, 1e-3))
                 if _round == 0 and first:
                     rep.cost_start = c0
                 first = False
@@ -284,7 +288,9 @@ class PoseGraph:
             for _ in range(8):
                 A = H + sp.diags(lam * np.maximum(diag, 1e-9) + 1e-12)
                 try:
-                    dx = -splu(A.tocsc()).solve(b)
+                    # symmetric positive definite: a symmetric fill-reducing ordering, no pivoting
+                    dx = -splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                               options={"SymmetricMode": True}).solve(b)
                 except RuntimeError:
                     lam *= 10.0
                     continue
