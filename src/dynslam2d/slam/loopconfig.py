@@ -28,7 +28,7 @@ class LoopConfig(BaseModel):
         description="Returns farther than this are left out of the submaps and of the loop queries, m.",
     )
     search_every: int = Field(
-        1, ge=1,
+        2, ge=1,
         description="Search for loops on every this-many-th keyframe.",
     )
     min_path_gap: float = Field(
@@ -84,8 +84,13 @@ class LoopConfig(BaseModel):
         0.1, gt=0.0, description="Rotation window in that case, rad."
     )
     search_level: int = Field(
-        1, ge=0,
+        2, ge=0,
         description="Submap level of the correlative search (0 = finest, each level doubles the cell size).",
+    )
+    search_points: int = Field(
+        180, ge=10,
+        description="Query points used by the correlative search (evenly sub-sampled; all of them, up to 360, "
+        "refine the match and count the support), count.",
     )
     min_score: float = Field(
         0.55, ge=0.0, le=1.0,

@@ -305,11 +305,11 @@ class LoopCloser:
         ang = min(c.angular_window + c.drift_rad_per_m * gap, c.max_angular_window)
         if tracked:
             lin, ang = min(lin, c.tracked_linear_window), min(ang, c.tracked_angular_window)
-        cr = correlative_search(lvl, pts, pred, lin, ang, None, _QUERY_POINTS, sc.correlative_max_height, 0.0, 0.0)
+        cr = correlative_search(lvl, pts, pred, lin, ang, None, c.search_points, sc.correlative_max_height, 0.0, 0.0)
         if cr is None or cr.score < c.min_score:
             return None
         # the runner-up only for a match good enough to become a candidate (a second branch and bound)
-        cr = correlative_search(lvl, pts, pred, lin, ang, None, _QUERY_POINTS, sc.correlative_max_height, 0.0, 0.0,
+        cr = correlative_search(lvl, pts, pred, lin, ang, None, c.search_points, sc.correlative_max_height, 0.0, 0.0,
                                 runner_up_distance=c.runner_up_distance, runner_up_angle=c.runner_up_angle)
         if cr is None or cr.score < c.min_score:
             return None
