@@ -215,5 +215,8 @@ def test_map_check_keeps_optimised_poses_only_when_the_map_gets_sharper(block_lo
     _, lo_opt = render_map(res, SlamConfig())
     assert map_entropy(lo_opt) < 0.97 * map_entropy(lo_front)
     assert not keep_optimised(res, lo_opt, lo_front, LoopConfig())
+    # a correction smaller than min_correction is not applied (here the largest one is 2.6 m)
+    assert not keep_optimised(res, lo_front, lo_opt, LoopConfig(min_correction=5.0))
+    assert res.stats["max_keyframe_correction_m"] > 1.0
     assert keep_optimised(res, lo_front, lo_opt, LoopConfig()) and res.corrected
     assert res.stats["map_entropy_optimised"] < res.stats["map_entropy_frontend"]

@@ -397,7 +397,7 @@ class RunResult:
             return {"enabled": False}
         st = self.loop.stats
         out: dict[str, object] = {"enabled": True, "corrected": self.loop.corrected}
-        for k in ("map_entropy_frontend", "map_entropy_optimised"):
+        for k in ("map_entropy_frontend", "map_entropy_optimised", "max_keyframe_correction_m"):
             if k in st:
                 out[k] = st[k]
         for k in ("keyframes", "submaps", "searches", "candidates", "loops_accepted", "loops_active", "loops_rejected",
@@ -443,7 +443,11 @@ def keep_optimised(loop: LoopResult, front_logodds: np.ndarray, opt_logodds: np.
     h_front, h_opt = map_entropy(front_logodds), map_entropy(opt_logodds)
     loop.stats["map_entropy_frontend"] = round(h_front, 1)
     loop.stats["map_entropy_optimised"] = round(h_opt, 1)
-    keep = not config.map_check or h_opt < h_front * (1.0 - config.map_check_margin)
+    d = loop.node_poses[:, :2] - loop.frontend[loop.keyframe_scans, :2]
+    moved = float(np.max(np.hypot(d[:, 0], d[:, 1]))) if d.size else 0.0
+    loop.stats["max_keyframe_correction_m"] = round(moved, 4)
+    keep = moved >= config.min_correction and (
+        not config.map_check or h_opt < h_front * (1.0 - config.map_check_margin))
     loop.stats["kept_optimised"] = float(keep)
     loop.corrected = keep
     return keep

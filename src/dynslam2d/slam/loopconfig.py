@@ -174,6 +174,11 @@ class LoopConfig(BaseModel):
         "A Hector-style front end that matched every revisit against its global map is often already as "
         "consistent as the loops can make it.",
     )
+    min_correction: float = Field(
+        0.05, ge=0.0,
+        description="Keep the front end's poses when the optimisation moves no keyframe by more than this, m: a "
+        "correction below the loops' own accuracy is noise, not drift.",
+    )
     map_check_margin: float = Field(
         0.0, ge=0.0,
         description="… sharper by at least this fraction of the front end map's entropy (dimensionless).",
