@@ -417,7 +417,7 @@ def render_map(loop: LoopResult, slam_config: SlamConfig) -> tuple[GridMap, np.n
     """The map re-rendered from the optimised keyframe poses: every keyframe's kept beams (the
     dynamic filter's removed beams stay out) integrated in order, as the front end did at its own
     poses. Returns (finest level as probabilities, its raw log-odds)."""
-    slam = HectorSlam(slam_config)
+    slam = HectorSlam(slam_config.model_copy(update={"map_levels": 1}))  # only the finest level is returned
     for kf, p in zip(loop.keyframes, loop.node_poses):
         slam.update_map(kf.kept(), Pose2D(float(p[0]), float(p[1]), float(p[2])), force=True)
     return slam.gridmap(0), slam.logodds(0)[0]

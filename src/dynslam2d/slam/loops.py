@@ -377,7 +377,9 @@ class LoopCloser:
     def _optimise(self, final: bool) -> None:
         c = self.config
         t0 = time.perf_counter()
-        self.graph.optimise(c.kernel, c.kernel_scale, c.iterations, c.outlier_chi2)
+        # during the run the optimisation only has to improve the search's predictions: fewer iterations
+        self.graph.optimise(c.kernel, c.kernel_scale, c.iterations if final else max(c.iterations // 3, 1),
+                            c.outlier_chi2)
         self._new_loops = 0
         self.stats["optimisations"] += 1
         self.stats["optimise_ms"] += (time.perf_counter() - t0) * 1e3
