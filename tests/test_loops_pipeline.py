@@ -184,3 +184,17 @@ def test_csail_false_loops_change_the_relations_by_less_than_5mm() -> None:
     corrupted = relations_with(set(rng.choice(len(good), size=len(good) // 10, replace=False).tolist()))
     assert abs(corrupted - clean) < 0.005
     assert clean < 0.035
+
+
+def test_frame_base_link_rewrites_the_front_end_trajectory_too(tmp_path, capsys) -> None:
+    from dynslam2d.io.trajectory import read_tum
+
+    out = tmp_path / "base"
+    code, _o, err = run_cli(capsys, "run", "sim:static", "--duration", "1", "--out", str(out), "--frame", "base_link",
+                            "-q")
+    assert code == 0, err
+    base = read_tum(out / "trajectory.tum")
+    front = read_tum(out / "trajectory_frontend.tum")
+    # no loop on a 1 s run: the front end's trajectory is the trajectory, in the same (base_link) frame
+    np.testing.assert_allclose(front.poses, base.poses, atol=1e-9)
+    assert np.hypot(*base.poses[0, :2]) == pytest.approx(0.15)

@@ -537,6 +537,14 @@ def run(
                 from dynslam2d.io.odometry import rewrite_trajectory_frame
 
                 rewrite_trajectory_frame(folder.work, mount)
+                if (folder.work / "trajectory_frontend.tum").exists():  # loop closure: the front end's too
+                    from dynslam2d.io.odometry import compose_mount
+                    from dynslam2d.io.trajectory import Trajectory, read_tum, write_tum
+
+                    ft = read_tum(folder.work / "trajectory_frontend.tum")
+                    write_tum(folder.work / "trajectory_frontend.tum",
+                              Trajectory(ft.stamps, compose_mount(ft.poses, mount.inverse()), ft.frame),
+                              comment="base_link pose in the map frame, front end before loop closure")
         except OSError as exc:  # disk full, folder removed under our feet, …
             raise DynSlamError(f"--out {out}: cannot write the results ({exc.strerror or exc}); nothing was kept") from None
         folder.finish()
