@@ -10,7 +10,8 @@ relations' ipc time through ``fr079.flirtlib.log``) and the sub-sampled Intel lo
 and prints one row per (log, setting): relations scored, translation / rotation error (mean ±
 std), loops found / active, whether the optimised poses were kept (map check), the wall time of
 the run (``summary.json`` ``wall_time_s``: reading, front end, loop closure, map re-rendering)
-and its peak memory.
+the CPU time of the process (user + system: what it takes on one unloaded core) and its peak
+memory.
 
     python benchmarks/bench_loops.py [--only csail fr079 intel] [--data ../shared/data]
         [--out /tmp/dynslam2d-bench-loops] [--cpu 0]
@@ -79,12 +80,14 @@ def main() -> None:
                 run_args += ["--config", str(cfg)]
             print(_show(run_args), flush=True)
             t0 = time.perf_counter()
-            proc = subprocess.run(["/usr/bin/time", "-f", "%M"] + _cmd(run_args, a.cpu), env=env,
+            proc = subprocess.run(["/usr/bin/time", "-f", "%U %S %M"] + _cmd(run_args, a.cpu), env=env,
                                   capture_output=True, text=True)
             if proc.returncode != 0:
                 print(proc.stderr, file=sys.stderr)
                 continue
-            peak_mb = int(proc.stderr.strip().splitlines()[-1]) / 1024
+            user, system, rss = proc.stderr.strip().splitlines()[-1].split()
+            cpu_s = float(user) + float(system)  # CPU time: what one unloaded core would take
+            peak_mb = int(rss) / 1024
             wall = time.perf_counter() - t0
             ev_args = ["eval", "relations", str(out), f"{a.data}/{rel}"] + [x.format(data=a.data) for x in extra]
             print(_show(ev_args), flush=True)
@@ -95,14 +98,14 @@ def main() -> None:
             rows.append((name, setting, ev["relations_scored"], ev["translation_m"]["mean"], ev["translation_m"]["std"],
                          ev["rotation_deg"]["mean"], ev["rotation_deg"]["std"], lc.get("loops_accepted", "—"),
                          lc.get("loops_active", "—"), "yes" if lc.get("corrected") else "no" if lc else "—",
-                         summ["wall_time_s"], wall, peak_mb))
+                         summ["wall_time_s"], wall, cpu_s, peak_mb))
     print()
     print("| log | loop closure | relations | translation [m] | rotation [deg] | loops (active) | optimised kept "
-          "| run wall [s] | process [s] | peak MB |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "| run wall [s] | process wall [s] | process CPU [s] | peak MB |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]:.4f} ± {r[4]:.4f} | {r[5]:.2f} ± {r[6]:.2f} | {r[7]} ({r[8]}) "
-              f"| {r[9]} | {r[10]:.1f} | {r[11]:.1f} | {r[12]:.0f} |")
+              f"| {r[9]} | {r[10]:.1f} | {r[11]:.1f} | {r[12]:.1f} | {r[13]:.0f} |")
 
 
 if __name__ == "__main__":
