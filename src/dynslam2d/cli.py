@@ -404,6 +404,7 @@ def run(
                                        "(laser pose ⊕ (base_link→laser)⁻¹; needs TF, CARMEN pose fields or --laser-offset).")] = "laser",
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
+    loop_closure: Annotated[Optional[str], typer.Option("--loop-closure", help="Loop closure and pose-graph optimisation behind the front end: on (trajectory.tum and the map from the optimised poses; trajectory_frontend.tum and graph.g2o too) or off (the front end alone) [on] (loop.enabled).")] = None,
     clean: Annotated[Optional[str], typer.Option("--clean", help="Clean-up pass after the run: on (map.pgm = cleaned "
                                                  "static map, map_online.pgm = online map) or off [on] (docs/maps.md).")] = None,
 ) -> None:
@@ -446,6 +447,10 @@ def run(
         if clean not in ("on", "off"):
             raise DynSlamError(f"--clean must be 'on' or 'off', got {clean!r}")
         cfg = with_overrides(cfg, {"clean": {"enabled": clean == "on"}})
+    if loop_closure is not None:
+        if loop_closure not in ("on", "off"):
+            raise DynSlamError(f"--loop-closure must be 'on' or 'off', got {loop_closure!r}")
+        cfg = with_overrides(cfg, {"loop": {"enabled": loop_closure == "on"}})
     if hector_compat:
         cfg = with_overrides(cfg, {"slam": {"hector_gradient_bug": True, "step_mode": "gauss_newton", "correlative_mode": "never"}})
     _check_sim_only(input, seed, duration)
@@ -539,6 +544,14 @@ def run(
                 from dynslam2d.io.odometry import rewrite_trajectory_frame
 
                 rewrite_trajectory_frame(folder.work, mount)
+                if (folder.work / "trajectory_frontend.tum").exists():  # loop closure: the front end's too
+                    from dynslam2d.io.odometry import compose_mount
+                    from dynslam2d.io.trajectory import Trajectory, read_tum, write_tum
+
+                    ft = read_tum(folder.work / "trajectory_frontend.tum")
+                    write_tum(folder.work / "trajectory_frontend.tum",
+                              Trajectory(ft.stamps, compose_mount(ft.poses, mount.inverse()), ft.frame),
+                              comment="base_link pose in the map frame, front end before loop closure")
         except OSError as exc:  # disk full, folder removed under our feet, …
             raise DynSlamError(f"--out {out}: cannot write the results ({exc.strerror or exc}); nothing was kept") from None
         folder.finish()
@@ -1247,25 +1260,32 @@ def eval_relations(
     estimate: Annotated[Path, typer.Argument(help="Estimated trajectory (TUM), e.g. a run's trajectory.tum, or a run folder.")],
     relations: Annotated[Path, typer.Argument(help="Kümmerle et al. relations file (t1 t2 x y z roll pitch yaw).")],
     tol: Annotated[float, typer.Option("--tol", min=0.0, help="Largest stamp difference to match a relation to a pose, s.")] = 1e-3,
+    clock: Annotated[Optional[Path], typer.Option("--clock", help="CARMEN log with both clocks (ipc and logger) on its laser records, e.g. fr079.flirtlib.log: the estimate's logger stamps are mapped to the relations' ipc clock through it.")] = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Relative pose error over ground-truth relations, mean ± std (Kümmerle et al., 2009)."""
     from dynslam2d.eval.relations import relation_errors_from
     from dynslam2d.io.relations import read_relations
-    from dynslam2d.io.trajectory import read_tum
+    from dynslam2d.io.trajectory import Trajectory, read_tum
 
     estimate = _estimate_path(estimate)
-    res = relation_errors_from(read_tum(estimate), read_relations(relations), tol=tol)
+    traj = read_tum(estimate)
+    if clock is not None:
+        from dynslam2d.io.relclock import read_clock_pairs
+
+        traj = Trajectory(read_clock_pairs(clock).to_ipc(traj.stamps), traj.poses)
+    res = relation_errors_from(traj, read_relations(relations), tol=tol)
     out = {
         "translation_m": {"mean": res.trans_mean, "std": res.trans_std, "rmse": res.trans_rmse},
         "rotation_deg": {"mean": res.rot_deg_mean, "std": res.rot_deg_std},
         "relations_used": res.n_used,
         "relations_unmatched": res.n_unmatched,
+        "relations_scored": res.n_used,
     }
     rows = [
         ("translation", f"{res.trans_mean:.3f} ± {res.trans_std:.3f} m"),
         ("rotation", f"{res.rot_deg_mean:.3f} ± {res.rot_deg_std:.3f}°"),
-        ("relations used", f"{res.n_used} ({res.n_unmatched} unmatched)"),
+        ("relations scored", f"{res.n_used} of {res.n_used + res.n_unmatched} ({res.n_unmatched} unmatched)"),
     ]
     _emit(out, as_json, _stats_table(f"relations {relations.name} vs {estimate}", rows))
 

@@ -29,6 +29,7 @@ from dynslam2d.filter import FilterConfig
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.cleanconfig import CleanConfig
 from dynslam2d.io.rangescale import LaserConfig
+from dynslam2d.slam.loopconfig import LoopConfig
 
 
 #: hector_mapping ROS parameter → our ``slam`` key (hector_mapping's HectorMappingRos.cpp;
@@ -84,6 +85,10 @@ class Config(BaseModel):
     )
     laser: LaserConfig = Field(
         default_factory=LaserConfig, description="The lidar itself: range scale (docs/slam.md)."
+    )
+    loop: LoopConfig = Field(
+        default_factory=LoopConfig, description="Loop closure and pose-graph optimisation behind the front end "
+        "(docs/slam.md, \"Loop closure\")."
     )
 
 

@@ -35,8 +35,11 @@ from dynslam2d.io.rangescale import apply_range_scale
 from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
+from dynslam2d.slam.config import SlamConfig
+from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.confidence import FLAGS
 from dynslam2d.slam.confidence import summarize as summarize_confidence
+from dynslam2d.slam.loops import LoopCloser, LoopResult
 from dynslam2d.types import Box, Pose2D, Scan, ScanSource, SourceMeta, Track
 
 
@@ -149,6 +152,8 @@ class Pipeline:
         self.body = BodyFilter(self.config.detect.footprint)
         self._moving: list[Track] = []  # tracks in M after the previous scan
         self._last_stamp: float | None = None
+        # loop closure behind the front end (slam/loops.py); it never changes the front end's poses or map
+        self.loops = LoopCloser(self.config.loop, self.config.slam) if self.config.loop.enabled else None
 
     def _exclude(self, scan: Scan, pose: Pose2D, tracks: list[Track], dt: float,
                  cache: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -203,6 +208,9 @@ class Pipeline:
             kept = scan.with_ranges(np.where(removed, np.nan, scan.ranges)) if removed.any() else scan
             updated = self.slam.update_map(kept, res.pose)
         t4 = time.perf_counter()
+        if self.loops is not None:  # its time is in the loop closure's own counters (summary.json loop_closure)
+            self.loops.add(scan.stamp, res.pose, scan, removed, updated,
+                           res.low_support or res.pose_source in ("prediction", "relocalised") or res.time_gap)
         self._moving = moving
         self._last_stamp = scan.stamp
         return StepResult(
@@ -313,6 +321,10 @@ class RunResult:
                                     self.slam_stats.get("lost_events", 0), self.slam_stats.get("relocalisations", 0),
                                     c.low_confidence_share, c.low_confidence_stretch)
     body: dict[str, object] = field(default_factory=dict)
+    #: the front end's trajectory when loop closure replaced ``trajectory`` by the optimised one (else None)
+    frontend_trajectory: Trajectory | None = None
+    #: the loop closure's result (graph, loops, counters), None with loop closure off
+    loop: LoopResult | None = None
 
     @property
     def n_scans(self) -> int:
@@ -377,7 +389,70 @@ class RunResult:
             "range_scale": self.source.extra.get("range_scale"),
             "trajectory_frame": "laser",
             "pose_confidence": self.pose_confidence(),
+            **({"loop_closure": self.loop_summary()} if self.loop is not None else {}),
         }
+
+    def loop_summary(self) -> dict[str, object]:
+        """The ``loop_closure`` block of summary.json: counters of the loop closure and whether it
+        changed the trajectory (docs/slam.md, "Loop closure")."""
+        if self.loop is None:
+            return {"enabled": False}
+        st = self.loop.stats
+        out: dict[str, object] = {"enabled": True, "corrected": self.loop.corrected}
+        for k in ("map_entropy_frontend", "map_entropy_optimised", "max_keyframe_correction_m"):
+            if k in st:
+                out[k] = st[k]
+        for k in ("keyframes", "submaps", "searches", "candidates", "loops_accepted", "loops_active", "loops_rejected",
+                  "optimisations"):
+            out[k] = int(st.get(k, 0))
+        for k in ("total_ms", "render_ms"):
+            out[k] = round(float(st.get(k, 0.0)), 1)
+        out["search_ms"] = round(float(st.get("search_ms", 0.0)), 1)
+        out["optimise_ms"] = round(float(st.get("optimise_ms", 0.0)), 1)
+        if self.frontend_trajectory is not None:
+            d = self.trajectory.poses[:, :2] - self.frontend_trajectory.poses[:, :2]
+            out["max_correction_m"] = round(float(np.max(np.hypot(d[:, 0], d[:, 1]))), 4) if d.size else 0.0
+        return out
+
+
+def render_map(loop: LoopResult, slam_config: SlamConfig) -> tuple[GridMap, np.ndarray]:
+    """The map re-rendered from the optimised keyframe poses: every keyframe's kept beams (the
+    dynamic filter's removed beams stay out) integrated in order, as the front end did at its own
+    poses. Returns (finest level as probabilities, its raw log-odds)."""
+    slam = HectorSlam(slam_config.model_copy(update={"map_levels": 1}))  # only the finest level is returned
+    for kf, p in zip(loop.keyframes, loop.node_poses):
+        slam.update_map(kf.kept(), Pose2D(float(p[0]), float(p[1]), float(p[2])), force=True)
+    return slam.gridmap(0), slam.logodds(0)[0]
+
+
+def map_entropy(logodds: np.ndarray) -> float:
+    """Total binary entropy of the observed cells of a log-odds map, nats: Σ −p ln p − (1−p) ln(1−p)
+    over cells with log-odds ≠ 0. Scans put at wrong poses blur walls into more, less certain cells,
+    so a more consistent set of poses gives a lower total (the occupancy-grid form of the mean map
+    entropy of Droeschel et al. / Razlaw et al., ECMR 2015)."""
+    lo = np.asarray(logodds, dtype=np.float64)
+    lo = lo[lo != 0.0]
+    if not lo.size:
+        return 0.0
+    p = np.clip(1.0 / (1.0 + np.exp(-lo)), 1e-12, 1.0 - 1e-12)
+    return float(-np.sum(p * np.log(p) + (1.0 - p) * np.log1p(-p)))
+
+
+def keep_optimised(loop: LoopResult, front_logodds: np.ndarray, opt_logodds: np.ndarray,
+                   config: LoopConfig) -> bool:
+    """Whether the optimised poses replace the front end's (``loop.map_check``); records the decision
+    and both entropies in ``loop.stats`` and sets ``loop.corrected`` accordingly."""
+    h_front, h_opt = map_entropy(front_logodds), map_entropy(opt_logodds)
+    loop.stats["map_entropy_frontend"] = round(h_front, 1)
+    loop.stats["map_entropy_optimised"] = round(h_opt, 1)
+    d = loop.node_poses[:, :2] - loop.frontend[loop.keyframe_scans, :2]
+    moved = float(np.max(np.hypot(d[:, 0], d[:, 1]))) if d.size else 0.0
+    loop.stats["max_keyframe_correction_m"] = round(moved, 4)
+    keep = moved >= config.min_correction and (
+        not config.map_check or h_opt < h_front * (1.0 - config.map_check_margin))
+    loop.stats["kept_optimised"] = float(keep)
+    loop.corrected = keep
+    return keep
 
 
 ProgressFn = Callable[[int, StepResult], None]
@@ -444,14 +519,26 @@ def run(
             obs.on_scan(scan, step, pipe)
         if progress is not None:
             progress(len(stamps), step)
-    wall = time.perf_counter() - t0
     flag_arr = flags.view().copy()
     logodds, _ = pipe.slam.logodds(0)
+    grid = pipe.gridmap()
+    trajectory = Trajectory(stamps.view().copy(), poses.view().copy())
+    frontend_trajectory = None
+    loop = pipe.loops.finish() if pipe.loops is not None else None
+    if loop is not None and loop.corrected:
+        t_render = time.perf_counter()
+        grid_opt, lo_opt = render_map(loop, pipe.config.slam)
+        loop.stats["render_ms"] = (time.perf_counter() - t_render) * 1e3
+        if keep_optimised(loop, logodds, lo_opt, pipe.config.loop):
+            frontend_trajectory = trajectory
+            trajectory = Trajectory(trajectory.stamps, loop.poses)
+            grid, logodds = grid_opt, lo_opt
+    wall = time.perf_counter() - t0
     summary = pipe.slam.summary()
     result = RunResult(
         source=source.meta,
         config=pipe.config,
-        trajectory=Trajectory(stamps.view().copy(), poses.view().copy()),
+        trajectory=trajectory,
         scores=scores.view().copy(),
         map_updated=flag_arr[:, 0],
         rejected=flag_arr[:, 1],
@@ -459,7 +546,7 @@ def run(
         removed_rows=removed_rows,
         track_rows=track_rows,
         timings_ms={k: v.view().copy() for k, v in timings.items()},
-        grid=pipe.gridmap(),
+        grid=grid,
         logodds=logodds,
         wall_time_s=wall,
         reasons=dict(summary.get("reasons", {})),  # type: ignore[arg-type]
@@ -468,6 +555,8 @@ def run(
         confidence={k: v.view().copy() for k, v in conf.items()},
         slam_stats={"lost_events": pipe.slam.lost_events, "relocalisations": pipe.slam.relocalisations},
         body=pipe.body.report(last_scan),
+        frontend_trajectory=frontend_trajectory,
+        loop=loop,
     )
     for obs in observers:
         obs.on_finish(result, pipe)

@@ -199,6 +199,14 @@ def write_results(
                 np.save(fh, run.logodds.astype(np.float32))
         paths["map_logodds_online.npy"] = out / "map_logodds_online.npy"
     paths["trajectory.tum"] = write_tum(out / "trajectory.tum", run.trajectory, comment="laser pose in the map frame")
+    if run.loop is not None:
+        # loop closure (docs/slam.md): trajectory.tum is optimised, the front end's trajectory and the graph kept
+        from dynslam2d.io.g2o import write_g2o
+
+        front = run.frontend_trajectory if run.frontend_trajectory is not None else run.trajectory
+        paths["trajectory_frontend.tum"] = write_tum(out / "trajectory_frontend.tum", front,
+                                                     comment="laser pose in the map frame, front end before loop closure")
+        paths["graph.g2o"] = write_g2o(out / "graph.g2o", run.loop.graph)
     paths["config.yaml"] = write_text_atomic(out / "config.yaml", dump_config(run.config))
     paths["tracks.csv"] = write_text_atomic(out / "tracks.csv", tracks_csv(run))
     removed = run.removed

@@ -117,6 +117,7 @@ def plot_map(
     low_support: np.ndarray | None = None,
     lost: np.ndarray | None = None,
     warning: str | None = None,
+    loop_edges: np.ndarray | None = None,
 ) -> Path:
     """Write a PNG of ``grid`` with trajectories, track paths and removed points.
 
@@ -135,6 +136,8 @@ def plot_map(
         low_support, lost: (n,) bool per trajectory pose: poses matched with low support are
             marked in :data:`style.LOW_SUPPORT`, poses while lost in :data:`style.LOST`.
         warning: a line drawn in a red box over the map (the pose cannot be trusted).
+        loop_edges: (k, 2, 2) loop closures as segments between the two keyframe positions (map
+            frame, m), drawn in :data:`style.LOOP_EDGE`.
     """
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
@@ -168,6 +171,12 @@ def plot_map(
                            label="estimated trajectory", zorder=4)
         handles += ax.plot(*trajectory_xy[0], marker="o", color=style.TRAJECTORY, ms=6, ls="none",
                            label="start", zorder=4)
+    if loop_edges is not None and len(loop_edges):
+        from matplotlib.collections import LineCollection
+
+        ax.add_collection(LineCollection(np.asarray(loop_edges, dtype=np.float64), colors=style.LOOP_EDGE,
+                                         linewidths=0.6, alpha=0.8, zorder=4.2))
+        handles.append(Line2D([], [], color=style.LOOP_EDGE, lw=0.8, label=f"loop closures ({len(loop_edges)})"))
     if trajectory_xy is not None and len(trajectory_xy):
         for mask, colour, label in ((low_support, style.LOW_SUPPORT, "low-support poses"),
                                     (lost, style.LOST, "poses while lost")):
