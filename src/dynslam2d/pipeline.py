@@ -21,7 +21,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Protocol, Sequence
+from typing import Callable, Iterable, Protocol, Sequence
 
 import numpy as np
 
@@ -236,6 +236,49 @@ class Pipeline:
     def gridmap(self) -> GridMap:
         """The finest map level as occupancy probabilities (NaN = never observed)."""
         return self.slam.gridmap(0)
+
+
+def find_body(scans: Iterable[Scan], config: Config | None = None, max_scans: int = 600) -> dict[str, object]:
+    """The robot's own body found in the first ``max_scans`` scans, without detection: what ``dynslam2d info``
+    reports (docs/tracking.md, "The robot's own body").
+
+    Runs what :meth:`Pipeline.process` runs before and after detection — footprint / body mask, scan matching
+    (with the recording's odometry where the scans carry it), map update — and the automatic body detection
+    of :class:`~dynslam2d.detect.body.BodyFilter` on the laser poses; about 1 ms per scan. Returns
+    :meth:`BodyFilter.report` (``auto_body_beams``, ``suggested_footprint`` in the laser frame, m, …) plus
+    ``scans_used``, ``travel_m`` (the laser's path length, m), ``turn_rad`` (its summed absolute turning, rad),
+    ``body_range_m`` ([min, max] range of the body beams, m; None without any) and ``enough_motion``: whether
+    the laser moved ``auto_min_travel`` and turned ``auto_min_turn`` (a motionless laser cannot tell its body
+    from a wall).
+    """
+    cfg = config if config is not None else Config()
+    slam = HectorSlam(cfg.slam)
+    body = BodyFilter(cfg.detect.footprint)
+    last: Scan | None = None
+    prev: Pose2D | None = None
+    n, travel, turn = 0, 0.0, 0.0
+    for scan in scans:
+        if n >= max_scans:
+            break
+        drop = body.mask(scan)
+        masked = scan.with_ranges(np.where(drop, np.nan, scan.ranges)) if drop.any() else scan
+        res = slam.match(masked)
+        body.observe(scan, res.pose)
+        if not res.rejected:
+            slam.update_map(masked, res.pose)
+        if prev is not None and res.pose.is_finite() and prev.is_finite():
+            travel += math.hypot(res.pose.x - prev.x, res.pose.y - prev.y)
+            turn += abs(math.remainder(res.pose.theta - prev.theta, 2.0 * math.pi))
+        prev = res.pose
+        last = scan
+        n += 1
+    out = body.report(last)
+    fc = cfg.detect.footprint
+    rng = body.body_ranges[body.body] if body.body.shape[0] else np.zeros(0)
+    out.update(scans_used=n, travel_m=round(travel, 3), turn_rad=round(turn, 3),
+               body_range_m=[round(float(rng.min()), 3), round(float(rng.max()), 3)] if rng.size else None,
+               enough_motion=bool(travel >= fc.auto_min_travel and turn >= fc.auto_min_turn))
+    return out
 
 
 #: Columns of :attr:`RunResult.track_rows` and of tracks.csv.
