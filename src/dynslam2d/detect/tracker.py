@@ -1015,8 +1015,9 @@ class Tracker:
         """How a person-shaped track shows that it moved into space that was empty, over its last ``n`` updates
         (the person's faster way into M, docs/tracking.md "People"); None = it does not.
 
-        ``"map"``: a mean ≥ ``person_map_free_min`` of its points in observed-free map cells (or no map to ask);
-        then ``person_min_displacement`` since birth is enough. ``"free"``: where the map has not seen the place
+        ``"kinematic"``: no map to ask (or the track was in M before); the general ``min_displacement`` applies.
+        ``"map"``: a mean ≥ ``person_map_free_min`` of its points in observed-free map cells; then
+        ``person_min_displacement`` since birth is enough. ``"free"``: where the map has not seen the place
         often enough, or the person's own earlier returns still mark the cells next to it, a mean ≥
         ``person_free_min`` of its points where an earlier scan saw through (or this scan sees through where it
         was: the free-space memory), with at most ``map_structure_max`` of them on long-occupied cells and at
@@ -1024,7 +1025,7 @@ class Tracker:
         the full ``min_displacement`` is needed. No earlier beam passes through a wall."""
         tc = self.config.tracker
         if not use_map:
-            return "map"
+            return "kinematic"  # no map to ask (or seen moving before): the general displacement applies
         mf = k.mfree[-n:]
         if sum(mf) / len(mf) >= tc.person_map_free_min:
             return "map"
