@@ -289,13 +289,15 @@ class TrackerConfig(BaseModel):
     )
     person_sustain_updates: int = Field(
         3, ge=1,
-        description="For a person (merged leg pair) the speed must exceed v_min for this many consecutive updates "
-        "(the rest of the test unchanged): a person who starts walking enters M within 0.5 s at 7.5 Hz.",
+        description="For a person (merged leg pair, or a person-sized circle) that shows it moved into empty space "
+        "(person_map_free_min, or person_free_min) the speed must exceed v_min for this many consecutive updates "
+        "instead of sustain_updates: a person who starts walking enters M within 0.5 s.",
     )
     person_map_free_min: float = Field(
         0.6, ge=0.0, le=1.0,
         description="The person's faster confirmation needs this mean fraction of its points in observed-free map "
-        "cells (stronger than map_free_min: small clutter pairs up like legs).",
+        "cells over its last person_sustain_updates updates (stronger than map_free_min: small clutter pairs up "
+        "like legs)…",
     )
     person_free_min: float = Field(
         0.5, ge=0.0, le=1.0,
