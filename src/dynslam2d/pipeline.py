@@ -27,7 +27,7 @@ import numpy as np
 
 from dynslam2d.config import Config
 from dynslam2d.detect.body import BodyFilter
-from dynslam2d.detect.mapevidence import MapView
+from dynslam2d.detect.mapevidence import MapView, map_evidence
 from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
@@ -165,6 +165,32 @@ class Pipeline:
         by = np.where(obj >= 0, ids[np.clip(obj, 0, None)], -1)
         return removed, by
 
+    def _spare_structure(self, scan: Scan, pose: Pose2D, moving: list[Track], removed: np.ndarray,
+                         removed_by: np.ndarray) -> None:
+        """In place: beams inside an exclusion region that are not the object's own (not among the beams of a
+        track in M in this scan) and whose point lies on long-occupied map structure stay in the scan
+        (``filter.spare_structure``; the same structure test as the tracker's map evidence,
+        ``detect.tracker.map_occupied_logodds``). The region's margin is for range noise and box-fit error; a
+        walker passing close to a wall seen at a grazing angle would otherwise take a strip of the wall with it."""
+        view = MapView.of_level(self.slam.map.levels[0])
+        if view is None:
+            return
+        own = np.zeros(removed.shape[0], dtype=bool)
+        for t in moving:
+            if t.beams is not None and len(t.beams):
+                own[t.beams] = True
+        cand = np.flatnonzero(removed & ~own)
+        if cand.shape[0] == 0:
+            return
+        r = scan.ranges[cand]
+        a = scan.angle_min + cand * scan.angle_increment
+        pts = pose.transform_points(np.column_stack((r * np.cos(a), r * np.sin(a))))
+        tc = self.config.detect.tracker
+        structure, _, _ = map_evidence(pts, view, tc.map_occupied_logodds, tc.map_free_logodds, tc.map_free_radius)
+        spare = cand[structure]
+        removed[spare] = False
+        removed_by[spare] = -1
+
     def process(self, scan: Scan) -> StepResult:
         """Run every stage on ``scan`` (scans must come in time order) and return the result."""
         t0 = time.perf_counter()
@@ -195,6 +221,8 @@ class Pipeline:
             known = {t.id for t in self._moving}
             moving = [t for t in moving if t.id in known]
         removed, removed_by = self._exclude(scan, res.pose, _observed_boxes(moving, scan, res.pose), 0.0, cache)
+        if self.config.filter.mode == "box" and self.config.filter.spare_structure and removed.any():
+            self._spare_structure(scan, res.pose, moving, removed, removed_by)
         t3 = time.perf_counter()
         # 5. map update with the filtered scan only.
         updated = False
