@@ -11,7 +11,7 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Annotated, Any, Optional
+from typing import Annotated, Any, Iterator, Optional
 
 import typer
 from typer.core import TyperArgument, TyperCommand, TyperGroup
@@ -193,8 +193,11 @@ def info(
     odom: OdomOpt = "auto",
     imu: ImuOpt = "auto",
     laser_offset: LaserOffsetOpt = None,
+    body_scans: Annotated[int, typer.Option("--body-scans", min=0, help="Look for the robot's own body (returns "
+                                            "fixed in the laser frame while it drives) in the first N scans and "
+                                            "suggest a footprint; 0 = skip.")] = 600,
 ) -> None:
-    """Print what a scan source holds: format, topic, scans, beams, FOV, rate, duration, ranges."""
+    """Print what a scan source holds: format, topic, scans, beams, FOV, rate, duration, ranges, robot body."""
     from dynslam2d.io.odometry import parse_laser_offset
     from dynslam2d.io.sources import open_source
     from dynslam2d.io.summary import summarize_source
@@ -205,10 +208,30 @@ def info(
     offset = parse_laser_offset(laser_offset) if laser_offset else None
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad, odom=odom, imu=imu,
                          laser_offset=offset)
+    first: list = []  # the first body_scans scans, kept while the summary reads the source once
+
+    class _KeepFirst:
+        meta = source.meta
+
+        def __iter__(self) -> Iterator:
+            for scan in source:
+                if len(first) < body_scans:
+                    first.append(scan)
+                yield scan
+
     with console.status(Text(f"reading {input} …"), spinner="dots") as status:
-        summary = summarize_source(source, progress=lambda n: status.update(Text(f"reading {input} … {n} scans")))
+        summary = summarize_source(_KeepFirst(), progress=lambda n: status.update(Text(f"reading {input} … {n} scans")))
+        body = None
+        if body_scans > 0 and first:
+            from dynslam2d.pipeline import find_body
+
+            status.update(Text(f"looking for the robot's body in the first {len(first)} scans …"))
+            body = find_body(first, max_scans=body_scans)
     if as_json:
-        sys.stdout.write(json.dumps(summary.as_dict(), indent=2, default=str) + "\n")
+        out = summary.as_dict()
+        if body is not None:
+            out["body"] = body
+        sys.stdout.write(json.dumps(out, indent=2, default=str) + "\n")
         return
     table = Table(title=Text(f"{summary.origin}"), show_header=False, title_justify="left")
     table.add_column(style="bold")
@@ -240,9 +263,25 @@ def info(
     for key in ("skipped_lines", "skipped_scans", "warnings"):
         if summary.extra.get(key):
             rows.append((key.replace("_", " "), str(summary.extra[key])))
+    if body is not None:
+        rows.append(("robot body", _body_line(body)))
     for k, v in rows:
         table.add_row(k, Text(str(v)))
     _show(table)
+
+
+def _body_line(body: dict) -> str:
+    """One line for ``info``: the body beams found in the first scans and the footprint to configure."""
+    seen = (f"the first {body['scans_used']} scans (laser moved {body['travel_m']:.1f} m, turned "
+            f"{body['turn_rad']:.1f} rad)")
+    if body.get("auto_body_beams"):
+        lo, hi = body["body_range_m"]
+        return (f"{body['auto_body_beams']} beams return a fixed range {lo:.2f}–{hi:.2f} m while the laser moves, in "
+                f"{seen}: the robot itself; suggested detect.footprint.polygon: {body['suggested_footprint']}")
+    if not body.get("enough_motion"):
+        return (f"not found in {seen}: a laser that hardly moves cannot tell its body from a wall; "
+                "'dynslam2d run' keeps looking over the whole recording (summary.json 'body')")
+    return f"none found in {seen}"
 
 
 @app.command()

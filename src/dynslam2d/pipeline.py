@@ -21,13 +21,13 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Protocol, Sequence
+from typing import Callable, Iterable, Protocol, Sequence
 
 import numpy as np
 
 from dynslam2d.config import Config
 from dynslam2d.detect.body import BodyFilter
-from dynslam2d.detect.mapevidence import MapView
+from dynslam2d.detect.mapevidence import MapView, map_evidence
 from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
@@ -171,6 +171,32 @@ class Pipeline:
         by = np.where(obj >= 0, ids[np.clip(obj, 0, None)], -1)
         return removed, by
 
+    def _spare_structure(self, scan: Scan, pose: Pose2D, moving: list[Track], removed: np.ndarray,
+                         removed_by: np.ndarray) -> None:
+        """In place: beams inside an exclusion region that are not the object's own (not among the beams of a
+        track in M in this scan) and whose point lies on long-occupied map structure stay in the scan
+        (``filter.spare_structure``; the same structure test as the tracker's map evidence,
+        ``detect.tracker.map_occupied_logodds``). The region's margin is for range noise and box-fit error; a
+        walker passing close to a wall seen at a grazing angle would otherwise take a strip of the wall with it."""
+        view = MapView.of_level(self.slam.map.levels[0])
+        if view is None:
+            return
+        own = np.zeros(removed.shape[0], dtype=bool)
+        for t in moving:
+            if t.beams is not None and len(t.beams):
+                own[t.beams] = True
+        cand = np.flatnonzero(removed & ~own)
+        if cand.shape[0] == 0:
+            return
+        r = scan.ranges[cand]
+        a = scan.angle_min + cand * scan.angle_increment
+        pts = pose.transform_points(np.column_stack((r * np.cos(a), r * np.sin(a))))
+        tc = self.config.detect.tracker
+        structure, _, _ = map_evidence(pts, view, tc.map_occupied_logodds, tc.map_free_logodds, tc.map_free_radius)
+        spare = cand[structure]
+        removed[spare] = False
+        removed_by[spare] = -1
+
     def process(self, scan: Scan) -> StepResult:
         """Run every stage on ``scan`` (scans must come in time order) and return the result."""
         t0 = time.perf_counter()
@@ -201,6 +227,8 @@ class Pipeline:
             known = {t.id for t in self._moving}
             moving = [t for t in moving if t.id in known]
         removed, removed_by = self._exclude(scan, res.pose, _observed_boxes(moving, scan, res.pose), 0.0, cache)
+        if self.config.filter.mode == "box" and self.config.filter.spare_structure and removed.any():
+            self._spare_structure(scan, res.pose, moving, removed, removed_by)
         t3 = time.perf_counter()
         # 5. map update with the filtered scan only.
         updated = False
@@ -245,6 +273,49 @@ class Pipeline:
     def gridmap(self) -> GridMap:
         """The finest map level as occupancy probabilities (NaN = never observed)."""
         return self.slam.gridmap(0)
+
+
+def find_body(scans: Iterable[Scan], config: Config | None = None, max_scans: int = 600) -> dict[str, object]:
+    """The robot's own body found in the first ``max_scans`` scans, without detection: what ``dynslam2d info``
+    reports (docs/tracking.md, "The robot's own body").
+
+    Runs what :meth:`Pipeline.process` runs before and after detection — footprint / body mask, scan matching
+    (with the recording's odometry where the scans carry it), map update — and the automatic body detection
+    of :class:`~dynslam2d.detect.body.BodyFilter` on the laser poses; about 1 ms per scan. Returns
+    :meth:`BodyFilter.report` (``auto_body_beams``, ``suggested_footprint`` in the laser frame, m, …) plus
+    ``scans_used``, ``travel_m`` (the laser's path length, m), ``turn_rad`` (its summed absolute turning, rad),
+    ``body_range_m`` ([min, max] range of the body beams, m; None without any) and ``enough_motion``: whether
+    the laser moved ``auto_min_travel`` and turned ``auto_min_turn`` (a motionless laser cannot tell its body
+    from a wall).
+    """
+    cfg = config if config is not None else Config()
+    slam = HectorSlam(cfg.slam)
+    body = BodyFilter(cfg.detect.footprint)
+    last: Scan | None = None
+    prev: Pose2D | None = None
+    n, travel, turn = 0, 0.0, 0.0
+    for scan in scans:
+        if n >= max_scans:
+            break
+        drop = body.mask(scan)
+        masked = scan.with_ranges(np.where(drop, np.nan, scan.ranges)) if drop.any() else scan
+        res = slam.match(masked)
+        body.observe(scan, res.pose)
+        if not res.rejected:
+            slam.update_map(masked, res.pose)
+        if prev is not None and res.pose.is_finite() and prev.is_finite():
+            travel += math.hypot(res.pose.x - prev.x, res.pose.y - prev.y)
+            turn += abs(math.remainder(res.pose.theta - prev.theta, 2.0 * math.pi))
+        prev = res.pose
+        last = scan
+        n += 1
+    out = body.report(last)
+    fc = cfg.detect.footprint
+    rng = body.body_ranges[body.body] if body.body.shape[0] else np.zeros(0)
+    out.update(scans_used=n, travel_m=round(travel, 3), turn_rad=round(turn, 3),
+               body_range_m=[round(float(rng.min()), 3), round(float(rng.max()), 3)] if rng.size else None,
+               enough_motion=bool(travel >= fc.auto_min_travel and turn >= fc.auto_min_turn))
+    return out
 
 
 #: Columns of :attr:`RunResult.track_rows` and of tracks.csv.
