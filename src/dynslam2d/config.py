@@ -28,7 +28,7 @@ from dynslam2d.detect.config import DetectConfig
 from dynslam2d.filter import FilterConfig
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.cleanconfig import CleanConfig
-from dynslam2d.io.rangescale import LaserConfig
+from dynslam2d.laserconfig import LaserConfig
 from dynslam2d.slam.loopconfig import LoopConfig
 
 

@@ -21,56 +21,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import Iterator, Literal, Union
+from typing import Iterator
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from dynslam2d.errors import DynSlamError
+from dynslam2d.laserconfig import SCALE_MAX, SCALE_MIN, LaserConfig
 from dynslam2d.io.odometry import SourceWrapper
 from dynslam2d.types import Scan, ScanSource
 
 __all__ = ["LaserConfig", "RangeScaleEstimate", "RangeScaleSource", "apply_range_scale", "estimate_range_scale",
            "scale_ranges"]
-
-#: Bounds of a plausible range scale (anything outside is an error of the input, not of the lidar).
-SCALE_MIN, SCALE_MAX = 0.5, 2.0
-
-
-class LaserConfig(BaseModel):
-    """The lidar itself (config group ``laser``)."""
-
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
-
-    range_scale: Union[float, Literal["auto"]] = Field(
-        1.0,
-        description="Every range is multiplied by this before detection and SLAM (a lidar that reads short: "
-        "> 1). 'auto' = estimated from the recording's odometry (odometry / laser-only SLAM displacement "
-        "over the first range_scale_scans scans; needs odometry). Dimensionless.",
-    )
-    range_scale_scans: int = Field(
-        1500, ge=10,
-        description="'auto': scans of the laser-only SLAM pass that estimates the range scale, count.",
-    )
-    range_scale_window: float = Field(
-        0.5, gt=0.0,
-        description="'auto': displacements are compared over windows of this length, s.",
-    )
-    range_scale_min_distance: float = Field(
-        2.0, gt=0.0,
-        description="'auto': the odometry must cover at least this distance (in windows where it moved) for "
-        "an estimate; otherwise the scale stays 1 with a warning, m.",
-    )
-
-    @field_validator("range_scale")
-    @classmethod
-    def _check_scale(cls, v: float | str) -> float | str:
-        if isinstance(v, str):
-            return v
-        if not (math.isfinite(v) and SCALE_MIN <= v <= SCALE_MAX):
-            raise ValueError(f"must be 'auto' or a number in [{SCALE_MIN}, {SCALE_MAX}], got {v}")
-        return v
-
 
 def scale_ranges(scan: Scan, k: float) -> Scan:
     """``scan`` with ranges and the range limits × ``k`` (odometry, IMU and geometry kept)."""
