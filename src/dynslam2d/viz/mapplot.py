@@ -23,6 +23,25 @@ def occupancy_image(grid: GridMap) -> np.ndarray:
     return img
 
 
+def grey_rgba(img: np.ndarray, erased: np.ndarray | None = None, erased_colour: str | None = None) -> np.ndarray:
+    """(H, W, 4) uint8 RGBA of the grey values ``img`` (0 … 1) through matplotlib's "gray" colormap, with
+    the cells of ``erased`` (H, W) bool painted in ``erased_colour``.
+
+    ``imshow`` of this image draws the same pixels as ``imshow(img, cmap="gray", vmin=0, vmax=1)`` with an
+    opaque overlay of ``erased`` on top, with a fraction of the memory: matplotlib resamples a float image
+    through float64 RGBA copies of the whole grid (about 200 MiB for MIT CSAIL's 1699 × 1122 cells) and a
+    uint8 one in place of them (issue 13 item 3).
+    """
+    import matplotlib.pyplot as plt
+
+    rgba = plt.get_cmap("gray")(np.clip(img, 0.0, 1.0), bytes=True)
+    if erased is not None and erased_colour is not None and erased.shape == img.shape:
+        from matplotlib.colors import to_rgba
+
+        rgba[erased] = np.round(np.array(to_rgba(erased_colour)) * 255.0).astype(np.uint8)
+    return rgba
+
+
 def points_overlay(
     xy: np.ndarray, extent: tuple[float, float, float, float], cell: float, colour: str,
     min_alpha: float = 0.35,
@@ -146,15 +165,13 @@ def plot_map(
     extent = grid.extent
     fw, fh = map_figure_size(extent)
     fig, ax = plt.subplots(figsize=(fw + 2.4, fh))
-    ax.imshow(occupancy_image(grid), cmap="gray", vmin=0.0, vmax=1.0, origin="lower",
+    has_erased = erased is not None and erased.shape == grid.shape and bool(erased.any())
+    # one uint8 image with the erased cells painted in (opaque, so the same pixels as an overlay)
+    ax.imshow(grey_rgba(occupancy_image(grid), erased if has_erased else None, style.ERASED), origin="lower",
               extent=extent, interpolation="nearest")
     handles: list[Any] = []
-    if erased is not None and erased.shape == grid.shape and erased.any():
-        from matplotlib.colors import to_rgba
-
-        over = np.zeros(erased.shape + (4,))
-        over[erased] = to_rgba(style.ERASED)
-        ax.imshow(over, origin="lower", extent=extent, interpolation="nearest", zorder=1)
+    if has_erased:
+        assert erased is not None
         n_er = int(erased.sum())
         handles.append(Patch(color=style.ERASED, label=f"erased by clean-up ({n_er * grid.resolution ** 2:.2f} m²)"))
     if removed_xy is not None and len(removed_xy):
