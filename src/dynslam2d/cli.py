@@ -558,7 +558,9 @@ def run(
     rows = [
         ("scans", str(summary["scans"])),
         ("wall time", f"{summary['wall_time_s']:.1f} s ({summary['scans_per_s']} scans/s"
-                      + (", including compiling the kernels)" if compiling else ")")),
+                      + (f", including {summary['kernel_compile_s']:.1f} s compiling the kernels)"
+                         if summary.get("kernel_compile_s", 0.0) >= 0.05
+                         else ", including compiling the kernels)" if compiling else ")")),
         *_steady_rows(summary, compiling),
         ("map updates", str(summary["map_updates"])),
         ("odometry", (f"{summary.get('odometry') or 'none (laser only)'}"

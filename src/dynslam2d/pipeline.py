@@ -32,6 +32,7 @@ from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
 from dynslam2d.io.trajectory import Trajectory
+from dynslam2d.jitcache import compile_seconds
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
 from dynslam2d.slam.confidence import FLAGS
@@ -173,14 +174,14 @@ class Pipeline:
         raw = scan
         body = self.body.mask(scan)
         if body.any():
-            scan = scan.with_ranges(np.where(body, np.nan, scan.ranges))
+            scan = scan.without(body)
         # 2. match with the known movers removed (their boxes advanced to this stamp).
         match_scan = scan
         if self._moving and self.config.filter.mode != "none":
             dt = scan.stamp - self._last_stamp if self._last_stamp is not None else 0.0
             pre_removed, _ = self._exclude(scan, self.slam.predict(scan.stamp), self._moving, dt, cache)
             if pre_removed.any():
-                match_scan = scan.with_ranges(np.where(pre_removed, np.nan, scan.ranges))
+                match_scan = scan.without(pre_removed)
         res = self.slam.match(match_scan)
         self.body.observe(raw, res.pose)
         t1 = time.perf_counter()
@@ -199,7 +200,7 @@ class Pipeline:
         # 5. map update with the filtered scan only.
         updated = False
         if not res.rejected:
-            kept = scan.with_ranges(np.where(removed, np.nan, scan.ranges)) if removed.any() else scan
+            kept = scan.without(removed) if removed.any() else scan
             updated = self.slam.update_map(kept, res.pose)
         t4 = time.perf_counter()
         self._moving = moving
@@ -312,6 +313,9 @@ class RunResult:
                                     self.slam_stats.get("lost_events", 0), self.slam_stats.get("relocalisations", 0),
                                     c.low_confidence_share, c.low_confidence_stretch)
     body: dict[str, object] = field(default_factory=dict)
+    #: wall time numba spent compiling kernels during the run, s (0 when every kernel came from the
+    #: cache; :func:`dynslam2d.jitcache.compile_seconds`) — inside ``wall_time_s`` and the first scans' times.
+    kernel_compile_s: float = 0.0
 
     @property
     def n_scans(self) -> int:
@@ -357,6 +361,7 @@ class RunResult:
             "processing_ms_median": float(np.median(total)) if total.size else None,
             "processing_ms_p95": float(np.percentile(total, 95)) if total.size else None,
             **_steady_speed(total),
+            "kernel_compile_s": round(self.kernel_compile_s, 3),
             "stage_ms_median": stage_ms,
             "map_updates": int(self.map_updated.sum()),
             "match_failures": int(self.rejected.sum()),
@@ -418,6 +423,7 @@ def run(
     conf = {"low_support": GrowArray(np.bool_), "degenerate": GrowArray(np.bool_), "lost": GrowArray(np.bool_),
             "degeneracy": GrowArray(np.float64)}
     t0 = time.perf_counter()
+    compile0 = compile_seconds()
     last_scan: Scan | None = None
     for scan in source:
         step = pipe.process(scan)
@@ -442,6 +448,7 @@ def run(
         if progress is not None:
             progress(len(stamps), step)
     wall = time.perf_counter() - t0
+    compile_s = compile_seconds() - compile0
     flag_arr = flags.view().copy()
     logodds, _ = pipe.slam.logodds(0)
     summary = pipe.slam.summary()
@@ -465,6 +472,7 @@ def run(
         confidence={k: v.view().copy() for k, v in conf.items()},
         slam_stats={"lost_events": pipe.slam.lost_events, "relocalisations": pipe.slam.relocalisations},
         body=pipe.body.report(last_scan),
+        kernel_compile_s=compile_s,
     )
     for obs in observers:
         obs.on_finish(result, pipe)

@@ -1,0 +1,112 @@
+"""Per-scan shortcuts (cached valid mask, Scan.without), numba's cache folder and the compile clock
+(issue 13 items 1-2). Speed itself is measured in benchmarks/, never asserted here."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from dynslam2d.jitcache import compile_seconds
+from dynslam2d.pipeline import run
+from dynslam2d.sim import simulate
+from dynslam2d.types import Scan
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+
+
+def _scan() -> Scan:
+    r = np.linspace(0.5, 9.0, 360)
+    r[::7] = np.nan
+    r[5] = 0.01  # below range_min
+    r[9] = 50.0  # beyond range_max
+    return Scan(stamp=1.0, angle_min=-3.0, angle_increment=6.0 / 359, ranges=r, range_min=0.05, range_max=8.0)
+
+
+def test_valid_mask_is_cached_but_every_call_gets_its_own_copy() -> None:
+    s = _scan()
+    first = s.valid_mask()
+    expected = np.isfinite(s.ranges) & (s.ranges >= 0.05) & (s.ranges <= 8.0)
+    np.testing.assert_array_equal(first, expected)
+    first[:] = False  # a caller changing its mask must not change the scan's
+    np.testing.assert_array_equal(s.valid_mask(), expected)
+    assert s.valid_mask() is not s.valid_mask()
+    # tightened gates are computed, not taken from the cache
+    np.testing.assert_array_equal(s.valid_mask(max_range=4.0), expected & (s.ranges <= 4.0))
+    np.testing.assert_array_equal(s.valid_mask(), expected)
+
+
+def test_without_equals_with_ranges_and_keeps_the_mask_consistent() -> None:
+    s = _scan()
+    drop = np.zeros(s.n_beams, dtype=bool)
+    drop[40:90] = True
+    for warm in (False, True):  # with and without a cached mask on the original
+        if warm:
+            s.valid_mask()
+        out = s.without(drop)
+        ref = s.with_ranges(np.where(drop, np.nan, s.ranges))
+        assert out.same_as(ref)
+        np.testing.assert_array_equal(out.valid_mask(), ref.valid_mask())
+        assert not out.valid_mask()[40:90].any()
+        np.testing.assert_array_equal(out.angles, s.angles)
+    assert np.isfinite(s.ranges[40:90]).sum() > 0  # the original is untouched
+
+
+def test_cache_folder_default_and_user_choice(tmp_path: Path) -> None:
+    code = ("import os, dynslam2d, dynslam2d.filter as f; "
+            "print(os.environ['NUMBA_CACHE_DIR']); print(f._exclusion_kernel._cache._cache_path)")
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(PYTHONPATH=SRC, XDG_CACHE_HOME=str(tmp_path / "xdg"))
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    folder, kernel_path = out.stdout.split("\n")[:2]
+    assert folder == str(tmp_path / "xdg" / "dynslam2d" / "numba")
+    assert kernel_path.startswith(folder)  # the kernels cache outside site-packages: a reinstall keeps them
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "mine")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    folder, kernel_path = out.stdout.split("\n")[:2]
+    assert folder == str(tmp_path / "mine") and kernel_path.startswith(folder)
+
+
+def test_compile_clock_counts_compiles_not_calls() -> None:
+    from numba import njit
+
+    @njit
+    def plus_one(x):  # type: ignore[no-untyped-def]
+        return x + 1
+
+    c0 = compile_seconds()
+    assert plus_one(1) == 2
+    c1 = compile_seconds()
+    assert c1 > c0
+    assert plus_one(2) == 3
+    assert compile_seconds() == c1  # a compiled kernel's call is no compile
+
+
+def test_run_reports_compile_time_of_kernels_compiled_during_the_run() -> None:
+    from numba import njit
+
+    sim = simulate("paper", duration=0.5)
+
+    class CompilesOnce:
+        def __init__(self) -> None:
+            @njit
+            def twice(x):  # type: ignore[no-untyped-def]
+                return 2 * x
+
+            self.kernel = twice
+
+        def on_scan(self, scan, step, pipeline):  # type: ignore[no-untyped-def]
+            self.kernel(step.index)
+
+        def on_finish(self, result, pipeline):  # type: ignore[no-untyped-def]
+            pass
+
+    run(sim.source(), observers=[CompilesOnce()])  # warm every project kernel first
+    cold = run(sim.source(), observers=[CompilesOnce()])
+    warm = run(sim.source())
+    assert cold.kernel_compile_s > 0.0
+    assert warm.kernel_compile_s == 0.0
+    assert cold.summary()["kernel_compile_s"] == round(cold.kernel_compile_s, 3)
