@@ -110,3 +110,14 @@ def test_run_reports_compile_time_of_kernels_compiled_during_the_run() -> None:
     assert cold.kernel_compile_s > 0.0
     assert warm.kernel_compile_s == 0.0
     assert cold.summary()["kernel_compile_s"] == round(cold.kernel_compile_s, 3)
+
+
+def test_assignment_solver_is_scipys_without_scipy_optimize() -> None:
+    code = ("import sys, numpy as np; from dynslam2d.detect.lsap import linear_sum_assignment as f; "
+            "print('scipy.optimize' in sys.modules); "
+            "c = np.random.default_rng(3).random((9, 6)); c[c > 0.85] = 1e9; r, k = f(c); "
+            "from scipy.optimize import linear_sum_assignment as g; r2, k2 = g(c); "
+            "print(r.tolist() == r2.tolist() and k.tolist() == k2.tolist(), len(r))")
+    out = subprocess.run([sys.executable, "-c", code], env={**os.environ, "PYTHONPATH": SRC},
+                         capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["False", "True", "6"]
