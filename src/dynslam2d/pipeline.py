@@ -33,6 +33,7 @@ from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
 from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.jitcache import compile_seconds
+from dynslam2d.memtrim import release_free_memory
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
 from dynslam2d.slam.confidence import FLAGS
@@ -449,6 +450,7 @@ def run(
             progress(len(stamps), step)
     wall = time.perf_counter() - t0
     compile_s = compile_seconds() - compile0
+    release_free_memory()  # the loop's freed temporaries, before the observers' end-of-run work (memtrim.py)
     flag_arr = flags.view().copy()
     logodds, _ = pipe.slam.logodds(0)
     summary = pipe.slam.summary()
