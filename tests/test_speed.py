@@ -142,3 +142,41 @@ def test_release_free_memory_returns_the_heap_to_the_os() -> None:
     if out[0] == "False":  # not glibc: nothing to release, nothing to test
         return
     assert float(out[1]) > 15.0
+
+
+def test_draw_grey_draws_the_pixels_of_a_float_imshow_with_an_overlay() -> None:
+    """The map figures' low-memory image (uint16 colormap indices resampled as data) gives exactly the
+    pixels of the float image through the "gray" colormap with the erased cells drawn over it."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import to_rgba
+
+    from dynslam2d.viz.mapplot import draw_grey
+
+    rng = np.random.default_rng(5)
+    img = rng.random((301, 207))
+    img[rng.random(img.shape) < 0.2] = 0.8
+    img[0, :] = 1.0
+    img[:, 0] = 0.0
+    erased = rng.random(img.shape) < 0.05
+    extent = (-3.0, 7.35, -1.0, 14.05)
+
+    def render(new: bool) -> np.ndarray:
+        fig, ax = plt.subplots(figsize=(2.3, 3.1))  # fewer pixels than cells: resampling picks cells
+        if new:
+            draw_grey(ax, img, extent, erased, "#ffb000")
+        else:
+            ax.imshow(img, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", extent=extent, interpolation="nearest")
+            over = np.zeros(img.shape + (4,))
+            over[erased] = to_rgba("#ffb000")
+            ax.imshow(over, origin="lower", extent=extent, interpolation="nearest", zorder=1)
+        fig.canvas.draw()
+        out = np.asarray(fig.canvas.buffer_rgba()).copy()
+        plt.close(fig)
+        return out
+
+    old, new = render(False), render(True)
+    assert (new[..., :3] == np.array([255, 176, 0])).all(axis=-1).sum() > 100  # erased cells drawn
+    np.testing.assert_array_equal(old, new)

@@ -23,23 +23,30 @@ def occupancy_image(grid: GridMap) -> np.ndarray:
     return img
 
 
-def grey_rgba(img: np.ndarray, erased: np.ndarray | None = None, erased_colour: str | None = None) -> np.ndarray:
-    """(H, W, 4) uint8 RGBA of the grey values ``img`` (0 … 1) through matplotlib's "gray" colormap, with
-    the cells of ``erased`` (H, W) bool painted in ``erased_colour``.
+def draw_grey(ax: Any, img: np.ndarray, extent: tuple[float, float, float, float],
+              erased: np.ndarray | None = None, erased_colour: str | None = None, **kw: Any) -> Any:
+    """``imshow`` of the grey values ``img`` ((H, W), 0 … 1, row 0 at the bottom) through matplotlib's
+    "gray" colormap, with the cells of ``erased`` ((H, W) bool) painted in ``erased_colour``.
 
-    ``imshow`` of this image draws the same pixels as ``imshow(img, cmap="gray", vmin=0, vmax=1)`` with an
-    opaque overlay of ``erased`` on top, with a fraction of the memory: matplotlib resamples a float image
-    through float64 RGBA copies of the whole grid (about 200 MiB for MIT CSAIL's 1699 × 1122 cells) and a
-    uint8 one in place of them (issue 13 item 3).
+    Draws the same pixels as ``imshow(img, cmap="gray", vmin=0, vmax=1, interpolation="nearest")``
+    with an opaque overlay of ``erased``, with a fraction of the memory: the image is handed over as
+    (H, W) uint16 indices into the colormap's 256 greys (+ the erased colour) and resampled as data,
+    where matplotlib would otherwise colour the whole grid into float RGBA copies before resampling
+    (about 200 MiB for MIT CSAIL's 1699 × 1122 cells; issue 13 item 3).
     """
+    from matplotlib.colors import ListedColormap, NoNorm, to_rgba
     import matplotlib.pyplot as plt
 
-    rgba = plt.get_cmap("gray")(np.clip(img, 0.0, 1.0), bytes=True)
-    if erased is not None and erased_colour is not None and erased.shape == img.shape:
-        from matplotlib.colors import to_rgba
-
-        rgba[erased] = np.round(np.array(to_rgba(erased_colour)) * 255.0).astype(np.uint8)
-    return rgba
+    grey = plt.get_cmap("gray")
+    n = grey.N
+    # the colormap's own lookup of a value in [0, 1]: index floor(v·N), 1.0 → N − 1
+    idx = np.clip((np.clip(img, 0.0, 1.0) * n).astype(np.int64), 0, n - 1).astype(np.uint16)
+    colours = grey(np.arange(n))
+    if erased is not None and erased_colour is not None and erased.shape == img.shape and erased.any():
+        idx[erased] = n
+        colours = np.vstack((colours, to_rgba(erased_colour)))
+    return ax.imshow(idx, cmap=ListedColormap(colours), norm=NoNorm(), origin="lower", extent=extent,
+                     interpolation="nearest", interpolation_stage="data", **kw)
 
 
 def points_overlay(
@@ -167,8 +174,7 @@ def plot_map(
     fig, ax = plt.subplots(figsize=(fw + 2.4, fh))
     has_erased = erased is not None and erased.shape == grid.shape and bool(erased.any())
     # one uint8 image with the erased cells painted in (opaque, so the same pixels as an overlay)
-    ax.imshow(grey_rgba(occupancy_image(grid), erased if has_erased else None, style.ERASED), origin="lower",
-              extent=extent, interpolation="nearest")
+    draw_grey(ax, occupancy_image(grid), extent, erased if has_erased else None, style.ERASED)
     handles: list[Any] = []
     if has_erased:
         assert erased is not None
