@@ -115,18 +115,25 @@ def _observed_boxes(tracks: list[Track], scan: Scan, pose: Pose2D) -> list[Track
     the tracked extent where part of the object is hidden and every observed point inside.
     """
     out: list[Track] = []
-    for t in tracks:
-        beams = t.beams
-        if beams is None or len(beams) == 0:
+    if not tracks:
+        return out
+    # the beams of every track at once (one trig + transform per scan instead of one per track)
+    lists = [t.beams if t.beams is not None else np.zeros(0, dtype=np.int64) for t in tracks]
+    counts = np.fromiter((len(b) for b in lists), dtype=np.int64, count=len(lists))
+    idx = np.concatenate(lists).astype(np.int64, copy=False) if counts.sum() else np.zeros(0, dtype=np.int64)
+    r_all = scan.ranges[idx]
+    a_all = scan.angles[idx]
+    ok_all = np.isfinite(r_all)
+    with np.errstate(invalid="ignore"):  # ±inf ranges (dropped by ok_all) may meet cos = 0
+        xy_all = pose.transform_points(np.column_stack((r_all * np.cos(a_all), r_all * np.sin(a_all))))
+    ends = np.cumsum(counts)
+    for k, t in enumerate(tracks):
+        lo, hi = int(ends[k] - counts[k]), int(ends[k])
+        ok = ok_all[lo:hi]
+        if hi == lo or not ok.any():
             out.append(t)
             continue
-        r = scan.ranges[beams]
-        a = scan.angles[beams]
-        ok = np.isfinite(r)
-        if not ok.any():
-            out.append(t)
-            continue
-        pts = pose.transform_points(np.column_stack((r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok]))))
+        pts = xy_all[lo:hi][ok]
         b = t.box
         c, s_ = math.cos(b.theta), math.sin(b.theta)
         d = pts - np.array([b.px, b.py])
