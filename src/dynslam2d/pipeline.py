@@ -392,6 +392,8 @@ class RunResult:
 
 
 ProgressFn = Callable[[int, StepResult], None]
+#: :func:`run` returns the allocator's free heap memory to the OS every this many scans (memtrim.py).
+TRIM_EVERY_SCANS = 1000
 
 
 class RunObserver(Protocol):
@@ -455,6 +457,8 @@ def run(
             obs.on_scan(scan, step, pipe)
         if progress is not None:
             progress(len(stamps), step)
+        if len(stamps) % TRIM_EVERY_SCANS == 0:
+            release_free_memory()  # a long log's freed temporaries back to the OS (memtrim.py; ~ms per call)
     wall = time.perf_counter() - t0
     compile_s = compile_seconds() - compile0
     release_free_memory()  # the loop's freed temporaries, before the observers' end-of-run work (memtrim.py)
