@@ -6,8 +6,9 @@ Each measurement runs in a fresh interpreter (a subprocess importing dynslam2d f
     the interpreter's start to the end of the first ``Pipeline.process`` call — wall and process CPU
     (CPU is what a shared machine does not inflate), and the whole run's wall / CPU;
   * ``cold`` (``--cold``): numba's cache is an empty temporary folder, so every kernel a run uses is
-    compiled. Reports ``kernel_compile_s`` of summary.json (wall time inside numba's compiler) and the
-    process CPU time of the whole run; cold CPU − warm CPU is the compile work.
+    compiled. Reports ``kernel_compile_s`` of summary.json (wall time inside numba's compiler during the
+    run loop), the process CPU time of the whole run (cold CPU − warm CPU is the compile work) and the
+    compile wall time of every kernel (including those compiled after the loop: clean-up pass).
 
     python benchmarks/bench_startup.py [--reps 3] [--cold] [--src src]
 
@@ -31,6 +32,22 @@ import json, sys, time, resource
 t_wall0 = time.perf_counter(); c0 = time.process_time()
 import dynslam2d.pipeline as P
 imp = (time.perf_counter() - t_wall0, time.process_time() - c0)
+from numba.core import event
+per_kernel = {}
+class _PerKernel(event.Listener):  # outermost compile time per kernel (nested compiles inside it)
+    depth = 0
+    def on_start(self, ev):
+        if self.depth == 0:
+            self.t0 = time.perf_counter()
+            d = ev.data or {}
+            f = getattr(d.get("dispatcher"), "py_func", None)
+            self.name = f"{f.__module__}.{f.__qualname__}" if f else "?"
+        self.depth += 1
+    def on_end(self, ev):
+        self.depth -= 1
+        if self.depth == 0:
+            per_kernel[self.name] = per_kernel.get(self.name, 0.0) + time.perf_counter() - self.t0
+event.register("numba:compile", _PerKernel())
 orig = P.Pipeline.process
 first = []
 def process(self, scan):
@@ -40,15 +57,16 @@ def process(self, scan):
     return out
 P.Pipeline.process = process
 from dynslam2d.cli import main
-sys.argv = ["dynslam2d", "run", "--out", sys.argv[1], "--force", "-q"]
+out_dir = sys.argv[1]
+sys.argv = ["dynslam2d", "run", "--out", out_dir, "--force", "-q"]
 try:
     main()
 except SystemExit:
     pass
 end = (time.perf_counter() - t_wall0, time.process_time() - c0)
-summary = json.load(open(sys.argv[1] + "/summary.json"))
+summary = json.load(open(out_dir + "/summary.json"))
 print(json.dumps({"import": imp, "first_scan": first[0], "end": end,
-                  "kernel_compile_s": summary.get("kernel_compile_s")}))
+                  "kernel_compile_s": summary.get("kernel_compile_s"), "per_kernel": per_kernel}))
 """
 
 
@@ -88,6 +106,11 @@ def main() -> None:
         print(f"cold (empty numba cache): kernel_compile_s {c['kernel_compile_s']} s wall in numba's compiler; "
               f"first scan done {c['first_scan'][0]:.1f} s wall; process CPU {c['process_cpu_s']:.1f} s "  # type: ignore[index]
               f"(warm: {statistics.median(w['process_cpu_s'] for w in warm):.1f} s)")  # type: ignore[type-var]
+        kernels = sorted(c["per_kernel"].items(), key=lambda kv: -kv[1])  # type: ignore[union-attr]
+        total = sum(t for _, t in kernels)
+        print(f"compile wall per kernel ({len(kernels)} compiled, {total:.1f} s in all, incl. outside the run loop):")
+        for name, t in kernels:
+            print(f"  {t:7.2f} s  {100 * t / total:5.1f} %  {name}")
 
 
 if __name__ == "__main__":
