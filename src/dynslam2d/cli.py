@@ -524,6 +524,7 @@ def run(
 
                 result = run_pipeline(source, cfg, progress=tick, observers=observers)
                 progress.update(task, completed=result.n_scans)
+        cleaner.counter = None  # the clean-up pass is done (cleaner.result): free its counts before the figures
         _check_run_usable(result, input)
         truth = ground_truth_for(source, truth_files, cfg.slam.map_resolution)
         try:
