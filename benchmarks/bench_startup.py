@@ -3,7 +3,8 @@
 Each measurement runs in a fresh interpreter (a subprocess importing dynslam2d from ``--src``):
 
   * ``warm``: numba's cache holds every kernel. Reports the import of the pipeline and the time from
-    the interpreter's start to the end of the first ``Pipeline.process`` call — wall and process CPU
+    the script's first line (the interpreter's own start, ~0.1 s, not included) to the end of the
+    first ``Pipeline.process`` call — wall and process CPU
     (CPU is what a shared machine does not inflate), and the whole run's wall / CPU;
   * ``cold`` (``--cold``): numba's cache is an empty temporary folder, so every kernel a run uses is
     compiled. Reports ``kernel_compile_s`` of summary.json (wall time inside numba's compiler during the
