@@ -33,6 +33,8 @@ from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
 from dynslam2d.io.rangescale import apply_range_scale
 from dynslam2d.io.trajectory import Trajectory
+from dynslam2d.jitcache import compile_seconds
+from dynslam2d.memtrim import release_free_memory
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
 from dynslam2d.slam.config import SlamConfig
@@ -117,18 +119,25 @@ def _observed_boxes(tracks: list[Track], scan: Scan, pose: Pose2D) -> list[Track
     the tracked extent where part of the object is hidden and every observed point inside.
     """
     out: list[Track] = []
-    for t in tracks:
-        beams = t.beams
-        if beams is None or len(beams) == 0:
+    if not tracks:
+        return out
+    # the beams of every track at once (one trig + transform per scan instead of one per track)
+    lists = [t.beams if t.beams is not None else np.zeros(0, dtype=np.int64) for t in tracks]
+    counts = np.fromiter((len(b) for b in lists), dtype=np.int64, count=len(lists))
+    idx = np.concatenate(lists).astype(np.int64, copy=False) if counts.sum() else np.zeros(0, dtype=np.int64)
+    r_all = scan.ranges[idx]
+    a_all = scan.angles[idx]
+    ok_all = np.isfinite(r_all)
+    with np.errstate(invalid="ignore"):  # ±inf ranges (dropped by ok_all) may meet cos = 0
+        xy_all = pose.transform_points(np.column_stack((r_all * np.cos(a_all), r_all * np.sin(a_all))))
+    ends = np.cumsum(counts)
+    for k, t in enumerate(tracks):
+        lo, hi = int(ends[k] - counts[k]), int(ends[k])
+        ok = ok_all[lo:hi]
+        if hi == lo or not ok.any():
             out.append(t)
             continue
-        r = scan.ranges[beams]
-        a = scan.angles[beams]
-        ok = np.isfinite(r)
-        if not ok.any():
-            out.append(t)
-            continue
-        pts = pose.transform_points(np.column_stack((r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok]))))
+        pts = xy_all[lo:hi][ok]
         b = t.box
         c, s_ = math.cos(b.theta), math.sin(b.theta)
         d = pts - np.array([b.px, b.py])
@@ -205,14 +214,14 @@ class Pipeline:
         raw = scan
         body = self.body.mask(scan)
         if body.any():
-            scan = scan.with_ranges(np.where(body, np.nan, scan.ranges))
+            scan = scan.without(body)
         # 2. match with the known movers removed (their boxes advanced to this stamp).
         match_scan = scan
         if self._moving and self.config.filter.mode != "none":
             dt = scan.stamp - self._last_stamp if self._last_stamp is not None else 0.0
             pre_removed, _ = self._exclude(scan, self.slam.predict(scan.stamp), self._moving, dt, cache)
             if pre_removed.any():
-                match_scan = scan.with_ranges(np.where(pre_removed, np.nan, scan.ranges))
+                match_scan = scan.without(pre_removed)
         res = self.slam.match(match_scan)
         self.body.observe(raw, res.pose)
         t1 = time.perf_counter()
@@ -233,7 +242,7 @@ class Pipeline:
         # 5. map update with the filtered scan only.
         updated = False
         if not res.rejected:
-            kept = scan.with_ranges(np.where(removed, np.nan, scan.ranges)) if removed.any() else scan
+            kept = scan.without(removed) if removed.any() else scan
             updated = self.slam.update_map(kept, res.pose)
         t4 = time.perf_counter()
         if self.loops is not None:  # its time is in the loop closure's own counters (summary.json loop_closure)
@@ -396,6 +405,9 @@ class RunResult:
     frontend_trajectory: Trajectory | None = None
     #: the loop closure's result (graph, loops, counters), None with loop closure off
     loop: LoopResult | None = None
+    #: wall time numba spent compiling kernels during the run, s (0 when every kernel came from the
+    #: cache; :func:`dynslam2d.jitcache.compile_seconds`) — inside ``wall_time_s`` and the first scans' times.
+    kernel_compile_s: float = 0.0
 
     @property
     def n_scans(self) -> int:
@@ -441,6 +453,7 @@ class RunResult:
             "processing_ms_median": float(np.median(total)) if total.size else None,
             "processing_ms_p95": float(np.percentile(total, 95)) if total.size else None,
             **_steady_speed(total),
+            "kernel_compile_s": round(self.kernel_compile_s, 3),
             "stage_ms_median": stage_ms,
             "map_updates": int(self.map_updated.sum()),
             "match_failures": int(self.rejected.sum()),
@@ -527,6 +540,8 @@ def keep_optimised(loop: LoopResult, front_logodds: np.ndarray, opt_logodds: np.
 
 
 ProgressFn = Callable[[int, StepResult], None]
+#: :func:`run` returns the allocator's free heap memory to the OS every this many scans (memtrim.py).
+TRIM_EVERY_SCANS = 1000
 
 
 class RunObserver(Protocol):
@@ -567,6 +582,7 @@ def run(
     conf = {"low_support": GrowArray(np.bool_), "degenerate": GrowArray(np.bool_), "lost": GrowArray(np.bool_),
             "degeneracy": GrowArray(np.float64)}
     t0 = time.perf_counter()
+    compile0 = compile_seconds()
     last_scan: Scan | None = None
     for scan in source:
         step = pipe.process(scan)
@@ -590,6 +606,10 @@ def run(
             obs.on_scan(scan, step, pipe)
         if progress is not None:
             progress(len(stamps), step)
+        if len(stamps) % TRIM_EVERY_SCANS == 0:
+            release_free_memory()  # a long log's freed temporaries back to the OS (memtrim.py; ~ms per call)
+    compile_s = compile_seconds() - compile0
+    release_free_memory()  # the loop's freed temporaries, before the observers' end-of-run work (memtrim.py)
     flag_arr = flags.view().copy()
     logodds, _ = pipe.slam.logodds(0)
     grid = pipe.gridmap()
@@ -628,6 +648,7 @@ def run(
         body=pipe.body.report(last_scan),
         frontend_trajectory=frontend_trajectory,
         loop=loop,
+        kernel_compile_s=compile_s,
     )
     for obs in observers:
         obs.on_finish(result, pipe)

@@ -35,6 +35,7 @@ from dynslam2d.pipeline import TRACK_COLUMNS, RunResult
 from dynslam2d.slam.cleanup import CleanResult
 from dynslam2d.types import ScanSource
 from dynslam2d.viz.collect import RemovedPointsCollector
+from dynslam2d.memtrim import release_free_memory
 from dynslam2d.viz.figures import write_figures
 
 
@@ -234,6 +235,7 @@ def write_results(
     summary["status"] = "complete"
     paths["summary.json"] = write_text_atomic(out / "summary.json", metrics_json(summary))
     # Figures: map.png, tracks.png and, with ground truth, errors.png (dynslam2d.viz.figures).
+    release_free_memory()  # figures allocate much; start them from a trimmed heap (memtrim.py)
     paths.update(write_figures(run, out, gt, collector, cleaned=cleaned))
     # run.json LAST: a folder whose run.json does not say "complete" lacks files (docs/reliability.md).
     paths["run.json"] = write_marker(out, "complete", scans=run.n_scans, input=run.source.origin,

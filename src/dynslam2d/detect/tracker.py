@@ -39,7 +39,7 @@ import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
+from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
 
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.measure import (
