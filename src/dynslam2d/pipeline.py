@@ -35,6 +35,7 @@ from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
 from dynslam2d.slam.confidence import FLAGS
+from dynslam2d.slam.erasure import EvidenceLedger
 from dynslam2d.slam.confidence import summarize as summarize_confidence
 from dynslam2d.types import Box, Pose2D, Scan, ScanSource, SourceMeta, Track
 
@@ -148,6 +149,11 @@ class Pipeline:
         self.body = BodyFilter(self.config.detect.footprint)
         self._moving: list[Track] = []  # tracks in M after the previous scan
         self._last_stamp: float | None = None
+        mem = self.config.detect.memory
+        #: retroactive erasure of what tracks wrote while they stood (slam/erasure.py; None = off)
+        self.ledger: EvidenceLedger | None = EvidenceLedger(
+            mem, self.config.slam.laser_min_dist, self.config.slam.laser_max_dist) if (
+            mem.erase and self.config.filter.mode != "none") else None
 
     def _exclude(self, scan: Scan, pose: Pose2D, tracks: list[Track], dt: float,
                  cache: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -198,9 +204,19 @@ class Pipeline:
         t3 = time.perf_counter()
         # 5. map update with the filtered scan only.
         updated = False
+        led = self.ledger
+        if led is not None:  # what a track wrote while it stood is taken out once it moves (slam/erasure.py)
+            removing = {t.id for t in moving} if filter_active(self.config.filter, len(moving)) else set()
+            led.erase_entering(tracks, removing, scan.stamp, self.slam.map)
+            led.observe(tracks, removing, scan.stamp)
         if not res.rejected:
             kept = scan.with_ranges(np.where(removed, np.nan, scan.ranges)) if removed.any() else scan
+            pending = None
+            if led is not None and tracks and self.slam.needs_map_update(res.pose):
+                pending = led.before_update(scan, res.pose, tracks, removed, self.slam.map)
             updated = self.slam.update_map(kept, res.pose)
+            if pending is not None and updated:
+                led.after_update(pending, self.slam.map)
         t4 = time.perf_counter()
         self._moving = moving
         self._last_stamp = scan.stamp
@@ -240,6 +256,9 @@ class Pipeline:
 
 #: Columns of :attr:`RunResult.track_rows` and of tracks.csv.
 TRACK_COLUMNS = ("stamp", "id", "state", "x", "y", "heading", "length", "width", "vx", "vy", "in_M")
+#: tracks.csv's columns: :data:`TRACK_COLUMNS` and ``remembered`` (1 = in M only by track memory: it
+#: moved before and has stopped, docs/maps.md).
+TRACK_CSV_COLUMNS = TRACK_COLUMNS + ("remembered",)
 
 
 def _steady_speed(total_ms: np.ndarray, warmup: int = 10) -> dict[str, float | None]:
@@ -312,6 +331,10 @@ class RunResult:
                                     self.slam_stats.get("lost_events", 0), self.slam_stats.get("relocalisations", 0),
                                     c.low_confidence_share, c.low_confidence_stretch)
     body: dict[str, object] = field(default_factory=dict)
+    #: track memory and retroactive erasure (docs/maps.md): counters for summary.json's ``memory`` block
+    memory: dict[str, object] = field(default_factory=dict)
+    #: (H, W) bool over ``grid``: cells whose evidence retroactive erasure took out (None = erasure off)
+    erased: np.ndarray | None = None
 
     @property
     def n_scans(self) -> int:
@@ -375,7 +398,22 @@ class RunResult:
             "odometry_detail": self.source.extra.get("odometry"),
             "trajectory_frame": "laser",
             "pose_confidence": self.pose_confidence(),
+            **({"memory": dict(self.memory)} if self.memory else {}),
         }
+
+
+def _memory_report(result: RunResult, pipe: Pipeline) -> None:
+    """Fill ``result.memory`` / ``result.erased`` from the tracker's memory and the erasure ledger."""
+    mc = pipe.config.detect.memory
+    rows = result.track_rows
+    remembered = 0
+    if isinstance(rows, TrackRows) and len(rows):
+        remembered = len(np.unique(rows.array()["id"][rows.remembered()]))
+    result.memory = {"enabled": mc.enabled, "erase": pipe.ledger is not None, "remembered_tracks": int(remembered)}
+    if pipe.ledger is not None:
+        result.memory.update(pipe.ledger.summary())
+        g = result.grid
+        result.erased = pipe.ledger.erased_mask(g.origin, g.shape, g.resolution)
 
 
 ProgressFn = Callable[[int, StepResult], None]
@@ -434,7 +472,7 @@ def run(
         for t in step.tracks:
             b = t.box
             track_rows.append((step.stamp, t.id, t.state, b.px, b.py, b.theta, b.length, b.width,
-                               float(t.velocity[0]), float(t.velocity[1]), bool(t.in_m)))
+                               float(t.velocity[0]), float(t.velocity[1]), bool(t.in_m)), remembered=t.remembered)
         for k, v in step.timings.items():
             timings.setdefault(k, GrowArray(np.float64)).append(v)
         for obs in observers:
@@ -466,6 +504,7 @@ def run(
         slam_stats={"lost_events": pipe.slam.lost_events, "relocalisations": pipe.slam.relocalisations},
         body=pipe.body.report(last_scan),
     )
+    _memory_report(result, pipe)
     for obs in observers:
         obs.on_finish(result, pipe)
     return result

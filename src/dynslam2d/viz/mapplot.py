@@ -117,6 +117,7 @@ def plot_map(
     low_support: np.ndarray | None = None,
     lost: np.ndarray | None = None,
     warning: str | None = None,
+    memory_erased: np.ndarray | None = None,
 ) -> Path:
     """Write a PNG of ``grid`` with trajectories, track paths and removed points.
 
@@ -135,6 +136,9 @@ def plot_map(
         low_support, lost: (n,) bool per trajectory pose: poses matched with low support are
             marked in :data:`style.LOW_SUPPORT`, poses while lost in :data:`style.LOST`.
         warning: a line drawn in a red box over the map (the pose cannot be trusted).
+        memory_erased: (H, W) bool, same cells as ``grid``: cells whose evidence retroactive erasure
+            took out during the run (what a parked object wrote before it left, docs/maps.md), drawn in
+            :data:`style.MEMORY_ERASED` (under the clean-up's cells).
     """
     import matplotlib
 
@@ -149,6 +153,15 @@ def plot_map(
     ax.imshow(occupancy_image(grid), cmap="gray", vmin=0.0, vmax=1.0, origin="lower",
               extent=extent, interpolation="nearest")
     handles: list[Any] = []
+    if memory_erased is not None and memory_erased.shape == grid.shape and memory_erased.any():
+        from matplotlib.colors import to_rgba
+
+        over = np.zeros(memory_erased.shape + (4,))
+        over[memory_erased] = to_rgba(style.MEMORY_ERASED)
+        ax.imshow(over, origin="lower", extent=extent, interpolation="nearest", zorder=1)
+        n_me = int(memory_erased.sum())
+        handles.append(Patch(color=style.MEMORY_ERASED,
+                             label=f"erased when a parked object left ({n_me * grid.resolution ** 2:.2f} m²)"))
     if erased is not None and erased.shape == grid.shape and erased.any():
         from matplotlib.colors import to_rgba
 
