@@ -248,3 +248,30 @@ def test_a_parked_object_that_leaves_is_erased_from_the_online_map(tmp_path):
     assert rows[0][-1] == "remembered"
     assert any(r[-1] == "1" for r in rows[1:])  # the cart stands again at the end, remembered
     assert paths["map.png"].exists() and paths["errors.png"].exists()
+
+
+def test_mover_recall_counts_stopped_movers_and_seen_ones_apart():
+    """Two movers walk in scans 0-1 and stand in 2-3; mover 1 is seen walking, mover 2 is not (0 hits):
+    its standing beams count as stopped but not as 'seen stopped'."""
+    from dynslam2d.eval.motionclass import removal_by_motion
+    from dynslam2d.sim.simulation import _MOVER_ROW_DTYPE as MOVER_ROW_DTYPE
+
+    stamps = np.array([0.0, 0.1, 0.2, 0.3])
+    rows = []
+    for i, t in enumerate(stamps):
+        for mid in (1, 2):
+            v = 1.0 if i < 2 else 0.0
+            hits = (5 if mid == 1 else 0) if i < 2 else 5
+            rows.append((t, mid, "person", 0.0, 0.0, 0.0, 0.5, 0.5, v, 0.0, hits))
+    mover_rows = np.array(rows, dtype=MOVER_ROW_DTYPE)
+    labels = np.zeros((4, 20), dtype=np.int64)
+    labels[:2, 0:5] = 1
+    labels[2:, 0:5] = 1
+    labels[2:, 10:15] = 2
+    removed = np.zeros_like(labels, dtype=bool)
+    removed[:, 0:5] = True  # mover 1 removed walking and stopped; mover 2 never
+    m = removal_by_motion(removed, labels, stamps, mover_rows)
+    assert m.n_walking == 10 and m.n_stopped == 20
+    assert m.mover_recall == pytest.approx(20 / 30)
+    assert m.n_seen_stopped == 10 and m.n_removed_seen_stopped == 10
+    assert m.seen_mover_recall == pytest.approx(1.0)
