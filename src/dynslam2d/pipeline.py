@@ -207,8 +207,8 @@ class Pipeline:
         led = self.ledger
         if led is not None:  # what a track wrote while it stood is taken out once it moves (slam/erasure.py)
             removing = {t.id for t in moving} if filter_active(self.config.filter, len(moving)) else set()
-            led.erase_entering(tracks, removing, scan.stamp, self.slam.map)
             led.observe(tracks, removing, scan.stamp)
+            led.erase_entering(tracks, removing, scan.stamp, self.slam.map)
         if not res.rejected:
             kept = scan.with_ranges(np.where(removed, np.nan, scan.ranges)) if removed.any() else scan
             pending = None

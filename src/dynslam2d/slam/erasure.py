@@ -88,6 +88,7 @@ class EvidenceLedger:
         self.laser_max_dist = float(laser_max_dist)
         self._ledgers: dict[int, _Ledger] = {}
         self._ended: dict[int, _Ledger] = {}
+        self._first: dict[int, tuple[float, float, float]] = {}  # live track id → box where first reported
         #: absolute finest-level cells whose evidence was erased (for map.png), with the count of events
         self.erased_cells: set[tuple[int, int]] = set()
         self.stats = {"erasures": 0, "tracks_erased": 0, "cells_changed": 0, "cells_to_unknown": 0,
@@ -132,11 +133,14 @@ class EvidenceLedger:
                 per_track.setdefault(t.id, []).append((c, before, uidx))
         for t in mine:
             if t.id in per_track:
-                led = self._ledgers.get(t.id)
-                if led is None:
-                    led = _Ledger(t.id, _box_key(t), _box_key(t), t.stamp, [_LevelRecord() for _ in hmap.levels])
-                    self._ledgers[t.id] = led
+                if t.id not in self._ledgers:
+                    self._ledgers[t.id] = self._new_ledger(t, t.stamp, len(hmap.levels))
         return PendingUpdate(per_track) if per_track else None
+
+    def _new_ledger(self, t: Track, stamp: float, n_levels: int) -> _Ledger:
+        """An empty ledger of ``t``; its first box is where the track was first reported."""
+        return _Ledger(t.id, self._first.get(t.id, _box_key(t)), _box_key(t), stamp,
+                       [_LevelRecord() for _ in range(n_levels)])
 
     @staticmethod
     def _read(lv, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -184,6 +188,11 @@ class EvidenceLedger:
     def observe(self, tracks: list[Track], removing: set[int], stamp: float) -> None:
         """Keep each live track's last box; move ledgers of ended tracks aside; drop old ones."""
         live = {t.id: t for t in tracks}
+        for t in tracks:
+            if t.id not in self._first:
+                self._first[t.id] = _box_key(t)
+        if len(self._first) > len(live):
+            self._first = {tid: b for tid, b in self._first.items() if tid in live}
         for tid in list(self._ledgers):
             t = live.get(tid)
             if t is None:
@@ -209,7 +218,7 @@ class EvidenceLedger:
                 continue
             led = self._ledgers.get(t.id)
             if led is None:
-                led = _Ledger(t.id, _box_key(t), _box_key(t), stamp, [_LevelRecord() for _ in hmap.levels])
+                led = self._new_ledger(t, stamp, len(hmap.levels))
                 self._ledgers[t.id] = led
             x, y = float(t.box.px), float(t.box.py)
             if led.m_start is None:
