@@ -7,7 +7,7 @@ cleaned map, and the removed shares of ``metrics.json``'s ``removal_by_motion``:
 movers, stopped movers (they moved before), movers with stopped ones counted as movers, the
 same counting a stopped mover only once the sensor saw it walk, and static structure.
 
-    python benchmarks/bench_stopgo.py sim:stop-and-go sim:parking [--set detect.segment.max_extent=5.6]
+    python benchmarks/bench_stopgo.py sim:stop-and-go sim:parking [--seed N] [--set detect.segment.max_extent=5.6]
 """
 
 from __future__ import annotations
@@ -44,10 +44,11 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("inputs", nargs="+")
     ap.add_argument("--set", action="append", default=[], help="KEY=VALUE config override (both runs)")
+    ap.add_argument("--seed", type=int, default=None, help="simulator seed (default: the scene's own)")
     args = ap.parse_args()
     for inp in args.inputs:
         for memory in (False, True):
-            src = open_source(inp)
+            src = open_source(inp, seed=args.seed)
             cfg = _config(memory, args.set)
             rec = CleanupRecorder(cfg.clean)
             t0 = time.perf_counter()
@@ -57,9 +58,13 @@ def main() -> None:
             m = compute_metrics(result, gt)
             a = m["alignment"]
             mc = map_metrics(rec.result.grid, gt.static_map, transform=Pose2D(a["x"], a["y"], a["theta"]))
-            r = m["removal_by_motion"]
+            nan = float("nan")
+            r = m.get("removal_by_motion") or {k: nan for k in ("walking_recall", "stopped_removed_share",
+                                                                 "mover_recall", "seen_mover_recall")}
+            if "static_removed_share" not in r:  # a scene without movers: every removed beam is static
+                r["static_removed_share"] = float(result.removed.mean()) if result.removed.size else 0.0
             mem = result.memory
-            print(f"{inp} memory {'on ' if memory else 'off'}: {result.n_scans} scans {wall:.1f} s, "
+            print(f"{inp}{'' if args.seed is None else f' seed {args.seed}'} memory {'on ' if memory else 'off'}: {result.n_scans} scans {wall:.1f} s, "
                   f"ATE {m['ate_rmse_m']:.4f} m, ghost {m['map']['ghost_area_m2']:.3f} -> {mc.ghost_area_m2:.3f} m2, "
                   f"F1 {m['map']['f1']:.4f} -> {mc.f1:.4f} (online -> cleaned)")
             print(f"    removed: walking {r['walking_recall']:.3f}, stopped {r['stopped_removed_share']:.3f}, "

@@ -73,10 +73,15 @@ class MemoryConfig(BaseModel):
         0.5, ge=0.0,
         description="Erase a track's evidence only once it moved this far from where it entered M, m.",
     )
+    erase_min_share: float = Field(
+        0.5, ge=0.0,
+        description="A cell's evidence is erased only where what the track wrote is at least this share of the "
+        "cell's log-odds (a wall cell that many scans hit keeps the few hits a false track added to it).",
+    )
     link_margin: float = Field(
         0.3, ge=0.0,
-        description="The evidence of an ended track (lost while parked) is erased with a track entering M that "
-        "was born within this distance of its box, m.",
+        description="The evidence of an ended track (lost while parked; only tracks that were confirmed) is "
+        "erased with a track entering M that was first seen within this distance of its box, m.",
     )
     ledger_keep_s: float = Field(
         600.0, gt=0.0,

@@ -18,13 +18,15 @@ Bookkeeping, per track and map level, at every map update (the pipeline calls
   hits touched it since (then erasure returns it to *unknown*).
 
 Erasure (:meth:`EvidenceLedger.erase_entering`) subtracts the recorded log-odds from each
-recorded cell — a cell that was free before the object stood there is free again, one
+recorded cell where they make up at least ``erase_min_share`` of the cell's log-odds (a wall
+cell that many scans hit keeps the few hits a false track added) — a cell that was free before the object stood there is free again, one
 that only the object made known is unknown again — and refreshes the probability cache
 of those cells. No other cell of any level changes. A track's evidence is erased when it
 is in the pipeline's removal set and has moved ``erase_min_travel`` from where it was
 first seen there (a false track that is in M for a moment without going anywhere erases
 nothing); evidence of a track that ended while the object stood (the robot drove away)
-is kept for ``ledger_keep_s`` and erased with a track that enters M where it stood.
+is kept for ``ledger_keep_s`` (only if the track was confirmed: tentative clutter is dropped) and
+erased with a track that enters M where it was first seen.
 
 Frames and units: cells are absolute level indices (cell (i, j) centred at
 (i·r_k, j·r_k) in the map frame, :mod:`dynslam2d.slam.grid`), stable when a level grows;
@@ -61,6 +63,7 @@ class _Ledger:
     levels: list[_LevelRecord]
     m_start: tuple[float, float] | None = None  # centre when first in the removal set, m
     linked: bool = False  # ended-track evidence already joined to a live track
+    confirmed: bool = False  # the track was reported confirmed at least once (not only tentative clutter)
 
     @property
     def n_cells(self) -> int:
@@ -196,11 +199,14 @@ class EvidenceLedger:
         for tid in list(self._ledgers):
             t = live.get(tid)
             if t is None:
-                self._ended[tid] = self._ledgers.pop(tid)
+                led = self._ledgers.pop(tid)
+                if led.confirmed:  # tentative clutter (wall fragments, noise) is never linked
+                    self._ended[tid] = led
             elif tid not in removing:
                 led = self._ledgers[tid]
                 led.last_box = _box_key(t)
                 led.last_seen = stamp
+                led.confirmed = led.confirmed or t.state != "tentative"
         keep = self.config.ledger_keep_s
         for tid in [i for i, led in self._ended.items() if stamp - led.last_seen > keep]:
             del self._ended[tid]
@@ -263,6 +269,10 @@ class EvidenceLedger:
             ok = (col >= 0) & (row >= 0) & (col < w) & (row < h)
             col, row, delta, pure, last = col[ok], row[ok], delta[ok], pure[ok], last[ok]
             cur = lv.logodds[row, col].astype(np.float64)
+            # a cell whose log-odds the track's hits make up only a small part of is the structure's
+            mine = delta >= self.config.erase_min_share * cur
+            col, row, delta, pure, last, cur = col[mine], row[mine], delta[mine], pure[mine], last[mine], cur[mine]
+            keys = keys[ok][mine]
             # unknown again: the track's hits made the cell known and nothing else touched it since
             unknown = pure & (lv.uidx[row, col] == last)
             new = np.where(unknown, 0.0, cur - delta).astype(np.float32)
@@ -272,7 +282,7 @@ class EvidenceLedger:
             if k == 0:
                 n0 = int(col.shape[0])
                 self.stats["cells_to_unknown"] += int(unknown.sum())
-                self.erased_cells.update(map(tuple, keys[ok].tolist()))
+                self.erased_cells.update(map(tuple, keys.tolist()))
             rec.cells.clear()
         self.stats["cells_changed"] += n0
         self.stats["erasures"] += 1
