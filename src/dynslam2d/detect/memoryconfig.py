@@ -83,6 +83,13 @@ class MemoryConfig(BaseModel):
         description="The evidence of an ended track (lost while parked; only tracks that were confirmed) is "
         "erased with a track entering M that was first seen within this distance of its box, m.",
     )
+    link_min_stand: float = Field(
+        1.0, ge=0.0,
+        description="… and only if that track stood where it was first seen (within link_margin) for at least "
+        "this long before it entered M (its centre then within link_margin + 0.5 m of where it was first seen), "
+        "s: a person born walking past a chair leg does not take the chair leg "
+        "with it.",
+    )
     ledger_keep_s: float = Field(
         600.0, gt=0.0,
         description="The evidence record of an ended track is kept this long for linking, s.",

@@ -58,6 +58,7 @@ class _Ledger:
 
     id: int
     first_box: tuple[float, float, float]  # centre x, y and half of the longer side where first seen, m
+    first_t: float  # stamp when the track was first reported, s
     last_box: tuple[float, float, float]  # the same where last seen, m
     last_seen: float  # stamp, s
     levels: list[_LevelRecord]
@@ -91,7 +92,7 @@ class EvidenceLedger:
         self.laser_max_dist = float(laser_max_dist)
         self._ledgers: dict[int, _Ledger] = {}
         self._ended: dict[int, _Ledger] = {}
-        self._first: dict[int, tuple[float, float, float]] = {}  # live track id → box where first reported
+        self._first: dict[int, tuple[tuple[float, float, float], float]] = {}  # id → (first box, its stamp)
         #: absolute finest-level cells whose evidence was erased (for map.png), with the count of events
         self.erased_cells: set[tuple[int, int]] = set()
         self.stats = {"erasures": 0, "tracks_erased": 0, "cells_changed": 0, "cells_to_unknown": 0,
@@ -142,8 +143,8 @@ class EvidenceLedger:
 
     def _new_ledger(self, t: Track, stamp: float, n_levels: int) -> _Ledger:
         """An empty ledger of ``t``; its first box is where the track was first reported."""
-        return _Ledger(t.id, self._first.get(t.id, _box_key(t)), _box_key(t), stamp,
-                       [_LevelRecord() for _ in range(n_levels)])
+        box, t0 = self._first.get(t.id, (_box_key(t), stamp))
+        return _Ledger(t.id, box, t0, _box_key(t), stamp, [_LevelRecord() for _ in range(n_levels)])
 
     @staticmethod
     def _read(lv, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -193,7 +194,7 @@ class EvidenceLedger:
         live = {t.id: t for t in tracks}
         for t in tracks:
             if t.id not in self._first:
-                self._first[t.id] = _box_key(t)
+                self._first[t.id] = (_box_key(t), stamp)
         if len(self._first) > len(live):
             self._first = {tid: b for tid, b in self._first.items() if tid in live}
         for tid in list(self._ledgers):
@@ -229,6 +230,10 @@ class EvidenceLedger:
             x, y = float(t.box.px), float(t.box.py)
             if led.m_start is None:
                 led.m_start = (x, y)
+                fx, fy, _ = led.first_box
+                # it stood where it was first seen before it moved: it may be what ended tracks saw parked
+                led.linked = not (stamp - led.first_t >= self.config.link_min_stand
+                                  and math.hypot(x - fx, y - fy) <= self.config.link_margin + 0.5)
             if math.hypot(x - led.m_start[0], y - led.m_start[1]) < self.config.erase_min_travel:
                 continue
             if not led.linked:
