@@ -275,3 +275,50 @@ def test_mover_recall_counts_stopped_movers_and_seen_ones_apart():
     assert m.mover_recall == pytest.approx(20 / 30)
     assert m.n_seen_stopped == 10 and m.n_removed_seen_stopped == 10
     assert m.seen_mover_recall == pytest.approx(1.0)
+
+
+def _box_scan(t: float, cx: float, cy: float, mode: str) -> Scan:
+    """A 0.6 m wide face at (cx, cy) in front of a ring wall at 8 m ("box"), hidden behind something at
+    2 m ("occluded"), or absent ("gone": the beams reach the wall)."""
+    r = np.full(N, 8.0)
+    d, b = math.hypot(cx, cy), math.atan2(cy, cx)
+    da = (ANGLES - b + math.pi) % (2 * math.pi) - math.pi
+    if mode == "box":
+        on = (np.abs(d * np.tan(da)) <= 0.3) & (np.abs(da) < 0.5)
+        r[on] = d / np.cos(da[on])
+    elif mode == "occluded":
+        r[np.abs(da) < 0.2] = 2.0
+    return Scan(stamp=t, angle_min=-math.pi, angle_increment=2 * math.pi / N, ranges=r, range_min=0.1,
+                range_max=20.0)
+
+
+@pytest.mark.parametrize("memory", [True, False])
+def test_a_remembered_track_coasts_where_it_stopped_until_its_place_is_seen_empty(memory):
+    from dynslam2d.detect.config import DetectConfig
+    from dynslam2d.detect.tracker import Tracker
+
+    cfg = DetectConfig()
+    cfg.memory.enabled = memory
+    tracker = Tracker(cfg)
+    t, seen = 0.0, []
+    plan = ([(4.0, -2.0 + 0.1 * i, "box") for i in range(40)] + [(4.0, 2.0, "box")] * 40
+            + [(4.0, 2.0, "occluded")] * 20 + [(4.0, 2.0, "gone")] * 3)
+    for cx, cy, mode in plan:
+        tracks = tracker.update(_box_scan(t, cx, cy, mode), Pose2D())
+        seen.append((t, mode, [k for k in tracks if math.hypot(k.box.px - cx, k.box.py - cy) < 0.8]))
+        t += 0.1
+    moving = [k for _, m, ks in seen[:40] for k in ks if k.in_m]
+    assert moving
+    tid = moving[-1].id
+    standing_late = [ks for tt, m, ks in seen[70:80]]
+    hidden = [ks for tt, m, ks in seen[80:100]]
+    if memory:
+        # stopped 3-4 s: still in M, remembered, same id; hidden 2 s (> max_coast_time 0.6 s): kept in place
+        assert all(len(ks) == 1 and ks[0].id == tid and ks[0].in_m and ks[0].remembered for ks in standing_late)
+        assert all(len(ks) == 1 and ks[0].id == tid and ks[0].state == "coasting" and ks[0].remembered
+                   for ks in hidden)
+        assert np.hypot(hidden[-1][0].box.px - 4.0, hidden[-1][0].box.py - 2.0) < 0.2
+    else:
+        assert all(not k.in_m for ks in standing_late for k in ks)
+        assert all(not ks for ks in hidden[10:])  # deleted after max_coast_time
+    assert not seen[-1][2]  # its place seen empty: no track there
