@@ -149,7 +149,7 @@ def _levels(slam):
 
 @pytest.mark.parametrize("free_before", [True, False])
 def test_erasure_takes_out_exactly_what_the_track_wrote(free_before):
-    """A ring wall at 5 m; an object at 2 m on some beams (a track not in M) for 10 scans, then the
+    """A ring wall at 5 m; an object at 2 m on some beams (a track not in M) for 15 scans, then the
     track enters M and moves away: its cells go back to what they were (free if scans saw them free
     before, unknown if only the object made them known); every other cell of every level is unchanged."""
     slam = HectorSlam(SlamConfig(map_levels=2))
@@ -161,7 +161,7 @@ def test_erasure_takes_out_exactly_what_the_track_wrote(free_before):
             slam.update_map(_ring(False, t), Pose2D(), force=True)
             t += 0.1
     snap_before = _levels(slam)
-    for _ in range(10):
+    for _ in range(15):  # it stands 1.5 s (> memory.link_min_stand) before it moves
         s = _ring(True, t)
         tr = [_track(t, 2.0, False, OBJECT)]
         led.observe(tr, set(), t)

@@ -90,6 +90,11 @@ class MemoryConfig(BaseModel):
         "s: a person born walking past a chair leg does not take the chair leg "
         "with it.",
     )
+    stand_speed: float = Field(
+        0.25, ge=0.0,
+        description="A track slower than this stands (for link_min_stand: only evidence written while a track "
+        "stood for link_min_stand is erased, and only such a track takes ended tracks' evidence with it), m/s.",
+    )
     ledger_keep_s: float = Field(
         600.0, gt=0.0,
         description="The evidence record of an ended track is kept this long for linking, s.",

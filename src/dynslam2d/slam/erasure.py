@@ -65,6 +65,7 @@ class _Ledger:
     m_start: tuple[float, float] | None = None  # centre when first in the removal set, m
     linked: bool = False  # ended-track evidence already joined to a live track
     confirmed: bool = False  # the track was reported confirmed at least once (not only tentative clutter)
+    skip: bool = False  # this stay in the removal set erases nothing (the track did not stand before it)
 
     @property
     def n_cells(self) -> int:
@@ -92,7 +93,8 @@ class EvidenceLedger:
         self.laser_max_dist = float(laser_max_dist)
         self._ledgers: dict[int, _Ledger] = {}
         self._ended: dict[int, _Ledger] = {}
-        self._first: dict[int, tuple[tuple[float, float, float], float]] = {}  # id → (first box, its stamp)
+        #: live track id → [box where it stands, stamp it began standing there, last stamp it stood there]
+        self._first: dict[int, list] = {}
         #: absolute finest-level cells whose evidence was erased (for map.png), with the count of events
         self.erased_cells: set[tuple[int, int]] = set()
         self.stats = {"erasures": 0, "tracks_erased": 0, "cells_changed": 0, "cells_to_unknown": 0,
@@ -143,7 +145,7 @@ class EvidenceLedger:
 
     def _new_ledger(self, t: Track, stamp: float, n_levels: int) -> _Ledger:
         """An empty ledger of ``t``; its first box is where the track was first reported."""
-        box, t0 = self._first.get(t.id, (_box_key(t), stamp))
+        box, t0, _ = self._first.get(t.id, (_box_key(t), stamp, stamp))
         return _Ledger(t.id, box, t0, _box_key(t), stamp, [_LevelRecord() for _ in range(n_levels)])
 
     @staticmethod
@@ -192,9 +194,16 @@ class EvidenceLedger:
     def observe(self, tracks: list[Track], removing: set[int], stamp: float) -> None:
         """Keep each live track's last box; move ledgers of ended tracks aside; drop old ones."""
         live = {t.id: t for t in tracks}
+        reach = self.config.link_margin + 0.5
         for t in tracks:
-            if t.id not in self._first:
-                self._first[t.id] = (_box_key(t), stamp)
+            a = self._first.get(t.id)
+            if a is None:
+                self._first[t.id] = [_box_key(t), stamp, stamp]
+            elif t.id not in removing and float(np.hypot(t.velocity[0], t.velocity[1])) < self.config.stand_speed:
+                if math.hypot(t.box.px - a[0][0], t.box.py - a[0][1]) <= reach:
+                    a[2] = stamp  # still standing where it stood
+                else:
+                    self._first[t.id] = [_box_key(t), stamp, stamp]  # standing at a new place
         if len(self._first) > len(live):
             self._first = {tid: b for tid, b in self._first.items() if tid in live}
         for tid in list(self._ledgers):
@@ -205,6 +214,7 @@ class EvidenceLedger:
                     self._ended[tid] = led
             elif tid not in removing:
                 led = self._ledgers[tid]
+                led.m_start, led.skip, led.linked = None, False, False  # out of the removal set (again)
                 led.last_box = _box_key(t)
                 led.last_seen = stamp
                 led.confirmed = led.confirmed or t.state != "tentative"
@@ -230,11 +240,16 @@ class EvidenceLedger:
             x, y = float(t.box.px), float(t.box.py)
             if led.m_start is None:
                 led.m_start = (x, y)
-                fx, fy, _ = led.first_box
-                # it stood where it was first seen before it moved: it may be what ended tracks saw parked
-                led.linked = not (stamp - led.first_t >= self.config.link_min_stand
-                                  and math.hypot(x - fx, y - fy) <= self.config.link_margin + 0.5)
-            if math.hypot(x - led.m_start[0], y - led.m_start[1]) < self.config.erase_min_travel:
+                (fx, fy, fh), f_t, last_t = self._first.get(t.id, (led.first_box, led.first_t, led.first_t))
+                led.first_box, led.first_t = (fx, fy, fh), f_t
+                # only what stood before it moved wrote evidence worth erasing (a person born walking enters
+                # M within a second: its few early hits are left to the clean-up pass), and only it may be
+                # what ended tracks saw parked where it stood
+                stood = (last_t - f_t >= self.config.link_min_stand
+                         and math.hypot(x - fx, y - fy) <= self.config.link_margin + 1.0)
+                led.skip = not stood
+                led.linked = not stood
+            if led.skip or math.hypot(x - led.m_start[0], y - led.m_start[1]) < self.config.erase_min_travel:
                 continue
             if not led.linked:
                 led.linked = True
