@@ -85,10 +85,10 @@ class MemoryConfig(BaseModel):
     )
     link_min_stand: float = Field(
         1.0, ge=0.0,
-        description="… and only if that track stood where it was first seen (within link_margin) for at least "
-        "this long before it entered M (its centre then within link_margin + 0.5 m of where it was first seen), "
-        "s: a person born walking past a chair leg does not take the chair leg "
-        "with it.",
+        description="A track's evidence is erased, and ended tracks' evidence linked to it, only if it stood "
+        "(slower than stand_speed, within link_margin + 0.5 m) for at least this long before it entered M and "
+        "entered M within link_margin + 1 m of that place, s: a person born walking past a chair leg neither "
+        "takes the chair leg with it nor has its own first steps erased.",
     )
     stand_speed: float = Field(
         0.25, ge=0.0,

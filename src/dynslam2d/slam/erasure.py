@@ -22,11 +22,13 @@ recorded cell where they make up at least ``erase_min_share`` of the cell's log-
 cell that many scans hit keeps the few hits a false track added) — a cell that was free before the object stood there is free again, one
 that only the object made known is unknown again — and refreshes the probability cache
 of those cells. No other cell of any level changes. A track's evidence is erased when it
-is in the pipeline's removal set and has moved ``erase_min_travel`` from where it was
-first seen there (a false track that is in M for a moment without going anywhere erases
-nothing); evidence of a track that ended while the object stood (the robot drove away)
-is kept for ``ledger_keep_s`` (only if the track was confirmed: tentative clutter is dropped) and
-erased with a track that enters M where it was first seen.
+is in the pipeline's removal set, *stood* before it entered it (slower than ``stand_speed``
+at one place for ``link_min_stand``: what a walker wrote in the second before it joined M
+is left to the clean-up pass) and has moved ``erase_min_travel`` from where it entered it
+(a false track that is in M for a moment without going anywhere erases nothing); evidence
+of a track that ended while the object stood (the robot drove away) is kept for
+``ledger_keep_s`` (only if the track was confirmed: tentative clutter is dropped) and erased
+with a track that stood where the ended track last was and then enters M.
 
 Frames and units: cells are absolute level indices (cell (i, j) centred at
 (i·r_k, j·r_k) in the map frame, :mod:`dynslam2d.slam.grid`), stable when a level grows;
