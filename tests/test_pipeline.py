@@ -70,8 +70,8 @@ def test_results_folder_holds_tracks_and_kept_mask(paper_runs, tmp_path):
         np.testing.assert_allclose(npz["stamps"], [s.stamp for s in sim.scans])
     with open(paths["tracks.csv"], newline="") as fh:
         rows = list(csv.reader(fh))
-    assert tuple(rows[0]) == TRACK_COLUMNS
-    assert any(r[-1] == "1" for r in rows[1:])  # some track is in M
+    assert tuple(rows[0]) == TRACK_COLUMNS + ("remembered",)
+    assert any(r[10] == "1" for r in rows[1:])  # some track is in M
     metrics = json.loads(paths["metrics.json"].read_text())
     assert metrics["removal"]["recall"] == pytest.approx(runs["default"][1]["removal"]["recall"])
 

@@ -40,6 +40,7 @@ from dynslam2d.slam import HectorSlam
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.confidence import FLAGS
+from dynslam2d.slam.erasure import EvidenceLedger
 from dynslam2d.slam.confidence import summarize as summarize_confidence
 from dynslam2d.slam.loops import LoopCloser, LoopResult
 from dynslam2d.types import Box, Pose2D, Scan, ScanSource, SourceMeta, Track
@@ -163,6 +164,11 @@ class Pipeline:
         self._last_stamp: float | None = None
         # loop closure behind the front end (slam/loops.py); it never changes the front end's poses or map
         self.loops = LoopCloser(self.config.loop, self.config.slam) if self.config.loop.enabled else None
+        mem = self.config.detect.memory
+        #: retroactive erasure of what tracks wrote while they stood (slam/erasure.py; None = off)
+        self.ledger: EvidenceLedger | None = EvidenceLedger(
+            mem, self.config.slam.laser_min_dist, self.config.slam.laser_max_dist) if (
+            mem.erase and self.config.filter.mode != "none") else None
 
     def _exclude(self, scan: Scan, pose: Pose2D, tracks: list[Track], dt: float,
                  cache: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -241,9 +247,19 @@ class Pipeline:
         t3 = time.perf_counter()
         # 5. map update with the filtered scan only.
         updated = False
+        led = self.ledger
+        if led is not None:  # what a track wrote while it stood is taken out once it moves (slam/erasure.py)
+            removing = {t.id for t in moving} if filter_active(self.config.filter, len(moving)) else set()
+            led.observe(tracks, removing, scan.stamp)
+            led.erase_entering(tracks, removing, scan.stamp, self.slam.map)
         if not res.rejected:
             kept = scan.without(removed) if removed.any() else scan
+            pending = None
+            if led is not None and tracks and self.slam.needs_map_update(res.pose):
+                pending = led.before_update(scan, res.pose, tracks, removed, self.slam.map)
             updated = self.slam.update_map(kept, res.pose)
+            if pending is not None and updated:
+                led.after_update(pending, self.slam.map)
         t4 = time.perf_counter()
         if self.loops is not None:  # its time is in the loop closure's own counters (summary.json loop_closure)
             self.loops.add(scan.stamp, res.pose, scan, removed, updated,
@@ -329,6 +345,9 @@ def find_body(scans: Iterable[Scan], config: Config | None = None, max_scans: in
 
 #: Columns of :attr:`RunResult.track_rows` and of tracks.csv.
 TRACK_COLUMNS = ("stamp", "id", "state", "x", "y", "heading", "length", "width", "vx", "vy", "in_M")
+#: tracks.csv's columns: :data:`TRACK_COLUMNS` and ``remembered`` (1 = in M only by track memory: it
+#: moved before and has stopped, docs/maps.md).
+TRACK_CSV_COLUMNS = TRACK_COLUMNS + ("remembered",)
 
 
 def _steady_speed(total_ms: np.ndarray, warmup: int = 10) -> dict[str, float | None]:
@@ -408,6 +427,10 @@ class RunResult:
     #: wall time numba spent compiling kernels during the run, s (0 when every kernel came from the
     #: cache; :func:`dynslam2d.jitcache.compile_seconds`) — inside ``wall_time_s`` and the first scans' times.
     kernel_compile_s: float = 0.0
+    #: track memory and retroactive erasure (docs/maps.md): counters for summary.json's ``memory`` block
+    memory: dict[str, object] = field(default_factory=dict)
+    #: (H, W) bool over ``grid``: cells whose evidence retroactive erasure took out (None = erasure off)
+    erased: np.ndarray | None = None
 
     @property
     def n_scans(self) -> int:
@@ -474,6 +497,7 @@ class RunResult:
             "trajectory_frame": "laser",
             "pose_confidence": self.pose_confidence(),
             **({"loop_closure": self.loop_summary()} if self.loop is not None else {}),
+            **({"memory": dict(self.memory)} if self.memory else {}),
         }
 
     def loop_summary(self) -> dict[str, object]:
@@ -539,6 +563,20 @@ def keep_optimised(loop: LoopResult, front_logodds: np.ndarray, opt_logodds: np.
     return keep
 
 
+def _memory_report(result: RunResult, pipe: Pipeline) -> None:
+    """Fill ``result.memory`` / ``result.erased`` from the tracker's memory and the erasure ledger."""
+    mc = pipe.config.detect.memory
+    rows = result.track_rows
+    remembered = 0
+    if isinstance(rows, TrackRows) and len(rows):
+        remembered = len(np.unique(rows.array()["id"][rows.remembered()]))
+    result.memory = {"enabled": mc.enabled, "erase": pipe.ledger is not None, "remembered_tracks": int(remembered)}
+    if pipe.ledger is not None:
+        result.memory.update(pipe.ledger.summary())
+        g = result.grid
+        result.erased = pipe.ledger.erased_mask(g.origin, g.shape, g.resolution)
+
+
 ProgressFn = Callable[[int, StepResult], None]
 #: :func:`run` returns the allocator's free heap memory to the OS every this many scans (memtrim.py).
 TRIM_EVERY_SCANS = 1000
@@ -599,7 +637,7 @@ def run(
         for t in step.tracks:
             b = t.box
             track_rows.append((step.stamp, t.id, t.state, b.px, b.py, b.theta, b.length, b.width,
-                               float(t.velocity[0]), float(t.velocity[1]), bool(t.in_m)))
+                               float(t.velocity[0]), float(t.velocity[1]), bool(t.in_m)), remembered=t.remembered)
         for k, v in step.timings.items():
             timings.setdefault(k, GrowArray(np.float64)).append(v)
         for obs in observers:
@@ -650,6 +688,7 @@ def run(
         loop=loop,
         kernel_compile_s=compile_s,
     )
+    _memory_report(result, pipe)
     for obs in observers:
         obs.on_finish(result, pipe)
     return result

@@ -137,7 +137,7 @@ TRACK_STATES = ("tentative", "confirmed", "coasting", "deleted")
 _TRACK_DTYPE = np.dtype([
     ("stamp", np.float64), ("id", np.int64), ("state", np.int8), ("x", np.float64), ("y", np.float64),
     ("heading", np.float64), ("length", np.float64), ("width", np.float64), ("vx", np.float64),
-    ("vy", np.float64), ("in_M", np.bool_),
+    ("vy", np.float64), ("in_M", np.bool_), ("remembered", np.bool_),
 ])
 
 
@@ -145,7 +145,9 @@ class TrackRows(Sequence[tuple]):
     """Rows ``(stamp, id, state, x, y, heading, length, width, vx, vy, in_M)`` in a structured array.
 
     Every number is kept as float64 (tracks.csv is identical to the one a list of tuples
-    gives), the state as a small integer: 74 bytes per row instead of ~500. Rows read back as tuples of Python values.
+    gives), the state as a small integer: 75 bytes per row instead of ~500. Rows read back as tuples of Python values.
+    Beside each row a flag ``remembered`` (the track is in M only by track memory, docs/maps.md):
+    :meth:`remembered`, tracks.csv's last column.
     """
 
     def __init__(self) -> None:
@@ -161,9 +163,10 @@ class TrackRows(Sequence[tuple]):
             self._state_codes[state] = code
         return code
 
-    def append(self, row: Sequence[object]) -> None:
+    def append(self, row: Sequence[object], remembered: bool = False) -> None:
         stamp, tid, state, x, y, th, ln, wd, vx, vy, in_m = row
-        self._rows.append((stamp, tid, self._code(str(state)), x, y, th, ln, wd, vx, vy, bool(in_m)))
+        self._rows.append((stamp, tid, self._code(str(state)), x, y, th, ln, wd, vx, vy, bool(in_m),
+                           bool(remembered)))
 
     def __len__(self) -> int:
         return len(self._rows)
@@ -185,6 +188,10 @@ class TrackRows(Sequence[tuple]):
     def array(self) -> np.ndarray:
         """The rows as a structured array (fields as in :data:`TRACK_COLUMNS`; ``state`` coded)."""
         return self._rows.view()
+
+    def remembered(self) -> np.ndarray:
+        """(n,) bool: the row's track is in M only because it moved before and stopped (track memory)."""
+        return self._rows.view()["remembered"]
 
     def state_names(self) -> list[str]:
         """State name of each code in :meth:`array`'s ``state`` field."""

@@ -31,7 +31,7 @@ from dynslam2d.io.mapfile import write_map
 from dynslam2d.io.outputs import read_marker, write_marker
 from dynslam2d.io.summary import input_report
 from dynslam2d.io.trajectory import Trajectory, write_tum
-from dynslam2d.pipeline import TRACK_COLUMNS, RunResult
+from dynslam2d.pipeline import TRACK_CSV_COLUMNS, RunResult
 from dynslam2d.slam.cleanup import CleanResult
 from dynslam2d.types import ScanSource
 from dynslam2d.viz.collect import RemovedPointsCollector
@@ -117,14 +117,18 @@ def compute_metrics(run: RunResult, gt: GroundTruthFiles) -> dict[str, Any]:
 
 
 def tracks_csv(run: RunResult) -> str:
-    """tracks.csv text: one row per (scan, live track), columns :data:`TRACK_COLUMNS` (map frame)."""
+    """tracks.csv text: one row per (scan, live track), columns :data:`TRACK_CSV_COLUMNS` (map frame)."""
+    from dynslam2d.records import TrackRows
+
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(TRACK_COLUMNS)
-    for row in run.track_rows:
+    w.writerow(TRACK_CSV_COLUMNS)
+    rows = run.track_rows
+    mem = rows.remembered().tolist() if isinstance(rows, TrackRows) else [False] * len(rows)
+    for row, rem in zip(rows, mem):
         stamp, tid, state, x, y, th, ln, wd, vx, vy, in_m = row
         w.writerow([repr(stamp), tid, state, f"{x:.4f}", f"{y:.4f}", f"{th:.4f}", f"{ln:.3f}", f"{wd:.3f}",
-                    f"{vx:.4f}", f"{vy:.4f}", int(in_m)])
+                    f"{vx:.4f}", f"{vy:.4f}", int(in_m), int(rem)])
     return buf.getvalue()
 
 

@@ -376,6 +376,8 @@ class Track:
         m_reason: why it is or is not in M (human-readable).
         beams: indices of the scan beams assigned to this track in this scan (empty when coasting).
         n_points: len(beams).
+        remembered: True if the track is in M only because it moved before and has stopped (track
+            memory, docs/maps.md).
     """
 
     id: int
@@ -392,6 +394,7 @@ class Track:
     m_reason: str
     beams: np.ndarray
     n_points: int
+    remembered: bool = False
 
     @property
     def center(self) -> np.ndarray:

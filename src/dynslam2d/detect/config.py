@@ -21,6 +21,8 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from dynslam2d.detect.memoryconfig import MemoryConfig
+
 
 class SegmentConfig(BaseModel):
     """Parameters of :func:`dynslam2d.detect.segment.segment_scan` (units in each description)."""
@@ -541,6 +543,9 @@ class DetectConfig(BaseModel):
     tracker: TrackerConfig = Field(default_factory=TrackerConfig, description="Kalman tracking and the set M.")
     footprint: FootprintConfig = Field(
         default_factory=FootprintConfig, description="The robot's own body: footprint polygon, automatic detection."
+    )
+    memory: MemoryConfig = Field(
+        default_factory=MemoryConfig, description="Track memory through stops and retroactive erasure (docs/maps.md)."
     )
 
     @model_validator(mode="after")

@@ -143,6 +143,12 @@ class _Track:
     probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
     p_finite: bool = True  # every entry of P is finite (checked where P changes)
     merged: bool = False  # left M when its detection joined long-standing structure (refuses such detections)
+    # track memory (detect.memory, docs/maps.md): kept in M through a stop
+    remembered: bool = False  # in M only because it moved before (stopped for m_exit_time or longer)
+    m_start_xy: tuple[float, float] | None = None  # centre where it last entered M, m
+    m_time: float = 0.0  # time spent in M over its updates, s
+    m_travel: float = 0.0  # largest distance of its centre from m_start_xy while in M, m
+    m_last_t: float | None = None  # stamp of its last update in M, s
 
 
 def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
@@ -179,6 +185,7 @@ class Tracker:
         self._cur_ref = None
         self._map: MapView | None = None  # the SLAM map given with the current scan (read only)
         self._pose: Pose2D | None = None
+        self._scan: Scan | None = None
         self._pose_hist: deque = deque()  # (stamp, x, y, θ) of the last still_time seconds
         self._laser_still = False
         self._dt = 0.0
@@ -232,6 +239,7 @@ class Tracker:
             self._body_near = self._body_grown
         self._map = map_view if self.config.tracker.map_evidence else None
         self._pose = pose
+        self._scan = scan
         self._laser_still = self._still(float(scan.stamp), pose)
         st.scans += 1
         t = float(scan.stamp)
@@ -336,12 +344,34 @@ class Tracker:
         P = np.array([k.P for k in self._tracks])
         X = X @ F.T
         P = F @ P @ F.T + Q
+        if self.config.memory.enabled:
+            for i, k in enumerate(self._tracks):
+                if k.remembered and k.misses > 0:  # coasting through a stop: it stays where it stood
+                    X[i], P[i] = self._stationary_prediction(k, F, dt)
         fin = np.isfinite(P).all(axis=(1, 2)).tolist()
         for i, k in enumerate(self._tracks):
             k.x = X[i]
             k.P = P[i]
             k.p_finite = fin[i]
         self._stacked = (X, P)
+
+    def _stationary_prediction(self, k: _Track, F: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Prediction of a remembered (stopped) track that is not detected, with a stationary motion model
+        (detect.memory): the centre stays, the velocity is 0, the position covariance grows by a small random walk and is kept
+        at most ``memory.max_position_sigma``, the velocity covariance at most ``memory.max_speed_sigma``
+        (it may start again: the velocity keeps some uncertainty and its coupling to the position)."""
+        mc = self.config.memory
+        x = k.x.copy()
+        x[2:] = 0.0
+        P = F @ k.P @ F.T
+        P[0, 0] += mc.stationary_noise * dt
+        P[1, 1] += mc.stationary_noise * dt
+        sp = math.sqrt(max(P[0, 0], P[1, 1], 0.0))
+        sv = math.sqrt(max(P[2, 2], P[3, 3], 0.0))
+        a = min(1.0, mc.max_position_sigma / sp) if sp > 0.0 else 1.0
+        b = min(1.0, mc.max_speed_sigma / sv) if sv > 0.0 else 1.0
+        S = np.array([a, a, b, b])
+        return x, P * S[:, None] * S[None, :]  # S P S: still a covariance
 
     def _stack(self) -> tuple[np.ndarray, np.ndarray]:
         """(n, 4) states and (n, 4, 4) covariances of the live tracks (from the prediction when it ran)."""
@@ -721,7 +751,7 @@ class Tracker:
             k.map_xy.clear()
             k.map_t.clear()
             k.fast = 0
-            k.probation = k.in_m
+            k.probation = k.in_m and not k.remembered  # a remembered track re-acquired where it stopped
         k.kind = det.kind
         k.merged = False
         fc = cfg.fit
@@ -893,7 +923,8 @@ class Tracker:
                     st.deleted_tentative += 1
                     st.tracks_deleted += 1
                     continue
-            if k.state == COASTING and t - k.last_hit > tc.max_coast_time:
+            if k.state == COASTING and t - k.last_hit > tc.max_coast_time and not (
+                    k.remembered and self._remembered_coasts(k, t)):
                 st.deleted_coasting += 1
                 st.tracks_deleted += 1
                 continue
@@ -909,6 +940,8 @@ class Tracker:
                 continue
             if k.id in updated:
                 self._dynamic(k, speed, t)
+                if self.config.memory.enabled:
+                    self._memory_bookkeeping(k, t)
             keep.append(k)
         self._tracks = keep
 
@@ -970,13 +1003,17 @@ class Tracker:
             return
         if k.in_m:
             slow_for = 0.0 if k.slow_since is None else t - k.slow_since
-            if k.slow_since is not None and slow_for >= tc.m_exit_time:
+            if k.slow_since is not None and slow_for >= tc.m_exit_time and self._remember(k, slow_for):
+                pass  # stopped, stays in M (track memory; the reason says why)
+            elif k.slow_since is not None and slow_for >= tc.m_exit_time:
                 k.in_m = False
+                k.remembered = False
                 k.reason = (f"left M: speed {speed:.2f} m/s below {tc.v_exit_ratio * tc.v_min:.2f} for "
                             f"{slow_for:.1f} s")
             elif k.slow_since is not None:
                 k.reason = f"in M (hysteresis): slow ({speed:.2f} m/s) for {slow_for:.1f} s"
             else:
+                k.remembered = False  # moving again
                 disp = float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))
                 k.reason = f"in M: speed {speed:.2f} m/s, moved {disp:.2f} m since birth"
             return
@@ -1033,6 +1070,75 @@ class Tracker:
         if len(fr) < n or sum(fr) / len(fr) < tc.person_free_min or sum(ms) / len(ms) > tc.map_structure_max:
             return None
         return "free" if (sum(mf) + sum(mu)) / len(mf) >= 0.5 else None
+    def _remember(self, k: _Track, slow_for: float) -> bool:
+        """Track memory (detect.memory, docs/maps.md): a track in M that has stopped (slow for
+        ``m_exit_time``) stays in M if it earned it — in M for ``min_m_time``, travelled ``min_travel`` from
+        where it entered M, box no longer than ``max_size`` — until it has stood for ``expiry_s``. Sets
+        ``remembered`` and the reason; False = the track leaves M as without memory."""
+        mc = self.config.memory
+        if not mc.enabled:
+            return False
+        if not k.remembered:
+            eligible = (k.m_time >= mc.min_m_time and k.m_travel >= mc.min_travel
+                        and float(max(k.size[0], k.size[1])) <= mc.max_size)
+            if not eligible:
+                return False
+        if mc.expiry_s is not None and slow_for > mc.expiry_s:
+            k.remembered = False
+            return False
+        k.remembered = True
+        k.reason = (f"in M (remembered): stopped for {slow_for:.1f} s after moving {k.m_travel:.2f} m in M "
+                    f"for {k.m_time:.1f} s")
+        return True
+
+    def _memory_bookkeeping(self, k: _Track, t: float) -> None:
+        """Time in M and the largest distance from where the track entered M (the memory's evidence)."""
+        if not k.in_m:
+            k.m_start_xy, k.m_last_t, k.remembered = None, None, False
+            k.m_time = k.m_travel = 0.0
+            return
+        x0, x1 = float(k.x[0]), float(k.x[1])
+        if k.m_start_xy is None:
+            k.m_start_xy = (x0, x1)
+        elif k.m_last_t is not None:
+            k.m_time += t - k.m_last_t
+        k.m_last_t = t
+        k.m_travel = max(k.m_travel, math.hypot(x0 - k.m_start_xy[0], x1 - k.m_start_xy[1]))
+
+    def _remembered_coasts(self, k: _Track, t: float) -> bool:
+        """A remembered track without detection is kept at its stopped place for ``memory.coast_time``
+        unless this scan sees through its box (``memory.seen_through_share`` of the beams towards it pass
+        beyond it: the object is gone)."""
+        mc = self.config.memory
+        if t - k.last_hit > mc.coast_time:
+            return False
+        return not self._seen_through(k)
+
+    def _seen_through(self, k: _Track) -> bool:
+        """This scan's beams towards the track's box pass beyond its far side (laser frame of this scan)."""
+        scan, p = self._scan, self._pose
+        if scan is None or p is None or not p.is_finite():
+            return False
+        dx, dy = float(k.x[0]) - p.x, float(k.x[1]) - p.y
+        d = math.hypot(dx, dy)
+        half = 0.5 * float(max(k.size[0], k.size[1]))
+        inner = 0.5 * float(min(k.size[0], k.size[1]))
+        if d <= half + 0.1:
+            return False
+        bearing = math.atan2(dy, dx) - p.theta
+        hw = math.atan2(max(inner, 0.05), d)
+        diff = (scan.angles - bearing + math.pi) % _TWO_PI - math.pi
+        sel = np.abs(diff) <= hw
+        n = int(np.count_nonzero(sel))
+        if n < 3:
+            return False
+        far = d + half + 0.2
+        if far >= scan.range_max:
+            return False
+        r = scan.ranges[sel]
+        with np.errstate(invalid="ignore"):
+            beyond = ~np.isfinite(r) | (r > far)
+        return float(np.count_nonzero(beyond)) / n >= self.config.memory.seen_through_share
 
     def _still(self, t: float, pose: Pose2D | None) -> bool:
         """The laser has stayed within ``still_distance`` / ``still_angle`` of its pose over the last
@@ -1124,5 +1230,5 @@ class Tracker:
                              box=Box(px, py, theta, float(length), float(width)),
                              velocity=np.array([vx, vy]), covariance=k.P.copy(), age=t - k.born, hits=k.hits,
                              misses=k.misses, kind=k.kind, in_m=k.in_m, m_reason=k.reason, beams=beams,
-                             n_points=int(beams.shape[0])))
+                             n_points=int(beams.shape[0]), remembered=k.remembered and k.in_m))
         return out

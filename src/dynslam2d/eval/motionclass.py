@@ -97,6 +97,12 @@ class MotionRemoval:
         n_walking, n_standing, n_stopped, n_static: beams per class.
         n_removed_walking, n_removed_standing, n_removed_stopped, n_removed_static.
         speed_threshold: m/s.
+        mover_recall: removed / beams of walking and stopped movers together (stopped movers counted as
+            movers: what track memory must remove, docs/maps.md).
+        seen_mover_recall: the same, counting a stopped mover only once the sensor has seen it walk
+            (at least ``min_hits`` beams on it in a scan where it walked; NaN without per-scan hits):
+            a mover that walked out of view and stands where it is first seen cannot be known to move.
+        n_seen_stopped, n_removed_seen_stopped: beams of stopped movers seen walking before, and removed.
     """
 
     walking_recall: float
@@ -112,13 +118,34 @@ class MotionRemoval:
     n_removed_stopped: int
     n_removed_static: int
     speed_threshold: float
+    mover_recall: float = float("nan")
+    seen_mover_recall: float = float("nan")
+    n_seen_stopped: int = 0
+    n_removed_seen_stopped: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
+def _seen_walking_before(mover_rows: np.ndarray, stamps: np.ndarray, ids: np.ndarray, speed_threshold: float,
+                         min_hits: int) -> np.ndarray | None:
+    """(n, k) bool: mover k was seen walking (≥ ``min_hits`` beams on it while faster than the threshold) at
+    or before scan i; None when the rows have no ``hits``."""
+    if "hits" not in (mover_rows.dtype.names or ()):
+        return None
+    st = np.asarray(stamps, dtype=np.float64).reshape(-1)
+    seen = np.zeros((st.shape[0], ids.shape[0]), dtype=bool)
+    if mover_rows.shape[0] and st.shape[0]:
+        col = np.searchsorted(ids, mover_rows["id"])
+        row = np.clip(np.searchsorted(st, mover_rows["stamp"] - 1e-6), 0, st.shape[0] - 1)
+        ok = np.abs(st[row] - mover_rows["stamp"]) <= 1e-6
+        walk = (np.hypot(mover_rows["vx"], mover_rows["vy"]) > speed_threshold) & (mover_rows["hits"] >= min_hits)
+        seen[row[ok & walk], col[ok & walk]] = True
+    return np.logical_or.accumulate(seen, axis=0)
+
+
 def removal_by_motion(removed: np.ndarray, labels: np.ndarray, label_stamps: np.ndarray, mover_rows: np.ndarray,
-                      speed_threshold: float = SPEED_THRESHOLD) -> MotionRemoval:
+                      speed_threshold: float = SPEED_THRESHOLD, min_hits: int = 3) -> MotionRemoval:
     """Score removed beams per class (walking / standing / stopped movers, static structure).
 
     Args:
@@ -138,6 +165,22 @@ def removal_by_motion(removed: np.ndarray, labels: np.ndarray, label_stamps: np.
     def share(c: int) -> float:
         return r[c] / n[c] if n[c] else float("nan")
 
+    n_mov, r_mov = n[WALKING] + n[STOPPED], r[WALKING] + r[STOPPED]
+    seen = _seen_walking_before(mover_rows, label_stamps, ids, speed_threshold, min_hits)
+    n_ss = r_ss = 0
+    seen_recall = float("nan")
+    if seen is not None:
+        lab = np.asarray(labels)
+        dyn = lab >= 1
+        seen_beam = np.zeros(lab.shape, dtype=bool)
+        if dyn.any() and ids.shape[0]:
+            rows_i = np.nonzero(dyn)[0]
+            seen_beam[dyn] = seen[rows_i, np.clip(np.searchsorted(ids, lab[dyn]), 0, ids.shape[0] - 1)]
+        ss = (cls == STOPPED) & seen_beam
+        n_ss, r_ss = int(ss.sum()), int((rem & ss).sum())
+        den = n[WALKING] + n_ss
+        seen_recall = (r[WALKING] + r_ss) / den if den else float("nan")
+
     return MotionRemoval(
         walking_recall=share(WALKING),
         standing_removed_share=share(STANDING),
@@ -147,6 +190,10 @@ def removal_by_motion(removed: np.ndarray, labels: np.ndarray, label_stamps: np.
         n_removed_walking=r[WALKING], n_removed_standing=r[STANDING], n_removed_stopped=r[STOPPED],
         n_removed_static=r[STATIC],
         speed_threshold=float(speed_threshold),
+        mover_recall=r_mov / n_mov if n_mov else float("nan"),
+        seen_mover_recall=seen_recall,
+        n_seen_stopped=n_ss,
+        n_removed_seen_stopped=r_ss,
     )
 
 

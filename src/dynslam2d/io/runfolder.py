@@ -67,12 +67,14 @@ def read_tracks(run_dir: str | os.PathLike[str]) -> np.ndarray:
     with path.open(newline="", encoding="utf-8") as fh:
         rows = list(csv.reader(fh))
     names = list(TRACK_DTYPE.names or ())
-    if not rows or rows[0] != names:
-        raise DynSlamError(f"{path}: header is not {','.join(names)}")
+    # tracks.csv of this version ends with a column "remembered" (track memory); older ones do not
+    if not rows or rows[0] not in (names, names + ["remembered"]):
+        raise DynSlamError(f"{path}: header is not {','.join(names)}[,remembered]")
+    width = len(rows[0])
     out = np.zeros(len(rows) - 1, dtype=TRACK_DTYPE)
     for i, row in enumerate(rows[1:]):
-        if len(row) != len(names):
-            raise DynSlamError(f"{path}:{i + 2}: {len(row)} fields, expected {len(names)}")
+        if len(row) != width:
+            raise DynSlamError(f"{path}:{i + 2}: {len(row)} fields, expected {width}")
         try:
             out[i] = (float(row[0]), int(row[1]), row[2], *map(float, row[3:10]), row[10] == "1")
         except ValueError as err:

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from dynslam2d.eval.trajectory import ate
+from dynslam2d.gridmap import GridMap
 from dynslam2d.io.groundtruth import GroundTruthFiles
 from dynslam2d.pipeline import RunResult
 from dynslam2d.slam.cleanup import CleanResult
@@ -85,6 +86,7 @@ def write_figures(
         low_support=conf.get("low_support"), lost=conf.get("lost"),
         warning=pc.get("warning"),  # type: ignore[arg-type]
         loop_edges=_loop_segments(result),
+        memory_erased=_memory_erased(result, grid),
     )
     confirmed = sorted((p for p in all_paths.values() if p.ever_confirmed), key=lambda p: p.id)
     n_m = sum(p.ever_in_m for p in confirmed)
@@ -107,6 +109,15 @@ def write_figures(
                                           title=f"{result.source.origin} — filter {result.config.filter.mode}",
                                           intervals=spans, map_note=note)
     return paths
+
+
+def _memory_erased(result: RunResult, grid: GridMap) -> np.ndarray | None:
+    """The run's retroactively erased cells (docs/maps.md) on ``grid``'s cells (the online and the cleaned
+    map share cells, resolution and origin), or None."""
+    erased = getattr(result, "erased", None)
+    if erased is None or erased.shape != grid.shape:
+        return None
+    return erased
 
 
 __all__ = ["write_figures"]

@@ -24,9 +24,12 @@ def occupancy_image(grid: GridMap) -> np.ndarray:
 
 
 def draw_grey(ax: Any, img: np.ndarray, extent: tuple[float, float, float, float],
-              erased: np.ndarray | None = None, erased_colour: str | None = None, **kw: Any) -> Any:
+              erased: np.ndarray | None = None, erased_colour: str | None = None,
+              paint: Sequence[tuple[np.ndarray | None, str]] = (), **kw: Any) -> Any:
     """``imshow`` of the grey values ``img`` ((H, W), 0 … 1, row 0 at the bottom) through matplotlib's
-    "gray" colormap, with the cells of ``erased`` ((H, W) bool) painted in ``erased_colour``.
+    "gray" colormap, with the cells of ``erased`` ((H, W) bool) painted in ``erased_colour`` and
+    those of each ``(mask, colour)`` of ``paint`` in its colour (later layers over earlier ones;
+    ``erased`` last).
 
     Draws the same pixels as ``imshow(img, cmap="gray", vmin=0, vmax=1, interpolation="nearest")``
     with an opaque overlay of ``erased``, with a fraction of the memory: the image is handed over as
@@ -42,9 +45,11 @@ def draw_grey(ax: Any, img: np.ndarray, extent: tuple[float, float, float, float
     # the colormap's own lookup of a value in [0, 1]: index floor(v·N), 1.0 → N − 1
     idx = np.clip((np.clip(img, 0.0, 1.0) * n).astype(np.int64), 0, n - 1).astype(np.uint16)
     colours = grey(np.arange(n))
-    if erased is not None and erased_colour is not None and erased.shape == img.shape and erased.any():
-        idx[erased] = n
-        colours = np.vstack((colours, to_rgba(erased_colour)))
+    layers = list(paint) + ([(erased, erased_colour)] if erased_colour is not None else [])
+    for mask, colour in layers:
+        if mask is not None and mask.shape == img.shape and mask.any():
+            idx[mask] = len(colours)
+            colours = np.vstack((colours, to_rgba(colour)))
     return ax.imshow(idx, cmap=ListedColormap(colours), norm=NoNorm(), origin="lower", extent=extent,
                      interpolation="nearest", interpolation_stage="data", **kw)
 
@@ -144,6 +149,7 @@ def plot_map(
     lost: np.ndarray | None = None,
     warning: str | None = None,
     loop_edges: np.ndarray | None = None,
+    memory_erased: np.ndarray | None = None,
 ) -> Path:
     """Write a PNG of ``grid`` with trajectories, track paths and removed points.
 
@@ -164,6 +170,9 @@ def plot_map(
         warning: a line drawn in a red box over the map (the pose cannot be trusted).
         loop_edges: (k, 2, 2) loop closures as segments between the two keyframe positions (map
             frame, m), drawn in :data:`style.LOOP_EDGE`.
+        memory_erased: (H, W) bool, same cells as ``grid``: cells whose evidence retroactive erasure
+            took out during the run (what a parked object wrote before it left, docs/maps.md), drawn in
+            :data:`style.MEMORY_ERASED` (under the clean-up's cells).
     """
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
@@ -172,10 +181,19 @@ def plot_map(
     fw, fh = map_figure_size(extent)
     fig = new_figure((fw + 2.4, fh))
     ax = fig.subplots()
-    has_erased = erased is not None and erased.shape == grid.shape and bool(erased.any())
-    # one uint8 image with the erased cells painted in (opaque, so the same pixels as an overlay)
-    draw_grey(ax, occupancy_image(grid), extent, erased if has_erased else None, style.ERASED)
     handles: list[Any] = []
+    has_erased = erased is not None and erased.shape == grid.shape and bool(erased.any())
+    has_mem = memory_erased is not None and memory_erased.shape == grid.shape and bool(memory_erased.any())
+    # one image with the erased cells painted in (opaque, so the same pixels as an overlay); the
+    # clean-up's cells over retroactive erasure's
+    paint = [(m, c) for m, c, on in ((memory_erased, style.MEMORY_ERASED, has_mem), (erased, style.ERASED, has_erased))
+             if on]
+    draw_grey(ax, occupancy_image(grid), extent, paint=paint)
+    if has_mem:
+        assert memory_erased is not None
+        n_me = int(memory_erased.sum())
+        handles.append(Patch(color=style.MEMORY_ERASED,
+                             label=f"erased when a parked object left ({n_me * grid.resolution ** 2:.2f} m²)"))
     if has_erased:
         assert erased is not None
         n_er = int(erased.sum())

@@ -50,3 +50,6 @@ def rgb01(colour: str) -> tuple[float, float, float]:
     return r / 255.0, g / 255.0, b / 255.0
 #: Cells the offline clean-up pass erased from the online map (amber; docs/maps.md).
 ERASED = "#ffb000"
+#: Cells whose evidence retroactive erasure took out of the online map (a parked object that left;
+#: violet; docs/maps.md).
+MEMORY_ERASED = "#9b59d0"
