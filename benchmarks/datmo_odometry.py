@@ -70,27 +70,33 @@ class _Mocap:
         return np.array([np.interp(t, self.red.stamps, self.red.xy[:, j]) for j in range(2)])
 
 
-def _pipeline_row(bag: Path, mocap: _Mocap, odom: str, scale: float | str) -> tuple[float, float, float | None]:
-    """Full default pipeline with ``--odom odom --imu odom --laser-offset LASER --range-scale scale``:
-    (distance over 0.4 s windows / mocap, ATE RMSE m, the range scale used)."""
-    from dynslam2d.config import Config
+def _window_ratio_and_ate(mocap: _Mocap, st: np.ndarray, est: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """(distance over 0.4 s windows (5 scans) / mocap's where mocap moved, ATE RMSE m, mocap laser poses at ``st``)."""
     from dynslam2d.eval.trajectory import ate
-    from dynslam2d.io.sources import open_source
     from dynslam2d.io.trajectory import Trajectory
-    from dynslam2d.pipeline import run
-    from dynslam2d.types import Pose2D
 
-    src = open_source(bag, odom=odom, imu=odom, laser_offset=Pose2D(*LASER))
-    result = run(src, Config(laser={"range_scale": scale}))
-    st, est = result.trajectory.stamps, result.trajectory.poses
     ref = mocap.laser_at(st)
     k = 5
     d_ref = np.hypot(*(ref[k:, :2] - ref[:-k, :2]).T)
     d_est = np.hypot(*(est[k:, :2] - est[:-k, :2]).T)
     moving = d_ref > 0.1
     a = ate(Trajectory(mocap.t, mocap.laser), Trajectory(st, est))
+    return float(d_est[moving].sum() / d_ref[moving].sum()), float(a.trans.rmse), ref
+
+
+def _pipeline_row(bag: Path, mocap: _Mocap, odom: str, scale: float | str) -> tuple[float, float, float | None]:
+    """Full default pipeline with ``--odom odom --imu odom --laser-offset LASER --range-scale scale``:
+    (distance over 0.4 s windows / mocap, ATE RMSE m, the range scale used)."""
+    from dynslam2d.config import Config
+    from dynslam2d.io.sources import open_source
+    from dynslam2d.pipeline import run
+    from dynslam2d.types import Pose2D
+
+    src = open_source(bag, odom=odom, imu=odom, laser_offset=Pose2D(*LASER))
+    result = run(src, Config(laser={"range_scale": scale}))
+    ratio, rmse, _ = _window_ratio_and_ate(mocap, result.trajectory.stamps, result.trajectory.poses)
     used = (src.meta.extra.get("range_scale") or {}).get("used")
-    return float(d_est[moving].sum() / d_ref[moving].sum()), float(a.trans.rmse), used
+    return ratio, rmse, used
 
 
 def _range_scale_table(bags: list[tuple[str, Path]]) -> None:
@@ -110,9 +116,7 @@ def _range_scale_table(bags: list[tuple[str, Path]]) -> None:
 
 def _slam_row(bag: Path, mocap: _Mocap, scale: float = 1.0) -> list[str]:
     """Laser-only SLAM (ranges × scale): length, 0.4 s window ratio, similarity scale, ATE."""
-    from dynslam2d.eval.trajectory import ate
     from dynslam2d.io.sources import open_source
-    from dynslam2d.io.trajectory import Trajectory
     from dynslam2d.pipeline import run
 
     src = open_source(bag, odom="none", imu="none")
@@ -131,16 +135,10 @@ def _slam_row(bag: Path, mocap: _Mocap, scale: float = 1.0) -> list[str]:
         result = run(_List())
     else:
         result = run(src)
-    st, est = result.trajectory.stamps, result.trajectory.poses
-    ref = mocap.laser_at(st)
-    k = 5
-    d_ref = np.hypot(*(ref[k:, :2] - ref[:-k, :2]).T)
-    d_est = np.hypot(*(est[k:, :2] - est[:-k, :2]).T)
-    moving = d_ref > 0.1
-    ref_traj = Trajectory(mocap.t, mocap.laser)
-    a = ate(ref_traj, Trajectory(st, est))
-    return [f"{_length(est[:, :2]):.3f}", f"{d_est[moving].sum() / d_ref[moving].sum():.3f}",
-            f"{_similarity_scale(ref[:, :2], est[:, :2]):.3f}", f"{a.trans.rmse:.3f}"]
+    est = result.trajectory.poses
+    ratio, rmse, ref = _window_ratio_and_ate(mocap, result.trajectory.stamps, est)
+    return [f"{_length(est[:, :2]):.3f}", f"{ratio:.3f}", f"{_similarity_scale(ref[:, :2], est[:, :2]):.3f}",
+            f"{rmse:.3f}"]
 
 
 def _crispness(scans: list, mocap: _Mocap, k: float, dt: float) -> int:
