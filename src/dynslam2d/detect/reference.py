@@ -31,25 +31,7 @@ import math
 import numpy as np
 
 from dynslam2d.detect.config import FitConfig
-from dynslam2d.detect.layout import (
-    F_CENTROID_X,
-    F_CENTROID_Y,
-    F_CIRCLE_R,
-    F_CIRCLE_RMS,
-    F_CIRCLE_X,
-    F_CIRCLE_Y,
-    F_HI1,
-    F_HI2,
-    F_LO1,
-    F_LO2,
-    F_RECT_RMS,
-    F_THETA,
-    KIND_CIRCLE,
-    KIND_POINT,
-    KIND_RECT,
-    SIZE_LOWER,
-    SIZE_MEASURED,
-)
+from dynslam2d.detect import layout as L
 from dynslam2d.detect.measure import Detection, Measurement
 from dynslam2d.detect.shapes import circle_center_fixed_radius
 
@@ -100,26 +82,26 @@ def classify_and_bound(beams: np.ndarray, pts: np.ndarray, fit_row: np.ndarray, 
     """Build a :class:`Detection` from one cluster and its row of
     :func:`dynslam2d.detect.shapes.fit_clusters` (map frame); ``dphi`` = |angle increment|, rad."""
     n = int(pts.shape[0])
-    theta = float(fit_row[F_THETA])
-    lo = np.array([fit_row[F_LO1], fit_row[F_LO2]])
-    hi = np.array([fit_row[F_HI1], fit_row[F_HI2]])
-    rect_rms = float(fit_row[F_RECT_RMS])
-    circ = np.array([fit_row[F_CIRCLE_X], fit_row[F_CIRCLE_Y], fit_row[F_CIRCLE_R]])
-    circ_rms = float(fit_row[F_CIRCLE_RMS])
-    centroid = np.array([fit_row[F_CENTROID_X], fit_row[F_CENTROID_Y]])
+    theta = float(fit_row[L.F_THETA])
+    lo = np.array([fit_row[L.F_LO1], fit_row[L.F_LO2]])
+    hi = np.array([fit_row[L.F_HI1], fit_row[L.F_HI2]])
+    rect_rms = float(fit_row[L.F_RECT_RMS])
+    circ = np.array([fit_row[L.F_CIRCLE_X], fit_row[L.F_CIRCLE_Y], fit_row[L.F_CIRCLE_R]])
+    circ_rms = float(fit_row[L.F_CIRCLE_RMS])
+    centroid = np.array([fit_row[L.F_CENTROID_X], fit_row[L.F_CENTROID_Y]])
     ext = hi - lo
     rel = np.zeros((2, 2), dtype=bool)
     if n <= cfg.point_max_points or max(ext[0], ext[1]) < cfg.point_max_extent:
-        kind = KIND_POINT
+        kind = L.KIND_POINT
     elif (n >= cfg.circle_min_points and cfg.circle_min_radius <= circ[2] <= cfg.circle_max_radius
           and circ_rms < cfg.circle_residual_ratio * rect_rms
           and min(ext[0], ext[1]) >= cfg.circle_min_depth_ratio * circ[2]
           and np.hypot(*(circ[:2] - sensor_xy)) > np.hypot(*(centroid - sensor_xy))):
-        kind = KIND_CIRCLE
+        kind = L.KIND_CIRCLE
     else:
-        kind = KIND_RECT
+        kind = L.KIND_RECT
     det = Detection(beams, pts, centroid, kind, theta, lo, hi, rel, circ, n)
-    if kind != KIND_RECT:
+    if kind != L.KIND_RECT:
         return det
     lo, hi = det.lo, det.hi  # refined in place below (faces)
     uv = det.to_uv(pts)
@@ -183,18 +165,18 @@ def measure(det: Detection, sizes: np.ndarray | None, radius: float | None, cfg:
     """
     size_obs = np.zeros(2)
     size_kind = np.zeros(2, dtype=np.int8)
-    if det.kind == KIND_POINT:
+    if det.kind == L.KIND_POINT:
         s2 = cfg.sigma_point ** 2
         R = np.diag([s2, s2])
         return Measurement(det.centroid.copy(), R, size_obs, size_kind, _H_POS, det.centroid.copy(), R)
-    if det.kind == KIND_CIRCLE:
+    if det.kind == L.KIND_CIRCLE:
         cx, cy, r = det.circle
         if radius is not None and radius > 0:
             cx, cy, _ = circle_center_fixed_radius(det.points[:, 0].copy(), det.points[:, 1].copy(),
                                                    float(cx), float(cy), float(radius))
         s2 = (1.5 * cfg.sigma_position) ** 2
         size_obs[:] = 2.0 * det.circle[2]
-        size_kind[:] = SIZE_MEASURED
+        size_kind[:] = L.SIZE_MEASURED
         z = np.array([cx, cy])
         R = np.diag([s2, s2])
         return Measurement(z, R, size_obs, size_kind, _H_POS, z, R)
@@ -205,7 +187,7 @@ def measure(det: Detection, sizes: np.ndarray | None, radius: float | None, cfg:
     uv = [0.0, 0.0]
     var = [0.0, 0.0]
     observed = [True, True]
-    kinds = [SIZE_LOWER, SIZE_LOWER]
+    kinds = [L.SIZE_LOWER, L.SIZE_LOWER]
     rel = det.rel
     for k, ext_k in ((0, ext0), (1, ext1)):
         rl, rh = bool(rel[k, 0]), bool(rel[k, 1])
@@ -215,7 +197,7 @@ def measure(det: Detection, sizes: np.ndarray | None, radius: float | None, cfg:
         if rl and rh:
             uv[k] = 0.5 * (lo[k] + hi[k])
             var[k] = sp2
-            kinds[k] = SIZE_MEASURED
+            kinds[k] = L.SIZE_MEASURED
         elif rl or rh:
             uv[k] = lo[k] + 0.5 * size_k if rl else hi[k] - 0.5 * size_k
             unc = size_sigma if sizes is not None else 0.5 * size_k
