@@ -31,11 +31,11 @@ from dynslam2d.detect.mapevidence import MapView
 from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
-from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
 from dynslam2d.slam.confidence import FLAGS
 from dynslam2d.slam.confidence import summarize as summarize_confidence
+from dynslam2d.trajectory import Trajectory
 from dynslam2d.types import Box, Pose2D, Scan, ScanSource, SourceMeta, Track
 
 
