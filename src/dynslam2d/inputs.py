@@ -31,18 +31,15 @@ def open_source(
     """Open a scan source: a simulated scenario or a recording whose format is sniffed.
 
     Args:
-        path: ``sim:<scenario>``, or a ROS 1 ``.bag``, a ROS 2 bag folder (sqlite3 or MCAP),
-            a bare ``.mcap``, a CARMEN log (``.clf``/``.log``, optionally gzipped), a ``.zip``
-            holding exactly one bag (extracted to a temporary folder, removed with the source),
-            or a pipe / FIFO / ``/dev/stdin`` holding one of these.
-        topic: the LaserScan topic (bags with several); ignored for other formats.
+        path: ``sim:<scenario>`` (a scenario of :mod:`dynslam2d.sim`), or anything
+            :func:`~dynslam2d.io.sources.open_recording` reads: a ROS 1 ``.bag``, a ROS 2 bag
+            folder, a bare ``.mcap``, a CARMEN log, a ``.zip`` holding one bag, or a pipe /
+            FIFO / ``/dev/stdin`` holding one of these.
         seed, duration: simulator seed and length in s (``sim:`` sources only).
-        skip_bad: skip malformed records and non-increasing stamps (counted) instead of
-            stopping with an error.
-        odom, imu: where ``Scan.odom`` / ``Scan.yaw_rate`` come from: "auto" (what the
-            input has), "none" (laser only), or a topic / record name
-            (:mod:`dynslam2d.io.odomsource`); ``meta.odometry`` says what was used.
-        laser_offset: the base → laser transform (m, rad) when the recording has no TF.
+        topic, skip_bad, odom, imu, laser_offset: as for
+            :func:`~dynslam2d.io.sources.open_recording`. For ``sim:`` the topic is ignored,
+            ``odom`` / ``imu`` are "auto" or "none" (the simulated odometry / IMU) and a
+            ``laser_offset`` is an error (the mount is in the simulator's odometry model).
     Returns:
         A :class:`~dynslam2d.io.sources.CheckedSource` (iterable of Scan, ``meta``,
         ``len()`` where known).
