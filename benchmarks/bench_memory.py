@@ -7,6 +7,11 @@ peak resident memory (``ru_maxrss``) and wall time.
 
     PYTHONPATH=src python benchmarks/bench_memory.py --scans 2000 200000
 
+``--inputs`` measures recordings instead (issue 13 item 3, the baseline: imports, kernels, map,
+clean-up pass and figures), e.g. MIT CSAIL, the leg_tracker and datmo bags, the README's scene:
+
+    PYTHONPATH=src python benchmarks/bench_memory.py --inputs ../shared/data/mit-csail/mit-csail.clf sim:paper
+
 Numbers go to docs/reliability.md with the command that produced them.
 """
 
@@ -78,11 +83,18 @@ def main() -> None:
     ap.add_argument("--keep", action="store_true", help="keep the generated logs and results")
     ap.add_argument("--src", default=str(Path(__file__).resolve().parents[1] / "src"),
                     help="the dynslam2d source folder to measure (default: this checkout's src/)")
+    ap.add_argument("--inputs", nargs="+", default=None,
+                    help="recordings (or sim:<scenario>) to measure instead of generated logs")
     ap.add_argument("extra", nargs="*", help="extra options for 'dynslam2d run' (after --)")
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="dynslam2d-bench-memory-"))
     rows = []
     try:
+        if args.inputs:
+            for i, inp in enumerate(args.inputs):
+                mib, wall = measure(Path(inp), work / f"in-{i}", args.extra, args.src)  # str(Path("sim:x")) == "sim:x"
+                print(f"{inp:<60} peak RSS {mib:8.1f} MiB  wall {wall:8.1f} s", flush=True)
+            return
         for n in args.scans:
             log = work / f"room-{n}.clf"
             write_log(log, n)

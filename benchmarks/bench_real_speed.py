@@ -9,7 +9,8 @@ Issue 9's speed target: ≥ 500 scans/s median for the whole pipeline on one cor
   * ``positive_7``  — ``leg_tracker/positive_7.bag`` (people walking near a motionless robot),
   * ``demo``        — ``leg_tracker/demo_stationary_simple_environment.bag``,
   * ``overtakes``   — ``datmo/overtakes.bag`` (RC cars, moving sensor),
-  * ``sim:drive``   — the simulated corridor drive.
+  * ``sim:drive``   — the simulated corridor drive,
+  * ``mit-csail``   — ``mit-csail/mit-csail.clf`` (a robot driving through an office building, laser only).
 
 The scans are read into memory first, so only ``Pipeline.process`` is timed (no bag decoding). For
 each input it reports
@@ -57,6 +58,7 @@ INPUTS: dict[str, tuple[str, str | None]] = {
     "demo_stationary": ("dynamic/leg_tracker/demo_stationary_simple_environment.bag", None),
     "overtakes": ("dynamic/datmo/overtakes.bag", None),
     "sim:drive": ("sim:drive", None),
+    "mit-csail": ("mit-csail/mit-csail.clf", None),
 }
 
 

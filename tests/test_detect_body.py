@@ -113,3 +113,56 @@ def test_without_the_body_filter_the_body_rides_with_the_robot() -> None:
     assert riding, "the body's returns are tracked"
     assert any("laser frame" in t.m_reason for t in riding)
     assert not any(t.in_m for t in riding)
+
+
+def _body_scans(n_scans: int, move: bool) -> tuple[list[Scan], np.ndarray]:
+    """The scans of :func:`drive` (or of a laser standing still at its start) and the last scan's body labels."""
+    scans, lab = [], None
+    for i in range(n_scans):
+        t = i / 10.0
+        tt = t if move else 0.0
+        pose = Pose2D(-4.0 + 0.8 * tt, -1.0 + 1.5 * math.sin(0.25 * tt), 0.4 * math.sin(0.25 * tt))
+        segs = np.vstack([ROOM, transform_segments(BODY, pose)])
+        ids = np.concatenate([np.zeros(ROOM.shape[0], dtype=np.int32), np.ones(BODY.shape[0], dtype=np.int32)])
+        dist, lab = cast_rays((pose.x, pose.y), pose.theta + ANGLES, segs, ids, np.zeros((0, 3)),
+                              np.zeros(0, dtype=np.int32))
+        r = dist + np.random.default_rng(i).normal(0.0, 0.01, dist.shape)
+        scans.append(Scan(stamp=100.0 + t, angle_min=float(ANGLES[0]), angle_increment=float(ANGLES[1] - ANGLES[0]),
+                          ranges=r, range_min=0.05, range_max=20.0))
+    return scans, lab
+
+
+def test_info_finds_the_body_in_a_bag_and_suggests_a_footprint(tmp_path, capsys) -> None:
+    """`dynslam2d info` on a bag of a driving robot whose laser sees a bumper and a mast: the body beams (and
+    no wall beam) are reported with a footprint that holds the body's returns; from a motionless laser it
+    says why it cannot tell (and finds nothing)."""
+    import json
+
+    from conftest import run_cli
+    from dynslam2d.io.rosbag import write_scan_bag
+
+    scans, lab = _body_scans(120, move=True)
+    bag = write_scan_bag(tmp_path / "drive.mcap", scans)
+    code, out, _ = run_cli(capsys, "info", str(bag), "--json")
+    assert code == 0
+    body = json.loads(out)["body"]
+    found = np.zeros(N, dtype=bool)
+    found[body["auto_body_beam_indices"]] = True
+    assert found[lab == 1].mean() > 0.8 and not found[lab == 0].any()
+    assert body["enough_motion"] and body["scans_used"] == 120
+    lo, hi = body["body_range_m"]
+    assert 0.2 < lo <= hi < 0.6  # the bumper and mast lie 0.25-0.45 m from the laser
+    poly = np.array(body["suggested_footprint"])
+    assert polygon_problem(poly) is None
+    assert points_in_polygon(scans[-1].points(lab == 1), poly).mean() > 0.9
+    code, out, _ = run_cli(capsys, "info", str(bag))
+    assert code == 0 and "robot body" in out and "suggested" in out
+    still, _ = _body_scans(60, move=False)
+    bag2 = write_scan_bag(tmp_path / "still.mcap", still)
+    code, out, _ = run_cli(capsys, "info", str(bag2), "--json")
+    body2 = json.loads(out)["body"]
+    assert body2["auto_body_beams"] == 0 and not body2["enough_motion"]
+    code, out, _ = run_cli(capsys, "info", str(bag2))
+    assert "cannot tell its body from a wall" in " ".join(out.split())
+    code, out, _ = run_cli(capsys, "info", str(bag), "--json", "--body-scans", "0")
+    assert "body" not in json.loads(out)

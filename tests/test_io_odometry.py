@@ -190,6 +190,24 @@ def test_odometry_stamps_that_do_not_cover_the_scans(tmp_path):
     assert any("outside the odometry's time span" in w for w in src.meta.extra["warnings"])
 
 
+def test_imu_stamps_that_do_not_cover_the_scans_and_nan_yaw_rates(tmp_path):
+    late = _write_bag(tmp_path / "late.bag", scan_stamps=SCAN_T, imu=(ODOM_T + 1000.0, np.full(ODOM_T.shape, 0.25)))
+    with pytest.raises(DynSlamError, match="no scan lies within the IMU's stamps"):
+        list(open_source(late, odom="none", imu="/imu"))
+    early = _write_bag(tmp_path / "early.bag", scan_stamps=SCAN_T, imu=(ODOM_T - 50.0, np.full(ODOM_T.shape, 0.25)))
+    with pytest.raises(DynSlamError, match="IMU stamps .* end before the first scan"):
+        list(open_source(early, odom="none", imu="/imu"))
+    src = open_source(late, odom="none")  # auto: every scan without a yaw rate is warned about, never silent
+    assert all(s.yaw_rate is None for s in src)
+    assert any("40 of 40 scans outside the IMU's time span" in w for w in src.meta.extra["warnings"])
+    rates = np.full(ODOM_T.shape, 0.25)
+    rates[5:8] = np.nan
+    nan = _write_bag(tmp_path / "nan.bag", scan_stamps=SCAN_T, imu=(ODOM_T, rates))
+    src = open_source(nan, odom="none", imu="/imu")
+    assert all(s.yaw_rate == pytest.approx(0.25) for s in src)
+    assert any("3 non-finite yaw rates dropped (first at message index 5)" in w for w in src.meta.extra["warnings"])
+
+
 def test_nan_in_odometry(tmp_path):
     base = _circle(ODOM_T - ODOM_T[0])
     base[10:13, 0] = np.nan

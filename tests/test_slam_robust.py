@@ -388,3 +388,39 @@ def test_outdoor_person_following_bag_warns_and_keeps_the_path_sane(tmp_path) ->
     assert low.mean() > 0.5
     assert longest_stretch(stamps, low)[0] > 60.0
     assert _path_length(est) < 400.0
+
+
+def _odometry_step(mode: str, offset: Pose2D, **noise: float) -> tuple[Pose2D, Pose2D]:
+    """(estimated, true) laser pose of scan 27 of sim:static, map frame, after scans 0, 3, …, 24 with
+    exact odometry and scan 27 with its odometry displaced by ``offset``."""
+    sim = SimSource("static", duration=3.0, beams=240)  # few beams: little information from the scan
+    scans, gt = list(sim), sim.ground_truth.poses
+    slam = HectorSlam(SlamConfig(odometry_prior=mode, correlative_mode="never", **noise))
+    for i in range(0, 28, 3):
+        odom = Pose2D.from_array(gt[i])
+        step = slam.process(scans[i].with_odometry(odom.compose(offset) if i == 27 else odom, None))
+    return step.pose, Pose2D.from_array(gt[0]).between(Pose2D.from_array(gt[27]))
+
+
+def test_odometry_prior_on_all_directions_is_weighted_by_its_noise_and_gated() -> None:
+    """odometry_prior 'all': the odometry's information σ²Σ⁻¹ joins the match on every direction. With a
+    precise odometry (2 mm) the pose moves towards the odometry's prediction; with the default noise model
+    (1 cm + 5 %) less; an odometry 0.5 m off (far beyond the joint noise) is refused and the scan decides
+    alone, exactly as in 'degenerate' mode."""
+    precise = {"odometry_noise_translation": 1e-4, "odometry_noise_floor_xy": 2e-3,
+               "odometry_noise_rotation": 1e-4, "odometry_noise_floor_theta": 1e-4}
+    small, big = Pose2D(0.004, 0.0, 0.0), Pose2D(0.5, 0.0, 0.0)
+    scan_only, true = _odometry_step("degenerate", small, **precise)
+    predicted = true.compose(small)
+
+    def gap(p: Pose2D) -> float:
+        d = predicted.between(p)
+        return math.hypot(d.x, d.y)
+
+    fused, _ = _odometry_step("all", small, **precise)
+    loose, _ = _odometry_step("all", small)
+    assert gap(scan_only) > 0.005  # 240 beams: the scan alone is off by several mm
+    assert gap(fused) < 0.85 * gap(scan_only)
+    assert gap(fused) < gap(loose)
+    refused, _ = _odometry_step("all", big, **precise)
+    assert np.allclose(refused.as_array(), _odometry_step("degenerate", big, **precise)[0].as_array(), atol=1e-9)

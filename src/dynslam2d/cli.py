@@ -11,7 +11,7 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Annotated, Any, Optional
+from typing import Annotated, Any, Iterator, Optional
 
 import typer
 from typer.core import TyperArgument, TyperCommand, TyperGroup
@@ -193,8 +193,11 @@ def info(
     odom: OdomOpt = "auto",
     imu: ImuOpt = "auto",
     laser_offset: LaserOffsetOpt = None,
+    body_scans: Annotated[int, typer.Option("--body-scans", min=0, help="Look for the robot's own body (returns "
+                                            "fixed in the laser frame while it drives) in the first N scans and "
+                                            "suggest a footprint; 0 = skip.")] = 600,
 ) -> None:
-    """Print what a scan source holds: format, topic, scans, beams, FOV, rate, duration, ranges."""
+    """Print what a scan source holds: format, topic, scans, beams, FOV, rate, duration, ranges, robot body."""
     from dynslam2d.io.odometry import parse_laser_offset
     from dynslam2d.io.sources import open_source
     from dynslam2d.io.summary import summarize_source
@@ -205,10 +208,30 @@ def info(
     offset = parse_laser_offset(laser_offset) if laser_offset else None
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad, odom=odom, imu=imu,
                          laser_offset=offset)
+    first: list = []  # the first body_scans scans, kept while the summary reads the source once
+
+    class _KeepFirst:
+        meta = source.meta
+
+        def __iter__(self) -> Iterator:
+            for scan in source:
+                if len(first) < body_scans:
+                    first.append(scan)
+                yield scan
+
     with console.status(Text(f"reading {input} …"), spinner="dots") as status:
-        summary = summarize_source(source, progress=lambda n: status.update(Text(f"reading {input} … {n} scans")))
+        summary = summarize_source(_KeepFirst(), progress=lambda n: status.update(Text(f"reading {input} … {n} scans")))
+        body = None
+        if body_scans > 0 and first:
+            from dynslam2d.pipeline import find_body
+
+            status.update(Text(f"looking for the robot's body in the first {len(first)} scans …"))
+            body = find_body(first, max_scans=body_scans)
     if as_json:
-        sys.stdout.write(json.dumps(summary.as_dict(), indent=2, default=str) + "\n")
+        out = summary.as_dict()
+        if body is not None:
+            out["body"] = body
+        sys.stdout.write(json.dumps(out, indent=2, default=str) + "\n")
         return
     table = Table(title=Text(f"{summary.origin}"), show_header=False, title_justify="left")
     table.add_column(style="bold")
@@ -240,9 +263,25 @@ def info(
     for key in ("skipped_lines", "skipped_scans", "warnings"):
         if summary.extra.get(key):
             rows.append((key.replace("_", " "), str(summary.extra[key])))
+    if body is not None:
+        rows.append(("robot body", _body_line(body)))
     for k, v in rows:
         table.add_row(k, Text(str(v)))
     _show(table)
+
+
+def _body_line(body: dict) -> str:
+    """One line for ``info``: the body beams found in the first scans and the footprint to configure."""
+    seen = (f"the first {body['scans_used']} scans (laser moved {body['travel_m']:.1f} m, turned "
+            f"{body['turn_rad']:.1f} rad)")
+    if body.get("auto_body_beams"):
+        lo, hi = body["body_range_m"]
+        return (f"{body['auto_body_beams']} beams return a fixed range {lo:.2f}–{hi:.2f} m while the laser moves, in "
+                f"{seen}: the robot itself; suggested detect.footprint.polygon: {body['suggested_footprint']}")
+    if not body.get("enough_motion"):
+        return (f"not found in {seen}: a laser that hardly moves cannot tell its body from a wall; "
+                "'dynslam2d run' keeps looking over the whole recording (summary.json 'body')")
+    return f"none found in {seen}"
 
 
 @app.command()
@@ -399,10 +438,12 @@ def run(
     odom: OdomOpt = "auto",
     imu: ImuOpt = "auto",
     laser_offset: LaserOffsetOpt = None,
+    range_scale: Annotated[Optional[str], typer.Option("--laser-range-scale", "--range-scale", help="Multiply every range by this (a lidar that reads short: > 1), or 'auto': estimate it from the recording's odometry (laser.range_scale) [1].")] = None,
     frame: Annotated[str, typer.Option("--frame", help="Poses in trajectory.tum: laser (default) or base_link "
                                        "(laser pose ⊕ (base_link→laser)⁻¹; needs TF, CARMEN pose fields or --laser-offset).")] = "laser",
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
+    loop_closure: Annotated[Optional[str], typer.Option("--loop-closure", help="Loop closure and pose-graph optimisation behind the front end: on (trajectory.tum and the map from the optimised poses; trajectory_frontend.tum and graph.g2o too) or off (the front end alone) [on] (loop.enabled).")] = None,
     clean: Annotated[Optional[str], typer.Option("--clean", help="Clean-up pass after the run: on (map.pgm = cleaned "
                                                  "static map, map_online.pgm = online map) or off [on] (docs/maps.md).")] = None,
 ) -> None:
@@ -439,10 +480,16 @@ def run(
     }})
     if filter_mode is not None:
         cfg = with_overrides(cfg, {"filter": {"mode": filter_mode}})
+    if range_scale is not None:
+        cfg = with_overrides(cfg, {"laser": {"range_scale": _parse_range_scale(range_scale)}})
     if clean is not None:
         if clean not in ("on", "off"):
             raise DynSlamError(f"--clean must be 'on' or 'off', got {clean!r}")
         cfg = with_overrides(cfg, {"clean": {"enabled": clean == "on"}})
+    if loop_closure is not None:
+        if loop_closure not in ("on", "off"):
+            raise DynSlamError(f"--loop-closure must be 'on' or 'off', got {loop_closure!r}")
+        cfg = with_overrides(cfg, {"loop": {"enabled": loop_closure == "on"}})
     if hector_compat:
         cfg = with_overrides(cfg, {"slam": {"hector_gradient_bug": True, "step_mode": "gauss_newton", "correlative_mode": "never"}})
     _check_sim_only(input, seed, duration)
@@ -466,6 +513,10 @@ def run(
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad, odom=odom, imu=imu,
                          laser_offset=offset)
     mount = _laser_mount(source.meta) if frame == "base_link" else None
+    odo_info = source.meta.extra.get("odometry") or {}
+    if cfg.laser.range_scale == "auto" and not odo_info.get("has_odometry", bool(odo_info.get("source"))):
+        raise DynSlamError(f"{source.meta.origin}: --range-scale auto needs odometry, and the input has none "
+                           "(see --odom; or give the scale as a number)")
     _check_map_size(source, cfg)
     if write_bag is not None:
         clean_stale_parts(write_bag)
@@ -524,6 +575,7 @@ def run(
 
                 result = run_pipeline(source, cfg, progress=tick, observers=observers)
                 progress.update(task, completed=result.n_scans)
+        cleaner.counter = None  # the clean-up pass is done (cleaner.result): free its counts before the figures
         _check_run_usable(result, input)
         truth = ground_truth_for(source, truth_files, cfg.slam.map_resolution)
         try:
@@ -532,6 +584,14 @@ def run(
                 from dynslam2d.io.odometry import rewrite_trajectory_frame
 
                 rewrite_trajectory_frame(folder.work, mount)
+                if (folder.work / "trajectory_frontend.tum").exists():  # loop closure: the front end's too
+                    from dynslam2d.io.odometry import compose_mount
+                    from dynslam2d.io.trajectory import Trajectory, read_tum, write_tum
+
+                    ft = read_tum(folder.work / "trajectory_frontend.tum")
+                    write_tum(folder.work / "trajectory_frontend.tum",
+                              Trajectory(ft.stamps, compose_mount(ft.poses, mount.inverse()), ft.frame),
+                              comment="base_link pose in the map frame, front end before loop closure")
         except OSError as exc:  # disk full, folder removed under our feet, …
             raise DynSlamError(f"--out {out}: cannot write the results ({exc.strerror or exc}); nothing was kept") from None
         folder.finish()
@@ -555,12 +615,18 @@ def run(
     if isinstance(odo, dict) and (odo.get("without_odom") or 0) > 0:
         err_console.print(f"[yellow]warning:[/] odometry: {odo['without_odom']} of {odo['scans']} scans had no "
                           f"odometry (outside its time span or in a gap): matched laser only")
+    if isinstance(odo, dict) and odo.get("imu") and odo.get("scans") and odo.get("with_yaw_rate", 0) < odo["scans"]:
+        err_console.print(f"[yellow]warning:[/] IMU: {odo['scans'] - odo['with_yaw_rate']} of {odo['scans']} scans had "
+                          f"no yaw rate (outside the IMU's time span or in a gap): no rotation prior there")
     rows = [
         ("scans", str(summary["scans"])),
         ("wall time", f"{summary['wall_time_s']:.1f} s ({summary['scans_per_s']} scans/s"
-                      + (", including compiling the kernels)" if compiling else ")")),
+                      + (f", including {summary['kernel_compile_s']:.1f} s compiling the kernels)"
+                         if summary.get("kernel_compile_s", 0.0) >= 0.05
+                         else ", including compiling the kernels)" if compiling else ")")),
         *_steady_rows(summary, compiling),
         ("map updates", str(summary["map_updates"])),
+        *_range_scale_row(summary),
         ("odometry", (f"{summary.get('odometry') or 'none (laser only)'}"
                       + (f", {odo['with_odom']}/{odo['scans']} scans" if isinstance(odo, dict) and odo.get('scans') else ""))),
         ("rejected matches", str(summary["match_failures"])),
@@ -599,6 +665,29 @@ def run(
     console.print(Text.assemble("results in ", (str(out), "bold")))
     if write_bag is not None:
         console.print(Text.assemble("bag for RViz / Foxglove: ", (str(write_bag), "bold"), " (docs/ros.md)"))
+
+
+def _parse_range_scale(text: str) -> float | str:
+    """``--range-scale``: 'auto' or a number."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return float(text)
+    except ValueError:
+        raise DynSlamError(f"--range-scale must be 'auto' or a number such as 1.05, got {text!r}") from None
+
+
+def _range_scale_row(summary: dict[str, Any]) -> list[tuple[str, str]]:
+    """The range scale used, with the evidence of an automatic estimate."""
+    rs = summary.get("range_scale")
+    if not isinstance(rs, dict) or (rs.get("mode") == "fixed" and rs.get("used") == 1.0):
+        return []
+    if rs.get("mode") != "auto":
+        return [("range scale", f"{rs['used']:g} (given)")]
+    if not math.isfinite(rs.get("scale") or math.nan):
+        return [("range scale", f"1 (auto: too little odometry motion, {rs['odom_distance']:.2f} m)")]
+    return [("range scale", f"{rs['used']:.4f} (auto: odometry {rs['odom_distance']:.2f} m / laser "
+                            f"{rs['slam_distance']:.2f} m over {rs['windows']} windows of the first {rs['scans']} scans)")]
 
 
 def _say_if_compiling(show: bool) -> bool:
@@ -1213,25 +1302,32 @@ def eval_relations(
     estimate: Annotated[Path, typer.Argument(help="Estimated trajectory (TUM), e.g. a run's trajectory.tum, or a run folder.")],
     relations: Annotated[Path, typer.Argument(help="Kümmerle et al. relations file (t1 t2 x y z roll pitch yaw).")],
     tol: Annotated[float, typer.Option("--tol", min=0.0, help="Largest stamp difference to match a relation to a pose, s.")] = 1e-3,
+    clock: Annotated[Optional[Path], typer.Option("--clock", help="CARMEN log with both clocks (ipc and logger) on its laser records, e.g. fr079.flirtlib.log: the estimate's logger stamps are mapped to the relations' ipc clock through it.")] = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Relative pose error over ground-truth relations, mean ± std (Kümmerle et al., 2009)."""
     from dynslam2d.eval.relations import relation_errors_from
     from dynslam2d.io.relations import read_relations
-    from dynslam2d.io.trajectory import read_tum
+    from dynslam2d.io.trajectory import Trajectory, read_tum
 
     estimate = _estimate_path(estimate)
-    res = relation_errors_from(read_tum(estimate), read_relations(relations), tol=tol)
+    traj = read_tum(estimate)
+    if clock is not None:
+        from dynslam2d.io.relclock import read_clock_pairs
+
+        traj = Trajectory(read_clock_pairs(clock).to_ipc(traj.stamps), traj.poses)
+    res = relation_errors_from(traj, read_relations(relations), tol=tol)
     out = {
         "translation_m": {"mean": res.trans_mean, "std": res.trans_std, "rmse": res.trans_rmse},
         "rotation_deg": {"mean": res.rot_deg_mean, "std": res.rot_deg_std},
         "relations_used": res.n_used,
         "relations_unmatched": res.n_unmatched,
+        "relations_scored": res.n_used,
     }
     rows = [
         ("translation", f"{res.trans_mean:.3f} ± {res.trans_std:.3f} m"),
         ("rotation", f"{res.rot_deg_mean:.3f} ± {res.rot_deg_std:.3f}°"),
-        ("relations used", f"{res.n_used} ({res.n_unmatched} unmatched)"),
+        ("relations scored", f"{res.n_used} of {res.n_used + res.n_unmatched} ({res.n_unmatched} unmatched)"),
     ]
     _emit(out, as_json, _stats_table(f"relations {relations.name} vs {estimate}", rows))
 

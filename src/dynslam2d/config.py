@@ -28,6 +28,8 @@ from dynslam2d.detect.config import DetectConfig
 from dynslam2d.filter import FilterConfig
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.cleanconfig import CleanConfig
+from dynslam2d.laserconfig import LaserConfig
+from dynslam2d.slam.loopconfig import LoopConfig
 
 
 #: hector_mapping ROS parameter → our ``slam`` key (hector_mapping's HectorMappingRos.cpp;
@@ -64,6 +66,7 @@ RUN_OPTIONS: dict[str, tuple[str, str | None]] = {
     "slam.constant_velocity": ("--constant-velocity", None),
     "slam.correlative_mode": ("--correlative-mode", "--correlative"),
     "filter.mode": ("--filter-mode", "--filter"),
+    "laser.range_scale": ("--laser-range-scale", "--range-scale"),
 }
 
 
@@ -79,6 +82,13 @@ class Config(BaseModel):
     filter: FilterConfig = Field(default_factory=FilterConfig, description="Dynamic-point filter (paper Eq. 4-8).")
     clean: CleanConfig = Field(
         default_factory=CleanConfig, description="Offline map clean-up after the run (docs/maps.md)."
+    )
+    laser: LaserConfig = Field(
+        default_factory=LaserConfig, description="The lidar itself: range scale (docs/slam.md)."
+    )
+    loop: LoopConfig = Field(
+        default_factory=LoopConfig, description="Loop closure and pose-graph optimisation behind the front end "
+        "(docs/slam.md, \"Loop closure\")."
     )
 
 

@@ -1,16 +1,103 @@
 """Whether numba's on-disk cache holds the project's compiled kernels.
 
 Every kernel is ``@njit(cache=True)``: the first run after an install or an edit of a
-kernel module compiles them (tens of seconds), later runs load them from numba's cache
-(``__pycache__/*.nbi`` index + ``*.nbc`` data beside the source, or ``NUMBA_CACHE_DIR``).
+kernel module compiles them (tens of seconds), later runs load them from numba's cache.
 The command line uses :func:`kernel_cache_state` to say "compiling kernels" instead of
-reporting a misleading speed for such a run.
+reporting a misleading speed for such a run, and :func:`compile_seconds` measures the time
+spent compiling (``kernel_compile_s`` in summary.json).
+
+Where the cache lives: :func:`default_cache_dir` (``$XDG_CACHE_HOME/dynslam2d/numba``, by default
+``~/.cache/dynslam2d/numba``), which ``import dynslam2d`` gives numba as ``NUMBA_CACHE_DIR`` unless
+that is already set (:func:`use_default_cache_dir`). numba's default, ``__pycache__`` beside the
+installed sources, is replaced with the files by every ``pip install``; a cache outside
+site-packages survives a reinstall, and numba keys each entry by the SHA-256 of the source file
+(numba ≥ 0.59), so an unchanged kernel module is loaded, not compiled again (docs/speed.md).
 """
 
 from __future__ import annotations
 
+import os
 import sys
+import time
 from dataclasses import dataclass
+from pathlib import Path
+
+#: Environment variable naming numba's cache folder (numba's own).
+CACHE_ENV = "NUMBA_CACHE_DIR"
+
+
+def default_cache_dir() -> Path:
+    """``$XDG_CACHE_HOME/dynslam2d/numba`` (``~/.cache/dynslam2d/numba`` when XDG_CACHE_HOME is unset)."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "dynslam2d" / "numba"
+
+
+def use_default_cache_dir() -> str | None:
+    """Point numba's cache at :func:`default_cache_dir` unless the user chose one.
+
+    Called by ``import dynslam2d`` before any kernel module is imported. Does nothing when
+    ``NUMBA_CACHE_DIR`` is set (the user's choice wins) or numba is already imported (its
+    configuration is read once, at import; the kernels then cache in ``__pycache__``). When the
+    folder cannot be created, numba's default is kept. Returns the folder in use, or None.
+    """
+    if os.environ.get(CACHE_ENV):
+        return os.environ[CACHE_ENV]
+    if "numba" in sys.modules:
+        return None
+    path = default_cache_dir()
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None
+    if not os.access(path, os.W_OK):
+        return None
+    os.environ[CACHE_ENV] = str(path)
+    return str(path)
+
+
+class _CompileClock:
+    """Total wall time numba has spent compiling in this process, s: one listener on numba's
+    "numba:compile" event (cache misses only; a load from the cache is no compile), installed on first
+    use; nested compiles (a kernel compiling the kernels it calls) count once."""
+
+    def __init__(self) -> None:
+        self.total = 0.0
+        self._depth = 0
+        self._t0 = 0.0
+        self._installed = False
+
+    def install(self) -> None:
+        if self._installed:
+            return
+        try:
+            from numba.core import event
+        except ImportError:  # pragma: no cover - numba is a dependency
+            return
+        clock = self
+
+        class _Listener(event.Listener):
+            def on_start(self, ev: object) -> None:
+                if clock._depth == 0:
+                    clock._t0 = time.perf_counter()
+                clock._depth += 1
+
+            def on_end(self, ev: object) -> None:
+                clock._depth -= 1
+                if clock._depth == 0:
+                    clock.total += time.perf_counter() - clock._t0
+
+        event.register("numba:compile", _Listener())
+        self._installed = True
+
+
+_CLOCK = _CompileClock()
+
+
+def compile_seconds() -> float:
+    """Seconds numba has spent compiling kernels in this process so far (start measuring with a first
+    call; the difference of two calls is the compile time in between)."""
+    _CLOCK.install()
+    return _CLOCK.total
 
 
 @dataclass(frozen=True)

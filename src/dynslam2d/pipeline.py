@@ -21,20 +21,26 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Protocol, Sequence
+from typing import Callable, Iterable, Protocol, Sequence
 
 import numpy as np
 
 from dynslam2d.config import Config
 from dynslam2d.detect.body import BodyFilter
-from dynslam2d.detect.mapevidence import MapView
+from dynslam2d.detect.mapevidence import MapView, map_evidence
 from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
+from dynslam2d.jitcache import compile_seconds
+from dynslam2d.memtrim import release_free_memory
+from dynslam2d.rangescale import apply_range_scale
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
+from dynslam2d.slam.config import SlamConfig
+from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.confidence import FLAGS
 from dynslam2d.slam.confidence import summarize as summarize_confidence
+from dynslam2d.slam.loops import LoopCloser, LoopResult
 from dynslam2d.trajectory import Trajectory
 from dynslam2d.types import Box, Pose2D, Scan, ScanSource, SourceMeta, Track
 
@@ -113,18 +119,25 @@ def _observed_boxes(tracks: list[Track], scan: Scan, pose: Pose2D) -> list[Track
     the tracked extent where part of the object is hidden and every observed point inside.
     """
     out: list[Track] = []
-    for t in tracks:
-        beams = t.beams
-        if beams is None or len(beams) == 0:
+    if not tracks:
+        return out
+    # the beams of every track at once (one trig + transform per scan instead of one per track)
+    lists = [t.beams if t.beams is not None else np.zeros(0, dtype=np.int64) for t in tracks]
+    counts = np.fromiter((len(b) for b in lists), dtype=np.int64, count=len(lists))
+    idx = np.concatenate(lists).astype(np.int64, copy=False) if counts.sum() else np.zeros(0, dtype=np.int64)
+    r_all = scan.ranges[idx]
+    a_all = scan.angles[idx]
+    ok_all = np.isfinite(r_all)
+    with np.errstate(invalid="ignore"):  # ±inf ranges (dropped by ok_all) may meet cos = 0
+        xy_all = pose.transform_points(np.column_stack((r_all * np.cos(a_all), r_all * np.sin(a_all))))
+    ends = np.cumsum(counts)
+    for k, t in enumerate(tracks):
+        lo, hi = int(ends[k] - counts[k]), int(ends[k])
+        ok = ok_all[lo:hi]
+        if hi == lo or not ok.any():
             out.append(t)
             continue
-        r = scan.ranges[beams]
-        a = scan.angles[beams]
-        ok = np.isfinite(r)
-        if not ok.any():
-            out.append(t)
-            continue
-        pts = pose.transform_points(np.column_stack((r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok]))))
+        pts = xy_all[lo:hi][ok]
         b = t.box
         c, s_ = math.cos(b.theta), math.sin(b.theta)
         d = pts - np.array([b.px, b.py])
@@ -148,6 +161,8 @@ class Pipeline:
         self.body = BodyFilter(self.config.detect.footprint)
         self._moving: list[Track] = []  # tracks in M after the previous scan
         self._last_stamp: float | None = None
+        # loop closure behind the front end (slam/loops.py); it never changes the front end's poses or map
+        self.loops = LoopCloser(self.config.loop, self.config.slam) if self.config.loop.enabled else None
 
     def _exclude(self, scan: Scan, pose: Pose2D, tracks: list[Track], dt: float,
                  cache: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -165,6 +180,32 @@ class Pipeline:
         by = np.where(obj >= 0, ids[np.clip(obj, 0, None)], -1)
         return removed, by
 
+    def _spare_structure(self, scan: Scan, pose: Pose2D, moving: list[Track], removed: np.ndarray,
+                         removed_by: np.ndarray) -> None:
+        """In place: beams inside an exclusion region that are not the object's own (not among the beams of a
+        track in M in this scan) and whose point lies on long-occupied map structure stay in the scan
+        (``filter.spare_structure``; the same structure test as the tracker's map evidence,
+        ``detect.tracker.map_occupied_logodds``). The region's margin is for range noise and box-fit error; a
+        walker passing close to a wall seen at a grazing angle would otherwise take a strip of the wall with it."""
+        view = MapView.of_level(self.slam.map.levels[0])
+        if view is None:
+            return
+        own = np.zeros(removed.shape[0], dtype=bool)
+        for t in moving:
+            if t.beams is not None and len(t.beams):
+                own[t.beams] = True
+        cand = np.flatnonzero(removed & ~own)
+        if cand.shape[0] == 0:
+            return
+        r = scan.ranges[cand]
+        a = scan.angle_min + cand * scan.angle_increment
+        pts = pose.transform_points(np.column_stack((r * np.cos(a), r * np.sin(a))))
+        tc = self.config.detect.tracker
+        structure, _, _ = map_evidence(pts, view, tc.map_occupied_logodds, tc.map_free_logodds, tc.map_free_radius)
+        spare = cand[structure]
+        removed[spare] = False
+        removed_by[spare] = -1
+
     def process(self, scan: Scan) -> StepResult:
         """Run every stage on ``scan`` (scans must come in time order) and return the result."""
         t0 = time.perf_counter()
@@ -173,14 +214,14 @@ class Pipeline:
         raw = scan
         body = self.body.mask(scan)
         if body.any():
-            scan = scan.with_ranges(np.where(body, np.nan, scan.ranges))
+            scan = scan.without(body)
         # 2. match with the known movers removed (their boxes advanced to this stamp).
         match_scan = scan
         if self._moving and self.config.filter.mode != "none":
             dt = scan.stamp - self._last_stamp if self._last_stamp is not None else 0.0
             pre_removed, _ = self._exclude(scan, self.slam.predict(scan.stamp), self._moving, dt, cache)
             if pre_removed.any():
-                match_scan = scan.with_ranges(np.where(pre_removed, np.nan, scan.ranges))
+                match_scan = scan.without(pre_removed)
         res = self.slam.match(match_scan)
         self.body.observe(raw, res.pose)
         t1 = time.perf_counter()
@@ -195,13 +236,18 @@ class Pipeline:
             known = {t.id for t in self._moving}
             moving = [t for t in moving if t.id in known]
         removed, removed_by = self._exclude(scan, res.pose, _observed_boxes(moving, scan, res.pose), 0.0, cache)
+        if self.config.filter.mode == "box" and self.config.filter.spare_structure and removed.any():
+            self._spare_structure(scan, res.pose, moving, removed, removed_by)
         t3 = time.perf_counter()
         # 5. map update with the filtered scan only.
         updated = False
         if not res.rejected:
-            kept = scan.with_ranges(np.where(removed, np.nan, scan.ranges)) if removed.any() else scan
+            kept = scan.without(removed) if removed.any() else scan
             updated = self.slam.update_map(kept, res.pose)
         t4 = time.perf_counter()
+        if self.loops is not None:  # its time is in the loop closure's own counters (summary.json loop_closure)
+            self.loops.add(scan.stamp, res.pose, scan, removed, updated,
+                           res.low_support or res.pose_source in ("prediction", "relocalised") or res.time_gap)
         self._moving = moving
         self._last_stamp = scan.stamp
         return StepResult(
@@ -236,6 +282,49 @@ class Pipeline:
     def gridmap(self) -> GridMap:
         """The finest map level as occupancy probabilities (NaN = never observed)."""
         return self.slam.gridmap(0)
+
+
+def find_body(scans: Iterable[Scan], config: Config | None = None, max_scans: int = 600) -> dict[str, object]:
+    """The robot's own body found in the first ``max_scans`` scans, without detection: what ``dynslam2d info``
+    reports (docs/tracking.md, "The robot's own body").
+
+    Runs what :meth:`Pipeline.process` runs before and after detection — footprint / body mask, scan matching
+    (with the recording's odometry where the scans carry it), map update — and the automatic body detection
+    of :class:`~dynslam2d.detect.body.BodyFilter` on the laser poses; about 1 ms per scan. Returns
+    :meth:`BodyFilter.report` (``auto_body_beams``, ``suggested_footprint`` in the laser frame, m, …) plus
+    ``scans_used``, ``travel_m`` (the laser's path length, m), ``turn_rad`` (its summed absolute turning, rad),
+    ``body_range_m`` ([min, max] range of the body beams, m; None without any) and ``enough_motion``: whether
+    the laser moved ``auto_min_travel`` and turned ``auto_min_turn`` (a motionless laser cannot tell its body
+    from a wall).
+    """
+    cfg = config if config is not None else Config()
+    slam = HectorSlam(cfg.slam)
+    body = BodyFilter(cfg.detect.footprint)
+    last: Scan | None = None
+    prev: Pose2D | None = None
+    n, travel, turn = 0, 0.0, 0.0
+    for scan in scans:
+        if n >= max_scans:
+            break
+        drop = body.mask(scan)
+        masked = scan.with_ranges(np.where(drop, np.nan, scan.ranges)) if drop.any() else scan
+        res = slam.match(masked)
+        body.observe(scan, res.pose)
+        if not res.rejected:
+            slam.update_map(masked, res.pose)
+        if prev is not None and res.pose.is_finite() and prev.is_finite():
+            travel += math.hypot(res.pose.x - prev.x, res.pose.y - prev.y)
+            turn += abs(math.remainder(res.pose.theta - prev.theta, 2.0 * math.pi))
+        prev = res.pose
+        last = scan
+        n += 1
+    out = body.report(last)
+    fc = cfg.detect.footprint
+    rng = body.body_ranges[body.body] if body.body.shape[0] else np.zeros(0)
+    out.update(scans_used=n, travel_m=round(travel, 3), turn_rad=round(turn, 3),
+               body_range_m=[round(float(rng.min()), 3), round(float(rng.max()), 3)] if rng.size else None,
+               enough_motion=bool(travel >= fc.auto_min_travel and turn >= fc.auto_min_turn))
+    return out
 
 
 #: Columns of :attr:`RunResult.track_rows` and of tracks.csv.
@@ -312,6 +401,13 @@ class RunResult:
                                     self.slam_stats.get("lost_events", 0), self.slam_stats.get("relocalisations", 0),
                                     c.low_confidence_share, c.low_confidence_stretch)
     body: dict[str, object] = field(default_factory=dict)
+    #: the front end's trajectory when loop closure replaced ``trajectory`` by the optimised one (else None)
+    frontend_trajectory: Trajectory | None = None
+    #: the loop closure's result (graph, loops, counters), None with loop closure off
+    loop: LoopResult | None = None
+    #: wall time numba spent compiling kernels during the run, s (0 when every kernel came from the
+    #: cache; :func:`dynslam2d.jitcache.compile_seconds`) — inside ``wall_time_s`` and the first scans' times.
+    kernel_compile_s: float = 0.0
 
     @property
     def n_scans(self) -> int:
@@ -357,6 +453,7 @@ class RunResult:
             "processing_ms_median": float(np.median(total)) if total.size else None,
             "processing_ms_p95": float(np.percentile(total, 95)) if total.size else None,
             **_steady_speed(total),
+            "kernel_compile_s": round(self.kernel_compile_s, 3),
             "stage_ms_median": stage_ms,
             "map_updates": int(self.map_updated.sum()),
             "match_failures": int(self.rejected.sum()),
@@ -373,12 +470,78 @@ class RunResult:
             "map_origin_m": list(self.grid.origin),
             "odometry": self.source.odometry,
             "odometry_detail": self.source.extra.get("odometry"),
+            "range_scale": self.source.extra.get("range_scale"),
             "trajectory_frame": "laser",
             "pose_confidence": self.pose_confidence(),
+            **({"loop_closure": self.loop_summary()} if self.loop is not None else {}),
         }
+
+    def loop_summary(self) -> dict[str, object]:
+        """The ``loop_closure`` block of summary.json: counters of the loop closure and whether it
+        changed the trajectory (docs/slam.md, "Loop closure")."""
+        if self.loop is None:
+            return {"enabled": False}
+        st = self.loop.stats
+        out: dict[str, object] = {"enabled": True, "corrected": self.loop.corrected}
+        for k in ("map_entropy_frontend", "map_entropy_optimised", "max_keyframe_correction_m"):
+            if k in st:
+                out[k] = st[k]
+        for k in ("keyframes", "submaps", "searches", "candidates", "loops_accepted", "loops_active", "loops_rejected",
+                  "optimisations"):
+            out[k] = int(st.get(k, 0))
+        for k in ("total_ms", "render_ms"):
+            out[k] = round(float(st.get(k, 0.0)), 1)
+        out["search_ms"] = round(float(st.get("search_ms", 0.0)), 1)
+        out["optimise_ms"] = round(float(st.get("optimise_ms", 0.0)), 1)
+        if self.frontend_trajectory is not None:
+            d = self.trajectory.poses[:, :2] - self.frontend_trajectory.poses[:, :2]
+            out["max_correction_m"] = round(float(np.max(np.hypot(d[:, 0], d[:, 1]))), 4) if d.size else 0.0
+        return out
+
+
+def render_map(loop: LoopResult, slam_config: SlamConfig) -> tuple[GridMap, np.ndarray]:
+    """The map re-rendered from the optimised keyframe poses: every keyframe's kept beams (the
+    dynamic filter's removed beams stay out) integrated in order, as the front end did at its own
+    poses. Returns (finest level as probabilities, its raw log-odds)."""
+    slam = HectorSlam(slam_config.model_copy(update={"map_levels": 1}))  # only the finest level is returned
+    for kf, p in zip(loop.keyframes, loop.node_poses):
+        slam.update_map(kf.kept(), Pose2D(float(p[0]), float(p[1]), float(p[2])), force=True)
+    return slam.gridmap(0), slam.logodds(0)[0]
+
+
+def map_entropy(logodds: np.ndarray) -> float:
+    """Total binary entropy of the observed cells of a log-odds map, nats: Σ −p ln p − (1−p) ln(1−p)
+    over cells with log-odds ≠ 0. Scans put at wrong poses blur walls into more, less certain cells,
+    so a more consistent set of poses gives a lower total (the occupancy-grid form of the mean map
+    entropy of Droeschel et al. / Razlaw et al., ECMR 2015)."""
+    lo = np.asarray(logodds, dtype=np.float64)
+    lo = lo[lo != 0.0]
+    if not lo.size:
+        return 0.0
+    p = np.clip(1.0 / (1.0 + np.exp(-lo)), 1e-12, 1.0 - 1e-12)
+    return float(-np.sum(p * np.log(p) + (1.0 - p) * np.log1p(-p)))
+
+
+def keep_optimised(loop: LoopResult, front_logodds: np.ndarray, opt_logodds: np.ndarray,
+                   config: LoopConfig) -> bool:
+    """Whether the optimised poses replace the front end's (``loop.map_check``); records the decision
+    and both entropies in ``loop.stats`` and sets ``loop.corrected`` accordingly."""
+    h_front, h_opt = map_entropy(front_logodds), map_entropy(opt_logodds)
+    loop.stats["map_entropy_frontend"] = round(h_front, 1)
+    loop.stats["map_entropy_optimised"] = round(h_opt, 1)
+    d = loop.node_poses[:, :2] - loop.frontend[loop.keyframe_scans, :2]
+    moved = float(np.max(np.hypot(d[:, 0], d[:, 1]))) if d.size else 0.0
+    loop.stats["max_keyframe_correction_m"] = round(moved, 4)
+    keep = moved >= config.min_correction and (
+        not config.map_check or h_opt < h_front * (1.0 - config.map_check_margin))
+    loop.stats["kept_optimised"] = float(keep)
+    loop.corrected = keep
+    return keep
 
 
 ProgressFn = Callable[[int, StepResult], None]
+#: :func:`run` returns the allocator's free heap memory to the OS every this many scans (memtrim.py).
+TRIM_EVERY_SCANS = 1000
 
 
 class RunObserver(Protocol):
@@ -406,6 +569,7 @@ def run(
     from it); every observer sees every scan (see :class:`RunObserver`).
     """
     pipe = Pipeline(config)
+    source = apply_range_scale(source, pipe.config.laser, pipe.config.slam)
     # Per-scan records in compact growable arrays (dynslam2d.records): a few hundred bytes
     # per scan instead of Python objects, so long logs do not exhaust memory.
     stamps = GrowArray(np.float64)
@@ -418,6 +582,7 @@ def run(
     conf = {"low_support": GrowArray(np.bool_), "degenerate": GrowArray(np.bool_), "lost": GrowArray(np.bool_),
             "degeneracy": GrowArray(np.float64)}
     t0 = time.perf_counter()
+    compile0 = compile_seconds()
     last_scan: Scan | None = None
     for scan in source:
         step = pipe.process(scan)
@@ -441,14 +606,30 @@ def run(
             obs.on_scan(scan, step, pipe)
         if progress is not None:
             progress(len(stamps), step)
-    wall = time.perf_counter() - t0
+        if len(stamps) % TRIM_EVERY_SCANS == 0:
+            release_free_memory()  # a long log's freed temporaries back to the OS (memtrim.py; ~ms per call)
+    compile_s = compile_seconds() - compile0
+    release_free_memory()  # the loop's freed temporaries, before the observers' end-of-run work (memtrim.py)
     flag_arr = flags.view().copy()
     logodds, _ = pipe.slam.logodds(0)
+    grid = pipe.gridmap()
+    trajectory = Trajectory(stamps.view().copy(), poses.view().copy())
+    frontend_trajectory = None
+    loop = pipe.loops.finish() if pipe.loops is not None else None
+    if loop is not None and loop.corrected:
+        t_render = time.perf_counter()
+        grid_opt, lo_opt = render_map(loop, pipe.config.slam)
+        loop.stats["render_ms"] = (time.perf_counter() - t_render) * 1e3
+        if keep_optimised(loop, logodds, lo_opt, pipe.config.loop):
+            frontend_trajectory = trajectory
+            trajectory = Trajectory(trajectory.stamps, loop.poses)
+            grid, logodds = grid_opt, lo_opt
+    wall = time.perf_counter() - t0
     summary = pipe.slam.summary()
     result = RunResult(
         source=source.meta,
         config=pipe.config,
-        trajectory=Trajectory(stamps.view().copy(), poses.view().copy()),
+        trajectory=trajectory,
         scores=scores.view().copy(),
         map_updated=flag_arr[:, 0],
         rejected=flag_arr[:, 1],
@@ -456,7 +637,7 @@ def run(
         removed_rows=removed_rows,
         track_rows=track_rows,
         timings_ms={k: v.view().copy() for k, v in timings.items()},
-        grid=pipe.gridmap(),
+        grid=grid,
         logodds=logodds,
         wall_time_s=wall,
         reasons=dict(summary.get("reasons", {})),  # type: ignore[arg-type]
@@ -465,6 +646,9 @@ def run(
         confidence={k: v.view().copy() for k, v in conf.items()},
         slam_stats={"lost_events": pipe.slam.lost_events, "relocalisations": pipe.slam.relocalisations},
         body=pipe.body.report(last_scan),
+        frontend_trajectory=frontend_trajectory,
+        loop=loop,
+        kernel_compile_s=compile_s,
     )
     for obs in observers:
         obs.on_finish(result, pipe)

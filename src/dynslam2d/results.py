@@ -35,6 +35,7 @@ from dynslam2d.pipeline import TRACK_COLUMNS, RunResult
 from dynslam2d.slam.cleanup import CleanResult
 from dynslam2d.types import ScanSource
 from dynslam2d.viz.collect import RemovedPointsCollector
+from dynslam2d.memtrim import release_free_memory
 from dynslam2d.viz.figures import write_figures
 
 
@@ -199,6 +200,14 @@ def write_results(
                 np.save(fh, run.logodds.astype(np.float32))
         paths["map_logodds_online.npy"] = out / "map_logodds_online.npy"
     paths["trajectory.tum"] = write_tum(out / "trajectory.tum", run.trajectory, comment="laser pose in the map frame")
+    if run.loop is not None:
+        # loop closure (docs/slam.md): trajectory.tum is optimised, the front end's trajectory and the graph kept
+        from dynslam2d.io.g2o import write_g2o
+
+        front = run.frontend_trajectory if run.frontend_trajectory is not None else run.trajectory
+        paths["trajectory_frontend.tum"] = write_tum(out / "trajectory_frontend.tum", front,
+                                                     comment="laser pose in the map frame, front end before loop closure")
+        paths["graph.g2o"] = write_g2o(out / "graph.g2o", run.loop.graph)
     paths["config.yaml"] = write_text_atomic(out / "config.yaml", dump_config(run.config))
     paths["tracks.csv"] = write_text_atomic(out / "tracks.csv", tracks_csv(run))
     removed = run.removed
@@ -226,6 +235,7 @@ def write_results(
     summary["status"] = "complete"
     paths["summary.json"] = write_text_atomic(out / "summary.json", metrics_json(summary))
     # Figures: map.png, tracks.png and, with ground truth, errors.png (dynslam2d.viz.figures).
+    release_free_memory()  # figures allocate much; start them from a trimmed heap (memtrim.py)
     paths.update(write_figures(run, out, gt, collector, cleaned=cleaned))
     # run.json LAST: a folder whose run.json does not say "complete" lacks files (docs/reliability.md).
     paths["run.json"] = write_marker(out, "complete", scans=run.n_scans, input=run.source.origin,

@@ -121,6 +121,7 @@ class Scan:
     odom: Pose2D | None = None
     yaw_rate: float | None = None
     _angles: np.ndarray | None = field(default=None, repr=False, compare=False)
+    _valid: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         ranges = np.ascontiguousarray(self.ranges, dtype=np.float64)
@@ -184,13 +185,22 @@ class Scan:
     def valid_mask(self, min_range: float | None = None, max_range: float | None = None) -> np.ndarray:
         """(n,) bool: beams that hold a return (finite and within [range_min, range_max]).
 
-        ``min_range``/``max_range`` tighten the sensor's own limits (for range gates).
+        ``min_range``/``max_range`` tighten the sensor's own limits (for range gates). Without
+        them the mask is computed once per scan and each call returns a fresh copy.
         """
+        if min_range is None and max_range is None and self._valid is not None:
+            return self._valid.copy()
         lo = self.range_min if min_range is None else max(self.range_min, min_range)
         hi = self.range_max if max_range is None else min(self.range_max, max_range)
         r = self.ranges
         with np.errstate(invalid="ignore"):
-            return np.isfinite(r) & (r >= lo) & (r <= hi)
+            valid = np.isfinite(r) & (r >= lo) & (r <= hi)
+        if min_range is None and max_range is None:
+            # computed once per scan (the pipeline's stages ask 5-6 times; a copy costs a fraction of
+            # the tests) and handed out as copies, which callers may change; ranges never change
+            object.__setattr__(self, "_valid", valid)
+            return valid.copy()
+        return valid
 
     def points(self, mask: np.ndarray | None = None) -> np.ndarray:
         """(m, 2) Cartesian points in the sensor frame, m, of the beams in ``mask``
@@ -217,6 +227,18 @@ class Scan:
             odom=self.odom,
             yaw_rate=self.yaw_rate,
         )
+
+    def without(self, mask: np.ndarray) -> Scan:
+        """A copy with the beams in ``mask`` ((n,) bool) set to no return (NaN): the same as
+        ``with_ranges(np.where(mask, np.nan, ranges))`` without re-validating the unchanged geometry
+        (the pipeline drops the robot's body, known movers and removed beams this way every scan)."""
+        out = object.__new__(Scan)
+        for name in Scan.__slots__:
+            object.__setattr__(out, name, getattr(self, name))
+        object.__setattr__(out, "ranges", np.where(mask, np.nan, self.ranges))
+        valid = self._valid
+        object.__setattr__(out, "_valid", None if valid is None else valid & ~mask)
+        return out
 
     def with_odometry(self, odom: Pose2D | None, yaw_rate: float | None = None) -> Scan:
         """A copy carrying ``odom`` (laser pose in the odometry frame) and ``yaw_rate`` (rad/s).
@@ -299,6 +321,23 @@ class ScanSource(Protocol):
     def __iter__(self) -> Iterator[Scan]: ...
 
     def __len__(self) -> int: ...
+
+
+class SourceWrapper:
+    """A scan source that wraps another: same ``meta`` and length; every other attribute
+    (``ground_truth`` of a simulated source, ``path`` of a bag, …) is the inner source's."""
+
+    def __init__(self, inner: ScanSource) -> None:
+        self.inner = inner
+        self.meta: SourceMeta = inner.meta
+
+    def __len__(self) -> int:
+        return len(self.inner)
+
+    def __getattr__(self, name: str) -> object:
+        if name == "inner":
+            raise AttributeError(name)
+        return getattr(self.inner, name)
 
 
 @dataclass(frozen=True, slots=True)

@@ -218,6 +218,11 @@ class BodyFilter:
             edge = ~self.body & (grown > 0.0)
             self._drop_r[edge] = grown[edge] + tol
 
+    @property
+    def body_ranges(self) -> np.ndarray:
+        """(beams,) the fixed range of each body beam, m (0 where a beam is not a body beam)."""
+        return self._body_r
+
     def report(self, scan: Scan | None = None) -> dict[str, object]:
         """What was dropped and, when body beams were found, a suggested footprint (laser frame, m)."""
         out: dict[str, object] = {

@@ -289,13 +289,27 @@ class TrackerConfig(BaseModel):
     )
     person_sustain_updates: int = Field(
         3, ge=1,
-        description="For a person (merged leg pair) the speed must exceed v_min for this many consecutive updates "
-        "(the rest of the test unchanged): a person who starts walking enters M within 0.5 s at 7.5 Hz.",
+        description="For a person (merged leg pair, or a person-sized circle) that shows it moved into empty space "
+        "(person_map_free_min, or person_free_min) the speed must exceed v_min for this many consecutive updates "
+        "instead of sustain_updates: a person who starts walking enters M within 0.5 s.",
     )
     person_map_free_min: float = Field(
         0.6, ge=0.0, le=1.0,
         description="The person's faster confirmation needs this mean fraction of its points in observed-free map "
-        "cells (stronger than map_free_min: small clutter pairs up like legs).",
+        "cells over its last person_sustain_updates updates (stronger than map_free_min: small clutter pairs up "
+        "like legs)…",
+    )
+    person_free_min: float = Field(
+        0.5, ge=0.0, le=1.0,
+        description="…or this mean fraction of its points where an earlier scan saw through (the free-space memory: "
+        "free_ref_ages, free_margin), with at most map_structure_max of them on long-occupied map cells: the map "
+        "has not seen a place a person just walked into often enough, and the person's own earlier returns mark "
+        "the cells next to it, but no earlier beam passes through a wall.",
+    )
+    person_min_displacement: float = Field(
+        0.15, ge=0.0,
+        description="Net displacement since birth that a person on the faster way into M needs (instead of "
+        "min_displacement), m: a person who stood still for a while was born where it stood.",
     )
     net_speed_ratio: float = Field(
         0.7, ge=0.0,
@@ -412,6 +426,12 @@ class TrackerConfig(BaseModel):
         description="A track in M slower than v_exit_ratio·v_min for map_structure_stop_time whose last two "
         "detections have at least this fraction of "
         "points on long-occupied map cells leaves M at once (it merged with a wall; no hysteresis).",
+    )
+    merge_size_jump: float = Field(
+        0.5, gt=0.0,
+        description="A track in M whose gate holds a detection longer than its own longer side plus this, with at "
+        "least map_structure_stop of the detection's points on long-occupied map cells (and its own points not on "
+        "structure), has merged with a wall: it is not updated with it and leaves M at once, m.",
     )
     map_structure_stop_time: float = Field(
         0.5, ge=0.0,

@@ -39,7 +39,7 @@ import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
+from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
 
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.measure import (
@@ -142,6 +142,7 @@ class _Track:
     slow_since: float | None = None
     probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
     p_finite: bool = True  # every entry of P is finite (checked where P changes)
+    merged: bool = False  # left M when its detection joined long-standing structure (refuses such detections)
 
 
 def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
@@ -190,6 +191,7 @@ class Tracker:
         self._batch: tuple | None = None  # per-detection arrays of the current scan (kernels)
         self._default: tuple | None = None  # default measurements of the current scan's detections
         self._stacked: tuple[np.ndarray, np.ndarray] | None = None  # predicted X, P of all tracks
+        self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate)
         #: Segmentation and detections of the last processed scan (for inspection / plots).
         self.last_segmentation: Segmentation | None = None
         self.last_detections: list[Detection] = []
@@ -254,6 +256,7 @@ class Tracker:
             if k.has_heading and k.kind == KIND_RECT:
                 self._motion_prior(k)
         dets = self._detect(scan, pose)
+        self._merged = set()
         if not dets and not scan.valid_mask().any():
             st.empty_scans += 1
         pairs = self._associate(dets)
@@ -541,6 +544,8 @@ class Tracker:
         grow_ok = (det_ext[None, :] <= tc.max_size_jump_ratio * tsize.max(axis=1)[:, None] + tc.max_size_jump) | \
             ~known[:, None]
         ok = ok & grow_ok
+        if self._map is not None:
+            ok = self._veto_merged(ok, dets, det_ext, tsize)
         if not ok.any():
             return []
         cost = np.where(ok, d2, _BIG)
@@ -563,6 +568,30 @@ class Tracker:
             pairs.extend(zip(ii.tolist(), jj.tolist()))
             taken[jj] = True
         return pairs
+
+    def _veto_merged(self, ok: np.ndarray, dets: list[Detection], det_ext: np.ndarray,
+                     tsize: np.ndarray) -> np.ndarray:
+        """``ok`` without the pairs in which a detection is a track in M merged with long-standing structure: at
+        least ``map_structure_stop`` of its points on long-occupied map cells and its longer side more than
+        ``merge_size_jump`` beyond the track's, while the track's own points were not on structure (mean ≤
+        ``map_structure_max``). A person walking up to a wall joins the wall's cluster; updating the person's track
+        with it would carry M onto the wall. A track in M left with no detection leaves M (:meth:`_manage`) and
+        keeps refusing such detections (``merged``) until a detection of its own size updates it."""
+        tc = self.config.tracker
+        rows = [i for i, k in enumerate(self._tracks) if k.in_m or k.merged]
+        if not rows:
+            return ok
+        cand = np.array([d.map_structure >= tc.map_structure_stop for d in dets])
+        if not cand.any():
+            return ok
+        ok = ok.copy()
+        for i in rows:
+            k = self._tracks[i]
+            hit = ok[i] & cand & (det_ext > float(tsize[i].max()) + tc.merge_size_jump)
+            if hit.any() and (not k.mstruct or sum(k.mstruct) / len(k.mstruct) <= tc.map_structure_max):
+                ok[i] &= ~hit
+                self._merged.add(k.id)
+        return ok
 
     def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float,
                       vac: dict[int, float]) -> list[bool]:
@@ -694,6 +723,7 @@ class Tracker:
             k.fast = 0
             k.probation = k.in_m
         k.kind = det.kind
+        k.merged = False
         fc = cfg.fit
         person = det.person or (det.kind == KIND_CIRCLE and fc.person_min_radius <= float(det.circle[2])
                                 <= fc.person_max_radius)
@@ -841,6 +871,11 @@ class Tracker:
         st = self.stats
         keep: list[_Track] = []
         for k in self._tracks:
+            if k.id in self._merged and k.id not in updated and k.in_m:
+                k.in_m = False
+                k.merged = True
+                k.fast = 0
+                k.reason = "left M: merged with long-occupied map structure (its detection joined a wall's cluster)"
             if k.id not in updated:
                 k.misses += 1
                 k.history.append(False)
@@ -913,8 +948,8 @@ class Tracker:
         # a track seen moving before re-enters M on the kinematic test: where it paused, the map wrote it
         use_map = self._map is not None and len(k.mstruct) > 0 and not k.was_in_m
         npu = tc.person_sustain_updates
-        fast_person = k.person_streak >= npu and (
-            not use_map or sum(k.mfree[-npu:]) / len(k.mfree[-npu:]) >= tc.person_map_free_min)
+        person_way = self._person_moved_in(k, npu, use_map) if k.person_streak >= npu else None
+        fast_person = person_way is not None
         need = tc.person_sustain_updates if fast_person else tc.sustain_updates
         have_map = self._map is not None and len(k.mstruct) > 0
         if k.in_m and have_map and len(k.mstruct) >= tc.sustain_updates and \
@@ -956,13 +991,14 @@ class Tracker:
         elif (net := self._net_speed(k, need)) is not None and net < tc.net_speed_ratio * tc.v_min:
             k.reason = (f"not in M: net speed over the last {need} updates {net:.2f} m/s < "
                         f"{tc.net_speed_ratio * tc.v_min:.2f} (jitter, not motion)")
-        elif (disp := float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))) < tc.min_displacement:
+        elif (disp := float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))) < (
+                min_disp := tc.person_min_displacement if person_way == "map" else tc.min_displacement):
             # (the net displacement since birth is computed only here: most tracks stop at a test above)
-            k.reason = f"not in M: moved {disp:.2f} m < {tc.min_displacement:.2f} m since birth"
+            k.reason = f"not in M: moved {disp:.2f} m < {min_disp:.2f} m since birth"
         elif self._free is not None and (not k.free or sum(k.free) / len(k.free) < tc.free_min_fraction):
             k.reason = (f"not in M: points on free space {sum(k.free) / max(len(k.free), 1):.2f} < "
                         f"{tc.free_min_fraction:.2f} (static structure)")
-        elif use_map and sum(k.mfree) / len(k.mfree) < tc.map_free_min and not (
+        elif use_map and not fast_person and sum(k.mfree) / len(k.mfree) < tc.map_free_min and not (
                 self._laser_still and sum(k.munknown) / len(k.munknown) >= 1.0 - tc.map_free_min):
             k.reason = (f"not in M: points in observed-free map cells {sum(k.mfree) / len(k.mfree):.2f} < "
                         f"{tc.map_free_min:.2f} (no map evidence of motion)")
@@ -974,6 +1010,29 @@ class Tracker:
             k.was_in_m = True
             k.reason = (f"in M: speed {speed:.2f} m/s > v_min for {k.fast} updates, moved {disp:.2f} m "
                         "since birth")
+
+    def _person_moved_in(self, k: _Track, n: int, use_map: bool) -> str | None:
+        """How a person-shaped track shows that it moved into space that was empty, over its last ``n`` updates
+        (the person's faster way into M, docs/tracking.md "People"); None = it does not.
+
+        ``"kinematic"``: no map to ask (or the track was in M before); the general ``min_displacement`` applies.
+        ``"map"``: a mean ≥ ``person_map_free_min`` of its points in observed-free map cells; then
+        ``person_min_displacement`` since birth is enough. ``"free"``: where the map has not seen the place
+        often enough, or the person's own earlier returns still mark the cells next to it, a mean ≥
+        ``person_free_min`` of its points where an earlier scan saw through (or this scan sees through where it
+        was: the free-space memory), with at most ``map_structure_max`` of them on long-occupied cells and at
+        least half in cells the map has either seen free or never seen (not on cells it saw occupied); then
+        the full ``min_displacement`` is needed. No earlier beam passes through a wall."""
+        tc = self.config.tracker
+        if not use_map:
+            return "kinematic"  # no map to ask (or seen moving before): the general displacement applies
+        mf = k.mfree[-n:]
+        if sum(mf) / len(mf) >= tc.person_map_free_min:
+            return "map"
+        fr, ms, mu = k.free[-n:], k.mstruct[-n:], k.munknown[-n:]
+        if len(fr) < n or sum(fr) / len(fr) < tc.person_free_min or sum(ms) / len(ms) > tc.map_structure_max:
+            return None
+        return "free" if (sum(mf) + sum(mu)) / len(mf) >= 0.5 else None
 
     def _still(self, t: float, pose: Pose2D | None) -> bool:
         """The laser has stayed within ``still_distance`` / ``still_angle`` of its pose over the last

@@ -28,7 +28,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
 
 from dynslam2d.errors import DynSlamError
 from dynslam2d.gridmap import GridMap
@@ -170,6 +169,8 @@ def distance_to(mask: np.ndarray, resolution: float) -> np.ndarray:
     """Euclidean distance (m) from every cell centre to the nearest cell of ``mask`` (inf if none)."""
     if not mask.any():
         return np.full(mask.shape, np.inf)
+    from scipy.ndimage import distance_transform_edt  # on use: runs without ground truth never need it
+
     return distance_transform_edt(~mask, sampling=resolution)
 
 

@@ -382,7 +382,7 @@ def read_bag_odometry(
     p = Path(path)
     topics = list_topics(p)
     plan = _plan(p, topics, odom, imu)
-    out = OdometryInput(explicit=plan.explicit_odom)
+    out = OdometryInput(explicit=plan.explicit_odom, explicit_imu=plan.explicit_imu)
     out.warnings.extend(plan.notes or [])
     kinds = plan.kinds or []
     wanted: set[str] = set()

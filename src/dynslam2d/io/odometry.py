@@ -32,7 +32,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from dynslam2d.errors import DynSlamError
-from dynslam2d.types import Pose2D, Scan, ScanSource, SourceMeta, wrap_angle
+from dynslam2d.types import Pose2D, Scan, ScanSource, SourceWrapper, wrap_angle
 
 __all__ = [
     "DEFAULT_MAX_GAP_S",
@@ -281,29 +281,13 @@ class OdometryInput:
     description: str | None = None
     warnings: list[str] = field(default_factory=list)
     explicit: bool = False
+    explicit_imu: bool = False  # the user named the IMU topic (then zero coverage is an error)
     tolerance: float = DEFAULT_TOLERANCE_S
     max_gap: float = DEFAULT_MAX_GAP_S
 
     @property
     def empty(self) -> bool:
         return self.track is None and self.imu is None and self.laser_poses is None
-
-
-class SourceWrapper:
-    """A scan source that wraps another: same ``meta`` and length; every other attribute
-    (``ground_truth`` of a simulated source, ``path`` of a bag, …) is the inner source's."""
-
-    def __init__(self, inner: ScanSource) -> None:
-        self.inner = inner
-        self.meta: SourceMeta = inner.meta
-
-    def __len__(self) -> int:
-        return len(self.inner)
-
-    def __getattr__(self, name: str) -> object:
-        if name == "inner":
-            raise AttributeError(name)
-        return getattr(self.inner, name)
 
 
 class OdometrySource(SourceWrapper):
@@ -342,6 +326,7 @@ class OdometrySource(SourceWrapper):
             "with_odom": 0,
             "without_odom": 0,
             "with_yaw_rate": 0,
+            "has_odometry": o.track is not None or o.laser_poses is not None,  # not only an IMU
         }
         if o.track is not None:
             self.stats["span"] = list(o.track.span)
@@ -367,6 +352,10 @@ class OdometrySource(SourceWrapper):
                 base, ok = o.track.at(scan.stamp, tolerance=o.tolerance, max_gap=o.max_gap)
                 if ok[0]:
                     odom = Pose2D.from_array(compose_mount(base, o.mount)[0])
+            if o.explicit_imu and index == 0 and o.imu is not None and scan.stamp > o.imu.stamps[-1] + o.tolerance:
+                raise DynSlamError(
+                    f"{self.meta.origin}: {o.imu.source}: IMU stamps {o.imu.stamps[0]:.3f}…{o.imu.stamps[-1]:.3f} s "
+                    f"end before the first scan ({scan.stamp:.3f} s); different clocks? (use --imu none)")
             rate = None if o.imu is None else o.imu.at(scan.stamp, tolerance=o.tolerance, max_gap=o.max_gap)
             st["scans"] += 1
             if odom is not None:
@@ -393,6 +382,17 @@ class OdometrySource(SourceWrapper):
             if o.explicit and st["with_odom"] == 0:
                 raise DynSlamError(f"{self.meta.origin}: {o.description}: no scan lies within the odometry's "
                                    f"stamps{where}; different clocks? (use --odom none for laser only)")
+        if o.imu is not None and st["scans"] and st["with_yaw_rate"] < st["scans"]:
+            a, b = float(o.imu.stamps[0]), float(o.imu.stamps[-1])
+            where = f" (IMU covers {a:.3f}…{b:.3f} s, scans {first_stamp:.3f}…{last_stamp:.3f} s)"
+            if o.explicit_imu and st["with_yaw_rate"] == 0:
+                raise DynSlamError(f"{self.meta.origin}: {o.imu.source}: no scan lies within the IMU's stamps{where}; "
+                                   "different clocks? (use --imu none)")
+            msg = (f"IMU: {st['scans'] - st['with_yaw_rate']} of {st['scans']} scans outside the IMU's time span "
+                   f"or in a gap{where}; those scans have no yaw rate")
+            warnings = self.meta.extra.setdefault("warnings", [])
+            if msg not in warnings:
+                warnings.append(msg)
 
 
 def rewrite_trajectory_frame(run_dir: Any, mount: Pose2D) -> None:

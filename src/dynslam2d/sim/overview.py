@@ -12,11 +12,6 @@ import os
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.collections import LineCollection
-from matplotlib.figure import Figure
-from matplotlib.patches import Circle as CirclePatch
-from matplotlib.patches import Polygon
 
 from dynslam2d.io.atomic import atomic_path
 from dynslam2d.sim.simulation import Simulation
@@ -70,6 +65,13 @@ def plot_overview(sim: Simulation, path: str | os.PathLike[str], scan_index: int
         figsize = (max(dx * scale + 1.0, 8.0), dy * scale + 2.6)
     else:
         figsize = (dx * scale + 4.2, max(dy * scale + 1.0, 4.5))
+    # matplotlib on use, not on import: `import dynslam2d.sim` is on every simulated run's path (issue 13)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle as CirclePatch
+    from matplotlib.patches import Polygon
+
     fig = Figure(figsize=figsize, layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)

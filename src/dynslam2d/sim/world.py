@@ -20,7 +20,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from matplotlib.path import Path as MplPath
 from numba import njit
 
 from dynslam2d.gridmap import GridMap
@@ -257,6 +256,8 @@ class World:
         h = int(math.ceil((ymax + margin - y0) / resolution))
         grid = GridMap(np.zeros((h, w)), resolution, (x0, y0))
         if self.interior or self.solids:
+            from matplotlib.path import Path as MplPath  # only for ground-truth maps, not on import
+
             xc, yc = grid.cell_centers()
             centres = np.column_stack((xc.ravel(), yc.ravel()))
             inside = np.zeros(centres.shape[0], dtype=bool)

@@ -430,6 +430,15 @@ class CleanupRecorder:
         if self.counter is None:
             slam = pipeline.config.slam  # type: ignore[attr-defined]
             self.counter = VisibilityCounter(slam.map_resolution, self.config, slam)
+        loop = getattr(result, "loop", None)
+        if loop is not None and loop.corrected:
+            # loop closure moved the poses after counting: count the keyframes (the scans written into the
+            # map) again at their optimised poses, so the counts match the re-rendered map (docs/slam.md)
+            slam = self.slam if self.slam is not None else pipeline.config.slam  # type: ignore[attr-defined]
+            self.counter = VisibilityCounter(slam.map_resolution, self.config, slam)
+            for kf, p in zip(loop.keyframes, loop.node_poses):
+                self.counter.add(kf.scan, Pose2D(float(p[0]), float(p[1]), float(p[2])),
+                                 kf.removed if kf.removed.size else None)
         self.result = clean_map(result.grid, self.counter, result.logodds)  # type: ignore[attr-defined]
 
 

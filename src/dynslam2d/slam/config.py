@@ -253,6 +253,28 @@ class SlamConfig(BaseModel):
         "Hessian eigenvalue (the prior holds there; along well-constrained directions the scan "
         "decides). 0 = no prior.",
     )
+    odometry_prior: Literal["degenerate", "all"] = Field(
+        "degenerate",
+        description="How odometry enters the match: 'degenerate' = only along directions the scan cannot "
+        "constrain (stiffness prior_weight); 'all' = on every direction, weighted by the odometry noise "
+        "model (odometry_noise_*) against the scan's own information.",
+    )
+    odometry_noise_translation: float = Field(
+        0.05, gt=0.0,
+        description="Odometry noise model: standard deviation of the translation per metre travelled (m/m).",
+    )
+    odometry_noise_rotation: float = Field(
+        0.05, gt=0.0,
+        description="Odometry noise model: standard deviation of the heading per radian turned (rad/rad).",
+    )
+    odometry_noise_floor_xy: float = Field(
+        0.01, gt=0.0,
+        description="Odometry noise model: translation standard deviation per step at rest, m.",
+    )
+    odometry_noise_floor_theta: float = Field(
+        0.005, gt=0.0,
+        description="Odometry noise model: heading standard deviation per step at rest, rad.",
+    )
     motion_prior: bool = Field(
         True,
         description="Without odometry, the constant-velocity prediction is the prior along degenerate "

@@ -61,6 +61,9 @@ SOURCE_RELOCALISED = "relocalised"  # wide search after being lost
 _WARMUP_SEARCHES = 3
 #: A degenerate direction stays degenerate while its ratio is below this × degeneracy_threshold.
 _DEGENERACY_HYSTERESIS = 1.5
+#: odometry_prior "all": a match farther from the odometry prediction than this squared Mahalanobis
+#: distance (χ² with 3 degrees of freedom, 99 %) is not fused with it.
+_ODOMETRY_GATE_CHI2 = 11.34
 #: Interpolated probability below which an endpoint counts as landing in known free space.
 FREE_SPACE_PROB = 0.45
 
@@ -125,6 +128,7 @@ class MatchResult:
     prior: str | None = None
     pose_source: str = SOURCE_SCAN
     state: str = STATE_TRACKING
+    sigma2: float = math.nan
 
 
 @dataclass(slots=True)
@@ -136,6 +140,7 @@ class _Prior:
     kind: str | None
     axes: np.ndarray
     gate: bool
+    delta: Pose2D | None = None  # the odometry increment since the previous scan (laser frame)
 
 
 @dataclass(slots=True)
@@ -223,6 +228,7 @@ class HectorSlam:
         self._degenerate_prev = (False, False)  # (translation, rotation) degenerate on the last matched scan
         self._last_relocalise: float | None = None  # stamp of the last relocalisation attempt
         self._history: deque[tuple[float, Pose2D]] = deque()  # accepted (stamp, pose) of the last velocity_window s
+        self._sigma2: float | None = None  # running residual variance of accepted matches (probability²)
 
     # ---- properties --------------------------------------------------------------------
     @property
@@ -321,7 +327,8 @@ class HectorSlam:
         dt = scan.stamp - self._last_stamp if self._last_stamp is not None else 0.0
         odom = scan.odom
         if c.use_odometry and odom is not None and self._last_odom is not None and odom.is_finite():
-            return _Prior(last.compose(self._last_odom.between(odom)), "odometry", all_axes, True)
+            delta = self._last_odom.between(odom)
+            return _Prior(last.compose(delta), "odometry", all_axes, True, delta)
         v = self._model_velocity() if self._state == STATE_TRACKING else None
         cv = last.compose(Pose2D(float(v[0] * dt), float(v[1] * dt), float(v[2] * dt))) if v is not None else last
         w = scan.yaw_rate
@@ -416,7 +423,7 @@ class HectorSlam:
             else:
                 self._use_prediction(res, prior, PREDICT_LOST)
         else:
-            self._match_tracking(res, pts, prior, scan.stamp)
+            self._match_tracking(res, pts, prior, scan.stamp, self._odometry_information(prior))
             if res.low_support and prior.kind == "odometry" and predicted is None:
                 # odometry is a prior, not a replacement: when the odometry-seeded match finds little
                 # support (odometry slipped or glitched), try the laser-only seed too and keep the better
@@ -433,13 +440,40 @@ class HectorSlam:
             self._commit(scan, res)
         return res
 
-    def _match_tracking(self, res: MatchResult, pts: np.ndarray, prior: _Prior, stamp: float) -> None:
-        """Match from ``res.start``, then the prior along degenerate directions and the motion gate."""
+    def _match_tracking(self, res: MatchResult, pts: np.ndarray, prior: _Prior, stamp: float,
+                        info: np.ndarray | None = None) -> None:
+        """Match from ``res.start`` (with ``info``: the odometry prior on all directions), then the prior
+        along degenerate directions and the motion gate."""
         self._match_against_map(res, pts)
+        if info is not None and res.reason is None and self._sigma2:
+            # odometry_prior "all": the scan's match must agree with the odometry within their joint noise
+            # (Mahalanobis test on the difference, covariance Σ_odom + σ²H⁻¹, χ² 3 dof 99 %) — a wheel slip or
+            # glitch must not pull the pose — and then the two are fused: the match is refined with the prior
+            # σ²Σ_odom⁻¹ added to the normal equations
+            d = prior.pose.between(res.pose)
+            x = np.array([d.x, d.y, d.theta])
+            joint = np.linalg.inv(info / self._sigma2) + res.covariance
+            if float(x @ np.linalg.solve(joint, x)) < _ODOMETRY_GATE_CHI2:
+                p = self._refine(pts, res.pose.as_array(), prior.pose.as_array(), info)
+                if np.all(np.isfinite(p)):
+                    self._fit(res, pts, Pose2D(float(p[0]), float(p[1]), float(wrap_angle(p[2]))))
         if res.reason != REJECT_NON_FINITE and res.reason != REJECT_JUMP:
             self._apply_prior_and_gate(res, pts, prior, stamp)
         else:
             res.low_support = True  # pose = start estimate (with odometry: the odometry prediction)
+
+    def _odometry_information(self, prior: _Prior) -> np.ndarray | None:
+        """The odometry prior on every direction (``odometry_prior: all``), in the matcher's units: σ²·Σ⁻¹
+        with Σ the odometry increment's covariance from the noise model and σ² the scans' residual
+        variance (the matcher minimises Σr², whose information is H/σ²), world units (1/m², 1/rad²)."""
+        c = self.config
+        if c.odometry_prior != "all" or prior.kind != "odometry" or prior.delta is None or self._sigma2 is None:
+            return None
+        d = math.hypot(prior.delta.x, prior.delta.y)
+        a = abs(prior.delta.theta)
+        var_xy = c.odometry_noise_floor_xy**2 + (c.odometry_noise_translation * d) ** 2
+        var_th = c.odometry_noise_floor_theta**2 + (c.odometry_noise_rotation * a) ** 2
+        return self._sigma2 * np.diag([1.0 / var_xy, 1.0 / var_xy, 1.0 / var_th])
 
     def _too_close(self, scan: Scan) -> bool:
         """More than ``too_close_fraction`` of the valid returns are closer than laser_min_dist."""
@@ -481,7 +515,8 @@ class HectorSlam:
         res.pose = pose
         res.hessian = fit.hessian
         res.score = fit.score
-        sigma2 = c.covariance_sigma**2 if c.covariance_sigma is not None else fit.cost / max(pts.shape[0] - 3, 1)
+        res.sigma2 = fit.cost / max(pts.shape[0] - 3, 1)
+        sigma2 = c.covariance_sigma**2 if c.covariance_sigma is not None else res.sigma2
         res.covariance = covariance_world(fit.hessian, sigma2, self.map.resolution)
 
     def _apply_prior_and_gate(self, res: MatchResult, pts: np.ndarray, prior: _Prior, stamp: float) -> None:
@@ -557,7 +592,8 @@ class HectorSlam:
         res.rejected = True  # the first scan after relocalising is not written into the map
         res.reason = "relocalised"
 
-    def _match_against_map(self, res: MatchResult, pts: np.ndarray) -> None:
+    def _match_against_map(self, res: MatchResult, pts: np.ndarray,
+                           prior_pose: np.ndarray | None = None, prior_info: np.ndarray | None = None) -> None:
         c = self.config
         levels = self.map.levels
         start = res.start.as_array()
@@ -566,7 +602,7 @@ class HectorSlam:
             p = match_multires(
                 levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
                 c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
-                c.max_translation_step,
+                c.max_translation_step, prior_pose, prior_info,
             )
             if not np.all(np.isfinite(p)):
                 return p, -1.0
@@ -661,6 +697,8 @@ class HectorSlam:
             self._n_accepted += 1
             a = c.score_average_rate
             self._score_avg = res.score if self._score_avg is None else (1 - a) * self._score_avg + a * res.score
+            if math.isfinite(res.sigma2):
+                self._sigma2 = res.sigma2 if self._sigma2 is None else (1 - a) * self._sigma2 + a * res.sigma2
 
     def _update_state(self, stamp: float, res: MatchResult) -> None:
         """Tracking ↔ lost: lost after ``lost_after`` s of scans whose match could not be accepted (the

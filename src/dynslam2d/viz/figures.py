@@ -19,6 +19,17 @@ from dynslam2d.viz.trackpaths import final_confirmed, track_paths, tracks_to_dra
 from dynslam2d.viz.tracksplot import plot_tracks
 
 
+def _loop_segments(result: RunResult) -> np.ndarray | None:
+    """(k, 2, 2) segments between the optimised positions of the two keyframes of every active loop."""
+    loop = getattr(result, "loop", None)
+    if loop is None or not loop.loops:
+        return None
+    ij = np.asarray(loop.loops, dtype=np.int64)
+    # drawn where the map's poses put the keyframes: optimised, or the front end's when those were kept
+    nodes = loop.node_poses if loop.corrected else loop.frontend[loop.keyframe_scans]
+    return np.stack((nodes[ij[:, 0], :2], nodes[ij[:, 1], :2]), axis=1)
+
+
 def write_figures(
     result: RunResult,
     out_dir: str | os.PathLike[str],
@@ -73,6 +84,7 @@ def write_figures(
         removed_xy=removed_xy, erased=cleaned.erased if cleaned is not None else None,
         low_support=conf.get("low_support"), lost=conf.get("lost"),
         warning=pc.get("warning"),  # type: ignore[arg-type]
+        loop_edges=_loop_segments(result),
     )
     confirmed = sorted((p for p in all_paths.values() if p.ever_confirmed), key=lambda p: p.id)
     n_m = sum(p.ever_in_m for p in confirmed)

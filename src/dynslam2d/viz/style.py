@@ -32,6 +32,8 @@ UNKNOWN = "#e4e4e4"
 LOW_SUPPORT = "#f0a000"
 #: Pose confidence: scans while the SLAM was lost.
 LOST = "#b40000"
+#: Loop closures (map.png): segments between the two keyframes of each loop edge.
+LOOP_EDGE = "#2ca02c"
 #: Pose confidence: degenerate scans (time shading).
 DEGENERATE = "#56b4e9"
 

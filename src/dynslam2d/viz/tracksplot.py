@@ -11,7 +11,7 @@ import numpy as np
 
 from dynslam2d.gridmap import GridMap
 from dynslam2d.viz.figure import new_figure, save_png
-from dynslam2d.viz.mapplot import map_figure_size, occupancy_image, frame_metric_axes
+from dynslam2d.viz.mapplot import draw_grey, frame_metric_axes, map_figure_size, occupancy_image
 from dynslam2d.viz.trackpaths import TrackPath
 
 #: Colour map of the speed (m/s): plasma without its pale-yellow end (unreadable on white).
@@ -85,7 +85,7 @@ def plot_tracks(
     if grid is not None:
         # Faint map: occupied cells light grey, everything else white.
         img = 1.0 - 0.35 * (1.0 - occupancy_image(grid))
-        ax.imshow(img, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", extent=extent, interpolation="nearest")
+        draw_grey(ax, img, extent)
     vmax = speed_limit(tracks)
     norm = Normalize(0.0, vmax)
     cmap = _speed_cmap()

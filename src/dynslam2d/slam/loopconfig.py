@@ -1,0 +1,186 @@
+"""Configuration of loop closure and pose-graph optimisation (docs/slam.md, "Loop closure")."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class LoopConfig(BaseModel):
+    """Parameters of :mod:`dynslam2d.slam.loops` and :mod:`dynslam2d.slam.posegraph` (units in each
+    description)."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    enabled: bool = Field(
+        True,
+        description="Close loops and optimise the pose graph behind the front end: trajectory.tum and the map "
+        "come from the optimised poses, trajectory_frontend.tum keeps the front end's (CLI --loop-closure on|off; "
+        "off = the front end alone, unchanged).",
+    )
+    submap_keyframes: int = Field(
+        10, ge=2,
+        description="Keyframes (scans written into the map) per submap; loops are searched against finished submaps.",
+    )
+    submap_max_range: float = Field(
+        20.0, gt=0.0,
+        description="Returns farther than this are left out of the submaps and of the loop queries, m.",
+    )
+    search_every: int = Field(
+        2, ge=1,
+        description="Search for loops on every this-many-th keyframe.",
+    )
+    min_path_gap: float = Field(
+        6.0, ge=0.0,
+        description="A submap is a loop candidate only if the robot travelled at least this far since the "
+        "submap's last keyframe, m (closer ones are linked by the keyframe chain already).",
+    )
+    search_radius: float = Field(
+        2.0, gt=0.0,
+        description="Submaps whose centre keyframe lies within this distance of the current pose estimate are "
+        "searched, m, grown by drift_per_m × the path travelled since the submap.",
+    )
+    drift_per_m: float = Field(
+        0.02, ge=0.0,
+        description="Position uncertainty of the front end per metre travelled (grows the search), m/m.",
+    )
+    max_search_radius: float = Field(
+        6.0, gt=0.0,
+        description="Cap of the grown search radius, m.",
+    )
+    linear_window: float = Field(
+        1.0, gt=0.0,
+        description="Translation window of the correlative (branch-and-bound) search around the predicted "
+        "pose, m, grown like the search radius up to max_linear_window.",
+    )
+    max_linear_window: float = Field(
+        3.0, gt=0.0,
+        description="Cap of the grown translation window, m.",
+    )
+    angular_window: float = Field(
+        0.35, gt=0.0,
+        description="Rotation window of the correlative search, rad (plus drift_rad_per_m × path).",
+    )
+    drift_rad_per_m: float = Field(
+        0.002, ge=0.0,
+        description="Heading uncertainty of the front end per metre travelled, rad/m.",
+    )
+    max_angular_window: float = Field(
+        0.8, gt=0.0,
+        description="Cap of the grown rotation window, rad.",
+    )
+    tracked_linear_window: float = Field(
+        0.3, gt=0.0,
+        description="Translation window when a loop was accepted within consistency_window keyframes (its "
+        "prediction is good), m.",
+    )
+    tracked_search_every: int = Field(
+        3, ge=1,
+        description="While loops keep being found (one within consistency_window keyframes), search only every "
+        "this-many-th keyframe, and only the nearest submap.",
+    )
+    tracked_angular_window: float = Field(
+        0.1, gt=0.0, description="Rotation window in that case, rad."
+    )
+    search_level: int = Field(
+        2, ge=0,
+        description="Submap level of the correlative search (0 = finest, each level doubles the cell size).",
+    )
+    search_points: int = Field(
+        180, ge=10,
+        description="Query points used by the correlative search (evenly sub-sampled; all of them, up to 360, "
+        "refine the match and count the support), count.",
+    )
+    min_score: float = Field(
+        0.55, ge=0.0, le=1.0,
+        description="Smallest correlative score (mean smeared hit value of the query points, 0 … 1) of a loop.",
+    )
+    min_margin: float = Field(
+        0.08, ge=0.0,
+        description="The best pose must beat the best pose farther than runner_up_distance / runner_up_angle "
+        "by this much score (a corridor gives two equal answers).",
+    )
+    runner_up_distance: float = Field(
+        0.6, gt=0.0, description="Distance beyond which another pose counts as the runner-up, m."
+    )
+    runner_up_angle: float = Field(
+        0.25, gt=0.0, description="Rotation beyond which another pose counts as the runner-up, rad."
+    )
+    min_support: int = Field(
+        80, ge=0,
+        description="Query points that must land on occupied submap cells at the refined pose (count).",
+    )
+    min_support_share: float = Field(
+        0.55, ge=0.0, le=1.0,
+        description="… and at least this share of the query points.",
+    )
+    min_spread: float = Field(
+        2.0, ge=0.0,
+        description="Bearings of the supporting points must cover at least this angle, rad.",
+    )
+    max_degeneracy: float = Field(
+        0.0, ge=0.0,
+        description="Refuse loops whose match Hessian has a smallest/largest eigenvalue ratio below this "
+        "(0 = off; a corridor constrains only one direction).",
+    )
+    consistency_window: int = Field(
+        8, ge=0,
+        description="A loop candidate is accepted once another candidate within this many keyframes implies "
+        "the same correction of the front end's pose (0 = accept single candidates).",
+    )
+    consistency_distance: float = Field(
+        0.15, gt=0.0, description="… the same correction within this translation, m."
+    )
+    consistency_angle: float = Field(
+        0.03, gt=0.0, description="… and this rotation, rad."
+    )
+    odom_sigma_xy: float = Field(
+        0.01, gt=0.0, description="Standard deviation of a keyframe-to-keyframe edge, m, plus odom_sigma_per_m × its length."
+    )
+    odom_sigma_per_m: float = Field(
+        0.02, ge=0.0, description="Growth of that deviation with the edge's length, m/m."
+    )
+    odom_sigma_theta: float = Field(
+        0.004, gt=0.0, description="Standard deviation of a keyframe edge's rotation, rad, plus odom_sigma_theta_per_rad × |Δθ|."
+    )
+    odom_sigma_theta_per_rad: float = Field(
+        0.02, ge=0.0, description="Growth of the rotation deviation with the edge's rotation, rad/rad."
+    )
+    loop_sigma_xy: float = Field(0.03, gt=0.0, description="Standard deviation of a loop edge's translation, m.")
+    loop_sigma_theta: float = Field(0.006, gt=0.0, description="Standard deviation of a loop edge's rotation, rad.")
+    kernel: Literal["dcs", "cauchy", "none"] = Field(
+        "dcs",
+        description="Robust kernel of loop edges: dcs (dynamic covariance scaling, the closed form of switchable "
+        "constraints), cauchy, or none.",
+    )
+    kernel_scale: float = Field(
+        5.0, gt=0.0, description="Φ of dcs / c of cauchy, in χ² (dcs) or χ (cauchy) units of the loop edge."
+    )
+    outlier_chi2: float = Field(
+        30.0, gt=0.0,
+        description="After optimising, loop edges whose χ² (eᵀΩe) is still above this are switched off and the "
+        "graph optimised again.",
+    )
+    optimise_every: int = Field(
+        20, ge=1,
+        description="Optimise during the run after this many newly accepted loops (a final full optimisation "
+        "always runs).",
+    )
+    map_check: bool = Field(
+        True,
+        description="Keep the optimised poses only if the map re-rendered from them is sharper than the front "
+        "end's map (lower total occupancy entropy); otherwise trajectory.tum and the map stay the front end's. "
+        "A Hector-style front end that matched every revisit against its global map is often already as "
+        "consistent as the loops can make it.",
+    )
+    min_correction: float = Field(
+        0.05, ge=0.0,
+        description="Keep the front end's poses when the optimisation moves no keyframe by more than this, m: a "
+        "correction below the loops' own accuracy is noise, not drift.",
+    )
+    map_check_margin: float = Field(
+        0.0, ge=0.0,
+        description="… sharper by at least this fraction of the front end map's entropy (dimensionless).",
+    )
+    iterations: int = Field(30, ge=1, description="Largest number of Gauss–Newton/LM iterations per optimisation.")

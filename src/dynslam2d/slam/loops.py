@@ -1,0 +1,418 @@
+"""Loop closure behind the Hector-style front end (docs/slam.md, "Loop closure").
+
+Design (after Cartographer, Hess et al. ICRA 2016, with the front end's single global map
+kept as it is):
+
+* **Keyframes** are the scans the front end writes into its map (every ``map_update_*``
+  threshold). Each keyframe is a node of a :class:`~dynslam2d.slam.posegraph.PoseGraph`;
+  consecutive keyframes are linked by the front end's relative pose (scan-to-map matching,
+  which already carries the odometry prior where the recording has one), with a standard
+  deviation that grows with the edge's length and is ten times larger across scans whose pose
+  was not backed by a well-supported match.
+* **Submaps**: every ``submap_keyframes`` consecutive keyframes form a small multi-resolution
+  grid in the frame of its middle keyframe (the *anchor*), built from the keyframes' filtered
+  scans (the beams the dynamic filter removed never enter it) at their front-end poses relative
+  to the anchor. Grids are built when needed and a few are cached; what is kept for good is
+  the keyframes' scans.
+* **Loop search**: on every ``search_every``-th keyframe, finished submaps whose anchor lies
+  within a radius of the current pose estimate (grown with the path travelled since the submap:
+  the front end's uncertainty) are searched with the correlative branch-and-bound matcher
+  (Olson 2009; :func:`~dynslam2d.slam.correlative.correlative_search`) around the predicted pose,
+  refined by the multi-resolution Gauss–Newton matcher. A match is a *candidate* if its score,
+  its margin over the best pose elsewhere (runner-up), its supporting points and their angular
+  spread are all high enough.
+* **Consistency**: a candidate becomes a loop edge once another candidate within a few
+  keyframes implies the same pose of the robot relative to the map (both loops and the chain of
+  keyframes between them close up); lone candidates are dropped.
+* **Optimisation**: during the run after every few accepted loops, and once at the end, with a
+  robust kernel on loop edges and pruning of loops the graph does not support.
+
+Every scan's optimised pose is its last keyframe's optimised pose composed with the front end's
+relative pose from that keyframe. Poses are laser poses in the map frame (m, rad).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dynslam2d.slam.config import SlamConfig
+from dynslam2d.slam.correlative import correlative_search
+from dynslam2d.slam.grid import MultiResMap
+from dynslam2d.slam.loopconfig import LoopConfig
+from dynslam2d.slam.matcher import degeneracy, evaluate, match_multires, support
+from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
+from dynslam2d.types import Pose2D, Scan
+
+#: Submap grids kept built at a time (each a few MB).
+_SUBMAP_CACHE = 6
+#: Largest number of submaps searched per keyframe (nearest first).
+_MAX_CANDIDATES = 3
+#: Query points used per loop search (evenly sub-sampled).
+_QUERY_POINTS = 360
+#: Keyframe edges across unsupported scans get their deviation multiplied by this.
+_WEAK_FACTOR = 10.0
+
+
+@dataclass(slots=True)
+class Keyframe:
+    """A scan written into the front end's map: its node, its front-end pose and its beams.
+
+    ``scan`` has the robot's own body removed; ``removed`` marks the beams the dynamic filter
+    removed (kept out of submaps and loop queries, and of the re-rendered map).
+    """
+
+    scan_index: int
+    stamp: float
+    frontend: np.ndarray
+    scan: Scan
+    removed: np.ndarray
+    path: float  # path length of the front end up to this keyframe, m
+
+    def kept(self) -> Scan:
+        """The scan with the removed beams set to "no return"."""
+        if self.removed.size and self.removed.any():
+            return self.scan.with_ranges(np.where(self.removed, np.nan, self.scan.ranges))
+        return self.scan
+
+
+@dataclass(slots=True)
+class LoopCandidate:
+    """A scan-to-submap match: keyframe ``node`` seen from the anchor node ``anchor`` is ``z``."""
+
+    node: int
+    anchor: int
+    z: np.ndarray
+    score: float
+    margin: float
+    support: int
+    accepted: bool = False
+
+
+@dataclass(slots=True)
+class LoopResult:
+    """What :meth:`LoopCloser.finish` returns.
+
+    Attributes:
+        poses: (n, 3) optimised laser pose of every scan given to the closer (m, rad).
+        frontend: (n, 3) the front end's poses of the same scans.
+        keyframe_scans: (k,) scan index of every keyframe (graph node).
+        node_poses: (k, 3) optimised keyframe poses.
+        graph: the optimised pose graph.
+        loops: accepted loop edges as (node i, node j) pairs that stayed active.
+        corrected: the optimisation changed the poses (at least one loop edge stayed active).
+        stats: counters (keyframes, submaps, searches, candidates, loops accepted / rejected, ms).
+        keyframes: the keyframes (to re-render the map and recount the clean-up pass).
+    """
+
+    poses: np.ndarray
+    frontend: np.ndarray
+    keyframe_scans: np.ndarray
+    node_poses: np.ndarray
+    graph: PoseGraph
+    loops: list[tuple[int, int]]
+    corrected: bool
+    stats: dict[str, float]
+    keyframes: list[Keyframe] = field(default_factory=list, repr=False)
+
+
+def edge_sigmas(config: LoopConfig, z: np.ndarray, weak: bool) -> tuple[float, float]:
+    """(σ_xy m, σ_θ rad) of a keyframe-to-keyframe edge of relative pose ``z``."""
+    d = math.hypot(float(z[0]), float(z[1]))
+    sxy = config.odom_sigma_xy + config.odom_sigma_per_m * d
+    sth = config.odom_sigma_theta + config.odom_sigma_theta_per_rad * abs(float(z[2]))
+    if weak:
+        sxy *= _WEAK_FACTOR
+        sth *= _WEAK_FACTOR
+    return sxy, sth
+
+
+class LoopCloser:
+    """Builds the pose graph scan by scan (:meth:`add`) and returns the optimised trajectory
+    (:meth:`finish`)."""
+
+    def __init__(self, config: LoopConfig | None = None, slam: SlamConfig | None = None) -> None:
+        self.config = config if config is not None else LoopConfig()
+        self.slam = slam if slam is not None else SlamConfig()
+        self.graph = PoseGraph()
+        self.keyframes: list[Keyframe] = []
+        self.candidates: list[LoopCandidate] = []
+        self.loop_edges: list[int] = []  # edge indices in the graph
+        self._scan_node: list[int] = []  # per scan: its last keyframe's node (−1 before the first)
+        self._frontend: list[tuple[float, float, float]] = []
+        self._weak_since_kf = False
+        self._path = 0.0
+        self._last_pose: np.ndarray | None = None
+        self._opt_nodes = 0  # nodes covered by the last optimisation
+        self._new_loops = 0
+        self._cache: OrderedDict[int, MultiResMap] = OrderedDict()
+        self.stats: dict[str, float] = {"searches": 0, "candidates": 0, "loops_accepted": 0, "optimisations": 0,
+                                        "search_ms": 0.0, "optimise_ms": 0.0, "total_ms": 0.0}
+
+    # ---- input ----------------------------------------------------------------------------
+    def add(self, stamp: float, pose: Pose2D, scan: Scan, removed: np.ndarray, keyframe: bool,
+            weak: bool = False) -> None:
+        """One scan of the run in order: its front-end laser pose; ``scan`` with the robot's body
+        removed, ``removed`` the beams the dynamic filter removed; ``keyframe``: written into the
+        front end's map; ``weak``: its pose was not backed by a well-supported match."""
+        t0 = time.perf_counter()
+        p = np.array([pose.x, pose.y, pose.theta], dtype=np.float64)
+        if self._last_pose is not None and np.all(np.isfinite(p)):
+            self._path += math.hypot(p[0] - self._last_pose[0], p[1] - self._last_pose[1])
+        if np.all(np.isfinite(p)):
+            self._last_pose = p
+        self._frontend.append((float(p[0]), float(p[1]), float(p[2])))
+        self._weak_since_kf |= bool(weak)
+        if keyframe and np.all(np.isfinite(p)):
+            self._add_keyframe(len(self._frontend) - 1, stamp, p, scan, removed)
+        self._scan_node.append(len(self.keyframes) - 1)
+        self.stats["total_ms"] += (time.perf_counter() - t0) * 1e3
+
+    def _add_keyframe(self, index: int, stamp: float, p: np.ndarray, scan: Scan, removed: np.ndarray) -> None:
+        c = self.config
+        rm = np.asarray(removed, dtype=bool)
+        kf = Keyframe(index, stamp, p, scan, rm if rm.shape == scan.ranges.shape else np.zeros(0, bool), self._path)
+        if self.keyframes:
+            prev_node = len(self.keyframes) - 1
+            est_prev = self.graph.pose(prev_node)
+            z = relative(self.keyframes[-1].frontend, p)
+            node = self.graph.add_node(compose(est_prev, z))
+            sxy, sth = edge_sigmas(c, z, self._weak_since_kf)
+            self.graph.add_edge(prev_node, node, z, diag_info(sxy, sth))
+        else:
+            node = self.graph.add_node(p)
+        self.keyframes.append(kf)
+        self._weak_since_kf = False
+        every = c.search_every * (c.tracked_search_every if self._recent_loop(node) is not None else 1)
+        if node % every == 0:
+            self._search(node)
+        self._confirm(node)
+        if self._new_loops >= c.optimise_every or (self._new_loops >= 2 and node - self._opt_nodes >= 3 * c.optimise_every):
+            self._optimise(final=False)
+            self._opt_nodes = node
+
+    # ---- submaps --------------------------------------------------------------------------
+    def _submap_range(self, s: int) -> tuple[int, int, int]:
+        """(first node, last node, anchor node) of submap ``s``."""
+        n = self.config.submap_keyframes
+        first = s * n
+        last = first + n - 1
+        return first, last, first + n // 2
+
+    def _points(self, kf: Keyframe) -> tuple[np.ndarray, np.ndarray]:
+        """(returns (n, 2), clearing-ray ends (m, 2)) of the kept beams in the laser frame, m."""
+        c = self.slam
+        scan = kf.kept()
+        r = scan.ranges
+        lim = min(c.laser_max_dist, self.config.submap_max_range)
+        with np.errstate(invalid="ignore"):
+            valid = scan.valid_mask() & (r > c.laser_min_dist) & (r < lim)
+        return scan.points(valid), np.zeros((0, 2))
+
+    def _submap(self, s: int) -> MultiResMap:
+        grid = self._cache.get(s)
+        if grid is not None:
+            self._cache.move_to_end(s)
+            return grid
+        c = self.slam
+        first, last, anchor = self._submap_range(s)
+        grid = MultiResMap(c.map_resolution, max(self.config.search_level + 1, 2), c.logodds_free,
+                           c.logodds_occupied, c.occupied_logodds_cap, c.map_growth_margin)
+        a = self.keyframes[anchor].frontend
+        for k in range(first, last + 1):
+            pts, _ = self._points(self.keyframes[k])
+            if pts.shape[0]:
+                rel = relative(a, self.keyframes[k].frontend)
+                grid.integrate(Pose2D(float(rel[0]), float(rel[1]), float(rel[2])), pts)
+        self._cache[s] = grid
+        if len(self._cache) > _SUBMAP_CACHE:
+            self._cache.popitem(last=False)
+        return grid
+
+    # ---- loop search ----------------------------------------------------------------------
+    def _estimate(self, node: int) -> np.ndarray:
+        """Current estimate of a node's pose: optimised, or the last optimised node composed with
+        the front end's relative pose."""
+        return self.graph.pose(node)
+
+    def _search(self, node: int) -> None:
+        c = self.config
+        t0 = time.perf_counter()
+        kf = self.keyframes[node]
+        est = self._estimate(node)
+        n_sub = (node + 1) // c.submap_keyframes  # finished submaps
+        if node < c.submap_keyframes:
+            return
+        recent = self._recent_loop(node)
+        if recent is not None:
+            # a loop a few keyframes ago: it and the keyframe chain since predict this pose well, so the
+            # search needs only a small window around that prediction
+            est = compose(self._implied(recent), relative(self._estimate(recent.node), est))
+        found: list[tuple[float, int, float]] = []
+        for s in range(n_sub):
+            first, last, anchor = self._submap_range(s)
+            if last >= node:
+                continue
+            gap = kf.path - self.keyframes[last].path
+            if gap < c.min_path_gap:
+                continue
+            radius = min(c.search_radius + c.drift_per_m * gap, c.max_search_radius)
+            if recent is not None:
+                radius = c.search_radius
+            a = self._estimate(anchor)
+            d = math.hypot(a[0] - est[0], a[1] - est[1])
+            if d <= radius:
+                found.append((d, s, gap))
+        if not found:
+            return
+        found.sort()
+        pts, _ = self._points(kf)
+        if pts.shape[0] < max(c.min_support, 10):
+            return
+        if pts.shape[0] > _QUERY_POINTS:
+            pts = pts[np.linspace(0, pts.shape[0] - 1, _QUERY_POINTS).astype(np.int64)]
+        for _d, s, gap in found[:1 if recent is not None else _MAX_CANDIDATES]:
+            cand = self._match(node, s, 0.0 if recent is not None else gap, pts, est, recent is not None)
+            self.stats["searches"] += 1
+            if cand is not None:
+                self.candidates.append(cand)
+                self.stats["candidates"] += 1
+        self.stats["search_ms"] += (time.perf_counter() - t0) * 1e3
+
+    def _recent_loop(self, node: int) -> LoopCandidate | None:
+        """The latest accepted loop candidate within ``consistency_window`` keyframes of ``node``."""
+        w = max(self.config.consistency_window, 1)
+        best = None
+        for cand in self.candidates:
+            if cand.accepted and node - cand.node <= w and (best is None or cand.node > best.node):
+                best = cand
+        return best
+
+    def _match(self, node: int, s: int, gap: float, pts: np.ndarray, est: np.ndarray,
+               tracked: bool = False) -> LoopCandidate | None:
+        c = self.config
+        sc = self.slam
+        _first, _last, anchor = self._submap_range(s)
+        grid = self._submap(s)
+        levels = grid.levels
+        lvl = levels[min(c.search_level, len(levels) - 1)]
+        pred = relative(self._estimate(anchor), est)
+        lin = min(c.linear_window + c.drift_per_m * gap, c.max_linear_window)
+        ang = min(c.angular_window + c.drift_rad_per_m * gap, c.max_angular_window)
+        if tracked:
+            lin, ang = min(lin, c.tracked_linear_window), min(ang, c.tracked_angular_window)
+        cr = correlative_search(lvl, pts, pred, lin, ang, None, c.search_points, sc.correlative_max_height, 0.0, 0.0)
+        if cr is None or cr.score < c.min_score:
+            return None
+        # the runner-up only for a match good enough to become a candidate (a second branch and bound)
+        cr = correlative_search(lvl, pts, pred, lin, ang, None, c.search_points, sc.correlative_max_height, 0.0, 0.0,
+                                runner_up_distance=c.runner_up_distance, runner_up_angle=c.runner_up_angle)
+        if cr is None or cr.score < c.min_score:
+            return None
+        margin = cr.score - (cr.runner_up or 0.0)
+        if margin < c.min_margin:
+            return None
+        p = match_multires(levels, pts, cr.pose, sc.iterations_coarse, sc.iterations_finest, False,
+                           sc.step_mode == "lm", sc.lm_lambda_init, sc.lm_lambda_max, sc.max_rotation_step,
+                           sc.max_translation_step)
+        if not np.all(np.isfinite(p)) or math.hypot(p[0] - cr.pose[0], p[1] - cr.pose[1]) > 2 * lvl.resolution:
+            return None
+        n_sup, spread = support(levels[0], pts, p, sc.support_probability)
+        if n_sup < c.min_support or n_sup < c.min_support_share * pts.shape[0] or spread < c.min_spread:
+            return None
+        if c.max_degeneracy > 0.0:
+            fit = evaluate(levels[0], pts, p)
+            if degeneracy(fit.hessian, levels[0].resolution, pts, sc.degeneracy_threshold).ratio < c.max_degeneracy:
+                return None
+        return LoopCandidate(node, anchor, np.asarray(p, dtype=np.float64), float(cr.score), float(margin), int(n_sup))
+
+    # ---- consistency ----------------------------------------------------------------------
+    def _implied(self, cand: LoopCandidate) -> np.ndarray:
+        """The pose of the candidate's keyframe implied by the loop: anchor estimate ⊕ z."""
+        return compose(self._estimate(cand.anchor), cand.z)
+
+    def _consistent(self, a: LoopCandidate, b: LoopCandidate) -> bool:
+        c = self.config
+        # the two loops and the keyframe chain between them must close up
+        implied = relative(self._implied(a), self._implied(b))
+        chain = relative(self._estimate(a.node), self._estimate(b.node))
+        d = relative(chain, implied)
+        return math.hypot(d[0], d[1]) <= c.consistency_distance and abs(d[2]) <= c.consistency_angle
+
+    def _confirm(self, node: int) -> None:
+        c = self.config
+        keep: list[LoopCandidate] = []
+        for cand in self.candidates:
+            if cand.accepted:
+                continue
+            if c.consistency_window == 0:
+                self._accept(cand)
+                continue
+            partners = [o for o in self.candidates if o is not cand and o.node != cand.node
+                        and abs(o.node - cand.node) <= c.consistency_window and self._consistent(cand, o)]
+            if partners:
+                self._accept(cand)
+                for o in partners:
+                    if not o.accepted:
+                        self._accept(o)
+            elif node - cand.node <= c.consistency_window:
+                keep.append(cand)
+        # accepted candidates stay as partners for the next ones within the window
+        self.candidates = [o for o in self.candidates if (o.accepted and node - o.node <= c.consistency_window)] + [
+            o for o in keep if not o.accepted]
+
+    def _accept(self, cand: LoopCandidate) -> None:
+        c = self.config
+        cand.accepted = True
+        k = self.graph.add_edge(cand.anchor, cand.node, cand.z, diag_info(c.loop_sigma_xy, c.loop_sigma_theta), loop=True)
+        self.loop_edges.append(k)
+        self.stats["loops_accepted"] += 1
+        self._new_loops += 1
+
+    # ---- optimisation ---------------------------------------------------------------------
+    def _optimise(self, final: bool) -> None:
+        c = self.config
+        t0 = time.perf_counter()
+        # during the run the optimisation only has to improve the search's predictions: fewer iterations
+        self.graph.optimise(c.kernel, c.kernel_scale, c.iterations if final else max(c.iterations // 3, 1),
+                            c.outlier_chi2)
+        self._new_loops = 0
+        self.stats["optimisations"] += 1
+        self.stats["optimise_ms"] += (time.perf_counter() - t0) * 1e3
+
+    def finish(self) -> LoopResult:
+        """Final full optimisation; every scan's optimised pose."""
+        t0 = time.perf_counter()
+        frontend = np.asarray(self._frontend, dtype=np.float64).reshape(-1, 3)
+        active = [k for k in self.loop_edges if self.graph.edges[k].active]
+        if self.loop_edges:
+            self._optimise(final=True)
+            active = [k for k in self.loop_edges if self.graph.edges[k].active]
+        corrected = bool(active)
+        nodes = self.graph.poses.copy()
+        poses = frontend.copy()
+        if corrected and nodes.shape[0]:
+            poses = scan_poses(frontend, np.asarray(self._scan_node, dtype=np.int64),
+                               np.array([k.frontend for k in self.keyframes]).reshape(-1, 3), nodes)
+        loops = [(self.graph.edges[k].i, self.graph.edges[k].j) for k in active]
+        self.stats["total_ms"] += (time.perf_counter() - t0) * 1e3
+        stats = dict(self.stats)
+        stats.update({"keyframes": len(self.keyframes), "submaps": len(self.keyframes) // self.config.submap_keyframes,
+                      "loops_active": len(active), "loops_rejected": len(self.loop_edges) - len(active)})
+        return LoopResult(poses, frontend, np.array([k.scan_index for k in self.keyframes], dtype=np.int64),
+                          nodes, self.graph, loops, corrected, stats, self.keyframes)
+
+
+def scan_poses(frontend: np.ndarray, scan_node: np.ndarray, node_frontend: np.ndarray,
+               node_poses: np.ndarray) -> np.ndarray:
+    """(n, 3) poses of every scan: its last keyframe's pose in ``node_poses`` composed with the front
+    end's relative pose from that keyframe (``scan_node`` (n,) keyframe of each scan, −1 = none yet:
+    the front end's pose is kept)."""
+    out = np.array(frontend, dtype=np.float64, copy=True)
+    has = scan_node >= 0
+    out[has] = compose(node_poses[scan_node[has]], relative(node_frontend[scan_node[has]], frontend[has]))
+    return out

@@ -1,0 +1,222 @@
+"""Loop closure (slam/loops.py) and the pose graph (slam/posegraph.py) on simulated scenes."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dynslam2d.sim.sensor import LidarModel
+from dynslam2d.sim.world import World, cast_rays, polyline_segments, rect_segments
+from dynslam2d.slam.config import SlamConfig
+from dynslam2d.slam.loopconfig import LoopConfig
+from dynslam2d.slam.loops import LoopCloser
+from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
+from dynslam2d.types import Pose2D
+
+LIDAR = LidarModel(beams=360, fov=2 * math.pi, rate_hz=10.0, range_min=0.1, range_max=20.0, noise_sigma=0.01)
+
+
+def _block_loop_world() -> World:
+    """A 2.4 m wide corridor around a 24 × 14 m block, with pillars, recesses and boxes that make
+    every stretch look different."""
+    outer = polyline_segments([(0, 0), (30, 0), (30, 20), (0, 20)], closed=True)
+    inner = polyline_segments([(3, 3), (27, 3), (27, 17), (3, 17)], closed=True)
+    feats = [rect_segments(x, y, 0.0, 0.4, 0.4) for x, y in ((6, 0.5), (13, 0.6), (22, 0.4), (29.4, 7),
+                                                              (29.5, 14), (18, 19.5), (8, 19.4), (0.6, 12))]
+    feats += [rect_segments(x, y, 0.5, 0.8, 0.3) for x, y in ((10, 2.6), (25, 2.7), (27.3, 10), (15, 17.3), (2.7, 6))]
+    return World(np.vstack([outer, inner] + feats))
+
+
+def _loop_path(step: float = 0.2, laps: float = 1.35) -> np.ndarray:
+    """(n, 3) laser poses along the corridor's centre line, counter-clockwise, ``laps`` laps; at each
+    corner the robot turns on the spot in 0.1 rad steps."""
+    corners = np.array([(1.5, 1.5), (28.5, 1.5), (28.5, 18.5), (1.5, 18.5)])
+    segs = [(corners[k], corners[(k + 1) % 4]) for k in range(4)]
+    lap = sum(float(np.linalg.norm(b - a)) for a, b in segs)
+    out = []
+    s = 0.0
+    prev = None
+    while s < laps * lap:
+        r = s % lap
+        for a, b in segs:
+            seg = float(np.linalg.norm(b - a))
+            if r <= seg:
+                d = (b - a) / seg
+                heading = math.atan2(d[1], d[0])
+                if prev is not None:
+                    turn = math.remainder(heading - prev[2], 2 * math.pi)
+                    for k in range(1, int(abs(turn) / 0.1) + 1):
+                        out.append((prev[0], prev[1], prev[2] + math.copysign(0.1 * k, turn)))
+                pos = a + d * r
+                out.append((pos[0], pos[1], heading))
+                prev = out[-1]
+                break
+            r -= seg
+        s += step
+    return np.array(out)
+
+
+def _scans(world: World, poses: np.ndarray, seed: int = 0) -> list:
+    rng = np.random.default_rng(seed)
+    scans = []
+    for k, p in enumerate(poses):
+        true, _ = cast_rays(p[:2], LIDAR.angles + p[2], world.segments, max_dist=LIDAR.range_max)
+        r, _ = LIDAR.measure(true, rng)
+        scans.append(LIDAR.make_scan(0.1 * k, r))
+    return scans
+
+
+def _drifted(gt: np.ndarray, rad_per_m: float) -> np.ndarray:
+    """A front end that turns ``rad_per_m`` too much per metre: its poses drift away from ``gt``."""
+    rel = relative(gt[:-1], gt[1:])
+    rel[:, 2] += rad_per_m * np.hypot(rel[:, 0], rel[:, 1])
+    out = [gt[0]]
+    for z in rel:
+        out.append(compose(out[-1], z))
+    return np.array(out)
+
+
+def _close(world: World, gt: np.ndarray, front: np.ndarray, config: LoopConfig | None = None) -> tuple:
+    scans = _scans(world, gt)
+    lc = LoopCloser(config or LoopConfig(), SlamConfig())
+    for k, (s, p) in enumerate(zip(scans, front)):
+        lc.add(s.stamp, Pose2D(*p), s, np.zeros(s.ranges.shape, bool), keyframe=k % 2 == 0)
+    return lc, lc.finish()
+
+
+@pytest.fixture(scope="module")
+def block_loop() -> tuple:
+    world = _block_loop_world()
+    gt = _loop_path()
+    front = _drifted(gt, 0.0015)
+    lc, res = _close(world, gt, front)
+    return gt, front, lc, res
+
+
+def test_loop_closure_pulls_the_drift_back(block_loop: tuple) -> None:
+    gt, front, _lc, res = block_loop
+    err_front = np.hypot(*(front[:, :2] - gt[:, :2]).T)
+    err_opt = np.hypot(*(res.poses[:, :2] - gt[:, :2]).T)
+    assert err_front.max() > 1.0  # the front end ends more than a metre off
+    assert res.corrected and len(res.loops) >= 5
+    assert err_opt.max() < 0.3 and err_opt.max() < err_front.max() / 8  # 2.6 m → 0.22 m
+    # every accepted loop agrees with the ground truth: the keyframe seen from the anchor
+    kf = res.keyframe_scans
+    for i, j in res.loops:
+        e = next(e for e in res.graph.edges if e.loop and e.active and (e.i, e.j) == (i, j))
+        true = relative(gt[kf[i]], gt[kf[j]])
+        assert math.hypot(*(e.z[:2] - true[:2])) < 0.1 and abs(e.z[2] - true[2]) < 0.02
+
+
+def test_no_loop_closure_without_revisit() -> None:
+    world = _block_loop_world()
+    gt = _loop_path(laps=0.6)
+    lc, res = _close(world, gt, _drifted(gt, 0.0015))
+    assert not res.corrected and res.loops == []
+    assert np.array_equal(res.poses, res.frontend)
+
+
+def test_ambiguous_corridor_gives_no_loop() -> None:
+    """Down and back a featureless corridor: every match along its axis scores the same, so the
+    runner-up margin refuses them all."""
+    # 200 m long: from the stretch driven (70 … 130 m) the end walls are beyond the 20 m range
+    world = World(np.vstack([polyline_segments([(0, 0), (200, 0), (200, 2.4), (0, 2.4)], closed=True)]))
+    out = [(70.0 + 0.2 * k, 1.2, 0.0) for k in range(300)] + [(130.0 - 0.2 * k, 1.2, math.pi) for k in range(300)]
+    gt = np.array(out)
+    lc, res = _close(world, gt, _drifted(gt, 0.0), LoopConfig(min_path_gap=4.0))
+    assert lc.stats["searches"] > 20  # it did look
+    assert res.loops == []
+
+
+def test_pose_graph_matches_scipy_least_squares() -> None:
+    from scipy.optimize import least_squares
+
+    rng = np.random.default_rng(3)
+    th = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    gt = np.stack([5 * np.cos(th), 5 * np.sin(th), th + np.pi / 2], 1)
+    odo = relative(gt[:-1], gt[1:]) + rng.normal(0, [0.03, 0.03, 0.01], (59, 3))
+    g = PoseGraph()
+    p = [gt[0]]
+    for z in odo:
+        p.append(compose(p[-1], z))
+    for q in p:
+        g.add_node(q)
+    for k, z in enumerate(odo):
+        g.add_edge(k, k + 1, z, diag_info(0.03, 0.01))
+    g.add_edge(0, 59, relative(gt[0], gt[59]), diag_info(0.02, 0.005), loop=True)
+    g.add_edge(10, 50, relative(gt[10], gt[50]), diag_info(0.02, 0.005), loop=True)
+    p0 = g.poses.copy()
+    g.optimise(kernel="none", outlier_chi2=None)
+
+    def res(x: np.ndarray) -> np.ndarray:
+        P = np.vstack([p0[:1], x.reshape(-1, 3)])
+        return np.concatenate([np.linalg.cholesky(e.info).T @ relative(e.z, relative(P[e.i], P[e.j]))
+                               for e in g.edges])
+
+    ref = np.vstack([p0[:1], least_squares(res, p0[1:].ravel()).x.reshape(-1, 3)])
+    d = ref - g.poses
+    d[:, 2] = np.angle(np.exp(1j * d[:, 2]))
+    assert np.abs(d).max() < 1e-5
+    assert np.abs(g.poses[:, :2] - gt[:, :2]).max() < np.abs(p0[:, :2] - gt[:, :2]).max() / 2
+
+
+@pytest.mark.parametrize("kernel", ["dcs", "cauchy"])
+def test_robust_kernel_shrugs_off_injected_false_loops(block_loop: tuple, kernel: str) -> None:
+    """A tenth of the accepted loops replaced by wrong ones (1–3 m, 0.3 rad off): the optimised
+    trajectory stays within 5 mm of the one with those loops simply left out; without a kernel it
+    does not."""
+    gt, front, lc, res = block_loop
+    good = [e for e in res.graph.edges if e.loop and e.active]
+    rng = np.random.default_rng(7)
+    bad = set(rng.choice(len(good), size=max(1, len(good) // 10), replace=False).tolist())
+
+    def optimised(kernel_name: str, outlier: float | None, wrong: bool) -> np.ndarray:
+        g = PoseGraph()
+        for p in front[res.keyframe_scans]:
+            g.add_node(p)
+        for e in res.graph.edges:
+            if not e.loop:
+                g.add_edge(e.i, e.j, e.z, e.info)
+        r = np.random.default_rng(11)
+        for k, e in enumerate(good):
+            if k in bad:
+                if not wrong:
+                    continue
+                z = e.z + np.array([r.uniform(1, 3) * r.choice([-1, 1]), r.uniform(1, 3), 0.3])
+            else:
+                z = e.z
+            g.add_edge(e.i, e.j, z, e.info, loop=True)
+        g.optimise(kernel_name, lc.config.kernel_scale if kernel_name == "dcs" else 1.0, 50, outlier)
+        return g.poses
+
+    reference = optimised(lc.config.kernel, lc.config.outlier_chi2, wrong=False)
+    robust = optimised(kernel, lc.config.outlier_chi2, wrong=True)
+    plain = optimised("none", None, wrong=True)
+    d_robust = np.hypot(*(robust[:, :2] - reference[:, :2]).T).max()
+    d_plain = np.hypot(*(plain[:, :2] - reference[:, :2]).T).max()
+    assert d_robust < 0.005
+    assert d_plain > 0.05
+
+
+def test_map_check_keeps_optimised_poses_only_when_the_map_gets_sharper(block_loop: tuple) -> None:
+    """The front end drifted 2.6 m: its map holds the start area twice, the optimised one once —
+    lower total entropy, so the optimised poses are kept; the other way round they are refused."""
+    from dynslam2d.pipeline import keep_optimised, map_entropy, render_map
+
+    _gt, _front, _lc, res = block_loop
+    saved = res.node_poses
+    try:
+        res.node_poses = res.frontend[res.keyframe_scans]
+        _, lo_front = render_map(res, SlamConfig())
+    finally:
+        res.node_poses = saved
+    _, lo_opt = render_map(res, SlamConfig())
+    assert map_entropy(lo_opt) < 0.97 * map_entropy(lo_front)
+    assert not keep_optimised(res, lo_opt, lo_front, LoopConfig())
+    # a correction smaller than min_correction is not applied (here the largest one is 2.6 m)
+    assert not keep_optimised(res, lo_front, lo_opt, LoopConfig(min_correction=5.0))
+    assert res.stats["max_keyframe_correction_m"] > 1.0
+    assert keep_optimised(res, lo_front, lo_opt, LoopConfig()) and res.corrected
+    assert res.stats["map_entropy_optimised"] < res.stats["map_entropy_frontend"]
