@@ -94,7 +94,7 @@ def run_job(job: Job) -> dict[str, Any]:
     """
     from dynslam2d.config import config_from_dict
     from dynslam2d.io.outputs import plan_results_folder
-    from dynslam2d.io.sources import open_source
+    from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import run as run_pipeline
     from dynslam2d.results import ground_truth_for, write_results
     from dynslam2d.slam.cleanup import CleanupRecorder
