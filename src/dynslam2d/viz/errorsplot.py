@@ -140,6 +140,7 @@ def plot_errors(
         Patch(color=style.MATCHED, label="mapped structure"),
         Patch(color=style.GHOST, label=f"ghost cells ({diff.n_ghost}, {diff.n_ghost * res * res:.2f} m²)"),
         Patch(color=style.MISSED, label=f"missed structure ({diff.n_missed} cells)"),
+        Patch(facecolor="#ffffff", edgecolor="0.6", label="observed, free"),
         Patch(facecolor=style.UNKNOWN, edgecolor="0.6", label="not observed"),
     ]
     ax_m.legend(handles=handles, loc="upper right", fontsize="small", framealpha=0.9)
