@@ -27,7 +27,7 @@ from scipy import ndimage
 
 from dynslam2d.config import Config
 from dynslam2d.eval.maps import distance_to, map_metrics
-from dynslam2d.io.sources import open_source
+from dynslam2d.inputs import open_source
 from dynslam2d.pipeline import run
 from dynslam2d.results import compute_metrics, ground_truth_for
 from dynslam2d.slam.cleanup import CleanupRecorder, compare_online

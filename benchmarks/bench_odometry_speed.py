@@ -40,7 +40,7 @@ class _Listed:
 
 
 def main() -> None:
-    from dynslam2d.io.sources import open_source
+    from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import run
     from dynslam2d.slam import HectorSlam, SlamConfig
     from dynslam2d.types import Pose2D

@@ -64,7 +64,7 @@ INPUTS: dict[str, tuple[str, str | None]] = {
 
 def load(data: Path, name: str) -> list:
     """The scans of input ``name`` in memory (None when the file is absent)."""
-    from dynslam2d.io.sources import open_source
+    from dynslam2d.inputs import open_source
 
     rel, topic = INPUTS[name]
     path = rel if rel.startswith("sim:") else str(data / rel)

@@ -22,7 +22,7 @@ import numpy as np
 from dynslam2d.config import load_config
 from dynslam2d.eval.maps import distance_to, load_run_map
 from dynslam2d.eval.stationary import background_map, median_background_scan, residue_area
-from dynslam2d.io.sources import open_source
+from dynslam2d.inputs import open_source
 
 
 def main() -> None:

@@ -19,7 +19,7 @@ import yaml
 
 from dynslam2d.config import Config, config_from_dict
 from dynslam2d.eval.maps import map_metrics
-from dynslam2d.io.sources import open_source
+from dynslam2d.inputs import open_source
 from dynslam2d.pipeline import run
 from dynslam2d.results import compute_metrics, ground_truth_for
 from dynslam2d.slam.cleanup import CleanupRecorder

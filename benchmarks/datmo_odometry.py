@@ -88,7 +88,7 @@ def _pipeline_row(bag: Path, mocap: _Mocap, odom: str, scale: float | str) -> tu
     """Full default pipeline with ``--odom odom --imu odom --laser-offset LASER --range-scale scale``:
     (distance over 0.4 s windows / mocap, ATE RMSE m, the range scale used)."""
     from dynslam2d.config import Config
-    from dynslam2d.io.sources import open_source
+    from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import run
     from dynslam2d.types import Pose2D
 
@@ -116,7 +116,7 @@ def _range_scale_table(bags: list[tuple[str, Path]]) -> None:
 
 def _slam_row(bag: Path, mocap: _Mocap, scale: float = 1.0) -> list[str]:
     """Laser-only SLAM (ranges × scale): length, 0.4 s window ratio, similarity scale, ATE."""
-    from dynslam2d.io.sources import open_source
+    from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import run
 
     src = open_source(bag, odom="none", imu="none")
@@ -175,7 +175,7 @@ def main() -> None:
         return
     from dynslam2d.io.odombag import read_bag_odometry
     from dynslam2d.io.odometry import compose_mount
-    from dynslam2d.io.sources import open_source
+    from dynslam2d.inputs import open_source
     from dynslam2d.types import Pose2D
 
     mount = Pose2D(*LASER)

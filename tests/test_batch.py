@@ -224,3 +224,13 @@ def test_experiment_cells_run_through_the_engine_with_identical_rows():
 
     a, b = pooled.maps[("paper-1", "box")], serial.maps[("paper-1", "box")]
     assert a.origin == b.origin and np.array_equal(a.prob, b.prob, equal_nan=True)
+
+
+def test_timing_columns_are_the_machine_dependent_ones():
+    timing = ("seconds", "summary.wall_time_s", "summary.loop_closure.total_ms", "summary.loop_closure.search_ms",
+              "summary.kernel_compile_s", "summary.steady_scans_per_s", "summary.stage_ms_median.match",
+              "summary.first_scan_ms", "metrics.cleanup.pass_time_s")
+    results = ("metrics.ate_rmse_m", "summary.removed_beam_share", "metrics.time_to_m.median_delay",
+               "summary.pose_confidence.lost_time_s", "summary.loop_closure.loops_accepted", "summary.scans")
+    assert [c for c in timing if not is_timing_column(c)] == []
+    assert [c for c in results if is_timing_column(c)] == []

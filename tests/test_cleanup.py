@@ -189,7 +189,7 @@ def test_cli_clean_flag_and_outputs(tmp_path, capsys):
 def test_mit_csail_cleanup_removes_no_wall(shared_data):
     """First 900 scans of MIT CSAIL: the pass erases a little and loses no wall."""
     from dynslam2d.config import Config
-    from dynslam2d.io.sources import open_source
+    from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import run
     from dynslam2d.slam.cleanup import CleanupRecorder
 

@@ -52,7 +52,7 @@ def test_odometry_option_errors_are_one_line(tmp_path, capsys):
 
 
 def test_simulate_odometry_noise_and_mount_options(tmp_path, capsys):
-    from dynslam2d.io.sources import open_source
+    from dynslam2d.inputs import open_source
 
     out = tmp_path / "sim"
     code, _, err = cli(capsys, "simulate", "crowd", "--duration", "3", "--beams", "90", "--out", str(out),

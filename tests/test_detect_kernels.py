@@ -15,9 +15,6 @@ import pytest
 from dynslam2d.detect import DetectConfig, Tracker, fit_clusters, search_angles, segment_scan
 from dynslam2d.detect.freespace import FreeSpaceMemory
 from dynslam2d.detect.kernels import (
-    K_CIRCLE,
-    K_POINT,
-    K_RECT,
     _pairwise_sum,
     classify_batch,
     fit_params,
@@ -26,12 +23,31 @@ from dynslam2d.detect.kernels import (
     measure_batch,
     segment_means,
 )
-from dynslam2d.detect.measure import KIND_CIRCLE, KIND_POINT, KIND_RECT, classify_and_bound, measure
+from dynslam2d.detect.layout import (
+    F_HI1,
+    F_HI2,
+    F_LO1,
+    F_LO2,
+    F_THETA,
+    FIT_CENTROID,
+    FIT_CIRCLE,
+    KIND_CODES,
+    KIND_NAMES,
+    K_CIRCLE,
+    K_POINT,
+    K_RECT,
+    DetectionBatch,
+)
+from dynslam2d.detect.reference import classify_and_bound, measure
 from dynslam2d.detect.shapes import CRITERIA, _lu_solve3
 from dynslam2d.sim import simulate
 from dynslam2d.types import Pose2D
 
-CODES = {KIND_POINT: K_POINT, KIND_CIRCLE: K_CIRCLE, KIND_RECT: K_RECT}
+
+def test_kind_table_maps_codes_and_names_both_ways() -> None:
+    assert KIND_NAMES[K_POINT] == "point" and KIND_NAMES[K_CIRCLE] == "circle" and KIND_NAMES[K_RECT] == "rect"
+    assert all(KIND_NAMES[KIND_CODES[name]] == name for name in KIND_NAMES)
+    assert sorted(KIND_CODES.values()) == list(range(len(KIND_NAMES)))
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +90,8 @@ def test_classify_and_measure_batches_match_the_reference(scenes) -> None:
         dets, idx = [], []
         for c in range(seg.n_clusters):
             row = fits[c]
-            expect_keep = not seg.structure[c] and max(row[2] - row[1], row[4] - row[3]) <= cfg.segment.max_extent
+            expect_keep = not seg.structure[c] and max(row[F_HI1] - row[F_LO1],
+                                                       row[F_HI2] - row[F_LO2]) <= cfg.segment.max_extent
             assert keep[c] == expect_keep
             if not expect_keep:
                 continue
@@ -82,7 +99,7 @@ def test_classify_and_measure_batches_match_the_reference(scenes) -> None:
             det = classify_and_bound(seg.beams[a0:a1], pts[a0:a1], row, np.array([pose.x, pose.y]), scan.ranges,
                                      valid, allpts, seg.wrapped, cfg.segment.max_skip_beams, scan.range_max,
                                      cfg.fit, dphi)
-            assert kind[c] == CODES[det.kind]
+            assert kind[c] == KIND_CODES[det.kind]
             np.testing.assert_allclose(lohi[c], [det.lo[0], det.lo[1], det.hi[0], det.hi[1]], rtol=0, atol=1e-12)
             np.testing.assert_array_equal(rel[c], det.rel)
             n_kind[int(kind[c])] += 1
@@ -94,8 +111,8 @@ def test_classify_and_measure_batches_match_the_reference(scenes) -> None:
         idx = np.array(idx)
         m = len(dets)
         starts, npts = seg.offsets[idx], np.diff(seg.offsets)[idx]
-        batch = (kind[idx], fits[idx, 0].copy(), lohi[idx], rel[idx], fits[idx, 10:12].copy(),
-                 fits[idx, 6:9].copy(), px, py, starts, npts)
+        batch = DetectionBatch(kind[idx], fits[idx, F_THETA].copy(), lohi[idx], rel[idx],
+                               fits[idx, FIT_CENTROID].copy(), fits[idx, FIT_CIRCLE].copy(), px, py, starts, npts)
         # every detection three ways: defaults, with a track's sizes, with a track's radius
         rows = np.tile(np.arange(m), 3)
         sizes = np.vstack((np.zeros((m, 2)), np.tile([[0.9, 0.45]], (m, 1)), np.zeros((m, 2))))

@@ -15,7 +15,7 @@ from conftest import ScanList, shared_file
 
 from dynslam2d.config import Config, config_from_dict
 from dynslam2d.eval.stationary import median_background_scan
-from dynslam2d.io.sources import open_source
+from dynslam2d.inputs import open_source
 from dynslam2d.pipeline import run
 
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from dynslam2d.detect import FitConfig, fit_circle, fit_clusters, fit_rectangle, search_angles
-from dynslam2d.detect.measure import SIZE_LOWER, SIZE_MEASURED, classify_and_bound, measure
+from dynslam2d.detect.layout import SIZE_LOWER, SIZE_MEASURED
+from dynslam2d.detect.reference import classify_and_bound, measure
 from dynslam2d.detect.shapes import CRITERIA
 from dynslam2d.types import Box, wrap_angle
 

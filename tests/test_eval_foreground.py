@@ -12,8 +12,8 @@ from conftest import shared_file
 from dynslam2d.cli import main
 from dynslam2d.errors import DynSlamError
 from dynslam2d.eval.foreground import evaluate_foreground, foreground_mask, foreground_removal
+from dynslam2d.inputs import open_source
 from dynslam2d.io.rosbag import write_scan_bag
-from dynslam2d.io.sources import open_source
 from dynslam2d.sim import Circle, Mover, Scenario, oscillating_in_place, ping_pong, simulate
 from dynslam2d.sim.scenarios import _build_world
 from dynslam2d.sim.sensor import LidarModel

@@ -19,7 +19,7 @@ from dynslam2d.io.odombag import (
 )
 from dynslam2d.io.odometry import ImuTrack, OdometryTrack, compose_mount, interpolate_poses, parse_laser_offset
 from dynslam2d.io.rosbag import LASERSCAN, laserscan_message, open_bag_writer
-from dynslam2d.io.sources import open_source
+from dynslam2d.inputs import open_source
 from dynslam2d.types import Pose2D, Scan
 
 from conftest import shared_file

@@ -11,8 +11,9 @@ import pytest
 from conftest import shared_file
 
 from dynslam2d.errors import DynSlamError
+from dynslam2d.inputs import open_source
 from dynslam2d.io.rosbag import write_scan_bag
-from dynslam2d.io.sources import open_source, sniff_format
+from dynslam2d.io.sources import sniff_format
 from dynslam2d.io.zipbag import ExtractedBag, ZipBagSource, bag_file
 from dynslam2d.sim import simulate
 

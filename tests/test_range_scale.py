@@ -9,7 +9,7 @@ import pytest
 
 from dynslam2d.config import Config
 from dynslam2d.errors import DynSlamError
-from dynslam2d.io.rangescale import LaserConfig, RangeScaleSource, apply_range_scale, estimate_range_scale, scale_ranges
+from dynslam2d.rangescale import LaserConfig, RangeScaleSource, apply_range_scale, estimate_range_scale, scale_ranges
 from dynslam2d.sim import SimSource
 from dynslam2d.sim.odometry import OdometryModel
 from dynslam2d.slam import HectorSlam, SlamConfig

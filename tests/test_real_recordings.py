@@ -9,7 +9,7 @@ from dynslam2d.config import Config, with_overrides
 from dynslam2d.eval.reference import load_reference
 from dynslam2d.eval.stationary import background_map, median_background_scan, stationary_score
 from dynslam2d.eval.trajectory import ate
-from dynslam2d.io.sources import open_source
+from dynslam2d.inputs import open_source
 from dynslam2d.pipeline import run
 from dynslam2d.types import Pose2D
 

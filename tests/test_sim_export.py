@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from dynslam2d.errors import DynSlamError
+from dynslam2d.inputs import open_source
 from dynslam2d.io.groundtruth import read_ground_truth_folder
-from dynslam2d.io.sources import open_source
 from dynslam2d.sim import simulate
 from dynslam2d.sim.export import write_simulation
 

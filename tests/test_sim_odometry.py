@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from dynslam2d.inputs import open_source
 from dynslam2d.io.odometry import compose_mount
-from dynslam2d.io.sources import open_source
 from dynslam2d.io.trajectory import read_tum
 from dynslam2d.sim import SimSource, simulate
 from dynslam2d.sim.export import write_simulation

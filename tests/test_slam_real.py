@@ -6,7 +6,7 @@ from conftest import shared_file
 
 from dynslam2d.eval.reference import load_reference
 from dynslam2d.eval.trajectory import ate
-from dynslam2d.io.sources import open_source
+from dynslam2d.inputs import open_source
 from dynslam2d.pipeline import run
 from dynslam2d.types import Pose2D
 

@@ -377,7 +377,7 @@ def test_outdoor_person_following_bag_warns_and_keeps_the_path_sane(tmp_path) ->
     archive = shared_file("dynamic/leg_tracker/person_following_outdoor_1.bag.zip")
     with zipfile.ZipFile(archive) as z:
         z.extractall(tmp_path)
-    from dynslam2d.io.sources import open_source
+    from dynslam2d.inputs import open_source
 
     source = open_source(tmp_path / "person_following_outdoor_1.bag", topic="/scan_base2")
     slam = HectorSlam(SlamConfig())

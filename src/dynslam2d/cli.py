@@ -199,7 +199,7 @@ def info(
 ) -> None:
     """Print what a scan source holds: format, topic, scans, beams, FOV, rate, duration, ranges, robot body."""
     from dynslam2d.io.odometry import parse_laser_offset
-    from dynslam2d.io.sources import open_source
+    from dynslam2d.inputs import open_source
     from dynslam2d.io.summary import summarize_source
 
     _check_sim_only(input, seed, duration)
@@ -458,7 +458,7 @@ def run(
 
     from dynslam2d.config import Config, load_config, with_overrides
     from dynslam2d.io.outputs import check_bag_target, clean_stale_parts, plan_results_folder, same_or_inside
-    from dynslam2d.io.sources import open_source
+    from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import run as run_pipeline
     from dynslam2d.results import ground_truth_for, write_results
 
@@ -1195,7 +1195,7 @@ def eval_stationary(
     from dynslam2d.config import load_config
     from dynslam2d.eval.maps import load_run_map
     from dynslam2d.eval.stationary import background_map, median_background_scan, stationary_score
-    from dynslam2d.io.sources import open_source
+    from dynslam2d.inputs import open_source
     from dynslam2d.io.trajectory import read_tum
 
     cfg = load_config(run_dir / "config.yaml") if (run_dir / "config.yaml").exists() else None

@@ -23,7 +23,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from dynslam2d.errors import DynSlamError
-from dynslam2d.io.yamlfile import read_yaml_mapping
+from dynslam2d.yamlfile import read_yaml_mapping
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.filter import FilterConfig
 from dynslam2d.slam.config import SlamConfig

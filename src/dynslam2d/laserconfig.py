@@ -1,6 +1,6 @@
 """The lidar's own configuration (config group ``laser``): its range scale.
 
-Applied by :mod:`dynslam2d.io.rangescale` (docs/slam.md, "Range scale").
+Applied by :mod:`dynslam2d.rangescale` (docs/slam.md, "Range scale").
 """
 
 from __future__ import annotations

@@ -31,10 +31,9 @@ from dynslam2d.detect.mapevidence import MapView, map_evidence
 from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
-from dynslam2d.io.rangescale import apply_range_scale
-from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.jitcache import compile_seconds
 from dynslam2d.memtrim import release_free_memory
+from dynslam2d.rangescale import apply_range_scale
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
 from dynslam2d.slam.config import SlamConfig
@@ -43,6 +42,7 @@ from dynslam2d.slam.confidence import FLAGS
 from dynslam2d.slam.erasure import EvidenceLedger
 from dynslam2d.slam.confidence import summarize as summarize_confidence
 from dynslam2d.slam.loops import LoopCloser, LoopResult
+from dynslam2d.trajectory import Trajectory
 from dynslam2d.types import Box, Pose2D, Scan, ScanSource, SourceMeta, Track
 
 

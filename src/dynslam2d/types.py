@@ -323,6 +323,23 @@ class ScanSource(Protocol):
     def __len__(self) -> int: ...
 
 
+class SourceWrapper:
+    """A scan source that wraps another: same ``meta`` and length; every other attribute
+    (``ground_truth`` of a simulated source, ``path`` of a bag, …) is the inner source's."""
+
+    def __init__(self, inner: ScanSource) -> None:
+        self.inner = inner
+        self.meta: SourceMeta = inner.meta
+
+    def __len__(self) -> int:
+        return len(self.inner)
+
+    def __getattr__(self, name: str) -> object:
+        if name == "inner":
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
+
 @dataclass(frozen=True, slots=True)
 class Box:
     """An oriented rectangle, the paper's object state x = [p_x, p_y, θ, l, w] (paper Eq. 2).

@@ -94,7 +94,7 @@ def run_job(job: Job) -> dict[str, Any]:
     """
     from dynslam2d.config import config_from_dict
     from dynslam2d.io.outputs import plan_results_folder
-    from dynslam2d.io.sources import open_source
+    from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import run as run_pipeline
     from dynslam2d.results import ground_truth_for, write_results
     from dynslam2d.slam.cleanup import CleanupRecorder
@@ -214,7 +214,8 @@ def flatten(data: Any, prefix: str) -> dict[str, Any]:
 
 #: batch.csv columns that measure the machine (wall time, speed), not the result: they differ
 #: between two runs of the same job; every other column is reproducible.
-_TIMING = re.compile(r"(^seconds$|wall_time_s$|pass_time_s$|first_scan_ms$|_ms_median$|_ms_p95$|scans_per_s$|\.stage_ms_median\.)")
+_TIMING = re.compile(r"(^seconds$|wall_time_s$|pass_time_s$|kernel_compile_s$|_ms$|_ms_median$|_ms_p95$|scans_per_s$|"
+                     r"\.stage_ms_median\.)")
 
 
 def is_timing_column(column: str) -> bool:

@@ -11,14 +11,17 @@ Quick use::
 
 Modules: :mod:`~dynslam2d.detect.segment` (breakpoint segmentation, paper Eq. 1),
 :mod:`~dynslam2d.detect.shapes` (rectangle / circle fits, paper Eq. 2),
-:mod:`~dynslam2d.detect.measure` (which sides of a cluster are real → centre measurement),
+:mod:`~dynslam2d.detect.measure` (the detection and measurement types),
+:mod:`~dynslam2d.detect.reference` (which sides of a cluster are real → centre measurement, as readable
+per-detection Python: the reference the kernels are tested against, not public API),
 :mod:`~dynslam2d.detect.tracker` (Kalman tracking, track management, set M),
 :mod:`~dynslam2d.detect.kernels` (the tracker's per-scan numba batches),
+:mod:`~dynslam2d.detect.layout` (names of the kernels' packed array columns and kind codes),
 :mod:`~dynslam2d.detect.config` (parameters).
 """
 
 from dynslam2d.detect.config import DetectConfig, FitConfig, SegmentConfig, TrackerConfig
-from dynslam2d.detect.measure import Detection, Measurement, classify_and_bound, measure
+from dynslam2d.detect.measure import Detection, Measurement
 from dynslam2d.detect.segment import Segmentation, is_full_circle, segment_scan
 from dynslam2d.detect.shapes import RectFit, fit_circle, fit_clusters, fit_rectangle, search_angles
 from dynslam2d.detect.tracker import COASTING, CONFIRMED, TENTATIVE, Tracker, TrackerStats
@@ -37,12 +40,10 @@ __all__ = [
     "Tracker",
     "TrackerConfig",
     "TrackerStats",
-    "classify_and_bound",
     "fit_circle",
     "fit_clusters",
     "fit_rectangle",
     "is_full_circle",
-    "measure",
     "search_angles",
     "segment_scan",
 ]

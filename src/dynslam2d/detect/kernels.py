@@ -1,7 +1,7 @@
 """Batched numba kernels of the tracker's per-scan work (one call per scan, not per object).
 
-The Python reference versions are :func:`dynslam2d.detect.measure.classify_and_bound`,
-:func:`dynslam2d.detect.measure.measure` and
+The readable reference versions are :func:`dynslam2d.detect.reference.classify_and_bound`,
+:func:`dynslam2d.detect.reference.measure` and
 :meth:`dynslam2d.detect.freespace.FreeSpaceMemory.seen_through_by`; the kernels here do the
 same arithmetic for every cluster / pair / point of a scan in one pass, so that
 ``Tracker.update`` pays the Python overhead once per scan instead of once per detection
@@ -9,7 +9,8 @@ same arithmetic for every cluster / pair / point of a scan in one pass, so that
 
 Frames: map frame (points already transformed with the scan's pose). Units m, rad.
 Fit parameters travel as one float array built by :func:`fit_params` (fewer kernel arguments,
-less dispatch overhead).
+less dispatch overhead). The columns of the packed ``fits`` / ``lohi`` arrays and the kind codes are
+named in :mod:`dynslam2d.detect.layout`.
 """
 
 from __future__ import annotations
@@ -20,10 +21,30 @@ import numpy as np
 from numba import njit
 
 from dynslam2d.detect.config import FitConfig
+from dynslam2d.detect.layout import (
+    F_CENTROID_X,
+    F_CENTROID_Y,
+    F_CIRCLE_R,
+    F_CIRCLE_RMS,
+    F_CIRCLE_X,
+    F_CIRCLE_Y,
+    F_HI1,
+    F_HI2,
+    F_LO1,
+    F_LO2,
+    F_RECT_RMS,
+    F_THETA,
+    K_CIRCLE,
+    K_POINT,
+    K_RECT,
+    L_HI1,
+    L_HI2,
+    L_LO1,
+    L_LO2,
+    SIZE_LOWER,
+    SIZE_MEASURED,
+)
 from dynslam2d.detect.shapes import circle_center_fixed_radius
-
-#: Kind codes of the batch kernels (strings in :class:`~dynslam2d.detect.measure.Detection`).
-K_POINT, K_CIRCLE, K_RECT = 0, 1, 2
 
 # indices into the fit-parameter array
 _P_POINT_MAX_POINTS = 0
@@ -152,7 +173,7 @@ def _endpoint_real(u: np.ndarray, v: np.ndarray, pos: int, k: int, lo_k: float, 
                    ranges: np.ndarray, valid: np.ndarray, ax: np.ndarray, ay: np.ndarray, c: float, s: float,
                    wrapped: bool, max_skip: int, range_max: float, p: np.ndarray, su: float, sv: float,
                    dphi: float) -> bool:
-    """Kernel twin of :func:`dynslam2d.detect.measure._endpoint_real` (uv split in u, v arrays)."""
+    """Kernel twin of :func:`dynslam2d.detect.reference._endpoint_real` (uv split in u, v arrays)."""
     n = ranges.shape[0]
     r0 = u[pos] - su
     r1 = v[pos] - sv
@@ -193,12 +214,13 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
                    structure: np.ndarray, sx: float, sy: float, ranges: np.ndarray, valid: np.ndarray,
                    ax: np.ndarray, ay: np.ndarray, wrapped: bool, max_skip: int, range_max: float, dphi: float,
                    max_extent: float, p: np.ndarray) -> tuple:
-    """:func:`~dynslam2d.detect.measure.classify_and_bound` for every cluster of a scan.
+    """:func:`~dynslam2d.detect.reference.classify_and_bound` for every cluster of a scan.
 
     Args:
         px, py: map-frame points of the clusters (concatenated like ``beams``), m.
         beams, offsets, structure: the :class:`~dynslam2d.detect.segment.Segmentation`.
-        fits: (k, 12) rows of :func:`~dynslam2d.detect.shapes.fit_clusters`.
+        fits: (k, N_FIT_COLS) rows of :func:`~dynslam2d.detect.shapes.fit_clusters` (columns
+            :mod:`dynslam2d.detect.layout` ``F_*``).
         sx, sy: sensor position, map frame, m.
         ranges, valid: the scan's ranges (m) and beams with a return.
         ax, ay: map-frame points of all beams (0 range where invalid), m.
@@ -206,8 +228,8 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
         p: :func:`fit_params`.
 
     Returns:
-        ``(keep, kind, lohi, rel)``: (k,) bool (a detection, not structure), (k,) int8 kind code,
-        (k, 4) refined bounds lo1, lo2, hi1, hi2 (m), (k, 2, 2) bool real bounds.
+        ``(keep, kind, lohi, rel)``: (k,) bool (a detection, not structure), (k,) int8 kind code
+        (``K_*``), (k, 4) refined bounds lo1, lo2, hi1, hi2 (m; columns ``L_*``), (k, 2, 2) bool real bounds.
     """
     kc = offsets.shape[0] - 1
     keep = np.zeros(kc, dtype=np.bool_)
@@ -226,26 +248,28 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
         if structure[c]:
             continue
         f = fits[c]
-        if max(f[2] - f[1], f[4] - f[3]) > max_extent:
+        if max(f[F_HI1] - f[F_LO1], f[F_HI2] - f[F_LO2]) > max_extent:
             continue
         keep[c] = True
         a = offsets[c]
         n = offsets[c + 1] - a
-        theta = f[0]
-        lo0, hi0, lo1, hi1 = f[1], f[2], f[3], f[4]
+        theta = f[F_THETA]
+        lo0, hi0, lo1, hi1 = f[F_LO1], f[F_HI1], f[F_LO2], f[F_HI2]
         ext0 = hi0 - lo0
         ext1 = hi1 - lo1
-        lohi[c, 0] = lo0
-        lohi[c, 1] = lo1
-        lohi[c, 2] = hi0
-        lohi[c, 3] = hi1
+        lohi[c, L_LO1] = lo0
+        lohi[c, L_LO2] = lo1
+        lohi[c, L_HI1] = hi0
+        lohi[c, L_HI2] = hi1
         if n <= p[_P_POINT_MAX_POINTS] or max(ext0, ext1) < p[_P_POINT_MAX_EXTENT]:
             kind[c] = K_POINT
             continue
-        cr = f[8]
+        cr = f[F_CIRCLE_R]
         if (n >= p[_P_CIRCLE_MIN_POINTS] and p[_P_CIRCLE_MIN_RADIUS] <= cr <= p[_P_CIRCLE_MAX_RADIUS]
-                and f[9] < p[_P_CIRCLE_RES_RATIO] * f[5] and min(ext0, ext1) >= p[_P_CIRCLE_DEPTH_RATIO] * cr
-                and math.hypot(f[6] - sx, f[7] - sy) > math.hypot(f[10] - sx, f[11] - sy)):
+                and f[F_CIRCLE_RMS] < p[_P_CIRCLE_RES_RATIO] * f[F_RECT_RMS]
+                and min(ext0, ext1) >= p[_P_CIRCLE_DEPTH_RATIO] * cr
+                and math.hypot(f[F_CIRCLE_X] - sx, f[F_CIRCLE_Y] - sy)
+                > math.hypot(f[F_CENTROID_X] - sx, f[F_CENTROID_Y] - sy)):
             kind[c] = K_CIRCLE
             continue
         kind[c] = K_RECT
@@ -312,10 +336,10 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
                 step = -1 if pos == 0 else 1
                 rel[c, k, side] = _endpoint_real(u, v, pos, k, lo[k], hi[k], beams[a + pos], step, ranges, valid,
                                                  ax, ay, cs, sn, wrapped, max_skip, range_max, p, su, sv, dphi)
-        lohi[c, 0] = lo[0]
-        lohi[c, 1] = lo[1]
-        lohi[c, 2] = hi[0]
-        lohi[c, 3] = hi[1]
+        lohi[c, L_LO1] = lo[0]
+        lohi[c, L_LO2] = lo[1]
+        lohi[c, L_HI1] = hi[0]
+        lohi[c, L_HI2] = hi[1]
     return keep, kind, lohi, rel
 
 
@@ -324,10 +348,11 @@ def measure_batch(det: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np
                   centroid: np.ndarray, circle: np.ndarray, px: np.ndarray, py: np.ndarray, start: np.ndarray,
                   npts: np.ndarray, sizes: np.ndarray, has_sizes: np.ndarray, radius: np.ndarray,
                   size_sigma: np.ndarray, p: np.ndarray) -> tuple:
-    """:func:`~dynslam2d.detect.measure.measure` for many (detection, track prior) rows.
+    """:func:`~dynslam2d.detect.reference.measure` for many (detection, track prior) rows.
 
     Row r measures detection ``det[r]`` (indices into the per-detection arrays ``kind``,
-    ``theta``, ``lohi`` (lo1, lo2, hi1, hi2), ``rel``, ``centroid``, ``circle`` and its points
+    ``theta``, ``lohi`` (lo1, lo2, hi1, hi2), ``rel``, ``centroid``, ``circle`` (the fields of
+    :class:`dynslam2d.detect.tracker.DetectionBatch`) and its points
     ``px, py[start:start+npts]``) with the track's ``sizes[r]`` along the fit axes when
     ``has_sizes[r]`` (else the detection's default sizes), the track's ``radius[r]`` for circles
     when > 0, and ``size_sigma[r]`` (m).
@@ -369,13 +394,13 @@ def measure_batch(det: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np
                 cx, cy, _ = circle_center_fixed_radius(px[a:b].copy(), py[a:b].copy(), cx, cy, radius[r])
             s2 = (1.5 * p[_P_SIGMA_POSITION]) ** 2
             size_obs[r, 0] = size_obs[r, 1] = 2.0 * cr
-            size_kind[r, 0] = size_kind[r, 1] = 2
+            size_kind[r, 0] = size_kind[r, 1] = SIZE_MEASURED
             z[r, 0] = zm[r, 0] = cx
             z[r, 1] = zm[r, 1] = cy
             R[r, 0, 0] = R[r, 1, 1] = Rm[r, 0, 0] = Rm[r, 1, 1] = s2
             H[r, 0, 0] = H[r, 1, 1] = 1.0
             continue
-        lo0, lo1, hi0, hi1 = lohi[j, 0], lohi[j, 1], lohi[j, 2], lohi[j, 3]
+        lo0, lo1, hi0, hi1 = lohi[j, L_LO1], lohi[j, L_LO2], lohi[j, L_HI1], lohi[j, L_HI2]
         ext0 = hi0 - lo0
         ext1 = hi1 - lo1
         if has_sizes[r]:
@@ -400,11 +425,11 @@ def measure_batch(det: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np
                 # re-anchors the track (Tracker._update_track), it is no motion (docs/tracking.md)
                 size_k = sz[k]
             obs[k] = True
-            size_kind[r, k] = 1
+            size_kind[r, k] = SIZE_LOWER
             if rl and rh:
                 uv[k] = 0.5 * (lok + hik)
                 var[k] = sp2
-                size_kind[r, k] = 2
+                size_kind[r, k] = SIZE_MEASURED
             elif rl or rh:
                 uv[k] = lok + 0.5 * size_k if rl else hik - 0.5 * size_k
                 unc = size_sigma[r] if has_sizes[r] else 0.5 * size_k

@@ -22,6 +22,17 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from dynslam2d.detect.layout import (
+    F_CENTROID_X,
+    F_CENTROID_Y,
+    F_CIRCLE_RMS,
+    F_CIRCLE_X,
+    F_CIRCLE_Y,
+    F_RECT_RMS,
+    F_THETA,
+    N_FIT_COLS,
+)
+
 CRITERIA = {"area": 0, "closeness": 1, "variance": 2}
 
 
@@ -370,10 +381,11 @@ def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np
 
     ``stride`` > 1 searches every stride-th angle first, then the neighbours of the best one.
     Returns (k, 12): theta, lo1, hi1, lo2, hi2, rect_rms, circle cx, cy, r, circle_rms,
-    centroid x, y. Unfitted clusters hold only their centroid (other entries 0, rms inf).
+    centroid x, y (columns named in :mod:`dynslam2d.detect.layout`, ``F_*``). Unfitted clusters
+    hold only their centroid (other entries 0, rms inf).
     """
     k = offsets.shape[0] - 1
-    out = np.zeros((k, 12))
+    out = np.zeros((k, N_FIT_COLS))
     cos_t = np.cos(angles)
     sin_t = np.sin(angles)
     tmp = np.empty(6)
@@ -383,26 +395,26 @@ def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np
         b = offsets[c + 1]
         n = b - a
         if n == 0:
-            out[c, 5] = np.inf
-            out[c, 9] = np.inf
+            out[c, F_RECT_RMS] = np.inf
+            out[c, F_CIRCLE_RMS] = np.inf
             continue
         xs = x[a:b]
         ys = y[a:b]
-        out[c, 10] = xs.mean()
-        out[c, 11] = ys.mean()
+        out[c, F_CENTROID_X] = xs.mean()
+        out[c, F_CENTROID_Y] = ys.mean()
         if not fit_mask[c]:
-            out[c, 5] = np.inf
-            out[c, 9] = np.inf
+            out[c, F_RECT_RMS] = np.inf
+            out[c, F_CIRCLE_RMS] = np.inf
             continue
         _fit_one(xs, ys, cos_t, sin_t, criterion, d0, tmp, stride)
-        out[c, 0:6] = tmp
+        out[c, F_THETA:F_RECT_RMS + 1] = tmp  # θ, lo1, hi1, lo2, hi2, rms (the order of _fit_one)
         if n >= circle_min_points:
             _circle_one(xs, ys, tmpc)
-            out[c, 6:10] = tmpc
+            out[c, F_CIRCLE_X:F_CIRCLE_RMS + 1] = tmpc  # cx, cy, r, rms (the order of _circle_one)
         else:
-            out[c, 6] = out[c, 10]
-            out[c, 7] = out[c, 11]
-            out[c, 9] = np.inf
+            out[c, F_CIRCLE_X] = out[c, F_CENTROID_X]
+            out[c, F_CIRCLE_Y] = out[c, F_CENTROID_Y]
+            out[c, F_CIRCLE_RMS] = np.inf
     return out
 
 

@@ -13,7 +13,7 @@ see docs/tracking.md):
    the same scan, fit rectangle / circle / point models (paper Eq. 2);
 4. exclusive association: Hungarian (``scipy.optimize.linear_sum_assignment``) on the
    Mahalanobis distance of the centre innovation, gated by χ² and a Euclidean distance;
-5. Kalman update with the measurement of :mod:`dynslam2d.detect.measure` (which carries the
+5. Kalman update with the measurement of :func:`dynslam2d.detect.kernels.measure_batch` (which carries the
    track's size and heading: 90° ambiguity resolved against the track's axis), size and heading
    smoothing;
 6. management: tentative → confirmed (M of N hits) → coasting (no detection, prediction only)
@@ -42,15 +42,27 @@ import numpy as np
 from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
 
 from dynslam2d.detect.config import DetectConfig
-from dynslam2d.detect.measure import (
+from dynslam2d.detect.layout import (
+    F_THETA,
+    FIT_CENTROID,
+    FIT_CIRCLE,
+    FIT_CIRCLE_CENTRE,
     KIND_CIRCLE,
+    KIND_NAMES,
     KIND_POINT,
     KIND_RECT,
+    L_HI1,
+    L_HI2,
+    L_LO1,
+    L_LO2,
+    LOHI_HI,
+    LOHI_LO,
     SIZE_LOWER,
     SIZE_MEASURED,
-    Detection,
-    Measurement,
+    DetectionBatch,
+    MeasureRows,
 )
+from dynslam2d.detect.measure import Detection, Measurement
 from dynslam2d.detect.freespace import FreeSpaceMemory
 from dynslam2d.detect.mapevidence import MapView, map_evidence
 from dynslam2d.detect.kernels import (
@@ -195,8 +207,8 @@ class Tracker:
         self._fit_p = fit_params(self.config.fit)
         self._trig_key: tuple | None = None
         self._trig: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
-        self._batch: tuple | None = None  # per-detection arrays of the current scan (kernels)
-        self._default: tuple | None = None  # default measurements of the current scan's detections
+        self._batch: DetectionBatch | None = None  # per-detection arrays of the current scan (kernels)
+        self._default: MeasureRows | None = None  # default measurements of the current scan's detections
         self._stacked: tuple[np.ndarray, np.ndarray] | None = None  # predicted X, P of all tracks
         self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate)
         #: Segmentation and detections of the last processed scan (for inspection / plots).
@@ -321,7 +333,7 @@ class Tracker:
             return [None] * len(dets)
         geo = np.array([(k.x[0], k.x[1], k.theta_box, k.size[0], k.size[1]) for k in cand])
         b = self._batch
-        idx = fragment_hosts(b[6], b[7], b[8], b[9], np.array(dets, dtype=np.int64), geo[:, 0].copy(),
+        idx = fragment_hosts(b.px, b.py, b.start, b.npts, np.array(dets, dtype=np.int64), geo[:, 0].copy(),
                              geo[:, 1].copy(), geo[:, 2].copy(), geo[:, 3].copy(), geo[:, 4].copy(),
                              float(self.config.fit.fragment_margin))
         return [cand[i] if i >= 0 else None for i in idx.tolist()]
@@ -414,7 +426,7 @@ class Tracker:
         py = ay[seg.beams]
         fits = fit_clusters(px, py, seg.offsets, ~seg.structure, self._angles, CRITERIA[cfg.fit.criterion],
                             cfg.fit.closeness_d0, cfg.fit.circle_min_points, cfg.fit.coarse_stride)
-        # classify and bound every cluster in one pass (measure.classify_and_bound)
+        # classify and bound every cluster in one pass (reference.classify_and_bound)
         keep, kinds, lohi, rel = classify_batch(px, py, seg.beams, seg.offsets, fits, seg.structure, float(pose.x),
                                                 float(pose.y), ranges, valid, ax, ay, seg.wrapped,
                                                 int(cfg.segment.max_skip_beams), float(scan.range_max),
@@ -432,12 +444,13 @@ class Tracker:
         lohi = lohi[idx]
         rel = rel[idx]
         fits = fits[idx]
-        names = (KIND_POINT, KIND_CIRCLE, KIND_RECT)
-        # per-detection views, sliced once per scan (the same views as fits[j, 10:12], lohi[j, 0:2], …)
-        cen_v, circ_v, lo_v, hi_v = fits[:, 10:12], fits[:, 6:9], lohi[:, 0:2], lohi[:, 2:4]
-        for j, (a0, n, kd, th) in enumerate(zip(starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, 0].tolist())):
-            dets.append(Detection(beams[a0:a0 + n], pts[a0:a0 + n], cen_v[j], names[kd], th, lo_v[j], hi_v[j], rel[j],
-                                  circ_v[j], n))
+        # per-detection views, sliced once per scan (the same views as fits[j, FIT_CENTROID], lohi[j, LOHI_LO], …)
+        cen_v, circ_v = fits[:, FIT_CENTROID], fits[:, FIT_CIRCLE]
+        lo_v, hi_v = lohi[:, LOHI_LO], lohi[:, LOHI_HI]
+        for j, (a0, n, kd, th) in enumerate(zip(starts.tolist(), npts.tolist(), kinds.tolist(),
+                                                fits[:, F_THETA].tolist())):
+            dets.append(Detection(beams[a0:a0 + n], pts[a0:a0 + n], cen_v[j], KIND_NAMES[kd], th, lo_v[j], hi_v[j],
+                                  rel[j], circ_v[j], n))
         if self._free is not None:
             self._cur_ref = self._free.make_ref(scan, pose, valid)
             free = self._free.seen_through(pts, float(scan.stamp))
@@ -463,8 +476,9 @@ class Tracker:
         self.last_detections = dets
         if dets:
             m = len(dets)
-            self._batch = (kinds, fits[:, 0].copy(), lohi, rel, fits[:, 10:12].copy(), fits[:, 6:9].copy(), px, py,
-                           starts, npts)
+            self._batch = DetectionBatch(kind=kinds, theta=fits[:, F_THETA].copy(), lohi=lohi, rel=rel,
+                                         centroid=fits[:, FIT_CENTROID].copy(), circle=fits[:, FIT_CIRCLE].copy(),
+                                         px=px, py=py, start=starts, npts=npts)
             self._default = self._measure_rows(np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool),
                                                np.full(m, -1.0), np.zeros(m))
         return dets
@@ -478,12 +492,12 @@ class Tracker:
         Returns the detection list and the per-detection batch arrays, merged pairs appended at the end."""
         fc = self.config.fit
         # (the detections' lo / hi / centroid are rows of lohi / fits: one vectorised test)
-        ext = np.maximum(lohi[:, 2] - lohi[:, 0], lohi[:, 3] - lohi[:, 1])
+        ext = np.maximum(lohi[:, L_HI1] - lohi[:, L_LO1], lohi[:, L_HI2] - lohi[:, L_LO2])
         sel = np.flatnonzero((npts >= 2) & (ext <= fc.leg_max_extent))
         if sel.shape[0] < 2:
             return dets, kinds, fits, lohi, rel, starts, npts, px, py
         small = sel.tolist()
-        cen = fits[sel, 10:12]
+        cen = fits[sel, FIT_CENTROID]
         d2 = np.hypot(cen[:, None, 0] - cen[None, :, 0], cen[:, None, 1] - cen[None, :, 1])
         np.fill_diagonal(d2, np.inf)
         pairs: list[tuple[int, int]] = []
@@ -524,10 +538,10 @@ class Tracker:
                             (na * da.map_unknown + nb * db.map_unknown) / (na + nb))
             det.person = True
             new_dets.append(det)
-            new_fits[r, 6:8] = mid
-            new_fits[r, 10:12] = mid
-            new_lohi[r, 0:2] = lo
-            new_lohi[r, 2:4] = hi
+            new_fits[r, FIT_CIRCLE_CENTRE] = mid
+            new_fits[r, FIT_CENTROID] = mid
+            new_lohi[r, LOHI_LO] = lo
+            new_lohi[r, LOHI_HI] = hi
             new_starts[r] = n0
             new_npts[r] = na + nb
             ext_px.append(pts[:, 0])
@@ -544,10 +558,10 @@ class Tracker:
         return new_dets, kinds, fits, lohi, rel, starts, npts, np.concatenate(ext_px), np.concatenate(ext_py)
 
     def _measure_rows(self, det: np.ndarray, sizes: np.ndarray, has_sizes: np.ndarray, radius: np.ndarray,
-                      size_sigma: np.ndarray) -> tuple[np.ndarray, ...]:
-        """:func:`dynslam2d.detect.measure.measure` of this scan's detections ``det`` with the given track
+                      size_sigma: np.ndarray) -> MeasureRows:
+        """:func:`dynslam2d.detect.reference.measure` of this scan's detections ``det`` with the given track
         priors, batched (see :func:`dynslam2d.detect.kernels.measure_batch`)."""
-        return measure_batch(det, *self._batch, sizes, has_sizes, radius, size_sigma, self._fit_p)
+        return MeasureRows(*measure_batch(det, *self._batch, sizes, has_sizes, radius, size_sigma, self._fit_p))
 
     def _associate(self, dets: list[Detection]) -> list[tuple[int, int]]:
         n, m = len(self._tracks), len(dets)
@@ -562,12 +576,12 @@ class Tracker:
         theta_box = np.array([k.theta_box for k in tracks])
         # Mahalanobis gate and distance gate; a rectangle is measured again with the track's own sizes
         # (a side the detection "measured" too short, e.g. a grazing side, must not break the association)
-        d2, near, ok = gate_costs(Xs, Ps, reach, rect_trk, theta_box, tsize, self._default[0], self._default[1],
+        d2, near, ok = gate_costs(Xs, Ps, reach, rect_trk, theta_box, tsize, self._default.z, self._default.R,
                                   float(tc.gate_distance), float(tc.gate_chi2), *self._batch, self._fit_p)
         # a tracked object does not double its size from one scan to the next: a person track coasting
         # past a wall must not take the wall's cluster (it would carry M onto the wall)
-        b = self._batch
-        det_ext = np.maximum(b[2][:, 2] - b[2][:, 0], b[2][:, 3] - b[2][:, 1])
+        lohi = self._batch.lohi
+        det_ext = np.maximum(lohi[:, L_HI1] - lohi[:, L_LO1], lohi[:, L_HI2] - lohi[:, L_LO2])
         # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
         # later, a tracked object may touch another for a scan)
         known = np.array([k.misses > 0 and (bool(k.size_known.all()) or k.kind != KIND_RECT) for k in tracks])
@@ -646,7 +660,8 @@ class Tracker:
                 has[r] = True
             if det.kind == KIND_CIRCLE and k.kind == KIND_CIRCLE and k.radius > 0:
                 radius[r] = k.radius
-        _, _, H, zm, Rm, size_obs, size_kind = self._measure_rows(rows, sizes, has, radius, np.full(npair, 0.05))
+        mr = self._measure_rows(rows, sizes, has, radius, np.full(npair, 0.05))
+        H, zm, Rm, size_obs, size_kind = mr.H, mr.zm, mr.Rm, mr.size_obs, mr.size_kind
         Xs, Ps = self._stack()
         sel = np.array([ti for ti, _ in pairs], dtype=np.int64)
         Xn, Pn, ok = kalman_update_batch(Xs[sel], Ps[sel], H, zm, Rm)
@@ -867,8 +882,8 @@ class Tracker:
     def _birth(self, det: Detection, t: float, j: int) -> None:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
         cfg = self.config
-        d = self._default  # measure(det, None, None, cfg.fit) of every detection
-        meas = Measurement(d[0][j], d[1][j], d[5][j], d[6][j], d[2][j], d[3][j], d[4][j])
+        d = self._default  # reference.measure(det, None, None, cfg.fit) of every detection
+        meas = Measurement(d.z[j], d.R[j], d.size_obs[j], d.size_kind[j], d.H[j], d.zm[j], d.Rm[j])
         P = np.zeros((4, 4))
         P[:2, :2] = meas.R
         P[2, 2] = P[3, 3] = cfg.tracker.init_speed_sigma ** 2

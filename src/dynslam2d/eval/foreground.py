@@ -145,7 +145,7 @@ def evaluate_foreground(
 ) -> ForegroundRemoval:
     """:func:`foreground_removal` on a recording (any input ``open_source`` reads) and a results folder."""
     from dynslam2d.io.runfolder import read_removed_mask
-    from dynslam2d.io.sources import open_source
+    from dynslam2d.inputs import open_source
 
     if not margin > 0:
         raise DynSlamError(f"foreground: margin must be > 0 m, got {margin}")

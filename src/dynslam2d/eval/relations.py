@@ -43,7 +43,7 @@ import numpy as np
 from dynslam2d.errors import DynSlamError
 from dynslam2d.stamps import nearest_sorted
 from dynslam2d.eval.trajectory import ErrorStats
-from dynslam2d.io.trajectory import Trajectory
+from dynslam2d.trajectory import Trajectory
 from dynslam2d.types import wrap_angle
 
 #: Default stamp tolerance, s: relation files give stamps to 1 µs and the

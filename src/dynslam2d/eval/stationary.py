@@ -22,8 +22,8 @@ from typing import Iterable
 import numpy as np
 
 from dynslam2d.gridmap import GridMap
-from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.slam import HectorSlam, SlamConfig
+from dynslam2d.trajectory import Trajectory
 from dynslam2d.types import Pose2D, Scan, wrap_angle
 
 

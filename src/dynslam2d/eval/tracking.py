@@ -48,13 +48,17 @@ import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.tracker import CONFIRMED, COASTING, Tracker
 from dynslam2d.errors import DynSlamError
-from dynslam2d.types import Pose2D, Scan, wrap_angle
+from dynslam2d.types import Pose2D, Scan, Track, wrap_angle
+
+if TYPE_CHECKING:
+    from dynslam2d.sim.simulation import GroundTruth, Simulation
 
 #: DATMO's own logic (kostaskonkk/datmo, re-implemented) on the datmo bags: centre RMSE, m
 #: (the "DATMO's own logic" column of docs/tracking.md).
@@ -168,7 +172,27 @@ def evaluate_sim(scene: str, seed: int | None = None, duration: float | None = 2
     cfg = config or DetectConfig()
     sim = simulation if simulation is not None else simulate(scene, seed=seed, duration=duration)
     gt = sim.ground_truth
-    poses = gt.poses_in("first")
+    poses = _sim_poses(sim, pose_source)
+    truth = _SimTruth(gt, len(sim.scans), cfg, warmup)
+    tally = _SimTally()
+    tracker = Tracker(cfg)
+    t_proc = 0.0
+    for i, scan in enumerate(sim.scans):
+        t0 = time.perf_counter()
+        tracks = tracker.update(scan, Pose2D.from_array(poses[i]))
+        t_proc += time.perf_counter() - t0
+        tally.count_beams(i, tracks, truth)
+        tally.match_movers(i, tracks, truth)
+    n = len(sim.scans)
+    return tally.result(
+        scene=str(scene), seed=int(sim.scenario.seed), duration=float(sim.scenario.duration), n_scans=n,
+        ms_per_scan=1000.0 * t_proc / max(n, 1), stats=tracker.stats.as_dict(),
+    )
+
+
+def _sim_poses(sim: Simulation, pose_source: str) -> np.ndarray:
+    """(n, 3) laser poses in the first-scan frame the tracker gets: ground truth or Hector SLAM's."""
+    poses = sim.ground_truth.poses_in("first")
     if pose_source == "slam":
         from dynslam2d.slam import HectorSlam
 
@@ -176,60 +200,91 @@ def evaluate_sim(scene: str, seed: int | None = None, duration: float | None = 2
         poses = np.array([slam.process(s).pose.as_array() for s in sim.scans])
     elif pose_source != "truth":
         raise DynSlamError(f"evaluate_sim: pose_source must be 'truth' or 'slam', got {pose_source!r}")
-    states = gt.mover_states_in("first")
-    labels = gt.labels
-    ids = gt.mover_ids
-    n = len(sim.scans)
-    v_min = cfg.tracker.v_min
-    speeds = np.hypot(states[..., 3], states[..., 4]) if ids.size else np.zeros((n, 0))
-    hits = gt.mover_hits if ids.size else np.zeros((n, 0), dtype=np.int32)
-    visible = hits >= cfg.segment.min_points
-    stamps = gt.stamps
-    run_start = np.full(ids.size, np.nan)
-    tracker = Tracker(cfg)
-    n_truth = n_tp = n_flag = n_flag_mover = n_flag_moving = 0
-    static_total = static_flag = 0
-    cerr: list[float] = []
-    serr: list[float] = []
-    last_id: dict[int, int] = {}
-    switches = 0
-    ever_m: set[int] = set()
-    static_m: set[int] = set()
-    t_proc = 0.0
-    id_index = {int(k): j for j, k in enumerate(ids)}
-    for i, scan in enumerate(sim.scans):
-        t0 = time.perf_counter()
-        tracks = tracker.update(scan, Pose2D.from_array(poses[i]))
-        t_proc += time.perf_counter() - t0
-        lab = labels[i]
+    return poses
+
+
+class _SimTruth:
+    """The simulator's ground truth as :func:`evaluate_sim` reads it, scan by scan (first-scan frame).
+
+    :meth:`dynamic_ids` keeps, per mover, the stamp since which it has been visible without
+    a gap, so it must be called once per scan, in order.
+    """
+
+    def __init__(self, gt: GroundTruth, n: int, cfg: DetectConfig, warmup: float) -> None:
+        self.states = gt.mover_states_in("first")
+        self.labels = gt.labels
+        self.ids = gt.mover_ids
+        self.stamps = gt.stamps
+        self.warmup = warmup
+        self.v_min = cfg.tracker.v_min
+        ids = self.ids
+        self.speeds = np.hypot(self.states[..., 3], self.states[..., 4]) if ids.size else np.zeros((n, 0))
+        hits = gt.mover_hits if ids.size else np.zeros((n, 0), dtype=np.int32)
+        self.visible = hits >= cfg.segment.min_points
+        self.run_start = np.full(ids.size, np.nan)
+        self.id_index = {int(k): j for j, k in enumerate(ids)}
+
+    def dynamic_ids(self, i: int) -> np.ndarray:
+        """Ids of the movers that are dynamic truth in scan ``i``: faster than v_min and visible
+        in every scan of the last ``warmup`` s."""
+        ids, stamps, run_start = self.ids, self.stamps, self.run_start
         for j in range(ids.size):
-            if visible[i, j]:
+            if self.visible[i, j]:
                 if math.isnan(run_start[j]):
                     run_start[j] = stamps[i]
             else:
                 run_start[j] = math.nan
-        seasoned = ~np.isnan(run_start) & (stamps[i] - np.nan_to_num(run_start, nan=np.inf) >= warmup - 1e-9)
-        dyn_ids = ids[seasoned & (speeds[i] > v_min)] if ids.size else ids
-        truth = np.isin(lab, dyn_ids) if dyn_ids.size else np.zeros(lab.shape, dtype=bool)
-        moving_any = np.isin(lab, ids[speeds[i] > v_min]) if ids.size else np.zeros(lab.shape, dtype=bool)
+        seasoned = ~np.isnan(run_start) & (stamps[i] - np.nan_to_num(run_start, nan=np.inf) >= self.warmup - 1e-9)
+        return ids[seasoned & (self.speeds[i] > self.v_min)] if ids.size else ids
+
+
+@dataclass
+class _SimTally:
+    """Running counts and errors of :func:`evaluate_sim` (module docstring's definitions)."""
+
+    n_truth: int = 0
+    n_tp: int = 0
+    n_flag: int = 0
+    n_flag_mover: int = 0
+    n_flag_moving: int = 0
+    static_total: int = 0
+    static_flag: int = 0
+    cerr: list[float] = field(default_factory=list)
+    serr: list[float] = field(default_factory=list)
+    last_id: dict[int, int] = field(default_factory=dict)
+    switches: int = 0
+    ever_m: set[int] = field(default_factory=set)
+    static_m: set[int] = field(default_factory=set)
+
+    def count_beams(self, i: int, tracks: list[Track], truth: _SimTruth) -> None:
+        """Scan ``i``'s beams: dynamic truth, flagged (on a track in M), static; the tracks in M."""
+        lab = truth.labels[i]
+        ids = truth.ids
+        dyn_ids = truth.dynamic_ids(i)
+        is_truth = np.isin(lab, dyn_ids) if dyn_ids.size else np.zeros(lab.shape, dtype=bool)
+        moving_any = np.isin(lab, ids[truth.speeds[i] > truth.v_min]) if ids.size else np.zeros(lab.shape, dtype=bool)
         flagged = np.zeros(lab.shape, dtype=bool)
         for tr in tracks:
             if tr.in_m:
-                ever_m.add(tr.id)
+                self.ever_m.add(tr.id)
                 flagged[tr.beams] = True
                 if tr.n_points and np.mean(lab[tr.beams] == 0) > 0.5:
-                    static_m.add(tr.id)
-        n_truth += int(truth.sum())
-        n_tp += int((truth & flagged).sum())
+                    self.static_m.add(tr.id)
+        self.n_truth += int(is_truth.sum())
+        self.n_tp += int((is_truth & flagged).sum())
         static = lab == 0
-        static_total += int(static.sum())
-        static_flag += int((static & flagged).sum())
-        if stamps[i] - stamps[0] >= warmup:
-            n_flag += int(flagged.sum())
-            n_flag_mover += int((flagged & (lab > 0)).sum())
-            n_flag_moving += int((flagged & moving_any).sum())
+        self.static_total += int(static.sum())
+        self.static_flag += int((static & flagged).sum())
+        if truth.stamps[i] - truth.stamps[0] >= truth.warmup:
+            self.n_flag += int(flagged.sum())
+            self.n_flag_mover += int((flagged & (lab > 0)).sum())
+            self.n_flag_moving += int((flagged & moving_any).sum())
+
+    def match_movers(self, i: int, tracks: list[Track], truth: _SimTruth) -> None:
+        """Match scan ``i``'s seasoned confirmed tracks to movers: centre / speed errors, id switches."""
+        lab = truth.labels[i]
         for tr in tracks:
-            if tr.state != CONFIRMED or tr.age < warmup - 1e-9 or tr.n_points == 0:
+            if tr.state != CONFIRMED or tr.age < truth.warmup - 1e-9 or tr.n_points == 0:
                 continue
             lb = lab[tr.beams]
             lb = lb[lb > 0]
@@ -239,25 +294,30 @@ def evaluate_sim(scene: str, seed: int | None = None, duration: float | None = 2
             k = int(vals[np.argmax(counts)])
             if counts.max() * 2 <= tr.n_points:
                 continue
-            j = id_index[k]
-            sx = states[i, j]
-            cerr.append(float(math.hypot(tr.box.px - sx[0], tr.box.py - sx[1])))
-            serr.append(abs(tr.speed - float(speeds[i, j])))
-            if k in last_id and last_id[k] != tr.id:
-                switches += 1
-            last_id[k] = tr.id
-    return SimTrackingResult(
-        scene=str(scene), seed=int(sim.scenario.seed), duration=float(sim.scenario.duration), n_scans=n,
-        recall=n_tp / n_truth if n_truth else math.nan,
-        precision=n_flag_mover / n_flag if n_flag else math.nan,
-        precision_moving=n_flag_moving / n_flag if n_flag else math.nan,
-        fp_beam_rate=static_flag / static_total if static_total else 0.0,
-        n_dynamic_truth=n_truth, n_flagged=n_flag,
-        median_center_error=_nanmedian(cerr), p90_center_error=_nanpct(cerr, 90),
-        median_speed_error=_nanmedian(serr), p90_speed_error=_nanpct(serr, 90), n_matched=len(cerr),
-        id_switches=switches, tracks_ever_in_m=len(ever_m), static_tracks_in_m=len(static_m),
-        ms_per_scan=1000.0 * t_proc / max(n, 1), stats=tracker.stats.as_dict(),
-    )
+            j = truth.id_index[k]
+            sx = truth.states[i, j]
+            self.cerr.append(float(math.hypot(tr.box.px - sx[0], tr.box.py - sx[1])))
+            self.serr.append(abs(tr.speed - float(truth.speeds[i, j])))
+            if k in self.last_id and self.last_id[k] != tr.id:
+                self.switches += 1
+            self.last_id[k] = tr.id
+
+    def result(self, *, scene: str, seed: int, duration: float, n_scans: int, ms_per_scan: float,
+               stats: dict[str, int]) -> SimTrackingResult:
+        """The scores (ratios NaN when their denominator is 0)."""
+        n_flag, cerr, serr = self.n_flag, self.cerr, self.serr
+        return SimTrackingResult(
+            scene=scene, seed=seed, duration=duration, n_scans=n_scans,
+            recall=self.n_tp / self.n_truth if self.n_truth else math.nan,
+            precision=self.n_flag_mover / n_flag if n_flag else math.nan,
+            precision_moving=self.n_flag_moving / n_flag if n_flag else math.nan,
+            fp_beam_rate=self.static_flag / self.static_total if self.static_total else 0.0,
+            n_dynamic_truth=self.n_truth, n_flagged=n_flag,
+            median_center_error=_nanmedian(cerr), p90_center_error=_nanpct(cerr, 90),
+            median_speed_error=_nanmedian(serr), p90_speed_error=_nanpct(serr, 90), n_matched=len(cerr),
+            id_switches=self.switches, tracks_ever_in_m=len(self.ever_m), static_tracks_in_m=len(self.static_m),
+            ms_per_scan=ms_per_scan, stats=stats,
+        )
 
 
 # --------------------------------------------------------------------------- datmo bags

@@ -23,7 +23,7 @@ import numpy as np
 
 from dynslam2d.errors import DynSlamError
 from dynslam2d.stamps import match_nearest
-from dynslam2d.io.trajectory import Trajectory
+from dynslam2d.trajectory import Trajectory
 from dynslam2d.types import Pose2D, wrap_angle
 
 DeltaUnit = Literal["frames", "m"]

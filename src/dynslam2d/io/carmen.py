@@ -492,16 +492,23 @@ class CarmenSource:
             raise DynSlamError(f"{self.name}:{lineno}: malformed {kind} record: {reason}") from None
 
     def _index(self, max_range: float | None, nominal_rate_hz: float) -> None:
-        """Pass 1: validate every line, keep a compact index of the good laser records."""
+        """Pass 1: validate every line, keep a compact index of the good laser records.
+
+        Then, from that index: the FLASER no-return threshold, the scans' stamps and
+        order, the ODOM records on the scans' clock, and ``meta``.
+        """
         self._flaser_t: float | None = None
-        lines = GrowLines()
-        odom = GrowArrayF(8)
-        odom_lines = GrowLines()
-        kinds: Counter[str] = Counter()
-        skipped: list[int] = []
-        n_skipped = 0
-        stats = _FlaserStats()
-        beam_counts: set[int] = set()
+        found = self._read_index(max_range)
+        warnings: list[str] = []
+        rule = self._choose_flaser_threshold(found, max_range)
+        clock = self._order_stamps(found.lines, nominal_rate_hz, warnings)
+        self._odometry = _odometry_on_clock(found.odom, found.odom_lines, clock.time_source)
+        self.meta = self._describe(found, clock, rule, max_range, warnings)
+
+    def _read_index(self, max_range: float | None) -> _Pass1:
+        """Read every line once: count record kinds, parse (and check) the laser and ODOM
+        records, and index the good laser records; a file without any is an error."""
+        found = _Pass1()
         any_text = False
         for lineno, line, newline in self._lines():
             fields = line.split()
@@ -510,15 +517,15 @@ class CarmenSource:
             any_text = True
             kind = fields[0]
             if kind.startswith("#"):
-                kinds["#"] += 1
+                found.kinds["#"] += 1
                 continue
-            kinds[kind] += 1
+            found.kinds[kind] += 1
             if kind not in ("FLASER", "ROBOTLASER1", "ODOM"):
                 continue
             try:
                 if kind == "ODOM":
-                    odom.append(_parse_odom(fields))
-                    odom_lines.append(lineno)
+                    found.odom.append(_parse_odom(fields))
+                    found.odom_lines.append(lineno)
                     continue
                 raw = self._parse(kind, fields, lineno)
             except _BadLine as exc:
@@ -526,36 +533,35 @@ class CarmenSource:
                 if not newline:
                     reason += " (last line has no newline: file truncated?)"
                 self._bad(kind, lineno, reason)
-                n_skipped += 1
-                if len(skipped) < MAX_REPORTED_LINES:
-                    skipped.append(lineno)
+                found.skip(lineno)
                 continue
             try:  # geometry the Scan type rejects is a bad line too (range limit provisional here)
                 self._scan(raw, raw.ipc)
             except DynSlamError as exc:
                 self._bad(raw.kind, lineno, str(exc))
-                n_skipped += 1
-                if len(skipped) < MAX_REPORTED_LINES:
-                    skipped.append(lineno)
+                found.skip(lineno)
                 continue
             if raw.kind == "FLASER" and max_range is None:
-                stats.add(raw.ranges)
-            lines.append(lineno, raw.ipc, raw.logger, raw.kind == "FLASER")
-            beam_counts.add(int(raw.ranges.shape[0]))
+                found.stats.add(raw.ranges)
+            found.lines.append(lineno, raw.ipc, raw.logger, raw.kind == "FLASER")
+            found.beam_counts.add(int(raw.ranges.shape[0]))
         if not any_text:
             raise DynSlamError(f"{self.name}: file is empty")
-        n = len(lines)
-        if n == 0:
-            found = ", ".join(f"{k}×{v}" for k, v in sorted(kinds.items())) or "nothing"
+        if len(found.lines) == 0:
+            kinds, n_skipped = found.kinds, found.n_skipped
+            listed = ", ".join(f"{k}×{v}" for k, v in sorted(kinds.items())) or "nothing"
             extra = f"; {n_skipped} malformed laser/odometry lines skipped" if n_skipped else ""
             if not any(kinds.get(k) for k in _LASER_KINDS):
-                raise DynSlamError(f"{self.name}: no FLASER or ROBOTLASER1 laser records (found {found}){extra}")
+                raise DynSlamError(f"{self.name}: no FLASER or ROBOTLASER1 laser records (found {listed}){extra}")
             raise DynSlamError(f"{self.name}: no valid laser records ({n_skipped} malformed lines skipped)")
-        warnings: list[str] = []
+        return found
 
-        # -- no-return threshold of FLASER records (detect_no_return_threshold, streamed)
+    def _choose_flaser_threshold(self, found: _Pass1, max_range: float | None) -> str:
+        """Set the no-return threshold of FLASER records (detect_no_return_threshold, streamed);
+        return the rule that chose it ("" when no FLASER record needs one)."""
         rule = "max_range argument" if max_range is not None else ""
-        if max_range is None and lines.any_flaser():
+        stats = found.stats
+        if max_range is None and found.lines.any_flaser():
             if stats.n == 0:
                 self._flaser_t, rule = SICK_NO_RETURN, "default (no finite readings)"
             elif stats.top >= SICK_NO_RETURN:
@@ -565,8 +571,15 @@ class CarmenSource:
                 rule = f"saturation marker {stats.top:g} m repeated {stats.top_count} times"
             else:
                 self._flaser_t, rule = SICK_NO_RETURN, "default (no saturation marker found)"
+        return rule
 
-        # -- stamps: ipc, else logger, else synthesized
+    def _order_stamps(self, lines: GrowLines, nominal_rate_hz: float, warnings: list[str]) -> _Clock:
+        """Stamps: ipc, else logger, else synthesized; sorted stably and made strictly increasing.
+
+        Sets the scans' order and stamps; appends a string to ``warnings`` for each fallback
+        or repair.
+        """
+        n = len(lines)
         line_no, ipc, logger, is_flaser = lines.arrays()
         if n == 1 or np.ptp(ipc) > 0.0:
             time_source, stamps = "ipc", ipc
@@ -597,41 +610,27 @@ class CarmenSource:
         self._stamps = sorted_stamps
         self._lines_sorted = line_no[order]
         self._identity = bool(np.all(order == np.arange(n)))
+        return _Clock(time_source, backward, nudged, largest_nudge, is_flaser)
 
-        # -- odometry on the scans' clock
-        if len(odom):
-            arr = odom.array()
-            if time_source == "ipc":
-                ost = arr[:, 6].copy()
-            elif time_source == "logger":
-                ost = arr[:, 7].copy()
-            else:
-                ost = np.full(arr.shape[0], np.nan)
-            oorder = np.argsort(ost, kind="stable") if time_source != "synthesized" else np.arange(arr.shape[0])
-            arr = arr[oorder]
-            self._odometry = CarmenOdometry(
-                ost[oorder], arr[:, 0], arr[:, 1], arr[:, 2], arr[:, 3], arr[:, 4], arr[:, 5],
-                odom_lines.arrays()[0][oorder],
-            )
-        else:
-            empty = np.empty(0)
-            no_lines = np.empty(0, dtype=np.int64)
-            self._odometry = CarmenOdometry(empty, empty, empty, empty, empty, empty, empty, no_lines)
-
-        # -- metadata (from the first scan in stamp order)
+    def _describe(
+        self, found: _Pass1, clock: _Clock, rule: str, max_range: float | None, warnings: list[str]
+    ) -> SourceMeta:
+        """The source's metadata (geometry from the first scan in stamp order)."""
         first = next(self.records()).scan
+        is_flaser = clock.is_flaser
         used = [k for k, present in (("FLASER", bool(is_flaser.any())), ("ROBOTLASER1", bool((~is_flaser).any())))
                 if present]
-        diffs = np.diff(sorted_stamps)
+        diffs = np.diff(self._stamps)
         median_dt = float(np.median(diffs)) if diffs.size else 0.0
+        kinds = found.kinds
         ignored = {k: v for k, v in kinds.items() if k not in ("FLASER", "ROBOTLASER1", "ODOM", "#")}
-        if n_skipped:
-            warnings.append(f"{n_skipped} malformed lines skipped")
-        self.meta = SourceMeta(
+        if found.n_skipped:
+            warnings.append(f"{found.n_skipped} malformed lines skipped")
+        return SourceMeta(
             format="carmen",
             origin=self.name,
             topic="+".join(used),
-            count=n,
+            count=len(found.lines),
             beams=first.n_beams,
             fov=first.fov,
             rate_hz=(1.0 / median_dt) if median_dt > 0.0 else None,
@@ -642,14 +641,14 @@ class CarmenSource:
                 "records": dict(kinds),
                 "ignored_records": ignored,
                 "comments": kinds.get("#", 0),
-                "odometry_records": len(odom),
-                "skipped_lines": n_skipped,
-                "skipped_line_numbers": skipped,
-                "time_source": time_source,
-                "backward_steps": backward,
-                "nudged_stamps": nudged,
-                "largest_nudge_s": largest_nudge,
-                "beam_counts": sorted(beam_counts),
+                "odometry_records": len(found.odom),
+                "skipped_lines": found.n_skipped,
+                "skipped_line_numbers": found.skipped,
+                "time_source": clock.time_source,
+                "backward_steps": clock.backward,
+                "nudged_stamps": clock.nudged,
+                "largest_nudge_s": clock.largest_nudge,
+                "beam_counts": sorted(found.beam_counts),
                 "no_return_threshold": (max_range if max_range is not None else self._flaser_t),
                 "no_return_rule": rule or "ROBOTLASER1 max_range field",
                 "warnings": warnings,
@@ -759,3 +758,56 @@ class GrowArrayF:
 
     def array(self) -> np.ndarray:
         return self._a.view().copy()
+
+
+class _Pass1:
+    """What pass 1 over a CARMEN file keeps: the laser-record index, the ODOM rows, counters."""
+
+    def __init__(self) -> None:
+        self.lines = GrowLines()
+        self.odom = GrowArrayF(8)
+        self.odom_lines = GrowLines()
+        self.kinds: Counter[str] = Counter()
+        self.skipped: list[int] = []  # the first MAX_REPORTED_LINES skipped line numbers
+        self.n_skipped = 0
+        self.stats = _FlaserStats()
+        self.beam_counts: set[int] = set()
+
+    def skip(self, lineno: int) -> None:
+        """Count a malformed line (skip_bad)."""
+        self.n_skipped += 1
+        if len(self.skipped) < MAX_REPORTED_LINES:
+            self.skipped.append(lineno)
+
+
+@dataclass(frozen=True)
+class _Clock:
+    """How the scans' stamps were made: source, repairs, and which records are FLASER (file order)."""
+
+    time_source: str
+    backward: int
+    nudged: int
+    largest_nudge: float
+    is_flaser: np.ndarray
+
+
+def _odometry_on_clock(odom: GrowArrayF, odom_lines: GrowLines, time_source: str) -> CarmenOdometry:
+    """The ODOM records stamped on the scans' clock (``time_source``) and sorted by stamp
+    (file order when the scans' stamps are synthesized: ODOM stamps are then NaN)."""
+    if len(odom):
+        arr = odom.array()
+        if time_source == "ipc":
+            ost = arr[:, 6].copy()
+        elif time_source == "logger":
+            ost = arr[:, 7].copy()
+        else:
+            ost = np.full(arr.shape[0], np.nan)
+        oorder = np.argsort(ost, kind="stable") if time_source != "synthesized" else np.arange(arr.shape[0])
+        arr = arr[oorder]
+        return CarmenOdometry(
+            ost[oorder], arr[:, 0], arr[:, 1], arr[:, 2], arr[:, 3], arr[:, 4], arr[:, 5],
+            odom_lines.arrays()[0][oorder],
+        )
+    empty = np.empty(0)
+    no_lines = np.empty(0, dtype=np.int64)
+    return CarmenOdometry(empty, empty, empty, empty, empty, empty, empty, no_lines)

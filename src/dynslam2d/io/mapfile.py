@@ -23,7 +23,7 @@ import yaml
 from dynslam2d.errors import DynSlamError
 from dynslam2d.gridmap import GridMap
 from dynslam2d.io.atomic import atomic_path, write_text_atomic
-from dynslam2d.io.yamlfile import read_yaml_mapping
+from dynslam2d.yamlfile import read_yaml_mapping
 
 FREE_PIXEL = 254
 OCCUPIED_PIXEL = 0

@@ -32,7 +32,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from dynslam2d.errors import DynSlamError
-from dynslam2d.types import Pose2D, Scan, ScanSource, SourceMeta, wrap_angle
+from dynslam2d.types import Pose2D, Scan, ScanSource, SourceWrapper, wrap_angle
 
 __all__ = [
     "DEFAULT_MAX_GAP_S",
@@ -288,23 +288,6 @@ class OdometryInput:
     @property
     def empty(self) -> bool:
         return self.track is None and self.imu is None and self.laser_poses is None
-
-
-class SourceWrapper:
-    """A scan source that wraps another: same ``meta`` and length; every other attribute
-    (``ground_truth`` of a simulated source, ``path`` of a bag, …) is the inner source's."""
-
-    def __init__(self, inner: ScanSource) -> None:
-        self.inner = inner
-        self.meta: SourceMeta = inner.meta
-
-    def __len__(self) -> int:
-        return len(self.inner)
-
-    def __getattr__(self, name: str) -> object:
-        if name == "inner":
-            raise AttributeError(name)
-        return getattr(self.inner, name)
 
 
 class OdometrySource(SourceWrapper):

@@ -1,10 +1,12 @@
-"""Open anything that holds laser scans: format sniffing and stream checks.
+"""Open a recording of laser scans: format sniffing and stream checks.
 
-:func:`open_source` looks at what ``path`` is (a ``sim:<scenario>`` name, a ROS 2
-bag folder, or a file whose first bytes say ROS 1 bag, MCAP, gzip or CARMEN
-text) and returns a :class:`ScanSource`. Every source is wrapped in
-:class:`CheckedSource`, which enforces what all later stages rely on: stamps
-strictly increase, and the input is not empty.
+:func:`open_recording` looks at what ``path`` is (a ROS 2 bag folder, or a file
+whose first bytes say ROS 1 bag, MCAP, gzip or CARMEN text) and returns a
+:class:`ScanSource`. Every source is wrapped in :class:`CheckedSource`, which
+enforces what all later stages rely on: stamps strictly increase, and the input
+is not empty. Opening any input, simulated scenarios (``sim:<scenario>``)
+included, is :func:`dynslam2d.inputs.open_source`, one layer up
+(docs/architecture.md "Layers"); ``open_source`` is still reachable from here.
 """
 
 from __future__ import annotations
@@ -202,26 +204,23 @@ class CheckedSource:
             raise DynSlamError(f"{self.meta.origin}: holds no usable laser scans" + (f" ({why})" if why else ""))
 
 
-def open_source(
+def open_recording(
     path: str | os.PathLike[str],
     topic: str | None = None,
     *,
-    seed: int | None = None,
-    duration: float | None = None,
     skip_bad: bool = False,
     odom: str = "auto",
     imu: str = "auto",
     laser_offset: Pose2D | None = None,
 ) -> CheckedSource:
-    """Open a scan source by sniffing its format.
+    """Open a recorded scan source by sniffing its format.
 
     Args:
         path: a ROS 1 ``.bag``, a ROS 2 bag folder (sqlite3 or MCAP), a bare ``.mcap``,
-            a CARMEN log (``.clf``/``.log``, optionally gzipped), a ``.zip`` holding exactly
-            one bag (extracted to a temporary folder, removed with the source), or
-            ``sim:<scenario>``.
+            a CARMEN log (``.clf``/``.log``, optionally gzipped), or a ``.zip`` holding exactly
+            one bag (extracted to a temporary folder, removed with the source).
+            ``sim:<scenario>`` is not a recording: :func:`dynslam2d.inputs.open_source` opens it.
         topic: the LaserScan topic (bags with several); ignored for other formats.
-        seed, duration: simulator seed and length in s (``sim:`` sources only).
         skip_bad: skip malformed records and non-increasing stamps (counted) instead of
             stopping with an error.
         odom, imu: where ``Scan.odom`` / ``Scan.yaw_rate`` come from: "auto" (what the
@@ -240,9 +239,8 @@ def open_source(
         spooled = spool_stream(path)
         path = spooled
     try:
-        source = _open(path, topic, seed=seed, duration=duration, skip_bad=skip_bad,
-                       origin=origin if spooled is not None else None, odom=odom, imu=imu,
-                       laser_offset=laser_offset)
+        source = _open(path, topic, skip_bad=skip_bad, origin=origin if spooled is not None else None,
+                       odom=odom, imu=imu, laser_offset=laser_offset)
     except BaseException as exc:
         if spooled is not None:
             spooled.unlink(missing_ok=True)
@@ -256,23 +254,46 @@ def open_source(
     return source
 
 
+def checked_source(
+    inner: ScanSource, fmt: str, *, skip_bad: bool = False, odom: str = "auto", imu: str = "auto",
+    laser_offset: Pose2D | None = None,
+) -> CheckedSource:
+    """``inner`` (a source of format ``fmt``, as :func:`sniff_format` names it) with its
+    odometry / IMU input attached (:func:`dynslam2d.io.odomsource.attach_odometry`) and the
+    stream checks of :class:`CheckedSource`; the last step of opening any source."""
+    from dynslam2d.io.odomsource import attach_odometry
+
+    inner = attach_odometry(inner, fmt, odom=odom, imu=imu, laser_offset=laser_offset)
+    return CheckedSource(inner, skip_bad=skip_bad)
+
+
+def __getattr__(name: str) -> object:
+    # ``dynslam2d.io.sources.open_source`` keeps working for existing code; it lives one layer
+    # up (it opens ``sim:`` scenarios too), so it is imported on first use, not at module level.
+    if name == "open_source":
+        from dynslam2d.inputs import open_source
+
+        return open_source
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 def _unlink(path: str) -> None:
     with contextlib.suppress(OSError):
         os.unlink(path)
 
 
 def _open(
-    path: str | os.PathLike[str], topic: str | None, *, seed: int | None, duration: float | None, skip_bad: bool,
+    path: str | os.PathLike[str], topic: str | None, *, skip_bad: bool,
     origin: str | None = None, odom: str = "auto", imu: str = "auto", laser_offset: Pose2D | None = None,
 ) -> CheckedSource:
     fmt = sniff_format(path)
     text = os.fspath(path)
     inner: ScanSource
     if fmt == "sim":
-        from dynslam2d.sim import SimSource
-
-        inner = SimSource(text[len(SIM_PREFIX) :], seed=seed, duration=duration)
-    elif fmt == "zip":
+        raise DynSlamError(
+            f"{text}: a simulated scenario, not a recording; open it with dynslam2d.inputs.open_source"
+        )
+    if fmt == "zip":
         from dynslam2d.io.zipbag import ZipBagSource
 
         inner = ZipBagSource(text, topic=topic, skip_bad=skip_bad)
@@ -284,7 +305,4 @@ def _open(
         from dynslam2d.io.rosbag import RosbagSource
 
         inner = RosbagSource(text, topic=topic, skip_bad=skip_bad)
-    from dynslam2d.io.odomsource import attach_odometry
-
-    inner = attach_odometry(inner, fmt, odom=odom, imu=imu, laser_offset=laser_offset)
-    return CheckedSource(inner, skip_bad=skip_bad)
+    return checked_source(inner, fmt, skip_bad=skip_bad, odom=odom, imu=imu, laser_offset=laser_offset)

@@ -27,8 +27,7 @@ import numpy as np
 
 from dynslam2d.errors import DynSlamError
 from dynslam2d.laserconfig import SCALE_MAX, SCALE_MIN, LaserConfig
-from dynslam2d.io.odometry import SourceWrapper
-from dynslam2d.types import Scan, ScanSource
+from dynslam2d.types import Scan, ScanSource, SourceWrapper
 
 __all__ = ["LaserConfig", "RangeScaleEstimate", "RangeScaleSource", "apply_range_scale", "estimate_range_scale",
            "scale_ranges"]
