@@ -7,7 +7,7 @@ import pytest
 
 from dynslam2d.eval.trajectory import ate
 from dynslam2d.gridmap import GridMap
-from dynslam2d.io.trajectory import Trajectory
+from dynslam2d.trajectory import Trajectory
 from dynslam2d.types import Box, Pose2D
 from dynslam2d.viz import errorsplot, mapplot, style, tracksplot
 from dynslam2d.viz.trackpaths import MAX_LABELS, TrackPath, boxes_to_draw, label_tracks
@@ -120,7 +120,7 @@ def test_tracks_figure_labels_a_cluster_once_and_keeps_the_scale_bar_outside(tmp
     ax = seen["fig"].axes[0]
     ids = sorted(t.get_text() for t in ax.texts if t.get_text().isdigit())
     assert len(ids) == 2 and "999" in ids
-    assert _outside(ax, _scale_bar(ax))
+    assert _outside(ax, _scale_bar(ax)) and _outside(ax, ax.get_legend())
 
 
 def test_truth_colour_is_not_a_grey_and_far_from_not_observed():
@@ -145,7 +145,7 @@ def test_errors_scale_bar_outside_and_free_in_legend(tmp_path, monkeypatch):
     ax = seen["fig"].axes[1]
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
     assert "observed, free" in labels and "not observed" in labels
-    assert _outside(ax, _scale_bar(ax))
+    assert _outside(ax, _scale_bar(ax)) and _outside(ax, ax.get_legend())
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -143,11 +143,13 @@ def plot_errors(
         Patch(facecolor="#ffffff", edgecolor="0.6", label="observed, free"),
         Patch(facecolor=style.UNKNOWN, edgecolor="0.6", label="not observed"),
     ]
-    ax_m.legend(handles=handles, loc="upper right", fontsize="small", framealpha=0.9)
-    draw_scale_bar(ax_m, extent)
     ax_m.set_xlabel("x [m] (ground-truth frame)")
     ax_m.set_ylabel("y [m]")
     ax_m.set_aspect("equal")
+    draw_scale_bar(ax_m, extent)
+    # below the map (under the axis label and the scale bar), so it hides no cell
+    ax_m.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.07), ncol=3, fontsize="small",
+                framealpha=0.9)
     ax_m.set_title("map difference" + (f"\n{map_note}" if map_note else ""), fontsize="medium")
     if title:
         fig.suptitle(title)

@@ -138,7 +138,9 @@ def plot_tracks(
         Line2D([], [], color="0.2", lw=1.0, ls=(0, (2, 2)), alpha=0.6, label="not in M"),
         Line2D([], [], marker="o", ms=3.5, mfc="white", mec="0.2", ls="none", label="first report"),
     ]
-    ax.legend(handles=handles, loc="upper right", fontsize="small", framealpha=0.9).set_zorder(20)
+    # below the map (under the axis label and the scale bar), so it hides no path
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.07), ncol=3, fontsize="small",
+              framealpha=0.9).set_zorder(20)
     ax.set_title(title or f"{len(tracks)} tracks, coloured by speed")
     fig.tight_layout()
     return save_png(fig, path, dpi)
