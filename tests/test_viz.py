@@ -59,9 +59,10 @@ def test_results_folder_holds_every_figure(runs):
             assert paths[name].exists() and paths[name].stat().st_size > 10_000, (mode, name)
             img = Image.open(paths[name])
             assert img.format == "PNG"
-        # 8 in map + 2.4 in legend at 120 dpi; the paper room is about square.
+        # 8 in map + 2.7 in legend (the map greys, the removed-beam count; issue 15 item 7) at 120 dpi;
+        # the paper room is about square.
         w, h = Image.open(paths["map.png"]).size
-        assert w == 1248 and 700 <= h <= 1300
+        assert w == 1284 and 700 <= h <= 1300
         w, h = Image.open(paths["errors.png"]).size
         assert w == 960 and h > 1000
     assert "run.gif" not in out["none"]["paths"]
@@ -218,3 +219,21 @@ def test_figures_leave_the_callers_matplotlib_backend_alone(runs, tmp_path):
         assert all(paths[n].stat().st_size > 10_000 for n in ("map.png", "tracks.png", "errors.png"))
     finally:
         matplotlib.use(before)
+
+
+def test_figure_counts_match_summary(runs):
+    """map.png names the removed beams of the run (summary.json's share × beams, not the drawn
+    subsample) and tracks.png names summary.json's track counts (issue 15 item 7)."""
+    import json
+
+    from dynslam2d.viz.figures import removed_beams, tracks_title
+
+    _, _, out = runs
+    d = out["default"]
+    res, col = d["result"], d["collector"]
+    summary = json.loads((d["dir"] / "summary.json").read_text())
+    n = removed_beams(res)
+    assert n > 100 and n == int(res.removed.sum()) == round(summary["removed_beam_share"] * res.removed.size)
+    assert n >= len(col.points())
+    title = tracks_title(track_paths(res.track_rows))
+    assert f"{summary['tracks']} tracks" in title and f"{summary['tracks_in_M']} in M" in title

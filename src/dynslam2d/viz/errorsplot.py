@@ -140,13 +140,16 @@ def plot_errors(
         Patch(color=style.MATCHED, label="mapped structure"),
         Patch(color=style.GHOST, label=f"ghost cells ({diff.n_ghost}, {diff.n_ghost * res * res:.2f} m²)"),
         Patch(color=style.MISSED, label=f"missed structure ({diff.n_missed} cells)"),
+        Patch(facecolor="#ffffff", edgecolor="0.6", label="observed, free"),
         Patch(facecolor=style.UNKNOWN, edgecolor="0.6", label="not observed"),
     ]
-    ax_m.legend(handles=handles, loc="upper right", fontsize="small", framealpha=0.9)
-    draw_scale_bar(ax_m, extent)
     ax_m.set_xlabel("x [m] (ground-truth frame)")
     ax_m.set_ylabel("y [m]")
     ax_m.set_aspect("equal")
+    draw_scale_bar(ax_m, extent)
+    # below the map (under the axis label and the scale bar), so it hides no cell
+    ax_m.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.07), ncol=3, fontsize="small",
+                framealpha=0.9)
     ax_m.set_title("map difference" + (f"\n{map_note}" if map_note else ""), fontsize="medium")
     if title:
         fig.suptitle(title)

@@ -16,7 +16,7 @@ from dynslam2d.slam.confidence import stretches
 from dynslam2d.viz.collect import RemovedPointsCollector
 from dynslam2d.viz.errorsplot import map_difference, plot_errors
 from dynslam2d.viz.mapplot import plot_map
-from dynslam2d.viz.trackpaths import final_confirmed, track_paths, tracks_to_draw
+from dynslam2d.viz.trackpaths import TrackPath, boxes_to_draw, track_paths, tracks_to_draw
 from dynslam2d.viz.tracksplot import plot_tracks
 
 
@@ -74,25 +74,23 @@ def write_figures(
     title = f"{name} — {result.n_scans} scans, filter {result.config.filter.mode}"
     if ate_res is not None:
         title += f", ATE RMSE {ate_res.rmse:.3f} m"
-    final = final_confirmed(all_paths, last_stamp)
     removed_xy = collector.points() if collector is not None else None
     grid = cleaned.grid if cleaned is not None else result.grid
     conf = result.confidence
     pc = result.pose_confidence() if conf else {}
     paths["map.png"] = plot_map(
         out / "map.png", grid, traj.xy, reference_xy=ref_xy, title=title, dpi=dpi,
-        tracks=tracks_to_draw(all_paths, last_stamp), boxes=[(p.id, p.last_box) for p in final],
-        removed_xy=removed_xy, erased=cleaned.erased if cleaned is not None else None,
+        tracks=tracks_to_draw(all_paths, last_stamp), boxes=boxes_to_draw(all_paths, last_stamp),
+        removed_xy=removed_xy, removed_count=removed_beams(result) if removed_xy is not None else None, erased=cleaned.erased if cleaned is not None else None,
         low_support=conf.get("low_support"), lost=conf.get("lost"),
         warning=pc.get("warning"),  # type: ignore[arg-type]
         loop_edges=_loop_segments(result),
         memory_erased=_memory_erased(result, grid),
     )
     confirmed = sorted((p for p in all_paths.values() if p.ever_confirmed), key=lambda p: p.id)
-    n_m = sum(p.ever_in_m for p in confirmed)
     paths["tracks.png"] = plot_tracks(
         out / "tracks.png", confirmed, result.grid, dpi=dpi,
-        title=f"{result.source.origin} — {len(confirmed)} confirmed tracks ({n_m} ever in M), coloured by speed",
+        title=f"{result.source.origin}\n{tracks_title(all_paths)}",
     )
     if gt is not None and ate_res is not None:
         diff = map_difference(grid, gt.static_map, transform=ate_res.alignment)
@@ -111,6 +109,27 @@ def write_figures(
     return paths
 
 
+def removed_beams(result: RunResult) -> int:
+    """The run's removed beams: summary.json's ``removed_beam_share`` × its beams (all the removed
+    beams, where the removed points drawn in map.png may be a subsample)."""
+    from dynslam2d.records import BitRows
+
+    rows = result.removed_rows
+    if isinstance(rows, BitRows):
+        return int(rows.total_set)
+    return int(sum(int(np.count_nonzero(r)) for r in rows))
+
+
+def tracks_title(paths: dict[int, TrackPath]) -> str:
+    """The count line of tracks.png: the confirmed tracks it draws, named against summary.json's
+    ``tracks`` (every track id, tentative ones included) and ``tracks_in_M``."""
+    n_conf = sum(p.ever_confirmed for p in paths.values())
+    n_conf_m = sum(p.ever_confirmed and p.ever_in_m for p in paths.values())
+    n_m = sum(p.ever_in_m for p in paths.values())
+    return (f"{n_conf} confirmed tracks drawn ({n_conf_m} ever in M), coloured by speed\n"
+            f"(summary.json: {len(paths)} tracks with the tentative ones, {n_m} in M)")
+
+
 def _memory_erased(result: RunResult, grid: GridMap) -> np.ndarray | None:
     """The run's retroactively erased cells (docs/maps.md) on ``grid``'s cells (the online and the cleaned
     map share cells, resolution and origin), or None."""
@@ -120,4 +139,4 @@ def _memory_erased(result: RunResult, grid: GridMap) -> np.ndarray | None:
     return erased
 
 
-__all__ = ["write_figures"]
+__all__ = ["removed_beams", "tracks_title", "write_figures"]

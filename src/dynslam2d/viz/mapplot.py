@@ -13,14 +13,25 @@ from dynslam2d.gridmap import GridMap
 from dynslam2d.types import Box
 from dynslam2d.viz import style
 from dynslam2d.viz.figure import new_figure, save_png
-from dynslam2d.viz.trackpaths import TrackPath
+from dynslam2d.viz.trackpaths import TrackPath, label_tracks
 
 
 def occupancy_image(grid: GridMap) -> np.ndarray:
     """(H, W) grey values for display: free → white, occupied → black, unknown → light grey."""
     img = 1.0 - np.nan_to_num(grid.prob, nan=0.5)
-    img[~grid.known()] = 0.8
+    img[~grid.known()] = UNKNOWN_GREY
     return img
+
+
+#: Grey value of unobserved cells in :func:`occupancy_image` (0 black … 1 white).
+UNKNOWN_GREY = 0.8
+
+
+def removed_label(n_removed: int, n_drawn: int) -> str:
+    """Legend text of the removed points: the removed beams of the run, and how many are drawn."""
+    if n_drawn >= n_removed:
+        return f"removed beams ({n_removed:,})"
+    return f"removed beams ({n_removed:,}; {n_drawn:,} drawn)"
 
 
 def draw_grey(ax: Any, img: np.ndarray, extent: tuple[float, float, float, float],
@@ -96,27 +107,32 @@ def scale_bar_length(width_m: float) -> float:
 
 
 def frame_metric_axes(ax: Any, extent: tuple[float, float, float, float]) -> None:
-    """Axes in metres over ``extent`` (xmin, xmax, ymin, ymax), equal aspect, with a scale bar."""
-    draw_scale_bar(ax, extent)
+    """Axes in metres over ``extent`` (xmin, xmax, ymin, ymax), equal aspect, with a scale bar
+    outside the map area (below its lower-right corner, so it hides no cell)."""
     ax.set_xlim(extent[0], extent[1])
     ax.set_ylim(extent[2], extent[3])
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_aspect("equal")
+    draw_scale_bar(ax, extent)
 
 
 def draw_scale_bar(ax: Any, extent: tuple[float, float, float, float]) -> float:
-    """Draw a labelled scale bar in the lower-left corner of ``extent`` (m); return its length, m."""
-    from matplotlib.patches import Rectangle
+    """Draw a labelled scale bar of a round length (:func:`scale_bar_length` of ``extent``'s width,
+    m) below the lower-right corner of the axes, outside the map area (at the height of the
+    x-axis label, which is centred); return its length, m. The artist carries ``gid="scale_bar"``."""
+    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
     x0, x1, y0, y1 = extent
-    width_m, height_m = x1 - x0, y1 - y0
-    bar = scale_bar_length(width_m)
-    bx, by = x0 + 0.04 * width_m, y0 + 0.04 * height_m
-    ax.add_patch(Rectangle((bx - 0.02 * width_m, by - 0.025 * height_m), bar + 0.04 * width_m, 0.09 * height_m,
-                           facecolor="white", edgecolor="0.3", alpha=0.9, zorder=6))
-    ax.plot([bx, bx + bar], [by, by], color="black", lw=3, solid_capstyle="butt", zorder=7)
-    ax.text(bx + bar / 2, by + 0.015 * height_m, f"{bar:g} m", color="black", ha="center", va="bottom", zorder=7)
+    bar = scale_bar_length(x1 - x0)
+    # upper-right corner anchored at the axes' lower-right corner, moved in by ``borderpad`` font
+    # sizes (down, under the tick labels, and left): beside the centred axis label
+    sb = AnchoredSizeBar(ax.transData, bar, f"{bar:g} m", loc="upper right", bbox_to_anchor=(1.0, 0.0),
+                         bbox_transform=ax.transAxes, borderpad=2.2, pad=0.0, sep=2, frameon=False,
+                         size_vertical=0.008 * (y1 - y0), color="black", fontproperties={"size": "small"})
+    sb.set_gid("scale_bar")
+    sb.set_clip_on(False)
+    ax.add_artist(sb)
     return bar
 
 
@@ -150,6 +166,7 @@ def plot_map(
     warning: str | None = None,
     loop_edges: np.ndarray | None = None,
     memory_erased: np.ndarray | None = None,
+    removed_count: int | None = None,
 ) -> Path:
     """Write a PNG of ``grid`` with trajectories, track paths and removed points.
 
@@ -160,9 +177,13 @@ def plot_map(
         reference_xy: (n, 2) ground-truth positions already expressed in the map frame, m.
         tracks: track paths (map frame) to draw; tracks ever in M in :data:`style.TRACK_M`,
             others in :data:`style.TRACK_OTHER` (dashed); ids at the end of each path.
-        boxes: (id, box) of the final confirmed tracks, drawn as outlines (map frame).
+        boxes: (id, box) of the tracks to outline (map frame): write_figures passes the final
+            boxes of the tracks confirmed at the end that were ever in M (a box on a static
+            wall, a track never in M, is not drawn).
         removed_xy: (k, 2) endpoints of removed beams in the map frame, m, drawn in
-            :data:`style.REMOVED` (exact colour, one square per map cell hit).
+            :data:`style.REMOVED` (exact colour, one square per map cell hit); may be a subsample.
+        removed_count: the number of removed beams of the whole run, named in the legend (the
+            points drawn may be a subsample of them); default ``len(removed_xy)``.
         erased: (H, W) bool, same cells as ``grid``: cells the clean-up pass erased
             (docs/maps.md), drawn in :data:`style.ERASED`.
         low_support, lost: (n,) bool per trajectory pose: poses matched with low support are
@@ -179,7 +200,7 @@ def plot_map(
 
     extent = grid.extent
     fw, fh = map_figure_size(extent)
-    fig = new_figure((fw + 2.4, fh))
+    fig = new_figure((fw + 2.7, fh))
     ax = fig.subplots()
     handles: list[Any] = []
     has_erased = erased is not None and erased.shape == grid.shape and bool(erased.any())
@@ -189,6 +210,10 @@ def plot_map(
     paint = [(m, c) for m, c, on in ((memory_erased, style.MEMORY_ERASED, has_mem), (erased, style.ERASED, has_erased))
              if on]
     draw_grey(ax, occupancy_image(grid), extent, paint=paint)
+    # the three greys of occupancy_image
+    handles += [Patch(facecolor="black", edgecolor="0.3", label="occupied"),
+                Patch(facecolor="white", edgecolor="0.3", label="free"),
+                Patch(facecolor=str(UNKNOWN_GREY), edgecolor="0.3", label="not observed")]
     if has_mem:
         assert memory_erased is not None
         n_me = int(memory_erased.sum())
@@ -203,15 +228,17 @@ def plot_map(
         cell = max(grid.resolution, (extent[1] - extent[0]) / (8.0 * dpi / 1.5))
         img, ext = points_overlay(np.asarray(removed_xy, dtype=np.float64), extent, cell, style.REMOVED)
         ax.imshow(img, origin="lower", extent=ext, interpolation="nearest", zorder=2)
-        handles.append(Patch(color=style.REMOVED, label=f"removed points ({len(removed_xy)})"))
+        n_rm = len(removed_xy) if removed_count is None else int(removed_count)
+        handles.append(Patch(color=style.REMOVED, label=removed_label(n_rm, len(removed_xy))))
     if reference_xy is not None and len(reference_xy):
         handles += ax.plot(reference_xy[:, 0], reference_xy[:, 1], color=style.GROUND_TRUTH, lw=1.2,
                            label="ground truth", zorder=3)
     if trajectory_xy is not None and len(trajectory_xy):
         handles += ax.plot(trajectory_xy[:, 0], trajectory_xy[:, 1], color=style.TRAJECTORY, lw=1.2,
                            label="estimated trajectory", zorder=4)
-        handles += ax.plot(*trajectory_xy[0], marker="o", color=style.TRAJECTORY, ms=6, ls="none",
-                           label="start", zorder=4)
+        # small and hollow, under both lines: a robot turning in place keeps them visible
+        handles += ax.plot(*trajectory_xy[0], marker="o", mfc="none", mec=style.TRAJECTORY, mew=1.0, ms=4,
+                           ls="none", label="start", zorder=2.9)
     if loop_edges is not None and len(loop_edges):
         from matplotlib.collections import LineCollection
 
@@ -233,6 +260,9 @@ def plot_map(
             any_other |= not tp.ever_in_m
             ax.plot(tp.xy[:, 0], tp.xy[:, 1], color=colour, lw=1.3, ls="-" if tp.ever_in_m else "--",
                     alpha=0.9, zorder=5)
+        span = max(extent[1] - extent[0], extent[3] - extent[2])
+        for tp in label_tracks(tracks, span):
+            colour = style.TRACK_M if tp.ever_in_m else style.TRACK_OTHER
             ax.text(tp.xy[-1, 0], tp.xy[-1, 1], f" {tp.id}", color=colour, fontsize=7, fontweight="bold",
                     ha="left", va="bottom", zorder=8, clip_on=True)
         if any_m:
@@ -242,7 +272,7 @@ def plot_map(
     if boxes:
         for _tid, box in boxes:
             draw_box(ax, box, "black", lw=1.2, zorder=6)
-        handles.append(Line2D([], [], color="black", lw=1.2, label="final confirmed boxes"))
+        handles.append(Line2D([], [], color="black", lw=1.2, label=f"final boxes of tracks in M ({len(boxes)})"))
     frame_metric_axes(ax, extent)
     if warning:
         import textwrap

@@ -22,8 +22,9 @@ TRACK_OTHER = "#8c6d1f"
 GHOST = "#dc143c"
 #: Map difference: true structure the estimate observed but did not map.
 MISSED = "#1e64ff"
-#: Map difference: ground-truth structure (the outline everything is drawn over).
-TRUTH_OUTLINE = "#9a9a9a"
+#: Map difference: ground-truth structure (the outline everything is drawn over); a light teal, not
+#: a grey, so it stays apart from :data:`UNKNOWN` (issue 15 item 7).
+TRUTH_OUTLINE = "#66c2a5"
 #: Map difference: estimated occupied cells that match the truth.
 MATCHED = "#000000"
 #: Unknown / unobserved cells in difference images.

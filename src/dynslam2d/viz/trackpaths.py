@@ -115,4 +115,36 @@ def tracks_to_draw(paths: dict[int, TrackPath], last_stamp: float | None) -> lis
     return sorted((p for p in paths.values() if p.ever_in_m or p.id in final), key=lambda p: p.id)
 
 
-__all__ = ["TrackPath", "final_confirmed", "track_paths", "tracks_to_draw"]
+def boxes_to_draw(paths: dict[int, TrackPath], last_stamp: float | None) -> list[tuple[int, Box]]:
+    """(id, last box) of the tracks confirmed at the last scan that were ever in M, by id: the moving
+    objects the filter removed; a confirmed track never in M (often a piece of static wall) gets none."""
+    return [(p.id, p.last_box) for p in sorted(final_confirmed(paths, last_stamp), key=lambda p: p.id)
+            if p.ever_in_m]
+
+
+#: Id labels closer than this to an already placed one are left out, in units of the map's longer side.
+LABEL_GAP = 0.04
+#: At most this many id labels per figure (in-M tracks and long paths first).
+MAX_LABELS = 40
+
+
+def label_tracks(tracks: Sequence[TrackPath], span: float, gap: float = LABEL_GAP,
+                 max_labels: int = MAX_LABELS) -> list[TrackPath]:
+    """The tracks whose id a figure labels at its last position: tracks in M first, then the
+    longest paths; a label closer than ``gap`` × ``span`` (m; ``span`` the map's longer side) to
+    one already placed is left out; at most ``max_labels`` (a pile of ids is unreadable)."""
+    placed = np.zeros((0, 2))
+    out: list[TrackPath] = []
+    for t in sorted(tracks, key=lambda t: (not t.ever_in_m, -t.length_m)):
+        if len(out) >= max_labels:
+            break
+        end = t.xy[-1]
+        if len(placed) and float(np.min(np.hypot(*(placed - end).T))) < gap * span:
+            continue
+        placed = np.vstack((placed, end))
+        out.append(t)
+    return out
+
+
+__all__ = ["LABEL_GAP", "MAX_LABELS", "TrackPath", "boxes_to_draw", "final_confirmed", "label_tracks",
+           "track_paths", "tracks_to_draw"]

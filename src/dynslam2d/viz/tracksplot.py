@@ -12,15 +12,11 @@ import numpy as np
 from dynslam2d.gridmap import GridMap
 from dynslam2d.viz.figure import new_figure, save_png
 from dynslam2d.viz.mapplot import draw_grey, frame_metric_axes, map_figure_size, occupancy_image
-from dynslam2d.viz.trackpaths import TrackPath
+from dynslam2d.viz.trackpaths import MAX_LABELS, TrackPath, label_tracks
 
 #: Colour map of the speed (m/s): plasma without its pale-yellow end (unreadable on white).
 SPEED_CMAP = "plasma"
 _CMAP_TOP = 0.85
-#: Labels closer than this to an already placed label are left out, in figure-width units.
-_LABEL_GAP = 0.025
-#: At most this many id labels per figure (in-M tracks and long paths first).
-MAX_LABELS = 60
 #: Paths with more reports are drawn through this many evenly spaced ones.
 MAX_POINTS_PER_PATH = 400
 #: At most this many path segments per figure (beyond, every path is thinned evenly).
@@ -125,17 +121,9 @@ def plot_tracks(
             ax.add_collection(lc)
     if len(starts):
         ax.scatter(starts[:, 0], starts[:, 1], s=12, c="white", edgecolors="0.2", linewidths=0.8, zorder=5)
-    # Labels: tracks in M first, then the longest paths; skip one that would overlap another;
-    # at most MAX_LABELS (a figure with thousands of ids is unreadable and slow).
-    placed = np.zeros((0, 2))
-    for t in sorted(tracks, key=lambda t: (not t.ever_in_m, -t.length_m)):
-        if len(placed) >= MAX_LABELS:
-            break
-        end = t.xy[-1]
-        if len(placed) and float(np.min(np.hypot(*(placed - end).T))) < _LABEL_GAP * span:
-            continue
-        placed = np.vstack((placed, end))
-        ax.annotate(str(t.id), end, xytext=(3, 3), textcoords="offset points",
+    # Labels: tracks in M first, then the longest paths, thinned (trackpaths.label_tracks).
+    for t in label_tracks(tracks, span):
+        ax.annotate(str(t.id), t.xy[-1], xytext=(3, 3), textcoords="offset points",
                     fontsize=8 if t.ever_in_m else 6.5, fontweight="bold" if t.ever_in_m else "normal",
                     color="0.05" if t.ever_in_m else "0.35", zorder=6, annotation_clip=True,
                     bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7})
@@ -150,10 +138,12 @@ def plot_tracks(
         Line2D([], [], color="0.2", lw=1.0, ls=(0, (2, 2)), alpha=0.6, label="not in M"),
         Line2D([], [], marker="o", ms=3.5, mfc="white", mec="0.2", ls="none", label="first report"),
     ]
-    ax.legend(handles=handles, loc="upper right", fontsize="small", framealpha=0.9).set_zorder(20)
+    # below the map (under the axis label and the scale bar), so it hides no path
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.07), ncol=3, fontsize="small",
+              framealpha=0.9).set_zorder(20)
     ax.set_title(title or f"{len(tracks)} tracks, coloured by speed")
     fig.tight_layout()
     return save_png(fig, path, dpi)
 
 
-__all__ = ["SPEED_CMAP", "plot_tracks", "speed_limit"]
+__all__ = ["MAX_LABELS", "SPEED_CMAP", "plot_tracks", "speed_limit"]
