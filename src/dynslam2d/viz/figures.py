@@ -90,7 +90,7 @@ def write_figures(
     confirmed = sorted((p for p in all_paths.values() if p.ever_confirmed), key=lambda p: p.id)
     paths["tracks.png"] = plot_tracks(
         out / "tracks.png", confirmed, result.grid, dpi=dpi,
-        title=f"{result.source.origin}\n{tracks_title(all_paths)}",
+        title=f"{name}\n{tracks_title(all_paths)}",
     )
     if gt is not None and ate_res is not None:
         diff = map_difference(grid, gt.static_map, transform=ate_res.alignment)
@@ -104,7 +104,7 @@ def write_figures(
             note = (f"cleaned map (shown): ghost {mc.ghost_area_m2:.2f} m², F1 {mc.f1:.3f}; "
                     f"online map: ghost {mo.ghost_area_m2:.2f} m², F1 {mo.f1:.3f}")
         paths["errors.png"] = plot_errors(out / "errors.png", ate_res, diff, dpi=dpi,
-                                          title=f"{result.source.origin} — filter {result.config.filter.mode}",
+                                          title=f"{name} — filter {result.config.filter.mode}",
                                           intervals=spans, map_note=note)
     return paths
 
