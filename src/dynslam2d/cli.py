@@ -830,7 +830,7 @@ def _batch_progress(total: int, show: bool) -> Any:
 
 @app.command()
 def batch(
-    inputs: Annotated[list[str], typer.Argument(metavar="INPUT...", help="Bags, bag folders, .mcap files, CARMEN logs or sim:<scenario> inputs.")],
+    inputs: Annotated[list[str], typer.Argument(metavar="INPUT", help="Bags, bag folders, .mcap files, CARMEN logs or sim:<scenario> inputs.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Batch folder: one results folder per (input, setting), batch.csv, batch.md, batch.json.")],
     sets: Annotated[Optional[list[str]], typer.Option("--set", metavar="KEY=V1,V2", help="A config key (as in 'dynslam2d config dump') and the values to try; repeat for a grid, e.g. --set filter.mode=none,box --set slam.map_resolution=0.05,0.025.")] = None,
     workers: WorkersOpt = None,
