@@ -8,10 +8,10 @@ import sys
 import numpy as np
 import pytest
 import yaml
+from conftest import run_cli
 
 from dynslam2d.io.rosbag import write_scan_bag
 from dynslam2d.types import Scan
-from conftest import run_cli
 
 
 def cli(capsys, *args: str) -> tuple[int, str, str]:

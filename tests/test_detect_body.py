@@ -139,6 +139,7 @@ def test_info_finds_the_body_in_a_bag_and_suggests_a_footprint(tmp_path, capsys)
     import json
 
     from conftest import run_cli
+
     from dynslam2d.io.rosbag import write_scan_bag
 
     scans, lab = _body_scans(120, move=True)

@@ -31,11 +31,11 @@ from dynslam2d.detect.layout import (
     F_THETA,
     FIT_CENTROID,
     FIT_CIRCLE,
-    KIND_CODES,
-    KIND_NAMES,
     K_CIRCLE,
     K_POINT,
     K_RECT,
+    KIND_CODES,
+    KIND_NAMES,
     DetectionBatch,
 )
 from dynslam2d.detect.reference import classify_and_bound, measure

@@ -7,10 +7,10 @@ import shutil
 
 import numpy as np
 import pytest
+from conftest import shared_file
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from conftest import shared_file
 from dynslam2d.errors import DynSlamError
 from dynslam2d.io.rosbag import (
     LASERSCAN,

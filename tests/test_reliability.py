@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import run_cli
+
 from dynslam2d.io.rosbag import write_scan_bag
 from dynslam2d.sim import SimSource
 
@@ -559,9 +559,9 @@ def test_tracks_figure_draws_one_collection_per_kind_and_caps_labels(tmp_path, m
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from dynslam2d.types import Box
     from dynslam2d.viz import tracksplot
     from dynslam2d.viz.trackpaths import TrackPath
-    from dynslam2d.types import Box
 
     rng = np.random.default_rng(0)
     tracks = []

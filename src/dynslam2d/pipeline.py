@@ -20,8 +20,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Protocol, Sequence
+from typing import Protocol
 
 import numpy as np
 
@@ -36,11 +37,11 @@ from dynslam2d.memtrim import release_free_memory
 from dynslam2d.rangescale import apply_range_scale
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
-from dynslam2d.slam.config import SlamConfig
-from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.confidence import FLAGS
-from dynslam2d.slam.erasure import EvidenceLedger
 from dynslam2d.slam.confidence import summarize as summarize_confidence
+from dynslam2d.slam.config import SlamConfig
+from dynslam2d.slam.erasure import EvidenceLedger
+from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.loops import LoopCloser, LoopResult
 from dynslam2d.trajectory import Trajectory
 from dynslam2d.types import Box, Pose2D, Scan, ScanSource, SourceMeta, Track

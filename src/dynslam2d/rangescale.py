@@ -20,8 +20,8 @@ have their own, independent scale (the wheel radius).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass
-from typing import Iterator
 
 import numpy as np
 

@@ -22,9 +22,10 @@ import io
 import json
 import os
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from dynslam2d.batch.engine import Outcome, map_jobs
 from dynslam2d.batch.jobs import Job
@@ -93,8 +94,8 @@ def run_job(job: Job) -> dict[str, Any]:
     replaced; a foreign non-empty folder is refused). On any error the folder is discarded.
     """
     from dynslam2d.config import config_from_dict
-    from dynslam2d.io.outputs import plan_results_folder
     from dynslam2d.inputs import open_source
+    from dynslam2d.io.outputs import plan_results_folder
     from dynslam2d.pipeline import run as run_pipeline
     from dynslam2d.results import ground_truth_for, write_results
     from dynslam2d.slam.cleanup import CleanupRecorder

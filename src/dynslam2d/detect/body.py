@@ -167,7 +167,7 @@ class BodyFilter:
             drop[np.flatnonzero(valid)[inside]] = True
             self.footprint_dropped += int(inside.sum())
         if getattr(self.config, "auto", False) and self.body.any():
-            tol = float(getattr(self.config, "auto_tolerance"))
+            tol = float(self.config.auto_tolerance)
             auto = valid & (self._drop_r > 0.0) & (scan.ranges <= self._drop_r + tol) & ~drop
             self.auto_dropped += int(auto.sum())
             drop |= auto

@@ -45,10 +45,10 @@ class MapView:
     @classmethod
     def of_level(cls, level: object) -> MapView | None:
         """A view of a :class:`dynslam2d.slam.grid.GridLevel` (None while the level is empty)."""
-        lo = getattr(level, "logodds")
+        lo = level.logodds
         if lo.size == 0:
             return None
-        return cls(lo, int(getattr(level, "i0")), int(getattr(level, "j0")), float(getattr(level, "resolution")))
+        return cls(lo, int(level.i0), int(level.j0), float(level.resolution))
 
 
 @njit(cache=True)

@@ -34,14 +34,23 @@ free-space and fragment tests); only the per-track bookkeeping stays in Python (
 from __future__ import annotations
 
 import bisect
-from collections import deque
 import math
+from collections import deque
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
 
 from dynslam2d.detect.config import DetectConfig
+from dynslam2d.detect.freespace import FreeSpaceMemory
+from dynslam2d.detect.kernels import (
+    classify_batch,
+    fit_params,
+    fragment_hosts,
+    gate_costs,
+    kalman_update_batch,
+    measure_batch,
+    segment_means,
+)
 from dynslam2d.detect.layout import (
     F_THETA,
     FIT_CENTROID,
@@ -62,18 +71,9 @@ from dynslam2d.detect.layout import (
     DetectionBatch,
     MeasureRows,
 )
-from dynslam2d.detect.measure import Detection, Measurement
-from dynslam2d.detect.freespace import FreeSpaceMemory
+from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
 from dynslam2d.detect.mapevidence import MapView, map_evidence
-from dynslam2d.detect.kernels import (
-    classify_batch,
-    fit_params,
-    fragment_hosts,
-    gate_costs,
-    kalman_update_batch,
-    measure_batch,
-    segment_means,
-)
+from dynslam2d.detect.measure import Detection, Measurement
 from dynslam2d.detect.segment import Segmentation, segment_scan
 from dynslam2d.detect.shapes import CRITERIA, fit_clusters, search_angles
 from dynslam2d.types import Box, Pose2D, Scan, Track, wrap_angle

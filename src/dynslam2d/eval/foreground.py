@@ -22,8 +22,9 @@ docs/real.md uses this for the stationary leg_tracker bags:
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -144,8 +145,8 @@ def evaluate_foreground(
     margin: float = FOREGROUND_MARGIN,
 ) -> ForegroundRemoval:
     """:func:`foreground_removal` on a recording (any input ``open_source`` reads) and a results folder."""
-    from dynslam2d.io.runfolder import read_removed_mask
     from dynslam2d.inputs import open_source
+    from dynslam2d.io.runfolder import read_removed_mask
 
     if not margin > 0:
         raise DynSlamError(f"foreground: margin must be > 0 m, got {margin}")

@@ -24,7 +24,7 @@ then anything wrong is a DynSlamError.
 from __future__ import annotations
 
 import math
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 

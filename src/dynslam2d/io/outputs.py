@@ -25,9 +25,10 @@ import json
 import os
 import shutil
 import tempfile
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 from dynslam2d import __version__
 from dynslam2d.errors import DynSlamError
@@ -92,7 +93,7 @@ def write_marker(folder: str | os.PathLike[str], status: str, **info: Any) -> Pa
     from dynslam2d.io.atomic import write_text_atomic
 
     data = {"tool": "dynslam2d", "version": __version__, "status": status,
-            "written": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), **info}
+            "written": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"), **info}
     return write_text_atomic(Path(folder) / MARKER, json.dumps(data, indent=2, default=str) + "\n")
 
 
@@ -150,7 +151,7 @@ class ResultsFolder:
         """
         if not self.replace:
             return self.final
-        stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%d-%H%M%S")
+        stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%d-%H%M%S")
         target = _abs(self.final).parent / f"{self.final.name}.incomplete-{stamp}"
         os.replace(self.work, target)
         self.work = target

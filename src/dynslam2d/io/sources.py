@@ -18,8 +18,8 @@ import stat
 import tempfile
 import time
 import weakref
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 from dynslam2d.errors import DynSlamError
 from dynslam2d.types import Pose2D, Scan, ScanSource, SourceMeta
