@@ -84,7 +84,7 @@ def _write_bag(path, sim, people=None, people_type=PERSON_MSGTYPE, bad_index=Non
                       RECORD0 + i * DT)
             if people_type is None:
                 continue
-            for n, (si, pid, x, y) in enumerate([a for a in anns if a[0] == i]):
+            for n, (_si, pid, x, y) in enumerate([a for a in anns if a[0] == i]):
                 if people_type != PERSON_MSGTYPE:
                     msg = bag.msg_class(people_type)(header=bag.header(_header(i), "laser"), pose=pose(x, y))
                 else:

@@ -380,7 +380,7 @@ def simulate(
         "simulated ", (sc.name, "bold"), f" (seed {sc.seed}): {len(sim.scans)} scans over {sc.duration:g} s, "
         f"{len(sc.movers)} movers"
     ))
-    for role, path in paths.items():
+    for path in paths.values():
         console.print(Text(f"  {path}"))
     console.print(Text(f"map it with: dynslam2d run {paths['scans']} --gt {out}"))
 
@@ -586,7 +586,8 @@ def run(
     if write_bag is not None:
         check_bag_target(write_bag, force=force, inputs=inputs, out=out)
         if folder.replace and same_or_inside(write_bag, out):
-            raise DynSlamError(f"--write-bag {write_bag}: lies inside --out {out}, which is replaced; put the bag elsewhere")
+            raise DynSlamError(f"--write-bag {write_bag}: lies inside --out {out}, which is replaced; put the bag "
+                               f"elsewhere")
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad, odom=odom, imu=imu,
                          laser_offset=offset)
     mount = _laser_mount(source.meta) if frame == "base_link" else None
@@ -670,7 +671,8 @@ def run(
                               Trajectory(ft.stamps, compose_mount(ft.poses, mount.inverse()), ft.frame),
                               comment="base_link pose in the map frame, front end before loop closure")
         except OSError as exc:  # disk full, folder removed under our feet, …
-            raise DynSlamError(f"--out {out}: cannot write the results ({exc.strerror or exc}); nothing was kept") from None
+            raise DynSlamError(f"--out {out}: cannot write the results ({exc.strerror or exc}); nothing was "
+                               f"kept") from None
         folder.finish()
     except KeyboardInterrupt:
         _interrupted(folder, checkpointer)
@@ -705,7 +707,8 @@ def run(
         ("map updates", str(summary["map_updates"])),
         *_range_scale_row(summary),
         ("odometry", (f"{summary.get('odometry') or 'none (laser only)'}"
-                      + (f", {odo['with_odom']}/{odo['scans']} scans" if isinstance(odo, dict) and odo.get('scans') else ""))),
+                      + (f", {odo['with_odom']}/{odo['scans']} "
+                         f"scans" if isinstance(odo, dict) and odo.get('scans') else ""))),
         ("rejected matches", str(summary["match_failures"])),
         ("skipped scans", str(summary["skipped_scans"])),
         ("input dropped (--skip-bad)", ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in skipped.items() if v)
@@ -718,14 +721,16 @@ def run(
     cl = summary.get("cleanup")
     if isinstance(cl, dict):
         rows.append(("clean-up", f"erased {cl['erased_cells']} of {cl['occupied_cells_online']} occupied cells "
-                                 f"({cl['erased_area_m2']:.2f} m²) in {cl['pass_time_s']:.2f} s; online map in map_online.pgm"))
+                                 f"({cl['erased_area_m2']:.2f} m²) in {cl['pass_time_s']:.2f} s; online map in "
+                                 f"map_online.pgm"))
     repairs = summary.get("stamp_repairs") or {}
     if repairs.get("backward_steps") or repairs.get("nudged_stamps") or repairs.get("time_source") not in (None, "ipc"):
         rows.append(("stamp repairs", "; ".join(summary.get("input_warnings", [])) or str(repairs)))
     pc = summary.get("pose_confidence")
     if pc:
         rows.append(("pose confidence",
-                     f"{100 * pc['low_support_share']:.1f} % low support (longest {pc['longest_low_support_s']:.1f} s), "
+                     f"{100 * pc['low_support_share']:.1f} % low support (longest {pc['longest_low_support_s']:.1f} "
+                     f"s), "
                      f"{100 * pc['degenerate_share']:.1f} % degenerate (longest {pc['longest_degenerate_s']:.1f} s), "
                      f"lost {pc['lost_events']}× ({pc['lost_time_s']:.1f} s)"))
     body = summary.get("body") or {}
@@ -764,7 +769,8 @@ def _range_scale_row(summary: dict[str, Any]) -> list[tuple[str, str]]:
     if not math.isfinite(rs.get("scale") or math.nan):
         return [("range scale", f"1 (auto: too little odometry motion, {rs['odom_distance']:.2f} m)")]
     return [("range scale", f"{rs['used']:.4f} (auto: odometry {rs['odom_distance']:.2f} m / laser "
-                            f"{rs['slam_distance']:.2f} m over {rs['windows']} windows of the first {rs['scans']} scans)")]
+                            f"{rs['slam_distance']:.2f} m over {rs['windows']} windows of the first {rs['scans']} "
+                            f"scans)")]
 
 
 def _say_if_compiling(show: bool) -> bool:
@@ -795,7 +801,8 @@ def _check_sim_only(input: str, seed: int | None, duration: float | None) -> Non
         given = [name for name, v in (("--seed", seed), ("--duration", duration)) if v is not None]
         if given:
             verb = "applies" if len(given) == 1 else "apply"
-            raise DynSlamError(f"{' and '.join(given)} {verb} to sim:<scenario> inputs only, not to {input}; drop the option")
+            raise DynSlamError(f"{' and '.join(given)} {verb} to sim:<scenario> inputs only, not to {input}; drop the "
+                               f"option")
 
 
 def _input_paths(input: str, *more: Path | None) -> list[Path]:
@@ -880,7 +887,8 @@ def _interrupted(folder: Any, checkpointer: Any) -> None:
         err_console.print(Text(f"interrupted after {checkpointer.n_scans} scans; the last checkpoint could not be "
                                f"written ({exc}); earlier checkpoints in {folder.work}"), soft_wrap=True)
         raise SystemExit(130) from None
-    err_console.print(Text(f"interrupted after {checkpointer.n_scans} scans, partial results in {where}"), soft_wrap=True)
+    err_console.print(Text(f"interrupted after {checkpointer.n_scans} scans, partial results in "
+                           f"{where}"), soft_wrap=True)
     raise SystemExit(130)
 
 
@@ -964,17 +972,20 @@ def batch(
     counts = {"done": 0, "skipped": 0, "failed": 0}
     progress = _batch_progress(len(jobs), show)
     if show:
-        where = f"Ray ({ray})" if ray else (f"{n_workers} worker processes" if n_workers > 1 and len(jobs) > 1 else "this process")
+        where = f"Ray ({ray})" if ray else (f"{n_workers} worker "
+                                            f"processes" if n_workers > 1 and len(jobs) > 1 else "this process")
         err_console.print(f"{len(jobs)} runs ({len(inputs)} inputs × {len(jobs) // len(inputs)} settings) on {where}")
     with progress:
         task = progress.add_task("runs", total=len(jobs), info="")
 
         def tick(outcome: Any) -> None:
             counts[outcome.status] += 1
-            progress.update(task, advance=1, info=f"{counts['skipped']} skipped, {counts['failed']} failed · {outcome.name}")
+            progress.update(task, advance=1, info=f"{counts['skipped']} skipped, {counts['failed']} failed · "
+                                                  f"{outcome.name}")
             if show and outcome.status == "failed":
                 progress.console.print(Text.assemble(("failed: ", "bold "
-                                                                  "red"), f"{outcome.name}: {outcome.error}"), soft_wrap=True)
+                                                                  "red"), f"{outcome.name}: "
+                                                                          f"{outcome.error}"), soft_wrap=True)
 
         result = run_batch(jobs, out, workers=n_workers, ray=ray, on_outcome=tick)
     if as_json:
@@ -1169,7 +1180,8 @@ def _metric_rows(metrics: dict[str, Any]) -> list[tuple[str, str]]:
     if tm and tm["seen_walking"]:
         delay = "—" if tm["median_delay"] != tm["median_delay"] else f"{tm['median_delay']:.2f} s"
         rows.append(("walking movers caught by M (median delay)",
-                     f"{tm['reached']} of {tm['seen_walking']} ({delay}; {_pct(tm['within_half_second'])} within 0.5 s)"))
+                     f"{tm['reached']} of {tm['seen_walking']} ({delay}; {_pct(tm['within_half_second'])} within 0.5 "
+                     f"s)"))
     return rows
 
 

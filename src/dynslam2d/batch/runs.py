@@ -278,7 +278,8 @@ def batch_markdown(jobs: list[Job], outcomes: list[Outcome]) -> str:
     lines += ["", "Every value of every run (the columns of batch.csv):", ""]
     for r in rows:
         lines += [f"<details><summary>{r['run']} ({r['status']})</summary>", "", "| key | value |", "|---|---|"]
-        lines += [f"| {c} | {str(r[c]).replace('|', chr(92) + '|')} |" for c in columns if c in r and r[c] not in ("", None)]
+        lines += [f"| {c} | {str(r[c]).replace('|', chr(92) + '|')} "
+                  f"|" for c in columns if c in r and r[c] not in ("", None)]
         lines += ["", "</details>", ""]
     return "\n".join(lines)
 

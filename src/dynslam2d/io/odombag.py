@@ -296,7 +296,8 @@ def _plan(path: Path, topics: dict[str, str], odom: str, imu: str) -> _Plan:
         plan.wheel_topic = name
         if plan.imu_topic is None:
             raise DynSlamError(f"{path}: --odom {odom}: wheel-speed dead reckoning needs an IMU yaw rate, "
-                               f"and {'--imu none was given' if imu == 'none' else 'the bag has no sensor_msgs/Imu topic'}")
+                               f"and "
+                               f"{'--imu none was given' if imu == 'none' else 'the bag has no sensor_msgs/Imu topic'}")
     else:
         plan.kinds.append("topic")
         plan.odom_topic = name

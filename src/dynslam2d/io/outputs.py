@@ -203,7 +203,8 @@ def plan_results_folder(
             )
         if not force:
             raise DynSlamError(
-                f"--out {out}: holds the results of an earlier run; use --force to replace them, or choose another folder"
+                f"--out {out}: holds the results of an earlier run; use --force to replace them, or choose another "
+                f"folder"
             )
         for inp in inputs:
             if same_or_inside(inp, p):
@@ -253,7 +254,8 @@ def check_bag_target(
     if p.exists() or p.is_symlink():
         if not force:
             raise DynSlamError(
-                f"--write-bag {path}: exists already; use --force to replace a bag dynslam2d wrote, or choose another name"
+                f"--write-bag {path}: exists already; use --force to replace a bag dynslam2d wrote, or choose another "
+                f"name"
             )
         if not is_own_bag(p):
             raise DynSlamError(f"--write-bag {path}: exists and is not a bag written by dynslam2d; it is not replaced")

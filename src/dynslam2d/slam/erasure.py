@@ -126,7 +126,7 @@ class EvidenceLedger:
         if not (own >= 0).any():
             return None
         per_track: dict[int, list] = {}
-        for k, lv in enumerate(hmap.levels):
+        for lv in hmap.levels:
             cells = np.floor(pts / lv.resolution + 0.5).astype(np.int64)
             key = cells[:, 0] * 4294967296 + cells[:, 1]  # (i, j) as one integer (|i|, |j| < 2^31)
             other = np.unique(key[own < 0])
