@@ -32,7 +32,10 @@ def _same(a: list[dict[str, object]], b: list[dict[str, object]]) -> bool:
     def norm(v: object) -> object:
         return "nan" if isinstance(v, float) and v != v else v
 
-    return [{k: norm(v) for k, v in r.items()} for r in _table(a)] == [{k: norm(v) for k, v in r.items()} for r in _table(b)]
+    def rows(path):
+        return [{k: norm(v) for k, v in r.items()} for r in _table(path)]
+
+    return rows(a) == rows(b)
 
 
 def _children_cpu() -> float:

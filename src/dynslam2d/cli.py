@@ -132,14 +132,14 @@ def _show(table: Table, con: Console | None = None) -> None:
 
 TopicOpt = Annotated[str | None, typer.Option("--topic", help="LaserScan topic, for bags holding several.")]
 SkipBadOpt = Annotated[
-    bool, typer.Option("--skip-bad", help="Skip malformed records and non-increasing stamps (counted) instead of "
-                                          "stopping.")
+    bool, typer.Option(
+        "--skip-bad", help="Skip malformed records and non-increasing stamps (counted) instead of stopping.")
 ]
-SeedOpt = Annotated[int | None, typer.Option("--seed", help="Simulator seed (sim: inputs); default: the scenario's "
-                                                            "own.")]
+SeedOpt = Annotated[int | None, typer.Option(
+    "--seed", help="Simulator seed (sim: inputs); default: the scenario's own.")]
 DurationOpt = Annotated[
-    float | None, typer.Option("--duration", min=0.1, help="Simulated duration in s (sim: inputs); default: the "
-                                                           "scenario's own.")
+    float | None, typer.Option(
+        "--duration", min=0.1, help="Simulated duration in s (sim: inputs); default: the scenario's own.")
 ]
 
 
@@ -240,7 +240,8 @@ def info(
     table = Table(title=Text(f"{summary.origin}"), show_header=False, title_justify="left")
     table.add_column(style="bold")
     table.add_column()
-    beams = str(summary.beams_max) if summary.beams_min == summary.beams_max else f"{summary.beams_min}–{summary.beams_max}"
+    beams = (str(summary.beams_max) if summary.beams_min == summary.beams_max
+             else f"{summary.beams_min}–{summary.beams_max}")
     rows = [
         ("format", summary.format),
         ("topic / record", summary.topic or "—"),
@@ -290,34 +291,34 @@ def _body_line(body: dict) -> str:
 
 @app.command()
 def simulate(
-    scenario: Annotated[str, typer.Argument(help="Scenario name (see --list), e.g. paper, paper-1, static, "
-                                                 "crowd.")] = "paper",
-    out: Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default: "
-                                                                 "results/sim-<scenario>-<time>).")] = None,
+    scenario: Annotated[str, typer.Argument(
+        help="Scenario name (see --list), e.g. paper, paper-1, static, crowd.")] = "paper",
+    out: Annotated[Path | None, typer.Option(
+        "--out", "-o", help="Output folder (default: results/sim-<scenario>-<time>).")] = None,
     seed: SeedOpt = None,
     duration: DurationOpt = None,
-    resolution: Annotated[float, typer.Option("--map-resolution", min=0.005, help="Ground-truth map cell size, "
-                                                                                  "m.")] = 0.05,
-    storage: Annotated[str, typer.Option("--storage", help="Scan bag: mcap (bare .mcap), sqlite3 (ROS 2 folder) or "
-                                                           "ros1 (.bag).")] = "mcap",
+    resolution: Annotated[float, typer.Option(
+        "--map-resolution", min=0.005, help="Ground-truth map cell size, m.")] = 0.05,
+    storage: Annotated[str, typer.Option(
+        "--storage", help="Scan bag: mcap (bare .mcap), sqlite3 (ROS 2 folder) or ros1 (.bag).")] = "mcap",
     beams: Annotated[int | None, typer.Option("--beams", min=1, help="Beams per scan [720].")] = None,
-    fov_deg: Annotated[float | None, typer.Option("--fov-deg", min=1.0, max=360.0, help="Field of view, degrees "
-                                                                                        "[360].")] = None,
+    fov_deg: Annotated[float | None, typer.Option(
+        "--fov-deg", min=1.0, max=360.0, help="Field of view, degrees [360].")] = None,
     rate: Annotated[float | None, typer.Option("--rate", min=0.1, help="Scan rate, Hz [20].")] = None,
     noise: Annotated[float | None, typer.Option("--noise", min=0.0, help="Gaussian range noise σ, m [0.01].")] = None,
-    dropout: Annotated[float | None, typer.Option("--dropout", min=0.0, max=1.0, help="Probability a beam returns "
-                                                                                      "nothing [0].")] = None,
+    dropout: Annotated[float | None, typer.Option(
+        "--dropout", min=0.0, max=1.0, help="Probability a beam returns nothing [0].")] = None,
     range_max: Annotated[float | None, typer.Option("--range-max", min=0.1, help="Sensor max range, m [20].")] = None,
     list_scenarios: Annotated[bool, typer.Option("--list", help="List the scenarios and exit.")] = False,
-    force: Annotated[bool, typer.Option("--force", help="Replace an earlier output folder of dynslam2d at --out (never "
-                                                        "anything else).")] = False,
-    odom_noise: Annotated[float, typer.Option("--odom-noise", min=0.0, help="Multiplies every odometry/IMU noise, bias "
-                                                                            "and scale error of the default model (0 = "
-                                                                            "perfect odometry) [1].")] = 1.0,
-    laser_mount: Annotated[str | None, typer.Option("--laser-mount", help="The laser's pose on the robot base, x,y,yaw "
-                                                                          "(m, m, rad) [0.15,0,0].")] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the scenario list (--list) or the written files as "
-                                                         "JSON on stdout.")] = False,
+    force: Annotated[bool, typer.Option(
+        "--force", help="Replace an earlier output folder of dynslam2d at --out (never anything else).")] = False,
+    odom_noise: Annotated[float, typer.Option(
+        "--odom-noise", min=0.0, help="Multiplies every odometry/IMU noise, bias and scale error of the default model "
+                                      "(0 = perfect odometry) [1].")] = 1.0,
+    laser_mount: Annotated[str | None, typer.Option(
+        "--laser-mount", help="The laser's pose on the robot base, x,y,yaw (m, m, rad) [0.15,0,0].")] = None,
+    as_json: Annotated[bool, typer.Option(
+        "--json", help="Print the scenario list (--list) or the written files as JSON on stdout.")] = False,
 ) -> None:
     """Simulate a scene: scans as a bag, ground truth (map, trajectory, labels, movers), an overview PNG.
 
@@ -408,10 +409,10 @@ app.add_typer(config_app, name="config")
 
 @config_app.command("dump")
 def config_dump(
-    config: Annotated[Path | None, typer.Option("--config", help="Start from this YAML file instead of the "
-                                                                 "defaults.")] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the values as JSON instead of commented "
-                                                         "YAML.")] = False,
+    config: Annotated[Path | None, typer.Option(
+        "--config", help="Start from this YAML file instead of the defaults.")] = None,
+    as_json: Annotated[bool, typer.Option(
+        "--json", help="Print the values as JSON instead of commented YAML.")] = False,
 ) -> None:
     """Print the full configuration as YAML (defaults, or a file completed with defaults)."""
     from dynslam2d.config import Config, dump_config, load_config
@@ -426,93 +427,82 @@ def config_dump(
 @app.command()
 def run(
     input: Annotated[str, typer.Argument(help="Bag, bag folder, .mcap, CARMEN log or sim:<scenario>.")] = "sim:paper",
-    out: Annotated[Path | None, typer.Option("--out", "-o", help="Results folder (default: "
-                                                                 "results/run-<time>).")] = None,
+    out: Annotated[Path | None, typer.Option(
+        "--out", "-o", help="Results folder (default: results/run-<time>).")] = None,
     topic: TopicOpt = None,
-    gt: Annotated[Path | None, typer.Option("--gt", help="Ground-truth folder written by 'dynslam2d simulate' (for "
-                                                         "metrics).")] = None,
-    config: Annotated[Path | None, typer.Option("--config", help="YAML configuration (see 'dynslam2d config "
-                                                                 "dump').")] = None,
-    map_resolution: Annotated[float | None, typer.Option("--map-resolution", help="Finest map cell size, m "
-                                                                                  "[0.05].")] = None,
+    gt: Annotated[Path | None, typer.Option(
+        "--gt", help="Ground-truth folder written by 'dynslam2d simulate' (for metrics).")] = None,
+    config: Annotated[Path | None, typer.Option(
+        "--config", help="YAML configuration (see 'dynslam2d config dump').")] = None,
+    map_resolution: Annotated[float | None, typer.Option(
+        "--map-resolution", help="Finest map cell size, m [0.05].")] = None,
     map_levels: Annotated[int | None, typer.Option("--map-levels", help="Map levels [3].")] = None,
-    update_distance: Annotated[float | None, typer.Option("--map-update-distance-thresh", "--update-distance", help="Map update after this translation, m (slam.map_update_distance_thresh) [0.4].")] = None,
-    update_angle: Annotated[float | None, typer.Option("--map-update-angle-thresh", "--update-angle", help="Map update "
-                                                                                                           "after this "
-                                                                                                           "rotation, "
-                                                                                                           "rad "
-                                                                                                           "(slam.map_update_angle_thresh) [0.06].")] = None,
-    laser_min_dist: Annotated[float | None, typer.Option("--laser-min-dist", help="Ignore returns closer than this, m "
-                                                                                  "[0.4].")] = None,
-    laser_max_dist: Annotated[float | None, typer.Option("--laser-max-dist", help="Ignore returns farther than this, m "
-                                                                                  "[30].")] = None,
-    filter_mode: Annotated[str | None, typer.Option("--filter-mode", "--filter", help="Dynamic-point filter "
-                                                                                      "(filter.mode): none, fixed, "
-                                                                                      "adaptive (the paper's "
-                                                                                      "configurations 1-3) or box "
-                                                                                      "(ours: each moving object's box "
-                                                                                      "plus a margin; 'default' is its "
-                                                                                      "old name) [box].")] = None,
-    constant_velocity: Annotated[bool | None, typer.Option("--constant-velocity/--no-constant-velocity", help="Predict "
-                                                                                                              "with "
-                                                                                                              "constant velocity instead of the previous pose.")] = None,
-    correlative: Annotated[str | None, typer.Option("--correlative-mode", "--correlative", help="Correlative search "
-                                                                                                "seed: auto, always or "
-                                                                                                "never "
-                                                                                                "(slam.correlative_mode) [auto].")] = None,
-    hector_compat: Annotated[bool, typer.Option("--hector-compat", help="Behave like the reference hector_mapping: raw "
-                                                                        "Gauss-Newton step, its swapped gradient, no "
-                                                                        "correlative search.")] = False,
-    animate: Annotated[bool, typer.Option("--animate", help="Also write run.gif: scan points (kept / removed), tracked "
-                                                            "boxes, the growing map.")] = False,
-    frame_step: Annotated[int, typer.Option("--frame-step", min=1, help="With --animate: one frame every N "
-                                                                        "scans.")] = 5,
-    write_bag: Annotated[Path | None, typer.Option("--write-bag", help="Also write a bag for RViz / Foxglove: .mcap "
-                                                                       "(default), .db3, .bag (ROS 1) or a folder (ROS "
-                                                                       "2).")] = None,
-    bag_storage: Annotated[str | None, typer.Option("--bag-storage", help="ROS 2 storage for a bag folder: mcap or "
-                                                                          "sqlite3.")] = None,
-    map_period: Annotated[float, typer.Option("--map-period", min=0.0, help="Seconds of scan time between /map "
-                                                                            "messages (bag, viewer); 0 = every "
-                                                                            "scan.")] = 1.0,
-    viewer: Annotated[str, typer.Option("--viewer", help="Live viewer: none or rerun (pip install "
-                                                         "\"dynslam2d[viewer]\").")] = "none",
-    rerun_save: Annotated[Path | None, typer.Option("--rerun-save", help="With --viewer rerun: save a .rrd recording "
-                                                                         "instead of opening the viewer.")] = None,
+    update_distance: Annotated[float | None, typer.Option(
+        "--map-update-distance-thresh", "--update-distance", help="Map update after this translation, m "
+                                                                  "(slam.map_update_distance_thresh) [0.4].")] = None,
+    update_angle: Annotated[float | None, typer.Option(
+        "--map-update-angle-thresh", "--update-angle", help="Map update after this rotation, rad "
+                                                            "(slam.map_update_angle_thresh) [0.06].")] = None,
+    laser_min_dist: Annotated[float | None, typer.Option(
+        "--laser-min-dist", help="Ignore returns closer than this, m [0.4].")] = None,
+    laser_max_dist: Annotated[float | None, typer.Option(
+        "--laser-max-dist", help="Ignore returns farther than this, m [30].")] = None,
+    filter_mode: Annotated[str | None, typer.Option(
+        "--filter-mode", "--filter", help="Dynamic-point filter (filter.mode): none, fixed, adaptive (the paper's "
+                                          "configurations 1-3) or box (ours: each moving object's box plus a margin; "
+                                          "'default' is its old name) [box].")] = None,
+    constant_velocity: Annotated[bool | None, typer.Option(
+        "--constant-velocity/--no-constant-velocity", help="Predict with constant velocity instead of the previous "
+                                                           "pose.")] = None,
+    correlative: Annotated[str | None, typer.Option(
+        "--correlative-mode", "--correlative", help="Correlative search seed: auto, always or never "
+                                                    "(slam.correlative_mode) [auto].")] = None,
+    hector_compat: Annotated[bool, typer.Option(
+        "--hector-compat", help="Behave like the reference hector_mapping: raw Gauss-Newton step, its swapped "
+                                "gradient, no correlative search.")] = False,
+    animate: Annotated[bool, typer.Option(
+        "--animate", help="Also write run.gif: scan points (kept / removed), tracked boxes, the growing map.")] = False,
+    frame_step: Annotated[int, typer.Option(
+        "--frame-step", min=1, help="With --animate: one frame every N scans.")] = 5,
+    write_bag: Annotated[Path | None, typer.Option(
+        "--write-bag", help="Also write a bag for RViz / Foxglove: .mcap (default), .db3, .bag (ROS 1) or a folder "
+                            "(ROS 2).")] = None,
+    bag_storage: Annotated[str | None, typer.Option(
+        "--bag-storage", help="ROS 2 storage for a bag folder: mcap or sqlite3.")] = None,
+    map_period: Annotated[float, typer.Option(
+        "--map-period", min=0.0, help="Seconds of scan time between /map messages (bag, viewer); 0 = every "
+                                      "scan.")] = 1.0,
+    viewer: Annotated[str, typer.Option(
+        "--viewer", help="Live viewer: none or rerun (pip install \"dynslam2d[viewer]\").")] = "none",
+    rerun_save: Annotated[Path | None, typer.Option(
+        "--rerun-save", help="With --viewer rerun: save a .rrd recording instead of opening the viewer.")] = None,
     seed: SeedOpt = None,
     duration: DurationOpt = None,
     skip_bad: SkipBadOpt = False,
-    force: Annotated[bool, typer.Option("--force", help="Replace an earlier results folder (one with run.json) at "
-                                                        "--out and a bag dynslam2d wrote at --write-bag; never "
-                                                        "anything else.")] = False,
-    checkpoint_period: Annotated[float, typer.Option("--checkpoint-period", min=0.0, help="Write the trajectory and "
-                                                                                          "map so far into OUT every "
-                                                                                          "this many seconds (0 = "
-                                                                                          "never).")] = 60.0,
-    checkpoint_scans: Annotated[int, typer.Option("--checkpoint-scans", min=0, help="Also checkpoint every this many "
-                                                                                    "scans (0 = only by time).")] = 0,
+    force: Annotated[bool, typer.Option(
+        "--force", help="Replace an earlier results folder (one with run.json) at --out and a bag dynslam2d wrote at "
+                        "--write-bag; never anything else.")] = False,
+    checkpoint_period: Annotated[float, typer.Option(
+        "--checkpoint-period", min=0.0, help="Write the trajectory and map so far into OUT every this many seconds (0 "
+                                             "= never).")] = 60.0,
+    checkpoint_scans: Annotated[int, typer.Option(
+        "--checkpoint-scans", min=0, help="Also checkpoint every this many scans (0 = only by time).")] = 0,
     odom: OdomOpt = "auto",
     imu: ImuOpt = "auto",
     laser_offset: LaserOffsetOpt = None,
-    range_scale: Annotated[str | None, typer.Option("--laser-range-scale", "--range-scale", help="Multiply every range "
-                                                                                                 "by this (a lidar "
-                                                                                                 "that reads short: > "
-                                                                                                 "1), or 'auto': "
-                                                                                                 "estimate it from the "
-                                                                                                 "recording's odometry "
-                                                                                                 "(laser.range_scale) "
-                                                                                                 "[1].")] = None,
+    range_scale: Annotated[str | None, typer.Option(
+        "--laser-range-scale", "--range-scale", help="Multiply every range by this (a lidar that reads short: > 1), or "
+                                                     "'auto': estimate it from the recording's odometry "
+                                                     "(laser.range_scale) [1].")] = None,
     frame: Annotated[str, typer.Option("--frame", help="Poses in trajectory.tum: laser (default) or base_link "
                                        "(laser pose ⊕ (base_link→laser)⁻¹; needs TF, CARMEN pose fields or "
                                        "--laser-offset).")] = "laser",
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
-    loop_closure: Annotated[str | None, typer.Option("--loop-closure", help="Loop closure and pose-graph optimisation "
-                                                                            "behind the front end: on (trajectory.tum "
-                                                                            "and the map from the optimised poses; "
-                                                                            "trajectory_frontend.tum and graph.g2o "
-                                                                            "too) or off (the front end alone) [on] "
-                                                                            "(loop.enabled).")] = None,
+    loop_closure: Annotated[str | None, typer.Option(
+        "--loop-closure", help="Loop closure and pose-graph optimisation behind the front end: on (trajectory.tum and "
+                               "the map from the optimised poses; trajectory_frontend.tum and graph.g2o too) or off "
+                               "(the front end alone) [on] (loop.enabled).")] = None,
     clean: Annotated[str | None, typer.Option("--clean", help="Clean-up pass after the run: on (map.pgm = cleaned "
                                                  "static map, map_online.pgm = online map) or off [on] "
                                                  "(docs/maps.md).")] = None,
@@ -568,7 +558,8 @@ def run(
             raise DynSlamError(f"--loop-closure must be 'on' or 'off', got {loop_closure!r}")
         cfg = with_overrides(cfg, {"loop": {"enabled": loop_closure == "on"}})
     if hector_compat:
-        cfg = with_overrides(cfg, {"slam": {"hector_gradient_bug": True, "step_mode": "gauss_newton", "correlative_mode": "never"}})
+        cfg = with_overrides(cfg, {"slam": {"hector_gradient_bug": True, "step_mode": "gauss_newton",
+                                            "correlative_mode": "never"}})
     _check_sim_only(input, seed, duration)
     inputs = _input_paths(input, gt, config)
     truth_files = None
@@ -632,7 +623,8 @@ def run(
             if write_bag is not None:
                 from dynslam2d.io.rosout import BagRecorder
 
-                observers.append(stack.enter_context(BagRecorder(write_bag, storage=bag_storage, map_period=map_period)))
+                observers.append(stack.enter_context(BagRecorder(write_bag, storage=bag_storage,
+                                                                 map_period=map_period)))
             if viewer == "rerun":
                 from dynslam2d.viz.live import RerunViewer
 
@@ -902,15 +894,13 @@ def _default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-WorkersOpt = Annotated[int | None, typer.Option("--workers", "-j", min=1, help="Local worker processes [the CPUs "
-                                                                               "available; 1 = one run after the other "
-                                                                               "in this process].")]
-RayOpt = Annotated[str | None, typer.Option("--ray", metavar="ADDRESS", help="Run the jobs on Ray instead: a cluster "
-                                                                             "address (ray://host:10001, host:6379), "
-                                                                             "'auto' (the cluster this machine belongs "
-                                                                             "to) or 'local' (start Ray here); pip "
-                                                                             "install \"dynslam2d[cluster]\" "
-                                                                             "(docs/batch.md).")]
+WorkersOpt = Annotated[int | None, typer.Option(
+    "--workers", "-j", min=1, help="Local worker processes [the CPUs available; 1 = one run after the other in this "
+                                   "process].")]
+RayOpt = Annotated[str | None, typer.Option(
+    "--ray", metavar="ADDRESS", help="Run the jobs on Ray instead: a cluster address (ray://host:10001, host:6379), "
+                                     "'auto' (the cluster this machine belongs to) or 'local' (start Ray here); pip "
+                                     "install \"dynslam2d[cluster]\" (docs/batch.md).")]
 
 
 def _batch_progress(total: int, show: bool) -> Any:
@@ -924,21 +914,20 @@ def _batch_progress(total: int, show: bool) -> Any:
     )
 
     return Progress(TextColumn("[bold]runs[/]"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[info]}"),
-                    TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=err_console, disable=not show)
+                    TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=err_console,
+                    disable=not show)
 
 
 @app.command()
 def batch(
-    inputs: Annotated[list[str], typer.Argument(metavar="INPUT...", help="Bags, bag folders, .mcap files, CARMEN logs "
-                                                                         "or sim:<scenario> inputs.")],
-    out: Annotated[Path, typer.Option("--out", "-o", help="Batch folder: one results folder per (input, setting), "
-                                                          "batch.csv, batch.md, batch.json.")],
-    sets: Annotated[list[str] | None, typer.Option("--set", metavar="KEY=V1,V2", help="A config key (as in 'dynslam2d "
-                                                                                      "config dump') and the values to "
-                                                                                      "try; repeat for a grid, e.g. "
-                                                                                      "--set filter.mode=none,box "
-                                                                                      "--set "
-                                                                                      "slam.map_resolution=0.05,0.025.")] = None,
+    inputs: Annotated[list[str], typer.Argument(
+        metavar="INPUT...", help="Bags, bag folders, .mcap files, CARMEN logs or sim:<scenario> inputs.")],
+    out: Annotated[Path, typer.Option(
+        "--out", "-o", help="Batch folder: one results folder per (input, setting), batch.csv, batch.md, batch.json.")],
+    sets: Annotated[list[str] | None, typer.Option(
+        "--set", metavar="KEY=V1,V2", help="A config key (as in 'dynslam2d config dump') and the values to try; repeat "
+                                           "for a grid, e.g. --set filter.mode=none,box --set "
+                                           "slam.map_resolution=0.05,0.025.")] = None,
     workers: WorkersOpt = None,
     ray: RayOpt = None,
     config: Annotated[Path | None, typer.Option("--config", help="YAML configuration every run starts from.")] = None,
@@ -951,7 +940,8 @@ def batch(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print batch.json on stdout.")] = False,
 ) -> None:
-    """Run many inputs × parameter settings: one results folder each, batch.csv / batch.md with every summary and metric.
+    """Run many inputs × parameter settings: one results folder each, batch.csv / batch.md with every summary and
+    metric.
 
     Resumable: runs whose folder is complete (run.json) are skipped; a failed run is recorded
     with its error and does not stop the others (exit 1 at the end if any failed). --seed and
@@ -997,7 +987,8 @@ def batch(
         for o in result.outcomes:
             v = o.value or {}
             s, m = v.get("summary") or {}, v.get("metrics") or {}
-            table.add_row(o.name, o.status, _fmt(s.get("scans_per_s"), digits=0), _fmt(m.get("ate_rmse_m"), digits=4), o.error or "")
+            table.add_row(o.name, o.status, _fmt(s.get("scans_per_s"), digits=0), _fmt(m.get("ate_rmse_m"), digits=4),
+                          o.error or "")
         _show(table)
         console.print(Text.assemble("results in ", (str(out), "bold"), " (batch.csv, batch.md, batch.json)"))
     if result.failed:
@@ -1010,19 +1001,19 @@ app.add_typer(experiment_app, name="experiment")
 
 @experiment_app.command("paper")
 def experiment_paper(
-    out: Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default: "
-                                                                 "results/experiment-<time>).")] = None,
+    out: Annotated[Path | None, typer.Option(
+        "--out", "-o", help="Output folder (default: results/experiment-<time>).")] = None,
     duration: DurationOpt = None,
-    trials: Annotated[list[str] | None, typer.Option("--trial", help="Trial(s) to run [paper-1 paper-2 "
-                                                                     "paper-3].")] = None,
-    force: Annotated[bool, typer.Option("--force", help="Replace an earlier output folder of dynslam2d at --out (never "
-                                                        "anything else).")] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the table (table.json) on stdout instead of "
-                                                         "table.md.")] = False,
-    workers: Annotated[int, typer.Option("--workers", "-j", min=1, help="Worker processes for the 12 runs [1: one "
-                                                                        "after the other, so that the scans/s column "
-                                                                        "is the speed of an unloaded core]; the other "
-                                                                        "columns do not depend on it.")] = 1,
+    trials: Annotated[list[str] | None, typer.Option(
+        "--trial", help="Trial(s) to run [paper-1 paper-2 paper-3].")] = None,
+    force: Annotated[bool, typer.Option(
+        "--force", help="Replace an earlier output folder of dynslam2d at --out (never anything else).")] = False,
+    as_json: Annotated[bool, typer.Option(
+        "--json", help="Print the table (table.json) on stdout instead of table.md.")] = False,
+    workers: Annotated[int, typer.Option(
+        "--workers", "-j", min=1, help="Worker processes for the 12 runs [1: one after the other, so that the scans/s "
+                                       "column is the speed of an unloaded core]; the other columns do not depend on "
+                                       "it.")] = 1,
     ray: RayOpt = None,
 ) -> None:
     """The paper's experiment: 3 trials × 4 filter configurations → table.md/csv/json and figure2.png."""
@@ -1099,8 +1090,8 @@ def _emit(result: dict[str, object], as_json: bool, table: Table) -> None:
 
 
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print the result as JSON on stdout.")]
-MaxDtOpt = Annotated[float, typer.Option("--max-dt", min=0.0, help="Largest stamp difference for associating poses, s "
-                                                                   "(evo's --t_max_diff).")]
+MaxDtOpt = Annotated[float, typer.Option(
+    "--max-dt", min=0.0, help="Largest stamp difference for associating poses, s (evo's --t_max_diff).")]
 
 
 RefTopicOpt = Annotated[
@@ -1190,18 +1181,18 @@ def eval_people(
     bag: Annotated[Path, typer.Argument(help="Annotated leg_tracker bag (or a .zip holding it).")],
     run_dir: Annotated[Path, typer.Argument(help="Results folder of 'dynslam2d run' on that bag.")],
     topic: TopicOpt = None,
-    people_topic: Annotated[str, typer.Option("--people-topic", help="Topic of the leg_tracker/Person "
-                                                                     "annotations.")] = "/ground_truth_people_tracks",
-    radius: Annotated[float, typer.Option("--radius", help="Beams ending this close to an annotation are person beams, "
-                                                           "m.")] = 0.35,
-    walk_speed: Annotated[float, typer.Option("--walk-speed", help="A person moving at least this fast is walking, "
-                                                                   "m/s.")] = 0.3,
+    people_topic: Annotated[str, typer.Option(
+        "--people-topic", help="Topic of the leg_tracker/Person annotations.")] = "/ground_truth_people_tracks",
+    radius: Annotated[float, typer.Option(
+        "--radius", help="Beams ending this close to an annotation are person beams, m.")] = 0.35,
+    walk_speed: Annotated[float, typer.Option(
+        "--walk-speed", help="A person moving at least this fast is walking, m/s.")] = 0.3,
     window: Annotated[float, typer.Option("--window", help="Window of the walking speed, s.")] = 1.0,
-    m_radius: Annotated[float, typer.Option("--m-radius", help="A track in M this close to a person has caught it, "
-                                                               "m.")] = 0.5,
-    motion_frame: Annotated[str, typer.Option("--motion-frame", help="Judge walking in the 'map' frame (the run's "
-                                                                     "trajectory) or the 'scan' frame (motionless "
-                                                                     "sensor).")] = "map",
+    m_radius: Annotated[float, typer.Option(
+        "--m-radius", help="A track in M this close to a person has caught it, m.")] = 0.5,
+    motion_frame: Annotated[str, typer.Option(
+        "--motion-frame", help="Judge walking in the 'map' frame (the run's trajectory) or the 'scan' frame "
+                               "(motionless sensor).")] = "map",
     as_json: JsonOpt = False,
 ) -> None:
     """Score a run against hand-annotated people: removal recall on person beams (walking / standing),
@@ -1236,8 +1227,8 @@ def eval_foreground(
     input: Annotated[str, typer.Argument(help="The recording of a motionless sensor (bag, log).")],
     run_dir: Annotated[Path, typer.Argument(help="Results folder of 'dynslam2d run' on that recording.")],
     topic: TopicOpt = None,
-    margin: Annotated[float, typer.Option("--margin", help="A return this far in front of the per-beam median "
-                                                           "background is foreground, m.")] = 0.3,
+    margin: Annotated[float, typer.Option(
+        "--margin", help="A return this far in front of the per-beam median background is foreground, m.")] = 0.3,
     as_json: JsonOpt = False,
 ) -> None:
     """Removed foreground and background beams of a run of a motionless sensor.
@@ -1258,16 +1249,16 @@ def eval_foreground(
 
 @eval_app.command("tracking")
 def eval_tracking(
-    scenes: Annotated[list[str] | None, typer.Option("--scene", help="Simulated scene(s) [paper crowd corridor "
-                                                                     "static].")] = None,
-    datmo: Annotated[Path | None, typer.Option("--datmo", help="Folder of datmo bags (motion-capture ground truth) to "
-                                                               "score too.")] = None,
+    scenes: Annotated[list[str] | None, typer.Option(
+        "--scene", help="Simulated scene(s) [paper crowd corridor static].")] = None,
+    datmo: Annotated[Path | None, typer.Option(
+        "--datmo", help="Folder of datmo bags (motion-capture ground truth) to score too.")] = None,
     duration: Annotated[float, typer.Option("--duration", min=1.0, help="Simulated duration per scene, s.")] = 20.0,
     seed: SeedOpt = None,
-    poses: Annotated[str, typer.Option("--poses", help="Laser poses for the tracker: truth (simulator) or "
-                                                       "slam.")] = "truth",
-    config: Annotated[Path | None, typer.Option("--config", help="YAML configuration (its 'detect' section is "
-                                                                 "used).")] = None,
+    poses: Annotated[str, typer.Option(
+        "--poses", help="Laser poses for the tracker: truth (simulator) or slam.")] = "truth",
+    config: Annotated[Path | None, typer.Option(
+        "--config", help="YAML configuration (its 'detect' section is used).")] = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Score detection and tracking: dynamic-beam recall/precision, centre and speed errors, identity switches.
@@ -1286,7 +1277,8 @@ def eval_tracking(
     with console.status("tracking …", spinner="dots") as status:
         for scene in chosen:
             status.update(f"tracking sim:{scene} …")
-            sim_rows.append(evaluate_sim(scene, seed=seed, duration=duration, config=detect_cfg, pose_source=poses).row())
+            sim_rows.append(evaluate_sim(scene, seed=seed, duration=duration, config=detect_cfg,
+                                         pose_source=poses).row())
         if datmo is not None:
             status.update(f"tracking the bags in {datmo} …")
             bag_rows = [r.row() for r in evaluate_datmo_folder(datmo)]
@@ -1309,7 +1301,8 @@ def eval_tracking(
         for col in ("bag", "target", "matched", "centre RMSE", "DATMO RMSE", "speed err (med)", "ID switches"):
             b.add_column(col, justify="right")
         for r in bag_rows:
-            b.add_row(str(r["bag"]), str(r["target"]), f"{r['n_matched']}/{r['n_with_truth']}", _fmt(r["rmse_center"], " m"),
+            b.add_row(str(r["bag"]), str(r["target"]), f"{r['n_matched']}/{r['n_with_truth']}", _fmt(r["rmse_center"],
+                                                                                                     " m"),
                       _fmt(r["datmo_rmse"], " m"), _fmt(r["median_speed_error"], " m/s"), str(r["id_switches"]))
         _show(b)
 
@@ -1353,9 +1346,9 @@ def eval_ate(
     estimate: Annotated[Path, typer.Argument(help="Estimated trajectory (TUM) or a run folder.")],
     ref_topic: RefTopicOpt = None,
     sensor_offset: SensorOffsetOpt = (0.0, 0.0, 0.0),
-    no_align: Annotated[bool, typer.Option("--no-align", help="Do not SE(2)-align the estimate first (like evo_ape "
-                                                              "without -a; the default aligns like evo_ape "
-                                                              "-a).")] = False,
+    no_align: Annotated[bool, typer.Option(
+        "--no-align", help="Do not SE(2)-align the estimate first (like evo_ape without -a; the default aligns like "
+                           "evo_ape -a).")] = False,
     max_dt: MaxDtOpt = 0.01,
     as_json: JsonOpt = False,
 ) -> None:
@@ -1399,12 +1392,12 @@ def eval_rpe(
     estimate: Annotated[Path, typer.Argument(help="Estimated trajectory (TUM) or a run folder.")],
     ref_topic: RefTopicOpt = None,
     sensor_offset: SensorOffsetOpt = (0.0, 0.0, 0.0),
-    delta: Annotated[float, typer.Option("--delta", min=0.0, help="Pair distance, in --delta-unit (evo's "
-                                                                  "--delta).")] = 1,
-    delta_unit: Annotated[str, typer.Option("--delta-unit", help="'frames' or 'm' (evo's --delta_unit f / "
-                                                                 "m).")] = "frames",
-    all_pairs: Annotated[bool, typer.Option("--all-pairs", help="Use every pair, not consecutive ones (evo's "
-                                                                "--all_pairs).")] = False,
+    delta: Annotated[float, typer.Option(
+        "--delta", min=0.0, help="Pair distance, in --delta-unit (evo's --delta).")] = 1,
+    delta_unit: Annotated[str, typer.Option(
+        "--delta-unit", help="'frames' or 'm' (evo's --delta_unit f / m).")] = "frames",
+    all_pairs: Annotated[bool, typer.Option(
+        "--all-pairs", help="Use every pair, not consecutive ones (evo's --all_pairs).")] = False,
     max_dt: MaxDtOpt = 0.01,
     as_json: JsonOpt = False,
 ) -> None:
@@ -1423,7 +1416,8 @@ def eval_rpe(
     _check_not_swapped("rpe", reference, estimate)
     d: float | int = int(delta) if delta_unit == "frames" else delta
     ref = load_reference(reference, ref_topic, Pose2D(*sensor_offset))
-    res = rpe(ref, read_tum(_estimate_path(estimate)), delta=d, delta_unit=delta_unit, all_pairs=all_pairs, max_dt=max_dt)
+    res = rpe(ref, read_tum(_estimate_path(estimate)), delta=d, delta_unit=delta_unit, all_pairs=all_pairs,
+              max_dt=max_dt)
     out = {"translation_m": res.trans.as_dict(), "rotation_rad": res.rot.as_dict()}
     rows = [
         ("translation rmse", f"{res.trans.rmse:.4f} m"),
@@ -1437,15 +1431,14 @@ def eval_rpe(
 
 @eval_app.command("relations")
 def eval_relations(
-    estimate: Annotated[Path, typer.Argument(help="Estimated trajectory (TUM), e.g. a run's trajectory.tum, or a run "
-                                                  "folder.")],
+    estimate: Annotated[Path, typer.Argument(
+        help="Estimated trajectory (TUM), e.g. a run's trajectory.tum, or a run folder.")],
     relations: Annotated[Path, typer.Argument(help="Kümmerle et al. relations file (t1 t2 x y z roll pitch yaw).")],
-    tol: Annotated[float, typer.Option("--tol", min=0.0, help="Largest stamp difference to match a relation to a pose, "
-                                                              "s.")] = 1e-3,
-    clock: Annotated[Path | None, typer.Option("--clock", help="CARMEN log with both clocks (ipc and logger) on its "
-                                                               "laser records, e.g. fr079.flirtlib.log: the estimate's "
-                                                               "logger stamps are mapped to the relations' ipc clock "
-                                                               "through it.")] = None,
+    tol: Annotated[float, typer.Option(
+        "--tol", min=0.0, help="Largest stamp difference to match a relation to a pose, s.")] = 1e-3,
+    clock: Annotated[Path | None, typer.Option(
+        "--clock", help="CARMEN log with both clocks (ipc and logger) on its laser records, e.g. fr079.flirtlib.log: "
+                        "the estimate's logger stamps are mapped to the relations' ipc clock through it.")] = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Relative pose error over ground-truth relations, mean ± std (Kümmerle et al., 2009)."""

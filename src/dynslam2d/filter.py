@@ -53,8 +53,8 @@ class FilterConfig(BaseModel):
       (configuration 2);
     * ``adaptive`` — square of half-side ``d_j = max(w_j, l_j) · adaptive_lambda / 2``
       (paper Eq. 6, configuration 3);
-    * ``box`` — our setting (formerly ``default``, still accepted): the object's own box (``rectangle``, aligned with its
-      heading) or its enclosing square (``square``), grown by ``margin`` on every side
+    * ``box`` — our setting (formerly ``default``, still accepted): the object's own box (``rectangle``, aligned with
+      its heading) or its enclosing square (``square``), grown by ``margin`` on every side
       (range noise and box-fit error) plus ``speed_margin_time · |v_j|`` (motion during the
       scan / stamp offset), each half-extent capped at ``max_half_extent``.
     """

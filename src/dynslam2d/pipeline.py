@@ -417,7 +417,8 @@ class RunResult:
         n = self.n_scans
         c = self.config.slam
         flags = {k: self.confidence.get(k, np.zeros(n, dtype=bool)) for k in FLAGS}
-        return summarize_confidence(self.trajectory.stamps, flags, self.confidence.get("degeneracy", np.full(n, np.nan)),
+        return summarize_confidence(self.trajectory.stamps, flags,
+                                    self.confidence.get("degeneracy", np.full(n, np.nan)),
                                     self.slam_stats.get("lost_events", 0), self.slam_stats.get("relocalisations", 0),
                                     c.low_confidence_share, c.low_confidence_stretch)
     body: dict[str, object] = field(default_factory=dict)

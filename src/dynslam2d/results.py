@@ -39,7 +39,8 @@ from dynslam2d.viz.collect import RemovedPointsCollector
 from dynslam2d.viz.figures import write_figures
 
 
-def ground_truth_for(source: ScanSource, gt_dir: str | os.PathLike[str] | GroundTruthFiles | None, resolution: float) -> GroundTruthFiles | None:
+def ground_truth_for(source: ScanSource, gt_dir: str | os.PathLike[str] | GroundTruthFiles | None,
+                     resolution: float) -> GroundTruthFiles | None:
     """Ground truth for a run: from ``gt_dir`` if given, else from a simulated source, else None.
 
     Simulated ground truth is expressed in the first-scan frame (the SLAM map frame), like

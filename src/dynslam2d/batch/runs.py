@@ -241,7 +241,8 @@ def batch_rows(jobs: list[Job], outcomes: list[Outcome]) -> tuple[list[str], lis
         row.update(extra)
         rows.append(row)
     columns = ["run", "input", *keys, "status", "error", "seconds"]
-    columns += sorted(k for k in values if k.startswith("summary.")) + sorted(k for k in values if k.startswith("metrics."))
+    columns += sorted(k for k in values if k.startswith("summary."))
+    columns += sorted(k for k in values if k.startswith("metrics."))
     return columns, rows
 
 
@@ -266,7 +267,8 @@ def _num(row: dict[str, Any], key: str, digits: int, scale: float = 1.0) -> str:
 def batch_markdown(jobs: list[Job], outcomes: list[Outcome]) -> str:
     """batch.md: a headline table per run, then every value of every run (as in batch.csv)."""
     columns, rows = batch_rows(jobs, outcomes)
-    keys = [c for c in columns[2:] if c not in ("status", "error", "seconds") and not c.startswith(("summary.", "metrics."))]
+    keys = [c for c in columns[2:]
+            if c not in ("status", "error", "seconds") and not c.startswith(("summary.", "metrics."))]
     head = ["run", *keys, "status", "scans", "scans/s", "removed %", "ATE m", "IoU", "error"]
     lines = ["# dynslam2d batch", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:

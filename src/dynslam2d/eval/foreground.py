@@ -40,7 +40,8 @@ MIN_FOREGROUND_BEAMS = 5
 STABLE_SHARE = 0.5
 
 
-def foreground_mask(scans: Sequence[Scan], margin: float = FOREGROUND_MARGIN) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def foreground_mask(scans: Sequence[Scan],
+                    margin: float = FOREGROUND_MARGIN) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(foreground, valid, stable)``: (n, beams) bool masks of foreground beams and of beams
     with a return, and the (beams,) mask of beams that return in ≥ :data:`STABLE_SHARE` of the scans.
 

@@ -542,7 +542,8 @@ def odometry_message(bag: Any, stamp: float, frame: str, child: str, pose: np.nd
         pose=bag.msg_class("geometry_msgs/msg/Pose")(position=point, orientation=_quat(bag, float(pose[2]))),
         covariance=np.zeros(36, dtype=np.float64))
     twc = bag.msg_class("geometry_msgs/msg/TwistWithCovariance")(
-        twist=bag.msg_class("geometry_msgs/msg/Twist")(linear=_vec3(bag, twist[0]), angular=_vec3(bag, 0.0, 0.0, twist[1])),
+        twist=bag.msg_class("geometry_msgs/msg/Twist")(linear=_vec3(bag, twist[0]),
+                                                       angular=_vec3(bag, 0.0, 0.0, twist[1])),
         covariance=np.zeros(36, dtype=np.float64))
     return bag.msg_class(ODOMETRY)(header=bag.header(stamp, frame, seq), child_frame_id=child, pose=pwc, twist=twc)
 

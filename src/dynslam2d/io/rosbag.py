@@ -288,7 +288,8 @@ def list_topics(path: str | os.PathLike[str]) -> dict[str, str]:
         return _topic_types(reader)
 
 
-def read_topic_messages(path: str | os.PathLike[str], topics: Iterable[str]) -> Iterator[tuple[str, str, int, float, Any]]:
+def read_topic_messages(path: str | os.PathLike[str],
+                        topics: Iterable[str]) -> Iterator[tuple[str, str, int, float, Any]]:
     """Yield ``(topic, msgtype, index, bag time s, message)`` of several topics in one pass.
 
     Messages come in the bag's time order; ``index`` counts per topic from 0. Topics
