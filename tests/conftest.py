@@ -2,7 +2,8 @@
 
 Real datasets live in ``../shared/data`` beside the repository (CI has it; a
 user's machine usually does not). Tests that need them take the ``shared_data``
-fixture and are skipped with a clear reason when the folder is absent.
+fixture (or call ``shared_file``) and are skipped with a clear reason when the folder is absent;
+``pytest_collection_modifyitems`` below marks all of them ``shared_data``.
 """
 
 from __future__ import annotations
