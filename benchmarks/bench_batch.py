@@ -32,7 +32,10 @@ def _same(a: list[dict[str, object]], b: list[dict[str, object]]) -> bool:
     def norm(v: object) -> object:
         return "nan" if isinstance(v, float) and v != v else v
 
-    return [{k: norm(v) for k, v in r.items()} for r in _table(a)] == [{k: norm(v) for k, v in r.items()} for r in _table(b)]
+    def rows(path):
+        return [{k: norm(v) for k, v in r.items()} for r in _table(path)]
+
+    return rows(a) == rows(b)
 
 
 def _children_cpu() -> float:
@@ -60,7 +63,8 @@ def main() -> None:
     pooled = run_experiment(duration=args.duration, workers=args.workers)
     t_pool, c_pool = time.perf_counter() - t0, _children_cpu() - k0
     print(f"serial (1 process)          {t_serial:7.1f} s wall, {c_serial:7.1f} s CPU   (load average now "
-          f"{os.getloadavg()[0]:.1f}; above the CPU count, other programs share the CPUs and the wall ratio is theirs too)")
+          f"{os.getloadavg()[0]:.1f}; above the CPU count, other programs share the CPUs and the wall ratio is theirs "
+          f"too)")
     print(f"pool ({args.workers} worker processes)   {t_pool:7.1f} s wall, {c_pool:7.1f} s CPU in the workers   "
           f"ratio pool/serial {t_pool / t_serial:.2f} wall, {c_pool / c_serial:.2f} CPU"
           f"   same table: {_same(serial.rows, pooled.rows)}")

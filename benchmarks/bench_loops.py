@@ -70,7 +70,8 @@ def main() -> None:
         log, rel, extra = LOGS[name]
         for setting in a.settings:
             out = Path(a.out) / f"{name}-{setting}"
-            run_args = ["run", f"{a.data}/{log}", "--odom", "none", "--loop-closure", "off" if setting == "off" else "on",
+            run_args = ["run", f"{a.data}/{log}", "--odom", "none", "--loop-closure",
+                        "off" if setting == "off" else "on",
                         "--out", str(out), "--force", "-q"]
             if setting == "forced":
                 # the optimised poses whatever the map check says (loop.map_check false)

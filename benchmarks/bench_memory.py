@@ -68,7 +68,8 @@ def measure(log: Path, out: Path, extra: list[str], src: str) -> tuple[float, fl
             "r = subprocess.run(sys.argv[1:]); "
             "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, file=sys.stderr); sys.exit(r.returncode)")
     t0 = time.perf_counter()
-    res = subprocess.run([sys.executable, "-c", code, sys.executable, "-m", "dynslam2d", "run", str(log), "--out", str(out),
+    res = subprocess.run([sys.executable, "-c", code, sys.executable, "-m", "dynslam2d", "run", str(log), "--out",
+                          str(out),
                           "-q", *extra], env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
     if res.returncode != 0:

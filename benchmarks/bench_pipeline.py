@@ -84,7 +84,8 @@ def bench(name: str, scans: list) -> dict[str, object]:
     cpu_ms = (time.thread_time() - c_loop) * 1e3 / max(len(scans) - 1, 1)
     stats = {k: (float(np.median(v)), float(np.percentile(v, 95))) for k, v in per_stage.items()}
     return {
-        "scene": name, "scans": len(scans), "beams": scans[0].n_beams, "first_ms": first_ms, "warm_max_ms": warm_max_ms, "stages": stats,
+        "scene": name, "scans": len(scans), "beams": scans[0].n_beams, "first_ms": first_ms, "warm_max_ms": warm_max_ms,
+        "stages": stats,
         "scans_per_s_median": 1e3 / stats["total"][0], "scans_per_s_loop": (len(scans) - 1) / wall, "cpu_ms": cpu_ms,
         "mean_tracks": float(np.mean(n_tracks)), "mean_in_m": float(np.mean(n_m)),
         "removed_per_scan": removed / max(len(scans) - 1, 1),

@@ -64,13 +64,16 @@ def main() -> None:
             if "static_removed_share" not in r:  # a scene without movers: every removed beam is static
                 r["static_removed_share"] = float(result.removed.mean()) if result.removed.size else 0.0
             mem = result.memory
-            print(f"{inp}{'' if args.seed is None else f' seed {args.seed}'} memory {'on ' if memory else 'off'}: {result.n_scans} scans {wall:.1f} s, "
+            print(f"{inp}{'' if args.seed is None else f' seed {args.seed}'} memory {'on ' if memory else 'off'}: "
+                  f"{result.n_scans} scans {wall:.1f} s, "
                   f"ATE {m['ate_rmse_m']:.4f} m, ghost {m['map']['ghost_area_m2']:.3f} -> {mc.ghost_area_m2:.3f} m2, "
                   f"F1 {m['map']['f1']:.4f} -> {mc.f1:.4f} (online -> cleaned)")
             print(f"    removed: walking {r['walking_recall']:.3f}, stopped {r['stopped_removed_share']:.3f}, "
                   f"movers {r['mover_recall']:.3f}, movers seen walking {r['seen_mover_recall']:.3f}, "
-                  f"static {100 * r['static_removed_share']:.2f} %; remembered tracks {mem.get('remembered_tracks', 0)}, "
-                  f"erased cells {mem.get('erased_cells_finest', 0)} ({mem.get('tracks_erased', 0)} tracks)", flush=True)
+                  f"static {100 * r['static_removed_share']:.2f} %; remembered tracks "
+                  f"{mem.get('remembered_tracks', 0)}, "
+                  f"erased cells {mem.get('erased_cells_finest', 0)} ({mem.get('tracks_erased', 0)} "
+                  f"tracks)", flush=True)
 
 
 if __name__ == "__main__":

@@ -167,7 +167,8 @@ def run_entry(entry: dict[str, Any], repo: Path = REPO, keep: Path | None = None
     returncode, output, work, seconds = run_commands(entry["commands"], repo, keep)
     if returncode != 0:
         last = [ln for ln in output.splitlines() if ln.strip()][-3:]
-        return EntryResult(entry["id"], False, seconds, problem=f"commands failed (exit {returncode}): {' / '.join(last)}")
+        return EntryResult(entry["id"], False, seconds, problem=f"commands failed (exit {returncode}): "
+                                                                f"{' / '.join(last)}")
     figs = [compare(f, doc_text, output, work) for f in entry["figures"]]
     return EntryResult(entry["id"], all(f.ok for f in figs), seconds, figs)
 

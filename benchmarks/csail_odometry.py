@@ -41,8 +41,8 @@ def _relative_errors(stamps: np.ndarray, poses: np.ndarray, rel: object) -> np.n
 def main() -> None:
     from dynslam2d.config import Config
     from dynslam2d.eval.relations import relation_errors
-    from dynslam2d.io.relations import read_relations
     from dynslam2d.inputs import open_source
+    from dynslam2d.io.relations import read_relations
     from dynslam2d.pipeline import run
 
     log, relf = CSAIL / "mit-csail.clf", CSAIL / "mit-csail.relations"

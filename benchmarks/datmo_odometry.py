@@ -173,9 +173,9 @@ def main() -> None:
     if args.range_scale_only:
         _range_scale_table([(n, DATMO / f"{n}.bag") for n in BAGS if (DATMO / f"{n}.bag").exists()])
         return
+    from dynslam2d.inputs import open_source
     from dynslam2d.io.odombag import read_bag_odometry
     from dynslam2d.io.odometry import compose_mount
-    from dynslam2d.inputs import open_source
     from dynslam2d.types import Pose2D
 
     mount = Pose2D(*LASER)

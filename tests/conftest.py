@@ -2,12 +2,15 @@
 
 Real datasets live in ``../shared/data`` beside the repository (CI has it; a
 user's machine usually does not). Tests that need them take the ``shared_data``
-fixture and are skipped with a clear reason when the folder is absent.
+fixture (or call ``shared_file``) and are skipped with a clear reason when the folder is absent;
+``pytest_collection_modifyitems`` below marks all of them ``shared_data``.
 """
 
 from __future__ import annotations
 
+import inspect
 import os
+import types
 from pathlib import Path
 
 import pytest
@@ -30,6 +33,44 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"real datasets not available: {SHARED_DATA} does not exist")
     return SHARED_DATA
+
+
+SHARED_NAMES = frozenset({"shared_file", "shared_data", "SHARED_DATA"})
+
+
+def _uses_shared_data(code: types.CodeType, module: types.ModuleType, seen: set) -> bool:
+    """Whether ``code`` (or a nested function, or a function of its own test module it calls) names
+    the shared-data helpers; found by the names the bytecode refers to, so no test has to be run."""
+    if code in seen:
+        return False
+    seen.add(code)
+    names = set(code.co_names) | set(code.co_varnames)
+    if names & SHARED_NAMES:
+        return True
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType) and _uses_shared_data(const, module, seen):
+            return True
+    for name in code.co_names:
+        obj = getattr(module, name, None)
+        if inspect.isfunction(obj) and obj.__module__ == module.__name__:
+            if _uses_shared_data(obj.__code__, module, seen):
+                return True
+    return False
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark every test that needs ../shared/data with ``shared_data``, whether it takes the
+    ``shared_data`` fixture or calls ``shared_file`` (directly or through a helper of its module), so
+    ``pytest -m "not shared_data"`` selects exactly the tests that run without the datasets."""
+    for item in items:
+        func = getattr(item, "function", None)
+        if func is None:
+            continue
+        uses = "shared_data" in getattr(item, "fixturenames", ())
+        if not uses:
+            uses = _uses_shared_data(inspect.unwrap(func).__code__, item.module, set())
+        if uses and item.get_closest_marker("shared_data") is None:
+            item.add_marker(pytest.mark.shared_data)
 
 
 class ScanList:

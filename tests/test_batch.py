@@ -191,7 +191,8 @@ def test_batch_cli_exit_code_progress_and_tables(tmp_path):
 
 
 def test_batch_on_ray_gives_identical_metrics(serial_batch, tmp_path):
-    ray = pytest.importorskip("ray", reason="Ray is not installed (the optional extra: pip install 'dynslam2d[cluster]')")
+    ray = pytest.importorskip("ray", reason="Ray is not installed (the optional extra: pip install "
+                                            "'dynslam2d[cluster]')")
     out, _, _ = serial_batch
     started = not ray.is_initialized()
     if started:

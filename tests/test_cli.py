@@ -8,10 +8,10 @@ import sys
 import numpy as np
 import pytest
 import yaml
+from conftest import run_cli
 
 from dynslam2d.io.rosbag import write_scan_bag
 from dynslam2d.types import Scan
-from conftest import run_cli
 
 
 def cli(capsys, *args: str) -> tuple[int, str, str]:
@@ -73,14 +73,17 @@ def test_simulate_then_run_with_gt_folder(tmp_path, capsys):
     sim_dir = tmp_path / "sim"
     code, out, err = cli(capsys, "simulate", "static", "--out", str(sim_dir), "--duration", "4")
     assert code == 0, err
-    for name in ("scans.mcap", "gt_map.pgm", "gt_map.yaml", "gt_trajectory.tum", "labels.npz", "movers.csv", "overview.png"):
+    for name in ("scans.mcap", "gt_map.pgm", "gt_map.yaml", "gt_trajectory.tum", "labels.npz", "movers.csv",
+                 "overview.png"):
         assert (sim_dir / name).exists(), name
     run_dir = tmp_path / "run"
-    code, out, err = cli(capsys, "run", str(sim_dir / "scans.mcap"), "--gt", str(sim_dir), "--out", str(run_dir), "--json")
+    code, out, err = cli(capsys, "run", str(sim_dir / "scans.mcap"), "--gt", str(sim_dir), "--out", str(run_dir),
+                         "--json")
     assert code == 0, err
     summary = json.loads(out)
     assert summary["scans"] == 80 and summary["match_failures"] == 0
-    for name in ("map.pgm", "map.yaml", "map_logodds.npy", "trajectory.tum", "config.yaml", "summary.json", "map.png", "metrics.json"):
+    for name in ("map.pgm", "map.yaml", "map_logodds.npy", "trajectory.tum", "config.yaml", "summary.json", "map.png",
+                 "metrics.json"):
         assert (run_dir / name).exists(), name
     metrics = json.loads((run_dir / "metrics.json").read_text())
     assert metrics["ate_rmse_m"] < 0.03 and metrics["poses_compared"] == 80
@@ -97,7 +100,8 @@ def test_simulate_then_run_with_gt_folder(tmp_path, capsys):
 
 
 def test_run_options_reach_the_config(tmp_path, capsys):
-    code, _, err = cli(capsys, "run", "sim:static", "--duration", "1", "--map-resolution", "0.1", "--update-angle", "0.1",
+    code, _, err = cli(capsys, "run", "sim:static", "--duration", "1", "--map-resolution", "0.1", "--update-angle",
+                       "0.1",
                        "--out", str(tmp_path / "r"), "-q")
     assert code == 0, err
     cfg = yaml.safe_load((tmp_path / "r" / "config.yaml").read_text())
@@ -147,7 +151,8 @@ def test_run_writes_a_bag_for_rviz_and_foxglove(tmp_path, capsys):
     from dynslam2d.io.rosbag import list_topics
 
     bag = tmp_path / "out.mcap"
-    code, out, err = cli(capsys, "run", "sim:paper", "--duration", "2", "--out", str(tmp_path / "r"), "--write-bag", str(bag))
+    code, out, err = cli(capsys, "run", "sim:paper", "--duration", "2", "--out", str(tmp_path / "r"), "--write-bag",
+                         str(bag))
     assert code == 0, err
     topics = list_topics(bag)
     assert topics["/scan_filtered"] == "sensor_msgs/msg/LaserScan"
@@ -169,7 +174,8 @@ def test_run_animate_writes_all_figures(tmp_path, capsys):
     from PIL import Image
 
     out = tmp_path / "r"
-    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "2", "--animate", "--frame-step", "10", "--out", str(out), "-q")
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "2", "--animate", "--frame-step", "10", "--out",
+                       str(out), "-q")
     assert code == 0, err
     for name in ("map.png", "tracks.png", "errors.png", "run.gif"):
         assert (out / name).stat().st_size > 5_000, name

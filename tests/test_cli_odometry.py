@@ -6,12 +6,11 @@ import json
 
 import numpy as np
 import pytest
+from test_cli import cli
 
 from dynslam2d.io.odometry import compose_mount
 from dynslam2d.io.trajectory import read_tum
 from dynslam2d.types import Pose2D
-
-from test_cli import cli
 
 
 def test_run_reports_the_odometry_source_and_frame_base_link(tmp_path, capsys):

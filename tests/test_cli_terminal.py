@@ -221,7 +221,7 @@ def test_run_options_are_the_config_keys_with_dashes():
     import typer.main
 
     from dynslam2d.cli import app
-    from dynslam2d.config import Config, RUN_OPTIONS
+    from dynslam2d.config import RUN_OPTIONS, Config
 
     run = typer.main.get_command(app).commands["run"]
     names = {opt for p in run.params for opt in (*p.opts, *p.secondary_opts)}

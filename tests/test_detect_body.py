@@ -90,7 +90,7 @@ def test_body_is_found_automatically_and_never_follows_the_robot() -> None:
     # protects: a car keeping pace alongside looks exactly like a bumper for a while, datmo's parallel bag)
     first = next(i for i, (s, lab, _) in enumerate(steps) if s.body[lab == 1].mean() > 0.5)
     assert first <= 40
-    for step, lab, _ in steps[first:]:
+    for step, _lab, _ in steps[first:]:
         for t in step.tracks:
             if t.in_m:
                 assert math.hypot(t.box.px - step.pose.x, t.box.py - step.pose.y) > 1.0
@@ -139,6 +139,7 @@ def test_info_finds_the_body_in_a_bag_and_suggests_a_footprint(tmp_path, capsys)
     import json
 
     from conftest import run_cli
+
     from dynslam2d.io.rosbag import write_scan_bag
 
     scans, lab = _body_scans(120, move=True)

@@ -9,8 +9,8 @@ car on parallel, where the car's length is fully seen).
 from __future__ import annotations
 
 import pytest
-
 from conftest import shared_file
+
 from dynslam2d.eval.tracking import DATMO_RMSE, evaluate_datmo_bag
 
 #: Regression bounds: measured value + a small margin (measured: 0.118, 0.111, 0.161, 0.093, 0.156;

@@ -31,11 +31,11 @@ from dynslam2d.detect.layout import (
     F_THETA,
     FIT_CENTROID,
     FIT_CIRCLE,
-    KIND_CODES,
-    KIND_NAMES,
     K_CIRCLE,
     K_POINT,
     K_RECT,
+    KIND_CODES,
+    KIND_NAMES,
     DetectionBatch,
 )
 from dynslam2d.detect.reference import classify_and_bound, measure
@@ -195,7 +195,8 @@ def test_fragment_hosts_match_the_per_track_test() -> None:
     rng = np.random.default_rng(5)
     tx, ty = rng.uniform(-3, 3, 6), rng.uniform(-3, 3, 6)
     th, s0, s1 = rng.uniform(0, math.pi, 6), rng.uniform(0.3, 1.5, 6), rng.uniform(0.3, 1.0, 6)
-    clouds = [np.column_stack((tx[i % 6] + rng.normal(0, 0.3, 8), ty[i % 6] + rng.normal(0, 0.3, 8))) for i in range(30)]
+    clouds = [np.column_stack((tx[i % 6] + rng.normal(0, 0.3, 8), ty[i % 6] + rng.normal(0, 0.3, 8)))
+              for i in range(30)]
     px = np.concatenate([c[:, 0] for c in clouds])
     py = np.concatenate([c[:, 1] for c in clouds])
     npts = np.full(30, 8, dtype=np.int64)

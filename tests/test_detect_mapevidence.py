@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
+from test_detect_tracker import render
 
 from dynslam2d.detect import DetectConfig, Tracker
 from dynslam2d.detect.mapevidence import MapView, map_evidence
 from dynslam2d.types import Pose2D
-
-from test_detect_tracker import render
 
 RES = 0.05
 

@@ -18,7 +18,6 @@ from dynslam2d.eval.stationary import median_background_scan
 from dynslam2d.inputs import open_source
 from dynslam2d.pipeline import run
 
-
 _Scans = ScanList
 
 

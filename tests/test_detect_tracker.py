@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from dynslam2d.detect import CONFIRMED, COASTING, DetectConfig, TrackerConfig, Tracker
+from dynslam2d.detect import COASTING, CONFIRMED, DetectConfig, Tracker, TrackerConfig
 from dynslam2d.sim import cast_rays, rect_segments
 from dynslam2d.types import Pose2D, Scan
 

@@ -57,7 +57,8 @@ def test_agreement_rule():
 
 def test_run_entry_reports_quoted_vs_measured(tmp_path, monkeypatch):
     doc = tmp_path / "doc.md"
-    doc.write_text("Run `python -c \"print('rmse 0.1234 m'); open('r.json', 'w').write('{\\\"a\\\": {\\\"b\\\": 2.5}}')\"`:\n"
+    doc.write_text("Run `python -c \"print('rmse 0.1234 m'); open('r.json', 'w').write('{\\\"a\\\": {\\\"b\\\": "
+                   "2.5}}')\"`:\n"
                    "| bag | 0.123 | 2.5 |\n| other | 0.124 |\n")
     cmd = "python -c \"print('rmse 0.1234 m'); open('r.json', 'w').write('{\\\"a\\\": {\\\"b\\\": 2.5}}')\""
     assert cmd in doc.read_text()

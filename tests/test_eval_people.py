@@ -84,7 +84,7 @@ def _write_bag(path, sim, people=None, people_type=PERSON_MSGTYPE, bad_index=Non
                       RECORD0 + i * DT)
             if people_type is None:
                 continue
-            for n, (si, pid, x, y) in enumerate([a for a in anns if a[0] == i]):
+            for n, (_si, pid, x, y) in enumerate([a for a in anns if a[0] == i]):
                 if people_type != PERSON_MSGTYPE:
                     msg = bag.msg_class(people_type)(header=bag.header(_header(i), "laser"), pose=pose(x, y))
                 else:
@@ -123,8 +123,9 @@ def _write_run(run, sim, removed, shift=0.0):
         for i in range(gt.n_scans):
             wx, wy = gt.mover_states[i, 0, :2]
             sx, sy = gt.mover_states[i, 2, :2]
-            w.writerow([repr(float(stamps[i])), 1, "confirmed", wx, wy, 0, 0.4, 0.4, 1.0, 0.0, 0])  # near the walker, not in M
-            w.writerow([repr(float(stamps[i])), 2, "confirmed", 10.0, 10.0, 0, 1, 1, 1.0, 0.0, 1])  # in M, far from everyone
+            # near the walker, not in M; then in M, far from everyone
+            w.writerow([repr(float(stamps[i])), 1, "confirmed", wx, wy, 0, 0.4, 0.4, 1.0, 0.0, 0])
+            w.writerow([repr(float(stamps[i])), 2, "confirmed", 10.0, 10.0, 0, 1, 1, 1.0, 0.0, 1])
             if gt.stamps[i] >= T_M - 1e-9:
                 w.writerow([repr(float(stamps[i])), 3, "confirmed", sx + 0.3, sy - 0.2, 0, 0.4, 0.4, 1.2, 0.0, 1])
     return run

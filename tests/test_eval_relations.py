@@ -7,11 +7,11 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import shared_file
 
 from dynslam2d.errors import DynSlamError
 from dynslam2d.eval.relations import relation_errors, relation_errors_from
 from dynslam2d.io.trajectory import Trajectory
-from conftest import shared_file
 
 HALF_PI = math.pi / 2
 

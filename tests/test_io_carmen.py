@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import shared_file
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from conftest import shared_file
 from dynslam2d.errors import DynSlamError
 from dynslam2d.io.carmen import (
     DEFAULT_NOMINAL_RATE_HZ,

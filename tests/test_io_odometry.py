@@ -7,8 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import shared_file
 
 from dynslam2d.errors import DynSlamError
+from dynslam2d.inputs import open_source
 from dynslam2d.io.odombag import (
     ENCODER,
     TFMESSAGE,
@@ -19,10 +21,7 @@ from dynslam2d.io.odombag import (
 )
 from dynslam2d.io.odometry import ImuTrack, OdometryTrack, compose_mount, interpolate_poses, parse_laser_offset
 from dynslam2d.io.rosbag import LASERSCAN, laserscan_message, open_bag_writer
-from dynslam2d.inputs import open_source
 from dynslam2d.types import Pose2D, Scan
-
-from conftest import shared_file
 
 # --------------------------------------------------------------------------- helpers
 
@@ -224,7 +223,8 @@ def test_nan_in_odometry(tmp_path):
 def test_wrong_topics(tmp_path):
     base = _circle(ODOM_T - ODOM_T[0])
     bag = _write_bag(tmp_path / "t.bag", scan_stamps=SCAN_T, odom=(ODOM_T, base), imu=(ODOM_T, np.zeros(ODOM_T.shape)))
-    with pytest.raises(DynSlamError, match="--imu /odom: topic is nav_msgs/Odometry, not sensor_msgs/Imu; IMU topics: /imu"):
+    with pytest.raises(DynSlamError, match="--imu /odom: topic is nav_msgs/Odometry, not sensor_msgs/Imu; IMU topics: "
+                                           "/imu"):
         open_source(bag, imu="/odom")
     with pytest.raises(DynSlamError, match="--odom /imu: topic is sensor_msgs/Imu"):
         open_source(bag, odom="/imu")
@@ -273,7 +273,8 @@ def test_wheel_speed_dead_reckoning_with_imu(tmp_path):
         open_source(bag, odom="/wheel_speeds", imu="none")
     quiet = open_source(bag, imu="none")  # auto without an IMU: not used, and it says why
     assert quiet.meta.odometry is None
-    assert any("are not used: dead reckoning needs an IMU yaw rate (--imu none)" in x for x in quiet.meta.extra["warnings"])
+    assert any("are not used: dead reckoning needs an IMU yaw rate (--imu "
+               "none)" in x for x in quiet.meta.extra["warnings"])
 
 
 # --------------------------------------------------------------------------- CARMEN

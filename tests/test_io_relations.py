@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 import pytest
-
 from conftest import shared_file
+
 from dynslam2d.errors import DynSlamError
 from dynslam2d.io.carmen import CarmenSource
 from dynslam2d.io.relations import match_relation_stamps, read_relations

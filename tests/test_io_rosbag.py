@@ -7,10 +7,10 @@ import shutil
 
 import numpy as np
 import pytest
+from conftest import shared_file
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from conftest import shared_file
 from dynslam2d.errors import DynSlamError
 from dynslam2d.io.rosbag import (
     LASERSCAN,
@@ -212,7 +212,8 @@ def write_two_scan_topics(path):
         point = bag.msg_class("geometry_msgs/msg/Point")
         quat = bag.msg_class("geometry_msgs/msg/Quaternion")
         pose_cls = bag.msg_class("geometry_msgs/msg/Pose")
-        msg = pose(header=bag.header(1.0, "map"), pose=pose_cls(position=point(x=1.0, y=2.0, z=0.0), orientation=quat(x=0.0, y=0.0, z=0.0, w=1.0)))
+        msg = pose(header=bag.header(1.0, "map"), pose=pose_cls(position=point(x=1.0, y=2.0, z=0.0),
+                                                                orientation=quat(x=0.0, y=0.0, z=0.0, w=1.0)))
         bag.write("/pose", msg, 1.0)
     return path
 
@@ -247,13 +248,15 @@ def write_poses(bag, topic, stamps, xy, yaw, kind="geometry_msgs/msg/PoseStamped
     pose_cls = bag.msg_class("geometry_msgs/msg/Pose")
     for i, (t, (x, y), a) in enumerate(zip(stamps, xy, yaw)):
         # quaternion of a rotation by a about +z
-        p = pose_cls(position=point(x=x, y=y, z=0.3), orientation=quat(x=0.0, y=0.0, z=math.sin(a / 2), w=math.cos(a / 2)))
+        p = pose_cls(position=point(x=x, y=y, z=0.3), orientation=quat(x=0.0, y=0.0, z=math.sin(a / 2),
+                                                                       w=math.cos(a / 2)))
         if kind == "geometry_msgs/msg/PoseStamped":
             msg = bag.msg_class(kind)(header=bag.header(t, "map", i), pose=p)
         else:  # nav_msgs/msg/Odometry
             pwc = bag.msg_class("geometry_msgs/msg/PoseWithCovariance")(pose=p, covariance=np.zeros(36))
             vec = bag.msg_class("geometry_msgs/msg/Vector3")
-            tw = bag.msg_class("geometry_msgs/msg/Twist")(linear=vec(x=0.0, y=0.0, z=0.0), angular=vec(x=0.0, y=0.0, z=0.0))
+            tw = bag.msg_class("geometry_msgs/msg/Twist")(linear=vec(x=0.0, y=0.0, z=0.0),
+                                                          angular=vec(x=0.0, y=0.0, z=0.0))
             twc = bag.msg_class("geometry_msgs/msg/TwistWithCovariance")(twist=tw, covariance=np.zeros(36))
             msg = bag.msg_class(kind)(header=bag.header(t, "odom", i), child_frame_id="base_link", pose=pwc, twist=twc)
         bag.write(topic, msg, t)

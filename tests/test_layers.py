@@ -152,7 +152,7 @@ def test_local_upward_imports_are_the_listed_ones(layers):
         "docs/architecture.md 'Known upward imports', or move the code down"
     assert ALLOWED_LOCAL_UPWARD - local == set(), "an allowed upward import is gone: drop it from the list and the doc"
     doc = DOC.read_text(encoding="utf-8").split("Known upward imports", 1)[1].split("\n## ", 1)[0]
-    for importer, imported in ALLOWED_LOCAL_UPWARD:
+    for importer, _imported in ALLOWED_LOCAL_UPWARD:
         path = importer.removeprefix("dynslam2d.").replace(".", "/") + ".py"
         assert f"`{path}`" in doc, f"docs/architecture.md 'Known upward imports' does not name {path}"
 

@@ -6,8 +6,9 @@ import gzip
 
 import numpy as np
 import pytest
-
 from conftest import ScanList, run_cli, shared_file
+from test_loops import _block_loop_world, _loop_path, _scans
+
 from dynslam2d.config import Config, with_overrides
 from dynslam2d.errors import DynSlamError
 from dynslam2d.io.g2o import format_g2o, read_g2o, write_g2o
@@ -15,7 +16,6 @@ from dynslam2d.io.relclock import read_clock_pairs
 from dynslam2d.pipeline import render_map, run
 from dynslam2d.slam.posegraph import PoseGraph, diag_info
 from dynslam2d.types import SourceMeta
-from test_loops import _block_loop_world, _loop_path, _scans
 
 
 @pytest.fixture(scope="module")

@@ -86,9 +86,11 @@ def test_range_scale_bad_input() -> None:
 def test_cli_range_scale_option(tmp_path, capsys) -> None:
     from test_cli import cli
 
-    code, _, err = cli(capsys, "run", "sim:static", "--duration", "1", "--out", str(tmp_path / "x"), "--range-scale", "big")
+    code, _, err = cli(capsys, "run", "sim:static", "--duration", "1", "--out", str(tmp_path / "x"), "--range-scale",
+                       "big")
     assert code == 2 and "--range-scale must be 'auto' or a number" in err and len(err.strip().splitlines()) == 1
-    code, out, _ = cli(capsys, "run", "sim:static", "--duration", "2", "--out", str(tmp_path / "y"), "--range-scale", "1.05")
+    code, out, _ = cli(capsys, "run", "sim:static", "--duration", "2", "--out", str(tmp_path / "y"), "--range-scale",
+                       "1.05")
     assert code == 0 and "range scale" in out and "1.05 (given)" in out
     summary = json.loads((tmp_path / "y" / "summary.json").read_text())
     assert summary["range_scale"] == {"mode": "fixed", "used": 1.05}

@@ -13,7 +13,6 @@ from dynslam2d.inputs import open_source
 from dynslam2d.pipeline import run
 from dynslam2d.types import Pose2D
 
-
 _Scans = ScanList
 
 

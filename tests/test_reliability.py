@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import run_cli
+
 from dynslam2d.io.rosbag import write_scan_bag
 from dynslam2d.sim import SimSource
 
@@ -226,7 +226,8 @@ def test_ctrl_c_leaves_a_checkpoint_and_says_where(tmp_path, capsys, monkeypatch
 def test_kill_9_leaves_the_last_checkpoint(tmp_path):
     out = tmp_path / "r"
     env = dict(os.environ, PYTHONPATH=SRC)
-    proc = subprocess.Popen([sys.executable, "-m", "dynslam2d", "run", "sim:paper", "--duration", "60", "--out", str(out),
+    proc = subprocess.Popen([sys.executable, "-m", "dynslam2d", "run", "sim:paper", "--duration", "60", "--out",
+                             str(out),
                              "-q", "--checkpoint-scans", "20"], env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     try:
@@ -331,7 +332,8 @@ def test_wrong_message_definition_on_a_laserscan_topic_is_one_line(tmp_path, cap
 def test_config_file_errors_are_one_line(tmp_path, capsys, content, expect):
     cfg = tmp_path / "c.yaml"
     cfg.write_bytes(content)
-    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--config", str(cfg), "--out", str(tmp_path / "r"))
+    code, _, err = cli(capsys, "run", "sim:paper", "--duration", "1", "--config", str(cfg), "--out",
+                       str(tmp_path / "r"))
     assert code == 2 and expect in err and err.count("\n") == 1 and "c.yaml" in err
     assert not (tmp_path / "r").exists()
 
@@ -559,9 +561,9 @@ def test_tracks_figure_draws_one_collection_per_kind_and_caps_labels(tmp_path, m
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from dynslam2d.types import Box
     from dynslam2d.viz import tracksplot
     from dynslam2d.viz.trackpaths import TrackPath
-    from dynslam2d.types import Box
 
     rng = np.random.default_rng(0)
     tracks = []

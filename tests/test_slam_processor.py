@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 import pytest
-
 from conftest import shared_file
+
 from dynslam2d.eval.trajectory import ate
 from dynslam2d.io.trajectory import Trajectory
 from dynslam2d.sim import LidarModel, cast_rays, paper_room, simulate

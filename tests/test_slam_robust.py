@@ -9,9 +9,9 @@ import zipfile
 
 import numpy as np
 import pytest
+from conftest import shared_file
 from PIL import Image
 
-from conftest import shared_file
 from dynslam2d.config import Config
 from dynslam2d.eval.trajectory import ate
 from dynslam2d.io.trajectory import Trajectory

@@ -101,7 +101,8 @@ def test_other_bad_metadata_is_rejected():
 def test_random_metadata_either_validates_or_raises_project_error(n, amin, inc, amax, rmin, rmax, data):
     ranges = data.draw(st.lists(st.floats(allow_nan=True, allow_infinity=True, width=32), min_size=n, max_size=n))
     try:
-        s = Scan(stamp=0.0, angle_min=amin, angle_increment=inc, angle_max=amax, ranges=np.array(ranges), range_min=rmin, range_max=rmax)
+        s = Scan(stamp=0.0, angle_min=amin, angle_increment=inc, angle_max=amax, ranges=np.array(ranges),
+                 range_min=rmin, range_max=rmax)
     except DynSlamError:
         return
     mask = s.valid_mask()

@@ -126,7 +126,8 @@ def test_tracks_png_draws_coloured_paths(runs, tmp_path):
     assert list(p.in_m) == [r[10] for r in rows]
     drawn = [q for q in paths.values() if q.ever_confirmed]
     assert any(q.ever_in_m for q in drawn)
-    assert all(q.ever_in_m or q.states[-1] == "confirmed" for q in tracks_to_draw(paths, float(res.trajectory.stamps[-1])))
+    assert all(q.ever_in_m or q.states[-1] == "confirmed"
+               for q in tracks_to_draw(paths, float(res.trajectory.stamps[-1])))
     assert 0.5 <= speed_limit(drawn) <= 3.0
 
     def colourful(path) -> int:

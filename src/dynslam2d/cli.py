@@ -10,16 +10,17 @@ import contextlib
 import json
 import math
 import sys
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Annotated, Any, Iterator, Optional
+from typing import Annotated, Any
 
 import typer
-from typer.core import TyperArgument, TyperCommand, TyperGroup
 from rich.cells import cell_len
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 from rich.text import Text
+from typer.core import TyperArgument, TyperCommand, TyperGroup
 
 from dynslam2d import __version__
 from dynslam2d.errors import DynSlamError
@@ -106,7 +107,7 @@ def _plain(con: Console, cell: object) -> str:
     return con.render_str(str(cell)).plain if cell is not None else ""
 
 
-def _show(table: Table, con: Optional[Console] = None) -> None:
+def _show(table: Table, con: Console | None = None) -> None:
     """Print a table: boxed by rich on a terminal; to a pipe or file as plain text at full
     width (title on its own line, columns separated by two spaces, nothing cut)."""
     con = con or console
@@ -129,13 +130,16 @@ def _show(table: Table, con: Optional[Console] = None) -> None:
         lines.append("  ".join(parts).rstrip())
     con.file.write("\n".join(lines) + "\n")
 
-TopicOpt = Annotated[Optional[str], typer.Option("--topic", help="LaserScan topic, for bags holding several.")]
+TopicOpt = Annotated[str | None, typer.Option("--topic", help="LaserScan topic, for bags holding several.")]
 SkipBadOpt = Annotated[
-    bool, typer.Option("--skip-bad", help="Skip malformed records and non-increasing stamps (counted) instead of stopping.")
+    bool, typer.Option(
+        "--skip-bad", help="Skip malformed records and non-increasing stamps (counted) instead of stopping.")
 ]
-SeedOpt = Annotated[Optional[int], typer.Option("--seed", help="Simulator seed (sim: inputs); default: the scenario's own.")]
+SeedOpt = Annotated[int | None, typer.Option(
+    "--seed", help="Simulator seed (sim: inputs); default: the scenario's own.")]
 DurationOpt = Annotated[
-    Optional[float], typer.Option("--duration", min=0.1, help="Simulated duration in s (sim: inputs); default: the scenario's own.")
+    float | None, typer.Option(
+        "--duration", min=0.1, help="Simulated duration in s (sim: inputs); default: the scenario's own.")
 ]
 
 
@@ -149,7 +153,7 @@ ImuOpt = Annotated[
     str, typer.Option("--imu", help="IMU yaw rate: auto (the recording's sensor_msgs/Imu), none, or a topic.")
 ]
 LaserOffsetOpt = Annotated[
-    Optional[str],
+    str | None,
     typer.Option("--laser-offset", help="base_link → laser transform x,y,yaw (m, m, rad) when the recording has no "
                  "TF for it, e.g. -0.12,0,0 (overrides TF)."),
 ]
@@ -198,8 +202,8 @@ def info(
                                             "suggest a footprint; 0 = skip.")] = 600,
 ) -> None:
     """Print what a scan source holds: format, topic, scans, beams, FOV, rate, duration, ranges, robot body."""
-    from dynslam2d.io.odometry import parse_laser_offset
     from dynslam2d.inputs import open_source
+    from dynslam2d.io.odometry import parse_laser_offset
     from dynslam2d.io.summary import summarize_source
 
     _check_sim_only(input, seed, duration)
@@ -236,7 +240,8 @@ def info(
     table = Table(title=Text(f"{summary.origin}"), show_header=False, title_justify="left")
     table.add_column(style="bold")
     table.add_column()
-    beams = str(summary.beams_max) if summary.beams_min == summary.beams_max else f"{summary.beams_min}–{summary.beams_max}"
+    beams = (str(summary.beams_max) if summary.beams_min == summary.beams_max
+             else f"{summary.beams_min}–{summary.beams_max}")
     rows = [
         ("format", summary.format),
         ("topic / record", summary.topic or "—"),
@@ -286,29 +291,41 @@ def _body_line(body: dict) -> str:
 
 @app.command()
 def simulate(
-    scenario: Annotated[str, typer.Argument(help="Scenario name (see --list), e.g. paper, paper-1, static, crowd.")] = "paper",
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="Output folder (default: results/sim-<scenario>-<time>).")] = None,
+    scenario: Annotated[str, typer.Argument(
+        help="Scenario name (see --list), e.g. paper, paper-1, static, crowd.")] = "paper",
+    out: Annotated[Path | None, typer.Option(
+        "--out", "-o", help="Output folder (default: results/sim-<scenario>-<time>).")] = None,
     seed: SeedOpt = None,
     duration: DurationOpt = None,
-    resolution: Annotated[float, typer.Option("--map-resolution", min=0.005, help="Ground-truth map cell size, m.")] = 0.05,
-    storage: Annotated[str, typer.Option("--storage", help="Scan bag: mcap (bare .mcap), sqlite3 (ROS 2 folder) or ros1 (.bag).")] = "mcap",
-    beams: Annotated[Optional[int], typer.Option("--beams", min=1, help="Beams per scan [720].")] = None,
-    fov_deg: Annotated[Optional[float], typer.Option("--fov-deg", min=1.0, max=360.0, help="Field of view, degrees [360].")] = None,
-    rate: Annotated[Optional[float], typer.Option("--rate", min=0.1, help="Scan rate, Hz [20].")] = None,
-    noise: Annotated[Optional[float], typer.Option("--noise", min=0.0, help="Gaussian range noise σ, m [0.01].")] = None,
-    dropout: Annotated[Optional[float], typer.Option("--dropout", min=0.0, max=1.0, help="Probability a beam returns nothing [0].")] = None,
-    range_max: Annotated[Optional[float], typer.Option("--range-max", min=0.1, help="Sensor max range, m [20].")] = None,
+    resolution: Annotated[float, typer.Option(
+        "--map-resolution", min=0.005, help="Ground-truth map cell size, m.")] = 0.05,
+    storage: Annotated[str, typer.Option(
+        "--storage", help="Scan bag: mcap (bare .mcap), sqlite3 (ROS 2 folder) or ros1 (.bag).")] = "mcap",
+    beams: Annotated[int | None, typer.Option("--beams", min=1, help="Beams per scan [720].")] = None,
+    fov_deg: Annotated[float | None, typer.Option(
+        "--fov-deg", min=1.0, max=360.0, help="Field of view, degrees [360].")] = None,
+    rate: Annotated[float | None, typer.Option("--rate", min=0.1, help="Scan rate, Hz [20].")] = None,
+    noise: Annotated[float | None, typer.Option("--noise", min=0.0, help="Gaussian range noise σ, m [0.01].")] = None,
+    dropout: Annotated[float | None, typer.Option(
+        "--dropout", min=0.0, max=1.0, help="Probability a beam returns nothing [0].")] = None,
+    range_max: Annotated[float | None, typer.Option("--range-max", min=0.1, help="Sensor max range, m [20].")] = None,
     list_scenarios: Annotated[bool, typer.Option("--list", help="List the scenarios and exit.")] = False,
-    force: Annotated[bool, typer.Option("--force", help="Replace an earlier output folder of dynslam2d at --out (never anything else).")] = False,
-    odom_noise: Annotated[float, typer.Option("--odom-noise", min=0.0, help="Multiplies every odometry/IMU noise, bias and scale error of the default model (0 = perfect odometry) [1].")] = 1.0,
-    laser_mount: Annotated[Optional[str], typer.Option("--laser-mount", help="The laser's pose on the robot base, x,y,yaw (m, m, rad) [0.15,0,0].")] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the scenario list (--list) or the written files as JSON on stdout.")] = False,
+    force: Annotated[bool, typer.Option(
+        "--force", help="Replace an earlier output folder of dynslam2d at --out (never anything else).")] = False,
+    odom_noise: Annotated[float, typer.Option(
+        "--odom-noise", min=0.0, help="Multiplies every odometry/IMU noise, bias and scale error of the default model "
+                                      "(0 = perfect odometry) [1].")] = 1.0,
+    laser_mount: Annotated[str | None, typer.Option(
+        "--laser-mount", help="The laser's pose on the robot base, x,y,yaw (m, m, rad) [0.15,0,0].")] = None,
+    as_json: Annotated[bool, typer.Option(
+        "--json", help="Print the scenario list (--list) or the written files as JSON on stdout.")] = False,
 ) -> None:
     """Simulate a scene: scans as a bag, ground truth (map, trajectory, labels, movers), an overview PNG.
 
     The folder can be mapped with `dynslam2d run DIR/scans.mcap` and used as `--gt DIR`.
     """
-    from dynslam2d.sim import SCENARIOS, simulate as run_simulation
+    from dynslam2d.sim import SCENARIOS
+    from dynslam2d.sim import simulate as run_simulation
     from dynslam2d.sim.export import write_simulation
 
     if list_scenarios and as_json:
@@ -364,7 +381,7 @@ def simulate(
         "simulated ", (sc.name, "bold"), f" (seed {sc.seed}): {len(sim.scans)} scans over {sc.duration:g} s, "
         f"{len(sc.movers)} movers"
     ))
-    for role, path in paths.items():
+    for path in paths.values():
         console.print(Text(f"  {path}"))
     console.print(Text(f"map it with: dynslam2d run {paths['scans']} --gt {out}"))
 
@@ -392,8 +409,10 @@ app.add_typer(config_app, name="config")
 
 @config_app.command("dump")
 def config_dump(
-    config: Annotated[Optional[Path], typer.Option("--config", help="Start from this YAML file instead of the defaults.")] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the values as JSON instead of commented YAML.")] = False,
+    config: Annotated[Path | None, typer.Option(
+        "--config", help="Start from this YAML file instead of the defaults.")] = None,
+    as_json: Annotated[bool, typer.Option(
+        "--json", help="Print the values as JSON instead of commented YAML.")] = False,
 ) -> None:
     """Print the full configuration as YAML (defaults, or a file completed with defaults)."""
     from dynslam2d.config import Config, dump_config, load_config
@@ -408,44 +427,85 @@ def config_dump(
 @app.command()
 def run(
     input: Annotated[str, typer.Argument(help="Bag, bag folder, .mcap, CARMEN log or sim:<scenario>.")] = "sim:paper",
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="Results folder (default: results/run-<time>).")] = None,
+    out: Annotated[Path | None, typer.Option(
+        "--out", "-o", help="Results folder (default: results/run-<time>).")] = None,
     topic: TopicOpt = None,
-    gt: Annotated[Optional[Path], typer.Option("--gt", help="Ground-truth folder written by 'dynslam2d simulate' (for metrics).")] = None,
-    config: Annotated[Optional[Path], typer.Option("--config", help="YAML configuration (see 'dynslam2d config dump').")] = None,
-    map_resolution: Annotated[Optional[float], typer.Option("--map-resolution", help="Finest map cell size, m [0.05].")] = None,
-    map_levels: Annotated[Optional[int], typer.Option("--map-levels", help="Map levels [3].")] = None,
-    update_distance: Annotated[Optional[float], typer.Option("--map-update-distance-thresh", "--update-distance", help="Map update after this translation, m (slam.map_update_distance_thresh) [0.4].")] = None,
-    update_angle: Annotated[Optional[float], typer.Option("--map-update-angle-thresh", "--update-angle", help="Map update after this rotation, rad (slam.map_update_angle_thresh) [0.06].")] = None,
-    laser_min_dist: Annotated[Optional[float], typer.Option("--laser-min-dist", help="Ignore returns closer than this, m [0.4].")] = None,
-    laser_max_dist: Annotated[Optional[float], typer.Option("--laser-max-dist", help="Ignore returns farther than this, m [30].")] = None,
-    filter_mode: Annotated[Optional[str], typer.Option("--filter-mode", "--filter", help="Dynamic-point filter (filter.mode): none, fixed, adaptive (the paper's configurations 1-3) or box (ours: each moving object's box plus a margin; 'default' is its old name) [box].")] = None,
-    constant_velocity: Annotated[Optional[bool], typer.Option("--constant-velocity/--no-constant-velocity", help="Predict with constant velocity instead of the previous pose.")] = None,
-    correlative: Annotated[Optional[str], typer.Option("--correlative-mode", "--correlative", help="Correlative search seed: auto, always or never (slam.correlative_mode) [auto].")] = None,
-    hector_compat: Annotated[bool, typer.Option("--hector-compat", help="Behave like the reference hector_mapping: raw Gauss-Newton step, its swapped gradient, no correlative search.")] = False,
-    animate: Annotated[bool, typer.Option("--animate", help="Also write run.gif: scan points (kept / removed), tracked boxes, the growing map.")] = False,
-    frame_step: Annotated[int, typer.Option("--frame-step", min=1, help="With --animate: one frame every N scans.")] = 5,
-    write_bag: Annotated[Optional[Path], typer.Option("--write-bag", help="Also write a bag for RViz / Foxglove: .mcap (default), .db3, .bag (ROS 1) or a folder (ROS 2).")] = None,
-    bag_storage: Annotated[Optional[str], typer.Option("--bag-storage", help="ROS 2 storage for a bag folder: mcap or sqlite3.")] = None,
-    map_period: Annotated[float, typer.Option("--map-period", min=0.0, help="Seconds of scan time between /map messages (bag, viewer); 0 = every scan.")] = 1.0,
-    viewer: Annotated[str, typer.Option("--viewer", help="Live viewer: none or rerun (pip install \"dynslam2d[viewer]\").")] = "none",
-    rerun_save: Annotated[Optional[Path], typer.Option("--rerun-save", help="With --viewer rerun: save a .rrd recording instead of opening the viewer.")] = None,
+    gt: Annotated[Path | None, typer.Option(
+        "--gt", help="Ground-truth folder written by 'dynslam2d simulate' (for metrics).")] = None,
+    config: Annotated[Path | None, typer.Option(
+        "--config", help="YAML configuration (see 'dynslam2d config dump').")] = None,
+    map_resolution: Annotated[float | None, typer.Option(
+        "--map-resolution", help="Finest map cell size, m [0.05].")] = None,
+    map_levels: Annotated[int | None, typer.Option("--map-levels", help="Map levels [3].")] = None,
+    update_distance: Annotated[float | None, typer.Option(
+        "--map-update-distance-thresh", "--update-distance", help="Map update after this translation, m "
+                                                                  "(slam.map_update_distance_thresh) [0.4].")] = None,
+    update_angle: Annotated[float | None, typer.Option(
+        "--map-update-angle-thresh", "--update-angle", help="Map update after this rotation, rad "
+                                                            "(slam.map_update_angle_thresh) [0.06].")] = None,
+    laser_min_dist: Annotated[float | None, typer.Option(
+        "--laser-min-dist", help="Ignore returns closer than this, m [0.4].")] = None,
+    laser_max_dist: Annotated[float | None, typer.Option(
+        "--laser-max-dist", help="Ignore returns farther than this, m [30].")] = None,
+    filter_mode: Annotated[str | None, typer.Option(
+        "--filter-mode", "--filter", help="Dynamic-point filter (filter.mode): none, fixed, adaptive (the paper's "
+                                          "configurations 1-3) or box (ours: each moving object's box plus a margin; "
+                                          "'default' is its old name) [box].")] = None,
+    constant_velocity: Annotated[bool | None, typer.Option(
+        "--constant-velocity/--no-constant-velocity", help="Predict with constant velocity instead of the previous "
+                                                           "pose.")] = None,
+    correlative: Annotated[str | None, typer.Option(
+        "--correlative-mode", "--correlative", help="Correlative search seed: auto, always or never "
+                                                    "(slam.correlative_mode) [auto].")] = None,
+    hector_compat: Annotated[bool, typer.Option(
+        "--hector-compat", help="Behave like the reference hector_mapping: raw Gauss-Newton step, its swapped "
+                                "gradient, no correlative search.")] = False,
+    animate: Annotated[bool, typer.Option(
+        "--animate", help="Also write run.gif: scan points (kept / removed), tracked boxes, the growing map.")] = False,
+    frame_step: Annotated[int, typer.Option(
+        "--frame-step", min=1, help="With --animate: one frame every N scans.")] = 5,
+    write_bag: Annotated[Path | None, typer.Option(
+        "--write-bag", help="Also write a bag for RViz / Foxglove: .mcap (default), .db3, .bag (ROS 1) or a folder "
+                            "(ROS 2).")] = None,
+    bag_storage: Annotated[str | None, typer.Option(
+        "--bag-storage", help="ROS 2 storage for a bag folder: mcap or sqlite3.")] = None,
+    map_period: Annotated[float, typer.Option(
+        "--map-period", min=0.0, help="Seconds of scan time between /map messages (bag, viewer); 0 = every "
+                                      "scan.")] = 1.0,
+    viewer: Annotated[str, typer.Option(
+        "--viewer", help="Live viewer: none or rerun (pip install \"dynslam2d[viewer]\").")] = "none",
+    rerun_save: Annotated[Path | None, typer.Option(
+        "--rerun-save", help="With --viewer rerun: save a .rrd recording instead of opening the viewer.")] = None,
     seed: SeedOpt = None,
     duration: DurationOpt = None,
     skip_bad: SkipBadOpt = False,
-    force: Annotated[bool, typer.Option("--force", help="Replace an earlier results folder (one with run.json) at --out and a bag dynslam2d wrote at --write-bag; never anything else.")] = False,
-    checkpoint_period: Annotated[float, typer.Option("--checkpoint-period", min=0.0, help="Write the trajectory and map so far into OUT every this many seconds (0 = never).")] = 60.0,
-    checkpoint_scans: Annotated[int, typer.Option("--checkpoint-scans", min=0, help="Also checkpoint every this many scans (0 = only by time).")] = 0,
+    force: Annotated[bool, typer.Option(
+        "--force", help="Replace an earlier results folder (one with run.json) at --out and a bag dynslam2d wrote at "
+                        "--write-bag; never anything else.")] = False,
+    checkpoint_period: Annotated[float, typer.Option(
+        "--checkpoint-period", min=0.0, help="Write the trajectory and map so far into OUT every this many seconds (0 "
+                                             "= never).")] = 60.0,
+    checkpoint_scans: Annotated[int, typer.Option(
+        "--checkpoint-scans", min=0, help="Also checkpoint every this many scans (0 = only by time).")] = 0,
     odom: OdomOpt = "auto",
     imu: ImuOpt = "auto",
     laser_offset: LaserOffsetOpt = None,
-    range_scale: Annotated[Optional[str], typer.Option("--laser-range-scale", "--range-scale", help="Multiply every range by this (a lidar that reads short: > 1), or 'auto': estimate it from the recording's odometry (laser.range_scale) [1].")] = None,
+    range_scale: Annotated[str | None, typer.Option(
+        "--laser-range-scale", "--range-scale", help="Multiply every range by this (a lidar that reads short: > 1), or "
+                                                     "'auto': estimate it from the recording's odometry "
+                                                     "(laser.range_scale) [1].")] = None,
     frame: Annotated[str, typer.Option("--frame", help="Poses in trajectory.tum: laser (default) or base_link "
-                                       "(laser pose ⊕ (base_link→laser)⁻¹; needs TF, CARMEN pose fields or --laser-offset).")] = "laser",
+                                       "(laser pose ⊕ (base_link→laser)⁻¹; needs TF, CARMEN pose fields or "
+                                       "--laser-offset).")] = "laser",
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
-    loop_closure: Annotated[Optional[str], typer.Option("--loop-closure", help="Loop closure and pose-graph optimisation behind the front end: on (trajectory.tum and the map from the optimised poses; trajectory_frontend.tum and graph.g2o too) or off (the front end alone) [on] (loop.enabled).")] = None,
-    clean: Annotated[Optional[str], typer.Option("--clean", help="Clean-up pass after the run: on (map.pgm = cleaned "
-                                                 "static map, map_online.pgm = online map) or off [on] (docs/maps.md).")] = None,
+    loop_closure: Annotated[str | None, typer.Option(
+        "--loop-closure", help="Loop closure and pose-graph optimisation behind the front end: on (trajectory.tum and "
+                               "the map from the optimised poses; trajectory_frontend.tum and graph.g2o too) or off "
+                               "(the front end alone) [on] (loop.enabled).")] = None,
+    clean: Annotated[str | None, typer.Option("--clean", help="Clean-up pass after the run: on (map.pgm = cleaned "
+                                                 "static map, map_online.pgm = online map) or off [on] "
+                                                 "(docs/maps.md).")] = None,
 ) -> None:
     """Detect and remove moving objects, map the rest with Hector-style SLAM.
 
@@ -454,11 +514,18 @@ def run(
     tracks.csv, kept_mask.npz, config.yaml, summary.json, map.png, tracks.png and, with
     ground truth (sim: inputs or --gt), metrics.json and errors.png; run.gif with --animate.
     """
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     from dynslam2d.config import Config, load_config, with_overrides
-    from dynslam2d.io.outputs import check_bag_target, clean_stale_parts, plan_results_folder, same_or_inside
     from dynslam2d.inputs import open_source
+    from dynslam2d.io.outputs import check_bag_target, clean_stale_parts, plan_results_folder, same_or_inside
     from dynslam2d.pipeline import run as run_pipeline
     from dynslam2d.results import ground_truth_for, write_results
 
@@ -491,7 +558,8 @@ def run(
             raise DynSlamError(f"--loop-closure must be 'on' or 'off', got {loop_closure!r}")
         cfg = with_overrides(cfg, {"loop": {"enabled": loop_closure == "on"}})
     if hector_compat:
-        cfg = with_overrides(cfg, {"slam": {"hector_gradient_bug": True, "step_mode": "gauss_newton", "correlative_mode": "never"}})
+        cfg = with_overrides(cfg, {"slam": {"hector_gradient_bug": True, "step_mode": "gauss_newton",
+                                            "correlative_mode": "never"}})
     _check_sim_only(input, seed, duration)
     inputs = _input_paths(input, gt, config)
     truth_files = None
@@ -509,7 +577,8 @@ def run(
     if write_bag is not None:
         check_bag_target(write_bag, force=force, inputs=inputs, out=out)
         if folder.replace and same_or_inside(write_bag, out):
-            raise DynSlamError(f"--write-bag {write_bag}: lies inside --out {out}, which is replaced; put the bag elsewhere")
+            raise DynSlamError(f"--write-bag {write_bag}: lies inside --out {out}, which is replaced; put the bag "
+                               f"elsewhere")
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad, odom=odom, imu=imu,
                          laser_offset=offset)
     mount = _laser_mount(source.meta) if frame == "base_link" else None
@@ -554,7 +623,8 @@ def run(
             if write_bag is not None:
                 from dynslam2d.io.rosout import BagRecorder
 
-                observers.append(stack.enter_context(BagRecorder(write_bag, storage=bag_storage, map_period=map_period)))
+                observers.append(stack.enter_context(BagRecorder(write_bag, storage=bag_storage,
+                                                                 map_period=map_period)))
             if viewer == "rerun":
                 from dynslam2d.viz.live import RerunViewer
 
@@ -593,7 +663,8 @@ def run(
                               Trajectory(ft.stamps, compose_mount(ft.poses, mount.inverse()), ft.frame),
                               comment="base_link pose in the map frame, front end before loop closure")
         except OSError as exc:  # disk full, folder removed under our feet, …
-            raise DynSlamError(f"--out {out}: cannot write the results ({exc.strerror or exc}); nothing was kept") from None
+            raise DynSlamError(f"--out {out}: cannot write the results ({exc.strerror or exc}); nothing was "
+                               f"kept") from None
         folder.finish()
     except KeyboardInterrupt:
         _interrupted(folder, checkpointer)
@@ -628,7 +699,8 @@ def run(
         ("map updates", str(summary["map_updates"])),
         *_range_scale_row(summary),
         ("odometry", (f"{summary.get('odometry') or 'none (laser only)'}"
-                      + (f", {odo['with_odom']}/{odo['scans']} scans" if isinstance(odo, dict) and odo.get('scans') else ""))),
+                      + (f", {odo['with_odom']}/{odo['scans']} "
+                         f"scans" if isinstance(odo, dict) and odo.get('scans') else ""))),
         ("rejected matches", str(summary["match_failures"])),
         ("skipped scans", str(summary["skipped_scans"])),
         ("input dropped (--skip-bad)", ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in skipped.items() if v)
@@ -641,14 +713,16 @@ def run(
     cl = summary.get("cleanup")
     if isinstance(cl, dict):
         rows.append(("clean-up", f"erased {cl['erased_cells']} of {cl['occupied_cells_online']} occupied cells "
-                                 f"({cl['erased_area_m2']:.2f} m²) in {cl['pass_time_s']:.2f} s; online map in map_online.pgm"))
+                                 f"({cl['erased_area_m2']:.2f} m²) in {cl['pass_time_s']:.2f} s; online map in "
+                                 f"map_online.pgm"))
     repairs = summary.get("stamp_repairs") or {}
     if repairs.get("backward_steps") or repairs.get("nudged_stamps") or repairs.get("time_source") not in (None, "ipc"):
         rows.append(("stamp repairs", "; ".join(summary.get("input_warnings", [])) or str(repairs)))
     pc = summary.get("pose_confidence")
     if pc:
         rows.append(("pose confidence",
-                     f"{100 * pc['low_support_share']:.1f} % low support (longest {pc['longest_low_support_s']:.1f} s), "
+                     f"{100 * pc['low_support_share']:.1f} % low support (longest {pc['longest_low_support_s']:.1f} "
+                     f"s), "
                      f"{100 * pc['degenerate_share']:.1f} % degenerate (longest {pc['longest_degenerate_s']:.1f} s), "
                      f"lost {pc['lost_events']}× ({pc['lost_time_s']:.1f} s)"))
     body = summary.get("body") or {}
@@ -687,7 +761,8 @@ def _range_scale_row(summary: dict[str, Any]) -> list[tuple[str, str]]:
     if not math.isfinite(rs.get("scale") or math.nan):
         return [("range scale", f"1 (auto: too little odometry motion, {rs['odom_distance']:.2f} m)")]
     return [("range scale", f"{rs['used']:.4f} (auto: odometry {rs['odom_distance']:.2f} m / laser "
-                            f"{rs['slam_distance']:.2f} m over {rs['windows']} windows of the first {rs['scans']} scans)")]
+                            f"{rs['slam_distance']:.2f} m over {rs['windows']} windows of the first {rs['scans']} "
+                            f"scans)")]
 
 
 def _say_if_compiling(show: bool) -> bool:
@@ -712,16 +787,17 @@ def _steady_rows(summary: dict[str, Any], compiling: bool) -> list[tuple[str, st
                              + (" (compiling kernels)" if compiling else ""))]
 
 
-def _check_sim_only(input: str, seed: Optional[int], duration: Optional[float]) -> None:
+def _check_sim_only(input: str, seed: int | None, duration: float | None) -> None:
     """--seed and --duration drive the simulator; for a recording they would be silently ignored."""
     if not input.startswith("sim:"):
         given = [name for name, v in (("--seed", seed), ("--duration", duration)) if v is not None]
         if given:
             verb = "applies" if len(given) == 1 else "apply"
-            raise DynSlamError(f"{' and '.join(given)} {verb} to sim:<scenario> inputs only, not to {input}; drop the option")
+            raise DynSlamError(f"{' and '.join(given)} {verb} to sim:<scenario> inputs only, not to {input}; drop the "
+                               f"option")
 
 
-def _input_paths(input: str, *more: Optional[Path]) -> list[Path]:
+def _input_paths(input: str, *more: Path | None) -> list[Path]:
     """Every file the command reads (never written over)."""
     paths = [] if input.startswith("sim:") else [Path(input)]
     return paths + [Path(p) for p in more if p is not None]
@@ -803,7 +879,8 @@ def _interrupted(folder: Any, checkpointer: Any) -> None:
         err_console.print(Text(f"interrupted after {checkpointer.n_scans} scans; the last checkpoint could not be "
                                f"written ({exc}); earlier checkpoints in {folder.work}"), soft_wrap=True)
         raise SystemExit(130) from None
-    err_console.print(Text(f"interrupted after {checkpointer.n_scans} scans, partial results in {where}"), soft_wrap=True)
+    err_console.print(Text(f"interrupted after {checkpointer.n_scans} scans, partial results in "
+                           f"{where}"), soft_wrap=True)
     raise SystemExit(130)
 
 
@@ -817,25 +894,43 @@ def _default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-WorkersOpt = Annotated[Optional[int], typer.Option("--workers", "-j", min=1, help="Local worker processes [the CPUs available; 1 = one run after the other in this process].")]
-RayOpt = Annotated[Optional[str], typer.Option("--ray", metavar="ADDRESS", help="Run the jobs on Ray instead: a cluster address (ray://host:10001, host:6379), 'auto' (the cluster this machine belongs to) or 'local' (start Ray here); pip install \"dynslam2d[cluster]\" (docs/batch.md).")]
+WorkersOpt = Annotated[int | None, typer.Option(
+    "--workers", "-j", min=1, help="Local worker processes [the CPUs available; 1 = one run after the other in this "
+                                   "process].")]
+RayOpt = Annotated[str | None, typer.Option(
+    "--ray", metavar="ADDRESS", help="Run the jobs on Ray instead: a cluster address (ray://host:10001, host:6379), "
+                                     "'auto' (the cluster this machine belongs to) or 'local' (start Ray here); pip "
+                                     "install \"dynslam2d[cluster]\" (docs/batch.md).")]
 
 
 def _batch_progress(total: int, show: bool) -> Any:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     return Progress(TextColumn("[bold]runs[/]"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[info]}"),
-                    TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=err_console, disable=not show)
+                    TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=err_console,
+                    disable=not show)
 
 
 @app.command()
 def batch(
-    inputs: Annotated[list[str], typer.Argument(metavar="INPUT", help="Bags, bag folders, .mcap files, CARMEN logs or sim:<scenario> inputs.")],
-    out: Annotated[Path, typer.Option("--out", "-o", help="Batch folder: one results folder per (input, setting), batch.csv, batch.md, batch.json.")],
-    sets: Annotated[Optional[list[str]], typer.Option("--set", metavar="KEY=V1,V2", help="A config key (as in 'dynslam2d config dump') and the values to try; repeat for a grid, e.g. --set filter.mode=none,box --set slam.map_resolution=0.05,0.025.")] = None,
+    inputs: Annotated[list[str], typer.Argument(
+        metavar="INPUT", help="Bags, bag folders, .mcap files, CARMEN logs or sim:<scenario> inputs.")],
+    out: Annotated[Path, typer.Option(
+        "--out", "-o", help="Batch folder: one results folder per (input, setting), batch.csv, batch.md, batch.json.")],
+    sets: Annotated[list[str] | None, typer.Option(
+        "--set", metavar="KEY=V1,V2", help="A config key (as in 'dynslam2d config dump') and the values to try; repeat "
+                                           "for a grid, e.g. --set filter.mode=none,box --set "
+                                           "slam.map_resolution=0.05,0.025.")] = None,
     workers: WorkersOpt = None,
     ray: RayOpt = None,
-    config: Annotated[Optional[Path], typer.Option("--config", help="YAML configuration every run starts from.")] = None,
+    config: Annotated[Path | None, typer.Option("--config", help="YAML configuration every run starts from.")] = None,
     topic: TopicOpt = None,
     seed: SeedOpt = None,
     duration: DurationOpt = None,
@@ -845,7 +940,8 @@ def batch(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print batch.json on stdout.")] = False,
 ) -> None:
-    """Run many inputs × parameter settings: one results folder each, batch.csv / batch.md with every summary and metric.
+    """Run many inputs × parameter settings: one results folder each, batch.csv / batch.md with every summary and
+    metric.
 
     Resumable: runs whose folder is complete (run.json) are skipped; a failed run is recorded
     with its error and does not stop the others (exit 1 at the end if any failed). --seed and
@@ -866,16 +962,20 @@ def batch(
     counts = {"done": 0, "skipped": 0, "failed": 0}
     progress = _batch_progress(len(jobs), show)
     if show:
-        where = f"Ray ({ray})" if ray else (f"{n_workers} worker processes" if n_workers > 1 and len(jobs) > 1 else "this process")
+        where = f"Ray ({ray})" if ray else (f"{n_workers} worker "
+                                            f"processes" if n_workers > 1 and len(jobs) > 1 else "this process")
         err_console.print(f"{len(jobs)} runs ({len(inputs)} inputs × {len(jobs) // len(inputs)} settings) on {where}")
     with progress:
         task = progress.add_task("runs", total=len(jobs), info="")
 
         def tick(outcome: Any) -> None:
             counts[outcome.status] += 1
-            progress.update(task, advance=1, info=f"{counts['skipped']} skipped, {counts['failed']} failed · {outcome.name}")
+            progress.update(task, advance=1, info=f"{counts['skipped']} skipped, {counts['failed']} failed · "
+                                                  f"{outcome.name}")
             if show and outcome.status == "failed":
-                progress.console.print(Text.assemble(("failed: ", "bold red"), f"{outcome.name}: {outcome.error}"), soft_wrap=True)
+                progress.console.print(Text.assemble(("failed: ", "bold "
+                                                                  "red"), f"{outcome.name}: "
+                                                                          f"{outcome.error}"), soft_wrap=True)
 
         result = run_batch(jobs, out, workers=n_workers, ray=ray, on_outcome=tick)
     if as_json:
@@ -887,7 +987,8 @@ def batch(
         for o in result.outcomes:
             v = o.value or {}
             s, m = v.get("summary") or {}, v.get("metrics") or {}
-            table.add_row(o.name, o.status, _fmt(s.get("scans_per_s"), digits=0), _fmt(m.get("ate_rmse_m"), digits=4), o.error or "")
+            table.add_row(o.name, o.status, _fmt(s.get("scans_per_s"), digits=0), _fmt(m.get("ate_rmse_m"), digits=4),
+                          o.error or "")
         _show(table)
         console.print(Text.assemble("results in ", (str(out), "bold"), " (batch.csv, batch.md, batch.json)"))
     if result.failed:
@@ -900,12 +1001,19 @@ app.add_typer(experiment_app, name="experiment")
 
 @experiment_app.command("paper")
 def experiment_paper(
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="Output folder (default: results/experiment-<time>).")] = None,
+    out: Annotated[Path | None, typer.Option(
+        "--out", "-o", help="Output folder (default: results/experiment-<time>).")] = None,
     duration: DurationOpt = None,
-    trials: Annotated[Optional[list[str]], typer.Option("--trial", help="Trial(s) to run [paper-1 paper-2 paper-3].")] = None,
-    force: Annotated[bool, typer.Option("--force", help="Replace an earlier output folder of dynslam2d at --out (never anything else).")] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the table (table.json) on stdout instead of table.md.")] = False,
-    workers: Annotated[int, typer.Option("--workers", "-j", min=1, help="Worker processes for the 12 runs [1: one after the other, so that the scans/s column is the speed of an unloaded core]; the other columns do not depend on it.")] = 1,
+    trials: Annotated[list[str] | None, typer.Option(
+        "--trial", help="Trial(s) to run [paper-1 paper-2 paper-3].")] = None,
+    force: Annotated[bool, typer.Option(
+        "--force", help="Replace an earlier output folder of dynslam2d at --out (never anything else).")] = False,
+    as_json: Annotated[bool, typer.Option(
+        "--json", help="Print the table (table.json) on stdout instead of table.md.")] = False,
+    workers: Annotated[int, typer.Option(
+        "--workers", "-j", min=1, help="Worker processes for the 12 runs [1: one after the other, so that the scans/s "
+                                       "column is the speed of an unloaded core]; the other columns do not depend on "
+                                       "it.")] = 1,
     ray: RayOpt = None,
 ) -> None:
     """The paper's experiment: 3 trials × 4 filter configurations → table.md/csv/json and figure2.png."""
@@ -982,11 +1090,12 @@ def _emit(result: dict[str, object], as_json: bool, table: Table) -> None:
 
 
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print the result as JSON on stdout.")]
-MaxDtOpt = Annotated[float, typer.Option("--max-dt", min=0.0, help="Largest stamp difference for associating poses, s (evo's --t_max_diff).")]
+MaxDtOpt = Annotated[float, typer.Option(
+    "--max-dt", min=0.0, help="Largest stamp difference for associating poses, s (evo's --t_max_diff).")]
 
 
 RefTopicOpt = Annotated[
-    Optional[str], typer.Option("--ref-topic", help="Pose topic when REFERENCE is a bag (e.g. /ego_pose).")
+    str | None, typer.Option("--ref-topic", help="Pose topic when REFERENCE is a bag (e.g. /ego_pose).")
 ]
 SensorOffsetOpt = Annotated[
     tuple[float, float, float],
@@ -1062,7 +1171,8 @@ def _metric_rows(metrics: dict[str, Any]) -> list[tuple[str, str]]:
     if tm and tm["seen_walking"]:
         delay = "—" if tm["median_delay"] != tm["median_delay"] else f"{tm['median_delay']:.2f} s"
         rows.append(("walking movers caught by M (median delay)",
-                     f"{tm['reached']} of {tm['seen_walking']} ({delay}; {_pct(tm['within_half_second'])} within 0.5 s)"))
+                     f"{tm['reached']} of {tm['seen_walking']} ({delay}; {_pct(tm['within_half_second'])} within 0.5 "
+                     f"s)"))
     return rows
 
 
@@ -1071,12 +1181,18 @@ def eval_people(
     bag: Annotated[Path, typer.Argument(help="Annotated leg_tracker bag (or a .zip holding it).")],
     run_dir: Annotated[Path, typer.Argument(help="Results folder of 'dynslam2d run' on that bag.")],
     topic: TopicOpt = None,
-    people_topic: Annotated[str, typer.Option("--people-topic", help="Topic of the leg_tracker/Person annotations.")] = "/ground_truth_people_tracks",
-    radius: Annotated[float, typer.Option("--radius", help="Beams ending this close to an annotation are person beams, m.")] = 0.35,
-    walk_speed: Annotated[float, typer.Option("--walk-speed", help="A person moving at least this fast is walking, m/s.")] = 0.3,
+    people_topic: Annotated[str, typer.Option(
+        "--people-topic", help="Topic of the leg_tracker/Person annotations.")] = "/ground_truth_people_tracks",
+    radius: Annotated[float, typer.Option(
+        "--radius", help="Beams ending this close to an annotation are person beams, m.")] = 0.35,
+    walk_speed: Annotated[float, typer.Option(
+        "--walk-speed", help="A person moving at least this fast is walking, m/s.")] = 0.3,
     window: Annotated[float, typer.Option("--window", help="Window of the walking speed, s.")] = 1.0,
-    m_radius: Annotated[float, typer.Option("--m-radius", help="A track in M this close to a person has caught it, m.")] = 0.5,
-    motion_frame: Annotated[str, typer.Option("--motion-frame", help="Judge walking in the 'map' frame (the run's trajectory) or the 'scan' frame (motionless sensor).")] = "map",
+    m_radius: Annotated[float, typer.Option(
+        "--m-radius", help="A track in M this close to a person has caught it, m.")] = 0.5,
+    motion_frame: Annotated[str, typer.Option(
+        "--motion-frame", help="Judge walking in the 'map' frame (the run's trajectory) or the 'scan' frame "
+                               "(motionless sensor).")] = "map",
     as_json: JsonOpt = False,
 ) -> None:
     """Score a run against hand-annotated people: removal recall on person beams (walking / standing),
@@ -1111,7 +1227,8 @@ def eval_foreground(
     input: Annotated[str, typer.Argument(help="The recording of a motionless sensor (bag, log).")],
     run_dir: Annotated[Path, typer.Argument(help="Results folder of 'dynslam2d run' on that recording.")],
     topic: TopicOpt = None,
-    margin: Annotated[float, typer.Option("--margin", help="A return this far in front of the per-beam median background is foreground, m.")] = 0.3,
+    margin: Annotated[float, typer.Option(
+        "--margin", help="A return this far in front of the per-beam median background is foreground, m.")] = 0.3,
     as_json: JsonOpt = False,
 ) -> None:
     """Removed foreground and background beams of a run of a motionless sensor.
@@ -1132,12 +1249,16 @@ def eval_foreground(
 
 @eval_app.command("tracking")
 def eval_tracking(
-    scenes: Annotated[Optional[list[str]], typer.Option("--scene", help="Simulated scene(s) [paper crowd corridor static].")] = None,
-    datmo: Annotated[Optional[Path], typer.Option("--datmo", help="Folder of datmo bags (motion-capture ground truth) to score too.")] = None,
+    scenes: Annotated[list[str] | None, typer.Option(
+        "--scene", help="Simulated scene(s) [paper crowd corridor static].")] = None,
+    datmo: Annotated[Path | None, typer.Option(
+        "--datmo", help="Folder of datmo bags (motion-capture ground truth) to score too.")] = None,
     duration: Annotated[float, typer.Option("--duration", min=1.0, help="Simulated duration per scene, s.")] = 20.0,
     seed: SeedOpt = None,
-    poses: Annotated[str, typer.Option("--poses", help="Laser poses for the tracker: truth (simulator) or slam.")] = "truth",
-    config: Annotated[Optional[Path], typer.Option("--config", help="YAML configuration (its 'detect' section is used).")] = None,
+    poses: Annotated[str, typer.Option(
+        "--poses", help="Laser poses for the tracker: truth (simulator) or slam.")] = "truth",
+    config: Annotated[Path | None, typer.Option(
+        "--config", help="YAML configuration (its 'detect' section is used).")] = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Score detection and tracking: dynamic-beam recall/precision, centre and speed errors, identity switches.
@@ -1156,7 +1277,8 @@ def eval_tracking(
     with console.status("tracking …", spinner="dots") as status:
         for scene in chosen:
             status.update(f"tracking sim:{scene} …")
-            sim_rows.append(evaluate_sim(scene, seed=seed, duration=duration, config=detect_cfg, pose_source=poses).row())
+            sim_rows.append(evaluate_sim(scene, seed=seed, duration=duration, config=detect_cfg,
+                                         pose_source=poses).row())
         if datmo is not None:
             status.update(f"tracking the bags in {datmo} …")
             bag_rows = [r.row() for r in evaluate_datmo_folder(datmo)]
@@ -1164,7 +1286,10 @@ def eval_tracking(
         sys.stdout.write(json.dumps({"simulated": sim_rows, "datmo": bag_rows}, indent=2, default=float) + "\n")
         return
     t = Table(title=f"simulated scenes ({duration:g} s, {poses} poses)", title_justify="left")
-    for col in ("scene", "recall", "precision", "FP beams", "centre err (med)", "speed err (med)", "ID switches", "static tracks in M"):
+    for col in ("scene", "recall", "precision", "FP "
+                                                "beams", "centre err "
+                                                         "(med)", "speed err "
+                                                                  "(med)", "ID switches", "static tracks in M"):
         t.add_column(col, justify="right")
     for r in sim_rows:
         t.add_row(str(r["scene"]), _fmt(r["recall"]), _fmt(r["precision"]), f"{100 * float(r['fp_beam_rate']):.3f} %",
@@ -1176,7 +1301,8 @@ def eval_tracking(
         for col in ("bag", "target", "matched", "centre RMSE", "DATMO RMSE", "speed err (med)", "ID switches"):
             b.add_column(col, justify="right")
         for r in bag_rows:
-            b.add_row(str(r["bag"]), str(r["target"]), f"{r['n_matched']}/{r['n_with_truth']}", _fmt(r["rmse_center"], " m"),
+            b.add_row(str(r["bag"]), str(r["target"]), f"{r['n_matched']}/{r['n_with_truth']}", _fmt(r["rmse_center"],
+                                                                                                     " m"),
                       _fmt(r["datmo_rmse"], " m"), _fmt(r["median_speed_error"], " m/s"), str(r["id_switches"]))
         _show(b)
 
@@ -1220,7 +1346,9 @@ def eval_ate(
     estimate: Annotated[Path, typer.Argument(help="Estimated trajectory (TUM) or a run folder.")],
     ref_topic: RefTopicOpt = None,
     sensor_offset: SensorOffsetOpt = (0.0, 0.0, 0.0),
-    no_align: Annotated[bool, typer.Option("--no-align", help="Do not SE(2)-align the estimate first (like evo_ape without -a; the default aligns like evo_ape -a).")] = False,
+    no_align: Annotated[bool, typer.Option(
+        "--no-align", help="Do not SE(2)-align the estimate first (like evo_ape without -a; the default aligns like "
+                           "evo_ape -a).")] = False,
     max_dt: MaxDtOpt = 0.01,
     as_json: JsonOpt = False,
 ) -> None:
@@ -1264,9 +1392,12 @@ def eval_rpe(
     estimate: Annotated[Path, typer.Argument(help="Estimated trajectory (TUM) or a run folder.")],
     ref_topic: RefTopicOpt = None,
     sensor_offset: SensorOffsetOpt = (0.0, 0.0, 0.0),
-    delta: Annotated[float, typer.Option("--delta", min=0.0, help="Pair distance, in --delta-unit (evo's --delta).")] = 1,
-    delta_unit: Annotated[str, typer.Option("--delta-unit", help="'frames' or 'm' (evo's --delta_unit f / m).")] = "frames",
-    all_pairs: Annotated[bool, typer.Option("--all-pairs", help="Use every pair, not consecutive ones (evo's --all_pairs).")] = False,
+    delta: Annotated[float, typer.Option(
+        "--delta", min=0.0, help="Pair distance, in --delta-unit (evo's --delta).")] = 1,
+    delta_unit: Annotated[str, typer.Option(
+        "--delta-unit", help="'frames' or 'm' (evo's --delta_unit f / m).")] = "frames",
+    all_pairs: Annotated[bool, typer.Option(
+        "--all-pairs", help="Use every pair, not consecutive ones (evo's --all_pairs).")] = False,
     max_dt: MaxDtOpt = 0.01,
     as_json: JsonOpt = False,
 ) -> None:
@@ -1285,7 +1416,8 @@ def eval_rpe(
     _check_not_swapped("rpe", reference, estimate)
     d: float | int = int(delta) if delta_unit == "frames" else delta
     ref = load_reference(reference, ref_topic, Pose2D(*sensor_offset))
-    res = rpe(ref, read_tum(_estimate_path(estimate)), delta=d, delta_unit=delta_unit, all_pairs=all_pairs, max_dt=max_dt)
+    res = rpe(ref, read_tum(_estimate_path(estimate)), delta=d, delta_unit=delta_unit, all_pairs=all_pairs,
+              max_dt=max_dt)
     out = {"translation_m": res.trans.as_dict(), "rotation_rad": res.rot.as_dict()}
     rows = [
         ("translation rmse", f"{res.trans.rmse:.4f} m"),
@@ -1299,10 +1431,14 @@ def eval_rpe(
 
 @eval_app.command("relations")
 def eval_relations(
-    estimate: Annotated[Path, typer.Argument(help="Estimated trajectory (TUM), e.g. a run's trajectory.tum, or a run folder.")],
+    estimate: Annotated[Path, typer.Argument(
+        help="Estimated trajectory (TUM), e.g. a run's trajectory.tum, or a run folder.")],
     relations: Annotated[Path, typer.Argument(help="Kümmerle et al. relations file (t1 t2 x y z roll pitch yaw).")],
-    tol: Annotated[float, typer.Option("--tol", min=0.0, help="Largest stamp difference to match a relation to a pose, s.")] = 1e-3,
-    clock: Annotated[Optional[Path], typer.Option("--clock", help="CARMEN log with both clocks (ipc and logger) on its laser records, e.g. fr079.flirtlib.log: the estimate's logger stamps are mapped to the relations' ipc clock through it.")] = None,
+    tol: Annotated[float, typer.Option(
+        "--tol", min=0.0, help="Largest stamp difference to match a relation to a pose, s.")] = 1e-3,
+    clock: Annotated[Path | None, typer.Option(
+        "--clock", help="CARMEN log with both clocks (ipc and logger) on its laser records, e.g. fr079.flirtlib.log: "
+                        "the estimate's logger stamps are mapped to the relations' ipc clock through it.")] = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Relative pose error over ground-truth relations, mean ± std (Kümmerle et al., 2009)."""
@@ -1349,7 +1485,8 @@ def main() -> None:
     try:
         app()
     except DynSlamError as exc:
-        err_console.print(Text.assemble(("error:", "bold red"), " ", _one_line(str(exc))), highlight=False, soft_wrap=True)
+        err_console.print(Text.assemble(("error:", "bold "
+                                                   "red"), " ", _one_line(str(exc))), highlight=False, soft_wrap=True)
         sys.exit(2)
     except KeyboardInterrupt:
         err_console.print(Text("interrupted", style="yellow"))

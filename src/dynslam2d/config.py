@@ -22,15 +22,14 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from dynslam2d.errors import DynSlamError
-from dynslam2d.yamlfile import read_yaml_mapping
 from dynslam2d.detect.config import DetectConfig
+from dynslam2d.errors import DynSlamError
 from dynslam2d.filter import FilterConfig
-from dynslam2d.slam.config import SlamConfig
-from dynslam2d.slam.cleanconfig import CleanConfig
 from dynslam2d.laserconfig import LaserConfig
+from dynslam2d.slam.cleanconfig import CleanConfig
+from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.loopconfig import LoopConfig
-
+from dynslam2d.yamlfile import read_yaml_mapping
 
 #: hector_mapping ROS parameter → our ``slam`` key (hector_mapping's HectorMappingRos.cpp;
 #: the list is in docs/slam.md). In ``--config`` these names are accepted inside ``slam:``

@@ -19,9 +19,9 @@ import csv
 import io
 import json
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -177,7 +177,8 @@ def table_markdown(rows: list[dict[str, object]]) -> str:
     lines += ["", "The paper's Table 1 (Gazebo, its own maps):", "",
               "| trial | IoU unfiltered | wRMSE unfiltered | IoU filtered | wRMSE filtered |", "|---|---|---|---|---|"]
     for trial, p in PAPER_TABLE1.items():
-        lines.append(f"| {trial} | {p['iou_unfiltered']} | {p['rmse_unfiltered']} | {p['iou_filtered']} | {p['rmse_filtered']} |")
+        lines.append(f"| {trial} | {p['iou_unfiltered']} | {p['rmse_unfiltered']} | {p['iou_filtered']} | "
+                     f"{p['rmse_filtered']} |")
     return "\n".join(lines) + "\n"
 
 

@@ -53,8 +53,8 @@ class FilterConfig(BaseModel):
       (configuration 2);
     * ``adaptive`` — square of half-side ``d_j = max(w_j, l_j) · adaptive_lambda / 2``
       (paper Eq. 6, configuration 3);
-    * ``box`` — our setting (formerly ``default``, still accepted): the object's own box (``rectangle``, aligned with its
-      heading) or its enclosing square (``square``), grown by ``margin`` on every side
+    * ``box`` — our setting (formerly ``default``, still accepted): the object's own box (``rectangle``, aligned with
+      its heading) or its enclosing square (``square``), grown by ``margin`` on every side
       (range noise and box-fit error) plus ``speed_margin_time · |v_j|`` (motion during the
       scan / stamp offset), each half-extent capped at ``max_half_extent``.
     """
@@ -227,17 +227,17 @@ def half_extents(
     ``speed_margin_time > 0``; missing speeds count as 0). The ``fixed`` count rule is not
     applied here (see :func:`filter_scan_points`).
     """
-    l = np.abs(np.asarray(lengths, dtype=np.float64).reshape(-1))
+    lens = np.abs(np.asarray(lengths, dtype=np.float64).reshape(-1))
     w = np.abs(np.asarray(widths, dtype=np.float64).reshape(-1))
-    if l.shape != w.shape:
-        raise ValueError(f"half_extents: {l.shape[0]} lengths but {w.shape[0]} widths")
-    k = l.shape[0]
+    if lens.shape != w.shape:
+        raise ValueError(f"half_extents: {lens.shape[0]} lengths but {w.shape[0]} widths")
+    k = lens.shape[0]
     out = np.zeros((k, 2), dtype=np.float64)
     mode = config.mode
     if mode == "fixed":
         out[:] = config.fixed_d_ref * config.fixed_lambda / 2.0  # paper §3, configuration 2
     elif mode == "adaptive":
-        d = np.maximum(w, l) * config.adaptive_lambda / 2.0  # paper Eq. 6
+        d = np.maximum(w, lens) * config.adaptive_lambda / 2.0  # paper Eq. 6
         out[:, 0] = d
         out[:, 1] = d
     elif mode == "box":
@@ -248,11 +248,11 @@ def half_extents(
                 raise ValueError(f"half_extents: {k} boxes but {sp.shape[0]} speeds")
             grow = grow + config.speed_margin_time * np.nan_to_num(sp, nan=0.0)
         if config.default_shape == "square":
-            d = np.maximum(w, l) / 2.0
+            d = np.maximum(w, lens) / 2.0
             out[:, 0] = d + grow
             out[:, 1] = d + grow
         else:
-            out[:, 0] = l / 2.0 + grow
+            out[:, 0] = lens / 2.0 + grow
             out[:, 1] = w / 2.0 + grow
         if config.max_half_extent is not None:
             np.minimum(out, config.max_half_extent, out=out)

@@ -6,7 +6,7 @@ Applied by :mod:`dynslam2d.rangescale` (docs/slam.md, "Range scale").
 from __future__ import annotations
 
 import math
-from typing import Literal, Union
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
@@ -21,7 +21,7 @@ class LaserConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
-    range_scale: Union[float, Literal["auto"]] = Field(
+    range_scale: float | Literal["auto"] = Field(
         1.0,
         description="Every range is multiplied by this before detection and SLAM (a lidar that reads short: "
         "> 1). 'auto' = estimated from the recording's odometry (odometry / laser-only SLAM displacement "

@@ -20,8 +20,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Protocol, Sequence
+from typing import Protocol
 
 import numpy as np
 
@@ -36,11 +37,11 @@ from dynslam2d.memtrim import release_free_memory
 from dynslam2d.rangescale import apply_range_scale
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
-from dynslam2d.slam.config import SlamConfig
-from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.confidence import FLAGS
-from dynslam2d.slam.erasure import EvidenceLedger
 from dynslam2d.slam.confidence import summarize as summarize_confidence
+from dynslam2d.slam.config import SlamConfig
+from dynslam2d.slam.erasure import EvidenceLedger
+from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.loops import LoopCloser, LoopResult
 from dynslam2d.trajectory import Trajectory
 from dynslam2d.types import Box, Pose2D, Scan, ScanSource, SourceMeta, Track
@@ -416,7 +417,8 @@ class RunResult:
         n = self.n_scans
         c = self.config.slam
         flags = {k: self.confidence.get(k, np.zeros(n, dtype=bool)) for k in FLAGS}
-        return summarize_confidence(self.trajectory.stamps, flags, self.confidence.get("degeneracy", np.full(n, np.nan)),
+        return summarize_confidence(self.trajectory.stamps, flags,
+                                    self.confidence.get("degeneracy", np.full(n, np.nan)),
                                     self.slam_stats.get("lost_events", 0), self.slam_stats.get("relocalisations", 0),
                                     c.low_confidence_share, c.low_confidence_stretch)
     body: dict[str, object] = field(default_factory=dict)

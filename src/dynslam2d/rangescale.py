@@ -20,8 +20,8 @@ have their own, independent scale (the wheel radius).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass
-from typing import Iterator
 
 import numpy as np
 
@@ -76,7 +76,8 @@ class RangeScaleEstimate:
     window_ratio_iqr: tuple[float, float]
 
 
-def estimate_range_scale(source: ScanSource, laser: LaserConfig, slam_config: object | None = None) -> RangeScaleEstimate:
+def estimate_range_scale(source: ScanSource, laser: LaserConfig,
+                         slam_config: object | None = None) -> RangeScaleEstimate:
     """Range scale of ``source`` from its odometry: a laser-only SLAM pass (detection off) over the
     first ``laser.range_scale_scans`` scans; over windows of ``laser.range_scale_window`` s in which the
     odometry moved by more than 2 cm, ``scale = Σ|Δodom| / Σ|Δslam|`` (both laser-point displacements).

@@ -15,7 +15,7 @@ so code written for the former lists keeps working.
 
 from __future__ import annotations
 
-from typing import Iterator, Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 

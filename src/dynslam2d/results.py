@@ -31,15 +31,16 @@ from dynslam2d.io.mapfile import write_map
 from dynslam2d.io.outputs import read_marker, write_marker
 from dynslam2d.io.summary import input_report
 from dynslam2d.io.trajectory import Trajectory, write_tum
+from dynslam2d.memtrim import release_free_memory
 from dynslam2d.pipeline import TRACK_CSV_COLUMNS, RunResult
 from dynslam2d.slam.cleanup import CleanResult
 from dynslam2d.types import ScanSource
 from dynslam2d.viz.collect import RemovedPointsCollector
-from dynslam2d.memtrim import release_free_memory
 from dynslam2d.viz.figures import write_figures
 
 
-def ground_truth_for(source: ScanSource, gt_dir: str | os.PathLike[str] | GroundTruthFiles | None, resolution: float) -> GroundTruthFiles | None:
+def ground_truth_for(source: ScanSource, gt_dir: str | os.PathLike[str] | GroundTruthFiles | None,
+                     resolution: float) -> GroundTruthFiles | None:
     """Ground truth for a run: from ``gt_dir`` if given, else from a simulated source, else None.
 
     Simulated ground truth is expressed in the first-scan frame (the SLAM map frame), like
@@ -210,7 +211,8 @@ def write_results(
 
         front = run.frontend_trajectory if run.frontend_trajectory is not None else run.trajectory
         paths["trajectory_frontend.tum"] = write_tum(out / "trajectory_frontend.tum", front,
-                                                     comment="laser pose in the map frame, front end before loop closure")
+                                                     comment="laser pose in the map frame, front end before loop "
+                                                             "closure")
         paths["graph.g2o"] = write_g2o(out / "graph.g2o", run.loop.graph)
     paths["config.yaml"] = write_text_atomic(out / "config.yaml", dump_config(run.config))
     paths["tracks.csv"] = write_text_atomic(out / "tracks.csv", tracks_csv(run))

@@ -9,8 +9,8 @@ files is :mod:`dynslam2d.io.trajectory`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 

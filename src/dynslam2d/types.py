@@ -8,8 +8,9 @@ frame; a :class:`Pose2D` returned by SLAM is the laser pose in the map frame.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Iterator, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 

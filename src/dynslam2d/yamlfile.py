@@ -30,7 +30,8 @@ def read_yaml_mapping(path: str | os.PathLike[str], what: str) -> dict[str, Any]
         mark = exc.problem_mark
         where = f":{mark.line + 1}:{mark.column + 1}" if mark is not None else ""
         problem = exc.problem or exc.context or "syntax error"
-        raise DynSlamError(f"{path}{where}: cannot read {what}: not valid YAML ({problem}); fix the syntax there") from None
+        raise DynSlamError(f"{path}{where}: cannot read {what}: not valid YAML ({problem}); fix the syntax "
+                           f"there") from None
     except (OSError, yaml.YAMLError) as exc:
         text = " ".join(str(getattr(exc, "strerror", None) or exc).split())
         raise DynSlamError(f"{path}: cannot read {what} ({text})") from exc

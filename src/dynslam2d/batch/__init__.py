@@ -11,4 +11,5 @@ from dynslam2d.batch.engine import RAY_HINT, Outcome, map_jobs
 from dynslam2d.batch.jobs import Job, Setting, make_jobs, parse_setting
 from dynslam2d.batch.runs import BatchResult, run_batch
 
-__all__ = ["BatchResult", "Job", "Outcome", "RAY_HINT", "Setting", "make_jobs", "map_jobs", "parse_setting", "run_batch"]
+__all__ = ["BatchResult", "Job", "Outcome", "RAY_HINT", "Setting", "make_jobs", "map_jobs", "parse_setting",
+           "run_batch"]

@@ -15,9 +15,10 @@ on the worker — a shared path on a cluster.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from dynslam2d.errors import DynSlamError
 

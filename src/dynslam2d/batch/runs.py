@@ -22,9 +22,10 @@ import io
 import json
 import os
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from dynslam2d.batch.engine import Outcome, map_jobs
 from dynslam2d.batch.jobs import Job
@@ -93,8 +94,8 @@ def run_job(job: Job) -> dict[str, Any]:
     replaced; a foreign non-empty folder is refused). On any error the folder is discarded.
     """
     from dynslam2d.config import config_from_dict
-    from dynslam2d.io.outputs import plan_results_folder
     from dynslam2d.inputs import open_source
+    from dynslam2d.io.outputs import plan_results_folder
     from dynslam2d.pipeline import run as run_pipeline
     from dynslam2d.results import ground_truth_for, write_results
     from dynslam2d.slam.cleanup import CleanupRecorder
@@ -240,7 +241,8 @@ def batch_rows(jobs: list[Job], outcomes: list[Outcome]) -> tuple[list[str], lis
         row.update(extra)
         rows.append(row)
     columns = ["run", "input", *keys, "status", "error", "seconds"]
-    columns += sorted(k for k in values if k.startswith("summary.")) + sorted(k for k in values if k.startswith("metrics."))
+    columns += sorted(k for k in values if k.startswith("summary."))
+    columns += sorted(k for k in values if k.startswith("metrics."))
     return columns, rows
 
 
@@ -265,7 +267,8 @@ def _num(row: dict[str, Any], key: str, digits: int, scale: float = 1.0) -> str:
 def batch_markdown(jobs: list[Job], outcomes: list[Outcome]) -> str:
     """batch.md: a headline table per run, then every value of every run (as in batch.csv)."""
     columns, rows = batch_rows(jobs, outcomes)
-    keys = [c for c in columns[2:] if c not in ("status", "error", "seconds") and not c.startswith(("summary.", "metrics."))]
+    keys = [c for c in columns[2:]
+            if c not in ("status", "error", "seconds") and not c.startswith(("summary.", "metrics."))]
     head = ["run", *keys, "status", "scans", "scans/s", "removed %", "ATE m", "IoU", "error"]
     lines = ["# dynslam2d batch", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
@@ -277,7 +280,8 @@ def batch_markdown(jobs: list[Job], outcomes: list[Outcome]) -> str:
     lines += ["", "Every value of every run (the columns of batch.csv):", ""]
     for r in rows:
         lines += [f"<details><summary>{r['run']} ({r['status']})</summary>", "", "| key | value |", "|---|---|"]
-        lines += [f"| {c} | {str(r[c]).replace('|', chr(92) + '|')} |" for c in columns if c in r and r[c] not in ("", None)]
+        lines += [f"| {c} | {str(r[c]).replace('|', chr(92) + '|')} "
+                  f"|" for c in columns if c in r and r[c] not in ("", None)]
         lines += ["", "</details>", ""]
     return "\n".join(lines)
 

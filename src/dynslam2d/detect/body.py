@@ -9,8 +9,8 @@ detection, matching and mapping (docs/tracking.md, "The robot's own body"):
    y left, m); every return inside it is dropped.
 2. **Automatic**: a beam whose range stays within ``auto_tolerance`` of the same value (and
    below ``auto_max_range``) while the laser's pose moves ``auto_min_travel`` metres and turns
-   ``auto_min_turn`` radians away from where it was when that range was first seen is looking at something that moves with the laser. Static
-   structure cannot do that: translation along a wall keeps a perpendicular range, but the
+   ``auto_min_turn`` radians away from where it was when that range was first seen is looking at something that moves
+   with the laser. Static structure cannot do that: translation along a wall keeps a perpendicular range, but the
    turn changes it. From then on, returns of that beam up to the body's range (+ tolerance)
    are dropped. :meth:`BodyFilter.report` gives the beams and a suggested footprint (the convex
    hull of the body returns grown by ``suggest_margin``), for summary.json.
@@ -167,7 +167,7 @@ class BodyFilter:
             drop[np.flatnonzero(valid)[inside]] = True
             self.footprint_dropped += int(inside.sum())
         if getattr(self.config, "auto", False) and self.body.any():
-            tol = float(getattr(self.config, "auto_tolerance"))
+            tol = float(self.config.auto_tolerance)
             auto = valid & (self._drop_r > 0.0) & (scan.ranges <= self._drop_r + tol) & ~drop
             self.auto_dropped += int(auto.sum())
             drop |= auto

@@ -144,10 +144,10 @@ def _pairwise_sum(a: np.ndarray, lo: int, n: int) -> float:
     los[0] = lo
     ns[0] = n
     while top >= 0:
-        l = los[top]
+        start = los[top]
         m = ns[top]
         if m <= 128:
-            vals[vtop] = _pairwise_leaf(a, l, m)
+            vals[vtop] = _pairwise_leaf(a, start, m)
             vtop += 1
             top -= 1
             continue
@@ -156,11 +156,11 @@ def _pairwise_sum(a: np.ndarray, lo: int, n: int) -> float:
         if state[top] == 0:
             state[top] = 1
             top += 1
-            los[top], ns[top], state[top] = l, n2, 0
+            los[top], ns[top], state[top] = start, n2, 0
         elif state[top] == 1:
             state[top] = 2
             top += 1
-            los[top], ns[top], state[top] = l + n2, m - n2, 0
+            los[top], ns[top], state[top] = start + n2, m - n2, 0
         else:
             vals[vtop - 2] = vals[vtop - 2] + vals[vtop - 1]
             vtop -= 1

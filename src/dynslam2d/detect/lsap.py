@@ -10,7 +10,7 @@ back to the public import, so the solver is always SciPy's.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

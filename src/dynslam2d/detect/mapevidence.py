@@ -45,10 +45,10 @@ class MapView:
     @classmethod
     def of_level(cls, level: object) -> MapView | None:
         """A view of a :class:`dynslam2d.slam.grid.GridLevel` (None while the level is empty)."""
-        lo = getattr(level, "logodds")
+        lo = level.logodds
         if lo.size == 0:
             return None
-        return cls(lo, int(getattr(level, "i0")), int(getattr(level, "j0")), float(getattr(level, "resolution")))
+        return cls(lo, int(level.i0), int(level.j0), float(level.resolution))
 
 
 @njit(cache=True)
@@ -57,8 +57,8 @@ def map_evidence_kernel(px: np.ndarray, py: np.ndarray, logodds: np.ndarray, i0:
                         free: np.ndarray, unknown: np.ndarray, near_thr: float = 0.5) -> None:
     """Fill ``structure`` / ``free`` (n,) bool for the map-frame points (``px``, ``py``, m): the point's
     cell is long-occupied (log-odds ≥ ``occ_thr``); the point's cell is observed free (log-odds ≤
-    ``free_thr``) with no occupied cell (log-odds > ``near_thr``) within ``free_radius``; ``unknown``: the point's cell was never observed (log-odds 0, or outside
-    the grid)."""
+    ``free_thr``) with no occupied cell (log-odds > ``near_thr``) within ``free_radius``; ``unknown``: the point's cell
+    was never observed (log-odds 0, or outside the grid)."""
     h = logodds.shape[0]
     w = logodds.shape[1]
     for i in range(px.shape[0]):

@@ -53,7 +53,8 @@ class Detection:
             :mod:`dynslam2d.detect.freespace`; set by the tracker, 0 when unknown).
         map_structure, map_free, map_unknown: fractions of the points on long-occupied / observed-free /
             never observed cells of the SLAM map
-        person: a merged pair of legs (tracker, ``fit.person_merge``): measured at the middle of the legs (:mod:`dynslam2d.detect.mapevidence`; set by the tracker, 0 without a map).
+        person: a merged pair of legs (tracker, ``fit.person_merge``): measured at the middle of the legs
+            (:mod:`dynslam2d.detect.mapevidence`; set by the tracker, 0 without a map).
     """
 
     beams: np.ndarray

@@ -30,8 +30,8 @@ import math
 
 import numpy as np
 
-from dynslam2d.detect.config import FitConfig
 from dynslam2d.detect import layout as L
+from dynslam2d.detect.config import FitConfig
 from dynslam2d.detect.measure import Detection, Measurement
 from dynslam2d.detect.shapes import circle_center_fixed_radius
 

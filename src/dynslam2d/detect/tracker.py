@@ -34,14 +34,23 @@ free-space and fragment tests); only the per-track bookkeeping stays in Python (
 from __future__ import annotations
 
 import bisect
-from collections import deque
 import math
+from collections import deque
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
 
 from dynslam2d.detect.config import DetectConfig
+from dynslam2d.detect.freespace import FreeSpaceMemory
+from dynslam2d.detect.kernels import (
+    classify_batch,
+    fit_params,
+    fragment_hosts,
+    gate_costs,
+    kalman_update_batch,
+    measure_batch,
+    segment_means,
+)
 from dynslam2d.detect.layout import (
     F_THETA,
     FIT_CENTROID,
@@ -62,18 +71,9 @@ from dynslam2d.detect.layout import (
     DetectionBatch,
     MeasureRows,
 )
-from dynslam2d.detect.measure import Detection, Measurement
-from dynslam2d.detect.freespace import FreeSpaceMemory
+from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
 from dynslam2d.detect.mapevidence import MapView, map_evidence
-from dynslam2d.detect.kernels import (
-    classify_batch,
-    fit_params,
-    fragment_hosts,
-    gate_costs,
-    kalman_update_batch,
-    measure_batch,
-    segment_means,
-)
+from dynslam2d.detect.measure import Detection, Measurement
 from dynslam2d.detect.segment import Segmentation, segment_scan
 from dynslam2d.detect.shapes import CRITERIA, fit_clusters, search_angles
 from dynslam2d.types import Box, Pose2D, Scan, Track, wrap_angle
@@ -369,8 +369,8 @@ class Tracker:
 
     def _stationary_prediction(self, k: _Track, F: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Prediction of a remembered (stopped) track that is not detected, with a stationary motion model
-        (detect.memory): the centre stays, the velocity is 0, the position covariance grows by a small random walk and is kept
-        at most ``memory.max_position_sigma``, the velocity covariance at most ``memory.max_speed_sigma``
+        (detect.memory): the centre stays, the velocity is 0, the position covariance grows by a small random walk and
+        is kept at most ``memory.max_position_sigma``, the velocity covariance at most ``memory.max_speed_sigma``
         (it may start again: the velocity keeps some uncertainty and its coupling to the position)."""
         mc = self.config.memory
         x = k.x.copy()
@@ -902,7 +902,8 @@ class Tracker:
                    else 0.0, kind=det.kind, beams=det.beams, has_heading=det.kind == KIND_RECT,
                    free=[det.free_fraction], mstruct=[det.map_structure] if self._map is not None else [],
                    mfree=[det.map_free] if self._map is not None else [],
-                   munknown=[det.map_unknown] if self._map is not None else [], past=[(t, det.points)] if self._free is not None else [],
+                   munknown=[det.map_unknown] if self._map is not None else [],
+                   past=[(t, det.points)] if self._free is not None else [],
                    past_t=[t] if self._free is not None else [])
         k.p_finite = bool(np.isfinite(P).all())
         if cfg.tracker.confirm_hits <= 1:

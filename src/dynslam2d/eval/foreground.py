@@ -22,8 +22,9 @@ docs/real.md uses this for the stationary leg_tracker bags:
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -39,7 +40,8 @@ MIN_FOREGROUND_BEAMS = 5
 STABLE_SHARE = 0.5
 
 
-def foreground_mask(scans: Sequence[Scan], margin: float = FOREGROUND_MARGIN) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def foreground_mask(scans: Sequence[Scan],
+                    margin: float = FOREGROUND_MARGIN) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(foreground, valid, stable)``: (n, beams) bool masks of foreground beams and of beams
     with a return, and the (beams,) mask of beams that return in ≥ :data:`STABLE_SHARE` of the scans.
 
@@ -144,8 +146,8 @@ def evaluate_foreground(
     margin: float = FOREGROUND_MARGIN,
 ) -> ForegroundRemoval:
     """:func:`foreground_removal` on a recording (any input ``open_source`` reads) and a results folder."""
-    from dynslam2d.io.runfolder import read_removed_mask
     from dynslam2d.inputs import open_source
+    from dynslam2d.io.runfolder import read_removed_mask
 
     if not margin > 0:
         raise DynSlamError(f"foreground: margin must be > 0 m, got {margin}")

@@ -41,8 +41,8 @@ from typing import Protocol
 import numpy as np
 
 from dynslam2d.errors import DynSlamError
-from dynslam2d.stamps import nearest_sorted
 from dynslam2d.eval.trajectory import ErrorStats
+from dynslam2d.stamps import nearest_sorted
 from dynslam2d.trajectory import Trajectory
 from dynslam2d.types import wrap_angle
 

@@ -16,8 +16,8 @@ holds only what is always there. Two numbers follow:
 from __future__ import annotations
 
 import warnings
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass
-from typing import Iterable
 
 import numpy as np
 

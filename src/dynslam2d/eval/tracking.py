@@ -53,7 +53,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from dynslam2d.detect.config import DetectConfig
-from dynslam2d.detect.tracker import CONFIRMED, COASTING, Tracker
+from dynslam2d.detect.tracker import COASTING, CONFIRMED, Tracker
 from dynslam2d.errors import DynSlamError
 from dynslam2d.types import Pose2D, Scan, Track, wrap_angle
 

@@ -118,7 +118,8 @@ def read_ground_truth_folder(gt_dir: str | os.PathLike[str]) -> GroundTruthFiles
         raise DynSlamError(f"{d}: ground-truth folder not found")
     for name in (GT_MAP, GT_TRAJECTORY, GT_LABELS):
         if not (d / name).exists():
-            raise DynSlamError(f"{d}: not a ground-truth folder ({name} is missing; write one with 'dynslam2d simulate')")
+            raise DynSlamError(f"{d}: not a ground-truth folder ({name} is missing; write one with 'dynslam2d "
+                               f"simulate')")
     try:
         with np.load(d / GT_LABELS) as npz:
             stamps = np.asarray(npz["stamps"], dtype=np.float64)

@@ -27,9 +27,10 @@ from __future__ import annotations
 import math
 import os
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 
@@ -295,7 +296,8 @@ def _plan(path: Path, topics: dict[str, str], odom: str, imu: str) -> _Plan:
         plan.wheel_topic = name
         if plan.imu_topic is None:
             raise DynSlamError(f"{path}: --odom {odom}: wheel-speed dead reckoning needs an IMU yaw rate, "
-                               f"and {'--imu none was given' if imu == 'none' else 'the bag has no sensor_msgs/Imu topic'}")
+                               f"and "
+                               f"{'--imu none was given' if imu == 'none' else 'the bag has no sensor_msgs/Imu topic'}")
     else:
         plan.kinds.append("topic")
         plan.odom_topic = name
@@ -540,7 +542,8 @@ def odometry_message(bag: Any, stamp: float, frame: str, child: str, pose: np.nd
         pose=bag.msg_class("geometry_msgs/msg/Pose")(position=point, orientation=_quat(bag, float(pose[2]))),
         covariance=np.zeros(36, dtype=np.float64))
     twc = bag.msg_class("geometry_msgs/msg/TwistWithCovariance")(
-        twist=bag.msg_class("geometry_msgs/msg/Twist")(linear=_vec3(bag, twist[0]), angular=_vec3(bag, 0.0, 0.0, twist[1])),
+        twist=bag.msg_class("geometry_msgs/msg/Twist")(linear=_vec3(bag, twist[0]),
+                                                       angular=_vec3(bag, 0.0, 0.0, twist[1])),
         covariance=np.zeros(36, dtype=np.float64))
     return bag.msg_class(ODOMETRY)(header=bag.header(stamp, frame, seq), child_frame_id=child, pose=pwc, twist=twc)
 

@@ -26,8 +26,9 @@ scans' clock (header stamps of the bag, or the CARMEN log's timestamps).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 

@@ -24,7 +24,7 @@ then anything wrong is a DynSlamError.
 from __future__ import annotations
 
 import math
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -44,12 +44,12 @@ def _median_mount(odom: np.ndarray, laser: np.ndarray) -> Pose2D | None:
     good = np.all(np.isfinite(odom), axis=1) & np.all(np.isfinite(laser), axis=1)
     if not good.any():
         return None
-    o, l = odom[good], laser[good]
+    o, la = odom[good], laser[good]
     c, s = np.cos(o[:, 2]), np.sin(o[:, 2])
-    dx, dy = l[:, 0] - o[:, 0], l[:, 1] - o[:, 1]
+    dx, dy = la[:, 0] - o[:, 0], la[:, 1] - o[:, 1]
     mx = c * dx + s * dy
     my = -s * dx + c * dy
-    mt = wrap_angle(l[:, 2] - o[:, 2])
+    mt = wrap_angle(la[:, 2] - o[:, 2])
     return Pose2D(float(np.median(mx)), float(np.median(my)), float(np.median(mt)))
 
 

@@ -25,9 +25,10 @@ import json
 import os
 import shutil
 import tempfile
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 from dynslam2d import __version__
 from dynslam2d.errors import DynSlamError
@@ -92,7 +93,7 @@ def write_marker(folder: str | os.PathLike[str], status: str, **info: Any) -> Pa
     from dynslam2d.io.atomic import write_text_atomic
 
     data = {"tool": "dynslam2d", "version": __version__, "status": status,
-            "written": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), **info}
+            "written": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"), **info}
     return write_text_atomic(Path(folder) / MARKER, json.dumps(data, indent=2, default=str) + "\n")
 
 
@@ -150,7 +151,7 @@ class ResultsFolder:
         """
         if not self.replace:
             return self.final
-        stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%d-%H%M%S")
+        stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%d-%H%M%S")
         target = _abs(self.final).parent / f"{self.final.name}.incomplete-{stamp}"
         os.replace(self.work, target)
         self.work = target
@@ -202,7 +203,8 @@ def plan_results_folder(
             )
         if not force:
             raise DynSlamError(
-                f"--out {out}: holds the results of an earlier run; use --force to replace them, or choose another folder"
+                f"--out {out}: holds the results of an earlier run; use --force to replace them, or choose another "
+                f"folder"
             )
         for inp in inputs:
             if same_or_inside(inp, p):
@@ -252,7 +254,8 @@ def check_bag_target(
     if p.exists() or p.is_symlink():
         if not force:
             raise DynSlamError(
-                f"--write-bag {path}: exists already; use --force to replace a bag dynslam2d wrote, or choose another name"
+                f"--write-bag {path}: exists already; use --force to replace a bag dynslam2d wrote, or choose another "
+                f"name"
             )
         if not is_own_bag(p):
             raise DynSlamError(f"--write-bag {path}: exists and is not a bag written by dynslam2d; it is not replaced")

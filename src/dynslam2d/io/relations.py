@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from dynslam2d.errors import DynSlamError
-from dynslam2d.stamps import nearest_sorted
 from dynslam2d.io.carmen import read_text
+from dynslam2d.stamps import nearest_sorted
 
 #: Default stamp-matching tolerance, s (relation stamps are written with 6 decimals).
 DEFAULT_MATCH_TOL = 1e-3

@@ -74,7 +74,8 @@ def read_clock_pairs(path: str | os.PathLike[str]) -> ClockMap:
         ipc.append(a)
         logger.append(b)
     if not logger:
-        raise DynSlamError(f"{p}: no FLASER / ROBOTLASER1 records, so no clock pairs; pass the log that has both clocks")
+        raise DynSlamError(f"{p}: no FLASER / ROBOTLASER1 records, so no clock pairs; pass the log that has both "
+                           f"clocks")
     lg = np.asarray(logger)
     off = np.asarray(ipc) - lg
     if np.all(np.abs(off) < 1e-9):

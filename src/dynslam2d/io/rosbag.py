@@ -29,12 +29,13 @@ from a bag round-trips exactly; any other Scan is rounded to float32 on writing
 from __future__ import annotations
 
 import contextlib
-import tempfile
 import math
 import os
+import tempfile
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -287,7 +288,8 @@ def list_topics(path: str | os.PathLike[str]) -> dict[str, str]:
         return _topic_types(reader)
 
 
-def read_topic_messages(path: str | os.PathLike[str], topics: Iterable[str]) -> Iterator[tuple[str, str, int, float, Any]]:
+def read_topic_messages(path: str | os.PathLike[str],
+                        topics: Iterable[str]) -> Iterator[tuple[str, str, int, float, Any]]:
     """Yield ``(topic, msgtype, index, bag time s, message)`` of several topics in one pass.
 
     Messages come in the bag's time order; ``index`` counts per topic from 0. Topics
@@ -762,7 +764,8 @@ def open_bag_writer(path: str | os.PathLike[str], *, storage: str | None = None)
     Goes through :func:`atomic_path`; on any exception nothing is left at ``path``.
     """
     from rosbags.rosbag1 import Writer as Writer1
-    from rosbags.rosbag2 import StoragePlugin, Writer as Writer2
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as Writer2
     from rosbags.typesys import Stores, get_typestore
 
     final = Path(path)

@@ -43,7 +43,8 @@ def _need(run_dir: Path, name: str) -> Path:
         raise DynSlamError(f"{run_dir}: results folder not found (write one with 'dynslam2d run')")
     path = run_dir / name
     if not path.is_file():
-        raise DynSlamError(f"{run_dir}: not a complete results folder ({name} is missing; write one with 'dynslam2d run')")
+        raise DynSlamError(f"{run_dir}: not a complete results folder ({name} is missing; write one with 'dynslam2d "
+                           f"run')")
     return path
 
 

@@ -18,8 +18,8 @@ import stat
 import tempfile
 import time
 import weakref
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 from dynslam2d.errors import DynSlamError
 from dynslam2d.types import Pose2D, Scan, ScanSource, SourceMeta
@@ -83,7 +83,8 @@ def spool_stream(
                     raise DynSlamError(f"{name}: the stream ended before any data; nothing to read")
             if not first and time.monotonic() >= deadline:
                 raise DynSlamError(
-                    f"{name}: no data within {wait_s:g} s (a FIFO with no writer?); start the writer first or pass a file"
+                    f"{name}: no data within {wait_s:g} s (a FIFO with no writer?); start the writer first or pass a "
+                    f"file"
                 )
         os.set_blocking(fd, True)
         out = tempfile.NamedTemporaryFile(prefix="dynslam2d-stream-", delete=False)

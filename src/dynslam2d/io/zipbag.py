@@ -14,8 +14,9 @@ import os
 import shutil
 import tempfile
 import zipfile
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 from dynslam2d.errors import DynSlamError
 from dynslam2d.types import Scan, SourceMeta

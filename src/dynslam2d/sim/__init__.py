@@ -32,7 +32,7 @@ from dynslam2d.sim.overview import plot_overview
 from dynslam2d.sim.robot import ScriptedRobot, oscillating_in_place, waypoint_path
 from dynslam2d.sim.scenarios import SCENARIOS, Scenario, ScenarioSpec, build_scenario, paper_room
 from dynslam2d.sim.sensor import LidarModel
-from dynslam2d.sim.simulation import MOVER_ROW_FIELDS, GroundTruth, Simulation, SimSource, simulate
+from dynslam2d.sim.simulation import MOVER_ROW_FIELDS, GroundTruth, SimSource, Simulation, simulate
 from dynslam2d.sim.world import (
     LABEL_NONE,
     LABEL_STATIC,

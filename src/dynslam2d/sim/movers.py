@@ -19,8 +19,8 @@ Shapes are :class:`Rect` (``length`` along the heading × ``width`` across) and
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 

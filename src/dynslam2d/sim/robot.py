@@ -9,8 +9,8 @@ plus a sinusoidal yaw oscillation ``A·sin(2π t / T + φ)`` on top — the
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 

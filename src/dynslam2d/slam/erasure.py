@@ -19,8 +19,8 @@ Bookkeeping, per track and map level, at every map update (the pipeline calls
 
 Erasure (:meth:`EvidenceLedger.erase_entering`) subtracts the recorded log-odds from each
 recorded cell where they make up at least ``erase_min_share`` of the cell's log-odds (a wall
-cell that many scans hit keeps the few hits a false track added) — a cell that was free before the object stood there is free again, one
-that only the object made known is unknown again — and refreshes the probability cache
+cell that many scans hit keeps the few hits a false track added) — a cell that was free before the object stood there
+is free again, one that only the object made known is unknown again — and refreshes the probability cache
 of those cells. No other cell of any level changes. A track's evidence is erased when it
 is in the pipeline's removal set, *stood* before it entered it (slower than ``stand_speed``
 at one place for ``link_min_stand``: what a walker wrote in the second before it joined M
@@ -126,7 +126,7 @@ class EvidenceLedger:
         if not (own >= 0).any():
             return None
         per_track: dict[int, list] = {}
-        for k, lv in enumerate(hmap.levels):
+        for lv in hmap.levels:
             cells = np.floor(pts / lv.resolution + 0.5).astype(np.int64)
             key = cells[:, 0] * 4294967296 + cells[:, 1]  # (i, j) as one integer (|i|, |j| < 2^31)
             other = np.unique(key[own < 0])

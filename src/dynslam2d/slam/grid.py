@@ -23,7 +23,6 @@ from dynslam2d.gridmap import GridMap
 from dynslam2d.slam.raycast import integrate_rays
 from dynslam2d.types import Pose2D
 
-
 #: Bytes per cell: float32 log-odds + float32 probability cache + int32 update index.
 _BYTES_PER_CELL = 12
 

@@ -136,13 +136,15 @@ class LoopConfig(BaseModel):
         0.03, gt=0.0, description="… and this rotation, rad."
     )
     odom_sigma_xy: float = Field(
-        0.01, gt=0.0, description="Standard deviation of a keyframe-to-keyframe edge, m, plus odom_sigma_per_m × its length."
+        0.01, gt=0.0, description="Standard deviation of a keyframe-to-keyframe edge, m, plus odom_sigma_per_m × its "
+                                  "length."
     )
     odom_sigma_per_m: float = Field(
         0.02, ge=0.0, description="Growth of that deviation with the edge's length, m/m."
     )
     odom_sigma_theta: float = Field(
-        0.004, gt=0.0, description="Standard deviation of a keyframe edge's rotation, rad, plus odom_sigma_theta_per_rad × |Δθ|."
+        0.004, gt=0.0, description="Standard deviation of a keyframe edge's rotation, rad, plus "
+                                   "odom_sigma_theta_per_rad × |Δθ|."
     )
     odom_sigma_theta_per_rad: float = Field(
         0.02, ge=0.0, description="Growth of the rotation deviation with the edge's rotation, rad/rad."

@@ -191,7 +191,8 @@ class LoopCloser:
         if node % every == 0:
             self._search(node)
         self._confirm(node)
-        if self._new_loops >= c.optimise_every or (self._new_loops >= 2 and node - self._opt_nodes >= 3 * c.optimise_every):
+        if self._new_loops >= c.optimise_every or (
+                self._new_loops >= 2 and node - self._opt_nodes >= 3 * c.optimise_every):
             self._optimise(final=False)
             self._opt_nodes = node
 
@@ -368,7 +369,8 @@ class LoopCloser:
     def _accept(self, cand: LoopCandidate) -> None:
         c = self.config
         cand.accepted = True
-        k = self.graph.add_edge(cand.anchor, cand.node, cand.z, diag_info(c.loop_sigma_xy, c.loop_sigma_theta), loop=True)
+        k = self.graph.add_edge(cand.anchor, cand.node, cand.z, diag_info(c.loop_sigma_xy, c.loop_sigma_theta),
+                                loop=True)
         self.loop_edges.append(k)
         self.stats["loops_accepted"] += 1
         self._new_loops += 1

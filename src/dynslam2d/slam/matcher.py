@@ -23,7 +23,6 @@ from numba import njit
 from dynslam2d.slam.grid import GridLevel
 from dynslam2d.slam.interp import interp_value_grad
 
-
 #: An accepted LM step smaller than this (cells and rad) ends the iterations on a level early;
 #: it only saves time (the reference always runs all steps).
 _CONVERGED_CELLS = 1e-3

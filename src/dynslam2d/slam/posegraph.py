@@ -245,7 +245,7 @@ class PoseGraph:
         lam = 1e-4
         it = 0
         m = ii.shape[0]
-        for it in range(1, iterations + 1):
+        for it in range(1, iterations + 1):  # noqa: B007 (the count is returned after the loop)
             e, ca, sa, dth_x, dth_y = parts
             w = self._weights(chi, loop, kernel, scale)
             # Jacobian blocks: J_i (3×3), J_j (3×3) per edge

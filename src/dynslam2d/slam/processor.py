@@ -27,9 +27,9 @@ from dynslam2d.slam.grid import MapTooLargeError, MultiResMap
 from dynslam2d.slam.matcher import (
     Degeneracy,
     angular_spread,
+    close_count,
     covariance_world,
     degeneracy,
-    close_count,
     evaluate,
     free_fraction,
     match_multires,

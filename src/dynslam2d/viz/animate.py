@@ -10,8 +10,8 @@ import numpy as np
 
 from dynslam2d.types import Scan, Track
 from dynslam2d.viz import style
-from dynslam2d.viz.gif import GifStream
 from dynslam2d.viz.figure import new_figure
+from dynslam2d.viz.gif import GifStream
 from dynslam2d.viz.mapplot import occupancy_image
 
 _MARGINS = {"left": 0.09, "right": 0.98, "bottom": 0.08, "top": 0.93}

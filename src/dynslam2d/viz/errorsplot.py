@@ -111,7 +111,8 @@ def plot_errors(
     e = ate_result.errors
     t = ate_result.stamps - ate_result.stamps[0] if len(ate_result.stamps) else ate_result.stamps
     t_origin = float(ate_result.stamps[0]) if len(ate_result.stamps) else 0.0
-    shade = {"degenerate": (style.DEGENERATE, 0.25, "degenerate"), "low_support": (style.LOW_SUPPORT, 0.35, "low support"),
+    shade = {"degenerate": (style.DEGENERATE, 0.25, "degenerate"),
+             "low_support": (style.LOW_SUPPORT, 0.35, "low support"),
              "lost": (style.LOST, 0.35, "lost")}
     for kind, spans in (intervals or {}).items():
         if kind not in shade or not spans:

@@ -81,7 +81,8 @@ def write_figures(
     paths["map.png"] = plot_map(
         out / "map.png", grid, traj.xy, reference_xy=ref_xy, title=title, dpi=dpi,
         tracks=tracks_to_draw(all_paths, last_stamp), boxes=boxes_to_draw(all_paths, last_stamp),
-        removed_xy=removed_xy, removed_count=removed_beams(result) if removed_xy is not None else None, erased=cleaned.erased if cleaned is not None else None,
+        removed_xy=removed_xy, removed_count=removed_beams(result) if removed_xy is not None else None,
+        erased=cleaned.erased if cleaned is not None else None,
         low_support=conf.get("low_support"), lost=conf.get("lost"),
         warning=pc.get("warning"),  # type: ignore[arg-type]
         loop_edges=_loop_segments(result),
