@@ -205,7 +205,7 @@ class Pipeline:
         if cand.shape[0] == 0:
             return
         r = scan.ranges[cand]
-        a = scan.angle_min + cand * scan.angle_increment
+        a = scan.angles[cand]
         pts = pose.transform_points(np.column_stack((r * np.cos(a), r * np.sin(a))))
         tc = self.config.detect.tracker
         structure, _, _ = map_evidence(pts, view, tc.map_occupied_logodds, tc.map_free_logodds, tc.map_free_radius)
@@ -324,7 +324,7 @@ def find_body(scans: Iterable[Scan], config: Config | None = None, max_scans: in
         if n >= max_scans:
             break
         drop = body.mask(scan)
-        masked = scan.with_ranges(np.where(drop, np.nan, scan.ranges)) if drop.any() else scan
+        masked = scan.without(drop) if drop.any() else scan
         res = slam.match(masked)
         body.observe(scan, res.pose)
         if not res.rejected:

@@ -76,7 +76,7 @@ class Keyframe:
     def kept(self) -> Scan:
         """The scan with the removed beams set to "no return"."""
         if self.removed.size and self.removed.any():
-            return self.scan.with_ranges(np.where(self.removed, np.nan, self.scan.ranges))
+            return self.scan.without(self.removed)
         return self.scan
 
 
