@@ -514,6 +514,188 @@ def run(
     tracks.csv, kept_mask.npz, config.yaml, summary.json, map.png, tracks.png and, with
     ground truth (sim: inputs or --gt), metrics.json and errors.png; run.gif with --animate.
     """
+    _check_run_options(input, topic, viewer, {
+        "--map-resolution": map_resolution, "--update-distance": update_distance, "--update-angle": update_angle,
+        "--laser-min-dist": laser_min_dist, "--laser-max-dist": laser_max_dist, "--map-period": map_period})
+    cfg = _run_config(config, {
+        "map_resolution": map_resolution, "map_levels": map_levels,
+        "map_update_distance_thresh": update_distance, "map_update_angle_thresh": update_angle,
+        "laser_min_dist": laser_min_dist, "laser_max_dist": laser_max_dist,
+        "constant_velocity": constant_velocity, "correlative_mode": correlative,
+    }, filter_mode=filter_mode, range_scale=range_scale, clean=clean, loop_closure=loop_closure,
+        hector_compat=hector_compat)
+    _check_sim_only(input, seed, duration)
+    inputs = _input_paths(input, gt, config)
+    truth_files = _read_gt(gt)  # before the first scan: a bad --gt fails now
+    from dynslam2d.inputs import open_source
+    from dynslam2d.io.odometry import parse_laser_offset
+
+    if frame not in ("laser", "base_link"):
+        raise DynSlamError(f"--frame must be 'laser' or 'base_link', got {frame!r}")
+    offset = parse_laser_offset(laser_offset) if laser_offset else None
+    out = out or _default_out("run")
+    folder = _plan_run_folder(out, force, inputs, write_bag)  # outputs first: reading a log can take long
+    source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad, odom=odom, imu=imu,
+                         laser_offset=offset)
+    mount = _laser_mount(source.meta) if frame == "base_link" else None
+    _check_source(source, cfg, write_bag)
+    show = not (quiet or as_json)
+    compiling = _announce_run(source, show)
+    from dynslam2d.io.checkpoint import Checkpointer
+    from dynslam2d.slam.cleanup import CleanupRecorder
+    from dynslam2d.viz.collect import RemovedPointsCollector
+
+    collector = RemovedPointsCollector()
+    cleaner = CleanupRecorder(cfg.clean, cfg.slam)
+    folder.start(input=source.meta.origin)
+    checkpointer = Checkpointer(folder.work, every_s=checkpoint_period, every_scans=checkpoint_scans,
+                                info={"input": source.meta.origin})
+    old_term = _sigterm_as_interrupt()
+    try:
+        with contextlib.ExitStack() as stack:
+            observers: list[Any] = [collector, checkpointer]
+            observers += _run_observers(stack, cfg, folder.work, cleaner, animate=animate, frame_step=frame_step,
+                                        write_bag=write_bag, bag_storage=bag_storage, map_period=map_period,
+                                        viewer=viewer, rerun_save=rerun_save)
+            result = _map_with_progress(source, cfg, observers, show)
+        cleaner.counter = None  # the clean-up pass is done (cleaner.result): free its counts before the figures
+        _check_run_usable(result, input)
+        from dynslam2d.results import ground_truth_for
+
+        truth = ground_truth_for(source, truth_files, cfg.slam.map_resolution)
+        outputs = _write_run_outputs(result, folder.work, out, truth, collector, cleaner.result, mount)
+        folder.finish()
+    except KeyboardInterrupt:
+        _interrupted(folder, checkpointer)
+    except BaseException:
+        folder.discard()
+        raise
+    finally:
+        _restore_sigterm(old_term)
+    if as_json:
+        sys.stdout.write(json.dumps({**outputs.summary, "out": str(out)}, indent=2) + "\n")
+        return
+    if quiet:
+        return
+    _warn_odometry_gaps(source.meta.extra.get("odometry"))
+    _print_run(input, outputs, source.meta.extra.get("odometry"), compiling)
+    console.print(Text.assemble("results in ", (str(out), "bold")))
+    if write_bag is not None:
+        console.print(Text.assemble("bag for RViz / Foxglove: ", (str(write_bag), "bold"), " (docs/ros.md)"))
+
+
+def _check_run_options(input: str, topic: str | None, viewer: str, numbers: dict[str, float | None]) -> None:
+    """``run``'s options that need no file: the viewer's name, finite numbers, a non-empty topic."""
+    if viewer not in ("none", "rerun"):
+        raise DynSlamError(f"--viewer must be 'none' or 'rerun', got {viewer!r}")
+    for name, value in numbers.items():
+        if value is not None and not math.isfinite(value):
+            raise DynSlamError(f"{name} must be a finite number, got {value}")
+    if topic is not None and not topic.strip():
+        raise DynSlamError(f"--topic is empty; give the LaserScan topic name (see 'dynslam2d info {input}')")
+
+
+def _on_off(name: str, value: str) -> bool:
+    """An on/off option's value as a bool."""
+    if value not in ("on", "off"):
+        raise DynSlamError(f"{name} must be 'on' or 'off', got {value!r}")
+    return value == "on"
+
+
+def _run_config(config: Path | None, slam: dict[str, Any], *, filter_mode: str | None, range_scale: str | None,
+                clean: str | None, loop_closure: str | None, hector_compat: bool) -> Any:
+    """``run``'s configuration: the --config file (or the defaults), then every option given on the command line
+    (``slam``: slam.* keys, None = not given)."""
+    from dynslam2d.config import Config, load_config, with_overrides
+
+    cfg = load_config(config) if config else Config()
+    cfg = with_overrides(cfg, {"slam": slam})
+    if filter_mode is not None:
+        cfg = with_overrides(cfg, {"filter": {"mode": filter_mode}})
+    if range_scale is not None:
+        cfg = with_overrides(cfg, {"laser": {"range_scale": _parse_range_scale(range_scale)}})
+    if clean is not None:
+        cfg = with_overrides(cfg, {"clean": {"enabled": _on_off("--clean", clean)}})
+    if loop_closure is not None:
+        cfg = with_overrides(cfg, {"loop": {"enabled": _on_off("--loop-closure", loop_closure)}})
+    if hector_compat:
+        cfg = with_overrides(cfg, {"slam": {"hector_gradient_bug": True, "step_mode": "gauss_newton",
+                                            "correlative_mode": "never"}})
+    return cfg
+
+
+def _read_gt(gt: Path | None) -> Any:
+    """The --gt folder's ground truth, or None."""
+    if gt is None:
+        return None
+    from dynslam2d.io.groundtruth import read_ground_truth_folder
+
+    return read_ground_truth_folder(gt)
+
+
+def _plan_run_folder(out: Path, force: bool, inputs: list[Path], write_bag: Path | None) -> Any:
+    """The results folder to write (and the --write-bag target checked against it), before any work."""
+    from dynslam2d.io.outputs import check_bag_target, plan_results_folder, same_or_inside
+
+    folder = plan_results_folder(out, force=force, inputs=inputs)
+    if write_bag is not None:
+        check_bag_target(write_bag, force=force, inputs=inputs, out=out)
+        if folder.replace and same_or_inside(write_bag, out):
+            raise DynSlamError(f"--write-bag {write_bag}: lies inside --out {out}, which is replaced; put the bag "
+                               f"elsewhere")
+    return folder
+
+
+def _check_source(source: Any, cfg: Any, write_bag: Path | None) -> None:
+    """What the opened input must allow before the run: odometry for --range-scale auto, a map that fits; then
+    the parts an interrupted --write-bag left are cleared."""
+    odo_info = source.meta.extra.get("odometry") or {}
+    if cfg.laser.range_scale == "auto" and not odo_info.get("has_odometry", bool(odo_info.get("source"))):
+        raise DynSlamError(f"{source.meta.origin}: --range-scale auto needs odometry, and the input has none "
+                           "(see --odom; or give the scale as a number)")
+    _check_map_size(source, cfg)
+    if write_bag is not None:
+        from dynslam2d.io.outputs import clean_stale_parts
+
+        clean_stale_parts(write_bag)
+
+
+def _announce_run(source: Any, show: bool) -> bool:
+    """Before a run, on stderr: the odometry used, the input's warnings, and whether kernels compile (returned)."""
+    if show:
+        err_console.print(f"odometry: {escape(source.meta.odometry or 'none (laser only)')}")
+        for w in source.meta.extra.get("warnings", []) or []:
+            err_console.print(f"[yellow]warning:[/] {escape(str(w))}")
+    return _say_if_compiling(show)
+
+
+def _run_observers(stack: contextlib.ExitStack, cfg: Any, work: Path, cleaner: Any, *, animate: bool,
+                   frame_step: int, write_bag: Path | None, bag_storage: str | None, map_period: float, viewer: str,
+                   rerun_save: Path | None) -> list[Any]:
+    """The optional observers of a run, in order: the clean-up recorder, the animation, the bag, the live viewer
+    (those that hold files or windows are entered on ``stack``)."""
+    observers: list[Any] = []
+    if cfg.clean.enabled:
+        observers.append(cleaner)
+    if animate:
+        from dynslam2d.viz.animate import Animator
+
+        observers.append(Animator(work / "run.gif", frame_step=frame_step))
+    if write_bag is not None:
+        from dynslam2d.io.rosout import BagRecorder
+
+        observers.append(stack.enter_context(BagRecorder(write_bag, storage=bag_storage, map_period=map_period)))
+    if viewer == "rerun":
+        from dynslam2d.viz.live import RerunViewer
+
+        observers.append(stack.enter_context(RerunViewer(save=rerun_save, map_period=map_period)))
+    return observers
+
+
+def _map_with_progress(source: Any, cfg: Any, observers: list[Any], show: bool) -> Any:
+    """Run the pipeline over ``source`` with a progress bar on stderr (scans/s after the first scan)."""
+    import time
+
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -523,172 +705,90 @@ def run(
         TimeRemainingColumn,
     )
 
-    from dynslam2d.config import Config, load_config, with_overrides
-    from dynslam2d.inputs import open_source
-    from dynslam2d.io.outputs import check_bag_target, clean_stale_parts, plan_results_folder, same_or_inside
     from dynslam2d.pipeline import run as run_pipeline
-    from dynslam2d.results import ground_truth_for, write_results
 
-    if viewer not in ("none", "rerun"):
-        raise DynSlamError(f"--viewer must be 'none' or 'rerun', got {viewer!r}")
-    for name, value in (("--map-resolution", map_resolution), ("--update-distance", update_distance),
-                        ("--update-angle", update_angle), ("--laser-min-dist", laser_min_dist),
-                        ("--laser-max-dist", laser_max_dist), ("--map-period", map_period)):
-        if value is not None and not math.isfinite(value):
-            raise DynSlamError(f"{name} must be a finite number, got {value}")
-    if topic is not None and not topic.strip():
-        raise DynSlamError(f"--topic is empty; give the LaserScan topic name (see 'dynslam2d info {input}')")
-    cfg = load_config(config) if config else Config()
-    cfg = with_overrides(cfg, {"slam": {
-        "map_resolution": map_resolution, "map_levels": map_levels,
-        "map_update_distance_thresh": update_distance, "map_update_angle_thresh": update_angle,
-        "laser_min_dist": laser_min_dist, "laser_max_dist": laser_max_dist,
-        "constant_velocity": constant_velocity, "correlative_mode": correlative,
-    }})
-    if filter_mode is not None:
-        cfg = with_overrides(cfg, {"filter": {"mode": filter_mode}})
-    if range_scale is not None:
-        cfg = with_overrides(cfg, {"laser": {"range_scale": _parse_range_scale(range_scale)}})
-    if clean is not None:
-        if clean not in ("on", "off"):
-            raise DynSlamError(f"--clean must be 'on' or 'off', got {clean!r}")
-        cfg = with_overrides(cfg, {"clean": {"enabled": clean == "on"}})
-    if loop_closure is not None:
-        if loop_closure not in ("on", "off"):
-            raise DynSlamError(f"--loop-closure must be 'on' or 'off', got {loop_closure!r}")
-        cfg = with_overrides(cfg, {"loop": {"enabled": loop_closure == "on"}})
-    if hector_compat:
-        cfg = with_overrides(cfg, {"slam": {"hector_gradient_bug": True, "step_mode": "gauss_newton",
-                                            "correlative_mode": "never"}})
-    _check_sim_only(input, seed, duration)
-    inputs = _input_paths(input, gt, config)
-    truth_files = None
-    if gt is not None:
-        from dynslam2d.io.groundtruth import read_ground_truth_folder
-
-        truth_files = read_ground_truth_folder(gt)  # before the first scan: a bad --gt fails now
-    from dynslam2d.io.odometry import parse_laser_offset
-
-    if frame not in ("laser", "base_link"):
-        raise DynSlamError(f"--frame must be 'laser' or 'base_link', got {frame!r}")
-    offset = parse_laser_offset(laser_offset) if laser_offset else None
-    out = out or _default_out("run")
-    folder = plan_results_folder(out, force=force, inputs=inputs)  # outputs first: reading a log can take long
-    if write_bag is not None:
-        check_bag_target(write_bag, force=force, inputs=inputs, out=out)
-        if folder.replace and same_or_inside(write_bag, out):
-            raise DynSlamError(f"--write-bag {write_bag}: lies inside --out {out}, which is replaced; put the bag "
-                               f"elsewhere")
-    source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad, odom=odom, imu=imu,
-                         laser_offset=offset)
-    mount = _laser_mount(source.meta) if frame == "base_link" else None
-    odo_info = source.meta.extra.get("odometry") or {}
-    if cfg.laser.range_scale == "auto" and not odo_info.get("has_odometry", bool(odo_info.get("source"))):
-        raise DynSlamError(f"{source.meta.origin}: --range-scale auto needs odometry, and the input has none "
-                           "(see --odom; or give the scale as a number)")
-    _check_map_size(source, cfg)
-    if write_bag is not None:
-        clean_stale_parts(write_bag)
     total = source.meta.count
-    show = not (quiet or as_json)
-    if show:
-        err_console.print(f"odometry: {escape(source.meta.odometry or 'none (laser only)')}")
-        for w in source.meta.extra.get("warnings", []) or []:
-            err_console.print(f"[yellow]warning:[/] {escape(str(w))}")
-    compiling = _say_if_compiling(show)
     progress = Progress(
         TextColumn("[bold]mapping[/]"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
         TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=err_console, disable=not show,
     )
-    from dynslam2d.io.checkpoint import Checkpointer
-    from dynslam2d.viz.collect import RemovedPointsCollector
+    with progress:
+        task = progress.add_task("map", total=total, rate="")
+        state = {"t0": None}
 
-    collector = RemovedPointsCollector()
-    from dynslam2d.slam.cleanup import CleanupRecorder
+        def tick(n: int, step: object) -> None:
+            now = time.perf_counter()
+            if state["t0"] is None:
+                state["t0"] = now
+            if n % 10 == 0 or n == total:
+                el = now - state["t0"]
+                progress.update(task, completed=n, rate=f"{(n - 1) / el:.0f} scans/s" if el > 0 else "")
 
-    cleaner = CleanupRecorder(cfg.clean, cfg.slam)
-    folder.start(input=source.meta.origin)
-    checkpointer = Checkpointer(folder.work, every_s=checkpoint_period, every_scans=checkpoint_scans,
-                                info={"input": source.meta.origin})
-    old_term = _sigterm_as_interrupt()
+        result = run_pipeline(source, cfg, progress=tick, observers=observers)
+        progress.update(task, completed=result.n_scans)
+    return result
+
+
+def _write_run_outputs(result: Any, work: Path, out: Path, truth: Any, collector: Any, cleaned: Any,
+                       mount: Any) -> Any:
+    """Write the results folder (evaluated once against ``truth`` when there is one); with --frame base_link
+    turn its trajectories into base_link poses. Returns what was written (:class:`dynslam2d.results.RunOutputs`)."""
+    from dynslam2d.results import write_outputs
+
     try:
-        with contextlib.ExitStack() as stack:
-            observers: list[Any] = [collector, checkpointer]
-            if cfg.clean.enabled:
-                observers.append(cleaner)
-            if animate:
-                from dynslam2d.viz.animate import Animator
+        outputs = write_outputs(result, work, truth, collector, cleaned=cleaned)
+        if mount is not None:
+            _rewrite_frame(work, mount)
+            from dynslam2d.io.odometry import base_frame_fields
 
-                observers.append(Animator(folder.work / "run.gif", frame_step=frame_step))
-            if write_bag is not None:
-                from dynslam2d.io.rosout import BagRecorder
+            outputs.summary.update(base_frame_fields(mount))  # as rewritten into summary.json
+    except OSError as exc:  # disk full, folder removed under our feet, …
+        raise DynSlamError(f"--out {out}: cannot write the results ({exc.strerror or exc}); nothing was "
+                           f"kept") from None
+    return outputs
 
-                observers.append(stack.enter_context(BagRecorder(write_bag, storage=bag_storage,
-                                                                 map_period=map_period)))
-            if viewer == "rerun":
-                from dynslam2d.viz.live import RerunViewer
 
-                observers.append(stack.enter_context(RerunViewer(save=rerun_save, map_period=map_period)))
-            with progress:
-                task = progress.add_task("map", total=total, rate="")
-                state = {"t0": None}
+def _rewrite_frame(work: Path, mount: Any) -> None:
+    """--frame base_link: trajectory.tum (and the front end's, with loop closure) as base_link poses."""
+    from dynslam2d.io.odometry import rewrite_trajectory_frame
 
-                def tick(n: int, step: object) -> None:
-                    import time as _time
+    rewrite_trajectory_frame(work, mount)
+    if (work / "trajectory_frontend.tum").exists():  # loop closure: the front end's too
+        from dynslam2d.io.odometry import compose_mount
+        from dynslam2d.io.trajectory import Trajectory, read_tum, write_tum
 
-                    now = _time.perf_counter()
-                    if state["t0"] is None:
-                        state["t0"] = now
-                    if n % 10 == 0 or n == total:
-                        el = now - state["t0"]
-                        progress.update(task, completed=n, rate=f"{(n - 1) / el:.0f} scans/s" if el > 0 else "")
+        ft = read_tum(work / "trajectory_frontend.tum")
+        write_tum(work / "trajectory_frontend.tum",
+                  Trajectory(ft.stamps, compose_mount(ft.poses, mount.inverse()), ft.frame),
+                  comment="base_link pose in the map frame, front end before loop closure")
 
-                result = run_pipeline(source, cfg, progress=tick, observers=observers)
-                progress.update(task, completed=result.n_scans)
-        cleaner.counter = None  # the clean-up pass is done (cleaner.result): free its counts before the figures
-        _check_run_usable(result, input)
-        truth = ground_truth_for(source, truth_files, cfg.slam.map_resolution)
-        try:
-            paths = write_results(result, folder.work, truth, collector, cleaned=cleaner.result)
-            if mount is not None:
-                from dynslam2d.io.odometry import rewrite_trajectory_frame
 
-                rewrite_trajectory_frame(folder.work, mount)
-                if (folder.work / "trajectory_frontend.tum").exists():  # loop closure: the front end's too
-                    from dynslam2d.io.odometry import compose_mount
-                    from dynslam2d.io.trajectory import Trajectory, read_tum, write_tum
-
-                    ft = read_tum(folder.work / "trajectory_frontend.tum")
-                    write_tum(folder.work / "trajectory_frontend.tum",
-                              Trajectory(ft.stamps, compose_mount(ft.poses, mount.inverse()), ft.frame),
-                              comment="base_link pose in the map frame, front end before loop closure")
-        except OSError as exc:  # disk full, folder removed under our feet, …
-            raise DynSlamError(f"--out {out}: cannot write the results ({exc.strerror or exc}); nothing was "
-                               f"kept") from None
-        folder.finish()
-    except KeyboardInterrupt:
-        _interrupted(folder, checkpointer)
-    except BaseException:
-        folder.discard()
-        raise
-    finally:
-        _restore_sigterm(old_term)
-    paths = {k: out / v.name for k, v in paths.items()}
-    summary = json.loads(paths["summary.json"].read_text())
-    if as_json:
-        summary["out"] = str(out)
-        sys.stdout.write(json.dumps(summary, indent=2) + "\n")
-        return
-    if quiet:
-        return
-    skipped = summary.get("input_skipped", {})
-    odo = source.meta.extra.get("odometry")
+def _warn_odometry_gaps(odo: Any) -> None:
+    """After a run, on stderr: scans that had no odometry or no IMU yaw rate."""
     if isinstance(odo, dict) and (odo.get("without_odom") or 0) > 0:
         err_console.print(f"[yellow]warning:[/] odometry: {odo['without_odom']} of {odo['scans']} scans had no "
                           f"odometry (outside its time span or in a gap): matched laser only")
     if isinstance(odo, dict) and odo.get("imu") and odo.get("scans") and odo.get("with_yaw_rate", 0) < odo["scans"]:
         err_console.print(f"[yellow]warning:[/] IMU: {odo['scans'] - odo['with_yaw_rate']} of {odo['scans']} scans had "
                           f"no yaw rate (outside the IMU's time span or in a gap): no rotation prior there")
+
+
+def _print_run(input: str, outputs: Any, odo: Any, compiling: bool) -> None:
+    """The table of a run: summary.json's numbers and, with ground truth, metrics.json's (as written)."""
+    summary = outputs.summary
+    rows = _summary_rows(summary, odo, compiling)
+    if outputs.metrics is not None:
+        rows += _metric_rows(outputs.metrics)
+    _show(_stats_table(f"dynslam2d run {input}", rows))
+    pc = summary.get("pose_confidence")
+    if pc and pc.get("warning"):
+        console.print(Text.assemble(("warning: ", "bold red"), f"{pc['warning']} — the map and trajectory are not "
+                                    "reliable there (map.png marks the poses)"))
+
+
+def _summary_rows(summary: dict[str, Any], odo: Any, compiling: bool) -> list[tuple[str, str]]:
+    """The run table's rows from summary.json: speed, map updates, odometry, tracks, removal, map, clean-up, …"""
+    skipped = summary.get("input_skipped", {})
     rows = [
         ("scans", str(summary["scans"])),
         ("wall time", f"{summary['wall_time_s']:.1f} s ({summary['scans_per_s']} scans/s"
@@ -730,15 +830,7 @@ def run(
         rows.append(("robot's own returns dropped",
                      f"{body.get('footprint_dropped_returns', 0) + body.get('auto_dropped_returns', 0)} "
                      f"({body.get('auto_body_beams', 0)} body beams found; suggested footprint in summary.json)"))
-    if "metrics.json" in paths:
-        rows += _metric_rows(json.loads(paths["metrics.json"].read_text()))
-    _show(_stats_table(f"dynslam2d run {input}", rows))
-    if pc and pc.get("warning"):
-        console.print(Text.assemble(("warning: ", "bold red"), f"{pc['warning']} — the map and trajectory are not "
-                                    "reliable there (map.png marks the poses)"))
-    console.print(Text.assemble("results in ", (str(out), "bold")))
-    if write_bag is not None:
-        console.print(Text.assemble("bag for RViz / Foxglove: ", (str(write_bag), "bold"), " (docs/ros.md)"))
+    return rows
 
 
 def _parse_range_scale(text: str) -> float | str:

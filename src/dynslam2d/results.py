@@ -13,6 +13,7 @@ import csv
 import io
 import json
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -20,10 +21,7 @@ import numpy as np
 
 from dynslam2d.config import dump_config
 from dynslam2d.errors import DynSlamError
-from dynslam2d.eval.maps import map_metrics
-from dynslam2d.eval.motionclass import removal_by_motion, time_to_m
-from dynslam2d.eval.removal import match_scans, removal_metrics
-from dynslam2d.eval.trajectory import ate
+from dynslam2d.eval.runeval import RunEvaluation, evaluate_run
 from dynslam2d.gridmap import GridMap
 from dynslam2d.io.atomic import atomic_path, write_text_atomic
 from dynslam2d.io.groundtruth import GroundTruthFiles, read_ground_truth_folder
@@ -72,49 +70,27 @@ def evaluate(
     removed_stamps: np.ndarray | None = None,
     tracks: np.ndarray | None = None,
 ) -> dict[str, Any]:
-    """Every metric of a run against ground truth (formulas in docs/metrics.md).
-
-    - ATE (SE(2)-aligned, evo's definition) of ``trajectory`` against the GT trajectory;
-    - map metrics (paper Eq. 9 IoU, Eq. 10 weighted RMSE, tolerant precision / recall /
-      F1, ghost area) of ``grid`` against the GT static map, with the ATE alignment
-      mapping the run's map frame into the ground-truth frame;
-    - with ``removed`` ((n, beams) bool, True = beam removed by the filter) and its stamps:
-      precision / recall of removed beams against the per-beam labels;
-    - with ``tracks`` (tracks.csv rows, :data:`dynslam2d.io.runfolder.TRACK_DTYPE`): how fast
-      walking movers enter M (:func:`dynslam2d.eval.motionclass.time_to_m`).
-    """
-    dt = float(np.median(np.diff(gt.trajectory.stamps))) / 2 if len(gt.trajectory) > 1 else 0.01
-    res = ate(gt.trajectory, trajectory, align=True, max_dt=max(dt, 1e-3))
-    a = res.alignment
-    out: dict[str, Any] = {
-        "ate_rmse_m": res.trans.rmse,
-        "ate_m": res.trans.as_dict(),
-        "ate_rotation_rad": res.rot.as_dict(),
-        "alignment": {"x": a.x, "y": a.y, "theta": a.theta},
-        "poses_compared": res.n,
-        "map": map_metrics(grid, gt.static_map, transform=a).as_dict(),
-    }
-    if removed is not None and removed_stamps is not None and removed.size:
-        i_run, i_gt = match_scans(removed_stamps, gt.stamps, max_dt=max(dt, 1e-3))
-        lab = gt.labels[i_gt]
-        rem = removed[i_run]
-        if rem.shape[1] == lab.shape[1]:
-            out["removal"] = removal_metrics(rem, lab).as_dict()
-            if gt.movers is not None and gt.movers.shape[0]:
-                # walking / standing / stopped movers apart (dynslam2d.eval.motionclass)
-                out["removal_by_motion"] = removal_by_motion(rem, lab, gt.stamps[i_gt], gt.movers).as_dict()
-    if tracks is not None and gt.movers is not None and gt.movers.shape[0] and "hits" in (gt.movers.dtype.names or ()):
-        out["time_to_m"] = time_to_m(gt.movers, tracks, transform=a).as_dict()
-    return out
+    """Every metric of a run against ground truth, as metrics.json holds them: the
+    :meth:`~dynslam2d.eval.runeval.RunEvaluation.as_dict` of
+    :func:`~dynslam2d.eval.runeval.evaluate_run` (formulas in docs/metrics.md)."""
+    return evaluate_run(trajectory, grid, gt, removed, removed_stamps, tracks).as_dict()
 
 
-def compute_metrics(run: RunResult, gt: GroundTruthFiles) -> dict[str, Any]:
-    """:func:`evaluate` on an in-memory run."""
+def evaluate_result(run: RunResult, gt: GroundTruthFiles, cleaned: CleanResult | None = None) -> RunEvaluation:
+    """:func:`~dynslam2d.eval.runeval.evaluate_run` on an in-memory run; with ``cleaned`` (the clean-up
+    pass, docs/maps.md) its map is scored as ``map`` and the online map as ``map_online``."""
     from dynslam2d.io.runfolder import TRACK_DTYPE
 
     removed = run.removed
     tracks = np.array([tuple(r) for r in run.track_rows], dtype=TRACK_DTYPE)
-    return evaluate(run.trajectory, run.grid, gt, removed if removed.size else None, run.trajectory.stamps, tracks)
+    return evaluate_run(run.trajectory, run.grid, gt, removed if removed.size else None, run.trajectory.stamps, tracks,
+                        cleaned=cleaned.grid if cleaned is not None else None,
+                        cleanup=dict(cleaned.stats) if cleaned is not None else None)
+
+
+def compute_metrics(run: RunResult, gt: GroundTruthFiles) -> dict[str, Any]:
+    """:func:`evaluate` on an in-memory run (its online map)."""
+    return evaluate_result(run, gt).as_dict()
 
 
 def tracks_csv(run: RunResult) -> str:
@@ -170,14 +146,39 @@ def metrics_json(data: Any) -> str:
     return json.dumps(data, indent=2, default=default) + "\n"
 
 
-def write_results(
+@dataclass(frozen=True, eq=False)
+class RunOutputs:
+    """What :func:`write_outputs` wrote, for a caller that reports on it without reading the files back.
+
+    Attributes:
+        paths: every written file by name (``"summary.json"``, ``"map.png"``, …).
+        summary: summary.json's content as written (plain JSON values: lists, str keys, …).
+        metrics: metrics.json's content as written, or None without ground truth.
+        evaluation: the typed evaluation metrics.json and the figures came from, or None.
+    """
+
+    paths: dict[str, Path]
+    summary: dict[str, Any]
+    metrics: dict[str, Any] | None = None
+    evaluation: RunEvaluation | None = None
+
+
+def write_results(run: RunResult, out_dir: str | os.PathLike[str], gt: GroundTruthFiles | None = None,
+                  collector: RemovedPointsCollector | None = None,
+                  cleaned: CleanResult | None = None) -> dict[str, Path]:
+    """Write the results of ``run`` into ``out_dir``; return the written paths by name
+    (:func:`write_outputs`, whose other results the caller does not need)."""
+    return write_outputs(run, out_dir, gt, collector, cleaned=cleaned).paths
+
+
+def write_outputs(
     run: RunResult,
     out_dir: str | os.PathLike[str],
     gt: GroundTruthFiles | None = None,
     collector: RemovedPointsCollector | None = None,
     cleaned: CleanResult | None = None,
-) -> dict[str, Path]:
-    """Write the results of ``run`` into ``out_dir``; return the written paths by name.
+) -> RunOutputs:
+    """Write the results of ``run`` into ``out_dir``; return the paths, summary and metrics written.
 
     ``collector``: the :class:`~dynslam2d.viz.collect.RemovedPointsCollector` that watched
     the run (``run(..., observers=[collector])``), to draw the removed points in map.png.
@@ -185,6 +186,9 @@ def write_results(
     map_logodds.npy then hold the cleaned map and map_online.pgm/.yaml and
     map_logodds_online.npy the online one; metrics.json's ``map`` scores the cleaned map
     and ``map_online`` the online one.
+
+    With ``gt`` the run is evaluated once (:func:`evaluate_result`): metrics.json, the
+    summary's ``ate_rmse_m`` and the figures all come from that one :class:`RunEvaluation`.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -223,30 +227,27 @@ def write_results(
             np.savez_compressed(fh, stamps=run.trajectory.stamps, removed=removed)
     paths["kept_mask.npz"] = out / "kept_mask.npz"
     summary = run.summary()
-    metrics = compute_metrics(run, gt) if gt is not None else None
+    evaluation = evaluate_result(run, gt, cleaned) if gt is not None else None
     if cleaned is not None:
         summary["cleanup"] = dict(cleaned.stats)
-        if metrics is not None:
-            from dynslam2d.types import Pose2D
-
-            a = metrics["alignment"]
-            metrics["map_online"] = metrics["map"]
-            metrics["map"] = map_metrics(cleaned.grid, gt.static_map,  # type: ignore[union-attr]
-                                         transform=Pose2D(a["x"], a["y"], a["theta"])).as_dict()
-            metrics["cleanup"] = dict(cleaned.stats)
-    if metrics is not None:
-        summary["ate_rmse_m"] = metrics["ate_rmse_m"]
-        paths["metrics.json"] = write_text_atomic(out / "metrics.json", metrics_json(metrics))
+    metrics = None
+    if evaluation is not None:
+        summary["ate_rmse_m"] = evaluation.ate.rmse
+        text = metrics_json(evaluation.as_dict())
+        paths["metrics.json"] = write_text_atomic(out / "metrics.json", text)
+        metrics = json.loads(text)  # the values as written (JSON types), not the file read back
     summary.update(input_report(run.source))
     summary["status"] = "complete"
-    paths["summary.json"] = write_text_atomic(out / "summary.json", metrics_json(summary))
+    summary_text = metrics_json(summary)
+    paths["summary.json"] = write_text_atomic(out / "summary.json", summary_text)
     # Figures: map.png, tracks.png and, with ground truth, errors.png (dynslam2d.viz.figures).
     release_free_memory()  # figures allocate much; start them from a trimmed heap (memtrim.py)
-    paths.update(write_figures(run, out, gt, collector, cleaned=cleaned))
+    paths.update(write_figures(run, out, evaluation, collector, cleaned=cleaned))
     # run.json LAST: a folder whose run.json does not say "complete" lacks files (docs/reliability.md).
     paths["run.json"] = write_marker(out, "complete", scans=run.n_scans, input=run.source.origin,
                                      files=sorted(paths))
-    return paths
+    return RunOutputs(paths, json.loads(summary_text), metrics, evaluation)
 
 
-__all__ = ["compute_metrics", "evaluate", "evaluate_folder", "ground_truth_for", "write_results"]
+__all__ = ["RunOutputs", "compute_metrics", "evaluate", "evaluate_folder", "evaluate_result", "ground_truth_for",
+           "write_outputs", "write_results"]

@@ -185,6 +185,7 @@ class CellSets:
         truth_matched: A cells with a B cell within the tolerance; estimate_matched: the converse.
         observable: A cells within the tolerance of a cell the estimate observed.
         ghost: B cells farther than the ghost distance from every A cell.
+        tolerance, ghost_distance, occupied_threshold: the parameters the sets were built with (m, m, probability).
     """
 
     estimate: np.ndarray
@@ -198,6 +199,9 @@ class CellSets:
     estimate_matched: np.ndarray
     observable: np.ndarray
     ghost: np.ndarray
+    tolerance: float = 0.10
+    ghost_distance: float = 0.20
+    occupied_threshold: float = 0.65
 
 
 def cell_sets(
@@ -222,6 +226,7 @@ def cell_sets(
         estimate_matched=B & (d_to_a <= tolerance + _EPS),
         observable=A & (distance_to(known, res) <= tolerance + _EPS),
         ghost=B & (d_to_a > ghost_distance + _EPS),
+        tolerance=float(tolerance), ghost_distance=float(ghost_distance), occupied_threshold=float(occupied_threshold),
     )
 
 
@@ -253,7 +258,12 @@ def map_metrics(
         raise DynSlamError(
             f"map metrics: tolerance ({tolerance} m) and ghost distance ({ghost_distance} m) must be >= 0"
         )
-    cs = cell_sets(estimate, truth, transform, tolerance, ghost_distance, occupied_threshold)
+    return map_metrics_of(cell_sets(estimate, truth, transform, tolerance, ghost_distance, occupied_threshold))
+
+
+def map_metrics_of(cs: CellSets) -> MapMetrics:
+    """The :class:`MapMetrics` of cell sets already built by :func:`cell_sets` (what :func:`map_metrics`
+    computes after building them; a caller that also draws the sets builds them once)."""
     est, gt, A, B, est_known = cs.estimate, cs.truth, cs.truth_occupied, cs.estimate_occupied, cs.known
     res = cs.resolution
     n_a, n_b = int(A.sum()), int(B.sum())
@@ -316,9 +326,9 @@ def map_metrics(
         n_compared_occupied=n_occ,
         n_compared_free=n_free,
         resolution_m=res,
-        tolerance_m=float(tolerance),
-        ghost_distance_m=float(ghost_distance),
-        occupied_threshold=float(occupied_threshold),
+        tolerance_m=cs.tolerance,
+        ghost_distance_m=cs.ghost_distance,
+        occupied_threshold=cs.occupied_threshold,
     )
 
 
@@ -355,4 +365,4 @@ def load_run_map(run_dir: str | os.PathLike[str]) -> GridMap:
     return GridMap(prob, grid.resolution, grid.origin)
 
 
-__all__ = ["MapMetrics", "comparison_grids", "load_run_map", "map_metrics"]
+__all__ = ["MapMetrics", "comparison_grids", "load_run_map", "map_metrics", "map_metrics_of"]

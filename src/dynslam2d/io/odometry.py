@@ -418,6 +418,10 @@ def rewrite_trajectory_frame(run_dir: Any, mount: Pose2D) -> None:
     path = d / "summary.json"
     if path.exists():
         summary = json.loads(path.read_text())
-        summary["trajectory_frame"] = "base_link"
-        summary["base_to_laser"] = [mount.x, mount.y, mount.theta]
+        summary.update(base_frame_fields(mount))
         write_text_atomic(path, json.dumps(summary, indent=2) + "\n")
+
+
+def base_frame_fields(mount: Pose2D) -> dict[str, Any]:
+    """The summary.json fields :func:`rewrite_trajectory_frame` sets: the trajectory's frame and the mount."""
+    return {"trajectory_frame": "base_link", "base_to_laser": [mount.x, mount.y, mount.theta]}

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dynslam2d.eval.maps import cell_sets
+from dynslam2d.eval.maps import CellSets, cell_sets
 from dynslam2d.eval.trajectory import AteResult
 from dynslam2d.gridmap import GridMap
 from dynslam2d.types import Pose2D
@@ -65,7 +65,12 @@ def map_difference(
     MISSED cells are the observable true cells its ``recall`` counts as unmatched.
     ``transform`` is the pose of the estimate frame in the GT frame (the ATE alignment).
     """
-    cs = cell_sets(estimate, truth, transform, tolerance, ghost_distance, occupied_threshold)
+    return map_difference_of(cell_sets(estimate, truth, transform, tolerance, ghost_distance, occupied_threshold))
+
+
+def map_difference_of(cs: CellSets) -> MapDifference:
+    """The :class:`MapDifference` of cell sets already built by :func:`dynslam2d.eval.maps.cell_sets` (the
+    same sets the map metrics count: a run's evaluation builds them once for both)."""
     est, A, B, known, ghost = cs.estimate, cs.truth_occupied, cs.estimate_occupied, cs.known, cs.ghost
     res, origin = cs.resolution, cs.origin
     missed = cs.observable & ~cs.truth_matched
@@ -158,4 +163,4 @@ def plot_errors(
     return save_png(fig, path, dpi)
 
 
-__all__ = ["CLASS_COLOURS", "MapDifference", "map_difference", "plot_errors"]
+__all__ = ["CLASS_COLOURS", "MapDifference", "map_difference", "map_difference_of", "plot_errors"]

@@ -7,14 +7,13 @@ from pathlib import Path
 
 import numpy as np
 
-from dynslam2d.eval.trajectory import ate
+from dynslam2d.eval.runeval import RunEvaluation
 from dynslam2d.gridmap import GridMap
-from dynslam2d.io.groundtruth import GroundTruthFiles
 from dynslam2d.pipeline import RunResult
 from dynslam2d.slam.cleanup import CleanResult
 from dynslam2d.slam.confidence import stretches
 from dynslam2d.viz.collect import RemovedPointsCollector
-from dynslam2d.viz.errorsplot import map_difference, plot_errors
+from dynslam2d.viz.errorsplot import map_difference_of, plot_errors
 from dynslam2d.viz.mapplot import plot_map
 from dynslam2d.viz.trackpaths import TrackPath, boxes_to_draw, track_paths, tracks_to_draw
 from dynslam2d.viz.tracksplot import plot_tracks
@@ -34,7 +33,7 @@ def _loop_segments(result: RunResult) -> np.ndarray | None:
 def write_figures(
     result: RunResult,
     out_dir: str | os.PathLike[str],
-    gt: GroundTruthFiles | None = None,
+    evaluation: RunEvaluation | None = None,
     collector: RemovedPointsCollector | None = None,
     *,
     dpi: int = 120,
@@ -48,12 +47,16 @@ def write_figures(
       points (from ``collector``, if it watched the run), scale bar, axes in m;
     - ``tracks.png``: every track that was ever confirmed, coloured by speed (m/s), in-M
       segments solid, the rest dashed, ids labelled;
-    - ``errors.png`` (only with ``gt``): ATE over time and the map difference (ghost cells,
-      missed structure) over the ground-truth structure.
+    - ``errors.png`` (only with ``evaluation``): ATE over time and the map difference (ghost
+      cells, missed structure) over the ground-truth structure.
+
+    ``evaluation``: the run scored against ground truth (:func:`dynslam2d.eval.runeval.evaluate_run`,
+    the scores metrics.json holds); its ATE, alignment and cell sets are drawn as they are, never
+    computed again here.
 
     With ``cleaned`` (the clean-up pass, docs/maps.md) map.png shows the cleaned map with
-    the erased cells in :data:`style.ERASED`, and errors.png scores the cleaned map and
-    names the ghost area and F1 of both maps.
+    the erased cells in :data:`style.ERASED`, and errors.png draws the cleaned map and
+    names the ghost area and F1 of both maps (the evaluation's ``map`` and ``map_online``).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -63,11 +66,9 @@ def write_figures(
     all_paths = track_paths(result.track_rows)
     ate_res = None
     ref_xy = None
-    if gt is not None and len(gt.trajectory) and len(traj):
-        # Same association and alignment as dynslam2d.results.evaluate.
-        dt = float(np.median(np.diff(gt.trajectory.stamps))) / 2 if len(gt.trajectory) > 1 else 0.01
-        ate_res = ate(gt.trajectory, traj, align=True, max_dt=max(dt, 1e-3))
-        ref_xy = ate_res.alignment.inverse().transform_points(gt.trajectory.xy)
+    if evaluation is not None and len(evaluation.reference) and len(traj):
+        ate_res = evaluation.ate
+        ref_xy = ate_res.alignment.inverse().transform_points(evaluation.reference.xy)
     name = result.source.origin.replace("\\", "/").split(":")[-1].rstrip("/").split("/")[-1] or result.source.origin
     if result.source.origin.startswith("sim:"):
         name = result.source.origin
@@ -93,15 +94,12 @@ def write_figures(
         out / "tracks.png", confirmed, result.grid, dpi=dpi,
         title=f"{name}\n{tracks_title(all_paths)}",
     )
-    if gt is not None and ate_res is not None:
-        diff = map_difference(grid, gt.static_map, transform=ate_res.alignment)
+    if evaluation is not None and ate_res is not None:
+        diff = map_difference_of(evaluation.map.sets)  # the map drawn: the cleaned one after a clean-up pass
         spans = {k: stretches(traj.stamps, conf[k]) for k in ("degenerate", "low_support", "lost") if k in conf}
         note = ""
-        if cleaned is not None:
-            from dynslam2d.eval.maps import map_metrics
-
-            mc = map_metrics(cleaned.grid, gt.static_map, transform=ate_res.alignment)
-            mo = map_metrics(result.grid, gt.static_map, transform=ate_res.alignment)
+        if cleaned is not None and evaluation.map_online is not None:
+            mc, mo = evaluation.map.metrics, evaluation.map_online.metrics
             note = (f"cleaned map (shown): ghost {mc.ghost_area_m2:.2f} m², F1 {mc.f1:.3f}; "
                     f"online map: ghost {mo.ghost_area_m2:.2f} m², F1 {mo.f1:.3f}")
         paths["errors.png"] = plot_errors(out / "errors.png", ate_res, diff, dpi=dpi,
