@@ -696,22 +696,10 @@ def _map_with_progress(source: Any, cfg: Any, observers: list[Any], show: bool) 
     """Run the pipeline over ``source`` with a progress bar on stderr (scans/s after the first scan)."""
     import time
 
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
     from dynslam2d.pipeline import run as run_pipeline
 
     total = source.meta.count
-    progress = Progress(
-        TextColumn("[bold]mapping[/]"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
-        TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=err_console, disable=not show,
-    )
+    progress = _progress_bar("mapping", "rate", show)
     with progress:
         task = progress.add_task("map", total=total, rate="")
         state = {"t0": None}
@@ -995,7 +983,8 @@ RayOpt = Annotated[str | None, typer.Option(
                                      "install \"dynslam2d[cluster]\" (docs/batch.md).")]
 
 
-def _batch_progress(total: int, show: bool) -> Any:
+def _progress_bar(label: str, field: str, show: bool) -> Any:
+    """A progress bar on stderr: ``label``, bar, done/total, the task's ``field``, elapsed time, eta."""
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -1005,9 +994,13 @@ def _batch_progress(total: int, show: bool) -> Any:
         TimeRemainingColumn,
     )
 
-    return Progress(TextColumn("[bold]runs[/]"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[info]}"),
-                    TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=err_console,
-                    disable=not show)
+    return Progress(TextColumn(f"[bold]{label}[/]"), BarColumn(), MofNCompleteColumn(),
+                    TextColumn(f"{{task.fields[{field}]}}"), TimeElapsedColumn(), TextColumn("eta"),
+                    TimeRemainingColumn(), console=err_console, disable=not show)
+
+
+def _batch_progress(total: int, show: bool) -> Any:
+    return _progress_bar("runs", "info", show)
 
 
 @app.command()

@@ -62,14 +62,8 @@ def ground_truth_for(source: ScanSource, gt_dir: str | os.PathLike[str] | Ground
     )
 
 
-def evaluate(
-    trajectory: Trajectory,
-    grid: GridMap,
-    gt: GroundTruthFiles,
-    removed: np.ndarray | None = None,
-    removed_stamps: np.ndarray | None = None,
-    tracks: np.ndarray | None = None,
-) -> dict[str, Any]:
+def evaluate(trajectory: Trajectory, grid: GridMap, gt: GroundTruthFiles, removed: np.ndarray | None = None,
+             removed_stamps: np.ndarray | None = None, tracks: np.ndarray | None = None) -> dict[str, Any]:
     """Every metric of a run against ground truth, as metrics.json holds them: the
     :meth:`~dynslam2d.eval.runeval.RunEvaluation.as_dict` of
     :func:`~dynslam2d.eval.runeval.evaluate_run` (formulas in docs/metrics.md)."""

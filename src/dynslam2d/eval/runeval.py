@@ -55,11 +55,11 @@ class RunEvaluation:
     reference: Trajectory
     ate: AteResult
     map: MapScore
-    map_online: MapScore | None = None
-    removal: RemovalMetrics | None = None
-    removal_by_motion: MotionRemoval | None = None
-    time_to_m: TimeToM | None = None
-    cleanup: dict[str, Any] | None = None
+    map_online: MapScore | None
+    removal: RemovalMetrics | None
+    removal_by_motion: MotionRemoval | None
+    time_to_m: TimeToM | None
+    cleanup: dict[str, Any] | None
 
     def as_dict(self) -> dict[str, Any]:
         """metrics.json: plain Python values, in the file's key order."""
