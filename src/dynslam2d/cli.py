@@ -12,7 +12,7 @@ import math
 import sys
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.cells import cell_len
@@ -24,6 +24,16 @@ from typer.core import TyperArgument, TyperCommand, TyperGroup
 
 from dynslam2d import __version__
 from dynslam2d.errors import DynSlamError
+
+if TYPE_CHECKING:  # annotations only: the commands import what they use when they run
+    from dynslam2d.config import Config
+    from dynslam2d.io.groundtruth import GroundTruthFiles
+    from dynslam2d.io.outputs import ResultsFolder
+    from dynslam2d.pipeline import RunResult
+    from dynslam2d.results import RunOutputs
+    from dynslam2d.slam.cleanup import CleanResult, CleanupRecorder
+    from dynslam2d.types import Pose2D, ScanSource
+    from dynslam2d.viz.collect import RemovedPointsCollector
 
 
 class _Console(Console):
@@ -603,7 +613,7 @@ def _on_off(name: str, value: str) -> bool:
 
 
 def _run_config(config: Path | None, slam: dict[str, Any], *, filter_mode: str | None, range_scale: str | None,
-                clean: str | None, loop_closure: str | None, hector_compat: bool) -> Any:
+                clean: str | None, loop_closure: str | None, hector_compat: bool) -> Config:
     """``run``'s configuration: the --config file (or the defaults), then every option given on the command line
     (``slam``: slam.* keys, None = not given)."""
     from dynslam2d.config import Config, load_config, with_overrides
@@ -624,7 +634,7 @@ def _run_config(config: Path | None, slam: dict[str, Any], *, filter_mode: str |
     return cfg
 
 
-def _read_gt(gt: Path | None) -> Any:
+def _read_gt(gt: Path | None) -> GroundTruthFiles | None:
     """The --gt folder's ground truth, or None."""
     if gt is None:
         return None
@@ -633,7 +643,7 @@ def _read_gt(gt: Path | None) -> Any:
     return read_ground_truth_folder(gt)
 
 
-def _plan_run_folder(out: Path, force: bool, inputs: list[Path], write_bag: Path | None) -> Any:
+def _plan_run_folder(out: Path, force: bool, inputs: list[Path], write_bag: Path | None) -> ResultsFolder:
     """The results folder to write (and the --write-bag target checked against it), before any work."""
     from dynslam2d.io.outputs import check_bag_target, plan_results_folder, same_or_inside
 
@@ -646,7 +656,7 @@ def _plan_run_folder(out: Path, force: bool, inputs: list[Path], write_bag: Path
     return folder
 
 
-def _check_source(source: Any, cfg: Any, write_bag: Path | None) -> None:
+def _check_source(source: ScanSource, cfg: Config, write_bag: Path | None) -> None:
     """What the opened input must allow before the run: odometry for --range-scale auto, a map that fits; then
     the parts an interrupted --write-bag left are cleared."""
     odo_info = source.meta.extra.get("odometry") or {}
@@ -660,7 +670,7 @@ def _check_source(source: Any, cfg: Any, write_bag: Path | None) -> None:
         clean_stale_parts(write_bag)
 
 
-def _announce_run(source: Any, show: bool) -> bool:
+def _announce_run(source: ScanSource, show: bool) -> bool:
     """Before a run, on stderr: the odometry used, the input's warnings, and whether kernels compile (returned)."""
     if show:
         err_console.print(f"odometry: {escape(source.meta.odometry or 'none (laser only)')}")
@@ -669,7 +679,7 @@ def _announce_run(source: Any, show: bool) -> bool:
     return _say_if_compiling(show)
 
 
-def _run_observers(stack: contextlib.ExitStack, cfg: Any, work: Path, cleaner: Any, *, animate: bool,
+def _run_observers(stack: contextlib.ExitStack, cfg: Config, work: Path, cleaner: CleanupRecorder, *, animate: bool,
                    frame_step: int, write_bag: Path | None, bag_storage: str | None, map_period: float, viewer: str,
                    rerun_save: Path | None) -> list[Any]:
     """The optional observers of a run, in order: the clean-up recorder, the animation, the bag, the live viewer
@@ -692,7 +702,7 @@ def _run_observers(stack: contextlib.ExitStack, cfg: Any, work: Path, cleaner: A
     return observers
 
 
-def _map_with_progress(source: Any, cfg: Any, observers: list[Any], show: bool) -> Any:
+def _map_with_progress(source: ScanSource, cfg: Config, observers: list[Any], show: bool) -> RunResult:
     """Run the pipeline over ``source`` with a progress bar on stderr (scans/s after the first scan)."""
     import time
 
@@ -717,8 +727,9 @@ def _map_with_progress(source: Any, cfg: Any, observers: list[Any], show: bool) 
     return result
 
 
-def _write_run_outputs(result: Any, work: Path, out: Path, truth: Any, collector: Any, cleaned: Any,
-                       mount: Any) -> Any:
+def _write_run_outputs(result: RunResult, work: Path, out: Path, truth: GroundTruthFiles | None,
+                       collector: RemovedPointsCollector, cleaned: CleanResult | None,
+                       mount: Pose2D | None) -> RunOutputs:
     """Write the results folder (evaluated once against ``truth`` when there is one); with --frame base_link
     turn its trajectories into base_link poses. Returns what was written (:class:`dynslam2d.results.RunOutputs`)."""
     from dynslam2d.results import write_outputs
@@ -736,7 +747,7 @@ def _write_run_outputs(result: Any, work: Path, out: Path, truth: Any, collector
     return outputs
 
 
-def _rewrite_frame(work: Path, mount: Any) -> None:
+def _rewrite_frame(work: Path, mount: Pose2D) -> None:
     """--frame base_link: trajectory.tum (and the front end's, with loop closure) as base_link poses."""
     from dynslam2d.io.odometry import rewrite_trajectory_frame
 
@@ -761,7 +772,7 @@ def _warn_odometry_gaps(odo: Any) -> None:
                           f"no yaw rate (outside the IMU's time span or in a gap): no rotation prior there")
 
 
-def _print_run(input: str, outputs: Any, odo: Any, compiling: bool) -> None:
+def _print_run(input: str, outputs: RunOutputs, odo: Any, compiling: bool) -> None:
     """The table of a run: summary.json's numbers and, with ground truth, metrics.json's (as written)."""
     summary = outputs.summary
     rows = _summary_rows(summary, odo, compiling)
