@@ -11,7 +11,11 @@ It prints, for the SLAM alone (``HectorSlam``, laser only, no detection) with an
 refinement: the Kümmerle relation error on MIT CSAIL and Freiburg 079 (scored as ``bench_loops.py``
 does) and the ATE on simulated scenes, plus the share of scans refined and the time per scan.
 
-    python benchmarks/refine_trial.py [--only csail fr079 sim] [--keyframes 5]
+    python benchmarks/refine_trial.py [--only csail fr079 sim] [--keyframes 5] [--no-icp]
+        [--slam FIELD=VALUE ...]
+
+``--slam`` sets ``SlamConfig`` fields for both runs (e.g. ``iterations_finest=20``); ``--no-icp`` runs
+only the matcher without the refinement.
 """
 
 from __future__ import annotations
@@ -84,8 +88,18 @@ def main() -> None:
     ap.add_argument("--only", nargs="*", default=["csail", "fr079", "sim"])
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
     ap.add_argument("--keyframes", type=int, default=5)
+    ap.add_argument("--no-icp", action="store_true", help="only the matcher, without the ICP refinement")
+    ap.add_argument("--slam", nargs="*", default=[], metavar="FIELD=VALUE", help="SlamConfig fields for both runs")
     a = ap.parse_args()
-    cfg = SlamConfig(use_odometry=False)  # laser only (--odom none)
+    fields = dict(kv.split("=", 1) for kv in a.slam)
+    cfg = SlamConfig(use_odometry=False, **fields)  # laser only (--odom none); pydantic converts the strings
+    if fields:
+        print("slam:", fields, flush=True)
+
+    def slams() -> list[tuple[str, HectorSlam]]:
+        out: list[tuple[str, HectorSlam]] = [("Hector", HectorSlam(cfg))]
+        return out if a.no_icp else [*out, ("Hector + ICP", IcpRefinedSlam(cfg, a.keyframes))]
+
     for name in a.only:
         if name in ("csail", "fr079"):
             if name == "csail":
@@ -95,7 +109,7 @@ def main() -> None:
                 clock = "fr079/fr079.flirtlib.log"
             scans = list(CarmenSource(f"{a.data}/{log}"))
             rel = read_relations(f"{a.data}/{relf}")
-            for label, slam in (("Hector", HectorSlam(cfg)), ("Hector + ICP", IcpRefinedSlam(cfg, a.keyframes))):
+            for label, slam in slams():
                 st, po, ms = _run(slam, scans)
                 if clock is not None:
                     from dynslam2d.io.relclock import read_clock_pairs
@@ -109,7 +123,7 @@ def main() -> None:
             for scen in ("static", "paper", "corridor"):
                 sim = simulate(scen, seed=0, duration=30.0)
                 gt = Trajectory(sim.ground_truth.stamps, sim.ground_truth.poses_in("first"))
-                for label, slam in (("Hector", HectorSlam(cfg)), ("Hector + ICP", IcpRefinedSlam(cfg, a.keyframes))):
+                for label, slam in slams():
                     _, po, ms = _run(slam, sim.scans)
                     e = ate(gt, Trajectory(sim.ground_truth.stamps, po)).rmse
                     extra = f", refined {slam.refined} of {slam.tried}" if isinstance(slam, IcpRefinedSlam) else ""
