@@ -1,7 +1,7 @@
 """How well do the Kümmerle reference relations agree with the laser scans themselves? (not run by pytest)
 
-For every relation whose two scans are less than ``--max-dt`` s apart, the two raw scans (range gates
-as the SLAM uses them) are registered to each other by point-to-line ICP (Censi 2008,
+For every relation whose two scans are ``--min-dt`` (default 0) to ``--max-dt`` (default 2) s apart,
+the two raw scans (range gates as the SLAM uses them) are registered to each other by point-to-line ICP (Censi 2008,
 ``dynslam2d.slam.icp``), started from the estimated relative pose of a ``dynslam2d run``. It prints:
 
 * the relation error of the estimate and of this direct scan-to-scan registration (an independent
@@ -12,10 +12,12 @@ as the SLAM uses them) are registered to each other by point-to-line ICP (Censi 
   two scans clearly worse aligned than the estimate does is not what the laser saw;
 * where the registration ends when started at the reference pose (whether the reference sits in
   the same basin, away from its bottom);
-* a bound: the relation error over *all* relations if every short relation took the scan-to-scan
-  registration's value and every longer one were exact (0).
+* a bound: the relation error over *all* relations if every selected relation took the scan-to-scan
+  registration's value and every other one were exact (0);
+* with a clock log (fr079): the error of all relations by how far their ends' stamps are from the
+  matched scans' (a clock mapping that picked wrong scans would show there).
 
-    python benchmarks/relation_consistency.py csail RUN_DIR
+    python benchmarks/relation_consistency.py csail RUN_DIR [--min-dt 2 --max-dt inf]
     python benchmarks/relation_consistency.py fr079 RUN_DIR
 
 ``RUN_DIR`` is the ``--out`` of ``dynslam2d run LOG --odom none`` (its ``trajectory.tum``); the logs
