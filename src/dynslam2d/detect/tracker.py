@@ -130,6 +130,7 @@ class _Track:
     state: str = TENTATIVE
     hits: int = 1
     misses: int = 0
+    # hit (True) / miss per update, only the first confirm_window entries: all that the M-of-N rule reads
     history: list[bool] = field(default_factory=lambda: [True])
     fast: int = 0
     in_m: bool = False
@@ -197,6 +198,7 @@ class Tracker:
         self._cur_ref = None
         self._map: MapView | None = None  # the SLAM map given with the current scan (read only)
         self._pose: Pose2D | None = None
+        self._pose_cs: tuple[float, float] = (1.0, 0.0)  # cos / sin of self._pose.theta
         self._scan: Scan | None = None
         self._pose_hist: deque = deque()  # (stamp, x, y, θ) of the last still_time seconds
         self._laser_still = False
@@ -251,6 +253,8 @@ class Tracker:
             self._body_near = self._body_grown
         self._map = map_view if self.config.tracker.map_evidence else None
         self._pose = pose
+        self._pose_cs = ((math.cos(pose.theta), math.sin(pose.theta)) if pose is not None
+                         and math.isfinite(pose.theta) else (1.0, 0.0))
         self._scan = scan
         self._laser_still = self._still(float(scan.stamp), pose)
         st.scans += 1
@@ -777,7 +781,8 @@ class Tracker:
         k.hits += 1
         k.misses = 0
         k.last_hit = t
-        k.history.append(True)
+        if len(k.history) < tc.confirm_window:  # (bounded: only the first window is read)
+            k.history.append(True)
         k.beams = det.beams
         k.free.append(max(det.free_fraction, vacated))
         k.vac.append(vacated)
@@ -786,9 +791,9 @@ class Tracker:
             del k.vac[0]
         p = self._pose
         if p is not None:
-            x0, x1 = float(k.x[0]), float(k.x[1])
+            x0, x1 = k.x[:2].tolist()
             dx, dy = x0 - p.x, x1 - p.y
-            c, s = math.cos(p.theta), math.sin(p.theta)
+            c, s = self._pose_cs  # cos / sin of the pose's heading (once per scan)
             k.laser_xy.append((c * dx + s * dy, -s * dx + c * dy))
             k.map_xy.append((x0, x1))
             k.map_t.append(t)
@@ -924,18 +929,19 @@ class Tracker:
                 k.reason = "left M: merged with long-occupied map structure (its detection joined a wall's cluster)"
             if k.id not in updated:
                 k.misses += 1
-                k.history.append(False)
+                if len(k.history) < tc.confirm_window:  # (bounded: only the first window is read)
+                    k.history.append(False)
                 k.beams = np.zeros(0, dtype=np.int64)
                 if k.state == CONFIRMED:
                     k.state = COASTING
             elif k.state == COASTING:
                 k.state = CONFIRMED
             if k.state == TENTATIVE:
-                h = k.history[: tc.confirm_window]
+                h = k.history  # (its first confirm_window entries: it is kept no longer)
                 if sum(h) >= tc.confirm_hits:
                     k.state = CONFIRMED
                 elif sum(h) + (tc.confirm_window - len(h)) < tc.confirm_hits or k.misses > 0 and len(
-                        k.history) >= tc.confirm_window:
+                        h) >= tc.confirm_window:
                     st.deleted_tentative += 1
                     st.tracks_deleted += 1
                     continue
@@ -1219,12 +1225,19 @@ class Tracker:
 
     # ------------------------------------------------------------------ output
     def _report(self, t: float, updated: set[int]) -> list[Track]:
-        out = []
+        tracks = self._tracks
+        if not tracks:
+            return []
         tc = self.config.tracker
         no_beams = np.zeros(0, dtype=np.int64)
         slow = 0.5 * tc.v_min
-        for k in self._tracks:
-            px, py, vx, vy = k.x.tolist()
+        # (speed: states and covariances stacked in one copy each; every report's velocity / covariance is a
+        # row of them, its own memory apart from the tracker's)
+        X = np.array([k.x for k in tracks])
+        P = np.array([k.P for k in tracks])
+        V = X[:, 2:]
+        out = []
+        for i, (k, (px, py, vx, vy)) in enumerate(zip(tracks, X.tolist())):
             speed = math.hypot(vx, vy)
             if k.kind == KIND_CIRCLE:
                 theta = math.atan2(vy, vx) if speed > slow else 0.0
@@ -1242,9 +1255,7 @@ class Tracker:
                     theta, length, width = k.theta_box, sa, sb
                 theta = (float(theta) + math.pi) % _TWO_PI - math.pi  # wrap_angle
             beams = k.beams if k.id in updated else no_beams
-            out.append(Track(id=k.id, state=k.state, stamp=t,
-                             box=Box(px, py, theta, float(length), float(width)),
-                             velocity=np.array([vx, vy]), covariance=k.P.copy(), age=t - k.born, hits=k.hits,
-                             misses=k.misses, kind=k.kind, in_m=k.in_m, m_reason=k.reason, beams=beams,
-                             n_points=int(beams.shape[0]), remembered=k.remembered and k.in_m))
+            out.append(Track(k.id, k.state, t, Box(px, py, theta, float(length), float(width)), V[i], P[i],
+                             t - k.born, k.hits, k.misses, k.kind, k.in_m, k.reason, beams, int(beams.shape[0]),
+                             k.remembered and k.in_m))
         return out
