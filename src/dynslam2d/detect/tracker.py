@@ -277,7 +277,7 @@ class Tracker:
         self._dt = dt
         self._predict(dt)
         for k in self._tracks:
-            if k.has_heading and k.kind == KIND_RECT:
+            if k.has_heading and k.kind == KIND_RECT and k.state != TENTATIVE:  # (_motion_prior skips tentative)
                 self._motion_prior(k)
         dets = self._detect(scan, pose)
         self._merged = set()
@@ -451,28 +451,25 @@ class Tracker:
         # per-detection views, sliced once per scan (the same views as fits[j, FIT_CENTROID], lohi[j, LOHI_LO], …)
         cen_v, circ_v = fits[:, FIT_CENTROID], fits[:, FIT_CIRCLE]
         lo_v, hi_v = lohi[:, LOHI_LO], lohi[:, LOHI_HI]
-        for j, (a0, n, kd, th) in enumerate(zip(starts.tolist(), npts.tolist(), kinds.tolist(),
-                                                fits[:, F_THETA].tolist())):
-            dets.append(Detection(beams[a0:a0 + n], pts[a0:a0 + n], cen_v[j], KIND_NAMES[kd], th, lo_v[j], hi_v[j],
-                                  rel[j], circ_v[j], n))
+        # free-space and map evidence per detection (0 where unknown), then the detections in one pass
+        nd = idx.shape[0]
+        frac = fs = ff = fu = [0.0] * nd
         if self._free is not None:
             self._cur_ref = self._free.make_ref(scan, pose, valid)
             free = self._free.seen_through(pts, float(scan.stamp))
-            frac = segment_means(free.astype(np.float64), offsets)[idx]
-            for det, ff in zip(dets, frac.tolist()):
-                det.free_fraction = ff
+            frac = segment_means(free.astype(np.float64), offsets)[idx].tolist()
             self._free.add(scan, pose, valid, self._cur_ref)
         if self._map is not None:
             tc = cfg.tracker
             mstruct, mfree, munk = map_evidence(pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
                                                 tc.map_free_radius)
-            fs = segment_means(mstruct.astype(np.float64), offsets)[idx]
-            ff = segment_means(mfree.astype(np.float64), offsets)[idx]
-            fu = segment_means(munk.astype(np.float64), offsets)[idx]
-            for det, a, b, u in zip(dets, fs.tolist(), ff.tolist(), fu.tolist()):
-                det.map_structure = a
-                det.map_free = b
-                det.map_unknown = u
+            fs = segment_means(mstruct.astype(np.float64), offsets)[idx].tolist()
+            ff = segment_means(mfree.astype(np.float64), offsets)[idx].tolist()
+            fu = segment_means(munk.astype(np.float64), offsets)[idx].tolist()
+        for j, (a0, n, kd, th) in enumerate(zip(starts.tolist(), npts.tolist(), kinds.tolist(),
+                                                fits[:, F_THETA].tolist())):
+            dets.append(Detection(beams[a0:a0 + n], pts[a0:a0 + n], cen_v[j], KIND_NAMES[kd], th, lo_v[j], hi_v[j],
+                                  rel[j], circ_v[j], n, frac[j], fs[j], ff[j], fu[j]))
         if cfg.fit.person_merge and len(dets) > 1:
             dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
                                                                                  npts, px, py)
@@ -576,8 +573,12 @@ class Tracker:
         Xs, Ps = self._stack()
         tsize = np.array([k.size for k in tracks])
         reach = 0.5 * tsize.max(axis=1)
-        rect_trk = np.array([k.has_heading and k.kind == KIND_RECT for k in tracks])
-        theta_box = np.array([k.theta_box for k in tracks])
+        # (one pass over the tracks: heading, rectangle with heading, coasting with known size, established)
+        meta = np.array([(k.theta_box, k.has_heading and k.kind == KIND_RECT,
+                          k.misses > 0 and (k.kind != KIND_RECT or bool(k.size_known.all())), k.state != TENTATIVE)
+                         for k in tracks])
+        rect_trk = meta[:, 1] != 0.0
+        theta_box = meta[:, 0].copy()
         # Mahalanobis gate and distance gate; a rectangle is measured again with the track's own sizes
         # (a side the detection "measured" too short, e.g. a grazing side, must not break the association)
         d2, near, ok = gate_costs(Xs, Ps, reach, rect_trk, theta_box, tsize, self._default.z, self._default.R,
@@ -588,7 +589,7 @@ class Tracker:
         det_ext = np.maximum(lohi[:, L_HI1] - lohi[:, L_LO1], lohi[:, L_HI2] - lohi[:, L_LO2])
         # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
         # later, a tracked object may touch another for a scan)
-        known = np.array([k.misses > 0 and (bool(k.size_known.all()) or k.kind != KIND_RECT) for k in tracks])
+        known = meta[:, 2] != 0.0
         grow_ok = (det_ext[None, :] <= tc.max_size_jump_ratio * tsize.max(axis=1)[:, None] + tc.max_size_jump) | \
             ~known[:, None]
         ok = ok & grow_ok
@@ -598,7 +599,7 @@ class Tracker:
             return []
         cost = np.where(ok, d2, _BIG)
         # established tracks choose first; tentative ones share what is left
-        firm = np.array([k.state != TENTATIVE for k in self._tracks])
+        firm = meta[:, 3] != 0.0
         pairs: list[tuple[int, int]] = []
         taken = np.zeros(m, dtype=bool)
         for group in (firm, ~firm):
@@ -951,11 +952,11 @@ class Tracker:
                 st.tracks_deleted += 1
                 continue
             P = k.P
-            if not k.p_finite or math.sqrt(max(P[0, 0], P[1, 1])) > tc.max_position_sigma:
+            if not k.p_finite or math.sqrt(max(P.item(0), P.item(5))) > tc.max_position_sigma:  # P[0, 0], P[1, 1]
                 st.deleted_covariance += 1
                 st.tracks_deleted += 1
                 continue
-            speed = math.hypot(k.x[2], k.x[3])
+            speed = math.hypot(k.x.item(2), k.x.item(3))
             if speed > tc.max_object_speed:
                 st.deleted_speed += 1
                 st.tracks_deleted += 1
