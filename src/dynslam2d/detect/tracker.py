@@ -855,32 +855,30 @@ class Tracker:
             return out
         chunks: list[np.ndarray] = []
         owners: list[int] = []
-        counts: list[int] = [0]
         ref_ages = self._free.ref_ages
+        bisect_left = bisect.bisect_left
         for k in tracks:
-            if not k.past:
-                continue
             past = k.past
+            if not past:
+                continue
             npast = len(past)
             stamps = k.past_t
             for a in ref_ages:
                 # the entry whose age is nearest a (first one on ties, as np.argmin): stamps grow along
                 # past, so it lies next to where t − a would be inserted
-                ins = bisect.bisect_left(stamps, t - a)
-                j, best = -1, math.inf
-                for q in range(ins - 3 if ins > 3 else 0, ins + 3 if ins + 3 < npast else npast):
-                    dev = abs((t - stamps[q]) - a)
-                    if dev < best:
-                        j, best = q, dev
+                ins = bisect_left(stamps, t - a)
+                lo = ins - 3 if ins > 3 else 0
+                devs = [abs((t - q) - a) for q in stamps[lo:ins + 3 if ins + 3 < npast else npast]]
+                j = lo + devs.index(min(devs))
                 if t - stamps[j] > 0.0:
-                    pts = past[j][1]
-                    chunks.append(pts)
+                    chunks.append(past[j][1])
                     owners.append(k.id)
-                    counts.append(pts.shape[0])
         if not chunks:
             return out
+        counts = np.zeros(len(chunks) + 1, dtype=np.int64)
+        np.cumsum([c.shape[0] for c in chunks], out=counts[1:])
         free = self._free.seen_through_by(self._cur_ref, np.concatenate(chunks))
-        frac = segment_means(free.astype(np.float64), np.cumsum(counts)).tolist()
+        frac = segment_means(free.astype(np.float64), counts).tolist()
         for tid, f in zip(owners, frac):
             out[tid] = max(out.get(tid, 0.0), f)
         return out
