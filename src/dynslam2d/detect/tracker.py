@@ -84,6 +84,7 @@ COASTING = "coasting"
 _HALF_PI = 0.5 * math.pi
 _TWO_PI = 2.0 * math.pi
 _BIG = 1e12
+_NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
 
 
 @dataclass
@@ -146,7 +147,6 @@ class _Track:
     person_streak: int = 0  # consecutive updates with a merged pair of legs
     rode: bool = False  # judged riding with the laser (its body) at the last check
     was_in_m: bool = False  # has been in M before (seen moving): the map's word is not needed again
-    vac: list[float] = field(default_factory=list)  # vacated fraction per update (this scan sees through old points)
     laser_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the laser frame per update
     map_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the map frame per update
     map_t: list[float] = field(default_factory=list)  # stamps of map_xy, s
@@ -766,7 +766,6 @@ class Tracker:
             k.mstruct.clear()
             k.mfree.clear()
             k.munknown.clear()
-            k.vac.clear()
             k.laser_xy.clear()
             k.map_xy.clear()
             k.map_t.clear()
@@ -785,11 +784,9 @@ class Tracker:
         if len(k.history) < tc.confirm_window:  # (bounded: only the first window is read)
             k.history.append(True)
         k.beams = det.beams
-        k.free.append(max(det.free_fraction, vacated))
-        k.vac.append(vacated)
+        k.free.append(max(det.free_fraction, vacated))  # (vacated: this scan sees through its old points)
         if len(k.free) > tc.sustain_updates:
             del k.free[0]
-            del k.vac[0]
         p = self._pose
         if p is not None:
             x0, x1 = k.x[:2].tolist()
@@ -930,7 +927,7 @@ class Tracker:
                 k.misses += 1
                 if len(k.history) < tc.confirm_window:  # (bounded: only the first window is read)
                     k.history.append(False)
-                k.beams = np.zeros(0, dtype=np.int64)
+                k.beams = _NO_BEAMS
                 if k.state == CONFIRMED:
                     k.state = COASTING
             elif k.state == COASTING:
@@ -989,7 +986,7 @@ class Tracker:
                 k.reason = ("left M: after a gap the detections show no motion into free space "
                             "(a different, static object)")
                 return
-        if self._rides_with_laser(k):
+        if len(k.map_t) >= tc.ride_updates and self._rides_with_laser(k):  # (fewer: it cannot ride)
             if k.in_m:
                 k.in_m = False
             k.fast = 0
