@@ -33,9 +33,9 @@ free-space and fragment tests); only the per-track bookkeeping stays in Python (
 
 from __future__ import annotations
 
-import bisect
 import math
 from collections import deque
+from itertools import chain
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -84,6 +84,7 @@ COASTING = "coasting"
 _HALF_PI = 0.5 * math.pi
 _TWO_PI = 2.0 * math.pi
 _BIG = 1e12
+_WINDOW = np.arange(6)  # the past entries searched around the insertion point (_vacated)
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
 
 
@@ -850,25 +851,33 @@ class Tracker:
         out: dict[int, float] = {}
         if self._free is None or self._cur_ref is None:
             return out
+        own = [k for k in tracks if k.past]
+        if not own:
+            return out
+        # the entry of each track's past whose age is nearest each reference age (first one on ties, as
+        # np.argmin), for all tracks at once: the stamps of a past grow along it, so the entry lies within 3 of
+        # where t − a would be inserted (bisect_left = the count of stamps below t − a)
+        lens = np.fromiter([len(k.past_t) for k in own], np.int64, len(own))
+        stamps = np.fromiter(chain.from_iterable(k.past_t for k in own), np.float64, int(lens.sum()))
+        starts = np.zeros(len(own), dtype=np.int64)
+        np.cumsum(lens[:-1], out=starts[1:])
+        ages = self._free.ref_ages
+        pick = np.empty((len(own), len(ages)), dtype=np.int64)
+        for c, a in enumerate(ages):
+            ins = np.add.reduceat((stamps < t - a).astype(np.int64), starts)
+            lo = np.maximum(ins - 3, 0)
+            win = lo[:, None] + _WINDOW[None, :]
+            inside = win < np.minimum(ins + 3, lens)[:, None]
+            dev = np.abs((t - stamps[starts[:, None] + np.where(inside, win, 0)]) - a)
+            dev[~inside] = np.inf
+            pick[:, c] = lo + dev.argmin(axis=1)
+        age_ok = (t - stamps[starts[:, None] + pick] > 0.0).tolist()
         chunks: list[np.ndarray] = []
         owners: list[int] = []
-        ref_ages = self._free.ref_ages
-        bisect_left = bisect.bisect_left
-        for k in tracks:
-            past = k.past
-            if not past:
-                continue
-            npast = len(past)
-            stamps = k.past_t
-            for a in ref_ages:
-                # the entry whose age is nearest a (first one on ties, as np.argmin): stamps grow along
-                # past, so it lies next to where t − a would be inserted
-                ins = bisect_left(stamps, t - a)
-                lo = ins - 3 if ins > 3 else 0
-                devs = [abs((t - q) - a) for q in stamps[lo:ins + 3 if ins + 3 < npast else npast]]
-                j = lo + devs.index(min(devs))
-                if t - stamps[j] > 0.0:
-                    chunks.append(past[j][1])
+        for k, row, oks in zip(own, pick.tolist(), age_ok):
+            for j, ok in zip(row, oks):
+                if ok:
+                    chunks.append(k.past[j][1])
                     owners.append(k.id)
         if not chunks:
             return out
