@@ -33,15 +33,16 @@ free-space and fragment tests); only the per-track bookkeeping stays in Python (
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
-from itertools import chain
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.freespace import FreeSpaceMemory
+from dynslam2d.detect.frozen import fast_init
 from dynslam2d.detect.kernels import (
     classify_batch,
     fit_params,
@@ -84,7 +85,8 @@ COASTING = "coasting"
 _HALF_PI = 0.5 * math.pi
 _TWO_PI = 2.0 * math.pi
 _BIG = 1e12
-_WINDOW = np.arange(6)  # the past entries searched around the insertion point (_vacated)
+_make_track = fast_init(Track)  # Track(...) / Box(...) without the frozen dataclass __init__ (detect/frozen.py)
+_make_box = fast_init(Box)
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
 
 
@@ -574,12 +576,8 @@ class Tracker:
         Xs, Ps = self._stack()
         tsize = np.array([k.size for k in tracks])
         reach = 0.5 * tsize.max(axis=1)
-        # (one pass over the tracks: heading, rectangle with heading, coasting with known size, established)
-        meta = np.array([(k.theta_box, k.has_heading and k.kind == KIND_RECT,
-                          k.misses > 0 and (k.kind != KIND_RECT or bool(k.size_known.all())), k.state != TENTATIVE)
-                         for k in tracks])
-        rect_trk = meta[:, 1] != 0.0
-        theta_box = meta[:, 0].copy()
+        rect_trk = np.array([k.has_heading and k.kind == KIND_RECT for k in tracks])
+        theta_box = np.array([k.theta_box for k in tracks])
         # Mahalanobis gate and distance gate; a rectangle is measured again with the track's own sizes
         # (a side the detection "measured" too short, e.g. a grazing side, must not break the association)
         d2, near, ok = gate_costs(Xs, Ps, reach, rect_trk, theta_box, tsize, self._default.z, self._default.R,
@@ -590,7 +588,7 @@ class Tracker:
         det_ext = np.maximum(lohi[:, L_HI1] - lohi[:, L_LO1], lohi[:, L_HI2] - lohi[:, L_LO2])
         # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
         # later, a tracked object may touch another for a scan)
-        known = meta[:, 2] != 0.0
+        known = np.array([k.misses > 0 and (bool(k.size_known.all()) or k.kind != KIND_RECT) for k in tracks])
         grow_ok = (det_ext[None, :] <= tc.max_size_jump_ratio * tsize.max(axis=1)[:, None] + tc.max_size_jump) | \
             ~known[:, None]
         ok = ok & grow_ok
@@ -600,7 +598,7 @@ class Tracker:
             return []
         cost = np.where(ok, d2, _BIG)
         # established tracks choose first; tentative ones share what is left
-        firm = meta[:, 3] != 0.0
+        firm = np.array([k.state != TENTATIVE for k in self._tracks])
         pairs: list[tuple[int, int]] = []
         taken = np.zeros(m, dtype=bool)
         for group in (firm, ~firm):
@@ -851,40 +849,34 @@ class Tracker:
         out: dict[int, float] = {}
         if self._free is None or self._cur_ref is None:
             return out
-        own = [k for k in tracks if k.past]
-        if not own:
-            return out
-        # the entry of each track's past whose age is nearest each reference age (first one on ties, as
-        # np.argmin), for all tracks at once: the stamps of a past grow along it, so the entry lies within 3 of
-        # where t − a would be inserted (bisect_left = the count of stamps below t − a)
-        lens = np.fromiter([len(k.past_t) for k in own], np.int64, len(own))
-        stamps = np.fromiter(chain.from_iterable(k.past_t for k in own), np.float64, int(lens.sum()))
-        starts = np.zeros(len(own), dtype=np.int64)
-        np.cumsum(lens[:-1], out=starts[1:])
-        ages = self._free.ref_ages
-        pick = np.empty((len(own), len(ages)), dtype=np.int64)
-        for c, a in enumerate(ages):
-            ins = np.add.reduceat((stamps < t - a).astype(np.int64), starts)
-            lo = np.maximum(ins - 3, 0)
-            win = lo[:, None] + _WINDOW[None, :]
-            inside = win < np.minimum(ins + 3, lens)[:, None]
-            dev = np.abs((t - stamps[starts[:, None] + np.where(inside, win, 0)]) - a)
-            dev[~inside] = np.inf
-            pick[:, c] = lo + dev.argmin(axis=1)
-        age_ok = (t - stamps[starts[:, None] + pick] > 0.0).tolist()
         chunks: list[np.ndarray] = []
         owners: list[int] = []
-        for k, row, oks in zip(own, pick.tolist(), age_ok):
-            for j, ok in zip(row, oks):
-                if ok:
-                    chunks.append(k.past[j][1])
+        counts: list[int] = [0]
+        ref_ages = self._free.ref_ages
+        for k in tracks:
+            if not k.past:
+                continue
+            past = k.past
+            npast = len(past)
+            stamps = k.past_t
+            for a in ref_ages:
+                # the entry whose age is nearest a (first one on ties, as np.argmin): stamps grow along
+                # past, so it lies next to where t − a would be inserted
+                ins = bisect.bisect_left(stamps, t - a)
+                j, best = -1, math.inf
+                for q in range(ins - 3 if ins > 3 else 0, ins + 3 if ins + 3 < npast else npast):
+                    dev = abs((t - stamps[q]) - a)
+                    if dev < best:
+                        j, best = q, dev
+                if t - stamps[j] > 0.0:
+                    pts = past[j][1]
+                    chunks.append(pts)
                     owners.append(k.id)
+                    counts.append(pts.shape[0])
         if not chunks:
             return out
-        counts = np.zeros(len(chunks) + 1, dtype=np.int64)
-        np.cumsum([c.shape[0] for c in chunks], out=counts[1:])
         free = self._free.seen_through_by(self._cur_ref, np.concatenate(chunks))
-        frac = segment_means(free.astype(np.float64), counts).tolist()
+        frac = segment_means(free.astype(np.float64), np.cumsum(counts)).tolist()
         for tid, f in zip(owners, frac):
             out[tid] = max(out.get(tid, 0.0), f)
         return out
@@ -1260,7 +1252,7 @@ class Tracker:
                     theta, length, width = k.theta_box, sa, sb
                 theta = (float(theta) + math.pi) % _TWO_PI - math.pi  # wrap_angle
             beams = k.beams if k.id in updated else no_beams
-            out.append(Track(k.id, k.state, t, Box(px, py, theta, float(length), float(width)), V[i], P[i],
-                             t - k.born, k.hits, k.misses, k.kind, k.in_m, k.reason, beams, int(beams.shape[0]),
-                             k.remembered and k.in_m))
+            out.append(_make_track(k.id, k.state, t, _make_box(px, py, theta, float(length), float(width)), V[i],
+                                   P[i], t - k.born, k.hits, k.misses, k.kind, k.in_m, k.reason, beams,
+                                   int(beams.shape[0]), k.remembered and k.in_m))
         return out
