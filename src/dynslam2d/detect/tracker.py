@@ -42,6 +42,7 @@ import numpy as np
 
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.freespace import FreeSpaceMemory
+from dynslam2d.detect.frozen import fast_init
 from dynslam2d.detect.kernels import (
     classify_batch,
     fit_params,
@@ -84,6 +85,9 @@ COASTING = "coasting"
 _HALF_PI = 0.5 * math.pi
 _TWO_PI = 2.0 * math.pi
 _BIG = 1e12
+_make_track = fast_init(Track)  # Track(...) / Box(...) without the frozen dataclass __init__ (detect/frozen.py)
+_make_box = fast_init(Box)
+_NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
 
 
 @dataclass
@@ -130,6 +134,7 @@ class _Track:
     state: str = TENTATIVE
     hits: int = 1
     misses: int = 0
+    # hit (True) / miss per update, only the first confirm_window entries: all that the M-of-N rule reads
     history: list[bool] = field(default_factory=lambda: [True])
     fast: int = 0
     in_m: bool = False
@@ -145,7 +150,6 @@ class _Track:
     person_streak: int = 0  # consecutive updates with a merged pair of legs
     rode: bool = False  # judged riding with the laser (its body) at the last check
     was_in_m: bool = False  # has been in M before (seen moving): the map's word is not needed again
-    vac: list[float] = field(default_factory=list)  # vacated fraction per update (this scan sees through old points)
     laser_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the laser frame per update
     map_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the map frame per update
     map_t: list[float] = field(default_factory=list)  # stamps of map_xy, s
@@ -197,6 +201,7 @@ class Tracker:
         self._cur_ref = None
         self._map: MapView | None = None  # the SLAM map given with the current scan (read only)
         self._pose: Pose2D | None = None
+        self._pose_cs: tuple[float, float] = (1.0, 0.0)  # cos / sin of self._pose.theta
         self._scan: Scan | None = None
         self._pose_hist: deque = deque()  # (stamp, x, y, θ) of the last still_time seconds
         self._laser_still = False
@@ -251,6 +256,8 @@ class Tracker:
             self._body_near = self._body_grown
         self._map = map_view if self.config.tracker.map_evidence else None
         self._pose = pose
+        self._pose_cs = ((math.cos(pose.theta), math.sin(pose.theta)) if pose is not None
+                         and math.isfinite(pose.theta) else (1.0, 0.0))
         self._scan = scan
         self._laser_still = self._still(float(scan.stamp), pose)
         st.scans += 1
@@ -273,7 +280,7 @@ class Tracker:
         self._dt = dt
         self._predict(dt)
         for k in self._tracks:
-            if k.has_heading and k.kind == KIND_RECT:
+            if k.has_heading and k.kind == KIND_RECT and k.state != TENTATIVE:  # (_motion_prior skips tentative)
                 self._motion_prior(k)
         dets = self._detect(scan, pose)
         self._merged = set()
@@ -447,28 +454,25 @@ class Tracker:
         # per-detection views, sliced once per scan (the same views as fits[j, FIT_CENTROID], lohi[j, LOHI_LO], …)
         cen_v, circ_v = fits[:, FIT_CENTROID], fits[:, FIT_CIRCLE]
         lo_v, hi_v = lohi[:, LOHI_LO], lohi[:, LOHI_HI]
-        for j, (a0, n, kd, th) in enumerate(zip(starts.tolist(), npts.tolist(), kinds.tolist(),
-                                                fits[:, F_THETA].tolist())):
-            dets.append(Detection(beams[a0:a0 + n], pts[a0:a0 + n], cen_v[j], KIND_NAMES[kd], th, lo_v[j], hi_v[j],
-                                  rel[j], circ_v[j], n))
+        # free-space and map evidence per detection (0 where unknown), then the detections in one pass
+        nd = idx.shape[0]
+        frac = fs = ff = fu = [0.0] * nd
         if self._free is not None:
             self._cur_ref = self._free.make_ref(scan, pose, valid)
             free = self._free.seen_through(pts, float(scan.stamp))
-            frac = segment_means(free.astype(np.float64), offsets)[idx]
-            for det, ff in zip(dets, frac.tolist()):
-                det.free_fraction = ff
+            frac = segment_means(free.astype(np.float64), offsets)[idx].tolist()
             self._free.add(scan, pose, valid, self._cur_ref)
         if self._map is not None:
             tc = cfg.tracker
             mstruct, mfree, munk = map_evidence(pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
                                                 tc.map_free_radius)
-            fs = segment_means(mstruct.astype(np.float64), offsets)[idx]
-            ff = segment_means(mfree.astype(np.float64), offsets)[idx]
-            fu = segment_means(munk.astype(np.float64), offsets)[idx]
-            for det, a, b, u in zip(dets, fs.tolist(), ff.tolist(), fu.tolist()):
-                det.map_structure = a
-                det.map_free = b
-                det.map_unknown = u
+            fs = segment_means(mstruct.astype(np.float64), offsets)[idx].tolist()
+            ff = segment_means(mfree.astype(np.float64), offsets)[idx].tolist()
+            fu = segment_means(munk.astype(np.float64), offsets)[idx].tolist()
+        for j, (a0, n, kd, th) in enumerate(zip(starts.tolist(), npts.tolist(), kinds.tolist(),
+                                                fits[:, F_THETA].tolist())):
+            dets.append(Detection(beams[a0:a0 + n], pts[a0:a0 + n], cen_v[j], KIND_NAMES[kd], th, lo_v[j], hi_v[j],
+                                  rel[j], circ_v[j], n, frac[j], fs[j], ff[j], fu[j]))
         if cfg.fit.person_merge and len(dets) > 1:
             dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
                                                                                  npts, px, py)
@@ -761,7 +765,6 @@ class Tracker:
             k.mstruct.clear()
             k.mfree.clear()
             k.munknown.clear()
-            k.vac.clear()
             k.laser_xy.clear()
             k.map_xy.clear()
             k.map_t.clear()
@@ -777,18 +780,17 @@ class Tracker:
         k.hits += 1
         k.misses = 0
         k.last_hit = t
-        k.history.append(True)
+        if len(k.history) < tc.confirm_window:  # (bounded: only the first window is read)
+            k.history.append(True)
         k.beams = det.beams
-        k.free.append(max(det.free_fraction, vacated))
-        k.vac.append(vacated)
+        k.free.append(max(det.free_fraction, vacated))  # (vacated: this scan sees through its old points)
         if len(k.free) > tc.sustain_updates:
             del k.free[0]
-            del k.vac[0]
         p = self._pose
         if p is not None:
-            x0, x1 = float(k.x[0]), float(k.x[1])
+            x0, x1 = k.x[:2].tolist()
             dx, dy = x0 - p.x, x1 - p.y
-            c, s = math.cos(p.theta), math.sin(p.theta)
+            c, s = self._pose_cs  # cos / sin of the pose's heading (once per scan)
             k.laser_xy.append((c * dx + s * dy, -s * dx + c * dy))
             k.map_xy.append((x0, x1))
             k.map_t.append(t)
@@ -924,18 +926,19 @@ class Tracker:
                 k.reason = "left M: merged with long-occupied map structure (its detection joined a wall's cluster)"
             if k.id not in updated:
                 k.misses += 1
-                k.history.append(False)
-                k.beams = np.zeros(0, dtype=np.int64)
+                if len(k.history) < tc.confirm_window:  # (bounded: only the first window is read)
+                    k.history.append(False)
+                k.beams = _NO_BEAMS
                 if k.state == CONFIRMED:
                     k.state = COASTING
             elif k.state == COASTING:
                 k.state = CONFIRMED
             if k.state == TENTATIVE:
-                h = k.history[: tc.confirm_window]
+                h = k.history  # (its first confirm_window entries: it is kept no longer)
                 if sum(h) >= tc.confirm_hits:
                     k.state = CONFIRMED
                 elif sum(h) + (tc.confirm_window - len(h)) < tc.confirm_hits or k.misses > 0 and len(
-                        k.history) >= tc.confirm_window:
+                        h) >= tc.confirm_window:
                     st.deleted_tentative += 1
                     st.tracks_deleted += 1
                     continue
@@ -945,11 +948,11 @@ class Tracker:
                 st.tracks_deleted += 1
                 continue
             P = k.P
-            if not k.p_finite or math.sqrt(max(P[0, 0], P[1, 1])) > tc.max_position_sigma:
+            if not k.p_finite or math.sqrt(max(P.item(0), P.item(5))) > tc.max_position_sigma:  # P[0, 0], P[1, 1]
                 st.deleted_covariance += 1
                 st.tracks_deleted += 1
                 continue
-            speed = math.hypot(k.x[2], k.x[3])
+            speed = math.hypot(k.x.item(2), k.x.item(3))
             if speed > tc.max_object_speed:
                 st.deleted_speed += 1
                 st.tracks_deleted += 1
@@ -984,7 +987,7 @@ class Tracker:
                 k.reason = ("left M: after a gap the detections show no motion into free space "
                             "(a different, static object)")
                 return
-        if self._rides_with_laser(k):
+        if len(k.map_t) >= tc.ride_updates and self._rides_with_laser(k):  # (fewer: it cannot ride)
             if k.in_m:
                 k.in_m = False
             k.fast = 0
@@ -1219,12 +1222,19 @@ class Tracker:
 
     # ------------------------------------------------------------------ output
     def _report(self, t: float, updated: set[int]) -> list[Track]:
-        out = []
+        tracks = self._tracks
+        if not tracks:
+            return []
         tc = self.config.tracker
         no_beams = np.zeros(0, dtype=np.int64)
         slow = 0.5 * tc.v_min
-        for k in self._tracks:
-            px, py, vx, vy = k.x.tolist()
+        # (speed: states and covariances stacked in one copy each; every report's velocity / covariance is a
+        # row of them, its own memory apart from the tracker's)
+        X = np.array([k.x for k in tracks])
+        P = np.array([k.P for k in tracks])
+        V = X[:, 2:]
+        out = []
+        for i, (k, (px, py, vx, vy)) in enumerate(zip(tracks, X.tolist())):
             speed = math.hypot(vx, vy)
             if k.kind == KIND_CIRCLE:
                 theta = math.atan2(vy, vx) if speed > slow else 0.0
@@ -1242,9 +1252,7 @@ class Tracker:
                     theta, length, width = k.theta_box, sa, sb
                 theta = (float(theta) + math.pi) % _TWO_PI - math.pi  # wrap_angle
             beams = k.beams if k.id in updated else no_beams
-            out.append(Track(id=k.id, state=k.state, stamp=t,
-                             box=Box(px, py, theta, float(length), float(width)),
-                             velocity=np.array([vx, vy]), covariance=k.P.copy(), age=t - k.born, hits=k.hits,
-                             misses=k.misses, kind=k.kind, in_m=k.in_m, m_reason=k.reason, beams=beams,
-                             n_points=int(beams.shape[0]), remembered=k.remembered and k.in_m))
+            out.append(_make_track(k.id, k.state, t, _make_box(px, py, theta, float(length), float(width)), V[i],
+                                   P[i], t - k.born, k.hits, k.misses, k.kind, k.in_m, k.reason, beams,
+                                   int(beams.shape[0]), k.remembered and k.in_m))
         return out

@@ -1,0 +1,169 @@
+"""Tracker CPU time of two checkouts on the same scans, and where a pipeline step's CPU time goes (not run by pytest).
+
+On a shared machine the wall time of a whole run varies by a factor of 2-5 between runs of the same code; this
+compares ``Tracker.update`` of this checkout with that of another one (``--other``, e.g. the main worktree)
+inside one process, on the same tracker states:
+
+  * both pipelines (one with each checkout's ``detect/tracker.py``; the rest of the code is this checkout's) run
+    over the first ``--end`` scans of an input in lockstep; before each scan from ``--start`` on, each tracker is
+    snapshotted (deep copy) with that scan's arguments (scan, pose, map view, body beams);
+  * each snapshot's ``update`` is timed ``--reps`` times on a fresh copy, the two checkouts alternately, in
+    thread CPU time (``time.thread_time_ns``); the per-scan minimum over the repetitions is kept;
+  * printed: the mean over the scans of those minima for each checkout (µs per scan), their ratio, and the
+    median of the per-scan ratios.
+
+``--stages`` instead prints the thread CPU time of one plain run per pipeline component (tracker, SLAM
+match, map update, evidence ledger, body filter, exclusion), ms per scan and share of the step.
+
+    python benchmarks/bench_tracker_ab.py negative_2/right positive_7 [--other ../main/src] [--reps 5]
+        [--start 150 --end 210] [--stages]
+
+Pin to one core with ``taskset -c N``. Inputs: ``negative_2/left|rear|right``, ``positive_7``, ``overtakes``,
+``demo``, ``sim:drive`` (paths under ``--data``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import copy
+import importlib.util
+import statistics
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+INPUTS: dict[str, tuple[str, str | None]] = {
+    "negative_2/left": ("dynamic/leg_tracker/negative_2.bag", "/left_scan"),
+    "negative_2/rear": ("dynamic/leg_tracker/negative_2.bag", "/rear_scan"),
+    "negative_2/right": ("dynamic/leg_tracker/negative_2.bag", "/right_scan"),
+    "positive_7": ("dynamic/leg_tracker/positive_7.bag", None),
+    "overtakes": ("dynamic/datmo/overtakes.bag", None),
+    "demo": ("dynamic/leg_tracker/demo_stationary_simple_environment.bag", None),
+    "sim:drive": ("sim:drive", None),
+}
+
+
+def load_scans(data: Path, name: str) -> list:
+    from dynslam2d.inputs import open_source
+
+    rel, topic = INPUTS[name]
+    return list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+
+
+def other_tracker_module(src: Path):
+    """The other checkout's ``dynslam2d/detect/tracker.py`` as a module of its own (its imports resolve to this one)."""
+    spec = importlib.util.spec_from_file_location("other_tracker", src / "dynslam2d" / "detect" / "tracker.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["other_tracker"] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def ab(scans: list, other, reps: int, start: int, end: int) -> tuple[float, float, float]:
+    """(other µs/scan, this µs/scan, median per-scan ratio this / other) of Tracker.update (see the docstring)."""
+    from dynslam2d.detect import tracker as this
+    from dynslam2d.pipeline import Pipeline
+
+    pipes, states = {}, {"other": [], "this": []}
+    for tag, mod in (("other", other), ("this", this)):
+        p = Pipeline()
+        p.tracker = mod.Tracker(p.config.detect)
+        pipes[tag] = p
+    got: dict = {}
+    for i, s in enumerate(scans[:end]):
+        for tag, p in pipes.items():
+            if i < start:
+                p.process(s)
+                continue
+            snap = copy.deepcopy(p.tracker)
+            orig = p.tracker.update
+
+            def grab(*a, _o=orig):
+                got["args"] = (a[0], a[1], copy.deepcopy(a[2]), None if a[3] is None else a[3].copy())
+                return _o(*a)
+
+            p.tracker.update = grab
+            p.process(s)
+            del p.tracker.update
+            states[tag].append((snap, got["args"]))
+    n = len(states["this"])
+    best = {"other": [float("inf")] * n, "this": [float("inf")] * n}
+    for r in range(reps):
+        for j in range(n):
+            for tag in (("other", "this") if (r + j) % 2 == 0 else ("this", "other")):
+                tr, args = states[tag][j]
+                fresh = copy.deepcopy(tr)
+                t0 = time.thread_time_ns()
+                fresh.update(*args)
+                best[tag][j] = min(best[tag][j], time.thread_time_ns() - t0)
+    mo, mt = (sum(best[k]) / n / 1e3 for k in ("other", "this"))
+    return mo, mt, statistics.median(t / o for t, o in zip(best["this"], best["other"]))
+
+
+def stages(scans: list) -> tuple[float, dict[str, float]]:
+    """CPU ms per scan of one run after a warm-up, and per component (ms per scan)."""
+    from dynslam2d.pipeline import Pipeline
+
+    warm = Pipeline()
+    for s in scans[:60]:
+        warm.process(s)
+    p = Pipeline()
+    acc: collections.Counter = collections.Counter()
+
+    def wrap(obj, name: str, tag: str) -> None:
+        f = getattr(obj, name)
+
+        def timed(*a, **k):
+            t0 = time.thread_time_ns()
+            r = f(*a, **k)
+            acc[tag] += time.thread_time_ns() - t0
+            return r
+
+        setattr(obj, name, timed)
+
+    wrap(p.tracker, "update", "tracker")
+    wrap(p.slam, "match", "SLAM match")
+    wrap(p.slam, "update_map", "SLAM map update")
+    if p.ledger is not None:
+        for n in ("before_update", "after_update", "observe", "erase_entering"):
+            wrap(p.ledger, n, "evidence ledger (slam/erasure.py)")
+    wrap(p.body, "mask", "body filter")
+    wrap(p.body, "observe", "body filter")
+    wrap(p, "_exclude", "exclusion")
+    t0 = time.thread_time_ns()
+    for s in scans:
+        p.process(s)
+    n = len(scans)
+    return (time.thread_time_ns() - t0) / 1e6 / n, {k: v / 1e6 / n for k, v in acc.items()}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("inputs", nargs="+", choices=sorted(INPUTS))
+    ap.add_argument("--other", type=Path, default=REPO.parent / "main" / "src", help="the other checkout's src/")
+    ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--start", type=int, default=150)
+    ap.add_argument("--end", type=int, default=210)
+    ap.add_argument("--stages", action="store_true", help="per-component CPU of this checkout instead")
+    ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
+    args = ap.parse_args()
+    other = None if args.stages else other_tracker_module(args.other)
+    for name in args.inputs:
+        scans = load_scans(args.data, name)
+        if args.stages:
+            total, parts = stages(scans)
+            print(f"{name}: {total:.2f} ms CPU per scan")
+            for k, v in sorted(parts.items(), key=lambda kv: -kv[1]):
+                print(f"  {k:<36} {v:6.3f} ms ({100 * v / total:3.0f} %)")
+        else:
+            mo, mt, med = ab(scans, other, args.reps, args.start, args.end)
+            print(f"{name:<18} Tracker.update CPU µs/scan, scans {args.start}-{args.end}, min of {args.reps}: "
+                  f"other {mo:.0f}, this {mt:.0f}, ratio {mt / mo:.3f} (median per scan {med:.3f})")
+        sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,94 @@
+"""The tracker's cheap bookkeeping (issue 9 speed): fast report constructors, bounded history, reports
+that own their arrays — each checked against the plain construction or on a simulated moving box."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from dynslam2d.detect import DetectConfig, Tracker
+from dynslam2d.detect.frozen import fast_init
+from dynslam2d.sim import cast_rays, rect_segments
+from dynslam2d.types import Box, Pose2D, Scan, Track
+
+N = 360
+ANGLES = -math.pi + np.arange(N) * 2 * math.pi / N
+ROOM = rect_segments(0.0, 0.0, 0.0, 12.0, 10.0)
+
+
+def _fields(obj: object) -> list:
+    return [getattr(obj, f.name) for f in dataclasses.fields(obj)]
+
+
+def test_fast_init_builds_the_same_frozen_objects_as_the_class() -> None:
+    make_box, make_track = fast_init(Box), fast_init(Track)
+    assert make_box is not Box and make_track is not Track  # both qualify for the fast path
+    b = make_box(1.0, -2.0, 0.3, 0.8, 0.5)
+    ref = Box(1.0, -2.0, 0.3, 0.8, 0.5)
+    assert type(b) is Box and b == ref and hash(b) == hash(ref)
+    args = (7, "confirmed", 2.5, b, np.array([0.1, 0.2]), np.eye(4), 1.5, 9, 0, "rect", True, "in M", np.arange(3),
+            3)
+    t, tref = make_track(*args), Track(*args)
+    assert type(t) is Track and all(a is c for a, c in zip(_fields(t), _fields(tref)))  # every field, in order
+    assert t.remembered is False  # the field's default
+    assert make_track(*args, remembered=True).remembered is True
+    assert make_track(**{f.name: v for f, v in zip(dataclasses.fields(Track), args)}).hits == 9  # keywords
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        t.hits = 3  # type: ignore[misc]
+    with pytest.raises(TypeError):
+        make_box(1.0, 2.0)  # missing fields are an error, as with the class
+
+
+def test_fast_init_falls_back_to_the_class_where_slots_cannot_be_set_directly() -> None:
+    @dataclasses.dataclass(frozen=True)
+    class NoSlots:
+        a: int
+
+    @dataclasses.dataclass(frozen=True, slots=True)
+    class PostInit:
+        a: int
+
+        def __post_init__(self) -> None:
+            pass
+
+    @dataclasses.dataclass(slots=True)
+    class Factory:
+        a: list = dataclasses.field(default_factory=list)
+
+    for cls in (NoSlots, PostInit, Factory):
+        assert fast_init(cls) is cls
+
+
+def _scan(pose: Pose2D, box_x: float, stamp: float, seed: int) -> Scan:
+    segs = np.vstack([ROOM, rect_segments(box_x, 1.5, 0.0, 0.8, 0.5)])
+    ids = np.zeros(segs.shape[0], dtype=np.int32)
+    dist, _ = cast_rays((pose.x, pose.y), pose.theta + ANGLES, segs, ids, np.zeros((0, 3)),
+                        np.zeros(0, dtype=np.int32))
+    r = dist + np.random.default_rng(seed).normal(0.0, 0.005, dist.shape)
+    r[~np.isfinite(dist)] = np.inf
+    return Scan(stamp=stamp, angle_min=-math.pi, angle_increment=2 * math.pi / N, ranges=r, range_min=0.1,
+                range_max=20.0)
+
+
+def test_history_is_bounded_and_reports_own_their_arrays() -> None:
+    """A box driven past the laser for 60 updates: each track keeps at most ``confirm_window`` history entries
+    (the M-of-N rule reads no more), and a report's covariance / velocity are not the tracker's arrays (writing
+    into a report leaves the next step unchanged)."""
+    cfg = DetectConfig()
+    tr = Tracker(cfg)
+    pose = Pose2D(0.0, -2.0, 0.0)
+    out = []
+    for i in range(60):
+        out = tr.update(_scan(pose, -3.0 + 0.05 * i, i / 15.0, i), pose)
+    box = [t for t in out if t.in_m]
+    assert len(box) == 1 and box[0].hits >= 50
+    assert all(len(k.history) <= cfg.tracker.confirm_window for k in tr._tracks)
+    k = next(k for k in tr._tracks if k.id == box[0].id)
+    assert not np.shares_memory(box[0].covariance, k.P) and not np.shares_memory(box[0].velocity, k.x)
+    cov_before = k.P.copy()
+    box[0].covariance[:] = 1e6  # a caller scribbling on its report
+    box[0].velocity[:] = 99.0
+    assert np.array_equal(k.P, cov_before) and float(np.hypot(k.x[2], k.x[3])) < 1.0
