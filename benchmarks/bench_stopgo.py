@@ -7,7 +7,8 @@ cleaned map, and the removed shares of ``metrics.json``'s ``removal_by_motion``:
 movers, stopped movers (they moved before), movers with stopped ones counted as movers, the
 same counting a stopped mover only once the sensor saw it walk, and static structure.
 
-    python benchmarks/bench_stopgo.py sim:stop-and-go sim:parking [--seed N] [--set detect.segment.max_extent=5.6]
+    python benchmarks/bench_stopgo.py sim:stop-and-go sim:parking [--seed N] [--memory both|on|off]
+        [--set detect.segment.max_extent=5.6]
 """
 
 from __future__ import annotations
@@ -45,9 +46,10 @@ def main() -> None:
     ap.add_argument("inputs", nargs="+")
     ap.add_argument("--set", action="append", default=[], help="KEY=VALUE config override (both runs)")
     ap.add_argument("--seed", type=int, default=None, help="simulator seed (default: the scene's own)")
+    ap.add_argument("--memory", choices=("both", "on", "off"), default="both", help="which of the two runs")
     args = ap.parse_args()
     for inp in args.inputs:
-        for memory in (False, True):
+        for memory in {"both": (False, True), "on": (True,), "off": (False,)}[args.memory]:
             src = open_source(inp, seed=args.seed)
             cfg = _config(memory, args.set)
             rec = CleanupRecorder(cfg.clean)
