@@ -322,3 +322,36 @@ def test_a_remembered_track_coasts_where_it_stopped_until_its_place_is_seen_empt
         assert all(not k.in_m for ks in standing_late for k in ks)
         assert all(not ks for ks in hidden[10:])  # deleted after max_coast_time
     assert not seen[-1][2]  # its place seen empty: no track there
+
+
+def test_the_loop_closure_re_render_leaves_out_what_erasure_took_out():
+    """Loop closure keeps every keyframe to re-render the map from optimised poses; the beams whose
+    evidence retroactive erasure took out of the online map are marked removed in those keyframes,
+    so a re-render (here at the front end's own poses) holds no parked cart either, while the same
+    keyframes with only the filter's removed beams do."""
+    from dynslam2d.pipeline import render_map
+    from dynslam2d.eval.maps import map_metrics
+
+    src = SimSource(_parked_scene())
+    gt = ground_truth_for(src, None, 0.05)
+    cfg = _config(True, True, every_scan=True)
+    assert cfg.loop.enabled
+    res = run(src, cfg)
+    loop = res.loop
+    assert loop is not None and loop.keyframes
+    assert res.memory["erased_cells_finest"] > 20
+    marked = [kf for kf in loop.keyframes
+              if kf.removed.size and (kf.removed & ~res.removed[kf.scan_index][:kf.removed.shape[0]]).any()]
+    assert len(marked) > 10  # keyframes of the parked time lost the cart's beams after the fact
+    loop.node_poses = loop.frontend[loop.keyframe_scans]
+    grid, _ = render_map(loop, cfg.slam)
+    a = compute_metrics(res, gt)["alignment"]
+    T = Pose2D(a["x"], a["y"], a["theta"])
+    ghost_erased = map_metrics(grid, gt.static_map, T).ghost_area_m2
+    for kf in loop.keyframes:  # the same keyframes with only the filter's removed beams
+        kf.removed = res.removed[kf.scan_index].copy()
+    grid_plain, _ = render_map(loop, cfg.slam)
+    ghost_plain = map_metrics(grid_plain, gt.static_map, T).ghost_area_m2
+    assert ghost_plain > 0.04  # the cart's outline where it was parked
+    assert ghost_erased < 0.02
+    assert ghost_erased == pytest.approx(compute_metrics(res, gt)["map"]["ghost_area_m2"], abs=0.01)
