@@ -60,6 +60,16 @@ def _decode(keys: np.ndarray) -> np.ndarray:
     return np.column_stack(((keys - j) // _KEY_SHIFT, j))
 
 
+def _member(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(len(a),) bool: a[i] is in b (int64 keys; a sorted search, ~10× faster than np.isin at these sizes)."""
+    if b.shape[0] == 0:
+        return np.zeros(a.shape[0], dtype=bool)
+    o = np.sort(b)
+    i = np.searchsorted(o, a)
+    i[i == o.shape[0]] = 0
+    return o[i] == a
+
+
 class _LevelRecord:
     """Evidence of one track on one map level.
 
@@ -154,6 +164,7 @@ class _Ledger:
     skip: bool = False  # this stay in the removal set erases nothing (the track did not stand before it)
     #: (scan index, beams) of the track's kept beams at every recorded map update (only with keep_beams)
     beams: list[tuple[int, np.ndarray]] = field(default_factory=list)
+    last_track: Track | None = None  # the track as last seen out of the removal set
 
     @property
     def n_cells(self) -> int:
@@ -189,6 +200,7 @@ class EvidenceLedger:
         self.erased_beams: list[tuple[int, np.ndarray]] = []
         self._ledgers: dict[int, _Ledger] = {}
         self._ended: dict[int, _Ledger] = {}
+        self._oldest_ended = math.inf  # the smallest last_seen among the ended ledgers, s
         #: live track id → [box where it stands, stamp it began standing there, last stamp it stood there]
         self._first: dict[int, list] = {}
         #: absolute finest-level cells whose evidence was erased (for map.png), with the count of events
@@ -230,7 +242,7 @@ class EvidenceLedger:
             first = np.ones(so.shape[0], dtype=bool)
             first[1:] = (so[1:] != so[:-1]) | (sk[1:] != sk[:-1])
             # a cell another (unowned) kept beam of this scan hits is the structure's, not the track's
-            first &= ~np.isin(sk, key[~mine_b])
+            first &= ~_member(sk, key[~mine_b])
             sel = order[first]
             c = cells[mine_b][sel]
             before, uidx = self._read(lv, c)
@@ -296,11 +308,12 @@ class EvidenceLedger:
         """Keep each live track's last box; move ledgers of ended tracks aside; drop old ones."""
         live = {t.id: t for t in tracks}
         reach = self.config.link_margin + 0.5
+        stand = self.config.stand_speed
         for t in tracks:
             a = self._first.get(t.id)
             if a is None:
                 self._first[t.id] = [_box_key(t), stamp, stamp]
-            elif t.id not in removing and float(np.hypot(t.velocity[0], t.velocity[1])) < self.config.stand_speed:
+            elif t.id not in removing and math.hypot(float(t.velocity[0]), float(t.velocity[1])) < stand:
                 if math.hypot(t.box.px - a[0][0], t.box.py - a[0][1]) <= reach:
                     a[2] = stamp  # still standing where it stood
                 else:
@@ -311,19 +324,24 @@ class EvidenceLedger:
             t = live.get(tid)
             if t is None:
                 led = self._ledgers.pop(tid)
+                if led.last_track is not None:
+                    led.last_box = _box_key(led.last_track)
                 if led.confirmed:  # tentative clutter (wall fragments, noise) is never linked
                     self._ended[tid] = led
+                    self._oldest_ended = min(self._oldest_ended, led.last_seen)
                 else:
                     self._fold(led)  # (its cells count in cells_recorded)
             elif tid not in removing:
                 led = self._ledgers[tid]
                 led.m_start, led.skip, led.linked = None, False, False  # out of the removal set (again)
-                led.last_box = _box_key(t)
+                led.last_track = t  # (its box becomes last_box when the track ends)
                 led.last_seen = stamp
                 led.confirmed = led.confirmed or t.state != "tentative"
         keep = self.config.ledger_keep_s
-        for tid in [i for i, led in self._ended.items() if stamp - led.last_seen > keep]:
-            self._fold(self._ended.pop(tid))
+        if self._ended and stamp - self._oldest_ended > keep:  # (a full pass only when one has expired)
+            for tid in [i for i, led in self._ended.items() if stamp - led.last_seen > keep]:
+                self._fold(self._ended.pop(tid))
+            self._oldest_ended = min((led.last_seen for led in self._ended.values()), default=math.inf)
 
     # ------------------------------------------------------------------ erasure
     def erase_entering(self, tracks: list[Track], removing: set[int], stamp: float, hmap: MultiResMap) -> int:
