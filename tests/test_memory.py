@@ -329,8 +329,8 @@ def test_the_loop_closure_re_render_leaves_out_what_erasure_took_out():
     evidence retroactive erasure took out of the online map are marked removed in those keyframes,
     so a re-render (here at the front end's own poses) holds no parked cart either, while the same
     keyframes with only the filter's removed beams do."""
-    from dynslam2d.pipeline import render_map
     from dynslam2d.eval.maps import map_metrics
+    from dynslam2d.pipeline import render_map
 
     src = SimSource(_parked_scene())
     gt = ground_truth_for(src, None, 0.05)

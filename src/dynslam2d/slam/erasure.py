@@ -46,7 +46,6 @@ from dynslam2d.detect.memoryconfig import MemoryConfig
 from dynslam2d.slam.grid import MultiResMap
 from dynslam2d.types import Pose2D, Scan, Track
 
-
 #: (i, j) cell → one int64 key: i·2^32 + j (|i|, |j| < 2^31)
 _KEY_SHIFT = 4294967296
 _HALF = 2147483648
