@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import inspect
+import sys
 import time
 
 import numpy as np
@@ -77,6 +78,7 @@ def main() -> None:
     if args.compare:
         spec = importlib.util.spec_from_file_location("erasure_compare", args.compare)
         mod = importlib.util.module_from_spec(spec)
+        sys.modules["erasure_compare"] = mod  # (dataclasses look their module up)
         spec.loader.exec_module(mod)
         versions.append(("compare", mod.EvidenceLedger))
     versions.append(("this", P.EvidenceLedger))
