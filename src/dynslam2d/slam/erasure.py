@@ -51,6 +51,8 @@ _KEY_SHIFT = 4294967296
 _HALF = 2147483648
 #: A level record folds its appended update rows into one row per cell once it holds this many.
 _COMPACT_ROWS = 4096
+#: … or this many updates (each update's rows are four small arrays).
+_COMPACT_CHUNKS = 64
 
 
 def _decode(keys: np.ndarray) -> np.ndarray:
@@ -96,7 +98,7 @@ class _LevelRecord:
             return 0
         self._rows.append((key, delta, ub, ua))
         self._n_rows += key.shape[0]
-        return self.compact() if self._n_rows >= _COMPACT_ROWS else 0
+        return self.compact() if self._n_rows >= _COMPACT_ROWS or len(self._rows) >= _COMPACT_CHUNKS else 0
 
     def compact(self) -> int:
         """Fold the appended rows into the per-cell arrays; returns the number of new cells."""
