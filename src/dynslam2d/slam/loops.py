@@ -193,6 +193,8 @@ class LoopCloser:
             kf = self.keyframes[k]
             if kf.removed.shape != kf.scan.ranges.shape:
                 kf.removed = np.zeros(kf.scan.ranges.shape[0], dtype=bool)
+            else:  # a copy: the array may be the caller's (the pipeline's StepResult.removed of that scan)
+                kf.removed = kf.removed.copy()
             b = np.asarray(beams, dtype=np.int64)
             b = b[(b >= 0) & (b < kf.removed.shape[0])]
             n += int((~kf.removed[b]).sum())
