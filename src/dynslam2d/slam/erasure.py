@@ -30,6 +30,12 @@ of a track that ended while the object stood (the robot drove away) is kept for
 ``ledger_keep_s`` (only if the track was confirmed: tentative clutter is dropped) and erased
 with a track that stood where the ended track last was and then enters M.
 
+Recording is vectorised over all tracks: one sort per level and update, rows appended as arrays
+and folded per cell when they pile up (:class:`_LevelRecord`). With ``keep_beams`` (loop closure
+on) the ledger also keeps each track's (scan index, beams) and lists those of erased tracks in
+:attr:`EvidenceLedger.erased_beams`, for the loop closer to mark them removed in its keyframes so
+that a map re-rendered from the optimised poses leaves them out too (docs/maps.md).
+
 Frames and units: cells are absolute level indices (cell (i, j) centred at
 (i·r_k, j·r_k) in the map frame, :mod:`dynslam2d.slam.grid`), stable when a level grows;
 distances in m, stamps in s, log-odds dimensionless.
