@@ -7,7 +7,13 @@ cleaned map, and the removed shares of ``metrics.json``'s ``removal_by_motion``:
 movers, stopped movers (they moved before), movers with stopped ones counted as movers, the
 same counting a stopped mover only once the sensor saw it walk, and static structure.
 
-    python benchmarks/bench_stopgo.py sim:stop-and-go sim:parking [--seed N] [--set detect.segment.max_extent=5.6]
+    python benchmarks/bench_stopgo.py sim:stop-and-go sim:parking [--seed N] [--memory both|on|off]
+        [--set detect.segment.max_extent=5.6] [--explain]
+
+``--explain`` adds, per run, what limits the online map's F1 and ghost: the ground-truth occupied cells
+the recall counts (observable) but the map misses — never observed (unknown) or observed free, and of
+those how many kept beams hit (≥ 5 hits: structure the rays later cleared, e.g. walls seen at grazing
+incidence) — and the ghost cells of both maps by the nearest ground-truth mover.
 """
 
 from __future__ import annotations
@@ -15,10 +21,11 @@ from __future__ import annotations
 import argparse
 import time
 
+import numpy as np
 import yaml
 
 from dynslam2d.config import Config, config_from_dict
-from dynslam2d.eval.maps import map_metrics
+from dynslam2d.eval.maps import cell_sets, map_metrics
 from dynslam2d.inputs import open_source
 from dynslam2d.pipeline import run
 from dynslam2d.results import compute_metrics, ground_truth_for
@@ -40,19 +47,84 @@ def _config(memory: bool, sets: list[str]) -> Config:
     return config_from_dict(data, origin="--set")
 
 
+class HitCounter:
+    """Observer: per finest-level cell (absolute index), the kept beams that hit it in map updates."""
+
+    def __init__(self) -> None:
+        self.keys: list[np.ndarray] = []
+        self.resolution = 0.05
+
+    def on_scan(self, scan, step, pipeline) -> None:
+        if not step.map_updated:
+            return
+        c = pipeline.config.slam
+        self.resolution = c.map_resolution
+        with np.errstate(invalid="ignore"):
+            r = scan.ranges
+            keep = scan.valid_mask() & ~step.removed & (r > c.laser_min_dist) & (r < c.laser_max_dist)
+        cells = np.floor(step.pose.transform_points(scan.points(keep)) / c.map_resolution + 0.5).astype(np.int64)
+        self.keys.append(cells[:, 0] * 4294967296 + cells[:, 1])
+
+    def on_finish(self, result, pipeline) -> None:
+        pass
+
+    def hits_near(self, xy: np.ndarray) -> np.ndarray:
+        """Hits within one cell (3 × 3) of each map-frame point (n, 2), m."""
+        k = np.concatenate(self.keys) if self.keys else np.zeros(0, np.int64)
+        u, n = np.unique(k, return_counts=True)
+        out = np.zeros(xy.shape[0], dtype=np.int64)
+        if u.shape[0] == 0:
+            return out
+        c = np.floor(xy / self.resolution + 0.5).astype(np.int64)
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                q = (c[:, 0] + di) * 4294967296 + (c[:, 1] + dj)
+                i = np.clip(np.searchsorted(u, q), 0, u.shape[0] - 1)
+                out += np.where(u[i] == q, n[i], 0)
+        return out
+
+
+def explain(result, cleaned, gt, transform: Pose2D, hits: HitCounter) -> None:
+    """Print what limits the online map's F1 (missed observable cells) and the ghost cells by nearest mover."""
+    cs = cell_sets(result.grid, gt.static_map, transform)
+    miss = cs.observable & ~cs.truth_matched
+    est = cs.estimate[miss]
+    r, c = np.nonzero(miss)
+    xy = np.column_stack((cs.origin[0] + (c + 0.5) * cs.resolution, cs.origin[1] + (r + 0.5) * cs.resolution))
+    h = hits.hits_near(transform.inverse().transform_points(xy)) if xy.size else np.zeros(0, np.int64)
+    free = np.isfinite(est)
+    print(f"    online map misses {int(miss.sum())} of {int(cs.observable.sum())} observable structure cells: "
+          f"{int((~free).sum())} never observed, {int(free.sum())} observed free ({int((free & (h >= 5)).sum())} of "
+          f"them hit >= 5 times by kept beams, {int((free & (h == 0)).sum())} never hit)")
+    mv = gt.movers
+    for label, grid in (("online", result.grid), ("cleaned", cleaned.grid)):
+        g = cell_sets(grid, gt.static_map, transform).ghost
+        r, c = np.nonzero(g)
+        near: dict[int, int] = {}
+        for x, y in zip(cs.origin[0] + (c + 0.5) * cs.resolution, cs.origin[1] + (r + 0.5) * cs.resolution):
+            k = int(np.argmin(np.hypot(mv["x"] - x, mv["y"] - y))) if mv.shape[0] else -1
+            mid = int(mv["id"][k]) if k >= 0 else -1
+            near[mid] = near.get(mid, 0) + 1
+        print(f"    {label} ghost cells by nearest mover: " + (", ".join(f"mover {m}: {n}" for m, n in
+                                                                   sorted(near.items())) or "none"))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("inputs", nargs="+")
     ap.add_argument("--set", action="append", default=[], help="KEY=VALUE config override (both runs)")
     ap.add_argument("--seed", type=int, default=None, help="simulator seed (default: the scene's own)")
+    ap.add_argument("--memory", choices=("both", "on", "off"), default="both", help="which of the two runs")
+    ap.add_argument("--explain", action="store_true", help="what limits F1 and ghost (module docstring)")
     args = ap.parse_args()
     for inp in args.inputs:
-        for memory in (False, True):
+        for memory in {"both": (False, True), "on": (True,), "off": (False,)}[args.memory]:
             src = open_source(inp, seed=args.seed)
             cfg = _config(memory, args.set)
             rec = CleanupRecorder(cfg.clean)
             t0 = time.perf_counter()
-            result = run(src, cfg, observers=[rec])
+            hits = HitCounter()
+            result = run(src, cfg, observers=[rec, hits] if args.explain else [rec])
             wall = time.perf_counter() - t0
             gt = ground_truth_for(src, None, cfg.slam.map_resolution)
             m = compute_metrics(result, gt)
@@ -74,6 +146,8 @@ def main() -> None:
                   f"{mem.get('remembered_tracks', 0)}, "
                   f"erased cells {mem.get('erased_cells_finest', 0)} ({mem.get('tracks_erased', 0)} "
                   f"tracks)", flush=True)
+            if args.explain:
+                explain(result, rec.result, gt, Pose2D(a["x"], a["y"], a["theta"]), hits)
 
 
 if __name__ == "__main__":

@@ -220,3 +220,51 @@ def test_map_check_keeps_optimised_poses_only_when_the_map_gets_sharper(block_lo
     assert res.stats["max_keyframe_correction_m"] > 1.0
     assert keep_optimised(res, lo_front, lo_opt, LoopConfig()) and res.corrected
     assert res.stats["map_entropy_optimised"] < res.stats["map_entropy_frontend"]
+
+
+def test_re_rendered_map_leaves_out_beams_erased_after_the_fact() -> None:
+    """A box stands in the corridor while the robot passes it the first time and is gone on the second
+    lap; retroactive erasure hands the box's beams to the loop closer (``drop_beams``) once it has left.
+    Loop closure keeps the optimised poses and re-renders the map from the keyframes: the box is not in
+    it, while the same run without the dropped beams keeps it."""
+    from dynslam2d.pipeline import render_map
+
+    world = _block_loop_world()
+    box = rect_segments(12.0, 1.0, 0.0, 0.8, 0.6)  # in the lower corridor, 0.5 m beside the path
+    gt = _loop_path()
+    front = _drifted(gt, 0.0015)
+    rng = np.random.default_rng(0)
+    scans, box_beams = [], []
+    for k, p in enumerate(gt):
+        there = k < len(gt) // 2
+        segs = np.vstack([world.segments, box]) if there else world.segments
+        true, _ = cast_rays(p[:2], LIDAR.angles + p[2], segs, max_dist=LIDAR.range_max)
+        r, _ = LIDAR.measure(true, rng)
+        scans.append(LIDAR.make_scan(0.1 * k, r))
+        if there:
+            only, _ = cast_rays(p[:2], LIDAR.angles + p[2], box, max_dist=LIDAR.range_max)
+            box_beams.append((k, np.flatnonzero(np.isfinite(only) & (only == true))))
+
+    def closed(drop: bool):
+        lc = LoopCloser(LoopConfig(), SlamConfig())
+        given = []
+        for k, (s, p) in enumerate(zip(scans, front)):
+            given.append(np.zeros(s.ranges.shape, bool))
+            lc.add(s.stamp, Pose2D(*p), s, given[-1], keyframe=k % 2 == 0)
+            if drop and k == len(gt) // 2:  # the box has gone: its evidence is erased
+                assert lc.drop_beams(box_beams) > 100
+        assert not any(g.any() for g in given)  # the caller's arrays (the pipeline's step results) stay as given
+        return lc.finish()
+
+    def box_cells(res) -> int:
+        grid, _ = render_map(res, SlamConfig())
+        xs = grid.origin[0] + (np.arange(grid.shape[1]) + 0.5) * grid.resolution
+        ys = grid.origin[1] + (np.arange(grid.shape[0]) + 0.5) * grid.resolution
+        X, Y = np.meshgrid(xs, ys)
+        inside = (np.abs(X - 12.0) < 0.5) & (np.abs(Y - 1.0) < 0.4)
+        return int((np.nan_to_num(grid.prob, nan=0.0)[inside] > 0.65).sum())
+
+    res = closed(True)
+    assert res.corrected  # the optimised poses are what gets rendered
+    assert box_cells(res) == 0
+    assert box_cells(closed(False)) > 10

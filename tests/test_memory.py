@@ -322,3 +322,74 @@ def test_a_remembered_track_coasts_where_it_stopped_until_its_place_is_seen_empt
         assert all(not k.in_m for ks in standing_late for k in ks)
         assert all(not ks for ks in hidden[10:])  # deleted after max_coast_time
     assert not seen[-1][2]  # its place seen empty: no track there
+
+
+def test_the_loop_closure_re_render_leaves_out_what_erasure_took_out():
+    """Loop closure keeps every keyframe to re-render the map from optimised poses; the beams whose
+    evidence retroactive erasure took out of the online map are marked removed in those keyframes,
+    so a re-render (here at the front end's own poses) holds no parked cart either, while the same
+    keyframes with only the filter's removed beams do."""
+    from dynslam2d.eval.maps import map_metrics
+    from dynslam2d.pipeline import render_map
+
+    src = SimSource(_parked_scene())
+    gt = ground_truth_for(src, None, 0.05)
+    cfg = _config(True, True, every_scan=True)
+    assert cfg.loop.enabled
+    res = run(src, cfg)
+    loop = res.loop
+    assert loop is not None and loop.keyframes
+    assert res.memory["erased_cells_finest"] > 20
+    marked = [kf for kf in loop.keyframes
+              if kf.removed.size and (kf.removed & ~res.removed[kf.scan_index][:kf.removed.shape[0]]).any()]
+    assert len(marked) > 10  # keyframes of the parked time lost the cart's beams after the fact
+    loop.node_poses = loop.frontend[loop.keyframe_scans]
+    grid, _ = render_map(loop, cfg.slam)
+    a = compute_metrics(res, gt)["alignment"]
+    T = Pose2D(a["x"], a["y"], a["theta"])
+    ghost_erased = map_metrics(grid, gt.static_map, T).ghost_area_m2
+    for kf in loop.keyframes:  # the same keyframes with only the filter's removed beams
+        kf.removed = res.removed[kf.scan_index].copy()
+    grid_plain, _ = render_map(loop, cfg.slam)
+    ghost_plain = map_metrics(grid_plain, gt.static_map, T).ghost_area_m2
+    assert ghost_plain > 0.04  # the cart's outline where it was parked
+    assert ghost_erased < 0.02
+    assert ghost_erased == pytest.approx(compute_metrics(res, gt)["map"]["ghost_area_m2"], abs=0.01)
+
+
+@pytest.mark.parametrize("cap", [20000, 7])
+def test_ledger_rows_folded_early_or_late_give_the_same_record(monkeypatch, cap):
+    """The ledger appends each update's rows and folds them per cell when they pile up: folding after
+    every second update or only at the end gives the same cells, log-odds, purity and last update (an
+    object that moves a little between scans, so cells come and go); with a cell cap only the first
+    cells recorded are kept."""
+    import dynslam2d.slam.erasure as er
+
+    def record(chunks: int) -> list[dict]:
+        monkeypatch.setattr(er, "_COMPACT_CHUNKS", chunks)
+        slam = HectorSlam(SlamConfig(map_levels=2))
+        led = EvidenceLedger(MemoryConfig(max_ledger_cells=cap), slam.config.laser_min_dist,
+                             slam.config.laser_max_dist)
+        t = 0.0
+        for k in range(12):
+            s = _ring(True, t)
+            s.ranges[OBJECT] = 2.0 + 0.03 * (k % 4)  # the object's face moves between cells
+            if k % 5 == 4:
+                s.ranges[OBJECT[::2]] = 5.0  # some scans see past it: its cells are touched by others
+            tr = [_track(t, 2.0, False, OBJECT)]
+            led.observe(tr, set(), t)
+            pend = led.before_update(s, Pose2D(), tr, np.zeros(N, dtype=bool), slam.map)
+            slam.update_map(s, Pose2D(), force=True)
+            led.after_update(pend, slam.map)
+            t += 0.1
+        n = led.summary()["cells_recorded"]  # (folds what is pending)
+        return [lv.cells for lv in led._ledgers[7].levels], n
+
+    early, n_early = record(2)
+    late, n_late = record(10000)
+    assert early == late and n_early == n_late
+    assert len(early[0]) == min(cap, len(early[0])) and len(early[0]) > 5
+    if cap < 20000:
+        assert len(early[0]) == cap
+    else:  # cells only the object's hits made known
+        assert any(v[1] for v in early[0].values())

@@ -168,8 +168,8 @@ class Pipeline:
         mem = self.config.detect.memory
         #: retroactive erasure of what tracks wrote while they stood (slam/erasure.py; None = off)
         self.ledger: EvidenceLedger | None = EvidenceLedger(
-            mem, self.config.slam.laser_min_dist, self.config.slam.laser_max_dist) if (
-            mem.erase and self.config.filter.mode != "none") else None
+            mem, self.config.slam.laser_min_dist, self.config.slam.laser_max_dist,
+            keep_beams=self.loops is not None) if (mem.erase and self.config.filter.mode != "none") else None
 
     def _exclude(self, scan: Scan, pose: Pose2D, tracks: list[Track], dt: float,
                  cache: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -253,11 +253,16 @@ class Pipeline:
             removing = {t.id for t in moving} if filter_active(self.config.filter, len(moving)) else set()
             led.observe(tracks, removing, scan.stamp)
             led.erase_entering(tracks, removing, scan.stamp, self.slam.map)
+            if led.erased_beams:  # the loop closure's keyframes leave them out too (re-render, clean-up recount)
+                if self.loops is not None:
+                    self.loops.drop_beams(led.erased_beams)
+                led.erased_beams.clear()
         if not res.rejected:
             kept = scan.without(removed) if removed.any() else scan
             pending = None
             if led is not None and tracks and self.slam.needs_map_update(res.pose):
-                pending = led.before_update(scan, res.pose, tracks, removed, self.slam.map)
+                pending = led.before_update(scan, res.pose, tracks, removed, self.slam.map,
+                                            self.loops.next_index if self.loops is not None else -1)
             updated = self.slam.update_map(kept, res.pose)
             if pending is not None and updated:
                 led.after_update(pending, self.slam.map)

@@ -76,7 +76,22 @@ class SegmentConfig(BaseModel):
     max_extent: float = Field(
         3.0, gt=0.0,
         description="Clusters whose fitted rectangle has a side longer than this are static structure, m "
-        "(walls); the largest mover in the simulator is the 2 m bar.",
+        "(walls); the largest mover in the simulator is the 2 m bar. Longer clusters up to vehicle_max_extent "
+        "are detections only on observed-free map cells (detect/vehicles.py).",
+    )
+    vehicle_max_extent: float = Field(
+        6.0, ge=0.0,
+        description="Clusters longer than max_extent and up to this are kept as detections (cars, vans) when "
+        "the SLAM map shows they are not structure: at most vehicle_max_structure of their points on "
+        "long-occupied cells and at least vehicle_min_free in observed free space, m (≤ max_extent = off).",
+    )
+    vehicle_max_structure: float = Field(
+        0.1, ge=0.0, le=1.0,
+        description="Largest share of a long cluster's points on long-occupied map cells (detect/vehicles.py).",
+    )
+    vehicle_min_free: float = Field(
+        0.5, ge=0.0, le=1.0,
+        description="Smallest share of a long cluster's points in observed free map cells (detect/vehicles.py).",
     )
 
 

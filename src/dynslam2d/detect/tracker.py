@@ -77,6 +77,7 @@ from dynslam2d.detect.mapevidence import MapView, map_evidence
 from dynslam2d.detect.measure import Detection, Measurement
 from dynslam2d.detect.segment import Segmentation, segment_scan
 from dynslam2d.detect.shapes import CRITERIA, fit_clusters, search_angles
+from dynslam2d.detect.vehicles import admit_long_clusters, extent_limit
 from dynslam2d.types import Box, Pose2D, Scan, Track, wrap_angle
 
 TENTATIVE = "tentative"
@@ -437,8 +438,9 @@ class Tracker:
         keep, kinds, lohi, rel = classify_batch(px, py, seg.beams, seg.offsets, fits, seg.structure, float(pose.x),
                                                 float(pose.y), ranges, valid, ax, ay, seg.wrapped,
                                                 int(cfg.segment.max_skip_beams), float(scan.range_max),
-                                                abs(float(scan.angle_increment)), float(cfg.segment.max_extent),
-                                                self._fit_p)
+                                                abs(float(scan.angle_increment)), extent_limit(cfg), self._fit_p)
+        if cfg.segment.vehicle_max_extent > cfg.segment.max_extent:  # vehicle-size clusters (detect/vehicles.py)
+            admit_long_clusters(keep, fits, seg.offsets, px, py, self._map, cfg)
         idx = np.flatnonzero(keep)
         st.structure_clusters += seg.n_clusters - idx.shape[0]
         pts = np.column_stack((px, py))

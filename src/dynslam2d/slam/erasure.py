@@ -30,6 +30,12 @@ of a track that ended while the object stood (the robot drove away) is kept for
 ``ledger_keep_s`` (only if the track was confirmed: tentative clutter is dropped) and erased
 with a track that stood where the ended track last was and then enters M.
 
+Recording is vectorised over all tracks: one sort per level and update, rows appended as arrays
+and folded per cell when they pile up (:class:`_LevelRecord`). With ``keep_beams`` (loop closure
+on) the ledger also keeps each track's (scan index, beams) and lists those of erased tracks in
+:attr:`EvidenceLedger.erased_beams`, for the loop closer to mark them removed in its keyframes so
+that a map re-rendered from the optimised poses leaves them out too (docs/maps.md).
+
 Frames and units: cells are absolute level indices (cell (i, j) centred at
 (i·r_k, j·r_k) in the map frame, :mod:`dynslam2d.slam.grid`), stable when a level grows;
 distances in m, stamps in s, log-odds dimensionless.
@@ -46,12 +52,107 @@ from dynslam2d.detect.memoryconfig import MemoryConfig
 from dynslam2d.slam.grid import MultiResMap
 from dynslam2d.types import Pose2D, Scan, Track
 
+#: (i, j) cell → one int64 key: i·2^32 + j (|i|, |j| < 2^31)
+_KEY_SHIFT = 4294967296
+_HALF = 2147483648
+#: A level record folds its appended update rows into one row per cell once it holds this many.
+_COMPACT_ROWS = 4096
+#: … or this many updates (each update's rows are four small arrays).
+_COMPACT_CHUNKS = 64
 
-@dataclass(eq=False)
+
+def _decode(keys: np.ndarray) -> np.ndarray:
+    """(n,) cell keys → (n, 2) int64 absolute cells (i, j)."""
+    j = (keys + _HALF) % _KEY_SHIFT - _HALF
+    return np.column_stack(((keys - j) // _KEY_SHIFT, j))
+
+
+def _member(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(len(a),) bool: a[i] is in b (int64 keys; a sorted search, ~10× faster than np.isin at these sizes)."""
+    if b.shape[0] == 0:
+        return np.zeros(a.shape[0], dtype=bool)
+    o = np.sort(b)
+    i = np.searchsorted(o, a)
+    i[i == o.shape[0]] = 0
+    return o[i] == a
+
+
 class _LevelRecord:
-    """Evidence of one track on one map level: absolute cell → [added log-odds, pure, last update index]."""
+    """Evidence of one track on one map level.
 
-    cells: dict[tuple[int, int], list] = field(default_factory=dict)
+    Rows are appended per map update as arrays (cell key, added log-odds, update index before, after) and
+    folded into one row per cell (added log-odds summed; *pure*: the cell was unknown before the track's
+    first hit there and each later hit found the update index the track's previous hit left, i.e. nothing
+    but this track touched it since; the last update index) when they pile up and before they are read.
+    At most ``cap`` cells are kept: rows of cells first seen after ``cap`` others are dropped."""
+
+    __slots__ = ("cap", "key", "delta", "pure", "last", "_rows", "_n_rows")
+
+    def __init__(self, cap: int) -> None:
+        self.cap = cap
+        self.key = np.zeros(0, dtype=np.int64)
+        self.delta = np.zeros(0)
+        self.pure = np.zeros(0, dtype=bool)
+        self.last = np.zeros(0, dtype=np.int64)
+        self._rows: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._n_rows = 0
+
+    def append(self, key: np.ndarray, delta: np.ndarray, ub: np.ndarray, ua: np.ndarray) -> int:
+        """Add the rows of one update (each key at most once); returns the number of new cells recorded
+        when the rows were folded (else 0)."""
+        if key.shape[0] == 0:
+            return 0
+        self._rows.append((key, delta, ub, ua))
+        self._n_rows += key.shape[0]
+        return self.compact() if self._n_rows >= _COMPACT_ROWS or len(self._rows) >= _COMPACT_CHUNKS else 0
+
+    def compact(self) -> int:
+        """Fold the appended rows into the per-cell arrays; returns the number of new cells."""
+        if not self._rows:
+            return 0
+        nb = self.key.shape[0]
+        key = np.concatenate([self.key] + [r[0] for r in self._rows])
+        delta = np.concatenate([self.delta] + [r[1] for r in self._rows])
+        ub = np.concatenate([self.last] + [r[2] for r in self._rows])
+        ua = np.concatenate([self.last] + [r[3] for r in self._rows])
+        start_pure = np.concatenate([self.pure] + [r[2] < 0 for r in self._rows])
+        self._rows.clear()
+        self._n_rows = 0
+        order = np.argsort(key, kind="stable")  # per cell: the folded row first, then the updates in order
+        k = key[order]
+        head = np.ones(k.shape[0], dtype=bool)
+        head[1:] = k[1:] != k[:-1]
+        starts = np.flatnonzero(head)
+        ends = np.append(starts[1:], k.shape[0]) - 1
+        ub_s, ua_s = ub[order], ua[order]
+        chain = np.ones(k.shape[0], dtype=bool)
+        chain[1:] = ub_s[1:] == ua_s[:-1]
+        broken = np.add.reduceat((~chain & ~head).astype(np.int64), starts)
+        new_key = k[starts]
+        new_delta = np.add.reduceat(delta[order], starts)
+        new_pure = start_pure[order][starts] & (broken == 0)
+        new_last = ua_s[ends]
+        first = order[starts]  # the row where each cell first appeared (the folded cells come first)
+        if new_key.shape[0] > self.cap:
+            rank = np.empty(first.shape[0], dtype=np.int64)
+            rank[np.argsort(first, kind="stable")] = np.arange(first.shape[0])
+            ok = rank < self.cap
+            new_key, new_delta, new_pure, new_last = new_key[ok], new_delta[ok], new_pure[ok], new_last[ok]
+        self.key, self.delta, self.pure, self.last = new_key, new_delta, new_pure, new_last
+        return int(new_key.shape[0] - nb)
+
+    @property
+    def cells(self) -> dict[tuple[int, int], list]:
+        """Absolute cell → [added log-odds, pure, last update index] (folds the pending rows first)."""
+        self.compact()
+        return {(int(i), int(j)): [float(d), bool(p), int(u)]
+                for (i, j), d, p, u in zip(_decode(self.key).tolist(), self.delta, self.pure, self.last)}
+
+    def __len__(self) -> int:
+        return int(self.key.shape[0]) + self._n_rows
+
+    def clear(self) -> None:
+        self.__init__(self.cap)
 
 
 @dataclass(eq=False)
@@ -68,17 +169,22 @@ class _Ledger:
     linked: bool = False  # ended-track evidence already joined to a live track
     confirmed: bool = False  # the track was reported confirmed at least once (not only tentative clutter)
     skip: bool = False  # this stay in the removal set erases nothing (the track did not stand before it)
+    #: (scan index, beams) of the track's kept beams at every recorded map update (only with keep_beams)
+    beams: list[tuple[int, np.ndarray]] = field(default_factory=list)
+    last_track: Track | None = None  # the track as last seen out of the removal set
 
     @property
     def n_cells(self) -> int:
-        return sum(len(lv.cells) for lv in self.levels)
+        return sum(len(lv) for lv in self.levels)
 
 
 @dataclass(eq=False)
 class PendingUpdate:
-    """Cells and log-odds read before one map update (:meth:`EvidenceLedger.before_update`)."""
+    """Cells and log-odds read before one map update (:meth:`EvidenceLedger.before_update`): per map level
+    (track ids, cell keys, cells, log-odds before, update index before), sorted by track id, each (track,
+    cell) once."""
 
-    per_track: dict[int, list[tuple[np.ndarray, np.ndarray, np.ndarray]]]  # id → per level (cells, before, uidx)
+    per_level: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
 
 
 def _box_key(t: Track) -> tuple[float, float, float]:
@@ -89,12 +195,19 @@ def _box_key(t: Track) -> tuple[float, float, float]:
 class EvidenceLedger:
     """Per-track record of map evidence and its erasure (module docstring)."""
 
-    def __init__(self, config: MemoryConfig, laser_min_dist: float, laser_max_dist: float) -> None:
+    def __init__(self, config: MemoryConfig, laser_min_dist: float, laser_max_dist: float,
+                 keep_beams: bool = False) -> None:
         self.config = config
         self.laser_min_dist = float(laser_min_dist)
         self.laser_max_dist = float(laser_max_dist)
+        #: also keep, per track, the scan index and beams of its recorded hits, and list those of every
+        #: erased track in :attr:`erased_beams` (for a map re-rendered from the scans, slam/loops.py)
+        self.keep_beams = bool(keep_beams)
+        #: (scan index, beams) whose evidence was erased since the caller last emptied the list
+        self.erased_beams: list[tuple[int, np.ndarray]] = []
         self._ledgers: dict[int, _Ledger] = {}
         self._ended: dict[int, _Ledger] = {}
+        self._oldest_ended = math.inf  # the smallest last_seen among the ended ledgers, s
         #: live track id → [box where it stands, stamp it began standing there, last stamp it stood there]
         self._first: dict[int, list] = {}
         #: absolute finest-level cells whose evidence was erased (for map.png), with the count of events
@@ -104,51 +217,60 @@ class EvidenceLedger:
 
     # ------------------------------------------------------------------ recording
     def before_update(self, scan: Scan, pose: Pose2D, tracks: list[Track], removed: np.ndarray,
-                      hmap: MultiResMap) -> PendingUpdate | None:
+                      hmap: MultiResMap, index: int = -1) -> PendingUpdate | None:
         """Read, before the map update with ``scan`` (beams ``removed`` taken out) at ``pose``, the
         log-odds of the cells each track's kept beams will hit (removed beams, those of the tracks in the
-        removal set, are not recorded). Returns None when nothing is to be recorded."""
-        mine = [t for t in tracks if t.beams.shape[0]]
+        removal set, are not recorded). ``index`` is the scan's index in the run (kept with the beams when
+        ``keep_beams``). Returns None when nothing is to be recorded."""
+        mine = [t for t in tracks if t.beams is not None and t.beams.shape[0]]
         if not mine:
             return None
         r = scan.ranges
-        with np.errstate(invalid="ignore"):
-            valid = scan.valid_mask() & (r > self.laser_min_dist) & (r < self.laser_max_dist) & ~removed
         owner = np.full(r.shape[0], -1, dtype=np.int64)
         for t in mine:
             owner[t.beams] = t.id
-        idx = np.flatnonzero(valid)
-        if idx.shape[0] == 0:
+        with np.errstate(invalid="ignore"):
+            valid = scan.valid_mask() & (r > self.laser_min_dist) & (r < self.laser_max_dist) & ~removed
+        if not (valid & (owner >= 0)).any():
             return None
+        idx = np.flatnonzero(valid)
         a = scan.angles[idx]
         pts = pose.transform_points(np.column_stack((r[idx] * np.cos(a), r[idx] * np.sin(a))))
         own = owner[idx]
-        if not (own >= 0).any():
-            return None
-        per_track: dict[int, list] = {}
+        mine_b = own >= 0
+        ids = own[mine_b]
+        per_level = []
         for lv in hmap.levels:
             cells = np.floor(pts / lv.resolution + 0.5).astype(np.int64)
-            key = cells[:, 0] * 4294967296 + cells[:, 1]  # (i, j) as one integer (|i|, |j| < 2^31)
-            other = np.unique(key[own < 0])
-            for t in mine:
-                sel = own == t.id
-                if not sel.any():
-                    continue
-                ck, first = np.unique(key[sel], return_index=True)
-                excl = ~np.isin(ck, other, assume_unique=True)
-                c = cells[sel][first[excl]]
-                before, uidx = self._read(lv, c)
-                per_track.setdefault(t.id, []).append((c, before, uidx))
+            key = cells[:, 0] * _KEY_SHIFT + cells[:, 1]  # (i, j) as one integer
+            mk = key[mine_b]
+            order = np.lexsort((mk, ids))  # by track, then cell
+            so, sk = ids[order], mk[order]
+            first = np.ones(so.shape[0], dtype=bool)
+            first[1:] = (so[1:] != so[:-1]) | (sk[1:] != sk[:-1])
+            # a cell another (unowned) kept beam of this scan hits is the structure's, not the track's
+            first &= ~_member(sk, key[~mine_b])
+            sel = order[first]
+            c = cells[mine_b][sel]
+            before, uidx = self._read(lv, c)
+            per_level.append((ids[sel], mk[sel], c, before, uidx))
+        present = set(np.unique(ids).tolist())
         for t in mine:
-            if t.id in per_track:
-                if t.id not in self._ledgers:
-                    self._ledgers[t.id] = self._new_ledger(t, t.stamp, len(hmap.levels))
-        return PendingUpdate(per_track) if per_track else None
+            if t.id not in present:  # every beam of it removed
+                continue
+            if t.id not in self._ledgers:
+                self._ledgers[t.id] = self._new_ledger(t, t.stamp, len(hmap.levels))
+            if self.keep_beams and index >= 0:
+                kb = t.beams[valid[t.beams]]
+                if kb.shape[0]:
+                    self._ledgers[t.id].beams.append((int(index), kb.astype(np.int32)))
+        return PendingUpdate(per_level)
 
     def _new_ledger(self, t: Track, stamp: float, n_levels: int) -> _Ledger:
         """An empty ledger of ``t``; its first box is where the track was first reported."""
         box, t0, _ = self._first.get(t.id, (_box_key(t), stamp, stamp))
-        return _Ledger(t.id, box, t0, _box_key(t), stamp, [_LevelRecord() for _ in range(n_levels)])
+        cap = self.config.max_ledger_cells
+        return _Ledger(t.id, box, t0, _box_key(t), stamp, [_LevelRecord(cap) for _ in range(n_levels)])
 
     @staticmethod
     def _read(lv, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -168,40 +290,37 @@ class EvidenceLedger:
 
     def after_update(self, pending: PendingUpdate, hmap: MultiResMap) -> None:
         """Record the evidence the map update added in the cells read by :meth:`before_update`."""
-        cap = self.config.max_ledger_cells
-        for tid, per_level in pending.per_track.items():
-            led = self._ledgers.get(tid)
-            if led is None:
+        for k, (ids, keys, cells, before, ui_before) in enumerate(pending.per_level):
+            if ids.shape[0] == 0:
                 continue
-            for k, (cells, before, ui_before) in enumerate(per_level):
-                lv = hmap.levels[k]
-                after, ui_after = self._read(lv, cells)
-                rec = led.levels[k].cells
-                for (i, j), b, a, ub, ua in zip(cells.tolist(), before.tolist(), after.tolist(), ui_before.tolist(),
-                                                ui_after.tolist()):
-                    if ua == ub:
-                        continue  # not updated (outside the array, or the ray was skipped)
-                    key = (i, j)
-                    e = rec.get(key)
-                    if e is None:
-                        if len(rec) >= cap:
-                            continue
-                        rec[key] = [a - b, ub < 0, ua]
-                        self.stats["cells_recorded"] += 1
-                    else:
-                        e[0] += a - b
-                        e[1] = e[1] and ub == e[2]  # nothing but this track touched it since its last hit
-                        e[2] = ua
+            after, ui_after = self._read(hmap.levels[k], cells)
+            upd = ui_after != ui_before  # else not updated (outside the array, or the ray was skipped)
+            if not upd.any():
+                continue
+            ids, keys, delta, ub, ua = ids[upd], keys[upd], after[upd] - before[upd], ui_before[upd], ui_after[upd]
+            cut = np.flatnonzero(np.diff(ids)) + 1
+            lo = np.concatenate(([0], cut))
+            hi = np.append(cut, ids.shape[0])
+            for a, b in zip(lo.tolist(), hi.tolist()):
+                led = self._ledgers.get(int(ids[a]))
+                if led is not None:
+                    self.stats["cells_recorded"] += led.levels[k].append(keys[a:b], delta[a:b], ub[a:b], ua[a:b])
+
+    def _fold(self, led: _Ledger) -> None:
+        """Fold every level's pending rows of ``led`` (counts its new cells)."""
+        for rec in led.levels:
+            self.stats["cells_recorded"] += rec.compact()
 
     def observe(self, tracks: list[Track], removing: set[int], stamp: float) -> None:
         """Keep each live track's last box; move ledgers of ended tracks aside; drop old ones."""
         live = {t.id: t for t in tracks}
         reach = self.config.link_margin + 0.5
+        stand = self.config.stand_speed
         for t in tracks:
             a = self._first.get(t.id)
             if a is None:
                 self._first[t.id] = [_box_key(t), stamp, stamp]
-            elif t.id not in removing and float(np.hypot(t.velocity[0], t.velocity[1])) < self.config.stand_speed:
+            elif t.id not in removing and math.hypot(float(t.velocity[0]), float(t.velocity[1])) < stand:
                 if math.hypot(t.box.px - a[0][0], t.box.py - a[0][1]) <= reach:
                     a[2] = stamp  # still standing where it stood
                 else:
@@ -212,17 +331,24 @@ class EvidenceLedger:
             t = live.get(tid)
             if t is None:
                 led = self._ledgers.pop(tid)
+                if led.last_track is not None:
+                    led.last_box = _box_key(led.last_track)
                 if led.confirmed:  # tentative clutter (wall fragments, noise) is never linked
                     self._ended[tid] = led
+                    self._oldest_ended = min(self._oldest_ended, led.last_seen)
+                else:
+                    self._fold(led)  # (its cells count in cells_recorded)
             elif tid not in removing:
                 led = self._ledgers[tid]
                 led.m_start, led.skip, led.linked = None, False, False  # out of the removal set (again)
-                led.last_box = _box_key(t)
+                led.last_track = t  # (its box becomes last_box when the track ends)
                 led.last_seen = stamp
                 led.confirmed = led.confirmed or t.state != "tentative"
         keep = self.config.ledger_keep_s
-        for tid in [i for i, led in self._ended.items() if stamp - led.last_seen > keep]:
-            del self._ended[tid]
+        if self._ended and stamp - self._oldest_ended > keep:  # (a full pass only when one has expired)
+            for tid in [i for i, led in self._ended.items() if stamp - led.last_seen > keep]:
+                self._fold(self._ended.pop(tid))
+            self._oldest_ended = min((led.last_seen for led in self._ended.values()), default=math.inf)
 
     # ------------------------------------------------------------------ erasure
     def erase_entering(self, tracks: list[Track], removing: set[int], stamp: float, hmap: MultiResMap) -> int:
@@ -276,15 +402,13 @@ class EvidenceLedger:
     def _erase(self, led: _Ledger, hmap: MultiResMap) -> int:
         """Subtract ``led``'s evidence from every level (only its cells change); clear the ledger."""
         n0 = 0
+        self._fold(led)
         for k, rec in enumerate(led.levels):
-            if not rec.cells:
+            if not len(rec):
                 continue
             lv = hmap.levels[k]
-            keys = np.array(list(rec.cells.keys()), dtype=np.int64).reshape(-1, 2)
-            vals = list(rec.cells.values())
-            delta = np.array([v[0] for v in vals])
-            pure = np.array([v[1] for v in vals], dtype=bool)
-            last = np.array([v[2] for v in vals], dtype=np.int64)
+            keys = _decode(rec.key)
+            delta, pure, last = rec.delta, rec.pure, rec.last
             col = keys[:, 0] - lv.i0
             row = keys[:, 1] - lv.j0
             h, w = lv.shape
@@ -305,7 +429,10 @@ class EvidenceLedger:
                 n0 = int(col.shape[0])
                 self.stats["cells_to_unknown"] += int(unknown.sum())
                 self.erased_cells.update(map(tuple, keys.tolist()))
-            rec.cells.clear()
+            rec.clear()
+        if led.beams:
+            self.erased_beams.extend(led.beams)
+            led.beams = []
         self.stats["cells_changed"] += n0
         self.stats["erasures"] += 1
         self.stats["tracks_erased"] += 1
@@ -329,6 +456,8 @@ class EvidenceLedger:
 
     def summary(self) -> dict[str, int]:
         """Counters for summary.json's ``memory`` block."""
+        for led in (*self._ledgers.values(), *self._ended.values()):
+            self._fold(led)
         return {**self.stats, "erased_cells_finest": len(self.erased_cells),
                 "ledgers_live": len(self._ledgers), "ledgers_ended": len(self._ended)}
 

@@ -172,6 +172,36 @@ class LoopCloser:
         self._scan_node.append(len(self.keyframes) - 1)
         self.stats["total_ms"] += (time.perf_counter() - t0) * 1e3
 
+    @property
+    def next_index(self) -> int:
+        """The scan index the next :meth:`add` call gets (keyframes keep it as ``scan_index``)."""
+        return len(self._frontend)
+
+    def drop_beams(self, items: list[tuple[int, np.ndarray]]) -> int:
+        """Mark beams of earlier keyframes removed after the fact: ``items`` are (scan index, beam indices)
+        whose map evidence retroactive erasure took out of the front end's map (slam/erasure.py), so that
+        the re-rendered map (:func:`dynslam2d.pipeline.render_map`), the clean-up pass's recount and later
+        submaps leave them out too. Scans that are no keyframe are ignored. Returns the beams marked."""
+        if not items or not self.keyframes:
+            return 0
+        index = np.fromiter((kf.scan_index for kf in self.keyframes), dtype=np.int64, count=len(self.keyframes))
+        n = 0
+        for scan_index, beams in items:
+            k = int(np.searchsorted(index, scan_index))
+            if k >= index.shape[0] or index[k] != scan_index:
+                continue
+            kf = self.keyframes[k]
+            if kf.removed.shape != kf.scan.ranges.shape:
+                kf.removed = np.zeros(kf.scan.ranges.shape[0], dtype=bool)
+            else:  # a copy: the array may be the caller's (the pipeline's StepResult.removed of that scan)
+                kf.removed = kf.removed.copy()
+            b = np.asarray(beams, dtype=np.int64)
+            b = b[(b >= 0) & (b < kf.removed.shape[0])]
+            n += int((~kf.removed[b]).sum())
+            kf.removed[b] = True
+            self._cache.pop(k // self.config.submap_keyframes, None)  # its submap is rebuilt without them
+        return n
+
     def _add_keyframe(self, index: int, stamp: float, p: np.ndarray, scan: Scan, removed: np.ndarray) -> None:
         c = self.config
         rm = np.asarray(removed, dtype=bool)
