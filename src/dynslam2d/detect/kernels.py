@@ -280,8 +280,12 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
             v[i] = -sn * px[a + i] + cs * py[a + i]
         su = cs * sx + sn * sy
         sv = -sn * sx + cs * sy
-        lo = np.array([lo0, lo1])
-        hi = np.array([hi0, hi1])
+        lo = np.empty(2)  # (np.array([...]) would compile numba's list-to-array path)
+        lo[0] = lo0
+        lo[1] = lo1
+        hi = np.empty(2)
+        hi[0] = hi0
+        hi[1] = hi1
         ext = (ext0, ext1)
         for k in range(2):
             wk = u if k == 0 else v
@@ -534,10 +538,13 @@ def kalman_update_batch(X: np.ndarray, P: np.ndarray, H: np.ndarray, zm: np.ndar
                 if not math.isfinite(val):
                     good = False
                 Pn[r, i, q] = val
-        if not good:
-            Pn[r] = P[r]
+        if not good:  # element-wise copies: no slice assignment (its shape-error formatting costs ~4 s cold)
+            for i in range(4):
+                for q in range(4):
+                    Pn[r, i, q] = pr[i, q]
             continue
-        Xn[r] = xn
+        for i in range(4):
+            Xn[r, i] = xn[i]
         ok[r] = True
     return Xn, Pn, ok
 
