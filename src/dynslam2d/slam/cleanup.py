@@ -376,7 +376,8 @@ def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray |
     prob[erased] = ERASED_PROBABILITY
     lo = None
     if logodds is not None:
-        lo = np.array(logodds, dtype=np.float64, copy=True)
+        # the input's dtype (the SLAM's log-odds are float32, written as float32): no float64 copy of the map
+        lo = np.array(logodds, dtype=np.result_type(logodds, np.float32), copy=True)
         if lo.shape == erased.shape:
             lo[erased] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
     area = online.resolution ** 2
