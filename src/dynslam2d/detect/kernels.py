@@ -311,7 +311,8 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
                         omax = max(omax, wo[i])
                 if cnt >= 2:
                     face = omax - omin >= span
-                    face_line = _pairwise_sum(sel, 0, cnt) / cnt
+                    # np.int64(0), not 0: a literal argument compiles another specialisation
+                    face_line = _pairwise_sum(sel, np.int64(0), cnt) / cnt
                     if face:
                         if near == 0:
                             lo[k] = face_line
