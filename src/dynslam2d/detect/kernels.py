@@ -300,7 +300,7 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
             face_line = 0.0
             if near >= 0:
                 b = lo[k] if near == 0 else hi[k]
-                cnt = 0
+                cnt = np.int64(0)  # not a literal 0: numba would type a first call with Literal[int](0)
                 omin = np.inf
                 omax = -np.inf
                 for i in range(n):
