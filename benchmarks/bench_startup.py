@@ -92,6 +92,9 @@ def main() -> None:
     ap.add_argument("--cold", action="store_true", help="also measure one run from an empty numba cache")
     ap.add_argument("--src", default=str(Path(__file__).resolve().parents[1] / "src"))
     args = ap.parse_args()
+    if os.environ.get("PYTHONDONTWRITEBYTECODE"):
+        print("note: PYTHONDONTWRITEBYTECODE is set: every interpreter compiles the sources it imports (no .pyc), "
+              "which a pip-installed package does not (measure with `env -u PYTHONDONTWRITEBYTECODE` for that)")
     one(args.src, cold=False)  # fills the default cache if needed
     warm = [one(args.src, cold=False) for _ in range(args.reps)]
 

@@ -251,3 +251,69 @@ def test_counter_stops_growing_at_the_memory_limit():
     assert 0 < counter.nbytes <= 5e6 and counter.scans == 1
     counter.add(_scan(np.full(N_BEAMS, 5.0), 0.1), Pose2D(100.0, 0.0, 0.0))  # would need > 5 MB
     assert counter.too_large == 1 and counter.nbytes <= 5e6 and counter.scans == 1
+
+
+def _count_scan_five_channels(cells: np.ndarray, scan_id: int, ox: float, oy: float, hx: np.ndarray, hy: np.ndarray,
+                              cx: np.ndarray, cy: np.ndarray, core: float) -> None:
+    """The counter's former layout, in plain Python: hits, passes, switches, last hit id, last pass id."""
+    h, w = cells.shape[:2]
+    for x0, y0 in zip(hx, hy):
+        ix, iy = math.floor(x0 + 0.5), math.floor(y0 + 0.5)
+        if 0 <= ix < w and 0 <= iy < h and cells[iy, ix, 3] != scan_id:
+            if cells[iy, ix, 4] > cells[iy, ix, 3]:
+                cells[iy, ix, 2] += 1
+            cells[iy, ix, 3] = scan_id
+            cells[iy, ix, 0] += 1
+    for ex, ey in zip(cx, cy):
+        dx, dy = ex - ox, ey - oy
+        x_major = abs(dx) >= abs(dy)
+        if x_major:
+            a0, a1, slope, m0, n0 = math.floor(ox + 0.5), math.floor(ex + 0.5), (dy / dx if dx else 0.0), ox, oy
+        else:
+            a0, a1, slope, m0, n0 = math.floor(oy + 0.5), math.floor(ey + 0.5), dx / dy, oy, ox
+        step = 1 if a1 >= a0 else -1
+        for a in range(a0, a1 + step, step):
+            b = n0 + slope * (a - m0)
+            ib = math.floor(b + 0.5)
+            if abs(b - ib) <= core:
+                x, y = (a, ib) if x_major else (ib, a)
+                if 0 <= x < w and 0 <= y < h and cells[y, x, 3] != scan_id and cells[y, x, 4] != scan_id:
+                    if cells[y, x, 3] > cells[y, x, 4]:
+                        cells[y, x, 2] += 1
+                    cells[y, x, 4] = scan_id
+                    cells[y, x, 1] += 1
+
+
+def test_compact_counter_counts_as_the_five_channel_layout():
+    """10 bytes per cell (uint16 counts + one int32 latest touch) give the same hits, passes and
+    switches as the former five int32 channels, on random scans whose rays cross each other."""
+    from dynslam2d.slam.cleanup import _count_scan
+
+    rng = np.random.default_rng(3)
+    H, W = 40, 50
+    ref = np.zeros((H, W, 5), dtype=np.int64)
+    counts = np.zeros((H, W, 3), dtype=np.uint16)
+    last = np.zeros((H, W), dtype=np.int32)
+    for sid in range(1, 61):
+        ox, oy = rng.uniform(5, 45), rng.uniform(5, 35)
+        hx, hy = rng.uniform(0, W - 1, 30), rng.uniform(0, H - 1, 30)
+        keep = rng.random(30) < 0.7  # some beams removed: they clear but do not hit
+        _count_scan_five_channels(ref, sid, ox, oy, hx[keep], hy[keep], hx, hy, 0.4)
+        _count_scan(counts, last, sid, ox, oy, hx[keep], hy[keep], hx, hy, 0.4)
+    assert ref[:, :, 2].sum() > 50  # the scans did switch cells between hit and pass
+    np.testing.assert_array_equal(counts.astype(np.int64), ref[:, :, :3])
+
+
+def test_compact_counter_saturates_instead_of_wrapping():
+    from dynslam2d.slam.cleanup import COUNT_MAX, _count_scan
+
+    counts = np.full((3, 3, 3), COUNT_MAX - 1, dtype=np.uint16)
+    last = np.zeros((3, 3), dtype=np.int32)
+    one = np.array([1.0])
+    for sid in (1, 2, 3, 4):  # hit, pass, hit, pass of cell (1, 1): every count would pass 65535
+        if sid % 2:
+            _count_scan(counts, last, sid, 0.0, 0.0, one, one, np.zeros(0), np.zeros(0), 0.5)
+        else:
+            _count_scan(counts, last, sid, 0.0, 1.0, np.zeros(0), np.zeros(0), np.array([2.0]), one, 0.5)
+    assert counts[1, 1, 0] == COUNT_MAX and counts[1, 1, 1] == COUNT_MAX and counts[1, 1, 2] == COUNT_MAX
+    assert counts[1, 0, 1] == COUNT_MAX and counts[1, 0, 0] == COUNT_MAX - 1  # cell (0, 1): passed twice, never hit

@@ -280,8 +280,12 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
             v[i] = -sn * px[a + i] + cs * py[a + i]
         su = cs * sx + sn * sy
         sv = -sn * sx + cs * sy
-        lo = np.array([lo0, lo1])
-        hi = np.array([hi0, hi1])
+        lo = np.empty(2)  # (np.array([...]) would compile numba's list-to-array path)
+        lo[0] = lo0
+        lo[1] = lo1
+        hi = np.empty(2)
+        hi[0] = hi0
+        hi[1] = hi1
         ext = (ext0, ext1)
         for k in range(2):
             wk = u if k == 0 else v
@@ -296,7 +300,7 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
             face_line = 0.0
             if near >= 0:
                 b = lo[k] if near == 0 else hi[k]
-                cnt = 0
+                cnt = np.int64(0)  # not a literal 0: numba would type a first call with Literal[int](0)
                 omin = np.inf
                 omax = -np.inf
                 for i in range(n):
@@ -307,7 +311,8 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
                         omax = max(omax, wo[i])
                 if cnt >= 2:
                     face = omax - omin >= span
-                    face_line = _pairwise_sum(sel, 0, cnt) / cnt
+                    # np.int64(0), not 0: a literal argument compiles another specialisation
+                    face_line = _pairwise_sum(sel, np.int64(0), cnt) / cnt
                     if face:
                         if near == 0:
                             lo[k] = face_line
@@ -534,10 +539,13 @@ def kalman_update_batch(X: np.ndarray, P: np.ndarray, H: np.ndarray, zm: np.ndar
                 if not math.isfinite(val):
                     good = False
                 Pn[r, i, q] = val
-        if not good:
-            Pn[r] = P[r]
+        if not good:  # element-wise copies: no slice assignment (its shape-error formatting costs ~4 s cold)
+            for i in range(4):
+                for q in range(4):
+                    Pn[r, i, q] = pr[i, q]
             continue
-        Xn[r] = xn
+        for i in range(4):
+            Xn[r, i] = xn[i]
         ok[r] = True
     return Xn, Pn, ok
 

@@ -400,17 +400,24 @@ def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np
             continue
         xs = x[a:b]
         ys = y[a:b]
-        out[c, F_CENTROID_X] = xs.mean()
-        out[c, F_CENTROID_Y] = ys.mean()
+        sx = 0.0  # sequential sums, as numba's ndarray.mean (no array-method compile)
+        sy = 0.0
+        for i in range(n):
+            sx += xs[i]
+            sy += ys[i]
+        out[c, F_CENTROID_X] = sx / n
+        out[c, F_CENTROID_Y] = sy / n
         if not fit_mask[c]:
             out[c, F_RECT_RMS] = np.inf
             out[c, F_CIRCLE_RMS] = np.inf
             continue
         _fit_one(xs, ys, cos_t, sin_t, criterion, d0, tmp, stride)
-        out[c, F_THETA:F_RECT_RMS + 1] = tmp  # θ, lo1, hi1, lo2, hi2, rms (the order of _fit_one)
+        for q in range(6):  # θ, lo1, hi1, lo2, hi2, rms (the order of _fit_one); element-wise: a slice
+            out[c, F_THETA + q] = tmp[q]  # assignment compiles numba's shape-error formatting (~4 s cold)
         if n >= circle_min_points:
             _circle_one(xs, ys, tmpc)
-            out[c, F_CIRCLE_X:F_CIRCLE_RMS + 1] = tmpc  # cx, cy, r, rms (the order of _circle_one)
+            for q in range(4):  # cx, cy, r, rms (the order of _circle_one)
+                out[c, F_CIRCLE_X + q] = tmpc[q]
         else:
             out[c, F_CIRCLE_X] = out[c, F_CENTROID_X]
             out[c, F_CIRCLE_Y] = out[c, F_CENTROID_Y]

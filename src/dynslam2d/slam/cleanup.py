@@ -30,11 +30,11 @@ endpoints); a cell counts as passed only where the ray runs near its centre
 (``ray_core``), so rays that clip the corner of a wall end or door frame do not count.
 
 Memory: the pass never keeps scans. :class:`VisibilityCounter` is fed scan by scan
-during the run (:class:`CleanupRecorder` is a pipeline observer) and holds five int32
-grids (20 bytes per cell, growing with the scans, never beyond the SLAM's
-``max_map_memory_mb``). Hector-style SLAM never changes a pose after its scan (no loop
-closure), so the pose a scan had when it was processed is its pose in the final
-trajectory; counting during the run is the same as counting after it.
+during the run (:class:`CleanupRecorder` is a pipeline observer) and holds three uint16
+count grids and one int32 grid of each cell's latest touch (10 bytes per cell, growing with
+the scans, never beyond the SLAM's ``max_map_memory_mb``; counts saturate at 65535 scans).
+Hector-style SLAM never changes a pose after its scan (no loop closure), so the pose a scan
+had when it was processed is its pose in the final trajectory; counting during the run is the same as counting after it.
 
 Frames and units: world / map frame in m; cell (i, j) of the counters is absolute
 (centre at (i·r, j·r), as the SLAM grid levels), arrays indexed [row = y, col = x].
@@ -58,28 +58,42 @@ from dynslam2d.types import Pose2D, Scan
 ERASED_PROBABILITY = 0.1
 
 
-#: Channels of the counter's (H, W, 5) int32 array: one cache line per visited cell.
-_HIT, _THROUGH, _SWITCH, _LAST_HIT, _LAST_THROUGH = 0, 1, 2, 3, 4
+#: Channels of the counter's (H, W, 3) uint16 count array: one 6-byte group per visited cell.
+_HIT, _THROUGH, _SWITCH = 0, 1, 2
+
+#: Largest count a channel holds (uint16); counts saturate there instead of wrapping. A cell
+#: counted by more than 65535 scans (a robot parked for hours in front of a wall) keeps 65535:
+#: the erase rule compares counts with thresholds and ratios, which saturation leaves on the
+#: side of the larger count (docs/speed.md).
+COUNT_MAX = 65535
+
+#: Bytes per counted cell: three uint16 counts and one int32 "last touch" (scan id · 2 + hit).
+BYTES_PER_CELL = 10
 
 
 @njit(cache=True)
-def _count_scan(cells, scan_id, ox, oy, hx, hy, cx, cy, core):  # pragma: no cover - numba
-    """One scan into the counters ``cells`` (H, W, 5): hits, passes, switches, scan id of
-    the last hit, scan id of the last pass (ids start at 1; 0 = never). Coordinates are in cell units of the array
+def _count_scan(counts, last, scan_id, ox, oy, hx, hy, cx, cy, core):  # pragma: no cover - numba
+    """One scan into the counters ``counts`` (H, W, 3) uint16 (hits, passes, switches; saturating at
+    :data:`COUNT_MAX`) and ``last`` (H, W) int32, the cell's latest touch as ``2 · scan id + 1`` for a hit,
+    ``2 · scan id`` for a pass (ids start at 1; 0 = never). Coordinates are in cell units of the arrays
     (cell (i, j) centred on integers). ``(hx, hy)``: hit endpoints; ``(cx, cy)``: ends of
     the clearing segments from ``(ox, oy)``. Per scan, a cell gets at most one hit and
-    one pass, and no pass if the scan hit it. Switches count changes between hit and
-    pass in each cell's sequence of scans (the later of the two last ids is its state)."""
-    h = cells.shape[0]
-    w = cells.shape[1]
+    one pass, and no pass if the scan hit it (hits are counted first). Switches count changes between
+    hit and pass in each cell's sequence of scans (the kind of its latest touch is its state)."""
+    h = counts.shape[0]
+    w = counts.shape[1]
+    hit_code = 2 * scan_id + 1
     for k in range(hx.shape[0]):
         ix = int(math.floor(hx[k] + 0.5))
         iy = int(math.floor(hy[k] + 0.5))
-        if 0 <= ix < w and 0 <= iy < h and cells[iy, ix, 3] != scan_id:
-            if cells[iy, ix, 4] > cells[iy, ix, 3]:
-                cells[iy, ix, 2] += 1
-            cells[iy, ix, 3] = scan_id
-            cells[iy, ix, 0] += 1
+        if 0 <= ix < w and 0 <= iy < h:
+            lt = last[iy, ix]
+            if lt != hit_code:
+                if lt != 0 and (lt & 1) == 0 and counts[iy, ix, 2] < COUNT_MAX:
+                    counts[iy, ix, 2] += 1
+                last[iy, ix] = hit_code
+                if counts[iy, ix, 0] < COUNT_MAX:
+                    counts[iy, ix, 0] += 1
     for k in range(cx.shape[0]):
         dx = cx[k] - ox
         dy = cy[k] - oy
@@ -109,12 +123,13 @@ def _count_scan(cells, scan_id, ox, oy, hx, hy, cx, cy, core):  # pragma: no cov
                     x = ib
                     y = a
                 if 0 <= x < w and 0 <= y < h:
-                    lh = cells[y, x, 3]
-                    if lh != scan_id and cells[y, x, 4] != scan_id:
-                        if lh > cells[y, x, 4]:
-                            cells[y, x, 2] += 1
-                        cells[y, x, 4] = scan_id
-                        cells[y, x, 1] += 1
+                    lt = last[y, x]
+                    if (lt >> 1) != scan_id:
+                        if (lt & 1) == 1 and counts[y, x, 2] < COUNT_MAX:
+                            counts[y, x, 2] += 1
+                        last[y, x] = 2 * scan_id
+                        if counts[y, x, 1] < COUNT_MAX:
+                            counts[y, x, 1] += 1
             if a == a1:
                 break
             a += step
@@ -195,7 +210,7 @@ class VisibilityCounter:
     """Per-cell counts of scans that hit a cell and scans that passed through it.
 
     Grows with the scans it is fed (absolute cells, resolution ``resolution`` m);
-    memory 16 bytes per cell. Feed with :meth:`add`; read with :meth:`window`.
+    memory :data:`BYTES_PER_CELL` bytes per cell. Feed with :meth:`add`; read with :meth:`window`.
     """
 
     def __init__(self, resolution: float, config: CleanConfig | None = None,
@@ -206,29 +221,30 @@ class VisibilityCounter:
         self.margin_cells = max(int(math.ceil(growth_margin_m / self.resolution)), 1)
         self.i0 = 0  # absolute col of array column 0
         self.j0 = 0  # absolute row of array row 0
-        self._cells = np.zeros((0, 0, 5), dtype=np.int32)
+        self._cells = np.zeros((0, 0, 3), dtype=np.uint16)  # hits, passes, switches
+        self._last = np.zeros((0, 0), dtype=np.int32)  # latest touch: 2 · scan id (+ 1 for a hit)
         self.scans = 0  # scans counted (also the id of the next scan)
         self.too_large = 0  # scans left out: counting them would exceed the memory limit
         self.seconds = 0.0
 
     @property
     def hits(self) -> np.ndarray:
-        """(h, w) int32 view: scans that hit each cell (array cells, see :attr:`i0`, :attr:`j0`)."""
+        """(h, w) uint16 view: scans that hit each cell (array cells, see :attr:`i0`, :attr:`j0`)."""
         return self._cells[:, :, _HIT]
 
     @property
     def through(self) -> np.ndarray:
-        """(h, w) int32 view: scans that passed through each cell."""
+        """(h, w) uint16 view: scans that passed through each cell."""
         return self._cells[:, :, _THROUGH]
 
     @property
     def switches(self) -> np.ndarray:
-        """(h, w) int32 view: changes between hit and pass in each cell's scan sequence."""
+        """(h, w) uint16 view: changes between hit and pass in each cell's scan sequence."""
         return self._cells[:, :, _SWITCH]
 
     @property
     def nbytes(self) -> int:
-        return int(self._cells.nbytes)
+        return int(self._cells.nbytes + self._last.nbytes)
 
     def _ensure(self, imin: int, jmin: int, imax: int, jmax: int) -> bool:
         """Grow to hold cells [imin, imax] × [jmin, jmax]; False (nothing changed) if that
@@ -245,12 +261,14 @@ class VisibilityCounter:
             nj0 = min(self.j0, jmin - my) if jmin < self.j0 else self.j0
             ni1 = max(self.i0 + w, imax + mx + 1) if imax >= self.i0 + w else self.i0 + w
             nj1 = max(self.j0 + h, jmax + my + 1) if jmax >= self.j0 + h else self.j0 + h
-        if (nj1 - nj0) * (ni1 - ni0) * 20 > self.slam.max_map_memory_mb * 1e6:
+        if (nj1 - nj0) * (ni1 - ni0) * BYTES_PER_CELL > self.slam.max_map_memory_mb * 1e6:
             return False
-        new = np.zeros((nj1 - nj0, ni1 - ni0, 5), dtype=np.int32)
+        new = np.zeros((nj1 - nj0, ni1 - ni0, 3), dtype=np.uint16)
+        new_last = np.zeros((nj1 - nj0, ni1 - ni0), dtype=np.int32)
         if h:
             new[self.j0 - nj0:self.j0 - nj0 + h, self.i0 - ni0:self.i0 - ni0 + w] = self._cells
-        self._cells = new
+            new_last[self.j0 - nj0:self.j0 - nj0 + h, self.i0 - ni0:self.i0 - ni0 + w] = self._last
+        self._cells, self._last = new, new_last
         self.i0, self.j0 = ni0, nj0
         return True
 
@@ -278,7 +296,7 @@ class VisibilityCounter:
             self.too_large += 1  # the SLAM refuses such scans too ('map_too_large')
             self.seconds += time.perf_counter() - t0
             return
-        _count_scan(self._cells, self.scans + 1,
+        _count_scan(self._cells, self._last, self.scans + 1,
                     ox - self.i0, oy - self.j0, ex[kept] - self.i0, ey[kept] - self.j0,
                     cx[clear] - self.i0, cy[clear] - self.j0, float(c.ray_core))
         self.scans += 1
@@ -295,7 +313,7 @@ class VisibilityCounter:
         gi0 = int(round(grid.origin[0] / self.resolution + 0.5))
         gj0 = int(round(grid.origin[1] / self.resolution + 0.5))
         H, W = grid.shape
-        outs = [np.zeros((H, W), dtype=np.int32) for _ in range(3)]
+        outs = [np.zeros((H, W), dtype=np.uint16) for _ in range(3)]
         h, w = self._cells.shape[:2]
         c0, c1 = max(gi0, self.i0), min(gi0 + W, self.i0 + w)
         r0, r1 = max(gj0, self.j0), min(gj0 + H, self.j0 + h)
@@ -313,8 +331,9 @@ class CleanResult:
         grid: the cleaned map (erased cells at :data:`ERASED_PROBABILITY`), same cells as the online map.
         logodds: its log-odds (same cells), or None if no online log-odds was given.
         erased: (H, W) bool, cells occupied in the online map that the pass erased.
-        hits, through: (H, W) int32, scans that hit / passed through each cell.
-        switches: (H, W) int32, changes between hit and pass in each cell's scan sequence.
+        hits, through: (H, W) uint16, scans that hit / passed through each cell (saturating at
+            :data:`COUNT_MAX`).
+        switches: (H, W) uint16, changes between hit and pass in each cell's scan sequence.
         stats: numbers for summary.json / metrics.json (cells, m², seconds).
     """
 
@@ -357,7 +376,8 @@ def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray |
     prob[erased] = ERASED_PROBABILITY
     lo = None
     if logodds is not None:
-        lo = np.array(logodds, dtype=np.float64, copy=True)
+        # the input's dtype (the SLAM's log-odds are float32, written as float32): no float64 copy of the map
+        lo = np.array(logodds, dtype=np.result_type(logodds, np.float32), copy=True)
         if lo.shape == erased.shape:
             lo[erased] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
     area = online.resolution ** 2

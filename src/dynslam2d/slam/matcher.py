@@ -84,7 +84,7 @@ def cost_at(prob, pts, x, y, th):  # pragma: no cover - numba
     for i in range(pts.shape[0]):
         sx = pts[i, 0]
         sy = pts[i, 1]
-        m, _, _, _ = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, False)
+        m, _, _, _ = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, np.bool_(False))
         cost += (1.0 - m) * (1.0 - m)
     return cost
 
@@ -99,7 +99,7 @@ def fraction_below(prob, pts, x, y, th, thresh):  # pragma: no cover - numba
     for i in range(pts.shape[0]):
         sx = pts[i, 0]
         sy = pts[i, 1]
-        m, _, _, inside = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, False)
+        m, _, _, inside = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, np.bool_(False))
         if inside and m < thresh:
             n += 1
     return n / max(pts.shape[0], 1)
@@ -393,7 +393,7 @@ def _support_kernel(prob, pts_m, stride, inv_res, x, y, th, thresh, nb):  # prag
     for i in range(0, pts_m.shape[0], stride):
         sx = pts_m[i, 0] * inv_res
         sy = pts_m[i, 1] * inv_res
-        m, _, _, inside = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, False)
+        m, _, _, inside = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, np.bool_(False))
         if inside and m > thresh:
             n += 1
             b = int(math.floor((math.atan2(pts_m[i, 1], pts_m[i, 0]) + math.pi) / two_pi * nb)) % nb

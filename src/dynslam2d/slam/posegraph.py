@@ -28,8 +28,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.linalg import splu
 
 from dynslam2d.types import wrap_angle
 
@@ -229,6 +227,11 @@ class PoseGraph:
         idx = [k for k, e in enumerate(self.edges) if e.active]
         if not idx:
             return 0, 0.0, 0.0
+        # imported here, not with the module: scipy.sparse(.linalg) costs ~1 s and tens of MiB at start-up,
+        # and only a run that optimises a graph needs it (docs/speed.md)
+        import scipy.sparse as sp
+        from scipy.sparse.linalg import splu
+
         ii, jj, z, info = self._arrays(idx)
         loop = np.array([self.edges[k].loop for k in idx], dtype=bool)
         poses = self.poses.copy()
