@@ -24,6 +24,7 @@ from dynslam2d.gridmap import GridMap
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.correlative import correlative_search
 from dynslam2d.slam.grid import MapTooLargeError, MultiResMap
+from dynslam2d.slam.recovery import REJECT_AMBIGUOUS, ScanPeriod, needs_recovery, recover
 from dynslam2d.slam.matcher import (
     Degeneracy,
     angular_spread,
@@ -229,6 +230,8 @@ class HectorSlam:
         self._last_relocalise: float | None = None  # stamp of the last relocalisation attempt
         self._history: deque[tuple[float, Pose2D]] = deque()  # accepted (stamp, pose) of the last velocity_window s
         self._sigma2: float | None = None  # running residual variance of accepted matches (probability²)
+        self._dt: float | None = None  # stamp of the scan being matched minus the previous one's, s
+        self._period = ScanPeriod()  # typical stamp gap (the motion gate's floor with recovery on)
 
     # ---- properties --------------------------------------------------------------------
     @property
@@ -366,6 +369,8 @@ class HectorSlam:
         tolerances."""
         c = self.config
         dt = max(dt, 0.0)
+        if c.recovery:
+            dt = self._period.floor(dt)  # jittered stamps understate the motion a gap allowed (slam/recovery.py)
         k = dt * (0.5 * c.velocity_window + dt)
         return c.max_linear_accel * k + c.gate_distance, c.max_angular_accel * k + c.gate_angle
 
@@ -387,6 +392,7 @@ class HectorSlam:
         c = self.config
         t0 = time.perf_counter()
         pts, clear = self.scan_points(scan)
+        self._dt = scan.stamp - self._last_stamp if self._last_stamp is not None else None
         start, gap = self._predict(scan.stamp)
         prior = self._prior(scan, start, gap)
         laser_start = start
@@ -636,6 +642,14 @@ class HectorSlam:
             if found is not None and found[1] > best_s:
                 best_p, best_s = found
                 res.used_correlative = True
+        ambiguous = False
+        if needs_recovery(c, self._dt, best_s, self._score_avg):
+            # large-motion recovery (slam/recovery.py): a window grown with the gap, best vs runner-up
+            rec = recover(c, levels, pts, start, best_p, best_s, self._dt, lambda seed: refine(seed)[0])
+            if rec is not None:
+                self.counts["recovery"] += 1
+                res.used_correlative |= rec.changed
+                best_p, best_s, ambiguous = rec.pose, rec.score, rec.ambiguous
 
         if not np.all(np.isfinite(best_p)):
             res.rejected = True
@@ -656,6 +670,9 @@ class HectorSlam:
         elif res.free_fraction > c.reject_free_fraction:
             res.rejected = True
             res.reason = REJECT_FREE_SPACE
+        elif ambiguous:
+            res.rejected = True
+            res.reason = REJECT_AMBIGUOUS
 
     def _commit(self, scan: Scan, res: MatchResult) -> None:
         c = self.config
@@ -673,6 +690,8 @@ class HectorSlam:
         self._last_odom = scan.odom if scan.odom is not None and scan.odom.is_finite() else None
         self._last_yaw_rate = scan.yaw_rate if scan.yaw_rate is not None and math.isfinite(scan.yaw_rate) else None
         self._update_state(stamp, res)
+        if self._last_stamp is not None:
+            self._period.add(stamp - self._last_stamp)
         if res.skipped and res.pose_source != SOURCE_PREDICTION:
             self._last_stamp = stamp
             self._force_search = True
