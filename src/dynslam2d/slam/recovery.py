@@ -125,8 +125,11 @@ def recover(
     current_score: float,
     dt: float | None,
     refine: Callable[[np.ndarray], np.ndarray],
+    moving: np.ndarray | None = None,
 ) -> Recovery | None:
-    """Search around ``start`` (the prediction, world pose) for laser-frame points ``pts`` (n, 2, m).
+    """Search around ``start`` (the front end's start estimate, world pose) and, if given, around
+    ``moving`` (the pose the motion model predicts across the gap: the last velocity kept) for
+    laser-frame points ``pts`` (n, 2, m).
 
     ``current`` / ``current_score`` are the front end's own match and its finest-level score;
     ``refine`` runs the multi-resolution Gauss–Newton from a seed. Returns None if the map level
@@ -135,30 +138,37 @@ def recover(
     c = config
     lin, ang = windows(c, dt)
     lvl = levels[min(c.correlative_level, len(levels) - 1)]
-    cr = correlative_search(
-        lvl, pts, start, lin, ang, c.correlative_angular_step, c.correlative_max_points,
-        c.correlative_max_height, c.correlative_translation_weight, c.correlative_rotation_weight,
-        runner_up_distance=c.recovery_distinct_distance, runner_up_angle=c.recovery_distinct_angle,
-    )
-    if cr is None:
-        return None
     cands: list[tuple[np.ndarray, float, bool]] = []
     if np.all(np.isfinite(current)):
         cands.append((current, current_score, False))
-    for seed in (cr.pose, cr.runner_up_pose):
-        if seed is None:
+    centres = [start] if moving is None or not _distinct(moving, start, 0.5 * lin, 0.5 * ang) else [start, moving]
+    for centre in centres:
+        cr = correlative_search(
+            lvl, pts, centre, lin, ang, c.correlative_angular_step, c.correlative_max_points,
+            c.correlative_max_height, c.correlative_translation_weight, c.correlative_rotation_weight,
+            runner_up_distance=c.recovery_distinct_distance, runner_up_angle=c.recovery_distinct_angle,
+        )
+        if cr is None:
             continue
-        p = refine(seed)
-        if np.all(np.isfinite(p)):
-            p = np.array([p[0], p[1], float(wrap_angle(p[2]))])
-            cands.append((p, evaluate(levels[0], pts, p, c.hector_gradient_bug).score, True))
+        for seed in (cr.pose, cr.runner_up_pose):
+            if seed is None:
+                continue
+            p = refine(seed)
+            if np.all(np.isfinite(p)):
+                p = np.array([p[0], p[1], float(wrap_angle(p[2]))])
+                cands.append((p, evaluate(levels[0], pts, p, c.hector_gradient_bug).score, True))
     if not cands:
         return None
-    # the front end's own match stays unless a distinct pose beats it by the margin: a wide window in a
-    # half-mapped place holds many poses that score a little higher by chance
-    best = cands[0] if not cands[0][2] else max(cands, key=lambda x: x[1])
+    # among poses that score within the margin of the best, the one nearest the motion prediction (or,
+    # without one, the front end's own match); another pose wins only by the switch margin: a wide window
+    # in a half-mapped place holds many poses that score a little higher by chance
+    top = max(x[1] for x in cands)
+    ref = moving if moving is not None else (current if np.all(np.isfinite(current)) else start)
+    tied = [x for x in cands if x[1] >= top - c.recovery_margin]
+    best = min(tied, key=lambda x: math.hypot(x[0][0] - ref[0], x[0][1] - ref[1])
+               + abs(float(wrap_angle(x[0][2] - ref[2]))))
     challenger = max(cands, key=lambda x: x[1])
-    if challenger is not best and challenger[1] >= best[1] + c.recovery_switch_margin:
+    if moving is None and challenger is not best and challenger[1] >= best[1] + c.recovery_switch_margin:
         best = challenger
     others = [s for p, s, _ in cands if _distinct(p, best[0], c.recovery_distinct_distance, c.recovery_distinct_angle)]
     margin = best[1] - max(others) if others else math.inf
