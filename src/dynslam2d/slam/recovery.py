@@ -10,11 +10,13 @@ match, then
 
 1. searches a window that grows with the time gap (``recovery_linear_window`` +
    ``recovery_linear_speed``·dt, up to ``recovery_max_linear_window``; likewise for the
-   rotation) with the correlative branch-and-bound matcher (Olson 2009; Hess et al. 2016),
-   asking for the best pose and the best pose elsewhere (the runner-up);
-2. refines both with Gauss–Newton and replaces the front end's own match only by a pose whose
-   refined score (mean occupancy probability of the endpoints on the finest level) beats it by
-   ``recovery_switch_margin``;
+   rotation) with the correlative branch-and-bound matcher (Olson 2009; Hess et al. 2016)
+   around the previous pose and around the pose the velocity predicts across the gap, asking
+   each time for the best pose and the best pose elsewhere (the runner-up);
+2. refines them with Gauss–Newton; among the poses whose refined score (mean occupancy
+   probability of the endpoints on the finest level) is within ``recovery_margin`` of the best,
+   the one nearest the velocity prediction wins; without a velocity, the front end's own match
+   is replaced only by a pose scoring ``recovery_switch_margin`` higher;
 3. calls the match *ambiguous* when the best pose farther than ``recovery_distinct_distance``
    / ``recovery_distinct_angle`` from the winner scores within ``recovery_margin`` of it:
    the pose is still reported, but the scan is kept out of the map.
