@@ -413,6 +413,15 @@ class SlamConfig(BaseModel):
         description="The recovery replaces the front end's own match only by a distinct pose whose refined score is "
         "higher by this much (mean occupancy probability, 0 … 1).",
     )
+    recovery_motion_weight: float = Field(
+        0.2, ge=0.0,
+        description="With a velocity, a recovery candidate's score is lowered by this × its squared distance from "
+        "the velocity's prediction, score per m².",
+    )
+    recovery_motion_angle_weight: float = Field(
+        0.05, ge=0.0,
+        description="… and by this × its squared heading deviation, score per rad².",
+    )
     recovery_distinct_distance: float = Field(
         0.3, gt=0.0,
         description="Alternatives farther than this from the winner count as distinct, m.",

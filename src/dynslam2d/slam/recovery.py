@@ -161,11 +161,16 @@ def recover(
                 cands.append((p, evaluate(levels[0], pts, p, c.hector_gradient_bug).score, True))
     if not cands:
         return None
-    # among poses that score within the margin of the best, the one nearest the motion prediction (or,
-    # without one, the front end's own match); another pose wins only by the switch margin: a wide window
-    # in a half-mapped place holds many poses that score a little higher by chance
-    top = max(x[1] for x in cands)
+    # with a velocity, each pose's score is penalised by its squared deviation from the velocity's prediction
+    # (a starved map ahead of the robot makes a step back score higher); among poses within the margin of the
+    # best, the one nearest the prediction (without one: nearest the front end's own match) wins, and without
+    # a velocity another pose wins only by the switch margin: a wide window in a half-mapped place holds many
+    # poses that score a little higher by chance
     ref = moving if moving is not None else (current if np.all(np.isfinite(current)) else start)
+    if moving is not None:
+        cands = [(p, s - c.recovery_motion_weight * ((p[0] - ref[0]) ** 2 + (p[1] - ref[1]) ** 2)
+                  - c.recovery_motion_angle_weight * float(wrap_angle(p[2] - ref[2])) ** 2, f) for p, s, f in cands]
+    top = max(x[1] for x in cands)
     tied = [x for x in cands if x[1] >= top - c.recovery_margin]
     best = min(tied, key=lambda x: math.hypot(x[0][0] - ref[0], x[0][1] - ref[1])
                + abs(float(wrap_angle(x[0][2] - ref[2]))))
@@ -175,4 +180,6 @@ def recover(
     others = [s for p, s, _ in cands if _distinct(p, best[0], c.recovery_distinct_distance, c.recovery_distinct_angle)]
     margin = best[1] - max(others) if others else math.inf
     changed = best[2]
+    if moving is not None:  # the finest-level score of the winner, without the penalty
+        best = (best[0], evaluate(levels[0], pts, best[0], c.hector_gradient_bug).score, best[2])
     return Recovery(best[0], float(best[1]), float(margin), margin < c.recovery_margin, bool(changed), lin, ang)
