@@ -17,7 +17,8 @@ memory.
         [--out /tmp/dynslam2d-bench-loops] [--cpu 0]
 
 Settings: ``off``, ``on`` (the default) and ``forced`` (on, with ``loop.map_check: false``: the
-optimised poses are used even when the map check would keep the front end's).
+optimised poses are used even when the map check would keep the front end's); ``recovery`` (on, with
+``slam.recovery: true``) on request.
 
 ``--cpu N`` pins every command to core N (``taskset -c N``: "one core"). The commands are
 printed exactly as they were run (``dynslam2d`` = ``python -m dynslam2d`` with this checkout's
@@ -62,7 +63,8 @@ def main() -> None:
     ap.add_argument("--out", default="/tmp/dynslam2d-bench-loops")
     ap.add_argument("--cpu", type=int, default=None)
     ap.add_argument("--settings", nargs="*", default=["off", "on", "forced"],
-                    help="off, on (default settings), forced (on, optimised poses kept whatever the map check says)")
+                    help="off, on (default settings), forced (on, optimised poses kept whatever the map check says), "
+                    "recovery (on, with the front end's large-motion recovery)")
     a = ap.parse_args()
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""))
     rows = []
@@ -78,6 +80,12 @@ def main() -> None:
                 cfg = Path(a.out) / "forced.yaml"
                 cfg.parent.mkdir(parents=True, exist_ok=True)
                 cfg.write_text("loop:\n  map_check: false\n")
+                run_args += ["--config", str(cfg)]
+            if setting == "recovery":
+                # loop closure on plus the front end's large-motion recovery (slam.recovery, docs/slam.md)
+                cfg = Path(a.out) / "recovery.yaml"
+                cfg.parent.mkdir(parents=True, exist_ok=True)
+                cfg.write_text("slam:\n  recovery: true\n")
                 run_args += ["--config", str(cfg)]
             print(_show(run_args), flush=True)
             t0 = time.perf_counter()

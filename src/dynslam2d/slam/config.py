@@ -363,6 +363,74 @@ class SlamConfig(BaseModel):
         description="Longest tolerated stretch of low-support or lost scans before the warning, s.",
     )
 
+    # --- large-motion recovery (slam/recovery.py; docs/slam.md "Large motion between scans") ---
+    recovery: bool = Field(
+        False,
+        description="Large-motion recovery: after a stamp gap or a weak match, search a window grown with the gap "
+        "around the last pose and around the velocity kept across the gap (correlative branch and bound, best and "
+        "runner-up refined by Gauss–Newton); switch only on a clear score margin, keep an ambiguous match out of "
+        "the map, and floor the motion gate's dt at the median scan period. Off by default (docs/slam.md).",
+    )
+    recovery_min_gap: float = Field(
+        0.25, gt=0.0,
+        description="Recovery runs when the previous scan is more than this far back in time, s.",
+    )
+    recovery_score_ratio: float = Field(
+        0.6, ge=0.0, le=1.0,
+        description="… or when the match score is below this fraction of the running score average.",
+    )
+    recovery_linear_window: float = Field(
+        0.5, ge=0.0,
+        description="Translation half-width of the recovery search at no gap, m.",
+    )
+    recovery_linear_speed: float = Field(
+        1.0, ge=0.0,
+        description="The translation window grows by this × the gap (largest speed), m/s.",
+    )
+    recovery_max_linear_window: float = Field(
+        1.2, ge=0.0,
+        description="Cap of the translation window, m.",
+    )
+    recovery_angular_window: float = Field(
+        0.9, ge=0.0, le=math.pi,
+        description="Rotation half-width of the recovery search at no gap, rad.",
+    )
+    recovery_angular_speed: float = Field(
+        1.0, ge=0.0,
+        description="The rotation window grows by this × the gap (largest turn rate), rad/s.",
+    )
+    recovery_max_angular_window: float = Field(
+        math.pi, ge=0.0, le=math.pi,
+        description="Cap of the rotation window, rad.",
+    )
+    recovery_margin: float = Field(
+        0.03, ge=0.0, le=1.0,
+        description="A recovered match is ambiguous (pose kept, scan out of the map) unless its refined score "
+        "beats the best distinct alternative by this much (mean occupancy probability, 0 … 1).",
+    )
+    recovery_switch_margin: float = Field(
+        0.1, ge=0.0, le=1.0,
+        description="The recovery replaces the front end's own match only by a distinct pose whose refined score is "
+        "higher by this much (mean occupancy probability, 0 … 1).",
+    )
+    recovery_motion_weight: float = Field(
+        0.2, ge=0.0,
+        description="With a velocity, a recovery candidate's score is lowered by this × its squared distance from "
+        "the velocity's prediction, score per m².",
+    )
+    recovery_motion_angle_weight: float = Field(
+        0.05, ge=0.0,
+        description="… and by this × its squared heading deviation, score per rad².",
+    )
+    recovery_distinct_distance: float = Field(
+        0.3, gt=0.0,
+        description="Alternatives farther than this from the winner count as distinct, m.",
+    )
+    recovery_distinct_angle: float = Field(
+        0.2, gt=0.0,
+        description="… or rotated more than this, rad.",
+    )
+
     @model_validator(mode="after")
     def _check(self) -> SlamConfig:
         if self.laser_max_dist <= self.laser_min_dist:

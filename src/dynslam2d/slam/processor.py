@@ -35,6 +35,7 @@ from dynslam2d.slam.matcher import (
     match_multires,
     support,
 )
+from dynslam2d.slam.recovery import REJECT_AMBIGUOUS, ScanPeriod, needs_recovery, recover
 from dynslam2d.types import Pose2D, Scan, wrap_angle
 
 #: Reasons a scan is skipped (no matching, no map update).
@@ -229,6 +230,8 @@ class HectorSlam:
         self._last_relocalise: float | None = None  # stamp of the last relocalisation attempt
         self._history: deque[tuple[float, Pose2D]] = deque()  # accepted (stamp, pose) of the last velocity_window s
         self._sigma2: float | None = None  # running residual variance of accepted matches (probability²)
+        self._dt: float | None = None  # stamp of the scan being matched minus the previous one's, s
+        self._period = ScanPeriod()  # typical stamp gap (the motion gate's floor with recovery on)
 
     # ---- properties --------------------------------------------------------------------
     @property
@@ -356,6 +359,17 @@ class HectorSlam:
         dx, dy = p1.x - p0.x, p1.y - p0.y
         return np.array([c * dx + s_ * dy, -s_ * dx + c * dy, float(wrap_angle(p1.theta - p0.theta))]) / dt
 
+    def _moving_prediction(self) -> np.ndarray | None:
+        """The last pose advanced by the motion model's velocity over the current stamp gap (floored at the
+        median scan period, capped at max_time_gap) — kept across a time gap for the recovery search; None
+        without a velocity or a moving robot."""
+        v = self._model_velocity()
+        if v is None or self._last_pose is None or self._dt is None:
+            return None
+        t = min(self._period.floor(self._dt), self.config.max_time_gap)
+        p = self._last_pose.compose(Pose2D(float(v[0] * t), float(v[1] * t), float(v[2] * t)))
+        return p.as_array() if p.is_finite() else None
+
     def _gate_limits(self, dt: float) -> tuple[float, float]:
         """Largest deviation (m, rad) from the prediction the motion model allows ``dt`` s after the
         last accepted pose.
@@ -366,6 +380,8 @@ class HectorSlam:
         tolerances."""
         c = self.config
         dt = max(dt, 0.0)
+        if c.recovery:
+            dt = self._period.floor(dt)  # jittered stamps understate the motion a gap allowed (slam/recovery.py)
         k = dt * (0.5 * c.velocity_window + dt)
         return c.max_linear_accel * k + c.gate_distance, c.max_angular_accel * k + c.gate_angle
 
@@ -387,6 +403,7 @@ class HectorSlam:
         c = self.config
         t0 = time.perf_counter()
         pts, clear = self.scan_points(scan)
+        self._dt = scan.stamp - self._last_stamp if self._last_stamp is not None else None
         start, gap = self._predict(scan.stamp)
         prior = self._prior(scan, start, gap)
         laser_start = start
@@ -636,6 +653,18 @@ class HectorSlam:
             if found is not None and found[1] > best_s:
                 best_p, best_s = found
                 res.used_correlative = True
+        ambiguous = False
+        jump_d, jump_a = c.max_jump_distance, c.max_jump_angle
+        if needs_recovery(c, self._dt, best_s, self._score_avg):
+            # large-motion recovery (slam/recovery.py): a window grown with the gap, best vs runner-up
+            rec = recover(c, levels, pts, start, best_p, best_s, self._dt, lambda seed: refine(seed)[0],
+                          self._moving_prediction())
+            if rec is not None:
+                self.counts["recovery"] += 1
+                res.used_correlative |= rec.changed
+                best_p, best_s, ambiguous = rec.pose, rec.score, rec.ambiguous
+                # the searched window is a plausible motion: the jump limits open to it
+                jump_d, jump_a = max(jump_d, math.sqrt(2.0) * rec.linear_window), max(jump_a, rec.angular_window)
 
         if not np.all(np.isfinite(best_p)):
             res.rejected = True
@@ -643,7 +672,7 @@ class HectorSlam:
             return
         pose = Pose2D(float(best_p[0]), float(best_p[1]), float(wrap_angle(best_p[2])))
         d = res.start.between(pose)
-        if math.hypot(d.x, d.y) > c.max_jump_distance or abs(d.theta) > c.max_jump_angle:
+        if math.hypot(d.x, d.y) > jump_d or abs(d.theta) > jump_a:
             res.rejected = True
             res.reason = REJECT_JUMP
             return
@@ -656,6 +685,9 @@ class HectorSlam:
         elif res.free_fraction > c.reject_free_fraction:
             res.rejected = True
             res.reason = REJECT_FREE_SPACE
+        elif ambiguous:
+            res.rejected = True
+            res.reason = REJECT_AMBIGUOUS
 
     def _commit(self, scan: Scan, res: MatchResult) -> None:
         c = self.config
@@ -673,6 +705,8 @@ class HectorSlam:
         self._last_odom = scan.odom if scan.odom is not None and scan.odom.is_finite() else None
         self._last_yaw_rate = scan.yaw_rate if scan.yaw_rate is not None and math.isfinite(scan.yaw_rate) else None
         self._update_state(stamp, res)
+        if self._last_stamp is not None:
+            self._period.add(stamp - self._last_stamp)
         if res.skipped and res.pose_source != SOURCE_PREDICTION:
             self._last_stamp = stamp
             self._force_search = True
@@ -687,7 +721,9 @@ class HectorSlam:
                 self._velocity = np.array([d.x, d.y, d.theta]) / dt
         self._last_stamp = stamp
         self._force_search = res.rejected
-        if res.time_gap or self._state == STATE_LOST:
+        # with recovery on, a forward gap keeps the motion history: the recovery searches around the velocity
+        keep = c.recovery and self._dt is not None and self._dt > 0.0
+        if (res.time_gap and not keep) or self._state == STATE_LOST:
             self._history.clear()
         if not res.rejected or res.first:
             self._history.append((stamp, res.pose))
