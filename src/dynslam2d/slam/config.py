@@ -365,11 +365,11 @@ class SlamConfig(BaseModel):
 
     # --- large-motion recovery (slam/recovery.py; docs/slam.md "Large motion between scans") ---
     recovery: bool = Field(
-        False,
+        True,
         description="Large-motion recovery: after a stamp gap or a weak match, search a window grown with the gap "
         "around the last pose and around the velocity kept across the gap (correlative branch and bound, best and "
         "runner-up refined by Gauss–Newton); switch only on a clear score margin, keep an ambiguous match out of "
-        "the map, and floor the motion gate's dt at the median scan period. Off by default (docs/slam.md).",
+        "the map, and floor the motion gate's dt at the median scan period (docs/slam.md).",
     )
     recovery_min_gap: float = Field(
         0.25, gt=0.0,
