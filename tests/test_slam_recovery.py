@@ -50,7 +50,8 @@ def test_trigger_and_window_follow_the_gap_and_the_score() -> None:
     assert not needs_recovery(c, 0.05, 0.8, 0.8)
     assert needs_recovery(c, 0.6, 0.8, 0.8)  # gap
     assert needs_recovery(c, -0.1, 0.8, 0.8)  # backward stamp
-    assert needs_recovery(c, 0.05, 0.4, 0.8)  # weak match: 0.4 < 0.6 × 0.8
+    assert not needs_recovery(c, 0.05, 0.4, 0.8)  # weak matches do not trigger by default (ratio 0)
+    assert needs_recovery(SlamConfig(recovery=True, recovery_score_ratio=0.6), 0.05, 0.4, 0.8)  # 0.4 < 0.6 × 0.8
     assert not needs_recovery(c, 0.6, 0.8, None)  # nothing accepted yet
     assert not needs_recovery(SlamConfig(recovery=False), 5.0, 0.1, 0.8)
     lin0, ang0 = windows(c, 0.0)
