@@ -21,9 +21,9 @@ match, then
    / ``recovery_distinct_angle`` from the winner scores within ``recovery_margin`` of it:
    the pose is still reported, but the scan is kept out of the map.
 
-It runs only on measured conditions: a stamp gap above ``recovery_min_gap``, or a match score
-below ``recovery_score_ratio`` × the running average of accepted scores. Poses are laser poses
-in the map frame (m, rad).
+It runs only on measured conditions: a stamp gap above ``recovery_min_gap``, or, when
+``recovery_score_ratio`` is above 0 (default 0: gaps only), a match score below that fraction of
+the running average of accepted scores. Poses are laser poses in the map frame (m, rad).
 """
 
 from __future__ import annotations
@@ -77,16 +77,18 @@ class ScanPeriod:
 
     def __init__(self, n: int = 31) -> None:
         self._gaps: deque[float] = deque(maxlen=n)
+        self._median = 0.0
 
     def add(self, dt: float) -> None:
         """Record the gap ``dt`` s between two consecutive scans (ignored unless positive and finite)."""
         if dt > 0.0 and math.isfinite(dt):
             self._gaps.append(dt)
+            self._median = float(np.median(self._gaps))  # once per scan, not at every gate evaluation
 
     @property
     def median(self) -> float:
         """Median gap, s (0 before the first)."""
-        return float(np.median(self._gaps)) if self._gaps else 0.0
+        return self._median
 
     def floor(self, dt: float) -> float:
         """``dt`` raised to the median gap, s."""

@@ -218,7 +218,7 @@ def plot_map(
         assert memory_erased is not None
         n_me = int(memory_erased.sum())
         handles.append(Patch(color=style.MEMORY_ERASED,
-                             label=f"erased when a parked object left ({n_me * grid.resolution ** 2:.2f} m²)"))
+                             label=f"erased when a parked\nobject left ({n_me * grid.resolution ** 2:.2f} m²)"))
     if has_erased:
         assert erased is not None
         n_er = int(erased.sum())
