@@ -221,3 +221,30 @@ def test_clear_no_return_option() -> None:
     c, r = g_off.world_to_cell(p)[0]
     inside = 0 <= r < g_off.prob.shape[0] and 0 <= c < g_off.prob.shape[1]
     assert not inside or np.isnan(g_off.prob[r, c])
+
+
+def test_grazing_stop_keeps_walls_that_rays_run_along() -> None:
+    """stop-and-go's corridor walls are seen only at grazing incidence from the room: with Hector's update
+    (every cell before the endpoint free) the rays running along them clear wall cells other rays hit;
+    the incidence-scaled free-space stop (slam.grazing_stop_cells, docs/maps.md) keeps them, and leaves
+    the map unchanged where rays meet surfaces head-on."""
+    from dynslam2d.eval.maps import map_metrics
+    from dynslam2d.sim.simulation import simulate
+    from dynslam2d.slam.grid import grazing_stop
+
+    sim = simulate("stop-and-go", duration=15.0)
+    gt = sim.ground_truth
+    maps = {}
+    for g in (0.0, 1.0):
+        m = MultiResMap(0.05, 1, -0.405, 2.197, grazing_cells=g)
+        for i, scan in enumerate(sim.scans[::2]):
+            i *= 2
+            keep = (gt.labels[i] == 0) & np.isfinite(scan.ranges)
+            m.integrate(gt.pose(i), scan.points(keep))
+        maps[g] = map_metrics(m.to_gridmap(), gt.static_map(0.05))
+    assert maps[0.0].recall < 0.97  # grazing rays cleared wall cells
+    assert maps[1.0].recall > maps[0.0].recall + 0.01
+    assert maps[1.0].precision >= maps[0.0].precision - 0.002
+    # normal incidence: the stop is grazing_cells (1 cell = the endpoint the reference never frees)
+    wall = np.column_stack((np.full(21, 3.0), np.linspace(-0.2, 0.2, 21)))
+    assert np.allclose(grazing_stop(wall, 1.0, math.sin(math.radians(5.0))), 1.0, atol=0.01)

@@ -455,7 +455,7 @@ def _build_parking(seed: int, duration: float) -> Scenario:
     small = timeline((16.0, -10.0), [("wait", 10.0), ("go", (16.0, -1.0), 1.0), ("go", (6.5, 5.0), 1.0),
                                      ("go", (2.0, 5.0), 0.8)], start_heading=math.pi / 2)
     cart = timeline((-6.0, 6.3), [("wait", 30.0), ("go", (-1.5, 6.3), 0.7)], start_heading=0.0)
-    walker = timeline((9.0, 4.0), [("go", (-3.0, 4.5), 1.1)], start_heading=math.pi)
+    walker = timeline((-10.0, 4.6), [("go", (-3.0, 4.5), 1.1)], start_heading=0.0)
     stander = timeline((0.0, 0.0), [("wait", 50.0), ("go", (3.5, 0.5), 0.9), ("wait", 25.0),
                                     ("go", (-3.0, -0.5), 1.0)], start_heading=0.0)
     movers = (
