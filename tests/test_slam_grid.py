@@ -245,6 +245,8 @@ def test_grazing_stop_keeps_walls_that_rays_run_along() -> None:
     assert maps[0.0].recall < 0.97  # grazing rays cleared wall cells
     assert maps[1.0].recall > maps[0.0].recall + 0.01
     assert maps[1.0].precision >= maps[0.0].precision - 0.002
+    assert HectorSlam(SlamConfig(grazing_stop_cells=1.0)).map.grazing_cells == 1.0  # the option reaches the map
+    assert HectorSlam(SlamConfig()).map.grazing_cells == 0.0  # default: Hector's update
     # normal incidence: the stop is grazing_cells (1 cell = the endpoint the reference never frees)
     wall = np.column_stack((np.full(21, 3.0), np.linspace(-0.2, 0.2, 21)))
     assert np.allclose(grazing_stop(wall, 1.0, math.sin(math.radians(5.0))), 1.0, atol=0.01)
