@@ -8,12 +8,16 @@ movers, stopped movers (they moved before), movers with stopped ones counted as 
 same counting a stopped mover only once the sensor saw it walk, and static structure.
 
     python benchmarks/bench_stopgo.py sim:stop-and-go sim:parking [--seed N] [--memory both|on|off]
-        [--set detect.segment.max_extent=5.6] [--explain]
+        [--set detect.segment.max_extent=5.6] [--explain] [--per-mover]
 
 ``--explain`` adds, per run, what limits the online map's F1 and ghost: the ground-truth occupied cells
 the recall counts (observable) but the map misses — never observed (unknown) or observed free, and of
 those how many kept beams hit (≥ 5 hits: structure the rays later cleared, e.g. walls seen at grazing
 incidence) — and the ghost cells of both maps by the nearest ground-truth mover.
+
+``--per-mover`` adds, per simulated mover, the removed share of its beams while it moves (speed above
+0.05 m/s, as ``removal_by_motion``), while it stands after having moved, and while it stands before it
+first moved (from the simulator's per-beam labels).
 """
 
 from __future__ import annotations
@@ -109,6 +113,25 @@ def explain(result, cleaned, gt, transform: Pose2D, hits: HitCounter) -> None:
                                                                    sorted(near.items())) or "none"))
 
 
+def per_mover(src, result) -> None:
+    """Print, per simulated mover, the removed share of its beams moving / stopped after moving / before."""
+    gt = getattr(getattr(src, "inner", src), "ground_truth", None)
+    if gt is None:
+        return
+    st, lab, rem = gt.mover_states, gt.labels, result.removed
+    for j, m in enumerate(gt.movers):
+        moving = np.hypot(st[:, j, 3], st[:, j, 4]) > 0.05
+        before = np.cumsum(moving) == 0
+        mine = lab == m.id
+        parts = []
+        for name, rows in (("moving", moving), ("stopped after moving", ~moving & ~before),
+                           ("standing before moving", before)):
+            sel = mine & rows[:, None]
+            n = int(sel.sum())
+            parts.append(f"{name} {rem[sel].mean():.3f} of {n}" if n else f"{name} -")
+        print(f"    mover {m.id} {m.name}: " + ", ".join(parts))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("inputs", nargs="+")
@@ -116,6 +139,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=None, help="simulator seed (default: the scene's own)")
     ap.add_argument("--memory", choices=("both", "on", "off"), default="both", help="which of the two runs")
     ap.add_argument("--explain", action="store_true", help="what limits F1 and ghost (module docstring)")
+    ap.add_argument("--per-mover", action="store_true", help="removed shares per simulated mover")
     args = ap.parse_args()
     for inp in args.inputs:
         for memory in {"both": (False, True), "on": (True,), "off": (False,)}[args.memory]:
@@ -148,6 +172,8 @@ def main() -> None:
                   f"tracks)", flush=True)
             if args.explain:
                 explain(result, rec.result, gt, Pose2D(a["x"], a["y"], a["theta"]), hits)
+            if args.per_mover:
+                per_mover(src, result)
 
 
 if __name__ == "__main__":
