@@ -928,9 +928,11 @@ class Tracker:
                 k.reason = "left M: merged with long-occupied map structure (its detection joined a wall's cluster)"
             if k.id not in updated:
                 k.misses += 1
-                if k.in_m and not k.remembered and k.slow_since is not None and self.config.memory.enabled:
-                    # stopped in M and hidden before m_exit_time: it cannot finish its stop while unseen, so
-                    # it is remembered now (if eligible) instead of being deleted after max_coast_time
+                if k.in_m and not k.remembered and k.slow_since is not None and self.config.memory.enabled \
+                        and self._hidden(k):
+                    # stopped in M and hidden (something in front of it) before m_exit_time: it cannot finish its
+                    # stop while unseen, so it is remembered now (if eligible) instead of being deleted after
+                    # max_coast_time (a track that just vanishes in plain view, a false one, is not)
                     self._remember(k, t - k.slow_since)
                 if len(k.history) < tc.confirm_window:  # (bounded: only the first window is read)
                     k.history.append(False)
@@ -1138,6 +1140,24 @@ class Tracker:
         if t - k.last_hit > mc.coast_time:
             return False
         return not self._seen_through(k)
+
+    def _hidden(self, k: _Track) -> bool:
+        """This scan's beams towards the track's box mostly return in front of its near side (occluded)."""
+        scan, p = self._scan, self._pose
+        if scan is None or p is None or not p.is_finite():
+            return False
+        dx, dy = float(k.x[0]) - p.x, float(k.x[1]) - p.y
+        d = math.hypot(dx, dy)
+        near = d - 0.5 * float(max(k.size[0], k.size[1])) - 0.1
+        if near <= 0.0:
+            return False
+        diff = (scan.angles - (math.atan2(dy, dx) - p.theta) + math.pi) % _TWO_PI - math.pi
+        sel = np.abs(diff) <= math.atan2(max(0.5 * float(min(k.size[0], k.size[1])), 0.05), d)
+        n = int(np.count_nonzero(sel))
+        if n < 3:
+            return False
+        with np.errstate(invalid="ignore"):  # (only valid returns: a beam without one hides nothing)
+            return int(np.count_nonzero(scan.valid_mask()[sel] & (scan.ranges[sel] < near))) >= 0.5 * n
 
     def _seen_through(self, k: _Track) -> bool:
         """This scan's beams towards the track's box pass beyond its far side (laser frame of this scan)."""
