@@ -103,6 +103,45 @@ def ab(scans: list, other, reps: int, start: int, end: int) -> tuple[float, floa
     return mo, mt, statistics.median(t / o for t, o in zip(best["this"], best["other"]))
 
 
+def _same_tracks(a: list, b: list) -> bool:
+    """The two ``Tracker.update`` reports are equal field by field (floats and arrays bit for bit)."""
+    if len(a) != len(b):
+        return False
+    for x, y in zip(a, b):
+        for f in ("id", "state", "stamp", "age", "hits", "misses", "kind", "in_m", "m_reason", "n_points",
+                  "remembered"):
+            if getattr(x, f) != getattr(y, f):
+                return False
+        bx, by = x.box, y.box
+        if (bx.px, bx.py, bx.theta, bx.length, bx.width) != (by.px, by.py, by.theta, by.length, by.width):
+            return False
+        for f in ("velocity", "covariance", "beams"):
+            u, v = getattr(x, f), getattr(y, f)
+            if u.dtype != v.dtype or u.shape != v.shape or u.tobytes() != v.tobytes():
+                return False
+    return True
+
+
+def check(scans: list, other) -> tuple[int, int | None]:
+    """Both checkouts' trackers in lockstep over every scan (each in a pipeline of its own): (scans compared,
+    index of the first scan whose reports or stats differ, None if none). Identical reports keep the two
+    pipelines identical, so this checks the whole run's output of the tracker."""
+    from dynslam2d.detect import tracker as this
+    from dynslam2d.pipeline import Pipeline
+
+    pipes = []
+    for mod in (other, this):
+        p = Pipeline()
+        p.tracker = mod.Tracker(p.config.detect)
+        pipes.append(p)
+    for i, s in enumerate(scans):
+        ra, rb = (p.process(s) for p in pipes)
+        if not _same_tracks(ra.tracks, rb.tracks) or pipes[0].tracker.stats.as_dict() != \
+                pipes[1].tracker.stats.as_dict() or ra.removed.tobytes() != rb.removed.tobytes():
+            return i + 1, i
+    return len(scans), None
+
+
 def stages(scans: list) -> tuple[float, dict[str, float]]:
     """CPU ms per scan of one run after a warm-up, and per component (ms per scan)."""
     from dynslam2d.pipeline import Pipeline
@@ -148,12 +187,17 @@ def main() -> None:
     ap.add_argument("--start", type=int, default=150)
     ap.add_argument("--end", type=int, default=210)
     ap.add_argument("--stages", action="store_true", help="per-component CPU of this checkout instead")
+    ap.add_argument("--check", action="store_true",
+                    help="instead: run both checkouts' trackers over every scan and compare their reports exactly")
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     args = ap.parse_args()
     other = None if args.stages else other_tracker_module(args.other)
     for name in args.inputs:
         scans = load_scans(args.data, name)
-        if args.stages:
+        if args.check:
+            n, bad = check(scans, other)
+            print(f"{name:<18} {n} scans: " + ("reports identical" if bad is None else f"DIFFERENT at scan {bad}"))
+        elif args.stages:
             total, parts = stages(scans)
             print(f"{name}: {total:.2f} ms CPU per scan")
             for k, v in sorted(parts.items(), key=lambda kv: -kv[1]):

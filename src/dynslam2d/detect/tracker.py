@@ -369,10 +369,10 @@ class Tracker:
                 if k.remembered and k.misses > 0:  # coasting through a stop: it stays where it stood
                     X[i], P[i] = self._stationary_prediction(k, F, dt)
         fin = np.isfinite(P).all(axis=(1, 2)).tolist()
-        for i, k in enumerate(self._tracks):
-            k.x = X[i]
-            k.P = P[i]
-            k.p_finite = fin[i]
+        for k, xr, pr, f in zip(self._tracks, X, P, fin):  # (row views from the array iterators)
+            k.x = xr
+            k.P = pr
+            k.p_finite = f
         self._stacked = (X, P)
 
     def _stationary_prediction(self, k: _Track, F: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -471,10 +471,13 @@ class Tracker:
             fs = segment_means(mstruct.astype(np.float64), offsets)[idx].tolist()
             ff = segment_means(mfree.astype(np.float64), offsets)[idx].tolist()
             fu = segment_means(munk.astype(np.float64), offsets)[idx].tolist()
-        for j, (a0, n, kd, th) in enumerate(zip(starts.tolist(), npts.tolist(), kinds.tolist(),
-                                                fits[:, F_THETA].tolist())):
-            dets.append(Detection(beams[a0:a0 + n], pts[a0:a0 + n], cen_v[j], KIND_NAMES[kd], th, lo_v[j], hi_v[j],
-                                  rel[j], circ_v[j], n, frac[j], fs[j], ff[j], fu[j]))
+        # (row views from the array iterators: one C pass per array instead of an index per detection)
+        for a0, n, kd, th, cen_j, lo_j, hi_j, rel_j, circ_j, fr_j, fs_j, ff_j, fu_j in zip(
+                starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(), cen_v, lo_v, hi_v, rel,
+                circ_v, frac, fs, ff, fu):
+            b = a0 + n
+            dets.append(Detection(beams[a0:b], pts[a0:b], cen_j, KIND_NAMES[kd], th, lo_j, hi_j, rel_j, circ_j, n,
+                                  fr_j, fs_j, ff_j, fu_j))
         if cfg.fit.person_merge and len(dets) > 1:
             dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
                                                                                  npts, px, py)
@@ -508,11 +511,13 @@ class Tracker:
         np.fill_diagonal(d2, np.inf)
         pairs: list[tuple[int, int]] = []
         used: set[int] = set()
-        dflat = d2.ravel().tolist()
         ns, dmax = len(small), fc.leg_pair_distance
-        for flat in np.argsort(d2, axis=None).tolist():
-            if dflat[flat] > dmax:
-                break
+        dflat = d2.ravel()
+        # the pairs within dmax, nearest first (the order of a full argsort, of which only these were read)
+        cand = np.flatnonzero(dflat <= dmax)
+        if cand.shape[0] == 0:
+            return dets, kinds, fits, lohi, rel, starts, npts, px, py
+        for flat in cand[np.argsort(dflat[cand], kind="stable")].tolist():
             a, b = divmod(flat, ns)
             if a in used or b in used or a > b:
                 continue
@@ -578,8 +583,15 @@ class Tracker:
         Xs, Ps = self._stack()
         tsize = np.array([k.size for k in tracks])
         reach = 0.5 * tsize.max(axis=1)
-        rect_trk = np.array([k.has_heading and k.kind == KIND_RECT for k in tracks])
-        theta_box = np.array([k.theta_box for k in tracks])
+        rect_l, th_l, known_l, firm_l = [], [], [], []
+        for k in tracks:  # (per-track flags in one pass)
+            kr = k.kind == KIND_RECT
+            rect_l.append(k.has_heading and kr)
+            th_l.append(k.theta_box)
+            known_l.append(k.misses > 0 and (not kr or bool(k.size_known.all())))
+            firm_l.append(k.state != TENTATIVE)
+        rect_trk = np.array(rect_l)
+        theta_box = np.array(th_l)
         # Mahalanobis gate and distance gate; a rectangle is measured again with the track's own sizes
         # (a side the detection "measured" too short, e.g. a grazing side, must not break the association)
         d2, near, ok = gate_costs(Xs, Ps, reach, rect_trk, theta_box, tsize, self._default.z, self._default.R,
@@ -590,7 +602,7 @@ class Tracker:
         det_ext = np.maximum(lohi[:, L_HI1] - lohi[:, L_LO1], lohi[:, L_HI2] - lohi[:, L_LO2])
         # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
         # later, a tracked object may touch another for a scan)
-        known = np.array([k.misses > 0 and (bool(k.size_known.all()) or k.kind != KIND_RECT) for k in tracks])
+        known = np.array(known_l)
         grow_ok = (det_ext[None, :] <= tc.max_size_jump_ratio * tsize.max(axis=1)[:, None] + tc.max_size_jump) | \
             ~known[:, None]
         ok = ok & grow_ok
@@ -600,7 +612,7 @@ class Tracker:
             return []
         cost = np.where(ok, d2, _BIG)
         # established tracks choose first; tentative ones share what is left
-        firm = np.array([k.state != TENTATIVE for k in self._tracks])
+        firm = np.array(firm_l)
         pairs: list[tuple[int, int]] = []
         taken = np.zeros(m, dtype=bool)
         for group in (firm, ~firm):
@@ -655,30 +667,42 @@ class Tracker:
         has = np.zeros(npair, dtype=bool)
         radius = np.full(npair, -1.0)
         swaps = [False] * npair
-        rows = np.empty(npair, dtype=np.int64)
+        sel_l = [ti for ti, _ in pairs]
+        rows_l = [di for _, di in pairs]
         for r, (ti, di) in enumerate(pairs):
             k, det = tracks[ti], dets[di]
-            rows[r] = di
-            if det.kind == KIND_RECT and k.has_heading:
-                sw = self._swapped(k, det)
-                swaps[r] = sw
-                sizes[r] = k.size[::-1] if sw else k.size
-                has[r] = True
-            if det.kind == KIND_CIRCLE and k.kind == KIND_CIRCLE and k.radius > 0:
+            dk = det.kind
+            if dk == KIND_RECT:
+                if k.has_heading:
+                    # (self._swapped, inline)
+                    sw = int(round((det.theta - k.theta_box) / _HALF_PI)) % 2 == 1
+                    swaps[r] = sw
+                    sz = k.size
+                    if sw:
+                        sizes[r, 0] = sz[1]
+                        sizes[r, 1] = sz[0]
+                    else:
+                        sizes[r] = sz
+                    has[r] = True
+            elif dk == KIND_CIRCLE and k.kind == KIND_CIRCLE and k.radius > 0:
                 radius[r] = k.radius
+        rows = np.array(rows_l, dtype=np.int64)
         mr = self._measure_rows(rows, sizes, has, radius, np.full(npair, 0.05))
         H, zm, Rm, size_obs, size_kind = mr.H, mr.zm, mr.Rm, mr.size_obs, mr.size_kind
         Xs, Ps = self._stack()
-        sel = np.array([ti for ti, _ in pairs], dtype=np.int64)
+        sel = np.array(sel_l, dtype=np.int64)
         Xn, Pn, ok = kalman_update_batch(Xs[sel], Ps[sel], H, zm, Rm)
         self._bound_acceleration(Xs[sel], Xn, tracks, pairs)
         self._stacked = None  # the tracks change below
         out = ok.tolist()
         so, sk = size_obs.tolist(), size_kind.tolist()
-        for r, (ti, di) in enumerate(pairs):
+        upd = self._update_track
+        vget = vac.get
+        # (rows of Xn / Pn as views, made by the array iterators in one pass each)
+        for r, (ti, di), xr, pr in zip(range(npair), pairs, Xn, Pn):
             if out[r]:
                 k = tracks[ti]
-                self._update_track(k, dets[di], t, vac.get(k.id, 0.0), Xn[r], Pn[r], so[r], sk[r], swaps[r])
+                upd(k, dets[di], t, vget(k.id, 0.0), xr, pr, so[r], sk[r], swaps[r])
         return out
 
     def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track],
@@ -740,7 +764,9 @@ class Tracker:
                             k.size[ta] = obs
                             k.size_known[ta] = True
                     elif kind == SIZE_LOWER:
-                        k.size_lb[ta] = max(k.size_lb[ta], obs)
+                        lb = k.size_lb
+                        if obs > lb[ta]:  # (max(lb, obs))
+                            lb[ta] = obs
                         if obs > k.size[ta]:
                             # a partial view grew past the size: the box grows away from its one real
                             # bound, its centre moves with it, its velocity does not (item 2, docs/tracking.md)
@@ -785,35 +811,43 @@ class Tracker:
         if len(k.history) < tc.confirm_window:  # (bounded: only the first window is read)
             k.history.append(True)
         k.beams = det.beams
-        k.free.append(max(det.free_fraction, vacated))  # (vacated: this scan sees through its old points)
-        if len(k.free) > tc.sustain_updates:
-            del k.free[0]
+        nsus = tc.sustain_updates
+        free = k.free
+        free.append(max(det.free_fraction, vacated))  # (vacated: this scan sees through its old points)
+        if len(free) > nsus:
+            del free[0]
         p = self._pose
         if p is not None:
-            x0, x1 = k.x[:2].tolist()
+            xk = k.x
+            x0, x1 = xk.item(0), xk.item(1)
             dx, dy = x0 - p.x, x1 - p.y
             c, s = self._pose_cs  # cos / sin of the pose's heading (once per scan)
-            k.laser_xy.append((c * dx + s * dy, -s * dx + c * dy))
-            k.map_xy.append((x0, x1))
-            k.map_t.append(t)
-            while len(k.laser_xy) > tc.sustain_updates and t - k.map_t[0] > tc.ride_time:
-                del k.laser_xy[0]
-                del k.map_xy[0]
-                del k.map_t[0]
+            lxy, mxy, mt = k.laser_xy, k.map_xy, k.map_t
+            lxy.append((c * dx + s * dy, -s * dx + c * dy))
+            mxy.append((x0, x1))
+            mt.append(t)
+            ride_time = tc.ride_time
+            while len(lxy) > nsus and t - mt[0] > ride_time:
+                del lxy[0]
+                del mxy[0]
+                del mt[0]
         if self._map is not None:
-            k.mstruct.append(det.map_structure)
-            k.mfree.append(det.map_free)
-            k.munknown.append(det.map_unknown)
-            if len(k.mstruct) > tc.sustain_updates:
-                del k.mstruct[0]
-                del k.mfree[0]
-                del k.munknown[0]
+            ms, mf, mu = k.mstruct, k.mfree, k.munknown
+            ms.append(det.map_structure)
+            mf.append(det.map_free)
+            mu.append(det.map_unknown)
+            if len(ms) > nsus:
+                del ms[0]
+                del mf[0]
+                del mu[0]
         if self._free is not None:
-            k.past.append((t, det.points))
-            k.past_t.append(t)
-            while k.past and t - k.past[0][0] > self._free.max_age:
-                del k.past[0]
-                del k.past_t[0]
+            past, past_t = k.past, k.past_t
+            past.append((t, det.points))
+            past_t.append(t)
+            max_age = self._free.max_age
+            while past and t - past_t[0] > max_age:  # (past_t[q] is past[q][0])
+                del past[0]
+                del past_t[0]
 
     @staticmethod
     def _swapped(k: _Track, det: Detection) -> bool:
@@ -870,6 +904,9 @@ class Tracker:
                     dev = abs((t - stamps[q]) - a)
                     if dev < best:
                         j, best = q, dev
+                    elif dev > best:
+                        # (t − stamps[q] − a falls with q, so dev falls, then rises: no later entry is nearer)
+                        break
                 if t - stamps[j] > 0.0:
                     pts = past[j][1]
                     chunks.append(pts)
@@ -1236,7 +1273,7 @@ class Tracker:
         P = np.array([k.P for k in tracks])
         V = X[:, 2:]
         out = []
-        for i, (k, (px, py, vx, vy)) in enumerate(zip(tracks, X.tolist())):
+        for k, (px, py, vx, vy), vel, cov in zip(tracks, X.tolist(), V, P):  # (V, P rows: views)
             speed = math.hypot(vx, vy)
             if k.kind == KIND_CIRCLE:
                 theta = math.atan2(vy, vx) if speed > slow else 0.0
@@ -1254,7 +1291,7 @@ class Tracker:
                     theta, length, width = k.theta_box, sa, sb
                 theta = (float(theta) + math.pi) % _TWO_PI - math.pi  # wrap_angle
             beams = k.beams if k.id in updated else no_beams
-            out.append(_make_track(k.id, k.state, t, _make_box(px, py, theta, float(length), float(width)), V[i],
-                                   P[i], t - k.born, k.hits, k.misses, k.kind, k.in_m, k.reason, beams,
+            out.append(_make_track(k.id, k.state, t, _make_box(px, py, theta, float(length), float(width)), vel,
+                                   cov, t - k.born, k.hits, k.misses, k.kind, k.in_m, k.reason, beams,
                                    int(beams.shape[0]), k.remembered and k.in_m))
         return out
