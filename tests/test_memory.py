@@ -393,3 +393,31 @@ def test_ledger_rows_folded_early_or_late_give_the_same_record(monkeypatch, cap)
         assert len(early[0]) == cap
     else:  # cells only the object's hits made known
         assert any(v[1] for v in early[0].values())
+
+
+@pytest.mark.parametrize("memory", [True, False])
+def test_a_mover_that_stops_and_is_hidden_before_m_exit_time_is_remembered(memory):
+    """A track in M that stops and is occluded within m_exit_time (2.5 s) never completes the stop while
+    updated; with memory it must still be remembered (kept coasting where it stood) rather than deleted
+    after max_coast_time, so it keeps its id and stays in M when it is seen standing again."""
+    from dynslam2d.detect.config import DetectConfig
+    from dynslam2d.detect.tracker import Tracker
+
+    cfg = DetectConfig()
+    cfg.memory.enabled = memory
+    tracker = Tracker(cfg)
+    t, seen = 0.0, []
+    plan = ([(4.0, -2.0 + 0.1 * i, "box") for i in range(40)] + [(4.0, 2.0, "box")] * 12
+            + [(4.0, 2.0, "occluded")] * 30 + [(4.0, 2.0, "box")] * 30)
+    for cx, cy, mode in plan:
+        tracks = tracker.update(_box_scan(t, cx, cy, mode), Pose2D())
+        seen.append([k for k in tracks if math.hypot(k.box.px - cx, k.box.py - cy) < 0.8])
+        t += 0.1
+    moving = [k for ks in seen[:40] for k in ks if k.in_m]
+    assert moving
+    tid = moving[-1].id
+    back = seen[85:112]  # standing in view again after 3 s hidden
+    if memory:
+        assert all(len(ks) == 1 and ks[0].id == tid and ks[0].in_m and ks[0].remembered for ks in back)
+    else:
+        assert all(not k.in_m for ks in back for k in ks)

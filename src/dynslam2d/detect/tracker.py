@@ -965,6 +965,10 @@ class Tracker:
                 k.reason = "left M: merged with long-occupied map structure (its detection joined a wall's cluster)"
             if k.id not in updated:
                 k.misses += 1
+                if k.in_m and not k.remembered and k.slow_since is not None and self.config.memory.enabled:
+                    # stopped in M and hidden before m_exit_time: it cannot finish its stop while unseen, so
+                    # it is remembered now (if eligible) instead of being deleted after max_coast_time
+                    self._remember(k, t - k.slow_since)
                 if len(k.history) < tc.confirm_window:  # (bounded: only the first window is read)
                     k.history.append(False)
                 k.beams = _NO_BEAMS

@@ -63,6 +63,18 @@ class SlamConfig(BaseModel):
         description="If > 0, beams without a return mark cells free along the beam up to this distance, m. "
         "The reference never traces no-return beams (0 = off, the reference behaviour).",
     )
+    grazing_stop_cells: float = Field(
+        0.0, ge=0.0,
+        description="If > 0, a return's free-space update stops grazing_stop_cells / sin(α) cells before its "
+        "endpoint, α = incidence on the surface it hit (estimated from the neighbouring returns): rays "
+        "running along a wall do not clear the wall cells other rays hit (docs/maps.md, 'Walls seen at "
+        "grazing incidence'). 0 = the reference's update (every cell before the endpoint free).",
+    )
+    grazing_min_incidence_deg: float = Field(
+        5.0, gt=0.0, le=90.0,
+        description="Incidence below this counts as this in grazing_stop_cells, degrees (bounds the stop at "
+        "grazing_stop_cells / sin(5°) ≈ 11.5 · grazing_stop_cells cells).",
+    )
 
     # --- range gates (HectorMappingRos.cpp) ------------------------------------------
     laser_min_dist: float = Field(

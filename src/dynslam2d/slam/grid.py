@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from dynslam2d.gridmap import GridMap
-from dynslam2d.slam.raycast import integrate_rays
+from dynslam2d.slam.raycast import integrate_rays, integrate_rays_stop
 from dynslam2d.types import Pose2D
 
 #: Bytes per cell: float32 log-odds + float32 probability cache + int32 update index.
@@ -164,13 +164,15 @@ class GridLevel:
         l_free: float,
         l_occ: float,
         cap: float,
+        stop: np.ndarray | None = None,
     ) -> int:
         """Integrate one scan: rays from world point ``origin_xy`` (2,) to ``ends_xy`` (n, 2), m.
 
         ``hit`` (n,) bool: True = return (endpoint occupied), False = clearing ray (all free).
         Cells are the reference's rounding of map coordinates (``floor(v + 0.5)``,
         OccGridMapBase::updateByScan). Grows the level first so that no ray is dropped. Returns the number
-        of rays integrated.
+        of rays integrated. ``stop`` (n,) optional: per ray, its last ``stop`` cells (endpoint included) get
+        no free update (:func:`~dynslam2d.slam.raycast.integrate_rays_stop`; None = the reference's update).
         """
         r = self.resolution
         s_abs = np.floor(np.asarray(origin_xy, dtype=np.float64) / r + 0.5).astype(np.int64)
@@ -187,6 +189,12 @@ class GridLevel:
         self.update_counter += 3
         ex = np.ascontiguousarray(e_abs[:, 0] - self.i0)
         ey = np.ascontiguousarray(e_abs[:, 1] - self.j0)
+        if stop is not None:
+            return int(integrate_rays_stop(
+                self.logodds, self.prob, self.uidx, free_idx, occ_idx,
+                int(s_abs[0] - self.i0), int(s_abs[1] - self.j0), ex, ey,
+                np.ascontiguousarray(hit, dtype=np.bool_), np.ascontiguousarray(stop, dtype=np.float64),
+                float(l_free), float(l_occ), float(cap)))
         return int(
             integrate_rays(
                 self.logodds, self.prob, self.uidx, free_idx, occ_idx,
@@ -227,7 +235,11 @@ class MultiResMap:
         cap: float = 50.0,
         growth_margin: float = 5.0,
         max_bytes: int | None = None,
+        grazing_cells: float = 0.0,
+        min_incidence_deg: float = 5.0,
     ) -> None:
+        self.grazing_cells = float(grazing_cells)  # 0 = the reference's free update (see grazing_stop)
+        self.min_sin = math.sin(math.radians(min_incidence_deg))
         self.levels = [
             GridLevel(resolution * 2**k, growth_margin_cells=math.ceil(growth_margin / (resolution * 2**k)))
             for k in range(levels)
@@ -273,9 +285,14 @@ class MultiResMap:
                     f"integrating this scan would grow the map to {need / 1e6:.0f} MB "
                     f"(limit {self.max_bytes / 1e6:.0f} MB)"
                 )
+        stop = None
+        if self.grazing_cells > 0.0 and hit.shape[0]:
+            stop = np.zeros(hit.shape[0])
+            stop[: int(np.count_nonzero(hit))] = grazing_stop(
+                np.asarray(hits_laser, dtype=np.float64).reshape(-1, 2), self.grazing_cells, self.min_sin)
         n0 = 0
         for k, lv in enumerate(self.levels):
-            n = lv.integrate(origin, ends, hit, self.l_free, self.l_occ, self.cap)
+            n = lv.integrate(origin, ends, hit, self.l_free, self.l_occ, self.cap, stop)
             if k == 0:
                 n0 = n
         self.version += 1
@@ -304,3 +321,31 @@ class MultiResMap:
         b = lv.known_bounds() if crop else None
         r0, r1, c0, c1 = b if b is not None else (0, lv.shape[0], 0, lv.shape[1])
         return lv.logodds[r0:r1, c0:c1].copy(), lv.corner_origin(r0, c0)
+
+
+def grazing_stop(pts: np.ndarray, grazing_cells: float, min_sin: float) -> np.ndarray:
+    """Per return of a scan (``pts`` (n, 2) laser frame, m, in beam order), how many cells before its
+    endpoint the free-space update stops, in cells of any level: ``grazing_cells / max(sin α, min_sin)``.
+
+    α is the incidence between the beam and the surface it hit, estimated from the neighbouring returns
+    (``p[i+1] − p[i−1]``, one-sided at the ends; a depth jump reads as grazing, which only stops earlier).
+    A ray meeting a surface at α runs within one cell of it for ``1 / sin α`` cells before the endpoint,
+    so with the reference's update (every cell before the endpoint free) rays that graze a wall clear the
+    wall cells other rays hit. Free space is therefore not written within the surface's extent along the
+    ray: the inverse range sensor model of Thrun, Burgard & Fox, *Probabilistic Robotics* (2005), Table 9.2,
+    gives no free update within the obstacle depth before the measured range; at incidence α a surface of
+    thickness ``grazing_cells`` cells has depth ``grazing_cells / sin α`` along the ray (the same margin the
+    Peopleremover's ray shortening and our clean-up pass use, docs/maps.md). At normal incidence the stop is
+    ``grazing_cells`` (≤ 1.5 by default: nothing changes beyond the endpoint cell the reference skips)."""
+    n = pts.shape[0]
+    if n < 2:
+        return np.full(n, float(grazing_cells))
+    prev = np.vstack((pts[:1], pts[:-1]))
+    nxt = np.vstack((pts[1:], pts[-1:]))
+    t = nxt - prev
+    tn = np.hypot(t[:, 0], t[:, 1])
+    r = np.hypot(pts[:, 0], pts[:, 1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sn = np.abs(pts[:, 0] * t[:, 1] - pts[:, 1] * t[:, 0]) / (tn * r)
+    sn = np.where((tn > 0.0) & (r > 0.0) & np.isfinite(sn), sn, 1.0)
+    return grazing_cells / np.maximum(sn, min_sin)

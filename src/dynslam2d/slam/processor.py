@@ -207,6 +207,7 @@ class HectorSlam:
         self.map = MultiResMap(
             c.map_resolution, c.map_levels, c.logodds_free, c.logodds_occupied,
             c.occupied_logodds_cap, c.map_growth_margin, int(c.max_map_memory_mb * 1e6),
+            c.grazing_stop_cells, c.grazing_min_incidence_deg,
         )
         self.counts: Counter[str] = Counter()
         self.n_scans = 0

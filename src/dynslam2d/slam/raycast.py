@@ -156,3 +156,79 @@ def bresenham_free_cells(x0: int, y0: int, x1: int, y1: int) -> np.ndarray:  # p
             out[i + 1, 0] = x
             out[i + 1, 1] = y
     return out
+
+
+@njit(cache=True)
+def integrate_rays_stop(
+    logodds: np.ndarray,
+    prob: np.ndarray,
+    uidx: np.ndarray,
+    free_idx: int,
+    occ_idx: int,
+    sx: int,
+    sy: int,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    hit: np.ndarray,
+    stop: np.ndarray,
+    l_free: float,
+    l_occ: float,
+    cap: float,
+) -> int:  # pragma: no cover - numba
+    """:func:`integrate_rays` with a per-ray free-space stop: the intermediate cells of ray ``k`` that lie
+    less than ``stop[k] − 1`` cells (along the ray) before its endpoint get no free update — the ray's last
+    ``stop[k]`` cells, its endpoint cell included, which the reference never marks free. ``stop[k] ≤ 1``
+    gives the reference's update exactly. (Where the stop comes from: ``MultiResMap.integrate``.)"""
+    h, w = logodds.shape
+    if sx < 0 or sy < 0 or sx >= w or sy >= h:
+        return 0
+    n_done = 0
+    for k in range(ex.shape[0]):
+        x1 = ex[k]
+        y1 = ey[k]
+        if x1 == sx and y1 == sy:
+            continue
+        if x1 < 0 or y1 < 0 or x1 >= w or y1 >= h:
+            continue
+        dx = x1 - sx
+        dy = y1 - sy
+        adx = abs(dx)
+        ady = abs(dy)
+        stx = 1 if dx > 0 else -1
+        sty = 1 if dy > 0 else -1
+        major = adx if adx >= ady else ady
+        skip = 0
+        if stop[k] > 1.0:  # intermediate cell j major steps before the end lies j·L/major cells from it
+            skip = int((stop[k] - 1.0) * major / math.sqrt(float(dx * dx + dy * dy)))
+            if skip > major - 1:
+                skip = major - 1
+        n_free = major - 1 - skip
+        x = sx
+        y = sy
+        _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
+        if adx >= ady:
+            err = adx // 2
+            for i in range(adx - 1):
+                x += stx
+                err += ady
+                if err >= adx:
+                    y += sty
+                    err -= adx
+                if i < n_free:
+                    _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
+        else:
+            err = ady // 2
+            for i in range(ady - 1):
+                y += sty
+                err += adx
+                if err >= ady:
+                    x += stx
+                    err -= ady
+                if i < n_free:
+                    _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
+        if hit[k]:
+            _mark_occupied(logodds, prob, uidx, x1, y1, free_idx, occ_idx, l_free, l_occ, cap)
+        else:
+            _mark_free(logodds, prob, uidx, x1, y1, free_idx, l_free)
+        n_done += 1
+    return n_done
