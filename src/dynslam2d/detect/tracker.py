@@ -119,7 +119,7 @@ class TrackerStats:
         return asdict(self)
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, slots=True)  # (slots: faster attribute access in the per-track loops)
 class _Track:
     id: int
     x: np.ndarray  # [px, py, vx, vy], map frame
@@ -537,7 +537,7 @@ class Tracker:
         n0 = px.shape[0]
         for r, (a, b) in enumerate(pairs):
             da, db = dets[a], dets[b]
-            pts = np.vstack((da.points, db.points))
+            pts = np.concatenate((da.points, db.points))  # (np.vstack of two (n, 2) arrays)
             mid = 0.5 * (da.centroid + db.centroid)
             lo, hi = pts.min(axis=0), pts.max(axis=0)
             na, nb = da.n_points, db.n_points
@@ -561,8 +561,8 @@ class Tracker:
         self.stats.merged_leg_pairs += len(pairs)
         ki = np.array(keep, dtype=np.int64)
         kinds = np.concatenate((kinds[ki], np.zeros(m, dtype=kinds.dtype)))
-        fits = np.vstack((fits[ki], new_fits))
-        lohi = np.vstack((lohi[ki], new_lohi))
+        fits = np.concatenate((fits[ki], new_fits))
+        lohi = np.concatenate((lohi[ki], new_lohi))
         rel = np.concatenate((rel[ki], np.zeros((m, 2, 2), dtype=rel.dtype)))
         starts = np.concatenate((starts[ki], new_starts))
         npts = np.concatenate((npts[ki], new_npts))
@@ -588,7 +588,11 @@ class Tracker:
             kr = k.kind == KIND_RECT
             rect_l.append(k.has_heading and kr)
             th_l.append(k.theta_box)
-            known_l.append(k.misses > 0 and (not kr or bool(k.size_known.all())))
+            if k.misses > 0:
+                sk = k.size_known
+                known_l.append(not kr or bool(sk.item(0) and sk.item(1)))  # (size_known.all())
+            else:
+                known_l.append(False)
             firm_l.append(k.state != TENTATIVE)
         rect_trk = np.array(rect_l)
         theta_box = np.array(th_l)
@@ -889,24 +893,35 @@ class Tracker:
         owners: list[int] = []
         counts: list[int] = [0]
         ref_ages = self._free.ref_ages
+        bisect_left = bisect.bisect_left
         for k in tracks:
-            if not k.past:
-                continue
             past = k.past
+            if not past:
+                continue
             npast = len(past)
             stamps = k.past_t
             for a in ref_ages:
-                # the entry whose age is nearest a (first one on ties, as np.argmin): stamps grow along
-                # past, so it lies next to where t − a would be inserted
-                ins = bisect.bisect_left(stamps, t - a)
+                # the entry whose age is nearest a (first one on ties, as np.argmin) among past[ins − 3:ins + 3]:
+                # stamps grow along past, so it lies next to where t − a would be inserted. t − stamps[q] − a
+                # falls with q, so its magnitude falls, then rises: the search starts at ins − 1, goes forward
+                # while it falls and then back while it does not rise (the earliest of equal ones)
+                ins = bisect_left(stamps, t - a)
+                lo = ins - 3 if ins > 3 else 0
+                q0 = ins - 1 if ins > 0 else 0
                 j, best = -1, math.inf
-                for q in range(ins - 3 if ins > 3 else 0, ins + 3 if ins + 3 < npast else npast):
+                for q in range(q0, ins + 3 if ins + 3 < npast else npast):
                     dev = abs((t - stamps[q]) - a)
                     if dev < best:
                         j, best = q, dev
                     elif dev > best:
-                        # (t − stamps[q] − a falls with q, so dev falls, then rises: no later entry is nearer)
                         break
+                q = q0 - 1
+                while q >= lo:
+                    dev = abs((t - stamps[q]) - a)
+                    if not dev <= best:  # (NaN stops too: never chosen)
+                        break
+                    j, best = q, dev
+                    q -= 1
                 if t - stamps[j] > 0.0:
                     pts = past[j][1]
                     chunks.append(pts)
@@ -957,6 +972,7 @@ class Tracker:
         tc = self.config.tracker
         st = self.stats
         keep: list[_Track] = []
+        mem = self.config.memory.enabled
         for k in self._tracks:
             if k.id in self._merged and k.id not in updated and k.in_m:
                 k.in_m = False
@@ -1002,17 +1018,22 @@ class Tracker:
                 continue
             if k.id in updated:
                 self._dynamic(k, speed, t)
-                if self.config.memory.enabled:
-                    self._memory_bookkeeping(k, t)
+                if mem:
+                    if k.in_m:
+                        self._memory_bookkeeping(k, t)
+                    else:  # (_memory_bookkeeping of a track not in M, inline)
+                        k.m_start_xy, k.m_last_t, k.remembered = None, None, False
+                        k.m_time = k.m_travel = 0.0
             keep.append(k)
         self._tracks = keep
 
     def _dynamic(self, k: _Track, speed: float, t: float) -> None:
         """Paper Eq. 3 with persistence, certainty and displacement conditions."""
         tc = self.config.tracker
-        (p22, p23), (p32, p33) = k.P[2:, 2:].tolist()
+        P = k.P
+        p22, p23, p32, p33 = P.item(10), P.item(11), P.item(14), P.item(15)  # P[2:, 2:]
         if speed > 1e-9:
-            u0, u1 = float(k.x[2]) / speed, float(k.x[3]) / speed
+            u0, u1 = k.x.item(2) / speed, k.x.item(3) / speed
             sig = math.sqrt(max((u0 * p22 + u1 * p32) * u0 + (u0 * p23 + u1 * p33) * u1, 0.0))  # uᵀ P_v u
         else:
             sig = math.sqrt(max(p22, p33))
@@ -1082,7 +1103,7 @@ class Tracker:
         if k.state == TENTATIVE:
             k.reason = "not in M: tentative track"
         elif speed <= tc.v_min:
-            k.reason = f"not in M: speed {speed:.2f} m/s ≤ v_min {tc.v_min:.2f}"
+            k.reason = f"not in M: speed {speed:.2f} m/s ≤ v_min {tc.v_min:.2f}"  # (the most common reason)
         elif sig >= tc.max_speed_sigma:
             k.reason = f"not in M: velocity uncertain (σ {sig:.2f} m/s)"
         elif k.fast < need:
