@@ -177,6 +177,34 @@ def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     return F, Q
 
 
+def _nearest_age(stamps: list[float], n: int, t: float, a: float, bisect_left=bisect.bisect_left) -> int:
+    """Index of the entry of ``stamps`` (increasing, s; ``n`` = its length ≥ 1) whose age at ``t`` is nearest ``a``
+    (s), looked for among ``stamps[ins − 3:ins + 3]`` around the insertion point ``ins`` of t − a, the first one on
+    ties (as ``np.argmin`` of that window); −1 when no age is comparable (NaN).
+
+    t − stamps[q] − a falls with q, so its magnitude falls, then rises: the search starts at ins − 1, goes forward
+    while it falls and then back while it does not rise (to the earliest of equal ones) — the window's argmin in
+    two or three steps instead of six."""
+    ins = bisect_left(stamps, t - a)
+    lo = ins - 3 if ins > 3 else 0
+    q0 = ins - 1 if ins > 0 else 0
+    j, best = -1, math.inf
+    for q in range(q0, ins + 3 if ins + 3 < n else n):
+        dev = abs((t - stamps[q]) - a)
+        if dev < best:
+            j, best = q, dev
+        elif dev > best:
+            break
+    q = q0 - 1
+    while q >= lo:
+        dev = abs((t - stamps[q]) - a)
+        if not dev <= best:  # (NaN stops too: never chosen)
+            break
+        j, best = q, dev
+        q -= 1
+    return j
+
+
 def _wrap_quarter(a: float) -> float:
     """Wrap to [−π/4, π/4): the difference between two rectangle axis angles (90° ambiguity)."""
     return (a + 0.25 * math.pi) % _HALF_PI - 0.25 * math.pi
@@ -280,9 +308,10 @@ class Tracker:
         self._last_stamp, self._last_pose = t, pose
         self._dt = dt
         self._predict(dt)
-        for k in self._tracks:
-            if k.has_heading and k.kind == KIND_RECT and k.state != TENTATIVE:  # (_motion_prior skips tentative)
-                self._motion_prior(k)
+        if self.config.tracker.aspect_prior is not None:  # (without it _motion_prior changes nothing)
+            for k in self._tracks:
+                if k.has_heading and k.kind == KIND_RECT and k.state != TENTATIVE:  # (_motion_prior skips tentative)
+                    self._motion_prior(k)
         dets = self._detect(scan, pose)
         self._merged = set()
         if not dets and not scan.valid_mask().any():
@@ -901,27 +930,7 @@ class Tracker:
             npast = len(past)
             stamps = k.past_t
             for a in ref_ages:
-                # the entry whose age is nearest a (first one on ties, as np.argmin) among past[ins − 3:ins + 3]:
-                # stamps grow along past, so it lies next to where t − a would be inserted. t − stamps[q] − a
-                # falls with q, so its magnitude falls, then rises: the search starts at ins − 1, goes forward
-                # while it falls and then back while it does not rise (the earliest of equal ones)
-                ins = bisect_left(stamps, t - a)
-                lo = ins - 3 if ins > 3 else 0
-                q0 = ins - 1 if ins > 0 else 0
-                j, best = -1, math.inf
-                for q in range(q0, ins + 3 if ins + 3 < npast else npast):
-                    dev = abs((t - stamps[q]) - a)
-                    if dev < best:
-                        j, best = q, dev
-                    elif dev > best:
-                        break
-                q = q0 - 1
-                while q >= lo:
-                    dev = abs((t - stamps[q]) - a)
-                    if not dev <= best:  # (NaN stops too: never chosen)
-                        break
-                    j, best = q, dev
-                    q -= 1
+                j = _nearest_age(stamps, npast, t, a, bisect_left)
                 if t - stamps[j] > 0.0:
                     pts = past[j][1]
                     chunks.append(pts)
