@@ -1060,7 +1060,11 @@ class Tracker:
                 k.reason = ("left M: after a gap the detections show no motion into free space "
                             "(a different, static object)")
                 return
-        if len(k.map_t) >= tc.ride_updates and self._rides_with_laser(k):  # (fewer: it cannot ride)
+        if len(k.map_t) < tc.ride_updates:  # (fewer: it cannot ride)
+            pass
+        elif (lxy := k.laser_xy[-1])[0] * lxy[0] + lxy[1] * lxy[1] > tc.ride_max_range * tc.ride_max_range:
+            k.rode = False  # (_rides_with_laser's first test, inline: most tracks are far from the laser)
+        elif self._rides_with_laser(k):
             if k.in_m:
                 k.in_m = False
             k.fast = 0
