@@ -982,19 +982,25 @@ class Tracker:
         st = self.stats
         keep: list[_Track] = []
         mem = self.config.memory.enabled
+        merged = self._merged
+        window, need_hits = tc.confirm_window, tc.confirm_hits
+        max_coast, max_sig, max_speed = tc.max_coast_time, tc.max_position_sigma, tc.max_object_speed
+        sqrt, hypot = math.sqrt, math.hypot
         for k in self._tracks:
-            if k.id in self._merged and k.id not in updated and k.in_m:
+            kid = k.id
+            is_upd = kid in updated
+            if kid in merged and not is_upd and k.in_m:
                 k.in_m = False
                 k.merged = True
                 k.fast = 0
                 k.reason = "left M: merged with long-occupied map structure (its detection joined a wall's cluster)"
-            if k.id not in updated:
+            if not is_upd:
                 k.misses += 1
                 if k.in_m and not k.remembered and k.slow_since is not None and self.config.memory.enabled:
                     # stopped in M and hidden before m_exit_time: it cannot finish its stop while unseen, so
                     # it is remembered now (if eligible) instead of being deleted after max_coast_time
                     self._remember(k, t - k.slow_since)
-                if len(k.history) < tc.confirm_window:  # (bounded: only the first window is read)
+                if len(k.history) < window:  # (bounded: only the first window is read)
                     k.history.append(False)
                 k.beams = _NO_BEAMS
                 if k.state == CONFIRMED:
@@ -1003,29 +1009,30 @@ class Tracker:
                 k.state = CONFIRMED
             if k.state == TENTATIVE:
                 h = k.history  # (its first confirm_window entries: it is kept no longer)
-                if sum(h) >= tc.confirm_hits:
+                nh = sum(h)
+                if nh >= need_hits:
                     k.state = CONFIRMED
-                elif sum(h) + (tc.confirm_window - len(h)) < tc.confirm_hits or k.misses > 0 and len(
-                        h) >= tc.confirm_window:
+                elif nh + (window - len(h)) < need_hits or k.misses > 0 and len(h) >= window:
                     st.deleted_tentative += 1
                     st.tracks_deleted += 1
                     continue
-            if k.state == COASTING and t - k.last_hit > tc.max_coast_time and not (
+            if k.state == COASTING and t - k.last_hit > max_coast and not (
                     k.remembered and self._remembered_coasts(k, t)):
                 st.deleted_coasting += 1
                 st.tracks_deleted += 1
                 continue
             P = k.P
-            if not k.p_finite or math.sqrt(max(P.item(0), P.item(5))) > tc.max_position_sigma:  # P[0, 0], P[1, 1]
+            if not k.p_finite or sqrt(max(P.item(0), P.item(5))) > max_sig:  # P[0, 0], P[1, 1]
                 st.deleted_covariance += 1
                 st.tracks_deleted += 1
                 continue
-            speed = math.hypot(k.x.item(2), k.x.item(3))
-            if speed > tc.max_object_speed:
+            x = k.x
+            speed = hypot(x.item(2), x.item(3))
+            if speed > max_speed:
                 st.deleted_speed += 1
                 st.tracks_deleted += 1
                 continue
-            if k.id in updated:
+            if is_upd:
                 self._dynamic(k, speed, t)
                 if mem:
                     if k.in_m:
@@ -1311,25 +1318,29 @@ class Tracker:
         P = np.array([k.P for k in tracks])
         V = X[:, 2:]
         out = []
+        append, make_track, make_box = out.append, _make_track, _make_box  # (locals: the loop runs per track)
+        hypot, atan2, pi = math.hypot, math.atan2, math.pi
         for k, (px, py, vx, vy), vel, cov in zip(tracks, X.tolist(), V, P):  # (V, P rows: views)
-            speed = math.hypot(vx, vy)
+            speed = hypot(vx, vy)
             if k.kind == KIND_CIRCLE:
-                theta = math.atan2(vy, vx) if speed > slow else 0.0
+                theta = atan2(vy, vx) if speed > slow else 0.0
                 length = width = 2.0 * k.radius
             else:
                 sa, sb = k.size.tolist()
+                tb = k.theta_box
                 if speed > slow:
-                    vdir = math.atan2(vy, vx)
-                    q = int(round(((vdir - k.theta_box + math.pi) % _TWO_PI - math.pi) / _HALF_PI))  # wrap_angle
-                    theta = k.theta_box + q * _HALF_PI
+                    vdir = atan2(vy, vx)
+                    q = int(round(((vdir - tb + pi) % _TWO_PI - pi) / _HALF_PI))  # wrap_angle
+                    theta = tb + q * _HALF_PI
                     length, width = (sa, sb) if q % 2 == 0 else (sb, sa)
                 elif sb > sa:
-                    theta, length, width = k.theta_box + _HALF_PI, sb, sa
+                    theta, length, width = tb + _HALF_PI, sb, sa
                 else:
-                    theta, length, width = k.theta_box, sa, sb
-                theta = (float(theta) + math.pi) % _TWO_PI - math.pi  # wrap_angle
+                    theta, length, width = tb, sa, sb
+                theta = (float(theta) + pi) % _TWO_PI - pi  # wrap_angle
             beams = k.beams if k.id in updated else no_beams
-            out.append(_make_track(k.id, k.state, t, _make_box(px, py, theta, float(length), float(width)), vel,
-                                   cov, t - k.born, k.hits, k.misses, k.kind, k.in_m, k.reason, beams,
-                                   int(beams.shape[0]), k.remembered and k.in_m))
+            in_m = k.in_m
+            append(make_track(k.id, k.state, t, make_box(px, py, theta, float(length), float(width)), vel,
+                              cov, t - k.born, k.hits, k.misses, k.kind, in_m, k.reason, beams,
+                              len(beams), k.remembered and in_m))
         return out
