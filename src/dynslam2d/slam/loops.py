@@ -21,6 +21,10 @@ kept as it is):
   refined by the multi-resolution Gauss–Newton matcher. A match is a *candidate* if its score,
   its margin over the best pose elsewhere (runner-up), its supporting points and their angular
   spread are all high enough.
+* **Far search**: after ``far_after`` m without a loop, a few older submaps beyond the local radius are
+  searched over every rotation, within a radius grown with the translation deviations summed along the
+  graph's shortest path to them; a far candidate must imply a correction that uncertainty allows and is
+  verified at once on the keyframes before it (consistent partners spanning some path), then optimised.
 * **Consistency**: a candidate becomes a loop edge once another candidate within a few
   keyframes implies the same pose of the robot relative to the map (both loops and the chain of
   keyframes between them close up); lone candidates are dropped.
