@@ -65,8 +65,8 @@ def main() -> None:
     ap.add_argument("--cpu", type=int, default=None)
     ap.add_argument("--settings", nargs="*", default=["off", "on", "forced"],
                     help="off, on (default settings), forced (on, optimised poses kept whatever the map check says), "
-                    "recovery (on, with the front end's large-motion recovery), far40 (on, 40 far searches per keyframe, "
-                    "200 iterations, optimised poses kept)")
+                    "recovery (on, with the front end's large-motion recovery), far40 (on, 40 far searches per "
+                    "keyframe, 200 iterations, optimised poses kept)")
     a = ap.parse_args()
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""))
     rows = []
