@@ -18,7 +18,8 @@ memory.
 
 Settings: ``off``, ``on`` (the default) and ``forced`` (on, with ``loop.map_check: false``: the
 optimised poses are used even when the map check would keep the front end's); ``recovery`` (on, with
-``slam.recovery: true``) on request.
+``slam.recovery: true``) and ``far40`` (on, ``loop.far_searches: 40``, ``iterations: 200``, ``map_check:
+false``) on request.
 
 ``--cpu N`` pins every command to core N (``taskset -c N``: "one core"). The commands are
 printed exactly as they were run (``dynslam2d`` = ``python -m dynslam2d`` with this checkout's
@@ -64,7 +65,8 @@ def main() -> None:
     ap.add_argument("--cpu", type=int, default=None)
     ap.add_argument("--settings", nargs="*", default=["off", "on", "forced"],
                     help="off, on (default settings), forced (on, optimised poses kept whatever the map check says), "
-                    "recovery (on, with the front end's large-motion recovery)")
+                    "recovery (on, with the front end's large-motion recovery), far40 (on, 40 far searches per "
+                    "keyframe, 200 iterations, optimised poses kept)")
     a = ap.parse_args()
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""))
     rows = []
@@ -80,6 +82,13 @@ def main() -> None:
                 cfg = Path(a.out) / "forced.yaml"
                 cfg.parent.mkdir(parents=True, exist_ok=True)
                 cfg.write_text("loop:\n  map_check: false\n")
+                run_args += ["--config", str(cfg)]
+            if setting == "far40":
+                # the far loop search over 40 submaps per keyframe, converged optimisation, optimised poses kept
+                # (docs/slam.md, "Intel: where the error is")
+                cfg = Path(a.out) / "far40.yaml"
+                cfg.parent.mkdir(parents=True, exist_ok=True)
+                cfg.write_text("loop:\n  far_searches: 40\n  iterations: 200\n  map_check: false\n")
                 run_args += ["--config", str(cfg)]
             if setting == "recovery":
                 # loop closure on plus the front end's large-motion recovery (slam.recovery, docs/slam.md)

@@ -11,7 +11,7 @@ from dynslam2d.sim.sensor import LidarModel
 from dynslam2d.sim.world import World, cast_rays, polyline_segments, rect_segments
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.loopconfig import LoopConfig
-from dynslam2d.slam.loops import LoopCloser
+from dynslam2d.slam.loops import LoopCandidate, LoopCloser
 from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
 from dynslam2d.types import Pose2D
 
@@ -268,3 +268,70 @@ def test_re_rendered_map_leaves_out_beams_erased_after_the_fact() -> None:
     assert res.corrected  # the optimised poses are what gets rendered
     assert box_cells(res) == 0
     assert box_cells(closed(False)) > 10
+
+
+@pytest.fixture(scope="module")
+def far_loop() -> tuple:
+    """A front end whose heading drifts 0.006 rad/m: 10 m off at the end, about 4 m and 0.5 rad off when it
+    comes back to the start, beyond the local search's capped radius and windows (6 m, 3 m, 0.8 rad around
+    the drifted estimate)."""
+    world = _block_loop_world()
+    gt = _loop_path()
+    front = _drifted(gt, 0.006)
+    return world, gt, front, _close(world, gt, front)
+
+
+def _true_loops(res, gt: np.ndarray) -> None:
+    kf = res.keyframe_scans
+    for e in res.graph.edges:
+        if e.loop:
+            true = relative(gt[kf[e.i]], gt[kf[e.j]])
+            assert math.hypot(*(e.z[:2] - true[:2])) < 0.1 and abs(e.z[2] - true[2]) < 0.02
+
+
+def test_far_search_closes_a_loop_the_fixed_window_misses(far_loop: tuple) -> None:
+    world, gt, front, (lc, res) = far_loop
+    err_front = np.hypot(*(front[:, :2] - gt[:, :2]).T)
+    assert err_front.max() > 8.0
+    # the local search alone (the window around the drifted estimate) finds nothing
+    _lc0, res0 = _close(world, gt, front, LoopConfig(far_search=False))
+    assert res0.loops == [] and not res0.corrected
+    # the far search (radius from the uncertainty summed along the graph, every rotation) finds the start
+    assert lc.stats["far_loops"] >= 3 and res.corrected and len(res.loops) >= 10
+    _true_loops(res, gt)
+    err_opt = np.hypot(*(res.poses[:, :2] - gt[:, :2]).T)
+    assert err_opt.max() < 1.2  # 10.0 m → 0.94 m
+
+
+def test_far_search_refuses_look_alike_places() -> None:
+    """Less drift (0.004 rad/m): the corridor after one corner of the block looks like the corridor after
+    another, turned by 90°, and such matches pass score and margin; the correction they imply (11 m, 1.3 rad)
+    exceeds what the uncertainty allows, so every accepted loop is a true one and the map gets better."""
+    world = _block_loop_world()
+    gt = _loop_path()
+    front = _drifted(gt, 0.004)
+    lc, res = _close(world, gt, front)
+    _lc0, res0 = _close(world, gt, front, LoopConfig(far_search=False))
+    assert lc.stats["far_searches"] > 20 and lc.stats["far_loops"] >= 3
+    _true_loops(res, gt)
+    err = np.hypot(*(res.poses[:, :2] - gt[:, :2]).T).max()
+    err0 = np.hypot(*(res0.poses[:, :2] - gt[:, :2]).T).max()
+    assert err < 0.8 and err < err0 / 2  # 1.45 m (local search only) → 0.63 m
+
+
+def test_far_candidate_is_verified_on_the_keyframes_before_it(far_loop: tuple) -> None:
+    """A far candidate is accepted only if the preceding keyframes, matched around the pose it implies for
+    them, agree with it: the true one passes, the same one moved by 1.5 m and 0.4 rad does not."""
+    _world, _gt, _front, (lc, res) = far_loop
+    far = next(c for c in lc.candidates if c.far) if any(c.far for c in lc.candidates) else None
+    e = far if far is not None else next(e for e in res.graph.edges if e.loop)
+    node, anchor = (e.node, e.anchor) if far is not None else (e.j, e.i)
+    s = anchor // lc.config.submap_keyframes
+    z = np.array(e.z, dtype=np.float64)
+    n_edges = len(lc.graph.edges)
+    wrong = LoopCandidate(node, anchor, compose(z, np.array([1.5, 0.0, 0.4])), 0.8, 0.3, 200)
+    lc._verify_far(wrong, s)
+    assert len(lc.graph.edges) == n_edges and not wrong.accepted
+    right = LoopCandidate(node, anchor, z, 0.8, 0.3, 200)
+    lc._verify_far(right, s)
+    assert right.accepted and len(lc.graph.edges) >= n_edges + 1 + lc.config.far_partners

@@ -70,6 +70,52 @@ class LoopConfig(BaseModel):
         0.8, gt=0.0,
         description="Cap of the grown rotation window, rad.",
     )
+    far_search: bool = Field(
+        True,
+        description="Also search older submaps beyond the local radius, within a radius grown with the pose "
+        "uncertainty accumulated along the graph's shortest path to them (docs/slam.md, 'Loop search').",
+    )
+    far_after: float = Field(
+        20.0, ge=0.0,
+        description="Far searches only once the robot travelled this far since the last accepted loop, m "
+        "(while loops keep being found the local search suffices).",
+    )
+    far_level: int = Field(
+        3, ge=0,
+        description="Submap level of the far search (coarser than search_level: it covers every rotation).",
+    )
+    far_sigmas: float = Field(
+        3.0, gt=0.0,
+        description="The far radius is search_radius + this × the summed translation deviations of the edges "
+        "on the graph's shortest path (keyframe chain and accepted loops) from the submap to the keyframe "
+        "(dimensionless).",
+    )
+    max_far_radius: float = Field(
+        80.0, gt=0.0, description="Cap of the far radius, m."
+    )
+    far_searches: int = Field(
+        4, ge=0,
+        description="Far submaps searched per searched keyframe (least recently searched first), count.",
+    )
+    far_margin: float = Field(
+        3.0, ge=0.0,
+        description="A far search covers the submap's keyframes' extent around its anchor plus this much, m "
+        "(over every rotation).",
+    )
+    far_min_margin: float = Field(
+        0.15, ge=0.0,
+        description="Score margin over the runner-up a far candidate needs (instead of min_margin).",
+    )
+    far_partner_span: float = Field(
+        1.0, ge=0.0,
+        description="… and the far candidate's and its partners' keyframes must span at least this much path, m "
+        "(scans taken turning on the spot are not independent evidence: a corner matches another corner "
+        "turned by 90°).",
+    )
+    far_partners: int = Field(
+        2, ge=1,
+        description="Consistent partner candidates (within consistency_window keyframes) a far candidate needs.",
+    )
     tracked_linear_window: float = Field(
         0.3, gt=0.0,
         description="Translation window when a loop was accepted within consistency_window keyframes (its "

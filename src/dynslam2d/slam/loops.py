@@ -21,6 +21,10 @@ kept as it is):
   refined by the multi-resolution Gauss–Newton matcher. A match is a *candidate* if its score,
   its margin over the best pose elsewhere (runner-up), its supporting points and their angular
   spread are all high enough.
+* **Far search**: after ``far_after`` m without a loop, a few older submaps beyond the local radius are
+  searched over every rotation, within a radius grown with the translation deviations summed along the
+  graph's shortest path to them; a far candidate must imply a correction that uncertainty allows and is
+  verified at once on the keyframes before it (consistent partners spanning some path), then optimised.
 * **Consistency**: a candidate becomes a loop edge once another candidate within a few
   keyframes implies the same pose of the robot relative to the map (both loops and the chain of
   keyframes between them close up); lone candidates are dropped.
@@ -91,6 +95,7 @@ class LoopCandidate:
     margin: float
     support: int
     accepted: bool = False
+    far: bool = False  # found by the far search (uncertainty-grown radius, every rotation)
 
 
 @dataclass(slots=True)
@@ -150,7 +155,15 @@ class LoopCloser:
         self._opt_nodes = 0  # nodes covered by the last optimisation
         self._new_loops = 0
         self._cache: OrderedDict[int, MultiResMap] = OrderedDict()
+        # translation deviation (m) of every chain edge and accepted loop, keyed (i, j): the far search's
+        # uncertainty is their sum along the graph's shortest path
+        self._sigma_edges: dict[tuple[int, int], float] = {}
+        self._length_edges: dict[tuple[int, int], float] = {}  # their lengths, m (heading uncertainty)
+        self._far_last: dict[int, int] = {}  # submap → node of its last far search
+        self._extent: dict[int, float] = {}  # submap → largest keyframe distance from its anchor, m
+        self._loop_path = 0.0  # front-end path length at the last accepted loop's keyframe, m
         self.stats: dict[str, float] = {"searches": 0, "candidates": 0, "loops_accepted": 0, "optimisations": 0,
+                                        "far_searches": 0, "far_candidates": 0, "far_loops": 0,
                                         "search_ms": 0.0, "optimise_ms": 0.0, "total_ms": 0.0}
 
     # ---- input ----------------------------------------------------------------------------
@@ -213,6 +226,8 @@ class LoopCloser:
             node = self.graph.add_node(compose(est_prev, z))
             sxy, sth = edge_sigmas(c, z, self._weak_since_kf)
             self.graph.add_edge(prev_node, node, z, diag_info(sxy, sth))
+            self._sigma_edges[(prev_node, node)] = sxy
+            self._length_edges[(prev_node, node)] = math.hypot(float(z[0]), float(z[1]))
         else:
             node = self.graph.add_node(p)
         self.keyframes.append(kf)
@@ -251,7 +266,8 @@ class LoopCloser:
             return grid
         c = self.slam
         first, last, anchor = self._submap_range(s)
-        grid = MultiResMap(c.map_resolution, max(self.config.search_level + 1, 2), c.logodds_free,
+        top = max(self.config.search_level, self.config.far_level if self.config.far_search else 0)
+        grid = MultiResMap(c.map_resolution, max(top + 1, 2), c.logodds_free,
                            c.logodds_occupied, c.occupied_logodds_cap, c.map_growth_margin)
         a = self.keyframes[anchor].frontend
         for k in range(first, last + 1):
@@ -298,21 +314,143 @@ class LoopCloser:
             d = math.hypot(a[0] - est[0], a[1] - est[1])
             if d <= radius:
                 found.append((d, s, gap))
-        if not found:
+        far = (recent is None and c.far_search and c.far_searches > 0
+               and kf.path - self._loop_path >= c.far_after)
+        if not found and not far:
             return
         found.sort()
-        pts, _ = self._points(kf)
-        if pts.shape[0] < max(c.min_support, 10):
+        pts = self._query(kf)
+        if pts is None:
             return
-        if pts.shape[0] > _QUERY_POINTS:
-            pts = pts[np.linspace(0, pts.shape[0] - 1, _QUERY_POINTS).astype(np.int64)]
-        for _d, s, gap in found[:1 if recent is not None else _MAX_CANDIDATES]:
+        local = found[:1 if recent is not None else _MAX_CANDIDATES]
+        for _d, s, gap in local:
             cand = self._match(node, s, 0.0 if recent is not None else gap, pts, est, recent is not None)
             self.stats["searches"] += 1
             if cand is not None:
                 self.candidates.append(cand)
                 self.stats["candidates"] += 1
+        if far:
+            self._far_search(node, est, pts, {s for _d, s, _g in local})
         self.stats["search_ms"] += (time.perf_counter() - t0) * 1e3
+
+    def _query(self, kf: Keyframe) -> np.ndarray | None:
+        """The keyframe's query points (laser frame, m, at most _QUERY_POINTS), None if too few."""
+        pts, _ = self._points(kf)
+        if pts.shape[0] < max(self.config.min_support, 10):
+            return None
+        if pts.shape[0] > _QUERY_POINTS:
+            pts = pts[np.linspace(0, pts.shape[0] - 1, _QUERY_POINTS).astype(np.int64)]
+        return pts
+
+    # ---- far search: the radius grows with the uncertainty accumulated along the graph ------
+    def _uncertainty(self, node: int) -> tuple[np.ndarray, np.ndarray]:
+        """((n_nodes,) summed translation deviation (m) of the edges on the graph's shortest path from
+        ``node`` to every node (keyframe chain and accepted loops; inf beyond the far radius's cap),
+        (n_nodes,) length of the graph's shortest path, m)."""
+        # imported here: scipy.sparse costs start-up time and memory only a run that searches needs
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import dijkstra
+
+        c = self.config
+        n = self.graph.n_nodes
+        out = []
+        for edges, limit in ((self._sigma_edges, max(c.max_far_radius - c.search_radius, 0.0) / c.far_sigmas),
+                             (self._length_edges, np.inf)):
+            if not edges:
+                d = np.full(n, np.inf)
+                d[node] = 0.0
+            else:
+                ij = np.array(list(edges.keys()), dtype=np.int64)
+                w = np.array(list(edges.values()), dtype=np.float64) + 1e-9  # csgraph drops zero weights
+                m = coo_matrix((w, (ij[:, 0], ij[:, 1])), shape=(n, n)).tocsr()
+                d = dijkstra(m, directed=False, indices=node, limit=limit)
+            out.append(d)
+        return out[0], out[1]
+
+    def _far_search(self, node: int, est: np.ndarray, pts: np.ndarray, skip: set[int]) -> None:
+        """Search the least recently searched submaps within the uncertainty-grown radius (not already
+        searched locally) over every rotation; a candidate is verified at once on the keyframes before it."""
+        c = self.config
+        kf = self.keyframes[node]
+        unc, length = self._uncertainty(node)
+        elig: list[tuple[int, float, int, float]] = []
+        for s in range((node + 1) // c.submap_keyframes):
+            _first, last, anchor = self._submap_range(s)
+            if last >= node or s in skip or kf.path - self.keyframes[last].path < c.min_path_gap:
+                continue
+            r = min(c.search_radius + c.far_sigmas * float(unc[anchor]), c.max_far_radius)
+            a = self._estimate(anchor)
+            d = math.hypot(a[0] - est[0], a[1] - est[1])
+            if d <= r:
+                elig.append((self._far_last.get(s, -1), d / r, s, r, float(length[anchor])))
+        elig.sort()
+        for _last, _d, s, r, path in elig[:c.far_searches]:
+            self._far_last[s] = node
+            self.stats["far_searches"] += 1
+            _first, _l, anchor = self._submap_range(s)
+            pred = relative(self._estimate(anchor), est)
+            ext = self._submap_extent(s)
+            dist = math.hypot(pred[0], pred[1])
+            if dist > ext:  # the robot must be near the submap's keyframes to see what they saw
+                pred = np.array([pred[0] * ext / dist, pred[1] * ext / dist, pred[2]])
+            cand = self._match_at(node, s, pts, pred, min(r, ext + c.far_margin), math.pi, c.far_min_margin,
+                                  c.far_level)
+            if cand is None:
+                continue
+            implied = self._implied(cand)
+            turn = c.angular_window + c.far_sigmas * c.drift_rad_per_m * path
+            if math.hypot(implied[0] - est[0], implied[1] - est[1]) > r or abs(implied[2] - est[2]) > turn:
+                continue  # a correction larger than the uncertainty allows: a look-alike place, not a loop
+            cand.far = True
+            self.stats["far_candidates"] += 1
+            self._verify_far(cand, s)
+
+    def _submap_extent(self, s: int) -> float:
+        """Largest distance of submap ``s``'s keyframes from its anchor (front-end poses), m."""
+        e = self._extent.get(s)
+        if e is None:
+            first, last, anchor = self._submap_range(s)
+            a = self.keyframes[anchor].frontend
+            e = max(math.hypot(*relative(a, self.keyframes[k].frontend)[:2]) for k in range(first, last + 1))
+            self._extent[s] = e
+        return e
+
+    def _verify_far(self, cand: LoopCandidate, s: int) -> None:
+        """Accept a far candidate only if the keyframes just before it, matched against the same and the
+        neighbouring submaps around the pose the candidate implies for them, give at least
+        ``far_partners`` candidates consistent with it; then optimise at once (the correction is large)."""
+        c = self.config
+        node = cand.node
+        n_sub = (node + 1) // c.submap_keyframes
+        implied = self._implied(cand)
+        est_node = self._estimate(node)
+        partners: list[LoopCandidate] = []
+        for k in range(node - 1, max(node - 1 - max(c.consistency_window, 1), -1), -1):
+            pts = self._query(self.keyframes[k])
+            if pts is None:
+                continue
+            guess = compose(implied, relative(est_node, self._estimate(k)))
+            best: LoopCandidate | None = None
+            for s2 in (s - 1, s, s + 1):
+                if s2 < 0 or s2 >= n_sub or self._submap_range(s2)[1] >= k:
+                    continue
+                pred = relative(self._estimate(self._submap_range(s2)[2]), guess)
+                o = self._match_at(k, s2, pts, pred, c.linear_window, c.angular_window, c.min_margin)
+                self.stats["searches"] += 1
+                if o is not None and (best is None or o.score > best.score):
+                    best = o
+            if best is not None and self._consistent(cand, best):
+                partners.append(best)
+        paths = [self.keyframes[o.node].path for o in [cand, *partners]]
+        if len(partners) < c.far_partners or max(paths) - min(paths) < c.far_partner_span:
+            return
+        for o in [cand, *partners]:
+            o.far = True
+            self.candidates.append(o)
+            self._accept(o)
+        self.stats["far_loops"] += 1 + len(partners)
+        self._optimise(final=False)
+        self._opt_nodes = node
 
     def _recent_loop(self, node: int) -> LoopCandidate | None:
         """The latest accepted loop candidate within ``consistency_window`` keyframes of ``node``."""
@@ -326,16 +464,25 @@ class LoopCloser:
     def _match(self, node: int, s: int, gap: float, pts: np.ndarray, est: np.ndarray,
                tracked: bool = False) -> LoopCandidate | None:
         c = self.config
-        sc = self.slam
         _first, _last, anchor = self._submap_range(s)
-        grid = self._submap(s)
-        levels = grid.levels
-        lvl = levels[min(c.search_level, len(levels) - 1)]
         pred = relative(self._estimate(anchor), est)
         lin = min(c.linear_window + c.drift_per_m * gap, c.max_linear_window)
         ang = min(c.angular_window + c.drift_rad_per_m * gap, c.max_angular_window)
         if tracked:
             lin, ang = min(lin, c.tracked_linear_window), min(ang, c.tracked_angular_window)
+        return self._match_at(node, s, pts, pred, lin, ang, c.min_margin)
+
+    def _match_at(self, node: int, s: int, pts: np.ndarray, pred: np.ndarray, lin: float, ang: float,
+                  min_margin: float, level: int | None = None) -> LoopCandidate | None:
+        """Correlative search of submap ``s`` for keyframe ``node``'s points ``pts`` within ±``lin`` m /
+        ±``ang`` rad of ``pred`` (the keyframe in the anchor's frame), refined by Gauss–Newton; a candidate
+        if score, margin over the runner-up, support and spread pass."""
+        c = self.config
+        sc = self.slam
+        _first, _last, anchor = self._submap_range(s)
+        grid = self._submap(s)
+        lvl = grid.levels[min(c.search_level if level is None else level, len(grid.levels) - 1)]
+        levels = grid.levels[:max(c.search_level + 1, 2)]  # the refinement as without the far search's level
         cr = correlative_search(lvl, pts, pred, lin, ang, None, c.search_points, sc.correlative_max_height, 0.0, 0.0)
         if cr is None or cr.score < c.min_score:
             return None
@@ -345,7 +492,7 @@ class LoopCloser:
         if cr is None or cr.score < c.min_score:
             return None
         margin = cr.score - (cr.runner_up or 0.0)
-        if margin < c.min_margin:
+        if margin < min_margin:
             return None
         p = match_multires(levels, pts, cr.pose, sc.iterations_coarse, sc.iterations_finest, False,
                            sc.step_mode == "lm", sc.lm_lambda_init, sc.lm_lambda_max, sc.max_rotation_step,
@@ -401,8 +548,12 @@ class LoopCloser:
         cand.accepted = True
         k = self.graph.add_edge(cand.anchor, cand.node, cand.z, diag_info(c.loop_sigma_xy, c.loop_sigma_theta),
                                 loop=True)
+        key = (min(cand.anchor, cand.node), max(cand.anchor, cand.node))
+        self._sigma_edges[key] = min(self._sigma_edges.get(key, math.inf), c.loop_sigma_xy)
+        self._length_edges[key] = min(self._length_edges.get(key, math.inf), math.hypot(*cand.z[:2]))
         self.loop_edges.append(k)
         self.stats["loops_accepted"] += 1
+        self._loop_path = max(self._loop_path, self.keyframes[cand.node].path)
         self._new_loops += 1
 
     # ---- optimisation ---------------------------------------------------------------------
