@@ -76,14 +76,9 @@ def _min_abs(lo, hi):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr, excl):  # pragma: no cover - numba
-    """Exact best (rotation index, dx, dy, score) over rotations (qx/qy rows) and offsets in [−w, w]².
-
-    ``pyr`` (Hmax+1, H, W); ``qx, qy`` (nrot, n) int64 point cells at zero offset; ``dth`` (nrot,)
-    rotation offsets, rad; penalties ``wt_cell2`` per cell², ``wr`` per rad². ``excl`` (6,) int64
-    (k0, k1, dx0, dx1, dy0, dy1): candidates with k0 ≤ k ≤ k1, dx0 ≤ dx ≤ dx1 and dy0 ≤ dy ≤ dy1
-    are left out (the runner-up search); k0 > k1 leaves nothing out.
-    """
+def _top_blocks(pyr, qx, qy, w, dth, wt_cell2, wr):  # pragma: no cover - numba
+    """Bound of every top-height block of offsets: (k, dx, dy, score) arrays over rotations and blocks
+    (arguments as :func:`branch_and_bound`)."""
     hmax = pyr.shape[0] - 1
     nrot = qx.shape[0]
     step = 1 << hmax
@@ -109,7 +104,34 @@ def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr, excl):  # pragma: no cov
                 top_dy[c] = dy
                 top_s[c] = _block_score(pyr[hmax], qx[k], qy[k], dx, dy) - pr - wt_cell2 * (mx * mx + my * my)
                 c += 1
-    order = np.argsort(-top_s)
+    return top_k, top_dx, top_dy, top_s
+
+
+def branch_and_bound(pyr: np.ndarray, qx: np.ndarray, qy: np.ndarray, w: int, dth: np.ndarray, wt_cell2: float,
+                     wr: float, excl: np.ndarray) -> tuple[int, int, int, float]:
+    """Exact best (rotation index, dx, dy, score) over rotations (qx/qy rows) and offsets in [−w, w]².
+
+    ``pyr`` (Hmax+1, H, W) float32; ``qx, qy`` (nrot, n) int64 point cells at zero offset; ``dth`` (nrot,)
+    rotation offsets, rad; penalties ``wt_cell2`` per cell², ``wr`` per rad². ``excl`` (6,) int64
+    (k0, k1, dx0, dx1, dy0, dy1): candidates with k0 ≤ k ≤ k1, dx0 ≤ dx ≤ dx1 and dy0 ≤ dy ≤ dy1
+    are left out (the runner-up search); k0 > k1 leaves nothing out.
+
+    The top blocks are explored best bound first; they are ordered by NumPy (a stable sort, ties in
+    block order) rather than inside the kernel: numba's own ``argsort`` compiles its quicksort
+    machinery, about 1.5 s of a first run's compile (docs/speed.md).
+    """
+    top_k, top_dx, top_dy, top_s = _top_blocks(pyr, qx, qy, w, dth, wt_cell2, wr)
+    order = np.argsort(-top_s, kind="stable")
+    k, dx, dy, best = _descend(pyr, qx, qy, w, dth, wt_cell2, wr, excl, top_k, top_dx, top_dy, top_s, order)
+    return int(k), int(dx), int(dy), float(best)
+
+
+@njit(cache=True)
+def _descend(pyr, qx, qy, w, dth, wt_cell2, wr, excl, top_k, top_dx, top_dy, top_s,
+             order):  # pragma: no cover - numba
+    """Depth-first branch and bound from the top blocks in ``order`` (best bound first)."""
+    hmax = pyr.shape[0] - 1
+    ntop = top_s.shape[0]
     best = -1e300
     bk = 0
     bdx = 0
