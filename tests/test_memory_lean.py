@@ -78,3 +78,26 @@ def test_presized_render_allocates_once_and_gives_the_same_map(tmp_path) -> None
     assert grown.map.levels[0].n_grows > 1
     np.testing.assert_array_equal(sized.logodds(0)[0], grown.logodds(0)[0])
     assert sized.logodds(0)[1] == grown.logodds(0)[1]
+
+
+def test_counter_reserved_once_counts_the_same() -> None:
+    """The clean-up recount (after loop closure) reserves its counts once: same counts as growing."""
+    from dynslam2d.slam.cleanup import VisibilityCounter
+
+    gt = _loop_path(step=0.5, laps=1.0)
+    scans = _scans(_block_loop_world(), gt, seed=4)
+    items = [(s, Pose2D(float(p[0]), float(p[1]), float(p[2]))) for s, p in zip(scans, gt)]
+    grown, sized = VisibilityCounter(0.05), VisibilityCounter(0.05)
+    assert sized.reserve(items)
+    shape0 = sized.hits.shape
+    for s, p in items:
+        grown.add(s, p)
+        sized.add(s, p)
+    assert sized.hits.shape == shape0  # no growth after the reservation
+    assert sized.nbytes < grown.nbytes  # growing by half a side at a time over-allocates
+    assert grown.hits.sum() > 1000
+    for a, b in ((grown.hits, sized.hits), (grown.through, sized.through), (grown.switches, sized.switches)):
+        ia = np.argwhere(a > 0) + (grown.j0, grown.i0)
+        ib = np.argwhere(b > 0) + (sized.j0, sized.i0)
+        np.testing.assert_array_equal(ia, ib)  # the same absolute cells, in the same (row-major) order
+        np.testing.assert_array_equal(a[a > 0], b[b > 0])
