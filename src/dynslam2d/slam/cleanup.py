@@ -304,7 +304,7 @@ class VisibilityCounter:
         b: list[int] | None = None
         for scan, pose in scans:
             valid = self._valid(scan)
-            if not valid.any():
+            if not valid.any() or not pose.is_finite():
                 continue
             ex, ey, _cx, _cy, _kept, _clear = self._geometry(scan, pose, valid, None)
             c = self._cell_bounds(pose.x / self.resolution, pose.y / self.resolution, ex, ey, valid)
