@@ -535,9 +535,30 @@ def render_map(loop: LoopResult, slam_config: SlamConfig) -> tuple[GridMap, np.n
     dynamic filter's removed beams stay out) integrated in order, as the front end did at its own
     poses. Returns (finest level as probabilities, its raw log-odds)."""
     slam = HectorSlam(slam_config.model_copy(update={"map_levels": 1}))  # only the finest level is returned
+    _presize_render(slam, loop)
     for kf, p in zip(loop.keyframes, loop.node_poses):
         slam.update_map(kf.kept(), Pose2D(float(p[0]), float(p[1]), float(p[2])), force=True)
     return slam.gridmap(0), slam.logodds(0)[0]
+
+
+def _presize_render(slam: HectorSlam, loop: LoopResult) -> None:
+    """Allocate the re-render's map once at the bounds of every cell it will touch, instead of growing it
+    keyframe by keyframe (each growth copies the arrays and leaves the old ones to the allocator: tens of MB
+    on MIT CSAIL). Cells are absolute, so the map's values are the same (issue 13 item 3)."""
+    lv = slam.map.levels[0]
+    b: list[int] | None = None
+    for kf, p in zip(loop.keyframes, loop.node_poses):
+        pose = Pose2D(float(p[0]), float(p[1]), float(p[2]))
+        if not pose.is_finite():
+            continue
+        pts, clear = slam.scan_points(kf.kept())
+        ends = np.vstack((pts, clear)) if clear.shape[0] else pts
+        if ends.shape[0] < slam.config.min_points:
+            continue
+        c = lv.cell_bounds(np.array([pose.x, pose.y]), pose.transform_points(np.asarray(ends, dtype=np.float64)))
+        b = list(c) if b is None else [min(b[0], c[0]), min(b[1], c[1]), max(b[2], c[2]), max(b[3], c[3])]
+    if b is not None and (slam.map.max_bytes is None or lv.bytes_after_growth(*b) <= slam.map.max_bytes):
+        lv.ensure(*b)
 
 
 def map_entropy(logodds: np.ndarray) -> float:
@@ -582,6 +603,16 @@ def _memory_report(result: RunResult, pipe: Pipeline) -> None:
         result.memory.update(pipe.ledger.summary())
         g = result.grid
         result.erased = pipe.ledger.erased_mask(g.origin, g.shape, g.resolution)
+
+
+def _release_map(pipe: Pipeline) -> None:
+    """Replace the front end's map arrays by empty ones (after the run, once the results hold their own
+    copies): memory for the loop closure's re-render and the results (docs/speed.md)."""
+    for lv in pipe.slam.map.levels:
+        lv.logodds = np.zeros((0, 0), dtype=np.float32)
+        lv.prob = np.full((0, 0), 0.5, dtype=np.float32)
+        lv.uidx = np.full((0, 0), -1, dtype=np.int32)
+    release_free_memory()
 
 
 ProgressFn = Callable[[int, StepResult], None]
@@ -661,7 +692,12 @@ def run(
     trajectory = Trajectory(stamps.view().copy(), poses.view().copy())
     frontend_trajectory = None
     loop = pipe.loops.finish() if pipe.loops is not None else None
+    summary = pipe.slam.summary()
+    memory_bytes = pipe.slam.memory_bytes
     if loop is not None and loop.corrected:
+        # the front end's map is in ``grid`` / ``logodds`` now: free its levels before the re-render builds
+        # another map (issue 13 item 3; observers' on_finish get the pipeline without its map arrays)
+        _release_map(pipe)
         t_render = time.perf_counter()
         grid_opt, lo_opt = render_map(loop, pipe.config.slam)
         loop.stats["render_ms"] = (time.perf_counter() - t_render) * 1e3
@@ -670,7 +706,6 @@ def run(
             trajectory = Trajectory(trajectory.stamps, loop.poses)
             grid, logodds = grid_opt, lo_opt
     wall = time.perf_counter() - t0
-    summary = pipe.slam.summary()
     result = RunResult(
         source=source.meta,
         config=pipe.config,
@@ -686,7 +721,7 @@ def run(
         logodds=logodds,
         wall_time_s=wall,
         reasons=dict(summary.get("reasons", {})),  # type: ignore[arg-type]
-        memory_bytes=pipe.slam.memory_bytes,
+        memory_bytes=memory_bytes,
         tracker_stats=pipe.tracker.stats.as_dict(),
         confidence={k: v.view().copy() for k, v in conf.items()},
         slam_stats={"lost_events": pipe.slam.lost_events, "relocalisations": pipe.slam.relocalisations},

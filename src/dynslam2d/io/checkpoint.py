@@ -77,7 +77,9 @@ class Checkpointer:
             self.write()
 
     def on_finish(self, result: Any, pipeline: Any) -> None:
-        """Nothing: the complete results replace the checkpoint."""
+        """Let go of the pipeline: the complete results replace the checkpoint, and holding it would keep the
+        front end's maps, tracker and ledgers alive while the results and figures are written (docs/speed.md)."""
+        self._pipeline = None
 
     def write(self) -> None:
         """Write a checkpoint now (trajectory, map, summary.json and run.json marked incomplete)."""

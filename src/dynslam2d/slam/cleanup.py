@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -272,27 +273,62 @@ class VisibilityCounter:
         self.i0, self.j0 = ni0, nj0
         return True
 
+    def _valid(self, scan: Scan) -> np.ndarray:
+        s, r = self.slam, scan.ranges
+        with np.errstate(invalid="ignore"):
+            return scan.valid_mask() & (r > s.laser_min_dist) & (r < s.laser_max_dist)
+
+    def _geometry(self, scan: Scan, pose: Pose2D, valid: np.ndarray,
+                  removed: np.ndarray | None) -> tuple[np.ndarray, ...]:
+        """:func:`_scan_geometry` of one scan (ex, ey, cx, cy, kept, clear)."""
+        c = self.config
+        rem = removed if removed is not None and removed.shape == valid.shape else np.zeros_like(valid)
+        return _scan_geometry(
+            np.asarray(scan.ranges, dtype=np.float64), scan.angles, valid, np.asarray(rem, dtype=np.bool_), pose.x,
+            pose.y, pose.theta, self.resolution, c.margin_m, c.grazing_cells,
+            math.sin(math.radians(c.min_incidence_deg)))
+
+    @staticmethod
+    def _cell_bounds(ox: float, oy: float, ex: np.ndarray, ey: np.ndarray,
+                     valid: np.ndarray) -> tuple[int, int, int, int]:
+        """(imin, jmin, imax, jmax) absolute cells of the scan origin and its valid endpoints (cell units)."""
+        ev, fv = ex[valid], ey[valid]
+        return (int(math.floor(min(ox, ev.min()) + 0.5)), int(math.floor(min(oy, fv.min()) + 0.5)),
+                int(math.floor(max(ox, ev.max()) + 0.5)), int(math.floor(max(oy, fv.max()) + 0.5)))
+
+    def reserve(self, scans: Sequence[tuple[Scan, Pose2D]]) -> bool:
+        """Allocate the counts once for every cell ``scans`` (scan, pose) will touch, before adding them:
+        the counts grow by half their size per side otherwise, copying and leaving the old arrays to the
+        allocator (issue 13 item 3). The counts are the same either way (cells are absolute). Does nothing
+        (False) when the array would pass the SLAM's map memory limit; :meth:`add` then grows as usual."""
+        b: list[int] | None = None
+        for scan, pose in scans:
+            valid = self._valid(scan)
+            if not valid.any() or not pose.is_finite():
+                continue
+            ex, ey, _cx, _cy, _kept, _clear = self._geometry(scan, pose, valid, None)
+            c = self._cell_bounds(pose.x / self.resolution, pose.y / self.resolution, ex, ey, valid)
+            b = list(c) if b is None else [min(b[0], c[0]), min(b[1], c[1]), max(b[2], c[2]), max(b[3], c[3])]
+        if b is None or self._cells.shape[0]:
+            return False
+        m = self.margin_cells
+        if (b[3] - b[1] + 2 * m + 1) * (b[2] - b[0] + 2 * m + 1) * BYTES_PER_CELL > self.slam.max_map_memory_mb * 1e6:
+            return False
+        return self._ensure(*b)
+
     def add(self, scan: Scan, pose: Pose2D, removed: np.ndarray | None = None) -> None:
         """Count one scan taken at laser pose ``pose`` (map frame); ``removed`` (beams,) bool
         marks the beams the dynamic filter took out (no hit; they still pass through)."""
         t0 = time.perf_counter()
-        c, s = self.config, self.slam
-        r = scan.ranges
-        with np.errstate(invalid="ignore"):
-            valid = scan.valid_mask() & (r > s.laser_min_dist) & (r < s.laser_max_dist)
+        c, res = self.config, self.resolution
+        valid = self._valid(scan)
         if not valid.any():
             self.scans += 1
             self.seconds += time.perf_counter() - t0
             return
-        rem = removed if removed is not None and removed.shape == valid.shape else np.zeros_like(valid)
-        res = self.resolution
-        ex, ey, cx, cy, kept, clear = _scan_geometry(
-            np.asarray(r, dtype=np.float64), scan.angles, valid, np.asarray(rem, dtype=np.bool_), pose.x, pose.y,
-            pose.theta, res, c.margin_m, c.grazing_cells, math.sin(math.radians(c.min_incidence_deg)))
+        ex, ey, cx, cy, kept, clear = self._geometry(scan, pose, valid, removed)
         ox, oy = pose.x / res, pose.y / res
-        ev, fv = ex[valid], ey[valid]
-        if not self._ensure(int(math.floor(min(ox, ev.min()) + 0.5)), int(math.floor(min(oy, fv.min()) + 0.5)),
-                            int(math.floor(max(ox, ev.max()) + 0.5)), int(math.floor(max(oy, fv.max()) + 0.5))):
+        if not self._ensure(*self._cell_bounds(ox, oy, ex, ey, valid)):
             self.too_large += 1  # the SLAM refuses such scans too ('map_too_large')
             self.seconds += time.perf_counter() - t0
             return
@@ -355,6 +391,10 @@ def erase_rule(hits: np.ndarray, through: np.ndarray, switches: np.ndarray, conf
             & (switches <= c.max_switches + c.switch_share * np.minimum(hits, through)))
 
 
+#: Rows of the map :func:`clean_map` applies the erase rule to at a time (the rule's ratios are float64).
+_RULE_ROWS = 256
+
+
 def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray | None = None,
               occupied_threshold: float = 0.65) -> CleanResult:
     """Erase the cells of ``online`` (occupied: p > ``occupied_threshold``) that ``counter``
@@ -364,7 +404,10 @@ def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray |
     c = counter.config
     hits, through, switches = counter.window(online)
     occ = online.occupied(occupied_threshold)
-    erased = erase_rule(hits, through, switches, c) & occ
+    erased = np.empty(occ.shape, dtype=bool)
+    for r0 in range(0, occ.shape[0], _RULE_ROWS):  # a block of rows at a time: no map-sized float64 temporaries
+        rows = slice(r0, r0 + _RULE_ROWS)
+        erased[rows] = erase_rule(hits[rows], through[rows], switches[rows], c) & occ[rows]
     if c.revert_neighbors > 0:
         # Removert's "revert" step in 2D: a cell at the edge of structure that stays is kept.
         from scipy.ndimage import convolve
@@ -455,10 +498,12 @@ class CleanupRecorder:
             # loop closure moved the poses after counting: count the keyframes (the scans written into the
             # map) again at their optimised poses, so the counts match the re-rendered map (docs/slam.md)
             slam = self.slam if self.slam is not None else pipeline.config.slam  # type: ignore[attr-defined]
+            self.counter = None  # the run's counts go before the recount's are allocated
             self.counter = VisibilityCounter(slam.map_resolution, self.config, slam)
-            for kf, p in zip(loop.keyframes, loop.node_poses):
-                self.counter.add(kf.scan, Pose2D(float(p[0]), float(p[1]), float(p[2])),
-                                 kf.removed if kf.removed.size else None)
+            poses = [Pose2D(float(p[0]), float(p[1]), float(p[2])) for p in loop.node_poses]
+            self.counter.reserve([(kf.scan, p) for kf, p in zip(loop.keyframes, poses)])
+            for kf, p in zip(loop.keyframes, poses):
+                self.counter.add(kf.scan, p, kf.removed if kf.removed.size else None)
         self.result = clean_map(result.grid, self.counter, result.logodds)  # type: ignore[attr-defined]
 
 

@@ -582,6 +582,7 @@ class LoopCloser:
             poses = scan_poses(frontend, np.asarray(self._scan_node, dtype=np.int64),
                                np.array([k.frontend for k in self.keyframes]).reshape(-1, 3), nodes)
         loops = [(self.graph.edges[k].i, self.graph.edges[k].j) for k in active]
+        self._cache.clear()  # no search after the last one: its submap grids go before the map is re-rendered
         self.stats["total_ms"] += (time.perf_counter() - t0) * 1e3
         stats = dict(self.stats)
         stats.update({"keyframes": len(self.keyframes), "submaps": len(self.keyframes) // self.config.submap_keyframes,

@@ -48,17 +48,60 @@ def draw_grey(ax: Any, img: np.ndarray, extent: tuple[float, float, float, float
     where matplotlib would otherwise colour the whole grid into float RGBA copies before resampling
     (about 200 MiB for MIT CSAIL's 1699 × 1122 cells; issue 13 item 3).
     """
+    return draw_grey_indices(ax, grey_indices(img), extent, erased, erased_colour, paint, **kw)
+
+
+#: Rows of the map converted at a time by :func:`grey_indices` / :func:`occupancy_indices` (bounds the
+#: float64 temporaries to a few MB whatever the map's size; issue 13 item 3).
+_ROWS_PER_CHUNK = 256
+
+
+def _grey_colormap() -> Any:
     from matplotlib import colormaps
+
+    return colormaps["gray"]
+
+
+def grey_indices(img: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """(H, W) uint16 index of each grey value of ``img`` (0 … 1) into the "gray" colormap's N colours:
+    the colormap's own lookup, floor(v·N) with 1.0 → N − 1 (values outside [0, 1] clipped)."""
+    n = _grey_colormap().N
+    if out is None:
+        out = np.empty(img.shape, dtype=np.uint16)
+    for r0 in range(0, img.shape[0], _ROWS_PER_CHUNK):
+        part = img[r0:r0 + _ROWS_PER_CHUNK]
+        out[r0:r0 + _ROWS_PER_CHUNK] = np.clip((np.clip(part, 0.0, 1.0) * n).astype(np.int64), 0, n - 1)
+    return out
+
+
+def occupancy_indices(grid: GridMap, fade: float | None = None) -> np.ndarray:
+    """:func:`grey_indices` of :func:`occupancy_image` (optionally faded towards white,
+    ``1 − fade·(1 − grey)``), computed a block of rows at a time: the same values without the map-sized
+    float64 copies."""
+    prob = grid.prob
+    out = np.empty(prob.shape, dtype=np.uint16)
+    for r0 in range(0, prob.shape[0], _ROWS_PER_CHUNK):
+        part = prob[r0:r0 + _ROWS_PER_CHUNK]
+        img = 1.0 - np.nan_to_num(part, nan=0.5)
+        img[~np.isfinite(part)] = UNKNOWN_GREY
+        if fade is not None:
+            img = 1.0 - fade * (1.0 - img)
+        grey_indices(img, out[r0:r0 + _ROWS_PER_CHUNK])
+    return out
+
+
+def draw_grey_indices(ax: Any, idx: np.ndarray, extent: tuple[float, float, float, float],
+                      erased: np.ndarray | None = None, erased_colour: str | None = None,
+                      paint: Sequence[tuple[np.ndarray | None, str]] = (), **kw: Any) -> Any:
+    """:func:`draw_grey` of grey indices already computed (:func:`grey_indices`, :func:`occupancy_indices`;
+    ``idx`` is painted over in place)."""
     from matplotlib.colors import ListedColormap, NoNorm, to_rgba
 
-    grey = colormaps["gray"]
-    n = grey.N
-    # the colormap's own lookup of a value in [0, 1]: index floor(v·N), 1.0 → N − 1
-    idx = np.clip((np.clip(img, 0.0, 1.0) * n).astype(np.int64), 0, n - 1).astype(np.uint16)
-    colours = grey(np.arange(n))
+    grey = _grey_colormap()
+    colours = grey(np.arange(grey.N))
     layers = list(paint) + ([(erased, erased_colour)] if erased_colour is not None else [])
     for mask, colour in layers:
-        if mask is not None and mask.shape == img.shape and mask.any():
+        if mask is not None and mask.shape == idx.shape and mask.any():
             idx[mask] = len(colours)
             colours = np.vstack((colours, to_rgba(colour)))
     return ax.imshow(idx, cmap=ListedColormap(colours), norm=NoNorm(), origin="lower", extent=extent,
@@ -209,7 +252,7 @@ def plot_map(
     # clean-up's cells over retroactive erasure's
     paint = [(m, c) for m, c, on in ((memory_erased, style.MEMORY_ERASED, has_mem), (erased, style.ERASED, has_erased))
              if on]
-    draw_grey(ax, occupancy_image(grid), extent, paint=paint)
+    draw_grey_indices(ax, occupancy_indices(grid), extent, paint=paint)
     # the three greys of occupancy_image
     handles += [Patch(facecolor="black", edgecolor="0.3", label="occupied"),
                 Patch(facecolor="white", edgecolor="0.3", label="free"),

@@ -11,7 +11,7 @@ import numpy as np
 
 from dynslam2d.gridmap import GridMap
 from dynslam2d.viz.figure import new_figure, save_png
-from dynslam2d.viz.mapplot import draw_grey, frame_metric_axes, map_figure_size, occupancy_image
+from dynslam2d.viz.mapplot import draw_grey_indices, frame_metric_axes, map_figure_size, occupancy_indices
 from dynslam2d.viz.trackpaths import MAX_LABELS, TrackPath, label_tracks
 
 #: Colour map of the speed (m/s): plasma without its pale-yellow end (unreadable on white).
@@ -80,8 +80,7 @@ def plot_tracks(
     ax = fig.subplots()
     if grid is not None:
         # Faint map: occupied cells light grey, everything else white.
-        img = 1.0 - 0.35 * (1.0 - occupancy_image(grid))
-        draw_grey(ax, img, extent)
+        draw_grey_indices(ax, occupancy_indices(grid, fade=0.35), extent)
     vmax = speed_limit(tracks)
     norm = Normalize(0.0, vmax)
     cmap = _speed_cmap()

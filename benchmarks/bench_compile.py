@@ -1,0 +1,71 @@
+"""Cold compile of the README's first command by function (issue 13 item 2): runs ``dynslam2d run --out DIR``
+(sim:paper) in a fresh interpreter with an empty numba cache and records, from numba's ``numba:compile``
+events, the CPU time each function spends in numba's compiler excluding the functions it compiles in turn
+(kernels, their callees and numba's own helpers such as ``np.empty``'s implementation).
+
+    PYTHONPATH=src python benchmarks/bench_compile.py [--src src] [--top 25]
+
+Prints the process CPU of the whole run, the compile CPU summed over functions, their count and the
+largest ones. Not run by pytest; numbers go to docs/speed.md with this command.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+PROBE = r"""
+import json, sys, time
+c0 = time.process_time()
+from numba.core import event
+excl, stack = {}, []
+class Exclusive(event.Listener):
+    def on_start(self, ev):
+        f = getattr((ev.data or {}).get("dispatcher"), "py_func", None)
+        name = f"{f.__module__}.{f.__qualname__}" if f else "?"
+        now = time.process_time()
+        if stack:
+            stack[-1][1] += now - stack[-1][2]
+        stack.append([name, 0.0, now])
+    def on_end(self, ev):
+        now = time.process_time()
+        name, acc, t = stack.pop()
+        excl[name] = excl.get(name, 0.0) + acc + now - t
+        if stack:
+            stack[-1][2] = now
+event.register("numba:compile", Exclusive())
+from dynslam2d.cli import main
+sys.argv = ["dynslam2d", "run", "--out", sys.argv[1], "--force", "-q"]
+try:
+    main()
+except SystemExit:
+    pass
+print(json.dumps({"process_cpu": time.process_time() - c0, "per": excl}))
+"""
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--src", default=str(Path(__file__).resolve().parents[1] / "src"))
+    ap.add_argument("--top", type=int, default=25)
+    args = ap.parse_args()
+    env = dict(os.environ, PYTHONPATH=args.src, NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-cold-"))
+    out = tempfile.mkdtemp(prefix="bench-compile-") + "/run"
+    res = subprocess.run([sys.executable, "-c", PROBE, out], env=env, capture_output=True, text=True)
+    if res.returncode != 0:
+        raise SystemExit(res.stderr[-2000:])
+    data = json.loads(res.stdout.strip().splitlines()[-1])
+    per = sorted(data["per"].items(), key=lambda kv: -kv[1])
+    print(f"process CPU {data['process_cpu']:.1f} s; compile CPU {sum(v for _, v in per):.1f} s "
+          f"in {len(per)} functions")
+    for name, s in per[:args.top]:
+        print(f"{s:6.2f} s  {name}")
+
+
+if __name__ == "__main__":
+    main()

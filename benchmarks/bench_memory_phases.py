@@ -1,0 +1,107 @@
+"""Resident memory of one ``dynslam2d run`` by phase (issue 13 item 3): RSS sampled every 10 ms in the run's
+own process, with marks at the imports, the run loop, the loop closure's finish and re-render, the clean-up pass,
+the results and the figures; prints the peak of every phase and the process's ``ru_maxrss``.
+
+    PYTHONPATH=src python benchmarks/bench_memory_phases.py ../shared/data/mit-csail/mit-csail.clf
+
+Run it with a warm numba cache (a compile inside the loop adds LLVM's memory to the loop's phase).
+Not run by pytest; numbers go to docs/speed.md with this command.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib
+import os
+import resource
+import sys
+import tempfile
+import threading
+import time
+
+PAGE = os.sysconf("SC_PAGE_SIZE")
+
+
+def rss_mib() -> float:
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * PAGE / 2**20
+
+
+class Phases:
+    """The current phase's name and every phase's peak RSS (a sampling thread)."""
+
+    def __init__(self) -> None:
+        self.current = "imports"
+        self.peak: dict[str, float] = {}
+        self.lock = threading.Lock()
+        threading.Thread(target=self._sample, daemon=True).start()
+
+    def mark(self, name: str) -> None:
+        with self.lock:
+            self.current = name
+            r = rss_mib()
+            self.peak[name] = max(self.peak.get(name, 0.0), r)
+
+    def _sample(self) -> None:
+        while True:
+            r = rss_mib()
+            with self.lock:
+                self.peak[self.current] = max(self.peak.get(self.current, 0.0), r)
+            time.sleep(0.01)
+
+
+def wrap(phases: Phases, module: str, attr: str, label: str, after: str) -> None:
+    """Mark ``label`` when ``module.attr`` (``Class.method`` allowed) starts and ``after`` when it returns."""
+    owner = importlib.import_module(module)
+    *path, name = attr.split(".")
+    for p in path:
+        owner = getattr(owner, p)
+    fn = getattr(owner, name)
+
+    @functools.wraps(fn)
+    def marked(*a, **k):
+        phases.mark(label)
+        try:
+            return fn(*a, **k)
+        finally:
+            phases.mark(after)
+
+    setattr(owner, name, marked)
+
+
+def main() -> None:
+    if len(sys.argv) < 2:
+        raise SystemExit(__doc__)
+    phases = Phases()
+    import dynslam2d.cli
+    import dynslam2d.pipeline as P
+
+    phases.mark("after imports")
+    first = P.Pipeline.process
+
+    @functools.wraps(first)
+    def process(self, scan):  # the loop starts with the first scan (kernels load then)
+        if phases.current == "after imports":
+            phases.mark("run loop")
+        return first(self, scan)
+
+    P.Pipeline.process = process
+    wrap(phases, "dynslam2d.slam.loops", "LoopCloser.finish", "loop closure: optimise", "after the optimisation")
+    wrap(phases, "dynslam2d.pipeline", "render_map", "loop closure: re-render", "after the re-render")
+    wrap(phases, "dynslam2d.slam.cleanup", "CleanupRecorder.on_finish", "clean-up pass", "after the clean-up pass")
+    wrap(phases, "dynslam2d.results", "write_outputs", "results files", "end")
+    wrap(phases, "dynslam2d.results", "write_figures", "figures", "results files after the figures")
+    out = tempfile.mkdtemp(prefix="bench-memory-phases-")
+    sys.argv = ["dynslam2d", "run", sys.argv[1], "--out", out + "/run", "-q", *sys.argv[2:]]
+    try:
+        dynslam2d.cli.main()
+    except SystemExit:
+        pass
+    phases.mark("end")
+    for name, mib in phases.peak.items():
+        print(f"{name:<28} peak RSS {mib:7.1f} MiB")
+    print(f"{'process ru_maxrss':<28} {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:7.1f} MiB")
+
+
+if __name__ == "__main__":
+    main()
