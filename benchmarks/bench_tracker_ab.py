@@ -15,8 +15,16 @@ inside one process, on the same tracker states:
 ``--stages`` instead prints the thread CPU time of one plain run per pipeline component (tracker, SLAM
 match, map update, evidence ledger, body filter, exclusion), ms per scan and share of the step.
 
+``--split`` prints how much of ``Tracker.update``'s CPU time is spent in functions of other modules that it
+calls (segmentation, shape fits, classification, map evidence, free-space memory, the association / Kalman
+kernels) and how much in ``detect/tracker.py``'s own Python, µs per scan.
+
+``--check`` runs both checkouts' trackers over every scan of an input in lockstep and compares their reports
+exactly (every field of every track, floats and arrays bit for bit, the stats and the removed beams): a
+speed change of the tracker must print "reports identical".
+
     python benchmarks/bench_tracker_ab.py negative_2/right positive_7 [--other ../main/src] [--reps 5]
-        [--start 150 --end 210] [--stages]
+        [--start 150 --end 210] [--stages | --split | --check]
 
 Pin to one core with ``taskset -c N``. Inputs: ``negative_2/left|rear|right``, ``positive_7``, ``overtakes``,
 ``demo``, ``sim:drive`` (paths under ``--data``).
@@ -103,6 +111,88 @@ def ab(scans: list, other, reps: int, start: int, end: int) -> tuple[float, floa
     return mo, mt, statistics.median(t / o for t, o in zip(best["this"], best["other"]))
 
 
+def _same_tracks(a: list, b: list) -> bool:
+    """The two ``Tracker.update`` reports are equal field by field (floats and arrays bit for bit)."""
+    if len(a) != len(b):
+        return False
+    for x, y in zip(a, b):
+        for f in ("id", "state", "stamp", "age", "hits", "misses", "kind", "in_m", "m_reason", "n_points",
+                  "remembered"):
+            if getattr(x, f) != getattr(y, f):
+                return False
+        bx, by = x.box, y.box
+        if (bx.px, bx.py, bx.theta, bx.length, bx.width) != (by.px, by.py, by.theta, by.length, by.width):
+            return False
+        for f in ("velocity", "covariance", "beams"):
+            u, v = getattr(x, f), getattr(y, f)
+            if u.dtype != v.dtype or u.shape != v.shape or u.tobytes() != v.tobytes():
+                return False
+    return True
+
+
+def check(scans: list, other) -> tuple[int, int | None]:
+    """Both checkouts' trackers in lockstep over every scan (each in a pipeline of its own): (scans compared,
+    index of the first scan whose reports or stats differ, None if none). Identical reports keep the two
+    pipelines identical, so this checks the whole run's output of the tracker."""
+    from dynslam2d.detect import tracker as this
+    from dynslam2d.pipeline import Pipeline
+
+    pipes = []
+    for mod in (other, this):
+        p = Pipeline()
+        p.tracker = mod.Tracker(p.config.detect)
+        pipes.append(p)
+    for i, s in enumerate(scans):
+        ra, rb = (p.process(s) for p in pipes)
+        if not _same_tracks(ra.tracks, rb.tracks) or pipes[0].tracker.stats.as_dict() != \
+                pipes[1].tracker.stats.as_dict() or ra.removed.tobytes() != rb.removed.tobytes():
+            return i + 1, i
+    return len(scans), None
+
+
+#: functions of other modules that Tracker.update calls (module attribute of detect/tracker.py → label)
+_SPLIT = ("segment_scan", "fit_clusters", "classify_batch", "admit_long_clusters", "map_evidence", "gate_costs",
+          "measure_batch", "kalman_update_batch", "fragment_hosts", "segment_means", "linear_sum_assignment")
+
+
+def split(scans: list) -> tuple[float, dict[str, float]]:
+    """Tracker.update CPU µs per scan of one run after a warm-up, and the part of it (µs per scan) spent in each
+    function of another module (:data:`_SPLIT` and the free-space memory's methods)."""
+    from dynslam2d.detect import tracker as this
+    from dynslam2d.pipeline import Pipeline
+
+    warm = Pipeline()
+    for s in scans[:60]:
+        warm.process(s)
+    p = Pipeline()
+    acc: collections.Counter = collections.Counter()
+    saved = {n: getattr(this, n) for n in _SPLIT}
+
+    def timed(f, tag: str):
+        def g(*a, **k):
+            t0 = time.thread_time_ns()
+            r = f(*a, **k)
+            acc[tag] += time.thread_time_ns() - t0
+            return r
+        return g
+
+    try:
+        for n, f in saved.items():
+            setattr(this, n, timed(f, n))
+        if p.tracker._free is not None:
+            for n in ("seen_through", "seen_through_by", "make_ref", "add"):
+                setattr(p.tracker._free, n, timed(getattr(p.tracker._free, n), f"free-space memory ({n})"))
+        p.tracker.update = timed(p.tracker.update, "update")
+        for s in scans:
+            p.process(s)
+    finally:
+        for n, f in saved.items():
+            setattr(this, n, f)
+    n = len(scans)
+    total = acc.pop("update") / 1e3 / n
+    return total, {k: v / 1e3 / n for k, v in acc.items()}
+
+
 def stages(scans: list) -> tuple[float, dict[str, float]]:
     """CPU ms per scan of one run after a warm-up, and per component (ms per scan)."""
     from dynslam2d.pipeline import Pipeline
@@ -148,12 +238,26 @@ def main() -> None:
     ap.add_argument("--start", type=int, default=150)
     ap.add_argument("--end", type=int, default=210)
     ap.add_argument("--stages", action="store_true", help="per-component CPU of this checkout instead")
+    ap.add_argument("--split", action="store_true",
+                    help="instead: Tracker.update's CPU in other modules' functions vs tracker.py's own code")
+    ap.add_argument("--check", action="store_true",
+                    help="instead: run both checkouts' trackers over every scan and compare their reports exactly")
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     args = ap.parse_args()
-    other = None if args.stages else other_tracker_module(args.other)
+    other = None if args.stages or args.split else other_tracker_module(args.other)
     for name in args.inputs:
         scans = load_scans(args.data, name)
-        if args.stages:
+        if args.split:
+            total, parts = split(scans)
+            elsewhere = sum(parts.values())
+            print(f"{name}: Tracker.update {total:.0f} µs CPU per scan; in other modules' functions {elsewhere:.0f} "
+                  f"({100 * elsewhere / total:.0f} %), detect/tracker.py's own code {total - elsewhere:.0f}")
+            for k, v in sorted(parts.items(), key=lambda kv: -kv[1]):
+                print(f"  {k:<36} {v:6.0f} µs")
+        elif args.check:
+            n, bad = check(scans, other)
+            print(f"{name:<18} {n} scans: " + ("reports identical" if bad is None else f"DIFFERENT at scan {bad}"))
+        elif args.stages:
             total, parts = stages(scans)
             print(f"{name}: {total:.2f} ms CPU per scan")
             for k, v in sorted(parts.items(), key=lambda kv: -kv[1]):

@@ -119,7 +119,7 @@ class TrackerStats:
         return asdict(self)
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, slots=True)  # (slots: faster attribute access in the per-track loops)
 class _Track:
     id: int
     x: np.ndarray  # [px, py, vx, vy], map frame
@@ -175,6 +175,34 @@ def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     q11, q12, q22 = q * dt ** 3 / 3.0, q * dt ** 2 / 2.0, q * dt
     Q = np.array([[q11, 0, q12, 0], [0, q11, 0, q12], [q12, 0, q22, 0], [0, q12, 0, q22]])
     return F, Q
+
+
+def _nearest_age(stamps: list[float], n: int, t: float, a: float, bisect_left=bisect.bisect_left) -> int:
+    """Index of the entry of ``stamps`` (increasing, s; ``n`` = its length ≥ 1) whose age at ``t`` is nearest ``a``
+    (s), looked for among ``stamps[ins − 3:ins + 3]`` around the insertion point ``ins`` of t − a, the first one on
+    ties (as ``np.argmin`` of that window); −1 when no age is comparable (NaN).
+
+    t − stamps[q] − a falls with q, so its magnitude falls, then rises: the search starts at ins − 1, goes forward
+    while it falls and then back while it does not rise (to the earliest of equal ones) — the window's argmin in
+    two or three steps instead of six."""
+    ins = bisect_left(stamps, t - a)
+    lo = ins - 3 if ins > 3 else 0
+    q0 = ins - 1 if ins > 0 else 0
+    j, best = -1, math.inf
+    for q in range(q0, ins + 3 if ins + 3 < n else n):
+        dev = abs((t - stamps[q]) - a)
+        if dev < best:
+            j, best = q, dev
+        elif dev > best:
+            break
+    q = q0 - 1
+    while q >= lo:
+        dev = abs((t - stamps[q]) - a)
+        if not dev <= best:  # (NaN stops too: never chosen)
+            break
+        j, best = q, dev
+        q -= 1
+    return j
 
 
 def _wrap_quarter(a: float) -> float:
@@ -280,9 +308,10 @@ class Tracker:
         self._last_stamp, self._last_pose = t, pose
         self._dt = dt
         self._predict(dt)
-        for k in self._tracks:
-            if k.has_heading and k.kind == KIND_RECT and k.state != TENTATIVE:  # (_motion_prior skips tentative)
-                self._motion_prior(k)
+        if self.config.tracker.aspect_prior is not None:  # (without it _motion_prior changes nothing)
+            for k in self._tracks:
+                if k.has_heading and k.kind == KIND_RECT and k.state != TENTATIVE:  # (_motion_prior skips tentative)
+                    self._motion_prior(k)
         dets = self._detect(scan, pose)
         self._merged = set()
         if not dets and not scan.valid_mask().any():
@@ -369,10 +398,10 @@ class Tracker:
                 if k.remembered and k.misses > 0:  # coasting through a stop: it stays where it stood
                     X[i], P[i] = self._stationary_prediction(k, F, dt)
         fin = np.isfinite(P).all(axis=(1, 2)).tolist()
-        for i, k in enumerate(self._tracks):
-            k.x = X[i]
-            k.P = P[i]
-            k.p_finite = fin[i]
+        for k, xr, pr, f in zip(self._tracks, X, P, fin):  # (row views from the array iterators)
+            k.x = xr
+            k.P = pr
+            k.p_finite = f
         self._stacked = (X, P)
 
     def _stationary_prediction(self, k: _Track, F: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -471,10 +500,13 @@ class Tracker:
             fs = segment_means(mstruct.astype(np.float64), offsets)[idx].tolist()
             ff = segment_means(mfree.astype(np.float64), offsets)[idx].tolist()
             fu = segment_means(munk.astype(np.float64), offsets)[idx].tolist()
-        for j, (a0, n, kd, th) in enumerate(zip(starts.tolist(), npts.tolist(), kinds.tolist(),
-                                                fits[:, F_THETA].tolist())):
-            dets.append(Detection(beams[a0:a0 + n], pts[a0:a0 + n], cen_v[j], KIND_NAMES[kd], th, lo_v[j], hi_v[j],
-                                  rel[j], circ_v[j], n, frac[j], fs[j], ff[j], fu[j]))
+        # (row views from the array iterators: one C pass per array instead of an index per detection)
+        for a0, n, kd, th, cen_j, lo_j, hi_j, rel_j, circ_j, fr_j, fs_j, ff_j, fu_j in zip(
+                starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(), cen_v, lo_v, hi_v, rel,
+                circ_v, frac, fs, ff, fu):
+            b = a0 + n
+            dets.append(Detection(beams[a0:b], pts[a0:b], cen_j, KIND_NAMES[kd], th, lo_j, hi_j, rel_j, circ_j, n,
+                                  fr_j, fs_j, ff_j, fu_j))
         if cfg.fit.person_merge and len(dets) > 1:
             dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
                                                                                  npts, px, py)
@@ -508,11 +540,13 @@ class Tracker:
         np.fill_diagonal(d2, np.inf)
         pairs: list[tuple[int, int]] = []
         used: set[int] = set()
-        dflat = d2.ravel().tolist()
         ns, dmax = len(small), fc.leg_pair_distance
-        for flat in np.argsort(d2, axis=None).tolist():
-            if dflat[flat] > dmax:
-                break
+        dflat = d2.ravel()
+        # the pairs within dmax, nearest first (the order of a full argsort, of which only these were read)
+        cand = np.flatnonzero(dflat <= dmax)
+        if cand.shape[0] == 0:
+            return dets, kinds, fits, lohi, rel, starts, npts, px, py
+        for flat in cand[np.argsort(dflat[cand], kind="stable")].tolist():
             a, b = divmod(flat, ns)
             if a in used or b in used or a > b:
                 continue
@@ -532,7 +566,7 @@ class Tracker:
         n0 = px.shape[0]
         for r, (a, b) in enumerate(pairs):
             da, db = dets[a], dets[b]
-            pts = np.vstack((da.points, db.points))
+            pts = np.concatenate((da.points, db.points))  # (np.vstack of two (n, 2) arrays)
             mid = 0.5 * (da.centroid + db.centroid)
             lo, hi = pts.min(axis=0), pts.max(axis=0)
             na, nb = da.n_points, db.n_points
@@ -556,8 +590,8 @@ class Tracker:
         self.stats.merged_leg_pairs += len(pairs)
         ki = np.array(keep, dtype=np.int64)
         kinds = np.concatenate((kinds[ki], np.zeros(m, dtype=kinds.dtype)))
-        fits = np.vstack((fits[ki], new_fits))
-        lohi = np.vstack((lohi[ki], new_lohi))
+        fits = np.concatenate((fits[ki], new_fits))
+        lohi = np.concatenate((lohi[ki], new_lohi))
         rel = np.concatenate((rel[ki], np.zeros((m, 2, 2), dtype=rel.dtype)))
         starts = np.concatenate((starts[ki], new_starts))
         npts = np.concatenate((npts[ki], new_npts))
@@ -578,8 +612,19 @@ class Tracker:
         Xs, Ps = self._stack()
         tsize = np.array([k.size for k in tracks])
         reach = 0.5 * tsize.max(axis=1)
-        rect_trk = np.array([k.has_heading and k.kind == KIND_RECT for k in tracks])
-        theta_box = np.array([k.theta_box for k in tracks])
+        rect_l, th_l, known_l, firm_l = [], [], [], []
+        for k in tracks:  # (per-track flags in one pass)
+            kr = k.kind == KIND_RECT
+            rect_l.append(k.has_heading and kr)
+            th_l.append(k.theta_box)
+            if k.misses > 0:
+                sk = k.size_known
+                known_l.append(not kr or bool(sk.item(0) and sk.item(1)))  # (size_known.all())
+            else:
+                known_l.append(False)
+            firm_l.append(k.state != TENTATIVE)
+        rect_trk = np.array(rect_l)
+        theta_box = np.array(th_l)
         # Mahalanobis gate and distance gate; a rectangle is measured again with the track's own sizes
         # (a side the detection "measured" too short, e.g. a grazing side, must not break the association)
         d2, near, ok = gate_costs(Xs, Ps, reach, rect_trk, theta_box, tsize, self._default.z, self._default.R,
@@ -590,7 +635,7 @@ class Tracker:
         det_ext = np.maximum(lohi[:, L_HI1] - lohi[:, L_LO1], lohi[:, L_HI2] - lohi[:, L_LO2])
         # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
         # later, a tracked object may touch another for a scan)
-        known = np.array([k.misses > 0 and (bool(k.size_known.all()) or k.kind != KIND_RECT) for k in tracks])
+        known = np.array(known_l)
         grow_ok = (det_ext[None, :] <= tc.max_size_jump_ratio * tsize.max(axis=1)[:, None] + tc.max_size_jump) | \
             ~known[:, None]
         ok = ok & grow_ok
@@ -600,7 +645,7 @@ class Tracker:
             return []
         cost = np.where(ok, d2, _BIG)
         # established tracks choose first; tentative ones share what is left
-        firm = np.array([k.state != TENTATIVE for k in self._tracks])
+        firm = np.array(firm_l)
         pairs: list[tuple[int, int]] = []
         taken = np.zeros(m, dtype=bool)
         for group in (firm, ~firm):
@@ -655,30 +700,42 @@ class Tracker:
         has = np.zeros(npair, dtype=bool)
         radius = np.full(npair, -1.0)
         swaps = [False] * npair
-        rows = np.empty(npair, dtype=np.int64)
+        sel_l = [ti for ti, _ in pairs]
+        rows_l = [di for _, di in pairs]
         for r, (ti, di) in enumerate(pairs):
             k, det = tracks[ti], dets[di]
-            rows[r] = di
-            if det.kind == KIND_RECT and k.has_heading:
-                sw = self._swapped(k, det)
-                swaps[r] = sw
-                sizes[r] = k.size[::-1] if sw else k.size
-                has[r] = True
-            if det.kind == KIND_CIRCLE and k.kind == KIND_CIRCLE and k.radius > 0:
+            dk = det.kind
+            if dk == KIND_RECT:
+                if k.has_heading:
+                    # (self._swapped, inline)
+                    sw = int(round((det.theta - k.theta_box) / _HALF_PI)) % 2 == 1
+                    swaps[r] = sw
+                    sz = k.size
+                    if sw:
+                        sizes[r, 0] = sz[1]
+                        sizes[r, 1] = sz[0]
+                    else:
+                        sizes[r] = sz
+                    has[r] = True
+            elif dk == KIND_CIRCLE and k.kind == KIND_CIRCLE and k.radius > 0:
                 radius[r] = k.radius
+        rows = np.array(rows_l, dtype=np.int64)
         mr = self._measure_rows(rows, sizes, has, radius, np.full(npair, 0.05))
         H, zm, Rm, size_obs, size_kind = mr.H, mr.zm, mr.Rm, mr.size_obs, mr.size_kind
         Xs, Ps = self._stack()
-        sel = np.array([ti for ti, _ in pairs], dtype=np.int64)
+        sel = np.array(sel_l, dtype=np.int64)
         Xn, Pn, ok = kalman_update_batch(Xs[sel], Ps[sel], H, zm, Rm)
         self._bound_acceleration(Xs[sel], Xn, tracks, pairs)
         self._stacked = None  # the tracks change below
         out = ok.tolist()
         so, sk = size_obs.tolist(), size_kind.tolist()
-        for r, (ti, di) in enumerate(pairs):
+        upd = self._update_track
+        vget = vac.get
+        # (rows of Xn / Pn as views, made by the array iterators in one pass each)
+        for r, (ti, di), xr, pr in zip(range(npair), pairs, Xn, Pn):
             if out[r]:
                 k = tracks[ti]
-                self._update_track(k, dets[di], t, vac.get(k.id, 0.0), Xn[r], Pn[r], so[r], sk[r], swaps[r])
+                upd(k, dets[di], t, vget(k.id, 0.0), xr, pr, so[r], sk[r], swaps[r])
         return out
 
     def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track],
@@ -740,7 +797,9 @@ class Tracker:
                             k.size[ta] = obs
                             k.size_known[ta] = True
                     elif kind == SIZE_LOWER:
-                        k.size_lb[ta] = max(k.size_lb[ta], obs)
+                        lb = k.size_lb
+                        if obs > lb[ta]:  # (max(lb, obs))
+                            lb[ta] = obs
                         if obs > k.size[ta]:
                             # a partial view grew past the size: the box grows away from its one real
                             # bound, its centre moves with it, its velocity does not (item 2, docs/tracking.md)
@@ -785,35 +844,43 @@ class Tracker:
         if len(k.history) < tc.confirm_window:  # (bounded: only the first window is read)
             k.history.append(True)
         k.beams = det.beams
-        k.free.append(max(det.free_fraction, vacated))  # (vacated: this scan sees through its old points)
-        if len(k.free) > tc.sustain_updates:
-            del k.free[0]
+        nsus = tc.sustain_updates
+        free = k.free
+        free.append(max(det.free_fraction, vacated))  # (vacated: this scan sees through its old points)
+        if len(free) > nsus:
+            del free[0]
         p = self._pose
         if p is not None:
-            x0, x1 = k.x[:2].tolist()
+            xk = k.x
+            x0, x1 = xk.item(0), xk.item(1)
             dx, dy = x0 - p.x, x1 - p.y
             c, s = self._pose_cs  # cos / sin of the pose's heading (once per scan)
-            k.laser_xy.append((c * dx + s * dy, -s * dx + c * dy))
-            k.map_xy.append((x0, x1))
-            k.map_t.append(t)
-            while len(k.laser_xy) > tc.sustain_updates and t - k.map_t[0] > tc.ride_time:
-                del k.laser_xy[0]
-                del k.map_xy[0]
-                del k.map_t[0]
+            lxy, mxy, mt = k.laser_xy, k.map_xy, k.map_t
+            lxy.append((c * dx + s * dy, -s * dx + c * dy))
+            mxy.append((x0, x1))
+            mt.append(t)
+            ride_time = tc.ride_time
+            while len(lxy) > nsus and t - mt[0] > ride_time:
+                del lxy[0]
+                del mxy[0]
+                del mt[0]
         if self._map is not None:
-            k.mstruct.append(det.map_structure)
-            k.mfree.append(det.map_free)
-            k.munknown.append(det.map_unknown)
-            if len(k.mstruct) > tc.sustain_updates:
-                del k.mstruct[0]
-                del k.mfree[0]
-                del k.munknown[0]
+            ms, mf, mu = k.mstruct, k.mfree, k.munknown
+            ms.append(det.map_structure)
+            mf.append(det.map_free)
+            mu.append(det.map_unknown)
+            if len(ms) > nsus:
+                del ms[0]
+                del mf[0]
+                del mu[0]
         if self._free is not None:
-            k.past.append((t, det.points))
-            k.past_t.append(t)
-            while k.past and t - k.past[0][0] > self._free.max_age:
-                del k.past[0]
-                del k.past_t[0]
+            past, past_t = k.past, k.past_t
+            past.append((t, det.points))
+            past_t.append(t)
+            max_age = self._free.max_age
+            while past and t - past_t[0] > max_age:  # (past_t[q] is past[q][0])
+                del past[0]
+                del past_t[0]
 
     @staticmethod
     def _swapped(k: _Track, det: Detection) -> bool:
@@ -855,21 +922,15 @@ class Tracker:
         owners: list[int] = []
         counts: list[int] = [0]
         ref_ages = self._free.ref_ages
+        bisect_left = bisect.bisect_left
         for k in tracks:
-            if not k.past:
-                continue
             past = k.past
+            if not past:
+                continue
             npast = len(past)
             stamps = k.past_t
             for a in ref_ages:
-                # the entry whose age is nearest a (first one on ties, as np.argmin): stamps grow along
-                # past, so it lies next to where t − a would be inserted
-                ins = bisect.bisect_left(stamps, t - a)
-                j, best = -1, math.inf
-                for q in range(ins - 3 if ins > 3 else 0, ins + 3 if ins + 3 < npast else npast):
-                    dev = abs((t - stamps[q]) - a)
-                    if dev < best:
-                        j, best = q, dev
+                j = _nearest_age(stamps, npast, t, a, bisect_left)
                 if t - stamps[j] > 0.0:
                     pts = past[j][1]
                     chunks.append(pts)
@@ -920,13 +981,20 @@ class Tracker:
         tc = self.config.tracker
         st = self.stats
         keep: list[_Track] = []
+        mem = self.config.memory.enabled
+        merged = self._merged
+        window, need_hits = tc.confirm_window, tc.confirm_hits
+        max_coast, max_sig, max_speed = tc.max_coast_time, tc.max_position_sigma, tc.max_object_speed
+        sqrt, hypot = math.sqrt, math.hypot
         for k in self._tracks:
-            if k.id in self._merged and k.id not in updated and k.in_m:
+            kid = k.id
+            is_upd = kid in updated
+            if kid in merged and not is_upd and k.in_m:
                 k.in_m = False
                 k.merged = True
                 k.fast = 0
                 k.reason = "left M: merged with long-occupied map structure (its detection joined a wall's cluster)"
-            if k.id not in updated:
+            if not is_upd:
                 k.misses += 1
                 if k.in_m and not k.remembered and k.slow_since is not None and self.config.memory.enabled \
                         and self._hidden(k):
@@ -934,7 +1002,7 @@ class Tracker:
                     # stop while unseen, so it is remembered now (if eligible) instead of being deleted after
                     # max_coast_time (a track that just vanishes in plain view, a false one, is not)
                     self._remember(k, t - k.slow_since)
-                if len(k.history) < tc.confirm_window:  # (bounded: only the first window is read)
+                if len(k.history) < window:  # (bounded: only the first window is read)
                     k.history.append(False)
                 k.beams = _NO_BEAMS
                 if k.state == CONFIRMED:
@@ -943,41 +1011,47 @@ class Tracker:
                 k.state = CONFIRMED
             if k.state == TENTATIVE:
                 h = k.history  # (its first confirm_window entries: it is kept no longer)
-                if sum(h) >= tc.confirm_hits:
+                nh = sum(h)
+                if nh >= need_hits:
                     k.state = CONFIRMED
-                elif sum(h) + (tc.confirm_window - len(h)) < tc.confirm_hits or k.misses > 0 and len(
-                        h) >= tc.confirm_window:
+                elif nh + (window - len(h)) < need_hits or k.misses > 0 and len(h) >= window:
                     st.deleted_tentative += 1
                     st.tracks_deleted += 1
                     continue
-            if k.state == COASTING and t - k.last_hit > tc.max_coast_time and not (
+            if k.state == COASTING and t - k.last_hit > max_coast and not (
                     k.remembered and self._remembered_coasts(k, t)):
                 st.deleted_coasting += 1
                 st.tracks_deleted += 1
                 continue
             P = k.P
-            if not k.p_finite or math.sqrt(max(P.item(0), P.item(5))) > tc.max_position_sigma:  # P[0, 0], P[1, 1]
+            if not k.p_finite or sqrt(max(P.item(0), P.item(5))) > max_sig:  # P[0, 0], P[1, 1]
                 st.deleted_covariance += 1
                 st.tracks_deleted += 1
                 continue
-            speed = math.hypot(k.x.item(2), k.x.item(3))
-            if speed > tc.max_object_speed:
+            x = k.x
+            speed = hypot(x.item(2), x.item(3))
+            if speed > max_speed:
                 st.deleted_speed += 1
                 st.tracks_deleted += 1
                 continue
-            if k.id in updated:
+            if is_upd:
                 self._dynamic(k, speed, t)
-                if self.config.memory.enabled:
-                    self._memory_bookkeeping(k, t)
+                if mem:
+                    if k.in_m:
+                        self._memory_bookkeeping(k, t)
+                    else:  # (_memory_bookkeeping of a track not in M, inline)
+                        k.m_start_xy, k.m_last_t, k.remembered = None, None, False
+                        k.m_time = k.m_travel = 0.0
             keep.append(k)
         self._tracks = keep
 
     def _dynamic(self, k: _Track, speed: float, t: float) -> None:
         """Paper Eq. 3 with persistence, certainty and displacement conditions."""
         tc = self.config.tracker
-        (p22, p23), (p32, p33) = k.P[2:, 2:].tolist()
+        P = k.P
+        p22, p23, p32, p33 = P.item(10), P.item(11), P.item(14), P.item(15)  # P[2:, 2:]
         if speed > 1e-9:
-            u0, u1 = float(k.x[2]) / speed, float(k.x[3]) / speed
+            u0, u1 = k.x.item(2) / speed, k.x.item(3) / speed
             sig = math.sqrt(max((u0 * p22 + u1 * p32) * u0 + (u0 * p23 + u1 * p33) * u1, 0.0))  # uᵀ P_v u
         else:
             sig = math.sqrt(max(p22, p33))
@@ -995,7 +1069,11 @@ class Tracker:
                 k.reason = ("left M: after a gap the detections show no motion into free space "
                             "(a different, static object)")
                 return
-        if len(k.map_t) >= tc.ride_updates and self._rides_with_laser(k):  # (fewer: it cannot ride)
+        if len(k.map_t) < tc.ride_updates:  # (fewer: it cannot ride)
+            pass
+        elif (lxy := k.laser_xy[-1])[0] * lxy[0] + lxy[1] * lxy[1] > tc.ride_max_range * tc.ride_max_range:
+            k.rode = False  # (_rides_with_laser's first test, inline: most tracks are far from the laser)
+        elif self._rides_with_laser(k):
             if k.in_m:
                 k.in_m = False
             k.fast = 0
@@ -1047,7 +1125,7 @@ class Tracker:
         if k.state == TENTATIVE:
             k.reason = "not in M: tentative track"
         elif speed <= tc.v_min:
-            k.reason = f"not in M: speed {speed:.2f} m/s ≤ v_min {tc.v_min:.2f}"
+            k.reason = f"not in M: speed {speed:.2f} m/s ≤ v_min {tc.v_min:.2f}"  # (the most common reason)
         elif sig >= tc.max_speed_sigma:
             k.reason = f"not in M: velocity uncertain (σ {sig:.2f} m/s)"
         elif k.fast < need:
@@ -1260,25 +1338,29 @@ class Tracker:
         P = np.array([k.P for k in tracks])
         V = X[:, 2:]
         out = []
-        for i, (k, (px, py, vx, vy)) in enumerate(zip(tracks, X.tolist())):
-            speed = math.hypot(vx, vy)
+        append, make_track, make_box = out.append, _make_track, _make_box  # (locals: the loop runs per track)
+        hypot, atan2, pi = math.hypot, math.atan2, math.pi
+        for k, (px, py, vx, vy), vel, cov in zip(tracks, X.tolist(), V, P):  # (V, P rows: views)
+            speed = hypot(vx, vy)
             if k.kind == KIND_CIRCLE:
-                theta = math.atan2(vy, vx) if speed > slow else 0.0
+                theta = atan2(vy, vx) if speed > slow else 0.0
                 length = width = 2.0 * k.radius
             else:
                 sa, sb = k.size.tolist()
+                tb = k.theta_box
                 if speed > slow:
-                    vdir = math.atan2(vy, vx)
-                    q = int(round(((vdir - k.theta_box + math.pi) % _TWO_PI - math.pi) / _HALF_PI))  # wrap_angle
-                    theta = k.theta_box + q * _HALF_PI
+                    vdir = atan2(vy, vx)
+                    q = int(round(((vdir - tb + pi) % _TWO_PI - pi) / _HALF_PI))  # wrap_angle
+                    theta = tb + q * _HALF_PI
                     length, width = (sa, sb) if q % 2 == 0 else (sb, sa)
                 elif sb > sa:
-                    theta, length, width = k.theta_box + _HALF_PI, sb, sa
+                    theta, length, width = tb + _HALF_PI, sb, sa
                 else:
-                    theta, length, width = k.theta_box, sa, sb
-                theta = (float(theta) + math.pi) % _TWO_PI - math.pi  # wrap_angle
+                    theta, length, width = tb, sa, sb
+                theta = (float(theta) + pi) % _TWO_PI - pi  # wrap_angle
             beams = k.beams if k.id in updated else no_beams
-            out.append(_make_track(k.id, k.state, t, _make_box(px, py, theta, float(length), float(width)), V[i],
-                                   P[i], t - k.born, k.hits, k.misses, k.kind, k.in_m, k.reason, beams,
-                                   int(beams.shape[0]), k.remembered and k.in_m))
+            in_m = k.in_m
+            append(make_track(k.id, k.state, t, make_box(px, py, theta, float(length), float(width)), vel,
+                              cov, t - k.born, k.hits, k.misses, k.kind, in_m, k.reason, beams,
+                              len(beams), k.remembered and in_m))
         return out
