@@ -1059,6 +1059,8 @@ class Tracker:
         k.fast = k.fast + 1 if fast else 0
         if speed < tc.v_exit_ratio * tc.v_min:
             k.slow_since = t if k.slow_since is None else k.slow_since
+        elif k.remembered and k.fast < tc.sustain_updates:
+            pass  # a remembered stop ends only on M's sustained fast test, not on one scan of speed jitter
         else:
             k.slow_since = None
         if k.in_m and k.probation and self._free is not None and len(k.free) >= tc.sustain_updates:
