@@ -1,7 +1,6 @@
 """Fast paths of the per-scan work give exactly what the plain computation gives (issue 9/13 speed work):
 the LM matcher's one-pass trial step, the lazily computed match covariance, the reuse of the match's
-scan points by the map update, the map's growth bounds, the ledger's cell count of a dropped record and
-the pipeline's observed exclusion boxes."""
+scan points by the map update, the map's growth bounds and the ledger's cell count of a dropped record."""
 
 from __future__ import annotations
 
@@ -9,13 +8,12 @@ import math
 
 import numpy as np
 
-from dynslam2d.pipeline import _observed_boxes
 from dynslam2d.sim import LidarModel, cast_rays, paper_room
 from dynslam2d.slam import HectorSlam, SlamConfig
 from dynslam2d.slam.erasure import _LevelRecord
 from dynslam2d.slam.grid import GridLevel
 from dynslam2d.slam.matcher import _solve3, accumulate, covariance_world, match_level
-from dynslam2d.types import Box, Pose2D, Scan, Track
+from dynslam2d.types import Pose2D, Scan
 
 LIDAR = LidarModel(beams=720, noise_sigma=0.0)
 WALLS = paper_room().segments
@@ -146,41 +144,3 @@ def test_dropped_ledger_record_counts_the_cells_folding_would() -> None:
                 b.compact()
         assert a.new_cells() == b.compact()
         assert a.new_cells() > 0 or cap == 40
-
-
-def _track(tid: int, box: Box, beams: np.ndarray) -> Track:
-    return Track(tid, "confirmed", 0.0, box, np.zeros(2), np.eye(4), 1.0, 5, 0, "rect", True, "", beams,
-                 beams.shape[0])
-
-
-def test_observed_boxes_enclose_each_tracks_points_as_per_track_computation() -> None:
-    rng = np.random.default_rng(7)
-    ranges = rng.uniform(1.0, 6.0, 360)
-    ranges[[5, 6, 40]] = np.nan
-    scan = Scan(stamp=0.0, angle_min=-math.pi, angle_increment=2 * math.pi / 360, ranges=ranges,
-                range_min=0.05, range_max=10.0)
-    pose = Pose2D(0.4, -0.3, 0.7)
-    tracks = [
-        _track(1, Box(1.0, 2.0, 0.3, 0.5, 0.4), np.arange(0, 12)),  # two NaN beams among them
-        _track(2, Box(-1.0, 0.5, -1.2, 0.2, 0.2), np.zeros(0, dtype=np.int64)),  # coasting: no beams
-        _track(3, Box(3.0, -2.0, 2.5, 1.5, 0.6), np.array([40])),  # its only beam has no return
-        _track(4, Box(0.0, 0.0, 0.0, 0.1, 0.1), np.arange(100, 140)),
-    ]
-    got = _observed_boxes(tracks, scan, pose)
-    for t, g in zip(tracks, got):
-        r, a = scan.ranges[t.beams], scan.angles[t.beams]
-        ok = np.isfinite(r)
-        if not ok.any():
-            assert g is t
-            continue
-        pts = pose.transform_points(np.column_stack((r * np.cos(a), r * np.sin(a))))[ok]
-        b = t.box
-        c, s = math.cos(b.theta), math.sin(b.theta)
-        d = pts - np.array([b.px, b.py])
-        u, v = d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c
-        u0, u1 = min(-0.5 * b.length, float(u.min())), max(0.5 * b.length, float(u.max()))
-        v0, v1 = min(-0.5 * b.width, float(v.min())), max(0.5 * b.width, float(v.max()))
-        du, dv = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
-        want = Box(b.px + c * du - s * dv, b.py + s * du + c * dv, b.theta, u1 - u0, v1 - v0)
-        assert g.box == want and g.id == t.id and g.beams is t.beams and g.in_m == t.in_m
-    assert got[3].box.length > tracks[3].box.length  # the points do reach beyond the tracked box

@@ -103,11 +103,10 @@ def _boxes(tracks: list[Track], dt: float = 0.0) -> tuple[np.ndarray, ...]:
     if not tracks:
         z = np.zeros(0)
         return np.zeros((0, 2)), z, z, z, z, np.zeros(0, dtype=np.int64)
-    boxes = [t.box for t in tracks]
-    centres = np.array([(b.px, b.py) for b in boxes], dtype=np.float64) + np.array([t.velocity for t in tracks]) * dt
-    headings = np.array([b.theta for b in boxes])
-    lengths = np.array([b.length for b in boxes])
-    widths = np.array([b.width for b in boxes])
+    centres = np.array([t.box.center + t.velocity * dt for t in tracks])
+    headings = np.array([t.box.theta for t in tracks])
+    lengths = np.array([t.box.length for t in tracks])
+    widths = np.array([t.box.width for t in tracks])
     speeds = np.array([t.speed for t in tracks])
     ids = np.array([t.id for t in tracks], dtype=np.int64)
     return centres, headings, lengths, widths, speeds, ids
@@ -133,34 +132,21 @@ def _observed_boxes(tracks: list[Track], scan: Scan, pose: Pose2D) -> list[Track
     ok_all = np.isfinite(r_all)
     with np.errstate(invalid="ignore"):  # ±inf ranges (dropped by ok_all) may meet cos = 0
         xy_all = pose.transform_points(np.column_stack((r_all * np.cos(a_all), r_all * np.sin(a_all))))
-    # every track's points in its box frame at once, then per-track extremes (the same values as per track)
-    owner = np.repeat(np.arange(len(tracks)), counts)[ok_all]
-    n_ok = np.bincount(owner, minlength=len(tracks))
-    boxes = [t.box for t in tracks]
-    th = np.fromiter((b.theta for b in boxes), dtype=np.float64, count=len(boxes))
-    ctr = np.array([(b.px, b.py) for b in boxes], dtype=np.float64)
-    cs = np.array([math.cos(x) for x in th.tolist()])
-    sn = np.array([math.sin(x) for x in th.tolist()])
-    d = xy_all[ok_all] - ctr[owner]
-    c_p, s_p = cs[owner], sn[owner]
-    u = d[:, 0] * c_p + d[:, 1] * s_p
-    v = -d[:, 0] * s_p + d[:, 1] * c_p
-    has = n_ok > 0
-    seg = np.concatenate(([0], np.cumsum(n_ok)[:-1]))[has]
-    ext = np.full((len(tracks), 4), np.nan)
-    if seg.shape[0]:
-        ext[has, 0] = np.minimum.reduceat(u, seg)
-        ext[has, 1] = np.maximum.reduceat(u, seg)
-        ext[has, 2] = np.minimum.reduceat(v, seg)
-        ext[has, 3] = np.maximum.reduceat(v, seg)
-    for k, (t, h, (umin, umax, vmin, vmax)) in enumerate(zip(tracks, has.tolist(), ext.tolist())):
-        if not h:
+    ends = np.cumsum(counts)
+    for k, t in enumerate(tracks):
+        lo, hi = int(ends[k] - counts[k]), int(ends[k])
+        ok = ok_all[lo:hi]
+        if hi == lo or not ok.any():
             out.append(t)
             continue
-        b = boxes[k]
-        c, s_ = float(cs[k]), float(sn[k])
-        u0, u1 = min(-0.5 * b.length, umin), max(0.5 * b.length, umax)
-        v0, v1 = min(-0.5 * b.width, vmin), max(0.5 * b.width, vmax)
+        pts = xy_all[lo:hi][ok]
+        b = t.box
+        c, s_ = math.cos(b.theta), math.sin(b.theta)
+        d = pts - np.array([b.px, b.py])
+        u = d[:, 0] * c + d[:, 1] * s_
+        v = -d[:, 0] * s_ + d[:, 1] * c
+        u0, u1 = min(-0.5 * b.length, float(u.min())), max(0.5 * b.length, float(u.max()))
+        v0, v1 = min(-0.5 * b.width, float(v.min())), max(0.5 * b.width, float(v.max()))
         du, dv = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
         box = Box(b.px + c * du - s_ * dv, b.py + s_ * du + c * dv, b.theta, u1 - u0, v1 - v0)
         out.append(dataclasses.replace(t, box=box))

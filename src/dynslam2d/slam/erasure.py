@@ -235,10 +235,8 @@ class EvidenceLedger:
             return None
         r = scan.ranges
         owner = np.full(r.shape[0], -1, dtype=np.int64)
-        # one assignment for all tracks (in track order, as a loop over them would)
-        all_beams = np.concatenate([t.beams for t in mine]) if len(mine) > 1 else mine[0].beams
-        n_beams = np.fromiter((t.beams.shape[0] for t in mine), dtype=np.int64, count=len(mine))
-        owner[all_beams] = np.repeat(np.fromiter((t.id for t in mine), dtype=np.int64, count=len(mine)), n_beams)
+        for t in mine:
+            owner[t.beams] = t.id
         with np.errstate(invalid="ignore"):
             valid = scan.valid_mask() & (r > self.laser_min_dist) & (r < self.laser_max_dist) & ~removed
         if not (valid & (owner >= 0)).any():
@@ -265,19 +263,15 @@ class EvidenceLedger:
             before, uidx = self._read(lv, c)
             per_level.append((ids[sel], mk[sel], c, before, uidx))
         present = set(np.unique(ids).tolist())
-        keep = self.keep_beams and index >= 0
-        if keep:  # every track's kept beams at once: track k's are kept_all[ends[k] - n_kept[k]:ends[k]]
-            vb = valid[all_beams]
-            kept_all = all_beams[vb].astype(np.int32)
-            n_kept = np.add.reduceat(vb.astype(np.int64), np.concatenate(([0], np.cumsum(n_beams)[:-1]))).tolist()
-            ends = np.cumsum(n_kept).tolist()
-        for k, t in enumerate(mine):
+        for t in mine:
             if t.id not in present:  # every beam of it removed
                 continue
             if t.id not in self._ledgers:
                 self._ledgers[t.id] = self._new_ledger(t, t.stamp, len(hmap.levels))
-            if keep and n_kept[k]:
-                self._ledgers[t.id].beams.append((int(index), kept_all[ends[k] - n_kept[k]:ends[k]]))
+            if self.keep_beams and index >= 0:
+                kb = t.beams[valid[t.beams]]
+                if kb.shape[0]:
+                    self._ledgers[t.id].beams.append((int(index), kb.astype(np.int32)))
         return PendingUpdate(per_level)
 
     def _new_ledger(self, t: Track, stamp: float, n_levels: int) -> _Ledger:
