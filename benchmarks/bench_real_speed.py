@@ -24,10 +24,11 @@ each input it reports
     over the repetitions of each figure; the first scan, which only starts the map, left out);
   * scans/s = 1000 / median total;
   * cpu ms = thread CPU time of the whole loop per scan (less sensitive than wall time to other
-    jobs on a shared machine; ``time.thread_time``).
+    jobs on a shared machine; ``time.thread_time``); with ``--thread-time`` the per-stage figures
+    are thread CPU time too.
 
     python benchmarks/bench_real_speed.py [--only negative_2 positive_7 ...] [--reps 3] [--cold]
-        [--data ../shared/data] [--json out.json]
+        [--data ../shared/data] [--json out.json] [--thread-time]
 
 Pin to one core with ``taskset -c N`` for "one core". To compare two checkouts, run the script
 alternately with ``PYTHONPATH=<checkout>/src`` and compare the medians.
@@ -121,7 +122,16 @@ def main() -> None:
     ap.add_argument("--cold", action="store_true", help="empty numba cache: the first call is a full compile")
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     ap.add_argument("--json", type=Path, default=None, help="also write the figures here")
+    ap.add_argument("--thread-time", action="store_true",
+                    help="per-stage figures in thread CPU time instead of wall time (the pipeline's stage clock "
+                         "becomes time.thread_time: less sensitive to other jobs on a shared machine)")
     args = ap.parse_args()
+    if args.thread_time:
+        import types
+
+        import dynslam2d.pipeline as pipeline_module
+
+        pipeline_module.time = types.SimpleNamespace(perf_counter=time.thread_time)
     if args.cold:
         os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="numba-cold-")
     names = [n for n in INPUTS if args.only is None or any(o in n for o in args.only)]

@@ -141,6 +141,14 @@ class _LevelRecord:
         self.key, self.delta, self.pure, self.last = new_key, new_delta, new_pure, new_last
         return int(new_key.shape[0] - nb)
 
+    def new_cells(self) -> int:
+        """The number of new cells :meth:`compact` would return, without folding (for a record that is
+        dropped: counting its distinct cells is much cheaper than folding them)."""
+        if not self._rows:
+            return 0
+        n = np.unique(np.concatenate([self.key] + [r[0] for r in self._rows])).shape[0]
+        return min(n, self.cap) - int(self.key.shape[0])  # compact keeps the first ``cap`` cells
+
     @property
     def cells(self) -> dict[tuple[int, int], list]:
         """Absolute cell → [added log-odds, pure, last update index] (folds the pending rows first)."""
@@ -276,13 +284,15 @@ class EvidenceLedger:
     def _read(lv, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """log-odds (float64) and update index of absolute cells (0 and −1 outside the level's array)."""
         n = cells.shape[0]
-        lo = np.zeros(n)
-        ui = np.full(n, -1, dtype=np.int64)
         if lv.empty or n == 0:
-            return lo, ui
+            return np.zeros(n), np.full(n, -1, dtype=np.int64)
         h, w = lv.shape
         col = cells[:, 0] - lv.i0
         row = cells[:, 1] - lv.j0
+        if col.min() >= 0 and row.min() >= 0 and col.max() < w and row.max() < h:  # all inside (the usual case)
+            return lv.logodds[row, col].astype(np.float64), lv.uidx[row, col].astype(np.int64)
+        lo = np.zeros(n)
+        ui = np.full(n, -1, dtype=np.int64)
         ok = (col >= 0) & (row >= 0) & (col < w) & (row < h)
         lo[ok] = lv.logodds[row[ok], col[ok]]
         ui[ok] = lv.uidx[row[ok], col[ok]]
@@ -297,19 +307,29 @@ class EvidenceLedger:
             upd = ui_after != ui_before  # else not updated (outside the array, or the ray was skipped)
             if not upd.any():
                 continue
-            ids, keys, delta, ub, ua = ids[upd], keys[upd], after[upd] - before[upd], ui_before[upd], ui_after[upd]
-            cut = np.flatnonzero(np.diff(ids)) + 1
-            lo = np.concatenate(([0], cut))
-            hi = np.append(cut, ids.shape[0])
-            for a, b in zip(lo.tolist(), hi.tolist()):
-                led = self._ledgers.get(int(ids[a]))
+            if upd.all():  # (the usual case: no row to drop)
+                delta, ub, ua = after - before, ui_before, ui_after
+            else:
+                ids, keys, delta, ub, ua = ids[upd], keys[upd], after[upd] - before[upd], ui_before[upd], ui_after[upd]
+            cut = np.flatnonzero(ids[1:] != ids[:-1]) + 1
+            lo = [0, *cut.tolist()]
+            hi = [*lo[1:], ids.shape[0]]
+            added = 0
+            for tid, a, b in zip(ids[lo].tolist(), lo, hi):
+                led = self._ledgers.get(tid)
                 if led is not None:
-                    self.stats["cells_recorded"] += led.levels[k].append(keys[a:b], delta[a:b], ub[a:b], ua[a:b])
+                    added += led.levels[k].append(keys[a:b], delta[a:b], ub[a:b], ua[a:b])
+            self.stats["cells_recorded"] += added
 
     def _fold(self, led: _Ledger) -> None:
         """Fold every level's pending rows of ``led`` (counts its new cells)."""
         for rec in led.levels:
             self.stats["cells_recorded"] += rec.compact()
+
+    def _drop(self, led: _Ledger) -> None:
+        """Count the new cells of ``led``, a ledger that is dropped, as :meth:`_fold` would."""
+        for rec in led.levels:
+            self.stats["cells_recorded"] += rec.new_cells()
 
     def observe(self, tracks: list[Track], removing: set[int], stamp: float) -> None:
         """Keep each live track's last box; move ledgers of ended tracks aside; drop old ones."""
@@ -337,7 +357,7 @@ class EvidenceLedger:
                     self._ended[tid] = led
                     self._oldest_ended = min(self._oldest_ended, led.last_seen)
                 else:
-                    self._fold(led)  # (its cells count in cells_recorded)
+                    self._drop(led)  # (its cells count in cells_recorded)
             elif tid not in removing:
                 led = self._ledgers[tid]
                 led.m_start, led.skip, led.linked = None, False, False  # out of the removal set (again)
@@ -347,7 +367,7 @@ class EvidenceLedger:
         keep = self.config.ledger_keep_s
         if self._ended and stamp - self._oldest_ended > keep:  # (a full pass only when one has expired)
             for tid in [i for i, led in self._ended.items() if stamp - led.last_seen > keep]:
-                self._fold(self._ended.pop(tid))
+                self._drop(self._ended.pop(tid))
             self._oldest_ended = min((led.last_seen for led in self._ended.values()), default=math.inf)
 
     # ------------------------------------------------------------------ erasure

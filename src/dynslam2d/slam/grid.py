@@ -149,10 +149,13 @@ class GridLevel:
         """(imin, jmin, imax, jmax) absolute cells covering a ray origin and its ends (world, m)."""
         r = self.resolution
         s_abs = np.floor(np.asarray(origin_xy, dtype=np.float64) / r + 0.5)
-        e_abs = np.floor(np.asarray(ends_xy, dtype=np.float64) / r + 0.5)
+        e = np.asarray(ends_xy, dtype=np.float64)
+        # v ↦ floor(v / r + 0.5) is monotonic: the cells of the extreme ends are the extreme cells
+        e_lo = np.floor(e.min(axis=0) / r + 0.5)
+        e_hi = np.floor(e.max(axis=0) / r + 0.5)
         return (
-            int(min(s_abs[0], e_abs[:, 0].min())), int(min(s_abs[1], e_abs[:, 1].min())),
-            int(max(s_abs[0], e_abs[:, 0].max())), int(max(s_abs[1], e_abs[:, 1].max())),
+            int(min(s_abs[0], e_lo[0])), int(min(s_abs[1], e_lo[1])),
+            int(max(s_abs[0], e_hi[0])), int(max(s_abs[1], e_hi[1])),
         )
 
     # ---- update -----------------------------------------------------------------------

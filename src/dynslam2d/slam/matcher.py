@@ -76,20 +76,6 @@ def accumulate(prob, pts, x, y, th, swapped, H, g):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def cost_at(prob, pts, x, y, th):  # pragma: no cover - numba
-    """Σ (1−M)² at map pose (x, y, θ) (out-of-bounds points count M = 0)."""
-    c = math.cos(th)
-    s = math.sin(th)
-    cost = 0.0
-    for i in range(pts.shape[0]):
-        sx = pts[i, 0]
-        sy = pts[i, 1]
-        m, _, _, _ = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, np.bool_(False))
-        cost += (1.0 - m) * (1.0 - m)
-    return cost
-
-
-@njit(cache=True)
 def fraction_below(prob, pts, x, y, th, thresh):  # pragma: no cover - numba
     """Fraction of points whose interpolated probability at map pose (x, y, θ) is in bounds and
     below ``thresh`` — endpoints that land in space the map knows to be free."""
@@ -156,6 +142,8 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     """
     H = np.zeros((3, 3))
     g = np.zeros(3)
+    H2 = np.zeros((3, 3))  # H, g at a trial LM step (they become H, g when it is accepted)
+    g2 = np.zeros(3)
     A = np.zeros((3, 3))
     d = np.zeros(3)
     x = pose[0]
@@ -212,14 +200,16 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
         ny = y + d[1]
         nth = th + d[2]
         if use_lm:
-            new_cost = cost_at(prob, pts, nx, ny, nth)
+            # one pass gives the trial cost and, if the step is accepted, the new H and g (the same sums as a
+            # cost-only pass followed by accumulate at the accepted pose)
+            new_cost, _, _ = accumulate(prob, pts, nx, ny, nth, swapped, H2, g2)
             if use_prior:
                 new_cost += _prior_cost(nx, ny, nth, prior, lam_p)
             if new_cost < cost:
                 x, y, th = nx, ny, nth
-                cost, _, _ = accumulate(prob, pts, x, y, th, swapped, H, g)
-                if use_prior:
-                    cost += _prior_cost(x, y, th, prior, lam_p)
+                cost = new_cost
+                H, H2 = H2, H
+                g, g2 = g2, g
                 lam = max(lam * 0.1, 1e-7)
                 n_acc += 1
                 if nt < _CONVERGED_CELLS and abs(d[2]) < _CONVERGED_RAD:

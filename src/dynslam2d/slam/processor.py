@@ -107,7 +107,7 @@ class MatchResult:
 
     pose: Pose2D
     start: Pose2D
-    covariance: np.ndarray
+    _covariance: np.ndarray | None  # (see the covariance property)
     hessian: np.ndarray
     score: float
     n_points: int
@@ -130,6 +130,21 @@ class MatchResult:
     pose_source: str = SOURCE_SCAN
     state: str = STATE_TRACKING
     sigma2: float = math.nan
+    #: (Hessian, σ², cell side m) the covariance is computed from when first read (most scans never read it)
+    _covariance_of: tuple[np.ndarray, float, float] | None = field(default=None, repr=False)
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """(3, 3) σ²·H⁻¹ in world units (m², m·rad, rad²), order (x, y, θ); computed on first access."""
+        if self._covariance is None and self._covariance_of is not None:
+            self._covariance = covariance_world(*self._covariance_of)
+            self._covariance_of = None
+        return self._covariance
+
+    @covariance.setter
+    def covariance(self, value: np.ndarray) -> None:
+        self._covariance = value
+        self._covariance_of = None
 
 
 @dataclass(slots=True)
@@ -233,6 +248,7 @@ class HectorSlam:
         self._sigma2: float | None = None  # running residual variance of accepted matches (probability²)
         self._dt: float | None = None  # stamp of the scan being matched minus the previous one's, s
         self._period = ScanPeriod()  # typical stamp gap (the motion gate's floor with recovery on)
+        self._last_points: tuple[Scan, np.ndarray, np.ndarray] | None = None  # scan_points of the last match
 
     # ---- properties --------------------------------------------------------------------
     @property
@@ -404,6 +420,7 @@ class HectorSlam:
         c = self.config
         t0 = time.perf_counter()
         pts, clear = self.scan_points(scan)
+        self._last_points = (scan, pts, clear)  # the map update of this same scan reuses them (read-only)
         self._dt = scan.stamp - self._last_stamp if self._last_stamp is not None else None
         start, gap = self._predict(scan.stamp)
         prior = self._prior(scan, start, gap)
@@ -418,7 +435,7 @@ class HectorSlam:
         first = self.map.empty
         zero = np.zeros((3, 3))
         res = MatchResult(
-            pose=start, start=start, covariance=np.diag([1e6, 1e6, math.pi**2]), hessian=zero,
+            pose=start, start=start, _covariance=np.diag([1e6, 1e6, math.pi**2]), hessian=zero,
             score=0.0, n_points=int(pts.shape[0]), time_gap=gap, first=first, points=pts, clear_points=clear,
             prior=prior.kind, state=self._state,
         )
@@ -446,7 +463,7 @@ class HectorSlam:
                 # odometry is a prior, not a replacement: when the odometry-seeded match finds little
                 # support (odometry slipped or glitched), try the laser-only seed too and keep the better
                 alt = MatchResult(
-                    pose=laser_start, start=laser_start, covariance=res.covariance, hessian=zero, score=0.0,
+                    pose=laser_start, start=laser_start, _covariance=res.covariance, hessian=zero, score=0.0,
                     n_points=res.n_points, time_gap=gap, first=first, points=pts, clear_points=clear,
                     prior=prior.kind, state=self._state,
                 )
@@ -535,7 +552,7 @@ class HectorSlam:
         res.score = fit.score
         res.sigma2 = fit.cost / max(pts.shape[0] - 3, 1)
         sigma2 = c.covariance_sigma**2 if c.covariance_sigma is not None else res.sigma2
-        res.covariance = covariance_world(fit.hessian, sigma2, self.map.resolution)
+        res._covariance, res._covariance_of = None, (fit.hessian, sigma2, self.map.resolution)  # lazy
 
     def _apply_prior_and_gate(self, res: MatchResult, pts: np.ndarray, prior: _Prior, stamp: float) -> None:
         """Degeneracy analysis of the match; the prior along degenerate directions; the motion gate."""
@@ -778,7 +795,8 @@ class HectorSlam:
             return False
         if not (force or self.needs_map_update(pose)):
             return False
-        pts, clear = self.scan_points(scan)
+        last = self._last_points
+        pts, clear = (last[1], last[2]) if last is not None and last[0] is scan else self.scan_points(scan)
         return self._integrate(pts, clear, pose)
 
     def _integrate(self, pts: np.ndarray, clear: np.ndarray, pose: Pose2D) -> bool:

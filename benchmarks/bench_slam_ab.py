@@ -1,0 +1,157 @@
+"""Matcher and evidence-ledger CPU time of two checkouts on the same inputs, inside one process (not run by pytest).
+
+Whole runs on a shared machine vary by ±25 % between runs of the same code; this compares the two versions of a
+component on identical calls, alternately, in thread CPU time (``time.thread_time_ns``):
+
+  * ``matcher``: ``match_multires`` calls of this checkout's pipeline (scans 50–260, their map levels copied) are
+    replayed through the other checkout's ``slam/matcher.py`` and this one's, 5 times each, the versions
+    alternately; prints µs per call (median of the 5 sweeps) and whether every result is identical;
+  * ``ledger``: the pipeline's ``EvidenceLedger`` (this checkout) and one of the other checkout's
+    ``slam/erasure.py`` get the same ``observe`` / ``before_update`` / ``after_update`` calls in lockstep (the
+    other ledger's erasure acts on a copy of the map), each method's two versions alternately; prints ms per
+    scan per method and checks the two ledgers' summaries are equal.
+
+    python benchmarks/bench_slam_ab.py "negative_2 /right_scan" mit-csail [--part matcher ledger]
+        [--other ../main/src]
+
+Inputs: the names of ``bench_real_speed.py``. Pin to one core with ``taskset -c N``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import copy
+import importlib.util
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from bench_real_speed import INPUTS, load
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def other_module(src: Path, rel: str, name: str):
+    """The other checkout's module ``rel`` as a module of its own (its imports resolve to this checkout)."""
+    spec = importlib.util.spec_from_file_location(name, src / "dynslam2d" / rel)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def matcher_ab(scans: list, other) -> tuple[float, float, bool]:
+    """(other µs per call, this µs per call, identical results) of match_multires (module docstring)."""
+    import dynslam2d.slam.matcher as this
+    import dynslam2d.slam.processor as proc
+    from dynslam2d.pipeline import Pipeline
+
+    p = Pipeline()
+    calls = []
+    f = proc.match_multires
+
+    def grab(levels, *a):
+        if 50 < p.slam.n_scans <= 260:
+            lv_copy = [copy.copy(lv) for lv in levels]
+            for lv in lv_copy:
+                lv.prob = lv.prob.copy()
+            calls.append((lv_copy, a))
+        return f(levels, *a)
+
+    proc.match_multires = grab
+    try:
+        for s in scans[:261]:
+            p.process(s)
+    finally:
+        proc.match_multires = f
+    same = all(np.array_equal(other.match_multires(lv, *a), this.match_multires(lv, *a), equal_nan=True)
+               for lv, a in calls)
+    sweeps: dict[str, list[int]] = {"other": [], "this": []}
+    for r in range(5):
+        for tag, mod in (("other", other), ("this", this)) if r % 2 == 0 else (("this", this), ("other", other)):
+            t0 = time.thread_time_ns()
+            for lv, a in calls:
+                mod.match_multires(lv, *a)
+            sweeps[tag].append(time.thread_time_ns() - t0)
+    n = max(len(calls), 1)
+    return statistics.median(sweeps["other"]) / n / 1e3, statistics.median(sweeps["this"]) / n / 1e3, same
+
+
+def ledger_ab(scans: list, other) -> dict[str, tuple[float, float]]:
+    """{method: (other ms per scan, this ms per scan)} of the evidence ledger (module docstring)."""
+    from dynslam2d.pipeline import Pipeline
+
+    p = Pipeline()
+    this_l = p.ledger
+    other_l = other.EvidenceLedger(this_l.config, this_l.laser_min_dist, this_l.laser_max_dist,
+                                   keep_beams=this_l.keep_beams)
+    acc: collections.Counter = collections.Counter()
+    turn: collections.Counter = collections.Counter()
+    pending: dict[str, object] = {}
+
+    def pair(meth: str) -> None:
+        f_this, f_other = getattr(this_l, meth), getattr(other_l, meth)
+
+        def call(*a):
+            turn[meth] += 1
+            a_other = list(a)
+            if meth == "erase_entering":
+                a_other[-1] = copy.deepcopy(a[-1])
+            if meth == "after_update":
+                a_other[0] = pending["other"]
+            order = [("other", f_other, a_other), ("this", f_this, list(a))]
+            if turn[meth] % 2:
+                order.reverse()
+            res = {}
+            for tag, fn, args in order:
+                t0 = time.thread_time_ns()
+                res[tag] = fn(*args)
+                acc[(meth, tag)] += time.thread_time_ns() - t0
+            if meth == "before_update":
+                pending["other"] = res["other"]
+            return res["this"]
+
+        setattr(this_l, meth, call)
+
+    for m in ("observe", "erase_entering", "before_update", "after_update"):
+        pair(m)
+    for s in scans:
+        p.process(s)
+    if other_l.summary() != this_l.summary():
+        raise SystemExit(f"ledger summaries differ: {other_l.summary()} vs {this_l.summary()}")
+    n = len(scans)
+    # (erase_entering is left out: the other ledger's copy of the map makes its timing unfair)
+    return {m: (acc[(m, "other")] / n / 1e6, acc[(m, "this")] / n / 1e6)
+            for m in ("before_update", "after_update", "observe")}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("inputs", nargs="+", choices=sorted(INPUTS))
+    ap.add_argument("--part", nargs="+", choices=("matcher", "ledger"), default=["matcher", "ledger"])
+    ap.add_argument("--other", type=Path, default=REPO.parent / "main" / "src", help="the other checkout's src/")
+    ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
+    args = ap.parse_args()
+    for name in args.inputs:
+        scans = load(args.data, name)
+        if not scans:
+            print(f"{name}: input not found under {args.data}, skipped")
+            continue
+        if "matcher" in args.part:
+            mo, mt, same = matcher_ab(scans, other_module(args.other, "slam/matcher.py", "other_matcher"))
+            print(f"{name}: match_multires µs per call, other {mo:.0f}, this {mt:.0f} (×{mt / mo:.2f}); "
+                  f"results {'identical' if same else 'DIFFERENT'}")
+        if "ledger" in args.part:
+            parts = ledger_ab(scans, other_module(args.other, "slam/erasure.py", "other_erasure"))
+            o, t = sum(v[0] for v in parts.values()), sum(v[1] for v in parts.values())
+            detail = ", ".join(f"{m} {a:.3f} → {b:.3f}" for m, (a, b) in parts.items())
+            print(f"{name}: ledger ms per scan other → this: {o:.3f} → {t:.3f} (×{t / o:.2f}); {detail}; "
+                  "summaries equal")
+        sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,146 @@
+"""Fast paths of the per-scan work give exactly what the plain computation gives (issue 9/13 speed work):
+the LM matcher's one-pass trial step, the lazily computed match covariance, the reuse of the match's
+scan points by the map update, the map's growth bounds and the ledger's cell count of a dropped record."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dynslam2d.sim import LidarModel, cast_rays, paper_room
+from dynslam2d.slam import HectorSlam, SlamConfig
+from dynslam2d.slam.erasure import _LevelRecord
+from dynslam2d.slam.grid import GridLevel
+from dynslam2d.slam.matcher import _solve3, accumulate, covariance_world, match_level
+from dynslam2d.types import Pose2D, Scan
+
+LIDAR = LidarModel(beams=720, noise_sigma=0.0)
+WALLS = paper_room().segments
+
+
+def scan_at(pose: Pose2D, stamp: float = 0.0) -> Scan:
+    dist, _ = cast_rays((pose.x, pose.y), pose.theta + LIDAR.angles, WALLS)
+    ranges, _ = LIDAR.measure(dist, np.random.default_rng(0))
+    return LIDAR.make_scan(stamp, ranges)
+
+
+def mapped() -> tuple[HectorSlam, Pose2D]:
+    slam = HectorSlam(SlamConfig())
+    first = Pose2D(0.3, -0.4, 0.2)
+    slam.update_map(scan_at(first), Pose2D(), force=True)
+    for d in (Pose2D(0.3, 0.1, 0.1), Pose2D(-0.2, 0.3, -0.15)):
+        p = first.compose(d)
+        slam.update_map(scan_at(p), first.between(p), force=True)
+    return slam, first
+
+
+def lm_reference(prob, pts, pose, n_iter, lam0, lam_max, max_rot, max_trans):
+    """The LM loop with a cost-only pass at every trial step and H, g recomputed at an accepted pose."""
+    H, g, Hs, gs, d = np.zeros((3, 3)), np.zeros(3), np.zeros((3, 3)), np.zeros(3), np.zeros(3)
+    x, y, th = pose
+    cost, _, _ = accumulate(prob, pts, x, y, th, False, H, g)
+    lam, steps = lam0, {"accepted": 0, "rejected": 0}
+    for _ in range(n_iter):
+        if H[0, 0] == 0.0 or H[1, 1] == 0.0:
+            break
+        A = H.copy()
+        for a in range(3):
+            A[a, a] += lam * A[a, a] + 1e-9
+        if not _solve3(A, g.copy(), d):
+            lam *= 10.0
+            if lam > lam_max:
+                break
+            continue
+        d[2] = min(max(d[2], -max_rot), max_rot)
+        nt = math.sqrt(d[0] * d[0] + d[1] * d[1])
+        if nt > max_trans:
+            d[0] *= max_trans / nt
+            d[1] *= max_trans / nt
+        nx, ny, nth = x + d[0], y + d[1], th + d[2]
+        new_cost, _, _ = accumulate(prob, pts, nx, ny, nth, False, Hs, gs)  # cost only (H, g thrown away)
+        if new_cost < cost:
+            x, y, th = nx, ny, nth
+            cost, _, _ = accumulate(prob, pts, x, y, th, False, H, g)
+            lam = max(lam * 0.1, 1e-7)
+            steps["accepted"] += 1
+            if nt < 1e-3 and abs(d[2]) < 1e-5:
+                break
+        else:
+            steps["rejected"] += 1
+            lam *= 10.0
+            if lam > lam_max:
+                break
+    return np.array([x, y, th]), steps
+
+
+def test_lm_one_pass_trial_step_equals_separate_cost_and_derivative_passes() -> None:
+    slam, first = mapped()
+    pts = slam.scan_points(scan_at(first.compose(Pose2D(0.12, -0.08, 0.05))))[0]
+    seen = {"accepted": 0, "rejected": 0}
+    for lv in slam.map.levels:
+        pm = pts / lv.resolution
+        for off in ((0.0, 0.0, 0.0), (1.5, -1.0, 0.08), (-2.0, 0.5, -0.12), (0.3, 0.3, 0.3)):
+            start = lv.pose_to_map(np.array(off))
+            want, steps = lm_reference(lv.prob, pm, start, 12, 0.1, 1e4, 0.2, 2.0)
+            got, n_acc = match_level(lv.prob, pm, start, 12, False, True, 0.1, 1e4, 0.2, 2.0, start, np.zeros((3, 3)))
+            np.testing.assert_array_equal(got, want)  # bit-identical, not merely close
+            assert n_acc == steps["accepted"]
+            for key in seen:
+                seen[key] += steps[key]
+    assert seen["accepted"] > 0 and seen["rejected"] > 0  # both branches of the trial step were taken
+
+
+def test_match_covariance_is_computed_when_read_and_can_be_set() -> None:
+    slam, first = mapped()
+    res = slam.match(scan_at(first.compose(Pose2D(0.05, 0.0, 0.0)), stamp=0.1), commit=False)
+    assert res._covariance is None  # not computed by the match itself
+    want = covariance_world(res.hessian, res.sigma2, slam.map.resolution)
+    np.testing.assert_array_equal(res.covariance, want)
+    assert res._covariance_of is None and res.covariance is res.covariance  # computed once
+    res.covariance = np.eye(3)
+    np.testing.assert_array_equal(res.covariance, np.eye(3))
+
+
+def test_map_update_reusing_the_match_points_writes_the_same_map() -> None:
+    a, first = mapped()
+    b, _ = mapped()
+    scan = scan_at(first.compose(Pose2D(0.5, 0.2, 0.3)), stamp=0.1)
+    ra, rb = a.match(scan), b.match(scan)
+    assert ra.pose == rb.pose and a._last_points[0] is scan
+    twin = scan.without(np.zeros(scan.n_beams, dtype=bool))  # an equal scan, another object: recomputed
+    assert a.update_map(scan, ra.pose, force=True) and b.update_map(twin, rb.pose, force=True)
+    for la, lb in zip(a.map.levels, b.map.levels):
+        np.testing.assert_array_equal(la.logodds, lb.logodds)
+        np.testing.assert_array_equal(la.uidx, lb.uidx)
+
+
+def test_growth_bounds_from_the_extreme_ends_equal_the_extreme_cells() -> None:
+    rng = np.random.default_rng(3)
+    for res in (0.05, 0.1, 0.2):
+        lv = GridLevel(res)
+        ends = rng.uniform(-20.0, 20.0, (500, 2))
+        ends[:20] = np.round(ends[:20] / res - 0.5) * res + 0.5 * res  # exactly on cell borders
+        origin = rng.uniform(-1.0, 1.0, 2)
+        cells = np.floor(ends / res + 0.5)
+        s = np.floor(origin / res + 0.5)
+        want = (int(min(s[0], cells[:, 0].min())), int(min(s[1], cells[:, 1].min())),
+                int(max(s[0], cells[:, 0].max())), int(max(s[1], cells[:, 1].max())))
+        assert lv.cell_bounds(origin, ends) == want
+
+
+def test_dropped_ledger_record_counts_the_cells_folding_would() -> None:
+    rng = np.random.default_rng(5)
+    for cap, fold_first in ((10_000, False), (40, False), (40, True), (300, True)):
+        a, b = _LevelRecord(cap), _LevelRecord(cap)
+        for step in range(12):
+            keys = np.unique(rng.integers(0, 120, rng.integers(1, 30))).astype(np.int64)
+            n = keys.shape[0]
+            rows = (keys, rng.normal(size=n), np.full(n, step - 1), np.full(n, step))
+            a.append(*rows)
+            b.append(*rows)
+            if fold_first and step == 5:
+                a.compact()
+                b.compact()
+        assert a.new_cells() == b.compact()
+        assert a.new_cells() > 0 or cap == 40
