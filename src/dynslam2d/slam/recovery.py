@@ -29,6 +29,7 @@ the running average of accepted scores. Poses are laser poses in the map frame (
 from __future__ import annotations
 
 import math
+import statistics
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -83,7 +84,8 @@ class ScanPeriod:
         """Record the gap ``dt`` s between two consecutive scans (ignored unless positive and finite)."""
         if dt > 0.0 and math.isfinite(dt):
             self._gaps.append(dt)
-            self._median = float(np.median(self._gaps))  # once per scan, not at every gate evaluation
+            # once per scan; statistics.median gives np.median's value without its ~30 µs of array set-up
+            self._median = float(statistics.median(self._gaps))
 
     @property
     def median(self) -> float:
