@@ -36,7 +36,7 @@ import time
 import numpy as np
 from scenes import ten_movers
 
-STAGES = ("match", "track", "filter", "map_update", "total")
+STAGES = ("match", "track", "filter", "map_update", "loops", "total")
 
 
 def _scans(name: str, duration: float) -> list:

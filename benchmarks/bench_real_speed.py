@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 from bench_pipeline import warm_up  # the same throw-away pipeline over the first scans
 
-STAGES = ("match", "track", "filter", "map_update", "total")
+STAGES = ("match", "track", "filter", "map_update", "loops", "total")
 REPO = Path(__file__).resolve().parents[1]
 
 #: name → (input relative to the data folder or sim:…, topic)

@@ -56,7 +56,7 @@ def test_removed_beams_are_attributed_to_tracks_in_m(paper_runs):
         assert set(np.unique(step.removed_by[step.removed])) <= ids_in_m
         assert (step.removed_by[~step.removed] == -1).all()
         attributed += int(step.removed.sum())
-        assert set(step.timings) == {"match", "track", "filter", "map_update", "total"}
+        assert set(step.timings) == {"match", "track", "filter", "map_update", "loops", "total"}
     assert attributed > 0
 
 

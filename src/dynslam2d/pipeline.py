@@ -63,7 +63,8 @@ class StepResult:
         tracks: live tracks after this scan (map frame), each with ``in_m``.
         removed: (beams,) bool, True where the filter removed the beam from the map update.
         removed_by: (beams,) int, id of the track whose exclusion zone removed the beam (−1 = kept).
-        timings: wall time per stage, ms ("match", "track", "filter", "map_update", "total").
+        timings: wall time per stage, ms ("match", "track", "filter", "map_update", "loops" = the loop
+            closure's keyframes and searches, "total" = all of them).
         degeneracy: smallest / largest normalized eigenvalue of the match Hessian (NaN if not matched).
         degenerate: the scan left some direction of the pose unconstrained (a corridor's axis).
         support_points, support_spread: endpoints confirmed by the map (count) and the angle their
@@ -267,9 +268,10 @@ class Pipeline:
             if pending is not None and updated:
                 led.after_update(pending, self.slam.map)
         t4 = time.perf_counter()
-        if self.loops is not None:  # its time is in the loop closure's own counters (summary.json loop_closure)
+        if self.loops is not None:  # (also in the loop closure's own counters, summary.json loop_closure)
             self.loops.add(scan.stamp, res.pose, scan, removed, updated,
                            res.low_support or res.pose_source in ("prediction", "relocalised") or res.time_gap)
+        t5 = time.perf_counter()
         self._moving = moving
         self._last_stamp = scan.stamp
         return StepResult(
@@ -290,7 +292,8 @@ class Pipeline:
                 "track": (t2 - t1) * 1e3,
                 "filter": (t3 - t2) * 1e3,
                 "map_update": (t4 - t3) * 1e3,
-                "total": (t4 - t0) * 1e3,
+                "loops": (t5 - t4) * 1e3,
+                "total": (t5 - t0) * 1e3,
             },
             degeneracy=res.degeneracy,
             degenerate=res.degenerate,
