@@ -41,6 +41,7 @@ def test_written_map_keeps_grazing_walls_and_the_trajectory(stopgo_runs: tuple) 
     assert np.array_equal(plain.scores, stop.scores)
     assert "written_render_ms" in stop.summary()["loop_closure"]
     assert "written_render_ms" not in plain.summary()["loop_closure"]
+    assert Config().slam.written_grazing_stop_cells == 0.0  # off by default: the written map is the online map
     truth = sim.ground_truth.static_map(plain.grid.resolution, frame="first")  # the SLAM map frame
     m_plain, m_stop = map_metrics(plain.grid, truth), map_metrics(stop.grid, truth)
     assert m_plain.recall < 0.975  # rays running along the corridor walls cleared wall cells
