@@ -525,6 +525,8 @@ class RunResult:
             out[k] = int(st.get(k, 0))
         for k in ("total_ms", "render_ms"):
             out[k] = round(float(st.get(k, 0.0)), 1)
+        if "written_render_ms" in st:  # the written map's render with the grazing stop (docs/maps.md)
+            out["written_render_ms"] = round(float(st["written_render_ms"]), 1)
         out["search_ms"] = round(float(st.get("search_ms", 0.0)), 1)
         out["optimise_ms"] = round(float(st.get("optimise_ms", 0.0)), 1)
         if self.frontend_trajectory is not None:
@@ -533,24 +535,45 @@ class RunResult:
         return out
 
 
-def render_map(loop: LoopResult, slam_config: SlamConfig) -> tuple[GridMap, np.ndarray]:
+def render_map(loop: LoopResult, slam_config: SlamConfig, poses: np.ndarray | None = None,
+               grazing_stop_cells: float | None = None) -> tuple[GridMap, np.ndarray]:
     """The map re-rendered from the optimised keyframe poses: every keyframe's kept beams (the
     dynamic filter's removed beams stay out) integrated in order, as the front end did at its own
-    poses. Returns (finest level as probabilities, its raw log-odds)."""
-    slam = HectorSlam(slam_config.model_copy(update={"map_levels": 1}))  # only the finest level is returned
-    _presize_render(slam, loop)
-    for kf, p in zip(loop.keyframes, loop.node_poses):
+    poses. ``poses``: (k, 3) keyframe laser poses to render at instead of ``loop.node_poses`` (m, rad,
+    map frame); ``grazing_stop_cells``: the free-space update's grazing stop instead of the config's
+    (docs/maps.md). Returns (finest level as probabilities, its raw log-odds)."""
+    update: dict[str, object] = {"map_levels": 1}  # only the finest level is returned
+    if grazing_stop_cells is not None:
+        update["grazing_stop_cells"] = float(grazing_stop_cells)
+    slam = HectorSlam(slam_config.model_copy(update=update))
+    at = loop.node_poses if poses is None else poses
+    _presize_render(slam, loop, at)
+    for kf, p in zip(loop.keyframes, at):
         slam.update_map(kf.kept(), Pose2D(float(p[0]), float(p[1]), float(p[2])), force=True)
     return slam.gridmap(0), slam.logodds(0)[0]
 
 
-def _presize_render(slam: HectorSlam, loop: LoopResult) -> None:
+def render_written_map(loop: LoopResult, slam_config: SlamConfig) -> tuple[GridMap, np.ndarray] | None:
+    """The written map (docs/maps.md, "Walls seen at grazing incidence"): the keyframes rendered at their
+    final poses (the optimised ones when loop closure kept them, else the front end's) with the free-space
+    update stopped ``slam_config.written_grazing_stop_cells / sin α`` cells before each return, so rays
+    running along a wall do not clear it. The matcher's map is not touched. None when the option is 0 or
+    there are no keyframes."""
+    g = float(slam_config.written_grazing_stop_cells)
+    if g <= 0.0 or not loop.keyframes:
+        return None
+    poses = loop.node_poses if loop.corrected else np.array([kf.frontend for kf in loop.keyframes], dtype=np.float64)
+    return render_map(loop, slam_config, poses, grazing_stop_cells=g)
+
+
+def _presize_render(slam: HectorSlam, loop: LoopResult, poses: np.ndarray | None = None) -> None:
     """Allocate the re-render's map once at the bounds of every cell it will touch, instead of growing it
     keyframe by keyframe (each growth copies the arrays and leaves the old ones to the allocator: tens of MB
-    on MIT CSAIL). Cells are absolute, so the map's values are the same (issue 13 item 3)."""
+    on MIT CSAIL). Cells are absolute, so the map's values are the same (issue 13 item 3). ``poses``: the
+    keyframe poses rendered at (default ``loop.node_poses``)."""
     lv = slam.map.levels[0]
     b: list[int] | None = None
-    for kf, p in zip(loop.keyframes, loop.node_poses):
+    for kf, p in zip(loop.keyframes, loop.node_poses if poses is None else poses):
         pose = Pose2D(float(p[0]), float(p[1]), float(p[2]))
         if not pose.is_finite():
             continue
@@ -708,6 +731,17 @@ def run(
             frontend_trajectory = trajectory
             trajectory = Trajectory(trajectory.stamps, loop.poses)
             grid, logodds = grid_opt, lo_opt
+        del grid_opt, lo_opt  # a refused render goes before the written map's render below
+    if loop is not None and pipe.config.slam.written_grazing_stop_cells > 0.0 and loop.keyframes:
+        # the written map with the grazing stop, from the final poses; the matcher's map stays as it was
+        # (docs/maps.md, "Walls seen at grazing incidence"); free the front end's levels first, as above
+        if not loop.corrected:
+            _release_map(pipe)
+        t_render = time.perf_counter()
+        written = render_written_map(loop, pipe.config.slam)
+        loop.stats["written_render_ms"] = (time.perf_counter() - t_render) * 1e3
+        if written is not None:
+            grid, logodds = written
     wall = time.perf_counter() - t0
     result = RunResult(
         source=source.meta,
