@@ -144,3 +144,38 @@ def test_dropped_ledger_record_counts_the_cells_folding_would() -> None:
                 b.compact()
         assert a.new_cells() == b.compact()
         assert a.new_cells() > 0 or cap == 40
+
+
+def test_multires_integrate_equals_per_level_integration() -> None:
+    """MultiResMap.integrate (bounds from the extreme ends, end cells in shared buffers) writes every level
+    exactly as GridLevel.integrate does level by level, with and without the grazing stop and clearing rays."""
+    from dynslam2d.slam.grid import MultiResMap, grazing_stop
+
+    rng = np.random.default_rng(3)
+    for grazing in (0.0, 1.5):
+        fast = MultiResMap(0.05, 3, -0.4, 0.9, grazing_cells=grazing)
+        plain = MultiResMap(0.05, 3, -0.4, 0.9, grazing_cells=grazing)
+        pose = Pose2D(0.3, -0.2, 0.1)
+        for step in range(6):
+            pose = pose.compose(Pose2D(*rng.uniform(-0.4, 0.4, 2), float(rng.uniform(-0.3, 0.3))))
+            a = np.linspace(-2.0, 2.0, 300)
+            rr = rng.uniform(0.5, 4.0 + 3 * step, a.shape[0])  # later scans reach further: the levels grow
+            hits = np.column_stack((rr * np.cos(a), rr * np.sin(a)))
+            clear = hits[::7] * 1.3 if step % 2 else None
+            fast.integrate(pose, hits, clear)
+            ends = pose.transform_points(hits)
+            hit = np.ones(ends.shape[0], dtype=bool)
+            if clear is not None:
+                ends = np.vstack((ends, pose.transform_points(clear)))
+                hit = np.concatenate((hit, np.zeros(clear.shape[0], dtype=bool)))
+            stop = None
+            if grazing > 0.0:
+                stop = np.zeros(hit.shape[0])
+                stop[: hits.shape[0]] = grazing_stop(hits, grazing, plain.min_sin)
+            for lv in plain.levels:
+                lv.integrate(np.array([pose.x, pose.y]), ends, hit, plain.l_free, plain.l_occ, plain.cap, stop)
+        for lf, lp in zip(fast.levels, plain.levels):
+            assert (lf.i0, lf.j0, lf.shape, lf.update_counter) == (lp.i0, lp.j0, lp.shape, lp.update_counter)
+            assert np.array_equal(lf.logodds, lp.logodds) and np.array_equal(lf.prob, lp.prob)
+            assert np.array_equal(lf.uidx, lp.uidx)
+            assert lf.n_grows > 1  # the growth path was exercised
