@@ -193,6 +193,9 @@ class PendingUpdate:
     cell) once."""
 
     per_level: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+    #: per level, (flat array indices of the cells, i0, j0, shape) of the array they were read from, or None:
+    #: the update reads the same cells with them if the level did not grow
+    flat: list | None = None
 
 
 def _box_key(t: Track) -> tuple[float, float, float]:
@@ -247,6 +250,99 @@ class EvidenceLedger:
         own = owner[idx]
         mine_b = own >= 0
         ids = own[mine_b]
+        flat: list = []
+        per_level = self._level_cells(pts, mine_b, ids, hmap, flat)
+        if per_level is None:  # (cells beyond the packed values' range: level by level)
+            per_level, flat = self._level_cells_plain(pts, mine_b, ids, hmap), [None] * len(hmap.levels)
+        present = set(np.unique(ids).tolist())
+        kb_all = None
+        if self.keep_beams and index >= 0:  # every track's valid beams with one gather, split per track
+            allb = np.concatenate([t.beams for t in mine])
+            vb = valid[allb]
+            kb_all = allb[vb].astype(np.int32)
+            cs = np.concatenate(([0], np.cumsum(vb)))
+            lens = np.cumsum([0] + [t.beams.shape[0] for t in mine])
+            kb_lo, kb_hi = cs[lens[:-1]].tolist(), cs[lens[1:]].tolist()
+        for i, t in enumerate(mine):
+            if t.id not in present:  # every beam of it removed
+                continue
+            led = self._ledgers.get(t.id)
+            if led is None:
+                led = self._ledgers[t.id] = self._new_ledger(t, t.stamp, len(hmap.levels))
+            if kb_all is not None and kb_hi[i] > kb_lo[i]:
+                led.beams.append((int(index), kb_all[kb_lo[i]:kb_hi[i]]))
+        return PendingUpdate(per_level, flat)
+
+    def _level_cells(self, pts: np.ndarray, mine_b: np.ndarray, ids: np.ndarray, hmap: MultiResMap, flat: list
+                     ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] | None:
+        """:meth:`_level_cells_plain` for all levels with one sort: every point's (level, owner, cell) packed
+        into one integer (owner 0 = no track, else 1 + the rank of the track id; cells relative to the
+        level's smallest cell), sorted; the distinct values of tracks whose (level, cell) no unowned point
+        has are decoded back, in (level, track id, cell key) order. None if the packed values would not fit
+        in an int64. Appends to ``flat``, per level, (flat array indices of the cells, i0, j0, shape) when all
+        lie inside the level's array, else None."""
+        n_lv = len(hmap.levels)
+        rs = [lv.resolution for lv in hmap.levels]
+        xs, ys = pts[:, 0], pts[:, 1]
+        # v ↦ floor(v / r + 0.5) is monotonic: the extreme points give each level's extreme cells
+        x0, x1, y0, y1 = float(xs.min()), float(xs.max()), float(ys.min()), float(ys.max())
+        lox = [math.floor(x0 / r + 0.5) for r in rs]
+        loy = [math.floor(y0 / r + 0.5) for r in rs]
+        hix = [math.floor(x1 / r + 0.5) for r in rs]
+        hiy = [math.floor(y1 / r + 0.5) for r in rs]
+        wi = max(b - a for a, b in zip(lox, hix)) + 1
+        wj = max(b - a for a, b in zip(loy, hiy)) + 1
+        uids = np.unique(ids)  # ids ↦ rank 0 … R−1 in id order
+        block = (uids.shape[0] + 1) * wi * wj  # one level's values
+        if n_lv * block >= 1 << 62:
+            return None
+        owner = np.zeros(pts.shape[0], dtype=np.int64)
+        owner[mine_b] = np.searchsorted(uids, ids) + 1
+        res = np.array(rs)[:, None]
+        cx = np.floor(xs / res + 0.5).astype(np.int64)  # (L, n) cells, as pts / r_k + 0.5 per level
+        cy = np.floor(ys / res + 0.5).astype(np.int64)
+        cx -= np.array(lox, dtype=np.int64)[:, None]
+        cy -= np.array(loy, dtype=np.int64)[:, None]
+        packed = cx * wj + cy + owner * (wi * wj) + np.arange(0, n_lv * block, block, dtype=np.int64)[:, None]
+        u = np.sort(packed.ravel())
+        keep = np.ones(u.shape[0], dtype=bool)
+        keep[1:] = u[1:] != u[:-1]
+        u = u[keep]
+        lvl, rest = np.divmod(u, block)
+        own, cell = np.divmod(rest, wi * wj)
+        at = lvl * (wi * wj) + cell  # (level, cell) without the owner
+        theirs = own > 0
+        # a cell another (unowned) kept beam of this scan hits on the same level is the structure's
+        mine = theirs & ~_member(at, at[~theirs]) if not theirs.all() else theirs
+        lvl, own, cell = lvl[mine], own[mine], cell[mine]
+        ci, cj = np.divmod(cell, wj)
+        ci += np.array(lox, dtype=np.int64)[lvl]
+        cj += np.array(loy, dtype=np.int64)[lvl]
+        ids_s = uids[own - 1]
+        key_s = ci * _KEY_SHIFT + cj
+        cells_s = np.column_stack((ci, cj))
+        bounds = np.searchsorted(lvl, np.arange(n_lv + 1)).tolist()
+        per_level = []
+        for k, lv in enumerate(hmap.levels):
+            a, b = bounds[k], bounds[k + 1]
+            c = cells_s[a:b]
+            h, w = lv.shape
+            if w and lox[k] >= lv.i0 and loy[k] >= lv.j0 and hix[k] < lv.i0 + w and hiy[k] < lv.j0 + h:
+                # every cell inside the level's array (the usual case): one flat gather, kept for after_update
+                f = (cj[a:b] - lv.j0) * w + (ci[a:b] - lv.i0)
+                before, uidx = lv.logodds.ravel().take(f).astype(np.float64), lv.uidx.ravel().take(f).astype(np.int64)
+                flat.append((f, lv.i0, lv.j0, (h, w)))
+            else:
+                before, uidx = self._read(lv, c)
+                flat.append(None)
+            per_level.append((ids_s[a:b], key_s[a:b], c, before, uidx))
+        return per_level
+
+    def _level_cells_plain(self, pts: np.ndarray, mine_b: np.ndarray, ids: np.ndarray, hmap: MultiResMap
+                           ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+        """Per map level: (track ids, cell keys, cells, log-odds, update index) of the cells the tracks'
+        points ``pts[mine_b]`` (owners ``ids``) hit, sorted by track then cell key, each (track, cell) once,
+        leaving out cells the other points hit on that level."""
         per_level = []
         for lv in hmap.levels:
             cells = np.floor(pts / lv.resolution + 0.5).astype(np.int64)
@@ -262,17 +358,7 @@ class EvidenceLedger:
             c = cells[mine_b][sel]
             before, uidx = self._read(lv, c)
             per_level.append((ids[sel], mk[sel], c, before, uidx))
-        present = set(np.unique(ids).tolist())
-        for t in mine:
-            if t.id not in present:  # every beam of it removed
-                continue
-            if t.id not in self._ledgers:
-                self._ledgers[t.id] = self._new_ledger(t, t.stamp, len(hmap.levels))
-            if self.keep_beams and index >= 0:
-                kb = t.beams[valid[t.beams]]
-                if kb.shape[0]:
-                    self._ledgers[t.id].beams.append((int(index), kb.astype(np.int32)))
-        return PendingUpdate(per_level)
+        return per_level
 
     def _new_ledger(self, t: Track, stamp: float, n_levels: int) -> _Ledger:
         """An empty ledger of ``t``; its first box is where the track was first reported."""
@@ -303,7 +389,12 @@ class EvidenceLedger:
         for k, (ids, keys, cells, before, ui_before) in enumerate(pending.per_level):
             if ids.shape[0] == 0:
                 continue
-            after, ui_after = self._read(hmap.levels[k], cells)
+            lv = hmap.levels[k]
+            f = pending.flat[k] if pending.flat is not None else None
+            if f is not None and f[1] == lv.i0 and f[2] == lv.j0 and f[3] == lv.shape:
+                after, ui_after = lv.logodds.ravel().take(f[0]).astype(np.float64), lv.uidx.ravel().take(f[0]).astype(np.int64)
+            else:
+                after, ui_after = self._read(lv, cells)
             upd = ui_after != ui_before  # else not updated (outside the array, or the ray was skipped)
             if not upd.any():
                 continue
