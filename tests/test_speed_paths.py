@@ -179,3 +179,43 @@ def test_multires_integrate_equals_per_level_integration() -> None:
             assert np.array_equal(lf.logodds, lp.logodds) and np.array_equal(lf.prob, lp.prob)
             assert np.array_equal(lf.uidx, lp.uidx)
             assert lf.n_grows > 1  # the growth path was exercised
+
+
+def test_ledger_packed_level_cells_equal_the_per_level_sort() -> None:
+    """EvidenceLedger._level_cells (one sort of (level, track, cell) packed into int64, flat gathers) returns
+    exactly the rows of the per-level lexsort / membership path: tracks sharing cells, cells an unowned point
+    also hits (left out), points outside the level's array (read as 0 / −1), and the flat indices re-read
+    the same values."""
+    from dynslam2d.detect.memoryconfig import MemoryConfig
+    from dynslam2d.slam.erasure import EvidenceLedger
+    from dynslam2d.slam.grid import MultiResMap
+
+    rng = np.random.default_rng(5)
+    hmap = MultiResMap(0.05, 3, -0.4, 0.9)
+    a = np.linspace(-np.pi, np.pi, 400, endpoint=False)
+    hmap.integrate(Pose2D(), np.column_stack((3.0 * np.cos(a), 3.0 * np.sin(a))))
+    led = EvidenceLedger(MemoryConfig(), 0.1, 30.0)
+    n_checked = n_outside = 0
+    for trial in range(20):
+        reach = 2.5 if trial % 2 else 12.0  # far points lie outside the level arrays: the per-level read path
+        pts = rng.uniform(-reach, reach, (300, 2))
+        pts[100:140] = pts[:40] + rng.normal(0.0, 0.02, (40, 2))  # unowned points near the tracks' points
+        mine_b = np.zeros(300, dtype=bool)
+        mine_b[:100] = True
+        mine_b[200:] = rng.random(100) < 0.5
+        ids = rng.choice([3, 9, 11, 40], int(mine_b.sum()))
+        flat: list = []
+        fast = led._level_cells(pts, mine_b, ids, hmap, flat)
+        plain = led._level_cells_plain(pts, mine_b, ids, hmap)
+        assert fast is not None and len(fast) == len(plain) == 3
+        for k, (f, p) in enumerate(zip(fast, plain)):
+            for u, v in zip(f, p):
+                assert u.dtype == v.dtype and np.array_equal(u, v)
+            assert p[0].shape[0] > 0 and np.all(np.diff(p[0]) >= 0)
+            if flat[k] is None:
+                n_outside += 1
+            else:
+                lv = hmap.levels[k]
+                assert np.array_equal(lv.logodds.ravel()[flat[k][0]].astype(np.float64), p[3])
+            n_checked += 1
+    assert n_outside > 0 and n_outside < n_checked  # both read paths ran

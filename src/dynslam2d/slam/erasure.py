@@ -59,6 +59,11 @@ _HALF = 2147483648
 _COMPACT_ROWS = 4096
 #: … or this many updates (each update's rows are four small arrays).
 _COMPACT_CHUNKS = 64
+_EMPTY_I = np.zeros(0, dtype=np.int64)
+_EMPTY_F = np.zeros(0)
+_EMPTY_B = np.zeros(0, dtype=bool)
+for _a in (_EMPTY_I, _EMPTY_F, _EMPTY_B):
+    _a.flags.writeable = False
 
 
 def _decode(keys: np.ndarray) -> np.ndarray:
@@ -90,10 +95,11 @@ class _LevelRecord:
 
     def __init__(self, cap: int) -> None:
         self.cap = cap
-        self.key = np.zeros(0, dtype=np.int64)
-        self.delta = np.zeros(0)
-        self.pure = np.zeros(0, dtype=bool)
-        self.last = np.zeros(0, dtype=np.int64)
+        # (empty records share read-only empty arrays: a record's arrays are replaced, never written)
+        self.key = _EMPTY_I
+        self.delta = _EMPTY_F
+        self.pure = _EMPTY_B
+        self.last = _EMPTY_I
         self._rows: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self._n_rows = 0
 
@@ -406,10 +412,15 @@ class EvidenceLedger:
             lo = [0, *cut.tolist()]
             hi = [*lo[1:], ids.shape[0]]
             added = 0
+            ledgers = self._ledgers
             for tid, a, b in zip(ids[lo].tolist(), lo, hi):
-                led = self._ledgers.get(tid)
-                if led is not None:
-                    added += led.levels[k].append(keys[a:b], delta[a:b], ub[a:b], ua[a:b])
+                led = ledgers.get(tid)
+                if led is not None:  # (_LevelRecord.append inlined: every group holds rows)
+                    rec = led.levels[k]
+                    rec._rows.append((keys[a:b], delta[a:b], ub[a:b], ua[a:b]))
+                    rec._n_rows += b - a
+                    if rec._n_rows >= _COMPACT_ROWS or len(rec._rows) >= _COMPACT_CHUNKS:
+                        added += rec.compact()
             self.stats["cells_recorded"] += added
 
     def _fold(self, led: _Ledger) -> None:
