@@ -219,3 +219,42 @@ def test_ledger_packed_level_cells_equal_the_per_level_sort() -> None:
                 assert np.array_equal(lv.logodds.ravel()[flat[k][0]].astype(np.float64), p[3])
             n_checked += 1
     assert n_outside > 0 and n_outside < n_checked  # both read paths ran
+
+
+def test_ledger_keeps_each_tracks_valid_beams_as_the_per_track_gather() -> None:
+    """before_update with keep_beams gathers every track's kept beams at once: per track the same beams (in
+    order, int32) as ``t.beams[valid[t.beams]]``; a track with every beam removed or invalid gets no ledger."""
+    from dynslam2d.detect.memoryconfig import MemoryConfig
+    from dynslam2d.slam.erasure import EvidenceLedger
+    from dynslam2d.types import Box, Track
+
+    slam, first = mapped()
+    scan = scan_at(first, 1.0)
+    n = scan.ranges.shape[0]
+    ranges = scan.ranges.copy()
+    ranges[50:60] = np.nan  # invalid beams inside track 4's beams
+    scan = scan.with_ranges(ranges)
+    removed = np.zeros(n, dtype=bool)
+    removed[300:320] = True  # track 6: every beam removed
+
+    def track(tid: int, beams: np.ndarray) -> Track:
+        return Track(id=tid, state="confirmed", stamp=1.0, box=Box(1.0, 0.5, 0.0, 0.4, 0.4), velocity=np.zeros(2),
+                     covariance=np.eye(4), age=1.0, hits=1, misses=0, kind="rect", in_m=False, m_reason="",
+                     beams=beams, n_points=int(beams.shape[0]))
+
+    tracks = [track(4, np.arange(40, 80)), track(2, np.array([200, 150, 151, 400])), track(6, np.arange(300, 320)),
+              track(9, np.arange(500, 503, dtype=np.int32))]
+    led = EvidenceLedger(MemoryConfig(), slam.config.laser_min_dist, slam.config.laser_max_dist, keep_beams=True)
+    pend = led.before_update(scan, first, tracks, removed, slam.map, index=17)
+    assert pend is not None
+    with np.errstate(invalid="ignore"):
+        valid = (scan.valid_mask() & (scan.ranges > slam.config.laser_min_dist)
+                 & (scan.ranges < slam.config.laser_max_dist) & ~removed)
+    assert set(led._ledgers) == {4, 2, 9}
+    for t in tracks:
+        if t.id == 6:
+            continue
+        (idx, kb), = led._ledgers[t.id].beams
+        want = t.beams[valid[t.beams]].astype(np.int32)
+        assert idx == 17 and kb.dtype == np.int32 and np.array_equal(kb, want)
+    assert led._ledgers[4].beams[0][1].shape[0] == 30
