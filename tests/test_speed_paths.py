@@ -258,3 +258,44 @@ def test_ledger_keeps_each_tracks_valid_beams_as_the_per_track_gather() -> None:
         want = t.beams[valid[t.beams]].astype(np.int32)
         assert idx == 17 and kb.dtype == np.int32 and np.array_equal(kb, want)
     assert led._ledgers[4].beams[0][1].shape[0] == 30
+
+
+def test_ledger_beam_owner_in_one_assignment_equals_per_track_assignment() -> None:
+    """The beams' owner track is set with one assignment when no beam is in two tracks, else per track in order
+    (the later track wins): the pending rows equal those of the per-track owner and the per-level path."""
+    from dynslam2d.detect.memoryconfig import MemoryConfig
+    from dynslam2d.slam.erasure import EvidenceLedger
+    from dynslam2d.types import Box, Track
+
+    slam, first = mapped()
+    scan = scan_at(first, 1.0)
+    n = scan.ranges.shape[0]
+
+    def track(tid: int, beams: np.ndarray) -> Track:
+        return Track(id=tid, state="confirmed", stamp=1.0, box=Box(1.0, 0.5, 0.0, 0.4, 0.4), velocity=np.zeros(2),
+                     covariance=np.eye(4), age=1.0, hits=1, misses=0, kind="rect", in_m=False, m_reason="",
+                     beams=beams, n_points=int(beams.shape[0]))
+
+    for overlap in (False, True):
+        tracks = [track(8, np.arange(100, 140)), track(3, np.arange(300, 330)),
+                  track(5, np.arange(130, 150) if overlap else np.arange(140, 150))]
+        led = EvidenceLedger(MemoryConfig(), slam.config.laser_min_dist, slam.config.laser_max_dist)
+        removed = np.zeros(n, dtype=bool)
+        pend = led.before_update(scan, first, tracks, removed, slam.map)
+        owner = np.full(n, -1, dtype=np.int64)
+        for t in tracks:
+            owner[t.beams] = t.id
+        with np.errstate(invalid="ignore"):
+            valid = (scan.valid_mask() & (scan.ranges > slam.config.laser_min_dist)
+                     & (scan.ranges < slam.config.laser_max_dist))
+        idx = np.flatnonzero(valid)
+        a = scan.angles[idx]
+        r = scan.ranges[idx]
+        pts = first.transform_points(np.column_stack((r * np.cos(a), r * np.sin(a))))
+        mine_b = owner[idx] >= 0
+        plain = led._level_cells_plain(pts, mine_b, owner[idx][mine_b], slam.map)
+        for f, p in zip(pend.per_level, plain):
+            for u, v in zip(f, p):
+                assert np.array_equal(u, v)
+        n5 = int((pend.per_level[0][0] == 5).sum())
+        assert n5 > 0 and (int((pend.per_level[0][0] == 8).sum()) < 40 if overlap else True)

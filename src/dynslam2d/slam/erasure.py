@@ -244,8 +244,13 @@ class EvidenceLedger:
             return None
         r = scan.ranges
         owner = np.full(r.shape[0], -1, dtype=np.int64)
-        for t in mine:
-            owner[t.beams] = t.id
+        allb = np.concatenate([t.beams for t in mine])
+        lens = np.cumsum([0] + [t.beams.shape[0] for t in mine])
+        if np.bincount(allb, minlength=r.shape[0]).max() <= 1:  # no beam in two tracks: one assignment
+            owner[allb] = np.repeat(np.array([t.id for t in mine], dtype=np.int64), np.diff(lens))
+        else:  # (a later track's claim wins, as one assignment per track in order)
+            for t in mine:
+                owner[t.beams] = t.id
         with np.errstate(invalid="ignore"):
             valid = scan.valid_mask() & (r > self.laser_min_dist) & (r < self.laser_max_dist) & ~removed
         if not (valid & (owner >= 0)).any():
@@ -263,11 +268,9 @@ class EvidenceLedger:
         present = set(np.unique(ids).tolist())
         kb_all = None
         if self.keep_beams and index >= 0:  # every track's valid beams with one gather, split per track
-            allb = np.concatenate([t.beams for t in mine])
             vb = valid[allb]
             kb_all = allb[vb].astype(np.int32)
             cs = np.concatenate(([0], np.cumsum(vb)))
-            lens = np.cumsum([0] + [t.beams.shape[0] for t in mine])
             kb_lo, kb_hi = cs[lens[:-1]].tolist(), cs[lens[1:]].tolist()
         for i, t in enumerate(mine):
             if t.id not in present:  # every beam of it removed
@@ -442,7 +445,7 @@ class EvidenceLedger:
             a = self._first.get(t.id)
             if a is None:
                 self._first[t.id] = [_box_key(t), stamp, stamp]
-            elif t.id not in removing and math.hypot(float(t.velocity[0]), float(t.velocity[1])) < stand:
+            elif t.id not in removing and math.hypot(*t.velocity.tolist()) < stand:
                 if math.hypot(t.box.px - a[0][0], t.box.py - a[0][1]) <= reach:
                     a[2] = stamp  # still standing where it stood
                 else:
