@@ -401,7 +401,8 @@ class EvidenceLedger:
             lv = hmap.levels[k]
             f = pending.flat[k] if pending.flat is not None else None
             if f is not None and f[1] == lv.i0 and f[2] == lv.j0 and f[3] == lv.shape:
-                after, ui_after = lv.logodds.ravel().take(f[0]).astype(np.float64), lv.uidx.ravel().take(f[0]).astype(np.int64)
+                after = lv.logodds.ravel().take(f[0]).astype(np.float64)
+                ui_after = lv.uidx.ravel().take(f[0]).astype(np.int64)
             else:
                 after, ui_after = self._read(lv, cells)
             upd = ui_after != ui_before  # else not updated (outside the array, or the ray was skipped)
