@@ -30,7 +30,7 @@ of a track that ended while the object stood (the robot drove away) is kept for
 ``ledger_keep_s`` (only if the track was confirmed: tentative clutter is dropped) and erased
 with a track that stood where the ended track last was and then enters M.
 
-Recording is vectorised over all tracks: one sort per level and update, rows appended as arrays
+Recording is vectorised over all tracks and levels: one sort per update, rows appended as arrays
 and folded per cell when they pile up (:class:`_LevelRecord`). With ``keep_beams`` (loop closure
 on) the ledger also keeps each track's (scan index, beams) and lists those of erased tracks in
 :attr:`EvidenceLedger.erased_beams`, for the loop closer to mark them removed in its keyframes so
