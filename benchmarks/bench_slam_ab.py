@@ -9,9 +9,12 @@ component on identical calls, alternately, in thread CPU time (``time.thread_tim
   * ``ledger``: the pipeline's ``EvidenceLedger`` (this checkout) and one of the other checkout's
     ``slam/erasure.py`` get the same ``observe`` / ``before_update`` / ``after_update`` calls in lockstep (the
     other ledger's erasure acts on a copy of the map), each method's two versions alternately; prints ms per
-    scan per method and checks the two ledgers' summaries are equal.
+    scan per method and checks the two ledgers' summaries are equal;
+  * ``map``: the pipeline's ``MultiResMap.integrate`` calls (its map updates) replayed into a fresh map of the
+    other checkout's ``slam/grid.py`` and of this one's, 5 times each, alternately; prints ms per call (median
+    of the 5 sweeps) and whether the two maps are identical.
 
-    python benchmarks/bench_slam_ab.py "negative_2 /right_scan" mit-csail [--part matcher ledger]
+    python benchmarks/bench_slam_ab.py "negative_2 /right_scan" mit-csail [--part matcher ledger map]
         [--other ../main/src]
 
 Inputs: the names of ``bench_real_speed.py``. Pin to one core with ``taskset -c N``.
@@ -128,10 +131,55 @@ def ledger_ab(scans: list, other) -> dict[str, tuple[float, float]]:
             for m in ("before_update", "after_update", "observe")}
 
 
+def map_ab(scans: list, other) -> tuple[float, float, bool]:
+    """(other, this) ms per ``MultiResMap.integrate`` call of the pipeline's map updates, replayed 5 times into
+    a fresh map of each version, the versions alternately; and whether every level of the two maps is equal."""
+    from dynslam2d.pipeline import Pipeline
+    from dynslam2d.slam import grid
+
+    p = Pipeline()
+    calls = []
+    orig = grid.MultiResMap.integrate
+
+    def grab(self, pose, hits, clear=None):
+        if self is p.slam.map:
+            calls.append((pose, np.array(hits), None if clear is None else np.array(clear)))
+        return orig(self, pose, hits, clear)
+
+    grid.MultiResMap.integrate = grab
+    try:
+        for s in scans:
+            p.process(s)
+    finally:
+        grid.MultiResMap.integrate = orig
+    c = p.slam.config
+
+    def fresh(mod):
+        return mod.MultiResMap(c.map_resolution, c.map_levels, c.logodds_free, c.logodds_occupied,
+                               c.occupied_logodds_cap, c.map_growth_margin, int(c.max_map_memory_mb * 1e6),
+                               c.grazing_stop_cells, c.grazing_min_incidence_deg)
+
+    sweeps: dict[str, list[float]] = {"other": [], "this": []}
+    maps = {}
+    for rep in range(5):
+        for tag, mod in ((("other", other), ("this", grid)) if rep % 2 == 0 else (("this", grid), ("other", other))):
+            m, t = fresh(mod), 0
+            for pose, hits, clear in calls:
+                t0 = time.thread_time_ns()
+                m.integrate(pose, hits, clear)
+                t += time.thread_time_ns() - t0
+            sweeps[tag].append(t / max(len(calls), 1) / 1e6)
+            maps[tag] = m
+    same = all(np.array_equal(a.logodds, b.logodds) and np.array_equal(a.prob, b.prob)
+               and np.array_equal(a.uidx, b.uidx) for a, b in zip(maps["other"].levels, maps["this"].levels))
+    return statistics.median(sweeps["other"]), statistics.median(sweeps["this"]), same
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("inputs", nargs="+", choices=sorted(INPUTS))
-    ap.add_argument("--part", nargs="+", choices=("matcher", "ledger"), default=["matcher", "ledger"])
+    ap.add_argument("--part", nargs="+", choices=("matcher", "ledger", "map"),
+                    default=["matcher", "ledger", "map"])
     ap.add_argument("--other", type=Path, default=REPO.parent / "main" / "src", help="the other checkout's src/")
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     args = ap.parse_args()
@@ -150,6 +198,10 @@ def main() -> None:
             detail = ", ".join(f"{m} {a:.3f} → {b:.3f}" for m, (a, b) in parts.items())
             print(f"{name}: ledger ms per scan other → this: {o:.3f} → {t:.3f} (×{t / o:.2f}); {detail}; "
                   "summaries equal")
+        if "map" in args.part:
+            mo, mt, same = map_ab(scans, other_module(args.other, "slam/grid.py", "other_grid"))
+            print(f"{name}: MultiResMap.integrate ms per map update, other {mo:.3f}, this {mt:.3f} (×{mt / mo:.2f}); "
+                  f"maps {'identical' if same else 'DIFFERENT'}")
         sys.stdout.flush()
 
 

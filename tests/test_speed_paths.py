@@ -144,3 +144,158 @@ def test_dropped_ledger_record_counts_the_cells_folding_would() -> None:
                 b.compact()
         assert a.new_cells() == b.compact()
         assert a.new_cells() > 0 or cap == 40
+
+
+def test_multires_integrate_equals_per_level_integration() -> None:
+    """MultiResMap.integrate (bounds from the extreme ends, end cells in shared buffers) writes every level
+    exactly as GridLevel.integrate does level by level, with and without the grazing stop and clearing rays."""
+    from dynslam2d.slam.grid import MultiResMap, grazing_stop
+
+    rng = np.random.default_rng(3)
+    for grazing in (0.0, 1.5):
+        fast = MultiResMap(0.05, 3, -0.4, 0.9, grazing_cells=grazing)
+        plain = MultiResMap(0.05, 3, -0.4, 0.9, grazing_cells=grazing)
+        pose = Pose2D(0.3, -0.2, 0.1)
+        for step in range(6):
+            pose = pose.compose(Pose2D(*rng.uniform(-0.4, 0.4, 2), float(rng.uniform(-0.3, 0.3))))
+            a = np.linspace(-2.0, 2.0, 300)
+            rr = rng.uniform(0.5, 4.0 + 3 * step, a.shape[0])  # later scans reach further: the levels grow
+            hits = np.column_stack((rr * np.cos(a), rr * np.sin(a)))
+            clear = hits[::7] * 1.3 if step % 2 else None
+            fast.integrate(pose, hits, clear)
+            ends = pose.transform_points(hits)
+            hit = np.ones(ends.shape[0], dtype=bool)
+            if clear is not None:
+                ends = np.vstack((ends, pose.transform_points(clear)))
+                hit = np.concatenate((hit, np.zeros(clear.shape[0], dtype=bool)))
+            stop = None
+            if grazing > 0.0:
+                stop = np.zeros(hit.shape[0])
+                stop[: hits.shape[0]] = grazing_stop(hits, grazing, plain.min_sin)
+            for lv in plain.levels:
+                lv.integrate(np.array([pose.x, pose.y]), ends, hit, plain.l_free, plain.l_occ, plain.cap, stop)
+        for lf, lp in zip(fast.levels, plain.levels):
+            assert (lf.i0, lf.j0, lf.shape, lf.update_counter) == (lp.i0, lp.j0, lp.shape, lp.update_counter)
+            assert np.array_equal(lf.logodds, lp.logodds) and np.array_equal(lf.prob, lp.prob)
+            assert np.array_equal(lf.uidx, lp.uidx)
+            assert lf.n_grows > 1  # the growth path was exercised
+
+
+def test_ledger_packed_level_cells_equal_the_per_level_sort() -> None:
+    """EvidenceLedger._level_cells (one sort of (level, track, cell) packed into int64, flat gathers) returns
+    exactly the rows of the per-level lexsort / membership path: tracks sharing cells, cells an unowned point
+    also hits (left out), points outside the level's array (read as 0 / −1), and the flat indices re-read
+    the same values."""
+    from dynslam2d.detect.memoryconfig import MemoryConfig
+    from dynslam2d.slam.erasure import EvidenceLedger
+    from dynslam2d.slam.grid import MultiResMap
+
+    rng = np.random.default_rng(5)
+    hmap = MultiResMap(0.05, 3, -0.4, 0.9)
+    a = np.linspace(-np.pi, np.pi, 400, endpoint=False)
+    hmap.integrate(Pose2D(), np.column_stack((3.0 * np.cos(a), 3.0 * np.sin(a))))
+    led = EvidenceLedger(MemoryConfig(), 0.1, 30.0)
+    n_checked = n_outside = 0
+    for trial in range(20):
+        reach = 2.5 if trial % 2 else 12.0  # far points lie outside the level arrays: the per-level read path
+        pts = rng.uniform(-reach, reach, (300, 2))
+        pts[100:140] = pts[:40] + rng.normal(0.0, 0.02, (40, 2))  # unowned points near the tracks' points
+        mine_b = np.zeros(300, dtype=bool)
+        mine_b[:100] = True
+        mine_b[200:] = rng.random(100) < 0.5
+        ids = rng.choice([3, 9, 11, 40], int(mine_b.sum()))
+        flat: list = []
+        fast = led._level_cells(pts, mine_b, ids, hmap, flat)
+        plain = led._level_cells_plain(pts, mine_b, ids, hmap)
+        assert fast is not None and len(fast) == len(plain) == 3
+        for k, (f, p) in enumerate(zip(fast, plain)):
+            for u, v in zip(f, p):
+                assert u.dtype == v.dtype and np.array_equal(u, v)
+            assert p[0].shape[0] > 0 and np.all(np.diff(p[0]) >= 0)
+            if flat[k] is None:
+                n_outside += 1
+            else:
+                lv = hmap.levels[k]
+                assert np.array_equal(lv.logodds.ravel()[flat[k][0]].astype(np.float64), p[3])
+            n_checked += 1
+    assert n_outside > 0 and n_outside < n_checked  # both read paths ran
+
+
+def test_ledger_keeps_each_tracks_valid_beams_as_the_per_track_gather() -> None:
+    """before_update with keep_beams gathers every track's kept beams at once: per track the same beams (in
+    order, int32) as ``t.beams[valid[t.beams]]``; a track with every beam removed or invalid gets no ledger."""
+    from dynslam2d.detect.memoryconfig import MemoryConfig
+    from dynslam2d.slam.erasure import EvidenceLedger
+    from dynslam2d.types import Box, Track
+
+    slam, first = mapped()
+    scan = scan_at(first, 1.0)
+    n = scan.ranges.shape[0]
+    ranges = scan.ranges.copy()
+    ranges[50:60] = np.nan  # invalid beams inside track 4's beams
+    scan = scan.with_ranges(ranges)
+    removed = np.zeros(n, dtype=bool)
+    removed[300:320] = True  # track 6: every beam removed
+
+    def track(tid: int, beams: np.ndarray) -> Track:
+        return Track(id=tid, state="confirmed", stamp=1.0, box=Box(1.0, 0.5, 0.0, 0.4, 0.4), velocity=np.zeros(2),
+                     covariance=np.eye(4), age=1.0, hits=1, misses=0, kind="rect", in_m=False, m_reason="",
+                     beams=beams, n_points=int(beams.shape[0]))
+
+    tracks = [track(4, np.arange(40, 80)), track(2, np.array([200, 150, 151, 400])), track(6, np.arange(300, 320)),
+              track(9, np.arange(500, 503, dtype=np.int32))]
+    led = EvidenceLedger(MemoryConfig(), slam.config.laser_min_dist, slam.config.laser_max_dist, keep_beams=True)
+    pend = led.before_update(scan, first, tracks, removed, slam.map, index=17)
+    assert pend is not None
+    with np.errstate(invalid="ignore"):
+        valid = (scan.valid_mask() & (scan.ranges > slam.config.laser_min_dist)
+                 & (scan.ranges < slam.config.laser_max_dist) & ~removed)
+    assert set(led._ledgers) == {4, 2, 9}
+    for t in tracks:
+        if t.id == 6:
+            continue
+        (idx, kb), = led._ledgers[t.id].beams
+        want = t.beams[valid[t.beams]].astype(np.int32)
+        assert idx == 17 and kb.dtype == np.int32 and np.array_equal(kb, want)
+    assert led._ledgers[4].beams[0][1].shape[0] == 30
+
+
+def test_ledger_beam_owner_in_one_assignment_equals_per_track_assignment() -> None:
+    """The beams' owner track is set with one assignment when no beam is in two tracks, else per track in order
+    (the later track wins): the pending rows equal those of the per-track owner and the per-level path."""
+    from dynslam2d.detect.memoryconfig import MemoryConfig
+    from dynslam2d.slam.erasure import EvidenceLedger
+    from dynslam2d.types import Box, Track
+
+    slam, first = mapped()
+    scan = scan_at(first, 1.0)
+    n = scan.ranges.shape[0]
+
+    def track(tid: int, beams: np.ndarray) -> Track:
+        return Track(id=tid, state="confirmed", stamp=1.0, box=Box(1.0, 0.5, 0.0, 0.4, 0.4), velocity=np.zeros(2),
+                     covariance=np.eye(4), age=1.0, hits=1, misses=0, kind="rect", in_m=False, m_reason="",
+                     beams=beams, n_points=int(beams.shape[0]))
+
+    for overlap in (False, True):
+        tracks = [track(8, np.arange(100, 140)), track(3, np.arange(300, 330)),
+                  track(5, np.arange(130, 150) if overlap else np.arange(140, 150))]
+        led = EvidenceLedger(MemoryConfig(), slam.config.laser_min_dist, slam.config.laser_max_dist)
+        removed = np.zeros(n, dtype=bool)
+        pend = led.before_update(scan, first, tracks, removed, slam.map)
+        owner = np.full(n, -1, dtype=np.int64)
+        for t in tracks:
+            owner[t.beams] = t.id
+        with np.errstate(invalid="ignore"):
+            valid = (scan.valid_mask() & (scan.ranges > slam.config.laser_min_dist)
+                     & (scan.ranges < slam.config.laser_max_dist))
+        idx = np.flatnonzero(valid)
+        a = scan.angles[idx]
+        r = scan.ranges[idx]
+        pts = first.transform_points(np.column_stack((r * np.cos(a), r * np.sin(a))))
+        mine_b = owner[idx] >= 0
+        plain = led._level_cells_plain(pts, mine_b, owner[idx][mine_b], slam.map)
+        for f, p in zip(pend.per_level, plain):
+            for u, v in zip(f, p):
+                assert np.array_equal(u, v)
+        n5 = int((pend.per_level[0][0] == 5).sum())
+        assert n5 > 0 and (int((pend.per_level[0][0] == 8).sum()) < 40 if overlap else True)

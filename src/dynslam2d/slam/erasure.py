@@ -30,7 +30,7 @@ of a track that ended while the object stood (the robot drove away) is kept for
 ``ledger_keep_s`` (only if the track was confirmed: tentative clutter is dropped) and erased
 with a track that stood where the ended track last was and then enters M.
 
-Recording is vectorised over all tracks: one sort per level and update, rows appended as arrays
+Recording is vectorised over all tracks and levels: one sort per update, rows appended as arrays
 and folded per cell when they pile up (:class:`_LevelRecord`). With ``keep_beams`` (loop closure
 on) the ledger also keeps each track's (scan index, beams) and lists those of erased tracks in
 :attr:`EvidenceLedger.erased_beams`, for the loop closer to mark them removed in its keyframes so
@@ -59,6 +59,11 @@ _HALF = 2147483648
 _COMPACT_ROWS = 4096
 #: … or this many updates (each update's rows are four small arrays).
 _COMPACT_CHUNKS = 64
+_EMPTY_I = np.zeros(0, dtype=np.int64)
+_EMPTY_F = np.zeros(0)
+_EMPTY_B = np.zeros(0, dtype=bool)
+for _a in (_EMPTY_I, _EMPTY_F, _EMPTY_B):
+    _a.flags.writeable = False
 
 
 def _decode(keys: np.ndarray) -> np.ndarray:
@@ -90,10 +95,11 @@ class _LevelRecord:
 
     def __init__(self, cap: int) -> None:
         self.cap = cap
-        self.key = np.zeros(0, dtype=np.int64)
-        self.delta = np.zeros(0)
-        self.pure = np.zeros(0, dtype=bool)
-        self.last = np.zeros(0, dtype=np.int64)
+        # (empty records share read-only empty arrays: a record's arrays are replaced, never written)
+        self.key = _EMPTY_I
+        self.delta = _EMPTY_F
+        self.pure = _EMPTY_B
+        self.last = _EMPTY_I
         self._rows: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self._n_rows = 0
 
@@ -193,6 +199,9 @@ class PendingUpdate:
     cell) once."""
 
     per_level: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+    #: per level, (flat array indices of the cells, i0, j0, shape) of the array they were read from, or None:
+    #: the update reads the same cells with them if the level did not grow
+    flat: list | None = None
 
 
 def _box_key(t: Track) -> tuple[float, float, float]:
@@ -235,8 +244,13 @@ class EvidenceLedger:
             return None
         r = scan.ranges
         owner = np.full(r.shape[0], -1, dtype=np.int64)
-        for t in mine:
-            owner[t.beams] = t.id
+        allb = np.concatenate([t.beams for t in mine])
+        lens = np.cumsum([0] + [t.beams.shape[0] for t in mine])
+        if np.bincount(allb, minlength=r.shape[0]).max() <= 1:  # no beam in two tracks: one assignment
+            owner[allb] = np.repeat(np.array([t.id for t in mine], dtype=np.int64), np.diff(lens))
+        else:  # (a later track's claim wins, as one assignment per track in order)
+            for t in mine:
+                owner[t.beams] = t.id
         with np.errstate(invalid="ignore"):
             valid = scan.valid_mask() & (r > self.laser_min_dist) & (r < self.laser_max_dist) & ~removed
         if not (valid & (owner >= 0)).any():
@@ -247,6 +261,97 @@ class EvidenceLedger:
         own = owner[idx]
         mine_b = own >= 0
         ids = own[mine_b]
+        flat: list = []
+        per_level = self._level_cells(pts, mine_b, ids, hmap, flat)
+        if per_level is None:  # (cells beyond the packed values' range: level by level)
+            per_level, flat = self._level_cells_plain(pts, mine_b, ids, hmap), [None] * len(hmap.levels)
+        present = set(np.unique(ids).tolist())
+        kb_all = None
+        if self.keep_beams and index >= 0:  # every track's valid beams with one gather, split per track
+            vb = valid[allb]
+            kb_all = allb[vb].astype(np.int32)
+            cs = np.concatenate(([0], np.cumsum(vb)))
+            kb_lo, kb_hi = cs[lens[:-1]].tolist(), cs[lens[1:]].tolist()
+        for i, t in enumerate(mine):
+            if t.id not in present:  # every beam of it removed
+                continue
+            led = self._ledgers.get(t.id)
+            if led is None:
+                led = self._ledgers[t.id] = self._new_ledger(t, t.stamp, len(hmap.levels))
+            if kb_all is not None and kb_hi[i] > kb_lo[i]:
+                led.beams.append((int(index), kb_all[kb_lo[i]:kb_hi[i]]))
+        return PendingUpdate(per_level, flat)
+
+    def _level_cells(self, pts: np.ndarray, mine_b: np.ndarray, ids: np.ndarray, hmap: MultiResMap, flat: list
+                     ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] | None:
+        """:meth:`_level_cells_plain` for all levels with one sort: every point's (level, owner, cell) packed
+        into one integer (owner 0 = no track, else 1 + the rank of the track id; cells relative to the
+        level's smallest cell), sorted; the distinct values of tracks whose (level, cell) no unowned point
+        has are decoded back, in (level, track id, cell key) order. None if the packed values would not fit
+        in an int64. Appends to ``flat``, per level, (flat array indices of the cells, i0, j0, shape) when all
+        lie inside the level's array, else None."""
+        n_lv = len(hmap.levels)
+        rs = [lv.resolution for lv in hmap.levels]
+        xs, ys = pts[:, 0], pts[:, 1]
+        # v ↦ floor(v / r + 0.5) is monotonic: the extreme points give each level's extreme cells
+        x0, x1, y0, y1 = float(xs.min()), float(xs.max()), float(ys.min()), float(ys.max())
+        lox = [math.floor(x0 / r + 0.5) for r in rs]
+        loy = [math.floor(y0 / r + 0.5) for r in rs]
+        hix = [math.floor(x1 / r + 0.5) for r in rs]
+        hiy = [math.floor(y1 / r + 0.5) for r in rs]
+        wi = max(b - a for a, b in zip(lox, hix)) + 1
+        wj = max(b - a for a, b in zip(loy, hiy)) + 1
+        uids = np.unique(ids)  # ids ↦ rank 0 … R−1 in id order
+        block = (uids.shape[0] + 1) * wi * wj  # one level's values
+        if n_lv * block >= 1 << 62:
+            return None
+        owner = np.zeros(pts.shape[0], dtype=np.int64)
+        owner[mine_b] = np.searchsorted(uids, ids) + 1
+        res = np.array(rs)[:, None]
+        cx = np.floor(xs / res + 0.5).astype(np.int64)  # (L, n) cells, as pts / r_k + 0.5 per level
+        cy = np.floor(ys / res + 0.5).astype(np.int64)
+        cx -= np.array(lox, dtype=np.int64)[:, None]
+        cy -= np.array(loy, dtype=np.int64)[:, None]
+        packed = cx * wj + cy + owner * (wi * wj) + np.arange(0, n_lv * block, block, dtype=np.int64)[:, None]
+        u = np.sort(packed.ravel())
+        keep = np.ones(u.shape[0], dtype=bool)
+        keep[1:] = u[1:] != u[:-1]
+        u = u[keep]
+        lvl, rest = np.divmod(u, block)
+        own, cell = np.divmod(rest, wi * wj)
+        at = lvl * (wi * wj) + cell  # (level, cell) without the owner
+        theirs = own > 0
+        # a cell another (unowned) kept beam of this scan hits on the same level is the structure's
+        mine = theirs & ~_member(at, at[~theirs]) if not theirs.all() else theirs
+        lvl, own, cell = lvl[mine], own[mine], cell[mine]
+        ci, cj = np.divmod(cell, wj)
+        ci += np.array(lox, dtype=np.int64)[lvl]
+        cj += np.array(loy, dtype=np.int64)[lvl]
+        ids_s = uids[own - 1]
+        key_s = ci * _KEY_SHIFT + cj
+        cells_s = np.column_stack((ci, cj))
+        bounds = np.searchsorted(lvl, np.arange(n_lv + 1)).tolist()
+        per_level = []
+        for k, lv in enumerate(hmap.levels):
+            a, b = bounds[k], bounds[k + 1]
+            c = cells_s[a:b]
+            h, w = lv.shape
+            if w and lox[k] >= lv.i0 and loy[k] >= lv.j0 and hix[k] < lv.i0 + w and hiy[k] < lv.j0 + h:
+                # every cell inside the level's array (the usual case): one flat gather, kept for after_update
+                f = (cj[a:b] - lv.j0) * w + (ci[a:b] - lv.i0)
+                before, uidx = lv.logodds.ravel().take(f).astype(np.float64), lv.uidx.ravel().take(f).astype(np.int64)
+                flat.append((f, lv.i0, lv.j0, (h, w)))
+            else:
+                before, uidx = self._read(lv, c)
+                flat.append(None)
+            per_level.append((ids_s[a:b], key_s[a:b], c, before, uidx))
+        return per_level
+
+    def _level_cells_plain(self, pts: np.ndarray, mine_b: np.ndarray, ids: np.ndarray, hmap: MultiResMap
+                           ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+        """Per map level: (track ids, cell keys, cells, log-odds, update index) of the cells the tracks'
+        points ``pts[mine_b]`` (owners ``ids``) hit, sorted by track then cell key, each (track, cell) once,
+        leaving out cells the other points hit on that level."""
         per_level = []
         for lv in hmap.levels:
             cells = np.floor(pts / lv.resolution + 0.5).astype(np.int64)
@@ -262,17 +367,7 @@ class EvidenceLedger:
             c = cells[mine_b][sel]
             before, uidx = self._read(lv, c)
             per_level.append((ids[sel], mk[sel], c, before, uidx))
-        present = set(np.unique(ids).tolist())
-        for t in mine:
-            if t.id not in present:  # every beam of it removed
-                continue
-            if t.id not in self._ledgers:
-                self._ledgers[t.id] = self._new_ledger(t, t.stamp, len(hmap.levels))
-            if self.keep_beams and index >= 0:
-                kb = t.beams[valid[t.beams]]
-                if kb.shape[0]:
-                    self._ledgers[t.id].beams.append((int(index), kb.astype(np.int32)))
-        return PendingUpdate(per_level)
+        return per_level
 
     def _new_ledger(self, t: Track, stamp: float, n_levels: int) -> _Ledger:
         """An empty ledger of ``t``; its first box is where the track was first reported."""
@@ -303,7 +398,13 @@ class EvidenceLedger:
         for k, (ids, keys, cells, before, ui_before) in enumerate(pending.per_level):
             if ids.shape[0] == 0:
                 continue
-            after, ui_after = self._read(hmap.levels[k], cells)
+            lv = hmap.levels[k]
+            f = pending.flat[k] if pending.flat is not None else None
+            if f is not None and f[1] == lv.i0 and f[2] == lv.j0 and f[3] == lv.shape:
+                after = lv.logodds.ravel().take(f[0]).astype(np.float64)
+                ui_after = lv.uidx.ravel().take(f[0]).astype(np.int64)
+            else:
+                after, ui_after = self._read(lv, cells)
             upd = ui_after != ui_before  # else not updated (outside the array, or the ray was skipped)
             if not upd.any():
                 continue
@@ -315,10 +416,15 @@ class EvidenceLedger:
             lo = [0, *cut.tolist()]
             hi = [*lo[1:], ids.shape[0]]
             added = 0
+            ledgers = self._ledgers
             for tid, a, b in zip(ids[lo].tolist(), lo, hi):
-                led = self._ledgers.get(tid)
-                if led is not None:
-                    added += led.levels[k].append(keys[a:b], delta[a:b], ub[a:b], ua[a:b])
+                led = ledgers.get(tid)
+                if led is not None:  # (_LevelRecord.append inlined: every group holds rows)
+                    rec = led.levels[k]
+                    rec._rows.append((keys[a:b], delta[a:b], ub[a:b], ua[a:b]))
+                    rec._n_rows += b - a
+                    if rec._n_rows >= _COMPACT_ROWS or len(rec._rows) >= _COMPACT_CHUNKS:
+                        added += rec.compact()
             self.stats["cells_recorded"] += added
 
     def _fold(self, led: _Ledger) -> None:
@@ -340,7 +446,7 @@ class EvidenceLedger:
             a = self._first.get(t.id)
             if a is None:
                 self._first[t.id] = [_box_key(t), stamp, stamp]
-            elif t.id not in removing and math.hypot(float(t.velocity[0]), float(t.velocity[1])) < stand:
+            elif t.id not in removing and math.hypot(*t.velocity.tolist()) < stand:
                 if math.hypot(t.box.px - a[0][0], t.box.py - a[0][1]) <= reach:
                     a[2] = stamp  # still standing where it stood
                 else:

@@ -187,21 +187,27 @@ class GridLevel:
         jmin = int(min(s_abs[1], e_abs[:, 1].min()))
         jmax = int(max(s_abs[1], e_abs[:, 1].max()))
         self.ensure(imin, jmin, imax, jmax)
+        ex = np.ascontiguousarray(e_abs[:, 0] - self.i0)
+        ey = np.ascontiguousarray(e_abs[:, 1] - self.j0)
+        return self.integrate_cells(int(s_abs[0] - self.i0), int(s_abs[1] - self.j0), ex, ey, hit,
+                                    l_free, l_occ, cap, stop)
+
+    def integrate_cells(self, sx: int, sy: int, ex: np.ndarray, ey: np.ndarray, hit: np.ndarray,
+                        l_free: float, l_occ: float, cap: float, stop: np.ndarray | None = None) -> int:
+        """:meth:`integrate` with the rays already in array cells: from (``sx``, ``sy``) to (``ex[k]``,
+        ``ey[k]``) (int64, the level already grown to hold them; cells outside are skipped). One scan's
+        update: takes the next update indices. Returns the number of rays integrated."""
         free_idx = self.update_counter + 1
         occ_idx = self.update_counter + 2
         self.update_counter += 3
-        ex = np.ascontiguousarray(e_abs[:, 0] - self.i0)
-        ey = np.ascontiguousarray(e_abs[:, 1] - self.j0)
         if stop is not None:
             return int(integrate_rays_stop(
-                self.logodds, self.prob, self.uidx, free_idx, occ_idx,
-                int(s_abs[0] - self.i0), int(s_abs[1] - self.j0), ex, ey,
+                self.logodds, self.prob, self.uidx, free_idx, occ_idx, int(sx), int(sy), ex, ey,
                 np.ascontiguousarray(hit, dtype=np.bool_), np.ascontiguousarray(stop, dtype=np.float64),
                 float(l_free), float(l_occ), float(cap)))
         return int(
             integrate_rays(
-                self.logodds, self.prob, self.uidx, free_idx, occ_idx,
-                int(s_abs[0] - self.i0), int(s_abs[1] - self.j0), ex, ey,
+                self.logodds, self.prob, self.uidx, free_idx, occ_idx, int(sx), int(sy), ex, ey,
                 np.ascontiguousarray(hit, dtype=np.bool_), float(l_free), float(l_occ), float(cap),
             )
         )
@@ -278,11 +284,21 @@ class MultiResMap:
         if clear_laser is not None and len(clear_laser):
             ends = np.vstack((ends, pose.transform_points(np.asarray(clear_laser, dtype=np.float64))))
             hit = np.concatenate((hit, np.zeros(len(clear_laser), dtype=np.bool_)))
-        origin = np.array([pose.x, pose.y])
         if ends.shape[0] == 0:
             return 0
+        # every level's cell bounds from the extreme ends: v ↦ floor(v / r + 0.5) is monotonic, so the
+        # extreme ends give the extreme cells (as GridLevel.cell_bounds), with a few scalar operations
+        lo = ends.min(axis=0).tolist()
+        hi = ends.max(axis=0).tolist()
+        ox, oy = float(pose.x), float(pose.y)
+        bounds = []
+        for lv in self.levels:
+            r = lv.resolution
+            sx, sy = math.floor(ox / r + 0.5), math.floor(oy / r + 0.5)
+            bounds.append((sx, sy, min(sx, math.floor(lo[0] / r + 0.5)), min(sy, math.floor(lo[1] / r + 0.5)),
+                           max(sx, math.floor(hi[0] / r + 0.5)), max(sy, math.floor(hi[1] / r + 0.5))))
         if self.max_bytes is not None:
-            need = sum(lv.bytes_after_growth(*lv.cell_bounds(origin, ends)) for lv in self.levels)
+            need = sum(lv.bytes_after_growth(*b[2:]) for lv, b in zip(self.levels, bounds))
             if need > self.max_bytes:
                 raise MapTooLargeError(
                     f"integrating this scan would grow the map to {need / 1e6:.0f} MB "
@@ -293,9 +309,21 @@ class MultiResMap:
             stop = np.zeros(hit.shape[0])
             stop[: int(np.count_nonzero(hit))] = grazing_stop(
                 np.asarray(hits_laser, dtype=np.float64).reshape(-1, 2), self.grazing_cells, self.min_sin)
+        # the rays' end cells of a level, computed as GridLevel.integrate does (floor(v / r + 0.5), array
+        # coordinates), into buffers shared by the levels: (2, n) rows are the contiguous x and y arrays
+        ends_t = np.ascontiguousarray(ends.T)
+        buf = np.empty_like(ends_t)
         n0 = 0
-        for k, lv in enumerate(self.levels):
-            n = lv.integrate(origin, ends, hit, self.l_free, self.l_occ, self.cap, stop)
+        for k, (lv, (sx, sy, imin, jmin, imax, jmax)) in enumerate(zip(self.levels, bounds)):
+            lv.ensure(imin, jmin, imax, jmax)
+            np.divide(ends_t, lv.resolution, out=buf)
+            buf += 0.5
+            np.floor(buf, out=buf)
+            cells = buf.astype(np.int64)
+            cells[0] -= lv.i0
+            cells[1] -= lv.j0
+            n = lv.integrate_cells(sx - lv.i0, sy - lv.j0, cells[0], cells[1], hit,
+                                   self.l_free, self.l_occ, self.cap, stop)
             if k == 0:
                 n0 = n
         self.version += 1
