@@ -48,6 +48,49 @@ def _mark_occupied(logodds, prob, uidx, x, y, free_idx, occ_idx, l_free, l_occ, 
 
 
 @njit(cache=True)
+def _integrate_ray(logodds, prob, uidx, free_idx, occ_idx, sx, sy, x1, y1, is_hit, skip,
+                   l_free, l_occ, cap):  # pragma: no cover - numba
+    """One ray from cell (sx, sy) to (x1, y1), both inside the array and distinct: the start cell and the
+    intermediate cells free except the last ``skip`` intermediate ones, the endpoint occupied if
+    ``is_hit`` else free (Bresenham as OccGridMapBase::bresenham2D; ties of the major axis go to x)."""
+    dx = x1 - sx
+    dy = y1 - sy
+    adx = abs(dx)
+    ady = abs(dy)
+    stx = 1 if dx > 0 else -1
+    sty = 1 if dy > 0 else -1
+    major = adx if adx >= ady else ady
+    n_free = major - 1 - skip
+    x = sx
+    y = sy
+    _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
+    if adx >= ady:
+        err = adx // 2
+        for i in range(adx - 1):
+            x += stx
+            err += ady
+            if err >= adx:
+                y += sty
+                err -= adx
+            if i < n_free:
+                _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
+    else:
+        err = ady // 2
+        for i in range(ady - 1):
+            y += sty
+            err += adx
+            if err >= ady:
+                x += stx
+                err -= ady
+            if i < n_free:
+                _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
+    if is_hit:
+        _mark_occupied(logodds, prob, uidx, x1, y1, free_idx, occ_idx, l_free, l_occ, cap)
+    else:
+        _mark_free(logodds, prob, uidx, x1, y1, free_idx, l_free)
+
+
+@njit(cache=True)
 def integrate_rays(
     logodds: np.ndarray,
     prob: np.ndarray,
@@ -82,37 +125,7 @@ def integrate_rays(
             continue
         if x1 < 0 or y1 < 0 or x1 >= w or y1 >= h:
             continue
-        dx = x1 - sx
-        dy = y1 - sy
-        adx = abs(dx)
-        ady = abs(dy)
-        stx = 1 if dx > 0 else -1
-        sty = 1 if dy > 0 else -1
-        x = sx
-        y = sy
-        _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
-        if adx >= ady:  # major axis x (ties go to x), as OccGridMapBase::bresenham2D
-            err = adx // 2
-            for _ in range(adx - 1):
-                x += stx
-                err += ady
-                if err >= adx:
-                    y += sty
-                    err -= adx
-                _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
-        else:
-            err = ady // 2
-            for _ in range(ady - 1):
-                y += sty
-                err += adx
-                if err >= ady:
-                    x += stx
-                    err -= ady
-                _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
-        if hit[k]:
-            _mark_occupied(logodds, prob, uidx, x1, y1, free_idx, occ_idx, l_free, l_occ, cap)
-        else:
-            _mark_free(logodds, prob, uidx, x1, y1, free_idx, l_free)
+        _integrate_ray(logodds, prob, uidx, free_idx, occ_idx, sx, sy, x1, y1, hit[k], 0, l_free, l_occ, cap)
         n_done += 1
     return n_done
 
@@ -192,43 +205,12 @@ def integrate_rays_stop(
             continue
         dx = x1 - sx
         dy = y1 - sy
-        adx = abs(dx)
-        ady = abs(dy)
-        stx = 1 if dx > 0 else -1
-        sty = 1 if dy > 0 else -1
-        major = adx if adx >= ady else ady
+        major = abs(dx) if abs(dx) >= abs(dy) else abs(dy)
         skip = 0
         if stop[k] > 1.0:  # intermediate cell j major steps before the end lies j·L/major cells from it
             skip = int((stop[k] - 1.0) * major / math.sqrt(float(dx * dx + dy * dy)))
             if skip > major - 1:
                 skip = major - 1
-        n_free = major - 1 - skip
-        x = sx
-        y = sy
-        _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
-        if adx >= ady:
-            err = adx // 2
-            for i in range(adx - 1):
-                x += stx
-                err += ady
-                if err >= adx:
-                    y += sty
-                    err -= adx
-                if i < n_free:
-                    _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
-        else:
-            err = ady // 2
-            for i in range(ady - 1):
-                y += sty
-                err += adx
-                if err >= ady:
-                    x += stx
-                    err -= ady
-                if i < n_free:
-                    _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
-        if hit[k]:
-            _mark_occupied(logodds, prob, uidx, x1, y1, free_idx, occ_idx, l_free, l_occ, cap)
-        else:
-            _mark_free(logodds, prob, uidx, x1, y1, free_idx, l_free)
+        _integrate_ray(logodds, prob, uidx, free_idx, occ_idx, sx, sy, x1, y1, hit[k], skip, l_free, l_occ, cap)
         n_done += 1
     return n_done
