@@ -103,3 +103,24 @@ def run_cli(capsys, *args: str) -> tuple[int, str, str]:
         sys.argv = old
     out, err = capsys.readouterr()
     return code, out, err
+
+
+def room_box_scan(pose, box: tuple[float, float, float, float], stamp: float, seed: int, n: int = 360):
+    """A simulated 360° scan (n beams, 5 mm range noise) from ``pose`` in a 12 × 10 m room holding one box
+    ``(cx, cy, width, height)`` m, map frame; no return = inf."""
+    import math
+
+    import numpy as np
+
+    from dynslam2d.sim import cast_rays, rect_segments
+    from dynslam2d.types import Scan
+
+    angles = -math.pi + np.arange(n) * 2 * math.pi / n
+    segs = np.vstack([rect_segments(0.0, 0.0, 0.0, 12.0, 10.0), rect_segments(box[0], box[1], 0.0, box[2], box[3])])
+    ids = np.zeros(segs.shape[0], dtype=np.int32)
+    dist, _ = cast_rays((pose.x, pose.y), pose.theta + angles, segs, ids, np.zeros((0, 3)),
+                        np.zeros(0, dtype=np.int32))
+    r = dist + np.random.default_rng(seed).normal(0.0, 0.005, dist.shape)
+    r[~np.isfinite(dist)] = np.inf
+    return Scan(stamp=stamp, angle_min=-math.pi, angle_increment=2 * math.pi / n, ranges=r, range_min=0.1,
+                range_max=20.0)

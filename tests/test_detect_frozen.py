@@ -8,15 +8,14 @@ import math
 
 import numpy as np
 import pytest
+from conftest import room_box_scan
 
 from dynslam2d.detect import DetectConfig, Tracker
 from dynslam2d.detect.frozen import fast_init
-from dynslam2d.sim import cast_rays, rect_segments
+from dynslam2d.sim import rect_segments
 from dynslam2d.types import Box, Pose2D, Scan, Track
 
 N = 360
-ANGLES = -math.pi + np.arange(N) * 2 * math.pi / N
-ROOM = rect_segments(0.0, 0.0, 0.0, 12.0, 10.0)
 
 
 def _fields(obj: object) -> list:
@@ -63,14 +62,7 @@ def test_fast_init_falls_back_to_the_class_where_slots_cannot_be_set_directly() 
 
 
 def _scan(pose: Pose2D, box_x: float, stamp: float, seed: int) -> Scan:
-    segs = np.vstack([ROOM, rect_segments(box_x, 1.5, 0.0, 0.8, 0.5)])
-    ids = np.zeros(segs.shape[0], dtype=np.int32)
-    dist, _ = cast_rays((pose.x, pose.y), pose.theta + ANGLES, segs, ids, np.zeros((0, 3)),
-                        np.zeros(0, dtype=np.int32))
-    r = dist + np.random.default_rng(seed).normal(0.0, 0.005, dist.shape)
-    r[~np.isfinite(dist)] = np.inf
-    return Scan(stamp=stamp, angle_min=-math.pi, angle_increment=2 * math.pi / N, ranges=r, range_min=0.1,
-                range_max=20.0)
+    return room_box_scan(pose, (box_x, 1.5, 0.8, 0.5), stamp, seed, N)
 
 
 def test_history_is_bounded_and_reports_own_their_arrays() -> None:

@@ -9,16 +9,15 @@ import math
 import random
 
 import numpy as np
+from conftest import room_box_scan
 
 from dynslam2d.detect import DetectConfig, Tracker
 from dynslam2d.detect.kernels import segment_means
 from dynslam2d.detect.tracker import _nearest_age
-from dynslam2d.sim import cast_rays, rect_segments
+from dynslam2d.sim import rect_segments
 from dynslam2d.types import Pose2D, Scan
 
 N = 360
-ANGLES = -math.pi + np.arange(N) * 2 * math.pi / N
-ROOM = rect_segments(0.0, 0.0, 0.0, 12.0, 10.0)
 
 
 def _window_argmin(stamps: list[float], t: float, a: float) -> int:
@@ -50,14 +49,7 @@ def test_nearest_age_is_the_window_argmin_on_random_stamp_lists() -> None:
 
 
 def _scan(pose: Pose2D, box_x: float, stamp: float, seed: int) -> Scan:
-    segs = np.vstack([ROOM, rect_segments(box_x, 0.0, 0.0, 0.6, 0.6)])
-    ids = np.zeros(segs.shape[0], dtype=np.int32)
-    dist, _ = cast_rays((pose.x, pose.y), pose.theta + ANGLES, segs, ids, np.zeros((0, 3)),
-                        np.zeros(0, dtype=np.int32))
-    r = dist + np.random.default_rng(seed).normal(0.0, 0.005, dist.shape)
-    r[~np.isfinite(dist)] = np.inf
-    return Scan(stamp=stamp, angle_min=-math.pi, angle_increment=2 * math.pi / N, ranges=r, range_min=0.1,
-                range_max=20.0)
+    return room_box_scan(pose, (box_x, 0.0, 0.6, 0.6), stamp, seed, N)
 
 
 def _vacated_reference(tr: Tracker, t: float) -> dict[int, float]:
