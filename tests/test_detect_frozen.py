@@ -4,7 +4,6 @@ that own their arrays — each checked against the plain construction or on a si
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 import pytest
@@ -12,7 +11,6 @@ from conftest import room_box_scan
 
 from dynslam2d.detect import DetectConfig, Tracker
 from dynslam2d.detect.frozen import fast_init
-from dynslam2d.sim import rect_segments
 from dynslam2d.types import Box, Pose2D, Scan, Track
 
 N = 360

@@ -14,7 +14,6 @@ from conftest import room_box_scan
 from dynslam2d.detect import DetectConfig, Tracker
 from dynslam2d.detect.kernels import segment_means
 from dynslam2d.detect.tracker import _nearest_age
-from dynslam2d.sim import rect_segments
 from dynslam2d.types import Pose2D, Scan
 
 N = 360
