@@ -43,14 +43,12 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_digest import INPUTS as _ALL_INPUTS  # noqa: E402  (the inputs the digest checks)
+
 INPUTS: dict[str, tuple[str, str | None]] = {
-    "negative_2/left": ("dynamic/leg_tracker/negative_2.bag", "/left_scan"),
-    "negative_2/rear": ("dynamic/leg_tracker/negative_2.bag", "/rear_scan"),
-    "negative_2/right": ("dynamic/leg_tracker/negative_2.bag", "/right_scan"),
-    "positive_7": ("dynamic/leg_tracker/positive_7.bag", None),
-    "overtakes": ("dynamic/datmo/overtakes.bag", None),
-    "demo": ("dynamic/leg_tracker/demo_stationary_simple_environment.bag", None),
-    "sim:drive": ("sim:drive", None),
+    k: _ALL_INPUTS[k] for k in ("negative_2/left", "negative_2/rear", "negative_2/right", "positive_7", "overtakes",
+                                "demo", "sim:drive")
 }
 
 
