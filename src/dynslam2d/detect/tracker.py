@@ -707,7 +707,7 @@ class Tracker:
             dk = det.kind
             if dk == KIND_RECT:
                 if k.has_heading:
-                    # (self._swapped, inline)
+                    # the detection's first axis is the track's second (90° ambiguity of a box's axes)
                     sw = int(round((det.theta - k.theta_box) / _HALF_PI)) % 2 == 1
                     swaps[r] = sw
                     sz = k.size
@@ -881,11 +881,6 @@ class Tracker:
             while past and t - past_t[0] > max_age:  # (past_t[q] is past[q][0])
                 del past[0]
                 del past_t[0]
-
-    @staticmethod
-    def _swapped(k: _Track, det: Detection) -> bool:
-        """True when the detection's first axis is the track's second (90° ambiguity)."""
-        return int(round((det.theta - k.theta_box) / _HALF_PI)) % 2 == 1
 
     def _motion_prior(self, k: _Track) -> None:
         """Hidden side of a moving box whose other side is measured: a side parallel to the motion is
