@@ -147,6 +147,10 @@ SkipBadOpt = Annotated[
 ]
 SeedOpt = Annotated[int | None, typer.Option(
     "--seed", help="Simulator seed (sim: inputs); default: the scenario's own.")]
+SetOpt = Annotated[list[str] | None, typer.Option(
+    "--set", metavar="KEY=VALUE", help="Set one config key (dotted as in 'dynslam2d config dump'; the value is read "
+                                       "as YAML), after --config and before the named options; repeat for more, "
+                                       "e.g. --set detect.tracker.m_exit_time=2 --set loop.far_searches=8.")]
 DurationOpt = Annotated[
     float | None, typer.Option(
         "--duration", min=0.1, help="Simulated duration in s (sim: inputs); default: the scenario's own.")
@@ -444,6 +448,7 @@ def run(
         "--gt", help="Ground-truth folder written by 'dynslam2d simulate' (for metrics).")] = None,
     config: Annotated[Path | None, typer.Option(
         "--config", help="YAML configuration (see 'dynslam2d config dump').")] = None,
+    sets: SetOpt = None,
     map_resolution: Annotated[float | None, typer.Option(
         "--map-resolution", help="Finest map cell size, m [0.05].")] = None,
     map_levels: Annotated[int | None, typer.Option("--map-levels", help="Map levels [3].")] = None,
@@ -533,7 +538,7 @@ def run(
         "laser_min_dist": laser_min_dist, "laser_max_dist": laser_max_dist,
         "constant_velocity": constant_velocity, "correlative_mode": correlative,
     }, filter_mode=filter_mode, range_scale=range_scale, clean=clean, loop_closure=loop_closure,
-        hector_compat=hector_compat)
+        hector_compat=hector_compat, sets=sets or [])
     _check_sim_only(input, seed, duration)
     inputs = _input_paths(input, gt, config)
     truth_files = _read_gt(gt)  # before the first scan: a bad --gt fails now
@@ -613,12 +618,12 @@ def _on_off(name: str, value: str) -> bool:
 
 
 def _run_config(config: Path | None, slam: dict[str, Any], *, filter_mode: str | None, range_scale: str | None,
-                clean: str | None, loop_closure: str | None, hector_compat: bool) -> Config:
-    """``run``'s configuration: the --config file (or the defaults), then every option given on the command line
-    (``slam``: slam.* keys, None = not given)."""
-    from dynslam2d.config import Config, load_config, with_overrides
+                clean: str | None, loop_closure: str | None, hector_compat: bool, sets: list[str]) -> Config:
+    """``run``'s configuration: the --config file (or the defaults), then the --set KEY=VALUE assignments, then
+    every named option given on the command line (``slam``: slam.* keys, None = not given)."""
+    from dynslam2d.config import Config, load_config, with_assignments, with_overrides
 
-    cfg = load_config(config) if config else Config()
+    cfg = with_assignments(load_config(config) if config else Config(), sets)
     cfg = with_overrides(cfg, {"slam": slam})
     if filter_mode is not None:
         cfg = with_overrides(cfg, {"filter": {"mode": filter_mode}})
@@ -1111,11 +1116,23 @@ def experiment_paper(
                                        "column is the speed of an unloaded core]; the other columns do not depend on "
                                        "it.")] = 1,
     ray: RayOpt = None,
+    config: Annotated[Path | None, typer.Option(
+        "--config", help="YAML configuration every cell starts from (its filter.mode is the cell's).")] = None,
+    sets: SetOpt = None,
 ) -> None:
-    """The paper's experiment: 3 trials × 4 filter configurations → table.md/csv/json and figure2.png."""
+    """The paper's experiment: 3 trials × 4 filter configurations → table.md/csv/json and figure2.png.
+
+    With --config or --set the cells start from that configuration (written to config.yaml
+    beside the table); each cell then sets its own filter.mode.
+    """
+    from dynslam2d.config import Config, dump_config, load_config, with_assignments
     from dynslam2d.experiments import CONFIGURATIONS, TRIALS, run_experiment, write_experiment
+    from dynslam2d.io.atomic import write_text_atomic
     from dynslam2d.io.outputs import plan_results_folder, write_marker
 
+    if any(s.partition("=")[0].strip() == "filter.mode" for s in sets or []):
+        raise DynSlamError("--set filter.mode: the experiment runs every filter mode itself; set other keys")
+    base = with_assignments(load_config(config) if config else Config(), sets or [])
     out = out or _default_out("experiment")
     folder = plan_results_folder(out, force=force)  # before the work: a bad --out fails at once
     chosen = tuple(trials) if trials else TRIALS
@@ -1130,10 +1147,11 @@ def experiment_paper(
         status.update(Text(f"running … {n_done[0]}/{len(CONFIGURATIONS) * len(chosen)} done (last: {text})"))
 
     with console.status("running …", spinner="dots") as status:
-        result = run_experiment(chosen, duration=duration, progress=cell_done, workers=workers, ray=ray)
+        result = run_experiment(chosen, duration=duration, base=base, progress=cell_done, workers=workers, ray=ray)
         try:
             folder.start(input="experiment paper")
             paths = write_experiment(result, folder.work)
+            paths["config.yaml"] = write_text_atomic(folder.work / "config.yaml", dump_config(base, comments=False))
             write_marker(folder.work, "complete", input="experiment paper", files=sorted(paths))
             work = folder.work
             folder.finish()

@@ -152,6 +152,64 @@ def with_overrides(config: Config, overrides: dict[str, dict[str, Any]]) -> Conf
     return config_from_dict(data, origin="command-line options")
 
 
+def check_key(key: str, spec: str) -> None:
+    """Raise DynSlamError unless the dotted ``key`` (as in ``config dump``) names a value of :class:`Config`
+    (``spec`` is the option as the user wrote it, for the message)."""
+    parts = key.split(".")
+    model: type[BaseModel] = Config
+    for i, part in enumerate(parts):
+        fields = model.model_fields
+        if part not in fields:
+            where = ".".join(parts[:i]) or "the configuration"
+            raise DynSlamError(
+                f"--set {spec}: {where} has no key {part!r}; keys: {', '.join(sorted(fields))} "
+                f"(see 'dynslam2d config dump')"
+            )
+        ann = fields[part].annotation
+        if i < len(parts) - 1:
+            if not (isinstance(ann, type) and issubclass(ann, BaseModel)):
+                raise DynSlamError(f"--set {spec}: {'.'.join(parts[: i + 1])} is a value, not a section")
+            model = ann
+        elif isinstance(ann, type) and issubclass(ann, BaseModel):
+            raise DynSlamError(f"--set {spec}: {'.'.join(parts)} is a section; name one of its keys")
+
+
+def set_key(data: dict[str, Any], key: str, value: Any) -> None:
+    """Set the dotted ``key`` in a ``Config.model_dump()``-shaped dict."""
+    parts = key.split(".")
+    node = data
+    for part in parts[:-1]:
+        node = node[part]
+    node[parts[-1]] = value
+
+
+def parse_assignment(spec: str) -> tuple[str, Any]:
+    """``KEY=VALUE`` (KEY dotted as in ``config dump``, VALUE read as YAML: ``0.05``, ``off``, ``[1, 2]``)."""
+    key, sep, text = spec.partition("=")
+    key = key.strip()
+    if not sep or not key or not text.strip():
+        raise DynSlamError(f"--set {spec}: expected KEY=VALUE, e.g. slam.map_resolution=0.025")
+    check_key(key, spec)
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        problem = getattr(err, "problem", None) or "unreadable"
+        raise DynSlamError(f"--set {spec}: the value is not valid YAML ({problem}); quote it or fix the "
+                           f"brackets") from None
+    return key, value
+
+
+def with_assignments(config: Config, specs: list[str]) -> Config:
+    """A copy of ``config`` with every ``KEY=VALUE`` of ``specs`` applied in order (``run --set``)."""
+    if not specs:
+        return config
+    data = config.model_dump()
+    for spec in specs:
+        key, value = parse_assignment(spec)
+        set_key(data, key, value)
+    return config_from_dict(data, origin="--set " + " ".join(specs))
+
+
 _DUMP_HEADER = """\
 # dynslam2d configuration (dynslam2d config dump). Give any part of it to
 # `dynslam2d run --config FILE.yaml`; missing keys keep their defaults.

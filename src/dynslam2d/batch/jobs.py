@@ -18,9 +18,8 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import BaseModel
 
-from dynslam2d.config import Config, config_from_dict
+from dynslam2d.config import Config, check_key, config_from_dict, set_key
 from dynslam2d.errors import DynSlamError
 
 
@@ -49,46 +48,19 @@ class Job:
     options: dict[str, Any] = field(default_factory=dict)
 
 
-def _field_model(model: type[BaseModel], parts: list[str], spec: str) -> None:
-    """Raise DynSlamError unless ``parts`` names a field path of ``model``."""
-    for i, part in enumerate(parts):
-        fields = model.model_fields
-        if part not in fields:
-            where = ".".join(parts[:i]) or "the configuration"
-            raise DynSlamError(
-                f"--set {spec}: {where} has no key {part!r}; keys: {', '.join(sorted(fields))} "
-                f"(see 'dynslam2d config dump')"
-            )
-        ann = fields[part].annotation
-        if i < len(parts) - 1:
-            if not (isinstance(ann, type) and issubclass(ann, BaseModel)):
-                raise DynSlamError(f"--set {spec}: {'.'.join(parts[: i + 1])} is a value, not a section")
-            model = ann
-        elif isinstance(ann, type) and issubclass(ann, BaseModel):
-            raise DynSlamError(f"--set {spec}: {'.'.join(parts)} is a section; name one of its keys")
-
-
 def parse_setting(spec: str) -> Setting:
     """Parse ``KEY=V1,V2,…`` (KEY dotted as in ``config dump``; values read as YAML scalars)."""
     key, sep, rest = spec.partition("=")
     key = key.strip()
     if not sep or not key or not rest.strip():
         raise DynSlamError(f"--set {spec}: expected KEY=VALUE[,VALUE…], e.g. filter.mode=none,box")
-    _field_model(Config, key.split("."), spec)
+    check_key(key, spec)
     texts = tuple(t.strip() for t in rest.split(","))
     if any(not t for t in texts):
         raise DynSlamError(f"--set {spec}: an empty value; separate values with single commas")
     if len(set(texts)) != len(texts):
         raise DynSlamError(f"--set {spec}: a value is listed twice")
     return Setting(key, texts, tuple(yaml.safe_load(t) for t in texts))
-
-
-def _set_path(data: dict[str, Any], key: str, value: Any) -> None:
-    parts = key.split(".")
-    node = data
-    for part in parts[:-1]:
-        node = node[part]
-    node[parts[-1]] = value
 
 
 def settings_grid(settings: list[Setting]) -> list[list[tuple[str, str, Any]]]:
@@ -164,7 +136,7 @@ def make_jobs(
             if sig not in cache:
                 data = base.model_dump()
                 for key, _, value in combo:
-                    _set_path(data, key, value)
+                    set_key(data, key, value)
                 spec = ", ".join(f"{k}={t}" for k, t, _ in combo)
                 cache[sig] = config_from_dict(data, origin=f"--set {spec}").model_dump(mode="json")
             name = "__".join([label] + [_safe(f"{k}={t}") for k, t, _ in combo])
