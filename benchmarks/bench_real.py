@@ -24,7 +24,7 @@ ms/scan = median processing time per scan (summary.json ``processing_ms_median``
 beside it) and scans/s = 1000 / that median.
 
     python benchmarks/bench_real.py [--filter default] [--config FILE] [--only negative_2 drive ...]
-        [--data ../shared/data] [--out /tmp/dynslam2d-bench-real] [--table real.md] [--cpu 0]
+        [--data ../shared/data] [--out DIR] [--table real.md] [--cpu 0]
 
 ``--cpu N`` pins every command to core N (``taskset -c N``: "one core"). The commands are
 printed, and written under the table, exactly as they were run (``dynslam2d`` = ``python -m
@@ -40,6 +40,7 @@ import os
 import shlex
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -130,7 +131,8 @@ def measure(rec: Recording, args: argparse.Namespace, env: dict[str, str], prefi
     out = args.out / label.replace("/", "_").replace(":", "_").replace(" ", "_")
     topic = ["--topic", rec.topic] if rec.topic else []
     seed = [] if rec.seed is None else ["--seed", str(rec.seed)]
-    run = ["run", source, *topic, *seed, "--out", _relative(out), "--filter", args.filter, "--quiet"]
+    # --force: a run folder left by an earlier benchmark at --out is replaced (only a dynslam2d results folder is)
+    run = ["run", source, *topic, *seed, "--out", _relative(out), "--filter", args.filter, "--quiet", "--force"]
     if args.config:
         run += ["--config", _relative(args.config)]
     try:
@@ -204,13 +206,16 @@ def table(rows: list[Row]) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data", help="the shared data folder")
-    ap.add_argument("--out", type=Path, default=Path("/tmp/dynslam2d-bench-real"), help="folder for the run folders")
+    ap.add_argument("--out", type=Path, default=None,
+                    help="folder for the run folders (default: a new temporary one; earlier runs in it are replaced)")
     ap.add_argument("--table", type=Path, default=None, help="also write the markdown table + commands here")
     ap.add_argument("--filter", default="box", choices=("none", "fixed", "adaptive", "box", "default"))
     ap.add_argument("--config", type=Path, default=None, help="YAML configuration passed to every run")
     ap.add_argument("--only", nargs="+", default=None, help="recordings whose name contains any of these words")
     ap.add_argument("--cpu", type=int, default=None, help="pin every command to this core (taskset -c)")
     args = ap.parse_args()
+    if args.out is None:
+        args.out = Path(tempfile.mkdtemp(prefix="dynslam2d-bench-real-"))
     args.data, args.out = args.data.resolve(), args.out.resolve()
     args.out.mkdir(parents=True, exist_ok=True)
     sys.path.insert(0, str(REPO / "src"))
