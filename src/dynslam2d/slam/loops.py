@@ -49,6 +49,7 @@ from dynslam2d.slam.correlative import correlative_search
 from dynslam2d.slam.grid import MultiResMap
 from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.matcher import degeneracy, evaluate, match_multires, support
+from dynslam2d.slam.placedesc import PlaceIndex
 from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
 from dynslam2d.types import Pose2D, Scan
 
@@ -158,13 +159,19 @@ class LoopCloser:
         # translation deviation (m) of every chain edge and accepted loop, keyed (i, j): the far search's
         # uncertainty is their sum along the graph's shortest path
         self._sigma_edges: dict[tuple[int, int], float] = {}
-        self._length_edges: dict[tuple[int, int], float] = {}  # their lengths, m (heading uncertainty)
+        # their heading deviations, rad: drift_rad_per_m × length, plus far_weak_turn across a weak match
+        self._turn_edges: dict[tuple[int, int], float] = {}
         self._far_last: dict[int, int] = {}  # submap → node of its last far search
         self._extent: dict[int, float] = {}  # submap → largest keyframe distance from its anchor, m
         self._loop_path = 0.0  # front-end path length at the last accepted loop's keyframe, m
+        c = self.config
+        # place descriptors of every place_every-th keyframe: the far search ranks submaps by them
+        self._places = (PlaceIndex(c.place_rings, c.place_sectors, c.place_max_range)
+                        if c.far_search and c.far_rank == "descriptor" else None)
+        self._query_desc: tuple[int, np.ndarray] | None = None  # (node, descriptor) of the latest keyframe
         self.stats: dict[str, float] = {"searches": 0, "candidates": 0, "loops_accepted": 0, "optimisations": 0,
                                         "far_searches": 0, "far_candidates": 0, "far_loops": 0,
-                                        "search_ms": 0.0, "optimise_ms": 0.0, "total_ms": 0.0}
+                                        "place_ms": 0.0, "search_ms": 0.0, "optimise_ms": 0.0, "total_ms": 0.0}
 
     # ---- input ----------------------------------------------------------------------------
     def add(self, stamp: float, pose: Pose2D, scan: Scan, removed: np.ndarray, keyframe: bool,
@@ -227,11 +234,14 @@ class LoopCloser:
             sxy, sth = edge_sigmas(c, z, self._weak_since_kf)
             self.graph.add_edge(prev_node, node, z, diag_info(sxy, sth))
             self._sigma_edges[(prev_node, node)] = sxy
-            self._length_edges[(prev_node, node)] = math.hypot(float(z[0]), float(z[1]))
+            self._turn_edges[(prev_node, node)] = (c.drift_rad_per_m * math.hypot(float(z[0]), float(z[1]))
+                                                   + (c.far_weak_turn if self._weak_since_kf else 0.0))
         else:
             node = self.graph.add_node(p)
         self.keyframes.append(kf)
         self._weak_since_kf = False
+        if self._places is not None:
+            self._describe(node)
         every = c.search_every * (c.tracked_search_every if self._recent_loop(node) is not None else 1)
         if node % every == 0:
             self._search(node)
@@ -346,7 +356,7 @@ class LoopCloser:
     def _uncertainty(self, node: int) -> tuple[np.ndarray, np.ndarray]:
         """((n_nodes,) summed translation deviation (m) of the edges on the graph's shortest path from
         ``node`` to every node (keyframe chain and accepted loops; inf beyond the far radius's cap),
-        (n_nodes,) length of the graph's shortest path, m)."""
+        (n_nodes,) summed heading deviation (rad) of the edges on the path that minimises it)."""
         # imported here: scipy.sparse costs start-up time and memory only a run that searches needs
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import dijkstra
@@ -355,7 +365,7 @@ class LoopCloser:
         n = self.graph.n_nodes
         out = []
         for edges, limit in ((self._sigma_edges, max(c.max_far_radius - c.search_radius, 0.0) / c.far_sigmas),
-                             (self._length_edges, np.inf)):
+                             (self._turn_edges, np.inf)):
             if not edges:
                 d = np.full(n, np.inf)
                 d[node] = 0.0
@@ -372,8 +382,8 @@ class LoopCloser:
         searched locally) over every rotation; a candidate is verified at once on the keyframes before it."""
         c = self.config
         kf = self.keyframes[node]
-        unc, length = self._uncertainty(node)
-        elig: list[tuple[int, float, int, float]] = []
+        unc, heading = self._uncertainty(node)
+        elig: list[tuple[float, float, int, float, float]] = []
         for s in range((node + 1) // c.submap_keyframes):
             _first, last, anchor = self._submap_range(s)
             if last >= node or s in skip or kf.path - self.keyframes[last].path < c.min_path_gap:
@@ -382,9 +392,13 @@ class LoopCloser:
             a = self._estimate(anchor)
             d = math.hypot(a[0] - est[0], a[1] - est[1])
             if d <= r:
-                elig.append((self._far_last.get(s, -1), d / r, s, r, float(length[anchor])))
+                elig.append((self._far_last.get(s, -1), d / r, s, r, float(heading[anchor])))
+        if self._places is not None and elig:
+            # the submaps that look most like this place first (Scan Context ranking), not the least recently searched
+            rank = self._place_ranks(node)
+            elig = [(rank.get(s, 2.0), d, s, r, dth) for _last, d, s, r, dth in elig]
         elig.sort()
-        for _last, _d, s, r, path in elig[:c.far_searches]:
+        for _last, _d, s, r, dth in elig[:c.far_searches]:
             self._far_last[s] = node
             self.stats["far_searches"] += 1
             _first, _l, anchor = self._submap_range(s)
@@ -398,12 +412,43 @@ class LoopCloser:
             if cand is None:
                 continue
             implied = self._implied(cand)
-            turn = c.angular_window + c.far_sigmas * c.drift_rad_per_m * path
-            if math.hypot(implied[0] - est[0], implied[1] - est[1]) > r or abs(implied[2] - est[2]) > turn:
+            turn = c.angular_window + c.far_sigmas * dth
+            jump = math.hypot(implied[0] - est[0], implied[1] - est[1])
+            if jump > r or abs(math.remainder(implied[2] - est[2], math.tau)) > turn:
                 continue  # a correction larger than the uncertainty allows: a look-alike place, not a loop
             cand.far = True
             self.stats["far_candidates"] += 1
             self._verify_far(cand, s)
+
+    def _describe(self, node: int) -> None:
+        """The place descriptor of keyframe ``node`` (the returns of the last ``place_keyframes`` keyframes in its
+        frame, front-end relative poses); stored every ``place_every``-th keyframe, kept for this node's search."""
+        c = self.config
+        t0 = time.perf_counter()
+        base = self.keyframes[node].frontend
+        parts = []
+        for k in range(max(node - c.place_keyframes + 1, 0), node + 1):
+            pts, _ = self._points(self.keyframes[k])
+            if pts.shape[0]:
+                parts.append(compose(relative(base, self.keyframes[k].frontend), np.c_[pts, np.zeros(pts.shape[0])]))
+        desc = self._places.describe(np.vstack(parts)[:, :2] if parts else np.zeros((0, 2)))
+        if node % c.place_every == 0:
+            self._places.add(node, desc)
+        self._query_desc = (node, desc)
+        self.stats["place_ms"] += (time.perf_counter() - t0) * 1e3
+
+    def _place_ranks(self, node: int) -> dict[int, float]:
+        """Submap → smallest place-descriptor distance of its stored keyframes to keyframe ``node``'s place."""
+        c = self.config
+        t0 = time.perf_counter()
+        if self._query_desc is None or self._query_desc[0] != node:
+            self._describe(node)
+        keys, d, _shift = self._places.distances(self._query_desc[1])
+        sub = keys // c.submap_keyframes
+        best = np.full(int(sub.max()) + 1 if sub.size else 0, np.inf)
+        np.minimum.at(best, sub, d)
+        self.stats["place_ms"] += (time.perf_counter() - t0) * 1e3
+        return {s: float(v) for s, v in enumerate(best) if np.isfinite(v)}
 
     def _submap_extent(self, s: int) -> float:
         """Largest distance of submap ``s``'s keyframes from its anchor (front-end poses), m."""
@@ -488,7 +533,8 @@ class LoopCloser:
             return None
         # the runner-up only for a match good enough to become a candidate (a second branch and bound)
         cr = correlative_search(lvl, pts, pred, lin, ang, None, c.search_points, sc.correlative_max_height, 0.0, 0.0,
-                                runner_up_distance=c.runner_up_distance, runner_up_angle=c.runner_up_angle)
+                                runner_up_distance=c.runner_up_distance, runner_up_angle=c.runner_up_angle,
+                                runner_up_wrap=c.runner_up_wrap)
         if cr is None or cr.score < c.min_score:
             return None
         margin = cr.score - (cr.runner_up or 0.0)
@@ -550,7 +596,7 @@ class LoopCloser:
                                 loop=True)
         key = (min(cand.anchor, cand.node), max(cand.anchor, cand.node))
         self._sigma_edges[key] = min(self._sigma_edges.get(key, math.inf), c.loop_sigma_xy)
-        self._length_edges[key] = min(self._length_edges.get(key, math.inf), math.hypot(*cand.z[:2]))
+        self._turn_edges[key] = min(self._turn_edges.get(key, math.inf), c.drift_rad_per_m * math.hypot(*cand.z[:2]))
         self.loop_edges.append(k)
         self.stats["loops_accepted"] += 1
         self._loop_path = max(self._loop_path, self.keyframes[cand.node].path)
