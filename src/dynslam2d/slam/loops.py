@@ -59,6 +59,8 @@ _SUBMAP_CACHE = 6
 _MAX_CANDIDATES = 3
 #: Query points used per loop search (evenly sub-sampled).
 _QUERY_POINTS = 360
+#: Returns per keyframe that enter place descriptors (evenly sub-sampled).
+_PLACE_POINTS = 120
 #: Keyframe edges across unsupported scans get their deviation multiplied by this.
 _WEAK_FACTOR = 10.0
 
@@ -169,6 +171,7 @@ class LoopCloser:
         self._places = (PlaceIndex(c.place_rings, c.place_sectors, c.place_max_range)
                         if c.far_search and c.far_rank == "descriptor" else None)
         self._query_desc: tuple[int, np.ndarray] | None = None  # (node, descriptor) of the latest keyframe
+        self._place_pts: dict[int, np.ndarray] = {}  # node → its returns for the descriptors (last place_keyframes)
         self.stats: dict[str, float] = {"searches": 0, "candidates": 0, "loops_accepted": 0, "optimisations": 0,
                                         "far_searches": 0, "far_candidates": 0, "far_loops": 0,
                                         "place_ms": 0.0, "search_ms": 0.0, "optimise_ms": 0.0, "total_ms": 0.0}
@@ -241,7 +244,14 @@ class LoopCloser:
         self.keyframes.append(kf)
         self._weak_since_kf = False
         if self._places is not None:
-            self._describe(node)
+            # the keyframe's returns (a few, float32) while later descriptors still need them
+            pts, _ = self._points(kf)
+            if pts.shape[0] > _PLACE_POINTS:
+                pts = pts[np.linspace(0, pts.shape[0] - 1, _PLACE_POINTS).astype(np.int64)]
+            self._place_pts[node] = pts.astype(np.float32)
+            self._place_pts.pop(node - c.place_keyframes, None)
+            if node % c.place_every == 0:
+                self._describe(node, True)
         every = c.search_every * (c.tracked_search_every if self._recent_loop(node) is not None else 1)
         if node % every == 0:
             self._search(node)
@@ -420,19 +430,22 @@ class LoopCloser:
             self.stats["far_candidates"] += 1
             self._verify_far(cand, s)
 
-    def _describe(self, node: int) -> None:
-        """The place descriptor of keyframe ``node`` (the returns of the last ``place_keyframes`` keyframes in its
-        frame, front-end relative poses); stored every ``place_every``-th keyframe, kept for this node's search."""
+    def _describe(self, node: int, store: bool) -> None:
+        """The place descriptor of keyframe ``node``: the returns of the last ``place_keyframes`` keyframes (at most
+        _PLACE_POINTS each) in its laser frame, placed with the front end's relative poses; stored in the index if
+        ``store``, kept for this node's search."""
         c = self.config
         t0 = time.perf_counter()
+        nodes = [k for k in range(max(node - c.place_keyframes + 1, 0), node + 1) if k in self._place_pts]
         base = self.keyframes[node].frontend
+        rel = relative(base, np.array([self.keyframes[k].frontend for k in nodes]).reshape(-1, 3))
         parts = []
-        for k in range(max(node - c.place_keyframes + 1, 0), node + 1):
-            pts, _ = self._points(self.keyframes[k])
-            if pts.shape[0]:
-                parts.append(compose(relative(base, self.keyframes[k].frontend), np.c_[pts, np.zeros(pts.shape[0])]))
-        desc = self._places.describe(np.vstack(parts)[:, :2] if parts else np.zeros((0, 2)))
-        if node % c.place_every == 0:
+        for (x, y, th), k in zip(rel, nodes):
+            pts = self._place_pts[k]
+            ct, st = math.cos(th), math.sin(th)
+            parts.append(np.c_[x + ct * pts[:, 0] - st * pts[:, 1], y + st * pts[:, 0] + ct * pts[:, 1]])
+        desc = self._places.describe(np.vstack(parts) if parts else np.zeros((0, 2)))
+        if store:
             self._places.add(node, desc)
         self._query_desc = (node, desc)
         self.stats["place_ms"] += (time.perf_counter() - t0) * 1e3
@@ -442,7 +455,7 @@ class LoopCloser:
         c = self.config
         t0 = time.perf_counter()
         if self._query_desc is None or self._query_desc[0] != node:
-            self._describe(node)
+            self._describe(node, False)
         keys, d, _shift = self._places.distances(self._query_desc[1])
         sub = keys // c.submap_keyframes
         best = np.full(int(sub.max()) + 1 if sub.size else 0, np.inf)
