@@ -270,7 +270,8 @@ class Pipeline:
         t4 = time.perf_counter()
         if self.loops is not None:  # (also in the loop closure's own counters, summary.json loop_closure)
             self.loops.add(scan.stamp, res.pose, scan, removed, updated,
-                           res.low_support or res.pose_source in ("prediction", "relocalised") or res.time_gap)
+                           res.low_support or res.pose_source in ("prediction", "relocalised") or res.time_gap,
+                           res.score)
         t5 = time.perf_counter()
         self._moving = moving
         self._last_stamp = scan.stamp

@@ -229,6 +229,21 @@ class LoopConfig(BaseModel):
     odom_sigma_theta_per_rad: float = Field(
         0.02, ge=0.0, description="Growth of the rotation deviation with the edge's rotation, rad/rad."
     )
+    weak_score: float = Field(
+        0.6, ge=0.0, le=1.0,
+        description="A keyframe edge across a scan whose match score (mean occupancy at the endpoints) is below this "
+        "gets a larger deviation, growing linearly to ten times at weak_score_floor (0 = off): the loop corrections "
+        "bend the graph where the front end matched poorly.",
+    )
+    weak_robust: bool = Field(
+        True,
+        description="Keyframe edges across a weak match (predicted, relocalised, weakly supported, after a time gap) "
+        "are under the loops' robust kernel too: where the loops say the front end broke, the graph bends there "
+        "instead of spreading the correction over every edge.",
+    )
+    weak_score_floor: float = Field(
+        0.3, ge=0.0, le=1.0, description="Match score at which a keyframe edge's deviation is ten times larger."
+    )
     loop_sigma_xy: float = Field(0.03, gt=0.0, description="Standard deviation of a loop edge's translation, m.")
     loop_sigma_theta: float = Field(0.006, gt=0.0, description="Standard deviation of a loop edge's rotation, rad.")
     kernel: Literal["dcs", "cauchy", "none"] = Field(

@@ -128,15 +128,22 @@ class LoopResult:
     keyframes: list[Keyframe] = field(default_factory=list, repr=False)
 
 
-def edge_sigmas(config: LoopConfig, z: np.ndarray, weak: bool) -> tuple[float, float]:
-    """(σ_xy m, σ_θ rad) of a keyframe-to-keyframe edge of relative pose ``z``."""
+def edge_sigmas(config: LoopConfig, z: np.ndarray, weak: bool, score: float = math.nan) -> tuple[float, float]:
+    """(σ_xy m, σ_θ rad) of a keyframe-to-keyframe edge of relative pose ``z``; ``weak``: a scan it spans was not
+    backed by a well-supported match (deviation × _WEAK_FACTOR); ``score``: the lowest match score (0 … 1) of the
+    scans it spans — below ``weak_score`` the deviation grows linearly up to × _WEAK_FACTOR at
+    ``weak_score_floor`` (a match that barely fits is where the front end breaks; the loop corrections
+    should bend the graph there, not spread over every edge)."""
     d = math.hypot(float(z[0]), float(z[1]))
     sxy = config.odom_sigma_xy + config.odom_sigma_per_m * d
     sth = config.odom_sigma_theta + config.odom_sigma_theta_per_rad * abs(float(z[2]))
+    f = 1.0
     if weak:
-        sxy *= _WEAK_FACTOR
-        sth *= _WEAK_FACTOR
-    return sxy, sth
+        f = _WEAK_FACTOR
+    elif config.weak_score > config.weak_score_floor and score < config.weak_score:
+        t = min((config.weak_score - score) / (config.weak_score - config.weak_score_floor), 1.0)
+        f = 1.0 + (_WEAK_FACTOR - 1.0) * t
+    return sxy * f, sth * f
 
 
 class LoopCloser:
@@ -153,6 +160,7 @@ class LoopCloser:
         self._scan_node: list[int] = []  # per scan: its last keyframe's node (−1 before the first)
         self._frontend: list[tuple[float, float, float]] = []
         self._weak_since_kf = False
+        self._score_since_kf = math.inf  # lowest match score since the last keyframe
         self._path = 0.0
         self._last_pose: np.ndarray | None = None
         self._opt_nodes = 0  # nodes covered by the last optimisation
@@ -164,6 +172,8 @@ class LoopCloser:
         # their heading deviations, rad: drift_rad_per_m × length, plus far_weak_turn across a weak match
         self._turn_edges: dict[tuple[int, int], float] = {}
         self._far_last: dict[int, int] = {}  # submap → node of its last far search
+        # far candidates whose keyframes before them gave too few partners: (candidate, submap, partners so far)
+        self._pending: list[tuple[LoopCandidate, int, list[LoopCandidate]]] = []
         self._extent: dict[int, float] = {}  # submap → largest keyframe distance from its anchor, m
         self._loop_path = 0.0  # front-end path length at the last accepted loop's keyframe, m
         c = self.config
@@ -178,10 +188,11 @@ class LoopCloser:
 
     # ---- input ----------------------------------------------------------------------------
     def add(self, stamp: float, pose: Pose2D, scan: Scan, removed: np.ndarray, keyframe: bool,
-            weak: bool = False) -> None:
+            weak: bool = False, score: float = math.nan) -> None:
         """One scan of the run in order: its front-end laser pose; ``scan`` with the robot's body
         removed, ``removed`` the beams the dynamic filter removed; ``keyframe``: written into the
-        front end's map; ``weak``: its pose was not backed by a well-supported match."""
+        front end's map; ``weak``: its pose was not backed by a well-supported match; ``score``: its match
+        score (0 … 1, mean occupancy at the endpoints; NaN = unknown)."""
         t0 = time.perf_counter()
         p = np.array([pose.x, pose.y, pose.theta], dtype=np.float64)
         if self._last_pose is not None and np.all(np.isfinite(p)):
@@ -190,6 +201,8 @@ class LoopCloser:
             self._last_pose = p
         self._frontend.append((float(p[0]), float(p[1]), float(p[2])))
         self._weak_since_kf |= bool(weak)
+        if score == score:  # not NaN
+            self._score_since_kf = min(self._score_since_kf, float(score))
         if keyframe and np.all(np.isfinite(p)):
             self._add_keyframe(len(self._frontend) - 1, stamp, p, scan, removed)
         self._scan_node.append(len(self.keyframes) - 1)
@@ -234,8 +247,8 @@ class LoopCloser:
             est_prev = self.graph.pose(prev_node)
             z = relative(self.keyframes[-1].frontend, p)
             node = self.graph.add_node(compose(est_prev, z))
-            sxy, sth = edge_sigmas(c, z, self._weak_since_kf)
-            self.graph.add_edge(prev_node, node, z, diag_info(sxy, sth))
+            sxy, sth = edge_sigmas(c, z, self._weak_since_kf, self._score_since_kf)
+            self.graph.add_edge(prev_node, node, z, diag_info(sxy, sth), robust=c.weak_robust and self._weak_since_kf)
             self._sigma_edges[(prev_node, node)] = sxy
             self._turn_edges[(prev_node, node)] = (c.drift_rad_per_m * math.hypot(float(z[0]), float(z[1]))
                                                    + (c.far_weak_turn if self._weak_since_kf else 0.0))
@@ -243,6 +256,7 @@ class LoopCloser:
             node = self.graph.add_node(p)
         self.keyframes.append(kf)
         self._weak_since_kf = False
+        self._score_since_kf = math.inf
         if self._places is not None:
             # the keyframe's returns (a few, float32) while later descriptors still need them
             pts, _ = self._points(kf)
@@ -253,6 +267,8 @@ class LoopCloser:
             if node % c.place_every == 0:
                 self._describe(node, True)
         every = c.search_every * (c.tracked_search_every if self._recent_loop(node) is not None else 1)
+        if self._pending:
+            self._pending_far(node)
         if node % every == 0:
             self._search(node)
         self._confirm(node)
@@ -476,39 +492,70 @@ class LoopCloser:
     def _verify_far(self, cand: LoopCandidate, s: int) -> None:
         """Accept a far candidate only if the keyframes just before it, matched against the same and the
         neighbouring submaps around the pose the candidate implies for them, give at least
-        ``far_partners`` candidates consistent with it; then optimise at once (the correction is large)."""
+        ``far_partners`` candidates consistent with it; then optimise at once (the correction is large).
+        Without enough partners before it (the front end may have broken just before the candidate, so that
+        the chain to the earlier keyframes is wrong), the next ``consistency_window`` keyframes are tried as
+        they arrive (:meth:`_pending_far`)."""
         c = self.config
         node = cand.node
-        n_sub = (node + 1) // c.submap_keyframes
-        implied = self._implied(cand)
-        est_node = self._estimate(node)
         partners: list[LoopCandidate] = []
         for k in range(node - 1, max(node - 1 - max(c.consistency_window, 1), -1), -1):
-            pts = self._query(self.keyframes[k])
-            if pts is None:
+            o = self._far_partner(cand, s, k)
+            if o is not None:
+                partners.append(o)
+        if not self._far_verified(cand, partners) and c.consistency_window > 0:
+            self._pending.append((cand, s, partners))
+
+    def _far_partner(self, cand: LoopCandidate, s: int, k: int) -> LoopCandidate | None:
+        """Keyframe ``k`` matched against submap ``s`` and its neighbours around the pose far candidate ``cand``
+        implies for it (through the keyframe chain); the best match if it is consistent with ``cand``."""
+        c = self.config
+        pts = self._query(self.keyframes[k])
+        if pts is None:
+            return None
+        n_sub = (max(k, cand.node) + 1) // c.submap_keyframes
+        guess = compose(self._implied(cand), relative(self._estimate(cand.node), self._estimate(k)))
+        best: LoopCandidate | None = None
+        for s2 in (s - 1, s, s + 1):
+            if s2 < 0 or s2 >= n_sub or self._submap_range(s2)[1] >= k:
                 continue
-            guess = compose(implied, relative(est_node, self._estimate(k)))
-            best: LoopCandidate | None = None
-            for s2 in (s - 1, s, s + 1):
-                if s2 < 0 or s2 >= n_sub or self._submap_range(s2)[1] >= k:
-                    continue
-                pred = relative(self._estimate(self._submap_range(s2)[2]), guess)
-                o = self._match_at(k, s2, pts, pred, c.linear_window, c.angular_window, c.min_margin)
-                self.stats["searches"] += 1
-                if o is not None and (best is None or o.score > best.score):
-                    best = o
-            if best is not None and self._consistent(cand, best):
-                partners.append(best)
+            pred = relative(self._estimate(self._submap_range(s2)[2]), guess)
+            o = self._match_at(k, s2, pts, pred, c.linear_window, c.angular_window, c.min_margin)
+            self.stats["searches"] += 1
+            if o is not None and (best is None or o.score > best.score):
+                best = o
+        return best if best is not None and self._consistent(cand, best) else None
+
+    def _far_verified(self, cand: LoopCandidate, partners: list[LoopCandidate]) -> bool:
+        """Accept ``cand`` and its partners if there are ``far_partners`` of them spanning ``far_partner_span`` of
+        path; then optimise at once. Returns whether they were accepted."""
+        c = self.config
         paths = [self.keyframes[o.node].path for o in [cand, *partners]]
         if len(partners) < c.far_partners or max(paths) - min(paths) < c.far_partner_span:
-            return
+            return False
         for o in [cand, *partners]:
             o.far = True
             self.candidates.append(o)
             self._accept(o)
         self.stats["far_loops"] += 1 + len(partners)
         self._optimise(final=False)
-        self._opt_nodes = node
+        self._opt_nodes = len(self.keyframes) - 1
+        return True
+
+    def _pending_far(self, node: int) -> None:
+        """Try the new keyframe ``node`` as a partner of far candidates not yet verified (within
+        ``consistency_window`` keyframes after them)."""
+        keep = []
+        for cand, s, partners in self._pending:
+            if node - cand.node > self.config.consistency_window:
+                continue
+            o = self._far_partner(cand, s, node)
+            if o is not None:
+                partners.append(o)
+                if self._far_verified(cand, partners):
+                    continue
+            keep.append((cand, s, partners))
+        self._pending = keep
 
     def _recent_loop(self, node: int) -> LoopCandidate | None:
         """The latest accepted loop candidate within ``consistency_window`` keyframes of ``node``."""
