@@ -91,7 +91,7 @@ class LoopConfig(BaseModel):
         "(dimensionless).",
     )
     far_weak_turn: float = Field(
-        0.5, ge=0.0,
+        0.2, ge=0.0,
         description="Heading deviation a keyframe edge across a weak match (predicted, relocalised, weakly supported "
         "or after a time gap) adds to the far search's heading uncertainty, rad; elsewhere drift_rad_per_m × "
         "length. A far candidate may correct the heading by angular_window + far_sigmas × the smallest sum of "

@@ -116,7 +116,7 @@ class PlaceIndex:
 
         Returns (keys (n,), d (n,) in [0, 1], shift (n,) sectors): at the best shift, query sector j faces the
         stored place's sector j − shift, i.e. the query's frame is the stored one turned by
-        shift·2π/sectors rad (for places seen from the same position).
+        −shift·2π/sectors rad (for places seen from the same position).
         """
         n = self._n if upto is None else min(int(upto), self._n)
         if n == 0:
