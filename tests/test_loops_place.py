@@ -105,6 +105,9 @@ def test_descriptor_ranking_finds_the_far_loop_right_after_the_break(broken_fron
     lc, res, err, first = _run(gt, front, scans, LoopConfig(far_searches=1))
     assert first is not None and first < 260
     assert res.corrected and lc.stats["far_loops"] >= 3
+    # the keyframes before that candidate are across the jump (their chain to it is wrong): its partners are the
+    # keyframes after it (deferred verification); without that the loop waits for the revisit (0.30 m left)
+    assert lc.stats["far_deferred"] >= 1
     assert err.max() < 0.05  # 7.07 m → 0.007 m
     kf = res.keyframe_scans
     for e in res.graph.edges:  # every loop it accepted is true
