@@ -93,8 +93,8 @@ def main() -> None:
                 cfg.write_text("loop:\n  far_searches: 40\n  iterations: 200\n  map_check: false\n")
                 run_args += ["--config", str(cfg)]
             if "=" in setting:
-                # on, with loop-section settings KEY=VALUE[,KEY=VALUE…] (the ablations of docs/slam.md, "Intel: where the
-                # error is"), e.g. far_rank=oldest or weak_robust=false,weak_score=0
+                # on, with loop-section settings KEY=VALUE[,KEY=VALUE…] (the ablations of docs/slam.md, "Intel:
+                # where the error is"), e.g. far_rank=oldest or weak_robust=false,weak_score=0
                 cfg = Path(a.out) / f"{setting.replace('=', '-').replace(',', '_')}.yaml"
                 cfg.parent.mkdir(parents=True, exist_ok=True)
                 cfg.write_text("loop:\n" + "".join(f"  {kv.split('=', 1)[0]}: {kv.split('=', 1)[1]}\n"

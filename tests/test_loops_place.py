@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from test_loops import LIDAR, _block_loop_world, _loop_path, _scans
 
 from dynslam2d.sim.world import World, cast_rays, rect_segments
 from dynslam2d.slam.config import SlamConfig
@@ -14,7 +15,6 @@ from dynslam2d.slam.loops import LoopCloser
 from dynslam2d.slam.placedesc import PlaceIndex
 from dynslam2d.slam.posegraph import compose, relative
 from dynslam2d.types import Pose2D
-from test_loops import LIDAR, _block_loop_world, _loop_path, _scans
 
 
 def _cluttered_world(seed: int = 5) -> World:
