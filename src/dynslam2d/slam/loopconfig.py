@@ -102,7 +102,7 @@ class LoopConfig(BaseModel):
     )
     far_searches: int = Field(
         4, ge=0,
-        description="Far submaps searched per searched keyframe (least recently searched first), count.",
+        description="Far submaps searched per searched keyframe (the first far_searches by far_rank), count.",
     )
     far_margin: float = Field(
         3.0, ge=0.0,

@@ -23,8 +23,13 @@ kept as it is):
   spread are all high enough.
 * **Far search**: after ``far_after`` m without a loop, a few older submaps beyond the local radius are
   searched over every rotation, within a radius grown with the translation deviations summed along the
-  graph's shortest path to them; a far candidate must imply a correction that uncertainty allows and is
-  verified at once on the keyframes before it (consistent partners spanning some path), then optimised.
+  graph's shortest path to them — the ones whose place descriptors (:mod:`dynslam2d.slam.placedesc`, after
+  Scan Context) look most like the keyframe's place; a far candidate must imply a correction that uncertainty
+  allows (heading: drift per metre plus ``far_weak_turn`` per weak edge) and is verified on the keyframes
+  before it, or else on the ones after it (consistent partners spanning some path), then optimised.
+* **Weak stretches**: keyframe edges across weak matches are under the loops' robust kernel too, and edges
+  across low-scoring matches get larger deviations, so that a loop correction bends the graph where the
+  front end broke.
 * **Consistency**: a candidate becomes a loop edge once another candidate within a few
   keyframes implies the same pose of the robot relative to the map (both loops and the chain of
   keyframes between them close up); lone candidates are dropped.
