@@ -19,7 +19,8 @@ memory.
 Settings: ``off``, ``on`` (the default) and ``forced`` (on, with ``loop.map_check: false``: the
 optimised poses are used even when the map check would keep the front end's); ``recovery`` (on, with
 ``slam.recovery: true``) and ``far40`` (on, ``loop.far_searches: 40``, ``iterations: 200``, ``map_check:
-false``) on request.
+false``) on request; ``KEY=VALUE[,KEY=VALUE...]`` runs loop closure on with those ``loop:`` settings (e.g.
+``far_rank=oldest``: the ablations of docs/slam.md, "Intel: where the error is").
 
 ``--cpu N`` pins every command to core N (``taskset -c N``: "one core"). The commands are
 printed exactly as they were run (``dynslam2d`` = ``python -m dynslam2d`` with this checkout's
@@ -66,7 +67,8 @@ def main() -> None:
     ap.add_argument("--settings", nargs="*", default=["off", "on", "forced"],
                     help="off, on (default settings), forced (on, optimised poses kept whatever the map check says), "
                     "recovery (on, with the front end's large-motion recovery), far40 (on, 40 far searches per "
-                    "keyframe, 200 iterations, optimised poses kept)")
+                    "keyframe, 200 iterations, optimised poses kept), or KEY=VALUE[,KEY=VALUE...] (on, with those "
+                    "loop: settings)")
     a = ap.parse_args()
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""))
     rows = []
@@ -89,6 +91,14 @@ def main() -> None:
                 cfg = Path(a.out) / "far40.yaml"
                 cfg.parent.mkdir(parents=True, exist_ok=True)
                 cfg.write_text("loop:\n  far_searches: 40\n  iterations: 200\n  map_check: false\n")
+                run_args += ["--config", str(cfg)]
+            if "=" in setting:
+                # on, with loop-section settings KEY=VALUE[,KEY=VALUE…] (the ablations of docs/slam.md, "Intel:
+                # where the error is"), e.g. far_rank=oldest or weak_robust=false,weak_score=0
+                cfg = Path(a.out) / f"{setting.replace('=', '-').replace(',', '_')}.yaml"
+                cfg.parent.mkdir(parents=True, exist_ok=True)
+                cfg.write_text("loop:\n" + "".join(f"  {kv.split('=', 1)[0]}: {kv.split('=', 1)[1]}\n"
+                                                    for kv in setting.split(",")))
                 run_args += ["--config", str(cfg)]
             if setting == "recovery":
                 # loop closure on plus the front end's large-motion recovery (slam.recovery, docs/slam.md)

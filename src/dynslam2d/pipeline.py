@@ -270,7 +270,8 @@ class Pipeline:
         t4 = time.perf_counter()
         if self.loops is not None:  # (also in the loop closure's own counters, summary.json loop_closure)
             self.loops.add(scan.stamp, res.pose, scan, removed, updated,
-                           res.low_support or res.pose_source in ("prediction", "relocalised") or res.time_gap)
+                           res.low_support or res.pose_source in ("prediction", "relocalised") or res.time_gap,
+                           res.score)
         t5 = time.perf_counter()
         self._moving = moving
         self._last_stamp = scan.stamp
@@ -529,6 +530,7 @@ class RunResult:
             out["written_render_ms"] = round(float(st["written_render_ms"]), 1)
         out["search_ms"] = round(float(st.get("search_ms", 0.0)), 1)
         out["optimise_ms"] = round(float(st.get("optimise_ms", 0.0)), 1)
+        out["place_ms"] = round(float(st.get("place_ms", 0.0)), 1)  # place descriptors (far search ranking)
         if self.frontend_trajectory is not None:
             d = self.trajectory.poses[:, :2] - self.frontend_trajectory.poses[:, :2]
             out["max_correction_m"] = round(float(np.max(np.hypot(d[:, 0], d[:, 1]))), 4) if d.size else 0.0

@@ -245,12 +245,18 @@ def correlative_search(
     rotation_weight: float = 0.05,
     runner_up_distance: float | None = None,
     runner_up_angle: float = 0.3,
+    runner_up_wrap: bool = False,
 ) -> CorrelativeResult | None:
     """Search ``level`` around ``start_world`` for the best pose of laser-frame points ``pts_m`` (n, 2, m).
 
     With ``runner_up_distance`` (m), a second branch-and-bound pass finds the best pose farther
     than that (or than ``runner_up_angle`` rad) from the best one. Returns None if the level is
     empty or there are no points.
+
+    ``runner_up_wrap``: the runner-up's rotation neighbourhood wraps around the circle — a search over
+    every rotation (window ≥ π) holds the best orientation at θ and θ ± 2π too, and without it the
+    "runner-up" can be the best pose itself turned by 2π (default False: the behaviour the front end's
+    recovery and relocalisation were measured with).
     """
     if level.empty or pts_m.shape[0] == 0:
         return None
@@ -294,7 +300,21 @@ def correlative_search(
         step = angular_window / max(n_half, 1)
         ek = int(math.ceil(runner_up_angle / step)) if step > 0 else 0
         excl = np.array([k - ek, k + ek, dx - ec, dx + ec, dy - ec, dy + ec], dtype=np.int64)
-        k2, dx2, dy2, s2 = branch_and_bound(pyr, qx0, qy0, w, dth, translation_weight * r * r, rotation_weight, excl)
+        period = int(round(2.0 * math.pi / step)) if step > 0 else 0
+        if runner_up_wrap and period and th.shape[0] > period:
+            # rows k and k ± period are the same orientation: the rows within ±ek of the best one around the
+            # circle go first, so that one contiguous exclusion box covers all of them
+            rows = np.arange(th.shape[0])
+            off = np.abs(rows - k) % period
+            near = np.minimum(off, period - off) <= ek
+            perm = np.concatenate((rows[near], rows[~near]))
+            excl[0], excl[1] = 0, int(near.sum()) - 1
+            k2, dx2, dy2, s2 = branch_and_bound(pyr, np.ascontiguousarray(qx0[perm]), np.ascontiguousarray(qy0[perm]),
+                                                w, dth[perm], translation_weight * r * r, rotation_weight, excl)
+            k2 = int(perm[k2])
+        else:
+            k2, dx2, dy2, s2 = branch_and_bound(pyr, qx0, qy0, w, dth, translation_weight * r * r, rotation_weight,
+                                                excl)
         out.runner_up = float(s2) if s2 > -1e299 else 0.0
         out.runner_up_pose = level.pose_to_world(np.array([mp[0] + dx2, mp[1] + dy2, th[k2]]))
     return out

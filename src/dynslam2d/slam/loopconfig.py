@@ -90,17 +90,45 @@ class LoopConfig(BaseModel):
         "on the graph's shortest path (keyframe chain and accepted loops) from the submap to the keyframe "
         "(dimensionless).",
     )
+    far_weak_turn: float = Field(
+        0.2, ge=0.0,
+        description="Heading deviation a keyframe edge across a weak match (predicted, relocalised, weakly supported "
+        "or after a time gap) adds to the far search's heading uncertainty, rad; elsewhere drift_rad_per_m × "
+        "length. A far candidate may correct the heading by angular_window + far_sigmas × the smallest sum of "
+        "these deviations along the graph.",
+    )
     max_far_radius: float = Field(
         80.0, gt=0.0, description="Cap of the far radius, m."
     )
     far_searches: int = Field(
         4, ge=0,
-        description="Far submaps searched per searched keyframe (least recently searched first), count.",
+        description="Far submaps searched per searched keyframe (the first far_searches by far_rank), count.",
     )
     far_margin: float = Field(
         3.0, ge=0.0,
         description="A far search covers the submap's keyframes' extent around its anchor plus this much, m "
         "(over every rotation).",
+    )
+    far_rank: Literal["descriptor", "oldest"] = Field(
+        "descriptor",
+        description="Which far_searches submaps a keyframe searches among those within the far radius: "
+        "'descriptor' = the submaps whose keyframes' place descriptors (slam/placedesc.py, after Scan Context) "
+        "look most like this keyframe's, 'oldest' = the least recently searched ones (round robin).",
+    )
+    place_keyframes: int = Field(
+        20, ge=1,
+        description="A keyframe's place descriptor describes the returns of this many keyframes up to it (itself "
+        "included), placed with the front end's relative poses in its laser frame (count).",
+    )
+    place_every: int = Field(
+        2, ge=1,
+        description="Every this-many-th keyframe stores its place descriptor (a submap's distance to a query is "
+        "the smallest over its stored keyframes).",
+    )
+    place_rings: int = Field(20, ge=1, description="Range rings of the place descriptor (count).")
+    place_sectors: int = Field(60, ge=4, description="Bearing sectors of the place descriptor (count).")
+    place_max_range: float = Field(
+        15.0, gt=0.0, description="Returns farther than this from the keyframe are left out of its descriptor, m."
     )
     far_min_margin: float = Field(
         0.15, ge=0.0,
@@ -153,6 +181,12 @@ class LoopConfig(BaseModel):
     runner_up_angle: float = Field(
         0.25, gt=0.0, description="Rotation beyond which another pose counts as the runner-up, rad."
     )
+    runner_up_wrap: bool = Field(
+        True,
+        description="The runner-up's rotation neighbourhood wraps around the circle (a far search covers every "
+        "rotation, and the best pose turned by 2π is no runner-up); false = the behaviour before (the margin of "
+        "every far match was then ~0).",
+    )
     min_support: int = Field(
         80, ge=0,
         description="Query points that must land on occupied submap cells at the refined pose (count).",
@@ -194,6 +228,21 @@ class LoopConfig(BaseModel):
     )
     odom_sigma_theta_per_rad: float = Field(
         0.02, ge=0.0, description="Growth of the rotation deviation with the edge's rotation, rad/rad."
+    )
+    weak_score: float = Field(
+        0.6, ge=0.0, le=1.0,
+        description="A keyframe edge across a scan whose match score (mean occupancy at the endpoints) is below this "
+        "gets a larger deviation, growing linearly to ten times at weak_score_floor (0 = off): the loop corrections "
+        "bend the graph where the front end matched poorly.",
+    )
+    weak_robust: bool = Field(
+        True,
+        description="Keyframe edges across a weak match (predicted, relocalised, weakly supported, after a time gap) "
+        "are under the loops' robust kernel too: where the loops say the front end broke, the graph bends there "
+        "instead of spreading the correction over every edge.",
+    )
+    weak_score_floor: float = Field(
+        0.3, ge=0.0, le=1.0, description="Match score at which a keyframe edge's deviation is ten times larger."
     )
     loop_sigma_xy: float = Field(0.03, gt=0.0, description="Standard deviation of a loop edge's translation, m.")
     loop_sigma_theta: float = Field(0.006, gt=0.0, description="Standard deviation of a loop edge's rotation, rad.")

@@ -23,8 +23,13 @@ kept as it is):
   spread are all high enough.
 * **Far search**: after ``far_after`` m without a loop, a few older submaps beyond the local radius are
   searched over every rotation, within a radius grown with the translation deviations summed along the
-  graph's shortest path to them; a far candidate must imply a correction that uncertainty allows and is
-  verified at once on the keyframes before it (consistent partners spanning some path), then optimised.
+  graph's shortest path to them — the ones whose place descriptors (:mod:`dynslam2d.slam.placedesc`, after
+  Scan Context) look most like the keyframe's place; a far candidate must imply a correction that uncertainty
+  allows (heading: drift per metre plus ``far_weak_turn`` per weak edge) and is verified on the keyframes
+  before it, or else on the ones after it (consistent partners spanning some path), then optimised.
+* **Weak stretches**: keyframe edges across weak matches are under the loops' robust kernel too, and edges
+  across low-scoring matches get larger deviations, so that a loop correction bends the graph where the
+  front end broke.
 * **Consistency**: a candidate becomes a loop edge once another candidate within a few
   keyframes implies the same pose of the robot relative to the map (both loops and the chain of
   keyframes between them close up); lone candidates are dropped.
@@ -49,6 +54,7 @@ from dynslam2d.slam.correlative import correlative_search
 from dynslam2d.slam.grid import MultiResMap
 from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.matcher import degeneracy, evaluate, match_multires, support
+from dynslam2d.slam.placedesc import PlaceIndex
 from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
 from dynslam2d.types import Pose2D, Scan
 
@@ -58,6 +64,8 @@ _SUBMAP_CACHE = 6
 _MAX_CANDIDATES = 3
 #: Query points used per loop search (evenly sub-sampled).
 _QUERY_POINTS = 360
+#: Returns per keyframe that enter place descriptors (evenly sub-sampled).
+_PLACE_POINTS = 120
 #: Keyframe edges across unsupported scans get their deviation multiplied by this.
 _WEAK_FACTOR = 10.0
 
@@ -125,15 +133,22 @@ class LoopResult:
     keyframes: list[Keyframe] = field(default_factory=list, repr=False)
 
 
-def edge_sigmas(config: LoopConfig, z: np.ndarray, weak: bool) -> tuple[float, float]:
-    """(σ_xy m, σ_θ rad) of a keyframe-to-keyframe edge of relative pose ``z``."""
+def edge_sigmas(config: LoopConfig, z: np.ndarray, weak: bool, score: float = math.nan) -> tuple[float, float]:
+    """(σ_xy m, σ_θ rad) of a keyframe-to-keyframe edge of relative pose ``z``; ``weak``: a scan it spans was not
+    backed by a well-supported match (deviation × _WEAK_FACTOR); ``score``: the lowest match score (0 … 1) of the
+    scans it spans — below ``weak_score`` the deviation grows linearly up to × _WEAK_FACTOR at
+    ``weak_score_floor`` (a match that barely fits is where the front end breaks; the loop corrections
+    should bend the graph there, not spread over every edge)."""
     d = math.hypot(float(z[0]), float(z[1]))
     sxy = config.odom_sigma_xy + config.odom_sigma_per_m * d
     sth = config.odom_sigma_theta + config.odom_sigma_theta_per_rad * abs(float(z[2]))
+    f = 1.0
     if weak:
-        sxy *= _WEAK_FACTOR
-        sth *= _WEAK_FACTOR
-    return sxy, sth
+        f = _WEAK_FACTOR
+    elif config.weak_score > config.weak_score_floor and score < config.weak_score:
+        t = min((config.weak_score - score) / (config.weak_score - config.weak_score_floor), 1.0)
+        f = 1.0 + (_WEAK_FACTOR - 1.0) * t
+    return sxy * f, sth * f
 
 
 class LoopCloser:
@@ -150,6 +165,7 @@ class LoopCloser:
         self._scan_node: list[int] = []  # per scan: its last keyframe's node (−1 before the first)
         self._frontend: list[tuple[float, float, float]] = []
         self._weak_since_kf = False
+        self._score_since_kf = math.inf  # lowest match score since the last keyframe
         self._path = 0.0
         self._last_pose: np.ndarray | None = None
         self._opt_nodes = 0  # nodes covered by the last optimisation
@@ -158,20 +174,31 @@ class LoopCloser:
         # translation deviation (m) of every chain edge and accepted loop, keyed (i, j): the far search's
         # uncertainty is their sum along the graph's shortest path
         self._sigma_edges: dict[tuple[int, int], float] = {}
-        self._length_edges: dict[tuple[int, int], float] = {}  # their lengths, m (heading uncertainty)
+        # their heading deviations, rad: drift_rad_per_m × length, plus far_weak_turn across a weak match
+        self._turn_edges: dict[tuple[int, int], float] = {}
         self._far_last: dict[int, int] = {}  # submap → node of its last far search
+        # far candidates whose keyframes before them gave too few partners: (candidate, submap, partners so far)
+        self._pending: list[tuple[LoopCandidate, int, list[LoopCandidate]]] = []
         self._extent: dict[int, float] = {}  # submap → largest keyframe distance from its anchor, m
         self._loop_path = 0.0  # front-end path length at the last accepted loop's keyframe, m
+        c = self.config
+        # place descriptors of every place_every-th keyframe: the far search ranks submaps by them
+        self._places = (PlaceIndex(c.place_rings, c.place_sectors, c.place_max_range)
+                        if c.far_search and c.far_rank == "descriptor" else None)
+        self._query_desc: tuple[int, np.ndarray] | None = None  # (node, descriptor) of the latest keyframe
+        self._place_pts: dict[int, np.ndarray] = {}  # node → its returns for the descriptors (last place_keyframes)
         self.stats: dict[str, float] = {"searches": 0, "candidates": 0, "loops_accepted": 0, "optimisations": 0,
                                         "far_searches": 0, "far_candidates": 0, "far_loops": 0,
-                                        "search_ms": 0.0, "optimise_ms": 0.0, "total_ms": 0.0}
+                                        "far_deferred": 0, "place_ms": 0.0, "search_ms": 0.0, "optimise_ms": 0.0,
+                                        "total_ms": 0.0}
 
     # ---- input ----------------------------------------------------------------------------
     def add(self, stamp: float, pose: Pose2D, scan: Scan, removed: np.ndarray, keyframe: bool,
-            weak: bool = False) -> None:
+            weak: bool = False, score: float = math.nan) -> None:
         """One scan of the run in order: its front-end laser pose; ``scan`` with the robot's body
         removed, ``removed`` the beams the dynamic filter removed; ``keyframe``: written into the
-        front end's map; ``weak``: its pose was not backed by a well-supported match."""
+        front end's map; ``weak``: its pose was not backed by a well-supported match; ``score``: its match
+        score (0 … 1, mean occupancy at the endpoints; NaN = unknown)."""
         t0 = time.perf_counter()
         p = np.array([pose.x, pose.y, pose.theta], dtype=np.float64)
         if self._last_pose is not None and np.all(np.isfinite(p)):
@@ -180,6 +207,8 @@ class LoopCloser:
             self._last_pose = p
         self._frontend.append((float(p[0]), float(p[1]), float(p[2])))
         self._weak_since_kf |= bool(weak)
+        if score == score:  # not NaN
+            self._score_since_kf = min(self._score_since_kf, float(score))
         if keyframe and np.all(np.isfinite(p)):
             self._add_keyframe(len(self._frontend) - 1, stamp, p, scan, removed)
         self._scan_node.append(len(self.keyframes) - 1)
@@ -224,15 +253,28 @@ class LoopCloser:
             est_prev = self.graph.pose(prev_node)
             z = relative(self.keyframes[-1].frontend, p)
             node = self.graph.add_node(compose(est_prev, z))
-            sxy, sth = edge_sigmas(c, z, self._weak_since_kf)
-            self.graph.add_edge(prev_node, node, z, diag_info(sxy, sth))
+            sxy, sth = edge_sigmas(c, z, self._weak_since_kf, self._score_since_kf)
+            self.graph.add_edge(prev_node, node, z, diag_info(sxy, sth), robust=c.weak_robust and self._weak_since_kf)
             self._sigma_edges[(prev_node, node)] = sxy
-            self._length_edges[(prev_node, node)] = math.hypot(float(z[0]), float(z[1]))
+            self._turn_edges[(prev_node, node)] = (c.drift_rad_per_m * math.hypot(float(z[0]), float(z[1]))
+                                                   + (c.far_weak_turn if self._weak_since_kf else 0.0))
         else:
             node = self.graph.add_node(p)
         self.keyframes.append(kf)
         self._weak_since_kf = False
+        self._score_since_kf = math.inf
+        if self._places is not None:
+            # the keyframe's returns (a few, float32) while later descriptors still need them
+            pts, _ = self._points(kf)
+            if pts.shape[0] > _PLACE_POINTS:
+                pts = pts[np.linspace(0, pts.shape[0] - 1, _PLACE_POINTS).astype(np.int64)]
+            self._place_pts[node] = pts.astype(np.float32)
+            self._place_pts.pop(node - c.place_keyframes, None)
+            if node % c.place_every == 0:
+                self._describe(node, True)
         every = c.search_every * (c.tracked_search_every if self._recent_loop(node) is not None else 1)
+        if self._pending:
+            self._pending_far(node)
         if node % every == 0:
             self._search(node)
         self._confirm(node)
@@ -346,7 +388,7 @@ class LoopCloser:
     def _uncertainty(self, node: int) -> tuple[np.ndarray, np.ndarray]:
         """((n_nodes,) summed translation deviation (m) of the edges on the graph's shortest path from
         ``node`` to every node (keyframe chain and accepted loops; inf beyond the far radius's cap),
-        (n_nodes,) length of the graph's shortest path, m)."""
+        (n_nodes,) summed heading deviation (rad) of the edges on the path that minimises it)."""
         # imported here: scipy.sparse costs start-up time and memory only a run that searches needs
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import dijkstra
@@ -355,7 +397,7 @@ class LoopCloser:
         n = self.graph.n_nodes
         out = []
         for edges, limit in ((self._sigma_edges, max(c.max_far_radius - c.search_radius, 0.0) / c.far_sigmas),
-                             (self._length_edges, np.inf)):
+                             (self._turn_edges, np.inf)):
             if not edges:
                 d = np.full(n, np.inf)
                 d[node] = 0.0
@@ -372,8 +414,8 @@ class LoopCloser:
         searched locally) over every rotation; a candidate is verified at once on the keyframes before it."""
         c = self.config
         kf = self.keyframes[node]
-        unc, length = self._uncertainty(node)
-        elig: list[tuple[int, float, int, float]] = []
+        unc, heading = self._uncertainty(node)
+        elig: list[tuple[float, float, int, float, float]] = []
         for s in range((node + 1) // c.submap_keyframes):
             _first, last, anchor = self._submap_range(s)
             if last >= node or s in skip or kf.path - self.keyframes[last].path < c.min_path_gap:
@@ -382,9 +424,13 @@ class LoopCloser:
             a = self._estimate(anchor)
             d = math.hypot(a[0] - est[0], a[1] - est[1])
             if d <= r:
-                elig.append((self._far_last.get(s, -1), d / r, s, r, float(length[anchor])))
+                elig.append((self._far_last.get(s, -1), d / r, s, r, float(heading[anchor])))
+        if self._places is not None and elig:
+            # the submaps that look most like this place first (Scan Context ranking), not the least recently searched
+            rank = self._place_ranks(node)
+            elig = [(rank.get(s, 2.0), d, s, r, dth) for _last, d, s, r, dth in elig]
         elig.sort()
-        for _last, _d, s, r, path in elig[:c.far_searches]:
+        for _last, _d, s, r, dth in elig[:c.far_searches]:
             self._far_last[s] = node
             self.stats["far_searches"] += 1
             _first, _l, anchor = self._submap_range(s)
@@ -398,12 +444,46 @@ class LoopCloser:
             if cand is None:
                 continue
             implied = self._implied(cand)
-            turn = c.angular_window + c.far_sigmas * c.drift_rad_per_m * path
-            if math.hypot(implied[0] - est[0], implied[1] - est[1]) > r or abs(implied[2] - est[2]) > turn:
+            turn = c.angular_window + c.far_sigmas * dth
+            jump = math.hypot(implied[0] - est[0], implied[1] - est[1])
+            if jump > r or abs(math.remainder(implied[2] - est[2], math.tau)) > turn:
                 continue  # a correction larger than the uncertainty allows: a look-alike place, not a loop
             cand.far = True
             self.stats["far_candidates"] += 1
             self._verify_far(cand, s)
+
+    def _describe(self, node: int, store: bool) -> None:
+        """The place descriptor of keyframe ``node``: the returns of the last ``place_keyframes`` keyframes (at most
+        _PLACE_POINTS each) in its laser frame, placed with the front end's relative poses; stored in the index if
+        ``store``, kept for this node's search."""
+        c = self.config
+        t0 = time.perf_counter()
+        nodes = [k for k in range(max(node - c.place_keyframes + 1, 0), node + 1) if k in self._place_pts]
+        base = self.keyframes[node].frontend
+        rel = relative(base, np.array([self.keyframes[k].frontend for k in nodes]).reshape(-1, 3))
+        parts = []
+        for (x, y, th), k in zip(rel, nodes):
+            pts = self._place_pts[k]
+            ct, st = math.cos(th), math.sin(th)
+            parts.append(np.c_[x + ct * pts[:, 0] - st * pts[:, 1], y + st * pts[:, 0] + ct * pts[:, 1]])
+        desc = self._places.describe(np.vstack(parts) if parts else np.zeros((0, 2)))
+        if store:
+            self._places.add(node, desc)
+        self._query_desc = (node, desc)
+        self.stats["place_ms"] += (time.perf_counter() - t0) * 1e3
+
+    def _place_ranks(self, node: int) -> dict[int, float]:
+        """Submap → smallest place-descriptor distance of its stored keyframes to keyframe ``node``'s place."""
+        c = self.config
+        t0 = time.perf_counter()
+        if self._query_desc is None or self._query_desc[0] != node:
+            self._describe(node, False)
+        keys, d, _shift = self._places.distances(self._query_desc[1])
+        sub = keys // c.submap_keyframes
+        best = np.full(int(sub.max()) + 1 if sub.size else 0, np.inf)
+        np.minimum.at(best, sub, d)
+        self.stats["place_ms"] += (time.perf_counter() - t0) * 1e3
+        return {s: float(v) for s, v in enumerate(best) if np.isfinite(v)}
 
     def _submap_extent(self, s: int) -> float:
         """Largest distance of submap ``s``'s keyframes from its anchor (front-end poses), m."""
@@ -418,39 +498,71 @@ class LoopCloser:
     def _verify_far(self, cand: LoopCandidate, s: int) -> None:
         """Accept a far candidate only if the keyframes just before it, matched against the same and the
         neighbouring submaps around the pose the candidate implies for them, give at least
-        ``far_partners`` candidates consistent with it; then optimise at once (the correction is large)."""
+        ``far_partners`` candidates consistent with it; then optimise at once (the correction is large).
+        Without enough partners before it (the front end may have broken just before the candidate, so that
+        the chain to the earlier keyframes is wrong), the next ``consistency_window`` keyframes are tried as
+        they arrive (:meth:`_pending_far`)."""
         c = self.config
         node = cand.node
-        n_sub = (node + 1) // c.submap_keyframes
-        implied = self._implied(cand)
-        est_node = self._estimate(node)
         partners: list[LoopCandidate] = []
         for k in range(node - 1, max(node - 1 - max(c.consistency_window, 1), -1), -1):
-            pts = self._query(self.keyframes[k])
-            if pts is None:
+            o = self._far_partner(cand, s, k)
+            if o is not None:
+                partners.append(o)
+        if not self._far_verified(cand, partners) and c.consistency_window > 0:
+            self._pending.append((cand, s, partners))
+
+    def _far_partner(self, cand: LoopCandidate, s: int, k: int) -> LoopCandidate | None:
+        """Keyframe ``k`` matched against submap ``s`` and its neighbours around the pose far candidate ``cand``
+        implies for it (through the keyframe chain); the best match if it is consistent with ``cand``."""
+        c = self.config
+        pts = self._query(self.keyframes[k])
+        if pts is None:
+            return None
+        n_sub = (max(k, cand.node) + 1) // c.submap_keyframes
+        guess = compose(self._implied(cand), relative(self._estimate(cand.node), self._estimate(k)))
+        best: LoopCandidate | None = None
+        for s2 in (s - 1, s, s + 1):
+            if s2 < 0 or s2 >= n_sub or self._submap_range(s2)[1] >= k:
                 continue
-            guess = compose(implied, relative(est_node, self._estimate(k)))
-            best: LoopCandidate | None = None
-            for s2 in (s - 1, s, s + 1):
-                if s2 < 0 or s2 >= n_sub or self._submap_range(s2)[1] >= k:
-                    continue
-                pred = relative(self._estimate(self._submap_range(s2)[2]), guess)
-                o = self._match_at(k, s2, pts, pred, c.linear_window, c.angular_window, c.min_margin)
-                self.stats["searches"] += 1
-                if o is not None and (best is None or o.score > best.score):
-                    best = o
-            if best is not None and self._consistent(cand, best):
-                partners.append(best)
+            pred = relative(self._estimate(self._submap_range(s2)[2]), guess)
+            o = self._match_at(k, s2, pts, pred, c.linear_window, c.angular_window, c.min_margin)
+            self.stats["searches"] += 1
+            if o is not None and (best is None or o.score > best.score):
+                best = o
+        return best if best is not None and self._consistent(cand, best) else None
+
+    def _far_verified(self, cand: LoopCandidate, partners: list[LoopCandidate]) -> bool:
+        """Accept ``cand`` and its partners if there are ``far_partners`` of them spanning ``far_partner_span`` of
+        path; then optimise at once. Returns whether they were accepted."""
+        c = self.config
         paths = [self.keyframes[o.node].path for o in [cand, *partners]]
         if len(partners) < c.far_partners or max(paths) - min(paths) < c.far_partner_span:
-            return
+            return False
         for o in [cand, *partners]:
             o.far = True
             self.candidates.append(o)
             self._accept(o)
         self.stats["far_loops"] += 1 + len(partners)
         self._optimise(final=False)
-        self._opt_nodes = node
+        self._opt_nodes = len(self.keyframes) - 1
+        return True
+
+    def _pending_far(self, node: int) -> None:
+        """Try the new keyframe ``node`` as a partner of far candidates not yet verified (within
+        ``consistency_window`` keyframes after them)."""
+        keep = []
+        for cand, s, partners in self._pending:
+            if node - cand.node > self.config.consistency_window:
+                continue
+            o = self._far_partner(cand, s, node)
+            if o is not None:
+                partners.append(o)
+                if self._far_verified(cand, partners):
+                    self.stats["far_deferred"] += 1
+                    continue
+            keep.append((cand, s, partners))
+        self._pending = keep
 
     def _recent_loop(self, node: int) -> LoopCandidate | None:
         """The latest accepted loop candidate within ``consistency_window`` keyframes of ``node``."""
@@ -488,7 +600,8 @@ class LoopCloser:
             return None
         # the runner-up only for a match good enough to become a candidate (a second branch and bound)
         cr = correlative_search(lvl, pts, pred, lin, ang, None, c.search_points, sc.correlative_max_height, 0.0, 0.0,
-                                runner_up_distance=c.runner_up_distance, runner_up_angle=c.runner_up_angle)
+                                runner_up_distance=c.runner_up_distance, runner_up_angle=c.runner_up_angle,
+                                runner_up_wrap=c.runner_up_wrap)
         if cr is None or cr.score < c.min_score:
             return None
         margin = cr.score - (cr.runner_up or 0.0)
@@ -550,7 +663,7 @@ class LoopCloser:
                                 loop=True)
         key = (min(cand.anchor, cand.node), max(cand.anchor, cand.node))
         self._sigma_edges[key] = min(self._sigma_edges.get(key, math.inf), c.loop_sigma_xy)
-        self._length_edges[key] = min(self._length_edges.get(key, math.inf), math.hypot(*cand.z[:2]))
+        self._turn_edges[key] = min(self._turn_edges.get(key, math.inf), c.drift_rad_per_m * math.hypot(*cand.z[:2]))
         self.loop_edges.append(k)
         self.stats["loops_accepted"] += 1
         self._loop_path = max(self._loop_path, self.keyframes[cand.node].path)

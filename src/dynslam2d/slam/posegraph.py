@@ -38,7 +38,9 @@ KERNELS = ("dcs", "cauchy", "none")
 class Edge:
     """One relative-pose constraint: x_j = x_i ⊕ z (m, rad), information ``info`` (3×3).
 
-    ``loop``: a loop closure (robust kernel applies); ``active``: taken into account.
+    ``loop``: a loop closure (robust kernel applies); ``robust``: the robust kernel applies although it is no
+    loop (an odometry-like edge across a weak match, which may be a break of the front end); ``active``: taken
+    into account.
     ``weight``: the robust weight of the last optimisation (1 for odometry-like edges).
     """
 
@@ -49,6 +51,7 @@ class Edge:
     loop: bool = False
     active: bool = True
     weight: float = 1.0
+    robust: bool = False
 
 
 @dataclass(slots=True)
@@ -128,13 +131,13 @@ class PoseGraph:
         return self._n - 1
 
     def add_edge(self, i: int, j: int, z: tuple[float, float, float] | np.ndarray, info: np.ndarray,
-                 loop: bool = False) -> int:
+                 loop: bool = False, robust: bool = False) -> int:
         """Append the constraint x_j = x_i ⊕ z with information ``info`` (3×3); returns its index."""
         if not (0 <= i < self.n_nodes and 0 <= j < self.n_nodes) or i == j:
             raise ValueError(f"add_edge: bad node ids {i}, {j} (graph has {self.n_nodes} nodes)")
         info = np.asarray(info, dtype=np.float64).reshape(3, 3)
         self.edges.append(Edge(int(i), int(j), np.asarray(z, dtype=np.float64).reshape(3).copy(),
-                               0.5 * (info + info.T), bool(loop)))
+                               0.5 * (info + info.T), bool(loop), robust=bool(robust)))
         return len(self.edges) - 1
 
     # ---- evaluation ---------------------------------------------------------------------
@@ -233,7 +236,8 @@ class PoseGraph:
         from scipy.sparse.linalg import splu
 
         ii, jj, z, info = self._arrays(idx)
-        loop = np.array([self.edges[k].loop for k in idx], dtype=bool)
+        # the edges under the robust kernel: loops, and edges marked robust
+        loop = np.array([self.edges[k].loop or self.edges[k].robust for k in idx], dtype=bool)
         poses = self.poses.copy()
         n = self.n_nodes
 

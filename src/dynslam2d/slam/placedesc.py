@@ -1,0 +1,135 @@
+"""Place descriptors: which older places look like the current one, cheaply (docs/slam.md, "Far search").
+
+A place is described by the points a robot saw around a keyframe — the scans of the last few keyframes,
+placed with the front end's relative poses in the keyframe's laser frame — as a polar occupancy image after
+Scan Context (Kim & Kim, "Scan Context: Egocentric Spatial Descriptor for Place Recognition within 3D Point
+Cloud Map", IROS 2018): ``rings`` range bins of ``max_range / rings`` m × ``sectors`` bearing bins, a cell
+being 1 where any point falls (the 2D counterpart of Scan Context's maximum height). Comparing two places,
+the column (sector) vectors are compared by cosine similarity at every circular shift of the sectors — a
+rotation of the robot shifts the image's columns — and the distance is
+
+    d(a, b) = min_shift 1 − Σ_j cos(a_j, b_(j − shift)) / |{j : a_j ≠ 0 or b_(j − shift) ≠ 0}|
+
+(Kim & Kim, Eq. 5–6; here divided by the columns occupied in either image, so a place that sees much more
+or much less than the other scores worse, not better). All shifts of all stored places are evaluated at
+once as circular cross-correlations with the FFT along the sectors. 0 = identical (up to rotation),
+1 = nothing in common.
+
+What it is for: ranking every older place by ``d`` and running the expensive correlative verification only
+on the best few (:mod:`dynslam2d.slam.loops`, far search). It is no proof of a loop.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def polar_descriptor(points: np.ndarray, rings: int, sectors: int, max_range: float) -> np.ndarray:
+    """(rings, sectors) float32 0/1 polar occupancy image of ``points`` ((n, 2), m, in the place's frame):
+    ring k holds ranges [k, k+1)·max_range/rings, sector j bearings [j, j+1)·2π/sectors − π (rad)."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    out = np.zeros((rings, sectors), dtype=np.float32)
+    if pts.shape[0] == 0:
+        return out
+    r = np.hypot(pts[:, 0], pts[:, 1])
+    m = np.isfinite(r) & (r < max_range)
+    if not m.any():
+        return out
+    ri = np.minimum((r[m] * (rings / max_range)).astype(np.int64), rings - 1)
+    a = np.arctan2(pts[m, 1], pts[m, 0])
+    si = np.floor((a + math.pi) * (sectors / (2.0 * math.pi))).astype(np.int64) % sectors
+    out[ri, si] = 1.0
+    return out
+
+
+def _spectra(desc: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """(rfft of the column-normalised image (rings, sectors//2+1), rfft of its occupied-column indicator,
+    number of occupied columns) of one descriptor."""
+    d = np.asarray(desc, dtype=np.float64)
+    norm = np.linalg.norm(d, axis=0)
+    occ = norm > 0.0
+    unit = d / np.where(occ, norm, 1.0)
+    return np.fft.rfft(unit, axis=1), np.fft.rfft(occ.astype(np.float64)), int(occ.sum())
+
+
+class PlaceIndex:
+    """Descriptors of stored places (integer keys, e.g. pose-graph nodes) and their distance to a query.
+
+    >>> idx = PlaceIndex(20, 60, 15.0)
+    >>> pts = np.array([[2.0, 0.0], [0.0, 3.0], [-4.0, -1.0]])
+    >>> idx.add(7, polar_descriptor(pts, 20, 60, 15.0))
+    >>> keys, d, shift = idx.distances(polar_descriptor(pts, 20, 60, 15.0))
+    >>> int(keys[0]), round(float(d[0]), 6), int(shift[0])
+    (7, 0.0, 0)
+    """
+
+    def __init__(self, rings: int, sectors: int, max_range: float) -> None:
+        self.rings = int(rings)
+        self.sectors = int(sectors)
+        self.max_range = float(max_range)
+        nf = self.sectors // 2 + 1
+        self._cols = np.zeros((16, self.rings, nf), dtype=np.complex64)
+        self._occ = np.zeros((16, nf), dtype=np.complex64)
+        self._count = np.zeros(16, dtype=np.int32)
+        self._keys = np.zeros(16, dtype=np.int64)
+        self._n = 0
+
+    def __len__(self) -> int:
+        return self._n
+
+    @property
+    def keys(self) -> np.ndarray:
+        """(n,) keys of the stored places, in the order added."""
+        return self._keys[: self._n]
+
+    @property
+    def nbytes(self) -> int:
+        """Memory of the stored spectra, bytes."""
+        return int(self._cols.nbytes + self._occ.nbytes + self._count.nbytes + self._keys.nbytes)
+
+    def describe(self, points: np.ndarray) -> np.ndarray:
+        """:func:`polar_descriptor` with this index's rings, sectors and range."""
+        return polar_descriptor(points, self.rings, self.sectors, self.max_range)
+
+    def add(self, key: int, desc: np.ndarray) -> None:
+        """Store place ``key`` with descriptor ``desc`` ((rings, sectors), from :meth:`describe`)."""
+        if desc.shape != (self.rings, self.sectors):
+            raise ValueError(f"PlaceIndex.add: descriptor shape {desc.shape}, expected {(self.rings, self.sectors)}")
+        if self._n == self._keys.shape[0]:
+            grow = self._keys.shape[0]
+            self._cols = np.concatenate((self._cols, np.zeros_like(self._cols[:grow])))
+            self._occ = np.concatenate((self._occ, np.zeros_like(self._occ[:grow])))
+            self._count = np.concatenate((self._count, np.zeros_like(self._count[:grow])))
+            self._keys = np.concatenate((self._keys, np.zeros_like(self._keys[:grow])))
+        cols, occ, count = _spectra(desc)
+        k = self._n
+        self._cols[k] = cols
+        self._occ[k] = occ
+        self._count[k] = count
+        self._keys[k] = int(key)
+        self._n += 1
+
+    def distances(self, desc: np.ndarray, upto: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Distance of the query ``desc`` to every stored place (the first ``upto`` if given).
+
+        Returns (keys (n,), d (n,) in [0, 1], shift (n,) sectors): at the best shift, query sector j faces the
+        stored place's sector j − shift, i.e. the query's frame is the stored one turned by
+        −shift·2π/sectors rad (for places seen from the same position).
+        """
+        n = self._n if upto is None else min(int(upto), self._n)
+        if n == 0:
+            return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
+        q_cols, q_occ, q_count = _spectra(desc)
+        s = self.sectors
+        # Σ_j Σ_r a[r, j] b[r, j − shift] for every shift: circular cross-correlation, summed over the rings
+        corr = np.fft.irfft(np.einsum("rf,nrf->nf", q_cols, np.conj(self._cols[:n])), n=s, axis=1)
+        overlap = np.fft.irfft(q_occ[None, :] * np.conj(self._occ[:n]), n=s, axis=1)
+        union = q_count + self._count[:n, None].astype(np.float64) - np.rint(overlap)
+        d = 1.0 - corr / np.maximum(union, 1.0)
+        best = np.argmin(d, axis=1)
+        return self._keys[:n].copy(), np.clip(d[np.arange(n), best], 0.0, 1.0), best.astype(np.int64)
+
+
+__all__ = ["PlaceIndex", "polar_descriptor"]
