@@ -34,6 +34,7 @@ free-space and fragment tests); only the per-track bookkeeping stays in Python (
 from __future__ import annotations
 
 import bisect
+import copy
 import math
 from collections import deque
 from dataclasses import asdict, dataclass, field
@@ -74,7 +75,7 @@ from dynslam2d.detect.layout import (
 )
 from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
 from dynslam2d.detect.mapevidence import MapView, map_evidence
-from dynslam2d.detect.measure import Detection, Measurement
+from dynslam2d.detect.measure import Detection
 from dynslam2d.detect.segment import Segmentation, segment_scan
 from dynslam2d.detect.shapes import CRITERIA, fit_clusters, search_angles
 from dynslam2d.detect.vehicles import admit_long_clusters, extent_limit
@@ -84,11 +85,14 @@ TENTATIVE = "tentative"
 CONFIRMED = "confirmed"
 COASTING = "coasting"
 _HALF_PI = 0.5 * math.pi
+_QUARTER_PI = 0.25 * math.pi
 _TWO_PI = 2.0 * math.pi
 _BIG = 1e12
 _make_track = fast_init(Track)  # Track(...) / Box(...) without the frozen dataclass __init__ (detect/frozen.py)
 _make_box = fast_init(Box)
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
+_NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives it its row
+_ROWS0 = 64  # initial rows of the tracker's state arrays (doubled when full)
 
 
 @dataclass
@@ -128,8 +132,8 @@ class _Track:
     last_hit: float
     birth_xy: np.ndarray
     theta_box: float  # axis angle of size[0], rad
-    size: np.ndarray  # sizes along theta_box and theta_box + π/2, m
-    size_known: np.ndarray  # bool (2,)
+    size: list[float]  # sizes along theta_box and theta_box + π/2, m (a list: read and written per entry)
+    size_known: list[bool]  # (2,)
     radius: float
     kind: str
     state: str = TENTATIVE
@@ -142,7 +146,7 @@ class _Track:
     reason: str = "not in M: tentative track"
     beams: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     has_heading: bool = False
-    size_lb: np.ndarray = field(default_factory=lambda: np.zeros(2))  # largest partial views per axis, m
+    size_lb: list[float] = field(default_factory=lambda: [0.0, 0.0])  # largest partial views per axis, m
     free: list[float] = field(default_factory=list)
     mstruct: list[float] = field(default_factory=list)  # map evidence per update (mapevidence.py)
     mfree: list[float] = field(default_factory=list)
@@ -205,9 +209,14 @@ def _nearest_age(stamps: list[float], n: int, t: float, a: float, bisect_left=bi
     return j
 
 
-def _wrap_quarter(a: float) -> float:
-    """Wrap to [−π/4, π/4): the difference between two rectangle axis angles (90° ambiguity)."""
-    return (a + 0.25 * math.pi) % _HALF_PI - 0.25 * math.pi
+def _default_sizes(det: Detection, fit) -> list[float]:
+    """:meth:`Detection.default_sizes` as a list of floats (the same arithmetic on the same values)."""
+    (lo0, lo1), (hi0, hi1) = det.lo.tolist(), det.hi.tolist()
+    (r00, r01), (r10, r11) = det.rel.tolist()
+    e0, e1 = hi0 - lo0, hi1 - lo1
+    o0 = e0 if r00 and r01 else max(e0, min(fit.default_depth, fit.default_depth_ratio * max(e1, 0.0)))
+    o1 = e1 if r10 and r11 else max(e1, min(fit.default_depth, fit.default_depth_ratio * max(e0, 0.0)))
+    return [o0, o1]
 
 
 class Tracker:
@@ -221,6 +230,11 @@ class Tracker:
         self.config = config or DetectConfig()
         self.stats = TrackerStats()
         self._tracks: list[_Track] = []
+        # the Kalman states and covariances of the live tracks, row i = self._tracks[i] (struct of arrays: the
+        # prediction runs in place on them, the reports copy them in one go); each _Track's x / P is a view of
+        # its row (re-pointed when rows move: growth by doubling, compaction after deletions in _manage)
+        self._X = np.zeros((_ROWS0, 4))
+        self._P = np.zeros((_ROWS0, 4, 4))
         self._next_id = 1
         self._last_stamp: float | None = None
         self._last_pose: Pose2D | None = None
@@ -389,20 +403,20 @@ class Tracker:
         if not self._tracks or dt <= 0.0:
             return
         F, Q = _cv_matrices(dt, self.config.tracker.accel_noise)
-        X = np.array([k.x for k in self._tracks])
-        P = np.array([k.P for k in self._tracks])
-        X = X @ F.T
-        P = F @ P @ F.T + Q
+        n = len(self._tracks)
+        Xb, Pb = self._X[:n], self._P[:n]
+        X = Xb @ F.T
+        P = F @ Pb @ F.T + Q
         if self.config.memory.enabled:
             for i, k in enumerate(self._tracks):
                 if k.remembered and k.misses > 0:  # coasting through a stop: it stays where it stood
-                    X[i], P[i] = self._stationary_prediction(k, F, dt)
+                    X[i], P[i] = self._stationary_prediction(k, F, dt)  # (from k.x / k.P: not yet written)
+        Xb[...] = X  # (the tracks' x / P are views of these rows)
+        Pb[...] = P
         fin = np.isfinite(P).all(axis=(1, 2)).tolist()
-        for k, xr, pr, f in zip(self._tracks, X, P, fin):  # (row views from the array iterators)
-            k.x = xr
-            k.P = pr
+        for k, f in zip(self._tracks, fin):
             k.p_finite = f
-        self._stacked = (X, P)
+        self._stacked = (Xb, Pb)
 
     def _stationary_prediction(self, k: _Track, F: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Prediction of a remembered (stopped) track that is not detected, with a stationary motion model
@@ -425,8 +439,46 @@ class Tracker:
     def _stack(self) -> tuple[np.ndarray, np.ndarray]:
         """(n, 4) states and (n, 4, 4) covariances of the live tracks (from the prediction when it ran)."""
         if self._stacked is None:
-            self._stacked = (np.array([k.x for k in self._tracks]), np.array([k.P for k in self._tracks]))
+            n = len(self._tracks)
+            self._stacked = (self._X[:n], self._P[:n])
         return self._stacked
+
+    def _add_row(self, k: _Track, x, P: np.ndarray) -> None:
+        """Append ``k`` to the live tracks with state ``x`` (4,) and covariance ``P`` (4, 4): its row of the
+        state arrays (doubled when full) gets the values, ``k.x`` / ``k.P`` become views of it."""
+        n = len(self._tracks)
+        if n == self._X.shape[0]:
+            X = np.zeros((2 * n, 4))
+            P2 = np.zeros((2 * n, 4, 4))
+            X[:n] = self._X[:n]
+            P2[:n] = self._P[:n]
+            self._X, self._P = X, P2
+            self._repoint(0)
+        self._X[n] = x
+        self._P[n] = P
+        k.x = self._X[n]
+        k.P = self._P[n]
+        self._tracks.append(k)
+
+    def _repoint(self, start: int) -> None:
+        """Make the x / P of the live tracks from index ``start`` on views of their rows again."""
+        X, P = self._X, self._P
+        tracks = self._tracks
+        for i in range(start, len(tracks)):
+            k = tracks[i]
+            k.x = X[i]
+            k.P = P[i]
+
+    def __deepcopy__(self, memo: dict) -> Tracker:
+        """A deep copy whose tracks' x / P are views of the copy's own state arrays (a plain deep copy would
+        make them arrays of their own)."""
+        new = object.__new__(type(self))
+        memo[id(self)] = new
+        for name, value in self.__dict__.items():
+            setattr(new, name, copy.deepcopy(value, memo))
+        new._repoint(0)
+        new._stacked = None
+        return new
 
     def _beam_trig(self, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
         """cos / sin of the beam angles, cached per beam geometry (sensor frame)."""
@@ -619,7 +671,7 @@ class Tracker:
             th_l.append(k.theta_box)
             if k.misses > 0:
                 sk = k.size_known
-                known_l.append(not kr or bool(sk.item(0) and sk.item(1)))  # (size_known.all())
+                known_l.append(not kr or (sk[0] and sk[1]))  # (all(size_known))
             else:
                 known_l.append(False)
             firm_l.append(k.state != TENTATIVE)
@@ -696,31 +748,33 @@ class Tracker:
         (:mod:`dynslam2d.detect.kernels`); the shape bookkeeping stays per track."""
         tracks = self._tracks
         npair = len(pairs)
-        sizes = np.zeros((npair, 2))
-        has = np.zeros(npair, dtype=bool)
-        radius = np.full(npair, -1.0)
-        swaps = [False] * npair
+        sizes_l: list[tuple[float, float]] = []
+        has_l: list[bool] = []
+        radius_l: list[float] = []
+        swaps: list[bool] = []
         sel_l = [ti for ti, _ in pairs]
         rows_l = [di for _, di in pairs]
-        for r, (ti, di) in enumerate(pairs):
+        no_size = (0.0, 0.0)
+        for ti, di in pairs:
             k, det = tracks[ti], dets[di]
             dk = det.kind
+            sw, sz, has_sz, rad = False, no_size, False, -1.0
             if dk == KIND_RECT:
                 if k.has_heading:
                     # the detection's first axis is the track's second (90° ambiguity of a box's axes)
                     sw = int(round((det.theta - k.theta_box) / _HALF_PI)) % 2 == 1
-                    swaps[r] = sw
-                    sz = k.size
-                    if sw:
-                        sizes[r, 0] = sz[1]
-                        sizes[r, 1] = sz[0]
-                    else:
-                        sizes[r] = sz
-                    has[r] = True
+                    s0, s1 = k.size
+                    sz = (s1, s0) if sw else (s0, s1)
+                    has_sz = True
             elif dk == KIND_CIRCLE and k.kind == KIND_CIRCLE and k.radius > 0:
-                radius[r] = k.radius
+                rad = k.radius
+            swaps.append(sw)
+            sizes_l.append(sz)
+            has_l.append(has_sz)
+            radius_l.append(rad)
         rows = np.array(rows_l, dtype=np.int64)
-        mr = self._measure_rows(rows, sizes, has, radius, np.full(npair, 0.05))
+        mr = self._measure_rows(rows, np.array(sizes_l, dtype=np.float64), np.array(has_l, dtype=bool),
+                                np.array(radius_l, dtype=np.float64), np.full(npair, 0.05))
         H, zm, Rm, size_obs, size_kind = mr.H, mr.zm, mr.Rm, mr.size_obs, mr.size_kind
         Xs, Ps = self._stack()
         sel = np.array(sel_l, dtype=np.int64)
@@ -768,7 +822,8 @@ class Tracker:
         """Apply one Kalman result (``x_new``, ``P_new``) and the shape / bookkeeping update."""
         cfg = self.config
         tc = cfg.tracker
-        k.x, k.P = x_new, P_new
+        k.x[:] = x_new  # (the rows of the tracker's state arrays)
+        k.P[:] = P_new
         k.p_finite = True  # kalman_update_batch rejects non-finite results
         # shape: heading (90° ambiguity) and sizes along the track's own axes
         if det.kind == KIND_RECT:
@@ -776,8 +831,8 @@ class Tracker:
                 k.theta_box = det.theta
                 k.has_heading = True
                 swap = False
-                k.size = det.default_sizes(cfg.fit)
-                k.size_known = np.array([size_kind[0] == SIZE_MEASURED, size_kind[1] == SIZE_MEASURED])
+                k.size = _default_sizes(det, cfg.fit)
+                k.size_known = [size_kind[0] == SIZE_MEASURED, size_kind[1] == SIZE_MEASURED]
             else:
                 rl = det.rel.tolist()
                 informative = (rl[0][0] or rl[0][1]) and (rl[1][0] or rl[1][1])
@@ -785,39 +840,42 @@ class Tracker:
                     (lo0, lo1), (hi0, hi1) = det.lo.tolist(), det.hi.tolist()
                     informative = max(hi0 - lo0, hi1 - lo1) > 0.3  # the extent's longer side, m
                 if informative:
-                    th = k.theta_box + tc.heading_gain * _wrap_quarter(det.theta - k.theta_box)
-                    k.theta_box = float((th + math.pi) % _TWO_PI - math.pi)  # wrap_angle
+                    tb = k.theta_box
+                    # (the axis difference wrapped to [−π/4, π/4): 90° ambiguity)
+                    th = tb + tc.heading_gain * ((det.theta - tb + _QUARTER_PI) % _HALF_PI - _QUARTER_PI)
+                    k.theta_box = (th + math.pi) % _TWO_PI - math.pi  # wrap_angle
+                size, known = k.size, k.size_known
                 for a in (0, 1):
                     ta = 1 - a if swap else a
                     obs, kind = size_obs[a], size_kind[a]
                     if kind == SIZE_MEASURED:
-                        if k.size_known[ta]:
-                            k.size[ta] += tc.size_gain * (obs - k.size[ta])
+                        if known[ta]:
+                            size[ta] += tc.size_gain * (obs - size[ta])
                         else:
-                            k.size[ta] = obs
-                            k.size_known[ta] = True
+                            size[ta] = obs
+                            known[ta] = True
                     elif kind == SIZE_LOWER:
                         lb = k.size_lb
                         if obs > lb[ta]:  # (max(lb, obs))
                             lb[ta] = obs
-                        if obs > k.size[ta]:
+                        if obs > size[ta]:
                             # a partial view grew past the size: the box grows away from its one real
                             # bound, its centre moves with it, its velocity does not (item 2, docs/tracking.md)
-                            grow = obs - k.size[ta]
-                            lo_real, hi_real = bool(det.rel[a, 0]), bool(det.rel[a, 1])
+                            grow = obs - size[ta]
+                            lo_real, hi_real = rl[a]
                             if lo_real != hi_real:
                                 sgn = 0.5 * grow if lo_real else -0.5 * grow
                                 th = det.theta + a * _HALF_PI
-                                k.x = k.x.copy()
                                 k.x[0] += sgn * math.cos(th)
                                 k.x[1] += sgn * math.sin(th)
-                            k.size[ta] = obs
+                            size[ta] = obs
         elif det.kind == KIND_CIRCLE:
             r = float(det.circle[2])
             k.radius = r if k.kind != KIND_CIRCLE or k.radius <= 0 else k.radius + tc.size_gain * (r - k.radius)
-            k.size = np.array([2.0 * k.radius, 2.0 * k.radius])
+            k.size = [2.0 * k.radius, 2.0 * k.radius]
         elif det.kind == KIND_POINT and k.kind == KIND_POINT:
-            k.size = np.maximum(det.extent, 0.05)
+            (lo0, lo1), (hi0, hi1) = det.lo.tolist(), det.hi.tolist()
+            k.size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
         if k.misses > 0:
             # re-acquired after a gap: the free-space evidence must be rebuilt from this object
             k.past.clear()
@@ -888,7 +946,7 @@ class Tracker:
         along their long axis). Moves the hidden size by ``size_gain`` per update, never below the
         largest partial view."""
         tc = self.config.tracker
-        kn0, kn1 = k.size_known.tolist()
+        kn0, kn1 = k.size_known
         if tc.aspect_prior is None or k.state == TENTATIVE or (kn0 and kn1) or not (kn0 or kn1):
             return
         speed = math.hypot(k.x[2], k.x[3])
@@ -943,22 +1001,24 @@ class Tracker:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
         cfg = self.config
         d = self._default  # reference.measure(det, None, None, cfg.fit) of every detection
-        meas = Measurement(d.z[j], d.R[j], d.size_obs[j], d.size_kind[j], d.H[j], d.zm[j], d.Rm[j])
+        z = d.z[j]
         P = np.zeros((4, 4))
-        P[:2, :2] = meas.R
+        P[:2, :2] = d.R[j]
         P[2, 2] = P[3, 3] = cfg.tracker.init_speed_sigma ** 2
         if det.kind == KIND_RECT:
-            size = det.default_sizes(cfg.fit)
-            known = meas.size_kind == SIZE_MEASURED
+            size = _default_sizes(det, cfg.fit)
+            sk0, sk1 = d.size_kind[j].tolist()
+            known = [sk0 == SIZE_MEASURED, sk1 == SIZE_MEASURED]
         elif det.kind == KIND_CIRCLE:
-            size = np.full(2, 2.0 * det.circle[2])
-            known = np.ones(2, dtype=bool)
+            size = [float(2.0 * det.circle[2])] * 2
+            known = [True, True]
         else:
-            size = np.maximum(det.extent, 0.05)
-            known = np.zeros(2, dtype=bool)
-        k = _Track(id=self._next_id, x=np.array([meas.z[0], meas.z[1], 0.0, 0.0]), P=P, born=t, last_hit=t,
-                   birth_xy=meas.z.copy(), theta_box=det.theta, size=np.asarray(size, dtype=np.float64),
-                   size_known=np.asarray(known, dtype=bool), radius=float(det.circle[2]) if det.kind == KIND_CIRCLE
+            (lo0, lo1), (hi0, hi1) = det.lo.tolist(), det.hi.tolist()
+            size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
+            known = [False, False]
+        k = _Track(id=self._next_id, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t,
+                   birth_xy=z.copy(), theta_box=det.theta, size=size,
+                   size_known=known, radius=float(det.circle[2]) if det.kind == KIND_CIRCLE
                    else 0.0, kind=det.kind, beams=det.beams, has_heading=det.kind == KIND_RECT,
                    free=[det.free_fraction], mstruct=[det.map_structure] if self._map is not None else [],
                    mfree=[det.map_free] if self._map is not None else [],
@@ -969,7 +1029,7 @@ class Tracker:
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
         self._next_id += 1
-        self._tracks.append(k)
+        self._add_row(k, (z[0], z[1], 0.0, 0.0), P)
         self.stats.tracks_born += 1
 
     def _manage(self, t: float, updated: set[int]) -> None:
@@ -981,7 +1041,8 @@ class Tracker:
         window, need_hits = tc.confirm_window, tc.confirm_hits
         max_coast, max_sig, max_speed = tc.max_coast_time, tc.max_position_sigma, tc.max_object_speed
         sqrt, hypot = math.sqrt, math.hypot
-        for k in self._tracks:
+        rows: list[int] = []  # the state rows of the kept tracks
+        for i, k in enumerate(self._tracks):
             kid = k.id
             is_upd = kid in updated
             if kid in merged and not is_upd and k.in_m:
@@ -1038,7 +1099,24 @@ class Tracker:
                         k.m_start_xy, k.m_last_t, k.remembered = None, None, False
                         k.m_time = k.m_travel = 0.0
             keep.append(k)
+            rows.append(i)
+        if len(keep) < len(self._tracks):
+            self._compact(keep, rows)
+
+    def _compact(self, keep: list[_Track], rows: list[int]) -> None:
+        """Keep only the tracks ``keep``, whose state rows were ``rows`` (increasing): the rows move up to
+        0 … len(keep) − 1 in that order and the tracks' x / P are re-pointed to them."""
+        m = len(keep)
+        start = 0  # the tracks before the first deleted one stay in their rows
+        while start < m and rows[start] == start:
+            start += 1
+        if start < m:
+            idx = np.array(rows[start:], dtype=np.int64)
+            X, P = self._X, self._P
+            X[start:m] = X[idx]  # (fancy indexing copies first: no row is overwritten before it is read)
+            P[start:m] = P[idx]
         self._tracks = keep
+        self._repoint(start)
 
     def _dynamic(self, k: _Track, speed: float, t: float) -> None:
         """Paper Eq. 3 with persistence, certainty and displacement conditions."""
@@ -1331,8 +1409,9 @@ class Tracker:
         slow = 0.5 * tc.v_min
         # (speed: states and covariances stacked in one copy each; every report's velocity / covariance is a
         # row of them, its own memory apart from the tracker's)
-        X = np.array([k.x for k in tracks])
-        P = np.array([k.P for k in tracks])
+        n = len(tracks)
+        X = self._X[:n].copy()
+        P = self._P[:n].copy()
         V = X[:, 2:]
         out = []
         append, make_track, make_box = out.append, _make_track, _make_box  # (locals: the loop runs per track)
@@ -1343,7 +1422,7 @@ class Tracker:
                 theta = atan2(vy, vx) if speed > slow else 0.0
                 length = width = 2.0 * k.radius
             else:
-                sa, sb = k.size.tolist()
+                sa, sb = k.size
                 tb = k.theta_box
                 if speed > slow:
                     vdir = atan2(vy, vx)
