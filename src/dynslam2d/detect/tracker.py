@@ -170,6 +170,7 @@ class _Track:
     m_time: float = 0.0  # time spent in M over its updates, s
     m_travel: float = 0.0  # largest distance of its centre from m_start_xy while in M, m
     m_last_t: float | None = None  # stamp of its last update in M, s
+    row: int = -1  # its row of the tracker's state arrays (Tracker._X / _P; x and P are views of it)
 
 
 def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
@@ -230,11 +231,15 @@ class Tracker:
         self.config = config or DetectConfig()
         self.stats = TrackerStats()
         self._tracks: list[_Track] = []
-        # the Kalman states and covariances of the live tracks, row i = self._tracks[i] (struct of arrays: the
-        # prediction runs in place on them, the reports copy them in one go); each _Track's x / P is a view of
-        # its row (re-pointed when rows move: growth by doubling, compaction after deletions in _manage)
+        # the Kalman states and covariances of the live tracks (struct of arrays: the prediction runs on all of
+        # them at once, the reports copy them in one go); each _Track keeps its row for life (k.row; rows of
+        # deleted tracks are reused by births) and its x / P are views of that row (re-pointed only when the
+        # arrays grow, by doubling)
         self._X = np.zeros((_ROWS0, 4))
         self._P = np.zeros((_ROWS0, 4, 4))
+        self._rows_used = 0  # rows 0 … _rows_used − 1 have been handed out
+        self._free_rows: list[int] = []  # rows of deleted tracks, reused first
+        self._order: np.ndarray | None = None  # the rows of self._tracks in their order (None: to be built)
         self._next_id = 1
         self._last_stamp: float | None = None
         self._last_pose: Pose2D | None = None
@@ -267,6 +272,9 @@ class Tracker:
     def reset(self) -> None:
         """Forget every track and the free-space evidence (ids keep counting up)."""
         self._tracks.clear()
+        self._rows_used = 0
+        self._free_rows.clear()
+        self._order = None
         if self._free is not None:
             self._free.clear()
 
@@ -403,20 +411,19 @@ class Tracker:
         if not self._tracks or dt <= 0.0:
             return
         F, Q = _cv_matrices(dt, self.config.tracker.accel_noise)
-        n = len(self._tracks)
-        Xb, Pb = self._X[:n], self._P[:n]
-        X = Xb @ F.T
-        P = F @ Pb @ F.T + Q
+        order = self._rows()
+        X = self._X[order] @ F.T
+        P = F @ self._P[order] @ F.T + Q
         if self.config.memory.enabled:
             for i, k in enumerate(self._tracks):
                 if k.remembered and k.misses > 0:  # coasting through a stop: it stays where it stood
                     X[i], P[i] = self._stationary_prediction(k, F, dt)  # (from k.x / k.P: not yet written)
-        Xb[...] = X  # (the tracks' x / P are views of these rows)
-        Pb[...] = P
+        self._X[order] = X  # (the tracks' x / P are views of these rows)
+        self._P[order] = P
         fin = np.isfinite(P).all(axis=(1, 2)).tolist()
         for k, f in zip(self._tracks, fin):
             k.p_finite = f
-        self._stacked = (Xb, Pb)
+        self._stacked = (X, P)
 
     def _stationary_prediction(self, k: _Track, F: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Prediction of a remembered (stopped) track that is not detected, with a stationary motion model
@@ -439,35 +446,46 @@ class Tracker:
     def _stack(self) -> tuple[np.ndarray, np.ndarray]:
         """(n, 4) states and (n, 4, 4) covariances of the live tracks (from the prediction when it ran)."""
         if self._stacked is None:
-            n = len(self._tracks)
-            self._stacked = (self._X[:n], self._P[:n])
+            order = self._rows()
+            self._stacked = (self._X[order], self._P[order])
         return self._stacked
 
-    def _add_row(self, k: _Track, x, P: np.ndarray) -> None:
-        """Append ``k`` to the live tracks with state ``x`` (4,) and covariance ``P`` (4, 4): its row of the
-        state arrays (doubled when full) gets the values, ``k.x`` / ``k.P`` become views of it."""
-        n = len(self._tracks)
-        if n == self._X.shape[0]:
-            X = np.zeros((2 * n, 4))
-            P2 = np.zeros((2 * n, 4, 4))
-            X[:n] = self._X[:n]
-            P2[:n] = self._P[:n]
-            self._X, self._P = X, P2
-            self._repoint(0)
-        self._X[n] = x
-        self._P[n] = P
-        k.x = self._X[n]
-        k.P = self._P[n]
-        self._tracks.append(k)
+    def _rows(self) -> np.ndarray:
+        """The state-array rows of the live tracks, in their order (int64)."""
+        if self._order is None:
+            self._order = np.array([k.row for k in self._tracks], dtype=np.int64)
+        return self._order
 
-    def _repoint(self, start: int) -> None:
-        """Make the x / P of the live tracks from index ``start`` on views of their rows again."""
+    def _add_row(self, k: _Track, x, P: np.ndarray) -> None:
+        """Append ``k`` to the live tracks with state ``x`` (4,) and covariance ``P`` (4, 4): it gets a row of
+        the state arrays (a deleted track's, else a new one; the arrays double when full) holding the values,
+        and ``k.x`` / ``k.P`` become views of it."""
+        if self._free_rows:
+            row = self._free_rows.pop()
+        else:
+            row = self._rows_used
+            self._rows_used += 1
+            if row == self._X.shape[0]:
+                X = np.zeros((2 * row, 4))
+                P2 = np.zeros((2 * row, 4, 4))
+                X[:row] = self._X
+                P2[:row] = self._P
+                self._X, self._P = X, P2
+                self._repoint()
+        self._X[row] = x
+        self._P[row] = P
+        k.row = row
+        k.x = self._X[row]
+        k.P = self._P[row]
+        self._tracks.append(k)
+        self._order = None
+
+    def _repoint(self) -> None:
+        """Make the x / P of the live tracks views of their rows of the (new) state arrays."""
         X, P = self._X, self._P
-        tracks = self._tracks
-        for i in range(start, len(tracks)):
-            k = tracks[i]
-            k.x = X[i]
-            k.P = P[i]
+        for k in self._tracks:
+            k.x = X[k.row]
+            k.P = P[k.row]
 
     def __deepcopy__(self, memo: dict) -> Tracker:
         """A deep copy whose tracks' x / P are views of the copy's own state arrays (a plain deep copy would
@@ -476,7 +494,7 @@ class Tracker:
         memo[id(self)] = new
         for name, value in self.__dict__.items():
             setattr(new, name, copy.deepcopy(value, memo))
-        new._repoint(0)
+        new._repoint()
         new._stacked = None
         return new
 
@@ -1041,8 +1059,7 @@ class Tracker:
         window, need_hits = tc.confirm_window, tc.confirm_hits
         max_coast, max_sig, max_speed = tc.max_coast_time, tc.max_position_sigma, tc.max_object_speed
         sqrt, hypot = math.sqrt, math.hypot
-        rows: list[int] = []  # the state rows of the kept tracks
-        for i, k in enumerate(self._tracks):
+        for k in self._tracks:
             kid = k.id
             is_upd = kid in updated
             if kid in merged and not is_upd and k.in_m:
@@ -1099,24 +1116,11 @@ class Tracker:
                         k.m_start_xy, k.m_last_t, k.remembered = None, None, False
                         k.m_time = k.m_travel = 0.0
             keep.append(k)
-            rows.append(i)
         if len(keep) < len(self._tracks):
-            self._compact(keep, rows)
-
-    def _compact(self, keep: list[_Track], rows: list[int]) -> None:
-        """Keep only the tracks ``keep``, whose state rows were ``rows`` (increasing): the rows move up to
-        0 … len(keep) − 1 in that order and the tracks' x / P are re-pointed to them."""
-        m = len(keep)
-        start = 0  # the tracks before the first deleted one stay in their rows
-        while start < m and rows[start] == start:
-            start += 1
-        if start < m:
-            idx = np.array(rows[start:], dtype=np.int64)
-            X, P = self._X, self._P
-            X[start:m] = X[idx]  # (fancy indexing copies first: no row is overwritten before it is read)
-            P[start:m] = P[idx]
+            kept = {k.row for k in keep}
+            self._free_rows.extend(k.row for k in self._tracks if k.row not in kept)  # (births reuse them)
+            self._order = None
         self._tracks = keep
-        self._repoint(start)
 
     def _dynamic(self, k: _Track, speed: float, t: float) -> None:
         """Paper Eq. 3 with persistence, certainty and displacement conditions."""
@@ -1409,9 +1413,9 @@ class Tracker:
         slow = 0.5 * tc.v_min
         # (speed: states and covariances stacked in one copy each; every report's velocity / covariance is a
         # row of them, its own memory apart from the tracker's)
-        n = len(tracks)
-        X = self._X[:n].copy()
-        P = self._P[:n].copy()
+        order = self._rows()
+        X = self._X[order]  # (copies: the reports' own memory)
+        P = self._P[order]
         V = X[:, 2:]
         out = []
         append, make_track, make_box = out.append, _make_track, _make_box  # (locals: the loop runs per track)
