@@ -92,7 +92,8 @@ _make_track = fast_init(Track)  # Track(...) / Box(...) without the frozen datac
 _make_box = fast_init(Box)
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
 _NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives it its row
-_ROWS0 = 64  # initial rows of the tracker's state arrays (doubled when full)
+_ROWS0 = 64
+_min_rows, _max_rows = np.minimum.reduce, np.maximum.reduce  # initial rows of the tracker's state arrays (doubled when full)
 
 
 @dataclass
@@ -555,21 +556,30 @@ class Tracker:
         # per-detection views, sliced once per scan (the same views as fits[j, FIT_CENTROID], lohi[j, LOHI_LO], …)
         cen_v, circ_v = fits[:, FIT_CENTROID], fits[:, FIT_CIRCLE]
         lo_v, hi_v = lohi[:, LOHI_LO], lohi[:, LOHI_HI]
-        # free-space and map evidence per detection (0 where unknown), then the detections in one pass
+        # free-space and map evidence per detection (0 where unknown), then the detections in one pass; both
+        # tests are per point, so only the detections' points are tested (structure clusters, most of the
+        # points, are not detections)
         nd = idx.shape[0]
         frac = fs = ff = fu = [0.0] * nd
+        if self._free is not None or self._map is not None:
+            if nd < seg.n_clusters:
+                det_pts = pts[np.repeat(keep.astype(bool, copy=False), offsets[1:] - offsets[:-1])]
+                det_off = np.zeros(nd + 1, dtype=np.int64)
+                np.cumsum(npts, out=det_off[1:])
+            else:
+                det_pts, det_off = pts, offsets
         if self._free is not None:
             self._cur_ref = self._free.make_ref(scan, pose, valid)
-            free = self._free.seen_through(pts, float(scan.stamp))
-            frac = segment_means(free.astype(np.float64), offsets)[idx].tolist()
+            free = self._free.seen_through(det_pts, float(scan.stamp))
+            frac = segment_means(free.astype(np.float64), det_off).tolist()
             self._free.add(scan, pose, valid, self._cur_ref)
         if self._map is not None:
             tc = cfg.tracker
-            mstruct, mfree, munk = map_evidence(pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
+            mstruct, mfree, munk = map_evidence(det_pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
                                                 tc.map_free_radius)
-            fs = segment_means(mstruct.astype(np.float64), offsets)[idx].tolist()
-            ff = segment_means(mfree.astype(np.float64), offsets)[idx].tolist()
-            fu = segment_means(munk.astype(np.float64), offsets)[idx].tolist()
+            fs = segment_means(mstruct.astype(np.float64), det_off).tolist()
+            ff = segment_means(mfree.astype(np.float64), det_off).tolist()
+            fu = segment_means(munk.astype(np.float64), det_off).tolist()
         # (row views from the array iterators: one C pass per array instead of an index per detection)
         for a0, n, kd, th, cen_j, lo_j, hi_j, rel_j, circ_j, fr_j, fs_j, ff_j, fu_j in zip(
                 starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(), cen_v, lo_v, hi_v, rel,
@@ -638,7 +648,7 @@ class Tracker:
             da, db = dets[a], dets[b]
             pts = np.concatenate((da.points, db.points))  # (np.vstack of two (n, 2) arrays)
             mid = 0.5 * (da.centroid + db.centroid)
-            lo, hi = pts.min(axis=0), pts.max(axis=0)
+            lo, hi = _min_rows(pts, axis=0), _max_rows(pts, axis=0)  # (pts.min / max(axis=0) without the wrappers)
             na, nb = da.n_points, db.n_points
             det = Detection(np.concatenate((da.beams, db.beams)), pts, mid, KIND_POINT, 0.0, lo, hi,
                             np.zeros((2, 2), dtype=bool), np.array([mid[0], mid[1], 0.0]), na + nb,
@@ -1000,9 +1010,11 @@ class Tracker:
                 continue
             npast = len(past)
             stamps = k.past_t
+            last = -2
             for a in ref_ages:
                 j = _nearest_age(stamps, npast, t, a, bisect_left)
-                if t - stamps[j] > 0.0:
+                if j != last and t - stamps[j] > 0.0:  # (the same stored scan for two ages: tested once)
+                    last = j
                     pts = past[j][1]
                     chunks.append(pts)
                     owners.append(k.id)
