@@ -92,8 +92,8 @@ _make_track = fast_init(Track)  # Track(...) / Box(...) without the frozen datac
 _make_box = fast_init(Box)
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
 _NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives it its row
-_ROWS0 = 64
-_min_rows, _max_rows = np.minimum.reduce, np.maximum.reduce  # initial rows of the tracker's state arrays (doubled when full)
+_ROWS0 = 64  # initial rows of the tracker's state arrays (doubled when full)
+_min_rows, _max_rows = np.minimum.reduce, np.maximum.reduce  # (ndarray.min / max without numpy's Python wrappers)
 
 
 @dataclass
