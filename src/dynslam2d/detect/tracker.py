@@ -179,7 +179,10 @@ def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     F = np.eye(4)
     F[0, 2] = F[1, 3] = dt
     q11, q12, q22 = q * dt ** 3 / 3.0, q * dt ** 2 / 2.0, q * dt
-    Q = np.array([[q11, 0, q12, 0], [0, q11, 0, q12], [q12, 0, q22, 0], [0, q12, 0, q22]])
+    Q = np.zeros((4, 4))
+    Q[0, 0] = Q[1, 1] = q11
+    Q[0, 2] = Q[1, 3] = Q[2, 0] = Q[3, 1] = q12
+    Q[2, 2] = Q[3, 3] = q22
     return F, Q
 
 
@@ -391,10 +394,12 @@ class Tracker:
         cand = [k for k in self._tracks if k.id in updated and k.state == CONFIRMED]
         if not cand:
             return [None] * len(dets)
-        geo = np.array([(k.x[0], k.x[1], k.theta_box, k.size[0], k.size[1]) for k in cand])
+        xy = self._X[[k.row for k in cand], :2]  # (the candidates' centres, one gather)
         b = self._batch
-        idx = fragment_hosts(b.px, b.py, b.start, b.npts, np.array(dets, dtype=np.int64), geo[:, 0].copy(),
-                             geo[:, 1].copy(), geo[:, 2].copy(), geo[:, 3].copy(), geo[:, 4].copy(),
+        idx = fragment_hosts(b.px, b.py, b.start, b.npts, np.array(dets, dtype=np.int64), xy[:, 0].copy(),
+                             xy[:, 1].copy(), np.array([k.theta_box for k in cand], dtype=np.float64),
+                             np.array([k.size[0] for k in cand], dtype=np.float64),
+                             np.array([k.size[1] for k in cand], dtype=np.float64),
                              float(self.config.fit.fragment_margin))
         return [cand[i] if i >= 0 else None for i in idx.tolist()]
 
@@ -691,7 +696,8 @@ class Tracker:
         tracks = self._tracks
         Xs, Ps = self._stack()
         tsize = np.array([k.size for k in tracks])
-        reach = 0.5 * tsize.max(axis=1)
+        tmax = tsize.max(axis=1)
+        reach = 0.5 * tmax
         rect_l, th_l, known_l, firm_l = [], [], [], []
         for k in tracks:  # (per-track flags in one pass)
             kr = k.kind == KIND_RECT
@@ -716,7 +722,7 @@ class Tracker:
         # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
         # later, a tracked object may touch another for a scan)
         known = np.array(known_l)
-        grow_ok = (det_ext[None, :] <= tc.max_size_jump_ratio * tsize.max(axis=1)[:, None] + tc.max_size_jump) | \
+        grow_ok = (det_ext[None, :] <= tc.max_size_jump_ratio * tmax[:, None] + tc.max_size_jump) | \
             ~known[:, None]
         ok = ok & grow_ok
         if self._map is not None:
@@ -806,18 +812,22 @@ class Tracker:
         H, zm, Rm, size_obs, size_kind = mr.H, mr.zm, mr.Rm, mr.size_obs, mr.size_kind
         Xs, Ps = self._stack()
         sel = np.array(sel_l, dtype=np.int64)
-        Xn, Pn, ok = kalman_update_batch(Xs[sel], Ps[sel], H, zm, Rm)
-        self._bound_acceleration(Xs[sel], Xn, tracks, pairs)
+        X_prior = Xs[sel]  # (kalman_update_batch works on copies: the prior stays as it is)
+        Xn, Pn, ok = kalman_update_batch(X_prior, Ps[sel], H, zm, Rm)
+        self._bound_acceleration(X_prior, Xn, tracks, pairs)
         self._stacked = None  # the tracks change below
         out = ok.tolist()
+        # the new states and covariances into the tracks' rows of the state arrays, all at once
+        rows = self._rows()[sel[ok]]
+        self._X[rows] = Xn[ok]
+        self._P[rows] = Pn[ok]
         so, sk = size_obs.tolist(), size_kind.tolist()
         upd = self._update_track
         vget = vac.get
-        # (rows of Xn / Pn as views, made by the array iterators in one pass each)
-        for r, (ti, di), xr, pr in zip(range(npair), pairs, Xn, Pn):
+        for r, (ti, di) in enumerate(pairs):
             if out[r]:
                 k = tracks[ti]
-                upd(k, dets[di], t, vget(k.id, 0.0), xr, pr, so[r], sk[r], swaps[r])
+                upd(k, dets[di], t, vget(k.id, 0.0), so[r], sk[r], swaps[r])
         return out
 
     def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track],
@@ -845,13 +855,11 @@ class Tracker:
                 X_new[r, 3] = X_prior[r, 3] + dvy * lim / d
                 self.stats.accel_bounded += 1
 
-    def _update_track(self, k: _Track, det: Detection, t: float, vacated: float, x_new: np.ndarray,
-                      P_new: np.ndarray, size_obs: list[float], size_kind: list[int], swap: bool) -> None:
-        """Apply one Kalman result (``x_new``, ``P_new``) and the shape / bookkeeping update."""
+    def _update_track(self, k: _Track, det: Detection, t: float, vacated: float, size_obs: list[float],
+                      size_kind: list[int], swap: bool) -> None:
+        """The shape / bookkeeping update of a track whose Kalman result is already in its row (k.x, k.P)."""
         cfg = self.config
         tc = cfg.tracker
-        k.x[:] = x_new  # (the rows of the tracker's state arrays)
-        k.P[:] = P_new
         k.p_finite = True  # kalman_update_batch rejects non-finite results
         # shape: heading (90° ambiguity) and sizes along the track's own axes
         if det.kind == KIND_RECT:
@@ -1055,7 +1063,8 @@ class Tracker:
                    munknown=[det.map_unknown] if self._map is not None else [],
                    past=[(t, det.points)] if self._free is not None else [],
                    past_t=[t] if self._free is not None else [])
-        k.p_finite = bool(np.isfinite(P).all())
+        # (np.isfinite(P).all() of its only non-zero entries: the measurement's R and the speed variance)
+        k.p_finite = all(map(math.isfinite, d.R[j].ravel().tolist())) and math.isfinite(P.item(10))
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
         self._next_id += 1
