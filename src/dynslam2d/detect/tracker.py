@@ -28,7 +28,10 @@ quantity is in the map frame (m, rad, m/s).
 Speed: steps 3–5 run as one numba kernel call per scan each (:mod:`dynslam2d.detect.kernels`:
 classification and bounds of all clusters, the measurements, the gate, the Kalman updates, the
 free-space and fragment tests); only the per-track bookkeeping stays in Python (≈0.8 ms per
-720-beam scan with 10 movers, ``benchmarks/bench_detect.py``).
+720-beam scan with 10 movers, ``benchmarks/bench_detect.py``). The Kalman states and covariances of
+all live tracks are two arrays owned by the tracker (``_X``, ``_P``; each track keeps one row for
+life, its ``x`` / ``P`` are views of it): the prediction, the association and the reports read
+them as whole arrays, the Kalman results are written back in one scatter per scan.
 """
 
 from __future__ import annotations
