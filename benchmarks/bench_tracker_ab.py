@@ -19,12 +19,16 @@ match, map update, evidence ledger, body filter, exclusion), ms per scan and sha
 calls (segmentation, shape fits, classification, map evidence, free-space memory, the association / Kalman
 kernels) and how much in ``detect/tracker.py``'s own Python, µs per scan.
 
+``--pipeline`` runs two whole pipelines (one with each checkout's tracker) over every scan in lockstep, timing each
+``Pipeline.process`` call in thread CPU time, the two alternately first: the median CPU ms per scan of each and their
+ratio — the figure bench_real.py's ms/scan (a wall-time median) gives on a quiet machine, robust to other load.
+
 ``--check`` runs both checkouts' trackers over every scan of an input in lockstep and compares their reports
 exactly (every field of every track, floats and arrays bit for bit, the stats and the removed beams): a
 speed change of the tracker must print "reports identical".
 
     python benchmarks/bench_tracker_ab.py negative_2/right positive_7 [--other ../main/src] [--reps 5]
-        [--start 150 --end 210] [--stages | --split | --check]
+        [--start 150 --end 210] [--stages | --split | --check | --pipeline]
 
 Pin to one core with ``taskset -c N``. Inputs: ``negative_2/left|rear|right``, ``positive_7``, ``overtakes``,
 ``demo``, ``sim:drive`` (paths under ``--data``).
@@ -148,6 +152,30 @@ def check(scans: list, other) -> tuple[int, int | None]:
     return len(scans), None
 
 
+def pipeline_ab(scans: list, other) -> tuple[float, float, float]:
+    """(other, this) median CPU ms of ``Pipeline.process`` per scan over every scan, two pipelines (one with each
+    checkout's tracker) in lockstep, and the median of the per-scan ratios this / other."""
+    from dynslam2d.detect import tracker as this
+    from dynslam2d.pipeline import Pipeline
+
+    warm = Pipeline()
+    for s in scans[:60]:
+        warm.process(s)
+    pipes = {}
+    for tag, mod in (("other", other), ("this", this)):
+        p = Pipeline()
+        p.tracker = mod.Tracker(p.config.detect)
+        pipes[tag] = p
+    cpu: dict[str, list[float]] = {"other": [], "this": []}
+    for i, s in enumerate(scans):
+        for tag in (("other", "this") if i % 2 == 0 else ("this", "other")):
+            t0 = time.thread_time_ns()
+            pipes[tag].process(s)
+            cpu[tag].append((time.thread_time_ns() - t0) / 1e6)
+    return (statistics.median(cpu["other"]), statistics.median(cpu["this"]),
+            statistics.median(t / o for t, o in zip(cpu["this"], cpu["other"])))
+
+
 #: functions of other modules that Tracker.update calls (module attribute of detect/tracker.py → label)
 _SPLIT = ("segment_scan", "fit_clusters", "classify_batch", "admit_long_clusters", "map_evidence", "gate_costs",
           "measure_batch", "kalman_update_batch", "fragment_hosts", "segment_means", "linear_sum_assignment")
@@ -240,6 +268,8 @@ def main() -> None:
                     help="instead: Tracker.update's CPU in other modules' functions vs tracker.py's own code")
     ap.add_argument("--check", action="store_true",
                     help="instead: run both checkouts' trackers over every scan and compare their reports exactly")
+    ap.add_argument("--pipeline", action="store_true",
+                    help="instead: median CPU ms per scan of the whole pipeline with each checkout's tracker")
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     args = ap.parse_args()
     other = None if args.stages or args.split else other_tracker_module(args.other)
@@ -255,6 +285,10 @@ def main() -> None:
         elif args.check:
             n, bad = check(scans, other)
             print(f"{name:<18} {n} scans: " + ("reports identical" if bad is None else f"DIFFERENT at scan {bad}"))
+        elif args.pipeline:
+            mo, mt, med = pipeline_ab(scans, other)
+            print(f"{name:<18} pipeline CPU ms/scan, median over {len(scans)} scans: other {mo:.3f}, this {mt:.3f}, "
+                  f"ratio {mt / mo:.3f} (median per scan {med:.3f})")
         elif args.stages:
             total, parts = stages(scans)
             print(f"{name}: {total:.2f} ms CPU per scan")

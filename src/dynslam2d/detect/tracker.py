@@ -28,12 +28,16 @@ quantity is in the map frame (m, rad, m/s).
 Speed: steps 3–5 run as one numba kernel call per scan each (:mod:`dynslam2d.detect.kernels`:
 classification and bounds of all clusters, the measurements, the gate, the Kalman updates, the
 free-space and fragment tests); only the per-track bookkeeping stays in Python (≈0.8 ms per
-720-beam scan with 10 movers, ``benchmarks/bench_detect.py``).
+720-beam scan with 10 movers, ``benchmarks/bench_detect.py``). The Kalman states and covariances of
+all live tracks are two arrays owned by the tracker (``_X``, ``_P``; each track keeps one row for
+life, its ``x`` / ``P`` are views of it): the prediction, the association and the reports read
+them as whole arrays, the Kalman results are written back in one scatter per scan.
 """
 
 from __future__ import annotations
 
 import bisect
+import copy
 import math
 from collections import deque
 from dataclasses import asdict, dataclass, field
@@ -74,7 +78,7 @@ from dynslam2d.detect.layout import (
 )
 from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
 from dynslam2d.detect.mapevidence import MapView, map_evidence
-from dynslam2d.detect.measure import Detection, Measurement
+from dynslam2d.detect.measure import Detection
 from dynslam2d.detect.segment import Segmentation, segment_scan
 from dynslam2d.detect.shapes import CRITERIA, fit_clusters, search_angles
 from dynslam2d.detect.vehicles import admit_long_clusters, extent_limit
@@ -84,11 +88,15 @@ TENTATIVE = "tentative"
 CONFIRMED = "confirmed"
 COASTING = "coasting"
 _HALF_PI = 0.5 * math.pi
+_QUARTER_PI = 0.25 * math.pi
 _TWO_PI = 2.0 * math.pi
 _BIG = 1e12
 _make_track = fast_init(Track)  # Track(...) / Box(...) without the frozen dataclass __init__ (detect/frozen.py)
 _make_box = fast_init(Box)
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
+_NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives it its row
+_ROWS0 = 64  # initial rows of the tracker's state arrays (doubled when full)
+_min_rows, _max_rows = np.minimum.reduce, np.maximum.reduce  # (ndarray.min / max without numpy's Python wrappers)
 
 
 @dataclass
@@ -128,8 +136,8 @@ class _Track:
     last_hit: float
     birth_xy: np.ndarray
     theta_box: float  # axis angle of size[0], rad
-    size: np.ndarray  # sizes along theta_box and theta_box + π/2, m
-    size_known: np.ndarray  # bool (2,)
+    size: list[float]  # sizes along theta_box and theta_box + π/2, m (a list: read and written per entry)
+    size_known: list[bool]  # (2,)
     radius: float
     kind: str
     state: str = TENTATIVE
@@ -142,7 +150,7 @@ class _Track:
     reason: str = "not in M: tentative track"
     beams: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     has_heading: bool = False
-    size_lb: np.ndarray = field(default_factory=lambda: np.zeros(2))  # largest partial views per axis, m
+    size_lb: list[float] = field(default_factory=lambda: [0.0, 0.0])  # largest partial views per axis, m
     free: list[float] = field(default_factory=list)
     mstruct: list[float] = field(default_factory=list)  # map evidence per update (mapevidence.py)
     mfree: list[float] = field(default_factory=list)
@@ -166,6 +174,7 @@ class _Track:
     m_time: float = 0.0  # time spent in M over its updates, s
     m_travel: float = 0.0  # largest distance of its centre from m_start_xy while in M, m
     m_last_t: float | None = None  # stamp of its last update in M, s
+    row: int = -1  # its row of the tracker's state arrays (Tracker._X / _P; x and P are views of it)
 
 
 def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
@@ -173,7 +182,10 @@ def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     F = np.eye(4)
     F[0, 2] = F[1, 3] = dt
     q11, q12, q22 = q * dt ** 3 / 3.0, q * dt ** 2 / 2.0, q * dt
-    Q = np.array([[q11, 0, q12, 0], [0, q11, 0, q12], [q12, 0, q22, 0], [0, q12, 0, q22]])
+    Q = np.zeros((4, 4))
+    Q[0, 0] = Q[1, 1] = q11
+    Q[0, 2] = Q[1, 3] = Q[2, 0] = Q[3, 1] = q12
+    Q[2, 2] = Q[3, 3] = q22
     return F, Q
 
 
@@ -205,9 +217,14 @@ def _nearest_age(stamps: list[float], n: int, t: float, a: float, bisect_left=bi
     return j
 
 
-def _wrap_quarter(a: float) -> float:
-    """Wrap to [−π/4, π/4): the difference between two rectangle axis angles (90° ambiguity)."""
-    return (a + 0.25 * math.pi) % _HALF_PI - 0.25 * math.pi
+def _default_sizes(det: Detection, fit) -> list[float]:
+    """:meth:`Detection.default_sizes` as a list of floats (the same arithmetic on the same values)."""
+    (lo0, lo1), (hi0, hi1) = det.lo.tolist(), det.hi.tolist()
+    (r00, r01), (r10, r11) = det.rel.tolist()
+    e0, e1 = hi0 - lo0, hi1 - lo1
+    o0 = e0 if r00 and r01 else max(e0, min(fit.default_depth, fit.default_depth_ratio * max(e1, 0.0)))
+    o1 = e1 if r10 and r11 else max(e1, min(fit.default_depth, fit.default_depth_ratio * max(e0, 0.0)))
+    return [o0, o1]
 
 
 class Tracker:
@@ -221,6 +238,15 @@ class Tracker:
         self.config = config or DetectConfig()
         self.stats = TrackerStats()
         self._tracks: list[_Track] = []
+        # the Kalman states and covariances of the live tracks (struct of arrays: the prediction runs on all of
+        # them at once, the reports copy them in one go); each _Track keeps its row for life (k.row; rows of
+        # deleted tracks are reused by births) and its x / P are views of that row (re-pointed only when the
+        # arrays grow, by doubling)
+        self._X = np.zeros((_ROWS0, 4))
+        self._P = np.zeros((_ROWS0, 4, 4))
+        self._rows_used = 0  # rows 0 … _rows_used − 1 have been handed out
+        self._free_rows: list[int] = []  # rows of deleted tracks, reused first
+        self._order: np.ndarray | None = None  # the rows of self._tracks in their order (None: to be built)
         self._next_id = 1
         self._last_stamp: float | None = None
         self._last_pose: Pose2D | None = None
@@ -253,6 +279,9 @@ class Tracker:
     def reset(self) -> None:
         """Forget every track and the free-space evidence (ids keep counting up)."""
         self._tracks.clear()
+        self._rows_used = 0
+        self._free_rows.clear()
+        self._order = None
         if self._free is not None:
             self._free.clear()
 
@@ -368,10 +397,12 @@ class Tracker:
         cand = [k for k in self._tracks if k.id in updated and k.state == CONFIRMED]
         if not cand:
             return [None] * len(dets)
-        geo = np.array([(k.x[0], k.x[1], k.theta_box, k.size[0], k.size[1]) for k in cand])
+        xy = self._X[[k.row for k in cand], :2]  # (the candidates' centres, one gather)
         b = self._batch
-        idx = fragment_hosts(b.px, b.py, b.start, b.npts, np.array(dets, dtype=np.int64), geo[:, 0].copy(),
-                             geo[:, 1].copy(), geo[:, 2].copy(), geo[:, 3].copy(), geo[:, 4].copy(),
+        idx = fragment_hosts(b.px, b.py, b.start, b.npts, np.array(dets, dtype=np.int64), xy[:, 0].copy(),
+                             xy[:, 1].copy(), np.array([k.theta_box for k in cand], dtype=np.float64),
+                             np.array([k.size[0] for k in cand], dtype=np.float64),
+                             np.array([k.size[1] for k in cand], dtype=np.float64),
                              float(self.config.fit.fragment_margin))
         return [cand[i] if i >= 0 else None for i in idx.tolist()]
 
@@ -389,18 +420,17 @@ class Tracker:
         if not self._tracks or dt <= 0.0:
             return
         F, Q = _cv_matrices(dt, self.config.tracker.accel_noise)
-        X = np.array([k.x for k in self._tracks])
-        P = np.array([k.P for k in self._tracks])
-        X = X @ F.T
-        P = F @ P @ F.T + Q
+        order = self._rows()
+        X = self._X[order] @ F.T
+        P = F @ self._P[order] @ F.T + Q
         if self.config.memory.enabled:
             for i, k in enumerate(self._tracks):
                 if k.remembered and k.misses > 0:  # coasting through a stop: it stays where it stood
-                    X[i], P[i] = self._stationary_prediction(k, F, dt)
+                    X[i], P[i] = self._stationary_prediction(k, F, dt)  # (from k.x / k.P: not yet written)
+        self._X[order] = X  # (the tracks' x / P are views of these rows)
+        self._P[order] = P
         fin = np.isfinite(P).all(axis=(1, 2)).tolist()
-        for k, xr, pr, f in zip(self._tracks, X, P, fin):  # (row views from the array iterators)
-            k.x = xr
-            k.P = pr
+        for k, f in zip(self._tracks, fin):
             k.p_finite = f
         self._stacked = (X, P)
 
@@ -425,8 +455,57 @@ class Tracker:
     def _stack(self) -> tuple[np.ndarray, np.ndarray]:
         """(n, 4) states and (n, 4, 4) covariances of the live tracks (from the prediction when it ran)."""
         if self._stacked is None:
-            self._stacked = (np.array([k.x for k in self._tracks]), np.array([k.P for k in self._tracks]))
+            order = self._rows()
+            self._stacked = (self._X[order], self._P[order])
         return self._stacked
+
+    def _rows(self) -> np.ndarray:
+        """The state-array rows of the live tracks, in their order (int64)."""
+        if self._order is None:
+            self._order = np.array([k.row for k in self._tracks], dtype=np.int64)
+        return self._order
+
+    def _add_row(self, k: _Track, x, P: np.ndarray) -> None:
+        """Append ``k`` to the live tracks with state ``x`` (4,) and covariance ``P`` (4, 4): it gets a row of
+        the state arrays (a deleted track's, else a new one; the arrays double when full) holding the values,
+        and ``k.x`` / ``k.P`` become views of it."""
+        if self._free_rows:
+            row = self._free_rows.pop()
+        else:
+            row = self._rows_used
+            self._rows_used += 1
+            if row == self._X.shape[0]:
+                X = np.zeros((2 * row, 4))
+                P2 = np.zeros((2 * row, 4, 4))
+                X[:row] = self._X
+                P2[:row] = self._P
+                self._X, self._P = X, P2
+                self._repoint()
+        self._X[row] = x
+        self._P[row] = P
+        k.row = row
+        k.x = self._X[row]
+        k.P = self._P[row]
+        self._tracks.append(k)
+        self._order = None
+
+    def _repoint(self) -> None:
+        """Make the x / P of the live tracks views of their rows of the (new) state arrays."""
+        X, P = self._X, self._P
+        for k in self._tracks:
+            k.x = X[k.row]
+            k.P = P[k.row]
+
+    def __deepcopy__(self, memo: dict) -> Tracker:
+        """A deep copy whose tracks' x / P are views of the copy's own state arrays (a plain deep copy would
+        make them arrays of their own)."""
+        new = object.__new__(type(self))
+        memo[id(self)] = new
+        for name, value in self.__dict__.items():
+            setattr(new, name, copy.deepcopy(value, memo))
+        new._repoint()
+        new._stacked = None
+        return new
 
     def _beam_trig(self, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
         """cos / sin of the beam angles, cached per beam geometry (sensor frame)."""
@@ -485,21 +564,30 @@ class Tracker:
         # per-detection views, sliced once per scan (the same views as fits[j, FIT_CENTROID], lohi[j, LOHI_LO], …)
         cen_v, circ_v = fits[:, FIT_CENTROID], fits[:, FIT_CIRCLE]
         lo_v, hi_v = lohi[:, LOHI_LO], lohi[:, LOHI_HI]
-        # free-space and map evidence per detection (0 where unknown), then the detections in one pass
+        # free-space and map evidence per detection (0 where unknown), then the detections in one pass; both
+        # tests are per point, so only the detections' points are tested (structure clusters, most of the
+        # points, are not detections)
         nd = idx.shape[0]
         frac = fs = ff = fu = [0.0] * nd
+        if self._free is not None or self._map is not None:
+            if nd < seg.n_clusters:
+                det_pts = pts[np.repeat(keep.astype(bool, copy=False), offsets[1:] - offsets[:-1])]
+                det_off = np.zeros(nd + 1, dtype=np.int64)
+                np.cumsum(npts, out=det_off[1:])
+            else:
+                det_pts, det_off = pts, offsets
         if self._free is not None:
             self._cur_ref = self._free.make_ref(scan, pose, valid)
-            free = self._free.seen_through(pts, float(scan.stamp))
-            frac = segment_means(free.astype(np.float64), offsets)[idx].tolist()
+            free = self._free.seen_through(det_pts, float(scan.stamp))
+            frac = segment_means(free.astype(np.float64), det_off).tolist()
             self._free.add(scan, pose, valid, self._cur_ref)
         if self._map is not None:
             tc = cfg.tracker
-            mstruct, mfree, munk = map_evidence(pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
+            mstruct, mfree, munk = map_evidence(det_pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
                                                 tc.map_free_radius)
-            fs = segment_means(mstruct.astype(np.float64), offsets)[idx].tolist()
-            ff = segment_means(mfree.astype(np.float64), offsets)[idx].tolist()
-            fu = segment_means(munk.astype(np.float64), offsets)[idx].tolist()
+            fs = segment_means(mstruct.astype(np.float64), det_off).tolist()
+            ff = segment_means(mfree.astype(np.float64), det_off).tolist()
+            fu = segment_means(munk.astype(np.float64), det_off).tolist()
         # (row views from the array iterators: one C pass per array instead of an index per detection)
         for a0, n, kd, th, cen_j, lo_j, hi_j, rel_j, circ_j, fr_j, fs_j, ff_j, fu_j in zip(
                 starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(), cen_v, lo_v, hi_v, rel,
@@ -568,7 +656,7 @@ class Tracker:
             da, db = dets[a], dets[b]
             pts = np.concatenate((da.points, db.points))  # (np.vstack of two (n, 2) arrays)
             mid = 0.5 * (da.centroid + db.centroid)
-            lo, hi = pts.min(axis=0), pts.max(axis=0)
+            lo, hi = _min_rows(pts, axis=0), _max_rows(pts, axis=0)  # (pts.min / max(axis=0) without the wrappers)
             na, nb = da.n_points, db.n_points
             det = Detection(np.concatenate((da.beams, db.beams)), pts, mid, KIND_POINT, 0.0, lo, hi,
                             np.zeros((2, 2), dtype=bool), np.array([mid[0], mid[1], 0.0]), na + nb,
@@ -611,7 +699,8 @@ class Tracker:
         tracks = self._tracks
         Xs, Ps = self._stack()
         tsize = np.array([k.size for k in tracks])
-        reach = 0.5 * tsize.max(axis=1)
+        tmax = tsize.max(axis=1)
+        reach = 0.5 * tmax
         rect_l, th_l, known_l, firm_l = [], [], [], []
         for k in tracks:  # (per-track flags in one pass)
             kr = k.kind == KIND_RECT
@@ -619,7 +708,7 @@ class Tracker:
             th_l.append(k.theta_box)
             if k.misses > 0:
                 sk = k.size_known
-                known_l.append(not kr or bool(sk.item(0) and sk.item(1)))  # (size_known.all())
+                known_l.append(not kr or (sk[0] and sk[1]))  # (all(size_known))
             else:
                 known_l.append(False)
             firm_l.append(k.state != TENTATIVE)
@@ -636,7 +725,7 @@ class Tracker:
         # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
         # later, a tracked object may touch another for a scan)
         known = np.array(known_l)
-        grow_ok = (det_ext[None, :] <= tc.max_size_jump_ratio * tsize.max(axis=1)[:, None] + tc.max_size_jump) | \
+        grow_ok = (det_ext[None, :] <= tc.max_size_jump_ratio * tmax[:, None] + tc.max_size_jump) | \
             ~known[:, None]
         ok = ok & grow_ok
         if self._map is not None:
@@ -696,46 +785,52 @@ class Tracker:
         (:mod:`dynslam2d.detect.kernels`); the shape bookkeeping stays per track."""
         tracks = self._tracks
         npair = len(pairs)
-        sizes = np.zeros((npair, 2))
-        has = np.zeros(npair, dtype=bool)
-        radius = np.full(npair, -1.0)
-        swaps = [False] * npair
+        sizes_l: list[tuple[float, float]] = []
+        has_l: list[bool] = []
+        radius_l: list[float] = []
+        swaps: list[bool] = []
         sel_l = [ti for ti, _ in pairs]
         rows_l = [di for _, di in pairs]
-        for r, (ti, di) in enumerate(pairs):
+        no_size = (0.0, 0.0)
+        for ti, di in pairs:
             k, det = tracks[ti], dets[di]
             dk = det.kind
+            sw, sz, has_sz, rad = False, no_size, False, -1.0
             if dk == KIND_RECT:
                 if k.has_heading:
                     # the detection's first axis is the track's second (90° ambiguity of a box's axes)
                     sw = int(round((det.theta - k.theta_box) / _HALF_PI)) % 2 == 1
-                    swaps[r] = sw
-                    sz = k.size
-                    if sw:
-                        sizes[r, 0] = sz[1]
-                        sizes[r, 1] = sz[0]
-                    else:
-                        sizes[r] = sz
-                    has[r] = True
+                    s0, s1 = k.size
+                    sz = (s1, s0) if sw else (s0, s1)
+                    has_sz = True
             elif dk == KIND_CIRCLE and k.kind == KIND_CIRCLE and k.radius > 0:
-                radius[r] = k.radius
+                rad = k.radius
+            swaps.append(sw)
+            sizes_l.append(sz)
+            has_l.append(has_sz)
+            radius_l.append(rad)
         rows = np.array(rows_l, dtype=np.int64)
-        mr = self._measure_rows(rows, sizes, has, radius, np.full(npair, 0.05))
+        mr = self._measure_rows(rows, np.array(sizes_l, dtype=np.float64), np.array(has_l, dtype=bool),
+                                np.array(radius_l, dtype=np.float64), np.full(npair, 0.05))
         H, zm, Rm, size_obs, size_kind = mr.H, mr.zm, mr.Rm, mr.size_obs, mr.size_kind
         Xs, Ps = self._stack()
         sel = np.array(sel_l, dtype=np.int64)
-        Xn, Pn, ok = kalman_update_batch(Xs[sel], Ps[sel], H, zm, Rm)
-        self._bound_acceleration(Xs[sel], Xn, tracks, pairs)
+        X_prior = Xs[sel]  # (kalman_update_batch works on copies: the prior stays as it is)
+        Xn, Pn, ok = kalman_update_batch(X_prior, Ps[sel], H, zm, Rm)
+        self._bound_acceleration(X_prior, Xn, tracks, pairs)
         self._stacked = None  # the tracks change below
         out = ok.tolist()
+        # the new states and covariances into the tracks' rows of the state arrays, all at once
+        rows = self._rows()[sel[ok]]
+        self._X[rows] = Xn[ok]
+        self._P[rows] = Pn[ok]
         so, sk = size_obs.tolist(), size_kind.tolist()
         upd = self._update_track
         vget = vac.get
-        # (rows of Xn / Pn as views, made by the array iterators in one pass each)
-        for r, (ti, di), xr, pr in zip(range(npair), pairs, Xn, Pn):
+        for r, (ti, di) in enumerate(pairs):
             if out[r]:
                 k = tracks[ti]
-                upd(k, dets[di], t, vget(k.id, 0.0), xr, pr, so[r], sk[r], swaps[r])
+                upd(k, dets[di], t, vget(k.id, 0.0), so[r], sk[r], swaps[r])
         return out
 
     def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track],
@@ -763,12 +858,11 @@ class Tracker:
                 X_new[r, 3] = X_prior[r, 3] + dvy * lim / d
                 self.stats.accel_bounded += 1
 
-    def _update_track(self, k: _Track, det: Detection, t: float, vacated: float, x_new: np.ndarray,
-                      P_new: np.ndarray, size_obs: list[float], size_kind: list[int], swap: bool) -> None:
-        """Apply one Kalman result (``x_new``, ``P_new``) and the shape / bookkeeping update."""
+    def _update_track(self, k: _Track, det: Detection, t: float, vacated: float, size_obs: list[float],
+                      size_kind: list[int], swap: bool) -> None:
+        """The shape / bookkeeping update of a track whose Kalman result is already in its row (k.x, k.P)."""
         cfg = self.config
         tc = cfg.tracker
-        k.x, k.P = x_new, P_new
         k.p_finite = True  # kalman_update_batch rejects non-finite results
         # shape: heading (90° ambiguity) and sizes along the track's own axes
         if det.kind == KIND_RECT:
@@ -776,8 +870,8 @@ class Tracker:
                 k.theta_box = det.theta
                 k.has_heading = True
                 swap = False
-                k.size = det.default_sizes(cfg.fit)
-                k.size_known = np.array([size_kind[0] == SIZE_MEASURED, size_kind[1] == SIZE_MEASURED])
+                k.size = _default_sizes(det, cfg.fit)
+                k.size_known = [size_kind[0] == SIZE_MEASURED, size_kind[1] == SIZE_MEASURED]
             else:
                 rl = det.rel.tolist()
                 informative = (rl[0][0] or rl[0][1]) and (rl[1][0] or rl[1][1])
@@ -785,39 +879,42 @@ class Tracker:
                     (lo0, lo1), (hi0, hi1) = det.lo.tolist(), det.hi.tolist()
                     informative = max(hi0 - lo0, hi1 - lo1) > 0.3  # the extent's longer side, m
                 if informative:
-                    th = k.theta_box + tc.heading_gain * _wrap_quarter(det.theta - k.theta_box)
-                    k.theta_box = float((th + math.pi) % _TWO_PI - math.pi)  # wrap_angle
+                    tb = k.theta_box
+                    # (the axis difference wrapped to [−π/4, π/4): 90° ambiguity)
+                    th = tb + tc.heading_gain * ((det.theta - tb + _QUARTER_PI) % _HALF_PI - _QUARTER_PI)
+                    k.theta_box = (th + math.pi) % _TWO_PI - math.pi  # wrap_angle
+                size, known = k.size, k.size_known
                 for a in (0, 1):
                     ta = 1 - a if swap else a
                     obs, kind = size_obs[a], size_kind[a]
                     if kind == SIZE_MEASURED:
-                        if k.size_known[ta]:
-                            k.size[ta] += tc.size_gain * (obs - k.size[ta])
+                        if known[ta]:
+                            size[ta] += tc.size_gain * (obs - size[ta])
                         else:
-                            k.size[ta] = obs
-                            k.size_known[ta] = True
+                            size[ta] = obs
+                            known[ta] = True
                     elif kind == SIZE_LOWER:
                         lb = k.size_lb
                         if obs > lb[ta]:  # (max(lb, obs))
                             lb[ta] = obs
-                        if obs > k.size[ta]:
+                        if obs > size[ta]:
                             # a partial view grew past the size: the box grows away from its one real
                             # bound, its centre moves with it, its velocity does not (item 2, docs/tracking.md)
-                            grow = obs - k.size[ta]
-                            lo_real, hi_real = bool(det.rel[a, 0]), bool(det.rel[a, 1])
+                            grow = obs - size[ta]
+                            lo_real, hi_real = rl[a]
                             if lo_real != hi_real:
                                 sgn = 0.5 * grow if lo_real else -0.5 * grow
                                 th = det.theta + a * _HALF_PI
-                                k.x = k.x.copy()
                                 k.x[0] += sgn * math.cos(th)
                                 k.x[1] += sgn * math.sin(th)
-                            k.size[ta] = obs
+                            size[ta] = obs
         elif det.kind == KIND_CIRCLE:
             r = float(det.circle[2])
             k.radius = r if k.kind != KIND_CIRCLE or k.radius <= 0 else k.radius + tc.size_gain * (r - k.radius)
-            k.size = np.array([2.0 * k.radius, 2.0 * k.radius])
+            k.size = [2.0 * k.radius, 2.0 * k.radius]
         elif det.kind == KIND_POINT and k.kind == KIND_POINT:
-            k.size = np.maximum(det.extent, 0.05)
+            (lo0, lo1), (hi0, hi1) = det.lo.tolist(), det.hi.tolist()
+            k.size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
         if k.misses > 0:
             # re-acquired after a gap: the free-space evidence must be rebuilt from this object
             k.past.clear()
@@ -888,7 +985,7 @@ class Tracker:
         along their long axis). Moves the hidden size by ``size_gain`` per update, never below the
         largest partial view."""
         tc = self.config.tracker
-        kn0, kn1 = k.size_known.tolist()
+        kn0, kn1 = k.size_known
         if tc.aspect_prior is None or k.state == TENTATIVE or (kn0 and kn1) or not (kn0 or kn1):
             return
         speed = math.hypot(k.x[2], k.x[3])
@@ -924,9 +1021,11 @@ class Tracker:
                 continue
             npast = len(past)
             stamps = k.past_t
+            last = -2
             for a in ref_ages:
                 j = _nearest_age(stamps, npast, t, a, bisect_left)
-                if t - stamps[j] > 0.0:
+                if j != last and t - stamps[j] > 0.0:  # (the same stored scan for two ages: tested once)
+                    last = j
                     pts = past[j][1]
                     chunks.append(pts)
                     owners.append(k.id)
@@ -943,33 +1042,36 @@ class Tracker:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
         cfg = self.config
         d = self._default  # reference.measure(det, None, None, cfg.fit) of every detection
-        meas = Measurement(d.z[j], d.R[j], d.size_obs[j], d.size_kind[j], d.H[j], d.zm[j], d.Rm[j])
+        z = d.z[j]
         P = np.zeros((4, 4))
-        P[:2, :2] = meas.R
+        P[:2, :2] = d.R[j]
         P[2, 2] = P[3, 3] = cfg.tracker.init_speed_sigma ** 2
         if det.kind == KIND_RECT:
-            size = det.default_sizes(cfg.fit)
-            known = meas.size_kind == SIZE_MEASURED
+            size = _default_sizes(det, cfg.fit)
+            sk0, sk1 = d.size_kind[j].tolist()
+            known = [sk0 == SIZE_MEASURED, sk1 == SIZE_MEASURED]
         elif det.kind == KIND_CIRCLE:
-            size = np.full(2, 2.0 * det.circle[2])
-            known = np.ones(2, dtype=bool)
+            size = [float(2.0 * det.circle[2])] * 2
+            known = [True, True]
         else:
-            size = np.maximum(det.extent, 0.05)
-            known = np.zeros(2, dtype=bool)
-        k = _Track(id=self._next_id, x=np.array([meas.z[0], meas.z[1], 0.0, 0.0]), P=P, born=t, last_hit=t,
-                   birth_xy=meas.z.copy(), theta_box=det.theta, size=np.asarray(size, dtype=np.float64),
-                   size_known=np.asarray(known, dtype=bool), radius=float(det.circle[2]) if det.kind == KIND_CIRCLE
+            (lo0, lo1), (hi0, hi1) = det.lo.tolist(), det.hi.tolist()
+            size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
+            known = [False, False]
+        k = _Track(id=self._next_id, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t,
+                   birth_xy=z.copy(), theta_box=det.theta, size=size,
+                   size_known=known, radius=float(det.circle[2]) if det.kind == KIND_CIRCLE
                    else 0.0, kind=det.kind, beams=det.beams, has_heading=det.kind == KIND_RECT,
                    free=[det.free_fraction], mstruct=[det.map_structure] if self._map is not None else [],
                    mfree=[det.map_free] if self._map is not None else [],
                    munknown=[det.map_unknown] if self._map is not None else [],
                    past=[(t, det.points)] if self._free is not None else [],
                    past_t=[t] if self._free is not None else [])
-        k.p_finite = bool(np.isfinite(P).all())
+        # (np.isfinite(P).all() of its only non-zero entries: the measurement's R and the speed variance)
+        k.p_finite = all(map(math.isfinite, d.R[j].ravel().tolist())) and math.isfinite(P.item(10))
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
         self._next_id += 1
-        self._tracks.append(k)
+        self._add_row(k, (z[0], z[1], 0.0, 0.0), P)
         self.stats.tracks_born += 1
 
     def _manage(self, t: float, updated: set[int]) -> None:
@@ -1038,6 +1140,10 @@ class Tracker:
                         k.m_start_xy, k.m_last_t, k.remembered = None, None, False
                         k.m_time = k.m_travel = 0.0
             keep.append(k)
+        if len(keep) < len(self._tracks):
+            kept = {k.row for k in keep}
+            self._free_rows.extend(k.row for k in self._tracks if k.row not in kept)  # (births reuse them)
+            self._order = None
         self._tracks = keep
 
     def _dynamic(self, k: _Track, speed: float, t: float) -> None:
@@ -1331,8 +1437,9 @@ class Tracker:
         slow = 0.5 * tc.v_min
         # (speed: states and covariances stacked in one copy each; every report's velocity / covariance is a
         # row of them, its own memory apart from the tracker's)
-        X = np.array([k.x for k in tracks])
-        P = np.array([k.P for k in tracks])
+        order = self._rows()
+        X = self._X[order]  # (copies: the reports' own memory)
+        P = self._P[order]
         V = X[:, 2:]
         out = []
         append, make_track, make_box = out.append, _make_track, _make_box  # (locals: the loop runs per track)
@@ -1343,7 +1450,7 @@ class Tracker:
                 theta = atan2(vy, vx) if speed > slow else 0.0
                 length = width = 2.0 * k.radius
             else:
-                sa, sb = k.size.tolist()
+                sa, sb = k.size
                 tb = k.theta_box
                 if speed > slow:
                     vdir = atan2(vy, vx)
