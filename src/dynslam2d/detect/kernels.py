@@ -137,9 +137,7 @@ def _pairwise_sum(a: np.ndarray, lo: int, n: int) -> float:
         return _pairwise_leaf(a, lo, n)
     los = np.empty(64, dtype=np.int64)
     ns = np.empty(64, dtype=np.int64)
-    # (np.empty and [:] = 0, not np.zeros: np.zeros compiles numba's zero-fill helper once per dtype and ndim, docs/speed.md)
-    state = np.empty(64, dtype=np.int8)
-    state[:] = 0
+    state = np.zeros(64, dtype=np.int8)
     vals = np.empty(64)
     top = 0
     vtop = 0
@@ -234,14 +232,10 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
         (``K_*``), (k, 4) refined bounds lo1, lo2, hi1, hi2 (m; columns ``L_*``), (k, 2, 2) bool real bounds.
     """
     kc = offsets.shape[0] - 1
-    keep = np.empty(kc, dtype=np.bool_)
-    keep[:] = 0
-    kind = np.empty(kc, dtype=np.int8)
-    kind[:] = 0
-    lohi = np.empty((kc, 4))
-    lohi[:] = 0
-    rel = np.empty((kc, 2, 2), dtype=np.bool_)
-    rel[:] = 0
+    keep = np.zeros(kc, dtype=np.bool_)
+    kind = np.zeros(kc, dtype=np.int8)
+    lohi = np.zeros((kc, 4))
+    rel = np.zeros((kc, 2, 2), dtype=np.bool_)
     tol = p[_P_FACE_TOL]
     span = p[_P_MIN_FACE_SPAN]
     nmax = 0
@@ -373,31 +367,20 @@ def measure_batch(det: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np
         stacked over rows: (r, 2), (r, 2, 2), (r, 2, 4), (r, 2), (r, 2, 2), (r, 2), (r, 2) int8.
     """
     nr = det.shape[0]
-    z = np.empty((nr, 2))
-    z[:] = 0
-    R = np.empty((nr, 2, 2))
-    R[:] = 0
-    H = np.empty((nr, 2, 4))
-    H[:] = 0
-    zm = np.empty((nr, 2))
-    zm[:] = 0
-    Rm = np.empty((nr, 2, 2))
-    Rm[:] = 0
-    size_obs = np.empty((nr, 2))
-    size_obs[:] = 0
-    size_kind = np.empty((nr, 2), dtype=np.int8)
-    size_kind[:] = 0
+    z = np.zeros((nr, 2))
+    R = np.zeros((nr, 2, 2))
+    H = np.zeros((nr, 2, 4))
+    zm = np.zeros((nr, 2))
+    Rm = np.zeros((nr, 2, 2))
+    size_obs = np.zeros((nr, 2))
+    size_kind = np.zeros((nr, 2), dtype=np.int8)
     sp2 = p[_P_SIGMA_POSITION] ** 2
     su2 = p[_P_SIGMA_UNOBS] ** 2
     sus2 = p[_P_SIGMA_UNOBS_SPEED] ** 2
-    uv = np.empty(2)
-    uv[:] = 0
-    var = np.empty(2)
-    var[:] = 0
-    obs = np.empty(2, dtype=np.bool_)
-    obs[:] = 0
-    sz = np.empty(2)
-    sz[:] = 0
+    uv = np.zeros(2)
+    var = np.zeros(2)
+    obs = np.zeros(2, dtype=np.bool_)
+    sz = np.zeros(2)
     for r in range(nr):
         j = det[r]
         kd = kind[j]
@@ -496,8 +479,7 @@ def kalman_update_batch(X: np.ndarray, P: np.ndarray, H: np.ndarray, zm: np.ndar
     nr = X.shape[0]
     Xn = X.copy()
     Pn = P.copy()
-    ok = np.empty(nr, dtype=np.bool_)
-    ok[:] = 0
+    ok = np.zeros(nr, dtype=np.bool_)
     PHt = np.empty((4, 2))
     K = np.empty((4, 2))
     KHP = np.empty((4, 4))
@@ -609,8 +591,7 @@ def seen_through_kernel(px: np.ndarray, py: np.ndarray, ix: float, iy: float, it
 def segment_means(values: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """(k,) mean of ``values[offsets[c]:offsets[c+1]]`` (0 for an empty segment)."""
     k = offsets.shape[0] - 1
-    out = np.empty(k)
-    out[:] = 0
+    out = np.zeros(k)
     for c in range(k):
         n = offsets[c + 1] - offsets[c]
         if n > 0:

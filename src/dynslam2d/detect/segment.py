@@ -68,9 +68,7 @@ def _link_kernel(ranges: np.ndarray, angles: np.ndarray, valid_idx: np.ndarray, 
                  wrap: bool) -> np.ndarray:
     """links[j] = 1 if valid beam j links to valid beam j+1 (the last one to the first when wrap)."""
     m = valid_idx.shape[0]
-    # (np.empty and [:] = 0, not np.zeros: np.zeros compiles numba's zero-fill helper once per dtype and ndim, docs/speed.md)
-    links = np.empty(m, dtype=np.uint8)
-    links[:] = 0
+    links = np.zeros(m, dtype=np.uint8)
     n = ranges.shape[0]
     for j in range(m):
         if j == m - 1 and not wrap:
@@ -112,8 +110,7 @@ def _clusters_kernel(valid_idx: np.ndarray, links: np.ndarray, wrap: bool, n_bea
     m = valid_idx.shape[0]
     labels = -np.ones(n_beams, dtype=np.int32)
     beams = np.empty(m, dtype=np.int64)
-    offsets = np.empty(m + 1, dtype=np.int64)
-    offsets[:] = 0
+    offsets = np.zeros(m + 1, dtype=np.int64)
     if m == 0:
         return labels, beams[:0], offsets[:1], 0
     # start right after the last break so that no run is cut by the array end and clusters

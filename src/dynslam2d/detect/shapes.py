@@ -385,9 +385,7 @@ def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np
     hold only their centroid (other entries 0, rms inf).
     """
     k = offsets.shape[0] - 1
-    # (np.empty and [:] = 0, not np.zeros: np.zeros compiles numba's zero-fill helper once per dtype and ndim, docs/speed.md)
-    out = np.empty((k, N_FIT_COLS))
-    out[:] = 0
+    out = np.zeros((k, N_FIT_COLS))
     cos_t = np.cos(angles)
     sin_t = np.sin(angles)
     tmp = np.empty(6)

@@ -146,11 +146,8 @@ def _scan_geometry(ranges, angles, valid, removed, px, py, th, res, margin_m, gr
     sides and reads as grazing, which only makes the margin larger. Margin =
     max(margin_m, grazing_cells·res / max(sin α, min_sin))."""
     n = ranges.shape[0]
-    # (np.empty and [:] = 0, not np.zeros: np.zeros compiles numba's zero-fill helper once per dtype and ndim, docs/speed.md)
-    lx = np.empty(n)
-    lx[:] = 0
-    ly = np.empty(n)
-    ly[:] = 0
+    lx = np.zeros(n)
+    ly = np.zeros(n)
     for i in range(n):
         if valid[i]:
             lx[i] = ranges[i] * math.cos(angles[i])
@@ -161,10 +158,8 @@ def _scan_geometry(ranges, angles, valid, removed, px, py, th, res, margin_m, gr
     ey = np.empty(n)
     cx = np.empty(n)
     cy = np.empty(n)
-    kept = np.empty(n, dtype=np.bool_)
-    kept[:] = 0
-    clear = np.empty(n, dtype=np.bool_)
-    clear[:] = 0
+    kept = np.zeros(n, dtype=np.bool_)
+    clear = np.zeros(n, dtype=np.bool_)
     ox = px / res
     oy = py / res
     for i in range(n):

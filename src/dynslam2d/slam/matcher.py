@@ -140,19 +140,12 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     units as ``pose``): the normal equations become (H + Λp)Δ = g + Λp(ξp − ξ). An all-zero
     ``lam_p`` is the plain matcher.
     """
-    # (np.empty and [:] = 0, not np.zeros: np.zeros compiles numba's zero-fill helper once per dtype and ndim, docs/speed.md)
-    H = np.empty((3, 3))
-    H[:] = 0
-    g = np.empty(3)
-    g[:] = 0
-    H2 = np.empty((3, 3))  # H, g at a trial LM step (they become H, g when it is accepted)
-    H2[:] = 0
-    g2 = np.empty(3)
-    g2[:] = 0
-    A = np.empty((3, 3))
-    A[:] = 0
-    d = np.empty(3)
-    d[:] = 0
+    H = np.zeros((3, 3))
+    g = np.zeros(3)
+    H2 = np.zeros((3, 3))  # H, g at a trial LM step (they become H, g when it is accepted)
+    g2 = np.zeros(3)
+    A = np.zeros((3, 3))
+    d = np.zeros(3)
     x = pose[0]
     y = pose[1]
     th = pose[2]
@@ -161,8 +154,7 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
         for b in range(3):
             if lam_p[a, b] != 0.0:
                 use_prior = True
-    gp = np.empty(3)
-    gp[:] = 0
+    gp = np.zeros(3)
     cost, _, _ = accumulate(prob, pts, x, y, th, swapped, H, g)
     if use_prior:
         cost += _prior_cost(x, y, th, prior, lam_p)
@@ -365,8 +357,7 @@ _SPREAD_POINTS = 120
 @njit(cache=True)
 def _spread_kernel(pts, use, nb):  # pragma: no cover - numba
     """Number of the ``nb`` bearing bins holding a point of ``pts`` (rows with ``use``)."""
-    seen = np.empty(nb, dtype=np.bool_)
-    seen[:] = 0
+    seen = np.zeros(nb, dtype=np.bool_)
     k = 0
     two_pi = 2.0 * math.pi
     for i in range(pts.shape[0]):
@@ -385,8 +376,7 @@ def _support_kernel(prob, pts_m, stride, inv_res, x, y, th, thresh, nb):  # prag
     map pose (x cells, y cells, θ) exceeds ``thresh``; return (count, bearing bins they occupy)."""
     c = math.cos(th)
     s = math.sin(th)
-    seen = np.empty(nb, dtype=np.bool_)
-    seen[:] = 0
+    seen = np.zeros(nb, dtype=np.bool_)
     n = 0
     k = 0
     two_pi = 2.0 * math.pi
