@@ -30,8 +30,8 @@ of a track that ended while the object stood (the robot drove away) is kept for
 ``ledger_keep_s`` (only if the track was confirmed: tentative clutter is dropped) and erased
 with a track that stood where the ended track last was and then enters M.
 
-Recording is vectorised over all tracks and levels: one sort per update, rows appended as arrays
-and folded per cell when they pile up (:class:`_LevelRecord`). With ``keep_beams`` (loop closure
+Recording is vectorised over all tracks and levels: one sort per update, rows copied into each record's
+buffers and folded per cell when they pile up (:class:`_LevelRecord`; no per-update objects are kept). With ``keep_beams`` (loop closure
 on) the ledger also keeps each track's (scan index, beams) and lists those of erased tracks in
 :attr:`EvidenceLedger.erased_beams`, for the loop closer to mark them removed in its keyframes so
 that a map re-rendered from the optimised poses leaves them out too (docs/maps.md).
