@@ -31,10 +31,10 @@ of a track that ended while the object stood (the robot drove away) is kept for
 with a track that stood where the ended track last was and then enters M.
 
 Recording is vectorised over all tracks and levels: one sort per update, rows copied into each record's
-buffers and folded per cell when they pile up (:class:`_LevelRecord`; no per-update objects are kept). With ``keep_beams`` (loop closure
-on) the ledger also keeps each track's (scan index, beams) and lists those of erased tracks in
-:attr:`EvidenceLedger.erased_beams`, for the loop closer to mark them removed in its keyframes so
-that a map re-rendered from the optimised poses leaves them out too (docs/maps.md).
+buffers and folded per cell when they pile up (:class:`_LevelRecord`; no per-update objects are kept).
+With ``keep_beams`` (loop closure on) the ledger also keeps each track's (scan index, beams) and lists
+those of erased tracks in :attr:`EvidenceLedger.erased_beams`, for the loop closer to mark them removed
+in its keyframes so that a map re-rendered from the optimised poses leaves them out too (docs/maps.md).
 
 Frames and units: cells are absolute level indices (cell (i, j) centred at
 (i·r_k, j·r_k) in the map frame, :mod:`dynslam2d.slam.grid`), stable when a level grows;
