@@ -5,8 +5,9 @@ events, the CPU time each function spends in numba's compiler excluding the func
 
     PYTHONPATH=src python benchmarks/bench_compile.py [--src src] [--top 25]
 
-Prints the process CPU of the whole run, the compile CPU summed over functions, their count and the
-largest ones. Not run by pytest; numbers go to docs/speed.md with this command.
+Prints the process CPU of the whole run, the compile CPU summed over functions, their count (and the number of
+compilations: numba's helpers such as ``np.empty``'s are compiled once per signature) and the largest ones.
+Not run by pytest; numbers go to docs/speed.md with this command.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ PROBE = r"""
 import json, sys, time
 c0 = time.process_time()
 from numba.core import event
-excl, stack = {}, []
+excl, stack, n = {}, [], [0]
 class Exclusive(event.Listener):
     def on_start(self, ev):
         f = getattr((ev.data or {}).get("dispatcher"), "py_func", None)
@@ -36,6 +37,7 @@ class Exclusive(event.Listener):
         now = time.process_time()
         name, acc, t = stack.pop()
         excl[name] = excl.get(name, 0.0) + acc + now - t
+        n[0] += 1
         if stack:
             stack[-1][2] = now
 event.register("numba:compile", Exclusive())
@@ -45,7 +47,7 @@ try:
     main()
 except SystemExit:
     pass
-print(json.dumps({"process_cpu": time.process_time() - c0, "per": excl}))
+print(json.dumps({"process_cpu": time.process_time() - c0, "per": excl, "compilations": n[0]}))
 """
 
 
@@ -62,7 +64,8 @@ def main() -> None:
     data = json.loads(res.stdout.strip().splitlines()[-1])
     per = sorted(data["per"].items(), key=lambda kv: -kv[1])
     print(f"process CPU {data['process_cpu']:.1f} s; compile CPU {sum(v for _, v in per):.1f} s "
-          f"in {len(per)} functions")
+          f"in {len(per)} functions ({data['compilations']} compilations: a function compiled for several "
+          f"signatures counts once per signature)")
     for name, s in per[:args.top]:
         print(f"{s:6.2f} s  {name}")
 

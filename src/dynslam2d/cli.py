@@ -1596,6 +1596,9 @@ def main() -> None:
     ``error: <message>`` on stderr with exit 2; Ctrl-C exits 130. Every writer is
     atomic, so an interrupted run leaves no half-written file under a final name.
     """
+    from dynslam2d.jitcache import load_blas_alone
+
+    load_blas_alone()  # numba's BLAS check without the whole of scipy.linalg (about 17 MiB, docs/speed.md)
     try:
         app()
     except DynSlamError as exc:

@@ -55,6 +55,48 @@ def use_default_cache_dir() -> str | None:
     return str(path)
 
 
+#: SciPy's BLAS extension module, which numba imports to check for BLAS (numba.np.arraymath).
+BLAS_MODULE = "scipy.linalg.cython_blas"
+
+
+def load_blas_alone() -> bool:
+    """Load SciPy's BLAS extension ``scipy.linalg.cython_blas`` on its own, before numba needs it.
+
+    numba checks for BLAS when it loads or compiles its first kernel (``numba.np.arraymath`` imports
+    ``scipy.linalg.cython_blas``), and importing a submodule first imports its package: the whole of
+    ``scipy.linalg``, about 17 MiB and 0.2 s of CPU that a run never uses (no kernel calls BLAS; the
+    pose graph's sparse solver imports what it needs when loop closure solves a graph). Loaded from its
+    file and registered under its name, the extension is what numba's import finds, and ``scipy.linalg``
+    stays unimported (docs/speed.md, "Memory and compile, fourth pass"). The command line calls this
+    first: it owns the process; a library user's process is left as it is. One difference for other code
+    in the same process: when it later imports ``scipy.linalg``, the package has no ``cython_blas``
+    attribute until that code imports the submodule by name (``from scipy.linalg import cython_blas``
+    works either way). Returns whether it loaded the module; does nothing once numba's check or
+    ``scipy.linalg`` ran, and on any failure (numba then imports it as usual)."""
+    if BLAS_MODULE in sys.modules or "scipy.linalg" in sys.modules or "numba.np.arraymath" in sys.modules:
+        return False
+    try:
+        import importlib.machinery
+        import importlib.util
+
+        spec = importlib.util.find_spec("scipy")  # (a top-level find_spec imports nothing)
+        for folder in (spec.submodule_search_locations or []) if spec is not None else []:
+            for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+                path = Path(folder) / "linalg" / f"cython_blas{suffix}"
+                if path.is_file():
+                    ext = importlib.util.spec_from_file_location(BLAS_MODULE, path)
+                    if ext is None or ext.loader is None:
+                        return False
+                    mod = importlib.util.module_from_spec(ext)
+                    ext.loader.exec_module(mod)
+                    sys.modules[BLAS_MODULE] = mod
+                    return True
+    except Exception:  # noqa: BLE001 - an optimisation only: numba imports the package as usual
+        sys.modules.pop(BLAS_MODULE, None)
+        return False
+    return False
+
+
 class _CompileClock:
     """Total wall time numba has spent compiling in this process, s: one listener on numba's
     "numba:compile" event (cache misses only; a load from the cache is no compile), installed on first

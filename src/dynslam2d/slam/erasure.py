@@ -30,11 +30,11 @@ of a track that ended while the object stood (the robot drove away) is kept for
 ``ledger_keep_s`` (only if the track was confirmed: tentative clutter is dropped) and erased
 with a track that stood where the ended track last was and then enters M.
 
-Recording is vectorised over all tracks and levels: one sort per update, rows appended as arrays
-and folded per cell when they pile up (:class:`_LevelRecord`). With ``keep_beams`` (loop closure
-on) the ledger also keeps each track's (scan index, beams) and lists those of erased tracks in
-:attr:`EvidenceLedger.erased_beams`, for the loop closer to mark them removed in its keyframes so
-that a map re-rendered from the optimised poses leaves them out too (docs/maps.md).
+Recording is vectorised over all tracks and levels: one sort per update, rows copied into each record's
+buffers and folded per cell when they pile up (:class:`_LevelRecord`; no per-update objects are kept).
+With ``keep_beams`` (loop closure on) the ledger also keeps each track's (scan index, beams) and lists
+those of erased tracks in :attr:`EvidenceLedger.erased_beams`, for the loop closer to mark them removed
+in its keyframes so that a map re-rendered from the optimised poses leaves them out too (docs/maps.md).
 
 Frames and units: cells are absolute level indices (cell (i, j) centred at
 (i·r_k, j·r_k) in the map frame, :mod:`dynslam2d.slam.grid`), stable when a level grows;
@@ -59,10 +59,13 @@ _HALF = 2147483648
 _COMPACT_ROWS = 4096
 #: … or this many updates (each update's rows are four small arrays).
 _COMPACT_CHUNKS = 64
+#: Smallest capacity of a record's pending buffers, rows (most records of clutter tracks hold a few rows).
+_PENDING_MIN = 16
 _EMPTY_I = np.zeros(0, dtype=np.int64)
 _EMPTY_F = np.zeros(0)
 _EMPTY_B = np.zeros(0, dtype=bool)
-for _a in (_EMPTY_I, _EMPTY_F, _EMPTY_B):
+_EMPTY_I3 = np.zeros((3, 0), dtype=np.int64)
+for _a in (_EMPTY_I, _EMPTY_F, _EMPTY_B, _EMPTY_I3):
     _a.flags.writeable = False
 
 
@@ -85,13 +88,15 @@ def _member(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 class _LevelRecord:
     """Evidence of one track on one map level.
 
-    Rows are appended per map update as arrays (cell key, added log-odds, update index before, after) and
-    folded into one row per cell (added log-odds summed; *pure*: the cell was unknown before the track's
-    first hit there and each later hit found the update index the track's previous hit left, i.e. nothing
-    but this track touched it since; the last update index) when they pile up and before they are read.
-    At most ``cap`` cells are kept: rows of cells first seen after ``cap`` others are dropped."""
+    Rows are appended per map update (cell key, added log-odds, update index before, after) into two pending
+    buffers of the record (one (3, capacity) int64 array of key and update indices, one float64 array of the
+    log-odds; copied, so no view holds an update's arrays alive) and folded into one row per cell (added
+    log-odds summed; *pure*: the cell was unknown before the track's first hit there and each later hit found
+    the update index the track's previous hit left, i.e. nothing but this track touched it since; the last
+    update index) when they pile up and before they are read. At most ``cap`` cells are kept: rows of cells
+    first seen after ``cap`` others are dropped."""
 
-    __slots__ = ("cap", "key", "delta", "pure", "last", "_rows", "_n_rows")
+    __slots__ = ("cap", "key", "delta", "pure", "last", "_pk", "_pd", "_n_rows", "_n_chunks")
 
     def __init__(self, cap: int) -> None:
         self.cap = cap
@@ -100,30 +105,54 @@ class _LevelRecord:
         self.delta = _EMPTY_F
         self.pure = _EMPTY_B
         self.last = _EMPTY_I
-        self._rows: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._pk = _EMPTY_I3  # pending rows: key, update index before, update index after
+        self._pd = _EMPTY_F  # pending rows: added log-odds
         self._n_rows = 0
+        self._n_chunks = 0
+
+    def push(self, key: np.ndarray, delta: np.ndarray, ub: np.ndarray, ua: np.ndarray) -> bool:
+        """Copy the rows of one update (each key at most once, at least one row) into the pending buffers;
+        True when they should now be folded (:meth:`compact`)."""
+        n = self._n_rows
+        m = n + key.shape[0]
+        if m > self._pd.shape[0]:  # grow (doubling; the buffers are let go when folded)
+            size = max(_PENDING_MIN, 2 * m)
+            pk = np.empty((3, size), dtype=np.int64)
+            pd = np.empty(size)
+            pk[:, :n] = self._pk[:, :n]
+            pd[:n] = self._pd[:n]
+            self._pk, self._pd = pk, pd
+        pk = self._pk
+        pk[0, n:m] = key
+        pk[1, n:m] = ub
+        pk[2, n:m] = ua
+        self._pd[n:m] = delta
+        self._n_rows = m
+        self._n_chunks += 1
+        return m >= _COMPACT_ROWS or self._n_chunks >= _COMPACT_CHUNKS
 
     def append(self, key: np.ndarray, delta: np.ndarray, ub: np.ndarray, ua: np.ndarray) -> int:
         """Add the rows of one update (each key at most once); returns the number of new cells recorded
         when the rows were folded (else 0)."""
         if key.shape[0] == 0:
             return 0
-        self._rows.append((key, delta, ub, ua))
-        self._n_rows += key.shape[0]
-        return self.compact() if self._n_rows >= _COMPACT_ROWS or len(self._rows) >= _COMPACT_CHUNKS else 0
+        return self.compact() if self.push(key, delta, ub, ua) else 0
 
     def compact(self) -> int:
         """Fold the appended rows into the per-cell arrays; returns the number of new cells."""
-        if not self._rows:
+        n = self._n_rows
+        if not n:
             return 0
         nb = self.key.shape[0]
-        key = np.concatenate([self.key] + [r[0] for r in self._rows])
-        delta = np.concatenate([self.delta] + [r[1] for r in self._rows])
-        ub = np.concatenate([self.last] + [r[2] for r in self._rows])
-        ua = np.concatenate([self.last] + [r[3] for r in self._rows])
-        start_pure = np.concatenate([self.pure] + [r[2] < 0 for r in self._rows])
-        self._rows.clear()
+        pk, pd = self._pk, self._pd
+        key = np.concatenate((self.key, pk[0, :n]))
+        delta = np.concatenate((self.delta, pd[:n]))
+        ub = np.concatenate((self.last, pk[1, :n]))
+        ua = np.concatenate((self.last, pk[2, :n]))
+        start_pure = np.concatenate((self.pure, pk[1, :n] < 0))
+        self._pk, self._pd = _EMPTY_I3, _EMPTY_F
         self._n_rows = 0
+        self._n_chunks = 0
         order = np.argsort(key, kind="stable")  # per cell: the folded row first, then the updates in order
         k = key[order]
         head = np.ones(k.shape[0], dtype=bool)
@@ -150,9 +179,9 @@ class _LevelRecord:
     def new_cells(self) -> int:
         """The number of new cells :meth:`compact` would return, without folding (for a record that is
         dropped: counting its distinct cells is much cheaper than folding them)."""
-        if not self._rows:
+        if not self._n_rows:
             return 0
-        n = np.unique(np.concatenate([self.key] + [r[0] for r in self._rows])).shape[0]
+        n = np.unique(np.concatenate((self.key, self._pk[0, :self._n_rows]))).shape[0]
         return min(n, self.cap) - int(self.key.shape[0])  # compact keeps the first ``cap`` cells
 
     @property
@@ -419,11 +448,9 @@ class EvidenceLedger:
             ledgers = self._ledgers
             for tid, a, b in zip(ids[lo].tolist(), lo, hi):
                 led = ledgers.get(tid)
-                if led is not None:  # (_LevelRecord.append inlined: every group holds rows)
+                if led is not None:  # (every group holds rows)
                     rec = led.levels[k]
-                    rec._rows.append((keys[a:b], delta[a:b], ub[a:b], ua[a:b]))
-                    rec._n_rows += b - a
-                    if rec._n_rows >= _COMPACT_ROWS or len(rec._rows) >= _COMPACT_CHUNKS:
+                    if rec.push(keys[a:b], delta[a:b], ub[a:b], ua[a:b]):
                         added += rec.compact()
             self.stats["cells_recorded"] += added
 
