@@ -28,7 +28,7 @@ import numpy as np
 
 from dynslam2d.config import Config
 from dynslam2d.detect.body import BodyFilter
-from dynslam2d.detect.mapevidence import MapView, map_evidence
+from dynslam2d.detect.mapevidence import MapView, map_evidence, vacated_outlines, yielding_view
 from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
@@ -167,6 +167,8 @@ class Pipeline:
         # loop closure behind the front end (slam/loops.py); it never changes the front end's poses or map
         self.loops = LoopCloser(self.config.loop, self.config.slam) if self.config.loop.enabled else None
         mem = self.config.detect.memory
+        #: scans in which an outline of long-occupied cells was seen through and yielded (vacated footprints)
+        self.vacated_scans = 0
         #: retroactive erasure of what tracks wrote while they stood (slam/erasure.py; None = off)
         self.ledger: EvidenceLedger | None = EvidenceLedger(
             mem, self.config.slam.laser_min_dist, self.config.slam.laser_max_dist,
@@ -189,12 +191,13 @@ class Pipeline:
         return removed, by
 
     def _spare_structure(self, scan: Scan, pose: Pose2D, moving: list[Track], removed: np.ndarray,
-                         removed_by: np.ndarray) -> None:
+                         removed_by: np.ndarray, only_ids: np.ndarray | None = None) -> None:
         """In place: beams inside an exclusion region that are not the object's own (not among the beams of a
         track in M in this scan) and whose point lies on long-occupied map structure stay in the scan
         (``filter.spare_structure``; the same structure test as the tracker's map evidence,
         ``detect.tracker.map_occupied_logodds``). The region's margin is for range noise and box-fit error; a
-        walker passing close to a wall seen at a grazing angle would otherwise take a strip of the wall with it."""
+        walker passing close to a wall seen at a grazing angle would otherwise take a strip of the wall with it.
+        ``only_ids``: only beams removed by these tracks are candidates (``filter.spare_structure_vehicles``)."""
         view = MapView.of_level(self.slam.map.levels[0])
         if view is None:
             return
@@ -202,7 +205,7 @@ class Pipeline:
         for t in moving:
             if t.beams is not None and len(t.beams):
                 own[t.beams] = True
-        cand = np.flatnonzero(removed & ~own)
+        cand = np.flatnonzero(removed & ~own & (np.isin(removed_by, only_ids) if only_ids is not None else True))
         if cand.shape[0] == 0:
             return
         r = scan.ranges[cand]
@@ -213,6 +216,25 @@ class Pipeline:
         spare = cand[structure]
         removed[spare] = False
         removed_by[spare] = -1
+
+    def _evidence_view(self, scan: Scan, pose: Pose2D) -> MapView | None:
+        """The finest map level as the tracker's map evidence sees it for ``scan`` at ``pose``: outlines of
+        long-occupied cells that this scan sees through (a parked vehicle driving off) count as observed free
+        (``detect.tracker.map_vacate_min_cells``; docs/maps.md, "Vacated footprints"). The SLAM map itself is
+        not changed."""
+        view = MapView.of_level(self.slam.map.levels[0])
+        tc = self.config.detect.tracker
+        if view is None or tc.map_vacate_min_cells <= 0 or not tc.map_evidence:
+            return view
+        cc = self.config.clean
+        vac = vacated_outlines(view, scan.ranges, scan.angles, scan.valid_mask(), (pose.x, pose.y, pose.theta),
+                               occupied_logodds=tc.map_occupied_logodds, min_cells=tc.map_vacate_min_cells,
+                               max_extent=tc.map_vacate_max_extent, margin_m=cc.margin_m,
+                               grazing_cells=cc.grazing_cells, min_incidence_deg=cc.min_incidence_deg,
+                               ray_core=cc.ray_core)
+        if vac.outlines:
+            self.vacated_scans += 1
+        return yielding_view(view, vac)
 
     def process(self, scan: Scan) -> StepResult:
         """Run every stage on ``scan`` (scans must come in time order) and return the result."""
@@ -234,7 +256,7 @@ class Pipeline:
         self.body.observe(raw, res.pose)
         t1 = time.perf_counter()
         # 3. track in the map frame with this scan's pose.
-        tracks = self.tracker.update(scan, res.pose, MapView.of_level(self.slam.map.levels[0]),
+        tracks = self.tracker.update(scan, res.pose, self._evidence_view(scan, res.pose),
                                      self.body.body if self.config.detect.footprint.auto else None)
         t2 = time.perf_counter()
         # 4. the dynamic set M and its exclusion zones (paper Eq. 3, 5-8).
@@ -246,6 +268,10 @@ class Pipeline:
         removed, removed_by = self._exclude(scan, res.pose, _observed_boxes(moving, scan, res.pose), 0.0, cache)
         if self.config.filter.mode == "box" and self.config.filter.spare_structure and removed.any():
             self._spare_structure(scan, res.pose, moving, removed, removed_by)
+        elif self.config.filter.mode == "box" and self.config.filter.spare_structure_vehicles and removed.any():
+            big = [t.id for t in moving if max(t.box.length, t.box.width) > self.config.detect.segment.max_extent]
+            if big:
+                self._spare_structure(scan, res.pose, moving, removed, removed_by, np.array(big))
         t3 = time.perf_counter()
         # 5. map update with the filtered scan only.
         updated = False

@@ -396,6 +396,18 @@ class TrackerConfig(BaseModel):
         description="A track in M whose mean fraction of points on long-occupied cells reaches this leaves M "
         "(it has become part of the map's structure).",
     )
+    map_vacate_min_cells: int = Field(
+        4, ge=0,
+        description="Vacated footprints (docs/maps.md): an outline of long-occupied map cells at most "
+        "map_vacate_max_extent long that the current scan sees through in at least this many cells (a vehicle "
+        "parked since before the robot saw it, now driving off its outline) counts as observed free, not "
+        "structure, for this scan's map evidence. 0 = off.",
+    )
+    map_vacate_max_extent: float = Field(
+        6.0, gt=0.0,
+        description="Longest side (along the map's axes) of an outline that can yield as a vacated footprint, m; "
+        "a wall's outline is longer and never yields.",
+    )
     still_time: float = Field(
         1.0, gt=0.0,
         description="The laser counts as motionless when its pose stayed within still_distance / still_angle over "
