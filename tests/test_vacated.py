@@ -67,6 +67,12 @@ def test_a_seen_through_outline_yields_and_a_wall_does_not():
     s2, _, _ = map_evidence(wall, yielding_view(view, vac))
     assert s2.all()
     assert view.logodds[150 + 40, 150 + 20] == 8.0  # the map itself is not changed
+    # the pipeline's limits (Config: segment.max_extent 3 m, map_vacate_min_depth 1 m) keep the 4 m outline;
+    # an outline no longer than min_extent, or beams that end less than min_depth_m behind it, do not yield
+    kw = dict(occupied_logodds=6.0, min_cells=4, max_extent=6.0)
+    assert vacated_outlines(view, r, a, valid, (0.0, 0.0, 0.0), min_depth_m=1.0, min_extent=3.0, **kw).outlines == 1
+    assert vacated_outlines(view, r, a, valid, (0.0, 0.0, 0.0), min_extent=4.5, **kw).outlines == 0
+    assert vacated_outlines(view, r, a, valid, (0.0, 0.0, 0.0), min_depth_m=18.0, **kw).outlines == 0
     # a longer limit lets the wall yield too; min_cells 0 switches the rule off
     assert vacated_outlines(view, r, a, valid, (0.0, 0.0, 0.0), occupied_logodds=6.0, min_cells=4,
                             max_extent=15.0).outlines == 2

@@ -231,7 +231,8 @@ class Pipeline:
                                occupied_logodds=tc.map_occupied_logodds, min_cells=tc.map_vacate_min_cells,
                                max_extent=tc.map_vacate_max_extent, margin_m=cc.margin_m,
                                grazing_cells=cc.grazing_cells, min_incidence_deg=cc.min_incidence_deg,
-                               ray_core=cc.ray_core)
+                               ray_core=cc.ray_core, min_depth_m=tc.map_vacate_min_depth,
+                               min_extent=self.config.detect.segment.max_extent)
         if vac.outlines:
             self.vacated_scans += 1
         return yielding_view(view, vac)

@@ -401,7 +401,14 @@ class TrackerConfig(BaseModel):
         description="Vacated footprints (docs/maps.md): an outline of long-occupied map cells at most "
         "map_vacate_max_extent long that the current scan sees through in at least this many cells (a vehicle "
         "parked since before the robot saw it, now driving off its outline) counts as observed free, not "
-        "structure, for this scan's map evidence. 0 = off.",
+        "structure, for this scan's map evidence; only outlines longer than segment.max_extent (vehicle size: "
+        "shorter objects are tracked without the rule). 0 = off.",
+    )
+    map_vacate_min_depth: float = Field(
+        1.0, ge=0.0,
+        description="A long-occupied cell counts as seen through by a beam (vacated footprints) only when the beam "
+        "and both its neighbours clear at least this far beyond it, m: a wall mapped a few cm off by pose error, or "
+        "a chair leg the beam slips past, is passed by a beam that ends right behind it.",
     )
     map_vacate_max_extent: float = Field(
         6.0, gt=0.0,

@@ -133,7 +133,7 @@ def map_evidence(points: np.ndarray, view: MapView | None, occupied_logodds: flo
 @njit(cache=True)
 def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx: np.ndarray,
                                   cy: np.ndarray, clear: np.ndarray, core: float, occ_thr: float,
-                                  out_r: np.ndarray, out_c: np.ndarray) -> int:  # pragma: no cover - numba
+                                  out_r: np.ndarray, out_c: np.ndarray, depth: float = 0.0) -> int:  # pragma: no cover
     """Cells with log-odds ≥ ``occ_thr`` that the clearing segments from (``ox``, ``oy``) to (``cx``, ``cy``)
     (world cell units, m / resolution; only where ``clear``) pass through within ``core`` cells of the cell
     centre across the ray's major axis (the traversal of :func:`dynslam2d.slam.cleanup._count_scan`), and not
@@ -166,7 +166,11 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
         # tangent to it, a neighbour ending on it) does not see through it
         reach2 = -1.0
         if 0 < k < cx.shape[0] - 1 and clear[k - 1] and clear[k + 1]:
-            reach2 = min((cx[k - 1] - ox) ** 2 + (cy[k - 1] - oy) ** 2, (cx[k + 1] - ox) ** 2 + (cy[k + 1] - oy) ** 2)
+            reach = math.sqrt(min((cx[k - 1] - ox) ** 2 + (cy[k - 1] - oy) ** 2,
+                                  (cx[k + 1] - ox) ** 2 + (cy[k + 1] - oy) ** 2,
+                                  (cx[k] - ox) ** 2 + (cy[k] - oy) ** 2)) - depth
+            if reach > 0.0:
+                reach2 = reach * reach
         if reach2 < 0.0:
             continue
         step = 1 if a1 >= a0 else -1
@@ -263,7 +267,8 @@ def vacated_outlines(view: MapView | None, ranges: np.ndarray, angles: np.ndarra
                      pose_xy_theta: tuple[float, float, float], *, occupied_logodds: float, min_cells: int,
                      max_extent: float, margin_m: float = 0.10, grazing_cells: float = 1.5,
                      min_incidence_deg: float = 5.0, ray_core: float = 0.4,
-                     near_logodds: float = 0.5) -> VacatedOutlines:
+                     near_logodds: float = 0.5, min_depth_m: float = 0.0,
+                     min_extent: float = 0.0) -> VacatedOutlines:
     """Outlines of long-occupied cells that the scan sees through (section comment above).
 
     ``ranges`` / ``angles`` (n,) are the scan's beams in the laser frame (m, rad), ``valid`` marks returns,
@@ -291,7 +296,8 @@ def vacated_outlines(view: MapView | None, ranges: np.ndarray, angles: np.ndarra
     out_r = np.empty(cap, dtype=np.int64)
     out_c = np.empty(cap, dtype=np.int64)
     n = seen_through_structure_kernel(view.logodds, int(view.i0), int(view.j0), px / res, py / res, cx, cy,
-                                      clear, float(ray_core), float(occupied_logodds), out_r, out_c)
+                                      clear, float(ray_core), float(occupied_logodds), out_r, out_c,
+                                      float(min_depth_m) / res)
     if n < min_cells:
         return VacatedOutlines(empty, empty, 0, 0)
     w = view.logodds.shape[1]
@@ -316,7 +322,8 @@ def vacated_outlines(view: MapView | None, ranges: np.ndarray, angles: np.ndarra
         comp = cr[:m] * w + cc[:m]
         inside = np.isin(codes, comp)
         done |= inside
-        if int(inside.sum()) >= min_cells:
+        side = max(int(cr[:m].max() - cr[:m].min()), int(cc[:m].max() - cc[:m].min())) * res
+        if int(inside.sum()) >= min_cells and side > min_extent:
             rows.append(cr[:m].copy())
             cols.append(cc[:m].copy())
     if not rows:
