@@ -28,7 +28,7 @@ import numpy as np
 
 from dynslam2d.config import Config
 from dynslam2d.detect.body import BodyFilter
-from dynslam2d.detect.mapevidence import MapView, map_evidence, vacated_outlines, yielding_view
+from dynslam2d.detect.mapevidence import MapView, VacatedHistory, map_evidence, vacated_outlines, yielding_view
 from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
@@ -169,6 +169,7 @@ class Pipeline:
         mem = self.config.detect.memory
         #: scans in which an outline of long-occupied cells was seen through and yielded (vacated footprints)
         self.vacated_scans = 0
+        self._vacated = VacatedHistory(self.config.detect.tracker.map_vacate_scans)
         #: retroactive erasure of what tracks wrote while they stood (slam/erasure.py; None = off)
         self.ledger: EvidenceLedger | None = EvidenceLedger(
             mem, self.config.slam.laser_min_dist, self.config.slam.laser_max_dist,
@@ -232,7 +233,9 @@ class Pipeline:
                                max_extent=tc.map_vacate_max_extent, margin_m=cc.margin_m,
                                grazing_cells=cc.grazing_cells, min_incidence_deg=cc.min_incidence_deg,
                                ray_core=cc.ray_core, min_depth_m=tc.map_vacate_min_depth,
-                               min_extent=self.config.detect.segment.max_extent)
+                               min_extent=self.config.detect.segment.max_extent,
+                               min_share=tc.map_vacate_min_share)
+        vac = self._vacated.persistent(view, vac)
         if vac.outlines:
             self.vacated_scans += 1
         return yielding_view(view, vac)
@@ -573,6 +576,8 @@ def render_map(loop: LoopResult, slam_config: SlamConfig, poses: np.ndarray | No
     if grazing_stop_cells is not None:
         update["grazing_stop_cells"] = float(grazing_stop_cells)
     slam = HectorSlam(slam_config.model_copy(update=update))
+    if grazing_stop_cells is not None:  # the written map's stop, on long surfaces only when configured
+        slam.map.grazing_min_surface_m = float(slam_config.written_grazing_min_surface_m)
     at = loop.node_poses if poses is None else poses
     _presize_render(slam, loop, at)
     for kf, p in zip(loop.keyframes, at):

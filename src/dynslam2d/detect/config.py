@@ -410,6 +410,16 @@ class TrackerConfig(BaseModel):
         "and both its neighbours clear at least this far beyond it, m: a wall mapped a few cm off by pose error, or "
         "a chair leg the beam slips past, is passed by a beam that ends right behind it.",
     )
+    map_vacate_min_share: float = Field(
+        0.2, ge=0.0, le=1.0,
+        description="…and only when the scan sees through at least this share of the outline's long-occupied "
+        "cells (vacated footprints; a car that started to leave shows a fifth to a quarter of its outline at once).",
+    )
+    map_vacate_scans: int = Field(
+        3, ge=1,
+        description="…and only when the same outline (half of its cells) qualified in this many consecutive scans "
+        "(vacated footprints).",
+    )
     map_vacate_max_extent: float = Field(
         6.0, gt=0.0,
         description="Longest side (along the map's axes) of an outline that can yield as a vacated footprint, m; "

@@ -255,12 +255,14 @@ class VacatedOutlines:
         rows, cols: array cells (of the view's level) of the outlines that yield; empty if none.
         seen_through: long-occupied cells the scan saw through (all outlines, yielding or not).
         outlines: outlines that yield.
+        sizes: cells of each yielding outline (``rows`` / ``cols`` hold them one outline after the other).
     """
 
     rows: np.ndarray
     cols: np.ndarray
     seen_through: int
     outlines: int
+    sizes: tuple[int, ...] = ()
 
 
 def vacated_outlines(view: MapView | None, ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray,
@@ -268,7 +270,7 @@ def vacated_outlines(view: MapView | None, ranges: np.ndarray, angles: np.ndarra
                      max_extent: float, margin_m: float = 0.10, grazing_cells: float = 1.5,
                      min_incidence_deg: float = 5.0, ray_core: float = 0.4,
                      near_logodds: float = 0.5, min_depth_m: float = 0.0,
-                     min_extent: float = 0.0) -> VacatedOutlines:
+                     min_extent: float = 0.0, min_share: float = 0.0) -> VacatedOutlines:
     """Outlines of long-occupied cells that the scan sees through (section comment above).
 
     ``ranges`` / ``angles`` (n,) are the scan's beams in the laser frame (m, rad), ``valid`` marks returns,
@@ -323,12 +325,50 @@ def vacated_outlines(view: MapView | None, ranges: np.ndarray, angles: np.ndarra
         inside = np.isin(codes, comp)
         done |= inside
         side = max(int(cr[:m].max() - cr[:m].min()), int(cc[:m].max() - cc[:m].min())) * res
-        if int(inside.sum()) >= min_cells and side > min_extent:
+        seen = int(inside.sum())
+        longocc = int(np.count_nonzero(view.logodds[cr[:m], cc[:m]] >= occupied_logodds))
+        if seen >= min_cells and side > min_extent and seen >= min_share * longocc:
             rows.append(cr[:m].copy())
             cols.append(cc[:m].copy())
     if not rows:
         return VacatedOutlines(empty, empty, int(codes.shape[0]), 0)
-    return VacatedOutlines(np.concatenate(rows), np.concatenate(cols), int(codes.shape[0]), len(rows))
+    return VacatedOutlines(np.concatenate(rows), np.concatenate(cols), int(codes.shape[0]), len(rows),
+                           tuple(int(r.shape[0]) for r in rows))
+
+
+class VacatedHistory:
+    """Keeps an outline's yield only when it persists: the same outline (at least half of its cells) was a
+    yielding candidate in each of the ``scans − 1`` scans before (docs/maps.md, "Vacated footprints"). A
+    vehicle driving off its outline is seen through scan after scan; pose error or a beam slipping past
+    furniture passes through a mapped outline in a scan here and there."""
+
+    def __init__(self, scans: int) -> None:
+        self.scans = max(int(scans), 1)
+        self._past: list[np.ndarray] = []  # absolute cell codes of earlier scans' candidates, newest last
+
+    def persistent(self, view: MapView, vac: VacatedOutlines) -> VacatedOutlines:
+        """``vac`` with only the outlines that persisted; remembers this scan's candidates."""
+        w = 1 << 31
+        codes = (vac.rows + view.j0).astype(np.int64) * w + (vac.cols + view.i0)
+        past = self._past[-(self.scans - 1):] if self.scans > 1 else []
+        keep_r: list[np.ndarray] = []
+        keep_c: list[np.ndarray] = []
+        sizes: list[int] = []
+        a = 0
+        for n in vac.sizes:
+            c = codes[a:a + n]
+            if len(past) == self.scans - 1 and all(np.count_nonzero(np.isin(c, p)) * 2 >= n for p in past):
+                keep_r.append(vac.rows[a:a + n])
+                keep_c.append(vac.cols[a:a + n])
+                sizes.append(n)
+            a += n
+        self._past.append(codes)
+        del self._past[:-max(self.scans - 1, 1)]
+        if not sizes:
+            e = np.zeros(0, dtype=np.int64)
+            return VacatedOutlines(e, e, vac.seen_through, 0)
+        return VacatedOutlines(np.concatenate(keep_r), np.concatenate(keep_c), vac.seen_through, len(sizes),
+                               tuple(sizes))
 
 
 def yielding_view(view: MapView, vacated: VacatedOutlines, free_value: float = -2.0) -> MapView:
