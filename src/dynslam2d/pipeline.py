@@ -576,8 +576,6 @@ def render_map(loop: LoopResult, slam_config: SlamConfig, poses: np.ndarray | No
     if grazing_stop_cells is not None:
         update["grazing_stop_cells"] = float(grazing_stop_cells)
     slam = HectorSlam(slam_config.model_copy(update=update))
-    if grazing_stop_cells is not None:  # the written map's stop, on long surfaces only when configured
-        slam.map.grazing_min_surface_m = float(slam_config.written_grazing_min_surface_m)
     at = loop.node_poses if poses is None else poses
     _presize_render(slam, loop, at)
     for kf, p in zip(loop.keyframes, at):

@@ -80,13 +80,6 @@ class SlamConfig(BaseModel):
         "--loop-closure off the written map is the online map. 0 (default) = the online map as the matcher "
         "built it; 1 lifts stop-and-go's map F1 0.9765 -> 0.9901 but leaves a few more people's cells.",
     )
-    written_grazing_min_surface_m: float = Field(
-        0.0, ge=0.0,
-        description="If > 0, the written map's grazing stop (written_grazing_stop_cells) applies only on surfaces "
-        "at least this long (returns split at depth jumps by the adaptive breakpoint test), with the incidence "
-        "taken from neighbours on the same surface: walls keep their grazing cells, while rays ending on a person "
-        "or next to one still clear its old places (docs/maps.md, 'The written map only'), m. 0 = every return.",
-    )
     grazing_min_incidence_deg: float = Field(
         5.0, gt=0.0, le=90.0,
         description="Incidence below this counts as this in grazing_stop_cells, degrees (bounds the stop at "

@@ -249,9 +249,6 @@ class MultiResMap:
     ) -> None:
         self.grazing_cells = float(grazing_cells)  # 0 = the reference's free update (see grazing_stop)
         self.min_sin = math.sin(math.radians(min_incidence_deg))
-        #: > 0: the grazing stop only on surfaces at least this long, m, with α from neighbours on the same
-        #: surface (grazing_stop_surfaces; set by the written map's render, docs/maps.md); 0 = grazing_stop
-        self.grazing_min_surface_m = 0.0
         self.levels = [
             GridLevel(resolution * 2**k, growth_margin_cells=math.ceil(growth_margin / (resolution * 2**k)))
             for k in range(levels)
@@ -310,10 +307,8 @@ class MultiResMap:
         stop = None
         if self.grazing_cells > 0.0 and hit.shape[0]:
             stop = np.zeros(hit.shape[0])
-            hl = np.asarray(hits_laser, dtype=np.float64).reshape(-1, 2)
-            stop[: int(np.count_nonzero(hit))] = grazing_stop(hl, self.grazing_cells, self.min_sin) \
-                if self.grazing_min_surface_m <= 0.0 else \
-                grazing_stop_surfaces(hl, self.grazing_cells, self.min_sin, self.grazing_min_surface_m)
+            stop[: int(np.count_nonzero(hit))] = grazing_stop(
+                np.asarray(hits_laser, dtype=np.float64).reshape(-1, 2), self.grazing_cells, self.min_sin)
         # the rays' end cells of a level, computed as GridLevel.integrate does (floor(v / r + 0.5), array
         # coordinates), into buffers shared by the levels: (2, n) rows are the contiguous x and y arrays
         ends_t = np.ascontiguousarray(ends.T)
@@ -385,42 +380,3 @@ def grazing_stop(pts: np.ndarray, grazing_cells: float, min_sin: float) -> np.nd
         sn = np.abs(pts[:, 0] * t[:, 1] - pts[:, 1] * t[:, 0]) / (tn * r)
     sn = np.where((tn > 0.0) & (r > 0.0) & np.isfinite(sn), sn, 1.0)
     return grazing_cells / np.maximum(sn, min_sin)
-
-
-def grazing_stop_surfaces(pts: np.ndarray, grazing_cells: float, min_sin: float, min_surface_m: float,
-                          lambda_rad: float = math.radians(5.0), noise_m: float = 0.03) -> np.ndarray:
-    """:func:`grazing_stop` restricted to long surfaces (docs/maps.md, "The written map only").
-
-    The returns (``pts`` (n, 2) laser frame, m, in beam order) are split into surfaces where consecutive
-    returns lie farther apart than the adaptive breakpoint distance ``r · sin Δφ / sin(λ − Δφ) + noise_m``
-    (Borges & Aldon, *Line extraction in 2D range images for mobile robotics*, JIRS 2004; λ =
-    ``lambda_rad`` so that a wall seen at down to λ incidence stays one surface). α is estimated from the
-    neighbours on the same surface only (one-sided at its ends), so a depth jump does not read as grazing;
-    and the stop ``grazing_cells / max(sin α, min_sin)`` applies only on surfaces whose ends are at least
-    ``min_surface_m`` apart — a wall, not a person, a leg or a small object, whose old places next to it the
-    rays ending on it must still clear. Elsewhere the stop is ``grazing_cells`` (normal incidence)."""
-    n = pts.shape[0]
-    g = float(grazing_cells)
-    if n < 2:
-        return np.full(n, g)
-    r = np.hypot(pts[:, 0], pts[:, 1])
-    phi = np.arctan2(pts[:, 1], pts[:, 0])
-    gap = np.hypot(np.diff(pts[:, 0]), np.diff(pts[:, 1]))
-    dphi = np.abs((np.diff(phi) + math.pi) % (2.0 * math.pi) - math.pi)
-    rr = np.minimum(r[:-1], r[1:])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        dmax = rr * np.sin(dphi) / np.sin(np.maximum(lambda_rad - dphi, 1e-6)) + noise_m
-    link = (gap <= dmax) & (dphi < lambda_rad)
-    run = np.concatenate(([0], np.cumsum(~link)))
-    first = np.flatnonzero(np.concatenate(([True], ~link)))
-    last = np.concatenate((first[1:] - 1, [n - 1]))
-    ext = np.hypot(pts[last, 0] - pts[first, 0], pts[last, 1] - pts[first, 1])
-    prev = np.where(np.concatenate(([False], link))[:, None], np.vstack((pts[:1], pts[:-1])), pts)
-    nxt = np.where(np.concatenate((link, [False]))[:, None], np.vstack((pts[1:], pts[-1:])), pts)
-    t = nxt - prev
-    tn = np.hypot(t[:, 0], t[:, 1])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sn = np.abs(pts[:, 0] * t[:, 1] - pts[:, 1] * t[:, 0]) / (tn * r)
-    sn = np.where((tn > 0.0) & (r > 0.0) & np.isfinite(sn), sn, 1.0)
-    stop = g / np.maximum(sn, min_sin)
-    return np.where(ext[run] >= min_surface_m, stop, g)
