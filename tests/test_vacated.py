@@ -8,7 +8,9 @@ import pytest
 
 from dynslam2d.config import Config
 from dynslam2d.detect.mapevidence import MapView, VacatedHistory, map_evidence, vacated_outlines, yielding_view
-from dynslam2d.pipeline import run
+from dynslam2d.pipeline import run, scan_clearing
+from dynslam2d.slam.cleanconfig import CleanConfig
+from dynslam2d.types import Pose2D
 from dynslam2d.results import compute_metrics, ground_truth_for
 from dynslam2d.sim import Mover, Rect, Scenario, oscillating_in_place, timeline
 from dynslam2d.sim.scenarios import _build_world
@@ -16,6 +18,11 @@ from dynslam2d.sim.sensor import LidarModel
 from dynslam2d.sim.simulation import SimSource
 
 RES = 0.05
+
+
+def _geo(r: np.ndarray, a: np.ndarray, valid: np.ndarray) -> tuple:
+    """The clearing geometry of a scan from the laser at the origin, heading 0 (pipeline.scan_clearing)."""
+    return scan_clearing(r, a, valid, Pose2D(0.0, 0.0, 0.0), RES, CleanConfig())
 
 
 def _map() -> MapView:
@@ -48,7 +55,7 @@ def _scan() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def test_a_seen_through_outline_yields_and_a_wall_does_not():
     view = _map()
     r, a, valid = _scan()
-    vac = vacated_outlines(view, r, a, valid, (0.0, 0.0, 0.0), occupied_logodds=6.0, min_cells=4, max_extent=6.0)
+    vac = vacated_outlines(view, *_geo(r, a, valid), occupied_logodds=6.0, min_cells=4, max_extent=6.0)
     assert vac.outlines == 1
     x = (vac.cols + view.i0) * RES
     y = (vac.rows + view.j0) * RES
@@ -70,13 +77,13 @@ def test_a_seen_through_outline_yields_and_a_wall_does_not():
     # the pipeline's limits (Config: segment.max_extent 3 m, map_vacate_min_depth 1 m) keep the 4 m outline;
     # an outline no longer than min_extent, or beams that end less than min_depth_m behind it, do not yield
     kw = dict(occupied_logodds=6.0, min_cells=4, max_extent=6.0)
-    assert vacated_outlines(view, r, a, valid, (0.0, 0.0, 0.0), min_depth_m=1.0, min_extent=3.0, **kw).outlines == 1
-    assert vacated_outlines(view, r, a, valid, (0.0, 0.0, 0.0), min_extent=4.5, **kw).outlines == 0
-    assert vacated_outlines(view, r, a, valid, (0.0, 0.0, 0.0), min_depth_m=18.0, **kw).outlines == 0
+    assert vacated_outlines(view, *_geo(r, a, valid), min_depth_m=1.0, min_extent=3.0, **kw).outlines == 1
+    assert vacated_outlines(view, *_geo(r, a, valid), min_extent=4.5, **kw).outlines == 0
+    assert vacated_outlines(view, *_geo(r, a, valid), min_depth_m=18.0, **kw).outlines == 0
     # a longer limit lets the wall yield too; min_cells 0 switches the rule off
-    assert vacated_outlines(view, r, a, valid, (0.0, 0.0, 0.0), occupied_logodds=6.0, min_cells=4,
+    assert vacated_outlines(view, *_geo(r, a, valid), occupied_logodds=6.0, min_cells=4,
                             max_extent=15.0).outlines == 2
-    assert vacated_outlines(view, r, a, valid, (0.0, 0.0, 0.0), occupied_logodds=6.0, min_cells=0,
+    assert vacated_outlines(view, *_geo(r, a, valid), occupied_logodds=6.0, min_cells=0,
                             max_extent=6.0).outlines == 0
 
 
@@ -95,7 +102,7 @@ def test_a_round_object_seen_past_its_edges_does_not_yield():
     with np.errstate(invalid="ignore"):
         r = np.where(disc >= 0.0, b - np.sqrt(np.maximum(disc, 0.0)), 8.0)
     r = np.where(r > 0.0, r, 8.0)
-    vac = vacated_outlines(view, r, a, np.ones(720, dtype=bool), (0.0, 0.0, 0.0), occupied_logodds=6.0,
+    vac = vacated_outlines(view, *_geo(r, a, np.ones(720, dtype=bool)), occupied_logodds=6.0,
                            min_cells=1, max_extent=6.0)
     assert vac.seen_through == 0 and vac.outlines == 0
 
@@ -127,15 +134,15 @@ def test_an_outline_yields_only_after_it_persisted_and_with_enough_of_it_seen_th
     view = _map()
     r, a, valid = _scan()
     kw = dict(occupied_logodds=6.0, min_cells=4, max_extent=6.0)
-    vac = vacated_outlines(view, r, a, valid, (0.0, 0.0, 0.0), **kw)
+    vac = vacated_outlines(view, *_geo(r, a, valid), **kw)
     assert len(vac.sizes) == 1 and sum(vac.sizes) == vac.rows.shape[0]
     # a share of the outline's long-occupied cells seen through: enough for 0.2, not for 0.9
-    assert vacated_outlines(view, r, a, valid, (0.0, 0.0, 0.0), min_share=0.2, **kw).outlines == 1
-    assert vacated_outlines(view, r, a, valid, (0.0, 0.0, 0.0), min_share=0.9, **kw).outlines == 0
+    assert vacated_outlines(view, *_geo(r, a, valid), min_share=0.2, **kw).outlines == 1
+    assert vacated_outlines(view, *_geo(r, a, valid), min_share=0.9, **kw).outlines == 0
     hist = VacatedHistory(3)
     got = [hist.persistent(view, vac).outlines for _ in range(4)]
     assert got == [0, 0, 1, 1]  # the third consecutive scan yields
     hist = VacatedHistory(3)
-    empty = vacated_outlines(view, r, a, np.zeros_like(valid), (0.0, 0.0, 0.0), **kw)
+    empty = vacated_outlines(view, *_geo(r, a, np.zeros_like(valid)), **kw)
     got = [hist.persistent(view, v).outlines for v in (vac, empty, vac, vac, vac)]
     assert got == [0, 0, 0, 0, 1]  # a gap restarts the count

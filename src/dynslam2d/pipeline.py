@@ -37,6 +37,8 @@ from dynslam2d.memtrim import release_free_memory
 from dynslam2d.rangescale import apply_range_scale
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
+from dynslam2d.slam.cleanconfig import CleanConfig
+from dynslam2d.slam.cleanup import _scan_geometry  # (the clean-up pass's beam geometry: one definition)
 from dynslam2d.slam.confidence import FLAGS
 from dynslam2d.slam.confidence import summarize as summarize_confidence
 from dynslam2d.slam.config import SlamConfig
@@ -154,6 +156,23 @@ def _observed_boxes(tracks: list[Track], scan: Scan, pose: Pose2D) -> list[Track
     return out
 
 
+def scan_clearing(ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray, pose: Pose2D, resolution: float,
+                  clean: CleanConfig) -> tuple[tuple[float, float], np.ndarray, np.ndarray, np.ndarray]:
+    """The clean-up pass's beam geometry for one scan (docs/maps.md, "What the pass counts"): the laser's
+    position and the ends (cx, cy) of the beams' clearing segments, (n,) in world cell units (m /
+    ``resolution``), and ``clear`` (n,) bool, the beams with a return (``valid``) longer than their margin
+    (``clean.margin_m``, grown to ``clean.grazing_cells · resolution / sin α`` at grazing incidence).
+    ``ranges`` / ``angles``: the beams in the laser frame (m, rad); ``pose``: the laser pose, map frame."""
+    _, _, cx, cy, _, clear = _scan_geometry(np.ascontiguousarray(ranges, dtype=np.float64),
+                                            np.ascontiguousarray(angles, dtype=np.float64),
+                                            np.ascontiguousarray(valid, dtype=np.bool_),
+                                            np.zeros(ranges.shape[0], dtype=np.bool_), float(pose.x), float(pose.y),
+                                            float(pose.theta), float(resolution), float(clean.margin_m),
+                                            float(clean.grazing_cells),
+                                            math.sin(math.radians(clean.min_incidence_deg)))
+    return (float(pose.x) / resolution, float(pose.y) / resolution), cx, cy, clear
+
+
 class Pipeline:
     """Scans in; poses, tracks, removed beams and a map out. One :meth:`process` call per scan."""
 
@@ -167,8 +186,7 @@ class Pipeline:
         # loop closure behind the front end (slam/loops.py); it never changes the front end's poses or map
         self.loops = LoopCloser(self.config.loop, self.config.slam) if self.config.loop.enabled else None
         mem = self.config.detect.memory
-        #: scans in which an outline of long-occupied cells was seen through and yielded (vacated footprints)
-        self.vacated_scans = 0
+        #: outlines of long-occupied cells seen through in recent scans (vacated footprints, _evidence_view)
         self._vacated = VacatedHistory(self.config.detect.tracker.map_vacate_scans)
         #: retroactive erasure of what tracks wrote while they stood (slam/erasure.py; None = off)
         self.ledger: EvidenceLedger | None = EvidenceLedger(
@@ -228,17 +246,15 @@ class Pipeline:
         if view is None or tc.map_vacate_min_cells <= 0 or not tc.map_evidence:
             return view
         cc = self.config.clean
-        vac = vacated_outlines(view, scan.ranges, scan.angles, scan.valid_mask(), (pose.x, pose.y, pose.theta),
+        origin, cx, cy, clear = scan_clearing(scan.ranges, scan.angles, scan.valid_mask(), pose, view.resolution,
+                                              cc)
+        vac = vacated_outlines(view, origin, cx, cy, clear,
                                occupied_logodds=tc.map_occupied_logodds, min_cells=tc.map_vacate_min_cells,
-                               max_extent=tc.map_vacate_max_extent, margin_m=cc.margin_m,
-                               grazing_cells=cc.grazing_cells, min_incidence_deg=cc.min_incidence_deg,
+                               max_extent=tc.map_vacate_max_extent,
                                ray_core=cc.ray_core, min_depth_m=tc.map_vacate_min_depth,
                                min_extent=self.config.detect.segment.max_extent,
                                min_share=tc.map_vacate_min_share)
-        vac = self._vacated.persistent(view, vac)
-        if vac.outlines:
-            self.vacated_scans += 1
-        return yielding_view(view, vac)
+        return yielding_view(view, self._vacated.persistent(view, vac))
 
     def process(self, scan: Scan) -> StepResult:
         """Run every stage on ``scan`` (scans must come in time order) and return the result."""

@@ -136,8 +136,9 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
                                   out_r: np.ndarray, out_c: np.ndarray, depth: float = 0.0) -> int:  # pragma: no cover
     """Cells with log-odds ≥ ``occ_thr`` that the clearing segments from (``ox``, ``oy``) to (``cx``, ``cy``)
     (world cell units, m / resolution; only where ``clear``) pass through within ``core`` cells of the cell
-    centre across the ray's major axis (the traversal of :func:`dynslam2d.slam.cleanup._count_scan`), and not
-    farther from the origin than the clearing ends of both neighbouring beams (``k ± 1``, which must clear).
+    centre across the ray's major axis (the traversal of :func:`dynslam2d.slam.cleanup._count_scan`), and at
+    least ``depth`` (cells) nearer to the origin than the clearing ends of the beam and both its neighbours
+    (``k ± 1``, which must clear).
     Writes array rows / columns into ``out_r`` / ``out_c`` (possibly repeated) and returns their number
     (at most the arrays' length)."""
     h = logodds.shape[0]
@@ -265,41 +266,34 @@ class VacatedOutlines:
     sizes: tuple[int, ...] = ()
 
 
-def vacated_outlines(view: MapView | None, ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray,
-                     pose_xy_theta: tuple[float, float, float], *, occupied_logodds: float, min_cells: int,
-                     max_extent: float, margin_m: float = 0.10, grazing_cells: float = 1.5,
-                     min_incidence_deg: float = 5.0, ray_core: float = 0.4,
-                     near_logodds: float = 0.5, min_depth_m: float = 0.0,
+def vacated_outlines(view: MapView | None, origin: tuple[float, float], cx: np.ndarray, cy: np.ndarray,
+                     clear: np.ndarray, *, occupied_logodds: float, min_cells: int, max_extent: float,
+                     ray_core: float = 0.4, near_logodds: float = 0.5, min_depth_m: float = 0.0,
                      min_extent: float = 0.0, min_share: float = 0.0) -> VacatedOutlines:
-    """Outlines of long-occupied cells that the scan sees through (section comment above).
+    """Outlines of long-occupied cells that one scan sees through (section comment above).
 
-    ``ranges`` / ``angles`` (n,) are the scan's beams in the laser frame (m, rad), ``valid`` marks returns,
-    ``pose_xy_theta`` the laser pose in the map frame (m, rad). A beam clears the cells before its endpoint
-    up to the clean-up pass's margin (``margin_m``, grown to ``grazing_cells · resolution / sin α`` at
-    grazing incidence α ≥ ``min_incidence_deg``; docs/maps.md "What the pass counts"), within ``ray_core``
-    of a cell's centre. Long-occupied cells (log-odds ≥ ``occupied_logodds``) so cleared are grouped into
-    their 8-connected outline of occupied cells (log-odds > ``near_logodds``); an outline yields when it
-    spans at most ``max_extent`` (m) along both grid axes and the scan saw through at least ``min_cells``
-    of its cells."""
-    from dynslam2d.slam.cleanup import _scan_geometry  # (the pass's beam geometry: one definition)
-
+    The scan's beams are the clearing segments from the laser at ``origin`` to (``cx``, ``cy``), (n,) in beam
+    order, in world cell units (m / the view's resolution), only where ``clear``: the clean-up pass's beam
+    geometry, which ends each beam a margin before its return, longer at grazing incidence
+    (:func:`dynslam2d.pipeline.scan_clearing`; docs/maps.md "What the pass counts"). A long-occupied cell
+    (log-odds ≥ ``occupied_logodds``) counts as seen through where a beam passes within ``ray_core`` of its
+    centre and that beam and both its neighbours clear at least ``min_depth_m`` (m) beyond it. Such cells are
+    grouped into their 8-connected outline of occupied cells (log-odds > ``near_logodds``); an outline yields
+    when its longer side along the grid axes is more than ``min_extent`` and at most ``max_extent`` (m), and
+    the scan saw through at least ``min_cells`` of its cells and at least ``min_share`` of its long-occupied
+    cells."""
     empty = np.zeros(0, dtype=np.int64)
-    if view is None or min_cells <= 0 or ranges.shape[0] == 0:
+    if view is None or min_cells <= 0 or cx.shape[0] == 0:
         return VacatedOutlines(empty, empty, 0, 0)
     res = float(view.resolution)
-    px, py, th = (float(v) for v in pose_xy_theta)
-    _, _, cx, cy, _, clear = _scan_geometry(np.ascontiguousarray(ranges, dtype=np.float64),
-                                            np.ascontiguousarray(angles, dtype=np.float64),
-                                            np.ascontiguousarray(valid, dtype=np.bool_),
-                                            np.zeros(ranges.shape[0], dtype=np.bool_), px, py, th, res,
-                                            float(margin_m), float(grazing_cells),
-                                            math.sin(math.radians(min_incidence_deg)))
-    cap = 64 * ranges.shape[0]
+    cap = 64 * cx.shape[0]
     out_r = np.empty(cap, dtype=np.int64)
     out_c = np.empty(cap, dtype=np.int64)
-    n = seen_through_structure_kernel(view.logodds, int(view.i0), int(view.j0), px / res, py / res, cx, cy,
-                                      clear, float(ray_core), float(occupied_logodds), out_r, out_c,
-                                      float(min_depth_m) / res)
+    n = seen_through_structure_kernel(view.logodds, int(view.i0), int(view.j0), float(origin[0]), float(origin[1]),
+                                      np.ascontiguousarray(cx, dtype=np.float64),
+                                      np.ascontiguousarray(cy, dtype=np.float64),
+                                      np.ascontiguousarray(clear, dtype=np.bool_), float(ray_core),
+                                      float(occupied_logodds), out_r, out_c, float(min_depth_m) / res)
     if n < min_cells:
         return VacatedOutlines(empty, empty, 0, 0)
     w = view.logodds.shape[1]
