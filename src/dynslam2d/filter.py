@@ -111,6 +111,12 @@ class FilterConfig(BaseModel):
         "default: the wall beams it keeps change the map, and on negative_2 /right_scan a clutter leg pair then "
         "enters M (0.11 -> 0.49 % removed). False = everything inside is removed (paper Eq. 8 as printed).",
     )
+    spare_structure_vehicles: bool = Field(
+        True,
+        description="'box': spare_structure for the regions of vehicle-size tracks only (a box side longer than "
+        "detect.segment.max_extent): a vehicle's tracked box can be metres off after a partial view or a 90° "
+        "turn, and would take the wall beside it (docs/maps.md, 'Vacated footprints').",
+    )
     trusted_pose_only: bool = Field(
         True,
         description="A track joins the removal set only on a scan whose pose the SLAM trusts (a match "

@@ -28,7 +28,7 @@ import numpy as np
 
 from dynslam2d.config import Config
 from dynslam2d.detect.body import BodyFilter
-from dynslam2d.detect.mapevidence import MapView, map_evidence
+from dynslam2d.detect.mapevidence import MapView, VacatedHistory, map_evidence, vacated_outlines, yielding_view
 from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan
 from dynslam2d.gridmap import GridMap
@@ -37,6 +37,8 @@ from dynslam2d.memtrim import release_free_memory
 from dynslam2d.rangescale import apply_range_scale
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
+from dynslam2d.slam.cleanconfig import CleanConfig
+from dynslam2d.slam.cleanup import _scan_geometry  # (the clean-up pass's beam geometry: one definition)
 from dynslam2d.slam.confidence import FLAGS
 from dynslam2d.slam.confidence import summarize as summarize_confidence
 from dynslam2d.slam.config import SlamConfig
@@ -154,6 +156,23 @@ def _observed_boxes(tracks: list[Track], scan: Scan, pose: Pose2D) -> list[Track
     return out
 
 
+def scan_clearing(ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray, pose: Pose2D, resolution: float,
+                  clean: CleanConfig) -> tuple[tuple[float, float], np.ndarray, np.ndarray, np.ndarray]:
+    """The clean-up pass's beam geometry for one scan (docs/maps.md, "What the pass counts"): the laser's
+    position and the ends (cx, cy) of the beams' clearing segments, (n,) in world cell units (m /
+    ``resolution``), and ``clear`` (n,) bool, the beams with a return (``valid``) longer than their margin
+    (``clean.margin_m``, grown to ``clean.grazing_cells · resolution / sin α`` at grazing incidence).
+    ``ranges`` / ``angles``: the beams in the laser frame (m, rad); ``pose``: the laser pose, map frame."""
+    _, _, cx, cy, _, clear = _scan_geometry(np.ascontiguousarray(ranges, dtype=np.float64),
+                                            np.ascontiguousarray(angles, dtype=np.float64),
+                                            np.ascontiguousarray(valid, dtype=np.bool_),
+                                            np.zeros(ranges.shape[0], dtype=np.bool_), float(pose.x), float(pose.y),
+                                            float(pose.theta), float(resolution), float(clean.margin_m),
+                                            float(clean.grazing_cells),
+                                            math.sin(math.radians(clean.min_incidence_deg)))
+    return (float(pose.x) / resolution, float(pose.y) / resolution), cx, cy, clear
+
+
 class Pipeline:
     """Scans in; poses, tracks, removed beams and a map out. One :meth:`process` call per scan."""
 
@@ -167,6 +186,8 @@ class Pipeline:
         # loop closure behind the front end (slam/loops.py); it never changes the front end's poses or map
         self.loops = LoopCloser(self.config.loop, self.config.slam) if self.config.loop.enabled else None
         mem = self.config.detect.memory
+        #: outlines of long-occupied cells seen through in recent scans (vacated footprints, _evidence_view)
+        self._vacated = VacatedHistory(self.config.detect.tracker.map_vacate_scans)
         #: retroactive erasure of what tracks wrote while they stood (slam/erasure.py; None = off)
         self.ledger: EvidenceLedger | None = EvidenceLedger(
             mem, self.config.slam.laser_min_dist, self.config.slam.laser_max_dist,
@@ -189,12 +210,13 @@ class Pipeline:
         return removed, by
 
     def _spare_structure(self, scan: Scan, pose: Pose2D, moving: list[Track], removed: np.ndarray,
-                         removed_by: np.ndarray) -> None:
+                         removed_by: np.ndarray, only_ids: np.ndarray | None = None) -> None:
         """In place: beams inside an exclusion region that are not the object's own (not among the beams of a
         track in M in this scan) and whose point lies on long-occupied map structure stay in the scan
         (``filter.spare_structure``; the same structure test as the tracker's map evidence,
         ``detect.tracker.map_occupied_logodds``). The region's margin is for range noise and box-fit error; a
-        walker passing close to a wall seen at a grazing angle would otherwise take a strip of the wall with it."""
+        walker passing close to a wall seen at a grazing angle would otherwise take a strip of the wall with it.
+        ``only_ids``: only beams removed by these tracks are candidates (``filter.spare_structure_vehicles``)."""
         view = MapView.of_level(self.slam.map.levels[0])
         if view is None:
             return
@@ -202,7 +224,7 @@ class Pipeline:
         for t in moving:
             if t.beams is not None and len(t.beams):
                 own[t.beams] = True
-        cand = np.flatnonzero(removed & ~own)
+        cand = np.flatnonzero(removed & ~own & (np.isin(removed_by, only_ids) if only_ids is not None else True))
         if cand.shape[0] == 0:
             return
         r = scan.ranges[cand]
@@ -213,6 +235,26 @@ class Pipeline:
         spare = cand[structure]
         removed[spare] = False
         removed_by[spare] = -1
+
+    def _evidence_view(self, scan: Scan, pose: Pose2D) -> MapView | None:
+        """The finest map level as the tracker's map evidence sees it for ``scan`` at ``pose``: outlines of
+        long-occupied cells that this scan sees through (a parked vehicle driving off) count as observed free
+        (``detect.tracker.map_vacate_min_cells``; docs/maps.md, "Vacated footprints"). The SLAM map itself is
+        not changed."""
+        view = MapView.of_level(self.slam.map.levels[0])
+        tc = self.config.detect.tracker
+        if view is None or tc.map_vacate_min_cells <= 0 or not tc.map_evidence:
+            return view
+        cc = self.config.clean
+        origin, cx, cy, clear = scan_clearing(scan.ranges, scan.angles, scan.valid_mask(), pose, view.resolution,
+                                              cc)
+        vac = vacated_outlines(view, origin, cx, cy, clear,
+                               occupied_logodds=tc.map_occupied_logodds, min_cells=tc.map_vacate_min_cells,
+                               max_extent=tc.map_vacate_max_extent,
+                               ray_core=cc.ray_core, min_depth_m=tc.map_vacate_min_depth,
+                               min_extent=self.config.detect.segment.max_extent,
+                               min_share=tc.map_vacate_min_share)
+        return yielding_view(view, self._vacated.persistent(view, vac))
 
     def process(self, scan: Scan) -> StepResult:
         """Run every stage on ``scan`` (scans must come in time order) and return the result."""
@@ -234,7 +276,7 @@ class Pipeline:
         self.body.observe(raw, res.pose)
         t1 = time.perf_counter()
         # 3. track in the map frame with this scan's pose.
-        tracks = self.tracker.update(scan, res.pose, MapView.of_level(self.slam.map.levels[0]),
+        tracks = self.tracker.update(scan, res.pose, self._evidence_view(scan, res.pose),
                                      self.body.body if self.config.detect.footprint.auto else None)
         t2 = time.perf_counter()
         # 4. the dynamic set M and its exclusion zones (paper Eq. 3, 5-8).
@@ -246,6 +288,10 @@ class Pipeline:
         removed, removed_by = self._exclude(scan, res.pose, _observed_boxes(moving, scan, res.pose), 0.0, cache)
         if self.config.filter.mode == "box" and self.config.filter.spare_structure and removed.any():
             self._spare_structure(scan, res.pose, moving, removed, removed_by)
+        elif self.config.filter.mode == "box" and self.config.filter.spare_structure_vehicles and removed.any():
+            big = [t.id for t in moving if max(t.box.length, t.box.width) > self.config.detect.segment.max_extent]
+            if big:
+                self._spare_structure(scan, res.pose, moving, removed, removed_by, np.array(big))
         t3 = time.perf_counter()
         # 5. map update with the filtered scan only.
         updated = False

@@ -396,6 +396,35 @@ class TrackerConfig(BaseModel):
         description="A track in M whose mean fraction of points on long-occupied cells reaches this leaves M "
         "(it has become part of the map's structure).",
     )
+    map_vacate_min_cells: int = Field(
+        4, ge=0,
+        description="Vacated footprints (docs/maps.md): an outline of long-occupied map cells at most "
+        "map_vacate_max_extent long that the current scan sees through in at least this many cells (a vehicle "
+        "parked since before the robot saw it, now driving off its outline) counts as observed free, not "
+        "structure, for this scan's map evidence; only outlines longer than segment.max_extent (vehicle size: "
+        "shorter objects are tracked without the rule). 0 = off.",
+    )
+    map_vacate_min_depth: float = Field(
+        1.0, ge=0.0,
+        description="A long-occupied cell counts as seen through by a beam (vacated footprints) only when the beam "
+        "and both its neighbours clear at least this far beyond it, m: a wall mapped a few cm off by pose error, or "
+        "a chair leg the beam slips past, is passed by a beam that ends right behind it.",
+    )
+    map_vacate_min_share: float = Field(
+        0.2, ge=0.0, le=1.0,
+        description="…and only when the scan sees through at least this share of the outline's long-occupied "
+        "cells (vacated footprints; a car that started to leave shows a fifth to a quarter of its outline at once).",
+    )
+    map_vacate_scans: int = Field(
+        3, ge=1,
+        description="…and only when the same outline (half of its cells) qualified in this many consecutive scans "
+        "(vacated footprints).",
+    )
+    map_vacate_max_extent: float = Field(
+        6.0, gt=0.0,
+        description="Longest side (along the map's axes) of an outline that can yield as a vacated footprint, m; "
+        "a wall's outline is longer and never yields.",
+    )
     still_time: float = Field(
         1.0, gt=0.0,
         description="The laser counts as motionless when its pose stayed within still_distance / still_angle over "

@@ -21,6 +21,7 @@ Frames: map frame (the finest map level's world coordinates), units m. The map i
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -115,3 +116,261 @@ def map_evidence(points: np.ndarray, view: MapView | None, occupied_logodds: flo
                         int(view.i0), int(view.j0), float(view.resolution), float(occupied_logodds),
                         float(free_logodds), int(free_radius), structure, free, unknown)
     return structure, free, unknown
+
+
+# ----------------------------------------------------------------------------- vacated footprints
+#
+# A vehicle parked since before the robot saw the place is in the map: its outline is long-occupied, so the
+# structure test above calls its points structure, and while it drives off its own outline (about its
+# length) it cannot be a mover. What tells it from a wall is the scan itself: beams of the current scan pass
+# through long-occupied cells of its outline where it no longer stands. A wall is never seen through (the
+# clean-up pass's tolerances, docs/maps.md, keep grazing rays and pose error from looking so). When a small,
+# bounded outline of long-occupied cells is seen through in enough cells, the whole outline "yields": for
+# the map evidence of this scan its cells count as observed free, not structure (docs/maps.md, "Vacated
+# footprints").
+
+
+@njit(cache=True)
+def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx: np.ndarray,
+                                  cy: np.ndarray, clear: np.ndarray, core: float, occ_thr: float,
+                                  out_r: np.ndarray, out_c: np.ndarray, depth: float = 0.0) -> int:  # pragma: no cover
+    """Cells with log-odds ≥ ``occ_thr`` that the clearing segments from (``ox``, ``oy``) to (``cx``, ``cy``)
+    (world cell units, m / resolution; only where ``clear``) pass through within ``core`` cells of the cell
+    centre across the ray's major axis (the traversal of :func:`dynslam2d.slam.cleanup._count_scan`), and at
+    least ``depth`` (cells) nearer to the origin than the clearing ends of the beam and both its neighbours
+    (``k ± 1``, which must clear).
+    Writes array rows / columns into ``out_r`` / ``out_c`` (possibly repeated) and returns their number
+    (at most the arrays' length)."""
+    h = logodds.shape[0]
+    w = logodds.shape[1]
+    cap = out_r.shape[0]
+    n = 0
+    for k in range(cx.shape[0]):
+        if not clear[k]:
+            continue
+        dx = cx[k] - ox
+        dy = cy[k] - oy
+        x_major = abs(dx) >= abs(dy)
+        if x_major:
+            a0 = int(math.floor(ox + 0.5))
+            a1 = int(math.floor(cx[k] + 0.5))
+            slope = dy / dx if dx != 0.0 else 0.0
+            m0 = ox
+            n0 = oy
+        else:
+            a0 = int(math.floor(oy + 0.5))
+            a1 = int(math.floor(cy[k] + 0.5))
+            slope = dx / dy
+            m0 = oy
+            n0 = ox
+        # both neighbouring beams must clear at least as far: the silhouette edge of a round object (a ray
+        # tangent to it, a neighbour ending on it) does not see through it
+        reach2 = -1.0
+        if 0 < k < cx.shape[0] - 1 and clear[k - 1] and clear[k + 1]:
+            reach = math.sqrt(min((cx[k - 1] - ox) ** 2 + (cy[k - 1] - oy) ** 2,
+                                  (cx[k + 1] - ox) ** 2 + (cy[k + 1] - oy) ** 2,
+                                  (cx[k] - ox) ** 2 + (cy[k] - oy) ** 2)) - depth
+            if reach > 0.0:
+                reach2 = reach * reach
+        if reach2 < 0.0:
+            continue
+        step = 1 if a1 >= a0 else -1
+        a = a0
+        while True:
+            b = n0 + slope * (a - m0)
+            ib = int(math.floor(b + 0.5))
+            if abs(b - ib) <= core:
+                if x_major:
+                    x = a - i0
+                    y = ib - j0
+                else:
+                    x = ib - i0
+                    y = a - j0
+                if 0 <= x < w and 0 <= y < h and logodds[y, x] >= occ_thr and n < cap and \
+                        (x + i0 - ox) ** 2 + (y + j0 - oy) ** 2 <= reach2:
+                    out_r[n] = y
+                    out_c[n] = x
+                    n += 1
+            if a == a1:
+                break
+            a += step
+    return n
+
+
+@njit(cache=True)
+def grow_outline_kernel(logodds: np.ndarray, r0: int, c0: int, near_thr: float, max_side: int,
+                        out_r: np.ndarray, out_c: np.ndarray) -> int:  # pragma: no cover - numba
+    """The 8-connected component of cells with log-odds > ``near_thr`` that holds array cell (``r0``, ``c0``),
+    written into ``out_r`` / ``out_c``; returns its size, or −1 when it spans more than ``max_side`` cells
+    along a grid axis (a wall, not an object) or does not fit the output arrays."""
+    h = logodds.shape[0]
+    w = logodds.shape[1]
+    side = 2 * max_side + 1
+    seen = np.zeros((side, side), dtype=np.uint8)
+    cap = out_r.shape[0]
+    out_r[0] = r0
+    out_c[0] = c0
+    seen[max_side, max_side] = 1
+    n = 1
+    head = 0
+    rmin = rmax = r0
+    cmin = cmax = c0
+    while head < n:
+        r = out_r[head]
+        c = out_c[head]
+        head += 1
+        for dr in range(-1, 2):
+            for dc in range(-1, 2):
+                rr = r + dr
+                cc = c + dc
+                if (dr == 0 and dc == 0) or rr < 0 or cc < 0 or rr >= h or cc >= w:
+                    continue
+                if logodds[rr, cc] <= near_thr:
+                    continue
+                lr = rr - r0 + max_side
+                lc = cc - c0 + max_side
+                if lr < 0 or lc < 0 or lr >= side or lc >= side:
+                    return -1
+                if seen[lr, lc]:
+                    continue
+                seen[lr, lc] = 1
+                if n >= cap:
+                    return -1
+                out_r[n] = rr
+                out_c[n] = cc
+                n += 1
+                rmin = min(rmin, rr)
+                rmax = max(rmax, rr)
+                cmin = min(cmin, cc)
+                cmax = max(cmax, cc)
+                if rmax - rmin + 1 > max_side or cmax - cmin + 1 > max_side:
+                    return -1
+    return n
+
+
+@dataclass(frozen=True, slots=True)
+class VacatedOutlines:
+    """What :func:`vacated_outlines` found in one scan.
+
+    Attributes:
+        rows, cols: array cells (of the view's level) of the outlines that yield; empty if none.
+        seen_through: long-occupied cells the scan saw through (all outlines, yielding or not).
+        outlines: outlines that yield.
+        sizes: cells of each yielding outline (``rows`` / ``cols`` hold them one outline after the other).
+    """
+
+    rows: np.ndarray
+    cols: np.ndarray
+    seen_through: int
+    outlines: int
+    sizes: tuple[int, ...] = ()
+
+
+def vacated_outlines(view: MapView | None, origin: tuple[float, float], cx: np.ndarray, cy: np.ndarray,
+                     clear: np.ndarray, *, occupied_logodds: float, min_cells: int, max_extent: float,
+                     ray_core: float = 0.4, near_logodds: float = 0.5, min_depth_m: float = 0.0,
+                     min_extent: float = 0.0, min_share: float = 0.0) -> VacatedOutlines:
+    """Outlines of long-occupied cells that one scan sees through (section comment above).
+
+    The scan's beams are the clearing segments from the laser at ``origin`` to (``cx``, ``cy``), (n,) in beam
+    order, in world cell units (m / the view's resolution), only where ``clear``: the clean-up pass's beam
+    geometry, which ends each beam a margin before its return, longer at grazing incidence
+    (:func:`dynslam2d.pipeline.scan_clearing`; docs/maps.md "What the pass counts"). A long-occupied cell
+    (log-odds ≥ ``occupied_logodds``) counts as seen through where a beam passes within ``ray_core`` of its
+    centre and that beam and both its neighbours clear at least ``min_depth_m`` (m) beyond it. Such cells are
+    grouped into their 8-connected outline of occupied cells (log-odds > ``near_logodds``); an outline yields
+    when its longer side along the grid axes is more than ``min_extent`` and at most ``max_extent`` (m), and
+    the scan saw through at least ``min_cells`` of its cells and at least ``min_share`` of its long-occupied
+    cells."""
+    empty = np.zeros(0, dtype=np.int64)
+    if view is None or min_cells <= 0 or cx.shape[0] == 0:
+        return VacatedOutlines(empty, empty, 0, 0)
+    res = float(view.resolution)
+    cap = 64 * cx.shape[0]
+    out_r = np.empty(cap, dtype=np.int64)
+    out_c = np.empty(cap, dtype=np.int64)
+    n = seen_through_structure_kernel(view.logodds, int(view.i0), int(view.j0), float(origin[0]), float(origin[1]),
+                                      np.ascontiguousarray(cx, dtype=np.float64),
+                                      np.ascontiguousarray(cy, dtype=np.float64),
+                                      np.ascontiguousarray(clear, dtype=np.bool_), float(ray_core),
+                                      float(occupied_logodds), out_r, out_c, float(min_depth_m) / res)
+    if n < min_cells:
+        return VacatedOutlines(empty, empty, 0, 0)
+    w = view.logodds.shape[1]
+    codes = np.unique(out_r[:n] * w + out_c[:n])
+    if codes.shape[0] < min_cells:
+        return VacatedOutlines(empty, empty, int(codes.shape[0]), 0)
+    max_side = max(int(math.ceil(max_extent / res)), 1)
+    comp_cap = 4 * max_side * max_side
+    cr = np.empty(comp_cap, dtype=np.int64)
+    cc = np.empty(comp_cap, dtype=np.int64)
+    done = np.zeros(codes.shape[0], dtype=bool)
+    rows: list[np.ndarray] = []
+    cols: list[np.ndarray] = []
+    for s in range(codes.shape[0]):
+        if done[s]:
+            continue
+        r0, c0 = divmod(int(codes[s]), w)
+        m = grow_outline_kernel(view.logodds, r0, c0, float(near_logodds), max_side, cr, cc)
+        if m < 0:
+            done[s] = True
+            continue
+        comp = cr[:m] * w + cc[:m]
+        inside = np.isin(codes, comp)
+        done |= inside
+        side = max(int(cr[:m].max() - cr[:m].min()), int(cc[:m].max() - cc[:m].min())) * res
+        seen = int(inside.sum())
+        longocc = int(np.count_nonzero(view.logodds[cr[:m], cc[:m]] >= occupied_logodds))
+        if seen >= min_cells and side > min_extent and seen >= min_share * longocc:
+            rows.append(cr[:m].copy())
+            cols.append(cc[:m].copy())
+    if not rows:
+        return VacatedOutlines(empty, empty, int(codes.shape[0]), 0)
+    return VacatedOutlines(np.concatenate(rows), np.concatenate(cols), int(codes.shape[0]), len(rows),
+                           tuple(int(r.shape[0]) for r in rows))
+
+
+class VacatedHistory:
+    """Keeps an outline's yield only when it persists: the same outline (at least half of its cells) was a
+    yielding candidate in each of the ``scans − 1`` scans before (docs/maps.md, "Vacated footprints"). A
+    vehicle driving off its outline is seen through scan after scan; pose error or a beam slipping past
+    furniture passes through a mapped outline in a scan here and there."""
+
+    def __init__(self, scans: int) -> None:
+        self.scans = max(int(scans), 1)
+        self._past: list[np.ndarray] = []  # absolute cell codes of earlier scans' candidates, newest last
+
+    def persistent(self, view: MapView, vac: VacatedOutlines) -> VacatedOutlines:
+        """``vac`` with only the outlines that persisted; remembers this scan's candidates."""
+        w = 1 << 31
+        codes = (vac.rows + view.j0).astype(np.int64) * w + (vac.cols + view.i0)
+        past = self._past[-(self.scans - 1):] if self.scans > 1 else []
+        keep_r: list[np.ndarray] = []
+        keep_c: list[np.ndarray] = []
+        sizes: list[int] = []
+        a = 0
+        for n in vac.sizes:
+            c = codes[a:a + n]
+            if len(past) == self.scans - 1 and all(np.count_nonzero(np.isin(c, p)) * 2 >= n for p in past):
+                keep_r.append(vac.rows[a:a + n])
+                keep_c.append(vac.cols[a:a + n])
+                sizes.append(n)
+            a += n
+        self._past.append(codes)
+        del self._past[:-max(self.scans - 1, 1)]
+        if not sizes:
+            e = np.zeros(0, dtype=np.int64)
+            return VacatedOutlines(e, e, vac.seen_through, 0)
+        return VacatedOutlines(np.concatenate(keep_r), np.concatenate(keep_c), vac.seen_through, len(sizes),
+                               tuple(sizes))
+
+
+def yielding_view(view: MapView, vacated: VacatedOutlines, free_value: float = -2.0) -> MapView:
+    """``view`` with the cells of the yielding outlines set to ``free_value`` (observed free): a copy, only
+    when there are any (else ``view`` itself). Only the map evidence of one scan reads it; the SLAM map is
+    not changed."""
+    if vacated.rows.shape[0] == 0:
+        return view
+    lo = view.logodds.copy()
+    lo[vacated.rows, vacated.cols] = free_value
+    return MapView(lo, view.i0, view.j0, view.resolution)
