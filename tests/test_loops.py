@@ -335,3 +335,28 @@ def test_far_candidate_is_verified_on_the_keyframes_before_it(far_loop: tuple) -
     right = LoopCandidate(node, anchor, z, 0.8, 0.3, 200)
     lc._verify_far(right, s)
     assert right.accepted and len(lc.graph.edges) >= n_edges + 1 + lc.config.far_partners
+
+
+def test_rematch_repairs_a_local_break_no_loop_spans() -> None:
+    """A keyframe the front end put 0.6 m along the corridor and back (a look-alike match, as on Intel's
+    scans 2433→2435): the loops correct the drift but not that keyframe; the re-match against its optimised
+    predecessors' map does."""
+    world = _block_loop_world()
+    gt = _loop_path()
+    front = _drifted(gt, 0.0015)
+    k = 120  # a keyframe on the first straight, far from the start where the loops are; the scan after it
+    # (no keyframe) was tracked from it
+    front[k:k + 2] = compose(front[k:k + 2], np.array([0.6, 0.0, 0.0]))
+    errs = {}
+    for on in (False, True):
+        _lc, res = _close(world, gt, front, LoopConfig(rematch=on))
+        assert res.corrected
+        err = np.hypot(*(res.poses[:, :2] - gt[:, :2]).T)
+        assert np.delete(err, [k, k + 1]).max() < 0.3
+        # the broken scans relative to the keyframe before them (the loops leave ~0.17 m of drift there)
+        rel = relative(res.poses[k - 2], res.poses[k:k + 2]) - relative(gt[k - 2], gt[k:k + 2])
+        errs[on] = float(np.hypot(rel[:, 0], rel[:, 1]).max())
+        if on:
+            assert res.stats["rematch_edges"] >= 1
+    assert errs[False] > 0.5  # without the re-match the broken keyframe stays 0.6 m off its neighbours
+    assert errs[True] < 0.03

@@ -244,6 +244,22 @@ class LoopConfig(BaseModel):
     weak_score_floor: float = Field(
         0.3, ge=0.0, le=1.0, description="Match score at which a keyframe edge's deviation is ten times larger."
     )
+    rematch: bool = Field(
+        True,
+        description="After the final optimisation (when a loop stayed active), re-match every keyframe against the "
+        "map of the rematch_window keyframes before it at their optimised poses and add an edge where the match "
+        "disagrees with the chain: repairs local breaks of the front end that no loop spans (slam/rematch.py).",
+    )
+    rematch_window: int = Field(10, ge=1, description="Keyframes before a keyframe that its re-match map holds.")
+    rematch_linear_window: float = Field(
+        1.0, gt=0.0, description="Half-width of the re-match's correlative search around the chain's pose, m.")
+    rematch_angular_window: float = Field(
+        0.3, gt=0.0, description="Half-width of the re-match's correlative search in rotation, rad.")
+    rematch_min_shift: float = Field(
+        0.1, ge=0.0, description="A re-match becomes an edge only if it moves the keyframe by more than this, m …")
+    rematch_min_turn: float = Field(0.05, ge=0.0, description="… or turns it by more than this, rad.")
+    rematch_replace: bool = Field(
+        True, description="A re-match edge switches off the chain edge it disagrees with (else both stay, robust).")
     loop_sigma_xy: float = Field(0.03, gt=0.0, description="Standard deviation of a loop edge's translation, m.")
     loop_sigma_theta: float = Field(0.006, gt=0.0, description="Standard deviation of a loop edge's rotation, rad.")
     kernel: Literal["dcs", "cauchy", "none"] = Field(

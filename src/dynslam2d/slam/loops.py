@@ -56,6 +56,7 @@ from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.matcher import degeneracy, evaluate, match_multires, support
 from dynslam2d.slam.placedesc import PlaceIndex
 from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
+from dynslam2d.slam.rematch import rematch_keyframes
 from dynslam2d.types import Pose2D, Scan
 
 #: Submap grids kept built at a time (each a few MB).
@@ -189,7 +190,8 @@ class LoopCloser:
         self._place_pts: dict[int, np.ndarray] = {}  # node → its returns for the descriptors (last place_keyframes)
         self.stats: dict[str, float] = {"searches": 0, "candidates": 0, "loops_accepted": 0, "optimisations": 0,
                                         "far_searches": 0, "far_candidates": 0, "far_loops": 0,
-                                        "far_deferred": 0, "place_ms": 0.0, "search_ms": 0.0, "optimise_ms": 0.0,
+                                        "far_deferred": 0, "rematch_edges": 0, "rematch_ms": 0.0, "place_ms": 0.0,
+                                        "search_ms": 0.0, "optimise_ms": 0.0,
                                         "total_ms": 0.0}
 
     # ---- input ----------------------------------------------------------------------------
@@ -688,6 +690,13 @@ class LoopCloser:
         if self.loop_edges:
             self._optimise(final=True)
             active = [k for k in self.loop_edges if self.graph.edges[k].active]
+            if active and self.config.rematch:
+                t1 = time.perf_counter()
+                self.stats["rematch_edges"] = rematch_keyframes(self)
+                self.stats["rematch_ms"] = (time.perf_counter() - t1) * 1e3
+                if self.stats["rematch_edges"]:
+                    self._optimise(final=True)
+                    active = [k for k in self.loop_edges if self.graph.edges[k].active]
         corrected = bool(active)
         nodes = self.graph.poses.copy()
         poses = frontend.copy()

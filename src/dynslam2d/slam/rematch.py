@@ -1,0 +1,105 @@
+"""Re-matching of keyframes against the map of their optimised predecessors (after the loop closure).
+
+A loop only corrects the keyframe chain as a whole between the keyframes it ties; a local break of the
+front end (a scan that slid along a corridor, or jumped to a look-alike and back, with no loop right there)
+stays in the chain. After the final optimisation each keyframe ``b`` is matched once more, in order,
+against a local map rendered from the ``rematch_window`` keyframes before it at their current (optimised,
+and already re-matched) poses: correlative search around the chain's pose, then Gauss–Newton, the same
+acceptance as a loop (score, margin over the runner-up, support). Where the match disagrees with the
+chain by more than ``rematch_min_shift`` / ``rematch_min_turn`` it becomes an edge (b−1, b) under the
+robust kernel, and the keyframes from ``b`` on are moved with it so that the next local maps are built from
+the repaired poses; the graph is optimised again afterwards. See docs/slam.md, "Intel: where the error is".
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from dynslam2d.slam.correlative import correlative_search
+from dynslam2d.slam.grid import MultiResMap
+from dynslam2d.slam.matcher import match_multires, support
+from dynslam2d.slam.posegraph import compose, diag_info, relative
+from dynslam2d.types import Pose2D
+
+if TYPE_CHECKING:
+    from dynslam2d.slam.loops import LoopCloser
+
+
+def _local_map(closer: LoopCloser, poses: np.ndarray, first: int, last: int, anchor: np.ndarray) -> MultiResMap:
+    """Grid of keyframes first … last (inclusive) at ``poses`` (n, 3; world, m / rad), in ``anchor``'s frame."""
+    sc = closer.slam
+    c = closer.config
+    grid = MultiResMap(sc.map_resolution, max(c.search_level + 1, 2), sc.logodds_free, sc.logodds_occupied,
+                       sc.occupied_logodds_cap, sc.map_growth_margin)
+    for k in range(first, last + 1):
+        pts, _ = closer._points(closer.keyframes[k])
+        if pts.shape[0]:
+            rel = relative(anchor, poses[k])
+            grid.integrate(Pose2D(float(rel[0]), float(rel[1]), float(rel[2])), pts)
+    return grid
+
+
+def _match(closer: LoopCloser, grid: MultiResMap, pts: np.ndarray, pred: np.ndarray) -> np.ndarray | None:
+    """Keyframe points ``pts`` (laser frame, m) matched in ``grid`` around ``pred`` (grid frame): the refined
+    pose, or None when score, margin or support fail the loop acceptance (LoopConfig)."""
+    c = closer.config
+    sc = closer.slam
+    lvl = grid.levels[min(c.search_level, len(grid.levels) - 1)]
+    cr = correlative_search(lvl, pts, pred, c.rematch_linear_window, c.rematch_angular_window, None,
+                            c.search_points, sc.correlative_max_height, 0.0, 0.0,
+                            runner_up_distance=c.runner_up_distance, runner_up_angle=c.runner_up_angle)
+    if cr is None or cr.score < c.min_score or cr.score - (cr.runner_up or 0.0) < c.min_margin:
+        return None
+    levels = grid.levels[: max(c.search_level + 1, 2)]
+    p = match_multires(levels, pts, cr.pose, sc.iterations_coarse, sc.iterations_finest, False,
+                       sc.step_mode == "lm", sc.lm_lambda_init, sc.lm_lambda_max, sc.max_rotation_step,
+                       sc.max_translation_step)
+    if not np.all(np.isfinite(p)) or math.hypot(p[0] - cr.pose[0], p[1] - cr.pose[1]) > 2 * lvl.resolution:
+        return None
+    n_sup, spread = support(levels[0], pts, p, sc.support_probability)
+    if n_sup < c.min_support or n_sup < c.min_support_share * pts.shape[0] or spread < c.min_spread:
+        return None
+    return np.asarray(p, dtype=np.float64)
+
+
+def rematch_keyframes(closer: LoopCloser) -> int:
+    """Re-match every keyframe against its predecessors' map at the graph's current poses and add an edge
+    (b−1, b) for each that disagrees with the chain (module docstring). Does not optimise. Returns the
+    number of edges added."""
+    c = closer.config
+    g = closer.graph
+    n = len(closer.keyframes)
+    if n < 2:
+        return 0
+    work = g.poses.copy()
+    info = diag_info(c.loop_sigma_xy, c.loop_sigma_theta)
+    chain = {e.i: k for k, e in enumerate(g.edges) if not e.loop and e.j == e.i + 1}
+    added = 0
+    for b in range(1, n):
+        pts, _ = closer._points(closer.keyframes[b])
+        if pts.shape[0] < c.min_support:
+            continue
+        anchor = work[b - 1]
+        grid = _local_map(closer, work, max(0, b - c.rematch_window), b - 1, anchor)
+        pred = relative(anchor, work[b])
+        z = _match(closer, grid, pts, pred)
+        if z is None:
+            continue
+        d = relative(pred, z)
+        if math.hypot(d[0], d[1]) < c.rematch_min_shift and abs(d[2]) < c.rematch_min_turn:
+            continue
+        g.add_edge(b - 1, b, z, info, robust=not c.rematch_replace)
+        k = chain.get(b - 1)
+        if k is not None:
+            if c.rematch_replace:
+                g.edges[k].active = False
+            else:
+                g.edges[k].robust = True
+        added += 1
+        # keyframes b … n−1 follow the repaired pose rigidly (the next local maps are built from them)
+        new_b = compose(anchor, z)
+        work[b:] = compose(new_b, relative(work[b], work[b:]))
+    return added
