@@ -251,6 +251,18 @@ class LoopConfig(BaseModel):
         "disagrees with the chain: repairs local breaks of the front end that no loop spans (slam/rematch.py).",
     )
     rematch_window: int = Field(10, ge=1, description="Keyframes before a keyframe that its re-match map holds.")
+    rematch_all: bool = Field(
+        False, description="Re-match every keyframe (else only those near where the front end was unsure or the "
+        "optimisation bent the chain: rematch_score, rematch_bend_shift / rematch_bend_turn, rematch_neighbours).")
+    rematch_score: float = Field(
+        0.6, ge=0.0, le=1.0, description="A keyframe edge across a weak match, or a scan whose match score is below "
+        "this (or not given), marks its keyframe for the re-match.")
+    rematch_bend_shift: float = Field(
+        0.05, ge=0.0, description="… as does an edge whose optimised relative pose differs from the front end's by "
+        "more than this, m …")
+    rematch_bend_turn: float = Field(0.02, ge=0.0, description="… or this, rad.")
+    rematch_neighbours: int = Field(
+        2, ge=0, description="Keyframes before and after a marked one that are re-matched with it.")
     rematch_linear_window: float = Field(
         1.0, gt=0.0, description="Half-width of the re-match's correlative search around the chain's pose, m.")
     rematch_angular_window: float = Field(

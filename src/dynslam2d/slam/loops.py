@@ -165,6 +165,10 @@ class LoopCloser:
         self.loop_edges: list[int] = []  # edge indices in the graph
         self._scan_node: list[int] = []  # per scan: its last keyframe's node (−1 before the first)
         self._frontend: list[tuple[float, float, float]] = []
+        # per keyframe, the edge from the one before it: a scan it spans was weak; the lowest match score of
+        # those scans (NaN: none given)
+        self.kf_weak: list[bool] = []
+        self.kf_score: list[float] = []
         self._weak_since_kf = False
         self._score_since_kf = math.inf  # lowest match score since the last keyframe
         self._path = 0.0
@@ -190,7 +194,7 @@ class LoopCloser:
         self._place_pts: dict[int, np.ndarray] = {}  # node → its returns for the descriptors (last place_keyframes)
         self.stats: dict[str, float] = {"searches": 0, "candidates": 0, "loops_accepted": 0, "optimisations": 0,
                                         "far_searches": 0, "far_candidates": 0, "far_loops": 0,
-                                        "far_deferred": 0, "rematch_edges": 0, "rematch_ms": 0.0, "place_ms": 0.0,
+                                        "far_deferred": 0, "rematch_edges": 0, "rematch_checked": 0, "rematch_ms": 0.0, "place_ms": 0.0,
                                         "search_ms": 0.0, "optimise_ms": 0.0,
                                         "total_ms": 0.0}
 
@@ -263,6 +267,9 @@ class LoopCloser:
         else:
             node = self.graph.add_node(p)
         self.keyframes.append(kf)
+        # what the front end said about the edge into this keyframe (the re-match selects keyframes by it)
+        self.kf_weak.append(bool(self._weak_since_kf) and len(self.keyframes) > 1)
+        self.kf_score.append(self._score_since_kf if math.isfinite(self._score_since_kf) else math.nan)
         self._weak_since_kf = False
         self._score_since_kf = math.inf
         if self._places is not None:
@@ -692,7 +699,7 @@ class LoopCloser:
             active = [k for k in self.loop_edges if self.graph.edges[k].active]
             if active and self.config.rematch:
                 t1 = time.perf_counter()
-                self.stats["rematch_edges"] = rematch_keyframes(self)
+                self.stats["rematch_edges"], self.stats["rematch_checked"] = rematch_keyframes(self)
                 self.stats["rematch_ms"] = (time.perf_counter() - t1) * 1e3
                 if self.stats["rematch_edges"]:
                     self._optimise(final=True)

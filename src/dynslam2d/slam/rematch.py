@@ -9,6 +9,11 @@ acceptance as a loop (score, margin over the runner-up, support). Where the matc
 chain by more than ``rematch_min_shift`` / ``rematch_min_turn`` it becomes an edge (b−1, b) under the
 robust kernel, and the keyframes from ``b`` on are moved with it so that the next local maps are built from
 the repaired poses; the graph is optimised again afterwards. See docs/slam.md, "Intel: where the error is".
+
+Only keyframes near where a break can be are matched (:func:`selected`, unless ``rematch_all``): within
+``rematch_neighbours`` keyframes of an edge across a weak or low-scoring front-end match (or one without a
+score), or of an edge the optimisation bent away from the front end's relative pose. A keyframe left out is
+one whose match would not have changed anything unless the front end broke there without noticing.
 """
 
 from __future__ import annotations
@@ -65,24 +70,54 @@ def _match(closer: LoopCloser, grid: MultiResMap, pts: np.ndarray, pred: np.ndar
     return np.asarray(p, dtype=np.float64)
 
 
-def rematch_keyframes(closer: LoopCloser) -> int:
-    """Re-match every keyframe against its predecessors' map at the graph's current poses and add an edge
-    (b−1, b) for each that disagrees with the chain (module docstring). Does not optimise. Returns the
-    number of edges added."""
+def selected(closer: LoopCloser) -> np.ndarray:
+    """(n,) bool: keyframes to re-match. Marked: the edge into a keyframe spans a weak front-end match or a
+    match score below ``rematch_score`` (or none given), or the optimised relative pose of the keyframe to the one
+    before it differs from the front end's edge by more than ``rematch_bend_shift`` m / ``rematch_bend_turn`` rad
+    (the loops bent the chain there); selected: within ``rematch_neighbours`` keyframes of a marked one."""
+    c = closer.config
+    g = closer.graph
+    n = len(closer.keyframes)
+    if c.rematch_all:
+        return np.ones(n, dtype=bool)
+    score = np.asarray(closer.kf_score, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        mark = np.asarray(closer.kf_weak, dtype=bool) | ~(score >= c.rematch_score)  # NaN (no score) marks
+    mark[0] = False
+    for e in g.edges:
+        if e.loop or e.j != e.i + 1 or not e.active:
+            continue
+        d = relative(e.z, relative(g.poses[e.i], g.poses[e.j]))
+        if math.hypot(d[0], d[1]) > c.rematch_bend_shift or abs(d[2]) > c.rematch_bend_turn:
+            mark[e.j] = True
+    w = c.rematch_neighbours
+    sel = np.convolve(mark.astype(np.int64), np.ones(2 * w + 1, dtype=np.int64), mode="same") > 0
+    return sel
+
+
+def rematch_keyframes(closer: LoopCloser) -> tuple[int, int]:
+    """Re-match the :func:`selected` keyframes, in order, against their predecessors' map at the graph's current
+    poses and add an edge (b−1, b) for each that disagrees with the chain (module docstring). Does not optimise.
+    Returns (edges added, keyframes matched)."""
     c = closer.config
     g = closer.graph
     n = len(closer.keyframes)
     if n < 2:
-        return 0
+        return 0, 0
+    sel = selected(closer)
     work = g.poses.copy()
     info = diag_info(c.loop_sigma_xy, c.loop_sigma_theta)
     chain = {e.i: k for k, e in enumerate(g.edges) if not e.loop and e.j == e.i + 1}
     added = 0
+    checked = 0
     for b in range(1, n):
+        if not sel[b]:
+            continue
         pts, _ = closer._points(closer.keyframes[b])
         if pts.shape[0] < c.min_support:
             continue
         anchor = work[b - 1]
+        checked += 1
         grid = _local_map(closer, work, max(0, b - c.rematch_window), b - 1, anchor)
         pred = relative(anchor, work[b])
         z = _match(closer, grid, pts, pred)
@@ -102,4 +137,4 @@ def rematch_keyframes(closer: LoopCloser) -> int:
         # keyframes b … n−1 follow the repaired pose rigidly (the next local maps are built from them)
         new_b = compose(anchor, z)
         work[b:] = compose(new_b, relative(work[b], work[b:]))
-    return added
+    return added, checked
