@@ -360,3 +360,30 @@ def test_rematch_repairs_a_local_break_no_loop_spans() -> None:
             assert res.stats["rematch_edges"] >= 1
     assert errs[False] > 0.5  # without the re-match the broken keyframe stays 0.6 m off its neighbours
     assert errs[True] < 0.03
+
+
+def test_rematch_only_near_low_scores() -> None:
+    """With the front end's match scores given, only keyframes near a low-scoring match are re-matched: the
+    break of the test above is repaired when its scan scored low, checking a handful of keyframes; with every
+    score high no keyframe is matched (the break stays: the cost of the selection)."""
+    world = _block_loop_world()
+    gt = _loop_path()
+    front = _drifted(gt, 0.0015)
+    k = 120
+    front[k:k + 2] = compose(front[k:k + 2], np.array([0.6, 0.0, 0.0]))
+    scans = _scans(world, gt)
+    out = {}
+    for low in (True, False):
+        lc = LoopCloser(LoopConfig(), SlamConfig())
+        for i, (s, p) in enumerate(zip(scans, front)):
+            score = 0.3 if low and i in (k, k + 1) else 0.9
+            lc.add(s.stamp, Pose2D(*p), s, np.zeros(s.ranges.shape, bool), keyframe=i % 2 == 0, score=score)
+        res = lc.finish()
+        assert res.corrected
+        rel = relative(res.poses[k - 2], res.poses[k:k + 2]) - relative(gt[k - 2], gt[k:k + 2])
+        out[low] = (float(np.hypot(rel[:, 0], rel[:, 1]).max()), res.stats["rematch_checked"],
+                    res.stats["rematch_edges"], len(res.keyframe_scans))
+    err, checked, edges, n_kf = out[True]
+    assert err < 0.03 and edges >= 1
+    assert 1 <= checked <= 8 < n_kf // 10  # keyframes 60, 61 marked (± 2), not the whole run
+    assert out[False][1] == 0 and out[False][0] > 0.5
