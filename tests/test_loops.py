@@ -348,8 +348,11 @@ def test_rematch_repairs_a_local_break_no_loop_spans() -> None:
     # (no keyframe) was tracked from it
     front[k:k + 2] = compose(front[k:k + 2], np.array([0.6, 0.0, 0.0]))
     errs = {}
-    for on in (False, True):
-        _lc, res = _close(world, gt, front, LoopConfig(rematch=on))
+    for on in (False, True, "reuse"):
+        # "reuse": the local map kept for the following keyframes (rematch_reuse), in the frame of the keyframe it
+        # was built for: the edge must still be the keyframe seen from the one before it
+        cfg = LoopConfig(rematch=bool(on), rematch_reuse=20 if on == "reuse" else 0)
+        _lc, res = _close(world, gt, front, cfg)
         assert res.corrected
         err = np.hypot(*(res.poses[:, :2] - gt[:, :2]).T)
         assert np.delete(err, [k, k + 1]).max() < 0.3
@@ -359,7 +362,7 @@ def test_rematch_repairs_a_local_break_no_loop_spans() -> None:
         if on:
             assert res.stats["rematch_edges"] >= 1
     assert errs[False] > 0.5  # without the re-match the broken keyframe stays 0.6 m off its neighbours
-    assert errs[True] < 0.03
+    assert errs[True] < 0.03 and errs["reuse"] < 0.03
 
 
 def test_rematch_only_near_low_scores() -> None:

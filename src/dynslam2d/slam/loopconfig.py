@@ -254,6 +254,9 @@ class LoopConfig(BaseModel):
     rematch_all: bool = Field(
         False, description="Re-match every keyframe (else only those near where the front end was unsure or the "
         "optimisation bent the chain: rematch_score, rematch_bend_shift / rematch_bend_turn, rematch_neighbours).")
+    rematch_reuse: int = Field(
+        0, ge=0, description="Keyframes by which the re-match's local map may grow (kept for the next keyframe, with "
+        "the keyframes in between added) before it is rebuilt from rematch_window keyframes; 0: rebuilt for each.")
     rematch_score: float = Field(
         0.6, ge=0.0, le=1.0, description="A keyframe edge across a weak match, or a scan whose match score is below "
         "this (or not given), marks its keyframe for the re-match.")

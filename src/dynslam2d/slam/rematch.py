@@ -33,12 +33,15 @@ if TYPE_CHECKING:
     from dynslam2d.slam.loops import LoopCloser
 
 
-def _local_map(closer: LoopCloser, poses: np.ndarray, first: int, last: int, anchor: np.ndarray) -> MultiResMap:
-    """Grid of keyframes first … last (inclusive) at ``poses`` (n, 3; world, m / rad), in ``anchor``'s frame."""
+def _local_map(closer: LoopCloser, poses: np.ndarray, first: int, last: int, anchor: np.ndarray,
+               grid: MultiResMap | None = None) -> MultiResMap:
+    """Grid of keyframes first … last (inclusive) at ``poses`` (n, 3; world, m / rad), in ``anchor``'s frame
+    (added to ``grid`` if given)."""
     sc = closer.slam
     c = closer.config
-    grid = MultiResMap(sc.map_resolution, max(c.search_level + 1, 2), sc.logodds_free, sc.logodds_occupied,
-                       sc.occupied_logodds_cap, sc.map_growth_margin)
+    if grid is None:
+        grid = MultiResMap(sc.map_resolution, max(c.search_level + 1, 2), sc.logodds_free, sc.logodds_occupied,
+                           sc.occupied_logodds_cap, sc.map_growth_margin)
     for k in range(first, last + 1):
         pts, _ = closer._points(closer.keyframes[k])
         if pts.shape[0]:
@@ -110,6 +113,12 @@ def rematch_keyframes(closer: LoopCloser) -> tuple[int, int]:
     chain = {e.i: k for k, e in enumerate(g.edges) if not e.loop and e.j == e.i + 1}
     added = 0
     checked = 0
+    w = c.rematch_window
+    # the local map: keyframes lo … last in the frame whose pose (world) is ``frame``; kept for the next keyframe
+    # while it holds at most rematch_window + rematch_reuse keyframes (a repair moves only keyframes after ``last``)
+    grid: MultiResMap | None = None
+    lo = last = -1
+    frame = work[0]
     for b in range(1, n):
         if not sel[b]:
             continue
@@ -118,12 +127,20 @@ def rematch_keyframes(closer: LoopCloser) -> tuple[int, int]:
             continue
         anchor = work[b - 1]
         checked += 1
-        grid = _local_map(closer, work, max(0, b - c.rematch_window), b - 1, anchor)
-        pred = relative(anchor, work[b])
-        z = _match(closer, grid, pts, pred)
-        if z is None:
+        first = max(0, b - w)
+        if grid is not None and lo >= b - w - c.rematch_reuse and last + 1 >= first:
+            grid = _local_map(closer, work, last + 1, b - 1, frame, grid)
+        else:
+            frame = anchor.copy()
+            lo = first
+            grid = _local_map(closer, work, first, b - 1, frame)
+        last = b - 1
+        pred = relative(frame, work[b])
+        zf = _match(closer, grid, pts, pred)
+        if zf is None:
             continue
-        d = relative(pred, z)
+        d = relative(pred, zf)
+        z = relative(anchor, compose(frame, zf))  # keyframe b seen from b − 1
         if math.hypot(d[0], d[1]) < c.rematch_min_shift and abs(d[2]) < c.rematch_min_turn:
             continue
         g.add_edge(b - 1, b, z, info, robust=not c.rematch_replace)
