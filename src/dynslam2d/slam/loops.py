@@ -194,7 +194,8 @@ class LoopCloser:
         self._place_pts: dict[int, np.ndarray] = {}  # node → its returns for the descriptors (last place_keyframes)
         self.stats: dict[str, float] = {"searches": 0, "candidates": 0, "loops_accepted": 0, "optimisations": 0,
                                         "far_searches": 0, "far_candidates": 0, "far_loops": 0,
-                                        "far_deferred": 0, "rematch_edges": 0, "rematch_checked": 0, "rematch_ms": 0.0, "place_ms": 0.0,
+                                        "far_deferred": 0, "rematch_edges": 0, "rematch_checked": 0, "rematch_ms": 0.0,
+                                        "place_ms": 0.0,
                                         "search_ms": 0.0, "optimise_ms": 0.0,
                                         "total_ms": 0.0}
 
