@@ -128,7 +128,7 @@ def rematch_keyframes(closer: LoopCloser) -> tuple[int, int]:
         anchor = work[b - 1]
         checked += 1
         first = max(0, b - w)
-        if grid is not None and lo >= b - w - c.rematch_reuse and last + 1 >= first:
+        if c.rematch_reuse and grid is not None and lo >= b - w - c.rematch_reuse and last + 1 >= first:
             grid = _local_map(closer, work, last + 1, b - 1, frame, grid)
         else:
             frame = anchor.copy()
