@@ -53,10 +53,10 @@ from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.correlative import correlative_search
 from dynslam2d.slam.grid import MultiResMap
 from dynslam2d.slam.loopconfig import LoopConfig
-from dynslam2d.slam.matcher import degeneracy, evaluate, match_multires, support
+from dynslam2d.slam.matcher import degeneracy, evaluate
 from dynslam2d.slam.placedesc import PlaceIndex
 from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
-from dynslam2d.slam.rematch import rematch_keyframes
+from dynslam2d.slam.rematch import refine_supported, rematch_keyframes
 from dynslam2d.types import Pose2D, Scan
 
 #: Submap grids kept built at a time (each a few MB).
@@ -69,6 +69,7 @@ _QUERY_POINTS = 360
 _PLACE_POINTS = 120
 #: Keyframe edges across unsupported scans get their deviation multiplied by this.
 _WEAK_FACTOR = 10.0
+
 
 
 @dataclass(slots=True)
@@ -617,14 +618,10 @@ class LoopCloser:
         margin = cr.score - (cr.runner_up or 0.0)
         if margin < min_margin:
             return None
-        p = match_multires(levels, pts, cr.pose, sc.iterations_coarse, sc.iterations_finest, False,
-                           sc.step_mode == "lm", sc.lm_lambda_init, sc.lm_lambda_max, sc.max_rotation_step,
-                           sc.max_translation_step)
-        if not np.all(np.isfinite(p)) or math.hypot(p[0] - cr.pose[0], p[1] - cr.pose[1]) > 2 * lvl.resolution:
+        refined = refine_supported(levels, pts, cr.pose, 2 * lvl.resolution, c, sc)
+        if refined is None:
             return None
-        n_sup, spread = support(levels[0], pts, p, sc.support_probability)
-        if n_sup < c.min_support or n_sup < c.min_support_share * pts.shape[0] or spread < c.min_spread:
-            return None
+        p, n_sup = refined
         if c.max_degeneracy > 0.0:
             fit = evaluate(levels[0], pts, p)
             if degeneracy(fit.hessian, levels[0].resolution, pts, sc.degeneracy_threshold).ratio < c.max_degeneracy:

@@ -30,8 +30,28 @@ from dynslam2d.slam.posegraph import compose, diag_info, relative
 from dynslam2d.types import Pose2D
 
 if TYPE_CHECKING:
+    from dynslam2d.slam.config import SlamConfig
+    from dynslam2d.slam.grid import GridLevel
+    from dynslam2d.slam.loopconfig import LoopConfig
     from dynslam2d.slam.loops import LoopCloser
 
+
+def refine_supported(levels: list[GridLevel], pts: np.ndarray, seed: np.ndarray, max_shift: float, c: LoopConfig,
+                     sc: SlamConfig) -> tuple[np.ndarray, int] | None:
+    """A correlative match ``seed`` (x, y, θ in the levels' frame, m / rad) of points ``pts`` (laser frame, m)
+    refined by Gauss–Newton on ``levels``, and its supporting point count; None when the refinement is not
+    finite, moves more than ``max_shift`` m from the seed, or the support (count, share of ``pts``, angular
+    spread) is below the loop acceptance's minimums (``loop.min_support``, ``min_support_share``,
+    ``min_spread``). Shared by the loop search (:mod:`dynslam2d.slam.loops`) and the re-match."""
+    p = match_multires(levels, pts, seed, sc.iterations_coarse, sc.iterations_finest, False,
+                       sc.step_mode == "lm", sc.lm_lambda_init, sc.lm_lambda_max, sc.max_rotation_step,
+                       sc.max_translation_step)
+    if not np.all(np.isfinite(p)) or math.hypot(p[0] - seed[0], p[1] - seed[1]) > max_shift:
+        return None
+    n_sup, spread = support(levels[0], pts, p, sc.support_probability)
+    if n_sup < c.min_support or n_sup < c.min_support_share * pts.shape[0] or spread < c.min_spread:
+        return None
+    return p, n_sup
 
 def _local_map(closer: LoopCloser, poses: np.ndarray, first: int, last: int, anchor: np.ndarray,
                grid: MultiResMap | None = None) -> MultiResMap:
@@ -61,16 +81,8 @@ def _match(closer: LoopCloser, grid: MultiResMap, pts: np.ndarray, pred: np.ndar
                             runner_up_distance=c.runner_up_distance, runner_up_angle=c.runner_up_angle)
     if cr is None or cr.score < c.min_score or cr.score - (cr.runner_up or 0.0) < c.min_margin:
         return None
-    levels = grid.levels[: max(c.search_level + 1, 2)]
-    p = match_multires(levels, pts, cr.pose, sc.iterations_coarse, sc.iterations_finest, False,
-                       sc.step_mode == "lm", sc.lm_lambda_init, sc.lm_lambda_max, sc.max_rotation_step,
-                       sc.max_translation_step)
-    if not np.all(np.isfinite(p)) or math.hypot(p[0] - cr.pose[0], p[1] - cr.pose[1]) > 2 * lvl.resolution:
-        return None
-    n_sup, spread = support(levels[0], pts, p, sc.support_probability)
-    if n_sup < c.min_support or n_sup < c.min_support_share * pts.shape[0] or spread < c.min_spread:
-        return None
-    return np.asarray(p, dtype=np.float64)
+    refined = refine_supported(grid.levels[: max(c.search_level + 1, 2)], pts, cr.pose, 2 * lvl.resolution, c, sc)
+    return None if refined is None else np.asarray(refined[0], dtype=np.float64)
 
 
 def selected(closer: LoopCloser) -> np.ndarray:
