@@ -144,6 +144,10 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
     h = logodds.shape[0]
     w = logodds.shape[1]
     flat = logodds.reshape(h * w)
+    # the first pass compares in float32 (as the map is stored) with the largest float32 ≤ occ_thr
+    occ_lo = np.float32(occ_thr)
+    if occ_lo > occ_thr:
+        occ_lo = np.nextafter(occ_lo, np.float32(-np.inf))
     cap = out_r.shape[0]
     n = 0
     for k in range(1, cx.shape[0] - 1):
@@ -173,23 +177,25 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
             slope = dx / dy
             m0, n0 = oy, ox
             a_off, a_len, b_off, b_len, sa, sb = j0, h, i0, w, w, 1
-        # only a inside the grid and within the reach (a cell centred at a is at least |a − m0| from the laser;
-        # +1 against rounding: the distance test below is the exact one)
+        # only a inside the grid and within the reach: a cell the ray passes within core ≤ 0.5 of its centre at
+        # a is at least |a − m0|·√(1 + slope²) − 0.5 from the laser (+1 against rounding: the distance test
+        # below is the exact one)
+        along = (reach + 0.5) / math.sqrt(1.0 + slope * slope)
         if a1 >= a0:
             step = 1
             start = max(a0, a_off)
-            cnt = min(a1, int(math.floor(m0 + reach)) + 1, a_off + a_len - 1) - start + 1
+            cnt = min(a1, int(math.floor(m0 + along)) + 1, a_off + a_len - 1) - start + 1
         else:
             step = -1
             start = min(a0, a_off + a_len - 1)
-            cnt = start - max(a1, int(math.ceil(m0 - reach)) - 1, a_off) + 1
+            cnt = start - max(a1, int(math.ceil(m0 - along)) - 1, a_off) + 1
         # a branch-free first pass (it vectorises): most beams pass no long-occupied cell at all
         hits = 0
         for t in range(cnt):
             a = start + step * t
             bi = int(math.floor(n0 + slope * (a - m0) + 0.5)) - b_off
             inside = (bi >= 0) & (bi < b_len)
-            hits += inside & (flat[(a - a_off) * sa + (bi if inside else 0) * sb] >= occ_thr)
+            hits += inside & (flat[(a - a_off) * sa + (bi if inside else 0) * sb] >= occ_lo)
         if hits == 0:
             continue
         for t in range(cnt):
@@ -236,7 +242,8 @@ def grow_outlines_kernel(logodds: np.ndarray, out_r: np.ndarray, out_c: np.ndarr
     done = np.zeros(nc, dtype=np.bool_)
     side = 2 * max_side + 1
     window = np.zeros((side, side), dtype=np.uint8)  # cells of the current growth, around its start
-    cap = 4 * max_side * max_side
+    # a growth stops once its cells span more than max_side along an axis: it never holds more than max_side² + 1
+    cap = max_side * max_side + 1
     gr = np.empty(cap, dtype=np.int64)
     gc = np.empty(cap, dtype=np.int64)
     k = 0
