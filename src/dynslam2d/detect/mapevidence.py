@@ -190,15 +190,16 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
             start = min(a0, a_off + a_len - 1)
             cnt = start - max(a1, int(math.ceil(m0 - along)) - 1, a_off) + 1
         # a branch-free first pass (it vectorises): most beams pass no long-occupied cell at all
-        hits = 0
+        first = cnt
+        last = -1
         for t in range(cnt):
             a = start + step * t
             bi = int(math.floor(n0 + slope * (a - m0) + 0.5)) - b_off
             inside = (bi >= 0) & (bi < b_len)
-            hits += inside & (flat[(a - a_off) * sa + (bi if inside else 0) * sb] >= occ_lo)
-        if hits == 0:
-            continue
-        for t in range(cnt):
+            hit = inside & (flat[(a - a_off) * sa + (bi if inside else 0) * sb] >= occ_lo)
+            first = min(first, t if hit else cnt)
+            last = max(last, t if hit else -1)
+        for t in range(first, last + 1):
             a = start + step * t
             b = n0 + slope * (a - m0)
             ib = int(math.floor(b + 0.5))
@@ -214,22 +215,30 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
 
 
 @njit(cache=True)
-def grow_outlines_kernel(logodds: np.ndarray, out_r: np.ndarray, out_c: np.ndarray, n: int, near_thr: float,
-                         occ_thr: np.float32, max_side: int, min_cells: int, res: float, min_extent: float,
-                         min_share: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:  # pragma: no cover
-    """The outlines of the seen-through cells ``out_r[:n]`` / ``out_c[:n]`` (array rows / columns, possibly
-    repeated) and which of them yield (:func:`vacated_outlines`).
+def vacated_outlines_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx: np.ndarray,
+                            cy: np.ndarray, clear: np.ndarray, core: float, occ_thr: float, depth: float,
+                            near_thr: float, occ32: np.float32, max_side: int, min_cells: int, res: float,
+                            min_extent: float, min_share: float
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:  # pragma: no cover - numba
+    """The long-occupied cells the beams see through (:func:`seen_through_structure_kernel`, arguments up to
+    ``depth`` as there, at most 64 per beam), their outlines and which of them yield (:func:`vacated_outlines`).
 
-    The distinct seen-through cells are taken in order of their code ``row · W + col``; each one not yet in an
-    outline grows its 8-connected component of cells with log-odds > ``near_thr`` (breadth first). A component
-    spanning more than ``max_side`` cells along a grid axis (a wall, not an object) is abandoned as soon as its
-    cells so far show it; every cell grown so far belongs to it, so none of them starts another growth.
-    A complete outline yields when its longer side (cells · ``res``, m) is more than ``min_extent`` (m) and it
-    holds at least ``min_cells`` seen-through cells and ``min_share`` of its cells with log-odds ≥ ``occ_thr``.
+    Nothing when fewer than ``min_cells`` cells are seen through. Else the distinct seen-through cells are taken in
+    order of their code ``row · W + col``; each one not yet in an outline grows its 8-connected component of cells
+    with log-odds > ``near_thr`` (breadth first). A component spanning more than ``max_side`` cells along a grid
+    axis (a wall, not an object) is abandoned as soon as its cells so far show it; every cell grown so far
+    belongs to it, so none of them starts another growth. A complete outline yields when its longer side
+    (cells · ``res``, m) is more than ``min_extent`` (m) and it holds at least ``min_cells`` seen-through cells
+    and ``min_share`` of its cells with log-odds ≥ ``occ32``: ``occ_thr`` in float32, as NumPy compares the
+    float32 map with a Python float.
     Returns the yielding outlines' rows and columns, one outline after the other (each in its growth order),
-    their sizes and the number of distinct seen-through cells. ``occ_thr`` is float32 as the map is: the
-    share test compares as NumPy compares the map with a Python float.
+    their sizes and the number of distinct seen-through cells (0 when fewer than ``min_cells`` were found).
     """
+    out_r = np.empty(64 * cx.shape[0], dtype=np.int64)
+    out_c = np.empty(64 * cx.shape[0], dtype=np.int64)
+    n = seen_through_structure_kernel(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, out_r, out_c, depth)
+    if n < min_cells:
+        return out_r[:0], out_c[:0], out_r[:0], 0
     h = logodds.shape[0]
     w = logodds.shape[1]
     codes = np.unique(out_r[:n] * w + out_c[:n])
@@ -305,13 +314,14 @@ def grow_outlines_kernel(logodds: np.ndarray, out_r: np.ndarray, out_c: np.ndarr
         seen = 0
         longocc = 0
         for q in range(m):
-            code = gr[q] * w + gc[q]
-            p = np.searchsorted(codes, code)
-            if p < nc and codes[p] == code:
-                done[p] = True
-                seen += 1
-            if logodds[gr[q], gc[q]] >= occ_thr:
+            # a seen-through cell is ≥ occ_thr, so ≥ occ32 (float32 rounds to nearest)
+            if logodds[gr[q], gc[q]] >= occ32:
                 longocc += 1
+                code = gr[q] * w + gc[q]
+                p = np.searchsorted(codes, code)
+                if p < nc and codes[p] == code:
+                    done[p] = True
+                    seen += 1
         if ok and seen >= min_cells and max(rmax - rmin, cmax - cmin) * res > min_extent and \
                 seen >= min_share * longocc:
             if total + m > comp_r.shape[0]:
@@ -367,20 +377,12 @@ def vacated_outlines(view: MapView | None, origin: tuple[float, float], cx: np.n
     if view is None or min_cells <= 0 or cx.shape[0] == 0:
         return VacatedOutlines(empty, empty, 0, 0)
     res = float(view.resolution)
-    cap = 64 * cx.shape[0]
-    out_r = np.empty(cap, dtype=np.int64)
-    out_c = np.empty(cap, dtype=np.int64)
-    n = seen_through_structure_kernel(np.ascontiguousarray(view.logodds), int(view.i0), int(view.j0),
-                                      float(origin[0]), float(origin[1]),
-                                      np.ascontiguousarray(cx, dtype=np.float64),
-                                      np.ascontiguousarray(cy, dtype=np.float64),
-                                      np.ascontiguousarray(clear, dtype=np.bool_), float(ray_core),
-                                      float(occupied_logodds), out_r, out_c, float(min_depth_m) / res)
-    if n < min_cells:
-        return VacatedOutlines(empty, empty, 0, 0)
-    rows, cols, sizes, nc = grow_outlines_kernel(view.logodds, out_r, out_c, n, float(near_logodds),
-                                                 np.float32(occupied_logodds), max(int(math.ceil(max_extent / res)), 1),
-                                                 int(min_cells), res, float(min_extent), float(min_share))
+    rows, cols, sizes, nc = vacated_outlines_kernel(
+        np.ascontiguousarray(view.logodds), int(view.i0), int(view.j0), float(origin[0]), float(origin[1]),
+        np.ascontiguousarray(cx, dtype=np.float64), np.ascontiguousarray(cy, dtype=np.float64),
+        np.ascontiguousarray(clear, dtype=np.bool_), float(ray_core), float(occupied_logodds),
+        float(min_depth_m) / res, float(near_logodds), np.float32(occupied_logodds),
+        max(int(math.ceil(max_extent / res)), 1), int(min_cells), res, float(min_extent), float(min_share))
     if sizes.shape[0] == 0:
         return VacatedOutlines(empty, empty, int(nc), 0)
     return VacatedOutlines(rows, cols, int(nc), int(sizes.shape[0]), tuple(int(m) for m in sizes))
