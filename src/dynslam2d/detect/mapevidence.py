@@ -143,11 +143,6 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
     (at most the arrays' length)."""
     h = logodds.shape[0]
     w = logodds.shape[1]
-    flat = logodds.reshape(h * w)
-    # the first pass compares in float32 (as the map is stored) with the largest float32 ≤ occ_thr
-    occ_lo = np.float32(occ_thr)
-    if occ_lo > occ_thr:
-        occ_lo = np.nextafter(occ_lo, np.float32(-np.inf))
     cap = out_r.shape[0]
     n = 0
     for k in range(1, cx.shape[0] - 1):
@@ -163,20 +158,20 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
         reach2 = reach * reach
         dx = cx[k] - ox
         dy = cy[k] - oy
-        # walk the major axis a; the minor coordinate b of the ray at a; flat index (a − a_off)·sa + (b − b_off)·sb
+        # walk the major axis a (array axis 1 − ar), the minor coordinate b of the ray at a (array axis 1 − br)
         x_major = abs(dx) >= abs(dy)
         if x_major:
             a0 = int(math.floor(ox + 0.5))
             a1 = int(math.floor(cx[k] + 0.5))
             slope = dy / dx if dx != 0.0 else 0.0
             m0, n0 = ox, oy
-            a_off, a_len, b_off, b_len, sa, sb = i0, w, j0, h, 1, w
+            a_off, a_len, b_off, b_len, ar, br = i0, w, j0, h, 0, 1
         else:
             a0 = int(math.floor(oy + 0.5))
             a1 = int(math.floor(cy[k] + 0.5))
             slope = dx / dy
             m0, n0 = oy, ox
-            a_off, a_len, b_off, b_len, sa, sb = j0, h, i0, w, w, 1
+            a_off, a_len, b_off, b_len, ar, br = j0, h, i0, w, 1, 0
         # only a inside the grid and within the reach: a cell the ray passes within core ≤ 0.5 of its centre at
         # a is at least |a − m0|·√(1 + slope²) − 0.5 from the laser (+1 against rounding: the distance test
         # below is the exact one)
@@ -196,7 +191,8 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
             a = start + step * t
             bi = int(math.floor(n0 + slope * (a - m0) + 0.5)) - b_off
             inside = (bi >= 0) & (bi < b_len)
-            hit = inside & (flat[(a - a_off) * sa + (bi if inside else 0) * sb] >= occ_lo)
+            bi = bi if inside else 0
+            hit = inside & (logodds[ar * (a - a_off) + br * bi, (1 - ar) * (a - a_off) + (1 - br) * bi] >= occ_thr)
             first = min(first, t if hit else cnt)
             last = max(last, t if hit else -1)
         for t in range(first, last + 1):
@@ -204,7 +200,8 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
             b = n0 + slope * (a - m0)
             ib = int(math.floor(b + 0.5))
             bi = ib - b_off
-            if bi < 0 or bi >= b_len or abs(b - ib) > core or flat[(a - a_off) * sa + bi * sb] < occ_thr:
+            if bi < 0 or bi >= b_len or abs(b - ib) > core or \
+                    logodds[ar * (a - a_off) + br * bi, (1 - ar) * (a - a_off) + (1 - br) * bi] < occ_thr:
                 continue
             x, y = (a, ib) if x_major else (ib, a)
             if n < cap and (x - ox) ** 2 + (y - oy) ** 2 <= reach2:
@@ -241,8 +238,26 @@ def vacated_outlines_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy
         return out_r[:0], out_c[:0], out_r[:0], 0
     h = logodds.shape[0]
     w = logodds.shape[1]
-    codes = np.unique(out_r[:n] * w + out_c[:n])
-    nc = codes.shape[0]
+    # the distinct codes, ascending (a Shell sort here: np.unique would add numba's sort to the cold compile)
+    codes = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        codes[i] = out_r[i] * w + out_c[i]
+    gap = n // 2
+    while gap > 0:
+        for i in range(gap, n):
+            v = codes[i]
+            j = i
+            while j >= gap and codes[j - gap] > v:
+                codes[j] = codes[j - gap]
+                j -= gap
+            codes[j] = v
+        gap //= 2
+    nc = 0
+    for i in range(n):
+        if nc == 0 or codes[i] != codes[nc - 1]:
+            codes[nc] = codes[i]
+            nc += 1
+    codes = codes[:nc]
     comp_r = np.empty(0 if nc < min_cells else 1024, dtype=np.int64)
     comp_c = np.empty(comp_r.shape[0], dtype=np.int64)
     sizes = np.empty(nc, dtype=np.int64)
@@ -318,7 +333,14 @@ def vacated_outlines_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy
             if logodds[gr[q], gc[q]] >= occ32:
                 longocc += 1
                 code = gr[q] * w + gc[q]
-                p = np.searchsorted(codes, code)
+                p = 0
+                hi = nc
+                while p < hi:
+                    mid = (p + hi) // 2
+                    if codes[mid] < code:
+                        p = mid + 1
+                    else:
+                        hi = mid
                 if p < nc and codes[p] == code:
                     done[p] = True
                     seen += 1
@@ -327,12 +349,14 @@ def vacated_outlines_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy
             if total + m > comp_r.shape[0]:
                 grown_r = np.empty(2 * (total + m), dtype=np.int64)
                 grown_c = np.empty(2 * (total + m), dtype=np.int64)
-                grown_r[:total] = comp_r[:total]
-                grown_c[:total] = comp_c[:total]
+                for q in range(total):
+                    grown_r[q] = comp_r[q]
+                    grown_c[q] = comp_c[q]
                 comp_r = grown_r
                 comp_c = grown_c
-            comp_r[total:total + m] = gr[:m]
-            comp_c[total:total + m] = gc[:m]
+            for q in range(m):
+                comp_r[total + q] = gr[q]
+                comp_c[total + q] = gc[q]
             sizes[k] = m
             k += 1
             total += m
