@@ -5,6 +5,7 @@ beams through the map, the outlines' growth and the yielding view) with ``time.t
 whole run's thread time (the clean-up pass included):
 
     python benchmarks/bench_vacate.py sim:paper sim:parking ../shared/data/mit-csail/mit-csail.clf
+    python benchmarks/bench_vacate.py ../shared/data/dynamic/leg_tracker/negative_2.bag --topic /right_scan
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from dynslam2d.pipeline import Pipeline, run
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("inputs", nargs="+")
+    ap.add_argument("--topic", default=None, help="scan topic of the recordings (ignored by sim: inputs)")
     args = ap.parse_args()
     acc = [0.0, 0]
     orig = Pipeline._evidence_view
@@ -35,10 +37,11 @@ def main() -> None:
     for inp in args.inputs:
         acc[0], acc[1] = 0.0, 0
         t0 = time.thread_time()
-        run(open_source(inp), Config())
+        run(open_source(inp, args.topic), Config())
         tot = time.thread_time() - t0
         n = max(acc[1], 1)
-        print(f"{inp}: trace {1e3 * acc[0] / n:.2f} ms/scan, run {1e3 * tot / n:.2f} ms/scan "
+        name = f"{inp} {args.topic}" if args.topic and not inp.startswith("sim:") else inp
+        print(f"{name}: trace {1e3 * acc[0] / n:.2f} ms/scan, run {1e3 * tot / n:.2f} ms/scan "
               f"({100 * acc[0] / tot:.0f} %)", flush=True)
 
 

@@ -146,3 +146,34 @@ def test_an_outline_yields_only_after_it_persisted_and_with_enough_of_it_seen_th
     empty = vacated_outlines(view, *_geo(r, a, np.zeros_like(valid)), **kw)
     got = [hist.persistent(view, v).outlines for v in (vac, empty, vac, vac, vac)]
     assert got == [0, 0, 0, 0, 1]  # a gap restarts the count
+
+
+def test_two_outlines_in_one_scan_are_judged_each_on_its_own():
+    """A second, 2 m outline (x −5…−3 m, y 2…3.8 m) beside the 4 m car, both seen through by the same scan, with
+    the 14 m wall seen through too: each outline yields or not by its own size, in the order of its lowest cell."""
+    view = _map()
+    lo = view.logodds.copy()
+
+    def cell(v: float) -> int:
+        return int(np.floor(v / RES + 0.5)) + 150
+
+    lo[cell(2.0), cell(-5.0):cell(-3.0) + 1] = 8.0
+    lo[cell(3.8), cell(-5.0):cell(-3.0) + 1] = 8.0
+    lo[cell(2.0):cell(3.8) + 1, cell(-5.0)] = 8.0
+    lo[cell(2.0):cell(3.8) + 1, cell(-3.0)] = 8.0
+    view = MapView(lo, -150, -150, RES)
+    r, a, valid = _scan()
+    kw = dict(occupied_logodds=6.0, min_cells=4, max_extent=6.0)
+    both = vacated_outlines(view, *_geo(r, a, valid), **kw)
+    assert both.outlines == 2 and both.sizes == (2 * 41 + 2 * 35, 2 * 81 + 2 * 35)
+    x = (both.cols + view.i0) * RES
+    small, large = x[:both.sizes[0]], x[both.sizes[0]:]
+    assert small.min() == pytest.approx(-5.0) and small.max() == pytest.approx(-3.0)
+    assert large.min() == pytest.approx(1.0) and large.max() == pytest.approx(5.0)
+    # the 2 m outline is no longer than min_extent 3 m: only the car yields, the same cells as on its own
+    one = vacated_outlines(view, *_geo(r, a, valid), min_extent=3.0, **kw)
+    alone = vacated_outlines(_map(), *_geo(r, a, valid), min_extent=3.0, **kw)
+    assert one.outlines == 1 and one.sizes == alone.sizes
+    assert np.array_equal(one.rows, alone.rows) and np.array_equal(one.cols, alone.cols)
+    # the rejected outline's seen-through cells still count
+    assert one.seen_through == both.seen_through > alone.seen_through

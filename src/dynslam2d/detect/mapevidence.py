@@ -145,107 +145,222 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
     w = logodds.shape[1]
     cap = out_r.shape[0]
     n = 0
-    for k in range(cx.shape[0]):
-        if not clear[k]:
+    for k in range(1, cx.shape[0] - 1):
+        # both neighbouring beams must clear at least as far: the silhouette edge of a round object (a ray
+        # tangent to it, a neighbour ending on it) does not see through it
+        if not (clear[k] and clear[k - 1] and clear[k + 1]):
             continue
+        reach = math.sqrt(min((cx[k - 1] - ox) ** 2 + (cy[k - 1] - oy) ** 2,
+                              (cx[k + 1] - ox) ** 2 + (cy[k + 1] - oy) ** 2,
+                              (cx[k] - ox) ** 2 + (cy[k] - oy) ** 2)) - depth
+        if not reach > 0.0:
+            continue
+        reach2 = reach * reach
         dx = cx[k] - ox
         dy = cy[k] - oy
+        # walk the major axis a (array axis 1 − ar), the minor coordinate b of the ray at a (array axis 1 − br)
         x_major = abs(dx) >= abs(dy)
         if x_major:
             a0 = int(math.floor(ox + 0.5))
             a1 = int(math.floor(cx[k] + 0.5))
             slope = dy / dx if dx != 0.0 else 0.0
-            m0 = ox
-            n0 = oy
+            m0, n0 = ox, oy
+            a_off, a_len, b_off, b_len, ar, br = i0, w, j0, h, 0, 1
         else:
             a0 = int(math.floor(oy + 0.5))
             a1 = int(math.floor(cy[k] + 0.5))
             slope = dx / dy
-            m0 = oy
-            n0 = ox
-        # both neighbouring beams must clear at least as far: the silhouette edge of a round object (a ray
-        # tangent to it, a neighbour ending on it) does not see through it
-        reach2 = -1.0
-        if 0 < k < cx.shape[0] - 1 and clear[k - 1] and clear[k + 1]:
-            reach = math.sqrt(min((cx[k - 1] - ox) ** 2 + (cy[k - 1] - oy) ** 2,
-                                  (cx[k + 1] - ox) ** 2 + (cy[k + 1] - oy) ** 2,
-                                  (cx[k] - ox) ** 2 + (cy[k] - oy) ** 2)) - depth
-            if reach > 0.0:
-                reach2 = reach * reach
-        if reach2 < 0.0:
-            continue
-        step = 1 if a1 >= a0 else -1
-        a = a0
-        while True:
+            m0, n0 = oy, ox
+            a_off, a_len, b_off, b_len, ar, br = j0, h, i0, w, 1, 0
+        # only a inside the grid and within the reach: a cell the ray passes within core ≤ 0.5 of its centre at
+        # a is at least |a − m0|·√(1 + slope²) − 0.5 from the laser (+1 against rounding: the distance test
+        # below is the exact one)
+        along = (reach + 0.5) / math.sqrt(1.0 + slope * slope)
+        if a1 >= a0:
+            step = 1
+            start = max(a0, a_off)
+            cnt = min(a1, int(math.floor(m0 + along)) + 1, a_off + a_len - 1) - start + 1
+        else:
+            step = -1
+            start = min(a0, a_off + a_len - 1)
+            cnt = start - max(a1, int(math.ceil(m0 - along)) - 1, a_off) + 1
+        # a branch-free first pass (it vectorises): most beams pass no long-occupied cell at all
+        first = cnt
+        last = -1
+        for t in range(cnt):
+            a = start + step * t
+            bi = int(math.floor(n0 + slope * (a - m0) + 0.5)) - b_off
+            inside = (bi >= 0) & (bi < b_len)
+            bi = bi if inside else 0
+            hit = inside & (logodds[ar * (a - a_off) + br * bi, (1 - ar) * (a - a_off) + (1 - br) * bi] >= occ_thr)
+            first = min(first, t if hit else cnt)
+            last = max(last, t if hit else -1)
+        for t in range(first, last + 1):
+            a = start + step * t
             b = n0 + slope * (a - m0)
             ib = int(math.floor(b + 0.5))
-            if abs(b - ib) <= core:
-                if x_major:
-                    x = a - i0
-                    y = ib - j0
-                else:
-                    x = ib - i0
-                    y = a - j0
-                if 0 <= x < w and 0 <= y < h and logodds[y, x] >= occ_thr and n < cap and \
-                        (x + i0 - ox) ** 2 + (y + j0 - oy) ** 2 <= reach2:
-                    out_r[n] = y
-                    out_c[n] = x
-                    n += 1
-            if a == a1:
-                break
-            a += step
+            bi = ib - b_off
+            if bi < 0 or bi >= b_len or abs(b - ib) > core or \
+                    logodds[ar * (a - a_off) + br * bi, (1 - ar) * (a - a_off) + (1 - br) * bi] < occ_thr:
+                continue
+            x, y = (a, ib) if x_major else (ib, a)
+            if n < cap and (x - ox) ** 2 + (y - oy) ** 2 <= reach2:
+                out_r[n] = y - j0
+                out_c[n] = x - i0
+                n += 1
     return n
 
 
 @njit(cache=True)
-def grow_outline_kernel(logodds: np.ndarray, r0: int, c0: int, near_thr: float, max_side: int,
-                        out_r: np.ndarray, out_c: np.ndarray) -> int:  # pragma: no cover - numba
-    """The 8-connected component of cells with log-odds > ``near_thr`` that holds array cell (``r0``, ``c0``),
-    written into ``out_r`` / ``out_c``; returns its size, or −1 when it spans more than ``max_side`` cells
-    along a grid axis (a wall, not an object) or does not fit the output arrays."""
+def vacated_outlines_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx: np.ndarray,
+                            cy: np.ndarray, clear: np.ndarray, core: float, occ_thr: float, depth: float,
+                            near_thr: float, occ32: np.float32, max_side: int, min_cells: int, res: float,
+                            min_extent: float, min_share: float
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:  # pragma: no cover - numba
+    """The long-occupied cells the beams see through (:func:`seen_through_structure_kernel`, arguments up to
+    ``depth`` as there, at most 64 per beam), their outlines and which of them yield (:func:`vacated_outlines`).
+
+    Nothing when fewer than ``min_cells`` cells are seen through. Else the distinct seen-through cells are taken in
+    order of their code ``row · W + col``; each one not yet in an outline grows its 8-connected component of cells
+    with log-odds > ``near_thr`` (breadth first). A component spanning more than ``max_side`` cells along a grid
+    axis (a wall, not an object) is abandoned as soon as its cells so far show it; every cell grown so far
+    belongs to it, so none of them starts another growth. A complete outline yields when its longer side
+    (cells · ``res``, m) is more than ``min_extent`` (m) and it holds at least ``min_cells`` seen-through cells
+    and ``min_share`` of its cells with log-odds ≥ ``occ32``: ``occ_thr`` in float32, as NumPy compares the
+    float32 map with a Python float.
+    Returns the yielding outlines' rows and columns, one outline after the other (each in its growth order),
+    their sizes and the number of distinct seen-through cells (0 when fewer than ``min_cells`` were found).
+    """
+    out_r = np.empty(64 * cx.shape[0], dtype=np.int64)
+    out_c = np.empty(64 * cx.shape[0], dtype=np.int64)
+    n = seen_through_structure_kernel(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, out_r, out_c, depth)
+    if n < min_cells:
+        return out_r[:0], out_c[:0], out_r[:0], 0
     h = logodds.shape[0]
     w = logodds.shape[1]
+    # the distinct codes, ascending (a Shell sort here: np.unique would add numba's sort to the cold compile)
+    codes = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        codes[i] = out_r[i] * w + out_c[i]
+    gap = n // 2
+    while gap > 0:
+        for i in range(gap, n):
+            v = codes[i]
+            j = i
+            while j >= gap and codes[j - gap] > v:
+                codes[j] = codes[j - gap]
+                j -= gap
+            codes[j] = v
+        gap //= 2
+    nc = 0
+    for i in range(n):
+        if nc == 0 or codes[i] != codes[nc - 1]:
+            codes[nc] = codes[i]
+            nc += 1
+    codes = codes[:nc]
+    comp_r = np.empty(0 if nc < min_cells else 1024, dtype=np.int64)
+    comp_c = np.empty(comp_r.shape[0], dtype=np.int64)
+    sizes = np.empty(nc, dtype=np.int64)
+    if nc < min_cells:
+        return comp_r, comp_c, sizes[:0], nc
+    done = np.zeros(nc, dtype=np.bool_)
     side = 2 * max_side + 1
-    seen = np.zeros((side, side), dtype=np.uint8)
-    cap = out_r.shape[0]
-    out_r[0] = r0
-    out_c[0] = c0
-    seen[max_side, max_side] = 1
-    n = 1
-    head = 0
-    rmin = rmax = r0
-    cmin = cmax = c0
-    while head < n:
-        r = out_r[head]
-        c = out_c[head]
-        head += 1
-        for dr in range(-1, 2):
-            for dc in range(-1, 2):
-                rr = r + dr
-                cc = c + dc
-                if (dr == 0 and dc == 0) or rr < 0 or cc < 0 or rr >= h or cc >= w:
-                    continue
-                if logodds[rr, cc] <= near_thr:
-                    continue
-                lr = rr - r0 + max_side
-                lc = cc - c0 + max_side
-                if lr < 0 or lc < 0 or lr >= side or lc >= side:
-                    return -1
-                if seen[lr, lc]:
-                    continue
-                seen[lr, lc] = 1
-                if n >= cap:
-                    return -1
-                out_r[n] = rr
-                out_c[n] = cc
-                n += 1
-                rmin = min(rmin, rr)
-                rmax = max(rmax, rr)
-                cmin = min(cmin, cc)
-                cmax = max(cmax, cc)
-                if rmax - rmin + 1 > max_side or cmax - cmin + 1 > max_side:
-                    return -1
-    return n
+    window = np.zeros((side, side), dtype=np.uint8)  # cells of the current growth, around its start
+    # a growth stops once its cells span more than max_side along an axis: it never holds more than max_side² + 1
+    cap = max_side * max_side + 1
+    gr = np.empty(cap, dtype=np.int64)
+    gc = np.empty(cap, dtype=np.int64)
+    k = 0
+    total = 0
+    for s in range(nc):
+        if done[s]:
+            continue
+        r0 = codes[s] // w
+        c0 = codes[s] - r0 * w
+        gr[0] = r0
+        gc[0] = c0
+        window[max_side, max_side] = 1
+        m = 1
+        head = 0
+        rmin = rmax = r0
+        cmin = cmax = c0
+        ok = True
+        while head < m and ok:
+            r = gr[head]
+            c = gc[head]
+            head += 1
+            for dr in range(-1, 2):
+                if not ok:
+                    break
+                for dc in range(-1, 2):
+                    rr = r + dr
+                    cc = c + dc
+                    if (dr == 0 and dc == 0) or rr < 0 or cc < 0 or rr >= h or cc >= w:
+                        continue
+                    if logodds[rr, cc] <= near_thr:
+                        continue
+                    lr = rr - r0 + max_side
+                    lc = cc - c0 + max_side
+                    if lr < 0 or lc < 0 or lr >= side or lc >= side:
+                        ok = False
+                        break
+                    if window[lr, lc]:
+                        continue
+                    window[lr, lc] = 1
+                    if m >= cap:
+                        ok = False
+                        break
+                    gr[m] = rr
+                    gc[m] = cc
+                    m += 1
+                    rmin = min(rmin, rr)
+                    rmax = max(rmax, rr)
+                    cmin = min(cmin, cc)
+                    cmax = max(cmax, cc)
+                    if rmax - rmin + 1 > max_side or cmax - cmin + 1 > max_side:
+                        ok = False
+                        break
+        for q in range(m):
+            window[gr[q] - r0 + max_side, gc[q] - c0 + max_side] = 0
+        if not ok and logodds[r0, c0] <= near_thr:
+            # a start below near_thr joins the components around it: only it is known to fail
+            done[s] = True
+            continue
+        seen = 0
+        longocc = 0
+        for q in range(m):
+            # a seen-through cell is ≥ occ_thr, so ≥ occ32 (float32 rounds to nearest)
+            if logodds[gr[q], gc[q]] >= occ32:
+                longocc += 1
+                code = gr[q] * w + gc[q]
+                p = 0
+                hi = nc
+                while p < hi:
+                    mid = (p + hi) // 2
+                    if codes[mid] < code:
+                        p = mid + 1
+                    else:
+                        hi = mid
+                if p < nc and codes[p] == code:
+                    done[p] = True
+                    seen += 1
+        if ok and seen >= min_cells and max(rmax - rmin, cmax - cmin) * res > min_extent and \
+                seen >= min_share * longocc:
+            if total + m > comp_r.shape[0]:
+                grown_r = np.empty(2 * (total + m), dtype=np.int64)
+                grown_c = np.empty(2 * (total + m), dtype=np.int64)
+                for q in range(total):
+                    grown_r[q] = comp_r[q]
+                    grown_c[q] = comp_c[q]
+                comp_r = grown_r
+                comp_c = grown_c
+            for q in range(m):
+                comp_r[total + q] = gr[q]
+                comp_c[total + q] = gc[q]
+            sizes[k] = m
+            k += 1
+            total += m
+    return comp_r[:total], comp_c[:total], sizes[:k], nc
 
 
 @dataclass(frozen=True, slots=True)
@@ -286,48 +401,15 @@ def vacated_outlines(view: MapView | None, origin: tuple[float, float], cx: np.n
     if view is None or min_cells <= 0 or cx.shape[0] == 0:
         return VacatedOutlines(empty, empty, 0, 0)
     res = float(view.resolution)
-    cap = 64 * cx.shape[0]
-    out_r = np.empty(cap, dtype=np.int64)
-    out_c = np.empty(cap, dtype=np.int64)
-    n = seen_through_structure_kernel(view.logodds, int(view.i0), int(view.j0), float(origin[0]), float(origin[1]),
-                                      np.ascontiguousarray(cx, dtype=np.float64),
-                                      np.ascontiguousarray(cy, dtype=np.float64),
-                                      np.ascontiguousarray(clear, dtype=np.bool_), float(ray_core),
-                                      float(occupied_logodds), out_r, out_c, float(min_depth_m) / res)
-    if n < min_cells:
-        return VacatedOutlines(empty, empty, 0, 0)
-    w = view.logodds.shape[1]
-    codes = np.unique(out_r[:n] * w + out_c[:n])
-    if codes.shape[0] < min_cells:
-        return VacatedOutlines(empty, empty, int(codes.shape[0]), 0)
-    max_side = max(int(math.ceil(max_extent / res)), 1)
-    comp_cap = 4 * max_side * max_side
-    cr = np.empty(comp_cap, dtype=np.int64)
-    cc = np.empty(comp_cap, dtype=np.int64)
-    done = np.zeros(codes.shape[0], dtype=bool)
-    rows: list[np.ndarray] = []
-    cols: list[np.ndarray] = []
-    for s in range(codes.shape[0]):
-        if done[s]:
-            continue
-        r0, c0 = divmod(int(codes[s]), w)
-        m = grow_outline_kernel(view.logodds, r0, c0, float(near_logodds), max_side, cr, cc)
-        if m < 0:
-            done[s] = True
-            continue
-        comp = cr[:m] * w + cc[:m]
-        inside = np.isin(codes, comp)
-        done |= inside
-        side = max(int(cr[:m].max() - cr[:m].min()), int(cc[:m].max() - cc[:m].min())) * res
-        seen = int(inside.sum())
-        longocc = int(np.count_nonzero(view.logodds[cr[:m], cc[:m]] >= occupied_logodds))
-        if seen >= min_cells and side > min_extent and seen >= min_share * longocc:
-            rows.append(cr[:m].copy())
-            cols.append(cc[:m].copy())
-    if not rows:
-        return VacatedOutlines(empty, empty, int(codes.shape[0]), 0)
-    return VacatedOutlines(np.concatenate(rows), np.concatenate(cols), int(codes.shape[0]), len(rows),
-                           tuple(int(r.shape[0]) for r in rows))
+    rows, cols, sizes, nc = vacated_outlines_kernel(
+        np.ascontiguousarray(view.logodds), int(view.i0), int(view.j0), float(origin[0]), float(origin[1]),
+        np.ascontiguousarray(cx, dtype=np.float64), np.ascontiguousarray(cy, dtype=np.float64),
+        np.ascontiguousarray(clear, dtype=np.bool_), float(ray_core), float(occupied_logodds),
+        float(min_depth_m) / res, float(near_logodds), np.float32(occupied_logodds),
+        max(int(math.ceil(max_extent / res)), 1), int(min_cells), res, float(min_extent), float(min_share))
+    if sizes.shape[0] == 0:
+        return VacatedOutlines(empty, empty, int(nc), 0)
+    return VacatedOutlines(rows, cols, int(nc), int(sizes.shape[0]), tuple(int(m) for m in sizes))
 
 
 class VacatedHistory:
