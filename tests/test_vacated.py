@@ -8,20 +8,21 @@ import pytest
 
 from dynslam2d.config import Config
 from dynslam2d.detect.mapevidence import MapView, VacatedHistory, map_evidence, vacated_outlines, yielding_view
-from dynslam2d.pipeline import run, scan_clearing
+from dynslam2d.pipeline import run
 from dynslam2d.results import compute_metrics, ground_truth_for
 from dynslam2d.sim import Mover, Rect, Scenario, oscillating_in_place, timeline
 from dynslam2d.sim.scenarios import _build_world
 from dynslam2d.sim.sensor import LidarModel
 from dynslam2d.sim.simulation import SimSource
 from dynslam2d.slam.cleanconfig import CleanConfig
+from dynslam2d.slam.cleanup import scan_clearing
 from dynslam2d.types import Pose2D
 
 RES = 0.05
 
 
 def _geo(r: np.ndarray, a: np.ndarray, valid: np.ndarray) -> tuple:
-    """The clearing geometry of a scan from the laser at the origin, heading 0 (pipeline.scan_clearing)."""
+    """The clearing geometry of a scan from the laser at the origin, heading 0 (slam.cleanup.scan_clearing)."""
     return scan_clearing(r, a, valid, Pose2D(0.0, 0.0, 0.0), RES, CleanConfig())
 
 

@@ -37,8 +37,7 @@ from dynslam2d.memtrim import release_free_memory
 from dynslam2d.rangescale import apply_range_scale
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
-from dynslam2d.slam.cleanconfig import CleanConfig
-from dynslam2d.slam.cleanup import _scan_geometry  # (the clean-up pass's beam geometry: one definition)
+from dynslam2d.slam.cleanup import scan_clearing
 from dynslam2d.slam.confidence import FLAGS
 from dynslam2d.slam.confidence import summarize as summarize_confidence
 from dynslam2d.slam.config import SlamConfig
@@ -154,23 +153,6 @@ def _observed_boxes(tracks: list[Track], scan: Scan, pose: Pose2D) -> list[Track
         box = Box(b.px + c * du - s_ * dv, b.py + s_ * du + c * dv, b.theta, u1 - u0, v1 - v0)
         out.append(dataclasses.replace(t, box=box))
     return out
-
-
-def scan_clearing(ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray, pose: Pose2D, resolution: float,
-                  clean: CleanConfig) -> tuple[tuple[float, float], np.ndarray, np.ndarray, np.ndarray]:
-    """The clean-up pass's beam geometry for one scan (docs/maps.md, "What the pass counts"): the laser's
-    position and the ends (cx, cy) of the beams' clearing segments, (n,) in world cell units (m /
-    ``resolution``), and ``clear`` (n,) bool, the beams with a return (``valid``) longer than their margin
-    (``clean.margin_m``, grown to ``clean.grazing_cells · resolution / sin α`` at grazing incidence).
-    ``ranges`` / ``angles``: the beams in the laser frame (m, rad); ``pose``: the laser pose, map frame."""
-    _, _, cx, cy, _, clear = _scan_geometry(np.ascontiguousarray(ranges, dtype=np.float64),
-                                            np.ascontiguousarray(angles, dtype=np.float64),
-                                            np.ascontiguousarray(valid, dtype=np.bool_),
-                                            np.zeros(ranges.shape[0], dtype=np.bool_), float(pose.x), float(pose.y),
-                                            float(pose.theta), float(resolution), float(clean.margin_m),
-                                            float(clean.grazing_cells),
-                                            math.sin(math.radians(clean.min_incidence_deg)))
-    return (float(pose.x) / resolution, float(pose.y) / resolution), cx, cy, clear
 
 
 class Pipeline:

@@ -390,7 +390,7 @@ def vacated_outlines(view: MapView | None, origin: tuple[float, float], cx: np.n
     The scan's beams are the clearing segments from the laser at ``origin`` to (``cx``, ``cy``), (n,) in beam
     order, in world cell units (m / the view's resolution), only where ``clear``: the clean-up pass's beam
     geometry, which ends each beam a margin before its return, longer at grazing incidence
-    (:func:`dynslam2d.pipeline.scan_clearing`; docs/maps.md "What the pass counts"). A long-occupied cell
+    (:func:`dynslam2d.slam.cleanup.scan_clearing`; docs/maps.md "What the pass counts"). A long-occupied cell
     (log-odds ≥ ``occupied_logodds``) counts as seen through where a beam passes within ``ray_core`` of its
     centre and that beam and both its neighbours clear at least ``min_depth_m`` (m) beyond it. Such cells are
     grouped into their 8-connected outline of occupied cells (log-odds > ``near_logodds``); an outline yields

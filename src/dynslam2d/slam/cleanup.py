@@ -507,5 +507,23 @@ class CleanupRecorder:
         self.result = clean_map(result.grid, self.counter, result.logodds)  # type: ignore[attr-defined]
 
 
+
+def scan_clearing(ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray, pose: Pose2D, resolution: float,
+                  clean: CleanConfig) -> tuple[tuple[float, float], np.ndarray, np.ndarray, np.ndarray]:
+    """The clean-up pass's beam geometry for one scan (docs/maps.md, "What the pass counts"): the laser's
+    position and the ends (cx, cy) of the beams' clearing segments, (n,) in world cell units (m /
+    ``resolution``), and ``clear`` (n,) bool, the beams with a return (``valid``) longer than their margin
+    (``clean.margin_m``, grown to ``clean.grazing_cells · resolution / sin α`` at grazing incidence).
+    ``ranges`` / ``angles``: the beams in the laser frame (m, rad); ``pose``: the laser pose, map frame."""
+    _, _, cx, cy, _, clear = _scan_geometry(np.ascontiguousarray(ranges, dtype=np.float64),
+                                            np.ascontiguousarray(angles, dtype=np.float64),
+                                            np.ascontiguousarray(valid, dtype=np.bool_),
+                                            np.zeros(ranges.shape[0], dtype=np.bool_), float(pose.x), float(pose.y),
+                                            float(pose.theta), float(resolution), float(clean.margin_m),
+                                            float(clean.grazing_cells),
+                                            math.sin(math.radians(clean.min_incidence_deg)))
+    return (float(pose.x) / resolution, float(pose.y) / resolution), cx, cy, clear
+
+
 __all__ = ["ERASED_PROBABILITY", "CleanResult", "CleanupRecorder", "VisibilityCounter", "clean_map", "compare_online",
-           "erase_rule"]
+           "erase_rule", "scan_clearing"]
