@@ -390,3 +390,22 @@ def test_rematch_only_near_low_scores() -> None:
     assert err < 0.03 and edges >= 1
     assert 1 <= checked <= 8 < n_kf // 10  # keyframes 60, 61 marked (± 2), not the whole run
     assert out[False][1] == 0 and out[False][0] > 0.5
+
+
+@pytest.mark.parametrize("n", [2, 3, 4, 7])
+def test_rematch_selection_grows_marks_by_the_neighbours_on_short_chains(n):
+    # a chain shorter than the 2·neighbours + 1 window (np.convolve "same" returned the window's length then)
+    from types import SimpleNamespace
+
+    from dynslam2d.slam.rematch import selected
+
+    graph = PoseGraph()
+    for k in range(n):
+        graph.add_node(np.array([float(k), 0.0, 0.0]))
+    scores = [1.0] * n
+    scores[1] = 0.1  # keyframe 1's incoming match was poor: it and its neighbours are re-matched
+    closer = SimpleNamespace(config=LoopConfig(rematch_neighbours=2), graph=graph, keyframes=[None] * n,
+                             kf_score=scores, kf_weak=[False] * n)
+    sel = selected(closer)
+    assert sel.shape == (n,)
+    assert sel.tolist() == [k <= 3 for k in range(n)]

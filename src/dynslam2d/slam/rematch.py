@@ -105,8 +105,10 @@ def selected(closer: LoopCloser) -> np.ndarray:
         d = relative(e.z, relative(g.poses[e.i], g.poses[e.j]))
         if math.hypot(d[0], d[1]) > c.rematch_bend_shift or abs(d[2]) > c.rematch_bend_turn:
             mark[e.j] = True
-    w = c.rematch_neighbours
-    sel = np.convolve(mark.astype(np.int64), np.ones(2 * w + 1, dtype=np.int64), mode="same") > 0
+    sel = mark.copy()
+    for s in range(1, min(c.rematch_neighbours, n - 1) + 1):  # grow by the neighbours on either side
+        sel[s:] |= mark[:-s]
+        sel[:-s] |= mark[s:]
     return sel
 
 
