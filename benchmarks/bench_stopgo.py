@@ -10,8 +10,8 @@ same counting a stopped mover only once the sensor saw it walk, and static struc
     python benchmarks/bench_stopgo.py sim:stop-and-go sim:parking [--seed N] [--memory both|on|off]
         [--set detect.segment.max_extent=5.6] [--explain] [--per-mover]
 
-``--explain`` adds, per run, what limits the online map's F1 and ghost: the ground-truth occupied cells
-the recall counts (observable) but the map misses — never observed (unknown) or observed free, and of
+``--explain`` adds, per run, what limits the F1 and ghost of the online and the cleaned map: the ground-truth
+occupied cells the recall counts (observable) but the map misses — never observed (unknown) or observed free, and of
 those how many kept beams hit (≥ 5 hits: structure the rays later cleared, e.g. walls seen at grazing
 incidence) — and the ghost cells of both maps by the nearest ground-truth mover.
 
@@ -89,17 +89,20 @@ class HitCounter:
 
 
 def explain(result, cleaned, gt, transform: Pose2D, hits: HitCounter) -> None:
-    """Print what limits the online map's F1 (missed observable cells) and the ghost cells by nearest mover."""
-    cs = cell_sets(result.grid, gt.static_map, transform)
-    miss = cs.observable & ~cs.truth_matched
-    est = cs.estimate[miss]
-    r, c = np.nonzero(miss)
-    xy = np.column_stack((cs.origin[0] + (c + 0.5) * cs.resolution, cs.origin[1] + (r + 0.5) * cs.resolution))
-    h = hits.hits_near(transform.inverse().transform_points(xy)) if xy.size else np.zeros(0, np.int64)
-    free = np.isfinite(est)
-    print(f"    online map misses {int(miss.sum())} of {int(cs.observable.sum())} observable structure cells: "
-          f"{int((~free).sum())} never observed, {int(free.sum())} observed free ({int((free & (h >= 5)).sum())} of "
-          f"them hit >= 5 times by kept beams, {int((free & (h == 0)).sum())} never hit)")
+    """Print what limits the F1 of both maps (missed observable cells) and the ghost cells by nearest mover."""
+    for label, grid in (("online", result.grid), ("cleaned", cleaned.grid)):
+        cs = cell_sets(grid, gt.static_map, transform)
+        miss = cs.observable & ~cs.truth_matched
+        est = cs.estimate[miss]
+        r, c = np.nonzero(miss)
+        xy = np.column_stack((cs.origin[0] + (c + 0.5) * cs.resolution, cs.origin[1] + (r + 0.5) * cs.resolution))
+        h = hits.hits_near(transform.inverse().transform_points(xy)) if xy.size else np.zeros(0, np.int64)
+        free = np.isfinite(est)
+        print(f"    {label} map misses {int(miss.sum())} of {int(cs.observable.sum())} observable structure cells: "
+              f"{int((~free).sum())} never observed, {int(free.sum())} observed free ({int((free & (h >= 5)).sum())} "
+              f"of them hit >= 5 times by kept beams, {int((free & (h == 0)).sum())} never hit)")
+    restored = cleaned.stats.get("restored_cells", 0)
+    print(f"    clean-up pass: erased {cleaned.stats['erased_cells']}, restored {restored} cells")
     mv = gt.movers
     for label, grid in (("online", result.grid), ("cleaned", cleaned.grid)):
         g = cell_sets(grid, gt.static_map, transform).ghost

@@ -137,6 +137,59 @@ def test_a_wall_seen_at_grazing_angles_is_kept():
     assert clean_map(online, counter_loose).erased.sum() > 20
 
 
+def _corridor_scans(n: int = 80, seed: int = 0) -> tuple[list[Scan], list[Pose2D]]:
+    """A sensor wandering in a 4 × 4 m room (x, y in [−2, 2]) whose east wall opens (|y| < 1) into a
+    corridor to x = 14: the corridor walls are seen from the room only at grazing incidence (stop-and-go's
+    layout). Exact ray casting against the wall segments, 0.01 m range noise."""
+    rng = np.random.default_rng(seed)
+    walls = [(-2, -2, 2, -2), (-2, 2, 2, 2), (-2, -2, -2, 2), (2, 1, 2, 2), (2, -2, 2, -1),
+             (2, 1, 14, 1), (2, -1, 14, -1), (14, -1, 14, 1)]
+    scans, poses = [], []
+    for k in range(n):
+        px, py, th = 0.3 * math.sin(0.21 * k), 0.4 * math.sin(0.13 * k), 0.3 * math.sin(0.17 * k)
+        c, s = np.cos(ANGLES + th), np.sin(ANGLES + th)
+        best = np.full(N_BEAMS, np.inf)
+        for x0, y0, x1, y1 in walls:  # ray p + t·(c, s) against segment q + u·e, u in [0, 1]
+            ex, ey = x1 - x0, y1 - y0
+            den = c * ey - s * ex
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = ((x0 - px) * ey - (y0 - py) * ex) / den
+                u = ((x0 - px) * s - (y0 - py) * c) / den
+            np.minimum(best, np.where((np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1), t, np.inf), out=best)
+        r = best + rng.normal(0.0, 0.01, N_BEAMS)
+        r[best > 19.0] = np.inf
+        scans.append(_scan(r, 0.1 * k))
+        poses.append(Pose2D(px, py, th))
+    return scans, poses
+
+
+def test_wall_cells_that_grazing_rays_cleared_are_restored():
+    """Hector's update lets the rays that run along the corridor walls clear wall cells other rays hit; the
+    pass puts back the observed-free cells hit ≥ restore_min_hits times and (almost) never seen through
+    beyond the incidence-scaled margin (docs/maps.md), and nothing off the walls."""
+    scans, poses = _corridor_scans()
+    xs = np.arange(4.0, 12.0, 0.05)
+    line = np.vstack([np.column_stack((xs, np.full_like(xs, y))) for y in (1.0, -1.0)])
+    recall = {}
+    for min_hits in (0, 3):
+        slam, counter = _online_and_counter(scans, poses, config=CleanConfig(restore_min_hits=min_hits))
+        online = slam.gridmap(0)
+        res = clean_map(online, counter, slam.logodds(0)[0])
+        rows, cols = _cells_at(online, line)
+        recall[min_hits] = (online.occupied()[rows, cols].mean(), res.grid.occupied()[rows, cols].mean())
+        assert res.erased.sum() == 0
+        assert res.stats["restored_cells"] == int(res.restored.sum())
+    assert recall[0][0] < 0.8  # the online map lost a quarter of the corridor walls' cells
+    assert recall[0][1] == recall[0][0]  # restore off: the pass adds nothing
+    assert recall[3][1] > 0.9  # restored: most of them are back
+    r, c = np.nonzero(res.restored)
+    y = online.origin[1] + (r + 0.5) * online.resolution
+    x = online.origin[0] + (c + 0.5) * online.resolution
+    assert res.restored.sum() > 50
+    assert (np.abs(np.abs(y) - 1.0) <= 0.051).all() and (x > 2.0).all()  # only corridor wall cells
+    assert np.isclose(res.logodds[r, c], math.log(9.0)).all()
+
+
 def test_counter_grows_with_the_scans_and_keeps_its_counts():
     scans = _ring_scans([False] * 3)
     counter = VisibilityCounter(0.05)

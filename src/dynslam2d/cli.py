@@ -817,8 +817,8 @@ def _summary_rows(summary: dict[str, Any], odo: Any, compiling: bool) -> list[tu
     cl = summary.get("cleanup")
     if isinstance(cl, dict):
         rows.append(("clean-up", f"erased {cl['erased_cells']} of {cl['occupied_cells_online']} occupied cells "
-                                 f"({cl['erased_area_m2']:.2f} m²) in {cl['pass_time_s']:.2f} s; online map in "
-                                 f"map_online.pgm"))
+                                 f"({cl['erased_area_m2']:.2f} m²), restored {cl.get('restored_cells', 0)} in "
+                                 f"{cl['pass_time_s']:.2f} s; online map in map_online.pgm"))
     repairs = summary.get("stamp_repairs") or {}
     if repairs.get("backward_steps") or repairs.get("nudged_stamps") or repairs.get("time_source") not in (None, "ipc"):
         rows.append(("stamp repairs", "; ".join(summary.get("input_warnings", [])) or str(repairs)))

@@ -70,3 +70,14 @@ class CleanConfig(BaseModel):
         "kept after all (it is the edge of a structure that stays: a pillar corner, the face of a wall); "
         "0 = off.",
     )
+    restore_min_hits: int = Field(
+        3, ge=0,
+        description="Put back as occupied a cell the online map holds free (observed) that at least this many "
+        "counted scans hit with a kept beam and that beams were (almost) never seen to pass through beyond "
+        "their incidence-scaled margin: a wall cell that rays running along the wall cleared in the online "
+        "map (docs/maps.md, 'Walls that grazing rays cleared'). 0 = off.",
+    )
+    restore_through_ratio: float = Field(
+        0.1, ge=0.0,
+        description="… and only if scans passing through it ≤ this × scans hitting it (dimensionless).",
+    )

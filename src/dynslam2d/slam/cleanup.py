@@ -29,6 +29,15 @@ to ``grazing_cells · resolution / sin α`` (α estimated per beam from the neig
 endpoints); a cell counts as passed only where the ray runs near its centre
 (``ray_core``), so rays that clip the corner of a wall end or door frame do not count.
 
+Walls that grazing rays cleared: Hector's online update frees every cell before a return, so rays that run
+along a wall seen only at grazing incidence clear wall cells that other rays hit (docs/maps.md). The same
+counts find them: a cell the online map observed free, that at least ``restore_min_hits`` scans hit with a kept
+beam and that beams passed beyond their incidence-scaled margin at most ``restore_through_ratio · hits``
+times, is put back as occupied — Removert's "revert" of removals that the sensor's geometry, not a change,
+caused; the margin is Peopleremover's ray shortening and the inverse sensor model's no-update zone within an
+obstacle's depth before the measured range (Thrun, Burgard & Fox, Probabilistic Robotics, Table 9.2) with the
+depth of a one-cell surface seen at incidence α.
+
 Memory: the pass never keeps scans. :class:`VisibilityCounter` is fed scan by scan
 during the run (:class:`CleanupRecorder` is a pipeline observer) and holds three uint16
 count grids and one int32 grid of each cell's latest touch (10 bytes per cell, growing with
@@ -57,6 +66,9 @@ from dynslam2d.types import Pose2D, Scan
 
 #: Occupancy probability written into erased cells of the cleaned map (clearly free).
 ERASED_PROBABILITY = 0.1
+
+#: Occupancy probability written into restored cells of the cleaned map (one hit's worth: Hector's 0.9).
+RESTORED_PROBABILITY = 0.9
 
 
 #: Channels of the counter's (H, W, 3) uint16 count array: one 6-byte group per visited cell.
@@ -371,6 +383,8 @@ class CleanResult:
             :data:`COUNT_MAX`).
         switches: (H, W) uint16, changes between hit and pass in each cell's scan sequence.
         stats: numbers for summary.json / metrics.json (cells, m², seconds).
+        restored: (H, W) bool, cells observed free in the online map that the pass put back as occupied (at
+            :data:`RESTORED_PROBABILITY`), or None when not computed.
     """
 
     grid: GridMap
@@ -380,6 +394,18 @@ class CleanResult:
     through: np.ndarray
     switches: np.ndarray
     stats: dict[str, float | int] = field(default_factory=dict)
+    restored: np.ndarray | None = None
+
+
+def restore_rule(hits: np.ndarray, through: np.ndarray, config: CleanConfig) -> np.ndarray:
+    """Cells (bool, same shape) hit often and (almost) never seen through: ``H ≥ restore_min_hits`` and
+    ``T ≤ restore_through_ratio·H`` (all False when ``restore_min_hits`` is 0). Applied to the online map's
+    observed free cells, these are the wall cells that Hector's update let rays running along the wall clear
+    (module docstring)."""
+    c = config
+    if c.restore_min_hits <= 0:
+        return np.zeros(hits.shape, dtype=bool)
+    return (hits >= c.restore_min_hits) & (through <= c.restore_through_ratio * hits)
 
 
 def erase_rule(hits: np.ndarray, through: np.ndarray, switches: np.ndarray, config: CleanConfig) -> np.ndarray:
@@ -405,9 +431,12 @@ def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray |
     hits, through, switches = counter.window(online)
     occ = online.occupied(occupied_threshold)
     erased = np.empty(occ.shape, dtype=bool)
+    restored = np.empty(occ.shape, dtype=bool)
     for r0 in range(0, occ.shape[0], _RULE_ROWS):  # a block of rows at a time: no map-sized float64 temporaries
         rows = slice(r0, r0 + _RULE_ROWS)
         erased[rows] = erase_rule(hits[rows], through[rows], switches[rows], c) & occ[rows]
+        # observed free in the online map (unknown cells were never cleared: nothing to restore there)
+        restored[rows] = restore_rule(hits[rows], through[rows], c) & ~occ[rows] & np.isfinite(online.prob[rows])
     if c.revert_neighbors > 0:
         # Removert's "revert" step in 2D: a cell at the edge of structure that stays is kept.
         from scipy.ndimage import convolve
@@ -417,23 +446,28 @@ def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray |
         erased &= n_kept < c.revert_neighbors
     prob = online.prob.copy()
     prob[erased] = ERASED_PROBABILITY
+    prob[restored] = RESTORED_PROBABILITY
     lo = None
     if logodds is not None:
         # the input's dtype (the SLAM's log-odds are float32, written as float32): no float64 copy of the map
         lo = np.array(logodds, dtype=np.result_type(logodds, np.float32), copy=True)
         if lo.shape == erased.shape:
             lo[erased] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
+            lo[restored] = math.log(RESTORED_PROBABILITY / (1.0 - RESTORED_PROBABILITY))
     area = online.resolution ** 2
     stats: dict[str, float | int] = {
         "occupied_cells_online": int(occ.sum()),
         "erased_cells": int(erased.sum()),
         "erased_area_m2": float(erased.sum() * area),
+        "restored_cells": int(restored.sum()),
+        "restored_area_m2": float(restored.sum() * area),
         "scans_counted": int(counter.scans),
         "scans_too_large": int(counter.too_large),
         "pass_time_s": float(counter.seconds + time.perf_counter() - t0),
         "counter_bytes": counter.nbytes,
     }
-    return CleanResult(GridMap(prob, online.resolution, online.origin), lo, erased, hits, through, switches, stats)
+    return CleanResult(GridMap(prob, online.resolution, online.origin), lo, erased, hits, through, switches, stats,
+                       restored)
 
 
 def compare_online(online: GridMap, cleaned: CleanResult, tolerance: float = 0.10,
@@ -525,5 +559,5 @@ def scan_clearing(ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray, pos
     return (float(pose.x) / resolution, float(pose.y) / resolution), cx, cy, clear
 
 
-__all__ = ["ERASED_PROBABILITY", "CleanResult", "CleanupRecorder", "VisibilityCounter", "clean_map", "compare_online",
-           "erase_rule", "scan_clearing"]
+__all__ = ["ERASED_PROBABILITY", "RESTORED_PROBABILITY", "CleanResult", "CleanupRecorder", "VisibilityCounter",
+           "clean_map", "compare_online", "erase_rule", "restore_rule", "scan_clearing"]
