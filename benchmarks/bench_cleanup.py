@@ -5,7 +5,8 @@ For each input: one run with the clean-up recorder watching, then
   * SLAM time (the run's wall time minus the pass) and the pass's time (counting during
     the run + the final erase), as a share of the SLAM time (target: < 20 % on MIT CSAIL
     and fr079);
-  * occupied cells of the online map, cells erased, F1 of the cleaned occupied cells
+  * occupied cells of the online map, cells erased (and restored: free online, hit, never seen
+    through), F1 of the cleaned occupied cells
     against the online ones, "lost" structure (online occupied cells farther than 0.10 m
     from every cleaned occupied cell) and its largest connected piece (m);
   * with ground truth (sim:<scenario>): ghost area and F1 of the online and the cleaned map.
@@ -59,6 +60,8 @@ def _figure(path: str, name: str, online, cleaned, lost: np.ndarray) -> None:
     img[occ] = 0.0
     img[cleaned.erased] = (1.0, 0.69, 0.0)
     img[lost] = (0.85, 0.0, 0.0)
+    restored = cleaned.restored if cleaned.restored is not None else np.zeros(occ.shape, dtype=bool)
+    img[restored] = (0.0, 0.55, 0.9)
     res = online.resolution
     win = int(round(12.0 / res))
     score = ndimage.uniform_filter(cleaned.erased.astype(float), size=win, mode="constant")
@@ -69,7 +72,8 @@ def _figure(path: str, name: str, online, cleaned, lost: np.ndarray) -> None:
     axes[0].imshow(img, origin="lower", extent=ext, interpolation="nearest")
     x0, y0 = online.origin[0] + c0 * res, online.origin[1] + r0 * res
     axes[0].add_patch(Rectangle((x0, y0), win * res, win * res, fill=False, ec="tab:blue", lw=1.5))
-    axes[0].set_title(f"{name}: online map, {int(cleaned.erased.sum())} of {int(occ.sum())} occupied cells erased")
+    axes[0].set_title(f"{name}: online map, {int(cleaned.erased.sum())} of {int(occ.sum())} occupied cells erased, "
+                      f"{int(restored.sum())} restored")
     sub = img[r0:r0 + win, c0:c0 + win]
     axes[1].imshow(sub, origin="lower", interpolation="nearest",
                    extent=(x0, x0 + sub.shape[1] * res, y0, y0 + sub.shape[0] * res))
@@ -79,7 +83,8 @@ def _figure(path: str, name: str, online, cleaned, lost: np.ndarray) -> None:
         ax.set_ylabel("y [m]")
     axes[1].legend(handles=[Patch(color="black", label="kept (occupied in both maps)"),
                             Patch(color=(1.0, 0.69, 0.0), label="erased by the clean-up"),
-                            Patch(color=(0.85, 0.0, 0.0), label="lost: > 0.10 m from any kept cell")],
+                            Patch(color=(0.85, 0.0, 0.0), label="lost: > 0.10 m from any kept cell"),
+                            Patch(color=(0.0, 0.55, 0.9), label="restored (free online, hit, not seen through)")],
                    loc="upper right", fontsize="small", framealpha=0.9)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
@@ -108,6 +113,11 @@ def main() -> None:
         print(f"  erased {cl.stats['erased_cells']} of {cl.stats['occupied_cells_online']} occupied cells "
               f"({cl.stats['erased_area_m2']:.2f} m2); cleaned vs online F1 {cmp['f1']:.4f}; lost "
               f"{cmp['lost_cells']} cells ({100 * cmp['lost_share']:.2f} %), longest lost piece {longest:.2f} m")
+        if cl.restored is not None and cl.restored.any():
+            d = distance_to(result.grid.occupied() & ~cl.erased, result.grid.resolution)[cl.restored]
+            print(f"  restored {int(cl.restored.sum())} cells ({cl.stats['restored_area_m2']:.2f} m2), "
+                  f"{int((d <= 1.5 * result.grid.resolution).sum())} of them beside a kept occupied cell, farthest "
+                  f"{float(d.max()):.2f} m from one")
         gt = ground_truth_for(src, None, cfg.slam.map_resolution)
         if gt is not None:
             m = compute_metrics(result, gt)

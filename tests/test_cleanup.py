@@ -227,8 +227,12 @@ def test_cli_clean_flag_and_outputs(tmp_path, capsys):
     assert metrics["map"]["f1"] > metrics["map_online"]["f1"]
     cleaned, online = read_map(out / "map.yaml"), read_map(out / "map_online.yaml")
     diff = ~((cleaned.prob == online.prob) | (np.isnan(cleaned.prob) & np.isnan(online.prob)))
-    assert diff.sum() == summary["cleanup"]["erased_cells"]
-    assert (online.prob[diff] == 1.0).all() and (cleaned.prob[diff] == 0.0).all()  # occupied → free only
+    # erased cells go occupied → free; restored ones (walls grazing rays cleared) not occupied → occupied
+    assert summary["cleanup"]["restored_cells"] > 0
+    assert diff.sum() == summary["cleanup"]["erased_cells"] + summary["cleanup"]["restored_cells"]
+    erased = diff & (cleaned.prob == 0.0)
+    assert erased.sum() == summary["cleanup"]["erased_cells"] and (online.prob[erased] == 1.0).all()
+    assert (cleaned.prob[diff & ~erased] == 1.0).all() and not (online.prob[diff & ~erased] == 1.0).any()
     off = tmp_path / "off"
     assert cli("run", "sim:static", "--duration", "1", "--clean", "off", "--out", str(off), "-q") == 0
     assert (off / "map.pgm").exists() and not (off / "map_online.pgm").exists()
