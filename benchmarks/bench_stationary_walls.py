@@ -5,6 +5,9 @@ For each results folder of ``dynslam2d run`` on the same recording:
   * residue: m² occupied in the run's map (map.yaml + map_logodds.npy, the written map) but
     free in the map of the per-beam median scan (the background) — the number
     ``dynslam2d eval stationary`` prints;
+  * of the residue, the part within 0.10 m of an occupied background cell (on or beside the walls
+    the median scan sees: wall cells the background map's own single Hector update cleared, which the
+    clean-up pass restores) and the part farther away (people and things the median scan does not see);
   * walls lost: cells occupied in the background map farther than 0.10 m from every
     occupied cell of the run's map (structure the median scan sees and the run's map lost),
     as a count and a share of the background's occupied cells.
@@ -45,7 +48,16 @@ def main() -> None:
         run_on_bg = np.zeros(bg.shape, dtype=bool)
         run_on_bg[cells[ok, 1], cells[ok, 0]] = True
         lost = occ_bg & (distance_to(run_on_bg, bg.resolution) > 0.10 + 1e-9)
-        print(f"{run_dir}: residue {residue_area(run_map, bg):.4f} m2, walls lost {int(lost.sum())} of "
+        # residue cells (run occupied, background free: residue_area's test) by distance to the background's walls
+        prob = np.full(cells.shape[0], np.nan)
+        prob[ok] = bg.prob[cells[ok, 1], cells[ok, 0]]
+        with np.errstate(invalid="ignore"):
+            res = ok & (prob < 0.5)
+        near = np.zeros(cells.shape[0], dtype=bool)
+        near[res] = distance_to(occ_bg, bg.resolution)[cells[res, 1], cells[res, 0]] <= 0.10 + 1e-9
+        a = run_map.resolution ** 2
+        print(f"{run_dir}: residue {residue_area(run_map, bg):.4f} m2 ({near.sum() * a:.4f} within 0.10 m of the "
+              f"background's walls, {(res & ~near).sum() * a:.4f} farther), walls lost {int(lost.sum())} of "
               f"{int(occ_bg.sum())} background cells ({100 * lost.sum() / max(occ_bg.sum(), 1):.2f} %)")
 
 
