@@ -373,10 +373,16 @@ class EvidenceLedger:
         u = u[keep]
         lvl, rest = np.divmod(u, block)
         own, cell = np.divmod(rest, wi * wj)
-        at = lvl * (wi * wj) + cell  # (level, cell) without the owner
         theirs = own > 0
-        # a cell another (unowned) kept beam of this scan hits on the same level is the structure's
-        mine = theirs & ~_member(at, at[~theirs]) if not theirs.all() else theirs
+        # a cell another (unowned) kept beam of this scan hits on the same level is the structure's: its
+        # unowned value (level, owner 0, cell) is among the sorted values u
+        if theirs.all():
+            mine = theirs
+        else:
+            q = u - own * (wi * wj)  # each value with owner 0
+            i = np.searchsorted(u, q)
+            i[i == u.shape[0]] = 0
+            mine = theirs & (u[i] != q)
         lvl, own, cell = lvl[mine], own[mine], cell[mine]
         ci, cj = np.divmod(cell, wj)
         ci += np.array(lox, dtype=np.int64)[lvl]
