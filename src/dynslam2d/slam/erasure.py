@@ -303,20 +303,23 @@ class EvidenceLedger:
                 owner[t.beams] = t.id
         with np.errstate(invalid="ignore"):
             valid = scan.valid_mask() & (r > self.laser_min_dist) & (r < self.laser_max_dist) & ~removed
-        if not (valid & (owner >= 0)).any():
-            return None
         idx = np.flatnonzero(valid)
-        cos_a, sin_a = scan.trig()
-        ri = r[idx]
-        pts = pose.transform_points(np.column_stack((ri * cos_a[idx], ri * sin_a[idx])))
         own = owner[idx]
         mine_b = own >= 0
+        if not mine_b.any():
+            return None
+        cos_a, sin_a = scan.trig()
+        ri = r[idx]
+        lx, ly = ri * cos_a[idx], ri * sin_a[idx]
+        c, s = math.cos(pose.theta), math.sin(pose.theta)
+        # map frame, contiguous x and y: the values of pose.transform_points on the (n, 2) points
+        xy = (c * lx - s * ly + pose.x, s * lx + c * ly + pose.y)
         ids = own[mine_b]
         flat: list = []
         uids = np.unique(ids)
-        per_level = self._level_cells(pts, mine_b, ids, hmap, flat, uids)
+        per_level = self._level_cells(None, mine_b, ids, hmap, flat, uids, xy)
         if per_level is None:  # (cells beyond the packed values' range: level by level)
-            per_level, flat = self._level_cells_plain(pts, mine_b, ids, hmap), [None] * len(hmap.levels)
+            per_level, flat = self._level_cells_plain(np.column_stack(xy), mine_b, ids, hmap), [None] * len(hmap.levels)
         present = set(uids.tolist())
         kb_all = None
         if self.keep_beams and index >= 0:  # every track's valid beams with one gather, split per track
@@ -334,18 +337,19 @@ class EvidenceLedger:
                 led.beams.append((int(index), kb_all[kb_lo[i]:kb_hi[i]]))
         return PendingUpdate(per_level, flat)
 
-    def _level_cells(self, pts: np.ndarray, mine_b: np.ndarray, ids: np.ndarray, hmap: MultiResMap, flat: list,
-                     uids: np.ndarray | None = None
+    def _level_cells(self, pts: np.ndarray | None, mine_b: np.ndarray, ids: np.ndarray, hmap: MultiResMap, flat: list,
+                     uids: np.ndarray | None = None, xy: tuple[np.ndarray, np.ndarray] | None = None
                      ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] | None:
         """:meth:`_level_cells_plain` for all levels with one sort: every point's (level, owner, cell) packed
         into one integer (owner 0 = no track, else 1 + the rank of the track id; cells relative to the
         level's smallest cell), sorted; the distinct values of tracks whose (level, cell) no unowned point
         has are decoded back, in (level, track id, cell key) order. None if the packed values would not fit
         in an int64. Appends to ``flat``, per level, (flat array indices of the cells, i0, j0, shape) when all
-        lie inside the level's array, else None. ``uids``: ``np.unique(ids)`` if the caller has it."""
+        lie inside the level's array, else None. ``uids``: ``np.unique(ids)`` if the caller has it; ``xy``: the
+        points' x and y as two contiguous arrays instead of ``pts``."""
         n_lv = len(hmap.levels)
         rs = [lv.resolution for lv in hmap.levels]
-        xs, ys = pts[:, 0], pts[:, 1]
+        xs, ys = (pts[:, 0], pts[:, 1]) if xy is None else xy
         # v ↦ floor(v / r + 0.5) is monotonic: the extreme points give each level's extreme cells
         x0, x1, y0, y1 = float(xs.min()), float(xs.max()), float(ys.min()), float(ys.max())
         lox = [math.floor(x0 / r + 0.5) for r in rs]
@@ -359,7 +363,7 @@ class EvidenceLedger:
         block = (uids.shape[0] + 1) * wi * wj  # one level's values
         if n_lv * block >= 1 << 62:
             return None
-        owner = np.zeros(pts.shape[0], dtype=np.int64)
+        owner = np.zeros(xs.shape[0], dtype=np.int64)
         owner[mine_b] = np.searchsorted(uids, ids) + 1
         res = np.array(rs)[:, None]
         cx = np.floor(xs / res + 0.5).astype(np.int64)  # (L, n) cells, as pts / r_k + 0.5 per level
