@@ -14,6 +14,12 @@ CPU ms per scan of each checkout, their ratio, the median of the per-scan ratios
     taskset -c 1 python benchmarks/bench_pipeline_ab.py negative_2/right negative_2/left negative_2/rear \
         --other /work/main/src [--reps 1]
 
+``--parts`` instead runs this checkout alone (after the same warm-up) with thread-CPU timers around the parts of
+the per-scan path outside the tracker and prints, per part, the median and mean µs over the scans that update
+the map and over the others: the map update's ray kernel, the vacated-footprint kernel, the matcher's kernels
+and the whole match, the evidence ledger's methods, the body filter and the loop closer's ``add`` with its
+place descriptor and searches.
+
 Inputs: the names of ``bench_digest.py`` (paths under ``--data``). Both workers inherit this process's CPU
 affinity: pin the parent with ``taskset``.
 """
@@ -101,19 +107,87 @@ def compare(data: Path, name: str, other: Path, reps: int) -> None:
     sys.stdout.flush()
 
 
+def parts(data: Path, name: str) -> None:
+    """Print the per-part CPU µs of this checkout on ``name`` (see the module docstring, ``--parts``)."""
+    import collections
+    import time
+
+    import numpy as np
+
+    import dynslam2d.detect.mapevidence as me
+    import dynslam2d.slam.matcher as mt
+    from dynslam2d.inputs import open_source
+    from dynslam2d.pipeline import Pipeline
+
+    rel, topic = INPUTS[name]
+    scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+    warm = Pipeline()
+    for s in scans[:WARMUP]:
+        warm.process(s)
+    acc: collections.Counter = collections.Counter()
+
+    def wrap(obj, attr: str, tag: str) -> None:
+        f = getattr(obj, attr)
+
+        def timed(*a, **k):
+            t0 = time.thread_time_ns()
+            r = f(*a, **k)
+            acc[tag] += time.thread_time_ns() - t0
+            return r
+
+        setattr(obj, attr, timed)
+
+    wrap(me, "vacated_outlines_kernel", "vacated-footprint kernel")
+    for k in ("match_level", "accumulate", "fraction_below", "_support_kernel", "_spread_kernel"):
+        wrap(mt, k, "match: kernels (LM, evaluation, support, free space, spread)")
+    pipe = Pipeline()
+    wrap(pipe.slam, "match", "match: whole")
+    wrap(pipe.slam, "update_map", "map: whole update")
+    for lv in pipe.slam.map.levels:  # (the front end's map only: the loop closer's submaps have their own)
+        wrap(lv, "integrate_cells", "map: ray kernels (integrate_cells, all levels)")
+    wrap(pipe.body, "mask", "body filter")
+    wrap(pipe.body, "observe", "body filter")
+    if pipe.ledger is not None:
+        for k in ("before_update", "after_update", "observe", "erase_entering"):
+            wrap(pipe.ledger, k, f"ledger: {k}")
+    if pipe.loops is not None:
+        wrap(pipe.loops, "add", "loops: add")
+        for k, tag in (("_describe", "loops: place descriptor"), ("_search", "loops: searches")):
+            if hasattr(pipe.loops, k):
+                wrap(pipe.loops, k, tag)
+    rows, upd = [], []
+    for s in scans:
+        acc.clear()
+        step = pipe.process(s)
+        rows.append(dict(acc))
+        upd.append(bool(step.map_updated))
+    u = np.array(upd)
+    print(f"{name}: {len(scans)} scans, {int(u.sum())} update the map; CPU µs per scan (median / mean)")
+    print(f"  {'part':<62} {'updating scans':>16} {'other scans':>16}")
+    for tag in sorted({k for r in rows for k in r}):
+        v = np.array([r.get(tag, 0) / 1e3 for r in rows])
+        cols = [f"{np.median(v[m]):7.0f} / {v[m].mean():6.0f}" if m.any() else "-" for m in (u, ~u)]
+        print(f"  {tag:<62} {cols[0]:>16} {cols[1]:>16}")
+    sys.stdout.flush()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("inputs", nargs="+", choices=sorted(INPUTS))
     ap.add_argument("--other", type=Path, default=REPO.parent / "main" / "src", help="the other checkout's src/")
     ap.add_argument("--reps", type=int, default=1, help="lockstep runs per input (pooled)")
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
+    ap.add_argument("--parts", action="store_true", help="instead: per-part CPU of this checkout alone")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.worker:
         worker(args.data, args.inputs[0])
         return
     for name in args.inputs:
-        compare(args.data, name, args.other, args.reps)
+        if args.parts:
+            parts(args.data, name)
+        else:
+            compare(args.data, name, args.other, args.reps)
 
 
 if __name__ == "__main__":

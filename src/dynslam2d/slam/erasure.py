@@ -509,15 +509,19 @@ class EvidenceLedger:
         live = {t.id: t for t in tracks}
         reach = self.config.link_margin + 0.5
         stand = self.config.stand_speed
+        first = self._first
+        hypot = math.hypot
         for t in tracks:
-            a = self._first.get(t.id)
+            tid = t.id
+            a = first.get(tid)
             if a is None:
-                self._first[t.id] = [_box_key(t), stamp, stamp]
-            elif t.id not in removing and math.hypot(*t.velocity.tolist()) < stand:
-                if math.hypot(t.box.px - a[0][0], t.box.py - a[0][1]) <= reach:
+                first[tid] = [_box_key(t), stamp, stamp]
+            elif tid not in removing and hypot(*t.velocity.tolist()) < stand:
+                b, f = t.box, a[0]
+                if hypot(b.px - f[0], b.py - f[1]) <= reach:
                     a[2] = stamp  # still standing where it stood
                 else:
-                    self._first[t.id] = [_box_key(t), stamp, stamp]  # standing at a new place
+                    first[tid] = [_box_key(t), stamp, stamp]  # standing at a new place
         if len(self._first) > len(live):
             self._first = {tid: b for tid, b in self._first.items() if tid in live}
         for tid, led in list(self._ledgers.items()):
