@@ -1,6 +1,8 @@
 """Fast paths of the per-scan work give exactly what the plain computation gives (issue 9/13 speed work):
 the LM matcher's one-pass trial step, the lazily computed match covariance, the reuse of the match's
-scan points by the map update, the map's growth bounds and the ledger's cell count of a dropped record."""
+scan points by the map update, the map's growth bounds, the ledger's cell count of a dropped record and its
+block copy of an update's rows, the beam trigonometry shared by the scans of a laser and the body filter's
+kept drop ranges."""
 
 from __future__ import annotations
 
@@ -299,3 +301,97 @@ def test_ledger_beam_owner_in_one_assignment_equals_per_track_assignment() -> No
                 assert np.array_equal(u, v)
         n5 = int((pend.per_level[0][0] == 5).sum())
         assert n5 > 0 and (int((pend.per_level[0][0] == 8).sum()) < 40 if overlap else True)
+
+
+def test_scan_trig_is_shared_and_gives_the_per_scan_trigonometry() -> None:
+    """Scan.trig computes the beams' cos / sin once per beam geometry (read-only, shared by the scans of a laser);
+    points, the matcher's scan points and the clearing geometry are bit for bit what the per-scan cos / sin of
+    the selected angles give."""
+    from dynslam2d.slam.cleanup import CleanConfig, scan_clearing
+
+    rng = np.random.default_rng(11)
+    a, b = scan_at(Pose2D(0.2, 0.1, 0.3)), scan_at(Pose2D(-0.4, 0.3, -1.0), 0.1)
+    ca, sa = a.trig()
+    assert b.trig()[0] is ca and not ca.flags.writeable and not sa.flags.writeable
+    other = Scan(stamp=0.0, angle_min=-1.0, angle_increment=0.01, ranges=np.full(200, 2.0), range_min=0.05,
+                 range_max=20.0)
+    assert other.trig()[0] is not ca and other.trig()[0].shape == (200,)
+    for _ in range(20):
+        m = a.valid_mask() & (rng.random(a.n_beams) < rng.random())
+        ang = a.angles[m]
+        want = np.column_stack((a.ranges[m] * np.cos(ang), a.ranges[m] * np.sin(ang)))
+        assert np.array_equal(a.points(m), want)
+    slam = HectorSlam(SlamConfig(clear_no_return_dist=2.0))
+    pts, clear = slam.scan_points(a)
+    noret = ~np.isfinite(a.ranges) | (a.ranges > a.range_max) | (a.ranges >= slam.config.laser_max_dist)
+    assert np.array_equal(clear, np.column_stack((2.0 * np.cos(a.angles[noret]), 2.0 * np.sin(a.angles[noret]))))
+    pose = Pose2D(0.3, -0.2, 0.7)
+    with_angles = scan_clearing(a.ranges, a.angles, a.valid_mask(), pose, 0.05, CleanConfig())
+    with_trig = scan_clearing(a.ranges, a.trig(), a.valid_mask(), pose, 0.05, CleanConfig())
+    assert with_angles[0] == with_trig[0]
+    for u, v in zip(with_angles[1:], with_trig[1:]):
+        assert np.array_equal(u, v)
+
+
+def test_ledger_rows_pushed_as_one_block_fold_as_pushed_row_by_row() -> None:
+    """_LevelRecord.push_rows (an update's rows stacked once, one copy per record) folds to what push gives,
+    and a record holding one update counts its cells without a sort as folding would, under the cap too."""
+    rng = np.random.default_rng(8)
+    for cap in (10_000, 30):
+        a, b = _LevelRecord(cap), _LevelRecord(cap)
+        for step in range(40):
+            keys = np.unique(rng.integers(0, 200, rng.integers(1, 50))).astype(np.int64)
+            n = keys.shape[0]
+            delta, ub, ua = rng.normal(size=n), np.where(rng.random(n) < 0.8, step - 1, -1), np.full(n, step)
+            rows = np.empty((4, n + 3), dtype=np.int64)  # with columns of other tracks around
+            rows[:, :n] = np.stack((keys, ub, ua, delta.view(np.int64)))
+            rows[:, n:] = -5
+            if a.push(keys, delta, ub, ua):
+                a.compact()
+            if b.push_rows(rows, 0, n):
+                b.compact()
+        assert a.compact() == b.compact()
+        for f in ("key", "delta", "pure", "last"):
+            assert np.array_equal(getattr(a, f), getattr(b, f))
+        one, ref = _LevelRecord(cap), _LevelRecord(cap)
+        keys = np.arange(0, 90, 2, dtype=np.int64)
+        for rec in (one, ref):
+            rec.push(keys, np.ones(45), np.full(45, -1), np.zeros(45, dtype=np.int64))
+        assert one.new_cells() == ref.compact() == min(45, cap)
+
+
+def test_body_filter_keeps_drop_ranges_equal_to_a_fresh_computation() -> None:
+    """BodyFilter.observe keeps its drop ranges while the body beams and their ranges stay the same: after every
+    scan they equal the ranges computed from scratch from the body beams (edges included)."""
+    from dynslam2d.config import Config
+    from dynslam2d.detect.body import BodyFilter
+
+    cfg = Config().detect.footprint
+    body = BodyFilter(cfg)
+    n = 360
+    rng = np.random.default_rng(2)
+    changes = 0
+    prev = None
+    for i in range(150):
+        pose = Pose2D(0.02 * i, 0.01 * i, 0.03 * i)
+        r = rng.uniform(2.0, 6.0, n)
+        r[100:106] = 0.3 + rng.normal(0.0, 0.005, 6)  # a bumper fixed in the laser frame
+        if i >= 90:
+            r[200:203] = 0.5  # a second part seen from scan 90 on
+        s = Scan(stamp=0.1 * i, angle_min=-math.pi, angle_increment=2 * math.pi / n, ranges=r, range_min=0.05,
+                 range_max=20.0)
+        body.mask(s)
+        body.observe(s, pose)
+        ref_r = np.where(body.body, body._ref, 0.0)
+        grown = ref_r.copy()
+        for d in range(1, int(cfg.auto_edge_beams) + 1):
+            grown[d:] = np.maximum(grown[d:], ref_r[:-d])
+            grown[:-d] = np.maximum(grown[:-d], ref_r[d:])
+        edge = ~body.body & (grown > 0.0)
+        want = ref_r.copy()
+        want[edge] = grown[edge] + cfg.auto_tolerance
+        assert np.array_equal(body.body_ranges, ref_r) and np.array_equal(body._drop_r, want)
+        if prev is not None and not np.array_equal(prev, body.body):
+            changes += 1
+        prev = body.body.copy()
+    assert body.body[100:106].all() and body.body[200:203].all() and changes >= 2

@@ -130,10 +130,10 @@ def _observed_boxes(tracks: list[Track], scan: Scan, pose: Pose2D) -> list[Track
     counts = np.fromiter((len(b) for b in lists), dtype=np.int64, count=len(lists))
     idx = np.concatenate(lists).astype(np.int64, copy=False) if counts.sum() else np.zeros(0, dtype=np.int64)
     r_all = scan.ranges[idx]
-    a_all = scan.angles[idx]
+    cos_a, sin_a = scan.trig()
     ok_all = np.isfinite(r_all)
     with np.errstate(invalid="ignore"):  # ±inf ranges (dropped by ok_all) may meet cos = 0
-        xy_all = pose.transform_points(np.column_stack((r_all * np.cos(a_all), r_all * np.sin(a_all))))
+        xy_all = pose.transform_points(np.column_stack((r_all * cos_a[idx], r_all * sin_a[idx])))
     ends = np.cumsum(counts)
     for k, t in enumerate(tracks):
         lo, hi = int(ends[k] - counts[k]), int(ends[k])
@@ -210,8 +210,8 @@ class Pipeline:
         if cand.shape[0] == 0:
             return
         r = scan.ranges[cand]
-        a = scan.angles[cand]
-        pts = pose.transform_points(np.column_stack((r * np.cos(a), r * np.sin(a))))
+        cos_a, sin_a = scan.trig()
+        pts = pose.transform_points(np.column_stack((r * cos_a[cand], r * sin_a[cand])))
         tc = self.config.detect.tracker
         structure, _, _ = map_evidence(pts, view, tc.map_occupied_logodds, tc.map_free_logodds, tc.map_free_radius)
         spare = cand[structure]
@@ -228,7 +228,7 @@ class Pipeline:
         if view is None or tc.map_vacate_min_cells <= 0 or not tc.map_evidence:
             return view
         cc = self.config.clean
-        origin, cx, cy, clear = scan_clearing(scan.ranges, scan.angles, scan.valid_mask(), pose, view.resolution,
+        origin, cx, cy, clear = scan_clearing(scan.ranges, scan.trig(), scan.valid_mask(), pose, view.resolution,
                                               cc)
         vac = vacated_outlines(view, origin, cx, cy, clear,
                                occupied_logodds=tc.map_occupied_logodds, min_cells=tc.map_vacate_min_cells,
@@ -286,13 +286,15 @@ class Pipeline:
                 if self.loops is not None:
                     self.loops.drop_beams(led.erased_beams)
                 led.erased_beams.clear()
-        if not res.rejected:
+        # the thresholds are tested once: a scan that will not update the map builds no kept copy
+        need = not res.rejected and self.slam.needs_map_update(res.pose)
+        if need or not (res.rejected or res.pose.is_finite()):  # (update_map counts a refused non-finite pose)
             kept = scan.without(removed) if removed.any() else scan
             pending = None
-            if led is not None and tracks and self.slam.needs_map_update(res.pose):
+            if led is not None and tracks and need:
                 pending = led.before_update(scan, res.pose, tracks, removed, self.slam.map,
                                             self.loops.next_index if self.loops is not None else -1)
-            updated = self.slam.update_map(kept, res.pose)
+            updated = self.slam.update_map(kept, res.pose, force=need)
             if pending is not None and updated:
                 led.after_update(pending, self.slam.map)
         t4 = time.perf_counter()

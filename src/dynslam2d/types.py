@@ -23,6 +23,11 @@ ANGLE_COUNT_TOLERANCE_BEAMS = 1.01
 #: Largest |beam angle| accepted, rad. Scanners use [-π, π] or [0, 2π]; anything
 #: beyond two turns is corrupt metadata.
 MAX_ABS_ANGLE = 4.0 * math.pi
+#: (angle_min, angle_increment, beams) → read-only (cos, sin) of the beam angles: every scan of a laser has the
+#: same beam geometry, so the trigonometry is computed once per laser (Scan.trig), not once per scan and stage
+_TRIG: dict[tuple[float, float, int], tuple[np.ndarray, np.ndarray]] = {}
+#: at most this many beam geometries are kept (a log holds one per laser)
+_TRIG_MAX = 16
 
 
 def wrap_angle(a: float | np.ndarray) -> float | np.ndarray:
@@ -178,6 +183,21 @@ class Scan:
             return a
         return self._angles
 
+    def trig(self) -> tuple[np.ndarray, np.ndarray]:
+        """(cos, sin) of :attr:`angles`, (n,) read-only arrays shared by every scan with the same beam
+        geometry (elementwise the same values as ``np.cos(angles[m])`` for any selection ``m``)."""
+        key = (self.angle_min, self.angle_increment, self.n_beams)
+        t = _TRIG.get(key)
+        if t is None:
+            a = self.angles
+            t = (np.cos(a), np.sin(a))
+            for arr in t:
+                arr.flags.writeable = False
+            if len(_TRIG) >= _TRIG_MAX:
+                _TRIG.clear()
+            _TRIG[key] = t
+        return t
+
     @property
     def fov(self) -> float:
         """Field of view covered by the beams, rad (n·|increment|)."""
@@ -208,8 +228,8 @@ class Scan:
         (default: the valid beams). Paper Eq. 4: s_i = (r_i cos α_i, r_i sin α_i)."""
         m = self.valid_mask() if mask is None else mask
         r = self.ranges[m]
-        a = self.angles[m]
-        return np.column_stack((r * np.cos(a), r * np.sin(a)))
+        c, s = self.trig()
+        return np.column_stack((r * c[m], r * s[m]))
 
     def with_ranges(self, ranges: np.ndarray, stamp: float | None = None) -> Scan:
         """A copy with new ranges (same beam geometry), e.g. a filtered scan."""

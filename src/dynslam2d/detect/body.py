@@ -204,7 +204,10 @@ class BodyFilter:
             moved = np.hypot(pose.x - st[:, 0], pose.y - st[:, 1]) >= cfg.auto_min_travel
             turned = np.abs(wrap_angle(pose.theta - st[:, 2])) >= cfg.auto_min_turn
             self._moved[idx[moved & turned]] = True
-        self.body = self._moved & (self._same >= cfg.auto_min_scans) & (self._same >= cfg.auto_share * self._seen)
+        body = self._moved & (self._same >= cfg.auto_min_scans) & (self._same >= cfg.auto_share * self._seen)
+        if np.array_equal(body, self.body) and np.array_equal(self._ref[body], self._body_r[body]):
+            return  # the same body beams at the same ranges (the usual case): the drop ranges stay as they are
+        self.body = body
         self._body_r = np.where(self.body, self._ref, 0.0)
         # the beams next to a body edge see it part of the time (mixed returns): they drop returns up to
         # the nearby body range + 2 tolerances

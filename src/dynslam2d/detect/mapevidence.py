@@ -412,6 +412,10 @@ def vacated_outlines(view: MapView | None, origin: tuple[float, float], cx: np.n
     return VacatedOutlines(rows, cols, int(nc), int(sizes.shape[0]), tuple(int(m) for m in sizes))
 
 
+_NO_CODES = np.zeros(0, dtype=np.int64)
+_NO_CODES.flags.writeable = False
+
+
 class VacatedHistory:
     """Keeps an outline's yield only when it persists: the same outline (at least half of its cells) was a
     yielding candidate in each of the ``scans − 1`` scans before (docs/maps.md, "Vacated footprints"). A
@@ -424,6 +428,10 @@ class VacatedHistory:
 
     def persistent(self, view: MapView, vac: VacatedOutlines) -> VacatedOutlines:
         """``vac`` with only the outlines that persisted; remembers this scan's candidates."""
+        if not vac.sizes and vac.rows.shape[0] == 0:  # no candidate in this scan (the usual case)
+            self._past.append(_NO_CODES)
+            del self._past[:-max(self.scans - 1, 1)]
+            return VacatedOutlines(_NO_CODES, _NO_CODES, vac.seen_through, 0)
         w = 1 << 31
         codes = (vac.rows + view.j0).astype(np.int64) * w + (vac.cols + view.i0)
         past = self._past[-(self.scans - 1):] if self.scans > 1 else []

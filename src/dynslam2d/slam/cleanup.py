@@ -149,7 +149,7 @@ def _count_scan(counts, last, scan_id, ox, oy, hx, hy, cx, cy, core):  # pragma:
 
 
 @njit(cache=True)
-def _scan_geometry(ranges, angles, valid, removed, px, py, th, res, margin_m, grazing_cells,
+def _scan_geometry(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin_m, grazing_cells,
                    min_sin):  # pragma: no cover - numba
     """Endpoints (ex, ey) and clearing ends (cx, cy) of one scan in world cell units (m / res),
     with ``kept`` (valid and not removed: a hit) and ``clear`` (valid and longer than its
@@ -162,8 +162,8 @@ def _scan_geometry(ranges, angles, valid, removed, px, py, th, res, margin_m, gr
     ly = np.zeros(n)
     for i in range(n):
         if valid[i]:
-            lx[i] = ranges[i] * math.cos(angles[i])
-            ly[i] = ranges[i] * math.sin(angles[i])
+            lx[i] = ranges[i] * cos_a[i]
+            ly[i] = ranges[i] * sin_a[i]
     ca = math.cos(th)
     sa = math.sin(th)
     ex = np.empty(n)
@@ -295,8 +295,9 @@ class VisibilityCounter:
         """:func:`_scan_geometry` of one scan (ex, ey, cx, cy, kept, clear)."""
         c = self.config
         rem = removed if removed is not None and removed.shape == valid.shape else np.zeros_like(valid)
+        cos_a, sin_a = scan.trig()
         return _scan_geometry(
-            np.asarray(scan.ranges, dtype=np.float64), scan.angles, valid, np.asarray(rem, dtype=np.bool_), pose.x,
+            np.asarray(scan.ranges, dtype=np.float64), cos_a, sin_a, valid, np.asarray(rem, dtype=np.bool_), pose.x,
             pose.y, pose.theta, self.resolution, c.margin_m, c.grazing_cells,
             math.sin(math.radians(c.min_incidence_deg)))
 
@@ -542,15 +543,27 @@ class CleanupRecorder:
 
 
 
-def scan_clearing(ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray, pose: Pose2D, resolution: float,
+def _read_only_trig(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(cos, sin) of ``angles`` as read-only float64 arrays, the array type :meth:`Scan.trig` gives (numba
+    compiles :func:`_scan_geometry` once for it)."""
+    a = np.asarray(angles, dtype=np.float64)
+    out = (np.cos(a), np.sin(a))
+    for arr in out:
+        arr.flags.writeable = False
+    return out
+
+
+def scan_clearing(ranges: np.ndarray, angles: np.ndarray | tuple[np.ndarray, np.ndarray], valid: np.ndarray,
+                  pose: Pose2D, resolution: float,
                   clean: CleanConfig) -> tuple[tuple[float, float], np.ndarray, np.ndarray, np.ndarray]:
     """The clean-up pass's beam geometry for one scan (docs/maps.md, "What the pass counts"): the laser's
     position and the ends (cx, cy) of the beams' clearing segments, (n,) in world cell units (m /
     ``resolution``), and ``clear`` (n,) bool, the beams with a return (``valid``) longer than their margin
     (``clean.margin_m``, grown to ``clean.grazing_cells · resolution / sin α`` at grazing incidence).
-    ``ranges`` / ``angles``: the beams in the laser frame (m, rad); ``pose``: the laser pose, map frame."""
-    _, _, cx, cy, _, clear = _scan_geometry(np.ascontiguousarray(ranges, dtype=np.float64),
-                                            np.ascontiguousarray(angles, dtype=np.float64),
+    ``ranges`` / ``angles``: the beams in the laser frame (m, rad), or instead of the angles their (cos, sin)
+    (:meth:`Scan.trig`, computed once per laser); ``pose``: the laser pose, map frame."""
+    cos_a, sin_a = angles if isinstance(angles, tuple) else _read_only_trig(angles)
+    _, _, cx, cy, _, clear = _scan_geometry(np.ascontiguousarray(ranges, dtype=np.float64), cos_a, sin_a,
                                             np.ascontiguousarray(valid, dtype=np.bool_),
                                             np.zeros(ranges.shape[0], dtype=np.bool_), float(pose.x), float(pose.y),
                                             float(pose.theta), float(resolution), float(clean.margin_m),

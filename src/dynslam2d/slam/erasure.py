@@ -64,8 +64,8 @@ _PENDING_MIN = 16
 _EMPTY_I = np.zeros(0, dtype=np.int64)
 _EMPTY_F = np.zeros(0)
 _EMPTY_B = np.zeros(0, dtype=bool)
-_EMPTY_I3 = np.zeros((3, 0), dtype=np.int64)
-for _a in (_EMPTY_I, _EMPTY_F, _EMPTY_B, _EMPTY_I3):
+_EMPTY_I4 = np.zeros((4, 0), dtype=np.int64)
+for _a in (_EMPTY_I, _EMPTY_F, _EMPTY_B, _EMPTY_I4):
     _a.flags.writeable = False
 
 
@@ -96,7 +96,7 @@ class _LevelRecord:
     update index) when they pile up and before they are read. At most ``cap`` cells are kept: rows of cells
     first seen after ``cap`` others are dropped."""
 
-    __slots__ = ("cap", "key", "delta", "pure", "last", "_pk", "_pd", "_n_rows", "_n_chunks")
+    __slots__ = ("cap", "key", "delta", "pure", "last", "_pk", "_n_rows", "_n_chunks")
 
     def __init__(self, cap: int) -> None:
         self.cap = cap
@@ -105,28 +105,47 @@ class _LevelRecord:
         self.delta = _EMPTY_F
         self.pure = _EMPTY_B
         self.last = _EMPTY_I
-        self._pk = _EMPTY_I3  # pending rows: key, update index before, update index after
-        self._pd = _EMPTY_F  # pending rows: added log-odds
+        self._pk = _EMPTY_I4  # pending rows: key, update index before, update index after, added log-odds' bits
         self._n_rows = 0
         self._n_chunks = 0
 
+    @property
+    def _pd(self) -> np.ndarray:
+        """The pending buffer's added log-odds (float64 view of its last row)."""
+        return self._pk[3].view(np.float64)
+
+    def _room(self, m: int) -> np.ndarray:
+        """The pending buffer, grown (doubling) to hold ``m`` rows; the buffers are let go when folded."""
+        pk = self._pk
+        if m > pk.shape[1]:
+            grown = np.empty((4, max(_PENDING_MIN, 2 * m)), dtype=np.int64)
+            grown[:, :self._n_rows] = pk[:, :self._n_rows]
+            self._pk = pk = grown
+        return pk
+
     def push(self, key: np.ndarray, delta: np.ndarray, ub: np.ndarray, ua: np.ndarray) -> bool:
-        """Copy the rows of one update (each key at most once, at least one row) into the pending buffers;
+        """Copy the rows of one update (each key at most once, at least one row) into the pending buffer;
         True when they should now be folded (:meth:`compact`)."""
         n = self._n_rows
         m = n + key.shape[0]
-        if m > self._pd.shape[0]:  # grow (doubling; the buffers are let go when folded)
-            size = max(_PENDING_MIN, 2 * m)
-            pk = np.empty((3, size), dtype=np.int64)
-            pd = np.empty(size)
-            pk[:, :n] = self._pk[:, :n]
-            pd[:n] = self._pd[:n]
-            self._pk, self._pd = pk, pd
-        pk = self._pk
+        pk = self._room(m)
         pk[0, n:m] = key
         pk[1, n:m] = ub
         pk[2, n:m] = ua
-        self._pd[n:m] = delta
+        pk[3, n:m] = np.asarray(delta, dtype=np.float64).view(np.int64)
+        self._n_rows = m
+        self._n_chunks += 1
+        return m >= _COMPACT_ROWS or self._n_chunks >= _COMPACT_CHUNKS
+
+    def push_rows(self, rows: np.ndarray, a: int, b: int) -> bool:
+        """:meth:`push` of columns ``a:b`` of ``rows``, a (4, n) int64 array whose rows are the keys, the update
+        indices before and after and the added log-odds' float64 bits (one copy instead of four)."""
+        n = self._n_rows
+        m = n + b - a
+        pk = self._pk
+        if m > pk.shape[1]:  # (_room, inlined: this runs for every track and level at every map update)
+            pk = self._room(m)
+        pk[:, n:m] = rows[:, a:b]
         self._n_rows = m
         self._n_chunks += 1
         return m >= _COMPACT_ROWS or self._n_chunks >= _COMPACT_CHUNKS
@@ -144,13 +163,13 @@ class _LevelRecord:
         if not n:
             return 0
         nb = self.key.shape[0]
-        pk, pd = self._pk, self._pd
+        pk = self._pk
         key = np.concatenate((self.key, pk[0, :n]))
-        delta = np.concatenate((self.delta, pd[:n]))
+        delta = np.concatenate((self.delta, pk[3, :n].view(np.float64)))
         ub = np.concatenate((self.last, pk[1, :n]))
         ua = np.concatenate((self.last, pk[2, :n]))
         start_pure = np.concatenate((self.pure, pk[1, :n] < 0))
-        self._pk, self._pd = _EMPTY_I3, _EMPTY_F
+        self._pk = _EMPTY_I4
         self._n_rows = 0
         self._n_chunks = 0
         order = np.argsort(key, kind="stable")  # per cell: the folded row first, then the updates in order
@@ -181,6 +200,8 @@ class _LevelRecord:
         dropped: counting its distinct cells is much cheaper than folding them)."""
         if not self._n_rows:
             return 0
+        if self._n_chunks == 1 and not self.key.shape[0]:  # one update's rows: each key once
+            return min(self._n_rows, self.cap)
         n = np.unique(np.concatenate((self.key, self._pk[0, :self._n_rows]))).shape[0]
         return min(n, self.cap) - int(self.key.shape[0])  # compact keeps the first ``cap`` cells
 
@@ -198,7 +219,7 @@ class _LevelRecord:
         self.__init__(self.cap)
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, slots=True)
 class _Ledger:
     """What one track's points wrote into the map while it was not removed."""
 
@@ -282,19 +303,24 @@ class EvidenceLedger:
                 owner[t.beams] = t.id
         with np.errstate(invalid="ignore"):
             valid = scan.valid_mask() & (r > self.laser_min_dist) & (r < self.laser_max_dist) & ~removed
-        if not (valid & (owner >= 0)).any():
-            return None
         idx = np.flatnonzero(valid)
-        a = scan.angles[idx]
-        pts = pose.transform_points(np.column_stack((r[idx] * np.cos(a), r[idx] * np.sin(a))))
         own = owner[idx]
         mine_b = own >= 0
+        if not mine_b.any():
+            return None
+        cos_a, sin_a = scan.trig()
+        ri = r[idx]
+        lx, ly = ri * cos_a[idx], ri * sin_a[idx]
+        c, s = math.cos(pose.theta), math.sin(pose.theta)
+        # map frame, contiguous x and y: the values of pose.transform_points on the (n, 2) points
+        xy = (c * lx - s * ly + pose.x, s * lx + c * ly + pose.y)
         ids = own[mine_b]
         flat: list = []
-        per_level = self._level_cells(pts, mine_b, ids, hmap, flat)
+        uids = np.unique(ids)
+        per_level = self._level_cells(None, mine_b, ids, hmap, flat, uids, xy)
         if per_level is None:  # (cells beyond the packed values' range: level by level)
-            per_level, flat = self._level_cells_plain(pts, mine_b, ids, hmap), [None] * len(hmap.levels)
-        present = set(np.unique(ids).tolist())
+            per_level, flat = self._level_cells_plain(np.column_stack(xy), mine_b, ids, hmap), [None] * len(hmap.levels)
+        present = set(uids.tolist())
         kb_all = None
         if self.keep_beams and index >= 0:  # every track's valid beams with one gather, split per track
             vb = valid[allb]
@@ -311,17 +337,19 @@ class EvidenceLedger:
                 led.beams.append((int(index), kb_all[kb_lo[i]:kb_hi[i]]))
         return PendingUpdate(per_level, flat)
 
-    def _level_cells(self, pts: np.ndarray, mine_b: np.ndarray, ids: np.ndarray, hmap: MultiResMap, flat: list
+    def _level_cells(self, pts: np.ndarray | None, mine_b: np.ndarray, ids: np.ndarray, hmap: MultiResMap, flat: list,
+                     uids: np.ndarray | None = None, xy: tuple[np.ndarray, np.ndarray] | None = None
                      ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] | None:
         """:meth:`_level_cells_plain` for all levels with one sort: every point's (level, owner, cell) packed
         into one integer (owner 0 = no track, else 1 + the rank of the track id; cells relative to the
         level's smallest cell), sorted; the distinct values of tracks whose (level, cell) no unowned point
         has are decoded back, in (level, track id, cell key) order. None if the packed values would not fit
         in an int64. Appends to ``flat``, per level, (flat array indices of the cells, i0, j0, shape) when all
-        lie inside the level's array, else None."""
+        lie inside the level's array, else None. ``uids``: ``np.unique(ids)`` if the caller has it; ``xy``: the
+        points' x and y as two contiguous arrays instead of ``pts``."""
         n_lv = len(hmap.levels)
         rs = [lv.resolution for lv in hmap.levels]
-        xs, ys = pts[:, 0], pts[:, 1]
+        xs, ys = (pts[:, 0], pts[:, 1]) if xy is None else xy
         # v ↦ floor(v / r + 0.5) is monotonic: the extreme points give each level's extreme cells
         x0, x1, y0, y1 = float(xs.min()), float(xs.max()), float(ys.min()), float(ys.max())
         lox = [math.floor(x0 / r + 0.5) for r in rs]
@@ -330,11 +358,12 @@ class EvidenceLedger:
         hiy = [math.floor(y1 / r + 0.5) for r in rs]
         wi = max(b - a for a, b in zip(lox, hix)) + 1
         wj = max(b - a for a, b in zip(loy, hiy)) + 1
-        uids = np.unique(ids)  # ids ↦ rank 0 … R−1 in id order
+        if uids is None:
+            uids = np.unique(ids)  # ids ↦ rank 0 … R−1 in id order
         block = (uids.shape[0] + 1) * wi * wj  # one level's values
         if n_lv * block >= 1 << 62:
             return None
-        owner = np.zeros(pts.shape[0], dtype=np.int64)
+        owner = np.zeros(xs.shape[0], dtype=np.int64)
         owner[mine_b] = np.searchsorted(uids, ids) + 1
         res = np.array(rs)[:, None]
         cx = np.floor(xs / res + 0.5).astype(np.int64)  # (L, n) cells, as pts / r_k + 0.5 per level
@@ -348,10 +377,16 @@ class EvidenceLedger:
         u = u[keep]
         lvl, rest = np.divmod(u, block)
         own, cell = np.divmod(rest, wi * wj)
-        at = lvl * (wi * wj) + cell  # (level, cell) without the owner
         theirs = own > 0
-        # a cell another (unowned) kept beam of this scan hits on the same level is the structure's
-        mine = theirs & ~_member(at, at[~theirs]) if not theirs.all() else theirs
+        # a cell another (unowned) kept beam of this scan hits on the same level is the structure's: its
+        # unowned value (level, owner 0, cell) is among the sorted values u
+        if theirs.all():
+            mine = theirs
+        else:
+            q = u - own * (wi * wj)  # each value with owner 0
+            i = np.searchsorted(u, q)
+            i[i == u.shape[0]] = 0
+            mine = theirs & (u[i] != q)
         lvl, own, cell = lvl[mine], own[mine], cell[mine]
         ci, cj = np.divmod(cell, wj)
         ci += np.array(lox, dtype=np.int64)[lvl]
@@ -441,6 +476,11 @@ class EvidenceLedger:
                 delta, ub, ua = after - before, ui_before, ui_after
             else:
                 ids, keys, delta, ub, ua = ids[upd], keys[upd], after[upd] - before[upd], ui_before[upd], ui_after[upd]
+            rows = np.empty((4, ids.shape[0]), dtype=np.int64)  # one copy per record below, not four
+            rows[0] = keys
+            rows[1] = ub
+            rows[2] = ua
+            rows[3] = delta.view(np.int64)
             cut = np.flatnonzero(ids[1:] != ids[:-1]) + 1
             lo = [0, *cut.tolist()]
             hi = [*lo[1:], ids.shape[0]]
@@ -450,7 +490,7 @@ class EvidenceLedger:
                 led = ledgers.get(tid)
                 if led is not None:  # (every group holds rows)
                     rec = led.levels[k]
-                    if rec.push(keys[a:b], delta[a:b], ub[a:b], ua[a:b]):
+                    if rec.push_rows(rows, a, b):
                         added += rec.compact()
             self.stats["cells_recorded"] += added
 
@@ -469,21 +509,25 @@ class EvidenceLedger:
         live = {t.id: t for t in tracks}
         reach = self.config.link_margin + 0.5
         stand = self.config.stand_speed
+        first = self._first
+        hypot = math.hypot
         for t in tracks:
-            a = self._first.get(t.id)
+            tid = t.id
+            a = first.get(tid)
             if a is None:
-                self._first[t.id] = [_box_key(t), stamp, stamp]
-            elif t.id not in removing and math.hypot(*t.velocity.tolist()) < stand:
-                if math.hypot(t.box.px - a[0][0], t.box.py - a[0][1]) <= reach:
+                first[tid] = [_box_key(t), stamp, stamp]
+            elif tid not in removing and hypot(*t.velocity.tolist()) < stand:
+                b, f = t.box, a[0]
+                if hypot(b.px - f[0], b.py - f[1]) <= reach:
                     a[2] = stamp  # still standing where it stood
                 else:
-                    self._first[t.id] = [_box_key(t), stamp, stamp]  # standing at a new place
+                    first[tid] = [_box_key(t), stamp, stamp]  # standing at a new place
         if len(self._first) > len(live):
             self._first = {tid: b for tid, b in self._first.items() if tid in live}
-        for tid in list(self._ledgers):
+        for tid, led in list(self._ledgers.items()):
             t = live.get(tid)
             if t is None:
-                led = self._ledgers.pop(tid)
+                del self._ledgers[tid]
                 if led.last_track is not None:
                     led.last_box = _box_key(led.last_track)
                 if led.confirmed:  # tentative clutter (wall fragments, noise) is never linked
@@ -492,7 +536,6 @@ class EvidenceLedger:
                 else:
                     self._drop(led)  # (its cells count in cells_recorded)
             elif tid not in removing:
-                led = self._ledgers[tid]
                 led.m_start, led.skip, led.linked = None, False, False  # out of the removal set (again)
                 led.last_track = t  # (its box becomes last_box when the track ends)
                 led.last_seen = stamp

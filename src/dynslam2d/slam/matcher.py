@@ -306,7 +306,7 @@ def match_multires(
             lv.prob, pts_m / lv.resolution, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
             pp, lam_k,
         )
-        if not np.all(np.isfinite(out)):
+        if not (math.isfinite(out[0]) and math.isfinite(out[1]) and math.isfinite(out[2])):
             return np.full(3, np.nan)
         pose = lv.pose_to_world(out)
         pose[2] = (pose[2] + math.pi) % (2.0 * math.pi) - math.pi  # wrap after each level (§2.5)
@@ -427,7 +427,20 @@ def angular_spread(pts_m: np.ndarray) -> float:
     if pts_m.shape[0] == 0:
         return 0.0
     sub = pts_m[:: max(1, pts_m.shape[0] // _SPREAD_POINTS)]  # ≥ 1.6 points per 5° bin of a dense full circle
-    return _spread_kernel(sub, np.ones(sub.shape[0], dtype=np.bool_), _N_BINS) * (2.0 * math.pi / _N_BINS)
+    return _spread_kernel(sub, _all_true(sub.shape[0]), _N_BINS) * (2.0 * math.pi / _N_BINS)
+
+
+#: a shared all-True mask for _spread_kernel (it only reads it; kept writeable: numba compiles a read-only
+#: array type as another specialisation)
+_ALL_TRUE = np.ones(2 * _SPREAD_POINTS + 2, dtype=np.bool_)
+
+
+def _all_true(n: int) -> np.ndarray:
+    """(n,) True (a view of a shared buffer, grown when too short; never written)."""
+    global _ALL_TRUE
+    if n > _ALL_TRUE.shape[0]:
+        _ALL_TRUE = np.ones(n, dtype=np.bool_)
+    return _ALL_TRUE[:n]
 
 
 @dataclass(slots=True)
@@ -502,9 +515,9 @@ def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, 
     u = 0.5 * (h[0][2] + h[2][0]) * k
     v = 0.5 * (h[1][2] + h[2][1]) * k
     r = h[2][2]
-    none = Degeneracy(0.0, 0.0, 0.0, np.array([1.0, 0.0]), rho, 0.0, True, True)
-    if not all(math.isfinite(t) for t in (a, b, d, u, v, r)) or not a + d > 0.0:
-        return none
+    if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(d) and math.isfinite(u) and math.isfinite(v)
+            and math.isfinite(r)) or not a + d > 0.0:
+        return Degeneracy(0.0, 0.0, 0.0, np.array([1.0, 0.0]), rho, 0.0, True, True)
     if r > 1e-12 * (a + d):  # rotation marginalized (Schur complement)
         a2, b2, d2 = a - u * u / r, b - u * v / r, d - v * v / r
     else:  # the scan sees no rotation at all
@@ -513,7 +526,7 @@ def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, 
     disc = math.sqrt(max(0.25 * (a2 - d2) ** 2 + b2 * b2, 0.0))
     lam_max, lam_min = half_tr + disc, half_tr - disc
     if not lam_max > 0.0:
-        return none
+        return Degeneracy(0.0, 0.0, 0.0, np.array([1.0, 0.0]), rho, 0.0, True, True)
     # eigenvector of lam_min
     if abs(b2) > 1e-300:
         ax, ay = lam_min - d2, b2

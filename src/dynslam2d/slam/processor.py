@@ -26,6 +26,7 @@ from dynslam2d.slam.correlative import correlative_search
 from dynslam2d.slam.grid import MapTooLargeError, MultiResMap
 from dynslam2d.slam.matcher import (
     Degeneracy,
+    LevelFit,
     angular_spread,
     close_count,
     covariance_world,
@@ -67,6 +68,8 @@ _DEGENERACY_HYSTERESIS = 1.5
 _ODOMETRY_GATE_CHI2 = 11.34
 #: Interpolated probability below which an endpoint counts as landing in known free space.
 FREE_SPACE_PROB = 0.45
+#: the covariance of a scan that was not matched (copied into each MatchResult: callers may change theirs)
+_NO_MATCH_COVARIANCE = np.diag([1e6, 1e6, math.pi**2])
 
 
 @dataclass(slots=True)
@@ -305,9 +308,9 @@ class HectorSlam:
             with np.errstate(invalid="ignore"):
                 # no return: NaN / inf / beyond the sensor's range_max (not "too close")
                 noret = ~np.isfinite(r) | (r > scan.range_max) | (r >= c.laser_max_dist)
-            a = scan.angles[noret]
+            cos_a, sin_a = scan.trig()
             d = c.clear_no_return_dist
-            clear = np.column_stack((d * np.cos(a), d * np.sin(a)))
+            clear = np.column_stack((d * cos_a[noret], d * sin_a[noret]))
         else:
             clear = np.zeros((0, 2))
         return pts, clear
@@ -435,7 +438,7 @@ class HectorSlam:
         first = self.map.empty
         zero = np.zeros((3, 3))
         res = MatchResult(
-            pose=start, start=start, _covariance=np.diag([1e6, 1e6, math.pi**2]), hessian=zero,
+            pose=start, start=start, _covariance=_NO_MATCH_COVARIANCE.copy(), hessian=zero,
             score=0.0, n_points=int(pts.shape[0]), time_gap=gap, first=first, points=pts, clear_points=clear,
             prior=prior.kind, state=self._state,
         )
@@ -543,10 +546,11 @@ class HectorSlam:
             c.max_translation_step, prior_pose, prior_info,
         )
 
-    def _fit(self, res: MatchResult, pts: np.ndarray, pose: Pose2D) -> None:
-        """Hessian, score and covariance of ``pose`` into ``res``."""
+    def _fit(self, res: MatchResult, pts: np.ndarray, pose: Pose2D, fit: LevelFit | None = None) -> None:
+        """Hessian, score and covariance of ``pose`` into ``res`` (``fit``: already evaluated there)."""
         c = self.config
-        fit = evaluate(self.map.levels[0], pts, pose.as_array(), c.hector_gradient_bug)
+        if fit is None:
+            fit = evaluate(self.map.levels[0], pts, pose.as_array(), c.hector_gradient_bug)
         res.pose = pose
         res.hessian = fit.hessian
         res.score = fit.score
@@ -633,15 +637,19 @@ class HectorSlam:
         levels = self.map.levels
         start = res.start.as_array()
 
+        last_fit: list = []  # (pose bytes, LevelFit) of the latest refine: _fit reuses it at the same pose
+
         def refine(seed: np.ndarray) -> tuple[np.ndarray, float]:
             p = match_multires(
                 levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
                 c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
                 c.max_translation_step, prior_pose, prior_info,
             )
-            if not np.all(np.isfinite(p)):
+            if not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
                 return p, -1.0
-            return p, evaluate(levels[0], pts, p).score
+            fit = evaluate(levels[0], pts, p)
+            last_fit[:] = [p.tobytes(), fit]
+            return p, fit.score
 
         def search() -> tuple[np.ndarray, float] | None:
             lvl = levels[min(c.correlative_level, len(levels) - 1)]
@@ -684,7 +692,7 @@ class HectorSlam:
                 # the searched window is a plausible motion: the jump limits open to it
                 jump_d, jump_a = max(jump_d, math.sqrt(2.0) * rec.linear_window), max(jump_a, rec.angular_window)
 
-        if not np.all(np.isfinite(best_p)):
+        if not (math.isfinite(best_p[0]) and math.isfinite(best_p[1]) and math.isfinite(best_p[2])):
             res.rejected = True
             res.reason = REJECT_NON_FINITE
             return
@@ -694,9 +702,13 @@ class HectorSlam:
             res.rejected = True
             res.reason = REJECT_JUMP
             return
-        self._fit(res, pts, pose)
+        at = pose.as_array()
+        # the final refine's evaluation at this same pose (its H, cost and score: evaluate with the same
+        # gradient weights), instead of evaluating it again
+        self._fit(res, pts, pose, last_fit[1] if last_fit and not c.hector_gradient_bug
+                  and last_fit[0] == at.tobytes() else None)
         avg = self._score_avg
-        res.free_fraction = free_fraction(levels[min(1, len(levels) - 1)], pts, pose.as_array(), FREE_SPACE_PROB)
+        res.free_fraction = free_fraction(levels[min(1, len(levels) - 1)], pts, at, FREE_SPACE_PROB)
         if res.score < c.reject_score_min or (avg is not None and res.score < c.reject_score_ratio * avg):
             res.rejected = True
             res.reason = REJECT_LOW_SCORE

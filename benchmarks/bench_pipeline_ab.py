@@ -1,0 +1,194 @@
+"""Whole-pipeline CPU time per scan and per stage of two checkouts, in lockstep (not run by pytest).
+
+``bench_tracker_ab.py --pipeline`` swaps only ``detect/tracker.py``; a change anywhere else in the per-scan path
+(matcher, map update, evidence ledger, map evidence, filter, pipeline glue) needs both whole checkouts. Two
+worker processes, one per checkout (``PYTHONPATH``), each open the input, warm their kernels on its first 60
+scans with a throw-away pipeline, then process the scans one at a time when told to: the parent sends scan
+``i`` to one worker, waits, then to the other (which one goes first alternates with ``i``), so both run on the
+same core under the same load, scan by scan. Each worker times ``Pipeline.process`` in thread CPU time
+(``time.thread_time_ns``) and reports its stage timings (``StepResult.timings``) in thread CPU time too (the
+pipeline's ``time.perf_counter`` is swapped for ``time.thread_time`` in the worker). Printed per input: median
+CPU ms per scan of each checkout, their ratio, the median of the per-scan ratios, and the median of every stage
+(``map_update`` also over the scans that updated the map).
+
+    taskset -c 1 python benchmarks/bench_pipeline_ab.py negative_2/right negative_2/left negative_2/rear \
+        --other /work/main/src [--reps 1]
+
+``--parts`` instead runs this checkout alone (after the same warm-up) with thread-CPU timers around the parts of
+the per-scan path outside the tracker and prints, per part, the median and mean µs over the scans that update
+the map and over the others: the map update's ray kernel, the vacated-footprint kernel, the matcher's kernels
+and the whole match, the evidence ledger's methods, the body filter and the loop closer's ``add`` with its
+place descriptor and searches.
+
+Inputs: the names of ``bench_digest.py`` (paths under ``--data``). Both workers inherit this process's CPU
+affinity: pin the parent with ``taskset``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_digest import INPUTS  # noqa: E402
+
+WARMUP = 60
+
+
+def worker(data: Path, name: str) -> None:
+    """Serve ``go`` lines on stdin: process the next scan, answer one JSON line (CPU ms, stage ms, updated)."""
+    import time
+    import types
+
+    import dynslam2d.pipeline as pl
+    from dynslam2d.inputs import open_source
+
+    rel, topic = INPUTS[name]
+    scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+    warm = pl.Pipeline()
+    for s in scans[:WARMUP]:
+        warm.process(s)
+    del warm
+    pl.time = types.SimpleNamespace(perf_counter=time.thread_time)  # stage timings in thread CPU time
+    pipe = pl.Pipeline()
+    print(json.dumps({"scans": len(scans)}), flush=True)
+    for i, line in enumerate(sys.stdin):
+        if i >= len(scans) or line.strip() != "go":
+            break
+        t0 = time.thread_time_ns()
+        step = pipe.process(scans[i])
+        cpu = (time.thread_time_ns() - t0) / 1e6
+        print(json.dumps({"cpu": cpu, "t": step.timings, "u": bool(step.map_updated)}), flush=True)
+
+
+def compare(data: Path, name: str, other: Path, reps: int) -> None:
+    """Run both checkouts over ``name`` ``reps`` times in lockstep and print the comparison."""
+    cpu: dict[str, list[float]] = {"other": [], "this": []}
+    stages: dict[str, dict[str, list[float]]] = {"other": {}, "this": {}}
+    upd: dict[str, list[bool]] = {"other": [], "this": []}
+    for _ in range(reps):
+        procs = {}
+        for tag, src in (("other", other.resolve()), ("this", REPO / "src")):
+            env = dict(os.environ, PYTHONPATH=str(src))
+            procs[tag] = subprocess.Popen(
+                [sys.executable, str(Path(__file__).resolve()), "--worker", name, "--data", str(data)],
+                env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        n = min(json.loads(p.stdout.readline())["scans"] for p in procs.values())
+        for i in range(n):
+            for tag in (("other", "this") if i % 2 == 0 else ("this", "other")):
+                p = procs[tag]
+                p.stdin.write("go\n")
+                p.stdin.flush()
+                r = json.loads(p.stdout.readline())
+                cpu[tag].append(r["cpu"])
+                upd[tag].append(r["u"])
+                for k, v in r["t"].items():
+                    stages[tag].setdefault(k, []).append(v)
+        for p in procs.values():
+            p.stdin.close()
+            p.wait()
+    mo, mt = statistics.median(cpu["other"]), statistics.median(cpu["this"])
+    per = statistics.median(t / o for t, o in zip(cpu["this"], cpu["other"]))
+    print(f"{name}: {len(cpu['this'])} scans, pipeline CPU ms/scan median: other {mo:.3f}, this {mt:.3f}, "
+          f"ratio {mt / mo:.3f} (median per-scan ratio {per:.3f})")
+    for k in stages["this"]:
+        a, b = statistics.median(stages["other"][k]), statistics.median(stages["this"][k])
+        print(f"  {k:<11} other {a:7.3f}  this {b:7.3f}  ratio {b / a if a else float('nan'):.3f}")
+    for tag in ("other", "this"):
+        mu = [v for v, u in zip(stages[tag]["map_update"], upd[tag]) if u]
+        if mu:
+            print(f"  map_update on updated scans ({len(mu)}), {tag}: {statistics.median(mu):.3f}")
+    sys.stdout.flush()
+
+
+def parts(data: Path, name: str) -> None:
+    """Print the per-part CPU µs of this checkout on ``name`` (see the module docstring, ``--parts``)."""
+    import collections
+    import time
+
+    import numpy as np
+
+    import dynslam2d.detect.mapevidence as me
+    import dynslam2d.slam.matcher as mt
+    from dynslam2d.inputs import open_source
+    from dynslam2d.pipeline import Pipeline
+
+    rel, topic = INPUTS[name]
+    scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+    warm = Pipeline()
+    for s in scans[:WARMUP]:
+        warm.process(s)
+    acc: collections.Counter = collections.Counter()
+
+    def wrap(obj, attr: str, tag: str) -> None:
+        f = getattr(obj, attr)
+
+        def timed(*a, **k):
+            t0 = time.thread_time_ns()
+            r = f(*a, **k)
+            acc[tag] += time.thread_time_ns() - t0
+            return r
+
+        setattr(obj, attr, timed)
+
+    wrap(me, "vacated_outlines_kernel", "vacated-footprint kernel")
+    for k in ("match_level", "accumulate", "fraction_below", "_support_kernel", "_spread_kernel"):
+        wrap(mt, k, "match: kernels (LM, evaluation, support, free space, spread)")
+    pipe = Pipeline()
+    wrap(pipe.slam, "match", "match: whole")
+    wrap(pipe.slam, "update_map", "map: whole update")
+    for lv in pipe.slam.map.levels:  # (the front end's map only: the loop closer's submaps have their own)
+        wrap(lv, "integrate_cells", "map: ray kernels (integrate_cells, all levels)")
+    wrap(pipe.body, "mask", "body filter")
+    wrap(pipe.body, "observe", "body filter")
+    if pipe.ledger is not None:
+        for k in ("before_update", "after_update", "observe", "erase_entering"):
+            wrap(pipe.ledger, k, f"ledger: {k}")
+    if pipe.loops is not None:
+        wrap(pipe.loops, "add", "loops: add")
+        for k, tag in (("_describe", "loops: place descriptor"), ("_search", "loops: searches")):
+            if hasattr(pipe.loops, k):
+                wrap(pipe.loops, k, tag)
+    rows, upd = [], []
+    for s in scans:
+        acc.clear()
+        step = pipe.process(s)
+        rows.append(dict(acc))
+        upd.append(bool(step.map_updated))
+    u = np.array(upd)
+    print(f"{name}: {len(scans)} scans, {int(u.sum())} update the map; CPU µs per scan (median / mean)")
+    print(f"  {'part':<62} {'updating scans':>16} {'other scans':>16}")
+    for tag in sorted({k for r in rows for k in r}):
+        v = np.array([r.get(tag, 0) / 1e3 for r in rows])
+        cols = [f"{np.median(v[m]):7.0f} / {v[m].mean():6.0f}" if m.any() else "-" for m in (u, ~u)]
+        print(f"  {tag:<62} {cols[0]:>16} {cols[1]:>16}")
+    sys.stdout.flush()
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("inputs", nargs="+", choices=sorted(INPUTS))
+    ap.add_argument("--other", type=Path, default=REPO.parent / "main" / "src", help="the other checkout's src/")
+    ap.add_argument("--reps", type=int, default=1, help="lockstep runs per input (pooled)")
+    ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
+    ap.add_argument("--parts", action="store_true", help="instead: per-part CPU of this checkout alone")
+    ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.worker:
+        worker(args.data, args.inputs[0])
+        return
+    for name in args.inputs:
+        if args.parts:
+            parts(args.data, name)
+        else:
+            compare(args.data, name, args.other, args.reps)
+
+
+if __name__ == "__main__":
+    main()
