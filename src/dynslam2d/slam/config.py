@@ -375,6 +375,13 @@ class SlamConfig(BaseModel):
         0.35, ge=0.0, le=1.0,
         description="… and its correlative score is at least this (score units 0 … 1).",
     )
+    relocalise_runner_up_wrap: bool = Field(
+        True,
+        description="The relocalisation's runner-up neighbourhood (0.3 rad) wraps around the circle: its ±π search "
+        "holds the best pose turned by 2π, which without the wrap is its own runner-up (margin 0) whenever the "
+        "answer lies within 0.3 rad of the prediction ± π; false = the behaviour before (docs/slam.md, "
+        "\"Large motion between scans\").",
+    )
     low_confidence_share: float = Field(
         0.05, ge=0.0, le=1.0,
         description="Runs where more than this share of the scans is matched with low support (or lost), or "
@@ -453,6 +460,13 @@ class SlamConfig(BaseModel):
     recovery_distinct_angle: float = Field(
         0.2, gt=0.0,
         description="… or rotated more than this, rad.",
+    )
+    recovery_runner_up_wrap: bool = Field(
+        True,
+        description="The recovery search's runner-up neighbourhood wraps around the circle: a window grown to ±π "
+        "(gaps above 2.2 s) or just short of it holds the best pose (nearly) turned by 2π, which without the wrap "
+        "is taken as the runner-up and refines back onto the best pose, so the real alternative is never seeded "
+        "and the margin is overstated; false = the behaviour before (docs/slam.md, \"Large motion between scans\").",
     )
 
     @model_validator(mode="after")

@@ -208,6 +208,29 @@ def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr, excl):  # pragma: no cov
     return bk, bdx, bdy, best
 
 
+def _wrapped_rows(dth: np.ndarray, k: int, ek: int, step: float) -> np.ndarray | None:
+    """Rows (rotation offsets ``dth``, rad, evenly ``step`` apart) within ±``ek`` steps of row ``k`` around the
+    circle, as a mask; None when the window does not reach around (the plain index range ±``ek`` is exact).
+
+    A window of ±π or more holds every orientation twice (rows k and k ± 2π/step): the index distance is taken
+    modulo that period (the loop closure's far search, measured so). A window just short of ±π holds its two
+    ends within the neighbourhood of each other around the circle: there the angles themselves decide.
+    """
+    if step <= 0.0:
+        return None
+    n = dth.shape[0]
+    period = int(round(2.0 * math.pi / step))
+    rows = np.arange(n)
+    if period and n > period:
+        off = np.abs(rows - k) % period
+        return np.minimum(off, period - off) <= ek
+    if 2.0 * math.pi - (dth[-1] - dth[0]) > ek * step:
+        return None
+    d = np.abs(np.remainder(dth - dth[k] + math.pi, 2.0 * math.pi) - math.pi)
+    near = d <= ek * step * (1.0 + 1e-9)
+    return None if np.array_equal(near, np.abs(rows - k) <= ek) else near
+
+
 #: Exclusion box that leaves nothing out (k0 > k1).
 _NO_EXCL = np.array([1, 0, 0, 0, 0, 0], dtype=np.int64)
 
@@ -255,8 +278,10 @@ def correlative_search(
 
     ``runner_up_wrap``: the runner-up's rotation neighbourhood wraps around the circle — a search over
     every rotation (window ≥ π) holds the best orientation at θ and θ ± 2π too, and without it the
-    "runner-up" can be the best pose itself turned by 2π (default False: the behaviour the front end's
-    recovery and relocalisation were measured with).
+    "runner-up" can be the best pose itself turned by 2π; a window just short of π holds its two ends within
+    the neighbourhood of each other. Default False: the plain index neighbourhood (the front end's
+    ``recovery_runner_up_wrap`` / ``relocalise_runner_up_wrap`` and the loop closure's ``runner_up_wrap``
+    choose it per call site).
     """
     if level.empty or pts_m.shape[0] == 0:
         return None
@@ -300,13 +325,11 @@ def correlative_search(
         step = angular_window / max(n_half, 1)
         ek = int(math.ceil(runner_up_angle / step)) if step > 0 else 0
         excl = np.array([k - ek, k + ek, dx - ec, dx + ec, dy - ec, dy + ec], dtype=np.int64)
-        period = int(round(2.0 * math.pi / step)) if step > 0 else 0
-        if runner_up_wrap and period and th.shape[0] > period:
-            # rows k and k ± period are the same orientation: the rows within ±ek of the best one around the
-            # circle go first, so that one contiguous exclusion box covers all of them
+        near = _wrapped_rows(dth, k, ek, step) if runner_up_wrap else None
+        if near is not None:
+            # the rows within ±ek of the best one around the circle go first, so that one contiguous
+            # exclusion box covers all of them
             rows = np.arange(th.shape[0])
-            off = np.abs(rows - k) % period
-            near = np.minimum(off, period - off) <= ek
             perm = np.concatenate((rows[near], rows[~near]))
             excl[0], excl[1] = 0, int(near.sum()) - 1
             k2, dx2, dy2, s2 = branch_and_bound(pyr, np.ascontiguousarray(qx0[perm]), np.ascontiguousarray(qy0[perm]),

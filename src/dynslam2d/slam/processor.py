@@ -612,7 +612,7 @@ class HectorSlam:
         cr = correlative_search(
             lvl, pts, prior.pose.as_array(), c.relocalise_linear_window, c.relocalise_angular_window,
             c.correlative_angular_step, c.correlative_max_points, c.correlative_max_height,
-            0.0, 0.0, runner_up_distance=0.5, runner_up_angle=0.3,
+            0.0, 0.0, runner_up_distance=0.5, runner_up_angle=0.3, runner_up_wrap=c.relocalise_runner_up_wrap,
         )
         res.used_correlative = True
         if cr is None or cr.score < c.relocalise_min_score or cr.score - (cr.runner_up or 0.0) < c.relocalise_margin:

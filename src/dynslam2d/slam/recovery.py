@@ -19,7 +19,10 @@ match, then
    is replaced only by a pose scoring ``recovery_switch_margin`` higher;
 3. calls the match *ambiguous* when the best pose farther than ``recovery_distinct_distance``
    / ``recovery_distinct_angle`` from the winner scores within ``recovery_margin`` of it:
-   the pose is still reported, but the scan is kept out of the map.
+   the pose is still reported, but the scan is kept out of the map. The search's runner-up
+   neighbourhood wraps around the circle (``recovery_runner_up_wrap``): in a window of ±π, or
+   just short of it, the best pose turned by 2π would otherwise be the runner-up, refine back onto
+   the best pose and leave the real alternative unseeded (the margin overstated).
 
 It runs only on measured conditions: a stamp gap above ``recovery_min_gap``, or, when
 ``recovery_score_ratio`` is above 0 (default 0: gaps only), a match score below that fraction of
@@ -153,6 +156,7 @@ def recover(
             lvl, pts, centre, lin, ang, c.correlative_angular_step, c.correlative_max_points,
             c.correlative_max_height, c.correlative_translation_weight, c.correlative_rotation_weight,
             runner_up_distance=c.recovery_distinct_distance, runner_up_angle=c.recovery_distinct_angle,
+            runner_up_wrap=c.recovery_runner_up_wrap,
         )
         if cr is None:
             continue
