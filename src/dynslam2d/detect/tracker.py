@@ -40,6 +40,7 @@ import bisect
 import copy
 import math
 from collections import deque
+from itertools import chain as _chain
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -53,7 +54,9 @@ from dynslam2d.detect.kernels import (
     fragment_hosts,
     gate_costs,
     kalman_update_batch,
+    leg_pairs,
     measure_batch,
+    nearest_ages,
     segment_means,
 )
 from dynslam2d.detect.layout import (
@@ -253,6 +256,7 @@ class Tracker:
         self._angles = search_angles(self.config.fit.angle_step_deg)
         tc = self.config.tracker
         self._free = FreeSpaceMemory(tc.free_ref_ages, tc.free_margin) if tc.free_space_check else None
+        self._ref_ages = np.array(self._free.ref_ages if self._free is not None else (), dtype=np.float64)
         self._cur_ref = None
         self._map: MapView | None = None  # the SLAM map given with the current scan (read only)
         self._pose: Pose2D | None = None
@@ -617,31 +621,11 @@ class Tracker:
         the other stands does not move the person's centre by a full stride, so its speed does not jump.
         Returns the detection list and the per-detection batch arrays, merged pairs appended at the end."""
         fc = self.config.fit
-        # (the detections' lo / hi / centroid are rows of lohi / fits: one vectorised test)
-        ext = np.maximum(lohi[:, L_HI1] - lohi[:, L_LO1], lohi[:, L_HI2] - lohi[:, L_LO2])
-        sel = np.flatnonzero((npts >= 2) & (ext <= fc.leg_max_extent))
-        if sel.shape[0] < 2:
+        first, second = leg_pairs(lohi, npts, fits[:, FIT_CENTROID], float(fc.leg_max_extent),
+                                  float(fc.leg_pair_distance))
+        if first.shape[0] == 0:
             return dets, kinds, fits, lohi, rel, starts, npts, px, py
-        small = sel.tolist()
-        cen = fits[sel, FIT_CENTROID]
-        d2 = np.hypot(cen[:, None, 0] - cen[None, :, 0], cen[:, None, 1] - cen[None, :, 1])
-        np.fill_diagonal(d2, np.inf)
-        pairs: list[tuple[int, int]] = []
-        used: set[int] = set()
-        ns, dmax = len(small), fc.leg_pair_distance
-        dflat = d2.ravel()
-        # the pairs within dmax, nearest first (the order of a full argsort, of which only these were read)
-        cand = np.flatnonzero(dflat <= dmax)
-        if cand.shape[0] == 0:
-            return dets, kinds, fits, lohi, rel, starts, npts, px, py
-        for flat in cand[np.argsort(dflat[cand], kind="stable")].tolist():
-            a, b = divmod(flat, ns)
-            if a in used or b in used or a > b:
-                continue
-            used.update((a, b))
-            pairs.append((small[a], small[b]))
-        if not pairs:
-            return dets, kinds, fits, lohi, rel, starts, npts, px, py
+        pairs = list(zip(first.tolist(), second.tolist()))
         drop = {j for pr in pairs for j in pr}
         keep = [j for j in range(len(dets)) if j not in drop]
         new_dets = [dets[j] for j in keep]
@@ -1006,36 +990,29 @@ class Tracker:
     def _vacated(self, tracks: list[_Track], t: float) -> dict[int, float]:
         """Per track id: the largest fraction of its earlier points (at the free-space reference ages)
         that the current scan sees through — a receding object leaves free space behind its visible
-        face. One vectorised test for all tracks."""
+        face. The stored scans nearest each reference age are found for all tracks in one kernel call
+        (:func:`dynslam2d.detect.kernels.nearest_ages`, the search of :func:`_nearest_age`), their points
+        tested in one vectorised call."""
         out: dict[int, float] = {}
         if self._free is None or self._cur_ref is None:
             return out
-        chunks: list[np.ndarray] = []
-        owners: list[int] = []
-        counts: list[int] = [0]
-        ref_ages = self._free.ref_ages
-        bisect_left = bisect.bisect_left
-        for k in tracks:
-            past = k.past
-            if not past:
-                continue
-            npast = len(past)
-            stamps = k.past_t
-            last = -2
-            for a in ref_ages:
-                j = _nearest_age(stamps, npast, t, a, bisect_left)
-                if j != last and t - stamps[j] > 0.0:  # (the same stored scan for two ages: tested once)
-                    last = j
-                    pts = past[j][1]
-                    chunks.append(pts)
-                    owners.append(k.id)
-                    counts.append(pts.shape[0])
-        if not chunks:
+        sel = [k for k in tracks if k.past]
+        if not sel:
             return out
+        counts = [len(k.past_t) for k in sel]
+        stamps = np.fromiter(_chain.from_iterable([k.past_t for k in sel]), np.float64, sum(counts))
+        ii, jj = nearest_ages(stamps, np.array(counts, dtype=np.int64), t, self._ref_ages)
+        if ii.shape[0] == 0:
+            return out
+        chunks = [sel[i].past[j][1] for i, j in zip(ii.tolist(), jj.tolist())]
+        counts = [0]
+        counts.extend([c.shape[0] for c in chunks])
         free = self._free.seen_through_by(self._cur_ref, np.concatenate(chunks))
         frac = segment_means(free.astype(np.float64), np.cumsum(counts)).tolist()
-        for tid, f in zip(owners, frac):
-            out[tid] = max(out.get(tid, 0.0), f)
+        get = out.get
+        for i, f in zip(ii.tolist(), frac):
+            tid = sel[i].id
+            out[tid] = max(get(tid, 0.0), f)
         return out
 
     def _birth(self, det: Detection, t: float, j: int) -> None:
