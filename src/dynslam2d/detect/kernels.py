@@ -835,3 +835,42 @@ def leg_pairs(lohi: np.ndarray, npts: np.ndarray, centroid: np.ndarray, leg_max_
         second[npair] = small[b]
         npair += 1
     return first[:npair], second[:npair]
+
+
+@njit(cache=True)
+def size_jump_gate(ok: np.ndarray, lohi: np.ndarray, tmax: np.ndarray, known: np.ndarray, ratio: float,
+                   jump: float) -> tuple:
+    """The association's size-jump test (``Tracker._associate``) in one pass: (ok', det_ext) where det_ext (m,) is
+    each detection's longer extent max(hi1 − lo1, hi2 − lo2) (m; NaN as numpy's maximum) and ok' = ok minus the
+    pairs of a track whose size is ``known`` and a detection longer than ``ratio`` × the track's longest side
+    ``tmax`` (m) + ``jump`` (m). ``ok`` is not written."""
+    n, m = ok.shape
+    ext = np.empty(m)
+    for j in range(m):
+        e1 = lohi[j, L_HI1] - lohi[j, L_LO1]
+        e2 = lohi[j, L_HI2] - lohi[j, L_LO2]
+        ext[j] = e1 if (e1 >= e2 or e1 != e1) else e2  # (np.maximum)
+    out = np.empty((n, m), dtype=np.bool_)
+    for i in range(n):
+        lim = ratio * tmax[i] + jump
+        kn = known[i]
+        for j in range(m):
+            out[i, j] = ok[i, j] and (ext[j] <= lim or not kn)
+    return out, ext
+
+
+@njit(cache=True)
+def accel_candidates(X_prior: np.ndarray, X_new: np.ndarray, lim2: float) -> np.ndarray:
+    """Rows r whose velocity change from ``X_prior`` to ``X_new`` ((r, 4) states [x, y, vx, vy], m/s) has a squared
+    norm above ``lim2`` ((m/s)²): the only rows the acceleration bound of ``Tracker._bound_acceleration`` tests
+    exactly."""
+    n = X_prior.shape[0]
+    out = np.empty(n, dtype=np.int64)
+    m = 0
+    for r in range(n):
+        dvx = X_new[r, 2] - X_prior[r, 2]
+        dvy = X_new[r, 3] - X_prior[r, 3]
+        if dvx * dvx + dvy * dvy > lim2:
+            out[m] = r
+            m += 1
+    return out[:m]
