@@ -23,12 +23,17 @@ kernels) and how much in ``detect/tracker.py``'s own Python, µs per scan.
 ``Pipeline.process`` call in thread CPU time, the two alternately first: the median CPU ms per scan of each and their
 ratio — the figure bench_real.py's ms/scan (a wall-time median) gives on a quiet machine, robust to other load.
 
+``--phases`` runs the two whole pipelines in lockstep as ``--pipeline`` does and splits each ``Tracker.update`` into
+its steps (prediction, detection, association, vacated space, Kalman / shape updates, management and the test of M,
+fragments, births, reports; the rest of ``update`` apart): thread CPU µs per scan of each step, inclusive, for each
+checkout (the timers add about 1 µs per timed call).
+
 ``--check`` runs both checkouts' trackers over every scan of an input in lockstep and compares their reports
 exactly (every field of every track, floats and arrays bit for bit, the stats and the removed beams): a
 speed change of the tracker must print "reports identical".
 
     python benchmarks/bench_tracker_ab.py negative_2/right positive_7 [--other ../main/src] [--reps 5]
-        [--start 150 --end 210] [--stages | --split | --check | --pipeline]
+        [--start 150 --end 210] [--stages | --split | --check | --pipeline | --phases]
 
 Pin to one core with ``taskset -c N``. Inputs: ``negative_2/left|rear|right``, ``positive_7``, ``overtakes``,
 ``demo``, ``sim:drive`` (paths under ``--data``).
@@ -176,6 +181,50 @@ def pipeline_ab(scans: list, other) -> tuple[float, float, float]:
             statistics.median(t / o for t, o in zip(cpu["this"], cpu["other"])))
 
 
+#: the steps of Tracker.update that --phases times (methods of the tracker, each called from update)
+_PHASES = ("_predict", "_detect", "_associate", "_vacated", "_update_pairs", "_manage", "_hosts_of_fragments", "_birth",
+           "_report")
+
+
+def phases_ab(scans: list, other) -> dict[str, dict[str, float]]:
+    """Per checkout ("other", "this"): thread CPU µs per scan of each step of ``Tracker.update`` (:data:`_PHASES`,
+    inclusive) and of the rest of ``update`` ("update (rest)"), two pipelines in lockstep over every scan after a
+    warm-up."""
+    from dynslam2d.detect import tracker as this
+    from dynslam2d.pipeline import Pipeline
+
+    warm = Pipeline()
+    for s in scans[:60]:
+        warm.process(s)
+    acc: dict[str, collections.Counter] = {"other": collections.Counter(), "this": collections.Counter()}
+    pipes = {}
+    for tag, mod in (("other", other), ("this", this)):
+        p = Pipeline()
+        p.tracker = mod.Tracker(p.config.detect)
+        for name in _PHASES + ("update",):
+            f = getattr(p.tracker, name, None)
+            if f is None:
+                continue
+
+            def timed(*a, _f=f, _c=acc[tag], _n=name, **k):
+                t0 = time.thread_time_ns()
+                r = _f(*a, **k)
+                _c[_n] += time.thread_time_ns() - t0
+                return r
+
+            setattr(p.tracker, name, timed)  # (an instance attribute: update's self._x(...) calls find it)
+        pipes[tag] = p
+    for i, s in enumerate(scans):
+        for tag in (("other", "this") if i % 2 == 0 else ("this", "other")):
+            pipes[tag].process(s)
+    out = {}
+    for tag, c in acc.items():
+        d = {k: v / 1e3 / len(scans) for k, v in c.items()}
+        d["update (rest)"] = d.pop("update") - sum(d.values())
+        out[tag] = d
+    return out
+
+
 #: functions of other modules that Tracker.update calls (module attribute of detect/tracker.py → label)
 _SPLIT = ("segment_scan", "fit_clusters", "classify_batch", "admit_long_clusters", "map_evidence", "gate_costs",
           "measure_batch", "kalman_update_batch", "fragment_hosts", "segment_means", "linear_sum_assignment")
@@ -270,6 +319,8 @@ def main() -> None:
                     help="instead: run both checkouts' trackers over every scan and compare their reports exactly")
     ap.add_argument("--pipeline", action="store_true",
                     help="instead: median CPU ms per scan of the whole pipeline with each checkout's tracker")
+    ap.add_argument("--phases", action="store_true",
+                    help="instead: CPU µs per scan of each step of Tracker.update, both checkouts in lockstep")
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     args = ap.parse_args()
     other = None if args.stages or args.split else other_tracker_module(args.other)
@@ -289,6 +340,14 @@ def main() -> None:
             mo, mt, med = pipeline_ab(scans, other)
             print(f"{name:<18} pipeline CPU ms/scan, median over {len(scans)} scans: other {mo:.3f}, this {mt:.3f}, "
                   f"ratio {mt / mo:.3f} (median per scan {med:.3f})")
+        elif args.phases:
+            ph = phases_ab(scans, other)
+            to, tt = sum(ph["other"].values()), sum(ph["this"].values())
+            print(f"{name}: Tracker.update CPU µs/scan by step, other → this (ratio); total {to:.0f} → {tt:.0f} "
+                  f"({tt / to:.3f})")
+            for k in sorted(ph["this"], key=lambda q: -ph["other"].get(q, 0.0)):
+                o, t = ph["other"].get(k, 0.0), ph["this"][k]
+                print(f"  {k:<22} {o:7.1f} → {t:7.1f}" + (f"  ({t / o:.2f})" if o > 0 else ""))
         elif args.stages:
             total, parts = stages(scans)
             print(f"{name}: {total:.2f} ms CPU per scan")

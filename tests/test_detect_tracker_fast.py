@@ -13,6 +13,7 @@ from conftest import room_box_scan
 
 from dynslam2d.detect import DetectConfig, Tracker
 from dynslam2d.detect.kernels import segment_means
+from dynslam2d.detect.layout import F_CENTROID_X, F_CENTROID_Y, N_FIT_COLS
 from dynslam2d.detect.tracker import _nearest_age
 from dynslam2d.types import Pose2D, Scan
 
@@ -163,7 +164,9 @@ def test_leg_pairs_kernel_matches_the_numpy_pairing() -> None:
         npts = rng.integers(1, 12, m)
         cen = np.round(rng.uniform(-2, 2, (m, 2)) * 5) / 5  # (a 0.2 m grid: ties)
         want = _leg_pairs_numpy(lohi, npts, cen, 0.25, 0.5)
-        a, b = leg_pairs(lohi, npts, cen, 0.25, 0.5)
+        fits = np.zeros((m, N_FIT_COLS))
+        fits[:, F_CENTROID_X], fits[:, F_CENTROID_Y] = cen[:, 0], cen[:, 1]
+        a, b = leg_pairs(lohi, npts, fits, 0.25, 0.5)
         assert list(zip(a.tolist(), b.tolist())) == want
         merged += len(want)
     assert merged > 500

@@ -782,15 +782,16 @@ def nearest_ages(stamps: np.ndarray, counts: np.ndarray, t: float, ages: np.ndar
 
 
 @njit(cache=True)
-def leg_pairs(lohi: np.ndarray, npts: np.ndarray, centroid: np.ndarray, leg_max_extent: float,
+def leg_pairs(lohi: np.ndarray, npts: np.ndarray, fits: np.ndarray, leg_max_extent: float,
               pair_distance: float) -> tuple:
     """The pairs of legs that ``Tracker._merge_legs`` merges into people, in one pass (map frame, m).
 
     Legs: detections with ≥ 2 points whose extent (``lohi``, columns L_*) is at most ``leg_max_extent`` on both
-    axes. Pairs: the leg pairs whose centroids (``centroid``, (m, 2)) lie within ``pair_distance`` of each other,
+    axes. Pairs: the leg pairs whose centroids (columns F_CENTROID_* of ``fits``, (m, N_FIT_COLS)) lie within ``pair_distance`` of each other,
     taken greedily nearest first (a stable sort of the distances in the row-major order of the legs' distance
     matrix), each leg at most once. Returns (first, second) detection indices of the pairs in the order taken,
-    first < second. The distances are ``hypot`` of the coordinate differences, as numpy's."""
+    first < second. The distances are ``hypot`` of the coordinate differences, as numpy's. (``fits`` whole, not a
+    column slice: a non-contiguous argument is compiled again on every first call, the cache does not keep it.)"""
     m = npts.shape[0]
     small = np.empty(m, dtype=np.int64)
     ns = 0
@@ -811,7 +812,7 @@ def leg_pairs(lohi: np.ndarray, npts: np.ndarray, centroid: np.ndarray, leg_max_
             if a == b:
                 continue  # (the diagonal: inf, never within reach)
             jb = small[b]
-            d = np.hypot(centroid[ja, 0] - centroid[jb, 0], centroid[ja, 1] - centroid[jb, 1])
+            d = np.hypot(fits[ja, F_CENTROID_X] - fits[jb, F_CENTROID_X], fits[ja, F_CENTROID_Y] - fits[jb, F_CENTROID_Y])
             if d <= pair_distance:
                 flat[nc] = a * ns + b
                 dist[nc] = d

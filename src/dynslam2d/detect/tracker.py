@@ -628,8 +628,7 @@ class Tracker:
         the other stands does not move the person's centre by a full stride, so its speed does not jump.
         Returns the detection list and the per-detection batch arrays, merged pairs appended at the end."""
         fc = self.config.fit
-        first, second = leg_pairs(lohi, npts, fits[:, FIT_CENTROID], float(fc.leg_max_extent),
-                                  float(fc.leg_pair_distance))
+        first, second = leg_pairs(lohi, npts, fits, float(fc.leg_max_extent), float(fc.leg_pair_distance))
         if first.shape[0] == 0:
             return dets, kinds, fits, lohi, rel, starts, npts, px, py
         pairs = list(zip(first.tolist(), second.tolist()))
