@@ -25,8 +25,8 @@ ratio — the figure bench_real.py's ms/scan (a wall-time median) gives on a qui
 
 ``--phases`` runs the two whole pipelines in lockstep as ``--pipeline`` does and splits each ``Tracker.update`` into
 its steps (prediction, detection, association, vacated space, Kalman / shape updates, management and the test of M,
-fragments, births, reports; the rest of ``update`` apart): thread CPU µs per scan of each step, inclusive, for each
-checkout (the timers add about 1 µs per timed call).
+fragments, births, reports; the rest of ``update`` apart): for each checkout the median over the scans of the
+thread CPU µs of each step, inclusive (the timers add about 1 µs per timed call).
 
 ``--check`` runs both checkouts' trackers over every scan of an input in lockstep and compares their reports
 exactly (every field of every track, floats and arrays bit for bit, the stats and the removed beams): a
@@ -187,16 +187,19 @@ _PHASES = ("_predict", "_detect", "_associate", "_vacated", "_update_pairs", "_m
 
 
 def phases_ab(scans: list, other) -> dict[str, dict[str, float]]:
-    """Per checkout ("other", "this"): thread CPU µs per scan of each step of ``Tracker.update`` (:data:`_PHASES`,
-    inclusive) and of the rest of ``update`` ("update (rest)"), two pipelines in lockstep over every scan after a
-    warm-up."""
+    """Per checkout ("other", "this"): the median over the scans of the thread CPU µs that each step of
+    ``Tracker.update`` (:data:`_PHASES`, inclusive) took in the scan, of the rest of ``update`` ("update (rest)") and
+    of the whole ``update`` ("total"), two pipelines in lockstep over every scan after a warm-up over every scan
+    (medians: a one-off pause of the shared machine or a late first call does not count)."""
     from dynslam2d.detect import tracker as this
     from dynslam2d.pipeline import Pipeline
 
     warm = Pipeline()
-    for s in scans[:60]:
+    for s in scans:  # (every scan: a kernel first called late, e.g. on scan 339, would load in one side's timed run)
         warm.process(s)
     acc: dict[str, collections.Counter] = {"other": collections.Counter(), "this": collections.Counter()}
+    per: dict[str, dict[str, list[float]]] = {"other": collections.defaultdict(list),
+                                              "this": collections.defaultdict(list)}
     pipes = {}
     for tag, mod in (("other", other), ("this", this)):
         p = Pipeline()
@@ -216,13 +219,15 @@ def phases_ab(scans: list, other) -> dict[str, dict[str, float]]:
         pipes[tag] = p
     for i, s in enumerate(scans):
         for tag in (("other", "this") if i % 2 == 0 else ("this", "other")):
+            c = acc[tag]
+            c.clear()
             pipes[tag].process(s)
-    out = {}
-    for tag, c in acc.items():
-        d = {k: v / 1e3 / len(scans) for k, v in c.items()}
-        d["update (rest)"] = d.pop("update") - sum(d.values())
-        out[tag] = d
-    return out
+            total = c["update"]
+            per[tag]["total"].append(total / 1e3)
+            per[tag]["update (rest)"].append((total - sum(c[n] for n in _PHASES)) / 1e3)
+            for n in _PHASES:
+                per[tag][n].append(c[n] / 1e3)
+    return {tag: {k: statistics.median(v) for k, v in d.items()} for tag, d in per.items()}
 
 
 #: functions of other modules that Tracker.update calls (module attribute of detect/tracker.py → label)
@@ -342,9 +347,9 @@ def main() -> None:
                   f"ratio {mt / mo:.3f} (median per scan {med:.3f})")
         elif args.phases:
             ph = phases_ab(scans, other)
-            to, tt = sum(ph["other"].values()), sum(ph["this"].values())
-            print(f"{name}: Tracker.update CPU µs/scan by step, other → this (ratio); total {to:.0f} → {tt:.0f} "
-                  f"({tt / to:.3f})")
+            to, tt = ph["other"].pop("total"), ph["this"].pop("total")
+            print(f"{name}: Tracker.update CPU µs per scan, medians over the scans, other → this (ratio): "
+                  f"{to:.0f} → {tt:.0f} ({tt / to:.3f}); by step:")
             for k in sorted(ph["this"], key=lambda q: -ph["other"].get(q, 0.0)):
                 o, t = ph["other"].get(k, 0.0), ph["this"][k]
                 print(f"  {k:<22} {o:7.1f} → {t:7.1f}" + (f"  ({t / o:.2f})" if o > 0 else ""))
