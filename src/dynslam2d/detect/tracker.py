@@ -1070,11 +1070,7 @@ class Tracker:
         window, need_hits = tc.confirm_window, tc.confirm_hits
         max_coast, max_sig, max_speed = tc.max_coast_time, tc.max_position_sigma, tc.max_object_speed
         sqrt, hypot = math.sqrt, math.hypot
-        # (every track's state and covariance as lists in two calls: Python floats, as ndarray.item of each entry)
-        order = self._rows()
-        x_rows = self._X[order].tolist()
-        p_rows = self._P[order].reshape(-1, 16).tolist()
-        for k, xr, pr in zip(self._tracks, x_rows, p_rows):
+        for k in self._tracks:
             kid = k.id
             is_upd = kid in updated
             if kid in merged and not is_upd and k.in_m:
@@ -1111,17 +1107,19 @@ class Tracker:
                 st.deleted_coasting += 1
                 st.tracks_deleted += 1
                 continue
-            if not k.p_finite or sqrt(max(pr[0], pr[5])) > max_sig:  # P[0, 0], P[1, 1]
+            P = k.P
+            if not k.p_finite or sqrt(max(P.item(0), P.item(5))) > max_sig:  # P[0, 0], P[1, 1]
                 st.deleted_covariance += 1
                 st.tracks_deleted += 1
                 continue
-            speed = hypot(xr[2], xr[3])
+            x = k.x
+            speed = hypot(x.item(2), x.item(3))
             if speed > max_speed:
                 st.deleted_speed += 1
                 st.tracks_deleted += 1
                 continue
             if is_upd:
-                self._dynamic(k, speed, t, xr, pr)
+                self._dynamic(k, speed, t)
                 if mem:
                     if k.in_m:
                         self._memory_bookkeeping(k, t)
@@ -1135,13 +1133,13 @@ class Tracker:
             self._order = None
         self._tracks = keep
 
-    def _dynamic(self, k: _Track, speed: float, t: float, xr: list[float], pr: list[float]) -> None:
-        """Paper Eq. 3 with persistence, certainty and displacement conditions (``xr`` / ``pr``: the track's state
-        and its covariance, row-major, as lists of floats)."""
+    def _dynamic(self, k: _Track, speed: float, t: float) -> None:
+        """Paper Eq. 3 with persistence, certainty and displacement conditions."""
         tc = self.config.tracker
-        p22, p23, p32, p33 = pr[10], pr[11], pr[14], pr[15]  # P[2:, 2:]
+        P = k.P
+        p22, p23, p32, p33 = P.item(10), P.item(11), P.item(14), P.item(15)  # P[2:, 2:]
         if speed > 1e-9:
-            u0, u1 = xr[2] / speed, xr[3] / speed
+            u0, u1 = k.x.item(2) / speed, k.x.item(3) / speed
             sig = math.sqrt(max((u0 * p22 + u1 * p32) * u0 + (u0 * p23 + u1 * p33) * u1, 0.0))  # uᵀ P_v u
         else:
             sig = math.sqrt(max(p22, p33))
