@@ -148,8 +148,9 @@ def _leg_pairs_numpy(lohi: np.ndarray, npts: np.ndarray, cen: np.ndarray, lmax: 
 
 
 def test_leg_pairs_kernel_matches_the_numpy_pairing() -> None:
-    """leg_pairs against the numpy pairing it replaced on random scenes of legs, walls and clutter, with centres on
-    a coarse grid (equal distances: the stable order decides) and NaN extents."""
+    """leg_pairs against the numpy pairing it replaced on random scenes of legs, walls and clutter, with centres
+    anywhere (numba's np.hypot is libm's, as numpy's) or on a coarse grid (equal distances: the stable order
+    decides), and NaN extents."""
     from dynslam2d.detect.kernels import leg_pairs
 
     rng = np.random.default_rng(5)
@@ -162,7 +163,9 @@ def test_leg_pairs_kernel_matches_the_numpy_pairing() -> None:
         if m and rng.random() < 0.1:
             lohi[rng.integers(m), rng.integers(4)] = np.nan
         npts = rng.integers(1, 12, m)
-        cen = np.round(rng.uniform(-2, 2, (m, 2)) * 5) / 5  # (a 0.2 m grid: ties)
+        cen = rng.uniform(-2, 2, (m, 2))
+        if rng.random() < 0.5:
+            cen = np.round(cen * 5) / 5  # (a 0.2 m grid: equal distances, the order decides)
         want = _leg_pairs_numpy(lohi, npts, cen, 0.25, 0.5)
         fits = np.zeros((m, N_FIT_COLS))
         fits[:, F_CENTROID_X], fits[:, F_CENTROID_Y] = cen[:, 0], cen[:, 1]
