@@ -787,11 +787,11 @@ def leg_pairs(lohi: np.ndarray, npts: np.ndarray, fits: np.ndarray, leg_max_exte
     """The pairs of legs that ``Tracker._merge_legs`` merges into people, in one pass (map frame, m).
 
     Legs: detections with ≥ 2 points whose extent (``lohi``, columns L_*) is at most ``leg_max_extent`` on both
-    axes. Pairs: the leg pairs whose centroids (columns F_CENTROID_* of ``fits``, (m, N_FIT_COLS)) lie within ``pair_distance`` of each other,
-    taken greedily nearest first (a stable sort of the distances in the row-major order of the legs' distance
-    matrix), each leg at most once. Returns (first, second) detection indices of the pairs in the order taken,
-    first < second. The distances are ``hypot`` of the coordinate differences, as numpy's. (``fits`` whole, not a
-    column slice: a non-contiguous argument is compiled again on every first call, the cache does not keep it.)"""
+    axes. Pairs: the leg pairs whose centroids (columns F_CENTROID_* of ``fits``, (m, N_FIT_COLS)) lie within
+    ``pair_distance`` of each other, taken greedily nearest first (a stable sort of the distances in the row-major
+    order of the legs' distance matrix), each leg at most once. Returns (first, second) detection indices of the
+    pairs in the order taken, first < second. The distances are ``np.hypot`` of the coordinate differences (libm's
+    hypot, as numpy's; not CPython's ``math.hypot``, whose last bit can differ)."""
     m = npts.shape[0]
     small = np.empty(m, dtype=np.int64)
     ns = 0
@@ -812,7 +812,8 @@ def leg_pairs(lohi: np.ndarray, npts: np.ndarray, fits: np.ndarray, leg_max_exte
             if a == b:
                 continue  # (the diagonal: inf, never within reach)
             jb = small[b]
-            d = np.hypot(fits[ja, F_CENTROID_X] - fits[jb, F_CENTROID_X], fits[ja, F_CENTROID_Y] - fits[jb, F_CENTROID_Y])
+            d = np.hypot(fits[ja, F_CENTROID_X] - fits[jb, F_CENTROID_X],
+                         fits[ja, F_CENTROID_Y] - fits[jb, F_CENTROID_Y])
             if d <= pair_distance:
                 flat[nc] = a * ns + b
                 dist[nc] = d

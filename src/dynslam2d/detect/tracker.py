@@ -40,8 +40,8 @@ import bisect
 import copy
 import math
 from collections import deque
-from itertools import chain as _chain
 from dataclasses import asdict, dataclass, field
+from itertools import chain as _chain
 
 import numpy as np
 
@@ -70,10 +70,6 @@ from dynslam2d.detect.layout import (
     KIND_NAMES,
     KIND_POINT,
     KIND_RECT,
-    L_HI1,
-    L_HI2,
-    L_LO1,
-    L_LO2,
     LOHI_HI,
     LOHI_LO,
     SIZE_LOWER,
