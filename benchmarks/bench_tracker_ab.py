@@ -23,12 +23,17 @@ kernels) and how much in ``detect/tracker.py``'s own Python, µs per scan.
 ``Pipeline.process`` call in thread CPU time, the two alternately first: the median CPU ms per scan of each and their
 ratio — the figure bench_real.py's ms/scan (a wall-time median) gives on a quiet machine, robust to other load.
 
+``--phases`` runs the two whole pipelines in lockstep as ``--pipeline`` does and splits each ``Tracker.update`` into
+its steps (prediction, detection, association, vacated space, Kalman / shape updates, management and the test of M,
+fragments, births, reports; the rest of ``update`` apart): for each checkout the median over the scans of the
+thread CPU µs of each step, inclusive (the timers add about 1 µs per timed call).
+
 ``--check`` runs both checkouts' trackers over every scan of an input in lockstep and compares their reports
 exactly (every field of every track, floats and arrays bit for bit, the stats and the removed beams): a
 speed change of the tracker must print "reports identical".
 
     python benchmarks/bench_tracker_ab.py negative_2/right positive_7 [--other ../main/src] [--reps 5]
-        [--start 150 --end 210] [--stages | --split | --check | --pipeline]
+        [--start 150 --end 210] [--stages | --split | --check | --pipeline | --phases]
 
 Pin to one core with ``taskset -c N``. Inputs: ``negative_2/left|rear|right``, ``positive_7``, ``overtakes``,
 ``demo``, ``sim:drive`` (paths under ``--data``).
@@ -176,6 +181,55 @@ def pipeline_ab(scans: list, other) -> tuple[float, float, float]:
             statistics.median(t / o for t, o in zip(cpu["this"], cpu["other"])))
 
 
+#: the steps of Tracker.update that --phases times (methods of the tracker, each called from update)
+_PHASES = ("_predict", "_detect", "_associate", "_vacated", "_update_pairs", "_manage", "_hosts_of_fragments", "_birth",
+           "_report")
+
+
+def phases_ab(scans: list, other) -> dict[str, dict[str, float]]:
+    """Per checkout ("other", "this"): the median over the scans of the thread CPU µs that each step of
+    ``Tracker.update`` (:data:`_PHASES`, inclusive) took in the scan, of the rest of ``update`` ("update (rest)") and
+    of the whole ``update`` ("total"), two pipelines in lockstep over every scan after a warm-up over every scan
+    (medians: a one-off pause of the shared machine or a late first call does not count)."""
+    from dynslam2d.detect import tracker as this
+    from dynslam2d.pipeline import Pipeline
+
+    warm = Pipeline()
+    for s in scans:  # (every scan: a kernel first called late, e.g. on scan 339, would load in one side's timed run)
+        warm.process(s)
+    acc: dict[str, collections.Counter] = {"other": collections.Counter(), "this": collections.Counter()}
+    per: dict[str, dict[str, list[float]]] = {"other": collections.defaultdict(list),
+                                              "this": collections.defaultdict(list)}
+    pipes = {}
+    for tag, mod in (("other", other), ("this", this)):
+        p = Pipeline()
+        p.tracker = mod.Tracker(p.config.detect)
+        for name in _PHASES + ("update",):
+            f = getattr(p.tracker, name, None)
+            if f is None:
+                continue
+
+            def timed(*a, _f=f, _c=acc[tag], _n=name, **k):
+                t0 = time.thread_time_ns()
+                r = _f(*a, **k)
+                _c[_n] += time.thread_time_ns() - t0
+                return r
+
+            setattr(p.tracker, name, timed)  # (an instance attribute: update's self._x(...) calls find it)
+        pipes[tag] = p
+    for i, s in enumerate(scans):
+        for tag in (("other", "this") if i % 2 == 0 else ("this", "other")):
+            c = acc[tag]
+            c.clear()
+            pipes[tag].process(s)
+            total = c["update"]
+            per[tag]["total"].append(total / 1e3)
+            per[tag]["update (rest)"].append((total - sum(c[n] for n in _PHASES)) / 1e3)
+            for n in _PHASES:
+                per[tag][n].append(c[n] / 1e3)
+    return {tag: {k: statistics.median(v) for k, v in d.items()} for tag, d in per.items()}
+
+
 #: functions of other modules that Tracker.update calls (module attribute of detect/tracker.py → label)
 _SPLIT = ("segment_scan", "fit_clusters", "classify_batch", "admit_long_clusters", "map_evidence", "gate_costs",
           "measure_batch", "kalman_update_batch", "fragment_hosts", "segment_means", "linear_sum_assignment")
@@ -270,6 +324,8 @@ def main() -> None:
                     help="instead: run both checkouts' trackers over every scan and compare their reports exactly")
     ap.add_argument("--pipeline", action="store_true",
                     help="instead: median CPU ms per scan of the whole pipeline with each checkout's tracker")
+    ap.add_argument("--phases", action="store_true",
+                    help="instead: CPU µs per scan of each step of Tracker.update, both checkouts in lockstep")
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     args = ap.parse_args()
     other = None if args.stages or args.split else other_tracker_module(args.other)
@@ -289,6 +345,14 @@ def main() -> None:
             mo, mt, med = pipeline_ab(scans, other)
             print(f"{name:<18} pipeline CPU ms/scan, median over {len(scans)} scans: other {mo:.3f}, this {mt:.3f}, "
                   f"ratio {mt / mo:.3f} (median per scan {med:.3f})")
+        elif args.phases:
+            ph = phases_ab(scans, other)
+            to, tt = ph["other"].pop("total"), ph["this"].pop("total")
+            print(f"{name}: Tracker.update CPU µs per scan, medians over the scans, other → this (ratio): "
+                  f"{to:.0f} → {tt:.0f} ({tt / to:.3f}); by step:")
+            for k in sorted(ph["this"], key=lambda q: -ph["other"].get(q, 0.0)):
+                o, t = ph["other"].get(k, 0.0), ph["this"][k]
+                print(f"  {k:<22} {o:7.1f} → {t:7.1f}" + (f"  ({t / o:.2f})" if o > 0 else ""))
         elif args.stages:
             total, parts = stages(scans)
             print(f"{name}: {total:.2f} ms CPU per scan")

@@ -13,6 +13,7 @@ from conftest import room_box_scan
 
 from dynslam2d.detect import DetectConfig, Tracker
 from dynslam2d.detect.kernels import segment_means
+from dynslam2d.detect.layout import F_CENTROID_X, F_CENTROID_Y, N_FIT_COLS
 from dynslam2d.detect.tracker import _nearest_age
 from dynslam2d.types import Pose2D, Scan
 
@@ -86,3 +87,112 @@ def test_vacated_space_of_a_receding_box_matches_the_plain_search() -> None:
             checked += len(got)
             high += any(v > 0.5 for v in got.values())
     assert checked >= 30 and high >= 20  # the box's track had vacated space at almost every step
+
+
+def test_nearest_ages_kernel_picks_what_the_per_track_search_picked() -> None:
+    """nearest_ages (all tracks in one call) against the per-track loop it replaced: _nearest_age per reference
+    age, an entry kept when it differs from the last kept one and is older than t, −1 standing for the last entry
+    (Python's index) — on random stamp lists with repeats, NaN stamps and a NaN time."""
+    from dynslam2d.detect.kernels import nearest_ages
+
+    rng = random.Random(11)
+    kept_total = 0
+    for _ in range(3000):
+        lists = []
+        for _ in range(rng.randint(1, 6)):
+            x, st = rng.choice([0.0, 1.3e9]), []
+            for _ in range(rng.randint(1, 20)):
+                x += rng.choice([0.0, 1e-7, 0.0667, 0.1, 0.3])
+                st.append(x)
+            if rng.random() < 0.05:
+                st[rng.randrange(len(st))] = math.nan
+            lists.append(st)
+        t = max(s[-1] for s in lists if not math.isnan(s[-1])) if rng.random() < 0.97 else math.nan
+        t += rng.choice([0.0, 0.05, 0.3, 1.0])
+        ages = (0.3, 0.8, rng.random())
+        want = []
+        for i, st in enumerate(lists):
+            last = -2
+            for a in ages:
+                j = _nearest_age(st, len(st), t, a)
+                if j != last and t - st[j] > 0.0:
+                    last = j
+                    want.append((i, j if j >= 0 else len(st) - 1))
+        ii, jj = nearest_ages(np.array([x for st in lists for x in st]), np.array([len(s) for s in lists]), t,
+                              np.array(ages))
+        assert list(zip(ii.tolist(), jj.tolist())) == want
+        kept_total += len(want)
+    assert kept_total > 5000
+
+
+def _leg_pairs_numpy(lohi: np.ndarray, npts: np.ndarray, cen: np.ndarray, lmax: float, dmax: float) -> list:
+    """The leg pairing as first written with numpy (Tracker._merge_legs before the kernel)."""
+    ext = np.maximum(lohi[:, 2] - lohi[:, 0], lohi[:, 3] - lohi[:, 1])
+    sel = np.flatnonzero((npts >= 2) & (ext <= lmax))
+    if sel.shape[0] < 2:
+        return []
+    small = sel.tolist()
+    c = cen[sel]
+    d2 = np.hypot(c[:, None, 0] - c[None, :, 0], c[:, None, 1] - c[None, :, 1])
+    np.fill_diagonal(d2, np.inf)
+    dflat = d2.ravel()
+    cand = np.flatnonzero(dflat <= dmax)
+    pairs, used = [], set()
+    for flat in cand[np.argsort(dflat[cand], kind="stable")].tolist():
+        a, b = divmod(flat, len(small))
+        if a in used or b in used or a > b:
+            continue
+        used.update((a, b))
+        pairs.append((small[a], small[b]))
+    return pairs
+
+
+def test_leg_pairs_kernel_matches_the_numpy_pairing() -> None:
+    """leg_pairs against the numpy pairing it replaced on random scenes of legs, walls and clutter, with centres
+    anywhere (numba's np.hypot is libm's, as numpy's) or on a coarse grid (equal distances: the stable order
+    decides), and NaN extents."""
+    from dynslam2d.detect.kernels import leg_pairs
+
+    rng = np.random.default_rng(5)
+    merged = 0
+    for _ in range(2000):
+        m = int(rng.integers(0, 25))
+        lo = rng.uniform(-5, 5, (m, 2))
+        ext = rng.choice([0.05, 0.1, 0.2, 0.3, 1.5], (m, 2))
+        lohi = np.column_stack((lo, lo + ext))
+        if m and rng.random() < 0.1:
+            lohi[rng.integers(m), rng.integers(4)] = np.nan
+        npts = rng.integers(1, 12, m)
+        cen = rng.uniform(-2, 2, (m, 2))
+        if rng.random() < 0.5:
+            cen = np.round(cen * 5) / 5  # (a 0.2 m grid: equal distances, the order decides)
+        want = _leg_pairs_numpy(lohi, npts, cen, 0.25, 0.5)
+        fits = np.zeros((m, N_FIT_COLS))
+        fits[:, F_CENTROID_X], fits[:, F_CENTROID_Y] = cen[:, 0], cen[:, 1]
+        a, b = leg_pairs(lohi, npts, fits, 0.25, 0.5)
+        assert list(zip(a.tolist(), b.tolist())) == want
+        merged += len(want)
+    assert merged > 500
+
+
+def test_size_jump_gate_and_accel_candidates_match_numpy() -> None:
+    """The association's size-jump gate and the acceleration bound's candidate rows against the numpy
+    expressions they replaced (NaN extents and sizes included)."""
+    from dynslam2d.detect.kernels import accel_candidates, size_jump_gate
+
+    rng = np.random.default_rng(3)
+    for _ in range(500):
+        n, m = int(rng.integers(1, 30)), int(rng.integers(1, 30))
+        ok = rng.random((n, m)) < 0.7
+        lohi = rng.uniform(-1, 1, (m, 4))
+        lohi[:, 2:] = lohi[:, :2] + rng.choice([0.0, 0.1, 0.5, 3.0], (m, 2))
+        tmax = rng.choice([0.05, 0.3, 1.0, np.nan], n)
+        known = rng.random(n) < 0.5
+        det_ext = np.maximum(lohi[:, 2] - lohi[:, 0], lohi[:, 3] - lohi[:, 1])
+        want = ok & ((det_ext[None, :] <= 2.0 * tmax[:, None] + 0.3) | ~known[:, None])
+        got, ext = size_jump_gate(ok, lohi, tmax, known, 2.0, 0.3)
+        assert np.array_equal(got, want) and ext.tobytes() == det_ext.tobytes()
+        Xp, Xn = rng.normal(size=(n, 4)), rng.normal(size=(n, 4))
+        lim2 = (0.999 * float(rng.uniform(0.1, 2.0))) ** 2
+        dvx, dvy = Xn[:, 2] - Xp[:, 2], Xn[:, 3] - Xp[:, 3]
+        assert accel_candidates(Xp, Xn, lim2).tolist() == np.flatnonzero(dvx * dvx + dvy * dvy > lim2).tolist()

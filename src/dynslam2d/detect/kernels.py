@@ -718,3 +718,161 @@ def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.n
         for j in range(m):
             ok[i, j] = math.isfinite(d2[i, j]) and d2[i, j] < gate_chi2 and near[i, j]
     return d2, near, ok
+
+
+@njit(cache=True)
+def nearest_ages(stamps: np.ndarray, counts: np.ndarray, t: float, ages: np.ndarray) -> tuple:
+    """The stored scans each track tests for vacated space (``Tracker._vacated``), for all tracks in one call.
+
+    ``stamps``: the increasing stamps (s) of every track's stored scans, concatenated; ``counts``: (n,) how many
+    belong to each track (≥ 1). For track i and each age a of ``ages`` (s), in order: the entry whose age at ``t``
+    is nearest a among the six around the insertion point of t − a (the first on ties; −1 when no age is
+    comparable, NaN, which then stands for the track's last entry, as Python's index −1), kept when it differs
+    from the last kept one of the track and is older than ``t``. Returns (track index, entry index within the
+    track) of the kept ones, track by track, ages in order — the search of ``tracker._nearest_age`` (bisect, then
+    the window's argmin walked from ins − 1) with the same comparisons."""
+    n = counts.shape[0]
+    na = ages.shape[0]
+    out_i = np.empty(n * na, dtype=np.int64)
+    out_j = np.empty(n * na, dtype=np.int64)
+    m = 0
+    base = 0
+    for i in range(n):
+        cnt = counts[i]
+        last = -2
+        for q_a in range(na):
+            a = ages[q_a]
+            x = t - a
+            lo, hi = 0, cnt  # bisect_left(stamps, x)
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if stamps[base + mid] < x:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            ins = lo
+            wlo = ins - 3 if ins > 3 else 0
+            q0 = ins - 1 if ins > 0 else 0
+            j = -1
+            best = np.inf
+            qend = ins + 3 if ins + 3 < cnt else cnt
+            for q in range(q0, qend):
+                dev = abs((t - stamps[base + q]) - a)
+                if dev < best:
+                    j = q
+                    best = dev
+                elif dev > best:
+                    break
+            q = q0 - 1
+            while q >= wlo:
+                dev = abs((t - stamps[base + q]) - a)
+                if not dev <= best:
+                    break
+                j = q
+                best = dev
+                q -= 1
+            jj = j if j >= 0 else cnt - 1  # (Python's stamps[-1])
+            if j != last and t - stamps[base + jj] > 0.0:
+                last = j
+                out_i[m] = i
+                out_j[m] = jj
+                m += 1
+        base += cnt
+    return out_i[:m], out_j[:m]
+
+
+@njit(cache=True)
+def leg_pairs(lohi: np.ndarray, npts: np.ndarray, fits: np.ndarray, leg_max_extent: float,
+              pair_distance: float) -> tuple:
+    """The pairs of legs that ``Tracker._merge_legs`` merges into people, in one pass (map frame, m).
+
+    Legs: detections with ≥ 2 points whose extent (``lohi``, columns L_*) is at most ``leg_max_extent`` on both
+    axes. Pairs: the leg pairs whose centroids (columns F_CENTROID_* of ``fits``, (m, N_FIT_COLS)) lie within
+    ``pair_distance`` of each other, taken greedily nearest first (a stable sort of the distances in the row-major
+    order of the legs' distance matrix), each leg at most once. Returns (first, second) detection indices of the
+    pairs in the order taken, first < second. The distances are ``np.hypot`` of the coordinate differences (libm's
+    hypot, as numpy's; not CPython's ``math.hypot``, whose last bit can differ)."""
+    m = npts.shape[0]
+    small = np.empty(m, dtype=np.int64)
+    ns = 0
+    for j in range(m):
+        if npts[j] >= 2 and lohi[j, L_HI1] - lohi[j, L_LO1] <= leg_max_extent and \
+                lohi[j, L_HI2] - lohi[j, L_LO2] <= leg_max_extent:
+            small[ns] = j
+            ns += 1
+    empty = np.empty(0, dtype=np.int64)
+    if ns < 2:
+        return empty, empty
+    flat = np.empty(ns * ns, dtype=np.int64)
+    dist = np.empty(ns * ns)
+    nc = 0
+    for a in range(ns):
+        ja = small[a]
+        for b in range(ns):
+            if a == b:
+                continue  # (the diagonal: inf, never within reach)
+            jb = small[b]
+            d = np.hypot(fits[ja, F_CENTROID_X] - fits[jb, F_CENTROID_X],
+                         fits[ja, F_CENTROID_Y] - fits[jb, F_CENTROID_Y])
+            if d <= pair_distance:
+                flat[nc] = a * ns + b
+                dist[nc] = d
+                nc += 1
+    if nc == 0:
+        return empty, empty
+    order = np.argsort(dist[:nc], kind="mergesort")  # (stable: equal distances keep the row-major order)
+    used = np.zeros(ns, dtype=np.bool_)
+    first = np.empty(ns // 2, dtype=np.int64)
+    second = np.empty(ns // 2, dtype=np.int64)
+    npair = 0
+    for q in range(nc):
+        f = flat[order[q]]
+        a = f // ns
+        b = f - a * ns
+        if used[a] or used[b] or a > b:
+            continue
+        used[a] = True
+        used[b] = True
+        first[npair] = small[a]
+        second[npair] = small[b]
+        npair += 1
+    return first[:npair], second[:npair]
+
+
+@njit(cache=True)
+def size_jump_gate(ok: np.ndarray, lohi: np.ndarray, tmax: np.ndarray, known: np.ndarray, ratio: float,
+                   jump: float) -> tuple:
+    """The association's size-jump test (``Tracker._associate``) in one pass: (ok', det_ext) where det_ext (m,) is
+    each detection's longer extent max(hi1 − lo1, hi2 − lo2) (m; NaN as numpy's maximum) and ok' = ok minus the
+    pairs of a track whose size is ``known`` and a detection longer than ``ratio`` × the track's longest side
+    ``tmax`` (m) + ``jump`` (m). ``ok`` is not written."""
+    n, m = ok.shape
+    ext = np.empty(m)
+    for j in range(m):
+        e1 = lohi[j, L_HI1] - lohi[j, L_LO1]
+        e2 = lohi[j, L_HI2] - lohi[j, L_LO2]
+        ext[j] = e1 if (e1 >= e2 or e1 != e1) else e2  # (np.maximum)
+    out = np.empty((n, m), dtype=np.bool_)
+    for i in range(n):
+        lim = ratio * tmax[i] + jump
+        kn = known[i]
+        for j in range(m):
+            out[i, j] = ok[i, j] and (ext[j] <= lim or not kn)
+    return out, ext
+
+
+@njit(cache=True)
+def accel_candidates(X_prior: np.ndarray, X_new: np.ndarray, lim2: float) -> np.ndarray:
+    """Rows r whose velocity change from ``X_prior`` to ``X_new`` ((r, 4) states [x, y, vx, vy], m/s) has a squared
+    norm above ``lim2`` ((m/s)²): the only rows the acceleration bound of ``Tracker._bound_acceleration`` tests
+    exactly."""
+    n = X_prior.shape[0]
+    out = np.empty(n, dtype=np.int64)
+    m = 0
+    for r in range(n):
+        dvx = X_new[r, 2] - X_prior[r, 2]
+        dvy = X_new[r, 3] - X_prior[r, 3]
+        if dvx * dvx + dvy * dvy > lim2:
+            out[m] = r
+            m += 1
+    return out[:m]

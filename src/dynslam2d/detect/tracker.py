@@ -41,6 +41,7 @@ import copy
 import math
 from collections import deque
 from dataclasses import asdict, dataclass, field
+from itertools import chain as _chain
 
 import numpy as np
 
@@ -48,13 +49,17 @@ from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.freespace import FreeSpaceMemory
 from dynslam2d.detect.frozen import fast_init
 from dynslam2d.detect.kernels import (
+    accel_candidates,
     classify_batch,
     fit_params,
     fragment_hosts,
     gate_costs,
     kalman_update_batch,
+    leg_pairs,
     measure_batch,
+    nearest_ages,
     segment_means,
+    size_jump_gate,
 )
 from dynslam2d.detect.layout import (
     F_THETA,
@@ -65,10 +70,6 @@ from dynslam2d.detect.layout import (
     KIND_NAMES,
     KIND_POINT,
     KIND_RECT,
-    L_HI1,
-    L_HI2,
-    L_LO1,
-    L_LO2,
     LOHI_HI,
     LOHI_LO,
     SIZE_LOWER,
@@ -217,10 +218,11 @@ def _nearest_age(stamps: list[float], n: int, t: float, a: float, bisect_left=bi
     return j
 
 
-def _default_sizes(det: Detection, fit) -> list[float]:
-    """:meth:`Detection.default_sizes` as a list of floats (the same arithmetic on the same values)."""
-    (lo0, lo1), (hi0, hi1) = det.lo.tolist(), det.hi.tolist()
-    (r00, r01), (r10, r11) = det.rel.tolist()
+def _default_sizes(lohi: list[float], rel: list[list[bool]], fit) -> list[float]:
+    """:meth:`Detection.default_sizes` as a list of floats (the same arithmetic on the same values), from the
+    detection's row of the scan's ``lohi`` (lo1, lo2, hi1, hi2) and ``rel`` as lists."""
+    lo0, lo1, hi0, hi1 = lohi
+    (r00, r01), (r10, r11) = rel
     e0, e1 = hi0 - lo0, hi1 - lo1
     o0 = e0 if r00 and r01 else max(e0, min(fit.default_depth, fit.default_depth_ratio * max(e1, 0.0)))
     o1 = e1 if r10 and r11 else max(e1, min(fit.default_depth, fit.default_depth_ratio * max(e0, 0.0)))
@@ -253,6 +255,7 @@ class Tracker:
         self._angles = search_angles(self.config.fit.angle_step_deg)
         tc = self.config.tracker
         self._free = FreeSpaceMemory(tc.free_ref_ages, tc.free_margin) if tc.free_space_check else None
+        self._ref_ages = np.array(self._free.ref_ages if self._free is not None else (), dtype=np.float64)
         self._cur_ref = None
         self._map: MapView | None = None  # the SLAM map given with the current scan (read only)
         self._pose: Pose2D | None = None
@@ -270,6 +273,8 @@ class Tracker:
         self._batch: DetectionBatch | None = None  # per-detection arrays of the current scan (kernels)
         self._default: MeasureRows | None = None  # default measurements of the current scan's detections
         self._stacked: tuple[np.ndarray, np.ndarray] | None = None  # predicted X, P of all tracks
+        self._lohi_l: list[list[float]] = []  # this scan's detections' lohi rows (lo1, lo2, hi1, hi2), m
+        self._rel_l: list[list[list[bool]]] = []  # and their rel rows (real bounds)
         self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate)
         #: Segmentation and detections of the last processed scan (for inspection / plots).
         self.last_segmentation: Segmentation | None = None
@@ -607,6 +612,8 @@ class Tracker:
                                          px=px, py=py, start=starts, npts=npts)
             self._default = self._measure_rows(np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool),
                                                np.full(m, -1.0), np.zeros(m))
+            # the detections' bounds and real-bound flags as lists (read per track update / birth, no per-row copy)
+            self._lohi_l, self._rel_l = lohi.tolist(), rel.tolist()
         return dets
 
     def _merge_legs(self, dets: list[Detection], kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray,
@@ -617,31 +624,10 @@ class Tracker:
         the other stands does not move the person's centre by a full stride, so its speed does not jump.
         Returns the detection list and the per-detection batch arrays, merged pairs appended at the end."""
         fc = self.config.fit
-        # (the detections' lo / hi / centroid are rows of lohi / fits: one vectorised test)
-        ext = np.maximum(lohi[:, L_HI1] - lohi[:, L_LO1], lohi[:, L_HI2] - lohi[:, L_LO2])
-        sel = np.flatnonzero((npts >= 2) & (ext <= fc.leg_max_extent))
-        if sel.shape[0] < 2:
+        first, second = leg_pairs(lohi, npts, fits, float(fc.leg_max_extent), float(fc.leg_pair_distance))
+        if first.shape[0] == 0:
             return dets, kinds, fits, lohi, rel, starts, npts, px, py
-        small = sel.tolist()
-        cen = fits[sel, FIT_CENTROID]
-        d2 = np.hypot(cen[:, None, 0] - cen[None, :, 0], cen[:, None, 1] - cen[None, :, 1])
-        np.fill_diagonal(d2, np.inf)
-        pairs: list[tuple[int, int]] = []
-        used: set[int] = set()
-        ns, dmax = len(small), fc.leg_pair_distance
-        dflat = d2.ravel()
-        # the pairs within dmax, nearest first (the order of a full argsort, of which only these were read)
-        cand = np.flatnonzero(dflat <= dmax)
-        if cand.shape[0] == 0:
-            return dets, kinds, fits, lohi, rel, starts, npts, px, py
-        for flat in cand[np.argsort(dflat[cand], kind="stable")].tolist():
-            a, b = divmod(flat, ns)
-            if a in used or b in used or a > b:
-                continue
-            used.update((a, b))
-            pairs.append((small[a], small[b]))
-        if not pairs:
-            return dets, kinds, fits, lohi, rel, starts, npts, px, py
+        pairs = list(zip(first.tolist(), second.tolist()))
         drop = {j for pr in pairs for j in pr}
         keep = [j for j in range(len(dets)) if j not in drop]
         new_dets = [dets[j] for j in keep]
@@ -701,8 +687,8 @@ class Tracker:
         tsize = np.array([k.size for k in tracks])
         tmax = tsize.max(axis=1)
         reach = 0.5 * tmax
-        rect_l, th_l, known_l, firm_l = [], [], [], []
-        for k in tracks:  # (per-track flags in one pass)
+        rect_l, th_l, known_l, firm_r, tent_r = [], [], [], [], []
+        for i, k in enumerate(tracks):  # (per-track flags in one pass)
             kr = k.kind == KIND_RECT
             rect_l.append(k.has_heading and kr)
             th_l.append(k.theta_box)
@@ -711,45 +697,47 @@ class Tracker:
                 known_l.append(not kr or (sk[0] and sk[1]))  # (all(size_known))
             else:
                 known_l.append(False)
-            firm_l.append(k.state != TENTATIVE)
-        rect_trk = np.array(rect_l)
-        theta_box = np.array(th_l)
+            (firm_r if k.state != TENTATIVE else tent_r).append(i)
         # Mahalanobis gate and distance gate; a rectangle is measured again with the track's own sizes
         # (a side the detection "measured" too short, e.g. a grazing side, must not break the association)
-        d2, near, ok = gate_costs(Xs, Ps, reach, rect_trk, theta_box, tsize, self._default.z, self._default.R,
-                                  float(tc.gate_distance), float(tc.gate_chi2), *self._batch, self._fit_p)
+        d2, near, ok = gate_costs(Xs, Ps, reach, np.array(rect_l), np.array(th_l), tsize, self._default.z,
+                                  self._default.R, float(tc.gate_distance), float(tc.gate_chi2), *self._batch,
+                                  self._fit_p)
         # a tracked object does not double its size from one scan to the next: a person track coasting
         # past a wall must not take the wall's cluster (it would carry M onto the wall)
-        lohi = self._batch.lohi
-        det_ext = np.maximum(lohi[:, L_HI1] - lohi[:, L_LO1], lohi[:, L_HI2] - lohi[:, L_LO2])
         # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
         # later, a tracked object may touch another for a scan)
-        known = np.array(known_l)
-        grow_ok = (det_ext[None, :] <= tc.max_size_jump_ratio * tmax[:, None] + tc.max_size_jump) | \
-            ~known[:, None]
-        ok = ok & grow_ok
+        ok, det_ext = size_jump_gate(ok, self._batch.lohi, tmax, np.array(known_l), float(tc.max_size_jump_ratio),
+                                     float(tc.max_size_jump))
         if self._map is not None:
             ok = self._veto_merged(ok, dets, det_ext, tsize)
         if not ok.any():
             return []
         cost = np.where(ok, d2, _BIG)
         # established tracks choose first; tentative ones share what is left
-        firm = np.array(firm_l)
         pairs: list[tuple[int, int]] = []
-        taken = np.zeros(m, dtype=bool)
-        for group in (firm, ~firm):
-            if not group.any():
+        taken: np.ndarray | None = None  # detections taken by the established tracks
+        for group in (firm_r, tent_r):
+            if not group:
                 continue
-            rows_idx = np.flatnonzero(group)
-            sub = cost[rows_idx][:, ~taken]
-            cols_idx = np.flatnonzero(~taken)
+            rows_idx = np.array(group, dtype=np.int64)
+            if taken is None:
+                cols_idx = None
+                sub = cost[rows_idx]  # (nothing taken yet: every column)
+            else:
+                free = ~taken
+                cols_idx = np.flatnonzero(free)
+                sub = cost[rows_idx][:, free]
             if sub.size == 0:
                 continue
             rr, cc = linear_sum_assignment(sub)
-            ii, jj = rows_idx[rr], cols_idx[cc]
+            ii = rows_idx[rr]
+            jj = cc if cols_idx is None else cols_idx[cc]
             good = ok[ii, jj]
             ii, jj = ii[good], jj[good]
             pairs.extend(zip(ii.tolist(), jj.tolist()))
+            if taken is None:
+                taken = np.zeros(m, dtype=bool)
             taken[jj] = True
         return pairs
 
@@ -830,7 +818,7 @@ class Tracker:
         for r, (ti, di) in enumerate(pairs):
             if out[r]:
                 k = tracks[ti]
-                upd(k, dets[di], t, vget(k.id, 0.0), so[r], sk[r], swaps[r])
+                upd(k, dets[di], di, t, vget(k.id, 0.0), so[r], sk[r], swaps[r])
         return out
 
     def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track],
@@ -844,9 +832,10 @@ class Tracker:
             return
         lim = tc.max_accel * self._dt
         # (speed: only rows whose velocity change comes near the bound go through the exact test below)
-        dvx, dvy = X_new[:, 2] - X_prior[:, 2], X_new[:, 3] - X_prior[:, 3]
-        near = np.flatnonzero(dvx * dvx + dvy * dvy > (0.999 * lim) ** 2).tolist()
-        for r in near:
+        near = accel_candidates(X_prior, X_new, (0.999 * lim) ** 2)
+        if near.shape[0] == 0:
+            return
+        for r in near.tolist():
             k = tracks[pairs[r][0]]
             if k.hits < tc.accel_bound_after:
                 continue
@@ -858,9 +847,10 @@ class Tracker:
                 X_new[r, 3] = X_prior[r, 3] + dvy * lim / d
                 self.stats.accel_bounded += 1
 
-    def _update_track(self, k: _Track, det: Detection, t: float, vacated: float, size_obs: list[float],
+    def _update_track(self, k: _Track, det: Detection, di: int, t: float, vacated: float, size_obs: list[float],
                       size_kind: list[int], swap: bool) -> None:
-        """The shape / bookkeeping update of a track whose Kalman result is already in its row (k.x, k.P)."""
+        """The shape / bookkeeping update of a track whose Kalman result is already in its row (k.x, k.P) with
+        detection ``det`` (index ``di`` of this scan's detections)."""
         cfg = self.config
         tc = cfg.tracker
         k.p_finite = True  # kalman_update_batch rejects non-finite results
@@ -870,13 +860,13 @@ class Tracker:
                 k.theta_box = det.theta
                 k.has_heading = True
                 swap = False
-                k.size = _default_sizes(det, cfg.fit)
+                k.size = _default_sizes(self._lohi_l[di], self._rel_l[di], cfg.fit)
                 k.size_known = [size_kind[0] == SIZE_MEASURED, size_kind[1] == SIZE_MEASURED]
             else:
-                rl = det.rel.tolist()
+                rl = self._rel_l[di]
                 informative = (rl[0][0] or rl[0][1]) and (rl[1][0] or rl[1][1])
                 if not informative:
-                    (lo0, lo1), (hi0, hi1) = det.lo.tolist(), det.hi.tolist()
+                    lo0, lo1, hi0, hi1 = self._lohi_l[di]
                     informative = max(hi0 - lo0, hi1 - lo1) > 0.3  # the extent's longer side, m
                 if informative:
                     tb = k.theta_box
@@ -913,7 +903,7 @@ class Tracker:
             k.radius = r if k.kind != KIND_CIRCLE or k.radius <= 0 else k.radius + tc.size_gain * (r - k.radius)
             k.size = [2.0 * k.radius, 2.0 * k.radius]
         elif det.kind == KIND_POINT and k.kind == KIND_POINT:
-            (lo0, lo1), (hi0, hi1) = det.lo.tolist(), det.hi.tolist()
+            lo0, lo1, hi0, hi1 = self._lohi_l[di]
             k.size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
         if k.misses > 0:
             # re-acquired after a gap: the free-space evidence must be rebuilt from this object
@@ -1006,36 +996,29 @@ class Tracker:
     def _vacated(self, tracks: list[_Track], t: float) -> dict[int, float]:
         """Per track id: the largest fraction of its earlier points (at the free-space reference ages)
         that the current scan sees through — a receding object leaves free space behind its visible
-        face. One vectorised test for all tracks."""
+        face. The stored scans nearest each reference age are found for all tracks in one kernel call
+        (:func:`dynslam2d.detect.kernels.nearest_ages`, the search of :func:`_nearest_age`), their points
+        tested in one vectorised call."""
         out: dict[int, float] = {}
         if self._free is None or self._cur_ref is None:
             return out
-        chunks: list[np.ndarray] = []
-        owners: list[int] = []
-        counts: list[int] = [0]
-        ref_ages = self._free.ref_ages
-        bisect_left = bisect.bisect_left
-        for k in tracks:
-            past = k.past
-            if not past:
-                continue
-            npast = len(past)
-            stamps = k.past_t
-            last = -2
-            for a in ref_ages:
-                j = _nearest_age(stamps, npast, t, a, bisect_left)
-                if j != last and t - stamps[j] > 0.0:  # (the same stored scan for two ages: tested once)
-                    last = j
-                    pts = past[j][1]
-                    chunks.append(pts)
-                    owners.append(k.id)
-                    counts.append(pts.shape[0])
-        if not chunks:
+        sel = [k for k in tracks if k.past]
+        if not sel:
             return out
+        counts = [len(k.past_t) for k in sel]
+        stamps = np.fromiter(_chain.from_iterable([k.past_t for k in sel]), np.float64, sum(counts))
+        ii, jj = nearest_ages(stamps, np.array(counts, dtype=np.int64), t, self._ref_ages)
+        if ii.shape[0] == 0:
+            return out
+        chunks = [sel[i].past[j][1] for i, j in zip(ii.tolist(), jj.tolist())]
+        counts = [0]
+        counts.extend([c.shape[0] for c in chunks])
         free = self._free.seen_through_by(self._cur_ref, np.concatenate(chunks))
         frac = segment_means(free.astype(np.float64), np.cumsum(counts)).tolist()
-        for tid, f in zip(owners, frac):
-            out[tid] = max(out.get(tid, 0.0), f)
+        get = out.get
+        for i, f in zip(ii.tolist(), frac):
+            tid = sel[i].id
+            out[tid] = max(get(tid, 0.0), f)
         return out
 
     def _birth(self, det: Detection, t: float, j: int) -> None:
@@ -1047,14 +1030,14 @@ class Tracker:
         P[:2, :2] = d.R[j]
         P[2, 2] = P[3, 3] = cfg.tracker.init_speed_sigma ** 2
         if det.kind == KIND_RECT:
-            size = _default_sizes(det, cfg.fit)
+            size = _default_sizes(self._lohi_l[j], self._rel_l[j], cfg.fit)
             sk0, sk1 = d.size_kind[j].tolist()
             known = [sk0 == SIZE_MEASURED, sk1 == SIZE_MEASURED]
         elif det.kind == KIND_CIRCLE:
             size = [float(2.0 * det.circle[2])] * 2
             known = [True, True]
         else:
-            (lo0, lo1), (hi0, hi1) = det.lo.tolist(), det.hi.tolist()
+            lo0, lo1, hi0, hi1 = self._lohi_l[j]
             size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
             known = [False, False]
         k = _Track(id=self._next_id, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t,
