@@ -1,0 +1,106 @@
+"""The second far loop search: after the final optimisation and the keyframe re-match (docs/slam.md, "Intel: where
+the error is").
+
+During the run the far search looks for a keyframe's place in older submaps only while no loop was found for
+``far_after`` m, and around the pose the graph estimated *then*. A part of the run that the front end tied to the
+rest only through a stretch where it lost the map (a wing visited at the start, its return much later) can stay
+metres and a radian off: when the robot comes back, the loops it is already closing elsewhere keep the far search
+off, and the local search's window cannot cover the error. After the final optimisation (and the re-match) the
+graph's poses are much better, and the graph says which pairs it does not tie yet: a keyframe and an older submap
+whose every path along the graph (keyframe chain and accepted loops) crosses a weak front-end match.
+
+So every stored place (every ``place_every``-th keyframe, on the ``search_every`` grid) is searched once more with
+the far search's machinery — the place descriptor ranking, the all-rotation correlative search on ``far_level``,
+the uncertainty gates, the verification by ``far_partners`` consistent partners, each verified loop optimised at
+once — but only against the submaps that every path along the graph to the keyframe ties across a weak or
+low-scoring front-end match (:func:`untied`; ``second_searches`` of them per keyframe). Pairs the loops and the well-supported chain already tie are not
+searched: on a log without weak matches (MIT CSAIL) the pass searches nothing. Each round that adds loops ends with
+a full optimisation; ``second_rounds`` rounds at most (the next one starts from the better graph).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from typing import TYPE_CHECKING
+
+from dynslam2d.slam.rematch import rematch_keyframes
+
+if TYPE_CHECKING:
+    from dynslam2d.slam.loops import LoopCloser
+
+
+def untied(closer: LoopCloser, node: int) -> np.ndarray:
+    """(n_nodes,) bool: the nodes whose every path along the graph to ``node`` (keyframe chain, accepted loops and
+    re-match edges) crosses a keyframe edge across a weak front-end match or a match score below ``weak_score``: the
+    pairs the loops do not tie yet (Dijkstra with such an edge weighing 1, every other edge ~0)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    c = closer.config
+    g = closer.graph
+    n = g.n_nodes
+    ii = np.fromiter((e.i for e in g.edges if e.active), dtype=np.int64)
+    jj = np.fromiter((e.j for e in g.edges if e.active), dtype=np.int64)
+    loop = np.fromiter((e.loop for e in g.edges if e.active), dtype=bool)
+    weak = np.asarray(closer.kf_weak, dtype=bool)
+    with np.errstate(invalid="ignore"):
+        weak = weak | (np.asarray(closer.kf_score, dtype=np.float64) < c.weak_score)
+    chain = ~loop & (jj == ii + 1)
+    w = np.where(chain & weak[jj], 1.0, 1e-6)  # csgraph drops zero weights
+    m = coo_matrix((w, (ii, jj)), shape=(n, n)).tocsr()
+    return dijkstra(m, directed=False, indices=node, limit=1.5) >= 0.5
+
+
+def second_search(closer: LoopCloser) -> tuple[int, int]:
+    """One round of the second far search over every ``search_every``-th stored place of ``closer`` (module
+    docstring). Loops are accepted (and optimised, as the far search does) as they are verified; pending
+    candidates are tried on the keyframes after them. Does not run the final optimisation.
+    Returns (far searches made, loop edges accepted)."""
+    c = closer.config
+    n = len(closer.keyframes)
+    searches0 = closer.stats["far_searches"]
+    loops0 = closer.stats["loops_accepted"]
+    closer._pending = []
+    closer._second = {(e.i, e.j) for e in closer.graph.edges if e.loop}
+    # queries must be stored places: the returns of older keyframes that a new descriptor would need are gone
+    step = math.lcm(c.search_every, c.place_every) if closer._places is not None else c.search_every
+    for node in range(c.submap_keyframes, n):
+        if closer._pending:
+            closer._pending_far(node)
+        if node % step:
+            continue
+        pts = closer._query(closer.keyframes[node])
+        if pts is None:
+            continue
+        allowed = untied(closer, node)
+        if allowed.any():
+            closer._far_search(node, closer._estimate(node), pts, set(), allowed, c.second_searches)
+    closer._pending = []
+    closer._second = None
+    return int(closer.stats["far_searches"] - searches0), int(closer.stats["loops_accepted"] - loops0)
+
+
+def run_second_search(closer: LoopCloser) -> None:
+    """Up to ``second_rounds`` rounds of :func:`second_search`, each followed by a full optimisation, while a round
+    adds loops; counters in ``closer.stats`` (``second_searches``, ``second_loops``, ``second_rounds``,
+    ``second_ms``)."""
+    t0 = time.perf_counter()
+    for _ in range(closer.config.second_rounds):
+        searches, loops = second_search(closer)
+        closer.stats["second_searches"] += searches
+        closer.stats["second_loops"] += loops
+        closer.stats["second_rounds"] += 1
+        if not loops:
+            break
+        closer._optimise(final=True)
+        if closer.config.second_rematch:
+            # the keyframes the new loops moved, matched again against their predecessors (slam/rematch.py)
+            edges, checked = rematch_keyframes(closer)
+            closer.stats["rematch_edges"] += edges
+            closer.stats["rematch_checked"] += checked
+            if edges:
+                closer._optimise(final=True)
+    closer.stats["second_ms"] += (time.perf_counter() - t0) * 1e3
