@@ -289,10 +289,22 @@ class LoopConfig(BaseModel):
         description="far_partner_span of the second search, m (its candidates have passed the place ranking against "
         "a graph whose poses the loops already corrected).",
     )
+    second_optimise_each: bool = Field(
+        False,
+        description="The second search optimises the graph after each loop it verifies, as the run's far search does "
+        "(false: only after the round).",
+    )
+    second_cache: int = Field(
+        24, ge=1,
+        description="Submap grids kept built during the second search (count; each a few MB; the search jumps between "
+        "places, so fewer are rebuilt than with the run's six).",
+    )
     second_rematch: bool = Field(
         False, description="After a second-search round that added loops, re-match the keyframes again (rematch_*).")
     second_rounds: int = Field(
-        1, ge=1, description="Rounds of the second search at most (another only after one that added loops).")
+        2, ge=1, description="Rounds of the second search at most: the first from every stored place, each next one "
+        "(only after a round that added loops) from the keyframes whose far candidates the round before could not "
+        "verify.")
     loop_sigma_xy: float = Field(0.03, gt=0.0, description="Standard deviation of a loop edge's translation, m.")
     loop_sigma_theta: float = Field(0.006, gt=0.0, description="Standard deviation of a loop edge's rotation, rad.")
     kernel: Literal["dcs", "cauchy", "none"] = Field(

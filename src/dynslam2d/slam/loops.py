@@ -178,6 +178,7 @@ class LoopCloser:
         self._opt_nodes = 0  # nodes covered by the last optimisation
         self._new_loops = 0
         self._cache: OrderedDict[int, MultiResMap] = OrderedDict()
+        self._cache_size = _SUBMAP_CACHE  # grids kept built (the second search keeps more: it jumps between places)
         # translation deviation (m) of every chain edge and accepted loop, keyed (i, j): the far search's
         # uncertainty is their sum along the graph's shortest path
         self._sigma_edges: dict[tuple[int, int], float] = {}
@@ -186,6 +187,7 @@ class LoopCloser:
         self._far_last: dict[int, int] = {}  # submap → node of its last far search
         # during the second search (slam/secondsearch.py): the (anchor, node) pairs that have a loop edge; else None
         self._second: set[tuple[int, int]] | None = None
+        self._second_tried: list[LoopCandidate] | None = None  # … and its far candidates (verified or not)
         # far candidates whose keyframes before them gave too few partners: (candidate, submap, partners so far)
         self._pending: list[tuple[LoopCandidate, int, list[LoopCandidate]]] = []
         self._extent: dict[int, float] = {}  # submap → largest keyframe distance from its anchor, m
@@ -333,7 +335,7 @@ class LoopCloser:
                 rel = relative(a, self.keyframes[k].frontend)
                 grid.integrate(Pose2D(float(rel[0]), float(rel[1]), float(rel[2])), pts)
         self._cache[s] = grid
-        if len(self._cache) > _SUBMAP_CACHE:
+        if len(self._cache) > self._cache_size:
             self._cache.popitem(last=False)
         return grid
 
@@ -472,6 +474,8 @@ class LoopCloser:
             cand.far = True
             self.stats["far_candidates"] += 1
             self._verify_far(cand, s)
+            if self._second_tried is not None:
+                self._second_tried.append(cand)
         return len(elig)
 
     def _describe(self, node: int, store: bool) -> None:
@@ -577,7 +581,8 @@ class LoopCloser:
             self._accept(o)
             accepted += 1
         self.stats["far_loops"] += accepted
-        self._optimise(final=False)
+        if self._second is None or self.config.second_optimise_each:
+            self._optimise(final=False)
         self._opt_nodes = len(self.keyframes) - 1
         return True
 

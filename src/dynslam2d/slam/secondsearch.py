@@ -13,7 +13,7 @@ So every stored place (every ``place_every``-th keyframe, on the ``search_every`
 the far search's machinery — the place descriptor ranking, the all-rotation correlative search on ``far_level``,
 the uncertainty gates, the verification by ``far_partners`` consistent partners, each verified loop optimised at
 once — but only against the submaps that every path along the graph to the keyframe ties across a weak or
-low-scoring front-end match (:func:`untied`; ``second_searches`` of them per keyframe). Pairs the loops and the well-supported chain already tie are not
+low-scoring front-end match (:func:`ties`; ``second_searches`` of them per keyframe). Pairs the loops and the well-supported chain already tie are not
 searched: on a log without weak matches (MIT CSAIL) the pass searches nothing. Each round that adds loops ends with
 a full optimisation; ``second_rounds`` rounds at most (the next one starts from the better graph).
 """
@@ -28,68 +28,96 @@ from typing import TYPE_CHECKING
 
 from dynslam2d.slam.rematch import rematch_keyframes
 
+#: Submap grids kept built during the run's search (as slam/loops.py keeps them).
+_SUBMAP_CACHE = 6
+
 if TYPE_CHECKING:
     from dynslam2d.slam.loops import LoopCloser
 
 
-def untied(closer: LoopCloser, node: int) -> np.ndarray:
-    """(n_nodes,) bool: the nodes whose every path along the graph to ``node`` (keyframe chain, accepted loops and
-    re-match edges) crosses a keyframe edge across a weak front-end match or a match score below ``weak_score``: the
-    pairs the loops do not tie yet (Dijkstra with such an edge weighing 1, every other edge ~0)."""
+def ties(closer: LoopCloser) -> np.ndarray:
+    """(n_nodes,) int: a label per node, equal for the nodes that a path along the graph (accepted loops, re-match
+    edges, keyframe edges) connects without crossing a keyframe edge across a weak front-end match or a match score
+    below ``weak_score``: nodes with different labels are the pairs the loops do not tie yet (connected components
+    of the graph without those edges)."""
     from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import dijkstra
+    from scipy.sparse.csgraph import connected_components
 
     c = closer.config
     g = closer.graph
     n = g.n_nodes
-    ii = np.fromiter((e.i for e in g.edges if e.active), dtype=np.int64)
-    jj = np.fromiter((e.j for e in g.edges if e.active), dtype=np.int64)
-    loop = np.fromiter((e.loop for e in g.edges if e.active), dtype=bool)
     weak = np.asarray(closer.kf_weak, dtype=bool)
     with np.errstate(invalid="ignore"):
         weak = weak | (np.asarray(closer.kf_score, dtype=np.float64) < c.weak_score)
-    chain = ~loop & (jj == ii + 1)
-    w = np.where(chain & weak[jj], 1.0, 1e-6)  # csgraph drops zero weights
-    m = coo_matrix((w, (ii, jj)), shape=(n, n)).tocsr()
-    return dijkstra(m, directed=False, indices=node, limit=1.5) >= 0.5
+    ii, jj = [], []
+    seen: set[int] = set()
+    for e in g.edges:
+        front = not e.loop and e.j == e.i + 1 and e.j not in seen  # the front end's edge (the first one into j)
+        if front:
+            seen.add(e.j)
+        if e.active and not (front and weak[e.j]):
+            ii.append(e.i)
+            jj.append(e.j)
+    m = coo_matrix((np.ones(len(ii)), (ii, jj)), shape=(n, n)).tocsr()
+    return connected_components(m, directed=False)[1]
 
 
-def second_search(closer: LoopCloser) -> tuple[int, int]:
+def untied(closer: LoopCloser, node: int) -> np.ndarray:
+    """(n_nodes,) bool: the nodes whose every path along the graph to ``node`` crosses a weak or low-scoring front-end
+    match (:func:`ties`)."""
+    labels = ties(closer)
+    return labels != labels[node]
+
+
+def second_search(closer: LoopCloser, nodes: set[int] | None = None) -> tuple[int, int, set[int]]:
     """One round of the second far search over every ``search_every``-th stored place of ``closer`` (module
-    docstring). Loops are accepted (and optimised, as the far search does) as they are verified; pending
-    candidates are tried on the keyframes after them. Does not run the final optimisation.
-    Returns (far searches made, loop edges accepted)."""
+    docstring), or over ``nodes`` only. Loops are accepted as they are verified (the graph optimised after each if
+    ``second_optimise_each``); pending candidates are tried on the keyframes after them. Does not run the final
+    optimisation. Returns (far searches made, loop edges accepted, the keyframes whose far candidates were not
+    verified)."""
     c = closer.config
     n = len(closer.keyframes)
     searches0 = closer.stats["far_searches"]
     loops0 = closer.stats["loops_accepted"]
     closer._pending = []
+    closer._cache_size = max(closer._cache_size, c.second_cache)
     closer._second = {(e.i, e.j) for e in closer.graph.edges if e.loop}
+    closer._second_tried = []
     # queries must be stored places: the returns of older keyframes that a new descriptor would need are gone
     step = math.lcm(c.search_every, c.place_every) if closer._places is not None else c.search_every
+    labels: np.ndarray | None = None
+    n_loops = 0.0
     for node in range(c.submap_keyframes, n):
         if closer._pending:
             closer._pending_far(node)
-        if node % step:
+        if node % step if nodes is None else node not in nodes:
             continue
         pts = closer._query(closer.keyframes[node])
         if pts is None:
             continue
-        allowed = untied(closer, node)
+        if labels is None or closer.stats["loops_accepted"] != n_loops:  # new loops tie more pairs
+            labels, n_loops = ties(closer), closer.stats["loops_accepted"]
+        allowed = labels != labels[node]
         if allowed.any():
             closer._far_search(node, closer._estimate(node), pts, set(), allowed, c.second_searches)
     closer._pending = []
-    closer._second = None
-    return int(closer.stats["far_searches"] - searches0), int(closer.stats["loops_accepted"] - loops0)
+    failed = {cand.node for cand in closer._second_tried if not cand.accepted}
+    closer._second = closer._second_tried = None
+    closer._cache_size = _SUBMAP_CACHE
+    while len(closer._cache) > _SUBMAP_CACHE:
+        closer._cache.popitem(last=False)
+    return int(closer.stats["far_searches"] - searches0), int(closer.stats["loops_accepted"] - loops0), failed
 
 
 def run_second_search(closer: LoopCloser) -> None:
     """Up to ``second_rounds`` rounds of :func:`second_search`, each followed by a full optimisation, while a round
-    adds loops; counters in ``closer.stats`` (``second_searches``, ``second_loops``, ``second_rounds``,
-    ``second_ms``)."""
+    adds loops: the first over every stored place, the next ones only from the keyframes whose far candidates the
+    round before could not verify (the graph the new loops corrected may verify them); counters in ``closer.stats``
+    (``second_searches``, ``second_loops``, ``second_rounds``, ``second_ms``)."""
     t0 = time.perf_counter()
+    nodes: set[int] | None = None
     for _ in range(closer.config.second_rounds):
-        searches, loops = second_search(closer)
+        searches, loops, nodes = second_search(closer, nodes)
         closer.stats["second_searches"] += searches
         closer.stats["second_loops"] += loops
         closer.stats["second_rounds"] += 1
@@ -103,4 +131,6 @@ def run_second_search(closer: LoopCloser) -> None:
             closer.stats["rematch_checked"] += checked
             if edges:
                 closer._optimise(final=True)
+        if not nodes:
+            break
     closer.stats["second_ms"] += (time.perf_counter() - t0) * 1e3
