@@ -69,9 +69,9 @@ def replay(path: str, relations: str, tol: float, settings: list[str]) -> dict[s
 
     from dynslam2d.eval.relations import relation_errors_from
     from dynslam2d.io.relations import read_relations
-    from dynslam2d.trajectory import Trajectory
     from dynslam2d.pipeline import keep_optimised, render_map
     from dynslam2d.slam.loops import LoopCloser
+    from dynslam2d.trajectory import Trajectory
 
     with open(path, "rb") as f:
         rec = pickle.load(f)

@@ -11,25 +11,25 @@ whose every path along the graph (keyframe chain and accepted loops) crosses a w
 
 So every stored place (every ``place_every``-th keyframe, on the ``search_every`` grid) is searched once more with
 the far search's machinery — the place descriptor ranking, the all-rotation correlative search on ``far_level``,
-the uncertainty gates, the verification by ``far_partners`` consistent partners, each verified loop optimised at
-once — but only against the submaps that every path along the graph to the keyframe ties across a weak or
-low-scoring front-end match (:func:`ties`; ``second_searches`` of them per keyframe). Pairs the loops and the well-supported chain already tie are not
-searched: on a log without weak matches (MIT CSAIL) the pass searches nothing. Each round that adds loops ends with
-a full optimisation; ``second_rounds`` rounds at most (the next one starts from the better graph).
+the uncertainty gates, the verification by ``far_partners`` consistent partners (spanning ``second_partner_span``)
+— but only against the submaps that every path along the graph to the keyframe reaches across a weak or
+low-scoring front-end match (:func:`ties`; ``second_searches`` of them per keyframe). Pairs the loops and the
+well-supported chain already tie are not searched: on a log without weak matches (MIT CSAIL) the pass searches
+nothing. A pair that already has a loop edge gets no second one. The graph is optimised once after the round (after
+every verified loop with ``second_optimise_each``: then each search starts from a slightly different graph, which
+made the Intel result less stable); a next round (``second_rounds``) searches only from the keyframes whose far
+candidates could not be verified, and ``second_rematch`` re-matches the keyframes after a round that added loops.
 """
 
 from __future__ import annotations
 
 import math
 import time
-
-import numpy as np
 from typing import TYPE_CHECKING
 
-from dynslam2d.slam.rematch import rematch_keyframes
+import numpy as np
 
-#: Submap grids kept built during the run's search (as slam/loops.py keeps them).
-_SUBMAP_CACHE = 6
+from dynslam2d.slam.rematch import rematch_keyframes
 
 if TYPE_CHECKING:
     from dynslam2d.slam.loops import LoopCloser
@@ -80,7 +80,8 @@ def second_search(closer: LoopCloser, nodes: set[int] | None = None) -> tuple[in
     searches0 = closer.stats["far_searches"]
     loops0 = closer.stats["loops_accepted"]
     closer._pending = []
-    closer._cache_size = max(closer._cache_size, c.second_cache)
+    cache0 = closer._cache_size
+    closer._cache_size = max(cache0, c.second_cache)
     closer._second = {(e.i, e.j) for e in closer.graph.edges if e.loop}
     closer._second_tried = []
     # queries must be stored places: the returns of older keyframes that a new descriptor would need are gone
@@ -103,8 +104,8 @@ def second_search(closer: LoopCloser, nodes: set[int] | None = None) -> tuple[in
     closer._pending = []
     failed = {cand.node for cand in closer._second_tried if not cand.accepted}
     closer._second = closer._second_tried = None
-    closer._cache_size = _SUBMAP_CACHE
-    while len(closer._cache) > _SUBMAP_CACHE:
+    closer._cache_size = cache0
+    while len(closer._cache) > cache0:
         closer._cache.popitem(last=False)
     return int(closer.stats["far_searches"] - searches0), int(closer.stats["loops_accepted"] - loops0), failed
 
