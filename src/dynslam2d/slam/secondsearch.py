@@ -88,6 +88,10 @@ def second_search(closer: LoopCloser, nodes: set[int] | None = None) -> tuple[in
     step = math.lcm(c.search_every, c.place_every) if closer._places is not None else c.search_every
     labels: np.ndarray | None = None
     n_loops = 0.0
+    k = c.submap_keyframes
+    anchors = np.arange(n // k, dtype=np.int64) * k + k // 2  # every submap's anchor, last node and its path (m)
+    last = anchors - k // 2 + k - 1
+    last_path = np.array([closer.keyframes[int(j)].path for j in last], dtype=np.float64)
     for node in range(c.submap_keyframes, n):
         if closer._pending:
             closer._pending_far(node)
@@ -99,7 +103,12 @@ def second_search(closer: LoopCloser, nodes: set[int] | None = None) -> tuple[in
         if labels is None or closer.stats["loops_accepted"] != n_loops:  # new loops tie more pairs
             labels, n_loops = ties(closer), closer.stats["loops_accepted"]
         allowed = labels != labels[node]
-        if allowed.any():
+        # an untied submap the far search would consider at all (finished, far enough along the path): else the
+        # graph uncertainty and the place ranking of this keyframe are not worth computing
+        n_sub = (node + 1) // k
+        path = closer.keyframes[node].path
+        if n_sub and np.any(allowed[anchors[:n_sub]] & (last[:n_sub] < node)
+                            & (path - last_path[:n_sub] >= c.min_path_gap)):
             closer._far_search(node, closer._estimate(node), pts, set(), allowed, c.second_searches)
     closer._pending = []
     failed = {cand.node for cand in closer._second_tried if not cand.accepted}
