@@ -564,6 +564,10 @@ class RunResult:
         out["rematch_edges"] = int(st.get("rematch_edges", 0))  # keyframes re-matched after the loops (slam/rematch.py)
         out["rematch_ms"] = round(float(st.get("rematch_ms", 0.0)), 1)
         out["rematch_checked"] = int(st.get("rematch_checked", 0))  # keyframes the re-match selected and matched
+        # the second far search after the re-match (slam/secondsearch.py): far searches, loops, rounds, wall time
+        for k in ("second_searches", "second_loops", "second_rounds"):
+            out[k] = int(st.get(k, 0))
+        out["second_ms"] = round(float(st.get("second_ms", 0.0)), 1)
         if self.frontend_trajectory is not None:
             d = self.trajectory.poses[:, :2] - self.frontend_trajectory.poses[:, :2]
             out["max_correction_m"] = round(float(np.max(np.hypot(d[:, 0], d[:, 1]))), 4) if d.size else 0.0

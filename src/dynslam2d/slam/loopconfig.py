@@ -275,6 +275,36 @@ class LoopConfig(BaseModel):
     rematch_min_turn: float = Field(0.05, ge=0.0, description="… or turns it by more than this, rad.")
     rematch_replace: bool = Field(
         True, description="A re-match edge switches off the chain edge it disagrees with (else both stay, robust).")
+    second_search: bool = Field(
+        True,
+        description="After the final optimisation and the re-match, search far once more from every stored place "
+        "against the older submaps the graph does not tie yet (every path along the graph crosses a weak or "
+        "low-scoring front-end match), from the improved poses; verified loops are added and the graph optimised "
+        "again (slam/secondsearch.py).",
+    )
+    second_searches: int = Field(
+        4, ge=0, description="Submaps searched per keyframe by the second search (the most alike places first).")
+    second_partner_span: float = Field(
+        0.8, ge=0.0,
+        description="far_partner_span of the second search, m (its candidates have passed the place ranking against "
+        "a graph whose poses the loops already corrected).",
+    )
+    second_optimise_each: bool = Field(
+        False,
+        description="The second search optimises the graph after each loop it verifies, as the run's far search does "
+        "(false: only after the round).",
+    )
+    second_cache: int = Field(
+        24, ge=1,
+        description="Submap grids kept built during the second search (count; each a few MB; the search jumps between "
+        "places, so fewer are rebuilt than with the run's six).",
+    )
+    second_rematch: bool = Field(
+        False, description="After a second-search round that added loops, re-match the keyframes again (rematch_*).")
+    second_rounds: int = Field(
+        2, ge=1, description="Rounds of the second search at most: the first from every stored place, each next one "
+        "(only after a round that added loops) from the keyframes whose far candidates the round before could not "
+        "verify.")
     loop_sigma_xy: float = Field(0.03, gt=0.0, description="Standard deviation of a loop edge's translation, m.")
     loop_sigma_theta: float = Field(0.006, gt=0.0, description="Standard deviation of a loop edge's rotation, rad.")
     kernel: Literal["dcs", "cauchy", "none"] = Field(

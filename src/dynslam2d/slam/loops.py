@@ -57,6 +57,7 @@ from dynslam2d.slam.matcher import degeneracy, evaluate
 from dynslam2d.slam.placedesc import PlaceIndex
 from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
 from dynslam2d.slam.rematch import refine_supported, rematch_keyframes
+from dynslam2d.slam.secondsearch import run_second_search
 from dynslam2d.types import Pose2D, Scan
 
 #: Submap grids kept built at a time (each a few MB).
@@ -177,12 +178,16 @@ class LoopCloser:
         self._opt_nodes = 0  # nodes covered by the last optimisation
         self._new_loops = 0
         self._cache: OrderedDict[int, MultiResMap] = OrderedDict()
+        self._cache_size = _SUBMAP_CACHE  # grids kept built (the second search keeps more: it jumps between places)
         # translation deviation (m) of every chain edge and accepted loop, keyed (i, j): the far search's
         # uncertainty is their sum along the graph's shortest path
         self._sigma_edges: dict[tuple[int, int], float] = {}
         # their heading deviations, rad: drift_rad_per_m × length, plus far_weak_turn across a weak match
         self._turn_edges: dict[tuple[int, int], float] = {}
         self._far_last: dict[int, int] = {}  # submap → node of its last far search
+        # during the second search (slam/secondsearch.py): the (anchor, node) pairs that have a loop edge; else None
+        self._second: set[tuple[int, int]] | None = None
+        self._second_tried: list[LoopCandidate] | None = None  # … and its far candidates (verified or not)
         # far candidates whose keyframes before them gave too few partners: (candidate, submap, partners so far)
         self._pending: list[tuple[LoopCandidate, int, list[LoopCandidate]]] = []
         self._extent: dict[int, float] = {}  # submap → largest keyframe distance from its anchor, m
@@ -196,6 +201,7 @@ class LoopCloser:
         self.stats: dict[str, float] = {"searches": 0, "candidates": 0, "loops_accepted": 0, "optimisations": 0,
                                         "far_searches": 0, "far_candidates": 0, "far_loops": 0,
                                         "far_deferred": 0, "rematch_edges": 0, "rematch_checked": 0, "rematch_ms": 0.0,
+                                        "second_searches": 0, "second_loops": 0, "second_rounds": 0, "second_ms": 0.0,
                                         "place_ms": 0.0,
                                         "search_ms": 0.0, "optimise_ms": 0.0,
                                         "total_ms": 0.0}
@@ -329,7 +335,7 @@ class LoopCloser:
                 rel = relative(a, self.keyframes[k].frontend)
                 grid.integrate(Pose2D(float(rel[0]), float(rel[1]), float(rel[2])), pts)
         self._cache[s] = grid
-        if len(self._cache) > _SUBMAP_CACHE:
+        if len(self._cache) > self._cache_size:
             self._cache.popitem(last=False)
         return grid
 
@@ -420,9 +426,13 @@ class LoopCloser:
             out.append(d)
         return out[0], out[1]
 
-    def _far_search(self, node: int, est: np.ndarray, pts: np.ndarray, skip: set[int]) -> None:
-        """Search the least recently searched submaps within the uncertainty-grown radius (not already
-        searched locally) over every rotation; a candidate is verified at once on the keyframes before it."""
+    def _far_search(self, node: int, est: np.ndarray, pts: np.ndarray, skip: set[int],
+                    allowed: np.ndarray | None = None, count: int | None = None) -> int:
+        """Search the ``count`` (default ``far_searches``) submaps within the uncertainty-grown radius (not already
+        searched locally) that look most like this place (or were least recently searched) over every rotation; a
+        candidate is verified at once on the keyframes before it. ``allowed``: (n_nodes,) bool, only submaps whose
+        anchor it marks (the second search: pairs the graph does not tie yet). Returns the number of submaps that
+        were eligible."""
         c = self.config
         kf = self.keyframes[node]
         unc, heading = self._uncertainty(node)
@@ -430,6 +440,8 @@ class LoopCloser:
         for s in range((node + 1) // c.submap_keyframes):
             _first, last, anchor = self._submap_range(s)
             if last >= node or s in skip or kf.path - self.keyframes[last].path < c.min_path_gap:
+                continue
+            if allowed is not None and not allowed[anchor]:
                 continue
             r = min(c.search_radius + c.far_sigmas * float(unc[anchor]), c.max_far_radius)
             a = self._estimate(anchor)
@@ -441,7 +453,7 @@ class LoopCloser:
             rank = self._place_ranks(node)
             elig = [(rank.get(s, 2.0), d, s, r, dth) for _last, d, s, r, dth in elig]
         elig.sort()
-        for _last, _d, s, r, dth in elig[:c.far_searches]:
+        for _last, _d, s, r, dth in elig[:c.far_searches if count is None else count]:
             self._far_last[s] = node
             self.stats["far_searches"] += 1
             _first, _l, anchor = self._submap_range(s)
@@ -462,6 +474,9 @@ class LoopCloser:
             cand.far = True
             self.stats["far_candidates"] += 1
             self._verify_far(cand, s)
+            if self._second_tried is not None:
+                self._second_tried.append(cand)
+        return len(elig)
 
     def _describe(self, node: int, store: bool) -> None:
         """The place descriptor of keyframe ``node``: the returns of the last ``place_keyframes`` keyframes (at most
@@ -487,9 +502,13 @@ class LoopCloser:
         """Submap → smallest place-descriptor distance of its stored keyframes to keyframe ``node``'s place."""
         c = self.config
         t0 = time.perf_counter()
-        if self._query_desc is None or self._query_desc[0] != node:
+        if self._query_desc is not None and self._query_desc[0] == node:
+            keys, d, _shift = self._places.distances(self._query_desc[1])
+        elif node in self._places:  # a stored place (the second search: older keyframes' returns are gone)
+            keys, d, _shift = self._places.distances_of(node)
+        else:
             self._describe(node, False)
-        keys, d, _shift = self._places.distances(self._query_desc[1])
+            keys, d, _shift = self._places.distances(self._query_desc[1])
         sub = keys // c.submap_keyframes
         best = np.full(int(sub.max()) + 1 if sub.size else 0, np.inf)
         np.minimum.at(best, sub, d)
@@ -548,14 +567,22 @@ class LoopCloser:
         path; then optimise at once. Returns whether they were accepted."""
         c = self.config
         paths = [self.keyframes[o.node].path for o in [cand, *partners]]
-        if len(partners) < c.far_partners or max(paths) - min(paths) < c.far_partner_span:
+        span = c.far_partner_span if self._second is None else c.second_partner_span
+        if len(partners) < c.far_partners or max(paths) - min(paths) < span:
             return False
+        accepted = 0
         for o in [cand, *partners]:
             o.far = True
+            if self._second is not None:  # the second search: a pair the graph already has a loop for adds nothing
+                if (o.anchor, o.node) in self._second:
+                    continue
+                self._second.add((o.anchor, o.node))
             self.candidates.append(o)
             self._accept(o)
-        self.stats["far_loops"] += 1 + len(partners)
-        self._optimise(final=False)
+            accepted += 1
+        self.stats["far_loops"] += accepted
+        if self._second is None or self.config.second_optimise_each:
+            self._optimise(final=False)
         self._opt_nodes = len(self.keyframes) - 1
         return True
 
@@ -702,6 +729,9 @@ class LoopCloser:
                 if self.stats["rematch_edges"]:
                     self._optimise(final=True)
                     active = [k for k in self.loop_edges if self.graph.edges[k].active]
+            if active and self.config.second_search and self.config.far_search:
+                run_second_search(self)
+                active = [k for k in self.loop_edges if self.graph.edges[k].active]
         corrected = bool(active)
         nodes = self.graph.poses.copy()
         poses = frontend.copy()

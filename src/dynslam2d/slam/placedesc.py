@@ -75,6 +75,7 @@ class PlaceIndex:
         self._count = np.zeros(16, dtype=np.int32)
         self._keys = np.zeros(16, dtype=np.int64)
         self._n = 0
+        self._row: dict[int, int] = {}  # key → row of the arrays
 
     def __len__(self) -> int:
         return self._n
@@ -109,6 +110,7 @@ class PlaceIndex:
         self._occ[k] = occ
         self._count[k] = count
         self._keys[k] = int(key)
+        self._row[int(key)] = k
         self._n += 1
 
     def distances(self, desc: np.ndarray, upto: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -121,7 +123,24 @@ class PlaceIndex:
         n = self._n if upto is None else min(int(upto), self._n)
         if n == 0:
             return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
-        q_cols, q_occ, q_count = _spectra(desc)
+        return self._distances(*_spectra(desc), n)
+
+    def __contains__(self, key: object) -> bool:
+        return isinstance(key, (int, np.integer)) and int(key) in self._row
+
+    def distances_of(self, key: int, upto: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`distances` with the stored place ``key`` as the query (its descriptor is not kept, its spectra
+        are; KeyError if it was not stored)."""
+        k = self._row[int(key)]
+        n = self._n if upto is None else min(int(upto), self._n)
+        return self._distances(self._cols[k].astype(np.complex128), self._occ[k].astype(np.complex128),
+                               int(self._count[k]), n)
+
+    def _distances(self, q_cols: np.ndarray, q_occ: np.ndarray, q_count: int,
+                   n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(keys, d, shift) of the first ``n`` stored places against a query given by its spectra (_spectra)."""
+        if n == 0:
+            return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
         s = self.sectors
         # Σ_j Σ_r a[r, j] b[r, j − shift] for every shift: circular cross-correlation, summed over the rings
         corr = np.fft.irfft(np.einsum("rf,nrf->nf", q_cols, np.conj(self._cols[:n])), n=s, axis=1)
