@@ -1,0 +1,221 @@
+"""numba kernels of the evidence ledger's per-update recording (slam/erasure.py, issue 9).
+
+Each map update of the pipeline records, per track and map level, the cells the track's kept beams hit and the
+log-odds the update added there. These kernels do that work in a fixed number of calls per update (two for the
+cells of all levels around one ``np.sort``, one per level for the read before the update, one per level for the
+rows after it) instead of about a hundred small numpy calls. They compute exactly what the numpy code they
+replace computed (``tests/test_ledger_kernels.py`` checks them against it on random inputs):
+
+* :func:`pack_cells`: every point's (level, owner, cell) as one int64, ``level·block + owner·wi·wj + cx·wj + cy``
+  (cells relative to each level's smallest cell, ``floor(v / r + 0.5)`` as slam/grid.py);
+* :func:`unpack_cells`: from the sorted packed values, each distinct (level, owner > 0, cell) that no owner-0
+  value shares (a cell another kept beam of the scan hits is the structure's), decoded to track id, cell key
+  ``i·2^32 + j`` and cell (i, j), in (level, track, cell) order;
+* :func:`read_cells`: log-odds and update index of cells (0 and −1 outside the level's array) and their flat
+  array indices (−1 outside);
+* :func:`update_rows`: after the update, the rows (key, update index before, after, added log-odds' bits) of the
+  cells the update changed, and the per-track groups of those rows.
+
+Explicit signatures: one specialisation each, compiled (or loaded from numba's cache) when the module is
+imported. Units: points in m (map frame), resolutions in m, cells absolute level indices.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+_KEY_SHIFT = 4294967296
+#: packed values must stay below this (they are int64)
+_LIMIT = 1 << 62
+#: |v / r| at or beyond this cannot be a valid cell (keys hold |i|, |j| < 2^31): the caller's per-level path
+_CELL_LIMIT = 2.0 ** 31
+
+
+@njit("Tuple((int64[::1], int64[::1]))(float64[::1], float64[::1], int64[::1], float64[::1], int64)", cache=True)
+def pack_cells(xs, ys, owner, rs, n_tracks):  # pragma: no cover - numba
+    """(packed (L·n,) int64 values, level by level; params [lox_0…, loy_0…, wi, wj, block]) of points
+    (``xs``, ``ys``) with ``owner`` (0 = no track, else 1 + the track's rank among ``n_tracks``) on levels of
+    resolutions ``rs``; both empty when the values would not fit in an int64 (or a cell in the key)."""
+    n = xs.shape[0]
+    n_lv = rs.shape[0]
+    empty = np.zeros(0, dtype=np.int64)
+    x0 = xs[0]
+    x1 = xs[0]
+    y0 = ys[0]
+    y1 = ys[0]
+    for p in range(1, n):
+        x = xs[p]
+        y = ys[p]
+        if x < x0:
+            x0 = x
+        if x > x1:
+            x1 = x
+        if y < y0:
+            y0 = y
+        if y > y1:
+            y1 = y
+    params = np.empty(2 * n_lv + 3, dtype=np.int64)
+    wi = 0
+    wj = 0
+    for k in range(n_lv):
+        r = rs[k]
+        for v in (x0 / r, x1 / r, y0 / r, y1 / r):
+            if not abs(v) < _CELL_LIMIT:
+                return empty, empty
+        # v ↦ floor(v / r + 0.5) is monotonic: the extreme points give each level's extreme cells
+        lx = math.floor(x0 / r + 0.5)
+        ly = math.floor(y0 / r + 0.5)
+        params[k] = lx
+        params[n_lv + k] = ly
+        wi = max(wi, math.floor(x1 / r + 0.5) - lx + 1)
+        wj = max(wj, math.floor(y1 / r + 0.5) - ly + 1)
+    # n_lv · (n_tracks + 1) · wi · wj < 2^62, tested factor by factor (p · f ≥ L ⇔ f > (L − 1) // p)
+    prod = n_lv
+    for f in (n_tracks + 1, wi, wj):
+        if f > (_LIMIT - 1) // prod:
+            return empty, empty
+        prod *= f
+    wij = wi * wj
+    block = (n_tracks + 1) * wij
+    params[2 * n_lv] = wi
+    params[2 * n_lv + 1] = wj
+    params[2 * n_lv + 2] = block
+    packed = np.empty(n_lv * n, dtype=np.int64)
+    for k in range(n_lv):
+        r = rs[k]
+        lx = params[k]
+        ly = params[n_lv + k]
+        base = k * block
+        for p in range(n):
+            cx = np.int64(math.floor(xs[p] / r + 0.5)) - lx
+            cy = np.int64(math.floor(ys[p] / r + 0.5)) - ly
+            packed[k * n + p] = cx * wj + cy + owner[p] * wij + base
+    return packed, params
+
+
+@njit("Tuple((int64[::1], int64[::1], int64[:, ::1], int64[::1]))(int64[::1], int64[::1], int64[::1], int64)",
+      cache=True)
+def unpack_cells(u, params, uids, n_lv):  # pragma: no cover - numba
+    """(track ids, cell keys, (m, 2) cells, level bounds (L + 1,)) of the sorted packed values ``u`` of
+    :func:`pack_cells` (``params``; ``uids``: the track ids by rank): each distinct value of an owner > 0 whose
+    (level, cell) has no owner-0 value, in the values' order."""
+    n = u.shape[0]
+    wi = params[2 * n_lv]
+    wj = params[2 * n_lv + 1]
+    block = params[2 * n_lv + 2]
+    wij = wi * wj
+    sel = np.empty(n, dtype=np.int64)
+    m = 0
+    for p in range(n):
+        v = u[p]
+        if p > 0 and v == u[p - 1]:
+            continue
+        own = (v % block) // wij
+        if own == 0:
+            continue
+        q = v - own * wij  # the same level and cell with owner 0: is it among the values (all smaller)?
+        lo = 0
+        hi = p
+        while lo < hi:
+            mid = (lo + hi) >> 1
+            if u[mid] < q:
+                lo = mid + 1
+            else:
+                hi = mid
+        if lo < p and u[lo] == q:
+            continue
+        sel[m] = p
+        m += 1
+    ids = np.empty(m, dtype=np.int64)
+    keys = np.empty(m, dtype=np.int64)
+    cells = np.empty((m, 2), dtype=np.int64)
+    bounds = np.zeros(n_lv + 1, dtype=np.int64)
+    for t in range(m):
+        v = u[sel[t]]
+        lvl = v // block
+        rest = v - lvl * block
+        own = rest // wij
+        cell = rest - own * wij
+        ci = cell // wj + params[lvl]
+        cj = cell - (cell // wj) * wj + params[n_lv + lvl]
+        ids[t] = uids[own - 1]
+        keys[t] = ci * _KEY_SHIFT + cj
+        cells[t, 0] = ci
+        cells[t, 1] = cj
+        bounds[lvl + 1] += 1
+    for k in range(n_lv):
+        bounds[k + 1] += bounds[k]
+    return ids, keys, cells, bounds
+
+
+@njit("Tuple((float64[::1], int64[::1], int64[::1], int64))(float32[:, :], int32[:, :], int64[:, ::1], int64, int64)",
+      cache=True)
+def read_cells(logodds, uidx, cells, i0, j0):  # pragma: no cover - numba
+    """(log-odds (float64), update index (int64), flat index into the (H, W) arrays, number outside) of absolute
+    ``cells`` (m, 2) on a level whose array starts at cell (``i0``, ``j0``); 0, −1, −1 outside the array."""
+    h, w = logodds.shape
+    m = cells.shape[0]
+    lo = np.zeros(m)
+    ui = np.full(m, -1, dtype=np.int64)
+    f = np.full(m, -1, dtype=np.int64)
+    n_out = 0
+    for t in range(m):
+        col = cells[t, 0] - i0
+        row = cells[t, 1] - j0
+        if col >= 0 and row >= 0 and col < w and row < h:
+            lo[t] = logodds[row, col]
+            ui[t] = uidx[row, col]
+            f[t] = row * w + col
+        else:
+            n_out += 1
+    return lo, ui, f, n_out
+
+
+@njit("Tuple((int64[:, ::1], int64[::1], int64[::1]))(float32[:, :], int32[:, :], int64[::1], int64[::1], "
+      "int64[::1], float64[::1], int64[::1])", cache=True)
+def update_rows(logodds, uidx, f, ids, keys, before, ub):  # pragma: no cover - numba
+    """After a map update: ((4, m) rows — cell key, update index before, update index after, the added log-odds'
+    float64 bits — of the cells whose update index changed; the track id of each group of rows; the groups'
+    bounds (g + 1,)), from the cells' flat indices ``f`` (−1: outside the array, read as log-odds 0 and index −1)
+    and what :func:`read_cells` read before the update. ``ids`` is sorted, so each track's rows are one group."""
+    w = logodds.shape[1]
+    n = f.shape[0]
+    after = np.empty(n)
+    ua = np.empty(n, dtype=np.int64)
+    m = 0
+    for t in range(n):
+        ft = f[t]
+        if ft >= 0:
+            row = ft // w
+            col = ft - row * w
+            after[t] = logodds[row, col]
+            ua[t] = uidx[row, col]
+        else:
+            after[t] = 0.0
+            ua[t] = -1
+        if ua[t] != ub[t]:  # else not updated (outside the array, or the ray was skipped)
+            m += 1
+    rows = np.empty((4, m), dtype=np.int64)
+    delta = np.empty(m)
+    gid = np.empty(m, dtype=np.int64)
+    starts = np.empty(m + 1, dtype=np.int64)
+    g = 0
+    j = 0
+    for t in range(n):
+        if ua[t] == ub[t]:
+            continue
+        rows[0, j] = keys[t]
+        rows[1, j] = ub[t]
+        rows[2, j] = ua[t]
+        delta[j] = after[t] - before[t]
+        if j == 0 or ids[t] != gid[g - 1]:
+            gid[g] = ids[t]
+            starts[g] = j
+            g += 1
+        j += 1
+    starts[g] = m
+    rows[3, :] = delta.view(np.int64)
+    return rows, gid[:g].copy(), starts[:g + 1].copy()
