@@ -15,7 +15,7 @@ from dynslam2d.slam import ledgerkernels as lk
 _KEY_SHIFT = 4294967296
 
 
-def _reference_cells(xs, ys, ids, mine_b, rs, lo0, lo1):
+def _reference_cells(xs, ys, ids, mine_b, rs):
     """The numpy path of ``EvidenceLedger._level_cells`` before the kernels: (ids, keys, cells) per level,
     or None when the packed values would not fit in an int64."""
     n_lv = len(rs)
@@ -78,7 +78,7 @@ def test_pack_and_unpack_pick_the_cells_of_the_numpy_path(seed: int) -> None:
     if not mine_b.any():
         mine_b[0] = True
     ids = rng.choice([2, 7, 8, 31, 1000], int(mine_b.sum()))
-    ref = _reference_cells(xs, ys, ids, mine_b, rs, None, None)
+    ref = _reference_cells(xs, ys, ids, mine_b, rs)
     uids = np.unique(ids)
     owner = np.zeros(n, dtype=np.int64)
     owner[mine_b] = np.searchsorted(uids, ids) + 1
@@ -98,7 +98,7 @@ def test_pack_refuses_values_beyond_int64_and_far_cells() -> None:
     ys = np.array([-4.0e7, 4.0e7, 1.0])
     owner = np.array([0, 1, 2], dtype=np.int64)
     ids = np.array([5, 9])
-    assert _reference_cells(xs, ys, ids, owner > 0, [0.05, 0.1, 0.2], None, None) is None
+    assert _reference_cells(xs, ys, ids, owner > 0, [0.05, 0.1, 0.2]) is None
     packed, params = lk.pack_cells(xs, ys, owner, np.array([0.05, 0.1, 0.2]), 2)
     assert packed.shape[0] == 0 and params.shape[0] == 0
     packed, params = lk.pack_cells(np.array([1.0e9, 1.0]), np.array([0.0, 1.0]), np.array([1, 0]), np.array([0.05]), 1)
@@ -157,3 +157,51 @@ def test_read_and_update_rows_equal_the_numpy_after_update(seed: int) -> None:
     assert np.array_equal(tids, kept[np.concatenate(([0], cut))] if kept.shape[0] else kept)
     if seed == 0:
         assert 0 < want.shape[1] < m and n_out > 0
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_scan_cells_keep_the_beams_and_cells_of_the_numpy_path(seed: int) -> None:
+    """scan_cells against the numpy code of the former before_update: the kept beams (valid, inside the laser's
+    open range interval, not removed; NaN, inf and ranges exactly at the limits among them), the map-frame
+    points of Pose2D.transform_points, and, decoded, the same cells per level (a track whose beams are all
+    dropped has a count of 0 and no cell)."""
+    from dynslam2d.types import Pose2D
+
+    rng = np.random.default_rng(200 + seed)
+    n = 720
+    r = rng.uniform(0.0, 12.0, n)
+    r[rng.integers(0, n, 30)] = np.nan
+    r[rng.integers(0, n, 10)] = np.inf
+    r[rng.integers(0, n, 10)] = 0.1  # == laser_min_dist: not kept
+    r[rng.integers(0, n, 10)] = 10.0  # == laser_max_dist: not kept
+    r[100:140] = r[40]  # ties: equal ranges
+    angles = np.linspace(-np.pi, np.pi, n, endpoint=False)
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    cos_a.flags.writeable = sin_a.flags.writeable = False  # as Scan.trig's shared arrays
+    vm = np.isfinite(r) & (r >= 0.05) & (r <= 11.0)
+    removed = rng.random(n) < 0.1
+    owner = np.full(n, -1, dtype=np.int64)
+    for tid, (a, b) in zip((12, 3, 40, 7), ((0, 60), (200, 260), (400, 405), (600, 700))):
+        owner[a:b] = tid
+    removed[400:405] = True  # track 40: every beam removed
+    uids = np.array([3, 7, 12, 40])
+    pose = Pose2D(float(rng.uniform(-5, 5)), float(rng.uniform(-5, 5)), float(rng.uniform(-np.pi, np.pi)))
+    c, s = math.cos(pose.theta), math.sin(pose.theta)
+    rs = np.array([0.05, 0.1, 0.2])
+    packed, params, valid, counts = lk.scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, 0.1, 10.0, c, s,
+                                                  pose.x, pose.y, rs)
+    with np.errstate(invalid="ignore"):
+        want_valid = vm & (r > 0.1) & (r < 10.0) & ~removed
+    assert np.array_equal(valid, want_valid)
+    idx = np.flatnonzero(want_valid)
+    own = owner[idx]
+    mine_b = own >= 0
+    assert np.array_equal(counts, [int((own == t).sum()) for t in uids]) and counts[3] == 0 and counts[:3].all()
+    pts = pose.transform_points(np.column_stack((r[idx] * cos_a[idx], r[idx] * sin_a[idx])))
+    ref = _reference_cells(pts[:, 0].copy(), pts[:, 1].copy(), own[mine_b], mine_b, list(rs))
+    packed.sort()
+    got = lk.unpack_cells(packed, params, uids, 3)
+    for u, v in zip(got, ref):
+        assert u.dtype == v.dtype and np.array_equal(u, v)
+    none = lk.scan_cells(r, cos_a, sin_a, vm, np.ones(n, dtype=bool), owner, uids, 0.1, 10.0, c, s, 0.0, 0.0, rs)
+    assert none[0].shape[0] == 0 and not none[3].any()

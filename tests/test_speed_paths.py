@@ -184,13 +184,14 @@ def test_multires_integrate_equals_per_level_integration() -> None:
 
 
 def test_ledger_packed_level_cells_equal_the_per_level_sort() -> None:
-    """EvidenceLedger._level_cells (one sort of (level, track, cell) packed into int64, flat gathers) returns
+    """EvidenceLedger._level_cells (one sort of (level, track, cell) packed into int64 by pack_cells) returns
     exactly the rows of the per-level lexsort / membership path: tracks sharing cells, cells an unowned point
     also hits (left out), points outside the level's array (read as 0 / −1), and the flat indices re-read
     the same values."""
     from dynslam2d.detect.memoryconfig import MemoryConfig
     from dynslam2d.slam.erasure import EvidenceLedger
     from dynslam2d.slam.grid import MultiResMap
+    from dynslam2d.slam.ledgerkernels import pack_cells
 
     rng = np.random.default_rng(5)
     hmap = MultiResMap(0.05, 3, -0.4, 0.9)
@@ -207,7 +208,13 @@ def test_ledger_packed_level_cells_equal_the_per_level_sort() -> None:
         mine_b[200:] = rng.random(100) < 0.5
         ids = rng.choice([3, 9, 11, 40], int(mine_b.sum()))
         flat: list = []
-        fast = led._level_cells(pts, mine_b, ids, hmap, flat)
+        uids = np.unique(ids)
+        owner = np.zeros(300, dtype=np.int64)
+        owner[mine_b] = np.searchsorted(uids, ids) + 1
+        packed, params = pack_cells(pts[:, 0].copy(), pts[:, 1].copy(), owner,
+                                    np.array([lv.resolution for lv in hmap.levels]), uids.shape[0])
+        packed.sort()
+        fast = led._level_cells(packed, params, uids, hmap, flat)
         plain = led._level_cells_plain(pts, mine_b, ids, hmap)
         assert fast is not None and len(fast) == len(plain) == 3
         for k, (f, p) in enumerate(zip(fast, plain)):

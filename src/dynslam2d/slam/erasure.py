@@ -50,7 +50,7 @@ import numpy as np
 
 from dynslam2d.detect.memoryconfig import MemoryConfig
 from dynslam2d.slam.grid import MultiResMap
-from dynslam2d.slam.ledgerkernels import pack_cells, read_cells, unpack_cells, update_rows
+from dynslam2d.slam.ledgerkernels import read_cells, scan_cells, unpack_cells, update_rows
 from dynslam2d.types import Pose2D, Scan, Track
 
 #: (i, j) cell → one int64 key: i·2^32 + j (|i|, |j| < 2^31)
@@ -302,26 +302,28 @@ class EvidenceLedger:
         else:  # (a later track's claim wins, as one assignment per track in order)
             for t in mine:
                 owner[t.beams] = t.id
-        with np.errstate(invalid="ignore"):
-            valid = scan.valid_mask() & (r > self.laser_min_dist) & (r < self.laser_max_dist) & ~removed
-        idx = np.flatnonzero(valid)
-        own = owner[idx]
-        mine_b = own >= 0
-        if not mine_b.any():
-            return None
+        uids = np.array(sorted({t.id for t in mine}), dtype=np.int64)  # track id ↦ rank 0 … R−1
         cos_a, sin_a = scan.trig()
-        ri = r[idx]
-        lx, ly = ri * cos_a[idx], ri * sin_a[idx]
         c, s = math.cos(pose.theta), math.sin(pose.theta)
-        # map frame, contiguous x and y: the values of pose.transform_points on the (n, 2) points
-        xy = (c * lx - s * ly + pose.x, s * lx + c * ly + pose.y)
-        ids = own[mine_b]
+        # the kept beams (valid, inside the laser's ranges, not removed), their map-frame points (the values of
+        # pose.transform_points) and every point's (level, owner, cell) packed, in one call
+        packed, params, valid, counts = scan_cells(
+            r, cos_a, sin_a, scan.valid_mask(), removed, owner, uids, self.laser_min_dist, self.laser_max_dist,
+            c, s, float(pose.x), float(pose.y), np.array([lv.resolution for lv in hmap.levels], dtype=np.float64))
+        if not counts.any():
+            return None
         flat: list = []
-        uids = np.unique(ids)
-        per_level = self._level_cells(None, mine_b, ids, hmap, flat, uids, xy)
-        if per_level is None:  # (cells beyond the packed values' range: level by level)
-            per_level, flat = self._level_cells_plain(np.column_stack(xy), mine_b, ids, hmap), [None] * len(hmap.levels)
-        present = set(uids.tolist())
+        if params.shape[0]:
+            packed.sort()
+            per_level = self._level_cells(packed, params, uids, hmap, flat)
+        else:  # (cells beyond the packed values' range: level by level)
+            idx = np.flatnonzero(valid)
+            own = owner[idx]
+            mine_b = own >= 0
+            lx, ly = r[idx] * cos_a[idx], r[idx] * sin_a[idx]
+            pts = np.column_stack((c * lx - s * ly + pose.x, s * lx + c * ly + pose.y))
+            per_level, flat = self._level_cells_plain(pts, mine_b, own[mine_b], hmap), [None] * len(hmap.levels)
+        present = set(uids[counts > 0].tolist())
         kb_all = None
         if self.keep_beams and index >= 0:  # every track's valid beams with one gather, split per track
             vb = valid[allb]
@@ -338,30 +340,16 @@ class EvidenceLedger:
                 led.beams.append((int(index), kb_all[kb_lo[i]:kb_hi[i]]))
         return PendingUpdate(per_level, flat)
 
-    def _level_cells(self, pts: np.ndarray | None, mine_b: np.ndarray, ids: np.ndarray, hmap: MultiResMap, flat: list,
-                     uids: np.ndarray | None = None, xy: tuple[np.ndarray, np.ndarray] | None = None
-                     ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] | None:
-        """:meth:`_level_cells_plain` for all levels with one sort: every point's (level, owner, cell) packed
-        into one integer (owner 0 = no track, else 1 + the rank of the track id; cells relative to the
-        level's smallest cell), sorted; the distinct values of tracks whose (level, cell) no unowned point
-        has are decoded back, in (level, track id, cell key) order (slam/ledgerkernels.py: two kernel calls
-        around one ``np.sort``, one read per level). None if the packed values would not fit in an int64.
-        Appends to ``flat``, per level, (flat array indices of the cells, i0, j0, shape) when all lie inside
-        the level's array, else None. ``uids``: ``np.unique(ids)`` if the caller has it; ``xy``: the points'
-        x and y as two contiguous arrays instead of ``pts``."""
+    def _level_cells(self, packed: np.ndarray, params: np.ndarray, uids: np.ndarray, hmap: MultiResMap, flat: list
+                     ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+        """:meth:`_level_cells_plain` for all levels from one sort: ``packed``, every point's (level, owner, cell)
+        packed into one integer by :func:`~dynslam2d.slam.ledgerkernels.pack_cells` (``params``; owner 0 = no
+        track, else 1 + the rank of the track id in ``uids``), sorted; the distinct values of tracks whose
+        (level, cell) no unowned point has are decoded back, in (level, track id, cell key) order, and their
+        cells read (one kernel call, then one per level). Appends to ``flat``, per level, (flat array indices
+        of the cells, i0, j0, shape) when all lie inside the level's array, else None."""
         n_lv = len(hmap.levels)
-        xs, ys = (pts[:, 0], pts[:, 1]) if xy is None else xy
-        if uids is None:
-            uids = np.unique(ids)  # ids ↦ rank 0 … R−1 in id order
-        owner = np.zeros(xs.shape[0], dtype=np.int64)
-        owner[mine_b] = np.searchsorted(uids, ids) + 1
-        rs = np.array([lv.resolution for lv in hmap.levels], dtype=np.float64)
-        packed, params = pack_cells(np.ascontiguousarray(xs, dtype=np.float64),
-                                    np.ascontiguousarray(ys, dtype=np.float64), owner, rs, uids.shape[0])
-        if not params.shape[0]:
-            return None
-        packed.sort()
-        ids_s, key_s, cells_s, bounds = unpack_cells(packed, params, uids.astype(np.int64), n_lv)
+        ids_s, key_s, cells_s, bounds = unpack_cells(packed, params, uids, n_lv)
         bounds = bounds.tolist()
         per_level = []
         for k, lv in enumerate(hmap.levels):

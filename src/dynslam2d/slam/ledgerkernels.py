@@ -6,6 +6,7 @@ cells of all levels around one ``np.sort``, one per level for the read before th
 rows after it) instead of about a hundred small numpy calls. They compute exactly what the numpy code they
 replace computed (``tests/test_ledger_kernels.py`` checks them against it on random inputs):
 
+* :func:`scan_cells`: the kept beams' map-frame points and owners, packed by :func:`pack_cells`;
 * :func:`pack_cells`: every point's (level, owner, cell) as one int64, ``level·block + owner·wi·wj + cx·wj + cy``
   (cells relative to each level's smallest cell, ``floor(v / r + 0.5)`` as slam/grid.py);
 * :func:`unpack_cells`: from the sorted packed values, each distinct (level, owner > 0, cell) that no owner-0
@@ -25,7 +26,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 _KEY_SHIFT = 4294967296
 #: packed values must stay below this (they are int64)
@@ -94,6 +95,65 @@ def pack_cells(xs, ys, owner, rs, n_tracks):  # pragma: no cover - numba
             cy = np.int64(math.floor(ys[p] / r + 0.5)) - ly
             packed[k * n + p] = cx * wj + cy + owner[p] * wij + base
     return packed, params
+
+
+_I1 = types.int64[::1]
+_F1 = types.float64[::1]
+_F1_RO = types.Array(types.float64, 1, "C", readonly=True)  # Scan.trig's shared cos / sin
+_SCAN_SIG = types.Tuple((_I1, _I1, types.boolean[::1], _I1))(
+    _F1, _F1_RO, _F1_RO, types.boolean[::1], types.boolean[:], _I1, _I1, *(types.float64,) * 6, _F1)
+
+
+@njit(_SCAN_SIG, cache=True)
+def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, py, rs):  # pragma: no cover
+    """:func:`pack_cells` of a scan's kept beams: (packed values, params, the kept beams (n,) bool, the number of
+    kept beams of each track (R,)). Kept: ``vm`` (the scan's valid mask), ``rmin < r < rmax`` and not
+    ``removed``; ``owner``: each beam's track id (−1: none), ``uids``: the sorted ids of the tracks with beams
+    (owner 1 + rank). Points in the map frame at pose (``px``, ``py``, cos ``c``, sin ``s``), computed as
+    ``Pose2D.transform_points`` computes them. Packed values and params are empty when no kept beam has a
+    track or the values would not fit (:func:`pack_cells`; the caller then takes the per-level path)."""
+    n = r.shape[0]
+    n_tr = uids.shape[0]
+    valid = np.empty(n, dtype=np.bool_)
+    counts = np.zeros(n_tr, dtype=np.int64)
+    m = 0
+    for b in range(n):
+        rb = r[b]
+        ok = vm[b] and rb > rmin and rb < rmax and not removed[b]
+        valid[b] = ok
+        if ok:
+            m += 1
+    xs = np.empty(m, dtype=np.float64)
+    ys = np.empty(m, dtype=np.float64)
+    rank = np.zeros(m, dtype=np.int64)
+    p = 0
+    n_own = 0
+    for b in range(n):
+        if not valid[b]:
+            continue
+        lx = r[b] * cos_a[b]
+        ly = r[b] * sin_a[b]
+        xs[p] = c * lx - s * ly + px
+        ys[p] = s * lx + c * ly + py
+        o = owner[b]
+        if o >= 0:
+            lo = 0
+            hi = n_tr
+            while lo < hi:
+                mid = (lo + hi) >> 1
+                if uids[mid] < o:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            rank[p] = lo + 1
+            counts[lo] += 1
+            n_own += 1
+        p += 1
+    if n_own == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, valid, counts
+    packed, params = pack_cells(xs, ys, rank, rs, n_tr)
+    return packed, params, valid, counts
 
 
 @njit("Tuple((int64[::1], int64[::1], int64[:, ::1], int64[::1]))(int64[::1], int64[::1], int64[::1], int64)",
