@@ -68,43 +68,70 @@ def _points(rng, n, r):
     return xs, ys
 
 
+def _scan(rng, n, r_coarse):
+    """Ranges and read-only cos / sin (as Scan.trig's) whose points ``r·cos``, ``r·sin`` (the identity pose's
+    map-frame points) have ties: a third on cell boundaries of the coarsest level ((k − 0.5)·r, also boundaries
+    of the finer levels), duplicates, negative and positive coordinates."""
+    xs, ys = _points(rng, n, r_coarse)
+    rr = np.hypot(xs, ys)
+    rr[rr == 0.0] = 1.0
+    cos_a, sin_a = xs / rr, ys / rr
+    on = rng.random(n) < 0.5  # half the beams exactly on the boundaries: cos = x, sin = y at range 1
+    rr[on], cos_a[on], sin_a[on] = 1.0, xs[on], ys[on]
+    cos_a.flags.writeable = sin_a.flags.writeable = False
+    return rr, cos_a, sin_a
+
+
+def _scan_cells(rr, cos_a, sin_a, owner, uids, rs):
+    """scan_cells at the identity pose (every beam kept), sorted: (packed, params, the points x and y)."""
+    n = rr.shape[0]
+    packed, params, valid, counts = lk.scan_cells(rr, cos_a, sin_a, np.ones(n, dtype=bool), np.zeros(n, dtype=bool),
+                                                  owner, uids, 0.0, np.inf, 1.0, 0.0, 0.0, 0.0, np.array(rs))
+    assert valid.all()
+    packed.sort()
+    return packed, params, rr * cos_a, rr * sin_a
+
+
 @pytest.mark.parametrize("seed", range(12))
-def test_pack_and_unpack_pick_the_cells_of_the_numpy_path(seed: int) -> None:
+def test_scan_cells_and_unpack_pick_the_cells_of_the_numpy_path(seed: int) -> None:
     rng = np.random.default_rng(seed)
     rs = [0.05, 0.1, 0.2] if seed % 3 else [0.025, 0.05, 0.1, 0.2]
     n = int(rng.integers(1, 400))
-    xs, ys = _points(rng, n, rs[-1])
+    rr, cos_a, sin_a = _scan(rng, n, rs[-1])
     mine_b = rng.random(n) < (0.5 if seed % 2 else 0.95)
     if not mine_b.any():
         mine_b[0] = True
     ids = rng.choice([2, 7, 8, 31, 1000], int(mine_b.sum()))
-    ref = _reference_cells(xs, ys, ids, mine_b, rs)
+    owner = np.full(n, -1, dtype=np.int64)
+    owner[mine_b] = ids
     uids = np.unique(ids)
-    owner = np.zeros(n, dtype=np.int64)
-    owner[mine_b] = np.searchsorted(uids, ids) + 1
-    packed, params = lk.pack_cells(xs, ys, owner, np.array(rs), uids.shape[0])
-    packed.sort()
+    packed, params, xs, ys = _scan_cells(rr, cos_a, sin_a, owner, uids, rs)
+    ref = _reference_cells(xs, ys, ids, mine_b, rs)
     got = lk.unpack_cells(packed, params, uids, len(rs))
     for u, v in zip(got, ref):
         assert u.dtype == v.dtype and np.array_equal(u, v)
-    # the cases the kernels must get right occurred: shared cells left out, cells of several tracks kept
     assert got[0].shape[0] > 0
 
 
-def test_pack_refuses_values_beyond_int64_and_far_cells() -> None:
+def test_scan_cells_refuse_values_beyond_int64_and_far_cells() -> None:
     """A scan spread so wide that the packed values would overflow, and a point whose cell does not fit in a
-    key, give empty outputs (the caller then takes the per-level path), as the numpy path returned None."""
-    xs = np.array([-4.0e7, 4.0e7, 0.0])
-    ys = np.array([-4.0e7, 4.0e7, 1.0])
-    owner = np.array([0, 1, 2], dtype=np.int64)
-    ids = np.array([5, 9])
-    assert _reference_cells(xs, ys, ids, owner > 0, [0.05, 0.1, 0.2]) is None
-    packed, params = lk.pack_cells(xs, ys, owner, np.array([0.05, 0.1, 0.2]), 2)
-    assert packed.shape[0] == 0 and params.shape[0] == 0
-    packed, params = lk.pack_cells(np.array([1.0e9, 1.0]), np.array([0.0, 1.0]), np.array([1, 0]), np.array([0.05]), 1)
-    assert params.shape[0] == 0
-    packed, params = lk.pack_cells(np.array([10.0, 1.0]), np.array([0.0, 1.0]), np.array([1, 0]), np.array([0.05]), 1)
-    assert params.shape[0] == 5 and packed.shape[0] == 2
+    key, give empty packed values (the caller then takes the per-level path), as the numpy path returned None."""
+    cos_a = np.array([1.0, -1.0, 0.0, 0.0])
+    sin_a = np.array([0.0, 0.0, 1.0, -1.0])
+    cos_a.flags.writeable = sin_a.flags.writeable = False
+    rr = np.full(4, 6.0e7)
+    owner = np.array([-1, 5, 9, 5], dtype=np.int64)
+    uids = np.array([5, 9])
+    ones, zeros = np.ones(4, dtype=bool), np.zeros(4, dtype=bool)
+    rs = np.array([0.05, 0.1, 0.2])
+    xs, ys = rr * cos_a, rr * sin_a
+    assert _reference_cells(xs, ys, owner[owner >= 0], owner >= 0, list(rs)) is None
+    out = lk.scan_cells(rr, cos_a, sin_a, ones, zeros, owner, uids, 0.0, np.inf, 1.0, 0.0, 0.0, 0.0, rs)
+    assert out[0].shape[0] == 0 and out[1].shape[0] == 0 and out[3].tolist() == [2, 1]
+    far = lk.scan_cells(rr / 1e4, cos_a, sin_a, ones, zeros, owner, uids, 0.0, np.inf, 1.0, 0.0, 1.0e9, 0.0, rs)
+    assert far[1].shape[0] == 0
+    near = lk.scan_cells(rr / 1e4, cos_a, sin_a, ones, zeros, owner, uids, 0.0, np.inf, 1.0, 0.0, 0.0, 0.0, rs)
+    assert near[1].shape[0] == 9 and near[0].shape[0] == 12
 
 
 def _read_reference(logodds, uidx, cells, i0, j0):

@@ -343,7 +343,7 @@ class EvidenceLedger:
     def _level_cells(self, packed: np.ndarray, params: np.ndarray, uids: np.ndarray, hmap: MultiResMap, flat: list
                      ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
         """:meth:`_level_cells_plain` for all levels from one sort: ``packed``, every point's (level, owner, cell)
-        packed into one integer by :func:`~dynslam2d.slam.ledgerkernels.pack_cells` (``params``; owner 0 = no
+        packed into one integer by :func:`~dynslam2d.slam.ledgerkernels.scan_cells` (``params``; owner 0 = no
         track, else 1 + the rank of the track id in ``uids``), sorted; the distinct values of tracks whose
         (level, cell) no unowned point has are decoded back, in (level, track id, cell key) order, and their
         cells read (one kernel call, then one per level). Appends to ``flat``, per level, (flat array indices

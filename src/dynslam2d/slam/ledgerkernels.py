@@ -6,9 +6,8 @@ cells of all levels around one ``np.sort``, one per level for the read before th
 rows after it) instead of about a hundred small numpy calls. They compute exactly what the numpy code they
 replace computed (``tests/test_ledger_kernels.py`` checks them against it on random inputs):
 
-* :func:`scan_cells`: the kept beams' map-frame points and owners, packed by :func:`pack_cells`;
-* :func:`pack_cells`: every point's (level, owner, cell) as one int64, ``level·block + owner·wi·wj + cx·wj + cy``
-  (cells relative to each level's smallest cell, ``floor(v / r + 0.5)`` as slam/grid.py);
+* :func:`scan_cells`: the kept beams (valid, inside the laser's ranges, not removed), their map-frame points
+  and owner tracks, and every point's (level, owner, cell) as one int64;
 * :func:`unpack_cells`: from the sorted packed values, each distinct (level, owner > 0, cell) that no owner-0
   value shares (a cell another kept beam of the scan hits is the structure's), decoded to track id, cell key
   ``i·2^32 + j`` and cell (i, j), in (level, track, cell) order;
@@ -35,68 +34,6 @@ _LIMIT = 1 << 62
 _CELL_LIMIT = 2.0 ** 31
 
 
-@njit("Tuple((int64[::1], int64[::1]))(float64[::1], float64[::1], int64[::1], float64[::1], int64)", cache=True)
-def pack_cells(xs, ys, owner, rs, n_tracks):  # pragma: no cover - numba
-    """(packed (L·n,) int64 values, level by level; params [lox_0…, loy_0…, wi, wj, block]) of points
-    (``xs``, ``ys``) with ``owner`` (0 = no track, else 1 + the track's rank among ``n_tracks``) on levels of
-    resolutions ``rs``; both empty when the values would not fit in an int64 (or a cell in the key)."""
-    n = xs.shape[0]
-    n_lv = rs.shape[0]
-    empty = np.zeros(0, dtype=np.int64)
-    x0 = xs[0]
-    x1 = xs[0]
-    y0 = ys[0]
-    y1 = ys[0]
-    for p in range(1, n):
-        x = xs[p]
-        y = ys[p]
-        if x < x0:
-            x0 = x
-        if x > x1:
-            x1 = x
-        if y < y0:
-            y0 = y
-        if y > y1:
-            y1 = y
-    params = np.empty(2 * n_lv + 3, dtype=np.int64)
-    wi = 0
-    wj = 0
-    for k in range(n_lv):
-        r = rs[k]
-        for v in (x0 / r, x1 / r, y0 / r, y1 / r):
-            if not abs(v) < _CELL_LIMIT:
-                return empty, empty
-        # v ↦ floor(v / r + 0.5) is monotonic: the extreme points give each level's extreme cells
-        lx = math.floor(x0 / r + 0.5)
-        ly = math.floor(y0 / r + 0.5)
-        params[k] = lx
-        params[n_lv + k] = ly
-        wi = max(wi, math.floor(x1 / r + 0.5) - lx + 1)
-        wj = max(wj, math.floor(y1 / r + 0.5) - ly + 1)
-    # n_lv · (n_tracks + 1) · wi · wj < 2^62, tested factor by factor (p · f ≥ L ⇔ f > (L − 1) // p)
-    prod = n_lv
-    for f in (n_tracks + 1, wi, wj):
-        if f > (_LIMIT - 1) // prod:
-            return empty, empty
-        prod *= f
-    wij = wi * wj
-    block = (n_tracks + 1) * wij
-    params[2 * n_lv] = wi
-    params[2 * n_lv + 1] = wj
-    params[2 * n_lv + 2] = block
-    packed = np.empty(n_lv * n, dtype=np.int64)
-    for k in range(n_lv):
-        r = rs[k]
-        lx = params[k]
-        ly = params[n_lv + k]
-        base = k * block
-        for p in range(n):
-            cx = np.int64(math.floor(xs[p] / r + 0.5)) - lx
-            cy = np.int64(math.floor(ys[p] / r + 0.5)) - ly
-            packed[k * n + p] = cx * wj + cy + owner[p] * wij + base
-    return packed, params
-
-
 _I1 = types.int64[::1]
 _F1 = types.float64[::1]
 _F1_RO = types.Array(types.float64, 1, "C", readonly=True)  # Scan.trig's shared cos / sin
@@ -106,12 +43,15 @@ _SCAN_SIG = types.Tuple((_I1, _I1, types.boolean[::1], _I1))(
 
 @njit(_SCAN_SIG, cache=True)
 def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, py, rs):  # pragma: no cover
-    """:func:`pack_cells` of a scan's kept beams: (packed values, params, the kept beams (n,) bool, the number of
-    kept beams of each track (R,)). Kept: ``vm`` (the scan's valid mask), ``rmin < r < rmax`` and not
+    """A scan's kept beams, their points' (level, owner, cell) packed: (packed (L·m,) int64 values
+    ``level·block + owner·wi·wj + cx·wj + cy``, level by level, cells relative to each level's smallest cell
+    (``floor(v / r + 0.5)`` as slam/grid.py); params [lox_0…, loy_0…, wi, wj, block]; the kept beams (n,) bool;
+    the number of kept beams of each track (R,)). Kept: ``vm`` (the scan's valid mask), ``rmin < r < rmax`` and not
     ``removed``; ``owner``: each beam's track id (−1: none), ``uids``: the sorted ids of the tracks with beams
     (owner 1 + rank). Points in the map frame at pose (``px``, ``py``, cos ``c``, sin ``s``), computed as
     ``Pose2D.transform_points`` computes them. Packed values and params are empty when no kept beam has a
-    track or the values would not fit (:func:`pack_cells`; the caller then takes the per-level path)."""
+    track, or when the values would not fit in an int64 or a cell in a key (the caller then takes the per-level
+    path)."""
     n = r.shape[0]
     n_tr = uids.shape[0]
     valid = np.empty(n, dtype=np.bool_)
@@ -149,10 +89,62 @@ def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, 
             counts[lo] += 1
             n_own += 1
         p += 1
+    empty = np.zeros(0, dtype=np.int64)
     if n_own == 0:
-        empty = np.zeros(0, dtype=np.int64)
         return empty, empty, valid, counts
-    packed, params = pack_cells(xs, ys, rank, rs, n_tr)
+    # every point's (level, owner, cell) as one int64 (owner 0 = no track, else 1 + rank)
+    n_lv = rs.shape[0]
+    x0 = xs[0]
+    x1 = xs[0]
+    y0 = ys[0]
+    y1 = ys[0]
+    for p in range(1, m):
+        x = xs[p]
+        y = ys[p]
+        if x < x0:
+            x0 = x
+        if x > x1:
+            x1 = x
+        if y < y0:
+            y0 = y
+        if y > y1:
+            y1 = y
+    params = np.empty(2 * n_lv + 3, dtype=np.int64)
+    wi = 0
+    wj = 0
+    for k in range(n_lv):
+        res = rs[k]
+        for v in (x0 / res, x1 / res, y0 / res, y1 / res):
+            if not abs(v) < _CELL_LIMIT:
+                return empty, empty, valid, counts
+        # v ↦ floor(v / res + 0.5) is monotonic: the extreme points give each level's extreme cells
+        cx0 = math.floor(x0 / res + 0.5)
+        cy0 = math.floor(y0 / res + 0.5)
+        params[k] = cx0
+        params[n_lv + k] = cy0
+        wi = max(wi, math.floor(x1 / res + 0.5) - cx0 + 1)
+        wj = max(wj, math.floor(y1 / res + 0.5) - cy0 + 1)
+    # n_lv · (n_tr + 1) · wi · wj < 2^62, tested factor by factor (p · f ≥ L ⇔ f > (L − 1) // p)
+    prod = n_lv
+    for f in (n_tr + 1, wi, wj):
+        if f > (_LIMIT - 1) // prod:
+            return empty, empty, valid, counts
+        prod *= f
+    wij = wi * wj
+    block = (n_tr + 1) * wij
+    params[2 * n_lv] = wi
+    params[2 * n_lv + 1] = wj
+    params[2 * n_lv + 2] = block
+    packed = np.empty(n_lv * m, dtype=np.int64)
+    for k in range(n_lv):
+        res = rs[k]
+        cx0 = params[k]
+        cy0 = params[n_lv + k]
+        base = k * block
+        for p in range(m):
+            cx = np.int64(math.floor(xs[p] / res + 0.5)) - cx0
+            cy = np.int64(math.floor(ys[p] / res + 0.5)) - cy0
+            packed[k * m + p] = cx * wj + cy + rank[p] * wij + base
     return packed, params, valid, counts
 
 
@@ -160,7 +152,7 @@ def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, 
       cache=True)
 def unpack_cells(u, params, uids, n_lv):  # pragma: no cover - numba
     """(track ids, cell keys, (m, 2) cells, level bounds (L + 1,)) of the sorted packed values ``u`` of
-    :func:`pack_cells` (``params``; ``uids``: the track ids by rank): each distinct value of an owner > 0 whose
+    :func:`scan_cells` (``params``; ``uids``: the track ids by rank): each distinct value of an owner > 0 whose
     (level, cell) has no owner-0 value, in the values' order."""
     n = u.shape[0]
     wi = params[2 * n_lv]
@@ -243,26 +235,32 @@ def update_rows(logodds, uidx, f, ids, keys, before, ub):  # pragma: no cover - 
     and what :func:`read_cells` read before the update. ``ids`` is sorted, so each track's rows are one group."""
     w = logodds.shape[1]
     n = f.shape[0]
-    after = np.empty(n)
+    delta = np.empty(n)
     ua = np.empty(n, dtype=np.int64)
     m = 0
+    g = 0
+    last = 0
     for t in range(n):
         ft = f[t]
+        after = 0.0
+        u = -1
         if ft >= 0:
             row = ft // w
             col = ft - row * w
-            after[t] = logodds[row, col]
-            ua[t] = uidx[row, col]
-        else:
-            after[t] = 0.0
-            ua[t] = -1
-        if ua[t] != ub[t]:  # else not updated (outside the array, or the ray was skipped)
+            after = logodds[row, col]
+            u = uidx[row, col]
+        ua[t] = u
+        delta[t] = after - before[t]
+        if u != ub[t]:  # else not updated (outside the array, or the ray was skipped)
+            if m == 0 or ids[t] != last:
+                g += 1
+                last = ids[t]
             m += 1
+    bits = delta.view(np.int64)
     rows = np.empty((4, m), dtype=np.int64)
-    delta = np.empty(m)
-    gid = np.empty(m, dtype=np.int64)
-    starts = np.empty(m + 1, dtype=np.int64)
-    g = 0
+    gid = np.empty(g, dtype=np.int64)
+    starts = np.empty(g + 1, dtype=np.int64)
+    k = 0
     j = 0
     for t in range(n):
         if ua[t] == ub[t]:
@@ -270,12 +268,11 @@ def update_rows(logodds, uidx, f, ids, keys, before, ub):  # pragma: no cover - 
         rows[0, j] = keys[t]
         rows[1, j] = ub[t]
         rows[2, j] = ua[t]
-        delta[j] = after[t] - before[t]
-        if j == 0 or ids[t] != gid[g - 1]:
-            gid[g] = ids[t]
-            starts[g] = j
-            g += 1
+        rows[3, j] = bits[t]
+        if j == 0 or ids[t] != gid[k - 1]:
+            gid[k] = ids[t]
+            starts[k] = j
+            k += 1
         j += 1
     starts[g] = m
-    rows[3, :] = delta.view(np.int64)
-    return rows, gid[:g].copy(), starts[:g + 1].copy()
+    return rows, gid, starts
