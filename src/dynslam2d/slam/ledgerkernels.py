@@ -34,6 +34,19 @@ _LIMIT = 1 << 62
 _CELL_LIMIT = 2.0 ** 31
 
 
+@njit("int64(int64[::1], int64, int64)", cache=True)
+def _lower_bound(a, hi, v):  # pragma: no cover - numba
+    """The first index in ``a[:hi]`` (sorted) whose value is not below ``v`` (``hi`` if none)."""
+    lo = 0
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if a[mid] < v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
 _I1 = types.int64[::1]
 _F1 = types.float64[::1]
 _F1_RO = types.Array(types.float64, 1, "C", readonly=True)  # Scan.trig's shared cos / sin
@@ -77,14 +90,7 @@ def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, 
         ys[p] = s * lx + c * ly + py
         o = owner[b]
         if o >= 0:
-            lo = 0
-            hi = n_tr
-            while lo < hi:
-                mid = (lo + hi) >> 1
-                if uids[mid] < o:
-                    lo = mid + 1
-                else:
-                    hi = mid
+            lo = _lower_bound(uids, n_tr, o)
             rank[p] = lo + 1
             counts[lo] += 1
             n_own += 1
@@ -169,14 +175,7 @@ def unpack_cells(u, params, uids, n_lv):  # pragma: no cover - numba
         if own == 0:
             continue
         q = v - own * wij  # the same level and cell with owner 0: is it among the values (all smaller)?
-        lo = 0
-        hi = p
-        while lo < hi:
-            mid = (lo + hi) >> 1
-            if u[mid] < q:
-                lo = mid + 1
-            else:
-                hi = mid
+        lo = _lower_bound(u, p, q)
         if lo < p and u[lo] == q:
             continue
         sel[m] = p
