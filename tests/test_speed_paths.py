@@ -184,13 +184,14 @@ def test_multires_integrate_equals_per_level_integration() -> None:
 
 
 def test_ledger_packed_level_cells_equal_the_per_level_sort() -> None:
-    """EvidenceLedger._level_cells (one sort of (level, track, cell) packed into int64, flat gathers) returns
+    """EvidenceLedger._level_cells (one sort of (level, track, cell) packed into int64 by scan_cells) returns
     exactly the rows of the per-level lexsort / membership path: tracks sharing cells, cells an unowned point
     also hits (left out), points outside the level's array (read as 0 / −1), and the flat indices re-read
     the same values."""
     from dynslam2d.detect.memoryconfig import MemoryConfig
     from dynslam2d.slam.erasure import EvidenceLedger
     from dynslam2d.slam.grid import MultiResMap
+    from dynslam2d.slam.ledgerkernels import scan_cells
 
     rng = np.random.default_rng(5)
     hmap = MultiResMap(0.05, 3, -0.4, 0.9)
@@ -202,12 +203,24 @@ def test_ledger_packed_level_cells_equal_the_per_level_sort() -> None:
         reach = 2.5 if trial % 2 else 12.0  # far points lie outside the level arrays: the per-level read path
         pts = rng.uniform(-reach, reach, (300, 2))
         pts[100:140] = pts[:40] + rng.normal(0.0, 0.02, (40, 2))  # unowned points near the tracks' points
+        # as a scan at the identity pose: ranges and read-only cos / sin whose products are the points
+        rr = np.hypot(pts[:, 0], pts[:, 1])
+        cos_a, sin_a = pts[:, 0] / rr, pts[:, 1] / rr
+        cos_a.flags.writeable = sin_a.flags.writeable = False
+        pts = np.column_stack((rr * cos_a, rr * sin_a))
         mine_b = np.zeros(300, dtype=bool)
         mine_b[:100] = True
         mine_b[200:] = rng.random(100) < 0.5
         ids = rng.choice([3, 9, 11, 40], int(mine_b.sum()))
         flat: list = []
-        fast = led._level_cells(pts, mine_b, ids, hmap, flat)
+        uids = np.unique(ids)
+        owner = np.full(300, -1, dtype=np.int64)
+        owner[mine_b] = ids
+        packed, params, _, _ = scan_cells(rr, cos_a, sin_a, np.ones(300, dtype=bool), np.zeros(300, dtype=bool),
+                                          owner, uids, 0.0, np.inf, 1.0, 0.0, 0.0, 0.0,
+                                          np.array([lv.resolution for lv in hmap.levels]))
+        packed.sort()
+        fast = led._level_cells(packed, params, uids, hmap, flat)
         plain = led._level_cells_plain(pts, mine_b, ids, hmap)
         assert fast is not None and len(fast) == len(plain) == 3
         for k, (f, p) in enumerate(zip(fast, plain)):

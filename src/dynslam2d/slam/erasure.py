@@ -50,6 +50,7 @@ import numpy as np
 
 from dynslam2d.detect.memoryconfig import MemoryConfig
 from dynslam2d.slam.grid import MultiResMap
+from dynslam2d.slam.ledgerkernels import read_cells, scan_cells, unpack_cells, update_rows
 from dynslam2d.types import Pose2D, Scan, Track
 
 #: (i, j) cell → one int64 key: i·2^32 + j (|i|, |j| < 2^31)
@@ -301,26 +302,28 @@ class EvidenceLedger:
         else:  # (a later track's claim wins, as one assignment per track in order)
             for t in mine:
                 owner[t.beams] = t.id
-        with np.errstate(invalid="ignore"):
-            valid = scan.valid_mask() & (r > self.laser_min_dist) & (r < self.laser_max_dist) & ~removed
-        idx = np.flatnonzero(valid)
-        own = owner[idx]
-        mine_b = own >= 0
-        if not mine_b.any():
-            return None
+        uids = np.array(sorted({t.id for t in mine}), dtype=np.int64)  # track id ↦ rank 0 … R−1
         cos_a, sin_a = scan.trig()
-        ri = r[idx]
-        lx, ly = ri * cos_a[idx], ri * sin_a[idx]
         c, s = math.cos(pose.theta), math.sin(pose.theta)
-        # map frame, contiguous x and y: the values of pose.transform_points on the (n, 2) points
-        xy = (c * lx - s * ly + pose.x, s * lx + c * ly + pose.y)
-        ids = own[mine_b]
+        # the kept beams (valid, inside the laser's ranges, not removed), their map-frame points (the values of
+        # pose.transform_points) and every point's (level, owner, cell) packed, in one call
+        packed, params, valid, counts = scan_cells(
+            r, cos_a, sin_a, scan.valid_mask(), removed, owner, uids, self.laser_min_dist, self.laser_max_dist,
+            c, s, float(pose.x), float(pose.y), np.array([lv.resolution for lv in hmap.levels], dtype=np.float64))
+        if not counts.any():
+            return None
         flat: list = []
-        uids = np.unique(ids)
-        per_level = self._level_cells(None, mine_b, ids, hmap, flat, uids, xy)
-        if per_level is None:  # (cells beyond the packed values' range: level by level)
-            per_level, flat = self._level_cells_plain(np.column_stack(xy), mine_b, ids, hmap), [None] * len(hmap.levels)
-        present = set(uids.tolist())
+        if params.shape[0]:
+            packed.sort()
+            per_level = self._level_cells(packed, params, uids, hmap, flat)
+        else:  # (cells beyond the packed values' range: level by level)
+            idx = np.flatnonzero(valid)
+            own = owner[idx]
+            mine_b = own >= 0
+            lx, ly = r[idx] * cos_a[idx], r[idx] * sin_a[idx]
+            pts = np.column_stack((c * lx - s * ly + pose.x, s * lx + c * ly + pose.y))
+            per_level, flat = self._level_cells_plain(pts, mine_b, own[mine_b], hmap), [None] * len(hmap.levels)
+        present = set(uids[counts > 0].tolist())
         kb_all = None
         if self.keep_beams and index >= 0:  # every track's valid beams with one gather, split per track
             vb = valid[allb]
@@ -337,77 +340,24 @@ class EvidenceLedger:
                 led.beams.append((int(index), kb_all[kb_lo[i]:kb_hi[i]]))
         return PendingUpdate(per_level, flat)
 
-    def _level_cells(self, pts: np.ndarray | None, mine_b: np.ndarray, ids: np.ndarray, hmap: MultiResMap, flat: list,
-                     uids: np.ndarray | None = None, xy: tuple[np.ndarray, np.ndarray] | None = None
-                     ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] | None:
-        """:meth:`_level_cells_plain` for all levels with one sort: every point's (level, owner, cell) packed
-        into one integer (owner 0 = no track, else 1 + the rank of the track id; cells relative to the
-        level's smallest cell), sorted; the distinct values of tracks whose (level, cell) no unowned point
-        has are decoded back, in (level, track id, cell key) order. None if the packed values would not fit
-        in an int64. Appends to ``flat``, per level, (flat array indices of the cells, i0, j0, shape) when all
-        lie inside the level's array, else None. ``uids``: ``np.unique(ids)`` if the caller has it; ``xy``: the
-        points' x and y as two contiguous arrays instead of ``pts``."""
+    def _level_cells(self, packed: np.ndarray, params: np.ndarray, uids: np.ndarray, hmap: MultiResMap, flat: list
+                     ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+        """:meth:`_level_cells_plain` for all levels from one sort: ``packed``, every point's (level, owner, cell)
+        packed into one integer by :func:`~dynslam2d.slam.ledgerkernels.scan_cells` (``params``; owner 0 = no
+        track, else 1 + the rank of the track id in ``uids``), sorted; the distinct values of tracks whose
+        (level, cell) no unowned point has are decoded back, in (level, track id, cell key) order, and their
+        cells read (one kernel call, then one per level). Appends to ``flat``, per level, (flat array indices
+        of the cells, i0, j0, shape) when all lie inside the level's array, else None."""
         n_lv = len(hmap.levels)
-        rs = [lv.resolution for lv in hmap.levels]
-        xs, ys = (pts[:, 0], pts[:, 1]) if xy is None else xy
-        # v ↦ floor(v / r + 0.5) is monotonic: the extreme points give each level's extreme cells
-        x0, x1, y0, y1 = float(xs.min()), float(xs.max()), float(ys.min()), float(ys.max())
-        lox = [math.floor(x0 / r + 0.5) for r in rs]
-        loy = [math.floor(y0 / r + 0.5) for r in rs]
-        hix = [math.floor(x1 / r + 0.5) for r in rs]
-        hiy = [math.floor(y1 / r + 0.5) for r in rs]
-        wi = max(b - a for a, b in zip(lox, hix)) + 1
-        wj = max(b - a for a, b in zip(loy, hiy)) + 1
-        if uids is None:
-            uids = np.unique(ids)  # ids ↦ rank 0 … R−1 in id order
-        block = (uids.shape[0] + 1) * wi * wj  # one level's values
-        if n_lv * block >= 1 << 62:
-            return None
-        owner = np.zeros(xs.shape[0], dtype=np.int64)
-        owner[mine_b] = np.searchsorted(uids, ids) + 1
-        res = np.array(rs)[:, None]
-        cx = np.floor(xs / res + 0.5).astype(np.int64)  # (L, n) cells, as pts / r_k + 0.5 per level
-        cy = np.floor(ys / res + 0.5).astype(np.int64)
-        cx -= np.array(lox, dtype=np.int64)[:, None]
-        cy -= np.array(loy, dtype=np.int64)[:, None]
-        packed = cx * wj + cy + owner * (wi * wj) + np.arange(0, n_lv * block, block, dtype=np.int64)[:, None]
-        u = np.sort(packed.ravel())
-        keep = np.ones(u.shape[0], dtype=bool)
-        keep[1:] = u[1:] != u[:-1]
-        u = u[keep]
-        lvl, rest = np.divmod(u, block)
-        own, cell = np.divmod(rest, wi * wj)
-        theirs = own > 0
-        # a cell another (unowned) kept beam of this scan hits on the same level is the structure's: its
-        # unowned value (level, owner 0, cell) is among the sorted values u
-        if theirs.all():
-            mine = theirs
-        else:
-            q = u - own * (wi * wj)  # each value with owner 0
-            i = np.searchsorted(u, q)
-            i[i == u.shape[0]] = 0
-            mine = theirs & (u[i] != q)
-        lvl, own, cell = lvl[mine], own[mine], cell[mine]
-        ci, cj = np.divmod(cell, wj)
-        ci += np.array(lox, dtype=np.int64)[lvl]
-        cj += np.array(loy, dtype=np.int64)[lvl]
-        ids_s = uids[own - 1]
-        key_s = ci * _KEY_SHIFT + cj
-        cells_s = np.column_stack((ci, cj))
-        bounds = np.searchsorted(lvl, np.arange(n_lv + 1)).tolist()
+        ids_s, key_s, cells_s, bounds = unpack_cells(packed, params, uids, n_lv)
+        bounds = bounds.tolist()
         per_level = []
         for k, lv in enumerate(hmap.levels):
             a, b = bounds[k], bounds[k + 1]
             c = cells_s[a:b]
-            h, w = lv.shape
-            if w and lox[k] >= lv.i0 and loy[k] >= lv.j0 and hix[k] < lv.i0 + w and hiy[k] < lv.j0 + h:
-                # every cell inside the level's array (the usual case): one flat gather, kept for after_update
-                f = (cj[a:b] - lv.j0) * w + (ci[a:b] - lv.i0)
-                before, uidx = lv.logodds.ravel().take(f).astype(np.float64), lv.uidx.ravel().take(f).astype(np.int64)
-                flat.append((f, lv.i0, lv.j0, (h, w)))
-            else:
-                before, uidx = self._read(lv, c)
-                flat.append(None)
+            before, uidx, f, n_out = read_cells(lv.logodds, lv.uidx, c, lv.i0, lv.j0)
+            # the flat indices, for after_update to re-read the same cells if the level does not grow
+            flat.append((f, lv.i0, lv.j0, lv.shape) if n_out == 0 else None)
             per_level.append((ids_s[a:b], key_s[a:b], c, before, uidx))
         return per_level
 
@@ -459,40 +409,26 @@ class EvidenceLedger:
 
     def after_update(self, pending: PendingUpdate, hmap: MultiResMap) -> None:
         """Record the evidence the map update added in the cells read by :meth:`before_update`."""
+        ledgers = self._ledgers
+        added = 0
         for k, (ids, keys, cells, before, ui_before) in enumerate(pending.per_level):
             if ids.shape[0] == 0:
                 continue
             lv = hmap.levels[k]
             f = pending.flat[k] if pending.flat is not None else None
-            if f is not None and f[1] == lv.i0 and f[2] == lv.j0 and f[3] == lv.shape:
-                after = lv.logodds.ravel().take(f[0]).astype(np.float64)
-                ui_after = lv.uidx.ravel().take(f[0]).astype(np.int64)
-            else:
-                after, ui_after = self._read(lv, cells)
-            upd = ui_after != ui_before  # else not updated (outside the array, or the ray was skipped)
-            if not upd.any():
-                continue
-            if upd.all():  # (the usual case: no row to drop)
-                delta, ub, ua = after - before, ui_before, ui_after
-            else:
-                ids, keys, delta, ub, ua = ids[upd], keys[upd], after[upd] - before[upd], ui_before[upd], ui_after[upd]
-            rows = np.empty((4, ids.shape[0]), dtype=np.int64)  # one copy per record below, not four
-            rows[0] = keys
-            rows[1] = ub
-            rows[2] = ua
-            rows[3] = delta.view(np.int64)
-            cut = np.flatnonzero(ids[1:] != ids[:-1]) + 1
-            lo = [0, *cut.tolist()]
-            hi = [*lo[1:], ids.shape[0]]
-            added = 0
-            ledgers = self._ledgers
-            for tid, a, b in zip(ids[lo].tolist(), lo, hi):
+            if f is None or f[1] != lv.i0 or f[2] != lv.j0 or f[3] != lv.shape:  # (the level grew: read anew)
+                f = read_cells(lv.logodds, lv.uidx, cells, lv.i0, lv.j0)[2:3]
+            # one block of rows (cell keys, update index before / after, log-odds' bits) of the updated cells;
+            # each record copies its track's slice of it
+            rows, tids, starts = update_rows(lv.logodds, lv.uidx, f[0], ids, keys, before, ui_before)
+            st = starts.tolist()
+            for tid, a, b in zip(tids.tolist(), st, st[1:]):
                 led = ledgers.get(tid)
                 if led is not None:  # (every group holds rows)
                     rec = led.levels[k]
                     if rec.push_rows(rows, a, b):
                         added += rec.compact()
-            self.stats["cells_recorded"] += added
+        self.stats["cells_recorded"] += added
 
     def _fold(self, led: _Ledger) -> None:
         """Fold every level's pending rows of ``led`` (counts its new cells)."""

@@ -1,0 +1,277 @@
+"""numba kernels of the evidence ledger's per-update recording (slam/erasure.py, issue 9).
+
+Each map update of the pipeline records, per track and map level, the cells the track's kept beams hit and the
+log-odds the update added there. These kernels do that work in a fixed number of calls per update (two for the
+cells of all levels around one ``np.sort``, one per level for the read before the update, one per level for the
+rows after it) instead of about a hundred small numpy calls. They compute exactly what the numpy code they
+replace computed (``tests/test_ledger_kernels.py`` checks them against it on random inputs):
+
+* :func:`scan_cells`: the kept beams (valid, inside the laser's ranges, not removed), their map-frame points
+  and owner tracks, and every point's (level, owner, cell) as one int64;
+* :func:`unpack_cells`: from the sorted packed values, each distinct (level, owner > 0, cell) that no owner-0
+  value shares (a cell another kept beam of the scan hits is the structure's), decoded to track id, cell key
+  ``i·2^32 + j`` and cell (i, j), in (level, track, cell) order;
+* :func:`read_cells`: log-odds and update index of cells (0 and −1 outside the level's array) and their flat
+  array indices (−1 outside);
+* :func:`update_rows`: after the update, the rows (key, update index before, after, added log-odds' bits) of the
+  cells the update changed, and the per-track groups of those rows.
+
+Explicit signatures: one specialisation each, compiled (or loaded from numba's cache) when the module is
+imported. Units: points in m (map frame), resolutions in m, cells absolute level indices.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, types
+
+_KEY_SHIFT = 4294967296
+#: packed values must stay below this (they are int64)
+_LIMIT = 1 << 62
+#: |v / r| at or beyond this cannot be a valid cell (keys hold |i|, |j| < 2^31): the caller's per-level path
+_CELL_LIMIT = 2.0 ** 31
+
+
+@njit("int64(int64[::1], int64, int64)", cache=True)
+def _lower_bound(a, hi, v):  # pragma: no cover - numba
+    """The first index in ``a[:hi]`` (sorted) whose value is not below ``v`` (``hi`` if none)."""
+    lo = 0
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if a[mid] < v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+_I1 = types.int64[::1]
+_F1 = types.float64[::1]
+_F1_RO = types.Array(types.float64, 1, "C", readonly=True)  # Scan.trig's shared cos / sin
+_SCAN_SIG = types.Tuple((_I1, _I1, types.boolean[::1], _I1))(
+    _F1, _F1_RO, _F1_RO, types.boolean[::1], types.boolean[:], _I1, _I1, *(types.float64,) * 6, _F1)
+
+
+@njit(_SCAN_SIG, cache=True)
+def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, py, rs):  # pragma: no cover
+    """A scan's kept beams, their points' (level, owner, cell) packed: (packed (L·m,) int64 values
+    ``level·block + owner·wi·wj + cx·wj + cy``, level by level, cells relative to each level's smallest cell
+    (``floor(v / r + 0.5)`` as slam/grid.py); params [lox_0…, loy_0…, wi, wj, block]; the kept beams (n,) bool;
+    the number of kept beams of each track (R,)). Kept: ``vm`` (the scan's valid mask), ``rmin < r < rmax`` and not
+    ``removed``; ``owner``: each beam's track id (−1: none), ``uids``: the sorted ids of the tracks with beams
+    (owner 1 + rank). Points in the map frame at pose (``px``, ``py``, cos ``c``, sin ``s``), computed as
+    ``Pose2D.transform_points`` computes them. Packed values and params are empty when no kept beam has a
+    track, or when the values would not fit in an int64 or a cell in a key (the caller then takes the per-level
+    path)."""
+    n = r.shape[0]
+    n_tr = uids.shape[0]
+    valid = np.empty(n, dtype=np.bool_)
+    counts = np.zeros(n_tr, dtype=np.int64)
+    m = 0
+    for b in range(n):
+        rb = r[b]
+        ok = vm[b] and rb > rmin and rb < rmax and not removed[b]
+        valid[b] = ok
+        if ok:
+            m += 1
+    xs = np.empty(m, dtype=np.float64)
+    ys = np.empty(m, dtype=np.float64)
+    rank = np.zeros(m, dtype=np.int64)
+    p = 0
+    n_own = 0
+    for b in range(n):
+        if not valid[b]:
+            continue
+        lx = r[b] * cos_a[b]
+        ly = r[b] * sin_a[b]
+        xs[p] = c * lx - s * ly + px
+        ys[p] = s * lx + c * ly + py
+        o = owner[b]
+        if o >= 0:
+            lo = _lower_bound(uids, n_tr, o)
+            rank[p] = lo + 1
+            counts[lo] += 1
+            n_own += 1
+        p += 1
+    empty = np.zeros(0, dtype=np.int64)
+    if n_own == 0:
+        return empty, empty, valid, counts
+    # every point's (level, owner, cell) as one int64 (owner 0 = no track, else 1 + rank)
+    n_lv = rs.shape[0]
+    x0 = xs[0]
+    x1 = xs[0]
+    y0 = ys[0]
+    y1 = ys[0]
+    for p in range(1, m):
+        x = xs[p]
+        y = ys[p]
+        if x < x0:
+            x0 = x
+        if x > x1:
+            x1 = x
+        if y < y0:
+            y0 = y
+        if y > y1:
+            y1 = y
+    params = np.empty(2 * n_lv + 3, dtype=np.int64)
+    wi = 0
+    wj = 0
+    for k in range(n_lv):
+        res = rs[k]
+        for v in (x0 / res, x1 / res, y0 / res, y1 / res):
+            if not abs(v) < _CELL_LIMIT:
+                return empty, empty, valid, counts
+        # v ↦ floor(v / res + 0.5) is monotonic: the extreme points give each level's extreme cells
+        cx0 = math.floor(x0 / res + 0.5)
+        cy0 = math.floor(y0 / res + 0.5)
+        params[k] = cx0
+        params[n_lv + k] = cy0
+        wi = max(wi, math.floor(x1 / res + 0.5) - cx0 + 1)
+        wj = max(wj, math.floor(y1 / res + 0.5) - cy0 + 1)
+    # n_lv · (n_tr + 1) · wi · wj < 2^62, tested factor by factor (p · f ≥ L ⇔ f > (L − 1) // p)
+    prod = n_lv
+    for f in (n_tr + 1, wi, wj):
+        if f > (_LIMIT - 1) // prod:
+            return empty, empty, valid, counts
+        prod *= f
+    wij = wi * wj
+    block = (n_tr + 1) * wij
+    params[2 * n_lv] = wi
+    params[2 * n_lv + 1] = wj
+    params[2 * n_lv + 2] = block
+    packed = np.empty(n_lv * m, dtype=np.int64)
+    for k in range(n_lv):
+        res = rs[k]
+        cx0 = params[k]
+        cy0 = params[n_lv + k]
+        base = k * block
+        for p in range(m):
+            cx = np.int64(math.floor(xs[p] / res + 0.5)) - cx0
+            cy = np.int64(math.floor(ys[p] / res + 0.5)) - cy0
+            packed[k * m + p] = cx * wj + cy + rank[p] * wij + base
+    return packed, params, valid, counts
+
+
+@njit("Tuple((int64[::1], int64[::1], int64[:, ::1], int64[::1]))(int64[::1], int64[::1], int64[::1], int64)",
+      cache=True)
+def unpack_cells(u, params, uids, n_lv):  # pragma: no cover - numba
+    """(track ids, cell keys, (m, 2) cells, level bounds (L + 1,)) of the sorted packed values ``u`` of
+    :func:`scan_cells` (``params``; ``uids``: the track ids by rank): each distinct value of an owner > 0 whose
+    (level, cell) has no owner-0 value, in the values' order."""
+    n = u.shape[0]
+    wi = params[2 * n_lv]
+    wj = params[2 * n_lv + 1]
+    block = params[2 * n_lv + 2]
+    wij = wi * wj
+    sel = np.empty(n, dtype=np.int64)
+    m = 0
+    for p in range(n):
+        v = u[p]
+        if p > 0 and v == u[p - 1]:
+            continue
+        own = (v % block) // wij
+        if own == 0:
+            continue
+        q = v - own * wij  # the same level and cell with owner 0: is it among the values (all smaller)?
+        lo = _lower_bound(u, p, q)
+        if lo < p and u[lo] == q:
+            continue
+        sel[m] = p
+        m += 1
+    ids = np.empty(m, dtype=np.int64)
+    keys = np.empty(m, dtype=np.int64)
+    cells = np.empty((m, 2), dtype=np.int64)
+    bounds = np.zeros(n_lv + 1, dtype=np.int64)
+    for t in range(m):
+        v = u[sel[t]]
+        lvl = v // block
+        rest = v - lvl * block
+        own = rest // wij
+        cell = rest - own * wij
+        ci = cell // wj + params[lvl]
+        cj = cell - (cell // wj) * wj + params[n_lv + lvl]
+        ids[t] = uids[own - 1]
+        keys[t] = ci * _KEY_SHIFT + cj
+        cells[t, 0] = ci
+        cells[t, 1] = cj
+        bounds[lvl + 1] += 1
+    for k in range(n_lv):
+        bounds[k + 1] += bounds[k]
+    return ids, keys, cells, bounds
+
+
+@njit("Tuple((float64[::1], int64[::1], int64[::1], int64))(float32[:, :], int32[:, :], int64[:, ::1], int64, int64)",
+      cache=True)
+def read_cells(logodds, uidx, cells, i0, j0):  # pragma: no cover - numba
+    """(log-odds (float64), update index (int64), flat index into the (H, W) arrays, number outside) of absolute
+    ``cells`` (m, 2) on a level whose array starts at cell (``i0``, ``j0``); 0, −1, −1 outside the array."""
+    h, w = logodds.shape
+    m = cells.shape[0]
+    lo = np.zeros(m)
+    ui = np.full(m, -1, dtype=np.int64)
+    f = np.full(m, -1, dtype=np.int64)
+    n_out = 0
+    for t in range(m):
+        col = cells[t, 0] - i0
+        row = cells[t, 1] - j0
+        if col >= 0 and row >= 0 and col < w and row < h:
+            lo[t] = logodds[row, col]
+            ui[t] = uidx[row, col]
+            f[t] = row * w + col
+        else:
+            n_out += 1
+    return lo, ui, f, n_out
+
+
+@njit("Tuple((int64[:, ::1], int64[::1], int64[::1]))(float32[:, :], int32[:, :], int64[::1], int64[::1], "
+      "int64[::1], float64[::1], int64[::1])", cache=True)
+def update_rows(logodds, uidx, f, ids, keys, before, ub):  # pragma: no cover - numba
+    """After a map update: ((4, m) rows — cell key, update index before, update index after, the added log-odds'
+    float64 bits — of the cells whose update index changed; the track id of each group of rows; the groups'
+    bounds (g + 1,)), from the cells' flat indices ``f`` (−1: outside the array, read as log-odds 0 and index −1)
+    and what :func:`read_cells` read before the update. ``ids`` is sorted, so each track's rows are one group."""
+    w = logodds.shape[1]
+    n = f.shape[0]
+    delta = np.empty(n)
+    ua = np.empty(n, dtype=np.int64)
+    m = 0
+    g = 0
+    last = 0
+    for t in range(n):
+        ft = f[t]
+        after = 0.0
+        u = -1
+        if ft >= 0:
+            row = ft // w
+            col = ft - row * w
+            after = logodds[row, col]
+            u = uidx[row, col]
+        ua[t] = u
+        delta[t] = after - before[t]
+        if u != ub[t]:  # else not updated (outside the array, or the ray was skipped)
+            if m == 0 or ids[t] != last:
+                g += 1
+                last = ids[t]
+            m += 1
+    bits = delta.view(np.int64)
+    rows = np.empty((4, m), dtype=np.int64)
+    gid = np.empty(g, dtype=np.int64)
+    starts = np.empty(g + 1, dtype=np.int64)
+    k = 0
+    j = 0
+    for t in range(n):
+        if ua[t] == ub[t]:
+            continue
+        rows[0, j] = keys[t]
+        rows[1, j] = ub[t]
+        rows[2, j] = ua[t]
+        rows[3, j] = bits[t]
+        if j == 0 or ids[t] != gid[k - 1]:
+            gid[k] = ids[t]
+            starts[k] = j
+            k += 1
+        j += 1
+    starts[g] = m
+    return rows, gid, starts
