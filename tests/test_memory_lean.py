@@ -277,3 +277,21 @@ def test_cli_drops_the_clean_up_count_windows_before_writing() -> None:
     cleaner = SimpleNamespace(result=None)
     _drop_count_windows(cleaner)  # no clean-up pass: nothing to drop
     assert cleaner.result is None
+
+
+def test_saved_figure_lets_go_of_its_images_and_pixels(tmp_path) -> None:
+    """``save_png`` writes the PNG, then empties the figure: the map image (and matplotlib's resampled copy of it)
+    and the Agg pixel buffer go before the run's next figure is drawn."""
+    import weakref
+
+    from dynslam2d.viz.figure import new_figure, save_png
+
+    fig = new_figure((4.0, 3.0))
+    ax = fig.subplots()
+    img = ax.imshow(np.arange(40_000, dtype=np.uint16).reshape(200, 200))
+    path = save_png(fig, tmp_path / "f.png", dpi=50)
+    assert path.stat().st_size > 1000 and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert fig.axes == [] and not hasattr(fig.canvas, "renderer")
+    ref = weakref.ref(img)
+    del img
+    assert ref() is None  # nothing in the figure keeps the image artist alive: freed without the garbage collector
