@@ -295,3 +295,21 @@ def test_saved_figure_lets_go_of_its_images_and_pixels(tmp_path) -> None:
     ref = weakref.ref(img)
     del img
     assert ref() is None  # nothing in the figure keeps the image artist alive: freed without the garbage collector
+
+
+def test_occupied_and_free_masks_without_a_float64_copy() -> None:
+    """``GridMap.occupied`` / ``free`` (the clean-up pass, map.pgm, the map metrics) give nan_to_num's masks —
+    an unknown cell as probability 0 / 1, infinities as the largest floats — for any threshold, in about one
+    byte per cell (nan_to_num copied the float64 map first)."""
+    rng = np.random.default_rng(2)
+    prob = rng.uniform(-0.2, 1.2, (400, 500))
+    prob[rng.uniform(size=prob.shape) < 0.3] = np.nan
+    prob[0, :4] = (np.inf, -np.inf, 0.65, 0.196)
+    grid = GridMap(prob, 0.05, (0.0, 0.0))
+    for t in (-0.5, 0.0, 0.196, 0.65, 1.0, 1.5):
+        np.testing.assert_array_equal(grid.occupied(t), np.nan_to_num(prob, nan=0.0) > t)
+        np.testing.assert_array_equal(grid.free(t), np.nan_to_num(prob, nan=1.0) < t)
+    _, peak = _traced_peak(grid.occupied, 0.65)
+    assert peak < 2 * prob.size + 2**16, peak / prob.size
+    _, peak = _traced_peak(grid.free, 0.196)
+    assert peak < 2 * prob.size + 2**16, peak / prob.size
