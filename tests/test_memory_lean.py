@@ -3,8 +3,10 @@ in row blocks, the pre-sized re-render of the loop closure and the checkpointer 
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 from conftest import ScanList
@@ -105,13 +107,11 @@ def test_counter_reserved_once_counts_the_same() -> None:
 
 # ---- fifth pass (docs/speed.md, "Memory and compile, fifth pass") ------------------------------------------------
 
-SRC = str(__import__("pathlib").Path(__file__).resolve().parents[1] / "src")
+SRC = str(Path(__file__).resolve().parents[1] / "src")
 
 
 def _modules_after(statement: str, names: tuple[str, ...]) -> list[str]:
     """The ``names`` in ``sys.modules`` after running ``statement`` in a fresh interpreter."""
-    import os
-
     code = f"import sys; {statement}; print(','.join(m for m in {names!r} if m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          env={**os.environ, "PYTHONPATH": SRC})
@@ -145,8 +145,6 @@ def test_plain_numba_errors_set_before_numba_and_never_over_the_user() -> None:
             "from dynslam2d.jitcache import plain_numba_errors\n"
             "print(os.environ.get('NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING'), type(e.termcolor()).__name__, "
             "plain_numba_errors(), file=sys.stderr)\n")
-    import os
-
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING"}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          env={**env, "PYTHONPATH": SRC}).stderr.split()[-3:]
