@@ -23,6 +23,9 @@ from pathlib import Path
 PROBE = r"""
 import json, sys, time
 c0 = time.process_time()
+import dynslam2d.jitcache as jc  # what the command line's main() does before numba is imported:
+for name in ("plain_numba_errors", "load_blas_alone"):  # (older checkouts lack the first)
+    getattr(jc, name, lambda: None)()
 from numba.core import event
 excl, stack, n = {}, [], [0]
 class Exclusive(event.Listener):

@@ -3,8 +3,10 @@ in row blocks, the pre-sized re-render of the loop closure and the checkpointer 
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 from conftest import ScanList
@@ -101,3 +103,211 @@ def test_counter_reserved_once_counts_the_same() -> None:
         ib = np.argwhere(b > 0) + (sized.j0, sized.i0)
         np.testing.assert_array_equal(ia, ib)  # the same absolute cells, in the same (row-major) order
         np.testing.assert_array_equal(a[a > 0], b[b > 0])
+
+
+# ---- fifth pass (docs/speed.md, "Memory and compile, fifth pass") ------------------------------------------------
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+
+
+def _modules_after(statement: str, names: tuple[str, ...]) -> list[str]:
+    """The ``names`` in ``sys.modules`` after running ``statement`` in a fresh interpreter."""
+    code = f"import sys; {statement}; print(','.join(m for m in {names!r} if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={**os.environ, "PYTHONPATH": SRC})
+    return [m for m in out.stdout.strip().split(",") if m]
+
+
+def test_cli_import_loads_no_kernels_config_or_figures() -> None:
+    """``import dynslam2d.cli`` (every command's start: ``--help``, ``config dump``, ``info``) loads neither numba
+    (77 MiB and most of a second) nor pydantic, SciPy, matplotlib or rosbags: each command imports what it uses."""
+    assert _modules_after("import dynslam2d.cli", ("numba", "llvmlite", "pydantic", "scipy", "matplotlib",
+                                                   "rosbags", "PIL")) == []
+
+
+def test_pipeline_import_loads_no_figures_bags_or_linear_algebra() -> None:
+    """A run's imports before its first scan: no matplotlib / PIL (figures, after the run), no rosbags (bags only),
+    no scipy.linalg or scipy.sparse (the pose graph's solver imports them when it first solves)."""
+    assert _modules_after("import dynslam2d.pipeline, dynslam2d.results, dynslam2d.cli",
+                          ("matplotlib", "PIL", "rosbags", "scipy.linalg", "scipy.sparse", "scipy.optimize",
+                           "scipy.ndimage")) == []
+
+
+def test_plain_numba_errors_set_before_numba_and_never_over_the_user() -> None:
+    """The command line has numba format its typing errors without colorama (a shorter cold compile); a setting
+    of the user's is kept, and once numba is imported nothing changes."""
+    code = ("import os, sys\n"
+            "os.environ.pop('NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING', None)\n"
+            "from dynslam2d.cli import main\n"
+            "sys.argv = ['dynslam2d', '--help']\n"
+            "try:\n    main()\nexcept SystemExit:\n    pass\n"
+            "import numba.core.errors as e\n"
+            "from dynslam2d.jitcache import plain_numba_errors\n"
+            "print(os.environ.get('NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING'), type(e.termcolor()).__name__, "
+            "plain_numba_errors(), file=sys.stderr)\n")
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={**env, "PYTHONPATH": SRC}).stderr.split()[-3:]
+    assert out == ["1", "NOPColorScheme", "False"]
+    code2 = ("import os; from dynslam2d.jitcache import plain_numba_errors; "
+             "print(plain_numba_errors(), repr(os.environ['NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING']))")
+    out2 = subprocess.run([sys.executable, "-c", code2], capture_output=True, text=True, check=True,
+                          env={**env, "PYTHONPATH": SRC, "NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING": ""})
+    assert out2.stdout.split() == ["False", "''"]  # the user's (empty: highlighting on) setting is kept
+
+
+def _traced_peak(fn, *args):
+    """(result, peak bytes numpy and Python allocated while ``fn(*args)`` ran)."""
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        tracemalloc.reset_peak()
+        base = tracemalloc.get_traced_memory()[0]
+        out = fn(*args)
+        peak = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+    return out, peak
+
+
+def test_map_export_is_the_logistic_of_the_logodds_in_about_one_float64_per_cell() -> None:
+    """``to_gridmap`` (the run's map export, at the end of the run loop and of every re-render) computes
+    1 / (1 + exp(−l)) in place: the same float64 values as the whole-array expression, with a peak of the
+    output's 8 bytes per cell plus the unobserved mask (it was 4 map-sized float64 arrays)."""
+    from dynslam2d.slam.grid import MultiResMap
+
+    rng = np.random.default_rng(5)
+    m = MultiResMap(0.05, 1, -0.4, 0.85)
+    lv = m.levels[0]
+    lv.ensure(0, 0, 899, 599)  # 600 × 900 cells with margins
+    lv.logodds[:] = rng.normal(0.0, 4.0, lv.shape).astype(np.float32)
+    lv.uidx[:] = np.where(rng.uniform(size=lv.shape) < 0.7, 7, -1).astype(np.int32)
+    lv.uidx[:40] = -1  # unobserved rows: the export crops them
+    grid, peak = _traced_peak(m.to_gridmap, 0)
+    r0, r1, c0, c1 = lv.known_bounds()
+    lo = lv.logodds[r0:r1, c0:c1].astype(np.float64)
+    expected = 1.0 / (1.0 + np.exp(-lo))
+    expected[lv.uidx[r0:r1, c0:c1] < 0] = np.nan
+    np.testing.assert_array_equal(grid.prob, expected)  # bit for bit (NaN where unobserved)
+    cells = grid.prob.size
+    assert cells > 400_000
+    assert peak < 10 * cells + 2**20, peak / cells  # 8 B/cell for the output, 1 for the mask
+
+
+def test_map_entropy_in_blocks_equals_the_whole_array_sum_in_a_fraction_of_the_memory() -> None:
+    """The loop closure's map check (``map_entropy``) sums the same float64 terms as the whole-array expression
+    (bit-identical: one float64 array of terms summed once), with temporaries of one block instead of a float64
+    copy of the map and one observed-cell-sized array per operation."""
+    from dynslam2d.pipeline import _ENTROPY_BLOCK, map_entropy
+
+    rng = np.random.default_rng(9)
+    lo = rng.normal(0.0, 5.0, (900, 700)).astype(np.float32)
+    lo[rng.uniform(size=lo.shape) < 0.3] = 0.0  # unobserved cells
+    lo[0, :4] = (60.0, -60.0, 1e-3, -1e-3)  # clipped at both ends, near 0.5
+    obs = lo[lo != 0.0].astype(np.float64)
+    p = np.clip(1.0 / (1.0 + np.exp(-obs)), 1e-12, 1.0 - 1e-12)
+    expected = float(-np.sum(p * np.log(p) + (1.0 - p) * np.log1p(-p)))
+    got, peak = _traced_peak(map_entropy, lo)
+    assert got == expected
+    n = obs.size
+    assert n > 4 * _ENTROPY_BLOCK  # several blocks and a partial last one
+    # the observed values (float32), their terms (float64), the mask and two blocks of float64
+    assert peak < 12 * n + lo.size + 4 * 8 * _ENTROPY_BLOCK + 2**20, peak / n
+    assert map_entropy(np.zeros((5, 5), dtype=np.float32)) == 0.0
+
+
+def test_run_frees_the_front_end_map_before_the_loop_closure_finishes() -> None:
+    """``run`` lets go of the front end's map levels as soon as the results hold its export, before the loop
+    closure's final optimisation and re-render allocate theirs; the summary still reports the map's bytes."""
+    import dynslam2d.pipeline as P
+    from dynslam2d.slam.loops import LoopCloser
+
+    order: list[str] = []
+    release, finish = P._release_map, LoopCloser.finish
+
+    def spy_release(pipe):
+        order.append("release")
+        return release(pipe)
+
+    def spy_finish(self):
+        order.append("finish")
+        return finish(self)
+
+    class Levels:
+        sizes: list[int] = []
+
+        def on_scan(self, scan, step, pipeline) -> None:
+            pass
+
+        def on_finish(self, result, pipeline) -> None:
+            Levels.sizes = [lv.logodds.size + lv.prob.size + lv.uidx.size for lv in pipeline.slam.map.levels]
+
+    scans, meta = _loop_run()
+    P._release_map, LoopCloser.finish = spy_release, spy_finish
+    try:
+        result = run(ScanList(scans, meta), Config(), observers=[Levels()])
+    finally:
+        P._release_map, LoopCloser.finish = release, finish
+    assert order[:2] == ["release", "finish"]
+    assert Levels.sizes and not any(Levels.sizes)
+    assert result.memory_bytes > 0 and result.summary()["map_cells"] == list(result.grid.shape)
+    assert np.isfinite(result.grid.prob).sum() > 1000
+
+
+def test_cli_drops_the_clean_up_count_windows_before_writing() -> None:
+    """The results folder and the figures read the clean-up result's map, erased cells and stats; its count
+    windows (3 × 2 bytes per map cell) are let go before the figures."""
+    from types import SimpleNamespace
+
+    from dynslam2d.cli import _drop_count_windows
+    from dynslam2d.slam.cleanup import CleanResult
+
+    grid = GridMap(np.full((30, 40), 0.2), 0.05, (0.0, 0.0))
+    win = np.ones((30, 40), dtype=np.uint16)
+    erased = np.zeros((30, 40), dtype=bool)
+    lo = np.zeros((30, 40), dtype=np.float32)
+    cleaner = SimpleNamespace(result=CleanResult(grid, lo, erased, win, win.copy(), win.copy(), {"erased_cells": 0}))
+    _drop_count_windows(cleaner)
+    res = cleaner.result
+    assert res.grid is grid and res.logodds is lo and res.erased is erased and res.stats == {"erased_cells": 0}
+    assert res.hits.size == res.through.size == res.switches.size == 0
+    cleaner = SimpleNamespace(result=None)
+    _drop_count_windows(cleaner)  # no clean-up pass: nothing to drop
+    assert cleaner.result is None
+
+
+def test_saved_figure_lets_go_of_its_images_and_pixels(tmp_path) -> None:
+    """``save_png`` writes the PNG, then empties the figure: the map image (and matplotlib's resampled copy of it)
+    and the Agg pixel buffer go before the run's next figure is drawn."""
+    import weakref
+
+    from dynslam2d.viz.figure import new_figure, save_png
+
+    fig = new_figure((4.0, 3.0))
+    ax = fig.subplots()
+    img = ax.imshow(np.arange(40_000, dtype=np.uint16).reshape(200, 200))
+    path = save_png(fig, tmp_path / "f.png", dpi=50)
+    assert path.stat().st_size > 1000 and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert fig.axes == [] and not hasattr(fig.canvas, "renderer")
+    ref = weakref.ref(img)
+    del img
+    assert ref() is None  # nothing in the figure keeps the image artist alive: freed without the garbage collector
+
+
+def test_occupied_and_free_masks_without_a_float64_copy() -> None:
+    """``GridMap.occupied`` / ``free`` (the clean-up pass, map.pgm, the map metrics) give nan_to_num's masks —
+    an unknown cell as probability 0 / 1, infinities as the largest floats — for any threshold, in about one
+    byte per cell (nan_to_num copied the float64 map first)."""
+    rng = np.random.default_rng(2)
+    prob = rng.uniform(-0.2, 1.2, (400, 500))
+    prob[rng.uniform(size=prob.shape) < 0.3] = np.nan
+    prob[0, :4] = (np.inf, -np.inf, 0.65, 0.196)
+    grid = GridMap(prob, 0.05, (0.0, 0.0))
+    for t in (-0.5, 0.0, 0.196, 0.65, 1.0, 1.5):
+        np.testing.assert_array_equal(grid.occupied(t), np.nan_to_num(prob, nan=0.0) > t)
+        np.testing.assert_array_equal(grid.free(t), np.nan_to_num(prob, nan=1.0) < t)
+    _, peak = _traced_peak(grid.occupied, 0.65)
+    assert peak < 2 * prob.size + 2**16, peak / prob.size
+    _, peak = _traced_peak(grid.free, 0.196)
+    assert peak < 2 * prob.size + 2**16, peak / prob.size

@@ -574,6 +574,7 @@ def run(
                                         viewer=viewer, rerun_save=rerun_save)
             result = _map_with_progress(source, cfg, observers, show)
         cleaner.counter = None  # the clean-up pass is done (cleaner.result): free its counts before the figures
+        _drop_count_windows(cleaner)
         _check_run_usable(result, input)
         from dynslam2d.results import ground_truth_for
 
@@ -705,6 +706,20 @@ def _run_observers(stack: contextlib.ExitStack, cfg: Config, work: Path, cleaner
 
         observers.append(stack.enter_context(RerunViewer(save=rerun_save, map_period=map_period)))
     return observers
+
+
+def _drop_count_windows(cleaner: Any) -> None:
+    """Replace the clean-up result's per-cell count windows (hits, passes, switches: 3 × 2 bytes per map cell) by
+    empty arrays: the results folder and the figures read only its map, erased cells and stats, and the windows
+    would stay resident under the figures (docs/speed.md, memory)."""
+    import dataclasses
+
+    import numpy as np
+
+    res = cleaner.result
+    if res is not None:
+        empty = np.zeros((0, 0), dtype=np.uint16)
+        cleaner.result = dataclasses.replace(res, hits=empty, through=empty, switches=empty)
 
 
 def _map_with_progress(source: ScanSource, cfg: Config, observers: list[Any], show: bool) -> RunResult:
@@ -1596,8 +1611,9 @@ def main() -> None:
     ``error: <message>`` on stderr with exit 2; Ctrl-C exits 130. Every writer is
     atomic, so an interrupted run leaves no half-written file under a final name.
     """
-    from dynslam2d.jitcache import load_blas_alone
+    from dynslam2d.jitcache import load_blas_alone, plain_numba_errors
 
+    plain_numba_errors()  # no colorama round trip per numba typing attempt: a shorter cold compile (docs/speed.md)
     load_blas_alone()  # numba's BLAS check without the whole of scipy.linalg (about 17 MiB, docs/speed.md)
     try:
         app()

@@ -67,13 +67,22 @@ class GridMap:
 
     def occupied(self, threshold: float = 0.65) -> np.ndarray:
         """(H, W) bool: cells with probability above ``threshold`` (unknown → False)."""
+        # an unknown cell counts as probability 0 (as np.nan_to_num(prob, nan=0) > threshold), without the
+        # map-sized float64 copy nan_to_num makes (docs/speed.md, memory)
         with np.errstate(invalid="ignore"):
-            return np.nan_to_num(self.prob, nan=0.0) > threshold
+            out = self.prob > threshold
+            if 0.0 > threshold:
+                out |= np.isnan(self.prob)
+        return out
 
     def free(self, threshold: float = 0.196) -> np.ndarray:
         """(H, W) bool: cells with probability below ``threshold`` (unknown → False)."""
+        # an unknown cell counts as probability 1 (as np.nan_to_num(prob, nan=1) < threshold), without a copy
         with np.errstate(invalid="ignore"):
-            return np.nan_to_num(self.prob, nan=1.0) < threshold
+            out = self.prob < threshold
+            if 1.0 < threshold:
+                out |= np.isnan(self.prob)
+        return out
 
     def known(self) -> np.ndarray:
         """(H, W) bool: cells that hold an observation (not NaN)."""

@@ -55,6 +55,26 @@ def use_default_cache_dir() -> str | None:
     return str(path)
 
 
+#: numba's switch for plain (uncoloured) error messages (numba.core.errors), read when numba is imported.
+PLAIN_ERRORS_ENV = "NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING"
+
+
+def plain_numba_errors() -> bool:
+    """Have numba format its error messages without terminal highlighting, unless the user chose otherwise.
+
+    While it types a kernel, numba tries many templates per call and formats an error message for every
+    attempt that does not fit (tens of thousands on a cold run); with colorama installed each message is
+    wrapped in colorama's ``init()`` / ``deinit()``, which re-wraps ``sys.stdout`` and ``sys.stderr`` every
+    time — 2–4 % of the cold compile of the README's first command (docs/speed.md). numba's default theme
+    only makes the messages bold; numba's own test suite runs without it. The command line calls this
+    first (it owns the process); does nothing once numba is imported (it reads the setting at import) or
+    when the variable is set. Returns whether it set it."""
+    if PLAIN_ERRORS_ENV in os.environ or "numba" in sys.modules:
+        return False
+    os.environ[PLAIN_ERRORS_ENV] = "1"
+    return True
+
+
 #: SciPy's BLAS extension module, which numba imports to check for BLAS (numba.np.arraymath).
 BLAS_MODULE = "scipy.linalg.cython_blas"
 

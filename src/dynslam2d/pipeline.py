@@ -631,12 +631,35 @@ def map_entropy(logodds: np.ndarray) -> float:
     over cells with log-odds ≠ 0. Scans put at wrong poses blur walls into more, less certain cells,
     so a more consistent set of poses gives a lower total (the occupancy-grid form of the mean map
     entropy of Droeschel et al. / Razlaw et al., ECMR 2015)."""
-    lo = np.asarray(logodds, dtype=np.float64)
-    lo = lo[lo != 0.0]
-    if not lo.size:
+    lo = np.asarray(logodds)
+    vals = lo[lo != 0.0]
+    if not vals.size:
         return 0.0
-    p = np.clip(1.0 / (1.0 + np.exp(-lo)), 1e-12, 1.0 - 1e-12)
-    return float(-np.sum(p * np.log(p) + (1.0 - p) * np.log1p(-p)))
+    # the terms p ln p + (1 − p) ln(1 − p), p = clip(σ(l)), with the same float64 operations as the whole-array
+    # expression, a block of cells at a time into one array, summed once as before: no float64 copy of the
+    # map and no map-sized temporary per operation (the loop closure's map check ran at the run's memory
+    # peak; docs/speed.md)
+    terms = np.empty(vals.shape[0], dtype=np.float64)
+    for i0 in range(0, vals.shape[0], _ENTROPY_BLOCK):
+        p = vals[i0:i0 + _ENTROPY_BLOCK].astype(np.float64)
+        np.negative(p, out=p)
+        np.exp(p, out=p)
+        p += 1.0
+        np.divide(1.0, p, out=p)
+        np.clip(p, 1e-12, 1.0 - 1e-12, out=p)
+        a = terms[i0:i0 + _ENTROPY_BLOCK]
+        np.log(p, out=a)
+        a *= p
+        b = np.negative(p)
+        np.log1p(b, out=b)
+        np.subtract(1.0, p, out=p)
+        b *= p
+        a += b
+    return float(-np.sum(terms))
+
+
+#: Cells per block of :func:`map_entropy` (a few MB of temporaries).
+_ENTROPY_BLOCK = 1 << 16
 
 
 def keep_optimised(loop: LoopResult, front_logodds: np.ndarray, opt_logodds: np.ndarray,
@@ -754,15 +777,16 @@ def run(
     flag_arr = flags.view().copy()
     logodds, _ = pipe.slam.logodds(0)
     grid = pipe.gridmap()
+    summary = pipe.slam.summary()
+    memory_bytes = pipe.slam.memory_bytes
+    # the front end's map is in ``grid`` / ``logodds`` now: free its levels before the loop closure's final
+    # optimisation and re-render build theirs (issue 13 item 3; observers' on_finish get the pipeline without
+    # its map arrays)
+    _release_map(pipe)
     trajectory = Trajectory(stamps.view().copy(), poses.view().copy())
     frontend_trajectory = None
     loop = pipe.loops.finish() if pipe.loops is not None else None
-    summary = pipe.slam.summary()
-    memory_bytes = pipe.slam.memory_bytes
     if loop is not None and loop.corrected:
-        # the front end's map is in ``grid`` / ``logodds`` now: free its levels before the re-render builds
-        # another map (issue 13 item 3; observers' on_finish get the pipeline without its map arrays)
-        _release_map(pipe)
         t_render = time.perf_counter()
         grid_opt, lo_opt = render_map(loop, pipe.config.slam)
         loop.stats["render_ms"] = (time.perf_counter() - t_render) * 1e3
@@ -773,9 +797,7 @@ def run(
         del grid_opt, lo_opt  # a refused render goes before the written map's render below
     if loop is not None and pipe.config.slam.written_grazing_stop_cells > 0.0 and loop.keyframes:
         # the written map with the grazing stop, from the final poses; the matcher's map stays as it was
-        # (docs/maps.md, "Walls seen at grazing incidence"); free the front end's levels first, as above
-        if not loop.corrected:
-            _release_map(pipe)
+        # (docs/maps.md, "Walls seen at grazing incidence"); the front end's levels were freed above
         t_render = time.perf_counter()
         written = render_written_map(loop, pipe.config.slam)
         loop.stats["written_render_ms"] = (time.perf_counter() - t_render) * 1e3

@@ -339,8 +339,13 @@ class MultiResMap:
             return GridMap(np.full((1, 1), np.nan), lv.resolution, lv.corner_origin())
         b = lv.known_bounds() if crop else None
         r0, r1, c0, c1 = b if b is not None else (0, lv.shape[0], 0, lv.shape[1])
-        lo = lv.logodds[r0:r1, c0:c1].astype(np.float64)
-        prob = 1.0 / (1.0 + np.exp(-lo))
+        # 1 / (1 + exp(−l)) in place: the same float64 values without three map-sized temporaries
+        # (the export is the end of the run loop's memory peak; docs/speed.md)
+        prob = lv.logodds[r0:r1, c0:c1].astype(np.float64)
+        np.negative(prob, out=prob)
+        np.exp(prob, out=prob)
+        prob += 1.0
+        np.divide(1.0, prob, out=prob)
         prob[lv.uidx[r0:r1, c0:c1] < 0] = np.nan
         return GridMap(prob, lv.resolution, lv.corner_origin(r0, c0))
 

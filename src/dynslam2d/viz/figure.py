@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from dynslam2d.io.atomic import atomic_path
+from dynslam2d.memtrim import release_free_memory
 
 
 def new_figure(figsize: tuple[float, float], dpi: float | None = None, layout: str | None = None) -> Any:
@@ -25,8 +26,16 @@ def new_figure(figsize: tuple[float, float], dpi: float | None = None, layout: s
 
 
 def save_png(fig: Any, path: str | os.PathLike[str], dpi: int = 120) -> Path:
-    """Write matplotlib figure ``fig`` as a PNG at ``path`` (atomically)."""
+    """Write matplotlib figure ``fig`` as a PNG at ``path`` (atomically), then empty it: its artists (the map
+    images and their resampled copies) and the canvas's Agg pixel buffer are freed now, not when the garbage
+    collector next finds the figure's reference cycles, so the next figure of a run is not drawn on top of them
+    (docs/speed.md, memory). The figure is not drawn again after this."""
     path = Path(path)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
+    fig.clear()
+    canvas = getattr(fig, "canvas", None)
+    if canvas is not None and hasattr(canvas, "renderer"):
+        del canvas.renderer  # FigureCanvasAgg's cached renderer holds the pixel buffer (width × height × 4 bytes)
+    release_free_memory()  # and what they held back to the OS (memtrim.py)
     return path
