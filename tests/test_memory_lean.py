@@ -226,9 +226,9 @@ def test_run_frees_the_front_end_map_before_the_loop_closure_finishes() -> None:
     order: list[str] = []
     release, finish = P._release_map, LoopCloser.finish
 
-    def spy_release(pipe):
+    def spy_release(pipe, grid):
         order.append("release")
-        return release(pipe)
+        return release(pipe, grid)
 
     def spy_finish(self):
         order.append("finish")
@@ -236,12 +236,15 @@ def test_run_frees_the_front_end_map_before_the_loop_closure_finishes() -> None:
 
     class Levels:
         sizes: list[int] = []
+        finite_after_release = 0
 
         def on_scan(self, scan, step, pipeline) -> None:
             pass
 
         def on_finish(self, result, pipeline) -> None:
             Levels.sizes = [lv.logodds.size + lv.prob.size + lv.uidx.size for lv in pipeline.slam.map.levels]
+            # a checkpoint written now (Ctrl-C during the loop closure's finish) must get the real map
+            Levels.finite_after_release = int(np.isfinite(pipeline.gridmap().prob).sum())
 
     scans, meta = _loop_run()
     P._release_map, LoopCloser.finish = spy_release, spy_finish
@@ -251,6 +254,7 @@ def test_run_frees_the_front_end_map_before_the_loop_closure_finishes() -> None:
         P._release_map, LoopCloser.finish = release, finish
     assert order[:2] == ["release", "finish"]
     assert Levels.sizes and not any(Levels.sizes)
+    assert Levels.finite_after_release > 1000
     assert result.memory_bytes > 0 and result.summary()["map_cells"] == list(result.grid.shape)
     assert np.isfinite(result.grid.prob).sum() > 1000
 

@@ -170,6 +170,10 @@ class Pipeline:
         mem = self.config.detect.memory
         #: outlines of long-occupied cells seen through in recent scans (vacated footprints, _evidence_view)
         self._vacated = VacatedHistory(self.config.detect.tracker.map_vacate_scans)
+        #: the front end's final map once :func:`run` has freed its levels (``_release_map``): what
+        #: :meth:`gridmap` returns from then on, so a checkpoint written during the loop closure's finish
+        #: (Ctrl-C) still writes the real map, not the freed 1 × 1 one
+        self._released_grid: GridMap | None = None
         #: retroactive erasure of what tracks wrote while they stood (slam/erasure.py; None = off)
         self.ledger: EvidenceLedger | None = EvidenceLedger(
             mem, self.config.slam.laser_min_dist, self.config.slam.laser_max_dist,
@@ -336,7 +340,10 @@ class Pipeline:
         )
 
     def gridmap(self) -> GridMap:
-        """The finest map level as occupancy probabilities (NaN = never observed)."""
+        """The finest map level as occupancy probabilities (NaN = never observed); after :func:`run` freed the
+        front end's levels, the map they held then."""
+        if self._released_grid is not None:
+            return self._released_grid
         return self.slam.gridmap(0)
 
 
@@ -693,9 +700,11 @@ def _memory_report(result: RunResult, pipe: Pipeline) -> None:
         result.erased = pipe.ledger.erased_mask(g.origin, g.shape, g.resolution)
 
 
-def _release_map(pipe: Pipeline) -> None:
+def _release_map(pipe: Pipeline, grid: GridMap) -> None:
     """Replace the front end's map arrays by empty ones (after the run, once the results hold their own
-    copies): memory for the loop closure's re-render and the results (docs/speed.md)."""
+    copies): memory for the loop closure's re-render and the results (docs/speed.md). ``grid`` is the
+    front end's exported map, which :meth:`Pipeline.gridmap` returns from now on."""
+    pipe._released_grid = grid
     for lv in pipe.slam.map.levels:
         lv.logodds = np.zeros((0, 0), dtype=np.float32)
         lv.prob = np.full((0, 0), 0.5, dtype=np.float32)
@@ -782,7 +791,7 @@ def run(
     # the front end's map is in ``grid`` / ``logodds`` now: free its levels before the loop closure's final
     # optimisation and re-render build theirs (issue 13 item 3; observers' on_finish get the pipeline without
     # its map arrays)
-    _release_map(pipe)
+    _release_map(pipe, grid)
     trajectory = Trajectory(stamps.view().copy(), poses.view().copy())
     frontend_trajectory = None
     loop = pipe.loops.finish() if pipe.loops is not None else None

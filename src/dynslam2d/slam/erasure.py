@@ -50,7 +50,6 @@ import numpy as np
 
 from dynslam2d.detect.memoryconfig import MemoryConfig
 from dynslam2d.slam.grid import MultiResMap
-from dynslam2d.slam.ledgerkernels import read_cells, scan_cells, unpack_cells, update_rows
 from dynslam2d.types import Pose2D, Scan, Track
 
 #: (i, j) cell → one int64 key: i·2^32 + j (|i|, |j| < 2^31)
@@ -290,6 +289,9 @@ class EvidenceLedger:
         log-odds of the cells each track's kept beams will hit (removed beams, those of the tracks in the
         removal set, are not recorded). ``index`` is the scan's index in the run (kept with the beams when
         ``keep_beams``). Returns None when nothing is to be recorded."""
+        # imported at first use: their explicit signatures compile (or load from numba's cache) on import, which
+        # would put ~0.4 s and scipy.linalg on every `import dynslam2d.pipeline` (issue 13's warm start)
+        from dynslam2d.slam.ledgerkernels import scan_cells
         mine = [t for t in tracks if t.beams is not None and t.beams.shape[0]]
         if not mine:
             return None
@@ -348,6 +350,7 @@ class EvidenceLedger:
         (level, cell) no unowned point has are decoded back, in (level, track id, cell key) order, and their
         cells read (one kernel call, then one per level). Appends to ``flat``, per level, (flat array indices
         of the cells, i0, j0, shape) when all lie inside the level's array, else None."""
+        from dynslam2d.slam.ledgerkernels import read_cells, unpack_cells  # at first use (see before_update)
         n_lv = len(hmap.levels)
         ids_s, key_s, cells_s, bounds = unpack_cells(packed, params, uids, n_lv)
         bounds = bounds.tolist()
@@ -409,6 +412,7 @@ class EvidenceLedger:
 
     def after_update(self, pending: PendingUpdate, hmap: MultiResMap) -> None:
         """Record the evidence the map update added in the cells read by :meth:`before_update`."""
+        from dynslam2d.slam.ledgerkernels import read_cells, update_rows  # at first use (see before_update)
         ledgers = self._ledgers
         added = 0
         for k, (ids, keys, cells, before, ui_before) in enumerate(pending.per_level):
