@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -29,14 +31,15 @@ def _room(n: int = 120, res: float = 0.05) -> GridMap:
 
 
 def _spy(monkeypatch, module) -> dict:
-    """Replace ``module.save_png`` with one that draws the figure and keeps it for inspection."""
+    """Replace ``module.save_png`` with one that draws the figure, writes it and keeps it for inspection (the
+    real one empties the figure after writing it: tests/test_memory_lean.py)."""
     seen: dict = {}
-    real = module.save_png
 
     def spy(fig, path, dpi):
         fig.canvas.draw()
         seen["fig"] = fig
-        return real(fig, path, dpi)
+        fig.savefig(path, dpi=dpi, format="png")
+        return Path(path)
 
     monkeypatch.setattr(module, "save_png", spy)
     return seen
