@@ -119,6 +119,8 @@ class TrackerStats:
     deleted_covariance: int = 0
     deleted_speed: int = 0
     deleted_tentative: int = 0
+    deleted_structure: int = 0  # still clutter on long-occupied map cells (structure_retire_updates)
+    unborn_structure: int = 0  # detections on map structure given no track (structure_birth_min)
     rejected_updates: int = 0
     merged_fragments: int = 0
     merged_leg_pairs: int = 0
@@ -367,6 +369,7 @@ class Tracker:
             hosts = self._hosts_of_fragments(unused, updated)
         else:
             hosts = [None] * len(unused)
+        birth_max = self.config.tracker.structure_birth_min
         for di, host in zip(unused, hosts):
             det = dets[di]
             if self.config.tracker.confirm_hits <= 1:
@@ -374,6 +377,9 @@ class Tracker:
             if host is not None:  # a piece of an object already updated: its beams belong to it
                 host.beams = np.concatenate((host.beams, det.beams))
                 st.merged_fragments += 1
+                continue
+            if det.map_structure >= birth_max and self._map is not None:
+                st.unborn_structure += 1  # structure the map already holds: no track (structure_birth_min)
                 continue
             self._birth(det, t, di)
             updated.add(self._tracks[-1].id)
@@ -1066,6 +1072,9 @@ class Tracker:
         window, need_hits = tc.confirm_window, tc.confirm_hits
         max_coast, max_sig, max_speed = tc.max_coast_time, tc.max_position_sigma, tc.max_object_speed
         sqrt, hypot = math.sqrt, math.hypot
+        v_min = tc.v_min
+        retire_n = tc.structure_retire_updates if self._map is not None else 0
+        retire_s = tc.structure_retire_fraction
         for k in self._tracks:
             kid = k.id
             is_upd = kid in updated
@@ -1112,6 +1121,12 @@ class Tracker:
             speed = hypot(x.item(2), x.item(3))
             if speed > max_speed:
                 st.deleted_speed += 1
+                st.tracks_deleted += 1
+                continue
+            if is_upd and retire_n and not k.was_in_m and not k.remembered and len(ms := k.mstruct) >= retire_n \
+                    and speed < v_min and min(ms[-retire_n:]) >= retire_s:
+                # clutter retirement: a still track the map already holds as structure (docs/real.md "Speed")
+                st.deleted_structure += 1
                 st.tracks_deleted += 1
                 continue
             if is_upd:
