@@ -201,8 +201,10 @@ def _cluttered_starter() -> Scenario:
 def test_clutter_on_map_structure_is_retired_and_a_walker_still_enters_m_fast() -> None:
     """Clutter retirement (tracker.structure_retire_updates, structure_birth_min; docs/real.md "Speed"): the
     boxes along the walls become long-occupied map cells, and the still tracks on them are retired / never
-    born, so the tracker carries far fewer tracks per scan than with the rule off; the walking person still
-    enters M within 0.5 s of starting to walk."""
+    born, so the tracker carries far fewer tracks per scan than with the rule off (measured: 493 against 1172
+    track reports over the 6 s); the walking person still enters M within 0.5 s of starting to walk (0.40 s;
+    0.33 s with the rule off: the track of the person standing by the wall, on cells the map holds by then, is
+    retired, and the walker's new track needs its own updates)."""
     sc = _cluttered_starter()
     steps, gt = _run(sc, Config())
     off = Config()
@@ -210,6 +212,6 @@ def test_clutter_on_map_structure_is_retired_and_a_walker_still_enters_m_fast() 
     off.detect.tracker.structure_birth_min = 1.1
     steps_off, _ = _run(sc, off)
     live, live_off = sum(len(s.tracks) for s in steps), sum(len(s.tracks) for s in steps_off)
-    assert live < 0.7 * live_off, (live, live_off)
+    assert live < 0.55 * live_off, (live, live_off)
     assert _time_to_m(steps, gt, 4.0) <= 0.5
     assert _time_to_m(steps_off, gt, 4.0) <= 0.5
