@@ -206,10 +206,12 @@ def test_clutter_on_map_structure_is_retired_and_a_walker_still_enters_m_fast() 
     0.33 s with the rule off: the track of the person standing by the wall, on cells the map holds by then, is
     retired, and the walker's new track needs its own updates)."""
     sc = _cluttered_starter()
-    steps, gt = _run(sc, Config())
+    on = Config()
+    on.detect.tracker.structure_retire_updates = 2  # (off by default)
+    on.detect.tracker.structure_birth_min = 0.5
+    steps, gt = _run(sc, on)
     off = Config()
-    off.detect.tracker.structure_retire_updates = 0
-    off.detect.tracker.structure_birth_min = 1.1
+    assert off.detect.tracker.structure_retire_updates == 0 and off.detect.tracker.structure_birth_min > 1.0
     steps_off, _ = _run(sc, off)
     live, live_off = sum(len(s.tracks) for s in steps), sum(len(s.tracks) for s in steps_off)
     assert live < 0.55 * live_off, (live, live_off)

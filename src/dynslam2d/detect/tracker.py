@@ -365,11 +365,16 @@ class Tracker:
                     st.rejected_updates += 1
         self._manage(t, updated)
         unused = [di for di in range(len(dets)) if di not in used]
+        if self._map is not None and (birth_max := self.config.tracker.structure_birth_min) <= 1.0:
+            # structure the map already holds gets no track (structure_birth_min) and joins no track as a
+            # fragment either: an unassociated piece of wall beside a mover in M is not part of it
+            n_unused = len(unused)
+            unused = [di for di in unused if dets[di].map_structure < birth_max]
+            st.unborn_structure += n_unused - len(unused)
         if self.config.tracker.confirm_hits > 1:  # births stay tentative: hosts can be found in one batch
             hosts = self._hosts_of_fragments(unused, updated)
         else:
             hosts = [None] * len(unused)
-        birth_max = self.config.tracker.structure_birth_min
         for di, host in zip(unused, hosts):
             det = dets[di]
             if self.config.tracker.confirm_hits <= 1:
@@ -377,9 +382,6 @@ class Tracker:
             if host is not None:  # a piece of an object already updated: its beams belong to it
                 host.beams = np.concatenate((host.beams, det.beams))
                 st.merged_fragments += 1
-                continue
-            if det.map_structure >= birth_max and self._map is not None:
-                st.unborn_structure += 1  # structure the map already holds: no track (structure_birth_min)
                 continue
             self._birth(det, t, di)
             updated.add(self._tracks[-1].id)
