@@ -414,8 +414,7 @@ class TrackerConfig(BaseModel):
         1.1, ge=0.0, le=1.1,
         description="No track is born on a detection with at least this fraction of its points on long-occupied "
         "map cells (structure the map already holds; a new mover's points lie mostly on free or unknown cells). "
-        "Such detections also join no track as a fragment, nor update a track in M whose own points were not on "
-        "structure (no clutter track holds them any more). Above 1.0 = off (the default; 0.5 with clutter "
+        "Such detections also join no track as a fragment. Above 1.0 = off (the default; 0.5 with clutter "
         "retirement on). Only with map_evidence and a map.",
     )
     map_vacate_min_cells: int = Field(
