@@ -719,8 +719,6 @@ class Tracker:
                                      float(tc.max_size_jump))
         if self._map is not None:
             ok = self._veto_merged(ok, dets, det_ext, tsize)
-            if (birth_max := tc.structure_birth_min) <= 1.0:
-                ok = self._veto_structure(ok, dets, birth_max)
         if not ok.any():
             return []
         cost = np.where(ok, d2, _BIG)
@@ -750,23 +748,6 @@ class Tracker:
                 taken = np.zeros(m, dtype=bool)
             taken[jj] = True
         return pairs
-
-    def _veto_structure(self, ok: np.ndarray, dets: list[Detection], birth_max: float) -> np.ndarray:
-        """With ``structure_birth_min`` on: a track in M whose own points were not on structure (mean ≤
-        ``map_structure_max``) is not updated with a detection of at least ``birth_max`` of its points on
-        long-occupied map cells. Such detections get no track of their own (:meth:`update`), so no clutter
-        track holds them any more; a walker in M passing a wall would otherwise take its fragments, then the
-        wall (sim:drive)."""
-        tc = self.config.tracker
-        cand = np.array([d.map_structure >= birth_max for d in dets])
-        if not cand.any():
-            return ok
-        rows = [i for i, k in enumerate(self._tracks) if k.in_m and k.mstruct and
-                sum(k.mstruct) / len(k.mstruct) <= tc.map_structure_max]
-        if rows:
-            ok = ok.copy()
-            ok[np.array(rows)[:, None], np.flatnonzero(cand)[None, :]] = False
-        return ok
 
     def _veto_merged(self, ok: np.ndarray, dets: list[Detection], det_ext: np.ndarray,
                      tsize: np.ndarray) -> np.ndarray:
