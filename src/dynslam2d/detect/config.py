@@ -396,6 +396,27 @@ class TrackerConfig(BaseModel):
         description="A track in M whose mean fraction of points on long-occupied cells reaches this leaves M "
         "(it has become part of the map's structure).",
     )
+    structure_retire_updates: int = Field(
+        0, ge=0,
+        description="Clutter retirement (issue 9 speed): a track never in M and slower than v_min whose points "
+        "lay at least structure_retire_fraction on long-occupied map cells (map_occupied_logodds) in each of its "
+        "last this many updates is deleted: "
+        "the map already holds it as structure, so carrying, predicting and updating it each scan only costs "
+        "time (a wall fragment, furniture). Only with map_evidence and a map. 0 = off (the default: on, with 2, "
+        "it costs sim:drive 0.5 points of static removals, docs/real.md 'Speed').",
+    )
+    structure_retire_fraction: float = Field(
+        0.5, ge=0.0, le=1.0,
+        description="See structure_retire_updates: the fraction of a track's points on long-occupied map cells "
+        "that each of its last structure_retire_updates updates must reach for a still track to be retired.",
+    )
+    structure_birth_min: float = Field(
+        1.1, ge=0.0, le=1.1,
+        description="No track is born on a detection with at least this fraction of its points on long-occupied "
+        "map cells (structure the map already holds; a new mover's points lie mostly on free or unknown cells). "
+        "Such detections also join no track as a fragment. Above 1.0 = off (the default; 0.5 with clutter "
+        "retirement on). Only with map_evidence and a map.",
+    )
     map_vacate_min_cells: int = Field(
         4, ge=0,
         description="Vacated footprints (docs/maps.md): an outline of long-occupied map cells at most "

@@ -119,6 +119,8 @@ class TrackerStats:
     deleted_covariance: int = 0
     deleted_speed: int = 0
     deleted_tentative: int = 0
+    deleted_structure: int = 0  # still clutter on long-occupied map cells (structure_retire_updates)
+    unborn_structure: int = 0  # detections on map structure given no track (structure_birth_min)
     rejected_updates: int = 0
     merged_fragments: int = 0
     merged_leg_pairs: int = 0
@@ -363,6 +365,12 @@ class Tracker:
                     st.rejected_updates += 1
         self._manage(t, updated)
         unused = [di for di in range(len(dets)) if di not in used]
+        if self._map is not None and (birth_max := self.config.tracker.structure_birth_min) <= 1.0:
+            # structure the map already holds gets no track (structure_birth_min) and joins no track as a
+            # fragment either: an unassociated piece of wall beside a mover in M is not part of it
+            n_unused = len(unused)
+            unused = [di for di in unused if dets[di].map_structure < birth_max]
+            st.unborn_structure += n_unused - len(unused)
         if self.config.tracker.confirm_hits > 1:  # births stay tentative: hosts can be found in one batch
             hosts = self._hosts_of_fragments(unused, updated)
         else:
@@ -1066,6 +1074,9 @@ class Tracker:
         window, need_hits = tc.confirm_window, tc.confirm_hits
         max_coast, max_sig, max_speed = tc.max_coast_time, tc.max_position_sigma, tc.max_object_speed
         sqrt, hypot = math.sqrt, math.hypot
+        v_min = tc.v_min
+        retire_n = tc.structure_retire_updates if self._map is not None else 0
+        retire_s = tc.structure_retire_fraction
         for k in self._tracks:
             kid = k.id
             is_upd = kid in updated
@@ -1112,6 +1123,12 @@ class Tracker:
             speed = hypot(x.item(2), x.item(3))
             if speed > max_speed:
                 st.deleted_speed += 1
+                st.tracks_deleted += 1
+                continue
+            if is_upd and retire_n and not k.was_in_m and not k.remembered and len(ms := k.mstruct) >= retire_n \
+                    and speed < v_min and min(ms[-retire_n:]) >= retire_s:
+                # clutter retirement: a still track the map already holds as structure (docs/real.md "Speed")
+                st.deleted_structure += 1
                 st.tracks_deleted += 1
                 continue
             if is_upd:
