@@ -14,8 +14,8 @@ from dynslam2d.detect import Tracker
 from dynslam2d.detect.mapevidence import MapView
 from dynslam2d.pipeline import Pipeline
 from dynslam2d.sim import Circle, LidarModel, Mover, Scenario, World, cast_rays, polyline_segments, simulate, timeline
-from dynslam2d.sim.world import rect_corners
 from dynslam2d.sim.robot import waypoint_path
+from dynslam2d.sim.world import rect_corners
 from dynslam2d.types import Pose2D, Scan
 
 RATE = 15.0  # Hz, as sim:drive
