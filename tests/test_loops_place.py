@@ -131,7 +131,8 @@ class _EagerPlaces(LoopCloser):
     keyframe, before that keyframe's search."""
 
     def _place_drop(self, node: int) -> None:
-        due, self._place_due = self._place_due, []
+        due = list(self._place_due)
+        self._place_due.clear()
         for k in due:
             self._describe(k, True)
         super()._place_drop(node)
@@ -168,11 +169,10 @@ def test_lazy_place_descriptors_equal_the_eager_ones(broken_front_end: tuple) ->
     assert held_e == eager.config.place_keyframes
     assert lazy.stats["far_searches"] >= 1 and len(ranks_l) >= 1
     lazy._place_flush()  # places due after the last ranking (none if the second search ranked at the end)
-    for a, b in ((eager._places, lazy._places),):
-        assert a.keys.tolist() == b.keys.tolist() and len(a) > 100
-        n = len(a)
-        for name in ("_cols", "_occ", "_count"):
-            assert np.array_equal(getattr(a, name)[:n], getattr(b, name)[:n]), name
+    a, b = eager._places, lazy._places
+    assert a.keys.tolist() == b.keys.tolist() and len(a) > 100
+    for name in ("_cols", "_occ", "_count"):  # the stored spectra, bit for bit
+        assert np.array_equal(getattr(a, name)[:len(a)], getattr(b, name)[:len(b)]), name
     assert ranks_l == ranks_e
     assert np.array_equal(res_l.poses, res_e.poses)
     assert eager.stats["far_loops"] == lazy.stats["far_loops"] >= 3

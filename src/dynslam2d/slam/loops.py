@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -200,8 +200,8 @@ class LoopCloser:
         self._place_pts: dict[int, np.ndarray] = {}  # node → its returns for the descriptors (see _place_due)
         # stored places whose descriptor is not computed yet, ascending: computed when a ranking first needs the
         # index (_place_flush); their keyframes' returns stay in _place_pts until then (≤ 1 kB per keyframe, less
-        # than the 5 kB of spectra each stored place then takes)
-        self._place_due: list[int] = []
+        # than the 5 kB of spectra each stored place then takes: never more memory than describing at once)
+        self._place_due: deque[int] = deque()
         self._place_lo = 0  # the oldest node whose returns _place_pts may still hold
         self.stats: dict[str, float] = {"searches": 0, "candidates": 0, "loops_accepted": 0, "optimisations": 0,
                                         "far_searches": 0, "far_candidates": 0, "far_loops": 0,
@@ -517,12 +517,11 @@ class LoopCloser:
         """Describe and store every place still due, oldest first (the index's rows in the order the eager
         description gave them); their inputs — the keyframes' returns and front-end poses — never change after
         the keyframe, so the descriptors are bit-identical to those computed at keyframe time."""
-        if not self._place_due:
-            return
-        for k in self._place_due:
-            self._describe(k, True)
-        self._place_due = []
-        self._place_drop(len(self.keyframes) - 1)
+        last = len(self.keyframes) - 1
+        while self._place_due:
+            self._describe(self._place_due[0], True)
+            self._place_due.popleft()
+            self._place_drop(last)  # each place's returns freed as soon as described: memory never above eager
 
     def _place_ranks(self, node: int) -> dict[int, float]:
         """Submap → smallest place-descriptor distance of its stored keyframes to keyframe ``node``'s place."""
