@@ -9,7 +9,7 @@ same core under the same load, scan by scan. Each worker times ``Pipeline.proces
 (``time.thread_time_ns``) and reports its stage timings (``StepResult.timings``) in thread CPU time too (the
 pipeline's ``time.perf_counter`` is swapped for ``time.thread_time`` in the worker). Printed per input: median
 CPU ms per scan of each checkout, their ratio, the median of the per-scan ratios, and the median of every stage
-(``map_update`` also over the scans that updated the map).
+(``map_update``, ``loops`` and the whole pipeline also over the scans that updated the map).
 
     taskset -c 1 python benchmarks/bench_pipeline_ab.py negative_2/right negative_2/left negative_2/rear \
         --other /work/main/src [--reps 1]
@@ -100,10 +100,13 @@ def compare(data: Path, name: str, other: Path, reps: int) -> None:
     for k in stages["this"]:
         a, b = statistics.median(stages["other"][k]), statistics.median(stages["this"][k])
         print(f"  {k:<11} other {a:7.3f}  this {b:7.3f}  ratio {b / a if a else float('nan'):.3f}")
-    for tag in ("other", "this"):
-        mu = [v for v, u in zip(stages[tag]["map_update"], upd[tag]) if u]
-        if mu:
-            print(f"  map_update on updated scans ({len(mu)}), {tag}: {statistics.median(mu):.3f}")
+    # the scans that update the map (keyframes: the loop closer's place descriptor and searches) decide the median
+    for k in ("map_update", "loops", "cpu"):
+        for tag in ("other", "this"):
+            mu = [v for v, u in zip(cpu[tag] if k == "cpu" else stages[tag].get(k, []), upd[tag]) if u]
+            if mu:
+                print(f"  {'pipeline CPU' if k == 'cpu' else k} on updated scans ({len(mu)}), {tag}: "
+                      f"{statistics.median(mu):.3f}")
     sys.stdout.flush()
 
 

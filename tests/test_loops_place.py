@@ -124,3 +124,58 @@ def test_descriptor_ranking_finds_the_far_loop_right_after_the_break(broken_fron
     # loops placed the graph: 0.28 → 0.01 m
     lc2, _res2, err2, _first2 = _run(gt, front, scans, LoopConfig(far_searches=1, far_rank="oldest"))
     assert lc2.stats["rematch_edges"] >= 1 and err2.max() < 0.05
+
+
+class _EagerPlaces(LoopCloser):
+    """The loop closer as it was before the place descriptors became lazy: every stored place described at its
+    keyframe, before that keyframe's search."""
+
+    def _place_drop(self, node: int) -> None:
+        due = list(self._place_due)
+        self._place_due.clear()
+        for k in due:
+            self._describe(k, True)
+        super()._place_drop(node)
+
+
+def _ranked_run(cls: type, gt: np.ndarray, front: np.ndarray, scans: list) -> tuple:
+    """Run ``cls`` over the broken front end; (closer, result, every far ranking in order as (node, ranks),
+    largest number of places due at a keyframe, largest number of keyframes whose returns were held)."""
+    lc = cls(LoopConfig(far_searches=1), SlamConfig())
+    ranks: list[tuple[int, dict[int, float]]] = []
+    ranker = lc._place_ranks
+
+    def watched(node: int) -> dict[int, float]:
+        r = ranker(node)
+        ranks.append((node, r))
+        return r
+
+    lc._place_ranks = watched  # type: ignore[method-assign]
+    due = held = 0
+    for k, (s, p) in enumerate(zip(scans, front)):
+        lc.add(s.stamp, Pose2D(*p), s, np.zeros(s.ranges.shape, bool), keyframe=k % 2 == 0, weak=k == 251)
+        due, held = max(due, len(lc._place_due)), max(held, len(lc._place_pts))
+    return lc, lc.finish(), ranks, due, held
+
+
+def test_lazy_place_descriptors_equal_the_eager_ones(broken_front_end: tuple) -> None:
+    """Describing a place only when a far search first ranks places (and in the second search at the end) gives
+    bit-identical descriptors, rankings and poses to describing every stored place at its keyframe: the inputs
+    (the keyframes' returns, the front end's poses) are kept as they were at the keyframe."""
+    gt, front, scans = broken_front_end
+    eager, res_e, ranks_e, due_e, held_e = _ranked_run(_EagerPlaces, gt, front, scans)
+    lazy, res_l, ranks_l, due_l, held_l = _ranked_run(LoopCloser, gt, front, scans)
+    assert due_e == 0 and due_l >= 10  # the lazy run really deferred places (until the far search at the break)
+    assert held_e == eager.config.place_keyframes
+    assert lazy.stats["far_searches"] >= 1 and len(ranks_l) >= 1
+    lazy._place_flush()  # places due after the last ranking (none if the second search ranked at the end)
+    a, b = eager._places, lazy._places
+    assert a.keys.tolist() == b.keys.tolist() and len(a) > 100
+    for name in ("_cols", "_occ", "_count"):  # the stored spectra, bit for bit
+        assert np.array_equal(getattr(a, name)[:len(a)], getattr(b, name)[:len(b)]), name
+    assert ranks_l == ranks_e
+    assert np.array_equal(res_l.poses, res_e.poses)
+    assert eager.stats["far_loops"] == lazy.stats["far_loops"] >= 3
+    # the lazy closer holds returns of the keyframes of the places due and their windows only: after a flush at
+    # most place_keyframes keyframes again
+    assert len(lazy._place_pts) <= lazy.config.place_keyframes

@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -197,7 +197,12 @@ class LoopCloser:
         self._places = (PlaceIndex(c.place_rings, c.place_sectors, c.place_max_range)
                         if c.far_search and c.far_rank == "descriptor" else None)
         self._query_desc: tuple[int, np.ndarray] | None = None  # (node, descriptor) of the latest keyframe
-        self._place_pts: dict[int, np.ndarray] = {}  # node → its returns for the descriptors (last place_keyframes)
+        self._place_pts: dict[int, np.ndarray] = {}  # node → its returns for the descriptors (see _place_due)
+        # stored places whose descriptor is not computed yet, ascending: computed when a ranking first needs the
+        # index (_place_flush); their keyframes' returns stay in _place_pts until then (≤ 1 kB per keyframe, less
+        # than the 5 kB of spectra each stored place then takes: never more memory than describing at once)
+        self._place_due: deque[int] = deque()
+        self._place_lo = 0  # the oldest node whose returns _place_pts may still hold
         self.stats: dict[str, float] = {"searches": 0, "candidates": 0, "loops_accepted": 0, "optimisations": 0,
                                         "far_searches": 0, "far_candidates": 0, "far_loops": 0,
                                         "far_deferred": 0, "rematch_edges": 0, "rematch_checked": 0, "rematch_ms": 0.0,
@@ -286,9 +291,11 @@ class LoopCloser:
             if pts.shape[0] > _PLACE_POINTS:
                 pts = pts[np.linspace(0, pts.shape[0] - 1, _PLACE_POINTS).astype(np.int64)]
             self._place_pts[node] = pts.astype(np.float32)
-            self._place_pts.pop(node - c.place_keyframes, None)
             if node % c.place_every == 0:
-                self._describe(node, True)
+                # described lazily (_place_flush), from these same returns and front-end poses: most keyframes
+                # of a run never rank far places, and the descriptor is most of a keyframe's cost (docs/slam.md)
+                self._place_due.append(node)
+            self._place_drop(node)
         every = c.search_every * (c.tracked_search_every if self._recent_loop(node) is not None else 1)
         if self._pending:
             self._pending_far(node)
@@ -498,9 +505,28 @@ class LoopCloser:
         self._query_desc = (node, desc)
         self.stats["place_ms"] += (time.perf_counter() - t0) * 1e3
 
+    def _place_drop(self, node: int) -> None:
+        """Free the returns no descriptor needs any more: those before the window (``place_keyframes``) of the
+        oldest place still due, or of keyframe ``node`` (the latest) if none is due."""
+        lo = (self._place_due[0] if self._place_due else node) - self.config.place_keyframes + 1
+        while self._place_lo < lo:
+            self._place_pts.pop(self._place_lo, None)
+            self._place_lo += 1
+
+    def _place_flush(self) -> None:
+        """Describe and store every place still due, oldest first (the index's rows in the order the eager
+        description gave them); their inputs — the keyframes' returns and front-end poses — never change after
+        the keyframe, so the descriptors are bit-identical to those computed at keyframe time."""
+        last = len(self.keyframes) - 1
+        while self._place_due:
+            self._describe(self._place_due[0], True)
+            self._place_due.popleft()
+            self._place_drop(last)  # each place's returns freed as soon as described: memory never above eager
+
     def _place_ranks(self, node: int) -> dict[int, float]:
         """Submap → smallest place-descriptor distance of its stored keyframes to keyframe ``node``'s place."""
         c = self.config
+        self._place_flush()
         t0 = time.perf_counter()
         if self._query_desc is not None and self._query_desc[0] == node:
             keys, d, _shift = self._places.distances(self._query_desc[1])
