@@ -16,6 +16,8 @@ For each input: one run with the clean-up recorder watching, then
 
     python benchmarks/bench_cleanup.py ../shared/data/mit-csail/mit-csail.clf \\
         ../shared/data/fr079/freiburg-079-corrected.log.gz sim:stop-and-go sim:parking
+    python benchmarks/bench_cleanup.py ../shared/data/dynamic/leg_tracker/negative_2.bag --topic /right_scan \\
+        --set clean.rehit_min_hits=0      # the rule before the rehit test
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ import time
 import numpy as np
 from scipy import ndimage
 
-from dynslam2d.config import Config
+from dynslam2d.config import Config, with_assignments
 from dynslam2d.eval.maps import distance_to, map_metrics
 from dynslam2d.inputs import open_source
 from dynslam2d.pipeline import run
@@ -95,10 +97,13 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("inputs", nargs="+")
     ap.add_argument("--figure", default=None, help="PNG of the first input's maps")
+    ap.add_argument("--topic", default=None, help="scan topic of a bag with several (every bag input)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="configuration override, e.g. clean.rehit_min_hits=0 (repeatable)")
     args = ap.parse_args()
     for k, inp in enumerate(args.inputs):
-        src = open_source(inp)
-        cfg = Config()
+        src = open_source(inp, topic=args.topic if not inp.startswith("sim:") else None)
+        cfg = with_assignments(Config(), args.set)
         rec = CleanupRecorder(cfg.clean)
         t0 = time.perf_counter()
         result = run(src, cfg, observers=[rec])

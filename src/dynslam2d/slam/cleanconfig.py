@@ -64,6 +64,14 @@ class CleanConfig(BaseModel):
         0.15, ge=0.0,
         description="Extra switches allowed per scan of the rarer kind (hit or pass), dimensionless.",
     )
+    rehit_min_hits: int = Field(
+        6, ge=0,
+        description="Never erase a cell hit by at least this many counted scans whose first and latest counted "
+        "touches were both hits (hit, seen through, hit again): the structure was there before and after the "
+        "scans that saw through it, so those scans disagree with the others about where it is — pose error "
+        "between visits, not a mover (docs/maps.md, 'What the erased cells are'). 6 = two visits of min_through "
+        "scans; a cell that two people walking past crossed is hit 2–5 times. 0 = off (the rule before it).",
+    )
     revert_neighbors: int = Field(
         3, ge=0, le=9,
         description="An erased cell with at least this many kept occupied cells among its 8 neighbours is "

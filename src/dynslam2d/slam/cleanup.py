@@ -23,6 +23,14 @@ seen through in another, while glass, railings, the copies of a wall that pose d
 put apart and wall cells clipped by grazing rays alternate (our stand-in for Removert's
 "revert" of removals caused by pose and discretisation ambiguity).
 
+Structure seen again after it was seen through: a cell hit by at least ``rehit_min_hits`` (6) scans whose
+first and latest counted touches were both hits (``S`` even and ≥ 2, latest a hit) is never erased. An object
+that left (hits, then passes), arrived (passes, then hits) or stood for a while (passes, hits, passes) is not of
+that kind; a wall is, when the scans of one visit were placed with pose error: they see through where the other
+visits, before and after, hit it (docs/maps.md, "What the erased cells are"). Removert's "revert" (Kim & Kim,
+IROS 2020) for the removals that pose error causes, judged from the order of the observations instead of a
+coarser resolution.
+
 Walls at grazing incidence: a ray that meets a surface at angle α runs within one
 cell of it for about ``resolution / sin α`` before the endpoint, so the margin grows
 to ``grazing_cells · resolution / sin α`` (α estimated per beam from the neighbouring
@@ -351,9 +359,8 @@ class VisibilityCounter:
         self.scans += 1
         self.seconds += time.perf_counter() - t0
 
-    def window(self, grid: GridMap) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(hits, through, switches), each shaped like ``grid`` (same cells; zeros where
-        never counted).
+    def _overlap(self, grid: GridMap) -> tuple[slice, slice, slice, slice] | None:
+        """(grid rows, grid cols, counter rows, counter cols) of the cells both hold, or None.
 
         ``grid`` must share the counter's resolution and have its cell centres on
         multiples of it (as the SLAM levels do)."""
@@ -362,14 +369,32 @@ class VisibilityCounter:
         gi0 = int(round(grid.origin[0] / self.resolution + 0.5))
         gj0 = int(round(grid.origin[1] / self.resolution + 0.5))
         H, W = grid.shape
-        outs = [np.zeros((H, W), dtype=np.uint16) for _ in range(3)]
         h, w = self._cells.shape[:2]
         c0, c1 = max(gi0, self.i0), min(gi0 + W, self.i0 + w)
         r0, r1 = max(gj0, self.j0), min(gj0 + H, self.j0 + h)
-        if c1 > c0 and r1 > r0:
+        if c1 <= c0 or r1 <= r0:
+            return None
+        return (slice(r0 - gj0, r1 - gj0), slice(c0 - gi0, c1 - gi0), slice(r0 - self.j0, r1 - self.j0),
+                slice(c0 - self.i0, c1 - self.i0))
+
+    def window(self, grid: GridMap) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(hits, through, switches), each shaped like ``grid`` (same cells; zeros where
+        never counted)."""
+        outs = [np.zeros(grid.shape, dtype=np.uint16) for _ in range(3)]
+        ov = self._overlap(grid)
+        if ov is not None:
             for out, arr in zip(outs, (self.hits, self.through, self.switches)):
-                out[r0 - gj0:r1 - gj0, c0 - gi0:c1 - gi0] = arr[r0 - self.j0:r1 - self.j0, c0 - self.i0:c1 - self.i0]
+                out[ov[0], ov[1]] = arr[ov[2], ov[3]]
         return outs[0], outs[1], outs[2]
+
+    def latest_hit(self, grid: GridMap) -> np.ndarray:
+        """(H, W) bool shaped like ``grid``: the cell's latest counted touch was a hit (False where never
+        counted). With the switch count's parity it gives the first touch too (:func:`erase_rule`)."""
+        out = np.zeros(grid.shape, dtype=bool)
+        ov = self._overlap(grid)
+        if ov is not None:
+            out[ov[0], ov[1]] = (self._last[ov[2], ov[3]] & 1) == 1
+        return out
 
 
 @dataclass(eq=False)
@@ -409,13 +434,20 @@ def restore_rule(hits: np.ndarray, through: np.ndarray, config: CleanConfig) -> 
     return (hits >= c.restore_min_hits) & (through <= c.restore_through_ratio * hits)
 
 
-def erase_rule(hits: np.ndarray, through: np.ndarray, switches: np.ndarray, config: CleanConfig) -> np.ndarray:
+def erase_rule(hits: np.ndarray, through: np.ndarray, switches: np.ndarray, config: CleanConfig,
+               latest_hit: np.ndarray | None = None) -> np.ndarray:
     """Cells (bool, same shape) that were seen through often enough, relative to their hits,
     in few blocks: ``T ≥ min_through``, ``T ≥ through_ratio·H`` and
-    ``S ≤ max_switches + switch_share·min(H, T)`` (module docstring)."""
+    ``S ≤ max_switches + switch_share·min(H, T)`` (module docstring). With ``latest_hit`` (the cell's latest
+    counted touch was a hit, :meth:`VisibilityCounter.latest_hit`), cells hit at least ``rehit_min_hits`` times
+    whose first and latest touches were both hits (``S`` even and ≥ 2, latest a hit: hit, seen through, hit
+    again) are left out (``rehit_min_hits`` 0: none)."""
     c = config
-    return ((through >= c.min_through) & (through >= c.through_ratio * hits)
-            & (switches <= c.max_switches + c.switch_share * np.minimum(hits, through)))
+    out = ((through >= c.min_through) & (through >= c.through_ratio * hits)
+           & (switches <= c.max_switches + c.switch_share * np.minimum(hits, through)))
+    if c.rehit_min_hits > 0 and latest_hit is not None:
+        out &= ~(latest_hit & (switches >= 2) & (switches % 2 == 0) & (hits >= c.rehit_min_hits))
+    return out
 
 
 #: Rows of the map :func:`clean_map` applies the erase rule to at a time (the rule's ratios are float64).
@@ -430,12 +462,14 @@ def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray |
     t0 = time.perf_counter()
     c = counter.config
     hits, through, switches = counter.window(online)
+    latest_hit = counter.latest_hit(online) if c.rehit_min_hits > 0 else None
     occ = online.occupied(occupied_threshold)
     erased = np.empty(occ.shape, dtype=bool)
     restored = np.empty(occ.shape, dtype=bool)
     for r0 in range(0, occ.shape[0], _RULE_ROWS):  # a block of rows at a time: no map-sized float64 temporaries
         rows = slice(r0, r0 + _RULE_ROWS)
-        erased[rows] = erase_rule(hits[rows], through[rows], switches[rows], c) & occ[rows]
+        erased[rows] = erase_rule(hits[rows], through[rows], switches[rows], c,
+                                  None if latest_hit is None else latest_hit[rows]) & occ[rows]
         # observed free in the online map (unknown cells were never cleared: nothing to restore there)
         restored[rows] = restore_rule(hits[rows], through[rows], c) & ~occ[rows] & np.isfinite(online.prob[rows])
     if c.revert_neighbors > 0:
@@ -499,7 +533,10 @@ def compare_online(online: GridMap, cleaned: CleanResult, tolerance: float = 0.1
 class CleanupRecorder:
     """Pipeline observer (:class:`dynslam2d.pipeline.RunObserver`) that feeds a
     :class:`VisibilityCounter` with every matched scan and, at the end of the run,
-    cleans the final map into :attr:`result`."""
+    cleans the final map into :attr:`result`. :attr:`counter_class` builds the counter (a subclass may
+    count differently, e.g. ``benchmarks/bench_erased.py`` keeps the counted scans to explain the erasures)."""
+
+    counter_class: type[VisibilityCounter] = VisibilityCounter
 
     def __init__(self, config: CleanConfig | None = None, slam: SlamConfig | None = None) -> None:
         self.config = config if config is not None else CleanConfig()
@@ -519,7 +556,7 @@ class CleanupRecorder:
         self._last_stamp = scan.stamp
         if self.counter is None:
             slam = self.slam if self.slam is not None else pipeline.config.slam  # type: ignore[attr-defined]
-            self.counter = VisibilityCounter(slam.map_resolution, self.config, slam)
+            self.counter = self.counter_class(slam.map_resolution, self.config, slam)
         self.counter.add(scan, step.pose, step.removed)  # type: ignore[attr-defined]
 
     def on_finish(self, result: object, pipeline: object) -> None:
@@ -527,14 +564,14 @@ class CleanupRecorder:
             return
         if self.counter is None:
             slam = pipeline.config.slam  # type: ignore[attr-defined]
-            self.counter = VisibilityCounter(slam.map_resolution, self.config, slam)
+            self.counter = self.counter_class(slam.map_resolution, self.config, slam)
         loop = getattr(result, "loop", None)
         if loop is not None and loop.corrected:
             # loop closure moved the poses after counting: count the keyframes (the scans written into the
             # map) again at their optimised poses, so the counts match the re-rendered map (docs/slam.md)
             slam = self.slam if self.slam is not None else pipeline.config.slam  # type: ignore[attr-defined]
             self.counter = None  # the run's counts go before the recount's are allocated
-            self.counter = VisibilityCounter(slam.map_resolution, self.config, slam)
+            self.counter = self.counter_class(slam.map_resolution, self.config, slam)
             poses = [Pose2D(float(p[0]), float(p[1]), float(p[2])) for p in loop.node_poses]
             self.counter.reserve([(kf.scan, p) for kf, p in zip(loop.keyframes, poses)])
             for kf, p in zip(loop.keyframes, poses):
