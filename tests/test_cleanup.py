@@ -83,6 +83,25 @@ def test_an_object_that_arrived_and_parked_is_erased():
     assert res.erased[rows, cols].mean() > 0.9
 
 
+def test_structure_hit_again_after_it_was_seen_through_is_kept():
+    """Hit, seen through, hit again (a wall the scans of one visit placed elsewhere): kept when hit by at least
+    ``rehit_min_hits`` scans, erased with the bound off or when hit too rarely (two people crossing the cell);
+    an object that left or stood for a while (seen through at both ends) is erased as before."""
+    def erased(present: list[bool], rehit: int = 6) -> float:
+        scans = _ring_scans(present)
+        slam, counter = _online_and_counter(scans, [Pose2D()] * len(scans), config=CleanConfig(rehit_min_hits=rehit))
+        online = slam.gridmap(0)
+        rows, cols = _cells_at(online, _object_points())
+        return float(clean_map(online, counter).erased[rows, cols].mean())
+
+    back = [True] * 8 + [False] * 10 + [True] * 8
+    assert erased(back) == 0.0
+    assert erased(back, rehit=0) > 0.9
+    assert erased([True] * 2 + [False] * 10 + [True] * 2) > 0.9  # hit 4 times: below the bound
+    assert erased([False] * 8 + [True] * 8 + [False] * 10) > 0.9  # stood for a while
+    assert erased([True] * 8 + [False] * 10) > 0.9  # left
+
+
 def test_cells_that_alternate_between_hit_and_seen_through_are_kept():
     # Glass, railings or the doubled wall of a drifted pass: hits and passes alternate scan by scan.
     scans = _ring_scans([k % 2 == 0 for k in range(40)])
@@ -413,8 +432,8 @@ def _wall_erasures(grid, cleaned: np.ndarray, static_map) -> tuple[int, int]:
 
 
 def test_an_empty_room_driven_through_keeps_its_walls():
-    """SLAM poses (error of a few mm): the pass erases (almost) no wall cell. Without the revert step it erases 65
-    of them (the faces of walls clipped by rays), with ``switch_share: 0.5`` 18; the default erases 4."""
+    """SLAM poses (error of a few mm): the pass erases (almost) no wall cell — 2 (4 with ``rehit_min_hits: 0``).
+    Without the revert step it erases 38 (the faces of walls clipped by rays in one block of scans)."""
     from dynslam2d.config import Config
     from dynslam2d.pipeline import run
     from dynslam2d.results import ground_truth_for
