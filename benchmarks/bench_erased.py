@@ -9,12 +9,14 @@ occupied cells:
   * ``copy``: the nearest kept cell 0.075–0.40 m away (a second outline of something the map keeps);
   * ``gone``: no kept cell within 0.40 m (the whole object left the map).
 
-and, for each, **how well the scans that saw through it agree with the scans that hit it** around the cell:
-the endpoints of (up to 8) passing scans within 2 m of the cell are registered (2D point-to-point ICP,
-trimmed at 0.3 m) onto those of (up to 8) hitting scans, leaving out 0.25 m around the cell itself; the
-"misalignment" is how far that moves the cell's centre. A mover that left is seen through from poses that
-agree with the poses that hit it (misalignment ≈ the SLAM's error, a few mm in simulation); a wall whose
-copies come from pose error is seen through by scans that are off by the size of the copy's offset.
+how many were hit mostly at grazing incidence, mostly beside a depth jump (mixed pixels) or from closer than
+0.5 m (the robot's body), and, for each class, **how well the scans that saw through a cell agree with the
+scans that hit it** around the cell: the endpoints of (up to 8) passing scans within 2 m of the cell are
+registered (2D point-to-point ICP, trimmed at 0.3 m) onto those of (up to 8) hitting scans, leaving out 0.25 m
+around the cell itself; the "misalignment" is how far that moves the cell's centre. A mover that left is seen
+through from poses that agree with the poses that hit it (misalignment ≈ the SLAM's error, a few mm in
+simulation); a wall whose copies come from pose error is seen through by scans that are off by the size of the
+copy's offset. ``--visits`` registers whole counted scans of later visits onto a first one.
 
 With ground truth (``sim:<scenario>``) the erased cells within 0.10 m of the true static structure are
 counted too (walls the pass erased). Run-wide: erased / lost (online occupied cells > 0.10 m from every
@@ -87,6 +89,50 @@ def _events(counter: KeepingCounter, cells: np.ndarray) -> tuple[list[list[int]]
             elif scratch._cells[r[m], c[m], 1]:
                 passes[m].append(k)
     return hits, passes
+
+
+def _hit_kinds(counter: KeepingCounter, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per erased cell (absolute (i, j) rows of ``cells``): whether most of the kept beams that ended in it met
+    their surface at grazing incidence (below 15°, from the neighbouring endpoints as the counter estimates it),
+    whether most ended beside a depth jump of more than 0.2 m to a neighbouring beam (mixed pixels), and whether
+    any ended closer than 0.5 m to the laser (the robot's own body)."""
+    key = cells[:, 0] * (1 << 32) + cells[:, 1]
+    order = np.argsort(key)
+    n = len(cells)
+    total, grazing, jump, close = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n, dtype=bool)
+    res, slam = counter.resolution, counter.slam
+    for scan, pose, removed in counter.kept:
+        r = scan.ranges
+        with np.errstate(invalid="ignore"):
+            ok = scan.valid_mask() & (r > slam.laser_min_dist) & (r < slam.laser_max_dist)
+        kept = ok & ~removed if removed is not None and removed.shape == ok.shape else ok
+        ca, sa = scan.trig()
+        lx, ly = np.where(ok, r * ca, 0.0), np.where(ok, r * sa, 0.0)
+        prev_ok, next_ok = np.r_[False, ok[:-1]], np.r_[ok[1:], False]
+        ax, ay = np.where(prev_ok, np.r_[0.0, lx[:-1]], lx), np.where(prev_ok, np.r_[0.0, ly[:-1]], ly)
+        bx, by = np.where(next_ok, np.r_[lx[1:], 0.0], lx), np.where(next_ok, np.r_[ly[1:], 0.0], ly)
+        tx, ty = bx - ax, by - ay
+        tn = np.hypot(tx, ty)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sn = np.where(tn > 0, np.abs(lx * ty - ly * tx) / (tn * np.where(ok, r, 1.0)), 1.0)
+            rr = np.where(ok, r, np.nan)
+            jumps = np.fmax(np.where(prev_ok, np.abs(rr - np.r_[np.nan, rr[:-1]]), 0.0),
+                            np.where(next_ok, np.abs(rr - np.r_[rr[1:], np.nan]), 0.0))
+        c, si = math.cos(pose.theta), math.sin(pose.theta)
+        wx, wy = pose.x + c * lx - si * ly, pose.y + si * lx + c * ly
+        ci = np.floor(wx / res + 0.5).astype(np.int64)
+        cj = np.floor(wy / res + 0.5).astype(np.int64)
+        beam = np.nonzero(kept)[0]
+        k = ci[beam] * (1 << 32) + cj[beam]
+        pos = np.searchsorted(key[order], k)
+        hit = (pos < n) & (key[order][np.minimum(pos, n - 1)] == k)
+        for b, m in zip(beam[hit], order[pos[hit]]):
+            total[m] += 1
+            grazing[m] += sn[b] < math.sin(math.radians(15.0))
+            jump[m] += jumps[b] > 0.2
+            close[m] |= r[b] < 0.5
+    with np.errstate(invalid="ignore"):
+        return grazing / total > 0.5, jump / total > 0.5, close
 
 
 def _endpoints(scan: Scan, pose: Pose2D, removed: np.ndarray | None, slam) -> np.ndarray:  # type: ignore[no-untyped-def]
@@ -192,6 +238,7 @@ def main() -> None:
         if args.visits:
             _visits(pts, [np.array([p.x, p.y]) for _, p, _ in counter.kept], args.visits)
         mis = np.array([_misalignment(counter, pts, xy[m], hits[m], passes[m]) for m in range(len(xy))])
+        grazing, mixed, close = _hit_kinds(counter, cells)
         H = cl.hits[rows, cols].astype(int)
         d = dk[rows, cols]
         cls = np.where(H <= 2, "fringe", np.where(d <= BESIDE_M, "thinned", np.where(d <= COPY_M, "copy", "gone")))
@@ -199,6 +246,9 @@ def main() -> None:
         print(f"{name}: {result.n_scans} scans, {cl.stats['scans_counted']} counted; erased {len(xy)} of "
               f"{int(occ.sum())} occupied cells ({len(xy) * res * res:.2f} m2), lost {int(lost.sum())}, restored "
               f"{int(cl.restored.sum()) if cl.restored is not None else 0}")
+        print(f"  most hits at incidence below 15 deg: {int(grazing.sum())} cells; most hits beside a depth jump over "
+              f"0.2 m (mixed pixels): {int(mixed.sum())}; hit from closer than 0.5 m (the robot's body): "
+              f"{int(close.sum())}")
         gt = ground_truth_for(src, None, cfg.slam.map_resolution)
         on_wall = np.zeros(len(xy), dtype=bool)
         if gt is not None:
