@@ -13,9 +13,10 @@ results do not change.
 
 The background process is not started when the cache is warm, on one usable CPU
 (``os.sched_getaffinity``), or when ``DYNSLAM2D_COMPILE_WORKER=0`` (also ``off``/``false``/``no``). It
-ignores Ctrl-C (the run handles it and stops the process on its way out), leaves when the run's process
-is gone (Linux: ``PR_SET_PDEATHSIG``; elsewhere it checks between kernels), prints nothing and never
-fails the run: a kernel it cannot compile is skipped.
+runs in its own process group and ignores SIGINT, so a Ctrl-C in the terminal reaches the run only (which
+stops the process on its way out, as at any exit); it leaves when the run's process is gone (Linux:
+``PR_SET_PDEATHSIG``; elsewhere it checks between kernels), prints nothing and never fails the run: a
+kernel it cannot compile is skipped.
 """
 
 from __future__ import annotations
@@ -92,19 +93,17 @@ class BackgroundCompile:
         atexit.unregister(self.stop)
 
 
-def _child_setup() -> None:  # pragma: no cover - runs in the child between fork and exec
-    """In the child before Python starts: Ctrl-C ignored (an ignored SIGINT stays ignored in the new
-    interpreter; the run stops the child itself) and, on Linux, SIGTERM when the process that started it
-    dies (prctl PR_SET_PDEATHSIG)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if not sys.platform.startswith("linux"):
-        return
-    try:
-        import ctypes
+def _leave_with_parent(parent: int) -> bool:
+    """In the background process: have Linux send SIGTERM when the run's process dies (prctl
+    PR_SET_PDEATHSIG), then check that it has not died already. False when it has."""
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
 
-        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
-    except Exception:  # noqa: BLE001 - the child also checks its parent between kernels
-        pass
+            ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+        except Exception:  # noqa: BLE001 - compile_kernels also checks its parent between kernels
+            pass
+    return os.getppid() == parent
 
 
 def start_background_compile() -> BackgroundCompile | None:
@@ -121,7 +120,7 @@ def start_background_compile() -> BackgroundCompile | None:
         proc = subprocess.Popen(
             [sys.executable, "-m", "dynslam2d.jitwarm", str(os.getpid())], env=env, stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, close_fds=True,
-            preexec_fn=_child_setup if os.name == "posix" else None)
+            start_new_session=True)  # its own process group: a Ctrl-C in the terminal reaches the run only
     except OSError:
         return None
     return BackgroundCompile(proc)
@@ -158,6 +157,8 @@ def main(argv: list[str] | None = None) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the run's to handle; it stops this process
     args = sys.argv[1:] if argv is None else argv
     parent = int(args[0]) if args else None
+    if parent is not None and not _leave_with_parent(parent):
+        return
     from dynslam2d.jitcache import load_blas_alone, plain_numba_errors
 
     plain_numba_errors()
