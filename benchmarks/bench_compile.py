@@ -71,9 +71,7 @@ try:
 except SystemExit:
     pass
 kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-print(json.dumps({"process_cpu": time.process_time(), "children_cpu": kids.ru_utime + kids.ru_stime,
-                  "children_maxrss_kib": kids.ru_maxrss,
-                  "maxrss_kib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}))
+print(json.dumps({"process_cpu": time.process_time(), "children_cpu": kids.ru_utime + kids.ru_stime}))
 """
 
 
@@ -89,8 +87,7 @@ def wait(src: str) -> None:
     data = json.loads(res.stdout.strip().splitlines()[-1])
     summary = json.loads((out / "summary.json").read_text())
     print(f"cold wait {wall:.1f} s wall; kernel_compile_s {summary['kernel_compile_s']:.1f} s; run process CPU "
-          f"{data['process_cpu']:.1f} s, background compile CPU {data['children_cpu']:.1f} s; peak RSS run "
-          f"{data['maxrss_kib'] / 1024:.0f} MiB, background {data['children_maxrss_kib'] / 1024:.0f} MiB; load average "
+          f"{data['process_cpu']:.1f} s, background compile CPU {data['children_cpu']:.1f} s; load average "
           f"{os.getloadavg()[0]:.2f}; src {src}")
 
 
