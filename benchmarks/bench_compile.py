@@ -28,6 +28,16 @@ import tempfile
 import time
 from pathlib import Path
 
+#: Probe code: the README's first command in this interpreter (``sys.argv[1]``: the results folder).
+RUN_FIRST_COMMAND = r"""
+from dynslam2d.cli import main
+sys.argv = ["dynslam2d", "run", "--out", sys.argv[1], "--force", "-q"]
+try:
+    main()
+except SystemExit:
+    pass
+"""
+
 PROBE = r"""
 import json, sys, time
 c0 = time.process_time()
@@ -52,24 +62,14 @@ class Exclusive(event.Listener):
         if stack:
             stack[-1][2] = now
 event.register("numba:compile", Exclusive())
-from dynslam2d.cli import main
-sys.argv = ["dynslam2d", "run", "--out", sys.argv[1], "--force", "-q"]
-try:
-    main()
-except SystemExit:
-    pass
+""" + RUN_FIRST_COMMAND + r"""
 print(json.dumps({"process_cpu": time.process_time() - c0, "per": excl, "compilations": n[0]}))
 """
 
 
 WAIT = r"""
 import json, resource, sys, time
-from dynslam2d.cli import main
-sys.argv = ["dynslam2d", "run", "--out", sys.argv[1], "--force", "-q"]
-try:
-    main()
-except SystemExit:
-    pass
+""" + RUN_FIRST_COMMAND + r"""
 kids = resource.getrusage(resource.RUSAGE_CHILDREN)
 print(json.dumps({"process_cpu": time.process_time(), "children_cpu": kids.ru_utime + kids.ru_stime}))
 """

@@ -21,6 +21,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from bench_compile import RUN_FIRST_COMMAND  # (benchmarks/ is on sys.path when this script runs)
+
 PROBE = r"""
 import json, sys, time
 import dynslam2d.jitcache as jc
@@ -37,26 +39,15 @@ class FirstUse(event.Listener):
     def on_end(self, ev):
         pass
 event.register("numba:compile", FirstUse())
-from dynslam2d.cli import main
-out = sys.argv[1]
-sys.argv = ["dynslam2d", "run", "--out", out, "--force", "-q"]
-try:
-    main()
-except SystemExit:
-    pass
+""" + RUN_FIRST_COMMAND + r"""
 print(json.dumps(sorted(seen, key=seen.get)))
 """
 
 WARM = r"""
 import json, sys
 from numba.core.registry import CPUDispatcher
-from dynslam2d.cli import main
 from dynslam2d.jitwarm import signature_text
-sys.argv = ["dynslam2d", "run", "--out", sys.argv[1], "--force", "-q"]
-try:
-    main()
-except SystemExit:
-    pass
+""" + RUN_FIRST_COMMAND + r"""
 held = [[f"{name}.{attr}", signature_text(sig)] for name, mod in list(sys.modules.items())
         if mod is not None and name.startswith("dynslam2d") for attr, obj in vars(mod).items()
         if isinstance(obj, CPUDispatcher) and obj.__module__ == name for sig in obj.signatures]
