@@ -109,16 +109,22 @@ def _leave_with_parent(parent: int) -> bool:
 def start_background_compile() -> BackgroundCompile | None:
     """Start the background compile (``python -m dynslam2d.jitwarm``) unless :func:`worker_wanted` says no.
 
-    The child inherits the environment, so it caches into the same ``NUMBA_CACHE_DIR``; this package's folder
-    goes first on its ``PYTHONPATH`` so that it compiles the same source files (numba keys the cache by them).
-    Returns None when not started or when the process cannot be started."""
+    The child is the same interpreter with the same environment, so it caches into the same
+    ``NUMBA_CACHE_DIR``. It must import this very copy of dynslam2d (numba keys the cache by the source
+    files): an installed copy it finds in site-packages as this process did; a checkout's folder (not an
+    installed one, which must not go before the standard library) is put first on its ``PYTHONPATH``, and
+    ``-P`` keeps the current folder off its path. Returns None when not started or when it cannot start."""
     if not worker_wanted():
         return None
+    import site
+
     root = str(Path(__file__).resolve().parents[1])
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
+    installed = {str(Path(p).resolve()) for p in [*site.getsitepackages(), site.getusersitepackages()]}
+    paths = [] if root in installed else [root]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (*paths, os.environ.get("PYTHONPATH")) if p))
     try:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "dynslam2d.jitwarm", str(os.getpid())], env=env, stdin=subprocess.DEVNULL,
+            [sys.executable, "-P", "-m", "dynslam2d.jitwarm", str(os.getpid())], env=env, stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, close_fds=True,
             start_new_session=True)  # its own process group: a Ctrl-C in the terminal reaches the run only
     except OSError:
