@@ -140,3 +140,15 @@ def test_background_process_ignores_ctrl_c_stops_on_request_and_dies_with_its_pa
     assert b.proc.poll() is None
     b.stop()
     assert b.proc.poll() is not None
+
+
+def test_run_starts_the_background_process_only_on_a_cold_cache(monkeypatch):
+    """``dynslam2d run``'s start-up check: nothing is started when the cache holds the kernels."""
+    from dynslam2d import cli, jitcache
+
+    started = []
+    monkeypatch.setattr(jitwarm, "start_background_compile", lambda: started.append(1) or "started")
+    for cached, want in ((40, (False, None)), (0, (True, "started"))):
+        monkeypatch.setattr(jitcache, "kernel_cache_state", lambda c=cached: jitcache.KernelCacheState(40, c))
+        assert cli._cold_start() == want
+    assert started == [1]
