@@ -4,10 +4,17 @@ events, the CPU time each function spends in numba's compiler excluding the func
 (kernels, their callees and numba's own helpers such as ``np.empty``'s implementation).
 
     PYTHONPATH=src python benchmarks/bench_compile.py [--src src] [--top 25]
+    PYTHONPATH=src python benchmarks/bench_compile.py --wait [--src src]
 
 Prints the process CPU of the whole run, the compile CPU summed over functions, their count (and the number of
-compilations: numba's helpers such as ``np.empty``'s are compiled once per signature) and the largest ones.
-Not run by pytest; numbers go to docs/speed.md with this command.
+compilations: numba's helpers such as ``np.empty``'s are compiled once per signature) and the largest ones; this
+profile runs with the background compile off (``DYNSLAM2D_COMPILE_WORKER=0``), so it counts all the compile work.
+
+``--wait`` instead measures what a user waits for: the README's first command from an empty cache as the command
+line runs it (the background compile on where there is a second CPU: do not pin it to one core with taskset),
+and prints the wall time from interpreter start to exit, ``kernel_compile_s`` from summary.json, the run's
+process CPU and the CPU of the processes it started (the background compile). Not run by pytest; numbers go to
+docs/speed.md with this command and the load average.
 """
 
 from __future__ import annotations
@@ -18,7 +25,18 @@ import os
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
+
+#: Probe code: the README's first command in this interpreter (``sys.argv[1]``: the results folder).
+RUN_FIRST_COMMAND = r"""
+from dynslam2d.cli import main
+sys.argv = ["dynslam2d", "run", "--out", sys.argv[1], "--force", "-q"]
+try:
+    main()
+except SystemExit:
+    pass
+"""
 
 PROBE = r"""
 import json, sys, time
@@ -44,22 +62,46 @@ class Exclusive(event.Listener):
         if stack:
             stack[-1][2] = now
 event.register("numba:compile", Exclusive())
-from dynslam2d.cli import main
-sys.argv = ["dynslam2d", "run", "--out", sys.argv[1], "--force", "-q"]
-try:
-    main()
-except SystemExit:
-    pass
+""" + RUN_FIRST_COMMAND + r"""
 print(json.dumps({"process_cpu": time.process_time() - c0, "per": excl, "compilations": n[0]}))
 """
+
+
+WAIT = r"""
+import json, resource, sys, time
+""" + RUN_FIRST_COMMAND + r"""
+kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+print(json.dumps({"process_cpu": time.process_time(), "children_cpu": kids.ru_utime + kids.ru_stime}))
+"""
+
+
+def wait(src: str) -> None:
+    """One cold run of the README's first command as a user starts it: wall time and CPU."""
+    env = dict(os.environ, PYTHONPATH=src, NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-cold-"))
+    out = Path(tempfile.mkdtemp(prefix="bench-compile-")) / "run"
+    t0 = time.perf_counter()
+    res = subprocess.run([sys.executable, "-c", WAIT, str(out)], env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if res.returncode != 0:
+        raise SystemExit(res.stderr[-2000:])
+    data = json.loads(res.stdout.strip().splitlines()[-1])
+    summary = json.loads((out / "summary.json").read_text())
+    print(f"cold wait {wall:.1f} s wall; kernel_compile_s {summary['kernel_compile_s']:.1f} s; run process CPU "
+          f"{data['process_cpu']:.1f} s, background compile CPU {data['children_cpu']:.1f} s; load average "
+          f"{os.getloadavg()[0]:.2f}; src {src}")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--src", default=str(Path(__file__).resolve().parents[1] / "src"))
     ap.add_argument("--top", type=int, default=25)
+    ap.add_argument("--wait", action="store_true", help="the wall-time wait of a cold run instead of the profile")
     args = ap.parse_args()
-    env = dict(os.environ, PYTHONPATH=args.src, NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-cold-"))
+    if args.wait:
+        wait(args.src)
+        return
+    env = dict(os.environ, PYTHONPATH=args.src, NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-cold-"),
+               DYNSLAM2D_COMPILE_WORKER="0")
     out = tempfile.mkdtemp(prefix="bench-compile-") + "/run"
     res = subprocess.run([sys.executable, "-c", PROBE, out], env=env, capture_output=True, text=True)
     if res.returncode != 0:

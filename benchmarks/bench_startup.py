@@ -9,7 +9,9 @@ Each measurement runs in a fresh interpreter (a subprocess importing dynslam2d f
   * ``cold`` (``--cold``): numba's cache is an empty temporary folder, so every kernel a run uses is
     compiled. Reports ``kernel_compile_s`` of summary.json (wall time inside numba's compiler during the
     run loop), the process CPU time of the whole run (cold CPU − warm CPU is the compile work) and the
-    compile wall time of every kernel (including those compiled after the loop: clean-up pass).
+    compile wall time of every kernel (including those compiled after the loop: clean-up pass). The run is
+    the command line's, so with a second CPU its background compile (dynslam2d.jitwarm) takes the late
+    kernels and they count neither here nor in the process CPU; ``bench_compile.py --wait`` reports both.
 
     python benchmarks/bench_startup.py [--reps 3] [--cold] [--src src]
 

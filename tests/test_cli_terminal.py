@@ -243,7 +243,8 @@ def test_cold_numba_cache_is_announced(tmp_path):
             "from dynslam2d.jitcache import kernel_cache_state\n"
             "from dynslam2d.cli import _say_if_compiling\n"
             "s = kernel_cache_state()\n"
-            "print(s.total, s.cached, _say_if_compiling(True))\n")
+            "_say_if_compiling(True, s.cold)\n"
+            "print(s.total, s.cached, s.cold)\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
     assert r.returncode == 0, r.stderr
     total, cached, cold = r.stdout.split()

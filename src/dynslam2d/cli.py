@@ -550,12 +550,13 @@ def run(
     offset = parse_laser_offset(laser_offset) if laser_offset else None
     out = out or _default_out("run")
     folder = _plan_run_folder(out, force, inputs, write_bag)  # outputs first: reading a log can take long
+    compiling, background = _cold_start()  # before the input's first scan, which may need kernels already
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad, odom=odom, imu=imu,
                          laser_offset=offset)
     mount = _laser_mount(source.meta) if frame == "base_link" else None
     _check_source(source, cfg, write_bag)
     show = not (quiet or as_json)
-    compiling = _announce_run(source, show)
+    _announce_run(source, show, compiling)
     from dynslam2d.io.checkpoint import Checkpointer
     from dynslam2d.slam.cleanup import CleanupRecorder
     from dynslam2d.viz.collect import RemovedPointsCollector
@@ -588,6 +589,8 @@ def run(
         raise
     finally:
         _restore_sigterm(old_term)
+        if background is not None:
+            background.stop()
     if as_json:
         sys.stdout.write(json.dumps({**outputs.summary, "out": str(out)}, indent=2) + "\n")
         return
@@ -676,13 +679,13 @@ def _check_source(source: ScanSource, cfg: Config, write_bag: Path | None) -> No
         clean_stale_parts(write_bag)
 
 
-def _announce_run(source: ScanSource, show: bool) -> bool:
-    """Before a run, on stderr: the odometry used, the input's warnings, and whether kernels compile (returned)."""
+def _announce_run(source: ScanSource, show: bool, cold: bool) -> None:
+    """Before a run, on stderr: the odometry used, the input's warnings, and whether kernels compile."""
     if show:
         err_console.print(f"odometry: {escape(source.meta.odometry or 'none (laser only)')}")
         for w in source.meta.extra.get("warnings", []) or []:
             err_console.print(f"[yellow]warning:[/] {escape(str(w))}")
-    return _say_if_compiling(show)
+    _say_if_compiling(show, cold)
 
 
 def _run_observers(stack: contextlib.ExitStack, cfg: Config, work: Path, cleaner: CleanupRecorder, *, animate: bool,
@@ -876,15 +879,23 @@ def _range_scale_row(summary: dict[str, Any]) -> list[tuple[str, str]]:
                             f"scans)")]
 
 
-def _say_if_compiling(show: bool) -> bool:
-    """Before a run: one line on stderr when numba must compile the kernels (a first run, or
-    the first after an update), whose speed would otherwise look like the program's."""
+def _cold_start() -> tuple[bool, Any]:
+    """Whether numba must compile the kernels (a first run, or the first after an update), and then the
+    background compile of the late kernels on a second CPU (:mod:`dynslam2d.jitwarm`; None when not
+    started). Loads the pipeline's kernel modules to tell."""
+    import dynslam2d.pipeline  # noqa: F401 - its kernel modules, for the cache check
     from dynslam2d.jitcache import kernel_cache_state
+    from dynslam2d.jitwarm import start_background_compile
 
     cold = kernel_cache_state().cold
+    return cold, start_background_compile() if cold else None
+
+
+def _say_if_compiling(show: bool, cold: bool) -> None:
+    """Before a run: one line on stderr when numba must compile the kernels, whose speed would otherwise
+    look like the program's."""
     if cold and show:
         err_console.print(Text("compiling kernels (first run only; later runs start at once) …", style="yellow"))
-    return cold
 
 
 def _steady_rows(summary: dict[str, Any], compiling: bool) -> list[tuple[str, str]]:

@@ -1,0 +1,110 @@
+"""The kernels a first run of ``dynslam2d run`` (sim:paper, default configuration) compiles, in order of
+first use, with the argument types of each (numba type names): what :mod:`dynslam2d.jitwarm` compiles in a second
+process, last-used first, while a cold run compiles in its own order.
+
+Written by ``benchmarks/record_kernels.py`` (do not edit by hand); tests/test_jitwarm.py checks it against the
+signatures the kernels hold after a real run. A kernel missing here is compiled by the run itself, as before.
+"""
+
+#: (module.qualname, argument types) in order of first use; one signature per kernel.
+KERNELS: tuple[tuple[str, str], ...] = (
+    ('dynslam2d.sim.world._cast_kernel',
+     "(float64, float64, Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), "
+     "Array(int32, 1, 'C'), Array(float64, 2, 'C'), Array(int32, 1, 'C'), float64,)"),
+    ('dynslam2d.detect.segment._link_kernel',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), bool, float64, float64, "
+     'float64, float64, float64, int64, bool,)'),
+    ('dynslam2d.detect.segment._clusters_kernel',
+     "(Array(int64, 1, 'C'), Array(uint8, 1, 'C'), bool, int64, int64,)"),
+    ('dynslam2d.detect.shapes.fit_clusters',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
+     "Array(float64, 1, 'C'), int64, float64, int64, int64,)"),
+    ('dynslam2d.detect.kernels.classify_batch',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
+     "Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), Array(bool, "
+     "1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, int64, float64, float64, float64, "
+     "Array(float64, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.segment_means',
+     "(Array(float64, 1, 'C'), Array(int64, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.leg_pairs',
+     "(Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), float64, float64,)"),
+    ('dynslam2d.detect.kernels.measure_batch',
+     "(Array(int64, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), "
+     "Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), "
+     "Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
+     "Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'),)"),
+    ('dynslam2d.slam.ledgerkernels._lower_bound',
+     "(Array(int64, 1, 'C'), int64, int64,)"),
+    ('dynslam2d.slam.ledgerkernels.scan_cells',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
+     "'C'), Array(bool, 1, 'A'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), float64, float64, float64, "
+     "float64, float64, float64, Array(float64, 1, 'C'),)"),
+    ('dynslam2d.slam.ledgerkernels.unpack_cells',
+     "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), int64,)"),
+    ('dynslam2d.slam.ledgerkernels.read_cells',
+     "(Array(float32, 2, 'A'), Array(int32, 2, 'A'), Array(int64, 2, 'C'), int64, int64,)"),
+    ('dynslam2d.slam.ledgerkernels.update_rows',
+     "(Array(float32, 2, 'A'), Array(int32, 2, 'A'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
+     "Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'),)"),
+    ('dynslam2d.slam.raycast.integrate_rays',
+     "(Array(float32, 2, 'C'), Array(float32, 2, 'C'), Array(int32, 2, 'C'), int64, int64, int64, int64, "
+     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, float64,)"),
+    ('dynslam2d.slam.cleanup._scan_geometry',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
+     "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),
+    ('dynslam2d.slam.cleanup._count_scan',
+     "(Array(uint16, 3, 'C'), Array(int32, 2, 'C'), int64, float64, float64, Array(float64, 1, 'C'), "
+     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
+    ('dynslam2d.slam.matcher.close_count',
+     "(Array(float64, 1, 'C'), float64, float64, float64,)"),
+    ('dynslam2d.slam.matcher._spread_kernel',
+     "(Array(float64, 2, 'A'), Array(bool, 1, 'C'), int64,)"),
+    ('dynslam2d.slam.matcher.match_level',
+     "(Array(float32, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), int64, bool, bool, "
+     "float64, float64, float64, float64, Array(float64, 1, 'C'), Array(float64, 2, 'C'),)"),
+    ('dynslam2d.slam.matcher.accumulate',
+     "(Array(float32, 2, 'C'), Array(float64, 2, 'C'), float64, float64, float64, bool, Array(float64, 2, "
+     "'C'), Array(float64, 1, 'C'),)"),
+    ('dynslam2d.slam.correlative.branch_and_bound',
+     "(Array(float32, 3, 'C'), Array(int64, 2, 'C'), Array(int64, 2, 'C'), int64, Array(float64, 1, 'C'), "
+     "float64, float64, Array(int64, 1, 'C'),)"),
+    ('dynslam2d.slam.matcher.fraction_below',
+     "(Array(float32, 2, 'C'), Array(float64, 2, 'C'), float64, float64, float64, float64,)"),
+    ('dynslam2d.slam.matcher._support_kernel',
+     "(Array(float32, 2, 'C'), Array(float64, 2, 'C'), int64, float64, float64, float64, float64, "
+     'float64, int64,)'),
+    ('dynslam2d.detect.mapevidence.vacated_outlines_kernel',
+     "(Array(float32, 2, 'C'), int64, int64, float64, float64, Array(float64, 1, 'C'), Array(float64, 1, "
+     "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float32, int64, int64, float64, "
+     'float64, float64,)'),
+    ('dynslam2d.detect.mapevidence.map_evidence_kernel',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float32, 2, 'C'), int64, int64, float64, "
+     "float64, float64, int64, Array(bool, 1, 'C'), Array(bool, 1, 'C'), Array(bool, 1, 'C'), "
+     'omitted(default=0.5),)'),
+    ('dynslam2d.detect.kernels.seen_through_kernel',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, float64, float64, Array(float64, 1, 'C'), "
+     "float64, float64, bool, float64, float64, Array(bool, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.gate_costs',
+     "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), "
+     "Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
+     "float64, float64, Array(int8, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, "
+     "3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, "
+     "'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.size_jump_gate',
+     "(Array(bool, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, "
+     'float64,)'),
+    ('dynslam2d.detect.kernels.nearest_ages',
+     "(Array(float64, 1, 'C'), Array(int64, 1, 'C'), float64, Array(float64, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.kalman_update_batch',
+     "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), "
+     "Array(float64, 3, 'C'),)"),
+    ('dynslam2d.detect.kernels.accel_candidates',
+     "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), float64,)"),
+    ('dynslam2d.detect.kernels.fragment_hosts',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
+     "Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
+     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
+    ('dynslam2d.filter._exclusion_kernel',
+     "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
+     "Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(int64, 1, 'C'),)"),
+)

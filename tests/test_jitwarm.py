@@ -1,0 +1,154 @@
+"""Background compile of a cold first run (dynslam2d.jitwarm, issue 13 item 2, docs/speed.md).
+
+The manifest of kernels and signatures must match what a real run compiles (else the second process compiles
+the wrong things and the run waits as before); a cold run with the second process on must load kernels from the
+cache that it did not compile itself; the process must leave with its parent and be off on one CPU or on request.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from dynslam2d import jitwarm
+from dynslam2d.jitmanifest import KERNELS
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+
+#: After a run in this interpreter: every dynslam2d kernel that holds a compiled signature, as signature_text.
+DUMP = r"""
+import json, sys
+from numba.core.registry import CPUDispatcher
+from dynslam2d.jitwarm import signature_text
+out = {}
+for name, mod in list(sys.modules.items()):
+    if mod is None or not name.startswith("dynslam2d"):
+        continue
+    for attr, obj in vars(mod).items():
+        if isinstance(obj, CPUDispatcher) and obj.__module__ == name and obj.signatures:
+            s = obj.stats
+            out[f"{name}.{attr}"] = {"sigs": [signature_text(sig) for sig in obj.signatures],
+                                     "hits": sum(s.cache_hits.values()), "misses": sum(s.cache_misses.values())}
+print(json.dumps(out))
+"""
+
+
+def _run_and_dump(tmp_path: Path, env: dict[str, str], *run_args: str) -> dict:
+    code = ("import sys\nfrom dynslam2d.cli import main\n"
+            f"sys.argv = ['dynslam2d', 'run', '--out', {str(tmp_path / 'run')!r}, '--force', '-q', *{run_args!r}]\n"
+            "try:\n    main()\nexcept SystemExit as e:\n    assert not e.code, e.code\n" + DUMP)
+    r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def test_signature_text_reads_back():
+    from numba.core import types as t
+
+    sig = (t.Array(t.float64, 1, "C"), t.Array(t.float32, 2, "A", readonly=True), t.boolean, t.int64,
+           t.Omitted(0.5), t.UniTuple(t.int64, 2))
+    assert jitwarm.parse_signature(jitwarm.signature_text(sig)) == sig
+    assert jitwarm.parse_signature(jitwarm.signature_text(sig[:1])) == sig[:1]
+
+
+def test_manifest_matches_the_kernels_a_real_run_compiles(tmp_path):
+    """The README's first command, with the background compile off: each kernel it holds afterwards has exactly
+    the manifest's one signature, and no kernel is missing from the manifest (re-run benchmarks/record_kernels.py
+    after changing a kernel's arguments)."""
+    env = {**os.environ, "PYTHONPATH": SRC, jitwarm.WORKER_ENV: "0"}
+    got = {name: k["sigs"] for name, k in _run_and_dump(tmp_path, env).items()}
+    want = {name: [sig] for name, sig in KERNELS}
+    assert got == want
+    assert len(KERNELS) >= 25
+
+
+@pytest.mark.cold_compile
+@pytest.mark.skipif(jitwarm.usable_cpus() < 2, reason="the background compile runs only with a second CPU")
+def test_cold_run_loads_kernels_the_background_process_compiled(tmp_path):
+    """A cold 3 s run in an empty cache: kernels it uses come from the cache, which only the second process can
+    have filled (without it every kernel is a cache miss); the rest it compiled once. ~25 s of CPU."""
+    env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    env.pop(jitwarm.WORKER_ENV, None)
+    used = _run_and_dump(tmp_path, env, "--duration", "3")
+    loaded = sorted(name for name, k in used.items() if k["hits"] and not k["misses"])
+    late = {name for name, _ in KERNELS[-10:]}  # the second process starts from these
+    assert len(loaded) >= 5 and late & set(loaded), used
+    assert all(k["hits"] + k["misses"] == 1 for k in used.values())  # one signature, compiled or loaded once
+    assert any(p.suffix == ".nbi" for p in (tmp_path / "cache").rglob("*"))
+
+
+def test_off_on_request_and_on_one_cpu(monkeypatch):
+    monkeypatch.setattr(jitwarm, "usable_cpus", lambda: 2)
+    for off in ("0", "off", "False", "no"):
+        monkeypatch.setenv(jitwarm.WORKER_ENV, off)
+        assert not jitwarm.worker_wanted() and jitwarm.start_background_compile() is None
+    monkeypatch.delenv(jitwarm.WORKER_ENV)
+    assert jitwarm.worker_wanted()
+    monkeypatch.setattr(jitwarm, "usable_cpus", lambda: 1)
+    assert not jitwarm.worker_wanted() and jitwarm.start_background_compile() is None
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+def _sigint_ignored(pid: int) -> bool:
+    """Whether process ``pid`` ignores SIGINT (/proc/PID/status SigIgn mask)."""
+    with open(f"/proc/{pid}/status") as f:
+        mask = next(int(line.split()[1], 16) for line in f if line.startswith("SigIgn:"))
+    return bool(mask >> (signal.SIGINT - 1) & 1)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or jitwarm.usable_cpus() < 2,
+                    reason="Linux /proc and a second CPU")
+def test_background_process_ignores_ctrl_c_stops_on_request_and_dies_with_its_parent(tmp_path, monkeypatch):
+    env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    env.pop(jitwarm.WORKER_ENV, None)
+    # a parent that starts it and dies without clean-up (no atexit): the child must not outlive it
+    code = ("import os\nfrom dynslam2d.jitwarm import start_background_compile\n"
+            "b = start_background_compile()\nprint(b.proc.pid, flush=True)\n"
+            "import time; time.sleep(1.5)\nos._exit(0)\n")
+    r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    pid = int(r.stdout.split()[0])
+    deadline = time.monotonic() + 10
+    while _alive(pid) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _alive(pid)
+    # in this process: a terminal's Ctrl-C goes to the foreground process group, which the child is not in, and
+    # SIGINT sent to it anyway is ignored once it runs; stop() ends it
+    monkeypatch.setenv("NUMBA_CACHE_DIR", env["NUMBA_CACHE_DIR"])
+    monkeypatch.delenv(jitwarm.WORKER_ENV, raising=False)
+    b = jitwarm.start_background_compile()
+    assert b is not None and os.getpgid(b.proc.pid) != os.getpgid(0)
+    deadline = time.monotonic() + 20
+    while _sigint_ignored(b.proc.pid) is False and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert _sigint_ignored(b.proc.pid)
+    os.kill(b.proc.pid, signal.SIGINT)
+    time.sleep(0.3)
+    assert b.proc.poll() is None
+    b.stop()
+    assert b.proc.poll() is not None
+
+
+def test_run_starts_the_background_process_only_on_a_cold_cache(monkeypatch):
+    """``dynslam2d run``'s start-up check: nothing is started when the cache holds the kernels."""
+    from dynslam2d import cli, jitcache
+
+    started = []
+    monkeypatch.setattr(jitwarm, "start_background_compile", lambda: started.append(1) or "started")
+    for cached, want in ((40, (False, None)), (0, (True, "started"))):
+        monkeypatch.setattr(jitcache, "kernel_cache_state", lambda c=cached: jitcache.KernelCacheState(40, c))
+        assert cli._cold_start() == want
+    assert started == [1]
