@@ -99,6 +99,15 @@ class Detection:
         return out
 
 
+def _row_view(array: str, cols: slice, doc: str) -> property:
+    """A read-only property: the columns ``cols`` of row ``self._j`` of the array attribute ``array`` (a view)."""
+
+    def get(self: ScanDetection) -> np.ndarray:
+        return getattr(self, array)[self._j, cols]
+
+    return property(get, doc=doc)
+
+
 class ScanDetection(Detection):
     """A :class:`Detection` of the tracker's current scan whose small per-detection arrays (``centroid``, ``lo``,
     ``hi``, ``rel``, ``circle``) are read from the scan's fit and bound arrays when asked for (views of their rows,
@@ -129,25 +138,11 @@ class ScanDetection(Detection):
         self._rel = rel
         self._j = j
 
-    @property
-    def centroid(self) -> np.ndarray:  # type: ignore[override]
-        return self._fits[self._j, FIT_CENTROID]
-
-    @property
-    def circle(self) -> np.ndarray:  # type: ignore[override]
-        return self._fits[self._j, FIT_CIRCLE]
-
-    @property
-    def lo(self) -> np.ndarray:  # type: ignore[override]
-        return self._lohi[self._j, LOHI_LO]
-
-    @property
-    def hi(self) -> np.ndarray:  # type: ignore[override]
-        return self._lohi[self._j, LOHI_HI]
-
-    @property
-    def rel(self) -> np.ndarray:  # type: ignore[override]
-        return self._rel[self._j]
+    centroid = _row_view("_fits", FIT_CENTROID, "(2,) mean of the points, m")
+    circle = _row_view("_fits", FIT_CIRCLE, "(3,) circle centre x, y and radius, m")
+    lo = _row_view("_lohi", LOHI_LO, "(2,) lower bounds along e1, e2, m")
+    hi = _row_view("_lohi", LOHI_HI, "(2,) upper bounds along e1, e2, m")
+    rel = _row_view("_rel", slice(None), "(2, 2) bool: bound [axis, lower / upper] is real")
 
     def __reduce__(self) -> tuple:
         return Detection, (self.beams, self.points, self.centroid, self.kind, self.theta, self.lo, self.hi, self.rel,

@@ -589,21 +589,25 @@ class Tracker:
                 np.cumsum(npts, out=det_off[1:])
             else:
                 det_pts, det_off = pts, offsets
+        masks = []  # per-point bool masks whose per-detection means are wanted
         if self._free is not None:
             self._cur_ref = self._free.make_ref(scan, pose, valid)
-            free = self._free.seen_through(det_pts, float(scan.stamp))
-            frac = segment_means(free.astype(np.float64), det_off).tolist()
+            masks.append(self._free.seen_through(det_pts, float(scan.stamp)))
             self._free.add(scan, pose, valid, self._cur_ref)
         if self._map is not None:
             tc = cfg.tracker
-            mstruct, mfree, munk = map_evidence(det_pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
-                                                tc.map_free_radius)
-            # (the three fractions in one call: the three masks one after the other, each detection's points
-            # a segment of each)
-            npt = det_off[-1]
-            means = segment_means(np.concatenate((mstruct, mfree, munk)).astype(np.float64),
-                                  np.concatenate((det_off[:-1], det_off[:-1] + npt, det_off + 2 * npt))).tolist()
-            fs, ff, fu = means[:nd], means[nd:2 * nd], means[2 * nd:]
+            masks.extend(map_evidence(det_pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
+                                      tc.map_free_radius))  # (structure, free, unknown)
+        if masks:
+            # (every fraction in one call: the masks one after the other, each detection's points a segment of
+            # each; a segment's mean does not depend on where it starts)
+            npt, q = det_off[-1], len(masks)
+            means = segment_means(np.concatenate(masks).astype(np.float64), np.concatenate(
+                [det_off[:-1] + i * npt for i in range(q - 1)] + [det_off + (q - 1) * npt])).tolist()
+            if self._free is not None:
+                frac, means = means[:nd], means[nd:]
+            if self._map is not None:
+                fs, ff, fu = means[:nd], means[nd:2 * nd], means[2 * nd:]
         # (their centroid, bounds, flags and circle stay rows of fits / lohi / rel until read: ScanDetection)
         for j, (a0, n, kd, th, fr_j, fs_j, ff_j, fu_j) in enumerate(zip(
                 starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(), frac, fs, ff, fu)):
@@ -811,7 +815,8 @@ class Tracker:
             has_l.append(has_sz)
             radius_l.append(rad)
         rows = np.array(rows_l, dtype=np.int64)
-        mr = self._measure_rows(rows, np.array(sizes_l, dtype=np.float64), np.array(has_l, dtype=bool),
+        sizes = np.fromiter(_chain.from_iterable(sizes_l), np.float64, 2 * npair).reshape(npair, 2)
+        mr = self._measure_rows(rows, sizes, np.array(has_l, dtype=bool),
                                 np.array(radius_l, dtype=np.float64), np.full(npair, 0.05))
         H, zm, Rm, size_obs, size_kind = mr.H, mr.zm, mr.Rm, mr.size_obs, mr.size_kind
         Xs, Ps = self._stack()
