@@ -4,6 +4,7 @@ that own their arrays — each checked against the plain construction or on a si
 from __future__ import annotations
 
 import dataclasses
+import pickle
 
 import numpy as np
 import pytest
@@ -37,6 +38,12 @@ def test_fast_init_builds_the_same_frozen_objects_as_the_class() -> None:
         t.hits = 3  # type: ignore[misc]
     with pytest.raises(TypeError):
         make_box(1.0, 2.0)  # missing fields are an error, as with the class
+    # built on a twin class of the same slots, then re-classed: nothing of the twin is left on the object
+    for obj, ref_obj in ((b, ref), (t, tref)):
+        assert obj.__class__ is type(ref_obj) and not hasattr(obj, "__dict__")
+        c = pickle.loads(pickle.dumps(obj))
+        assert type(c) is type(ref_obj) and all(
+            np.array_equal(u, w) for u, w in zip(_fields(c), _fields(ref_obj)))
 
 
 def test_fast_init_falls_back_to_the_class_where_slots_cannot_be_set_directly() -> None:

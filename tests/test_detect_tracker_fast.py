@@ -196,3 +196,43 @@ def test_size_jump_gate_and_accel_candidates_match_numpy() -> None:
         lim2 = (0.999 * float(rng.uniform(0.1, 2.0))) ** 2
         dvx, dvy = Xn[:, 2] - Xp[:, 2], Xn[:, 3] - Xp[:, 3]
         assert accel_candidates(Xp, Xn, lim2).tolist() == np.flatnonzero(dvx * dvx + dvy * dvy > lim2).tolist()
+
+
+def test_scan_detections_read_the_rows_of_their_scans_fit_arrays() -> None:
+    """The tracker's per-cluster detections (ScanDetection) give the centroid, bounds, real-bound flags and circle of
+    their row of the scan's fit arrays — the values a Detection built with those rows holds — and copy to a plain
+    Detection with the same fields. Checked on a simulated box seen from a moving laser: every detection's centroid
+    is the mean of its own points, and its bounds are ordered."""
+    import copy
+    import dataclasses
+    import pickle
+
+    from dynslam2d.detect.measure import Detection, ScanDetection
+
+    tr = Tracker(DetectConfig())
+    seen = 0
+    for i in range(20):
+        pose = Pose2D(0.02 * i, -2.0, 0.01 * i)
+        tr.update(_scan(pose, -1.0 + 0.05 * i, i / 15.0, i), pose)
+        for det in tr.last_detections:
+            if det.person:
+                continue  # (a merged pair of legs is a plain Detection)
+            assert isinstance(det, ScanDetection)
+            seen += 1
+            pts = det.points
+            assert det.n_points == pts.shape[0] == det.beams.shape[0]
+            assert np.allclose(det.centroid, pts.mean(axis=0), rtol=0.0, atol=1e-12)
+            assert (det.lo <= det.hi).all() and det.extent.tolist() == (det.hi - det.lo).tolist()
+            assert det.rel.shape == (2, 2) and det.rel.dtype == bool and det.circle.shape == (3,)
+            for c in (copy.deepcopy(det), pickle.loads(pickle.dumps(det))):
+                assert type(c) is Detection
+                for f in dataclasses.fields(Detection):
+                    assert np.array_equal(getattr(c, f.name), getattr(det, f.name)), f.name
+    assert seen >= 20
+    fits = np.arange(2 * N_FIT_COLS, dtype=np.float64).reshape(2, N_FIT_COLS)
+    lohi = np.array([[0.0, 1.0, 2.0, 3.0], [4.0, 5.0, 6.0, 7.0]])
+    rel = np.array([[[True, False], [False, True]], [[False, False], [True, True]]])
+    d = ScanDetection(np.arange(2), np.zeros((2, 2)), "rect", 0.5, 2, 0.1, 0.2, 0.3, 0.4, fits, lohi, rel, 1)
+    assert d.centroid.tolist() == [fits[1, F_CENTROID_X], fits[1, F_CENTROID_Y]]
+    assert d.lo.tolist() == [4.0, 5.0] and d.hi.tolist() == [6.0, 7.0] and d.rel.tolist() == rel[1].tolist()
+    assert d.extent.tolist() == [2.0, 2.0] and d.person is False and d.map_unknown == 0.4

@@ -33,6 +33,7 @@ class _Ref:
     increment: float
     full: bool
     reach: float  # a no-return beam saw through everything closer than this, m
+    inv: tuple[float, float, float]  # pose.inverse() as (x, y, θ): map → reference sensor frame (made once)
 
 
 class FreeSpaceMemory:
@@ -58,8 +59,9 @@ class FreeSpaceMemory:
         """A reference built from ``scan`` (taken at ``pose``, map frame; ``valid`` = beams with a return)."""
         r = np.where(valid, scan.ranges, np.inf)
         full = scan.n_beams * abs(scan.angle_increment) >= 2.0 * math.pi - 1.5 * abs(scan.angle_increment)
+        inv = pose.inverse()
         return _Ref(float(scan.stamp), pose, r, float(scan.angle_min), float(scan.angle_increment), full,
-                    float(scan.range_max))
+                    float(scan.range_max), (inv.x, inv.y, inv.theta))
 
     def add(self, scan: Scan, pose: Pose2D, valid: np.ndarray, ref: _Ref | None = None) -> None:
         """Remember ``scan`` (taken at ``pose``, map frame); ``valid`` marks beams with a return."""
@@ -104,6 +106,6 @@ class FreeSpaceMemory:
         ρ + margin (or no return within reach); outside a partial fan is unknown (module docstring)."""
         if ref.increment == 0.0 or not math.isfinite(ref.increment):
             return  # a degenerate reference scan has no beam geometry: nothing is known to be free
-        inv = ref.pose.inverse()
-        seen_through_kernel(px, py, inv.x, inv.y, inv.theta, ref.ranges, ref.angle_min, ref.increment, ref.full,
+        ix, iy, ith = ref.inv  # (ref.pose.inverse(), made with the reference)
+        seen_through_kernel(px, py, ix, iy, ith, ref.ranges, ref.angle_min, ref.increment, ref.full,
                             ref.reach, self.margin, free)

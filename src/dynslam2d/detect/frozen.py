@@ -4,8 +4,10 @@ The ``__init__`` that :mod:`dataclasses` generates for a frozen class sets every
 ``object.__setattr__`` (its ``__setattr__`` raises), a few µs per object; a tracker step reports every live
 track, and on a recording with much clutter (``negative_2``: ≈ 35 live tracks per scan) building the
 reports was the largest single cost of the step. :func:`fast_init` returns a function that takes the same
-arguments as the class and sets the slots directly through their descriptors; the object is the same
-(same type, same field values, frozen afterwards). Classes it cannot handle (no ``__slots__``, a
+arguments as the class and sets the slots directly: on an unfrozen twin class with the same slots (plain
+attribute stores, the fastest way to fill slots from Python), whose instance then becomes an instance of the class
+by ``__class__`` assignment (allowed between classes of the same slot layout), else through the slots'
+descriptors; the object is the same (same type, same field values, frozen afterwards). Classes it cannot handle (no ``__slots__``, a
 ``__post_init__``, a field with a ``default_factory`` or ``init=False``) get the class itself back.
 """
 
@@ -14,6 +16,19 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from typing import Any
+
+
+def _layout_twin_ok(cls: type) -> bool:
+    """An instance of a plain class with the slots of ``cls`` (same names, same order: the same instance layout)
+    can become an instance of ``cls`` by ``__class__`` assignment (False where Python refuses it)."""
+    if cls.__bases__ != (object,):
+        return False
+    twin = type(f"_{cls.__name__}Twin", (), {"__slots__": tuple(cls.__slots__)})
+    try:
+        object.__new__(twin).__class__ = cls
+    except TypeError:
+        return False
+    return True
 
 
 def fast_init(cls: type) -> Callable[..., Any]:
@@ -36,12 +51,19 @@ def fast_init(cls: type) -> Callable[..., Any]:
         else:
             env[f"_fi_dflt{i}"] = f.default
             params.append(f"{f.name}=_fi_dflt{i}")
-    body = "".join(f"    _fi_set{i}(_fi_obj, {n})\n" for i, n in enumerate(names))
-    src = f"def make({', '.join(params)}):\n    _fi_obj = _fi_new(_fi_cls)\n{body}    return _fi_obj\n"
+    if _layout_twin_ok(cls):
+        # an unfrozen twin class with the same slots whose __init__ stores the fields (plain attribute stores) and
+        # then makes the object an instance of cls (``__class__`` assignment: the same layout, the values stay);
+        # calling the twin is the constructor
+        body = "".join(f"        self.{n} = {n}\n" for n in names)
+        src = (f"class make:\n    __slots__ = {tuple(cls.__slots__)!r}\n\n"
+               f"    def __init__(self, {', '.join(params)}):\n{body}        self.__class__ = _fi_cls\n")
+    else:
+        body = "".join(f"    _fi_set{i}(_fi_obj, {n})\n" for i, n in enumerate(names))
+        src = f"def make({', '.join(params)}):\n    _fi_obj = _fi_new(_fi_cls)\n{body}    return _fi_obj\n"
     exec(src, env)  # noqa: S102 (the same technique as dataclasses' own generated __init__)
     make = env["make"]
     make.__doc__ = f"{cls.__name__}(...) with its slots set directly (detect.frozen.fast_init)."
     return make
-
 
 __all__ = ["fast_init"]

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dynslam2d.detect.config import FitConfig
+from dynslam2d.detect.layout import FIT_CENTROID, FIT_CIRCLE, LOHI_HI, LOHI_LO
 
 
 @dataclass(slots=True, eq=False)
@@ -96,6 +97,57 @@ class Detection:
             if not (self.rel[k, 0] and self.rel[k, 1]):
                 out[k] = max(ext[k], min(cfg.default_depth, cfg.default_depth_ratio * max(ext[1 - k], 0.0)))
         return out
+
+
+def _row_view(array: str, cols: slice, doc: str) -> property:
+    """A read-only property: the columns ``cols`` of row ``self._j`` of the array attribute ``array`` (a view)."""
+
+    def get(self: ScanDetection) -> np.ndarray:
+        return getattr(self, array)[self._j, cols]
+
+    return property(get, doc=doc)
+
+
+class ScanDetection(Detection):
+    """A :class:`Detection` of the tracker's current scan whose small per-detection arrays (``centroid``, ``lo``,
+    ``hi``, ``rel``, ``circle``) are read from the scan's fit and bound arrays when asked for (views of their rows,
+    the values of a :class:`Detection` built with them), not sliced when the detection is made: the tracker makes
+    one per cluster per scan and reads them for few. A copy (``copy`` / ``pickle``) is a plain :class:`Detection`.
+
+    ``fits``: the scan's (k, N_FIT_COLS) fit rows (:func:`dynslam2d.detect.shapes.fit_clusters`), ``lohi``: (k, 4)
+    bounds lo1, lo2, hi1, hi2, ``rel``: (k, 2, 2) real-bound flags (:mod:`dynslam2d.detect.layout`); ``j``: this
+    detection's row of them."""
+
+    __slots__ = ("_fits", "_lohi", "_rel", "_j")
+
+    def __init__(self, beams: np.ndarray, points: np.ndarray, kind: str, theta: float, n_points: int,
+                 free_fraction: float, map_structure: float, map_free: float, map_unknown: float, fits: np.ndarray,
+                 lohi: np.ndarray, rel: np.ndarray, j: int) -> None:
+        self.beams = beams
+        self.points = points
+        self.kind = kind
+        self.theta = theta
+        self.n_points = n_points
+        self.free_fraction = free_fraction
+        self.map_structure = map_structure
+        self.map_free = map_free
+        self.map_unknown = map_unknown
+        self.person = False
+        self._fits = fits
+        self._lohi = lohi
+        self._rel = rel
+        self._j = j
+
+    centroid = _row_view("_fits", FIT_CENTROID, "(2,) mean of the points, m")
+    circle = _row_view("_fits", FIT_CIRCLE, "(3,) circle centre x, y and radius, m")
+    lo = _row_view("_lohi", LOHI_LO, "(2,) lower bounds along e1, e2, m")
+    hi = _row_view("_lohi", LOHI_HI, "(2,) upper bounds along e1, e2, m")
+    rel = _row_view("_rel", slice(None), "(2, 2) bool: bound [axis, lower / upper] is real")
+
+    def __reduce__(self) -> tuple:
+        return Detection, (self.beams, self.points, self.centroid, self.kind, self.theta, self.lo, self.hi, self.rel,
+                           self.circle, self.n_points, self.free_fraction, self.map_structure, self.map_free,
+                           self.map_unknown, self.person)
 
 
 @dataclass(slots=True)

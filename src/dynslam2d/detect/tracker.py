@@ -79,7 +79,7 @@ from dynslam2d.detect.layout import (
 )
 from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
 from dynslam2d.detect.mapevidence import MapView, map_evidence
-from dynslam2d.detect.measure import Detection
+from dynslam2d.detect.measure import Detection, ScanDetection
 from dynslam2d.detect.segment import Segmentation, segment_scan
 from dynslam2d.detect.shapes import CRITERIA, fit_clusters, search_angles
 from dynslam2d.detect.vehicles import admit_long_clusters, extent_limit
@@ -97,6 +97,7 @@ _make_box = fast_init(Box)
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
 _NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives it its row
 _ROWS0 = 64  # initial rows of the tracker's state arrays (doubled when full)
+_all_rows, _any_of = np.logical_and.reduce, np.logical_or.reduce  # (ndarray.all / any without the Python wrappers)
 _min_rows, _max_rows = np.minimum.reduce, np.maximum.reduce  # (ndarray.min / max without numpy's Python wrappers)
 
 
@@ -182,13 +183,9 @@ class _Track:
 
 def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     """Constant-velocity transition F and white-noise-acceleration Q for state [x, y, vx, vy]."""
-    F = np.eye(4)
-    F[0, 2] = F[1, 3] = dt
     q11, q12, q22 = q * dt ** 3 / 3.0, q * dt ** 2 / 2.0, q * dt
-    Q = np.zeros((4, 4))
-    Q[0, 0] = Q[1, 1] = q11
-    Q[0, 2] = Q[1, 3] = Q[2, 0] = Q[3, 1] = q12
-    Q[2, 2] = Q[3, 3] = q22
+    F = np.array([[1.0, 0.0, dt, 0.0], [0.0, 1.0, 0.0, dt], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+    Q = np.array([[q11, 0.0, q12, 0.0], [0.0, q11, 0.0, q12], [q12, 0.0, q22, 0.0], [0.0, q12, 0.0, q22]])
     return F, Q
 
 
@@ -274,6 +271,7 @@ class Tracker:
         self._trig: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
         self._batch: DetectionBatch | None = None  # per-detection arrays of the current scan (kernels)
         self._default: MeasureRows | None = None  # default measurements of the current scan's detections
+        self._no_prior: tuple | None = None  # measure_batch's "no track prior" arguments for the last m detections
         self._stacked: tuple[np.ndarray, np.ndarray] | None = None  # predicted X, P of all tracks
         self._lohi_l: list[list[float]] = []  # this scan's detections' lohi rows (lo1, lo2, hi1, hi2), m
         self._rel_l: list[list[list[bool]]] = []  # and their rel rows (real bounds)
@@ -437,12 +435,13 @@ class Tracker:
         X = self._X[order] @ F.T
         P = F @ self._P[order] @ F.T + Q
         if self.config.memory.enabled:
-            for i, k in enumerate(self._tracks):
-                if k.remembered and k.misses > 0:  # coasting through a stop: it stays where it stood
-                    X[i], P[i] = self._stationary_prediction(k, F, dt)  # (from k.x / k.P: not yet written)
+            tracks = self._tracks
+            # coasting through a stop: it stays where it stood
+            for i in [i for i, k in enumerate(tracks) if k.remembered and k.misses > 0]:
+                X[i], P[i] = self._stationary_prediction(tracks[i], F, dt)  # (from k.x / k.P: not yet written)
         self._X[order] = X  # (the tracks' x / P are views of these rows)
         self._P[order] = P
-        fin = np.isfinite(P).all(axis=(1, 2)).tolist()
+        fin = _all_rows(np.isfinite(P).reshape(P.shape[0], 16), axis=1).tolist()  # (every entry of each P finite)
         for k, f in zip(self._tracks, fin):
             k.p_finite = f
         self._stacked = (X, P)
@@ -568,19 +567,20 @@ class Tracker:
         offsets = seg.offsets
         beams = seg.beams
         dets: list[Detection] = []
-        starts = offsets[idx]
-        npts = offsets[idx + 1] - starts
-        kinds = kinds[idx]
-        lohi = lohi[idx]
-        rel = rel[idx]
-        fits = fits[idx]
-        # per-detection views, sliced once per scan (the same views as fits[j, FIT_CENTROID], lohi[j, LOHI_LO], …)
-        cen_v, circ_v = fits[:, FIT_CENTROID], fits[:, FIT_CIRCLE]
-        lo_v, hi_v = lohi[:, LOHI_LO], lohi[:, LOHI_HI]
+        nd = idx.shape[0]
+        if nd < seg.n_clusters:
+            starts = offsets[idx]
+            npts = offsets[idx + 1] - starts
+            kinds = kinds[idx]
+            lohi = lohi[idx]
+            rel = rel[idx]
+            fits = fits[idx]
+        else:  # (every cluster is a detection: the arrays as they are, no copies)
+            starts = offsets[:-1]
+            npts = offsets[1:] - starts
         # free-space and map evidence per detection (0 where unknown), then the detections in one pass; both
         # tests are per point, so only the detections' points are tested (structure clusters, most of the
         # points, are not detections)
-        nd = idx.shape[0]
         frac = fs = ff = fu = [0.0] * nd
         if self._free is not None or self._map is not None:
             if nd < seg.n_clusters:
@@ -589,25 +589,31 @@ class Tracker:
                 np.cumsum(npts, out=det_off[1:])
             else:
                 det_pts, det_off = pts, offsets
+        masks = []  # per-point bool masks whose per-detection means are wanted
         if self._free is not None:
             self._cur_ref = self._free.make_ref(scan, pose, valid)
-            free = self._free.seen_through(det_pts, float(scan.stamp))
-            frac = segment_means(free.astype(np.float64), det_off).tolist()
+            masks.append(self._free.seen_through(det_pts, float(scan.stamp)))
             self._free.add(scan, pose, valid, self._cur_ref)
         if self._map is not None:
             tc = cfg.tracker
-            mstruct, mfree, munk = map_evidence(det_pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
-                                                tc.map_free_radius)
-            fs = segment_means(mstruct.astype(np.float64), det_off).tolist()
-            ff = segment_means(mfree.astype(np.float64), det_off).tolist()
-            fu = segment_means(munk.astype(np.float64), det_off).tolist()
-        # (row views from the array iterators: one C pass per array instead of an index per detection)
-        for a0, n, kd, th, cen_j, lo_j, hi_j, rel_j, circ_j, fr_j, fs_j, ff_j, fu_j in zip(
-                starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(), cen_v, lo_v, hi_v, rel,
-                circ_v, frac, fs, ff, fu):
+            masks.extend(map_evidence(det_pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
+                                      tc.map_free_radius))  # (structure, free, unknown)
+        if masks:
+            # (every fraction in one call: the masks one after the other, each detection's points a segment of
+            # each; a segment's mean does not depend on where it starts)
+            npt, q = det_off[-1], len(masks)
+            means = segment_means(np.concatenate(masks).astype(np.float64), np.concatenate(
+                [det_off[:-1] + i * npt for i in range(q - 1)] + [det_off + (q - 1) * npt])).tolist()
+            if self._free is not None:
+                frac, means = means[:nd], means[nd:]
+            if self._map is not None:
+                fs, ff, fu = means[:nd], means[nd:2 * nd], means[2 * nd:]
+        # (their centroid, bounds, flags and circle stay rows of fits / lohi / rel until read: ScanDetection)
+        for j, (a0, n, kd, th, fr_j, fs_j, ff_j, fu_j) in enumerate(zip(
+                starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(), frac, fs, ff, fu)):
             b = a0 + n
-            dets.append(Detection(beams[a0:b], pts[a0:b], cen_j, KIND_NAMES[kd], th, lo_j, hi_j, rel_j, circ_j, n,
-                                  fr_j, fs_j, ff_j, fu_j))
+            dets.append(ScanDetection(beams[a0:b], pts[a0:b], KIND_NAMES[kd], th, n, fr_j, fs_j, ff_j, fu_j, fits,
+                                      lohi, rel, j))
         if cfg.fit.person_merge and len(dets) > 1:
             dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
                                                                                  npts, px, py)
@@ -618,8 +624,11 @@ class Tracker:
             self._batch = DetectionBatch(kind=kinds, theta=fits[:, F_THETA].copy(), lohi=lohi, rel=rel,
                                          centroid=fits[:, FIT_CENTROID].copy(), circle=fits[:, FIT_CIRCLE].copy(),
                                          px=px, py=py, start=starts, npts=npts)
-            self._default = self._measure_rows(np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool),
-                                               np.full(m, -1.0), np.zeros(m))
+            if self._no_prior is None or self._no_prior[0].shape[0] != m:
+                # (no track prior: the same arrays for every scan with m detections; the kernel only reads them)
+                self._no_prior = (np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool), np.full(m, -1.0),
+                                  np.zeros(m))
+            self._default = self._measure_rows(*self._no_prior)
             # the detections' bounds and real-bound flags as lists (read per track update / birth, no per-row copy)
             self._lohi_l, self._rel_l = lohi.tolist(), rel.tolist()
         return dets
@@ -692,8 +701,8 @@ class Tracker:
         tc = self.config.tracker
         tracks = self._tracks
         Xs, Ps = self._stack()
-        tsize = np.array([k.size for k in tracks])
-        tmax = tsize.max(axis=1)
+        tsize = np.fromiter(_chain.from_iterable([k.size for k in tracks]), np.float64, 2 * n).reshape(n, 2)
+        tmax = np.maximum(tsize[:, 0], tsize[:, 1])  # (tsize.max(axis=1) without its Python wrapper)
         reach = 0.5 * tmax
         rect_l, th_l, known_l, firm_r, tent_r = [], [], [], [], []
         for i, k in enumerate(tracks):  # (per-track flags in one pass)
@@ -719,7 +728,7 @@ class Tracker:
                                      float(tc.max_size_jump))
         if self._map is not None:
             ok = self._veto_merged(ok, dets, det_ext, tsize)
-        if not ok.any():
+        if not _any_of(ok, axis=None):
             return []
         cost = np.where(ok, d2, _BIG)
         # established tracks choose first; tentative ones share what is left
@@ -806,7 +815,8 @@ class Tracker:
             has_l.append(has_sz)
             radius_l.append(rad)
         rows = np.array(rows_l, dtype=np.int64)
-        mr = self._measure_rows(rows, np.array(sizes_l, dtype=np.float64), np.array(has_l, dtype=bool),
+        sizes = np.fromiter(_chain.from_iterable(sizes_l), np.float64, 2 * npair).reshape(npair, 2)
+        mr = self._measure_rows(rows, sizes, np.array(has_l, dtype=bool),
                                 np.array(radius_l, dtype=np.float64), np.full(npair, 0.05))
         H, zm, Rm, size_obs, size_kind = mr.H, mr.zm, mr.Rm, mr.size_obs, mr.size_kind
         Xs, Ps = self._stack()
@@ -820,13 +830,7 @@ class Tracker:
         rows = self._rows()[sel[ok]]
         self._X[rows] = Xn[ok]
         self._P[rows] = Pn[ok]
-        so, sk = size_obs.tolist(), size_kind.tolist()
-        upd = self._update_track
-        vget = vac.get
-        for r, (ti, di) in enumerate(pairs):
-            if out[r]:
-                k = tracks[ti]
-                upd(k, dets[di], di, t, vget(k.id, 0.0), so[r], sk[r], swaps[r])
+        self._update_tracks(pairs, dets, t, vac, out, size_obs.tolist(), size_kind.tolist(), swaps)
         return out
 
     def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track],
@@ -855,127 +859,142 @@ class Tracker:
                 X_new[r, 3] = X_prior[r, 3] + dvy * lim / d
                 self.stats.accel_bounded += 1
 
-    def _update_track(self, k: _Track, det: Detection, di: int, t: float, vacated: float, size_obs: list[float],
-                      size_kind: list[int], swap: bool) -> None:
-        """The shape / bookkeeping update of a track whose Kalman result is already in its row (k.x, k.P) with
-        detection ``det`` (index ``di`` of this scan's detections)."""
+    def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float, vac: dict[int, float],
+                       applied: list[bool], size_obs: list[list[float]], size_kind: list[list[int]],
+                       swaps: list[bool]) -> None:
+        """The shape / bookkeeping update of the tracks of ``pairs`` (track index, detection index) whose Kalman
+        result is already in their rows (k.x, k.P) where ``applied``; the scan's constants are read once (one
+        loop over the pairs: the update of one track is a few µs of Python)."""
         cfg = self.config
-        tc = cfg.tracker
-        k.p_finite = True  # kalman_update_batch rejects non-finite results
-        # shape: heading (90° ambiguity) and sizes along the track's own axes
-        if det.kind == KIND_RECT:
-            if not k.has_heading or k.kind != KIND_RECT:
-                k.theta_box = det.theta
-                k.has_heading = True
-                swap = False
-                k.size = _default_sizes(self._lohi_l[di], self._rel_l[di], cfg.fit)
-                k.size_known = [size_kind[0] == SIZE_MEASURED, size_kind[1] == SIZE_MEASURED]
-            else:
-                rl = self._rel_l[di]
-                informative = (rl[0][0] or rl[0][1]) and (rl[1][0] or rl[1][1])
-                if not informative:
-                    lo0, lo1, hi0, hi1 = self._lohi_l[di]
-                    informative = max(hi0 - lo0, hi1 - lo1) > 0.3  # the extent's longer side, m
-                if informative:
-                    tb = k.theta_box
-                    # (the axis difference wrapped to [−π/4, π/4): 90° ambiguity)
-                    th = tb + tc.heading_gain * ((det.theta - tb + _QUARTER_PI) % _HALF_PI - _QUARTER_PI)
-                    k.theta_box = (th + math.pi) % _TWO_PI - math.pi  # wrap_angle
-                size, known = k.size, k.size_known
-                for a in (0, 1):
-                    ta = 1 - a if swap else a
-                    obs, kind = size_obs[a], size_kind[a]
-                    if kind == SIZE_MEASURED:
-                        if known[ta]:
-                            size[ta] += tc.size_gain * (obs - size[ta])
-                        else:
-                            size[ta] = obs
-                            known[ta] = True
-                    elif kind == SIZE_LOWER:
-                        lb = k.size_lb
-                        if obs > lb[ta]:  # (max(lb, obs))
-                            lb[ta] = obs
-                        if obs > size[ta]:
-                            # a partial view grew past the size: the box grows away from its one real
-                            # bound, its centre moves with it, its velocity does not (item 2, docs/tracking.md)
-                            grow = obs - size[ta]
-                            lo_real, hi_real = rl[a]
-                            if lo_real != hi_real:
-                                sgn = 0.5 * grow if lo_real else -0.5 * grow
-                                th = det.theta + a * _HALF_PI
-                                k.x[0] += sgn * math.cos(th)
-                                k.x[1] += sgn * math.sin(th)
-                            size[ta] = obs
-        elif det.kind == KIND_CIRCLE:
-            r = float(det.circle[2])
-            k.radius = r if k.kind != KIND_CIRCLE or k.radius <= 0 else k.radius + tc.size_gain * (r - k.radius)
-            k.size = [2.0 * k.radius, 2.0 * k.radius]
-        elif det.kind == KIND_POINT and k.kind == KIND_POINT:
-            lo0, lo1, hi0, hi1 = self._lohi_l[di]
-            k.size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
-        if k.misses > 0:
-            # re-acquired after a gap: the free-space evidence must be rebuilt from this object
-            k.past.clear()
-            k.past_t.clear()
-            k.free.clear()
-            k.mstruct.clear()
-            k.mfree.clear()
-            k.munknown.clear()
-            k.laser_xy.clear()
-            k.map_xy.clear()
-            k.map_t.clear()
-            k.fast = 0
-            k.probation = k.in_m and not k.remembered  # a remembered track re-acquired where it stopped
-        k.kind = det.kind
-        k.merged = False
-        fc = cfg.fit
-        person = det.person or (det.kind == KIND_CIRCLE and fc.person_min_radius <= float(det.circle[2])
-                                <= fc.person_max_radius)
-        k.person = person
-        k.person_streak = k.person_streak + 1 if person else 0
-        k.hits += 1
-        k.misses = 0
-        k.last_hit = t
-        if len(k.history) < tc.confirm_window:  # (bounded: only the first window is read)
-            k.history.append(True)
-        k.beams = det.beams
-        nsus = tc.sustain_updates
-        free = k.free
-        free.append(max(det.free_fraction, vacated))  # (vacated: this scan sees through its old points)
-        if len(free) > nsus:
-            del free[0]
+        tc, fc = cfg.tracker, cfg.fit
+        heading_gain, size_gain = tc.heading_gain, tc.size_gain
+        pmin_r, pmax_r = fc.person_min_radius, fc.person_max_radius
+        window, nsus, ride_time = tc.confirm_window, tc.sustain_updates, tc.ride_time
+        lohi_l, rel_l = self._lohi_l, self._rel_l
         p = self._pose
         if p is not None:
-            xk = k.x
-            x0, x1 = xk.item(0), xk.item(1)
-            dx, dy = x0 - p.x, x1 - p.y
+            pose_x, pose_y = p.x, p.y
             c, s = self._pose_cs  # cos / sin of the pose's heading (once per scan)
-            lxy, mxy, mt = k.laser_xy, k.map_xy, k.map_t
-            lxy.append((c * dx + s * dy, -s * dx + c * dy))
-            mxy.append((x0, x1))
-            mt.append(t)
-            ride_time = tc.ride_time
-            while len(lxy) > nsus and t - mt[0] > ride_time:
-                del lxy[0]
-                del mxy[0]
-                del mt[0]
-        if self._map is not None:
-            ms, mf, mu = k.mstruct, k.mfree, k.munknown
-            ms.append(det.map_structure)
-            mf.append(det.map_free)
-            mu.append(det.map_unknown)
-            if len(ms) > nsus:
-                del ms[0]
-                del mf[0]
-                del mu[0]
-        if self._free is not None:
-            past, past_t = k.past, k.past_t
-            past.append((t, det.points))
-            past_t.append(t)
-            max_age = self._free.max_age
-            while past and t - past_t[0] > max_age:  # (past_t[q] is past[q][0])
-                del past[0]
-                del past_t[0]
+        use_map = self._map is not None
+        max_age = self._free.max_age if self._free is not None else None
+        vget = vac.get
+        cos, sin, pi = math.cos, math.sin, math.pi
+        tracks = self._tracks
+        for r, (ti, di) in enumerate(pairs):
+            if not applied[r]:
+                continue
+            k, det = tracks[ti], dets[di]
+            dkind = det.kind
+            k.p_finite = True  # kalman_update_batch rejects non-finite results
+            # shape: heading (90° ambiguity) and sizes along the track's own axes
+            if dkind == KIND_RECT:
+                sk = size_kind[r]
+                if not k.has_heading or k.kind != KIND_RECT:
+                    k.theta_box = det.theta
+                    k.has_heading = True
+                    k.size = _default_sizes(lohi_l[di], rel_l[di], fc)
+                    k.size_known = [sk[0] == SIZE_MEASURED, sk[1] == SIZE_MEASURED]
+                else:
+                    swap = swaps[r]
+                    rl = rel_l[di]
+                    informative = (rl[0][0] or rl[0][1]) and (rl[1][0] or rl[1][1])
+                    if not informative:
+                        lo0, lo1, hi0, hi1 = lohi_l[di]
+                        informative = max(hi0 - lo0, hi1 - lo1) > 0.3  # the extent's longer side, m
+                    if informative:
+                        tb = k.theta_box
+                        # (the axis difference wrapped to [−π/4, π/4): 90° ambiguity)
+                        th = tb + heading_gain * ((det.theta - tb + _QUARTER_PI) % _HALF_PI - _QUARTER_PI)
+                        k.theta_box = (th + pi) % _TWO_PI - pi  # wrap_angle
+                    size, known = k.size, k.size_known
+                    so = size_obs[r]
+                    for a in (0, 1):
+                        ta = 1 - a if swap else a
+                        obs, kind = so[a], sk[a]
+                        if kind == SIZE_MEASURED:
+                            if known[ta]:
+                                size[ta] += size_gain * (obs - size[ta])
+                            else:
+                                size[ta] = obs
+                                known[ta] = True
+                        elif kind == SIZE_LOWER:
+                            lb = k.size_lb
+                            if obs > lb[ta]:  # (max(lb, obs))
+                                lb[ta] = obs
+                            if obs > size[ta]:
+                                # a partial view grew past the size: the box grows away from its one real
+                                # bound, its centre moves with it, its velocity does not (item 2, docs/tracking.md)
+                                grow = obs - size[ta]
+                                lo_real, hi_real = rl[a]
+                                if lo_real != hi_real:
+                                    sgn = 0.5 * grow if lo_real else -0.5 * grow
+                                    th = det.theta + a * _HALF_PI
+                                    k.x[0] += sgn * cos(th)
+                                    k.x[1] += sgn * sin(th)
+                                size[ta] = obs
+            elif dkind == KIND_CIRCLE:
+                rad = float(det.circle[2])
+                k.radius = rad if k.kind != KIND_CIRCLE or k.radius <= 0 else k.radius + size_gain * (rad - k.radius)
+                k.size = [2.0 * k.radius, 2.0 * k.radius]
+            elif dkind == KIND_POINT and k.kind == KIND_POINT:
+                lo0, lo1, hi0, hi1 = lohi_l[di]
+                k.size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
+            if k.misses > 0:
+                # re-acquired after a gap: the free-space evidence must be rebuilt from this object
+                k.past.clear()
+                k.past_t.clear()
+                k.free.clear()
+                k.mstruct.clear()
+                k.mfree.clear()
+                k.munknown.clear()
+                k.laser_xy.clear()
+                k.map_xy.clear()
+                k.map_t.clear()
+                k.fast = 0
+                k.probation = k.in_m and not k.remembered  # a remembered track re-acquired where it stopped
+                k.misses = 0
+            k.kind = dkind
+            k.merged = False
+            person = det.person or (dkind == KIND_CIRCLE and pmin_r <= float(det.circle[2]) <= pmax_r)
+            k.person = person
+            k.person_streak = k.person_streak + 1 if person else 0
+            k.hits += 1
+            k.last_hit = t
+            if len(k.history) < window:  # (bounded: only the first window is read)
+                k.history.append(True)
+            k.beams = det.beams
+            free = k.free
+            free.append(max(det.free_fraction, vget(k.id, 0.0)))  # (vacated: this scan sees through its old points)
+            if len(free) > nsus:
+                del free[0]
+            if p is not None:
+                xk = k.x
+                x0, x1 = xk.item(0), xk.item(1)
+                dx, dy = x0 - pose_x, x1 - pose_y
+                lxy, mxy, mt = k.laser_xy, k.map_xy, k.map_t
+                lxy.append((c * dx + s * dy, -s * dx + c * dy))
+                mxy.append((x0, x1))
+                mt.append(t)
+                while len(lxy) > nsus and t - mt[0] > ride_time:
+                    del lxy[0]
+                    del mxy[0]
+                    del mt[0]
+            if use_map:
+                ms, mf, mu = k.mstruct, k.mfree, k.munknown
+                ms.append(det.map_structure)
+                mf.append(det.map_free)
+                mu.append(det.map_unknown)
+                if len(ms) > nsus:
+                    del ms[0]
+                    del mf[0]
+                    del mu[0]
+            if max_age is not None:
+                past, past_t = k.past, k.past_t
+                past.append((t, det.points))
+                past_t.append(t)
+                while past and t - past_t[0] > max_age:  # (past_t[q] is past[q][0])
+                    del past[0]
+                    del past_t[0]
 
     def _motion_prior(self, k: _Track) -> None:
         """Hidden side of a moving box whose other side is measured: a side parallel to the motion is
