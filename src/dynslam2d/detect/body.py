@@ -191,14 +191,16 @@ class BodyFilter:
         self._same += same
         # a beam whose reference range explains less than half of its returns starts over from this one
         restart = near & ~same & (self._same < 0.5 * self._seen)
-        self._ref[restart] = r[restart]
-        self._same[restart] = 1
-        self._seen[restart] = 1
-        self._start[restart] = (pose.x, pose.y, pose.theta)
-        self._moved[restart] = False
+        if restart.any():  # (most scans restart no beam: five assignments less)
+            self._ref[restart] = r[restart]
+            self._same[restart] = 1
+            self._seen[restart] = 1
+            self._start[restart] = (pose.x, pose.y, pose.theta)
+            self._moved[restart] = False
         # net motion away from where the range was first seen (summed increments would add up pose jitter)
-        # (only the beams that kept their range can become body beams: the test runs on those alone)
-        idx = np.flatnonzero(same)
+        # (only the beams that kept their range can become body beams: the test runs on those alone, and only
+        # on those not marked moved yet — marking a moved beam again changes nothing)
+        idx = np.flatnonzero(same & ~self._moved)
         if idx.shape[0]:
             st = self._start[idx]
             moved = np.hypot(pose.x - st[:, 0], pose.y - st[:, 1]) >= cfg.auto_min_travel

@@ -426,11 +426,22 @@ class EvidenceLedger:
             # each record copies its track's slice of it
             rows, tids, starts = update_rows(lv.logodds, lv.uidx, f[0], ids, keys, before, ui_before)
             st = starts.tolist()
+            # _LevelRecord.push_rows inlined (≈ 25 tracks × 3 levels per update: the call and attribute
+            # lookups were most of the loop); the same copy of each track's slice into its record's buffer
             for tid, a, b in zip(tids.tolist(), st, st[1:]):
                 led = ledgers.get(tid)
                 if led is not None:  # (every group holds rows)
                     rec = led.levels[k]
-                    if rec.push_rows(rows, a, b):
+                    n = rec._n_rows
+                    m = n + b - a
+                    pk = rec._pk
+                    if m > pk.shape[1]:
+                        pk = rec._room(m)
+                    pk[:, n:m] = rows[:, a:b]
+                    rec._n_rows = m
+                    c = rec._n_chunks + 1
+                    rec._n_chunks = c
+                    if m >= _COMPACT_ROWS or c >= _COMPACT_CHUNKS:
                         added += rec.compact()
         self.stats["cells_recorded"] += added
 
