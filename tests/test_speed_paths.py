@@ -408,3 +408,110 @@ def test_body_filter_keeps_drop_ranges_equal_to_a_fresh_computation() -> None:
             changes += 1
         prev = body.body.copy()
     assert body.body[100:106].all() and body.body[200:203].all() and changes >= 2
+
+
+def test_single_pose_relative_and_compose_equal_the_vectorised_path() -> None:
+    """relative / compose of one (3,) pose each (the keyframe path, scalar arithmetic without np.stack) give
+    bit for bit what the (n, 3) path gives, including angles at ±π and wrap-around."""
+    from dynslam2d.slam.posegraph import compose, relative
+
+    rng = np.random.default_rng(11)
+    a = np.column_stack((rng.normal(0, 30, 4000), rng.normal(0, 30, 4000), rng.uniform(-12, 12, 4000)))
+    b = np.column_stack((rng.normal(0, 30, 4000), rng.normal(0, 30, 4000), rng.uniform(-12, 12, 4000)))
+    a[:50, 2], b[:50, 2] = math.pi, -math.pi
+    a[50:100, 2], b[50:100, 2] = np.nextafter(math.pi, 0.0), 0.0
+    for f in (relative, compose):
+        many = f(a, b)
+        one = np.array([f(a[i], b[i]) for i in range(a.shape[0])])
+        assert one.shape == many.shape and one.tobytes() == many.tobytes()
+    assert not np.array_equal(relative(a, b), compose(a, b))
+
+
+def test_keyframe_index_spread_equals_linspace_and_is_shared() -> None:
+    """loops._even: the evenly spread sub-sample indices of the place returns and loop queries, once per size."""
+    from dynslam2d.slam.loops import _even
+
+    for n, k in ((121, 120), (600, 120), (1081, 360), (361, 360), (5000, 360)):
+        idx = _even(n, k)
+        assert np.array_equal(idx, np.linspace(0, n - 1, k).astype(np.int64)) and idx.dtype == np.int64
+        assert idx[0] == 0 and idx[-1] == n - 1 and not idx.flags.writeable
+        assert _even(n, k) is idx
+
+
+def test_loop_closer_given_the_kept_scan_builds_the_same_keyframes() -> None:
+    """LoopCloser.add with the caller's kept scan (the pipeline's, built for the map update) stores the same
+    place returns, searches and loop candidates as when it builds the kept scan itself."""
+    from dynslam2d.slam.loops import LoopCloser
+
+    a, b = LoopCloser(), LoopCloser()
+    rng = np.random.default_rng(4)
+    for i in range(130):  # a loop around the room: keyframes, submaps and searches
+        th = 2 * math.pi * i / 60
+        pose = Pose2D(1.5 * math.cos(th), 1.5 * math.sin(th), th + 1.0)
+        scan = scan_at(pose, 0.1 * i)
+        removed = rng.random(scan.n_beams) < 0.05
+        kept = scan.without(removed)
+        a.add(scan.stamp, pose, scan, removed, i % 2 == 0, score=0.8)
+        b.add(scan.stamp, pose, scan, removed, i % 2 == 0, score=0.8, kept=kept)
+    assert len(a.keyframes) == len(b.keyframes) == 65
+    assert a._place_pts.keys() == b._place_pts.keys()
+    assert all(np.array_equal(a._place_pts[k], b._place_pts[k]) for k in a._place_pts)
+    assert a.stats["searches"] == b.stats["searches"] > 0
+    assert [(c.node, c.anchor, c.z.tobytes()) for c in a.candidates] == \
+        [(c.node, c.anchor, c.z.tobytes()) for c in b.candidates]
+
+
+def test_body_filter_skipping_empty_restarts_and_moved_beams_finds_the_same_body() -> None:
+    """BodyFilter.observe skips the restart assignments when no beam restarts and tests the net motion only on
+    beams not yet marked moved: its state after every scan equals the full-mask computation's, with beams that
+    restart (a near object that comes and goes) and beams that become body beams; BodyFilter.mask, which keeps
+    the drop ranges' limits until they change, drops what the drop ranges of that moment say."""
+    from dynslam2d.config import Config
+    from dynslam2d.detect.body import BodyFilter
+    from dynslam2d.types import wrap_angle
+
+    cfg = Config().detect.footprint
+    body = BodyFilter(cfg)
+    n = 360
+    ref = {"ref": np.full(n, np.nan), "start": np.zeros((n, 3)), "same": np.zeros(n, np.int64),
+           "seen": np.zeros(n, np.int64), "moved": np.zeros(n, bool)}
+    rng = np.random.default_rng(5)
+    restarts = drops = 0
+    for i in range(160):
+        pose = Pose2D(0.02 * i, 0.01 * i, 0.03 * i)
+        r = rng.uniform(2.0, 6.0, n)
+        r[100:106] = 0.3 + rng.normal(0.0, 0.005, 6)  # fixed in the laser frame: body beams
+        r[150:160] = rng.choice([0.25, 0.4, 3.0], 10)  # near, jumping: restarts
+        if i >= 90:
+            r[200:203] = 0.45  # a second body part from scan 90 on: the drop ranges change after first use
+        s = Scan(stamp=0.1 * i, angle_min=-math.pi, angle_increment=2 * math.pi / n, ranges=r, range_min=0.05,
+                 range_max=20.0)
+        want_drop = np.zeros(n, dtype=bool)
+        if body.body.any():  # the mask from the drop ranges as they stand (kept limits must follow them)
+            want_drop = s.valid_mask() & (body._drop_r > 0.0) & (r <= body._drop_r + cfg.auto_tolerance)
+        drops += int(want_drop.sum())
+        assert np.array_equal(body.mask(s), want_drop)
+        body.observe(s, pose)
+        # the full-mask computation (before this change)
+        valid = s.valid_mask()
+        near = valid & (r <= cfg.auto_max_range)
+        same = near & (np.abs(r - ref["ref"]) <= cfg.auto_tolerance)
+        ref["seen"] += valid
+        ref["same"] += same
+        restart = near & ~same & (ref["same"] < 0.5 * ref["seen"])
+        restarts += int(restart.sum())
+        ref["ref"][restart] = r[restart]
+        ref["same"][restart] = 1
+        ref["seen"][restart] = 1
+        ref["start"][restart] = (pose.x, pose.y, pose.theta)
+        ref["moved"][restart] = False
+        idx = np.flatnonzero(same)
+        st = ref["start"][idx]
+        mv = np.hypot(pose.x - st[:, 0], pose.y - st[:, 1]) >= cfg.auto_min_travel
+        tn = np.abs(wrap_angle(pose.theta - st[:, 2])) >= cfg.auto_min_turn
+        ref["moved"][idx[mv & tn]] = True
+        want = ref["moved"] & (ref["same"] >= cfg.auto_min_scans) & (ref["same"] >= cfg.auto_share * ref["seen"])
+        assert np.array_equal(body.body, want) and np.array_equal(body._moved, ref["moved"])
+        assert np.array_equal(body._ref, ref["ref"], equal_nan=True) and np.array_equal(body._start, ref["start"])
+        assert np.array_equal(body._same, ref["same"]) and np.array_equal(body._seen, ref["seen"])
+    assert restarts > 20 and drops > 100 and body.body[100:106].all() and body.body[200:203].all()

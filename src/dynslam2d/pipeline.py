@@ -292,6 +292,7 @@ class Pipeline:
                 led.erased_beams.clear()
         # the thresholds are tested once: a scan that will not update the map builds no kept copy
         need = not res.rejected and self.slam.needs_map_update(res.pose)
+        kept = None
         if need or not (res.rejected or res.pose.is_finite()):  # (update_map counts a refused non-finite pose)
             kept = scan.without(removed) if removed.any() else scan
             pending = None
@@ -305,7 +306,7 @@ class Pipeline:
         if self.loops is not None:  # (also in the loop closure's own counters, summary.json loop_closure)
             self.loops.add(scan.stamp, res.pose, scan, removed, updated,
                            res.low_support or res.pose_source in ("prediction", "relocalised") or res.time_gap,
-                           res.score)
+                           res.score, kept)
         t5 = time.perf_counter()
         self._moving = moving
         self._last_stamp = scan.stamp

@@ -150,6 +150,8 @@ class BodyFilter:
         self.body = np.zeros(n, dtype=bool)
         self._body_r = np.zeros(n)
         self._drop_r = np.zeros(n)
+        #: (drop range > 0, drop range + auto_tolerance) of the drop ranges, built by mask at first use
+        self._drop_lim: tuple[np.ndarray, np.ndarray] | None = None
         self._same = np.zeros(n, dtype=np.int64)
         self._seen = np.zeros(n, dtype=np.int64)
         self._moved = np.zeros(n, dtype=bool)
@@ -168,8 +170,13 @@ class BodyFilter:
             self.footprint_dropped += int(inside.sum())
         if getattr(self.config, "auto", False) and self.body.any():
             tol = float(self.config.auto_tolerance)
-            auto = valid & (self._drop_r > 0.0) & (scan.ranges <= self._drop_r + tol) & ~drop
-            self.auto_dropped += int(auto.sum())
+            lim = self._drop_lim
+            if lim is None:  # (the drop ranges' mask and limits change only with them: observe resets this)
+                lim = self._drop_lim = (self._drop_r > 0.0, self._drop_r + tol)
+            auto = valid & lim[0] & (scan.ranges <= lim[1])
+            if self.polygon is not None:
+                auto &= ~drop
+            self.auto_dropped += int(np.count_nonzero(auto))
             drop |= auto
         self.scans += 1
         return drop
@@ -191,14 +198,16 @@ class BodyFilter:
         self._same += same
         # a beam whose reference range explains less than half of its returns starts over from this one
         restart = near & ~same & (self._same < 0.5 * self._seen)
-        self._ref[restart] = r[restart]
-        self._same[restart] = 1
-        self._seen[restart] = 1
-        self._start[restart] = (pose.x, pose.y, pose.theta)
-        self._moved[restart] = False
+        if restart.any():  # (most scans restart no beam: five assignments less)
+            self._ref[restart] = r[restart]
+            self._same[restart] = 1
+            self._seen[restart] = 1
+            self._start[restart] = (pose.x, pose.y, pose.theta)
+            self._moved[restart] = False
         # net motion away from where the range was first seen (summed increments would add up pose jitter)
-        # (only the beams that kept their range can become body beams: the test runs on those alone)
-        idx = np.flatnonzero(same)
+        # (only the beams that kept their range can become body beams: the test runs on those alone, and only
+        # on those not marked moved yet — marking a moved beam again changes nothing)
+        idx = np.flatnonzero(same & ~self._moved)
         if idx.shape[0]:
             st = self._start[idx]
             moved = np.hypot(pose.x - st[:, 0], pose.y - st[:, 1]) >= cfg.auto_min_travel
@@ -212,6 +221,7 @@ class BodyFilter:
         # the beams next to a body edge see it part of the time (mixed returns): they drop returns up to
         # the nearby body range + 2 tolerances
         self._drop_r = self._body_r.copy()
+        self._drop_lim = None
         k = int(cfg.auto_edge_beams)
         if k > 0 and self.body.any():
             grown = self._body_r.copy()

@@ -292,19 +292,29 @@ class EvidenceLedger:
         # imported at first use: their explicit signatures compile (or load from numba's cache) on import, which
         # would put ~0.4 s and scipy.linalg on every `import dynslam2d.pipeline` (issue 13's warm start)
         from dynslam2d.slam.ledgerkernels import scan_cells
-        mine = [t for t in tracks if t.beams is not None and t.beams.shape[0]]
+        mine: list[Track] = []  # the tracks with beams, their beams, beam counts and ids (one pass)
+        blist: list[np.ndarray] = []
+        blen = [0]
+        bids: list[int] = []
+        for t in tracks:
+            b = t.beams
+            if b is not None and b.shape[0]:
+                mine.append(t)
+                blist.append(b)
+                blen.append(b.shape[0])
+                bids.append(t.id)
         if not mine:
             return None
         r = scan.ranges
         owner = np.full(r.shape[0], -1, dtype=np.int64)
-        allb = np.concatenate([t.beams for t in mine])
-        lens = np.cumsum([0] + [t.beams.shape[0] for t in mine])
+        allb = np.concatenate(blist)
+        lens = np.cumsum(blen)
         if np.bincount(allb, minlength=r.shape[0]).max() <= 1:  # no beam in two tracks: one assignment
-            owner[allb] = np.repeat(np.array([t.id for t in mine], dtype=np.int64), np.diff(lens))
+            owner[allb] = np.repeat(np.array(bids, dtype=np.int64), blen[1:])
         else:  # (a later track's claim wins, as one assignment per track in order)
             for t in mine:
                 owner[t.beams] = t.id
-        uids = np.array(sorted({t.id for t in mine}), dtype=np.int64)  # track id ↦ rank 0 … R−1
+        uids = np.array(sorted(set(bids)), dtype=np.int64)  # track id ↦ rank 0 … R−1
         cos_a, sin_a = scan.trig()
         c, s = math.cos(pose.theta), math.sin(pose.theta)
         # the kept beams (valid, inside the laser's ranges, not removed), their map-frame points (the values of
@@ -426,11 +436,22 @@ class EvidenceLedger:
             # each record copies its track's slice of it
             rows, tids, starts = update_rows(lv.logodds, lv.uidx, f[0], ids, keys, before, ui_before)
             st = starts.tolist()
+            # _LevelRecord.push_rows inlined (≈ 25 tracks × 3 levels per update: the call and attribute
+            # lookups were most of the loop); the same copy of each track's slice into its record's buffer
             for tid, a, b in zip(tids.tolist(), st, st[1:]):
                 led = ledgers.get(tid)
                 if led is not None:  # (every group holds rows)
                     rec = led.levels[k]
-                    if rec.push_rows(rows, a, b):
+                    n = rec._n_rows
+                    m = n + b - a
+                    pk = rec._pk
+                    if m > pk.shape[1]:
+                        pk = rec._room(m)
+                    pk[:, n:m] = rows[:, a:b]
+                    rec._n_rows = m
+                    c = rec._n_chunks + 1
+                    rec._n_chunks = c
+                    if m >= _COMPACT_ROWS or c >= _COMPACT_CHUNKS:
                         added += rec.compact()
         self.stats["cells_recorded"] += added
 

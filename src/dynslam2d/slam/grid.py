@@ -279,17 +279,26 @@ class MultiResMap:
         free-space clearing rays in the laser frame (optional). Returns the rays integrated on
         level 0. The caller must have checked the pose is finite.
         """
-        ends = pose.transform_points(np.asarray(hits_laser, dtype=np.float64).reshape(-1, 2))
-        hit = np.ones(ends.shape[0], dtype=np.bool_)
+        hits = np.asarray(hits_laser, dtype=np.float64).reshape(-1, 2)
+        n_hit = hits.shape[0]
+        pts = hits
         if clear_laser is not None and len(clear_laser):
-            ends = np.vstack((ends, pose.transform_points(np.asarray(clear_laser, dtype=np.float64))))
-            hit = np.concatenate((hit, np.zeros(len(clear_laser), dtype=np.bool_)))
-        if ends.shape[0] == 0:
+            pts = np.vstack((hits, np.asarray(clear_laser, dtype=np.float64)))
+        if pts.shape[0] == 0:
             return 0
+        # the rays' ends in the map frame as two contiguous rows: the arithmetic of Pose2D.transform_points,
+        # element by element (so the same values), without its (n, 2) layout and the transposed copy
+        c, s = math.cos(pose.theta), math.sin(pose.theta)
+        px, py = pts[:, 0], pts[:, 1]
+        ends_t = np.empty((2, pts.shape[0]))
+        ends_t[0] = c * px - s * py + pose.x
+        ends_t[1] = s * px + c * py + pose.y
+        hit = np.ones(pts.shape[0], dtype=np.bool_)
+        hit[n_hit:] = False
         # every level's cell bounds from the extreme ends: v ↦ floor(v / r + 0.5) is monotonic, so the
         # extreme ends give the extreme cells (as GridLevel.cell_bounds), with a few scalar operations
-        lo = ends.min(axis=0).tolist()
-        hi = ends.max(axis=0).tolist()
+        lo = ends_t.min(axis=1).tolist()
+        hi = ends_t.max(axis=1).tolist()
         ox, oy = float(pose.x), float(pose.y)
         bounds = []
         for lv in self.levels:
@@ -307,11 +316,9 @@ class MultiResMap:
         stop = None
         if self.grazing_cells > 0.0 and hit.shape[0]:
             stop = np.zeros(hit.shape[0])
-            stop[: int(np.count_nonzero(hit))] = grazing_stop(
-                np.asarray(hits_laser, dtype=np.float64).reshape(-1, 2), self.grazing_cells, self.min_sin)
+            stop[:n_hit] = grazing_stop(hits, self.grazing_cells, self.min_sin)
         # the rays' end cells of a level, computed as GridLevel.integrate does (floor(v / r + 0.5), array
         # coordinates), into buffers shared by the levels: (2, n) rows are the contiguous x and y arrays
-        ends_t = np.ascontiguousarray(ends.T)
         buf = np.empty_like(ends_t)
         n0 = 0
         for k, (lv, (sx, sy, imin, jmin, imax, jmax)) in enumerate(zip(self.levels, bounds)):

@@ -42,6 +42,7 @@ relative pose from that keyframe. Poses are laser poses in the map frame (m, rad
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections import OrderedDict, deque
@@ -70,6 +71,15 @@ _QUERY_POINTS = 360
 _PLACE_POINTS = 120
 #: Keyframe edges across unsupported scans get their deviation multiplied by this.
 _WEAK_FACTOR = 10.0
+
+
+@functools.lru_cache(maxsize=256)
+def _even(n: int, k: int) -> np.ndarray:
+    """(k,) read-only int64 indices of ``k`` points evenly spread over ``n`` (``np.linspace``, truncated): the same
+    few scan sizes come back at every keyframe, so each is computed once."""
+    idx = np.linspace(0, n - 1, k).astype(np.int64)
+    idx.flags.writeable = False
+    return idx
 
 
 
@@ -203,6 +213,8 @@ class LoopCloser:
         # than the 5 kB of spectra each stored place then takes: never more memory than describing at once)
         self._place_due: deque[int] = deque()
         self._place_lo = 0  # the oldest node whose returns _place_pts may still hold
+        #: while a keyframe is added: (keyframe, its kept scan or None, its points once computed), see _points
+        self._kf_points: tuple | None = None
         self.stats: dict[str, float] = {"searches": 0, "candidates": 0, "loops_accepted": 0, "optimisations": 0,
                                         "far_searches": 0, "far_candidates": 0, "far_loops": 0,
                                         "far_deferred": 0, "rematch_edges": 0, "rematch_checked": 0, "rematch_ms": 0.0,
@@ -213,23 +225,26 @@ class LoopCloser:
 
     # ---- input ----------------------------------------------------------------------------
     def add(self, stamp: float, pose: Pose2D, scan: Scan, removed: np.ndarray, keyframe: bool,
-            weak: bool = False, score: float = math.nan) -> None:
+            weak: bool = False, score: float = math.nan, kept: Scan | None = None) -> None:
         """One scan of the run in order: its front-end laser pose; ``scan`` with the robot's body
         removed, ``removed`` the beams the dynamic filter removed; ``keyframe``: written into the
         front end's map; ``weak``: its pose was not backed by a well-supported match; ``score``: its match
-        score (0 … 1, mean occupancy at the endpoints; NaN = unknown)."""
+        score (0 … 1, mean occupancy at the endpoints; NaN = unknown); ``kept``: optional, ``scan`` with the
+        ``removed`` beams set to no return, as the caller already built it (saves building it again)."""
         t0 = time.perf_counter()
         p = np.array([pose.x, pose.y, pose.theta], dtype=np.float64)
-        if self._last_pose is not None and np.all(np.isfinite(p)):
-            self._path += math.hypot(p[0] - self._last_pose[0], p[1] - self._last_pose[1])
-        if np.all(np.isfinite(p)):
+        x, y, th = p.tolist()
+        finite = math.isfinite(x) and math.isfinite(y) and math.isfinite(th)
+        if self._last_pose is not None and finite:
+            self._path += math.hypot(x - self._last_pose[0], y - self._last_pose[1])
+        if finite:
             self._last_pose = p
-        self._frontend.append((float(p[0]), float(p[1]), float(p[2])))
+        self._frontend.append((x, y, th))
         self._weak_since_kf |= bool(weak)
         if score == score:  # not NaN
             self._score_since_kf = min(self._score_since_kf, float(score))
-        if keyframe and np.all(np.isfinite(p)):
-            self._add_keyframe(len(self._frontend) - 1, stamp, p, scan, removed)
+        if keyframe and finite:
+            self._add_keyframe(len(self._frontend) - 1, stamp, p, scan, removed, kept)
         self._scan_node.append(len(self.keyframes) - 1)
         self.stats["total_ms"] += (time.perf_counter() - t0) * 1e3
 
@@ -263,10 +278,19 @@ class LoopCloser:
             self._cache.pop(k // self.config.submap_keyframes, None)  # its submap is rebuilt without them
         return n
 
-    def _add_keyframe(self, index: int, stamp: float, p: np.ndarray, scan: Scan, removed: np.ndarray) -> None:
-        c = self.config
+    def _add_keyframe(self, index: int, stamp: float, p: np.ndarray, scan: Scan, removed: np.ndarray,
+                      kept: Scan | None = None) -> None:
         rm = np.asarray(removed, dtype=bool)
         kf = Keyframe(index, stamp, p, scan, rm if rm.shape == scan.ranges.shape else np.zeros(0, bool), self._path)
+        # the keyframe's points are read twice below (place returns, loop query): computed once, from ``kept``
+        self._kf_points = (kf, kept, None)
+        try:
+            self._add_keyframe_node(kf, p)
+        finally:
+            self._kf_points = None
+
+    def _add_keyframe_node(self, kf: Keyframe, p: np.ndarray) -> None:
+        c = self.config
         if self.keyframes:
             prev_node = len(self.keyframes) - 1
             est_prev = self.graph.pose(prev_node)
@@ -289,7 +313,7 @@ class LoopCloser:
             # the keyframe's returns (a few, float32) while later descriptors still need them
             pts, _ = self._points(kf)
             if pts.shape[0] > _PLACE_POINTS:
-                pts = pts[np.linspace(0, pts.shape[0] - 1, _PLACE_POINTS).astype(np.int64)]
+                pts = pts[_even(pts.shape[0], _PLACE_POINTS)]
             self._place_pts[node] = pts.astype(np.float32)
             if node % c.place_every == 0:
                 # described lazily (_place_flush), from these same returns and front-end poses: most keyframes
@@ -317,8 +341,16 @@ class LoopCloser:
 
     def _points(self, kf: Keyframe) -> tuple[np.ndarray, np.ndarray]:
         """(returns (n, 2), clearing-ray ends (m, 2)) of the kept beams in the laser frame, m."""
+        cur = self._kf_points
+        if cur is not None and cur[0] is kf:  # the keyframe being added (read-only: callers copy or index)
+            if cur[2] is None:
+                self._kf_points = cur = (kf, None, self._scan_points(cur[1] if cur[1] is not None else kf.kept()))
+            return cur[2]
+        return self._scan_points(kf.kept())
+
+    def _scan_points(self, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_points` of a keyframe's kept scan."""
         c = self.slam
-        scan = kf.kept()
         r = scan.ranges
         lim = min(c.laser_max_dist, self.config.submap_max_range)
         with np.errstate(invalid="ignore"):
@@ -405,7 +437,7 @@ class LoopCloser:
         if pts.shape[0] < max(self.config.min_support, 10):
             return None
         if pts.shape[0] > _QUERY_POINTS:
-            pts = pts[np.linspace(0, pts.shape[0] - 1, _QUERY_POINTS).astype(np.int64)]
+            pts = pts[_even(pts.shape[0], _QUERY_POINTS)]
         return pts
 
     # ---- far search: the radius grows with the uncertainty accumulated along the graph ------

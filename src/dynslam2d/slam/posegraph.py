@@ -326,6 +326,10 @@ def relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a⁻¹ ⊕ b for poses (…, 3) (x m, y m, θ rad)."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
+    if a.ndim == 1 and b.ndim == 1:  # one pose each (every keyframe): the same operations on scalars, no stack
+        c, s = np.cos(a[2]), np.sin(a[2])
+        dx, dy = b[0] - a[0], b[1] - a[1]
+        return np.array([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[2] - a[2])])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
     return np.stack((c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[..., 2] - a[..., 2])), axis=-1)
@@ -335,6 +339,9 @@ def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a ⊕ b for poses (…, 3) (x m, y m, θ rad)."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
+    if a.ndim == 1 and b.ndim == 1:  # one pose each: as relative
+        c, s = np.cos(a[2]), np.sin(a[2])
+        return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_angle(a[2] + b[2])])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     return np.stack((a[..., 0] + c * b[..., 0] - s * b[..., 1], a[..., 1] + s * b[..., 0] + c * b[..., 1],
                      wrap_angle(a[..., 2] + b[..., 2])), axis=-1)
