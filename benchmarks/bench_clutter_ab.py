@@ -2,12 +2,12 @@
 
 Made for clutter retirement (docs/real.md "Speed", ``tracker.structure_retire_updates`` / ``structure_birth_min``):
 per input, each named configuration's tracks born, retired on structure, detections left unborn on structure,
-live tracks per scan (``Tracker.n_tracks`` after each scan, mean), tracks ever in M, and the median thread CPU ms
-of ``Pipeline.process`` and of ``Tracker.update``. The pipelines process each scan alternately first. "off" (the
-defaults with both rules off) is always run.
+live tracks per scan (``Tracker.n_tracks`` after each scan, mean; dormant tracks are not live), dormant tracks
+per scan, tracks ever in M, and the median thread CPU ms of ``Pipeline.process`` and of ``Tracker.update``. The
+pipelines process each scan alternately first. "off" (the defaults with both rules off) is always run; "on:" with
+no assignment is the defaults (the rule is on by default).
 
-    taskset -c 1 python benchmarks/bench_clutter_ab.py negative_2/right,negative_2/left,negative_2/rear \
-        "on:detect.tracker.structure_retire_updates=2,detect.tracker.structure_birth_min=0.5"
+    taskset -c 1 python benchmarks/bench_clutter_ab.py negative_2/right,negative_2/left,negative_2/rear "on:"
 
 Inputs: the names of ``bench_digest.py`` (paths under ../shared/data); a configuration is NAME:KEY=VALUE,….
 """
@@ -43,6 +43,7 @@ def run(name: str, cfgs: dict[str, list[str]]) -> list[str]:
         p.tracker.update = timed
     tot: dict[str, list[float]] = {n: [] for n in cfgs}
     live = dict.fromkeys(cfgs, 0)
+    dormant = dict.fromkeys(cfgs, 0)
     in_m: dict[str, set[int]] = {n: set() for n in cfgs}
     for i, scan in enumerate(scans):
         for n in (list(cfgs) if i % 2 == 0 else list(reversed(cfgs))):
@@ -51,12 +52,14 @@ def run(name: str, cfgs: dict[str, list[str]]) -> list[str]:
             r = p.process(scan)
             tot[n].append((time.thread_time_ns() - t0) / 1e6)
             live[n] += p.tracker.n_tracks
+            dormant[n] += len(p.tracker._dormant)
             in_m[n] |= {t.id for t in r.tracks if t.in_m}
     out = []
     for n, p in pipes.items():
         st = p.tracker.stats
         out.append(f"{name:18s} {n:8s} born {st.tracks_born:5d} retired {st.deleted_structure:4d} unborn "
-                   f"{st.unborn_structure:5d} live/scan {live[n] / len(scans):5.1f} inM {len(in_m[n]):3d}  "
+                   f"{st.unborn_structure:5d} live/scan {live[n] / len(scans):5.1f} dormant/scan "
+                   f"{dormant[n] / len(scans):4.1f} inM {len(in_m[n]):3d}  "
                    f"pipe {statistics.median(tot[n]):.3f} ms  track {statistics.median(upd_ms[n]):.3f} ms")
     return out
 

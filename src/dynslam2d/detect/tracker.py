@@ -122,6 +122,7 @@ class TrackerStats:
     deleted_tentative: int = 0
     deleted_structure: int = 0  # still clutter on long-occupied map cells (structure_retire_updates)
     unborn_structure: int = 0  # detections on map structure given no track (structure_birth_min)
+    revived_structure: int = 0  # dormant (retired) tracks back to life when their object left the structure
     rejected_updates: int = 0
     merged_fragments: int = 0
     merged_leg_pairs: int = 0
@@ -276,6 +277,13 @@ class Tracker:
         self._lohi_l: list[list[float]] = []  # this scan's detections' lohi rows (lo1, lo2, hi1, hi2), m
         self._rel_l: list[list[list[bool]]] = []  # and their rel rows (real bounds)
         self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate)
+        # clutter retirement (structure_retire_updates): confirmed still tracks on map structure, out of the
+        # Kalman tracking but kept (and reported) while their object is seen, so that a parked mover keeps
+        # its id and standing history until it leaves (_clutter_detections)
+        self._dormant: list[_Track] = []
+        # … and the places of detections on structure that got no track: (m, 4) centre x, y (m, map frame), reach
+        # (m) and the stamp last seen (s); like a dormant track, such a place keeps its detection from live tracks
+        self._marks = np.zeros((0, 4))
         #: Segmentation and detections of the last processed scan (for inspection / plots).
         self.last_segmentation: Segmentation | None = None
         self.last_detections: list[Detection] = []
@@ -284,6 +292,8 @@ class Tracker:
     def reset(self) -> None:
         """Forget every track and the free-space evidence (ids keep counting up)."""
         self._tracks.clear()
+        self._dormant.clear()
+        self._marks = self._marks[:0]
         self._rows_used = 0
         self._free_rows.clear()
         self._order = None
@@ -363,12 +373,9 @@ class Tracker:
                     st.rejected_updates += 1
         self._manage(t, updated)
         unused = [di for di in range(len(dets)) if di not in used]
-        if self._map is not None and (birth_max := self.config.tracker.structure_birth_min) <= 1.0:
-            # structure the map already holds gets no track (structure_birth_min) and joins no track as a
-            # fragment either: an unassociated piece of wall beside a mover in M is not part of it
-            n_unused = len(unused)
-            unused = [di for di in unused if dets[di].map_structure < birth_max]
-            st.unborn_structure += n_unused - len(unused)
+        if self._map is not None and self.config.tracker.structure_birth_min <= 1.0 or self._dormant or \
+                self._marks.shape[0]:
+            unused = self._clutter_detections(dets, unused, t, updated)
         if self.config.tracker.confirm_hits > 1:  # births stay tentative: hosts can be found in one batch
             hosts = self._hosts_of_fragments(unused, updated)
         else:
@@ -383,7 +390,10 @@ class Tracker:
                 continue
             self._birth(det, t, di)
             updated.add(self._tracks[-1].id)
-        return self._report(t, updated)
+        out = self._report(t, updated)
+        if self._dormant:
+            out.extend(self._dormant_reports(t))
+        return out
 
     def _host_of_fragment(self, det: Detection, updated: set[int]) -> _Track | None:
         """The updated confirmed track whose box (grown by fit.fragment_margin) holds the detection."""
@@ -767,6 +777,13 @@ class Tracker:
         with it would carry M onto the wall. A track in M left with no detection leaves M (:meth:`_manage`) and
         keeps refusing such detections (``merged``) until a detection of its own size updates it."""
         tc = self.config.tracker
+        if self._dormant or self._marks.shape[0]:
+            # a dormant track, or the place of a detection on structure that got no track, keeps its object's
+            # detections on structure (_clutter_detections): no live track takes them, as the clutter track would
+            # have kept them before it was retired (or without the rule, born on them)
+            claimed = self._claims(dets)
+            if claimed.any():
+                ok = ok & ~claimed[None, :]
         rows = [i for i, k in enumerate(self._tracks) if k.in_m or k.merged]
         if not rows:
             return ok
@@ -1051,22 +1068,8 @@ class Tracker:
     def _birth(self, det: Detection, t: float, j: int) -> None:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
         cfg = self.config
-        d = self._default  # reference.measure(det, None, None, cfg.fit) of every detection
-        z = d.z[j]
-        P = np.zeros((4, 4))
-        P[:2, :2] = d.R[j]
-        P[2, 2] = P[3, 3] = cfg.tracker.init_speed_sigma ** 2
-        if det.kind == KIND_RECT:
-            size = _default_sizes(self._lohi_l[j], self._rel_l[j], cfg.fit)
-            sk0, sk1 = d.size_kind[j].tolist()
-            known = [sk0 == SIZE_MEASURED, sk1 == SIZE_MEASURED]
-        elif det.kind == KIND_CIRCLE:
-            size = [float(2.0 * det.circle[2])] * 2
-            known = [True, True]
-        else:
-            lo0, lo1, hi0, hi1 = self._lohi_l[j]
-            size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
-            known = [False, False]
+        z, P, size, known = self._birth_state(det, j)
+        d = self._default
         k = _Track(id=self._next_id, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t,
                    birth_xy=z.copy(), theta_box=det.theta, size=size,
                    size_known=known, radius=float(det.circle[2]) if det.kind == KIND_CIRCLE
@@ -1083,6 +1086,28 @@ class Tracker:
         self._next_id += 1
         self._add_row(k, (z[0], z[1], 0.0, 0.0), P)
         self.stats.tracks_born += 1
+
+    def _birth_state(self, det: Detection, j: int) -> tuple[np.ndarray, np.ndarray, list[float], list[bool]]:
+        """The measured centre z (2,), initial covariance P (4, 4), sizes and known-size flags of a track started
+        from detection ``det`` (index ``j`` of this scan's detections), map frame, m."""
+        cfg = self.config
+        d = self._default  # reference.measure(det, None, None, cfg.fit) of every detection
+        z = d.z[j]
+        P = np.zeros((4, 4))
+        P[:2, :2] = d.R[j]
+        P[2, 2] = P[3, 3] = cfg.tracker.init_speed_sigma ** 2
+        if det.kind == KIND_RECT:
+            size = _default_sizes(self._lohi_l[j], self._rel_l[j], cfg.fit)
+            sk0, sk1 = d.size_kind[j].tolist()
+            known = [sk0 == SIZE_MEASURED, sk1 == SIZE_MEASURED]
+        elif det.kind == KIND_CIRCLE:
+            size = [float(2.0 * det.circle[2])] * 2
+            known = [True, True]
+        else:
+            lo0, lo1, hi0, hi1 = self._lohi_l[j]
+            size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
+            known = [False, False]
+        return z, P, size, known
 
     def _manage(self, t: float, updated: set[int]) -> None:
         tc = self.config.tracker
@@ -1146,9 +1171,13 @@ class Tracker:
                 continue
             if is_upd and retire_n and not k.was_in_m and not k.remembered and len(ms := k.mstruct) >= retire_n \
                     and speed < v_min and min(ms[-retire_n:]) >= retire_s:
-                # clutter retirement: a still track the map already holds as structure (docs/real.md "Speed")
+                # clutter retirement: a still track the map already holds as structure (docs/real.md "Speed");
+                # a confirmed one stays as a dormant track while its object is seen (_clutter_detections)
                 st.deleted_structure += 1
-                st.tracks_deleted += 1
+                if k.state == TENTATIVE:
+                    st.tracks_deleted += 1
+                else:
+                    self._retire(k)
                 continue
             if is_upd:
                 self._dynamic(k, speed, t)
@@ -1164,6 +1193,151 @@ class Tracker:
             self._free_rows.extend(k.row for k in self._tracks if k.row not in kept)  # (births reuse them)
             self._order = None
         self._tracks = keep
+
+    def _retire(self, k: _Track) -> None:
+        """Make ``k`` (a confirmed track being retired as structure in :meth:`_manage`) dormant: out of the live
+        tracks (its state-array row is freed, so its state becomes its own copy, at rest), kept in
+        ``_dormant``."""
+        x = k.x.copy()
+        x[2:] = 0.0
+        k.x, k.P = x, k.P.copy()
+        k.fast = 0
+        k.slow_since = None
+        k.reason = "not in M: still, on long-occupied map cells (retired as structure)"
+        self._dormant.append(k)
+
+    def _clutter_detections(self, dets: list[Detection], unused: list[int], t: float,
+                            updated: set[int]) -> list[int]:
+        """Clutter retirement's handling of the detections no track took (docs/real.md "Fewer clutter tracks").
+
+        A dormant track (:meth:`_retire`) keeps the unused detections whose centroid lies within half its box's
+        longer side plus ``fit.fragment_margin`` of its centre: their beams are its beams in this scan's report
+        (the map's evidence ledger keeps recording what it writes, slam/erasure.py). Such a detection with fewer
+        than ``structure_birth_min`` of its points on long-occupied cells has left the structure: its object
+        moves, and the dormant track comes back to life with it (:meth:`_revive`; it keeps its id, its birth
+        place and its standing history, which the retroactive erasure needs). Other detections with at least
+        ``structure_birth_min`` on long-occupied cells get no track and join no track as a fragment (an
+        unassociated piece of wall beside a mover in M is not part of it); their places are kept (``_marks``) so
+        that no live track takes them in later scans either. Dormant tracks and places unseen for
+        ``max_coast_time`` are deleted. Returns the detections left for births and fragments."""
+        tc = self.config.tracker
+        st = self.stats
+        dorm = self._dormant
+        if dorm:
+            n0 = len(dorm)
+            dorm[:] = [k for k in dorm if t - k.last_hit <= tc.max_coast_time]
+            st.tracks_deleted += n0 - len(dorm)
+            for k in dorm:
+                if k.last_hit != t:  # (retired in this scan: it keeps the beams of its last update)
+                    k.beams = _NO_BEAMS
+                    k.misses += 1
+        marks = self._marks
+        if marks.shape[0]:
+            marks = marks[t - marks[:, 3] <= tc.max_coast_time]
+        birth_max = tc.structure_birth_min if self._map is not None else 1.1
+        nd = len(dorm)
+        if (nd or marks.shape[0]) and unused:
+            gaps = self._claim_gaps(unused, marks)
+            best, gap = gaps.argmin(axis=1).tolist(), gaps.min(axis=1).tolist()  # nearest dormant track / place
+        else:
+            best = gap = None
+        revived: set[int] = set()
+        new_marks = []
+        margin = self.config.fit.fragment_margin
+        out = []
+        for r, di in enumerate(unused):
+            det = dets[di]
+            on_structure = det.map_structure >= birth_max
+            if on_structure:
+                lo0, lo1, hi0, hi1 = self._lohi_l[di]
+                reach = 0.5 * max(hi0 - lo0, hi1 - lo1) + margin
+            if gap is not None and gap[r] <= 0.0:
+                i = best[r]
+                if i >= nd:  # a place of structure without a track
+                    if on_structure:
+                        marks[i - nd] = (det.centroid[0], det.centroid[1], reach, t)
+                        st.unborn_structure += 1
+                        continue
+                elif i not in revived:
+                    k = dorm[i]
+                    if on_structure:
+                        k.beams = det.beams if k.last_hit != t else np.concatenate((k.beams, det.beams))
+                        k.last_hit = t
+                        k.misses = 0
+                        continue
+                    self._revive(k, det, t, di)
+                    updated.add(k.id)
+                    revived.add(i)
+                    continue
+            if on_structure:
+                new_marks.append((det.centroid[0], det.centroid[1], reach, t))
+                st.unborn_structure += 1
+                continue
+            out.append(di)
+        if revived:
+            dorm[:] = [k for i, k in enumerate(dorm) if i not in revived]
+        self._marks = np.vstack((marks, new_marks)) if new_marks else marks
+        return out
+
+    def _claim_gaps(self, sel: list[int], marks: np.ndarray) -> np.ndarray:
+        """(len(sel), dormant + len(marks)) distance from the centroid of each detection ``sel`` to the centre of
+        each dormant track, then of each place ``marks``, minus its reach (half the dormant track's longer side
+        plus ``fit.fragment_margin``; a place's own reach), m (≤ 0: the detection is that object)."""
+        dorm = self._dormant
+        margin = self.config.fit.fragment_margin
+        cen = np.concatenate((np.array([(k.x.item(0), k.x.item(1)) for k in dorm]).reshape(-1, 2), marks[:, :2]))
+        reach = np.concatenate((np.array([0.5 * max(k.size) + margin for k in dorm]), marks[:, 2]))
+        c = self._batch.centroid[sel]  # (the detections' centroids, this scan's batch)
+        return np.hypot(c[:, 0, None] - cen[None, :, 0], c[:, 1, None] - cen[None, :, 1]) - reach[None, :]
+
+    def _claims(self, dets: list[Detection]) -> np.ndarray:
+        """(n,) bool: the detection has at least ``structure_birth_min`` of its points on long-occupied cells and
+        is a dormant track's object or that of a kept place (:meth:`_claim_gaps`)."""
+        out = np.zeros(len(dets), dtype=bool)
+        sel = [di for di, d in enumerate(dets) if d.map_structure >= self.config.tracker.structure_birth_min]
+        if sel:
+            out[sel] = (self._claim_gaps(sel, self._marks) <= 0.0).any(axis=1)
+        return out
+
+    def _revive(self, k: _Track, det: Detection, t: float, j: int) -> None:
+        """A dormant track whose object left the structure (detection ``det``, index ``j``) back among the live
+        tracks: restarted at the detection like a birth (state, covariance, shape, evidence lists), keeping its
+        id, birth time and place, hits and state (docs/real.md "Fewer clutter tracks")."""
+        z, P, size, known = self._birth_state(det, j)
+        self.stats.revived_structure += 1
+        k.theta_box, k.size, k.size_known, k.kind = det.theta, size, known, det.kind
+        k.radius = float(det.circle[2]) if det.kind == KIND_CIRCLE else 0.0
+        k.has_heading = det.kind == KIND_RECT
+        k.hits += 1
+        k.misses = 0
+        k.last_hit = t
+        k.beams = det.beams
+        k.free = [det.free_fraction]
+        if self._map is not None:
+            k.mstruct, k.mfree, k.munknown = [det.map_structure], [det.map_free], [det.map_unknown]
+        k.past, k.past_t = ([(t, det.points)], [t]) if self._free is not None else ([], [])
+        k.laser_xy, k.map_xy, k.map_t = [], [], []
+        k.person, k.person_streak, k.rode = False, 0, False
+        k.reason = "not in M: left the map structure it was retired on"
+        k.p_finite = bool(np.isfinite(P).all())
+        self._add_row(k, (z[0], z[1], 0.0, 0.0), P)
+
+    def _dormant_reports(self, t: float) -> list[Track]:
+        """Reports of the dormant tracks (at rest, not in M; beams only where seen in this scan)."""
+        out = []
+        zero = np.zeros(2)
+        for k in self._dormant:
+            if k.kind == KIND_CIRCLE:
+                theta, length, width = 0.0, 2.0 * k.radius, 2.0 * k.radius
+            elif k.size[1] > k.size[0]:
+                theta, length, width = float(wrap_angle(k.theta_box + _HALF_PI)), k.size[1], k.size[0]
+            else:
+                theta, length, width = float(wrap_angle(k.theta_box)), k.size[0], k.size[1]
+            out.append(_make_track(k.id, CONFIRMED if k.misses == 0 else COASTING, t,
+                                   _make_box(float(k.x[0]), float(k.x[1]), theta, float(length), float(width)),
+                                   zero.copy(), k.P.copy(), t - k.born, k.hits, k.misses, k.kind, False, k.reason,
+                                   k.beams, len(k.beams), False))
+        return out
 
     def _dynamic(self, k: _Track, speed: float, t: float) -> None:
         """Paper Eq. 3 with persistence, certainty and displacement conditions."""
