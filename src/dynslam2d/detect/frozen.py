@@ -7,8 +7,8 @@ reports was the largest single cost of the step. :func:`fast_init` returns a fun
 arguments as the class and sets the slots directly: on an unfrozen twin class with the same slots (plain
 attribute stores, the fastest way to fill slots from Python), whose instance then becomes an instance of the class
 by ``__class__`` assignment (allowed between classes of the same slot layout), else through the slots'
-descriptors; the object is the same (same type, same field values, frozen afterwards). Classes it cannot handle (no ``__slots__``, a
-``__post_init__``, a field with a ``default_factory`` or ``init=False``) get the class itself back.
+descriptors; the object is the same (same type, same field values, frozen afterwards). Classes it cannot handle
+(no ``__slots__``, a ``__post_init__``, a field with a ``default_factory`` or ``init=False``) get the class itself back.
 """
 
 from __future__ import annotations
