@@ -368,7 +368,9 @@ def test_rematch_repairs_a_local_break_no_loop_spans() -> None:
 def test_rematch_only_near_low_scores() -> None:
     """With the front end's match scores given, only keyframes near a low-scoring match are re-matched: the
     break of the test above is repaired when its scan scored low, checking a handful of keyframes; with every
-    score high no keyframe is matched (the break stays: the cost of the selection)."""
+    score high no keyframe is matched (the break stays: the cost of the selection) — unless, as by default, the
+    0.6 m step out and back is taken as a front-end jump (``loop.jump_weak``, slam/jumps.py): then the edges
+    across it are weak and the keyframes there are re-matched too."""
     world = _block_loop_world()
     gt = _loop_path()
     front = _drifted(gt, 0.0015)
@@ -376,10 +378,10 @@ def test_rematch_only_near_low_scores() -> None:
     front[k:k + 2] = compose(front[k:k + 2], np.array([0.6, 0.0, 0.0]))
     scans = _scans(world, gt)
     out = {}
-    for low in (True, False):
-        lc = LoopCloser(LoopConfig(), SlamConfig())
+    for low, jump_weak in ((True, False), (False, False), ("jump", True)):
+        lc = LoopCloser(LoopConfig(jump_weak=jump_weak), SlamConfig())
         for i, (s, p) in enumerate(zip(scans, front)):
-            score = 0.3 if low and i in (k, k + 1) else 0.9
+            score = 0.3 if low is True and i in (k, k + 1) else 0.9
             lc.add(s.stamp, Pose2D(*p), s, np.zeros(s.ranges.shape, bool), keyframe=i % 2 == 0, score=score)
         res = lc.finish()
         assert res.corrected
@@ -390,6 +392,8 @@ def test_rematch_only_near_low_scores() -> None:
     assert err < 0.03 and edges >= 1
     assert 1 <= checked <= 8 < n_kf // 10  # keyframes 60, 61 marked (± 2), not the whole run
     assert out[False][1] == 0 and out[False][0] > 0.5
+    err, checked, edges, _ = out["jump"]
+    assert err < 0.03 and edges >= 1 and 1 <= checked <= 8
 
 
 @pytest.mark.parametrize("n", [2, 3, 4, 7])

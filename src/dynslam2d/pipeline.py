@@ -42,6 +42,7 @@ from dynslam2d.slam.confidence import FLAGS
 from dynslam2d.slam.confidence import summarize as summarize_confidence
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.erasure import EvidenceLedger
+from dynslam2d.slam.jumps import jump_flags
 from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.loops import LoopCloser, LoopResult
 from dynslam2d.trajectory import Trajectory
@@ -464,10 +465,12 @@ class RunResult:
         n = self.n_scans
         c = self.config.slam
         flags = {k: self.confidence.get(k, np.zeros(n, dtype=bool)) for k in FLAGS}
+        front = self.frontend_trajectory if self.frontend_trajectory is not None else self.trajectory
         return summarize_confidence(self.trajectory.stamps, flags,
                                     self.confidence.get("degeneracy", np.full(n, np.nan)),
                                     self.slam_stats.get("lost_events", 0), self.slam_stats.get("relocalisations", 0),
-                                    c.low_confidence_share, c.low_confidence_stretch)
+                                    c.low_confidence_share, c.low_confidence_stretch,
+                                    jump_flags(front.stamps, front.poses, c.jump_shift, c.jump_ratio, c.jump_turn))
     body: dict[str, object] = field(default_factory=dict)
     #: the front end's trajectory when loop closure replaced ``trajectory`` by the optimised one (else None)
     frontend_trajectory: Trajectory | None = None

@@ -43,13 +43,17 @@ def stretches(stamps: np.ndarray, flag: np.ndarray) -> list[tuple[float, float]]
 
 
 def summarize(stamps: np.ndarray, flags: dict[str, np.ndarray], degeneracy: np.ndarray,
-              lost_events: int, relocalisations: int, max_share: float, max_stretch: float) -> dict[str, object]:
+              lost_events: int, relocalisations: int, max_share: float, max_stretch: float,
+              jumps: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> dict[str, object]:
     """The ``pose_confidence`` block of summary.json.
 
     ``flags``: (n,) bool arrays "low_support", "degenerate", "lost"; ``degeneracy`` (n,) smallest /
     largest normalized Hessian eigenvalue (NaN where not matched). The run is flagged
     ``trustworthy = False`` when the share of low-support scans exceeds ``max_share`` or a
-    low-support stretch lasts longer than ``max_stretch`` s; ``warning`` then says why in one line.
+    low-support stretch lasts longer than ``max_stretch`` s, or the front end jumped; ``warning`` then says why
+    in one line. ``jumps``: (flag, shift m, turn rad), each (n,), of :func:`dynslam2d.slam.jumps.jump_flags` on
+    the front end's trajectory (None = not checked): a jump is the front end snapping back after drifting, so the
+    poses before it were off by about its size even though every match looked well supported.
     """
     stamps = np.asarray(stamps, dtype=np.float64)
     n = stamps.shape[0]
@@ -82,6 +86,17 @@ def summarize(stamps: np.ndarray, flags: dict[str, np.ndarray], degeneracy: np.n
         reasons.append(f"{100 * share:.0f} % of scans matched with low support (longest stretch {longest:.1f} s)")
     if lost_events:
         reasons.append(f"lost {lost_events}× ({float(out['lost_time_s']):.1f} s), relocalised {relocalisations}×")
+    if jumps is not None:
+        jf, jshift, jturn = (np.asarray(a) for a in jumps)
+        out["jumps"] = int(jf.sum())
+        out["jump_stamps_s"] = [round(float(t - stamps[0]), 3) for t in stamps[jf]] if n else []
+        out["largest_jump_m"] = round(float(jshift[jf].max()), 3) if jf.any() else 0.0
+        out["largest_jump_deg"] = round(float(np.degrees(jturn[jf].max())), 2) if jf.any() else 0.0
+        if jf.any():
+            k = int(np.flatnonzero(jf)[np.argmax(jshift[jf])])
+            reasons.append(f"the front end jumped {int(jf.sum())}× (largest {jshift[k]:.2f} m, "
+                           f"{np.degrees(jturn[k]):.1f}° at {stamps[k] - stamps[0]:.1f} s): the poses around it "
+                           "were off by up to that much")
     out["trustworthy"] = not reasons
     out["warning"] = ("pose not trustworthy: " + "; ".join(reasons)) if reasons else None
     return out

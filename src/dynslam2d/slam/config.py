@@ -391,6 +391,24 @@ class SlamConfig(BaseModel):
         2.0, gt=0.0,
         description="Longest tolerated stretch of low-support or lost scans before the warning, s.",
     )
+    jump_shift: float = Field(
+        0.25, ge=0.0,
+        description="A scan whose front-end step from the previous scan exceeds the motion of the three steps before "
+        "it (their median velocity × its time step) by this much, and by jump_ratio × that motion's step, is a "
+        "jump: the front end snapped back after drifting (slam/jumps.py; not max_jump_distance, which rejects a "
+        "match). Jumps make the run not trustworthy and, with loop.jump_weak, weaken the keyframe edge across "
+        "them; m, map frame (0 = off). Largest excess on the real recordings without a jump: 0.23 m (datmo "
+        "overtakes), 0.35 m = 1.9 steps (MIT CSAIL); negative_2's snap back: 0.55 m = 5.0 steps.",
+    )
+    jump_ratio: float = Field(
+        3.0, ge=0.0,
+        description="… and at least this many times the length of the step the motion before it predicts.",
+    )
+    jump_turn: float = Field(
+        0.0, ge=0.0,
+        description="A scan whose rotation step exceeds the rotation before it by this much is a jump too, rad (0 = "
+        "off: at MIT CSAIL's 4.8 Hz the robot's own turning changes by up to 26° from one scan to the next).",
+    )
 
     # --- large-motion recovery (slam/recovery.py; docs/slam.md "Large motion between scans") ---
     recovery: bool = Field(

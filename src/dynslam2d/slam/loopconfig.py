@@ -241,6 +241,14 @@ class LoopConfig(BaseModel):
         "are under the loops' robust kernel too: where the loops say the front end broke, the graph bends there "
         "instead of spreading the correction over every edge.",
     )
+    jump_weak: bool = Field(
+        False,
+        description="A keyframe edge across a front-end jump (slam.jump_shift, jump_ratio, jump_turn: the front end "
+        "snapped back after drifting) is weak like one across a weakly supported match, so loops can undo the drift "
+        "before it instead of keeping the jump as motion. Off by default: on negative_2 /right_scan it brings the "
+        "drifted keyframes from 0.36–0.61 m to ≤ 0.09 m, but spreads 2° into an earlier visit and the clean-up "
+        "then erases more (docs/slam.md, \"negative_2: the stretch that maps walls twice\").",
+    )
     weak_score_floor: float = Field(
         0.3, ge=0.0, le=1.0, description="Match score at which a keyframe edge's deviation is ten times larger."
     )

@@ -53,6 +53,7 @@ import numpy as np
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.correlative import correlative_search
 from dynslam2d.slam.grid import MultiResMap
+from dynslam2d.slam.jumps import JumpCheck
 from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.matcher import degeneracy, evaluate
 from dynslam2d.slam.placedesc import PlaceIndex
@@ -183,6 +184,8 @@ class LoopCloser:
         self.kf_score: list[float] = []
         self._weak_since_kf = False
         self._score_since_kf = math.inf  # lowest match score since the last keyframe
+        sc = self.slam
+        self._jumps = JumpCheck(sc.jump_shift, sc.jump_ratio, sc.jump_turn) if self.config.jump_weak else None
         self._path = 0.0
         self._last_pose: np.ndarray | None = None
         self._opt_nodes = 0  # nodes covered by the last optimisation
@@ -240,6 +243,8 @@ class LoopCloser:
         if finite:
             self._last_pose = p
         self._frontend.append((x, y, th))
+        if self._jumps is not None and self._jumps.update(stamp, x, y, th):
+            weak = True  # the front end snapped back: the drift before it is for the loops to undo
         self._weak_since_kf |= bool(weak)
         if score == score:  # not NaN
             self._score_since_kf = min(self._score_since_kf, float(score))

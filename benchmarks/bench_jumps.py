@@ -1,0 +1,132 @@
+"""Front-end jumps and the loop closer's view of a drifted stretch (docs/slam.md, "negative_2: the stretch that maps
+walls twice"; not run by pytest).
+
+``steps RUN_DIR...``: for each run folder (``dynslam2d run ... --out RUN_DIR``), the scans whose front-end step
+exceeds the motion before it the most (:func:`dynslam2d.slam.jumps.step_excess`: excess m, in predicted steps,
+rotation excess °), the scans flagged as jumps with the folder's configuration, the steps around the largest, and
+how far the optimised trajectory (``trajectory.tum``) is from the front end's (``trajectory_frontend.tum``)::
+
+    python benchmarks/bench_jumps.py steps results/n2r results/csail
+
+``loops INPUT [KEY=VALUE...] [--topic T] [--nodes A:B]``: one run with the loop closer's local searches traced:
+for every keyframe in A:B and submap searched, the correlative score and runner-up, how far the match moved the
+keyframe from the front end's pose, and the refined match's support (count, share of the query points) against
+the acceptance bounds (``loop.min_support``, ``min_support_share``, ``min_spread``)::
+
+    python benchmarks/bench_jumps.py loops ../shared/data/dynamic/leg_tracker/negative_2.bag --topic /right_scan \\
+        --nodes 190:211
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import numpy as np
+
+from dynslam2d.config import Config, with_assignments
+from dynslam2d.slam.jumps import jump_flags, step_excess
+
+
+def _tum(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps s, poses (n, 3) x, y, θ) of a TUM trajectory file (planar: θ from the quaternion's z, w)."""
+    a = np.loadtxt(path)
+    return a[:, 0], np.column_stack((a[:, 1], a[:, 2], 2 * np.arctan2(a[:, 6], a[:, 7])))
+
+
+def steps(dirs: list[str]) -> None:
+    for d in map(Path, dirs):
+        t, p = _tum(d / ("trajectory_frontend.tum" if (d / "trajectory_frontend.tum").exists() else "trajectory.tum"))
+        sc = Config.model_validate(__import__("yaml").safe_load((d / "config.yaml").read_text())).slam \
+            if (d / "config.yaml").exists() else Config().slam
+        shift, turn, expected = step_excess(t, p)
+        flag = jump_flags(t, p, sc.jump_shift, sc.jump_ratio, sc.jump_turn)[0]
+        top = np.argsort(-shift)[:4]
+        print(f"{d}: {len(t)} scans, jumps {np.flatnonzero(flag).tolist()} (jump_shift {sc.jump_shift} m, "
+              f"jump_ratio {sc.jump_ratio}, jump_turn {sc.jump_turn} rad)")
+        print("  largest excess: " + ", ".join(
+            f"scan {i} {shift[i]:.3f} m ({shift[i] / max(expected[i], 1e-9):.1f} steps)" for i in top)
+            + f"; rotation excess max {math.degrees(turn.max()):.1f} deg at scan {int(np.argmax(turn))}")
+        k = int(top[0])
+        for i in range(max(1, k - 3), min(len(t), k + 3)):
+            step = math.hypot(*(p[i, :2] - p[i - 1, :2]))
+            dth = math.degrees(math.remainder(p[i, 2] - p[i - 1, 2], 2 * math.pi))
+            print(f"    scan {i}: dt {t[i] - t[i - 1]:.3f} s, step {step:.3f} m, {dth:+.1f} deg, excess "
+                  f"{shift[i]:.3f} m")
+        if (d / "trajectory_frontend.tum").exists() and (d / "trajectory.tum").exists():
+            _, q = _tum(d / "trajectory.tum")
+            diff = np.hypot(*(q[:, :2] - p[:, :2]).T)
+            print(f"  optimised vs front end: max {diff.max():.3f} m (scan {int(np.argmax(diff))}), median "
+                  f"{np.median(diff):.3f} m")
+
+
+def loops(inp: str, topic: str | None, nodes: str, sets: list[str]) -> None:
+    import dynslam2d.slam.loops as lp
+    from dynslam2d.inputs import open_source
+    from dynslam2d.pipeline import run
+    from dynslam2d.slam.matcher import match_multires, support
+
+    a, b = (int(v) for v in nodes.split(":"))
+    rows: list[str] = []
+    orig_cs, orig_match_at = lp.correlative_search, lp.LoopCloser._match_at
+    cur: dict[str, object] = {}
+
+    def cs(lvl, pts, pred, *args, **kw):  # type: ignore[no-untyped-def]
+        r = orig_cs(lvl, pts, pred, *args, **kw)
+        if r is not None:
+            cur["score"], cur["runner_up"], cur["pose"] = r.score, r.runner_up, r.pose
+            cur["moved"] = (math.hypot(r.pose[0] - pred[0], r.pose[1] - pred[1]), math.degrees(r.pose[2] - pred[2]))
+        return r
+
+    def match_at(self, node, s, pts, pred, lin, ang, min_margin, level=None):  # type: ignore[no-untyped-def]
+        cur.clear()
+        cand = orig_match_at(self, node, s, pts, pred, lin, ang, min_margin, level)
+        if a <= node < b and "score" in cur:
+            c, sc = self.config, self.slam
+            txt = f"keyframe {node} submap {s}: score {cur['score']:.3f} runner-up {cur['runner_up'] or 0:.3f}"
+            if "moved" in cur:
+                txt += f", match {cur['moved'][0]:.2f} m / {cur['moved'][1]:+.1f} deg from the front end"
+            grid = self._submap(s)
+            levels = grid.levels[:max(c.search_level + 1, 2)]
+            seed = np.asarray(cur["pose"] if cand is None else cand.z, dtype=np.float64)
+            if cur.get("runner_up") is not None:
+                p = match_multires(levels, pts, seed, sc.iterations_coarse, sc.iterations_finest, False,
+                                   sc.step_mode == "lm", sc.lm_lambda_init, sc.lm_lambda_max, sc.max_rotation_step,
+                                   sc.max_translation_step)
+                n_sup, spread = support(levels[0], pts, p, sc.support_probability)
+                txt += (f", support {n_sup}/{pts.shape[0]} = {n_sup / pts.shape[0]:.2f} (min {c.min_support_share}), "
+                        f"spread {spread:.2f} rad")
+            rows.append(txt + (" -> candidate" if cand is not None else ""))
+        return cand
+
+    lp.correlative_search, lp.LoopCloser._match_at = cs, match_at
+    try:
+        result = run(open_source(inp, topic=topic), with_assignments(Config(), sets))
+    finally:
+        lp.correlative_search, lp.LoopCloser._match_at = orig_cs, orig_match_at
+    print("\n".join(rows))
+    if result.loop is not None:
+        print(f"loops active {result.loop.loops}; stats accepted {result.loop.stats.get('loops_accepted')}, "
+              f"rejected {result.loop.stats.get('loops_rejected')}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    s1 = sub.add_parser("steps")
+    s1.add_argument("dirs", nargs="+")
+    s2 = sub.add_parser("loops")
+    s2.add_argument("input")
+    s2.add_argument("--topic", default=None)
+    s2.add_argument("--nodes", default="0:1000000")
+    s2.add_argument("sets", nargs="*", metavar="KEY=VALUE")
+    args = ap.parse_args()
+    if args.cmd == "steps":
+        steps(args.dirs)
+    else:
+        loops(args.input, args.topic, args.nodes, args.sets)
+
+
+if __name__ == "__main__":
+    main()
