@@ -145,17 +145,20 @@ def test_track_in_m_does_not_take_a_wall_when_its_person_vanishes_next_to_it() -
     within the person's gate. Updating the person's track with it would carry M onto the wall (sim:drive: a
     walker at a corridor's end took the end wall, 3400 static beams removed). The detection is refused and the
     track leaves M: no wall beam is ever in M. With the refusal off (merge_size_jump huge) the clutter rule's claims
-    alone keep the wall's cluster from the track (the wall piece is a dormant track's object, or a kept place of
-    structure, docs/real.md "Fewer clutter tracks"); with both off the track takes the wall and stays in M."""
+    alone keep the wall's cluster from the track when that rule is on (the wall piece is a dormant track's object,
+    or a kept place of structure, docs/real.md "Fewer clutter tracks"); with both off (the clutter rule is off by
+    default) the track takes the wall and stays in M."""
     removed, largest = _wall_run(Config())
     assert removed == 0 and largest < 1.0, (removed, largest)
     no_veto = Config()
     no_veto.detect.tracker.merge_size_jump = 100.0
-    removed_c, largest_c = _wall_run(no_veto)
+    claims = no_veto.model_copy(deep=True)
+    claims.detect.tracker.structure_retire_updates = 2
+    claims.detect.tracker.structure_birth_min = 0.5
+    removed_c, largest_c = _wall_run(claims)
     assert removed_c == 0 and largest_c < 1.0, (removed_c, largest_c)
-    off = no_veto.model_copy(deep=True)
-    off.detect.tracker.structure_retire_updates = 0
-    off.detect.tracker.structure_birth_min = 1.1
+    off = no_veto
+    assert off.detect.tracker.structure_retire_updates == 0 and off.detect.tracker.structure_birth_min > 1.0
     removed_off, largest_off = _wall_run(off)
     assert removed_off > 20 and largest_off > 1.0, (removed_off, largest_off)
 
@@ -205,7 +208,7 @@ def _cluttered_starter() -> Scenario:
 
 
 def test_clutter_on_map_structure_is_retired_and_a_walker_still_enters_m_fast() -> None:
-    """Clutter retirement, on by default (tracker.structure_retire_updates, structure_birth_min; docs/real.md
+    """Clutter retirement, off by default (tracker.structure_retire_updates, structure_birth_min; docs/real.md
     "Fewer clutter tracks"): the boxes along the walls become long-occupied map cells, and the still tracks on
     them are retired (dormant) or never born, so the tracker carries far fewer live tracks per scan than with the
     rule off (measured: 524 against 1172 live tracks summed over the 6 s' scans); the walking person still enters M
@@ -213,10 +216,10 @@ def test_clutter_on_map_structure_is_retired_and_a_walker_still_enters_m_fast() 
     the map holds the cells it stands on, and the walker's revived track needs its own updates)."""
     sc = _cluttered_starter()
     on = Config()
-    assert on.detect.tracker.structure_retire_updates == 2 and on.detect.tracker.structure_birth_min == 0.5
+    on.detect.tracker.structure_retire_updates = 2
+    on.detect.tracker.structure_birth_min = 0.5
     off = Config()
-    off.detect.tracker.structure_retire_updates = 0
-    off.detect.tracker.structure_birth_min = 1.1
+    assert off.detect.tracker.structure_retire_updates == 0 and off.detect.tracker.structure_birth_min > 1.0
     sim = simulate(sc)
     runs = {}
     for name, cfg in (("on", on), ("off", off)):
