@@ -1,6 +1,6 @@
-"""Clutter retirement (issue 9 speed; docs/real.md "Fewer clutter tracks"; off by default, switched on here): each case that an
-earlier, plain version of the rule broke is run here and would fail if it came back (simulated scenes with exact
-labels, and one real recording, skipped without ../shared/data)."""
+"""Clutter retirement (issue 9 speed; docs/real.md "Fewer clutter tracks"; off by default, switched on here): each
+case that an earlier, plain version of the rule broke is run here and would fail if it came back (simulated scenes
+with exact labels, and one real recording, skipped without ../shared/data)."""
 
 from __future__ import annotations
 
