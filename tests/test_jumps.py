@@ -114,3 +114,29 @@ def test_negative_2_jump_flagged_and_the_drift_before_it_undone() -> None:
     ref = np.vstack([world(k) for k in range(25)])
     shifts = [_icp_shift(world(k), ref, loop.node_poses[k, :2]) for k in range(187, 203, 3)]
     assert max(shifts) <= 0.15, shifts
+
+
+def test_map_png_marks_the_jump(tmp_path) -> None:
+    """map.png draws a cross in style.JUMP at each flagged pose (the terminal's warning says map.png marks the
+    poses): the jump colour covers pixels with the flags and none without."""
+    from PIL import Image
+
+    from dynslam2d.gridmap import GridMap
+    from dynslam2d.viz import style
+    from dynslam2d.viz.mapplot import plot_map
+
+    t, poses = _drive()
+    w = np.clip((np.arange(len(t)) - 40) / 40.0, 0.0, 1.0)
+    w[80:] = 0.0
+    drifted = poses + w[:, None] * np.array([0.4, 0.3, math.radians(8.0)])
+    flag = jump_flags(t, drifted, 0.25, 3.0)[0]
+    grid = GridMap(np.full((160, 160), 0.5), 0.05, (-4.0, -4.0))
+    colour = np.array(style.rgb255(style.JUMP))
+
+    def jump_pixels(jumps: np.ndarray | None) -> int:
+        path = plot_map(tmp_path / "map.png", grid, drifted[:, :2], jumps=jumps)
+        img = np.asarray(Image.open(path).convert("RGB")).astype(int)
+        return int((np.abs(img - colour).max(axis=2) <= 2).sum())
+
+    assert jump_pixels(flag) > 40
+    assert jump_pixels(None) == 0 and jump_pixels(np.zeros_like(flag)) == 0

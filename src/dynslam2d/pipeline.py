@@ -465,12 +465,17 @@ class RunResult:
         n = self.n_scans
         c = self.config.slam
         flags = {k: self.confidence.get(k, np.zeros(n, dtype=bool)) for k in FLAGS}
-        front = self.frontend_trajectory if self.frontend_trajectory is not None else self.trajectory
         return summarize_confidence(self.trajectory.stamps, flags,
                                     self.confidence.get("degeneracy", np.full(n, np.nan)),
                                     self.slam_stats.get("lost_events", 0), self.slam_stats.get("relocalisations", 0),
-                                    c.low_confidence_share, c.low_confidence_stretch,
-                                    jump_flags(front.stamps, front.poses, c.jump_shift, c.jump_ratio, c.jump_turn))
+                                    c.low_confidence_share, c.low_confidence_stretch, self.front_end_jumps())
+
+    def front_end_jumps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(flag, shift m, turn rad), each (n,) per scan: the front end's snaps back after a drift
+        (:func:`dynslam2d.slam.jumps.jump_flags` on the front end's trajectory, ``slam.jump_*``)."""
+        c = self.config.slam
+        front = self.frontend_trajectory if self.frontend_trajectory is not None else self.trajectory
+        return jump_flags(front.stamps, front.poses, c.jump_shift, c.jump_ratio, c.jump_turn)
     body: dict[str, object] = field(default_factory=dict)
     #: the front end's trajectory when loop closure replaced ``trajectory`` by the optimised one (else None)
     frontend_trajectory: Trajectory | None = None

@@ -85,6 +85,7 @@ def write_figures(
         removed_xy=removed_xy, removed_count=removed_beams(result) if removed_xy is not None else None,
         erased=cleaned.erased if cleaned is not None else None,
         low_support=conf.get("low_support"), lost=conf.get("lost"),
+        jumps=result.front_end_jumps()[0] if conf else None,
         warning=pc.get("warning"),  # type: ignore[arg-type]
         loop_edges=_loop_segments(result),
         memory_erased=_memory_erased(result, grid),

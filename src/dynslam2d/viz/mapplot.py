@@ -206,6 +206,7 @@ def plot_map(
     erased: np.ndarray | None = None,
     low_support: np.ndarray | None = None,
     lost: np.ndarray | None = None,
+    jumps: np.ndarray | None = None,
     warning: str | None = None,
     loop_edges: np.ndarray | None = None,
     memory_erased: np.ndarray | None = None,
@@ -231,6 +232,8 @@ def plot_map(
             (docs/maps.md), drawn in :data:`style.ERASED`.
         low_support, lost: (n,) bool per trajectory pose: poses matched with low support are
             marked in :data:`style.LOW_SUPPORT`, poses while lost in :data:`style.LOST`.
+        jumps: (n,) bool per trajectory pose: scans where the front end snapped back after drifting
+            (``pose_confidence.jumps`` of summary.json), marked with a cross in :data:`style.JUMP`.
         warning: a line drawn in a red box over the map (the pose cannot be trusted).
         loop_edges: (k, 2, 2) loop closures as segments between the two keyframe positions (map
             frame, m), drawn in :data:`style.LOOP_EDGE`.
@@ -295,6 +298,10 @@ def plot_map(
                 m = np.asarray(mask, dtype=bool)
                 handles += ax.plot(trajectory_xy[m, 0], trajectory_xy[m, 1], marker=".", ms=3, ls="none",
                                    color=colour, label=f"{label} ({int(m.sum())})", zorder=4.5)
+        if jumps is not None and len(jumps) == len(trajectory_xy) and np.any(jumps):
+            m = np.asarray(jumps, dtype=bool)
+            handles += ax.plot(trajectory_xy[m, 0], trajectory_xy[m, 1], marker="X", ms=9, mew=0.8, mec="white",
+                               ls="none", color=style.JUMP, label=f"front-end jumps ({int(m.sum())})", zorder=4.6)
     if tracks:
         any_m = any_other = False
         for tp in tracks:

@@ -33,6 +33,8 @@ UNKNOWN = "#e4e4e4"
 LOW_SUPPORT = "#f0a000"
 #: Pose confidence: scans while the SLAM was lost.
 LOST = "#b40000"
+#: Pose confidence: scans where the front end snapped back after a drift (a jump; trajectory markers).
+JUMP = "#7a00b4"
 #: Loop closures (map.png): segments between the two keyframes of each loop edge.
 LOOP_EDGE = "#2ca02c"
 #: Pose confidence: degenerate scans (time shading).
