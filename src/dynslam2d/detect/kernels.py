@@ -820,7 +820,29 @@ def leg_pairs(lohi: np.ndarray, npts: np.ndarray, fits: np.ndarray, leg_max_exte
                 nc += 1
     if nc == 0:
         return empty, empty
-    order = np.argsort(dist[:nc], kind="mergesort")  # (stable: equal distances keep the row-major order)
+    # nearest first: a stable bottom-up merge sort of dist[:nc] (equal distances keep the row-major order), the
+    # order np.argsort(kind="mergesort") gives (distances are ≤ pair_distance, never NaN), written out because
+    # numba's argsort compiles its merge-sort machinery, about 1 s of a first run's compile (docs/speed.md)
+    order = np.empty(nc, dtype=np.int64)
+    for q in range(nc):
+        order[q] = q
+    buf = np.empty(nc, dtype=np.int64)
+    width = 1
+    while width < nc:
+        for lo in range(0, nc, 2 * width):
+            mid = min(lo + width, nc)
+            hi = min(lo + 2 * width, nc)
+            i = lo
+            j = mid
+            for o in range(lo, hi):
+                if j < hi and (i >= mid or dist[order[j]] < dist[order[i]]):
+                    buf[o] = order[j]
+                    j += 1
+                else:
+                    buf[o] = order[i]
+                    i += 1
+        order, buf = buf, order
+        width *= 2
     used = np.zeros(ns, dtype=np.bool_)
     first = np.empty(ns // 2, dtype=np.int64)
     second = np.empty(ns // 2, dtype=np.int64)
