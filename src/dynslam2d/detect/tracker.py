@@ -373,7 +373,7 @@ class Tracker:
                     st.rejected_updates += 1
         self._manage(t, updated)
         unused = [di for di in range(len(dets)) if di not in used]
-        if self._map is not None and self.config.tracker.structure_birth_min <= 1.0 or self._dormant or \
+        if (self._map is not None and self.config.tracker.structure_birth_min <= 1.0) or self._dormant or \
                 self._marks.shape[0]:
             unused = self._clutter_detections(dets, unused, t, updated)
         if self.config.tracker.confirm_hits > 1:  # births stay tentative: hosts can be found in one batch
