@@ -42,15 +42,18 @@ def step_excess(stamps: np.ndarray, poses: np.ndarray,
     ok = dt > 1e-6
     v = np.full_like(d, np.nan)
     v[ok] = d[ok] / dt[ok, None]
-    for k in range(window, d.shape[0]):
-        prev = v[k - window:k]
-        if not ok[k] or not np.all(np.isfinite(prev)) or not np.all(np.isfinite(d[k])):
-            continue
-        pred = np.median(prev, axis=0) * dt[k]
-        e = d[k] - pred
-        shift[k + 1] = math.hypot(e[0], e[1])
-        turn[k + 1] = abs(math.atan2(math.sin(e[2]), math.cos(e[2])))
-        expected[k + 1] = math.hypot(pred[0], pred[1])
+    m = d.shape[0] - window  # steps k = window … n-2, each predicted from v[k - window:k]
+    if m <= 0:
+        return shift, turn, expected
+    prev = np.lib.stride_tricks.sliding_window_view(v, window, axis=0)[:m]  # (m, 3, window)
+    cur = d[window:]
+    good = ok[window:] & np.isfinite(prev).all(axis=(1, 2)) & np.isfinite(cur).all(axis=1)
+    pred = np.median(prev[good], axis=2) * dt[window:][good, None]
+    e = cur[good] - pred
+    rows = np.flatnonzero(good) + window + 1
+    shift[rows] = np.hypot(e[:, 0], e[:, 1])
+    turn[rows] = np.abs(np.arctan2(np.sin(e[:, 2]), np.cos(e[:, 2])))
+    expected[rows] = np.hypot(pred[:, 0], pred[:, 1])
     return shift, turn, expected
 
 
