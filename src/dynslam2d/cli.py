@@ -215,7 +215,10 @@ def info(
                                             "fixed in the laser frame while it drives) in the first N scans and "
                                             "suggest a footprint; 0 = skip.")] = 600,
 ) -> None:
-    """Print what a scan source holds: format, topic, scans, beams, FOV, rate, duration, ranges, robot body."""
+    """Print what a scan source holds: format, topic, scans, beams, FOV, rate, duration, ranges, robot body.
+
+    A bag with several LaserScan topics and no --topic: every scan topic (one row each), the other topics
+    (odometry, TF, IMU, poses) and what 'run' needs (--topic)."""
     from dynslam2d.inputs import open_source
     from dynslam2d.io.odometry import parse_laser_offset
     from dynslam2d.io.summary import summarize_source
@@ -224,6 +227,9 @@ def info(
     if topic is not None and not topic.strip():
         raise DynSlamError(f"--topic is empty; give the LaserScan topic name (see 'dynslam2d info {input}')")
     offset = parse_laser_offset(laser_offset) if laser_offset else None
+    if topic is None and _several_scan_topics(input):
+        _info_bag_overview(input, skip_bad=skip_bad, odom=odom, imu=imu, body_scans=body_scans, as_json=as_json)
+        return
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad, odom=odom, imu=imu,
                          laser_offset=offset)
     first: list = []  # the first body_scans scans, kept while the summary reads the source once
@@ -287,6 +293,95 @@ def info(
     for k, v in rows:
         table.add_row(k, Text(str(v)))
     _show(table)
+
+
+#: The order in which ``info``'s bag overview lists the other topics, by role (io/baginfo.py ``topic_role``).
+_ROLE_ORDER = ("odometry", "TF", "static TF", "IMU", "wheel speeds", "poses", "other")
+
+
+def _several_scan_topics(input: str) -> bool:
+    """Whether ``input`` is a bag file or folder (not a pipe) holding more than one LaserScan topic."""
+    from dynslam2d.io.baginfo import laserscan_topics
+    from dynslam2d.io.sources import SIM_PREFIX, is_stream, sniff_format
+
+    if input.startswith(SIM_PREFIX) or is_stream(input):
+        return False
+    if sniff_format(input) not in ("ros1-bag", "ros2-bag", "mcap", "zip"):
+        return False
+    return len(laserscan_topics(input)) > 1
+
+
+def _info_bag_overview(input: str, *, skip_bad: bool, odom: str, imu: str, body_scans: int, as_json: bool) -> None:
+    """``info`` on a bag with several LaserScan topics: one row per scan topic (read in one pass), the robot
+    body each laser sees in its first ``body_scans`` scans, the other topics, and the ``--topic`` choice."""
+    from dynslam2d.io.baginfo import describe_bag, topic_role
+
+    with console.status(Text(f"reading {input} …"), spinner="dots") as status:
+        bag = describe_bag(input, keep_first=body_scans, skip_bad=skip_bad, odom=odom, imu=imu,
+                           progress=lambda n: status.update(Text(f"reading {input} … {n} scans")))
+        bodies: dict[str, dict] = {}
+        if body_scans > 0:
+            from dynslam2d.pipeline import find_body
+
+            for name, first in bag.first_scans.items():
+                if first:
+                    status.update(Text(f"looking for the robot's body in the first {len(first)} scans of {name} …"))
+                    bodies[name] = find_body(first, max_scans=body_scans)
+    names = list(bag.scans)
+    if as_json:
+        out = bag.as_dict()
+        for name, body in bodies.items():
+            out["scans"][name]["body"] = body  # type: ignore[index]
+        out["run_needs_topic"] = names
+        sys.stdout.write(json.dumps(out, indent=2, default=str) + "\n")
+        return
+    table = Table(title=Text(f"{input}: {bag.format}, {len(names)} LaserScan topics"), title_justify="left")
+    for head in ("topic", "messages", "rate", "duration", "beams", "field of view", "sensor range", "median return",
+                 "no return", "frame", "robot body"):
+        table.add_column(head, justify="left" if head in ("topic", "frame", "robot body") else "right")
+    for name, s in bag.scans.items():
+        beams = str(s.beams_max) if s.beams_min == s.beams_max else f"{s.beams_min}–{s.beams_max}"
+        table.add_row(
+            Text(name), str(bag.topics[name][1]),
+            _fmt(s.rate_hz, " Hz", 2), _fmt(s.duration, " s", 1), beams, f"{math.degrees(s.fov):.1f}°",
+            f"{_fmt(s.range_min, '', 2)}–{_fmt(s.range_max, ' m', 2)}", _fmt(s.valid_range_median, " m", 2),
+            f"{100 * s.no_return_share:.1f} %", Text(s.frame_id or "—"), Text(_body_cell(bodies.get(name))))
+    _show(table)
+    lines = []
+    for name, s in bag.scans.items():
+        if s.extra.get("skipped_scans"):
+            lines.append(f"{name}: {s.extra['skipped_scans']} of {bag.topics[name][1]} stamps do not increase "
+                         "(left out above; 'run' needs --skip-bad)")
+        if s.extra.get("skipped_messages"):
+            lines.append(f"{name}: {s.extra['skipped_messages']} malformed messages skipped")
+    others: dict[str, list[str]] = {role: [] for role in _ROLE_ORDER}
+    for name, (msgtype, count) in bag.topics.items():
+        if name not in bag.scans:
+            role = topic_role(name, msgtype) or "other"
+            others.setdefault(role, []).append(f"{name} ({msgtype.replace('/msg/', '/')}, {count})")
+    lines += [f"{role}: {', '.join(items)}" for role, items in others.items() if items] or ["other topics: none"]
+    tried = bag.odometry["odometry"]
+    lines.append(f"--odom {odom}: " + (" else ".join(tried) if tried else "none (laser only)")  # type: ignore[arg-type]
+                 + f"; --imu {imu}: {bag.odometry['imu'] or 'none'}")
+    lines += [str(n) for n in bag.odometry["notes"]]  # type: ignore[attr-defined]
+    for name, body in bodies.items():
+        if body.get("auto_body_beams"):
+            lines.append(f"{name} body footprint (laser frame {bag.scans[name].frame_id or '?'}, "
+                         f"detect.footprint.polygon): {body['suggested_footprint']}")
+    lines.append(f"'dynslam2d run' maps one of them: --topic {' | '.join(names)}; "
+                 f"'dynslam2d info {input} --topic T' describes one in full")
+    for line in lines:
+        console.print(Text(line), soft_wrap=True)
+
+
+def _body_cell(body: dict | None) -> str:
+    """The robot-body cell of ``info``'s bag overview (the full line is ``info --topic``'s)."""
+    if body is None:
+        return "—"
+    if body.get("auto_body_beams"):
+        lo, hi = body["body_range_m"]
+        return f"{body['auto_body_beams']} beams at {lo:.2f}–{hi:.2f} m"
+    return "none" if body.get("enough_motion") else f"unknown (laser moved {body['travel_m']:.1f} m)"
 
 
 def _body_line(body: dict) -> str:

@@ -54,6 +54,7 @@ __all__ = [
     "DeadReckoning",
     "TfTree",
     "imu_message",
+    "odometry_candidates",
     "odometry_message",
     "read_bag_odometry",
     "transform_message",
@@ -302,6 +303,29 @@ def _plan(path: Path, topics: dict[str, str], odom: str, imu: str) -> _Plan:
         plan.kinds.append("topic")
         plan.odom_topic = name
     return plan
+
+
+def odometry_candidates(path: str | os.PathLike[str], topics: dict[str, str], odom: str = "auto",
+                        imu: str = "auto") -> dict[str, object]:
+    """What :func:`read_bag_odometry` would try on a bag holding ``topics`` (name → type), from the
+    names alone (no message read; for ``dynslam2d info``'s bag overview).
+
+    Returns ``odometry``: the sources in the order tried (``"/odom (nav_msgs/Odometry)"``, ``"tf"``,
+    ``"wheel speeds /wheel_speeds + IMU"``; empty = laser only), ``imu``: the IMU topic or None, and
+    ``notes``. Whether TF gives odometry depends on the laser's frame (a moving transform above it),
+    known only once a scan topic is read. Raises DynSlamError as :func:`read_bag_odometry` does for an
+    explicitly named topic that is missing or of the wrong type.
+    """
+    plan = _plan(Path(path), topics, odom, imu)
+    tried: list[str] = []
+    for kind in plan.kinds or []:
+        if kind == "topic" and plan.odom_topic:
+            tried.append(f"{plan.odom_topic} ({_short(topics[plan.odom_topic])})")
+        elif kind == "tf":
+            tried.append("tf")
+        elif kind == "wheels" and plan.wheel_topic:
+            tried.append(f"wheel speeds {plan.wheel_topic} + IMU")
+    return {"odometry": tried, "imu": plan.imu_topic, "notes": list(plan.notes or [])}
 
 
 def _dead_reckon(wheels: list[tuple[float, Any]], imu: ImuTrack, model: DeadReckoning,

@@ -53,9 +53,11 @@ __all__ = [
     "list_topics",
     "open_bag_writer",
     "read_pose_topic",
+    "read_scan_topics",
     "read_topic_messages",
     "ros_time_to_stamp",
     "stamp_to_ros_time",
+    "topic_counts",
     "write_scan_bag",
 ]
 
@@ -252,19 +254,29 @@ def _iter_raw(
                 f"{path}: cannot read message index {index} of topic {topic} "
                 f"({type(err).__name__}: {_short(err)}); the bag looks corrupt or truncated{hint}"
             ) from err
-        try:
-            msg = reader.deserialize(raw, conn.msgtype)
-        except Exception as err:
-            if on_bad is None:
-                raise DynSlamError(
-                    f"{path}: cannot decode message index {index} of topic {topic} "
-                    f"({type(err).__name__}: {_short(err)}); use --skip-bad to drop such messages"
-                ) from err
-            on_bad(index)
+        msg = _decode(reader, raw, conn.msgtype, path, topic, index, skip=on_bad is not None,
+                      hint="use --skip-bad to drop such messages")
+        if msg is None:
+            on_bad(index)  # type: ignore[misc]
             index += 1
             continue
         yield index, t_ns, msg
         index += 1
+
+
+def _decode(reader: Any, raw: bytes, msgtype: str, path: Path, topic: str, index: int, *, skip: bool,
+            hint: str) -> Any | None:
+    """Deserialise one message; a message that cannot be decoded gives None with ``skip`` (the caller counts
+    it), else a DynSlamError naming ``path``, ``topic`` and ``index``, ending with ``hint``."""
+    try:
+        return reader.deserialize(raw, msgtype)
+    except Exception as err:
+        if skip:
+            return None
+        raise DynSlamError(
+            f"{path}: cannot decode message index {index} of topic {topic} ({type(err).__name__}: {_short(err)}); "
+            f"{hint}"
+        ) from err
 
 
 def _short(err: BaseException, limit: int = 160) -> str:
@@ -288,14 +300,18 @@ def list_topics(path: str | os.PathLike[str]) -> dict[str, str]:
         return _topic_types(reader)
 
 
-def read_topic_messages(path: str | os.PathLike[str],
-                        topics: Iterable[str]) -> Iterator[tuple[str, str, int, float, Any]]:
+def read_topic_messages(path: str | os.PathLike[str], topics: Iterable[str], *,
+                        on_bad: Callable[[str, int], None] | None = None,
+                        decode_hint: str = "the bag looks corrupt or truncated",
+                        ) -> Iterator[tuple[str, str, int, float, Any]]:
     """Yield ``(topic, msgtype, index, bag time s, message)`` of several topics in one pass.
 
     Messages come in the bag's time order; ``index`` counts per topic from 0. Topics
     the bag does not hold are ignored (callers check :func:`list_topics` first). Used by
     the odometry readers (:mod:`dynslam2d.io.odombag`) to read /odom, /tf, /tf_static and
-    an IMU together.
+    an IMU together, and by :func:`read_scan_topics`. A message that cannot be decoded
+    raises DynSlamError (ending with ``decode_hint``), or, with ``on_bad``, is passed over after
+    ``on_bad(topic, index)``.
     """
     p = Path(path)
     with _open_bag(p) as (reader, _):
@@ -309,17 +325,49 @@ def read_topic_messages(path: str | os.PathLike[str],
         while True:
             try:
                 conn, t_ns, raw = next(it)
-                msg = reader.deserialize(raw, conn.msgtype)
             except StopIteration:
                 return
             except Exception as err:
                 raise DynSlamError(
-                    f"{p}: cannot read a message of {', '.join(names)} ({type(err).__name__}: {err}); "
+                    f"{p}: cannot read a message of {', '.join(names)} ({type(err).__name__}: {_short(err)}); "
                     f"the bag looks corrupt or truncated"
                 ) from err
             index = counts.get(conn.topic, 0)
             counts[conn.topic] = index + 1
+            msg = _decode(reader, raw, conn.msgtype, p, conn.topic, index, skip=on_bad is not None,
+                          hint=decode_hint)
+            if msg is None:
+                on_bad(conn.topic, index)  # type: ignore[misc]
+                continue
             yield conn.topic, conn.msgtype, index, t_ns * 1e-9, msg
+
+
+def topic_counts(path: str | os.PathLike[str]) -> dict[str, tuple[str, int]]:
+    """Every topic of a bag → (message type, message count from the bag's index)."""
+    p = Path(path)
+    with _open_bag(p) as (reader, _):
+        return {name: (info.msgtype or "?", int(info.msgcount)) for name, info in sorted(reader.topics.items())}
+
+
+def read_scan_topics(path: str | os.PathLike[str], topics: Iterable[str], *,
+                     on_bad: Callable[[str, int], None] | None = None) -> Iterator[tuple[str, int, Scan]]:
+    """Yield ``(topic, index, Scan)`` of several LaserScan topics in one pass, in the bag's time order.
+
+    ``index`` counts each topic's messages from 0. A message that cannot be decoded or is no
+    valid LaserScan raises DynSlamError naming topic and index, or, with ``on_bad``, is
+    passed over after ``on_bad(topic, index)`` (``--skip-bad``).
+    """
+    p = Path(path)
+    for topic, _, index, _, msg in read_topic_messages(p, topics, on_bad=on_bad,
+                                                       decode_hint="use --skip-bad to drop such messages"):
+        try:
+            scan = _scan_from_msg(msg, p, topic, index)
+        except DynSlamError as err:
+            if on_bad is None:
+                raise DynSlamError(f"{err}; use --skip-bad to drop such messages") from err
+            on_bad(topic, index)
+            continue
+        yield topic, index, scan
 
 
 # --------------------------------------------------------------------------- scans
@@ -435,8 +483,8 @@ class RosbagSource:
         if topic is None:
             if len(scans) > 1:
                 raise DynSlamError(
-                    f"{self.path}: {len(scans)} LaserScan topics ({', '.join(scans)}); "
-                    f"choose one with --topic"
+                    f"{self.path}: {len(scans)} LaserScan topics ({', '.join(scans)}); choose one with --topic "
+                    f"(e.g. --topic {next(iter(scans))}); 'dynslam2d info {self.path}' describes each"
                 )
             return next(iter(scans))
         if not topic.strip():
