@@ -8,6 +8,15 @@ how far the optimised trajectory (``trajectory.tum``) is from the front end's (`
 
     python benchmarks/bench_jumps.py steps results/n2r results/csail
 
+``reference RUN_DIR LOG [--window A:B]``: for a run of a CARMEN log whose pose fields are corrected poses (the
+flirtlib logs' TORO poses, GMapping's ``*-corrected.log.gz``), each flagged step of the front end
+(``trajectory_frontend.tum``) against the same two scans' step in the log's ``laser_pose``: fine (< 0.1 m off) or
+wrong (>= 0.25 m); the rule on the corrected poses themselves; how the time steps relate to the steps; what other
+``jump_shift`` / ``jump_ratio`` (and a regular-time-step guard) would flag; with ``--window`` each pose of scans
+A..B-1 relative to scan A-1 in both::
+
+    python benchmarks/bench_jumps.py reference results/intel ../shared/data/intel/intel-lab.flirtlib.log
+
 ``loops INPUT [KEY=VALUE...] [--topic T] [--nodes A:B]``: one run with the loop closer's local searches traced:
 for every keyframe in A:B and submap searched, the correlative score and runner-up, how far the match moved the
 keyframe from the front end's pose, and the refined match's support (count, share of the query points) against
@@ -59,6 +68,68 @@ def steps(dirs: list[str]) -> None:
             diff = np.hypot(*(q[:, :2] - p[:, :2]).T)
             print(f"  optimised vs front end: max {diff.max():.3f} m (scan {int(np.argmax(diff))}), median "
                   f"{np.median(diff):.3f} m")
+
+
+def _rel(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Pose ``q`` in the frame of pose ``p`` (x, y m; θ rad wrapped)."""
+    c, s = math.cos(p[2]), math.sin(p[2])
+    dx, dy = q[0] - p[0], q[1] - p[1]
+    return np.array([c * dx + s * dy, -s * dx + c * dy, math.remainder(q[2] - p[2], 2 * math.pi)])
+
+
+def _span(v: np.ndarray, fmt: str = ".3f") -> str:
+    return f"{v.min():{fmt}}–{v.max():{fmt}}" if v.size else "—"
+
+
+def reference(run_dir: str, log: str, window: str | None) -> None:
+    from dynslam2d.io.carmen import CarmenSource
+
+    d = Path(run_dir)
+    sc = Config.model_validate(__import__("yaml").safe_load((d / "config.yaml").read_text())).slam
+    t, p = _tum(d / "trajectory_frontend.tum")
+    recs = list(CarmenSource(log).records())
+    rp = np.array([[r.laser_pose.x, r.laser_pose.y, r.laser_pose.theta] for r in recs])
+    if len(recs) != len(t) or not np.allclose([r.scan.stamp for r in recs], t, atol=1e-6):
+        raise SystemExit(f"{log}: {len(recs)} scans, the run {len(t)}: not the run's input")
+    err = np.zeros(len(t))  # each step's translation against the corrected step, m
+    err[1:] = [math.hypot(*(_rel(p[i - 1], p[i])[:2] - _rel(rp[i - 1], rp[i])[:2])) for i in range(1, len(t))]
+    flag, shift, _ = jump_flags(t, p, sc.jump_shift, sc.jump_ratio, sc.jump_turn)
+    ratio = shift / np.maximum(step_excess(t, p)[2], 1e-9)
+    ref_flag = jump_flags(t, rp, sc.jump_shift, sc.jump_ratio, sc.jump_turn)[0]
+    print(f"{d}: {len(t)} scans, {int(flag.sum())} flagged; the same rule on the corrected poses flags "
+          f"{int(ref_flag.sum())} ({int((flag & ref_flag).sum())} of ours among them)")
+    for name, m in (("fine (< 0.1 m)", flag & (err < 0.1)), ("between", flag & (err >= 0.1) & (err < 0.25)),
+                    ("wrong (>= 0.25 m)", flag & (err >= 0.25))):
+        print(f"  {name}: {int(m.sum())}, step error {_span(err[m])} m, excess {_span(shift[m])} m, "
+              f"{_span(ratio[m], '.1f')} predicted steps; scans {np.flatnonzero(m).tolist()}")
+    dt = np.diff(t)
+    ref_step = np.hypot(*np.diff(rp[:, :2], axis=0).T)
+    print(f"  time steps: {100 * np.mean(dt <= 0.004):.0f} % <= 4 ms, {int((dt > 2).sum())} > 2 s, median "
+          f"{np.median(dt):.3f} s; correlation of the corrected step length with the time step "
+          f"{np.corrcoef(ref_step, dt)[0, 1]:.2f}")
+    med = np.array([np.median(dt[max(0, k - 3):k]) if k >= 3 else np.nan for k in range(len(dt))])
+    regular = np.zeros(len(t), dtype=bool)
+    regular[1:] = np.maximum(dt, med) / np.minimum(dt, med) <= 1.5  # NaN (no three steps before) -> False
+    for shift_m, r in ((0.25, 3.0), (0.35, 3.0), (0.5, 3.0), (0.25, 10.0), (0.5, 10.0)):
+        f = jump_flags(t, p, shift_m, r)[0]
+        print(f"  jump_shift {shift_m}, jump_ratio {r:g}: " + "; ".join(
+            f"{label}{int(g.sum())} flags, {int((g & (err >= 0.25)).sum())} wrong, {int((g & (err < 0.1)).sum())} fine"
+            for label, g in (("", f), ("time step within 1.5x of the 3 before: ", f & regular))))
+    a, b = p[:, :2] - p[:, :2].mean(0), rp[:, :2] - rp[:, :2].mean(0)
+    u, _, vt = np.linalg.svd(a.T @ b)  # rigid 2D alignment (Umeyama 1991, without scale)
+    rot = vt.T @ np.diag([1.0, np.sign(np.linalg.det(vt.T @ u.T))]) @ u.T
+    res = np.linalg.norm(a @ rot.T - b, axis=1)
+    length = [float(np.hypot(*np.diff(q[:, :2], axis=0).T).sum()) for q in (p, rp)]
+    print(f"  whole run: path {length[0]:.1f} m against {length[1]:.1f} m, {np.sqrt(np.mean(res ** 2)):.3f} m RMSE "
+          f"against the corrected poses after a rigid alignment")
+    if window:
+        lo, hi = (int(v) for v in window.split(":"))
+        for i in range(lo, hi):
+            x, y = _rel(p[lo - 1], p[i]), _rel(rp[lo - 1], rp[i])
+            off = math.degrees(math.remainder(x[2] - y[2], 2 * math.pi))
+            print(f"    scan {i}: {t[i] - t[0]:.2f} s, front end {x[0]:+.3f} {x[1]:+.3f} m {math.degrees(x[2]):+.1f} "
+                  f"deg, corrected {y[0]:+.3f} {y[1]:+.3f} m {math.degrees(y[2]):+.1f} deg: off "
+                  f"{math.hypot(*(x[:2] - y[:2])):.3f} m {off:+.1f} deg")
 
 
 def loops(inp: str, topic: str | None, nodes: str, sets: list[str]) -> None:
@@ -116,6 +187,10 @@ def main() -> None:
     sub = ap.add_subparsers(dest="cmd", required=True)
     s1 = sub.add_parser("steps")
     s1.add_argument("dirs", nargs="+")
+    s3 = sub.add_parser("reference")
+    s3.add_argument("run_dir")
+    s3.add_argument("log")
+    s3.add_argument("--window", default=None, metavar="A:B")
     s2 = sub.add_parser("loops")
     s2.add_argument("input")
     s2.add_argument("--topic", default=None)
@@ -124,6 +199,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.cmd == "steps":
         steps(args.dirs)
+    elif args.cmd == "reference":
+        reference(args.run_dir, args.log, args.window)
     else:
         loops(args.input, args.topic, args.nodes, args.sets)
 
