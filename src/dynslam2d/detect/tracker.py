@@ -632,6 +632,8 @@ class Tracker:
             no_prior = self._no_prior.get(m)
             if no_prior is None:
                 # (no track prior: the same arrays for every scan with m detections; the kernel only reads them)
+                if len(self._no_prior) >= 64:
+                    self._no_prior.clear()
                 no_prior = self._no_prior[m] = (np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool),
                                                 np.full(m, -1.0), np.zeros(m))
             self._default = self._measure_rows(*no_prior)
