@@ -195,6 +195,37 @@ def test_free_space_kernel_matches_numpy(fov) -> None:
     assert 200 < got.sum() < 4800  # both answers occur
 
 
+def test_free_space_references_and_flags_into_a_given_mask() -> None:
+    """The reference scans are the buffered ones nearest each reference age (the first on ties, as np.argmin of the
+    age differences), each once and only if older than now; ``seen_through_xy`` ORs their verdicts into the mask
+    it is given (points already set stay set), the verdicts of ``seen_through``."""
+    sim = simulate("crowd", duration=1.0)
+    poses = [Pose2D.from_array(p) for p in sim.ground_truth.poses_in("first")]
+    mem = FreeSpaceMemory(ref_ages=(0.3, 0.8, 0.3))
+    for scan, pose in zip(sim.scans[:20], poses[:20]):
+        mem.add(scan, pose, scan.valid_mask())
+    buf = list(mem._buf)
+    stamps = np.array([b.stamp for b in buf])
+    for now in (float(stamps[-1]), float(stamps[-1]) + 0.05, float(stamps[10]), 0.5 * (stamps[3] + stamps[4]) + 0.3):
+        want = []
+        ages = now - stamps
+        for a in mem.ref_ages:
+            j = int(np.argmin(np.abs(ages - a)))
+            if ages[j] > 0.0 and buf[j] not in want:
+                want.append(buf[j])
+        assert mem._refs(now) == want
+    assert len(mem._refs(float(stamps[-1]))) == 2  # the second age 0.3 picks the same scan: once
+    rng = np.random.default_rng(6)
+    pts = rng.uniform(-8.0, 8.0, size=(3000, 2))
+    now = float(stamps[-1]) + 0.05
+    base = mem.seen_through(pts, now)
+    pre = rng.random(3000) < 0.1
+    got = pre.copy()
+    mem.seen_through_xy(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), now, got)
+    np.testing.assert_array_equal(got, base | pre)
+    assert 100 < base.sum() < 2900
+
+
 def test_fragment_hosts_match_the_per_track_test() -> None:
     rng = np.random.default_rng(5)
     tx, ty = rng.uniform(-3, 3, 6), rng.uniform(-3, 3, 6)
