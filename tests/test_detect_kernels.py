@@ -20,8 +20,12 @@ from dynslam2d.detect.kernels import (
     fit_params,
     fragment_hosts,
     kalman_update_batch,
+    leg_pairs,
+    mask_fractions,
     measure_batch,
+    merge_leg_pairs,
     segment_means,
+    world_points,
 )
 from dynslam2d.detect.layout import (
     F_HI1,
@@ -191,6 +195,37 @@ def test_free_space_kernel_matches_numpy(fov) -> None:
     assert 200 < got.sum() < 4800  # both answers occur
 
 
+def test_free_space_references_and_flags_into_a_given_mask() -> None:
+    """The reference scans are the buffered ones nearest each reference age (the first on ties, as np.argmin of the
+    age differences), each once and only if older than now; ``seen_through_xy`` ORs their verdicts into the mask
+    it is given (points already set stay set), the verdicts of ``seen_through``."""
+    sim = simulate("crowd", duration=1.0)
+    poses = [Pose2D.from_array(p) for p in sim.ground_truth.poses_in("first")]
+    mem = FreeSpaceMemory(ref_ages=(0.3, 0.8, 0.3))
+    for scan, pose in zip(sim.scans[:20], poses[:20]):
+        mem.add(scan, pose, scan.valid_mask())
+    buf = list(mem._buf)
+    stamps = np.array([b.stamp for b in buf])
+    for now in (float(stamps[-1]), float(stamps[-1]) + 0.05, float(stamps[10]), 0.5 * (stamps[3] + stamps[4]) + 0.3):
+        want = []
+        ages = now - stamps
+        for a in mem.ref_ages:
+            j = int(np.argmin(np.abs(ages - a)))
+            if ages[j] > 0.0 and buf[j] not in want:
+                want.append(buf[j])
+        assert mem._refs(now) == want
+    assert len(mem._refs(float(stamps[-1]))) == 2  # the second age 0.3 picks the same scan: once
+    rng = np.random.default_rng(6)
+    pts = rng.uniform(-8.0, 8.0, size=(3000, 2))
+    now = float(stamps[-1]) + 0.05
+    base = mem.seen_through(pts, now)
+    pre = rng.random(3000) < 0.1
+    got = pre.copy()
+    mem.seen_through_xy(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), now, got)
+    np.testing.assert_array_equal(got, base | pre)
+    assert 100 < base.sum() < 2900
+
+
 def test_fragment_hosts_match_the_per_track_test() -> None:
     rng = np.random.default_rng(5)
     tx, ty = rng.uniform(-3, 3, 6), rng.uniform(-3, 3, 6)
@@ -228,6 +263,92 @@ def test_pairwise_sum_and_segment_means_round_like_numpy() -> None:
     assert means[1] == 0.0
     for c in (0, 2, 3):
         assert means[c] == v[off[c]:off[c + 1]].mean()
+
+
+def test_mask_fractions_equal_segment_means_of_the_masks() -> None:
+    """The tracker's per-detection fractions: the count over the length, bit for bit segment_means of 0 / 1."""
+    rng = np.random.default_rng(3)
+    off = np.array([0, 5, 5, 300, 301, 1303], dtype=np.int64)
+    masks = rng.random((4, 1303)) < np.array([[0.02], [0.5], [0.9], [0.37]])
+    got = mask_fractions(masks, off)
+    assert got.shape == (4, 5) and (got[:, 1] == 0.0).all()
+    for r in range(4):
+        want = segment_means(masks[r].astype(np.float64), off)
+        assert got[r].tobytes() == want.tobytes()
+    assert 0.0 < got[0, 4] < got[3, 4] < got[1, 4] < got[2, 4] < 1.0
+
+
+def test_world_points_are_the_pose_transform_bit_for_bit(scenes) -> None:
+    """The kernel that maps the beams into the map frame gives the numpy arithmetic the tracker had (the same
+    operations in the same order; invalid beams at the pose)."""
+    cfg = DetectConfig()
+    for scan, pose in scenes[:6]:
+        seg = segment_scan(scan, cfg.segment)
+        valid = scan.valid_mask() & (scan.ranges > 0.0)
+        cos_a, sin_a = np.cos(scan.angles), np.sin(scan.angles)
+        c, s = math.cos(pose.theta), math.sin(pose.theta)
+        r = np.where(valid, scan.ranges, 0.0)
+        lx, ly = r * cos_a, r * sin_a
+        ax, ay = c * lx - s * ly + pose.x, s * lx + c * ly + pose.y
+        got = world_points(scan.ranges, valid, cos_a, sin_a, c, s, float(pose.x), float(pose.y), seg.beams)
+        for g, w in zip(got, (ax, ay, ax[seg.beams], ay[seg.beams], np.column_stack((ax, ay))[seg.beams])):
+            assert g.shape == w.shape and g.tobytes() == w.tobytes()
+        assert (got[0][~valid] == pose.x).all()
+
+
+def _merge_numpy(first, second, px, py, beams, starts, npts, kinds, fits, lohi, rel):
+    """The leg merge as the tracker's numpy code did it (pair by pair, concatenations)."""
+    pairs = list(zip(first.tolist(), second.tolist()))
+    drop = {j for pr in pairs for j in pr}
+    ki = np.array([j for j in range(starts.shape[0]) if j not in drop], dtype=np.int64)
+    m, n0 = len(pairs), px.shape[0]
+    new_fits, new_lohi = np.zeros((m, fits.shape[1])), np.empty((m, 4))
+    new_starts, new_npts, ext_px, ext_py, ext_b = [], [], [px], [py], []
+    for r, (a, b) in enumerate(pairs):
+        sa, sb = slice(starts[a], starts[a] + npts[a]), slice(starts[b], starts[b] + npts[b])
+        pts = np.concatenate((np.column_stack((px[sa], py[sa])), np.column_stack((px[sb], py[sb]))))
+        mid = 0.5 * (fits[a, FIT_CENTROID] + fits[b, FIT_CENTROID])
+        new_fits[r, 6:8] = mid
+        new_fits[r, FIT_CENTROID] = mid
+        new_lohi[r, :2], new_lohi[r, 2:] = pts.min(axis=0), pts.max(axis=0)
+        new_starts.append(n0)
+        new_npts.append(pts.shape[0])
+        ext_px.append(pts[:, 0])
+        ext_py.append(pts[:, 1])
+        ext_b.append(np.concatenate((beams[sa], beams[sb])))
+        n0 += pts.shape[0]
+    return (ki, np.concatenate((kinds[ki], np.zeros(m, dtype=kinds.dtype))), np.concatenate((fits[ki], new_fits)),
+            np.concatenate((lohi[ki], new_lohi)), np.concatenate((rel[ki], np.zeros((m, 2, 2), dtype=bool))),
+            np.concatenate((starts[ki], np.array(new_starts, dtype=np.int64))),
+            np.concatenate((npts[ki], np.array(new_npts, dtype=np.int64))), np.concatenate(ext_px),
+            np.concatenate(ext_py), np.concatenate(ext_b))
+
+
+def test_merge_leg_pairs_matches_the_numpy_merge() -> None:
+    """Legs of simulated people (small clusters in pairs) among larger clusters: the kernel's merged arrays are
+    those of the pair-by-pair numpy merge, bit for bit."""
+    rng = np.random.default_rng(4)
+    sizes = rng.integers(2, 9, 24)
+    sizes[::5] = 30  # some clusters too large to be legs
+    offsets = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
+    centres = rng.uniform(-6.0, 6.0, (24, 2))
+    centres[1::2] = centres[::2] + rng.uniform(-0.25, 0.25, (12, 2))  # leg pairs 0.1-0.35 m apart
+    spread = np.where(sizes == 30, 1.0, 0.04)
+    px = np.concatenate([centres[c, 0] + spread[c] * rng.normal(size=sizes[c]) for c in range(24)])
+    py = np.concatenate([centres[c, 1] + spread[c] * rng.normal(size=sizes[c]) for c in range(24)])
+    beams = rng.permutation(2 * px.shape[0])[:px.shape[0]].astype(np.int64)
+    fits = fit_clusters(px, py, offsets, np.ones(24, dtype=bool), search_angles(1.0), CRITERIA["variance"], 0.01,
+                        5, 5)
+    lohi = np.column_stack((fits[:, F_LO1], fits[:, F_LO2], fits[:, F_HI1], fits[:, F_HI2]))
+    rel = rng.random((24, 2, 2)) < 0.5
+    kinds = rng.integers(0, 3, 24).astype(np.int8)
+    starts, npts = offsets[:-1], offsets[1:] - offsets[:-1]
+    first, second = leg_pairs(lohi, npts, fits, 0.35, 0.6)
+    assert first.shape[0] >= 4
+    got = merge_leg_pairs(first, second, px, py, beams, starts, npts, kinds, fits, lohi, rel)
+    want = _merge_numpy(first, second, px, py, beams, starts, npts, kinds, fits, lohi, rel)
+    for g, w in zip(got, want):
+        assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes()
 
 
 def test_lu_solve3_matches_lapack_and_flags_singular() -> None:

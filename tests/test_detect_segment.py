@@ -115,3 +115,50 @@ def test_scan_without_valid_returns(value: float) -> None:
 def test_single_closed_ring_is_one_cluster() -> None:
     seg = segment_scan(full_scan(np.full(360, 2.0)))
     assert seg.n_clusters == 1 and seg.sizes().tolist() == [360]
+
+
+def _links_reference(scan: Scan, cfg: SegmentConfig, wrap: bool) -> list[bool]:
+    """Paper Eq. 1 per pair of consecutive valid beams, straight from the formula (law of cosines gap against the
+    clamped Borges–Aldon threshold, trigonometry computed for every pair)."""
+    idx = np.flatnonzero(scan.valid_mask() & (scan.ranges > 0.0))
+    n, m, lam = scan.n_beams, idx.shape[0], math.radians(cfg.lambda_deg)
+    out = []
+    for j in range(m if wrap else m - 1):
+        a, b = int(idx[j]), int(idx[(j + 1) % m])
+        if (b - a - 1 if b > a else b + n - a - 1) > cfg.max_skip_beams:
+            out.append(False)
+            continue
+        ra, rb = scan.ranges[a], scan.ranges[b]
+        dphi = abs(scan.angles[b] - scan.angles[a])
+        dphi = 2.0 * math.pi - dphi if dphi > math.pi else dphi
+        gap2 = max(ra * ra + rb * rb - 2.0 * ra * rb * math.cos(dphi), 0.0)
+        thr = cfg.d_max if dphi >= lam else min(max(ra * math.sin(dphi) / math.sin(lam - dphi)
+                                                    + 3.0 * cfg.sigma_r, cfg.d_min), cfg.d_max)
+        out.append(bool(gap2 < thr * thr))
+    return out
+
+
+@pytest.mark.parametrize("full", [True, False])
+def test_cached_trigonometry_gives_the_links_of_the_formula(full: bool) -> None:
+    """The segmentation reads the adjacent beams' trigonometry from a per-geometry cache and computes it only for
+    pairs across dropped beams: every cluster boundary is where the formula puts a break, on the first scan of a
+    geometry (cache filled) and on the next ones (cache read), and with the tracker's pre-checked mask."""
+    rng = np.random.default_rng(7)
+    cfg = SegmentConfig()
+    for trial in range(4):
+        r = np.repeat(rng.uniform(0.5, 12.0, 72), 10) + rng.normal(0.0, 0.02, 720)
+        r[rng.random(720) < 0.06] = np.inf  # dropped beams: links across 1-3 of them use their own angles
+        scan = full_scan(r, stamp=float(trial)) if full else fan_scan(r)
+        wrap = full and is_full_circle(scan)
+        links = _links_reference(scan, cfg, wrap)
+        valid = scan.valid_mask() & (scan.ranges > 0.0)
+        for seg in (segment_scan(scan, cfg), segment_scan(scan, cfg, valid, checked=True)):
+            idx = np.flatnonzero(valid)
+            pos = {int(b): j for j, b in enumerate(idx)}
+            for c in range(seg.n_clusters):
+                members = seg.cluster(c)
+                for a, b in zip(members[:-1], members[1:]):
+                    assert links[pos[int(a)]], (trial, a, b)  # linked inside a cluster
+                assert not links[pos[int(members[-1])] % len(links)] or (not wrap and pos[int(members[-1])] ==
+                                                                          len(idx) - 1)
+            assert 5 < seg.n_clusters < 200 and seg.wrapped == wrap

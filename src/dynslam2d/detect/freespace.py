@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dynslam2d.detect.frozen import fast_init
 from dynslam2d.detect.kernels import seen_through_kernel
 from dynslam2d.types import Pose2D, Scan
 
@@ -34,6 +35,9 @@ class _Ref:
     full: bool
     reach: float  # a no-return beam saw through everything closer than this, m
     inv: tuple[float, float, float]  # pose.inverse() as (x, y, θ): map → reference sensor frame (made once)
+
+
+_make_ref = fast_init(_Ref)  # (the frozen dataclass without its __init__'s object.__setattr__, detect/frozen.py)
 
 
 class FreeSpaceMemory:
@@ -60,8 +64,8 @@ class FreeSpaceMemory:
         r = np.where(valid, scan.ranges, np.inf)
         full = scan.n_beams * abs(scan.angle_increment) >= 2.0 * math.pi - 1.5 * abs(scan.angle_increment)
         inv = pose.inverse()
-        return _Ref(float(scan.stamp), pose, r, float(scan.angle_min), float(scan.angle_increment), full,
-                    float(scan.range_max), (inv.x, inv.y, inv.theta))
+        return _make_ref(float(scan.stamp), pose, r, float(scan.angle_min), float(scan.angle_increment), full,
+                         float(scan.range_max), (inv.x, inv.y, inv.theta))
 
     def add(self, scan: Scan, pose: Pose2D, valid: np.ndarray, ref: _Ref | None = None) -> None:
         """Remember ``scan`` (taken at ``pose``, map frame); ``valid`` marks beams with a return."""
@@ -73,12 +77,24 @@ class FreeSpaceMemory:
         out: list[_Ref] = []
         if not self._buf:
             return out
-        ages = np.array([now - b.stamp for b in self._buf])
+        ages = [now - b.stamp for b in self._buf]
         for a in self.ref_ages:
-            j = int(np.argmin(np.abs(ages - a)))
+            # the buffered scan whose age is nearest a (the first on ties, as np.argmin; ages are finite)
+            j, best = 0, abs(ages[0] - a)
+            for i in range(1, len(ages)):
+                d = abs(ages[i] - a)
+                if d < best:
+                    j, best = i, d
             if ages[j] > 0.0 and self._buf[j] not in out:
                 out.append(self._buf[j])
         return out
+
+    def seen_through_xy(self, px: np.ndarray, py: np.ndarray, now: float, free: np.ndarray) -> None:
+        """OR into ``free`` ((n,) bool) the points (``px``, ``py``: (n,) C-contiguous map-frame x, y, m) that lay in
+        space a reference scan saw as free: :meth:`seen_through` without the copies."""
+        if px.shape[0]:
+            for ref in self._refs(now):
+                self._test(ref, px, py, free)
 
     def seen_through(self, points: np.ndarray, now: float) -> np.ndarray:
         """(n,) bool: the (n, 2) map-frame points lay in space that a reference scan saw as free."""

@@ -210,6 +210,146 @@ def _endpoint_real(u: np.ndarray, v: np.ndarray, pos: int, k: int, lo_k: float, 
 
 
 @njit(cache=True)
+def world_points(ranges: np.ndarray, valid: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, c: float, s: float,
+                 x: float, y: float, beams: np.ndarray) -> tuple:
+    """The scan's beams in the map frame (pose ``x, y`` and cos / sin ``c, s`` of its θ; ``cos_a``, ``sin_a``: the
+    beam angles' cos / sin; beams not ``valid`` at the pose's origin): (ax, ay) per beam, (px, py) = (ax, ay) of
+    ``beams`` and the same as (m, 2) points, m. The arithmetic of :meth:`dynslam2d.types.Pose2D.transform_points`
+    on ``r·(cos, sin)`` in the same order (one pass instead of eight numpy temporaries)."""
+    n = ranges.shape[0]
+    ax = np.empty(n)
+    ay = np.empty(n)
+    for i in range(n):
+        r = ranges[i] if valid[i] else 0.0
+        lx = r * cos_a[i]
+        ly = r * sin_a[i]
+        ax[i] = c * lx - s * ly + x
+        ay[i] = s * lx + c * ly + y
+    m = beams.shape[0]
+    px = np.empty(m)
+    py = np.empty(m)
+    pts = np.empty((m, 2))
+    for q in range(m):
+        px[q] = ax[beams[q]]
+        py[q] = ay[beams[q]]
+        pts[q, 0] = px[q]
+        pts[q, 1] = py[q]
+    return ax, ay, px, py, pts
+
+
+@njit(cache=True)
+def mask_fractions(masks: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """(q, k) fraction of True in each segment ``masks[r, offsets[c]:offsets[c+1]]`` of each row r (0 for an empty
+    segment): the count over the length, which is the value of :func:`segment_means` of the mask as 0 / 1 floats
+    (every partial sum of 0 / 1 values is an exact integer, in any order)."""
+    q = masks.shape[0]
+    k = offsets.shape[0] - 1
+    out = np.zeros((q, k))
+    for r in range(q):
+        for c in range(k):
+            a = offsets[c]
+            n = offsets[c + 1] - a
+            if n > 0:
+                cnt = 0
+                for i in range(a, a + n):
+                    if masks[r, i]:
+                        cnt += 1
+                out[r, c] = cnt / n
+    return out
+
+
+@njit(cache=True)
+def merge_leg_pairs(first: np.ndarray, second: np.ndarray, px: np.ndarray, py: np.ndarray, beams: np.ndarray,
+                    starts: np.ndarray, npts: np.ndarray, kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray,
+                    rel: np.ndarray) -> tuple:
+    """The per-detection arrays after ``Tracker._merge_legs`` merged the leg pairs (``first[r]``, ``second[r]``) into
+    people (map frame, m): the detections in no pair first, in their order, then one per pair, in pair order.
+
+    A person is measured with the point model at the middle of the legs' centroids, 0.5·(c_a + c_b), with the
+    bounding box of both legs' points (lo = min, hi = max per coordinate; rectangle axis angle 0, no real bound);
+    its points (``px``, ``py``) and ``beams`` are the first leg's then the second's, appended after the scan's
+    points. Returns (kept detection indices, kinds, fits, lohi, rel, starts, npts, px, py, the persons' beams
+    concatenated)."""
+    m = first.shape[0]
+    k = starts.shape[0]
+    paired = np.zeros(k, dtype=np.bool_)
+    added = 0
+    for r in range(m):
+        paired[first[r]] = True
+        paired[second[r]] = True
+        added += npts[first[r]] + npts[second[r]]
+    nk = k - 2 * m
+    ki = np.empty(nk, dtype=np.int64)
+    q = 0
+    for j in range(k):
+        if not paired[j]:
+            ki[q] = j
+            q += 1
+    nf = fits.shape[1]
+    kinds2 = np.zeros(nk + m, dtype=kinds.dtype)
+    fits2 = np.zeros((nk + m, nf))
+    lohi2 = np.empty((nk + m, 4))
+    rel2 = np.zeros((nk + m, 2, 2), dtype=np.bool_)
+    starts2 = np.empty(nk + m, dtype=starts.dtype)
+    npts2 = np.empty(nk + m, dtype=npts.dtype)
+    for q in range(nk):
+        j = ki[q]
+        kinds2[q] = kinds[j]
+        for c in range(nf):
+            fits2[q, c] = fits[j, c]
+        for c in range(4):
+            lohi2[q, c] = lohi[j, c]
+        for u in range(2):
+            for w in range(2):
+                rel2[q, u, w] = rel[j, u, w]
+        starts2[q] = starts[j]
+        npts2[q] = npts[j]
+    n0 = px.shape[0]
+    px2 = np.empty(n0 + added)
+    py2 = np.empty(n0 + added)
+    mbeams = np.empty(added, dtype=beams.dtype)
+    for i in range(n0):
+        px2[i] = px[i]
+        py2[i] = py[i]
+    o = n0
+    for r in range(m):
+        row = nk + r
+        lo0 = np.inf
+        lo1 = np.inf
+        hi0 = -np.inf
+        hi1 = -np.inf
+        starts2[row] = o
+        for leg in range(2):
+            j = first[r] if leg == 0 else second[r]
+            a = starts[j]
+            for i in range(a, a + npts[j]):
+                x = px[i]
+                y = py[i]
+                px2[o] = x
+                py2[o] = y
+                mbeams[o - n0] = beams[i]
+                o += 1
+                lo0 = min(lo0, x)
+                hi0 = max(hi0, x)
+                lo1 = min(lo1, y)
+                hi1 = max(hi1, y)
+        npts2[row] = o - starts2[row]
+        a = first[r]
+        b = second[r]
+        mx = 0.5 * (fits[a, F_CENTROID_X] + fits[b, F_CENTROID_X])
+        my = 0.5 * (fits[a, F_CENTROID_Y] + fits[b, F_CENTROID_Y])
+        fits2[row, F_CIRCLE_X] = mx
+        fits2[row, F_CIRCLE_Y] = my
+        fits2[row, F_CENTROID_X] = mx
+        fits2[row, F_CENTROID_Y] = my
+        lohi2[row, L_LO1] = lo0
+        lohi2[row, L_LO2] = lo1
+        lohi2[row, L_HI1] = hi0
+        lohi2[row, L_HI2] = hi1
+    return ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams
+
+
+@njit(cache=True)
 def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: np.ndarray, fits: np.ndarray,
                    structure: np.ndarray, sx: float, sy: float, ranges: np.ndarray, valid: np.ndarray,
                    ax: np.ndarray, ay: np.ndarray, wrapped: bool, max_skip: int, range_max: float, dphi: float,
@@ -564,6 +704,8 @@ def seen_through_kernel(px: np.ndarray, py: np.ndarray, ix: float, iy: float, it
     c = math.cos(ith)
     s = math.sin(ith)
     for i in range(n):
+        if free[i]:
+            continue  # (seen through by an earlier reference already: nothing to add)
         lx = c * px[i] - s * py[i] + ix
         ly = s * px[i] + c * py[i] + iy
         rho = math.hypot(lx, ly)

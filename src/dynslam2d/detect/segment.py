@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit
 
 from dynslam2d.detect.config import SegmentConfig
+from dynslam2d.detect.frozen import fast_init
 from dynslam2d.types import Scan
 
 
@@ -63,13 +64,76 @@ class Segmentation:
 
 
 @njit(cache=True)
-def _link_kernel(ranges: np.ndarray, angles: np.ndarray, valid_idx: np.ndarray, fixed: bool, fixed_gap: float,
-                 lam: float, three_sigma: float, d_min: float, d_max: float, max_skip: int,
-                 wrap: bool) -> np.ndarray:
-    """links[j] = 1 if valid beam j links to valid beam j+1 (the last one to the first when wrap)."""
-    m = valid_idx.shape[0]
-    links = np.zeros(m, dtype=np.uint8)
+def _adjacent_trig(angles: np.ndarray, lam: float, trig: np.ndarray) -> None:
+    """trig[a] = cos Δφ, sin Δφ, sin(λ − Δφ) and (Δφ ≥ λ) of beams a and a+1 (Δφ = |φ_{a+1} − φ_a|, folded to
+    [0, π]): the trigonometry of :func:`_link` for adjacent beams, made once per beam geometry."""
+    for a in range(angles.shape[0] - 1):
+        dphi = abs(angles[a + 1] - angles[a])
+        if dphi > math.pi:
+            dphi = 2.0 * math.pi - dphi
+        trig[a, 0] = math.cos(dphi)
+        trig[a, 1] = math.sin(dphi)
+        trig[a, 2] = math.sin(lam - dphi) if dphi < lam else 0.0
+        trig[a, 3] = 1.0 if dphi >= lam else 0.0
+
+
+@njit(cache=True)
+def _link(ranges: np.ndarray, angles: np.ndarray, trig: np.ndarray, a: int, b: int, fixed: bool, fixed_gap: float,
+          lam: float, three_sigma: float, d_min: float, d_max: float) -> bool:
+    """Valid beams a and b belong to the same cluster (paper Eq. 1): the gap between their points is below the
+    fixed or adaptive threshold; adjacent beams (b = a + 1) read their trigonometry from ``trig``."""
+    ra = ranges[a]
+    rb = ranges[b]
+    if b == a + 1:
+        cd = trig[a, 0]
+        sd = trig[a, 1]
+        sl = trig[a, 2]
+        wide = trig[a, 3] != 0.0
+    else:
+        dphi = abs(angles[b] - angles[a])
+        if dphi > math.pi:
+            dphi = 2.0 * math.pi - dphi
+        cd = math.cos(dphi)
+        wide = dphi >= lam
+        sd = math.sin(dphi)
+        sl = 0.0 if wide else math.sin(lam - dphi)
+    gap2 = ra * ra + rb * rb - 2.0 * ra * rb * cd  # law of cosines (as Datmo::Clustering)
+    if gap2 < 0.0:
+        gap2 = 0.0
+    if fixed:
+        thr = fixed_gap
+    else:
+        # paper Eq. 1 / Borges & Aldon 2004 ABD, clamped to [d_min, d_max]
+        if wide:
+            thr = d_max
+        else:
+            thr = ra * sd / sl + three_sigma
+            if thr < d_min:
+                thr = d_min
+            elif thr > d_max:
+                thr = d_max
+    return gap2 < thr * thr
+
+
+@njit(cache=True)
+def _segment_kernel(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, trig: np.ndarray, fill_trig: bool,
+                    fixed: bool, fixed_gap: float, lam: float, three_sigma: float, d_min: float, d_max: float,
+                    max_skip: int, wrap: bool, min_points: int, max_points: int) -> tuple:
+    """The whole segmentation in one pass: the valid beams of ``mask``, the links between consecutive ones (the
+    last to the first when ``wrap`` and more than two beams are valid), the runs of linked beams → (labels, beams,
+    offsets, structure, n_dropped, wrapped). ``fill_trig``: fill ``trig`` first (:func:`_adjacent_trig`)."""
     n = ranges.shape[0]
+    if fill_trig:
+        _adjacent_trig(angles, lam, trig)
+    valid_idx = np.empty(n, dtype=np.int64)
+    m = 0
+    for i in range(n):
+        if mask[i]:
+            valid_idx[m] = i
+            m += 1
+    wrap = wrap and m > 2
+    # links[j] = 1 if valid beam j links to valid beam j+1 (the last one to the first when wrap)
+    links = np.zeros(m, dtype=np.uint8)
     for j in range(m):
         if j == m - 1 and not wrap:
             break
@@ -78,41 +142,13 @@ def _link_kernel(ranges: np.ndarray, angles: np.ndarray, valid_idx: np.ndarray, 
         skipped = b - a - 1 if b > a else b + n - a - 1
         if skipped > max_skip or (m == 1):
             continue
-        ra = ranges[a]
-        rb = ranges[b]
-        dphi = abs(angles[b] - angles[a])
-        if dphi > math.pi:
-            dphi = 2.0 * math.pi - dphi
-        gap2 = ra * ra + rb * rb - 2.0 * ra * rb * math.cos(dphi)  # law of cosines (as Datmo::Clustering)
-        if gap2 < 0.0:
-            gap2 = 0.0
-        if fixed:
-            thr = fixed_gap
-        else:
-            # paper Eq. 1 / Borges & Aldon 2004 ABD, clamped to [d_min, d_max]
-            if dphi >= lam:
-                thr = d_max
-            else:
-                thr = ra * math.sin(dphi) / math.sin(lam - dphi) + three_sigma
-                if thr < d_min:
-                    thr = d_min
-                elif thr > d_max:
-                    thr = d_max
-        if gap2 < thr * thr:
+        if _link(ranges, angles, trig, a, b, fixed, fixed_gap, lam, three_sigma, d_min, d_max):
             links[j] = 1
-    return links
-
-
-@njit(cache=True)
-def _clusters_kernel(valid_idx: np.ndarray, links: np.ndarray, wrap: bool, n_beams: int,
-                     min_points: int) -> tuple:
-    """Runs of linked valid beams → (labels, beams, offsets, n_dropped)."""
-    m = valid_idx.shape[0]
-    labels = -np.ones(n_beams, dtype=np.int32)
+    labels = -np.ones(n, dtype=np.int32)
     beams = np.empty(m, dtype=np.int64)
     offsets = np.zeros(m + 1, dtype=np.int64)
     if m == 0:
-        return labels, beams[:0], offsets[:1], 0
+        return labels, beams[:0], offsets[:1], np.zeros(0, dtype=np.bool_), 0, wrap
     # start right after the last break so that no run is cut by the array end and clusters
     # come in scan order (a cluster wrapping past the end comes first)
     start = 0
@@ -143,7 +179,10 @@ def _clusters_kernel(valid_idx: np.ndarray, links: np.ndarray, wrap: bool, n_bea
             else:
                 dropped += 1
             count = 0
-    return labels, beams[:nb], offsets[:k + 1], dropped
+    structure = np.empty(k, dtype=np.bool_)
+    for c in range(k):
+        structure[c] = offsets[c + 1] - offsets[c] > max_points
+    return labels, beams[:nb], offsets[:k + 1], structure, dropped, wrap
 
 
 def is_full_circle(scan: Scan) -> bool:
@@ -152,7 +191,15 @@ def is_full_circle(scan: Scan) -> bool:
     return scan.n_beams * inc >= 2.0 * math.pi - 1.5 * inc
 
 
-def segment_scan(scan: Scan, config: SegmentConfig | None = None, valid: np.ndarray | None = None) -> Segmentation:
+#: per beam geometry (n, angle_min, angle_increment): the beam angles (:attr:`Scan.angles`, the same values for every
+#: scan of that geometry) and, per λ, the adjacent beams' trigonometry (:func:`_adjacent_trig`); a few entries
+_GEOMETRY: dict[tuple, tuple[np.ndarray, dict[float, np.ndarray]]] = {}
+_GEOMETRY_MAX = 16
+_make_segmentation = fast_init(Segmentation)  # (the frozen dataclass without its __init__'s object.__setattr__)
+
+
+def segment_scan(scan: Scan, config: SegmentConfig | None = None, valid: np.ndarray | None = None, *,
+                 checked: bool = False) -> Segmentation:
     """Split ``scan`` into clusters of consecutive beams (paper Eq. 1).
 
     Args:
@@ -160,20 +207,33 @@ def segment_scan(scan: Scan, config: SegmentConfig | None = None, valid: np.ndar
         config: segmentation parameters (defaults if None).
         valid: optional (n,) bool mask of beams to use (default ``scan.valid_mask()``; zero
             ranges are always excluded).
+        checked: ``valid`` is a C-contiguous bool mask that holds only beams of ``scan.valid_mask()`` with
+            a range > 0 already (the tracker's): used as it is.
 
     Returns:
         A :class:`Segmentation`; a scan with no valid return gives zero clusters.
     """
     cfg = config or SegmentConfig()
-    mask = scan.valid_mask() if valid is None else np.asarray(valid, dtype=bool) & scan.valid_mask()
-    mask &= scan.ranges > 0.0
-    valid_idx = np.flatnonzero(mask).astype(np.int64)
+    if checked and valid is not None:
+        mask = valid
+    else:
+        mask = scan.valid_mask() if valid is None else np.asarray(valid, dtype=bool) & scan.valid_mask()
+        mask &= scan.ranges > 0.0
+    key = (scan.ranges.shape[0], scan.angle_min, scan.angle_increment)
+    geo = _GEOMETRY.get(key)
+    if geo is None:
+        if len(_GEOMETRY) >= _GEOMETRY_MAX:
+            _GEOMETRY.clear()
+        geo = _GEOMETRY[key] = (scan.angles, {})
+    angles, trigs = geo
+    lam = math.radians(cfg.lambda_deg)
+    trig = trigs.get(lam)
+    fill = trig is None
+    if fill:
+        trig = trigs[lam] = np.zeros((max(key[0], 1), 4))
     wrap = {"auto": is_full_circle(scan), "always": True, "never": False}[cfg.wrap_around]
-    wrap = wrap and valid_idx.shape[0] > 2
-    links = _link_kernel(scan.ranges, scan.angles, valid_idx, cfg.mode == "fixed", float(cfg.fixed_gap),
-                         math.radians(cfg.lambda_deg), 3.0 * float(cfg.sigma_r), float(cfg.d_min),
-                         float(cfg.d_max), int(cfg.max_skip_beams), wrap)
-    labels, beams, offsets, dropped = _clusters_kernel(valid_idx, links, wrap, scan.n_beams, int(cfg.min_points))
-    structure = np.diff(offsets) > cfg.max_points
-    return Segmentation(labels=labels, beams=beams, offsets=offsets, structure=structure, wrapped=bool(wrap),
-                        n_dropped=int(dropped))
+    labels, beams, offsets, structure, dropped, wrapped = _segment_kernel(
+        scan.ranges, angles, mask, trig, fill, cfg.mode == "fixed", float(cfg.fixed_gap), lam,
+        3.0 * float(cfg.sigma_r), float(cfg.d_min), float(cfg.d_max), int(cfg.max_skip_beams), wrap,
+        int(cfg.min_points), int(cfg.max_points))
+    return _make_segmentation(labels, beams, offsets, structure, wrapped, dropped)

@@ -56,29 +56,29 @@ from dynslam2d.detect.kernels import (
     gate_costs,
     kalman_update_batch,
     leg_pairs,
+    mask_fractions,
     measure_batch,
+    merge_leg_pairs,
     nearest_ages,
     segment_means,
     size_jump_gate,
+    world_points,
 )
 from dynslam2d.detect.layout import (
     F_THETA,
     FIT_CENTROID,
     FIT_CIRCLE,
-    FIT_CIRCLE_CENTRE,
     KIND_CIRCLE,
     KIND_NAMES,
     KIND_POINT,
     KIND_RECT,
-    LOHI_HI,
-    LOHI_LO,
     SIZE_LOWER,
     SIZE_MEASURED,
     DetectionBatch,
     MeasureRows,
 )
 from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
-from dynslam2d.detect.mapevidence import MapView, map_evidence
+from dynslam2d.detect.mapevidence import MapView, map_evidence_kernel
 from dynslam2d.detect.measure import Detection, ScanDetection
 from dynslam2d.detect.segment import Segmentation, segment_scan
 from dynslam2d.detect.shapes import CRITERIA, fit_clusters, search_angles
@@ -272,7 +272,7 @@ class Tracker:
         self._trig: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
         self._batch: DetectionBatch | None = None  # per-detection arrays of the current scan (kernels)
         self._default: MeasureRows | None = None  # default measurements of the current scan's detections
-        self._no_prior: tuple | None = None  # measure_batch's "no track prior" arguments for the last m detections
+        self._no_prior: dict[int, tuple] = {}  # measure_batch's "no track prior" arguments for m detections, by m
         self._stacked: tuple[np.ndarray, np.ndarray] | None = None  # predicted X, P of all tracks
         self._lohi_l: list[list[float]] = []  # this scan's detections' lohi rows (lo1, lo2, hi1, hi2), m
         self._rel_l: list[list[list[bool]]] = []  # and their rel rows (real bounds)
@@ -541,41 +541,37 @@ class Tracker:
     def _detect(self, scan: Scan, pose: Pose2D) -> list[Detection]:
         cfg = self.config
         st = self.stats
-        seg = segment_scan(scan, cfg.segment)
+        ranges = scan.ranges
+        valid = scan.valid_mask()  # (a copy)
+        valid &= ranges > 0.0
+        seg = segment_scan(scan, cfg.segment, valid, checked=True)
         self.last_segmentation = seg
         st.clusters += seg.n_clusters
         st.dropped_small_clusters += seg.n_dropped
-        ranges = scan.ranges
-        valid = scan.valid_mask() & (ranges > 0.0)
         self._batch = None
         if seg.n_clusters == 0:
             self.last_detections = []
             if self._free is not None:
                 self._free.add(scan, pose, valid)
             return []
-        r = np.where(valid, ranges, 0.0)
         cos_a, sin_a = self._beam_trig(scan)
-        lx, ly = r * cos_a, r * sin_a
-        # pose.transform_points, split in x / y columns
-        c, s = math.cos(pose.theta), math.sin(pose.theta)
-        ax = c * lx - s * ly + pose.x
-        ay = s * lx + c * ly + pose.y
-        px = ax[seg.beams]
-        py = ay[seg.beams]
-        fits = fit_clusters(px, py, seg.offsets, ~seg.structure, self._angles, CRITERIA[cfg.fit.criterion],
+        # pose.transform_points of the beams (invalid ones at the pose), all beams and the clusters' ones
+        beams = seg.beams
+        ct, st_ = math.cos(pose.theta), math.sin(pose.theta)
+        ax, ay, px, py, pts = world_points(ranges, valid, cos_a, sin_a, ct, st_, float(pose.x),
+                                           float(pose.y), beams)
+        offsets = seg.offsets
+        fits = fit_clusters(px, py, offsets, ~seg.structure, self._angles, CRITERIA[cfg.fit.criterion],
                             cfg.fit.closeness_d0, cfg.fit.circle_min_points, cfg.fit.coarse_stride)
         # classify and bound every cluster in one pass (reference.classify_and_bound)
-        keep, kinds, lohi, rel = classify_batch(px, py, seg.beams, seg.offsets, fits, seg.structure, float(pose.x),
+        keep, kinds, lohi, rel = classify_batch(px, py, beams, offsets, fits, seg.structure, float(pose.x),
                                                 float(pose.y), ranges, valid, ax, ay, seg.wrapped,
                                                 int(cfg.segment.max_skip_beams), float(scan.range_max),
                                                 abs(float(scan.angle_increment)), extent_limit(cfg), self._fit_p)
         if cfg.segment.vehicle_max_extent > cfg.segment.max_extent:  # vehicle-size clusters (detect/vehicles.py)
-            admit_long_clusters(keep, fits, seg.offsets, px, py, self._map, cfg)
+            admit_long_clusters(keep, fits, offsets, px, py, self._map, cfg)
         idx = np.flatnonzero(keep)
         st.structure_clusters += seg.n_clusters - idx.shape[0]
-        pts = np.column_stack((px, py))
-        offsets = seg.offsets
-        beams = seg.beams
         dets: list[Detection] = []
         nd = idx.shape[0]
         if nd < seg.n_clusters:
@@ -592,32 +588,31 @@ class Tracker:
         # tests are per point, so only the detections' points are tested (structure clusters, most of the
         # points, are not detections)
         frac = fs = ff = fu = [0.0] * nd
-        if self._free is not None or self._map is not None:
+        free, view = self._free, self._map
+        if free is not None or view is not None:
             if nd < seg.n_clusters:
-                det_pts = pts[np.repeat(keep.astype(bool, copy=False), offsets[1:] - offsets[:-1])]
+                sel = np.repeat(keep.astype(bool, copy=False), offsets[1:] - offsets[:-1])
+                det_px, det_py = px[sel], py[sel]
                 det_off = np.zeros(nd + 1, dtype=np.int64)
                 np.cumsum(npts, out=det_off[1:])
             else:
-                det_pts, det_off = pts, offsets
-        masks = []  # per-point bool masks whose per-detection means are wanted
-        if self._free is not None:
-            self._cur_ref = self._free.make_ref(scan, pose, valid)
-            masks.append(self._free.seen_through(det_pts, float(scan.stamp)))
-            self._free.add(scan, pose, valid, self._cur_ref)
-        if self._map is not None:
-            tc = cfg.tracker
-            masks.extend(map_evidence(det_pts, self._map, tc.map_occupied_logodds, tc.map_free_logodds,
-                                      tc.map_free_radius))  # (structure, free, unknown)
-        if masks:
-            # (every fraction in one call: the masks one after the other, each detection's points a segment of
-            # each; a segment's mean does not depend on where it starts)
-            npt, q = det_off[-1], len(masks)
-            means = segment_means(np.concatenate(masks).astype(np.float64), np.concatenate(
-                [det_off[:-1] + i * npt for i in range(q - 1)] + [det_off + (q - 1) * npt])).tolist()
-            if self._free is not None:
-                frac, means = means[:nd], means[nd:]
-            if self._map is not None:
-                fs, ff, fu = means[:nd], means[nd:2 * nd], means[2 * nd:]
+                det_px, det_py, det_off = px, py, offsets
+            # per-point flags, one row each: seen through by an earlier scan; on structure, free, unknown in the map
+            ev = np.zeros((4 if view is not None else 1, det_px.shape[0]), dtype=bool)
+            if free is not None:
+                self._cur_ref = free.make_ref(scan, pose, valid)
+                free.seen_through_xy(det_px, det_py, float(scan.stamp), ev[0])
+                free.add(scan, pose, valid, self._cur_ref)
+            if view is not None:
+                tc = cfg.tracker
+                map_evidence_kernel(det_px, det_py, view.logodds, int(view.i0), int(view.j0), float(view.resolution),
+                                    float(tc.map_occupied_logodds), float(tc.map_free_logodds),
+                                    int(tc.map_free_radius), ev[1], ev[2], ev[3])
+            means = mask_fractions(ev, det_off).tolist()
+            if free is not None:
+                frac = means[0]
+            if view is not None:
+                fs, ff, fu = means[1:]
         # (their centroid, bounds, flags and circle stay rows of fits / lohi / rel until read: ScanDetection)
         for j, (a0, n, kd, th, fr_j, fs_j, ff_j, fu_j) in enumerate(zip(
                 starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(), frac, fs, ff, fu)):
@@ -626,7 +621,7 @@ class Tracker:
                                       lohi, rel, j))
         if cfg.fit.person_merge and len(dets) > 1:
             dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
-                                                                                 npts, px, py)
+                                                                                 npts, px, py, beams)
         st.detections += len(dets)
         self.last_detections = dets
         if dets:
@@ -634,69 +629,56 @@ class Tracker:
             self._batch = DetectionBatch(kind=kinds, theta=fits[:, F_THETA].copy(), lohi=lohi, rel=rel,
                                          centroid=fits[:, FIT_CENTROID].copy(), circle=fits[:, FIT_CIRCLE].copy(),
                                          px=px, py=py, start=starts, npts=npts)
-            if self._no_prior is None or self._no_prior[0].shape[0] != m:
+            no_prior = self._no_prior.get(m)
+            if no_prior is None:
                 # (no track prior: the same arrays for every scan with m detections; the kernel only reads them)
-                self._no_prior = (np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool), np.full(m, -1.0),
-                                  np.zeros(m))
-            self._default = self._measure_rows(*self._no_prior)
+                if len(self._no_prior) >= 64:
+                    self._no_prior.clear()
+                no_prior = self._no_prior[m] = (np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool),
+                                                np.full(m, -1.0), np.zeros(m))
+            self._default = self._measure_rows(*no_prior)
             # the detections' bounds and real-bound flags as lists (read per track update / birth, no per-row copy)
             self._lohi_l, self._rel_l = lohi.tolist(), rel.tolist()
         return dets
 
     def _merge_legs(self, dets: list[Detection], kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray,
-                    rel: np.ndarray, starts: np.ndarray, npts: np.ndarray, px: np.ndarray, py: np.ndarray) -> tuple:
+                    rel: np.ndarray, starts: np.ndarray, npts: np.ndarray, px: np.ndarray, py: np.ndarray,
+                    beams: np.ndarray) -> tuple:
         """People (leg_tracker, Leigh et al. ICRA 2015, pairs legs): two leg-sized detections (both sides
         ≤ ``fit.leg_max_extent``) whose centres lie within ``fit.leg_pair_distance`` become one person
         detection, measured at the middle of the two legs with the point model. A leg swinging forward while
         the other stands does not move the person's centre by a full stride, so its speed does not jump.
-        Returns the detection list and the per-detection batch arrays, merged pairs appended at the end."""
+        Returns the detection list and the per-detection batch arrays, merged pairs appended at the end (the
+        arrays by :func:`dynslam2d.detect.kernels.merge_leg_pairs`; ``beams``: the beams of ``px``, ``py``)."""
         fc = self.config.fit
         first, second = leg_pairs(lohi, npts, fits, float(fc.leg_max_extent), float(fc.leg_pair_distance))
-        if first.shape[0] == 0:
+        m = first.shape[0]
+        if m == 0:
             return dets, kinds, fits, lohi, rel, starts, npts, px, py
-        pairs = list(zip(first.tolist(), second.tolist()))
-        drop = {j for pr in pairs for j in pr}
-        keep = [j for j in range(len(dets)) if j not in drop]
-        new_dets = [dets[j] for j in keep]
-        ext_px, ext_py = [px], [py]
-        m = len(pairs)
-        new_fits = np.zeros((m, fits.shape[1]))
-        new_lohi = np.empty((m, 4))
-        new_starts = np.empty(m, dtype=starts.dtype)
-        new_npts = np.empty(m, dtype=npts.dtype)
-        n0 = px.shape[0]
-        for r, (a, b) in enumerate(pairs):
+        ki, kinds, fits, lohi, rel, starts, npts, px, py, mbeams = merge_leg_pairs(
+            first, second, px, py, beams, starts, npts, kinds, fits, lohi, rel)
+        new_dets = [dets[j] for j in ki.tolist()]
+        row = len(new_dets)
+        n0 = px.shape[0] - mbeams.shape[0]
+        pts = np.column_stack((px[n0:], py[n0:]))  # the persons' points, (n, 2)
+        o = 0
+        for a, b in zip(first.tolist(), second.tolist()):
             da, db = dets[a], dets[b]
-            pts = np.concatenate((da.points, db.points))  # (np.vstack of two (n, 2) arrays)
-            mid = 0.5 * (da.centroid + db.centroid)
-            lo, hi = _min_rows(pts, axis=0), _max_rows(pts, axis=0)  # (pts.min / max(axis=0) without the wrappers)
             na, nb = da.n_points, db.n_points
-            det = Detection(np.concatenate((da.beams, db.beams)), pts, mid, KIND_POINT, 0.0, lo, hi,
-                            np.zeros((2, 2), dtype=bool), np.array([mid[0], mid[1], 0.0]), na + nb,
-                            (na * da.free_fraction + nb * db.free_fraction) / (na + nb),
-                            (na * da.map_structure + nb * db.map_structure) / (na + nb),
-                            (na * da.map_free + nb * db.map_free) / (na + nb),
-                            (na * da.map_unknown + nb * db.map_unknown) / (na + nb))
+            n = na + nb
+            # (centroid = circle centre = the legs' middle, lo / hi their box, no real bound, theta 0: rows of the
+            # merged arrays, as a scan detection's)
+            det = ScanDetection(mbeams[o:o + n], pts[o:o + n], KIND_POINT, 0.0, n,
+                                (na * da.free_fraction + nb * db.free_fraction) / n,
+                                (na * da.map_structure + nb * db.map_structure) / n,
+                                (na * da.map_free + nb * db.map_free) / n,
+                                (na * da.map_unknown + nb * db.map_unknown) / n, fits, lohi, rel, row)
             det.person = True
             new_dets.append(det)
-            new_fits[r, FIT_CIRCLE_CENTRE] = mid
-            new_fits[r, FIT_CENTROID] = mid
-            new_lohi[r, LOHI_LO] = lo
-            new_lohi[r, LOHI_HI] = hi
-            new_starts[r] = n0
-            new_npts[r] = na + nb
-            ext_px.append(pts[:, 0])
-            ext_py.append(pts[:, 1])
-            n0 += na + nb
-        self.stats.merged_leg_pairs += len(pairs)
-        ki = np.array(keep, dtype=np.int64)
-        kinds = np.concatenate((kinds[ki], np.zeros(m, dtype=kinds.dtype)))
-        fits = np.concatenate((fits[ki], new_fits))
-        lohi = np.concatenate((lohi[ki], new_lohi))
-        rel = np.concatenate((rel[ki], np.zeros((m, 2, 2), dtype=rel.dtype)))
-        starts = np.concatenate((starts[ki], new_starts))
-        npts = np.concatenate((npts[ki], new_npts))
-        return new_dets, kinds, fits, lohi, rel, starts, npts, np.concatenate(ext_px), np.concatenate(ext_py)
+            row += 1
+            o += n
+        self.stats.merged_leg_pairs += m
+        return new_dets, kinds, fits, lohi, rel, starts, npts, px, py
 
     def _measure_rows(self, det: np.ndarray, sizes: np.ndarray, has_sizes: np.ndarray, radius: np.ndarray,
                       size_sigma: np.ndarray) -> MeasureRows:
