@@ -97,6 +97,7 @@ _make_box = fast_init(Box)
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
 _NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives it its row
 _ROWS0 = 64  # initial rows of the tracker's state arrays (doubled when full)
+_P_MANAGE = np.array([0, 5, 10, 11, 14, 15])  # P[0, 0], P[1, 1], P[2, 2], P[2, 3], P[3, 2], P[3, 3] of a raveled P
 _all_rows, _any_of = np.logical_and.reduce, np.logical_or.reduce  # (ndarray.all / any without the Python wrappers)
 _min_rows, _max_rows = np.minimum.reduce, np.maximum.reduce  # (ndarray.min / max without numpy's Python wrappers)
 
@@ -171,7 +172,6 @@ class _Track:
     past_t: list[float] = field(default_factory=list)  # the stamps of past, s (kept in step with it)
     slow_since: float | None = None
     probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
-    p_finite: bool = True  # every entry of P is finite (checked where P changes)
     merged: bool = False  # left M when its detection joined long-standing structure (refuses such detections)
     # track memory (detect.memory, docs/maps.md): kept in M through a stop
     remembered: bool = False  # in M only because it moved before (stopped for m_exit_time or longer)
@@ -185,8 +185,9 @@ class _Track:
 def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     """Constant-velocity transition F and white-noise-acceleration Q for state [x, y, vx, vy]."""
     q11, q12, q22 = q * dt ** 3 / 3.0, q * dt ** 2 / 2.0, q * dt
-    F = np.array([[1.0, 0.0, dt, 0.0], [0.0, 1.0, 0.0, dt], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
-    Q = np.array([[q11, 0.0, q12, 0.0], [0.0, q11, 0.0, q12], [q12, 0.0, q22, 0.0], [0.0, q12, 0.0, q22]])
+    # (flat lists reshaped: the same values, half the cost of nested lists)
+    F = np.array([1.0, 0.0, dt, 0.0, 0.0, 1.0, 0.0, dt, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]).reshape(4, 4)
+    Q = np.array([q11, 0.0, q12, 0.0, 0.0, q11, 0.0, q12, q12, 0.0, q22, 0.0, 0.0, q12, 0.0, q22]).reshape(4, 4)
     return F, Q
 
 
@@ -246,6 +247,7 @@ class Tracker:
         # arrays grow, by doubling)
         self._X = np.zeros((_ROWS0, 4))
         self._P = np.zeros((_ROWS0, 4, 4))
+        self._pfin = np.ones(_ROWS0, dtype=bool)  # per row: every entry of its P is finite (set where P changes)
         self._rows_used = 0  # rows 0 … _rows_used − 1 have been handed out
         self._free_rows: list[int] = []  # rows of deleted tracks, reused first
         self._order: np.ndarray | None = None  # the rows of self._tracks in their order (None: to be built)
@@ -318,7 +320,10 @@ class Tracker:
         self._body_near = None
         if body_beams is not None and body_beams.shape[0] == scan.n_beams:
             # the body beams rarely change: the grown mask is kept while they stay the same
-            if self._body_key is None or not np.array_equal(self._body_key, body_beams):
+            key = self._body_key
+            # (np.array_equal's answer for the bool masks, without its Python wrapper: the same dtype, shape and bytes)
+            if key is None or key.dtype != body_beams.dtype or key.shape != body_beams.shape or \
+                    key.tobytes() != body_beams.tobytes():
                 w = self.config.tracker.ride_beam_window
                 near = body_beams.astype(bool).copy()
                 for d in range(1, w + 1):
@@ -451,9 +456,7 @@ class Tracker:
                 X[i], P[i] = self._stationary_prediction(tracks[i], F, dt)  # (from k.x / k.P: not yet written)
         self._X[order] = X  # (the tracks' x / P are views of these rows)
         self._P[order] = P
-        fin = _all_rows(np.isfinite(P).reshape(P.shape[0], 16), axis=1).tolist()  # (every entry of each P finite)
-        for k, f in zip(self._tracks, fin):
-            k.p_finite = f
+        self._pfin[order] = _all_rows(np.isfinite(P).reshape(P.shape[0], 16), axis=1)  # (every entry of each P finite)
         self._stacked = (X, P)
 
     def _stationary_prediction(self, k: _Track, F: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -487,10 +490,10 @@ class Tracker:
             self._order = np.array([k.row for k in self._tracks], dtype=np.int64)
         return self._order
 
-    def _add_row(self, k: _Track, x, P: np.ndarray) -> None:
-        """Append ``k`` to the live tracks with state ``x`` (4,) and covariance ``P`` (4, 4): it gets a row of
-        the state arrays (a deleted track's, else a new one; the arrays double when full) holding the values,
-        and ``k.x`` / ``k.P`` become views of it."""
+    def _add_row(self, k: _Track, x, P: np.ndarray, p_finite: bool) -> None:
+        """Append ``k`` to the live tracks with state ``x`` (4,) and covariance ``P`` (4, 4) (``p_finite``: every
+        entry of P is finite): it gets a row of the state arrays (a deleted track's, else a new one; the arrays
+        double when full) holding the values, and ``k.x`` / ``k.P`` become views of it."""
         if self._free_rows:
             row = self._free_rows.pop()
         else:
@@ -502,9 +505,11 @@ class Tracker:
                 X[:row] = self._X
                 P2[:row] = self._P
                 self._X, self._P = X, P2
+                self._pfin = np.concatenate((self._pfin, np.ones(row, dtype=bool)))
                 self._repoint()
         self._X[row] = x
         self._P[row] = P
+        self._pfin[row] = p_finite
         k.row = row
         k.x = self._X[row]
         k.P = self._P[row]
@@ -847,6 +852,7 @@ class Tracker:
         rows = self._rows()[sel[ok]]
         self._X[rows] = Xn[ok]
         self._P[rows] = Pn[ok]
+        self._pfin[rows] = True  # (kalman_update_batch rejects non-finite results)
         self._update_tracks(pairs, dets, t, vac, out, size_obs.tolist(), size_kind.tolist(), swaps)
         return out
 
@@ -902,7 +908,6 @@ class Tracker:
                 continue
             k, det = tracks[ti], dets[di]
             dkind = det.kind
-            k.p_finite = True  # kalman_update_batch rejects non-finite results
             # shape: heading (90° ambiguity) and sizes along the track's own axes
             if dkind == KIND_RECT:
                 sk = size_kind[r]
@@ -1080,11 +1085,11 @@ class Tracker:
                    past=[(t, det.points)] if self._free is not None else [],
                    past_t=[t] if self._free is not None else [])
         # (np.isfinite(P).all() of its only non-zero entries: the measurement's R and the speed variance)
-        k.p_finite = all(map(math.isfinite, d.R[j].ravel().tolist())) and math.isfinite(P.item(10))
+        p_finite = all(map(math.isfinite, d.R[j].ravel().tolist())) and math.isfinite(P.item(10))
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
         self._next_id += 1
-        self._add_row(k, (z[0], z[1], 0.0, 0.0), P)
+        self._add_row(k, (z[0], z[1], 0.0, 0.0), P, p_finite)
         self.stats.tracks_born += 1
 
     def _birth_state(self, det: Detection, j: int) -> tuple[np.ndarray, np.ndarray, list[float], list[bool]]:
@@ -1110,6 +1115,13 @@ class Tracker:
         return z, P, size, known
 
     def _manage(self, t: float, updated: set[int]) -> None:
+        """Track management (M of N, deletions, clutter retirement) and the test of M (paper Eq. 3) of the updated
+        tracks. The entries of the states and covariances it reads are gathered from the state arrays once per scan
+        (the same floats ``ndarray.item`` gives); the test of M runs inline up to its common outcomes (tentative, or
+        not in M and at most v_min) with the scan's constants read once, the rest in :meth:`_dynamic`."""
+        tracks = self._tracks
+        if not tracks:
+            return
         tc = self.config.tracker
         st = self.stats
         keep: list[_Track] = []
@@ -1121,7 +1133,17 @@ class Tracker:
         v_min = tc.v_min
         retire_n = tc.structure_retire_updates if self._map is not None else 0
         retire_s = tc.structure_retire_fraction
-        for k in self._tracks:
+        # (the test of M's constants, the same products as in _dynamic)
+        max_ssig, v_exit, nsus = tc.max_speed_sigma, tc.v_exit_ratio * tc.v_min, tc.sustain_updates
+        ride_n, ride_r2 = tc.ride_updates, tc.ride_max_range * tc.ride_max_range
+        probe = self._free is not None
+        slow_tail = f" m/s ≤ v_min {v_min:.2f}"  # (the most common reason's constant part)
+        order = self._rows()
+        # P[0, 0], P[1, 1], P[2:, 2:] and the velocity of every track, as Python floats, and its finite-P flag
+        pv = self._P.reshape(-1, 16)[order[:, None], _P_MANAGE].tolist()
+        vv = self._X[order, 2:].tolist()
+        fins = self._pfin[order].tolist()
+        for k, (p00, p11, p22, p23, p32, p33), (vx, vy), fin in zip(tracks, pv, vv, fins):
             kid = k.id
             is_upd = kid in updated
             if kid in merged and not is_upd and k.in_m:
@@ -1158,13 +1180,11 @@ class Tracker:
                 st.deleted_coasting += 1
                 st.tracks_deleted += 1
                 continue
-            P = k.P
-            if not k.p_finite or sqrt(max(P.item(0), P.item(5))) > max_sig:  # P[0, 0], P[1, 1]
+            if not fin or sqrt(max(p00, p11)) > max_sig:
                 st.deleted_covariance += 1
                 st.tracks_deleted += 1
                 continue
-            x = k.x
-            speed = hypot(x.item(2), x.item(3))
+            speed = hypot(vx, vy)
             if speed > max_speed:
                 st.deleted_speed += 1
                 st.tracks_deleted += 1
@@ -1180,7 +1200,44 @@ class Tracker:
                     self._retire(k)
                 continue
             if is_upd:
-                self._dynamic(k, speed, t)
+                # paper Eq. 3 with persistence, certainty and displacement conditions (the start of _dynamic, inline)
+                if speed > 1e-9:
+                    u0, u1 = vx / speed, vy / speed
+                    sig = sqrt(max((u0 * p22 + u1 * p32) * u0 + (u0 * p23 + u1 * p33) * u1, 0.0))  # uᵀ P_v u
+                else:
+                    sig = sqrt(max(p22, p33))
+                kfast = k.fast + 1 if speed > v_min and sig < max_ssig else 0
+                k.fast = kfast
+                if speed < v_exit:
+                    if k.slow_since is None:
+                        k.slow_since = t
+                elif k.remembered and kfast < nsus:
+                    pass  # a remembered stop ends only on M's sustained fast test, not on one scan of speed jitter
+                else:
+                    k.slow_since = None
+                if k.in_m and k.probation and probe and len(k.free) >= nsus and self._probation_fails(k):
+                    pass  # left M
+                else:
+                    rides = False
+                    if len(k.map_t) >= ride_n:  # (fewer: it cannot ride)
+                        lx, ly = k.laser_xy[-1]
+                        if lx * lx + ly * ly > ride_r2:
+                            k.rode = False  # (_rides_with_laser's first test, inline: most tracks are far from it)
+                        else:
+                            rides = self._rides_with_laser(k)
+                    if rides:
+                        k.in_m = False
+                        k.fast = 0
+                        k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
+                    elif k.in_m:
+                        self._dynamic(k, speed, sig, t)
+                    elif k.state == TENTATIVE:
+                        # (speed: most tracks are short-lived tentative clutter; nothing else changes them)
+                        k.reason = "not in M: tentative track"
+                    elif speed <= v_min:
+                        k.reason = f"not in M: speed {speed:.2f}{slow_tail}"  # (the most common reason)
+                    else:
+                        self._dynamic(k, speed, sig, t)
                 if mem:
                     if k.in_m:
                         self._memory_bookkeeping(k, t)
@@ -1319,8 +1376,7 @@ class Tracker:
         k.laser_xy, k.map_xy, k.map_t = [], [], []
         k.person, k.person_streak, k.rode = False, 0, False
         k.reason = "not in M: left the map structure it was retired on"
-        k.p_finite = bool(np.isfinite(P).all())
-        self._add_row(k, (z[0], z[1], 0.0, 0.0), P)
+        self._add_row(k, (z[0], z[1], 0.0, 0.0), P, bool(np.isfinite(P).all()))
 
     def _dormant_reports(self, t: float) -> list[Track]:
         """Reports of the dormant tracks (at rest, not in M; beams only where seen in this scan)."""
@@ -1339,46 +1395,23 @@ class Tracker:
                                    k.beams, len(k.beams), False))
         return out
 
-    def _dynamic(self, k: _Track, speed: float, t: float) -> None:
-        """Paper Eq. 3 with persistence, certainty and displacement conditions."""
-        tc = self.config.tracker
-        P = k.P
-        p22, p23, p32, p33 = P.item(10), P.item(11), P.item(14), P.item(15)  # P[2:, 2:]
-        if speed > 1e-9:
-            u0, u1 = k.x.item(2) / speed, k.x.item(3) / speed
-            sig = math.sqrt(max((u0 * p22 + u1 * p32) * u0 + (u0 * p23 + u1 * p33) * u1, 0.0))  # uᵀ P_v u
-        else:
-            sig = math.sqrt(max(p22, p33))
-        fast = speed > tc.v_min and sig < tc.max_speed_sigma
-        k.fast = k.fast + 1 if fast else 0
-        if speed < tc.v_exit_ratio * tc.v_min:
-            k.slow_since = t if k.slow_since is None else k.slow_since
-        elif k.remembered and k.fast < tc.sustain_updates:
-            pass  # a remembered stop ends only on M's sustained fast test, not on one scan of speed jitter
-        else:
-            k.slow_since = None
-        if k.in_m and k.probation and self._free is not None and len(k.free) >= tc.sustain_updates:
-            k.probation = False
-            if sum(k.free) / len(k.free) < tc.free_min_fraction:
-                k.in_m = False
-                k.fast = 0
-                k.reason = ("left M: after a gap the detections show no motion into free space "
-                            "(a different, static object)")
-                return
-        if len(k.map_t) < tc.ride_updates:  # (fewer: it cannot ride)
-            pass
-        elif (lxy := k.laser_xy[-1])[0] * lxy[0] + lxy[1] * lxy[1] > tc.ride_max_range * tc.ride_max_range:
-            k.rode = False  # (_rides_with_laser's first test, inline: most tracks are far from the laser)
-        elif self._rides_with_laser(k):
-            if k.in_m:
-                k.in_m = False
+    def _probation_fails(self, k: _Track) -> bool:
+        """End the probation of ``k`` (in M, re-acquired after a gap, with ``sustain_updates`` free-space fractions):
+        it leaves M (True) when they show no motion into free space."""
+        k.probation = False
+        if sum(k.free) / len(k.free) < self.config.tracker.free_min_fraction:
+            k.in_m = False
             k.fast = 0
-            k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
-            return
-        if k.state == TENTATIVE and not k.in_m:
-            # (speed: most tracks are short-lived tentative clutter; nothing below changes them but the reason)
-            k.reason = "not in M: tentative track"
-            return
+            k.reason = "left M: after a gap the detections show no motion into free space (a different, static object)"
+            return True
+        return False
+
+    def _dynamic(self, k: _Track, speed: float, sig: float, t: float) -> None:
+        """Paper Eq. 3 with persistence, certainty and displacement conditions: the rest of the test that
+        :meth:`_manage` starts (speed persistence ``k.fast``, slow time, probation and the riding test done there)
+        for an updated track in M, or confirmed / coasting with ``speed`` (m/s) > v_min; ``sig``: σ of the speed
+        along the velocity, m/s."""
+        tc = self.config.tracker
         # a track seen moving before re-enters M on the kinematic test: where it paused, the map wrote it
         use_map = self._map is not None and len(k.mstruct) > 0 and not k.was_in_m
         npu = tc.person_sustain_updates
