@@ -157,6 +157,8 @@ class _Track:
     beams: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     has_heading: bool = False
     size_lb: list[float] = field(default_factory=lambda: [0.0, 0.0])  # largest partial views per axis, m
+    # free-space fraction per update; an entry may be a tuple (floor, ref, t, past) until it is read, its
+    # vacated-space part not yet computed (Tracker._free_values)
     free: list[float] = field(default_factory=list)
     mstruct: list[float] = field(default_factory=list)  # map evidence per update (mapevidence.py)
     mfree: list[float] = field(default_factory=list)
@@ -369,8 +371,7 @@ class Tracker:
         updated: set[int] = set()
         used = set()
         if pairs:
-            vac = self._vacated([self._tracks[ti] for ti, _ in pairs], t)
-            for (ti, di), ok in zip(pairs, self._update_pairs(pairs, dets, t, vac)):
+            for (ti, di), ok in zip(pairs, self._update_pairs(pairs, dets, t)):
                 if ok:
                     updated.add(self._tracks[ti].id)
                     used.add(di)
@@ -804,8 +805,7 @@ class Tracker:
                 self._merged.add(k.id)
         return ok
 
-    def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float,
-                      vac: dict[int, float]) -> list[bool]:
+    def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float) -> list[bool]:
         """Kalman and shape updates of the associated (track, detection) pairs; True where applied.
 
         The measurements (with each track's sizes / radius) and the Kalman updates run as one batch
@@ -853,7 +853,7 @@ class Tracker:
         self._X[rows] = Xn[ok]
         self._P[rows] = Pn[ok]
         self._pfin[rows] = True  # (kalman_update_batch rejects non-finite results)
-        self._update_tracks(pairs, dets, t, vac, out, size_obs.tolist(), size_kind.tolist(), swaps)
+        self._update_tracks(pairs, dets, t, out, size_obs.tolist(), size_kind.tolist(), swaps)
         return out
 
     def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track],
@@ -882,9 +882,8 @@ class Tracker:
                 X_new[r, 3] = X_prior[r, 3] + dvy * lim / d
                 self.stats.accel_bounded += 1
 
-    def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float, vac: dict[int, float],
-                       applied: list[bool], size_obs: list[list[float]], size_kind: list[list[int]],
-                       swaps: list[bool]) -> None:
+    def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float, applied: list[bool],
+                       size_obs: list[list[float]], size_kind: list[list[int]], swaps: list[bool]) -> None:
         """The shape / bookkeeping update of the tracks of ``pairs`` (track index, detection index) whose Kalman
         result is already in their rows (k.x, k.P) where ``applied``; the scan's constants are read once (one
         loop over the pairs: the update of one track is a few µs of Python)."""
@@ -900,7 +899,7 @@ class Tracker:
             c, s = self._pose_cs  # cos / sin of the pose's heading (once per scan)
         use_map = self._map is not None
         max_age = self._free.max_age if self._free is not None else None
-        vget = vac.get
+        ref = self._cur_ref if self._free is not None else None  # (the vacated-space test's reference: this scan)
         cos, sin, pi = math.cos, math.sin, math.pi
         tracks = self._tracks
         for r, (ti, di) in enumerate(pairs):
@@ -961,6 +960,8 @@ class Tracker:
             elif dkind == KIND_POINT and k.kind == KIND_POINT:
                 lo0, lo1, hi0, hi1 = lohi_l[di]
                 k.size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
+            # (the stored points before this update: their vacated-space fraction is computed when first read)
+            past0 = tuple(k.past) if ref is not None and k.past else None
             if k.misses > 0:
                 # re-acquired after a gap: the free-space evidence must be rebuilt from this object
                 k.past.clear()
@@ -986,7 +987,8 @@ class Tracker:
                 k.history.append(True)
             k.beams = det.beams
             free = k.free
-            free.append(max(det.free_fraction, vget(k.id, 0.0)))  # (vacated: this scan sees through its old points)
+            # (vacated: this scan sees through its old points; computed when the entry is read, _free_values)
+            free.append((det.free_fraction, ref, t, past0) if past0 is not None else max(det.free_fraction, 0.0))
             if len(free) > nsus:
                 del free[0]
             if p is not None:
@@ -1048,27 +1050,49 @@ class Tracker:
         face. The stored scans nearest each reference age are found for all tracks in one kernel call
         (:func:`dynslam2d.detect.kernels.nearest_ages`, the search of :func:`_nearest_age`), their points
         tested in one vectorised call."""
-        out: dict[int, float] = {}
         if self._free is None or self._cur_ref is None:
-            return out
+            return {}
         sel = [k for k in tracks if k.past]
         if not sel:
-            return out
-        counts = [len(k.past_t) for k in sel]
-        stamps = np.fromiter(_chain.from_iterable([k.past_t for k in sel]), np.float64, sum(counts))
-        ii, jj = nearest_ages(stamps, np.array(counts, dtype=np.int64), t, self._ref_ages)
+            return {}
+        return self._seen_through_pasts(self._cur_ref, t, [k.id for k in sel], [k.past_t for k in sel],
+                                        [k.past for k in sel])
+
+    def _seen_through_pasts(self, ref, t: float, ids: list[int], stamps: list[list[float]],
+                            pasts: list) -> dict[int, float]:
+        """:meth:`_vacated` of tracks given by their ``ids``, the ``stamps`` (s) of their stored points and the stored
+        (stamp, points) ``pasts``, against the free-space reference ``ref`` of the scan at ``t`` (s)."""
+        out: dict[int, float] = {}
+        counts = [len(st) for st in stamps]
+        flat = np.fromiter(_chain.from_iterable(stamps), np.float64, sum(counts))
+        ii, jj = nearest_ages(flat, np.array(counts, dtype=np.int64), t, self._ref_ages)
         if ii.shape[0] == 0:
             return out
-        chunks = [sel[i].past[j][1] for i, j in zip(ii.tolist(), jj.tolist())]
+        chunks = [pasts[i][j][1] for i, j in zip(ii.tolist(), jj.tolist())]
         counts = [0]
         counts.extend([c.shape[0] for c in chunks])
-        free = self._free.seen_through_by(self._cur_ref, np.concatenate(chunks))
+        free = self._free.seen_through_by(ref, np.concatenate(chunks))
         frac = segment_means(free.astype(np.float64), np.cumsum(counts)).tolist()
         get = out.get
         for i, f in zip(ii.tolist(), frac):
-            tid = sel[i].id
+            tid = ids[i]
             out[tid] = max(get(tid, 0.0), f)
         return out
+
+    def _free_values(self, k: _Track) -> list[float]:
+        """``k.free`` with every entry a float. An update whose track had stored points appends a tuple (floor, ref,
+        t, past) instead of its free-space fraction: the detection's own fraction, the free-space reference of the
+        scan at ``t`` (s) and the track's stored (stamp, points) before the update; its value, max(floor, the
+        vacated fraction of :meth:`_vacated` in that scan), is computed here when first read and replaces the tuple.
+        Most entries are never read (the free-space condition of M is reached by few tracks; ≈ 3 % on negative_2),
+        so most free-space tests of stored points never run."""
+        free = k.free
+        for q, v in enumerate(free):
+            if type(v) is tuple:
+                floor, ref, t, past = v
+                vac = self._seen_through_pasts(ref, t, [0], [[e[0] for e in past]], [past]).get(0, 0.0)
+                free[q] = max(floor, vac)
+        return free
 
     def _birth(self, det: Detection, t: float, j: int) -> None:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
@@ -1399,7 +1423,8 @@ class Tracker:
         """End the probation of ``k`` (in M, re-acquired after a gap, with ``sustain_updates`` free-space fractions):
         it leaves M (True) when they show no motion into free space."""
         k.probation = False
-        if sum(k.free) / len(k.free) < self.config.tracker.free_min_fraction:
+        free = self._free_values(k)
+        if sum(free) / len(free) < self.config.tracker.free_min_fraction:
             k.in_m = False
             k.fast = 0
             k.reason = "left M: after a gap the detections show no motion into free space (a different, static object)"
@@ -1466,8 +1491,8 @@ class Tracker:
                 min_disp := tc.person_min_displacement if person_way == "map" else tc.min_displacement):
             # (the net displacement since birth is computed only here: most tracks stop at a test above)
             k.reason = f"not in M: moved {disp:.2f} m < {min_disp:.2f} m since birth"
-        elif self._free is not None and (not k.free or sum(k.free) / len(k.free) < tc.free_min_fraction):
-            k.reason = (f"not in M: points on free space {sum(k.free) / max(len(k.free), 1):.2f} < "
+        elif self._free is not None and (not (fr := self._free_values(k)) or sum(fr) / len(fr) < tc.free_min_fraction):
+            k.reason = (f"not in M: points on free space {sum(fr) / max(len(fr), 1):.2f} < "
                         f"{tc.free_min_fraction:.2f} (static structure)")
         elif use_map and not fast_person and sum(k.mfree) / len(k.mfree) < tc.map_free_min and not (
                 self._laser_still and sum(k.munknown) / len(k.munknown) >= 1.0 - tc.map_free_min):
@@ -1500,7 +1525,7 @@ class Tracker:
         mf = k.mfree[-n:]
         if sum(mf) / len(mf) >= tc.person_map_free_min:
             return "map"
-        fr, ms, mu = k.free[-n:], k.mstruct[-n:], k.munknown[-n:]
+        fr, ms, mu = self._free_values(k)[-n:], k.mstruct[-n:], k.munknown[-n:]
         if len(fr) < n or sum(fr) / len(fr) < tc.person_free_min or sum(ms) / len(ms) > tc.map_structure_max:
             return None
         return "free" if (sum(mf) + sum(mu)) / len(mf) >= 0.5 else None
