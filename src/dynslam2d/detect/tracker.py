@@ -1089,10 +1089,15 @@ class Tracker:
         free = k.free
         for q, v in enumerate(free):
             if type(v) is tuple:
-                floor, ref, t, past = v
-                vac = self._seen_through_pasts(ref, t, [0], [[e[0] for e in past]], [past]).get(0, 0.0)
-                free[q] = max(floor, vac)
+                free[q] = self._free_value(v)
         return free
+
+    def _free_value(self, entry: float | tuple) -> float:
+        """The free-space fraction of one entry of a track's ``free`` list (:meth:`_free_values`)."""
+        if type(entry) is not tuple:
+            return entry
+        floor, ref, t, past = entry
+        return max(floor, self._seen_through_pasts(ref, t, [0], [[e[0] for e in past]], [past]).get(0, 0.0))
 
     def _birth(self, det: Detection, t: float, j: int) -> None:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
