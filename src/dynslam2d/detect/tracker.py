@@ -266,7 +266,7 @@ class Tracker:
         self._pose_cs: tuple[float, float] = (1.0, 0.0)  # cos / sin of self._pose.theta
         self._scan: Scan | None = None
         self._pose_hist: deque = deque()  # (stamp, x, y, θ) of the last still_time seconds
-        self._laser_still = False
+        self._laser_still: bool | None = False  # (None: not compared yet in this scan, _is_still)
         self._dt = 0.0
         self._body_near: np.ndarray | None = None
         self._body_key: np.ndarray | None = None  # body beams the grown mask below was made from
@@ -1500,7 +1500,7 @@ class Tracker:
             k.reason = (f"not in M: points on free space {sum(fr) / max(len(fr), 1):.2f} < "
                         f"{tc.free_min_fraction:.2f} (static structure)")
         elif use_map and not fast_person and sum(k.mfree) / len(k.mfree) < tc.map_free_min and not (
-                self._laser_still and sum(k.munknown) / len(k.munknown) >= 1.0 - tc.map_free_min):
+                self._is_still() and sum(k.munknown) / len(k.munknown) >= 1.0 - tc.map_free_min):
             k.reason = (f"not in M: points in observed-free map cells {sum(k.mfree) / len(k.mfree):.2f} < "
                         f"{tc.map_free_min:.2f} (no map evidence of motion)")
         elif use_map and sum(k.mstruct) / len(k.mstruct) > tc.map_structure_max:
@@ -1622,10 +1622,11 @@ class Tracker:
             beyond = ~np.isfinite(r) | (r > far)
         return float(np.count_nonzero(beyond)) / n >= self.config.memory.seen_through_share
 
-    def _still(self, t: float, pose: Pose2D | None) -> bool:
+    def _still(self, t: float, pose: Pose2D | None) -> bool | None:
         """The laser has stayed within ``still_distance`` / ``still_angle`` of its pose over the last
         ``still_time`` seconds (then walls cannot slide into view, and a map that a motionless robot does
-        not update leaves the places people walk into unknown: unknown counts like free)."""
+        not update leaves the places people walk into unknown: unknown counts like free). Keeps the poses of
+        the last ``still_time`` s; None: not decided yet, :meth:`_is_still` compares them with ``pose`` when asked."""
         tc = self.config.tracker
         if pose is None or not pose.is_finite():
             return False
@@ -1635,8 +1636,17 @@ class Tracker:
             h.popleft()
         if t - h[0][0] < tc.still_time:
             return False
-        return all(math.hypot(x - pose.x, y - pose.y) <= tc.still_distance
-                   and abs(float(wrap_angle(th - pose.theta))) <= tc.still_angle for _, x, y, th in h)
+        return None  # (the poses are compared when asked: _is_still)
+
+    def _is_still(self) -> bool:
+        """:meth:`_still` of this scan; its comparison of the kept poses with this scan's runs when first asked in the
+        scan (few tracks reach the test that asks)."""
+        if self._laser_still is None:
+            tc, pose = self.config.tracker, self._pose
+            self._laser_still = all(math.hypot(x - pose.x, y - pose.y) <= tc.still_distance
+                                    and abs(float(wrap_angle(th - pose.theta))) <= tc.still_angle
+                                    for _, x, y, th in self._pose_hist)
+        return self._laser_still
 
     @staticmethod
     def _net_speed(k: _Track, n: int) -> float | None:
