@@ -249,7 +249,6 @@ class Tracker:
         # arrays grow, by doubling)
         self._X = np.zeros((_ROWS0, 4))
         self._P = np.zeros((_ROWS0, 4, 4))
-        self._pfin = np.ones(_ROWS0, dtype=bool)  # per row: every entry of its P is finite (set where P changes)
         self._rows_used = 0  # rows 0 … _rows_used − 1 have been handed out
         self._free_rows: list[int] = []  # rows of deleted tracks, reused first
         self._order: np.ndarray | None = None  # the rows of self._tracks in their order (None: to be built)
@@ -457,7 +456,6 @@ class Tracker:
                 X[i], P[i] = self._stationary_prediction(tracks[i], F, dt)  # (from k.x / k.P: not yet written)
         self._X[order] = X  # (the tracks' x / P are views of these rows)
         self._P[order] = P
-        self._pfin[order] = _all_rows(np.isfinite(P).reshape(P.shape[0], 16), axis=1)  # (every entry of each P finite)
         self._stacked = (X, P)
 
     def _stationary_prediction(self, k: _Track, F: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -491,10 +489,10 @@ class Tracker:
             self._order = np.array([k.row for k in self._tracks], dtype=np.int64)
         return self._order
 
-    def _add_row(self, k: _Track, x, P: np.ndarray, p_finite: bool) -> None:
-        """Append ``k`` to the live tracks with state ``x`` (4,) and covariance ``P`` (4, 4) (``p_finite``: every
-        entry of P is finite): it gets a row of the state arrays (a deleted track's, else a new one; the arrays
-        double when full) holding the values, and ``k.x`` / ``k.P`` become views of it."""
+    def _add_row(self, k: _Track, x, P: np.ndarray) -> None:
+        """Append ``k`` to the live tracks with state ``x`` (4,) and covariance ``P`` (4, 4): it gets a row of
+        the state arrays (a deleted track's, else a new one; the arrays double when full) holding the values,
+        and ``k.x`` / ``k.P`` become views of it."""
         if self._free_rows:
             row = self._free_rows.pop()
         else:
@@ -506,11 +504,9 @@ class Tracker:
                 X[:row] = self._X
                 P2[:row] = self._P
                 self._X, self._P = X, P2
-                self._pfin = np.concatenate((self._pfin, np.ones(row, dtype=bool)))
                 self._repoint()
         self._X[row] = x
         self._P[row] = P
-        self._pfin[row] = p_finite
         k.row = row
         k.x = self._X[row]
         k.P = self._P[row]
@@ -758,9 +754,8 @@ class Tracker:
                 cols_idx = None
                 sub = cost[rows_idx]  # (nothing taken yet: every column)
             else:
-                free = ~taken
-                cols_idx = np.flatnonzero(free)
-                sub = cost[rows_idx][:, free]
+                cols_idx = (~taken).nonzero()[0]
+                sub = cost[rows_idx[:, None], cols_idx]  # (one gather of the rows' free columns)
             if sub.size == 0:
                 continue
             rr, cc = linear_sum_assignment(sub)
@@ -852,7 +847,6 @@ class Tracker:
         rows = self._rows()[sel[ok]]
         self._X[rows] = Xn[ok]
         self._P[rows] = Pn[ok]
-        self._pfin[rows] = True  # (kalman_update_batch rejects non-finite results)
         self._update_tracks(pairs, dets, t, out, size_obs.tolist(), size_kind.tolist(), swaps)
         return out
 
@@ -1103,7 +1097,6 @@ class Tracker:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
         cfg = self.config
         z, P, size, known = self._birth_state(det, j)
-        d = self._default
         k = _Track(id=self._next_id, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t,
                    birth_xy=z.copy(), theta_box=det.theta, size=size,
                    size_known=known, radius=float(det.circle[2]) if det.kind == KIND_CIRCLE
@@ -1113,12 +1106,10 @@ class Tracker:
                    munknown=[det.map_unknown] if self._map is not None else [],
                    past=[(t, det.points)] if self._free is not None else [],
                    past_t=[t] if self._free is not None else [])
-        # (np.isfinite(P).all() of its only non-zero entries: the measurement's R and the speed variance)
-        p_finite = all(map(math.isfinite, d.R[j].ravel().tolist())) and math.isfinite(P.item(10))
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
         self._next_id += 1
-        self._add_row(k, (z[0], z[1], 0.0, 0.0), P, p_finite)
+        self._add_row(k, (z[0], z[1], 0.0, 0.0), P)
         self.stats.tracks_born += 1
 
     def _birth_state(self, det: Detection, j: int) -> tuple[np.ndarray, np.ndarray, list[float], list[bool]]:
@@ -1168,10 +1159,13 @@ class Tracker:
         probe = self._free is not None
         slow_tail = f" m/s ≤ v_min {v_min:.2f}"  # (the most common reason's constant part)
         order = self._rows()
-        # P[0, 0], P[1, 1], P[2:, 2:] and the velocity of every track, as Python floats, and its finite-P flag
-        pv = self._P.reshape(-1, 16)[order[:, None], _P_MANAGE].tolist()
+        # every track's covariance is finite (was: a flag per track set wherever P changed; the prediction gives
+        # each P, a Kalman update is applied only when finite, a birth's P is its R and speed variance), and its
+        # P[0, 0], P[1, 1], P[2:, 2:] and velocity as Python floats
+        Pf = self._P.reshape(-1, 16)[order]
+        fins = _all_rows(np.isfinite(Pf), axis=1).tolist()
+        pv = Pf[:, _P_MANAGE].tolist()
         vv = self._X[order, 2:].tolist()
-        fins = self._pfin[order].tolist()
         for k, (p00, p11, p22, p23, p32, p33), (vx, vy), fin in zip(tracks, pv, vv, fins):
             kid = k.id
             is_upd = kid in updated
@@ -1405,7 +1399,7 @@ class Tracker:
         k.laser_xy, k.map_xy, k.map_t = [], [], []
         k.person, k.person_streak, k.rode = False, 0, False
         k.reason = "not in M: left the map structure it was retired on"
-        self._add_row(k, (z[0], z[1], 0.0, 0.0), P, bool(np.isfinite(P).all()))
+        self._add_row(k, (z[0], z[1], 0.0, 0.0), P)
 
     def _dormant_reports(self, t: float) -> list[Track]:
         """Reports of the dormant tracks (at rest, not in M; beams only where seen in this scan)."""
