@@ -93,8 +93,6 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.size_jump_gate',
      "(Array(bool, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, "
      'float64,)'),
-    ('dynslam2d.detect.kernels.nearest_ages',
-     "(Array(float64, 1, 'C'), Array(int64, 1, 'C'), float64, Array(float64, 1, 'C'),)"),
     ('dynslam2d.detect.kernels.kalman_update_batch',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 3, 'C'),)"),
@@ -104,6 +102,8 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
+    ('dynslam2d.detect.kernels.nearest_ages',
+     "(Array(float64, 1, 'C'), Array(int64, 1, 'C'), float64, Array(float64, 1, 'C'),)"),
     ('dynslam2d.filter._exclusion_kernel',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(int64, 1, 'C'),)"),
