@@ -1159,9 +1159,8 @@ class Tracker:
         probe = self._free is not None
         slow_tail = f" m/s ≤ v_min {v_min:.2f}"  # (the most common reason's constant part)
         order = self._rows()
-        # every track's covariance is finite (was: a flag per track set wherever P changed; the prediction gives
-        # each P, a Kalman update is applied only when finite, a birth's P is its R and speed variance), and its
-        # P[0, 0], P[1, 1], P[2:, 2:] and velocity as Python floats
+        # per track: whether every entry of its covariance is finite (tested here on the rows as they are, instead of
+        # a flag kept in step wherever P changes), and its P[0, 0], P[1, 1], P[2:, 2:] and velocity as Python floats
         Pf = self._P.reshape(-1, 16)[order]
         fins = _all_rows(np.isfinite(Pf), axis=1).tolist()
         pv = Pf[:, _P_MANAGE].tolist()
