@@ -1,6 +1,6 @@
 """The tracker's faster per-track loops (issue 9 speed) against the plain computations they replace: the
 vacated-space search (the stored scan whose age is nearest each free-space reference age) on random stamp
-lists and on a simulated box driving away from the laser."""
+lists and on a simulated box driving away from the laser; the free-space entries computed when read."""
 
 from __future__ import annotations
 
@@ -236,3 +236,34 @@ def test_scan_detections_read_the_rows_of_their_scans_fit_arrays() -> None:
     assert d.centroid.tolist() == [fits[1, F_CENTROID_X], fits[1, F_CENTROID_Y]]
     assert d.lo.tolist() == [4.0, 5.0] and d.hi.tolist() == [6.0, 7.0] and d.rel.tolist() == rel[1].tolist()
     assert d.extent.tolist() == [2.0, 2.0] and d.person is False and d.map_unknown == 0.4
+
+
+def test_free_space_entries_read_late_hold_the_vacated_fraction_of_their_scan() -> None:
+    """A track's free-space history gets the vacated-space part of an update's entry only when the entry is read
+    (Tracker._free_values): on a box driving away from the laser, hidden twice for a few scans (re-acquisition
+    clears the stored points), every entry read after the whole run equals what the update's own scan gave when it
+    was computed at once: max(the detection's free fraction, Tracker._vacated of the track in that scan)."""
+    expected: list[tuple[float | tuple, float]] = []
+
+    class Eager(Tracker):
+        def _update_tracks(self, pairs, dets, t, applied, *rest):
+            vac = self._vacated([self._tracks[ti] for ti, _ in pairs], t)  # (this scan, before the update)
+            super()._update_tracks(pairs, dets, t, applied, *rest)
+            for (ti, di), ok in zip(pairs, applied):
+                if ok:
+                    k = self._tracks[ti]
+                    expected.append((k.free[-1], max(dets[di].free_fraction, vac.get(k.id, 0.0))))
+
+    tr = Eager(DetectConfig())
+    pose = Pose2D(-5.0, 0.0, 0.0)
+    for i in range(60):
+        t = i / 15.0
+        hidden = 20 <= i < 24 or 40 <= i < 43
+        tr.update(_scan(pose, 100.0 if hidden else -3.5 + 1.0 * t, t, i), pose)
+    lazy = [(e, want) for e, want in expected if type(e) is tuple]
+    assert len(lazy) >= 40  # entries left to be read
+    for entry, want in expected:
+        assert tr._free_value(entry) == want
+    assert sum(want > entry[0] for entry, want in lazy) >= 20  # the vacated space decided those entries
+    for k in tr._tracks:
+        assert all(type(v) is float for v in tr._free_values(k))

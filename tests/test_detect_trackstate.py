@@ -101,3 +101,19 @@ def test_growth_and_deep_copy_change_no_report() -> None:
         elif copied is not None:
             assert _same(a, copied.update(scan, POSE))
     assert small._X.shape[0] >= 8 and copied is not None
+
+
+def test_a_track_whose_covariance_turns_non_finite_is_deleted() -> None:
+    """The management tests every entry of each live track's covariance row (no per-track flag kept): a NaN
+    velocity variance, which the position-σ test cannot see (max(NaN, σ²) is NaN, never above the limit), deletes
+    the track (``deleted_covariance``) in the next scan, and only that track; no report carries a non-finite P."""
+    tr = Tracker(DetectConfig())
+    for i in range(30):
+        tr.update(_scan(i), POSE)
+    k = max(tr._tracks, key=lambda k: k.hits)  # the moving box
+    k.P[2, 2] = np.nan  # (a view of its row of the state arrays)
+    before = tr.stats.deleted_covariance
+    out = tr.update(_scan(30), POSE)
+    assert tr.stats.deleted_covariance == before + 1
+    assert k.id not in {t.id for t in out}
+    assert all(np.isfinite(t.covariance).all() for t in out)

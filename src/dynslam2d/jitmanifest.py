@@ -11,12 +11,11 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.sim.world._cast_kernel',
      "(float64, float64, Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(int32, 1, 'C'), Array(float64, 2, 'C'), Array(int32, 1, 'C'), float64,)"),
-    ('dynslam2d.detect.segment._segment_kernel',
-     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 2, 'C'), bool, "
-     'bool, float64, float64, float64, float64, float64, int64, bool, int64, int64,)'),
-    ('dynslam2d.detect.kernels.world_points',
-     "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
-     "float64, float64, float64, float64, Array(int64, 1, 'C'),)"),
+    ('dynslam2d.detect.segment._link_kernel',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), bool, float64, float64, "
+     'float64, float64, float64, int64, bool,)'),
+    ('dynslam2d.detect.segment._clusters_kernel',
+     "(Array(int64, 1, 'C'), Array(uint8, 1, 'C'), bool, int64, int64,)"),
     ('dynslam2d.detect.shapes.fit_clusters',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
      "Array(float64, 1, 'C'), int64, float64, int64, int64,)"),
@@ -25,8 +24,8 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), Array(bool, "
      "1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, int64, float64, float64, float64, "
      "Array(float64, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.mask_fractions',
-     "(Array(bool, 2, 'C'), Array(int64, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.segment_means',
+     "(Array(float64, 1, 'C'), Array(int64, 1, 'C'),)"),
     ('dynslam2d.detect.kernels.leg_pairs',
      "(Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), float64, float64,)"),
     ('dynslam2d.detect.kernels.measure_batch',
@@ -94,10 +93,6 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.size_jump_gate',
      "(Array(bool, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, "
      'float64,)'),
-    ('dynslam2d.detect.kernels.nearest_ages',
-     "(Array(float64, 1, 'C'), Array(int64, 1, 'C'), float64, Array(float64, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.segment_means',
-     "(Array(float64, 1, 'C'), Array(int64, 1, 'C'),)"),
     ('dynslam2d.detect.kernels.kalman_update_batch',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 3, 'C'),)"),
@@ -107,11 +102,9 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
+    ('dynslam2d.detect.kernels.nearest_ages',
+     "(Array(float64, 1, 'C'), Array(int64, 1, 'C'), float64, Array(float64, 1, 'C'),)"),
     ('dynslam2d.filter._exclusion_kernel',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(int64, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.merge_leg_pairs',
-     "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int8, 1, 'C'), "
-     "Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(bool, 3, 'C'),)"),
 )

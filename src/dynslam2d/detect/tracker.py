@@ -97,6 +97,7 @@ _make_box = fast_init(Box)
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
 _NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives it its row
 _ROWS0 = 64  # initial rows of the tracker's state arrays (doubled when full)
+_P_MANAGE = np.array([0, 5, 10, 11, 14, 15])  # P[0, 0], P[1, 1], P[2, 2], P[2, 3], P[3, 2], P[3, 3] of a raveled P
 _all_rows, _any_of = np.logical_and.reduce, np.logical_or.reduce  # (ndarray.all / any without the Python wrappers)
 _min_rows, _max_rows = np.minimum.reduce, np.maximum.reduce  # (ndarray.min / max without numpy's Python wrappers)
 
@@ -156,6 +157,8 @@ class _Track:
     beams: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     has_heading: bool = False
     size_lb: list[float] = field(default_factory=lambda: [0.0, 0.0])  # largest partial views per axis, m
+    # free-space fraction per update; an entry may be a tuple (floor, ref, t, past) until it is read, its
+    # vacated-space part not yet computed (Tracker._free_values)
     free: list[float] = field(default_factory=list)
     mstruct: list[float] = field(default_factory=list)  # map evidence per update (mapevidence.py)
     mfree: list[float] = field(default_factory=list)
@@ -171,7 +174,6 @@ class _Track:
     past_t: list[float] = field(default_factory=list)  # the stamps of past, s (kept in step with it)
     slow_since: float | None = None
     probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
-    p_finite: bool = True  # every entry of P is finite (checked where P changes)
     merged: bool = False  # left M when its detection joined long-standing structure (refuses such detections)
     # track memory (detect.memory, docs/maps.md): kept in M through a stop
     remembered: bool = False  # in M only because it moved before (stopped for m_exit_time or longer)
@@ -185,8 +187,9 @@ class _Track:
 def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     """Constant-velocity transition F and white-noise-acceleration Q for state [x, y, vx, vy]."""
     q11, q12, q22 = q * dt ** 3 / 3.0, q * dt ** 2 / 2.0, q * dt
-    F = np.array([[1.0, 0.0, dt, 0.0], [0.0, 1.0, 0.0, dt], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
-    Q = np.array([[q11, 0.0, q12, 0.0], [0.0, q11, 0.0, q12], [q12, 0.0, q22, 0.0], [0.0, q12, 0.0, q22]])
+    # (flat lists reshaped: the same values, half the cost of nested lists)
+    F = np.array([1.0, 0.0, dt, 0.0, 0.0, 1.0, 0.0, dt, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]).reshape(4, 4)
+    Q = np.array([q11, 0.0, q12, 0.0, 0.0, q11, 0.0, q12, q12, 0.0, q22, 0.0, 0.0, q12, 0.0, q22]).reshape(4, 4)
     return F, Q
 
 
@@ -262,7 +265,7 @@ class Tracker:
         self._pose_cs: tuple[float, float] = (1.0, 0.0)  # cos / sin of self._pose.theta
         self._scan: Scan | None = None
         self._pose_hist: deque = deque()  # (stamp, x, y, θ) of the last still_time seconds
-        self._laser_still = False
+        self._laser_still: bool | None = False  # (None: not compared yet in this scan, _is_still)
         self._dt = 0.0
         self._body_near: np.ndarray | None = None
         self._body_key: np.ndarray | None = None  # body beams the grown mask below was made from
@@ -318,7 +321,10 @@ class Tracker:
         self._body_near = None
         if body_beams is not None and body_beams.shape[0] == scan.n_beams:
             # the body beams rarely change: the grown mask is kept while they stay the same
-            if self._body_key is None or not np.array_equal(self._body_key, body_beams):
+            key = self._body_key
+            # (np.array_equal's answer for the bool masks, without its Python wrapper: the same dtype, shape and bytes)
+            if key is None or key.dtype != body_beams.dtype or key.shape != body_beams.shape or \
+                    key.tobytes() != body_beams.tobytes():
                 w = self.config.tracker.ride_beam_window
                 near = body_beams.astype(bool).copy()
                 for d in range(1, w + 1):
@@ -364,8 +370,7 @@ class Tracker:
         updated: set[int] = set()
         used = set()
         if pairs:
-            vac = self._vacated([self._tracks[ti] for ti, _ in pairs], t)
-            for (ti, di), ok in zip(pairs, self._update_pairs(pairs, dets, t, vac)):
+            for (ti, di), ok in zip(pairs, self._update_pairs(pairs, dets, t)):
                 if ok:
                     updated.add(self._tracks[ti].id)
                     used.add(di)
@@ -451,9 +456,6 @@ class Tracker:
                 X[i], P[i] = self._stationary_prediction(tracks[i], F, dt)  # (from k.x / k.P: not yet written)
         self._X[order] = X  # (the tracks' x / P are views of these rows)
         self._P[order] = P
-        fin = _all_rows(np.isfinite(P).reshape(P.shape[0], 16), axis=1).tolist()  # (every entry of each P finite)
-        for k, f in zip(self._tracks, fin):
-            k.p_finite = f
         self._stacked = (X, P)
 
     def _stationary_prediction(self, k: _Track, F: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -734,9 +736,8 @@ class Tracker:
                 cols_idx = None
                 sub = cost[rows_idx]  # (nothing taken yet: every column)
             else:
-                free = ~taken
-                cols_idx = np.flatnonzero(free)
-                sub = cost[rows_idx][:, free]
+                cols_idx = (~taken).nonzero()[0]
+                sub = cost[rows_idx[:, None], cols_idx]  # (one gather of the rows' free columns)
             if sub.size == 0:
                 continue
             rr, cc = linear_sum_assignment(sub)
@@ -781,8 +782,7 @@ class Tracker:
                 self._merged.add(k.id)
         return ok
 
-    def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float,
-                      vac: dict[int, float]) -> list[bool]:
+    def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float) -> list[bool]:
         """Kalman and shape updates of the associated (track, detection) pairs; True where applied.
 
         The measurements (with each track's sizes / radius) and the Kalman updates run as one batch
@@ -829,7 +829,7 @@ class Tracker:
         rows = self._rows()[sel[ok]]
         self._X[rows] = Xn[ok]
         self._P[rows] = Pn[ok]
-        self._update_tracks(pairs, dets, t, vac, out, size_obs.tolist(), size_kind.tolist(), swaps)
+        self._update_tracks(pairs, dets, t, out, size_obs.tolist(), size_kind.tolist(), swaps)
         return out
 
     def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track],
@@ -858,9 +858,8 @@ class Tracker:
                 X_new[r, 3] = X_prior[r, 3] + dvy * lim / d
                 self.stats.accel_bounded += 1
 
-    def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float, vac: dict[int, float],
-                       applied: list[bool], size_obs: list[list[float]], size_kind: list[list[int]],
-                       swaps: list[bool]) -> None:
+    def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float, applied: list[bool],
+                       size_obs: list[list[float]], size_kind: list[list[int]], swaps: list[bool]) -> None:
         """The shape / bookkeeping update of the tracks of ``pairs`` (track index, detection index) whose Kalman
         result is already in their rows (k.x, k.P) where ``applied``; the scan's constants are read once (one
         loop over the pairs: the update of one track is a few µs of Python)."""
@@ -876,7 +875,7 @@ class Tracker:
             c, s = self._pose_cs  # cos / sin of the pose's heading (once per scan)
         use_map = self._map is not None
         max_age = self._free.max_age if self._free is not None else None
-        vget = vac.get
+        ref = self._cur_ref if self._free is not None else None  # (the vacated-space test's reference: this scan)
         cos, sin, pi = math.cos, math.sin, math.pi
         tracks = self._tracks
         for r, (ti, di) in enumerate(pairs):
@@ -884,7 +883,6 @@ class Tracker:
                 continue
             k, det = tracks[ti], dets[di]
             dkind = det.kind
-            k.p_finite = True  # kalman_update_batch rejects non-finite results
             # shape: heading (90° ambiguity) and sizes along the track's own axes
             if dkind == KIND_RECT:
                 sk = size_kind[r]
@@ -938,6 +936,8 @@ class Tracker:
             elif dkind == KIND_POINT and k.kind == KIND_POINT:
                 lo0, lo1, hi0, hi1 = lohi_l[di]
                 k.size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
+            # (the stored points before this update: their vacated-space fraction is computed when first read)
+            past0 = tuple(k.past) if ref is not None and k.past else None
             if k.misses > 0:
                 # re-acquired after a gap: the free-space evidence must be rebuilt from this object
                 k.past.clear()
@@ -963,7 +963,8 @@ class Tracker:
                 k.history.append(True)
             k.beams = det.beams
             free = k.free
-            free.append(max(det.free_fraction, vget(k.id, 0.0)))  # (vacated: this scan sees through its old points)
+            # (vacated: this scan sees through its old points; computed when the entry is read, _free_values)
+            free.append((det.free_fraction, ref, t, past0) if past0 is not None else max(det.free_fraction, 0.0))
             if len(free) > nsus:
                 del free[0]
             if p is not None:
@@ -1025,33 +1026,59 @@ class Tracker:
         face. The stored scans nearest each reference age are found for all tracks in one kernel call
         (:func:`dynslam2d.detect.kernels.nearest_ages`, the search of :func:`_nearest_age`), their points
         tested in one vectorised call."""
-        out: dict[int, float] = {}
         if self._free is None or self._cur_ref is None:
-            return out
+            return {}
         sel = [k for k in tracks if k.past]
         if not sel:
-            return out
-        counts = [len(k.past_t) for k in sel]
-        stamps = np.fromiter(_chain.from_iterable([k.past_t for k in sel]), np.float64, sum(counts))
-        ii, jj = nearest_ages(stamps, np.array(counts, dtype=np.int64), t, self._ref_ages)
+            return {}
+        return self._seen_through_pasts(self._cur_ref, t, [k.id for k in sel], [k.past_t for k in sel],
+                                        [k.past for k in sel])
+
+    def _seen_through_pasts(self, ref, t: float, ids: list[int], stamps: list[list[float]],
+                            pasts: list) -> dict[int, float]:
+        """:meth:`_vacated` of tracks given by their ``ids``, the ``stamps`` (s) of their stored points and the stored
+        (stamp, points) ``pasts``, against the free-space reference ``ref`` of the scan at ``t`` (s)."""
+        out: dict[int, float] = {}
+        counts = [len(st) for st in stamps]
+        flat = np.fromiter(_chain.from_iterable(stamps), np.float64, sum(counts))
+        ii, jj = nearest_ages(flat, np.array(counts, dtype=np.int64), t, self._ref_ages)
         if ii.shape[0] == 0:
             return out
-        chunks = [sel[i].past[j][1] for i, j in zip(ii.tolist(), jj.tolist())]
+        chunks = [pasts[i][j][1] for i, j in zip(ii.tolist(), jj.tolist())]
         counts = [0]
         counts.extend([c.shape[0] for c in chunks])
-        free = self._free.seen_through_by(self._cur_ref, np.concatenate(chunks))
+        free = self._free.seen_through_by(ref, np.concatenate(chunks))
         frac = segment_means(free.astype(np.float64), np.cumsum(counts)).tolist()
         get = out.get
         for i, f in zip(ii.tolist(), frac):
-            tid = sel[i].id
+            tid = ids[i]
             out[tid] = max(get(tid, 0.0), f)
         return out
+
+    def _free_values(self, k: _Track) -> list[float]:
+        """``k.free`` with every entry a float. An update whose track had stored points appends a tuple (floor, ref,
+        t, past) instead of its free-space fraction: the detection's own fraction, the free-space reference of the
+        scan at ``t`` (s) and the track's stored (stamp, points) before the update; its value, max(floor, the
+        vacated fraction of :meth:`_vacated` in that scan), is computed here when first read and replaces the tuple.
+        Most entries are never read (the free-space condition of M is reached by few tracks; ≈ 3 % on negative_2),
+        so most free-space tests of stored points never run."""
+        free = k.free
+        for q, v in enumerate(free):
+            if type(v) is tuple:
+                free[q] = self._free_value(v)
+        return free
+
+    def _free_value(self, entry: float | tuple) -> float:
+        """The free-space fraction of one entry of a track's ``free`` list (:meth:`_free_values`)."""
+        if type(entry) is not tuple:
+            return entry
+        floor, ref, t, past = entry
+        return max(floor, self._seen_through_pasts(ref, t, [0], [[e[0] for e in past]], [past]).get(0, 0.0))
 
     def _birth(self, det: Detection, t: float, j: int) -> None:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
         cfg = self.config
         z, P, size, known = self._birth_state(det, j)
-        d = self._default
         k = _Track(id=self._next_id, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t,
                    birth_xy=z.copy(), theta_box=det.theta, size=size,
                    size_known=known, radius=float(det.circle[2]) if det.kind == KIND_CIRCLE
@@ -1061,8 +1088,6 @@ class Tracker:
                    munknown=[det.map_unknown] if self._map is not None else [],
                    past=[(t, det.points)] if self._free is not None else [],
                    past_t=[t] if self._free is not None else [])
-        # (np.isfinite(P).all() of its only non-zero entries: the measurement's R and the speed variance)
-        k.p_finite = all(map(math.isfinite, d.R[j].ravel().tolist())) and math.isfinite(P.item(10))
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
         self._next_id += 1
@@ -1092,6 +1117,13 @@ class Tracker:
         return z, P, size, known
 
     def _manage(self, t: float, updated: set[int]) -> None:
+        """Track management (M of N, deletions, clutter retirement) and the test of M (paper Eq. 3) of the updated
+        tracks. The entries of the states and covariances it reads are gathered from the state arrays once per scan
+        (the same floats ``ndarray.item`` gives); the test of M runs inline up to its common outcomes (tentative, or
+        not in M and at most v_min) with the scan's constants read once, the rest in :meth:`_dynamic`."""
+        tracks = self._tracks
+        if not tracks:
+            return
         tc = self.config.tracker
         st = self.stats
         keep: list[_Track] = []
@@ -1103,7 +1135,19 @@ class Tracker:
         v_min = tc.v_min
         retire_n = tc.structure_retire_updates if self._map is not None else 0
         retire_s = tc.structure_retire_fraction
-        for k in self._tracks:
+        # (the test of M's constants, the same products as in _dynamic)
+        max_ssig, v_exit, nsus = tc.max_speed_sigma, tc.v_exit_ratio * tc.v_min, tc.sustain_updates
+        ride_n, ride_r2 = tc.ride_updates, tc.ride_max_range * tc.ride_max_range
+        probe = self._free is not None
+        slow_tail = f" m/s ≤ v_min {v_min:.2f}"  # (the most common reason's constant part)
+        order = self._rows()
+        # per track: whether every entry of its covariance is finite (tested here on the rows as they are, instead of
+        # a flag kept in step wherever P changes), and its P[0, 0], P[1, 1], P[2:, 2:] and velocity as Python floats
+        Pf = self._P.reshape(-1, 16)[order]
+        fins = _all_rows(np.isfinite(Pf), axis=1).tolist()
+        pv = Pf[:, _P_MANAGE].tolist()
+        vv = self._X[order, 2:].tolist()
+        for k, (p00, p11, p22, p23, p32, p33), (vx, vy), fin in zip(tracks, pv, vv, fins):
             kid = k.id
             is_upd = kid in updated
             if kid in merged and not is_upd and k.in_m:
@@ -1140,13 +1184,11 @@ class Tracker:
                 st.deleted_coasting += 1
                 st.tracks_deleted += 1
                 continue
-            P = k.P
-            if not k.p_finite or sqrt(max(P.item(0), P.item(5))) > max_sig:  # P[0, 0], P[1, 1]
+            if not fin or sqrt(max(p00, p11)) > max_sig:
                 st.deleted_covariance += 1
                 st.tracks_deleted += 1
                 continue
-            x = k.x
-            speed = hypot(x.item(2), x.item(3))
+            speed = hypot(vx, vy)
             if speed > max_speed:
                 st.deleted_speed += 1
                 st.tracks_deleted += 1
@@ -1162,7 +1204,44 @@ class Tracker:
                     self._retire(k)
                 continue
             if is_upd:
-                self._dynamic(k, speed, t)
+                # paper Eq. 3 with persistence, certainty and displacement conditions (the start of _dynamic, inline)
+                if speed > 1e-9:
+                    u0, u1 = vx / speed, vy / speed
+                    sig = sqrt(max((u0 * p22 + u1 * p32) * u0 + (u0 * p23 + u1 * p33) * u1, 0.0))  # uᵀ P_v u
+                else:
+                    sig = sqrt(max(p22, p33))
+                kfast = k.fast + 1 if speed > v_min and sig < max_ssig else 0
+                k.fast = kfast
+                if speed < v_exit:
+                    if k.slow_since is None:
+                        k.slow_since = t
+                elif k.remembered and kfast < nsus:
+                    pass  # a remembered stop ends only on M's sustained fast test, not on one scan of speed jitter
+                else:
+                    k.slow_since = None
+                if k.in_m and k.probation and probe and len(k.free) >= nsus and self._probation_fails(k):
+                    pass  # left M
+                else:
+                    rides = False
+                    if len(k.map_t) >= ride_n:  # (fewer: it cannot ride)
+                        lx, ly = k.laser_xy[-1]
+                        if lx * lx + ly * ly > ride_r2:
+                            k.rode = False  # (_rides_with_laser's first test, inline: most tracks are far from it)
+                        else:
+                            rides = self._rides_with_laser(k)
+                    if rides:
+                        k.in_m = False
+                        k.fast = 0
+                        k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
+                    elif k.in_m:
+                        self._dynamic(k, speed, sig, t)
+                    elif k.state == TENTATIVE:
+                        # (speed: most tracks are short-lived tentative clutter; nothing else changes them)
+                        k.reason = "not in M: tentative track"
+                    elif speed <= v_min:
+                        k.reason = f"not in M: speed {speed:.2f}{slow_tail}"  # (the most common reason)
+                    else:
+                        self._dynamic(k, speed, sig, t)
                 if mem:
                     if k.in_m:
                         self._memory_bookkeeping(k, t)
@@ -1301,7 +1380,6 @@ class Tracker:
         k.laser_xy, k.map_xy, k.map_t = [], [], []
         k.person, k.person_streak, k.rode = False, 0, False
         k.reason = "not in M: left the map structure it was retired on"
-        k.p_finite = bool(np.isfinite(P).all())
         self._add_row(k, (z[0], z[1], 0.0, 0.0), P)
 
     def _dormant_reports(self, t: float) -> list[Track]:
@@ -1321,46 +1399,24 @@ class Tracker:
                                    k.beams, len(k.beams), False))
         return out
 
-    def _dynamic(self, k: _Track, speed: float, t: float) -> None:
-        """Paper Eq. 3 with persistence, certainty and displacement conditions."""
-        tc = self.config.tracker
-        P = k.P
-        p22, p23, p32, p33 = P.item(10), P.item(11), P.item(14), P.item(15)  # P[2:, 2:]
-        if speed > 1e-9:
-            u0, u1 = k.x.item(2) / speed, k.x.item(3) / speed
-            sig = math.sqrt(max((u0 * p22 + u1 * p32) * u0 + (u0 * p23 + u1 * p33) * u1, 0.0))  # uᵀ P_v u
-        else:
-            sig = math.sqrt(max(p22, p33))
-        fast = speed > tc.v_min and sig < tc.max_speed_sigma
-        k.fast = k.fast + 1 if fast else 0
-        if speed < tc.v_exit_ratio * tc.v_min:
-            k.slow_since = t if k.slow_since is None else k.slow_since
-        elif k.remembered and k.fast < tc.sustain_updates:
-            pass  # a remembered stop ends only on M's sustained fast test, not on one scan of speed jitter
-        else:
-            k.slow_since = None
-        if k.in_m and k.probation and self._free is not None and len(k.free) >= tc.sustain_updates:
-            k.probation = False
-            if sum(k.free) / len(k.free) < tc.free_min_fraction:
-                k.in_m = False
-                k.fast = 0
-                k.reason = ("left M: after a gap the detections show no motion into free space "
-                            "(a different, static object)")
-                return
-        if len(k.map_t) < tc.ride_updates:  # (fewer: it cannot ride)
-            pass
-        elif (lxy := k.laser_xy[-1])[0] * lxy[0] + lxy[1] * lxy[1] > tc.ride_max_range * tc.ride_max_range:
-            k.rode = False  # (_rides_with_laser's first test, inline: most tracks are far from the laser)
-        elif self._rides_with_laser(k):
-            if k.in_m:
-                k.in_m = False
+    def _probation_fails(self, k: _Track) -> bool:
+        """End the probation of ``k`` (in M, re-acquired after a gap, with ``sustain_updates`` free-space fractions):
+        it leaves M (True) when they show no motion into free space."""
+        k.probation = False
+        free = self._free_values(k)
+        if sum(free) / len(free) < self.config.tracker.free_min_fraction:
+            k.in_m = False
             k.fast = 0
-            k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
-            return
-        if k.state == TENTATIVE and not k.in_m:
-            # (speed: most tracks are short-lived tentative clutter; nothing below changes them but the reason)
-            k.reason = "not in M: tentative track"
-            return
+            k.reason = "left M: after a gap the detections show no motion into free space (a different, static object)"
+            return True
+        return False
+
+    def _dynamic(self, k: _Track, speed: float, sig: float, t: float) -> None:
+        """Paper Eq. 3 with persistence, certainty and displacement conditions: the rest of the test that
+        :meth:`_manage` starts (speed persistence ``k.fast``, slow time, probation and the riding test done there)
+        for an updated track in M, or confirmed / coasting with ``speed`` (m/s) > v_min; ``sig``: σ of the speed
+        along the velocity, m/s."""
+        tc = self.config.tracker
         # a track seen moving before re-enters M on the kinematic test: where it paused, the map wrote it
         use_map = self._map is not None and len(k.mstruct) > 0 and not k.was_in_m
         npu = tc.person_sustain_updates
@@ -1415,11 +1471,11 @@ class Tracker:
                 min_disp := tc.person_min_displacement if person_way == "map" else tc.min_displacement):
             # (the net displacement since birth is computed only here: most tracks stop at a test above)
             k.reason = f"not in M: moved {disp:.2f} m < {min_disp:.2f} m since birth"
-        elif self._free is not None and (not k.free or sum(k.free) / len(k.free) < tc.free_min_fraction):
-            k.reason = (f"not in M: points on free space {sum(k.free) / max(len(k.free), 1):.2f} < "
+        elif self._free is not None and (not (fr := self._free_values(k)) or sum(fr) / len(fr) < tc.free_min_fraction):
+            k.reason = (f"not in M: points on free space {sum(fr) / max(len(fr), 1):.2f} < "
                         f"{tc.free_min_fraction:.2f} (static structure)")
         elif use_map and not fast_person and sum(k.mfree) / len(k.mfree) < tc.map_free_min and not (
-                self._laser_still and sum(k.munknown) / len(k.munknown) >= 1.0 - tc.map_free_min):
+                self._is_still() and sum(k.munknown) / len(k.munknown) >= 1.0 - tc.map_free_min):
             k.reason = (f"not in M: points in observed-free map cells {sum(k.mfree) / len(k.mfree):.2f} < "
                         f"{tc.map_free_min:.2f} (no map evidence of motion)")
         elif use_map and sum(k.mstruct) / len(k.mstruct) > tc.map_structure_max:
@@ -1449,7 +1505,7 @@ class Tracker:
         mf = k.mfree[-n:]
         if sum(mf) / len(mf) >= tc.person_map_free_min:
             return "map"
-        fr, ms, mu = k.free[-n:], k.mstruct[-n:], k.munknown[-n:]
+        fr, ms, mu = self._free_values(k)[-n:], k.mstruct[-n:], k.munknown[-n:]
         if len(fr) < n or sum(fr) / len(fr) < tc.person_free_min or sum(ms) / len(ms) > tc.map_structure_max:
             return None
         return "free" if (sum(mf) + sum(mu)) / len(mf) >= 0.5 else None
@@ -1541,10 +1597,11 @@ class Tracker:
             beyond = ~np.isfinite(r) | (r > far)
         return float(np.count_nonzero(beyond)) / n >= self.config.memory.seen_through_share
 
-    def _still(self, t: float, pose: Pose2D | None) -> bool:
+    def _still(self, t: float, pose: Pose2D | None) -> bool | None:
         """The laser has stayed within ``still_distance`` / ``still_angle`` of its pose over the last
         ``still_time`` seconds (then walls cannot slide into view, and a map that a motionless robot does
-        not update leaves the places people walk into unknown: unknown counts like free)."""
+        not update leaves the places people walk into unknown: unknown counts like free). Keeps the poses of
+        the last ``still_time`` s; None: not decided yet, :meth:`_is_still` compares them with ``pose`` when asked."""
         tc = self.config.tracker
         if pose is None or not pose.is_finite():
             return False
@@ -1554,8 +1611,17 @@ class Tracker:
             h.popleft()
         if t - h[0][0] < tc.still_time:
             return False
-        return all(math.hypot(x - pose.x, y - pose.y) <= tc.still_distance
-                   and abs(float(wrap_angle(th - pose.theta))) <= tc.still_angle for _, x, y, th in h)
+        return None  # (the poses are compared when asked: _is_still)
+
+    def _is_still(self) -> bool:
+        """:meth:`_still` of this scan; its comparison of the kept poses with this scan's runs when first asked in the
+        scan (few tracks reach the test that asks)."""
+        if self._laser_still is None:
+            tc, pose = self.config.tracker, self._pose
+            self._laser_still = all(math.hypot(x - pose.x, y - pose.y) <= tc.still_distance
+                                    and abs(float(wrap_angle(th - pose.theta))) <= tc.still_angle
+                                    for _, x, y, th in self._pose_hist)
+        return self._laser_still
 
     @staticmethod
     def _net_speed(k: _Track, n: int) -> float | None:
