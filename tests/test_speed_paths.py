@@ -149,14 +149,16 @@ def test_dropped_ledger_record_counts_the_cells_folding_would() -> None:
 
 
 def test_multires_integrate_equals_per_level_integration() -> None:
-    """MultiResMap.integrate (bounds from the extreme ends, end cells in shared buffers) writes every level
-    exactly as GridLevel.integrate does level by level, with and without the grazing stop and clearing rays."""
+    """MultiResMap.integrate (bounds from the extreme ends, every level's end cells and rays in one kernel call)
+    writes every level exactly as GridLevel.integrate does level by level, with and without the grazing stop and
+    clearing rays, on maps of 2, 3 (the fused kernel) and 4 levels (the per-level loop)."""
     from dynslam2d.slam.grid import MultiResMap, grazing_stop
 
     rng = np.random.default_rng(3)
-    for grazing in (0.0, 1.5):
-        fast = MultiResMap(0.05, 3, -0.4, 0.9, grazing_cells=grazing)
-        plain = MultiResMap(0.05, 3, -0.4, 0.9, grazing_cells=grazing)
+    # 3 levels and fewer: one kernel call for all (integrate_levels); 4: level by level in Python
+    for grazing, n_levels in ((0.0, 3), (1.5, 3), (0.0, 2), (1.5, 4)):
+        fast = MultiResMap(0.05, n_levels, -0.4, 0.9, grazing_cells=grazing)
+        plain = MultiResMap(0.05, n_levels, -0.4, 0.9, grazing_cells=grazing)
         pose = Pose2D(0.3, -0.2, 0.1)
         for step in range(6):
             pose = pose.compose(Pose2D(*rng.uniform(-0.4, 0.4, 2), float(rng.uniform(-0.3, 0.3))))
@@ -181,6 +183,46 @@ def test_multires_integrate_equals_per_level_integration() -> None:
             assert np.array_equal(lf.logodds, lp.logodds) and np.array_equal(lf.prob, lp.prob)
             assert np.array_equal(lf.uidx, lp.uidx)
             assert lf.n_grows > 1  # the growth path was exercised
+
+
+def test_match_pyramid_equals_the_level_by_level_match_and_evaluation(monkeypatch) -> None:
+    """The matcher's one kernel call for all levels and the evaluation at its result (match_and_evaluate,
+    match_multires) give bit for bit the poses and fits of the per-level loop followed by evaluate, on maps of
+    2 and 3 levels, from seeds near and far (LM steps accepted and refused)."""
+    import dynslam2d.slam.matcher as mt
+    from dynslam2d.slam.grid import MultiResMap
+
+    slam, first = mapped()
+    small = MultiResMap(0.05, 2, -0.4, 0.9)
+    for lv, src in zip(small.levels, slam.map.levels):
+        lv.logodds, lv.prob, lv.uidx, lv.i0, lv.j0 = src.logodds, src.prob, src.uidx, src.i0, src.j0
+    pts = slam.scan_points(scan_at(first.compose(Pose2D(0.12, -0.08, 0.05))))[0]
+    args = (4, 12, False, True, 0.1, 1e4, 0.2, 2.0)
+    n_fused = 0
+    kernel = mt.match_pyramid
+
+    def counted(*a):
+        nonlocal n_fused
+        n_fused += 1
+        return kernel(*a)
+
+    for levels in (slam.map.levels, small.levels):
+        for off in ((0.0, 0.0, 0.0), (0.4, -0.3, 0.15), (-0.6, 0.2, -0.3), (1.5, 1.5, 1.0)):
+            seed = first.compose(Pose2D(*off)).as_array()
+            monkeypatch.setattr(mt, "match_pyramid", counted)
+            got_p, got_fit = mt.match_and_evaluate(levels, pts, seed, *args)
+            got_only = mt.match_multires(levels, pts, seed, *args)
+            monkeypatch.setattr(mt, "_PYRAMID_LEVELS", 0)  # the level-by-level loop
+            want_p = mt.match_multires(levels, pts, seed, *args)
+            want_fit = mt.evaluate(levels[0], pts, want_p)
+            monkeypatch.undo()
+            np.testing.assert_array_equal(got_p, want_p)
+            np.testing.assert_array_equal(got_only, want_p)
+            assert (got_fit.cost, got_fit.score, got_fit.n_inside) == (want_fit.cost, want_fit.score,
+                                                                       want_fit.n_inside)
+            np.testing.assert_array_equal(got_fit.hessian, want_fit.hessian)
+            assert np.abs(want_p - seed).max() > 1e-6  # the match moved
+    assert n_fused == 16  # every call above took the one-kernel path
 
 
 def test_ledger_packed_level_cells_equal_the_per_level_sort() -> None:
