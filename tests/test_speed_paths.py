@@ -185,46 +185,6 @@ def test_multires_integrate_equals_per_level_integration() -> None:
             assert lf.n_grows > 1  # the growth path was exercised
 
 
-def test_match_pyramid_equals_the_level_by_level_match_and_evaluation(monkeypatch) -> None:
-    """The matcher's one kernel call for all levels and the evaluation at its result (match_and_evaluate,
-    match_multires) give bit for bit the poses and fits of the per-level loop followed by evaluate, on maps of
-    2 and 3 levels, from seeds near and far (LM steps accepted and refused)."""
-    import dynslam2d.slam.matcher as mt
-    from dynslam2d.slam.grid import MultiResMap
-
-    slam, first = mapped()
-    small = MultiResMap(0.05, 2, -0.4, 0.9)
-    for lv, src in zip(small.levels, slam.map.levels):
-        lv.logodds, lv.prob, lv.uidx, lv.i0, lv.j0 = src.logodds, src.prob, src.uidx, src.i0, src.j0
-    pts = slam.scan_points(scan_at(first.compose(Pose2D(0.12, -0.08, 0.05))))[0]
-    args = (4, 12, False, True, 0.1, 1e4, 0.2, 2.0)
-    n_fused = 0
-    kernel = mt.match_pyramid
-
-    def counted(*a):
-        nonlocal n_fused
-        n_fused += 1
-        return kernel(*a)
-
-    for levels in (slam.map.levels, small.levels):
-        for off in ((0.0, 0.0, 0.0), (0.4, -0.3, 0.15), (-0.6, 0.2, -0.3), (1.5, 1.5, 1.0)):
-            seed = first.compose(Pose2D(*off)).as_array()
-            monkeypatch.setattr(mt, "match_pyramid", counted)
-            got_p, got_fit = mt.match_and_evaluate(levels, pts, seed, *args)
-            got_only = mt.match_multires(levels, pts, seed, *args)
-            monkeypatch.setattr(mt, "_PYRAMID_LEVELS", 0)  # the level-by-level loop
-            want_p = mt.match_multires(levels, pts, seed, *args)
-            want_fit = mt.evaluate(levels[0], pts, want_p)
-            monkeypatch.undo()
-            np.testing.assert_array_equal(got_p, want_p)
-            np.testing.assert_array_equal(got_only, want_p)
-            assert (got_fit.cost, got_fit.score, got_fit.n_inside) == (want_fit.cost, want_fit.score,
-                                                                       want_fit.n_inside)
-            np.testing.assert_array_equal(got_fit.hessian, want_fit.hessian)
-            assert np.abs(want_p - seed).max() > 1e-6  # the match moved
-    assert n_fused == 16  # every call above took the one-kernel path
-
-
 def test_ledger_packed_level_cells_equal_the_per_level_sort() -> None:
     """EvidenceLedger._level_cells (one sort of (level, track, cell) packed into int64 by scan_cells) returns
     exactly the rows of the per-level lexsort / membership path: tracks sharing cells, cells an unowned point

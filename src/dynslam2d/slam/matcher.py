@@ -231,65 +231,6 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     return out, n_acc
 
 
-@njit(cache=True)
-def match_pyramid(probs, res, i0, j0, n_levels, pts_m, start, it_coarse, it_finest, swapped, use_lm, lam0, lam_max,
-                  max_rot, max_trans, fit, H0):  # pragma: no cover - numba
-    """:func:`match_multires` without a prior, every level in one call, then :func:`evaluate` of the result on
-    level 0 (gradient weights not swapped): the same arithmetic in the same order (so the same bits) without the
-    per-level Python (pose conversions, scaled point copies, one kernel call per level).
-
-    ``probs``: the levels' probability caches (a 3-tuple; levels ``n_levels`` … 2 are unused), ``res``, ``i0``,
-    ``j0`` (3-tuples) their cell sides (m) and array offsets (cells). Returns (world pose (3,), cost, Σ M,
-    n_inside) with ``H0`` (3, 3) filled with the Hessian at the pose when ``fit``; cost = −1 when not ``fit``,
-    the pose is not finite or level 0 is empty (no evaluation; ``H0`` then zero when ``fit``).
-    """
-    pose = start.copy()
-    n = pts_m.shape[0]
-    scaled = np.empty((n, 2))
-    no_prior = np.zeros((3, 3))
-    for k in range(n_levels - 1, -1, -1):
-        prob = probs[k]
-        if prob.size == 0:
-            continue
-        n_iter = it_finest if k == 0 else it_coarse
-        if n_iter <= 0:
-            continue
-        r = res[k]
-        mp = np.empty(3)
-        mp[0] = pose[0] / r - i0[k]  # GridLevel.pose_to_map
-        mp[1] = pose[1] / r - j0[k]
-        mp[2] = pose[2]
-        for i in range(n):
-            scaled[i, 0] = pts_m[i, 0] / r
-            scaled[i, 1] = pts_m[i, 1] / r
-        out, _ = match_level(prob, scaled, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans, mp,
-                             no_prior)
-        if not (math.isfinite(out[0]) and math.isfinite(out[1]) and math.isfinite(out[2])):
-            pose[0] = np.nan
-            pose[1] = np.nan
-            pose[2] = np.nan
-            return pose, -1.0, 0.0, 0
-        pose[0] = (out[0] + i0[k]) * r  # GridLevel.pose_to_world
-        pose[1] = (out[1] + j0[k]) * r
-        pose[2] = (out[2] + math.pi) % (2.0 * math.pi) - math.pi  # wrap after each level (§2.5)
-    if not fit:
-        return pose, -1.0, 0.0, 0
-    for a in range(3):
-        for b in range(3):
-            H0[a, b] = 0.0
-    prob = probs[0]
-    if prob.size == 0:
-        return pose, -1.0, 0.0, 0
-    r = res[0]
-    for i in range(n):
-        scaled[i, 0] = pts_m[i, 0] / r
-        scaled[i, 1] = pts_m[i, 1] / r
-    g = np.zeros(3)
-    cost, summ, n_in = accumulate(prob, scaled, pose[0] / r - i0[0], pose[1] / r - j0[0], pose[2], np.bool_(False),
-                                  H0, g)
-    return pose, cost, summ, n_in
-
-
 @dataclass(slots=True)
 class LevelFit:
     """Evaluation of a world pose on one level.
@@ -346,9 +287,6 @@ def match_multires(
     if pts_m.shape[0] == 0:
         return pose
     use_prior = prior_world is not None and prior_info is not None and bool(np.any(prior_info))
-    if not use_prior and len(levels) <= _PYRAMID_LEVELS:  # one kernel call (the same steps, below, per level)
-        return _match_pyramid(levels, pts_m, pose, iterations_coarse, iterations_finest, swapped, use_lm, lam0,
-                              lam_max, max_rot, max_trans_cells, False)[0]
     for k in range(len(levels) - 1, -1, -1):
         lv = levels[k]
         if lv.empty:
@@ -373,53 +311,6 @@ def match_multires(
         pose = lv.pose_to_world(out)
         pose[2] = (pose[2] + math.pi) % (2.0 * math.pi) - math.pi  # wrap after each level (§2.5)
     return pose
-
-
-#: The most levels :func:`match_pyramid` takes (the default map has 3; more go level by level in Python).
-_PYRAMID_LEVELS = 3
-#: A level :func:`match_pyramid` skips (the tuple of levels is always 3 long: one kernel specialisation).
-_NO_LEVEL = np.zeros((0, 0), dtype=np.float32)
-
-
-def _match_pyramid(levels: list[GridLevel], pts_m: np.ndarray, pose: np.ndarray, iterations_coarse: int,
-                   iterations_finest: int, swapped: bool, use_lm: bool, lam0: float, lam_max: float, max_rot: float,
-                   max_trans_cells: float, fit: bool) -> tuple[np.ndarray, LevelFit | None]:
-    """:func:`match_pyramid` on at most 3 ``levels`` and at least one point: (world pose, its level-0
-    :class:`LevelFit` as :func:`evaluate` gives it, or None when not ``fit`` or the pose is not finite)."""
-    n_lv = len(levels)
-    pad = _PYRAMID_LEVELS - n_lv
-    probs = tuple(lv.prob for lv in levels) + (_NO_LEVEL,) * pad
-    res = tuple(lv.resolution for lv in levels) + (1.0,) * pad
-    i0 = tuple(lv.i0 for lv in levels) + (0,) * pad
-    j0 = tuple(lv.j0 for lv in levels) + (0,) * pad
-    pts = np.ascontiguousarray(pts_m, dtype=np.float64)
-    H = np.zeros((3, 3))
-    p, cost, summ, n_in = match_pyramid(probs, res, i0, j0, n_lv, pts, pose, int(iterations_coarse),
-                                        int(iterations_finest), bool(swapped), bool(use_lm), float(lam0),
-                                        float(lam_max), float(max_rot), float(max_trans_cells), fit, H)
-    if not fit or not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
-        return p, None
-    if cost < 0.0:  # (level 0 empty: evaluate's answer)
-        return p, evaluate(levels[0], pts_m, p)
-    return p, LevelFit(H, float(cost), float(summ) / pts.shape[0], int(n_in))
-
-
-def match_and_evaluate(levels: list[GridLevel], pts_m: np.ndarray, start_world: np.ndarray, iterations_coarse: int,
-                       iterations_finest: int, swapped: bool = False, use_lm: bool = True, lam0: float = 0.1,
-                       lam_max: float = 1e4, max_rot: float = 0.2, max_trans_cells: float = 2.0
-                       ) -> tuple[np.ndarray, LevelFit | None]:
-    """:func:`match_multires` without a prior, then :func:`evaluate` of its pose on level 0 (gradient weights not
-    swapped): (world pose (3,), its fit, or None when the pose is not finite). One kernel call for both with at
-    most 3 levels; the same values either way."""
-    pose = np.asarray(start_world, dtype=np.float64).copy()
-    if pts_m.shape[0] and len(levels) <= _PYRAMID_LEVELS:
-        return _match_pyramid(levels, pts_m, pose, iterations_coarse, iterations_finest, swapped, use_lm, lam0,
-                              lam_max, max_rot, max_trans_cells, True)
-    p = match_multires(levels, pts_m, pose, iterations_coarse, iterations_finest, swapped, use_lm, lam0, lam_max,
-                       max_rot, max_trans_cells)
-    if not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
-        return p, None
-    return p, evaluate(levels[0], pts_m, p)
 
 
 def free_fraction(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, thresh: float) -> float:

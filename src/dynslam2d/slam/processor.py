@@ -34,7 +34,6 @@ from dynslam2d.slam.matcher import (
     evaluate,
     free_fraction,
     gated_points,
-    match_and_evaluate,
     match_multires,
     support,
 )
@@ -632,23 +631,14 @@ class HectorSlam:
         last_fit: list = []  # (pose bytes, LevelFit) of the latest refine: _fit reuses it at the same pose
 
         def refine(seed: np.ndarray) -> tuple[np.ndarray, float]:
-            if prior_info is None:  # the match and its evaluation at the result (one kernel call)
-                p, fit = match_and_evaluate(
-                    levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
-                    c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
-                    c.max_translation_step,
-                )
-                if fit is None:
-                    return p, -1.0
-            else:
-                p = match_multires(
-                    levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
-                    c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
-                    c.max_translation_step, prior_pose, prior_info,
-                )
-                if not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
-                    return p, -1.0
-                fit = evaluate(levels[0], pts, p)
+            p = match_multires(
+                levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
+                c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
+                c.max_translation_step, prior_pose, prior_info,
+            )
+            if not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
+                return p, -1.0
+            fit = evaluate(levels[0], pts, p)
             last_fit[:] = [p.tobytes(), fit]
             return p, fit.score
 
