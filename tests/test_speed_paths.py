@@ -149,14 +149,16 @@ def test_dropped_ledger_record_counts_the_cells_folding_would() -> None:
 
 
 def test_multires_integrate_equals_per_level_integration() -> None:
-    """MultiResMap.integrate (bounds from the extreme ends, end cells in shared buffers) writes every level
-    exactly as GridLevel.integrate does level by level, with and without the grazing stop and clearing rays."""
+    """MultiResMap.integrate (bounds from the extreme ends, every level's end cells and rays in one kernel call)
+    writes every level exactly as GridLevel.integrate does level by level, with and without the grazing stop and
+    clearing rays, on maps of 2, 3 (the fused kernel) and 4 levels (the per-level loop)."""
     from dynslam2d.slam.grid import MultiResMap, grazing_stop
 
     rng = np.random.default_rng(3)
-    for grazing in (0.0, 1.5):
-        fast = MultiResMap(0.05, 3, -0.4, 0.9, grazing_cells=grazing)
-        plain = MultiResMap(0.05, 3, -0.4, 0.9, grazing_cells=grazing)
+    # 3 levels and fewer: one kernel call for all (integrate_levels); 4: level by level in Python
+    for grazing, n_levels in ((0.0, 3), (1.5, 3), (0.0, 2), (1.5, 4)):
+        fast = MultiResMap(0.05, n_levels, -0.4, 0.9, grazing_cells=grazing)
+        plain = MultiResMap(0.05, n_levels, -0.4, 0.9, grazing_cells=grazing)
         pose = Pose2D(0.3, -0.2, 0.1)
         for step in range(6):
             pose = pose.compose(Pose2D(*rng.uniform(-0.4, 0.4, 2), float(rng.uniform(-0.3, 0.3))))
@@ -515,3 +517,42 @@ def test_body_filter_skipping_empty_restarts_and_moved_beams_finds_the_same_body
         assert np.array_equal(body._ref, ref["ref"], equal_nan=True) and np.array_equal(body._start, ref["start"])
         assert np.array_equal(body._same, ref["same"]) and np.array_equal(body._seen, ref["seen"])
     assert restarts > 20 and drops > 100 and body.body[100:106].all() and body.body[200:203].all()
+
+
+def test_scan_points_kernel_equals_the_masked_array_computation() -> None:
+    """HectorSlam.scan_points' one kernel pass gives the gated returns and, with clear_no_return_dist, the
+    clearing-ray ends of the masked array expressions it replaced (NaN, ±inf, beyond range_max, too close,
+    beyond laser_max_dist, on the gates exactly), bit for bit and in beam order; so does the loop closer's
+    keyframe points (LoopCloser._scan_points)."""
+    n = 400
+    rng = np.random.default_rng(11)
+    r = rng.uniform(0.0, 35.0, n)
+    r[::13] = np.nan
+    r[5::17] = np.inf
+    r[7::19] = -np.inf
+    r[9::23] = 0.4  # laser_min_dist (excluded)
+    r[11::29] = 25.0  # laser_max_dist: a "no return" for the clearing rays
+    s = Scan(stamp=0.0, angle_min=-2.0, angle_increment=4.0 / n, ranges=r, range_min=0.1, range_max=30.0)
+    for clear_dist in (0.0, 3.0):
+        c = SlamConfig(laser_min_dist=0.4, laser_max_dist=25.0, clear_no_return_dist=clear_dist)
+        pts, clear = HectorSlam(c).scan_points(s)
+        cos_a, sin_a = s.trig()
+        with np.errstate(invalid="ignore"):
+            valid = s.valid_mask() & (r > c.laser_min_dist) & (r < c.laser_max_dist)
+            noret = ~np.isfinite(r) | (r > s.range_max) | (r >= c.laser_max_dist)
+        np.testing.assert_array_equal(pts, np.column_stack((r[valid] * cos_a[valid], r[valid] * sin_a[valid])))
+        want = (np.column_stack((clear_dist * cos_a[noret], clear_dist * sin_a[noret])) if clear_dist > 0.0
+                else np.zeros((0, 2)))
+        np.testing.assert_array_equal(clear, want)
+        assert pts.shape[0] > 100 and (clear_dist == 0.0 or clear.shape[0] > 50)
+    # the loop closer's keyframe points: the same kernel without clearing rays, cut at submap_max_range
+    from dynslam2d.slam.loopconfig import LoopConfig
+    from dynslam2d.slam.loops import LoopCloser
+
+    c = SlamConfig(laser_min_dist=0.4, laser_max_dist=25.0)
+    closer = LoopCloser(LoopConfig(submap_max_range=12.0), c)
+    pts, clear = closer._scan_points(s)
+    with np.errstate(invalid="ignore"):
+        valid = s.valid_mask() & (r > 0.4) & (r < 12.0)
+    np.testing.assert_array_equal(pts, s.points(valid))
+    assert clear.shape == (0, 2) and pts.shape[0] > 50

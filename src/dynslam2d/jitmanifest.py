@@ -11,6 +11,14 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.sim.world._cast_kernel',
      "(float64, float64, Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(int32, 1, 'C'), Array(float64, 2, 'C'), Array(int32, 1, 'C'), float64,)"),
+    ('dynslam2d.slam.matcher.gated_points',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
+     "'C'), float64, float64, float64, float64,)"),
+    ('dynslam2d.detect.body._observe_beams',
+     "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), "
+     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, 1, 'C'), "
+     "Array(bool, 1, 'C'), Array(float64, 1, 'C'), float64, float64, float64, float64, float64, int64, "
+     "float64, Array(bool, 1, 'C'),)"),
     ('dynslam2d.detect.segment._link_kernel',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), bool, float64, float64, "
      'float64, float64, float64, int64, bool,)'),
@@ -46,9 +54,12 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.slam.ledgerkernels.update_rows',
      "(Array(float32, 2, 'A'), Array(int32, 2, 'A'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'),)"),
-    ('dynslam2d.slam.raycast.integrate_rays',
-     "(Array(float32, 2, 'C'), Array(float32, 2, 'C'), Array(int32, 2, 'C'), int64, int64, int64, int64, "
-     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, float64,)"),
+    ('dynslam2d.slam.raycast.integrate_levels',
+     "(UniTuple(Array(float32, 2, 'C', False, aligned=True), 3), UniTuple(Array(float32, 2, 'C', False, "
+     "aligned=True), 3), UniTuple(Array(int32, 2, 'C', False, aligned=True), 3), int64, UniTuple(float64, "
+     '3), UniTuple(int64, 3), UniTuple(int64, 3), UniTuple(int64, 3), UniTuple(int64, 3), UniTuple(int64, '
+     "3), Array(float64, 2, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), bool, float64, float64, "
+     'float64,)'),
     ('dynslam2d.slam.cleanup._scan_geometry',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),

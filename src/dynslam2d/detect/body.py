@@ -21,10 +21,13 @@ only measures how far the laser travelled and turned. Units m, rad.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from dynslam2d.errors import DynSlamError
-from dynslam2d.types import Pose2D, Scan, wrap_angle
+from dynslam2d.types import Pose2D, Scan
 
 
 def polygon_problem(polygon: list[tuple[float, float]] | np.ndarray) -> str | None:
@@ -117,6 +120,50 @@ def grow_polygon(hull: np.ndarray, margin: float) -> np.ndarray:
     return h + d / n[:, None] * margin
 
 
+@njit(cache=True)
+def _observe_beams(r, valid, max_range, tol, ref, seen, same_n, start, moved, body, body_r, px, py, pth, min_travel,
+                   min_turn, min_scans, share, new_body):  # pragma: no cover - numba
+    """:meth:`BodyFilter.observe`'s per-beam update, in place, for ranges ``r`` (m) with ``valid`` returns at laser
+    pose (``px``, ``py``, ``pth``) (map frame, m / rad). A valid return within ``max_range`` is *near*; it is
+    *the same* when within ``tol`` of the beam's reference range ``ref``; ``seen`` / ``same_n`` count the beam's
+    returns and those at the reference range. A near return that is not the same, on a beam whose reference
+    explains less than half of its returns, starts the beam over from it (reference, counts 1, ``start`` pose,
+    not ``moved``). A beam that kept its range and is not ``moved`` yet becomes moved once the laser is
+    ``min_travel`` (m) and ``min_turn`` (rad) away from its start pose: net motion away from where the range was
+    first seen (summed increments would add up pose jitter). ``new_body`` gets the body beams: moved, at least
+    ``min_scans`` returns at the reference range and at least ``share`` of all. Returns whether the body beams or
+    their ranges differ from ``body`` / ``body_r``. (The same values as the array expressions it replaced, one
+    beam at a time: math.hypot is the C library's hypot as numpy's, % the same floored remainder.)"""
+    changed = False
+    two_pi = 2.0 * math.pi
+    for i in range(r.shape[0]):
+        v = valid[i]
+        near = v and r[i] <= max_range
+        same = near and abs(r[i] - ref[i]) <= tol
+        if v:
+            seen[i] += 1
+        if same:
+            same_n[i] += 1
+        # a beam whose reference range explains less than half of its returns starts over from this one
+        if near and not same and same_n[i] < 0.5 * seen[i]:
+            ref[i] = r[i]
+            same_n[i] = 1
+            seen[i] = 1
+            start[i, 0] = px
+            start[i, 1] = py
+            start[i, 2] = pth
+            moved[i] = False
+        if same and not moved[i]:
+            if math.hypot(px - start[i, 0], py - start[i, 1]) >= min_travel and \
+                    abs((pth - start[i, 2] + math.pi) % two_pi - math.pi) >= min_turn:  # (types.wrap_angle)
+                moved[i] = True
+        b = moved[i] and same_n[i] >= min_scans and same_n[i] >= share * seen[i]
+        new_body[i] = b
+        if b != body[i] or (b and ref[i] != body_r[i]):
+            changed = True
+    return changed
+
+
 class BodyFilter:
     """Drops the robot's own returns: footprint polygon + automatic detection (module docstring).
 
@@ -189,32 +236,14 @@ class BodyFilter:
         n = scan.n_beams
         if n != self._n:
             self._reset(n)
-        r = scan.ranges
-        valid = scan.valid_mask()
-        near = valid & (r <= float(cfg.auto_max_range))
         tol = float(cfg.auto_tolerance)
-        same = near & (np.abs(r - self._ref) <= tol)
-        self._seen += valid
-        self._same += same
-        # a beam whose reference range explains less than half of its returns starts over from this one
-        restart = near & ~same & (self._same < 0.5 * self._seen)
-        if restart.any():  # (most scans restart no beam: five assignments less)
-            self._ref[restart] = r[restart]
-            self._same[restart] = 1
-            self._seen[restart] = 1
-            self._start[restart] = (pose.x, pose.y, pose.theta)
-            self._moved[restart] = False
-        # net motion away from where the range was first seen (summed increments would add up pose jitter)
-        # (only the beams that kept their range can become body beams: the test runs on those alone, and only
-        # on those not marked moved yet — marking a moved beam again changes nothing)
-        idx = np.flatnonzero(same & ~self._moved)
-        if idx.shape[0]:
-            st = self._start[idx]
-            moved = np.hypot(pose.x - st[:, 0], pose.y - st[:, 1]) >= cfg.auto_min_travel
-            turned = np.abs(wrap_angle(pose.theta - st[:, 2])) >= cfg.auto_min_turn
-            self._moved[idx[moved & turned]] = True
-        body = self._moved & (self._same >= cfg.auto_min_scans) & (self._same >= cfg.auto_share * self._seen)
-        if np.array_equal(body, self.body) and np.array_equal(self._ref[body], self._body_r[body]):
+        # per beam, in one pass (_observe_beams): the counts of returns and of returns at the reference range, the
+        # restarts, the net motion test and the body beams
+        body = np.empty(n, dtype=np.bool_)
+        if not _observe_beams(scan.ranges, scan.valid_mask(), float(cfg.auto_max_range), tol, self._ref, self._seen,
+                              self._same, self._start, self._moved, self.body, self._body_r, float(pose.x),
+                              float(pose.y), float(pose.theta), float(cfg.auto_min_travel), float(cfg.auto_min_turn),
+                              int(cfg.auto_min_scans), float(cfg.auto_share), body):
             return  # the same body beams at the same ranges (the usual case): the drop ranges stay as they are
         self.body = body
         self._body_r = np.where(self.body, self._ref, 0.0)

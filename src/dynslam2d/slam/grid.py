@@ -20,11 +20,17 @@ import math
 import numpy as np
 
 from dynslam2d.gridmap import GridMap
-from dynslam2d.slam.raycast import integrate_rays, integrate_rays_stop
+from dynslam2d.slam.raycast import integrate_levels, integrate_rays, integrate_rays_stop
 from dynslam2d.types import Pose2D
 
 #: Bytes per cell: float32 log-odds + float32 probability cache + int32 update index.
 _BYTES_PER_CELL = 12
+#: The most levels :meth:`MultiResMap.integrate` updates in one kernel call (the default map has 3; the level
+#: tuples are padded to this length with empty arrays: one kernel specialisation).
+_FUSED_LEVELS = 3
+_NO_F32 = np.zeros((0, 0), dtype=np.float32)
+_NO_I32 = np.zeros((0, 0), dtype=np.int32)
+_NO_STOP = np.zeros(0)
 
 
 class MapTooLargeError(RuntimeError):
@@ -317,6 +323,27 @@ class MultiResMap:
         if self.grazing_cells > 0.0 and hit.shape[0]:
             stop = np.zeros(hit.shape[0])
             stop[:n_hit] = grazing_stop(hits, self.grazing_cells, self.min_sin)
+        levels = self.levels
+        n_lv = len(levels)
+        if n_lv <= _FUSED_LEVELS:  # every level in one kernel call (the same cells and updates as the loop below)
+            for lv, b in zip(levels, bounds):
+                lv.ensure(*b[2:])
+            pad = _FUSED_LEVELS - n_lv
+            counter = tuple(lv.update_counter for lv in levels) + (0,) * pad
+            for lv in levels:
+                lv.update_counter += 3  # (GridLevel.integrate_cells: a scan takes the next three update indices)
+            n0 = integrate_levels(
+                tuple(lv.logodds for lv in levels) + (_NO_F32,) * pad,
+                tuple(lv.prob for lv in levels) + (_NO_F32,) * pad,
+                tuple(lv.uidx for lv in levels) + (_NO_I32,) * pad, n_lv,
+                tuple(lv.resolution for lv in levels) + (1.0,) * pad,
+                tuple(lv.i0 for lv in levels) + (0,) * pad, tuple(lv.j0 for lv in levels) + (0,) * pad,
+                tuple(b[0] - lv.i0 for lv, b in zip(levels, bounds)) + (0,) * pad,
+                tuple(b[1] - lv.j0 for lv, b in zip(levels, bounds)) + (0,) * pad,
+                counter, ends_t, hit, stop if stop is not None else _NO_STOP, stop is not None,
+                self.l_free, self.l_occ, self.cap)
+            self.version += 1
+            return int(n0)
         # the rays' end cells of a level, computed as GridLevel.integrate does (floor(v / r + 0.5), array
         # coordinates), into buffers shared by the levels: (2, n) rows are the contiguous x and y arrays
         buf = np.empty_like(ends_t)

@@ -55,7 +55,7 @@ from dynslam2d.slam.correlative import correlative_search
 from dynslam2d.slam.grid import MultiResMap
 from dynslam2d.slam.jumps import JumpCheck
 from dynslam2d.slam.loopconfig import LoopConfig
-from dynslam2d.slam.matcher import degeneracy, evaluate
+from dynslam2d.slam.matcher import degeneracy, evaluate, gated_points
 from dynslam2d.slam.placedesc import PlaceIndex
 from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
 from dynslam2d.slam.rematch import refine_supported, rematch_keyframes
@@ -356,11 +356,9 @@ class LoopCloser:
     def _scan_points(self, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_points` of a keyframe's kept scan."""
         c = self.slam
-        r = scan.ranges
-        lim = min(c.laser_max_dist, self.config.submap_max_range)
-        with np.errstate(invalid="ignore"):
-            valid = scan.valid_mask() & (r > c.laser_min_dist) & (r < lim)
-        return scan.points(valid), np.zeros((0, 2))
+        cos_a, sin_a = scan.trig()
+        return gated_points(scan.ranges, cos_a, sin_a, scan.valid_mask(), float(scan.range_max),
+                            float(c.laser_min_dist), float(min(c.laser_max_dist, self.config.submap_max_range)), 0.0)
 
     def _submap(self, s: int) -> MultiResMap:
         grid = self._cache.get(s)

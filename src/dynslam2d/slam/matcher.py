@@ -443,6 +443,37 @@ def _all_true(n: int) -> np.ndarray:
     return _ALL_TRUE[:n]
 
 
+@njit(cache=True)
+def gated_points(r, cos_a, sin_a, valid, range_max, min_dist, max_dist, clear_dist):  # pragma: no cover - numba
+    """``HectorSlam.scan_points`` of ranges ``r`` (m) with beam (cos, sin) ``cos_a``, ``sin_a`` and ``valid``
+    returns (finite, within the sensor's limits): (returns (n, 2), clearing-ray ends (m, 2)) in the laser frame, m
+    — the valid returns strictly inside (``min_dist``, ``max_dist``) at (r·cos, r·sin) (Scan.points), and, when
+    ``clear_dist`` > 0, at ``clear_dist`` along every beam without a return (not finite, beyond ``range_max``
+    or at least ``max_dist``; not "too close"). ``clear_dist`` 0: the returns alone (the loop closer's keyframes)."""
+    n = r.shape[0]
+    m = 0
+    k = 0
+    for i in range(n):
+        if valid[i] and r[i] > min_dist and r[i] < max_dist:
+            m += 1
+        elif clear_dist > 0.0 and (not math.isfinite(r[i]) or r[i] > range_max or r[i] >= max_dist):
+            k += 1
+    pts = np.empty((m, 2))
+    clear = np.empty((k, 2))
+    m = 0
+    k = 0
+    for i in range(n):
+        if valid[i] and r[i] > min_dist and r[i] < max_dist:
+            pts[m, 0] = r[i] * cos_a[i]
+            pts[m, 1] = r[i] * sin_a[i]
+            m += 1
+        elif clear_dist > 0.0 and (not math.isfinite(r[i]) or r[i] > range_max or r[i] >= max_dist):
+            clear[k, 0] = clear_dist * cos_a[i]
+            clear[k, 1] = clear_dist * sin_a[i]
+            k += 1
+    return pts, clear
+
+
 @dataclass(slots=True)
 class Degeneracy:
     """Degeneracy analysis of a match Hessian (after Zhang, Kaess & Singh 2016, "On degeneracy of

@@ -33,6 +33,7 @@ from dynslam2d.slam.matcher import (
     degeneracy,
     evaluate,
     free_fraction,
+    gated_points,
     match_multires,
     support,
 )
@@ -300,20 +301,10 @@ class HectorSlam:
         ``clear_no_return_dist`` > 0): beams without a return, ending at that distance.
         """
         c = self.config
-        r = scan.ranges
-        with np.errstate(invalid="ignore"):
-            valid = scan.valid_mask() & (r > c.laser_min_dist) & (r < c.laser_max_dist)
-        pts = scan.points(valid)
-        if c.clear_no_return_dist > 0.0:
-            with np.errstate(invalid="ignore"):
-                # no return: NaN / inf / beyond the sensor's range_max (not "too close")
-                noret = ~np.isfinite(r) | (r > scan.range_max) | (r >= c.laser_max_dist)
-            cos_a, sin_a = scan.trig()
-            d = c.clear_no_return_dist
-            clear = np.column_stack((d * cos_a[noret], d * sin_a[noret]))
-        else:
-            clear = np.zeros((0, 2))
-        return pts, clear
+        cos_a, sin_a = scan.trig()
+        # (one kernel call for the gates, the points and the clearing-ray ends)
+        return gated_points(scan.ranges, cos_a, sin_a, scan.valid_mask(), float(scan.range_max),
+                             float(c.laser_min_dist), float(c.laser_max_dist), float(c.clear_no_return_dist))
 
     # ---- prediction --------------------------------------------------------------------
     def predict(self, stamp: float) -> Pose2D:

@@ -214,3 +214,51 @@ def integrate_rays_stop(
         _integrate_ray(logodds, prob, uidx, free_idx, occ_idx, sx, sy, x1, y1, hit[k], skip, l_free, l_occ, cap)
         n_done += 1
     return n_done
+
+
+@njit(cache=True)
+def integrate_levels(logodds, prob, uidx, n_levels, res, i0, j0, sx, sy, counter, ends, hit, stop, use_stop,
+                     l_free, l_occ, cap):  # pragma: no cover - numba
+    """One scan into every level in one call: per level ``k`` < ``n_levels`` (3-tuples ``logodds``, ``prob``,
+    ``uidx``, cell side ``res`` m, array offsets ``i0``, ``j0``, ray start cell ``sx``, ``sy`` in array cells,
+    update counter ``counter`` before this scan), the end cells of the rays ``ends`` (2, n) (map frame, m) as
+    ``MultiResMap.integrate`` computed them level by level (``floor(v / r + 0.5)``, OccGridMapBase::updateByScan's
+    rounding, minus the offsets), then :func:`integrate_rays` (or :func:`integrate_rays_stop` with ``use_stop``)
+    with the level's update indices ``counter + 1`` (free) and ``counter + 2`` (occupied). The levels must hold
+    the rays already (``GridLevel.ensure``). Returns the number of rays integrated on level 0."""
+    n0 = 0
+    n = ends.shape[1]
+    for k in range(n_levels):
+        lo = logodds[k]
+        pr = prob[k]
+        ui = uidx[k]
+        h, w = lo.shape
+        r = res[k]
+        free_idx = counter[k] + 1
+        occ_idx = counter[k] + 2
+        s_x = sx[k]
+        s_y = sy[k]
+        if s_x < 0 or s_y < 0 or s_x >= w or s_y >= h:
+            continue
+        n_done = 0
+        for i in range(n):
+            x1 = int(math.floor(ends[0, i] / r + 0.5)) - i0[k]
+            y1 = int(math.floor(ends[1, i] / r + 0.5)) - j0[k]
+            if x1 == s_x and y1 == s_y:
+                continue
+            if x1 < 0 or y1 < 0 or x1 >= w or y1 >= h:
+                continue
+            skip = 0
+            if use_stop:
+                dx = x1 - s_x
+                dy = y1 - s_y
+                major = abs(dx) if abs(dx) >= abs(dy) else abs(dy)
+                if stop[i] > 1.0:  # (as integrate_rays_stop)
+                    skip = int((stop[i] - 1.0) * major / math.sqrt(float(dx * dx + dy * dy)))
+                    if skip > major - 1:
+                        skip = major - 1
+            _integrate_ray(lo, pr, ui, free_idx, occ_idx, s_x, s_y, x1, y1, hit[i], skip, l_free, l_occ, cap)
+            n_done += 1
+        if k == 0:
+            n0 = n_done
+    return n0
