@@ -2,16 +2,18 @@
 walls twice"; not run by pytest).
 
 ``steps RUN_DIR...``: for each run folder (``dynslam2d run ... --out RUN_DIR``), the scans whose front-end step
-exceeds the motion before it the most (:func:`dynslam2d.slam.jumps.step_excess`: excess m, in predicted steps,
-rotation excess °), the scans flagged as jumps with the folder's configuration, the steps around the largest, and
-how far the optimised trajectory (``trajectory.tum``) is from the front end's (``trajectory_frontend.tum``)::
+exceeds the motion before it the most (:func:`dynslam2d.slam.jumps.step_excess`: excess m over both predictions,
+in predicted steps, rotation excess °), the scans flagged as jumps with the folder's configuration, the steps around
+the largest, and how far the optimised trajectory (``trajectory.tum``) is from the front end's
+(``trajectory_frontend.tum``)::
 
     python benchmarks/bench_jumps.py steps results/n2r results/csail
 
 ``reference RUN_DIR LOG [--window A:B]``: for a run of a CARMEN log whose pose fields are corrected poses (the
 flirtlib logs' TORO poses, GMapping's ``*-corrected.log.gz``), each flagged step of the front end
 (``trajectory_frontend.tum``) against the same two scans' step in the log's ``laser_pose``: fine (< 0.1 m off) or
-wrong (>= 0.25 m); the rule on the corrected poses themselves; how the time steps relate to the steps; what other
+wrong (>= 0.25 m); the same for the constant-velocity prediction alone (the rule before the constant-step one
+joined it); the rule on the corrected poses themselves; how the time steps relate to the steps; what other
 ``jump_shift`` / ``jump_ratio`` (and a regular-time-step guard) would flag; with ``--window`` each pose of scans
 A..B-1 relative to scan A-1 in both::
 
@@ -35,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from dynslam2d.config import Config, with_assignments
-from dynslam2d.slam.jumps import jump_flags, step_excess
+from dynslam2d.slam.jumps import jump_flags, model_excess, step_excess
 
 
 def _tum(path: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -49,13 +51,13 @@ def steps(dirs: list[str]) -> None:
         t, p = _tum(d / ("trajectory_frontend.tum" if (d / "trajectory_frontend.tum").exists() else "trajectory.tum"))
         sc = Config.model_validate(__import__("yaml").safe_load((d / "config.yaml").read_text())).slam \
             if (d / "config.yaml").exists() else Config().slam
-        shift, turn, expected = step_excess(t, p)
+        shift, turn, ratio = step_excess(t, p)
         flag = jump_flags(t, p, sc.jump_shift, sc.jump_ratio, sc.jump_turn)[0]
         top = np.argsort(-shift)[:4]
         print(f"{d}: {len(t)} scans, jumps {np.flatnonzero(flag).tolist()} (jump_shift {sc.jump_shift} m, "
               f"jump_ratio {sc.jump_ratio}, jump_turn {sc.jump_turn} rad)")
         print("  largest excess: " + ", ".join(
-            f"scan {i} {shift[i]:.3f} m ({shift[i] / max(expected[i], 1e-9):.1f} steps)" for i in top)
+            f"scan {i} {shift[i]:.3f} m ({ratio[i]:.1f} steps)" for i in top)
             + f"; rotation excess max {math.degrees(turn.max()):.1f} deg at scan {int(np.argmax(turn))}")
         k = int(top[0])
         for i in range(max(1, k - 3), min(len(t), k + 3)):
@@ -81,6 +83,14 @@ def _span(v: np.ndarray, fmt: str = ".3f") -> str:
     return f"{v.min():{fmt}}–{v.max():{fmt}}" if v.size else "—"
 
 
+def _classes(flag: np.ndarray, err: np.ndarray, shift: np.ndarray, ratio: np.ndarray, indent: str = "  ") -> None:
+    """The flagged steps by their error against the corrected step (``err`` m): fine, between, wrong."""
+    for name, m in (("fine (< 0.1 m)", flag & (err < 0.1)), ("between", flag & (err >= 0.1) & (err < 0.25)),
+                    ("wrong (>= 0.25 m)", flag & (err >= 0.25))):
+        print(f"{indent}{name}: {int(m.sum())}, step error {_span(err[m])} m, excess {_span(shift[m])} m, "
+              f"{_span(ratio[m], '.1f')} predicted steps; scans {np.flatnonzero(m).tolist()}")
+
+
 def reference(run_dir: str, log: str, window: str | None) -> None:
     from dynslam2d.io.carmen import CarmenSource
 
@@ -94,14 +104,15 @@ def reference(run_dir: str, log: str, window: str | None) -> None:
     err = np.zeros(len(t))  # each step's translation against the corrected step, m
     err[1:] = [math.hypot(*(_rel(p[i - 1], p[i])[:2] - _rel(rp[i - 1], rp[i])[:2])) for i in range(1, len(t))]
     flag, shift, _ = jump_flags(t, p, sc.jump_shift, sc.jump_ratio, sc.jump_turn)
-    ratio = shift / np.maximum(step_excess(t, p)[2], 1e-9)
+    ratio = step_excess(t, p)[2]
     ref_flag = jump_flags(t, rp, sc.jump_shift, sc.jump_ratio, sc.jump_turn)[0]
     print(f"{d}: {len(t)} scans, {int(flag.sum())} flagged; the same rule on the corrected poses flags "
           f"{int(ref_flag.sum())} ({int((flag & ref_flag).sum())} of ours among them)")
-    for name, m in (("fine (< 0.1 m)", flag & (err < 0.1)), ("between", flag & (err >= 0.1) & (err < 0.25)),
-                    ("wrong (>= 0.25 m)", flag & (err >= 0.25))):
-        print(f"  {name}: {int(m.sum())}, step error {_span(err[m])} m, excess {_span(shift[m])} m, "
-              f"{_span(ratio[m], '.1f')} predicted steps; scans {np.flatnonzero(m).tolist()}")
+    _classes(flag, err, shift, ratio)
+    vs, _, ve = model_excess(t, p)["velocity"]  # the constant-velocity prediction alone: the rule before
+    vflag = (vs >= sc.jump_shift) & (vs >= sc.jump_ratio * ve)
+    print(f"  constant velocity alone (the rule before): {int(vflag.sum())} flagged")
+    _classes(vflag, err, vs, vs / np.maximum(ve, 1e-9), "    ")
     dt = np.diff(t)
     ref_step = np.hypot(*np.diff(rp[:, :2], axis=0).T)
     print(f"  time steps: {100 * np.mean(dt <= 0.004):.0f} % <= 4 ms, {int((dt > 2).sum())} > 2 s, median "

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from dynslam2d.slam.confidence import summarize
-from dynslam2d.slam.jumps import JumpCheck, jump_flags, step_excess
+from dynslam2d.slam.jumps import JumpCheck, jump_flags, model_excess, step_excess
 
 
 def _drive(n: int = 120, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
@@ -22,13 +22,26 @@ def _drive(n: int = 120, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
     return t, poses
 
 
+def _snap(poses: np.ndarray, start: int, end: int, offset: tuple[float, float, float]) -> np.ndarray:
+    """``poses`` drifting linearly by up to ``offset`` (m, m, rad) over scans ``start`` … ``end``-1 and snapping
+    back at scan ``end``: a front end that followed its own map and then saw the old one again."""
+    w = np.clip((np.arange(len(poses)) - start) / float(end - start), 0.0, 1.0)
+    w[end:] = 0.0
+    return poses + w[:, None] * np.asarray(offset)
+
+
+def _velocity_alone(t: np.ndarray, poses: np.ndarray) -> int:
+    """How many steps the constant-velocity prediction alone (the rule before the constant-step one) flags at
+    0.25 m and 3 predicted steps."""
+    shift, _, expected = model_excess(t, poses)["velocity"]
+    return int(((shift >= 0.25) & (shift >= 3.0 * expected)).sum())
+
+
 def test_only_the_snap_back_is_a_jump() -> None:
     """A front end drifting by up to 0.5 m and 8° over scans 40–79 and snapping back at scan 80: the drift itself
     (smooth) is no jump, the snap is, and nothing else is; the one-scan-at-a-time check gives the same flags."""
     t, poses = _drive()
-    w = np.clip((np.arange(len(t)) - 40) / 40.0, 0.0, 1.0)
-    w[80:] = 0.0
-    drifted = poses + w[:, None] * np.array([0.4, 0.3, math.radians(8.0)])
+    drifted = _snap(poses, 40, 80, (0.4, 0.3, math.radians(8.0)))
     flag, shift, turn = jump_flags(t, drifted, 0.25, 3.0)
     assert np.flatnonzero(flag).tolist() == [80]
     assert 0.45 < shift[80] < 0.55 and math.degrees(turn[80]) > 7.0
@@ -58,6 +71,75 @@ def test_a_jump_makes_the_run_untrustworthy() -> None:
     assert abs(out["jump_stamps_s"][0] - t[60]) < 1e-9 and 0.45 < out["largest_jump_m"] < 0.55
     clean = summarize(t, flags, np.full(n, 0.5), 0, 0, 0.05, 2.0, jump_flags(t, _drive()[1], 0.25, 3.0))
     assert clean["jumps"] == 0 and clean["trustworthy"] is True
+
+
+def _logged(n: int = 200, seed: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """A log sub-sampled by distance whose stamps do not follow the motion (as Intel's ``intel-lab.flirtlib.log``):
+    a robot on a circle of 4 m, one scan per 0.15 m of path (0.3 m where a scan was dropped, one step in ten),
+    5 mm / 0.2° pose noise; time steps of 3 ms (10 %), 0.3–1.0 s (80 %) or 2–3 s (10 %) whatever the step:
+    (stamps s, poses (n, 3))."""
+    rng = np.random.default_rng(seed)
+    steps = np.full(n - 1, 0.15)
+    steps[rng.choice(n - 1, n // 10, replace=False)] = 0.3
+    a = np.r_[0.0, np.cumsum(steps)] / 4.0
+    poses = np.column_stack((4 * np.sin(a), 4 * (1 - np.cos(a)), a))
+    poses[:, :2] += rng.normal(0, 0.005, (n, 2))
+    poses[:, 2] += rng.normal(0, math.radians(0.2), n)
+    kind = rng.random(n - 1)
+    dt = np.where(kind < 0.1, 0.003, np.where(kind < 0.9, rng.uniform(0.3, 1.0, n - 1), rng.uniform(2.0, 3.0, n - 1)))
+    return np.r_[0.0, np.cumsum(dt)], poses
+
+
+def test_irregular_stamps_no_false_jump_and_the_snap_back_kept() -> None:
+    """Stamps that do not follow the motion: the constant-velocity prediction alone (the rule before) flags steps
+    the robot made (a 0.15 m step 3 ms after a scan), the two predictions together flag none; a drift of 0.57 m
+    and 8° over scans 100–139 snapping back at scan 140 is still the one jump, online as on the trajectory."""
+    t, poses = _logged()
+    assert _velocity_alone(t, poses) >= 3
+    flag, shift, _ = jump_flags(t, poses, 0.25, 3.0)
+    assert not flag.any() and shift.max() < 0.2
+    drifted = _snap(poses, 100, 140, (0.45, 0.35, math.radians(8.0)))
+    flag, shift, turn = jump_flags(t, drifted, 0.25, 3.0)
+    assert np.flatnonzero(flag).tolist() == [140]
+    assert 0.45 < shift[140] < 0.65 and math.degrees(turn[140]) > 7.0
+    check = JumpCheck(0.25, 3.0)
+    assert [check.update(float(s), *map(float, p)) for s, p in zip(t, drifted)] == flag.tolist()
+
+
+def test_largest_jump_is_one_jump() -> None:
+    """Two jumps, the larger shift with the smaller turn: ``largest_jump_m`` / ``_deg`` / ``_s`` and the warning
+    all describe the jump with the larger shift (before, ``largest_jump_deg`` was the other jump's turn)."""
+    t, poses = _drive()
+    poses[40:, 0] += 0.6
+    poses[40:, 2] += math.radians(3.0)
+    poses[90:, 1] += 0.35
+    poses[90:, 2] += math.radians(20.0)
+    n = len(t)
+    flags = {"low_support": np.zeros(n, bool), "degenerate": np.zeros(n, bool), "lost": np.zeros(n, bool)}
+    jumps = jump_flags(t, poses, 0.25, 3.0)
+    assert np.flatnonzero(jumps[0]).tolist() == [40, 90]
+    out = summarize(t, flags, np.full(n, 0.5), 0, 0, 0.05, 2.0, jumps)
+    assert 0.55 < out["largest_jump_m"] < 0.65 and 2.0 < out["largest_jump_deg"] < 4.0
+    assert abs(out["largest_jump_s"] - t[40]) < 1e-3
+    assert (f"largest {out['largest_jump_m']:.2f} m / {out['largest_jump_deg']:.1f}° beyond the motion before it, "
+            f"at {t[40]:.1f} s") in str(out["warning"])
+
+
+def test_carmen_corrected_poses_irregular_stamps() -> None:
+    """The robot's own motion (the logs' corrected poses) with the logs' stamps: on Intel's
+    ``intel-lab.flirtlib.log`` (steps of ~0.17 m whose stamps are 3 ms to seconds apart) the constant-velocity
+    prediction alone flags 43 steps, both predictions together 16; on fr079 (a steady 0.24 s) both flag its
+    1 (docs/slam.md, "Intel, Freiburg 079 and ACES")."""
+    from conftest import shared_file
+
+    from dynslam2d.io.carmen import CarmenSource
+
+    for log, before, after in (("intel/intel-lab.flirtlib.log", 43, 16), ("fr079/freiburg-079-corrected.log.gz", 1, 1)):
+        recs = list(CarmenSource(shared_file(log)).records())
+        t = np.array([r.scan.stamp for r in recs])
+        p = np.array([[r.laser_pose.x, r.laser_pose.y, r.laser_pose.theta] for r in recs])
+        assert _velocity_alone(t, p) == before, log
+        assert int(jump_flags(t, p, 0.25, 3.0)[0].sum()) == after, log
 
 
 def _icp_shift(src: np.ndarray, dst: np.ndarray, at: np.ndarray) -> float:
@@ -126,9 +208,7 @@ def test_map_png_marks_the_jump(tmp_path) -> None:
     from dynslam2d.viz.mapplot import plot_map
 
     t, poses = _drive()
-    w = np.clip((np.arange(len(t)) - 40) / 40.0, 0.0, 1.0)
-    w[80:] = 0.0
-    drifted = poses + w[:, None] * np.array([0.4, 0.3, math.radians(8.0)])
+    drifted = _snap(poses, 40, 80, (0.4, 0.3, math.radians(8.0)))
     flag = jump_flags(t, drifted, 0.25, 3.0)[0]
     grid = GridMap(np.full((160, 160), 0.5), 0.05, (-4.0, -4.0))
     colour = np.array(style.rgb255(style.JUMP))

@@ -937,13 +937,14 @@ def _summary_rows(summary: dict[str, Any], odo: Any, compiling: bool) -> list[tu
         rows.append(("stamp repairs", "; ".join(summary.get("input_warnings", [])) or str(repairs)))
     pc = summary.get("pose_confidence")
     if pc:
+        from dynslam2d.slam.confidence import jump_text
+
         rows.append(("pose confidence",
                      f"{100 * pc['low_support_share']:.1f} % low support (longest {pc['longest_low_support_s']:.1f} "
                      f"s), "
                      f"{100 * pc['degenerate_share']:.1f} % degenerate (longest {pc['longest_degenerate_s']:.1f} s), "
                      f"lost {pc['lost_events']}× ({pc['lost_time_s']:.1f} s)"
-                     + (f", {pc['jumps']} front-end jump(s) (largest {pc['largest_jump_m']:.2f} m, "
-                        f"{pc['largest_jump_deg']:.1f}°)" if pc.get("jumps") else "")))
+                     + (f", {pc['jumps']} front-end jump(s) (largest {jump_text(pc)})" if pc.get("jumps") else "")))
     body = summary.get("body") or {}
     if body.get("footprint_dropped_returns") or body.get("auto_body_beams"):
         rows.append(("robot's own returns dropped",

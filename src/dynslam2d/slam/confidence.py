@@ -42,6 +42,13 @@ def stretches(stamps: np.ndarray, flag: np.ndarray) -> list[tuple[float, float]]
     return out
 
 
+def jump_text(pc: dict[str, object]) -> str:
+    """The largest jump of a ``pose_confidence`` block in words, as the warning and the run table give it:
+    "0.98 m / 4.0° beyond the motion before it, at 729.5 s"."""
+    return (f"{float(pc['largest_jump_m']):.2f} m / {float(pc['largest_jump_deg']):.1f}° beyond the motion before it"
+            + (f", at {float(pc['largest_jump_s']):.1f} s" if pc.get("largest_jump_s") is not None else ""))
+
+
 def summarize(stamps: np.ndarray, flags: dict[str, np.ndarray], degeneracy: np.ndarray,
               lost_events: int, relocalisations: int, max_share: float, max_stretch: float,
               jumps: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> dict[str, object]:
@@ -54,6 +61,8 @@ def summarize(stamps: np.ndarray, flags: dict[str, np.ndarray], degeneracy: np.n
     in one line. ``jumps``: (flag, shift m, turn rad), each (n,), of :func:`dynslam2d.slam.jumps.jump_flags` on
     the front end's trajectory (None = not checked): a jump is the front end snapping back after drifting, so the
     poses before it were off by about its size even though every match looked well supported.
+    ``largest_jump_m`` / ``largest_jump_deg`` / ``largest_jump_s`` describe one jump, the one with the largest shift:
+    by how much its step exceeds the motion before it (m, °) and when (s after the first scan).
     """
     stamps = np.asarray(stamps, dtype=np.float64)
     n = stamps.shape[0]
@@ -90,12 +99,14 @@ def summarize(stamps: np.ndarray, flags: dict[str, np.ndarray], degeneracy: np.n
         jf, jshift, jturn = (np.asarray(a) for a in jumps)
         out["jumps"] = int(jf.sum())
         out["jump_stamps_s"] = [round(float(t - stamps[0]), 3) for t in stamps[jf]] if n else []
-        out["largest_jump_m"] = round(float(jshift[jf].max()), 3) if jf.any() else 0.0
-        out["largest_jump_deg"] = round(float(np.degrees(jturn[jf].max())), 2) if jf.any() else 0.0
-        if jf.any():
-            k = int(np.flatnonzero(jf)[np.argmax(jshift[jf])])
-            reasons.append(f"the front end jumped {int(jf.sum())}× (largest {jshift[k]:.2f} m, "
-                           f"{np.degrees(jturn[k]):.1f}° at {stamps[k] - stamps[0]:.1f} s): the poses around it "
+        # the largest jump (largest shift) and that same jump's rotation excess and time: one jump, not the largest
+        # shift of one and the largest rotation of another
+        k = int(np.flatnonzero(jf)[np.argmax(jshift[jf])]) if jf.any() else -1
+        out["largest_jump_m"] = round(float(jshift[k]), 3) if k >= 0 else 0.0
+        out["largest_jump_deg"] = round(float(np.degrees(jturn[k])), 2) if k >= 0 else 0.0
+        out["largest_jump_s"] = round(float(stamps[k] - stamps[0]), 3) if k >= 0 else None
+        if k >= 0:
+            reasons.append(f"the front end jumped {int(jf.sum())}× (largest {jump_text(out)}): the poses around it "
                            "were off by up to that much")
     out["trustworthy"] = not reasons
     out["warning"] = ("pose not trustworthy: " + "; ".join(reasons)) if reasons else None

@@ -394,11 +394,13 @@ class SlamConfig(BaseModel):
     jump_shift: float = Field(
         0.25, ge=0.0,
         description="A scan whose front-end step from the previous scan exceeds the motion of the three steps before "
-        "it (their median velocity × its time step) by this much, and by jump_ratio × that motion's step, is a "
-        "jump: the front end snapped back after drifting (slam/jumps.py; not max_jump_distance, which rejects a "
-        "match). Jumps make the run not trustworthy and, with loop.jump_weak, weaken the keyframe edge across "
-        "them; m, map frame (0 = off). Largest excess on the real recordings without a jump: 0.23 m (datmo "
-        "overtakes), 0.35 m = 1.9 steps (MIT CSAIL); negative_2's snap back: 0.55 m = 5.0 steps.",
+        "it by this much, and by jump_ratio × that motion's step, is a jump: the front end snapped back after "
+        "drifting (slam/jumps.py; not max_jump_distance, which rejects a match). The motion is predicted twice, as "
+        "their median velocity × its time step and as their median step (for logs whose stamps do not follow the "
+        "motion), and the step must exceed both. Jumps make the run not trustworthy and, with loop.jump_weak, "
+        "weaken the keyframe edge across them; m, map frame (0 = off). Largest excess on the real recordings "
+        "without a jump: 0.23 m = 2.0 steps (datmo overtakes), 0.35 m = 1.9 steps (MIT CSAIL); negative_2's snap "
+        "back: 0.55 m = 5.3 steps.",
     )
     jump_ratio: float = Field(
         3.0, ge=0.0,
