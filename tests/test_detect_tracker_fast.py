@@ -314,7 +314,7 @@ def test_detection_free_fractions_read_late_equal_the_test_of_their_scan() -> No
     for run in runs:
         shadow = FreeSpaceMemory(cfg.tracker.free_ref_ages, cfg.tracker.free_margin)
 
-        def eager(points: np.ndarray, now: float) -> float:
+        def eager(points: np.ndarray, now: float, shadow: FreeSpaceMemory = shadow) -> float:
             return int(np.count_nonzero(shadow.seen_through(points, now))) / points.shape[0]
 
         lazy_tr, forced_tr = Lazy(cfg), Forced(cfg)
