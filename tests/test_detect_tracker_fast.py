@@ -1,6 +1,7 @@
 """The tracker's faster per-track loops (issue 9 speed) against the plain computations they replace: the
 vacated-space search (the stored scan whose age is nearest each free-space reference age) on random stamp
-lists and on a simulated box driving away from the laser; the free-space entries computed when read."""
+lists and on a simulated box driving away from the laser; the free-space entries and the detections' free-space
+fractions computed when read."""
 
 from __future__ import annotations
 
@@ -264,6 +265,76 @@ def test_free_space_entries_read_late_hold_the_vacated_fraction_of_their_scan() 
     assert len(lazy) >= 40  # entries left to be read
     for entry, want in expected:
         assert tr._free_value(entry) == want
-    assert sum(want > entry[0] for entry, want in lazy) >= 20  # the vacated space decided those entries
+    assert sum(want > entry[0].free_fraction for entry, want in lazy) >= 20  # the vacated space decided those entries
     for k in tr._tracks:
         assert all(type(v) is float for v in tr._free_values(k))
+
+
+def _track_rows(tracks: list) -> list[tuple]:
+    return [(r.id, r.state, r.in_m, r.m_reason, r.box.px, r.box.py, r.box.theta, r.box.length, r.box.width,
+             r.velocity.tolist(), r.hits, r.misses, r.kind) for r in tracks]
+
+
+def test_detection_free_fractions_read_late_equal_the_test_of_their_scan() -> None:
+    """A detection's free-space fraction is computed when first read (ScanDetection.free_fraction), after the tracker's
+    free-space memory has gained later scans and dropped old ones: on a simulated crowd and on two people walking /
+    standing on legs (merged into person detections) seen from a moving laser, every fraction read after the whole
+    run equals the count over n of its points that a memory fed the same scans saw through at the detection's own
+    scan, before gaining it (a merged pair of legs: the legs' fractions weighted by their point counts), and a
+    tracker that reads every fraction at once reports the same tracks, scan by scan, as one that leaves them."""
+    from test_detect_people import RATE, render, scene
+
+    from dynslam2d.detect.freespace import FreeSpaceMemory
+    from dynslam2d.sim import simulate
+
+    sim = simulate("crowd", duration=4.0)
+    runs = [list(zip(sim.scans, [Pose2D.from_array(p) for p in sim.ground_truth.poses_in("first")]))]
+    legs = []
+    for i in range(int(6.0 * RATE)):
+        pose = Pose2D(0.2 * i / RATE, 0.0, 0.0)
+        legs.append((render(pose, i / RATE, *scene(i / RATE, 2.0, 1.2), i)[0], pose))
+    runs.append(legs)
+    cfg = DetectConfig()
+
+    class Forced(Tracker):
+        def _detect(self, scan, pose):
+            dets = super()._detect(scan, pose)
+            for d in dets:
+                d.free_fraction  # noqa: B018  (read at once)
+            return dets
+
+    class Lazy(Tracker):
+        def _merge_legs(self, *args):
+            out = super()._merge_legs(*args)
+            self.legs.update({id(d): d._ff for d in out[0] if d.person})  # (the legs, merged away: not yet read)
+            return out
+
+    recorded: list[tuple] = []
+    persons = 0
+    for run in runs:
+        shadow = FreeSpaceMemory(cfg.tracker.free_ref_ages, cfg.tracker.free_margin)
+
+        def eager(points: np.ndarray, now: float, shadow: FreeSpaceMemory = shadow) -> float:
+            return int(np.count_nonzero(shadow.seen_through(points, now))) / points.shape[0]
+
+        lazy_tr, forced_tr = Lazy(cfg), Forced(cfg)
+        for scan, pose in run:
+            now = float(scan.stamp)
+            lazy_tr.legs = {}
+            rows = _track_rows(lazy_tr.update(scan, pose))
+            assert rows == _track_rows(forced_tr.update(scan, pose))
+            for d in lazy_tr.last_detections:
+                if d.person:
+                    da, db = lazy_tr.legs[id(d)]
+                    na, nb = da.n_points, db.n_points
+                    want = (na * eager(da.points, now) + nb * eager(db.points, now)) / (na + nb)
+                    persons += 1
+                else:
+                    want = eager(d.points, now)
+                recorded.append((d, want))
+            shadow.add(scan, pose, scan.valid_mask() & (scan.ranges > 0.0))
+    unread = sum(type(d._ff) is not float for d, _ in recorded)
+    assert unread > 0.8 * len(recorded)  # most were never read during the run
+    for d, want in recorded:
+        assert d.free_fraction == want
+    assert persons >= 40 and sum(w > 0.0 for _, w in recorded) >= 50  # merged legs and free space occurred

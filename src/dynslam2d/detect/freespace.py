@@ -117,11 +117,48 @@ class FreeSpaceMemory:
         return free
 
     def _test(self, ref: _Ref, px: np.ndarray, py: np.ndarray, free: np.ndarray) -> None:
-        """OR into ``free`` the points (x ``px``, y ``py``, map frame) that ``ref`` saw through: bearing and
-        range in the reference sensor frame, the nearest beam and its two neighbours all farther than
-        ρ + margin (or no return within reach); outside a partial fan is unknown (module docstring)."""
-        if ref.increment == 0.0 or not math.isfinite(ref.increment):
-            return  # a degenerate reference scan has no beam geometry: nothing is known to be free
-        ix, iy, ith = ref.inv  # (ref.pose.inverse(), made with the reference)
-        seen_through_kernel(px, py, ix, iy, ith, ref.ranges, ref.angle_min, ref.increment, ref.full,
-                            ref.reach, self.margin, free)
+        """OR into ``free`` the points (x ``px``, y ``py``, map frame) that ``ref`` saw through (:func:`_seen_by`)."""
+        _seen_by(ref, px, py, self.margin, free)
+
+    def test_at(self, now: float) -> FreeTest | None:
+        """The free-space test of a scan at ``now`` (s) kept for later: the reference scans it uses now (None when
+        there is none: every point is unknown, fraction 0). The memory gains and drops scans afterwards; the
+        test keeps its own (:class:`FreeTest`)."""
+        refs = self._refs(now)
+        return FreeTest(tuple(refs), self.margin) if refs else None
+
+
+def _seen_by(ref: _Ref, px: np.ndarray, py: np.ndarray, margin: float, free: np.ndarray) -> None:
+    """OR into ``free`` the points (x ``px``, y ``py``, map frame) that ``ref`` saw through: bearing and
+    range in the reference sensor frame, the nearest beam and its two neighbours all farther than
+    ρ + ``margin`` (or no return within reach); outside a partial fan is unknown (module docstring)."""
+    if ref.increment == 0.0 or not math.isfinite(ref.increment):
+        return  # a degenerate reference scan has no beam geometry: nothing is known to be free
+    ix, iy, ith = ref.inv  # (ref.pose.inverse(), made with the reference)
+    seen_through_kernel(px, py, ix, iy, ith, ref.ranges, ref.angle_min, ref.increment, ref.full,
+                        ref.reach, margin, free)
+
+
+class FreeTest:
+    """The free-space test of one scan with the reference scans the memory chose for it
+    (:meth:`FreeSpaceMemory.test_at`), so that a detection's fraction can be computed when it is first read, after
+    the memory has moved on: the value is that of :meth:`FreeSpaceMemory.seen_through` at the scan's time."""
+
+    __slots__ = ("refs", "margin")
+
+    def __init__(self, refs: tuple[_Ref, ...], margin: float) -> None:
+        self.refs = refs
+        self.margin = margin
+
+    def fraction(self, points: np.ndarray) -> float:
+        """Fraction of the (n, 2) map-frame ``points`` that a reference scan saw through (0 for none): the count
+        over n, as the tracker's per-detection mean (:func:`dynslam2d.detect.kernels.mask_fractions`)."""
+        n = points.shape[0]
+        if n == 0:
+            return 0.0
+        free = np.zeros(n, dtype=bool)
+        px = np.ascontiguousarray(points[:, 0])
+        py = np.ascontiguousarray(points[:, 1])
+        for ref in self.refs:
+            _seen_by(ref, px, py, self.margin, free)
+        return int(np.count_nonzero(free)) / n

@@ -116,19 +116,23 @@ class ScanDetection(Detection):
 
     ``fits``: the scan's (k, N_FIT_COLS) fit rows (:func:`dynslam2d.detect.shapes.fit_clusters`), ``lohi``: (k, 4)
     bounds lo1, lo2, hi1, hi2, ``rel``: (k, 2, 2) real-bound flags (:mod:`dynslam2d.detect.layout`); ``j``: this
-    detection's row of them."""
+    detection's row of them.
 
-    __slots__ = ("_fits", "_lohi", "_rel", "_j")
+    ``free_fraction`` may be given as a float, or left to be computed when first read (few are read): as an object
+    with ``fraction(points)`` (the scan's free-space test, :class:`dynslam2d.detect.freespace.FreeTest`), or as a
+    pair of scan detections (a merged pair of legs: their fractions weighted by their point counts)."""
+
+    __slots__ = ("_fits", "_lohi", "_rel", "_j", "_ff")
 
     def __init__(self, beams: np.ndarray, points: np.ndarray, kind: str, theta: float, n_points: int,
-                 free_fraction: float, map_structure: float, map_free: float, map_unknown: float, fits: np.ndarray,
-                 lohi: np.ndarray, rel: np.ndarray, j: int) -> None:
+                 free_fraction: float | object, map_structure: float, map_free: float, map_unknown: float,
+                 fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray, j: int) -> None:
         self.beams = beams
         self.points = points
         self.kind = kind
         self.theta = theta
         self.n_points = n_points
-        self.free_fraction = free_fraction
+        self._ff = free_fraction
         self.map_structure = map_structure
         self.map_free = map_free
         self.map_unknown = map_unknown
@@ -143,6 +147,28 @@ class ScanDetection(Detection):
     lo = _row_view("_lohi", LOHI_LO, "(2,) lower bounds along e1, e2, m")
     hi = _row_view("_lohi", LOHI_HI, "(2,) upper bounds along e1, e2, m")
     rel = _row_view("_rel", slice(None), "(2, 2) bool: bound [axis, lower / upper] is real")
+
+    @property
+    def free_fraction(self) -> float:
+        """Fraction of the points lying where an earlier scan saw through (:class:`Detection`), computed when first
+        read if it was given as a test or a pair of legs (class docstring) and kept."""
+        v = self._ff
+        if type(v) is float:
+            return v
+        if type(v) is tuple:  # a merged pair of legs (Tracker._merge_legs): the point-weighted mean
+            da, db = v
+            na, nb = da.n_points, db.n_points
+            v = (na * da.free_fraction + nb * db.free_fraction) / (na + nb)
+        elif hasattr(v, "fraction"):
+            v = v.fraction(self.points)
+        else:
+            return v
+        self._ff = v
+        return v
+
+    @free_fraction.setter
+    def free_fraction(self, value: float) -> None:
+        self._ff = value
 
     def __reduce__(self) -> tuple:
         return Detection, (self.beams, self.points, self.centroid, self.kind, self.theta, self.lo, self.hi, self.rel,

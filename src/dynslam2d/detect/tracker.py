@@ -157,8 +157,8 @@ class _Track:
     beams: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     has_heading: bool = False
     size_lb: list[float] = field(default_factory=lambda: [0.0, 0.0])  # largest partial views per axis, m
-    # free-space fraction per update; an entry may be a tuple (floor, ref, t, past) until it is read, its
-    # vacated-space part not yet computed (Tracker._free_values)
+    # free-space fraction per update; an entry may be a detection (a birth's) or a tuple (det, ref, t, past) until it
+    # is read, its value not yet computed (Tracker._free_values)
     free: list[float] = field(default_factory=list)
     mstruct: list[float] = field(default_factory=list)  # map evidence per update (mapevidence.py)
     mfree: list[float] = field(default_factory=list)
@@ -586,12 +586,19 @@ class Tracker:
         else:  # (every cluster is a detection: the arrays as they are, no copies)
             starts = offsets[:-1]
             npts = offsets[1:] - starts
-        # free-space and map evidence per detection (0 where unknown), then the detections in one pass; both
-        # tests are per point, so only the detections' points are tested (structure clusters, most of the
-        # points, are not detections)
+        # free-space and map evidence per detection (0 where unknown), then the detections in one pass. The map test
+        # is per point, so only the detections' points are tested (structure clusters, most of the points, are not
+        # detections). The free-space fraction is read for few detections (births, updates whose entry is read:
+        # Tracker._free_values): each detection keeps this scan's test (the memory's references now, before it
+        # gains this scan) and computes its fraction when first read (ScanDetection.free_fraction)
         frac = fs = ff = fu = [0.0] * nd
         free, view = self._free, self._map
-        if free is not None or view is not None:
+        if free is not None:
+            self._cur_ref = free.make_ref(scan, pose, valid)
+            if nd and (test := free.test_at(float(scan.stamp))) is not None:
+                frac = [test] * nd
+            free.add(scan, pose, valid, self._cur_ref)
+        if view is not None:
             if nd < seg.n_clusters:
                 sel = np.repeat(keep.astype(bool, copy=False), offsets[1:] - offsets[:-1])
                 det_px, det_py = px[sel], py[sel]
@@ -599,22 +606,13 @@ class Tracker:
                 np.cumsum(npts, out=det_off[1:])
             else:
                 det_px, det_py, det_off = px, py, offsets
-            # per-point flags, one row each: seen through by an earlier scan; on structure, free, unknown in the map
-            ev = np.zeros((4 if view is not None else 1, det_px.shape[0]), dtype=bool)
-            if free is not None:
-                self._cur_ref = free.make_ref(scan, pose, valid)
-                free.seen_through_xy(det_px, det_py, float(scan.stamp), ev[0])
-                free.add(scan, pose, valid, self._cur_ref)
-            if view is not None:
-                tc = cfg.tracker
-                map_evidence_kernel(det_px, det_py, view.logodds, int(view.i0), int(view.j0), float(view.resolution),
-                                    float(tc.map_occupied_logodds), float(tc.map_free_logodds),
-                                    int(tc.map_free_radius), ev[1], ev[2], ev[3])
-            means = mask_fractions(ev, det_off).tolist()
-            if free is not None:
-                frac = means[0]
-            if view is not None:
-                fs, ff, fu = means[1:]
+            # per-point flags, one row each: on structure, free, unknown in the map
+            ev = np.zeros((3, det_px.shape[0]), dtype=bool)
+            tc = cfg.tracker
+            map_evidence_kernel(det_px, det_py, view.logodds, int(view.i0), int(view.j0), float(view.resolution),
+                                float(tc.map_occupied_logodds), float(tc.map_free_logodds),
+                                int(tc.map_free_radius), ev[0], ev[1], ev[2])
+            fs, ff, fu = mask_fractions(ev, det_off).tolist()
         # (their centroid, bounds, flags and circle stay rows of fits / lohi / rel until read: ScanDetection)
         for j, (a0, n, kd, th, fr_j, fs_j, ff_j, fu_j) in enumerate(zip(
                 starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(), frac, fs, ff, fu)):
@@ -670,8 +668,7 @@ class Tracker:
             n = na + nb
             # (centroid = circle centre = the legs' middle, lo / hi their box, no real bound, theta 0: rows of the
             # merged arrays, as a scan detection's)
-            det = ScanDetection(mbeams[o:o + n], pts[o:o + n], KIND_POINT, 0.0, n,
-                                (na * da.free_fraction + nb * db.free_fraction) / n,
+            det = ScanDetection(mbeams[o:o + n], pts[o:o + n], KIND_POINT, 0.0, n, (da, db),  # (free: when read)
                                 (na * da.map_structure + nb * db.map_structure) / n,
                                 (na * da.map_free + nb * db.map_free) / n,
                                 (na * da.map_unknown + nb * db.map_unknown) / n, fits, lohi, rel, row)
@@ -964,7 +961,8 @@ class Tracker:
             k.beams = det.beams
             free = k.free
             # (vacated: this scan sees through its old points; computed when the entry is read, _free_values)
-            free.append((det.free_fraction, ref, t, past0) if past0 is not None else max(det.free_fraction, 0.0))
+            # (the detection's own fraction too: det.free_fraction, computed when read)
+            free.append((det, ref, t, past0) if past0 is not None else max(det.free_fraction, 0.0))
             if len(free) > nsus:
                 del free[0]
             if p is not None:
@@ -1056,24 +1054,26 @@ class Tracker:
         return out
 
     def _free_values(self, k: _Track) -> list[float]:
-        """``k.free`` with every entry a float. An update whose track had stored points appends a tuple (floor, ref,
-        t, past) instead of its free-space fraction: the detection's own fraction, the free-space reference of the
-        scan at ``t`` (s) and the track's stored (stamp, points) before the update; its value, max(floor, the
-        vacated fraction of :meth:`_vacated` in that scan), is computed here when first read and replaces the tuple.
-        Most entries are never read (the free-space condition of M is reached by few tracks; ≈ 3 % on negative_2),
-        so most free-space tests of stored points never run."""
+        """``k.free`` with every entry a float. A birth appends its detection instead of its free-space fraction, and an
+        update whose track had stored points appends a tuple (det, ref, t, past): the detection (its own fraction is
+        the floor), the free-space reference of the scan at ``t`` (s) and the track's stored (stamp, points) before
+        the update; its value, max(det.free_fraction, the vacated fraction of :meth:`_vacated` in that scan), is
+        computed here when first read and replaces the entry (the detection's own fraction, too, is computed when
+        first read: ScanDetection.free_fraction). Most entries are never read (the free-space condition of M is
+        reached by few tracks; ≈ 3 % on negative_2), so most free-space tests never run."""
         free = k.free
         for q, v in enumerate(free):
-            if type(v) is tuple:
+            if type(v) is not float:
                 free[q] = self._free_value(v)
         return free
 
-    def _free_value(self, entry: float | tuple) -> float:
-        """The free-space fraction of one entry of a track's ``free`` list (:meth:`_free_values`)."""
+    def _free_value(self, entry: float | Detection | tuple) -> float:
+        """The free-space fraction of one entry of a track's ``free`` list (:meth:`_free_values`): a float, a detection
+        (a birth's: its fraction) or a tuple (an update's, its floor the detection)."""
         if type(entry) is not tuple:
-            return entry
-        floor, ref, t, past = entry
-        return max(floor, self._seen_through_pasts(ref, t, [0], [[e[0] for e in past]], [past]).get(0, 0.0))
+            return entry.free_fraction if isinstance(entry, Detection) else entry
+        det, ref, t, past = entry
+        return max(det.free_fraction, self._seen_through_pasts(ref, t, [0], [[e[0] for e in past]], [past]).get(0, 0.0))
 
     def _birth(self, det: Detection, t: float, j: int) -> None:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
@@ -1083,7 +1083,7 @@ class Tracker:
                    birth_xy=z.copy(), theta_box=det.theta, size=size,
                    size_known=known, radius=float(det.circle[2]) if det.kind == KIND_CIRCLE
                    else 0.0, kind=det.kind, beams=det.beams, has_heading=det.kind == KIND_RECT,
-                   free=[det.free_fraction], mstruct=[det.map_structure] if self._map is not None else [],
+                   free=[det], mstruct=[det.map_structure] if self._map is not None else [],
                    mfree=[det.map_free] if self._map is not None else [],
                    munknown=[det.map_unknown] if self._map is not None else [],
                    past=[(t, det.points)] if self._free is not None else [],
