@@ -454,15 +454,49 @@ def erase_rule(hits: np.ndarray, through: np.ndarray, switches: np.ndarray, conf
 _RULE_ROWS = 256
 
 
+@dataclass(eq=False)
+class CountWindows:
+    """What :func:`clean_map` reads from a :class:`VisibilityCounter`, on the online map's cells: the count windows
+    (:meth:`VisibilityCounter.window`), the latest-touch mask (None when the rule does not use it) and the counter's
+    numbers for the stats. Taking them first lets a caller free the counter before the cleaned copies are made."""
+
+    hits: np.ndarray
+    through: np.ndarray
+    switches: np.ndarray
+    latest_hit: np.ndarray | None
+    config: CleanConfig
+    scans: int
+    too_large: int
+    seconds: float
+    nbytes: int
+
+    @classmethod
+    def of(cls, online: GridMap, counter: VisibilityCounter) -> CountWindows:
+        c = counter.config
+        hits, through, switches = counter.window(online)
+        latest_hit = counter.latest_hit(online) if c.rehit_min_hits > 0 else None
+        return cls(hits, through, switches, latest_hit, c, int(counter.scans), int(counter.too_large),
+                   float(counter.seconds), counter.nbytes)
+
+
 def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray | None = None,
               occupied_threshold: float = 0.65) -> CleanResult:
     """Erase the cells of ``online`` (occupied: p > ``occupied_threshold``) that ``counter``
     saw through often enough (rule in the module docstring). ``logodds``: the online
     map's raw log-odds (same cells), returned cleaned alongside."""
     t0 = time.perf_counter()
-    c = counter.config
-    hits, through, switches = counter.window(online)
-    latest_hit = counter.latest_hit(online) if c.rehit_min_hits > 0 else None
+    return clean_windows(online, CountWindows.of(online, counter), logodds, occupied_threshold, t0=t0)
+
+
+def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | None = None,
+                  occupied_threshold: float = 0.65, keep_counts: bool = True, t0: float | None = None) -> CleanResult:
+    """:func:`clean_map` from the counts read off the counter (:meth:`CountWindows.of`). With ``keep_counts``
+    False the result's count windows are empty (0 × 0) and ``counts`` lets go of them once the rules are
+    applied, before the cleaned copies of the map are made (issue 13 item 3: the command line keeps only the
+    map, the erased cells and the stats). ``t0``: when the pass started (``time.perf_counter``), for its time."""
+    t0 = time.perf_counter() if t0 is None else t0
+    c = counts.config
+    hits, through, switches, latest_hit = counts.hits, counts.through, counts.switches, counts.latest_hit
     occ = online.occupied(occupied_threshold)
     erased = np.empty(occ.shape, dtype=bool)
     restored = np.empty(occ.shape, dtype=bool)
@@ -472,13 +506,19 @@ def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray |
                                   None if latest_hit is None else latest_hit[rows]) & occ[rows]
         # observed free in the online map (unknown cells were never cleared: nothing to restore there)
         restored[rows] = restore_rule(hits[rows], through[rows], c) & ~occ[rows] & np.isfinite(online.prob[rows])
+    if not keep_counts:
+        empty = np.zeros((0, 0), dtype=np.uint16)
+        hits = through = switches = counts.hits = counts.through = counts.switches = empty
+        latest_hit = counts.latest_hit = None
     if c.revert_neighbors > 0:
         # Removert's "revert" step in 2D: a cell at the edge of structure that stays is kept.
         from scipy.ndimage import convolve
 
         kept = (occ & ~erased).astype(np.int16)
         n_kept = convolve(kept, np.ones((3, 3), dtype=np.int16), mode="constant") - kept
+        del kept
         erased &= n_kept < c.revert_neighbors
+        del n_kept
     prob = online.prob.copy()
     prob[erased] = ERASED_PROBABILITY
     prob[restored] = RESTORED_PROBABILITY
@@ -490,16 +530,18 @@ def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray |
             lo[erased] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
             lo[restored] = math.log(RESTORED_PROBABILITY / (1.0 - RESTORED_PROBABILITY))
     area = online.resolution ** 2
+    n_occ = int(occ.sum())
+    del occ
     stats: dict[str, float | int] = {
-        "occupied_cells_online": int(occ.sum()),
+        "occupied_cells_online": n_occ,
         "erased_cells": int(erased.sum()),
         "erased_area_m2": float(erased.sum() * area),
         "restored_cells": int(restored.sum()),
         "restored_area_m2": float(restored.sum() * area),
-        "scans_counted": int(counter.scans),
-        "scans_too_large": int(counter.too_large),
-        "pass_time_s": float(counter.seconds + time.perf_counter() - t0),
-        "counter_bytes": counter.nbytes,
+        "scans_counted": counts.scans,
+        "scans_too_large": counts.too_large,
+        "pass_time_s": float(counts.seconds + time.perf_counter() - t0),
+        "counter_bytes": counts.nbytes,
     }
     return CleanResult(GridMap(prob, online.resolution, online.origin), lo, erased, hits, through, switches, stats,
                        restored)
@@ -538,9 +580,13 @@ class CleanupRecorder:
 
     counter_class: type[VisibilityCounter] = VisibilityCounter
 
-    def __init__(self, config: CleanConfig | None = None, slam: SlamConfig | None = None) -> None:
+    def __init__(self, config: CleanConfig | None = None, slam: SlamConfig | None = None,
+                 keep_counts: bool = True) -> None:
         self.config = config if config is not None else CleanConfig()
         self.slam = slam
+        #: False: the counter is let go once the map is cleaned (before the cleaned copies are made) and the
+        #: result's count windows are empty (:func:`clean_windows`; the command line needs neither)
+        self.keep_counts = bool(keep_counts)
         self.counter: VisibilityCounter | None = None
         self.result: CleanResult | None = None
         self._last_stamp = -math.inf
@@ -576,7 +622,12 @@ class CleanupRecorder:
             self.counter.reserve([(kf.scan, p) for kf, p in zip(loop.keyframes, poses)])
             for kf, p in zip(loop.keyframes, poses):
                 self.counter.add(kf.scan, p, kf.removed if kf.removed.size else None)
-        self.result = clean_map(result.grid, self.counter, result.logodds)  # type: ignore[attr-defined]
+        t0 = time.perf_counter()
+        counts = CountWindows.of(result.grid, self.counter)  # type: ignore[attr-defined]
+        if not self.keep_counts:
+            self.counter = None  # (26 MB on MIT CSAIL) before the rule's masks and the cleaned copies
+        self.result = clean_windows(result.grid, counts, result.logodds,  # type: ignore[attr-defined]
+                                    keep_counts=self.keep_counts, t0=t0)
 
 
 
@@ -609,5 +660,6 @@ def scan_clearing(ranges: np.ndarray, angles: np.ndarray | tuple[np.ndarray, np.
     return (float(pose.x) / resolution, float(pose.y) / resolution), cx, cy, clear
 
 
-__all__ = ["ERASED_PROBABILITY", "RESTORED_PROBABILITY", "CleanResult", "CleanupRecorder", "VisibilityCounter",
-           "clean_map", "compare_online", "erase_rule", "restore_rule", "scan_clearing"]
+__all__ = ["ERASED_PROBABILITY", "RESTORED_PROBABILITY", "CleanResult", "CleanupRecorder", "CountWindows",
+           "VisibilityCounter", "clean_map", "clean_windows", "compare_online", "erase_rule", "restore_rule",
+           "scan_clearing"]

@@ -281,6 +281,8 @@ class EvidenceLedger:
         self.erased_cells: set[tuple[int, int]] = set()
         self.stats = {"erasures": 0, "tracks_erased": 0, "cells_changed": 0, "cells_to_unknown": 0,
                       "ended_ledgers_linked": 0, "cells_recorded": 0}
+        #: :meth:`summary` once :meth:`release` let the records go (nothing is recorded after that)
+        self._final: dict[str, int] | None = None
 
     # ------------------------------------------------------------------ recording
     def before_update(self, scan: Scan, pose: Pose2D, tracks: list[Track], removed: np.ndarray,
@@ -492,6 +494,10 @@ class EvidenceLedger:
                 if led.last_track is not None:
                     led.last_box = _box_key(led.last_track)
                 if led.confirmed:  # tentative clutter (wall fragments, noise) is never linked
+                    # folded now: an ended record gets no more rows, and its pending buffers (up to 4096 rows of
+                    # 32 bytes per level, allocated with room to double) would wait for the summary otherwise
+                    # (issue 13 item 3); the same fold the summary or an erasure would make, counted the same
+                    self._fold(led)
                     self._ended[tid] = led
                     self._oldest_ended = min(self._oldest_ended, led.last_seen)
                 else:
@@ -613,10 +619,24 @@ class EvidenceLedger:
 
     def summary(self) -> dict[str, int]:
         """Counters for summary.json's ``memory`` block."""
+        if self._final is not None:
+            return dict(self._final)
         for led in (*self._ledgers.values(), *self._ended.values()):
             self._fold(led)
         return {**self.stats, "erased_cells_finest": len(self.erased_cells),
                 "ledgers_live": len(self._ledgers), "ledgers_ended": len(self._ended)}
+
+    def release(self) -> None:
+        """The run is over: keep :meth:`summary` (the records folded first, as it does) and :attr:`erased_cells`,
+        and let every track's record go (issue 13 item 3: some 20 MB of buffers and small objects on MIT CSAIL,
+        held through the loop closure's re-render and the clean-up pass otherwise). Recording or erasing after
+        this starts from empty records; :meth:`summary` keeps returning the counters of the release."""
+        self._final = self.summary()
+        self._ledgers = {}
+        self._ended = {}
+        self._first = {}
+        self._oldest_ended = math.inf
+        self.erased_beams = []
 
 
 __all__ = ["EvidenceLedger", "PendingUpdate"]
