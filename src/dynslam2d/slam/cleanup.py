@@ -88,15 +88,19 @@ _HIT, _THROUGH, _SWITCH = 0, 1, 2
 #: side of the larger count (docs/speed.md).
 COUNT_MAX = 65535
 
-#: Bytes per counted cell: three uint16 counts and one int32 "last touch" (scan id · 2 + hit).
-BYTES_PER_CELL = 10
+#: Bytes per counted cell: three uint16 counts and one uint16 "last touch" (scan number · 2 + hit).
+BYTES_PER_CELL = 8
+#: Largest scan number in the "last touch" array (2 · 32767 + 1 fits uint16); past it the counter renumbers the
+#: earlier touches (:meth:`VisibilityCounter._renumber`), which leaves every count the same.
+_ID_SPAN = 32767
 
 
 @njit(cache=True)
 def _count_scan(counts, last, scan_id, ox, oy, hx, hy, cx, cy, core):  # pragma: no cover - numba
     """One scan into the counters ``counts`` (H, W, 3) uint16 (hits, passes, switches; saturating at
-    :data:`COUNT_MAX`) and ``last`` (H, W) int32, the cell's latest touch as ``2 · scan id + 1`` for a hit,
-    ``2 · scan id`` for a pass (ids start at 1; 0 = never). Coordinates are in cell units of the arrays
+    :data:`COUNT_MAX`) and ``last`` (H, W) uint16, the cell's latest touch as ``2 · n + 1`` for a hit, ``2 · n``
+    for a pass, n the number of the scan that touched it (1 … :data:`_ID_SPAN`; 0 = never; ``scan_id`` is this
+    scan's, larger than every number in ``last``). Coordinates are in cell units of the arrays
     (cell (i, j) centred on integers). ``(hx, hy)``: hit endpoints; ``(cx, cy)``: ends of
     the clearing segments from ``(ox, oy)``. Per scan, a cell gets at most one hit and
     one pass, and no pass if the scan hit it (hits are counted first). Switches count changes between
@@ -243,7 +247,8 @@ class VisibilityCounter:
         self.i0 = 0  # absolute col of array column 0
         self.j0 = 0  # absolute row of array row 0
         self._cells = np.zeros((0, 0, 3), dtype=np.uint16)  # hits, passes, switches
-        self._last = np.zeros((0, 0), dtype=np.int32)  # latest touch: 2 · scan id (+ 1 for a hit)
+        self._last = np.zeros((0, 0), dtype=np.uint16)  # latest touch: 2 · scan number (+ 1 for a hit)
+        self._id_base = 0  # scan number = scan id − this (see _renumber)
         self.scans = 0  # scans counted (also the id of the next scan)
         self.too_large = 0  # scans left out: counting them would exceed the memory limit
         self.seconds = 0.0
@@ -285,7 +290,7 @@ class VisibilityCounter:
         if (nj1 - nj0) * (ni1 - ni0) * BYTES_PER_CELL > self.slam.max_map_memory_mb * 1e6:
             return False
         new = np.zeros((nj1 - nj0, ni1 - ni0, 3), dtype=np.uint16)
-        new_last = np.zeros((nj1 - nj0, ni1 - ni0), dtype=np.int32)
+        new_last = np.zeros((nj1 - nj0, ni1 - ni0), dtype=np.uint16)
         if h:
             new[self.j0 - nj0:self.j0 - nj0 + h, self.i0 - ni0:self.i0 - ni0 + w] = self._cells
             new_last[self.j0 - nj0:self.j0 - nj0 + h, self.i0 - ni0:self.i0 - ni0 + w] = self._last
@@ -353,11 +358,22 @@ class VisibilityCounter:
             self.too_large += 1  # the SLAM refuses such scans too ('map_too_large')
             self.seconds += time.perf_counter() - t0
             return
-        _count_scan(self._cells, self._last, self.scans + 1,
+        if self.scans + 1 - self._id_base > _ID_SPAN:
+            self._renumber()
+        _count_scan(self._cells, self._last, self.scans + 1 - self._id_base,
                     ox - self.i0, oy - self.j0, ex[kept] - self.i0, ey[kept] - self.j0,
                     cx[clear] - self.i0, cy[clear] - self.j0, float(c.ray_core))
         self.scans += 1
         self.seconds += time.perf_counter() - t0
+
+    def _renumber(self) -> None:
+        """Make every touch so far one of scan number 1 (its kind kept) and the next scan number 2. The counting
+        kernel compares a cell's latest touch only with the current scan's number (touched by this scan or
+        not) and reads its kind, so the counts are those the scan ids themselves would give: the "last touch"
+        array holds 2 bytes per cell instead of 4 whatever the length of the log (issue 13 item 3)."""
+        last = self._last
+        np.copyto(last, (last & 1) + 2, where=last != 0)
+        self._id_base = self.scans - 1
 
     def _overlap(self, grid: GridMap) -> tuple[slice, slice, slice, slice] | None:
         """(grid rows, grid cols, counter rows, counter cols) of the cells both hold, or None.

@@ -195,6 +195,12 @@ class _LevelRecord:
         self.key, self.delta, self.pure, self.last = new_key, new_delta, new_pure, new_last
         return int(new_key.shape[0] - nb)
 
+    def shrink(self) -> None:
+        """Copy the pending rows into a buffer of their size (the record keeps its rows and what they fold to)."""
+        n = self._n_rows
+        if n < self._pk.shape[1]:
+            self._pk = self._pk[:, :n].copy() if n else _EMPTY_I4
+
     def new_cells(self) -> int:
         """The number of new cells :meth:`compact` would return, without folding (for a record that is
         dropped: counting its distinct cells is much cheaper than folding them)."""
@@ -494,10 +500,11 @@ class EvidenceLedger:
                 if led.last_track is not None:
                     led.last_box = _box_key(led.last_track)
                 if led.confirmed:  # tentative clutter (wall fragments, noise) is never linked
-                    # folded now: an ended record gets no more rows, and its pending buffers (up to 4096 rows of
-                    # 32 bytes per level, allocated with room to double) would wait for the summary otherwise
-                    # (issue 13 item 3); the same fold the summary or an erasure would make, counted the same
-                    self._fold(led)
+                    # an ended record gets no more rows: its pending buffers, allocated with room to double
+                    # (up to 2 × 4096 rows of 32 bytes per level), shrink to their rows (issue 13 item 3; one
+                    # copy, where folding them here would sort them in the per-scan path)
+                    for rec in led.levels:
+                        rec.shrink()
                     self._ended[tid] = led
                     self._oldest_ended = min(self._oldest_ended, led.last_seen)
                 else:
