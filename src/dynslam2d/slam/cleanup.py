@@ -48,7 +48,7 @@ depth of a one-cell surface seen at incidence α.
 
 Memory: the pass never keeps scans. :class:`VisibilityCounter` is fed scan by scan
 during the run (:class:`CleanupRecorder` is a pipeline observer) and holds three uint16
-count grids and one int32 grid of each cell's latest touch (10 bytes per cell, growing with
+count grids and one uint16 grid of each cell's latest touch (8 bytes per cell, growing with
 the scans, never beyond the SLAM's ``max_map_memory_mb``; counts saturate at 65535 scans).
 Hector-style SLAM never changes a pose after its scan (no loop closure), so the pose a scan
 had when it was processed is its pose in the final trajectory; counting during the run is the same as counting after it.
