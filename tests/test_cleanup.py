@@ -361,7 +361,7 @@ def _count_scan_five_channels(cells: np.ndarray, scan_id: int, ox: float, oy: fl
 
 
 def test_compact_counter_counts_as_the_five_channel_layout():
-    """10 bytes per cell (uint16 counts + one int32 latest touch) give the same hits, passes and
+    """8 bytes per cell (uint16 counts + one uint16 latest touch) give the same hits, passes and
     switches as the former five int32 channels, on random scans whose rays cross each other."""
     from dynslam2d.slam.cleanup import _count_scan
 
@@ -369,7 +369,7 @@ def test_compact_counter_counts_as_the_five_channel_layout():
     H, W = 40, 50
     ref = np.zeros((H, W, 5), dtype=np.int64)
     counts = np.zeros((H, W, 3), dtype=np.uint16)
-    last = np.zeros((H, W), dtype=np.int32)
+    last = np.zeros((H, W), dtype=np.uint16)
     for sid in range(1, 61):
         ox, oy = rng.uniform(5, 45), rng.uniform(5, 35)
         hx, hy = rng.uniform(0, W - 1, 30), rng.uniform(0, H - 1, 30)
@@ -380,11 +380,31 @@ def test_compact_counter_counts_as_the_five_channel_layout():
     np.testing.assert_array_equal(counts.astype(np.int64), ref[:, :, :3])
 
 
+def test_renumbered_scans_count_the_same(monkeypatch):
+    """The counter numbers scans in its 2-byte "last touch" array up to ``_ID_SPAN`` and then renumbers the
+    earlier touches: with a span of 3 (renumbering every other scan) the counts, the latest-touch kinds and the
+    cleaned map are those of the default span, on the corridor's scans (hits and passes switching)."""
+    import dynslam2d.slam.cleanup as C
+
+    scans, poses = _corridor_scans(40)
+    slam, wide = _online_and_counter(scans, poses)
+    online = slam.gridmap(0)
+    monkeypatch.setattr(C, "_ID_SPAN", 3)
+    _, narrow = _online_and_counter(scans, poses)
+    assert wide._id_base == 0 and narrow._id_base > 30
+    assert wide.switches.sum() > 50
+    for a, b in ((wide.hits, narrow.hits), (wide.through, narrow.through), (wide.switches, narrow.switches)):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(wide.latest_hit(online), narrow.latest_hit(online))
+    assert (wide.latest_hit(online)).sum() > 100
+    np.testing.assert_array_equal(clean_map(online, wide).grid.prob, clean_map(online, narrow).grid.prob)
+
+
 def test_compact_counter_saturates_instead_of_wrapping():
     from dynslam2d.slam.cleanup import COUNT_MAX, _count_scan
 
     counts = np.full((3, 3, 3), COUNT_MAX - 1, dtype=np.uint16)
-    last = np.zeros((3, 3), dtype=np.int32)
+    last = np.zeros((3, 3), dtype=np.uint16)
     one = np.array([1.0])
     for sid in (1, 2, 3, 4):  # hit, pass, hit, pass of cell (1, 1): every count would pass 65535
         if sid % 2:

@@ -11,11 +11,14 @@ from pathlib import Path
 import numpy as np
 from conftest import ScanList
 from test_loops import _block_loop_world, _loop_path, _scans
+from test_memory import _config as _memory_config
+from test_memory import _parked_scene
 
 from dynslam2d.config import Config
 from dynslam2d.gridmap import GridMap
 from dynslam2d.io.checkpoint import Checkpointer
 from dynslam2d.pipeline import _presize_render, run
+from dynslam2d.sim.simulation import SimSource
 from dynslam2d.slam.processor import HectorSlam
 from dynslam2d.types import Pose2D, SourceMeta
 from dynslam2d.viz.mapplot import UNKNOWN_GREY, grey_indices, occupancy_image, occupancy_indices
@@ -259,26 +262,80 @@ def test_run_frees_the_front_end_map_before_the_loop_closure_finishes() -> None:
     assert np.isfinite(result.grid.prob).sum() > 1000
 
 
-def test_cli_drops_the_clean_up_count_windows_before_writing() -> None:
-    """The results folder and the figures read the clean-up result's map, erased cells and stats; its count
-    windows (3 × 2 bytes per map cell) are let go before the figures."""
-    from types import SimpleNamespace
+def test_lean_clean_up_frees_its_counts_and_cleans_the_same_map() -> None:
+    """The command line's clean-up recorder (``keep_counts=False``) lets go of the counter before the cleaned
+    copies are made and keeps no count windows; the cleaned map, log-odds, erased and restored cells and the
+    stats are those of the recorder that keeps everything."""
+    from dynslam2d.slam.cleanup import CleanupRecorder
 
-    from dynslam2d.cli import _drop_count_windows
-    from dynslam2d.slam.cleanup import CleanResult
+    scans, meta = _loop_run()
+    cfg = Config()
+    kept, lean = CleanupRecorder(cfg.clean, cfg.slam), CleanupRecorder(cfg.clean, cfg.slam, keep_counts=False)
+    result = run(ScanList(scans, meta), cfg, observers=[kept, lean])
+    a, b = kept.result, lean.result
+    assert a is not None and b is not None
+    assert kept.counter is not None and lean.counter is None
+    assert a.hits.shape == a.grid.shape and a.hits.sum() > 1000
+    assert b.hits.size == b.through.size == b.switches.size == 0
+    assert a.stats["erased_cells"] + a.stats["restored_cells"] > 0  # the pass changed something to compare
+    np.testing.assert_array_equal(a.grid.prob, b.grid.prob)
+    np.testing.assert_array_equal(a.logodds, b.logodds)
+    np.testing.assert_array_equal(a.erased, b.erased)
+    np.testing.assert_array_equal(a.restored, b.restored)
+    assert {k: v for k, v in a.stats.items() if k != "pass_time_s"} == \
+        {k: v for k, v in b.stats.items() if k != "pass_time_s"}
+    assert result.grid.shape == a.grid.shape
 
-    grid = GridMap(np.full((30, 40), 0.2), 0.05, (0.0, 0.0))
-    win = np.ones((30, 40), dtype=np.uint16)
-    erased = np.zeros((30, 40), dtype=bool)
-    lo = np.zeros((30, 40), dtype=np.float32)
-    cleaner = SimpleNamespace(result=CleanResult(grid, lo, erased, win, win.copy(), win.copy(), {"erased_cells": 0}))
-    _drop_count_windows(cleaner)
-    res = cleaner.result
-    assert res.grid is grid and res.logodds is lo and res.erased is erased and res.stats == {"erased_cells": 0}
-    assert res.hits.size == res.through.size == res.switches.size == 0
-    cleaner = SimpleNamespace(result=None)
-    _drop_count_windows(cleaner)  # no clean-up pass: nothing to drop
-    assert cleaner.result is None
+
+def test_run_releases_the_erasure_ledgers_and_keeps_their_summary() -> None:
+    """After the loop ``run`` folds the erasure ledgers, keeps their summary and erased cells and lets the per-track
+    records go (before the re-render and the clean-up pass); ledgers of ended tracks keep only their rows' room."""
+    from dynslam2d.slam.erasure import EvidenceLedger
+
+    seen: dict[str, object] = {}
+    release = EvidenceLedger.release
+
+    def spy(self):
+        # every ended record's pending buffer was cut to its rows when its track ended
+        seen["slack_ended"] = sum(rec._pk.shape[1] - rec._n_rows for led in self._ended.values() for rec in led.levels)
+        seen["pending_ended"] = sum(rec._n_rows for led in self._ended.values() for rec in led.levels)
+        seen["ended"] = len(self._ended)
+        seen["before"] = EvidenceLedger.summary(self)
+        release(self)
+        seen["records_after"] = len(self._ledgers) + len(self._ended)
+
+    EvidenceLedger.release = spy
+    try:
+        result = run(SimSource(_parked_scene()), _memory_config(True, True, every_scan=True))
+    finally:
+        EvidenceLedger.release = release
+    assert seen["records_after"] == 0 and seen["slack_ended"] == 0 and seen["pending_ended"] > 0
+    assert seen["ended"] > 0 and result.memory["cells_recorded"] > 100 and result.memory["erasures"] > 0
+    assert result.memory["cells_recorded"] == seen["before"]["cells_recorded"]  # type: ignore[index]
+    assert {k: result.memory[k] for k in seen["before"]} == seen["before"]  # type: ignore[union-attr]
+
+
+def test_cached_submaps_keep_only_their_probabilities() -> None:
+    """The loop closer's cached submap grids keep their probability cache and let the log-odds and update indices
+    go (read-only broadcasts of "unknown" of the same shape: no memory, writes fail)."""
+    import pytest
+
+    from dynslam2d.slam.grid import MultiResMap
+    from dynslam2d.slam.loops import _keep_probabilities
+
+    grid = MultiResMap(0.05, 2, -0.4, 0.9, 50.0, 10)
+    ang = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+    grid.integrate(Pose2D(), np.column_stack((3.0 * np.cos(ang), 3.0 * np.sin(ang))))
+    lv = grid.levels[0]
+    shape, prob = lv.shape, lv.prob.copy()
+    assert (lv.uidx >= 0).sum() > 1000
+    _keep_probabilities(lv)
+    assert lv.shape == shape and not lv.empty
+    np.testing.assert_array_equal(lv.prob, prob)
+    assert lv.logodds.base is not None and lv.logodds.base.nbytes <= 4 and lv.uidx.base.nbytes <= 4
+    assert not lv.logodds.any() and (lv.uidx == -1).all()
+    with pytest.raises(ValueError):
+        lv.logodds[0, 0] = 1.0
 
 
 def test_saved_figure_lets_go_of_its_images_and_pixels(tmp_path) -> None:
@@ -315,3 +372,26 @@ def test_occupied_and_free_masks_without_a_float64_copy() -> None:
     assert peak < 2 * prob.size + 2**16, peak / prob.size
     _, peak = _traced_peak(grid.free, 0.196)
     assert peak < 2 * prob.size + 2**16, peak / prob.size
+
+
+def test_released_results_are_written_byte_for_byte_the_same(tmp_path) -> None:
+    """``write_outputs(release=True)`` (the command line) lets the log-odds, keyframes and maps go as soon as they
+    are written or drawn; every file it writes is the one written without it."""
+    from dynslam2d.results import write_outputs
+    from dynslam2d.slam.cleanup import CleanupRecorder
+
+    scans, meta = _loop_run()
+    cfg = Config()
+    runs = []
+    for _ in range(2):
+        rec = CleanupRecorder(cfg.clean, cfg.slam, keep_counts=False)
+        runs.append((run(ScanList(scans, meta), cfg, observers=[rec]), rec.result))
+    (res_a, cl_a), (res_b, cl_b) = runs
+    assert cl_a is not None and cl_b is not None and res_b.loop is not None and res_b.loop.keyframes
+    a = write_outputs(res_a, tmp_path / "a", cleaned=cl_a).paths
+    b = write_outputs(res_b, tmp_path / "b", cleaned=cl_b, release=True).paths
+    assert res_b.grid is None and cl_b.grid is None and cl_b.logodds is None and res_b.logodds.size == 0
+    assert not res_b.loop.keyframes and res_a.grid is not None and res_a.loop.keyframes
+    assert set(a) == set(b) and {"map.png", "tracks.png", "map_logodds_online.npy", "map_online.pgm"} <= set(a)
+    for name in sorted(set(a) - {"summary.json", "run.json"}):  # (these two hold timings)
+        assert a[name].read_bytes() == b[name].read_bytes(), name

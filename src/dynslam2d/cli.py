@@ -657,7 +657,7 @@ def run(
     from dynslam2d.viz.collect import RemovedPointsCollector
 
     collector = RemovedPointsCollector()
-    cleaner = CleanupRecorder(cfg.clean, cfg.slam)
+    cleaner = CleanupRecorder(cfg.clean, cfg.slam, keep_counts=False)  # (only its map, erased cells and stats)
     folder.start(input=source.meta.origin)
     checkpointer = Checkpointer(folder.work, every_s=checkpoint_period, every_scans=checkpoint_scans,
                                 info={"input": source.meta.origin})
@@ -669,8 +669,6 @@ def run(
                                         write_bag=write_bag, bag_storage=bag_storage, map_period=map_period,
                                         viewer=viewer, rerun_save=rerun_save)
             result = _map_with_progress(source, cfg, observers, show)
-        cleaner.counter = None  # the clean-up pass is done (cleaner.result): free its counts before the figures
-        _drop_count_windows(cleaner)
         _check_run_usable(result, input)
         from dynslam2d.results import ground_truth_for
 
@@ -806,20 +804,6 @@ def _run_observers(stack: contextlib.ExitStack, cfg: Config, work: Path, cleaner
     return observers
 
 
-def _drop_count_windows(cleaner: Any) -> None:
-    """Replace the clean-up result's per-cell count windows (hits, passes, switches: 3 × 2 bytes per map cell) by
-    empty arrays: the results folder and the figures read only its map, erased cells and stats, and the windows
-    would stay resident under the figures (docs/speed.md, memory)."""
-    import dataclasses
-
-    import numpy as np
-
-    res = cleaner.result
-    if res is not None:
-        empty = np.zeros((0, 0), dtype=np.uint16)
-        cleaner.result = dataclasses.replace(res, hits=empty, through=empty, switches=empty)
-
-
 def _map_with_progress(source: ScanSource, cfg: Config, observers: list[Any], show: bool) -> RunResult:
     """Run the pipeline over ``source`` with a progress bar on stderr (scans/s after the first scan)."""
     import time
@@ -853,7 +837,7 @@ def _write_run_outputs(result: RunResult, work: Path, out: Path, truth: GroundTr
     from dynslam2d.results import write_outputs
 
     try:
-        outputs = write_outputs(result, work, truth, collector, cleaned=cleaned)
+        outputs = write_outputs(result, work, truth, collector, cleaned=cleaned, release=True)
         if mount is not None:
             _rewrite_frame(work, mount)
             from dynslam2d.io.odometry import base_frame_fields

@@ -64,7 +64,7 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),
     ('dynslam2d.slam.cleanup._count_scan',
-     "(Array(uint16, 3, 'C'), Array(int32, 2, 'C'), int64, float64, float64, Array(float64, 1, 'C'), "
+     "(Array(uint16, 3, 'C'), Array(uint16, 2, 'C'), int64, float64, float64, Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
     ('dynslam2d.slam.matcher.close_count',
      "(Array(float64, 1, 'C'), float64, float64, float64,)"),

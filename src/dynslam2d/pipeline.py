@@ -42,6 +42,7 @@ from dynslam2d.slam.confidence import FLAGS
 from dynslam2d.slam.confidence import summarize as summarize_confidence
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.erasure import EvidenceLedger
+from dynslam2d.slam.grid import MultiResMap, logistic_map
 from dynslam2d.slam.jumps import jump_flags
 from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.loops import LoopCloser, LoopResult
@@ -174,7 +175,7 @@ class Pipeline:
         #: the front end's final map once :func:`run` has freed its levels (``_release_map``): what
         #: :meth:`gridmap` returns from then on, so a checkpoint written during the loop closure's finish
         #: (Ctrl-C) still writes the real map, not the freed 1 × 1 one
-        self._released_grid: GridMap | None = None
+        self._released_grid: GridMap | _MapExport | None = None
         #: retroactive erasure of what tracks wrote while they stood (slam/erasure.py; None = off)
         self.ledger: EvidenceLedger | None = EvidenceLedger(
             mem, self.config.slam.laser_min_dist, self.config.slam.laser_max_dist,
@@ -344,6 +345,8 @@ class Pipeline:
     def gridmap(self) -> GridMap:
         """The finest map level as occupancy probabilities (NaN = never observed); after :func:`run` freed the
         front end's levels, the map they held then."""
+        if isinstance(self._released_grid, _MapExport):
+            return self._released_grid.gridmap()
         if self._released_grid is not None:
             return self._released_grid
         return self.slam.gridmap(0)
@@ -605,7 +608,9 @@ def render_map(loop: LoopResult, slam_config: SlamConfig, poses: np.ndarray | No
     _presize_render(slam, loop, at)
     for kf, p in zip(loop.keyframes, at):
         slam.update_map(kf.kept(), Pose2D(float(p[0]), float(p[1]), float(p[2])), force=True)
-    return slam.gridmap(0), slam.logodds(0)[0]
+    out = _MapExport.of(slam.map)
+    del slam  # its level (12 bytes per cell) goes before the float64 map is made (issue 13 item 3)
+    return out.gridmap(), out.logodds
 
 
 def render_written_map(loop: LoopResult, slam_config: SlamConfig) -> tuple[GridMap, np.ndarray] | None:
@@ -709,15 +714,48 @@ def _memory_report(result: RunResult, pipe: Pipeline) -> None:
         result.erased = pipe.ledger.erased_mask(g.origin, g.shape, g.resolution)
 
 
-def _release_map(pipe: Pipeline, grid: GridMap) -> None:
+@dataclass(eq=False)
+class _MapExport:
+    """The finest level of a map, cropped to its observed cells (:meth:`MultiResMap.to_gridmap`'s crop), as its
+    float32 log-odds and a mask of the never-updated cells: 5 bytes per cell where the float64
+    :class:`GridMap` and the log-odds take 12. ``run`` keeps the front end's map so until it knows whether the
+    loop closure's re-render replaces it (issue 13 item 3)."""
+
+    logodds: np.ndarray  # (H, W) float32, row 0 at the bottom
+    unknown: np.ndarray  # (H, W) bool, never updated
+    resolution: float  # m
+    origin: tuple[float, float]  # world (x, y) of the lower-left corner of cell (0, 0), m
+
+    @classmethod
+    def of(cls, hmap: MultiResMap) -> _MapExport:
+        lv = hmap.levels[0]
+        if lv.empty:
+            return cls(np.zeros((1, 1), dtype=np.float32), np.ones((1, 1), dtype=bool), lv.resolution,
+                       lv.corner_origin())
+        b = lv.known_bounds()
+        r0, r1, c0, c1 = b if b is not None else (0, lv.shape[0], 0, lv.shape[1])
+        return cls(lv.logodds[r0:r1, c0:c1].copy(), lv.uidx[r0:r1, c0:c1] < 0, lv.resolution,
+                   lv.corner_origin(r0, c0))
+
+    def gridmap(self) -> GridMap:
+        """The map as probabilities, NaN = never observed: the values of :meth:`MultiResMap.to_gridmap`."""
+        return GridMap(logistic_map(self.logodds, self.unknown), self.resolution, self.origin)
+
+
+def _release_map(pipe: Pipeline, front: _MapExport) -> None:
     """Replace the front end's map arrays by empty ones (after the run, once the results hold their own
-    copies): memory for the loop closure's re-render and the results (docs/speed.md). ``grid`` is the
+    copies): memory for the loop closure's re-render and the results (docs/speed.md). ``front`` is the
     front end's exported map, which :meth:`Pipeline.gridmap` returns from now on."""
-    pipe._released_grid = grid
+    pipe._released_grid = front
     for lv in pipe.slam.map.levels:
         lv.logodds = np.zeros((0, 0), dtype=np.float32)
         lv.prob = np.full((0, 0), 0.5, dtype=np.float32)
         lv.uidx = np.full((0, 0), -1, dtype=np.int32)
+    # the tracker keeps the last scan's view of the finest level (its log-odds array, 12.5 MB on MIT CSAIL),
+    # which would keep that level alive through the re-render and the clean-up pass
+    pipe.tracker._map = None
+    if pipe.ledger is not None:
+        pipe.ledger.release()  # its per-track records (tens of MB on MIT CSAIL); the summary stays
     release_free_memory()
 
 
@@ -793,16 +831,16 @@ def run(
     compile_s = compile_seconds() - compile0
     release_free_memory()  # the loop's freed temporaries, before the observers' end-of-run work (memtrim.py)
     flag_arr = flags.view().copy()
-    logodds, _ = pipe.slam.logodds(0)
-    grid = pipe.gridmap()
+    front = _MapExport.of(pipe.slam.map)  # (its float64 map is made once the run knows it keeps it)
+    logodds = front.logodds
     summary = pipe.slam.summary()
     memory_bytes = pipe.slam.memory_bytes
-    # the front end's map is in ``grid`` / ``logodds`` now: free its levels before the loop closure's final
-    # optimisation and re-render build theirs (issue 13 item 3; observers' on_finish get the pipeline without
-    # its map arrays)
-    _release_map(pipe, grid)
+    # the front end's map is in ``front`` now: free its levels before the loop closure's final optimisation and
+    # re-render build theirs (issue 13 item 3; observers' on_finish get the pipeline without its map arrays)
+    _release_map(pipe, front)
     trajectory = Trajectory(stamps.view().copy(), poses.view().copy())
     frontend_trajectory = None
+    grid: GridMap | None = None  # the written map; the front end's unless a render replaces it
     loop = pipe.loops.finish() if pipe.loops is not None else None
     if loop is not None and loop.corrected:
         t_render = time.perf_counter()
@@ -821,6 +859,10 @@ def run(
         loop.stats["written_render_ms"] = (time.perf_counter() - t_render) * 1e3
         if written is not None:
             grid, logodds = written
+    if grid is None:
+        grid = front.gridmap()
+        pipe._released_grid = grid  # (the same map, made now: Pipeline.gridmap need not make it again)
+    del front
     wall = time.perf_counter() - t0
     result = RunResult(
         source=source.meta,

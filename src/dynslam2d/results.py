@@ -171,6 +171,7 @@ def write_outputs(
     gt: GroundTruthFiles | None = None,
     collector: RemovedPointsCollector | None = None,
     cleaned: CleanResult | None = None,
+    release: bool = False,
 ) -> RunOutputs:
     """Write the results of ``run`` into ``out_dir``; return the paths, summary and metrics written.
 
@@ -183,6 +184,11 @@ def write_outputs(
 
     With ``gt`` the run is evaluated once (:func:`evaluate_result`): metrics.json, the
     summary's ``ate_rmse_m`` and the figures all come from that one :class:`RunEvaluation`.
+
+    ``release``: the caller does not use ``run`` and ``cleaned`` afterwards (the command line): their log-odds
+    and the loop closure's keyframes are let go once written, before the figures are drawn, and the maps as the
+    figures are done with them (issue 13 item 3; ``run.logodds`` becomes a 0 × 0 array, ``cleaned.logodds``,
+    ``run.grid`` and ``cleaned.grid`` None, ``run.loop.keyframes`` empty; :func:`write_figures`).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -193,14 +199,14 @@ def write_outputs(
     paths["map.yaml"], paths["map.pgm"] = ypath, ppath
     with atomic_path(out / "map_logodds.npy") as tmp:
         with tmp.open("wb") as fh:
-            np.save(fh, final_lo.astype(np.float32))
+            np.save(fh, np.asarray(final_lo, dtype=np.float32))  # (no copy of a float32 map)
     paths["map_logodds.npy"] = out / "map_logodds.npy"
     if cleaned is not None:
         ypath, ppath = write_map(out / "map_online.yaml", run.grid)
         paths["map_online.yaml"], paths["map_online.pgm"] = ypath, ppath
         with atomic_path(out / "map_logodds_online.npy") as tmp:
             with tmp.open("wb") as fh:
-                np.save(fh, run.logodds.astype(np.float32))
+                np.save(fh, np.asarray(run.logodds, dtype=np.float32))
         paths["map_logodds_online.npy"] = out / "map_logodds_online.npy"
     paths["trajectory.tum"] = write_tum(out / "trajectory.tum", run.trajectory, comment="laser pose in the map frame")
     if run.loop is not None:
@@ -212,6 +218,13 @@ def write_outputs(
                                                      comment="laser pose in the map frame, front end before loop "
                                                              "closure")
         paths["graph.g2o"] = write_g2o(out / "graph.g2o", run.loop.graph)
+    if release:  # nothing below reads them (the figures draw the maps' probabilities)
+        run.logodds = np.zeros((0, 0), dtype=np.float32)
+        if cleaned is not None:
+            cleaned.logodds = None
+        if run.loop is not None:
+            run.loop.keyframes = []
+    del final_lo
     paths["config.yaml"] = write_text_atomic(out / "config.yaml", dump_config(run.config))
     paths["tracks.csv"] = write_text_atomic(out / "tracks.csv", tracks_csv(run))
     removed = run.removed
@@ -236,7 +249,7 @@ def write_outputs(
     paths["summary.json"] = write_text_atomic(out / "summary.json", summary_text)
     # Figures: map.png, tracks.png and, with ground truth, errors.png (dynslam2d.viz.figures).
     release_free_memory()  # figures allocate much; start them from a trimmed heap (memtrim.py)
-    paths.update(write_figures(run, out, evaluation, collector, cleaned=cleaned))
+    paths.update(write_figures(run, out, evaluation, collector, cleaned=cleaned, release=release))
     # run.json LAST: a folder whose run.json does not say "complete" lacks files (docs/reliability.md).
     paths["run.json"] = write_marker(out, "complete", scans=run.n_scans, input=run.source.origin,
                                      files=sorted(paths))

@@ -112,7 +112,7 @@ def run_job(job: Job) -> dict[str, Any]:
                          skip_bad=bool(opts.get("skip_bad", False)), odom=opts.get("odom", "auto"),
                          imu=opts.get("imu", "auto"))
     collector = RemovedPointsCollector()
-    cleaner = CleanupRecorder(cfg.clean, cfg.slam)
+    cleaner = CleanupRecorder(cfg.clean, cfg.slam, keep_counts=False)  # (only its map, erased cells, stats)
     folder.start(input=source.meta.origin, batch_job=job.name)
     try:
         write_text_atomic(folder.work / JOB_FILE, json.dumps(_job_record(job), indent=2, default=str) + "\n")

@@ -48,7 +48,7 @@ depth of a one-cell surface seen at incidence α.
 
 Memory: the pass never keeps scans. :class:`VisibilityCounter` is fed scan by scan
 during the run (:class:`CleanupRecorder` is a pipeline observer) and holds three uint16
-count grids and one int32 grid of each cell's latest touch (10 bytes per cell, growing with
+count grids and one uint16 grid of each cell's latest touch (8 bytes per cell, growing with
 the scans, never beyond the SLAM's ``max_map_memory_mb``; counts saturate at 65535 scans).
 Hector-style SLAM never changes a pose after its scan (no loop closure), so the pose a scan
 had when it was processed is its pose in the final trajectory; counting during the run is the same as counting after it.
@@ -88,15 +88,19 @@ _HIT, _THROUGH, _SWITCH = 0, 1, 2
 #: side of the larger count (docs/speed.md).
 COUNT_MAX = 65535
 
-#: Bytes per counted cell: three uint16 counts and one int32 "last touch" (scan id · 2 + hit).
-BYTES_PER_CELL = 10
+#: Bytes per counted cell: three uint16 counts and one uint16 "last touch" (scan number · 2 + hit).
+BYTES_PER_CELL = 8
+#: Largest scan number in the "last touch" array (2 · 32767 + 1 fits uint16); past it the counter renumbers the
+#: earlier touches (:meth:`VisibilityCounter._renumber`), which leaves every count the same.
+_ID_SPAN = 32767
 
 
 @njit(cache=True)
 def _count_scan(counts, last, scan_id, ox, oy, hx, hy, cx, cy, core):  # pragma: no cover - numba
     """One scan into the counters ``counts`` (H, W, 3) uint16 (hits, passes, switches; saturating at
-    :data:`COUNT_MAX`) and ``last`` (H, W) int32, the cell's latest touch as ``2 · scan id + 1`` for a hit,
-    ``2 · scan id`` for a pass (ids start at 1; 0 = never). Coordinates are in cell units of the arrays
+    :data:`COUNT_MAX`) and ``last`` (H, W) uint16, the cell's latest touch as ``2 · n + 1`` for a hit, ``2 · n``
+    for a pass, n the number of the scan that touched it (1 … :data:`_ID_SPAN`; 0 = never; ``scan_id`` is this
+    scan's, larger than every number in ``last``). Coordinates are in cell units of the arrays
     (cell (i, j) centred on integers). ``(hx, hy)``: hit endpoints; ``(cx, cy)``: ends of
     the clearing segments from ``(ox, oy)``. Per scan, a cell gets at most one hit and
     one pass, and no pass if the scan hit it (hits are counted first). Switches count changes between
@@ -243,7 +247,8 @@ class VisibilityCounter:
         self.i0 = 0  # absolute col of array column 0
         self.j0 = 0  # absolute row of array row 0
         self._cells = np.zeros((0, 0, 3), dtype=np.uint16)  # hits, passes, switches
-        self._last = np.zeros((0, 0), dtype=np.int32)  # latest touch: 2 · scan id (+ 1 for a hit)
+        self._last = np.zeros((0, 0), dtype=np.uint16)  # latest touch: 2 · scan number (+ 1 for a hit)
+        self._id_base = 0  # scan number = scan id − this (see _renumber)
         self.scans = 0  # scans counted (also the id of the next scan)
         self.too_large = 0  # scans left out: counting them would exceed the memory limit
         self.seconds = 0.0
@@ -285,7 +290,7 @@ class VisibilityCounter:
         if (nj1 - nj0) * (ni1 - ni0) * BYTES_PER_CELL > self.slam.max_map_memory_mb * 1e6:
             return False
         new = np.zeros((nj1 - nj0, ni1 - ni0, 3), dtype=np.uint16)
-        new_last = np.zeros((nj1 - nj0, ni1 - ni0), dtype=np.int32)
+        new_last = np.zeros((nj1 - nj0, ni1 - ni0), dtype=np.uint16)
         if h:
             new[self.j0 - nj0:self.j0 - nj0 + h, self.i0 - ni0:self.i0 - ni0 + w] = self._cells
             new_last[self.j0 - nj0:self.j0 - nj0 + h, self.i0 - ni0:self.i0 - ni0 + w] = self._last
@@ -353,11 +358,22 @@ class VisibilityCounter:
             self.too_large += 1  # the SLAM refuses such scans too ('map_too_large')
             self.seconds += time.perf_counter() - t0
             return
-        _count_scan(self._cells, self._last, self.scans + 1,
+        if self.scans + 1 - self._id_base > _ID_SPAN:
+            self._renumber()
+        _count_scan(self._cells, self._last, self.scans + 1 - self._id_base,
                     ox - self.i0, oy - self.j0, ex[kept] - self.i0, ey[kept] - self.j0,
                     cx[clear] - self.i0, cy[clear] - self.j0, float(c.ray_core))
         self.scans += 1
         self.seconds += time.perf_counter() - t0
+
+    def _renumber(self) -> None:
+        """Make every touch so far one of scan number 1 (its kind kept) and the next scan number 2. The counting
+        kernel compares a cell's latest touch only with the current scan's number (touched by this scan or
+        not) and reads its kind, so the counts are those the scan ids themselves would give: the "last touch"
+        array holds 2 bytes per cell instead of 4 whatever the length of the log (issue 13 item 3)."""
+        last = self._last
+        np.copyto(last, (last & 1) + 2, where=last != 0)
+        self._id_base = self.scans - 1
 
     def _overlap(self, grid: GridMap) -> tuple[slice, slice, slice, slice] | None:
         """(grid rows, grid cols, counter rows, counter cols) of the cells both hold, or None.
@@ -454,15 +470,49 @@ def erase_rule(hits: np.ndarray, through: np.ndarray, switches: np.ndarray, conf
 _RULE_ROWS = 256
 
 
+@dataclass(eq=False)
+class CountWindows:
+    """What :func:`clean_map` reads from a :class:`VisibilityCounter`, on the online map's cells: the count windows
+    (:meth:`VisibilityCounter.window`), the latest-touch mask (None when the rule does not use it) and the counter's
+    numbers for the stats. Taking them first lets a caller free the counter before the cleaned copies are made."""
+
+    hits: np.ndarray
+    through: np.ndarray
+    switches: np.ndarray
+    latest_hit: np.ndarray | None
+    config: CleanConfig
+    scans: int
+    too_large: int
+    seconds: float
+    nbytes: int
+
+    @classmethod
+    def of(cls, online: GridMap, counter: VisibilityCounter) -> CountWindows:
+        c = counter.config
+        hits, through, switches = counter.window(online)
+        latest_hit = counter.latest_hit(online) if c.rehit_min_hits > 0 else None
+        return cls(hits, through, switches, latest_hit, c, int(counter.scans), int(counter.too_large),
+                   float(counter.seconds), counter.nbytes)
+
+
 def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray | None = None,
               occupied_threshold: float = 0.65) -> CleanResult:
     """Erase the cells of ``online`` (occupied: p > ``occupied_threshold``) that ``counter``
     saw through often enough (rule in the module docstring). ``logodds``: the online
     map's raw log-odds (same cells), returned cleaned alongside."""
     t0 = time.perf_counter()
-    c = counter.config
-    hits, through, switches = counter.window(online)
-    latest_hit = counter.latest_hit(online) if c.rehit_min_hits > 0 else None
+    return clean_windows(online, CountWindows.of(online, counter), logodds, occupied_threshold, t0=t0)
+
+
+def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | None = None,
+                  occupied_threshold: float = 0.65, keep_counts: bool = True, t0: float | None = None) -> CleanResult:
+    """:func:`clean_map` from the counts read off the counter (:meth:`CountWindows.of`). With ``keep_counts``
+    False the result's count windows are empty (0 × 0) and ``counts`` lets go of them once the rules are
+    applied, before the cleaned copies of the map are made (issue 13 item 3: the command line keeps only the
+    map, the erased cells and the stats). ``t0``: when the pass started (``time.perf_counter``), for its time."""
+    t0 = time.perf_counter() if t0 is None else t0
+    c = counts.config
+    hits, through, switches, latest_hit = counts.hits, counts.through, counts.switches, counts.latest_hit
     occ = online.occupied(occupied_threshold)
     erased = np.empty(occ.shape, dtype=bool)
     restored = np.empty(occ.shape, dtype=bool)
@@ -472,13 +522,19 @@ def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray |
                                   None if latest_hit is None else latest_hit[rows]) & occ[rows]
         # observed free in the online map (unknown cells were never cleared: nothing to restore there)
         restored[rows] = restore_rule(hits[rows], through[rows], c) & ~occ[rows] & np.isfinite(online.prob[rows])
+    if not keep_counts:
+        empty = np.zeros((0, 0), dtype=np.uint16)
+        hits = through = switches = counts.hits = counts.through = counts.switches = empty
+        latest_hit = counts.latest_hit = None
     if c.revert_neighbors > 0:
         # Removert's "revert" step in 2D: a cell at the edge of structure that stays is kept.
         from scipy.ndimage import convolve
 
         kept = (occ & ~erased).astype(np.int16)
         n_kept = convolve(kept, np.ones((3, 3), dtype=np.int16), mode="constant") - kept
+        del kept
         erased &= n_kept < c.revert_neighbors
+        del n_kept
     prob = online.prob.copy()
     prob[erased] = ERASED_PROBABILITY
     prob[restored] = RESTORED_PROBABILITY
@@ -490,16 +546,18 @@ def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray |
             lo[erased] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
             lo[restored] = math.log(RESTORED_PROBABILITY / (1.0 - RESTORED_PROBABILITY))
     area = online.resolution ** 2
+    n_occ = int(occ.sum())
+    del occ
     stats: dict[str, float | int] = {
-        "occupied_cells_online": int(occ.sum()),
+        "occupied_cells_online": n_occ,
         "erased_cells": int(erased.sum()),
         "erased_area_m2": float(erased.sum() * area),
         "restored_cells": int(restored.sum()),
         "restored_area_m2": float(restored.sum() * area),
-        "scans_counted": int(counter.scans),
-        "scans_too_large": int(counter.too_large),
-        "pass_time_s": float(counter.seconds + time.perf_counter() - t0),
-        "counter_bytes": counter.nbytes,
+        "scans_counted": counts.scans,
+        "scans_too_large": counts.too_large,
+        "pass_time_s": float(counts.seconds + time.perf_counter() - t0),
+        "counter_bytes": counts.nbytes,
     }
     return CleanResult(GridMap(prob, online.resolution, online.origin), lo, erased, hits, through, switches, stats,
                        restored)
@@ -538,9 +596,13 @@ class CleanupRecorder:
 
     counter_class: type[VisibilityCounter] = VisibilityCounter
 
-    def __init__(self, config: CleanConfig | None = None, slam: SlamConfig | None = None) -> None:
+    def __init__(self, config: CleanConfig | None = None, slam: SlamConfig | None = None,
+                 keep_counts: bool = True) -> None:
         self.config = config if config is not None else CleanConfig()
         self.slam = slam
+        #: False: the counter is let go once the map is cleaned (before the cleaned copies are made) and the
+        #: result's count windows are empty (:func:`clean_windows`; the command line needs neither)
+        self.keep_counts = bool(keep_counts)
         self.counter: VisibilityCounter | None = None
         self.result: CleanResult | None = None
         self._last_stamp = -math.inf
@@ -576,7 +638,12 @@ class CleanupRecorder:
             self.counter.reserve([(kf.scan, p) for kf, p in zip(loop.keyframes, poses)])
             for kf, p in zip(loop.keyframes, poses):
                 self.counter.add(kf.scan, p, kf.removed if kf.removed.size else None)
-        self.result = clean_map(result.grid, self.counter, result.logodds)  # type: ignore[attr-defined]
+        t0 = time.perf_counter()
+        counts = CountWindows.of(result.grid, self.counter)  # type: ignore[attr-defined]
+        if not self.keep_counts:
+            self.counter = None  # (26 MB on MIT CSAIL) before the rule's masks and the cleaned copies
+        self.result = clean_windows(result.grid, counts, result.logodds,  # type: ignore[attr-defined]
+                                    keep_counts=self.keep_counts, t0=t0)
 
 
 
@@ -609,5 +676,6 @@ def scan_clearing(ranges: np.ndarray, angles: np.ndarray | tuple[np.ndarray, np.
     return (float(pose.x) / resolution, float(pose.y) / resolution), cx, cy, clear
 
 
-__all__ = ["ERASED_PROBABILITY", "RESTORED_PROBABILITY", "CleanResult", "CleanupRecorder", "VisibilityCounter",
-           "clean_map", "compare_online", "erase_rule", "restore_rule", "scan_clearing"]
+__all__ = ["ERASED_PROBABILITY", "RESTORED_PROBABILITY", "CleanResult", "CleanupRecorder", "CountWindows",
+           "VisibilityCounter", "clean_map", "clean_windows", "compare_online", "erase_rule", "restore_rule",
+           "scan_clearing"]

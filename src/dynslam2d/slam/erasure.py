@@ -195,6 +195,12 @@ class _LevelRecord:
         self.key, self.delta, self.pure, self.last = new_key, new_delta, new_pure, new_last
         return int(new_key.shape[0] - nb)
 
+    def shrink(self) -> None:
+        """Copy the pending rows into a buffer of their size (the record keeps its rows and what they fold to)."""
+        n = self._n_rows
+        if n < self._pk.shape[1]:
+            self._pk = self._pk[:, :n].copy() if n else _EMPTY_I4
+
     def new_cells(self) -> int:
         """The number of new cells :meth:`compact` would return, without folding (for a record that is
         dropped: counting its distinct cells is much cheaper than folding them)."""
@@ -281,6 +287,8 @@ class EvidenceLedger:
         self.erased_cells: set[tuple[int, int]] = set()
         self.stats = {"erasures": 0, "tracks_erased": 0, "cells_changed": 0, "cells_to_unknown": 0,
                       "ended_ledgers_linked": 0, "cells_recorded": 0}
+        #: :meth:`summary` once :meth:`release` let the records go (nothing is recorded after that)
+        self._final: dict[str, int] | None = None
 
     # ------------------------------------------------------------------ recording
     def before_update(self, scan: Scan, pose: Pose2D, tracks: list[Track], removed: np.ndarray,
@@ -492,6 +500,11 @@ class EvidenceLedger:
                 if led.last_track is not None:
                     led.last_box = _box_key(led.last_track)
                 if led.confirmed:  # tentative clutter (wall fragments, noise) is never linked
+                    # an ended record gets no more rows: its pending buffers, allocated with room to double
+                    # (up to 2 × 4096 rows of 32 bytes per level), shrink to their rows (issue 13 item 3; one
+                    # copy, where folding them here would sort them in the per-scan path)
+                    for rec in led.levels:
+                        rec.shrink()
                     self._ended[tid] = led
                     self._oldest_ended = min(self._oldest_ended, led.last_seen)
                 else:
@@ -613,10 +626,24 @@ class EvidenceLedger:
 
     def summary(self) -> dict[str, int]:
         """Counters for summary.json's ``memory`` block."""
+        if self._final is not None:
+            return dict(self._final)
         for led in (*self._ledgers.values(), *self._ended.values()):
             self._fold(led)
         return {**self.stats, "erased_cells_finest": len(self.erased_cells),
                 "ledgers_live": len(self._ledgers), "ledgers_ended": len(self._ended)}
+
+    def release(self) -> None:
+        """The run is over: keep :meth:`summary` (the records folded first, as it does) and :attr:`erased_cells`,
+        and let every track's record go (issue 13 item 3: some 20 MB of buffers and small objects on MIT CSAIL,
+        held through the loop closure's re-render and the clean-up pass otherwise). Recording or erasing after
+        this starts from empty records; :meth:`summary` keeps returning the counters of the release."""
+        self._final = self.summary()
+        self._ledgers = {}
+        self._ended = {}
+        self._first = {}
+        self._oldest_ended = math.inf
+        self.erased_beams = []
 
 
 __all__ = ["EvidenceLedger", "PendingUpdate"]

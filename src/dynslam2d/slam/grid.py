@@ -373,14 +373,7 @@ class MultiResMap:
             return GridMap(np.full((1, 1), np.nan), lv.resolution, lv.corner_origin())
         b = lv.known_bounds() if crop else None
         r0, r1, c0, c1 = b if b is not None else (0, lv.shape[0], 0, lv.shape[1])
-        # 1 / (1 + exp(−l)) in place: the same float64 values without three map-sized temporaries
-        # (the export is the end of the run loop's memory peak; docs/speed.md)
-        prob = lv.logodds[r0:r1, c0:c1].astype(np.float64)
-        np.negative(prob, out=prob)
-        np.exp(prob, out=prob)
-        prob += 1.0
-        np.divide(1.0, prob, out=prob)
-        prob[lv.uidx[r0:r1, c0:c1] < 0] = np.nan
+        prob = logistic_map(lv.logodds[r0:r1, c0:c1], lv.uidx[r0:r1, c0:c1] < 0)
         return GridMap(prob, lv.resolution, lv.corner_origin(r0, c0))
 
     def export_logodds(self, level: int = 0, crop: bool = True) -> tuple[np.ndarray, tuple[float, float]]:
@@ -391,6 +384,20 @@ class MultiResMap:
         b = lv.known_bounds() if crop else None
         r0, r1, c0, c1 = b if b is not None else (0, lv.shape[0], 0, lv.shape[1])
         return lv.logodds[r0:r1, c0:c1].copy(), lv.corner_origin(r0, c0)
+
+
+def logistic_map(logodds: np.ndarray, unknown: np.ndarray) -> np.ndarray:
+    """(H, W) float64 occupancy probabilities 1 / (1 + exp(−l)) of float32 log-odds ``logodds``, NaN where
+    ``unknown`` (bool, same shape): :meth:`MultiResMap.to_gridmap`'s values. Computed in place in one float64
+    array, without three map-sized temporaries (the export is the end of the run loop's memory peak;
+    docs/speed.md)."""
+    prob = logodds.astype(np.float64)
+    np.negative(prob, out=prob)
+    np.exp(prob, out=prob)
+    prob += 1.0
+    np.divide(1.0, prob, out=prob)
+    prob[unknown] = np.nan
+    return prob
 
 
 def grazing_stop(pts: np.ndarray, grazing_cells: float, min_sin: float) -> np.ndarray:

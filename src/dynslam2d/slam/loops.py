@@ -52,7 +52,7 @@ import numpy as np
 
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.correlative import correlative_search
-from dynslam2d.slam.grid import MultiResMap
+from dynslam2d.slam.grid import GridLevel, MultiResMap
 from dynslam2d.slam.jumps import JumpCheck
 from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.matcher import degeneracy, evaluate, gated_points
@@ -72,6 +72,16 @@ _QUERY_POINTS = 360
 _PLACE_POINTS = 120
 #: Keyframe edges across unsupported scans get their deviation multiplied by this.
 _WEAK_FACTOR = 10.0
+
+
+def _keep_probabilities(lv: GridLevel) -> None:
+    """Let a built submap level's log-odds and update indices go: the loop searches read only its probability
+    cache (the correlative search's score table, the matcher's refinement and support). Their place is taken by
+    read-only broadcasts of "unknown" of the same shape (no memory), so the level keeps its shape and a write
+    to them fails instead of going unnoticed."""
+    shape = lv.shape
+    lv.logodds = np.broadcast_to(np.zeros((), dtype=np.float32), shape)
+    lv.uidx = np.broadcast_to(np.full((), -1, dtype=np.int32), shape)
 
 
 @functools.lru_cache(maxsize=256)
@@ -376,6 +386,8 @@ class LoopCloser:
             if pts.shape[0]:
                 rel = relative(a, self.keyframes[k].frontend)
                 grid.integrate(Pose2D(float(rel[0]), float(rel[1]), float(rel[2])), pts)
+        for lv in grid.levels:  # the searches read only the probabilities (issue 13 item 3: 2/3 of each grid)
+            _keep_probabilities(lv)
         self._cache[s] = grid
         if len(self._cache) > self._cache_size:
             self._cache.popitem(last=False)

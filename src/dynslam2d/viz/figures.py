@@ -16,7 +16,7 @@ from dynslam2d.viz.collect import RemovedPointsCollector
 from dynslam2d.viz.errorsplot import map_difference_of, plot_errors
 from dynslam2d.viz.mapplot import plot_map
 from dynslam2d.viz.trackpaths import TrackPath, boxes_to_draw, track_paths, tracks_to_draw
-from dynslam2d.viz.tracksplot import plot_tracks
+from dynslam2d.viz.tracksplot import plot_tracks, tracks_background
 
 
 def _loop_segments(result: RunResult) -> np.ndarray | None:
@@ -38,6 +38,7 @@ def write_figures(
     *,
     dpi: int = 120,
     cleaned: CleanResult | None = None,
+    release: bool = False,
 ) -> dict[str, Path]:
     """Write the figures of ``result`` into ``out_dir`` (each atomically); return paths by name.
 
@@ -57,6 +58,11 @@ def write_figures(
     With ``cleaned`` (the clean-up pass, docs/maps.md) map.png shows the cleaned map with
     the erased cells in :data:`style.ERASED`, and errors.png draws the cleaned map and
     names the ghost area and F1 of both maps (the evaluation's ``map`` and ``map_online``).
+
+    ``release``: the caller does not use ``result`` and ``cleaned`` afterwards (the command line): their maps are
+    let go as soon as the figures no longer need them — the online map once tracks.png's faint copy is made
+    (2 bytes per cell), the drawn map after map.png (``result.grid`` and ``cleaned.grid`` become None; issue 13
+    item 3).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -77,6 +83,9 @@ def write_figures(
         title += f", ATE RMSE {ate_res.rmse:.3f} m"
     removed_xy = collector.points() if collector is not None else None
     grid = cleaned.grid if cleaned is not None else result.grid
+    background = tracks_background(result.grid) if release else result.grid
+    if release and cleaned is not None:  # (map.png draws the cleaned map)
+        result.grid = None  # type: ignore[assignment]
     conf = result.confidence
     pc = result.pose_confidence() if conf else {}
     paths["map.png"] = plot_map(
@@ -90,9 +99,15 @@ def write_figures(
         loop_edges=_loop_segments(result),
         memory_erased=_memory_erased(result, grid),
     )
+    if release:
+        del grid
+        if cleaned is not None:
+            cleaned.grid = None  # type: ignore[assignment]
+        else:
+            result.grid = None  # type: ignore[assignment]
     confirmed = sorted((p for p in all_paths.values() if p.ever_confirmed), key=lambda p: p.id)
     paths["tracks.png"] = plot_tracks(
-        out / "tracks.png", confirmed, result.grid, dpi=dpi,
+        out / "tracks.png", confirmed, background, dpi=dpi,
         title=f"{name}\n{tracks_title(all_paths)}",
     )
     if evaluation is not None and ate_res is not None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -88,6 +89,15 @@ def occupancy_indices(grid: GridMap, fade: float | None = None) -> np.ndarray:
             img = 1.0 - fade * (1.0 - img)
         grey_indices(img, out[r0:r0 + _ROWS_PER_CHUNK])
     return out
+
+
+@dataclass(frozen=True, eq=False)
+class GreyMap:
+    """A map already converted to the grey indices a figure draws (:func:`occupancy_indices`), with its extent
+    (xmin, xmax, ymin, ymax), m: 2 bytes per cell where the :class:`GridMap` takes 8 (issue 13 item 3)."""
+
+    indices: np.ndarray  # (H, W) uint16, row 0 at the bottom
+    extent: tuple[float, float, float, float]
 
 
 def draw_grey_indices(ax: Any, idx: np.ndarray, extent: tuple[float, float, float, float],

@@ -11,7 +11,7 @@ import numpy as np
 
 from dynslam2d.gridmap import GridMap
 from dynslam2d.viz.figure import new_figure, save_png
-from dynslam2d.viz.mapplot import draw_grey_indices, frame_metric_axes, map_figure_size, occupancy_indices
+from dynslam2d.viz.mapplot import GreyMap, draw_grey_indices, frame_metric_axes, map_figure_size, occupancy_indices
 from dynslam2d.viz.trackpaths import MAX_LABELS, TrackPath, label_tracks
 
 #: Colour map of the speed (m/s): plasma without its pale-yellow end (unreadable on white).
@@ -21,6 +21,13 @@ _CMAP_TOP = 0.85
 MAX_POINTS_PER_PATH = 400
 #: At most this many path segments per figure (beyond, every path is thinned evenly).
 MAX_SEGMENTS = 60_000
+#: The map under the paths is faded towards white by this factor (occupied cells light grey).
+MAP_FADE = 0.35
+
+
+def tracks_background(grid: GridMap) -> GreyMap:
+    """The faint map :func:`plot_tracks` draws under the paths, as grey indices: what it keeps of ``grid``."""
+    return GreyMap(occupancy_indices(grid, fade=MAP_FADE), grid.extent)
 
 
 def _speed_cmap():  # type: ignore[no-untyped-def]
@@ -52,7 +59,7 @@ def speed_limit(tracks: Sequence[TrackPath]) -> float:
 def plot_tracks(
     path: str | os.PathLike[str],
     tracks: Sequence[TrackPath],
-    grid: GridMap | None = None,
+    grid: GridMap | GreyMap | None = None,
     *,
     title: str = "",
     dpi: int = 120,
@@ -61,7 +68,8 @@ def plot_tracks(
 
     Segments where the track is in the dynamic set M are solid and thick, the others
     dashed and faint; up to :data:`MAX_LABELS` paths are labelled with their id at their last
-    position; each starts with a small circle. ``grid`` (optional) is drawn faintly underneath for context.
+    position; each starts with a small circle. ``grid`` (optional) is drawn faintly underneath for context (or
+    :func:`tracks_background` of it, computed before).
     """
     from matplotlib.collections import LineCollection
     from matplotlib.colors import Normalize
@@ -80,7 +88,9 @@ def plot_tracks(
     ax = fig.subplots()
     if grid is not None:
         # Faint map: occupied cells light grey, everything else white.
-        draw_grey_indices(ax, occupancy_indices(grid, fade=0.35), extent)
+        bg = grid if isinstance(grid, GreyMap) else tracks_background(grid)
+        draw_grey_indices(ax, bg.indices, extent)
+        del bg
     vmax = speed_limit(tracks)
     norm = Normalize(0.0, vmax)
     cmap = _speed_cmap()
@@ -145,4 +155,4 @@ def plot_tracks(
     return save_png(fig, path, dpi)
 
 
-__all__ = ["MAX_LABELS", "SPEED_CMAP", "plot_tracks", "speed_limit"]
+__all__ = ["MAP_FADE", "MAX_LABELS", "SPEED_CMAP", "plot_tracks", "speed_limit", "tracks_background"]
