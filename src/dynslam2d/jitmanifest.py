@@ -19,11 +19,12 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, 1, 'C'), "
      "Array(bool, 1, 'C'), Array(float64, 1, 'C'), float64, float64, float64, float64, float64, int64, "
      "float64, Array(bool, 1, 'C'),)"),
-    ('dynslam2d.detect.segment._link_kernel',
-     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), bool, float64, float64, "
-     'float64, float64, float64, int64, bool,)'),
-    ('dynslam2d.detect.segment._clusters_kernel',
-     "(Array(int64, 1, 'C'), Array(uint8, 1, 'C'), bool, int64, int64,)"),
+    ('dynslam2d.detect.segment._segment_kernel',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 2, 'C'), bool, "
+     'bool, float64, float64, float64, float64, float64, int64, bool, int64, int64,)'),
+    ('dynslam2d.detect.kernels.world_points',
+     "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
+     "float64, float64, float64, float64, Array(int64, 1, 'C'),)"),
     ('dynslam2d.detect.shapes.fit_clusters',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
      "Array(float64, 1, 'C'), int64, float64, int64, int64,)"),
@@ -32,8 +33,6 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), Array(bool, "
      "1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, int64, float64, float64, float64, "
      "Array(float64, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.segment_means',
-     "(Array(float64, 1, 'C'), Array(int64, 1, 'C'),)"),
     ('dynslam2d.detect.kernels.leg_pairs',
      "(Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), float64, float64,)"),
     ('dynslam2d.detect.kernels.measure_batch',
@@ -92,9 +91,8 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float32, 2, 'C'), int64, int64, float64, "
      "float64, float64, int64, Array(bool, 1, 'C'), Array(bool, 1, 'C'), Array(bool, 1, 'C'), "
      'omitted(default=0.5),)'),
-    ('dynslam2d.detect.kernels.seen_through_kernel',
-     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, float64, float64, Array(float64, 1, 'C'), "
-     "float64, float64, bool, float64, float64, Array(bool, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.mask_fractions',
+     "(Array(bool, 2, 'C'), Array(int64, 1, 'C'),)"),
     ('dynslam2d.detect.kernels.gate_costs',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
@@ -113,9 +111,18 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
+    ('dynslam2d.detect.kernels.seen_through_kernel',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, float64, float64, Array(float64, 1, 'C'), "
+     "float64, float64, bool, float64, float64, Array(bool, 1, 'C'),)"),
     ('dynslam2d.detect.kernels.nearest_ages',
      "(Array(float64, 1, 'C'), Array(int64, 1, 'C'), float64, Array(float64, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.segment_means',
+     "(Array(float64, 1, 'C'), Array(int64, 1, 'C'),)"),
     ('dynslam2d.filter._exclusion_kernel',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(int64, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.merge_leg_pairs',
+     "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
+     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int8, 1, 'C'), "
+     "Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(bool, 3, 'C'),)"),
 )
