@@ -259,6 +259,7 @@ class Tracker:
         tc = self.config.tracker
         self._free = FreeSpaceMemory(tc.free_ref_ages, tc.free_margin) if tc.free_space_check else None
         self._ref_ages = np.array(self._free.ref_ages if self._free is not None else (), dtype=np.float64)
+        self._ref_ages_l = self._ref_ages.tolist()  # (the same ages as floats: the one-track search, _vacated_one)
         self._cur_ref = None
         self._map: MapView | None = None  # the SLAM map given with the current scan (read only)
         self._pose: Pose2D | None = None
@@ -1073,7 +1074,29 @@ class Tracker:
         if type(entry) is not tuple:
             return entry.free_fraction if isinstance(entry, Detection) else entry
         det, ref, t, past = entry
-        return max(det.free_fraction, self._seen_through_pasts(ref, t, [0], [[e[0] for e in past]], [past]).get(0, 0.0))
+        return max(det.free_fraction, self._vacated_one(ref, t, past))
+
+    def _vacated_one(self, ref, t: float, past: tuple, count_nonzero=np.count_nonzero) -> float:
+        """:meth:`_seen_through_pasts` of one track (its stored (stamp, points) ``past``, ≥ 1 entry) against the
+        free-space reference ``ref`` of the scan at ``t`` (s), without the batch's arrays: the stored scan nearest each
+        reference age by :func:`_nearest_age` (the search of ``nearest_ages``, −1 standing for the last entry; only
+        scans older than ``t``), each one's points tested once, the largest fraction seen through (0 for none). The
+        fraction is the count over n: ``segment_means`` of the 0 / 1 flags, whose partial sums are exact."""
+        stamps = [e[0] for e in past]
+        n = len(stamps)
+        best, last = 0.0, -2
+        for a in self._ref_ages_l:
+            j = _nearest_age(stamps, n, t, a)
+            if j < 0:
+                j = n - 1
+            if j == last or not t - stamps[j] > 0.0:
+                continue
+            last = j
+            pts = past[j][1]
+            npt = pts.shape[0]
+            f = int(count_nonzero(self._free.seen_through_by(ref, pts))) / npt if npt else 0.0
+            best = max(best, f)
+        return best
 
     def _birth(self, det: Detection, t: float, j: int) -> None:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
