@@ -791,10 +791,12 @@ class Tracker:
         has_l: list[bool] = []
         radius_l: list[float] = []
         swaps: list[bool] = []
-        sel_l = [ti for ti, _ in pairs]
-        rows_l = [di for _, di in pairs]
+        sel_l: list[int] = []
+        rows_l: list[int] = []
         no_size = (0.0, 0.0)
         for ti, di in pairs:
+            sel_l.append(ti)
+            rows_l.append(di)
             k, det = tracks[ti], dets[di]
             dk = det.kind
             sw, sz, has_sz, rad = False, no_size, False, -1.0
@@ -823,10 +825,16 @@ class Tracker:
         self._bound_acceleration(X_prior, Xn, tracks, pairs)
         self._stacked = None  # the tracks change below
         out = ok.tolist()
-        # the new states and covariances into the tracks' rows of the state arrays, all at once
-        rows = self._rows()[sel[ok]]
-        self._X[rows] = Xn[ok]
-        self._P[rows] = Pn[ok]
+        # the new states and covariances into the tracks' rows of the state arrays, all at once (every update applied,
+        # the usual case: without the boolean selections)
+        if all(out):
+            rows = self._rows()[sel]
+            self._X[rows] = Xn
+            self._P[rows] = Pn
+        else:
+            rows = self._rows()[sel[ok]]
+            self._X[rows] = Xn[ok]
+            self._P[rows] = Pn[ok]
         self._update_tracks(pairs, dets, t, out, size_obs.tolist(), size_kind.tolist(), swaps)
         return out
 
