@@ -26,7 +26,8 @@ ratio — the figure bench_real.py's ms/scan (a wall-time median) gives on a qui
 ``--phases`` runs the two whole pipelines in lockstep as ``--pipeline`` does and splits each ``Tracker.update`` into
 its steps (prediction, detection, association, vacated space, Kalman / shape updates, management and the test of M,
 fragments, births, reports; the rest of ``update`` apart): for each checkout the median over the scans of the
-thread CPU µs of each step, inclusive (the timers add about 1 µs per timed call).
+thread CPU µs of each step, inclusive (the timers add about 1 µs per timed call); the free-space entries read late
+(``Tracker._free_values``, inside ``_manage``, on few scans) as their mean over the scans.
 
 ``--check`` runs both checkouts' trackers over every scan of an input in lockstep and compares their reports
 exactly (every field of every track, floats and arrays bit for bit, the stats and the removed beams): a
@@ -186,6 +187,10 @@ _PHASES = ("_predict", "_detect", "_associate", "_vacated", "_update_pairs", "_m
            "_report")
 
 
+#: methods called inside those steps that --phases times too (not subtracted from the rest of update)
+_NESTED = ("_free_values",)
+
+
 def phases_ab(scans: list, other) -> dict[str, dict[str, float]]:
     """Per checkout ("other", "this"): the median over the scans of the thread CPU µs that each step of
     ``Tracker.update`` (:data:`_PHASES`, inclusive) took in the scan, of the rest of ``update`` ("update (rest)") and
@@ -204,7 +209,7 @@ def phases_ab(scans: list, other) -> dict[str, dict[str, float]]:
     for tag, mod in (("other", other), ("this", this)):
         p = Pipeline()
         p.tracker = mod.Tracker(p.config.detect)
-        for name in _PHASES + ("update",):
+        for name in _PHASES + _NESTED + ("update",):
             f = getattr(p.tracker, name, None)
             if f is None:
                 continue
@@ -227,7 +232,12 @@ def phases_ab(scans: list, other) -> dict[str, dict[str, float]]:
             per[tag]["update (rest)"].append((total - sum(c[n] for n in _PHASES)) / 1e3)
             for n in _PHASES:
                 per[tag][n].append(c[n] / 1e3)
-    return {tag: {k: statistics.median(v) for k, v in d.items()} for tag, d in per.items()}
+            for n in _NESTED:
+                per[tag][n].append(c[n] / 1e3)
+    # (a nested method runs on few scans: its mean over the scans; the step it runs in includes it)
+    return {tag: {(f"{k} (mean)" if k in _NESTED else k):
+                  (statistics.fmean(v) if k in _NESTED else statistics.median(v)) for k, v in d.items()}
+            for tag, d in per.items()}
 
 
 #: functions of other modules that Tracker.update calls (module attribute of detect/tracker.py → label)
