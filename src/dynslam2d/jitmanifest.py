@@ -114,10 +114,6 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.seen_through_kernel',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, float64, float64, Array(float64, 1, 'C'), "
      "float64, float64, bool, float64, float64, Array(bool, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.nearest_ages',
-     "(Array(float64, 1, 'C'), Array(int64, 1, 'C'), float64, Array(float64, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.segment_means',
-     "(Array(float64, 1, 'C'), Array(int64, 1, 'C'),)"),
     ('dynslam2d.filter._exclusion_kernel',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(int64, 1, 'C'),)"),
