@@ -54,7 +54,8 @@ def _scan(pose: Pose2D, box_x: float, stamp: float, seed: int) -> Scan:
 
 
 def _vacated_reference(tr: Tracker, t: float) -> dict[int, float]:
-    """Tracker._vacated with the plain window argmin (the code before the faster search)."""
+    """The vacated space of every track with the plain window argmin and one batched test (the code before the
+    faster search and the one-track path, Tracker._vacated_one)."""
     chunks, owners, counts = [], [], [0]
     for k in tr._tracks:
         for a in tr._free.ref_ages:
@@ -83,47 +84,12 @@ def test_vacated_space_of_a_receding_box_matches_the_plain_search() -> None:
         t = i / 15.0
         tr.update(_scan(pose, -3.5 + 1.2 * t, t, i), pose)
         if i >= 10:
-            got = tr._vacated(tr._tracks, t)
-            assert got == _vacated_reference(tr, t)
-            checked += len(got)
+            want = _vacated_reference(tr, t)
+            got = {k.id: tr._vacated_one(tr._cur_ref, t, tuple(k.past)) for k in tr._tracks if k.past}
+            assert got == {tid: want.get(tid, 0.0) for tid in got}
+            checked += len(want)
             high += any(v > 0.5 for v in got.values())
     assert checked >= 30 and high >= 20  # the box's track had vacated space at almost every step
-
-
-def test_nearest_ages_kernel_picks_what_the_per_track_search_picked() -> None:
-    """nearest_ages (all tracks in one call) against the per-track loop it replaced: _nearest_age per reference
-    age, an entry kept when it differs from the last kept one and is older than t, −1 standing for the last entry
-    (Python's index) — on random stamp lists with repeats, NaN stamps and a NaN time."""
-    from dynslam2d.detect.kernels import nearest_ages
-
-    rng = random.Random(11)
-    kept_total = 0
-    for _ in range(3000):
-        lists = []
-        for _ in range(rng.randint(1, 6)):
-            x, st = rng.choice([0.0, 1.3e9]), []
-            for _ in range(rng.randint(1, 20)):
-                x += rng.choice([0.0, 1e-7, 0.0667, 0.1, 0.3])
-                st.append(x)
-            if rng.random() < 0.05:
-                st[rng.randrange(len(st))] = math.nan
-            lists.append(st)
-        t = max(s[-1] for s in lists if not math.isnan(s[-1])) if rng.random() < 0.97 else math.nan
-        t += rng.choice([0.0, 0.05, 0.3, 1.0])
-        ages = (0.3, 0.8, rng.random())
-        want = []
-        for i, st in enumerate(lists):
-            last = -2
-            for a in ages:
-                j = _nearest_age(st, len(st), t, a)
-                if j != last and t - st[j] > 0.0:
-                    last = j
-                    want.append((i, j if j >= 0 else len(st) - 1))
-        ii, jj = nearest_ages(np.array([x for st in lists for x in st]), np.array([len(s) for s in lists]), t,
-                              np.array(ages))
-        assert list(zip(ii.tolist(), jj.tolist())) == want
-        kept_total += len(want)
-    assert kept_total > 5000
 
 
 def _leg_pairs_numpy(lohi: np.ndarray, npts: np.ndarray, cen: np.ndarray, lmax: float, dmax: float) -> list:
@@ -243,12 +209,12 @@ def test_free_space_entries_read_late_hold_the_vacated_fraction_of_their_scan() 
     """A track's free-space history gets the vacated-space part of an update's entry only when the entry is read
     (Tracker._free_values): on a box driving away from the laser, hidden twice for a few scans (re-acquisition
     clears the stored points), every entry read after the whole run equals what the update's own scan gave when it
-    was computed at once: max(the detection's free fraction, Tracker._vacated of the track in that scan)."""
+    was computed at once: max(the detection's free fraction, the track's vacated space in that scan)."""
     expected: list[tuple[float | tuple, float]] = []
 
     class Eager(Tracker):
         def _update_tracks(self, pairs, dets, t, applied, *rest):
-            vac = self._vacated([self._tracks[ti] for ti, _ in pairs], t)  # (this scan, before the update)
+            vac = _vacated_reference(self, t)  # (this scan, before the update)
             super()._update_tracks(pairs, dets, t, applied, *rest)
             for (ti, di), ok in zip(pairs, applied):
                 if ok:

@@ -863,67 +863,6 @@ def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.n
 
 
 @njit(cache=True)
-def nearest_ages(stamps: np.ndarray, counts: np.ndarray, t: float, ages: np.ndarray) -> tuple:
-    """The stored scans each track tests for vacated space (``Tracker._vacated``), for all tracks in one call.
-
-    ``stamps``: the increasing stamps (s) of every track's stored scans, concatenated; ``counts``: (n,) how many
-    belong to each track (≥ 1). For track i and each age a of ``ages`` (s), in order: the entry whose age at ``t``
-    is nearest a among the six around the insertion point of t − a (the first on ties; −1 when no age is
-    comparable, NaN, which then stands for the track's last entry, as Python's index −1), kept when it differs
-    from the last kept one of the track and is older than ``t``. Returns (track index, entry index within the
-    track) of the kept ones, track by track, ages in order — the search of ``tracker._nearest_age`` (bisect, then
-    the window's argmin walked from ins − 1) with the same comparisons."""
-    n = counts.shape[0]
-    na = ages.shape[0]
-    out_i = np.empty(n * na, dtype=np.int64)
-    out_j = np.empty(n * na, dtype=np.int64)
-    m = 0
-    base = 0
-    for i in range(n):
-        cnt = counts[i]
-        last = -2
-        for q_a in range(na):
-            a = ages[q_a]
-            x = t - a
-            lo, hi = 0, cnt  # bisect_left(stamps, x)
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if stamps[base + mid] < x:
-                    lo = mid + 1
-                else:
-                    hi = mid
-            ins = lo
-            wlo = ins - 3 if ins > 3 else 0
-            q0 = ins - 1 if ins > 0 else 0
-            j = -1
-            best = np.inf
-            qend = ins + 3 if ins + 3 < cnt else cnt
-            for q in range(q0, qend):
-                dev = abs((t - stamps[base + q]) - a)
-                if dev < best:
-                    j = q
-                    best = dev
-                elif dev > best:
-                    break
-            q = q0 - 1
-            while q >= wlo:
-                dev = abs((t - stamps[base + q]) - a)
-                if not dev <= best:
-                    break
-                j = q
-                best = dev
-                q -= 1
-            jj = j if j >= 0 else cnt - 1  # (Python's stamps[-1])
-            if j != last and t - stamps[base + jj] > 0.0:
-                last = j
-                out_i[m] = i
-                out_j[m] = jj
-                m += 1
-        base += cnt
-    return out_i[:m], out_j[:m]
-
-
-@njit(cache=True)
 def leg_pairs(lohi: np.ndarray, npts: np.ndarray, fits: np.ndarray, leg_max_extent: float,
               pair_distance: float) -> tuple:
     """The pairs of legs that ``Tracker._merge_legs`` merges into people, in one pass (map frame, m).

@@ -59,8 +59,6 @@ from dynslam2d.detect.kernels import (
     mask_fractions,
     measure_batch,
     merge_leg_pairs,
-    nearest_ages,
-    segment_means,
     size_jump_gate,
     world_points,
 )
@@ -1027,46 +1025,11 @@ class Tracker:
         prior = min(max(prior, k.size_lb[a]), self.config.segment.max_extent)
         k.size[a] += tc.size_gain * (prior - k.size[a])
 
-    def _vacated(self, tracks: list[_Track], t: float) -> dict[int, float]:
-        """Per track id: the largest fraction of its earlier points (at the free-space reference ages)
-        that the current scan sees through — a receding object leaves free space behind its visible
-        face. The stored scans nearest each reference age are found for all tracks in one kernel call
-        (:func:`dynslam2d.detect.kernels.nearest_ages`, the search of :func:`_nearest_age`), their points
-        tested in one vectorised call."""
-        if self._free is None or self._cur_ref is None:
-            return {}
-        sel = [k for k in tracks if k.past]
-        if not sel:
-            return {}
-        return self._seen_through_pasts(self._cur_ref, t, [k.id for k in sel], [k.past_t for k in sel],
-                                        [k.past for k in sel])
-
-    def _seen_through_pasts(self, ref, t: float, ids: list[int], stamps: list[list[float]],
-                            pasts: list) -> dict[int, float]:
-        """:meth:`_vacated` of tracks given by their ``ids``, the ``stamps`` (s) of their stored points and the stored
-        (stamp, points) ``pasts``, against the free-space reference ``ref`` of the scan at ``t`` (s)."""
-        out: dict[int, float] = {}
-        counts = [len(st) for st in stamps]
-        flat = np.fromiter(_chain.from_iterable(stamps), np.float64, sum(counts))
-        ii, jj = nearest_ages(flat, np.array(counts, dtype=np.int64), t, self._ref_ages)
-        if ii.shape[0] == 0:
-            return out
-        chunks = [pasts[i][j][1] for i, j in zip(ii.tolist(), jj.tolist())]
-        counts = [0]
-        counts.extend([c.shape[0] for c in chunks])
-        free = self._free.seen_through_by(ref, np.concatenate(chunks))
-        frac = segment_means(free.astype(np.float64), np.cumsum(counts)).tolist()
-        get = out.get
-        for i, f in zip(ii.tolist(), frac):
-            tid = ids[i]
-            out[tid] = max(get(tid, 0.0), f)
-        return out
-
     def _free_values(self, k: _Track) -> list[float]:
         """``k.free`` with every entry a float. A birth appends its detection instead of its free-space fraction, and an
         update whose track had stored points appends a tuple (det, ref, t, past): the detection (its own fraction is
         the floor), the free-space reference of the scan at ``t`` (s) and the track's stored (stamp, points) before
-        the update; its value, max(det.free_fraction, the vacated fraction of :meth:`_vacated` in that scan), is
+        the update; its value, max(det.free_fraction, the vacated fraction of :meth:`_vacated_one` in that scan), is
         computed here when first read and replaces the entry (the detection's own fraction, too, is computed when
         first read: ScanDetection.free_fraction). Most entries are never read (the free-space condition of M is
         reached by few tracks; ≈ 3 % on negative_2), so most free-space tests never run."""
@@ -1085,11 +1048,11 @@ class Tracker:
         return max(det.free_fraction, self._vacated_one(ref, t, past))
 
     def _vacated_one(self, ref, t: float, past: tuple, count_nonzero=np.count_nonzero) -> float:
-        """:meth:`_seen_through_pasts` of one track (its stored (stamp, points) ``past``, ≥ 1 entry) against the
-        free-space reference ``ref`` of the scan at ``t`` (s), without the batch's arrays: the stored scan nearest each
-        reference age by :func:`_nearest_age` (the search of ``nearest_ages``, −1 standing for the last entry; only
-        scans older than ``t``), each one's points tested once, the largest fraction seen through (0 for none). The
-        fraction is the count over n: ``segment_means`` of the 0 / 1 flags, whose partial sums are exact."""
+        """The vacated space of one track: the largest fraction of its stored points (``past``: (stamp s, (n, 2) map
+        points) entries, ≥ 1) that the scan at ``t`` (s) sees through, against that scan's free-space reference
+        ``ref`` — a receding object leaves free space behind its visible face. For each reference age the stored
+        scan nearest it (:func:`_nearest_age`, −1 standing for the last entry; only scans older than ``t``) is
+        tested once; the fraction is the count over n (0 for none)."""
         stamps = [e[0] for e in past]
         n = len(stamps)
         best, last = 0.0, -2
