@@ -197,8 +197,8 @@ def test_free_space_kernel_matches_numpy(fov) -> None:
 
 def test_free_space_references_and_flags_into_a_given_mask() -> None:
     """The reference scans are the buffered ones nearest each reference age (the first on ties, as np.argmin of the
-    age differences), each once and only if older than now; ``seen_through_xy`` ORs their verdicts into the mask
-    it is given (points already set stay set), the verdicts of ``seen_through``."""
+    age differences), each once and only if older than now; the test kept for later (``test_at``, the references
+    chosen now) gives the fraction ``seen_through`` gives now, also after the memory has gained and dropped scans."""
     sim = simulate("crowd", duration=1.0)
     poses = [Pose2D.from_array(p) for p in sim.ground_truth.poses_in("first")]
     mem = FreeSpaceMemory(ref_ages=(0.3, 0.8, 0.3))
@@ -219,10 +219,10 @@ def test_free_space_references_and_flags_into_a_given_mask() -> None:
     pts = rng.uniform(-8.0, 8.0, size=(3000, 2))
     now = float(stamps[-1]) + 0.05
     base = mem.seen_through(pts, now)
-    pre = rng.random(3000) < 0.1
-    got = pre.copy()
-    mem.seen_through_xy(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), now, got)
-    np.testing.assert_array_equal(got, base | pre)
+    test = mem.test_at(now)
+    mem.clear()  # (the memory moves on — here it forgets every scan — the kept test does not)
+    assert not mem.seen_through(pts, now).any()
+    assert test.fraction(pts) == int(np.count_nonzero(base)) / 3000
     assert 100 < base.sum() < 2900
 
 

@@ -89,13 +89,6 @@ class FreeSpaceMemory:
                 out.append(self._buf[j])
         return out
 
-    def seen_through_xy(self, px: np.ndarray, py: np.ndarray, now: float, free: np.ndarray) -> None:
-        """OR into ``free`` ((n,) bool) the points (``px``, ``py``: (n,) C-contiguous map-frame x, y, m) that lay in
-        space a reference scan saw as free: :meth:`seen_through` without the copies."""
-        if px.shape[0]:
-            for ref in self._refs(now):
-                self._test(ref, px, py, free)
-
     def seen_through(self, points: np.ndarray, now: float) -> np.ndarray:
         """(n,) bool: the (n, 2) map-frame points lay in space that a reference scan saw as free."""
         n = points.shape[0]
