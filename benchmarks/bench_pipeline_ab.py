@@ -16,9 +16,9 @@ CPU ms per scan of each checkout, their ratio, the median of the per-scan ratios
 
 ``--parts`` instead runs this checkout alone (after the same warm-up) with thread-CPU timers around the parts of
 the per-scan path outside the tracker and prints, per part, the median and mean µs over the scans that update
-the map and over the others: the map update's ray kernel, the vacated-footprint kernel, the matcher's kernels
-and the whole match, the evidence ledger's methods, the body filter and the loop closer's ``add`` with its
-place descriptor and searches.
+the map and over the others: the map update's ``MultiResMap.integrate`` (ray kernel and its Python), the
+vacated-footprint kernel, the matcher's kernels and the whole match, the evidence ledger's methods, the body filter
+and the loop closer's ``add`` with its place descriptor and searches.
 
 Inputs: the names of ``bench_digest.py`` (paths under ``--data``). Both workers inherit this process's CPU
 affinity: pin the parent with ``taskset``.
@@ -146,8 +146,8 @@ def parts(data: Path, name: str) -> None:
     pipe = Pipeline()
     wrap(pipe.slam, "match", "match: whole")
     wrap(pipe.slam, "update_map", "map: whole update")
-    for lv in pipe.slam.map.levels:  # (the front end's map only: the loop closer's submaps have their own)
-        wrap(lv, "integrate_cells", "map: ray kernels (integrate_cells, all levels)")
+    # the front end's map only (the loop closer's submaps have their own): every level, its Python and ray kernel
+    wrap(pipe.slam.map, "integrate", "map: MultiResMap.integrate")
     wrap(pipe.body, "mask", "body filter")
     wrap(pipe.body, "observe", "body filter")
     if pipe.ledger is not None:

@@ -130,6 +130,92 @@ def test_occupied_cap() -> None:
     assert cell(lv, 1, 0) == pytest.approx(30 * L_FREE, abs=1e-4)  # free side unbounded
 
 
+def _reference_rays(lv: GridLevel, sx: int, sy: int, ex, ey, hit, stop, free_idx: int, occ_idx: int,
+                    cap: float) -> None:
+    """The reference's update (OccGridMapBase::updateByScan) written plainly, cell by cell, on the Bresenham cells
+    of :func:`bresenham_free_cells`: a free update at most once per cell per scan, occupied winning and undoing
+    this scan's free update, the cap on the occupied side, the probability cache from the float64 log-odds,
+    the last ``stop`` cells of a ray without free update."""
+    h, w = lv.shape
+
+    def free(x, y):
+        if lv.uidx[y, x] < free_idx:
+            v = float(lv.logodds[y, x]) + L_FREE
+            lv.logodds[y, x] = v
+            lv.prob[y, x] = 1.0 / (1.0 + math.exp(-v))
+            lv.uidx[y, x] = free_idx
+
+    for k in range(len(ex)):
+        x1, y1 = int(ex[k]), int(ey[k])
+        if (x1, y1) == (sx, sy) or not (0 <= x1 < w and 0 <= y1 < h):
+            continue
+        cells = bresenham_free_cells(sx, sy, x1, y1)
+        major = max(abs(x1 - sx), abs(y1 - sy))
+        skip = 0
+        if stop is not None and stop[k] > 1.0:
+            skip = min(int((stop[k] - 1.0) * major / math.hypot(x1 - sx, y1 - sy)), major - 1)
+        for x, y in cells[: major - skip].tolist():
+            free(x, y)
+        if hit[k]:
+            u = lv.uidx[y1, x1]
+            if u < occ_idx:
+                v = float(lv.logodds[y1, x1])
+                if u == free_idx:
+                    v -= L_FREE
+                if v < cap:
+                    v += L_OCC
+                lv.logodds[y1, x1] = v
+                lv.prob[y1, x1] = 1.0 / (1.0 + math.exp(-v))
+                lv.uidx[y1, x1] = occ_idx
+        else:
+            free(x1, y1)
+
+
+@pytest.mark.parametrize("with_stop", [False, True])
+def test_ray_kernels_equal_the_plain_reference_update(with_stop: bool) -> None:
+    """GridLevel.integrate and MultiResMap.integrate (the flat-index walk of slam/raycast.py) write every level
+    bit for bit as the plain cell-by-cell reference update: repeated scans (free-then-occupied in one scan, the
+    cap reached), clearing rays, with and without the grazing stop, on maps of 1, 3 (one kernel call) and 4 levels."""
+    rng = np.random.default_rng(11)
+    for n_levels in (1, 3, 4):
+        hmap = MultiResMap(0.1, n_levels, L_FREE, L_OCC, cap=6.0, grazing_cells=1.5 if with_stop else 0.0)
+        for lv in hmap.levels:  # (large enough for every scan below: no growth)
+            m = int(6.0 / lv.resolution) + 2
+            lv.ensure(-m, -m, m, m)
+        ref = [GridLevel(lv.resolution) for lv in hmap.levels]
+        for scan in range(8):
+            pose = Pose2D(*rng.uniform(-0.5, 0.5, 2), float(rng.uniform(-3, 3)))
+            a = np.linspace(-2.5, 2.5, 250)
+            rr = rng.choice([1.5, 2.0, 3.0], a.shape[0]) + rng.normal(0.0, 0.02, a.shape[0])
+            hits = np.column_stack((rr * np.cos(a), rr * np.sin(a)))
+            clear = hits[::9] * 1.4 if scan % 2 else None
+            before = [(lv.i0, lv.j0, lv.logodds.copy(), lv.prob.copy(), lv.uidx.copy(), lv.update_counter)
+                      for lv in hmap.levels]
+            hmap.integrate(pose, hits, clear)
+            ends = pose.transform_points(hits)
+            hit = np.ones(ends.shape[0], dtype=bool)
+            if clear is not None:
+                ends = np.vstack((ends, pose.transform_points(clear)))
+                hit = np.concatenate((hit, np.zeros(clear.shape[0], dtype=bool)))
+            stop = None
+            if with_stop:
+                from dynslam2d.slam.grid import grazing_stop
+
+                stop = np.zeros(hit.shape[0])
+                stop[: hits.shape[0]] = grazing_stop(hits, 1.5, hmap.min_sin)
+            for lv, rl, (i0, j0, lo, pr, ui, cnt) in zip(hmap.levels, ref, before):
+                assert (lv.i0, lv.j0) == (i0, j0)  # (the map does not grow: the reference reads the same cells)
+                rl.logodds, rl.prob, rl.uidx, rl.i0, rl.j0 = lo, pr, ui, i0, j0
+                r = lv.resolution
+                cells = np.floor(ends / r + 0.5).astype(np.int64)
+                _reference_rays(rl, int(math.floor(pose.x / r + 0.5)) - i0, int(math.floor(pose.y / r + 0.5)) - j0,
+                                cells[:, 0] - i0, cells[:, 1] - j0, hit, stop, cnt + 1, cnt + 2, hmap.cap)
+                assert np.array_equal(lv.logodds, rl.logodds) and np.array_equal(lv.prob, rl.prob)
+                assert np.array_equal(lv.uidx, rl.uidx)
+        assert hmap.levels[0].logodds.max() > 6.0  # the cap was reached
+        assert (hmap.levels[0].logodds < 0).sum() > 100
+
+
 # --------------------------------------------------------------------------- growth
 
 def test_growth_keeps_content_in_every_direction() -> None:

@@ -21,73 +21,101 @@ import math
 import numpy as np
 from numba import njit
 
-
-@njit(cache=True)
-def _mark_free(logodds, prob, uidx, x, y, free_idx, l_free):  # pragma: no cover - numba
-    # OccGridMapBase::updateSetFree: at most one free update per cell per scan
-    if uidx[y, x] < free_idx:
-        v = logodds[y, x] + l_free
-        logodds[y, x] = v
-        prob[y, x] = 1.0 / (1.0 + math.exp(-v))
-        uidx[y, x] = free_idx
+#: placeholders of the inputs :func:`_rays` does not use on a call (its other way of giving the rays)
+_NO_ENDS = np.zeros((2, 0))
+_NO_CELLS = np.zeros(0, dtype=np.int64)
+_NO_STOP = np.zeros(0)
 
 
 @njit(cache=True)
-def _mark_occupied(logodds, prob, uidx, x, y, free_idx, occ_idx, l_free, l_occ, cap):  # pragma: no cover
-    # OccGridMapBase::updateSetOccupied: occupied wins; undo this scan's free update first
-    u = uidx[y, x]
-    if u < occ_idx:
-        v = logodds[y, x]
-        if u == free_idx:
-            v -= l_free
-        if v < cap:  # GridMapLogOdds.h: soft cap on the occupied side only
-            v += l_occ
-        logodds[y, x] = v
-        prob[y, x] = 1.0 / (1.0 + math.exp(-v))
-        uidx[y, x] = occ_idx
+def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j0, hit, stop, use_stop,
+          l_free, l_occ, cap):  # pragma: no cover - numba
+    """Rays from array cell (``sx``, ``sy``) into one level (arrays ``logodds``, ``prob``, ``uidx`` (H, W),
+    C-contiguous): to cells (``ex[k]``, ``ey[k]``) or, when ``ends`` has columns, to the cells of the map-frame
+    ends ``ends`` (2, n), m (``floor(v / r + 0.5)`` minus the offsets ``i0``, ``j0``: OccGridMapBase::updateByScan's
+    rounding). ``hit[k]`` True: the start and intermediate cells free, the endpoint occupied; False: every cell
+    free. With ``use_stop`` the last ``stop[k]`` cells of a ray (its endpoint included) get no free update.
+    Rays with the start or end cell outside the array, or ending in the start cell, are skipped whole. Returns
+    the number of rays integrated.
 
-
-@njit(cache=True)
-def _integrate_ray(logodds, prob, uidx, free_idx, occ_idx, sx, sy, x1, y1, is_hit, skip,
-                   l_free, l_occ, cap):  # pragma: no cover - numba
-    """One ray from cell (sx, sy) to (x1, y1), both inside the array and distinct: the start cell and the
-    intermediate cells free except the last ``skip`` intermediate ones, the endpoint occupied if
-    ``is_hit`` else free (Bresenham as OccGridMapBase::bresenham2D; ties of the major axis go to x)."""
-    dx = x1 - sx
-    dy = y1 - sy
-    adx = abs(dx)
-    ady = abs(dy)
-    stx = 1 if dx > 0 else -1
-    sty = 1 if dy > 0 else -1
-    major = adx if adx >= ady else ady
-    n_free = major - 1 - skip
-    x = sx
-    y = sy
-    _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
-    if adx >= ady:
-        err = adx // 2
-        for i in range(adx - 1):
-            x += stx
-            err += ady
-            if err >= adx:
-                y += sty
-                err -= adx
-            if i < n_free:
-                _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
-    else:
-        err = ady // 2
-        for i in range(ady - 1):
-            y += sty
-            err += adx
-            if err >= ady:
-                x += stx
-                err -= ady
-            if i < n_free:
-                _mark_free(logodds, prob, uidx, x, y, free_idx, l_free)
-    if is_hit:
-        _mark_occupied(logodds, prob, uidx, x1, y1, free_idx, occ_idx, l_free, l_occ, cap)
-    else:
-        _mark_free(logodds, prob, uidx, x1, y1, free_idx, l_free)
+    Free update (OccGridMapBase::updateSetFree): at most one per cell per scan (update index ``free_idx``);
+    occupied (updateSetOccupied): at most one, winning over this scan's free update, which it undoes first; a
+    hit adds ``l_occ`` only while the log-odds is below ``cap`` (GridMapLogOdds.h); the probability cache is
+    refreshed in every touched cell. The cells are those of the reference's integer Bresenham walk
+    (OccGridMapBase::bresenham2D: major axis = larger |Δ|, ties to x, error starting at |Δmajor|/2). The walk
+    runs on flat indices with the steps along the major and minor axes as index offsets, and the cell updates
+    are written out in the loop (a helper taking the arrays, called per cell, made numba keep reference-count
+    updates in the walk: several times slower)."""
+    h, w = logodds.shape
+    if sx < 0 or sy < 0 or sx >= w or sy >= h:
+        return 0
+    lo = logodds.reshape(h * w)  # (views: the arrays are C-contiguous)
+    pr = prob.reshape(h * w)
+    ui = uidx.reshape(h * w)
+    from_ends = ends.shape[1] > 0
+    n = ends.shape[1] if from_ends else ex.shape[0]
+    f0 = sy * w + sx
+    n_done = 0
+    for k in range(n):
+        if from_ends:
+            x1 = int(math.floor(ends[0, k] / r + 0.5)) - i0
+            y1 = int(math.floor(ends[1, k] / r + 0.5)) - j0
+        else:
+            x1 = ex[k]
+            y1 = ey[k]
+        if x1 == sx and y1 == sy:
+            continue
+        if x1 < 0 or y1 < 0 or x1 >= w or y1 >= h:
+            continue
+        dx = x1 - sx
+        dy = y1 - sy
+        adx = abs(dx)
+        ady = abs(dy)
+        stx = 1 if dx > 0 else -1
+        sty = w if dy > 0 else -w  # (a step along y in flat indices)
+        if adx >= ady:
+            major, minor, d_major, d_minor = adx, ady, stx, sty
+        else:
+            major, minor, d_major, d_minor = ady, adx, sty, stx
+        skip = 0  # intermediate cell j major steps before the end lies j·L/major cells from it
+        if use_stop and stop[k] > 1.0:
+            skip = int((stop[k] - 1.0) * major / math.sqrt(float(dx * dx + dy * dy)))
+            if skip > major - 1:
+                skip = major - 1
+        # the start cell (j = 0), then the first major − 1 − skip intermediate cells of the walk: free
+        f = f0
+        err = major // 2
+        for j in range(major - skip):
+            if j > 0:
+                f += d_major
+                err += minor
+                if err >= major:
+                    f += d_minor
+                    err -= major
+            if ui[f] < free_idx:
+                v = lo[f] + l_free
+                lo[f] = v
+                pr[f] = 1.0 / (1.0 + math.exp(-v))
+                ui[f] = free_idx
+        f = y1 * w + x1
+        u = ui[f]
+        if hit[k]:
+            if u < occ_idx:
+                v = lo[f]
+                if u == free_idx:
+                    v -= l_free
+                if v < cap:
+                    v += l_occ
+                lo[f] = v
+                pr[f] = 1.0 / (1.0 + math.exp(-v))
+                ui[f] = occ_idx
+        elif u < free_idx:
+            v = lo[f] + l_free
+            lo[f] = v
+            pr[f] = 1.0 / (1.0 + math.exp(-v))
+            ui[f] = free_idx
+        n_done += 1
+    return n_done
 
 
 @njit(cache=True)
@@ -114,20 +142,8 @@ def integrate_rays(
     (OccGridMapBase::updateByScan); rays ending in the start cell are skipped. Returns the
     number of rays integrated.
     """
-    h, w = logodds.shape
-    if sx < 0 or sy < 0 or sx >= w or sy >= h:
-        return 0
-    n_done = 0
-    for k in range(ex.shape[0]):
-        x1 = ex[k]
-        y1 = ey[k]
-        if x1 == sx and y1 == sy:
-            continue
-        if x1 < 0 or y1 < 0 or x1 >= w or y1 >= h:
-            continue
-        _integrate_ray(logodds, prob, uidx, free_idx, occ_idx, sx, sy, x1, y1, hit[k], 0, l_free, l_occ, cap)
-        n_done += 1
-    return n_done
+    return _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, _NO_ENDS, 1.0, 0, 0, hit, _NO_STOP,
+                 False, l_free, l_occ, cap)
 
 
 @njit(cache=True)
@@ -192,28 +208,8 @@ def integrate_rays_stop(
     less than ``stop[k] − 1`` cells (along the ray) before its endpoint get no free update — the ray's last
     ``stop[k]`` cells, its endpoint cell included, which the reference never marks free. ``stop[k] ≤ 1``
     gives the reference's update exactly. (Where the stop comes from: ``MultiResMap.integrate``.)"""
-    h, w = logodds.shape
-    if sx < 0 or sy < 0 or sx >= w or sy >= h:
-        return 0
-    n_done = 0
-    for k in range(ex.shape[0]):
-        x1 = ex[k]
-        y1 = ey[k]
-        if x1 == sx and y1 == sy:
-            continue
-        if x1 < 0 or y1 < 0 or x1 >= w or y1 >= h:
-            continue
-        dx = x1 - sx
-        dy = y1 - sy
-        major = abs(dx) if abs(dx) >= abs(dy) else abs(dy)
-        skip = 0
-        if stop[k] > 1.0:  # intermediate cell j major steps before the end lies j·L/major cells from it
-            skip = int((stop[k] - 1.0) * major / math.sqrt(float(dx * dx + dy * dy)))
-            if skip > major - 1:
-                skip = major - 1
-        _integrate_ray(logodds, prob, uidx, free_idx, occ_idx, sx, sy, x1, y1, hit[k], skip, l_free, l_occ, cap)
-        n_done += 1
-    return n_done
+    return _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, _NO_ENDS, 1.0, 0, 0, hit, stop, True,
+                 l_free, l_occ, cap)
 
 
 @njit(cache=True)
@@ -227,38 +223,9 @@ def integrate_levels(logodds, prob, uidx, n_levels, res, i0, j0, sx, sy, counter
     with the level's update indices ``counter + 1`` (free) and ``counter + 2`` (occupied). The levels must hold
     the rays already (``GridLevel.ensure``). Returns the number of rays integrated on level 0."""
     n0 = 0
-    n = ends.shape[1]
     for k in range(n_levels):
-        lo = logodds[k]
-        pr = prob[k]
-        ui = uidx[k]
-        h, w = lo.shape
-        r = res[k]
-        free_idx = counter[k] + 1
-        occ_idx = counter[k] + 2
-        s_x = sx[k]
-        s_y = sy[k]
-        if s_x < 0 or s_y < 0 or s_x >= w or s_y >= h:
-            continue
-        n_done = 0
-        for i in range(n):
-            x1 = int(math.floor(ends[0, i] / r + 0.5)) - i0[k]
-            y1 = int(math.floor(ends[1, i] / r + 0.5)) - j0[k]
-            if x1 == s_x and y1 == s_y:
-                continue
-            if x1 < 0 or y1 < 0 or x1 >= w or y1 >= h:
-                continue
-            skip = 0
-            if use_stop:
-                dx = x1 - s_x
-                dy = y1 - s_y
-                major = abs(dx) if abs(dx) >= abs(dy) else abs(dy)
-                if stop[i] > 1.0:  # (as integrate_rays_stop)
-                    skip = int((stop[i] - 1.0) * major / math.sqrt(float(dx * dx + dy * dy)))
-                    if skip > major - 1:
-                        skip = major - 1
-            _integrate_ray(lo, pr, ui, free_idx, occ_idx, s_x, s_y, x1, y1, hit[i], skip, l_free, l_occ, cap)
-            n_done += 1
+        n_done = _rays(logodds[k], prob[k], uidx[k], counter[k] + 1, counter[k] + 2, sx[k], sy[k], _NO_CELLS,
+                       _NO_CELLS, ends, res[k], i0[k], j0[k], hit, stop, use_stop, l_free, l_occ, cap)
         if k == 0:
             n0 = n_done
     return n0
