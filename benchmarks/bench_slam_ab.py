@@ -11,7 +11,8 @@ component on identical calls, alternately, in thread CPU time (``time.thread_tim
     other ledger's erasure acts on a copy of the map), each method's two versions alternately; prints ms per
     scan per method and checks the two ledgers' summaries are equal;
   * ``map``: the pipeline's ``MultiResMap.integrate`` calls (its map updates) replayed into a fresh map of the
-    other checkout's ``slam/grid.py`` and of this one's, 5 times each, alternately; prints ms per call (median
+    other checkout's ``slam/grid.py`` with its ``slam/raycast.py`` kernels and of this one's, 5 times each,
+    alternately; prints ms per call (median
     of the 5 sweeps) and whether the two maps are identical.
 
     python benchmarks/bench_slam_ab.py "negative_2 /right_scan" mit-csail [--part matcher ledger map]
@@ -199,7 +200,11 @@ def main() -> None:
             print(f"{name}: ledger ms per scan other → this: {o:.3f} → {t:.3f} (×{t / o:.2f}); {detail}; "
                   "summaries equal")
         if "map" in args.part:
-            mo, mt, same = map_ab(scans, other_module(args.other, "slam/grid.py", "other_grid"))
+            other_grid = other_module(args.other, "slam/grid.py", "other_grid")
+            other_rays = other_module(args.other, "slam/raycast.py", "other_raycast")
+            for k in ("integrate_levels", "integrate_rays", "integrate_rays_stop"):  # (the other checkout's kernels)
+                setattr(other_grid, k, getattr(other_rays, k))
+            mo, mt, same = map_ab(scans, other_grid)
             print(f"{name}: MultiResMap.integrate ms per map update, other {mo:.3f}, this {mt:.3f} (×{mt / mo:.2f}); "
                   f"maps {'identical' if same else 'DIFFERENT'}")
         sys.stdout.flush()
