@@ -124,3 +124,23 @@ def room_box_scan(pose, box: tuple[float, float, float, float], stamp: float, se
     r[~np.isfinite(dist)] = np.inf
     return Scan(stamp=stamp, angle_min=-math.pi, angle_increment=2 * math.pi / n, ranges=r, range_min=0.1,
                 range_max=20.0)
+
+
+def scan_rays(pose, hits, clear, grazing: float, min_sin: float):
+    """The rays ``MultiResMap.integrate`` casts for returns ``hits`` (n, 2) and clearing-ray ends ``clear`` (m, 2, or
+    None) in the laser frame at ``pose``: (map-frame ends (n + m, 2), hit flags, per-ray free-space stop or None
+    when ``grazing`` is 0), for checking its update level by level."""
+    import numpy as np
+
+    from dynslam2d.slam.grid import grazing_stop
+
+    ends = pose.transform_points(hits)
+    hit = np.ones(ends.shape[0], dtype=bool)
+    if clear is not None:
+        ends = np.vstack((ends, pose.transform_points(clear)))
+        hit = np.concatenate((hit, np.zeros(clear.shape[0], dtype=bool)))
+    stop = None
+    if grazing > 0.0:
+        stop = np.zeros(hit.shape[0])
+        stop[: hits.shape[0]] = grazing_stop(hits, grazing, min_sin)
+    return ends, hit, stop

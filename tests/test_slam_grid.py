@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import scan_rays
 
 from dynslam2d.slam import HectorSlam, SlamConfig
 from dynslam2d.slam.grid import GridLevel, MultiResMap
@@ -192,17 +193,7 @@ def test_ray_kernels_equal_the_plain_reference_update(with_stop: bool) -> None:
             before = [(lv.i0, lv.j0, lv.logodds.copy(), lv.prob.copy(), lv.uidx.copy(), lv.update_counter)
                       for lv in hmap.levels]
             hmap.integrate(pose, hits, clear)
-            ends = pose.transform_points(hits)
-            hit = np.ones(ends.shape[0], dtype=bool)
-            if clear is not None:
-                ends = np.vstack((ends, pose.transform_points(clear)))
-                hit = np.concatenate((hit, np.zeros(clear.shape[0], dtype=bool)))
-            stop = None
-            if with_stop:
-                from dynslam2d.slam.grid import grazing_stop
-
-                stop = np.zeros(hit.shape[0])
-                stop[: hits.shape[0]] = grazing_stop(hits, 1.5, hmap.min_sin)
+            ends, hit, stop = scan_rays(pose, hits, clear, hmap.grazing_cells, hmap.min_sin)
             for lv, rl, (i0, j0, lo, pr, ui, cnt) in zip(hmap.levels, ref, before):
                 assert (lv.i0, lv.j0) == (i0, j0)  # (the map does not grow: the reference reads the same cells)
                 rl.logodds, rl.prob, rl.uidx, rl.i0, rl.j0 = lo, pr, ui, i0, j0

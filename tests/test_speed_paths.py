@@ -152,7 +152,9 @@ def test_multires_integrate_equals_per_level_integration() -> None:
     """MultiResMap.integrate (bounds from the extreme ends, every level's end cells and rays in one kernel call)
     writes every level exactly as GridLevel.integrate does level by level, with and without the grazing stop and
     clearing rays, on maps of 2, 3 (the fused kernel) and 4 levels (the per-level loop)."""
-    from dynslam2d.slam.grid import MultiResMap, grazing_stop
+    from conftest import scan_rays
+
+    from dynslam2d.slam.grid import MultiResMap
 
     rng = np.random.default_rng(3)
     # 3 levels and fewer: one kernel call for all (integrate_levels); 4: level by level in Python
@@ -167,15 +169,7 @@ def test_multires_integrate_equals_per_level_integration() -> None:
             hits = np.column_stack((rr * np.cos(a), rr * np.sin(a)))
             clear = hits[::7] * 1.3 if step % 2 else None
             fast.integrate(pose, hits, clear)
-            ends = pose.transform_points(hits)
-            hit = np.ones(ends.shape[0], dtype=bool)
-            if clear is not None:
-                ends = np.vstack((ends, pose.transform_points(clear)))
-                hit = np.concatenate((hit, np.zeros(clear.shape[0], dtype=bool)))
-            stop = None
-            if grazing > 0.0:
-                stop = np.zeros(hit.shape[0])
-                stop[: hits.shape[0]] = grazing_stop(hits, grazing, plain.min_sin)
+            ends, hit, stop = scan_rays(pose, hits, clear, grazing, plain.min_sin)
             for lv in plain.levels:
                 lv.integrate(np.array([pose.x, pose.y]), ends, hit, plain.l_free, plain.l_occ, plain.cap, stop)
         for lf, lp in zip(fast.levels, plain.levels):

@@ -44,8 +44,8 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
     refreshed in every touched cell. The cells are those of the reference's integer Bresenham walk
     (OccGridMapBase::bresenham2D: major axis = larger |Δ|, ties to x, error starting at |Δmajor|/2). The walk
     runs on flat indices with the steps along the major and minor axes as index offsets, and the cell updates
-    are written out in the loop (a helper taking the arrays, called per cell, made numba keep reference-count
-    updates in the walk: several times slower)."""
+    are written out in the loop (helpers taking the arrays, called per cell, were slower in every trial, several
+    times so where numba did not inline them; docs/speed.md)."""
     h, w = logodds.shape
     if sx < 0 or sy < 0 or sx >= w or sy >= h:
         return 0
