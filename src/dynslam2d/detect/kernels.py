@@ -1174,3 +1174,29 @@ def report_boxes(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray,
             out[i, 4] = sb
         out[i, 2] = (theta + math.pi) % _TWO_PI - math.pi  # wrap_angle
     return out, undecided
+
+
+@njit(cache=True)
+def association_rows(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, missed: np.ndarray) -> tuple:
+    """The association's per-track inputs from the shape rows ``rows`` of the live tracks (in their order):
+    (sizes (n, 2) m, longest side (n,) m as numpy's maximum, rectangle with a heading (n,) bool, axis angle (n,) rad,
+    size known (n,) bool: a track that ``missed`` its last scan and is not a rectangle or knows both sizes — the
+    size-jump gate applies to it)."""
+    n = rows.shape[0]
+    tsize = np.empty((n, 2))
+    tmax = np.empty(n)
+    rect = np.empty(n, dtype=np.bool_)
+    theta = np.empty(n)
+    known = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        k = rows[i]
+        s0 = G[k, G_SIZE0]
+        s1 = G[k, G_SIZE1]
+        tsize[i, 0] = s0
+        tsize[i, 1] = s1
+        tmax[i] = s0 if (s0 >= s1 or s0 != s0) else s1  # (np.maximum)
+        kr = Gi[k, GI_KIND] == K_RECT
+        rect[i] = kr and Gi[k, GI_HEADING] != 0
+        theta[i] = G[k, G_THETA]
+        known[i] = missed[i] and (not kr or (Gi[k, GI_KNOWN0] != 0 and Gi[k, GI_KNOWN1] != 0))
+    return tsize, tmax, rect, theta, known

@@ -62,6 +62,7 @@ from dynslam2d.detect.kernels import (
     N_G,
     N_GI,
     accel_candidates,
+    association_rows,
     classify_batch,
     fit_params,
     fragment_hosts,
@@ -81,7 +82,6 @@ from dynslam2d.detect.layout import (
     F_THETA,
     FIT_CENTROID,
     FIT_CIRCLE,
-    K_RECT,
     KIND_CIRCLE,
     KIND_CODES,
     KIND_NAMES,
@@ -793,22 +793,17 @@ class Tracker:
         tc = self.config.tracker
         tracks = self._tracks
         Xs, Ps = self._stack()
-        # the tracks' shape state, one gather of their rows
-        order = self._rows()
-        G, Gi = self._G[order], self._Gi[order]
-        tsize = G[:, G_SIZE0:G_SIZE1 + 1].copy()
-        tmax = np.maximum(tsize[:, 0], tsize[:, 1])  # (tsize.max(axis=1) without its Python wrapper)
-        reach = 0.5 * tmax
-        kr = Gi[:, GI_KIND] == K_RECT
         firm_r, tent_r, missed = [], [], []
         for i, k in enumerate(tracks):  # (the state and misses: Python attributes)
             (firm_r if k.state != TENTATIVE else tent_r).append(i)
             missed.append(k.misses > 0)
-        # (a coasting track's size is known if all(size_known) or it is not a rectangle)
-        known = np.array(missed) & (~kr | ((Gi[:, GI_KNOWN0] != 0) & (Gi[:, GI_KNOWN1] != 0)))
+        # the tracks' sizes, flags and axis angles from their shape rows in one call ("known": a coasting track's size
+        # is known if all(size_known) or it is not a rectangle)
+        tsize, tmax, rect, theta, known = association_rows(self._G, self._Gi, self._rows(), np.array(missed))
+        reach = 0.5 * tmax
         # Mahalanobis gate and distance gate; a rectangle is measured again with the track's own sizes
         # (a side the detection "measured" too short, e.g. a grazing side, must not break the association)
-        d2, near, ok = gate_costs(Xs, Ps, reach, (Gi[:, GI_HEADING] != 0) & kr, G[:, G_THETA].copy(), tsize,
+        d2, near, ok = gate_costs(Xs, Ps, reach, rect, theta, tsize,
                                   self._default.z, self._default.R, float(tc.gate_distance), float(tc.gate_chi2),
                                   *self._batch, self._fit_p)
         # a tracked object does not double its size from one scan to the next: a person track coasting
@@ -912,7 +907,7 @@ class Tracker:
         shape_update(self._G, self._Gi, self._X, trows, dis, ok, b.kind, b.theta, b.lohi, b.rel, b.circle,
                      mr.size_obs, mr.size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
                      float(tc.heading_gain), float(tc.size_gain))
-        self._update_tracks(pairs, dets, t, out)
+        self._update_tracks(pairs, dets, t, out, trows)
         return out
 
     def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track],
@@ -929,23 +924,28 @@ class Tracker:
         near = accel_candidates(X_prior, X_new, (0.999 * lim) ** 2)
         if near.shape[0] == 0:
             return
-        for r in near.tolist():
-            k = tracks[pairs[r][0]]
-            if k.hits < tc.accel_bound_after:
+        # (the candidates' velocities as Python floats in one gather each, the bounded ones written in one scatter)
+        after, hypot = tc.accel_bound_after, math.hypot
+        rows, vals = [], []
+        for r, (pvx, pvy), (nvx, nvy) in zip(near.tolist(), X_prior[near, 2:].tolist(), X_new[near, 2:].tolist()):
+            if tracks[pairs[r][0]].hits < after:
                 continue
-            dvx = X_new[r, 2] - X_prior[r, 2]
-            dvy = X_new[r, 3] - X_prior[r, 3]
-            d = math.hypot(dvx, dvy)
+            dvx = nvx - pvx
+            dvy = nvy - pvy
+            d = hypot(dvx, dvy)
             if d > lim:
-                X_new[r, 2] = X_prior[r, 2] + dvx * lim / d
-                X_new[r, 3] = X_prior[r, 3] + dvy * lim / d
-                self.stats.accel_bounded += 1
+                rows.append(r)
+                vals.append((pvx + dvx * lim / d, pvy + dvy * lim / d))
+        if rows:
+            X_new[rows, 2:] = vals
+            self.stats.accel_bounded += len(rows)
 
     def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float,
-                       applied: list[bool]) -> None:
-        """The bookkeeping update of the tracks of ``pairs`` (track index, detection index) whose Kalman and shape
-        results are already in their rows (k.x, k.P, k.g, k.gi) where ``applied``; the scan's constants are read once
-        (one loop over the pairs: the update of one track is a few µs of Python)."""
+                       applied: list[bool], trows: np.ndarray) -> None:
+        """The bookkeeping update of the tracks of ``pairs`` (track index, detection index; ``trows``: their rows of
+        the state arrays) whose Kalman and shape results are already in their rows (k.x, k.P, k.g, k.gi) where
+        ``applied``; the scan's constants are read once (one loop over the pairs: the update of one track is a few µs
+        of Python)."""
         cfg = self.config
         tc, fc = cfg.tracker, cfg.fit
         pmin_r, pmax_r = fc.person_min_radius, fc.person_max_radius
@@ -958,8 +958,16 @@ class Tracker:
         max_age = self._free.max_age if self._free is not None else None
         ref = self._cur_ref if self._free is not None else None  # (the vacated-space test's reference: this scan)
         tracks = self._tracks
-        for r, (ti, di) in enumerate(pairs):
-            if not applied[r]:
+        if p is not None:
+            # the centres in the map and laser frames, all pairs at once (numpy's elementwise products and sums: the
+            # same roundings as on the floats one by one)
+            xy = self._X[trows, :2]
+            dx, dy = xy[:, 0] - pose_x, xy[:, 1] - pose_y
+            centres = zip(xy.tolist(), (c * dx + s * dy).tolist(), (-s * dx + c * dy).tolist())
+        else:
+            centres = [None] * len(pairs)
+        for (ti, di), ok, cen in zip(pairs, applied, centres):
+            if not ok:
                 continue
             k, det = tracks[ti], dets[di]
             dkind = det.kind
@@ -995,11 +1003,9 @@ class Tracker:
             if len(free) > nsus:
                 del free[0]
             if p is not None:
-                xk = k.x
-                x0, x1 = xk.item(0), xk.item(1)
-                dx, dy = x0 - pose_x, x1 - pose_y
+                (x0, x1), lx, ly = cen
                 lxy, mxy, mt = k.laser_xy, k.map_xy, k.map_t
-                lxy.append((c * dx + s * dy, -s * dx + c * dy))
+                lxy.append((lx, ly))
                 mxy.append((x0, x1))
                 mt.append(t)
                 while len(lxy) > nsus and t - mt[0] > ride_time:
