@@ -31,7 +31,11 @@ free-space and fragment tests); only the per-track bookkeeping stays in Python (
 720-beam scan with 10 movers, ``benchmarks/bench_detect.py``). The Kalman states and covariances of
 all live tracks are two arrays owned by the tracker (``_X``, ``_P``; each track keeps one row for
 life, its ``x`` / ``P`` are views of it): the prediction, the association and the reports read
-them as whole arrays, the Kalman results are written back in one scatter per scan.
+them as whole arrays, the Kalman results are written back in one scatter per scan. The shape state
+(box axis angle, sizes, radius, largest partial views, kind, heading and known-size flags) lives in two
+more arrays on the same rows (``_G``, ``_Gi``; ``g`` / ``gi`` views per track, properties such as
+``theta_box`` or ``size`` read them one track at a time): the measurement priors, the shape update, the
+association's inputs and the reported boxes are one kernel call each over all pairs / tracks.
 """
 
 from __future__ import annotations
@@ -103,7 +107,6 @@ TENTATIVE = "tentative"
 CONFIRMED = "confirmed"
 COASTING = "coasting"
 _HALF_PI = 0.5 * math.pi
-_QUARTER_PI = 0.25 * math.pi
 _TWO_PI = 2.0 * math.pi
 _BIG = 1e12
 _make_track = fast_init(Track)  # Track(...) / Box(...) without the frozen dataclass __init__ (detect/frozen.py)
@@ -113,7 +116,6 @@ _NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives i
 _ROWS0 = 64  # initial rows of the tracker's state arrays (doubled when full)
 _P_MANAGE = np.array([0, 5, 10, 11, 14, 15])  # P[0, 0], P[1, 1], P[2, 2], P[2, 3], P[3, 2], P[3, 3] of a raveled P
 _all_rows, _any_of = np.logical_and.reduce, np.logical_or.reduce  # (ndarray.all / any without the Python wrappers)
-_min_rows, _max_rows = np.minimum.reduce, np.maximum.reduce  # (ndarray.min / max without numpy's Python wrappers)
 
 
 @dataclass
