@@ -163,3 +163,26 @@ def test_shape_rows_and_reported_boxes() -> None:
     t = next(t for t in tr._report(SCANS * DT, set()) if t.id == k.id)
     assert (t.box.theta, t.box.length, t.box.width) == _box_reference(k, float(np.nextafter(slow, 1.0)), 0.0, slow)
     assert abs(t.box.theta) < 0.5
+
+
+def test_births_one_at_a_time_when_confirmed_at_once() -> None:
+    """With ``confirm_hits`` 1 a birth is confirmed at once and may host the next detections as fragments, so the
+    fragments and births of a scan are decided one detection at a time (``Tracker._host_of_fragment``): every new
+    track is reported confirmed in its first scan with its own rows (state and shape), and the moving box keeps one
+    track into M."""
+    tr = Tracker(DetectConfig.model_validate({"tracker": {"confirm_hits": 1, "confirm_window": 1}}))
+    seen: set[int] = set()
+    born = 0
+    for i in range(SCANS):
+        out = tr.update(_scan(i), POSE)
+        rows = [k.row for k in tr._tracks]
+        assert len(set(rows)) == len(rows)
+        for t in out:
+            if t.id not in seen:
+                seen.add(t.id)
+                born += 1
+                k = next(k for k in tr._tracks if k.id == t.id)
+                assert t.state == "confirmed" and t.hits == 1 and t.misses == 0
+                assert np.shares_memory(k.g, tr._G[k.row]) and t.kind == k.kind
+    assert born == tr.stats.tracks_born >= 10
+    assert any(t.hits >= 40 and t.in_m for t in out)
