@@ -117,3 +117,72 @@ def test_a_track_whose_covariance_turns_non_finite_is_deleted() -> None:
     assert tr.stats.deleted_covariance == before + 1
     assert k.id not in {t.id for t in out}
     assert all(np.isfinite(t.covariance).all() for t in out)
+
+
+def _box_reference(k, vx: float, vy: float, slow: float) -> tuple[float, float, float]:
+    """The reported heading, length and width of a track as the per-track Python of the reports computed them
+    before the shape rows (the kernel ``report_boxes`` must give the same floats)."""
+    speed = math.hypot(vx, vy)
+    if k.kind == "circle":
+        return (math.atan2(vy, vx) if speed > slow else 0.0), 2.0 * k.radius, 2.0 * k.radius
+    sa, sb = k.size
+    tb = k.theta_box
+    if speed > slow:
+        q = int(round(((math.atan2(vy, vx) - tb + math.pi) % (2 * math.pi) - math.pi) / (0.5 * math.pi)))
+        theta, length, width = tb + q * 0.5 * math.pi, *((sa, sb) if q % 2 == 0 else (sb, sa))
+    elif sb > sa:
+        theta, length, width = tb + 0.5 * math.pi, sb, sa
+    else:
+        theta, length, width = tb, sa, sb
+    return (theta + math.pi) % (2 * math.pi) - math.pi, length, width
+
+
+def test_shape_rows_and_reported_boxes() -> None:
+    """Every live track's shape state (axis angle, sizes, radius, kind, flags) is a view of its rows of
+    ``Tracker._G`` / ``_Gi``. The boxes of the reports (kernel
+    ``report_boxes``) equal the per-track reference above bit for bit, and so does a track whose speed equals the
+    moving limit exactly: the kernel leaves it undecided and ``math.hypot`` decides (still: along its longer side)."""
+    tr = Tracker(DetectConfig())
+    slow = 0.5 * tr.config.tracker.v_min
+    checked = 0
+    for i in range(SCANS):
+        out = tr.update(_scan(i), POSE)
+        by_id = {t.id: t for t in out}
+        for k in tr._tracks:
+            assert np.shares_memory(k.g, tr._G[k.row]) and np.shares_memory(k.gi, tr._Gi[k.row])
+            b = by_id[k.id].box
+            assert (b.theta, b.length, b.width) == _box_reference(k, *k.x[2:].tolist(), slow)
+            checked += 1
+    assert checked >= 300 and any(t.in_m and t.kind == "rect" for t in out)
+    k = max(tr._tracks, key=lambda k: k.hits)  # the moving box
+    k.x[2:] = (slow, 0.0)  # exactly at the limit: hypot(slow, 0) == slow, not above it
+    t = next(t for t in tr._report(SCANS * DT, set()) if t.id == k.id)
+    assert (t.box.theta, t.box.length, t.box.width) == _box_reference(k, slow, 0.0, slow)
+    assert t.box.length == max(k.size)
+    k.x[2:] = (np.nextafter(slow, 1.0), 0.0)  # one ulp above: moving, headed along +x
+    t = next(t for t in tr._report(SCANS * DT, set()) if t.id == k.id)
+    assert (t.box.theta, t.box.length, t.box.width) == _box_reference(k, float(np.nextafter(slow, 1.0)), 0.0, slow)
+    assert abs(t.box.theta) < 0.5
+
+
+def test_births_one_at_a_time_when_confirmed_at_once() -> None:
+    """With ``confirm_hits`` 1 a birth is confirmed at once and may host the next detections as fragments, so the
+    fragments and births of a scan are decided one detection at a time (``Tracker._host_of_fragment``): every new
+    track is reported confirmed in its first scan with its own rows (state and shape), and the moving box keeps one
+    track into M."""
+    tr = Tracker(DetectConfig.model_validate({"tracker": {"confirm_hits": 1, "confirm_window": 1}}))
+    seen: set[int] = set()
+    born = 0
+    for i in range(SCANS):
+        out = tr.update(_scan(i), POSE)
+        rows = [k.row for k in tr._tracks]
+        assert len(set(rows)) == len(rows)
+        for t in out:
+            if t.id not in seen:
+                seen.add(t.id)
+                born += 1
+                k = next(k for k in tr._tracks if k.id == t.id)
+                assert t.state == "confirmed" and t.hits == 1 and t.misses == 0
+                assert np.shares_memory(k.g, tr._G[k.row]) and t.kind == k.kind
+    assert born == tr.stats.tracks_born >= 10
+    assert any(t.hits >= 40 and t.in_m for t in out)

@@ -40,6 +40,9 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.report_boxes',
+     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
+     "float64, Array(int8, 1, 'C'),)"),
     ('dynslam2d.slam.ledgerkernels._lower_bound',
      "(Array(int64, 1, 'C'), int64, int64,)"),
     ('dynslam2d.slam.ledgerkernels.scan_cells',
@@ -93,6 +96,8 @@ KERNELS: tuple[tuple[str, str], ...] = (
      'omitted(default=0.5),)'),
     ('dynslam2d.detect.kernels.mask_fractions',
      "(Array(bool, 2, 'C'), Array(int64, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.association_rows',
+     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'),)"),
     ('dynslam2d.detect.kernels.gate_costs',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
@@ -102,11 +107,19 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.size_jump_gate',
      "(Array(bool, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, "
      'float64,)'),
+    ('dynslam2d.detect.kernels.pair_priors',
+     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
+     "Array(int8, 1, 'C'), Array(float64, 1, 'C'),)"),
     ('dynslam2d.detect.kernels.kalman_update_batch',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 3, 'C'),)"),
     ('dynslam2d.detect.kernels.accel_candidates',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), float64,)"),
+    ('dynslam2d.detect.kernels.shape_update',
+     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
+     "Array(int64, 1, 'C'), Array(bool, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), "
+     "Array(float64, 2, 'C'), Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
+     "Array(int8, 2, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64,)"),
     ('dynslam2d.detect.kernels.fragment_hosts',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "

@@ -979,3 +979,224 @@ def accel_candidates(X_prior: np.ndarray, X_new: np.ndarray, lim2: float) -> np.
             out[m] = r
             m += 1
     return out[:m]
+
+
+# ------------------------------------------------------------------ the tracker's per-track shape state (rows)
+# Columns of the tracker's per-track shape arrays (``Tracker._G`` float64, ``Tracker._Gi`` int8; one row per live
+# track, the row of its Kalman state): the box's axis angle and sizes along it (tracks' own axes), the circle radius,
+# the largest partial views per axis (m, rad, map frame); the kind code of its last detection, has-heading and the
+# known-size flags per axis (0 / 1).
+G_THETA, G_SIZE0, G_SIZE1, G_RADIUS, G_LB0, G_LB1 = 0, 1, 2, 3, 4, 5
+N_G = 6
+GI_KIND, GI_HEADING, GI_KNOWN0, GI_KNOWN1 = 0, 1, 2, 3
+N_GI = 4
+_HALF_PI = 0.5 * math.pi
+_QUARTER_PI = 0.25 * math.pi
+_TWO_PI = 2.0 * math.pi
+
+
+@njit(cache=True)
+def pair_priors(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, det: np.ndarray, kind: np.ndarray,
+                theta: np.ndarray) -> tuple:
+    """The track priors of ``measure_batch`` for associated (track row ``rows[r]``, detection ``det[r]``) pairs, with
+    the detections' kind codes and axis angles (rad) of the scan: (swap (r,) bool: the detection's first axis is the
+    track's second (90° ambiguity of a box's axes), sizes (r, 2) the track's sizes along the detection's axes (m),
+    has (r,) bool, radius (r,) the track's circle radius (m; −1: none)). A rectangle detection gets the sizes of a
+    track that has a heading, a circle the radius of a circle track (the arithmetic of ``Tracker._update_pairs``)."""
+    n = rows.shape[0]
+    swap = np.zeros(n, dtype=np.bool_)
+    sizes = np.zeros((n, 2))
+    has = np.zeros(n, dtype=np.bool_)
+    radius = np.full(n, -1.0)
+    for r in range(n):
+        k = rows[r]
+        j = det[r]
+        dk = kind[j]
+        if dk == K_RECT:
+            if Gi[k, GI_HEADING] != 0:
+                sw = int(round((theta[j] - G[k, G_THETA]) / _HALF_PI)) % 2 == 1
+                swap[r] = sw
+                if sw:
+                    sizes[r, 0] = G[k, G_SIZE1]
+                    sizes[r, 1] = G[k, G_SIZE0]
+                else:
+                    sizes[r, 0] = G[k, G_SIZE0]
+                    sizes[r, 1] = G[k, G_SIZE1]
+                has[r] = True
+        elif dk == K_CIRCLE and Gi[k, GI_KIND] == K_CIRCLE and G[k, G_RADIUS] > 0:
+            radius[r] = G[k, G_RADIUS]
+    return swap, sizes, has, radius
+
+
+@njit(cache=True)
+def _py_max(a: float, b: float) -> float:
+    """Python's ``max(a, b)`` of two floats (the first unless the second is larger)."""
+    return b if b > a else a
+
+
+@njit(cache=True)
+def shape_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray, det: np.ndarray,
+                 applied: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray,
+                 circle: np.ndarray, size_obs: np.ndarray, size_kind: np.ndarray, swap: np.ndarray,
+                 default_depth: float, default_depth_ratio: float, heading_gain: float, size_gain: float) -> None:
+    """The shape update of the tracks of associated pairs (track row ``rows[r]``, detection ``det[r]``, where
+    ``applied[r]``), in place on their rows of ``G`` / ``Gi`` (columns above) and, for a box grown past a partial
+    view, of the states ``X`` (rows [x, y, vx, vy], m): a rectangle sets or smooths the heading (90° ambiguity;
+    only an informative view: a real bound on each axis, or an extent longer than 0.3 m) and the sizes along the
+    track's axes (measured: smoothed by ``size_gain``; a lower bound raises the largest partial view and grows the
+    box away from its one real bound, its centre moving with it); a circle smooths the radius; a point detection of
+    a point track takes its extent (at least 0.05 m). The kind becomes the detection's. ``size_obs`` / ``size_kind``
+    / ``swap``: the measurement's per-axis sizes and kinds (``measure_batch``) and :func:`pair_priors`' swaps; the
+    arithmetic, in order, of ``Tracker._update_tracks`` before the per-track arrays (docs/tracking.md, item 2)."""
+    for r in range(rows.shape[0]):
+        if not applied[r]:
+            continue
+        k = rows[r]
+        j = det[r]
+        dk = kind[j]
+        if dk == K_RECT:
+            if Gi[k, GI_HEADING] == 0 or Gi[k, GI_KIND] != K_RECT:
+                G[k, G_THETA] = theta[j]
+                Gi[k, GI_HEADING] = 1
+                # Detection.default_sizes: the extent where both bounds are real, else
+                # max(extent, min(default_depth, default_depth_ratio · max(other extent, 0)))
+                e0 = lohi[j, L_HI1] - lohi[j, L_LO1]
+                e1 = lohi[j, L_HI2] - lohi[j, L_LO2]
+                if rel[j, 0, 0] and rel[j, 0, 1]:
+                    G[k, G_SIZE0] = e0
+                else:
+                    v = default_depth_ratio * _py_max(e1, 0.0)
+                    G[k, G_SIZE0] = _py_max(e0, v if v < default_depth else default_depth)
+                if rel[j, 1, 0] and rel[j, 1, 1]:
+                    G[k, G_SIZE1] = e1
+                else:
+                    v = default_depth_ratio * _py_max(e0, 0.0)
+                    G[k, G_SIZE1] = _py_max(e1, v if v < default_depth else default_depth)
+                Gi[k, GI_KNOWN0] = 1 if size_kind[r, 0] == SIZE_MEASURED else 0
+                Gi[k, GI_KNOWN1] = 1 if size_kind[r, 1] == SIZE_MEASURED else 0
+            else:
+                sw = swap[r]
+                informative = (rel[j, 0, 0] or rel[j, 0, 1]) and (rel[j, 1, 0] or rel[j, 1, 1])
+                if not informative:
+                    informative = _py_max(lohi[j, L_HI1] - lohi[j, L_LO1], lohi[j, L_HI2] - lohi[j, L_LO2]) > 0.3
+                if informative:
+                    tb = G[k, G_THETA]
+                    th = tb + heading_gain * ((theta[j] - tb + _QUARTER_PI) % _HALF_PI - _QUARTER_PI)
+                    G[k, G_THETA] = (th + math.pi) % _TWO_PI - math.pi  # wrap_angle
+                for a in range(2):
+                    ta = 1 - a if sw else a
+                    obs = size_obs[r, a]
+                    sk = size_kind[r, a]
+                    if sk == SIZE_MEASURED:
+                        if Gi[k, GI_KNOWN0 + ta] != 0:
+                            G[k, G_SIZE0 + ta] += size_gain * (obs - G[k, G_SIZE0 + ta])
+                        else:
+                            G[k, G_SIZE0 + ta] = obs
+                            Gi[k, GI_KNOWN0 + ta] = 1
+                    elif sk == SIZE_LOWER:
+                        if obs > G[k, G_LB0 + ta]:
+                            G[k, G_LB0 + ta] = obs
+                        if obs > G[k, G_SIZE0 + ta]:
+                            grow = obs - G[k, G_SIZE0 + ta]
+                            lo_real = rel[j, a, 0]
+                            if lo_real != rel[j, a, 1]:
+                                sgn = 0.5 * grow if lo_real else -0.5 * grow
+                                tha = theta[j] + a * _HALF_PI
+                                X[k, 0] += sgn * math.cos(tha)
+                                X[k, 1] += sgn * math.sin(tha)
+                            G[k, G_SIZE0 + ta] = obs
+        elif dk == K_CIRCLE:
+            rad = circle[j, 2]
+            kr = G[k, G_RADIUS]
+            if Gi[k, GI_KIND] != K_CIRCLE or kr <= 0:
+                G[k, G_RADIUS] = rad
+            else:
+                G[k, G_RADIUS] = kr + size_gain * (rad - kr)
+            G[k, G_SIZE0] = 2.0 * G[k, G_RADIUS]
+            G[k, G_SIZE1] = 2.0 * G[k, G_RADIUS]
+        elif dk == K_POINT and Gi[k, GI_KIND] == K_POINT:
+            G[k, G_SIZE0] = _py_max(lohi[j, L_HI1] - lohi[j, L_LO1], 0.05)
+            G[k, G_SIZE1] = _py_max(lohi[j, L_HI2] - lohi[j, L_LO2], 0.05)
+        Gi[k, GI_KIND] = dk
+
+
+@njit(cache=True)
+def report_boxes(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray, slow: float,
+                 fast: np.ndarray) -> tuple:
+    """The reported boxes of the tracks of state rows ``rows``: (n, 5) centre x, y, heading, length, width (m, rad,
+    map frame) and (n,) bool "undecided". A moving track (speed above ``slow``, m/s) is headed along its velocity (a
+    box: the axis nearest it, its sides swapped when that is the second axis), a still box along its longer side, a
+    still circle at 0; the heading of a box is wrapped to [−π, π) (``Tracker._report``'s arithmetic). ``fast`` (n,)
+    int8: 1 / 0 the moving test's outcome given, −1 to test here; a speed within 1e-12 relative of ``slow`` is left
+    undecided (its row not written: the caller decides with Python's ``math.hypot``, which may differ from this
+    one by an ulp, and calls again)."""
+    n = rows.shape[0]
+    out = np.empty((n, 5))
+    undecided = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        k = rows[i]
+        vx = X[k, 2]
+        vy = X[k, 3]
+        f = fast[i]
+        if f < 0:
+            h = math.hypot(vx, vy)
+            if abs(h - slow) <= 1e-12 * slow:
+                undecided[i] = True
+                continue
+            moving = h > slow
+        else:
+            moving = f == 1
+        out[i, 0] = X[k, 0]
+        out[i, 1] = X[k, 1]
+        if Gi[k, GI_KIND] == K_CIRCLE:
+            out[i, 2] = math.atan2(vy, vx) if moving else 0.0
+            out[i, 3] = out[i, 4] = 2.0 * G[k, G_RADIUS]
+            continue
+        sa = G[k, G_SIZE0]
+        sb = G[k, G_SIZE1]
+        tb = G[k, G_THETA]
+        if moving:
+            q = int(round(((math.atan2(vy, vx) - tb + math.pi) % _TWO_PI - math.pi) / _HALF_PI))
+            theta = tb + q * _HALF_PI
+            if q % 2 == 0:
+                out[i, 3] = sa
+                out[i, 4] = sb
+            else:
+                out[i, 3] = sb
+                out[i, 4] = sa
+        elif sb > sa:
+            theta = tb + _HALF_PI
+            out[i, 3] = sb
+            out[i, 4] = sa
+        else:
+            theta = tb
+            out[i, 3] = sa
+            out[i, 4] = sb
+        out[i, 2] = (theta + math.pi) % _TWO_PI - math.pi  # wrap_angle
+    return out, undecided
+
+
+@njit(cache=True)
+def association_rows(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, missed: np.ndarray) -> tuple:
+    """The association's per-track inputs from the shape rows ``rows`` of the live tracks (in their order):
+    (sizes (n, 2) m, longest side (n,) m as numpy's maximum, rectangle with a heading (n,) bool, axis angle (n,) rad,
+    size known (n,) bool: a track that ``missed`` its last scan and is not a rectangle or knows both sizes — the
+    size-jump gate applies to it)."""
+    n = rows.shape[0]
+    tsize = np.empty((n, 2))
+    tmax = np.empty(n)
+    rect = np.empty(n, dtype=np.bool_)
+    theta = np.empty(n)
+    known = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        k = rows[i]
+        s0 = G[k, G_SIZE0]
+        s1 = G[k, G_SIZE1]
+        tsize[i, 0] = s0
+        tsize[i, 1] = s1
+        tmax[i] = s0 if (s0 >= s1 or s0 != s0) else s1  # (np.maximum)
+        kr = Gi[k, GI_KIND] == K_RECT
+        rect[i] = kr and Gi[k, GI_HEADING] != 0
+        theta[i] = G[k, G_THETA]
+        known[i] = missed[i] and (not kr or (Gi[k, GI_KNOWN0] != 0 and Gi[k, GI_KNOWN1] != 0))
+    return tsize, tmax, rect, theta, known

@@ -31,7 +31,11 @@ free-space and fragment tests); only the per-track bookkeeping stays in Python (
 720-beam scan with 10 movers, ``benchmarks/bench_detect.py``). The Kalman states and covariances of
 all live tracks are two arrays owned by the tracker (``_X``, ``_P``; each track keeps one row for
 life, its ``x`` / ``P`` are views of it): the prediction, the association and the reports read
-them as whole arrays, the Kalman results are written back in one scatter per scan.
+them as whole arrays, the Kalman results are written back in one scatter per scan. The shape state
+(box axis angle, sizes, radius, largest partial views, kind, heading and known-size flags) lives in two
+more arrays on the same rows (``_G``, ``_Gi``; ``g`` / ``gi`` views per track, properties such as
+``theta_box`` or ``size`` read them one track at a time): the measurement priors, the shape update, the
+association's inputs and the reported boxes are one kernel call each over all pairs / tracks.
 """
 
 from __future__ import annotations
@@ -49,7 +53,20 @@ from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.freespace import FreeSpaceMemory
 from dynslam2d.detect.frozen import fast_init
 from dynslam2d.detect.kernels import (
+    G_LB0,
+    G_LB1,
+    G_RADIUS,
+    G_SIZE0,
+    G_SIZE1,
+    G_THETA,
+    GI_HEADING,
+    GI_KIND,
+    GI_KNOWN0,
+    GI_KNOWN1,
+    N_G,
+    N_GI,
     accel_candidates,
+    association_rows,
     classify_batch,
     fit_params,
     fragment_hosts,
@@ -59,6 +76,9 @@ from dynslam2d.detect.kernels import (
     mask_fractions,
     measure_batch,
     merge_leg_pairs,
+    pair_priors,
+    report_boxes,
+    shape_update,
     size_jump_gate,
     world_points,
 )
@@ -67,10 +87,10 @@ from dynslam2d.detect.layout import (
     FIT_CENTROID,
     FIT_CIRCLE,
     KIND_CIRCLE,
+    KIND_CODES,
     KIND_NAMES,
     KIND_POINT,
     KIND_RECT,
-    SIZE_LOWER,
     SIZE_MEASURED,
     DetectionBatch,
     MeasureRows,
@@ -87,7 +107,6 @@ TENTATIVE = "tentative"
 CONFIRMED = "confirmed"
 COASTING = "coasting"
 _HALF_PI = 0.5 * math.pi
-_QUARTER_PI = 0.25 * math.pi
 _TWO_PI = 2.0 * math.pi
 _BIG = 1e12
 _make_track = fast_init(Track)  # Track(...) / Box(...) without the frozen dataclass __init__ (detect/frozen.py)
@@ -97,7 +116,6 @@ _NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives i
 _ROWS0 = 64  # initial rows of the tracker's state arrays (doubled when full)
 _P_MANAGE = np.array([0, 5, 10, 11, 14, 15])  # P[0, 0], P[1, 1], P[2, 2], P[2, 3], P[3, 2], P[3, 3] of a raveled P
 _all_rows, _any_of = np.logical_and.reduce, np.logical_or.reduce  # (ndarray.all / any without the Python wrappers)
-_min_rows, _max_rows = np.minimum.reduce, np.maximum.reduce  # (ndarray.min / max without numpy's Python wrappers)
 
 
 @dataclass
@@ -139,11 +157,10 @@ class _Track:
     born: float
     last_hit: float
     birth_xy: np.ndarray
-    theta_box: float  # axis angle of size[0], rad
-    size: list[float]  # sizes along theta_box and theta_box + π/2, m (a list: read and written per entry)
-    size_known: list[bool]  # (2,)
-    radius: float
-    kind: str
+    # the shape state: views of the track's rows of the tracker's arrays (Tracker._G, _Gi; columns G_* / GI_* of
+    # detect/kernels.py), read and written by the per-scan kernels; the properties below read them one track at a time
+    g: np.ndarray  # (N_G,) float: axis angle, sizes, circle radius, largest partial views (rad, m)
+    gi: np.ndarray  # (N_GI,) int8: kind code, has heading, known-size flags (both tuples until _add_row)
     state: str = TENTATIVE
     hits: int = 1
     misses: int = 0
@@ -153,8 +170,6 @@ class _Track:
     in_m: bool = False
     reason: str = "not in M: tentative track"
     beams: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    has_heading: bool = False
-    size_lb: list[float] = field(default_factory=lambda: [0.0, 0.0])  # largest partial views per axis, m
     # free-space fraction per update; an entry may be a detection (a birth's) or a tuple (det, ref, t, past) until it
     # is read, its value not yet computed (Tracker._free_values)
     free: list[float] = field(default_factory=list)
@@ -179,7 +194,81 @@ class _Track:
     m_time: float = 0.0  # time spent in M over its updates, s
     m_travel: float = 0.0  # largest distance of its centre from m_start_xy while in M, m
     m_last_t: float | None = None  # stamp of its last update in M, s
-    row: int = -1  # its row of the tracker's state arrays (Tracker._X / _P; x and P are views of it)
+    row: int = -1  # its row of the tracker's state arrays (Tracker._X / _P / _G / _Gi; x, P, g, gi are views of it)
+
+    # (the shape state as Python values, read from the rows: the tuples cannot be written in place by mistake)
+    @property
+    def theta_box(self) -> float:
+        """Axis angle of size[0], rad (map frame)."""
+        return self.g.item(G_THETA)
+
+    @theta_box.setter
+    def theta_box(self, value: float) -> None:
+        self.g[G_THETA] = value
+
+    @property
+    def size(self) -> tuple[float, float]:
+        """Sizes along theta_box and theta_box + π/2, m."""
+        g = self.g
+        return g.item(G_SIZE0), g.item(G_SIZE1)
+
+    @size.setter
+    def size(self, value) -> None:
+        self.g[G_SIZE0], self.g[G_SIZE1] = value
+
+    @property
+    def size_lb(self) -> tuple[float, float]:
+        """Largest partial views per axis, m."""
+        g = self.g
+        return g.item(G_LB0), g.item(G_LB1)
+
+    @property
+    def size_known(self) -> tuple[bool, bool]:
+        """The sizes along each axis were measured (both bounds seen)."""
+        gi = self.gi
+        return gi.item(GI_KNOWN0) != 0, gi.item(GI_KNOWN1) != 0
+
+    @size_known.setter
+    def size_known(self, value) -> None:
+        self.gi[GI_KNOWN0], self.gi[GI_KNOWN1] = value
+
+    @property
+    def radius(self) -> float:
+        """Circle radius, m (0: none)."""
+        return self.g.item(G_RADIUS)
+
+    @radius.setter
+    def radius(self, value: float) -> None:
+        self.g[G_RADIUS] = value
+
+    @property
+    def kind(self) -> str:
+        """Shape model of the last detection: "rect", "circle" or "point"."""
+        return KIND_NAMES[self.gi.item(GI_KIND)]
+
+    @kind.setter
+    def kind(self, value: str) -> None:
+        self.gi[GI_KIND] = KIND_CODES[value]
+
+    @property
+    def has_heading(self) -> bool:
+        """theta_box comes from a rectangle fit."""
+        return self.gi.item(GI_HEADING) != 0
+
+    @has_heading.setter
+    def has_heading(self, value: bool) -> None:
+        self.gi[GI_HEADING] = value
+
+
+# (_shape_rows builds the rows in this column order)
+assert (G_THETA, G_SIZE0, G_SIZE1, G_RADIUS, G_LB0, G_LB1, N_G) == (0, 1, 2, 3, 4, 5, 6)
+assert (GI_KIND, GI_HEADING, GI_KNOWN0, GI_KNOWN1, N_GI) == (0, 1, 2, 3, 4)
+
+
+def _shape_rows(theta_box: float, size, known, radius: float, kind: str, has_heading: bool) -> tuple:
+    """A new track's (g, gi) shape values as tuples in the columns of detect/kernels.py (size_lb 0): what
+    ``Tracker._add_row`` writes into its rows of the tracker's arrays (then g / gi become views of them)."""
+    return (theta_box, size[0], size[1], radius, 0.0, 0.0), (KIND_CODES[kind], has_heading, known[0], known[1])
 
 
 def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
@@ -247,6 +336,10 @@ class Tracker:
         # arrays grow, by doubling)
         self._X = np.zeros((_ROWS0, 4))
         self._P = np.zeros((_ROWS0, 4, 4))
+        # … and their shape state (the same rows; columns G_* / GI_* of detect/kernels.py): the association, the shape
+        # update and the reports read and write it for all tracks in one kernel call or gather each
+        self._G = np.zeros((_ROWS0, N_G))
+        self._Gi = np.zeros((_ROWS0, N_GI), dtype=np.int8)
         self._rows_used = 0  # rows 0 … _rows_used − 1 have been handed out
         self._free_rows: list[int] = []  # rows of deleted tracks, reused first
         self._order: np.ndarray | None = None  # the rows of self._tracks in their order (None: to be built)
@@ -422,12 +515,12 @@ class Tracker:
         cand = [k for k in self._tracks if k.id in updated and k.state == CONFIRMED]
         if not cand:
             return [None] * len(dets)
-        xy = self._X[[k.row for k in cand], :2]  # (the candidates' centres, one gather)
+        rows = [k.row for k in cand]
+        xy = self._X[rows, :2]  # (the candidates' centres and shapes, one gather each)
+        G = self._G[rows]
         b = self._batch
         idx = fragment_hosts(b.px, b.py, b.start, b.npts, np.array(dets, dtype=np.int64), xy[:, 0].copy(),
-                             xy[:, 1].copy(), np.array([k.theta_box for k in cand], dtype=np.float64),
-                             np.array([k.size[0] for k in cand], dtype=np.float64),
-                             np.array([k.size[1] for k in cand], dtype=np.float64),
+                             xy[:, 1].copy(), G[:, G_THETA].copy(), G[:, G_SIZE0].copy(), G[:, G_SIZE1].copy(),
                              float(self.config.fit.fragment_margin))
         return [cand[i] if i >= 0 else None for i in idx.tolist()]
 
@@ -490,8 +583,8 @@ class Tracker:
 
     def _add_row(self, k: _Track, x, P: np.ndarray) -> None:
         """Append ``k`` to the live tracks with state ``x`` (4,) and covariance ``P`` (4, 4): it gets a row of
-        the state arrays (a deleted track's, else a new one; the arrays double when full) holding the values,
-        and ``k.x`` / ``k.P`` become views of it."""
+        the state arrays (a deleted track's, else a new one; the arrays double when full) holding the values and
+        its own shape rows ``k.g`` / ``k.gi``, and ``k.x`` / ``k.P`` / ``k.g`` / ``k.gi`` become views of it."""
         if self._free_rows:
             row = self._free_rows.pop()
         else:
@@ -500,27 +593,38 @@ class Tracker:
             if row == self._X.shape[0]:
                 X = np.zeros((2 * row, 4))
                 P2 = np.zeros((2 * row, 4, 4))
-                X[:row] = self._X
-                P2[:row] = self._P
-                self._X, self._P = X, P2
+                X[:row] = self._X[:row]
+                P2[:row] = self._P[:row]
+                G = np.zeros((2 * row, N_G))
+                Gi = np.zeros((2 * row, N_GI), dtype=np.int8)
+                G[:row] = self._G[:row]
+                Gi[:row] = self._Gi[:row]
+                self._X, self._P, self._G, self._Gi = X, P2, G, Gi
                 self._repoint()
         self._X[row] = x
         self._P[row] = P
+        self._G[row] = k.g
+        self._Gi[row] = k.gi
         k.row = row
         k.x = self._X[row]
         k.P = self._P[row]
+        k.g = self._G[row]
+        k.gi = self._Gi[row]
         self._tracks.append(k)
         self._order = None
 
     def _repoint(self) -> None:
-        """Make the x / P of the live tracks views of their rows of the (new) state arrays."""
-        X, P = self._X, self._P
+        """Make the x / P / g / gi of the live tracks views of their rows of the (new) state arrays."""
+        X, P, G, Gi = self._X, self._P, self._G, self._Gi
         for k in self._tracks:
-            k.x = X[k.row]
-            k.P = P[k.row]
+            row = k.row
+            k.x = X[row]
+            k.P = P[row]
+            k.g = G[row]
+            k.gi = Gi[row]
 
     def __deepcopy__(self, memo: dict) -> Tracker:
-        """A deep copy whose tracks' x / P are views of the copy's own state arrays (a plain deep copy would
+        """A deep copy whose tracks' x / P / g / gi are views of the copy's own state arrays (a plain deep copy would
         make them arrays of their own)."""
         new = object.__new__(type(self))
         memo[id(self)] = new
@@ -691,30 +795,24 @@ class Tracker:
         tc = self.config.tracker
         tracks = self._tracks
         Xs, Ps = self._stack()
-        tsize = np.fromiter(_chain.from_iterable([k.size for k in tracks]), np.float64, 2 * n).reshape(n, 2)
-        tmax = np.maximum(tsize[:, 0], tsize[:, 1])  # (tsize.max(axis=1) without its Python wrapper)
-        reach = 0.5 * tmax
-        rect_l, th_l, known_l, firm_r, tent_r = [], [], [], [], []
-        for i, k in enumerate(tracks):  # (per-track flags in one pass)
-            kr = k.kind == KIND_RECT
-            rect_l.append(k.has_heading and kr)
-            th_l.append(k.theta_box)
-            if k.misses > 0:
-                sk = k.size_known
-                known_l.append(not kr or (sk[0] and sk[1]))  # (all(size_known))
-            else:
-                known_l.append(False)
+        firm_r, tent_r, missed = [], [], []
+        for i, k in enumerate(tracks):  # (the state and misses: Python attributes)
             (firm_r if k.state != TENTATIVE else tent_r).append(i)
+            missed.append(k.misses > 0)
+        # the tracks' sizes, flags and axis angles from their shape rows in one call ("known": a coasting track's size
+        # is known if all(size_known) or it is not a rectangle)
+        tsize, tmax, rect, theta, known = association_rows(self._G, self._Gi, self._rows(), np.array(missed))
+        reach = 0.5 * tmax
         # Mahalanobis gate and distance gate; a rectangle is measured again with the track's own sizes
         # (a side the detection "measured" too short, e.g. a grazing side, must not break the association)
-        d2, near, ok = gate_costs(Xs, Ps, reach, np.array(rect_l), np.array(th_l), tsize, self._default.z,
-                                  self._default.R, float(tc.gate_distance), float(tc.gate_chi2), *self._batch,
-                                  self._fit_p)
+        d2, near, ok = gate_costs(Xs, Ps, reach, rect, theta, tsize,
+                                  self._default.z, self._default.R, float(tc.gate_distance), float(tc.gate_chi2),
+                                  *self._batch, self._fit_p)
         # a tracked object does not double its size from one scan to the next: a person track coasting
         # past a wall must not take the wall's cluster (it would carry M onto the wall)
         # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
         # later, a tracked object may touch another for a scan)
-        ok, det_ext = size_jump_gate(ok, self._batch.lohi, tmax, np.array(known_l), float(tc.max_size_jump_ratio),
+        ok, det_ext = size_jump_gate(ok, self._batch.lohi, tmax, known, float(tc.max_size_jump_ratio),
                                      float(tc.max_size_jump))
         if self._map is not None:
             ok = self._veto_merged(ok, dets, det_ext, tsize)
@@ -781,59 +879,37 @@ class Tracker:
     def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float) -> list[bool]:
         """Kalman and shape updates of the associated (track, detection) pairs; True where applied.
 
-        The measurements (with each track's sizes / radius) and the Kalman updates run as one batch
-        (:mod:`dynslam2d.detect.kernels`); the shape bookkeeping stays per track."""
-        tracks = self._tracks
+        The track priors of the measurements (each track's sizes / radius), the measurements, the Kalman updates and
+        the shape updates run as one kernel call each on the tracks' rows (:mod:`dynslam2d.detect.kernels`); the
+        bookkeeping stays per track (:meth:`_update_tracks`)."""
         npair = len(pairs)
-        sizes_l: list[tuple[float, float]] = []
-        has_l: list[bool] = []
-        radius_l: list[float] = []
-        swaps: list[bool] = []
-        sel_l: list[int] = []
-        rows_l: list[int] = []
-        no_size = (0.0, 0.0)
-        for ti, di in pairs:
-            sel_l.append(ti)
-            rows_l.append(di)
-            k, det = tracks[ti], dets[di]
-            dk = det.kind
-            sw, sz, has_sz, rad = False, no_size, False, -1.0
-            if dk == KIND_RECT:
-                if k.has_heading:
-                    # the detection's first axis is the track's second (90° ambiguity of a box's axes)
-                    sw = int(round((det.theta - k.theta_box) / _HALF_PI)) % 2 == 1
-                    s0, s1 = k.size
-                    sz = (s1, s0) if sw else (s0, s1)
-                    has_sz = True
-            elif dk == KIND_CIRCLE and k.kind == KIND_CIRCLE and k.radius > 0:
-                rad = k.radius
-            swaps.append(sw)
-            sizes_l.append(sz)
-            has_l.append(has_sz)
-            radius_l.append(rad)
-        rows = np.array(rows_l, dtype=np.int64)
-        sizes = np.fromiter(_chain.from_iterable(sizes_l), np.float64, 2 * npair).reshape(npair, 2)
-        mr = self._measure_rows(rows, sizes, np.array(has_l, dtype=bool),
-                                np.array(radius_l, dtype=np.float64), np.full(npair, 0.05))
-        H, zm, Rm, size_obs, size_kind = mr.H, mr.zm, mr.Rm, mr.size_obs, mr.size_kind
+        sel = np.fromiter(_chain.from_iterable(pairs), np.int64, 2 * npair).reshape(npair, 2)
+        dis = sel[:, 1].copy()
+        sel = sel[:, 0].copy()
+        b = self._batch
+        trows = self._rows()[sel]
+        swaps, sizes, has, radius = pair_priors(self._G, self._Gi, trows, dis, b.kind, b.theta)
+        mr = self._measure_rows(dis, sizes, has, radius, np.full(npair, 0.05))
         Xs, Ps = self._stack()
-        sel = np.array(sel_l, dtype=np.int64)
         X_prior = Xs[sel]  # (kalman_update_batch works on copies: the prior stays as it is)
-        Xn, Pn, ok = kalman_update_batch(X_prior, Ps[sel], H, zm, Rm)
-        self._bound_acceleration(X_prior, Xn, tracks, pairs)
+        Xn, Pn, ok = kalman_update_batch(X_prior, Ps[sel], mr.H, mr.zm, mr.Rm)
+        self._bound_acceleration(X_prior, Xn, self._tracks, pairs)
         self._stacked = None  # the tracks change below
         out = ok.tolist()
         # the new states and covariances into the tracks' rows of the state arrays, all at once (every update applied,
         # the usual case: without the boolean selections)
         if all(out):
-            rows = self._rows()[sel]
-            self._X[rows] = Xn
-            self._P[rows] = Pn
+            self._X[trows] = Xn
+            self._P[trows] = Pn
         else:
-            rows = self._rows()[sel[ok]]
+            rows = trows[ok]
             self._X[rows] = Xn[ok]
             self._P[rows] = Pn[ok]
-        self._update_tracks(pairs, dets, t, out, size_obs.tolist(), size_kind.tolist(), swaps)
+        fc, tc = self.config.fit, self.config.tracker
+        shape_update(self._G, self._Gi, self._X, trows, dis, ok, b.kind, b.theta, b.lohi, b.rel, b.circle,
+                     mr.size_obs, mr.size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
+                     float(tc.heading_gain), float(tc.size_gain))
+        self._update_tracks(pairs, dets, t, out, trows)
         return out
 
     def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track],
@@ -850,29 +926,32 @@ class Tracker:
         near = accel_candidates(X_prior, X_new, (0.999 * lim) ** 2)
         if near.shape[0] == 0:
             return
-        for r in near.tolist():
-            k = tracks[pairs[r][0]]
-            if k.hits < tc.accel_bound_after:
+        # (the candidates' velocities as Python floats in one gather each, the bounded ones written in one scatter)
+        after, hypot = tc.accel_bound_after, math.hypot
+        rows, vals = [], []
+        for r, (pvx, pvy), (nvx, nvy) in zip(near.tolist(), X_prior[near, 2:].tolist(), X_new[near, 2:].tolist()):
+            if tracks[pairs[r][0]].hits < after:
                 continue
-            dvx = X_new[r, 2] - X_prior[r, 2]
-            dvy = X_new[r, 3] - X_prior[r, 3]
-            d = math.hypot(dvx, dvy)
+            dvx = nvx - pvx
+            dvy = nvy - pvy
+            d = hypot(dvx, dvy)
             if d > lim:
-                X_new[r, 2] = X_prior[r, 2] + dvx * lim / d
-                X_new[r, 3] = X_prior[r, 3] + dvy * lim / d
-                self.stats.accel_bounded += 1
+                rows.append(r)
+                vals.append((pvx + dvx * lim / d, pvy + dvy * lim / d))
+        if rows:
+            X_new[rows, 2:] = vals
+            self.stats.accel_bounded += len(rows)
 
-    def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float, applied: list[bool],
-                       size_obs: list[list[float]], size_kind: list[list[int]], swaps: list[bool]) -> None:
-        """The shape / bookkeeping update of the tracks of ``pairs`` (track index, detection index) whose Kalman
-        result is already in their rows (k.x, k.P) where ``applied``; the scan's constants are read once (one
-        loop over the pairs: the update of one track is a few µs of Python)."""
+    def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float,
+                       applied: list[bool], trows: np.ndarray) -> None:
+        """The bookkeeping update of the tracks of ``pairs`` (track index, detection index; ``trows``: their rows of
+        the state arrays) whose Kalman and shape results are already in their rows (k.x, k.P, k.g, k.gi) where
+        ``applied``; the scan's constants are read once (one loop over the pairs: the update of one track is a few µs
+        of Python)."""
         cfg = self.config
         tc, fc = cfg.tracker, cfg.fit
-        heading_gain, size_gain = tc.heading_gain, tc.size_gain
         pmin_r, pmax_r = fc.person_min_radius, fc.person_max_radius
         window, nsus, ride_time = tc.confirm_window, tc.sustain_updates, tc.ride_time
-        lohi_l, rel_l = self._lohi_l, self._rel_l
         p = self._pose
         if p is not None:
             pose_x, pose_y = p.x, p.y
@@ -880,66 +959,20 @@ class Tracker:
         use_map = self._map is not None
         max_age = self._free.max_age if self._free is not None else None
         ref = self._cur_ref if self._free is not None else None  # (the vacated-space test's reference: this scan)
-        cos, sin, pi = math.cos, math.sin, math.pi
         tracks = self._tracks
-        for r, (ti, di) in enumerate(pairs):
-            if not applied[r]:
+        if p is not None:
+            # the centres in the map and laser frames, all pairs at once (numpy's elementwise products and sums: the
+            # same roundings as on the floats one by one)
+            xy = self._X[trows, :2]
+            dx, dy = xy[:, 0] - pose_x, xy[:, 1] - pose_y
+            centres = zip(xy.tolist(), (c * dx + s * dy).tolist(), (-s * dx + c * dy).tolist())
+        else:
+            centres = [None] * len(pairs)
+        for (ti, di), ok, cen in zip(pairs, applied, centres):
+            if not ok:
                 continue
             k, det = tracks[ti], dets[di]
             dkind = det.kind
-            # shape: heading (90° ambiguity) and sizes along the track's own axes
-            if dkind == KIND_RECT:
-                sk = size_kind[r]
-                if not k.has_heading or k.kind != KIND_RECT:
-                    k.theta_box = det.theta
-                    k.has_heading = True
-                    k.size = _default_sizes(lohi_l[di], rel_l[di], fc)
-                    k.size_known = [sk[0] == SIZE_MEASURED, sk[1] == SIZE_MEASURED]
-                else:
-                    swap = swaps[r]
-                    rl = rel_l[di]
-                    informative = (rl[0][0] or rl[0][1]) and (rl[1][0] or rl[1][1])
-                    if not informative:
-                        lo0, lo1, hi0, hi1 = lohi_l[di]
-                        informative = max(hi0 - lo0, hi1 - lo1) > 0.3  # the extent's longer side, m
-                    if informative:
-                        tb = k.theta_box
-                        # (the axis difference wrapped to [−π/4, π/4): 90° ambiguity)
-                        th = tb + heading_gain * ((det.theta - tb + _QUARTER_PI) % _HALF_PI - _QUARTER_PI)
-                        k.theta_box = (th + pi) % _TWO_PI - pi  # wrap_angle
-                    size, known = k.size, k.size_known
-                    so = size_obs[r]
-                    for a in (0, 1):
-                        ta = 1 - a if swap else a
-                        obs, kind = so[a], sk[a]
-                        if kind == SIZE_MEASURED:
-                            if known[ta]:
-                                size[ta] += size_gain * (obs - size[ta])
-                            else:
-                                size[ta] = obs
-                                known[ta] = True
-                        elif kind == SIZE_LOWER:
-                            lb = k.size_lb
-                            if obs > lb[ta]:  # (max(lb, obs))
-                                lb[ta] = obs
-                            if obs > size[ta]:
-                                # a partial view grew past the size: the box grows away from its one real
-                                # bound, its centre moves with it, its velocity does not (item 2, docs/tracking.md)
-                                grow = obs - size[ta]
-                                lo_real, hi_real = rl[a]
-                                if lo_real != hi_real:
-                                    sgn = 0.5 * grow if lo_real else -0.5 * grow
-                                    th = det.theta + a * _HALF_PI
-                                    k.x[0] += sgn * cos(th)
-                                    k.x[1] += sgn * sin(th)
-                                size[ta] = obs
-            elif dkind == KIND_CIRCLE:
-                rad = float(det.circle[2])
-                k.radius = rad if k.kind != KIND_CIRCLE or k.radius <= 0 else k.radius + size_gain * (rad - k.radius)
-                k.size = [2.0 * k.radius, 2.0 * k.radius]
-            elif dkind == KIND_POINT and k.kind == KIND_POINT:
-                lo0, lo1, hi0, hi1 = lohi_l[di]
-                k.size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
             # (the stored points before this update: their vacated-space fraction is computed when first read)
             past0 = tuple(k.past) if ref is not None and k.past else None
             if k.misses > 0:
@@ -956,7 +989,6 @@ class Tracker:
                 k.fast = 0
                 k.probation = k.in_m and not k.remembered  # a remembered track re-acquired where it stopped
                 k.misses = 0
-            k.kind = dkind
             k.merged = False
             person = det.person or (dkind == KIND_CIRCLE and pmin_r <= float(det.circle[2]) <= pmax_r)
             k.person = person
@@ -973,11 +1005,9 @@ class Tracker:
             if len(free) > nsus:
                 del free[0]
             if p is not None:
-                xk = k.x
-                x0, x1 = xk.item(0), xk.item(1)
-                dx, dy = x0 - pose_x, x1 - pose_y
+                (x0, x1), lx, ly = cen
                 lxy, mxy, mt = k.laser_xy, k.map_xy, k.map_t
-                lxy.append((c * dx + s * dy, -s * dx + c * dy))
+                lxy.append((lx, ly))
                 mxy.append((x0, x1))
                 mt.append(t)
                 while len(lxy) > nsus and t - mt[0] > ride_time:
@@ -1023,7 +1053,8 @@ class Tracker:
         else:
             return
         prior = min(max(prior, k.size_lb[a]), self.config.segment.max_extent)
-        k.size[a] += tc.size_gain * (prior - k.size[a])
+        s = k.size[a]
+        k.g[G_SIZE0 + a] = s + tc.size_gain * (prior - s)
 
     def _free_values(self, k: _Track) -> list[float]:
         """``k.free`` with every entry a float. A birth appends its detection instead of its free-space fraction, and an
@@ -1073,11 +1104,10 @@ class Tracker:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
         cfg = self.config
         z, P, size, known = self._birth_state(det, j)
-        k = _Track(id=self._next_id, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t,
-                   birth_xy=z.copy(), theta_box=det.theta, size=size,
-                   size_known=known, radius=float(det.circle[2]) if det.kind == KIND_CIRCLE
-                   else 0.0, kind=det.kind, beams=det.beams, has_heading=det.kind == KIND_RECT,
-                   free=[det], mstruct=[det.map_structure] if self._map is not None else [],
+        g, gi = _shape_rows(det.theta, size, known, float(det.circle[2]) if det.kind == KIND_CIRCLE else 0.0,
+                            det.kind, det.kind == KIND_RECT)
+        k = _Track(id=self._next_id, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t, birth_xy=z.copy(), g=g, gi=gi,
+                   beams=det.beams, free=[det], mstruct=[det.map_structure] if self._map is not None else [],
                    mfree=[det.map_free] if self._map is not None else [],
                    munknown=[det.map_unknown] if self._map is not None else [],
                    past=[(t, det.points)] if self._free is not None else [],
@@ -1255,7 +1285,7 @@ class Tracker:
         ``_dormant``."""
         x = k.x.copy()
         x[2:] = 0.0
-        k.x, k.P = x, k.P.copy()
+        k.x, k.P, k.g, k.gi = x, k.P.copy(), k.g.copy(), k.gi.copy()
         k.fast = 0
         k.slow_since = None
         k.reason = "not in M: still, on long-occupied map cells (retired as structure)"
@@ -1667,39 +1697,28 @@ class Tracker:
         tracks = self._tracks
         if not tracks:
             return []
-        tc = self.config.tracker
-        no_beams = np.zeros(0, dtype=np.int64)
-        slow = 0.5 * tc.v_min
-        # (speed: states and covariances stacked in one copy each; every report's velocity / covariance is a
-        # row of them, its own memory apart from the tracker's)
+        slow = 0.5 * self.config.tracker.v_min
+        # (speed: the boxes of all tracks from their rows in one kernel call; states and covariances stacked in one copy
+        # each, every report's velocity / covariance a row of them, its own memory apart from the tracker's)
         order = self._rows()
+        n = order.shape[0]
+        fast = np.full(n, -1, dtype=np.int8)
+        boxes, undecided = report_boxes(self._G, self._Gi, self._X, order, slow, fast)
+        if undecided.any():  # (a speed within an ulp of the limit: decided by math.hypot, as the reports always were)
+            for i in undecided.nonzero()[0].tolist():
+                vx, vy = self._X[order[i], 2:].tolist()
+                fast[i] = math.hypot(vx, vy) > slow
+            boxes, _ = report_boxes(self._G, self._Gi, self._X, order, slow, fast)
         X = self._X[order]  # (copies: the reports' own memory)
         P = self._P[order]
         V = X[:, 2:]
+        kinds = self._Gi[order, GI_KIND].tolist()
+        no_beams = np.zeros(0, dtype=np.int64)
         out = []
-        append, make_track, make_box = out.append, _make_track, _make_box  # (locals: the loop runs per track)
-        hypot, atan2, pi = math.hypot, math.atan2, math.pi
-        for k, (px, py, vx, vy), vel, cov in zip(tracks, X.tolist(), V, P):  # (V, P rows: views)
-            speed = hypot(vx, vy)
-            if k.kind == KIND_CIRCLE:
-                theta = atan2(vy, vx) if speed > slow else 0.0
-                length = width = 2.0 * k.radius
-            else:
-                sa, sb = k.size
-                tb = k.theta_box
-                if speed > slow:
-                    vdir = atan2(vy, vx)
-                    q = int(round(((vdir - tb + pi) % _TWO_PI - pi) / _HALF_PI))  # wrap_angle
-                    theta = tb + q * _HALF_PI
-                    length, width = (sa, sb) if q % 2 == 0 else (sb, sa)
-                elif sb > sa:
-                    theta, length, width = tb + _HALF_PI, sb, sa
-                else:
-                    theta, length, width = tb, sa, sb
-                theta = (float(theta) + pi) % _TWO_PI - pi  # wrap_angle
+        append, make_track, make_box, names = out.append, _make_track, _make_box, KIND_NAMES  # (locals: per track)
+        for k, (px, py, theta, length, width), kd, vel, cov in zip(tracks, boxes.tolist(), kinds, V, P):
             beams = k.beams if k.id in updated else no_beams
             in_m = k.in_m
-            append(make_track(k.id, k.state, t, make_box(px, py, theta, float(length), float(width)), vel,
-                              cov, t - k.born, k.hits, k.misses, k.kind, in_m, k.reason, beams,
-                              len(beams), k.remembered and in_m))
+            append(make_track(k.id, k.state, t, make_box(px, py, theta, length, width), vel, cov, t - k.born, k.hits,
+                              k.misses, names[kd], in_m, k.reason, beams, len(beams), k.remembered and in_m))
         return out
