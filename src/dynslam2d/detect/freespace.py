@@ -99,17 +99,9 @@ class FreeSpaceMemory:
             test.count(points, free)
         return free
 
-    def seen_through_by(self, ref: _Ref, points: np.ndarray) -> np.ndarray:
-        """(n,) bool: the scan ``ref`` saw through the (n, 2) map-frame points."""
-        free = np.zeros(points.shape[0], dtype=bool)
-        if points.shape[0]:
-            seen_through_refs(np.ascontiguousarray(points, dtype=np.float64), ref.ranges, ref.par, ref.ranges, ref.par,
-                              1, self.margin, free)
-        return free
-
     def count_seen_by(self, ref: _Ref, points: np.ndarray) -> int:
-        """How many of the (n, 2) map-frame points the scan ``ref`` saw through (the count of :meth:`seen_through_by`:
-        one kernel call, no mask kept)."""
+        """How many of the (n, 2) map-frame points the scan ``ref`` saw through (module docstring; one kernel call, no
+        mask kept: a track's vacated space, read late)."""
         if not points.shape[0]:
             return 0
         return seen_through_refs(np.ascontiguousarray(points, dtype=np.float64), ref.ranges, ref.par, ref.ranges,

@@ -2,7 +2,7 @@
 
 The readable reference versions are :func:`dynslam2d.detect.reference.classify_and_bound`,
 :func:`dynslam2d.detect.reference.measure` and
-:meth:`dynslam2d.detect.freespace.FreeSpaceMemory.seen_through_by`; the kernels here do the
+:class:`dynslam2d.detect.freespace.FreeTest`; the kernels here do the
 same arithmetic for every cluster / pair / point of a scan in one pass, so that
 ``Tracker.update`` pays the Python overhead once per scan instead of once per detection
 (issue 4, Speed). ``tests/test_detect_kernels.py`` checks them against the reference versions.
@@ -700,9 +700,9 @@ def seen_through_refs(pts: np.ndarray, ranges_a: np.ndarray, par_a: np.ndarray, 
     Reference a (b): its ranges ``ranges_a`` (no return = inf) and ``par_a`` = (ix, iy, ith: the inverse of its
     laser pose, map → reference sensor frame; angle_min, increment, rad; full fan 1 / 0; reach: a no-return beam saw
     through everything closer, m). A reference with increment 0 or not finite has no beam
-    geometry and sees nothing. The test of a point and a reference is
-    :meth:`dynslam2d.detect.freespace.FreeSpaceMemory.seen_through_by`'s (its module docstring): bearing and range
-    in the reference sensor frame, the nearest beam and its two neighbours all farther than ρ + ``margin``.
+    geometry and sees nothing. The test of a point and a reference (:mod:`dynslam2d.detect.freespace`'s docstring):
+    bearing and range in the reference sensor frame, the nearest beam and its two neighbours all farther than
+    ρ + ``margin`` (or no return within reach); outside a partial fan is unknown.
     """
     n = pts.shape[0]
     ca = math.cos(par_a[2])
