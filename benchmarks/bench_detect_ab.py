@@ -4,7 +4,8 @@
 scan-to-scan noise. This runs this checkout's pipeline over an input once and records the arguments of
 
   * ``fit_clusters`` (the tracker's shape fits, one call per scan),
-  * ``vacated_outlines_kernel`` (the pipeline's vacated footprints, one call per scan with a map),
+  * ``vacated_outlines`` (the pipeline's vacated footprints, one call per scan with a map; timed while the
+    pipeline runs, both versions on the call's arguments, as the map is too large to keep a copy per scan),
   * the free-space fractions read late: ``FreeTest.fraction`` (a detection's own fraction, all reference scans)
     and the vacated part of a track's entry (``FreeSpaceMemory.count_seen_by``; the other checkout's
     ``seen_through_by`` and ``np.count_nonzero`` where it has no ``count_seen_by``),
@@ -56,15 +57,19 @@ def load_other(src: Path, rel: str, name: str, deps: dict | None = None):
     return mod
 
 
-def record(scans: list) -> dict:
-    """This checkout's pipeline over ``scans``; the recorded calls of every timed part (module docstring)."""
-    from dynslam2d.detect import freespace, mapevidence, tracker
+def record(scans: list, other_vacated, reps: int) -> tuple[dict, list]:
+    """This checkout's pipeline over ``scans``: the recorded calls of the parts timed afterwards (module docstring),
+    and per call of ``vacated_outlines`` (timed as it happens, against ``other_vacated``: its map is too large to
+    keep a copy per scan) the minima over ``reps`` alternated calls (this ns, other ns) and whether the results
+    were equal."""
+    from dynslam2d import pipeline
+    from dynslam2d.detect import freespace, tracker
     from dynslam2d.pipeline import Pipeline
 
-    rec: dict[str, list] = {"fit_clusters": [], "vacated_outlines_kernel": [], "free fraction": [],
-                            "vacated read": []}
+    rec: dict[str, list] = {"fit_clusters": [], "free fraction": [], "vacated read": []}
+    live: list[tuple[int, int, bool]] = []
     made: dict[int, tuple] = {}  # id(ref) → (scan, pose, valid) it was made from
-    fit0, vac0 = tracker.fit_clusters, mapevidence.vacated_outlines_kernel
+    fit0, vac0 = tracker.fit_clusters, pipeline.vacated_outlines
     make0, frac0, count0 = freespace.FreeSpaceMemory.make_ref, freespace.FreeTest.fraction, \
         freespace.FreeSpaceMemory.count_seen_by
 
@@ -75,9 +80,19 @@ def record(scans: list) -> dict:
         rec["fit_clusters"].append(copies(a))
         return fit0(*a)
 
-    def vac(*a):
-        rec["vacated_outlines_kernel"].append(copies(a))
-        return vac0(*a)
+    def vac(*a, **k):
+        fn = {"this": vac0, "other": other_vacated}
+        best, out = {"this": 1 << 62, "other": 1 << 62}, {}
+        for r in range(reps):
+            for tag in (("other", "this") if (r + len(live)) % 2 == 0 else ("this", "other")):
+                t0 = time.thread_time_ns()
+                out[tag] = fn[tag](*a, **k)
+                best[tag] = min(best[tag], time.thread_time_ns() - t0)
+        a_, b_ = out["this"], out["other"]
+        same = (a_.rows.tobytes(), a_.cols.tobytes(), a_.seen_through, a_.outlines, a_.sizes) == \
+            (b_.rows.tobytes(), b_.cols.tobytes(), b_.seen_through, b_.outlines, b_.sizes)
+        live.append((best["this"], best["other"], same))
+        return out["this"]
 
     def make_ref(scan, pose, valid):
         ref = make0(scan, pose, valid)
@@ -92,7 +107,7 @@ def record(scans: list) -> dict:
         rec["vacated read"].append(([made[id(ref)][1:]], self.margin, points.copy()))
         return count0(self, ref, points)
 
-    tracker.fit_clusters, mapevidence.vacated_outlines_kernel = fit, vac
+    tracker.fit_clusters, pipeline.vacated_outlines = fit, vac
     freespace.FreeSpaceMemory.make_ref = staticmethod(make_ref)
     freespace.FreeTest.fraction, freespace.FreeSpaceMemory.count_seen_by = fraction, count_seen_by
     try:
@@ -100,29 +115,25 @@ def record(scans: list) -> dict:
         for s in scans:
             p.process(s)
     finally:
-        tracker.fit_clusters, mapevidence.vacated_outlines_kernel = fit0, vac0
+        tracker.fit_clusters, pipeline.vacated_outlines = fit0, vac0
         freespace.FreeSpaceMemory.make_ref = staticmethod(make0)
         freespace.FreeTest.fraction, freespace.FreeSpaceMemory.count_seen_by = frac0, count0
-    return rec
+    return rec, live
 
 
 def callers(other_src: Path) -> dict:
     """Per part: ((prepare, call) of this checkout, (prepare, call) of the other one): ``prepare`` turns one recorded
     call into the arguments of ``call`` (untimed: e.g. the reference scans of a free-space read, which the pipeline
     makes once per scan), ``call`` returns a comparable result."""
-    from dynslam2d.detect import freespace, mapevidence, shapes
+    from dynslam2d.detect import freespace, shapes
 
     o_kernels = load_other(other_src, "detect/kernels.py", "other_kernels")
     o_shapes = load_other(other_src, "detect/shapes.py", "other_shapes")
-    o_me = load_other(other_src, "detect/mapevidence.py", "other_mapevidence")
     o_free = load_other(other_src, "detect/freespace.py", "other_freespace",
                         {"dynslam2d.detect.kernels": o_kernels})
 
     def same(a):
         return a
-
-    def vac_key(out: tuple) -> tuple:
-        return tuple(x.tobytes() if isinstance(x, np.ndarray) else x for x in out)
 
     def refs_of(mod):
         def prep(rec):
@@ -144,8 +155,6 @@ def callers(other_src: Path) -> dict:
     return {
         "fit_clusters": ((same, lambda a: shapes.fit_clusters(*a).tobytes()),
                          (same, lambda a: o_shapes.fit_clusters(*a).tobytes())),
-        "vacated_outlines_kernel": ((same, lambda a: vac_key(mapevidence.vacated_outlines_kernel(*a))),
-                                    (same, lambda a: vac_key(o_me.vacated_outlines_kernel(*a)))),
         "free fraction": ((refs_of(freespace), fraction), (refs_of(o_free), fraction)),
         "vacated read": ((refs_of(freespace), read), (refs_of(o_free), read)),
     }
@@ -161,10 +170,11 @@ def main() -> None:
     from dynslam2d.inputs import open_source
 
     calls = callers(args.other)
+    o_me = load_other(args.other, "detect/mapevidence.py", "other_mapevidence")
     for name in args.inputs:
         rel, topic = INPUTS[name]
         scans = list(open_source(rel if rel.startswith("sim:") else str(args.data / rel), topic))
-        rec = record(scans)
+        rec, live = record(scans, o_me.vacated_outlines, args.reps)
         print(f"{name}: {len(scans)} scans; µs per scan (sums of per-call minima over {args.reps} alternated "
               "repetitions), other → this")
         for part, sides in calls.items():
@@ -187,6 +197,9 @@ def main() -> None:
             to, tt = (sum(best[k]) / len(scans) / 1e3 for k in ("other", "this"))
             print(f"  {part:26s} {len(got):5d} calls  {to:8.2f} → {tt:8.2f}  (×{tt / to:.2f})  "
                   f"{'identical' if same else 'DIFFERENT'}")
+        tt, to = (sum(x[q] for x in live) / len(scans) / 1e3 for q in (0, 1))
+        print(f"  {'vacated_outlines':26s} {len(live):5d} calls  {to:8.2f} → {tt:8.2f}  (×{tt / to:.2f})  "
+              f"{'identical' if all(x[2] for x in live) else 'DIFFERENT'}  (timed during the run)")
 
 
 if __name__ == "__main__":
