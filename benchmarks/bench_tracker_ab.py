@@ -271,8 +271,9 @@ def split(scans: list) -> tuple[float, dict[str, float]]:
         for n, f in saved.items():
             setattr(this, n, timed(f, n))
         if p.tracker._free is not None:
-            for n in ("seen_through", "seen_through_by", "make_ref", "add"):
-                setattr(p.tracker._free, n, timed(getattr(p.tracker._free, n), f"free-space memory ({n})"))
+            for n in ("seen_through", "seen_through_by", "count_seen_by", "make_ref", "add"):
+                if hasattr(p.tracker._free, n):  # (names of either checkout's memory)
+                    setattr(p.tracker._free, n, timed(getattr(p.tracker._free, n), f"free-space memory ({n})"))
         p.tracker.update = timed(p.tracker.update, "update")
         for s in scans:
             p.process(s)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from dynslam2d.detect import DetectConfig, Tracker, fit_clusters, search_angles, segment_scan
-from dynslam2d.detect.freespace import FreeSpaceMemory
+from dynslam2d.detect.freespace import FreeSpaceMemory, FreeTest
 from dynslam2d.detect.kernels import (
     _pairwise_sum,
     classify_batch,
@@ -45,7 +45,7 @@ from dynslam2d.detect.layout import (
 from dynslam2d.detect.reference import classify_and_bound, measure
 from dynslam2d.detect.shapes import CRITERIA, _lu_solve3
 from dynslam2d.sim import simulate
-from dynslam2d.types import Pose2D
+from dynslam2d.types import Pose2D, Scan
 
 
 def test_kind_table_maps_codes_and_names_both_ways() -> None:
@@ -189,7 +189,8 @@ def test_free_space_kernel_matches_numpy(fov) -> None:
     ref = mem.make_ref(sim.scans[0], poses[0], sim.scans[0].valid_mask())
     rng = np.random.default_rng(0)
     pts = rng.uniform(-8.0, 8.0, size=(5000, 2))
-    got = mem.seen_through_by(ref, pts)
+    got = np.zeros(pts.shape[0], dtype=bool)
+    assert FreeTest((ref,), mem.margin).count(pts, got) == got.sum()  # (the runtime test, one reference)
     want = _seen_through_numpy(ref, pts, mem.margin)
     np.testing.assert_array_equal(got, want)
     assert 200 < got.sum() < 4800  # both answers occur
@@ -219,11 +220,51 @@ def test_free_space_references_and_flags_into_a_given_mask() -> None:
     pts = rng.uniform(-8.0, 8.0, size=(3000, 2))
     now = float(stamps[-1]) + 0.05
     base = mem.seen_through(pts, now)
+    refs = mem._refs(now)
+    assert len(refs) == 2
+    # every reference in one kernel call: the OR of the per-reference numpy tests
+    np.testing.assert_array_equal(base, _seen_through_numpy(refs[0], pts, mem.margin)
+                                  | _seen_through_numpy(refs[1], pts, mem.margin))
+    assert (base != _seen_through_numpy(refs[0], pts, mem.margin)).any()  # (the second reference adds points)
     test = mem.test_at(now)
     mem.clear()  # (the memory moves on — here it forgets every scan — the kept test does not)
     assert not mem.seen_through(pts, now).any()
     assert test.fraction(pts) == int(np.count_nonzero(base)) / 3000
     assert 100 < base.sum() < 2900
+
+
+def test_free_test_with_references_of_different_beam_counts() -> None:
+    """A kept test whose reference scans differ in beam count and fan (a full one and 400 of its 720 beams), in both
+    orders and with a third reference (two kernel calls): its count and flags are the OR of the per-reference numpy
+    tests, points already flagged stay and count too, and a single reference's count is that of its own mask."""
+    sim = simulate("crowd", duration=0.5)
+    full = sim.scans[3]
+    s0 = sim.scans[0]
+    part = Scan(s0.stamp, s0.angle_min + 100 * s0.angle_increment, s0.angle_increment, s0.ranges[100:500].copy(),
+                s0.range_min, s0.range_max)  # (400 of the 720 beams: a partial fan)
+    mem = FreeSpaceMemory()
+    ra = mem.make_ref(full, Pose2D.from_array(sim.ground_truth.poses_in("first")[3]), full.valid_mask())
+    rb = mem.make_ref(part, Pose2D(0.4, -0.3, 0.5), part.valid_mask())
+    assert ra.full and not rb.full
+    assert ra.ranges.shape[0] != rb.ranges.shape[0]
+    rng = np.random.default_rng(8)
+    pts = rng.uniform(-8.0, 8.0, size=(4000, 2))
+    want = _seen_through_numpy(ra, pts, mem.margin) | _seen_through_numpy(rb, pts, mem.margin)
+    rc = mem.make_ref(full, Pose2D(-1.0, 0.5, 2.0), full.valid_mask())
+    want3 = want | _seen_through_numpy(rc, pts, mem.margin)
+    assert want3.sum() > want.sum()
+    assert FreeTest((ra, rb, rc), mem.margin).fraction(pts) == int(np.count_nonzero(want3)) / 4000
+    assert FreeTest((), mem.margin).fraction(pts) == 0.0
+    for refs in ((ra, rb), (rb, ra)):
+        test = FreeTest(refs, mem.margin)
+        free = np.zeros(4000, dtype=bool)
+        free[:7] = True  # (flags already set stay and count)
+        assert test.count(pts, free) == int(np.count_nonzero(want | (np.arange(4000) < 7)))
+        np.testing.assert_array_equal(free[7:], want[7:])
+        assert test.fraction(pts) == int(np.count_nonzero(want)) / 4000
+    for ref in (ra, rb):
+        assert mem.count_seen_by(ref, pts) == int(np.count_nonzero(_seen_through_numpy(ref, pts, mem.margin)))
+    assert 100 < want.sum() < 3900
 
 
 def test_fragment_hosts_match_the_per_track_test() -> None:

@@ -74,6 +74,96 @@ def test_batch_kernel_matches_numpy_fit() -> None:
                 assert coarse[c, 0] == pytest.approx(ref.theta, abs=math.radians(1.01))
 
 
+def _plain_rect_row(x: list[float], y: list[float], cos_t: list[float], sin_t: list[float], criterion: int,
+                    d0: float, stride: int) -> list[float]:
+    """θ, lo1, hi1, lo2, hi2, rms of one cluster with every angle scored in plain float arithmetic: the sums of
+    squares to both edges taken point by point in order (the decision the kernel may take from the bound of
+    shapes._near_side_known instead), the same coarse-to-fine order and tie rules."""
+    n, kk = len(x), len(cos_t)
+
+    def project(c: float, s: float) -> tuple:
+        c1 = [c * x[i] + s * y[i] for i in range(n)]
+        c2 = [-s * x[i] + c * y[i] for i in range(n)]
+        lo1, hi1, lo2, hi2 = math.inf, -math.inf, math.inf, -math.inf
+        for u, v in zip(c1, c2):
+            lo1, hi1, lo2, hi2 = min(lo1, u), max(hi1, u), min(lo2, v), max(hi2, v)
+        return c1, c2, lo1, hi1, lo2, hi2
+
+    def score(k: int) -> float:
+        c1, c2, lo1, hi1, lo2, hi2 = project(cos_t[k], sin_t[k])
+        if criterion == 0:
+            return -(hi1 - lo1) * (hi2 - lo2)
+        sa1 = sb1 = sa2 = sb2 = 0.0
+        for u, v in zip(c1, c2):
+            sa1 += (hi1 - u) ** 2
+            sb1 += (u - lo1) ** 2
+            sa2 += (hi2 - v) ** 2
+            sb2 += (v - lo2) ** 2
+        h1, h2 = sa1 < sb1, sa2 < sb2
+        d = [(hi1 - u if h1 else u - lo1, hi2 - v if h2 else v - lo2) for u, v in zip(c1, c2)]
+        if criterion == 1:
+            sc = 0.0
+            for d1, d2 in d:
+                sc += 1.0 / max(min(d1, d2), d0)
+            return sc
+        s1 = q1 = s2 = q2 = 0.0
+        m1 = m2 = 0
+        for d1, d2 in d:
+            if d1 < d2:
+                s1, q1, m1 = s1 + d1, q1 + d1 * d1, m1 + 1
+            else:
+                s2, q2, m2 = s2 + d2, q2 + d2 * d2, m2 + 1
+        v1 = q1 / m1 - (s1 / m1) ** 2 if m1 > 0 else 0.0
+        v2 = q2 / m2 - (s2 / m2) ** 2 if m2 > 0 else 0.0
+        return -v1 - v2
+
+    best, best_k = -math.inf, 0
+    for k in range(0, kk, stride):
+        sc = score(k)
+        if sc > best + 1e-12:
+            best, best_k = sc, k
+    if stride > 1:
+        centre = best_k
+        for dk in range(-stride + 1, stride):
+            if dk:
+                k = (centre + dk) % kk
+                sc = score(k)
+                if sc > best + 1e-12 or (abs(sc - best) <= 1e-12 and k < best_k):
+                    best, best_k = sc, k
+    c1, c2, lo1, hi1, lo2, hi2 = project(cos_t[best_k], sin_t[best_k])
+    ss = 0.0
+    for u, v in zip(c1, c2):
+        r = min(min(hi1 - u, u - lo1), min(hi2 - v, v - lo2))
+        ss += r * r
+    return [math.atan2(sin_t[best_k], cos_t[best_k]), lo1, hi1, lo2, hi2, math.sqrt(ss / n)]
+
+
+def test_batch_kernel_is_bit_identical_to_plain_sums_also_on_ties() -> None:
+    """The kernel decides each axis' nearer edge from a bound when the sums of squares cannot compare otherwise
+    (shapes._near_side_known) and sums them where they might: its rows equal the plain sums' bit for bit, on noisy
+    L-shapes far from the origin (map frame) and on clusters built so that the two sums tie (points symmetric about
+    their middle along an axis: equal sums in exact arithmetic, the bound must leave them to the sums)."""
+    rng = np.random.default_rng(11)
+    clusters = [l_shape(rng.uniform(-40, 40), rng.uniform(-40, 40), rng.uniform(0, math.pi), rng.uniform(0.1, 2.0),
+                        rng.uniform(0.05, 1.0), int(rng.integers(3, 40)), 0.01, q) for q in range(40)]
+    for q in range(12):  # symmetric point sets: ties of the sums at several angles (0°, 45°, 90° of a square grid)
+        g = np.arange(-(q % 4) - 1, (q % 4) + 2, dtype=float) * 0.05
+        xx, yy = np.meshgrid(g, g if q % 2 else g[:2])
+        clusters.append(np.column_stack((xx.ravel() + (q - 6) * 3.0, yy.ravel() + 12.5)))
+    clusters.append(np.array([[1.0, 2.0], [1.0, 2.0], [1.0, 2.0]]))  # zero width: always the sums
+    pts = np.vstack(clusters)
+    offsets = np.cumsum([0] + [c.shape[0] for c in clusters])
+    angles = search_angles(1.0)
+    cos_t, sin_t = np.cos(angles).tolist(), np.sin(angles).tolist()
+    for criterion in (0, 1, 2):
+        for stride in (1, 5):
+            out = fit_clusters(pts[:, 0].copy(), pts[:, 1].copy(), offsets, np.ones(len(clusters), dtype=bool),
+                               angles, criterion, 0.01, 5, stride)
+            for c, cl in enumerate(clusters):
+                want = _plain_rect_row(cl[:, 0].tolist(), cl[:, 1].tolist(), cos_t, sin_t, criterion, 0.01, stride)
+                assert out[c, :6].tolist() == want, (criterion, stride, c)
+
+
 @pytest.mark.parametrize("pts", [np.zeros((0, 2)), np.array([[1.0, 2.0]]), np.array([[1.0, 2.0], [1.0, 2.0]]),
                                  np.column_stack((np.linspace(0, 1, 5), np.zeros(5)))])
 def test_degenerate_clusters_never_give_nan(pts: np.ndarray) -> None:

@@ -13,6 +13,7 @@ import numpy as np
 from conftest import room_box_scan
 
 from dynslam2d.detect import DetectConfig, Tracker
+from dynslam2d.detect.freespace import FreeTest
 from dynslam2d.detect.kernels import segment_means
 from dynslam2d.detect.layout import F_CENTROID_X, F_CENTROID_Y, N_FIT_COLS
 from dynslam2d.detect.tracker import _nearest_age
@@ -68,7 +69,9 @@ def _vacated_reference(tr: Tracker, t: float) -> dict[int, float]:
                 counts.append(k.past[j][1].shape[0])
     out: dict[int, float] = {}
     if chunks:
-        free = tr._free.seen_through_by(tr._cur_ref, np.concatenate(chunks))
+        pts = np.concatenate(chunks)
+        free = np.zeros(pts.shape[0], dtype=bool)
+        FreeTest((tr._cur_ref,), tr._free.margin).count(pts, free)  # (the runtime test, this scan's reference)
         for tid, f in zip(owners, segment_means(free.astype(np.float64), np.cumsum(counts)).tolist()):
             out[tid] = max(out.get(tid, 0.0), f)
     return out

@@ -124,9 +124,9 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
-    ('dynslam2d.detect.kernels.seen_through_kernel',
-     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, float64, float64, Array(float64, 1, 'C'), "
-     "float64, float64, bool, float64, float64, Array(bool, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.seen_through_refs',
+     "(Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
+     "Array(float64, 1, 'C'), int64, float64, Array(bool, 1, 'C'),)"),
     ('dynslam2d.filter._exclusion_kernel',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(int64, 1, 'C'),)"),

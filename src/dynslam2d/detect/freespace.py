@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dynslam2d.detect.frozen import fast_init
-from dynslam2d.detect.kernels import seen_through_kernel
+from dynslam2d.detect.kernels import seen_through_refs
 from dynslam2d.types import Pose2D, Scan
 
 
@@ -34,7 +34,9 @@ class _Ref:
     increment: float
     full: bool
     reach: float  # a no-return beam saw through everything closer than this, m
-    inv: tuple[float, float, float]  # pose.inverse() as (x, y, θ): map → reference sensor frame (made once)
+    # (7,) its parameters for seen_through_refs: pose.inverse() (x, y, θ: map → reference sensor frame, made once),
+    # angle_min, increment, full, reach
+    par: np.ndarray
 
 
 _make_ref = fast_init(_Ref)  # (the frozen dataclass without its __init__'s object.__setattr__, detect/frozen.py)
@@ -64,8 +66,9 @@ class FreeSpaceMemory:
         r = np.where(valid, scan.ranges, np.inf)
         full = scan.n_beams * abs(scan.angle_increment) >= 2.0 * math.pi - 1.5 * abs(scan.angle_increment)
         inv = pose.inverse()
-        return _make_ref(float(scan.stamp), pose, r, float(scan.angle_min), float(scan.angle_increment), full,
-                         float(scan.range_max), (inv.x, inv.y, inv.theta))
+        amin, inc, reach = float(scan.angle_min), float(scan.angle_increment), float(scan.range_max)
+        par = np.array([inv.x, inv.y, inv.theta, amin, inc, 1.0 if full else 0.0, reach])
+        return _make_ref(float(scan.stamp), pose, r, amin, inc, full, reach, par)
 
     def add(self, scan: Scan, pose: Pose2D, valid: np.ndarray, ref: _Ref | None = None) -> None:
         """Remember ``scan`` (taken at ``pose``, map frame); ``valid`` marks beams with a return."""
@@ -91,27 +94,18 @@ class FreeSpaceMemory:
 
     def seen_through(self, points: np.ndarray, now: float) -> np.ndarray:
         """(n,) bool: the (n, 2) map-frame points lay in space that a reference scan saw as free."""
-        n = points.shape[0]
-        free = np.zeros(n, dtype=bool)
-        if n == 0:
-            return free
-        px = np.ascontiguousarray(points[:, 0])
-        py = np.ascontiguousarray(points[:, 1])
-        for ref in self._refs(now):
-            self._test(ref, px, py, free)
+        free = np.zeros(points.shape[0], dtype=bool)
+        if points.shape[0] and (test := self.test_at(now)) is not None:
+            test.count(points, free)
         return free
 
-    def seen_through_by(self, ref: _Ref, points: np.ndarray) -> np.ndarray:
-        """(n,) bool: the scan ``ref`` saw through the (n, 2) map-frame points."""
-        n = points.shape[0]
-        free = np.zeros(n, dtype=bool)
-        if n:
-            self._test(ref, np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]), free)
-        return free
-
-    def _test(self, ref: _Ref, px: np.ndarray, py: np.ndarray, free: np.ndarray) -> None:
-        """OR into ``free`` the points (x ``px``, y ``py``, map frame) that ``ref`` saw through (:func:`_seen_by`)."""
-        _seen_by(ref, px, py, self.margin, free)
+    def count_seen_by(self, ref: _Ref, points: np.ndarray) -> int:
+        """How many of the (n, 2) map-frame points the scan ``ref`` saw through (module docstring; one kernel call, no
+        mask kept: a track's vacated space, read late)."""
+        if not points.shape[0]:
+            return 0
+        return seen_through_refs(np.ascontiguousarray(points, dtype=np.float64), ref.ranges, ref.par, ref.ranges,
+                                 ref.par, 1, self.margin, np.zeros(points.shape[0], dtype=bool))
 
     def test_at(self, now: float) -> FreeTest | None:
         """The free-space test of a scan at ``now`` (s) kept for later: the reference scans it uses now (None when
@@ -119,17 +113,6 @@ class FreeSpaceMemory:
         test keeps its own (:class:`FreeTest`)."""
         refs = self._refs(now)
         return FreeTest(tuple(refs), self.margin) if refs else None
-
-
-def _seen_by(ref: _Ref, px: np.ndarray, py: np.ndarray, margin: float, free: np.ndarray) -> None:
-    """OR into ``free`` the points (x ``px``, y ``py``, map frame) that ``ref`` saw through: bearing and
-    range in the reference sensor frame, the nearest beam and its two neighbours all farther than
-    ρ + ``margin`` (or no return within reach); outside a partial fan is unknown (module docstring)."""
-    if ref.increment == 0.0 or not math.isfinite(ref.increment):
-        return  # a degenerate reference scan has no beam geometry: nothing is known to be free
-    ix, iy, ith = ref.inv  # (ref.pose.inverse(), made with the reference)
-    seen_through_kernel(px, py, ix, iy, ith, ref.ranges, ref.angle_min, ref.increment, ref.full,
-                        ref.reach, margin, free)
 
 
 class FreeTest:
@@ -143,15 +126,25 @@ class FreeTest:
         self.refs = refs
         self.margin = margin
 
+    def count(self, points: np.ndarray, free: np.ndarray) -> int:
+        """OR into ``free`` the (n, 2) map-frame ``points`` a reference scan saw through; returns how many ``free``
+        holds then. Two references per kernel call (:func:`dynslam2d.detect.kernels.seen_through_refs`: one call
+        for the default two reference ages)."""
+        pts = np.ascontiguousarray(points, dtype=np.float64)
+        refs, margin = self.refs, self.margin
+        if not refs:
+            return int(np.count_nonzero(free))
+        for q in range(0, len(refs), 2):
+            two = q + 1 < len(refs)
+            a = refs[q]
+            b = refs[q + 1] if two else a
+            count = seen_through_refs(pts, a.ranges, a.par, b.ranges, b.par, 2 if two else 1, margin, free)
+        return count
+
     def fraction(self, points: np.ndarray) -> float:
         """Fraction of the (n, 2) map-frame ``points`` that a reference scan saw through (0 for none): the count
         over n, as the tracker's per-detection mean (:func:`dynslam2d.detect.kernels.mask_fractions`)."""
         n = points.shape[0]
         if n == 0:
             return 0.0
-        free = np.zeros(n, dtype=bool)
-        px = np.ascontiguousarray(points[:, 0])
-        py = np.ascontiguousarray(points[:, 1])
-        for ref in self.refs:
-            _seen_by(ref, px, py, self.margin, free)
-        return int(np.count_nonzero(free)) / n
+        return self.count(points, np.zeros(n, dtype=bool)) / n

@@ -2,7 +2,7 @@
 
 The readable reference versions are :func:`dynslam2d.detect.reference.classify_and_bound`,
 :func:`dynslam2d.detect.reference.measure` and
-:meth:`dynslam2d.detect.freespace.FreeSpaceMemory.seen_through_by`; the kernels here do the
+:class:`dynslam2d.detect.freespace.FreeTest`; the kernels here do the
 same arithmetic for every cluster / pair / point of a scan in one pass, so that
 ``Tracker.update`` pays the Python overhead once per scan instead of once per detection
 (issue 4, Speed). ``tests/test_detect_kernels.py`` checks them against the reference versions.
@@ -691,42 +691,65 @@ def kalman_update_batch(X: np.ndarray, P: np.ndarray, H: np.ndarray, zm: np.ndar
 
 
 @njit(cache=True)
-def seen_through_kernel(px: np.ndarray, py: np.ndarray, ix: float, iy: float, ith: float, ranges: np.ndarray,
-                        angle_min: float, increment: float, full: bool, reach: float, margin: float,
-                        free: np.ndarray) -> None:
-    """OR into ``free`` the points (map frame) that a reference scan saw through.
+def seen_through_refs(pts: np.ndarray, ranges_a: np.ndarray, par_a: np.ndarray, ranges_b: np.ndarray,
+                      par_b: np.ndarray, nref: int, margin: float, free: np.ndarray) -> int:
+    """OR into ``free`` the (n, 2) map-frame points ``pts`` that one of ``nref`` (1 or 2) reference scans saw
+    through; returns how many points ``free`` then holds (the count of a detection's fraction: the references of
+    a test in one call, no mask per reference; more references: further calls OR-ing into the same ``free``).
 
-    ``(ix, iy, ith)`` is the inverse of the reference laser pose (map → reference sensor frame);
-    the rest as :meth:`dynslam2d.detect.freespace.FreeSpaceMemory.seen_through_by`.
+    Reference a (b): its ranges ``ranges_a`` (no return = inf) and ``par_a`` = (ix, iy, ith: the inverse of its
+    laser pose, map → reference sensor frame; angle_min, increment, rad; full fan 1 / 0; reach: a no-return beam saw
+    through everything closer, m). A reference with increment 0 or not finite has no beam
+    geometry and sees nothing. The test of a point and a reference (:mod:`dynslam2d.detect.freespace`'s docstring):
+    bearing and range in the reference sensor frame, the nearest beam and its two neighbours all farther than
+    ρ + ``margin`` (or no return within reach); outside a partial fan is unknown.
     """
-    n = px.shape[0]
-    m = ranges.shape[0]
-    c = math.cos(ith)
-    s = math.sin(ith)
+    n = pts.shape[0]
+    ca = math.cos(par_a[2])
+    sa = math.sin(par_a[2])
+    cb = math.cos(par_b[2])
+    sb = math.sin(par_b[2])
+    count = 0
     for i in range(n):
         if free[i]:
-            continue  # (seen through by an earlier reference already: nothing to add)
-        lx = c * px[i] - s * py[i] + ix
-        ly = s * px[i] + c * py[i] + iy
-        rho = math.hypot(lx, ly)
-        phi = math.atan2(ly, lx)
-        idx = int(np.rint((phi - angle_min) / increment))
-        if full:
-            idx %= m
-        else:
-            if idx < 0 or idx >= m:
-                idx = int(np.rint((phi + 2.0 * math.pi - angle_min) / increment))
-            if not (idx >= 1 and idx < m - 1):
+            count += 1
+            continue
+        x = pts[i, 0]
+        y = pts[i, 1]
+        for r in range(nref):
+            ranges = ranges_a if r == 0 else ranges_b
+            par = par_a if r == 0 else par_b
+            increment = par[4]
+            if increment == 0.0 or not math.isfinite(increment):
                 continue
-        lo = (idx - 1) % m
-        hi = (idx + 1) % m
-        rmin = min(min(ranges[idx], ranges[lo]), ranges[hi])
-        if math.isinf(rmin):
-            beyond = rho < reach - margin
-        else:
-            beyond = rmin > rho + margin
-        if beyond:
-            free[i] = True
+            c = ca if r == 0 else cb
+            s = sa if r == 0 else sb
+            lx = c * x - s * y + par[0]
+            ly = s * x + c * y + par[1]
+            rho = math.hypot(lx, ly)
+            phi = math.atan2(ly, lx)
+            angle_min = par[3]
+            m = ranges.shape[0]
+            idx = int(np.rint((phi - angle_min) / increment))
+            if par[5] != 0.0:
+                idx %= m
+            else:
+                if idx < 0 or idx >= m:
+                    idx = int(np.rint((phi + 2.0 * math.pi - angle_min) / increment))
+                if not (idx >= 1 and idx < m - 1):
+                    continue
+            lo = (idx - 1) % m
+            hi = (idx + 1) % m
+            rmin = min(min(ranges[idx], ranges[lo]), ranges[hi])
+            if math.isinf(rmin):
+                beyond = rho < par[6] - margin
+            else:
+                beyond = rmin > rho + margin
+            if beyond:
+                free[i] = True
+                count += 1
+                break
+    return count
 
 
 @njit(cache=True)

@@ -144,6 +144,7 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
     h = logodds.shape[0]
     w = logodds.shape[1]
     cap = out_r.shape[0]
+    flat = logodds.ravel()  # (a view: the map is C-contiguous)
     n = 0
     for k in range(1, cx.shape[0] - 1):
         # both neighbouring beams must clear at least as far: the silhouette edge of a round object (a ray
@@ -184,17 +185,28 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
             step = -1
             start = min(a0, a_off + a_len - 1)
             cnt = start - max(a1, int(math.ceil(m0 - along)) - 1, a_off) + 1
-        # a branch-free first pass (it vectorises): most beams pass no long-occupied cell at all
+        # a branch-free first pass (it vectorises): most beams pass no long-occupied cell at all. One loop per major
+        # axis, each reading the flat map at row · w + column (no per-cell choice of the axes: ≈ ×0.85 on negative_2)
         first = cnt
         last = -1
-        for t in range(cnt):
-            a = start + step * t
-            bi = int(math.floor(n0 + slope * (a - m0) + 0.5)) - b_off
-            inside = (bi >= 0) & (bi < b_len)
-            bi = bi if inside else 0
-            hit = inside & (logodds[ar * (a - a_off) + br * bi, (1 - ar) * (a - a_off) + (1 - br) * bi] >= occ_thr)
-            first = min(first, t if hit else cnt)
-            last = max(last, t if hit else -1)
+        if x_major:  # (a: the column, b: the row)
+            for t in range(cnt):
+                a = start + step * t
+                bi = int(math.floor(n0 + slope * (a - m0) + 0.5)) - b_off
+                inside = (bi >= 0) & (bi < b_len)
+                bi = bi if inside else 0
+                hit = inside & (flat[bi * w + (a - a_off)] >= occ_thr)
+                first = min(first, t if hit else cnt)
+                last = max(last, t if hit else -1)
+        else:  # (a: the row, b: the column)
+            for t in range(cnt):
+                a = start + step * t
+                bi = int(math.floor(n0 + slope * (a - m0) + 0.5)) - b_off
+                inside = (bi >= 0) & (bi < b_len)
+                bi = bi if inside else 0
+                hit = inside & (flat[(a - a_off) * w + bi] >= occ_thr)
+                first = min(first, t if hit else cnt)
+                last = max(last, t if hit else -1)
         for t in range(first, last + 1):
             a = start + step * t
             b = n0 + slope * (a - m0)

@@ -140,81 +140,137 @@ def _project(x: np.ndarray, y: np.ndarray, c: float, s: float, c1: np.ndarray,
     return lo1, hi1, lo2, hi2
 
 
+#: unit roundoff of float64 (2^-53), for the error bound of :func:`_near_side_known`
+_U = 2.0 ** -53
+
+
 @njit(cache=True)
-def _score(x: np.ndarray, y: np.ndarray, c: float, s: float, criterion: int, d0: float, c1: np.ndarray,
-           c2: np.ndarray) -> float:
-    """Zhang et al. 2017 criterion of the axis angle (cos c, sin s); larger is better."""
-    n = x.shape[0]
-    lo1, hi1, lo2, hi2 = _project(x, y, c, s, c1, c2)
-    if criterion == 0:
-        return -(hi1 - lo1) * (hi2 - lo2)
-    sa1 = 0.0
-    sb1 = 0.0
-    sa2 = 0.0
-    sb2 = 0.0
-    for i in range(n):
-        sa1 += (hi1 - c1[i]) ** 2
-        sb1 += (c1[i] - lo1) ** 2
-        sa2 += (hi2 - c2[i]) ** 2
-        sb2 += (c2[i] - lo2) ** 2
-    use_hi1 = sa1 < sb1
-    use_hi2 = sa2 < sb2
-    if criterion == 1:
-        score = 0.0
-        for i in range(n):
-            d1 = hi1 - c1[i] if use_hi1 else c1[i] - lo1
-            d2 = hi2 - c2[i] if use_hi2 else c2[i] - lo2
-            score += 1.0 / max(min(d1, d2), d0)
-        return score
-    s1 = 0.0
-    q1 = 0.0
-    m1 = 0
-    s2 = 0.0
-    q2 = 0.0
-    m2 = 0
-    for i in range(n):
-        d1 = hi1 - c1[i] if use_hi1 else c1[i] - lo1
-        d2 = hi2 - c2[i] if use_hi2 else c2[i] - lo2
-        if d1 < d2:
-            s1 += d1
-            q1 += d1 * d1
-            m1 += 1
-        else:
-            s2 += d2
-            q2 += d2 * d2
-            m2 += 1
-    v1 = q1 / m1 - (s1 / m1) ** 2 if m1 > 0 else 0.0
-    v2 = q2 / m2 - (s2 / m2) ** 2 if m2 > 0 else 0.0
-    return -v1 - v2
+def _near_side_known(n: int, lo: float, hi: float, total: float) -> int:
+    """Which edge the points of one axis go to, without the pass over them when the float sums cannot disagree:
+    1 when Σ(hi − cᵢ)² < Σ(cᵢ − lo)² computed in sequence (the far edge ``hi``), 0 when not, −1 when undecided.
+
+    ``lo``/``hi`` are the smallest / largest of the n projections cᵢ and ``total`` their sum taken in order. Over the
+    reals SA − SB = w·E with w = hi − lo and E = n(hi + lo) − 2Σcᵢ, and SA + SB ≤ n·w². Each float sum of n
+    non-negative terms (each term one subtraction and one product) is within γ_{n+2}·SA of SA (Higham, Accuracy and
+    Stability of Numerical Algorithms, §3.1 and §4.2: γ_k = ku / (1 − ku), u = 2^-53), so when
+    |SA − SB| > γ_{n+2}·(SA + SB) the float comparison has the sign of the real one; E computed from ``total`` is
+    within γ_{n+3}·8nM of E (M = max(|lo|, |hi|)). The bound below holds both with a factor 4 to spare; otherwise
+    (ties, degenerate or non-finite values) −1 and the caller sums as before, so the flag is always the one of the
+    sums in sequence."""
+    w = hi - lo
+    m = max(abs(hi), abs(lo))
+    if not (w > 1e-100 and m < 1e100):  # (w² and the terms stay normal floats; no overflow; NaN fails too)
+        return -1
+    e = n * (hi + lo) - 2.0 * total
+    g = 8.0 * (n + 4) * _U
+    if abs(e) > g * (4.0 * n * m + n * w):
+        return 1 if e < 0.0 else 0
+    return -1
 
 
 @njit(cache=True)
 def _fit_one(x: np.ndarray, y: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray, criterion: int,
-             d0: float, out: np.ndarray, stride: int) -> None:
-    """Best angle over ``cos_t, sin_t``: every angle (stride 1), or every stride-th angle and then
-    the angles around the best one (coarse-to-fine)."""
+             d0: float, out: np.ndarray, stride: int, c1: np.ndarray, c2: np.ndarray, order: np.ndarray) -> None:
+    """Best angle over ``cos_t, sin_t`` by the Zhang et al. 2017 criterion (larger is better): every angle (stride
+    1), or every stride-th angle and then the angles around the best one (coarse-to-fine). ``c1``, ``c2`` (≥ n) and
+    ``order`` (≥ len(cos_t) + 2·stride) are work space.
+
+    One loop scores every angle in turn (the angles to score listed in ``order``, the fine ones appended once the
+    coarse best is known): no call per angle. Each point's edge is decided per axis from the sums of squares to
+    both edges (Zhang: the group goes to the nearer edge), by :func:`_near_side_known` when the float comparison
+    is certain, else by the sums themselves."""
     n = x.shape[0]
     kk = cos_t.shape[0]
-    c1 = np.empty(n)
-    c2 = np.empty(n)
+    step = max(stride, 1)
+    nq = 0
+    for k in range(0, kk, step):
+        order[nq] = k
+        nq += 1
+    ncoarse = nq
     best = -np.inf
     best_k = 0
-    step = max(stride, 1)
-    for k in range(0, kk, step):
-        sc = _score(x, y, cos_t[k], sin_t[k], criterion, d0, c1, c2)
-        if sc > best + 1e-12:
-            best = sc
-            best_k = k
-    if step > 1:
-        centre = best_k
-        for dk in range(-step + 1, step):
-            if dk == 0:
-                continue
-            k = (centre + dk) % kk
-            sc = _score(x, y, cos_t[k], sin_t[k], criterion, d0, c1, c2)
-            if sc > best + 1e-12 or (abs(sc - best) <= 1e-12 and k < best_k):
+    q = 0
+    while q < nq:
+        k = order[q]
+        c = cos_t[k]
+        s = sin_t[k]
+        lo1 = np.inf
+        hi1 = -np.inf
+        lo2 = np.inf
+        hi2 = -np.inf
+        t1 = 0.0
+        t2 = 0.0
+        for i in range(n):
+            u = c * x[i] + s * y[i]
+            v = -s * x[i] + c * y[i]
+            c1[i] = u
+            c2[i] = v
+            t1 += u
+            t2 += v
+            lo1 = min(lo1, u)
+            hi1 = max(hi1, u)
+            lo2 = min(lo2, v)
+            hi2 = max(hi2, v)
+        if criterion == 0:
+            sc = -(hi1 - lo1) * (hi2 - lo2)
+        else:
+            f1 = _near_side_known(n, lo1, hi1, t1)
+            f2 = _near_side_known(n, lo2, hi2, t2)
+            if f1 < 0 or f2 < 0:
+                sa1 = 0.0
+                sb1 = 0.0
+                sa2 = 0.0
+                sb2 = 0.0
+                for i in range(n):
+                    sa1 += (hi1 - c1[i]) ** 2
+                    sb1 += (c1[i] - lo1) ** 2
+                    sa2 += (hi2 - c2[i]) ** 2
+                    sb2 += (c2[i] - lo2) ** 2
+                use_hi1 = sa1 < sb1
+                use_hi2 = sa2 < sb2
+            else:
+                use_hi1 = f1 == 1
+                use_hi2 = f2 == 1
+            if criterion == 1:
+                sc = 0.0
+                for i in range(n):
+                    d1 = hi1 - c1[i] if use_hi1 else c1[i] - lo1
+                    d2 = hi2 - c2[i] if use_hi2 else c2[i] - lo2
+                    sc += 1.0 / max(min(d1, d2), d0)
+            else:
+                s1 = 0.0
+                q1 = 0.0
+                m1 = 0
+                s2 = 0.0
+                q2 = 0.0
+                m2 = 0
+                for i in range(n):
+                    d1 = hi1 - c1[i] if use_hi1 else c1[i] - lo1
+                    d2 = hi2 - c2[i] if use_hi2 else c2[i] - lo2
+                    if d1 < d2:
+                        s1 += d1
+                        q1 += d1 * d1
+                        m1 += 1
+                    else:
+                        s2 += d2
+                        q2 += d2 * d2
+                        m2 += 1
+                v1 = q1 / m1 - (s1 / m1) ** 2 if m1 > 0 else 0.0
+                v2 = q2 / m2 - (s2 / m2) ** 2 if m2 > 0 else 0.0
+                sc = -v1 - v2
+        if q < ncoarse:
+            if sc > best + 1e-12:
                 best = sc
                 best_k = k
+        elif sc > best + 1e-12 or (abs(sc - best) <= 1e-12 and k < best_k):
+            best = sc
+            best_k = k
+        q += 1
+        if q == ncoarse and step > 1:  # the fine angles: within one coarse step of the coarse best
+            for dk in range(-step + 1, step):
+                if dk != 0:
+                    order[nq] = (best_k + dk) % kk
+                    nq += 1
     c = cos_t[best_k]
     s = sin_t[best_k]
     lo1, hi1, lo2, hi2 = _project(x, y, c, s, c1, c2)
@@ -390,6 +446,12 @@ def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np
     sin_t = np.sin(angles)
     tmp = np.empty(6)
     tmpc = np.empty(4)
+    nmax = 0
+    for c in range(k):
+        nmax = max(nmax, offsets[c + 1] - offsets[c])
+    c1 = np.empty(nmax)  # (work space of _fit_one, once per call)
+    c2 = np.empty(nmax)
+    order = np.empty(cos_t.shape[0] + 2 * max(stride, 1), dtype=np.int64)
     for c in range(k):
         a = offsets[c]
         b = offsets[c + 1]
@@ -411,7 +473,7 @@ def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np
             out[c, F_RECT_RMS] = np.inf
             out[c, F_CIRCLE_RMS] = np.inf
             continue
-        _fit_one(xs, ys, cos_t, sin_t, criterion, d0, tmp, stride)
+        _fit_one(xs, ys, cos_t, sin_t, criterion, d0, tmp, stride, c1, c2, order)
         for q in range(6):  # θ, lo1, hi1, lo2, hi2, rms (the order of _fit_one); element-wise: a slice
             out[c, F_THETA + q] = tmp[q]  # assignment compiles numba's shape-error formatting (~4 s cold)
         if n >= circle_min_points:

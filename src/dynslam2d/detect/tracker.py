@@ -1078,7 +1078,7 @@ class Tracker:
         det, ref, t, past = entry
         return max(det.free_fraction, self._vacated_one(ref, t, past))
 
-    def _vacated_one(self, ref, t: float, past: tuple, count_nonzero=np.count_nonzero) -> float:
+    def _vacated_one(self, ref, t: float, past: tuple) -> float:
         """The vacated space of one track: the largest fraction of its stored points (``past``: (stamp s, (n, 2) map
         points) entries, ≥ 1) that the scan at ``t`` (s) sees through, against that scan's free-space reference
         ``ref`` — a receding object leaves free space behind its visible face. For each reference age the stored
@@ -1096,7 +1096,7 @@ class Tracker:
             last = j
             pts = past[j][1]
             npt = pts.shape[0]
-            f = int(count_nonzero(self._free.seen_through_by(ref, pts))) / npt if npt else 0.0
+            f = self._free.count_seen_by(ref, pts) / npt if npt else 0.0
             best = max(best, f)
         return best
 
