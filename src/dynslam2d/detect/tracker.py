@@ -1142,9 +1142,10 @@ class Tracker:
 
     def _manage(self, t: float, updated: set[int]) -> None:
         """Track management (M of N, deletions, clutter retirement) and the test of M (paper Eq. 3) of the updated
-        tracks. The entries of the states and covariances it reads are gathered from the state arrays once per scan
-        (the same floats ``ndarray.item`` gives); the test of M runs inline up to its common outcomes (tentative, or
-        not in M and at most v_min) with the scan's constants read once, the rest in :meth:`_dynamic`."""
+        tracks. The covariance test and the speed's σ of all live tracks come from their state rows in one kernel
+        call (``manage_rows``; the speeds are Python's ``math.hypot``, given to it); the test of M runs inline up to
+        its common outcomes (tentative, or not in M and at most v_min) with the scan's constants read once, the rest
+        in :meth:`_dynamic`."""
         tracks = self._tracks
         if not tracks:
             return
