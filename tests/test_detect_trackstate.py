@@ -186,3 +186,48 @@ def test_births_one_at_a_time_when_confirmed_at_once() -> None:
                 assert np.shares_memory(k.g, tr._G[k.row]) and t.kind == k.kind
     assert born == tr.stats.tracks_born >= 10
     assert any(t.hits >= 40 and t.in_m for t in out)
+
+
+def _manage_reference(P: np.ndarray, vx: float, vy: float, max_sig: float) -> tuple[bool, float]:
+    """The management's covariance test and σ of the speed along the velocity as its per-track Python computed them
+    before the kernel ``manage_rows`` (Python floats, math.sqrt, max)."""
+    if not np.isfinite(P).all():
+        return True, 0.0
+    p = P.tolist()
+    if math.sqrt(max(p[0][0], p[1][1])) > max_sig:
+        return True, 0.0
+    speed = math.hypot(vx, vy)
+    if speed > 1e-9:
+        u0, u1 = vx / speed, vy / speed
+        return False, math.sqrt(max((u0 * p[2][2] + u1 * p[3][2]) * u0 + (u0 * p[2][3] + u1 * p[3][3]) * u1, 0.0))
+    return False, math.sqrt(max(p[2][2], p[3][3]))
+
+
+def test_manage_rows_is_the_former_per_track_arithmetic() -> None:
+    """``manage_rows`` (the management's covariance test and speed σ of all live tracks) gives the per-track Python's
+    outcomes and floats bit for bit on random rows in a shuffled order: non-finite entries, a position σ just above
+    and below the limit, velocities at rest or below 1e-9, a velocity covariance whose quadratic form is negative
+    (σ 0), and velocities whose libm hypot differs from Python's math.hypot by an ulp (the speeds are given)."""
+    from dynslam2d.detect.kernels import manage_rows
+
+    rng = np.random.default_rng(7)
+    n = 4000
+    A = rng.normal(size=(n, 4, 4))
+    P = A @ A.transpose(0, 2, 1) * rng.uniform(0.01, 2.0, size=(n, 1, 1))
+    P[::97, 2, 3] = P[::97, 3, 2] = -5.0 * (P[::97, 2, 2] + P[::97, 3, 3])  # indefinite: uᵀ P_v u < 0 for some u
+    P[5::101, rng.integers(0, 4), rng.integers(0, 4)] = np.nan
+    P[7::103, 1, 1] = np.inf
+    max_sig = 1.5
+    P[11::53, 0, 0] = max_sig * max_sig
+    P[13::53, 0, 0] = np.nextafter(max_sig * max_sig, 10.0)
+    X = rng.normal(size=(n, 4)) * rng.choice([1e-12, 1e-3, 1.0, 30.0], size=(n, 1))
+    X[::17, 2:] = 0.0
+    vx, vy = X[:, 2].tolist(), X[:, 3].tolist()
+    speeds = [math.hypot(a, b) for a, b in zip(vx, vy)]
+    assert any(s != float(h) for s, h in zip(speeds, np.hypot(X[:, 2], X[:, 3])))  # (libm's hypot differs here)
+    rows = rng.permutation(n)
+    bad, sig = manage_rows(P, X, rows, np.array([speeds[r] for r in rows]), max_sig)
+    ref = [_manage_reference(P[r], vx[r], vy[r], max_sig) for r in rows.tolist()]
+    assert bad.tolist() == [b for b, _ in ref]
+    assert [s for s, b in zip(sig.tolist(), bad.tolist()) if not b] == [s for b, s in ref if not b]
+    assert 0 < bad.sum() < n and any(s == 0.0 for b, s in ref if not b)

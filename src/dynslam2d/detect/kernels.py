@@ -1223,3 +1223,39 @@ def association_rows(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, missed: np
         theta[i] = G[k, G_THETA]
         known[i] = missed[i] and (not kr or (Gi[k, GI_KNOWN0] != 0 and Gi[k, GI_KNOWN1] != 0))
     return tsize, tmax, rect, theta, known
+
+
+@njit(cache=True)
+def manage_rows(P: np.ndarray, X: np.ndarray, rows: np.ndarray, speed: np.ndarray, max_sig: float) -> tuple:
+    """The management's per-track tests from the state rows ``rows`` of the live tracks (in their order) and their
+    ``speed`` (n,) m/s (Python's ``math.hypot`` of the velocity, given: libm's hypot here can differ by an ulp):
+    (n,) bool "covariance fails" (an entry of P not finite, or sqrt(max(P[0, 0], P[1, 1])) > ``max_sig``, m) and
+    (n,) σ of the speed along the velocity, m/s (uᵀ P_v u with u = v / speed, or sqrt(max(P[2, 2], P[3, 3])) at a
+    speed ≤ 1e-9; 0 where the covariance fails). ``Tracker._manage``'s former Python arithmetic in the same order
+    (each operation rounded alone; max(a, b) is a unless b > a)."""
+    n = rows.shape[0]
+    bad = np.zeros(n, dtype=np.bool_)
+    sig = np.zeros(n)
+    for i in range(n):
+        k = rows[i]
+        fin = True
+        for a in range(4):
+            for b in range(4):
+                if not np.isfinite(P[k, a, b]):
+                    fin = False
+        p00 = P[k, 0, 0]
+        p11 = P[k, 1, 1]
+        if not fin or math.sqrt(p11 if p11 > p00 else p00) > max_sig:
+            bad[i] = True
+            continue
+        p22 = P[k, 2, 2]
+        p33 = P[k, 3, 3]
+        s = speed[i]
+        if s > 1e-9:
+            u0 = X[k, 2] / s
+            u1 = X[k, 3] / s
+            q = (u0 * p22 + u1 * P[k, 3, 2]) * u0 + (u0 * P[k, 2, 3] + u1 * p33) * u1
+            sig[i] = math.sqrt(0.0 if 0.0 > q else q)
+        else:
+            sig[i] = math.sqrt(p33 if p33 > p22 else p22)
+    return bad, sig

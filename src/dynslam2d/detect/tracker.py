@@ -73,6 +73,7 @@ from dynslam2d.detect.kernels import (
     gate_costs,
     kalman_update_batch,
     leg_pairs,
+    manage_rows,
     mask_fractions,
     measure_batch,
     merge_leg_pairs,
@@ -114,8 +115,7 @@ _make_box = fast_init(Box)
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
 _NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives it its row
 _ROWS0 = 64  # initial rows of the tracker's state arrays (doubled when full)
-_P_MANAGE = np.array([0, 5, 10, 11, 14, 15])  # P[0, 0], P[1, 1], P[2, 2], P[2, 3], P[3, 2], P[3, 3] of a raveled P
-_all_rows, _any_of = np.logical_and.reduce, np.logical_or.reduce  # (ndarray.all / any without the Python wrappers)
+_any_of = np.logical_or.reduce  # (ndarray.any without the Python wrapper)
 
 
 @dataclass
@@ -1142,9 +1142,10 @@ class Tracker:
 
     def _manage(self, t: float, updated: set[int]) -> None:
         """Track management (M of N, deletions, clutter retirement) and the test of M (paper Eq. 3) of the updated
-        tracks. The entries of the states and covariances it reads are gathered from the state arrays once per scan
-        (the same floats ``ndarray.item`` gives); the test of M runs inline up to its common outcomes (tentative, or
-        not in M and at most v_min) with the scan's constants read once, the rest in :meth:`_dynamic`."""
+        tracks. The covariance test and the speed's σ of all live tracks come from their state rows in one kernel
+        call (``manage_rows``; the speeds are Python's ``math.hypot``, given to it); the test of M runs inline up to
+        its common outcomes (tentative, or not in M and at most v_min) with the scan's constants read once, the rest
+        in :meth:`_dynamic`."""
         tracks = self._tracks
         if not tracks:
             return
@@ -1155,7 +1156,7 @@ class Tracker:
         merged = self._merged
         window, need_hits = tc.confirm_window, tc.confirm_hits
         max_coast, max_sig, max_speed = tc.max_coast_time, tc.max_position_sigma, tc.max_object_speed
-        sqrt, hypot = math.sqrt, math.hypot
+        hypot = math.hypot
         v_min = tc.v_min
         retire_n = tc.structure_retire_updates if self._map is not None else 0
         retire_s = tc.structure_retire_fraction
@@ -1165,13 +1166,14 @@ class Tracker:
         probe = self._free is not None
         slow_tail = f" m/s ≤ v_min {v_min:.2f}"  # (the most common reason's constant part)
         order = self._rows()
-        # per track: whether every entry of its covariance is finite (tested here on the rows as they are, instead of
-        # a flag kept in step wherever P changes), and its P[0, 0], P[1, 1], P[2:, 2:] and velocity as Python floats
-        Pf = self._P.reshape(-1, 16)[order]
-        fins = _all_rows(np.isfinite(Pf), axis=1).tolist()
-        pv = Pf[:, _P_MANAGE].tolist()
-        vv = self._X[order, 2:].tolist()
-        for k, (p00, p11, p22, p23, p32, p33), (vx, vy), fin in zip(tracks, pv, vv, fins):
+        # per track: its speed (Python's math.hypot, as the reasons print it), whether its covariance fails (tested on
+        # the rows as they are, instead of a flag kept in step wherever P changes) and σ of its speed along the
+        # velocity, from the state rows in one kernel call
+        vv = self._X[order, 2:]
+        speeds = list(map(hypot, vv[:, 0].tolist(), vv[:, 1].tolist()))
+        bads, sigs = manage_rows(self._P, self._X, order, np.array(speeds), max_sig)
+        bads, sigs = bads.tolist(), sigs.tolist()
+        for k, speed, sig, bad in zip(tracks, speeds, sigs, bads):
             kid = k.id
             is_upd = kid in updated
             if kid in merged and not is_upd and k.in_m:
@@ -1181,8 +1183,7 @@ class Tracker:
                 k.reason = "left M: merged with long-occupied map structure (its detection joined a wall's cluster)"
             if not is_upd:
                 k.misses += 1
-                if k.in_m and not k.remembered and k.slow_since is not None and self.config.memory.enabled \
-                        and self._hidden(k):
+                if k.in_m and not k.remembered and k.slow_since is not None and mem and self._hidden(k):
                     # stopped in M and hidden (something in front of it) before m_exit_time: it cannot finish its
                     # stop while unseen, so it is remembered now (if eligible) instead of being deleted after
                     # max_coast_time (a track that just vanishes in plain view, a false one, is not)
@@ -1208,11 +1209,10 @@ class Tracker:
                 st.deleted_coasting += 1
                 st.tracks_deleted += 1
                 continue
-            if not fin or sqrt(max(p00, p11)) > max_sig:
+            if bad:
                 st.deleted_covariance += 1
                 st.tracks_deleted += 1
                 continue
-            speed = hypot(vx, vy)
             if speed > max_speed:
                 st.deleted_speed += 1
                 st.tracks_deleted += 1
@@ -1229,11 +1229,6 @@ class Tracker:
                 continue
             if is_upd:
                 # paper Eq. 3 with persistence, certainty and displacement conditions (the start of _dynamic, inline)
-                if speed > 1e-9:
-                    u0, u1 = vx / speed, vy / speed
-                    sig = sqrt(max((u0 * p22 + u1 * p32) * u0 + (u0 * p23 + u1 * p33) * u1, 0.0))  # uᵀ P_v u
-                else:
-                    sig = sqrt(max(p22, p33))
                 kfast = k.fast + 1 if speed > v_min and sig < max_ssig else 0
                 k.fast = kfast
                 if speed < v_exit:
