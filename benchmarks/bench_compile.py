@@ -42,7 +42,7 @@ PROBE = r"""
 import json, sys, time
 c0 = time.process_time()
 import dynslam2d.jitcache as jc  # what the command line's main() does before numba is imported:
-for name in ("plain_numba_errors", "load_blas_alone"):  # (older checkouts lack the first)
+for name in ("plain_numba_errors", "load_blas_alone", "lean_numba_compile"):  # (older checkouts lack some)
     getattr(jc, name, lambda: None)()
 from numba.core import event
 excl, stack, n = {}, [], [0]
