@@ -5,6 +5,7 @@ events, the CPU time each function spends in numba's compiler excluding the func
 
     PYTHONPATH=src python benchmarks/bench_compile.py [--src src] [--top 25]
     PYTHONPATH=src python benchmarks/bench_compile.py --wait [--src src]
+    PYTHONPATH=src python benchmarks/bench_compile.py --trace [--src src]
 
 Prints the process CPU of the whole run, the compile CPU summed over functions, their count (and the number of
 compilations: numba's helpers such as ``np.empty``'s are compiled once per signature) and the largest ones; this
@@ -13,8 +14,10 @@ profile runs with the background compile off (``DYNSLAM2D_COMPILE_WORKER=0``), s
 ``--wait`` instead measures what a user waits for: the README's first command from an empty cache as the command
 line runs it (the background compile on where there is a second CPU: do not pin it to one core with taskset),
 and prints the wall time from interpreter start to exit, ``kernel_compile_s`` from summary.json, the run's
-process CPU and the CPU of the processes it started (the background compile). Not run by pytest; numbers go to
-docs/speed.md with this command and the load average.
+process CPU and the CPU of the processes it started (the background compile). ``--trace`` runs it the same way and
+prints the timeline of both processes: every ``Dispatcher.compile`` call of a dynslam2d kernel or numba helper that
+compiled (C) or loaded from the cache (L), with its start and end (s from the start), and which functions both
+processes compiled. Not run by pytest; numbers go to docs/speed.md with this command and the load average.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ PROBE = r"""
 import json, sys, time
 c0 = time.process_time()
 import dynslam2d.jitcache as jc  # what the command line's main() does before numba is imported:
-for name in ("plain_numba_errors", "load_blas_alone"):  # (older checkouts lack the first)
+for name in ("plain_numba_errors", "load_blas_alone", "lean_numba_compile"):  # (older checkouts lack some)
     getattr(jc, name, lambda: None)()
 from numba.core import event
 excl, stack, n = {}, [], [0]
@@ -75,6 +78,78 @@ print(json.dumps({"process_cpu": time.process_time(), "children_cpu": kids.ru_ut
 """
 
 
+TRACER = r"""
+import json, os, sys, time
+def _log(*row):
+    with open(os.environ["TRACE_FILE"], "a") as f:
+        f.write(json.dumps(row) + "\n")
+def _install_tracer(who):
+    from numba.core import dispatcher as _d
+    orig, depth = _d.Dispatcher.compile, [0]
+    def compile(self, sig):
+        n0, h0 = sum(self._cache_misses.values()), sum(self._cache_hits.values())
+        t0 = time.time(); depth[0] += 1
+        try:
+            return orig(self, sig)
+        finally:
+            depth[0] -= 1
+            miss, hit = sum(self._cache_misses.values()) - n0, sum(self._cache_hits.values()) - h0
+            if miss or hit:
+                fn = self.py_func
+                _log(who, f"{fn.__module__}.{fn.__qualname__}", t0, time.time(), "C" if miss else "L", depth[0])
+    _d.Dispatcher.compile = compile
+"""
+
+TRACE_RUN = TRACER + r"""
+import dynslam2d.jitcache as jc
+for name in ("plain_numba_errors", "load_blas_alone"):
+    getattr(jc, name, lambda: None)()
+_install_tracer("run")
+import dynslam2d.jitwarm as jw
+_Popen = jw.subprocess.Popen
+class _Shim:  # the background process as the command line starts it, with the tracer installed first
+    def __getattr__(self, k):
+        return getattr(__import__("subprocess"), k)
+    def Popen(self, args, **kw):
+        i = args.index("-m")
+        return _Popen(args[:i] + ["-c", os.environ["TRACE_WORKER"]] + args[i + 2:], **kw)
+jw.subprocess = _Shim()
+""" + RUN_FIRST_COMMAND + r"""
+_log("run", "<exit>", time.time(), time.time(), "M", 0)
+"""
+
+TRACE_WORKER = TRACER + r"""
+import dynslam2d.jitwarm as jw
+_compile_kernels = jw.compile_kernels
+def _traced(*a, **k):
+    _install_tracer("bg")
+    return _compile_kernels(*a, **k)
+jw.compile_kernels = _traced
+jw.main(sys.argv[1:])
+"""
+
+
+def trace(src: str) -> None:
+    """One cold run as ``wait`` starts it, with both processes' compile and cache-load timeline."""
+    folder = Path(tempfile.mkdtemp(prefix="bench-compile-"))
+    log = folder / "trace.jsonl"
+    t0 = time.time()
+    env = dict(os.environ, PYTHONPATH=src, NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-cold-"),
+               TRACE_FILE=str(log), TRACE_WORKER=TRACE_WORKER)
+    res = subprocess.run([sys.executable, "-c", TRACE_RUN, str(folder / "run")], env=env, capture_output=True,
+                         text=True)
+    if res.returncode != 0:
+        raise SystemExit(res.stderr[-2000:])
+    rows = sorted((json.loads(line) for line in log.read_text().splitlines()), key=lambda r: r[2])
+    for who, name, a, b, kind, depth in rows:
+        print(f"{who:3s} {a - t0:7.2f} {b - t0:7.2f} {b - a:6.2f} {kind} {'  ' * depth}{name}")
+    compiled = {who: {r[1] for r in rows if r[0] == who and r[4] == "C"} for who in ("run", "bg")}
+    summary = json.loads((folder / "run" / "summary.json").read_text())
+    print(f"compiled by both: {sorted(compiled['run'] & compiled['bg'])}")
+    print(f"wall {time.time() - t0:.1f} s; kernel_compile_s {summary['kernel_compile_s']:.1f} s; load average "
+          f"{os.getloadavg()[0]:.2f}; src {src}")
+
+
 def wait(src: str) -> None:
     """One cold run of the README's first command as a user starts it: wall time and CPU."""
     env = dict(os.environ, PYTHONPATH=src, NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-cold-"))
@@ -96,9 +171,10 @@ def main() -> None:
     ap.add_argument("--src", default=str(Path(__file__).resolve().parents[1] / "src"))
     ap.add_argument("--top", type=int, default=25)
     ap.add_argument("--wait", action="store_true", help="the wall-time wait of a cold run instead of the profile")
+    ap.add_argument("--trace", action="store_true", help="the timeline of both processes' compiles and loads")
     args = ap.parse_args()
-    if args.wait:
-        wait(args.src)
+    if args.wait or args.trace:
+        (trace if args.trace else wait)(args.src)
         return
     env = dict(os.environ, PYTHONPATH=args.src, NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-cold-"),
                DYNSLAM2D_COMPILE_WORKER="0")

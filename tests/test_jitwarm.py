@@ -147,8 +147,119 @@ def test_run_starts_the_background_process_only_on_a_cold_cache(monkeypatch):
     from dynslam2d import cli, jitcache
 
     started = []
+    monkeypatch.setattr(jitcache, "lean_numba_compile", lambda: False)  # (numba of this test process left as it is)
     monkeypatch.setattr(jitwarm, "start_background_compile", lambda: started.append(1) or "started")
     for cached, want in ((40, (False, None)), (0, (True, "started"))):
         monkeypatch.setattr(jitcache, "kernel_cache_state", lambda c=cached: jitcache.KernelCacheState(40, c))
         assert cli._cold_start() == want
     assert started == [1]
+
+
+#: A small manifest kernel for the board tests (compiles in well under a second).
+SMALL = next((name, sig) for name, sig in KERNELS if name.endswith(".accel_candidates"))
+
+BOARD_RUN = r"""
+import json, subprocess, sys, time
+from pathlib import Path
+from dynslam2d import jitcache, jitwarm
+from numba.core import caching
+name, sig, folder = sys.argv[1], sys.argv[2], Path(sys.argv[3])
+board = jitwarm.CompileBoard(folder, "run")
+(folder / f"bg.{name}").touch()  # the background process has started this kernel (it compiles it after 1 s)
+worker = subprocess.Popen([sys.executable, "-c", sys.argv[4], name, sig, str(folder)])
+load0 = caching.Cache.load_overload
+board.install(other_alive=lambda: worker.poll() is None)
+c0 = jitcache.compile_seconds()
+disp = jitwarm._dispatcher(name)
+disp.compile(jitwarm.parse_signature(sig))
+waited = jitcache.compile_seconds() - c0
+board.uninstall()
+worker.wait()
+s = disp.stats
+print(json.dumps({"hits": sum(s.cache_hits.values()), "misses": sum(s.cache_misses.values()), "waited": waited,
+                  "restored": caching.Cache.load_overload is load0, "marks": sorted(p.name for p in folder.iterdir())}))
+"""
+
+BOARD_BG = r"""
+import sys, time
+from dynslam2d import jitwarm
+name, sig, folder = sys.argv[1:4]
+board = jitwarm.CompileBoard(folder, "bg")
+board.install()
+time.sleep(1.0)
+print(jitwarm.compile_kernels([(name, sig)], board=board), file=sys.stderr)
+"""
+
+
+def test_run_waits_for_a_kernel_the_background_process_is_compiling_and_loads_it(tmp_path):
+    """Where the two processes meet: a cache miss on a kernel the background process is compiling waits for it
+    and loads it (a cache hit, no compile in the run), and the wait counts as compile time (kernel_compile_s)."""
+    env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    (tmp_path / "board").mkdir()
+    r = subprocess.run([sys.executable, "-c", BOARD_RUN, *SMALL, str(tmp_path / "board"), BOARD_BG], env=env,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    got = json.loads(r.stdout.strip().splitlines()[-1])
+    assert (got["hits"], got["misses"]) == (1, 0), got
+    assert got["waited"] > 0.5 and got["restored"] and got["marks"] == [], got
+
+
+SKIP_RUNS = r"""
+import json, sys
+from pathlib import Path
+from dynslam2d import jitwarm
+name, sig, folder = sys.argv[1], sys.argv[2], Path(sys.argv[3])
+board = jitwarm.CompileBoard(folder, "bg")
+(folder / f"run.{name}").touch()  # the run is compiling it
+first = jitwarm.compile_kernels([(name, sig)], board=board)
+(folder / f"run.{name}").unlink()
+second = jitwarm.compile_kernels([(name, sig)], board=board)
+print(json.dumps([first, second]))
+"""
+
+
+def test_background_process_skips_a_kernel_the_run_is_compiling(tmp_path):
+    env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    (tmp_path / "board").mkdir()
+    r = subprocess.run([sys.executable, "-c", SKIP_RUNS, *SMALL, str(tmp_path / "board")], env=env,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert json.loads(r.stdout.strip().splitlines()[-1]) == [[], [SMALL[0]]]
+
+
+LEAN = r"""
+import json, sys
+import numpy as np
+from dynslam2d import jitcache, jitwarm
+lean = sys.argv[3] == "1"
+if lean:
+    assert jitcache.lean_numba_compile() and not jitcache.lean_numba_compile()  # (once)
+from numba.core.compiler import Flags
+a, b = Flags(), Flags()
+a.nrt = True
+b.nrt, b.boundscheck = True, False  # the same values as a's (boundscheck defaults to False), stored differently
+equal = [a == b, a == Flags(), hash(a) == hash(tuple(sorted(a.values()))) == hash(b)]
+disp = jitwarm._dispatcher(sys.argv[1])
+disp.compile(jitwarm.parse_signature(sig := sys.argv[2]))
+cres = disp.overloads[disp.signatures[0]]
+rng = np.random.default_rng(3)
+X0, X1 = rng.normal(size=(50, 4)), rng.normal(size=(50, 4))
+print(json.dumps({"cfunc": cres.fndesc.llvm_cfunc_wrapper_name in cres.library.get_llvm_str(),
+                  "out": disp(X0, X1, 1.0).tolist(), "equal": equal}))
+"""
+
+
+def test_lean_compile_drops_cfunc_wrappers_and_keeps_kernels_and_flag_semantics(tmp_path):
+    """jitcache.lean_numba_compile: no C-callable wrapper beside a kernel compiled after it, the kernel's results
+    unchanged, and numba's flag comparisons as before (equal values equal, whether stored or defaulted)."""
+    name, sig = next((n, s) for n, s in KERNELS if n.endswith(".accel_candidates"))
+    got = {}
+    for lean in ("0", "1"):
+        env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / f"cache{lean}")}
+        r = subprocess.run([sys.executable, "-c", LEAN, name, sig, lean], env=env, capture_output=True, text=True,
+                           timeout=300)
+        assert r.returncode == 0, r.stderr[-3000:]
+        got[lean] = json.loads(r.stdout.strip().splitlines()[-1])
+    assert got["0"]["cfunc"] and not got["1"]["cfunc"]
+    assert got["0"]["out"] == got["1"]["out"] and len(got["1"]["out"]) > 5
+    assert got["0"]["equal"] == got["1"]["equal"] == [True, False, True]

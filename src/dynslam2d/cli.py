@@ -964,7 +964,11 @@ def _range_scale_row(summary: dict[str, Any]) -> list[tuple[str, str]]:
 def _cold_start() -> tuple[bool, Any]:
     """Whether numba must compile the kernels (a first run, or the first after an update), and then the
     background compile of the late kernels on a second CPU (:mod:`dynslam2d.jitwarm`; None when not
-    started). Loads the pipeline's kernel modules to tell."""
+    started). Loads the pipeline's kernel modules to tell, after making numba's compiles leaner
+    (:func:`dynslam2d.jitcache.lean_numba_compile`: about a tenth less cold compile, the same kernels)."""
+    from dynslam2d.jitcache import lean_numba_compile
+
+    lean_numba_compile()
     import dynslam2d.pipeline  # noqa: F401 - its kernel modules, for the cache check
     from dynslam2d.jitcache import kernel_cache_state
     from dynslam2d.jitwarm import start_background_compile

@@ -21,6 +21,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 #: Environment variable naming numba's cache folder (numba's own).
 CACHE_ENV = "NUMBA_CACHE_DIR"
@@ -72,6 +73,57 @@ def plain_numba_errors() -> bool:
     if PLAIN_ERRORS_ENV in os.environ or "numba" in sys.modules:
         return False
     os.environ[PLAIN_ERRORS_ENV] = "1"
+    return True
+
+
+def lean_numba_compile() -> bool:
+    """Have numba do less work per compiled function in this process, without changing any kernel's code.
+
+    - **No C-callable wrapper.** numba emits, beside each function and its Python wrapper, a ``cfunc``
+      wrapper so that the function can be passed around as a first-class function value; no kernel of
+      this project is used that way (``@cfunc`` sets its own flag and is not affected). Setting
+      ``no_cfunc_wrapper`` where a function's options leave it unset saves building, optimising and
+      compiling 110–120 such wrappers on a cold run of the README's first command (kernels and numba's
+      own ``np.empty``-style helpers alike).
+    - **Cheaper option comparisons.** numba looks up every overloaded call it types (``np.empty``,
+      ``min``, operators: about 70 000 lookups on that cold run) in a cache keyed by the compile flags;
+      ``TargetConfig.__hash__`` hashes the sorted option names (a constant per class) and ``__eq__``
+      compares all 22 options' values, rebuilding both dicts each time (3.6 and 6.1 µs). The hash is kept
+      per class and equal stored values answer ``__eq__`` at once; the results are the same.
+
+    Together about a tenth of the compile CPU (docs/speed.md). The command line and its background
+    compile call this first (they own the process); a library user's process is left as it is. Returns
+    whether it changed numba; does nothing when called again or when numba's internals differ."""
+    try:
+        from numba.core import cpu, targetconfig
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return False
+    options, config = cpu.CPUTargetOptions, targetconfig.TargetConfig
+    if getattr(options.finalize, "_dynslam2d_lean", False) or not hasattr(config, "_values"):
+        return False
+    finalize, equal = options.finalize, config.__eq__
+    hashes: dict[type, int] = {}
+
+    def lean_finalize(self: Any, flags: Any, opts: Any) -> None:
+        finalize(self, flags, opts)
+        if not flags.is_set("no_cfunc_wrapper"):
+            flags.no_cfunc_wrapper = True
+
+    def class_hash(self: Any) -> int:  # numba's own: hash(tuple(sorted(self.values()))), the sorted option names
+        cls = type(self)
+        if cls not in hashes:
+            hashes[cls] = hash(tuple(sorted(cls.options)))
+        return hashes[cls]
+
+    def fast_equal(self: Any, other: Any) -> Any:
+        if type(self) is type(other) and self._values == other._values:
+            return True
+        return equal(self, other)
+
+    lean_finalize._dynslam2d_lean = True  # type: ignore[attr-defined]
+    options.finalize = lean_finalize
+    config.__hash__ = class_hash  # type: ignore[method-assign,assignment]
+    config.__eq__ = fast_equal  # type: ignore[method-assign,assignment]
     return True
 
 
@@ -156,10 +208,18 @@ _CLOCK = _CompileClock()
 
 
 def compile_seconds() -> float:
-    """Seconds numba has spent compiling kernels in this process so far (start measuring with a first
-    call; the difference of two calls is the compile time in between)."""
+    """Seconds numba has spent compiling kernels in this process so far, plus the time spent waiting for a
+    kernel the background compile was compiling (:class:`dynslam2d.jitwarm.CompileBoard`; start measuring
+    with a first call; the difference of two calls is the compile time in between)."""
     _CLOCK.install()
     return _CLOCK.total
+
+
+def add_compile_wait(seconds: float) -> None:
+    """Count ``seconds`` spent waiting for another process's compile of a kernel as compile time (outside
+    a compile of this process's own; inside one it is already counted)."""
+    if _CLOCK._depth == 0:
+        _CLOCK.total += seconds
 
 
 @dataclass(frozen=True)

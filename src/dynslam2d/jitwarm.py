@@ -11,6 +11,10 @@ entry's data and index each to a temporary file renamed into place, so the run r
 none and then compiles the kernel itself). A loaded kernel is the compiled code of the same source, so
 results do not change.
 
+The two processes also tell each other which kernel each is compiling (:class:`CompileBoard`): where they
+meet, the run waits for a kernel the background process has already started instead of compiling it a
+second time from the beginning, and the background process skips a kernel the run is compiling.
+
 The background process is not started when the cache is warm, on one usable CPU
 (``os.sched_getaffinity``), or when ``DYNSLAM2D_COMPILE_WORKER=0`` (also ``off``/``false``/``no``). It
 runs in its own process group and ignores SIGINT, so a Ctrl-C in the terminal reaches the run only (which
@@ -24,10 +28,13 @@ from __future__ import annotations
 import atexit
 import importlib
 import os
+import shutil
 import signal
 import subprocess
 import sys
-from collections.abc import Iterable
+import tempfile
+import time
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -74,15 +81,121 @@ def worker_wanted() -> bool:
     return os.environ.get(WORKER_ENV, "").strip().lower() not in _OFF and usable_cpus() >= 2
 
 
+class CompileBoard:
+    """Which dynslam2d kernels the run (``run``) and its background process (``bg``) are compiling right now.
+
+    One empty file per kernel and process in a folder both know (``<who>.<module>.<qualname>``), created
+    when numba starts compiling the kernel in that process (numba's ``numba:compile`` event, after its
+    cache lookup missed) and removed once numba has written it to the cache (``Cache.save_overload``).
+    :meth:`install` hooks both into this process's numba; in the run it also makes a cache lookup that
+    misses a kernel the background process is compiling wait until that process has saved it (or has
+    gone), then look again: the kernel is loaded instead of compiled twice. Only kernels whose dispatcher
+    caches to disk (``cache=True``) are marked, so every mark is removed by the save that follows."""
+
+    def __init__(self, folder: str | Path, me: str) -> None:
+        self.folder = Path(folder)
+        self.me = me
+        self._undo: list[Callable[[], None]] = []
+
+    def _path(self, who: str, name: str) -> Path:
+        return self.folder / f"{who}.{name}"
+
+    def busy(self, who: str, name: str) -> bool:
+        """Whether process ``who`` ("run" or "bg") is compiling kernel ``name`` (module.qualname)."""
+        return self._path(who, name).exists()
+
+    def mark(self, name: str) -> None:
+        try:
+            self._path(self.me, name).touch()
+        except OSError:  # (the folder is gone: the run has finished)
+            pass
+
+    def clear(self, name: str | None = None) -> None:
+        """Remove this process's mark of ``name``, or all its marks."""
+        paths = [self._path(self.me, name)] if name else self.folder.glob(f"{self.me}.*")
+        for path in paths:
+            try:
+                path.unlink()
+            except OSError:
+                pass
+
+    def install(self, other_alive: Callable[[], bool] | None = None, max_wait_s: float = 120.0) -> None:
+        """Mark this process's kernel compiles; with ``other_alive`` (the run's side), wait at a cache miss
+        for a kernel the background process is compiling while ``other_alive()`` holds."""
+        from numba.core import caching, event
+
+        from dynslam2d.jitcache import add_compile_wait
+
+        board, other = self, "bg" if self.me == "run" else "run"
+
+        class _Marker(event.Listener):
+            def on_start(self, ev: Any) -> None:
+                disp = (ev.data or {}).get("dispatcher")
+                name = _kernel_name(getattr(disp, "py_func", None))
+                if name is not None and isinstance(getattr(disp, "_cache", None), caching.Cache):
+                    board.mark(name)
+
+            def on_end(self, ev: Any) -> None:
+                pass
+
+        load, save = caching.Cache.load_overload, caching.Cache.save_overload
+
+        def save_overload(cache: Any, sig: Any, data: Any) -> None:
+            try:
+                save(cache, sig, data)
+            finally:
+                name = _kernel_name(getattr(cache, "_py_func", None))
+                if name is not None:
+                    board.clear(name)
+
+        def load_overload(cache: Any, sig: Any, target_context: Any) -> Any:
+            data = load(cache, sig, target_context)
+            name = _kernel_name(getattr(cache, "_py_func", None))
+            if data is not None or name is None:
+                return data
+            t0 = time.perf_counter()
+            while board.busy(other, name) and other_alive() and time.perf_counter() - t0 < max_wait_s:
+                time.sleep(0.005)
+            add_compile_wait(time.perf_counter() - t0)
+            return load(cache, sig, target_context)  # (also when the other saved it since the first look)
+
+        listener = _Marker()
+        event.register("numba:compile", listener)
+        caching.Cache.save_overload = save_overload
+        if other_alive is not None:
+            caching.Cache.load_overload = load_overload
+
+        def undo() -> None:
+            event.unregister("numba:compile", listener)
+            caching.Cache.load_overload, caching.Cache.save_overload = load, save
+
+        self._undo.append(undo)
+
+    def uninstall(self) -> None:
+        """Undo :meth:`install` and remove this process's marks."""
+        while self._undo:
+            self._undo.pop()()
+        self.clear()
+
+
+def _kernel_name(func: Any) -> str | None:
+    """``module.qualname`` of a dynslam2d kernel's Python function, else None."""
+    module = getattr(func, "__module__", None) or ""
+    return f"{module}.{func.__qualname__}" if module.split(".")[0] == "dynslam2d" else None
+
+
 class BackgroundCompile:
     """The background compile process of a cold run; :meth:`stop` ends it (also at interpreter exit)."""
 
-    def __init__(self, proc: subprocess.Popen[bytes]) -> None:
+    def __init__(self, proc: subprocess.Popen[bytes], board: CompileBoard | None = None) -> None:
         self.proc = proc
+        self.board = board
         atexit.register(self.stop)
 
     def stop(self, timeout: float = 2.0) -> None:
         """End the process if it still runs (SIGTERM, then SIGKILL after ``timeout`` s) and reap it."""
+        if self.board is not None:
+            self.board.uninstall()
         if self.proc.poll() is None:
             self.proc.terminate()
             try:
@@ -90,6 +203,9 @@ class BackgroundCompile:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
+        if self.board is not None:
+            shutil.rmtree(self.board.folder, ignore_errors=True)
+            self.board = None
         atexit.unregister(self.stop)
 
 
@@ -123,13 +239,19 @@ def start_background_compile() -> BackgroundCompile | None:
     paths = [] if root in installed else [root]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (*paths, os.environ.get("PYTHONPATH")) if p))
     try:
+        folder = tempfile.mkdtemp(prefix="dynslam2d-compile-")
         proc = subprocess.Popen(
-            [sys.executable, "-P", "-m", "dynslam2d.jitwarm", str(os.getpid())], env=env, stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, close_fds=True,
+            [sys.executable, "-P", "-m", "dynslam2d.jitwarm", str(os.getpid()), folder], env=env,
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, close_fds=True,
             start_new_session=True)  # its own process group: a Ctrl-C in the terminal reaches the run only
     except OSError:
         return None
-    return BackgroundCompile(proc)
+    board = CompileBoard(folder, "run")
+    try:
+        board.install(other_alive=lambda: proc.poll() is None)
+    except Exception:  # noqa: BLE001 - numba internals changed: the two processes just do not coordinate
+        board.uninstall()
+    return BackgroundCompile(proc, board)
 
 
 def _dispatcher(name: str) -> Any:
@@ -137,10 +259,11 @@ def _dispatcher(name: str) -> Any:
     return getattr(importlib.import_module(module), attr)
 
 
-def compile_kernels(kernels: Iterable[tuple[str, str]], parent: int | None = None) -> list[str]:
+def compile_kernels(kernels: Iterable[tuple[str, str]], parent: int | None = None,
+                    board: CompileBoard | None = None) -> list[str]:
     """Compile each (kernel, signature) of ``kernels`` in the order given, skipping kernels whose cache
-    already holds an entry (the run got there first); stop when process ``parent`` is gone. Returns the
-    kernels compiled or loaded here."""
+    already holds an entry or that the run is compiling (``board``: the run got there first); stop when
+    process ``parent`` is gone. Returns the kernels compiled or loaded here."""
     from dynslam2d.jitcache import _has_valid_index
 
     done = []
@@ -148,30 +271,43 @@ def compile_kernels(kernels: Iterable[tuple[str, str]], parent: int | None = Non
         if parent is not None and os.getppid() != parent:
             break
         try:
+            if board is not None and board.busy("run", name):
+                continue
             disp = _dispatcher(name)
             if _has_valid_index(disp):
                 continue
             disp.compile(parse_signature(sig))
         except Exception:  # noqa: BLE001 - the run compiles what is missing, as without this process
             continue
+        finally:
+            if board is not None:
+                board.clear()  # (a kernel that failed to compile leaves no mark the run would wait on)
         done.append(name)
     return done
 
 
 def main(argv: list[str] | None = None) -> None:
-    """``python -m dynslam2d.jitwarm PARENT_PID``: compile the manifest's kernels, last-used first."""
+    """``python -m dynslam2d.jitwarm PARENT_PID [BOARD_FOLDER]``: compile the manifest's kernels, last-used
+    first, telling the run through :class:`CompileBoard` which one it is compiling."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the run's to handle; it stops this process
     args = sys.argv[1:] if argv is None else argv
     parent = int(args[0]) if args else None
     if parent is not None and not _leave_with_parent(parent):
         return
-    from dynslam2d.jitcache import load_blas_alone, plain_numba_errors
+    from dynslam2d.jitcache import lean_numba_compile, load_blas_alone, plain_numba_errors
 
     plain_numba_errors()
     load_blas_alone()
+    lean_numba_compile()
     from dynslam2d.jitmanifest import KERNELS
 
-    compile_kernels(reversed(KERNELS), parent)
+    board = CompileBoard(args[1], "bg") if len(args) > 1 else None
+    if board is not None:
+        try:
+            board.install()
+        except Exception:  # noqa: BLE001 - numba internals changed: compile without telling the run
+            board = None
+    compile_kernels(reversed(KERNELS), parent, board)
 
 
 if __name__ == "__main__":
