@@ -36,7 +36,7 @@ def _glibc(name: str, *argtypes: type) -> Callable[..., int] | None:
 _M_TRIM_THRESHOLD = -1
 _M_MMAP_THRESHOLD = -3
 #: Blocks from this size on get their own mapping, returned to the OS when freed (:func:`map_large_blocks`).
-MMAP_THRESHOLD_BYTES = 512 * 1024
+MMAP_THRESHOLD_BYTES = 4 * 1024 * 1024
 #: Free memory at the heap's top that glibc keeps rather than returning it at once (:func:`map_large_blocks`).
 TRIM_THRESHOLD_BYTES = 8 * 1024 * 1024
 
@@ -49,6 +49,8 @@ def map_large_blocks(threshold: int = MMAP_THRESHOLD_BYTES, trim: int = TRIM_THR
     stays in the process wherever a live block sits above it: on MIT CSAIL the heap held 25–40 MiB of free
     memory at the run loop's end. With the threshold fixed, every block of ``threshold`` bytes or more is its
     own mapping and goes back to the OS when freed; smaller ones (a scan's arrays) stay on the heap as before.
+    4 MiB: a lower threshold also maps the few 0.5–4 MiB arrays some scans make, and their page faults cost
+    MIT CSAIL about 2 % per scan (512 KiB: 2 % slower for 4 MiB less peak; docs/speed.md "Memory, eighth pass").
     The fixed trim threshold keeps the heap's top from being returned and taken back after every scan (with the
     threshold fixed, glibc no longer raises it either). Process-wide and for the rest of the process: the
     command line calls it (it owns the process); a library user's process is left as it is. Returns whether
