@@ -11,7 +11,6 @@ place (:func:`map_large_blocks`); elsewhere (macOS, musl, Windows) both are no-o
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import sys
 from collections.abc import Callable
 from functools import cache
@@ -23,8 +22,9 @@ def _glibc(name: str, *argtypes: type) -> Callable[..., int] | None:
     if not sys.platform.startswith("linux"):
         return None
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        fn = getattr(libc, name)  # glibc only
+        # the process's own symbols (libc's among them): no ``ctypes.util.find_library``, which runs ldconfig in a
+        # subprocess (~6 ms before the first scan, now that the command line calls this at start)
+        fn = getattr(ctypes.CDLL(None), name)  # glibc only
     except (OSError, AttributeError):
         return None
     fn.argtypes = list(argtypes)
