@@ -46,8 +46,12 @@ def worker(data: Path, name: str) -> None:
     import time
     import types
 
+    import dynslam2d.memtrim as mt
     import dynslam2d.pipeline as pl
     from dynslam2d.inputs import open_source
+
+    if hasattr(mt, "map_large_blocks"):  # the allocator setting the command line makes (a checkout without it: none)
+        mt.map_large_blocks()
 
     rel, topic = INPUTS[name]
     scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))

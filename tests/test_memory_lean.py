@@ -395,3 +395,103 @@ def test_released_results_are_written_byte_for_byte_the_same(tmp_path) -> None:
     assert set(a) == set(b) and {"map.png", "tracks.png", "map_logodds_online.npy", "map_online.pgm"} <= set(a)
     for name in sorted(set(a) - {"summary.json", "run.json"}):  # (these two hold timings)
         assert a[name].read_bytes() == b[name].read_bytes(), name
+
+
+def test_level_growth_holds_the_old_level_and_one_new_array_not_both_levels() -> None:
+    """``GridLevel.ensure`` grows its three arrays one at a time, each old one let go before the next new one is
+    made: the memory it adds while growing is about one new array above the grown level's own size, not the whole
+    old level on top of the new one (the old code's peak: old + new). Content and geometry are kept."""
+    import tracemalloc
+
+    from dynslam2d.slam.grid import GridLevel
+
+    rng = np.random.default_rng(3)
+    lv = GridLevel(0.05)
+    tracemalloc.start()  # before the level's arrays exist: their frees are counted too
+    try:
+        lv.ensure(0, 0, 799, 599)
+        lv.logodds[:] = rng.normal(0.0, 3.0, lv.shape).astype(np.float32)
+        lv.prob[:] = rng.uniform(size=lv.shape).astype(np.float32)
+        lv.uidx[:] = rng.integers(-1, 50, lv.shape).astype(np.int32)
+        before = {k: getattr(lv, k).copy() for k in ("logodds", "prob", "uidx")}
+        i0, j0, (h, w) = lv.i0, lv.j0, lv.shape
+        old_bytes = lv.nbytes
+        tracemalloc.reset_peak()
+        base = tracemalloc.get_traced_memory()[0]
+        lv.ensure(i0 - 300, j0 - 10, i0 + w + 300, j0 + h - 1)
+        peak = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+    new_bytes = lv.nbytes
+    assert new_bytes > 1.5 * old_bytes
+    # grown level minus the old one, plus one array of the new size: the one-at-a-time transient (old and new levels
+    # side by side would be new_bytes)
+    assert peak <= new_bytes - old_bytes + new_bytes // 3 + 2**16, (peak, old_bytes, new_bytes)
+    c0, r0 = i0 - lv.i0, j0 - lv.j0
+    for k, old in before.items():
+        arr = getattr(lv, k)
+        assert arr.shape == lv.shape and arr.flags.c_contiguous
+        np.testing.assert_array_equal(arr[r0:r0 + h, c0:c0 + w], old)
+    grown = np.ones(lv.shape, dtype=bool)
+    grown[r0:r0 + h, c0:c0 + w] = False
+    assert (lv.logodds[grown] == 0).all() and (lv.prob[grown] == 0.5).all() and (lv.uidx[grown] == -1).all()
+
+
+def test_map_export_after_freeing_what_it_does_not_read_is_the_same() -> None:
+    """At the run loop's end ``run`` frees the coarser levels and the finest level's probability cache before it
+    exports the finest level (less memory at the loop's end): the export reads neither, so it is the same."""
+    from dynslam2d.pipeline import _MapExport, _release_unexported
+    from dynslam2d.slam.grid import MultiResMap
+
+    rng = np.random.default_rng(8)
+    m = MultiResMap(0.05, 3, -0.4, 0.85)
+    for lv in m.levels:
+        lv.ensure(0, 0, 399, 299)
+        lv.logodds[:] = rng.normal(0.0, 3.0, lv.shape).astype(np.float32)
+        lv.uidx[:] = np.where(rng.uniform(size=lv.shape) < 0.6, 4, -1).astype(np.int32)
+    a = _MapExport.of(m)
+    _release_unexported(m)
+    assert m.levels[0].prob.size == 0 and all(lv.nbytes == 0 for lv in m.levels[1:])
+    b = _MapExport.of(m)
+    np.testing.assert_array_equal(a.logodds, b.logodds)
+    np.testing.assert_array_equal(a.unknown, b.unknown)
+    assert a.origin == b.origin and a.resolution == b.resolution
+
+
+_HEAP_PROBE = r"""
+import sys
+import numpy as np
+from dynslam2d.memtrim import map_large_blocks
+if sys.argv[1] == "1":
+    assert map_large_blocks()
+def rss():
+    return int(open("/proc/self/statm").read().split()[1]) * 4096
+big = np.ones(24 * 2**20, dtype=np.uint8)  # a map-sized array, freed: glibc's default raises its threshold to it
+del big
+base = rss()
+blocks, keep = [], []
+for _ in range(5):  # 25 MiB in 5 MiB arrays, each with a live 64 kB block after it (in the heap either way)
+    blocks.append(np.ones(5 * 2**20, dtype=np.uint8))
+    keep.append(bytearray(64_000))
+del blocks
+print((rss() - base) / 2**20)
+"""
+
+
+def test_fixed_mmap_threshold_returns_freed_arrays_to_the_os() -> None:
+    """``memtrim.map_large_blocks`` (the command line sets it): once a map-sized array was freed, glibc by default
+    puts later arrays of up to that size in its heap, where freed ones stay resident below live small blocks; with
+    the threshold fixed they are mappings of their own and leave the process when freed. Linux/glibc only."""
+    import ctypes
+
+    import pytest
+
+    from dynslam2d.memtrim import _glibc
+
+    if _glibc("mallopt", ctypes.c_int, ctypes.c_int) is None:
+        pytest.skip("glibc's allocator only")
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1] / "src"))
+    kept = {flag: float(subprocess.run([sys.executable, "-c", _HEAP_PROBE, flag], capture_output=True, text=True,
+                                       check=True, env=env).stdout) for flag in ("0", "1")}
+    assert kept["1"] < 4.0, kept  # MiB still resident after freeing 25 MiB of arrays
+    assert kept["0"] > 16.0, kept  # (the default keeps them: the test measures what the setting changes)

@@ -1709,7 +1709,9 @@ def main() -> None:
     atomic, so an interrupted run leaves no half-written file under a final name.
     """
     from dynslam2d.jitcache import load_blas_alone, plain_numba_errors
+    from dynslam2d.memtrim import map_large_blocks
 
+    map_large_blocks()  # freed map-sized arrays go back to the OS, not into a fragmented heap (memtrim.py)
     plain_numba_errors()  # no colorama round trip per numba typing attempt: a shorter cold compile (docs/speed.md)
     load_blas_alone()  # numba's BLAS check without the whole of scipy.linalg (about 17 MiB, docs/speed.md)
     try:

@@ -742,6 +742,17 @@ class _MapExport:
         return GridMap(logistic_map(self.logodds, self.unknown), self.resolution, self.origin)
 
 
+def _release_unexported(hmap: MultiResMap) -> None:
+    """Free what :meth:`_MapExport.of` does not read: the coarser levels and the finest level's probability
+    cache. The end of the run loop, where the export's copies are made beside every level, was the loop's
+    second-highest point on MIT CSAIL (docs/speed.md "Memory, eighth pass")."""
+    for k, lv in enumerate(hmap.levels):
+        lv.prob = np.full((0, 0), 0.5, dtype=np.float32)
+        if k > 0:
+            lv.logodds = np.zeros((0, 0), dtype=np.float32)
+            lv.uidx = np.full((0, 0), -1, dtype=np.int32)
+
+
 def _release_map(pipe: Pipeline, front: _MapExport) -> None:
     """Replace the front end's map arrays by empty ones (after the run, once the results hold their own
     copies): memory for the loop closure's re-render and the results (docs/speed.md). ``front`` is the
@@ -831,10 +842,11 @@ def run(
     compile_s = compile_seconds() - compile0
     release_free_memory()  # the loop's freed temporaries, before the observers' end-of-run work (memtrim.py)
     flag_arr = flags.view().copy()
-    front = _MapExport.of(pipe.slam.map)  # (its float64 map is made once the run knows it keeps it)
-    logodds = front.logodds
     summary = pipe.slam.summary()
     memory_bytes = pipe.slam.memory_bytes
+    _release_unexported(pipe.slam.map)  # the export below reads only the finest level's log-odds and indices
+    front = _MapExport.of(pipe.slam.map)  # (its float64 map is made once the run knows it keeps it)
+    logodds = front.logodds
     # the front end's map is in ``front`` now: free its levels before the loop closure's final optimisation and
     # re-render build theirs (issue 13 item 3; observers' on_finish get the pipeline without its map arrays)
     _release_map(pipe, front)
