@@ -747,10 +747,10 @@ def _release_unexported(hmap: MultiResMap) -> None:
     cache. The end of the run loop, where the export's copies are made beside every level, was the loop's
     second-highest point on MIT CSAIL (docs/speed.md "Memory, eighth pass")."""
     for k, lv in enumerate(hmap.levels):
-        lv.prob = np.full((0, 0), 0.5, dtype=np.float32)
-        if k > 0:
-            lv.logodds = np.zeros((0, 0), dtype=np.float32)
-            lv.uidx = np.full((0, 0), -1, dtype=np.int32)
+        if k == 0:
+            lv.release("prob")
+        else:
+            lv.release()
 
 
 def _release_map(pipe: Pipeline, front: _MapExport) -> None:
@@ -759,9 +759,7 @@ def _release_map(pipe: Pipeline, front: _MapExport) -> None:
     front end's exported map, which :meth:`Pipeline.gridmap` returns from now on."""
     pipe._released_grid = front
     for lv in pipe.slam.map.levels:
-        lv.logodds = np.zeros((0, 0), dtype=np.float32)
-        lv.prob = np.full((0, 0), 0.5, dtype=np.float32)
-        lv.uidx = np.full((0, 0), -1, dtype=np.int32)
+        lv.release()
     # the tracker keeps the last scan's view of the finest level (its log-odds array, 12.5 MB on MIT CSAIL),
     # which would keep that level alive through the re-render and the clean-up pass
     pipe.tracker._map = None

@@ -37,6 +37,11 @@ class MapTooLargeError(RuntimeError):
     """Integrating a scan would grow the map beyond its memory limit (the scan is not integrated)."""
 
 
+#: A level's per-cell arrays: (attribute, value of a cell never updated, dtype), in the order :meth:`GridLevel.ensure`
+#: grows them (the log-odds last: the tracker's view of the last scan's map keeps the old ones until the next scan).
+_LEVEL_ARRAYS = (("prob", 0.5, np.float32), ("uidx", -1, np.int32), ("logodds", 0.0, np.float32))
+
+
 class GridLevel:
     """One log-odds grid level.
 
@@ -51,9 +56,10 @@ class GridLevel:
     def __init__(self, resolution: float, growth_margin_cells: int = 100) -> None:
         self.resolution = float(resolution)
         self.growth_margin_cells = max(int(growth_margin_cells), 1)
-        self.logodds = np.zeros((0, 0), dtype=np.float32)
-        self.prob = np.full((0, 0), 0.5, dtype=np.float32)
-        self.uidx = np.full((0, 0), -1, dtype=np.int32)
+        self.logodds: np.ndarray
+        self.prob: np.ndarray
+        self.uidx: np.ndarray
+        self.release()
         self.i0 = 0
         self.j0 = 0
         self.update_counter = 0  # hector's currUpdateIndex (grows by 3 per scan)
@@ -101,6 +107,13 @@ class GridLevel:
     def nbytes(self) -> int:
         return int(self.logodds.nbytes + self.prob.nbytes + self.uidx.nbytes)
 
+    def release(self, *names: str) -> None:
+        """Replace the arrays ``names`` ("logodds", "prob", "uidx"; all when none are given) by empty (0, 0) ones,
+        freeing their memory (the level's offsets are kept)."""
+        for name, fill, dtype in _LEVEL_ARRAYS:
+            if not names or name in names:
+                setattr(self, name, np.full((0, 0), fill, dtype=dtype))
+
     # ---- growth -----------------------------------------------------------------------
     def _grown_bounds(self, imin: int, jmin: int, imax: int, jmax: int) -> tuple[int, int, int, int] | None:
         """(i0, j0, i1, j1) of the array after growing to hold [imin, imax] × [jmin, jmax], or None
@@ -141,9 +154,8 @@ class GridLevel:
         c0, r0 = self.i0 - ni0, self.j0 - nj0
         # one array at a time, each old one let go before the next new one is made: the transient is the old
         # level plus one new array, not old and new levels side by side (MIT CSAIL's last growth of the finest
-        # level: 47 instead of 67 MiB; docs/speed.md "Memory, eighth pass"). The log-odds go last: the tracker's
-        # view of the last scan's map keeps the old ones until the next scan.
-        for name, fill, dtype in (("prob", 0.5, np.float32), ("uidx", -1, np.int32), ("logodds", 0, np.float32)):
+        # level: 47 instead of 67 MiB; docs/speed.md "Memory, eighth pass").
+        for name, fill, dtype in _LEVEL_ARRAYS:
             new = np.zeros((nh, nw), dtype=dtype) if fill == 0 else np.full((nh, nw), fill, dtype=dtype)
             if w > 0:
                 new[r0:r0 + h, c0:c0 + w] = getattr(self, name)
