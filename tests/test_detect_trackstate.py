@@ -231,3 +231,44 @@ def test_manage_rows_is_the_former_per_track_arithmetic() -> None:
     assert bad.tolist() == [b for b, _ in ref]
     assert [s for s, b in zip(sig.tolist(), bad.tolist()) if not b] == [s for b, s in ref if not b]
     assert 0 < bad.sum() < n and any(s == 0.0 for b, s in ref if not b)
+
+
+def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal bit for bit (NaN equal to NaN)."""
+    return bool(np.all((a.view(np.int64) == b.view(np.int64)) | (np.isnan(a) & np.isnan(b))))
+
+
+def test_cv_predict_is_numpys_prediction_bit_for_bit() -> None:
+    """``cv_predict`` (the Kalman prediction of all live tracks in one kernel call) gives numpy's ``X[rows] @ F.T``
+    and ``F @ P[rows] @ F.T + Q`` bit for bit (OpenBLAS's dgemm sums: one FMA per term) on random stacks of 2-200
+    rows in a shuffled order, with magnitudes over ten decades and non-finite entries, and writes the same values
+    into the rows; a plain sum of rounded products (no FMA) differs on most stacks, so the test tells them apart."""
+    from dynslam2d.detect.kernels import cv_predict
+    from dynslam2d.detect.tracker import _cv_matrices
+
+    rng = np.random.default_rng(11)
+    plain_differs = 0
+    for trial in range(300):
+        n = int(rng.integers(2, 200))
+        m = n + int(rng.integers(0, 20))
+        X = rng.normal(size=(m, 4)) * 10.0 ** rng.uniform(-4, 4, size=(m, 1))
+        A = rng.normal(size=(m, 4, 4)) * 10.0 ** rng.uniform(-3, 2, size=(m, 1, 1))
+        P = A @ A.transpose(0, 2, 1)
+        if trial % 4 == 0:
+            P[rng.integers(0, m), rng.integers(0, 4), rng.integers(0, 4)] = rng.choice([np.inf, -np.inf, np.nan, -0.0])
+            X[rng.integers(0, m), rng.integers(0, 4)] = rng.choice([np.inf, np.nan, -0.0])
+        rows = rng.permutation(m)[:n].astype(np.int64)
+        F, Q = _cv_matrices(float(rng.uniform(0.01, 0.3)), float(rng.uniform(0.1, 5.0)))
+        with np.errstate(invalid="ignore"):
+            Xr = X[rows] @ F.T
+            Pr = F @ P[rows] @ F.T + Q
+        Xw, Pw = X.copy(), P.copy()
+        Xo, Po = cv_predict(Xw, Pw, rows, F, Q)
+        assert _same_bits(Xo, Xr) and _same_bits(Po, Pr)
+        assert _same_bits(Xw[rows], Xr) and _same_bits(Pw[rows], Pr)
+        rest = np.setdiff1d(np.arange(m), rows)
+        assert _same_bits(Xw[rest], X[rest]) and _same_bits(Pw[rest], P[rest])
+        FP = np.einsum("ik,nkj->nij", F, P[rows])  # (rounded products summed: no FMA)
+        plain = np.einsum("nik,jk->nij", FP, F) + Q
+        plain_differs += not _same_bits(plain, Pr)
+    assert plain_differs > 100

@@ -90,6 +90,9 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float32, 2, 'C'), int64, int64, float64, float64, Array(float64, 1, 'C'), Array(float64, 1, "
      "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float32, int64, int64, float64, "
      'float64, float64,)'),
+    ('dynslam2d.detect.kernels.cv_predict',
+     "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
+     "Array(float64, 2, 'C'),)"),
     ('dynslam2d.detect.mapevidence.map_evidence_kernel',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float32, 2, 'C'), int64, int64, float64, "
      "float64, float64, int64, Array(bool, 1, 'C'), Array(bool, 1, 'C'), Array(bool, 1, 'C'), "

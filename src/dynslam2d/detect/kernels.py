@@ -17,8 +17,11 @@ from __future__ import annotations
 
 import math
 
+import llvmlite.ir as _lir
 import numpy as np
 from numba import njit
+from numba.core import types as _nbtypes
+from numba.extending import intrinsic as _intrinsic
 
 from dynslam2d.detect.config import FitConfig
 from dynslam2d.detect.layout import (
@@ -1259,3 +1262,57 @@ def manage_rows(P: np.ndarray, X: np.ndarray, rows: np.ndarray, speed: np.ndarra
         else:
             sig[i] = math.sqrt(p33 if p33 > p22 else p22)
     return bad, sig
+
+
+@_intrinsic
+def _fma(typingctx, a, b, c):
+    """a·b + c rounded once (LLVM's ``llvm.fma.f64``, the FMA instruction where the CPU has one): the operation the
+    BLAS dgemm kernels (OpenBLAS) accumulate a matrix product with."""
+    sig = _nbtypes.float64(_nbtypes.float64, _nbtypes.float64, _nbtypes.float64)
+
+    def codegen(context, builder, signature, args):
+        d = _lir.DoubleType()
+        fn = builder.module.declare_intrinsic("llvm.fma", [d], _lir.FunctionType(d, [d, d, d]))
+        return builder.call(fn, args)
+
+    return sig, codegen
+
+
+@njit(cache=True)
+def cv_predict(X: np.ndarray, P: np.ndarray, rows: np.ndarray, F: np.ndarray, Q: np.ndarray) -> tuple:
+    """The Kalman prediction x' = F x, P' = F P Fᵀ + Q of the state rows ``rows`` (n ≥ 2 of them) of ``X`` (rows, 4)
+    and ``P`` (rows, 4, 4), map frame; F, Q (4, 4) the constant-velocity transition and noise. Returns the predicted
+    (n, 4) states and (n, 4, 4) covariances (arrays of their own), and writes them into the rows too.
+
+    Bit for bit numpy's ``X[rows] @ F.T`` and ``F @ P[rows] @ F.T + Q`` with OpenBLAS: each entry of a product is
+    its dgemm kernel's sum over k = 0 … 3 from 0.0, one FMA per term (fma(a_ik, b_kj, acc)), the product F P
+    rounded before it is multiplied by Fᵀ, Q added after. (With one row numpy takes the matrix-vector path, gemv,
+    whose sums are not these: the caller keeps numpy's products for n < 2.)"""
+    n = rows.shape[0]
+    Xo = np.empty((n, 4))
+    Po = np.empty((n, 4, 4))
+    T = np.empty((4, 4))
+    for r in range(n):
+        q = rows[r]
+        for i in range(4):
+            acc = 0.0
+            for k in range(4):
+                acc = _fma(X[q, k], F[i, k], acc)
+            Xo[r, i] = acc
+        for i in range(4):
+            for j in range(4):
+                acc = 0.0
+                for k in range(4):
+                    acc = _fma(F[i, k], P[q, k, j], acc)
+                T[i, j] = acc
+        for i in range(4):
+            for j in range(4):
+                acc = 0.0
+                for k in range(4):
+                    acc = _fma(T[i, k], F[j, k], acc)
+                Po[r, i, j] = acc + Q[i, j]
+        for i in range(4):
+            X[q, i] = Xo[r, i]
+            for j in range(4):
+                P[q, i, j] = Po[r, i, j]
+    return Xo, Po

@@ -68,6 +68,7 @@ from dynslam2d.detect.kernels import (
     accel_candidates,
     association_rows,
     classify_batch,
+    cv_predict,
     fit_params,
     fragment_hosts,
     gate_costs,
@@ -539,15 +540,24 @@ class Tracker:
             return
         F, Q = _cv_matrices(dt, self.config.tracker.accel_noise)
         order = self._rows()
-        X = self._X[order] @ F.T
-        P = F @ self._P[order] @ F.T + Q
-        if self.config.memory.enabled:
-            tracks = self._tracks
-            # coasting through a stop: it stays where it stood
-            for i in [i for i, k in enumerate(tracks) if k.remembered and k.misses > 0]:
-                X[i], P[i] = self._stationary_prediction(tracks[i], F, dt)  # (from k.x / k.P: not yet written)
-        self._X[order] = X  # (the tracks' x / P are views of these rows)
-        self._P[order] = P
+        tracks = self._tracks
+        # coasting through a stop: it stays where it stood (from k.x / k.P, before the rows are written)
+        still = [(i, self._stationary_prediction(tracks[i], F, dt)) for i in
+                 [i for i, k in enumerate(tracks) if k.remembered and k.misses > 0]] \
+            if self.config.memory.enabled else ()
+        if order.shape[0] >= 2:
+            # numpy's products bit for bit, the rows written in the kernel (the tracks' x / P are views of them)
+            X, P = cv_predict(self._X, self._P, order, F, Q)
+            for i, (x, p) in still:
+                X[i], P[i] = x, p
+                self._X[order[i]], self._P[order[i]] = x, p
+        else:  # (one track: numpy's matrix-vector product, whose sums the kernel does not reproduce)
+            X = self._X[order] @ F.T
+            P = F @ self._P[order] @ F.T + Q
+            for i, (x, p) in still:
+                X[i], P[i] = x, p
+            self._X[order] = X
+            self._P[order] = P
         self._stacked = (X, P)
 
     def _stationary_prediction(self, k: _Track, F: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
