@@ -46,6 +46,7 @@ import math
 from collections import deque
 from dataclasses import asdict, dataclass, field
 from itertools import chain as _chain
+from itertools import starmap as _starmap
 
 import numpy as np
 
@@ -971,11 +972,10 @@ class Tracker:
         ref = self._cur_ref if self._free is not None else None  # (the vacated-space test's reference: this scan)
         tracks = self._tracks
         if p is not None:
-            # the centres in the map and laser frames, all pairs at once (numpy's elementwise products and sums: the
-            # same roundings as on the floats one by one)
-            xy = self._X[trows, :2]
-            dx, dy = xy[:, 0] - pose_x, xy[:, 1] - pose_y
-            centres = zip(xy.tolist(), (c * dx + s * dy).tolist(), (-s * dx + c * dy).tolist())
+            # the centres in the map frame, one gather (their laser-frame centres below, on the floats one by one:
+            # the roundings of the former elementwise numpy products and sums)
+            centres = self._X[trows, :2].tolist()
+            ns = -s
         else:
             centres = [None] * len(pairs)
         for (ti, di), ok, cen in zip(pairs, applied, centres):
@@ -1015,9 +1015,11 @@ class Tracker:
             if len(free) > nsus:
                 del free[0]
             if p is not None:
-                (x0, x1), lx, ly = cen
+                x0, x1 = cen
+                dx = x0 - pose_x
+                dy = x1 - pose_y
                 lxy, mxy, mt = k.laser_xy, k.map_xy, k.map_t
-                lxy.append((lx, ly))
+                lxy.append((c * dx + s * dy, ns * dx + c * dy))
                 mxy.append((x0, x1))
                 mt.append(t)
                 while len(lxy) > nsus and t - mt[0] > ride_time:
@@ -1162,6 +1164,7 @@ class Tracker:
         tc = self.config.tracker
         st = self.stats
         keep: list[_Track] = []
+        gone: list[int] = []  # the rows of the tracks deleted or retired here, in their order (births reuse them)
         mem = self.config.memory.enabled
         merged = self._merged
         window, need_hits = tc.confirm_window, tc.confirm_hits
@@ -1179,8 +1182,7 @@ class Tracker:
         # per track: its speed (Python's math.hypot, as the reasons print it), whether its covariance fails (tested on
         # the rows as they are, instead of a flag kept in step wherever P changes) and σ of its speed along the
         # velocity, from the state rows in one kernel call
-        vv = self._X[order, 2:]
-        speeds = list(map(hypot, vv[:, 0].tolist(), vv[:, 1].tolist()))
+        speeds = list(_starmap(hypot, self._X[order, 2:].tolist()))
         bads, sigs = manage_rows(self._P, self._X, order, np.array(speeds), max_sig)
         bads, sigs = bads.tolist(), sigs.tolist()
         for k, speed, sig, bad in zip(tracks, speeds, sigs, bads):
@@ -1213,19 +1215,23 @@ class Tracker:
                 elif nh + (window - len(h)) < need_hits or k.misses > 0 and len(h) >= window:
                     st.deleted_tentative += 1
                     st.tracks_deleted += 1
+                    gone.append(k.row)
                     continue
             if k.state == COASTING and t - k.last_hit > max_coast and not (
                     k.remembered and self._remembered_coasts(k, t)):
                 st.deleted_coasting += 1
                 st.tracks_deleted += 1
+                gone.append(k.row)
                 continue
             if bad:
                 st.deleted_covariance += 1
                 st.tracks_deleted += 1
+                gone.append(k.row)
                 continue
             if speed > max_speed:
                 st.deleted_speed += 1
                 st.tracks_deleted += 1
+                gone.append(k.row)
                 continue
             if is_upd and retire_n and not k.was_in_m and not k.remembered and len(ms := k.mstruct) >= retire_n \
                     and speed < v_min and min(ms[-retire_n:]) >= retire_s:
@@ -1236,6 +1242,7 @@ class Tracker:
                     st.tracks_deleted += 1
                 else:
                     self._retire(k)
+                gone.append(k.row)
                 continue
             if is_upd:
                 # paper Eq. 3 with persistence, certainty and displacement conditions (the start of _dynamic, inline)
@@ -1274,13 +1281,13 @@ class Tracker:
                 if mem:
                     if k.in_m:
                         self._memory_bookkeeping(k, t)
-                    else:  # (_memory_bookkeeping of a track not in M, inline)
+                    elif k.m_start_xy is not None or k.remembered:  # (_memory_bookkeeping of a track not in M, inline;
+                        # with m_start_xy None, m_last_t is None, m_time and m_travel 0.0: set after it, reset with it)
                         k.m_start_xy, k.m_last_t, k.remembered = None, None, False
                         k.m_time = k.m_travel = 0.0
             keep.append(k)
-        if len(keep) < len(self._tracks):
-            kept = {k.row for k in keep}
-            self._free_rows.extend(k.row for k in self._tracks if k.row not in kept)  # (births reuse them)
+        if gone:
+            self._free_rows.extend(gone)
             self._order = None
         self._tracks = keep
 
