@@ -25,14 +25,21 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.world_points',
      "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "float64, float64, float64, float64, Array(int64, 1, 'C'),)"),
-    ('dynslam2d.detect.shapes.fit_clusters',
+    ('dynslam2d.detect.shapes._angle_trig',
+     "(Array(float64, 1, 'C'),)"),
+    ('dynslam2d.detect.shapes.fit_clusters_trig',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
-     "Array(float64, 1, 'C'), int64, float64, int64, int64,)"),
+     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), int64, float64, int64, int64,)"),
     ('dynslam2d.detect.kernels.classify_batch',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), Array(bool, "
      "1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, int64, float64, float64, float64, "
      "Array(float64, 1, 'C'),)"),
+    ('dynslam2d.detect.vehicles.long_kept',
+     "(Array(bool, 1, 'C'), Array(float64, 2, 'C'), float64,)"),
+    ('dynslam2d.detect.freespace._ref_arrays',
+     "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, "
+     'float64,)'),
     ('dynslam2d.detect.kernels.leg_pairs',
      "(Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), float64, float64,)"),
     ('dynslam2d.detect.kernels.measure_batch',
