@@ -262,24 +262,3 @@ def test_round_cluster_uses_circle_model_and_true_centre() -> None:
     m = measure(det, None, None, cfg)
     assert np.hypot(*(m.z - [3.0, 0.0])) < 0.01
     assert np.hypot(*(det.centroid - [3.0, 0.0])) > 0.1  # the centroid alone would be biased
-
-
-def test_fit_clusters_takes_the_angles_by_value() -> None:
-    """fit_clusters keeps each angle array's cos / sin: an array changed in place, or another one, is fitted with
-    its own angles (the same rows as fit_clusters_trig with numba's cos / sin of them), not with kept ones."""
-    from dynslam2d.detect.shapes import _angle_trig, fit_clusters_trig
-
-    clusters = [l_shape(2, 0, 0.2, 1.0, 0.5, 15, 0.005, 1), l_shape(0, -3, 0.7, 2.0, 0.1, 25, 0.005, 3)]
-    pts = np.vstack(clusters)
-    x, y = pts[:, 0].copy(), pts[:, 1].copy()
-    offsets = np.cumsum([0] + [c.shape[0] for c in clusters])
-    mask = np.ones(2, dtype=bool)
-    angles = search_angles(1.0)
-    first = fit_clusters(x, y, offsets, mask, angles, CRITERIA["variance"], 0.01, 5)
-    angles += math.radians(0.5)  # the same array object, other values
-    moved = fit_clusters(x, y, offsets, mask, angles, CRITERIA["variance"], 0.01, 5)
-    c, s = _angle_trig(angles)
-    assert moved.tobytes() == fit_clusters_trig(x, y, offsets, mask, c, s, CRITERIA["variance"], 0.01, 5, 1).tobytes()
-    assert not np.array_equal(first[:, 0], moved[:, 0])  # another angle set, other axis angles
-    again = fit_clusters(x, y, offsets, mask, search_angles(1.0), CRITERIA["variance"], 0.01, 5)
-    assert again.tobytes() == first.tobytes()

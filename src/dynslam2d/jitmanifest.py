@@ -25,11 +25,9 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.world_points',
      "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "float64, float64, float64, float64, Array(int64, 1, 'C'),)"),
-    ('dynslam2d.detect.shapes._angle_trig',
-     "(Array(float64, 1, 'C'),)"),
-    ('dynslam2d.detect.shapes.fit_clusters_trig',
+    ('dynslam2d.detect.shapes.fit_clusters',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
-     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), int64, float64, int64, int64,)"),
+     "Array(float64, 1, 'C'), int64, float64, int64, int64,)"),
     ('dynslam2d.detect.kernels.classify_batch',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), Array(bool, "

@@ -431,42 +431,19 @@ def _circle_one(x: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def _angle_trig(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """cos and sin of the candidate angles (rad), as :func:`fit_clusters` used them (numba's np.cos / np.sin)."""
-    return np.cos(angles), np.sin(angles)
-
-
-#: (dtype, bytes) of a candidate angle array → its :func:`_angle_trig` (the tracker passes one array every scan)
-_TRIG: dict[tuple[str, bytes], tuple[np.ndarray, np.ndarray]] = {}
-_TRIG_MAX = 16
-
-
 def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np.ndarray, angles: np.ndarray,
                  criterion: int, d0: float, circle_min_points: int, stride: int = 1) -> np.ndarray:
-    """Fit every cluster ``c`` with ``fit_mask[c]`` (points ``x, y[offsets[c]:offsets[c+1]]``) over the candidate
-    axis angles ``angles`` (rad).
+    """Fit every cluster ``c`` with ``fit_mask[c]`` (points ``x, y[offsets[c]:offsets[c+1]]``).
 
     ``stride`` > 1 searches every stride-th angle first, then the neighbours of the best one.
     Returns (k, 12): theta, lo1, hi1, lo2, hi2, rect_rms, circle cx, cy, r, circle_rms,
     centroid x, y (columns named in :mod:`dynslam2d.detect.layout`, ``F_*``). Unfitted clusters
-    hold only their centroid (other entries 0, rms inf). The angles' cos / sin are made once per angle array
-    (kept by value) and passed to :func:`fit_clusters_trig`.
+    hold only their centroid (other entries 0, rms inf).
     """
-    key = (angles.dtype.str, angles.tobytes())
-    trig = _TRIG.get(key)
-    if trig is None:
-        if len(_TRIG) >= _TRIG_MAX:
-            _TRIG.clear()
-        trig = _TRIG[key] = _angle_trig(angles)
-    return fit_clusters_trig(x, y, offsets, fit_mask, trig[0], trig[1], criterion, d0, circle_min_points, stride)
-
-
-@njit(cache=True)
-def fit_clusters_trig(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np.ndarray, cos_t: np.ndarray,
-                      sin_t: np.ndarray, criterion: int, d0: float, circle_min_points: int, stride: int) -> np.ndarray:
-    """:func:`fit_clusters` with the candidate angles given as their cos ``cos_t`` and sin ``sin_t``."""
     k = offsets.shape[0] - 1
     out = np.zeros((k, N_FIT_COLS))
+    cos_t = np.cos(angles)
+    sin_t = np.sin(angles)
     tmp = np.empty(6)
     tmpc = np.empty(4)
     nmax = 0
