@@ -19,6 +19,7 @@ from dynslam2d.detect.kernels import (
     classify_batch,
     fit_params,
     fragment_hosts,
+    gate_costs,
     kalman_update_batch,
     leg_pairs,
     mask_fractions,
@@ -419,3 +420,61 @@ def test_tracker_without_detections_or_tracks_is_cheap_and_consistent() -> None:
     out = tr.update(empty, poses[10])
     assert tr.last_detections == [] and tr.stats.empty_scans == 1
     assert all(t.n_points == 0 for t in out) and len(out) == n_before
+
+
+def test_gate_distance_test_is_hypots_also_at_the_limit() -> None:
+    """gate_costs' near[i, j] is hypot(centroid − track) < gate_distance + reach[i] bit for bit: it decides most
+    pairs from the squared distance, so pairs placed exactly on the limit and one ulp either side, NaN centroids and
+    a negative / NaN / zero limit must still give hypot's answer (and d2, ok as computed from it)."""
+    rng = np.random.default_rng(7)
+    n = 6
+    Xs = np.zeros((n, 4))
+    Xs[:, 0] = rng.uniform(-30.0, 30.0, n)
+    Xs[:, 1] = rng.uniform(-30.0, 30.0, n)
+    Ps = np.tile(np.eye(4) * 0.3, (n, 1, 1))
+    reach = np.array([0.4, 1.3, -5.0, np.nan, 0.0, 0.7])
+    gd = 1.0
+    cen = []
+    for i in range(n):
+        lim = gd + reach[i]
+        for ang in rng.uniform(0.0, 2.0 * math.pi, 12):
+            for d in (lim, np.nextafter(lim, 0.0), np.nextafter(lim, 10.0), lim * (1 - 1e-11), lim * (1 + 1e-11),
+                      0.5 * lim, 2.0 * lim, 1e-3):
+                cen.append((Xs[i, 0] + d * math.cos(ang), Xs[i, 1] + d * math.sin(ang)))
+    cen.append((np.nan, 0.0))
+    cen.append((np.inf, 0.0))
+    centroid = np.array(cen)
+    m = centroid.shape[0]
+    R = np.tile(np.eye(2) * 0.01, (m, 1, 1))
+    kind = np.full(m, K_POINT, dtype=np.int8)
+    d2, near, ok = gate_costs(Xs, Ps, reach, np.zeros(n, dtype=bool), np.zeros(n), np.ones((n, 2)), centroid.copy(),
+                              R, gd, 9.21, kind, np.zeros(m), np.zeros((m, 4)), np.zeros((m, 2, 2), dtype=bool),
+                              centroid, np.zeros((m, 3)), np.zeros(1), np.zeros(1), np.zeros(m, dtype=np.int64),
+                              np.ones(m, dtype=np.int64), fit_params(DetectConfig().fit))
+    want = np.array([[math.hypot(centroid[j, 0] - Xs[i, 0], centroid[j, 1] - Xs[i, 1]) < gd + reach[i]
+                      for j in range(m)] for i in range(n)])
+    np.testing.assert_array_equal(near, want)
+    assert 0 < want.sum() < want.size
+    assert not near[2].any() and not near[3].any()  # (a negative and a NaN limit: never near)
+    # the pairs placed on the limit and an ulp either side (left to hypot by the shortcut) give both answers
+    on = np.array([[near[i, i * 96 + a * 8 + t] for a in range(12) for t in range(3)] for i in (0, 1, 4, 5)])
+    assert on.any() and not on.all()
+    assert near[0, 3:96:8].all() and not near[0, 4:96:8].any()  # 1e-11 relative inside / outside the limit
+    np.testing.assert_array_equal(ok, np.isfinite(d2) & (d2 < 9.21) & want)
+
+
+def test_reference_arrays_are_the_masked_ranges_and_the_inverse_pose() -> None:
+    """FreeSpaceMemory.make_ref's ranges are np.where(valid, ranges, inf) and its parameter row holds
+    Pose2D.inverse() bit for bit (with angle_min, increment, the full-circle flag and range_max)."""
+    sim = simulate("crowd", duration=0.5)
+    scan = sim.scans[2]
+    valid = scan.valid_mask()
+    valid[::5] = False
+    for pose in (Pose2D(3.25, -1.5, 2.9), Pose2D(-0.1, 7.0, -3.1), Pose2D(0.0, 0.0, math.pi)):
+        ref = FreeSpaceMemory.make_ref(scan, pose, valid)
+        np.testing.assert_array_equal(ref.ranges, np.where(valid, scan.ranges, np.inf))
+        inv = pose.inverse()
+        want = np.array([inv.x, inv.y, inv.theta, scan.angle_min, scan.angle_increment, 1.0 if ref.full else 0.0,
+                         scan.range_max])
+        assert ref.par.tobytes() == want.tobytes()
+        assert ref.pose is pose and ref.stamp == scan.stamp

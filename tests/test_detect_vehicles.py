@@ -9,7 +9,7 @@ from dynslam2d.config import Config
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.layout import F_HI1, F_HI2, F_LO1, F_LO2, N_FIT_COLS
 from dynslam2d.detect.mapevidence import MapView
-from dynslam2d.detect.vehicles import admit_long_clusters, extent_limit
+from dynslam2d.detect.vehicles import admit_long_clusters, extent_limit, long_kept
 from dynslam2d.pipeline import run
 from dynslam2d.results import compute_metrics, ground_truth_for
 from dynslam2d.sim import Mover, Rect, Scenario, oscillating_in_place, timeline
@@ -77,3 +77,28 @@ def test_a_van_driving_past_is_tracked_and_removed_and_no_wall_is():
     # longer than max_extent (3 m): structure, tracked only while seen end-on (0.15)
     assert out[0.0]["walking_recall"] < 0.25 and out[6.0]["walking_recall"] > 2.5 * out[0.0]["walking_recall"]
     assert out[6.0]["static_removed_share"] < 0.002
+
+
+def test_long_kept_is_the_numpy_selection_also_with_nan_sides():
+    """long_kept equals flatnonzero(keep & (maximum(ext1, ext2) > limit)): a NaN side is never long (np.maximum
+    propagates it), either side may be the long one, a dropped cluster is never listed."""
+    rng = np.random.default_rng(3)
+    f = np.zeros((400, N_FIT_COLS))
+    f[:, F_LO1] = rng.uniform(-2.0, 2.0, 400)
+    f[:, F_HI1] = f[:, F_LO1] + rng.uniform(0.0, 6.0, 400)
+    f[:, F_LO2] = rng.uniform(-2.0, 2.0, 400)
+    f[:, F_HI2] = f[:, F_LO2] + rng.uniform(0.0, 6.0, 400)
+    f[::7, F_HI1] = np.nan
+    f[3::11, F_LO2] = np.nan
+    f[5, F_HI1] = f[5, F_LO1] + 3.0  # exactly the limit: not longer
+    keep = rng.random(400) < 0.7
+    ext = np.maximum(f[:, F_HI1] - f[:, F_LO1], f[:, F_HI2] - f[:, F_LO2])
+    want = np.flatnonzero(keep & (ext > 3.0))
+    got = long_kept(keep, f, 3.0)
+    assert got.dtype == np.int64
+    np.testing.assert_array_equal(got, want)
+    assert 50 < want.shape[0] < 250
+    # NaN in one side with the other side long: numpy says not long, a plain "either side > limit" would say long
+    nan_long = np.flatnonzero(keep & np.isnan(ext) & ((f[:, F_HI1] - f[:, F_LO1] > 3.0)
+                                                      | (f[:, F_HI2] - f[:, F_LO2] > 3.0)))
+    assert nan_long.shape[0] > 0 and not np.isin(nan_long, got).any()

@@ -33,6 +33,11 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), Array(bool, "
      "1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, int64, float64, float64, float64, "
      "Array(float64, 1, 'C'),)"),
+    ('dynslam2d.detect.vehicles.long_kept',
+     "(Array(bool, 1, 'C'), Array(float64, 2, 'C'), float64,)"),
+    ('dynslam2d.detect.freespace._ref_arrays',
+     "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, "
+     'float64,)'),
     ('dynslam2d.detect.kernels.leg_pairs',
      "(Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), float64, float64,)"),
     ('dynslam2d.detect.kernels.measure_batch',

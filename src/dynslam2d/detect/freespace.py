@@ -19,10 +19,11 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from dynslam2d.detect.frozen import fast_init
 from dynslam2d.detect.kernels import seen_through_refs
-from dynslam2d.types import Pose2D, Scan
+from dynslam2d.types import Pose2D, Scan, wrap_angle
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -37,6 +38,26 @@ class _Ref:
     # (7,) its parameters for seen_through_refs: pose.inverse() (x, y, θ: map → reference sensor frame, made once),
     # angle_min, increment, full, reach
     par: np.ndarray
+
+
+@njit(cache=True)
+def _ref_arrays(ranges: np.ndarray, valid: np.ndarray, ix: float, iy: float, ith: float, amin: float, inc: float,
+                full: float, reach: float) -> tuple:
+    """A reference's ranges (m; +inf where ``valid`` is False: ``np.where(valid, ranges, inf)``) and its (7,)
+    parameter row (:attr:`_Ref.par`) in one call."""
+    n = ranges.shape[0]
+    r = np.empty(n)
+    for i in range(n):
+        r[i] = ranges[i] if valid[i] else np.inf
+    par = np.empty(7)
+    par[0] = ix
+    par[1] = iy
+    par[2] = ith
+    par[3] = amin
+    par[4] = inc
+    par[5] = full
+    par[6] = reach
+    return r, par
 
 
 _make_ref = fast_init(_Ref)  # (the frozen dataclass without its __init__'s object.__setattr__, detect/frozen.py)
@@ -63,11 +84,15 @@ class FreeSpaceMemory:
     @staticmethod
     def make_ref(scan: Scan, pose: Pose2D, valid: np.ndarray) -> _Ref:
         """A reference built from ``scan`` (taken at ``pose``, map frame; ``valid`` = beams with a return)."""
-        r = np.where(valid, scan.ranges, np.inf)
-        full = scan.n_beams * abs(scan.angle_increment) >= 2.0 * math.pi - 1.5 * abs(scan.angle_increment)
-        inv = pose.inverse()
+        ranges = scan.ranges
+        inc_abs = abs(scan.angle_increment)
+        full = ranges.shape[0] * inc_abs >= 2.0 * math.pi - 1.5 * inc_abs
+        # pose.inverse() (Pose2D.inverse's arithmetic, without the Pose2D)
+        x, y, th = pose.x, pose.y, pose.theta
+        c, s = math.cos(th), math.sin(th)
         amin, inc, reach = float(scan.angle_min), float(scan.angle_increment), float(scan.range_max)
-        par = np.array([inv.x, inv.y, inv.theta, amin, inc, 1.0 if full else 0.0, reach])
+        r, par = _ref_arrays(ranges, valid, -c * x - s * y, s * x - c * y, float(wrap_angle(-th)), amin, inc,
+                             1.0 if full else 0.0, reach)
         return _make_ref(float(scan.stamp), pose, r, amin, inc, full, reach, par)
 
     def add(self, scan: Scan, pose: Pose2D, valid: np.ndarray, ref: _Ref | None = None) -> None:

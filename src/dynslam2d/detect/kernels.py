@@ -423,26 +423,22 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
             v[i] = -sn * px[a + i] + cs * py[a + i]
         su = cs * sx + sn * sy
         sv = -sn * sx + cs * sy
-        lo = np.empty(2)  # (np.array([...]) would compile numba's list-to-array path)
-        lo[0] = lo0
-        lo[1] = lo1
-        hi = np.empty(2)
-        hi[0] = hi0
-        hi[1] = hi1
         ext = (ext0, ext1)
         for k in range(2):
             wk = u if k == 0 else v
             wo = v if k == 0 else u
             sk = su if k == 0 else sv
+            lok = lo0 if k == 0 else lo1  # (this axis' bounds as scalars, written back below: no arrays per cluster)
+            hik = hi0 if k == 0 else hi1
             near = -1
-            if sk < lo[k]:
+            if sk < lok:
                 near = 0
-            elif sk > hi[k]:
+            elif sk > hik:
                 near = 1
             face = False
             face_line = 0.0
             if near >= 0:
-                b = lo[k] if near == 0 else hi[k]
+                b = lok if near == 0 else hik
                 cnt = np.int64(0)  # not a literal 0: numba would type a first call with Literal[int](0)
                 omin = np.inf
                 omax = -np.inf
@@ -458,11 +454,11 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
                     face_line = _pairwise_sum(sel, np.int64(0), cnt) / cnt
                     if face:
                         if near == 0:
-                            lo[k] = face_line
+                            lok = face_line
                         else:
-                            hi[k] = face_line
+                            hik = face_line
             for side in range(2):
-                b = lo[k] if side == 0 else hi[k]
+                b = lok if side == 0 else hik
                 if face and side == near:
                     rel[c, k, side] = True
                     continue
@@ -482,12 +478,18 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
                         continue
                 pos = 0 if d0 <= d1 else n - 1
                 step = -1 if pos == 0 else 1
-                rel[c, k, side] = _endpoint_real(u, v, pos, k, lo[k], hi[k], beams[a + pos], step, ranges, valid,
+                rel[c, k, side] = _endpoint_real(u, v, pos, k, lok, hik, beams[a + pos], step, ranges, valid,
                                                  ax, ay, cs, sn, wrapped, max_skip, range_max, p, su, sv, dphi)
-        lohi[c, L_LO1] = lo[0]
-        lohi[c, L_LO2] = lo[1]
-        lohi[c, L_HI1] = hi[0]
-        lohi[c, L_HI2] = hi[1]
+            if k == 0:
+                lo0 = lok
+                hi0 = hik
+            else:
+                lo1 = lok
+                hi1 = hik
+        lohi[c, L_LO1] = lo0
+        lohi[c, L_LO2] = lo1
+        lohi[c, L_HI1] = hi0
+        lohi[c, L_HI2] = hi1
     return keep, kind, lohi, rel
 
 
@@ -828,11 +830,25 @@ def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.n
     for i in range(n):
         x0 = Xs[i, 0]
         x1 = Xs[i, 1]
+        p00 = Ps[i, 0, 0]
+        p01 = Ps[i, 0, 1]
+        p10 = Ps[i, 1, 0]
+        p11 = Ps[i, 1, 1]
+        lim = gate_distance + reach[i]
+        # the distance gate hypot(dx, dy) < lim without the hypot where dx² + dy² (float) decides it: that sum is
+        # within 2.3e-16 relative of the exact one and libm's hypot within an ulp of its root, so a squared distance
+        # 1e-9 relative below / above lim² (lim well inside the normal range) gives hypot's answer; else hypot
+        lim2_in = -1.0
+        lim2_out = np.inf
+        if 1e-100 < lim < 1e100:
+            lim2 = lim * lim
+            lim2_in = lim2 * (1.0 - 1e-9)
+            lim2_out = lim2 * (1.0 + 1e-9)
         for j in range(m):
-            s00 = Ps[i, 0, 0] + R[j, 0, 0]
-            s01 = Ps[i, 0, 1] + R[j, 0, 1]
-            s10 = Ps[i, 1, 0] + R[j, 1, 0]
-            s11 = Ps[i, 1, 1] + R[j, 1, 1]
+            s00 = p00 + R[j, 0, 0]
+            s01 = p01 + R[j, 0, 1]
+            s10 = p10 + R[j, 1, 0]
+            s11 = p11 + R[j, 1, 1]
             e0 = Z[j, 0] - x0
             e1 = Z[j, 1] - x1
             det_s = s00 * s11 - s01 * s10
@@ -843,7 +859,13 @@ def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.n
                 d2[i, j] = math.copysign(np.inf, num) * math.copysign(1.0, det_s)
             else:
                 d2[i, j] = np.nan
-            near[i, j] = math.hypot(centroid[j, 0] - x0, centroid[j, 1] - x1) < gate_distance + reach[i]
+            dx = centroid[j, 0] - x0
+            dy = centroid[j, 1] - x1
+            q = dx * dx + dy * dy
+            if q < lim2_in:
+                near[i, j] = True
+            elif not q > lim2_out:  # (NaN or close to the limit: hypot decides)
+                near[i, j] = math.hypot(dx, dy) < lim
             if near[i, j] and rect_trk[i] and kind[j] == K_RECT:
                 pi[npair] = i
                 pj[npair] = j

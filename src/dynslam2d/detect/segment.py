@@ -127,10 +127,9 @@ def _segment_kernel(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, tr
         _adjacent_trig(angles, lam, trig)
     valid_idx = np.empty(n, dtype=np.int64)
     m = 0
-    for i in range(n):
-        if mask[i]:
-            valid_idx[m] = i
-            m += 1
+    for i in range(n):  # (branch-free: the slot after the last valid beam is overwritten)
+        valid_idx[m] = i
+        m += 1 if mask[i] else 0
     wrap = wrap and m > 2
     # links[j] = 1 if valid beam j links to valid beam j+1 (the last one to the first when wrap)
     links = np.zeros(m, dtype=np.uint8)
@@ -138,13 +137,13 @@ def _segment_kernel(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, tr
         if j == m - 1 and not wrap:
             break
         a = valid_idx[j]
-        b = valid_idx[(j + 1) % m]
+        b = valid_idx[j + 1] if j + 1 < m else valid_idx[0]  # (the last to the first: no modulo per beam)
         skipped = b - a - 1 if b > a else b + n - a - 1
         if skipped > max_skip or (m == 1):
             continue
         if _link(ranges, angles, trig, a, b, fixed, fixed_gap, lam, three_sigma, d_min, d_max):
             links[j] = 1
-    labels = -np.ones(n, dtype=np.int32)
+    labels = np.full(n, -1, dtype=np.int32)
     beams = np.empty(m, dtype=np.int64)
     offsets = np.zeros(m + 1, dtype=np.int64)
     if m == 0:
@@ -164,8 +163,11 @@ def _segment_kernel(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, tr
     nb = 0
     dropped = 0
     count = 0
+    j = start - 1
     for t in range(m):
-        j = (start + t) % m
+        j += 1
+        if j == m:
+            j = 0
         beams[nb + count] = valid_idx[j]
         count += 1
         last = t == m - 1

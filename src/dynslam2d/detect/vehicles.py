@@ -19,6 +19,7 @@ Frames: map frame; units m.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.layout import F_HI1, F_HI2, F_LO1, F_LO2
@@ -31,6 +32,27 @@ def extent_limit(config: DetectConfig) -> float:
     return max(seg.max_extent, seg.vehicle_max_extent)
 
 
+@njit(cache=True)
+def long_kept(keep: np.ndarray, fits: np.ndarray, max_extent: float) -> np.ndarray:
+    """Indices (ascending, int64) of the kept clusters (``keep``) whose fitted rectangle (``fits`` rows,
+    :func:`~dynslam2d.detect.shapes.fit_clusters`) has a side longer than ``max_extent`` (m): numpy's
+    ``flatnonzero(keep & (maximum(hi1 − lo1, hi2 − lo2) > max_extent))`` in one pass (a NaN side is never longer,
+    as ``np.maximum`` propagates it)."""
+    out = np.empty(keep.shape[0], dtype=np.int64)
+    m = 0
+    for c in range(keep.shape[0]):
+        if not keep[c]:
+            continue
+        e1 = fits[c, F_HI1] - fits[c, F_LO1]
+        e2 = fits[c, F_HI2] - fits[c, F_LO2]
+        if e1 != e1 or e2 != e2:
+            continue
+        if e1 > max_extent or e2 > max_extent:
+            out[m] = c
+            m += 1
+    return out[:m]
+
+
 def admit_long_clusters(keep: np.ndarray, fits: np.ndarray, offsets: np.ndarray, px: np.ndarray, py: np.ndarray,
                         view: MapView | None, config: DetectConfig) -> int:
     """In place: ``keep[c]`` = False for every kept cluster ``c`` longer than ``segment.max_extent`` whose
@@ -38,8 +60,7 @@ def admit_long_clusters(keep: np.ndarray, fits: np.ndarray, offsets: np.ndarray,
     :func:`~dynslam2d.detect.shapes.fit_clusters`, ``offsets`` the segmentation's, ``px``/``py`` the
     clusters' map-frame points (m). Returns the number of long clusters left kept."""
     seg = config.segment
-    ext = np.maximum(fits[:, F_HI1] - fits[:, F_LO1], fits[:, F_HI2] - fits[:, F_LO2])
-    long_ = np.flatnonzero(keep & (ext > seg.max_extent))
+    long_ = long_kept(keep, fits, float(seg.max_extent))  # (none on most scans: one call, no temporaries)
     if long_.shape[0] == 0:
         return 0
     if view is None:
@@ -58,4 +79,4 @@ def admit_long_clusters(keep: np.ndarray, fits: np.ndarray, offsets: np.ndarray,
     return int(ok.sum())
 
 
-__all__ = ["admit_long_clusters", "extent_limit"]
+__all__ = ["admit_long_clusters", "extent_limit", "long_kept"]
