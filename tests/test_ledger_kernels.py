@@ -232,3 +232,24 @@ def test_scan_cells_keep_the_beams_and_cells_of_the_numpy_path(seed: int) -> Non
         assert u.dtype == v.dtype and np.array_equal(u, v)
     none = lk.scan_cells(r, cos_a, sin_a, vm, np.ones(n, dtype=bool), owner, uids, 0.1, 10.0, c, s, 0.0, 0.0, rs)
     assert none[0].shape[0] == 0 and not none[3].any()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_beam_owners_give_each_beam_to_the_last_track_listing_it(seed: int) -> None:
+    """beam_owners against numpy's assignment track after track (beams shared by tracks, repeated within a
+    track, negative indices, tracks without beams)."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 300))
+    ids = rng.choice(np.arange(1, 60), int(rng.integers(1, 12)), replace=False).astype(np.int64)
+    beams = [rng.integers(-n, n, int(rng.integers(0, 40))) for _ in ids]
+    beams.append(np.concatenate([b[:2] for b in beams]))  # a last track sharing beams with every other
+    ids = np.append(ids, 99)
+    want = np.full(n, -1, dtype=np.int64)
+    for tid, b in zip(ids, beams):
+        want[b] = tid
+    ends = np.cumsum([0] + [b.shape[0] for b in beams]).astype(np.int64)
+    got = lk.beam_owners(n, np.concatenate(beams).astype(np.int64), ends, ids)
+    assert got.dtype == np.int64 and np.array_equal(got, want)
+    assert (got[beams[-1]] == 99).all()
+    with pytest.raises(IndexError):
+        lk.beam_owners(3, np.array([3], dtype=np.int64), np.array([0, 1], dtype=np.int64), ids[:1])

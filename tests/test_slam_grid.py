@@ -327,3 +327,24 @@ def test_grazing_stop_keeps_walls_that_rays_run_along() -> None:
     # normal incidence: the stop is grazing_cells (1 cell = the endpoint the reference never frees)
     wall = np.column_stack((np.full(21, 3.0), np.linspace(-0.2, 0.2, 21)))
     assert np.allclose(grazing_stop(wall, 1.0, math.sin(math.radians(5.0))), 1.0, atol=0.01)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_ray_ends_equal_the_pose_transform_and_numpy_extremes(seed: int) -> None:
+    """raycast.ray_ends gives MultiResMap.integrate the ends Pose2D.transform_points computes (bit for bit), the
+    hit flags (hits first, then clearing ends) and numpy's min / max of each row, NaN included."""
+    from dynslam2d.slam.raycast import ray_ends
+
+    rng = np.random.default_rng(seed)
+    hits = rng.normal(0.0, 8.0, (int(rng.integers(1, 300)), 2))
+    clear = rng.normal(0.0, 8.0, (int(rng.integers(0, 50)), 2))[:, ::-1]  # (a non-contiguous view)
+    pose = Pose2D(float(rng.uniform(-30, 30)), float(rng.uniform(-30, 30)), float(rng.uniform(-math.pi, math.pi)))
+    ends, hit, box = ray_ends(hits, clear, math.cos(pose.theta), math.sin(pose.theta), pose.x, pose.y)
+    want = pose.transform_points(np.vstack((hits, clear)))
+    assert np.array_equal(ends, want.T) and ends.flags.c_contiguous
+    assert hit.tolist() == [True] * hits.shape[0] + [False] * clear.shape[0]
+    assert box.tolist() == [*want.min(axis=0).tolist(), *want.max(axis=0).tolist()]
+    hits[hits.shape[0] // 2, 1] = np.nan  # (NaN in both rows after the rotation)
+    box = ray_ends(hits, clear, math.cos(pose.theta), math.sin(pose.theta), pose.x, pose.y)[2]
+    want = pose.transform_points(np.vstack((hits, clear)))
+    assert np.isnan(box).all() and np.isnan(want.min(axis=0)).all() and np.isnan(want.max(axis=0)).all()

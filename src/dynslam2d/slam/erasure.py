@@ -299,7 +299,7 @@ class EvidenceLedger:
         ``keep_beams``). Returns None when nothing is to be recorded."""
         # imported at first use: their explicit signatures compile (or load from numba's cache) on import, which
         # would put ~0.4 s and scipy.linalg on every `import dynslam2d.pipeline` (issue 13's warm start)
-        from dynslam2d.slam.ledgerkernels import scan_cells
+        from dynslam2d.slam.ledgerkernels import beam_owners, scan_cells
         mine: list[Track] = []  # the tracks with beams, their beams, beam counts and ids (one pass)
         blist: list[np.ndarray] = []
         blen = [0]
@@ -314,14 +314,10 @@ class EvidenceLedger:
         if not mine:
             return None
         r = scan.ranges
-        owner = np.full(r.shape[0], -1, dtype=np.int64)
         allb = np.concatenate(blist)
         lens = np.cumsum(blen)
-        if np.bincount(allb, minlength=r.shape[0]).max() <= 1:  # no beam in two tracks: one assignment
-            owner[allb] = np.repeat(np.array(bids, dtype=np.int64), blen[1:])
-        else:  # (a later track's claim wins, as one assignment per track in order)
-            for t in mine:
-                owner[t.beams] = t.id
+        # each beam's track (a later track's claim wins, as one assignment per track in order)
+        owner = beam_owners(r.shape[0], allb.astype(np.int64, copy=False), lens, np.array(bids, dtype=np.int64))
         uids = np.array(sorted(set(bids)), dtype=np.int64)  # track id ↦ rank 0 … R−1
         cos_a, sin_a = scan.trig()
         c, s = math.cos(pose.theta), math.sin(pose.theta)

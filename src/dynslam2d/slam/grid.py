@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from dynslam2d.gridmap import GridMap
-from dynslam2d.slam.raycast import integrate_levels, integrate_rays, integrate_rays_stop
+from dynslam2d.slam.raycast import integrate_levels, integrate_rays, integrate_rays_stop, ray_ends
 from dynslam2d.types import Pose2D
 
 #: Bytes per cell: float32 log-odds + float32 probability cache + int32 update index.
@@ -31,6 +31,7 @@ _FUSED_LEVELS = 3
 _NO_F32 = np.zeros((0, 0), dtype=np.float32)
 _NO_I32 = np.zeros((0, 0), dtype=np.int32)
 _NO_STOP = np.zeros(0)
+_NO_CLEAR = np.zeros((0, 2))
 
 
 class MapTooLargeError(RuntimeError):
@@ -300,24 +301,17 @@ class MultiResMap:
         """
         hits = np.asarray(hits_laser, dtype=np.float64).reshape(-1, 2)
         n_hit = hits.shape[0]
-        pts = hits
-        if clear_laser is not None and len(clear_laser):
-            pts = np.vstack((hits, np.asarray(clear_laser, dtype=np.float64)))
-        if pts.shape[0] == 0:
+        clear = _NO_CLEAR if clear_laser is None else np.asarray(clear_laser, dtype=np.float64).reshape(-1, 2)
+        if n_hit + clear.shape[0] == 0:
             return 0
-        # the rays' ends in the map frame as two contiguous rows: the arithmetic of Pose2D.transform_points,
-        # element by element (so the same values), without its (n, 2) layout and the transposed copy
-        c, s = math.cos(pose.theta), math.sin(pose.theta)
-        px, py = pts[:, 0], pts[:, 1]
-        ends_t = np.empty((2, pts.shape[0]))
-        ends_t[0] = c * px - s * py + pose.x
-        ends_t[1] = s * px + c * py + pose.y
-        hit = np.ones(pts.shape[0], dtype=np.bool_)
-        hit[n_hit:] = False
+        # the rays' ends in the map frame as two contiguous rows (the arithmetic of Pose2D.transform_points,
+        # element by element, so the same values), the hit flags and the ends' extremes, in one kernel call
+        ends_t, hit, box = ray_ends(hits, clear, math.cos(pose.theta), math.sin(pose.theta), float(pose.x),
+                                    float(pose.y))
         # every level's cell bounds from the extreme ends: v ↦ floor(v / r + 0.5) is monotonic, so the
         # extreme ends give the extreme cells (as GridLevel.cell_bounds), with a few scalar operations
-        lo = ends_t.min(axis=1).tolist()
-        hi = ends_t.max(axis=1).tolist()
+        box = box.tolist()
+        lo, hi = box[:2], box[2:]
         ox, oy = float(pose.x), float(pose.y)
         bounds = []
         for lv in self.levels:

@@ -6,6 +6,7 @@ cells of all levels around one ``np.sort``, one per level for the read before th
 rows after it) instead of about a hundred small numpy calls. They compute exactly what the numpy code they
 replace computed (``tests/test_ledger_kernels.py`` checks them against it on random inputs):
 
+* :func:`beam_owners`: each beam's owner track (the last track listing it), from all tracks' beams in one array;
 * :func:`scan_cells`: the kept beams (valid, inside the laser's ranges, not removed), their map-frame points
   and owner tracks, and every point's (level, owner, cell) as one int64;
 * :func:`unpack_cells`: from the sorted packed values, each distinct (level, owner > 0, cell) that no owner-0
@@ -45,6 +46,25 @@ def _lower_bound(a, hi, v):  # pragma: no cover - numba
         else:
             hi = mid
     return lo
+
+
+@njit("int64[::1](int64, int64[::1], int64[::1], int64[::1])", cache=True)
+def beam_owners(n, beams, ends, ids):  # pragma: no cover - numba
+    """(n,) int64: per beam of a scan of ``n`` beams, the id of the track that lists it (−1: none); track ``t``
+    (id ``ids[t]``) lists ``beams[ends[t]:ends[t + 1]]`` (``ends`` (T + 1,), from 0). A beam two tracks list goes
+    to the later one, as numpy's ``owner[beams_t] = ids[t]`` track after track; negative beams count from the end
+    as numpy's indices do."""
+    owner = np.full(n, -1, dtype=np.int64)
+    for t in range(ids.shape[0]):
+        tid = ids[t]
+        for e in range(ends[t], ends[t + 1]):
+            b = beams[e]
+            if b < 0:
+                b += n
+            if b < 0 or b >= n:
+                raise IndexError("beam index out of the scan")
+            owner[b] = tid
+    return owner
 
 
 _I1 = types.int64[::1]
@@ -161,45 +181,58 @@ def unpack_cells(u, params, uids, n_lv):  # pragma: no cover - numba
     :func:`scan_cells` (``params``; ``uids``: the track ids by rank): each distinct value of an owner > 0 whose
     (level, cell) has no owner-0 value, in the values' order."""
     n = u.shape[0]
+    n_tr = uids.shape[0]
     wi = params[2 * n_lv]
     wj = params[2 * n_lv + 1]
     block = params[2 * n_lv + 2]
     wij = wi * wj
-    sel = np.empty(n, dtype=np.int64)
+    # one pass in the values' order: the (level, owner) group of a value follows from comparisons with its group's
+    # end (the values are sorted), and each owner group's cells are matched against its level's owner-0 cells by
+    # a merge (both ascending), not by a search and divisions per value
+    ids = np.empty(n, dtype=np.int64)
+    keys = np.empty(n, dtype=np.int64)
+    cells = np.empty((n, 2), dtype=np.int64)
+    bounds = np.zeros(n_lv + 1, dtype=np.int64)
+    lvl = 0
+    own = 0
+    base = 0  # lvl · block + own · wij: the group's smallest value
+    z_lo = 0  # the level's owner-0 values: u[z_lo:z_hi]
+    z_hi = 0
+    zp = 0  # merge position in them
     m = 0
     for p in range(n):
         v = u[p]
         if p > 0 and v == u[p - 1]:
             continue
-        own = (v % block) // wij
+        while v >= base + wij:  # the next (level, owner) group
+            own += 1
+            if own > n_tr:
+                lvl += 1
+                own = 0
+            base = lvl * block + own * wij
+            if own == 0:
+                z_lo = p
+                z_hi = p
+            zp = z_lo
         if own == 0:
+            z_hi = p + 1
             continue
-        q = v - own * wij  # the same level and cell with owner 0: is it among the values (all smaller)?
-        lo = _lower_bound(u, p, q)
-        if lo < p and u[lo] == q:
+        q = v - own * wij  # the same level and cell with owner 0
+        while zp < z_hi and u[zp] < q:
+            zp += 1
+        if zp < z_hi and u[zp] == q:
             continue
-        sel[m] = p
-        m += 1
-    ids = np.empty(m, dtype=np.int64)
-    keys = np.empty(m, dtype=np.int64)
-    cells = np.empty((m, 2), dtype=np.int64)
-    bounds = np.zeros(n_lv + 1, dtype=np.int64)
-    for t in range(m):
-        v = u[sel[t]]
-        lvl = v // block
-        rest = v - lvl * block
-        own = rest // wij
-        cell = rest - own * wij
-        ci = cell // wj + params[lvl]
-        cj = cell - (cell // wj) * wj + params[n_lv + lvl]
-        ids[t] = uids[own - 1]
-        keys[t] = ci * _KEY_SHIFT + cj
-        cells[t, 0] = ci
-        cells[t, 1] = cj
+        cell = v - base
+        ci = cell // wj
+        ids[m] = uids[own - 1]
+        keys[m] = (ci + params[lvl]) * _KEY_SHIFT + (cell - ci * wj + params[n_lv + lvl])
+        cells[m, 0] = ci + params[lvl]
+        cells[m, 1] = cell - ci * wj + params[n_lv + lvl]
         bounds[lvl + 1] += 1
+        m += 1
     for k in range(n_lv):
         bounds[k + 1] += bounds[k]
-    return ids, keys, cells, bounds
+    return ids[:m].copy(), keys[:m].copy(), cells[:m].copy(), bounds
 
 
 @njit("Tuple((float64[::1], int64[::1], int64[::1], int64))(float32[:, :], int32[:, :], int64[:, ::1], int64, int64)",
@@ -275,3 +308,4 @@ def update_rows(logodds, uidx, f, ids, keys, before, ub):  # pragma: no cover - 
         j += 1
     starts[g] = m
     return rows, gid, starts
+

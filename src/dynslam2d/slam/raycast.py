@@ -229,3 +229,43 @@ def integrate_levels(logodds, prob, uidx, n_levels, res, i0, j0, sx, sy, counter
         if k == 0:
             n0 = n_done
     return n0
+
+
+@njit(cache=True)
+def ray_ends(hits, clear, c, s, x, y):  # pragma: no cover - numba
+    """The ends of one scan's rays in the map frame: ((2, n) rows x and y of the ``hits`` (n_hit, 2) then the
+    ``clear`` (m, 2) ends, laser frame, m, moved by the pose (``x``, ``y``, cos ``c``, sin ``s``) with the arithmetic
+    of ``Pose2D.transform_points`` element by element; (n,) hit flags, True for the hits; [min x, min y, max x,
+    max y] of the ends, NaN where a row holds a NaN, as numpy's ``min`` / ``max``)."""
+    n_hit = hits.shape[0]
+    n = n_hit + clear.shape[0]
+    ends = np.empty((2, n))
+    hit = np.empty(n, dtype=np.bool_)
+    for k in range(n):
+        if k < n_hit:
+            px = hits[k, 0]
+            py = hits[k, 1]
+            hit[k] = True
+        else:
+            px = clear[k - n_hit, 0]
+            py = clear[k - n_hit, 1]
+            hit[k] = False
+        ends[0, k] = c * px - s * py + x
+        ends[1, k] = s * px + c * py + y
+    box = np.empty(4)
+    for r in range(2):
+        lo = ends[r, 0]
+        hi = lo
+        for k in range(1, n):
+            v = ends[r, k]
+            if v != v:
+                lo = v
+                hi = v
+                break
+            if v < lo:
+                lo = v
+            if v > hi:
+                hi = v
+        box[r] = lo
+        box[2 + r] = hi
+    return ends, hit, box
