@@ -1,6 +1,7 @@
 """The matcher's fused kernels give exactly what the plain computation gives (issues 9/13, matching pass 8):
 the whole pyramid in one kernel call (``match_pyramid``) against the per-level loop of ``match_level`` calls,
-``evaluate`` and ``free_fraction`` at the result, and the polynomial bearing bin against ``atan2``."""
+``evaluate`` and ``free_fraction`` at the result, the polynomial bearing bin against ``atan2``, and the correlative
+search's score pyramid and rotated point cells against their array expressions."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from numba import njit
 
 from dynslam2d.sim import LidarModel, cast_rays, paper_room
 from dynslam2d.slam import HectorSlam, SlamConfig
+from dynslam2d.slam.correlative import _pyramid, _rotated_cells, _score_pyramid, _score_table
 from dynslam2d.slam.matcher import _bearing_bin, evaluate, free_fraction, match_level, match_multires
 from dynslam2d.types import Pose2D, Scan, wrap_angle
 
@@ -137,3 +139,35 @@ def test_polynomial_bearing_bin_equals_atan2_bin() -> None:
     z2 = z * z
     poly = z * (0.9998660 + z2 * (-0.3302995 + z2 * (0.1801410 + z2 * (-0.0851330 + z2 * 0.0208351))))
     assert np.abs(poly - np.arctan(z)).max() < 1.2e-5
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 7), (5, 1), (3, 3), (17, 40), (120, 95)])
+def test_score_pyramid_kernel_equals_the_array_table_and_pyramid(shape: tuple[int, int]) -> None:
+    rng = np.random.default_rng(2)
+    big = rng.uniform(0.0, 1.0, (shape[0] + 4, shape[1] + 6)).astype(np.float32)
+    big[rng.uniform(size=big.shape) < 0.3] = 0.5  # unknown
+    big[rng.uniform(size=big.shape) < 0.1] = 1.0
+    crop = big[2:2 + shape[0], 3:3 + shape[1]]  # a strided crop, as the search passes
+    for hmax in range(5):
+        want = _pyramid(_score_table(crop), hmax)
+        got = _score_pyramid(crop, hmax)
+        assert got.dtype == want.dtype == np.float32
+        np.testing.assert_array_equal(got, want)
+    if min(shape) >= 3:
+        t0 = _score_pyramid(crop, 0)[0]
+        assert np.any((t0 > 0.0) & (np.maximum(2.0 * crop - 1.0, 0.0) == 0.0))  # the half-value smear reached
+
+
+def test_rotated_cells_kernel_equals_the_array_expressions() -> None:
+    rng = np.random.default_rng(3)
+    pc = rng.uniform(-300.0, 300.0, (240, 2))
+    pc[::3] = np.round(pc[::3] * 2.0) / 2.0  # half-cell values, where the rounding of floor(v + 0.5) decides
+    th = 0.3 + np.arange(-20, 21) * 0.01
+    mp = (123.25, -50.5)
+    c, s = np.cos(th)[:, None], np.sin(th)[:, None]
+    want_x = np.floor(c * pc[None, :, 0] - s * pc[None, :, 1] + mp[0] + 0.5).astype(np.int64)
+    want_y = np.floor(s * pc[None, :, 0] + c * pc[None, :, 1] + mp[1] + 0.5).astype(np.int64)
+    qx, qy, x0, x1, y0, y1 = _rotated_cells(pc, np.cos(th), np.sin(th), mp[0], mp[1])
+    np.testing.assert_array_equal(qx, want_x)
+    np.testing.assert_array_equal(qy, want_y)
+    assert (x0, x1, y0, y1) == (want_x.min(), want_x.max(), want_y.min(), want_y.max())

@@ -406,7 +406,7 @@ def match_multires(
     1/m², 1/(m·rad), 1/rad²) adds the prior term ½(ξ−ξp)ᵀΛ(ξ−ξp) on every level.
     ``fit``: a list that receives ``[evaluate(levels[0], pts_m, pose), free_fraction(levels[min(1, L − 1)], pts_m,
     (x, y, wrap_angle(θ)), free_thresh)]`` of the returned pose when it is finite (from the same kernel call; on a
-    map of more than three levels it stays empty).
+    map of more than three levels, or for points that are not a C-contiguous float64 array, it stays empty).
     Returns the world pose (3,).
     """
     pose = np.array(start_world, dtype=np.float64)
@@ -414,8 +414,9 @@ def match_multires(
         return pose
     use_prior = prior_world is not None and prior_info is not None and bool(np.any(prior_info))
     n_lv = len(levels)
-    if n_lv <= 3:
-        # every level in one kernel call (match_pyramid), the finest level's evaluation with it
+    if n_lv <= 3 and pts_m.dtype == np.float64 and pts_m.flags.c_contiguous:
+        # every level in one kernel call (match_pyramid), the finest level's evaluation with it (other point
+        # arrays take the loop below: their scaled copies have the loop's dtype and layout)
         geo = np.array([(lv.resolution, lv.i0, lv.j0, lv.logodds.size == 0) for lv in levels], dtype=np.float64)
         if use_prior:
             info = np.asarray(prior_info, dtype=np.float64)
