@@ -280,8 +280,8 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     Hk = np.zeros((3, 3))
     mp = np.empty(3)
     pp = np.empty(3)
-    pts0 = pts_m[:0]
-    pts1 = pts_m[:0]
+    pts0 = np.empty((0, 2))  # level 0's / 1's scaled points once computed (C-contiguous, as pts_m / res)
+    pts1 = np.empty((0, 2))
     last0 = False  # the last iterations ran on level 0 (unswapped) ending at (lx, ly, lth)
     lx = ly = lth = 0.0
     l_raw = l_summ = 0.0
