@@ -57,13 +57,13 @@ def matcher_ab(scans: list, other) -> tuple[float, float, bool]:
     calls = []
     f = proc.match_multires
 
-    def grab(levels, *a):
+    def grab(levels, *a, **k):
         if 50 < p.slam.n_scans <= 260:
             lv_copy = [copy.copy(lv) for lv in levels]
             for lv in lv_copy:
                 lv.prob = lv.prob.copy()
-            calls.append((lv_copy, a))
-        return f(levels, *a)
+            calls.append((lv_copy, a))  # (replayed without the keyword outputs ``fit`` / ``free_thresh``)
+        return f(levels, *a, **k)
 
     proc.match_multires = grab
     try:

@@ -81,17 +81,18 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 1, 'C'), float64, float64, float64,)"),
     ('dynslam2d.slam.matcher._spread_kernel',
      "(Array(float64, 2, 'A'), Array(bool, 1, 'C'), int64,)"),
-    ('dynslam2d.slam.matcher.match_level',
-     "(Array(float32, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), int64, bool, bool, "
-     "float64, float64, float64, float64, Array(float64, 1, 'C'), Array(float64, 2, 'C'),)"),
-    ('dynslam2d.slam.matcher.accumulate',
-     "(Array(float32, 2, 'C'), Array(float64, 2, 'C'), float64, float64, float64, bool, Array(float64, 2, "
-     "'C'), Array(float64, 1, 'C'),)"),
+    ('dynslam2d.slam.matcher.match_pyramid',
+     "(Array(float32, 2, 'C'), Array(float32, 2, 'C'), Array(float32, 2, 'C'), Array(float64, 2, 'C'), "
+     "Array(float64, 2, 'C'), Array(float64, 1, 'C'), int64, int64, bool, bool, float64, float64, "
+     "float64, float64, bool, Array(float64, 1, 'C'), Array(float64, 3, 'C'), bool, float64, "
+     "Array(float64, 2, 'C'),)"),
+    ('dynslam2d.slam.correlative._rotated_cells',
+     "(Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, float64,)"),
+    ('dynslam2d.slam.correlative._score_pyramid',
+     "(Array(float32, 2, 'A'), int64,)"),
     ('dynslam2d.slam.correlative.branch_and_bound',
      "(Array(float32, 3, 'C'), Array(int64, 2, 'C'), Array(int64, 2, 'C'), int64, Array(float64, 1, 'C'), "
      "float64, float64, Array(int64, 1, 'C'),)"),
-    ('dynslam2d.slam.matcher.fraction_below',
-     "(Array(float32, 2, 'C'), Array(float64, 2, 'C'), float64, float64, float64, float64,)"),
     ('dynslam2d.slam.matcher._support_kernel',
      "(Array(float32, 2, 'C'), Array(float64, 2, 'C'), int64, float64, float64, float64, float64, "
      'float64, int64,)'),

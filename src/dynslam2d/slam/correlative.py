@@ -56,6 +56,88 @@ def _pyramid(t0: np.ndarray, max_height: int) -> np.ndarray:
 
 
 @njit(cache=True)
+def _score_pyramid(prob, max_height):  # pragma: no cover - numba
+    """``_pyramid(_score_table(prob), max_height)`` in one kernel (float32, the same values: the table's
+    float32 2p − 1 and 0.5·m, and maxima, which are exact in any order; ``prob`` holds no NaN)."""
+    hh, ww = prob.shape
+    out = np.zeros((max_height + 1, hh, ww), dtype=np.float32)
+    zero = np.float32(0.0)
+    two = np.float32(2.0)
+    one = np.float32(1.0)
+    half = np.float32(0.5)
+    t = np.empty((hh, ww), dtype=np.float32)
+    m = np.empty((hh, ww), dtype=np.float32)
+    for y in range(hh):
+        for x in range(ww):
+            v = two * prob[y, x] - one
+            t[y, x] = max(v, zero)
+        # 3-wide max along the row
+        for x in range(ww):
+            m[y, x] = t[y, x]
+        for x in range(1, ww):
+            m[y, x] = max(m[y, x], t[y, x - 1])
+        for x in range(ww - 1):
+            m[y, x] = max(m[y, x], t[y, x + 1])
+    t0 = out[0]
+    for y in range(hh):  # then 3-high max along the column, halved, and at least the cell's own value
+        for x in range(ww):
+            t0[y, x] = m[y, x]
+        if y >= 1:
+            for x in range(ww):
+                t0[y, x] = max(t0[y, x], m[y - 1, x])
+        if y + 1 < hh:
+            for x in range(ww):
+                t0[y, x] = max(t0[y, x], m[y + 1, x])
+        for x in range(ww):
+            t0[y, x] = max(t[y, x], half * t0[y, x])
+    for h in range(1, max_height + 1):
+        s = 1 << (h - 1)
+        prev = out[h - 1]
+        cur = out[h]
+        for y in range(hh):  # max over [x, x + s) then [y, y + s) (0 outside: the values are ≥ 0)
+            for x in range(ww):
+                t[y, x] = prev[y, x]
+            for x in range(ww - s):
+                t[y, x] = max(t[y, x], prev[y, x + s])
+        for y in range(hh):
+            for x in range(ww):
+                cur[y, x] = t[y, x]
+            if y + s < hh:
+                for x in range(ww):
+                    cur[y, x] = max(cur[y, x], t[y + s, x])
+    return out
+
+
+@njit(cache=True)
+def _rotated_cells(pc, c, s, mx, my):  # pragma: no cover - numba
+    """Nearest cells (qx, qy) (nrot, n) int64 of the points ``pc`` (n ≥ 1, 2, cells) turned by each row's (cos
+    ``c``, sin ``s``) and moved by (``mx``, ``my``): floor(c·x − s·y + mx + 0.5), floor(s·x + c·y + my + 0.5), the
+    same float64 operations in the same order as the array expressions they replace; and their (min qx, max qx,
+    min qy, max qy)."""
+    nrot = c.shape[0]
+    n = pc.shape[0]
+    qx = np.empty((nrot, n), dtype=np.int64)
+    qy = np.empty((nrot, n), dtype=np.int64)
+    x0 = y0 = np.iinfo(np.int64).max
+    x1 = y1 = np.iinfo(np.int64).min
+    for k in range(nrot):
+        ck = c[k]
+        sk = s[k]
+        for i in range(n):
+            px = pc[i, 0]
+            py = pc[i, 1]
+            a = int(math.floor(ck * px - sk * py + mx + 0.5))
+            b = int(math.floor(sk * px + ck * py + my + 0.5))
+            qx[k, i] = a
+            qy[k, i] = b
+            x0 = min(x0, a)
+            x1 = max(x1, a)
+            y0 = min(y0, b)
+            y1 = max(y1, b)
+    return qx, qy, x0, x1, y0, y1
+
+
+@njit(cache=True)
 def _block_score(table, qx, qy, dx, dy):  # pragma: no cover - numba
     hh, ww = table.shape
     n = qx.shape[0]
@@ -299,23 +381,22 @@ def correlative_search(
     dth = np.arange(-n_half, n_half + 1, dtype=np.float64) * (angular_window / max(n_half, 1))
     th = start_world[2] + dth
     mp = level.pose_to_map(np.asarray(start_world, dtype=np.float64))
-    c, s = np.cos(th)[:, None], np.sin(th)[:, None]
-    qxf = c * pc[None, :, 0] - s * pc[None, :, 1] + mp[0]
-    qyf = s * pc[None, :, 0] + c * pc[None, :, 1] + mp[1]
-    qx = np.floor(qxf + 0.5).astype(np.int64)
-    qy = np.floor(qyf + 0.5).astype(np.int64)
+    qx, qy, qx_min, qx_max, qy_min, qy_max = _rotated_cells(pc, np.cos(th), np.sin(th), float(mp[0]), float(mp[1]))
     w = int(math.ceil(linear_window / r))
     hmax = max(0, min(max_height, int(math.floor(math.log2(2 * w + 1))) if w > 0 else 0))
     H, W = level.shape
-    c0 = max(int(qx.min()) - w - 1, 0)
-    c1 = min(int(qx.max()) + w + 2, W)
-    r0 = max(int(qy.min()) - w - 1, 0)
-    r1 = min(int(qy.max()) + w + 2, H)
+    c0 = max(qx_min - w - 1, 0)
+    c1 = min(qx_max + w + 2, W)
+    r0 = max(qy_min - w - 1, 0)
+    r1 = min(qy_max + w + 2, H)
     if c1 <= c0 or r1 <= r0:
         return None
-    pyr = _pyramid(_score_table(level.prob[r0:r1, c0:c1]), hmax)
-    qx0 = np.ascontiguousarray(qx - c0)
-    qy0 = np.ascontiguousarray(qy - r0)
+    crop = level.prob[r0:r1, c0:c1]
+    pyr = _score_pyramid(crop if crop.dtype == np.float32 else crop.astype(np.float32), hmax)  # = _pyramid(
+    # _score_table(crop), hmax): one pass per level in a kernel instead of a dozen array temporaries
+    qx -= c0  # (fresh contiguous arrays from the kernel: shifted in place)
+    qy -= r0
+    qx0, qy0 = qx, qy
     k, dx, dy, best = branch_and_bound(pyr, qx0, qy0, w, dth, translation_weight * r * r, rotation_weight, _NO_EXCL)
     pose_map = np.array([mp[0] + dx, mp[1] + dy, th[k]])
     out = CorrelativeResult(level.pose_to_world(pose_map), float(best), int(th.shape[0]))

@@ -29,6 +29,8 @@ _CONVERGED_CELLS = 1e-3
 _CONVERGED_RAD = 1e-5
 #: The all-zero prior information (no prior).
 _ZERO3 = np.zeros((3, 3))
+#: all-zero prior information of up to three levels (read only)
+_ZERO_PRIORS = np.zeros((3, 3, 3))
 
 
 @njit(cache=True)
@@ -128,18 +130,10 @@ def _prior_cost(x, y, th, prior, lam_p):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
-                prior, lam_p):  # pragma: no cover
-    """Run ``n_iter`` GN/LM steps on one level from map pose ``pose`` (x, y cells, θ rad).
-
-    Returns (pose (3,), number of accepted steps). Steps are bounded: |Δθ| ≤ max_rot
-    (reference ±0.2 rad clamp), |Δxy| ≤ max_trans cells. With an empty map (H00 or H11 = 0)
-    no step is taken (as ScanMatcher::estimateTransformationLogLh).
-
-    ``prior`` (3,) and ``lam_p`` (3, 3) add a prior term ½(ξ−ξp)ᵀΛp(ξ−ξp) to the objective (same
-    units as ``pose``): the normal equations become (H + Λp)Δ = g + Λp(ξp − ξ). An all-zero
-    ``lam_p`` is the plain matcher.
-    """
+def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
+                prior, lam_p, H_out):  # pragma: no cover - numba
+    """:func:`match_level`'s iterations; returns (x, y, θ, accepted steps, cost, Σ M, n_inside) with H at the
+    returned pose in ``H_out`` (cost, Σ M and n_inside of :func:`accumulate` there: without the prior term)."""
     H = np.zeros((3, 3))
     g = np.zeros(3)
     H2 = np.zeros((3, 3))  # H, g at a trial LM step (they become H, g when it is accepted)
@@ -155,7 +149,8 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
             if lam_p[a, b] != 0.0:
                 use_prior = True
     gp = np.zeros(3)
-    cost, _, _ = accumulate(prob, pts, x, y, th, swapped, H, g)
+    raw, summ, n_in = accumulate(prob, pts, x, y, th, swapped, H, g)
+    cost = raw
     if use_prior:
         cost += _prior_cost(x, y, th, prior, lam_p)
     lam = lam0
@@ -202,12 +197,14 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
         if use_lm:
             # one pass gives the trial cost and, if the step is accepted, the new H and g (the same sums as a
             # cost-only pass followed by accumulate at the accepted pose)
-            new_cost, _, _ = accumulate(prob, pts, nx, ny, nth, swapped, H2, g2)
+            new_raw, new_summ, new_in = accumulate(prob, pts, nx, ny, nth, swapped, H2, g2)
+            new_cost = new_raw
             if use_prior:
                 new_cost += _prior_cost(nx, ny, nth, prior, lam_p)
             if new_cost < cost:
                 x, y, th = nx, ny, nth
                 cost = new_cost
+                raw, summ, n_in = new_raw, new_summ, new_in
                 H, H2 = H2, H
                 g, g2 = g2, g
                 lam = max(lam * 0.1, 1e-7)
@@ -220,15 +217,139 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
                     break
         else:
             x, y, th = nx, ny, nth
-            cost, _, _ = accumulate(prob, pts, x, y, th, swapped, H, g)
+            raw, summ, n_in = accumulate(prob, pts, x, y, th, swapped, H, g)
+            cost = raw
             if use_prior:
                 cost += _prior_cost(x, y, th, prior, lam_p)
             n_acc += 1
+    for a in range(3):
+        for b in range(3):
+            H_out[a, b] = H[a, b]
+    return x, y, th, n_acc, raw, summ, n_in
+
+
+@njit(cache=True)
+def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
+                prior, lam_p):  # pragma: no cover
+    """Run ``n_iter`` GN/LM steps on one level from map pose ``pose`` (x, y cells, θ rad).
+
+    Returns (pose (3,), number of accepted steps). Steps are bounded: |Δθ| ≤ max_rot
+    (reference ±0.2 rad clamp), |Δxy| ≤ max_trans cells. With an empty map (H00 or H11 = 0)
+    no step is taken (as ScanMatcher::estimateTransformationLogLh).
+
+    ``prior`` (3,) and ``lam_p`` (3, 3) add a prior term ½(ξ−ξp)ᵀΛp(ξ−ξp) to the objective (same
+    units as ``pose``): the normal equations become (H + Λp)Δ = g + Λp(ξp − ξ). An all-zero
+    ``lam_p`` is the plain matcher.
+    """
+    H = np.zeros((3, 3))
+    x, y, th, n_acc, _, _, _ = _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
+                                           max_trans, prior, lam_p, H)
     out = np.empty(3)
     out[0] = x
     out[1] = y
     out[2] = th
     return out, n_acc
+
+
+@njit(cache=True)
+def _same_float(a, b):  # pragma: no cover - numba
+    """``a`` and ``b`` are the same float, sign of zero included (finite values)."""
+    return a == b and (a != 0.0 or math.copysign(1.0, a) == math.copysign(1.0, b))
+
+
+@njit(cache=True)
+def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, swapped, use_lm, lam0, lam_max,
+                  max_rot, max_trans, use_prior, prior_world, lam_ps, want_fit, free_thresh, H_out):  # pragma: no cover
+    """:func:`match_multires` on a map of at most three levels in one call (the same arithmetic as its Python
+    loop): ``prob0`` … ``prob2`` the levels' probability caches (finest first; unused ones any array), ``geo``
+    (L, 4) per level (cell side m, i0, j0, 1.0 if empty), ``pts_m`` (n, 2) laser-frame points m, ``start`` the
+    world pose (x m, y m, θ rad); ``prior_world`` (3,) with ``lam_ps`` (L, 3, 3) the prior per level in its cell
+    units when ``use_prior``.
+
+    Returns (world pose (3,), fitted, cost, Σ M, n_inside, free). With ``want_fit`` and a finite result on a
+    non-empty finest level, ``fitted`` is True and H (in ``H_out``), cost, Σ M and n_inside are :func:`evaluate`'s
+    at the returned pose on level 0 (unswapped weights): the last iteration's sums when that iteration ran on
+    level 0, unswapped, at exactly the same map pose, else one :func:`accumulate` pass; and ``free`` is
+    :func:`free_fraction` below ``free_thresh`` on level min(1, L − 1) at the returned pose with θ wrapped once more
+    (as ``Pose2D(x, y, wrap_angle(θ))``)."""
+    pose = np.empty(3)
+    pose[0] = start[0]
+    pose[1] = start[1]
+    pose[2] = start[2]
+    n_lv = geo.shape[0]
+    Hk = np.zeros((3, 3))
+    mp = np.empty(3)
+    pp = np.empty(3)
+    pts0 = np.empty((0, 2))  # level 0's / 1's scaled points once computed (C-contiguous, as pts_m / res)
+    pts1 = np.empty((0, 2))
+    last0 = False  # the last iterations ran on level 0 (unswapped) ending at (lx, ly, lth)
+    lx = ly = lth = 0.0
+    l_raw = l_summ = 0.0
+    l_in = 0
+    for k in range(n_lv - 1, -1, -1):
+        if geo[k, 3] != 0.0:
+            continue
+        n_iter = it_finest if k == 0 else it_coarse
+        if n_iter <= 0:
+            continue
+        res = geo[k, 0]
+        i0 = geo[k, 1]
+        j0 = geo[k, 2]
+        mp[0] = pose[0] / res - i0
+        mp[1] = pose[1] / res - j0
+        mp[2] = pose[2]
+        if use_prior:
+            pp[0] = prior_world[0] / res - i0
+            pp[1] = prior_world[1] / res - j0
+            pp[2] = mp[2] + (prior_world[2] - mp[2] + math.pi) % (2.0 * math.pi) - math.pi  # same branch as θ
+        else:
+            pp[0] = mp[0]
+            pp[1] = mp[1]
+            pp[2] = mp[2]
+        pts = pts_m / res
+        prob = prob0 if k == 0 else (prob1 if k == 1 else prob2)
+        x, y, th, _, raw, summ, n_in = _match_core(prob, pts, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
+                                                   max_trans, pp, lam_ps[k], Hk)
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
+            pose[0] = np.nan
+            pose[1] = np.nan
+            pose[2] = np.nan
+            return pose, False, 0.0, 0.0, 0, 0.0
+        pose[0] = (x + i0) * res
+        pose[1] = (y + j0) * res
+        pose[2] = (th + math.pi) % (2.0 * math.pi) - math.pi  # wrap after each level (§2.5)
+        last0 = k == 0 and not swapped
+        if k == 1:
+            pts1 = pts
+        if k == 0:
+            pts0 = pts
+            lx, ly, lth = x, y, th
+            l_raw, l_summ, l_in = raw, summ, n_in
+    if not want_fit or geo[0, 3] != 0.0:
+        return pose, False, 0.0, 0.0, 0, 0.0
+    fl = min(1, n_lv - 1)
+    free = 0.0
+    if geo[fl, 3] == 0.0:
+        res = geo[fl, 0]
+        if fl == 0 or pts1.shape[0] != pts_m.shape[0]:
+            pts1 = pts_m / res
+        free = fraction_below(prob1 if fl == 1 else prob0, pts1, pose[0] / res - geo[fl, 1],
+                              pose[1] / res - geo[fl, 2], (pose[2] + math.pi) % (2.0 * math.pi) - math.pi,
+                              free_thresh)
+    res = geo[0, 0]
+    m0 = pose[0] / res - geo[0, 1]
+    m1 = pose[1] / res - geo[0, 2]
+    m2 = pose[2]
+    if last0 and _same_float(m0, lx) and _same_float(m1, ly) and _same_float(m2, lth):
+        for a in range(3):
+            for b in range(3):
+                H_out[a, b] = Hk[a, b]
+        return pose, True, l_raw, l_summ, l_in, free
+    if pts0.shape[0] != pts_m.shape[0]:
+        pts0 = pts_m / res
+    g = np.zeros(3)
+    cost, summ, n_in = accumulate(prob0, pts0, m0, m1, m2, False, H_out, g)
+    return pose, True, cost, summ, n_in, free
 
 
 @dataclass(slots=True)
@@ -273,6 +394,8 @@ def match_multires(
     max_trans_cells: float = 2.0,
     prior_world: np.ndarray | None = None,
     prior_info: np.ndarray | None = None,
+    fit: list | None = None,
+    free_thresh: float = 0.5,
 ) -> np.ndarray:
     """Coarse-to-fine matching (Kohlbrecher et al., SSRR 2011 §IV-C; MapRepMultiMap::matchData):
     from the coarsest level down to level 0,
@@ -281,13 +404,40 @@ def match_multires(
     ``pts_m``: (n, 2) points in the laser frame, m. ``start_world``: (x m, y m, θ rad).
     ``prior_world`` (x m, y m, θ rad) with ``prior_info`` (3, 3, information in world units:
     1/m², 1/(m·rad), 1/rad²) adds the prior term ½(ξ−ξp)ᵀΛ(ξ−ξp) on every level.
+    ``fit``: a list that receives ``[evaluate(levels[0], pts_m, pose), free_fraction(levels[min(1, L − 1)], pts_m,
+    (x, y, wrap_angle(θ)), free_thresh)]`` of the returned pose when it is finite (from the same kernel call; on a
+    map of more than three levels, or for points that are not a C-contiguous float64 array, it stays empty).
     Returns the world pose (3,).
     """
-    pose = np.asarray(start_world, dtype=np.float64).copy()
+    pose = np.array(start_world, dtype=np.float64)
     if pts_m.shape[0] == 0:
         return pose
     use_prior = prior_world is not None and prior_info is not None and bool(np.any(prior_info))
-    for k in range(len(levels) - 1, -1, -1):
+    n_lv = len(levels)
+    if n_lv <= 3 and pts_m.dtype == np.float64 and pts_m.flags.c_contiguous:
+        # every level in one kernel call (match_pyramid), the finest level's evaluation with it (other point
+        # arrays take the loop below: their scaled copies have the loop's dtype and layout)
+        geo = np.array([(lv.resolution, lv.i0, lv.j0, lv.logodds.size == 0) for lv in levels], dtype=np.float64)
+        if use_prior:
+            info = np.asarray(prior_info, dtype=np.float64)
+            lam_ps = np.empty((n_lv, 3, 3))
+            for k, lv in enumerate(levels):
+                S = np.diag([lv.resolution, lv.resolution, 1.0])  # cells → m
+                lam_ps[k] = S @ info @ S
+            pw = np.asarray(prior_world, dtype=np.float64)
+        else:
+            lam_ps, pw = _ZERO_PRIORS[:n_lv], pose
+        p0 = levels[0].prob
+        H = np.empty((3, 3))
+        out, fitted, cost, summ, n_in, free = match_pyramid(
+            p0, levels[1].prob if n_lv > 1 else p0, levels[2].prob if n_lv > 2 else p0, geo, pts_m, pose,
+            iterations_coarse, iterations_finest, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
+            use_prior, pw, lam_ps, fit is not None, free_thresh, H,
+        )
+        if fitted and fit is not None:
+            fit[:] = [LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in)), float(free)]
+        return out
+    for k in range(n_lv - 1, -1, -1):
         lv = levels[k]
         if lv.empty:
             continue
@@ -354,16 +504,54 @@ _SUPPORT_POINTS = 240
 _SPREAD_POINTS = 120
 
 
+#: Coefficients of the odd polynomial for atan(z), 0 ≤ z ≤ 1, |error| ≤ 1e-5 rad (Abramowitz & Stegun,
+#: Handbook of Mathematical Functions, 4.4.49; 1.15e-5 with these rounded coefficients, checked on a dense grid).
+_ATAN_C1 = 0.9998660
+_ATAN_C3 = -0.3302995
+_ATAN_C5 = 0.1801410
+_ATAN_C7 = -0.0851330
+_ATAN_C9 = 0.0208351
+#: A bin position (in bins) closer than this to a bin edge is recomputed with atan2: 1e-3 bins of 5° is
+#: 8.7e-5 rad, over seven times the polynomial's error.
+_BIN_EDGE_MARGIN = 1e-3
+
+
+@njit(cache=True)
+def _bearing_bin(x, y, nb):  # pragma: no cover - numba
+    """``int(floor((atan2(y, x) + π) / 2π · nb)) % nb``, the bearing bin of (x, y) — the same integer: the
+    angle from a polynomial, and ``atan2`` itself when that lands within ``_BIN_EDGE_MARGIN`` of a bin edge
+    (or at the origin / on a non-finite point)."""
+    two_pi = 2.0 * math.pi
+    ax = abs(x)
+    ay = abs(y)
+    if ax >= ay:
+        z = ay / ax if ax > 0.0 else math.nan
+    else:
+        z = ax / ay
+    z2 = z * z
+    a = z * (_ATAN_C1 + z2 * (_ATAN_C3 + z2 * (_ATAN_C5 + z2 * (_ATAN_C7 + z2 * _ATAN_C9))))
+    if ay > ax:
+        a = 0.5 * math.pi - a
+    if x < 0.0:
+        a = math.pi - a
+    if y < 0.0:
+        a = -a
+    t = (a + math.pi) / two_pi * nb
+    f = t - math.floor(t)
+    if f >= _BIN_EDGE_MARGIN and f <= 1.0 - _BIN_EDGE_MARGIN:
+        return int(math.floor(t)) % nb
+    return int(math.floor((math.atan2(y, x) + math.pi) / two_pi * nb)) % nb
+
+
 @njit(cache=True)
 def _spread_kernel(pts, use, nb):  # pragma: no cover - numba
     """Number of the ``nb`` bearing bins holding a point of ``pts`` (rows with ``use``)."""
     seen = np.zeros(nb, dtype=np.bool_)
     k = 0
-    two_pi = 2.0 * math.pi
     for i in range(pts.shape[0]):
         if not use[i]:
             continue
-        b = int(math.floor((math.atan2(pts[i, 1], pts[i, 0]) + math.pi) / two_pi * nb)) % nb
+        b = _bearing_bin(pts[i, 0], pts[i, 1], nb)
         if not seen[b]:
             seen[b] = True
             k += 1
@@ -379,14 +567,13 @@ def _support_kernel(prob, pts_m, stride, inv_res, x, y, th, thresh, nb):  # prag
     seen = np.zeros(nb, dtype=np.bool_)
     n = 0
     k = 0
-    two_pi = 2.0 * math.pi
     for i in range(0, pts_m.shape[0], stride):
         sx = pts_m[i, 0] * inv_res
         sy = pts_m[i, 1] * inv_res
         m, _, _, inside = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, np.bool_(False))
         if inside and m > thresh:
             n += 1
-            b = int(math.floor((math.atan2(pts_m[i, 1], pts_m[i, 0]) + math.pi) / two_pi * nb)) % nb
+            b = _bearing_bin(pts_m[i, 0], pts_m[i, 1], nb)
             if not seen[b]:
                 seen[b] = True
                 k += 1

@@ -69,6 +69,11 @@ _DEGENERACY_HYSTERESIS = 1.5
 _ODOMETRY_GATE_CHI2 = 11.34
 #: Interpolated probability below which an endpoint counts as landing in known free space.
 FREE_SPACE_PROB = 0.45
+#: the pose components a prediction knows: all, or only θ (an IMU's yaw without the motion model); shared, read only
+_ALL_AXES = np.ones(3, dtype=bool)
+_ALL_AXES.flags.writeable = False
+_THETA_AXIS = np.array([False, False, True])
+_THETA_AXIS.flags.writeable = False
 #: the covariance of a scan that was not matched (copied into each MatchResult: callers may change theirs)
 _NO_MATCH_COVARIANCE = np.diag([1e6, 1e6, math.pi**2])
 
@@ -335,7 +340,7 @@ class HectorSlam:
         with the IMU yaw rate for the rotation; else the motion model alone."""
         c = self.config
         last = self._last_pose
-        all_axes = np.ones(3, dtype=bool)
+        all_axes = _ALL_AXES
         if last is None or gap:
             return _Prior(start, None, all_axes, False)
         dt = scan.stamp - self._last_stamp if self._last_stamp is not None else 0.0
@@ -343,13 +348,13 @@ class HectorSlam:
         if c.use_odometry and odom is not None and self._last_odom is not None and odom.is_finite():
             delta = self._last_odom.between(odom)
             return _Prior(last.compose(delta), "odometry", all_axes, True, delta)
-        v = self._model_velocity() if self._state == STATE_TRACKING else None
-        cv = last.compose(Pose2D(float(v[0] * dt), float(v[1] * dt), float(v[2] * dt))) if v is not None else last
+        v = self._model_rates() if self._state == STATE_TRACKING else None
+        cv = last.compose(Pose2D(v[0] * dt, v[1] * dt, v[2] * dt)) if v is not None else last
         w = scan.yaw_rate
         if c.use_odometry and w is not None and math.isfinite(w) and dt > 0.0:
             w0 = self._last_yaw_rate if self._last_yaw_rate is not None else w
             th = float(wrap_angle(last.theta + 0.5 * (w0 + w) * dt))  # trapezoidal integration of the rate
-            axes = all_axes if c.motion_prior else np.array([False, False, True])
+            axes = all_axes if c.motion_prior else _THETA_AXIS
             return _Prior(Pose2D(cv.x, cv.y, th), "imu", axes, v is not None)
         if c.motion_prior:
             return _Prior(cv, "motion_model", all_axes, v is not None)
@@ -359,6 +364,11 @@ class HectorSlam:
         """(vx m/s, vy m/s, ω rad/s) of the motion model in the last pose's frame: the motion between the
         oldest and newest accepted pose of the last ``velocity_window`` s (a one-scan difference is too
         noisy to hold along a degenerate direction for seconds)."""
+        v = self._model_rates()
+        return None if v is None else np.array(v)
+
+    def _model_rates(self) -> tuple[float, float, float] | None:
+        """:meth:`_model_velocity` as three floats (the same values; no array on every scan's prediction)."""
         h = self._history
         if len(h) < 2:
             return None
@@ -368,7 +378,7 @@ class HectorSlam:
             return None
         c, s_ = math.cos(p1.theta), math.sin(p1.theta)
         dx, dy = p1.x - p0.x, p1.y - p0.y
-        return np.array([c * dx + s_ * dy, -s_ * dx + c * dy, float(wrap_angle(p1.theta - p0.theta))]) / dt
+        return (c * dx + s_ * dy) / dt, (-s_ * dx + c * dy) / dt, float(wrap_angle(p1.theta - p0.theta)) / dt
 
     def _moving_prediction(self) -> np.ndarray | None:
         """The last pose advanced by the motion model's velocity over the current stamp gap (floored at the
@@ -628,18 +638,24 @@ class HectorSlam:
         levels = self.map.levels
         start = res.start.as_array()
 
-        last_fit: list = []  # (pose bytes, LevelFit) of the latest refine: _fit reuses it at the same pose
+        # (pose bytes, LevelFit, free fraction) of the latest refine: _fit and the free-space test reuse them at the
+        # same pose
+        last_fit: list = []
 
         def refine(seed: np.ndarray) -> tuple[np.ndarray, float]:
+            fitted: list = []  # level 0's evaluation and the free fraction at the result, from the matcher's call
             p = match_multires(
                 levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
                 c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
-                c.max_translation_step, prior_pose, prior_info,
+                c.max_translation_step, prior_pose, prior_info, fit=fitted, free_thresh=FREE_SPACE_PROB,
             )
             if not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
                 return p, -1.0
-            fit = evaluate(levels[0], pts, p)
-            last_fit[:] = [p.tobytes(), fit]
+            if fitted:
+                fit, free = fitted
+            else:
+                fit, free = evaluate(levels[0], pts, p), None
+            last_fit[:] = [p.tobytes(), fit, free]
             return p, fit.score
 
         def search() -> tuple[np.ndarray, float] | None:
@@ -699,7 +715,11 @@ class HectorSlam:
         self._fit(res, pts, pose, last_fit[1] if last_fit and not c.hector_gradient_bug
                   and last_fit[0] == at.tobytes() else None)
         avg = self._score_avg
-        res.free_fraction = free_fraction(levels[min(1, len(levels) - 1)], pts, at, FREE_SPACE_PROB)
+        # the final refine's free fraction was taken at (x, y, wrap_angle(θ)) of its result: this pose when the
+        # result is best_p
+        free = last_fit[2] if last_fit and last_fit[2] is not None and last_fit[0] == best_p.tobytes() else None
+        res.free_fraction = free if free is not None else free_fraction(levels[min(1, len(levels) - 1)], pts, at,
+                                                                        FREE_SPACE_PROB)
         if res.score < c.reject_score_min or (avg is not None and res.score < c.reject_score_ratio * avg):
             res.rejected = True
             res.reason = REJECT_LOW_SCORE

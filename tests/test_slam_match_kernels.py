@@ -1,0 +1,173 @@
+"""The matcher's fused kernels give exactly what the plain computation gives (issues 9/13, matching pass 8):
+the whole pyramid in one kernel call (``match_pyramid``) against the per-level loop of ``match_level`` calls,
+``evaluate`` and ``free_fraction`` at the result, the polynomial bearing bin against ``atan2``, and the correlative
+search's score pyramid and rotated point cells against their array expressions."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from numba import njit
+
+from dynslam2d.sim import LidarModel, cast_rays, paper_room
+from dynslam2d.slam import HectorSlam, SlamConfig
+from dynslam2d.slam.correlative import _pyramid, _rotated_cells, _score_pyramid, _score_table
+from dynslam2d.slam.matcher import _bearing_bin, evaluate, free_fraction, match_level, match_multires
+from dynslam2d.types import Pose2D, Scan, wrap_angle
+
+LIDAR = LidarModel(beams=720, noise_sigma=0.0)
+WALLS = paper_room().segments
+
+
+def scan_at(pose: Pose2D, stamp: float = 0.0) -> Scan:
+    dist, _ = cast_rays((pose.x, pose.y), pose.theta + LIDAR.angles, WALLS)
+    ranges, _ = LIDAR.measure(dist, np.random.default_rng(0))
+    return LIDAR.make_scan(stamp, ranges)
+
+
+def mapped(levels: int) -> tuple[HectorSlam, Pose2D]:
+    slam = HectorSlam(SlamConfig(map_levels=levels))
+    first = Pose2D(0.3, -0.4, 0.2)
+    slam.update_map(scan_at(first), Pose2D(), force=True)
+    for d in (Pose2D(0.3, 0.1, 0.1), Pose2D(-0.2, 0.3, -0.15)):
+        p = first.compose(d)
+        slam.update_map(scan_at(p), first.between(p), force=True)
+    return slam, first
+
+
+def level_loop(levels, pts, start, it_coarse, it_finest, swapped, use_lm, prior_world=None, prior_info=None):
+    """The coarse-to-fine loop written out with one ``match_level`` call per level (the reference): (world pose,
+    level 0's map pose before the conversion to the world)."""
+    pose = np.array(start, dtype=np.float64)
+    out = None
+    for k in range(len(levels) - 1, -1, -1):
+        lv = levels[k]
+        n_iter = it_finest if k == 0 else it_coarse
+        if lv.empty or n_iter <= 0:
+            continue
+        mp = lv.pose_to_map(pose)
+        if prior_info is not None:
+            pp = lv.pose_to_map(prior_world)
+            pp[2] = mp[2] + (pp[2] - mp[2] + math.pi) % (2.0 * math.pi) - math.pi
+            S = np.diag([lv.resolution, lv.resolution, 1.0])
+            lam = S @ prior_info @ S
+        else:
+            pp, lam = mp, np.zeros((3, 3))
+        out, _ = match_level(lv.prob, pts / lv.resolution, mp, n_iter, swapped, use_lm, 0.1, 1e4, 0.2, 2.0, pp, lam)
+        pose = lv.pose_to_world(out)
+        pose[2] = (pose[2] + math.pi) % (2.0 * math.pi) - math.pi
+    return pose, out
+
+
+@pytest.mark.parametrize("n_levels", [1, 2, 3])
+def test_pyramid_kernel_equals_the_level_loop_and_evaluate(n_levels: int) -> None:
+    slam, first = mapped(n_levels)
+    levels = slam.map.levels
+    pts = slam.scan_points(scan_at(first.compose(Pose2D(0.12, -0.08, 0.05))))[0]
+    prior_info = np.array([[30.0, 2.0, 0.5], [2.0, 10.0, 0.1], [0.5, 0.1, 40.0]])
+    reused = computed = 0
+    frees: list[float] = []
+    for off in ((0.0, 0.0, 0.0), (0.15, -0.1, 0.08), (-0.2, 0.05, -0.12), (0.03, 0.03, 0.3), (0.0, 0.0, 3.1)):
+        start = np.array(off)
+        for swapped in (False, True):
+            for use_lm in (True, False):
+                for prior in (False, True):
+                    kw = dict(prior_world=start + np.array([0.02, -0.01, 0.03]), prior_info=prior_info) if prior \
+                        else {}
+                    fit: list = []
+                    got = match_multires(levels, pts, start, 4, 6, swapped, use_lm, fit=fit, free_thresh=0.45, **kw)
+                    want, last0 = level_loop(levels, pts, start, 4, 6, swapped, use_lm, **kw)
+                    np.testing.assert_array_equal(got, want)  # bit-identical, not merely close
+                    ev = evaluate(levels[0], pts, want)
+                    f, free = fit
+                    np.testing.assert_array_equal(f.hessian, ev.hessian)
+                    assert (f.cost, f.score, f.n_inside) == (ev.cost, ev.score, ev.n_inside)
+                    at = Pose2D(float(want[0]), float(want[1]), float(wrap_angle(want[2]))).as_array()
+                    assert free == free_fraction(levels[min(1, n_levels - 1)], pts, at, 0.45)
+                    frees.append(free)
+                    # the kernel's two ways to the evaluation (the last iteration's sums when level 0's map pose
+                    # survives the round trip through the world frame unchanged, else a fresh pass): both occur
+                    if not swapped:
+                        if np.array_equal(last0, levels[0].pose_to_map(want)):
+                            reused += 1
+                        else:
+                            computed += 1
+    assert reused > 0 and computed > 0
+    assert len(set(frees)) > 1  # the free fraction is not a constant here
+
+
+def test_pyramid_without_points_or_iterations_returns_the_start() -> None:
+    slam, first = mapped(3)
+    start = np.array([0.1, 0.2, 0.3])
+    fit: list = []
+    np.testing.assert_array_equal(match_multires(slam.map.levels, np.zeros((0, 2)), start, 4, 6, fit=fit), start)
+    assert fit == []
+    pts = slam.scan_points(scan_at(first))[0]
+    np.testing.assert_array_equal(match_multires(slam.map.levels, pts, start, 0, 0, fit=fit), start)
+    ev = evaluate(slam.map.levels[0], pts, start)
+    np.testing.assert_array_equal(fit[0].hessian, ev.hessian)
+    assert fit[0].score == ev.score and fit[1] == free_fraction(slam.map.levels[1], pts, start, 0.5)
+
+
+@njit(cache=False)
+def _bins_differ(xs, ys, nb):  # pragma: no cover - numba
+    bad = 0
+    for i in range(xs.shape[0]):
+        want = int(math.floor((math.atan2(ys[i], xs[i]) + math.pi) / (2.0 * math.pi) * nb)) % nb
+        if _bearing_bin(xs[i], ys[i], nb) != want:
+            bad += 1
+    return bad
+
+
+def test_polynomial_bearing_bin_equals_atan2_bin() -> None:
+    rng = np.random.default_rng(1)
+    a = rng.uniform(-math.pi, math.pi, 200_000)
+    r = rng.uniform(0.01, 30.0, a.size)
+    assert _bins_differ(r * np.cos(a), r * np.sin(a), 72) == 0
+    # at and around every bin edge (where the polynomial alone would pick the wrong bin), both signs of zero
+    edges = -math.pi + np.arange(73) * (2.0 * math.pi / 72)
+    a = (edges[:, None] + np.linspace(-2e-4, 2e-4, 2001)[None, :]).ravel()
+    r = rng.uniform(0.1, 20.0, a.size)
+    assert _bins_differ(r * np.cos(a), r * np.sin(a), 72) == 0
+    special = np.array([0.0, -0.0, 1.0, -1.0, 1e-300, -1e-300, 3.0])
+    x, y = np.meshgrid(special, special)
+    assert _bins_differ(x.ravel(), y.ravel(), 72) == 0
+    # the polynomial's error bound the edge margin relies on (Abramowitz & Stegun 4.4.49)
+    z = np.linspace(0.0, 1.0, 200_001)
+    z2 = z * z
+    poly = z * (0.9998660 + z2 * (-0.3302995 + z2 * (0.1801410 + z2 * (-0.0851330 + z2 * 0.0208351))))
+    assert np.abs(poly - np.arctan(z)).max() < 1.2e-5
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 7), (5, 1), (3, 3), (17, 40), (120, 95)])
+def test_score_pyramid_kernel_equals_the_array_table_and_pyramid(shape: tuple[int, int]) -> None:
+    rng = np.random.default_rng(2)
+    big = rng.uniform(0.0, 1.0, (shape[0] + 4, shape[1] + 6)).astype(np.float32)
+    big[rng.uniform(size=big.shape) < 0.3] = 0.5  # unknown
+    big[rng.uniform(size=big.shape) < 0.1] = 1.0
+    crop = big[2:2 + shape[0], 3:3 + shape[1]]  # a strided crop, as the search passes
+    for hmax in range(5):
+        want = _pyramid(_score_table(crop), hmax)
+        got = _score_pyramid(crop, hmax)
+        assert got.dtype == want.dtype == np.float32
+        np.testing.assert_array_equal(got, want)
+    if min(shape) >= 3:
+        t0 = _score_pyramid(crop, 0)[0]
+        assert np.any((t0 > 0.0) & (np.maximum(2.0 * crop - 1.0, 0.0) == 0.0))  # the half-value smear reached
+
+
+def test_rotated_cells_kernel_equals_the_array_expressions() -> None:
+    rng = np.random.default_rng(3)
+    pc = rng.uniform(-300.0, 300.0, (240, 2))
+    pc[::3] = np.round(pc[::3] * 2.0) / 2.0  # half-cell values, where the rounding of floor(v + 0.5) decides
+    th = 0.3 + np.arange(-20, 21) * 0.01
+    mp = (123.25, -50.5)
+    c, s = np.cos(th)[:, None], np.sin(th)[:, None]
+    want_x = np.floor(c * pc[None, :, 0] - s * pc[None, :, 1] + mp[0] + 0.5).astype(np.int64)
+    want_y = np.floor(s * pc[None, :, 0] + c * pc[None, :, 1] + mp[1] + 0.5).astype(np.int64)
+    qx, qy, x0, x1, y0, y1 = _rotated_cells(pc, np.cos(th), np.sin(th), mp[0], mp[1])
+    np.testing.assert_array_equal(qx, want_x)
+    np.testing.assert_array_equal(qy, want_y)
+    assert (x0, x1, y0, y1) == (want_x.min(), want_x.max(), want_y.min(), want_y.max())
