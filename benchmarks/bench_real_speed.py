@@ -56,8 +56,10 @@ INPUTS: dict[str, tuple[str, str | None]] = {
     "negative_2 /rear_scan": ("dynamic/leg_tracker/negative_2.bag", "/rear_scan"),
     "negative_2 /right_scan": ("dynamic/leg_tracker/negative_2.bag", "/right_scan"),
     "positive_7": ("dynamic/leg_tracker/positive_7.bag", None),
+    "positive_1": ("dynamic/leg_tracker/positive_1.bag", None),
     "demo_stationary": ("dynamic/leg_tracker/demo_stationary_simple_environment.bag", None),
     "overtakes": ("dynamic/datmo/overtakes.bag", None),
+    "two_robots": ("dynamic/datmo/two_robots.bag", None),
     "sim:drive": ("sim:drive", None),
     "mit-csail": ("mit-csail/mit-csail.clf", None),
 }
