@@ -110,6 +110,10 @@ def _box_rows(tracks: list[Track]) -> tuple[np.ndarray, np.ndarray]:
     return rows, ids
 
 
+#: :func:`_box_rows` of no tracks.
+_NO_ROWS = (np.zeros((0, 7)), np.zeros(0, dtype=np.int64))
+
+
 def _observed_rows(tracks: list[Track], scan: Scan, pose: Pose2D) -> tuple[np.ndarray, np.ndarray]:
     """:func:`_box_rows` of ``tracks`` with each box grown to enclose the points assigned to it in ``scan``.
 
@@ -161,6 +165,9 @@ class Pipeline:
                  dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Beams of ``scan`` (at ``pose``) inside the exclusion zones of the boxes ``rows``
         (:func:`_box_rows`) advanced by ``dt``, s: (removed, id of the remover or −1)."""
+        if not rows[0].shape[0]:  # nothing to exclude (filter_scan_ids would return the same)
+            n = scan.ranges.shape[0]
+            return np.zeros(n, dtype=bool), np.full(n, -1, dtype=np.int64)
         return filter_scan_ids(self.config.filter, scan, pose, rows[0], rows[1], dt)
 
     def _spare_structure(self, scan: Scan, pose: Pose2D, moving: list[Track], removed: np.ndarray,
@@ -238,7 +245,8 @@ class Pipeline:
             # an untrusted pose makes structure look like motion: only movers removed before stay removed
             known = {t.id for t in self._moving}
             moving = [t for t in moving if t.id in known]
-        removed, removed_by = self._exclude(scan, res.pose, _observed_rows(moving, scan, res.pose), 0.0)
+        rows = _observed_rows(moving, scan, res.pose) if moving else _NO_ROWS
+        removed, removed_by = self._exclude(scan, res.pose, rows, 0.0)
         if self.config.filter.mode == "box" and self.config.filter.spare_structure and removed.any():
             self._spare_structure(scan, res.pose, moving, removed, removed_by)
         elif self.config.filter.mode == "box" and self.config.filter.spare_structure_vehicles and removed.any():
