@@ -28,7 +28,11 @@ each input it reports
     are thread CPU time too.
 
     python benchmarks/bench_real_speed.py [--only negative_2 positive_7 ...] [--reps 3] [--cold]
-        [--data ../shared/data] [--json out.json] [--thread-time]
+        [--data ../shared/data] [--json out.json] [--thread-time] [--loop-parts]
+
+``--loop-parts`` instead times the loop closer's parts (``LoopCloser.add`` and the searches, submap builds,
+optimisation, place descriptors and graph distances inside it, and ``correlative_search``) in thread CPU time over
+one fresh pipeline: calls, ms per call, mean µs per scan (MIT CSAIL: its spikes).
 
 Pin to one core with ``taskset -c N`` for "one core". To compare two checkouts, run the script
 alternately with ``PYTHONPATH=<checkout>/src`` and compare the medians.
@@ -56,8 +60,10 @@ INPUTS: dict[str, tuple[str, str | None]] = {
     "negative_2 /rear_scan": ("dynamic/leg_tracker/negative_2.bag", "/rear_scan"),
     "negative_2 /right_scan": ("dynamic/leg_tracker/negative_2.bag", "/right_scan"),
     "positive_7": ("dynamic/leg_tracker/positive_7.bag", None),
+    "positive_1": ("dynamic/leg_tracker/positive_1.bag", None),
     "demo_stationary": ("dynamic/leg_tracker/demo_stationary_simple_environment.bag", None),
     "overtakes": ("dynamic/datmo/overtakes.bag", None),
+    "two_robots": ("dynamic/datmo/two_robots.bag", None),
     "sim:drive": ("sim:drive", None),
     "mit-csail": ("mit-csail/mit-csail.clf", None),
 }
@@ -114,6 +120,61 @@ def report(r: dict[str, object]) -> str:
     return "\n".join(lines)
 
 
+#: the loop closer's methods (and module function) timed by ``--loop-parts``
+LOOP_PARTS = ("add", "_search", "_far_search", "_match_at", "_submap", "_optimise", "_place_ranks", "_describe",
+              "_uncertainty")
+
+
+def loop_parts(name: str, scans: list) -> str:
+    """One fresh pipeline over ``scans`` after the warm-up with thread-CPU timers around the loop closer's parts:
+    calls, ms per call and mean µs per scan of each (nested parts are inside their callers' figures)."""
+    import collections
+
+    import dynslam2d.slam.loops as loops_module
+    from dynslam2d.pipeline import Pipeline
+
+    warm_up(scans)
+    acc: collections.Counter = collections.Counter()
+    calls: collections.Counter = collections.Counter()
+
+    def wrap(obj: object, attr: str) -> None:
+        f = getattr(obj, attr)
+
+        def timed(*a, **k):
+            t0 = time.thread_time_ns()
+            try:
+                return f(*a, **k)
+            finally:
+                acc[attr] += time.thread_time_ns() - t0
+                calls[attr] += 1
+
+        setattr(obj, attr, timed)
+
+    saved = loops_module.correlative_search
+    wrap(loops_module, "correlative_search")
+    try:
+        pipe = Pipeline()
+        if pipe.loops is None:
+            return f"\n== {name}: loop closure off =="
+        for k in LOOP_PARTS:
+            if hasattr(pipe.loops, k):
+                wrap(pipe.loops, k)
+        per = []
+        for s in scans:
+            a0 = acc["add"]
+            pipe.process(s)
+            per.append((acc["add"] - a0) / 1e6)
+    finally:
+        loops_module.correlative_search = saved
+    v = np.array(per)
+    lines = [f"\n== {name}: loop closer, thread CPU; add ms/scan mean {v.mean():.3f} median {np.median(v):.3f} "
+             f"p95 {np.percentile(v, 95):.3f} max {v.max():.1f}; scans over 2 ms: {int((v > 2).sum())} ==",
+             f"{'part':<20} {'calls':>6} {'ms/call':>8} {'µs/scan':>8}"]
+    for k, t in sorted(acc.items(), key=lambda kv: -kv[1]):
+        lines.append(f"{k:<20} {calls[k]:>6} {t / 1e6 / calls[k]:>8.3f} {t / 1e3 / len(scans):>8.1f}")
+    return "\n".join(lines)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--only", nargs="+", default=None,
@@ -125,6 +186,9 @@ def main() -> None:
     ap.add_argument("--thread-time", action="store_true",
                     help="per-stage figures in thread CPU time instead of wall time (the pipeline's stage clock "
                          "becomes time.thread_time: less sensitive to other jobs on a shared machine)")
+    ap.add_argument("--loop-parts", action="store_true",
+                    help="instead: thread CPU of the loop closer's parts (searches, submaps, optimisation, place "
+                         "descriptors) per call and per scan")
     args = ap.parse_args()
     if args.thread_time:
         import types
@@ -140,6 +204,9 @@ def main() -> None:
         scans = load(args.data, name)
         if not scans:
             print(f"\n== {name}: input not found under {args.data}, skipped ==")
+            continue
+        if args.loop_parts:
+            print(loop_parts(name, scans))
             continue
         r = bench(name, scans, args.reps)
         results.append(r)

@@ -27,6 +27,7 @@ matrix would rotate the square the wrong way).
 
 from __future__ import annotations
 
+import math
 from typing import Literal
 
 import numpy as np
@@ -161,6 +162,145 @@ def _exclusion_kernel(
                     best = d2
                     object_index[i] = j
                     removed[i] = True
+
+
+@njit(cache=True)
+def _scan_exclusion_kernel(
+    ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray,
+    pc: float, ps: float, px: float, py: float,
+    c: np.ndarray, th: np.ndarray, ha: np.ndarray, hb: np.ndarray, ids: np.ndarray,
+    removed: np.ndarray, removed_by: np.ndarray,
+) -> None:
+    """:func:`filter_scan` and the id lookup in one pass over the beams, in place: ``removed[i]`` and
+    ``removed_by[i]`` (the id ``ids[j]`` of the region that removed beam ``i``) for the valid beams.
+
+    Each valid beam's point is made as :meth:`Scan.points` (paper Eq. 4) and moved into the map frame as
+    :meth:`Pose2D.transform_points` (``pc``, ``ps`` = cos, sin of the pose's heading; ``px``, ``py`` its
+    position, m), with the same floating-point operations, then tested as :func:`_exclusion_kernel`.
+    """
+    n = ranges.shape[0]
+    k = c.shape[0]
+    ct = np.cos(th)
+    st = np.sin(th)
+    for i in range(n):
+        if not valid[i]:
+            continue
+        r = ranges[i]
+        lx = r * cos_a[i]
+        ly = r * sin_a[i]
+        x = pc * lx - ps * ly + px
+        y = ps * lx + pc * ly + py
+        best = np.inf
+        for j in range(k):
+            dx = x - c[j, 0]
+            dy = y - c[j, 1]
+            # T_j⁻¹ s_i = R(θ_j)ᵀ (s_i − p_j)  (paper Eq. 5 read as the object pose, Eq. 8)
+            u = ct[j] * dx + st[j] * dy
+            v = -st[j] * dx + ct[j] * dy
+            if abs(u) <= ha[j] and abs(v) <= hb[j]:  # paper Eq. 7 (NaN compares False: kept)
+                d2 = dx * dx + dy * dy
+                if d2 < best:  # overlapping regions: nearest centre wins, ties → lowest j
+                    best = d2
+                    removed_by[i] = ids[j]
+                    removed[i] = True
+
+
+@njit(cache=True)
+def observed_boxes_kernel(
+    ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, pc: float, ps: float, px: float, py: float,
+    beams: np.ndarray, ends: np.ndarray, boxes: np.ndarray,
+) -> None:
+    """Grow each box of ``boxes`` ((k, ≥ 5) rows [p_x, p_y, θ, l, w, …], map frame, m and rad; in place) to
+    enclose the finite returns of its beams ``beams[ends[j-1]:ends[j]]`` of the scan at the pose (``pc``, ``ps``
+    = cos, sin of its heading; ``px``, ``py`` its position, m): the paper's exclusion box is the rectangle fitted
+    to the object's cluster in this scan (§2.2, Eq. 2), which encloses it by construction; the union keeps the
+    tracked extent where part of the object is hidden. A box without a finite return stays as it is.
+
+    The floating-point operations are those of the per-track numpy version (points as :meth:`Scan.points` and
+    :meth:`Pose2D.transform_points`; extents ``min(-l/2, min u)`` … with Python's ``min``/``max`` on a NaN).
+    """
+    lo = 0
+    for j in range(boxes.shape[0]):
+        hi = ends[j]
+        bx = boxes[j, 0]
+        by = boxes[j, 1]
+        c = math.cos(boxes[j, 2])
+        s_ = math.sin(boxes[j, 2])
+        n_ok = 0
+        umin = np.inf
+        umax = -np.inf
+        vmin = np.inf
+        vmax = -np.inf
+        unan = False
+        vnan = False
+        for q in range(lo, hi):
+            b = beams[q]
+            r = ranges[b]
+            if not np.isfinite(r):
+                continue
+            n_ok += 1
+            lx = r * cos_a[b]
+            ly = r * sin_a[b]
+            d0 = (pc * lx - ps * ly + px) - bx
+            d1 = (ps * lx + pc * ly + py) - by
+            u = d0 * c + d1 * s_
+            v = -d0 * s_ + d1 * c
+            if u != u:
+                unan = True
+            else:
+                umin = min(umin, u)
+                umax = max(umax, u)
+            if v != v:
+                vnan = True
+            else:
+                vmin = min(vmin, v)
+                vmax = max(vmax, v)
+        lo = hi
+        if n_ok == 0:
+            continue
+        if unan:  # numpy's min / max of an array with a NaN is NaN
+            umin = np.nan
+            umax = np.nan
+        if vnan:
+            vmin = np.nan
+            vmax = np.nan
+        hl = -0.5 * boxes[j, 3]
+        hu = 0.5 * boxes[j, 3]
+        wl = -0.5 * boxes[j, 4]
+        wu = 0.5 * boxes[j, 4]
+        # Python's min(a, b) is b if b < a else a; max(a, b) is b if b > a else a
+        u0 = umin if umin < hl else hl
+        u1 = umax if umax > hu else hu
+        v0 = vmin if vmin < wl else wl
+        v1 = vmax if vmax > wu else wu
+        du = 0.5 * (u0 + u1)
+        dv = 0.5 * (v0 + v1)
+        boxes[j, 0] = bx + c * du - s_ * dv
+        boxes[j, 1] = by + s_ * du + c * dv
+        boxes[j, 3] = u1 - u0
+        boxes[j, 4] = v1 - v0
+
+
+@njit(cache=True)
+def _box_extents_kernel(boxes: np.ndarray, square: bool, margin: float, cap: float) -> np.ndarray:
+    """:func:`half_extents` of mode ``box`` without a speed margin, for (k, ≥ 5) rows [p_x, p_y, θ, l, w, …]:
+    (k, 2) half-extents, m, with the same floating-point operations (``cap`` = inf: no cap; a NaN side gives
+    NaN as ``np.maximum`` / ``np.minimum`` do)."""
+    k = boxes.shape[0]
+    out = np.empty((k, 2), dtype=np.float64)
+    for j in range(k):
+        ln = abs(boxes[j, 3])
+        w = abs(boxes[j, 4])
+        if square:
+            d = (ln if (ln != ln or ln > w) else w) if w == w else w  # np.maximum(w, l): NaN wins
+            a = d / 2.0 + margin
+            b = a
+        else:
+            a = ln / 2.0 + margin
+            b = w / 2.0 + margin
+        out[j, 0] = cap if a > cap else a  # np.minimum(x, cap): a NaN stays
+        out[j, 1] = cap if b > cap else b
+    return out
 
 
 def exclusion_mask(
@@ -376,12 +516,56 @@ def filter_scan(
     return removed, object_index
 
 
+def filter_scan_ids(
+    config: FilterConfig,
+    scan: Scan,
+    pose: Pose2D,
+    boxes: np.ndarray,
+    ids: np.ndarray,
+    dt: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`filter_scan` for boxes given as rows, with the remover's id instead of its index.
+
+    Args:
+        config: the filter configuration.
+        scan: the scan; ``pose`` its laser pose in the map frame.
+        boxes: (k, 7) rows [p_x, p_y, θ, l, w, v_x, v_y] of the objects in M, map frame (m, rad, m/s); each
+            centre is advanced to ``p + v·dt`` (``dt``, s) first.
+        ids: (k,) int64 ids of the objects.
+
+    Returns:
+        ``(removed, removed_by)``: (beams,) bool, True where the beam is removed, and (beams,) int64 id of the
+        object whose region removed it (−1 = kept): the same values as :func:`filter_scan` with the centres
+        ``p + v·dt`` and ``ids[object_index]``, in one kernel over the beams.
+    """
+    n = scan.ranges.shape[0]
+    removed = np.zeros(n, dtype=bool)
+    removed_by = np.full(n, -1, dtype=np.int64)
+    k = boxes.shape[0]
+    if not filter_active(config, k):
+        return removed, removed_by
+    centres = boxes[:, 0:2] + boxes[:, 5:7] * dt
+    if config.mode == "box" and config.speed_margin_time == 0.0:  # the default: one kernel call
+        cap = math.inf if config.max_half_extent is None else float(config.max_half_extent)
+        ext = _box_extents_kernel(boxes, config.default_shape == "square", float(config.margin), cap)
+    else:
+        speeds = np.array([math.hypot(vx, vy) for vx, vy in boxes[:, 5:7].tolist()]) if config.mode == "box" else None
+        ext = half_extents(config, boxes[:, 3], boxes[:, 4], speeds)
+    cos_a, sin_a = scan.trig()
+    _scan_exclusion_kernel(scan.ranges, cos_a, sin_a, scan.valid_mask(), math.cos(pose.theta), math.sin(pose.theta),
+                           float(pose.x), float(pose.y), centres, np.ascontiguousarray(boxes[:, 2]),
+                           np.ascontiguousarray(ext[:, 0]), np.ascontiguousarray(ext[:, 1]),
+                           np.ascontiguousarray(ids, dtype=np.int64), removed, removed_by)
+    return removed, removed_by
+
+
 __all__ = [
     "FilterConfig",
     "FilterMode",
     "exclusion_mask",
     "filter_active",
     "filter_scan",
+    "filter_scan_ids",
     "filter_scan_points",
     "half_extents",
     "half_sides",

@@ -143,9 +143,16 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.seen_through_refs',
      "(Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), int64, float64, Array(bool, 1, 'C'),)"),
-    ('dynslam2d.filter._exclusion_kernel',
-     "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
-     "Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(int64, 1, 'C'),)"),
+    ('dynslam2d.filter.observed_boxes_kernel',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), float64, "
+     "float64, float64, float64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'),)"),
+    ('dynslam2d.filter._box_extents_kernel',
+     "(Array(float64, 2, 'C'), bool, float64, float64,)"),
+    ('dynslam2d.filter._scan_exclusion_kernel',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
+     "'C'), float64, float64, float64, float64, Array(float64, 2, 'C'), Array(float64, 1, 'C'), "
+     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
+     "Array(int64, 1, 'C'),)"),
     ('dynslam2d.detect.kernels.merge_leg_pairs',
      "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int8, 1, 'C'), "

@@ -17,7 +17,6 @@ framework; :func:`run` drives it over a whole :class:`ScanSource`.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -30,7 +29,7 @@ from dynslam2d.config import Config
 from dynslam2d.detect.body import BodyFilter
 from dynslam2d.detect.mapevidence import MapView, VacatedHistory, map_evidence, vacated_outlines, yielding_view
 from dynslam2d.detect.tracker import Tracker
-from dynslam2d.filter import filter_active, filter_scan
+from dynslam2d.filter import filter_active, filter_scan_ids, observed_boxes_kernel
 from dynslam2d.gridmap import GridMap
 from dynslam2d.jitcache import compile_seconds
 from dynslam2d.memtrim import release_free_memory
@@ -47,7 +46,7 @@ from dynslam2d.slam.jumps import jump_flags
 from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.loops import LoopCloser, LoopResult
 from dynslam2d.trajectory import Trajectory
-from dynslam2d.types import Box, Pose2D, Scan, ScanSource, SourceMeta, Track
+from dynslam2d.types import Pose2D, Scan, ScanSource, SourceMeta, Track
 
 
 @dataclass(slots=True)
@@ -102,59 +101,40 @@ class StepResult:
     body: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
-def _boxes(tracks: list[Track], dt: float = 0.0) -> tuple[np.ndarray, ...]:
-    """Centres (advanced by velocity·dt), headings, lengths, widths, speeds, ids of ``tracks``."""
-    if not tracks:
-        z = np.zeros(0)
-        return np.zeros((0, 2)), z, z, z, z, np.zeros(0, dtype=np.int64)
-    centres = np.array([t.box.center + t.velocity * dt for t in tracks])
-    headings = np.array([t.box.theta for t in tracks])
-    lengths = np.array([t.box.length for t in tracks])
-    widths = np.array([t.box.width for t in tracks])
-    speeds = np.array([t.speed for t in tracks])
-    ids = np.array([t.id for t in tracks], dtype=np.int64)
-    return centres, headings, lengths, widths, speeds, ids
+def _box_rows(tracks: list[Track]) -> tuple[np.ndarray, np.ndarray]:
+    """(k, 7) rows [p_x, p_y, θ, l, w, v_x, v_y] of the boxes and velocities of ``tracks`` (map frame; m, rad,
+    m/s) and their (k,) int64 ids: what :func:`dynslam2d.filter.filter_scan_ids` takes."""
+    rows = np.array([(t.box.px, t.box.py, t.box.theta, t.box.length, t.box.width, t.velocity[0], t.velocity[1])
+                     for t in tracks], dtype=np.float64).reshape(-1, 7)
+    ids = np.fromiter((t.id for t in tracks), dtype=np.int64, count=len(tracks))
+    return rows, ids
 
 
-def _observed_boxes(tracks: list[Track], scan: Scan, pose: Pose2D) -> list[Track]:
-    """``tracks`` with each box grown to enclose the points assigned to it in ``scan``.
+#: :func:`_box_rows` of no tracks.
+_NO_ROWS = (np.zeros((0, 7)), np.zeros(0, dtype=np.int64))
+
+
+def _observed_rows(tracks: list[Track], scan: Scan, pose: Pose2D) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_box_rows` of ``tracks`` with each box grown to enclose the points assigned to it in ``scan``.
 
     The paper's exclusion box is the rectangle fitted to the object's cluster in this scan
     (§2.2, Eq. 2), which encloses the cluster by construction; a tracked box is smoothed
     over time and may sit a little inside the object's surface. The union of the two keeps
-    the tracked extent where part of the object is hidden and every observed point inside.
+    the tracked extent where part of the object is hidden and every observed point inside
+    (:func:`dynslam2d.filter.observed_boxes_kernel`, one call for every track).
     """
-    out: list[Track] = []
+    rows, ids = _box_rows(tracks)
     if not tracks:
-        return out
-    # the beams of every track at once (one trig + transform per scan instead of one per track)
-    lists = [t.beams if t.beams is not None else np.zeros(0, dtype=np.int64) for t in tracks]
-    counts = np.fromiter((len(b) for b in lists), dtype=np.int64, count=len(lists))
-    idx = np.concatenate(lists).astype(np.int64, copy=False) if counts.sum() else np.zeros(0, dtype=np.int64)
-    r_all = scan.ranges[idx]
-    cos_a, sin_a = scan.trig()
-    ok_all = np.isfinite(r_all)
-    with np.errstate(invalid="ignore"):  # ±inf ranges (dropped by ok_all) may meet cos = 0
-        xy_all = pose.transform_points(np.column_stack((r_all * cos_a[idx], r_all * sin_a[idx])))
-    ends = np.cumsum(counts)
-    for k, t in enumerate(tracks):
-        lo, hi = int(ends[k] - counts[k]), int(ends[k])
-        ok = ok_all[lo:hi]
-        if hi == lo or not ok.any():
-            out.append(t)
-            continue
-        pts = xy_all[lo:hi][ok]
-        b = t.box
-        c, s_ = math.cos(b.theta), math.sin(b.theta)
-        d = pts - np.array([b.px, b.py])
-        u = d[:, 0] * c + d[:, 1] * s_
-        v = -d[:, 0] * s_ + d[:, 1] * c
-        u0, u1 = min(-0.5 * b.length, float(u.min())), max(0.5 * b.length, float(u.max()))
-        v0, v1 = min(-0.5 * b.width, float(v.min())), max(0.5 * b.width, float(v.max()))
-        du, dv = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
-        box = Box(b.px + c * du - s_ * dv, b.py + s_ * du + c * dv, b.theta, u1 - u0, v1 - v0)
-        out.append(dataclasses.replace(t, box=box))
-    return out
+        return rows, ids
+    empty = np.zeros(0, dtype=np.int64)
+    lists = [t.beams if t.beams is not None else empty for t in tracks]  # a track without beams keeps its box
+    idx = np.concatenate(lists).astype(np.int64, copy=False)
+    ends = np.cumsum(np.fromiter((len(b) for b in lists), dtype=np.int64, count=len(lists)))
+    if idx.shape[0]:
+        cos_a, sin_a = scan.trig()
+        observed_boxes_kernel(scan.ranges, cos_a, sin_a, math.cos(pose.theta), math.sin(pose.theta),
+                              float(pose.x), float(pose.y), idx, ends, rows)
+    return rows, ids
 
 
 class Pipeline:
@@ -181,21 +161,14 @@ class Pipeline:
             mem, self.config.slam.laser_min_dist, self.config.slam.laser_max_dist,
             keep_beams=self.loops is not None) if (mem.erase and self.config.filter.mode != "none") else None
 
-    def _exclude(self, scan: Scan, pose: Pose2D, tracks: list[Track], dt: float,
-                 cache: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        """Beams of ``scan`` (at ``pose``) inside the exclusion zones of ``tracks`` advanced by ``dt``;
-        ``cache`` keeps the scan's valid mask and sensor-frame points between the two calls per scan."""
-        if not tracks:  # nothing to exclude (filter_scan would return the same)
+    def _exclude(self, scan: Scan, pose: Pose2D, rows: tuple[np.ndarray, np.ndarray],
+                 dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Beams of ``scan`` (at ``pose``) inside the exclusion zones of the boxes ``rows``
+        (:func:`_box_rows`) advanced by ``dt``, s: (removed, id of the remover or −1)."""
+        if not rows[0].shape[0]:  # nothing to exclude (filter_scan_ids would return the same)
             n = scan.ranges.shape[0]
             return np.zeros(n, dtype=bool), np.full(n, -1, dtype=np.int64)
-        centres, headings, lengths, widths, speeds, ids = _boxes(tracks, dt)
-        if "valid" not in cache and filter_active(self.config.filter, len(tracks)):
-            cache["valid"] = scan.valid_mask()
-            cache["points"] = scan.points(cache["valid"])
-        removed, obj = filter_scan(self.config.filter, scan, pose, centres, headings, lengths, widths, speeds,
-                                   cache.get("valid"), cache.get("points"))
-        by = np.where(obj >= 0, ids[np.clip(obj, 0, None)], -1)
-        return removed, by
+        return filter_scan_ids(self.config.filter, scan, pose, rows[0], rows[1], dt)
 
     def _spare_structure(self, scan: Scan, pose: Pose2D, moving: list[Track], removed: np.ndarray,
                          removed_by: np.ndarray, only_ids: np.ndarray | None = None) -> None:
@@ -247,7 +220,6 @@ class Pipeline:
     def process(self, scan: Scan) -> StepResult:
         """Run every stage on ``scan`` (scans must come in time order) and return the result."""
         t0 = time.perf_counter()
-        cache: dict[str, np.ndarray] = {}
         # 0. the robot's own body is never structure nor a mover (detect/body.py)
         raw = scan
         body = self.body.mask(scan)
@@ -257,7 +229,7 @@ class Pipeline:
         match_scan = scan
         if self._moving and self.config.filter.mode != "none":
             dt = scan.stamp - self._last_stamp if self._last_stamp is not None else 0.0
-            pre_removed, _ = self._exclude(scan, self.slam.predict(scan.stamp), self._moving, dt, cache)
+            pre_removed, _ = self._exclude(scan, self.slam.predict(scan.stamp), _box_rows(self._moving), dt)
             if pre_removed.any():
                 match_scan = scan.without(pre_removed)
         res = self.slam.match(match_scan)
@@ -273,7 +245,8 @@ class Pipeline:
             # an untrusted pose makes structure look like motion: only movers removed before stay removed
             known = {t.id for t in self._moving}
             moving = [t for t in moving if t.id in known]
-        removed, removed_by = self._exclude(scan, res.pose, _observed_boxes(moving, scan, res.pose), 0.0, cache)
+        rows = _observed_rows(moving, scan, res.pose) if moving else _NO_ROWS
+        removed, removed_by = self._exclude(scan, res.pose, rows, 0.0)
         if self.config.filter.mode == "box" and self.config.filter.spare_structure and removed.any():
             self._spare_structure(scan, res.pose, moving, removed, removed_by)
         elif self.config.filter.mode == "box" and self.config.filter.spare_structure_vehicles and removed.any():

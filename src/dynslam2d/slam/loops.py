@@ -93,6 +93,27 @@ def _even(n: int, k: int) -> np.ndarray:
     return idx
 
 
+def _place_points(rel: np.ndarray, pts: list[np.ndarray]) -> np.ndarray:
+    """(Σn, 2) float64 points of the keyframes' returns ``pts`` ((n_k, 2) float32 each, laser frame, m) placed
+    in one frame with the poses ``rel`` ((k, 3): x, y m, θ rad), in one pass over all keyframes: per point
+    ``x + cos θ·p_x − sin θ·p_y``, ``y + sin θ·p_x + cos θ·p_y`` with the products in float32 (``cos θ`` a Python
+    float meets a float32 array: NumPy rounds it to float32, NEP 50) and the sums in float64, the operations of
+    the per-keyframe expression this replaced, so the place descriptors stay bit-identical."""
+    if not pts:
+        return np.zeros((0, 2))
+    p = np.concatenate(pts) if len(pts) > 1 else pts[0]
+    counts = np.fromiter((q.shape[0] for q in pts), dtype=np.int64, count=len(pts))
+    th = rel[:, 2].tolist()
+    ct = np.repeat(np.array([math.cos(t) for t in th], dtype=np.float32), counts)
+    st = np.repeat(np.array([math.sin(t) for t in th], dtype=np.float32), counts)
+    x = np.repeat(rel[:, 0], counts)
+    y = np.repeat(rel[:, 1], counts)
+    px, py = p[:, 0], p[:, 1]
+    out = np.empty((p.shape[0], 2), dtype=np.float64)
+    out[:, 0] = x + ct * px - st * py
+    out[:, 1] = y + st * px + ct * py
+    return out
+
 
 @dataclass(slots=True)
 class Keyframe:
@@ -175,6 +196,43 @@ def edge_sigmas(config: LoopConfig, z: np.ndarray, weak: bool, score: float = ma
     return sxy * f, sth * f
 
 
+class _EdgeTable:
+    """The graph's edges (keyframe chain and accepted loops) with two weights each, in insertion order: the
+    translation deviation (m) and the heading deviation (rad) the far search sums along shortest paths. Kept as
+    growing arrays beside a key → row map, so that each far search reads them without rebuilding them from
+    dicts (the same rows, order and values as the dicts of (i, j) → weight they replace)."""
+
+    def __init__(self) -> None:
+        self._row: dict[tuple[int, int], int] = {}
+        self._ij = np.zeros((64, 2), dtype=np.int64)
+        self._w = np.zeros((64, 2), dtype=np.float64)
+
+    def __len__(self) -> int:
+        return len(self._row)
+
+    def set(self, key: tuple[int, int], sigma: float, turn: float, keep_min: bool = False) -> None:
+        """Edge ``key`` gets the weights (``sigma`` m, ``turn`` rad); with ``keep_min`` an existing edge keeps
+        the smaller of its old and new weight, each on its own."""
+        r = self._row.get(key)
+        if r is None:
+            r = len(self._row)
+            if r == self._ij.shape[0]:
+                self._ij = np.concatenate((self._ij, np.zeros_like(self._ij)))
+                self._w = np.concatenate((self._w, np.zeros_like(self._w)))
+            self._row[key] = r
+            self._ij[r] = key
+        elif keep_min:
+            sigma = min(float(self._w[r, 0]), sigma)
+            turn = min(float(self._w[r, 1]), turn)
+        self._w[r, 0] = sigma
+        self._w[r, 1] = turn
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """((n, 2) int64 node pairs, (n, 2) float64 weights [m, rad]), views in insertion order."""
+        n = len(self._row)
+        return self._ij[:n], self._w[:n]
+
+
 class LoopCloser:
     """Builds the pose graph scan by scan (:meth:`add`) and returns the optimised trajectory
     (:meth:`finish`)."""
@@ -203,10 +261,9 @@ class LoopCloser:
         self._cache: OrderedDict[int, MultiResMap] = OrderedDict()
         self._cache_size = _SUBMAP_CACHE  # grids kept built (the second search keeps more: it jumps between places)
         # translation deviation (m) of every chain edge and accepted loop, keyed (i, j): the far search's
-        # uncertainty is their sum along the graph's shortest path
-        self._sigma_edges: dict[tuple[int, int], float] = {}
-        # their heading deviations, rad: drift_rad_per_m × length, plus far_weak_turn across a weak match
-        self._turn_edges: dict[tuple[int, int], float] = {}
+        # uncertainty is their sum along the graph's shortest path; and their heading deviations, rad:
+        # drift_rad_per_m × length, plus far_weak_turn across a weak match
+        self._edges = _EdgeTable()
         self._far_last: dict[int, int] = {}  # submap → node of its last far search
         # during the second search (slam/secondsearch.py): the (anchor, node) pairs that have a loop edge; else None
         self._second: set[tuple[int, int]] | None = None
@@ -313,9 +370,8 @@ class LoopCloser:
             node = self.graph.add_node(compose(est_prev, z))
             sxy, sth = edge_sigmas(c, z, self._weak_since_kf, self._score_since_kf)
             self.graph.add_edge(prev_node, node, z, diag_info(sxy, sth), robust=c.weak_robust and self._weak_since_kf)
-            self._sigma_edges[(prev_node, node)] = sxy
-            self._turn_edges[(prev_node, node)] = (c.drift_rad_per_m * math.hypot(float(z[0]), float(z[1]))
-                                                   + (c.far_weak_turn if self._weak_since_kf else 0.0))
+            self._edges.set((prev_node, node), sxy, (c.drift_rad_per_m * math.hypot(float(z[0]), float(z[1]))
+                                                     + (c.far_weak_turn if self._weak_since_kf else 0.0)))
         else:
             node = self.graph.add_node(p)
         self.keyframes.append(kf)
@@ -467,14 +523,13 @@ class LoopCloser:
         c = self.config
         n = self.graph.n_nodes
         out = []
-        for edges, limit in ((self._sigma_edges, max(c.max_far_radius - c.search_radius, 0.0) / c.far_sigmas),
-                             (self._turn_edges, np.inf)):
-            if not edges:
+        ij, weights = self._edges.arrays()
+        for col, limit in ((0, max(c.max_far_radius - c.search_radius, 0.0) / c.far_sigmas), (1, np.inf)):
+            if not ij.shape[0]:
                 d = np.full(n, np.inf)
                 d[node] = 0.0
             else:
-                ij = np.array(list(edges.keys()), dtype=np.int64)
-                w = np.array(list(edges.values()), dtype=np.float64) + 1e-9  # csgraph drops zero weights
+                w = weights[:, col] + 1e-9  # csgraph drops zero weights
                 m = coo_matrix((w, (ij[:, 0], ij[:, 1])), shape=(n, n)).tocsr()
                 d = dijkstra(m, directed=False, indices=node, limit=limit)
             out.append(d)
@@ -541,12 +596,7 @@ class LoopCloser:
         nodes = [k for k in range(max(node - c.place_keyframes + 1, 0), node + 1) if k in self._place_pts]
         base = self.keyframes[node].frontend
         rel = relative(base, np.array([self.keyframes[k].frontend for k in nodes]).reshape(-1, 3))
-        parts = []
-        for (x, y, th), k in zip(rel, nodes):
-            pts = self._place_pts[k]
-            ct, st = math.cos(th), math.sin(th)
-            parts.append(np.c_[x + ct * pts[:, 0] - st * pts[:, 1], y + st * pts[:, 0] + ct * pts[:, 1]])
-        desc = self._places.describe(np.vstack(parts) if parts else np.zeros((0, 2)))
+        desc = self._places.describe(_place_points(rel, [self._place_pts[k] for k in nodes]))
         if store:
             self._places.add(node, desc)
         self._query_desc = (node, desc)
@@ -769,8 +819,7 @@ class LoopCloser:
         k = self.graph.add_edge(cand.anchor, cand.node, cand.z, diag_info(c.loop_sigma_xy, c.loop_sigma_theta),
                                 loop=True)
         key = (min(cand.anchor, cand.node), max(cand.anchor, cand.node))
-        self._sigma_edges[key] = min(self._sigma_edges.get(key, math.inf), c.loop_sigma_xy)
-        self._turn_edges[key] = min(self._turn_edges.get(key, math.inf), c.drift_rad_per_m * math.hypot(*cand.z[:2]))
+        self._edges.set(key, c.loop_sigma_xy, c.drift_rad_per_m * math.hypot(*cand.z[:2]), keep_min=True)
         self.loop_edges.append(k)
         self.stats["loops_accepted"] += 1
         self._loop_path = max(self._loop_path, self.keyframes[cand.node].path)

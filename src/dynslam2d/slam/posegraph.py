@@ -252,6 +252,18 @@ class PoseGraph:
         lam = 1e-4
         it = 0
         m = ii.shape[0]
+        # the sparsity pattern of H and b: the same every iteration (the edges do not change inside a solve)
+        r3 = np.arange(3)
+        rows_blk = np.concatenate([(3 * ii)[:, None, None] + r3[None, :, None] + 0 * r3[None, None, :],
+                                   (3 * jj)[:, None, None] + r3[None, :, None] + 0 * r3[None, None, :],
+                                   (3 * ii)[:, None, None] + r3[None, :, None] + 0 * r3[None, None, :],
+                                   (3 * jj)[:, None, None] + r3[None, :, None] + 0 * r3[None, None, :]]).ravel()
+        cols_blk = np.concatenate([(3 * ii)[:, None, None] + 0 * r3[None, :, None] + r3[None, None, :],
+                                   (3 * jj)[:, None, None] + 0 * r3[None, :, None] + r3[None, None, :],
+                                   (3 * jj)[:, None, None] + 0 * r3[None, :, None] + r3[None, None, :],
+                                   (3 * ii)[:, None, None] + 0 * r3[None, :, None] + r3[None, None, :]]).ravel()
+        b_i = (3 * ii)[:, None] + r3[None, :]
+        b_j = (3 * jj)[:, None] + r3[None, :]
         for it in range(1, iterations + 1):  # noqa: B007 (the count is returned after the loop)
             e, ca, sa, dth_x, dth_y = parts
             w = self._weights(chi, loop, kernel, scale)
@@ -273,20 +285,11 @@ class PoseGraph:
             Hij = np.transpose(Ji, (0, 2, 1)) @ WJj
             bi = np.einsum("nki,nk->ni", WJi, e)
             bj = np.einsum("nki,nk->ni", WJj, e)
-            r3 = np.arange(3)
-            rows_blk = np.concatenate([(3 * ii)[:, None, None] + r3[None, :, None] + 0 * r3[None, None, :],
-                                       (3 * jj)[:, None, None] + r3[None, :, None] + 0 * r3[None, None, :],
-                                       (3 * ii)[:, None, None] + r3[None, :, None] + 0 * r3[None, None, :],
-                                       (3 * jj)[:, None, None] + r3[None, :, None] + 0 * r3[None, None, :]])
-            cols_blk = np.concatenate([(3 * ii)[:, None, None] + 0 * r3[None, :, None] + r3[None, None, :],
-                                       (3 * jj)[:, None, None] + 0 * r3[None, :, None] + r3[None, None, :],
-                                       (3 * jj)[:, None, None] + 0 * r3[None, :, None] + r3[None, None, :],
-                                       (3 * ii)[:, None, None] + 0 * r3[None, :, None] + r3[None, None, :]])
             vals = np.concatenate([Hii, Hjj, Hij, np.transpose(Hij, (0, 2, 1))])
-            H = sp.coo_matrix((vals.ravel(), (rows_blk.ravel(), cols_blk.ravel())), shape=(3 * n, 3 * n)).tocsc()
+            H = sp.coo_matrix((vals.ravel(), (rows_blk, cols_blk)), shape=(3 * n, 3 * n)).tocsc()
             b = np.zeros(3 * n)
-            np.add.at(b, (3 * ii)[:, None] + r3[None, :], bi)
-            np.add.at(b, (3 * jj)[:, None] + r3[None, :], bj)
+            np.add.at(b, b_i, bi)
+            np.add.at(b, b_j, bj)
             # gauge: node 0 fixed
             H = H[3:, 3:]
             b = b[3:]
