@@ -144,3 +144,30 @@ def scan_rays(pose, hits, clear, grazing: float, min_sin: float):
         stop = np.zeros(hit.shape[0])
         stop[: hits.shape[0]] = grazing_stop(hits, grazing, min_sin)
     return ends, hit, stop
+
+
+def paper_room_scan(pose, stamp: float = 0.0):
+    """A noise-free 720-beam scan of the simulator's paper room seen from ``pose`` (map frame, m, rad)."""
+    import numpy as np
+
+    from dynslam2d.sim import LidarModel, cast_rays, paper_room
+
+    lidar = LidarModel(beams=720, noise_sigma=0.0)
+    dist, _ = cast_rays((pose.x, pose.y), pose.theta + lidar.angles, paper_room().segments)
+    ranges, _ = lidar.measure(dist, np.random.default_rng(0))
+    return lidar.make_scan(stamp, ranges)
+
+
+def paper_room_slam(levels: int | None = None):
+    """A ``HectorSlam`` (``levels`` map levels, the default when None) whose map holds three noise-free scans of the
+    paper room taken around the laser pose (0.3, -0.4, 0.2); returns it and that first pose."""
+    from dynslam2d.slam import HectorSlam, SlamConfig
+    from dynslam2d.types import Pose2D
+
+    slam = HectorSlam(SlamConfig() if levels is None else SlamConfig(map_levels=levels))
+    first = Pose2D(0.3, -0.4, 0.2)
+    slam.update_map(paper_room_scan(first), Pose2D(), force=True)
+    for d in (Pose2D(0.3, 0.1, 0.1), Pose2D(-0.2, 0.3, -0.15)):
+        p = first.compose(d)
+        slam.update_map(paper_room_scan(p), first.between(p), force=True)
+    return slam, first

@@ -9,32 +9,17 @@ import math
 
 import numpy as np
 import pytest
+from conftest import paper_room_scan, paper_room_slam
 from numba import njit
 
-from dynslam2d.sim import LidarModel, cast_rays, paper_room
-from dynslam2d.slam import HectorSlam, SlamConfig
 from dynslam2d.slam.correlative import _pyramid, _rotated_cells, _score_pyramid, _score_table
 from dynslam2d.slam.matcher import _bearing_bin, evaluate, free_fraction, match_level, match_multires
-from dynslam2d.types import Pose2D, Scan, wrap_angle
+from dynslam2d.types import Pose2D, wrap_angle
 
-LIDAR = LidarModel(beams=720, noise_sigma=0.0)
-WALLS = paper_room().segments
-
-
-def scan_at(pose: Pose2D, stamp: float = 0.0) -> Scan:
-    dist, _ = cast_rays((pose.x, pose.y), pose.theta + LIDAR.angles, WALLS)
-    ranges, _ = LIDAR.measure(dist, np.random.default_rng(0))
-    return LIDAR.make_scan(stamp, ranges)
+scan_at = paper_room_scan
 
 
-def mapped(levels: int) -> tuple[HectorSlam, Pose2D]:
-    slam = HectorSlam(SlamConfig(map_levels=levels))
-    first = Pose2D(0.3, -0.4, 0.2)
-    slam.update_map(scan_at(first), Pose2D(), force=True)
-    for d in (Pose2D(0.3, 0.1, 0.1), Pose2D(-0.2, 0.3, -0.15)):
-        p = first.compose(d)
-        slam.update_map(scan_at(p), first.between(p), force=True)
-    return slam, first
+mapped = paper_room_slam
 
 
 def level_loop(levels, pts, start, it_coarse, it_finest, swapped, use_lm, prior_world=None, prior_info=None):

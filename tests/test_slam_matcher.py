@@ -7,23 +7,15 @@ import math
 
 import numpy as np
 import pytest
+from conftest import paper_room_scan
 
-from dynslam2d.sim import LidarModel, cast_rays, paper_room
 from dynslam2d.slam import HectorSlam, SlamConfig
 from dynslam2d.slam.correlative import correlative_search
 from dynslam2d.slam.interp import interpolate
 from dynslam2d.slam.matcher import covariance_world, evaluate, match_multires
-from dynslam2d.types import Pose2D, Scan, wrap_angle
+from dynslam2d.types import Pose2D, wrap_angle
 
-LIDAR = LidarModel(beams=720, noise_sigma=0.0)
-WALLS = paper_room().segments
-
-
-def scan_at(pose: Pose2D, stamp: float = 0.0) -> Scan:
-    """Noise-free 720-beam scan of the paper room from laser pose ``pose`` (world frame)."""
-    dist, _ = cast_rays((pose.x, pose.y), pose.theta + LIDAR.angles, WALLS)
-    ranges, _ = LIDAR.measure(dist, np.random.default_rng(0))
-    return LIDAR.make_scan(stamp, ranges)
+scan_at = paper_room_scan
 
 
 def mapped_slam(cfg: SlamConfig, pose: Pose2D = Pose2D(0.3, -0.4, 0.2)) -> tuple[HectorSlam, Pose2D]:

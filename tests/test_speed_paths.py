@@ -9,32 +9,18 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from conftest import paper_room_scan, paper_room_slam
 
-from dynslam2d.sim import LidarModel, cast_rays, paper_room
 from dynslam2d.slam import HectorSlam, SlamConfig
 from dynslam2d.slam.erasure import _LevelRecord
 from dynslam2d.slam.grid import GridLevel
 from dynslam2d.slam.matcher import _solve3, accumulate, covariance_world, match_level
 from dynslam2d.types import Pose2D, Scan
 
-LIDAR = LidarModel(beams=720, noise_sigma=0.0)
-WALLS = paper_room().segments
+scan_at = paper_room_scan
 
 
-def scan_at(pose: Pose2D, stamp: float = 0.0) -> Scan:
-    dist, _ = cast_rays((pose.x, pose.y), pose.theta + LIDAR.angles, WALLS)
-    ranges, _ = LIDAR.measure(dist, np.random.default_rng(0))
-    return LIDAR.make_scan(stamp, ranges)
-
-
-def mapped() -> tuple[HectorSlam, Pose2D]:
-    slam = HectorSlam(SlamConfig())
-    first = Pose2D(0.3, -0.4, 0.2)
-    slam.update_map(scan_at(first), Pose2D(), force=True)
-    for d in (Pose2D(0.3, 0.1, 0.1), Pose2D(-0.2, 0.3, -0.15)):
-        p = first.compose(d)
-        slam.update_map(scan_at(p), first.between(p), force=True)
-    return slam, first
+mapped = paper_room_slam
 
 
 def lm_reference(prob, pts, pose, n_iter, lam0, lam_max, max_rot, max_trans):
