@@ -348,7 +348,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     if pts0.shape[0] != pts_m.shape[0]:
         pts0 = pts_m / res
     g = np.zeros(3)
-    cost, summ, n_in = accumulate(prob0, pts0, m0, m1, m2, False, H_out, g)
+    cost, summ, n_in = accumulate(prob0, pts0, m0, m1, m2, np.bool_(False), H_out, g)  # not a literal: one signature
     return pose, True, cost, summ, n_in, free
 
 
