@@ -15,10 +15,14 @@ CPU ms per scan of each checkout, their ratio, the median of the per-scan ratios
         --other /work/main/src [--reps 1]
 
 ``--parts`` instead runs this checkout alone (after the same warm-up) with thread-CPU timers around the parts of
-the per-scan path outside the tracker and prints, per part, the median and mean µs over the scans that update
-the map and over the others: the map update's ``MultiResMap.integrate`` (ray kernel and its Python), the
-vacated-footprint kernel, the matcher's kernels and the whole match, the evidence ledger's methods, the body filter
-and the loop closer's ``add`` with its place descriptor and searches.
+the per-scan path and prints, per part, the median and mean µs over the scans that update the map and over the
+others: the whole ``Pipeline.process`` and its top-level parts (body filter, the whole match, the tracker's
+``update`` and its map view, the exclusions and observed boxes, the evidence ledger's methods, the map update, the
+loop closer's ``add``), what ``process`` spends outside them ("unattributed": its own Python, the step record, the
+timers), and inside the parts: the matcher's kernels called from Python (``match_pyramid``, which runs every
+level with ``_match_core`` inside numba; the per-level ``match_level`` and the evaluation kernels; the scan
+gating), the map update's ``MultiResMap.integrate`` (ray kernel and its Python), the vacated-footprint kernel
+and the loop closer's place descriptor and searches. The wrapped timers cost ≈ 1 µs each.
 
 Inputs: the names of ``bench_digest.py`` (paths under ``--data``). Both workers inherit this process's CPU
 affinity: pin the parent with ``taskset``.
@@ -122,7 +126,9 @@ def parts(data: Path, name: str) -> None:
     import numpy as np
 
     import dynslam2d.detect.mapevidence as me
+    import dynslam2d.pipeline as pl
     import dynslam2d.slam.matcher as mt
+    import dynslam2d.slam.processor as pr
     from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import Pipeline
 
@@ -145,11 +151,28 @@ def parts(data: Path, name: str) -> None:
         setattr(obj, attr, timed)
 
     wrap(me, "vacated_outlines_kernel", "vacated-footprint kernel")
+    # the matcher's kernels called from Python (slam/matcher.py): match_pyramid runs every level of the match and
+    # the finest level's evaluation in one call (its _match_core / accumulate / fraction_below calls are inside
+    # numba and cannot be wrapped); match_level is the per-level path (seeds, other point sets), accumulate /
+    # fraction_below alone are evaluate / free_fraction outside match_pyramid
+    wrap(mt, "match_pyramid", "match: match_pyramid kernel (all levels, _match_core, evaluation)")
     for k in ("match_level", "accumulate", "fraction_below", "_support_kernel", "_spread_kernel"):
-        wrap(mt, k, "match: kernels (LM, evaluation, support, free space, spread)")
+        if hasattr(mt, k):
+            wrap(mt, k, "match: other kernels (match_level, accumulate, fraction_below, support, spread)")
+    for k in ("gated_points", "close_count"):  # imported by name into slam/processor.py
+        if hasattr(pr, k):
+            wrap(pr, k, "match: scan gating kernels (gated_points, close_count)")
     pipe = Pipeline()
+    # the top-level parts of Pipeline.process (TOP); what process spends outside them is printed as "unattributed"
+    wrap(pipe, "process", "process: whole")
     wrap(pipe.slam, "match", "match: whole")
+    wrap(pipe.tracker, "update", "tracker: update")
+    wrap(pipe, "_evidence_view", "tracker's map view (_evidence_view)")
+    wrap(pipe, "_exclude", "exclusion (both calls)")
+    wrap(pl, "_observed_rows", "observed boxes (_observed_rows)")
+    wrap(pl, "_box_rows", "box rows of the previous movers (_box_rows)")
     wrap(pipe.slam, "update_map", "map: whole update")
+    wrap(pipe.slam, "needs_map_update", "map: needs_map_update")
     # the front end's map only (the loop closer's submaps have their own): every level, its Python and ray kernel
     wrap(pipe.slam.map, "integrate", "map: MultiResMap.integrate")
     wrap(pipe.body, "mask", "body filter")
@@ -162,19 +185,28 @@ def parts(data: Path, name: str) -> None:
         for k, tag in (("_describe", "loops: place descriptor"), ("_search", "loops: searches")):
             if hasattr(pipe.loops, k):
                 wrap(pipe.loops, k, tag)
+    top = ("match: whole", "tracker: update", "tracker's map view (_evidence_view)", "exclusion (both calls)",
+           "observed boxes (_observed_rows)", "box rows of the previous movers (_box_rows)", "map: whole update",
+           "map: needs_map_update", "body filter", "loops: add") + tuple(
+               f"ledger: {k}" for k in ("before_update", "after_update", "observe", "erase_entering"))
     rows, upd = [], []
     for s in scans:
         acc.clear()
         step = pipe.process(s)
-        rows.append(dict(acc))
+        r = dict(acc)
+        r["process: unattributed (whole minus the top-level parts)"] = r["process: whole"] - sum(
+            r.get(k, 0) for k in top)
+        rows.append(r)
         upd.append(bool(step.map_updated))
     u = np.array(upd)
     print(f"{name}: {len(scans)} scans, {int(u.sum())} update the map; CPU µs per scan (median / mean)")
-    print(f"  {'part':<62} {'updating scans':>16} {'other scans':>16}")
-    for tag in sorted({k for r in rows for k in r}):
+    tags = sorted({k for r in rows for k in r})
+    w = max(len(t) for t in tags)
+    print(f"  {'part':<{w}} {'updating scans':>16} {'other scans':>16}")
+    for tag in tags:
         v = np.array([r.get(tag, 0) / 1e3 for r in rows])
         cols = [f"{np.median(v[m]):7.0f} / {v[m].mean():6.0f}" if m.any() else "-" for m in (u, ~u)]
-        print(f"  {tag:<62} {cols[0]:>16} {cols[1]:>16}")
+        print(f"  {tag:<{w}} {cols[0]:>16} {cols[1]:>16}")
     sys.stdout.flush()
 
 

@@ -133,35 +133,47 @@ class FilterConfig(BaseModel):
 
 
 @njit(cache=True)
+def _region_of(x: float, y: float, c: np.ndarray, ct: np.ndarray, st: np.ndarray, ha: np.ndarray,
+               hb: np.ndarray) -> int:
+    """Index ``j`` of the exclusion region that holds the point (``x``, ``y``), m, or −1 (paper Eq. 5–8).
+
+    Region ``j`` is the box of half-extents ``ha[j]``, ``hb[j]`` (m) about the centre ``c[j]`` with heading cosine
+    and sine ``ct[j]``, ``st[j]``. When regions overlap the nearest centre wins (ties: lowest ``j``); a NaN
+    point or extent is in no region.
+    """
+    best = np.inf
+    found = -1
+    for j in range(c.shape[0]):
+        dx = x - c[j, 0]
+        dy = y - c[j, 1]
+        # T_j⁻¹ s_i = R(θ_j)ᵀ (s_i − p_j)  (paper Eq. 5 read as the object pose, Eq. 8)
+        u = ct[j] * dx + st[j] * dy
+        v = -st[j] * dx + ct[j] * dy
+        if abs(u) <= ha[j] and abs(v) <= hb[j]:  # paper Eq. 7 (NaN compares False: kept)
+            d2 = dx * dx + dy * dy
+            if d2 < best:  # overlapping regions: nearest centre wins, ties → lowest j
+                best = d2
+                found = j
+    return found
+
+
+@njit(cache=True)
 def _exclusion_kernel(
     pts: np.ndarray, c: np.ndarray, th: np.ndarray, ha: np.ndarray, hb: np.ndarray,
     removed: np.ndarray, object_index: np.ndarray,
 ) -> None:
-    """Fill ``removed`` / ``object_index`` in place (points × objects double loop).
+    """Fill ``removed`` / ``object_index`` in place (points × objects double loop, :func:`_region_of`).
 
     A plain loop beats the vectorised numpy version ~15× on 720 points × 3 objects
     (4 µs vs 60 µs) because it allocates no (n, k) temporaries.
     """
-    n = pts.shape[0]
-    k = c.shape[0]
     ct = np.cos(th)
     st = np.sin(th)
-    for i in range(n):
-        x = pts[i, 0]
-        y = pts[i, 1]
-        best = np.inf
-        for j in range(k):
-            dx = x - c[j, 0]
-            dy = y - c[j, 1]
-            # T_j⁻¹ s_i = R(θ_j)ᵀ (s_i − p_j)  (paper Eq. 5 read as the object pose, Eq. 8)
-            u = ct[j] * dx + st[j] * dy
-            v = -st[j] * dx + ct[j] * dy
-            if abs(u) <= ha[j] and abs(v) <= hb[j]:  # paper Eq. 7 (NaN compares False: kept)
-                d2 = dx * dx + dy * dy
-                if d2 < best:  # overlapping regions: nearest centre wins, ties → lowest j
-                    best = d2
-                    object_index[i] = j
-                    removed[i] = True
+    for i in range(pts.shape[0]):
+        j = _region_of(pts[i, 0], pts[i, 1], c, ct, st, ha, hb)
+        if j >= 0:
+            object_index[i] = j
+            removed[i] = True
 
 
 @njit(cache=True)
@@ -176,33 +188,20 @@ def _scan_exclusion_kernel(
 
     Each valid beam's point is made as :meth:`Scan.points` (paper Eq. 4) and moved into the map frame as
     :meth:`Pose2D.transform_points` (``pc``, ``ps`` = cos, sin of the pose's heading; ``px``, ``py`` its
-    position, m), with the same floating-point operations, then tested as :func:`_exclusion_kernel`.
+    position, m), with the same floating-point operations, then tested by :func:`_region_of`.
     """
-    n = ranges.shape[0]
-    k = c.shape[0]
     ct = np.cos(th)
     st = np.sin(th)
-    for i in range(n):
+    for i in range(ranges.shape[0]):
         if not valid[i]:
             continue
         r = ranges[i]
         lx = r * cos_a[i]
         ly = r * sin_a[i]
-        x = pc * lx - ps * ly + px
-        y = ps * lx + pc * ly + py
-        best = np.inf
-        for j in range(k):
-            dx = x - c[j, 0]
-            dy = y - c[j, 1]
-            # T_j⁻¹ s_i = R(θ_j)ᵀ (s_i − p_j)  (paper Eq. 5 read as the object pose, Eq. 8)
-            u = ct[j] * dx + st[j] * dy
-            v = -st[j] * dx + ct[j] * dy
-            if abs(u) <= ha[j] and abs(v) <= hb[j]:  # paper Eq. 7 (NaN compares False: kept)
-                d2 = dx * dx + dy * dy
-                if d2 < best:  # overlapping regions: nearest centre wins, ties → lowest j
-                    best = d2
-                    removed_by[i] = ids[j]
-                    removed[i] = True
+        j = _region_of(pc * lx - ps * ly + px, ps * lx + pc * ly + py, c, ct, st, ha, hb)
+        if j >= 0:
+            removed_by[i] = ids[j]
+            removed[i] = True
 
 
 @njit(cache=True)

@@ -41,6 +41,7 @@ import numpy as np
 
 from dynslam2d.errors import DynSlamError
 from dynslam2d.io.atomic import atomic_path
+from dynslam2d.io.rosraw import RawLaserScan, is_ros1_laserscan, laserscan_ros1
 from dynslam2d.types import Pose2D, Scan, SourceMeta
 
 __all__ = [
@@ -233,15 +234,19 @@ def _iter_raw(
     start_ns: int | None = None,
     first_index: int = 0,
     on_bad: Callable[[int], None] | None = None,
+    raw_scans: bool = False,
 ) -> Iterator[tuple[int, int, Any]]:
     """Yield (index, bag time ns, deserialised message) of ``topic`` in the bag's time order.
 
     ``start_ns`` skips messages recorded before that bag time; ``first_index`` is then
     the index of the first message yielded (used in error messages only). A message
     that cannot be decoded raises DynSlamError, or, with ``on_bad``, is passed over
-    after calling ``on_bad(index)``.
+    after calling ``on_bad(index)``. ``raw_scans``: messages of ROS 1 LaserScan connections
+    come as :class:`~dynslam2d.io.rosraw.RawLaserScan` (decoded straight from their bytes,
+    the same values; :func:`_scan_from_msg` takes both).
     """
     it = reader.messages(connections=connections, start=start_ns)
+    direct = {c.id for c in connections if is_ros1_laserscan(c)} if raw_scans else set()
     index = first_index
     while True:
         try:
@@ -254,8 +259,10 @@ def _iter_raw(
                 f"{path}: cannot read message index {index} of topic {topic} "
                 f"({type(err).__name__}: {_short(err)}); the bag looks corrupt or truncated{hint}"
             ) from err
-        msg = _decode(reader, raw, conn.msgtype, path, topic, index, skip=on_bad is not None,
-                      hint="use --skip-bad to drop such messages")
+        msg = laserscan_ros1(raw) if conn.id in direct else None
+        if msg is None:  # (a message the direct decoder does not parse exactly: rosbags reports it)
+            msg = _decode(reader, raw, conn.msgtype, path, topic, index, skip=on_bad is not None,
+                          hint="use --skip-bad to drop such messages")
         if msg is None:
             on_bad(index)  # type: ignore[misc]
             index += 1
@@ -374,9 +381,14 @@ def read_scan_topics(path: str | os.PathLike[str], topics: Iterable[str], *,
 
 
 def _scan_from_msg(msg: Any, path: Path, topic: str, index: int) -> Scan:
-    """LaserScan message → Scan (every field kept; empty intensities → None)."""
+    """LaserScan message (rosbags' or a :class:`~dynslam2d.io.rosraw.RawLaserScan`) → Scan (every field kept;
+    empty intensities → None)."""
     try:
-        stamp = ros_time_to_stamp(msg.header.stamp.sec, msg.header.stamp.nanosec)
+        if type(msg) is RawLaserScan:
+            stamp, frame_id = ros_time_to_stamp(msg.sec, msg.nanosec), msg.frame_id
+        else:
+            stamp = ros_time_to_stamp(msg.header.stamp.sec, msg.header.stamp.nanosec)
+            frame_id = msg.header.frame_id
         intensities = msg.intensities if len(msg.intensities) else None
         return Scan(
             stamp=stamp,
@@ -385,7 +397,7 @@ def _scan_from_msg(msg: Any, path: Path, topic: str, index: int) -> Scan:
             ranges=msg.ranges,
             range_min=float(msg.range_min),
             range_max=float(msg.range_max),
-            frame_id=str(msg.header.frame_id),
+            frame_id=str(frame_id),
             intensities=intensities,
             angle_max=float(msg.angle_max),
             time_increment=float(msg.time_increment),
@@ -523,7 +535,8 @@ class RosbagSource:
                 raise DynSlamError(f"{self.path}: topic {self.topic} is gone")
             self.skipped_messages = 0
             on_bad = self._count_bad if self.skip_bad else None
-            for index, _, msg in _iter_raw(reader, self.path, self.topic, info.connections, on_bad=on_bad):
+            for index, _, msg in _iter_raw(reader, self.path, self.topic, info.connections, on_bad=on_bad,
+                                           raw_scans=True):
                 try:
                     scan = _scan_from_msg(msg, self.path, self.topic, index)
                 except DynSlamError:
