@@ -114,8 +114,10 @@ def _box_rows(tracks: list[Track]) -> tuple[np.ndarray, np.ndarray]:
 _NO_ROWS = (np.zeros((0, 7)), np.zeros(0, dtype=np.int64))
 
 
-def _observed_rows(tracks: list[Track], scan: Scan, pose: Pose2D) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_box_rows` of ``tracks`` with each box grown to enclose the points assigned to it in ``scan``.
+def _observed_rows(tracks: list[Track], scan: Scan, pose: Pose2D,
+                   keep: list[tuple[np.ndarray, np.ndarray]] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_box_rows` of ``tracks`` with each box grown to enclose the points assigned to it in ``scan``
+    (``keep``: receives :func:`_box_rows` of ``tracks`` itself, ungrown).
 
     The paper's exclusion box is the rectangle fitted to the object's cluster in this scan
     (§2.2, Eq. 2), which encloses the cluster by construction; a tracked box is smoothed
@@ -126,6 +128,8 @@ def _observed_rows(tracks: list[Track], scan: Scan, pose: Pose2D) -> tuple[np.nd
     rows, ids = _box_rows(tracks)
     if not tracks:
         return rows, ids
+    if keep is not None:
+        keep.append((rows.copy(), ids))  # the rows before growing (the next scan's exclusion before matching)
     empty = np.zeros(0, dtype=np.int64)
     lists = [t.beams if t.beams is not None else empty for t in tracks]  # a track without beams keeps its box
     idx = np.concatenate(lists).astype(np.int64, copy=False)
@@ -146,6 +150,8 @@ class Pipeline:
         self.tracker = Tracker(self.config.detect)
         self.body = BodyFilter(self.config.detect.footprint)
         self._moving: list[Track] = []  # tracks in M after the previous scan
+        #: :func:`_box_rows` of ``_moving``, kept by :func:`_observed_rows` before it grew the boxes
+        self._moving_rows: tuple[np.ndarray, np.ndarray] = _NO_ROWS
         self._last_stamp: float | None = None
         # loop closure behind the front end (slam/loops.py); it never changes the front end's poses or map
         self.loops = LoopCloser(self.config.loop, self.config.slam) if self.config.loop.enabled else None
@@ -229,7 +235,7 @@ class Pipeline:
         match_scan = scan
         if self._moving and self.config.filter.mode != "none":
             dt = scan.stamp - self._last_stamp if self._last_stamp is not None else 0.0
-            pre_removed, _ = self._exclude(scan, self.slam.predict(scan.stamp), _box_rows(self._moving), dt)
+            pre_removed, _ = self._exclude(scan, self.slam.predict(scan.stamp), self._moving_rows, dt)
             if pre_removed.any():
                 match_scan = scan.without(pre_removed)
         res = self.slam.match(match_scan)
@@ -245,7 +251,8 @@ class Pipeline:
             # an untrusted pose makes structure look like motion: only movers removed before stay removed
             known = {t.id for t in self._moving}
             moving = [t for t in moving if t.id in known]
-        rows = _observed_rows(moving, scan, res.pose) if moving else _NO_ROWS
+        kept_rows: list[tuple[np.ndarray, np.ndarray]] = []
+        rows = _observed_rows(moving, scan, res.pose, kept_rows) if moving else _NO_ROWS
         removed, removed_by = self._exclude(scan, res.pose, rows, 0.0)
         if self.config.filter.mode == "box" and self.config.filter.spare_structure and removed.any():
             self._spare_structure(scan, res.pose, moving, removed, removed_by)
@@ -284,6 +291,7 @@ class Pipeline:
                            res.score, kept)
         t5 = time.perf_counter()
         self._moving = moving
+        self._moving_rows = kept_rows[0] if kept_rows else _NO_ROWS
         self._last_stamp = scan.stamp
         return StepResult(
             index=self.slam.n_scans - 1,
@@ -742,6 +750,11 @@ def _release_map(pipe: Pipeline, front: _MapExport) -> None:
 
 
 ProgressFn = Callable[[int, StepResult], None]
+#: One scan's scalars in :func:`run`: stamp (s), laser pose (x, y m; θ rad), score, flags (map_updated, rejected,
+#: skipped) and pose confidence (:attr:`RunResult.confidence`).
+_SCAN_RECORD = np.dtype([("stamp", np.float64), ("pose", np.float64, (3,)), ("score", np.float64),
+                         ("flags", np.bool_, (3,)), ("low_support", np.bool_), ("degenerate", np.bool_),
+                         ("lost", np.bool_), ("degeneracy", np.float64)])
 #: :func:`run` returns the allocator's free heap memory to the OS every this many scans (memtrim.py).
 TRIM_EVERY_SCANS = 1000
 
@@ -773,46 +786,45 @@ def run(
     pipe = Pipeline(config)
     source = apply_range_scale(source, pipe.config.laser, pipe.config.slam)
     # Per-scan records in compact growable arrays (dynslam2d.records): a few hundred bytes
-    # per scan instead of Python objects, so long logs do not exhaust memory.
-    stamps = GrowArray(np.float64)
-    poses = GrowArray(np.float64, (3,))
-    scores = GrowArray(np.float64)
-    flags = GrowArray(np.bool_, (3,))
+    # per scan instead of Python objects, so long logs do not exhaust memory. A scan's scalars go in one
+    # structured row (one array write per scan), its live tracks in one TrackRows.extend.
+    per_scan = GrowArray(_SCAN_RECORD)
     removed_rows = BitRows()
     track_rows = TrackRows()
     timings: dict[str, GrowArray] = {}
-    conf = {"low_support": GrowArray(np.bool_), "degenerate": GrowArray(np.bool_), "lost": GrowArray(np.bool_),
-            "degeneracy": GrowArray(np.float64)}
     t0 = time.perf_counter()
     compile0 = compile_seconds()
     last_scan: Scan | None = None
+    n_done = 0
     for scan in source:
         step = pipe.process(scan)
-        conf["low_support"].append(step.low_support)
-        conf["degenerate"].append(step.degenerate)
-        conf["lost"].append(step.slam_state == "lost")
-        conf["degeneracy"].append(step.degeneracy)
         last_scan = scan
-        stamps.append(step.stamp)
-        poses.append((step.pose.x, step.pose.y, step.pose.theta))
-        scores.append(step.score)
-        flags.append((step.map_updated, step.rejected, step.skipped))
+        pose = step.pose
+        per_scan.append((step.stamp, (pose.x, pose.y, pose.theta), step.score,
+                         (step.map_updated, step.rejected, step.skipped), step.low_support, step.degenerate,
+                         step.slam_state == "lost", step.degeneracy))
+        n_done += 1
         removed_rows.append(step.removed)
-        for t in step.tracks:
-            b = t.box
-            track_rows.append((step.stamp, t.id, t.state, b.px, b.py, b.theta, b.length, b.width,
-                               float(t.velocity[0]), float(t.velocity[1]), bool(t.in_m)), remembered=t.remembered)
+        if step.tracks:
+            stamp = step.stamp
+            track_rows.extend([(stamp, t.id, t.state, t.box.px, t.box.py, t.box.theta, t.box.length, t.box.width,
+                                float(t.velocity[0]), float(t.velocity[1]), t.in_m) for t in step.tracks],
+                              [t.remembered for t in step.tracks])
         for k, v in step.timings.items():
-            timings.setdefault(k, GrowArray(np.float64)).append(v)
+            arr = timings.get(k)
+            if arr is None:
+                arr = timings[k] = GrowArray(np.float64)
+            arr.append(v)
         for obs in observers:
             obs.on_scan(scan, step, pipe)
         if progress is not None:
-            progress(len(stamps), step)
-        if len(stamps) % TRIM_EVERY_SCANS == 0:
+            progress(n_done, step)
+        if n_done % TRIM_EVERY_SCANS == 0:
             release_free_memory()  # a long log's freed temporaries back to the OS (memtrim.py; ~ms per call)
     compile_s = compile_seconds() - compile0
     release_free_memory()  # the loop's freed temporaries, before the observers' end-of-run work (memtrim.py)
-    flag_arr = flags.view().copy()
+    rec = per_scan.view()
+    flag_arr = rec["flags"].copy()
     summary = pipe.slam.summary()
     memory_bytes = pipe.slam.memory_bytes
     _release_unexported(pipe.slam.map)  # the export below reads only the finest level's log-odds and indices
@@ -821,7 +833,7 @@ def run(
     # the front end's map is in ``front`` now: free its levels before the loop closure's final optimisation and
     # re-render build theirs (issue 13 item 3; observers' on_finish get the pipeline without its map arrays)
     _release_map(pipe, front)
-    trajectory = Trajectory(stamps.view().copy(), poses.view().copy())
+    trajectory = Trajectory(rec["stamp"].copy(), rec["pose"].copy())
     frontend_trajectory = None
     grid: GridMap | None = None  # the written map; the front end's unless a render replaces it
     loop = pipe.loops.finish() if pipe.loops is not None else None
@@ -851,7 +863,7 @@ def run(
         source=source.meta,
         config=pipe.config,
         trajectory=trajectory,
-        scores=scores.view().copy(),
+        scores=rec["score"].copy(),
         map_updated=flag_arr[:, 0],
         rejected=flag_arr[:, 1],
         skipped=flag_arr[:, 2],
@@ -864,7 +876,7 @@ def run(
         reasons=dict(summary.get("reasons", {})),  # type: ignore[arg-type]
         memory_bytes=memory_bytes,
         tracker_stats=pipe.tracker.stats.as_dict(),
-        confidence={k: v.view().copy() for k, v in conf.items()},
+        confidence={k: rec[k].copy() for k in ("low_support", "degenerate", "lost", "degeneracy")},
         slam_stats={"lost_events": pipe.slam.lost_events, "relocalisations": pipe.slam.relocalisations},
         body=pipe.body.report(last_scan),
         frontend_trajectory=frontend_trajectory,

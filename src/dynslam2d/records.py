@@ -168,6 +168,16 @@ class TrackRows(Sequence[tuple]):
         self._rows.append((stamp, tid, self._code(str(state)), x, y, th, ln, wd, vx, vy, bool(in_m),
                            bool(remembered)))
 
+    def extend(self, rows: Sequence[Sequence[object]], remembered: Sequence[bool]) -> None:
+        """:meth:`append` of every row of ``rows`` (with its ``remembered`` flag) in one array write: the same
+        stored values (one scan's live tracks at once in :func:`dynslam2d.pipeline.run`)."""
+        if not rows:
+            return
+        code = self._code
+        recs = [(stamp, tid, code(str(state)), x, y, th, ln, wd, vx, vy, bool(in_m), bool(rem))
+                for (stamp, tid, state, x, y, th, ln, wd, vx, vy, in_m), rem in zip(rows, remembered, strict=True)]
+        self._rows.extend(np.array(recs, dtype=_TRACK_DTYPE))
+
     def __len__(self) -> int:
         return len(self._rows)
 

@@ -386,6 +386,7 @@ def read_bag_odometry(
     imu: str = "auto",
     laser_offset: Pose2D | None = None,
     dead_reckoning: DeadReckoning | None = None,
+    topics: dict[str, str] | None = None,
 ) -> OdometryInput:
     """Odometry, laser mount and IMU of a bag, as chosen by ``odom`` / ``imu``.
 
@@ -398,6 +399,9 @@ def read_bag_odometry(
         imu: "auto" (the bag's sensor_msgs/Imu topic, /imu/data preferred), "none", or a topic.
         laser_offset: base → laser transform to use instead of TF (m, rad).
         dead_reckoning: parameters of the wheel-speed model.
+        topics: the bag's topics and their types (:func:`~dynslam2d.io.rosbag.list_topics`) when the caller
+            has them already (a :class:`~dynslam2d.io.rosbag.RosbagSource`'s ``meta.extra["topics"]``): the bag
+            is then opened once here instead of twice.
 
     Raises:
         DynSlamError: an explicitly named topic that is missing or of the wrong type; TF
@@ -406,7 +410,7 @@ def read_bag_odometry(
             become warnings in the result and the next source (or none) is used.
     """
     p = Path(path)
-    topics = list_topics(p)
+    topics = list_topics(p) if topics is None else topics
     plan = _plan(p, topics, odom, imu)
     out = OdometryInput(explicit=plan.explicit_odom, explicit_imu=plan.explicit_imu)
     out.warnings.extend(plan.notes or [])

@@ -168,10 +168,14 @@ def attach_odometry(inner: ScanSource, fmt: str, *, odom: str = "auto", imu: str
         info = carmen_odometry(inner, odom, imu, laser_offset)
     else:
         from dynslam2d.io.odombag import read_bag_odometry
+        from dynslam2d.io.rosbag import RosbagSource
 
+        # a bag source listed its topics when it opened the bag: no second opening just for them
+        known = inner.meta.extra.get("topics") if isinstance(inner, RosbagSource) else None
         try:
             info = read_bag_odometry(getattr(inner, "path", inner.meta.origin), inner.meta.frame_id,
-                                     odom=odom, imu=imu, laser_offset=laser_offset)
+                                     odom=odom, imu=imu, laser_offset=laser_offset,
+                                     topics=dict(known) if isinstance(known, dict) else None)
         except DynSlamError as err:
             if odom not in ODOM_MODES or imu not in ODOM_MODES:
                 raise
