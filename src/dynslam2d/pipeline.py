@@ -806,10 +806,11 @@ def run(
         n_done += 1
         removed_rows.append(step.removed)
         if step.tracks:
-            stamp = step.stamp
-            track_rows.extend([(stamp, t.id, t.state, t.box.px, t.box.py, t.box.theta, t.box.length, t.box.width,
-                                float(t.velocity[0]), float(t.velocity[1]), t.in_m) for t in step.tracks],
-                              [t.remembered for t in step.tracks])
+            stamp, code, codes = step.stamp, track_rows.code, track_rows.state_codes
+            track_rows.extend_records([
+                (stamp, t.id, codes[t.state] if t.state in codes else code(t.state), b.px, b.py, b.theta, b.length,
+                 b.width, float(vel[0]), float(vel[1]), bool(t.in_m), bool(t.remembered))
+                for t in step.tracks for b, vel in ((t.box, t.velocity),)])
         for k, v in step.timings.items():
             arr = timings.get(k)
             if arr is None:

@@ -168,15 +168,21 @@ class TrackRows(Sequence[tuple]):
         self._rows.append((stamp, tid, self._code(str(state)), x, y, th, ln, wd, vx, vy, bool(in_m),
                            bool(remembered)))
 
-    def extend(self, rows: Sequence[Sequence[object]], remembered: Sequence[bool]) -> None:
-        """:meth:`append` of every row of ``rows`` (with its ``remembered`` flag) in one array write: the same
-        stored values (one scan's live tracks at once in :func:`dynslam2d.pipeline.run`)."""
-        if not rows:
-            return
-        code = self._code
-        recs = [(stamp, tid, code(str(state)), x, y, th, ln, wd, vx, vy, bool(in_m), bool(rem))
-                for (stamp, tid, state, x, y, th, ln, wd, vx, vy, in_m), rem in zip(rows, remembered, strict=True)]
-        self._rows.extend(np.array(recs, dtype=_TRACK_DTYPE))
+    def code(self, state: object) -> int:
+        """The small integer ``state`` is stored as (a new state name gets the next code)."""
+        return self._code(str(state))
+
+    @property
+    def state_codes(self) -> dict[str, int]:
+        """State name → code of the states seen so far (read only; :meth:`code` adds new ones)."""
+        return self._state_codes
+
+    def extend_records(self, records: Sequence[tuple]) -> None:
+        """Append rows given in storage order ``(stamp, id, state code, x, y, heading, length, width, vx, vy,
+        in_M, remembered)`` (codes from :meth:`code`) in one array write: the values :meth:`append` stores (one
+        scan's live tracks at once in :func:`dynslam2d.pipeline.run`)."""
+        if records:
+            self._rows.extend(np.array(records, dtype=_TRACK_DTYPE))
 
     def __len__(self) -> int:
         return len(self._rows)
