@@ -170,7 +170,7 @@ def parts(data: Path, name: str) -> None:
     wrap(pipe, "_evidence_view", "tracker's map view (_evidence_view)")
     wrap(pipe, "_exclude", "exclusion (both calls)")
     wrap(pl, "_observed_rows", "observed boxes (_observed_rows)")
-    wrap(pl, "_box_rows", "box rows of the previous movers (_box_rows)")
+    wrap(pl, "_box_rows", "  box rows (_box_rows, inside _observed_rows)")
     wrap(pipe.slam, "update_map", "map: whole update")
     wrap(pipe.slam, "needs_map_update", "map: needs_map_update")
     # the front end's map only (the loop closer's submaps have their own): every level, its Python and ray kernel
@@ -186,7 +186,7 @@ def parts(data: Path, name: str) -> None:
             if hasattr(pipe.loops, k):
                 wrap(pipe.loops, k, tag)
     top = ("match: whole", "tracker: update", "tracker's map view (_evidence_view)", "exclusion (both calls)",
-           "observed boxes (_observed_rows)", "box rows of the previous movers (_box_rows)", "map: whole update",
+           "observed boxes (_observed_rows)", "map: whole update",
            "map: needs_map_update", "body filter", "loops: add") + tuple(
                f"ledger: {k}" for k in ("before_update", "after_update", "observe", "erase_entering"))
     rows, upd = [], []
