@@ -126,23 +126,17 @@ class _LevelRecord:
         self.materialize()
         return self._pk[3].view(np.float64)
 
-    def materialize(self, exact: bool = False) -> None:
-        """Copy the referenced rows into the pending buffer (after its rows), growing it (doubling, or to exactly
-        the rows with ``exact``)."""
+    def materialize(self) -> None:
+        """Copy the referenced rows into the pending buffer, after its rows (one copy into a buffer of exactly the
+        pending rows)."""
         refs = self._refs
         if refs is None:
             return
-        m = self._n_rows
-        n = m - self._n_ref
-        pk = self._pk
-        if exact or m > pk.shape[1]:
-            grown = np.empty((4, m if exact else max(_PENDING_MIN, 2 * m)), dtype=np.int64)
-            grown[:, :n] = pk[:, :n]
-            self._pk = pk = grown
-        for rows, a, b in refs:
-            e = n + b - a
-            pk[:, n:e] = rows[:, a:b]
-            n = e
+        n = self._n_rows - self._n_ref
+        parts = [rows[:, a:b] for rows, a, b in refs]
+        if n:
+            parts.insert(0, self._pk[:, :n])
+        self._pk = np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0].copy()
         self._refs = None
         self._n_ref = 0
 
@@ -191,6 +185,7 @@ class _LevelRecord:
     def push_rows(self, rows: np.ndarray, a: int, b: int) -> bool:
         """:meth:`push` of columns ``a:b`` of ``rows``, a (4, n) int64 array whose rows are the keys, the update
         indices before and after and the added log-odds' float64 bits (one copy instead of four)."""
+        self.materialize()
         n = self._n_rows
         m = n + b - a
         pk = self._pk
@@ -213,7 +208,7 @@ class _LevelRecord:
         n = self._n_rows
         if not n:
             return 0
-        self.materialize(exact=True)
+        self.materialize()
         nb = self.key.shape[0]
         pk = self._pk
         key = np.concatenate((self.key, pk[0, :n]))
@@ -249,7 +244,7 @@ class _LevelRecord:
 
     def shrink(self) -> None:
         """Copy the pending rows into a buffer of their size (the record keeps its rows and what they fold to)."""
-        self.materialize(exact=True)
+        self.materialize()
         n = self._n_rows
         if n < self._pk.shape[1]:
             self._pk = self._pk[:, :n].copy() if n else _EMPTY_I4
@@ -261,8 +256,10 @@ class _LevelRecord:
             return 0
         if self._n_chunks == 1 and not self.key.shape[0]:  # one update's rows: each key once
             return min(self._n_rows, self.cap)
-        self.materialize()
-        n = np.unique(np.concatenate((self.key, self._pk[0, :self._n_rows]))).shape[0]
+        keys = [self.key, self._pk[0, :self._n_rows - self._n_ref]]
+        if self._refs is not None:  # (the referenced rows' keys, without copying the rows first)
+            keys += [rows[0, a:b] for rows, a, b in self._refs]
+        n = np.unique(np.concatenate(keys)).shape[0]
         return min(n, self.cap) - int(self.key.shape[0])  # compact keeps the first ``cap`` cells
 
     @property
@@ -354,9 +351,10 @@ class EvidenceLedger:
         ``keep_beams``). Returns None when nothing is to be recorded."""
         # imported at first use: their explicit signatures compile (or load from numba's cache) on import, which
         # would put ~0.4 s and scipy.linalg on every `import dynslam2d.pipeline` (issue 13's warm start)
-        from dynslam2d.slam.ledgerkernels import beam_owners, scan_cells
-        mine: list[Track] = []  # the tracks with beams, their beams, beam counts and ids (one pass)
+        from dynslam2d.slam.ledgerkernels import beam_owners, kept_beams, scan_cells
+        mine: list[Track] = []  # the tracks with beams, their beams, where each one's end and ids (one pass)
         blist: list[np.ndarray] = []
+        end = 0
         blen = [0]
         bids: list[int] = []
         for t in tracks:
@@ -364,15 +362,17 @@ class EvidenceLedger:
             if b is not None and b.shape[0]:
                 mine.append(t)
                 blist.append(b)
-                blen.append(b.shape[0])
+                end += b.shape[0]
+                blen.append(end)
                 bids.append(t.id)
         if not mine:
             return None
         r = scan.ranges
         allb = np.concatenate(blist)
-        lens = np.cumsum(blen)
+        lens = np.array(blen, dtype=np.int64)
         # each beam's track (a later track's claim wins, as one assignment per track in order)
-        owner = beam_owners(r.shape[0], allb.astype(np.int64, copy=False), lens, np.array(bids, dtype=np.int64))
+        allb = allb.astype(np.int64, copy=False)
+        owner = beam_owners(r.shape[0], allb, lens, np.array(bids, dtype=np.int64))
         uids = np.array(sorted(set(bids)), dtype=np.int64)  # track id ↦ rank 0 … R−1
         cos_a, sin_a = scan.trig()
         c, s = math.cos(pose.theta), math.sin(pose.theta)
@@ -396,11 +396,10 @@ class EvidenceLedger:
             per_level, flat = self._level_cells_plain(pts, mine_b, own[mine_b], hmap), [None] * len(hmap.levels)
         present = set(uids[counts > 0].tolist())
         kb_all = None
-        if self.keep_beams and index >= 0:  # every track's valid beams with one gather, split per track
-            vb = valid[allb]
-            kb_all = allb[vb].astype(np.int32)
-            cs = np.concatenate(([0], np.cumsum(vb)))
-            kb_lo, kb_hi = cs[lens[:-1]].tolist(), cs[lens[1:]].tolist()
+        if self.keep_beams and index >= 0:  # every track's valid beams in one kernel call, split per track
+            kb_all, kb_b = kept_beams(valid, allb, lens)
+            kb_b = kb_b.tolist()
+            kb_lo, kb_hi = kb_b, kb_b[1:]
         for i, t in enumerate(mine):
             if t.id not in present:  # every beam of it removed
                 continue
@@ -520,7 +519,7 @@ class EvidenceLedger:
             for led in ledgers.values():
                 for rec in led.levels:
                     if rec._refs is not None and rec._ref0 <= old:
-                        rec.materialize(exact=True)
+                        rec.materialize()
         self.stats["cells_recorded"] += added
 
     def _fold(self, led: _Ledger) -> None:
