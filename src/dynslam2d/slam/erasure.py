@@ -456,9 +456,10 @@ class EvidenceLedger:
 
     def _new_ledger(self, t: Track, stamp: float, n_levels: int) -> _Ledger:
         """An empty ledger of ``t``; its first box is where the track was first reported."""
-        box, t0, _ = self._first.get(t.id, (_box_key(t), stamp, stamp))
+        here = _box_key(t)
+        box, t0, _ = self._first.get(t.id) or (here, stamp, stamp)
         cap = self.config.max_ledger_cells
-        return _Ledger(t.id, box, t0, _box_key(t), stamp, [_LevelRecord(cap) for _ in range(n_levels)])
+        return _Ledger(t.id, box, t0, here, stamp, [_LevelRecord(cap) for _ in range(n_levels)])
 
     @staticmethod
     def _read(lv, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
