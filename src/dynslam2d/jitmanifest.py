@@ -52,6 +52,8 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(int64, 1, 'C'), int64, int64,)"),
     ('dynslam2d.slam.ledgerkernels.beam_owners',
      "(int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'),)"),
+    ('dynslam2d.slam.ledgerkernels.kept_beams',
+     "(Array(bool, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'),)"),
     ('dynslam2d.slam.ledgerkernels.scan_cells',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), Array(bool, 1, 'A'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), float64, float64, float64, "

@@ -61,6 +61,8 @@ _COMPACT_ROWS = 4096
 _COMPACT_CHUNKS = 64
 #: Smallest capacity of a record's pending buffers, rows (most records of clutter tracks hold a few rows).
 _PENDING_MIN = 16
+#: A record's row references to updates' shared row blocks are copied into its buffer when this many updates old.
+_REF_MAX_AGE = 64
 _EMPTY_I = np.zeros(0, dtype=np.int64)
 _EMPTY_F = np.zeros(0)
 _EMPTY_B = np.zeros(0, dtype=bool)
@@ -88,15 +90,21 @@ def _member(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 class _LevelRecord:
     """Evidence of one track on one map level.
 
-    Rows are appended per map update (cell key, added log-odds, update index before, after) into two pending
-    buffers of the record (one (3, capacity) int64 array of key and update indices, one float64 array of the
-    log-odds; copied, so no view holds an update's arrays alive) and folded into one row per cell (added
-    log-odds summed; *pure*: the cell was unknown before the track's first hit there and each later hit found
-    the update index the track's previous hit left, i.e. nothing but this track touched it since; the last
-    update index) when they pile up and before they are read. At most ``cap`` cells are kept: rows of cells
-    first seen after ``cap`` others are dropped."""
+    Rows are appended per map update (cell key, added log-odds, update index before, after) and folded into one
+    row per cell (added log-odds summed; *pure*: the cell was unknown before the track's first hit there and each
+    later hit found the update index the track's previous hit left, i.e. nothing but this track touched it since;
+    the last update index) when they pile up and before they are read. At most ``cap`` cells are kept: rows of
+    cells first seen after ``cap`` others are dropped.
 
-    __slots__ = ("cap", "key", "delta", "pure", "last", "_pk", "_n_rows", "_n_chunks")
+    Pending rows live in two places, in order: the record's own (4, capacity) int64 buffer (key, update index
+    before, update index after, the added log-odds' float64 bits; copied, so no view holds an update's arrays
+    alive) and, after it, references ``(rows, a, b)`` to columns ``a:b`` of an update's shared (4, m) row block
+    (:meth:`EvidenceLedger.after_update` records every track of a level with one reference each instead of one copy
+    each). The references are copied into the buffer (:meth:`materialize`) before the rows are read, when the
+    track ends, and when they are older than ``_REF_MAX_AGE`` updates (so a record keeps few update blocks alive)."""
+
+    __slots__ = ("cap", "key", "delta", "pure", "last", "_pk", "_n_rows", "_n_chunks", "_refs", "_n_ref",
+                 "_ref0")
 
     def __init__(self, cap: int) -> None:
         self.cap = cap
@@ -106,16 +114,35 @@ class _LevelRecord:
         self.pure = _EMPTY_B
         self.last = _EMPTY_I
         self._pk = _EMPTY_I4  # pending rows: key, update index before, update index after, added log-odds' bits
-        self._n_rows = 0
+        self._n_rows = 0  # pending rows, in the buffer and referenced
         self._n_chunks = 0
+        self._refs: list | None = None  # (rows, a, b) of pending rows after the buffer's, in order
+        self._n_ref = 0  # rows referenced by _refs
+        self._ref0 = 0  # the ledger's update number of the first reference
 
     @property
     def _pd(self) -> np.ndarray:
         """The pending buffer's added log-odds (float64 view of its last row)."""
+        self.materialize()
         return self._pk[3].view(np.float64)
+
+    def materialize(self) -> None:
+        """Copy the referenced rows into the pending buffer, after its rows (one copy into a buffer of exactly the
+        pending rows)."""
+        refs = self._refs
+        if refs is None:
+            return
+        n = self._n_rows - self._n_ref
+        parts = [rows[:, a:b] for rows, a, b in refs]
+        if n:
+            parts.insert(0, self._pk[:, :n])
+        self._pk = np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0].copy()
+        self._refs = None
+        self._n_ref = 0
 
     def _room(self, m: int) -> np.ndarray:
         """The pending buffer, grown (doubling) to hold ``m`` rows; the buffers are let go when folded."""
+        self.materialize()
         pk = self._pk
         if m > pk.shape[1]:
             grown = np.empty((4, max(_PENDING_MIN, 2 * m)), dtype=np.int64)
@@ -123,9 +150,27 @@ class _LevelRecord:
             self._pk = pk = grown
         return pk
 
+    def refer(self, rows: np.ndarray, a: int, b: int, update: int) -> bool:
+        """Add columns ``a:b`` (a < b) of ``rows`` (a (4, n) int64 row block, as in :meth:`push_rows`, that is not
+        written afterwards) by reference; ``update`` is the ledger's update number. True when the rows should now
+        be folded (:meth:`compact`)."""
+        refs = self._refs
+        if refs is None:
+            self._refs = [(rows, a, b)]
+            self._ref0 = update
+        else:
+            refs.append((rows, a, b))
+        self._n_ref += b - a
+        m = self._n_rows + b - a
+        self._n_rows = m
+        c = self._n_chunks + 1
+        self._n_chunks = c
+        return m >= _COMPACT_ROWS or c >= _COMPACT_CHUNKS
+
     def push(self, key: np.ndarray, delta: np.ndarray, ub: np.ndarray, ua: np.ndarray) -> bool:
         """Copy the rows of one update (each key at most once, at least one row) into the pending buffer;
         True when they should now be folded (:meth:`compact`)."""
+        self.materialize()
         n = self._n_rows
         m = n + key.shape[0]
         pk = self._room(m)
@@ -140,6 +185,7 @@ class _LevelRecord:
     def push_rows(self, rows: np.ndarray, a: int, b: int) -> bool:
         """:meth:`push` of columns ``a:b`` of ``rows``, a (4, n) int64 array whose rows are the keys, the update
         indices before and after and the added log-odds' float64 bits (one copy instead of four)."""
+        self.materialize()
         n = self._n_rows
         m = n + b - a
         pk = self._pk
@@ -162,6 +208,7 @@ class _LevelRecord:
         n = self._n_rows
         if not n:
             return 0
+        self.materialize()
         nb = self.key.shape[0]
         pk = self._pk
         key = np.concatenate((self.key, pk[0, :n]))
@@ -197,6 +244,7 @@ class _LevelRecord:
 
     def shrink(self) -> None:
         """Copy the pending rows into a buffer of their size (the record keeps its rows and what they fold to)."""
+        self.materialize()
         n = self._n_rows
         if n < self._pk.shape[1]:
             self._pk = self._pk[:, :n].copy() if n else _EMPTY_I4
@@ -208,7 +256,10 @@ class _LevelRecord:
             return 0
         if self._n_chunks == 1 and not self.key.shape[0]:  # one update's rows: each key once
             return min(self._n_rows, self.cap)
-        n = np.unique(np.concatenate((self.key, self._pk[0, :self._n_rows]))).shape[0]
+        keys = [self.key, self._pk[0, :self._n_rows - self._n_ref]]
+        if self._refs is not None:  # (the referenced rows' keys, without copying the rows first)
+            keys += [rows[0, a:b] for rows, a, b in self._refs]
+        n = np.unique(np.concatenate(keys)).shape[0]
         return min(n, self.cap) - int(self.key.shape[0])  # compact keeps the first ``cap`` cells
 
     @property
@@ -280,6 +331,7 @@ class EvidenceLedger:
         self.erased_beams: list[tuple[int, np.ndarray]] = []
         self._ledgers: dict[int, _Ledger] = {}
         self._ended: dict[int, _Ledger] = {}
+        self._n_updates = 0  # after_update calls (the age of a record's row references)
         self._oldest_ended = math.inf  # the smallest last_seen among the ended ledgers, s
         #: live track id → [box where it stands, stamp it began standing there, last stamp it stood there]
         self._first: dict[int, list] = {}
@@ -299,9 +351,10 @@ class EvidenceLedger:
         ``keep_beams``). Returns None when nothing is to be recorded."""
         # imported at first use: their explicit signatures compile (or load from numba's cache) on import, which
         # would put ~0.4 s and scipy.linalg on every `import dynslam2d.pipeline` (issue 13's warm start)
-        from dynslam2d.slam.ledgerkernels import beam_owners, scan_cells
-        mine: list[Track] = []  # the tracks with beams, their beams, beam counts and ids (one pass)
+        from dynslam2d.slam.ledgerkernels import beam_owners, kept_beams, scan_cells
+        mine: list[Track] = []  # the tracks with beams, their beams, where each one's end and ids (one pass)
         blist: list[np.ndarray] = []
+        end = 0
         blen = [0]
         bids: list[int] = []
         for t in tracks:
@@ -309,15 +362,17 @@ class EvidenceLedger:
             if b is not None and b.shape[0]:
                 mine.append(t)
                 blist.append(b)
-                blen.append(b.shape[0])
+                end += b.shape[0]
+                blen.append(end)
                 bids.append(t.id)
         if not mine:
             return None
         r = scan.ranges
         allb = np.concatenate(blist)
-        lens = np.cumsum(blen)
+        lens = np.array(blen, dtype=np.int64)
         # each beam's track (a later track's claim wins, as one assignment per track in order)
-        owner = beam_owners(r.shape[0], allb.astype(np.int64, copy=False), lens, np.array(bids, dtype=np.int64))
+        allb = allb.astype(np.int64, copy=False)
+        owner = beam_owners(r.shape[0], allb, lens, np.array(bids, dtype=np.int64))
         uids = np.array(sorted(set(bids)), dtype=np.int64)  # track id ↦ rank 0 … R−1
         cos_a, sin_a = scan.trig()
         c, s = math.cos(pose.theta), math.sin(pose.theta)
@@ -341,11 +396,10 @@ class EvidenceLedger:
             per_level, flat = self._level_cells_plain(pts, mine_b, own[mine_b], hmap), [None] * len(hmap.levels)
         present = set(uids[counts > 0].tolist())
         kb_all = None
-        if self.keep_beams and index >= 0:  # every track's valid beams with one gather, split per track
-            vb = valid[allb]
-            kb_all = allb[vb].astype(np.int32)
-            cs = np.concatenate(([0], np.cumsum(vb)))
-            kb_lo, kb_hi = cs[lens[:-1]].tolist(), cs[lens[1:]].tolist()
+        if self.keep_beams and index >= 0:  # every track's valid beams in one kernel call, split per track
+            kb_all, kb_b = kept_beams(valid, allb, lens)
+            kb_b = kb_b.tolist()
+            kb_lo, kb_hi = kb_b, kb_b[1:]
         for i, t in enumerate(mine):
             if t.id not in present:  # every beam of it removed
                 continue
@@ -402,9 +456,10 @@ class EvidenceLedger:
 
     def _new_ledger(self, t: Track, stamp: float, n_levels: int) -> _Ledger:
         """An empty ledger of ``t``; its first box is where the track was first reported."""
-        box, t0, _ = self._first.get(t.id, (_box_key(t), stamp, stamp))
+        here = _box_key(t)
+        box, t0, _ = self._first.get(t.id) or (here, stamp, stamp)
         cap = self.config.max_ledger_cells
-        return _Ledger(t.id, box, t0, _box_key(t), stamp, [_LevelRecord(cap) for _ in range(n_levels)])
+        return _Ledger(t.id, box, t0, here, stamp, [_LevelRecord(cap) for _ in range(n_levels)])
 
     @staticmethod
     def _read(lv, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -429,6 +484,7 @@ class EvidenceLedger:
         from dynslam2d.slam.ledgerkernels import read_cells, update_rows  # at first use (see before_update)
         ledgers = self._ledgers
         added = 0
+        self._n_updates = upd = self._n_updates + 1
         for k, (ids, keys, cells, before, ui_before) in enumerate(pending.per_level):
             if ids.shape[0] == 0:
                 continue
@@ -437,26 +493,34 @@ class EvidenceLedger:
             if f is None or f[1] != lv.i0 or f[2] != lv.j0 or f[3] != lv.shape:  # (the level grew: read anew)
                 f = read_cells(lv.logodds, lv.uidx, cells, lv.i0, lv.j0)[2:3]
             # one block of rows (cell keys, update index before / after, log-odds' bits) of the updated cells;
-            # each record copies its track's slice of it
+            # each record refers to its track's slice of it
             rows, tids, starts = update_rows(lv.logodds, lv.uidx, f[0], ids, keys, before, ui_before)
             st = starts.tolist()
-            # _LevelRecord.push_rows inlined (≈ 25 tracks × 3 levels per update: the call and attribute
-            # lookups were most of the loop); the same copy of each track's slice into its record's buffer
+            # each track's record refers to its slice of the block (_LevelRecord.refer inlined: ≈ 25 tracks × 3
+            # levels per update, where a copy into each record's buffer and its growth were most of the loop)
             for tid, a, b in zip(tids.tolist(), st, st[1:]):
                 led = ledgers.get(tid)
                 if led is not None:  # (every group holds rows)
                     rec = led.levels[k]
-                    n = rec._n_rows
-                    m = n + b - a
-                    pk = rec._pk
-                    if m > pk.shape[1]:
-                        pk = rec._room(m)
-                    pk[:, n:m] = rows[:, a:b]
+                    refs = rec._refs
+                    if refs is None:
+                        rec._refs = [(rows, a, b)]
+                        rec._ref0 = upd
+                    else:
+                        refs.append((rows, a, b))
+                    rec._n_ref += b - a
+                    m = rec._n_rows + b - a
                     rec._n_rows = m
                     c = rec._n_chunks + 1
                     rec._n_chunks = c
                     if m >= _COMPACT_ROWS or c >= _COMPACT_CHUNKS:
                         added += rec.compact()
+        if upd % _REF_MAX_AGE == 0:  # copy old references into their records' buffers (few blocks stay alive)
+            old = upd - _REF_MAX_AGE
+            for led in ledgers.values():
+                for rec in led.levels:
+                    if rec._refs is not None and rec._ref0 <= old:
+                        rec.materialize()
         self.stats["cells_recorded"] += added
 
     def _fold(self, led: _Ledger) -> None:

@@ -7,6 +7,7 @@ rows after it) instead of about a hundred small numpy calls. They compute exactl
 replace computed (``tests/test_ledger_kernels.py`` checks them against it on random inputs):
 
 * :func:`beam_owners`: each beam's owner track (the last track listing it), from all tracks' beams in one array;
+* :func:`kept_beams`: each track's kept beams (loop closure's record of what an erasure takes out);
 * :func:`scan_cells`: the kept beams (valid, inside the laser's ranges, not removed), their map-frame points
   and owner tracks, and every point's (level, owner, cell) as one int64;
 * :func:`unpack_cells`: from the sorted packed values, each distinct (level, owner > 0, cell) that no owner-0
@@ -65,6 +66,31 @@ def beam_owners(n, beams, ends, ids):  # pragma: no cover - numba
                 raise IndexError("beam index out of the scan")
             owner[b] = tid
     return owner
+
+
+@njit("Tuple((int32[::1], int64[::1]))(boolean[::1], int64[::1], int64[::1])", cache=True)
+def kept_beams(valid, beams, ends):  # pragma: no cover - numba
+    """(the beams ``b`` of ``beams`` with ``valid[b]``, as int32, in order; bounds (T + 1,) of each track's
+    part of them) for tracks listing ``beams[ends[t]:ends[t + 1]]`` (``ends`` (T + 1,), from 0): numpy's
+    ``beams[valid[beams]].astype(np.int32)`` and the cumulative counts of kept beams at ``ends``, negative beams
+    counting from the end as numpy's indices do."""
+    n = valid.shape[0]
+    n_tr = ends.shape[0] - 1
+    kb = np.empty(ends[n_tr], dtype=np.int32)
+    bounds = np.empty(n_tr + 1, dtype=np.int64)
+    j = 0
+    for t in range(n_tr):
+        bounds[t] = j
+        for e in range(ends[t], ends[t + 1]):
+            b = beams[e]
+            i = b + n if b < 0 else b
+            if i < 0 or i >= n:
+                raise IndexError("beam index out of the scan")
+            if valid[i]:
+                kb[j] = b
+                j += 1
+    bounds[n_tr] = j
+    return kb[:j], bounds
 
 
 _I1 = types.int64[::1]
