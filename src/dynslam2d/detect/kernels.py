@@ -47,7 +47,9 @@ from dynslam2d.detect.layout import (
     SIZE_LOWER,
     SIZE_MEASURED,
 )
+from dynslam2d.detect.mapevidence import map_evidence_kernel
 from dynslam2d.detect.shapes import circle_center_fixed_radius
+from dynslam2d.detect.vehicles import _admit_long
 
 # indices into the fit-parameter array
 _P_POINT_MAX_POINTS = 0
@@ -491,6 +493,79 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
         lohi[c, L_HI1] = hi0
         lohi[c, L_HI2] = hi1
     return keep, kind, lohi, rel
+
+
+@njit(cache=True)
+def classify_select(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: np.ndarray, fits: np.ndarray,
+                    structure: np.ndarray, sx: float, sy: float, ranges: np.ndarray, valid: np.ndarray,
+                    ax: np.ndarray, ay: np.ndarray, wrapped: bool, max_skip: int, range_max: float, dphi: float,
+                    extent: float, p: np.ndarray, admit: bool, max_extent: float, max_structure: float,
+                    min_free: float, has_map: bool, logodds: np.ndarray, i0: int, j0: int, res: float,
+                    occ_thr: float, free_thr: float, free_radius: int) -> tuple:
+    """The detections of a scan's clusters in one call: :func:`classify_batch` (arguments up to ``p``, its
+    ``max_extent`` here ``extent``), then where ``admit`` the vehicle-size clusters' map test
+    (:func:`~dynslam2d.detect.vehicles._admit_long` with ``max_extent``, ``max_structure``, ``min_free``), then the
+    kept clusters' rows and, where ``has_map``, their points' map evidence
+    (:func:`~dynslam2d.detect.mapevidence.map_evidence_kernel` on ``logodds`` / ``i0`` / ``j0`` / ``res`` with the
+    thresholds; map frame, m) as per-detection fractions (:func:`mask_fractions`).
+
+    Returns ``(starts, npts, kinds, lohi, rel, fits, fractions)``: the kept clusters' first point index into
+    ``px`` / ``py`` and point counts (int64), their kind codes, bounds, real-bound flags and fit rows (copies of the
+    kept rows of :func:`classify_batch`'s results and of ``fits``), and (3, nd) fractions of their points on
+    structure, free and unknown (zeros (3, 0) without a map)."""
+    keep, kinds, lohi, rel = classify_batch(px, py, beams, offsets, fits, structure, sx, sy, ranges, valid, ax, ay,
+                                            wrapped, max_skip, range_max, dphi, extent, p)
+    if admit:
+        _admit_long(keep, fits, offsets, px, py, max_extent, has_map, logodds, i0, j0, res, occ_thr, free_thr,
+                    free_radius, max_structure, min_free)
+    k = keep.shape[0]
+    nd = 0
+    for c in range(k):
+        if keep[c]:
+            nd += 1
+    idx = np.empty(nd, dtype=np.int64)
+    q = 0
+    for c in range(k):
+        if keep[c]:
+            idx[q] = c
+            q += 1
+    starts = np.empty(nd, dtype=np.int64)
+    npts = np.empty(nd, dtype=np.int64)
+    s_kinds = np.empty(nd, dtype=kinds.dtype)
+    s_lohi = np.empty((nd, lohi.shape[1]))
+    s_rel = np.empty((nd, rel.shape[1], rel.shape[2]), dtype=np.bool_)
+    s_fits = np.empty((nd, fits.shape[1]))
+    total = 0
+    for q in range(nd):
+        c = idx[q]
+        starts[q] = offsets[c]
+        npts[q] = offsets[c + 1] - offsets[c]
+        total += npts[q]
+        s_kinds[q] = kinds[c]
+        for a in range(lohi.shape[1]):
+            s_lohi[q, a] = lohi[c, a]
+        for a in range(rel.shape[1]):
+            for b in range(rel.shape[2]):
+                s_rel[q, a, b] = rel[c, a, b]
+        for a in range(fits.shape[1]):
+            s_fits[q, a] = fits[c, a]
+    if not has_map:
+        return starts, npts, s_kinds, s_lohi, s_rel, s_fits, np.zeros((3, 0))
+    det_px = np.empty(total)
+    det_py = np.empty(total)
+    det_off = np.empty(nd + 1, dtype=np.int64)
+    det_off[0] = 0
+    o = 0
+    for q in range(nd):
+        a = starts[q]
+        for i in range(a, a + npts[q]):
+            det_px[o] = px[i]
+            det_py[o] = py[i]
+            o += 1
+        det_off[q + 1] = o
+    ev = np.zeros((3, total), dtype=np.bool_)
+    map_evidence_kernel(det_px, det_py, logodds, i0, j0, res, occ_thr, free_thr, free_radius, ev[0], ev[1], ev[2])
+    return starts, npts, s_kinds, s_lohi, s_rel, s_fits, mask_fractions(ev, det_off)
 
 
 @njit(cache=True)
@@ -1013,6 +1088,26 @@ def size_jump_gate(ok: np.ndarray, lohi: np.ndarray, tmax: np.ndarray, known: np
 
 
 @njit(cache=True)
+def associate_gate(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, missed: np.ndarray, Xs: np.ndarray,
+                   Ps: np.ndarray, Z: np.ndarray, R: np.ndarray, gate_distance: float, gate_chi2: float,
+                   kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray,
+                   circle: np.ndarray, px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray,
+                   p: np.ndarray, ratio: float, jump: float) -> tuple:
+    """The association's gate in one call: :func:`association_rows` of the live tracks' shape rows ``rows``
+    (``missed``: their last scan had no update), :func:`gate_costs` with reach half the tracks' longest side, then
+    :func:`size_jump_gate` (``ratio``, ``jump``). Returns ``(d2, ok, det_ext, tsize)``: the costs, the pairs within
+    the gates, the detections' longer extents and the tracks' sizes (m)."""
+    tsize, tmax, rect, theta_box, known = association_rows(G, Gi, rows, missed)
+    reach = np.empty(tmax.shape[0])
+    for i in range(tmax.shape[0]):
+        reach[i] = 0.5 * tmax[i]
+    d2, _near, ok = gate_costs(Xs, Ps, reach, rect, theta_box, tsize, Z, R, gate_distance, gate_chi2, kind, theta,
+                               lohi, rel, centroid, circle, px, py, start, npts, p)
+    ok, det_ext = size_jump_gate(ok, lohi, tmax, known, ratio, jump)
+    return d2, ok, det_ext, tsize
+
+
+@njit(cache=True)
 def accel_candidates(X_prior: np.ndarray, X_new: np.ndarray, lim2: float) -> np.ndarray:
     """Rows r whose velocity change from ``X_prior`` to ``X_new`` ((r, 4) states [x, y, vx, vy], m/s) has a squared
     norm above ``lim2`` ((m/s)²): the only rows the acceleration bound of ``Tracker._bound_acceleration`` tests
@@ -1027,6 +1122,36 @@ def accel_candidates(X_prior: np.ndarray, X_new: np.ndarray, lim2: float) -> np.
             out[m] = r
             m += 1
     return out[:m]
+
+
+@njit(cache=True)
+def pair_updates(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, rows: np.ndarray, det: np.ndarray,
+                 kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray,
+                 circle: np.ndarray, px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray,
+                 p: np.ndarray, size_sigma: float) -> tuple:
+    """The Kalman updates of associated (track row ``rows[r]``, detection ``det[r]``) pairs in one call:
+    :func:`pair_priors` (the tracks' sizes / radius along the detections' axes), :func:`measure_batch` of the
+    detections with those priors and ``size_sigma`` (m) on every row, and :func:`kalman_update_batch` of the rows'
+    states and covariances (gathered from ``X`` / ``P``, which are not written). The detection arrays are
+    :class:`~dynslam2d.detect.layout.DetectionBatch`'s fields, ``p`` :func:`fit_params`.
+
+    Returns ``(X_prior (r, 4), X_new (r, 4), P_new (r, 4, 4), ok (r,), swap (r,), size_obs (r, 2), size_kind (r, 2))``:
+    the states before the update, the results of :func:`kalman_update_batch` and the measurements' sizes and kinds
+    with :func:`pair_priors`' swaps (what :func:`shape_update` reads)."""
+    n = rows.shape[0]
+    X_prior = np.empty((n, 4))
+    P_prior = np.empty((n, 4, 4))
+    for r in range(n):
+        k = rows[r]
+        for a in range(4):
+            X_prior[r, a] = X[k, a]
+            for b in range(4):
+                P_prior[r, a, b] = P[k, a, b]
+    swap, sizes, has, radius = pair_priors(G, Gi, rows, det, kind, theta)
+    _z, _R, H, zm, Rm, size_obs, size_kind = measure_batch(det, kind, theta, lohi, rel, centroid, circle, px, py,
+                                                           start, npts, sizes, has, radius, np.full(n, size_sigma), p)
+    Xn, Pn, ok = kalman_update_batch(X_prior, P_prior, H, zm, Rm)
+    return X_prior, Xn, Pn, ok, swap, size_obs, size_kind
 
 
 # ------------------------------------------------------------------ the tracker's per-track shape state (rows)
@@ -1083,10 +1208,11 @@ def _py_max(a: float, b: float) -> float:
 
 
 @njit(cache=True)
-def shape_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray, det: np.ndarray,
-                 applied: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray,
-                 circle: np.ndarray, size_obs: np.ndarray, size_kind: np.ndarray, swap: np.ndarray,
-                 default_depth: float, default_depth_ratio: float, heading_gain: float, size_gain: float) -> None:
+def shape_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xn: np.ndarray, Pn: np.ndarray,
+                 rows: np.ndarray, det: np.ndarray, applied: np.ndarray, kind: np.ndarray, theta: np.ndarray,
+                 lohi: np.ndarray, rel: np.ndarray, circle: np.ndarray, size_obs: np.ndarray, size_kind: np.ndarray,
+                 swap: np.ndarray, default_depth: float, default_depth_ratio: float, heading_gain: float,
+                 size_gain: float) -> None:
     """The shape update of the tracks of associated pairs (track row ``rows[r]``, detection ``det[r]``, where
     ``applied[r]``), in place on their rows of ``G`` / ``Gi`` (columns above) and, for a box grown past a partial
     view, of the states ``X`` (rows [x, y, vx, vy], m): a rectangle sets or smooths the heading (90° ambiguity;
@@ -1095,7 +1221,17 @@ def shape_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray,
     box away from its one real bound, its centre moving with it); a circle smooths the radius; a point detection of
     a point track takes its extent (at least 0.05 m). The kind becomes the detection's. ``size_obs`` / ``size_kind``
     / ``swap``: the measurement's per-axis sizes and kinds (``measure_batch``) and :func:`pair_priors`' swaps; the
-    arithmetic, in order, of ``Tracker._update_tracks`` before the per-track arrays (docs/tracking.md, item 2)."""
+    arithmetic, in order, of ``Tracker._update_tracks`` before the per-track arrays (docs/tracking.md, item 2).
+
+    First the Kalman results: row r of the new states ``Xn`` (r, 4) and covariances ``Pn`` (r, 4, 4) is copied into
+    row ``rows[r]`` of ``X`` / ``P`` where ``applied[r]`` (the rows are distinct: one per track)."""
+    for r in range(rows.shape[0]):
+        if applied[r]:
+            k = rows[r]
+            for a in range(4):
+                X[k, a] = Xn[r, a]
+                for b in range(4):
+                    P[k, a, b] = Pn[r, a, b]
     for r in range(rows.shape[0]):
         if not applied[r]:
             continue

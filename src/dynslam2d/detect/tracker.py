@@ -67,22 +67,18 @@ from dynslam2d.detect.kernels import (
     N_G,
     N_GI,
     accel_candidates,
-    association_rows,
-    classify_batch,
+    associate_gate,
+    classify_select,
     cv_predict,
     fit_params,
     fragment_hosts,
-    gate_costs,
-    kalman_update_batch,
     leg_pairs,
     manage_rows,
-    mask_fractions,
     measure_batch,
     merge_leg_pairs,
-    pair_priors,
+    pair_updates,
     report_boxes,
     shape_update,
-    size_jump_gate,
     world_points,
 )
 from dynslam2d.detect.layout import (
@@ -99,11 +95,11 @@ from dynslam2d.detect.layout import (
     MeasureRows,
 )
 from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
-from dynslam2d.detect.mapevidence import MapView, map_evidence_kernel
+from dynslam2d.detect.mapevidence import MapView
 from dynslam2d.detect.measure import Detection, ScanDetection
 from dynslam2d.detect.segment import Segmentation, segment_scan
 from dynslam2d.detect.shapes import CRITERIA, fit_clusters, search_angles
-from dynslam2d.detect.vehicles import admit_long_clusters, extent_limit
+from dynslam2d.detect.vehicles import _NO_MAP, extent_limit
 from dynslam2d.types import Box, Pose2D, Scan, Track, wrap_angle
 
 TENTATIVE = "tentative"
@@ -679,54 +675,38 @@ class Tracker:
         offsets = seg.offsets
         fits = fit_clusters(px, py, offsets, ~seg.structure, self._angles, CRITERIA[cfg.fit.criterion],
                             cfg.fit.closeness_d0, cfg.fit.circle_min_points, cfg.fit.coarse_stride)
-        # classify and bound every cluster in one pass (reference.classify_and_bound)
-        keep, kinds, lohi, rel = classify_batch(px, py, beams, offsets, fits, seg.structure, float(pose.x),
-                                                float(pose.y), ranges, valid, ax, ay, seg.wrapped,
-                                                int(cfg.segment.max_skip_beams), float(scan.range_max),
-                                                abs(float(scan.angle_increment)), extent_limit(cfg), self._fit_p)
-        if cfg.segment.vehicle_max_extent > cfg.segment.max_extent:  # vehicle-size clusters (detect/vehicles.py)
-            admit_long_clusters(keep, fits, offsets, px, py, self._map, cfg)
-        idx = np.flatnonzero(keep)
-        st.structure_clusters += seg.n_clusters - idx.shape[0]
+        # classify and bound every cluster (reference.classify_and_bound), the vehicle-size clusters' map test
+        # (detect/vehicles.py), the kept clusters' rows and their points' map evidence in one call. The map test is
+        # per point, so only the detections' points are tested (structure clusters, most of the points, are not
+        # detections)
+        view = self._map
+        sc, tc = cfg.segment, cfg.tracker
+        if view is None:
+            lo, i0, j0, res = _NO_MAP, 0, 0, 1.0
+        else:
+            lo, i0, j0, res = view.logodds, int(view.i0), int(view.j0), float(view.resolution)
+        starts, npts, kinds, lohi, rel, fits, mfr = classify_select(
+            px, py, beams, offsets, fits, seg.structure, float(pose.x), float(pose.y), ranges, valid, ax, ay,
+            seg.wrapped, int(sc.max_skip_beams), float(scan.range_max), abs(float(scan.angle_increment)),
+            extent_limit(cfg), self._fit_p, sc.vehicle_max_extent > sc.max_extent, float(sc.max_extent),
+            float(sc.vehicle_max_structure), float(sc.vehicle_min_free), view is not None, lo, i0, j0, res,
+            float(tc.map_occupied_logodds), float(tc.map_free_logodds), int(tc.map_free_radius))
+        nd = starts.shape[0]
+        st.structure_clusters += seg.n_clusters - nd
         dets: list[Detection] = []
-        nd = idx.shape[0]
-        if nd < seg.n_clusters:
-            starts = offsets[idx]
-            npts = offsets[idx + 1] - starts
-            kinds = kinds[idx]
-            lohi = lohi[idx]
-            rel = rel[idx]
-            fits = fits[idx]
-        else:  # (every cluster is a detection: the arrays as they are, no copies)
-            starts = offsets[:-1]
-            npts = offsets[1:] - starts
-        # free-space and map evidence per detection (0 where unknown), then the detections in one pass. The map test
-        # is per point, so only the detections' points are tested (structure clusters, most of the points, are not
-        # detections). The free-space fraction is read for few detections (births, updates whose entry is read:
-        # Tracker._free_values): each detection keeps this scan's test (the memory's references now, before it
-        # gains this scan) and computes its fraction when first read (ScanDetection.free_fraction)
+        # free-space evidence per detection (0 where unknown). The free-space fraction is read for few detections
+        # (births, updates whose entry is read: Tracker._free_values): each detection keeps this scan's test (the
+        # memory's references now, before it gains this scan) and computes its fraction when first read
+        # (ScanDetection.free_fraction)
         frac = fs = ff = fu = [0.0] * nd
-        free, view = self._free, self._map
+        free = self._free
         if free is not None:
             self._cur_ref = free.make_ref(scan, pose, valid)
             if nd and (test := free.test_at(float(scan.stamp))) is not None:
                 frac = [test] * nd
             free.add(scan, pose, valid, self._cur_ref)
         if view is not None:
-            if nd < seg.n_clusters:
-                sel = np.repeat(keep.astype(bool, copy=False), offsets[1:] - offsets[:-1])
-                det_px, det_py = px[sel], py[sel]
-                det_off = np.zeros(nd + 1, dtype=np.int64)
-                np.cumsum(npts, out=det_off[1:])
-            else:
-                det_px, det_py, det_off = px, py, offsets
-            # per-point flags, one row each: on structure, free, unknown in the map
-            ev = np.zeros((3, det_px.shape[0]), dtype=bool)
-            tc = cfg.tracker
-            map_evidence_kernel(det_px, det_py, view.logodds, int(view.i0), int(view.j0), float(view.resolution),
-                                float(tc.map_occupied_logodds), float(tc.map_free_logodds),
-                                int(tc.map_free_radius), ev[0], ev[1], ev[2])
-            fs, ff, fu = mask_fractions(ev, det_off).tolist()
+            fs, ff, fu = mfr.tolist()
         # (their centroid, bounds, flags and circle stay rows of fits / lohi / rel until read: ScanDetection)
         for j, (a0, n, kd, th, fr_j, fs_j, ff_j, fu_j) in enumerate(zip(
                 starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(), frac, fs, ff, fu)):
@@ -810,21 +790,17 @@ class Tracker:
         for i, k in enumerate(tracks):  # (the state and misses: Python attributes)
             (firm_r if k.state != TENTATIVE else tent_r).append(i)
             missed.append(k.misses > 0)
-        # the tracks' sizes, flags and axis angles from their shape rows in one call ("known": a coasting track's size
-        # is known if all(size_known) or it is not a rectangle)
-        tsize, tmax, rect, theta, known = association_rows(self._G, self._Gi, self._rows(), np.array(missed))
-        reach = 0.5 * tmax
-        # Mahalanobis gate and distance gate; a rectangle is measured again with the track's own sizes
-        # (a side the detection "measured" too short, e.g. a grazing side, must not break the association)
-        d2, near, ok = gate_costs(Xs, Ps, reach, rect, theta, tsize,
-                                  self._default.z, self._default.R, float(tc.gate_distance), float(tc.gate_chi2),
-                                  *self._batch, self._fit_p)
-        # a tracked object does not double its size from one scan to the next: a person track coasting
-        # past a wall must not take the wall's cluster (it would carry M onto the wall)
-        # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
-        # later, a tracked object may touch another for a scan)
-        ok, det_ext = size_jump_gate(ok, self._batch.lohi, tmax, known, float(tc.max_size_jump_ratio),
-                                     float(tc.max_size_jump))
+        # the tracks' sizes, flags and axis angles from their shape rows ("known": a coasting track's size is known if
+        # all(size_known) or it is not a rectangle); the Mahalanobis gate and distance gate (a rectangle is measured
+        # again with the track's own sizes: a side the detection "measured" too short, e.g. a grazing side, must not
+        # break the association); and the size-jump gate: a tracked object does not double its size from one scan
+        # to the next, so a person track coasting past a wall must not take the wall's cluster (it would carry M onto
+        # the wall; only for coasting tracks whose size is known: a bar first seen end-on may show its full length
+        # later, a tracked object may touch another for a scan). One call (associate_gate)
+        d2, ok, det_ext, tsize = associate_gate(self._G, self._Gi, self._rows(), np.array(missed), Xs, Ps,
+                                                self._default.z, self._default.R, float(tc.gate_distance),
+                                                float(tc.gate_chi2), *self._batch, self._fit_p,
+                                                float(tc.max_size_jump_ratio), float(tc.max_size_jump))
         if self._map is not None:
             ok = self._veto_merged(ok, dets, det_ext, tsize)
         if not _any_of(ok, axis=None):
@@ -899,26 +875,17 @@ class Tracker:
         sel = sel[:, 0].copy()
         b = self._batch
         trows = self._rows()[sel]
-        swaps, sizes, has, radius = pair_priors(self._G, self._Gi, trows, dis, b.kind, b.theta)
-        mr = self._measure_rows(dis, sizes, has, radius, np.full(npair, 0.05))
-        Xs, Ps = self._stack()
-        X_prior = Xs[sel]  # (kalman_update_batch works on copies: the prior stays as it is)
-        Xn, Pn, ok = kalman_update_batch(X_prior, Ps[sel], mr.H, mr.zm, mr.Rm)
+        # the priors, measurements and Kalman updates in one call; the rows' states are the prediction's (the stacked
+        # copies of _stack hold the same values)
+        X_prior, Xn, Pn, ok, swaps, size_obs, size_kind = pair_updates(self._G, self._Gi, self._X, self._P, trows, dis,
+                                                                       *b, self._fit_p, 0.05)
         self._bound_acceleration(X_prior, Xn, self._tracks, pairs)
         self._stacked = None  # the tracks change below
         out = ok.tolist()
-        # the new states and covariances into the tracks' rows of the state arrays, all at once (every update applied,
-        # the usual case: without the boolean selections)
-        if all(out):
-            self._X[trows] = Xn
-            self._P[trows] = Pn
-        else:
-            rows = trows[ok]
-            self._X[rows] = Xn[ok]
-            self._P[rows] = Pn[ok]
+        # the new states and covariances into the tracks' rows (where applied), then the shape updates: one call
         fc, tc = self.config.fit, self.config.tracker
-        shape_update(self._G, self._Gi, self._X, trows, dis, ok, b.kind, b.theta, b.lohi, b.rel, b.circle,
-                     mr.size_obs, mr.size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
+        shape_update(self._G, self._Gi, self._X, self._P, Xn, Pn, trows, dis, ok, b.kind, b.theta, b.lohi, b.rel,
+                     b.circle, size_obs, size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
                      float(tc.heading_gain), float(tc.size_gain))
         self._update_tracks(pairs, dets, t, out, trows)
         return out
