@@ -1208,11 +1208,10 @@ def _py_max(a: float, b: float) -> float:
 
 
 @njit(cache=True)
-def shape_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xn: np.ndarray, Pn: np.ndarray,
-                 rows: np.ndarray, det: np.ndarray, applied: np.ndarray, kind: np.ndarray, theta: np.ndarray,
-                 lohi: np.ndarray, rel: np.ndarray, circle: np.ndarray, size_obs: np.ndarray, size_kind: np.ndarray,
-                 swap: np.ndarray, default_depth: float, default_depth_ratio: float, heading_gain: float,
-                 size_gain: float) -> None:
+def shape_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray, det: np.ndarray,
+                 applied: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray,
+                 circle: np.ndarray, size_obs: np.ndarray, size_kind: np.ndarray, swap: np.ndarray,
+                 default_depth: float, default_depth_ratio: float, heading_gain: float, size_gain: float) -> None:
     """The shape update of the tracks of associated pairs (track row ``rows[r]``, detection ``det[r]``, where
     ``applied[r]``), in place on their rows of ``G`` / ``Gi`` (columns above) and, for a box grown past a partial
     view, of the states ``X`` (rows [x, y, vx, vy], m): a rectangle sets or smooths the heading (90° ambiguity;
@@ -1221,17 +1220,7 @@ def shape_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xn
     box away from its one real bound, its centre moving with it); a circle smooths the radius; a point detection of
     a point track takes its extent (at least 0.05 m). The kind becomes the detection's. ``size_obs`` / ``size_kind``
     / ``swap``: the measurement's per-axis sizes and kinds (``measure_batch``) and :func:`pair_priors`' swaps; the
-    arithmetic, in order, of ``Tracker._update_tracks`` before the per-track arrays (docs/tracking.md, item 2).
-
-    First the Kalman results: row r of the new states ``Xn`` (r, 4) and covariances ``Pn`` (r, 4, 4) is copied into
-    row ``rows[r]`` of ``X`` / ``P`` where ``applied[r]`` (the rows are distinct: one per track)."""
-    for r in range(rows.shape[0]):
-        if applied[r]:
-            k = rows[r]
-            for a in range(4):
-                X[k, a] = Xn[r, a]
-                for b in range(4):
-                    P[k, a, b] = Pn[r, a, b]
+    arithmetic, in order, of ``Tracker._update_tracks`` before the per-track arrays (docs/tracking.md, item 2)."""
     for r in range(rows.shape[0]):
         if not applied[r]:
             continue

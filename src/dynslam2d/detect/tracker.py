@@ -882,10 +882,18 @@ class Tracker:
         self._bound_acceleration(X_prior, Xn, self._tracks, pairs)
         self._stacked = None  # the tracks change below
         out = ok.tolist()
-        # the new states and covariances into the tracks' rows (where applied), then the shape updates: one call
+        # the new states and covariances into the tracks' rows of the state arrays, all at once (every update applied,
+        # the usual case: without the boolean selections)
+        if all(out):
+            self._X[trows] = Xn
+            self._P[trows] = Pn
+        else:
+            rows = trows[ok]
+            self._X[rows] = Xn[ok]
+            self._P[rows] = Pn[ok]
         fc, tc = self.config.fit, self.config.tracker
-        shape_update(self._G, self._Gi, self._X, self._P, Xn, Pn, trows, dis, ok, b.kind, b.theta, b.lohi, b.rel,
-                     b.circle, size_obs, size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
+        shape_update(self._G, self._Gi, self._X, trows, dis, ok, b.kind, b.theta, b.lohi, b.rel, b.circle,
+                     size_obs, size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
                      float(tc.heading_gain), float(tc.size_gain))
         self._update_tracks(pairs, dets, t, out, trows)
         return out
