@@ -28,13 +28,12 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.shapes.fit_clusters',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
      "Array(float64, 1, 'C'), int64, float64, int64, int64,)"),
-    ('dynslam2d.detect.kernels.classify_batch',
+    ('dynslam2d.detect.kernels.classify_select',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), Array(bool, "
      "1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, int64, float64, float64, float64, "
-     "Array(float64, 1, 'C'),)"),
-    ('dynslam2d.detect.vehicles.long_kept',
-     "(Array(bool, 1, 'C'), Array(float64, 2, 'C'), float64,)"),
+     "Array(float64, 1, 'C'), bool, float64, float64, float64, bool, Array(float32, 2, 'C'), int64, "
+     'int64, float64, float64, float64, int64,)'),
     ('dynslam2d.detect.freespace._ref_arrays',
      "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, "
      'float64,)'),
@@ -103,29 +102,18 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.cv_predict',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 2, 'C'),)"),
-    ('dynslam2d.detect.mapevidence.map_evidence_kernel',
-     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float32, 2, 'C'), int64, int64, float64, "
-     "float64, float64, int64, Array(bool, 1, 'C'), Array(bool, 1, 'C'), Array(bool, 1, 'C'), "
-     'omitted(default=0.5),)'),
-    ('dynslam2d.detect.kernels.mask_fractions',
-     "(Array(bool, 2, 'C'), Array(int64, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.association_rows',
-     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.gate_costs',
-     "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), "
-     "Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
+    ('dynslam2d.detect.kernels.associate_gate',
+     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
+     "Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
      "float64, float64, Array(int8, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, "
      "3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, "
-     "'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.size_jump_gate',
-     "(Array(bool, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, "
-     'float64,)'),
-    ('dynslam2d.detect.kernels.pair_priors',
-     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
-     "Array(int8, 1, 'C'), Array(float64, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.kalman_update_batch',
-     "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), "
-     "Array(float64, 3, 'C'),)"),
+     "'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), float64, float64,)"),
+    ('dynslam2d.detect.kernels.pair_updates',
+     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
+     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), "
+     "Array(float64, 2, 'C'), Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
+     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
+     "Array(float64, 1, 'C'), float64,)"),
     ('dynslam2d.detect.kernels.accel_candidates',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), float64,)"),
     ('dynslam2d.detect.kernels.shape_update',
