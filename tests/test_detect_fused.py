@@ -85,13 +85,11 @@ def _same(a, b) -> bool:
     return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
 
 
-def _classify_select_ref(*a):
-    """The calls classify_select replaces (Tracker._detect before pass 11): classify_batch, the numpy vehicle test,
-    the kept rows by flatnonzero and fancy indexing, map_evidence_kernel on the kept clusters' points and
-    mask_fractions."""
-    px, py, offsets, fits = a[0], a[1], a[3], a[4]
-    (admit, max_extent, max_structure, min_free, has_map, lo, i0, j0, res, occ, free_thr, radius) = a[18:]
-    keep, kinds, lohi, rel = K.classify_batch(*a[:18])
+def _select_ref(keep, kinds, lohi, rel, fits, offsets, px, py, admit, max_extent, max_structure, min_free, has_map,
+                lo, i0, j0, res, occ, free_thr, radius):
+    """The calls select_detections replaces (Tracker._detect before pass 11): the numpy vehicle test, the kept rows
+    by flatnonzero and fancy indexing, map_evidence_kernel on the kept clusters' points and mask_fractions."""
+    keep = keep.copy()
     if admit:
         cfg = DetectConfig()
         cfg.segment.max_extent, cfg.segment.vehicle_max_structure = max_extent, max_structure
@@ -123,49 +121,37 @@ def _pair_updates_ref(G, Gi, X, P, rows, det, *rest):
     return X_prior, Xn, Pn, ok, swap, mr[5], mr[6]
 
 
-def _associate_gate_ref(G, Gi, rows, missed, Xs, Ps, Z, R, gd, chi2, *rest):
-    """association_rows, reach = 0.5 · the longest side, gate_costs and size_jump_gate."""
-    batch, p, ratio, jump = rest[:10], rest[10], rest[11], rest[12]
-    tsize, tmax, rect, theta, known = K.association_rows(G, Gi, rows, missed)
-    d2, _near, ok = K.gate_costs(Xs, Ps, 0.5 * tmax, rect, theta, tsize, Z, R, gd, chi2, *batch, p)
-    ok, ext = K.size_jump_gate(ok, batch[2], tmax, known, ratio, jump)
-    return d2, ok, ext, tsize
-
-
 def _van_source() -> SimSource:
     from test_detect_vehicles import _van_scene
     return SimSource(_van_scene())
 
 
 def test_fused_kernels_give_the_former_calls_results_in_whole_runs(monkeypatch):
-    """Every call of classify_select, pair_updates and associate_gate in two simulated runs (people seen from a
+    """Every call of select_detections and pair_updates in two simulated runs (people seen from a
     driving robot; a van longer than max_extent driving past, so the vehicle test runs with its map) returns what
     the calls it replaces returned, bit for bit; the runs have detections, updates and vehicle-size clusters kept and
     dropped."""
-    seen = {"classify": 0, "pairs": 0, "gate": 0, "admit": 0, "map": 0}
+    seen = {"select": 0, "pairs": 0, "admit": 0, "map": 0}
 
-    def wrap(name, fused, ref, copies):
+    def wrap(name, fused, ref):
         def f(*a):
-            b = [x.copy() if i in copies else x for i, x in enumerate(a)]
-            want = ref(*b)
+            want = ref(*a)
             got = fused(*a)
             assert len(got) == len(want)
             for g, w in zip(got, want):
                 assert _same(g, w), name
             seen[name] += 1
-            if name == "classify":
-                seen["map"] += bool(a[22])
-                seen["admit"] += bool(a[18] and a[22]) and bool(long_kept(np.ones(a[4].shape[0], dtype=bool), a[4],
-                                                                              a[19]).shape[0])
+            if name == "select":
+                seen["map"] += bool(a[12])
+                seen["admit"] += bool(a[8] and a[12]) and bool(long_kept(a[0], a[4], a[9]).shape[0])
             return got
         return f
 
-    monkeypatch.setattr(tracker_mod, "classify_select", wrap("classify", K.classify_select, _classify_select_ref, ()))
-    monkeypatch.setattr(tracker_mod, "pair_updates", wrap("pairs", K.pair_updates, _pair_updates_ref, ()))
-    monkeypatch.setattr(tracker_mod, "associate_gate", wrap("gate", K.associate_gate, _associate_gate_ref, ()))
+    monkeypatch.setattr(tracker_mod, "select_detections", wrap("select", K.select_detections, _select_ref))
+    monkeypatch.setattr(tracker_mod, "pair_updates", wrap("pairs", K.pair_updates, _pair_updates_ref))
     for src in (open_source("sim:drive", seed=11, duration=6.0), _van_source()):
         pipe = Pipeline(Config())
         for scan in src:
             pipe.process(scan)
-    assert seen["classify"] > 100 and seen["pairs"] > 100 and seen["gate"] > 100
+    assert seen["select"] > 100 and seen["pairs"] > 100
     assert seen["map"] > 100 and seen["admit"] > 10

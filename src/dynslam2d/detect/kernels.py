@@ -496,25 +496,21 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
 
 
 @njit(cache=True)
-def classify_select(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: np.ndarray, fits: np.ndarray,
-                    structure: np.ndarray, sx: float, sy: float, ranges: np.ndarray, valid: np.ndarray,
-                    ax: np.ndarray, ay: np.ndarray, wrapped: bool, max_skip: int, range_max: float, dphi: float,
-                    extent: float, p: np.ndarray, admit: bool, max_extent: float, max_structure: float,
-                    min_free: float, has_map: bool, logodds: np.ndarray, i0: int, j0: int, res: float,
-                    occ_thr: float, free_thr: float, free_radius: int) -> tuple:
-    """The detections of a scan's clusters in one call: :func:`classify_batch` (arguments up to ``p``, its
-    ``max_extent`` here ``extent``), then where ``admit`` the vehicle-size clusters' map test
-    (:func:`~dynslam2d.detect.vehicles._admit_long` with ``max_extent``, ``max_structure``, ``min_free``), then the
-    kept clusters' rows and, where ``has_map``, their points' map evidence
+def select_detections(keep: np.ndarray, kinds: np.ndarray, lohi: np.ndarray, rel: np.ndarray, fits: np.ndarray,
+                      offsets: np.ndarray, px: np.ndarray, py: np.ndarray, admit: bool, max_extent: float,
+                      max_structure: float, min_free: float, has_map: bool, logodds: np.ndarray, i0: int, j0: int,
+                      res: float, occ_thr: float, free_thr: float, free_radius: int) -> tuple:
+    """The detections among a scan's classified clusters in one call: where ``admit`` the vehicle-size clusters' map
+    test (:func:`~dynslam2d.detect.vehicles._admit_long` with ``max_extent``, ``max_structure``, ``min_free``; in
+    place on ``keep``), then the kept clusters' rows and, where ``has_map``, their points' map evidence
     (:func:`~dynslam2d.detect.mapevidence.map_evidence_kernel` on ``logodds`` / ``i0`` / ``j0`` / ``res`` with the
-    thresholds; map frame, m) as per-detection fractions (:func:`mask_fractions`).
+    thresholds; map frame, m) as per-detection fractions (:func:`mask_fractions`). ``keep``, ``kinds``, ``lohi``,
+    ``rel``: :func:`classify_batch`'s results; ``fits``, ``offsets``, ``px``, ``py``: its arguments. (The
+    classification itself stays a call of its own: a kernel calling it would compile its body a second time.)
 
     Returns ``(starts, npts, kinds, lohi, rel, fits, fractions)``: the kept clusters' first point index into
     ``px`` / ``py`` and point counts (int64), their kind codes, bounds, real-bound flags and fit rows (copies of the
-    kept rows of :func:`classify_batch`'s results and of ``fits``), and (3, nd) fractions of their points on
-    structure, free and unknown (zeros (3, 0) without a map)."""
-    keep, kinds, lohi, rel = classify_batch(px, py, beams, offsets, fits, structure, sx, sy, ranges, valid, ax, ay,
-                                            wrapped, max_skip, range_max, dphi, extent, p)
+    kept rows), and (3, nd) fractions of their points on structure, free and unknown (zeros (3, 0) without a map)."""
     if admit:
         _admit_long(keep, fits, offsets, px, py, max_extent, has_map, logodds, i0, j0, res, occ_thr, free_thr,
                     free_radius, max_structure, min_free)
@@ -1085,26 +1081,6 @@ def size_jump_gate(ok: np.ndarray, lohi: np.ndarray, tmax: np.ndarray, known: np
         for j in range(m):
             out[i, j] = ok[i, j] and (ext[j] <= lim or not kn)
     return out, ext
-
-
-@njit(cache=True)
-def associate_gate(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, missed: np.ndarray, Xs: np.ndarray,
-                   Ps: np.ndarray, Z: np.ndarray, R: np.ndarray, gate_distance: float, gate_chi2: float,
-                   kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray,
-                   circle: np.ndarray, px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray,
-                   p: np.ndarray, ratio: float, jump: float) -> tuple:
-    """The association's gate in one call: :func:`association_rows` of the live tracks' shape rows ``rows``
-    (``missed``: their last scan had no update), :func:`gate_costs` with reach half the tracks' longest side, then
-    :func:`size_jump_gate` (``ratio``, ``jump``). Returns ``(d2, ok, det_ext, tsize)``: the costs, the pairs within
-    the gates, the detections' longer extents and the tracks' sizes (m)."""
-    tsize, tmax, rect, theta_box, known = association_rows(G, Gi, rows, missed)
-    reach = np.empty(tmax.shape[0])
-    for i in range(tmax.shape[0]):
-        reach[i] = 0.5 * tmax[i]
-    d2, _near, ok = gate_costs(Xs, Ps, reach, rect, theta_box, tsize, Z, R, gate_distance, gate_chi2, kind, theta,
-                               lohi, rel, centroid, circle, px, py, start, npts, p)
-    ok, det_ext = size_jump_gate(ok, lohi, tmax, known, ratio, jump)
-    return d2, ok, det_ext, tsize
 
 
 @njit(cache=True)

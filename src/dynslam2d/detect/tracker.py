@@ -67,18 +67,21 @@ from dynslam2d.detect.kernels import (
     N_G,
     N_GI,
     accel_candidates,
-    associate_gate,
-    classify_select,
+    association_rows,
+    classify_batch,
     cv_predict,
     fit_params,
     fragment_hosts,
+    gate_costs,
     leg_pairs,
     manage_rows,
     measure_batch,
     merge_leg_pairs,
     pair_updates,
     report_boxes,
+    select_detections,
     shape_update,
+    size_jump_gate,
     world_points,
 )
 from dynslam2d.detect.layout import (
@@ -675,7 +678,7 @@ class Tracker:
         offsets = seg.offsets
         fits = fit_clusters(px, py, offsets, ~seg.structure, self._angles, CRITERIA[cfg.fit.criterion],
                             cfg.fit.closeness_d0, cfg.fit.circle_min_points, cfg.fit.coarse_stride)
-        # classify and bound every cluster (reference.classify_and_bound), the vehicle-size clusters' map test
+        # classify and bound every cluster (reference.classify_and_bound); then the vehicle-size clusters' map test
         # (detect/vehicles.py), the kept clusters' rows and their points' map evidence in one call. The map test is
         # per point, so only the detections' points are tested (structure clusters, most of the points, are not
         # detections)
@@ -685,12 +688,14 @@ class Tracker:
             lo, i0, j0, res = _NO_MAP, 0, 0, 1.0
         else:
             lo, i0, j0, res = view.logodds, int(view.i0), int(view.j0), float(view.resolution)
-        starts, npts, kinds, lohi, rel, fits, mfr = classify_select(
-            px, py, beams, offsets, fits, seg.structure, float(pose.x), float(pose.y), ranges, valid, ax, ay,
-            seg.wrapped, int(sc.max_skip_beams), float(scan.range_max), abs(float(scan.angle_increment)),
-            extent_limit(cfg), self._fit_p, sc.vehicle_max_extent > sc.max_extent, float(sc.max_extent),
-            float(sc.vehicle_max_structure), float(sc.vehicle_min_free), view is not None, lo, i0, j0, res,
-            float(tc.map_occupied_logodds), float(tc.map_free_logodds), int(tc.map_free_radius))
+        keep, kinds, lohi, rel = classify_batch(px, py, beams, offsets, fits, seg.structure, float(pose.x),
+                                                float(pose.y), ranges, valid, ax, ay, seg.wrapped,
+                                                int(sc.max_skip_beams), float(scan.range_max),
+                                                abs(float(scan.angle_increment)), extent_limit(cfg), self._fit_p)
+        starts, npts, kinds, lohi, rel, fits, mfr = select_detections(
+            keep, kinds, lohi, rel, fits, offsets, px, py, sc.vehicle_max_extent > sc.max_extent,
+            float(sc.max_extent), float(sc.vehicle_max_structure), float(sc.vehicle_min_free), view is not None, lo,
+            i0, j0, res, float(tc.map_occupied_logodds), float(tc.map_free_logodds), int(tc.map_free_radius))
         nd = starts.shape[0]
         st.structure_clusters += seg.n_clusters - nd
         dets: list[Detection] = []
@@ -790,17 +795,21 @@ class Tracker:
         for i, k in enumerate(tracks):  # (the state and misses: Python attributes)
             (firm_r if k.state != TENTATIVE else tent_r).append(i)
             missed.append(k.misses > 0)
-        # the tracks' sizes, flags and axis angles from their shape rows ("known": a coasting track's size is known if
-        # all(size_known) or it is not a rectangle); the Mahalanobis gate and distance gate (a rectangle is measured
-        # again with the track's own sizes: a side the detection "measured" too short, e.g. a grazing side, must not
-        # break the association); and the size-jump gate: a tracked object does not double its size from one scan
-        # to the next, so a person track coasting past a wall must not take the wall's cluster (it would carry M onto
-        # the wall; only for coasting tracks whose size is known: a bar first seen end-on may show its full length
-        # later, a tracked object may touch another for a scan). One call (associate_gate)
-        d2, ok, det_ext, tsize = associate_gate(self._G, self._Gi, self._rows(), np.array(missed), Xs, Ps,
-                                                self._default.z, self._default.R, float(tc.gate_distance),
-                                                float(tc.gate_chi2), *self._batch, self._fit_p,
-                                                float(tc.max_size_jump_ratio), float(tc.max_size_jump))
+        # the tracks' sizes, flags and axis angles from their shape rows in one call ("known": a coasting track's size
+        # is known if all(size_known) or it is not a rectangle)
+        tsize, tmax, rect, theta, known = association_rows(self._G, self._Gi, self._rows(), np.array(missed))
+        reach = 0.5 * tmax
+        # Mahalanobis gate and distance gate; a rectangle is measured again with the track's own sizes
+        # (a side the detection "measured" too short, e.g. a grazing side, must not break the association)
+        d2, near, ok = gate_costs(Xs, Ps, reach, rect, theta, tsize,
+                                  self._default.z, self._default.R, float(tc.gate_distance), float(tc.gate_chi2),
+                                  *self._batch, self._fit_p)
+        # a tracked object does not double its size from one scan to the next: a person track coasting
+        # past a wall must not take the wall's cluster (it would carry M onto the wall)
+        # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
+        # later, a tracked object may touch another for a scan)
+        ok, det_ext = size_jump_gate(ok, self._batch.lohi, tmax, known, float(tc.max_size_jump_ratio),
+                                     float(tc.max_size_jump))
         if self._map is not None:
             ok = self._veto_merged(ok, dets, det_ext, tsize)
         if not _any_of(ok, axis=None):
