@@ -28,12 +28,16 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.shapes.fit_clusters',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
      "Array(float64, 1, 'C'), int64, float64, int64, int64,)"),
-    ('dynslam2d.detect.kernels.classify_select',
+    ('dynslam2d.detect.kernels.classify_batch',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), Array(bool, "
      "1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, int64, float64, float64, float64, "
-     "Array(float64, 1, 'C'), bool, float64, float64, float64, bool, Array(float32, 2, 'C'), int64, "
-     'int64, float64, float64, float64, int64,)'),
+     "Array(float64, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.select_detections',
+     "(Array(bool, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 2, 'C'), Array(bool, 3, 'C'), "
+     "Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, "
+     "float64, float64, float64, bool, Array(float32, 2, 'C'), int64, int64, float64, float64, float64, "
+     'int64,)'),
     ('dynslam2d.detect.freespace._ref_arrays',
      "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, "
      'float64,)'),
@@ -102,12 +106,17 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.cv_predict',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 2, 'C'),)"),
-    ('dynslam2d.detect.kernels.associate_gate',
-     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
-     "Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
+    ('dynslam2d.detect.kernels.association_rows',
+     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.gate_costs',
+     "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), "
+     "Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
      "float64, float64, Array(int8, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, "
      "3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, "
-     "'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), float64, float64,)"),
+     "'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.size_jump_gate',
+     "(Array(bool, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, "
+     'float64,)'),
     ('dynslam2d.detect.kernels.pair_updates',
      "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
      "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), "
