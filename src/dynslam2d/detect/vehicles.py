@@ -81,9 +81,9 @@ def _admit_long(keep: np.ndarray, fits: np.ndarray, offsets: np.ndarray, px: np.
             qx[o] = px[i]
             qy[o] = py[i]
             o += 1
-    structure = np.zeros(total, dtype=np.bool_)
-    free = np.zeros(total, dtype=np.bool_)
-    unknown = np.ones(total, dtype=np.bool_)
+    structure = np.empty(total, dtype=np.bool_)  # (the kernel writes every entry of the three)
+    free = np.empty(total, dtype=np.bool_)
+    unknown = np.empty(total, dtype=np.bool_)
     map_evidence_kernel(qx, qy, logodds, i0, j0, res, occ_thr, free_thr, free_radius, structure, free, unknown)
     kept = 0
     o = 0
