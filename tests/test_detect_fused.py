@@ -111,27 +111,17 @@ def _select_ref(keep, kinds, lohi, rel, fits, offsets, px, py, admit, max_extent
     return (*out, K.mask_fractions(ev, det_off))
 
 
-def _pair_updates_ref(G, Gi, X, P, rows, det, *rest):
-    """pair_priors, measure_batch (size σ on every row) and kalman_update_batch on the gathered rows."""
-    batch, p, sigma = rest[:10], rest[10], rest[11]
-    swap, sizes, has, radius = K.pair_priors(G, Gi, rows, det, batch[0], batch[1])
-    mr = K.measure_batch(det, *batch, sizes, has, radius, np.full(rows.shape[0], sigma), p)
-    X_prior = X[rows]
-    Xn, Pn, ok = K.kalman_update_batch(X_prior, P[rows], mr[2], mr[3], mr[4])
-    return X_prior, Xn, Pn, ok, swap, mr[5], mr[6]
-
-
 def _van_source() -> SimSource:
     from test_detect_vehicles import _van_scene
     return SimSource(_van_scene())
 
 
 def test_fused_kernels_give_the_former_calls_results_in_whole_runs(monkeypatch):
-    """Every call of select_detections and pair_updates in two simulated runs (people seen from a
+    """Every call of select_detections in two simulated runs (people seen from a
     driving robot; a van longer than max_extent driving past, so the vehicle test runs with its map) returns what
     the calls it replaces returned, bit for bit; the runs have detections, updates and vehicle-size clusters kept and
     dropped."""
-    seen = {"select": 0, "pairs": 0, "admit": 0, "map": 0}
+    seen = {"select": 0, "admit": 0, "map": 0}
 
     def wrap(name, fused, ref):
         def f(*a):
@@ -148,10 +138,9 @@ def test_fused_kernels_give_the_former_calls_results_in_whole_runs(monkeypatch):
         return f
 
     monkeypatch.setattr(tracker_mod, "select_detections", wrap("select", K.select_detections, _select_ref))
-    monkeypatch.setattr(tracker_mod, "pair_updates", wrap("pairs", K.pair_updates, _pair_updates_ref))
     for src in (open_source("sim:drive", seed=11, duration=6.0), _van_source()):
         pipe = Pipeline(Config())
         for scan in src:
             pipe.process(scan)
-    assert seen["select"] > 100 and seen["pairs"] > 100
+    assert seen["select"] > 100
     assert seen["map"] > 100 and seen["admit"] > 10

@@ -117,12 +117,12 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.size_jump_gate',
      "(Array(bool, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, "
      'float64,)'),
-    ('dynslam2d.detect.kernels.pair_updates',
-     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
-     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), "
-     "Array(float64, 2, 'C'), Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
-     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
-     "Array(float64, 1, 'C'), float64,)"),
+    ('dynslam2d.detect.kernels.pair_priors',
+     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
+     "Array(int8, 1, 'C'), Array(float64, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.kalman_update_batch',
+     "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), "
+     "Array(float64, 3, 'C'),)"),
     ('dynslam2d.detect.kernels.accel_candidates',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), float64,)"),
     ('dynslam2d.detect.kernels.shape_update',

@@ -1100,36 +1100,6 @@ def accel_candidates(X_prior: np.ndarray, X_new: np.ndarray, lim2: float) -> np.
     return out[:m]
 
 
-@njit(cache=True)
-def pair_updates(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, rows: np.ndarray, det: np.ndarray,
-                 kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray,
-                 circle: np.ndarray, px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray,
-                 p: np.ndarray, size_sigma: float) -> tuple:
-    """The Kalman updates of associated (track row ``rows[r]``, detection ``det[r]``) pairs in one call:
-    :func:`pair_priors` (the tracks' sizes / radius along the detections' axes), :func:`measure_batch` of the
-    detections with those priors and ``size_sigma`` (m) on every row, and :func:`kalman_update_batch` of the rows'
-    states and covariances (gathered from ``X`` / ``P``, which are not written). The detection arrays are
-    :class:`~dynslam2d.detect.layout.DetectionBatch`'s fields, ``p`` :func:`fit_params`.
-
-    Returns ``(X_prior (r, 4), X_new (r, 4), P_new (r, 4, 4), ok (r,), swap (r,), size_obs (r, 2), size_kind (r, 2))``:
-    the states before the update, the results of :func:`kalman_update_batch` and the measurements' sizes and kinds
-    with :func:`pair_priors`' swaps (what :func:`shape_update` reads)."""
-    n = rows.shape[0]
-    X_prior = np.empty((n, 4))
-    P_prior = np.empty((n, 4, 4))
-    for r in range(n):
-        k = rows[r]
-        for a in range(4):
-            X_prior[r, a] = X[k, a]
-            for b in range(4):
-                P_prior[r, a, b] = P[k, a, b]
-    swap, sizes, has, radius = pair_priors(G, Gi, rows, det, kind, theta)
-    _z, _R, H, zm, Rm, size_obs, size_kind = measure_batch(det, kind, theta, lohi, rel, centroid, circle, px, py,
-                                                           start, npts, sizes, has, radius, np.full(n, size_sigma), p)
-    Xn, Pn, ok = kalman_update_batch(X_prior, P_prior, H, zm, Rm)
-    return X_prior, Xn, Pn, ok, swap, size_obs, size_kind
-
-
 # ------------------------------------------------------------------ the tracker's per-track shape state (rows)
 # Columns of the tracker's per-track shape arrays (``Tracker._G`` float64, ``Tracker._Gi`` int8; one row per live
 # track, the row of its Kalman state): the box's axis angle and sizes along it (tracks' own axes), the circle radius,

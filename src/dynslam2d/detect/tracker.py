@@ -73,11 +73,12 @@ from dynslam2d.detect.kernels import (
     fit_params,
     fragment_hosts,
     gate_costs,
+    kalman_update_batch,
     leg_pairs,
     manage_rows,
     measure_batch,
     merge_leg_pairs,
-    pair_updates,
+    pair_priors,
     report_boxes,
     select_detections,
     shape_update,
@@ -884,10 +885,11 @@ class Tracker:
         sel = sel[:, 0].copy()
         b = self._batch
         trows = self._rows()[sel]
-        # the priors, measurements and Kalman updates in one call; the rows' states are the prediction's (the stacked
-        # copies of _stack hold the same values)
-        X_prior, Xn, Pn, ok, swaps, size_obs, size_kind = pair_updates(self._G, self._Gi, self._X, self._P, trows, dis,
-                                                                       *b, self._fit_p, 0.05)
+        swaps, sizes, has, radius = pair_priors(self._G, self._Gi, trows, dis, b.kind, b.theta)
+        mr = self._measure_rows(dis, sizes, has, radius, np.full(npair, 0.05))
+        Xs, Ps = self._stack()
+        X_prior = Xs[sel]  # (kalman_update_batch works on copies: the prior stays as it is)
+        Xn, Pn, ok = kalman_update_batch(X_prior, Ps[sel], mr.H, mr.zm, mr.Rm)
         self._bound_acceleration(X_prior, Xn, self._tracks, pairs)
         self._stacked = None  # the tracks change below
         out = ok.tolist()
@@ -902,7 +904,7 @@ class Tracker:
             self._P[rows] = Pn[ok]
         fc, tc = self.config.fit, self.config.tracker
         shape_update(self._G, self._Gi, self._X, trows, dis, ok, b.kind, b.theta, b.lohi, b.rel, b.circle,
-                     size_obs, size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
+                     mr.size_obs, mr.size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
                      float(tc.heading_gain), float(tc.size_gain))
         self._update_tracks(pairs, dets, t, out, trows)
         return out
