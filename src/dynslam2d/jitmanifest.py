@@ -33,8 +33,11 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), Array(bool, "
      "1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, int64, float64, float64, float64, "
      "Array(float64, 1, 'C'),)"),
-    ('dynslam2d.detect.vehicles.long_kept',
-     "(Array(bool, 1, 'C'), Array(float64, 2, 'C'), float64,)"),
+    ('dynslam2d.detect.kernels.select_detections',
+     "(Array(bool, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 2, 'C'), Array(bool, 3, 'C'), "
+     "Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, "
+     "float64, float64, float64, bool, Array(float32, 2, 'C'), int64, int64, float64, float64, float64, "
+     'int64,)'),
     ('dynslam2d.detect.freespace._ref_arrays',
      "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, "
      'float64,)'),
@@ -105,12 +108,6 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.cv_predict',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 2, 'C'),)"),
-    ('dynslam2d.detect.mapevidence.map_evidence_kernel',
-     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float32, 2, 'C'), int64, int64, float64, "
-     "float64, float64, int64, Array(bool, 1, 'C'), Array(bool, 1, 'C'), Array(bool, 1, 'C'), "
-     'omitted(default=0.5),)'),
-    ('dynslam2d.detect.kernels.mask_fractions',
-     "(Array(bool, 2, 'C'), Array(int64, 1, 'C'),)"),
     ('dynslam2d.detect.kernels.association_rows',
      "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'),)"),
     ('dynslam2d.detect.kernels.gate_costs',

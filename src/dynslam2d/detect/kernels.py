@@ -47,7 +47,9 @@ from dynslam2d.detect.layout import (
     SIZE_LOWER,
     SIZE_MEASURED,
 )
+from dynslam2d.detect.mapevidence import map_evidence_kernel
 from dynslam2d.detect.shapes import circle_center_fixed_radius
+from dynslam2d.detect.vehicles import _admit_long
 
 # indices into the fit-parameter array
 _P_POINT_MAX_POINTS = 0
@@ -491,6 +493,75 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
         lohi[c, L_HI1] = hi0
         lohi[c, L_HI2] = hi1
     return keep, kind, lohi, rel
+
+
+@njit(cache=True)
+def select_detections(keep: np.ndarray, kinds: np.ndarray, lohi: np.ndarray, rel: np.ndarray, fits: np.ndarray,
+                      offsets: np.ndarray, px: np.ndarray, py: np.ndarray, admit: bool, max_extent: float,
+                      max_structure: float, min_free: float, has_map: bool, logodds: np.ndarray, i0: int, j0: int,
+                      res: float, occ_thr: float, free_thr: float, free_radius: int) -> tuple:
+    """The detections among a scan's classified clusters in one call: where ``admit`` the vehicle-size clusters' map
+    test (:func:`~dynslam2d.detect.vehicles._admit_long` with ``max_extent``, ``max_structure``, ``min_free``; in
+    place on ``keep``), then the kept clusters' rows and, where ``has_map``, their points' map evidence
+    (:func:`~dynslam2d.detect.mapevidence.map_evidence_kernel` on ``logodds`` / ``i0`` / ``j0`` / ``res`` with the
+    thresholds; map frame, m) as per-detection fractions (:func:`mask_fractions`). ``keep``, ``kinds``, ``lohi``,
+    ``rel``: :func:`classify_batch`'s results; ``fits``, ``offsets``, ``px``, ``py``: its arguments. (The
+    classification itself stays a call of its own: a kernel calling it would compile its body a second time.)
+
+    Returns ``(starts, npts, kinds, lohi, rel, fits, fractions)``: the kept clusters' first point index into
+    ``px`` / ``py`` and point counts (int64), their kind codes, bounds, real-bound flags and fit rows (copies of the
+    kept rows), and (3, nd) fractions of their points on structure, free and unknown (zeros (3, 0) without a map)."""
+    if admit:
+        _admit_long(keep, fits, offsets, px, py, max_extent, has_map, logodds, i0, j0, res, occ_thr, free_thr,
+                    free_radius, max_structure, min_free)
+    k = keep.shape[0]
+    nd = 0
+    for c in range(k):
+        if keep[c]:
+            nd += 1
+    idx = np.empty(nd, dtype=np.int64)
+    q = 0
+    for c in range(k):
+        if keep[c]:
+            idx[q] = c
+            q += 1
+    starts = np.empty(nd, dtype=np.int64)
+    npts = np.empty(nd, dtype=np.int64)
+    s_kinds = np.empty(nd, dtype=kinds.dtype)
+    s_lohi = np.empty((nd, lohi.shape[1]))
+    s_rel = np.empty((nd, rel.shape[1], rel.shape[2]), dtype=np.bool_)
+    s_fits = np.empty((nd, fits.shape[1]))
+    total = 0
+    for q in range(nd):
+        c = idx[q]
+        starts[q] = offsets[c]
+        npts[q] = offsets[c + 1] - offsets[c]
+        total += npts[q]
+        s_kinds[q] = kinds[c]
+        for a in range(lohi.shape[1]):
+            s_lohi[q, a] = lohi[c, a]
+        for a in range(rel.shape[1]):
+            for b in range(rel.shape[2]):
+                s_rel[q, a, b] = rel[c, a, b]
+        for a in range(fits.shape[1]):
+            s_fits[q, a] = fits[c, a]
+    if not has_map:
+        return starts, npts, s_kinds, s_lohi, s_rel, s_fits, np.zeros((3, 0))
+    det_px = np.empty(total)
+    det_py = np.empty(total)
+    det_off = np.empty(nd + 1, dtype=np.int64)
+    det_off[0] = 0
+    o = 0
+    for q in range(nd):
+        a = starts[q]
+        for i in range(a, a + npts[q]):
+            det_px[o] = px[i]
+            det_py[o] = py[i]
+            o += 1
+        det_off[q + 1] = o
+    ev = np.zeros((3, total), dtype=np.bool_)
+    map_evidence_kernel(det_px, det_py, logodds, i0, j0, res, occ_thr, free_thr, free_radius, ev[0], ev[1], ev[2])
+    return starts, npts, s_kinds, s_lohi, s_rel, s_fits, mask_fractions(ev, det_off)
 
 
 @njit(cache=True)

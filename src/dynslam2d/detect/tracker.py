@@ -76,11 +76,11 @@ from dynslam2d.detect.kernels import (
     kalman_update_batch,
     leg_pairs,
     manage_rows,
-    mask_fractions,
     measure_batch,
     merge_leg_pairs,
     pair_priors,
     report_boxes,
+    select_detections,
     shape_update,
     size_jump_gate,
     world_points,
@@ -99,11 +99,11 @@ from dynslam2d.detect.layout import (
     MeasureRows,
 )
 from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
-from dynslam2d.detect.mapevidence import MapView, map_evidence_kernel
+from dynslam2d.detect.mapevidence import MapView
 from dynslam2d.detect.measure import Detection, ScanDetection
 from dynslam2d.detect.segment import Segmentation, segment_scan
 from dynslam2d.detect.shapes import CRITERIA, fit_clusters, search_angles
-from dynslam2d.detect.vehicles import admit_long_clusters, extent_limit
+from dynslam2d.detect.vehicles import _NO_MAP, extent_limit
 from dynslam2d.types import Box, Pose2D, Scan, Track, wrap_angle
 
 TENTATIVE = "tentative"
@@ -679,54 +679,40 @@ class Tracker:
         offsets = seg.offsets
         fits = fit_clusters(px, py, offsets, ~seg.structure, self._angles, CRITERIA[cfg.fit.criterion],
                             cfg.fit.closeness_d0, cfg.fit.circle_min_points, cfg.fit.coarse_stride)
-        # classify and bound every cluster in one pass (reference.classify_and_bound)
+        # classify and bound every cluster (reference.classify_and_bound); then the vehicle-size clusters' map test
+        # (detect/vehicles.py), the kept clusters' rows and their points' map evidence in one call. The map test is
+        # per point, so only the detections' points are tested (structure clusters, most of the points, are not
+        # detections)
+        view = self._map
+        sc, tc = cfg.segment, cfg.tracker
+        if view is None:
+            lo, i0, j0, res = _NO_MAP, 0, 0, 1.0
+        else:
+            lo, i0, j0, res = view.logodds, int(view.i0), int(view.j0), float(view.resolution)
         keep, kinds, lohi, rel = classify_batch(px, py, beams, offsets, fits, seg.structure, float(pose.x),
                                                 float(pose.y), ranges, valid, ax, ay, seg.wrapped,
-                                                int(cfg.segment.max_skip_beams), float(scan.range_max),
+                                                int(sc.max_skip_beams), float(scan.range_max),
                                                 abs(float(scan.angle_increment)), extent_limit(cfg), self._fit_p)
-        if cfg.segment.vehicle_max_extent > cfg.segment.max_extent:  # vehicle-size clusters (detect/vehicles.py)
-            admit_long_clusters(keep, fits, offsets, px, py, self._map, cfg)
-        idx = np.flatnonzero(keep)
-        st.structure_clusters += seg.n_clusters - idx.shape[0]
+        starts, npts, kinds, lohi, rel, fits, mfr = select_detections(
+            keep, kinds, lohi, rel, fits, offsets, px, py, sc.vehicle_max_extent > sc.max_extent,
+            float(sc.max_extent), float(sc.vehicle_max_structure), float(sc.vehicle_min_free), view is not None, lo,
+            i0, j0, res, float(tc.map_occupied_logodds), float(tc.map_free_logodds), int(tc.map_free_radius))
+        nd = starts.shape[0]
+        st.structure_clusters += seg.n_clusters - nd
         dets: list[Detection] = []
-        nd = idx.shape[0]
-        if nd < seg.n_clusters:
-            starts = offsets[idx]
-            npts = offsets[idx + 1] - starts
-            kinds = kinds[idx]
-            lohi = lohi[idx]
-            rel = rel[idx]
-            fits = fits[idx]
-        else:  # (every cluster is a detection: the arrays as they are, no copies)
-            starts = offsets[:-1]
-            npts = offsets[1:] - starts
-        # free-space and map evidence per detection (0 where unknown), then the detections in one pass. The map test
-        # is per point, so only the detections' points are tested (structure clusters, most of the points, are not
-        # detections). The free-space fraction is read for few detections (births, updates whose entry is read:
-        # Tracker._free_values): each detection keeps this scan's test (the memory's references now, before it
-        # gains this scan) and computes its fraction when first read (ScanDetection.free_fraction)
+        # free-space evidence per detection (0 where unknown). The free-space fraction is read for few detections
+        # (births, updates whose entry is read: Tracker._free_values): each detection keeps this scan's test (the
+        # memory's references now, before it gains this scan) and computes its fraction when first read
+        # (ScanDetection.free_fraction)
         frac = fs = ff = fu = [0.0] * nd
-        free, view = self._free, self._map
+        free = self._free
         if free is not None:
             self._cur_ref = free.make_ref(scan, pose, valid)
             if nd and (test := free.test_at(float(scan.stamp))) is not None:
                 frac = [test] * nd
             free.add(scan, pose, valid, self._cur_ref)
         if view is not None:
-            if nd < seg.n_clusters:
-                sel = np.repeat(keep.astype(bool, copy=False), offsets[1:] - offsets[:-1])
-                det_px, det_py = px[sel], py[sel]
-                det_off = np.zeros(nd + 1, dtype=np.int64)
-                np.cumsum(npts, out=det_off[1:])
-            else:
-                det_px, det_py, det_off = px, py, offsets
-            # per-point flags, one row each: on structure, free, unknown in the map
-            ev = np.zeros((3, det_px.shape[0]), dtype=bool)
-            tc = cfg.tracker
-            map_evidence_kernel(det_px, det_py, view.logodds, int(view.i0), int(view.j0), float(view.resolution),
-                                float(tc.map_occupied_logodds), float(tc.map_free_logodds),
-                                int(tc.map_free_radius), ev[0], ev[1], ev[2])
-            fs, ff, fu = mask_fractions(ev, det_off).tolist()
+            fs, ff, fu = mfr.tolist()
         # (their centroid, bounds, flags and circle stay rows of fits / lohi / rel until read: ScanDetection)
         for j, (a0, n, kd, th, fr_j, fs_j, ff_j, fu_j) in enumerate(zip(
                 starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(), frac, fs, ff, fu)):

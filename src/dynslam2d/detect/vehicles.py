@@ -23,7 +23,7 @@ from numba import njit
 
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.layout import F_HI1, F_HI2, F_LO1, F_LO2
-from dynslam2d.detect.mapevidence import MapView, map_evidence
+from dynslam2d.detect.mapevidence import MapView, map_evidence_kernel
 
 
 def extent_limit(config: DetectConfig) -> float:
@@ -53,30 +53,76 @@ def long_kept(keep: np.ndarray, fits: np.ndarray, max_extent: float) -> np.ndarr
     return out[:m]
 
 
+@njit(cache=True)
+def _admit_long(keep: np.ndarray, fits: np.ndarray, offsets: np.ndarray, px: np.ndarray, py: np.ndarray,
+                max_extent: float, has_map: bool, logodds: np.ndarray, i0: int, j0: int, res: float, occ_thr: float,
+                free_thr: float, free_radius: int, max_structure: float, min_free: float) -> int:
+    """:func:`admit_long_clusters` in one call (``has_map`` False: no map view, ``logodds`` unused). The long clusters'
+    points are tested by :func:`~dynslam2d.detect.mapevidence.map_evidence_kernel` in one batch, as
+    :func:`~dynslam2d.detect.mapevidence.map_evidence` tests them; a cluster's shares are its point counts over its
+    point count (exact integers in float64, as numpy's ``add.reduceat`` of the 0 / 1 flags sums them), compared
+    with the limits as numpy compares them (a NaN share, 0 / 0, is never within them)."""
+    long_ = long_kept(keep, fits, max_extent)
+    nl = long_.shape[0]
+    if nl == 0:
+        return 0
+    if not has_map:
+        for q in range(nl):
+            keep[long_[q]] = False
+        return 0
+    total = 0
+    for q in range(nl):
+        total += offsets[long_[q] + 1] - offsets[long_[q]]
+    qx = np.empty(total)
+    qy = np.empty(total)
+    o = 0
+    for q in range(nl):
+        for i in range(offsets[long_[q]], offsets[long_[q] + 1]):
+            qx[o] = px[i]
+            qy[o] = py[i]
+            o += 1
+    structure = np.empty(total, dtype=np.bool_)  # (the kernel writes every entry of the three)
+    free = np.empty(total, dtype=np.bool_)
+    unknown = np.empty(total, dtype=np.bool_)
+    map_evidence_kernel(qx, qy, logodds, i0, j0, res, occ_thr, free_thr, free_radius, structure, free, unknown)
+    kept = 0
+    o = 0
+    for q in range(nl):
+        c = long_[q]
+        n = offsets[c + 1] - offsets[c]
+        ns = 0
+        nf = 0
+        for i in range(o, o + n):
+            if structure[i]:
+                ns += 1
+            if free[i]:
+                nf += 1
+        o += n
+        if n > 0 and float(ns) / float(n) <= max_structure and float(nf) / float(n) >= min_free:
+            kept += 1
+        else:
+            keep[c] = False
+    return kept
+
+
+_NO_MAP = np.zeros((0, 0), dtype=np.float32)
+
+
 def admit_long_clusters(keep: np.ndarray, fits: np.ndarray, offsets: np.ndarray, px: np.ndarray, py: np.ndarray,
                         view: MapView | None, config: DetectConfig) -> int:
     """In place: ``keep[c]`` = False for every kept cluster ``c`` longer than ``segment.max_extent`` whose
     points fail the map test of the module docstring. ``fits`` are the rows of
     :func:`~dynslam2d.detect.shapes.fit_clusters`, ``offsets`` the segmentation's, ``px``/``py`` the
-    clusters' map-frame points (m). Returns the number of long clusters left kept."""
-    seg = config.segment
-    long_ = long_kept(keep, fits, float(seg.max_extent))  # (none on most scans: one call, no temporaries)
-    if long_.shape[0] == 0:
-        return 0
+    clusters' map-frame points (m). Returns the number of long clusters left kept. One kernel call
+    (:func:`_admit_long`; none long on most scans)."""
+    seg, tc = config.segment, config.tracker
     if view is None:
-        keep[long_] = False
-        return 0
-    sel = np.concatenate([np.arange(offsets[c], offsets[c + 1]) for c in long_.tolist()])
-    tc = config.tracker
-    structure, free, _ = map_evidence(np.column_stack((px[sel], py[sel])), view, tc.map_occupied_logodds,
-                                      tc.map_free_logodds, tc.map_free_radius)
-    n = (offsets[long_ + 1] - offsets[long_]).astype(np.float64)
-    bounds = np.concatenate(([0], np.cumsum(n).astype(np.int64)))[:-1]
-    s_share = np.add.reduceat(structure.astype(np.float64), bounds) / n
-    f_share = np.add.reduceat(free.astype(np.float64), bounds) / n
-    ok = (s_share <= seg.vehicle_max_structure) & (f_share >= seg.vehicle_min_free)
-    keep[long_[~ok]] = False
-    return int(ok.sum())
+        return _admit_long(keep, fits, offsets, px, py, float(seg.max_extent), False, _NO_MAP, 0, 0, 1.0, 0.0, 0.0,
+                           0, 0.0, 0.0)
+    return _admit_long(keep, fits, offsets, px, py, float(seg.max_extent), True, view.logodds, int(view.i0),
+                       int(view.j0), float(view.resolution), float(tc.map_occupied_logodds),
+                       float(tc.map_free_logodds), int(tc.map_free_radius), float(seg.vehicle_max_structure),
+                       float(seg.vehicle_min_free))
 
 
 __all__ = ["admit_long_clusters", "extent_limit", "long_kept"]

@@ -1,0 +1,146 @@
+"""The detect path's fused kernels give the results of the calls they replace, bit for bit (docs/speed.md, "The
+tracker's kernels fused, pass 11")."""
+
+from __future__ import annotations
+
+import numpy as np
+
+import dynslam2d.detect.tracker as tracker_mod
+from dynslam2d.config import Config
+from dynslam2d.detect import kernels as K
+from dynslam2d.detect.config import DetectConfig
+from dynslam2d.detect.layout import F_HI1, F_HI2, F_LO1, F_LO2, N_FIT_COLS
+from dynslam2d.detect.mapevidence import MapView, map_evidence, map_evidence_kernel
+from dynslam2d.detect.vehicles import admit_long_clusters, long_kept
+from dynslam2d.inputs import open_source
+from dynslam2d.pipeline import Pipeline
+from dynslam2d.sim.simulation import SimSource
+
+
+def _admit_numpy(keep, fits, offsets, px, py, view, config) -> int:
+    """The former numpy admit_long_clusters (pass 8), the reference."""
+    seg = config.segment
+    long_ = long_kept(keep, fits, float(seg.max_extent))
+    if long_.shape[0] == 0:
+        return 0
+    if view is None:
+        keep[long_] = False
+        return 0
+    sel = np.concatenate([np.arange(offsets[c], offsets[c + 1]) for c in long_.tolist()])
+    tc = config.tracker
+    structure, free, _ = map_evidence(np.column_stack((px[sel], py[sel])), view, tc.map_occupied_logodds,
+                                      tc.map_free_logodds, tc.map_free_radius)
+    n = (offsets[long_ + 1] - offsets[long_]).astype(np.float64)
+    bounds = np.concatenate(([0], np.cumsum(n).astype(np.int64)))[:-1]
+    s_share = np.add.reduceat(structure.astype(np.float64), bounds) / n
+    f_share = np.add.reduceat(free.astype(np.float64), bounds) / n
+    ok = (s_share <= seg.vehicle_max_structure) & (f_share >= seg.vehicle_min_free)
+    keep[long_[~ok]] = False
+    return int(ok.sum())
+
+
+def test_admit_long_clusters_is_the_former_numpy_selection():
+    """Random maps (free, occupied, unknown patches) and clusters, many long, some NaN points and sides, the shares
+    at their limits (the limits set to shares that occur): the kernel keeps exactly the clusters the numpy code
+    kept, and returns its count."""
+    rng = np.random.default_rng(11)
+    cfg = DetectConfig()
+    res = 0.05
+    n_diff = 0
+    n_long_kept = n_long_dropped = 0
+    for _ in range(300):
+        lo = rng.choice(np.array([0.0, -2.0, -0.35, -0.3, 0.4, 0.6, 6.0, 8.0], dtype=np.float32), size=(60, 80),
+                        p=[0.2, 0.35, 0.05, 0.05, 0.05, 0.05, 0.05, 0.2])
+        view = MapView(lo, -5, -7, res)
+        nc = int(rng.integers(1, 12))
+        sizes = rng.integers(1, 40, nc)
+        offsets = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
+        px = rng.uniform(-0.5, 4.5, offsets[-1])
+        py = rng.uniform(-0.5, 3.5, offsets[-1])
+        px[rng.random(px.shape[0]) < 0.03] = np.nan
+        fits = np.zeros((nc, N_FIT_COLS))
+        fits[:, F_LO1] = rng.uniform(-1, 1, nc)
+        fits[:, F_HI1] = fits[:, F_LO1] + rng.uniform(0, 6, nc)
+        fits[:, F_LO2] = rng.uniform(-1, 1, nc)
+        fits[:, F_HI2] = fits[:, F_LO2] + rng.uniform(0, 2, nc)
+        fits[rng.random(nc) < 0.1, F_HI1] = np.nan
+        keep0 = rng.random(nc) < 0.85
+        cfg.segment.vehicle_max_structure = float(rng.choice([0.0, 0.1, 0.25, 1.0 / 3.0, 0.5]))
+        cfg.segment.vehicle_min_free = float(rng.choice([0.0, 0.2, 0.25, 0.5, 2.0 / 3.0]))
+        for v in (view, None):
+            k_ref, k_new = keep0.copy(), keep0.copy()
+            r_ref = _admit_numpy(k_ref, fits, offsets, px, py, v, cfg)
+            r_new = admit_long_clusters(k_new, fits, offsets, px, py, v, cfg)
+            n_diff += int(r_ref != r_new) + int((k_ref != k_new).any())
+            if v is not None:
+                n_long_kept += r_ref
+                n_long_dropped += int((keep0 & ~k_ref).sum())
+    assert n_diff == 0
+    assert n_long_kept > 50 and n_long_dropped > 200  # (both outcomes occur often)
+
+
+def _same(a, b) -> bool:
+    """Equal arrays: dtype, shape and bytes (NaN payloads included)."""
+    a, b = np.ascontiguousarray(a), np.ascontiguousarray(b)
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def _select_ref(keep, kinds, lohi, rel, fits, offsets, px, py, admit, max_extent, max_structure, min_free, has_map,
+                lo, i0, j0, res, occ, free_thr, radius):
+    """The calls select_detections replaces (Tracker._detect before pass 11): the numpy vehicle test, the kept rows
+    by flatnonzero and fancy indexing, map_evidence_kernel on the kept clusters' points and mask_fractions."""
+    keep = keep.copy()
+    if admit:
+        cfg = DetectConfig()
+        cfg.segment.max_extent, cfg.segment.vehicle_max_structure = max_extent, max_structure
+        cfg.segment.vehicle_min_free = min_free
+        cfg.tracker.map_occupied_logodds, cfg.tracker.map_free_logodds = occ, free_thr
+        cfg.tracker.map_free_radius = radius
+        _admit_numpy(keep, fits, offsets, px, py, MapView(lo, i0, j0, res) if has_map else None, cfg)
+    idx = np.flatnonzero(keep)
+    starts = offsets[idx]
+    npts = offsets[idx + 1] - starts
+    out = [starts, npts, kinds[idx], lohi[idx], rel[idx], fits[idx]]
+    if not has_map:
+        return (*out, np.zeros((3, 0)))
+    sel = np.repeat(keep, offsets[1:] - offsets[:-1])
+    det_off = np.zeros(idx.shape[0] + 1, dtype=np.int64)
+    np.cumsum(npts, out=det_off[1:])
+    ev = np.zeros((3, int(sel.sum())), dtype=bool)
+    map_evidence_kernel(px[sel], py[sel], lo, i0, j0, res, occ, free_thr, radius, ev[0], ev[1], ev[2])
+    return (*out, K.mask_fractions(ev, det_off))
+
+
+def _van_source() -> SimSource:
+    from test_detect_vehicles import _van_scene
+    return SimSource(_van_scene())
+
+
+def test_fused_kernels_give_the_former_calls_results_in_whole_runs(monkeypatch):
+    """Every call of select_detections in two simulated runs (people seen from a
+    driving robot; a van longer than max_extent driving past, so the vehicle test runs with its map) returns what
+    the calls it replaces returned, bit for bit; the runs have detections, updates and vehicle-size clusters kept and
+    dropped."""
+    seen = {"select": 0, "admit": 0, "map": 0}
+
+    def wrap(name, fused, ref):
+        def f(*a):
+            want = ref(*a)
+            got = fused(*a)
+            assert len(got) == len(want)
+            for g, w in zip(got, want):
+                assert _same(g, w), name
+            seen[name] += 1
+            if name == "select":
+                seen["map"] += bool(a[12])
+                seen["admit"] += bool(a[8] and a[12]) and bool(long_kept(a[0], a[4], a[9]).shape[0])
+            return got
+        return f
+
+    monkeypatch.setattr(tracker_mod, "select_detections", wrap("select", K.select_detections, _select_ref))
+    for src in (open_source("sim:drive", seed=11, duration=6.0), _van_source()):
+        pipe = Pipeline(Config())
+        for scan in src:
+            pipe.process(scan)
+    assert seen["select"] > 100
+    assert seen["map"] > 100 and seen["admit"] > 10
