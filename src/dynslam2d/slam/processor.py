@@ -638,11 +638,23 @@ class HectorSlam:
         levels = self.map.levels
         start = res.start.as_array()
 
-        # (pose bytes, LevelFit, free fraction) of the latest refine: _fit and the free-space test reuse them at the
-        # same pose
-        last_fit: list = []
+        # pose bytes → (LevelFit, free fraction) of every refine of this scan: _fit and the free-space test reuse
+        # them at the same pose (the winner is not always the latest refine: a correlative seed that refines to a
+        # lower score leaves the first refine's pose)
+        fits: dict[bytes, tuple[LevelFit, float | None]] = {}
+        # seed bytes → (pose, score) of every refine of this scan: the map and the points do not change within the
+        # scan, so a seed refined before (a correlative search's pose equal to the start, or a recovery seed equal
+        # to an earlier one) refines to the same pose
+        refined: dict[bytes, tuple[np.ndarray, float]] = {}
 
         def refine(seed: np.ndarray) -> tuple[np.ndarray, float]:
+            key = np.asarray(seed, dtype=np.float64).tobytes()  # (the matcher's float64 start)
+            out = refined.get(key)
+            if out is None:  # (the poses are not written to by their users)
+                out = refined[key] = _refine_once(seed)
+            return out
+
+        def _refine_once(seed: np.ndarray) -> tuple[np.ndarray, float]:
             fitted: list = []  # level 0's evaluation and the free fraction at the result, from the matcher's call
             p = match_multires(
                 levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
@@ -655,7 +667,7 @@ class HectorSlam:
                 fit, free = fitted
             else:
                 fit, free = evaluate(levels[0], pts, p), None
-            last_fit[:] = [p.tobytes(), fit, free]
+            fits[p.tobytes()] = (fit, free)
             return p, fit.score
 
         def search() -> tuple[np.ndarray, float] | None:
@@ -710,14 +722,15 @@ class HectorSlam:
             res.reason = REJECT_JUMP
             return
         at = pose.as_array()
-        # the final refine's evaluation at this same pose (its H, cost and score: evaluate with the same
-        # gradient weights), instead of evaluating it again
-        self._fit(res, pts, pose, last_fit[1] if last_fit and not c.hector_gradient_bug
-                  and last_fit[0] == at.tobytes() else None)
+        # a refine's evaluation at this same pose (its H, cost and score: evaluate with the same gradient weights),
+        # instead of evaluating it again
+        at_fit = fits.get(at.tobytes()) if not c.hector_gradient_bug else None
+        self._fit(res, pts, pose, at_fit[0] if at_fit is not None else None)
         avg = self._score_avg
-        # the final refine's free fraction was taken at (x, y, wrap_angle(θ)) of its result: this pose when the
-        # result is best_p
-        free = last_fit[2] if last_fit and last_fit[2] is not None and last_fit[0] == best_p.tobytes() else None
+        # a refine's free fraction was taken at (x, y, wrap_angle(θ)) of its result: this pose when the result is
+        # best_p
+        best_fit = fits.get(best_p.tobytes())
+        free = best_fit[1] if best_fit is not None else None
         res.free_fraction = free if free is not None else free_fraction(levels[min(1, len(levels) - 1)], pts, at,
                                                                         FREE_SPACE_PROB)
         if res.score < c.reject_score_min or (avg is not None and res.score < c.reject_score_ratio * avg):
