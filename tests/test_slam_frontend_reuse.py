@@ -97,3 +97,24 @@ def test_a_search_seed_equal_to_the_start_is_not_refined_twice(monkeypatch) -> N
         assert step.pose == e.pose and step.score == e.score and step.map_updated == e.map_updated
         assert not step.used_correlative
         assert len(calls) - n0 == (0 if step.index == 0 else 1)  # (the first scan is not matched)
+
+
+def test_constant_velocity_start_is_the_last_motion_over_its_time() -> None:
+    """The constant-velocity start: the last accepted motion divided by its time, times the new gap, composed onto
+    the last pose — the same floats as the array arithmetic (Δ / dt, then × dt′) it replaced."""
+    slam = HectorSlam(SlamConfig(constant_velocity=True))
+    box = (7.0, 4.0, 1.2, 0.8)
+    poses = [Pose2D(2.0, 3.0, 0.1), Pose2D(2.13, 3.02, 0.14), Pose2D(2.27, 3.05, 0.19)]
+    stamps = [0.0, 0.1, 0.23]
+    for k, (p, t) in enumerate(zip(poses, stamps, strict=True)):
+        prev, prev_t = slam.pose, slam._last_stamp
+        step = slam.process(room_box_scan(p, box, t, seed=k))
+        assert not step.rejected
+        if k:
+            d = prev.between(step.pose)
+            v = np.array([d.x, d.y, d.theta]) / (t - prev_t)
+            later = t + 0.07
+            w = v * (later - t)
+            expect = step.pose.compose(Pose2D(float(w[0]), float(w[1]), float(w[2])))
+            assert slam.predict(later) == expect
+            assert slam.predict(later) != step.pose  # (it moved)

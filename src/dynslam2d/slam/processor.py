@@ -238,7 +238,8 @@ class HectorSlam:
         self.n_map_updates = 0
         self._last_pose: Pose2D | None = None
         self._last_stamp: float | None = None
-        self._velocity: np.ndarray | None = None  # (vx, vy, ω) in the previous laser frame, per s
+        # (vx, vy, ω) in the previous laser frame, per s (floats: only the constant-velocity start reads them)
+        self._velocity: tuple[float, float, float] | None = None
         self._last_motion = (0.0, 0.0)  # (|Δxy| m, |Δθ| rad) between the last two poses
         self._last_map_pose: Pose2D | None = None
         self._score_avg: float | None = None
@@ -329,8 +330,8 @@ class HectorSlam:
         if self._last_pose is None:
             return Pose2D(), gap
         if c.constant_velocity and not gap and self._velocity is not None and dt is not None:
-            v = self._velocity * dt
-            return self._last_pose.compose(Pose2D(float(v[0]), float(v[1]), float(v[2]))), gap
+            vx, vy, vth = self._velocity
+            return self._last_pose.compose(Pose2D(vx * dt, vy * dt, vth * dt)), gap
         return self._last_pose, gap
 
     # ---- motion prior -------------------------------------------------------------------
@@ -772,7 +773,7 @@ class HectorSlam:
             self._last_motion = (math.hypot(d.x, d.y), abs(d.theta))
             dt = stamp - self._last_stamp if self._last_stamp is not None else 0.0
             if 0.0 < dt <= c.max_time_gap and not res.rejected:
-                self._velocity = np.array([d.x, d.y, d.theta]) / dt
+                self._velocity = (d.x / dt, d.y / dt, d.theta / dt)  # (the array division's values, no array)
         self._last_stamp = stamp
         self._force_search = res.rejected
         # with recovery on, a forward gap keeps the motion history: the recovery searches around the velocity
