@@ -244,12 +244,16 @@ class HectorSlam:
         self._last_map_pose: Pose2D | None = None
         self._score_avg: float | None = None
         self._force_search = False
+        self._odometry_start = False  # the scan being matched starts from the odometry's prediction
         self._n_accepted = 0  # accepted matches against a non-empty map
         self._last_odom: Pose2D | None = None  # Scan.odom of the previous scan
         self._last_yaw_rate: float | None = None
         self._state = STATE_TRACKING
         self._unsupported_since: float | None = None  # stamp of the first scan of the current unsupported run
         self.lost_events = 0
+        #: front-end correlative searches run before the match ('auto' triggers or 'always'), whether or not
+        #: their pose won (``counts["correlative"]`` counts only the winners)
+        self.pre_searches = 0
         self.relocalisations = 0
         self._refused: tuple[float, Pose2D, int] | None = None  # (since, pose, scan number) of a refused weak match
         self._degenerate_prev = (False, False)  # (translation, rotation) degenerate on the last matched scan
@@ -463,7 +467,9 @@ class HectorSlam:
             else:
                 self._use_prediction(res, prior, PREDICT_LOST)
         else:
+            self._odometry_start = prior.kind == "odometry" and predicted is None
             self._match_tracking(res, pts, prior, scan.stamp, self._odometry_information(prior))
+            self._odometry_start = False  # (the laser-only seed below starts without the odometry's motion)
             if res.low_support and prior.kind == "odometry" and predicted is None:
                 # odometry is a prior, not a replacement: when the odometry-seeded match finds little
                 # support (odometry slipped or glitched), try the laser-only seed too and keep the better
@@ -683,7 +689,9 @@ class HectorSlam:
             return refine(cr.pose)
 
         mode = c.correlative_mode
-        big_motion = (
+        # a start the odometry predicted already holds the previous scan's motion: large motion alone does not
+        # trigger the search there (search_on_motion_with_odometry); the poor-match trigger below still does
+        big_motion = (not self._odometry_start or c.search_on_motion_with_odometry) and (
             self._last_motion[0] > c.correlative_trigger_distance
             or self._last_motion[1] > c.correlative_trigger_angle
         )
@@ -695,6 +703,7 @@ class HectorSlam:
         if mode != "never" and not pre_search and self._score_avg is not None:
             pre_search = best_s < c.poor_match_ratio * self._score_avg
         if pre_search:
+            self.pre_searches += 1
             found = search()
             if found is not None and found[1] > best_s:
                 best_p, best_s = found
