@@ -202,6 +202,15 @@ class SlamConfig(BaseModel):
         0.08, ge=0.0,
         description="'auto' mode: search when the previous inter-scan motion exceeded this rotation, rad.",
     )
+    search_on_motion_with_odometry: bool = Field(
+        False,
+        description="'auto' mode: keep the motion trigger (correlative_trigger_distance / _angle) when the start "
+        "estimate is the odometry's prediction. False (default): odometry already predicts the motion, so a "
+        "large previous motion alone is no sign the start is wrong (MIT CSAIL: 1794 of 1988 scans searched, 43 "
+        "moved by > 2 cm or 1°); the other triggers — a poor match (poor_match_ratio), a time gap, a rejected "
+        "or skipped previous scan, the first matches, and the large-motion recovery — still fire. Laser-only, "
+        "IMU and motion-model starts always keep the motion trigger.",
+    )
     poor_match_ratio: float = Field(
         0.85, ge=0.0, le=1.0,
         description="'auto' mode: search when the match score falls below this fraction of the running "

@@ -238,17 +238,22 @@ class HectorSlam:
         self.n_map_updates = 0
         self._last_pose: Pose2D | None = None
         self._last_stamp: float | None = None
-        self._velocity: np.ndarray | None = None  # (vx, vy, ω) in the previous laser frame, per s
+        # (vx, vy, ω) in the previous laser frame, per s (floats: only the constant-velocity start reads them)
+        self._velocity: tuple[float, float, float] | None = None
         self._last_motion = (0.0, 0.0)  # (|Δxy| m, |Δθ| rad) between the last two poses
         self._last_map_pose: Pose2D | None = None
         self._score_avg: float | None = None
         self._force_search = False
+        self._odometry_start = False  # the scan being matched starts from the odometry's prediction
         self._n_accepted = 0  # accepted matches against a non-empty map
         self._last_odom: Pose2D | None = None  # Scan.odom of the previous scan
         self._last_yaw_rate: float | None = None
         self._state = STATE_TRACKING
         self._unsupported_since: float | None = None  # stamp of the first scan of the current unsupported run
         self.lost_events = 0
+        #: front-end correlative searches run before the match ('auto' triggers or 'always'), whether or not
+        #: their pose won (``counts["correlative"]`` counts only the winners)
+        self.pre_searches = 0
         self.relocalisations = 0
         self._refused: tuple[float, Pose2D, int] | None = None  # (since, pose, scan number) of a refused weak match
         self._degenerate_prev = (False, False)  # (translation, rotation) degenerate on the last matched scan
@@ -329,8 +334,8 @@ class HectorSlam:
         if self._last_pose is None:
             return Pose2D(), gap
         if c.constant_velocity and not gap and self._velocity is not None and dt is not None:
-            v = self._velocity * dt
-            return self._last_pose.compose(Pose2D(float(v[0]), float(v[1]), float(v[2]))), gap
+            vx, vy, vth = self._velocity
+            return self._last_pose.compose(Pose2D(vx * dt, vy * dt, vth * dt)), gap
         return self._last_pose, gap
 
     # ---- motion prior -------------------------------------------------------------------
@@ -462,7 +467,9 @@ class HectorSlam:
             else:
                 self._use_prediction(res, prior, PREDICT_LOST)
         else:
+            self._odometry_start = prior.kind == "odometry" and predicted is None
             self._match_tracking(res, pts, prior, scan.stamp, self._odometry_information(prior))
+            self._odometry_start = False  # (the laser-only seed below starts without the odometry's motion)
             if res.low_support and prior.kind == "odometry" and predicted is None:
                 # odometry is a prior, not a replacement: when the odometry-seeded match finds little
                 # support (odometry slipped or glitched), try the laser-only seed too and keep the better
@@ -638,11 +645,23 @@ class HectorSlam:
         levels = self.map.levels
         start = res.start.as_array()
 
-        # (pose bytes, LevelFit, free fraction) of the latest refine: _fit and the free-space test reuse them at the
-        # same pose
-        last_fit: list = []
+        # pose bytes → (LevelFit, free fraction) of every refine of this scan: _fit and the free-space test reuse
+        # them at the same pose (the winner is not always the latest refine: a correlative seed that refines to a
+        # lower score leaves the first refine's pose)
+        fits: dict[bytes, tuple[LevelFit, float | None]] = {}
+        # seed bytes → (pose, score) of every refine of this scan: the map and the points do not change within the
+        # scan, so a seed refined before (a correlative search's pose equal to the start, or a recovery seed equal
+        # to an earlier one) refines to the same pose
+        refined: dict[bytes, tuple[np.ndarray, float]] = {}
 
         def refine(seed: np.ndarray) -> tuple[np.ndarray, float]:
+            key = np.asarray(seed, dtype=np.float64).tobytes()  # (the matcher's float64 start)
+            out = refined.get(key)
+            if out is None:  # (the poses are not written to by their users)
+                out = refined[key] = _refine_once(seed)
+            return out
+
+        def _refine_once(seed: np.ndarray) -> tuple[np.ndarray, float]:
             fitted: list = []  # level 0's evaluation and the free fraction at the result, from the matcher's call
             p = match_multires(
                 levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
@@ -655,7 +674,7 @@ class HectorSlam:
                 fit, free = fitted
             else:
                 fit, free = evaluate(levels[0], pts, p), None
-            last_fit[:] = [p.tobytes(), fit, free]
+            fits[p.tobytes()] = (fit, free)
             return p, fit.score
 
         def search() -> tuple[np.ndarray, float] | None:
@@ -670,7 +689,9 @@ class HectorSlam:
             return refine(cr.pose)
 
         mode = c.correlative_mode
-        big_motion = (
+        # a start the odometry predicted already holds the previous scan's motion: large motion alone does not
+        # trigger the search there (search_on_motion_with_odometry); the poor-match trigger below still does
+        big_motion = (not self._odometry_start or c.search_on_motion_with_odometry) and (
             self._last_motion[0] > c.correlative_trigger_distance
             or self._last_motion[1] > c.correlative_trigger_angle
         )
@@ -682,6 +703,7 @@ class HectorSlam:
         if mode != "never" and not pre_search and self._score_avg is not None:
             pre_search = best_s < c.poor_match_ratio * self._score_avg
         if pre_search:
+            self.pre_searches += 1
             found = search()
             if found is not None and found[1] > best_s:
                 best_p, best_s = found
@@ -710,14 +732,15 @@ class HectorSlam:
             res.reason = REJECT_JUMP
             return
         at = pose.as_array()
-        # the final refine's evaluation at this same pose (its H, cost and score: evaluate with the same
-        # gradient weights), instead of evaluating it again
-        self._fit(res, pts, pose, last_fit[1] if last_fit and not c.hector_gradient_bug
-                  and last_fit[0] == at.tobytes() else None)
+        # a refine's evaluation at this same pose (its H, cost and score: evaluate with the same gradient weights),
+        # instead of evaluating it again
+        at_fit = fits.get(at.tobytes()) if not c.hector_gradient_bug else None
+        self._fit(res, pts, pose, at_fit[0] if at_fit is not None else None)
         avg = self._score_avg
-        # the final refine's free fraction was taken at (x, y, wrap_angle(θ)) of its result: this pose when the
-        # result is best_p
-        free = last_fit[2] if last_fit and last_fit[2] is not None and last_fit[0] == best_p.tobytes() else None
+        # a refine's free fraction was taken at (x, y, wrap_angle(θ)) of its result: this pose when the result is
+        # best_p
+        best_fit = fits.get(best_p.tobytes())
+        free = best_fit[1] if best_fit is not None else None
         res.free_fraction = free if free is not None else free_fraction(levels[min(1, len(levels) - 1)], pts, at,
                                                                         FREE_SPACE_PROB)
         if res.score < c.reject_score_min or (avg is not None and res.score < c.reject_score_ratio * avg):
@@ -759,7 +782,7 @@ class HectorSlam:
             self._last_motion = (math.hypot(d.x, d.y), abs(d.theta))
             dt = stamp - self._last_stamp if self._last_stamp is not None else 0.0
             if 0.0 < dt <= c.max_time_gap and not res.rejected:
-                self._velocity = np.array([d.x, d.y, d.theta]) / dt
+                self._velocity = (d.x / dt, d.y / dt, d.theta / dt)  # (the array division's values, no array)
         self._last_stamp = stamp
         self._force_search = res.rejected
         # with recovery on, a forward gap keeps the motion history: the recovery searches around the velocity

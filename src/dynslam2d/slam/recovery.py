@@ -31,8 +31,8 @@ the running average of accepted scores. Poses are laser poses in the map frame (
 
 from __future__ import annotations
 
+import bisect
 import math
-import statistics
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -81,14 +81,22 @@ class ScanPeriod:
 
     def __init__(self, n: int = 31) -> None:
         self._gaps: deque[float] = deque(maxlen=n)
+        self._sorted: list[float] = []  # the same gaps in ascending order
         self._median = 0.0
 
     def add(self, dt: float) -> None:
         """Record the gap ``dt`` s between two consecutive scans (ignored unless positive and finite)."""
         if dt > 0.0 and math.isfinite(dt):
-            self._gaps.append(dt)
-            # once per scan; statistics.median gives np.median's value without its ~30 µs of array set-up
-            self._median = float(statistics.median(self._gaps))
+            gaps, srt = self._gaps, self._sorted
+            if len(gaps) == gaps.maxlen:
+                del srt[bisect.bisect_left(srt, gaps[0])]  # the gap the append drops (equal floats are alike)
+            gaps.append(dt)
+            bisect.insort(srt, dt)
+            # statistics.median's value (np.median's) from the sorted window kept up to date: the middle one, or
+            # the mean of the middle two, without sorting the window on every scan
+            n = len(srt)
+            i = n // 2
+            self._median = float(srt[i] if n % 2 else (srt[i - 1] + srt[i]) / 2)
 
     @property
     def median(self) -> float:
