@@ -105,59 +105,92 @@ def _count_scan(counts, last, scan_id, ox, oy, hx, hy, cx, cy, core):  # pragma:
     the clearing segments from ``(ox, oy)``. Per scan, a cell gets at most one hit and
     one pass, and no pass if the scan hit it (hits are counted first). Switches count changes between
     hit and pass in each cell's sequence of scans (the kind of its latest touch is its state)."""
+    for k in range(hx.shape[0]):
+        _count_hit(counts, last, scan_id, hx[k], hy[k])
+    for k in range(cx.shape[0]):
+        _count_ray(counts, last, scan_id, ox, oy, cx[k], cy[k], core)
+
+
+@njit(cache=True)
+def _count_beams(counts, last, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0, j0,
+                 core):  # pragma: no cover - numba
+    """:func:`_count_scan` of the beams as :func:`_scan_geometry` gives them (world cell units): hits at
+    ``(ex, ey)[kept]``, clearing segments to ``(cx, cy)[clear]``, all shifted by the array's first cell
+    ``(i0, j0)`` here (the same float64 subtractions numpy's ``ex[kept] - i0`` does) instead of in four
+    masked numpy copies per scan. ``(ox, oy)``: the laser in array cell units."""
+    fi0 = float(i0)
+    fj0 = float(j0)
+    for k in range(ex.shape[0]):
+        if kept[k]:
+            _count_hit(counts, last, scan_id, ex[k] - fi0, ey[k] - fj0)
+    for k in range(cx.shape[0]):
+        if clear[k]:
+            _count_ray(counts, last, scan_id, ox, oy, cx[k] - fi0, cy[k] - fj0, core)
+
+
+@njit(cache=True, inline="always")
+def _count_hit(counts, last, scan_id, hx, hy):  # pragma: no cover - numba
+    """A hit of scan ``scan_id`` at ``(hx, hy)`` (array cell units) into ``counts`` / ``last`` (:func:`_count_scan`)."""
+    ix = int(math.floor(hx + 0.5))
+    iy = int(math.floor(hy + 0.5))
+    if 0 <= ix < counts.shape[1] and 0 <= iy < counts.shape[0]:
+        hit_code = 2 * scan_id + 1
+        lt = last[iy, ix]
+        if lt != hit_code:
+            if lt != 0 and (lt & 1) == 0 and counts[iy, ix, 2] < COUNT_MAX:
+                counts[iy, ix, 2] += 1
+            last[iy, ix] = hit_code
+            if counts[iy, ix, 0] < COUNT_MAX:
+                counts[iy, ix, 0] += 1
+
+
+@njit(cache=True, inline="always")
+def _count_ray(counts, last, scan_id, ox, oy, ex, ey, core):  # pragma: no cover - numba
+    """The passes of scan ``scan_id`` along the segment ``(ox, oy)`` → ``(ex, ey)`` (array cell units) into
+    ``counts`` / ``last`` (:func:`_count_scan`): one cell per step of the major axis, counted where the segment
+    runs within ``core`` of the cell centre across it."""
+    dx = ex - ox
+    dy = ey - oy
+    if abs(dx) >= abs(dy):
+        _walk(counts, last, scan_id, int(math.floor(ox + 0.5)), int(math.floor(ex + 0.5)),
+              dy / dx if dx != 0.0 else 0.0, ox, oy, core, True)
+    else:
+        _walk(counts, last, scan_id, int(math.floor(oy + 0.5)), int(math.floor(ey + 0.5)), dx / dy, oy, ox, core,
+              False)
+
+
+@njit(cache=True, inline="always")
+def _walk(counts, last, scan_id, a0, a1, slope, m0, n0, core, x_major):  # pragma: no cover - numba
+    """Major-axis cells a0 … a1 of one ray (minor coordinate ``n0 + slope · (a − m0)``); ``x_major``: a is the
+    column (else the row)."""
     h = counts.shape[0]
     w = counts.shape[1]
-    hit_code = 2 * scan_id + 1
-    for k in range(hx.shape[0]):
-        ix = int(math.floor(hx[k] + 0.5))
-        iy = int(math.floor(hy[k] + 0.5))
-        if 0 <= ix < w and 0 <= iy < h:
-            lt = last[iy, ix]
-            if lt != hit_code:
-                if lt != 0 and (lt & 1) == 0 and counts[iy, ix, 2] < COUNT_MAX:
-                    counts[iy, ix, 2] += 1
-                last[iy, ix] = hit_code
-                if counts[iy, ix, 0] < COUNT_MAX:
-                    counts[iy, ix, 0] += 1
-    for k in range(cx.shape[0]):
-        dx = cx[k] - ox
-        dy = cy[k] - oy
-        x_major = abs(dx) >= abs(dy)
-        if x_major:
-            a0 = int(math.floor(ox + 0.5))
-            a1 = int(math.floor(cx[k] + 0.5))
-            slope = dy / dx if dx != 0.0 else 0.0
-            m0 = ox
-            n0 = oy
-        else:
-            a0 = int(math.floor(oy + 0.5))
-            a1 = int(math.floor(cy[k] + 0.5))
-            slope = dx / dy
-            m0 = oy
-            n0 = ox
-        step = 1 if a1 >= a0 else -1
-        a = a0
-        while True:
-            b = n0 + slope * (a - m0)
-            ib = int(math.floor(b + 0.5))
-            if abs(b - ib) <= core:
-                if x_major:
-                    x = a
-                    y = ib
-                else:
-                    x = ib
-                    y = a
-                if 0 <= x < w and 0 <= y < h:
-                    lt = last[y, x]
-                    if (lt >> 1) != scan_id:
-                        if (lt & 1) == 1 and counts[y, x, 2] < COUNT_MAX:
-                            counts[y, x, 2] += 1
-                        last[y, x] = 2 * scan_id
-                        if counts[y, x, 1] < COUNT_MAX:
-                            counts[y, x, 1] += 1
-            if a == a1:
-                break
-            a += step
+    pass_code = 2 * scan_id
+    step = 1 if a1 >= a0 else -1
+    a = a0
+    while True:
+        b = n0 + slope * (a - m0)
+        ib = int(math.floor(b + 0.5))
+        if abs(b - ib) <= core:
+            if x_major:
+                x = a
+                y = ib
+            else:
+                x = ib
+                y = a
+            if 0 <= x < w and 0 <= y < h:
+                # branch-free: about two in three visits find the cell already passed by this scan (rays share
+                # the cells near the laser), a branch the CPU mispredicts; the stores then write the same values
+                lt = np.int64(last[y, x])
+                first = np.int64((lt >> 1) != scan_id)  # 1: this scan's first touch of the cell
+                c_switch = np.int64(counts[y, x, 2])
+                c_pass = np.int64(counts[y, x, 1])
+                counts[y, x, 2] = c_switch + (first & lt & np.int64(c_switch < COUNT_MAX))  # was a hit: a switch
+                counts[y, x, 1] = c_pass + (first & np.int64(c_pass < COUNT_MAX))
+                last[y, x] = lt + first * (pass_code - lt)
+        if a == a1:
+            break
+        a += step
 
 
 @njit(cache=True)
@@ -360,9 +393,8 @@ class VisibilityCounter:
             return
         if self.scans + 1 - self._id_base > _ID_SPAN:
             self._renumber()
-        _count_scan(self._cells, self._last, self.scans + 1 - self._id_base,
-                    ox - self.i0, oy - self.j0, ex[kept] - self.i0, ey[kept] - self.j0,
-                    cx[clear] - self.i0, cy[clear] - self.j0, float(c.ray_core))
+        _count_beams(self._cells, self._last, self.scans + 1 - self._id_base, ox - self.i0, oy - self.j0,
+                     ex, ey, kept, cx, cy, clear, self.i0, self.j0, float(c.ray_core))
         self.scans += 1
         self.seconds += time.perf_counter() - t0
 
