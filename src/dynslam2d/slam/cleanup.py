@@ -112,20 +112,113 @@ def _count_scan(counts, last, scan_id, ox, oy, hx, hy, cx, cy, core):  # pragma:
 
 
 @njit(cache=True)
-def _count_beams(counts, last, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0, j0,
-                 core):  # pragma: no cover - numba
+def _count_beams(counts, last, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0, j0, core,
+                 mask):  # pragma: no cover - numba
     """:func:`_count_scan` of the beams as :func:`_scan_geometry` gives them (world cell units): hits at
     ``(ex, ey)[kept]``, clearing segments to ``(cx, cy)[clear]``, all shifted by the array's first cell
     ``(i0, j0)`` here (the same float64 subtractions numpy's ``ex[kept] - i0`` does) instead of in four
-    masked numpy copies per scan. ``(ox, oy)``: the laser in array cell units."""
+    masked numpy copies per scan. ``(ox, oy)``: the laser in array cell units. Returns the scratch ``mask``
+    (uint8, all zero; a larger one when the scan's box needs it) for the next scan.
+
+    The passes in two steps, with the counts of :func:`_count_scan`: the rays first mark the cells they pass
+    in ``mask`` (one byte per cell of the scan's bounding box, which stays in the first cache levels), then the
+    marked cells are counted in row order. A cell gets at most one pass per scan and the counts depend only on
+    the set of cells hit and the set passed, so the order does not matter; walking the rays straight into the
+    counts touched a new cache line of both arrays at every step of a ray running along y, and about two in three
+    steps land on a cell an earlier ray of the scan already passed."""
+    h = counts.shape[0]
+    w = counts.shape[1]
     fi0 = float(i0)
     fj0 = float(j0)
     for k in range(ex.shape[0]):
         if kept[k]:
             _count_hit(counts, last, scan_id, ex[k] - fi0, ey[k] - fj0)
+    # the cells any ray can reach: its major axis runs over rounded ends, its minor coordinate at most half a
+    # cell (|slope| ≤ 1) beyond the segment's; one more cell each side, clipped to the arrays (the rest is dropped)
+    lo_x = ox
+    hi_x = ox
+    lo_y = oy
+    hi_y = oy
     for k in range(cx.shape[0]):
         if clear[k]:
-            _count_ray(counts, last, scan_id, ox, oy, cx[k] - fi0, cy[k] - fj0, core)
+            lo_x = min(lo_x, cx[k] - fi0)
+            hi_x = max(hi_x, cx[k] - fi0)
+            lo_y = min(lo_y, cy[k] - fj0)
+            hi_y = max(hi_y, cy[k] - fj0)
+    x0 = max(int(math.floor(lo_x)) - 1, 0)
+    x1 = min(int(math.floor(hi_x)) + 2, w - 1)
+    y0 = max(int(math.floor(lo_y)) - 1, 0)
+    y1 = min(int(math.floor(hi_y)) + 2, h - 1)
+    if x1 < x0 or y1 < y0:
+        return mask
+    stride = (x1 - x0 + 8) // 8 * 8  # whole 8-byte words per row
+    need = stride * (y1 - y0 + 1)
+    if mask.shape[0] < need:
+        mask = np.zeros(need, dtype=np.uint8)
+    for k in range(cx.shape[0]):
+        if clear[k]:
+            _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, cx[k] - fi0, cy[k] - fj0, core)
+    words = mask[:need].view(np.uint64)
+    per_row = stride // 8
+    pass_code = 2 * scan_id
+    for r in range(y1 - y0 + 1):
+        y = y0 + r
+        for q in range(per_row):
+            if words[r * per_row + q] == 0:
+                continue
+            base = r * stride + q * 8
+            for j in range(8):
+                if mask[base + j] == 0:
+                    continue
+                mask[base + j] = 0
+                x = x0 + q * 8 + j
+                lt = last[y, x]
+                if (lt >> 1) != scan_id:  # not hit by this scan
+                    if (lt & 1) == 1 and counts[y, x, 2] < COUNT_MAX:
+                        counts[y, x, 2] += 1
+                    last[y, x] = pass_code
+                    if counts[y, x, 1] < COUNT_MAX:
+                        counts[y, x, 1] += 1
+    return mask
+
+
+@njit(cache=True, inline="always")
+def _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, ex, ey, core):  # pragma: no cover - numba
+    """Mark in ``mask`` (rows of ``stride`` bytes from cell (x0, y0); cells beyond (x1, y1) dropped) the cells the
+    segment ``(ox, oy)`` → ``(ex, ey)`` passes: the cells and ``core`` test of :func:`_walk`."""
+    dx = ex - ox
+    dy = ey - oy
+    x_major = abs(dx) >= abs(dy)
+    if x_major:
+        a0 = int(math.floor(ox + 0.5))
+        a1 = int(math.floor(ex + 0.5))
+        slope = dy / dx if dx != 0.0 else 0.0
+        m0 = ox
+        n0 = oy
+    else:
+        a0 = int(math.floor(oy + 0.5))
+        a1 = int(math.floor(ey + 0.5))
+        slope = dx / dy
+        m0 = oy
+        n0 = ox
+    step = 1 if a1 >= a0 else -1
+    a = a0
+    while True:
+        b = n0 + slope * (a - m0)
+        ib = int(math.floor(b + 0.5))
+        inside = np.uint8(abs(b - ib) <= core)  # or-ed in without a branch (one in five steps fails it)
+        if x_major:
+            x = a
+            y = ib
+        else:
+            x = ib
+            y = a
+        if x0 <= x <= x1 and y0 <= y <= y1:
+            i = (y - y0) * stride + (x - x0)
+            mask[i] = mask[i] | inside
+        if a == a1:
+            break
+        a += step
 
 
 @njit(cache=True, inline="always")
@@ -282,6 +375,8 @@ class VisibilityCounter:
         self._cells = np.zeros((0, 0, 3), dtype=np.uint16)  # hits, passes, switches
         self._last = np.zeros((0, 0), dtype=np.uint16)  # latest touch: 2 · scan number (+ 1 for a hit)
         self._id_base = 0  # scan number = scan id − this (see _renumber)
+        #: scratch of the counting kernel (one byte per cell of a scan's bounding box, zero between scans)
+        self._mask = np.zeros(0, dtype=np.uint8)
         self.scans = 0  # scans counted (also the id of the next scan)
         self.too_large = 0  # scans left out: counting them would exceed the memory limit
         self.seconds = 0.0
@@ -393,8 +488,9 @@ class VisibilityCounter:
             return
         if self.scans + 1 - self._id_base > _ID_SPAN:
             self._renumber()
-        _count_beams(self._cells, self._last, self.scans + 1 - self._id_base, ox - self.i0, oy - self.j0,
-                     ex, ey, kept, cx, cy, clear, self.i0, self.j0, float(c.ray_core))
+        self._mask = _count_beams(self._cells, self._last, self.scans + 1 - self._id_base, ox - self.i0,
+                                  oy - self.j0, ex, ey, kept, cx, cy, clear, self.i0, self.j0, float(c.ray_core),
+                                  self._mask)
         self.scans += 1
         self.seconds += time.perf_counter() - t0
 
