@@ -71,6 +71,9 @@ KERNELS: tuple[tuple[str, str], ...] = (
      '3), UniTuple(int64, 3), UniTuple(int64, 3), UniTuple(int64, 3), UniTuple(int64, 3), UniTuple(int64, '
      "3), Array(float64, 2, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), bool, float64, float64, "
      'float64,)'),
+    ('dynslam2d.slam.cleanup._geometry_bounds',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
+     "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),
     ('dynslam2d.slam.cleanup._scan_geometry',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),

@@ -357,6 +357,28 @@ def _scan_geometry(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin
     return ex, ey, cx, cy, kept, clear
 
 
+@njit(cache=True)
+def _geometry_bounds(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin_m, grazing_cells,
+                     min_sin):  # pragma: no cover - numba
+    """:func:`_scan_geometry` (same arguments) and the absolute cells (imin, jmin, imax, jmax) of the laser
+    and the valid endpoints (:meth:`VisibilityCounter._cell_bounds`: the same minima and maxima, exact, and
+    roundings) in one call, without the masked copies (``valid`` must hold a beam)."""
+    ex, ey, cx, cy, kept, clear = _scan_geometry(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin_m,
+                                                 grazing_cells, min_sin)
+    lo_x = px / res
+    hi_x = lo_x
+    lo_y = py / res
+    hi_y = lo_y
+    for i in range(ex.shape[0]):
+        if valid[i]:
+            lo_x = min(lo_x, ex[i])
+            hi_x = max(hi_x, ex[i])
+            lo_y = min(lo_y, ey[i])
+            hi_y = max(hi_y, ey[i])
+    return (ex, ey, cx, cy, kept, clear, int(math.floor(lo_x + 0.5)), int(math.floor(lo_y + 0.5)),
+            int(math.floor(hi_x + 0.5)), int(math.floor(hi_y + 0.5)))
+
+
 class VisibilityCounter:
     """Per-cell counts of scans that hit a cell and scans that passed through it.
 
@@ -434,13 +456,16 @@ class VisibilityCounter:
     def _geometry(self, scan: Scan, pose: Pose2D, valid: np.ndarray,
                   removed: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """:func:`_scan_geometry` of one scan (ex, ey, cx, cy, kept, clear)."""
+        return _scan_geometry(*self._geometry_args(scan, pose, valid, removed))
+
+    def _geometry_args(self, scan: Scan, pose: Pose2D, valid: np.ndarray, removed: np.ndarray | None) -> tuple:
+        """The arguments of :func:`_scan_geometry` / :func:`_geometry_bounds` for one scan."""
         c = self.config
         rem = removed if removed is not None and removed.shape == valid.shape else np.zeros_like(valid)
         cos_a, sin_a = scan.trig()
-        return _scan_geometry(
-            np.asarray(scan.ranges, dtype=np.float64), cos_a, sin_a, valid, np.asarray(rem, dtype=np.bool_), pose.x,
-            pose.y, pose.theta, self.resolution, c.margin_m, c.grazing_cells,
-            math.sin(math.radians(c.min_incidence_deg)))
+        return (np.asarray(scan.ranges, dtype=np.float64), cos_a, sin_a, valid, np.asarray(rem, dtype=np.bool_),
+                pose.x, pose.y, pose.theta, self.resolution, c.margin_m, c.grazing_cells,
+                math.sin(math.radians(c.min_incidence_deg)))
 
     @staticmethod
     def _cell_bounds(ox: float, oy: float, ex: np.ndarray, ey: np.ndarray,
@@ -480,9 +505,10 @@ class VisibilityCounter:
             self.scans += 1
             self.seconds += time.perf_counter() - t0
             return
-        ex, ey, cx, cy, kept, clear = self._geometry(scan, pose, valid, removed)
+        ex, ey, cx, cy, kept, clear, imin, jmin, imax, jmax = _geometry_bounds(
+            *self._geometry_args(scan, pose, valid, removed))
         ox, oy = pose.x / res, pose.y / res
-        if not self._ensure(*self._cell_bounds(ox, oy, ex, ey, valid)):
+        if not self._ensure(imin, jmin, imax, jmax):
             self.too_large += 1  # the SLAM refuses such scans too ('map_too_large')
             self.seconds += time.perf_counter() - t0
             return
