@@ -76,12 +76,16 @@ KERNELS: tuple[tuple[str, str], ...] = (
      '3), UniTuple(int64, 3), UniTuple(int64, 3), UniTuple(int64, 3), UniTuple(int64, 3), UniTuple(int64, '
      "3), Array(float64, 2, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), bool, float64, float64, "
      'float64,)'),
+    ('dynslam2d.slam.cleanup._geometry_bounds',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
+     "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),
     ('dynslam2d.slam.cleanup._scan_geometry',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),
-    ('dynslam2d.slam.cleanup._count_scan',
+    ('dynslam2d.slam.cleanup._count_beams',
      "(Array(uint16, 3, 'C'), Array(uint16, 2, 'C'), int64, float64, float64, Array(float64, 1, 'C'), "
-     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
+     "Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
+     "Array(bool, 1, 'C'), int64, int64, float64, Array(uint8, 1, 'C'),)"),
     ('dynslam2d.slam.matcher.close_count',
      "(Array(float64, 1, 'C'), float64, float64, float64,)"),
     ('dynslam2d.slam.matcher._spread_kernel',

@@ -105,59 +105,185 @@ def _count_scan(counts, last, scan_id, ox, oy, hx, hy, cx, cy, core):  # pragma:
     the clearing segments from ``(ox, oy)``. Per scan, a cell gets at most one hit and
     one pass, and no pass if the scan hit it (hits are counted first). Switches count changes between
     hit and pass in each cell's sequence of scans (the kind of its latest touch is its state)."""
+    for k in range(hx.shape[0]):
+        _count_hit(counts, last, scan_id, hx[k], hy[k])
+    for k in range(cx.shape[0]):
+        _count_ray(counts, last, scan_id, ox, oy, cx[k], cy[k], core)
+
+
+@njit(cache=True)
+def _count_beams(counts, last, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0, j0, core,
+                 mask):  # pragma: no cover - numba
+    """:func:`_count_scan` of the beams as :func:`_scan_geometry` gives them (world cell units): hits at
+    ``(ex, ey)[kept]``, clearing segments to ``(cx, cy)[clear]``, all shifted by the array's first cell
+    ``(i0, j0)`` here (the same float64 subtractions numpy's ``ex[kept] - i0`` does) instead of in four
+    masked numpy copies per scan. ``(ox, oy)``: the laser in array cell units. Returns the scratch ``mask``
+    (uint8, all zero; a larger one when the scan's box needs it) for the next scan.
+
+    The passes in two steps, with the counts of :func:`_count_scan`: the rays first mark the cells they pass
+    in ``mask`` (one byte per cell of the scan's bounding box, which stays in the first cache levels), then the
+    marked cells are counted in row order. A cell gets at most one pass per scan and the counts depend only on
+    the set of cells hit and the set passed, so the order does not matter; walking the rays straight into the
+    counts touched a new cache line of both arrays at every step of a ray running along y, and about two in three
+    steps land on a cell an earlier ray of the scan already passed."""
     h = counts.shape[0]
     w = counts.shape[1]
-    hit_code = 2 * scan_id + 1
-    for k in range(hx.shape[0]):
-        ix = int(math.floor(hx[k] + 0.5))
-        iy = int(math.floor(hy[k] + 0.5))
-        if 0 <= ix < w and 0 <= iy < h:
-            lt = last[iy, ix]
-            if lt != hit_code:
-                if lt != 0 and (lt & 1) == 0 and counts[iy, ix, 2] < COUNT_MAX:
-                    counts[iy, ix, 2] += 1
-                last[iy, ix] = hit_code
-                if counts[iy, ix, 0] < COUNT_MAX:
-                    counts[iy, ix, 0] += 1
+    fi0 = float(i0)
+    fj0 = float(j0)
+    for k in range(ex.shape[0]):
+        if kept[k]:
+            _count_hit(counts, last, scan_id, ex[k] - fi0, ey[k] - fj0)
+    # the cells any ray can reach: its major axis runs over rounded ends, its minor coordinate at most half a
+    # cell (|slope| ≤ 1) beyond the segment's; one more cell each side, clipped to the arrays (the rest is dropped)
+    lo_x = ox
+    hi_x = ox
+    lo_y = oy
+    hi_y = oy
     for k in range(cx.shape[0]):
-        dx = cx[k] - ox
-        dy = cy[k] - oy
-        x_major = abs(dx) >= abs(dy)
+        if clear[k]:
+            lo_x = min(lo_x, cx[k] - fi0)
+            hi_x = max(hi_x, cx[k] - fi0)
+            lo_y = min(lo_y, cy[k] - fj0)
+            hi_y = max(hi_y, cy[k] - fj0)
+    x0 = max(int(math.floor(lo_x)) - 1, 0)
+    x1 = min(int(math.floor(hi_x)) + 2, w - 1)
+    y0 = max(int(math.floor(lo_y)) - 1, 0)
+    y1 = min(int(math.floor(hi_y)) + 2, h - 1)
+    if x1 < x0 or y1 < y0:
+        return mask
+    stride = (x1 - x0 + 8) // 8 * 8  # whole 8-byte words per row
+    need = stride * (y1 - y0 + 1)
+    if mask.shape[0] < need:
+        mask = np.zeros(need, dtype=np.uint8)
+    for k in range(cx.shape[0]):
+        if clear[k]:
+            _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, cx[k] - fi0, cy[k] - fj0, core)
+    words = mask[:need].view(np.uint64)
+    per_row = stride // 8
+    pass_code = 2 * scan_id
+    for r in range(y1 - y0 + 1):
+        y = y0 + r
+        for q in range(per_row):
+            if words[r * per_row + q] == 0:
+                continue
+            base = r * stride + q * 8
+            for j in range(8):
+                if mask[base + j] == 0:
+                    continue
+                mask[base + j] = 0
+                x = x0 + q * 8 + j
+                lt = last[y, x]
+                if (lt >> 1) != scan_id:  # not hit by this scan
+                    if (lt & 1) == 1 and counts[y, x, 2] < COUNT_MAX:
+                        counts[y, x, 2] += 1
+                    last[y, x] = pass_code
+                    if counts[y, x, 1] < COUNT_MAX:
+                        counts[y, x, 1] += 1
+    return mask
+
+
+@njit(cache=True, inline="always")
+def _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, ex, ey, core):  # pragma: no cover - numba
+    """Mark in ``mask`` (rows of ``stride`` bytes from cell (x0, y0); cells beyond (x1, y1) dropped) the cells the
+    segment ``(ox, oy)`` → ``(ex, ey)`` passes: the cells and ``core`` test of :func:`_walk`."""
+    dx = ex - ox
+    dy = ey - oy
+    x_major = abs(dx) >= abs(dy)
+    if x_major:
+        a0 = int(math.floor(ox + 0.5))
+        a1 = int(math.floor(ex + 0.5))
+        slope = dy / dx if dx != 0.0 else 0.0
+        m0 = ox
+        n0 = oy
+    else:
+        a0 = int(math.floor(oy + 0.5))
+        a1 = int(math.floor(ey + 0.5))
+        slope = dx / dy
+        m0 = oy
+        n0 = ox
+    step = 1 if a1 >= a0 else -1
+    a = a0
+    while True:
+        b = n0 + slope * (a - m0)
+        ib = int(math.floor(b + 0.5))
+        inside = np.uint8(abs(b - ib) <= core)  # or-ed in without a branch (one in five steps fails it)
         if x_major:
-            a0 = int(math.floor(ox + 0.5))
-            a1 = int(math.floor(cx[k] + 0.5))
-            slope = dy / dx if dx != 0.0 else 0.0
-            m0 = ox
-            n0 = oy
+            x = a
+            y = ib
         else:
-            a0 = int(math.floor(oy + 0.5))
-            a1 = int(math.floor(cy[k] + 0.5))
-            slope = dx / dy
-            m0 = oy
-            n0 = ox
-        step = 1 if a1 >= a0 else -1
-        a = a0
-        while True:
-            b = n0 + slope * (a - m0)
-            ib = int(math.floor(b + 0.5))
-            if abs(b - ib) <= core:
-                if x_major:
-                    x = a
-                    y = ib
-                else:
-                    x = ib
-                    y = a
-                if 0 <= x < w and 0 <= y < h:
-                    lt = last[y, x]
-                    if (lt >> 1) != scan_id:
-                        if (lt & 1) == 1 and counts[y, x, 2] < COUNT_MAX:
-                            counts[y, x, 2] += 1
-                        last[y, x] = 2 * scan_id
-                        if counts[y, x, 1] < COUNT_MAX:
-                            counts[y, x, 1] += 1
-            if a == a1:
-                break
-            a += step
+            x = ib
+            y = a
+        if x0 <= x <= x1 and y0 <= y <= y1:
+            i = (y - y0) * stride + (x - x0)
+            mask[i] = mask[i] | inside
+        if a == a1:
+            break
+        a += step
+
+
+@njit(cache=True, inline="always")
+def _count_hit(counts, last, scan_id, hx, hy):  # pragma: no cover - numba
+    """A hit of scan ``scan_id`` at ``(hx, hy)`` (array cell units) into ``counts`` / ``last`` (:func:`_count_scan`)."""
+    ix = int(math.floor(hx + 0.5))
+    iy = int(math.floor(hy + 0.5))
+    if 0 <= ix < counts.shape[1] and 0 <= iy < counts.shape[0]:
+        hit_code = 2 * scan_id + 1
+        lt = last[iy, ix]
+        if lt != hit_code:
+            if lt != 0 and (lt & 1) == 0 and counts[iy, ix, 2] < COUNT_MAX:
+                counts[iy, ix, 2] += 1
+            last[iy, ix] = hit_code
+            if counts[iy, ix, 0] < COUNT_MAX:
+                counts[iy, ix, 0] += 1
+
+
+@njit(cache=True, inline="always")
+def _count_ray(counts, last, scan_id, ox, oy, ex, ey, core):  # pragma: no cover - numba
+    """The passes of scan ``scan_id`` along the segment ``(ox, oy)`` → ``(ex, ey)`` (array cell units) into
+    ``counts`` / ``last`` (:func:`_count_scan`): one cell per step of the major axis, counted where the segment
+    runs within ``core`` of the cell centre across it."""
+    dx = ex - ox
+    dy = ey - oy
+    if abs(dx) >= abs(dy):
+        _walk(counts, last, scan_id, int(math.floor(ox + 0.5)), int(math.floor(ex + 0.5)),
+              dy / dx if dx != 0.0 else 0.0, ox, oy, core, True)
+    else:
+        _walk(counts, last, scan_id, int(math.floor(oy + 0.5)), int(math.floor(ey + 0.5)), dx / dy, oy, ox, core,
+              False)
+
+
+@njit(cache=True, inline="always")
+def _walk(counts, last, scan_id, a0, a1, slope, m0, n0, core, x_major):  # pragma: no cover - numba
+    """Major-axis cells a0 … a1 of one ray (minor coordinate ``n0 + slope · (a − m0)``); ``x_major``: a is the
+    column (else the row)."""
+    h = counts.shape[0]
+    w = counts.shape[1]
+    pass_code = 2 * scan_id
+    step = 1 if a1 >= a0 else -1
+    a = a0
+    while True:
+        b = n0 + slope * (a - m0)
+        ib = int(math.floor(b + 0.5))
+        if abs(b - ib) <= core:
+            if x_major:
+                x = a
+                y = ib
+            else:
+                x = ib
+                y = a
+            if 0 <= x < w and 0 <= y < h:
+                # branch-free: about two in three visits find the cell already passed by this scan (rays share
+                # the cells near the laser), a branch the CPU mispredicts; the stores then write the same values
+                lt = np.int64(last[y, x])
+                first = np.int64((lt >> 1) != scan_id)  # 1: this scan's first touch of the cell
+                c_switch = np.int64(counts[y, x, 2])
+                c_pass = np.int64(counts[y, x, 1])
+                counts[y, x, 2] = c_switch + (first & lt & np.int64(c_switch < COUNT_MAX))  # was a hit: a switch
+                counts[y, x, 1] = c_pass + (first & np.int64(c_pass < COUNT_MAX))
+                last[y, x] = lt + first * (pass_code - lt)
+        if a == a1:
+            break
+        a += step
 
 
 @njit(cache=True)
@@ -231,6 +357,28 @@ def _scan_geometry(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin
     return ex, ey, cx, cy, kept, clear
 
 
+@njit(cache=True)
+def _geometry_bounds(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin_m, grazing_cells,
+                     min_sin):  # pragma: no cover - numba
+    """:func:`_scan_geometry` (same arguments) and the absolute cells (imin, jmin, imax, jmax) of the laser
+    and the valid endpoints (:meth:`VisibilityCounter._cell_bounds`: the same minima and maxima, exact, and
+    roundings) in one call, without the masked copies (``valid`` must hold a beam)."""
+    ex, ey, cx, cy, kept, clear = _scan_geometry(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin_m,
+                                                 grazing_cells, min_sin)
+    lo_x = px / res
+    hi_x = lo_x
+    lo_y = py / res
+    hi_y = lo_y
+    for i in range(ex.shape[0]):
+        if valid[i]:
+            lo_x = min(lo_x, ex[i])
+            hi_x = max(hi_x, ex[i])
+            lo_y = min(lo_y, ey[i])
+            hi_y = max(hi_y, ey[i])
+    return (ex, ey, cx, cy, kept, clear, int(math.floor(lo_x + 0.5)), int(math.floor(lo_y + 0.5)),
+            int(math.floor(hi_x + 0.5)), int(math.floor(hi_y + 0.5)))
+
+
 class VisibilityCounter:
     """Per-cell counts of scans that hit a cell and scans that passed through it.
 
@@ -249,6 +397,8 @@ class VisibilityCounter:
         self._cells = np.zeros((0, 0, 3), dtype=np.uint16)  # hits, passes, switches
         self._last = np.zeros((0, 0), dtype=np.uint16)  # latest touch: 2 · scan number (+ 1 for a hit)
         self._id_base = 0  # scan number = scan id − this (see _renumber)
+        #: scratch of the counting kernel (one byte per cell of a scan's bounding box, zero between scans)
+        self._mask = np.zeros(0, dtype=np.uint8)
         self.scans = 0  # scans counted (also the id of the next scan)
         self.too_large = 0  # scans left out: counting them would exceed the memory limit
         self.seconds = 0.0
@@ -306,13 +456,16 @@ class VisibilityCounter:
     def _geometry(self, scan: Scan, pose: Pose2D, valid: np.ndarray,
                   removed: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """:func:`_scan_geometry` of one scan (ex, ey, cx, cy, kept, clear)."""
+        return _scan_geometry(*self._geometry_args(scan, pose, valid, removed))
+
+    def _geometry_args(self, scan: Scan, pose: Pose2D, valid: np.ndarray, removed: np.ndarray | None) -> tuple:
+        """The arguments of :func:`_scan_geometry` / :func:`_geometry_bounds` for one scan."""
         c = self.config
         rem = removed if removed is not None and removed.shape == valid.shape else np.zeros_like(valid)
         cos_a, sin_a = scan.trig()
-        return _scan_geometry(
-            np.asarray(scan.ranges, dtype=np.float64), cos_a, sin_a, valid, np.asarray(rem, dtype=np.bool_), pose.x,
-            pose.y, pose.theta, self.resolution, c.margin_m, c.grazing_cells,
-            math.sin(math.radians(c.min_incidence_deg)))
+        return (np.asarray(scan.ranges, dtype=np.float64), cos_a, sin_a, valid, np.asarray(rem, dtype=np.bool_),
+                pose.x, pose.y, pose.theta, self.resolution, c.margin_m, c.grazing_cells,
+                math.sin(math.radians(c.min_incidence_deg)))
 
     @staticmethod
     def _cell_bounds(ox: float, oy: float, ex: np.ndarray, ey: np.ndarray,
@@ -352,17 +505,18 @@ class VisibilityCounter:
             self.scans += 1
             self.seconds += time.perf_counter() - t0
             return
-        ex, ey, cx, cy, kept, clear = self._geometry(scan, pose, valid, removed)
+        ex, ey, cx, cy, kept, clear, imin, jmin, imax, jmax = _geometry_bounds(
+            *self._geometry_args(scan, pose, valid, removed))
         ox, oy = pose.x / res, pose.y / res
-        if not self._ensure(*self._cell_bounds(ox, oy, ex, ey, valid)):
+        if not self._ensure(imin, jmin, imax, jmax):
             self.too_large += 1  # the SLAM refuses such scans too ('map_too_large')
             self.seconds += time.perf_counter() - t0
             return
         if self.scans + 1 - self._id_base > _ID_SPAN:
             self._renumber()
-        _count_scan(self._cells, self._last, self.scans + 1 - self._id_base,
-                    ox - self.i0, oy - self.j0, ex[kept] - self.i0, ey[kept] - self.j0,
-                    cx[clear] - self.i0, cy[clear] - self.j0, float(c.ray_core))
+        self._mask = _count_beams(self._cells, self._last, self.scans + 1 - self._id_base, ox - self.i0,
+                                  oy - self.j0, ex, ey, kept, cx, cy, clear, self.i0, self.j0, float(c.ray_core),
+                                  self._mask)
         self.scans += 1
         self.seconds += time.perf_counter() - t0
 
