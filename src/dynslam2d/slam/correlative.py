@@ -158,13 +158,21 @@ def _min_abs(lo, hi):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr, excl):  # pragma: no cover - numba
+def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr, excl, floor, stop):  # pragma: no cover - numba
     """Exact best (rotation index, dx, dy, score) over rotations (qx/qy rows) and offsets in [−w, w]².
 
     ``pyr`` (Hmax+1, H, W); ``qx, qy`` (nrot, n) int64 point cells at zero offset; ``dth`` (nrot,)
     rotation offsets, rad; penalties ``wt_cell2`` per cell², ``wr`` per rad². ``excl`` (6,) int64
     (k0, k1, dx0, dx1, dy0, dy1): candidates with k0 ≤ k ≤ k1, dx0 ≤ dx ≤ dx1 and dy0 ≤ dy ≤ dy1
     are left out (the runner-up search); k0 > k1 leaves nothing out.
+
+    ``floor``: only scores above it count (the search starts with it as its best: blocks whose bound is at most
+    ``floor`` are pruned; −1e300 = none). Returns score ``floor`` (and rotation / offsets 0) when no candidate
+    scores above it. Where every bound is admissible (``_admissible``) the best above ``floor`` is the one the
+    search without it finds, the same candidate among equal scores too (the first maximiser in the search's
+    fixed order is reached either way: every block on the way to it has a bound ≥ its score > ``floor``).
+    ``stop``: the search returns as soon as its best exceeds ``stop`` (that candidate, not necessarily the best:
+    the caller only needs to know some candidate beats ``stop``); +inf = never.
     """
     hmax = pyr.shape[0] - 1
     nrot = qx.shape[0]
@@ -213,7 +221,7 @@ def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr, excl):  # pragma: no cov
                     i += 1
         order, buf = buf, order
         width *= 2
-    best = -1e300
+    best = floor
     bk = 0
     bdx = 0
     bdy = 0
@@ -253,6 +261,8 @@ def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr, excl):  # pragma: no cov
                 bk = k
                 bdx = dx
                 bdy = dy
+                if best > stop:
+                    return bk, bdx, bdy, best
                 continue
             half = 1 << (h - 1)
             pr = wr * dth[k] * dth[k]
@@ -313,6 +323,16 @@ def _wrapped_rows(dth: np.ndarray, k: int, ek: int, step: float) -> np.ndarray |
     return None if np.array_equal(near, np.abs(rows - k) <= ek) else near
 
 
+def _admissible(t0: np.ndarray, inside_x: bool, inside_y: bool, e: int) -> bool:
+    """Whether every block bound of a search is at least the score of every offset inside the block, given the
+    crop's score table ``t0`` (H, W) and whether no point is read at a negative column (``inside_x``) / row
+    (``inside_y``) index for any offset. A block read at column x < 0 counts the point as 0, while an offset
+    inside it (x + i, i < 2^h) may read column x + i ≥ 0 of the map, at most column 2^hmax − 2 (``e`` − 1,
+    ``e`` = 2^hmax − 1): the bound holds where the table is 0 on those first ``e`` columns (rows alike). The lower
+    edges are the only ones: beyond the upper ones both the block and its offsets read nothing."""
+    return (inside_x or not t0[:, :e].any()) and (inside_y or not t0[:e, :].any())
+
+
 #: Exclusion box that leaves nothing out (k0 > k1).
 _NO_EXCL = np.array([1, 0, 0, 0, 0, 0], dtype=np.int64)
 
@@ -351,6 +371,8 @@ def correlative_search(
     runner_up_distance: float | None = None,
     runner_up_angle: float = 0.3,
     runner_up_wrap: bool = False,
+    min_score: float | None = None,
+    min_margin: float | None = None,
 ) -> CorrelativeResult | None:
     """Search ``level`` around ``start_world`` for the best pose of laser-frame points ``pts_m`` (n, 2, m).
 
@@ -364,6 +386,13 @@ def correlative_search(
     the neighbourhood of each other. Default False: the plain index neighbourhood (the front end's
     ``recovery_runner_up_wrap`` / ``relocalise_runner_up_wrap`` and the loop closure's ``runner_up_wrap``
     choose it per call site).
+
+    ``min_score``: the caller refuses a best score below it; the search then returns None instead of a pose
+    (and prunes the blocks whose bound is below it: the same pose as without it whenever it returns one).
+    ``min_margin``: the caller refuses a runner-up closer than this below the best score; the runner-up search
+    stops at the first pose that makes the margin (score − runner_up) smaller than it, and ``runner_up`` is then
+    that pose's score (a lower bound of the runner-up's, enough to refuse). Where the margin is at least
+    ``min_margin`` the runner-up is the one found without it.
     """
     if level.empty or pts_m.shape[0] == 0:
         return None
@@ -397,7 +426,15 @@ def correlative_search(
     qx -= c0  # (fresh contiguous arrays from the kernel: shifted in place)
     qy -= r0
     qx0, qy0 = qx, qy
-    k, dx, dy, best = branch_and_bound(pyr, qx0, qy0, w, dth, translation_weight * r * r, rotation_weight, _NO_EXCL)
+    floor = -1e300
+    if min_score is not None and _admissible(pyr[0], qx_min - c0 >= w, qy_min - r0 >= w, (1 << hmax) - 1):
+        # every block's bound is admissible: pruning the blocks below min_score keeps the result
+        # (branch_and_bound's docstring); otherwise the search runs without it
+        floor = math.nextafter(min_score, -math.inf)
+    k, dx, dy, best = branch_and_bound(pyr, qx0, qy0, w, dth, translation_weight * r * r, rotation_weight, _NO_EXCL,
+                                       floor, math.inf)
+    if min_score is not None and best < min_score:
+        return None
     pose_map = np.array([mp[0] + dx, mp[1] + dy, th[k]])
     out = CorrelativeResult(level.pose_to_world(pose_map), float(best), int(th.shape[0]))
     if runner_up_distance is not None:
@@ -406,6 +443,9 @@ def correlative_search(
         step = angular_window / max(n_half, 1)
         ek = int(math.ceil(runner_up_angle / step)) if step > 0 else 0
         excl = np.array([k - ek, k + ek, dx - ec, dx + ec, dy - ec, dy + ec], dtype=np.int64)
+        # any runner-up above ``stop`` makes the margin smaller than min_margin (1e-9 above the exact limit: the
+        # caller's rounded best − runner_up cannot reach min_margin there)
+        stop = best - min_margin + 1e-9 if min_margin is not None else math.inf
         near = _wrapped_rows(dth, k, ek, step) if runner_up_wrap else None
         if near is not None:
             # the rows within ±ek of the best one around the circle go first, so that one contiguous
@@ -414,11 +454,12 @@ def correlative_search(
             perm = np.concatenate((rows[near], rows[~near]))
             excl[0], excl[1] = 0, int(near.sum()) - 1
             k2, dx2, dy2, s2 = branch_and_bound(pyr, np.ascontiguousarray(qx0[perm]), np.ascontiguousarray(qy0[perm]),
-                                                w, dth[perm], translation_weight * r * r, rotation_weight, excl)
+                                                w, dth[perm], translation_weight * r * r, rotation_weight, excl,
+                                                -1e300, stop)
             k2 = int(perm[k2])
         else:
             k2, dx2, dy2, s2 = branch_and_bound(pyr, qx0, qy0, w, dth, translation_weight * r * r, rotation_weight,
-                                                excl)
+                                                excl, -1e300, stop)
         out.runner_up = float(s2) if s2 > -1e299 else 0.0
         out.runner_up_pose = level.pose_to_world(np.array([mp[0] + dx2, mp[1] + dy2, th[k2]]))
     return out
