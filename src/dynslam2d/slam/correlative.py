@@ -138,15 +138,47 @@ def _rotated_cells(pc, c, s, mx, my):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _block_score(table, qx, qy, dx, dy):  # pragma: no cover - numba
-    hh, ww = table.shape
-    n = qx.shape[0]
+def _cell_lists(qx, qy, ox, oy, ww, size, merge):  # pragma: no cover - numba
+    """The point cells of each rotation as flat indices into a (·, ``ww``) table whose cell (0, 0) is cell (``ox``,
+    ``oy``) of ``qx, qy`` (nrot, n): (``start`` (nrot+1,) int64, ``cell`` (m,) int64, ``count`` (m,) float64) —
+    rotation k's cells are ``cell[start[k]:start[k+1]]``, ``count`` points on each. With ``merge`` the points on
+    one cell become one entry (first-seen order; ``size`` = the table's cells), else one entry per point in
+    point order, each of count 1."""
+    nrot = qx.shape[0]
+    n = qx.shape[1]
+    start = np.empty(nrot + 1, dtype=np.int64)
+    cell = np.empty(nrot * n, dtype=np.int64)
+    count = np.empty(nrot * n)
+    mark = np.full(size if merge else 0, -1, dtype=np.int64)
+    pos = np.empty(size if merge else 0, dtype=np.int64)
+    m = 0
+    for k in range(nrot):
+        start[k] = m
+        for i in range(n):
+            c = (qy[k, i] - oy) * ww + (qx[k, i] - ox)
+            if merge and mark[c] == k:
+                count[pos[c]] += 1.0
+                continue
+            if merge:
+                mark[c] = k
+                pos[c] = m
+            cell[m] = c
+            count[m] = 1.0
+            m += 1
+    start[nrot] = m
+    return start, cell[:m], count[:m]
+
+
+@njit(cache=True)
+def _block_score(table, cell, count, a, b, off, n):  # pragma: no cover - numba
+    """Mean over the n points of table values at their cells ``cell[a:b]`` moved by the flat offset ``off``.
+
+    Each entry adds count × value: the same float64 sum as adding the points one by one in any order, because
+    the table values are multiples of 2^−24 in [0, 1] (2p − 1 of a float32 p ≥ 0.5 is exact, a multiple of
+    2^−23, and so is its half a multiple of 2^−24) and n ≤ 2^29 of them sum without rounding."""
     s = 0.0
-    for i in range(n):
-        x = qx[i] + dx
-        y = qy[i] + dy
-        if x >= 0 and y >= 0 and x < ww and y < hh:
-            s += table[y, x]
+    for j in range(a, b):
+        s += count[j] * table[cell[j] + off]
     return s / n
 
 
@@ -158,12 +190,15 @@ def _min_abs(lo, hi):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr, excl, floor, stop):  # pragma: no cover - numba
-    """Exact best (rotation index, dx, dy, score) over rotations (qx/qy rows) and offsets in [−w, w]².
+def branch_and_bound(tab, ww, start, cell, count, n, w, dth, wt_cell2, wr, excl, floor,
+                     stop):  # pragma: no cover - numba
+    """Exact best (rotation index, dx, dy, score) over rotations and offsets in [−w, w]².
 
-    ``pyr`` (Hmax+1, H, W); ``qx, qy`` (nrot, n) int64 point cells at zero offset; ``dth`` (nrot,)
-    rotation offsets, rad; penalties ``wt_cell2`` per cell², ``wr`` per rad². ``excl`` (6,) int64
-    (k0, k1, dx0, dx1, dy0, dy1): candidates with k0 ≤ k ≤ k1, dx0 ≤ dx ≤ dx1 and dy0 ≤ dy ≤ dy1
+    ``tab`` (Hmax+1, H·``ww``) float32: the score pyramid, each level flat, with zeros wherever a point's cell
+    of some offset lies outside the searched map (every read is in range); ``start, cell, count``: each
+    rotation's point cells at zero offset as flat indices and their point counts (``_cell_lists``), ``n``
+    points; ``dth`` (nrot,) rotation offsets, rad; penalties ``wt_cell2`` per cell², ``wr`` per rad².
+    ``excl`` (6,) int64 (k0, k1, dx0, dx1, dy0, dy1): candidates with k0 ≤ k ≤ k1, dx0 ≤ dx ≤ dx1 and dy0 ≤ dy ≤ dy1
     are left out (the runner-up search); k0 > k1 leaves nothing out.
 
     ``floor``: only scores above it count (the search starts with it as its best: blocks whose bound is at most
@@ -174,8 +209,8 @@ def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr, excl, floor, stop):  # p
     ``stop``: the search returns as soon as its best exceeds ``stop`` (that candidate, not necessarily the best:
     the caller only needs to know some candidate beats ``stop``); +inf = never.
     """
-    hmax = pyr.shape[0] - 1
-    nrot = qx.shape[0]
+    hmax = tab.shape[0] - 1
+    nrot = start.shape[0] - 1
     step = 1 << hmax
     na = (2 * w + 1 + step - 1) // step
     ntop = nrot * na * na
@@ -197,7 +232,8 @@ def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr, excl, floor, stop):  # p
                 top_k[c] = k
                 top_dx[c] = dx
                 top_dy[c] = dy
-                top_s[c] = _block_score(pyr[hmax], qx[k], qy[k], dx, dy) - pr - wt_cell2 * (mx * mx + my * my)
+                top_s[c] = (_block_score(tab[hmax], cell, count, start[k], start[k + 1], dy * ww + dx, n) - pr
+                            - wt_cell2 * (mx * mx + my * my))
                 c += 1
     # best bound first: a stable merge sort by descending bound (ties in block order), written out here
     # because numba's np.argsort compiles its quicksort machinery, about 1.5 s of a first run's compile
@@ -279,7 +315,8 @@ def branch_and_bound(pyr, qx, qy, w, dth, wt_cell2, wr, excl, floor, stop):  # p
                         continue
                     ey = min(cdy + half - 1, w)
                     my = _min_abs(cdy, ey)
-                    cs[nc] = _block_score(pyr[h - 1], qx[k], qy[k], cdx, cdy) - pr - wt_cell2 * (mx * mx + my * my)
+                    cs[nc] = (_block_score(tab[h - 1], cell, count, start[k], start[k + 1], cdy * ww + cdx, n) - pr
+                              - wt_cell2 * (mx * mx + my * my))
                     cx[nc] = cdx
                     cy[nc] = cdy
                     nc += 1
@@ -431,8 +468,24 @@ def correlative_search(
         # every block's bound is admissible: pruning the blocks below min_score keeps the result
         # (branch_and_bound's docstring); otherwise the search runs without it
         floor = math.nextafter(min_score, -math.inf)
-    k, dx, dy, best = branch_and_bound(pyr, qx0, qy0, w, dth, translation_weight * r * r, rotation_weight, _NO_EXCL,
-                                       floor, math.inf)
+    # the pyramid laid into a table that holds every cell a point reads at any offset (zeros outside the crop:
+    # where the search read nothing), so that the search reads without range checks; the points on one cell
+    # counted once with their number where every table value is in [0, 1] (_block_score: the same sums)
+    ox = min(0, qx_min - c0 - w)
+    oy = min(0, qy_min - r0 - w)
+    ww = max(c1 - c0, qx_max - c0 + w + 1) - ox
+    hh = max(r1 - r0, qy_max - r0 + w + 1) - oy
+    if ox == 0 and oy == 0 and ww == c1 - c0 and hh == r1 - r0:
+        tab = pyr.reshape(hmax + 1, hh * ww)
+    else:
+        tab = np.zeros((hmax + 1, hh, ww), dtype=np.float32)
+        tab[:, -oy:r1 - r0 - oy, -ox:c1 - c0 - ox] = pyr
+        tab = tab.reshape(hmax + 1, hh * ww)
+    merge = bool(pyr[0].max() <= 1.0)
+    start, cell, count = _cell_lists(qx0, qy0, ox, oy, ww, hh * ww, merge)
+    n_pts = qx0.shape[1]
+    k, dx, dy, best = branch_and_bound(tab, ww, start, cell, count, n_pts, w, dth, translation_weight * r * r,
+                                       rotation_weight, _NO_EXCL, floor, math.inf)
     if min_score is not None and best < min_score:
         return None
     pose_map = np.array([mp[0] + dx, mp[1] + dy, th[k]])
@@ -453,13 +506,14 @@ def correlative_search(
             rows = np.arange(th.shape[0])
             perm = np.concatenate((rows[near], rows[~near]))
             excl[0], excl[1] = 0, int(near.sum()) - 1
-            k2, dx2, dy2, s2 = branch_and_bound(pyr, np.ascontiguousarray(qx0[perm]), np.ascontiguousarray(qy0[perm]),
-                                                w, dth[perm], translation_weight * r * r, rotation_weight, excl,
-                                                -1e300, stop)
+            start2, cell2, count2 = _cell_lists(np.ascontiguousarray(qx0[perm]), np.ascontiguousarray(qy0[perm]),
+                                                ox, oy, ww, hh * ww, merge)
+            k2, dx2, dy2, s2 = branch_and_bound(tab, ww, start2, cell2, count2, n_pts, w, dth[perm],
+                                                translation_weight * r * r, rotation_weight, excl, -1e300, stop)
             k2 = int(perm[k2])
         else:
-            k2, dx2, dy2, s2 = branch_and_bound(pyr, qx0, qy0, w, dth, translation_weight * r * r, rotation_weight,
-                                                excl, -1e300, stop)
+            k2, dx2, dy2, s2 = branch_and_bound(tab, ww, start, cell, count, n_pts, w, dth, translation_weight * r * r,
+                                                rotation_weight, excl, -1e300, stop)
         out.runner_up = float(s2) if s2 > -1e299 else 0.0
         out.runner_up_pose = level.pose_to_world(np.array([mp[0] + dx2, mp[1] + dy2, th[k2]]))
     return out
