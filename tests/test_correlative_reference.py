@@ -15,6 +15,7 @@ from dynslam2d.slam import HectorSlam, SlamConfig
 from dynslam2d.slam.correlative import (
     _NO_EXCL,
     CorrelativeResult,
+    _percentile95,
     _rotated_cells,
     _score_pyramid,
     _wrapped_rows,
@@ -323,3 +324,20 @@ def test_search_equals_it_on_a_probability_above_one() -> None:
                   reference_search(lv, pts, start, 0.8, 0.5, None, 150, 4))
     finally:
         lv.prob = saved
+
+
+def test_percentile95_equals_numpys() -> None:
+    """The angular step's 95th percentile of the point ranges, bit for bit numpy's (ties, one point, scales)."""
+    rng = np.random.default_rng(7)
+    for it in range(4000):
+        n = int(rng.integers(1, 400))
+        kind = it % 4
+        if kind == 0:
+            v = rng.uniform(0.0, 400.0, n)
+        elif kind == 1:
+            v = np.round(rng.uniform(0.0, 50.0, n), 1)  # many equal values
+        elif kind == 2:
+            v = np.hypot(rng.normal(0.0, 100.0, n), rng.normal(0.0, 100.0, n))
+        else:
+            v = rng.exponential(30.0, n) * rng.choice([1e-3, 1.0, 1e3])
+        assert _percentile95(v) == float(np.percentile(v, 95))

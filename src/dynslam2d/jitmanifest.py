@@ -90,11 +90,9 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, float64,)"),
     ('dynslam2d.slam.correlative._score_pyramid',
      "(Array(float32, 2, 'A'), int64,)"),
-    ('dynslam2d.slam.correlative._cell_lists',
-     "(Array(int64, 2, 'C'), Array(int64, 2, 'C'), int64, int64, int64, int64, bool,)"),
     ('dynslam2d.slam.correlative.branch_and_bound',
-     "(Array(float32, 2, 'C'), int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), "
-     "int64, int64, Array(float64, 1, 'C'), float64, float64, Array(int64, 1, 'C'), float64, float64,)"),
+     "(Array(float32, 2, 'C'), int64, Array(int64, 2, 'C'), Array(int64, 2, 'C'), bool, int64, "
+     "Array(float64, 1, 'C'), float64, float64, Array(int64, 1, 'C'), float64, float64,)"),
     ('dynslam2d.slam.matcher._support_kernel',
      "(Array(float32, 2, 'C'), Array(float64, 2, 'C'), int64, float64, float64, float64, float64, "
      'float64, int64,)'),
