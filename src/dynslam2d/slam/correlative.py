@@ -139,51 +139,6 @@ def _rotated_cells(pc, c, s, mx, my):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _point_sum(table, qx, qy, ww, off):  # pragma: no cover - numba
-    """Σ over the points (``qx, qy`` (n,) cells of a flat table of rows ``ww`` wide) of the table value at each
-    point's cell moved by the flat offset ``off``, point by point in order."""
-    s = 0.0
-    for i in range(qx.shape[0]):
-        s += table[qy[i] * ww + qx[i] + off]
-    return s
-
-
-@njit(cache=True)
-def _merge_rotation(qx, qy, ww, k, key, owner, slot, cell, count, m):  # pragma: no cover - numba
-    """Append the distinct cells of one rotation's points (``qx, qy`` (n,), flat rows ``ww`` wide) to ``cell`` /
-    ``count`` from entry ``m`` on (first-seen order, the number of points on each), with an open-addressing hash
-    whose slots hold rotation ``k``'s cells where ``owner`` is ``k``; returns the new end."""
-    mask = key.shape[0] - 1
-    for i in range(qx.shape[0]):
-        c = qy[i] * ww + qx[i]
-        h = (c * 2654435761) & mask
-        while owner[h] == k and key[h] != c:
-            h = (h + 1) & mask
-        if owner[h] == k:
-            count[slot[h]] += 1.0
-            continue
-        owner[h] = k
-        key[h] = c
-        slot[h] = m
-        cell[m] = c
-        count[m] = 1.0
-        m += 1
-    return m
-
-
-@njit(cache=True)
-def _block_score(table, cell, count, a, b, off):  # pragma: no cover - numba
-    """Σ count × table value over the cells ``cell[a:b]`` moved by the flat offset ``off``: the same float64 sum as
-    adding the points one by one in any order, because the table values are multiples of 2^−24 in [0, 1]
-    (2p − 1 of a float32 p ≥ 0.5 is exact, a multiple of 2^−23, and so is its half a multiple of 2^−24) and
-    n ≤ 2^29 of them (count × value ≤ n) sum without rounding."""
-    s = 0.0
-    for j in range(a, b):
-        s += count[j] * table[cell[j] + off]
-    return s
-
-
-@njit(cache=True)
 def _min_abs(lo, hi):  # pragma: no cover - numba
     if lo <= 0 <= hi:
         return 0
@@ -198,8 +153,8 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
     ``tab`` (Hmax+1, H·``ww``) float32: the score pyramid, each level flat, with zeros wherever a point's cell
     of some offset lies outside the searched map (every read is in range); ``qx, qy`` (nrot, n) int64 point
     cells at zero offset in that table. ``merge``: the table values are in [0, 1] — a rotation whose blocks are
-    split more than once is then read as its distinct cells with their point counts (built at its second split,
-    ``_merge_rotation``; ``_block_score``: the same sums), else point by point. ``dth`` (nrot,) rotation
+    split more than once is then read as its distinct cells with their point counts (built at its second split;
+    the same sums, see below), else point by point. ``dth`` (nrot,) rotation
     offsets, rad; penalties ``wt_cell2`` per cell², ``wr`` per rad².
     ``excl`` (6,) int64 (k0, k1, dx0, dx1, dy0, dy1): candidates with k0 ≤ k ≤ k1, dx0 ≤ dx ≤ dx1 and dy0 ≤ dy ≤ dy1
     are left out (the runner-up search); k0 > k1 leaves nothing out.
@@ -225,10 +180,12 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
     cap = 16
     while cap < 2 * n:
         cap *= 2
+    mask = cap - 1
     key = np.empty(cap, dtype=np.int64)
-    owner = np.full(cap, -1, dtype=np.int64)
+    owner = np.full(cap, -1, dtype=np.int64)  # the rotation whose cell a hash slot holds (−1: none yet)
     slot = np.empty(cap, dtype=np.int64)
     m = 0
+    top = tab[hmax]
     na = (2 * w + 1 + step - 1) // step
     ntop = nrot * na * na
     top_k = np.empty(ntop, dtype=np.int64)
@@ -249,8 +206,11 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
                 top_k[c] = k
                 top_dx[c] = dx
                 top_dy[c] = dy
-                top_s[c] = (_point_sum(tab[hmax], qx[k], qy[k], ww, dy * ww + dx) / n - pr
-                            - wt_cell2 * (mx * mx + my * my))
+                off = dy * ww + dx
+                ps = 0.0
+                for i in range(n):  # point by point, in order
+                    ps += top[qy[k, i] * ww + qx[k, i] + off]
+                top_s[c] = ps / n - pr - wt_cell2 * (mx * mx + my * my)
                 c += 1
     # best bound first: a stable merge sort by descending bound (ties in block order), written out here
     # because numba's np.argsort compiles its quicksort machinery, about 1.5 s of a first run's compile
@@ -323,7 +283,22 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
                 splits[k] += 1
                 if splits[k] >= 2:  # a rotation split once is read point by point: its list would rarely pay
                     rlo[k] = m
-                    m = _merge_rotation(qx[k], qy[k], ww, k, key, owner, slot, cell, count, m)
+                    # its distinct cells in first-seen order with their point counts, found with an
+                    # open-addressing hash whose slots hold rotation k's cells where owner is k
+                    for i in range(n):
+                        cc = qy[k, i] * ww + qx[k, i]
+                        hs = (cc * 2654435761) & mask
+                        while owner[hs] == k and key[hs] != cc:
+                            hs = (hs + 1) & mask
+                        if owner[hs] == k:
+                            count[slot[hs]] += 1.0
+                            continue
+                        owner[hs] = k
+                        key[hs] = cc
+                        slot[hs] = m
+                        cell[m] = cc
+                        count[m] = 1.0
+                        m += 1
                     rhi[k] = m
             nc = 0
             for ix in range(2):
@@ -338,10 +313,19 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
                         continue
                     ey = min(cdy + half - 1, w)
                     my = _min_abs(cdy, ey)
+                    off = cdy * ww + cdx
+                    tl = tab[h - 1]
+                    bs = 0.0
                     if rlo[k] >= 0:
-                        bs = _block_score(tab[h - 1], cell, count, rlo[k], rhi[k], cdy * ww + cdx)
+                        # Σ count × value over the distinct cells: the same float64 sum as adding the points one by
+                        # one in any order, because the table values are multiples of 2^−24 in [0, 1] (2p − 1 of a
+                        # float32 p ≥ 0.5 is exact, a multiple of 2^−23, its half a multiple of 2^−24) and n ≤ 2^29
+                        # of them (count × value ≤ n) sum without rounding
+                        for j in range(rlo[k], rhi[k]):
+                            bs += count[j] * tl[cell[j] + off]
                     else:
-                        bs = _point_sum(tab[h - 1], qx[k], qy[k], ww, cdy * ww + cdx)
+                        for i in range(n):  # point by point, in order
+                            bs += tl[qy[k, i] * ww + qx[k, i] + off]
                     cs[nc] = bs / n - pr - wt_cell2 * (mx * mx + my * my)
                     cx[nc] = cdx
                     cy[nc] = cdy
@@ -522,7 +506,7 @@ def correlative_search(
         floor = math.nextafter(min_score, -math.inf)
     # the pyramid laid into a table that holds every cell a point reads at any offset (zeros outside the crop:
     # where the search read nothing), so that the search reads without range checks; where every table value is
-    # in [0, 1] the points on one cell are counted once with their number (_block_score: the same sums)
+    # in [0, 1] the points on one cell are counted once with their number (branch_and_bound: the same sums)
     ox = min(0, qx_min - c0 - w)
     oy = min(0, qy_min - r0 - w)
     ww = max(c1 - c0, qx_max - c0 + w + 1) - ox
