@@ -100,8 +100,8 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.slam.correlative._score_pyramid',
      "(Array(float32, 2, 'A'), int64,)"),
     ('dynslam2d.slam.correlative.branch_and_bound',
-     "(Array(float32, 3, 'C'), Array(int64, 2, 'C'), Array(int64, 2, 'C'), int64, Array(float64, 1, 'C'), "
-     "float64, float64, Array(int64, 1, 'C'),)"),
+     "(Array(float32, 2, 'C'), int64, Array(int64, 2, 'C'), Array(int64, 2, 'C'), bool, int64, "
+     "Array(float64, 1, 'C'), float64, float64, Array(int64, 1, 'C'), float64, float64,)"),
     ('dynslam2d.slam.matcher._support_kernel',
      "(Array(float32, 2, 'C'), Array(float64, 2, 'C'), int64, float64, float64, float64, float64, "
      'float64, int64,)'),

@@ -756,13 +756,12 @@ class LoopCloser:
         grid = self._submap(s)
         lvl = grid.levels[min(c.search_level if level is None else level, len(grid.levels) - 1)]
         levels = grid.levels[:max(c.search_level + 1, 2)]  # the refinement as without the far search's level
-        cr = correlative_search(lvl, pts, pred, lin, ang, None, c.search_points, sc.correlative_max_height, 0.0, 0.0)
-        if cr is None or cr.score < c.min_score:
-            return None
-        # the runner-up only for a match good enough to become a candidate (a second branch and bound)
+        # one search: below min_score it returns None (and prunes what cannot reach it), the runner-up pass runs only
+        # for a match good enough to become a candidate and stops once the margin is lost (the same candidates as
+        # a search without the bounds followed by a second search with the runner-up)
         cr = correlative_search(lvl, pts, pred, lin, ang, None, c.search_points, sc.correlative_max_height, 0.0, 0.0,
                                 runner_up_distance=c.runner_up_distance, runner_up_angle=c.runner_up_angle,
-                                runner_up_wrap=c.runner_up_wrap)
+                                runner_up_wrap=c.runner_up_wrap, min_score=c.min_score, min_margin=min_margin)
         if cr is None or cr.score < c.min_score:
             return None
         margin = cr.score - (cr.runner_up or 0.0)
