@@ -171,3 +171,13 @@ def paper_room_slam(levels: int | None = None):
         p = first.compose(d)
         slam.update_map(paper_room_scan(p), first.between(p), force=True)
     return slam, first
+
+
+def paper_room_slam_points():
+    """:func:`paper_room_slam` with the default levels and the laser-frame points (m) of a fourth paper-room scan
+    taken 0.2 m ahead of and 0.1 rad turned from its first pose: a map and a scan to search it with."""
+    from dynslam2d.types import Pose2D
+
+    slam, first = paper_room_slam()
+    pts, _ = slam.scan_points(paper_room_scan(first.compose(Pose2D(0.2, 0.0, 0.1))))
+    return slam, pts

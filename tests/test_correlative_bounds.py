@@ -6,22 +6,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from conftest import paper_room_scan
+from conftest import paper_room_slam_points
 
-from dynslam2d.slam import HectorSlam, SlamConfig
+from dynslam2d.slam import HectorSlam
 from dynslam2d.slam.correlative import correlative_search
-from dynslam2d.types import Pose2D
 
 
 def _level_and_points() -> tuple[HectorSlam, np.ndarray]:
-    slam = HectorSlam(SlamConfig())
-    first = Pose2D(0.3, -0.4, 0.2)
-    slam.update_map(paper_room_scan(first), Pose2D(), force=True)
-    for d in (Pose2D(0.3, 0.1, 0.1), Pose2D(-0.2, 0.3, -0.15)):
-        p = first.compose(d)
-        slam.update_map(paper_room_scan(p), first.between(p), force=True)
-    pts, _ = slam.scan_points(paper_room_scan(first.compose(Pose2D(0.2, 0.0, 0.1))))
-    return slam, pts
+    return paper_room_slam_points()
 
 
 def _starts(rng: np.random.Generator, n: int) -> list[np.ndarray]:

@@ -8,10 +8,10 @@ import math
 
 import numpy as np
 import pytest
-from conftest import paper_room_scan
+from conftest import paper_room_slam_points
 from numba import njit
 
-from dynslam2d.slam import HectorSlam, SlamConfig
+from dynslam2d.slam import HectorSlam
 from dynslam2d.slam.correlative import (
     _NO_EXCL,
     CorrelativeResult,
@@ -22,7 +22,6 @@ from dynslam2d.slam.correlative import (
     correlative_search,
 )
 from dynslam2d.slam.grid import GridLevel
-from dynslam2d.types import Pose2D
 
 # ---- the code before (slam/correlative.py at the previous release), kept to compare against -------------------
 
@@ -260,14 +259,7 @@ def reference_search(
 # ---- the comparison ---------------------------------------------------------------------------------------------
 
 def _level_and_points() -> tuple[HectorSlam, np.ndarray]:
-    slam = HectorSlam(SlamConfig())
-    first = Pose2D(0.3, -0.4, 0.2)
-    slam.update_map(paper_room_scan(first), Pose2D(), force=True)
-    for d in (Pose2D(0.3, 0.1, 0.1), Pose2D(-0.2, 0.3, -0.15)):
-        p = first.compose(d)
-        slam.update_map(paper_room_scan(p), first.between(p), force=True)
-    pts, _ = slam.scan_points(paper_room_scan(first.compose(Pose2D(0.2, 0.0, 0.1))))
-    return slam, pts
+    return paper_room_slam_points()
 
 
 def _same(a: CorrelativeResult | None, b: CorrelativeResult | None) -> None:
