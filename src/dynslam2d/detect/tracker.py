@@ -371,8 +371,6 @@ class Tracker:
         self._default: MeasureRows | None = None  # default measurements of the current scan's detections
         self._no_prior: dict[int, tuple] = {}  # measure_batch's "no track prior" arguments for m detections, by m
         self._stacked: tuple[np.ndarray, np.ndarray] | None = None  # predicted X, P of all tracks
-        self._lohi_l: list[list[float]] = []  # this scan's detections' lohi rows (lo1, lo2, hi1, hi2), m
-        self._rel_l: list[list[list[bool]]] = []  # and their rel rows (real bounds)
         self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate)
         # clutter retirement (structure_retire_updates): confirmed still tracks on map structure, out of the
         # Kalman tracking but kept (and reported) while their object is seen, so that a parked mover keeps
@@ -737,8 +735,8 @@ class Tracker:
                 no_prior = self._no_prior[m] = (np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool),
                                                 np.full(m, -1.0), np.zeros(m))
             self._default = self._measure_rows(*no_prior)
-            # the detections' bounds and real-bound flags as lists (read per track update / birth, no per-row copy)
-            self._lohi_l, self._rel_l = lohi.tolist(), rel.tolist()
+            # (the detections' bounds and real-bound flags: read as Python lists by row, for births and detections on
+            # structure only (_birth_state, _clutter_detections): one row's tolist each, not the whole arrays' per scan)
         return dets
 
     def _merge_legs(self, dets: list[Detection], kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray,
@@ -1126,14 +1124,14 @@ class Tracker:
         P[:2, :2] = d.R[j]
         P[2, 2] = P[3, 3] = cfg.tracker.init_speed_sigma ** 2
         if det.kind == KIND_RECT:
-            size = _default_sizes(self._lohi_l[j], self._rel_l[j], cfg.fit)
+            size = _default_sizes(self._batch.lohi[j].tolist(), self._batch.rel[j].tolist(), cfg.fit)
             sk0, sk1 = d.size_kind[j].tolist()
             known = [sk0 == SIZE_MEASURED, sk1 == SIZE_MEASURED]
         elif det.kind == KIND_CIRCLE:
             size = [float(2.0 * det.circle[2])] * 2
             known = [True, True]
         else:
-            lo0, lo1, hi0, hi1 = self._lohi_l[j]
+            lo0, lo1, hi0, hi1 = self._batch.lohi[j].tolist()
             size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
             known = [False, False]
         return z, P, size, known
@@ -1332,7 +1330,7 @@ class Tracker:
             det = dets[di]
             on_structure = det.map_structure >= birth_max
             if on_structure:
-                lo0, lo1, hi0, hi1 = self._lohi_l[di]
+                lo0, lo1, hi0, hi1 = self._batch.lohi[di].tolist()
                 reach = 0.5 * max(hi0 - lo0, hi1 - lo1) + margin
             if gap is not None and gap[r] <= 0.0:
                 i = best[r]
