@@ -410,8 +410,8 @@ def test_single_pose_relative_and_compose_equal_the_vectorised_path() -> None:
 
 
 def test_keyframe_index_spread_equals_linspace_and_is_shared() -> None:
-    """loops._even: the evenly spread sub-sample indices of the place returns and loop queries, once per size."""
-    from dynslam2d.slam.loops import _even
+    """correlative.even_indices: evenly spread sub-sample indices (place returns, loop queries), once per size."""
+    from dynslam2d.slam.correlative import even_indices as _even
 
     for n, k in ((121, 120), (600, 120), (1081, 360), (361, 360), (5000, 360)):
         idx = _even(n, k)

@@ -381,9 +381,9 @@ def _admissible(t0: np.ndarray, inside_x: bool, inside_y: bool, e: int) -> bool:
 
 
 @functools.lru_cache(maxsize=256)
-def _even(n: int, k: int) -> np.ndarray:
+def even_indices(n: int, k: int) -> np.ndarray:
     """(k,) read-only int64 indices of ``k`` points evenly spread over ``n`` (``np.linspace``, truncated): the same
-    few scan sizes come back at every search, so each is computed once."""
+    few scan sizes come back at every search and keyframe, so each is computed once."""
     idx = np.linspace(0, n - 1, k).astype(np.int64)
     idx.flags.writeable = False
     return idx
@@ -472,7 +472,7 @@ def correlative_search(
     r = level.resolution
     n = pts_m.shape[0]
     if n > max_points:
-        pts_m = pts_m[_even(n, max_points)]
+        pts_m = pts_m[even_indices(n, max_points)]
     pc = pts_m / r
     ranges = np.hypot(pc[:, 0], pc[:, 1])
     if angular_step is None:

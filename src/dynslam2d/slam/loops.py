@@ -42,7 +42,6 @@ relative pose from that keyframe. Poses are laser poses in the map frame (m, rad
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 from collections import OrderedDict, deque
@@ -51,7 +50,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dynslam2d.slam.config import SlamConfig
-from dynslam2d.slam.correlative import correlative_search
+from dynslam2d.slam.correlative import correlative_search, even_indices
 from dynslam2d.slam.grid import GridLevel, MultiResMap
 from dynslam2d.slam.jumps import JumpCheck
 from dynslam2d.slam.loopconfig import LoopConfig
@@ -82,15 +81,6 @@ def _keep_probabilities(lv: GridLevel) -> None:
     shape = lv.shape
     lv.logodds = np.broadcast_to(np.zeros((), dtype=np.float32), shape)
     lv.uidx = np.broadcast_to(np.full((), -1, dtype=np.int32), shape)
-
-
-@functools.lru_cache(maxsize=256)
-def _even(n: int, k: int) -> np.ndarray:
-    """(k,) read-only int64 indices of ``k`` points evenly spread over ``n`` (``np.linspace``, truncated): the same
-    few scan sizes come back at every keyframe, so each is computed once."""
-    idx = np.linspace(0, n - 1, k).astype(np.int64)
-    idx.flags.writeable = False
-    return idx
 
 
 def _place_points(rel: np.ndarray, pts: list[np.ndarray]) -> np.ndarray:
@@ -384,7 +374,7 @@ class LoopCloser:
             # the keyframe's returns (a few, float32) while later descriptors still need them
             pts, _ = self._points(kf)
             if pts.shape[0] > _PLACE_POINTS:
-                pts = pts[_even(pts.shape[0], _PLACE_POINTS)]
+                pts = pts[even_indices(pts.shape[0], _PLACE_POINTS)]
             self._place_pts[node] = pts.astype(np.float32)
             if node % c.place_every == 0:
                 # described lazily (_place_flush), from these same returns and front-end poses: most keyframes
@@ -508,7 +498,7 @@ class LoopCloser:
         if pts.shape[0] < max(self.config.min_support, 10):
             return None
         if pts.shape[0] > _QUERY_POINTS:
-            pts = pts[_even(pts.shape[0], _QUERY_POINTS)]
+            pts = pts[even_indices(pts.shape[0], _QUERY_POINTS)]
         return pts
 
     # ---- far search: the radius grows with the uncertainty accumulated along the graph ------
