@@ -136,7 +136,7 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
                                   out_r: np.ndarray, out_c: np.ndarray, depth: float = 0.0) -> int:  # pragma: no cover
     """Cells with log-odds ≥ ``occ_thr`` that the clearing segments from (``ox``, ``oy``) to (``cx``, ``cy``)
     (world cell units, m / resolution; only where ``clear``) pass through within ``core`` cells of the cell
-    centre across the ray's major axis (the traversal of :func:`dynslam2d.slam.cleanup._count_scan`), and at
+    centre across the ray's major axis (the traversal of :func:`dynslam2d.slam.cleanup._mark_ray`), and at
     least ``depth`` (cells) nearer to the origin than the clearing ends of the beam and both its neighbours
     (``k ± 1``, which must clear).
     Writes array rows / columns into ``out_r`` / ``out_c`` (possibly repeated) and returns their number

@@ -95,8 +95,8 @@ BYTES_PER_CELL = 8
 _ID_SPAN = 32767
 
 
-@njit(cache=True)
-def _count_scan(counts, last, scan_id, ox, oy, hx, hy, cx, cy, core):  # pragma: no cover - numba
+def _count_scan(counts: np.ndarray, last: np.ndarray, scan_id: int, ox: float, oy: float, hx: np.ndarray,
+                hy: np.ndarray, cx: np.ndarray, cy: np.ndarray, core: float) -> None:
     """One scan into the counters ``counts`` (H, W, 3) uint16 (hits, passes, switches; saturating at
     :data:`COUNT_MAX`) and ``last`` (H, W) uint16, the cell's latest touch as ``2 · n + 1`` for a hit, ``2 · n``
     for a pass, n the number of the scan that touched it (1 … :data:`_ID_SPAN`; 0 = never; ``scan_id`` is this
@@ -104,11 +104,12 @@ def _count_scan(counts, last, scan_id, ox, oy, hx, hy, cx, cy, core):  # pragma:
     (cell (i, j) centred on integers). ``(hx, hy)``: hit endpoints; ``(cx, cy)``: ends of
     the clearing segments from ``(ox, oy)``. Per scan, a cell gets at most one hit and
     one pass, and no pass if the scan hit it (hits are counted first). Switches count changes between
-    hit and pass in each cell's sequence of scans (the kind of its latest touch is its state)."""
-    for k in range(hx.shape[0]):
-        _count_hit(counts, last, scan_id, hx[k], hy[k])
-    for k in range(cx.shape[0]):
-        _count_ray(counts, last, scan_id, ox, oy, cx[k], cy[k], core)
+    hit and pass in each cell's sequence of scans (the kind of its latest touch is its state).
+
+    The kernel :meth:`VisibilityCounter.add` runs (:func:`_count_beams`) with every beam kept and clearing and no
+    offset: the counting rule in array coordinates, for tests and callers that hold the endpoints already."""
+    _count_beams(counts, last, scan_id, float(ox), float(oy), hx, hy, np.ones(hx.shape[0], dtype=np.bool_), cx, cy,
+                 np.ones(cx.shape[0], dtype=np.bool_), 0, 0, float(core), np.zeros(0, dtype=np.uint8))
 
 
 @njit(cache=True)
@@ -185,7 +186,8 @@ def _count_beams(counts, last, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0,
 @njit(cache=True, inline="always")
 def _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, ex, ey, core):  # pragma: no cover - numba
     """Mark in ``mask`` (rows of ``stride`` bytes from cell (x0, y0); cells beyond (x1, y1) dropped) the cells the
-    segment ``(ox, oy)`` → ``(ex, ey)`` passes: the cells and ``core`` test of :func:`_walk`."""
+    segment ``(ox, oy)`` → ``(ex, ey)`` passes: one cell per step of the major axis, where the segment runs
+    within ``core`` of the cell centre across it."""
     dx = ex - ox
     dy = ey - oy
     x_major = abs(dx) >= abs(dy)
@@ -235,55 +237,6 @@ def _count_hit(counts, last, scan_id, hx, hy):  # pragma: no cover - numba
             last[iy, ix] = hit_code
             if counts[iy, ix, 0] < COUNT_MAX:
                 counts[iy, ix, 0] += 1
-
-
-@njit(cache=True, inline="always")
-def _count_ray(counts, last, scan_id, ox, oy, ex, ey, core):  # pragma: no cover - numba
-    """The passes of scan ``scan_id`` along the segment ``(ox, oy)`` → ``(ex, ey)`` (array cell units) into
-    ``counts`` / ``last`` (:func:`_count_scan`): one cell per step of the major axis, counted where the segment
-    runs within ``core`` of the cell centre across it."""
-    dx = ex - ox
-    dy = ey - oy
-    if abs(dx) >= abs(dy):
-        _walk(counts, last, scan_id, int(math.floor(ox + 0.5)), int(math.floor(ex + 0.5)),
-              dy / dx if dx != 0.0 else 0.0, ox, oy, core, True)
-    else:
-        _walk(counts, last, scan_id, int(math.floor(oy + 0.5)), int(math.floor(ey + 0.5)), dx / dy, oy, ox, core,
-              False)
-
-
-@njit(cache=True, inline="always")
-def _walk(counts, last, scan_id, a0, a1, slope, m0, n0, core, x_major):  # pragma: no cover - numba
-    """Major-axis cells a0 … a1 of one ray (minor coordinate ``n0 + slope · (a − m0)``); ``x_major``: a is the
-    column (else the row)."""
-    h = counts.shape[0]
-    w = counts.shape[1]
-    pass_code = 2 * scan_id
-    step = 1 if a1 >= a0 else -1
-    a = a0
-    while True:
-        b = n0 + slope * (a - m0)
-        ib = int(math.floor(b + 0.5))
-        if abs(b - ib) <= core:
-            if x_major:
-                x = a
-                y = ib
-            else:
-                x = ib
-                y = a
-            if 0 <= x < w and 0 <= y < h:
-                # branch-free: about two in three visits find the cell already passed by this scan (rays share
-                # the cells near the laser), a branch the CPU mispredicts; the stores then write the same values
-                lt = np.int64(last[y, x])
-                first = np.int64((lt >> 1) != scan_id)  # 1: this scan's first touch of the cell
-                c_switch = np.int64(counts[y, x, 2])
-                c_pass = np.int64(counts[y, x, 1])
-                counts[y, x, 2] = c_switch + (first & lt & np.int64(c_switch < COUNT_MAX))  # was a hit: a switch
-                counts[y, x, 1] = c_pass + (first & np.int64(c_pass < COUNT_MAX))
-                last[y, x] = lt + first * (pass_code - lt)
-        if a == a1:
-            break
-        a += step
 
 
 @njit(cache=True)
