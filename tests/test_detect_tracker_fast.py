@@ -64,9 +64,9 @@ def _vacated_reference(tr: Tracker, t: float) -> dict[int, float]:
                 continue
             j = _window_argmin(k.past_t, t, a)
             if t - k.past_t[j] > 0.0:
-                chunks.append(k.past[j][1])
+                chunks.append(k.past[j][1].points)
                 owners.append(k.id)
-                counts.append(k.past[j][1].shape[0])
+                counts.append(k.past[j][1].points.shape[0])
     out: dict[int, float] = {}
     if chunks:
         pts = np.concatenate(chunks)

@@ -116,19 +116,21 @@ class ScanDetection(Detection):
 
     ``fits``: the scan's (k, N_FIT_COLS) fit rows (:func:`dynslam2d.detect.shapes.fit_clusters`), ``lohi``: (k, 4)
     bounds lo1, lo2, hi1, hi2, ``rel``: (k, 2, 2) real-bound flags (:mod:`dynslam2d.detect.layout`); ``j``: this
-    detection's row of them.
+    detection's row of them; ``a0``: when ≥ 0, ``points`` is the scan's array of every detection's points and this
+    detection's are its rows from ``a0`` on (``n_points`` of them).
 
     ``free_fraction`` may be given as a float, or left to be computed when first read (few are read): as an object
     with ``fraction(points)`` (the scan's free-space test, :class:`dynslam2d.detect.freespace.FreeTest`), or as a
     pair of scan detections (a merged pair of legs: their fractions weighted by their point counts)."""
 
-    __slots__ = ("_fits", "_lohi", "_rel", "_j", "_ff")
+    __slots__ = ("_fits", "_lohi", "_rel", "_j", "_ff", "_pts", "_a0")
 
     def __init__(self, beams: np.ndarray, points: np.ndarray, kind: str, theta: float, n_points: int,
                  free_fraction: float | object, map_structure: float, map_free: float, map_unknown: float,
-                 fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray, j: int) -> None:
+                 fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray, j: int, a0: int = -1) -> None:
         self.beams = beams
-        self.points = points
+        self._pts = points
+        self._a0 = a0
         self.kind = kind
         self.theta = theta
         self.n_points = n_points
@@ -147,6 +149,19 @@ class ScanDetection(Detection):
     lo = _row_view("_lohi", LOHI_LO, "(2,) lower bounds along e1, e2, m")
     hi = _row_view("_lohi", LOHI_HI, "(2,) upper bounds along e1, e2, m")
     rel = _row_view("_rel", slice(None), "(2, 2) bool: bound [axis, lower / upper] is real")
+
+    @property
+    def points(self) -> np.ndarray:
+        """(n, 2) map-frame points, m: rows ``a0 … a0 + n_points − 1`` of the ``points`` given (a view made when read:
+        the tracker reads a detection's points for few detections per scan), or that array itself when no ``a0``
+        (≥ 0) was given."""
+        a0 = self._a0
+        return self._pts if a0 < 0 else self._pts[a0:a0 + self.n_points]
+
+    @points.setter
+    def points(self, value: np.ndarray) -> None:
+        self._pts = value
+        self._a0 = -1
 
     @property
     def free_fraction(self) -> float:

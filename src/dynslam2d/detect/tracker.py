@@ -185,7 +185,8 @@ class _Track:
     laser_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the laser frame per update
     map_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the map frame per update
     map_t: list[float] = field(default_factory=list)  # stamps of map_xy, s
-    past: list[tuple[float, np.ndarray]] = field(default_factory=list)
+    # (stamp s, detection) per update within the free-space memory's max age: its points are the detection's .points
+    past: list[tuple[float, Detection]] = field(default_factory=list)
     past_t: list[float] = field(default_factory=list)  # the stamps of past, s (kept in step with it)
     slow_since: float | None = None
     probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
@@ -260,6 +261,54 @@ class _Track:
     @has_heading.setter
     def has_heading(self, value: bool) -> None:
         self.gi[GI_HEADING] = value
+
+
+def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, beams: np.ndarray, free: list,
+               mstruct: list, mfree: list, munknown: list, past: list, past_t: list, _new=object.__new__) -> _Track:
+    """``_Track(id=tid, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t, birth_xy=…, g=…, gi=…, beams=…, free=…, mstruct=…,
+    mfree=…, munknown=…, past=…, past_t=…)`` with every other field at its default (a birth, :meth:`Tracker._birth`):
+    the slots set directly, about a quarter of the dataclass ``__init__``'s cost with its keyword binding and default
+    factories (``tests/test_detect_birth_fast.py`` compares every field with the dataclass's)."""
+    k = _new(_Track)
+    k.id = tid
+    k.x = _NO_STATE
+    k.P = _NO_STATE
+    k.born = t
+    k.last_hit = t
+    k.birth_xy = birth_xy
+    k.g = g
+    k.gi = gi
+    k.state = TENTATIVE
+    k.hits = 1
+    k.misses = 0
+    k.history = [True]
+    k.fast = 0
+    k.in_m = False
+    k.reason = "not in M: tentative track"
+    k.beams = beams
+    k.free = free
+    k.mstruct = mstruct
+    k.mfree = mfree
+    k.munknown = munknown
+    k.person = False
+    k.person_streak = 0
+    k.rode = False
+    k.was_in_m = False
+    k.laser_xy = []
+    k.map_xy = []
+    k.map_t = []
+    k.past = past
+    k.past_t = past_t
+    k.slow_since = None
+    k.probation = False
+    k.merged = False
+    k.remembered = False
+    k.m_start_xy = None
+    k.m_time = 0.0
+    k.m_travel = 0.0
+    k.m_last_t = None
+    k.row = -1
+    return k
 
 
 # (_shape_rows builds the rows in this column order)
@@ -372,6 +421,10 @@ class Tracker:
         self._no_prior: dict[int, tuple] = {}  # measure_batch's "no track prior" arguments for m detections, by m
         self._stacked: tuple[np.ndarray, np.ndarray] | None = None  # predicted X, P of all tracks
         self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate)
+        # this scan's ids of the updated tracks and indices of the detections they took (update, _update_tracks)
+        self._upd_sets: tuple[set[int], set[int]] = (set(), set())
+        # the last association's pairs (the list it returned) with their track and detection index arrays (int64)
+        self._pair_arrays: tuple[list, np.ndarray, np.ndarray] | None = None
         # clutter retirement (structure_retire_updates): confirmed still tracks on map structure, out of the
         # Kalman tracking but kept (and reported) while their object is seen, so that a parked mover keeps
         # its id and standing history until it leaves (_clutter_detections)
@@ -459,15 +512,13 @@ class Tracker:
         if not dets and not scan.valid_mask().any():
             st.empty_scans += 1
         pairs = self._associate(dets)
+        # (the ids of the updated tracks and the detections they took: filled by _update_tracks in its loop over the
+        # pairs, in the pairs' order)
         updated: set[int] = set()
-        used = set()
+        used: set[int] = set()
+        self._upd_sets = (updated, used)
         if pairs:
-            for (ti, di), ok in zip(pairs, self._update_pairs(pairs, dets, t)):
-                if ok:
-                    updated.add(self._tracks[ti].id)
-                    used.add(di)
-                else:
-                    st.rejected_updates += 1
+            st.rejected_updates += self._update_pairs(pairs, dets, t).count(False)
         self._manage(t, updated)
         unused = [di for di in range(len(dets)) if di not in used]
         if (self._map is not None and self.config.tracker.structure_birth_min <= 1.0) or self._dormant or \
@@ -515,12 +566,11 @@ class Tracker:
         cand = [k for k in self._tracks if k.id in updated and k.state == CONFIRMED]
         if not cand:
             return [None] * len(dets)
-        rows = [k.row for k in cand]
-        xy = self._X[rows, :2]  # (the candidates' centres and shapes, one gather each)
-        G = self._G[rows]
+        rows = np.array([k.row for k in cand], dtype=np.int64)
+        X, G = self._X, self._G  # (the candidates' centres and shapes: one contiguous gather per column)
         b = self._batch
-        idx = fragment_hosts(b.px, b.py, b.start, b.npts, np.array(dets, dtype=np.int64), xy[:, 0].copy(),
-                             xy[:, 1].copy(), G[:, G_THETA].copy(), G[:, G_SIZE0].copy(), G[:, G_SIZE1].copy(),
+        idx = fragment_hosts(b.px, b.py, b.start, b.npts, np.array(dets, dtype=np.int64), X[rows, 0], X[rows, 1],
+                             G[rows, G_THETA], G[rows, G_SIZE0], G[rows, G_SIZE1],
                              float(self.config.fit.fragment_margin))
         return [cand[i] if i >= 0 else None for i in idx.tolist()]
 
@@ -715,8 +765,9 @@ class Tracker:
         for j, (a0, n, kd, th, fr_j, fs_j, ff_j, fu_j) in enumerate(zip(
                 starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(), frac, fs, ff, fu)):
             b = a0 + n
-            dets.append(ScanDetection(beams[a0:b], pts[a0:b], KIND_NAMES[kd], th, n, fr_j, fs_j, ff_j, fu_j, fits,
-                                      lohi, rel, j))
+            # (its points: rows a0 … b − 1 of pts, a view made when read: ScanDetection.points)
+            dets.append(ScanDetection(beams[a0:b], pts, KIND_NAMES[kd], th, n, fr_j, fs_j, ff_j, fu_j, fits,
+                                      lohi, rel, j, a0))
         if cfg.fit.person_merge and len(dets) > 1:
             dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
                                                                                  npts, px, py, beams)
@@ -766,10 +817,10 @@ class Tracker:
             n = na + nb
             # (centroid = circle centre = the legs' middle, lo / hi their box, no real bound, theta 0: rows of the
             # merged arrays, as a scan detection's)
-            det = ScanDetection(mbeams[o:o + n], pts[o:o + n], KIND_POINT, 0.0, n, (da, db),  # (free: when read)
+            det = ScanDetection(mbeams[o:o + n], pts, KIND_POINT, 0.0, n, (da, db),  # (free: when read)
                                 (na * da.map_structure + nb * db.map_structure) / n,
                                 (na * da.map_free + nb * db.map_free) / n,
-                                (na * da.map_unknown + nb * db.map_unknown) / n, fits, lohi, rel, row)
+                                (na * da.map_unknown + nb * db.map_unknown) / n, fits, lohi, rel, row, o)
             det.person = True
             new_dets.append(det)
             row += 1
@@ -817,6 +868,7 @@ class Tracker:
         # established tracks choose first; tentative ones share what is left
         pairs: list[tuple[int, int]] = []
         taken: np.ndarray | None = None  # detections taken by the established tracks
+        sel: list[tuple[np.ndarray, np.ndarray]] = []  # each group's (track, detection) index arrays
         for group in (firm_r, tent_r):
             if not group:
                 continue
@@ -835,9 +887,15 @@ class Tracker:
             good = ok[ii, jj]
             ii, jj = ii[good], jj[good]
             pairs.extend(zip(ii.tolist(), jj.tolist()))
-            if taken is None:
+            sel.append((ii, jj))
+            if group is firm_r and tent_r:  # (the columns left matter only to the tentative group)
                 taken = np.zeros(m, dtype=bool)
-            taken[jj] = True
+                taken[jj] = True
+        # (the pairs as index arrays too, for _update_pairs: kept with the list they belong to)
+        if pairs:
+            self._pair_arrays = (pairs, *(sel[0] if len(sel) == 1 else
+                                          (np.concatenate((sel[0][0], sel[1][0])),
+                                           np.concatenate((sel[0][1], sel[1][1])))))
         return pairs
 
     def _veto_merged(self, ok: np.ndarray, dets: list[Detection], det_ext: np.ndarray,
@@ -878,9 +936,14 @@ class Tracker:
         the shape updates run as one kernel call each on the tracks' rows (:mod:`dynslam2d.detect.kernels`); the
         bookkeeping stays per track (:meth:`_update_tracks`)."""
         npair = len(pairs)
-        sel = np.fromiter(_chain.from_iterable(pairs), np.int64, 2 * npair).reshape(npair, 2)
-        dis = sel[:, 1].copy()
-        sel = sel[:, 0].copy()
+        pa = self._pair_arrays
+        if pa is not None and pa[0] is pairs:  # (the association's index arrays of these pairs)
+            sel, dis = pa[1], pa[2]
+        else:
+            sel = np.fromiter(_chain.from_iterable(pairs), np.int64, 2 * npair).reshape(npair, 2)
+            dis = sel[:, 1].copy()
+            sel = sel[:, 0].copy()
+        self._pair_arrays = None
         b = self._batch
         trows = self._rows()[sel]
         swaps, sizes, has, radius = pair_priors(self._G, self._Gi, trows, dis, b.kind, b.theta)
@@ -923,7 +986,7 @@ class Tracker:
             return
         # (the candidates' velocities as Python floats in one gather each, the bounded ones written in one scatter)
         after, hypot = tc.accel_bound_after, math.hypot
-        rows, vals = [], []
+        nb = 0
         for r, (pvx, pvy), (nvx, nvy) in zip(near.tolist(), X_prior[near, 2:].tolist(), X_new[near, 2:].tolist()):
             if tracks[pairs[r][0]].hits < after:
                 continue
@@ -931,11 +994,12 @@ class Tracker:
             dvy = nvy - pvy
             d = hypot(dvx, dvy)
             if d > lim:
-                rows.append(r)
-                vals.append((pvx + dvx * lim / d, pvy + dvy * lim / d))
-        if rows:
-            X_new[rows, 2:] = vals
-            self.stats.accel_bounded += len(rows)
+                # (written one element at a time: cheaper than a scatter of a few rows from a list of tuples)
+                X_new[r, 2] = pvx + dvx * lim / d
+                X_new[r, 3] = pvy + dvy * lim / d
+                nb += 1
+        if nb:
+            self.stats.accel_bounded += nb
 
     def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float,
                        applied: list[bool], trows: np.ndarray) -> None:
@@ -955,6 +1019,10 @@ class Tracker:
         max_age = self._free.max_age if self._free is not None else None
         ref = self._cur_ref if self._free is not None else None  # (the vacated-space test's reference: this scan)
         tracks = self._tracks
+        upd_add, used_add = (u.add for u in self._upd_sets)
+        # (the detections' circle radii as floats, one conversion per scan: row di of the batch is detection di's fit
+        # row, copied by the leg merge; float(det.circle[2]) would make a view per circle detection)
+        radii = self._batch.circle[:, 2].tolist()
         if p is not None:
             # the centres in the map frame, one gather (their laser-frame centres below, on the floats one by one:
             # the roundings of the former elementwise numpy products and sums)
@@ -966,6 +1034,8 @@ class Tracker:
             if not ok:
                 continue
             k, det = tracks[ti], dets[di]
+            upd_add(k.id)
+            used_add(di)
             dkind = det.kind
             # (the stored points before this update: their vacated-space fraction is computed when first read)
             past0 = tuple(k.past) if ref is not None and k.past else None
@@ -984,7 +1054,7 @@ class Tracker:
                 k.probation = k.in_m and not k.remembered  # a remembered track re-acquired where it stopped
                 k.misses = 0
             k.merged = False
-            person = det.person or (dkind == KIND_CIRCLE and pmin_r <= float(det.circle[2]) <= pmax_r)
+            person = det.person or (dkind == KIND_CIRCLE and pmin_r <= radii[di] <= pmax_r)
             k.person = person
             k.person_streak = k.person_streak + 1 if person else 0
             k.hits += 1
@@ -1021,7 +1091,7 @@ class Tracker:
                     del mu[0]
             if max_age is not None:
                 past, past_t = k.past, k.past_t
-                past.append((t, det.points))
+                past.append((t, det))  # (its points: det.points, read when the entry is)
                 past_t.append(t)
                 while past and t - past_t[0] > max_age:  # (past_t[q] is past[q][0])
                     del past[0]
@@ -1075,11 +1145,11 @@ class Tracker:
         return max(det.free_fraction, self._vacated_one(ref, t, past))
 
     def _vacated_one(self, ref, t: float, past: tuple) -> float:
-        """The vacated space of one track: the largest fraction of its stored points (``past``: (stamp s, (n, 2) map
-        points) entries, ≥ 1) that the scan at ``t`` (s) sees through, against that scan's free-space reference
-        ``ref`` — a receding object leaves free space behind its visible face. For each reference age the stored
-        scan nearest it (:func:`_nearest_age`, −1 standing for the last entry; only scans older than ``t``) is
-        tested once; the fraction is the count over n (0 for none)."""
+        """The vacated space of one track: the largest fraction of its stored points (``past``: (stamp s, detection)
+        entries, ≥ 1; the detection's (n, 2) map points) that the scan at ``t`` (s) sees through, against that scan's
+        free-space reference ``ref`` — a receding object leaves free space behind its visible face. For each reference
+        age the stored scan nearest it (:func:`_nearest_age`, −1 standing for the last entry; only scans older than
+        ``t``) is tested once; the fraction is the count over n (0 for none)."""
         stamps = [e[0] for e in past]
         n = len(stamps)
         best, last = 0.0, -2
@@ -1090,7 +1160,7 @@ class Tracker:
             if j == last or not t - stamps[j] > 0.0:
                 continue
             last = j
-            pts = past[j][1]
+            pts = past[j][1].points
             npt = pts.shape[0]
             f = self._free.count_seen_by(ref, pts) / npt if npt else 0.0
             best = max(best, f)
@@ -1102,12 +1172,10 @@ class Tracker:
         z, P, size, known = self._birth_state(det, j)
         g, gi = _shape_rows(det.theta, size, known, float(det.circle[2]) if det.kind == KIND_CIRCLE else 0.0,
                             det.kind, det.kind == KIND_RECT)
-        k = _Track(id=self._next_id, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t, birth_xy=z.copy(), g=g, gi=gi,
-                   beams=det.beams, free=[det], mstruct=[det.map_structure] if self._map is not None else [],
-                   mfree=[det.map_free] if self._map is not None else [],
-                   munknown=[det.map_unknown] if self._map is not None else [],
-                   past=[(t, det.points)] if self._free is not None else [],
-                   past_t=[t] if self._free is not None else [])
+        has_map, has_free = self._map is not None, self._free is not None
+        k = _new_track(self._next_id, t, z.copy(), g, gi, det.beams, [det],
+                       [det.map_structure] if has_map else [], [det.map_free] if has_map else [],
+                       [det.map_unknown] if has_map else [], [(t, det)] if has_free else [], [t] if has_free else [])
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
         self._next_id += 1
@@ -1396,7 +1464,7 @@ class Tracker:
         k.free = [det.free_fraction]
         if self._map is not None:
             k.mstruct, k.mfree, k.munknown = [det.map_structure], [det.map_free], [det.map_unknown]
-        k.past, k.past_t = ([(t, det.points)], [t]) if self._free is not None else ([], [])
+        k.past, k.past_t = ([(t, det)], [t]) if self._free is not None else ([], [])
         k.laser_xy, k.map_xy, k.map_t = [], [], []
         k.person, k.person_streak, k.rode = False, 0, False
         k.reason = "not in M: left the map structure it was retired on"
@@ -1700,7 +1768,7 @@ class Tracker:
         n = order.shape[0]
         fast = np.full(n, -1, dtype=np.int8)
         boxes, undecided = report_boxes(self._G, self._Gi, self._X, order, slow, fast)
-        if undecided.any():  # (a speed within an ulp of the limit: decided by math.hypot, as the reports always were)
+        if _any_of(undecided):  # (a speed within an ulp of the limit: decided by math.hypot, as the reports were)
             for i in undecided.nonzero()[0].tolist():
                 vx, vy = self._X[order[i], 2:].tolist()
                 fast[i] = math.hypot(vx, vy) > slow

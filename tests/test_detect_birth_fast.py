@@ -1,0 +1,60 @@
+"""The tracker's fast paths of pass trk13 (docs/speed.md): a birth's track record without the dataclass ``__init__``,
+and a scan detection's points made when read."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from dynslam2d.detect.measure import ScanDetection
+from dynslam2d.detect.tracker import _NO_STATE, _new_track, _Track
+
+
+def _args() -> dict:
+    return dict(tid=7, t=1.25, birth_xy=np.array([1.0, 2.0]), g=(0.1, 1.0, 0.5, 0.0, 0.0, 0.0),
+                gi=(0, True, True, False), beams=np.arange(3), free=[0.3], mstruct=[0.1], mfree=[0.2],
+                munknown=[0.7], past=[(1.25, None)], past_t=[1.25])
+
+
+def test_new_track_sets_every_field_as_the_dataclass_does() -> None:
+    """Every field of ``_new_track``'s record is the dataclass's for the same arguments (same value and type; the given
+    objects themselves; fresh lists for the defaults): a field added to ``_Track`` without its line in ``_new_track``
+    fails here (an unset slot raises, a different default differs)."""
+    a = _args()
+    fast = _new_track(**a)
+    ref = _Track(id=a["tid"], x=_NO_STATE, P=_NO_STATE, born=a["t"], last_hit=a["t"], birth_xy=a["birth_xy"], g=a["g"],
+                 gi=a["gi"], beams=a["beams"], free=a["free"], mstruct=a["mstruct"], mfree=a["mfree"],
+                 munknown=a["munknown"], past=a["past"], past_t=a["past_t"])
+    assert type(fast) is _Track
+    names = [f.name for f in dataclasses.fields(_Track)]
+    assert len(names) == len(_Track.__slots__) and len(names) > 30
+    for name in names:
+        got, want = getattr(fast, name), getattr(ref, name)
+        assert type(got) is type(want), name
+        if isinstance(want, np.ndarray):
+            assert got is want or (got.dtype == want.dtype and np.array_equal(got, want)), name
+        else:
+            assert got == want, name
+    # the lists given are the track's own; the defaults are new lists per track (not shared between tracks)
+    assert fast.free is a["free"] and fast.past is a["past"] and fast.birth_xy is a["birth_xy"]
+    other = _new_track(**_args())
+    for name in ("history", "laser_xy", "map_xy", "map_t"):
+        assert getattr(fast, name) is not getattr(other, name), name
+    fast.history.append(False)
+    assert other.history == [True]
+
+
+def test_scan_detection_points_are_its_rows_of_the_scan_array() -> None:
+    """A scan detection given the scan's points and its first row reads its own rows (a view of them); given only its
+    own points, that array itself; a point set assigned later replaces them."""
+    pts = np.arange(20.0).reshape(10, 2)
+    fits, lohi, rel = np.zeros((3, 12)), np.zeros((3, 4)), np.zeros((3, 2, 2), dtype=bool)
+    d = ScanDetection(np.arange(4), pts, "rect", 0.0, 4, 0.0, 0.0, 0.0, 0.0, fits, lohi, rel, 1, 3)
+    assert d.points.tolist() == pts[3:7].tolist() and np.shares_memory(d.points, pts)
+    own = np.ones((2, 2))
+    e = ScanDetection(np.arange(2), own, "rect", 0.0, 2, 0.0, 0.0, 0.0, 0.0, fits, lohi, rel, 0)
+    assert e.points is own
+    d.points = own
+    assert d.points is own
+    assert d.__reduce__()[1][1] is own  # (a copy is a Detection with these points)
