@@ -58,3 +58,41 @@ def test_scan_detection_points_are_its_rows_of_the_scan_array() -> None:
     d.points = own
     assert d.points is own
     assert d.__reduce__()[1][1] is own  # (a copy is a Detection with these points)
+
+
+def _refs_loop(mem, now: float) -> list:
+    """FreeSpaceMemory._refs as first written: a Python loop keeping the first smallest deviation per age."""
+    out: list = []
+    ages = [now - b.stamp for b in mem._buf]
+    for a in mem.ref_ages:
+        j, best = 0, abs(ages[0] - a)
+        for i in range(1, len(ages)):
+            d = abs(ages[i] - a)
+            if d < best:
+                j, best = i, d
+        if ages[j] > 0.0 and mem._buf[j] not in out:
+            out.append(mem._buf[j])
+    return out
+
+
+def test_reference_choice_is_the_first_nearest_age_also_with_repeated_stamps() -> None:
+    """The memory's reference scans (the first buffered scan nearest each reference age) are those of the plain loop
+    on buffers with repeated stamps (ties: the earlier scan), gaps, and reads at, between and after the stamps."""
+    import random
+
+    from dynslam2d.detect.freespace import FreeSpaceMemory, _Ref
+
+    rng = random.Random(13)
+    ties = 0
+    for _ in range(3000):
+        mem = FreeSpaceMemory((0.3, 0.8, rng.choice([0.05, 0.5, 1.0])))
+        x = rng.random()
+        for _ in range(rng.randint(1, 30)):
+            x += rng.choice([0.0, 0.0, 0.0667, 0.1, 0.25, 0.5])
+            mem._buf.append(_Ref(x, None, None, 0.0, 0.0, False, 0.0, None))
+        now = x + rng.choice([0.0, 0.0667, 0.3, 0.55, 0.8, 2.0])
+        got = [id(r) for r in mem._refs(now)]
+        assert got == [id(r) for r in _refs_loop(mem, now)]
+        stamps = [r.stamp for r in mem._buf]
+        ties += len(set(stamps)) < len(stamps)
+    assert ties > 1000  # repeated stamps were exercised

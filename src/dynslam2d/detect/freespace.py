@@ -107,12 +107,11 @@ class FreeSpaceMemory:
             return out
         ages = [now - b.stamp for b in self._buf]
         for a in self.ref_ages:
-            # the buffered scan whose age is nearest a (the first on ties, as np.argmin; ages are finite)
-            j, best = 0, abs(ages[0] - a)
-            for i in range(1, len(ages)):
-                d = abs(ages[i] - a)
-                if d < best:
-                    j, best = i, d
+            # the buffered scan whose age is nearest a (the first on ties, as np.argmin; ages are finite): min keeps
+            # its first item and replaces it only by a smaller one, and index finds that item's first position (an
+            # equal item before it would have been kept), so this is the loop "j = i where d < best" in C
+            dev = [abs(x - a) for x in ages]
+            j = dev.index(min(dev))
             if ages[j] > 0.0 and self._buf[j] not in out:
                 out.append(self._buf[j])
         return out

@@ -419,6 +419,7 @@ class Tracker:
         self._batch: DetectionBatch | None = None  # per-detection arrays of the current scan (kernels)
         self._default: MeasureRows | None = None  # default measurements of the current scan's detections
         self._no_prior: dict[int, tuple] = {}  # measure_batch's "no track prior" arguments for m detections, by m
+        self._size_sigma: dict[int, np.ndarray] = {}  # measure_batch's size σ of n associated pairs (m), by n
         self._stacked: tuple[np.ndarray, np.ndarray] | None = None  # predicted X, P of all tracks
         self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate)
         # this scan's ids of the updated tracks and indices of the detections they took (update, _update_tracks)
@@ -947,7 +948,12 @@ class Tracker:
         b = self._batch
         trows = self._rows()[sel]
         swaps, sizes, has, radius = pair_priors(self._G, self._Gi, trows, dis, b.kind, b.theta)
-        mr = self._measure_rows(dis, sizes, has, radius, np.full(npair, 0.05))
+        sig = self._size_sigma.get(npair)
+        if sig is None:  # (the measurements' size σ, the same array for every scan with npair pairs: only read)
+            if len(self._size_sigma) >= 64:
+                self._size_sigma.clear()
+            sig = self._size_sigma[npair] = np.full(npair, 0.05)
+        mr = self._measure_rows(dis, sizes, has, radius, sig)
         Xs, Ps = self._stack()
         X_prior = Xs[sel]  # (kalman_update_batch works on copies: the prior stays as it is)
         Xn, Pn, ok = kalman_update_batch(X_prior, Ps[sel], mr.H, mr.zm, mr.Rm)
