@@ -96,3 +96,34 @@ def test_reference_choice_is_the_first_nearest_age_also_with_repeated_stamps() -
         stamps = [r.stamp for r in mem._buf]
         ties += len(set(stamps)) < len(stamps)
     assert ties > 1000  # repeated stamps were exercised
+
+
+def test_scan_detections_are_the_constructors_detections() -> None:
+    """``scan_detections`` gives, slot for slot, the detections that ``ScanDetection(...)`` makes one by one (the
+    shared arrays themselves, the beams as views of the scan's beams with the same values)."""
+    from dynslam2d.detect.layout import KIND_NAMES
+    from dynslam2d.detect.measure import scan_detections
+
+    rng = np.random.default_rng(3)
+    npts = rng.integers(1, 9, size=12)
+    starts = np.concatenate(([0], np.cumsum(npts)[:-1]))
+    beams = np.arange(int(npts.sum())) * 3
+    pts = rng.normal(size=(beams.shape[0], 2))
+    kinds = rng.integers(0, len(KIND_NAMES), size=12).astype(np.int8)
+    fits, lohi, rel = rng.normal(size=(12, 12)), rng.normal(size=(12, 4)), rng.random((12, 2, 2)) < 0.5
+    theta, fs, ff, fu = rng.random((4, 12)).tolist()
+    test = object()  # (a scan's free-space test: shared by every detection)
+    got = scan_detections(beams, pts, starts.tolist(), npts.tolist(), kinds.tolist(), theta, test, fs, ff, fu, fits,
+                          lohi, rel)
+    assert len(got) == 12
+    for j, d in enumerate(got):
+        a0, n = int(starts[j]), int(npts[j])
+        want = ScanDetection(beams[a0:a0 + n], pts, KIND_NAMES[int(kinds[j])], theta[j], n, test, fs[j], ff[j], fu[j],
+                             fits, lohi, rel, j, a0)
+        assert type(d) is ScanDetection
+        for name in ScanDetection.__slots__ + ("kind", "theta", "n_points", "map_structure", "map_free", "map_unknown",
+                                               "person"):
+            g, w = getattr(d, name), getattr(want, name)
+            assert g is w or g == w, name
+        assert np.shares_memory(d.beams, beams) and d.beams.tolist() == want.beams.tolist()
+        assert d.points.tolist() == want.points.tolist() and d.centroid.tolist() == want.centroid.tolist()

@@ -100,7 +100,7 @@ from dynslam2d.detect.layout import (
 )
 from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
 from dynslam2d.detect.mapevidence import MapView
-from dynslam2d.detect.measure import Detection, ScanDetection
+from dynslam2d.detect.measure import Detection, ScanDetection, scan_detections
 from dynslam2d.detect.segment import Segmentation, segment_scan
 from dynslam2d.detect.shapes import CRITERIA, fit_clusters, search_angles
 from dynslam2d.detect.vehicles import _NO_MAP, extent_limit
@@ -748,27 +748,24 @@ class Tracker:
             i0, j0, res, float(tc.map_occupied_logodds), float(tc.map_free_logodds), int(tc.map_free_radius))
         nd = starts.shape[0]
         st.structure_clusters += seg.n_clusters - nd
-        dets: list[Detection] = []
         # free-space evidence per detection (0 where unknown). The free-space fraction is read for few detections
         # (births, updates whose entry is read: Tracker._free_values): each detection keeps this scan's test (the
         # memory's references now, before it gains this scan) and computes its fraction when first read
         # (ScanDetection.free_fraction)
-        frac = fs = ff = fu = [0.0] * nd
+        frac = 0.0
+        fs = ff = fu = [0.0] * nd
         free = self._free
         if free is not None:
             self._cur_ref = free.make_ref(scan, pose, valid)
             if nd and (test := free.test_at(float(scan.stamp))) is not None:
-                frac = [test] * nd
+                frac = test
             free.add(scan, pose, valid, self._cur_ref)
         if view is not None:
             fs, ff, fu = mfr.tolist()
-        # (their centroid, bounds, flags and circle stay rows of fits / lohi / rel until read: ScanDetection)
-        for j, (a0, n, kd, th, fr_j, fs_j, ff_j, fu_j) in enumerate(zip(
-                starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(), frac, fs, ff, fu)):
-            b = a0 + n
-            # (its points: rows a0 … b − 1 of pts, a view made when read: ScanDetection.points)
-            dets.append(ScanDetection(beams[a0:b], pts, KIND_NAMES[kd], th, n, fr_j, fs_j, ff_j, fu_j, fits,
-                                      lohi, rel, j, a0))
+        # (their centroid, bounds, flags and circle stay rows of fits / lohi / rel until read, their points rows of pts:
+        # ScanDetection; all made in one loop, scan_detections)
+        dets = scan_detections(beams, pts, starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(),
+                               frac, fs, ff, fu, fits, lohi, rel)
         if cfg.fit.person_merge and len(dets) > 1:
             dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
                                                                                  npts, px, py, beams)
