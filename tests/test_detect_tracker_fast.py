@@ -16,7 +16,7 @@ from dynslam2d.detect import DetectConfig, Tracker
 from dynslam2d.detect.freespace import FreeTest
 from dynslam2d.detect.kernels import segment_means
 from dynslam2d.detect.layout import F_CENTROID_X, F_CENTROID_Y, N_FIT_COLS
-from dynslam2d.detect.tracker import _nearest_age
+from dynslam2d.detect.tracker import _nearest_age, _past_points
 from dynslam2d.types import Pose2D, Scan
 
 N = 360
@@ -64,9 +64,9 @@ def _vacated_reference(tr: Tracker, t: float) -> dict[int, float]:
                 continue
             j = _window_argmin(k.past_t, t, a)
             if t - k.past_t[j] > 0.0:
-                chunks.append(k.past[j][1].points)
+                chunks.append(_past_points(k.past[j]))
                 owners.append(k.id)
-                counts.append(k.past[j][1].points.shape[0])
+                counts.append(_past_points(k.past[j]).shape[0])
     out: dict[int, float] = {}
     if chunks:
         pts = np.concatenate(chunks)

@@ -185,8 +185,9 @@ class _Track:
     laser_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the laser frame per update
     map_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the map frame per update
     map_t: list[float] = field(default_factory=list)  # stamps of map_xy, s
-    # (stamp s, detection) per update within the free-space memory's max age: its points are the detection's .points
-    past: list[tuple[float, Detection]] = field(default_factory=list)
+    # (stamp s, points array, a0, n) per update within the free-space memory's max age: the detection's (n, 2) points,
+    # rows a0 … a0 + n − 1 of the array (its scan's), or the whole array for a0 < 0 (_past_entry, _past_points)
+    past: list[tuple[float, np.ndarray, int, int]] = field(default_factory=list)
     past_t: list[float] = field(default_factory=list)  # the stamps of past, s (kept in step with it)
     slow_since: float | None = None
     probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
@@ -357,6 +358,21 @@ def _nearest_age(stamps: list[float], n: int, t: float, a: float, bisect_left=bi
         j, best = q, dev
         q -= 1
     return j
+
+
+def _past_entry(t: float, det: Detection) -> tuple[float, np.ndarray, int, int]:
+    """A track's stored-points entry (``_Track.past``) for detection ``det`` at stamp ``t`` (s): its points as the
+    array and row span a scan detection keeps (no view made; :func:`_past_points` makes it when read, the late
+    vacated-space test), or a plain detection's own points."""
+    if type(det) is ScanDetection:
+        return t, det._pts, det._a0, det.n_points
+    return t, det.points, -1, 0
+
+
+def _past_points(entry: tuple[float, np.ndarray, int, int]) -> np.ndarray:
+    """The (n, 2) map-frame points of a stored-points entry (:func:`_past_entry`)."""
+    _, pts, a0, n = entry
+    return pts if a0 < 0 else pts[a0:a0 + n]
 
 
 def _default_sizes(lohi: list[float], rel: list[list[bool]], fit) -> list[float]:
@@ -1094,7 +1110,7 @@ class Tracker:
                     del mu[0]
             if max_age is not None:
                 past, past_t = k.past, k.past_t
-                past.append((t, det))  # (its points: det.points, read when the entry is)
+                past.append((t, det._pts, det._a0, det.n_points))  # (_past_entry of a scan detection, inline)
                 past_t.append(t)
                 while past and t - past_t[0] > max_age:  # (past_t[q] is past[q][0])
                     del past[0]
@@ -1148,9 +1164,10 @@ class Tracker:
         return max(det.free_fraction, self._vacated_one(ref, t, past))
 
     def _vacated_one(self, ref, t: float, past: tuple) -> float:
-        """The vacated space of one track: the largest fraction of its stored points (``past``: (stamp s, detection)
-        entries, ≥ 1; the detection's (n, 2) map points) that the scan at ``t`` (s) sees through, against that scan's
-        free-space reference ``ref`` — a receding object leaves free space behind its visible face. For each reference
+        """The vacated space of one track: the largest fraction of its stored points (``past``: ≥ 1 entries of
+        ``_Track.past``, each a detection's (n, 2) map points, :func:`_past_points`) that the scan at ``t`` (s) sees
+        through, against that scan's free-space reference ``ref`` — a receding object leaves free space behind its
+        visible face. For each reference
         age the stored scan nearest it (:func:`_nearest_age`, −1 standing for the last entry; only scans older than
         ``t``) is tested once; the fraction is the count over n (0 for none)."""
         stamps = [e[0] for e in past]
@@ -1163,7 +1180,7 @@ class Tracker:
             if j == last or not t - stamps[j] > 0.0:
                 continue
             last = j
-            pts = past[j][1].points
+            pts = _past_points(past[j])
             npt = pts.shape[0]
             f = self._free.count_seen_by(ref, pts) / npt if npt else 0.0
             best = max(best, f)
@@ -1178,7 +1195,8 @@ class Tracker:
         has_map, has_free = self._map is not None, self._free is not None
         k = _new_track(self._next_id, t, z.copy(), g, gi, det.beams, [det],
                        [det.map_structure] if has_map else [], [det.map_free] if has_map else [],
-                       [det.map_unknown] if has_map else [], [(t, det)] if has_free else [], [t] if has_free else [])
+                       [det.map_unknown] if has_map else [], [_past_entry(t, det)] if has_free else [],
+                       [t] if has_free else [])
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
         self._next_id += 1
@@ -1467,7 +1485,7 @@ class Tracker:
         k.free = [det.free_fraction]
         if self._map is not None:
             k.mstruct, k.mfree, k.munknown = [det.map_structure], [det.map_free], [det.map_unknown]
-        k.past, k.past_t = ([(t, det)], [t]) if self._free is not None else ([], [])
+        k.past, k.past_t = ([_past_entry(t, det)], [t]) if self._free is not None else ([], [])
         k.laser_xy, k.map_xy, k.map_t = [], [], []
         k.person, k.person_streak, k.rode = False, 0, False
         k.reason = "not in M: left the map structure it was retired on"
