@@ -34,47 +34,97 @@ _ZERO_PRIORS = np.zeros((3, 3, 3))
 
 
 @njit(cache=True)
+def _sums(prob, pts, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
+    """:func:`accumulate`'s pass; without ``full`` only the cost (H, g untouched; Σ M and n_inside returned as 0).
+
+    The same float64 operations in the same order as :func:`~dynslam2d.slam.interp.interp_value_grad` and the
+    sums over the points, so the same bits: the sums are kept in local variables instead of ``H`` / ``g`` (stored
+    once at the end) and the four cells read from the flat (C-order) array at one index (no negative-index
+    wrap-around code: an in-bounds point's cell indices are ≥ 0). An out-of-bounds point adds (1 − 0)² = 1 to
+    the cost and nothing else, as before."""
+    c = math.cos(th)
+    s = math.sin(th)
+    h, w = prob.shape
+    flat = np.ascontiguousarray(prob).reshape(-1)  # (a view of the level's C-contiguous cache)
+    xmax = w - 2
+    ymax = h - 2
+    cost = 0.0
+    summ = 0.0
+    n_in = 0
+    g0 = 0.0
+    g1 = 0.0
+    g2 = 0.0
+    h00 = 0.0
+    h01 = 0.0
+    h02 = 0.0
+    h11 = 0.0
+    h12 = 0.0
+    h22 = 0.0
+    for i in range(pts.shape[0]):
+        sx = pts[i, 0]
+        sy = pts[i, 1]
+        qx = c * sx - s * sy + x
+        qy = s * sx + c * sy + y
+        if not (qx >= 0.0 and qy >= 0.0 and qx <= xmax and qy <= ymax):  # (also rejects NaN)
+            cost += 1.0
+            continue
+        x0 = int(qx)
+        y0 = int(qy)
+        fx = qx - x0
+        fy = qy - y0
+        k = np.uint64(y0) * np.uint64(w) + np.uint64(x0)
+        p00 = flat[k]
+        p10 = flat[k + np.uint64(1)]
+        p01 = flat[k + np.uint64(w)]
+        p11 = flat[k + np.uint64(w + 1)]
+        # Kohlbrecher et al. 2011 Eq. 4 (bilinear value), Eqs. 5–6 (its gradient)
+        m = (1.0 - fy) * ((1.0 - fx) * p00 + fx * p10) + fy * ((1.0 - fx) * p01 + fx * p11)
+        r = 1.0 - m
+        cost += r * r
+        if not full:
+            continue
+        if swapped:
+            mx = (1.0 - fx) * (p10 - p00) + fx * (p11 - p01)
+            my = (1.0 - fy) * (p01 - p00) + fy * (p11 - p10)
+        else:
+            mx = (1.0 - fy) * (p10 - p00) + fy * (p11 - p01)
+            my = (1.0 - fx) * (p01 - p00) + fx * (p11 - p10)
+        summ += m
+        n_in += 1
+        dth = (-s * sx - c * sy) * mx + (c * sx - s * sy) * my  # Kohlbrecher et al. 2011 Eq. 11
+        g0 += r * mx
+        g1 += r * my
+        g2 += r * dth
+        h00 += mx * mx
+        h01 += mx * my
+        h02 += mx * dth
+        h11 += my * my
+        h12 += my * dth
+        h22 += dth * dth
+    if full:
+        g[0] = g0
+        g[1] = g1
+        g[2] = g2
+        H[0, 0] = h00
+        H[0, 1] = h01
+        H[0, 2] = h02
+        H[1, 0] = h01
+        H[1, 1] = h11
+        H[1, 2] = h12
+        H[2, 0] = h02
+        H[2, 1] = h12
+        H[2, 2] = h22
+    return cost, summ, n_in
+
+
+@njit(cache=True)
 def accumulate(prob, pts, x, y, th, swapped, H, g):  # pragma: no cover - numba
     """Fill H (3, 3) and g (3,) at map pose (x, y, θ); return (cost, Σ M, n_inside).
 
     cost = Σ (1−M)² over all points, out-of-bounds points counting M = 0;
     out-of-bounds points add nothing to H, g (as getCompleteHessianDerivs).
     """
-    c = math.cos(th)
-    s = math.sin(th)
-    for a in range(3):
-        g[a] = 0.0
-        for b in range(3):
-            H[a, b] = 0.0
-    cost = 0.0
-    summ = 0.0
-    n_in = 0
-    for i in range(pts.shape[0]):
-        sx = pts[i, 0]
-        sy = pts[i, 1]
-        qx = c * sx - s * sy + x
-        qy = s * sx + c * sy + y
-        m, mx, my, inside = interp_value_grad(prob, qx, qy, swapped)
-        r = 1.0 - m
-        cost += r * r
-        if not inside:
-            continue
-        summ += m
-        n_in += 1
-        dth = (-s * sx - c * sy) * mx + (c * sx - s * sy) * my  # Kohlbrecher et al. 2011 Eq. 11
-        g[0] += r * mx
-        g[1] += r * my
-        g[2] += r * dth
-        H[0, 0] += mx * mx
-        H[0, 1] += mx * my
-        H[0, 2] += mx * dth
-        H[1, 1] += my * my
-        H[1, 2] += my * dth
-        H[2, 2] += dth * dth
-    H[1, 0] = H[0, 1]
-    H[2, 0] = H[0, 2]
-    H[2, 1] = H[1, 2]
-    return cost, summ, n_in
+    return _sums(prob, pts, x, y, th, swapped, True, H, g)
 
 
 @njit(cache=True)
@@ -130,10 +180,32 @@ def _prior_cost(x, y, th, prior, lam_p):  # pragma: no cover - numba
 
 
 @njit(cache=True)
+def _same_float(a, b):  # pragma: no cover - numba
+    """``a`` and ``b`` are the same float, sign of zero included (finite values)."""
+    return a == b and (a != 0.0 or math.copysign(1.0, a) == math.copysign(1.0, b))
+
+
+@njit(cache=True)
+def _round_trips(x, y, th, res, i0, j0):  # pragma: no cover - numba
+    """Map pose (x, y, θ) comes back bit for bit from the world pose :func:`match_pyramid` makes of it (((x + i0)·res,
+    (y + j0)·res, wrapped θ) and back: x / res − i0 …), so that its finest-level evaluation is this pose's sums."""
+    wx = (x + i0) * res
+    wy = (y + j0) * res
+    wth = (th + math.pi) % (2.0 * math.pi) - math.pi
+    return _same_float(wx / res - i0, x) and _same_float(wy / res - j0, y) and _same_float(wth, th)
+
+
+@njit(cache=True)
 def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
-                prior, lam_p, H_out):  # pragma: no cover - numba
+                prior, lam_p, H_out, keep, res, i0, j0):  # pragma: no cover - numba
     """:func:`match_level`'s iterations; returns (x, y, θ, accepted steps, cost, Σ M, n_inside) with H at the
-    returned pose in ``H_out`` (cost, Σ M and n_inside of :func:`accumulate` there: without the prior term)."""
+    returned pose in ``H_out`` (cost, Σ M and n_inside of :func:`accumulate` there: without the prior term).
+
+    H, Σ M and n_inside at the returned pose are needed only with ``keep`` and when that pose survives
+    :func:`_round_trips` with (``res``, ``i0``, ``j0``) (else ``H_out``, Σ M and n_inside are unspecified). An LM
+    trial step that, if accepted, ends the iterations (the last one, or converged) and whose H is not needed
+    so runs the cost-only pass: its cost is the same sum (the rejected / accepted decision and the pose do not
+    change), and the H, g it would have made are never read."""
     H = np.zeros((3, 3))
     g = np.zeros(3)
     H2 = np.zeros((3, 3))  # H, g at a trial LM step (they become H, g when it is accepted)
@@ -155,7 +227,7 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
         cost += _prior_cost(x, y, th, prior, lam_p)
     lam = lam0
     n_acc = 0
-    for _ in range(n_iter):
+    for it in range(n_iter):
         if H[0, 0] == 0.0 or H[1, 1] == 0.0:
             break
         for a in range(3):
@@ -196,8 +268,11 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
         nth = th + d[2]
         if use_lm:
             # one pass gives the trial cost and, if the step is accepted, the new H and g (the same sums as a
-            # cost-only pass followed by accumulate at the accepted pose)
-            new_raw, new_summ, new_in = accumulate(prob, pts, nx, ny, nth, swapped, H2, g2)
+            # cost-only pass followed by accumulate at the accepted pose); a step whose acceptance ends the
+            # iterations needs them only when the caller keeps this pose's H
+            ends = it == n_iter - 1 or (nt < _CONVERGED_CELLS and abs(d[2]) < _CONVERGED_RAD)
+            full = not ends or (keep and _round_trips(nx, ny, nth, res, i0, j0))
+            new_raw, new_summ, new_in = _sums(prob, pts, nx, ny, nth, swapped, full, H2, g2)
             new_cost = new_raw
             if use_prior:
                 new_cost += _prior_cost(nx, ny, nth, prior, lam_p)
@@ -205,8 +280,9 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
                 x, y, th = nx, ny, nth
                 cost = new_cost
                 raw, summ, n_in = new_raw, new_summ, new_in
-                H, H2 = H2, H
-                g, g2 = g2, g
+                if full:
+                    H, H2 = H2, H
+                    g, g2 = g2, g
                 lam = max(lam * 0.1, 1e-7)
                 n_acc += 1
                 if nt < _CONVERGED_CELLS and abs(d[2]) < _CONVERGED_RAD:
@@ -243,18 +319,12 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     """
     H = np.zeros((3, 3))
     x, y, th, n_acc, _, _, _ = _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
-                                           max_trans, prior, lam_p, H)
+                                           max_trans, prior, lam_p, H, False, 1.0, 0.0, 0.0)
     out = np.empty(3)
     out[0] = x
     out[1] = y
     out[2] = th
     return out, n_acc
-
-
-@njit(cache=True)
-def _same_float(a, b):  # pragma: no cover - numba
-    """``a`` and ``b`` are the same float, sign of zero included (finite values)."""
-    return a == b and (a != 0.0 or math.copysign(1.0, a) == math.copysign(1.0, b))
 
 
 @njit(cache=True)
@@ -308,8 +378,10 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             pp[2] = mp[2]
         pts = pts_m / res
         prob = prob0 if k == 0 else (prob1 if k == 1 else prob2)
+        # (only the finest level's H at its result is read, by the evaluation below)
         x, y, th, _, raw, summ, n_in = _match_core(prob, pts, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
-                                                   max_trans, pp, lam_ps[k], Hk)
+                                                   max_trans, pp, lam_ps[k], Hk, want_fit and k == 0 and not swapped,
+                                                   res, i0, j0)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
             pose[0] = np.nan
             pose[1] = np.nan
