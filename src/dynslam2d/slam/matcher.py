@@ -567,6 +567,11 @@ def covariance_world(hessian: np.ndarray, sigma2: float, resolution: float) -> n
     return 0.5 * (C + C.T)
 
 
+try:  # np.einsum without optimize calls this directly (the same result without the Python wrapper's dispatch)
+    from numpy._core._multiarray_umath import c_einsum as _einsum
+except ImportError:  # pragma: no cover - another NumPy layout
+    _einsum = np.einsum
+
 #: Width of the bearing bins of :func:`angular_spread` / :func:`support`, rad (5°).
 SPREAD_BIN = math.radians(5.0)
 _N_BINS = 72
@@ -677,6 +682,19 @@ def support(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, thresh:
     mp = level.pose_to_map(pose_world)
     n, bins = _support_kernel(level.prob, pts_m, stride, 1.0 / level.resolution, mp[0], mp[1], mp[2], thresh,
                               _N_BINS)
+    return int(n) * stride, bins * (2.0 * math.pi / _N_BINS)
+
+
+def support_at(level: GridLevel, pts_m: np.ndarray, x: float, y: float, theta: float,
+               thresh: float) -> tuple[int, float]:
+    """:func:`support` at the world pose (``x`` m, ``y`` m, ``theta`` rad) given as floats (no pose arrays: the
+    map pose is :meth:`GridLevel.pose_to_map`'s arithmetic on floats, the same values)."""
+    if level.empty or pts_m.shape[0] == 0:
+        return 0, 0.0
+    stride = max(1, pts_m.shape[0] // _SUPPORT_POINTS)
+    r = level.resolution
+    n, bins = _support_kernel(level.prob, pts_m, stride, 1.0 / r, float(x) / r - level.i0, float(y) / r - level.j0,
+                              float(theta), thresh, _N_BINS)
     return int(n) * stride, bins * (2.0 * math.pi / _N_BINS)
 
 
@@ -795,7 +813,7 @@ def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, 
 
     Closed-form 2×2 / scalar algebra (it runs on every scan)."""
     n = pts_m.shape[0]
-    rho = math.sqrt(float(np.einsum("ij,ij->", pts_m, pts_m)) / n) if n else 1.0
+    rho = math.sqrt(float(_einsum("ij,ij->", pts_m, pts_m)) / n) if n else 1.0
     rho = max(rho, 1e-3)
     h = hessian_cells.tolist()
     k = 1.0 / resolution  # world (m, m, rad) → cells / rad
