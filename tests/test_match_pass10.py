@@ -206,3 +206,76 @@ def test_match_core_with_cost_only_trials_equals_the_full_passes(n_levels: int) 
                                     kept += 1
                                     assert got[4:] == ref[4:] and Hn.tobytes() == Hr.tobytes()
     assert kept >= 4  # the kept-H comparison ran
+
+
+def test_gated_points_counts_equal_close_count_and_angular_spread() -> None:
+    """The scan gate's counts are ``close_count``'s and ``angular_spread``'s (bins × 2π/72), on scans with NaN,
+    inf, out-of-range and too-close returns, narrow and wide views, 0 to 1500 beams; without ``stats`` zeros and
+    the same points."""
+    from dynslam2d.slam.matcher import BIN_ANGLE, angular_spread, close_count, gated_points
+
+    rng = np.random.default_rng(7)
+    narrow = 0
+    for _ in range(300):
+        n = int(rng.integers(0, 1500))
+        fov = rng.choice([0.1, 0.6, 2.0, 2 * math.pi])
+        a = rng.uniform(-math.pi, math.pi) + np.linspace(0.0, fov, n)
+        r = rng.uniform(0.0, 12.0, n)
+        bad = rng.random(n)
+        r[bad < 0.05] = np.nan
+        r[(bad >= 0.05) & (bad < 0.08)] = np.inf
+        r[(bad >= 0.08) & (bad < 0.2)] = rng.uniform(0.0, 0.3, int(((bad >= 0.08) & (bad < 0.2)).sum()))
+        lo, hi, min_d, max_d = 0.05, 10.0, float(rng.choice([0.0, 0.2, 0.25])), 9.0
+        valid = np.isfinite(r) & (r >= lo) & (r <= hi)
+        ca, sa = np.cos(a), np.sin(a)
+        pts, clear, nv, nc, bins = gated_points(r, ca, sa, valid, lo, hi, min_d, max_d, 3.0, True)
+        p2, c2, z1, z2, z3 = gated_points(r, ca, sa, valid, lo, hi, min_d, max_d, 3.0, False)
+        assert (nv, nc) == close_count(r, lo, hi, min_d)
+        assert bins * BIN_ANGLE == angular_spread(pts)
+        assert (z1, z2, z3) == (0, 0, 0) and p2.tobytes() == pts.tobytes() and c2.tobytes() == clear.tobytes()
+        narrow += bins * BIN_ANGLE < 0.5
+    assert narrow > 10
+
+
+@pytest.mark.parametrize("limits", [{}, {"relocalise_margin": 0.3}, {"relocalise_min_score": 0.999}])
+def test_relocalising_with_the_search_bounds_gives_the_same_steps(monkeypatch: pytest.MonkeyPatch,
+                                                                  limits: dict) -> None:
+    """Lost after a blackout, then relocalised (default limits), or refused on the margin or on the score: the steps
+    (poses, states, reasons) are the same bits whether the relocalising search gets the refusal bounds
+    (``min_score`` / ``min_margin``) or not (the previous call)."""
+    import dynslam2d.slam.processor as pr
+    from dynslam2d.sim import simulate
+    from dynslam2d.slam import HectorSlam, SlamConfig
+
+    sim = simulate("static", duration=12.0)
+    scans = []
+    for i, s in enumerate(sim.scans):
+        s = s.with_ranges(s.ranges)  # (no odometry / IMU: the laser alone)
+        scans.append(s.with_ranges(np.full(s.ranges.shape, np.inf)) if 120 <= i < 180 else s)
+
+    def run(drop_bounds: bool) -> tuple[list[bytes], int]:
+        calls = [0]
+        search = pr.correlative_search
+
+        def wrapped(*a, **k):
+            if "min_score" in k:
+                calls[0] += 1
+                if drop_bounds:
+                    k.pop("min_score")
+                    k.pop("min_margin")
+            return search(*a, **k)
+
+        monkeypatch.setattr(pr, "correlative_search", wrapped)
+        slam = HectorSlam(SlamConfig(**limits))
+        out = []
+        for s in scans:
+            st = slam.process(s)
+            out.append(np.array([st.pose.x, st.pose.y, st.pose.theta, st.score]).tobytes()
+                       + f"{st.state}|{st.reason}|{st.pose_source}|{st.map_updated}".encode())
+        monkeypatch.setattr(pr, "correlative_search", search)
+        return out, calls[0], slam.relocalisations
+
+    with_bounds, n, found = run(False)
+    without, n2, found2 = run(True)
+    assert n == n2 and found == found2 and with_bounds == without
+    assert n >= (1 if not limits else 2) and found <= 1  # with the limits raised, refused at least once

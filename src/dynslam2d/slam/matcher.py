@@ -329,20 +329,21 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
 
 @njit(cache=True)
 def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, swapped, use_lm, lam0, lam_max,
-                  max_rot, max_trans, use_prior, prior_world, lam_ps, want_fit, free_thresh, H_out):  # pragma: no cover
+                  max_rot, max_trans, use_prior, prior_world, lam_ps, want_fit, free_thresh, H_out,
+                  pose):  # pragma: no cover
     """:func:`match_multires` on a map of at most three levels in one call (the same arithmetic as its Python
     loop): ``prob0`` … ``prob2`` the levels' probability caches (finest first; unused ones any array), ``geo``
     (L, 4) per level (cell side m, i0, j0, 1.0 if empty), ``pts_m`` (n, 2) laser-frame points m, ``start`` the
     world pose (x m, y m, θ rad); ``prior_world`` (3,) with ``lam_ps`` (L, 3, 3) the prior per level in its cell
     units when ``use_prior``.
 
-    Returns (world pose (3,), fitted, cost, Σ M, n_inside, free). With ``want_fit`` and a finite result on a
+    Writes the world pose into ``pose`` (3,) (not ``start``'s array) and returns (fitted, cost, Σ M, n_inside,
+    free). With ``want_fit`` and a finite result on a
     non-empty finest level, ``fitted`` is True and H (in ``H_out``), cost, Σ M and n_inside are :func:`evaluate`'s
     at the returned pose on level 0 (unswapped weights): the last iteration's sums when that iteration ran on
     level 0, unswapped, at exactly the same map pose, else one :func:`accumulate` pass; and ``free`` is
     :func:`free_fraction` below ``free_thresh`` on level min(1, L − 1) at the returned pose with θ wrapped once more
     (as ``Pose2D(x, y, wrap_angle(θ))``)."""
-    pose = np.empty(3)
     pose[0] = start[0]
     pose[1] = start[1]
     pose[2] = start[2]
@@ -386,7 +387,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             pose[0] = np.nan
             pose[1] = np.nan
             pose[2] = np.nan
-            return pose, False, 0.0, 0.0, 0, 0.0
+            return False, 0.0, 0.0, 0, 0.0
         pose[0] = (x + i0) * res
         pose[1] = (y + j0) * res
         pose[2] = (th + math.pi) % (2.0 * math.pi) - math.pi  # wrap after each level (§2.5)
@@ -398,7 +399,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             lx, ly, lth = x, y, th
             l_raw, l_summ, l_in = raw, summ, n_in
     if not want_fit or geo[0, 3] != 0.0:
-        return pose, False, 0.0, 0.0, 0, 0.0
+        return False, 0.0, 0.0, 0, 0.0
     fl = min(1, n_lv - 1)
     free = 0.0
     if geo[fl, 3] == 0.0:
@@ -416,12 +417,30 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
         for a in range(3):
             for b in range(3):
                 H_out[a, b] = Hk[a, b]
-        return pose, True, l_raw, l_summ, l_in, free
+        return True, l_raw, l_summ, l_in, free
     if pts0.shape[0] != pts_m.shape[0]:
         pts0 = pts_m / res
     g = np.zeros(3)
     cost, summ, n_in = accumulate(prob0, pts0, m0, m1, m2, np.bool_(False), H_out, g)  # not a literal: one signature
-    return pose, True, cost, summ, n_in, free
+    return True, cost, summ, n_in, free
+
+
+#: level geometry key → (L, 4) float64 array of match_pyramid's ``geo`` (see _level_geometry); a few maps
+#: (the front end's, the warm-up's, the loop closer's submaps) share it, each geometry changing only when its map grows
+_GEO: dict[tuple, np.ndarray] = {}
+_GEO_MAX = 32
+
+
+def _level_geometry(levels: list[GridLevel]) -> np.ndarray:
+    """(L, 4) float64 (cell side m, i0, j0, 1.0 if empty) of ``levels``, shared between calls with the same values
+    (not to be written to; the kernel only reads it)."""
+    key = tuple([(lv.resolution, lv.i0, lv.j0, lv.logodds.size == 0) for lv in levels])
+    geo = _GEO.get(key)
+    if geo is None:
+        if len(_GEO) >= _GEO_MAX:
+            _GEO.clear()
+        geo = _GEO[key] = np.array(key, dtype=np.float64)
+    return geo
 
 
 @dataclass(slots=True)
@@ -489,7 +508,7 @@ def match_multires(
     if n_lv <= 3 and pts_m.dtype == np.float64 and pts_m.flags.c_contiguous:
         # every level in one kernel call (match_pyramid), the finest level's evaluation with it (other point
         # arrays take the loop below: their scaled copies have the loop's dtype and layout)
-        geo = np.array([(lv.resolution, lv.i0, lv.j0, lv.logodds.size == 0) for lv in levels], dtype=np.float64)
+        geo = _level_geometry(levels)
         if use_prior:
             info = np.asarray(prior_info, dtype=np.float64)
             lam_ps = np.empty((n_lv, 3, 3))
@@ -501,10 +520,11 @@ def match_multires(
             lam_ps, pw = _ZERO_PRIORS[:n_lv], pose
         p0 = levels[0].prob
         H = np.empty((3, 3))
-        out, fitted, cost, summ, n_in, free = match_pyramid(
+        out = np.empty(3)  # (filled by the kernel: a new array is cheaper made here than returned from numba)
+        fitted, cost, summ, n_in, free = match_pyramid(
             p0, levels[1].prob if n_lv > 1 else p0, levels[2].prob if n_lv > 2 else p0, geo, pts_m, pose,
             iterations_coarse, iterations_finest, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
-            use_prior, pw, lam_ps, fit is not None, free_thresh, H,
+            use_prior, pw, lam_ps, fit is not None, free_thresh, H, out,
         )
         if fitted and fit is not None:
             fit[:] = [LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in)), float(free)]
@@ -575,6 +595,8 @@ except ImportError:  # pragma: no cover - another NumPy layout
 #: Width of the bearing bins of :func:`angular_spread` / :func:`support`, rad (5°).
 SPREAD_BIN = math.radians(5.0)
 _N_BINS = 72
+#: the angle of one bin as the spread is computed (bins × this), rad (bit for bit 2π / 72, not math.radians(5))
+BIN_ANGLE = 2.0 * math.pi / _N_BINS
 #: Points evaluated by :func:`support` / :func:`angular_spread` (dense scans are subsampled).
 _SUPPORT_POINTS = 240
 #: Points :func:`angular_spread` looks at (it only has to tell a narrow view from a wide one).
@@ -721,19 +743,32 @@ def _all_true(n: int) -> np.ndarray:
 
 
 @njit(cache=True)
-def gated_points(r, cos_a, sin_a, valid, range_max, min_dist, max_dist, clear_dist):  # pragma: no cover - numba
+def gated_points(r, cos_a, sin_a, valid, range_min, range_max, min_dist, max_dist, clear_dist,
+                 stats):  # pragma: no cover - numba
     """``HectorSlam.scan_points`` of ranges ``r`` (m) with beam (cos, sin) ``cos_a``, ``sin_a`` and ``valid``
-    returns (finite, within the sensor's limits): (returns (n, 2), clearing-ray ends (m, 2)) in the laser frame, m
-    — the valid returns strictly inside (``min_dist``, ``max_dist``) at (r·cos, r·sin) (Scan.points), and, when
-    ``clear_dist`` > 0, at ``clear_dist`` along every beam without a return (not finite, beyond ``range_max``
-    or at least ``max_dist``; not "too close"). ``clear_dist`` 0: the returns alone (the loop closer's keyframes)."""
+    returns (finite, within the sensor's limits): (returns (n, 2), clearing-ray ends (m, 2), n_valid, n_close,
+    spread bins) in the laser frame, m — the valid returns strictly inside (``min_dist``, ``max_dist``) at
+    (r·cos, r·sin) (Scan.points), and, when ``clear_dist`` > 0, at ``clear_dist`` along every beam without a return
+    (not finite, beyond ``range_max`` or at least ``max_dist``; not "too close"). ``clear_dist`` 0: the returns
+    alone (the loop closer's keyframes).
+
+    With ``stats`` also what the processor asks of every scan, from the same pass: :func:`close_count` of ``r``
+    with (``range_min``, ``range_max``, ``min_dist``) as (n_valid, n_close), and the number of bearing bins
+    :func:`angular_spread` finds on the returns (every ``max(1, n // _SPREAD_POINTS)``-th one); else 0, 0, 0."""
     n = r.shape[0]
     m = 0
     k = 0
+    n_valid = 0
+    n_close = 0
     for i in range(n):
-        if valid[i] and r[i] > min_dist and r[i] < max_dist:
+        ri = r[i]
+        if stats and math.isfinite(ri) and ri >= range_min and ri <= range_max:
+            n_valid += 1
+            if ri <= min_dist:
+                n_close += 1
+        if valid[i] and ri > min_dist and ri < max_dist:
             m += 1
-        elif clear_dist > 0.0 and (not math.isfinite(r[i]) or r[i] > range_max or r[i] >= max_dist):
+        elif clear_dist > 0.0 and (not math.isfinite(ri) or ri > range_max or ri >= max_dist):
             k += 1
     pts = np.empty((m, 2))
     clear = np.empty((k, 2))
@@ -748,7 +783,15 @@ def gated_points(r, cos_a, sin_a, valid, range_max, min_dist, max_dist, clear_di
             clear[k, 0] = clear_dist * cos_a[i]
             clear[k, 1] = clear_dist * sin_a[i]
             k += 1
-    return pts, clear
+    bins = 0
+    if stats and m > 0:
+        seen = np.zeros(_N_BINS, dtype=np.bool_)
+        for i in range(0, m, max(1, m // _SPREAD_POINTS)):
+            b = _bearing_bin(pts[i, 0], pts[i, 1], _N_BINS)
+            if not seen[b]:
+                seen[b] = True
+                bins += 1
+    return pts, clear, n_valid, n_close, bins
 
 
 @dataclass(slots=True)

@@ -25,9 +25,9 @@ from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.correlative import correlative_search
 from dynslam2d.slam.grid import MapTooLargeError, MultiResMap
 from dynslam2d.slam.matcher import (
+    BIN_ANGLE,
     Degeneracy,
     LevelFit,
-    angular_spread,
     close_count,
     covariance_world,
     degeneracy,
@@ -330,11 +330,17 @@ class HectorSlam:
         (laser_min_dist, laser_max_dist) (hector_mapping HectorMappingRos.cpp). Clearing rays (only if
         ``clear_no_return_dist`` > 0): beams without a return, ending at that distance.
         """
+        return self._gate(scan, False)[:2]
+
+    def _gate(self, scan: Scan, stats: bool) -> tuple[np.ndarray, np.ndarray, int, int, int]:
+        """:meth:`scan_points` and, with ``stats``, (valid returns, those within laser_min_dist, bearing bins of the
+        returns) for the too-close and narrow-view tests (:func:`~dynslam2d.slam.matcher.gated_points`)."""
         c = self.config
         cos_a, sin_a = scan.trig()
-        # (one kernel call for the gates, the points and the clearing-ray ends)
-        return gated_points(scan.ranges, cos_a, sin_a, scan.valid_mask(), float(scan.range_max),
-                             float(c.laser_min_dist), float(c.laser_max_dist), float(c.clear_no_return_dist))
+        # (one kernel call for the gates, the points, the clearing-ray ends and the per-scan tests' counts)
+        return gated_points(scan.ranges, cos_a, sin_a, scan.valid_mask(), float(scan.range_min),
+                            float(scan.range_max), float(c.laser_min_dist), float(c.laser_max_dist),
+                            float(c.clear_no_return_dist), stats)
 
     # ---- prediction --------------------------------------------------------------------
     def predict(self, stamp: float) -> Pose2D:
@@ -448,7 +454,7 @@ class HectorSlam:
         """
         c = self.config
         t0 = time.perf_counter()
-        pts, clear = self.scan_points(scan)
+        pts, clear, n_valid, n_close, spread_bins = self._gate(scan, True)
         self._last_points = (scan, pts, clear)  # the map update of this same scan reuses them (read-only)
         self._dt = scan.stamp - self._last_stamp if self._last_stamp is not None else None
         start, gap = self._predict(scan.stamp)
@@ -475,9 +481,9 @@ class HectorSlam:
             self._use_prediction(res, prior, None)
         elif first:
             res.covariance = np.zeros((3, 3))
-        elif self._too_close(scan):
+        elif self._too_close_counts(n_valid, n_close):
             self._use_prediction(res, prior, PREDICT_TOO_CLOSE)
-        elif angular_spread(pts) < c.min_sector:
+        elif spread_bins * BIN_ANGLE < c.min_sector:  # angular_spread(pts)
             self._use_prediction(res, prior, PREDICT_NARROW)
         elif self._state == STATE_LOST:
             if self._last_relocalise is None or scan.stamp - self._last_relocalise >= c.relocalise_interval \
@@ -548,6 +554,13 @@ class HectorSlam:
             return False
         n, close = close_count(np.ascontiguousarray(scan.ranges, dtype=np.float64), scan.range_min,
                                scan.range_max, c.laser_min_dist)
+        return n > 0 and close > c.too_close_fraction * n
+
+    def _too_close_counts(self, n: int, close: int) -> bool:
+        """:meth:`_too_close` from the counts :meth:`_gate` took (``close_count``'s)."""
+        c = self.config
+        if c.laser_min_dist <= 0.0:
+            return False
         return n > 0 and close > c.too_close_fraction * n
 
     def _use_prediction(self, res: MatchResult, prior: _Prior, reason: str | None) -> None:
@@ -641,6 +654,9 @@ class HectorSlam:
             lvl, pts, prior.pose.as_array(), c.relocalise_linear_window, c.relocalise_angular_window,
             c.correlative_angular_step, c.correlative_max_points, c.correlative_max_height,
             0.0, 0.0, runner_up_distance=0.5, runner_up_angle=0.3, runner_up_wrap=c.relocalise_runner_up_wrap,
+            # the two refusals below, given to the search: it prunes by them and returns None below the score (the
+            # same pose whenever it returns one; a runner-up that refuses stays one that refuses)
+            min_score=c.relocalise_min_score, min_margin=c.relocalise_margin,
         )
         res.used_correlative = True
         if cr is None or cr.score < c.relocalise_min_score or cr.score - (cr.runner_up or 0.0) < c.relocalise_margin:
