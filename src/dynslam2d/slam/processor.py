@@ -28,7 +28,6 @@ from dynslam2d.slam.matcher import (
     BIN_ANGLE,
     Degeneracy,
     LevelFit,
-    close_count,
     covariance_world,
     degeneracy,
     evaluate,
@@ -547,17 +546,9 @@ class HectorSlam:
         var_th = c.odometry_noise_floor_theta**2 + (c.odometry_noise_rotation * a) ** 2
         return self._sigma2 * np.diag([1.0 / var_xy, 1.0 / var_xy, 1.0 / var_th])
 
-    def _too_close(self, scan: Scan) -> bool:
-        """More than ``too_close_fraction`` of the valid returns are closer than laser_min_dist."""
-        c = self.config
-        if c.laser_min_dist <= 0.0:
-            return False
-        n, close = close_count(np.ascontiguousarray(scan.ranges, dtype=np.float64), scan.range_min,
-                               scan.range_max, c.laser_min_dist)
-        return n > 0 and close > c.too_close_fraction * n
-
     def _too_close_counts(self, n: int, close: int) -> bool:
-        """:meth:`_too_close` from the counts :meth:`_gate` took (``close_count``'s)."""
+        """More than ``too_close_fraction`` of the ``n`` valid returns (``close`` of them closer than
+        laser_min_dist: :func:`~dynslam2d.slam.matcher.close_count`'s counts, taken by :meth:`_gate`)."""
         c = self.config
         if c.laser_min_dist <= 0.0:
             return False
