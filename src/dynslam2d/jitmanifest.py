@@ -13,7 +13,7 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(int32, 1, 'C'), Array(float64, 2, 'C'), Array(int32, 1, 'C'), float64,)"),
     ('dynslam2d.slam.matcher.gated_points',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
-     "'C'), float64, float64, float64, float64,)"),
+     "'C'), float64, float64, float64, float64, float64, bool,)"),
     ('dynslam2d.detect.body._observe_beams',
      "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, 1, 'C'), "
@@ -86,15 +86,11 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(uint16, 3, 'C'), Array(uint16, 2, 'C'), int64, float64, float64, Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(bool, 1, 'C'), int64, int64, float64, Array(uint8, 1, 'C'),)"),
-    ('dynslam2d.slam.matcher.close_count',
-     "(Array(float64, 1, 'C'), float64, float64, float64,)"),
-    ('dynslam2d.slam.matcher._spread_kernel',
-     "(Array(float64, 2, 'A'), Array(bool, 1, 'C'), int64,)"),
     ('dynslam2d.slam.matcher.match_pyramid',
      "(Array(float32, 2, 'C'), Array(float32, 2, 'C'), Array(float32, 2, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 2, 'C'), Array(float64, 1, 'C'), int64, int64, bool, bool, float64, float64, "
      "float64, float64, bool, Array(float64, 1, 'C'), Array(float64, 3, 'C'), bool, float64, "
-     "Array(float64, 2, 'C'),)"),
+     "Array(float64, 2, 'C'), Array(float64, 1, 'C'),)"),
     ('dynslam2d.slam.correlative._rotated_cells',
      "(Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, float64,)"),
     ('dynslam2d.slam.correlative._score_pyramid',

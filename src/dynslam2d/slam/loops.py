@@ -413,8 +413,9 @@ class LoopCloser:
         """:meth:`_points` of a keyframe's kept scan."""
         c = self.slam
         cos_a, sin_a = scan.trig()
-        return gated_points(scan.ranges, cos_a, sin_a, scan.valid_mask(), float(scan.range_max),
-                            float(c.laser_min_dist), float(min(c.laser_max_dist, self.config.submap_max_range)), 0.0)
+        return gated_points(scan.ranges, cos_a, sin_a, scan.valid_mask(), float(scan.range_min), float(scan.range_max),
+                            float(c.laser_min_dist), float(min(c.laser_max_dist, self.config.submap_max_range)), 0.0,
+                            False)[:2]
 
     def _submap(self, s: int) -> MultiResMap:
         grid = self._cache.get(s)
@@ -459,18 +460,25 @@ class LoopCloser:
             # search needs only a small window around that prediction
             est = compose(self._implied(recent), relative(self._estimate(recent.node), est))
         found: list[tuple[float, int, float]] = []
+        # every finished submap's anchor estimate as floats at once (rows first + n // 2 of the graph's poses: the
+        # values _estimate reads one by one), and the keyframe's estimate: the same differences and hypot
+        n = c.submap_keyframes
+        anchors = self.graph.poses[n // 2::n][:n_sub, :2].tolist()
+        ex, ey = float(est[0]), float(est[1])
+        path = kf.path
+        keyframes = self.keyframes
         for s in range(n_sub):
-            first, last, anchor = self._submap_range(s)
+            last = s * n + n - 1  # (_submap_range)
             if last >= node:
                 continue
-            gap = kf.path - self.keyframes[last].path
+            gap = path - keyframes[last].path
             if gap < c.min_path_gap:
                 continue
             radius = min(c.search_radius + c.drift_per_m * gap, c.max_search_radius)
             if recent is not None:
                 radius = c.search_radius
-            a = self._estimate(anchor)
-            d = math.hypot(a[0] - est[0], a[1] - est[1])
+            ax, ay = anchors[s]
+            d = math.hypot(ax - ex, ay - ey)
             if d <= radius:
                 found.append((d, s, gap))
         far = (recent is None and c.far_search and c.far_searches > 0

@@ -34,47 +34,97 @@ _ZERO_PRIORS = np.zeros((3, 3, 3))
 
 
 @njit(cache=True)
+def _sums(prob, pts, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
+    """:func:`accumulate`'s pass; without ``full`` only the cost (H, g untouched; Σ M and n_inside returned as 0).
+
+    The same float64 operations in the same order as :func:`~dynslam2d.slam.interp.interp_value_grad` and the
+    sums over the points, so the same bits: the sums are kept in local variables instead of ``H`` / ``g`` (stored
+    once at the end) and the four cells read from the flat (C-order) array at one index (no negative-index
+    wrap-around code: an in-bounds point's cell indices are ≥ 0). An out-of-bounds point adds (1 − 0)² = 1 to
+    the cost and nothing else, as before."""
+    c = math.cos(th)
+    s = math.sin(th)
+    h, w = prob.shape
+    flat = np.ascontiguousarray(prob).reshape(-1)  # (a view of the level's C-contiguous cache)
+    xmax = w - 2
+    ymax = h - 2
+    cost = 0.0
+    summ = 0.0
+    n_in = 0
+    g0 = 0.0
+    g1 = 0.0
+    g2 = 0.0
+    h00 = 0.0
+    h01 = 0.0
+    h02 = 0.0
+    h11 = 0.0
+    h12 = 0.0
+    h22 = 0.0
+    for i in range(pts.shape[0]):
+        sx = pts[i, 0]
+        sy = pts[i, 1]
+        qx = c * sx - s * sy + x
+        qy = s * sx + c * sy + y
+        if not (qx >= 0.0 and qy >= 0.0 and qx <= xmax and qy <= ymax):  # (also rejects NaN)
+            cost += 1.0
+            continue
+        x0 = int(qx)
+        y0 = int(qy)
+        fx = qx - x0
+        fy = qy - y0
+        k = np.uint64(y0) * np.uint64(w) + np.uint64(x0)
+        p00 = flat[k]
+        p10 = flat[k + np.uint64(1)]
+        p01 = flat[k + np.uint64(w)]
+        p11 = flat[k + np.uint64(w + 1)]
+        # Kohlbrecher et al. 2011 Eq. 4 (bilinear value), Eqs. 5–6 (its gradient)
+        m = (1.0 - fy) * ((1.0 - fx) * p00 + fx * p10) + fy * ((1.0 - fx) * p01 + fx * p11)
+        r = 1.0 - m
+        cost += r * r
+        if not full:
+            continue
+        if swapped:
+            mx = (1.0 - fx) * (p10 - p00) + fx * (p11 - p01)
+            my = (1.0 - fy) * (p01 - p00) + fy * (p11 - p10)
+        else:
+            mx = (1.0 - fy) * (p10 - p00) + fy * (p11 - p01)
+            my = (1.0 - fx) * (p01 - p00) + fx * (p11 - p10)
+        summ += m
+        n_in += 1
+        dth = (-s * sx - c * sy) * mx + (c * sx - s * sy) * my  # Kohlbrecher et al. 2011 Eq. 11
+        g0 += r * mx
+        g1 += r * my
+        g2 += r * dth
+        h00 += mx * mx
+        h01 += mx * my
+        h02 += mx * dth
+        h11 += my * my
+        h12 += my * dth
+        h22 += dth * dth
+    if full:
+        g[0] = g0
+        g[1] = g1
+        g[2] = g2
+        H[0, 0] = h00
+        H[0, 1] = h01
+        H[0, 2] = h02
+        H[1, 0] = h01
+        H[1, 1] = h11
+        H[1, 2] = h12
+        H[2, 0] = h02
+        H[2, 1] = h12
+        H[2, 2] = h22
+    return cost, summ, n_in
+
+
+@njit(cache=True)
 def accumulate(prob, pts, x, y, th, swapped, H, g):  # pragma: no cover - numba
     """Fill H (3, 3) and g (3,) at map pose (x, y, θ); return (cost, Σ M, n_inside).
 
     cost = Σ (1−M)² over all points, out-of-bounds points counting M = 0;
     out-of-bounds points add nothing to H, g (as getCompleteHessianDerivs).
     """
-    c = math.cos(th)
-    s = math.sin(th)
-    for a in range(3):
-        g[a] = 0.0
-        for b in range(3):
-            H[a, b] = 0.0
-    cost = 0.0
-    summ = 0.0
-    n_in = 0
-    for i in range(pts.shape[0]):
-        sx = pts[i, 0]
-        sy = pts[i, 1]
-        qx = c * sx - s * sy + x
-        qy = s * sx + c * sy + y
-        m, mx, my, inside = interp_value_grad(prob, qx, qy, swapped)
-        r = 1.0 - m
-        cost += r * r
-        if not inside:
-            continue
-        summ += m
-        n_in += 1
-        dth = (-s * sx - c * sy) * mx + (c * sx - s * sy) * my  # Kohlbrecher et al. 2011 Eq. 11
-        g[0] += r * mx
-        g[1] += r * my
-        g[2] += r * dth
-        H[0, 0] += mx * mx
-        H[0, 1] += mx * my
-        H[0, 2] += mx * dth
-        H[1, 1] += my * my
-        H[1, 2] += my * dth
-        H[2, 2] += dth * dth
-    H[1, 0] = H[0, 1]
-    H[2, 0] = H[0, 2]
-    H[2, 1] = H[1, 2]
-    return cost, summ, n_in
+    return _sums(prob, pts, x, y, th, swapped, True, H, g)
 
 
 @njit(cache=True)
@@ -130,10 +180,32 @@ def _prior_cost(x, y, th, prior, lam_p):  # pragma: no cover - numba
 
 
 @njit(cache=True)
+def _same_float(a, b):  # pragma: no cover - numba
+    """``a`` and ``b`` are the same float, sign of zero included (finite values)."""
+    return a == b and (a != 0.0 or math.copysign(1.0, a) == math.copysign(1.0, b))
+
+
+@njit(cache=True)
+def _round_trips(x, y, th, res, i0, j0):  # pragma: no cover - numba
+    """Map pose (x, y, θ) comes back bit for bit from the world pose :func:`match_pyramid` makes of it (((x + i0)·res,
+    (y + j0)·res, wrapped θ) and back: x / res − i0 …), so that its finest-level evaluation is this pose's sums."""
+    wx = (x + i0) * res
+    wy = (y + j0) * res
+    wth = (th + math.pi) % (2.0 * math.pi) - math.pi
+    return _same_float(wx / res - i0, x) and _same_float(wy / res - j0, y) and _same_float(wth, th)
+
+
+@njit(cache=True)
 def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
-                prior, lam_p, H_out):  # pragma: no cover - numba
+                prior, lam_p, H_out, keep, res, i0, j0):  # pragma: no cover - numba
     """:func:`match_level`'s iterations; returns (x, y, θ, accepted steps, cost, Σ M, n_inside) with H at the
-    returned pose in ``H_out`` (cost, Σ M and n_inside of :func:`accumulate` there: without the prior term)."""
+    returned pose in ``H_out`` (cost, Σ M and n_inside of :func:`accumulate` there: without the prior term).
+
+    H, Σ M and n_inside at the returned pose are needed only with ``keep`` and when that pose survives
+    :func:`_round_trips` with (``res``, ``i0``, ``j0``) (else ``H_out``, Σ M and n_inside are unspecified). An LM
+    trial step that, if accepted, ends the iterations (the last one, or converged) and whose H is not needed
+    so runs the cost-only pass: its cost is the same sum (the rejected / accepted decision and the pose do not
+    change), and the H, g it would have made are never read."""
     H = np.zeros((3, 3))
     g = np.zeros(3)
     H2 = np.zeros((3, 3))  # H, g at a trial LM step (they become H, g when it is accepted)
@@ -155,7 +227,7 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
         cost += _prior_cost(x, y, th, prior, lam_p)
     lam = lam0
     n_acc = 0
-    for _ in range(n_iter):
+    for it in range(n_iter):
         if H[0, 0] == 0.0 or H[1, 1] == 0.0:
             break
         for a in range(3):
@@ -196,8 +268,11 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
         nth = th + d[2]
         if use_lm:
             # one pass gives the trial cost and, if the step is accepted, the new H and g (the same sums as a
-            # cost-only pass followed by accumulate at the accepted pose)
-            new_raw, new_summ, new_in = accumulate(prob, pts, nx, ny, nth, swapped, H2, g2)
+            # cost-only pass followed by accumulate at the accepted pose); a step whose acceptance ends the
+            # iterations needs them only when the caller keeps this pose's H
+            ends = it == n_iter - 1 or (nt < _CONVERGED_CELLS and abs(d[2]) < _CONVERGED_RAD)
+            full = not ends or (keep and _round_trips(nx, ny, nth, res, i0, j0))
+            new_raw, new_summ, new_in = _sums(prob, pts, nx, ny, nth, swapped, full, H2, g2)
             new_cost = new_raw
             if use_prior:
                 new_cost += _prior_cost(nx, ny, nth, prior, lam_p)
@@ -205,8 +280,9 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
                 x, y, th = nx, ny, nth
                 cost = new_cost
                 raw, summ, n_in = new_raw, new_summ, new_in
-                H, H2 = H2, H
-                g, g2 = g2, g
+                if full:
+                    H, H2 = H2, H
+                    g, g2 = g2, g
                 lam = max(lam * 0.1, 1e-7)
                 n_acc += 1
                 if nt < _CONVERGED_CELLS and abs(d[2]) < _CONVERGED_RAD:
@@ -243,7 +319,7 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     """
     H = np.zeros((3, 3))
     x, y, th, n_acc, _, _, _ = _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
-                                           max_trans, prior, lam_p, H)
+                                           max_trans, prior, lam_p, H, False, 1.0, 0.0, 0.0)
     out = np.empty(3)
     out[0] = x
     out[1] = y
@@ -252,27 +328,22 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
 
 
 @njit(cache=True)
-def _same_float(a, b):  # pragma: no cover - numba
-    """``a`` and ``b`` are the same float, sign of zero included (finite values)."""
-    return a == b and (a != 0.0 or math.copysign(1.0, a) == math.copysign(1.0, b))
-
-
-@njit(cache=True)
 def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, swapped, use_lm, lam0, lam_max,
-                  max_rot, max_trans, use_prior, prior_world, lam_ps, want_fit, free_thresh, H_out):  # pragma: no cover
+                  max_rot, max_trans, use_prior, prior_world, lam_ps, want_fit, free_thresh, H_out,
+                  pose):  # pragma: no cover
     """:func:`match_multires` on a map of at most three levels in one call (the same arithmetic as its Python
     loop): ``prob0`` … ``prob2`` the levels' probability caches (finest first; unused ones any array), ``geo``
     (L, 4) per level (cell side m, i0, j0, 1.0 if empty), ``pts_m`` (n, 2) laser-frame points m, ``start`` the
     world pose (x m, y m, θ rad); ``prior_world`` (3,) with ``lam_ps`` (L, 3, 3) the prior per level in its cell
     units when ``use_prior``.
 
-    Returns (world pose (3,), fitted, cost, Σ M, n_inside, free). With ``want_fit`` and a finite result on a
+    Writes the world pose into ``pose`` (3,) (not ``start``'s array) and returns (fitted, cost, Σ M, n_inside,
+    free). With ``want_fit`` and a finite result on a
     non-empty finest level, ``fitted`` is True and H (in ``H_out``), cost, Σ M and n_inside are :func:`evaluate`'s
     at the returned pose on level 0 (unswapped weights): the last iteration's sums when that iteration ran on
     level 0, unswapped, at exactly the same map pose, else one :func:`accumulate` pass; and ``free`` is
     :func:`free_fraction` below ``free_thresh`` on level min(1, L − 1) at the returned pose with θ wrapped once more
     (as ``Pose2D(x, y, wrap_angle(θ))``)."""
-    pose = np.empty(3)
     pose[0] = start[0]
     pose[1] = start[1]
     pose[2] = start[2]
@@ -308,13 +379,15 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             pp[2] = mp[2]
         pts = pts_m / res
         prob = prob0 if k == 0 else (prob1 if k == 1 else prob2)
+        # (only the finest level's H at its result is read, by the evaluation below)
         x, y, th, _, raw, summ, n_in = _match_core(prob, pts, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
-                                                   max_trans, pp, lam_ps[k], Hk)
+                                                   max_trans, pp, lam_ps[k], Hk, want_fit and k == 0 and not swapped,
+                                                   res, i0, j0)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
             pose[0] = np.nan
             pose[1] = np.nan
             pose[2] = np.nan
-            return pose, False, 0.0, 0.0, 0, 0.0
+            return False, 0.0, 0.0, 0, 0.0
         pose[0] = (x + i0) * res
         pose[1] = (y + j0) * res
         pose[2] = (th + math.pi) % (2.0 * math.pi) - math.pi  # wrap after each level (§2.5)
@@ -326,7 +399,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             lx, ly, lth = x, y, th
             l_raw, l_summ, l_in = raw, summ, n_in
     if not want_fit or geo[0, 3] != 0.0:
-        return pose, False, 0.0, 0.0, 0, 0.0
+        return False, 0.0, 0.0, 0, 0.0
     fl = min(1, n_lv - 1)
     free = 0.0
     if geo[fl, 3] == 0.0:
@@ -344,12 +417,30 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
         for a in range(3):
             for b in range(3):
                 H_out[a, b] = Hk[a, b]
-        return pose, True, l_raw, l_summ, l_in, free
+        return True, l_raw, l_summ, l_in, free
     if pts0.shape[0] != pts_m.shape[0]:
         pts0 = pts_m / res
     g = np.zeros(3)
     cost, summ, n_in = accumulate(prob0, pts0, m0, m1, m2, np.bool_(False), H_out, g)  # not a literal: one signature
-    return pose, True, cost, summ, n_in, free
+    return True, cost, summ, n_in, free
+
+
+#: level geometry key → (L, 4) float64 array of match_pyramid's ``geo`` (see _level_geometry); a few maps
+#: (the front end's, the warm-up's, the loop closer's submaps) share it, each geometry changing only when its map grows
+_GEO: dict[tuple, np.ndarray] = {}
+_GEO_MAX = 32
+
+
+def _level_geometry(levels: list[GridLevel]) -> np.ndarray:
+    """(L, 4) float64 (cell side m, i0, j0, 1.0 if empty) of ``levels``, shared between calls with the same values
+    (not to be written to; the kernel only reads it)."""
+    key = tuple([(lv.resolution, lv.i0, lv.j0, lv.logodds.size == 0) for lv in levels])
+    geo = _GEO.get(key)
+    if geo is None:
+        if len(_GEO) >= _GEO_MAX:
+            _GEO.clear()
+        geo = _GEO[key] = np.array(key, dtype=np.float64)
+    return geo
 
 
 @dataclass(slots=True)
@@ -417,7 +508,7 @@ def match_multires(
     if n_lv <= 3 and pts_m.dtype == np.float64 and pts_m.flags.c_contiguous:
         # every level in one kernel call (match_pyramid), the finest level's evaluation with it (other point
         # arrays take the loop below: their scaled copies have the loop's dtype and layout)
-        geo = np.array([(lv.resolution, lv.i0, lv.j0, lv.logodds.size == 0) for lv in levels], dtype=np.float64)
+        geo = _level_geometry(levels)
         if use_prior:
             info = np.asarray(prior_info, dtype=np.float64)
             lam_ps = np.empty((n_lv, 3, 3))
@@ -429,10 +520,11 @@ def match_multires(
             lam_ps, pw = _ZERO_PRIORS[:n_lv], pose
         p0 = levels[0].prob
         H = np.empty((3, 3))
-        out, fitted, cost, summ, n_in, free = match_pyramid(
+        out = np.empty(3)  # (filled by the kernel: a new array is cheaper made here than returned from numba)
+        fitted, cost, summ, n_in, free = match_pyramid(
             p0, levels[1].prob if n_lv > 1 else p0, levels[2].prob if n_lv > 2 else p0, geo, pts_m, pose,
             iterations_coarse, iterations_finest, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
-            use_prior, pw, lam_ps, fit is not None, free_thresh, H,
+            use_prior, pw, lam_ps, fit is not None, free_thresh, H, out,
         )
         if fitted and fit is not None:
             fit[:] = [LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in)), float(free)]
@@ -495,9 +587,16 @@ def covariance_world(hessian: np.ndarray, sigma2: float, resolution: float) -> n
     return 0.5 * (C + C.T)
 
 
+try:  # np.einsum without optimize calls this directly (the same result without the Python wrapper's dispatch)
+    from numpy._core._multiarray_umath import c_einsum as _einsum
+except ImportError:  # pragma: no cover - another NumPy layout
+    _einsum = np.einsum
+
 #: Width of the bearing bins of :func:`angular_spread` / :func:`support`, rad (5°).
 SPREAD_BIN = math.radians(5.0)
 _N_BINS = 72
+#: the angle of one bin as the spread is computed (bins × this), rad (bit for bit 2π / 72, not math.radians(5))
+BIN_ANGLE = 2.0 * math.pi / _N_BINS
 #: Points evaluated by :func:`support` / :func:`angular_spread` (dense scans are subsampled).
 _SUPPORT_POINTS = 240
 #: Points :func:`angular_spread` looks at (it only has to tell a narrow view from a wide one).
@@ -608,6 +707,19 @@ def support(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, thresh:
     return int(n) * stride, bins * (2.0 * math.pi / _N_BINS)
 
 
+def support_at(level: GridLevel, pts_m: np.ndarray, x: float, y: float, theta: float,
+               thresh: float) -> tuple[int, float]:
+    """:func:`support` at the world pose (``x`` m, ``y`` m, ``theta`` rad) given as floats (no pose arrays: the
+    map pose is :meth:`GridLevel.pose_to_map`'s arithmetic on floats, the same values)."""
+    if level.empty or pts_m.shape[0] == 0:
+        return 0, 0.0
+    stride = max(1, pts_m.shape[0] // _SUPPORT_POINTS)
+    r = level.resolution
+    n, bins = _support_kernel(level.prob, pts_m, stride, 1.0 / r, float(x) / r - level.i0, float(y) / r - level.j0,
+                              float(theta), thresh, _N_BINS)
+    return int(n) * stride, bins * (2.0 * math.pi / _N_BINS)
+
+
 def angular_spread(pts_m: np.ndarray) -> float:
     """Angular extent covered by the bearings of laser-frame points ``pts_m`` (n, 2), rad: the
     number of 5° bearing bins holding a point times the bin width (0 … 2π)."""
@@ -631,19 +743,32 @@ def _all_true(n: int) -> np.ndarray:
 
 
 @njit(cache=True)
-def gated_points(r, cos_a, sin_a, valid, range_max, min_dist, max_dist, clear_dist):  # pragma: no cover - numba
+def gated_points(r, cos_a, sin_a, valid, range_min, range_max, min_dist, max_dist, clear_dist,
+                 stats):  # pragma: no cover - numba
     """``HectorSlam.scan_points`` of ranges ``r`` (m) with beam (cos, sin) ``cos_a``, ``sin_a`` and ``valid``
-    returns (finite, within the sensor's limits): (returns (n, 2), clearing-ray ends (m, 2)) in the laser frame, m
-    — the valid returns strictly inside (``min_dist``, ``max_dist``) at (r·cos, r·sin) (Scan.points), and, when
-    ``clear_dist`` > 0, at ``clear_dist`` along every beam without a return (not finite, beyond ``range_max``
-    or at least ``max_dist``; not "too close"). ``clear_dist`` 0: the returns alone (the loop closer's keyframes)."""
+    returns (finite, within the sensor's limits): (returns (n, 2), clearing-ray ends (m, 2), n_valid, n_close,
+    spread bins) in the laser frame, m — the valid returns strictly inside (``min_dist``, ``max_dist``) at
+    (r·cos, r·sin) (Scan.points), and, when ``clear_dist`` > 0, at ``clear_dist`` along every beam without a return
+    (not finite, beyond ``range_max`` or at least ``max_dist``; not "too close"). ``clear_dist`` 0: the returns
+    alone (the loop closer's keyframes).
+
+    With ``stats`` also what the processor asks of every scan, from the same pass: :func:`close_count` of ``r``
+    with (``range_min``, ``range_max``, ``min_dist``) as (n_valid, n_close), and the number of bearing bins
+    :func:`angular_spread` finds on the returns (every ``max(1, n // _SPREAD_POINTS)``-th one); else 0, 0, 0."""
     n = r.shape[0]
     m = 0
     k = 0
+    n_valid = 0
+    n_close = 0
     for i in range(n):
-        if valid[i] and r[i] > min_dist and r[i] < max_dist:
+        ri = r[i]
+        if stats and math.isfinite(ri) and ri >= range_min and ri <= range_max:
+            n_valid += 1
+            if ri <= min_dist:
+                n_close += 1
+        if valid[i] and ri > min_dist and ri < max_dist:
             m += 1
-        elif clear_dist > 0.0 and (not math.isfinite(r[i]) or r[i] > range_max or r[i] >= max_dist):
+        elif clear_dist > 0.0 and (not math.isfinite(ri) or ri > range_max or ri >= max_dist):
             k += 1
     pts = np.empty((m, 2))
     clear = np.empty((k, 2))
@@ -658,7 +783,15 @@ def gated_points(r, cos_a, sin_a, valid, range_max, min_dist, max_dist, clear_di
             clear[k, 0] = clear_dist * cos_a[i]
             clear[k, 1] = clear_dist * sin_a[i]
             k += 1
-    return pts, clear
+    bins = 0
+    if stats and m > 0:
+        seen = np.zeros(_N_BINS, dtype=np.bool_)
+        for i in range(0, m, max(1, m // _SPREAD_POINTS)):
+            b = _bearing_bin(pts[i, 0], pts[i, 1], _N_BINS)
+            if not seen[b]:
+                seen[b] = True
+                bins += 1
+    return pts, clear, n_valid, n_close, bins
 
 
 @dataclass(slots=True)
@@ -723,7 +856,7 @@ def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, 
 
     Closed-form 2×2 / scalar algebra (it runs on every scan)."""
     n = pts_m.shape[0]
-    rho = math.sqrt(float(np.einsum("ij,ij->", pts_m, pts_m)) / n) if n else 1.0
+    rho = math.sqrt(float(_einsum("ij,ij->", pts_m, pts_m)) / n) if n else 1.0
     rho = max(rho, 1e-3)
     h = hessian_cells.tolist()
     k = 1.0 / resolution  # world (m, m, rad) → cells / rad

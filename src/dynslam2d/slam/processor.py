@@ -25,17 +25,16 @@ from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.correlative import correlative_search
 from dynslam2d.slam.grid import MapTooLargeError, MultiResMap
 from dynslam2d.slam.matcher import (
+    BIN_ANGLE,
     Degeneracy,
     LevelFit,
-    angular_spread,
-    close_count,
     covariance_world,
     degeneracy,
     evaluate,
     free_fraction,
     gated_points,
     match_multires,
-    support,
+    support_at,
 )
 from dynslam2d.slam.recovery import REJECT_AMBIGUOUS, ScanPeriod, needs_recovery, recover
 from dynslam2d.types import Pose2D, Scan, wrap_angle
@@ -76,6 +75,26 @@ _THETA_AXIS = np.array([False, False, True])
 _THETA_AXIS.flags.writeable = False
 #: the covariance of a scan that was not matched (copied into each MatchResult: callers may change theirs)
 _NO_MATCH_COVARIANCE = np.diag([1e6, 1e6, math.pi**2])
+
+
+def _wrap(a: float) -> float:
+    """:func:`~dynslam2d.types.wrap_angle` of a float (the same operations)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _between(a: Pose2D, b: Pose2D) -> tuple[float, float, float]:
+    """(x, y, θ) of ``a.between(b)`` (``a⁻¹ ⊕ b``) without the two intermediate :class:`Pose2D`: the same float
+    operations in the same order as ``Pose2D.inverse`` and ``Pose2D.compose``, so the same bits."""
+    c, s = math.cos(a.theta), math.sin(a.theta)
+    ix, iy, ith = -c * a.x - s * a.y, s * a.x - c * a.y, _wrap(-a.theta)
+    c, s = math.cos(ith), math.sin(ith)
+    return ix + c * b.x - s * b.y, iy + s * b.x + c * b.y, _wrap(ith + b.theta)
+
+
+def _compose(a: Pose2D, x: float, y: float, theta: float) -> Pose2D:
+    """``a.compose(Pose2D(x, y, theta))`` (the same operations as ``Pose2D.compose``)."""
+    c, s = math.cos(a.theta), math.sin(a.theta)
+    return Pose2D(a.x + c * x - s * y, a.y + s * x + c * y, _wrap(a.theta + theta))
 
 
 @dataclass(slots=True)
@@ -310,11 +329,17 @@ class HectorSlam:
         (laser_min_dist, laser_max_dist) (hector_mapping HectorMappingRos.cpp). Clearing rays (only if
         ``clear_no_return_dist`` > 0): beams without a return, ending at that distance.
         """
+        return self._gate(scan, False)[:2]
+
+    def _gate(self, scan: Scan, stats: bool) -> tuple[np.ndarray, np.ndarray, int, int, int]:
+        """:meth:`scan_points` and, with ``stats``, (valid returns, those within laser_min_dist, bearing bins of the
+        returns) for the too-close and narrow-view tests (:func:`~dynslam2d.slam.matcher.gated_points`)."""
         c = self.config
         cos_a, sin_a = scan.trig()
-        # (one kernel call for the gates, the points and the clearing-ray ends)
-        return gated_points(scan.ranges, cos_a, sin_a, scan.valid_mask(), float(scan.range_max),
-                             float(c.laser_min_dist), float(c.laser_max_dist), float(c.clear_no_return_dist))
+        # (one kernel call for the gates, the points, the clearing-ray ends and the per-scan tests' counts)
+        return gated_points(scan.ranges, cos_a, sin_a, scan.valid_mask(), float(scan.range_min),
+                            float(scan.range_max), float(c.laser_min_dist), float(c.laser_max_dist),
+                            float(c.clear_no_return_dist), stats)
 
     # ---- prediction --------------------------------------------------------------------
     def predict(self, stamp: float) -> Pose2D:
@@ -354,7 +379,7 @@ class HectorSlam:
             delta = self._last_odom.between(odom)
             return _Prior(last.compose(delta), "odometry", all_axes, True, delta)
         v = self._model_rates() if self._state == STATE_TRACKING else None
-        cv = last.compose(Pose2D(v[0] * dt, v[1] * dt, v[2] * dt)) if v is not None else last
+        cv = _compose(last, v[0] * dt, v[1] * dt, v[2] * dt) if v is not None else last
         w = scan.yaw_rate
         if c.use_odometry and w is not None and math.isfinite(w) and dt > 0.0:
             w0 = self._last_yaw_rate if self._last_yaw_rate is not None else w
@@ -428,7 +453,7 @@ class HectorSlam:
         """
         c = self.config
         t0 = time.perf_counter()
-        pts, clear = self.scan_points(scan)
+        pts, clear, n_valid, n_close, spread_bins = self._gate(scan, True)
         self._last_points = (scan, pts, clear)  # the map update of this same scan reuses them (read-only)
         self._dt = scan.stamp - self._last_stamp if self._last_stamp is not None else None
         start, gap = self._predict(scan.stamp)
@@ -455,9 +480,9 @@ class HectorSlam:
             self._use_prediction(res, prior, None)
         elif first:
             res.covariance = np.zeros((3, 3))
-        elif self._too_close(scan):
+        elif self._too_close_counts(n_valid, n_close):
             self._use_prediction(res, prior, PREDICT_TOO_CLOSE)
-        elif angular_spread(pts) < c.min_sector:
+        elif spread_bins * BIN_ANGLE < c.min_sector:  # angular_spread(pts)
             self._use_prediction(res, prior, PREDICT_NARROW)
         elif self._state == STATE_LOST:
             if self._last_relocalise is None or scan.stamp - self._last_relocalise >= c.relocalise_interval \
@@ -521,13 +546,12 @@ class HectorSlam:
         var_th = c.odometry_noise_floor_theta**2 + (c.odometry_noise_rotation * a) ** 2
         return self._sigma2 * np.diag([1.0 / var_xy, 1.0 / var_xy, 1.0 / var_th])
 
-    def _too_close(self, scan: Scan) -> bool:
-        """More than ``too_close_fraction`` of the valid returns are closer than laser_min_dist."""
+    def _too_close_counts(self, n: int, close: int) -> bool:
+        """More than ``too_close_fraction`` of the ``n`` valid returns (``close`` of them closer than
+        laser_min_dist: :func:`~dynslam2d.slam.matcher.close_count`'s counts, taken by :meth:`_gate`)."""
         c = self.config
         if c.laser_min_dist <= 0.0:
             return False
-        n, close = close_count(np.ascontiguousarray(scan.ranges, dtype=np.float64), scan.range_min,
-                               scan.range_max, c.laser_min_dist)
         return n > 0 and close > c.too_close_fraction * n
 
     def _use_prediction(self, res: MatchResult, prior: _Prior, reason: str | None) -> None:
@@ -541,8 +565,8 @@ class HectorSlam:
 
     def _support(self, res: MatchResult, pts: np.ndarray, pose: Pose2D) -> None:
         c = self.config
-        res.support_points, res.support_spread = support(self.map.levels[0], pts, pose.as_array(),
-                                                         c.support_probability)
+        res.support_points, res.support_spread = support_at(self.map.levels[0], pts, pose.x, pose.y, pose.theta,
+                                                            c.support_probability)
         res.low_support = res.support_points < c.support_min_points or res.support_spread < c.support_min_spread
 
     def _refine(self, pts: np.ndarray, seed: np.ndarray, prior_pose: np.ndarray | None = None,
@@ -587,9 +611,9 @@ class HectorSlam:
                     res.pose_source = SOURCE_SCAN_PRIOR
         self._support(res, pts, res.pose)
         if prior.gate and self._last_stamp is not None:
-            d = prior.pose.between(res.pose)
+            dx, dy, dth = _between(prior.pose, res.pose)
             lim_d, lim_a = self._gate_limits(stamp - self._last_stamp)
-            if (math.hypot(d.x, d.y) > lim_d or abs(d.theta) > lim_a) and res.low_support:
+            if (math.hypot(dx, dy) > lim_d or abs(dth) > lim_a) and res.low_support:
                 refused = self._refused
                 # a weak match the previous (refused) weak match predicts is two agreeing observations:
                 # the robot did accelerate beyond the model (a car speeding up), accept it
@@ -621,6 +645,9 @@ class HectorSlam:
             lvl, pts, prior.pose.as_array(), c.relocalise_linear_window, c.relocalise_angular_window,
             c.correlative_angular_step, c.correlative_max_points, c.correlative_max_height,
             0.0, 0.0, runner_up_distance=0.5, runner_up_angle=0.3, runner_up_wrap=c.relocalise_runner_up_wrap,
+            # the two refusals below, given to the search: it prunes by them and returns None below the score (the
+            # same pose whenever it returns one; a runner-up that refuses stays one that refuses)
+            min_score=c.relocalise_min_score, min_margin=c.relocalise_margin,
         )
         res.used_correlative = True
         if cr is None or cr.score < c.relocalise_min_score or cr.score - (cr.runner_up or 0.0) < c.relocalise_margin:
@@ -721,13 +748,14 @@ class HectorSlam:
                 # the searched window is a plausible motion: the jump limits open to it
                 jump_d, jump_a = max(jump_d, math.sqrt(2.0) * rec.linear_window), max(jump_a, rec.angular_window)
 
-        if not (math.isfinite(best_p[0]) and math.isfinite(best_p[1]) and math.isfinite(best_p[2])):
+        bx, by, bth = best_p.tolist()  # (Python floats: the same values, and wrapped by the same operations)
+        if not (math.isfinite(bx) and math.isfinite(by) and math.isfinite(bth)):
             res.rejected = True
             res.reason = REJECT_NON_FINITE
             return
-        pose = Pose2D(float(best_p[0]), float(best_p[1]), float(wrap_angle(best_p[2])))
-        d = res.start.between(pose)
-        if math.hypot(d.x, d.y) > jump_d or abs(d.theta) > jump_a:
+        pose = Pose2D(bx, by, _wrap(bth))
+        dx, dy, dth = _between(res.start, pose)
+        if math.hypot(dx, dy) > jump_d or abs(dth) > jump_a:
             res.rejected = True
             res.reason = REJECT_JUMP
             return
@@ -778,11 +806,11 @@ class HectorSlam:
         prev = self._last_pose
         self._last_pose = res.pose
         if prev is not None:
-            d = prev.between(res.pose)
-            self._last_motion = (math.hypot(d.x, d.y), abs(d.theta))
+            dx, dy, dth = _between(prev, res.pose)
+            self._last_motion = (math.hypot(dx, dy), abs(dth))
             dt = stamp - self._last_stamp if self._last_stamp is not None else 0.0
             if 0.0 < dt <= c.max_time_gap and not res.rejected:
-                self._velocity = (d.x / dt, d.y / dt, d.theta / dt)  # (the array division's values, no array)
+                self._velocity = (dx / dt, dy / dt, dth / dt)  # (the array division's values, no array)
         self._last_stamp = stamp
         self._force_search = res.rejected
         # with recovery on, a forward gap keeps the motion history: the recovery searches around the velocity
@@ -825,12 +853,13 @@ class HectorSlam:
     def needs_map_update(self, pose: Pose2D) -> bool:
         """True on the first scan or once the pose moved beyond the distance / angle thresholds
         from the last map update (HectorSlamProcessor::update)."""
-        if self._last_map_pose is None or self.map.empty:
+        last = self._last_map_pose
+        if last is None or self.map.empty:
             return True
-        d = self._last_map_pose.between(pose)
-        dist = math.hypot(pose.x - self._last_map_pose.x, pose.y - self._last_map_pose.y)
+        dth = _wrap(_wrap(-last.theta) + pose.theta)  # the θ of last.between(pose) (its x, y are not read)
+        dist = math.hypot(pose.x - last.x, pose.y - last.y)
         c = self.config
-        return dist > c.map_update_distance_thresh or abs(d.theta) > c.map_update_angle_thresh
+        return dist > c.map_update_distance_thresh or abs(dth) > c.map_update_angle_thresh
 
     def update_map(self, scan: Scan, pose: Pose2D, force: bool = False) -> bool:
         """Integrate ``scan`` taken at laser pose ``pose`` into every level, if the thresholds
