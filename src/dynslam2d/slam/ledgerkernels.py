@@ -335,3 +335,218 @@ def update_rows(logodds, uidx, f, ids, keys, before, ub):  # pragma: no cover - 
     starts[g] = m
     return rows, gid, starts
 
+
+
+#: levels the fused kernels take (3-tuples of level arrays, padded with empty ones; slam/grid.py's ``_FUSED_LEVELS``)
+FUSED_LEVELS = 3
+_LO3 = types.UniTuple(types.float32[:, ::1], FUSED_LEVELS)
+_UI3 = types.UniTuple(types.int32[:, ::1], FUSED_LEVELS)
+_IT3 = types.UniTuple(types.int64, FUSED_LEVELS)
+@njit(cache=True)
+def _track_points(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px, py, rs):  # pragma: no cover
+    """:func:`beam_owners`, the tracks' distinct ids in ascending order and :func:`scan_cells` in one call: (packed
+    values, params, kept beams (n,), kept beams per distinct track (R,), the distinct track ids ``uids`` (R,), the
+    tracks' ends in ``beams`` (T + 1,), from 0) of a scan whose track ``t`` (id ``ids[t]``) lists the next
+    ``lens[t]`` beams of ``beams``; the other arguments as :func:`scan_cells`. Each beam's owner is the last track
+    listing it."""
+    n_t = ids.shape[0]
+    ends = np.empty(n_t + 1, dtype=np.int64)
+    ends[0] = 0
+    for t in range(n_t):
+        ends[t + 1] = ends[t] + lens[t]
+    owner = beam_owners(r.shape[0], beams, ends, ids)
+    # the distinct ids, ascending (sorted(set(ids)); an insertion sort of a few dozen)
+    u = np.empty(n_t, dtype=np.int64)
+    m = 0
+    for t in range(n_t):
+        v = ids[t]
+        p = m
+        while p > 0 and u[p - 1] > v:
+            p -= 1
+        if p > 0 and u[p - 1] == v:
+            continue
+        for q in range(m, p, -1):
+            u[q] = u[q - 1]
+        u[p] = v
+        m += 1
+    uids = u[:m].copy()
+    packed, params, valid, counts = scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, py,
+                                               rs)
+    return packed, params, valid, counts, uids, ends
+
+
+@njit(cache=True)
+def _read_levels(u, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, valid, beams, ends, want_kb
+                ):  # pragma: no cover - numba
+    """:func:`unpack_cells` of the sorted packed values ``u`` and the read of its cells on the first
+    ``min(n_lv, 3)`` levels (``logodds``, ``uidx``: the levels' arrays, padded; ``i0``, ``j0``: their offsets), in one
+    call: (track ids, cell keys, (m, 2) cells, log-odds before (float64), update index before (int64; 0 and −1
+    outside a level's array and on levels ≥ 3, which the caller reads), level bounds (L + 1,), per track ``t`` of
+    ``ids`` whether any kept beam of it is left (``counts`` of its id's rank in ``uids`` > 0), and, with
+    ``want_kb``, :func:`kept_beams` of ``valid``, ``beams``, ``ends`` (else empty))."""
+    out_ids, keys, cells, bounds = unpack_cells(u, params, uids, n_lv)
+    m = out_ids.shape[0]
+    lo = np.zeros(m)
+    ui = np.full(m, -1, dtype=np.int64)
+    for k in range(min(n_lv, FUSED_LEVELS)):
+        a = logodds[k]
+        b = uidx[k]
+        h, w = a.shape
+        ci0 = i0[k]
+        cj0 = j0[k]
+        for t in range(bounds[k], bounds[k + 1]):
+            col = cells[t, 0] - ci0
+            row = cells[t, 1] - cj0
+            if col >= 0 and row >= 0 and col < w and row < h:
+                lo[t] = a[row, col]
+                ui[t] = b[row, col]
+    n_t = ids.shape[0]
+    n_u = uids.shape[0]
+    present = np.empty(n_t, dtype=np.bool_)
+    for t in range(n_t):
+        present[t] = counts[_lower_bound(uids, n_u, ids[t])] > 0
+    if want_kb:
+        kb, kb_b = kept_beams(valid, beams, ends)
+    else:
+        kb = np.zeros(0, dtype=np.int32)
+        kb_b = np.zeros(0, dtype=np.int64)
+    return out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b
+
+
+@njit(cache=True)
+def _radix_sort(a):  # pragma: no cover - numba
+    """Sort the non-negative int64 values ``a`` in place (least significant digit first, at most 11 bits a digit:
+    a few passes over the values, where a comparison sort of the ≈ 2000 values of a scan takes more)."""
+    n = a.shape[0]
+    mx = 0
+    for i in range(n):
+        if a[i] > mx:
+            mx = a[i]
+    bits = 0
+    while bits < 63 and (mx >> bits) > 0:
+        bits += 1
+    if bits == 0:
+        return
+    passes = (bits + 10) // 11
+    width = (bits + passes - 1) // passes
+    mask = (1 << width) - 1
+    cnt = np.empty(1 << width, dtype=np.int64)
+    src = a
+    dst = np.empty(n, dtype=np.int64)
+    for q in range(passes):
+        sh = q * width
+        cnt[:] = 0
+        for i in range(n):
+            cnt[(src[i] >> sh) & mask] += 1
+        tot = 0
+        for d in range(mask + 1):
+            k = cnt[d]
+            cnt[d] = tot
+            tot += k
+        for i in range(n):
+            v = src[i]
+            d = (v >> sh) & mask
+            dst[cnt[d]] = v
+            cnt[d] += 1
+        src, dst = dst, src
+    if passes % 2:  # (the sorted values are in the scratch array)
+        a[:] = src
+
+
+_B1 = types.boolean[::1]
+_RECORD_SIG = types.Tuple((
+    types.boolean, _I1, _I1, types.int64[:, ::1], _F1, _I1, _I1, _B1, types.int32[::1], _I1, _B1, _I1, _I1, _I1))(
+    _I1, _I1, _I1, _F1, _F1_RO, _F1_RO, _B1, types.boolean[:], *(types.float64,) * 6, _F1,
+    _LO3, _UI3, _IT3, _IT3, types.boolean)
+
+
+@njit(_RECORD_SIG, cache=True)
+def record_cells(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px, py, rs, logodds, uidx, i0, j0,
+                 want_kb):  # pragma: no cover - numba
+    """Everything the evidence ledger reads before a map update, in one call: each beam's owner track
+    (:func:`beam_owners`, track ``t`` with id ``ids[t]`` listing the next ``lens[t]`` of ``beams``), the kept beams'
+    points packed (:func:`scan_cells`; levels of cell side ``rs``), sorted, decoded (:func:`unpack_cells`) and their
+    cells read on the first ``min(L, 3)`` levels (``logodds``, ``uidx``, offsets ``i0``, ``j0``: 3-tuples, padded).
+    Returns (packed path taken — False when the values would not fit, then only the last five outputs are set;
+    track ids, cell keys, (m, 2) cells, log-odds before, update index before (0, −1 outside a level's array and on
+    levels ≥ 3), level bounds (L + 1,), per track whether a kept beam of it is left, with ``want_kb`` the kept beams
+    and their per-track bounds (:func:`kept_beams`), the kept-beam mask (n,), the distinct track ids ``uids``
+    ascending, kept beams per distinct track, the tracks' ends in ``beams`` (T + 1,))."""
+    packed, params, valid, counts, uids, ends = _track_points(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin,
+                                                              rmax, c, s, px, py, rs)
+    n_lv = rs.shape[0]
+    if params.shape[0] == 0:
+        e = np.zeros(0, dtype=np.int64)
+        return (False, e, e, np.zeros((0, 2), dtype=np.int64), np.zeros(0), e, e, np.zeros(0, dtype=np.bool_),
+                np.zeros(0, dtype=np.int32), e, valid, uids, counts, ends)
+    _radix_sort(packed)
+    out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b = _read_levels(
+        packed, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, valid, beams, ends, want_kb)
+    return True, out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b, valid, uids, counts, ends
+
+
+_ROWS_SIG = types.Tuple((types.int64[:, ::1], _I1, _I1, _I1))(
+    _LO3, _UI3, _IT3, _IT3, types.int64, _I1, _I1, types.int64[:, ::1], _F1, _I1, _I1)
+
+
+@njit(_ROWS_SIG, cache=True)
+def level_rows(logodds, uidx, i0, j0, n_lv, ids, keys, cells, before, ub, bounds):  # pragma: no cover - numba
+    """:func:`update_rows` of every level (``n_lv`` ≤ 3) in one call, the cells re-read after the map update from
+    the levels' current arrays and offsets (a level may have grown): ((4, m) rows of all levels, level by level;
+    the track id of each group of rows; the groups' bounds (g + 1,); each group's level (g,)). The cells of level
+    ``k`` are ``bounds[k]:bounds[k + 1]`` of ``ids``, ``keys``, ``cells``, ``before`` and ``ub`` (what
+    :func:`read_levels` read), sorted by track id within a level; a group holds one track's rows on one level."""
+    n = ids.shape[0]
+    delta = np.empty(n)
+    ua = np.empty(n, dtype=np.int64)
+    m = 0
+    g = 0
+    for k in range(n_lv):
+        a = logodds[k]
+        b = uidx[k]
+        h, w = a.shape
+        ci0 = i0[k]
+        cj0 = j0[k]
+        first = True
+        last = 0
+        for t in range(bounds[k], bounds[k + 1]):
+            col = cells[t, 0] - ci0
+            row = cells[t, 1] - cj0
+            after = 0.0
+            v = -1
+            if col >= 0 and row >= 0 and col < w and row < h:
+                after = a[row, col]
+                v = b[row, col]
+            ua[t] = v
+            delta[t] = after - before[t]
+            if v != ub[t]:  # else not updated (outside the array, or the ray was skipped)
+                if first or ids[t] != last:
+                    g += 1
+                    last = ids[t]
+                    first = False
+                m += 1
+    bits = delta.view(np.int64)
+    rows = np.empty((4, m), dtype=np.int64)
+    gid = np.empty(g, dtype=np.int64)
+    starts = np.empty(g + 1, dtype=np.int64)
+    glv = np.empty(g, dtype=np.int64)
+    q = 0
+    j = 0
+    for k in range(n_lv):
+        first = True
+        for t in range(bounds[k], bounds[k + 1]):
+            if ua[t] == ub[t]:
+                continue
+            rows[0, j] = keys[t]
+            rows[1, j] = ub[t]
+            rows[2, j] = ua[t]
+            rows[3, j] = bits[t]
+            if first or ids[t] != gid[q - 1]:
+                gid[q] = ids[t]
+                glv[q] = k
+                starts[q] = j
+                q += 1
+                first = False
+            j += 1
+    starts[g] = m
+    return rows, gid, starts, glv
