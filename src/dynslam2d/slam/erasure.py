@@ -263,7 +263,9 @@ class _LevelRecord:
         keys = [self.key, self._pk[0, :self._n_buf]]
         if self._refs is not None:  # (the referenced rows' keys, without copying the rows first)
             keys += [rows[0, a:b] for rows, a, b in self._refs]
-        n = np.unique(np.concatenate(keys)).shape[0]
+        k = np.concatenate(keys)  # (a new array: sorted in place; its distinct values counted as np.unique would)
+        k.sort()
+        n = int(np.count_nonzero(k[1:] != k[:-1])) + 1
         return min(n, self.cap) - int(self.key.shape[0])  # compact keeps the first ``cap`` cells
 
     @property
