@@ -144,7 +144,7 @@ def test_radix_sort_equals_numpy_sort(bits: int) -> None:
 def test_level_rows_equal_update_rows_per_level(seed: int) -> None:
     """level_rows against read_cells + update_rows level by level after a map update that changed some cells
     (and on one level grew the array: other offsets and shape): the same row block, level after level, the same
-    groups (a track's rows on one level), the groups' levels."""
+    groups (a track's rows on one level) with their levels, in (track id, level) order."""
     rng = np.random.default_rng(50 + seed)
     n_lv = 3
     levels_before, levels_after, per = [], [], []
@@ -174,19 +174,64 @@ def test_level_rows_equal_update_rows_per_level(seed: int) -> None:
         levels_before.append((lo, ui))
     cat = [np.concatenate([p[q] for p in per]) for q in range(5)]
     bounds = np.concatenate(([0], np.cumsum([p[0].shape[0] for p in per]))).astype(np.int64)
-    rows, gid, starts, glv = lk.level_rows(tuple(lv[0] for lv in levels_after), tuple(lv[1] for lv in levels_after),
+    rows, gid, glv, ga, gb = lk.level_rows(tuple(lv[0] for lv in levels_after), tuple(lv[1] for lv in levels_after),
                                            tuple(lv[2] for lv in levels_after), tuple(lv[3] for lv in levels_after),
                                            n_lv, cat[0], cat[1], np.ascontiguousarray(cat[2]), cat[3], cat[4], bounds)
-    w_rows, w_gid, w_starts, w_glv = [], [], [0], []
+    w_rows, groups = [], []
     off = 0
     for k, ((lo2, ui2, i0, j0), (ids, keys, cells, before, ub)) in enumerate(zip(levels_after, per)):
         f = lk.read_cells(lo2, ui2, cells, i0, j0)[2]
         r_k, g_k, s_k = lk.update_rows(lo2, ui2, f, ids, keys, before, ub)
         w_rows.append(r_k)
-        w_gid.extend(g_k.tolist())
-        w_starts.extend((s_k[1:] + off).tolist())
-        w_glv.extend([k] * g_k.shape[0])
+        groups += [(t, k, a + off, b + off) for t, a, b in zip(g_k.tolist(), s_k.tolist(), s_k[1:].tolist())]
         off += r_k.shape[1]
     assert np.array_equal(rows, np.concatenate(w_rows, axis=1))
-    assert gid.tolist() == w_gid and starts.tolist() == w_starts and glv.tolist() == w_glv
+    groups.sort(key=lambda g: (g[0], g[1]))  # (track id, level): each track's groups one after the other
+    assert list(zip(gid.tolist(), glv.tolist(), ga.tolist(), gb.tolist())) == groups
+    w_glv = [g[1] for g in groups]
     assert rows.shape[1] > 0 and len(set(w_glv)) > 1
+
+
+@pytest.mark.parametrize("levels", [2, 3, 4])
+def test_ledger_records_the_same_rows_through_the_fused_and_the_level_by_level_path(levels: int) -> None:
+    """Map updates recorded by EvidenceLedger with the fused kernels (and, with four levels, the fourth level read
+    and recorded level by level) and, for a second ledger, from the same reads handed over level by level (the
+    per-level path of after_update): every track's records fold to the same cells, log-odds, purity and update
+    indices, and the counters agree."""
+    from conftest import paper_room_scan, paper_room_slam
+
+    from dynslam2d.detect.memoryconfig import MemoryConfig
+    from dynslam2d.slam.erasure import EvidenceLedger, PendingUpdate
+    from dynslam2d.types import Box, Pose2D, Track
+
+    slam, first = paper_room_slam(levels)
+    a = EvidenceLedger(MemoryConfig(), slam.config.laser_min_dist, slam.config.laser_max_dist)
+    b = EvidenceLedger(MemoryConfig(), slam.config.laser_min_dist, slam.config.laser_max_dist)
+    for step in range(6):
+        pose = first.compose(Pose2D(0.05 * step, 0.02 * step, 0.01 * step))
+        scan = paper_room_scan(pose, 0.1 * step)
+        n = scan.ranges.shape[0]
+        tracks = [Track(id=tid, state="confirmed", stamp=0.1 * step, box=Box(1.0, 0.5, 0.0, 0.4, 0.4),
+                        velocity=np.zeros(2), covariance=np.eye(4), age=1.0, hits=1, misses=0, kind="rect",
+                        in_m=False, m_reason="", beams=beams, n_points=int(beams.shape[0]))
+                  for tid, beams in ((7, np.arange(100 + step, 160)), (2, np.arange(400, 430 + step)),
+                                     (11, np.arange(600, 640)))]
+        removed = np.zeros(n, dtype=bool)
+        pa = a.before_update(scan, pose, tracks, removed, slam.map)
+        pb = b.before_update(scan, pose, tracks, removed, slam.map)
+        assert pa.fused is not None
+        pb = PendingUpdate(per_level=pb.per_level)  # (the level-by-level form of the same reads)
+        assert slam.update_map(scan, pose, force=True)
+        a.after_update(pa, slam.map)
+        b.after_update(pb, slam.map)
+    assert set(a._ledgers) == set(b._ledgers) == {2, 7, 11}
+    cells = 0
+    for tid, la in a._ledgers.items():
+        for ra, rb in zip(la.levels, b._ledgers[tid].levels):
+            assert ra._refs is not None and len(ra) == len(rb)
+            n = ra.compact()
+            assert n == rb.compact() and n > 0
+            cells += n
+            for x, y in ((ra.key, rb.key), (ra.delta, rb.delta), (ra.pure, rb.pure), (ra.last, rb.last)):
+                assert np.array_equal(x, y)
+    assert cells > 100 and a.summary() == b.summary()

@@ -45,7 +45,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from itertools import repeat
 
 import numpy as np
 
@@ -311,7 +310,7 @@ class PendingUpdate:
     cell) once.
 
     Held either per level (:attr:`per_level`) or, from the fused kernels, as the five arrays of all levels one after
-    the other with the levels' bounds (``fused``: ids, keys, cells, log-odds, update index, bounds (L + 1,) list);
+    the other with the levels' bounds (``fused``: ids, keys, cells, log-odds, update index, bounds (L + 1,));
     :attr:`per_level` then gives the levels' slices of them."""
 
     __slots__ = ("_per_level", "fused")
@@ -324,6 +323,7 @@ class PendingUpdate:
     def per_level(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
         if self._per_level is None:
             *arrays, bounds = self.fused
+            bounds = bounds.tolist()
             self._per_level = [tuple(x[a:b] for x in arrays) for a, b in zip(bounds, bounds[1:])]
         return self._per_level
 
@@ -401,9 +401,8 @@ class EvidenceLedger:
                               np.array([lv.resolution for lv in levels], dtype=np.float64), *_level_arrays(levels),
                               want_kb)
         if packed_ok:
-            bounds = bounds.tolist()
             for k in range(_FUSED, len(levels)):  # (levels beyond the fused kernel's three)
-                lv, a, b = levels[k], bounds[k], bounds[k + 1]
+                lv, a, b = levels[k], int(bounds[k]), int(bounds[k + 1])
                 before[a:b], ub[a:b] = read_cells(lv.logodds, lv.uidx, cells_s[a:b], lv.i0, lv.j0)[:2]
             pending = PendingUpdate(fused=(ids_s, key_s, cells_s, before, ub, bounds))
             present = present.tolist()
@@ -523,20 +522,24 @@ class EvidenceLedger:
         levels = hmap.levels
         if pending.fused is not None and len(levels) <= _FUSED:
             # one block of rows (cell keys, update index before / after, log-odds' bits) of the updated cells of
-            # every level, the cells re-read from the levels' current arrays; each record refers to its slice of it
+            # every level, the cells re-read from the levels' current arrays, and its groups (a track's rows on a
+            # level) in (track, level) order
             ids, keys, cells, before, ub, bounds = pending.fused
-            rows, tids, starts, glv = level_rows(*_level_arrays(levels), len(levels), ids, keys, cells, before, ub,
-                                                 np.array(bounds, dtype=np.int64))
-            st = starts.tolist()
-            groups = zip(tids.tolist(), glv.tolist(), repeat(rows), st, st[1:])
+            rows, gid, glv, ga, gb = level_rows(*_level_arrays(levels), len(levels), ids, keys, cells, before, ub,
+                                                bounds)
         else:
-            groups = self._level_groups(pending, levels)
+            rows, gid, glv, ga, gb = self._level_groups(pending, levels)
         # each track's record refers to its slice of the block (_LevelRecord.refer inlined: ≈ 25 tracks × 3 levels
-        # per update, where a copy into each record's buffer and its growth were most of the loop)
-        for tid, k, rows, a, b in groups:
-            led = ledgers.get(tid)
-            if led is not None:  # (every group holds rows)
-                rec = led.levels[k]
+        # per update, where a copy into each record's buffer and its growth were most of the loop); a track's
+        # ledger is looked up once for its levels
+        prev = levs = None
+        for tid, k, a, b in zip(gid.tolist(), glv.tolist(), ga.tolist(), gb.tolist()):
+            if tid != prev:
+                prev = tid
+                led = ledgers.get(tid)
+                levs = led.levels if led is not None else None
+            if levs is not None:  # (every group holds rows)
+                rec = levs[k]
                 refs = rec._refs
                 if refs is None:
                     rec._refs = [(rows, a, b)]
@@ -558,18 +561,31 @@ class EvidenceLedger:
         self.stats["cells_recorded"] += added
 
     @staticmethod
-    def _level_groups(pending: PendingUpdate, levels: list):
-        """:meth:`after_update`'s groups level by level (more levels than the fused kernels take, or a level-by-level
-        pending update): (track id, level, row block, first, end column) of each track's updated cells."""
+    def _level_groups(pending: PendingUpdate, levels: list
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`after_update`'s row block and groups level by level (more levels than the fused kernel takes, or
+        a level-by-level pending update), as :func:`~dynslam2d.slam.ledgerkernels.level_rows` returns them but in
+        (level, track) order: the levels' blocks side by side, per group the track id, level, first and end
+        column."""
         from dynslam2d.slam.ledgerkernels import read_cells, update_rows
+        blocks, gid, glv, ga, gb = [], [], [], [], []
+        off = 0
         for k, (ids, keys, cells, before, ui_before) in enumerate(pending.per_level):
             if ids.shape[0] == 0:
                 continue
             lv = levels[k]
             f = read_cells(lv.logodds, lv.uidx, cells, lv.i0, lv.j0)[2]
             rows, tids, starts = update_rows(lv.logodds, lv.uidx, f, ids, keys, before, ui_before)
-            st = starts.tolist()
-            yield from zip(tids.tolist(), repeat(k), repeat(rows), st, st[1:])
+            blocks.append(rows)
+            gid.append(tids)
+            glv.append(np.full(tids.shape[0], k, dtype=np.int64))
+            ga.append(starts[:-1] + off)
+            gb.append(starts[1:] + off)
+            off += rows.shape[1]
+        if not blocks:
+            return _EMPTY_I4, _EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I
+        return (np.concatenate(blocks, axis=1), np.concatenate(gid), np.concatenate(glv), np.concatenate(ga),
+                np.concatenate(gb))
 
     def _fold(self, led: _Ledger) -> None:
         """Fold every level's pending rows of ``led`` (counts its new cells)."""

@@ -342,6 +342,8 @@ FUSED_LEVELS = 3
 _LO3 = types.UniTuple(types.float32[:, ::1], FUSED_LEVELS)
 _UI3 = types.UniTuple(types.int32[:, ::1], FUSED_LEVELS)
 _IT3 = types.UniTuple(types.int64, FUSED_LEVELS)
+
+
 @njit(cache=True)
 def _track_points(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px, py, rs):  # pragma: no cover
     """:func:`beam_owners`, the tracks' distinct ids in ascending order and :func:`scan_cells` in one call: (packed
@@ -485,7 +487,7 @@ def record_cells(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin, rmax, c, 
     return True, out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b, valid, uids, counts, ends
 
 
-_ROWS_SIG = types.Tuple((types.int64[:, ::1], _I1, _I1, _I1))(
+_ROWS_SIG = types.Tuple((types.int64[:, ::1], _I1, _I1, _I1, _I1))(
     _LO3, _UI3, _IT3, _IT3, types.int64, _I1, _I1, types.int64[:, ::1], _F1, _I1, _I1)
 
 
@@ -493,9 +495,10 @@ _ROWS_SIG = types.Tuple((types.int64[:, ::1], _I1, _I1, _I1))(
 def level_rows(logodds, uidx, i0, j0, n_lv, ids, keys, cells, before, ub, bounds):  # pragma: no cover - numba
     """:func:`update_rows` of every level (``n_lv`` ≤ 3) in one call, the cells re-read after the map update from
     the levels' current arrays and offsets (a level may have grown): ((4, m) rows of all levels, level by level;
-    the track id of each group of rows; the groups' bounds (g + 1,); each group's level (g,)). The cells of level
-    ``k`` are ``bounds[k]:bounds[k + 1]`` of ``ids``, ``keys``, ``cells``, ``before`` and ``ub`` (what
-    :func:`read_levels` read), sorted by track id within a level; a group holds one track's rows on one level."""
+    per group of rows (one track's rows on one level), in (track id, level) order: the track id, the level, the
+    first and the end column (g,) each). The cells of level ``k`` are ``bounds[k]:bounds[k + 1]`` of ``ids``,
+    ``keys``, ``cells``, ``before`` and ``ub`` (what :func:`record_cells` read), sorted by track id within a
+    level. (The caller looks each track's ledger up once for all its levels.)"""
     n = ids.shape[0]
     delta = np.empty(n)
     ua = np.empty(n, dtype=np.int64)
@@ -529,10 +532,11 @@ def level_rows(logodds, uidx, i0, j0, n_lv, ids, keys, cells, before, ub, bounds
     rows = np.empty((4, m), dtype=np.int64)
     gid = np.empty(g, dtype=np.int64)
     starts = np.empty(g + 1, dtype=np.int64)
-    glv = np.empty(g, dtype=np.int64)
+    lg = np.empty(n_lv + 1, dtype=np.int64)  # the groups of level k: lg[k]:lg[k + 1]
     q = 0
     j = 0
     for k in range(n_lv):
+        lg[k] = q
         first = True
         for t in range(bounds[k], bounds[k + 1]):
             if ua[t] == ub[t]:
@@ -543,10 +547,27 @@ def level_rows(logodds, uidx, i0, j0, n_lv, ids, keys, cells, before, ub, bounds
             rows[3, j] = bits[t]
             if first or ids[t] != gid[q - 1]:
                 gid[q] = ids[t]
-                glv[q] = k
                 starts[q] = j
                 q += 1
                 first = False
             j += 1
     starts[g] = m
-    return rows, gid, starts, glv
+    lg[n_lv] = g
+    # the groups in (track id, level) order: a merge of the levels' runs (each sorted by track id)
+    pos = lg[:n_lv].copy()
+    o_id = np.empty(g, dtype=np.int64)
+    o_lv = np.empty(g, dtype=np.int64)
+    o_a = np.empty(g, dtype=np.int64)
+    o_b = np.empty(g, dtype=np.int64)
+    for q in range(g):
+        best = -1
+        for k in range(n_lv):
+            if pos[k] < lg[k + 1] and (best < 0 or gid[pos[k]] < gid[pos[best]]):
+                best = k
+        src = pos[best]
+        pos[best] += 1
+        o_id[q] = gid[src]
+        o_lv[q] = best
+        o_a[q] = starts[src]
+        o_b[q] = starts[src + 1]
+    return rows, o_id, o_lv, o_a, o_b
