@@ -1,10 +1,11 @@
 """numba kernels of the evidence ledger's per-update recording (slam/erasure.py, issue 9).
 
 Each map update of the pipeline records, per track and map level, the cells the track's kept beams hit and the
-log-odds the update added there. These kernels do that work in a fixed number of calls per update (two for the
-cells of all levels around one ``np.sort``, one per level for the read before the update, one per level for the
-rows after it) instead of about a hundred small numpy calls. They compute exactly what the numpy code they
-replace computed (``tests/test_ledger_kernels.py`` checks them against it on random inputs):
+log-odds the update added there. The pipeline does that work in two calls per update: :func:`record_cells` before
+the map update (everything read before it) and :func:`level_rows` after it (the rows of every level), instead of
+about a hundred small numpy calls. They are built from single-step kernels that compute exactly what the numpy code
+they replaced computed (``tests/test_ledger_kernels.py`` checks them against it on random inputs,
+``tests/test_ledger_fused.py`` the fused kernels against the single steps):
 
 * :func:`beam_owners`: each beam's owner track (the last track listing it), from all tracks' beams in one array;
 * :func:`kept_beams`: each track's kept beams (loop closure's record of what an erasure takes out);
@@ -16,11 +17,15 @@ replace computed (``tests/test_ledger_kernels.py`` checks them against it on ran
 * :func:`read_cells`: log-odds and update index of cells (0 and −1 outside the level's array) and their flat
   array indices (−1 outside);
 * :func:`update_rows`: after the update, the rows (key, update index before, after, added log-odds' bits) of the
-  cells the update changed, and the per-track groups of those rows.
+  cells the update changed, and the per-track groups of those rows;
+* :func:`record_cells` = beam_owners, the distinct track ids, scan_cells, a radix sort, unpack_cells, the reads of
+  three levels and kept_beams; :func:`level_rows` = update_rows of three levels, re-reading by cell.
 
-Explicit signatures: one specialisation each, compiled (or loaded from numba's cache) when the module is
-imported. Units: points in m (map frame), resolutions in m, cells absolute level indices.
-"""
+Signatures: the two fused kernels declare theirs (one specialisation each, compiled or loaded from numba's cache
+when the module is imported, with the single steps they call); the single steps are compiled at first use (the
+level-by-level path of more than three levels or of cells beyond the packed range, and the tests), so a cold start
+does not compile those the fused kernels do not call. Units: points in m (map frame), resolutions in m, cells
+absolute level indices."""
 
 from __future__ import annotations
 
@@ -36,7 +41,7 @@ _LIMIT = 1 << 62
 _CELL_LIMIT = 2.0 ** 31
 
 
-@njit("int64(int64[::1], int64, int64)", cache=True)
+@njit(cache=True)
 def _lower_bound(a, hi, v):  # pragma: no cover - numba
     """The first index in ``a[:hi]`` (sorted) whose value is not below ``v`` (``hi`` if none)."""
     lo = 0
@@ -49,7 +54,7 @@ def _lower_bound(a, hi, v):  # pragma: no cover - numba
     return lo
 
 
-@njit("int64[::1](int64, int64[::1], int64[::1], int64[::1])", cache=True)
+@njit(cache=True)
 def beam_owners(n, beams, ends, ids):  # pragma: no cover - numba
     """(n,) int64: per beam of a scan of ``n`` beams, the id of the track that lists it (−1: none); track ``t``
     (id ``ids[t]``) lists ``beams[ends[t]:ends[t + 1]]`` (``ends`` (T + 1,), from 0). A beam two tracks list goes
@@ -68,7 +73,7 @@ def beam_owners(n, beams, ends, ids):  # pragma: no cover - numba
     return owner
 
 
-@njit("Tuple((int32[::1], int64[::1]))(boolean[::1], int64[::1], int64[::1])", cache=True)
+@njit(cache=True)
 def kept_beams(valid, beams, ends):  # pragma: no cover - numba
     """(the beams ``b`` of ``beams`` with ``valid[b]``, as int32, in order; bounds (T + 1,) of each track's
     part of them) for tracks listing ``beams[ends[t]:ends[t + 1]]`` (``ends`` (T + 1,), from 0): numpy's
@@ -96,11 +101,9 @@ def kept_beams(valid, beams, ends):  # pragma: no cover - numba
 _I1 = types.int64[::1]
 _F1 = types.float64[::1]
 _F1_RO = types.Array(types.float64, 1, "C", readonly=True)  # Scan.trig's shared cos / sin
-_SCAN_SIG = types.Tuple((_I1, _I1, types.boolean[::1], _I1))(
-    _F1, _F1_RO, _F1_RO, types.boolean[::1], types.boolean[:], _I1, _I1, *(types.float64,) * 6, _F1)
 
 
-@njit(_SCAN_SIG, cache=True)
+@njit(cache=True)
 def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, py, rs):  # pragma: no cover
     """A scan's kept beams, their points' (level, owner, cell) packed: (packed (L·m,) int64 values
     ``level·block + owner·wi·wj + cx·wj + cy``, level by level, cells relative to each level's smallest cell
@@ -200,8 +203,7 @@ def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, 
     return packed, params, valid, counts
 
 
-@njit("Tuple((int64[::1], int64[::1], int64[:, ::1], int64[::1]))(int64[::1], int64[::1], int64[::1], int64)",
-      cache=True)
+@njit(cache=True)
 def unpack_cells(u, params, uids, n_lv):  # pragma: no cover - numba
     """(track ids, cell keys, (m, 2) cells, level bounds (L + 1,)) of the sorted packed values ``u`` of
     :func:`scan_cells` (``params``; ``uids``: the track ids by rank): each distinct value of an owner > 0 whose
@@ -261,8 +263,7 @@ def unpack_cells(u, params, uids, n_lv):  # pragma: no cover - numba
     return ids[:m].copy(), keys[:m].copy(), cells[:m].copy(), bounds
 
 
-@njit("Tuple((float64[::1], int64[::1], int64[::1], int64))(float32[:, :], int32[:, :], int64[:, ::1], int64, int64)",
-      cache=True)
+@njit(cache=True)
 def read_cells(logodds, uidx, cells, i0, j0):  # pragma: no cover - numba
     """(log-odds (float64), update index (int64), flat index into the (H, W) arrays, number outside) of absolute
     ``cells`` (m, 2) on a level whose array starts at cell (``i0``, ``j0``); 0, −1, −1 outside the array."""
@@ -284,8 +285,7 @@ def read_cells(logodds, uidx, cells, i0, j0):  # pragma: no cover - numba
     return lo, ui, f, n_out
 
 
-@njit("Tuple((int64[:, ::1], int64[::1], int64[::1]))(float32[:, :], int32[:, :], int64[::1], int64[::1], "
-      "int64[::1], float64[::1], int64[::1])", cache=True)
+@njit(cache=True)
 def update_rows(logodds, uidx, f, ids, keys, before, ub):  # pragma: no cover - numba
     """After a map update: ((4, m) rows — cell key, update index before, update index after, the added log-odds'
     float64 bits — of the cells whose update index changed; the track id of each group of rows; the groups'
@@ -437,7 +437,8 @@ def _radix_sort(a):  # pragma: no cover - numba
     dst = np.empty(n, dtype=np.int64)
     for q in range(passes):
         sh = q * width
-        cnt[:] = 0
+        for d in range(mask + 1):
+            cnt[d] = 0
         for i in range(n):
             cnt[(src[i] >> sh) & mask] += 1
         tot = 0
@@ -451,8 +452,9 @@ def _radix_sort(a):  # pragma: no cover - numba
             dst[cnt[d]] = v
             cnt[d] += 1
         src, dst = dst, src
-    if passes % 2:  # (the sorted values are in the scratch array)
-        a[:] = src
+    if passes % 2:  # (the sorted values are in the scratch array; an element loop: a slice assignment compiles
+        for i in range(n):  # numpy's broadcast checks and their error messages, seconds of a cold compile)
+            a[i] = src[i]
 
 
 _B1 = types.boolean[::1]
