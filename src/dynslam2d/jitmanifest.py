@@ -51,23 +51,17 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.report_boxes',
      "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
      "float64, Array(int8, 1, 'C'),)"),
-    ('dynslam2d.slam.ledgerkernels._lower_bound',
-     "(Array(int64, 1, 'C'), int64, int64,)"),
-    ('dynslam2d.slam.ledgerkernels.beam_owners',
-     "(int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'),)"),
-    ('dynslam2d.slam.ledgerkernels.kept_beams',
-     "(Array(bool, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'),)"),
-    ('dynslam2d.slam.ledgerkernels.scan_cells',
-     "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
-     "'C'), Array(bool, 1, 'A'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), float64, float64, float64, "
-     "float64, float64, float64, Array(float64, 1, 'C'),)"),
-    ('dynslam2d.slam.ledgerkernels.unpack_cells',
-     "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), int64,)"),
-    ('dynslam2d.slam.ledgerkernels.read_cells',
-     "(Array(float32, 2, 'A'), Array(int32, 2, 'A'), Array(int64, 2, 'C'), int64, int64,)"),
-    ('dynslam2d.slam.ledgerkernels.update_rows',
-     "(Array(float32, 2, 'A'), Array(int32, 2, 'A'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'),)"),
+    ('dynslam2d.slam.ledgerkernels.record_cells',
+     "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), "
+     "Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, 'C'), Array(bool, 1, "
+     "'A'), float64, float64, float64, float64, float64, float64, Array(float64, 1, 'C'), "
+     "UniTuple(Array(float32, 2, 'C', False, aligned=True), 3), UniTuple(Array(int32, 2, 'C', False, "
+     'aligned=True), 3), UniTuple(int64, 3), UniTuple(int64, 3), bool,)'),
+    ('dynslam2d.slam.ledgerkernels.level_rows',
+     "(UniTuple(Array(float32, 2, 'C', False, aligned=True), 3), UniTuple(Array(int32, 2, 'C', False, "
+     "aligned=True), 3), UniTuple(int64, 3), UniTuple(int64, 3), int64, Array(int64, 1, 'C'), "
+     "Array(int64, 1, 'C'), Array(int64, 2, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), "
+     "Array(int64, 1, 'C'),)"),
     ('dynslam2d.slam.raycast.ray_ends',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), float64, float64, float64, float64,)"),
     ('dynslam2d.slam.raycast.integrate_levels',

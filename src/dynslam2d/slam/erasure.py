@@ -69,6 +69,10 @@ _EMPTY_B = np.zeros(0, dtype=bool)
 _EMPTY_I4 = np.zeros((4, 0), dtype=np.int64)
 for _a in (_EMPTY_I, _EMPTY_F, _EMPTY_B, _EMPTY_I4):
     _a.flags.writeable = False
+#: levels the fused kernels read in one call (slam/ledgerkernels.py's FUSED_LEVELS) and their empty padding
+_FUSED = 3
+_NO_F32 = np.zeros((0, 0), dtype=np.float32)
+_NO_I32 = np.zeros((0, 0), dtype=np.int32)
 
 
 def _decode(keys: np.ndarray) -> np.ndarray:
@@ -103,7 +107,7 @@ class _LevelRecord:
     each). The references are copied into the buffer (:meth:`materialize`) before the rows are read, when the
     track ends, and when they are older than ``_REF_MAX_AGE`` updates (so a record keeps few update blocks alive)."""
 
-    __slots__ = ("cap", "key", "delta", "pure", "last", "_pk", "_n_rows", "_n_chunks", "_refs", "_n_ref",
+    __slots__ = ("cap", "key", "delta", "pure", "last", "_pk", "_n_rows", "_n_chunks", "_refs", "_n_buf",
                  "_ref0")
 
     def __init__(self, cap: int) -> None:
@@ -117,7 +121,7 @@ class _LevelRecord:
         self._n_rows = 0  # pending rows, in the buffer and referenced
         self._n_chunks = 0
         self._refs: list | None = None  # (rows, a, b) of pending rows after the buffer's, in order
-        self._n_ref = 0  # rows referenced by _refs
+        self._n_buf = 0  # pending rows in the buffer (the others are referenced by _refs)
         self._ref0 = 0  # the ledger's update number of the first reference
 
     @property
@@ -132,13 +136,13 @@ class _LevelRecord:
         refs = self._refs
         if refs is None:
             return
-        n = self._n_rows - self._n_ref
+        n = self._n_buf
         parts = [rows[:, a:b] for rows, a, b in refs]
         if n:
             parts.insert(0, self._pk[:, :n])
         self._pk = np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0].copy()
         self._refs = None
-        self._n_ref = 0
+        self._n_buf = self._n_rows
 
     def _room(self, m: int) -> np.ndarray:
         """The pending buffer, grown (doubling) to hold ``m`` rows; the buffers are let go when folded."""
@@ -160,7 +164,6 @@ class _LevelRecord:
             self._ref0 = update
         else:
             refs.append((rows, a, b))
-        self._n_ref += b - a
         m = self._n_rows + b - a
         self._n_rows = m
         c = self._n_chunks + 1
@@ -178,7 +181,7 @@ class _LevelRecord:
         pk[1, n:m] = ub
         pk[2, n:m] = ua
         pk[3, n:m] = np.asarray(delta, dtype=np.float64).view(np.int64)
-        self._n_rows = m
+        self._n_rows = self._n_buf = m
         self._n_chunks += 1
         return m >= _COMPACT_ROWS or self._n_chunks >= _COMPACT_CHUNKS
 
@@ -192,7 +195,7 @@ class _LevelRecord:
         if m > pk.shape[1]:  # (_room, inlined: this runs for every track and level at every map update)
             pk = self._room(m)
         pk[:, n:m] = rows[:, a:b]
-        self._n_rows = m
+        self._n_rows = self._n_buf = m
         self._n_chunks += 1
         return m >= _COMPACT_ROWS or self._n_chunks >= _COMPACT_CHUNKS
 
@@ -217,7 +220,7 @@ class _LevelRecord:
         ua = np.concatenate((self.last, pk[2, :n]))
         start_pure = np.concatenate((self.pure, pk[1, :n] < 0))
         self._pk = _EMPTY_I4
-        self._n_rows = 0
+        self._n_rows = self._n_buf = 0
         self._n_chunks = 0
         order = np.argsort(key, kind="stable")  # per cell: the folded row first, then the updates in order
         k = key[order]
@@ -256,10 +259,12 @@ class _LevelRecord:
             return 0
         if self._n_chunks == 1 and not self.key.shape[0]:  # one update's rows: each key once
             return min(self._n_rows, self.cap)
-        keys = [self.key, self._pk[0, :self._n_rows - self._n_ref]]
+        keys = [self.key, self._pk[0, :self._n_buf]]
         if self._refs is not None:  # (the referenced rows' keys, without copying the rows first)
             keys += [rows[0, a:b] for rows, a, b in self._refs]
-        n = np.unique(np.concatenate(keys)).shape[0]
+        k = np.concatenate(keys)  # (a new array: sorted in place; its distinct values counted as np.unique would)
+        k.sort()
+        n = int(np.count_nonzero(k[1:] != k[:-1])) + 1
         return min(n, self.cap) - int(self.key.shape[0])  # compact keeps the first ``cap`` cells
 
     @property
@@ -299,16 +304,40 @@ class _Ledger:
         return sum(len(lv) for lv in self.levels)
 
 
-@dataclass(eq=False)
 class PendingUpdate:
     """Cells and log-odds read before one map update (:meth:`EvidenceLedger.before_update`): per map level
     (track ids, cell keys, cells, log-odds before, update index before), sorted by track id, each (track,
-    cell) once."""
+    cell) once.
 
-    per_level: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
-    #: per level, (flat array indices of the cells, i0, j0, shape) of the array they were read from, or None:
-    #: the update reads the same cells with them if the level did not grow
-    flat: list | None = None
+    Held either per level (:attr:`per_level`) or, from the fused kernels, as the five arrays of all levels one after
+    the other with the levels' bounds (``fused``: ids, keys, cells, log-odds, update index, bounds (L + 1,));
+    :attr:`per_level` then gives the levels' slices of them."""
+
+    __slots__ = ("_per_level", "fused")
+
+    def __init__(self, per_level: list | None = None, fused: tuple | None = None) -> None:
+        self._per_level = per_level
+        self.fused = fused
+
+    @property
+    def per_level(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+        if self._per_level is None:
+            *arrays, bounds = self.fused
+            bounds = bounds.tolist()
+            self._per_level = [tuple(x[a:b] for x in arrays) for a, b in zip(bounds, bounds[1:])]
+        return self._per_level
+
+
+def _level_arrays(levels: list) -> tuple[tuple, tuple, tuple, tuple]:
+    """The first ``FUSED_LEVELS`` levels' log-odds, update indices, i0 and j0 as the fused ledger kernels take
+    them (3-tuples, padded with empty arrays and zero offsets)."""
+    if len(levels) == _FUSED:  # (the usual three levels: no padding)
+        a, b, c = levels
+        return (a.logodds, b.logodds, c.logodds), (a.uidx, b.uidx, c.uidx), (a.i0, b.i0, c.i0), (a.j0, b.j0, c.j0)
+    lv3 = levels[:_FUSED]
+    pad = _FUSED - len(lv3)
+    return (tuple([lv.logodds for lv in lv3]) + (_NO_F32,) * pad, tuple([lv.uidx for lv in lv3]) + (_NO_I32,) * pad,
+            tuple([lv.i0 for lv in lv3]) + (0,) * pad, tuple([lv.j0 for lv in lv3]) + (0,) * pad)
 
 
 def _box_key(t: Track) -> tuple[float, float, float]:
@@ -351,64 +380,69 @@ class EvidenceLedger:
         ``keep_beams``). Returns None when nothing is to be recorded."""
         # imported at first use: their explicit signatures compile (or load from numba's cache) on import, which
         # would put ~0.4 s and scipy.linalg on every `import dynslam2d.pipeline` (issue 13's warm start)
-        from dynslam2d.slam.ledgerkernels import beam_owners, kept_beams, scan_cells
-        mine: list[Track] = []  # the tracks with beams, their beams, where each one's end and ids (one pass)
-        blist: list[np.ndarray] = []
-        end = 0
-        blen = [0]
-        bids: list[int] = []
-        for t in tracks:
-            b = t.beams
-            if b is not None and b.shape[0]:
-                mine.append(t)
-                blist.append(b)
-                end += b.shape[0]
-                blen.append(end)
-                bids.append(t.id)
+        from dynslam2d.slam.ledgerkernels import read_cells, record_cells
+        mine = [t for t in tracks if t.beams is not None and t.beams.shape[0]]  # the tracks with beams
         if not mine:
             return None
-        r = scan.ranges
-        allb = np.concatenate(blist)
-        lens = np.array(blen, dtype=np.int64)
-        # each beam's track (a later track's claim wins, as one assignment per track in order)
-        allb = allb.astype(np.int64, copy=False)
-        owner = beam_owners(r.shape[0], allb, lens, np.array(bids, dtype=np.int64))
-        uids = np.array(sorted(set(bids)), dtype=np.int64)  # track id ↦ rank 0 … R−1
-        cos_a, sin_a = scan.trig()
+        blist = [t.beams for t in mine]
+        ids = np.array([t.id for t in mine], dtype=np.int64)
+        lens = np.array([b.shape[0] for b in blist], dtype=np.int64)
+        allb = np.concatenate(blist).astype(np.int64, copy=False)
         c, s = math.cos(pose.theta), math.sin(pose.theta)
-        # the kept beams (valid, inside the laser's ranges, not removed), their map-frame points (the values of
-        # pose.transform_points) and every point's (level, owner, cell) packed, in one call
-        packed, params, valid, counts = scan_cells(
-            r, cos_a, sin_a, scan.valid_mask(), removed, owner, uids, self.laser_min_dist, self.laser_max_dist,
-            c, s, float(pose.x), float(pose.y), np.array([lv.resolution for lv in hmap.levels], dtype=np.float64))
-        if not counts.any():
+        levels = hmap.levels
+        want_kb = self.keep_beams and index >= 0
+        # in one call: each beam's track (a later track's claim wins), the kept beams (valid, inside the laser's
+        # ranges, not removed), their map-frame points (the values of pose.transform_points), every point's
+        # (level, track, cell) packed and sorted, the distinct ones no unowned point shares decoded and their cells
+        # read on (up to) three levels, which tracks keep beams and, for the loop closer, their kept beams
+        (packed_ok, ids_s, key_s, cells_s, before, ub, bounds, present, kb_all, kb_b, valid, uids, counts,
+         ends) = record_cells(allb, lens, ids, scan.ranges, *scan.trig(), scan.valid_mask(), removed,
+                              self.laser_min_dist, self.laser_max_dist, c, s, float(pose.x), float(pose.y),
+                              np.array([lv.resolution for lv in levels], dtype=np.float64), *_level_arrays(levels),
+                              want_kb)
+        if packed_ok:
+            for k in range(_FUSED, len(levels)):  # (levels beyond the fused kernel's three)
+                lv, a, b = levels[k], int(bounds[k]), int(bounds[k + 1])
+                before[a:b], ub[a:b] = read_cells(lv.logodds, lv.uidx, cells_s[a:b], lv.i0, lv.j0)[:2]
+            pending = PendingUpdate(fused=(ids_s, key_s, cells_s, before, ub, bounds))
+            present = present.tolist()
+        elif not counts.any():  # (no kept beam of any track)
             return None
-        flat: list = []
-        if params.shape[0]:
-            packed.sort()
-            per_level = self._level_cells(packed, params, uids, hmap, flat)
         else:  # (cells beyond the packed values' range: level by level)
-            idx = np.flatnonzero(valid)
-            own = owner[idx]
-            mine_b = own >= 0
-            lx, ly = r[idx] * cos_a[idx], r[idx] * sin_a[idx]
-            pts = np.column_stack((c * lx - s * ly + pose.x, s * lx + c * ly + pose.y))
-            per_level, flat = self._level_cells_plain(pts, mine_b, own[mine_b], hmap), [None] * len(hmap.levels)
-        present = set(uids[counts > 0].tolist())
-        kb_all = None
-        if self.keep_beams and index >= 0:  # every track's valid beams in one kernel call, split per track
-            kb_all, kb_b = kept_beams(valid, allb, lens)
+            pending, present, kb_all, kb_b = self._pending_plain(scan, c, s, pose, allb, ends, ids, uids, valid,
+                                                                 counts, hmap, want_kb)
+        if want_kb:  # every track's kept beams, split per track
             kb_b = kb_b.tolist()
-            kb_lo, kb_hi = kb_b, kb_b[1:]
-        for i, t in enumerate(mine):
-            if t.id not in present:  # every beam of it removed
+        ledgers = self._ledgers
+        n_lv = len(levels)
+        for i, (t, keep) in enumerate(zip(mine, present)):
+            if not keep:  # every beam of it removed
                 continue
-            led = self._ledgers.get(t.id)
+            led = ledgers.get(t.id)
             if led is None:
-                led = self._ledgers[t.id] = self._new_ledger(t, t.stamp, len(hmap.levels))
-            if kb_all is not None and kb_hi[i] > kb_lo[i]:
-                led.beams.append((int(index), kb_all[kb_lo[i]:kb_hi[i]]))
-        return PendingUpdate(per_level, flat)
+                led = ledgers[t.id] = self._new_ledger(t, t.stamp, n_lv)
+            if want_kb and kb_b[i + 1] > kb_b[i]:
+                led.beams.append((int(index), kb_all[kb_b[i]:kb_b[i + 1]]))
+        return pending
+
+    def _pending_plain(self, scan: Scan, c: float, s: float, pose: Pose2D, allb: np.ndarray, ends: np.ndarray,
+                       ids: np.ndarray, uids: np.ndarray, valid: np.ndarray, counts: np.ndarray, hmap: MultiResMap,
+                       want_kb: bool) -> tuple[PendingUpdate, list, np.ndarray | None, np.ndarray | None]:
+        """:meth:`before_update`'s level-by-level path (cells beyond the packed values' range): (the pending
+        update, per track of ``ids`` whether it keeps beams, the kept beams and their per-track bounds or None)."""
+        from dynslam2d.slam.ledgerkernels import beam_owners, kept_beams
+        r = scan.ranges
+        cos_a, sin_a = scan.trig()
+        owner = beam_owners(r.shape[0], allb, ends, ids)
+        idx = np.flatnonzero(valid)
+        own = owner[idx]
+        mine_b = own >= 0
+        lx, ly = r[idx] * cos_a[idx], r[idx] * sin_a[idx]
+        pts = np.column_stack((c * lx - s * ly + pose.x, s * lx + c * ly + pose.y))
+        kept = set(uids[counts > 0].tolist())
+        present = [tid in kept for tid in ids.tolist()]
+        kb_all, kb_b = kept_beams(valid, allb, ends) if want_kb else (None, None)
+        return PendingUpdate(self._level_cells_plain(pts, mine_b, own[mine_b], hmap)), present, kb_all, kb_b
 
     def _level_cells(self, packed: np.ndarray, params: np.ndarray, uids: np.ndarray, hmap: MultiResMap, flat: list
                      ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
@@ -481,40 +515,43 @@ class EvidenceLedger:
 
     def after_update(self, pending: PendingUpdate, hmap: MultiResMap) -> None:
         """Record the evidence the map update added in the cells read by :meth:`before_update`."""
-        from dynslam2d.slam.ledgerkernels import read_cells, update_rows  # at first use (see before_update)
+        from dynslam2d.slam.ledgerkernels import level_rows  # at first use (see before_update)
         ledgers = self._ledgers
         added = 0
         self._n_updates = upd = self._n_updates + 1
-        for k, (ids, keys, cells, before, ui_before) in enumerate(pending.per_level):
-            if ids.shape[0] == 0:
-                continue
-            lv = hmap.levels[k]
-            f = pending.flat[k] if pending.flat is not None else None
-            if f is None or f[1] != lv.i0 or f[2] != lv.j0 or f[3] != lv.shape:  # (the level grew: read anew)
-                f = read_cells(lv.logodds, lv.uidx, cells, lv.i0, lv.j0)[2:3]
-            # one block of rows (cell keys, update index before / after, log-odds' bits) of the updated cells;
-            # each record refers to its track's slice of it
-            rows, tids, starts = update_rows(lv.logodds, lv.uidx, f[0], ids, keys, before, ui_before)
-            st = starts.tolist()
-            # each track's record refers to its slice of the block (_LevelRecord.refer inlined: ≈ 25 tracks × 3
-            # levels per update, where a copy into each record's buffer and its growth were most of the loop)
-            for tid, a, b in zip(tids.tolist(), st, st[1:]):
+        levels = hmap.levels
+        if pending.fused is not None and len(levels) <= _FUSED:
+            # one block of rows (cell keys, update index before / after, log-odds' bits) of the updated cells of
+            # every level, the cells re-read from the levels' current arrays, and its groups (a track's rows on a
+            # level) in (track, level) order
+            ids, keys, cells, before, ub, bounds = pending.fused
+            rows, gid, glv, ga, gb = level_rows(*_level_arrays(levels), len(levels), ids, keys, cells, before, ub,
+                                                bounds)
+        else:
+            rows, gid, glv, ga, gb = self._level_groups(pending, levels)
+        # each track's record refers to its slice of the block (_LevelRecord.refer inlined: ≈ 25 tracks × 3 levels
+        # per update, where a copy into each record's buffer and its growth were most of the loop); a track's
+        # ledger is looked up once for its levels
+        prev = levs = None
+        for tid, k, a, b in zip(gid.tolist(), glv.tolist(), ga.tolist(), gb.tolist()):
+            if tid != prev:
+                prev = tid
                 led = ledgers.get(tid)
-                if led is not None:  # (every group holds rows)
-                    rec = led.levels[k]
-                    refs = rec._refs
-                    if refs is None:
-                        rec._refs = [(rows, a, b)]
-                        rec._ref0 = upd
-                    else:
-                        refs.append((rows, a, b))
-                    rec._n_ref += b - a
-                    m = rec._n_rows + b - a
-                    rec._n_rows = m
-                    c = rec._n_chunks + 1
-                    rec._n_chunks = c
-                    if m >= _COMPACT_ROWS or c >= _COMPACT_CHUNKS:
-                        added += rec.compact()
+                levs = led.levels if led is not None else None
+            if levs is not None:  # (every group holds rows)
+                rec = levs[k]
+                refs = rec._refs
+                if refs is None:
+                    rec._refs = [(rows, a, b)]
+                    rec._ref0 = upd
+                else:
+                    refs.append((rows, a, b))
+                m = rec._n_rows + b - a
+                rec._n_rows = m
+                c = rec._n_chunks + 1
+                rec._n_chunks = c
+                if m >= _COMPACT_ROWS or c >= _COMPACT_CHUNKS:
+                    added += rec.compact()
         if upd % _REF_MAX_AGE == 0:  # copy old references into their records' buffers (few blocks stay alive)
             old = upd - _REF_MAX_AGE
             for led in ledgers.values():
@@ -522,6 +559,33 @@ class EvidenceLedger:
                     if rec._refs is not None and rec._ref0 <= old:
                         rec.materialize()
         self.stats["cells_recorded"] += added
+
+    @staticmethod
+    def _level_groups(pending: PendingUpdate, levels: list
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`after_update`'s row block and groups level by level (more levels than the fused kernel takes, or
+        a level-by-level pending update), as :func:`~dynslam2d.slam.ledgerkernels.level_rows` returns them but in
+        (level, track) order: the levels' blocks side by side, per group the track id, level, first and end
+        column."""
+        from dynslam2d.slam.ledgerkernels import read_cells, update_rows
+        blocks, gid, glv, ga, gb = [], [], [], [], []
+        off = 0
+        for k, (ids, keys, cells, before, ui_before) in enumerate(pending.per_level):
+            if ids.shape[0] == 0:
+                continue
+            lv = levels[k]
+            f = read_cells(lv.logodds, lv.uidx, cells, lv.i0, lv.j0)[2]
+            rows, tids, starts = update_rows(lv.logodds, lv.uidx, f, ids, keys, before, ui_before)
+            blocks.append(rows)
+            gid.append(tids)
+            glv.append(np.full(tids.shape[0], k, dtype=np.int64))
+            ga.append(starts[:-1] + off)
+            gb.append(starts[1:] + off)
+            off += rows.shape[1]
+        if not blocks:
+            return _EMPTY_I4, _EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I
+        return (np.concatenate(blocks, axis=1), np.concatenate(gid), np.concatenate(glv), np.concatenate(ga),
+                np.concatenate(gb))
 
     def _fold(self, led: _Ledger) -> None:
         """Fold every level's pending rows of ``led`` (counts its new cells)."""
@@ -535,45 +599,49 @@ class EvidenceLedger:
 
     def observe(self, tracks: list[Track], removing: set[int], stamp: float) -> None:
         """Keep each live track's last box; move ledgers of ended tracks aside; drop old ones."""
-        live = {t.id: t for t in tracks}
         reach = self.config.link_margin + 0.5
         stand = self.config.stand_speed
         first = self._first
+        ledgers = self._ledgers
         hypot = math.hypot
-        for t in tracks:
+        for t in tracks:  # (one pass: where each track stands, and its ledger's last sight)
             tid = t.id
             a = first.get(tid)
+            out = tid not in removing
             if a is None:
                 first[tid] = [_box_key(t), stamp, stamp]
-            elif tid not in removing and hypot(*t.velocity.tolist()) < stand:
+            elif out and hypot(*t.velocity.tolist()) < stand:
                 b, f = t.box, a[0]
                 if hypot(b.px - f[0], b.py - f[1]) <= reach:
                     a[2] = stamp  # still standing where it stood
                 else:
                     first[tid] = [_box_key(t), stamp, stamp]  # standing at a new place
-        if len(self._first) > len(live):
-            self._first = {tid: b for tid, b in self._first.items() if tid in live}
-        for tid, led in list(self._ledgers.items()):
-            t = live.get(tid)
-            if t is None:
-                del self._ledgers[tid]
-                if led.last_track is not None:
-                    led.last_box = _box_key(led.last_track)
-                if led.confirmed:  # tentative clutter (wall fragments, noise) is never linked
-                    # an ended record gets no more rows: its pending buffers, allocated with room to double
-                    # (up to 2 × 4096 rows of 32 bytes per level), shrink to their rows (issue 13 item 3; one
-                    # copy, where folding them here would sort them in the per-scan path)
-                    for rec in led.levels:
-                        rec.shrink()
-                    self._ended[tid] = led
-                    self._oldest_ended = min(self._oldest_ended, led.last_seen)
-                else:
-                    self._drop(led)  # (its cells count in cells_recorded)
-            elif tid not in removing:
-                led.m_start, led.skip, led.linked = None, False, False  # out of the removal set (again)
-                led.last_track = t  # (its box becomes last_box when the track ends)
-                led.last_seen = stamp
-                led.confirmed = led.confirmed or t.state != "tentative"
+            if out:
+                led = ledgers.get(tid)
+                if led is not None:
+                    if led.m_start is not None:  # out of the removal set (again); skip and linked are only set
+                        led.m_start, led.skip, led.linked = None, False, False  # (with m_start)
+                    led.last_track = t  # (its box becomes last_box when the track ends)
+                    led.last_seen = stamp
+                    if not led.confirmed and t.state != "tentative":
+                        led.confirmed = True
+        live = {t.id for t in tracks}
+        if len(first) > len(live):
+            self._first = {tid: b for tid, b in first.items() if tid in live}
+        for tid in [i for i in ledgers if i not in live]:  # (in the ledgers' order)
+            led = ledgers.pop(tid)
+            if led.last_track is not None:
+                led.last_box = _box_key(led.last_track)
+            if led.confirmed:  # tentative clutter (wall fragments, noise) is never linked
+                # an ended record gets no more rows: its pending buffers, allocated with room to double
+                # (up to 2 × 4096 rows of 32 bytes per level), shrink to their rows (issue 13 item 3; one
+                # copy, where folding them here would sort them in the per-scan path)
+                for rec in led.levels:
+                    rec.shrink()
+                self._ended[tid] = led
+                self._oldest_ended = min(self._oldest_ended, led.last_seen)
+            else:
+                self._drop(led)  # (its cells count in cells_recorded)
         keep = self.config.ledger_keep_s
         if self._ended and stamp - self._oldest_ended > keep:  # (a full pass only when one has expired)
             for tid in [i for i, led in self._ended.items() if stamp - led.last_seen > keep]:

@@ -1,10 +1,11 @@
 """numba kernels of the evidence ledger's per-update recording (slam/erasure.py, issue 9).
 
 Each map update of the pipeline records, per track and map level, the cells the track's kept beams hit and the
-log-odds the update added there. These kernels do that work in a fixed number of calls per update (two for the
-cells of all levels around one ``np.sort``, one per level for the read before the update, one per level for the
-rows after it) instead of about a hundred small numpy calls. They compute exactly what the numpy code they
-replace computed (``tests/test_ledger_kernels.py`` checks them against it on random inputs):
+log-odds the update added there. The pipeline does that work in two calls per update: :func:`record_cells` before
+the map update (everything read before it) and :func:`level_rows` after it (the rows of every level), instead of
+about a hundred small numpy calls. They are built from single-step kernels that compute exactly what the numpy code
+they replaced computed (``tests/test_ledger_kernels.py`` checks them against it on random inputs,
+``tests/test_ledger_fused.py`` the fused kernels against the single steps):
 
 * :func:`beam_owners`: each beam's owner track (the last track listing it), from all tracks' beams in one array;
 * :func:`kept_beams`: each track's kept beams (loop closure's record of what an erasure takes out);
@@ -16,11 +17,15 @@ replace computed (``tests/test_ledger_kernels.py`` checks them against it on ran
 * :func:`read_cells`: log-odds and update index of cells (0 and −1 outside the level's array) and their flat
   array indices (−1 outside);
 * :func:`update_rows`: after the update, the rows (key, update index before, after, added log-odds' bits) of the
-  cells the update changed, and the per-track groups of those rows.
+  cells the update changed, and the per-track groups of those rows;
+* :func:`record_cells` = beam_owners, the distinct track ids, scan_cells, a radix sort, unpack_cells, the reads of
+  three levels and kept_beams; :func:`level_rows` = update_rows of three levels, re-reading by cell.
 
-Explicit signatures: one specialisation each, compiled (or loaded from numba's cache) when the module is
-imported. Units: points in m (map frame), resolutions in m, cells absolute level indices.
-"""
+Signatures: the two fused kernels declare theirs (one specialisation each, compiled or loaded from numba's cache
+when the module is imported, with the single steps they call); the single steps are compiled at first use (the
+level-by-level path of more than three levels or of cells beyond the packed range, and the tests), so a cold start
+does not compile those the fused kernels do not call. Units: points in m (map frame), resolutions in m, cells
+absolute level indices."""
 
 from __future__ import annotations
 
@@ -36,7 +41,7 @@ _LIMIT = 1 << 62
 _CELL_LIMIT = 2.0 ** 31
 
 
-@njit("int64(int64[::1], int64, int64)", cache=True)
+@njit(cache=True)
 def _lower_bound(a, hi, v):  # pragma: no cover - numba
     """The first index in ``a[:hi]`` (sorted) whose value is not below ``v`` (``hi`` if none)."""
     lo = 0
@@ -49,7 +54,7 @@ def _lower_bound(a, hi, v):  # pragma: no cover - numba
     return lo
 
 
-@njit("int64[::1](int64, int64[::1], int64[::1], int64[::1])", cache=True)
+@njit(cache=True)
 def beam_owners(n, beams, ends, ids):  # pragma: no cover - numba
     """(n,) int64: per beam of a scan of ``n`` beams, the id of the track that lists it (−1: none); track ``t``
     (id ``ids[t]``) lists ``beams[ends[t]:ends[t + 1]]`` (``ends`` (T + 1,), from 0). A beam two tracks list goes
@@ -68,7 +73,7 @@ def beam_owners(n, beams, ends, ids):  # pragma: no cover - numba
     return owner
 
 
-@njit("Tuple((int32[::1], int64[::1]))(boolean[::1], int64[::1], int64[::1])", cache=True)
+@njit(cache=True)
 def kept_beams(valid, beams, ends):  # pragma: no cover - numba
     """(the beams ``b`` of ``beams`` with ``valid[b]``, as int32, in order; bounds (T + 1,) of each track's
     part of them) for tracks listing ``beams[ends[t]:ends[t + 1]]`` (``ends`` (T + 1,), from 0): numpy's
@@ -96,11 +101,9 @@ def kept_beams(valid, beams, ends):  # pragma: no cover - numba
 _I1 = types.int64[::1]
 _F1 = types.float64[::1]
 _F1_RO = types.Array(types.float64, 1, "C", readonly=True)  # Scan.trig's shared cos / sin
-_SCAN_SIG = types.Tuple((_I1, _I1, types.boolean[::1], _I1))(
-    _F1, _F1_RO, _F1_RO, types.boolean[::1], types.boolean[:], _I1, _I1, *(types.float64,) * 6, _F1)
 
 
-@njit(_SCAN_SIG, cache=True)
+@njit(cache=True)
 def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, py, rs):  # pragma: no cover
     """A scan's kept beams, their points' (level, owner, cell) packed: (packed (L·m,) int64 values
     ``level·block + owner·wi·wj + cx·wj + cy``, level by level, cells relative to each level's smallest cell
@@ -200,8 +203,7 @@ def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, 
     return packed, params, valid, counts
 
 
-@njit("Tuple((int64[::1], int64[::1], int64[:, ::1], int64[::1]))(int64[::1], int64[::1], int64[::1], int64)",
-      cache=True)
+@njit(cache=True)
 def unpack_cells(u, params, uids, n_lv):  # pragma: no cover - numba
     """(track ids, cell keys, (m, 2) cells, level bounds (L + 1,)) of the sorted packed values ``u`` of
     :func:`scan_cells` (``params``; ``uids``: the track ids by rank): each distinct value of an owner > 0 whose
@@ -261,8 +263,7 @@ def unpack_cells(u, params, uids, n_lv):  # pragma: no cover - numba
     return ids[:m].copy(), keys[:m].copy(), cells[:m].copy(), bounds
 
 
-@njit("Tuple((float64[::1], int64[::1], int64[::1], int64))(float32[:, :], int32[:, :], int64[:, ::1], int64, int64)",
-      cache=True)
+@njit(cache=True)
 def read_cells(logodds, uidx, cells, i0, j0):  # pragma: no cover - numba
     """(log-odds (float64), update index (int64), flat index into the (H, W) arrays, number outside) of absolute
     ``cells`` (m, 2) on a level whose array starts at cell (``i0``, ``j0``); 0, −1, −1 outside the array."""
@@ -284,8 +285,7 @@ def read_cells(logodds, uidx, cells, i0, j0):  # pragma: no cover - numba
     return lo, ui, f, n_out
 
 
-@njit("Tuple((int64[:, ::1], int64[::1], int64[::1]))(float32[:, :], int32[:, :], int64[::1], int64[::1], "
-      "int64[::1], float64[::1], int64[::1])", cache=True)
+@njit(cache=True)
 def update_rows(logodds, uidx, f, ids, keys, before, ub):  # pragma: no cover - numba
     """After a map update: ((4, m) rows — cell key, update index before, update index after, the added log-odds'
     float64 bits — of the cells whose update index changed; the track id of each group of rows; the groups'
@@ -335,3 +335,242 @@ def update_rows(logodds, uidx, f, ids, keys, before, ub):  # pragma: no cover - 
     starts[g] = m
     return rows, gid, starts
 
+
+
+#: levels the fused kernels take (3-tuples of level arrays, padded with empty ones; slam/grid.py's ``_FUSED_LEVELS``)
+FUSED_LEVELS = 3
+_LO3 = types.UniTuple(types.float32[:, ::1], FUSED_LEVELS)
+_UI3 = types.UniTuple(types.int32[:, ::1], FUSED_LEVELS)
+_IT3 = types.UniTuple(types.int64, FUSED_LEVELS)
+
+
+# (the two parts of record_cells are inlined into it: as functions of their own they cost ≈ 0.7–1 s more cold compile)
+@njit(cache=True, inline="always")
+def _track_points(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px, py, rs):  # pragma: no cover
+    """:func:`beam_owners`, the tracks' distinct ids in ascending order and :func:`scan_cells` in one call: (packed
+    values, params, kept beams (n,), kept beams per distinct track (R,), the distinct track ids ``uids`` (R,), the
+    tracks' ends in ``beams`` (T + 1,), from 0) of a scan whose track ``t`` (id ``ids[t]``) lists the next
+    ``lens[t]`` beams of ``beams``; the other arguments as :func:`scan_cells`. Each beam's owner is the last track
+    listing it."""
+    n_t = ids.shape[0]
+    ends = np.empty(n_t + 1, dtype=np.int64)
+    ends[0] = 0
+    for t in range(n_t):
+        ends[t + 1] = ends[t] + lens[t]
+    owner = beam_owners(r.shape[0], beams, ends, ids)
+    # the distinct ids, ascending (sorted(set(ids)); an insertion sort of a few dozen)
+    u = np.empty(n_t, dtype=np.int64)
+    m = 0
+    for t in range(n_t):
+        v = ids[t]
+        p = m
+        while p > 0 and u[p - 1] > v:
+            p -= 1
+        if p > 0 and u[p - 1] == v:
+            continue
+        for q in range(m, p, -1):
+            u[q] = u[q - 1]
+        u[p] = v
+        m += 1
+    uids = u[:m].copy()
+    packed, params, valid, counts = scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, py,
+                                               rs)
+    return packed, params, valid, counts, uids, ends
+
+
+@njit(cache=True, inline="always")
+def _read_levels(u, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, valid, beams, ends, want_kb
+                ):  # pragma: no cover - numba
+    """:func:`unpack_cells` of the sorted packed values ``u`` and the read of its cells on the first
+    ``min(n_lv, 3)`` levels (``logodds``, ``uidx``: the levels' arrays, padded; ``i0``, ``j0``: their offsets), in one
+    call: (track ids, cell keys, (m, 2) cells, log-odds before (float64), update index before (int64; 0 and −1
+    outside a level's array and on levels ≥ 3, which the caller reads), level bounds (L + 1,), per track ``t`` of
+    ``ids`` whether any kept beam of it is left (``counts`` of its id's rank in ``uids`` > 0), and, with
+    ``want_kb``, :func:`kept_beams` of ``valid``, ``beams``, ``ends`` (else empty))."""
+    out_ids, keys, cells, bounds = unpack_cells(u, params, uids, n_lv)
+    m = out_ids.shape[0]
+    lo = np.zeros(m)
+    ui = np.full(m, -1, dtype=np.int64)
+    for k in range(min(n_lv, FUSED_LEVELS)):
+        a = logodds[k]
+        b = uidx[k]
+        h, w = a.shape
+        ci0 = i0[k]
+        cj0 = j0[k]
+        for t in range(bounds[k], bounds[k + 1]):
+            col = cells[t, 0] - ci0
+            row = cells[t, 1] - cj0
+            if col >= 0 and row >= 0 and col < w and row < h:
+                lo[t] = a[row, col]
+                ui[t] = b[row, col]
+    n_t = ids.shape[0]
+    n_u = uids.shape[0]
+    present = np.empty(n_t, dtype=np.bool_)
+    for t in range(n_t):
+        present[t] = counts[_lower_bound(uids, n_u, ids[t])] > 0
+    if want_kb:
+        kb, kb_b = kept_beams(valid, beams, ends)
+    else:
+        kb = np.zeros(0, dtype=np.int32)
+        kb_b = np.zeros(0, dtype=np.int64)
+    return out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b
+
+
+@njit(cache=True)
+def _radix_sort(a):  # pragma: no cover - numba
+    """Sort the non-negative int64 values ``a`` in place (least significant digit first, at most 11 bits a digit:
+    a few passes over the values, where a comparison sort of the ≈ 2000 values of a scan takes more)."""
+    n = a.shape[0]
+    mx = 0
+    for i in range(n):
+        if a[i] > mx:
+            mx = a[i]
+    bits = 0
+    while bits < 63 and (mx >> bits) > 0:
+        bits += 1
+    if bits == 0:
+        return
+    passes = (bits + 10) // 11
+    width = (bits + passes - 1) // passes
+    mask = (1 << width) - 1
+    cnt = np.empty(1 << width, dtype=np.int64)
+    src = a
+    dst = np.empty(n, dtype=np.int64)
+    for q in range(passes):
+        sh = q * width
+        for d in range(mask + 1):
+            cnt[d] = 0
+        for i in range(n):
+            cnt[(src[i] >> sh) & mask] += 1
+        tot = 0
+        for d in range(mask + 1):
+            k = cnt[d]
+            cnt[d] = tot
+            tot += k
+        for i in range(n):
+            v = src[i]
+            d = (v >> sh) & mask
+            dst[cnt[d]] = v
+            cnt[d] += 1
+        src, dst = dst, src
+    if passes % 2:  # (the sorted values are in the scratch array; an element loop: a slice assignment compiles
+        for i in range(n):  # numpy's broadcast checks and their error messages, seconds of a cold compile)
+            a[i] = src[i]
+
+
+_B1 = types.boolean[::1]
+_RECORD_SIG = types.Tuple((
+    types.boolean, _I1, _I1, types.int64[:, ::1], _F1, _I1, _I1, _B1, types.int32[::1], _I1, _B1, _I1, _I1, _I1))(
+    _I1, _I1, _I1, _F1, _F1_RO, _F1_RO, _B1, types.boolean[:], *(types.float64,) * 6, _F1,
+    _LO3, _UI3, _IT3, _IT3, types.boolean)
+
+
+@njit(_RECORD_SIG, cache=True)
+def record_cells(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px, py, rs, logodds, uidx, i0, j0,
+                 want_kb):  # pragma: no cover - numba
+    """Everything the evidence ledger reads before a map update, in one call: each beam's owner track
+    (:func:`beam_owners`, track ``t`` with id ``ids[t]`` listing the next ``lens[t]`` of ``beams``), the kept beams'
+    points packed (:func:`scan_cells`; levels of cell side ``rs``), sorted, decoded (:func:`unpack_cells`) and their
+    cells read on the first ``min(L, 3)`` levels (``logodds``, ``uidx``, offsets ``i0``, ``j0``: 3-tuples, padded).
+    Returns (packed path taken — False when the values would not fit, then only the last five outputs are set;
+    track ids, cell keys, (m, 2) cells, log-odds before, update index before (0, −1 outside a level's array and on
+    levels ≥ 3), level bounds (L + 1,), per track whether a kept beam of it is left, with ``want_kb`` the kept beams
+    and their per-track bounds (:func:`kept_beams`), the kept-beam mask (n,), the distinct track ids ``uids``
+    ascending, kept beams per distinct track, the tracks' ends in ``beams`` (T + 1,))."""
+    packed, params, valid, counts, uids, ends = _track_points(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin,
+                                                              rmax, c, s, px, py, rs)
+    n_lv = rs.shape[0]
+    if params.shape[0] == 0:
+        e = np.zeros(0, dtype=np.int64)
+        return (False, e, e, np.zeros((0, 2), dtype=np.int64), np.zeros(0), e, e, np.zeros(0, dtype=np.bool_),
+                np.zeros(0, dtype=np.int32), e, valid, uids, counts, ends)
+    _radix_sort(packed)
+    out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b = _read_levels(
+        packed, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, valid, beams, ends, want_kb)
+    return True, out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b, valid, uids, counts, ends
+
+
+_ROWS_SIG = types.Tuple((types.int64[:, ::1], _I1, _I1, _I1, _I1))(
+    _LO3, _UI3, _IT3, _IT3, types.int64, _I1, _I1, types.int64[:, ::1], _F1, _I1, _I1)
+
+
+@njit(_ROWS_SIG, cache=True)
+def level_rows(logodds, uidx, i0, j0, n_lv, ids, keys, cells, before, ub, bounds):  # pragma: no cover - numba
+    """:func:`update_rows` of every level (``n_lv`` ≤ 3) in one call, the cells re-read after the map update from
+    the levels' current arrays and offsets (a level may have grown): ((4, m) rows of all levels, level by level;
+    per group of rows (one track's rows on one level), in (track id, level) order: the track id, the level, the
+    first and the end column (g,) each). The cells of level ``k`` are ``bounds[k]:bounds[k + 1]`` of ``ids``,
+    ``keys``, ``cells``, ``before`` and ``ub`` (what :func:`record_cells` read), sorted by track id within a
+    level. (The caller looks each track's ledger up once for all its levels.)"""
+    n = ids.shape[0]
+    delta = np.empty(n)
+    ua = np.empty(n, dtype=np.int64)
+    m = 0
+    g = 0
+    for k in range(n_lv):
+        a = logodds[k]
+        b = uidx[k]
+        h, w = a.shape
+        ci0 = i0[k]
+        cj0 = j0[k]
+        first = True
+        last = 0
+        for t in range(bounds[k], bounds[k + 1]):
+            col = cells[t, 0] - ci0
+            row = cells[t, 1] - cj0
+            after = 0.0
+            v = -1
+            if col >= 0 and row >= 0 and col < w and row < h:
+                after = a[row, col]
+                v = b[row, col]
+            ua[t] = v
+            delta[t] = after - before[t]
+            if v != ub[t]:  # else not updated (outside the array, or the ray was skipped)
+                if first or ids[t] != last:
+                    g += 1
+                    last = ids[t]
+                    first = False
+                m += 1
+    bits = delta.view(np.int64)
+    rows = np.empty((4, m), dtype=np.int64)
+    gid = np.empty(g, dtype=np.int64)
+    starts = np.empty(g + 1, dtype=np.int64)
+    lg = np.empty(n_lv + 1, dtype=np.int64)  # the groups of level k: lg[k]:lg[k + 1]
+    q = 0
+    j = 0
+    for k in range(n_lv):
+        lg[k] = q
+        first = True
+        for t in range(bounds[k], bounds[k + 1]):
+            if ua[t] == ub[t]:
+                continue
+            rows[0, j] = keys[t]
+            rows[1, j] = ub[t]
+            rows[2, j] = ua[t]
+            rows[3, j] = bits[t]
+            if first or ids[t] != gid[q - 1]:
+                gid[q] = ids[t]
+                starts[q] = j
+                q += 1
+                first = False
+            j += 1
+    starts[g] = m
+    lg[n_lv] = g
+    # the groups in (track id, level) order: a merge of the levels' runs (each sorted by track id)
+    pos = lg[:n_lv].copy()
+    o_id = np.empty(g, dtype=np.int64)
+    o_lv = np.empty(g, dtype=np.int64)
+    o_a = np.empty(g, dtype=np.int64)
+    o_b = np.empty(g, dtype=np.int64)
+    for q in range(g):
+        best = -1
+        for k in range(n_lv):
+            if pos[k] < lg[k + 1] and (best < 0 or gid[pos[k]] < gid[pos[best]]):
+                best = k
+        src = pos[best]
+        pos[best] += 1
+        o_id[q] = gid[src]
+        o_lv[q] = best
+        o_a[q] = starts[src]
+        o_b[q] = starts[src + 1]
+    return rows, o_id, o_lv, o_a, o_b

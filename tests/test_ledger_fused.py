@@ -1,0 +1,237 @@
+"""The evidence ledger's fused kernels (slam/ledgerkernels.py: ``record_cells`` before a map update, ``level_rows``
+after it, ``_radix_sort`` inside ``record_cells``) against the sequence of single-step kernels they replaced in
+``EvidenceLedger.before_update`` / ``after_update`` (beam_owners, scan_cells, np.sort, unpack_cells, read_cells per
+level, kept_beams; read_cells and update_rows per level): the same cells, values, rows and groups, bit for bit."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dynslam2d.slam import ledgerkernels as lk
+
+_KEY_SHIFT = 4294967296
+
+
+def _levels(rng, rs, pts):
+    """Per level a random (log-odds, update index, i0, j0) covering the points' cells right of their median."""
+    out = []
+    for r in rs:
+        ci = np.floor(pts / r + 0.5).astype(np.int64)
+        i0, j0 = int(np.median(ci[:, 0])), int(ci[:, 1].min()) - 1  # (cells left of the median are outside)
+        w, h = int(ci[:, 0].max()) - i0 + 1, int(ci[:, 1].max()) - j0 + 1
+        lo = rng.normal(0.0, 2.0, (max(h, 1), max(w, 1))).astype(np.float32)
+        ui = rng.integers(-1, 9, lo.shape).astype(np.int32)
+        out.append((lo, ui, i0, j0))
+    return out
+
+
+def _scan(rng, n=360):
+    r = rng.uniform(0.2, 8.0, n)
+    r[rng.integers(0, n, 20)] = np.nan
+    r[rng.integers(0, n, 10)] = 0.1  # == laser_min_dist: not kept
+    r[60:90] = r[59]  # ties
+    angles = np.linspace(-np.pi, np.pi, n, endpoint=False)
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    cos_a.flags.writeable = sin_a.flags.writeable = False  # as Scan.trig's shared arrays
+    vm = np.isfinite(r)
+    removed = rng.random(n) < 0.05
+    return r, cos_a, sin_a, vm, removed
+
+
+def _tracks(rng, n):
+    """Track ids (unsorted, one repeated) and their beams (shared between tracks, negative indices)."""
+    ids = [int(v) for v in rng.choice(np.arange(1, 90), 7, replace=False)]
+    ids.append(ids[2])  # an id listed twice
+    beams = []
+    for _ in ids:
+        a = int(rng.integers(0, n - 40))
+        beams.append(np.arange(a, a + int(rng.integers(1, 40))))
+    beams[3] = np.concatenate((beams[3], beams[1][:5], [-1, -2]))  # shared with track 1; negative indices
+    return np.array(ids, dtype=np.int64), beams
+
+
+@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("n_lv", [1, 2, 3])
+def test_record_cells_equals_the_single_step_kernels(seed: int, n_lv: int) -> None:
+    """record_cells against beam_owners → scan_cells → np.sort → unpack_cells → read_cells per level and
+    kept_beams: every output equal (cells outside a level's array read as 0 / −1; fewer levels than three)."""
+    rng = np.random.default_rng(seed)
+    r, cos_a, sin_a, vm, removed = _scan(rng)
+    n = r.shape[0]
+    ids, beams = _tracks(rng, n)
+    allb = np.concatenate(beams).astype(np.int64)
+    lens = np.array([b.shape[0] for b in beams], dtype=np.int64)
+    ends = np.concatenate(([0], np.cumsum(lens))).astype(np.int64)
+    rs = np.array([0.05, 0.1, 0.2][:n_lv])
+    c, s, px, py = math.cos(0.3), math.sin(0.3), float(rng.uniform(-3, 3)), float(rng.uniform(-3, 3))
+    pts = np.column_stack((c * r * cos_a - s * r * sin_a + px, s * r * cos_a + c * r * sin_a + py))
+    levels = _levels(rng, rs, pts[np.isfinite(pts[:, 0])])
+    pad = 3 - n_lv
+    lo_t = tuple(lv[0] for lv in levels) + (np.zeros((0, 0), np.float32),) * pad
+    ui_t = tuple(lv[1] for lv in levels) + (np.zeros((0, 0), np.int32),) * pad
+    i0_t = tuple(lv[2] for lv in levels) + (0,) * pad
+    j0_t = tuple(lv[3] for lv in levels) + (0,) * pad
+    got = lk.record_cells(allb, lens, ids, r, cos_a, sin_a, vm, removed, 0.1, 10.0, c, s, px, py, rs, lo_t, ui_t,
+                          i0_t, j0_t, True)
+    ok, g_ids, g_keys, g_cells, g_lo, g_ui, g_bounds, g_present, g_kb, g_kbb, g_valid, g_uids, g_counts, g_ends = got
+    # the single steps
+    owner = lk.beam_owners(n, allb, ends, ids)
+    uids = np.array(sorted(set(ids.tolist())), dtype=np.int64)
+    packed, params, valid, counts = lk.scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, 0.1, 10.0, c, s, px,
+                                                  py, rs)
+    assert ok and params.shape[0] > 0
+    assert np.array_equal(g_valid, valid) and np.array_equal(g_uids, uids) and np.array_equal(g_counts, counts)
+    assert np.array_equal(g_ends, ends)
+    packed.sort()
+    w_ids, w_keys, w_cells, w_bounds = lk.unpack_cells(packed, params, uids, n_lv)
+    for u, v in ((g_ids, w_ids), (g_keys, w_keys), (g_cells, w_cells), (g_bounds, w_bounds)):
+        assert u.dtype == v.dtype and np.array_equal(u, v)
+    n_out = 0
+    for k, (lo, ui, i0, j0) in enumerate(levels):
+        a, b = int(w_bounds[k]), int(w_bounds[k + 1])
+        w_lo, w_ui, _, out = lk.read_cells(lo, ui, w_cells[a:b], i0, j0)
+        assert np.array_equal(g_lo[a:b], w_lo) and np.array_equal(g_ui[a:b], w_ui)
+        n_out += out
+    assert n_out > 0 and g_ids.shape[0] > 20  # (cells outside the arrays were read)
+    kept = set(uids[counts > 0].tolist())
+    assert g_present.tolist() == [t in kept for t in ids.tolist()]
+    w_kb, w_kbb = lk.kept_beams(valid, allb, ends)
+    assert np.array_equal(g_kb, w_kb) and g_kb.dtype == np.int32 and np.array_equal(g_kbb, w_kbb)
+    # without the kept beams; and with every beam removed: the packed path is not taken, no track keeps a beam
+    assert lk.record_cells(allb, lens, ids, r, cos_a, sin_a, vm, removed, 0.1, 10.0, c, s, px, py, rs, lo_t, ui_t,
+                           i0_t, j0_t, False)[8].shape[0] == 0
+    none = lk.record_cells(allb, lens, ids, r, cos_a, sin_a, vm, np.ones(n, dtype=bool), 0.1, 10.0, c, s, px, py,
+                           rs, lo_t, ui_t, i0_t, j0_t, True)
+    assert not none[0] and not none[12].any()
+
+
+def test_record_cells_leaves_values_beyond_an_int64_to_the_level_by_level_path() -> None:
+    """A point far away (cells beyond the packed values' range): not packed, but the kept beams, track ids and
+    counts are returned for the level-by-level path."""
+    rng = np.random.default_rng(3)
+    r, cos_a, sin_a, vm, removed = _scan(rng)
+    r[5] = 1e12
+    ids, beams = _tracks(rng, r.shape[0])
+    beams[0] = np.append(beams[0], 5)
+    allb = np.concatenate(beams).astype(np.int64)
+    lens = np.array([b.shape[0] for b in beams], dtype=np.int64)
+    rs = np.array([0.05, 0.1, 0.2])
+    lo = np.zeros((4, 4), np.float32)
+    ui = np.zeros((4, 4), np.int32)
+    got = lk.record_cells(allb, lens, ids, r, cos_a, sin_a, vm, np.zeros(r.shape[0], dtype=bool), 0.0, 1e13, 1.0,
+                          0.0, 0.0, 0.0, rs, (lo,) * 3, (ui,) * 3, (0,) * 3, (0,) * 3, True)
+    assert not got[0] and got[10][5] and got[12].sum() > 0 and np.array_equal(got[11], np.unique(ids))
+
+
+@pytest.mark.parametrize("bits", [0, 1, 7, 11, 12, 23, 33, 45, 62])
+def test_radix_sort_equals_numpy_sort(bits: int) -> None:
+    """_radix_sort orders non-negative int64 values as np.sort does, whatever the digits' number (an even and an
+    odd number of passes, one value, duplicates)."""
+    rng = np.random.default_rng(bits)
+    for n in (0, 1, 2, 17, 1800):
+        a = rng.integers(0, 1 << bits, n, dtype=np.int64) if bits else np.zeros(n, dtype=np.int64)
+        if n > 2:
+            a[: n // 3] = a[n // 3: 2 * (n // 3)]  # duplicates
+        want = np.sort(a)
+        lk._radix_sort(a)
+        assert np.array_equal(a, want)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_level_rows_equal_update_rows_per_level(seed: int) -> None:
+    """level_rows against read_cells + update_rows level by level after a map update that changed some cells
+    (and on one level grew the array: other offsets and shape): the same row block, level after level, the same
+    groups (a track's rows on one level) with their levels, in (track id, level) order."""
+    rng = np.random.default_rng(50 + seed)
+    n_lv = 3
+    levels_before, levels_after, per = [], [], []
+    for k in range(n_lv):
+        h, w = int(rng.integers(2, 30)), int(rng.integers(2, 30))
+        lo = rng.normal(0.0, 2.0, (h, w)).astype(np.float32)
+        ui = rng.integers(-1, 5, (h, w)).astype(np.int32)
+        i0, j0 = int(rng.integers(-10, 10)), int(rng.integers(-10, 10))
+        m = int(rng.integers(0, 80))
+        cells = np.ascontiguousarray(np.column_stack((rng.integers(i0 - 3, i0 + w + 3, m),
+                                                      rng.integers(j0 - 3, j0 + h + 3, m))), dtype=np.int64)
+        # (even seeds: one track, id 0, on every level: a level's first group has the id of the one before it)
+        ids = np.sort(rng.choice([2, 5, 8, 13] if seed % 2 else [0], m)).astype(np.int64)
+        keys = cells[:, 0] * _KEY_SHIFT + cells[:, 1]
+        before, ub, _, _ = lk.read_cells(lo, ui, cells, i0, j0)
+        lo2, ui2 = lo.copy(), ui.copy()
+        hit = rng.random((h, w)) < 0.5
+        lo2[hit] += rng.normal(0.5, 0.3, int(hit.sum())).astype(np.float32)
+        ui2[hit & (rng.random((h, w)) < 0.8)] = 7
+        if k == 1:  # the level grew: two columns on the left, one row on top
+            g_lo = np.zeros((h + 1, w + 2), np.float32)
+            g_ui = np.full((h + 1, w + 2), -1, np.int32)
+            g_lo[:h, 2:], g_ui[:h, 2:] = lo2, ui2
+            lo2, ui2, i0 = g_lo, g_ui, i0 - 2
+        levels_after.append((lo2, ui2, i0, j0))
+        per.append((ids, keys, cells, before, ub))
+        levels_before.append((lo, ui))
+    cat = [np.concatenate([p[q] for p in per]) for q in range(5)]
+    bounds = np.concatenate(([0], np.cumsum([p[0].shape[0] for p in per]))).astype(np.int64)
+    rows, gid, glv, ga, gb = lk.level_rows(tuple(lv[0] for lv in levels_after), tuple(lv[1] for lv in levels_after),
+                                           tuple(lv[2] for lv in levels_after), tuple(lv[3] for lv in levels_after),
+                                           n_lv, cat[0], cat[1], np.ascontiguousarray(cat[2]), cat[3], cat[4], bounds)
+    w_rows, groups = [], []
+    off = 0
+    for k, ((lo2, ui2, i0, j0), (ids, keys, cells, before, ub)) in enumerate(zip(levels_after, per)):
+        f = lk.read_cells(lo2, ui2, cells, i0, j0)[2]
+        r_k, g_k, s_k = lk.update_rows(lo2, ui2, f, ids, keys, before, ub)
+        w_rows.append(r_k)
+        groups += [(t, k, a + off, b + off) for t, a, b in zip(g_k.tolist(), s_k.tolist(), s_k[1:].tolist())]
+        off += r_k.shape[1]
+    assert np.array_equal(rows, np.concatenate(w_rows, axis=1))
+    groups.sort(key=lambda g: (g[0], g[1]))  # (track id, level): each track's groups one after the other
+    assert list(zip(gid.tolist(), glv.tolist(), ga.tolist(), gb.tolist())) == groups
+    w_glv = [g[1] for g in groups]
+    assert rows.shape[1] > 0 and len(set(w_glv)) > 1
+
+
+@pytest.mark.parametrize("levels", [2, 3, 4])
+def test_ledger_records_the_same_rows_through_the_fused_and_the_level_by_level_path(levels: int) -> None:
+    """Map updates recorded by EvidenceLedger with the fused kernels (and, with four levels, the fourth level read
+    and recorded level by level) and, for a second ledger, from the same reads handed over level by level (the
+    per-level path of after_update): every track's records fold to the same cells, log-odds, purity and update
+    indices, and the counters agree."""
+    from conftest import paper_room_scan, paper_room_slam
+
+    from dynslam2d.detect.memoryconfig import MemoryConfig
+    from dynslam2d.slam.erasure import EvidenceLedger, PendingUpdate
+    from dynslam2d.types import Box, Pose2D, Track
+
+    slam, first = paper_room_slam(levels)
+    a = EvidenceLedger(MemoryConfig(), slam.config.laser_min_dist, slam.config.laser_max_dist)
+    b = EvidenceLedger(MemoryConfig(), slam.config.laser_min_dist, slam.config.laser_max_dist)
+    for step in range(6):
+        pose = first.compose(Pose2D(0.05 * step, 0.02 * step, 0.01 * step))
+        scan = paper_room_scan(pose, 0.1 * step)
+        n = scan.ranges.shape[0]
+        tracks = [Track(id=tid, state="confirmed", stamp=0.1 * step, box=Box(1.0, 0.5, 0.0, 0.4, 0.4),
+                        velocity=np.zeros(2), covariance=np.eye(4), age=1.0, hits=1, misses=0, kind="rect",
+                        in_m=False, m_reason="", beams=beams, n_points=int(beams.shape[0]))
+                  for tid, beams in ((7, np.arange(100 + step, 160)), (2, np.arange(400, 430 + step)),
+                                     (11, np.arange(600, 640)))]
+        removed = np.zeros(n, dtype=bool)
+        pa = a.before_update(scan, pose, tracks, removed, slam.map)
+        pb = b.before_update(scan, pose, tracks, removed, slam.map)
+        assert pa.fused is not None
+        pb = PendingUpdate(per_level=pb.per_level)  # (the level-by-level form of the same reads)
+        assert slam.update_map(scan, pose, force=True)
+        a.after_update(pa, slam.map)
+        b.after_update(pb, slam.map)
+    assert set(a._ledgers) == set(b._ledgers) == {2, 7, 11}
+    cells = 0
+    for tid, la in a._ledgers.items():
+        for ra, rb in zip(la.levels, b._ledgers[tid].levels):
+            assert ra._refs is not None and len(ra) == len(rb)
+            n = ra.compact()
+            assert n == rb.compact() and n > 0
+            cells += n
+            for x, y in ((ra.key, rb.key), (ra.delta, rb.delta), (ra.pure, rb.pure), (ra.last, rb.last)):
+                assert np.array_equal(x, y)
+    assert cells > 100 and a.summary() == b.summary()
