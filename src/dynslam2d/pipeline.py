@@ -27,7 +27,7 @@ import numpy as np
 
 from dynslam2d.config import Config
 from dynslam2d.detect.body import BodyFilter
-from dynslam2d.detect.mapevidence import MapView, VacatedHistory, map_evidence, vacated_outlines, yielding_view
+from dynslam2d.detect.mapevidence import MapView, map_evidence
 from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan_ids, observed_boxes_kernel
 from dynslam2d.gridmap import GridMap
@@ -36,7 +36,6 @@ from dynslam2d.memtrim import release_free_memory
 from dynslam2d.rangescale import apply_range_scale
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
-from dynslam2d.slam.cleanup import scan_clearing
 from dynslam2d.slam.confidence import FLAGS
 from dynslam2d.slam.confidence import summarize as summarize_confidence
 from dynslam2d.slam.config import SlamConfig
@@ -47,6 +46,7 @@ from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.loops import LoopCloser, LoopResult
 from dynslam2d.trajectory import Trajectory
 from dynslam2d.types import Pose2D, Scan, ScanSource, SourceMeta, Track
+from dynslam2d.vacated import VacatedTrace
 
 
 @dataclass(slots=True)
@@ -156,8 +156,15 @@ class Pipeline:
         # loop closure behind the front end (slam/loops.py); it never changes the front end's poses or map
         self.loops = LoopCloser(self.config.loop, self.config.slam) if self.config.loop.enabled else None
         mem = self.config.detect.memory
-        #: outlines of long-occupied cells seen through in recent scans (vacated footprints, _evidence_view)
-        self._vacated = VacatedHistory(self.config.detect.tracker.map_vacate_scans)
+        tc = self.config.detect.tracker
+        #: the vacated-footprint trace and its history of recent scans' outlines (_evidence_view; read once, here)
+        self._vacated = VacatedTrace(self.config.clean, occupied_logodds=tc.map_occupied_logodds,
+                                     min_cells=tc.map_vacate_min_cells, max_extent=tc.map_vacate_max_extent,
+                                     min_depth_m=tc.map_vacate_min_depth,
+                                     min_extent=self.config.detect.segment.max_extent,
+                                     min_share=tc.map_vacate_min_share, scans=tc.map_vacate_scans)
+        #: the last :class:`MapView` of the finest level (a new one only when the level's array or offset changes)
+        self._view: MapView | None = None
         #: the front end's final map once :func:`run` has freed its levels (``_release_map``): what
         #: :meth:`gridmap` returns from then on, so a checkpoint written during the loop closure's finish
         #: (Ctrl-C) still writes the real map, not the freed 1 × 1 one
@@ -206,22 +213,16 @@ class Pipeline:
     def _evidence_view(self, scan: Scan, pose: Pose2D) -> MapView | None:
         """The finest map level as the tracker's map evidence sees it for ``scan`` at ``pose``: outlines of
         long-occupied cells that this scan sees through (a parked vehicle driving off) count as observed free
-        (``detect.tracker.map_vacate_min_cells``; docs/maps.md, "Vacated footprints"). The SLAM map itself is
-        not changed."""
-        view = MapView.of_level(self.slam.map.levels[0])
+        (``detect.tracker.map_vacate_min_cells``; docs/maps.md, "Vacated footprints"; :class:`VacatedTrace`). The SLAM
+        map itself is not changed."""
+        lv = self.slam.map.levels[0]
+        view = self._view
+        if view is None or view.logodds is not lv.logodds or view.i0 != lv.i0 or view.j0 != lv.j0:
+            view = self._view = MapView.of_level(lv)  # (the map grew or was released; None while it is empty)
         tc = self.config.detect.tracker
         if view is None or tc.map_vacate_min_cells <= 0 or not tc.map_evidence:
             return view
-        cc = self.config.clean
-        origin, cx, cy, clear = scan_clearing(scan.ranges, scan.trig(), scan.valid_mask(), pose, view.resolution,
-                                              cc)
-        vac = vacated_outlines(view, origin, cx, cy, clear,
-                               occupied_logodds=tc.map_occupied_logodds, min_cells=tc.map_vacate_min_cells,
-                               max_extent=tc.map_vacate_max_extent,
-                               ray_core=cc.ray_core, min_depth_m=tc.map_vacate_min_depth,
-                               min_extent=self.config.detect.segment.max_extent,
-                               min_share=tc.map_vacate_min_share)
-        return yielding_view(view, self._vacated.persistent(view, vac))
+        return self._vacated.view(view, scan, pose)
 
     def process(self, scan: Scan) -> StepResult:
         """Run every stage on ``scan`` (scans must come in time order) and return the result."""
@@ -744,6 +745,7 @@ def _release_map(pipe: Pipeline, front: _MapExport) -> None:
     # the tracker keeps the last scan's view of the finest level (its log-odds array, 12.5 MB on MIT CSAIL),
     # which would keep that level alive through the re-render and the clean-up pass
     pipe.tracker._map = None
+    pipe._view = None  # (the pipeline's own view of it, _evidence_view)
     if pipe.ledger is not None:
         pipe.ledger.release()  # its per-track records (tens of MB on MIT CSAIL); the summary stays
     release_free_memory()
