@@ -104,10 +104,29 @@ class StepResult:
 def _box_rows(tracks: list[Track]) -> tuple[np.ndarray, np.ndarray]:
     """(k, 7) rows [p_x, p_y, θ, l, w, v_x, v_y] of the boxes and velocities of ``tracks`` (map frame; m, rad,
     m/s) and their (k,) int64 ids: what :func:`dynslam2d.filter.filter_scan_ids` takes."""
-    rows = np.array([(t.box.px, t.box.py, t.box.theta, t.box.length, t.box.width, t.velocity[0], t.velocity[1])
-                     for t in tracks], dtype=np.float64).reshape(-1, 7)
-    ids = np.fromiter((t.id for t in tracks), dtype=np.int64, count=len(tracks))
+    rows, ids, _, _ = _track_rows(tracks)
     return rows, ids
+
+
+def _track_rows(tracks: list[Track]) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[int]]:
+    """:func:`_box_rows` of ``tracks`` and, in the same pass, their non-empty beam index arrays and the running
+    count of beams after each track (a track without beams adds none)."""
+    vals: list[float] = []
+    ids: list[int] = []
+    beams: list[np.ndarray] = []
+    ends: list[int] = []
+    total = 0
+    for t in tracks:
+        b = t.box
+        v = t.velocity
+        vals += (b.px, b.py, b.theta, b.length, b.width, v[0], v[1])  # (one flat list: half the time of tuples)
+        ids.append(t.id)
+        tb = t.beams
+        if tb is not None and len(tb):
+            beams.append(tb)
+            total += len(tb)
+        ends.append(total)
+    return np.array(vals, dtype=np.float64).reshape(-1, 7), np.array(ids, dtype=np.int64), beams, ends
 
 
 #: :func:`_box_rows` of no tracks.
@@ -125,19 +144,16 @@ def _observed_rows(tracks: list[Track], scan: Scan, pose: Pose2D,
     the tracked extent where part of the object is hidden and every observed point inside
     (:func:`dynslam2d.filter.observed_boxes_kernel`, one call for every track).
     """
-    rows, ids = _box_rows(tracks)
+    rows, ids, beams, ends = _track_rows(tracks)
     if not tracks:
         return rows, ids
     if keep is not None:
         keep.append((rows.copy(), ids))  # the rows before growing (the next scan's exclusion before matching)
-    empty = np.zeros(0, dtype=np.int64)
-    lists = [t.beams if t.beams is not None else empty for t in tracks]  # a track without beams keeps its box
-    idx = np.concatenate(lists).astype(np.int64, copy=False)
-    ends = np.cumsum(np.fromiter((len(b) for b in lists), dtype=np.int64, count=len(lists)))
-    if idx.shape[0]:
+    if beams:  # (a track without beams keeps its box)
+        idx = np.concatenate(beams).astype(np.int64, copy=False)  # (a new array: the kernel's one signature)
         cos_a, sin_a = scan.trig()
         observed_boxes_kernel(scan.ranges, cos_a, sin_a, math.cos(pose.theta), math.sin(pose.theta),
-                              float(pose.x), float(pose.y), idx, ends, rows)
+                              float(pose.x), float(pose.y), idx, np.array(ends, dtype=np.int64), rows)
     return rows, ids
 
 
