@@ -116,3 +116,17 @@ def test_the_pipelines_views_equal_the_separate_calls_while_a_van_drives_off() -
     for scan in SimSource(_van_scene()):
         pipe.process(scan)
     assert seen["scans"] > 100 and seen["yielded"] > 5
+
+
+def test_a_scan_without_beams_breaks_a_persistence_run_as_before() -> None:
+    view = _map(np.random.default_rng(3))
+    clean = CleanConfig()
+    trace, hist = VacatedTrace(clean, scans=3, **KW), VacatedHistory(3)
+    scan = _scan(np.random.default_rng(0), 0.0)
+    empty = Scan(stamp=1.0, angle_min=0.0, angle_increment=0.01, ranges=np.zeros(0), range_min=0.05, range_max=20.0)
+    pose = Pose2D(0.0, 0.0, 0.0)
+    got_new, got_old = [], []
+    for s in (scan, scan, empty, scan, scan, scan):
+        got_new.append(trace.view(view, s, pose) is not view)
+        got_old.append(_old_view(view, s, pose, hist, clean) is not view)
+    assert got_new == got_old == [False, False, False, False, False, True]

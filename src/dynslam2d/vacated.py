@@ -121,7 +121,10 @@ class VacatedTrace:
         itself). Remembers this scan's candidates."""
         ranges = scan.ranges
         n = ranges.shape[0]
-        if self.min_cells <= 0 or n == 0:
+        if self.min_cells <= 0:
+            return view
+        if n == 0:  # (a scan without beams has no candidate: it breaks a persistence run)
+            self.history.none()
             return view
         res = view.resolution
         if res != self._res or n != self._beams:
