@@ -151,6 +151,12 @@ def parts(data: Path, name: str) -> None:
         setattr(obj, attr, timed)
 
     wrap(me, "vacated_outlines_kernel", "vacated-footprint kernel")
+    try:  # the pipeline's one-call trace (clearing geometry, trace and outlines; dynslam2d/vacated.py, view2 pass)
+        import dynslam2d.vacated as va
+    except ImportError:  # (a checkout before it)
+        va = None
+    if va is not None and hasattr(va, "vacated_scan_kernel"):
+        wrap(va, "vacated_scan_kernel", "vacated-footprint kernel")
     # the matcher's kernels called from Python (slam/matcher.py): match_pyramid runs every level of the match and
     # the finest level's evaluation in one call (its _match_core / accumulate / fraction_below calls are inside
     # numba and cannot be wrapped); match_level is the per-level path (seeds, other point sets), accumulate /

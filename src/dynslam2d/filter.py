@@ -302,6 +302,31 @@ def _box_extents_kernel(boxes: np.ndarray, square: bool, margin: float, cap: flo
     return out
 
 
+@njit(cache=True)
+def _rows_exclusion_kernel(
+    ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray,
+    pc: float, ps: float, px: float, py: float, boxes: np.ndarray, ids: np.ndarray, dt: float,
+    square: bool, margin: float, cap: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`filter_scan_ids` of mode ``box`` without a speed margin in one call: the centres ``p + v·dt`` of
+    the (k, 7) rows ``boxes`` (the same operations as the array expression), their regions
+    (:func:`_box_extents_kernel`) and the beams (:func:`_scan_exclusion_kernel`). Returns (removed, removed_by)."""
+    n = ranges.shape[0]
+    removed = np.zeros(n, dtype=np.bool_)
+    removed_by = np.full(n, -1, dtype=np.int64)
+    k = boxes.shape[0]
+    centres = np.empty((k, 2), dtype=np.float64)
+    th = np.empty(k, dtype=np.float64)
+    for j in range(k):
+        centres[j, 0] = boxes[j, 0] + boxes[j, 5] * dt
+        centres[j, 1] = boxes[j, 1] + boxes[j, 6] * dt
+        th[j] = boxes[j, 2]
+    ext = _box_extents_kernel(boxes, square, margin, cap)
+    _scan_exclusion_kernel(ranges, cos_a, sin_a, valid, pc, ps, px, py, centres, th, ext[:, 0].copy(),
+                           ext[:, 1].copy(), ids, removed, removed_by)
+    return removed, removed_by
+
+
 def exclusion_mask(
     points: np.ndarray,
     centres: np.ndarray,
@@ -538,19 +563,22 @@ def filter_scan_ids(
         ``p + v·dt`` and ``ids[object_index]``, in one kernel over the beams.
     """
     n = scan.ranges.shape[0]
-    removed = np.zeros(n, dtype=bool)
-    removed_by = np.full(n, -1, dtype=np.int64)
     k = boxes.shape[0]
     if not filter_active(config, k):
-        return removed, removed_by
-    centres = boxes[:, 0:2] + boxes[:, 5:7] * dt
+        return np.zeros(n, dtype=bool), np.full(n, -1, dtype=np.int64)
+    cos_a, sin_a = scan.trig()
     if config.mode == "box" and config.speed_margin_time == 0.0:  # the default: one kernel call
         cap = math.inf if config.max_half_extent is None else float(config.max_half_extent)
-        ext = _box_extents_kernel(boxes, config.default_shape == "square", float(config.margin), cap)
-    else:
-        speeds = np.array([math.hypot(vx, vy) for vx, vy in boxes[:, 5:7].tolist()]) if config.mode == "box" else None
-        ext = half_extents(config, boxes[:, 3], boxes[:, 4], speeds)
-    cos_a, sin_a = scan.trig()
+        return _rows_exclusion_kernel(scan.ranges, cos_a, sin_a, scan.valid_mask(), math.cos(pose.theta),
+                                      math.sin(pose.theta), float(pose.x), float(pose.y),
+                                      np.ascontiguousarray(boxes, dtype=np.float64),
+                                      np.ascontiguousarray(ids, dtype=np.int64), float(dt),
+                                      config.default_shape == "square", float(config.margin), cap)
+    removed = np.zeros(n, dtype=bool)
+    removed_by = np.full(n, -1, dtype=np.int64)
+    centres = boxes[:, 0:2] + boxes[:, 5:7] * dt
+    speeds = np.array([math.hypot(vx, vy) for vx, vy in boxes[:, 5:7].tolist()]) if config.mode == "box" else None
+    ext = half_extents(config, boxes[:, 3], boxes[:, 4], speeds)
     _scan_exclusion_kernel(scan.ranges, cos_a, sin_a, scan.valid_mask(), math.cos(pose.theta), math.sin(pose.theta),
                            float(pose.x), float(pose.y), centres, np.ascontiguousarray(boxes[:, 2]),
                            np.ascontiguousarray(ext[:, 0]), np.ascontiguousarray(ext[:, 1]),

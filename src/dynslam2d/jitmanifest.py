@@ -11,6 +11,9 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.sim.world._cast_kernel',
      "(float64, float64, Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(int32, 1, 'C'), Array(float64, 2, 'C'), Array(int32, 1, 'C'), float64,)"),
+    ('dynslam2d.detect.body._drop_body',
+     "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), float64, bool, Array(bool, 1, "
+     "'C'),)"),
     ('dynslam2d.slam.matcher.gated_points',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), float64, float64, float64, float64, float64, bool,)"),
@@ -73,9 +76,6 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.slam.cleanup._geometry_bounds',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),
-    ('dynslam2d.slam.cleanup._scan_geometry',
-     "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
-     "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),
     ('dynslam2d.slam.cleanup._count_beams',
      "(Array(uint16, 3, 'C'), Array(uint16, 2, 'C'), int64, float64, float64, Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
@@ -95,10 +95,10 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.slam.matcher._support_kernel',
      "(Array(float32, 2, 'C'), Array(float64, 2, 'C'), int64, float64, float64, float64, float64, "
      'float64, int64,)'),
-    ('dynslam2d.detect.mapevidence.vacated_outlines_kernel',
-     "(Array(float32, 2, 'C'), int64, int64, float64, float64, Array(float64, 1, 'C'), Array(float64, 1, "
-     "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float32, int64, int64, float64, "
-     'float64, float64,)'),
+    ('dynslam2d.vacated.vacated_scan_kernel',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
+     "'C'), float64, float64, float64, Array(float32, 2, 'C'), int64, int64, Array(float64, 1, 'C'), "
+     "Array(int64, 1, 'C'), Array(uint8, 2, 'C'),)"),
     ('dynslam2d.detect.kernels.cv_predict',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 2, 'C'),)"),
@@ -139,13 +139,10 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.filter.observed_boxes_kernel',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), float64, "
      "float64, float64, float64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'),)"),
-    ('dynslam2d.filter._box_extents_kernel',
-     "(Array(float64, 2, 'C'), bool, float64, float64,)"),
-    ('dynslam2d.filter._scan_exclusion_kernel',
+    ('dynslam2d.filter._rows_exclusion_kernel',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
-     "'C'), float64, float64, float64, float64, Array(float64, 2, 'C'), Array(float64, 1, 'C'), "
-     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
-     "Array(int64, 1, 'C'),)"),
+     "'C'), float64, float64, float64, float64, Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64, "
+     'bool, float64, float64,)'),
     ('dynslam2d.detect.kernels.merge_leg_pairs',
      "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int8, 1, 'C'), "

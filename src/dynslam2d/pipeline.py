@@ -27,7 +27,7 @@ import numpy as np
 
 from dynslam2d.config import Config
 from dynslam2d.detect.body import BodyFilter
-from dynslam2d.detect.mapevidence import MapView, VacatedHistory, map_evidence, vacated_outlines, yielding_view
+from dynslam2d.detect.mapevidence import MapView, map_evidence
 from dynslam2d.detect.tracker import Tracker
 from dynslam2d.filter import filter_active, filter_scan_ids, observed_boxes_kernel
 from dynslam2d.gridmap import GridMap
@@ -36,7 +36,6 @@ from dynslam2d.memtrim import release_free_memory
 from dynslam2d.rangescale import apply_range_scale
 from dynslam2d.records import BitRows, GrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
-from dynslam2d.slam.cleanup import scan_clearing
 from dynslam2d.slam.confidence import FLAGS
 from dynslam2d.slam.confidence import summarize as summarize_confidence
 from dynslam2d.slam.config import SlamConfig
@@ -47,6 +46,7 @@ from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.loops import LoopCloser, LoopResult
 from dynslam2d.trajectory import Trajectory
 from dynslam2d.types import Pose2D, Scan, ScanSource, SourceMeta, Track
+from dynslam2d.vacated import VacatedTrace
 
 
 @dataclass(slots=True)
@@ -104,10 +104,29 @@ class StepResult:
 def _box_rows(tracks: list[Track]) -> tuple[np.ndarray, np.ndarray]:
     """(k, 7) rows [p_x, p_y, θ, l, w, v_x, v_y] of the boxes and velocities of ``tracks`` (map frame; m, rad,
     m/s) and their (k,) int64 ids: what :func:`dynslam2d.filter.filter_scan_ids` takes."""
-    rows = np.array([(t.box.px, t.box.py, t.box.theta, t.box.length, t.box.width, t.velocity[0], t.velocity[1])
-                     for t in tracks], dtype=np.float64).reshape(-1, 7)
-    ids = np.fromiter((t.id for t in tracks), dtype=np.int64, count=len(tracks))
+    rows, ids, _, _ = _track_rows(tracks)
     return rows, ids
+
+
+def _track_rows(tracks: list[Track]) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[int]]:
+    """:func:`_box_rows` of ``tracks`` and, in the same pass, their non-empty beam index arrays and the running
+    count of beams after each track (a track without beams adds none)."""
+    vals: list[float] = []
+    ids: list[int] = []
+    beams: list[np.ndarray] = []
+    ends: list[int] = []
+    total = 0
+    for t in tracks:
+        b = t.box
+        v = t.velocity
+        vals += (b.px, b.py, b.theta, b.length, b.width, v[0], v[1])  # (one flat list: half the time of tuples)
+        ids.append(t.id)
+        tb = t.beams
+        if tb is not None and len(tb):
+            beams.append(tb)
+            total += len(tb)
+        ends.append(total)
+    return np.array(vals, dtype=np.float64).reshape(-1, 7), np.array(ids, dtype=np.int64), beams, ends
 
 
 #: :func:`_box_rows` of no tracks.
@@ -125,19 +144,16 @@ def _observed_rows(tracks: list[Track], scan: Scan, pose: Pose2D,
     the tracked extent where part of the object is hidden and every observed point inside
     (:func:`dynslam2d.filter.observed_boxes_kernel`, one call for every track).
     """
-    rows, ids = _box_rows(tracks)
+    rows, ids, beams, ends = _track_rows(tracks)
     if not tracks:
         return rows, ids
     if keep is not None:
         keep.append((rows.copy(), ids))  # the rows before growing (the next scan's exclusion before matching)
-    empty = np.zeros(0, dtype=np.int64)
-    lists = [t.beams if t.beams is not None else empty for t in tracks]  # a track without beams keeps its box
-    idx = np.concatenate(lists).astype(np.int64, copy=False)
-    ends = np.cumsum(np.fromiter((len(b) for b in lists), dtype=np.int64, count=len(lists)))
-    if idx.shape[0]:
+    if beams:  # (a track without beams keeps its box)
+        idx = np.concatenate(beams).astype(np.int64, copy=False)  # (a new array: the kernel's one signature)
         cos_a, sin_a = scan.trig()
         observed_boxes_kernel(scan.ranges, cos_a, sin_a, math.cos(pose.theta), math.sin(pose.theta),
-                              float(pose.x), float(pose.y), idx, ends, rows)
+                              float(pose.x), float(pose.y), idx, np.array(ends, dtype=np.int64), rows)
     return rows, ids
 
 
@@ -153,11 +169,19 @@ class Pipeline:
         #: :func:`_box_rows` of ``_moving``, kept by :func:`_observed_rows` before it grew the boxes
         self._moving_rows: tuple[np.ndarray, np.ndarray] = _NO_ROWS
         self._last_stamp: float | None = None
+        self._no_remover = np.zeros(0, dtype=np.int64)  # −1 per beam: what _exclude copies when nothing is excluded
         # loop closure behind the front end (slam/loops.py); it never changes the front end's poses or map
         self.loops = LoopCloser(self.config.loop, self.config.slam) if self.config.loop.enabled else None
         mem = self.config.detect.memory
-        #: outlines of long-occupied cells seen through in recent scans (vacated footprints, _evidence_view)
-        self._vacated = VacatedHistory(self.config.detect.tracker.map_vacate_scans)
+        tc = self.config.detect.tracker
+        #: the vacated-footprint trace and its history of recent scans' outlines (_evidence_view; read once, here)
+        self._vacated = VacatedTrace(self.config.clean, occupied_logodds=tc.map_occupied_logodds,
+                                     min_cells=tc.map_vacate_min_cells, max_extent=tc.map_vacate_max_extent,
+                                     min_depth_m=tc.map_vacate_min_depth,
+                                     min_extent=self.config.detect.segment.max_extent,
+                                     min_share=tc.map_vacate_min_share, scans=tc.map_vacate_scans)
+        #: the last :class:`MapView` of the finest level (a new one only when the level's array or offset changes)
+        self._view: MapView | None = None
         #: the front end's final map once :func:`run` has freed its levels (``_release_map``): what
         #: :meth:`gridmap` returns from then on, so a checkpoint written during the loop closure's finish
         #: (Ctrl-C) still writes the real map, not the freed 1 × 1 one
@@ -173,7 +197,10 @@ class Pipeline:
         (:func:`_box_rows`) advanced by ``dt``, s: (removed, id of the remover or −1)."""
         if not rows[0].shape[0]:  # nothing to exclude (filter_scan_ids would return the same)
             n = scan.ranges.shape[0]
-            return np.zeros(n, dtype=bool), np.full(n, -1, dtype=np.int64)
+            kept = self._no_remover
+            if kept.shape[0] != n:
+                kept = self._no_remover = np.full(n, -1, dtype=np.int64)
+            return np.zeros(n, dtype=bool), kept.copy()
         return filter_scan_ids(self.config.filter, scan, pose, rows[0], rows[1], dt)
 
     def _spare_structure(self, scan: Scan, pose: Pose2D, moving: list[Track], removed: np.ndarray,
@@ -206,22 +233,16 @@ class Pipeline:
     def _evidence_view(self, scan: Scan, pose: Pose2D) -> MapView | None:
         """The finest map level as the tracker's map evidence sees it for ``scan`` at ``pose``: outlines of
         long-occupied cells that this scan sees through (a parked vehicle driving off) count as observed free
-        (``detect.tracker.map_vacate_min_cells``; docs/maps.md, "Vacated footprints"). The SLAM map itself is
-        not changed."""
-        view = MapView.of_level(self.slam.map.levels[0])
+        (``detect.tracker.map_vacate_min_cells``; docs/maps.md, "Vacated footprints"; :class:`VacatedTrace`). The SLAM
+        map itself is not changed."""
+        lv = self.slam.map.levels[0]
+        view = self._view
+        if view is None or view.logodds is not lv.logodds or view.i0 != lv.i0 or view.j0 != lv.j0:
+            view = self._view = MapView.of_level(lv)  # (the map grew or was released; None while it is empty)
         tc = self.config.detect.tracker
         if view is None or tc.map_vacate_min_cells <= 0 or not tc.map_evidence:
             return view
-        cc = self.config.clean
-        origin, cx, cy, clear = scan_clearing(scan.ranges, scan.trig(), scan.valid_mask(), pose, view.resolution,
-                                              cc)
-        vac = vacated_outlines(view, origin, cx, cy, clear,
-                               occupied_logodds=tc.map_occupied_logodds, min_cells=tc.map_vacate_min_cells,
-                               max_extent=tc.map_vacate_max_extent,
-                               ray_core=cc.ray_core, min_depth_m=tc.map_vacate_min_depth,
-                               min_extent=self.config.detect.segment.max_extent,
-                               min_share=tc.map_vacate_min_share)
-        return yielding_view(view, self._vacated.persistent(view, vac))
+        return self._vacated.view(view, scan, pose)
 
     def process(self, scan: Scan) -> StepResult:
         """Run every stage on ``scan`` (scans must come in time order) and return the result."""
@@ -229,14 +250,14 @@ class Pipeline:
         # 0. the robot's own body is never structure nor a mover (detect/body.py)
         raw = scan
         body = self.body.mask(scan)
-        if body.any():
+        if np.count_nonzero(body):  # (``any`` of a short bool array costs four times as much)
             scan = scan.without(body)
         # 2. match with the known movers removed (their boxes advanced to this stamp).
         match_scan = scan
         if self._moving and self.config.filter.mode != "none":
             dt = scan.stamp - self._last_stamp if self._last_stamp is not None else 0.0
             pre_removed, _ = self._exclude(scan, self.slam.predict(scan.stamp), self._moving_rows, dt)
-            if pre_removed.any():
+            if np.count_nonzero(pre_removed):
                 match_scan = scan.without(pre_removed)
         res = self.slam.match(match_scan)
         self.body.observe(raw, res.pose)
@@ -254,12 +275,17 @@ class Pipeline:
         kept_rows: list[tuple[np.ndarray, np.ndarray]] = []
         rows = _observed_rows(moving, scan, res.pose, kept_rows) if moving else _NO_ROWS
         removed, removed_by = self._exclude(scan, res.pose, rows, 0.0)
-        if self.config.filter.mode == "box" and self.config.filter.spare_structure and removed.any():
-            self._spare_structure(scan, res.pose, moving, removed, removed_by)
-        elif self.config.filter.mode == "box" and self.config.filter.spare_structure_vehicles and removed.any():
-            big = [t.id for t in moving if max(t.box.length, t.box.width) > self.config.detect.segment.max_extent]
-            if big:
-                self._spare_structure(scan, res.pose, moving, removed, removed_by, np.array(big))
+        any_removed = bool(np.count_nonzero(removed)) if moving else False  # (no rows: nothing removed)
+        fc = self.config.filter
+        if any_removed and fc.mode == "box":
+            if fc.spare_structure:
+                self._spare_structure(scan, res.pose, moving, removed, removed_by)
+                any_removed = bool(np.count_nonzero(removed))
+            elif fc.spare_structure_vehicles:
+                big = [t.id for t in moving if max(t.box.length, t.box.width) > self.config.detect.segment.max_extent]
+                if big:
+                    self._spare_structure(scan, res.pose, moving, removed, removed_by, np.array(big))
+                    any_removed = bool(np.count_nonzero(removed))
         t3 = time.perf_counter()
         # 5. map update with the filtered scan only.
         updated = False
@@ -276,7 +302,7 @@ class Pipeline:
         need = not res.rejected and self.slam.needs_map_update(res.pose)
         kept = None
         if need or not (res.rejected or res.pose.is_finite()):  # (update_map counts a refused non-finite pose)
-            kept = scan.without(removed) if removed.any() else scan
+            kept = scan.without(removed) if any_removed else scan
             pending = None
             if led is not None and tracks and need:
                 pending = led.before_update(scan, res.pose, tracks, removed, self.slam.map,
@@ -744,6 +770,7 @@ def _release_map(pipe: Pipeline, front: _MapExport) -> None:
     # the tracker keeps the last scan's view of the finest level (its log-odds array, 12.5 MB on MIT CSAIL),
     # which would keep that level alive through the re-render and the clean-up pass
     pipe.tracker._map = None
+    pipe._view = None  # (the pipeline's own view of it, _evidence_view)
     if pipe.ledger is not None:
         pipe.ledger.release()  # its per-track records (tens of MB on MIT CSAIL); the summary stays
     release_free_memory()

@@ -8,6 +8,7 @@ frame; a :class:`Pose2D` returned by SLAM is the laser pose in the map frame.
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
@@ -253,12 +254,14 @@ class Scan:
         """A copy with the beams in ``mask`` ((n,) bool) set to no return (NaN): the same as
         ``with_ranges(np.where(mask, np.nan, ranges))`` without re-validating the unchanged geometry
         (the pipeline drops the robot's body, known movers and removed beams this way every scan)."""
-        out = object.__new__(Scan)
-        for name in Scan.__slots__:
-            object.__setattr__(out, name, getattr(self, name))
-        object.__setattr__(out, "ranges", np.where(mask, np.nan, self.ranges))
+        mask = np.asarray(mask, dtype=bool)
+        out = _copy_scan(self)
+        ranges = self.ranges.copy()
+        np.copyto(ranges, np.nan, where=mask)  # (the values of np.where(mask, nan, ranges), in half the time)
+        object.__setattr__(out, "ranges", ranges)
         valid = self._valid
-        object.__setattr__(out, "_valid", None if valid is None else valid & ~mask)
+        # valid and not mask (for bool arrays ``valid > mask`` is ``valid & ~mask`` in one operation)
+        object.__setattr__(out, "_valid", None if valid is None else np.greater(valid, mask))
         return out
 
     def with_odometry(self, odom: Pose2D | None, yaw_rate: float | None = None) -> Scan:
@@ -267,9 +270,7 @@ class Scan:
         Every other field is this (already validated) scan's, so the checks are not run again:
         sources attach odometry to every scan of a log.
         """
-        out = object.__new__(Scan)
-        for name in Scan.__slots__:
-            object.__setattr__(out, name, getattr(self, name))
+        out = _copy_scan(self)
         object.__setattr__(out, "odom", odom)
         object.__setattr__(out, "yaw_rate", yaw_rate)
         return out
@@ -294,6 +295,20 @@ class Scan:
             and arr_eq(self.ranges, other.ranges)
             and arr_eq(self.intensities, other.intensities)
         )
+
+
+#: Each slot's setter and one getter of every slot of :class:`Scan` (:func:`_copy_scan`).
+_SCAN_SETTERS = tuple(Scan.__dict__[name].__set__ for name in Scan.__slots__)
+_SCAN_VALUES = operator.attrgetter(*Scan.__slots__)
+
+
+def _copy_scan(scan: Scan) -> Scan:
+    """A shallow copy of ``scan`` without ``__init__``'s checks (every slot, in about a third of the time of a
+    ``getattr`` / ``object.__setattr__`` loop over the slot names)."""
+    out = object.__new__(Scan)
+    for put, value in zip(_SCAN_SETTERS, _SCAN_VALUES(scan)):
+        put(out, value)
+    return out
 
 
 @dataclass(slots=True)

@@ -164,6 +164,20 @@ def _observe_beams(r, valid, max_range, tol, ref, seen, same_n, start, moved, bo
     return changed
 
 
+@njit(cache=True)
+def _drop_body(ranges, valid, drop_r, tol, footprint, drop):  # pragma: no cover - numba
+    """:meth:`BodyFilter.mask`'s automatic part, in place: a ``valid`` return on a beam with a drop range
+    ``drop_r`` > 0 (m) is dropped when its range is at most ``drop_r + tol``; with a ``footprint`` only beams not
+    yet in ``drop``. Returns how many it dropped (the values of the array expressions it replaced)."""
+    count = 0
+    for i in range(ranges.shape[0]):
+        d = drop_r[i]
+        if valid[i] and d > 0.0 and ranges[i] <= d + tol and not (footprint and drop[i]):
+            drop[i] = True
+            count += 1
+    return count
+
+
 class BodyFilter:
     """Drops the robot's own returns: footprint polygon + automatic detection (module docstring).
 
@@ -197,8 +211,6 @@ class BodyFilter:
         self.body = np.zeros(n, dtype=bool)
         self._body_r = np.zeros(n)
         self._drop_r = np.zeros(n)
-        #: (drop range > 0, drop range + auto_tolerance) of the drop ranges, built by mask at first use
-        self._drop_lim: tuple[np.ndarray, np.ndarray] | None = None
         self._same = np.zeros(n, dtype=np.int64)
         self._seen = np.zeros(n, dtype=np.int64)
         self._moved = np.zeros(n, dtype=bool)
@@ -215,16 +227,9 @@ class BodyFilter:
             inside = points_in_polygon(pts, self.polygon)
             drop[np.flatnonzero(valid)[inside]] = True
             self.footprint_dropped += int(inside.sum())
-        if getattr(self.config, "auto", False) and self.body.any():
-            tol = float(self.config.auto_tolerance)
-            lim = self._drop_lim
-            if lim is None:  # (the drop ranges' mask and limits change only with them: observe resets this)
-                lim = self._drop_lim = (self._drop_r > 0.0, self._drop_r + tol)
-            auto = valid & lim[0] & (scan.ranges <= lim[1])
-            if self.polygon is not None:
-                auto &= ~drop
-            self.auto_dropped += int(np.count_nonzero(auto))
-            drop |= auto
+        if getattr(self.config, "auto", False):  # (without body beams every drop range is 0: nothing dropped)
+            self.auto_dropped += _drop_body(scan.ranges, valid, self._drop_r, float(self.config.auto_tolerance),
+                                            self.polygon is not None, drop)
         self.scans += 1
         return drop
 
@@ -250,7 +255,6 @@ class BodyFilter:
         # the beams next to a body edge see it part of the time (mixed returns): they drop returns up to
         # the nearby body range + 2 tolerances
         self._drop_r = self._body_r.copy()
-        self._drop_lim = None
         k = int(cfg.auto_edge_beams)
         if k > 0 and self.body.any():
             grown = self._body_r.copy()

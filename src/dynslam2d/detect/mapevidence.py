@@ -230,7 +230,25 @@ def vacated_outlines_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy
                             min_extent: float, min_share: float
                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:  # pragma: no cover - numba
     """The long-occupied cells the beams see through (:func:`seen_through_structure_kernel`, arguments up to
-    ``depth`` as there, at most 64 per beam), their outlines and which of them yield (:func:`vacated_outlines`).
+    ``depth`` as there, at most 64 per beam), their outlines and which of them yield (:func:`vacated_outlines`):
+    :func:`vacated_core` with buffers of its own."""
+    n = cx.shape[0]
+    cap = max_side * max_side + 1
+    return vacated_core(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, depth, near_thr, occ32, max_side,
+                        min_cells, res, min_extent, min_share, np.empty(64 * n, dtype=np.int64),
+                        np.empty(64 * n, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
+                        np.zeros((2 * max_side + 1, 2 * max_side + 1), dtype=np.uint8))
+
+
+@njit(cache=True)
+def vacated_core(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx: np.ndarray, cy: np.ndarray,
+                 clear: np.ndarray, core: float, occ_thr: float, depth: float, near_thr: float, occ32: np.float32,
+                 max_side: int, min_cells: int, res: float, min_extent: float, min_share: float, out_r: np.ndarray,
+                 out_c: np.ndarray, gr: np.ndarray, gc: np.ndarray, window: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:  # pragma: no cover - numba
+    """:func:`vacated_outlines_kernel` on buffers the caller keeps between scans: ``out_r`` / ``out_c`` (64 ·
+    beams) for the seen-through cells, ``gr`` / ``gc`` (``max_side``² + 1) for a growth, ``window``
+    (2 · ``max_side`` + 1 square, all 0; left all 0) for the cells of a growth.
 
     Nothing when fewer than ``min_cells`` cells are seen through. Else the distinct seen-through cells are taken in
     order of their code ``row · W + col``; each one not yet in an outline grows its 8-connected component of cells
@@ -243,8 +261,6 @@ def vacated_outlines_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy
     Returns the yielding outlines' rows and columns, one outline after the other (each in its growth order),
     their sizes and the number of distinct seen-through cells (0 when fewer than ``min_cells`` were found).
     """
-    out_r = np.empty(64 * cx.shape[0], dtype=np.int64)
-    out_c = np.empty(64 * cx.shape[0], dtype=np.int64)
     n = seen_through_structure_kernel(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, out_r, out_c, depth)
     if n < min_cells:
         return out_r[:0], out_c[:0], out_r[:0], 0
@@ -276,12 +292,9 @@ def vacated_outlines_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy
     if nc < min_cells:
         return comp_r, comp_c, sizes[:0], nc
     done = np.zeros(nc, dtype=np.bool_)
-    side = 2 * max_side + 1
-    window = np.zeros((side, side), dtype=np.uint8)  # cells of the current growth, around its start
+    side = 2 * max_side + 1  # window: cells of the current growth, around its start
     # a growth stops once its cells span more than max_side along an axis: it never holds more than max_side² + 1
     cap = max_side * max_side + 1
-    gr = np.empty(cap, dtype=np.int64)
-    gc = np.empty(cap, dtype=np.int64)
     k = 0
     total = 0
     for s in range(nc):
@@ -438,11 +451,15 @@ class VacatedHistory:
         self.scans = max(int(scans), 1)
         self._past: list[np.ndarray] = []  # absolute cell codes of earlier scans' candidates, newest last
 
+    def none(self) -> None:
+        """Remember a scan without candidates (what :meth:`persistent` does with one)."""
+        self._past.append(_NO_CODES)
+        del self._past[:-max(self.scans - 1, 1)]
+
     def persistent(self, view: MapView, vac: VacatedOutlines) -> VacatedOutlines:
         """``vac`` with only the outlines that persisted; remembers this scan's candidates."""
         if not vac.sizes and vac.rows.shape[0] == 0:  # no candidate in this scan (the usual case)
-            self._past.append(_NO_CODES)
-            del self._past[:-max(self.scans - 1, 1)]
+            self.none()
             return VacatedOutlines(_NO_CODES, _NO_CODES, vac.seen_through, 0)
         w = 1 << 31
         codes = (vac.rows + view.j0).astype(np.int64) * w + (vac.cols + view.i0)
