@@ -117,7 +117,7 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
     a multiply and a shift (exact below ``_MAGIC_MAX``, Granlund & Montgomery, PLDI 1994) instead of the error
     recurrence, so no step waits for the one before. The cell updates are written out
     in the loop (helpers taking the arrays, called per cell, were slower in every trial; docs/speed.md); a memo
-    miss is resolved after the walk (no call inside the loop), and each new cell prefetches the lines of the cell
+    miss is resolved at the end of the ray (no call inside the walk), and each new cell prefetches the lines of the cell
     ``_PREFETCH`` steps on (new cells come in runs)."""
     h, w = logodds.shape
     if sx < 0 or sy < 0 or sx >= w or sy >= h:
@@ -130,7 +130,7 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
     f0 = sy * w + sx
     n_done = 0
     mask = keys.shape[0] - 1
-    miss_f = np.empty(max(h, w) + 1, dtype=np.uint64)  # (a ray's free cells: fewer than max(h, w))
+    miss_f = np.empty(max(h, w) + 1, dtype=np.uint64)  # (a ray's cells: at most max(h, w))
     miss_v = np.empty(max(h, w) + 1)
     for k in range(n):
         if from_ends:
@@ -161,11 +161,11 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
         # the start cell (j = 0), then the first major − 1 − skip intermediate cells of the walk: free
         n_free = major - skip
         c = major // 2
+        n_miss = 0  # cells whose probability the memo did not hold (computed at the end of the ray)
         if major < _MAGIC_MAX:
             magic = ((1 << _MAGIC_SHIFT) + major - 1) // major  # ceil(2^42 / major)
             t = c
             fb = f0
-            n_miss = 0
             for _ in range(n_free):
                 f = np.uint64(fb + ((t * magic) >> _MAGIC_SHIFT) * d_minor)  # (unsigned: no negative-index test)
                 if ui[f] < free_idx:
@@ -188,8 +188,6 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
                         n_miss += 1
                 t += minor
                 fb += d_major
-            for i in range(n_miss):
-                pr[miss_f[i]] = _prob(miss_v[i], keys, vals)
         else:
             t = c
             fb = f0
@@ -202,8 +200,10 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
                     ui[f] = free_idx
                 t += minor
                 fb += d_major
-        f = y1 * w + x1
+        f = np.uint64(y1 * w + x1)
         u = ui[f]
+        v = 0.0
+        updated = False
         if hit[k]:
             if u < occ_idx:
                 v = lo[f]
@@ -212,13 +212,24 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
                 if v < cap:
                     v += l_occ
                 lo[f] = v
-                pr[f] = _prob(v, keys, vals)
                 ui[f] = occ_idx
+                updated = True
         elif u < free_idx:
             v = lo[f] + l_free
             lo[f] = v
-            pr[f] = _prob(v, keys, vals)
             ui[f] = free_idx
+            updated = True
+        if updated:
+            key = _bits(v)
+            e = np.uint64(((key * _FIB) >> 50) & mask)
+            if keys[e] == key:
+                pr[f] = vals[e]
+            else:
+                miss_f[n_miss] = f
+                miss_v[n_miss] = v
+                n_miss += 1
+        for i in range(n_miss):  # (the ray's cells are distinct: each written once, in the walk's order)
+            pr[miss_f[i]] = _prob(miss_v[i], keys, vals)
         n_done += 1
     return n_done
 
