@@ -72,7 +72,7 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "aligned=True), 3), UniTuple(Array(int32, 2, 'C', False, aligned=True), 3), int64, UniTuple(float64, "
      '3), UniTuple(int64, 3), UniTuple(int64, 3), UniTuple(int64, 3), UniTuple(int64, 3), UniTuple(int64, '
      "3), Array(float64, 2, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), bool, float64, float64, "
-     'float64,)'),
+     "float64, Array(int64, 1, 'C'), Array(float32, 1, 'C'),)"),
     ('dynslam2d.slam.cleanup._geometry_bounds',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),

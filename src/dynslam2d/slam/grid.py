@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from dynslam2d.gridmap import GridMap
-from dynslam2d.slam.raycast import integrate_levels, integrate_rays, integrate_rays_stop, ray_ends
+from dynslam2d.slam.raycast import integrate_levels, integrate_rays, integrate_rays_stop, new_prob_memo, ray_ends
 from dynslam2d.types import Pose2D
 
 #: Bytes per cell: float32 log-odds + float32 probability cache + int32 update index.
@@ -32,6 +32,9 @@ _NO_F32 = np.zeros((0, 0), dtype=np.float32)
 _NO_I32 = np.zeros((0, 0), dtype=np.int32)
 _NO_STOP = np.zeros(0)
 _NO_CLEAR = np.zeros((0, 2))
+#: the probability memo of the ray kernel (raycast._prob), shared by every map of the process: an entry depends on
+#: the log-odds value alone, and the kernel holds the GIL, so no two calls use it at once (48 KiB)
+_PROB_MEMO = new_prob_memo()
 
 
 class MapTooLargeError(RuntimeError):
@@ -149,6 +152,12 @@ class GridLevel:
         b = self._grown_bounds(imin, jmin, imax, jmax)
         if b is None:
             return False
+        self._grow(b)
+        return True
+
+    def _grow(self, b: tuple[int, int, int, int]) -> None:
+        """Reallocate the arrays to absolute cells [b[0], b[2]) × [b[1], b[3]) (bounds of :meth:`_grown_bounds`),
+        content kept."""
         h, w = self.shape
         ni0, nj0, ni1, nj1 = b
         nw, nh = ni1 - ni0, nj1 - nj0
@@ -163,7 +172,6 @@ class GridLevel:
             setattr(self, name, new)
         self.i0, self.j0 = ni0, nj0
         self.n_grows += 1
-        return True
 
     def cell_bounds(self, origin_xy: np.ndarray, ends_xy: np.ndarray) -> tuple[int, int, int, int]:
         """(imin, jmin, imax, jmax) absolute cells covering a ray origin and its ends (world, m)."""
@@ -278,6 +286,7 @@ class MultiResMap:
         self.cap = float(cap)
         self.version = 0  # incremented by every integration
         self.max_bytes = max_bytes
+        self._memo = _PROB_MEMO  # the ray kernel's probability memo (raycast._prob), kept from scan to scan
 
     @property
     def resolution(self) -> float:
@@ -319,8 +328,12 @@ class MultiResMap:
             sx, sy = math.floor(ox / r + 0.5), math.floor(oy / r + 0.5)
             bounds.append((sx, sy, min(sx, math.floor(lo[0] / r + 0.5)), min(sy, math.floor(lo[1] / r + 0.5)),
                            max(sx, math.floor(hi[0] / r + 0.5)), max(sy, math.floor(hi[1] / r + 0.5))))
+        levels = self.levels
+        # each level's bounds after growth (None: it holds the scan already), computed once for the limit and the growth
+        grown = [lv._grown_bounds(*b[2:]) for lv, b in zip(levels, bounds)]
         if self.max_bytes is not None:
-            need = sum(lv.bytes_after_growth(*b[2:]) for lv, b in zip(self.levels, bounds))
+            need = sum(lv.nbytes if g is None else (g[2] - g[0]) * (g[3] - g[1]) * _BYTES_PER_CELL
+                       for lv, g in zip(levels, grown))  # (GridLevel.bytes_after_growth)
             if need > self.max_bytes:
                 raise MapTooLargeError(
                     f"integrating this scan would grow the map to {need / 1e6:.0f} MB "
@@ -330,11 +343,26 @@ class MultiResMap:
         if self.grazing_cells > 0.0 and hit.shape[0]:
             stop = np.zeros(hit.shape[0])
             stop[:n_hit] = grazing_stop(hits, self.grazing_cells, self.min_sin)
-        levels = self.levels
+        for lv, g in zip(levels, grown):
+            if g is not None:
+                lv._grow(g)  # (GridLevel.ensure)
         n_lv = len(levels)
-        if n_lv <= _FUSED_LEVELS:  # every level in one kernel call (the same cells and updates as the loop below)
-            for lv, b in zip(levels, bounds):
-                lv.ensure(*b[2:])
+        if n_lv == _FUSED_LEVELS:  # the default map: every level in one kernel call, the arguments written out
+            a, b, c = levels
+            (ba, bb, bc) = bounds
+            counter = (a.update_counter, b.update_counter, c.update_counter)
+            a.update_counter += 3  # (GridLevel.integrate_cells: a scan takes the next three update indices)
+            b.update_counter += 3
+            c.update_counter += 3
+            n0 = integrate_levels(
+                (a.logodds, b.logodds, c.logodds), (a.prob, b.prob, c.prob), (a.uidx, b.uidx, c.uidx), 3,
+                (a.resolution, b.resolution, c.resolution), (a.i0, b.i0, c.i0), (a.j0, b.j0, c.j0),
+                (ba[0] - a.i0, bb[0] - b.i0, bc[0] - c.i0), (ba[1] - a.j0, bb[1] - b.j0, bc[1] - c.j0),
+                counter, ends_t, hit, stop if stop is not None else _NO_STOP, stop is not None,
+                self.l_free, self.l_occ, self.cap, *self._memo)
+            self.version += 1
+            return int(n0)
+        if n_lv < _FUSED_LEVELS:  # every level in one kernel call (the same cells and updates as the loop below)
             pad = _FUSED_LEVELS - n_lv
             counter = tuple(lv.update_counter for lv in levels) + (0,) * pad
             for lv in levels:
@@ -348,15 +376,14 @@ class MultiResMap:
                 tuple(b[0] - lv.i0 for lv, b in zip(levels, bounds)) + (0,) * pad,
                 tuple(b[1] - lv.j0 for lv, b in zip(levels, bounds)) + (0,) * pad,
                 counter, ends_t, hit, stop if stop is not None else _NO_STOP, stop is not None,
-                self.l_free, self.l_occ, self.cap)
+                self.l_free, self.l_occ, self.cap, *self._memo)
             self.version += 1
             return int(n0)
         # the rays' end cells of a level, computed as GridLevel.integrate does (floor(v / r + 0.5), array
         # coordinates), into buffers shared by the levels: (2, n) rows are the contiguous x and y arrays
         buf = np.empty_like(ends_t)
         n0 = 0
-        for k, (lv, (sx, sy, imin, jmin, imax, jmax)) in enumerate(zip(self.levels, bounds)):
-            lv.ensure(imin, jmin, imax, jmax)
+        for k, (lv, (sx, sy, *_)) in enumerate(zip(self.levels, bounds)):
             np.divide(ends_t, lv.resolution, out=buf)
             buf += 0.5
             np.floor(buf, out=buf)

@@ -19,7 +19,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from llvmlite import ir as _lir
 from numba import njit
+from numba import types as _nbtypes
+from numba.core import cgutils
+from numba.extending import intrinsic as _intrinsic
 
 #: placeholders of the inputs :func:`_rays` does not use on a call (its other way of giving the rays)
 _NO_ENDS = np.zeros((2, 0))
@@ -27,25 +31,94 @@ _NO_CELLS = np.zeros(0, dtype=np.int64)
 _NO_STOP = np.zeros(0)
 
 
+@_intrinsic
+def _bits(typingctx, v):
+    """The IEEE-754 bits of a float64 as an int64 (a bit cast, no conversion)."""
+    sig = _nbtypes.int64(_nbtypes.float64)
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], _lir.IntType(64))
+
+    return sig, codegen
+
+
+#: entries of a probability memo (:func:`new_prob_memo`; a power of two)
+MEMO_SIZE = 4096
+#: the walk computes a ray's minor-axis offsets with the multiply-shift below while its major length is less than
+#: this (exact there; longer rays divide)
+_MAGIC_MAX = 1 << 13
+_MAGIC_SHIFT = 42
+#: the memo's hash multiplier (Fibonacci hashing: 2^64 / golden ratio, as int64)
+_FIB = -7046029254386353131
+#: how many steps ahead of a new cell the walk prefetches the cells' lines
+_PREFETCH = 16
+#: entries of the memo :func:`integrate_rays` makes per call
+_CALL_MEMO_SIZE = 512
+
+
+@_intrinsic
+def _prefetch(typingctx, arr, idx):
+    """Prefetch for writing the cache line of ``arr[idx]`` (1-D C array; LLVM's ``llvm.prefetch``, a hint that
+    never faults, so ``idx`` may lie outside the array)."""
+    sig = _nbtypes.void(arr, idx)
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        i8p = _lir.IntType(8).as_pointer()
+        i32 = _lir.IntType(32)
+        fn = cgutils.get_or_insert_function(builder.module, _lir.FunctionType(_lir.VoidType(), [i8p, i32, i32, i32]),
+                                            "llvm.prefetch.p0")
+        ptr = builder.bitcast(builder.gep(ary.data, [args[1]]), i8p)
+        builder.call(fn, [ptr, i32(1), i32(3), i32(1)])  # (write, keep in all cache levels, data)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+def new_prob_memo(size: int = MEMO_SIZE) -> tuple[np.ndarray, np.ndarray]:
+    """An empty probability memo for :func:`integrate_levels`: (int64 keys, float32 values), ``size`` (a power of
+    two) entries, each valid from the start (key 0 = the bits of log-odds 0.0, value 0.5 = its probability)."""
+    return np.zeros(size, dtype=np.int64), np.full(size, 0.5, dtype=np.float32)
+
+
+@njit(cache=True, inline="always")
+def _prob(v, keys, vals):  # pragma: no cover - numba
+    """The probability cache's value of float64 log-odds ``v``: float32(1 / (1 + exp(−v))), looked up by the bits
+    of ``v`` in the direct-mapped memo (``keys``, ``vals``) and computed (and stored there) on a miss. The value is a
+    function of ``v`` alone, so the memo gives the bits ``exp`` gives; a map's log-odds take a few thousand values
+    (sums of the same two increments), so nearly every touched cell is a hit."""
+    key = _bits(v)
+    h = np.uint64(((key * _FIB) >> 50) & (keys.shape[0] - 1))
+    if keys[h] == key:
+        return vals[h]
+    p = np.float32(1.0 / (1.0 + math.exp(-v)))
+    keys[h] = key
+    vals[h] = p
+    return p
+
+
 @njit(cache=True)
 def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j0, hit, stop, use_stop,
-          l_free, l_occ, cap):  # pragma: no cover - numba
+          l_free, l_occ, cap, keys, vals):  # pragma: no cover - numba
     """Rays from array cell (``sx``, ``sy``) into one level (arrays ``logodds``, ``prob``, ``uidx`` (H, W),
     C-contiguous): to cells (``ex[k]``, ``ey[k]``) or, when ``ends`` has columns, to the cells of the map-frame
     ends ``ends`` (2, n), m (``floor(v / r + 0.5)`` minus the offsets ``i0``, ``j0``: OccGridMapBase::updateByScan's
     rounding). ``hit[k]`` True: the start and intermediate cells free, the endpoint occupied; False: every cell
     free. With ``use_stop`` the last ``stop[k]`` cells of a ray (its endpoint included) get no free update.
     Rays with the start or end cell outside the array, or ending in the start cell, are skipped whole. Returns
-    the number of rays integrated.
+    the number of rays integrated. ``keys``, ``vals``: the probability memo (:func:`new_prob_memo`).
 
     Free update (OccGridMapBase::updateSetFree): at most one per cell per scan (update index ``free_idx``);
     occupied (updateSetOccupied): at most one, winning over this scan's free update, which it undoes first; a
     hit adds ``l_occ`` only while the log-odds is below ``cap`` (GridMapLogOdds.h); the probability cache is
-    refreshed in every touched cell. The cells are those of the reference's integer Bresenham walk
-    (OccGridMapBase::bresenham2D: major axis = larger |Δ|, ties to x, error starting at |Δmajor|/2). The walk
-    runs on flat indices with the steps along the major and minor axes as index offsets, and the cell updates
-    are written out in the loop (helpers taking the arrays, called per cell, were slower in every trial, several
-    times so where numba did not inline them; docs/speed.md)."""
+    refreshed in every touched cell (:func:`_prob`). The cells are those of the reference's integer Bresenham walk
+    (OccGridMapBase::bresenham2D: major axis = larger |Δ|, ties to x, error starting at |Δmajor|/2): after j steps
+    along the major axis the walk has made ``(major // 2 + j·minor) // major`` minor steps, computed per cell with
+    a multiply and a shift (exact below ``_MAGIC_MAX``, Granlund & Montgomery, PLDI 1994) instead of the error
+    recurrence, so no step waits for the one before. The cell updates are written out
+    in the loop (helpers taking the arrays, called per cell, were slower in every trial; docs/speed.md); a memo
+    miss is resolved at the end of the ray (no call inside the walk), and each new cell prefetches the lines of the cell
+    ``_PREFETCH`` steps on (new cells come in runs)."""
     h, w = logodds.shape
     if sx < 0 or sy < 0 or sx >= w or sy >= h:
         return 0
@@ -56,6 +129,9 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
     n = ends.shape[1] if from_ends else ex.shape[0]
     f0 = sy * w + sx
     n_done = 0
+    mask = keys.shape[0] - 1
+    miss_f = np.empty(max(h, w) + 1, dtype=np.uint64)  # (a ray's cells: at most max(h, w))
+    miss_v = np.empty(max(h, w) + 1)
     for k in range(n):
         if from_ends:
             x1 = int(math.floor(ends[0, k] / r + 0.5)) - i0
@@ -83,22 +159,51 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
             if skip > major - 1:
                 skip = major - 1
         # the start cell (j = 0), then the first major − 1 − skip intermediate cells of the walk: free
-        f = f0
-        err = major // 2
-        for j in range(major - skip):
-            if j > 0:
-                f += d_major
-                err += minor
-                if err >= major:
-                    f += d_minor
-                    err -= major
-            if ui[f] < free_idx:
-                v = lo[f] + l_free
-                lo[f] = v
-                pr[f] = 1.0 / (1.0 + math.exp(-v))
-                ui[f] = free_idx
-        f = y1 * w + x1
+        n_free = major - skip
+        c = major // 2
+        n_miss = 0  # cells whose probability the memo did not hold (computed at the end of the ray)
+        if major < _MAGIC_MAX:
+            magic = ((1 << _MAGIC_SHIFT) + major - 1) // major  # ceil(2^42 / major)
+            t = c
+            fb = f0
+            for _ in range(n_free):
+                f = np.uint64(fb + ((t * magic) >> _MAGIC_SHIFT) * d_minor)  # (unsigned: no negative-index test)
+                if ui[f] < free_idx:
+                    # a cell seen for the first time this scan: the cells _PREFETCH steps on are likely new too
+                    g = np.uint64(fb + _PREFETCH * d_major + (((t + _PREFETCH * minor) * magic) >> _MAGIC_SHIFT)
+                                  * d_minor)
+                    _prefetch(ui, g)
+                    _prefetch(lo, g)
+                    _prefetch(pr, g)
+                    v = lo[f] + l_free
+                    lo[f] = v
+                    ui[f] = free_idx
+                    key = _bits(v)
+                    e = np.uint64(((key * _FIB) >> 50) & mask)
+                    if keys[e] == key:
+                        pr[f] = vals[e]
+                    else:  # (the memo's misses after the walk: no call inside the loop, no registers spilt)
+                        miss_f[n_miss] = f
+                        miss_v[n_miss] = v
+                        n_miss += 1
+                t += minor
+                fb += d_major
+        else:
+            t = c
+            fb = f0
+            for _ in range(n_free):
+                f = fb + (t // major) * d_minor
+                if ui[f] < free_idx:
+                    v = lo[f] + l_free
+                    lo[f] = v
+                    pr[f] = _prob(v, keys, vals)
+                    ui[f] = free_idx
+                t += minor
+                fb += d_major
+        f = np.uint64(y1 * w + x1)
         u = ui[f]
+        v = 0.0
+        updated = False
         if hit[k]:
             if u < occ_idx:
                 v = lo[f]
@@ -107,15 +212,32 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
                 if v < cap:
                     v += l_occ
                 lo[f] = v
-                pr[f] = 1.0 / (1.0 + math.exp(-v))
                 ui[f] = occ_idx
+                updated = True
         elif u < free_idx:
             v = lo[f] + l_free
             lo[f] = v
-            pr[f] = 1.0 / (1.0 + math.exp(-v))
             ui[f] = free_idx
+            updated = True
+        if updated:
+            key = _bits(v)
+            e = np.uint64(((key * _FIB) >> 50) & mask)
+            if keys[e] == key:
+                pr[f] = vals[e]
+            else:
+                miss_f[n_miss] = f
+                miss_v[n_miss] = v
+                n_miss += 1
+        for i in range(n_miss):  # (the ray's cells are distinct: each written once, in the walk's order)
+            pr[miss_f[i]] = _prob(miss_v[i], keys, vals)
         n_done += 1
     return n_done
+
+
+@njit(cache=True, inline="always")
+def _call_memo():  # pragma: no cover - numba
+    """A small probability memo for one call (:func:`new_prob_memo` inside a kernel)."""
+    return np.zeros(_CALL_MEMO_SIZE, dtype=np.int64), np.full(_CALL_MEMO_SIZE, 0.5, dtype=np.float32)
 
 
 @njit(cache=True)
@@ -142,8 +264,9 @@ def integrate_rays(
     (OccGridMapBase::updateByScan); rays ending in the start cell are skipped. Returns the
     number of rays integrated.
     """
+    keys, vals = _call_memo()
     return _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, _NO_ENDS, 1.0, 0, 0, hit, _NO_STOP,
-                 False, l_free, l_occ, cap)
+                 False, l_free, l_occ, cap, keys, vals)
 
 
 @njit(cache=True)
@@ -208,24 +331,26 @@ def integrate_rays_stop(
     less than ``stop[k] − 1`` cells (along the ray) before its endpoint get no free update — the ray's last
     ``stop[k]`` cells, its endpoint cell included, which the reference never marks free. ``stop[k] ≤ 1``
     gives the reference's update exactly. (Where the stop comes from: ``MultiResMap.integrate``.)"""
+    keys, vals = _call_memo()
     return _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, _NO_ENDS, 1.0, 0, 0, hit, stop, True,
-                 l_free, l_occ, cap)
+                 l_free, l_occ, cap, keys, vals)
 
 
 @njit(cache=True)
 def integrate_levels(logodds, prob, uidx, n_levels, res, i0, j0, sx, sy, counter, ends, hit, stop, use_stop,
-                     l_free, l_occ, cap):  # pragma: no cover - numba
+                     l_free, l_occ, cap, keys, vals):  # pragma: no cover - numba
     """One scan into every level in one call: per level ``k`` < ``n_levels`` (3-tuples ``logodds``, ``prob``,
     ``uidx``, cell side ``res`` m, array offsets ``i0``, ``j0``, ray start cell ``sx``, ``sy`` in array cells,
     update counter ``counter`` before this scan), the end cells of the rays ``ends`` (2, n) (map frame, m) as
     ``MultiResMap.integrate`` computed them level by level (``floor(v / r + 0.5)``, OccGridMapBase::updateByScan's
     rounding, minus the offsets), then :func:`integrate_rays` (or :func:`integrate_rays_stop` with ``use_stop``)
     with the level's update indices ``counter + 1`` (free) and ``counter + 2`` (occupied). The levels must hold
-    the rays already (``GridLevel.ensure``). Returns the number of rays integrated on level 0."""
+    the rays already (``GridLevel.ensure``). ``keys``, ``vals``: the map's probability memo (:func:`new_prob_memo`,
+    kept from scan to scan). Returns the number of rays integrated on level 0."""
     n0 = 0
     for k in range(n_levels):
         n_done = _rays(logodds[k], prob[k], uidx[k], counter[k] + 1, counter[k] + 2, sx[k], sy[k], _NO_CELLS,
-                       _NO_CELLS, ends, res[k], i0[k], j0[k], hit, stop, use_stop, l_free, l_occ, cap)
+                       _NO_CELLS, ends, res[k], i0[k], j0[k], hit, stop, use_stop, l_free, l_occ, cap, keys, vals)
         if k == 0:
             n0 = n_done
     return n0

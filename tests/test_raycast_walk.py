@@ -1,0 +1,182 @@
+"""The ray kernel's walk (slam/raycast.py): minor offsets by multiply-shift (and division above its limit), the
+probability memo resolved after the walk, the prefetches — each against the plain cell-by-cell reference update."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dynslam2d.slam.grid import GridLevel, MultiResMap
+from dynslam2d.slam.raycast import (
+    _MAGIC_MAX,
+    _MAGIC_SHIFT,
+    bresenham_free_cells,
+    integrate_rays,
+    integrate_rays_stop,
+    new_prob_memo,
+)
+from dynslam2d.types import Pose2D
+
+L_FREE = -0.4054651081081643
+L_OCC = 2.1972245773362196
+
+
+def _reference(lo, pr, ui, sx, sy, ex, ey, hit, stop, free_idx, occ_idx, cap) -> None:
+    """OccGridMapBase::updateByScan cell by cell on the error-recurrence Bresenham cells of
+    :func:`bresenham_free_cells` (float64 arrays of the level's values, updated in place)."""
+    h, w = lo.shape
+
+    def free(x, y):
+        if ui[y, x] < free_idx:
+            v = float(np.float32(lo[y, x])) + L_FREE
+            lo[y, x] = np.float32(v)
+            pr[y, x] = np.float32(1.0 / (1.0 + math.exp(-v)))
+            ui[y, x] = free_idx
+
+    for k in range(len(ex)):
+        x1, y1 = int(ex[k]), int(ey[k])
+        if (x1, y1) == (sx, sy) or not (0 <= x1 < w and 0 <= y1 < h):
+            continue
+        major = max(abs(x1 - sx), abs(y1 - sy))
+        skip = 0
+        if stop is not None and stop[k] > 1.0:
+            skip = min(int((stop[k] - 1.0) * major / math.hypot(x1 - sx, y1 - sy)), major - 1)
+        for x, y in bresenham_free_cells(sx, sy, x1, y1)[: major - skip].tolist():
+            free(x, y)
+        if hit[k]:
+            u = ui[y1, x1]
+            if u < occ_idx:
+                v = float(np.float32(lo[y1, x1]))
+                if u == free_idx:
+                    v -= L_FREE
+                if v < cap:
+                    v += L_OCC
+                lo[y1, x1] = np.float32(v)
+                pr[y1, x1] = np.float32(1.0 / (1.0 + math.exp(-v)))
+                ui[y1, x1] = occ_idx
+        else:
+            free(x1, y1)
+
+
+def _check(h: int, w: int, sx: int, sy: int, ex, ey, hit, stop, scans: int, cap: float = 6.0) -> None:
+    """Integrate the same rays ``scans`` times with the kernel and the reference; every array equal after each."""
+    lo = np.zeros((h, w), np.float32)
+    pr = np.full((h, w), 0.5, np.float32)
+    ui = np.full((h, w), -1, np.int32)
+    rlo, rpr, rui = lo.astype(np.float64), pr.astype(np.float64), ui.astype(np.int64)
+    ex, ey = np.asarray(ex, np.int64), np.asarray(ey, np.int64)
+    for s in range(scans):
+        fi, oi = 3 * s + 1, 3 * s + 2
+        if stop is None:
+            integrate_rays(lo, pr, ui, fi, oi, sx, sy, ex, ey, hit, L_FREE, L_OCC, cap)
+        else:
+            integrate_rays_stop(lo, pr, ui, fi, oi, sx, sy, ex, ey, hit, stop, L_FREE, L_OCC, cap)
+        _reference(rlo, rpr, rui, sx, sy, ex, ey, hit, stop, fi, oi, cap)
+        assert np.array_equal(lo, rlo.astype(np.float32))
+        assert np.array_equal(pr, rpr.astype(np.float32))
+        assert np.array_equal(ui, rui.astype(np.int32))
+
+
+def test_multiply_shift_gives_the_bresenham_minor_offsets_below_the_limit() -> None:
+    """(t · ceil(2^42 / M)) >> 42 == t // M for every major length M < _MAGIC_MAX and the walk's largest values of
+    t = M // 2 + j · minor (j < M, minor ≤ M), where the multiply-shift's error is largest; it fails above the
+    limit (so the kernel's division fallback is needed there)."""
+    for m in list(range(1, 600)) + list(range(_MAGIC_MAX - 600, _MAGIC_MAX)):
+        magic = ((1 << _MAGIC_SHIFT) + m - 1) // m
+        top = m // 2 + (m - 1) * m
+        t = np.concatenate((np.arange(max(top - 3 * m, 0), top + 1), np.arange(0, min(top, 3 * m) + 1)))
+        t = t.astype(np.int64)
+        assert np.array_equal((t * magic) >> _MAGIC_SHIFT, t // m), m
+    bad = 0
+    for m in range(1 << 15, (1 << 15) + 64):  # well above the limit, some values go wrong
+        magic = ((1 << _MAGIC_SHIFT) + m - 1) // m
+        t = np.arange(m * m - 4 * m, m * m, dtype=np.int64)
+        bad += int(np.count_nonzero((t * magic) >> _MAGIC_SHIFT != t // m))
+    assert bad > 0
+
+
+@pytest.mark.parametrize("with_stop", [False, True])
+def test_rays_sharing_cells_equal_the_reference(with_stop: bool) -> None:
+    """Dense fans of rays in every octant (each ray shares a leading run of cells with the previous one), runs of
+    equal ends, rays outside the array or ending in the start cell between them, clearing rays, the grazing stop,
+    repeated scans (free then occupied, the cap): bit for bit the reference."""
+    rng = np.random.default_rng(5)
+    h, w, sx, sy = 90, 110, 47, 41
+    a = np.sort(rng.uniform(-math.pi, math.pi, 700))
+    r = rng.choice([8.0, 20.0, 35.0, 60.0], a.size) + rng.normal(0.0, 0.7, a.size)
+    ex = np.floor(sx + r * np.cos(a) + 0.5).astype(np.int64)
+    ey = np.floor(sy + r * np.sin(a) + 0.5).astype(np.int64)
+    ex[rng.random(a.size) < 0.05] = sx  # some end in the start cell (skipped)
+    ey[ex == sx] = sy
+    ex = np.concatenate((ex, ex[100:160], ex[:40][::-1]))  # repeats and a reversed run
+    ey = np.concatenate((ey, ey[100:160], ey[:40][::-1]))
+    hit = rng.random(ex.size) < 0.85
+    stop = rng.choice([0.0, 1.0, 2.5, 7.0], ex.size) if with_stop else None
+    assert ((ex < 0) | (ex >= w) | (ey < 0) | (ey >= h)).any()  # (rays outside the array are among them)
+    _check(h, w, sx, sy, ex, ey, hit, stop, scans=4)
+
+
+def test_mirrored_rays_are_not_skipped_along() -> None:
+    """Consecutive rays mirrored about the major axis have the same minor offsets at every step but lie on opposite
+    sides (a different minor direction): the second ray's cells are its own (a walk that took the offsets' cells
+    from the previous ray would not update them)."""
+    h, w, sx, sy = 60, 60, 30, 30
+    ex = [sx + 25, sx + 25, sx - 25, sx - 25, sx + 6, sx - 6, sx + 6, sx - 6, sx + 25, sx + 25]
+    ey = [sy + 7, sy - 7, sy + 7, sy - 7, sy + 25, sy + 25, sy - 25, sy - 25, sy + 25, sy - 25]
+    _check(h, w, sx, sy, ex, ey, np.ones(len(ex), bool), None, scans=2)
+
+
+def test_rays_longer_than_the_multiply_shift_limit_equal_the_reference() -> None:
+    """Rays with a major length at and above _MAGIC_MAX take the division path: cells and values as the
+    reference, next to short rays in the same octant."""
+    h, w, sx, sy = 40, _MAGIC_MAX + 300, 2, 20
+    ex = np.array([w - 1, _MAGIC_MAX + 2, _MAGIC_MAX, _MAGIC_MAX - 1, 500, 501, w - 3, 30, w - 2])
+    ey = np.array([39, 0, 21, 25, 33, 33, 5, 22, 20])
+    hit = np.array([True, True, False, True, True, True, True, False, True])
+    _check(h, w, sx, sy, ex, ey, hit, None, scans=2)
+
+
+def test_probability_memo_collisions_keep_values_exact() -> None:
+    """A memo of two entries (a collision on almost every new value) and the default memo give the same map as
+    each other; the default memo's entries all hold 1 / (1 + exp(−v)) of their key."""
+    rng = np.random.default_rng(2)
+    maps = [MultiResMap(0.05, 3, L_FREE, L_OCC, cap=8.0) for _ in range(2)]
+    maps[0]._memo = new_prob_memo(2)
+    for s in range(12):
+        pose = Pose2D(*rng.uniform(-0.3, 0.3, 2), float(rng.uniform(-3, 3)))
+        a = np.linspace(-2.0, 2.0, 300)
+        rr = rng.choice([1.0, 2.0, 3.5], a.size) + rng.normal(0.0, 0.03, a.size)
+        hits = np.column_stack((rr * np.cos(a), rr * np.sin(a)))
+        for m in maps:
+            m.integrate(pose, hits, hits[::7] * 1.3 if s % 3 else None)
+    for la, lb in zip(maps[0].levels, maps[1].levels):
+        assert np.array_equal(la.logodds, lb.logodds) and np.array_equal(la.prob, lb.prob)
+        assert np.array_equal(la.uidx, lb.uidx)
+    keys, vals = maps[1]._memo
+    v = keys.view(np.float64)
+    assert np.count_nonzero(keys) > 50  # (the memo was used)
+    assert np.array_equal(vals, (1.0 / (1.0 + np.exp(-v))).astype(np.float32))
+
+
+def test_level_integrate_and_the_fused_call_agree_on_a_grown_map() -> None:
+    """GridLevel.integrate (the per-call memo of integrate_rays) and MultiResMap.integrate (the map's memo, every
+    level in one call, growth bounds computed once) write the same cells while the map grows in every direction."""
+    rng = np.random.default_rng(9)
+    hmap = MultiResMap(0.1, 3, L_FREE, L_OCC, cap=5.0)
+    ref = [GridLevel(lv.resolution, lv.growth_margin_cells) for lv in hmap.levels]
+    for s in range(10):
+        pose = Pose2D(float(3.0 * s * (-1) ** s), float(-2.0 * s), float(rng.uniform(-3, 3)))
+        a = np.linspace(-3.0, 3.0, 200)
+        rr = rng.uniform(0.5, 6.0, a.size)
+        hits = np.column_stack((rr * np.cos(a), rr * np.sin(a)))
+        hmap.integrate(pose, hits)
+        c, sn = math.cos(pose.theta), math.sin(pose.theta)
+        ends = np.column_stack((c * hits[:, 0] - sn * hits[:, 1] + pose.x, sn * hits[:, 0] + c * hits[:, 1] + pose.y))
+        for lv in ref:
+            lv.integrate(np.array([pose.x, pose.y]), ends, np.ones(a.size, bool), L_FREE, L_OCC, 5.0)
+    for lv, rl in zip(hmap.levels, ref):
+        assert (lv.i0, lv.j0, lv.shape) == (rl.i0, rl.j0, rl.shape)
+        assert np.array_equal(lv.logodds, rl.logodds) and np.array_equal(lv.prob, rl.prob)
+        assert np.array_equal(lv.uidx, rl.uidx)
