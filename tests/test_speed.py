@@ -62,7 +62,9 @@ def test_cache_folder_default_and_user_choice(tmp_path: Path) -> None:
     env.update(PYTHONPATH=SRC, XDG_CACHE_HOME=str(tmp_path / "xdg"))
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     folder, kernel_path = out.stdout.split("\n")[:2]
-    assert folder == str(tmp_path / "xdg" / "dynslam2d" / "numba")
+    from dynslam2d.jitcache import kernel_sources_fingerprint
+    # one subfolder per version of the kernel sources (numba checks only a kernel's own file)
+    assert folder == str(tmp_path / "xdg" / "dynslam2d" / "numba" / f"k-{kernel_sources_fingerprint()}")
     assert kernel_path.startswith(folder)  # the kernels cache outside site-packages: a reinstall keeps them
     env["NUMBA_CACHE_DIR"] = str(tmp_path / "mine")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)

@@ -12,11 +12,18 @@ that is already set (:func:`use_default_cache_dir`). numba's default, ``__pycach
 installed sources, is replaced with the files by every ``pip install``; a cache outside
 site-packages survives a reinstall, and numba keys each entry by the SHA-256 of the source file
 (numba ≥ 0.59), so an unchanged kernel module is loaded, not compiled again (docs/speed.md).
+
+numba checks only the kernel's own file: a kernel that calls (and so compiles in) a kernel of another
+module would be loaded stale after that other module changed. The default folder therefore has one
+subfolder per version of the kernel modules' sources (:func:`kernel_sources_fingerprint`), and folders of
+versions unused for :data:`STALE_AFTER_DAYS` are removed when a new one is made.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
+import shutil
 import sys
 import time
 from dataclasses import dataclass
@@ -27,10 +34,60 @@ from typing import Any
 CACHE_ENV = "NUMBA_CACHE_DIR"
 
 
-def default_cache_dir() -> Path:
+#: Prefix of the per-version subfolders of the default cache folder.
+VERSION_PREFIX = "k-"
+
+#: A version subfolder not used for this many days is removed when a new version's folder is made.
+STALE_AFTER_DAYS = 14.0
+
+
+def kernel_sources_fingerprint(package_dir: Path | None = None) -> str:
+    """16 hex digits of the SHA-256 over the package's kernel modules (those mentioning ``njit``): paths and bytes.
+
+    Any edit of a kernel module, including one whose kernels others call, gives a new fingerprint;
+    reinstalling the same sources gives the same one. Reads the package's sources (about 1.6 MB, a few ms).
+    """
+    root = package_dir if package_dir is not None else Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        data = path.read_bytes()
+        if b"njit" in data:
+            digest.update(path.relative_to(root).as_posix().encode() + b"\0")
+            digest.update(data)
+    return digest.hexdigest()[:16]
+
+
+def cache_root() -> Path:
     """``$XDG_CACHE_HOME/dynslam2d/numba`` (``~/.cache/dynslam2d/numba`` when XDG_CACHE_HOME is unset)."""
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "dynslam2d" / "numba"
+
+
+def default_cache_dir() -> Path:
+    """The cache folder of this version of the kernel sources: ``<cache_root()>/k-<fingerprint>``."""
+    return cache_root() / f"{VERSION_PREFIX}{kernel_sources_fingerprint()}"
+
+
+def remove_stale_versions(root: Path, keep: Path, days: float = STALE_AFTER_DAYS) -> list[Path]:
+    """Delete the version subfolders of ``root`` other than ``keep`` not used for ``days`` days; returns them.
+
+    "Used" is the folder's modification time, which :func:`use_default_cache_dir` refreshes on every
+    import. Only folders named ``k-<16 hex digits>`` are touched; errors (another process deleting the
+    same folder, permissions) are ignored.
+    """
+    limit = time.time() - days * 86400.0
+    removed = []
+    for path in root.glob(f"{VERSION_PREFIX}*"):
+        name = path.name[len(VERSION_PREFIX):]
+        if path == keep or len(name) != 16 or any(c not in "0123456789abcdef" for c in name):
+            continue
+        try:
+            if path.is_dir() and path.stat().st_mtime < limit:
+                shutil.rmtree(path)
+                removed.append(path)
+        except OSError:
+            continue
+    return removed
 
 
 def use_default_cache_dir() -> str | None:
@@ -47,11 +104,15 @@ def use_default_cache_dir() -> str | None:
         return None
     path = default_cache_dir()
     try:
+        is_new = not path.is_dir()
         path.mkdir(parents=True, exist_ok=True)
+        os.utime(path)  # marks this version as used (remove_stale_versions)
     except OSError:
         return None
     if not os.access(path, os.W_OK):
         return None
+    if is_new:
+        remove_stale_versions(path.parent, path)
     os.environ[CACHE_ENV] = str(path)
     return str(path)
 
