@@ -124,7 +124,7 @@ def accumulate(prob, pts, x, y, th, swapped, H, g):  # pragma: no cover - numba
     cost = Σ (1−M)² over all points, out-of-bounds points counting M = 0;
     out-of-bounds points add nothing to H, g (as getCompleteHessianDerivs).
     """
-    return _sums(prob, pts, x, y, th, swapped, True, H, g)
+    return _sums(prob, pts, x, y, th, swapped, np.bool_(True), H, g)  # not a literal: _match_core's signature
 
 
 @njit(cache=True)
@@ -787,7 +787,8 @@ def gated_points(r, cos_a, sin_a, valid, range_min, range_max, min_dist, max_dis
     if stats and m > 0:
         seen = np.zeros(_N_BINS, dtype=np.bool_)
         for i in range(0, m, max(1, m // _SPREAD_POINTS)):
-            b = _bearing_bin(pts[i, 0], pts[i, 1], _N_BINS)
+            b = _bearing_bin(pts[i, 0], pts[i, 1], seen.shape[0])  # (_N_BINS as an int64, not a literal:
+            # the signature _support_kernel compiles, not a second one)
             if not seen[b]:
                 seen[b] = True
                 bins += 1
