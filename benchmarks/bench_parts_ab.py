@@ -44,7 +44,6 @@ OUTSIDE = ("map view (_evidence_view)", "body filter", "exclusion (both calls)",
 def worker(data: Path, name: str) -> None:
     """Serve ``go`` lines on stdin: process the next scan, answer one JSON line (ns per part, updated)."""
     import collections
-    import time
 
     import dynslam2d.detect.mapevidence as me
     import dynslam2d.memtrim as mt
@@ -61,16 +60,9 @@ def worker(data: Path, name: str) -> None:
     del warm
     acc: collections.Counter = collections.Counter()
 
-    def wrap(obj, attr: str, tag: str) -> None:
-        f = getattr(obj, attr)
+    from cputimers import thread_cpu_wrapper
 
-        def timed(*a, **k):
-            t0 = time.thread_time_ns()
-            r = f(*a, **k)
-            acc[tag] += time.thread_time_ns() - t0
-            return r
-
-        setattr(obj, attr, timed)
+    wrap = thread_cpu_wrapper(acc)
 
     wrap(me, "vacated_outlines_kernel", "  vacated-footprint kernel")
     try:

@@ -121,7 +121,6 @@ def compare(data: Path, name: str, other: Path, reps: int) -> None:
 def parts(data: Path, name: str) -> None:
     """Print the per-part CPU µs of this checkout on ``name`` (see the module docstring, ``--parts``)."""
     import collections
-    import time
 
     import numpy as np
 
@@ -139,16 +138,9 @@ def parts(data: Path, name: str) -> None:
         warm.process(s)
     acc: collections.Counter = collections.Counter()
 
-    def wrap(obj, attr: str, tag: str) -> None:
-        f = getattr(obj, attr)
+    from cputimers import thread_cpu_wrapper
 
-        def timed(*a, **k):
-            t0 = time.thread_time_ns()
-            r = f(*a, **k)
-            acc[tag] += time.thread_time_ns() - t0
-            return r
-
-        setattr(obj, attr, timed)
+    wrap = thread_cpu_wrapper(acc)
 
     wrap(me, "vacated_outlines_kernel", "vacated-footprint kernel")
     try:  # the pipeline's one-call trace (clearing geometry, trace and outlines; dynslam2d/vacated.py, view2 pass)

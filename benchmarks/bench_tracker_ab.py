@@ -295,16 +295,9 @@ def stages(scans: list) -> tuple[float, dict[str, float]]:
     p = Pipeline()
     acc: collections.Counter = collections.Counter()
 
-    def wrap(obj, name: str, tag: str) -> None:
-        f = getattr(obj, name)
+    from cputimers import thread_cpu_wrapper
 
-        def timed(*a, **k):
-            t0 = time.thread_time_ns()
-            r = f(*a, **k)
-            acc[tag] += time.thread_time_ns() - t0
-            return r
-
-        setattr(obj, name, timed)
+    wrap = thread_cpu_wrapper(acc)
 
     wrap(p.tracker, "update", "tracker")
     wrap(p.slam, "match", "SLAM match")
