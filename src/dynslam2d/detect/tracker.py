@@ -657,8 +657,9 @@ class Tracker:
             self._order = np.array([k.row for k in self._tracks], dtype=np.int64)
         return self._order
 
-    def _add_row(self, k: _Track, x, P: np.ndarray) -> None:
-        """Append ``k`` to the live tracks with state ``x`` (4,) and covariance ``P`` (4, 4): it gets a row of
+    def _add_row(self, k: _Track, x, P: np.ndarray | None) -> None:
+        """Append ``k`` to the live tracks with state ``x`` (4,) and covariance ``P`` (4, 4) (None: written by the
+        caller into ``k.row`` afterwards): it gets a row of
         the state arrays (a deleted track's, else a new one; the arrays double when full) holding the values and
         its own shape rows ``k.g`` / ``k.gi``, and ``k.x`` / ``k.P`` / ``k.g`` / ``k.gi`` become views of it."""
         if self._free_rows:
@@ -677,8 +678,9 @@ class Tracker:
                 Gi[:row] = self._Gi[:row]
                 self._X, self._P, self._G, self._Gi = X, P2, G, Gi
                 self._repoint()
-        self._X[row] = x
-        self._P[row] = P
+        if x is not None:  # (None: the caller writes the state and covariance rows, _birth)
+            self._X[row] = x
+            self._P[row] = P
         self._G[row] = k.g
         self._Gi[row] = k.gi
         k.row = row
@@ -823,7 +825,9 @@ class Tracker:
         new_dets = [dets[j] for j in ki.tolist()]
         row = len(new_dets)
         n0 = px.shape[0] - mbeams.shape[0]
-        pts = np.column_stack((px[n0:], py[n0:]))  # the persons' points, (n, 2)
+        pts = np.empty((px.shape[0] - n0, 2))  # the persons' points, (n, 2) (np.column_stack's values)
+        pts[:, 0] = px[n0:]
+        pts[:, 1] = py[n0:]
         o = 0
         for a, b in zip(first.tolist(), second.tolist()):
             da, db = dets[a], dets[b]
@@ -1038,7 +1042,8 @@ class Tracker:
         max_age = self._free.max_age if self._free is not None else None
         ref = self._cur_ref if self._free is not None else None  # (the vacated-space test's reference: this scan)
         tracks = self._tracks
-        upd_add, used_add = (u.add for u in self._upd_sets)
+        upd, used = self._upd_sets
+        upd_add, used_add = upd.add, used.add
         # (the detections' circle radii as floats, one conversion per scan: row di of the batch is detection di's fit
         # row, copied by the leg merge; float(det.circle[2]) would make a view per circle detection)
         radii = self._batch.circle[:, 2].tolist()
@@ -1189,10 +1194,13 @@ class Tracker:
     def _birth(self, det: Detection, t: float, j: int) -> None:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
         cfg = self.config
-        z, P, size, known = self._birth_state(det, j)
-        g, gi = _shape_rows(det.theta, size, known, float(det.circle[2]) if det.kind == KIND_CIRCLE else 0.0,
-                            det.kind, det.kind == KIND_RECT)
+        size, known = self._birth_shape(det, j)
+        kind = det.kind
+        g, gi = _shape_rows(det.theta, size, known, self._batch.circle.item(j, 2) if kind == KIND_CIRCLE else 0.0,
+                            kind, kind == KIND_RECT)
         has_map, has_free = self._map is not None, self._free is not None
+        d = self._default  # reference.measure(det, None, None, cfg.fit) of every detection
+        z = d.z[j]
         k = _new_track(self._next_id, t, z.copy(), g, gi, det.beams, [det],
                        [det.map_structure] if has_map else [], [det.map_free] if has_map else [],
                        [det.map_unknown] if has_map else [], [_past_entry(t, det)] if has_free else [],
@@ -1200,7 +1208,17 @@ class Tracker:
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
         self._next_id += 1
-        self._add_row(k, (z[0], z[1], 0.0, 0.0), P)
+        self._add_row(k, None, None)
+        # (the state and the initial covariance written into the new rows directly: _birth_state's values, without
+        # the (4, 4) temporary it copies from)
+        row = k.row
+        X, P = self._X, self._P
+        X[row, :2] = z
+        X[row, 2:] = 0.0
+        Pr = P[row]
+        Pr.fill(0.0)
+        Pr[:2, :2] = d.R[j]
+        Pr[2, 2] = Pr[3, 3] = cfg.tracker.init_speed_sigma ** 2
         self.stats.tracks_born += 1
 
     def _birth_state(self, det: Detection, j: int) -> tuple[np.ndarray, np.ndarray, list[float], list[bool]]:
@@ -1212,18 +1230,22 @@ class Tracker:
         P = np.zeros((4, 4))
         P[:2, :2] = d.R[j]
         P[2, 2] = P[3, 3] = cfg.tracker.init_speed_sigma ** 2
-        if det.kind == KIND_RECT:
-            size = _default_sizes(self._batch.lohi[j].tolist(), self._batch.rel[j].tolist(), cfg.fit)
-            sk0, sk1 = d.size_kind[j].tolist()
-            known = [sk0 == SIZE_MEASURED, sk1 == SIZE_MEASURED]
-        elif det.kind == KIND_CIRCLE:
-            size = [float(2.0 * det.circle[2])] * 2
-            known = [True, True]
-        else:
-            lo0, lo1, hi0, hi1 = self._batch.lohi[j].tolist()
-            size = [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)]  # (np.maximum(det.extent, 0.05))
-            known = [False, False]
+        size, known = self._birth_shape(det, j)
         return z, P, size, known
+
+    def _birth_shape(self, det: Detection, j: int) -> tuple[list[float], list[bool]]:
+        """The sizes (m) and known-size flags of a track started from detection ``det`` (index ``j`` of this scan's
+        detections)."""
+        kind = det.kind
+        if kind == KIND_RECT:
+            b = self._batch
+            size = _default_sizes(b.lohi[j].tolist(), b.rel[j].tolist(), self.config.fit)
+            sk0, sk1 = self._default.size_kind[j].tolist()
+            return size, [sk0 == SIZE_MEASURED, sk1 == SIZE_MEASURED]
+        if kind == KIND_CIRCLE:
+            return [float(2.0 * det.circle[2])] * 2, [True, True]
+        lo0, lo1, hi0, hi1 = self._batch.lohi[j].tolist()
+        return [max(hi0 - lo0, 0.05), max(hi1 - lo1, 0.05)], [False, False]  # (np.maximum(det.extent, 0.05))
 
     def _manage(self, t: float, updated: set[int]) -> None:
         """Track management (M of N, deletions, clutter retirement) and the test of M (paper Eq. 3) of the updated
@@ -1787,7 +1809,8 @@ class Tracker:
         # each, every report's velocity / covariance a row of them, its own memory apart from the tracker's)
         order = self._rows()
         n = order.shape[0]
-        fast = np.full(n, -1, dtype=np.int8)
+        fast = np.empty(n, dtype=np.int8)  # (np.full without its Python wrapper)
+        fast.fill(-1)
         boxes, undecided = report_boxes(self._G, self._Gi, self._X, order, slow, fast)
         if _any_of(undecided):  # (a speed within an ulp of the limit: decided by math.hypot, as the reports were)
             for i in undecided.nonzero()[0].tolist():
