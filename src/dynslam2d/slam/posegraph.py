@@ -133,10 +133,11 @@ class PoseGraph:
     def add_edge(self, i: int, j: int, z: tuple[float, float, float] | np.ndarray, info: np.ndarray,
                  loop: bool = False, robust: bool = False) -> int:
         """Append the constraint x_j = x_i ⊕ z with information ``info`` (3×3); returns its index."""
-        if not (0 <= i < self.n_nodes and 0 <= j < self.n_nodes) or i == j:
-            raise ValueError(f"add_edge: bad node ids {i}, {j} (graph has {self.n_nodes} nodes)")
+        n = self._n
+        if not (0 <= i < n and 0 <= j < n) or i == j:
+            raise ValueError(f"add_edge: bad node ids {i}, {j} (graph has {n} nodes)")
         info = np.asarray(info, dtype=np.float64).reshape(3, 3)
-        self.edges.append(Edge(int(i), int(j), np.asarray(z, dtype=np.float64).reshape(3).copy(),
+        self.edges.append(Edge(int(i), int(j), np.array(z, dtype=np.float64).reshape(3),  # (a copy)
                                0.5 * (info + info.T), bool(loop), robust=bool(robust)))
         return len(self.edges) - 1
 
@@ -352,7 +353,10 @@ def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def diag_info(sigma_xy: float, sigma_theta: float) -> np.ndarray:
     """Information matrix diag(1/σ_xy², 1/σ_xy², 1/σ_θ²) (m, rad)."""
-    return np.diag([1.0 / sigma_xy**2, 1.0 / sigma_xy**2, 1.0 / sigma_theta**2])
+    m = np.zeros((3, 3))
+    m[0, 0] = m[1, 1] = 1.0 / sigma_xy**2
+    m[2, 2] = 1.0 / sigma_theta**2
+    return m
 
 
 __all__ = ["Edge", "KERNELS", "OptimiseReport", "PoseGraph", "compose", "diag_info", "relative"]
