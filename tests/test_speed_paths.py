@@ -409,6 +409,40 @@ def test_single_pose_relative_and_compose_equal_the_vectorised_path() -> None:
     assert not np.array_equal(relative(a, b), compose(a, b))
 
 
+def test_pose_graph_diag_edges_built_when_read_equal_added_edges() -> None:
+    """PoseGraph.add_diag_edge (the loop closer's keyframe edges, built when the edges are next read) gives the
+    edges add_edge with diag_info gives, at the same indices, between loop edges added with add_edge; and the
+    keyframe chain helper loops._chain equals relative and compose bit for bit."""
+    from dynslam2d.slam.loops import _chain
+    from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
+
+    rng = np.random.default_rng(3)
+    a, b = PoseGraph(), PoseGraph()
+    for g in (a, b):
+        for _ in range(12):
+            g.add_node(rng.normal(size=3) if g is a else a.poses[g.n_nodes])
+    ka, kb = [], []
+    for k in range(11):
+        z = rng.normal(size=3).tolist()
+        sxy, sth = float(rng.uniform(0.01, 1.0)), float(rng.uniform(0.001, 0.5))
+        ka.append(a.add_edge(k, k + 1, z, diag_info(sxy, sth), robust=k % 3 == 0))
+        kb.append(b.add_diag_edge(k, k + 1, list(z), sxy, sth, robust=k % 3 == 0))
+        if k % 4 == 3:  # a loop edge in between: it lands after the keyframe edges before it
+            ka.append(a.add_edge(0, k, z, np.eye(3), loop=True))
+            kb.append(b.add_edge(0, k, z, np.eye(3), loop=True))
+    assert ka == kb == list(range(len(a.edges)))
+    assert len(b._pending) == 3  # (the keyframe edges after the last loop edge are still unbuilt)
+    for ea, eb in zip(a.edges, b.edges, strict=True):
+        assert (ea.i, ea.j, ea.loop, ea.robust, ea.active) == (eb.i, eb.j, eb.loop, eb.robust, eb.active)
+        assert ea.z.tobytes() == eb.z.tobytes() and ea.info.tobytes() == eb.info.tobytes()
+    for _ in range(2000):
+        p, q, e = rng.normal(size=(3, 3)) * 10.0 ** rng.uniform(-3, 3)
+        p[2], q[2], e[2] = rng.uniform(-7, 7, 3)
+        z, x = _chain(p, q, e)
+        assert np.array(z).tobytes() == relative(p, q).tobytes()
+        assert np.array(x).tobytes() == compose(e, relative(p, q)).tobytes()
+
+
 def test_keyframe_index_spread_equals_linspace_and_is_shared() -> None:
     """correlative.even_indices: evenly spread sub-sample indices (place returns, loop queries), once per size."""
     from dynslam2d.slam.correlative import even_indices as _even

@@ -380,7 +380,7 @@ class LoopCloser:
             node = g.add_node(est)
             weak = self._weak_since_kf
             sxy, sth = edge_sigmas(c, z, weak, self._score_since_kf)
-            g.add_edge(prev_node, node, z, diag_info(sxy, sth), robust=c.weak_robust and weak)
+            g.add_diag_edge(prev_node, node, z, sxy, sth, robust=c.weak_robust and weak)  # (z: a new list)
             self._edges.set((prev_node, node), sxy,
                             c.drift_rad_per_m * math.hypot(z[0], z[1]) + (c.far_weak_turn if weak else 0.0))
         else:
