@@ -383,8 +383,16 @@ def _admissible(t0: np.ndarray, inside_x: bool, inside_y: bool, e: int) -> bool:
 @functools.lru_cache(maxsize=256)
 def even_indices(n: int, k: int) -> np.ndarray:
     """(k,) read-only int64 indices of ``k`` points evenly spread over ``n`` (``np.linspace``, truncated): the same
-    few scan sizes come back at every search and keyframe, so each is computed once."""
-    idx = np.linspace(0, n - 1, k).astype(np.int64)
+    few scan sizes come back at every search and keyframe, so each is computed once. Computed as ``np.linspace``
+    computes it for k ≥ 2 (``arange(k) · ((n − 1) / (k − 1))`` in float64, the last one set to n − 1, truncated)
+    without its per-call overhead: the number of returns varies from scan to scan, so many sizes are new."""
+    if k < 2:
+        idx = np.linspace(0, n - 1, k).astype(np.int64)
+    else:
+        y = np.arange(k, dtype=np.float64)
+        y *= (n - 1) / (k - 1)
+        y[-1] = n - 1
+        idx = y.astype(np.int64)
     idx.flags.writeable = False
     return idx
 

@@ -381,12 +381,18 @@ class EvidenceLedger:
         # imported at first use: their explicit signatures compile (or load from numba's cache) on import, which
         # would put ~0.4 s and scipy.linalg on every `import dynslam2d.pipeline` (issue 13's warm start)
         from dynslam2d.slam.ledgerkernels import read_cells, record_cells
-        mine = [t for t in tracks if t.beams is not None and t.beams.shape[0]]  # the tracks with beams
+        mine, blist, tids, nb = [], [], [], []  # the tracks with beams, their beams, ids and beam counts
+        for t in tracks:
+            b = t.beams
+            if b is not None and b.shape[0]:
+                mine.append(t)
+                blist.append(b)
+                tids.append(t.id)
+                nb.append(b.shape[0])
         if not mine:
             return None
-        blist = [t.beams for t in mine]
-        ids = np.array([t.id for t in mine], dtype=np.int64)
-        lens = np.array([b.shape[0] for b in blist], dtype=np.int64)
+        ids = np.array(tids, dtype=np.int64)
+        lens = np.array(nb, dtype=np.int64)
         allb = np.concatenate(blist).astype(np.int64, copy=False)
         c, s = math.cos(pose.theta), math.sin(pose.theta)
         levels = hmap.levels
@@ -411,18 +417,22 @@ class EvidenceLedger:
         else:  # (cells beyond the packed values' range: level by level)
             pending, present, kb_all, kb_b = self._pending_plain(scan, c, s, pose, allb, ends, ids, uids, valid,
                                                                  counts, hmap, want_kb)
-        if want_kb:  # every track's kept beams, split per track
-            kb_b = kb_b.tolist()
         ledgers = self._ledgers
         n_lv = len(levels)
-        for i, (t, keep) in enumerate(zip(mine, present)):
-            if not keep:  # every beam of it removed
-                continue
-            led = ledgers.get(t.id)
-            if led is None:
-                led = ledgers[t.id] = self._new_ledger(t, t.stamp, n_lv)
-            if want_kb and kb_b[i + 1] > kb_b[i]:
-                led.beams.append((int(index), kb_all[kb_b[i]:kb_b[i + 1]]))
+        if want_kb:  # every track's kept beams, split per track
+            kb = kb_b.tolist()
+            at = int(index)
+            for t, keep, a, b in zip(mine, present, kb, kb[1:]):
+                if keep:  # (else every beam of it removed)
+                    led = ledgers.get(t.id)
+                    if led is None:
+                        led = ledgers[t.id] = self._new_ledger(t, t.stamp, n_lv)
+                    if b > a:
+                        led.beams.append((at, kb_all[a:b]))
+        else:
+            for t, keep in zip(mine, present):
+                if keep and t.id not in ledgers:
+                    ledgers[t.id] = self._new_ledger(t, t.stamp, n_lv)
         return pending
 
     def _pending_plain(self, scan: Scan, c: float, s: float, pose: Pose2D, allb: np.ndarray, ends: np.ndarray,

@@ -59,7 +59,7 @@ from dynslam2d.slam.placedesc import PlaceIndex
 from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
 from dynslam2d.slam.rematch import refine_supported, rematch_keyframes
 from dynslam2d.slam.secondsearch import run_second_search
-from dynslam2d.types import Pose2D, Scan
+from dynslam2d.types import Pose2D, Scan, wrap_angle
 
 #: Submap grids kept built at a time (each a few MB).
 _SUBMAP_CACHE = 6
@@ -103,6 +103,21 @@ def _place_points(rel: np.ndarray, pts: list[np.ndarray]) -> np.ndarray:
     out[:, 0] = x + ct * px - st * py
     out[:, 1] = y + st * px + ct * py
     return out
+
+
+def _chain(a: np.ndarray, b: np.ndarray, e: np.ndarray) -> tuple[list[float], list[float]]:
+    """(z, x): z = a⁻¹ ⊕ b and x = e ⊕ z of the (3,) poses ``a``, ``b``, ``e`` (x m, y m, θ rad) as lists of floats,
+    with the float64 operations of :func:`~dynslam2d.slam.posegraph.relative` and
+    :func:`~dynslam2d.slam.posegraph.compose` (NumPy's cos and sin; sums and products in the same order), so
+    the values are the same bit for bit, without their arrays."""
+    ax, ay, at = a.tolist()
+    bx, by, bt = b.tolist()
+    ex, ey, et = e.tolist()
+    c, s = float(np.cos(at)), float(np.sin(at))
+    dx, dy = bx - ax, by - ay
+    zx, zy, zt = c * dx + s * dy, -s * dx + c * dy, wrap_angle(bt - at)
+    c, s = float(np.cos(et)), float(np.sin(et))
+    return [zx, zy, zt], [ex + c * zx - s * zy, ey + s * zx + c * zy, wrap_angle(et + zt)]
 
 
 @dataclass(slots=True)
@@ -267,10 +282,13 @@ class LoopCloser:
         self._places = (PlaceIndex(c.place_rings, c.place_sectors, c.place_max_range)
                         if c.far_search and c.far_rank == "descriptor" else None)
         self._query_desc: tuple[int, np.ndarray] | None = None  # (node, descriptor) of the latest keyframe
-        self._place_pts: dict[int, np.ndarray] = {}  # node → its returns for the descriptors (see _place_due)
+        # node → its returns for the descriptors (see _place_due): (keyframe, its removed beams at the keyframe) until
+        # a descriptor first reads them (_place_returns), then the returns (≤ 1 kB)
+        self._place_pts: dict[int, np.ndarray | tuple[Keyframe, np.ndarray]] = {}
         # stored places whose descriptor is not computed yet, ascending: computed when a ranking first needs the
-        # index (_place_flush); their keyframes' returns stay in _place_pts until then (≤ 1 kB per keyframe, less
-        # than the 5 kB of spectra each stored place then takes: never more memory than describing at once)
+        # index (_place_flush); their keyframes' entries stay in _place_pts until then (references to arrays the
+        # keyframe holds, or ≤ 1 kB of returns per keyframe, less than the 5 kB of spectra each stored place then
+        # takes: never more memory than describing at once)
         self._place_due: deque[int] = deque()
         self._place_lo = 0  # the oldest node whose returns _place_pts may still hold
         #: while a keyframe is added: (keyframe, its kept scan or None, its points once computed), see _points
@@ -355,13 +373,16 @@ class LoopCloser:
         c = self.config
         if self.keyframes:
             prev_node = len(self.keyframes) - 1
-            est_prev = self.graph.pose(prev_node)
-            z = relative(self.keyframes[-1].frontend, p)
-            node = self.graph.add_node(compose(est_prev, z))
-            sxy, sth = edge_sigmas(c, z, self._weak_since_kf, self._score_since_kf)
-            self.graph.add_edge(prev_node, node, z, diag_info(sxy, sth), robust=c.weak_robust and self._weak_since_kf)
-            self._edges.set((prev_node, node), sxy, (c.drift_rad_per_m * math.hypot(float(z[0]), float(z[1]))
-                                                     + (c.far_weak_turn if self._weak_since_kf else 0.0)))
+            g = self.graph
+            # the edge from the previous keyframe (z, front-end poses) and the new node's estimate (the previous
+            # node's estimate ⊕ z), in floats
+            z, est = _chain(self.keyframes[-1].frontend, p, g.poses[prev_node])
+            node = g.add_node(est)
+            weak = self._weak_since_kf
+            sxy, sth = edge_sigmas(c, z, weak, self._score_since_kf)
+            g.add_diag_edge(prev_node, node, z, sxy, sth, robust=c.weak_robust and weak)  # (z: a new list)
+            self._edges.set((prev_node, node), sxy,
+                            c.drift_rad_per_m * math.hypot(z[0], z[1]) + (c.far_weak_turn if weak else 0.0))
         else:
             node = self.graph.add_node(p)
         self.keyframes.append(kf)
@@ -371,11 +392,10 @@ class LoopCloser:
         self._weak_since_kf = False
         self._score_since_kf = math.inf
         if self._places is not None:
-            # the keyframe's returns (a few, float32) while later descriptors still need them
-            pts, _ = self._points(kf)
-            if pts.shape[0] > _PLACE_POINTS:
-                pts = pts[even_indices(pts.shape[0], _PLACE_POINTS)]
-            self._place_pts[node] = pts.astype(np.float32)
+            # what the keyframe's returns for later descriptors are made of: the keyframe and its removed beams as
+            # they are now (drop_beams may replace kf.removed later); the returns themselves are computed when a
+            # descriptor first needs them (_place_returns): most keyframes of a run never rank far places
+            self._place_pts[node] = (kf, kf.removed)
             if node % c.place_every == 0:
                 # described lazily (_place_flush), from these same returns and front-end poses: most keyframes
                 # of a run never rank far places, and the descriptor is most of a keyframe's cost (docs/slam.md)
@@ -594,11 +614,30 @@ class LoopCloser:
         nodes = [k for k in range(max(node - c.place_keyframes + 1, 0), node + 1) if k in self._place_pts]
         base = self.keyframes[node].frontend
         rel = relative(base, np.array([self.keyframes[k].frontend for k in nodes]).reshape(-1, 3))
-        desc = self._places.describe(_place_points(rel, [self._place_pts[k] for k in nodes]))
+        desc = self._places.describe(_place_points(rel, [self._place_returns(k) for k in nodes]))
         if store:
             self._places.add(node, desc)
         self._query_desc = (node, desc)
         self.stats["place_ms"] += (time.perf_counter() - t0) * 1e3
+
+    def _place_returns(self, node: int) -> np.ndarray:
+        """(n, 2) float32 returns of keyframe ``node`` for the place descriptors (laser frame, m; at most
+        _PLACE_POINTS, evenly sub-sampled): the kept beams' points of its scan with the beams that were removed when
+        it was added (not those :meth:`drop_beams` marked since), computed at the first call and then kept in
+        ``_place_pts`` until :meth:`_place_drop` frees them."""
+        v = self._place_pts[node]
+        if isinstance(v, np.ndarray):
+            return v
+        kf, rm = v
+        cur = self._kf_points
+        if cur is not None and cur[0] is kf:  # the keyframe being added: its points are shared with its query
+            pts, _ = self._points(kf)
+        else:  # (Keyframe.kept with the removed beams of that time)
+            pts, _ = self._scan_points(kf.scan.without(rm) if rm.size and rm.any() else kf.scan)
+        if pts.shape[0] > _PLACE_POINTS:
+            pts = pts[even_indices(pts.shape[0], _PLACE_POINTS)]
+        pts = self._place_pts[node] = pts.astype(np.float32)
+        return pts
 
     def _place_drop(self, node: int) -> None:
         """Free the returns no descriptor needs any more: those before the window (``place_keyframes``) of the

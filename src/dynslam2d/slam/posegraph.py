@@ -99,12 +99,28 @@ class PoseGraph:
     def __init__(self) -> None:
         self._p = np.zeros((16, 3))  # capacity grows by doubling; rows [:_n] are the nodes
         self._n = 0
-        self.edges: list[Edge] = []
+        self._edges: list[Edge] = []
+        #: edges given by :meth:`add_diag_edge` and not built yet, after those of ``_edges``
+        self._pending: list[tuple[int, int, object, float, float, bool]] = []
 
     # ---- building -----------------------------------------------------------------------
     @property
     def n_nodes(self) -> int:
         return self._n
+
+    @property
+    def edges(self) -> list[Edge]:
+        """The edges in the order they were added (those of :meth:`add_diag_edge` built at the first read)."""
+        if self._pending:
+            self._build_pending()
+        return self._edges
+
+    def _build_pending(self) -> None:
+        for i, j, z, sxy, sth, robust in self._pending:
+            info = diag_info(sxy, sth)
+            self._edges.append(Edge(i, j, np.array(z, dtype=np.float64).reshape(3), 0.5 * (info + info.T), False,
+                                    robust=robust))
+        self._pending = []
 
     @property
     def poses(self) -> np.ndarray:
@@ -133,12 +149,25 @@ class PoseGraph:
     def add_edge(self, i: int, j: int, z: tuple[float, float, float] | np.ndarray, info: np.ndarray,
                  loop: bool = False, robust: bool = False) -> int:
         """Append the constraint x_j = x_i ⊕ z with information ``info`` (3×3); returns its index."""
-        if not (0 <= i < self.n_nodes and 0 <= j < self.n_nodes) or i == j:
-            raise ValueError(f"add_edge: bad node ids {i}, {j} (graph has {self.n_nodes} nodes)")
+        n = self._n
+        if not (0 <= i < n and 0 <= j < n) or i == j:
+            raise ValueError(f"add_edge: bad node ids {i}, {j} (graph has {n} nodes)")
         info = np.asarray(info, dtype=np.float64).reshape(3, 3)
-        self.edges.append(Edge(int(i), int(j), np.asarray(z, dtype=np.float64).reshape(3).copy(),
-                               0.5 * (info + info.T), bool(loop), robust=bool(robust)))
-        return len(self.edges) - 1
+        edges = self.edges
+        edges.append(Edge(int(i), int(j), np.array(z, dtype=np.float64).reshape(3),  # (a copy)
+                          0.5 * (info + info.T), bool(loop), robust=bool(robust)))
+        return len(edges) - 1
+
+    def add_diag_edge(self, i: int, j: int, z: tuple[float, float, float] | list[float] | np.ndarray,
+                      sigma_xy: float, sigma_theta: float, robust: bool = False) -> int:
+        """``add_edge(i, j, z, diag_info(sigma_xy, sigma_theta), robust=robust)`` (no loop edge), its :class:`Edge`
+        built when :attr:`edges` is next read (the same edge, at the same index; ``z`` must not change until then):
+        the loop closer adds one per keyframe and reads the edges only to optimise. Returns its index."""
+        n = self._n
+        if not (0 <= i < n and 0 <= j < n) or i == j:
+            raise ValueError(f"add_diag_edge: bad node ids {i}, {j} (graph has {n} nodes)")
+        self._pending.append((int(i), int(j), z, sigma_xy, sigma_theta, bool(robust)))
+        return len(self._edges) + len(self._pending) - 1
 
     # ---- evaluation ---------------------------------------------------------------------
     def chi2(self, poses: np.ndarray | None = None) -> np.ndarray:
@@ -352,7 +381,10 @@ def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def diag_info(sigma_xy: float, sigma_theta: float) -> np.ndarray:
     """Information matrix diag(1/σ_xy², 1/σ_xy², 1/σ_θ²) (m, rad)."""
-    return np.diag([1.0 / sigma_xy**2, 1.0 / sigma_xy**2, 1.0 / sigma_theta**2])
+    m = np.zeros((3, 3))
+    m[0, 0] = m[1, 1] = 1.0 / sigma_xy**2
+    m[2, 2] = 1.0 / sigma_theta**2
+    return m
 
 
 __all__ = ["Edge", "KERNELS", "OptimiseReport", "PoseGraph", "compose", "diag_info", "relative"]
