@@ -348,3 +348,44 @@ def test_ray_ends_equal_the_pose_transform_and_numpy_extremes(seed: int) -> None
     box = ray_ends(hits, clear, math.cos(pose.theta), math.sin(pose.theta), pose.x, pose.y)[2]
     want = pose.transform_points(np.vstack((hits, clear)))
     assert np.isnan(box).all() and np.isnan(want.min(axis=0)).all() and np.isnan(want.max(axis=0)).all()
+
+
+# --------------------------------------------------------------------------- level arrays in huge pages
+
+@pytest.mark.parametrize(("shape", "fill", "dtype"), [((30, 40), 0.5, np.float32), ((700, 800), -1, np.int32),
+                                                      ((700, 801), 0.0, np.float32), ((1300, 900), 0.5, np.float32)])
+def test_level_arrays_are_filled_and_large_ones_start_on_a_huge_page(shape, fill, dtype) -> None:
+    import mmap
+
+    from dynslam2d.slam import grid
+
+    a = grid.level_array(shape, fill, dtype)
+    assert a.shape == shape and a.dtype == dtype and a.flags.c_contiguous and a.flags.writeable
+    assert np.all(a == fill)
+    big = a.nbytes >= 2 << 20
+    if big and hasattr(mmap, "MADV_HUGEPAGE"):
+        assert a.ctypes.data % (2 << 20) == 0  # (its whole 2 MiB pages are the ones advised)
+    a[-1, -1] = 7  # the last cell is the array's own (the mapping holds the array)
+    assert a[-1, -1] == 7 and a.sum() == fill * (a.size - 1) + 7
+
+
+def test_growth_across_the_huge_page_size_gives_the_plain_arrays_maps(monkeypatch) -> None:
+    from dynslam2d.slam import grid
+
+    def scans(m: MultiResMap) -> None:
+        for k in range(6):  # scans moving out: the finest level grows past 2 MiB per array (0.02 m cells)
+            o = np.array([8.0 * k, 3.0 * k])
+            ang = np.linspace(-math.pi, math.pi, 181)[:-1]
+            hits = np.c_[np.cos(ang), np.sin(ang)] * (6.0 + 2.0 * np.sin(3 * ang))[:, None]
+            m.integrate(Pose2D(float(o[0]), float(o[1]), 0.3 * k), hits)
+
+    m = MultiResMap(0.02, 3, L_FREE, L_OCC)
+    scans(m)
+    assert m.levels[0].logodds.nbytes >= 2 << 20
+    monkeypatch.setattr(grid, "level_array", lambda shape, fill, dtype: np.full(shape, fill, dtype=dtype))
+    ref = MultiResMap(0.02, 3, L_FREE, L_OCC)
+    scans(ref)
+    for a, b in zip(m.levels, ref.levels):
+        assert (a.i0, a.j0, a.shape) == (b.i0, b.j0, b.shape)
+        for name in ("logodds", "prob", "uidx"):
+            assert np.array_equal(getattr(a, name).view(np.int32), getattr(b, name).view(np.int32))
