@@ -16,7 +16,6 @@ world/r_k − j0)``: continuous, in cells, with array cell (col, row) centred at
 from __future__ import annotations
 
 import math
-import mmap
 
 import numpy as np
 
@@ -36,36 +35,6 @@ _NO_CLEAR = np.zeros((0, 2))
 #: the probability memo of the ray kernel (raycast._prob), shared by every map of the process: an entry depends on
 #: the log-odds value alone, and the kernel holds the GIL, so no two calls use it at once (48 KiB)
 _PROB_MEMO = new_prob_memo()
-
-
-#: a transparent huge page (x86-64 Linux), bytes
-_HUGE_PAGE = 2 << 20
-_HUGE_ADVICE = getattr(mmap, "MADV_HUGEPAGE", None)
-
-
-def level_array(shape: tuple[int, int], fill: float, dtype: type) -> np.ndarray:
-    """A C-contiguous (H, W) array filled with ``fill``, for a level's per-cell field.
-
-    Arrays of at least one 2 MiB page live in an anonymous mapping aligned to 2 MiB whose whole pages are advised to
-    the kernel's transparent huge pages (``madvise(MADV_HUGEPAGE)``; the tail stays in 4 KiB pages, so the memory
-    held is the array's): the ray walk of a map update steps across rows, a page every step or two, and the TLB
-    misses of 4 KiB pages are part of its cost (docs/speed.md "Map update, pass 13"). numpy advises huge pages
-    itself only for arrays of 4 MiB or more. Elsewhere (no ``MADV_HUGEPAGE``, small arrays) an ordinary array."""
-    h, w = shape
-    nbytes = h * w * np.dtype(dtype).itemsize
-    if _HUGE_ADVICE is None or nbytes < _HUGE_PAGE:
-        return np.zeros(shape, dtype=dtype) if fill == 0 else np.full(shape, fill, dtype=dtype)
-    mm = mmap.mmap(-1, nbytes + _HUGE_PAGE, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
-    raw = np.frombuffer(mm, dtype=np.uint8)
-    off = (-raw.ctypes.data) % _HUGE_PAGE
-    try:
-        mm.madvise(_HUGE_ADVICE, off, nbytes // _HUGE_PAGE * _HUGE_PAGE)
-    except OSError:  # (a kernel without transparent huge pages: ordinary pages)
-        pass
-    out = raw[off:off + nbytes].view(dtype).reshape(shape)
-    if fill != 0:  # (an anonymous mapping starts zeroed)
-        out.fill(fill)
-    return out
 
 
 class MapTooLargeError(RuntimeError):
@@ -197,7 +166,7 @@ class GridLevel:
         # level plus one new array, not old and new levels side by side (MIT CSAIL's last growth of the finest
         # level: 47 instead of 67 MiB; docs/speed.md "Memory, eighth pass").
         for name, fill, dtype in _LEVEL_ARRAYS:
-            new = level_array((nh, nw), fill, dtype)
+            new = np.zeros((nh, nw), dtype=dtype) if fill == 0 else np.full((nh, nw), fill, dtype=dtype)
             if w > 0:
                 new[r0:r0 + h, c0:c0 + w] = getattr(self, name)
             setattr(self, name, new)
