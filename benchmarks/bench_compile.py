@@ -8,8 +8,10 @@ events, the CPU time each function spends in numba's compiler excluding the func
     PYTHONPATH=src python benchmarks/bench_compile.py --trace [--src src]
 
 Prints the process CPU of the whole run, the compile CPU summed over functions, their count (and the number of
-compilations: numba's helpers such as ``np.empty``'s are compiled once per signature) and the largest ones; this
-profile runs with the background compile off (``DYNSLAM2D_COMPILE_WORKER=0``), so it counts all the compile work.
+compilations: numba's helpers such as ``np.empty``'s are compiled once per signature), the time in Python's cyclic
+garbage collector (``gc.callbacks``; it lands on whichever function is compiling), the peak RSS and the largest
+functions; this profile runs with the background compile off (``DYNSLAM2D_COMPILE_WORKER=0``), so it counts all
+the compile work.
 
 ``--wait`` instead measures what a user waits for: the README's first command from an empty cache as the command
 line runs it (the background compile on where there is a second CPU: do not pin it to one core with taskset),
@@ -65,8 +67,19 @@ class Exclusive(event.Listener):
         if stack:
             stack[-1][2] = now
 event.register("numba:compile", Exclusive())
+import gc, resource
+collector, gc_t0 = [0.0, 0, 0], [0.0]  # the cyclic garbage collector: CPU s, collections, full ones
+def _gc(phase, info):
+    if phase == "start":
+        gc_t0[0] = time.process_time()
+    else:
+        collector[0] += time.process_time() - gc_t0[0]
+        collector[1] += 1
+        collector[2] += info["generation"] == 2
+gc.callbacks.append(_gc)
 """ + RUN_FIRST_COMMAND + r"""
-print(json.dumps({"process_cpu": time.process_time() - c0, "per": excl, "compilations": n[0]}))
+print(json.dumps({"process_cpu": time.process_time() - c0, "per": excl, "compilations": n[0], "gc": collector,
+                  "rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
 """
 
 
@@ -187,6 +200,9 @@ def main() -> None:
     print(f"process CPU {data['process_cpu']:.1f} s; compile CPU {sum(v for _, v in per):.1f} s "
           f"in {len(per)} functions ({data['compilations']} compilations: a function compiled for several "
           f"signatures counts once per signature)")
+    if "gc" in data:
+        print(f"garbage collector {data['gc'][0]:.1f} s CPU in {data['gc'][1]} collections ({data['gc'][2]} full; "
+              f"within the figures above); peak RSS {data['rss_mib']:.0f} MiB; load average {os.getloadavg()[0]:.2f}")
     for name, s in per[:args.top]:
         print(f"{s:6.2f} s  {name}")
 

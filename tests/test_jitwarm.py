@@ -148,11 +148,31 @@ def test_run_starts_the_background_process_only_on_a_cold_cache(monkeypatch):
 
     started = []
     monkeypatch.setattr(jitcache, "lean_numba_compile", lambda: False)  # (numba of this test process left as it is)
+    monkeypatch.setattr(jitcache, "lean_compile_gc", lambda: started.append("gc") or False)  # (nor its collector)
     monkeypatch.setattr(jitwarm, "start_background_compile", lambda: started.append(1) or "started")
     for cached, want in ((40, (False, None)), (0, (True, "started"))):
         monkeypatch.setattr(jitcache, "kernel_cache_state", lambda c=cached: jitcache.KernelCacheState(40, c))
         assert cli._cold_start() == want
-    assert started == [1]
+    assert started == ["gc", 1]  # (the collector's thresholds changed on the cold cache only)
+
+
+def test_lean_compile_gc_raises_generation_0_only_from_cpythons_defaults():
+    """jitcache.lean_compile_gc: CPython's default thresholds become the compile's; thresholds the program has set
+    are left as they are."""
+    import gc
+
+    from dynslam2d import jitcache
+
+    before = gc.get_threshold()
+    try:
+        gc.set_threshold(700, 10, 10)
+        assert jitcache.lean_compile_gc()
+        assert gc.get_threshold() == jitcache.COMPILE_GC_THRESHOLD == (20000, 10, 10)
+        assert not jitcache.lean_compile_gc()  # (no longer the defaults)
+        gc.set_threshold(5000, 5, 5)
+        assert not jitcache.lean_compile_gc() and gc.get_threshold() == (5000, 5, 5)
+    finally:
+        gc.set_threshold(*before)
 
 
 #: A small manifest kernel for the board tests (compiles in well under a second).

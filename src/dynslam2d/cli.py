@@ -965,7 +965,8 @@ def _cold_start() -> tuple[bool, Any]:
     """Whether numba must compile the kernels (a first run, or the first after an update), and then the
     background compile of the late kernels on a second CPU (:mod:`dynslam2d.jitwarm`; None when not
     started). Loads the pipeline's kernel modules to tell, after making numba's compiles leaner
-    (:func:`dynslam2d.jitcache.lean_numba_compile`: about a tenth less cold compile, the same kernels)."""
+    (:func:`dynslam2d.jitcache.lean_numba_compile`: about a tenth less cold compile, the same kernels); on a cold
+    cache also Python's garbage collector (:func:`dynslam2d.jitcache.lean_compile_gc`)."""
     from dynslam2d.jitcache import lean_numba_compile
 
     lean_numba_compile()
@@ -974,6 +975,10 @@ def _cold_start() -> tuple[bool, Any]:
     from dynslam2d.jitwarm import start_background_compile
 
     cold = kernel_cache_state().cold
+    if cold:
+        from dynslam2d.jitcache import lean_compile_gc
+
+        lean_compile_gc()  # fewer collections while numba compiles (about a sixth of the compile CPU)
     return cold, start_background_compile() if cold else None
 
 

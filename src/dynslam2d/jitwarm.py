@@ -294,11 +294,12 @@ def main(argv: list[str] | None = None) -> None:
     parent = int(args[0]) if args else None
     if parent is not None and not _leave_with_parent(parent):
         return
-    from dynslam2d.jitcache import lean_numba_compile, load_blas_alone, plain_numba_errors
+    from dynslam2d.jitcache import lean_compile_gc, lean_numba_compile, load_blas_alone, plain_numba_errors
 
     plain_numba_errors()
     load_blas_alone()
     lean_numba_compile()
+    lean_compile_gc()
     from dynslam2d.jitmanifest import KERNELS
 
     board = CompileBoard(args[1], "bg") if len(args) > 1 else None
