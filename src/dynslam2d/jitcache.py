@@ -203,8 +203,9 @@ def lean_compile_gc() -> bool:
     (one core, background compile off) makes about 3 900 collections, 25 of them full ones that walk every
     object alive (0.2–0.3 s each): 6–7 s of CPU, about a sixth of its compile. Collecting generation 0 every
     20 000 allocations instead of every 700 lets most of numba's temporaries die before a collection would
-    promote them, so the old generation grows slowly: about 120 collections, one of them full, ≈ 2.5 s, at the
-    same peak memory (docs/speed.md, "Cold compile pass 4"). Nothing a kernel computes changes.
+    promote them, so the old generation grows slowly: about 120–200 collections, one of them full, ≈ 2.5 s, for
+    about 20 MB more peak memory while compiling (494–500 MB against 475 MB; docs/speed.md, "Cold compile pass 4").
+    Nothing a kernel computes changes.
 
     The command line calls this when the kernel cache is cold (a warm run keeps CPython's defaults), and so does
     its background compile; a library user's process is left as it is. Leaves thresholds the program has
