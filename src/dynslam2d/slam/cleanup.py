@@ -604,7 +604,7 @@ class VisibilityCounter:
                clear: np.ndarray, ox: float, oy: float, core: float) -> None:
         """One scan's beams (:func:`_scan_geometry`, world cell units; laser at (ox, oy)) into the tiles: a free
         pool row for every beam first (the hits), more when the passes need them (:func:`_count_beams`)."""
-        self._reserve_tiles(ex.shape[0])
+        self._reserve_tiles(ex.shape[0])  # (each beam's hit allocates at most one tile)
         resume = False
         while True:
             self._mask, self._n_tiles, full = _count_beams(
@@ -617,12 +617,13 @@ class VisibilityCounter:
             resume = True
 
     def _reserve_tiles(self, free: int) -> None:
-        """At least ``free`` unused rows in the tile pool: it grows by a quarter (and ``free`` rows), copying the
-        rows in use."""
-        cap, n = self._pool.shape[0], self._n_tiles
+        """At least ``free`` unused rows in the tile pool, or a row for every tile of the extent: it grows by a
+        quarter (and ``free`` rows, never past the extent's tiles), copying the rows in use."""
+        cap, n, tiles = self._pool.shape[0], self._n_tiles, self._table.size
+        free = min(free, tiles - n)
         if cap - n >= free:
             return
-        pool = np.zeros((n + max(n >> 2, free, 64), _TILE * _TILE, 4), dtype=np.uint16)
+        pool = np.zeros((min(n + max(n >> 2, free, 64), tiles), _TILE * _TILE, 4), dtype=np.uint16)
         pool[:n] = self._pool[:n]
         self._pool = pool
 
