@@ -76,18 +76,13 @@ def _events(counter: KeepingCounter, cells: np.ndarray) -> tuple[list[list[int]]
     hits: list[list[int]] = [[] for _ in range(len(cells))]
     passes: list[list[int]] = [[] for _ in range(len(cells))]
     for k, (scan, pose, removed) in enumerate(counter.kept):
-        scratch._cells[...] = 0
-        scratch._last[...] = 0
-        scratch.scans = 0
+        scratch.clear()
         scratch.add(scan, pose, removed)
-        h, w = scratch._cells.shape[:2]
-        c, r = cells[:, 0] - scratch.i0, cells[:, 1] - scratch.j0
-        ok = (c >= 0) & (c < w) & (r >= 0) & (r < h)
-        for m in np.nonzero(ok)[0]:
-            if scratch._cells[r[m], c[m], 0]:
-                hits[m].append(k)
-            elif scratch._cells[r[m], c[m], 1]:
-                passes[m].append(k)
+        got = scratch.at(cells[:, 0], cells[:, 1])
+        for m in np.nonzero(got[:, 0])[0]:
+            hits[m].append(k)
+        for m in np.nonzero((got[:, 0] == 0) & (got[:, 1] != 0))[0]:
+            passes[m].append(k)
     return hits, passes
 
 

@@ -74,7 +74,25 @@ def _reference_count(counts, last, scan_id, ox, oy, hx, hy, cx, cy, core):  # pr
 
 
 class _ReferenceCounter(VisibilityCounter):
-    """:meth:`VisibilityCounter.add` as it was: masked numpy copies into the reference kernel."""
+    """:meth:`VisibilityCounter.add` as it was: masked numpy copies into the reference kernel, on dense count
+    arrays over the counted extent (grown as the tiled counter grows its extent)."""
+
+    def __init__(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        super().__init__(*args, **kwargs)
+        self._cells = np.zeros((0, 0, 3), dtype=np.uint16)
+        self._last = np.zeros((0, 0), dtype=np.uint16)
+
+    def _ensure(self, imin, jmin, imax, jmax):  # type: ignore[no-untyped-def]
+        i0, j0, (h, w) = self.i0, self.j0, self.shape
+        if not super()._ensure(imin, jmin, imax, jmax):
+            return False
+        if self.shape != (h, w):
+            cells = np.zeros((*self.shape, 3), dtype=np.uint16)
+            last = np.zeros(self.shape, dtype=np.uint16)
+            cells[j0 - self.j0:j0 - self.j0 + h, i0 - self.i0:i0 - self.i0 + w] = self._cells
+            last[j0 - self.j0:j0 - self.j0 + h, i0 - self.i0:i0 - self.i0 + w] = self._last
+            self._cells, self._last = cells, last
+        return True
 
     def add(self, scan, pose, removed=None):  # type: ignore[no-untyped-def]
         res = self.resolution
@@ -98,10 +116,13 @@ def _assert_same(feed) -> VisibilityCounter:  # type: ignore[no-untyped-def]
     for scan, pose, removed in feed:
         new.add(scan, pose, removed)
         ref.add(scan, pose, removed)
-    assert (new.i0, new.j0, new._cells.shape) == (ref.i0, ref.j0, ref._cells.shape)
-    for a, b in ((new.hits, ref.hits), (new.through, ref.through), (new.switches, ref.switches),
-                 (new._last, ref._last)):
+    assert (new.i0, new.j0, new.shape) == (ref.i0, ref.j0, ref._last.shape)
+    for a, b in ((new.hits, ref._cells[:, :, 0]), (new.through, ref._cells[:, :, 1]),
+                 (new.switches, ref._cells[:, :, 2]), (new.last_touch(), ref._last)):
         np.testing.assert_array_equal(a, b)
+    # the tiles hold only where beams ended or passed: every allocated tile has a counted cell
+    assert new._n_tiles < new._table.size and new.resident_bytes <= new._table.size * 2048 + new._table.nbytes
+    assert all(new._pool[t].any() for t in range(new._n_tiles))
     return new
 
 

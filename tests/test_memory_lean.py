@@ -495,3 +495,36 @@ def test_fixed_mmap_threshold_returns_freed_arrays_to_the_os() -> None:
                                        check=True, env=env).stdout) for flag in ("0", "1")}
     assert kept["1"] < 4.0, kept  # MiB still resident after freeing 25 MiB of arrays
     assert kept["0"] > 16.0, kept  # (the default keeps them: the test measures what the setting changes)
+
+
+def test_released_results_draw_without_either_float64_map(tmp_path, monkeypatch) -> None:
+    """With ``release=True`` neither float64 map (the online one, the cleaned one drawn in map.png) is alive when
+    matplotlib draws map.png or tracks.png: the figures get grey indices (issue 13 item 3; a reference in
+    ``write_outputs`` kept the drawn map through both figures)."""
+    import gc
+    import weakref
+
+    import dynslam2d.viz.figures as F
+    from dynslam2d.results import write_outputs
+    from dynslam2d.slam.cleanup import CleanupRecorder
+
+    scans, meta = _loop_run()
+    cfg = Config()
+    rec = CleanupRecorder(cfg.clean, cfg.slam, keep_counts=False)
+    res = run(ScanList(scans, meta), cfg, observers=[rec])
+    assert rec.result is not None
+    maps = [weakref.ref(res.grid.prob), weakref.ref(rec.result.grid.prob)]
+    alive: dict[str, int] = {}
+
+    def spy(name, fn):  # type: ignore[no-untyped-def]
+        def drawn(*a, **k):  # type: ignore[no-untyped-def]
+            gc.collect()
+            alive[name] = sum(m() is not None for m in maps)
+            return fn(*a, **k)
+        return drawn
+
+    monkeypatch.setattr(F, "plot_map", spy("map.png", F.plot_map))
+    monkeypatch.setattr(F, "plot_tracks", spy("tracks.png", F.plot_tracks))
+    cleaned, rec.result = rec.result, None
+    write_outputs(res, tmp_path, cleaned=cleaned, release=True)
+    assert alive == {"map.png": 0, "tracks.png": 0}

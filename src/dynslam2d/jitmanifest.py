@@ -77,9 +77,10 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),
     ('dynslam2d.slam.cleanup._count_beams',
-     "(Array(uint16, 3, 'C'), Array(uint16, 2, 'C'), int64, float64, float64, Array(float64, 1, 'C'), "
-     "Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
-     "Array(bool, 1, 'C'), int64, int64, float64, Array(uint8, 1, 'C'),)"),
+     "(Array(int32, 2, 'C'), Array(uint16, 3, 'C'), int64, int64, int64, int64, float64, float64, "
+     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), "
+     "Array(float64, 1, 'C'), Array(bool, 1, 'C'), int64, int64, int64, int64, float64, Array(uint8, 1, "
+     "'C'), bool,)"),
     ('dynslam2d.slam.matcher.match_pyramid',
      "(Array(float32, 2, 'C'), Array(float32, 2, 'C'), Array(float32, 2, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 2, 'C'), Array(float64, 1, 'C'), int64, int64, bool, bool, float64, float64, "

@@ -216,6 +216,7 @@ def write_outputs(
     final_lo = cleaned.logodds if cleaned is not None and cleaned.logodds is not None else run.logodds
     ypath, ppath = write_map(out / "map.yaml", final_grid)
     paths["map.yaml"], paths["map.pgm"] = ypath, ppath
+    del final_grid  # (a reference here kept the drawn map through the figures, which let it go when done)
     with atomic_path(out / "map_logodds.npy") as tmp:
         with tmp.open("wb") as fh:
             np.save(fh, np.asarray(final_lo, dtype=np.float32))  # (no copy of a float32 map)

@@ -47,9 +47,11 @@ obstacle's depth before the measured range (Thrun, Burgard & Fox, Probabilistic 
 depth of a one-cell surface seen at incidence α.
 
 Memory: the pass never keeps scans. :class:`VisibilityCounter` is fed scan by scan
-during the run (:class:`CleanupRecorder` is a pipeline observer) and holds three uint16
-count grids and one uint16 grid of each cell's latest touch (8 bytes per cell, growing with
-the scans, never beyond the SLAM's ``max_map_memory_mb``; counts saturate at 65535 scans).
+during the run (:class:`CleanupRecorder` is a pipeline observer) and holds, per cell, three uint16
+counts and one uint16 latest touch (8 bytes per cell; counts saturate at 65535 scans), in
+16 × 16-cell tiles allocated where a beam first ends or passes: the counted extent grows with the
+scans as a dense grid would (never beyond the SLAM's ``max_map_memory_mb``), but only the tiles
+that rays reach take memory (15 % of MIT CSAIL's extent; docs/speed.md, "Memory, ninth pass").
 Hector-style SLAM never changes a pose after its scan (no loop closure), so the pose a scan
 had when it was processed is its pose in the final trajectory; counting during the run is the same as counting after it.
 
@@ -79,8 +81,14 @@ ERASED_PROBABILITY = 0.1
 RESTORED_PROBABILITY = 0.9
 
 
-#: Channels of the counter's (H, W, 3) uint16 count array: one 6-byte group per visited cell.
-_HIT, _THROUGH, _SWITCH = 0, 1, 2
+#: Channels of a counted cell (uint16 each): hits, passes, switches and the latest touch (:func:`_count_scan`).
+_HIT, _THROUGH, _SWITCH, _LAST = 0, 1, 2, 3
+
+#: Tiles of the counter: 2**_TILE_SHIFT cells a side, aligned on absolute cells (tile (a, b) holds cells
+#: i = 16·a … 16·a + 15, j = 16·b … 16·b + 15), each (256, 4) uint16 in the counter's tile pool (2 KiB).
+_TILE_SHIFT = 4
+_TILE = 1 << _TILE_SHIFT
+_TILE_MASK = _TILE - 1
 
 #: Largest count a channel holds (uint16); counts saturate there instead of wrapping. A cell
 #: counted by more than 65535 scans (a robot parked for hours in front of a wall) keeps 65535:
@@ -107,19 +115,66 @@ def _count_scan(counts: np.ndarray, last: np.ndarray, scan_id: int, ox: float, o
     hit and pass in each cell's sequence of scans (the kind of its latest touch is its state).
 
     The kernel :meth:`VisibilityCounter.add` runs (:func:`_count_beams`) with every beam kept and clearing and no
-    offset: the counting rule in array coordinates, for tests and callers that hold the endpoints already."""
-    _count_beams(counts, last, scan_id, float(ox), float(oy), hx, hy, np.ones(hx.shape[0], dtype=np.bool_), cx, cy,
-                 np.ones(cx.shape[0], dtype=np.bool_), 0, 0, float(core), np.zeros(0, dtype=np.uint8))
+    offset, on tiles made from the dense arrays and written back: the counting rule in array coordinates, for
+    tests and callers that hold the endpoints already."""
+    h, w = last.shape
+    table, pool, n = _tiles_of(counts, last)  # every tile allocated: no pool row is needed
+    _count_beams(table, pool, n, 0, 0, scan_id, float(ox), float(oy), hx, hy, np.ones(hx.shape[0], dtype=np.bool_),
+                 cx, cy, np.ones(cx.shape[0], dtype=np.bool_), 0, 0, h, w, float(core), np.zeros(0, dtype=np.uint8),
+                 False)
+    dense = _dense_of(table, pool, 0, 0, h, w)
+    counts[...] = dense[:, :, :3]
+    last[...] = dense[:, :, _LAST]
+
+
+def _tiles_of(counts: np.ndarray, last: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """The tile table and pool (:class:`VisibilityCounter`) of dense arrays ``counts`` (H, W, 3) / ``last`` (H, W)
+    whose cell (0, 0) is absolute cell (0, 0): every tile of the arrays allocated, in row order."""
+    h, w = last.shape
+    th, tw = -(-h // _TILE), -(-w // _TILE)
+    full = np.zeros((th * _TILE, tw * _TILE, 4), dtype=np.uint16)
+    full[:h, :w, :3] = counts
+    full[:h, :w, _LAST] = last
+    pool = np.ascontiguousarray(full.reshape(th, _TILE, tw, _TILE, 4).transpose(0, 2, 1, 3, 4)).reshape(
+        th * tw, _TILE * _TILE, 4)
+    return np.arange(th * tw, dtype=np.int32).reshape(th, tw), pool, th * tw
+
+
+def _dense_of(table: np.ndarray, pool: np.ndarray, r0: int, c0: int, h: int, w: int) -> np.ndarray:
+    """(h, w, 4) uint16 of the cells rows r0 … r0 + h − 1, cols c0 … c0 + w − 1 in the tiles' cell units (tile
+    (0, 0) of ``table`` starts at cell (0, 0); the range may pass the table's edges), channels as
+    :data:`_HIT` … :data:`_LAST`: zeros where no tile is allocated."""
+    out = np.zeros((h, w, 4), dtype=np.uint16)
+    if h <= 0 or w <= 0:
+        return out
+    tr0, tc0 = max(r0 >> _TILE_SHIFT, 0), max(c0 >> _TILE_SHIFT, 0)
+    tr1 = min((r0 + h - 1) >> _TILE_SHIFT, table.shape[0] - 1)
+    tc1 = min((c0 + w - 1) >> _TILE_SHIFT, table.shape[1] - 1)
+    for tr, tc in zip(*np.nonzero(table[tr0:tr1 + 1, tc0:tc1 + 1] >= 0)):
+        tr, tc = int(tr) + tr0, int(tc) + tc0
+        tile = pool[table[tr, tc]].reshape(_TILE, _TILE, 4)
+        y0, x0 = tr * _TILE - r0, tc * _TILE - c0  # the tile's first cell in the output
+        ya, xa = max(y0, 0), max(x0, 0)
+        yb, xb = min(y0 + _TILE, h), min(x0 + _TILE, w)
+        out[ya:yb, xa:xb] = tile[ya - y0:yb - y0, xa - x0:xb - x0]
+    return out
 
 
 @njit(cache=True)
-def _count_beams(counts, last, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0, j0, core,
-                 mask):  # pragma: no cover - numba
-    """:func:`_count_scan` of the beams as :func:`_scan_geometry` gives them (world cell units): hits at
-    ``(ex, ey)[kept]``, clearing segments to ``(cx, cy)[clear]``, all shifted by the array's first cell
-    ``(i0, j0)`` here (the same float64 subtractions numpy's ``ex[kept] - i0`` does) instead of in four
-    masked numpy copies per scan. ``(ox, oy)``: the laser in array cell units. Returns the scratch ``mask``
-    (uint8, all zero; a larger one when the scan's box needs it) for the next scan.
+def _count_beams(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0, j0, h, w, core,
+                 mask, resume):  # pragma: no cover - numba
+    """:func:`_count_scan` of the beams as :func:`_scan_geometry` gives them (world cell units) into the counter's
+    tiles: hits at ``(ex, ey)[kept]``, clearing segments to ``(cx, cy)[clear]``, all shifted by the counted
+    extent's first cell ``(i0, j0)`` here (the same float64 subtractions numpy's ``ex[kept] - i0`` does) instead
+    of in four masked numpy copies per scan; cells outside the extent's ``h`` × ``w`` cells are dropped.
+    ``(ox, oy)``: the laser in extent cell units. ``table`` (TH, TW) int32: the pool row of each tile (−1: none
+    yet), tile (0, 0) being absolute tile ``(ti0, tj0)``; ``pool`` (cap, 256, 4) uint16 with ``n_tiles`` rows in
+    use; a tile gets the next row when a beam first touches one of its cells. The pool must have a free row for
+    every kept beam (the hits); when the passes need more, the kernel stops with the rest of the passes still
+    marked in ``mask`` and returns ``full`` True: called again with a larger pool and ``resume`` True it counts
+    them (the marked cells left; hits and marking are not done again).
+    Returns the scratch ``mask`` (uint8, all zero when not ``full``; a larger one when the scan's box needs it)
+    for the next scan, the rows in use and ``full``.
 
     The passes in two steps, with the counts of :func:`_count_scan`: the rays first mark the cells they pass
     in ``mask`` (one byte per cell of the scan's bounding box, which stays in the first cache levels), then the
@@ -127,15 +182,34 @@ def _count_beams(counts, last, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0,
     the set of cells hit and the set passed, so the order does not matter; walking the rays straight into the
     counts touched a new cache line of both arrays at every step of a ray running along y, and about two in three
     steps land on a cell an earlier ray of the scan already passed."""
-    h = counts.shape[0]
-    w = counts.shape[1]
     fi0 = float(i0)
     fj0 = float(j0)
-    for k in range(ex.shape[0]):
-        if kept[k]:
-            _count_hit(counts, last, scan_id, ex[k] - fi0, ey[k] - fj0)
+    if not resume:
+        hit_code = 2 * scan_id + 1
+        for k in range(ex.shape[0]):
+            if kept[k]:
+                ix = int(math.floor(ex[k] - fi0 + 0.5))
+                iy = int(math.floor(ey[k] - fj0 + 0.5))
+                if 0 <= ix < w and 0 <= iy < h:
+                    xa = ix + i0
+                    ya = iy + j0
+                    r = (ya >> _TILE_SHIFT) - tj0
+                    q = (xa >> _TILE_SHIFT) - ti0
+                    t = table[r, q]
+                    if t < 0:  # (a free row per kept beam: the caller's)
+                        t = n_tiles
+                        table[r, q] = t
+                        n_tiles += 1
+                    c = ((ya & _TILE_MASK) << _TILE_SHIFT) | (xa & _TILE_MASK)
+                    lt = pool[t, c, 3]
+                    if lt != hit_code:
+                        if lt != 0 and (lt & 1) == 0 and pool[t, c, 2] < COUNT_MAX:
+                            pool[t, c, 2] += 1
+                        pool[t, c, 3] = hit_code
+                        if pool[t, c, 0] < COUNT_MAX:
+                            pool[t, c, 0] += 1
     # the cells any ray can reach: its major axis runs over rounded ends, its minor coordinate at most half a
-    # cell (|slope| ≤ 1) beyond the segment's; one more cell each side, clipped to the arrays (the rest is dropped)
+    # cell (|slope| ≤ 1) beyond the segment's; one more cell each side, clipped to the extent (the rest is dropped)
     lo_x = ox
     hi_x = ox
     lo_y = oy
@@ -151,36 +225,52 @@ def _count_beams(counts, last, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0,
     y0 = max(int(math.floor(lo_y)) - 1, 0)
     y1 = min(int(math.floor(hi_y)) + 2, h - 1)
     if x1 < x0 or y1 < y0:
-        return mask
+        return mask, n_tiles, False
     stride = (x1 - x0 + 8) // 8 * 8  # whole 8-byte words per row
     need = stride * (y1 - y0 + 1)
-    if mask.shape[0] < need:
-        mask = np.zeros(need, dtype=np.uint8)
-    for k in range(cx.shape[0]):
-        if clear[k]:
-            _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, cx[k] - fi0, cy[k] - fj0, core)
+    if not resume:
+        if mask.shape[0] < need:
+            mask = np.zeros(need, dtype=np.uint8)
+        for k in range(cx.shape[0]):
+            if clear[k]:
+                _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, cx[k] - fi0, cy[k] - fj0, core)
     words = mask[:need].view(np.uint64)
     per_row = stride // 8
     pass_code = 2 * scan_id
+    cap = pool.shape[0]
     for r in range(y1 - y0 + 1):
-        y = y0 + r
+        ya = y0 + r + j0
+        rt = (ya >> _TILE_SHIFT) - tj0
+        in_tile = (ya & _TILE_MASK) << _TILE_SHIFT
+        tc = -1  # the tile column of the last cell counted in this row, and its pool row
+        t = -1
         for q in range(per_row):
             if words[r * per_row + q] == 0:
                 continue
             base = r * stride + q * 8
-            for j in range(8):
-                if mask[base + j] == 0:
+            for jj in range(8):
+                if mask[base + jj] == 0:
                     continue
-                mask[base + j] = 0
-                x = x0 + q * 8 + j
-                lt = last[y, x]
+                xa = x0 + q * 8 + jj + i0
+                if (xa >> _TILE_SHIFT) - ti0 != tc:
+                    tc = (xa >> _TILE_SHIFT) - ti0
+                    t = table[rt, tc]
+                    if t < 0:
+                        if n_tiles == cap:
+                            return mask, n_tiles, True  # this cell and the rest still marked
+                        t = n_tiles
+                        table[rt, tc] = t
+                        n_tiles += 1
+                mask[base + jj] = 0
+                c = in_tile | (xa & _TILE_MASK)
+                lt = pool[t, c, 3]
                 if (lt >> 1) != scan_id:  # not hit by this scan
-                    if (lt & 1) == 1 and counts[y, x, 2] < COUNT_MAX:
-                        counts[y, x, 2] += 1
-                    last[y, x] = pass_code
-                    if counts[y, x, 1] < COUNT_MAX:
-                        counts[y, x, 1] += 1
-    return mask
+                    if (lt & 1) == 1 and pool[t, c, 2] < COUNT_MAX:
+                        pool[t, c, 2] += 1
+                    pool[t, c, 3] = pass_code
+                    if pool[t, c, 1] < COUNT_MAX:
+                        pool[t, c, 1] += 1
+    return mask, n_tiles, False
 
 
 @njit(cache=True, inline="always")
@@ -221,22 +311,6 @@ def _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, ex, ey, core):  # pragma: no
         if a == a1:
             break
         a += step
-
-
-@njit(cache=True, inline="always")
-def _count_hit(counts, last, scan_id, hx, hy):  # pragma: no cover - numba
-    """A hit of scan ``scan_id`` at ``(hx, hy)`` (array cell units) into ``counts`` / ``last`` (:func:`_count_scan`)."""
-    ix = int(math.floor(hx + 0.5))
-    iy = int(math.floor(hy + 0.5))
-    if 0 <= ix < counts.shape[1] and 0 <= iy < counts.shape[0]:
-        hit_code = 2 * scan_id + 1
-        lt = last[iy, ix]
-        if lt != hit_code:
-            if lt != 0 and (lt & 1) == 0 and counts[iy, ix, 2] < COUNT_MAX:
-                counts[iy, ix, 2] += 1
-            last[iy, ix] = hit_code
-            if counts[iy, ix, 0] < COUNT_MAX:
-                counts[iy, ix, 0] += 1
 
 
 @njit(cache=True)
@@ -335,8 +409,11 @@ def _geometry_bounds(ranges, cos_a, sin_a, valid, removed, px, py, th, res, marg
 class VisibilityCounter:
     """Per-cell counts of scans that hit a cell and scans that passed through it.
 
-    Grows with the scans it is fed (absolute cells, resolution ``resolution`` m);
-    memory :data:`BYTES_PER_CELL` bytes per cell. Feed with :meth:`add`; read with :meth:`window`.
+    Grows with the scans it is fed (absolute cells, resolution ``resolution`` m): the counted extent, cells
+    (:attr:`i0` … :attr:`i0` + w − 1, :attr:`j0` … :attr:`j0` + h − 1) with (h, w) = :attr:`shape`, grows as a
+    dense grid of :data:`BYTES_PER_CELL` bytes per cell would (:attr:`nbytes`, held to the SLAM's
+    ``max_map_memory_mb``); the counts are kept in 16 × 16-cell tiles allocated where a beam first ends or passes
+    (:attr:`resident_bytes`). Feed with :meth:`add`; read with :meth:`window`.
     """
 
     def __init__(self, resolution: float, config: CleanConfig | None = None,
@@ -345,10 +422,18 @@ class VisibilityCounter:
         self.config = config if config is not None else CleanConfig()
         self.slam = slam if slam is not None else SlamConfig(map_resolution=resolution)
         self.margin_cells = max(int(math.ceil(growth_margin_m / self.resolution)), 1)
-        self.i0 = 0  # absolute col of array column 0
-        self.j0 = 0  # absolute row of array row 0
-        self._cells = np.zeros((0, 0, 3), dtype=np.uint16)  # hits, passes, switches
-        self._last = np.zeros((0, 0), dtype=np.uint16)  # latest touch: 2 · scan number (+ 1 for a hit)
+        self.i0 = 0  # absolute col of the extent's column 0
+        self.j0 = 0  # absolute row of the extent's row 0
+        self._h = 0
+        self._w = 0
+        #: pool row of each tile of the extent (−1: not allocated); tile (0, 0) is absolute tile (_ti0, _tj0)
+        self._table = np.zeros((0, 0), dtype=np.int32)
+        self._ti0 = 0
+        self._tj0 = 0
+        #: the allocated tiles, (capacity, 256, 4) uint16: per cell hits, passes, switches and the latest touch
+        #: (2 · scan number, + 1 for a hit), cells in row order inside the tile; rows 0 … _n_tiles − 1 in use
+        self._pool = np.zeros((0, _TILE * _TILE, 4), dtype=np.uint16)
+        self._n_tiles = 0
         self._id_base = 0  # scan number = scan id − this (see _renumber)
         #: scratch of the counting kernel (one byte per cell of a scan's bounding box, zero between scans)
         self._mask = np.zeros(0, dtype=np.uint8)
@@ -357,28 +442,70 @@ class VisibilityCounter:
         self.seconds = 0.0
 
     @property
+    def shape(self) -> tuple[int, int]:
+        """(h, w): rows and columns of the counted extent."""
+        return self._h, self._w
+
+    def _dense(self) -> np.ndarray:
+        """(h, w, 4) uint16 copy of the whole extent (channels :data:`_HIT` … :data:`_LAST`)."""
+        return _dense_of(self._table, self._pool, self.j0 - (self._tj0 << _TILE_SHIFT),
+                         self.i0 - (self._ti0 << _TILE_SHIFT), self._h, self._w)
+
+    @property
     def hits(self) -> np.ndarray:
-        """(h, w) uint16 view: scans that hit each cell (array cells, see :attr:`i0`, :attr:`j0`)."""
-        return self._cells[:, :, _HIT]
+        """(h, w) uint16 copy: scans that hit each cell of the extent (see :attr:`i0`, :attr:`j0`)."""
+        return np.ascontiguousarray(self._dense()[:, :, _HIT])
 
     @property
     def through(self) -> np.ndarray:
-        """(h, w) uint16 view: scans that passed through each cell."""
-        return self._cells[:, :, _THROUGH]
+        """(h, w) uint16 copy: scans that passed through each cell."""
+        return np.ascontiguousarray(self._dense()[:, :, _THROUGH])
 
     @property
     def switches(self) -> np.ndarray:
-        """(h, w) uint16 view: changes between hit and pass in each cell's scan sequence."""
-        return self._cells[:, :, _SWITCH]
+        """(h, w) uint16 copy: changes between hit and pass in each cell's scan sequence."""
+        return np.ascontiguousarray(self._dense()[:, :, _SWITCH])
+
+    def last_touch(self) -> np.ndarray:
+        """(h, w) uint16 copy: each cell's latest touch (2 · scan number, + 1 for a hit; 0 = never)."""
+        return np.ascontiguousarray(self._dense()[:, :, _LAST])
+
+    def at(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """(n, 4) uint16: hits, passes, switches and latest touch of absolute cells (i[k], j[k]) (zeros outside
+        the extent or where nothing was counted)."""
+        i = np.asarray(i, dtype=np.int64)
+        j = np.asarray(j, dtype=np.int64)
+        out = np.zeros((i.shape[0], 4), dtype=np.uint16)
+        ok = (i >= self.i0) & (i < self.i0 + self._w) & (j >= self.j0) & (j < self.j0 + self._h)
+        t = np.full(i.shape[0], -1, dtype=np.int64)
+        t[ok] = self._table[(j[ok] >> _TILE_SHIFT) - self._tj0, (i[ok] >> _TILE_SHIFT) - self._ti0]
+        has = t >= 0
+        out[has] = self._pool[t[has], ((j[has] & _TILE_MASK) << _TILE_SHIFT) | (i[has] & _TILE_MASK)]
+        return out
+
+    def clear(self) -> None:
+        """Forget every count and scan (the extent stays)."""
+        self._table[...] = -1
+        self._pool = np.zeros((0, _TILE * _TILE, 4), dtype=np.uint16)
+        self._n_tiles = 0
+        self._id_base = 0
+        self.scans = 0
 
     @property
     def nbytes(self) -> int:
-        return int(self._cells.nbytes + self._last.nbytes)
+        """Bytes of the counted extent at :data:`BYTES_PER_CELL` per cell (summary.json's ``counter_bytes``,
+        the figure held to ``max_map_memory_mb``); the tiles hold :attr:`resident_bytes`."""
+        return int(self._h * self._w * BYTES_PER_CELL)
+
+    @property
+    def resident_bytes(self) -> int:
+        """Bytes the counts take: the tile pool (allocated rows) and the tile table."""
+        return int(self._pool.nbytes + self._table.nbytes)
 
     def _ensure(self, imin: int, jmin: int, imax: int, jmax: int) -> bool:
         """Grow to hold cells [imin, imax] × [jmin, jmax]; False (nothing changed) if that
         would take more than the SLAM's map memory limit (``max_map_memory_mb``)."""
-        h, w = self._cells.shape[:2]
+        h, w = self._h, self._w
         if h and imin >= self.i0 and jmin >= self.j0 and imax < self.i0 + w and jmax < self.j0 + h:
             return True
         if h == 0:
@@ -392,13 +519,15 @@ class VisibilityCounter:
             nj1 = max(self.j0 + h, jmax + my + 1) if jmax >= self.j0 + h else self.j0 + h
         if (nj1 - nj0) * (ni1 - ni0) * BYTES_PER_CELL > self.slam.max_map_memory_mb * 1e6:
             return False
-        new = np.zeros((nj1 - nj0, ni1 - ni0, 3), dtype=np.uint16)
-        new_last = np.zeros((nj1 - nj0, ni1 - ni0), dtype=np.uint16)
-        if h:
-            new[self.j0 - nj0:self.j0 - nj0 + h, self.i0 - ni0:self.i0 - ni0 + w] = self._cells
-            new_last[self.j0 - nj0:self.j0 - nj0 + h, self.i0 - ni0:self.i0 - ni0 + w] = self._last
-        self._cells, self._last = new, new_last
-        self.i0, self.j0 = ni0, nj0
+        # the tile table over the new extent (tiles are absolute: the allocated ones keep their pool rows)
+        ti0, tj0 = ni0 >> _TILE_SHIFT, nj0 >> _TILE_SHIFT
+        table = np.full((((nj1 - 1) >> _TILE_SHIFT) - tj0 + 1, ((ni1 - 1) >> _TILE_SHIFT) - ti0 + 1), -1,
+                        dtype=np.int32)
+        if self._table.size:
+            th, tw = self._table.shape
+            table[self._tj0 - tj0:self._tj0 - tj0 + th, self._ti0 - ti0:self._ti0 - ti0 + tw] = self._table
+        self._table, self._ti0, self._tj0 = table, ti0, tj0
+        self.i0, self.j0, self._h, self._w = ni0, nj0, nj1 - nj0, ni1 - ni0
         return True
 
     def _valid(self, scan: Scan) -> np.ndarray:
@@ -441,7 +570,7 @@ class VisibilityCounter:
             ex, ey, _cx, _cy, _kept, _clear = self._geometry(scan, pose, valid, None)
             c = self._cell_bounds(pose.x / self.resolution, pose.y / self.resolution, ex, ey, valid)
             b = list(c) if b is None else [min(b[0], c[0]), min(b[1], c[1]), max(b[2], c[2]), max(b[3], c[3])]
-        if b is None or self._cells.shape[0]:
+        if b is None or self._h:
             return False
         m = self.margin_cells
         if (b[3] - b[1] + 2 * m + 1) * (b[2] - b[0] + 2 * m + 1) * BYTES_PER_CELL > self.slam.max_map_memory_mb * 1e6:
@@ -467,23 +596,48 @@ class VisibilityCounter:
             return
         if self.scans + 1 - self._id_base > _ID_SPAN:
             self._renumber()
-        self._mask = _count_beams(self._cells, self._last, self.scans + 1 - self._id_base, ox - self.i0,
-                                  oy - self.j0, ex, ey, kept, cx, cy, clear, self.i0, self.j0, float(c.ray_core),
-                                  self._mask)
+        self._count(ex, ey, kept, cx, cy, clear, ox, oy, float(c.ray_core))
         self.scans += 1
         self.seconds += time.perf_counter() - t0
+
+    def _count(self, ex: np.ndarray, ey: np.ndarray, kept: np.ndarray, cx: np.ndarray, cy: np.ndarray,
+               clear: np.ndarray, ox: float, oy: float, core: float) -> None:
+        """One scan's beams (:func:`_scan_geometry`, world cell units; laser at (ox, oy)) into the tiles: a free
+        pool row for every beam first (the hits), more when the passes need them (:func:`_count_beams`)."""
+        self._reserve_tiles(ex.shape[0])  # (each beam's hit allocates at most one tile)
+        resume = False
+        while True:
+            self._mask, self._n_tiles, full = _count_beams(
+                self._table, self._pool, self._n_tiles, self._ti0, self._tj0, self.scans + 1 - self._id_base,
+                ox - self.i0, oy - self.j0, ex, ey, kept, cx, cy, clear, self.i0, self.j0, self._h, self._w, core,
+                self._mask, resume)
+            if not full:
+                return
+            self._reserve_tiles(ex.shape[0] + 1)
+            resume = True
+
+    def _reserve_tiles(self, free: int) -> None:
+        """At least ``free`` unused rows in the tile pool, or a row for every tile of the extent: it grows by a
+        quarter (and ``free`` rows, never past the extent's tiles), copying the rows in use."""
+        cap, n, tiles = self._pool.shape[0], self._n_tiles, self._table.size
+        free = min(free, tiles - n)
+        if cap - n >= free:
+            return
+        pool = np.zeros((min(n + max(n >> 2, free, 64), tiles), _TILE * _TILE, 4), dtype=np.uint16)
+        pool[:n] = self._pool[:n]
+        self._pool = pool
 
     def _renumber(self) -> None:
         """Make every touch so far one of scan number 1 (its kind kept) and the next scan number 2. The counting
         kernel compares a cell's latest touch only with the current scan's number (touched by this scan or
         not) and reads its kind, so the counts are those the scan ids themselves would give: the "last touch"
         array holds 2 bytes per cell instead of 4 whatever the length of the log (issue 13 item 3)."""
-        last = self._last
+        last = self._pool[:self._n_tiles, :, _LAST]
         np.copyto(last, (last & 1) + 2, where=last != 0)
         self._id_base = self.scans - 1
 
-    def _overlap(self, grid: GridMap) -> tuple[slice, slice, slice, slice] | None:
-        """(grid rows, grid cols, counter rows, counter cols) of the cells both hold, or None.
+    def _overlap(self, grid: GridMap) -> tuple[int, int] | None:
+        """The absolute cell (i, j) of ``grid``'s cell (0, 0), or None when ``grid`` and the extent share no cell.
 
         ``grid`` must share the counter's resolution and have its cell centres on
         multiples of it (as the SLAM levels do)."""
@@ -492,32 +646,50 @@ class VisibilityCounter:
         gi0 = int(round(grid.origin[0] / self.resolution + 0.5))
         gj0 = int(round(grid.origin[1] / self.resolution + 0.5))
         H, W = grid.shape
-        h, w = self._cells.shape[:2]
+        h, w = self._h, self._w
         c0, c1 = max(gi0, self.i0), min(gi0 + W, self.i0 + w)
         r0, r1 = max(gj0, self.j0), min(gj0 + H, self.j0 + h)
         if c1 <= c0 or r1 <= r0:
             return None
-        return (slice(r0 - gj0, r1 - gj0), slice(c0 - gi0, c1 - gi0), slice(r0 - self.j0, r1 - self.j0),
-                slice(c0 - self.i0, c1 - self.i0))
+        return gi0, gj0
+
+    def _grid_channels(self, grid: GridMap, channels: Sequence[int]) -> list[np.ndarray]:
+        """(H, W) uint16 arrays shaped like ``grid`` (same cells), one per channel of ``channels``: the counted
+        cells' values, zeros elsewhere (outside the extent or never counted). Filled tile by tile."""
+        H, W = grid.shape
+        outs = [np.zeros((H, W), dtype=np.uint16) for _ in channels]
+        g = self._overlap(grid)
+        if g is None:
+            return outs
+        gi0, gj0 = g
+        # the grid in the tiles' cells (the extent's cells only: the table covers them, and more)
+        r0, c0 = max(gj0, self.j0), max(gi0, self.i0)
+        r1, c1 = min(gj0 + H, self.j0 + self._h), min(gi0 + W, self.i0 + self._w)
+        tr0, tc0 = (r0 >> _TILE_SHIFT) - self._tj0, (c0 >> _TILE_SHIFT) - self._ti0
+        tr1, tc1 = ((r1 - 1) >> _TILE_SHIFT) - self._tj0, ((c1 - 1) >> _TILE_SHIFT) - self._ti0
+        sub = self._table[tr0:tr1 + 1, tc0:tc1 + 1]
+        for tr, tc in zip(*np.nonzero(sub >= 0)):
+            t = int(sub[tr, tc])
+            ya = (int(tr) + tr0 + self._tj0) << _TILE_SHIFT  # the tile's first absolute cell
+            xa = (int(tc) + tc0 + self._ti0) << _TILE_SHIFT
+            ys, ye = max(ya, r0), min(ya + _TILE, r1)
+            xs, xe = max(xa, c0), min(xa + _TILE, c1)
+            tile = self._pool[t].reshape(_TILE, _TILE, 4)
+            for out, ch in zip(outs, channels):
+                out[ys - gj0:ye - gj0, xs - gi0:xe - gi0] = tile[ys - ya:ye - ya, xs - xa:xe - xa, ch]
+        return outs
 
     def window(self, grid: GridMap) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(hits, through, switches), each shaped like ``grid`` (same cells; zeros where
         never counted)."""
-        outs = [np.zeros(grid.shape, dtype=np.uint16) for _ in range(3)]
-        ov = self._overlap(grid)
-        if ov is not None:
-            for out, arr in zip(outs, (self.hits, self.through, self.switches)):
-                out[ov[0], ov[1]] = arr[ov[2], ov[3]]
-        return outs[0], outs[1], outs[2]
+        hits, through, switches = self._grid_channels(grid, (_HIT, _THROUGH, _SWITCH))
+        return hits, through, switches
 
     def latest_hit(self, grid: GridMap) -> np.ndarray:
         """(H, W) bool shaped like ``grid``: the cell's latest counted touch was a hit (False where never
         counted). With the switch count's parity it gives the first touch too (:func:`erase_rule`)."""
-        out = np.zeros(grid.shape, dtype=bool)
-        ov = self._overlap(grid)
-        if ov is not None:
-            out[ov[0], ov[1]] = (self._last[ov[2], ov[3]] & 1) == 1
-        return out
+        (last,) = self._grid_channels(grid, (_LAST,))
+        return (last & 1) == 1
 
 
 @dataclass(eq=False)

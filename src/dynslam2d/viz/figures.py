@@ -14,7 +14,7 @@ from dynslam2d.slam.cleanup import CleanResult
 from dynslam2d.slam.confidence import stretches
 from dynslam2d.viz.collect import RemovedPointsCollector
 from dynslam2d.viz.errorsplot import map_difference_of, plot_errors
-from dynslam2d.viz.mapplot import plot_map
+from dynslam2d.viz.mapplot import GreyMap, plot_map
 from dynslam2d.viz.trackpaths import TrackPath, boxes_to_draw, track_paths, tracks_to_draw
 from dynslam2d.viz.tracksplot import plot_tracks, tracks_background
 
@@ -60,9 +60,8 @@ def write_figures(
     names the ghost area and F1 of both maps (the evaluation's ``map`` and ``map_online``).
 
     ``release``: the caller does not use ``result`` and ``cleaned`` afterwards (the command line): their maps are
-    let go as soon as the figures no longer need them — the online map once tracks.png's faint copy is made
-    (2 bytes per cell), the drawn map after map.png (``result.grid`` and ``cleaned.grid`` become None; issue 13
-    item 3).
+    let go before matplotlib draws: tracks.png's faint copy of the online map and map.png's map are made first as
+    grey indices (2 bytes per cell; ``result.grid`` and ``cleaned.grid`` become None; issue 13 item 3).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -82,10 +81,13 @@ def write_figures(
     if ate_res is not None:
         title += f", ATE RMSE {ate_res.rmse:.3f} m"
     removed_xy = collector.points() if collector is not None else None
-    grid = cleaned.grid if cleaned is not None else result.grid
+    grid: GridMap | GreyMap = cleaned.grid if cleaned is not None else result.grid
     background = tracks_background(result.grid) if release else result.grid
-    if release and cleaned is not None:  # (map.png draws the cleaned map)
+    if release:  # both maps as the grey indices the figures draw (2 bytes per cell), before matplotlib's work
+        grid = GreyMap.of(grid)
         result.grid = None  # type: ignore[assignment]
+        if cleaned is not None:
+            cleaned.grid = None  # type: ignore[assignment]
     conf = result.confidence
     pc = result.pose_confidence() if conf else {}
     paths["map.png"] = plot_map(
@@ -101,10 +103,6 @@ def write_figures(
     )
     if release:
         del grid
-        if cleaned is not None:
-            cleaned.grid = None  # type: ignore[assignment]
-        else:
-            result.grid = None  # type: ignore[assignment]
     confirmed = sorted((p for p in all_paths.values() if p.ever_confirmed), key=lambda p: p.id)
     paths["tracks.png"] = plot_tracks(
         out / "tracks.png", confirmed, background, dpi=dpi,
@@ -145,7 +143,7 @@ def tracks_title(paths: dict[int, TrackPath]) -> str:
             f"(summary.json: {len(paths)} tracks with the tentative ones, {n_m} in M)")
 
 
-def _memory_erased(result: RunResult, grid: GridMap) -> np.ndarray | None:
+def _memory_erased(result: RunResult, grid: GridMap | GreyMap) -> np.ndarray | None:
     """The run's retroactively erased cells (docs/maps.md) on ``grid``'s cells (the online and the cleaned
     map share cells, resolution and origin), or None."""
     erased = getattr(result, "erased", None)

@@ -94,10 +94,22 @@ def occupancy_indices(grid: GridMap, fade: float | None = None) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class GreyMap:
     """A map already converted to the grey indices a figure draws (:func:`occupancy_indices`), with its extent
-    (xmin, xmax, ymin, ymax), m: 2 bytes per cell where the :class:`GridMap` takes 8 (issue 13 item 3)."""
+    (xmin, xmax, ymin, ymax), m, and cell size, m (0 when not given): 2 bytes per cell where the :class:`GridMap`
+    takes 8 (issue 13 item 3)."""
 
     indices: np.ndarray  # (H, W) uint16, row 0 at the bottom
     extent: tuple[float, float, float, float]
+    resolution: float = 0.0
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(H, W) cells."""
+        return self.indices.shape  # type: ignore[return-value]
+
+    @classmethod
+    def of(cls, grid: GridMap, fade: float | None = None) -> GreyMap:
+        """:func:`occupancy_indices` of ``grid`` (``fade`` as there) with its extent and resolution."""
+        return cls(occupancy_indices(grid, fade), grid.extent, float(grid.resolution))
 
 
 def draw_grey_indices(ax: Any, idx: np.ndarray, extent: tuple[float, float, float, float],
@@ -204,7 +216,7 @@ def draw_box(ax: Any, box: Box, colour: str, lw: float = 1.5, zorder: float = 5,
 
 def plot_map(
     path: str | os.PathLike[str],
-    grid: GridMap,
+    grid: GridMap | GreyMap,
     trajectory_xy: np.ndarray | None = None,
     *,
     reference_xy: np.ndarray | None = None,
@@ -226,7 +238,8 @@ def plot_map(
 
     Args:
         path: PNG to write (atomically).
-        grid: the map, in the map frame.
+        grid: the map, in the map frame, or its :meth:`GreyMap.of` (with its resolution; its indices are
+            painted over).
         trajectory_xy: (n, 2) estimated laser positions in the map frame, m.
         reference_xy: (n, 2) ground-truth positions already expressed in the map frame, m.
         tracks: track paths (map frame) to draw; tracks ever in M in :data:`style.TRACK_M`,
@@ -265,7 +278,8 @@ def plot_map(
     # clean-up's cells over retroactive erasure's
     paint = [(m, c) for m, c, on in ((memory_erased, style.MEMORY_ERASED, has_mem), (erased, style.ERASED, has_erased))
              if on]
-    draw_grey_indices(ax, occupancy_indices(grid), extent, paint=paint)
+    draw_grey_indices(ax, grid.indices if isinstance(grid, GreyMap) else occupancy_indices(grid), extent,
+                      paint=paint)
     # the three greys of occupancy_image
     handles += [Patch(facecolor="black", edgecolor="0.3", label="occupied"),
                 Patch(facecolor="white", edgecolor="0.3", label="free"),
