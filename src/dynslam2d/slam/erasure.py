@@ -295,9 +295,15 @@ class _Ledger:
     linked: bool = False  # ended-track evidence already joined to a live track
     confirmed: bool = False  # the track was reported confirmed at least once (not only tentative clutter)
     skip: bool = False  # this stay in the removal set erases nothing (the track did not stand before it)
-    #: (scan index, beams) of the track's kept beams at every recorded map update (only with keep_beams)
-    beams: list[tuple[int, np.ndarray]] = field(default_factory=list)
+    #: (scan index, the update's kept beams of all tracks, first, end) of the track's kept beams at every recorded
+    #: map update (only with keep_beams; :attr:`beams` slices them)
+    kb: list[tuple[int, np.ndarray, int, int]] = field(default_factory=list)
     last_track: Track | None = None  # the track as last seen out of the removal set
+
+    @property
+    def beams(self) -> list[tuple[int, np.ndarray]]:
+        """(scan index, beams) of the track's kept beams at every recorded map update (only with keep_beams)."""
+        return [(i, kb[a:b]) for i, kb, a, b in self.kb]
 
     @property
     def n_cells(self) -> int:
@@ -427,8 +433,8 @@ class EvidenceLedger:
                     led = ledgers.get(t.id)
                     if led is None:
                         led = ledgers[t.id] = self._new_ledger(t, t.stamp, n_lv)
-                    if b > a:
-                        led.beams.append((at, kb_all[a:b]))
+                    if b > a:  # (the bounds, not a view: a view costs more per track and holds the same array)
+                        led.kb.append((at, kb_all, a, b))
         else:
             for t, keep in zip(mine, present):
                 if keep and t.id not in ledgers:
@@ -738,9 +744,9 @@ class EvidenceLedger:
                 self.stats["cells_to_unknown"] += int(unknown.sum())
                 self.erased_cells.update(map(tuple, keys.tolist()))
             rec.clear()
-        if led.beams:
+        if led.kb:
             self.erased_beams.extend(led.beams)
-            led.beams = []
+            led.kb = []
         self.stats["cells_changed"] += n0
         self.stats["erasures"] += 1
         self.stats["tracks_erased"] += 1
