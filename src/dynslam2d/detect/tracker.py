@@ -175,9 +175,9 @@ class _Track:
     # free-space fraction per update; an entry may be a detection (a birth's) or a tuple (det, ref, t, past) until it
     # is read, its value not yet computed (Tracker._free_values)
     free: list[float] = field(default_factory=list)
-    mstruct: list[float] = field(default_factory=list)  # map evidence per update (mapevidence.py)
-    mfree: list[float] = field(default_factory=list)
-    munknown: list[float] = field(default_factory=list)
+    # map evidence per update (mapevidence.py): (the detection's fractions of points on long-occupied, observed-free,
+    # never-observed map cells) as one tuple per update in one list (was three lists: fewer objects touched per scan)
+    mev: list[tuple[float, float, float]] = field(default_factory=list)
     person: bool = False  # the last detection was a merged pair of legs
     person_streak: int = 0  # consecutive updates with a merged pair of legs
     rode: bool = False  # judged riding with the laser (its body) at the last check
@@ -264,9 +264,9 @@ class _Track:
 
 
 def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, beams: np.ndarray, free: list,
-               mstruct: list, mfree: list, munknown: list, past: list, _new=object.__new__) -> _Track:
-    """``_Track(id=tid, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t, birth_xy=…, g=…, gi=…, beams=…, free=…, mstruct=…,
-    mfree=…, munknown=…, past=…)`` with every other field at its default (a birth, :meth:`Tracker._birth`):
+               mev: list, past: list, _new=object.__new__) -> _Track:
+    """``_Track(id=tid, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t, birth_xy=…, g=…, gi=…, beams=…, free=…, mev=…,
+    past=…)`` with every other field at its default (a birth, :meth:`Tracker._birth`):
     the slots set directly, about a quarter of the dataclass ``__init__``'s cost with its keyword binding and default
     factories (``tests/test_detect_birth_fast.py`` compares every field with the dataclass's)."""
     k = _new(_Track)
@@ -287,9 +287,7 @@ def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, be
     k.reason = "not in M: tentative track"
     k.beams = beams
     k.free = free
-    k.mstruct = mstruct
-    k.mfree = mfree
-    k.munknown = munknown
+    k.mev = mev
     k.person = False
     k.person_streak = 0
     k.rode = False
@@ -938,7 +936,7 @@ class Tracker:
         for i in rows:
             k = self._tracks[i]
             hit = ok[i] & cand & (det_ext > float(tsize[i].max()) + tc.merge_size_jump)
-            if hit.any() and (not k.mstruct or sum(k.mstruct) / len(k.mstruct) <= tc.map_structure_max):
+            if hit.any() and (not (mev := k.mev) or sum([e[0] for e in mev]) / len(mev) <= tc.map_structure_max):
                 ok[i] &= ~hit
                 self._merged.add(k.id)
         return ok
@@ -1063,9 +1061,7 @@ class Tracker:
                 # re-acquired after a gap: the free-space evidence must be rebuilt from this object
                 k.past.clear()
                 k.free.clear()
-                k.mstruct.clear()
-                k.mfree.clear()
-                k.munknown.clear()
+                k.mev.clear()
                 k.ride.clear()
                 k.fast = 0
                 k.probation = k.in_m and not k.remembered  # a remembered track re-acquired where it stopped
@@ -1094,14 +1090,10 @@ class Tracker:
                 while len(ride) > nsus and t - ride[0][4] > ride_time:
                     del ride[0]
             if use_map:
-                ms, mf, mu = k.mstruct, k.mfree, k.munknown
-                ms.append(det.map_structure)
-                mf.append(det.map_free)
-                mu.append(det.map_unknown)
-                if len(ms) > nsus:
-                    del ms[0]
-                    del mf[0]
-                    del mu[0]
+                mev = k.mev
+                mev.append((det.map_structure, det.map_free, det.map_unknown))
+                if len(mev) > nsus:
+                    del mev[0]
             if max_age is not None:
                 past = k.past
                 past.append((t, det._pts, det._a0, det.n_points))  # (_past_entry of a scan detection, inline)
@@ -1189,8 +1181,8 @@ class Tracker:
         d = self._default  # reference.measure(det, None, None, cfg.fit) of every detection
         z = d.z[j]
         k = _new_track(self._next_id, t, z.copy(), g, gi, det.beams, [det],
-                       [det.map_structure] if has_map else [], [det.map_free] if has_map else [],
-                       [det.map_unknown] if has_map else [], [_past_entry(t, det)] if has_free else [])
+                       [(det.map_structure, det.map_free, det.map_unknown)] if has_map else [],
+                       [_past_entry(t, det)] if has_free else [])
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
         self._next_id += 1
@@ -1314,8 +1306,8 @@ class Tracker:
                 st.tracks_deleted += 1
                 gone.append(k.row)
                 continue
-            if is_upd and retire_n and not k.was_in_m and not k.remembered and len(ms := k.mstruct) >= retire_n \
-                    and speed < v_min and min(ms[-retire_n:]) >= retire_s:
+            if is_upd and retire_n and not k.was_in_m and not k.remembered and len(mev := k.mev) >= retire_n \
+                    and speed < v_min and min([e[0] for e in mev[-retire_n:]]) >= retire_s:
                 # clutter retirement: a still track the map already holds as structure (docs/real.md "Speed");
                 # a confirmed one stays as a dormant track while its object is seen (_clutter_detections)
                 st.deleted_structure += 1
@@ -1492,7 +1484,7 @@ class Tracker:
         k.beams = det.beams
         k.free = [det.free_fraction]
         if self._map is not None:
-            k.mstruct, k.mfree, k.munknown = [det.map_structure], [det.map_free], [det.map_unknown]
+            k.mev = [(det.map_structure, det.map_free, det.map_unknown)]
         k.past = [_past_entry(t, det)] if self._free is not None else []
         k.ride = []
         k.person, k.person_streak, k.rode = False, 0, False
@@ -1534,23 +1526,26 @@ class Tracker:
         for an updated track in M, or confirmed / coasting with ``speed`` (m/s) > v_min; ``sig``: σ of the speed
         along the velocity, m/s."""
         tc = self.config.tracker
+        # the map evidence's columns as lists (the same floats in the same order: the same sums)
+        mev = k.mev
+        ms = [e[0] for e in mev]
         # a track seen moving before re-enters M on the kinematic test: where it paused, the map wrote it
-        use_map = self._map is not None and len(k.mstruct) > 0 and not k.was_in_m
+        use_map = self._map is not None and len(mev) > 0 and not k.was_in_m
         npu = tc.person_sustain_updates
         person_way = self._person_moved_in(k, npu, use_map) if k.person_streak >= npu else None
         fast_person = person_way is not None
         need = tc.person_sustain_updates if fast_person else tc.sustain_updates
-        have_map = self._map is not None and len(k.mstruct) > 0
-        if k.in_m and have_map and len(k.mstruct) >= tc.sustain_updates and \
-                sum(k.mstruct) / len(k.mstruct) >= tc.map_structure_exit:
+        have_map = self._map is not None and len(mev) > 0
+        if k.in_m and have_map and len(ms) >= tc.sustain_updates and \
+                sum(ms) / len(ms) >= tc.map_structure_exit:
             k.in_m = False
             k.fast = 0
-            k.reason = (f"left M: {sum(k.mstruct) / len(k.mstruct):.2f} of its points on long-occupied map cells "
+            k.reason = (f"left M: {sum(ms) / len(ms):.2f} of its points on long-occupied map cells "
                         "(structure)")
             return
         if k.in_m and have_map and k.slow_since is not None and t - k.slow_since >= tc.map_structure_stop_time \
-                and len(k.mstruct) >= 2 and \
-                0.5 * (k.mstruct[-1] + k.mstruct[-2]) >= tc.map_structure_stop:
+                and len(ms) >= 2 and \
+                0.5 * (ms[-1] + ms[-2]) >= tc.map_structure_stop:
             # a mover that stops where the map has long-standing structure has merged with it (a person
             # reaching a wall): hysteresis would carry M onto the wall
             k.in_m = False
@@ -1591,12 +1586,12 @@ class Tracker:
         elif self._free is not None and (not (fr := self._free_values(k)) or sum(fr) / len(fr) < tc.free_min_fraction):
             k.reason = (f"not in M: points on free space {sum(fr) / max(len(fr), 1):.2f} < "
                         f"{tc.free_min_fraction:.2f} (static structure)")
-        elif use_map and not fast_person and sum(k.mfree) / len(k.mfree) < tc.map_free_min and not (
-                self._is_still() and sum(k.munknown) / len(k.munknown) >= 1.0 - tc.map_free_min):
-            k.reason = (f"not in M: points in observed-free map cells {sum(k.mfree) / len(k.mfree):.2f} < "
+        elif use_map and not fast_person and sum(mf := [e[1] for e in mev]) / len(mf) < tc.map_free_min and not (
+                self._is_still() and sum(mu := [e[2] for e in mev]) / len(mu) >= 1.0 - tc.map_free_min):
+            k.reason = (f"not in M: points in observed-free map cells {sum(mf) / len(mf):.2f} < "
                         f"{tc.map_free_min:.2f} (no map evidence of motion)")
-        elif use_map and sum(k.mstruct) / len(k.mstruct) > tc.map_structure_max:
-            k.reason = (f"not in M: points on long-occupied map cells {sum(k.mstruct) / len(k.mstruct):.2f} > "
+        elif use_map and sum(ms) / len(ms) > tc.map_structure_max:
+            k.reason = (f"not in M: points on long-occupied map cells {sum(ms) / len(ms):.2f} > "
                         f"{tc.map_structure_max:.2f} (structure)")
         else:
             k.in_m = True
@@ -1619,10 +1614,11 @@ class Tracker:
         tc = self.config.tracker
         if not use_map:
             return "kinematic"  # no map to ask (or seen moving before): the general displacement applies
-        mf = k.mfree[-n:]
+        last = k.mev[-n:]
+        mf = [e[1] for e in last]
         if sum(mf) / len(mf) >= tc.person_map_free_min:
             return "map"
-        fr, ms, mu = self._free_values(k)[-n:], k.mstruct[-n:], k.munknown[-n:]
+        fr, ms, mu = self._free_values(k)[-n:], [e[0] for e in last], [e[2] for e in last]
         if len(fr) < n or sum(fr) / len(fr) < tc.person_free_min or sum(ms) / len(ms) > tc.map_structure_max:
             return None
         return "free" if (sum(mf) + sum(mu)) / len(mf) >= 0.5 else None
