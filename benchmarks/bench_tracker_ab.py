@@ -188,7 +188,7 @@ _PHASES = ("_predict", "_detect", "_associate", "_vacated", "_update_pairs", "_m
 
 
 #: methods called inside those steps that --phases times too (not subtracted from the rest of update)
-_NESTED = ("_free_values",)
+_NESTED = ("_free_values", "_update_tracks", "_bound_acceleration")
 
 
 def phases_ab(scans: list, other) -> dict[str, dict[str, float]]:

@@ -13,8 +13,8 @@ from dynslam2d.detect.tracker import _NO_STATE, _new_track, _Track
 
 def _args() -> dict:
     return dict(tid=7, t=1.25, birth_xy=np.array([1.0, 2.0]), g=(0.1, 1.0, 0.5, 0.0, 0.0, 0.0),
-                gi=(0, True, True, False), beams=np.arange(3), free=[0.3], mstruct=[0.1], mfree=[0.2],
-                munknown=[0.7], past=[(1.25, None)], past_t=[1.25])
+                gi=(0, True, True, False), beams=np.arange(3), free=[0.3], mev=[(0.1, 0.2, 0.7)],
+                past=[(1.25, None)])
 
 
 def test_new_track_sets_every_field_as_the_dataclass_does() -> None:
@@ -24,8 +24,8 @@ def test_new_track_sets_every_field_as_the_dataclass_does() -> None:
     a = _args()
     fast = _new_track(**a)
     ref = _Track(id=a["tid"], x=_NO_STATE, P=_NO_STATE, born=a["t"], last_hit=a["t"], birth_xy=a["birth_xy"], g=a["g"],
-                 gi=a["gi"], beams=a["beams"], free=a["free"], mstruct=a["mstruct"], mfree=a["mfree"],
-                 munknown=a["munknown"], past=a["past"], past_t=a["past_t"])
+                 gi=a["gi"], beams=a["beams"], free=a["free"], mev=a["mev"],
+                 past=a["past"])
     assert type(fast) is _Track
     names = [f.name for f in dataclasses.fields(_Track)]
     assert len(names) == len(_Track.__slots__) and len(names) > 30
@@ -39,7 +39,7 @@ def test_new_track_sets_every_field_as_the_dataclass_does() -> None:
     # the lists given are the track's own; the defaults are new lists per track (not shared between tracks)
     assert fast.free is a["free"] and fast.past is a["past"] and fast.birth_xy is a["birth_xy"]
     other = _new_track(**_args())
-    for name in ("history", "laser_xy", "map_xy", "map_t"):
+    for name in ("history", "ride"):
         assert getattr(fast, name) is not getattr(other, name), name
     fast.history.append(False)
     assert other.history == [True]

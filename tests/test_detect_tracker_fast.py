@@ -62,8 +62,9 @@ def _vacated_reference(tr: Tracker, t: float) -> dict[int, float]:
         for a in tr._free.ref_ages:
             if not k.past:
                 continue
-            j = _window_argmin(k.past_t, t, a)
-            if t - k.past_t[j] > 0.0:
+            stamps = [e[0] for e in k.past]
+            j = _window_argmin(stamps, t, a)
+            if t - stamps[j] > 0.0:
                 chunks.append(_past_points(k.past[j]))
                 owners.append(k.id)
                 counts.append(_past_points(k.past[j]).shape[0])

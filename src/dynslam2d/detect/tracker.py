@@ -175,20 +175,19 @@ class _Track:
     # free-space fraction per update; an entry may be a detection (a birth's) or a tuple (det, ref, t, past) until it
     # is read, its value not yet computed (Tracker._free_values)
     free: list[float] = field(default_factory=list)
-    mstruct: list[float] = field(default_factory=list)  # map evidence per update (mapevidence.py)
-    mfree: list[float] = field(default_factory=list)
-    munknown: list[float] = field(default_factory=list)
+    # map evidence per update (mapevidence.py): (the detection's fractions of points on long-occupied, observed-free,
+    # never-observed map cells) as one tuple per update in one list (was three lists: fewer objects touched per scan)
+    mev: list[tuple[float, float, float]] = field(default_factory=list)
     person: bool = False  # the last detection was a merged pair of legs
     person_streak: int = 0  # consecutive updates with a merged pair of legs
     rode: bool = False  # judged riding with the laser (its body) at the last check
     was_in_m: bool = False  # has been in M before (seen moving): the map's word is not needed again
-    laser_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the laser frame per update
-    map_xy: list[tuple[float, float]] = field(default_factory=list)  # centre in the map frame per update
-    map_t: list[float] = field(default_factory=list)  # stamps of map_xy, s
+    # (laser-frame x, y, map-frame x, y of its centre (m), stamp (s)) per update of the riding test's window: one list
+    # of one tuple per update (was three lists), fewer objects touched per scan (docs/speed.md, pass trk15)
+    ride: list[tuple[float, float, float, float, float]] = field(default_factory=list)
     # (stamp s, points array, a0, n) per update within the free-space memory's max age: the detection's (n, 2) points,
     # rows a0 … a0 + n − 1 of the array (its scan's), or the whole array for a0 < 0 (_past_entry, _past_points)
     past: list[tuple[float, np.ndarray, int, int]] = field(default_factory=list)
-    past_t: list[float] = field(default_factory=list)  # the stamps of past, s (kept in step with it)
     slow_since: float | None = None
     probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
     merged: bool = False  # left M when its detection joined long-standing structure (refuses such detections)
@@ -265,9 +264,9 @@ class _Track:
 
 
 def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, beams: np.ndarray, free: list,
-               mstruct: list, mfree: list, munknown: list, past: list, past_t: list, _new=object.__new__) -> _Track:
-    """``_Track(id=tid, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t, birth_xy=…, g=…, gi=…, beams=…, free=…, mstruct=…,
-    mfree=…, munknown=…, past=…, past_t=…)`` with every other field at its default (a birth, :meth:`Tracker._birth`):
+               mev: list, past: list, _new=object.__new__) -> _Track:
+    """``_Track(id=tid, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t, birth_xy=…, g=…, gi=…, beams=…, free=…, mev=…,
+    past=…)`` with every other field at its default (a birth, :meth:`Tracker._birth`):
     the slots set directly, about a quarter of the dataclass ``__init__``'s cost with its keyword binding and default
     factories (``tests/test_detect_birth_fast.py`` compares every field with the dataclass's)."""
     k = _new(_Track)
@@ -288,18 +287,13 @@ def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, be
     k.reason = "not in M: tentative track"
     k.beams = beams
     k.free = free
-    k.mstruct = mstruct
-    k.mfree = mfree
-    k.munknown = munknown
+    k.mev = mev
     k.person = False
     k.person_streak = 0
     k.rode = False
     k.was_in_m = False
-    k.laser_xy = []
-    k.map_xy = []
-    k.map_t = []
+    k.ride = []
     k.past = past
-    k.past_t = past_t
     k.slow_since = None
     k.probation = False
     k.merged = False
@@ -942,7 +936,7 @@ class Tracker:
         for i in rows:
             k = self._tracks[i]
             hit = ok[i] & cand & (det_ext > float(tsize[i].max()) + tc.merge_size_jump)
-            if hit.any() and (not k.mstruct or sum(k.mstruct) / len(k.mstruct) <= tc.map_structure_max):
+            if hit.any() and (not (mev := k.mev) or sum([e[0] for e in mev]) / len(mev) <= tc.map_structure_max):
                 ok[i] &= ~hit
                 self._merged.add(k.id)
         return ok
@@ -1066,14 +1060,9 @@ class Tracker:
             if k.misses > 0:
                 # re-acquired after a gap: the free-space evidence must be rebuilt from this object
                 k.past.clear()
-                k.past_t.clear()
                 k.free.clear()
-                k.mstruct.clear()
-                k.mfree.clear()
-                k.munknown.clear()
-                k.laser_xy.clear()
-                k.map_xy.clear()
-                k.map_t.clear()
+                k.mev.clear()
+                k.ride.clear()
                 k.fast = 0
                 k.probation = k.in_m and not k.remembered  # a remembered track re-acquired where it stopped
                 k.misses = 0
@@ -1096,30 +1085,20 @@ class Tracker:
                 x0, x1 = cen
                 dx = x0 - pose_x
                 dy = x1 - pose_y
-                lxy, mxy, mt = k.laser_xy, k.map_xy, k.map_t
-                lxy.append((c * dx + s * dy, ns * dx + c * dy))
-                mxy.append((x0, x1))
-                mt.append(t)
-                while len(lxy) > nsus and t - mt[0] > ride_time:
-                    del lxy[0]
-                    del mxy[0]
-                    del mt[0]
+                ride = k.ride
+                ride.append((c * dx + s * dy, ns * dx + c * dy, x0, x1, t))
+                while len(ride) > nsus and t - ride[0][4] > ride_time:
+                    del ride[0]
             if use_map:
-                ms, mf, mu = k.mstruct, k.mfree, k.munknown
-                ms.append(det.map_structure)
-                mf.append(det.map_free)
-                mu.append(det.map_unknown)
-                if len(ms) > nsus:
-                    del ms[0]
-                    del mf[0]
-                    del mu[0]
+                mev = k.mev
+                mev.append((det.map_structure, det.map_free, det.map_unknown))
+                if len(mev) > nsus:
+                    del mev[0]
             if max_age is not None:
-                past, past_t = k.past, k.past_t
+                past = k.past
                 past.append((t, det._pts, det._a0, det.n_points))  # (_past_entry of a scan detection, inline)
-                past_t.append(t)
-                while past and t - past_t[0] > max_age:  # (past_t[q] is past[q][0])
+                while past and t - past[0][0] > max_age:
                     del past[0]
-                    del past_t[0]
 
     def _motion_prior(self, k: _Track) -> None:
         """Hidden side of a moving box whose other side is measured: a side parallel to the motion is
@@ -1202,9 +1181,8 @@ class Tracker:
         d = self._default  # reference.measure(det, None, None, cfg.fit) of every detection
         z = d.z[j]
         k = _new_track(self._next_id, t, z.copy(), g, gi, det.beams, [det],
-                       [det.map_structure] if has_map else [], [det.map_free] if has_map else [],
-                       [det.map_unknown] if has_map else [], [_past_entry(t, det)] if has_free else [],
-                       [t] if has_free else [])
+                       [(det.map_structure, det.map_free, det.map_unknown)] if has_map else [],
+                       [_past_entry(t, det)] if has_free else [])
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
         self._next_id += 1
@@ -1328,8 +1306,8 @@ class Tracker:
                 st.tracks_deleted += 1
                 gone.append(k.row)
                 continue
-            if is_upd and retire_n and not k.was_in_m and not k.remembered and len(ms := k.mstruct) >= retire_n \
-                    and speed < v_min and min(ms[-retire_n:]) >= retire_s:
+            if is_upd and retire_n and not k.was_in_m and not k.remembered and len(mev := k.mev) >= retire_n \
+                    and speed < v_min and min([e[0] for e in mev[-retire_n:]]) >= retire_s:
                 # clutter retirement: a still track the map already holds as structure (docs/real.md "Speed");
                 # a confirmed one stays as a dormant track while its object is seen (_clutter_detections)
                 st.deleted_structure += 1
@@ -1354,8 +1332,8 @@ class Tracker:
                     pass  # left M
                 else:
                     rides = False
-                    if len(k.map_t) >= ride_n:  # (fewer: it cannot ride)
-                        lx, ly = k.laser_xy[-1]
+                    if len(ride := k.ride) >= ride_n:  # (fewer: it cannot ride)
+                        lx, ly = ride[-1][:2]
                         if lx * lx + ly * ly > ride_r2:
                             k.rode = False  # (_rides_with_laser's first test, inline: most tracks are far from it)
                         else:
@@ -1506,9 +1484,9 @@ class Tracker:
         k.beams = det.beams
         k.free = [det.free_fraction]
         if self._map is not None:
-            k.mstruct, k.mfree, k.munknown = [det.map_structure], [det.map_free], [det.map_unknown]
-        k.past, k.past_t = ([_past_entry(t, det)], [t]) if self._free is not None else ([], [])
-        k.laser_xy, k.map_xy, k.map_t = [], [], []
+            k.mev = [(det.map_structure, det.map_free, det.map_unknown)]
+        k.past = [_past_entry(t, det)] if self._free is not None else []
+        k.ride = []
         k.person, k.person_streak, k.rode = False, 0, False
         k.reason = "not in M: left the map structure it was retired on"
         self._add_row(k, (z[0], z[1], 0.0, 0.0), P)
@@ -1548,23 +1526,26 @@ class Tracker:
         for an updated track in M, or confirmed / coasting with ``speed`` (m/s) > v_min; ``sig``: σ of the speed
         along the velocity, m/s."""
         tc = self.config.tracker
+        # the map evidence's columns as lists (the same floats in the same order: the same sums)
+        mev = k.mev
+        ms = [e[0] for e in mev]
         # a track seen moving before re-enters M on the kinematic test: where it paused, the map wrote it
-        use_map = self._map is not None and len(k.mstruct) > 0 and not k.was_in_m
+        use_map = self._map is not None and len(mev) > 0 and not k.was_in_m
         npu = tc.person_sustain_updates
         person_way = self._person_moved_in(k, npu, use_map) if k.person_streak >= npu else None
         fast_person = person_way is not None
         need = tc.person_sustain_updates if fast_person else tc.sustain_updates
-        have_map = self._map is not None and len(k.mstruct) > 0
-        if k.in_m and have_map and len(k.mstruct) >= tc.sustain_updates and \
-                sum(k.mstruct) / len(k.mstruct) >= tc.map_structure_exit:
+        have_map = self._map is not None and len(mev) > 0
+        if k.in_m and have_map and len(ms) >= tc.sustain_updates and \
+                sum(ms) / len(ms) >= tc.map_structure_exit:
             k.in_m = False
             k.fast = 0
-            k.reason = (f"left M: {sum(k.mstruct) / len(k.mstruct):.2f} of its points on long-occupied map cells "
+            k.reason = (f"left M: {sum(ms) / len(ms):.2f} of its points on long-occupied map cells "
                         "(structure)")
             return
         if k.in_m and have_map and k.slow_since is not None and t - k.slow_since >= tc.map_structure_stop_time \
-                and len(k.mstruct) >= 2 and \
-                0.5 * (k.mstruct[-1] + k.mstruct[-2]) >= tc.map_structure_stop:
+                and len(ms) >= 2 and \
+                0.5 * (ms[-1] + ms[-2]) >= tc.map_structure_stop:
             # a mover that stops where the map has long-standing structure has merged with it (a person
             # reaching a wall): hysteresis would carry M onto the wall
             k.in_m = False
@@ -1605,12 +1586,12 @@ class Tracker:
         elif self._free is not None and (not (fr := self._free_values(k)) or sum(fr) / len(fr) < tc.free_min_fraction):
             k.reason = (f"not in M: points on free space {sum(fr) / max(len(fr), 1):.2f} < "
                         f"{tc.free_min_fraction:.2f} (static structure)")
-        elif use_map and not fast_person and sum(k.mfree) / len(k.mfree) < tc.map_free_min and not (
-                self._is_still() and sum(k.munknown) / len(k.munknown) >= 1.0 - tc.map_free_min):
-            k.reason = (f"not in M: points in observed-free map cells {sum(k.mfree) / len(k.mfree):.2f} < "
+        elif use_map and not fast_person and sum(mf := [e[1] for e in mev]) / len(mf) < tc.map_free_min and not (
+                self._is_still() and sum(mu := [e[2] for e in mev]) / len(mu) >= 1.0 - tc.map_free_min):
+            k.reason = (f"not in M: points in observed-free map cells {sum(mf) / len(mf):.2f} < "
                         f"{tc.map_free_min:.2f} (no map evidence of motion)")
-        elif use_map and sum(k.mstruct) / len(k.mstruct) > tc.map_structure_max:
-            k.reason = (f"not in M: points on long-occupied map cells {sum(k.mstruct) / len(k.mstruct):.2f} > "
+        elif use_map and sum(ms) / len(ms) > tc.map_structure_max:
+            k.reason = (f"not in M: points on long-occupied map cells {sum(ms) / len(ms):.2f} > "
                         f"{tc.map_structure_max:.2f} (structure)")
         else:
             k.in_m = True
@@ -1633,10 +1614,11 @@ class Tracker:
         tc = self.config.tracker
         if not use_map:
             return "kinematic"  # no map to ask (or seen moving before): the general displacement applies
-        mf = k.mfree[-n:]
+        last = k.mev[-n:]
+        mf = [e[1] for e in last]
         if sum(mf) / len(mf) >= tc.person_map_free_min:
             return "map"
-        fr, ms, mu = self._free_values(k)[-n:], k.mstruct[-n:], k.munknown[-n:]
+        fr, ms, mu = self._free_values(k)[-n:], [e[0] for e in last], [e[2] for e in last]
         if len(fr) < n or sum(fr) / len(fr) < tc.person_free_min or sum(ms) / len(ms) > tc.map_structure_max:
             return None
         return "free" if (sum(mf) + sum(mu)) / len(mf) >= 0.5 else None
@@ -1758,12 +1740,13 @@ class Tracker:
     def _net_speed(k: _Track, n: int) -> float | None:
         """Net displacement of the track's centre over its last ``n`` updates divided by their time span, m/s
         (None with fewer updates): pose jitter and association noise give a speed but no net motion."""
-        if len(k.map_xy) < max(n, 2):
+        ride = k.ride
+        if len(ride) < max(n, 2):
             return None
-        dt = k.map_t[-1] - k.map_t[-n]
+        (_, _, x0, y0, t0), (_, _, x1, y1, t1) = ride[-n], ride[-1]
+        dt = t1 - t0
         if dt <= 0.0:
             return None
-        (x0, y0), (x1, y1) = k.map_xy[-n], k.map_xy[-1]
         return math.hypot(x1 - x0, y1 - y0) / dt
 
     def _rides_with_laser(self, k: _Track) -> bool:
@@ -1772,9 +1755,10 @@ class Tracker:
         the spread, over its updates of the last ``ride_time`` seconds (at least ``ride_updates`` of them,
         spanning at least half of it): it moves with the robot (its body)."""
         tc = self.config.tracker
-        if len(k.map_t) < tc.ride_updates:
+        ride = k.ride
+        if len(ride) < tc.ride_updates:
             return False
-        lx_last, ly_last = k.laser_xy[-1]
+        lx_last, ly_last = ride[-1][:2]
         if lx_last * lx_last + ly_last * ly_last > tc.ride_max_range * tc.ride_max_range:
             k.rode = False
             return False  # far from the laser (most tracks): no arrays built
@@ -1782,15 +1766,15 @@ class Tracker:
         if self._body_near is not None and (nb == 0 or np.count_nonzero(self._body_near[k.beams]) / nb < 0.5):
             k.rode = False
             return False  # not where the robot's body was found
-        t_end = k.map_t[-1]
-        n = sum(1 for q in k.map_t if t_end - q <= tc.ride_time)
-        if n < tc.ride_updates or t_end - k.map_t[-n] < 0.5 * tc.ride_time:
+        t_end = ride[-1][4]
+        n = sum(1 for e in ride if t_end - e[4] <= tc.ride_time)
+        if n < tc.ride_updates or t_end - ride[-n][4] < 0.5 * tc.ride_time:
             return False
-        lx = np.array(k.laser_xy[-n:])
+        lx = np.array([e[:2] for e in ride[-n:]])
         if float(np.hypot(lx[:, 0], lx[:, 1]).max()) > tc.ride_max_range:
             return False
         spread = float(np.hypot(*(lx - lx.mean(axis=0)).T).max())
-        mx = np.array(k.map_xy[-n:])
+        mx = np.array([e[2:4] for e in ride[-n:]])
         moved = float(np.hypot(*(mx[-1] - mx[0])))
         # with a motionless laser the two frames agree: only motion far beyond the laser-frame spread rides;
         # once found riding, a track keeps riding until its laser-frame spread clearly exceeds the tolerance
