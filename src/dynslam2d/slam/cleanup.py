@@ -122,9 +122,9 @@ def _count_scan(counts: np.ndarray, last: np.ndarray, scan_id: int, ox: float, o
     _count_beams(table, pool, n, 0, 0, scan_id, float(ox), float(oy), hx, hy, np.ones(hx.shape[0], dtype=np.bool_),
                  cx, cy, np.ones(cx.shape[0], dtype=np.bool_), 0, 0, h, w, float(core), np.zeros(0, dtype=np.uint8),
                  False)
-    dense = _dense_of(table, pool, 0, 0, h, w)
-    counts[...] = dense[:, :, :3]
-    last[...] = dense[:, :, _LAST]
+    hit, through, switch, latest = _tile_channels(table, pool, 0, 0, h, w, (_HIT, _THROUGH, _SWITCH, _LAST))
+    counts[:, :, _HIT], counts[:, :, _THROUGH], counts[:, :, _SWITCH] = hit, through, switch
+    last[...] = latest
 
 
 def _tiles_of(counts: np.ndarray, last: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
@@ -140,24 +140,29 @@ def _tiles_of(counts: np.ndarray, last: np.ndarray) -> tuple[np.ndarray, np.ndar
     return np.arange(th * tw, dtype=np.int32).reshape(th, tw), pool, th * tw
 
 
-def _dense_of(table: np.ndarray, pool: np.ndarray, r0: int, c0: int, h: int, w: int) -> np.ndarray:
-    """(h, w, 4) uint16 of the cells rows r0 … r0 + h − 1, cols c0 … c0 + w − 1 in the tiles' cell units (tile
-    (0, 0) of ``table`` starts at cell (0, 0); the range may pass the table's edges), channels as
-    :data:`_HIT` … :data:`_LAST`: zeros where no tile is allocated."""
-    out = np.zeros((h, w, 4), dtype=np.uint16)
+def _tile_channels(table: np.ndarray, pool: np.ndarray, r0: int, c0: int, h: int, w: int,
+                   channels: Sequence[int]) -> list[np.ndarray]:
+    """(h, w) uint16 arrays, one per channel of ``channels`` (:data:`_HIT` … :data:`_LAST`), of the cells rows
+    r0 … r0 + h − 1, cols c0 … c0 + w − 1 in the tiles' cell units (tile (0, 0) of ``table`` starts at cell
+    (0, 0); the range may pass the table's edges): the counted cells' values, zeros where no tile is allocated.
+    Filled tile by tile, only the channels asked for (the clean-up pass reads three of four over the whole map)."""
+    outs = [np.zeros((h, w), dtype=np.uint16) for _ in channels]
     if h <= 0 or w <= 0:
-        return out
+        return outs
     tr0, tc0 = max(r0 >> _TILE_SHIFT, 0), max(c0 >> _TILE_SHIFT, 0)
     tr1 = min((r0 + h - 1) >> _TILE_SHIFT, table.shape[0] - 1)
     tc1 = min((c0 + w - 1) >> _TILE_SHIFT, table.shape[1] - 1)
-    for tr, tc in zip(*np.nonzero(table[tr0:tr1 + 1, tc0:tc1 + 1] >= 0)):
-        tr, tc = int(tr) + tr0, int(tc) + tc0
-        tile = pool[table[tr, tc]].reshape(_TILE, _TILE, 4)
-        y0, x0 = tr * _TILE - r0, tc * _TILE - c0  # the tile's first cell in the output
+    if tr1 < tr0 or tc1 < tc0:
+        return outs
+    sub = table[tr0:tr1 + 1, tc0:tc1 + 1]
+    for tr, tc in zip(*np.nonzero(sub >= 0)):
+        tile = pool[sub[tr, tc]].reshape(_TILE, _TILE, 4)
+        y0, x0 = (int(tr) + tr0) * _TILE - r0, (int(tc) + tc0) * _TILE - c0  # the tile's first cell in the output
         ya, xa = max(y0, 0), max(x0, 0)
         yb, xb = min(y0 + _TILE, h), min(x0 + _TILE, w)
-        out[ya:yb, xa:xb] = tile[ya - y0:yb - y0, xa - x0:xb - x0]
-    return out
+        for out, ch in zip(outs, channels):
+            out[ya:yb, xa:xb] = tile[ya - y0:yb - y0, xa - x0:xb - x0, ch]
+    return outs
 
 
 @njit(cache=True)
@@ -446,29 +451,30 @@ class VisibilityCounter:
         """(h, w): rows and columns of the counted extent."""
         return self._h, self._w
 
-    def _dense(self) -> np.ndarray:
-        """(h, w, 4) uint16 copy of the whole extent (channels :data:`_HIT` … :data:`_LAST`)."""
-        return _dense_of(self._table, self._pool, self.j0 - (self._tj0 << _TILE_SHIFT),
-                         self.i0 - (self._ti0 << _TILE_SHIFT), self._h, self._w)
+    def _extent_channel(self, channel: int) -> np.ndarray:
+        """(h, w) uint16 copy of one channel (:data:`_HIT` … :data:`_LAST`) over the whole extent."""
+        (out,) = _tile_channels(self._table, self._pool, self.j0 - (self._tj0 << _TILE_SHIFT),
+                                self.i0 - (self._ti0 << _TILE_SHIFT), self._h, self._w, (channel,))
+        return out
 
     @property
     def hits(self) -> np.ndarray:
         """(h, w) uint16 copy: scans that hit each cell of the extent (see :attr:`i0`, :attr:`j0`)."""
-        return np.ascontiguousarray(self._dense()[:, :, _HIT])
+        return self._extent_channel(_HIT)
 
     @property
     def through(self) -> np.ndarray:
         """(h, w) uint16 copy: scans that passed through each cell."""
-        return np.ascontiguousarray(self._dense()[:, :, _THROUGH])
+        return self._extent_channel(_THROUGH)
 
     @property
     def switches(self) -> np.ndarray:
         """(h, w) uint16 copy: changes between hit and pass in each cell's scan sequence."""
-        return np.ascontiguousarray(self._dense()[:, :, _SWITCH])
+        return self._extent_channel(_SWITCH)
 
     def last_touch(self) -> np.ndarray:
         """(h, w) uint16 copy: each cell's latest touch (2 · scan number, + 1 for a hit; 0 = never)."""
-        return np.ascontiguousarray(self._dense()[:, :, _LAST])
+        return self._extent_channel(_LAST)
 
     def at(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """(n, 4) uint16: hits, passes, switches and latest touch of absolute cells (i[k], j[k]) (zeros outside
@@ -655,29 +661,14 @@ class VisibilityCounter:
 
     def _grid_channels(self, grid: GridMap, channels: Sequence[int]) -> list[np.ndarray]:
         """(H, W) uint16 arrays shaped like ``grid`` (same cells), one per channel of ``channels``: the counted
-        cells' values, zeros elsewhere (outside the extent or never counted). Filled tile by tile."""
+        cells' values, zeros elsewhere (outside the extent or never counted)."""
         H, W = grid.shape
-        outs = [np.zeros((H, W), dtype=np.uint16) for _ in channels]
         g = self._overlap(grid)
         if g is None:
-            return outs
-        gi0, gj0 = g
-        # the grid in the tiles' cells (the extent's cells only: the table covers them, and more)
-        r0, c0 = max(gj0, self.j0), max(gi0, self.i0)
-        r1, c1 = min(gj0 + H, self.j0 + self._h), min(gi0 + W, self.i0 + self._w)
-        tr0, tc0 = (r0 >> _TILE_SHIFT) - self._tj0, (c0 >> _TILE_SHIFT) - self._ti0
-        tr1, tc1 = ((r1 - 1) >> _TILE_SHIFT) - self._tj0, ((c1 - 1) >> _TILE_SHIFT) - self._ti0
-        sub = self._table[tr0:tr1 + 1, tc0:tc1 + 1]
-        for tr, tc in zip(*np.nonzero(sub >= 0)):
-            t = int(sub[tr, tc])
-            ya = (int(tr) + tr0 + self._tj0) << _TILE_SHIFT  # the tile's first absolute cell
-            xa = (int(tc) + tc0 + self._ti0) << _TILE_SHIFT
-            ys, ye = max(ya, r0), min(ya + _TILE, r1)
-            xs, xe = max(xa, c0), min(xa + _TILE, c1)
-            tile = self._pool[t].reshape(_TILE, _TILE, 4)
-            for out, ch in zip(outs, channels):
-                out[ys - gj0:ye - gj0, xs - gi0:xe - gi0] = tile[ys - ya:ye - ya, xs - xa:xe - xa, ch]
-        return outs
+            return [np.zeros((H, W), dtype=np.uint16) for _ in channels]
+        gi0, gj0 = g  # (cells of the table outside the extent are never counted: zeros, as outside the table)
+        return _tile_channels(self._table, self._pool, gj0 - (self._tj0 << _TILE_SHIFT),
+                              gi0 - (self._ti0 << _TILE_SHIFT), H, W, channels)
 
     def window(self, grid: GridMap) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(hits, through, switches), each shaped like ``grid`` (same cells; zeros where

@@ -88,6 +88,12 @@ def _edge_errors(poses: np.ndarray, ii: np.ndarray, jj: np.ndarray, z: np.ndarra
     return e, ca, sa, dth_x, dth_y
 
 
+def _edge(i: int, j: int, z: object, info: np.ndarray, loop: bool, robust: bool) -> Edge:
+    """The :class:`Edge` x_j = x_i ⊕ z: ``z`` copied as (3,) float64, ``info`` (3×3) symmetrised."""
+    info = np.asarray(info, dtype=np.float64).reshape(3, 3)
+    return Edge(i, j, np.array(z, dtype=np.float64).reshape(3), 0.5 * (info + info.T), loop, robust=robust)
+
+
 class PoseGraph:
     """Nodes (poses) and edges; :meth:`optimise` moves the nodes.
 
@@ -117,9 +123,7 @@ class PoseGraph:
 
     def _build_pending(self) -> None:
         for i, j, z, sxy, sth, robust in self._pending:
-            info = diag_info(sxy, sth)
-            self._edges.append(Edge(i, j, np.array(z, dtype=np.float64).reshape(3), 0.5 * (info + info.T), False,
-                                    robust=robust))
+            self._edges.append(_edge(i, j, z, diag_info(sxy, sth), False, robust))
         self._pending = []
 
     @property
@@ -152,10 +156,8 @@ class PoseGraph:
         n = self._n
         if not (0 <= i < n and 0 <= j < n) or i == j:
             raise ValueError(f"add_edge: bad node ids {i}, {j} (graph has {n} nodes)")
-        info = np.asarray(info, dtype=np.float64).reshape(3, 3)
         edges = self.edges
-        edges.append(Edge(int(i), int(j), np.array(z, dtype=np.float64).reshape(3),  # (a copy)
-                          0.5 * (info + info.T), bool(loop), robust=bool(robust)))
+        edges.append(_edge(int(i), int(j), z, info, bool(loop), bool(robust)))
         return len(edges) - 1
 
     def add_diag_edge(self, i: int, j: int, z: tuple[float, float, float] | list[float] | np.ndarray,
