@@ -39,10 +39,10 @@ def test_new_track_sets_every_field_as_the_dataclass_does() -> None:
     # the lists given are the track's own; the defaults are new lists per track (not shared between tracks)
     assert fast.free is a["free"] and fast.past is a["past"] and fast.birth_xy is a["birth_xy"]
     other = _new_track(**_args())
-    for name in ("history", "ride"):
+    for name in ("ride",):
         assert getattr(fast, name) is not getattr(other, name), name
-    fast.history.append(False)
-    assert other.history == [True]
+    fast.ride.append((0.0, 0.0, 0.0, 0.0, 0.0))
+    assert other.ride == []
 
 
 def test_scan_detection_points_are_its_rows_of_the_scan_array() -> None:

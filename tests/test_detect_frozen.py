@@ -82,7 +82,7 @@ def test_history_is_bounded_and_reports_own_their_arrays() -> None:
         out = tr.update(_scan(pose, -3.0 + 0.05 * i, i / 15.0, i), pose)
     box = [t for t in out if t.in_m]
     assert len(box) == 1 and box[0].hits >= 50
-    assert all(len(k.history) <= cfg.tracker.confirm_window for k in tr._tracks)
+    assert all(k.hist_hits <= k.hist_n <= cfg.tracker.confirm_window for k in tr._tracks)
     k = next(k for k in tr._tracks if k.id == box[0].id)
     assert not np.shares_memory(box[0].covariance, k.P) and not np.shares_memory(box[0].velocity, k.x)
     cov_before = k.P.copy()

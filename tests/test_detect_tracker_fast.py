@@ -60,14 +60,15 @@ def _vacated_reference(tr: Tracker, t: float) -> dict[int, float]:
     chunks, owners, counts = [], [], [0]
     for k in tr._tracks:
         for a in tr._free.ref_ages:
-            if not k.past:
+            live = k.past[k.past_a:]  # (append-only: the live entries from past_a on)
+            if not live:
                 continue
-            stamps = [e[0] for e in k.past]
+            stamps = [e[0] for e in live]
             j = _window_argmin(stamps, t, a)
             if t - stamps[j] > 0.0:
-                chunks.append(_past_points(k.past[j]))
+                chunks.append(_past_points(live[j]))
                 owners.append(k.id)
-                counts.append(_past_points(k.past[j]).shape[0])
+                counts.append(_past_points(live[j]).shape[0])
     out: dict[int, float] = {}
     if chunks:
         pts = np.concatenate(chunks)
@@ -89,7 +90,8 @@ def test_vacated_space_of_a_receding_box_matches_the_plain_search() -> None:
         tr.update(_scan(pose, -3.5 + 1.2 * t, t, i), pose)
         if i >= 10:
             want = _vacated_reference(tr, t)
-            got = {k.id: tr._vacated_one(tr._cur_ref, t, tuple(k.past)) for k in tr._tracks if k.past}
+            got = {k.id: tr._vacated_one(tr._cur_ref, t, tuple(k.past[k.past_a:])) for k in tr._tracks
+                   if len(k.past) > k.past_a}
             assert got == {tid: want.get(tid, 0.0) for tid in got}
             checked += len(want)
             high += any(v > 0.5 for v in got.values())
@@ -308,3 +310,46 @@ def test_detection_free_fractions_read_late_equal_the_test_of_their_scan() -> No
     for d, want in recorded:
         assert d.free_fraction == want
     assert persons >= 40 and sum(w > 0.0 for _, w in recorded) >= 50  # merged legs and free space occurred
+
+
+def test_free_entries_snapshot_the_stored_points_and_the_m_of_n_counts_follow_the_hits() -> None:
+    """Pass trk16: an update's free-space entry refers to the track's stored points before it as (list, first, end)
+    of the append-only ``_Track.past`` instead of a copy — it must hold the very entries (the same objects, in order)
+    that were live before the update, also after later updates moved ``past_a``, started a new list or re-acquired
+    the track after a gap; and the M-of-N counts ``hist_n`` / ``hist_hits`` must be the length and the hit count of
+    the first ``confirm_window`` entries of the hit / miss sequence (the list they replace)."""
+    cfg = DetectConfig()
+    window = cfg.tracker.confirm_window
+    tr = Tracker(cfg)
+    pose = Pose2D(-5.0, 0.0, 0.0)
+    seq: dict[int, list[bool]] = {}  # per track id: hit / miss per scan since its birth (the reference list)
+    held = []  # (entry, the live entries before its update) of every snapshot made
+    compacted = gaps = 0
+    for i in range(80):
+        t = i / 15.0
+        hidden = i in (50, 51)  # (the box leaves the scan for two scans: misses, then a re-acquisition)
+        before = {k.id: tuple(k.past[k.past_a:]) for k in tr._tracks}
+        lists = {k.id: k.past for k in tr._tracks}
+        x = 30.0 if hidden else -3.5 + 0.9 * t
+        tr.update(_scan(pose, x, t, i), pose)
+        for k in tr._tracks:
+            if k.id not in seq:
+                seq[k.id] = [True]
+                continue
+            hit = k.misses == 0
+            seq[k.id].append(hit)
+            gaps += hit and k.past is not lists[k.id] and len(k.past) == 1
+            compacted += k.past is not lists[k.id] and len(k.past) > 1
+            if hit and k.free and type(k.free[-1]) is tuple and len(before[k.id]):
+                e = k.free[-1]
+                assert len(e) == 6 and e[3][e[4]:e[5]] == list(before[k.id])
+                held.append((e, before[k.id]))
+            assert 0 <= k.past_a < 8 and (not hit or all(t - s[0] <= tr._free.max_age for s in k.past[k.past_a:]))
+        for k in tr._tracks:
+            h = seq[k.id][:window]
+            assert (k.hist_n, k.hist_hits) == (len(h), sum(h)), (k.id, seq[k.id])
+    # every snapshot still reads its entries after all the later updates (the lists are never changed in place)
+    assert len(held) > 30 and compacted > 0 and gaps > 0
+    for e, want in held:
+        got = e[3][e[4]:e[5]]
+        assert len(got) == len(want) and all(a is b for a, b in zip(got, want))

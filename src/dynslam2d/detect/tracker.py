@@ -116,6 +116,8 @@ _make_track = fast_init(Track)  # Track(...) / Box(...) without the frozen datac
 _make_box = fast_init(Box)
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
 _NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives it its row
+# a track's stored-points list starts anew once this many of its entries are out of date (_Track.past, past_a)
+_PAST_COMPACT = 8
 _ROWS0 = 64  # initial rows of the tracker's state arrays (doubled when full)
 _any_of = np.logical_or.reduce  # (ndarray.any without the Python wrapper)
 
@@ -166,8 +168,10 @@ class _Track:
     state: str = TENTATIVE
     hits: int = 1
     misses: int = 0
-    # hit (True) / miss per update, only the first confirm_window entries: all that the M-of-N rule reads
-    history: list[bool] = field(default_factory=lambda: [True])
+    # the M-of-N rule's counts over the first confirm_window updates (all that it reads): how many updates (hits and
+    # misses) and how many hits; two ints instead of a list of bools per track (docs/speed.md, pass trk16)
+    hist_n: int = 1
+    hist_hits: int = 1
     fast: int = 0
     in_m: bool = False
     reason: str = "not in M: tentative track"
@@ -186,8 +190,12 @@ class _Track:
     # of one tuple per update (was three lists), fewer objects touched per scan (docs/speed.md, pass trk15)
     ride: list[tuple[float, float, float, float, float]] = field(default_factory=list)
     # (stamp s, points array, a0, n) per update within the free-space memory's max age: the detection's (n, 2) points,
-    # rows a0 … a0 + n − 1 of the array (its scan's), or the whole array for a0 < 0 (_past_entry, _past_points)
+    # rows a0 … a0 + n − 1 of the array (its scan's), or the whole array for a0 < 0 (_past_entry, _past_points).
+    # Append-only: the live entries are past[past_a:] (older ones are skipped by moving past_a, and dropped by
+    # starting a new list every _PAST_COMPACT of them), so an update's snapshot of the entries before it is
+    # (past, past_a, len(past)) instead of a copy (docs/speed.md, pass trk16); a new list, never a cleared one
     past: list[tuple[float, np.ndarray, int, int]] = field(default_factory=list)
+    past_a: int = 0
     slow_since: float | None = None
     probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
     merged: bool = False  # left M when its detection joined long-standing structure (refuses such detections)
@@ -281,7 +289,8 @@ def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, be
     k.state = TENTATIVE
     k.hits = 1
     k.misses = 0
-    k.history = [True]
+    k.hist_n = 1
+    k.hist_hits = 1
     k.fast = 0
     k.in_m = False
     k.reason = "not in M: tentative track"
@@ -294,6 +303,7 @@ def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, be
     k.was_in_m = False
     k.ride = []
     k.past = past
+    k.past_a = 0
     k.slow_since = None
     k.probation = False
     k.merged = False
@@ -1056,10 +1066,15 @@ class Tracker:
             used_add(di)
             dkind = det.kind
             # (the stored points before this update: their vacated-space fraction is computed when first read)
-            past0 = tuple(k.past) if ref is not None and k.past else None
+            # ((the list, first, end): the entries are never changed in place, so this is their snapshot)
+            past = k.past
+            pa = k.past_a
+            np0 = len(past)
+            past0 = (past, pa, np0) if ref is not None and np0 > pa else None
             if k.misses > 0:
                 # re-acquired after a gap: the free-space evidence must be rebuilt from this object
-                k.past.clear()
+                k.past = []  # (a new list: the snapshots of earlier updates may hold the old one)
+                k.past_a = 0
                 k.free.clear()
                 k.mev.clear()
                 k.ride.clear()
@@ -1072,13 +1087,14 @@ class Tracker:
             k.person_streak = k.person_streak + 1 if person else 0
             k.hits += 1
             k.last_hit = t
-            if len(k.history) < window:  # (bounded: only the first window is read)
-                k.history.append(True)
+            if k.hist_n < window:  # (the M-of-N counts: only the first window is read)
+                k.hist_n += 1
+                k.hist_hits += 1
             k.beams = det.beams
             free = k.free
             # (vacated: this scan sees through its old points; computed when the entry is read, _free_values)
             # (the detection's own fraction too: det.free_fraction, computed when read)
-            free.append((det, ref, t, past0) if past0 is not None else max(det.free_fraction, 0.0))
+            free.append((det, ref, t, *past0) if past0 is not None else max(det.free_fraction, 0.0))
             if len(free) > nsus:
                 del free[0]
             if p is not None:
@@ -1097,8 +1113,14 @@ class Tracker:
             if max_age is not None:
                 past = k.past
                 past.append((t, det._pts, det._a0, det.n_points))  # (_past_entry of a scan detection, inline)
-                while past and t - past[0][0] > max_age:
-                    del past[0]
+                pa = k.past_a
+                n = len(past)
+                while pa < n and t - past[pa][0] > max_age:
+                    pa += 1
+                if pa >= _PAST_COMPACT:  # (a new list of the live entries: the old one stays with its snapshots)
+                    k.past = past[pa:]
+                    pa = 0
+                k.past_a = pa
 
     def _motion_prior(self, k: _Track) -> None:
         """Hidden side of a moving box whose other side is measured: a side parallel to the motion is
@@ -1127,12 +1149,13 @@ class Tracker:
 
     def _free_values(self, k: _Track) -> list[float]:
         """``k.free`` with every entry a float. A birth appends its detection instead of its free-space fraction, and an
-        update whose track had stored points appends a tuple (det, ref, t, past): the detection (its own fraction is
-        the floor), the free-space reference of the scan at ``t`` (s) and the track's stored (stamp, points) before
-        the update; its value, max(det.free_fraction, the vacated fraction of :meth:`_vacated_one` in that scan), is
-        computed here when first read and replaces the entry (the detection's own fraction, too, is computed when
-        first read: ScanDetection.free_fraction). Most entries are never read (the free-space condition of M is
-        reached by few tracks; ≈ 3 % on negative_2), so most free-space tests never run."""
+        update whose track had stored points appends a tuple (det, ref, t, past, a, b): the detection (its own fraction
+        is the floor), the free-space reference of the scan at ``t`` (s) and the track's stored (stamp, points) before
+        the update (``past[a:b]``: ``_Track.past`` is append-only); its value, max(det.free_fraction, the vacated
+        fraction of :meth:`_vacated_one` in that scan), is computed here when first read and replaces the entry (the
+        detection's own fraction, too, is computed when first read: ScanDetection.free_fraction). Most entries are
+        never read (the free-space condition of M is reached by few tracks; ≈ 3 % on negative_2), so most free-space
+        tests never run."""
         free = k.free
         for q, v in enumerate(free):
             if type(v) is not float:
@@ -1144,8 +1167,8 @@ class Tracker:
         (a birth's: its fraction) or a tuple (an update's, its floor the detection)."""
         if type(entry) is not tuple:
             return entry.free_fraction if isinstance(entry, Detection) else entry
-        det, ref, t, past = entry
-        return max(det.free_fraction, self._vacated_one(ref, t, past))
+        det, ref, t, past, a, b = entry
+        return max(det.free_fraction, self._vacated_one(ref, t, past[a:b]))
 
     def _vacated_one(self, ref, t: float, past: tuple) -> float:
         """The vacated space of one track: the largest fraction of its stored points (``past``: ≥ 1 entries of
@@ -1273,19 +1296,18 @@ class Tracker:
                     # stop while unseen, so it is remembered now (if eligible) instead of being deleted after
                     # max_coast_time (a track that just vanishes in plain view, a false one, is not)
                     self._remember(k, t - k.slow_since)
-                if len(k.history) < window:  # (bounded: only the first window is read)
-                    k.history.append(False)
+                if k.hist_n < window:  # (the M-of-N counts: only the first window is read)
+                    k.hist_n += 1
                 k.beams = _NO_BEAMS
                 if k.state == CONFIRMED:
                     k.state = COASTING
             elif k.state == COASTING:
                 k.state = CONFIRMED
             if k.state == TENTATIVE:
-                h = k.history  # (its first confirm_window entries: it is kept no longer)
-                nh = sum(h)
+                nh, n = k.hist_hits, k.hist_n  # (hits and updates among its first confirm_window updates)
                 if nh >= need_hits:
                     k.state = CONFIRMED
-                elif nh + (window - len(h)) < need_hits or k.misses > 0 and len(h) >= window:
+                elif nh + (window - n) < need_hits or k.misses > 0 and n >= window:
                     st.deleted_tentative += 1
                     st.tracks_deleted += 1
                     gone.append(k.row)
@@ -1486,6 +1508,7 @@ class Tracker:
         if self._map is not None:
             k.mev = [(det.map_structure, det.map_free, det.map_unknown)]
         k.past = [_past_entry(t, det)] if self._free is not None else []
+        k.past_a = 0
         k.ride = []
         k.person, k.person_streak, k.rode = False, 0, False
         k.reason = "not in M: left the map structure it was retired on"
