@@ -128,6 +128,33 @@ def test_mirrored_rays_are_not_skipped_along() -> None:
     _check(h, w, sx, sy, ex, ey, np.ones(len(ex), bool), None, scans=2)
 
 
+def test_repeated_rays_are_skipped_only_when_they_would_change_nothing() -> None:
+    """A ray with the previous ray's end cell, kind and stop walks the same cells, all already updated this scan, so
+    the kernel skips it (counting it as the previous one was); the same end as a clearing ray then a return, or
+    with a shorter stop, does change cells and must be walked: bit for bit the reference, and the returned count
+    includes the skipped repeats but not the rays outside the array."""
+    h, w, sx, sy = 40, 50, 20, 18
+    ex = [35, 35, 35, 35, 35, 60, 60, 20, 20, 5, 5, 5, 30, 30, 30]
+    ey = [25, 25, 25, 25, 25, 10, 10, 18, 18, 3, 3, 3, 38, 38, 38]
+    hit = np.array([True, True, False, False, True, True, True, True, True, False, True, True, True, True, True])
+    # (35, 25): return ×2, clearing ×2 (changes nothing), return (changes nothing); (60, 10) outside; (20, 18) the
+    # start cell; (5, 3): clearing then a return (the end turns occupied); (30, 38) with stops 9, 9, then 1
+    stop = np.array([0.0] * 12 + [9.0, 9.0, 1.0])
+    _check(h, w, sx, sy, ex, ey, hit, None, scans=3)
+    _check(h, w, sx, sy, ex, ey, hit, stop, scans=3)
+    lo = np.zeros((h, w), np.float32)
+    pr = np.full((h, w), 0.5, np.float32)
+    ui = np.full((h, w), -1, np.int32)
+    exa, eya = np.asarray(ex, np.int64), np.asarray(ey, np.int64)
+    assert integrate_rays(lo, pr, ui, 1, 2, sx, sy, exa, eya, hit, L_FREE, L_OCC, 6.0) == 11
+    assert ui[3, 5] == 2 and lo[3, 5] == np.float32(L_OCC)  # the return after the clearing ray was not skipped
+    lo[:] = 0.0
+    ui[:] = -1
+    assert integrate_rays_stop(lo, pr, ui, 1, 2, sx, sy, exa, eya, hit, stop, L_FREE, L_OCC, 6.0) == 11
+    cells = bresenham_free_cells(sx, sy, 30, 38)
+    assert (ui[cells[:, 1], cells[:, 0]] == 1).all()  # stop 1 after stop 9: the ray's last cells made free too
+
+
 def test_rays_longer_than_the_multiply_shift_limit_equal_the_reference() -> None:
     """Rays with a major length at and above _MAGIC_MAX take the division path: cells and values as the
     reference, next to short rays in the same octant."""

@@ -132,6 +132,11 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
     mask = keys.shape[0] - 1
     miss_f = np.empty(max(h, w) + 1, dtype=np.uint64)  # (a ray's cells: at most max(h, w))
     miss_v = np.empty(max(h, w) + 1)
+    px = -1  # the previous ray: end cell, hit flag, stop and whether it was integrated (1) or skipped (0)
+    py = -1
+    ph = False
+    ps = 0.0
+    pd = 0
     for k in range(n):
         if from_ends:
             x1 = int(math.floor(ends[0, k] / r + 0.5)) - i0
@@ -139,10 +144,24 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
         else:
             x1 = ex[k]
             y1 = ey[k]
+        hk = hit[k]
+        sk = stop[k] if use_stop else 0.0
+        if k > 0 and x1 == px and y1 == py and hk == ph and sk == ps:
+            # the previous ray again (same start, end cell, kind and stop: the same cells): its cells hold this
+            # scan's update indices now (free_idx or occ_idx; they only grow within a scan), so walking it again
+            # would change nothing — counted as the previous one was
+            n_done += pd
+            continue
+        px = x1
+        py = y1
+        ph = hk
+        ps = sk
+        pd = 0
         if x1 == sx and y1 == sy:
             continue
         if x1 < 0 or y1 < 0 or x1 >= w or y1 >= h:
             continue
+        pd = 1
         dx = x1 - sx
         dy = y1 - sy
         adx = abs(dx)
@@ -204,7 +223,7 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
         u = ui[f]
         v = 0.0
         updated = False
-        if hit[k]:
+        if hk:
             if u < occ_idx:
                 v = lo[f]
                 if u == free_idx:
