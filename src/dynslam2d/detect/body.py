@@ -248,7 +248,9 @@ class BodyFilter:
         # restarts, the net motion test and the body beams
         body = np.empty(n, dtype=np.bool_)
         valid = scan._valid  # (read only by the kernel: the scan's cached mask, no copy)
-        if not _observe_beams(scan.ranges, valid if valid is not None else scan.valid_mask(), float(cfg.auto_max_range), tol, self._ref, self._seen,
+        if valid is None:
+            valid = scan.valid_mask()
+        if not _observe_beams(scan.ranges, valid, float(cfg.auto_max_range), tol, self._ref, self._seen,
                               self._same, self._start, self._moved, self.body, self._body_r, float(pose.x),
                               float(pose.y), float(pose.theta), float(cfg.auto_min_travel), float(cfg.auto_min_turn),
                               int(cfg.auto_min_scans), float(cfg.auto_share), body):
