@@ -132,7 +132,10 @@ class VacatedTrace:
         if res != self._res or n != self._beams:
             self._prepare(res, n)
         cos_a, sin_a = scan.trig()
-        nc, k, out = vacated_scan_kernel(ranges, cos_a, sin_a, scan.valid_mask(), float(pose.x), float(pose.y),
+        valid = scan._valid  # the scan's cached mask (the kernel only reads it: no copy)
+        if valid is None:
+            valid = scan.valid_mask()
+        nc, k, out = vacated_scan_kernel(ranges, cos_a, sin_a, valid, float(pose.x), float(pose.y),
                                          float(pose.theta), view.logodds, view.i0, view.j0, self.params, self._work,
                                          self._window)
         if k == 0:  # no candidate (most scans)

@@ -31,6 +31,8 @@ _CONVERGED_RAD = 1e-5
 _ZERO3 = np.zeros((3, 3))
 #: all-zero prior information of up to three levels (read only)
 _ZERO_PRIORS = np.zeros((3, 3, 3))
+#: ``_ZERO_PRIORS[:n]`` for n = 0 … 3, made once (not a new view on every match)
+_ZERO_PRIOR_VIEWS = tuple(_ZERO_PRIORS[:n] for n in range(4))
 
 
 @njit(cache=True)
@@ -434,12 +436,17 @@ _GEO_MAX = 32
 def _level_geometry(levels: list[GridLevel]) -> np.ndarray:
     """(L, 4) float64 (cell side m, i0, j0, 1.0 if empty) of ``levels``, shared between calls with the same values
     (not to be written to; the kernel only reads it)."""
-    key = tuple([(lv.resolution, lv.i0, lv.j0, lv.logodds.size == 0) for lv in levels])
+    if len(levels) == 3:  # (the default map: one flat key, no per-level tuples)
+        a, b, c = levels
+        key: tuple = (a.resolution, a.i0, a.j0, a.logodds.size == 0, b.resolution, b.i0, b.j0, b.logodds.size == 0,
+                      c.resolution, c.i0, c.j0, c.logodds.size == 0)
+    else:
+        key = tuple([(lv.resolution, lv.i0, lv.j0, lv.logodds.size == 0) for lv in levels])
     geo = _GEO.get(key)
     if geo is None:
         if len(_GEO) >= _GEO_MAX:
             _GEO.clear()
-        geo = _GEO[key] = np.array(key, dtype=np.float64)
+        geo = _GEO[key] = np.array(key, dtype=np.float64).reshape(len(levels), 4)
     return geo
 
 
@@ -517,7 +524,7 @@ def match_multires(
                 lam_ps[k] = S @ info @ S
             pw = np.asarray(prior_world, dtype=np.float64)
         else:
-            lam_ps, pw = _ZERO_PRIORS[:n_lv], pose
+            lam_ps, pw = _ZERO_PRIOR_VIEWS[n_lv], pose
         p0 = levels[0].prob
         H = np.empty((3, 3))
         out = np.empty(3)  # (filled by the kernel: a new array is cheaper made here than returned from numba)

@@ -73,8 +73,11 @@ _ALL_AXES = np.ones(3, dtype=bool)
 _ALL_AXES.flags.writeable = False
 _THETA_AXIS = np.array([False, False, True])
 _THETA_AXIS.flags.writeable = False
-#: the covariance of a scan that was not matched (copied into each MatchResult: callers may change theirs)
+#: the covariance of a scan that was not matched (copied into each MatchResult that reads it: callers may change theirs)
 _NO_MATCH_COVARIANCE = np.diag([1e6, 1e6, math.pi**2])
+#: ``MatchResult._covariance_of`` of a result not (yet) matched: its covariance is a copy of _NO_MATCH_COVARIANCE,
+#: made when first read (a matched scan replaces it in ``_fit`` before anyone reads it)
+_NO_MATCH: tuple = ()
 
 
 def _wrap(a: float) -> float:
@@ -158,14 +161,16 @@ class MatchResult:
     pose_source: str = SOURCE_SCAN
     state: str = STATE_TRACKING
     sigma2: float = math.nan
-    #: (Hessian, σ², cell side m) the covariance is computed from when first read (most scans never read it)
+    #: (Hessian, σ², cell side m) the covariance is computed from when first read (most scans never read it);
+    #: ``_NO_MATCH`` (empty): the no-match covariance, copied when first read
     _covariance_of: tuple[np.ndarray, float, float] | None = field(default=None, repr=False)
 
     @property
     def covariance(self) -> np.ndarray:
         """(3, 3) σ²·H⁻¹ in world units (m², m·rad, rad²), order (x, y, θ); computed on first access."""
         if self._covariance is None and self._covariance_of is not None:
-            self._covariance = covariance_world(*self._covariance_of)
+            of = self._covariance_of
+            self._covariance = covariance_world(*of) if of else _NO_MATCH_COVARIANCE.copy()
             self._covariance_of = None
         return self._covariance
 
@@ -336,8 +341,11 @@ class HectorSlam:
         returns) for the too-close and narrow-view tests (:func:`~dynslam2d.slam.matcher.gated_points`)."""
         c = self.config
         cos_a, sin_a = scan.trig()
+        valid = scan._valid  # the scan's own valid mask (the kernel only reads it: no copy); computed if not yet
+        if valid is None:
+            valid = scan.valid_mask()
         # (one kernel call for the gates, the points, the clearing-ray ends and the per-scan tests' counts)
-        return gated_points(scan.ranges, cos_a, sin_a, scan.valid_mask(), float(scan.range_min),
+        return gated_points(scan.ranges, cos_a, sin_a, valid, float(scan.range_min),
                             float(scan.range_max), float(c.laser_min_dist), float(c.laser_max_dist),
                             float(c.clear_no_return_dist), stats)
 
@@ -469,9 +477,9 @@ class HectorSlam:
         first = self.map.empty
         zero = np.zeros((3, 3))
         res = MatchResult(
-            pose=start, start=start, _covariance=_NO_MATCH_COVARIANCE.copy(), hessian=zero,
+            pose=start, start=start, _covariance=None, hessian=zero,
             score=0.0, n_points=int(pts.shape[0]), time_gap=gap, first=first, points=pts, clear_points=clear,
-            prior=prior.kind, state=self._state,
+            prior=prior.kind, state=self._state, _covariance_of=_NO_MATCH,
         )
         if pts.shape[0] < c.min_points:
             res.skipped = True
@@ -678,42 +686,10 @@ class HectorSlam:
         fits: dict[bytes, tuple[LevelFit, float | None]] = {}
         # seed bytes → (pose, score) of every refine of this scan: the map and the points do not change within the
         # scan, so a seed refined before (a correlative search's pose equal to the start, or a recovery seed equal
-        # to an earlier one) refines to the same pose
+        # to an earlier one) refines to the same pose. (Methods, not closures made on every scan: most scans refine
+        # once and search nothing.)
         refined: dict[bytes, tuple[np.ndarray, float]] = {}
-
-        def refine(seed: np.ndarray) -> tuple[np.ndarray, float]:
-            key = np.asarray(seed, dtype=np.float64).tobytes()  # (the matcher's float64 start)
-            out = refined.get(key)
-            if out is None:  # (the poses are not written to by their users)
-                out = refined[key] = _refine_once(seed)
-            return out
-
-        def _refine_once(seed: np.ndarray) -> tuple[np.ndarray, float]:
-            fitted: list = []  # level 0's evaluation and the free fraction at the result, from the matcher's call
-            p = match_multires(
-                levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
-                c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
-                c.max_translation_step, prior_pose, prior_info, fit=fitted, free_thresh=FREE_SPACE_PROB,
-            )
-            if not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
-                return p, -1.0
-            if fitted:
-                fit, free = fitted
-            else:
-                fit, free = evaluate(levels[0], pts, p), None
-            fits[p.tobytes()] = (fit, free)
-            return p, fit.score
-
-        def search() -> tuple[np.ndarray, float] | None:
-            lvl = levels[min(c.correlative_level, len(levels) - 1)]
-            cr = correlative_search(
-                lvl, pts, start, c.correlative_linear_window, c.correlative_angular_window,
-                c.correlative_angular_step, c.correlative_max_points, c.correlative_max_height,
-                c.correlative_translation_weight, c.correlative_rotation_weight,
-            )
-            if cr is None:
-                return None
-            return refine(cr.pose)
+        ctx = (levels, pts, prior_pose, prior_info, fits, refined)
 
         mode = c.correlative_mode
         # a start the odometry predicted already holds the previous scan's motion: large motion alone does not
@@ -726,12 +702,12 @@ class HectorSlam:
             mode == "auto"
             and (big_motion or res.time_gap or self._force_search or self._n_accepted < _WARMUP_SEARCHES)
         )
-        best_p, best_s = refine(start)
+        best_p, best_s = self._refine_cached(ctx, start)
         if mode != "never" and not pre_search and self._score_avg is not None:
             pre_search = best_s < c.poor_match_ratio * self._score_avg
         if pre_search:
             self.pre_searches += 1
-            found = search()
+            found = self._search(ctx, start)
             if found is not None and found[1] > best_s:
                 best_p, best_s = found
                 res.used_correlative = True
@@ -739,8 +715,8 @@ class HectorSlam:
         jump_d, jump_a = c.max_jump_distance, c.max_jump_angle
         if needs_recovery(c, self._dt, best_s, self._score_avg):
             # large-motion recovery (slam/recovery.py): a window grown with the gap, best vs runner-up
-            rec = recover(c, levels, pts, start, best_p, best_s, self._dt, lambda seed: refine(seed)[0],
-                          self._moving_prediction())
+            rec = recover(c, levels, pts, start, best_p, best_s, self._dt,
+                          lambda seed: self._refine_cached(ctx, seed)[0], self._moving_prediction())
             if rec is not None:
                 self.counts["recovery"] += 1
                 res.used_correlative |= rec.changed
@@ -753,24 +729,34 @@ class HectorSlam:
             res.rejected = True
             res.reason = REJECT_NON_FINITE
             return
-        pose = Pose2D(bx, by, _wrap(bth))
+        th = _wrap(bth)
+        pose = Pose2D(bx, by, th)
         dx, dy, dth = _between(res.start, pose)
         if math.hypot(dx, dy) > jump_d or abs(dth) > jump_a:
             res.rejected = True
             res.reason = REJECT_JUMP
             return
-        at = pose.as_array()
-        # a refine's evaluation at this same pose (its H, cost and score: evaluate with the same gradient weights),
-        # instead of evaluating it again
-        at_fit = fits.get(at.tobytes()) if not c.hector_gradient_bug else None
-        self._fit(res, pts, pose, at_fit[0] if at_fit is not None else None)
-        avg = self._score_avg
         # a refine's free fraction was taken at (x, y, wrap_angle(θ)) of its result: this pose when the result is
         # best_p
         best_fit = fits.get(best_p.tobytes())
+        at = None
+        # a refine's evaluation at this same pose (its H, cost and score: evaluate with the same gradient weights),
+        # instead of evaluating it again; the pose's bytes are best_p's when wrapping left θ's bits as they were
+        # (the matcher wraps θ already: nearly always)
+        if c.hector_gradient_bug:
+            at_fit = None
+        elif th == bth and math.copysign(1.0, th) == math.copysign(1.0, bth):
+            at_fit = best_fit
+        else:
+            at = pose.as_array()
+            at_fit = fits.get(at.tobytes())
+        self._fit(res, pts, pose, at_fit[0] if at_fit is not None else None)
+        avg = self._score_avg
         free = best_fit[1] if best_fit is not None else None
-        res.free_fraction = free if free is not None else free_fraction(levels[min(1, len(levels) - 1)], pts, at,
-                                                                        FREE_SPACE_PROB)
+        if free is None:
+            free = free_fraction(levels[min(1, len(levels) - 1)], pts, pose.as_array() if at is None else at,
+                                 FREE_SPACE_PROB)
+        res.free_fraction = free
         if res.score < c.reject_score_min or (avg is not None and res.score < c.reject_score_ratio * avg):
             res.rejected = True
             res.reason = REJECT_LOW_SCORE
@@ -780,6 +766,48 @@ class HectorSlam:
         elif ambiguous:
             res.rejected = True
             res.reason = REJECT_AMBIGUOUS
+
+    def _refine_cached(self, ctx: tuple, seed: np.ndarray) -> tuple[np.ndarray, float]:
+        """(pose, score) of refining ``seed`` on this scan (``ctx`` of :meth:`_match_against_map`), once per seed."""
+        refined = ctx[5]
+        key = np.asarray(seed, dtype=np.float64).tobytes()  # (the matcher's float64 start)
+        out = refined.get(key)
+        if out is None:  # (the poses are not written to by their users)
+            out = refined[key] = self._refine_once(ctx, seed)
+        return out
+
+    def _refine_once(self, ctx: tuple, seed: np.ndarray) -> tuple[np.ndarray, float]:
+        """Match from ``seed``: (pose, level 0's score there; −1 if not finite); its fit kept in ``ctx``'s fits."""
+        c = self.config
+        levels, pts, prior_pose, prior_info, fits, _ = ctx
+        fitted: list = []  # level 0's evaluation and the free fraction at the result, from the matcher's call
+        p = match_multires(
+            levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
+            c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
+            c.max_translation_step, prior_pose, prior_info, fit=fitted, free_thresh=FREE_SPACE_PROB,
+        )
+        if not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
+            return p, -1.0
+        if fitted:
+            fit, free = fitted
+        else:
+            fit, free = evaluate(levels[0], pts, p), None
+        fits[p.tobytes()] = (fit, free)
+        return p, fit.score
+
+    def _search(self, ctx: tuple, start: np.ndarray) -> tuple[np.ndarray, float] | None:
+        """The front end's correlative search around ``start``, its pose refined; None if it found nothing."""
+        c = self.config
+        levels, pts = ctx[0], ctx[1]
+        lvl = levels[min(c.correlative_level, len(levels) - 1)]
+        cr = correlative_search(
+            lvl, pts, start, c.correlative_linear_window, c.correlative_angular_window,
+            c.correlative_angular_step, c.correlative_max_points, c.correlative_max_height,
+            c.correlative_translation_weight, c.correlative_rotation_weight,
+        )
+        if cr is None:
+            return None
+        return self._refine_cached(ctx, cr.pose)
 
     def _commit(self, scan: Scan, res: MatchResult) -> None:
         c = self.config
