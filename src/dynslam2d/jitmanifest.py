@@ -57,7 +57,7 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.slam.ledgerkernels.record_cells',
      "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, 'C'), Array(bool, 1, "
-     "'C'), float64, float64, float64, float64, float64, float64, Array(float64, 1, 'C'), "
+     "'A'), float64, float64, float64, float64, float64, float64, Array(float64, 1, 'C'), "
      "UniTuple(Array(float32, 2, 'C', False, aligned=True), 3), UniTuple(Array(int32, 2, 'C', False, "
      'aligned=True), 3), UniTuple(int64, 3), UniTuple(int64, 3), bool,)'),
     ('dynslam2d.slam.ledgerkernels.level_rows',

@@ -508,8 +508,6 @@ class EvidenceLedger:
         c, s = math.cos(pose.theta), math.sin(pose.theta)
         levels = hmap.levels
         want_kb = self.keep_beams and index >= 0
-        if not removed.flags.c_contiguous:  # (the kernel's signature takes C arrays: an exact match, no conversion)
-            removed = np.ascontiguousarray(removed)
         # in one call: each beam's track (a later track's claim wins), the kept beams (valid, inside the laser's
         # ranges, not removed), their map-frame points (the values of pose.transform_points), every point's
         # (level, track, cell) packed and sorted, the distinct ones no unowned point shares decoded and their cells

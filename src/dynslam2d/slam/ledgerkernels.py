@@ -459,11 +459,9 @@ def _radix_sort(a):  # pragma: no cover - numba
 
 
 _B1 = types.boolean[::1]
-# (every array argument C-contiguous, as the caller passes them: a dispatcher of explicit signatures matches an
-# argument of another layout, e.g. a C array to an 'A' signature, by a conversion search on every call, ≈ 35 µs)
 _RECORD_SIG = types.Tuple((
     types.boolean, _I1, _I1, types.int64[:, ::1], _F1, _I1, _I1, _B1, types.int32[::1], _I1, _B1, _I1, _I1, _I1))(
-    _I1, _I1, _I1, _F1, _F1_RO, _F1_RO, _B1, _B1, *(types.float64,) * 6, _F1,
+    _I1, _I1, _I1, _F1, _F1_RO, _F1_RO, _B1, types.boolean[:], *(types.float64,) * 6, _F1,
     _LO3, _UI3, _IT3, _IT3, types.boolean)
 
 
