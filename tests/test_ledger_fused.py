@@ -174,9 +174,9 @@ def test_level_rows_equal_update_rows_per_level(seed: int) -> None:
         levels_before.append((lo, ui))
     cat = [np.concatenate([p[q] for p in per]) for q in range(5)]
     bounds = np.concatenate(([0], np.cumsum([p[0].shape[0] for p in per]))).astype(np.int64)
-    rows, gid, glv, ga, gb = lk.level_rows(tuple(lv[0] for lv in levels_after), tuple(lv[1] for lv in levels_after),
-                                           tuple(lv[2] for lv in levels_after), tuple(lv[3] for lv in levels_after),
-                                           n_lv, cat[0], cat[1], np.ascontiguousarray(cat[2]), cat[3], cat[4], bounds)
+    rows, gid, glv, ga, gb, t_id, t_bnd, t_rows = lk.level_rows(
+        tuple(lv[0] for lv in levels_after), tuple(lv[1] for lv in levels_after), tuple(lv[2] for lv in levels_after),
+        tuple(lv[3] for lv in levels_after), n_lv, cat[0], cat[1], np.ascontiguousarray(cat[2]), cat[3], cat[4], bounds)
     w_rows, groups = [], []
     off = 0
     for k, ((lo2, ui2, i0, j0), (ids, keys, cells, before, ub)) in enumerate(zip(levels_after, per)):
@@ -190,6 +190,13 @@ def test_level_rows_equal_update_rows_per_level(seed: int) -> None:
     assert list(zip(gid.tolist(), glv.tolist(), ga.tolist(), gb.tolist())) == groups
     w_glv = [g[1] for g in groups]
     assert rows.shape[1] > 0 and len(set(w_glv)) > 1
+    # the tracks: each id once, ascending, its groups one span of the group table, its rows summed over its levels
+    w_ids = sorted({g[0] for g in groups})
+    assert t_id.tolist() == w_ids and t_bnd[0] == 0 and t_bnd[-1] == len(groups)
+    for t, tid in enumerate(w_ids):
+        span = groups[t_bnd[t]:t_bnd[t + 1]]
+        assert span and all(g[0] == tid for g in span)
+        assert t_rows[t] == sum(g[3] - g[2] for g in span)
 
 
 @pytest.mark.parametrize("levels", [2, 3, 4])
@@ -227,8 +234,13 @@ def test_ledger_records_the_same_rows_through_the_fused_and_the_level_by_level_p
     assert set(a._ledgers) == set(b._ledgers) == {2, 7, 11}
     cells = 0
     for tid, la in a._ledgers.items():
-        for ra, rb in zip(la.levels, b._ledgers[tid].levels):
-            assert ra._refs is not None and len(ra) == len(rb)
+        lb = b._ledgers[tid]
+        # one entry per update in which the track had rows (not yet handed to the records: nothing folded)
+        n_ent = len(la.ent)
+        assert 1 <= n_ent <= 6 and len(lb.ent) == n_ent and la.nb_chunks == n_ent
+        for ra, rb in zip(la.levels, lb.levels):  # (levels settles the entries into the records)
+            assert not la.ent and ra._refs is None and len(ra) == len(rb) and ra._n_chunks == rb._n_chunks
+            assert max(r._n_chunks for r in la.recs) == n_ent
             n = ra.compact()
             assert n == rb.compact() and n > 0
             cells += n

@@ -75,6 +75,21 @@ _NO_F32 = np.zeros((0, 0), dtype=np.float32)
 _NO_I32 = np.zeros((0, 0), dtype=np.int32)
 
 
+#: slam/ledgerkernels.py once imported (at first use, :func:`_kernels`): its explicit signatures compile (or load from
+#: numba's cache) on import, which would put ~0.4 s and scipy.linalg on every `import dynslam2d.pipeline` (issue 13's
+#: warm start); a ``from … import`` in the per-update methods cost ≈ 3 µs warm, 8–13 µs in the pipeline, per call
+_lk = None
+
+
+def _kernels():
+    """The module slam/ledgerkernels.py (imported at the first call)."""
+    global _lk
+    if _lk is None:
+        from dynslam2d.slam import ledgerkernels
+        _lk = ledgerkernels
+    return _lk
+
+
 def _decode(keys: np.ndarray) -> np.ndarray:
     """(n,) cell keys → (n, 2) int64 absolute cells (i, j)."""
     j = (keys + _HALF) % _KEY_SHIFT - _HALF
@@ -283,14 +298,23 @@ class _LevelRecord:
 
 @dataclass(eq=False, slots=True)
 class _Ledger:
-    """What one track's points wrote into the map while it was not removed."""
+    """What one track's points wrote into the map while it was not removed.
+
+    A map update records the track with one *entry* (:meth:`EvidenceLedger.after_update`): the update's shared row
+    block and group table and the track's span of groups in it, instead of one reference per (track, level) record
+    (pass ledger13: one append per track and update, on fewer cold objects). :meth:`settle` hands the entries to
+    the level records (:meth:`_LevelRecord.refer`, in update order) before any record is read; ``nb_rows`` and
+    ``nb_chunks`` bound every record's pending rows and updates from above (their largest exact counts at the last
+    settle plus what the entries since could add), so the pipeline settles a ledger, and folds its records, at
+    exactly the update where a record reaches ``_COMPACT_ROWS`` or ``_COMPACT_CHUNKS`` (the fold's per-cell sums
+    are not associative in float64: folding at another update would change the erased log-odds' bits)."""
 
     id: int
     first_box: tuple[float, float, float]  # centre x, y and half of the longer side where first seen, m
     first_t: float  # stamp when the track was first reported, s
     last_box: tuple[float, float, float]  # the same where last seen, m
     last_seen: float  # stamp, s
-    levels: list[_LevelRecord]
+    recs: list[_LevelRecord]  # per map level (read through :attr:`levels`, which settles the entries first)
     m_start: tuple[float, float] | None = None  # centre when first in the removal set, m
     linked: bool = False  # ended-track evidence already joined to a live track
     confirmed: bool = False  # the track was reported confirmed at least once (not only tentative clutter)
@@ -299,6 +323,89 @@ class _Ledger:
     #: map update (only with keep_beams; :attr:`beams` slices them)
     kb: list[tuple[int, np.ndarray, int, int]] = field(default_factory=list)
     last_track: Track | None = None  # the track as last seen out of the removal set
+    #: (update block [rows, levels, first columns, end columns, their lists or None, update number], first group,
+    #: end group) per map update since the last :meth:`settle`
+    ent: list = field(default_factory=list)
+    ent0: int = 0  # the update number of the first entry
+    nb_rows: int = 0  # ≥ every record's pending rows once the entries are settled
+    nb_chunks: int = 0  # ≥ every record's pending updates once the entries are settled
+
+    @property
+    def levels(self) -> list[_LevelRecord]:
+        """The level records, with every entry settled into them."""
+        if self.ent:
+            self.settle()
+        return self.recs
+
+    def _parts(self) -> list:
+        """Per level, the entries' rows of the level: [their column slices, in update order; rows; updates], or
+        None for a level without rows in them."""
+        out: list = [None] * len(self.recs)
+        for blk, i, j in self.ent:
+            lists = blk[4]
+            if lists is None:  # (an update's group table as lists, made once for all the tracks that read it)
+                lists = blk[4] = (blk[1].tolist(), blk[2].tolist(), blk[3].tolist())
+            glv, ga, gb = lists
+            rows = blk[0]
+            for g in range(i, j):
+                k, a, b = glv[g], ga[g], gb[g]
+                p = out[k]
+                if p is None:
+                    out[k] = [[rows[:, a:b]], b - a, 1]
+                else:
+                    p[0].append(rows[:, a:b])
+                    p[1] += b - a
+                    p[2] += 1
+        return out
+
+    def settle(self) -> None:
+        """Copy every entry's rows into their level records' pending buffers, after the rows they hold (one copy
+        into a buffer of exactly the pending rows per level, as :meth:`_LevelRecord.materialize`; the caller
+        folds), and make the bounds exact."""
+        parts = self._parts()
+        self.ent = []
+        for rec, p in zip(self.recs, parts):
+            if p is None:
+                continue
+            rec.materialize()  # (references given by _LevelRecord.refer, if any, come first)
+            n = rec._n_rows
+            sl = p[0]
+            if n:
+                sl.insert(0, rec._pk[:, :n])
+            rec._pk = np.concatenate(sl, axis=1) if len(sl) > 1 else sl[0].copy()
+            rec._n_rows = rec._n_buf = n + p[1]
+            rec._n_chunks += p[2]
+        self.bound()
+
+    def new_cells(self) -> int:
+        """The new cells folding every record would count (:meth:`_LevelRecord.new_cells`), without settling the
+        entries (for a ledger that is dropped: no copy of its rows)."""
+        if not self.ent:
+            return sum(rec.new_cells() for rec in self.recs)
+        total = 0
+        for rec, p in zip(self.recs, self._parts()):
+            if p is None:
+                total += rec.new_cells()
+            elif not rec._n_rows and not rec.key.shape[0] and p[2] == 1:  # one update's rows: each key once
+                total += min(p[1], rec.cap)
+            else:
+                keys = [rec.key, rec._pk[0, :rec._n_buf]]
+                if rec._refs is not None:
+                    keys += [rows[0, a:b] for rows, a, b in rec._refs]
+                keys += [x[0] for x in p[0]]
+                k = np.concatenate(keys)
+                k.sort()
+                n = int(np.count_nonzero(k[1:] != k[:-1])) + 1
+                total += min(n, rec.cap) - int(rec.key.shape[0])
+        return total
+
+    def bound(self) -> None:
+        """Set the bounds to the records' exact largest counts (no entry pending)."""
+        r = c = 0
+        for rec in self.recs:
+            r = max(r, rec._n_rows)
+            c = max(c, rec._n_chunks)
+        self.nb_rows, self.nb_chunks = r, c
 
     @property
     def beams(self) -> list[tuple[int, np.ndarray]]:
@@ -384,9 +491,7 @@ class EvidenceLedger:
         log-odds of the cells each track's kept beams will hit (removed beams, those of the tracks in the
         removal set, are not recorded). ``index`` is the scan's index in the run (kept with the beams when
         ``keep_beams``). Returns None when nothing is to be recorded."""
-        # imported at first use: their explicit signatures compile (or load from numba's cache) on import, which
-        # would put ~0.4 s and scipy.linalg on every `import dynslam2d.pipeline` (issue 13's warm start)
-        from dynslam2d.slam.ledgerkernels import read_cells, record_cells
+        lk = _lk or _kernels()
         mine, blist, tids, nb = [], [], [], []  # the tracks with beams, their beams, ids and beam counts
         for t in tracks:
             b = t.beams
@@ -408,14 +513,14 @@ class EvidenceLedger:
         # (level, track, cell) packed and sorted, the distinct ones no unowned point shares decoded and their cells
         # read on (up to) three levels, which tracks keep beams and, for the loop closer, their kept beams
         (packed_ok, ids_s, key_s, cells_s, before, ub, bounds, present, kb_all, kb_b, valid, uids, counts,
-         ends) = record_cells(allb, lens, ids, scan.ranges, *scan.trig(), scan.valid_mask(), removed,
+         ends) = lk.record_cells(allb, lens, ids, scan.ranges, *scan.trig(), scan.valid_mask(), removed,
                               self.laser_min_dist, self.laser_max_dist, c, s, float(pose.x), float(pose.y),
                               np.array([lv.resolution for lv in levels], dtype=np.float64), *_level_arrays(levels),
                               want_kb)
         if packed_ok:
             for k in range(_FUSED, len(levels)):  # (levels beyond the fused kernel's three)
                 lv, a, b = levels[k], int(bounds[k]), int(bounds[k + 1])
-                before[a:b], ub[a:b] = read_cells(lv.logodds, lv.uidx, cells_s[a:b], lv.i0, lv.j0)[:2]
+                before[a:b], ub[a:b] = lk.read_cells(lv.logodds, lv.uidx, cells_s[a:b], lv.i0, lv.j0)[:2]
             pending = PendingUpdate(fused=(ids_s, key_s, cells_s, before, ub, bounds))
             present = present.tolist()
         elif not counts.any():  # (no kept beam of any track)
@@ -531,7 +636,7 @@ class EvidenceLedger:
 
     def after_update(self, pending: PendingUpdate, hmap: MultiResMap) -> None:
         """Record the evidence the map update added in the cells read by :meth:`before_update`."""
-        from dynslam2d.slam.ledgerkernels import level_rows  # at first use (see before_update)
+        lk = _lk or _kernels()
         ledgers = self._ledgers
         added = 0
         self._n_updates = upd = self._n_updates + 1
@@ -541,57 +646,60 @@ class EvidenceLedger:
             # every level, the cells re-read from the levels' current arrays, and its groups (a track's rows on a
             # level) in (track, level) order
             ids, keys, cells, before, ub, bounds = pending.fused
-            rows, gid, glv, ga, gb = level_rows(*_level_arrays(levels), len(levels), ids, keys, cells, before, ub,
-                                                bounds)
+            rows, _, glv, ga, gb, tid_t, bnd_t, n_t = lk.level_rows(*_level_arrays(levels), len(levels), ids, keys,
+                                                                    cells, before, ub, bounds)
         else:
-            rows, gid, glv, ga, gb = self._level_groups(pending, levels)
-        # each track's record refers to its slice of the block (_LevelRecord.refer inlined: ≈ 25 tracks × 3 levels
-        # per update, where a copy into each record's buffer and its growth were most of the loop); a track's
-        # ledger is looked up once for its levels
-        prev = levs = None
-        for tid, k, a, b in zip(gid.tolist(), glv.tolist(), ga.tolist(), gb.tolist()):
-            if tid != prev:
-                prev = tid
+            rows, glv, ga, gb, tid_t, bnd_t, n_t = self._level_groups(pending, levels)
+        # one entry per track (its groups are consecutive, in (track, level) order) in its ledger: the records get
+        # the rows when the ledger settles, which its bounds make happen at the update where a record is due to
+        # fold (and before any record is read)
+        if tid_t.shape[0]:
+            st = bnd_t.tolist()
+            blk = [rows, glv, ga, gb, None, upd]
+            for tid, i, j, n in zip(tid_t.tolist(), st, st[1:], n_t.tolist()):
                 led = ledgers.get(tid)
-                levs = led.levels if led is not None else None
-            if levs is not None:  # (every group holds rows)
-                rec = levs[k]
-                refs = rec._refs
-                if refs is None:
-                    rec._refs = [(rows, a, b)]
-                    rec._ref0 = upd
-                else:
-                    refs.append((rows, a, b))
-                m = rec._n_rows + b - a
-                rec._n_rows = m
-                c = rec._n_chunks + 1
-                rec._n_chunks = c
-                if m >= _COMPACT_ROWS or c >= _COMPACT_CHUNKS:
-                    added += rec.compact()
+                if led is None:
+                    continue
+                ent = led.ent
+                if not ent:
+                    led.ent0 = upd
+                ent.append((blk, i, j))
+                m = led.nb_rows + n
+                led.nb_rows = m
+                c = led.nb_chunks + 1
+                led.nb_chunks = c
+                if m >= _COMPACT_ROWS or c >= _COMPACT_CHUNKS:  # a record may be due: count exactly, fold
+                    led.settle()
+                    for rec in led.recs:
+                        if rec._n_rows >= _COMPACT_ROWS or rec._n_chunks >= _COMPACT_CHUNKS:
+                            added += rec.compact()
+                    led.bound()
         if upd % _REF_MAX_AGE == 0:  # copy old references into their records' buffers (few blocks stay alive)
             old = upd - _REF_MAX_AGE
             for led in ledgers.values():
-                for rec in led.levels:
+                if led.ent and led.ent0 <= old:
+                    led.settle()
+                for rec in led.recs:  # (references given by _LevelRecord.refer)
                     if rec._refs is not None and rec._ref0 <= old:
                         rec.materialize()
         self.stats["cells_recorded"] += added
 
     @staticmethod
-    def _level_groups(pending: PendingUpdate, levels: list
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`after_update`'s row block and groups level by level (more levels than the fused kernel takes, or
-        a level-by-level pending update), as :func:`~dynslam2d.slam.ledgerkernels.level_rows` returns them but in
-        (level, track) order: the levels' blocks side by side, per group the track id, level, first and end
-        column."""
-        from dynslam2d.slam.ledgerkernels import read_cells, update_rows
+    def _level_groups(pending: PendingUpdate, levels: list) -> tuple[np.ndarray, ...]:
+        """:meth:`after_update`'s row block, groups and tracks level by level (more levels than the fused kernel
+        takes, or a level-by-level pending update), as :func:`~dynslam2d.slam.ledgerkernels.level_rows` returns
+        them (without the groups' track ids): the levels' blocks side by side; per group, in (track, level) order,
+        the level, first and end column; per track, in id order, its id, its groups' bounds (T + 1,) and its rows
+        on all levels."""
+        lk = _lk or _kernels()
         blocks, gid, glv, ga, gb = [], [], [], [], []
         off = 0
         for k, (ids, keys, cells, before, ui_before) in enumerate(pending.per_level):
             if ids.shape[0] == 0:
                 continue
             lv = levels[k]
-            f = read_cells(lv.logodds, lv.uidx, cells, lv.i0, lv.j0)[2]
-            rows, tids, starts = update_rows(lv.logodds, lv.uidx, f, ids, keys, before, ui_before)
+            f = lk.read_cells(lv.logodds, lv.uidx, cells, lv.i0, lv.j0)[2]
+            rows, tids, starts = lk.update_rows(lv.logodds, lv.uidx, f, ids, keys, before, ui_before)
             blocks.append(rows)
             gid.append(tids)
             glv.append(np.full(tids.shape[0], k, dtype=np.int64))
@@ -599,9 +707,15 @@ class EvidenceLedger:
             gb.append(starts[1:] + off)
             off += rows.shape[1]
         if not blocks:
-            return _EMPTY_I4, _EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I
-        return (np.concatenate(blocks, axis=1), np.concatenate(gid), np.concatenate(glv), np.concatenate(ga),
-                np.concatenate(gb))
+            return _EMPTY_I4, _EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I, np.zeros(1, dtype=np.int64), _EMPTY_I
+        gid, glv = np.concatenate(gid), np.concatenate(glv)
+        order = np.lexsort((glv, gid))  # (each (track, level) once: the order of a track's groups is its levels')
+        gid, glv, ga, gb = gid[order], glv[order], np.concatenate(ga)[order], np.concatenate(gb)[order]
+        head = np.ones(gid.shape[0], dtype=bool)
+        head[1:] = gid[1:] != gid[:-1]
+        st = np.flatnonzero(head)
+        return (np.concatenate(blocks, axis=1), glv, ga, gb, gid[st], np.append(st, gid.shape[0]),
+                np.add.reduceat(gb - ga, st))
 
     def _fold(self, led: _Ledger) -> None:
         """Fold every level's pending rows of ``led`` (counts its new cells)."""
@@ -610,8 +724,7 @@ class EvidenceLedger:
 
     def _drop(self, led: _Ledger) -> None:
         """Count the new cells of ``led``, a ledger that is dropped, as :meth:`_fold` would."""
-        for rec in led.levels:
-            self.stats["cells_recorded"] += rec.new_cells()
+        self.stats["cells_recorded"] += led.new_cells()
 
     def observe(self, tracks: list[Track], removing: set[int], stamp: float) -> None:
         """Keep each live track's last box; move ledgers of ended tracks aside; drop old ones."""

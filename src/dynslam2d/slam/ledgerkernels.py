@@ -490,7 +490,7 @@ def record_cells(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin, rmax, c, 
     return True, out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b, valid, uids, counts, ends
 
 
-_ROWS_SIG = types.Tuple((types.int64[:, ::1], _I1, _I1, _I1, _I1))(
+_ROWS_SIG = types.Tuple((types.int64[:, ::1], _I1, _I1, _I1, _I1, _I1, _I1, _I1))(
     _LO3, _UI3, _IT3, _IT3, types.int64, _I1, _I1, types.int64[:, ::1], _F1, _I1, _I1)
 
 
@@ -499,9 +499,10 @@ def level_rows(logodds, uidx, i0, j0, n_lv, ids, keys, cells, before, ub, bounds
     """:func:`update_rows` of every level (``n_lv`` ≤ 3) in one call, the cells re-read after the map update from
     the levels' current arrays and offsets (a level may have grown): ((4, m) rows of all levels, level by level;
     per group of rows (one track's rows on one level), in (track id, level) order: the track id, the level, the
-    first and the end column (g,) each). The cells of level ``k`` are ``bounds[k]:bounds[k + 1]`` of ``ids``,
-    ``keys``, ``cells``, ``before`` and ``ub`` (what :func:`record_cells` read), sorted by track id within a
-    level. (The caller looks each track's ledger up once for all its levels.)"""
+    first and the end column (g,) each; per track with rows, in id order: its id (T,), its groups' bounds (T + 1,:
+    track ``t``'s groups are ``[b[t], b[t + 1])``) and its rows on all levels (T,)). The cells of level ``k`` are
+    ``bounds[k]:bounds[k + 1]`` of ``ids``, ``keys``, ``cells``, ``before`` and ``ub`` (what :func:`record_cells`
+    read), sorted by track id within a level. (The caller looks each track's ledger up once for all its levels.)"""
     n = ids.shape[0]
     delta = np.empty(n)
     ua = np.empty(n, dtype=np.int64)
@@ -573,4 +574,20 @@ def level_rows(logodds, uidx, i0, j0, n_lv, ids, keys, cells, before, ub, bounds
         o_lv[q] = best
         o_a[q] = starts[src]
         o_b[q] = starts[src + 1]
-    return rows, o_id, o_lv, o_a, o_b
+    # per track (its groups are consecutive): id, groups' bounds, rows
+    n_t = 0
+    for q in range(g):
+        if q == 0 or o_id[q] != o_id[q - 1]:
+            n_t += 1
+    t_id = np.empty(n_t, dtype=np.int64)
+    t_bnd = np.empty(n_t + 1, dtype=np.int64)
+    t_rows = np.zeros(n_t, dtype=np.int64)
+    p = -1
+    for q in range(g):
+        if q == 0 or o_id[q] != o_id[q - 1]:
+            p += 1
+            t_id[p] = o_id[q]
+            t_bnd[p] = q
+        t_rows[p] += o_b[q] - o_a[q]
+    t_bnd[n_t] = g
+    return rows, o_id, o_lv, o_a, o_b, t_id, t_bnd, t_rows
