@@ -286,7 +286,7 @@ def _box_extents_kernel(boxes: np.ndarray, square: bool, margin: float, cap: flo
     (k, 2) half-extents, m, with the same floating-point operations (``cap`` = inf: no cap; a NaN side gives
     NaN as ``np.maximum`` / ``np.minimum`` do)."""
     k = boxes.shape[0]
-    out = np.empty((k, 2), dtype=np.float64)
+    out = np.empty((k, 2))
     for j in range(k):
         ln = abs(boxes[j, 3])
         w = abs(boxes[j, 4])
@@ -315,7 +315,7 @@ def _rows_exclusion_kernel(
     removed = np.zeros(n, dtype=np.bool_)
     removed_by = np.full(n, -1, dtype=np.int64)
     k = boxes.shape[0]
-    centres = np.empty((k, 2), dtype=np.float64)
+    centres = np.empty((k, 2))
     th = np.empty(k, dtype=np.float64)
     for j in range(k):
         centres[j, 0] = boxes[j, 0] + boxes[j, 5] * dt

@@ -291,12 +291,12 @@ def merge_leg_pairs(first: np.ndarray, second: np.ndarray, px: np.ndarray, py: n
             ki[q] = j
             q += 1
     nf = fits.shape[1]
-    kinds2 = np.zeros(nk + m, dtype=kinds.dtype)
+    kinds2 = np.zeros(nk + m, dtype=np.int8)
     fits2 = np.zeros((nk + m, nf))
     lohi2 = np.empty((nk + m, 4))
     rel2 = np.zeros((nk + m, 2, 2), dtype=np.bool_)
-    starts2 = np.empty(nk + m, dtype=starts.dtype)
-    npts2 = np.empty(nk + m, dtype=npts.dtype)
+    starts2 = np.empty(nk + m, dtype=np.int64)
+    npts2 = np.empty(nk + m, dtype=np.int64)
     for q in range(nk):
         j = ki[q]
         kinds2[q] = kinds[j]
@@ -312,7 +312,7 @@ def merge_leg_pairs(first: np.ndarray, second: np.ndarray, px: np.ndarray, py: n
     n0 = px.shape[0]
     px2 = np.empty(n0 + added)
     py2 = np.empty(n0 + added)
-    mbeams = np.empty(added, dtype=beams.dtype)
+    mbeams = np.empty(added, dtype=np.int64)
     for i in range(n0):
         px2[i] = px[i]
         py2[i] = py[i]
@@ -527,7 +527,7 @@ def select_detections(keep: np.ndarray, kinds: np.ndarray, lohi: np.ndarray, rel
             q += 1
     starts = np.empty(nd, dtype=np.int64)
     npts = np.empty(nd, dtype=np.int64)
-    s_kinds = np.empty(nd, dtype=kinds.dtype)
+    s_kinds = np.empty(nd, dtype=np.int8)
     s_lohi = np.empty((nd, lohi.shape[1]))
     s_rel = np.empty((nd, rel.shape[1], rel.shape[2]), dtype=np.bool_)
     s_fits = np.empty((nd, fits.shape[1]))
