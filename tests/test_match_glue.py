@@ -73,8 +73,9 @@ def test_the_wrap_cases_cover_both_branches() -> None:
 
 
 def test_cached_valid_masks_are_read_not_copied_nor_written() -> None:
-    """The gate, the body filter and the vacated trace read ``scan._valid`` itself; the mask is the plain
-    expression's (no errstate: NaN and ±inf compare without a floating-point error) and nobody writes it."""
+    """The gate, the body filter and the vacated trace read ``scan.valid_view()``, the scan's cached mask itself; the
+    mask is the plain expression's (no errstate: NaN and ±inf compare without a floating-point error) and nobody
+    writes it."""
     rng = np.random.default_rng(3)
     r = rng.uniform(0.0, 40.0, 720)
     r[::7], r[::11], r[::13] = np.nan, np.inf, -np.inf
@@ -85,12 +86,15 @@ def test_cached_valid_masks_are_read_not_copied_nor_written() -> None:
         v = scan.valid_mask()
     np.testing.assert_array_equal(v, np.isfinite(r) & (r >= 0.1) & (r <= 30.0))
     cached = scan._valid
+    assert scan.valid_view() is cached and scan.valid_mask() is not cached
     before = cached.copy()
     slam, _ = paper_room_slam()
     pts, clear, n_valid, n_close, _ = slam._gate(scan, True)
     fresh = Scan(stamp=0.0, angle_min=-math.pi, angle_increment=2 * math.pi / 720, ranges=r.copy(), range_min=0.1,
                  range_max=30.0)
     assert fresh._valid is None
+    assert Scan(stamp=0.0, angle_min=-math.pi, angle_increment=2 * math.pi / 720, ranges=r.copy(), range_min=0.1,
+                range_max=30.0).valid_view().sum() == before.sum()
     pts2, clear2, n_valid2, n_close2, _ = slam._gate(fresh, True)  # (computes the mask on the way)
     np.testing.assert_array_equal(pts, pts2)
     np.testing.assert_array_equal(clear, clear2)

@@ -225,6 +225,15 @@ class Scan:
             return valid.copy()
         return valid
 
+    def valid_view(self) -> np.ndarray:
+        """(n,) bool: :meth:`valid_mask` without limits, the scan's own cached array and not a copy — for readers that
+        never write to it (the kernels that only read the mask); computed on the scan's first call."""
+        valid = self._valid
+        if valid is None:
+            self.valid_mask()
+            valid = self._valid
+        return valid
+
     def points(self, mask: np.ndarray | None = None) -> np.ndarray:
         """(m, 2) Cartesian points in the sensor frame, m, of the beams in ``mask``
         (default: the valid beams). Paper Eq. 4: s_i = (r_i cos α_i, r_i sin α_i)."""

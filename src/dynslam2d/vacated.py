@@ -132,9 +132,7 @@ class VacatedTrace:
         if res != self._res or n != self._beams:
             self._prepare(res, n)
         cos_a, sin_a = scan.trig()
-        valid = scan._valid  # the scan's cached mask (the kernel only reads it: no copy)
-        if valid is None:
-            valid = scan.valid_mask()
+        valid = scan.valid_view()  # (the kernel only reads it: no copy)
         nc, k, out = vacated_scan_kernel(ranges, cos_a, sin_a, valid, float(pose.x), float(pose.y),
                                          float(pose.theta), view.logodds, view.i0, view.j0, self.params, self._work,
                                          self._window)

@@ -220,9 +220,7 @@ class BodyFilter:
         n = scan.n_beams
         if n != self._n:
             self._reset(n)
-        valid = scan._valid  # the scan's cached mask, only read here (no copy); computed on the scan's first call
-        if valid is None:
-            valid = scan.valid_mask()
+        valid = scan.valid_view()  # (only read here: no copy)
         drop = np.zeros(n, dtype=bool)
         if self.polygon is not None and valid.any():
             pts = scan.points(valid)
@@ -247,9 +245,7 @@ class BodyFilter:
         # per beam, in one pass (_observe_beams): the counts of returns and of returns at the reference range, the
         # restarts, the net motion test and the body beams
         body = np.empty(n, dtype=np.bool_)
-        valid = scan._valid  # (read only by the kernel: the scan's cached mask, no copy)
-        if valid is None:
-            valid = scan.valid_mask()
+        valid = scan.valid_view()  # (read only by the kernel: no copy)
         if not _observe_beams(scan.ranges, valid, float(cfg.auto_max_range), tol, self._ref, self._seen,
                               self._same, self._start, self._moved, self.body, self._body_r, float(pose.x),
                               float(pose.y), float(pose.theta), float(cfg.auto_min_travel), float(cfg.auto_min_turn),

@@ -341,9 +341,7 @@ class HectorSlam:
         returns) for the too-close and narrow-view tests (:func:`~dynslam2d.slam.matcher.gated_points`)."""
         c = self.config
         cos_a, sin_a = scan.trig()
-        valid = scan._valid  # the scan's own valid mask (the kernel only reads it: no copy); computed if not yet
-        if valid is None:
-            valid = scan.valid_mask()
+        valid = scan.valid_view()  # (the kernel only reads it: no copy)
         # (one kernel call for the gates, the points, the clearing-ray ends and the per-scan tests' counts)
         return gated_points(scan.ranges, cos_a, sin_a, valid, float(scan.range_min),
                             float(scan.range_max), float(c.laser_min_dist), float(c.laser_max_dist),
