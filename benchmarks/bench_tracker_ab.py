@@ -25,9 +25,11 @@ ratio — the figure bench_real.py's ms/scan (a wall-time median) gives on a qui
 
 ``--phases`` runs the two whole pipelines in lockstep as ``--pipeline`` does and splits each ``Tracker.update`` into
 its steps (prediction, detection, association, vacated space, Kalman / shape updates, management and the test of M,
-fragments, births, reports; the rest of ``update`` apart): for each checkout the median over the scans of the
-thread CPU µs of each step, inclusive (the timers add about 1 µs per timed call); the free-space entries read late
-(``Tracker._free_values``, inside ``_manage``, on few scans) as their mean over the scans.
+fragments, the clutter test of unused detections, births, reports; the rest of ``update`` apart; :data:`_PHASES`):
+for each checkout the median over the scans of the thread CPU µs of each step, inclusive (the timers add about 1 µs
+per timed call); the methods called inside those steps (:data:`_NESTED`: the leg merge, the merged-detection veto,
+the Kalman bookkeeping, the acceleration bound, the dynamic test, the riding test, the free-space entries read late)
+as their mean over the scans (several run on few scans), each inside the step that calls it.
 
 ``--check`` runs both checkouts' trackers over every scan of an input in lockstep and compares their reports
 exactly (every field of every track, floats and arrays bit for bit, the stats and the removed beams): a
@@ -36,8 +38,9 @@ speed change of the tracker must print "reports identical".
     python benchmarks/bench_tracker_ab.py negative_2/right positive_7 [--other ../main/src] [--reps 5]
         [--start 150 --end 210] [--stages | --split | --check | --pipeline | --phases]
 
-Pin to one core with ``taskset -c N``. Inputs: ``negative_2/left|rear|right``, ``positive_7``, ``overtakes``,
-``demo``, ``sim:drive`` (paths under ``--data``).
+Pin to one core with ``taskset -c N``. Inputs: every name of ``bench_digest.INPUTS`` (``negative_2/left|rear|right``,
+``positive_7``, ``positive_1``, ``demo``, ``overtakes``, ``mit-csail``, ``sim:drive|crowd|stop-and-go|corridor``;
+recorded files under ``--data``); an unknown name stops with the list of accepted ones.
 """
 
 from __future__ import annotations
@@ -56,10 +59,16 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS as _ALL_INPUTS  # noqa: E402  (the inputs the digest checks)
 
-INPUTS: dict[str, tuple[str, str | None]] = {
-    k: _ALL_INPUTS[k] for k in ("negative_2/left", "negative_2/rear", "negative_2/right", "positive_7", "overtakes",
-                                "demo", "sim:drive")
-}
+#: name → (input relative to the data folder or sim:…, topic): every input the digest knows
+INPUTS: dict[str, tuple[str, str | None]] = dict(_ALL_INPUTS)
+
+
+def check_inputs(ap: argparse.ArgumentParser, names: list[str]) -> None:
+    """Stop (``ap.error``, exit status 2) if a name is not in :data:`INPUTS`, listing the accepted names."""
+    bad = [n for n in names if n not in INPUTS]
+    if bad:
+        ap.error(f"unknown input{'s' if len(bad) > 1 else ''} {', '.join(map(repr, bad))}; "
+                 f"accepted: {', '.join(INPUTS)}")
 
 
 def load_scans(data: Path, name: str) -> list:
@@ -182,13 +191,17 @@ def pipeline_ab(scans: list, other) -> tuple[float, float, float]:
             statistics.median(t / o for t, o in zip(cpu["this"], cpu["other"])))
 
 
-#: the steps of Tracker.update that --phases times (methods of the tracker, each called from update)
-_PHASES = ("_predict", "_detect", "_associate", "_vacated", "_update_pairs", "_manage", "_hosts_of_fragments", "_birth",
-           "_report")
+#: the steps of Tracker.update that --phases times (methods of the tracker, each called from update; a name the
+#: checkout lacks counts 0)
+_PHASES = ("_predict", "_detect", "_associate", "_vacated", "_update_pairs", "_manage", "_clutter_detections",
+           "_hosts_of_fragments", "_birth", "_report")
 
 
-#: methods called inside those steps that --phases times too (not subtracted from the rest of update)
-_NESTED = ("_free_values", "_update_tracks", "_bound_acceleration")
+#: methods called inside those steps that --phases times too (not subtracted from the rest of update): the leg merge
+#: (in _detect), the merged-detection veto (_associate), the Kalman bookkeeping and the acceleration bound
+#: (_update_pairs), the dynamic test, the free-space entries read late and the riding test (_manage)
+_NESTED = ("_free_values", "_update_tracks", "_bound_acceleration", "_merge_legs", "_veto_merged", "_dynamic",
+           "_rides_with_laser")
 
 
 def phases_ab(scans: list, other) -> dict[str, dict[str, float]]:
@@ -317,7 +330,7 @@ def stages(scans: list) -> tuple[float, dict[str, float]]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("inputs", nargs="+", choices=sorted(INPUTS))
+    ap.add_argument("inputs", nargs="+", metavar="INPUT", help=f"input names: {', '.join(INPUTS)}")
     ap.add_argument("--other", type=Path, default=REPO.parent / "main" / "src", help="the other checkout's src/")
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--start", type=int, default=150)
@@ -333,6 +346,7 @@ def main() -> None:
                     help="instead: CPU µs per scan of each step of Tracker.update, both checkouts in lockstep")
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     args = ap.parse_args()
+    check_inputs(ap, args.inputs)
     other = None if args.stages or args.split else other_tracker_module(args.other)
     for name in args.inputs:
         scans = load_scans(args.data, name)

@@ -14,7 +14,8 @@ tracker's data and code out of the caches, as in the pipeline, where the SLAM st
     taskset -c 0 python benchmarks/bench_tracker_replay.py negative_2/right [--other /tmp/base/src] [--reps 3]
         [--flush 16]
 
-Inputs: the names of ``bench_tracker_ab.py``. The recorded map views take memory (≈ 650 MB for negative_2).
+Inputs: the names of ``bench_tracker_ab.py`` (every input of ``bench_digest.INPUTS``, ``mit-csail`` among them; an
+unknown name stops with the list of accepted ones). The recorded map views take memory (≈ 650 MB for negative_2).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_tracker_ab import INPUTS, load_scans, other_tracker_module  # noqa: E402
+from bench_tracker_ab import INPUTS, check_inputs, load_scans, other_tracker_module  # noqa: E402
 
 
 def record(scans: list) -> tuple[object, list[tuple]]:
@@ -77,13 +78,14 @@ def replay_ab(cfg, calls: list[tuple], other, reps: int, flush_mb: int) -> dict[
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("inputs", nargs="+", choices=sorted(INPUTS))
+    ap.add_argument("inputs", nargs="+", metavar="INPUT", help=f"input names: {', '.join(INPUTS)}")
     ap.add_argument("--other", type=Path, default=Path(__file__).resolve().parents[1] / "src",
                     help="the other checkout's src/ (default: this one)")
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--flush", type=int, default=0, metavar="MB", help="touch MB of memory before every update")
     ap.add_argument("--data", type=Path, default=Path("/work/shared/data"))
     a = ap.parse_args()
+    check_inputs(ap, a.inputs)
     other = other_tracker_module(a.other)
     for name in a.inputs:
         cfg, calls = record(load_scans(a.data, name))
