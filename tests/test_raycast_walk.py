@@ -207,3 +207,88 @@ def test_level_integrate_and_the_fused_call_agree_on_a_grown_map() -> None:
         assert (lv.i0, lv.j0, lv.shape) == (rl.i0, rl.j0, rl.shape)
         assert np.array_equal(lv.logodds, rl.logodds) and np.array_equal(lv.prob, rl.prob)
         assert np.array_equal(lv.uidx, rl.uidx)
+
+
+def _levels_state(m: MultiResMap) -> list[tuple]:
+    return [(lv.logodds.tobytes(), lv.prob.tobytes(), lv.uidx.tobytes(), lv.i0, lv.j0, lv.shape, lv.update_counter)
+            for lv in m.levels]
+
+
+@pytest.mark.parametrize("n_levels", [3, 2])
+def test_fused_scan_call_takes_the_growth_way_exactly_when_a_level_must_grow(
+        n_levels: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """MultiResMap.integrate's one kernel call (ends, bounds, every level) integrates a scan only when every level
+    holds its start cell and its ends' cells; otherwise it writes nothing and the Python way grows the levels
+    (ray_ends called): scans ending on the array's edge cells, one cell past them, a start cell outside the array
+    with every end inside, a NaN end, a map over its byte limit — every level bit for bit the per-level reference,
+    the counters and errors as before."""
+    from conftest import scan_rays
+
+    import dynslam2d.slam.grid as grid
+    from dynslam2d.slam.grid import MapTooLargeError
+
+    calls = []
+    real_ends = grid.ray_ends
+
+    def counted(*a):
+        calls.append(1)
+        return real_ends(*a)
+
+    monkeypatch.setattr(grid, "ray_ends", counted)
+    fast = MultiResMap(0.05, n_levels, L_FREE, L_OCC, growth_margin=0.5)
+    plain = MultiResMap(0.05, n_levels, L_FREE, L_OCC, growth_margin=0.5)
+    a = np.linspace(-3.0, 3.0, 200)
+
+    def scan(pose: Pose2D, rr: np.ndarray, a: np.ndarray = a) -> bool:
+        """Integrate into both maps; True if the fused call integrated it (no ray_ends call)."""
+        hits = np.column_stack((rr * np.cos(a), rr * np.sin(a)))
+        n = len(calls)
+        fast.integrate(pose, hits)
+        ends, hit, _ = scan_rays(pose, hits, None, 0.0, plain.min_sin)
+        for lv in plain.levels:
+            lv.integrate(np.array([pose.x, pose.y]), ends, hit, plain.l_free, plain.l_occ, plain.cap)
+        for f, p in zip(fast.levels, plain.levels):
+            assert f.logodds.tobytes() == p.logodds.tobytes() and f.prob.tobytes() == p.prob.tobytes()
+            assert f.uidx.tobytes() == p.uidx.tobytes() and (f.i0, f.j0, f.shape) == (p.i0, p.j0, p.shape)
+        return len(calls) == n
+
+    pose = Pose2D(0.0, 0.0, 0.0)
+    assert not scan(pose, np.full(a.shape, 2.0))  # the first scan grows every level
+    lv0 = fast.levels[0]
+    # the array's last column, as a world x: a return on that cell's centre fits, one cell further does not
+    x_edge = (lv0.i0 + lv0.shape[1] - 1) * lv0.resolution
+    rr = np.full(a.shape, 1.0)
+    rr[100] = x_edge / math.cos(a[100])  # (a[100] ≈ 0.015 rad: nearly along +x)
+    counter = [lv.update_counter for lv in fast.levels]
+    version = fast.version
+    assert scan(pose, rr)
+    assert [lv.update_counter for lv in fast.levels] == [c + 3 for c in counter] and fast.version == version + 1
+    rr[100] = (x_edge + lv0.resolution) / math.cos(a[100])
+    assert not scan(pose, rr)  # one cell past the edge: level 0 grows
+    # every end inside the arrays, the start cell outside (the pose moved past the edge, the rays pointing back)
+    lv0 = fast.levels[0]
+    far = (lv0.i0 + lv0.shape[1] + 3) * lv0.resolution
+    back = Pose2D(far, 0.0, math.pi)
+    narrow = np.linspace(-0.3, 0.3, 50)
+    ends_x = far - (far - 1.0) * np.cos(narrow)
+    assert ends_x.max() < (lv0.i0 + lv0.shape[1] - 1) * lv0.resolution  # (every end inside level 0)
+    assert not scan(back, np.full(narrow.shape, far - 1.0), narrow)
+    assert scan(back, np.full(narrow.shape, far - 1.5), narrow)
+    before = _levels_state(fast)
+    bad = np.column_stack((np.cos(a), np.sin(a)))
+    bad[7] = np.nan
+    with pytest.raises(ValueError):
+        fast.integrate(pose, bad)
+    assert _levels_state(fast) == before
+    fast.max_bytes = fast.memory_bytes - 1  # already over the limit: no scan is integrated, as before
+    with pytest.raises(MapTooLargeError):
+        fast.integrate(pose, np.column_stack((np.cos(a), np.sin(a))))
+    assert _levels_state(fast) == before
+    fast.max_bytes = fast.memory_bytes
+    plain.max_bytes = None
+    assert scan(pose, np.full(a.shape, 1.2))
+    fast.levels[-1].release("prob")  # a level's arrays of different shapes: an error, nothing written
+    before = _levels_state(fast)
+    with pytest.raises(ValueError):
+        fast.integrate(pose, np.column_stack((np.cos(a), np.sin(a))))
+    assert _levels_state(fast) == before

@@ -301,6 +301,41 @@ class MultiResMap:
         """Bytes held by all levels (log-odds, probability cache, update indices)."""
         return sum(lv.nbytes for lv in self.levels)
 
+    def _integrate_fused(self, hits: np.ndarray, clear: np.ndarray, c: float, s: float, ox: float, oy: float,
+                         stop: np.ndarray | None) -> int:
+        """One scan into every level (at most ``_FUSED_LEVELS``) by one call of ``raycast.integrate_levels``
+        (``hits`` (n, 2), ``clear`` (m, 2) laser frame, m; laser pose ``ox``, ``oy`` m, cos ``c``, sin ``s``;
+        ``stop`` as :func:`grazing_stop`, or None). Returns the rays integrated on level 0, or −1 with nothing
+        written (and the update counters unchanged) when a level must grow first, an end is not finite or the
+        map is over its limit. The cells are written in ``raycast._rays``."""
+        levels = self.levels
+        n_lv = len(levels)
+        if n_lv == _FUSED_LEVELS:  # (the default map: the arguments written out)
+            la, lb, lc = levels
+            n0 = integrate_levels(
+                hits, clear, c, s, ox, oy, (la.logodds, lb.logodds, lc.logodds), (la.prob, lb.prob, lc.prob),
+                (la.uidx, lb.uidx, lc.uidx), 3, (la.resolution, lb.resolution, lc.resolution), (la.i0, lb.i0, lc.i0),
+                (la.j0, lb.j0, lc.j0), (la.update_counter, lb.update_counter, lc.update_counter),
+                stop if stop is not None else _NO_STOP, stop is not None,
+                -1 if self.max_bytes is None else self.max_bytes, self.l_free, self.l_occ, self.cap, *self._memo)
+        else:  # (fewer levels: the tuples padded to three, one kernel specialisation)
+            pad = _FUSED_LEVELS - n_lv
+            n0 = integrate_levels(
+                hits, clear, c, s, ox, oy, tuple(lv.logodds for lv in levels) + (_NO_F32,) * pad,
+                tuple(lv.prob for lv in levels) + (_NO_F32,) * pad,
+                tuple(lv.uidx for lv in levels) + (_NO_I32,) * pad, n_lv,
+                tuple(lv.resolution for lv in levels) + (1.0,) * pad,
+                tuple(lv.i0 for lv in levels) + (0,) * pad, tuple(lv.j0 for lv in levels) + (0,) * pad,
+                tuple(lv.update_counter for lv in levels) + (0,) * pad,
+                stop if stop is not None else _NO_STOP, stop is not None,
+                -1 if self.max_bytes is None else self.max_bytes, self.l_free, self.l_occ, self.cap, *self._memo)
+        if n0 < 0:
+            return -1
+        for lv in levels:
+            lv.update_counter += 3  # (GridLevel.integrate_cells: a scan takes the next three update indices)
+        self.version += 1
+        return int(n0)
+
     def integrate(self, pose: Pose2D, hits_laser: np.ndarray, clear_laser: np.ndarray | None = None) -> int:
         """Integrate a scan taken at laser pose ``pose`` (map frame) into every level.
 
@@ -311,24 +346,36 @@ class MultiResMap:
         hits = np.asarray(hits_laser, dtype=np.float64).reshape(-1, 2)
         n_hit = hits.shape[0]
         clear = _NO_CLEAR if clear_laser is None else np.asarray(clear_laser, dtype=np.float64).reshape(-1, 2)
-        if n_hit + clear.shape[0] == 0:
+        n = n_hit + clear.shape[0]
+        if n == 0:
             return 0
+        stop = None
+        if self.grazing_cells > 0.0:
+            stop = np.zeros(n)
+            stop[:n_hit] = grazing_stop(hits, self.grazing_cells, self.min_sin)
+        c, s = math.cos(pose.theta), math.sin(pose.theta)
+        ox, oy = float(pose.x), float(pose.y)
+        levels = self.levels
+        n_lv = len(levels)
+        if n_lv <= _FUSED_LEVELS:
+            # every level in one kernel call, which writes nothing and returns −1 when a level must grow first
+            # (or an end is not finite, or the map is over its limit): the way below
+            n0 = self._integrate_fused(hits, clear, c, s, ox, oy, stop)
+            if n0 >= 0:
+                return n0
         # the rays' ends in the map frame as two contiguous rows (the arithmetic of Pose2D.transform_points,
         # element by element, so the same values), the hit flags and the ends' extremes, in one kernel call
-        ends_t, hit, box = ray_ends(hits, clear, math.cos(pose.theta), math.sin(pose.theta), float(pose.x),
-                                    float(pose.y))
+        ends_t, hit, box = ray_ends(hits, clear, c, s, ox, oy)
         # every level's cell bounds from the extreme ends: v ↦ floor(v / r + 0.5) is monotonic, so the
         # extreme ends give the extreme cells (as GridLevel.cell_bounds), with a few scalar operations
         box = box.tolist()
         lo, hi = box[:2], box[2:]
-        ox, oy = float(pose.x), float(pose.y)
         bounds = []
-        for lv in self.levels:
+        for lv in levels:
             r = lv.resolution
             sx, sy = math.floor(ox / r + 0.5), math.floor(oy / r + 0.5)
             bounds.append((sx, sy, min(sx, math.floor(lo[0] / r + 0.5)), min(sy, math.floor(lo[1] / r + 0.5)),
                            max(sx, math.floor(hi[0] / r + 0.5)), max(sy, math.floor(hi[1] / r + 0.5))))
-        levels = self.levels
         # each level's bounds after growth (None: it holds the scan already), computed once for the limit and the growth
         grown = [lv._grown_bounds(*b[2:]) for lv, b in zip(levels, bounds)]
         if self.max_bytes is not None:
@@ -339,46 +386,14 @@ class MultiResMap:
                     f"integrating this scan would grow the map to {need / 1e6:.0f} MB "
                     f"(limit {self.max_bytes / 1e6:.0f} MB)"
                 )
-        stop = None
-        if self.grazing_cells > 0.0 and hit.shape[0]:
-            stop = np.zeros(hit.shape[0])
-            stop[:n_hit] = grazing_stop(hits, self.grazing_cells, self.min_sin)
         for lv, g in zip(levels, grown):
             if g is not None:
                 lv._grow(g)  # (GridLevel.ensure)
-        n_lv = len(levels)
-        if n_lv == _FUSED_LEVELS:  # the default map: every level in one kernel call, the arguments written out
-            a, b, c = levels
-            (ba, bb, bc) = bounds
-            counter = (a.update_counter, b.update_counter, c.update_counter)
-            a.update_counter += 3  # (GridLevel.integrate_cells: a scan takes the next three update indices)
-            b.update_counter += 3
-            c.update_counter += 3
-            n0 = integrate_levels(
-                (a.logodds, b.logodds, c.logodds), (a.prob, b.prob, c.prob), (a.uidx, b.uidx, c.uidx), 3,
-                (a.resolution, b.resolution, c.resolution), (a.i0, b.i0, c.i0), (a.j0, b.j0, c.j0),
-                (ba[0] - a.i0, bb[0] - b.i0, bc[0] - c.i0), (ba[1] - a.j0, bb[1] - b.j0, bc[1] - c.j0),
-                counter, ends_t, hit, stop if stop is not None else _NO_STOP, stop is not None,
-                self.l_free, self.l_occ, self.cap, *self._memo)
-            self.version += 1
-            return int(n0)
-        if n_lv < _FUSED_LEVELS:  # every level in one kernel call (the same cells and updates as the loop below)
-            pad = _FUSED_LEVELS - n_lv
-            counter = tuple(lv.update_counter for lv in levels) + (0,) * pad
-            for lv in levels:
-                lv.update_counter += 3  # (GridLevel.integrate_cells: a scan takes the next three update indices)
-            n0 = integrate_levels(
-                tuple(lv.logodds for lv in levels) + (_NO_F32,) * pad,
-                tuple(lv.prob for lv in levels) + (_NO_F32,) * pad,
-                tuple(lv.uidx for lv in levels) + (_NO_I32,) * pad, n_lv,
-                tuple(lv.resolution for lv in levels) + (1.0,) * pad,
-                tuple(lv.i0 for lv in levels) + (0,) * pad, tuple(lv.j0 for lv in levels) + (0,) * pad,
-                tuple(b[0] - lv.i0 for lv, b in zip(levels, bounds)) + (0,) * pad,
-                tuple(b[1] - lv.j0 for lv, b in zip(levels, bounds)) + (0,) * pad,
-                counter, ends_t, hit, stop if stop is not None else _NO_STOP, stop is not None,
-                self.l_free, self.l_occ, self.cap, *self._memo)
-            self.version += 1
-            return int(n0)
+        if n_lv <= _FUSED_LEVELS:  # every level holds the scan now: the fused call again
+            n0 = self._integrate_fused(hits, clear, c, s, ox, oy, stop)
+            if n0 < 0:
+                raise ValueError("a level's arrays differ in shape (released?): the scan cannot be integrated")
+            return n0
         # the rays' end cells of a level, computed as GridLevel.integrate does (floor(v / r + 0.5), array
         # coordinates), into buffers shared by the levels: (2, n) rows are the contiguous x and y arrays
         buf = np.empty_like(ends_t)

@@ -356,20 +356,47 @@ def integrate_rays_stop(
 
 
 @njit(cache=True)
-def integrate_levels(logodds, prob, uidx, n_levels, res, i0, j0, sx, sy, counter, ends, hit, stop, use_stop,
-                     l_free, l_occ, cap, keys, vals):  # pragma: no cover - numba
-    """One scan into every level in one call: per level ``k`` < ``n_levels`` (3-tuples ``logodds``, ``prob``,
-    ``uidx``, cell side ``res`` m, array offsets ``i0``, ``j0``, ray start cell ``sx``, ``sy`` in array cells,
-    update counter ``counter`` before this scan), the end cells of the rays ``ends`` (2, n) (map frame, m) as
-    ``MultiResMap.integrate`` computed them level by level (``floor(v / r + 0.5)``, OccGridMapBase::updateByScan's
-    rounding, minus the offsets), then :func:`integrate_rays` (or :func:`integrate_rays_stop` with ``use_stop``)
-    with the level's update indices ``counter + 1`` (free) and ``counter + 2`` (occupied). The levels must hold
-    the rays already (``GridLevel.ensure``). ``keys``, ``vals``: the map's probability memo (:func:`new_prob_memo`,
-    kept from scan to scan). Returns the number of rays integrated on level 0."""
+def integrate_levels(hits, clear, c, s, x, y, logodds, prob, uidx, n_levels, res, i0, j0, counter, stop, use_stop,
+                     max_bytes, l_free, l_occ, cap, keys, vals):  # pragma: no cover - numba
+    """One scan into every level in one call, when every level holds it already: the rays' ends in the map frame
+    from the ``hits`` (n_hit, 2) then the ``clear`` (m, 2) ends (laser frame, m) moved by the pose (``x``, ``y``,
+    cos ``c``, sin ``s``) as :func:`ray_ends` computes them, then per level ``k`` < ``n_levels`` (3-tuples
+    ``logodds``, ``prob``, ``uidx``, cell side ``res`` m, array offsets ``i0``, ``j0``, update counter ``counter``
+    before this scan) the rays from the pose's cell ``floor(x / r + 0.5)``, ``floor(y / r + 0.5)`` to the ends'
+    cells (``floor(v / r + 0.5)``, OccGridMapBase::updateByScan's rounding, minus the offsets) by
+    :func:`integrate_rays` (or :func:`integrate_rays_stop` with ``use_stop``) with the level's update indices
+    ``counter + 1`` (free) and ``counter + 2`` (occupied). ``keys``, ``vals``: the map's probability memo
+    (:func:`new_prob_memo`, kept from scan to scan). Returns the number of rays integrated on level 0, or −1,
+    having written nothing, when ``MultiResMap.integrate`` must take its other way: a level's arrays do not hold
+    the start cell and the cells of the ends' extremes (the level must grow: ``GridLevel._grown_bounds``), the
+    three arrays of a level differ in shape, an end is not finite, or the levels hold more than ``max_bytes``
+    (≥ 0; −1: no limit)."""
+    ends, hit, box = ray_ends(hits, clear, c, s, x, y)
+    if not (math.isfinite(box[0]) and math.isfinite(box[1]) and math.isfinite(box[2]) and math.isfinite(box[3])):
+        return -1
+    held = 0
+    for k in range(n_levels):
+        h, w = logodds[k].shape
+        if h == 0 or w == 0 or prob[k].shape != (h, w) or uidx[k].shape != (h, w):
+            return -1
+        held += 12 * h * w  # (GridLevel.nbytes: float32 + float32 + int32 per cell)
+        r = res[k]
+        # every cell of the scan inside the array (GridLevel._grown_bounds gives None): the start cell and the
+        # extreme ends' cells (v ↦ floor(v / r + 0.5) is monotonic), compared as floats (no int overflow)
+        for v, a0, n in ((x, i0[k], w), (y, j0[k], h), (box[0], i0[k], w), (box[1], j0[k], h),
+                         (box[2], i0[k], w), (box[3], j0[k], h)):
+            cell = np.floor(v / r + 0.5)  # (a float: no conversion of a huge value)
+            if cell < a0 or cell >= a0 + n:
+                return -1
+    if max_bytes >= 0 and held > max_bytes:
+        return -1
     n0 = 0
     for k in range(n_levels):
-        n_done = _rays(logodds[k], prob[k], uidx[k], counter[k] + 1, counter[k] + 2, sx[k], sy[k], _NO_CELLS,
-                       _NO_CELLS, ends, res[k], i0[k], j0[k], hit, stop, use_stop, l_free, l_occ, cap, keys, vals)
+        r = res[k]
+        sx = int(math.floor(x / r + 0.5)) - i0[k]
+        sy = int(math.floor(y / r + 0.5)) - j0[k]
+        n_done = _rays(logodds[k], prob[k], uidx[k], counter[k] + 1, counter[k] + 2, sx, sy, _NO_CELLS,
+                       _NO_CELLS, ends, r, i0[k], j0[k], hit, stop, use_stop, l_free, l_occ, cap, keys, vals)
         if k == 0:
             n0 = n_done
     return n0
