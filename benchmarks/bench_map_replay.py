@@ -5,7 +5,8 @@ by pytest).
 ``MultiResMap.integrate`` (pose, returns, clearing ends; laser frame) and the map's settings in a pickle. Then, per
 repetition, each checkout (``PYTHONPATH`` this ``src`` / ``--other``) replays the calls in a subprocess of its own,
 the checkouts alternately: a fresh ``MultiResMap`` with the pipeline's settings gets every call, in order, timed in
-thread CPU time (µs per call: the whole ``integrate`` and the ray kernel ``integrate_levels`` inside it), optionally
+thread CPU time (µs per call: the whole ``integrate`` and the ray kernel ``integrate_levels`` inside it, which since
+pass map15 also computes the rays' ends and checks the levels' bounds), optionally
 with ``--evict MB`` of memory written between two calls (the stages that run between two map updates in the
 pipeline push the levels out of the caches; ``--evict 0`` replays warm). Printed: median and mean µs per call of
 each checkout over ``--sweeps`` sweeps per repetition (the first sweep of a worker, which compiles, is not
@@ -13,6 +14,14 @@ counted), their ratios, and whether the levels after a sweep (log-odds, probabil
 are byte-identical between the checkouts.
 
     taskset -c 0 python benchmarks/bench_map_replay.py negative_2/right --other /tmp/base/src --reps 2 --evict 8
+
+``--inproc``: instead, one process replays the calls into a map of each checkout (the other checkout's
+``slam/grid.py`` and ``slam/raycast.py`` loaded as modules of their own), call by call alternately (which goes
+first alternates), ``--sweeps`` timed sweeps after one untimed; prints the median µs per call of each, the median of
+the per-call ratios and whether the levels are identical. Per-call pairs on the same core a few µs apart: less
+noisy than the subprocess replay on a loaded machine.
+
+    taskset -c 0 python benchmarks/bench_map_replay.py negative_2/right --other /tmp/base/src --inproc --evict 8
 
 The ledger's erasure, which writes into the map between two updates in the pipeline, is not replayed: the cells
 and values differ from the pipeline's, the work per call is the same kind.
@@ -113,6 +122,59 @@ def replay(path: Path, sweeps: int, evict_mb: float) -> None:
     print(json.dumps({"whole": whole, "kernel": kernel, "digest": digest}), flush=True)
 
 
+def inproc(path: Path, other: Path, sweeps: int, evict_mb: float) -> None:
+    """Replay the recorded calls into a map of each checkout in this process, call by call alternately; print the
+    median µs per call of each, the median per-call ratio (this / other) and whether the levels are identical."""
+    import importlib.util
+    import statistics
+    import time
+
+    import numpy as np
+
+    import dynslam2d.slam.grid as this_grid
+    from dynslam2d.types import Pose2D
+
+    def load(rel: str, name: str):
+        spec = importlib.util.spec_from_file_location(name, other / "dynslam2d" / rel)
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[name] = mod
+        spec.loader.exec_module(mod)
+        return mod
+
+    other_grid = load("slam/grid.py", "other_grid")
+    other_rays = load("slam/raycast.py", "other_raycast")
+    for k in ("integrate_levels", "integrate_rays", "integrate_rays_stop", "ray_ends", "new_prob_memo"):
+        if hasattr(other_rays, k):
+            setattr(other_grid, k, getattr(other_rays, k))
+    other_memo = other_rays.new_prob_memo()
+    with open(path, "rb") as fh:
+        rec = pickle.load(fh)
+    calls = [(Pose2D(x, y, t), h, c) for x, y, t, h, c in rec["calls"]]
+    junk = np.zeros(max(int(evict_mb * 1e6) // 8, 1))
+    res: dict[str, list[float]] = {"other": [], "this": []}
+    maps = {}
+    for sweep in range(sweeps + 1):
+        maps = {"other": other_grid.MultiResMap(**rec["settings"]), "this": this_grid.MultiResMap(**rec["settings"])}
+        maps["other"]._memo = other_memo  # (the other checkout's memo arrays, as its module would give)
+        for i, (pose, h, c) in enumerate(calls):
+            for tag in (("other", "this") if (i + sweep) % 2 == 0 else ("this", "other")):
+                if evict_mb > 0:
+                    junk += 1.0
+                t0 = time.thread_time_ns()
+                maps[tag].integrate(pose, h, c)
+                t = time.thread_time_ns() - t0
+                if sweep:
+                    res[tag].append(t / 1e3)
+    same = all(np.array_equal(a.logodds, b.logodds) and np.array_equal(a.prob, b.prob)
+               and np.array_equal(a.uidx, b.uidx) and (a.i0, a.j0, a.update_counter) == (b.i0, b.j0, b.update_counter)
+               for a, b in zip(maps["other"].levels, maps["this"].levels))
+    o, t = res["other"], res["this"]
+    ratio = statistics.median([b / a for a, b in zip(o, t)])
+    print(f"  in one process, {sweeps} sweeps, evict {evict_mb} MB: whole µs per call, median other "
+          f"{statistics.median(o):7.1f} this {statistics.median(t):7.1f}; median per-call ratio ×{ratio:.3f}; "
+          f"levels identical: {same}", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("inputs", nargs="+", choices=sorted(INPUTS))
@@ -123,6 +185,7 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     ap.add_argument("--cache", type=Path, default=Path("/tmp"), help="where the recorded calls are kept")
     ap.add_argument("--rerecord", action="store_true", help="record the calls again even if a recording exists")
+    ap.add_argument("--inproc", action="store_true", help="both checkouts in one process, call by call alternately")
     ap.add_argument("--replay", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.replay is not None:
@@ -133,6 +196,10 @@ def main() -> None:
         path = args.cache / f"map_replay_{name.replace('/', '_').replace(':', '_')}.pkl"
         if args.rerecord or not path.exists():
             record(args.data, name, path)
+        if args.inproc:
+            print(f"{name}:")
+            inproc(path, args.other.resolve(), args.sweeps, args.evict)
+            continue
         res: dict[str, dict[str, list[float]]] = {k: {"whole": [], "kernel": []} for k in ("other", "this")}
         digests: dict[str, set[str]] = {"other": set(), "this": set()}
         for rep in range(args.reps):
