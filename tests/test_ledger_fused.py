@@ -174,29 +174,27 @@ def test_level_rows_equal_update_rows_per_level(seed: int) -> None:
         levels_before.append((lo, ui))
     cat = [np.concatenate([p[q] for p in per]) for q in range(5)]
     bounds = np.concatenate(([0], np.cumsum([p[0].shape[0] for p in per]))).astype(np.int64)
-    rows, gid, glv, ga, gb, t_id, t_bnd, t_rows = lk.level_rows(
+    rows, t_id, t_bnd, t_lv = lk.level_rows(
         tuple(lv[0] for lv in levels_after), tuple(lv[1] for lv in levels_after), tuple(lv[2] for lv in levels_after),
         tuple(lv[3] for lv in levels_after), n_lv, cat[0], cat[1], np.ascontiguousarray(cat[2]), cat[3], cat[4], bounds)
-    w_rows, groups = [], []
-    off = 0
+    groups = []  # (track id, level, its rows) from update_rows, level by level
     for k, ((lo2, ui2, i0, j0), (ids, keys, cells, before, ub)) in enumerate(zip(levels_after, per)):
         f = lk.read_cells(lo2, ui2, cells, i0, j0)[2]
         r_k, g_k, s_k = lk.update_rows(lo2, ui2, f, ids, keys, before, ub)
-        w_rows.append(r_k)
-        groups += [(t, k, a + off, b + off) for t, a, b in zip(g_k.tolist(), s_k.tolist(), s_k[1:].tolist())]
-        off += r_k.shape[1]
-    assert np.array_equal(rows, np.concatenate(w_rows, axis=1))
+        groups += [(t, k, r_k[:, a:b]) for t, a, b in zip(g_k.tolist(), s_k.tolist(), s_k[1:].tolist())]
     groups.sort(key=lambda g: (g[0], g[1]))  # (track id, level): each track's groups one after the other
-    assert list(zip(gid.tolist(), glv.tolist(), ga.tolist(), gb.tolist())) == groups
-    w_glv = [g[1] for g in groups]
-    assert rows.shape[1] > 0 and len(set(w_glv)) > 1
-    # the tracks: each id once, ascending, its groups one span of the group table, its rows summed over its levels
+    assert len({g[1] for g in groups}) > 1
+    # the rows in (track id, level) order, each group's rows as update_rows gives them, the fifth row its level
+    want = np.concatenate([np.vstack((r, np.full((1, r.shape[1]), k))) for _, k, r in groups], axis=1)
+    assert rows.shape[1] > 0 and np.array_equal(rows, want)
+    # the tracks: each id once, ascending, its rows one column range (all its levels), its levels as bits
     w_ids = sorted({g[0] for g in groups})
-    assert t_id.tolist() == w_ids and t_bnd[0] == 0 and t_bnd[-1] == len(groups)
+    assert t_id.tolist() == w_ids and t_bnd[0] == 0 and t_bnd[-1] == rows.shape[1]
     for t, tid in enumerate(w_ids):
-        span = groups[t_bnd[t]:t_bnd[t + 1]]
-        assert span and all(g[0] == tid for g in span)
-        assert t_rows[t] == sum(g[3] - g[2] for g in span)
+        mine = [g for g in groups if g[0] == tid]
+        assert t_bnd[t + 1] - t_bnd[t] == sum(g[2].shape[1] for g in mine) > 0
+        assert np.array_equal(rows[:4, t_bnd[t]:t_bnd[t + 1]], np.concatenate([g[2] for g in mine], axis=1))
+        assert t_lv[t] == sum(1 << g[1] for g in mine)
 
 
 @pytest.mark.parametrize("levels", [2, 3, 4])
@@ -238,6 +236,7 @@ def test_ledger_records_the_same_rows_through_the_fused_and_the_level_by_level_p
         # one entry per update in which the track had rows (not yet handed to the records: nothing folded)
         n_ent = len(la.ent)
         assert 1 <= n_ent <= 6 and len(lb.ent) == n_ent and la.nb_chunks == n_ent
+        assert la.recs is None and lb.recs is None  # (made at the first settle)
         for ra, rb in zip(la.levels, lb.levels):  # (levels settles the entries into the records)
             assert not la.ent and ra._refs is None and len(ra) == len(rb) and ra._n_chunks == rb._n_chunks
             assert max(r._n_chunks for r in la.recs) == n_ent

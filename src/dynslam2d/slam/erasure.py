@@ -55,6 +55,8 @@ from dynslam2d.types import Pose2D, Scan, Track
 #: (i, j) cell → one int64 key: i·2^32 + j (|i|, |j| < 2^31)
 _KEY_SHIFT = 4294967296
 _HALF = 2147483648
+#: cell keys strictly inside ±2^60 can be shifted two bits (a level, ≤ 4 levels, in the low bits) without overflow
+_KEY_LIMIT = 1 << 60
 #: A level record folds its appended update rows into one row per cell once it holds this many.
 _COMPACT_ROWS = 4096
 #: … or this many updates (each update's rows are four small arrays).
@@ -67,7 +69,8 @@ _EMPTY_I = np.zeros(0, dtype=np.int64)
 _EMPTY_F = np.zeros(0)
 _EMPTY_B = np.zeros(0, dtype=bool)
 _EMPTY_I4 = np.zeros((4, 0), dtype=np.int64)
-for _a in (_EMPTY_I, _EMPTY_F, _EMPTY_B, _EMPTY_I4):
+_EMPTY_I5 = np.zeros((5, 0), dtype=np.int64)
+for _a in (_EMPTY_I, _EMPTY_F, _EMPTY_B, _EMPTY_I4, _EMPTY_I5):
     _a.flags.writeable = False
 #: levels the fused kernels read in one call (slam/ledgerkernels.py's FUSED_LEVELS) and their empty padding
 _FUSED = 3
@@ -301,20 +304,25 @@ class _Ledger:
     """What one track's points wrote into the map while it was not removed.
 
     A map update records the track with one *entry* (:meth:`EvidenceLedger.after_update`): the update's shared row
-    block and group table and the track's span of groups in it, instead of one reference per (track, level) record
-    (pass ledger13: one append per track and update, on fewer cold objects). :meth:`settle` hands the entries to
-    the level records (:meth:`_LevelRecord.refer`, in update order) before any record is read; ``nb_rows`` and
-    ``nb_chunks`` bound every record's pending rows and updates from above (their largest exact counts at the last
-    settle plus what the entries since could add), so the pipeline settles a ledger, and folds its records, at
-    exactly the update where a record reaches ``_COMPACT_ROWS`` or ``_COMPACT_CHUNKS`` (the fold's per-cell sums
-    are not associative in float64: folding at another update would change the erased log-odds' bits)."""
+    block, the track's column range in it (its rows of every level, level after level: the block is in (track,
+    level) order, pass ledger14) and the levels it has rows on, instead of one reference per (track, level) record
+    (pass ledger13: one append per track and update, on fewer cold objects). :meth:`settle` hands the entries'
+    rows to the level records, in update order, before any record is read; ``nb_rows`` and ``nb_chunks`` bound
+    every record's pending rows and updates from above (their largest exact counts at the last settle plus what
+    the entries since could add), so the pipeline settles a ledger, and folds its records, at exactly the update
+    where a record reaches ``_COMPACT_ROWS`` or ``_COMPACT_CHUNKS`` (the fold's per-cell sums are not associative
+    in float64: folding at another update would change the erased log-odds' bits). The level records are made at
+    the first settle (``recs`` is None before: a tentative track's ledger that is dropped never needs them)."""
 
     id: int
     first_box: tuple[float, float, float]  # centre x, y and half of the longer side where first seen, m
     first_t: float  # stamp when the track was first reported, s
     last_box: tuple[float, float, float]  # the same where last seen, m
     last_seen: float  # stamp, s
-    recs: list[_LevelRecord]  # per map level (read through :attr:`levels`, which settles the entries first)
+    #: per map level (read through :attr:`levels`, which makes them and settles the entries first), or None
+    recs: list[_LevelRecord] | None = None
+    n_levels: int = 3  # map levels (the records :attr:`levels` makes)
+    cap: int = 0  # each record's most cells (MemoryConfig.max_ledger_cells)
     m_start: tuple[float, float] | None = None  # centre when first in the removal set, m
     linked: bool = False  # ended-track evidence already joined to a live track
     confirmed: bool = False  # the track was reported confirmed at least once (not only tentative clutter)
@@ -323,8 +331,8 @@ class _Ledger:
     #: map update (only with keep_beams; :attr:`beams` slices them)
     kb: list[tuple[int, np.ndarray, int, int]] = field(default_factory=list)
     last_track: Track | None = None  # the track as last seen out of the removal set
-    #: (update block [rows, levels, first columns, end columns, their lists or None, update number], first group,
-    #: end group) per map update since the last :meth:`settle`
+    #: (update's (5, m) row block, first column, end column, levels with rows (bit k: level k)) per map update
+    #: since the last :meth:`settle`
     ent: list = field(default_factory=list)
     ent0: int = 0  # the update number of the first entry
     nb_rows: int = 0  # ≥ every record's pending rows once the entries are settled
@@ -333,76 +341,118 @@ class _Ledger:
     @property
     def levels(self) -> list[_LevelRecord]:
         """The level records, with every entry settled into them."""
-        if self.ent:
+        if self.ent or self.recs is None:
             self.settle()
         return self.recs
 
-    def _parts(self) -> list:
-        """Per level, the entries' rows of the level: [their column slices, in update order; rows; updates], or
-        None for a level without rows in them."""
-        out: list = [None] * len(self.recs)
-        for blk, i, j in self.ent:
-            lists = blk[4]
-            if lists is None:  # (an update's group table as lists, made once for all the tracks that read it)
-                lists = blk[4] = (blk[1].tolist(), blk[2].tolist(), blk[3].tolist())
-            glv, ga, gb = lists
-            rows = blk[0]
-            for g in range(i, j):
-                k, a, b = glv[g], ga[g], gb[g]
-                p = out[k]
-                if p is None:
-                    out[k] = [[rows[:, a:b]], b - a, 1]
-                else:
-                    p[0].append(rows[:, a:b])
-                    p[1] += b - a
-                    p[2] += 1
-        return out
+    def _rows(self) -> tuple[np.ndarray, list[int]]:
+        """The entries' rows, one after the other ((5, n): the record rows and their level; a view when there is
+        one entry), and per level the number of updates with rows on it."""
+        ent = self.ent
+        if len(ent) == 1:
+            rows, a, b, lv = ent[0]
+            cat = rows[:, a:b]
+            lvs = [lv]
+        else:
+            cat = np.concatenate([rows[:, a:b] for rows, a, b, _ in ent], axis=1)
+            lvs = [e[3] for e in ent]
+        n_lv = self.n_levels
+        if lvs.count((1 << n_lv) - 1) == len(lvs):  # (the usual case: rows on every level in every update)
+            return cat, [len(lvs)] * n_lv
+        chunks = [0] * n_lv
+        for x in lvs:
+            if type(x) is int:  # (an update's levels as bits)
+                for k in range(n_lv):
+                    chunks[k] += x >> k & 1
+            else:  # (a packed entry's updates per level, :meth:`pack`)
+                for k in range(n_lv):
+                    chunks[k] += x[k]
+        return cat, chunks
+
+    def pack(self) -> None:
+        """Copy the entries' rows out of the updates' shared row blocks into one array of exactly their rows (one
+        entry, its per-level update counts with it), so that the ledger holds no update's block alive: for a
+        ledger that gets no more rows (its track ended; issue 13 item 3), in one copy where :meth:`settle` would
+        copy each level's rows apart — the levels are split when the records are read (pass ledger14)."""
+        ent = self.ent
+        if not ent or (len(ent) == 1 and type(ent[0][3]) is not int):  # (nothing, or packed already)
+            return
+        cat, chunks = self._rows()
+        if len(ent) == 1:
+            cat = cat.copy()
+        self.ent = [(cat, 0, cat.shape[1], chunks)]
+        for rec in self.recs or ():  # (records a previous settle made: their pending buffers are exact already)
+            rec.shrink()
 
     def settle(self) -> None:
         """Copy every entry's rows into their level records' pending buffers, after the rows they hold (one copy
         into a buffer of exactly the pending rows per level, as :meth:`_LevelRecord.materialize`; the caller
-        folds), and make the bounds exact."""
-        parts = self._parts()
+        folds), and make the bounds exact. Makes the records if there are none yet."""
+        recs = self.recs
+        if recs is None:
+            recs = self.recs = [_LevelRecord(self.cap) for _ in range(self.n_levels)]
+        if not self.ent:
+            return
+        cat, chunks = self._rows()
         self.ent = []
-        for rec, p in zip(self.recs, parts):
-            if p is None:
+        lab = cat[4]
+        for k, (rec, c) in enumerate(zip(recs, chunks)):
+            if not c:
                 continue
+            part = cat[:4, lab == k]  # (a copy: the level's rows in update order, each update's in its order)
             rec.materialize()  # (references given by _LevelRecord.refer, if any, come first)
             n = rec._n_rows
-            sl = p[0]
-            if n:
-                sl.insert(0, rec._pk[:, :n])
-            rec._pk = np.concatenate(sl, axis=1) if len(sl) > 1 else sl[0].copy()
-            rec._n_rows = rec._n_buf = n + p[1]
-            rec._n_chunks += p[2]
+            rec._pk = np.concatenate((rec._pk[:, :n], part), axis=1) if n else part
+            rec._n_rows = rec._n_buf = n + part.shape[1]
+            rec._n_chunks += c
         self.bound()
 
     def new_cells(self) -> int:
         """The new cells folding every record would count (:meth:`_LevelRecord.new_cells`), without settling the
-        entries (for a ledger that is dropped: no copy of its rows)."""
-        if not self.ent:
-            return sum(rec.new_cells() for rec in self.recs)
+        entries (for a ledger that is dropped: no copy of its rows, no records made)."""
+        recs = self.recs
+        ent = self.ent
+        if not ent:
+            return sum(rec.new_cells() for rec in recs) if recs is not None else 0
+        if recs is None and len(ent) == 1 and type(ent[0][3]) is int and ent[0][2] - ent[0][1] <= self.cap:
+            return ent[0][2] - ent[0][1]  # (one update's rows: each key once per level, none over the cap)
+        cat, chunks = self._rows()
+        lab = cat[4]
+        if recs is None and self.n_levels <= 4:  # (the usual case: a tentative track's ledger of a few updates)
+            keys = cat[0]
+            if -_KEY_LIMIT <= int(keys.min()) and int(keys.max()) < _KEY_LIMIT:
+                # the distinct (level, cell) pairs as one int64 each (key · 4 + level: no overflow below the limit)
+                kl = (keys << 2) | lab
+                kl.sort()
+                n = int(np.count_nonzero(kl[1:] != kl[:-1])) + 1
+                if n <= self.cap:  # (then no level's count reaches the cap either)
+                    return n
         total = 0
-        for rec, p in zip(self.recs, self._parts()):
-            if p is None:
-                total += rec.new_cells()
-            elif not rec._n_rows and not rec.key.shape[0] and p[2] == 1:  # one update's rows: each key once
-                total += min(p[1], rec.cap)
-            else:
-                keys = [rec.key, rec._pk[0, :rec._n_buf]]
+        for k, c in enumerate(chunks):
+            rec = recs[k] if recs is not None else None
+            if not c:
+                total += rec.new_cells() if rec is not None else 0
+                continue
+            mine = cat[0][lab == k]
+            cap = self.cap if rec is None else rec.cap
+            if c == 1 and (rec is None or (not rec._n_rows and not rec.key.shape[0])):  # one update: each key once
+                total += min(mine.shape[0], cap)
+                continue
+            keys = [mine]
+            if rec is not None:
+                keys += [rec.key, rec._pk[0, :rec._n_buf]]
                 if rec._refs is not None:
                     keys += [rows[0, a:b] for rows, a, b in rec._refs]
-                keys += [x[0] for x in p[0]]
-                k = np.concatenate(keys)
-                k.sort()
-                n = int(np.count_nonzero(k[1:] != k[:-1])) + 1
-                total += min(n, rec.cap) - int(rec.key.shape[0])
+            k_all = np.concatenate(keys)
+            k_all.sort()
+            n = int(np.count_nonzero(k_all[1:] != k_all[:-1])) + 1
+            total += min(n, cap) - (int(rec.key.shape[0]) if rec is not None else 0)
         return total
 
     def bound(self) -> None:
         """Set the bounds to the records' exact largest counts (no entry pending)."""
         r = c = 0
-        for rec in self.recs:
+        for rec in self.recs or ():
             r = max(r, rec._n_rows)
             c = max(c, rec._n_chunks)
         self.nb_rows, self.nb_chunks = r, c
@@ -613,8 +663,7 @@ class EvidenceLedger:
         """An empty ledger of ``t``; its first box is where the track was first reported."""
         here = _box_key(t)
         box, t0, _ = self._first.get(t.id) or (here, stamp, stamp)
-        cap = self.config.max_ledger_cells
-        return _Ledger(t.id, box, t0, here, stamp, [_LevelRecord(cap) for _ in range(n_levels)])
+        return _Ledger(t.id, box, t0, here, stamp, None, n_levels, self.config.max_ledger_cells)
 
     @staticmethod
     def _read(lv, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -642,29 +691,27 @@ class EvidenceLedger:
         self._n_updates = upd = self._n_updates + 1
         levels = hmap.levels
         if pending.fused is not None and len(levels) <= _FUSED:
-            # one block of rows (cell keys, update index before / after, log-odds' bits) of the updated cells of
-            # every level, the cells re-read from the levels' current arrays, and its groups (a track's rows on a
-            # level) in (track, level) order
+            # one block of rows (cell keys, update index before / after, log-odds' bits, level) of the updated cells
+            # of every level in (track, level) order, the cells re-read from the levels' current arrays, and per
+            # track its column range and levels
             ids, keys, cells, before, ub, bounds = pending.fused
-            rows, _, glv, ga, gb, tid_t, bnd_t, n_t = lk.level_rows(*_level_arrays(levels), len(levels), ids, keys,
-                                                                    cells, before, ub, bounds)
+            rows, tid_t, bnd_t, lv_t = lk.level_rows(*_level_arrays(levels), len(levels), ids, keys, cells, before,
+                                                     ub, bounds)
         else:
-            rows, glv, ga, gb, tid_t, bnd_t, n_t = self._level_groups(pending, levels)
-        # one entry per track (its groups are consecutive, in (track, level) order) in its ledger: the records get
-        # the rows when the ledger settles, which its bounds make happen at the update where a record is due to
-        # fold (and before any record is read)
+            rows, tid_t, bnd_t, lv_t = self._level_groups(pending, levels)
+        # one entry per track in its ledger: the records get the rows when the ledger settles, which its bounds
+        # make happen at the update where a record is due to fold (and before any record is read)
         if tid_t.shape[0]:
             st = bnd_t.tolist()
-            blk = [rows, glv, ga, gb, None, upd]
-            for tid, i, j, n in zip(tid_t.tolist(), st, st[1:], n_t.tolist()):
+            for tid, i, j, lv in zip(tid_t.tolist(), st, st[1:], lv_t.tolist()):
                 led = ledgers.get(tid)
                 if led is None:
                     continue
                 ent = led.ent
                 if not ent:
                     led.ent0 = upd
-                ent.append((blk, i, j))
-                m = led.nb_rows + n
+                ent.append((rows, i, j, lv))
+                m = led.nb_rows + j - i
                 led.nb_rows = m
                 c = led.nb_chunks + 1
                 led.nb_chunks = c
@@ -674,23 +721,22 @@ class EvidenceLedger:
                         if rec._n_rows >= _COMPACT_ROWS or rec._n_chunks >= _COMPACT_CHUNKS:
                             added += rec.compact()
                     led.bound()
-        if upd % _REF_MAX_AGE == 0:  # copy old references into their records' buffers (few blocks stay alive)
+        if upd % _REF_MAX_AGE == 0:  # settle old entries (few update blocks stay alive)
             old = upd - _REF_MAX_AGE
             for led in ledgers.values():
                 if led.ent and led.ent0 <= old:
                     led.settle()
-                for rec in led.recs:  # (references given by _LevelRecord.refer)
+                for rec in led.recs or ():  # (references given by _LevelRecord.refer)
                     if rec._refs is not None and rec._ref0 <= old:
                         rec.materialize()
         self.stats["cells_recorded"] += added
 
     @staticmethod
     def _level_groups(pending: PendingUpdate, levels: list) -> tuple[np.ndarray, ...]:
-        """:meth:`after_update`'s row block, groups and tracks level by level (more levels than the fused kernel
-        takes, or a level-by-level pending update), as :func:`~dynslam2d.slam.ledgerkernels.level_rows` returns
-        them (without the groups' track ids): the levels' blocks side by side; per group, in (track, level) order,
-        the level, first and end column; per track, in id order, its id, its groups' bounds (T + 1,) and its rows
-        on all levels."""
+        """:meth:`after_update`'s row block and tracks level by level (more levels than the fused kernel takes, or
+        a level-by-level pending update), as :func:`~dynslam2d.slam.ledgerkernels.level_rows` returns them: the
+        (5, m) rows in (track, level) order (the fifth row: the level); per track, in id order, its id, its rows'
+        column bounds (T + 1,) and its levels (bit k: level k)."""
         lk = _lk or _kernels()
         blocks, gid, glv, ga, gb = [], [], [], [], []
         off = 0
@@ -700,22 +746,25 @@ class EvidenceLedger:
             lv = levels[k]
             f = lk.read_cells(lv.logodds, lv.uidx, cells, lv.i0, lv.j0)[2]
             rows, tids, starts = lk.update_rows(lv.logodds, lv.uidx, f, ids, keys, before, ui_before)
-            blocks.append(rows)
+            blocks.append(np.vstack((rows, np.full((1, rows.shape[1]), k, dtype=np.int64))))
             gid.append(tids)
             glv.append(np.full(tids.shape[0], k, dtype=np.int64))
             ga.append(starts[:-1] + off)
             gb.append(starts[1:] + off)
             off += rows.shape[1]
         if not blocks:
-            return _EMPTY_I4, _EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I, np.zeros(1, dtype=np.int64), _EMPTY_I
+            return _EMPTY_I5, _EMPTY_I, np.zeros(1, dtype=np.int64), _EMPTY_I
         gid, glv = np.concatenate(gid), np.concatenate(glv)
         order = np.lexsort((glv, gid))  # (each (track, level) once: the order of a track's groups is its levels')
         gid, glv, ga, gb = gid[order], glv[order], np.concatenate(ga)[order], np.concatenate(gb)[order]
+        n = gb - ga
+        # the columns of the groups in that order: each group's first column, then one by one
+        col = np.repeat(ga - np.concatenate(([0], np.cumsum(n)[:-1])), n) + np.arange(int(n.sum()))
         head = np.ones(gid.shape[0], dtype=bool)
         head[1:] = gid[1:] != gid[:-1]
         st = np.flatnonzero(head)
-        return (np.concatenate(blocks, axis=1), glv, ga, gb, gid[st], np.append(st, gid.shape[0]),
-                np.add.reduceat(gb - ga, st))
+        return (np.concatenate(blocks, axis=1)[:, col], gid[st], np.append(np.cumsum(n)[st] - n[st], int(n.sum())),
+                np.bitwise_or.reduceat(np.left_shift(1, glv), st))
 
     def _fold(self, led: _Ledger) -> None:
         """Fold every level's pending rows of ``led`` (counts its new cells)."""
@@ -762,11 +811,10 @@ class EvidenceLedger:
             if led.last_track is not None:
                 led.last_box = _box_key(led.last_track)
             if led.confirmed:  # tentative clutter (wall fragments, noise) is never linked
-                # an ended record gets no more rows: its pending buffers, allocated with room to double
-                # (up to 2 × 4096 rows of 32 bytes per level), shrink to their rows (issue 13 item 3; one
-                # copy, where folding them here would sort them in the per-scan path)
-                for rec in led.levels:
-                    rec.shrink()
+                # an ended ledger gets no more rows: its entries' rows are copied out of the updates' shared row
+                # blocks into one array of their size (issue 13 item 3; one copy, where folding them here would
+                # sort them in the per-scan path and splitting them per level would copy each level apart)
+                led.pack()
                 self._ended[tid] = led
                 self._oldest_ended = min(self._oldest_ended, led.last_seen)
             else:

@@ -19,7 +19,8 @@ they replaced computed (``tests/test_ledger_kernels.py`` checks them against it 
 * :func:`update_rows`: after the update, the rows (key, update index before, after, added log-odds' bits) of the
   cells the update changed, and the per-track groups of those rows;
 * :func:`record_cells` = beam_owners, the distinct track ids, scan_cells, a radix sort, unpack_cells, the reads of
-  three levels and kept_beams; :func:`level_rows` = update_rows of three levels, re-reading by cell.
+  three levels and kept_beams; :func:`level_rows` = update_rows of three levels, re-reading by cell, the rows
+  written in (track, level) order with their level as a fifth row.
 
 Signatures: the two fused kernels declare theirs (one specialisation each, compiled or loaded from numba's cache
 when the module is imported, with the single steps they call); the single steps are compiled at first use (the
@@ -490,23 +491,31 @@ def record_cells(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin, rmax, c, 
     return True, out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b, valid, uids, counts, ends
 
 
-_ROWS_SIG = types.Tuple((types.int64[:, ::1], _I1, _I1, _I1, _I1, _I1, _I1, _I1))(
+_ROWS_SIG = types.Tuple((types.int64[:, ::1], _I1, _I1, _I1))(
     _LO3, _UI3, _IT3, _IT3, types.int64, _I1, _I1, types.int64[:, ::1], _F1, _I1, _I1)
 
 
 @njit(_ROWS_SIG, cache=True)
 def level_rows(logodds, uidx, i0, j0, n_lv, ids, keys, cells, before, ub, bounds):  # pragma: no cover - numba
     """:func:`update_rows` of every level (``n_lv`` ≤ 3) in one call, the cells re-read after the map update from
-    the levels' current arrays and offsets (a level may have grown): ((4, m) rows of all levels, level by level;
-    per group of rows (one track's rows on one level), in (track id, level) order: the track id, the level, the
-    first and the end column (g,) each; per track with rows, in id order: its id (T,), its groups' bounds (T + 1,:
-    track ``t``'s groups are ``[b[t], b[t + 1])``) and its rows on all levels (T,)). The cells of level ``k`` are
-    ``bounds[k]:bounds[k + 1]`` of ``ids``, ``keys``, ``cells``, ``before`` and ``ub`` (what :func:`record_cells`
-    read), sorted by track id within a level. (The caller looks each track's ledger up once for all its levels.)"""
+    the levels' current arrays and offsets (a level may have grown), the rows written in (track id, level) order:
+    ((5, m) rows: key, update index before, after, added log-odds' bits and the row's level; per track with rows,
+    in id order: its id (T,), its rows' column bounds (T + 1,: track ``t``'s rows are ``[b[t], b[t + 1])``, its
+    levels' rows one after the other) and the levels it has rows on (T,: bit ``k`` for level ``k``)). A track's
+    rows of one level are the rows :func:`update_rows` gives it on that level, in the same order. The cells of
+    level ``k`` are ``bounds[k]:bounds[k + 1]`` of ``ids``, ``keys``, ``cells``, ``before`` and ``ub`` (what
+    :func:`record_cells` read), sorted by track id within a level. (Pass ledger14: one column range per track, so
+    that the ledger settles an update's rows of a track with one slice, slam/erasure.py ``_Ledger.settle``.)"""
     n = ids.shape[0]
     delta = np.empty(n)
     ua = np.empty(n, dtype=np.int64)
-    m = 0
+    # groups (a track's updated rows on one level), level by level, each level's in id order: id, the input
+    # span [first updated row, after the last one) and the number of updated rows in it
+    gid = np.empty(n, dtype=np.int64)
+    g_a = np.empty(n, dtype=np.int64)
+    g_b = np.empty(n, dtype=np.int64)
+    g_n = np.empty(n, dtype=np.int64)
+    lg = np.empty(n_lv + 1, dtype=np.int64)  # the groups of level k: lg[k]:lg[k + 1]
     g = 0
     for k in range(n_lv):
         a = logodds[k]
@@ -514,8 +523,8 @@ def level_rows(logodds, uidx, i0, j0, n_lv, ids, keys, cells, before, ub, bounds
         h, w = a.shape
         ci0 = i0[k]
         cj0 = j0[k]
+        lg[k] = g
         first = True
-        last = 0
         for t in range(bounds[k], bounds[k + 1]):
             col = cells[t, 0] - ci0
             row = cells[t, 1] - cj0
@@ -527,67 +536,48 @@ def level_rows(logodds, uidx, i0, j0, n_lv, ids, keys, cells, before, ub, bounds
             ua[t] = v
             delta[t] = after - before[t]
             if v != ub[t]:  # else not updated (outside the array, or the ray was skipped)
-                if first or ids[t] != last:
+                if first or ids[t] != gid[g - 1]:
+                    gid[g] = ids[t]
+                    g_a[g] = t
+                    g_n[g] = 0
                     g += 1
-                    last = ids[t]
                     first = False
-                m += 1
-    bits = delta.view(np.int64)
-    rows = np.empty((4, m), dtype=np.int64)
-    gid = np.empty(g, dtype=np.int64)
-    starts = np.empty(g + 1, dtype=np.int64)
-    lg = np.empty(n_lv + 1, dtype=np.int64)  # the groups of level k: lg[k]:lg[k + 1]
-    q = 0
-    j = 0
-    for k in range(n_lv):
-        lg[k] = q
-        first = True
-        for t in range(bounds[k], bounds[k + 1]):
-            if ua[t] == ub[t]:
-                continue
-            rows[0, j] = keys[t]
-            rows[1, j] = ub[t]
-            rows[2, j] = ua[t]
-            rows[3, j] = bits[t]
-            if first or ids[t] != gid[q - 1]:
-                gid[q] = ids[t]
-                starts[q] = j
-                q += 1
-                first = False
-            j += 1
-    starts[g] = m
+                g_b[g - 1] = t + 1
+                g_n[g - 1] += 1
     lg[n_lv] = g
-    # the groups in (track id, level) order: a merge of the levels' runs (each sorted by track id)
-    pos = lg[:n_lv].copy()
-    o_id = np.empty(g, dtype=np.int64)
-    o_lv = np.empty(g, dtype=np.int64)
-    o_a = np.empty(g, dtype=np.int64)
-    o_b = np.empty(g, dtype=np.int64)
+    bits = delta.view(np.int64)
+    # the groups in (track id, level) order (a merge of the levels' runs, each sorted by track id), their rows
+    # written in that order; per track: id, column bounds, levels
+    m = 0
     for q in range(g):
+        m += g_n[q]
+    rows = np.empty((5, m), dtype=np.int64)
+    t_id = np.empty(g, dtype=np.int64)
+    t_bnd = np.empty(g + 1, dtype=np.int64)
+    t_lv = np.zeros(g, dtype=np.int64)
+    pos = lg[:n_lv].copy()
+    n_t = 0
+    j = 0
+    for _ in range(g):
         best = -1
         for k in range(n_lv):
             if pos[k] < lg[k + 1] and (best < 0 or gid[pos[k]] < gid[pos[best]]):
                 best = k
         src = pos[best]
         pos[best] += 1
-        o_id[q] = gid[src]
-        o_lv[q] = best
-        o_a[q] = starts[src]
-        o_b[q] = starts[src + 1]
-    # per track (its groups are consecutive): id, groups' bounds, rows
-    n_t = 0
-    for q in range(g):
-        if q == 0 or o_id[q] != o_id[q - 1]:
+        if n_t == 0 or gid[src] != t_id[n_t - 1]:
+            t_id[n_t] = gid[src]
+            t_bnd[n_t] = j
             n_t += 1
-    t_id = np.empty(n_t, dtype=np.int64)
-    t_bnd = np.empty(n_t + 1, dtype=np.int64)
-    t_rows = np.zeros(n_t, dtype=np.int64)
-    p = -1
-    for q in range(g):
-        if q == 0 or o_id[q] != o_id[q - 1]:
-            p += 1
-            t_id[p] = o_id[q]
-            t_bnd[p] = q
-        t_rows[p] += o_b[q] - o_a[q]
-    t_bnd[n_t] = g
-    return rows, o_id, o_lv, o_a, o_b, t_id, t_bnd, t_rows
+        t_lv[n_t - 1] |= 1 << best
+        for t in range(g_a[src], g_b[src]):
+            if ua[t] == ub[t]:
+                continue
+            rows[0, j] = keys[t]
+            rows[1, j] = ub[t]
+            rows[2, j] = ua[t]
+            rows[3, j] = bits[t]
+            rows[4, j] = best
+            j += 1
+    t_bnd[n_t] = m
+    return rows, t_id[:n_t], t_bnd[:n_t + 1], t_lv[:n_t]
