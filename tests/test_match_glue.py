@@ -44,7 +44,7 @@ def test_the_refine_fit_is_reused_exactly_when_the_wrapped_pose_has_the_refines_
 
     def fake(levels, pts, seed, *a, fit=None, **k):  # noqa: ANN001, ANN002, ANN003, ANN202
         if fit is not None:
-            fit[:] = [mark, 0.0]
+            fit[:] = [mark, 0.0, None]
         return np.array([0.02, 0.0, theta])
 
     monkeypatch.setattr(pr, "match_multires", fake)

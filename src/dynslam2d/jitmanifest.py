@@ -85,7 +85,7 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float32, 2, 'C'), Array(float32, 2, 'C'), Array(float32, 2, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 2, 'C'), Array(float64, 1, 'C'), int64, int64, bool, bool, float64, float64, "
      "float64, float64, bool, Array(float64, 1, 'C'), Array(float64, 3, 'C'), bool, float64, "
-     "Array(float64, 2, 'C'), Array(float64, 1, 'C'),)"),
+     "Array(float64, 2, 'C'), Array(float64, 1, 'C'), float64,)"),
     ('dynslam2d.slam.correlative._rotated_cells',
      "(Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, float64,)"),
     ('dynslam2d.slam.correlative._score_pyramid',
@@ -93,9 +93,6 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.slam.correlative.branch_and_bound',
      "(Array(float32, 2, 'C'), int64, Array(int64, 2, 'C'), Array(int64, 2, 'C'), bool, int64, "
      "Array(float64, 1, 'C'), float64, float64, Array(int64, 1, 'C'), float64, float64,)"),
-    ('dynslam2d.slam.matcher._support_kernel',
-     "(Array(float32, 2, 'C'), Array(float64, 2, 'C'), int64, float64, float64, float64, float64, "
-     'float64, int64,)'),
     ('dynslam2d.vacated.vacated_scan_kernel',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), float64, float64, float64, Array(float32, 2, 'C'), int64, int64, Array(float64, 1, 'C'), "

@@ -332,7 +332,7 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
 @njit(cache=True)
 def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, swapped, use_lm, lam0, lam_max,
                   max_rot, max_trans, use_prior, prior_world, lam_ps, want_fit, free_thresh, H_out,
-                  pose):  # pragma: no cover
+                  pose, support_thresh):  # pragma: no cover
     """:func:`match_multires` on a map of at most three levels in one call (the same arithmetic as its Python
     loop): ``prob0`` … ``prob2`` the levels' probability caches (finest first; unused ones any array), ``geo``
     (L, 4) per level (cell side m, i0, j0, 1.0 if empty), ``pts_m`` (n, 2) laser-frame points m, ``start`` the
@@ -340,12 +340,14 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     units when ``use_prior``.
 
     Writes the world pose into ``pose`` (3,) (not ``start``'s array) and returns (fitted, cost, Σ M, n_inside,
-    free). With ``want_fit`` and a finite result on a
+    free, support count, support bins). With ``want_fit`` and a finite result on a
     non-empty finest level, ``fitted`` is True and H (in ``H_out``), cost, Σ M and n_inside are :func:`evaluate`'s
     at the returned pose on level 0 (unswapped weights): the last iteration's sums when that iteration ran on
-    level 0, unswapped, at exactly the same map pose, else one :func:`accumulate` pass; and ``free`` is
+    level 0, unswapped, at exactly the same map pose, else one :func:`accumulate` pass; ``free`` is
     :func:`free_fraction` below ``free_thresh`` on level min(1, L − 1) at the returned pose with θ wrapped once more
-    (as ``Pose2D(x, y, wrap_angle(θ))``)."""
+    (as ``Pose2D(x, y, wrap_angle(θ))``); and, unless ``support_thresh`` is NaN, the support count and bins are
+    :func:`support_at`'s (count already scaled by the stride; bins, not rad) above ``support_thresh`` on level 0 at
+    that same pose (else 0, 0)."""
     pose[0] = start[0]
     pose[1] = start[1]
     pose[2] = start[2]
@@ -389,7 +391,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             pose[0] = np.nan
             pose[1] = np.nan
             pose[2] = np.nan
-            return False, 0.0, 0.0, 0, 0.0
+            return False, 0.0, 0.0, 0, 0.0, 0, 0
         pose[0] = (x + i0) * res
         pose[1] = (y + j0) * res
         pose[2] = (th + math.pi) % (2.0 * math.pi) - math.pi  # wrap after each level (§2.5)
@@ -401,30 +403,37 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             lx, ly, lth = x, y, th
             l_raw, l_summ, l_in = raw, summ, n_in
     if not want_fit or geo[0, 3] != 0.0:
-        return False, 0.0, 0.0, 0, 0.0
+        return False, 0.0, 0.0, 0, 0.0, 0, 0
     fl = min(1, n_lv - 1)
     free = 0.0
+    wth = (pose[2] + math.pi) % (2.0 * math.pi) - math.pi  # (the wrapped θ of Pose2D(x, y, wrap_angle(θ)))
     if geo[fl, 3] == 0.0:
         res = geo[fl, 0]
         if fl == 0 or pts1.shape[0] != pts_m.shape[0]:
             pts1 = pts_m / res
         free = fraction_below(prob1 if fl == 1 else prob0, pts1, pose[0] / res - geo[fl, 1],
-                              pose[1] / res - geo[fl, 2], (pose[2] + math.pi) % (2.0 * math.pi) - math.pi,
-                              free_thresh)
+                              pose[1] / res - geo[fl, 2], wth, free_thresh)
     res = geo[0, 0]
     m0 = pose[0] / res - geo[0, 1]
     m1 = pose[1] / res - geo[0, 2]
     m2 = pose[2]
+    n_sup = 0
+    k_sup = 0
+    if support_thresh == support_thresh:  # (not NaN) support_at's arithmetic: (x / res − i0, y / res − j0, θ)
+        stride = max(1, pts_m.shape[0] // _SUPPORT_POINTS)
+        n_sup, k_sup = _support_kernel(prob0, pts_m, stride, 1.0 / res, m0, m1, wth, support_thresh,
+                                       np.int64(_N_BINS))  # (an int64, not a literal: the Python call's signature)
+        n_sup *= stride
     if last0 and _same_float(m0, lx) and _same_float(m1, ly) and _same_float(m2, lth):
         for a in range(3):
             for b in range(3):
                 H_out[a, b] = Hk[a, b]
-        return True, l_raw, l_summ, l_in, free
+        return True, l_raw, l_summ, l_in, free, n_sup, k_sup
     if pts0.shape[0] != pts_m.shape[0]:
         pts0 = pts_m / res
     g = np.zeros(3)
     cost, summ, n_in = accumulate(prob0, pts0, m0, m1, m2, np.bool_(False), H_out, g)  # not a literal: one signature
-    return True, cost, summ, n_in, free
+    return True, cost, summ, n_in, free, n_sup, k_sup
 
 
 #: level geometry key → (L, 4) float64 array of match_pyramid's ``geo`` (see _level_geometry); a few maps
@@ -494,6 +503,7 @@ def match_multires(
     prior_info: np.ndarray | None = None,
     fit: list | None = None,
     free_thresh: float = 0.5,
+    support_thresh: float | None = None,
 ) -> np.ndarray:
     """Coarse-to-fine matching (Kohlbrecher et al., SSRR 2011 §IV-C; MapRepMultiMap::matchData):
     from the coarsest level down to level 0,
@@ -504,7 +514,8 @@ def match_multires(
     1/m², 1/(m·rad), 1/rad²) adds the prior term ½(ξ−ξp)ᵀΛ(ξ−ξp) on every level.
     ``fit``: a list that receives ``[evaluate(levels[0], pts_m, pose), free_fraction(levels[min(1, L − 1)], pts_m,
     (x, y, wrap_angle(θ)), free_thresh)]`` of the returned pose when it is finite (from the same kernel call; on a
-    map of more than three levels, or for points that are not a C-contiguous float64 array, it stays empty).
+    map of more than three levels, or for points that are not a C-contiguous float64 array, it stays empty), and with
+    ``support_thresh`` a third item: :func:`support_at` ``(levels[0], pts_m, x, y, wrap_angle(θ), support_thresh)``.
     Returns the world pose (3,).
     """
     pose = np.array(start_world, dtype=np.float64)
@@ -528,13 +539,16 @@ def match_multires(
         p0 = levels[0].prob
         H = np.empty((3, 3))
         out = np.empty(3)  # (filled by the kernel: a new array is cheaper made here than returned from numba)
-        fitted, cost, summ, n_in, free = match_pyramid(
+        fitted, cost, summ, n_in, free, n_sup, k_sup = match_pyramid(
             p0, levels[1].prob if n_lv > 1 else p0, levels[2].prob if n_lv > 2 else p0, geo, pts_m, pose,
             iterations_coarse, iterations_finest, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
             use_prior, pw, lam_ps, fit is not None, free_thresh, H, out,
+            math.nan if support_thresh is None else support_thresh,
         )
         if fitted and fit is not None:
             fit[:] = [LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in)), float(free)]
+            if support_thresh is not None:
+                fit.append((int(n_sup), k_sup * BIN_ANGLE))
         return out
     for k in range(n_lv - 1, -1, -1):
         lv = levels[k]

@@ -287,6 +287,9 @@ class HectorSlam:
         self._dt: float | None = None  # stamp of the scan being matched minus the previous one's, s
         self._period = ScanPeriod()  # typical stamp gap (the motion gate's floor with recovery on)
         self._last_points: tuple[Scan, np.ndarray, np.ndarray] | None = None  # scan_points of the last match
+        # (result, pose, (count, spread)): the support the matcher's kernel took at the pose _match_against_map gave
+        # that result; :meth:`_support` uses it while the result still holds that same pose object
+        self._support_of: tuple[MatchResult, Pose2D, tuple[int, float]] | None = None
 
     # ---- properties --------------------------------------------------------------------
     @property
@@ -437,8 +440,8 @@ class HectorSlam:
         tolerances."""
         c = self.config
         dt = max(dt, 0.0)
-        if c.recovery:
-            dt = self._period.floor(dt)  # jittered stamps understate the motion a gap allowed (slam/recovery.py)
+        if c.recovery:  # jittered stamps understate the motion a gap allowed (slam/recovery.py)
+            dt = max(dt, self._period.median)  # (ScanPeriod.floor)
         k = dt * (0.5 * c.velocity_window + dt)
         return c.max_linear_accel * k + c.gate_distance, c.max_angular_accel * k + c.gate_angle
 
@@ -570,9 +573,15 @@ class HectorSlam:
             res.reason = reason
 
     def _support(self, res: MatchResult, pts: np.ndarray, pose: Pose2D) -> None:
+        """:func:`~dynslam2d.slam.matcher.support_at` of ``pose`` into ``res`` (the matcher's, taken in its kernel
+        call, when ``pose`` is the one :meth:`_match_against_map` gave ``res``: the same map, points and pose)."""
         c = self.config
-        res.support_points, res.support_spread = support_at(self.map.levels[0], pts, pose.x, pose.y, pose.theta,
-                                                            c.support_probability)
+        of = self._support_of
+        if of is not None and of[0] is res and of[1] is pose:
+            res.support_points, res.support_spread = of[2]
+        else:
+            res.support_points, res.support_spread = support_at(self.map.levels[0], pts, pose.x, pose.y, pose.theta,
+                                                                c.support_probability)
         res.low_support = res.support_points < c.support_min_points or res.support_spread < c.support_min_spread
 
     def _refine(self, pts: np.ndarray, seed: np.ndarray, prior_pose: np.ndarray | None = None,
@@ -616,10 +625,12 @@ class HectorSlam:
                     self._fit(res, pts, Pose2D(float(p[0]), float(p[1]), float(wrap_angle(p[2]))))
                     res.pose_source = SOURCE_SCAN_PRIOR
         self._support(res, pts, res.pose)
-        if prior.gate and self._last_stamp is not None:
+        # the motion gate refuses only weak matches: a well-supported one skips the deviation and the limits (pure
+        # arithmetic, the same outcome)
+        if prior.gate and res.low_support and self._last_stamp is not None:
             dx, dy, dth = _between(prior.pose, res.pose)
             lim_d, lim_a = self._gate_limits(stamp - self._last_stamp)
-            if (math.hypot(dx, dy) > lim_d or abs(dth) > lim_a) and res.low_support:
+            if math.hypot(dx, dy) > lim_d or abs(dth) > lim_a:
                 refused = self._refused
                 # a weak match the previous (refused) weak match predicts is two agreeing observations:
                 # the robot did accelerate beyond the model (a car speeding up), accept it
@@ -678,10 +689,10 @@ class HectorSlam:
         levels = self.map.levels
         start = res.start.as_array()
 
-        # pose bytes → (LevelFit, free fraction) of every refine of this scan: _fit and the free-space test reuse
-        # them at the same pose (the winner is not always the latest refine: a correlative seed that refines to a
-        # lower score leaves the first refine's pose)
-        fits: dict[bytes, tuple[LevelFit, float | None]] = {}
+        # pose bytes → (LevelFit, free fraction, support) of every refine of this scan: _fit, the free-space test and
+        # the support reuse them at the same pose (the winner is not always the latest refine: a correlative seed that
+        # refines to a lower score leaves the first refine's pose)
+        fits: dict[bytes, tuple[LevelFit, float | None, tuple[int, float] | None]] = {}
         # seed bytes → (pose, score) of every refine of this scan: the map and the points do not change within the
         # scan, so a seed refined before (a correlative search's pose equal to the start, or a recovery seed equal
         # to an earlier one) refines to the same pose. (Methods, not closures made on every scan: most scans refine
@@ -755,6 +766,9 @@ class HectorSlam:
             free = free_fraction(levels[min(1, len(levels) - 1)], pts, pose.as_array() if at is None else at,
                                  FREE_SPACE_PROB)
         res.free_fraction = free
+        # the refine's support was taken at this pose too (x, y, wrap_angle(θ) of its result)
+        sup = best_fit[2] if best_fit is not None else None
+        self._support_of = (res, pose, sup) if sup is not None else None
         if res.score < c.reject_score_min or (avg is not None and res.score < c.reject_score_ratio * avg):
             res.rejected = True
             res.reason = REJECT_LOW_SCORE
@@ -783,14 +797,15 @@ class HectorSlam:
             levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
             c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
             c.max_translation_step, prior_pose, prior_info, fit=fitted, free_thresh=FREE_SPACE_PROB,
+            support_thresh=c.support_probability,
         )
         if not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
             return p, -1.0
         if fitted:
-            fit, free = fitted
+            fit, free, sup = fitted
         else:
-            fit, free = evaluate(levels[0], pts, p), None
-        fits[p.tobytes()] = (fit, free)
+            fit, free, sup = evaluate(levels[0], pts, p), None, None
+        fits[p.tobytes()] = (fit, free, sup)
         return p, fit.score
 
     def _search(self, ctx: tuple, start: np.ndarray) -> tuple[np.ndarray, float] | None:

@@ -31,8 +31,9 @@ the running average of accepted scores. Poses are laser poses in the map frame (
 
 from __future__ import annotations
 
-import bisect
 import math
+from bisect import bisect_left as _bisect_left
+from bisect import insort as _insort
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -45,6 +46,7 @@ from dynslam2d.slam.grid import GridLevel
 from dynslam2d.slam.matcher import evaluate
 from dynslam2d.types import wrap_angle
 
+_INF = math.inf
 #: Reason of a recovered match kept out of the map.
 REJECT_AMBIGUOUS = "ambiguous_match"
 
@@ -82,26 +84,33 @@ class ScanPeriod:
     def __init__(self, n: int = 31) -> None:
         self._gaps: deque[float] = deque(maxlen=n)
         self._sorted: list[float] = []  # the same gaps in ascending order
-        self._median = 0.0
+        self._n = n
+        # the middle index of a full window of odd length (−1: even n, every add takes the general path)
+        self._mid = n // 2 if n % 2 else -1
+        #: Median gap, s (0 before the first); kept up to date by :meth:`add` (a plain attribute: the motion gate
+        #: reads it on every scan)
+        self.median = 0.0
 
     def add(self, dt: float) -> None:
         """Record the gap ``dt`` s between two consecutive scans (ignored unless positive and finite)."""
-        if dt > 0.0 and math.isfinite(dt):
-            gaps, srt = self._gaps, self._sorted
-            if len(gaps) == gaps.maxlen:
-                del srt[bisect.bisect_left(srt, gaps[0])]  # the gap the append drops (equal floats are alike)
-            gaps.append(dt)
-            bisect.insort(srt, dt)
+        if dt > 0.0 and dt < _INF:  # (NaN fails both)
+            srt = self._sorted
+            if len(srt) == self._n:
+                gaps = self._gaps
+                del srt[_bisect_left(srt, gaps[0])]  # the gap the append drops (equal floats are alike)
+                gaps.append(dt)
+                _insort(srt, dt)
+                if self._mid >= 0:  # a full window of odd length (on every scan once full): its fixed middle
+                    self.median = float(srt[self._mid])
+                    return
+            else:
+                self._gaps.append(dt)
+                _insort(srt, dt)
             # statistics.median's value (np.median's) from the sorted window kept up to date: the middle one, or
             # the mean of the middle two, without sorting the window on every scan
             n = len(srt)
             i = n // 2
-            self._median = float(srt[i] if n % 2 else (srt[i - 1] + srt[i]) / 2)
-
-    @property
-    def median(self) -> float:
-        """Median gap, s (0 before the first)."""
-        return self._median
+            self.median = float(srt[i] if n % 2 else (srt[i - 1] + srt[i]) / 2)
 
     def floor(self, dt: float) -> float:
         """``dt`` raised to the median gap, s."""
