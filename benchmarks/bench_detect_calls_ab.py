@@ -71,7 +71,10 @@ def record(scans: list) -> dict[str, list]:
     rec: dict[str, list] = collections.defaultdict(list)
     # (a name this checkout's tracker no longer calls is not recorded: admit_long_clusters runs inside
     # select_detections since the tracker's kernels were fused)
-    saved = {n: getattr(T, n) for n in _TRACKER_CALLS if hasattr(T, n)}
+    # (in detect/tracker.py and the step modules it was split into, pass trktable)
+    mods = [T] + [m for n in ("trackdetect", "trackupdate", "trackmanage", "trackreport")
+                  if (m := sys.modules.get(f"dynslam2d.detect.{n}")) is not None]
+    saved = {(m, n): getattr(m, n) for m in mods for n in _TRACKER_CALLS if hasattr(m, n)}
     make0 = freespace.FreeSpaceMemory.make_ref
 
     def wrap(f, n):
@@ -85,15 +88,15 @@ def record(scans: list) -> dict[str, list]:
         return make0(scan, pose, valid)
 
     try:
-        for n, f in saved.items():
-            setattr(T, n, wrap(f, n))
+        for (m, n), f in saved.items():
+            setattr(m, n, wrap(f, n))
         freespace.FreeSpaceMemory.make_ref = staticmethod(make_ref)
         p = Pipeline()
         for s in scans:
             p.process(s)
     finally:
-        for n, f in saved.items():
-            setattr(T, n, f)
+        for (m, n), f in saved.items():
+            setattr(m, n, f)
         freespace.FreeSpaceMemory.make_ref = staticmethod(make0)
     return rec
 

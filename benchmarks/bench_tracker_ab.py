@@ -48,6 +48,8 @@ from __future__ import annotations
 import argparse
 import collections
 import copy
+import importlib
+import importlib.abc
 import importlib.util
 import statistics
 import sys
@@ -78,12 +80,63 @@ def load_scans(data: Path, name: str) -> list:
     return list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
 
 
+#: the tracker's modules: ``detect/tracker.py`` and the step modules it was split into (pass trktable); a name a
+#: checkout lacks is skipped
+TRACKER_MODULES = ("tracker", "trackdetect", "trackupdate", "trackmanage", "trackreport", "tracktable")
+
+
+def tracker_modules() -> list:
+    """This checkout's tracker modules (:data:`TRACKER_MODULES` that exist), imported."""
+    out = []
+    for n in TRACKER_MODULES:
+        try:
+            out.append(importlib.import_module(f"dynslam2d.detect.{n}"))
+        except ModuleNotFoundError:
+            pass
+    return out
+
+
+class _OtherParts(importlib.abc.MetaPathFinder):
+    """Finds ``dynslam2d.detect.track*`` (other than ``tracker``) in the other checkout while its tracker loads."""
+
+    def __init__(self, folder: Path, names: set[str]) -> None:
+        self.folder, self.names = folder, names
+
+    def find_spec(self, name, path=None, target=None):
+        pkg, _, stem = name.rpartition(".")
+        if pkg == "dynslam2d.detect" and stem in self.names:
+            return importlib.util.spec_from_file_location(name, self.folder / f"{stem}.py")
+        return None
+
+
 def other_tracker_module(src: Path):
-    """The other checkout's ``dynslam2d/detect/tracker.py`` as a module of its own (its imports resolve to this one)."""
-    spec = importlib.util.spec_from_file_location("other_tracker", src / "dynslam2d" / "detect" / "tracker.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["other_tracker"] = mod
-    spec.loader.exec_module(mod)
+    """The other checkout's ``dynslam2d/detect/tracker.py`` as a module of its own, with the other checkout's step
+    modules ``detect/track*.py`` if it has them (pass trktable split the tracker); every other import resolves to
+    this checkout. This checkout's step modules stay what ``dynslam2d.detect.track*`` names afterwards."""
+    import dynslam2d.detect as pkg
+
+    folder = src / "dynslam2d" / "detect"
+    parts = {p.stem for p in folder.glob("track*.py")} - {"tracker"}
+    full = [f"dynslam2d.detect.{n}" for n in parts]
+    saved = {n: sys.modules.pop(n) for n in full if n in sys.modules}
+    attrs = {n: getattr(pkg, n) for n in parts if hasattr(pkg, n)}
+    finder = _OtherParts(folder, parts)
+    sys.meta_path.insert(0, finder)
+    try:
+        spec = importlib.util.spec_from_file_location("other_tracker", folder / "tracker.py")
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules["other_tracker"] = mod
+        spec.loader.exec_module(mod)
+    finally:
+        sys.meta_path.remove(finder)
+        for n in full:
+            sys.modules.pop(n, None)
+        sys.modules.update(saved)
+        for n in parts:
+            if n in attrs:
+                setattr(pkg, n, attrs[n])
+            elif hasattr(pkg, n):
+                delattr(pkg, n)
     return mod
 
 
@@ -253,7 +306,7 @@ def phases_ab(scans: list, other) -> dict[str, dict[str, float]]:
             for tag, d in per.items()}
 
 
-#: functions of other modules that Tracker.update calls (module attribute of detect/tracker.py → label)
+#: functions of other modules that Tracker.update calls (module attributes of detect/tracker.py and its step modules)
 _SPLIT = ("segment_scan", "fit_clusters", "classify_batch", "admit_long_clusters", "map_evidence",
           "map_evidence_kernel", "gate_costs", "measure_batch", "kalman_update_batch", "fragment_hosts",
           "segment_means", "linear_sum_assignment", "select_detections")
@@ -262,7 +315,6 @@ _SPLIT = ("segment_scan", "fit_clusters", "classify_batch", "admit_long_clusters
 def split(scans: list) -> tuple[float, dict[str, float]]:
     """Tracker.update CPU µs per scan of one run after a warm-up, and the part of it (µs per scan) spent in each
     function of another module (:data:`_SPLIT` and the free-space memory's methods)."""
-    from dynslam2d.detect import tracker as this
     from dynslam2d.pipeline import Pipeline
 
     warm = Pipeline()
@@ -270,7 +322,9 @@ def split(scans: list) -> tuple[float, dict[str, float]]:
         warm.process(s)
     p = Pipeline()
     acc: collections.Counter = collections.Counter()
-    saved = {n: getattr(this, n) for n in _SPLIT if hasattr(this, n)}  # (names a later version no longer uses skipped)
+    # (in every tracker module that calls it: detect/tracker.py and its step modules; names a later version no longer
+    # uses skipped)
+    saved = {(m, n): getattr(m, n) for m in tracker_modules() for n in _SPLIT if hasattr(m, n)}
 
     def timed(f, tag: str):
         def g(*a, **k):
@@ -281,8 +335,8 @@ def split(scans: list) -> tuple[float, dict[str, float]]:
         return g
 
     try:
-        for n, f in saved.items():
-            setattr(this, n, timed(f, n))
+        for (m, n), f in saved.items():
+            setattr(m, n, timed(f, n))
         if p.tracker._free is not None:
             for n in ("seen_through", "seen_through_by", "count_seen_by", "make_ref", "add"):
                 if hasattr(p.tracker._free, n):  # (names of either checkout's memory)
@@ -291,8 +345,8 @@ def split(scans: list) -> tuple[float, dict[str, float]]:
         for s in scans:
             p.process(s)
     finally:
-        for n, f in saved.items():
-            setattr(this, n, f)
+        for (m, n), f in saved.items():
+            setattr(m, n, f)
     n = len(scans)
     total = acc.pop("update") / 1e3 / n
     return total, {k: v / 1e3 / n for k, v in acc.items()}

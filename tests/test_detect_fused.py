@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-import dynslam2d.detect.tracker as tracker_mod
+import dynslam2d.detect.trackdetect as tracker_mod  # (_detect calls select_detections there)
 from dynslam2d.config import Config
 from dynslam2d.detect import kernels as K
 from dynslam2d.detect.config import DetectConfig

@@ -1,0 +1,175 @@
+"""Step 3 of ``Tracker.update`` (detect/tracker.py): the scan's detections in the map frame (segmentation, paper
+Eq. 1; shape fits, paper Eq. 2; classification, the map-evidence columns, the leg merge of people) and their
+default measurements. Split out of ``detect/tracker.py`` (docs/speed.md, pass trktable)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dynslam2d.detect.kernels import (
+    classify_batch,
+    leg_pairs,
+    measure_batch,
+    merge_leg_pairs,
+    select_detections,
+    world_points,
+)
+from dynslam2d.detect.layout import (
+    F_THETA,
+    FIT_CENTROID,
+    FIT_CIRCLE,
+    KIND_POINT,
+    DetectionBatch,
+    MeasureRows,
+)
+from dynslam2d.detect.measure import Detection, ScanDetection, scan_detections
+from dynslam2d.detect.segment import segment_scan
+from dynslam2d.detect.shapes import CRITERIA, fit_clusters
+from dynslam2d.detect.vehicles import _NO_MAP, extent_limit
+from dynslam2d.types import Pose2D, Scan
+
+
+class TrackDetect:
+    """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: the detection step (``_detect``, ``_merge_legs``)."""
+
+    def _beam_trig(self, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
+        """cos / sin of the beam angles, cached per beam geometry (sensor frame)."""
+        key = (scan.n_beams, float(scan.angle_min), float(scan.angle_increment))
+        if self._trig_key != key:
+            a = scan.angles
+            self._trig = (np.cos(a), np.sin(a))
+            self._trig_key = key
+        return self._trig
+
+    def _detect(self, scan: Scan, pose: Pose2D) -> list[Detection]:
+        cfg = self.config
+        st = self.stats
+        ranges = scan.ranges
+        valid = scan.valid_mask()  # (a copy)
+        valid &= ranges > 0.0
+        seg = segment_scan(scan, cfg.segment, valid, checked=True)
+        self.last_segmentation = seg
+        st.clusters += seg.n_clusters
+        st.dropped_small_clusters += seg.n_dropped
+        self._batch = None
+        if seg.n_clusters == 0:
+            self.last_detections = []
+            if self._free is not None:
+                self._free.add(scan, pose, valid)
+            return []
+        cos_a, sin_a = self._beam_trig(scan)
+        # pose.transform_points of the beams (invalid ones at the pose), all beams and the clusters' ones
+        beams = seg.beams
+        ct, st_ = math.cos(pose.theta), math.sin(pose.theta)
+        ax, ay, px, py, pts = world_points(ranges, valid, cos_a, sin_a, ct, st_, float(pose.x),
+                                           float(pose.y), beams)
+        offsets = seg.offsets
+        fits = fit_clusters(px, py, offsets, ~seg.structure, self._angles, CRITERIA[cfg.fit.criterion],
+                            cfg.fit.closeness_d0, cfg.fit.circle_min_points, cfg.fit.coarse_stride)
+        # classify and bound every cluster (reference.classify_and_bound); then the vehicle-size clusters' map test
+        # (detect/vehicles.py), the kept clusters' rows and their points' map evidence in one call. The map test is
+        # per point, so only the detections' points are tested (structure clusters, most of the points, are not
+        # detections)
+        view = self._map
+        sc, tc = cfg.segment, cfg.tracker
+        if view is None:
+            lo, i0, j0, res = _NO_MAP, 0, 0, 1.0
+        else:
+            lo, i0, j0, res = view.logodds, int(view.i0), int(view.j0), float(view.resolution)
+        keep, kinds, lohi, rel = classify_batch(px, py, beams, offsets, fits, seg.structure, float(pose.x),
+                                                float(pose.y), ranges, valid, ax, ay, seg.wrapped,
+                                                int(sc.max_skip_beams), float(scan.range_max),
+                                                abs(float(scan.angle_increment)), extent_limit(cfg), self._fit_p)
+        starts, npts, kinds, lohi, rel, fits, mfr = select_detections(
+            keep, kinds, lohi, rel, fits, offsets, px, py, sc.vehicle_max_extent > sc.max_extent,
+            float(sc.max_extent), float(sc.vehicle_max_structure), float(sc.vehicle_min_free), view is not None, lo,
+            i0, j0, res, float(tc.map_occupied_logodds), float(tc.map_free_logodds), int(tc.map_free_radius))
+        nd = starts.shape[0]
+        st.structure_clusters += seg.n_clusters - nd
+        # free-space evidence per detection (0 where unknown). The free-space fraction is read for few detections
+        # (births, updates whose entry is read: Tracker._free_values): each detection keeps this scan's test (the
+        # memory's references now, before it gains this scan) and computes its fraction when first read
+        # (ScanDetection.free_fraction)
+        frac = 0.0
+        fs = ff = fu = [0.0] * nd
+        free = self._free
+        if free is not None:
+            self._cur_ref = free.make_ref(scan, pose, valid)
+            if nd and (test := free.test_at(float(scan.stamp))) is not None:
+                frac = test
+            free.add(scan, pose, valid, self._cur_ref)
+        if view is not None:
+            fs, ff, fu = mfr.tolist()
+        # (their centroid, bounds, flags and circle stay rows of fits / lohi / rel until read, their points rows of pts:
+        # ScanDetection; all made in one loop, scan_detections)
+        dets = scan_detections(beams, pts, starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(),
+                               frac, fs, ff, fu, fits, lohi, rel)
+        if cfg.fit.person_merge and len(dets) > 1:
+            dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
+                                                                                 npts, px, py, beams)
+        st.detections += len(dets)
+        self.last_detections = dets
+        if dets:
+            m = len(dets)
+            self._batch = DetectionBatch(kind=kinds, theta=fits[:, F_THETA].copy(), lohi=lohi, rel=rel,
+                                         centroid=fits[:, FIT_CENTROID].copy(), circle=fits[:, FIT_CIRCLE].copy(),
+                                         px=px, py=py, start=starts, npts=npts)
+            no_prior = self._no_prior.get(m)
+            if no_prior is None:
+                # (no track prior: the same arrays for every scan with m detections; the kernel only reads them)
+                if len(self._no_prior) >= 64:
+                    self._no_prior.clear()
+                no_prior = self._no_prior[m] = (np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool),
+                                                np.full(m, -1.0), np.zeros(m))
+            self._default = self._measure_rows(*no_prior)
+            # (the detections' bounds and real-bound flags: read as Python lists by row, for births and detections on
+            # structure only (_birth_state, _clutter_detections): one row's tolist each, not the whole arrays' per scan)
+        return dets
+
+    def _merge_legs(self, dets: list[Detection], kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray,
+                    rel: np.ndarray, starts: np.ndarray, npts: np.ndarray, px: np.ndarray, py: np.ndarray,
+                    beams: np.ndarray) -> tuple:
+        """People (leg_tracker, Leigh et al. ICRA 2015, pairs legs): two leg-sized detections (both sides
+        ≤ ``fit.leg_max_extent``) whose centres lie within ``fit.leg_pair_distance`` become one person
+        detection, measured at the middle of the two legs with the point model. A leg swinging forward while
+        the other stands does not move the person's centre by a full stride, so its speed does not jump.
+        Returns the detection list and the per-detection batch arrays, merged pairs appended at the end (the
+        arrays by :func:`dynslam2d.detect.kernels.merge_leg_pairs`; ``beams``: the beams of ``px``, ``py``)."""
+        fc = self.config.fit
+        first, second = leg_pairs(lohi, npts, fits, float(fc.leg_max_extent), float(fc.leg_pair_distance))
+        m = first.shape[0]
+        if m == 0:
+            return dets, kinds, fits, lohi, rel, starts, npts, px, py
+        ki, kinds, fits, lohi, rel, starts, npts, px, py, mbeams = merge_leg_pairs(
+            first, second, px, py, beams, starts, npts, kinds, fits, lohi, rel)
+        new_dets = [dets[j] for j in ki.tolist()]
+        row = len(new_dets)
+        n0 = px.shape[0] - mbeams.shape[0]
+        pts = np.empty((px.shape[0] - n0, 2))  # the persons' points, (n, 2) (np.column_stack's values)
+        pts[:, 0] = px[n0:]
+        pts[:, 1] = py[n0:]
+        o = 0
+        for a, b in zip(first.tolist(), second.tolist()):
+            da, db = dets[a], dets[b]
+            na, nb = da.n_points, db.n_points
+            n = na + nb
+            # (centroid = circle centre = the legs' middle, lo / hi their box, no real bound, theta 0: rows of the
+            # merged arrays, as a scan detection's)
+            det = ScanDetection(mbeams[o:o + n], pts, KIND_POINT, 0.0, n, (da, db),  # (free: when read)
+                                (na * da.map_structure + nb * db.map_structure) / n,
+                                (na * da.map_free + nb * db.map_free) / n,
+                                (na * da.map_unknown + nb * db.map_unknown) / n, fits, lohi, rel, row, o)
+            det.person = True
+            new_dets.append(det)
+            row += 1
+            o += n
+        self.stats.merged_leg_pairs += m
+        return new_dets, kinds, fits, lohi, rel, starts, npts, px, py
+
+    def _measure_rows(self, det: np.ndarray, sizes: np.ndarray, has_sizes: np.ndarray, radius: np.ndarray,
+                      size_sigma: np.ndarray) -> MeasureRows:
+        """:func:`dynslam2d.detect.reference.measure` of this scan's detections ``det`` with the given track
+        priors, batched (see :func:`dynslam2d.detect.kernels.measure_batch`)."""
+        return MeasureRows(*measure_batch(det, *self._batch, sizes, has_sizes, radius, size_sigma, self._fit_p))

@@ -1,0 +1,432 @@
+"""Steps 6–7 of ``Tracker.update`` (detect/tracker.py): track management (M of N, coasting, deletions) and the
+dynamic set M (paper Eq. 3) with its tests (free space, map evidence, people, riding with the laser) and the
+track memory (detect.memory). Split out of ``detect/tracker.py`` (docs/speed.md, pass trktable)."""
+
+from __future__ import annotations
+
+import math
+from itertools import starmap as _starmap
+
+import numpy as np
+
+from dynslam2d.detect.kernels import manage_rows
+from dynslam2d.detect.tracktable import _NO_BEAMS, _TWO_PI, COASTING, CONFIRMED, TENTATIVE, _Track
+from dynslam2d.types import Pose2D, wrap_angle
+
+
+class TrackManage:
+    """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: management and the test of M (``_manage``, ``_dynamic``)."""
+
+    def _manage(self, t: float, updated: set[int]) -> None:
+        """Track management (M of N, deletions, clutter retirement) and the test of M (paper Eq. 3) of the updated
+        tracks. The covariance test and the speed's σ of all live tracks come from their state rows in one kernel
+        call (``manage_rows``; the speeds are Python's ``math.hypot``, given to it); the test of M runs inline up to
+        its common outcomes (tentative, or not in M and at most v_min) with the scan's constants read once, the rest
+        in :meth:`_dynamic`."""
+        tracks = self._tracks
+        if not tracks:
+            return
+        tc = self.config.tracker
+        st = self.stats
+        keep: list[_Track] = []
+        gone: list[int] = []  # the rows of the tracks deleted or retired here, in their order (births reuse them)
+        mem = self.config.memory.enabled
+        merged = self._merged
+        window, need_hits = tc.confirm_window, tc.confirm_hits
+        max_coast, max_sig, max_speed = tc.max_coast_time, tc.max_position_sigma, tc.max_object_speed
+        hypot = math.hypot
+        v_min = tc.v_min
+        retire_n = tc.structure_retire_updates if self._map is not None else 0
+        retire_s = tc.structure_retire_fraction
+        # (the test of M's constants, the same products as in _dynamic)
+        max_ssig, v_exit, nsus = tc.max_speed_sigma, tc.v_exit_ratio * tc.v_min, tc.sustain_updates
+        ride_n, ride_r2 = tc.ride_updates, tc.ride_max_range * tc.ride_max_range
+        probe = self._free is not None
+        slow_tail = f" m/s ≤ v_min {v_min:.2f}"  # (the most common reason's constant part)
+        order = self._rows()
+        # per track: its speed (Python's math.hypot, as the reasons print it), whether its covariance fails (tested on
+        # the rows as they are, instead of a flag kept in step wherever P changes) and σ of its speed along the
+        # velocity, from the state rows in one kernel call
+        speeds = list(_starmap(hypot, self._X[order, 2:].tolist()))
+        bads, sigs = manage_rows(self._P, self._X, order, np.array(speeds), max_sig)
+        bads, sigs = bads.tolist(), sigs.tolist()
+        for k, speed, sig, bad in zip(tracks, speeds, sigs, bads):
+            kid = k.id
+            is_upd = kid in updated
+            if kid in merged and not is_upd and k.in_m:
+                k.in_m = False
+                k.merged = True
+                k.fast = 0
+                k.reason = "left M: merged with long-occupied map structure (its detection joined a wall's cluster)"
+            if not is_upd:
+                k.misses += 1
+                if k.in_m and not k.remembered and k.slow_since is not None and mem and self._hidden(k):
+                    # stopped in M and hidden (something in front of it) before m_exit_time: it cannot finish its
+                    # stop while unseen, so it is remembered now (if eligible) instead of being deleted after
+                    # max_coast_time (a track that just vanishes in plain view, a false one, is not)
+                    self._remember(k, t - k.slow_since)
+                if k.hist_n < window:  # (the M-of-N counts: only the first window is read)
+                    k.hist_n += 1
+                k.beams = _NO_BEAMS
+                if k.state == CONFIRMED:
+                    k.state = COASTING
+            elif k.state == COASTING:
+                k.state = CONFIRMED
+            if k.state == TENTATIVE:
+                nh, n = k.hist_hits, k.hist_n  # (hits and updates among its first confirm_window updates)
+                if nh >= need_hits:
+                    k.state = CONFIRMED
+                elif nh + (window - n) < need_hits or k.misses > 0 and n >= window:
+                    st.deleted_tentative += 1
+                    st.tracks_deleted += 1
+                    gone.append(k.row)
+                    continue
+            if k.state == COASTING and t - k.last_hit > max_coast and not (
+                    k.remembered and self._remembered_coasts(k, t)):
+                st.deleted_coasting += 1
+                st.tracks_deleted += 1
+                gone.append(k.row)
+                continue
+            if bad:
+                st.deleted_covariance += 1
+                st.tracks_deleted += 1
+                gone.append(k.row)
+                continue
+            if speed > max_speed:
+                st.deleted_speed += 1
+                st.tracks_deleted += 1
+                gone.append(k.row)
+                continue
+            if is_upd and retire_n and not k.was_in_m and not k.remembered and len(mev := k.mev) >= retire_n \
+                    and speed < v_min and min([e[0] for e in mev[-retire_n:]]) >= retire_s:
+                # clutter retirement: a still track the map already holds as structure (docs/real.md "Speed");
+                # a confirmed one stays as a dormant track while its object is seen (_clutter_detections)
+                st.deleted_structure += 1
+                if k.state == TENTATIVE:
+                    st.tracks_deleted += 1
+                else:
+                    self._retire(k)
+                gone.append(k.row)
+                continue
+            if is_upd:
+                # paper Eq. 3 with persistence, certainty and displacement conditions (the start of _dynamic, inline)
+                kfast = k.fast + 1 if speed > v_min and sig < max_ssig else 0
+                k.fast = kfast
+                if speed < v_exit:
+                    if k.slow_since is None:
+                        k.slow_since = t
+                elif k.remembered and kfast < nsus:
+                    pass  # a remembered stop ends only on M's sustained fast test, not on one scan of speed jitter
+                else:
+                    k.slow_since = None
+                if k.in_m and k.probation and probe and len(k.free) >= nsus and self._probation_fails(k):
+                    pass  # left M
+                else:
+                    rides = False
+                    if len(ride := k.ride) >= ride_n:  # (fewer: it cannot ride)
+                        lx, ly = ride[-1][:2]
+                        if lx * lx + ly * ly > ride_r2:
+                            k.rode = False  # (_rides_with_laser's first test, inline: most tracks are far from it)
+                        else:
+                            rides = self._rides_with_laser(k)
+                    if rides:
+                        k.in_m = False
+                        k.fast = 0
+                        k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
+                    elif k.in_m:
+                        self._dynamic(k, speed, sig, t)
+                    elif k.state == TENTATIVE:
+                        # (speed: most tracks are short-lived tentative clutter; nothing else changes them)
+                        k.reason = "not in M: tentative track"
+                    elif speed <= v_min:
+                        k.reason = f"not in M: speed {speed:.2f}{slow_tail}"  # (the most common reason)
+                    else:
+                        self._dynamic(k, speed, sig, t)
+                if mem:
+                    if k.in_m:
+                        self._memory_bookkeeping(k, t)
+                    elif k.m_start_xy is not None or k.remembered:  # (_memory_bookkeeping of a track not in M, inline;
+                        # with m_start_xy None, m_last_t is None, m_time and m_travel 0.0: set after it, reset with it)
+                        k.m_start_xy, k.m_last_t, k.remembered = None, None, False
+                        k.m_time = k.m_travel = 0.0
+            keep.append(k)
+        if gone:
+            self._free_rows.extend(gone)
+            self._order = None
+        self._tracks = keep
+
+    def _probation_fails(self, k: _Track) -> bool:
+        """End the probation of ``k`` (in M, re-acquired after a gap, with ``sustain_updates`` free-space fractions):
+        it leaves M (True) when they show no motion into free space."""
+        k.probation = False
+        free = self._free_values(k)
+        if sum(free) / len(free) < self.config.tracker.free_min_fraction:
+            k.in_m = False
+            k.fast = 0
+            k.reason = "left M: after a gap the detections show no motion into free space (a different, static object)"
+            return True
+        return False
+
+    def _dynamic(self, k: _Track, speed: float, sig: float, t: float) -> None:
+        """Paper Eq. 3 with persistence, certainty and displacement conditions: the rest of the test that
+        :meth:`_manage` starts (speed persistence ``k.fast``, slow time, probation and the riding test done there)
+        for an updated track in M, or confirmed / coasting with ``speed`` (m/s) > v_min; ``sig``: σ of the speed
+        along the velocity, m/s."""
+        tc = self.config.tracker
+        # the map evidence's columns as lists (the same floats in the same order: the same sums)
+        mev = k.mev
+        ms = [e[0] for e in mev]
+        # a track seen moving before re-enters M on the kinematic test: where it paused, the map wrote it
+        use_map = self._map is not None and len(mev) > 0 and not k.was_in_m
+        npu = tc.person_sustain_updates
+        person_way = self._person_moved_in(k, npu, use_map) if k.person_streak >= npu else None
+        fast_person = person_way is not None
+        need = tc.person_sustain_updates if fast_person else tc.sustain_updates
+        have_map = self._map is not None and len(mev) > 0
+        if k.in_m and have_map and len(ms) >= tc.sustain_updates and \
+                sum(ms) / len(ms) >= tc.map_structure_exit:
+            k.in_m = False
+            k.fast = 0
+            k.reason = (f"left M: {sum(ms) / len(ms):.2f} of its points on long-occupied map cells "
+                        "(structure)")
+            return
+        if k.in_m and have_map and k.slow_since is not None and t - k.slow_since >= tc.map_structure_stop_time \
+                and len(ms) >= 2 and \
+                0.5 * (ms[-1] + ms[-2]) >= tc.map_structure_stop:
+            # a mover that stops where the map has long-standing structure has merged with it (a person
+            # reaching a wall): hysteresis would carry M onto the wall
+            k.in_m = False
+            k.fast = 0
+            k.reason = "left M: slowed down on long-occupied map cells (merged with structure)"
+            return
+        if k.in_m:
+            slow_for = 0.0 if k.slow_since is None else t - k.slow_since
+            if k.slow_since is not None and slow_for >= tc.m_exit_time and self._remember(k, slow_for):
+                pass  # stopped, stays in M (track memory; the reason says why)
+            elif k.slow_since is not None and slow_for >= tc.m_exit_time:
+                k.in_m = False
+                k.remembered = False
+                k.reason = (f"left M: speed {speed:.2f} m/s below {tc.v_exit_ratio * tc.v_min:.2f} for "
+                            f"{slow_for:.1f} s")
+            elif k.slow_since is not None:
+                k.reason = f"in M (hysteresis): slow ({speed:.2f} m/s) for {slow_for:.1f} s"
+            else:
+                k.remembered = False  # moving again
+                disp = float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))
+                k.reason = f"in M: speed {speed:.2f} m/s, moved {disp:.2f} m since birth"
+            return
+        if k.state == TENTATIVE:
+            k.reason = "not in M: tentative track"
+        elif speed <= tc.v_min:
+            k.reason = f"not in M: speed {speed:.2f} m/s ≤ v_min {tc.v_min:.2f}"  # (the most common reason)
+        elif sig >= tc.max_speed_sigma:
+            k.reason = f"not in M: velocity uncertain (σ {sig:.2f} m/s)"
+        elif k.fast < need:
+            k.reason = f"not in M: speed > v_min for {k.fast}/{need} updates"
+        elif (net := self._net_speed(k, need)) is not None and net < tc.net_speed_ratio * tc.v_min:
+            k.reason = (f"not in M: net speed over the last {need} updates {net:.2f} m/s < "
+                        f"{tc.net_speed_ratio * tc.v_min:.2f} (jitter, not motion)")
+        elif (disp := float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))) < (
+                min_disp := tc.person_min_displacement if person_way == "map" else tc.min_displacement):
+            # (the net displacement since birth is computed only here: most tracks stop at a test above)
+            k.reason = f"not in M: moved {disp:.2f} m < {min_disp:.2f} m since birth"
+        elif self._free is not None and (not (fr := self._free_values(k)) or sum(fr) / len(fr) < tc.free_min_fraction):
+            k.reason = (f"not in M: points on free space {sum(fr) / max(len(fr), 1):.2f} < "
+                        f"{tc.free_min_fraction:.2f} (static structure)")
+        elif use_map and not fast_person and sum(mf := [e[1] for e in mev]) / len(mf) < tc.map_free_min and not (
+                self._is_still() and sum(mu := [e[2] for e in mev]) / len(mu) >= 1.0 - tc.map_free_min):
+            k.reason = (f"not in M: points in observed-free map cells {sum(mf) / len(mf):.2f} < "
+                        f"{tc.map_free_min:.2f} (no map evidence of motion)")
+        elif use_map and sum(ms) / len(ms) > tc.map_structure_max:
+            k.reason = (f"not in M: points on long-occupied map cells {sum(ms) / len(ms):.2f} > "
+                        f"{tc.map_structure_max:.2f} (structure)")
+        else:
+            k.in_m = True
+            k.was_in_m = True
+            k.reason = (f"in M: speed {speed:.2f} m/s > v_min for {k.fast} updates, moved {disp:.2f} m "
+                        "since birth")
+
+    def _person_moved_in(self, k: _Track, n: int, use_map: bool) -> str | None:
+        """How a person-shaped track shows that it moved into space that was empty, over its last ``n`` updates
+        (the person's faster way into M, docs/tracking.md "People"); None = it does not.
+
+        ``"kinematic"``: no map to ask (or the track was in M before); the general ``min_displacement`` applies.
+        ``"map"``: a mean ≥ ``person_map_free_min`` of its points in observed-free map cells; then
+        ``person_min_displacement`` since birth is enough. ``"free"``: where the map has not seen the place
+        often enough, or the person's own earlier returns still mark the cells next to it, a mean ≥
+        ``person_free_min`` of its points where an earlier scan saw through (or this scan sees through where it
+        was: the free-space memory), with at most ``map_structure_max`` of them on long-occupied cells and at
+        least half in cells the map has either seen free or never seen (not on cells it saw occupied); then
+        the full ``min_displacement`` is needed. No earlier beam passes through a wall."""
+        tc = self.config.tracker
+        if not use_map:
+            return "kinematic"  # no map to ask (or seen moving before): the general displacement applies
+        last = k.mev[-n:]
+        mf = [e[1] for e in last]
+        if sum(mf) / len(mf) >= tc.person_map_free_min:
+            return "map"
+        fr, ms, mu = self._free_values(k)[-n:], [e[0] for e in last], [e[2] for e in last]
+        if len(fr) < n or sum(fr) / len(fr) < tc.person_free_min or sum(ms) / len(ms) > tc.map_structure_max:
+            return None
+        return "free" if (sum(mf) + sum(mu)) / len(mf) >= 0.5 else None
+
+    def _remember(self, k: _Track, slow_for: float) -> bool:
+        """Track memory (detect.memory, docs/maps.md): a track in M that has stopped (slow for
+        ``m_exit_time``) stays in M if it earned it — in M for ``min_m_time``, travelled ``min_travel`` from
+        where it entered M, box no longer than ``max_size`` — until it has stood for ``expiry_s``. Sets
+        ``remembered`` and the reason; False = the track leaves M as without memory."""
+        mc = self.config.memory
+        if not mc.enabled:
+            return False
+        if not k.remembered:
+            eligible = (k.m_time >= mc.min_m_time and k.m_travel >= mc.min_travel
+                        and float(max(k.size[0], k.size[1])) <= mc.max_size)
+            if not eligible:
+                return False
+        if mc.expiry_s is not None and slow_for > mc.expiry_s:
+            k.remembered = False
+            return False
+        k.remembered = True
+        k.reason = (f"in M (remembered): stopped for {slow_for:.1f} s after moving {k.m_travel:.2f} m in M "
+                    f"for {k.m_time:.1f} s")
+        return True
+
+    def _memory_bookkeeping(self, k: _Track, t: float) -> None:
+        """Time in M and the largest distance from where the track entered M (the memory's evidence)."""
+        if not k.in_m:
+            k.m_start_xy, k.m_last_t, k.remembered = None, None, False
+            k.m_time = k.m_travel = 0.0
+            return
+        x0, x1 = float(k.x[0]), float(k.x[1])
+        if k.m_start_xy is None:
+            k.m_start_xy = (x0, x1)
+        elif k.m_last_t is not None:
+            k.m_time += t - k.m_last_t
+        k.m_last_t = t
+        k.m_travel = max(k.m_travel, math.hypot(x0 - k.m_start_xy[0], x1 - k.m_start_xy[1]))
+
+    def _remembered_coasts(self, k: _Track, t: float) -> bool:
+        """A remembered track without detection is kept at its stopped place for ``memory.coast_time``
+        unless this scan sees through its box (``memory.seen_through_share`` of the beams towards it pass
+        beyond it: the object is gone)."""
+        mc = self.config.memory
+        if t - k.last_hit > mc.coast_time:
+            return False
+        return not self._seen_through(k)
+
+    def _hidden(self, k: _Track) -> bool:
+        """This scan's beams towards the track's box mostly return in front of its near side (occluded)."""
+        scan, p = self._scan, self._pose
+        if scan is None or p is None or not p.is_finite():
+            return False
+        dx, dy = float(k.x[0]) - p.x, float(k.x[1]) - p.y
+        d = math.hypot(dx, dy)
+        near = d - 0.5 * float(max(k.size[0], k.size[1])) - 0.1
+        if near <= 0.0:
+            return False
+        diff = (scan.angles - (math.atan2(dy, dx) - p.theta) + math.pi) % _TWO_PI - math.pi
+        sel = np.abs(diff) <= math.atan2(max(0.5 * float(min(k.size[0], k.size[1])), 0.05), d)
+        n = int(np.count_nonzero(sel))
+        if n < 3:
+            return False
+        with np.errstate(invalid="ignore"):  # (only valid returns: a beam without one hides nothing)
+            return int(np.count_nonzero(scan.valid_mask()[sel] & (scan.ranges[sel] < near))) >= 0.5 * n
+
+    def _seen_through(self, k: _Track) -> bool:
+        """This scan's beams towards the track's box pass beyond its far side (laser frame of this scan)."""
+        scan, p = self._scan, self._pose
+        if scan is None or p is None or not p.is_finite():
+            return False
+        dx, dy = float(k.x[0]) - p.x, float(k.x[1]) - p.y
+        d = math.hypot(dx, dy)
+        half = 0.5 * float(max(k.size[0], k.size[1]))
+        inner = 0.5 * float(min(k.size[0], k.size[1]))
+        if d <= half + 0.1:
+            return False
+        bearing = math.atan2(dy, dx) - p.theta
+        hw = math.atan2(max(inner, 0.05), d)
+        diff = (scan.angles - bearing + math.pi) % _TWO_PI - math.pi
+        sel = np.abs(diff) <= hw
+        n = int(np.count_nonzero(sel))
+        if n < 3:
+            return False
+        far = d + half + 0.2
+        if far >= scan.range_max:
+            return False
+        r = scan.ranges[sel]
+        with np.errstate(invalid="ignore"):
+            beyond = ~np.isfinite(r) | (r > far)
+        return float(np.count_nonzero(beyond)) / n >= self.config.memory.seen_through_share
+
+    def _still(self, t: float, pose: Pose2D | None) -> bool | None:
+        """The laser has stayed within ``still_distance`` / ``still_angle`` of its pose over the last
+        ``still_time`` seconds (then walls cannot slide into view, and a map that a motionless robot does
+        not update leaves the places people walk into unknown: unknown counts like free). Keeps the poses of
+        the last ``still_time`` s; None: not decided yet, :meth:`_is_still` compares them with ``pose`` when asked."""
+        tc = self.config.tracker
+        if pose is None or not pose.is_finite():
+            return False
+        h = self._pose_hist
+        h.append((t, pose.x, pose.y, pose.theta))
+        while len(h) > 2 and t - h[1][0] >= tc.still_time:
+            h.popleft()
+        if t - h[0][0] < tc.still_time:
+            return False
+        return None  # (the poses are compared when asked: _is_still)
+
+    def _is_still(self) -> bool:
+        """:meth:`_still` of this scan; its comparison of the kept poses with this scan's runs when first asked in the
+        scan (few tracks reach the test that asks)."""
+        if self._laser_still is None:
+            tc, pose = self.config.tracker, self._pose
+            self._laser_still = all(math.hypot(x - pose.x, y - pose.y) <= tc.still_distance
+                                    and abs(float(wrap_angle(th - pose.theta))) <= tc.still_angle
+                                    for _, x, y, th in self._pose_hist)
+        return self._laser_still
+
+    @staticmethod
+    def _net_speed(k: _Track, n: int) -> float | None:
+        """Net displacement of the track's centre over its last ``n`` updates divided by their time span, m/s
+        (None with fewer updates): pose jitter and association noise give a speed but no net motion."""
+        ride = k.ride
+        if len(ride) < max(n, 2):
+            return None
+        (_, _, x0, y0, t0), (_, _, x1, y1, t1) = ride[-n], ride[-1]
+        dt = t1 - t0
+        if dt <= 0.0:
+            return None
+        return math.hypot(x1 - x0, y1 - y0) / dt
+
+    def _rides_with_laser(self, k: _Track) -> bool:
+        """The track stays put in the LASER frame (spread below ``ride_tolerance``) within
+        ``ride_max_range`` of the laser while its map-frame centre moves more than that and more than 4×
+        the spread, over its updates of the last ``ride_time`` seconds (at least ``ride_updates`` of them,
+        spanning at least half of it): it moves with the robot (its body)."""
+        tc = self.config.tracker
+        ride = k.ride
+        if len(ride) < tc.ride_updates:
+            return False
+        lx_last, ly_last = ride[-1][:2]
+        if lx_last * lx_last + ly_last * ly_last > tc.ride_max_range * tc.ride_max_range:
+            k.rode = False
+            return False  # far from the laser (most tracks): no arrays built
+        nb = k.beams.shape[0]
+        if self._body_near is not None and (nb == 0 or np.count_nonzero(self._body_near[k.beams]) / nb < 0.5):
+            k.rode = False
+            return False  # not where the robot's body was found
+        t_end = ride[-1][4]
+        n = sum(1 for e in ride if t_end - e[4] <= tc.ride_time)
+        if n < tc.ride_updates or t_end - ride[-n][4] < 0.5 * tc.ride_time:
+            return False
+        lx = np.array([e[:2] for e in ride[-n:]])
+        if float(np.hypot(lx[:, 0], lx[:, 1]).max()) > tc.ride_max_range:
+            return False
+        spread = float(np.hypot(*(lx - lx.mean(axis=0)).T).max())
+        mx = np.array([e[2:4] for e in ride[-n:]])
+        moved = float(np.hypot(*(mx[-1] - mx[0])))
+        # with a motionless laser the two frames agree: only motion far beyond the laser-frame spread rides;
+        # once found riding, a track keeps riding until its laser-frame spread clearly exceeds the tolerance
+        # (a circle fit replacing a rectangle shifts the centre of a body part by a few cm)
+        tol = 3.0 * tc.ride_tolerance if k.rode else tc.ride_tolerance
+        k.rode = spread < tol and (k.rode or moved > max(tc.ride_tolerance, 4.0 * spread))
+        return k.rode

@@ -1,0 +1,69 @@
+"""The output of ``Tracker.update`` (detect/tracker.py): one :class:`dynslam2d.types.Track` per live (and dormant)
+track, map frame. Split out of ``detect/tracker.py`` (docs/speed.md, pass trktable)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dynslam2d.detect.frozen import fast_init
+from dynslam2d.detect.kernels import GI_KIND, report_boxes
+from dynslam2d.detect.layout import KIND_CIRCLE, KIND_NAMES
+from dynslam2d.detect.tracktable import _HALF_PI, COASTING, CONFIRMED, _any_of
+from dynslam2d.types import Box, Track, wrap_angle
+
+_make_track = fast_init(Track)  # Track(...) / Box(...) without the frozen dataclass __init__ (detect/frozen.py)
+_make_box = fast_init(Box)
+
+
+class TrackReport:
+    """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: the reports (``_report``)."""
+
+    def _report(self, t: float, updated: set[int]) -> list[Track]:
+        tracks = self._tracks
+        if not tracks:
+            return []
+        slow = 0.5 * self.config.tracker.v_min
+        # (speed: the boxes of all tracks from their rows in one kernel call; states and covariances stacked in one copy
+        # each, every report's velocity / covariance a row of them, its own memory apart from the tracker's)
+        order = self._rows()
+        n = order.shape[0]
+        fast = np.empty(n, dtype=np.int8)  # (np.full without its Python wrapper)
+        fast.fill(-1)
+        boxes, undecided = report_boxes(self._G, self._Gi, self._X, order, slow, fast)
+        if _any_of(undecided):  # (a speed within an ulp of the limit: decided by math.hypot, as the reports were)
+            for i in undecided.nonzero()[0].tolist():
+                vx, vy = self._X[order[i], 2:].tolist()
+                fast[i] = math.hypot(vx, vy) > slow
+            boxes, _ = report_boxes(self._G, self._Gi, self._X, order, slow, fast)
+        X = self._X[order]  # (copies: the reports' own memory)
+        P = self._P[order]
+        V = X[:, 2:]
+        kinds = self._Gi[order, GI_KIND].tolist()
+        no_beams = np.zeros(0, dtype=np.int64)
+        out = []
+        append, make_track, make_box, names = out.append, _make_track, _make_box, KIND_NAMES  # (locals: per track)
+        for k, (px, py, theta, length, width), kd, vel, cov in zip(tracks, boxes.tolist(), kinds, V, P):
+            beams = k.beams if k.id in updated else no_beams
+            in_m = k.in_m
+            append(make_track(k.id, k.state, t, make_box(px, py, theta, length, width), vel, cov, t - k.born, k.hits,
+                              k.misses, names[kd], in_m, k.reason, beams, len(beams), k.remembered and in_m))
+        return out
+
+    def _dormant_reports(self, t: float) -> list[Track]:
+        """Reports of the dormant tracks (at rest, not in M; beams only where seen in this scan)."""
+        out = []
+        zero = np.zeros(2)
+        for k in self._dormant:
+            if k.kind == KIND_CIRCLE:
+                theta, length, width = 0.0, 2.0 * k.radius, 2.0 * k.radius
+            elif k.size[1] > k.size[0]:
+                theta, length, width = float(wrap_angle(k.theta_box + _HALF_PI)), k.size[1], k.size[0]
+            else:
+                theta, length, width = float(wrap_angle(k.theta_box)), k.size[0], k.size[1]
+            out.append(_make_track(k.id, CONFIRMED if k.misses == 0 else COASTING, t,
+                                   _make_box(float(k.x[0]), float(k.x[1]), theta, float(length), float(width)),
+                                   zero.copy(), k.P.copy(), t - k.born, k.hits, k.misses, k.kind, False, k.reason,
+                                   k.beams, len(k.beams), False))
+        return out

@@ -1,0 +1,294 @@
+"""The tracker's track records and their rows of the state arrays (``Tracker._X``, ``_P``, ``_G``, ``_Gi``).
+
+A live track is a :class:`_Track` whose ``x`` / ``P`` / ``g`` / ``gi`` are views of its row (map frame, m, m/s,
+rad); :class:`TrackRows` hands out the rows (a deleted track's first, the arrays doubled when full), keeps the
+live rows in list order and re-points the views. Split out of ``detect/tracker.py`` (docs/speed.md, pass
+trktable); the columns of the plan's track table (docs/speed.md, "Tracker rewrite: the plan") go here."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dynslam2d.detect.kernels import (
+    G_LB0,
+    G_LB1,
+    G_RADIUS,
+    G_SIZE0,
+    G_SIZE1,
+    G_THETA,
+    GI_HEADING,
+    GI_KIND,
+    GI_KNOWN0,
+    GI_KNOWN1,
+    N_G,
+    N_GI,
+)
+from dynslam2d.detect.layout import KIND_CODES, KIND_NAMES
+from dynslam2d.detect.measure import Detection, ScanDetection
+
+_HALF_PI = 0.5 * math.pi
+_TWO_PI = 2.0 * math.pi
+_BIG = 1e12
+_any_of = np.logical_or.reduce  # (ndarray.any without the Python wrapper)
+
+TENTATIVE = "tentative"
+CONFIRMED = "confirmed"
+COASTING = "coasting"
+_NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
+_NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives it its row
+# a track's stored-points list starts anew once this many of its entries are out of date (_Track.past, past_a)
+_PAST_COMPACT = 8
+_ROWS0 = 64  # initial rows of the tracker's state arrays (doubled when full)
+
+
+@dataclass(eq=False, slots=True)  # (slots: faster attribute access in the per-track loops)
+class _Track:
+    id: int
+    x: np.ndarray  # [px, py, vx, vy], map frame
+    P: np.ndarray  # 4×4
+    born: float
+    last_hit: float
+    birth_xy: np.ndarray
+    # the shape state: views of the track's rows of the tracker's arrays (Tracker._G, _Gi; columns G_* / GI_* of
+    # detect/kernels.py), read and written by the per-scan kernels; the properties below read them one track at a time
+    g: np.ndarray  # (N_G,) float: axis angle, sizes, circle radius, largest partial views (rad, m)
+    gi: np.ndarray  # (N_GI,) int8: kind code, has heading, known-size flags (both tuples until _add_row)
+    state: str = TENTATIVE
+    hits: int = 1
+    misses: int = 0
+    # the M-of-N rule's counts over the first confirm_window updates (all that it reads): how many updates (hits and
+    # misses) and how many hits; two ints instead of a list of bools per track (docs/speed.md, pass trk16)
+    hist_n: int = 1
+    hist_hits: int = 1
+    fast: int = 0
+    in_m: bool = False
+    reason: str = "not in M: tentative track"
+    beams: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    # free-space fraction per update; an entry may be a detection (a birth's) or a tuple (det, ref, t, past) until it
+    # is read, its value not yet computed (Tracker._free_values)
+    free: list[float] = field(default_factory=list)
+    # map evidence per update (mapevidence.py): (the detection's fractions of points on long-occupied, observed-free,
+    # never-observed map cells) as one tuple per update in one list (was three lists: fewer objects touched per scan)
+    mev: list[tuple[float, float, float]] = field(default_factory=list)
+    person: bool = False  # the last detection was a merged pair of legs
+    person_streak: int = 0  # consecutive updates with a merged pair of legs
+    rode: bool = False  # judged riding with the laser (its body) at the last check
+    was_in_m: bool = False  # has been in M before (seen moving): the map's word is not needed again
+    # (laser-frame x, y, map-frame x, y of its centre (m), stamp (s)) per update of the riding test's window: one list
+    # of one tuple per update (was three lists), fewer objects touched per scan (docs/speed.md, pass trk15)
+    ride: list[tuple[float, float, float, float, float]] = field(default_factory=list)
+    # (stamp s, points array, a0, n) per update within the free-space memory's max age: the detection's (n, 2) points,
+    # rows a0 … a0 + n − 1 of the array (its scan's), or the whole array for a0 < 0 (_past_entry, _past_points).
+    # Append-only: the live entries are past[past_a:] (older ones are skipped by moving past_a, and dropped by
+    # starting a new list every _PAST_COMPACT of them), so an update's snapshot of the entries before it is
+    # (past, past_a, len(past)) instead of a copy (docs/speed.md, pass trk16); a new list, never a cleared one
+    past: list[tuple[float, np.ndarray, int, int]] = field(default_factory=list)
+    past_a: int = 0
+    slow_since: float | None = None
+    probation: bool = False  # in M, re-acquired after a gap: must show free-space evidence again
+    merged: bool = False  # left M when its detection joined long-standing structure (refuses such detections)
+    # track memory (detect.memory, docs/maps.md): kept in M through a stop
+    remembered: bool = False  # in M only because it moved before (stopped for m_exit_time or longer)
+    m_start_xy: tuple[float, float] | None = None  # centre where it last entered M, m
+    m_time: float = 0.0  # time spent in M over its updates, s
+    m_travel: float = 0.0  # largest distance of its centre from m_start_xy while in M, m
+    m_last_t: float | None = None  # stamp of its last update in M, s
+    row: int = -1  # its row of the tracker's state arrays (Tracker._X / _P / _G / _Gi; x, P, g, gi are views of it)
+
+    # (the shape state as Python values, read from the rows: the tuples cannot be written in place by mistake)
+    @property
+    def theta_box(self) -> float:
+        """Axis angle of size[0], rad (map frame)."""
+        return self.g.item(G_THETA)
+
+    @theta_box.setter
+    def theta_box(self, value: float) -> None:
+        self.g[G_THETA] = value
+
+    @property
+    def size(self) -> tuple[float, float]:
+        """Sizes along theta_box and theta_box + π/2, m."""
+        g = self.g
+        return g.item(G_SIZE0), g.item(G_SIZE1)
+
+    @size.setter
+    def size(self, value) -> None:
+        self.g[G_SIZE0], self.g[G_SIZE1] = value
+
+    @property
+    def size_lb(self) -> tuple[float, float]:
+        """Largest partial views per axis, m."""
+        g = self.g
+        return g.item(G_LB0), g.item(G_LB1)
+
+    @property
+    def size_known(self) -> tuple[bool, bool]:
+        """The sizes along each axis were measured (both bounds seen)."""
+        gi = self.gi
+        return gi.item(GI_KNOWN0) != 0, gi.item(GI_KNOWN1) != 0
+
+    @size_known.setter
+    def size_known(self, value) -> None:
+        self.gi[GI_KNOWN0], self.gi[GI_KNOWN1] = value
+
+    @property
+    def radius(self) -> float:
+        """Circle radius, m (0: none)."""
+        return self.g.item(G_RADIUS)
+
+    @radius.setter
+    def radius(self, value: float) -> None:
+        self.g[G_RADIUS] = value
+
+    @property
+    def kind(self) -> str:
+        """Shape model of the last detection: "rect", "circle" or "point"."""
+        return KIND_NAMES[self.gi.item(GI_KIND)]
+
+    @kind.setter
+    def kind(self, value: str) -> None:
+        self.gi[GI_KIND] = KIND_CODES[value]
+
+    @property
+    def has_heading(self) -> bool:
+        """theta_box comes from a rectangle fit."""
+        return self.gi.item(GI_HEADING) != 0
+
+    @has_heading.setter
+    def has_heading(self, value: bool) -> None:
+        self.gi[GI_HEADING] = value
+
+
+def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, beams: np.ndarray, free: list,
+               mev: list, past: list, _new=object.__new__) -> _Track:
+    """``_Track(id=tid, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t, birth_xy=…, g=…, gi=…, beams=…, free=…, mev=…,
+    past=…)`` with every other field at its default (a birth, :meth:`Tracker._birth`):
+    the slots set directly, about a quarter of the dataclass ``__init__``'s cost with its keyword binding and default
+    factories (``tests/test_detect_birth_fast.py`` compares every field with the dataclass's)."""
+    k = _new(_Track)
+    k.id = tid
+    k.x = _NO_STATE
+    k.P = _NO_STATE
+    k.born = t
+    k.last_hit = t
+    k.birth_xy = birth_xy
+    k.g = g
+    k.gi = gi
+    k.state = TENTATIVE
+    k.hits = 1
+    k.misses = 0
+    k.hist_n = 1
+    k.hist_hits = 1
+    k.fast = 0
+    k.in_m = False
+    k.reason = "not in M: tentative track"
+    k.beams = beams
+    k.free = free
+    k.mev = mev
+    k.person = False
+    k.person_streak = 0
+    k.rode = False
+    k.was_in_m = False
+    k.ride = []
+    k.past = past
+    k.past_a = 0
+    k.slow_since = None
+    k.probation = False
+    k.merged = False
+    k.remembered = False
+    k.m_start_xy = None
+    k.m_time = 0.0
+    k.m_travel = 0.0
+    k.m_last_t = None
+    k.row = -1
+    return k
+
+
+# (_shape_rows builds the rows in this column order)
+assert (G_THETA, G_SIZE0, G_SIZE1, G_RADIUS, G_LB0, G_LB1, N_G) == (0, 1, 2, 3, 4, 5, 6)
+assert (GI_KIND, GI_HEADING, GI_KNOWN0, GI_KNOWN1, N_GI) == (0, 1, 2, 3, 4)
+
+
+def _shape_rows(theta_box: float, size, known, radius: float, kind: str, has_heading: bool) -> tuple:
+    """A new track's (g, gi) shape values as tuples in the columns of detect/kernels.py (size_lb 0): what
+    ``Tracker._add_row`` writes into its rows of the tracker's arrays (then g / gi become views of them)."""
+    return (theta_box, size[0], size[1], radius, 0.0, 0.0), (KIND_CODES[kind], has_heading, known[0], known[1])
+
+
+def _past_entry(t: float, det: Detection) -> tuple[float, np.ndarray, int, int]:
+    """A track's stored-points entry (``_Track.past``) for detection ``det`` at stamp ``t`` (s): its points as the
+    array and row span a scan detection keeps (no view made; :func:`_past_points` makes it when read, the late
+    vacated-space test), or a plain detection's own points."""
+    if type(det) is ScanDetection:
+        return t, det._pts, det._a0, det.n_points
+    return t, det.points, -1, 0
+
+
+def _past_points(entry: tuple[float, np.ndarray, int, int]) -> np.ndarray:
+    """The (n, 2) map-frame points of a stored-points entry (:func:`_past_entry`)."""
+    _, pts, a0, n = entry
+    return pts if a0 < 0 else pts[a0:a0 + n]
+
+
+class TrackRows:
+    """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: the live tracks' rows of the state arrays."""
+
+    def _stack(self) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 4) states and (n, 4, 4) covariances of the live tracks (from the prediction when it ran)."""
+        if self._stacked is None:
+            order = self._rows()
+            self._stacked = (self._X[order], self._P[order])
+        return self._stacked
+
+    def _rows(self) -> np.ndarray:
+        """The state-array rows of the live tracks, in their order (int64)."""
+        if self._order is None:
+            self._order = np.array([k.row for k in self._tracks], dtype=np.int64)
+        return self._order
+
+    def _add_row(self, k: _Track, x, P: np.ndarray | None) -> None:
+        """Append ``k`` to the live tracks with state ``x`` (4,) and covariance ``P`` (4, 4) (None: written by the
+        caller into ``k.row`` afterwards): it gets a row of
+        the state arrays (a deleted track's, else a new one; the arrays double when full) holding the values and
+        its own shape rows ``k.g`` / ``k.gi``, and ``k.x`` / ``k.P`` / ``k.g`` / ``k.gi`` become views of it."""
+        if self._free_rows:
+            row = self._free_rows.pop()
+        else:
+            row = self._rows_used
+            self._rows_used += 1
+            if row == self._X.shape[0]:
+                X = np.zeros((2 * row, 4))
+                P2 = np.zeros((2 * row, 4, 4))
+                X[:row] = self._X[:row]
+                P2[:row] = self._P[:row]
+                G = np.zeros((2 * row, N_G))
+                Gi = np.zeros((2 * row, N_GI), dtype=np.int8)
+                G[:row] = self._G[:row]
+                Gi[:row] = self._Gi[:row]
+                self._X, self._P, self._G, self._Gi = X, P2, G, Gi
+                self._repoint()
+        if x is not None:  # (None: the caller writes the state and covariance rows, _birth)
+            self._X[row] = x
+            self._P[row] = P
+        self._G[row] = k.g
+        self._Gi[row] = k.gi
+        k.row = row
+        k.x = self._X[row]
+        k.P = self._P[row]
+        k.g = self._G[row]
+        k.gi = self._Gi[row]
+        self._tracks.append(k)
+        self._order = None
+
+    def _repoint(self) -> None:
+        """Make the x / P / g / gi of the live tracks views of their rows of the (new) state arrays."""
+        X, P, G, Gi = self._X, self._P, self._G, self._Gi
+        for k in self._tracks:
+            row = k.row
+            k.x = X[row]
+            k.P = P[row]
+            k.g = G[row]
+            k.gi = Gi[row]

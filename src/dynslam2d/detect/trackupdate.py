@@ -1,0 +1,297 @@
+"""Step 5 of ``Tracker.update`` (detect/tracker.py): the Kalman and shape updates of the associated pairs, the
+acceleration bound, the per-track bookkeeping (counters, map evidence, riding window, stored points) and the
+free-space values read late (the vacated-space test). Split out of ``detect/tracker.py`` (docs/speed.md, pass
+trktable)."""
+
+from __future__ import annotations
+
+import bisect
+import math
+from itertools import chain as _chain
+
+import numpy as np
+
+from dynslam2d.detect.kernels import (
+    G_SIZE0,
+    accel_candidates,
+    kalman_update_batch,
+    pair_priors,
+    shape_update,
+)
+from dynslam2d.detect.layout import KIND_CIRCLE
+from dynslam2d.detect.measure import Detection
+from dynslam2d.detect.tracktable import _HALF_PI, _PAST_COMPACT, TENTATIVE, _past_points, _Track
+
+
+def _nearest_age(stamps: list[float], n: int, t: float, a: float, bisect_left=bisect.bisect_left) -> int:
+    """Index of the entry of ``stamps`` (increasing, s; ``n`` = its length ≥ 1) whose age at ``t`` is nearest ``a``
+    (s), looked for among ``stamps[ins − 3:ins + 3]`` around the insertion point ``ins`` of t − a, the first one on
+    ties (as ``np.argmin`` of that window); −1 when no age is comparable (NaN).
+
+    t − stamps[q] − a falls with q, so its magnitude falls, then rises: the search starts at ins − 1, goes forward
+    while it falls and then back while it does not rise (to the earliest of equal ones) — the window's argmin in
+    two or three steps instead of six."""
+    ins = bisect_left(stamps, t - a)
+    lo = ins - 3 if ins > 3 else 0
+    q0 = ins - 1 if ins > 0 else 0
+    j, best = -1, math.inf
+    for q in range(q0, ins + 3 if ins + 3 < n else n):
+        dev = abs((t - stamps[q]) - a)
+        if dev < best:
+            j, best = q, dev
+        elif dev > best:
+            break
+    q = q0 - 1
+    while q >= lo:
+        dev = abs((t - stamps[q]) - a)
+        if not dev <= best:  # (NaN stops too: never chosen)
+            break
+        j, best = q, dev
+        q -= 1
+    return j
+
+
+class TrackUpdate:
+    """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: the update step (``_update_pairs``, ``_update_tracks``)."""
+
+    def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float) -> list[bool]:
+        """Kalman and shape updates of the associated (track, detection) pairs; True where applied.
+
+        The track priors of the measurements (each track's sizes / radius), the measurements, the Kalman updates and
+        the shape updates run as one kernel call each on the tracks' rows (:mod:`dynslam2d.detect.kernels`); the
+        bookkeeping stays per track (:meth:`_update_tracks`)."""
+        npair = len(pairs)
+        pa = self._pair_arrays
+        if pa is not None and pa[0] is pairs:  # (the association's index arrays of these pairs)
+            sel, dis = pa[1], pa[2]
+        else:
+            sel = np.fromiter(_chain.from_iterable(pairs), np.int64, 2 * npair).reshape(npair, 2)
+            dis = sel[:, 1].copy()
+            sel = sel[:, 0].copy()
+        self._pair_arrays = None
+        b = self._batch
+        trows = self._rows()[sel]
+        swaps, sizes, has, radius = pair_priors(self._G, self._Gi, trows, dis, b.kind, b.theta)
+        sig = self._size_sigma.get(npair)
+        if sig is None:  # (the measurements' size σ, the same array for every scan with npair pairs: only read)
+            if len(self._size_sigma) >= 64:
+                self._size_sigma.clear()
+            sig = self._size_sigma[npair] = np.full(npair, 0.05)
+        mr = self._measure_rows(dis, sizes, has, radius, sig)
+        Xs, Ps = self._stack()
+        X_prior = Xs[sel]  # (kalman_update_batch works on copies: the prior stays as it is)
+        Xn, Pn, ok = kalman_update_batch(X_prior, Ps[sel], mr.H, mr.zm, mr.Rm)
+        self._bound_acceleration(X_prior, Xn, self._tracks, pairs)
+        self._stacked = None  # the tracks change below
+        out = ok.tolist()
+        # the new states and covariances into the tracks' rows of the state arrays, all at once (every update applied,
+        # the usual case: without the boolean selections)
+        if all(out):
+            self._X[trows] = Xn
+            self._P[trows] = Pn
+        else:
+            rows = trows[ok]
+            self._X[rows] = Xn[ok]
+            self._P[rows] = Pn[ok]
+        fc, tc = self.config.fit, self.config.tracker
+        shape_update(self._G, self._Gi, self._X, trows, dis, ok, b.kind, b.theta, b.lohi, b.rel, b.circle,
+                     mr.size_obs, mr.size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
+                     float(tc.heading_gain), float(tc.size_gain))
+        self._update_tracks(pairs, dets, t, out, trows)
+        return out
+
+    def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track],
+                            pairs: list[tuple[int, int]]) -> None:
+        """Physical acceleration bound (in place on ``X_new``): once a track's velocity is established
+        (``accel_bound_after`` updates), one update may change it by at most ``max_accel``·dt — speeds no
+        longer jump from scan to scan with the shape of a partial view or a leg swinging. Row r of the
+        states belongs to ``tracks[pairs[r][0]]``."""
+        tc = self.config.tracker
+        if tc.max_accel is None or self._dt <= 0.0:
+            return
+        lim = tc.max_accel * self._dt
+        # (speed: only rows whose velocity change comes near the bound go through the exact test below)
+        near = accel_candidates(X_prior, X_new, (0.999 * lim) ** 2)
+        if near.shape[0] == 0:
+            return
+        # (the candidates' velocities as Python floats in one gather each, the bounded ones written in one scatter)
+        after, hypot = tc.accel_bound_after, math.hypot
+        nb = 0
+        for r, (pvx, pvy), (nvx, nvy) in zip(near.tolist(), X_prior[near, 2:].tolist(), X_new[near, 2:].tolist()):
+            if tracks[pairs[r][0]].hits < after:
+                continue
+            dvx = nvx - pvx
+            dvy = nvy - pvy
+            d = hypot(dvx, dvy)
+            if d > lim:
+                # (written one element at a time: cheaper than a scatter of a few rows from a list of tuples)
+                X_new[r, 2] = pvx + dvx * lim / d
+                X_new[r, 3] = pvy + dvy * lim / d
+                nb += 1
+        if nb:
+            self.stats.accel_bounded += nb
+
+    def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float,
+                       applied: list[bool], trows: np.ndarray) -> None:
+        """The bookkeeping update of the tracks of ``pairs`` (track index, detection index; ``trows``: their rows of
+        the state arrays) whose Kalman and shape results are already in their rows (k.x, k.P, k.g, k.gi) where
+        ``applied``; the scan's constants are read once (one loop over the pairs: the update of one track is a few µs
+        of Python)."""
+        cfg = self.config
+        tc, fc = cfg.tracker, cfg.fit
+        pmin_r, pmax_r = fc.person_min_radius, fc.person_max_radius
+        window, nsus, ride_time = tc.confirm_window, tc.sustain_updates, tc.ride_time
+        p = self._pose
+        if p is not None:
+            pose_x, pose_y = p.x, p.y
+            c, s = self._pose_cs  # cos / sin of the pose's heading (once per scan)
+        use_map = self._map is not None
+        max_age = self._free.max_age if self._free is not None else None
+        ref = self._cur_ref if self._free is not None else None  # (the vacated-space test's reference: this scan)
+        tracks = self._tracks
+        upd, used = self._upd_sets
+        upd_add, used_add = upd.add, used.add
+        # (the detections' circle radii as floats, one conversion per scan: row di of the batch is detection di's fit
+        # row, copied by the leg merge; float(det.circle[2]) would make a view per circle detection)
+        radii = self._batch.circle[:, 2].tolist()
+        if p is not None:
+            # the centres in the map frame, one gather (their laser-frame centres below, on the floats one by one:
+            # the roundings of the former elementwise numpy products and sums)
+            centres = self._X[trows, :2].tolist()
+            ns = -s
+        else:
+            centres = [None] * len(pairs)
+        for (ti, di), ok, cen in zip(pairs, applied, centres):
+            if not ok:
+                continue
+            k, det = tracks[ti], dets[di]
+            upd_add(k.id)
+            used_add(di)
+            dkind = det.kind
+            # (the stored points before this update: their vacated-space fraction is computed when first read)
+            # ((the list, first, end): the entries are never changed in place, so this is their snapshot)
+            past = k.past
+            pa = k.past_a
+            np0 = len(past)
+            past0 = (past, pa, np0) if ref is not None and np0 > pa else None
+            if k.misses > 0:
+                # re-acquired after a gap: the free-space evidence must be rebuilt from this object
+                k.past = []  # (a new list: the snapshots of earlier updates may hold the old one)
+                k.past_a = 0
+                k.free.clear()
+                k.mev.clear()
+                k.ride.clear()
+                k.fast = 0
+                k.probation = k.in_m and not k.remembered  # a remembered track re-acquired where it stopped
+                k.misses = 0
+            k.merged = False
+            person = det.person or (dkind == KIND_CIRCLE and pmin_r <= radii[di] <= pmax_r)
+            k.person = person
+            k.person_streak = k.person_streak + 1 if person else 0
+            k.hits += 1
+            k.last_hit = t
+            if k.hist_n < window:  # (the M-of-N counts: only the first window is read)
+                k.hist_n += 1
+                k.hist_hits += 1
+            k.beams = det.beams
+            free = k.free
+            # (vacated: this scan sees through its old points; computed when the entry is read, _free_values)
+            # (the detection's own fraction too: det.free_fraction, computed when read)
+            free.append((det, ref, t, *past0) if past0 is not None else max(det.free_fraction, 0.0))
+            if len(free) > nsus:
+                del free[0]
+            if p is not None:
+                x0, x1 = cen
+                dx = x0 - pose_x
+                dy = x1 - pose_y
+                ride = k.ride
+                ride.append((c * dx + s * dy, ns * dx + c * dy, x0, x1, t))
+                while len(ride) > nsus and t - ride[0][4] > ride_time:
+                    del ride[0]
+            if use_map:
+                mev = k.mev
+                mev.append((det.map_structure, det.map_free, det.map_unknown))
+                if len(mev) > nsus:
+                    del mev[0]
+            if max_age is not None:
+                past = k.past
+                past.append((t, det._pts, det._a0, det.n_points))  # (_past_entry of a scan detection, inline)
+                pa = k.past_a
+                n = len(past)
+                while pa < n and t - past[pa][0] > max_age:
+                    pa += 1
+                if pa >= _PAST_COMPACT:  # (a new list of the live entries: the old one stays with its snapshots)
+                    k.past = past[pa:]
+                    pa = 0
+                k.past_a = pa
+
+    def _motion_prior(self, k: _Track) -> None:
+        """Hidden side of a moving box whose other side is measured: a side parallel to the motion is
+        the length, one across it the width (``aspect_prior`` = width / length; cars and carts move
+        along their long axis). Moves the hidden size by ``size_gain`` per update, never below the
+        largest partial view."""
+        tc = self.config.tracker
+        kn0, kn1 = k.size_known
+        if tc.aspect_prior is None or k.state == TENTATIVE or (kn0 and kn1) or not (kn0 or kn1):
+            return
+        speed = math.hypot(k.x[2], k.x[3])
+        if speed < tc.prior_min_speed:
+            return
+        a = 0 if not k.size_known[0] else 1  # the hidden axis
+        ax = k.theta_box + a * _HALF_PI
+        c = abs(math.cos(ax) * k.x[2] + math.sin(ax) * k.x[3]) / speed
+        if c > 0.9:  # hidden axis along the motion: it is the length
+            prior = k.size[1 - a] / tc.aspect_prior
+        elif c < 0.45:  # across the motion: the width
+            prior = k.size[1 - a] * tc.aspect_prior
+        else:
+            return
+        prior = min(max(prior, k.size_lb[a]), self.config.segment.max_extent)
+        s = k.size[a]
+        k.g[G_SIZE0 + a] = s + tc.size_gain * (prior - s)
+
+    def _free_values(self, k: _Track) -> list[float]:
+        """``k.free`` with every entry a float. A birth appends its detection instead of its free-space fraction, and an
+        update whose track had stored points appends a tuple (det, ref, t, past, a, b): the detection (its own fraction
+        is the floor), the free-space reference of the scan at ``t`` (s) and the track's stored (stamp, points) before
+        the update (``past[a:b]``: ``_Track.past`` is append-only); its value, max(det.free_fraction, the vacated
+        fraction of :meth:`_vacated_one` in that scan), is computed here when first read and replaces the entry (the
+        detection's own fraction, too, is computed when first read: ScanDetection.free_fraction). Most entries are
+        never read (the free-space condition of M is reached by few tracks; ≈ 3 % on negative_2), so most free-space
+        tests never run."""
+        free = k.free
+        for q, v in enumerate(free):
+            if type(v) is not float:
+                free[q] = self._free_value(v)
+        return free
+
+    def _free_value(self, entry: float | Detection | tuple) -> float:
+        """The free-space fraction of one entry of a track's ``free`` list (:meth:`_free_values`): a float, a detection
+        (a birth's: its fraction) or a tuple (an update's, its floor the detection)."""
+        if type(entry) is not tuple:
+            return entry.free_fraction if isinstance(entry, Detection) else entry
+        det, ref, t, past, a, b = entry
+        return max(det.free_fraction, self._vacated_one(ref, t, past[a:b]))
+
+    def _vacated_one(self, ref, t: float, past: tuple) -> float:
+        """The vacated space of one track: the largest fraction of its stored points (``past``: ≥ 1 entries of
+        ``_Track.past``, each a detection's (n, 2) map points, :func:`_past_points`) that the scan at ``t`` (s) sees
+        through, against that scan's free-space reference ``ref`` — a receding object leaves free space behind its
+        visible face. For each reference
+        age the stored scan nearest it (:func:`_nearest_age`, −1 standing for the last entry; only scans older than
+        ``t``) is tested once; the fraction is the count over n (0 for none)."""
+        stamps = [e[0] for e in past]
+        n = len(stamps)
+        best, last = 0.0, -2
+        for a in self._ref_ages_l:
+            j = _nearest_age(stamps, n, t, a)
+            if j < 0:
+                j = n - 1
+            if j == last or not t - stamps[j] > 0.0:
+                continue
+            last = j
+            pts = _past_points(past[j])
+            npt = pts.shape[0]
+            f = self._free.count_seen_by(ref, pts) / npt if npt else 0.0
+            best = max(best, f)
+        return best
