@@ -15,22 +15,11 @@ level's resolution), as in :mod:`dynslam2d.slam.cleanup`.
 from __future__ import annotations
 
 import math
-import weakref
 
 import numpy as np
 from numba import njit
 
-from dynslam2d.detect.mapevidence import (
-    _BLOCK_SHIFT,
-    BLOCK,
-    BLOCK_FAR,
-    MapView,
-    VacatedHistory,
-    VacatedOutlines,
-    near_block,
-    vacated_core,
-    yielding_view,
-)
+from dynslam2d.detect.mapevidence import MapView, VacatedHistory, VacatedOutlines, vacated_core, yielding_view
 from dynslam2d.slam.cleanconfig import CleanConfig
 from dynslam2d.slam.cleanup import _scan_geometry
 from dynslam2d.types import Pose2D, Scan
@@ -43,8 +32,8 @@ _RES, _MARGIN, _GRAZING, _MIN_SIN, _CORE, _OCC, _DEPTH, _NEAR, _OCC32, _MAX_SIDE
 @njit(cache=True)
 def vacated_scan_kernel(ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray, px: float,
                         py: float, th: float, logodds: np.ndarray, i0: int, j0: int, params: np.ndarray,
-                        work: np.ndarray, window: np.ndarray, blocks: np.ndarray, rebuild: bool, ends: np.ndarray,
-                        hit: np.ndarray) -> tuple[int, int, np.ndarray]:  # pragma: no cover - numba
+                        work: np.ndarray, window: np.ndarray
+                        ) -> tuple[int, int, np.ndarray]:  # pragma: no cover - numba
     """One scan's vacated outlines: the clearing geometry of the beams (``ranges``, m, with their ``cos_a`` /
     ``sin_a`` and ``valid`` returns) from the laser at (``px``, ``py``, ``th``) (map frame, m, rad) as
     :func:`dynslam2d.slam.cleanup.scan_clearing` makes it, then :func:`vacated_core` on the map ``logodds``
@@ -53,34 +42,11 @@ def vacated_scan_kernel(ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray
     change between scans) and the buffers ``work`` (int64, at least 2 · 64 · beams + 2 · (max_side² + 1)) and
     ``window`` (uint8, all 0, (2 · max_side + 1)²).
 
-    ``blocks``: (0, 0), or the map's block summary the trace skips by
-    (:func:`dynslam2d.detect.mapevidence.block_summary`), brought up to date here first: made anew from the whole
-    map when ``rebuild``, then a block counts as holding a long-occupied cell where the end cell of a ray to
-    ``ends`` (2, m) (map frame, m) with ``hit`` (m,) — the hits of the map updates since the last call, the only
-    cells whose log-odds rose (:attr:`dynslam2d.slam.grid.GridLevel.raised`) — is long-occupied now. (Cells that
-    fall below the threshold later keep their block's 0: the values only ever err low, which is safe.)
-
     Returns the number of distinct seen-through cells, the number of yielding outlines and, when there are any,
     one array holding their rows, their columns and their sizes one after the other (else an empty one)."""
     res = params[_RES]
     max_side = int(params[_MAX_SIDE])
     n = ranges.shape[0]
-    if blocks.shape[0] > 0:
-        occ = params[_OCC]
-        h, w = logodds.shape
-        if rebuild:
-            blocks[:, :] = BLOCK_FAR
-            for r in range(h):
-                for q in range(w):
-                    if logodds[r, q] >= occ and blocks[r >> _BLOCK_SHIFT, q >> _BLOCK_SHIFT] != 0:
-                        near_block(blocks, r >> _BLOCK_SHIFT, q >> _BLOCK_SHIFT)
-        for k in range(hit.shape[0]):
-            if hit[k]:  # (the end cell as the ray kernel rounds it: slam/raycast.py)
-                x = int(math.floor(ends[0, k] / res + 0.5)) - i0
-                y = int(math.floor(ends[1, k] / res + 0.5)) - j0
-                if 0 <= x < w and 0 <= y < h and logodds[y, x] >= occ and \
-                        blocks[y >> _BLOCK_SHIFT, x >> _BLOCK_SHIFT] != 0:
-                    near_block(blocks, y >> _BLOCK_SHIFT, x >> _BLOCK_SHIFT)
     # (``removed`` only makes the geometry's ``kept``, which is not read here: ``valid`` stands in for it)
     _, _, cx, cy, _, clear = _scan_geometry(ranges, cos_a, sin_a, valid, valid, px, py, th, res, params[_MARGIN],
                                             params[_GRAZING], params[_MIN_SIN])
@@ -89,8 +55,7 @@ def vacated_scan_kernel(ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray
     rows, cols, sizes, nc = vacated_core(
         logodds, i0, j0, px / res, py / res, cx, cy, clear, params[_CORE], params[_OCC], params[_DEPTH],
         params[_NEAR], np.float32(params[_OCC32]), max_side, int(params[_MIN_CELLS]), res, params[_MIN_EXTENT],
-        params[_MIN_SHARE], work[:c], work[c:2 * c], work[2 * c:2 * c + g], work[2 * c + g:2 * c + 2 * g], window,
-        blocks)
+        params[_MIN_SHARE], work[:c], work[c:2 * c], work[2 * c:2 * c + g], work[2 * c + g:2 * c + 2 * g], window)
     k = sizes.shape[0]
     if k == 0:
         return nc, 0, work[:0]
@@ -102,11 +67,6 @@ def vacated_scan_kernel(ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray
     for q in range(k):
         out[2 * total + q] = sizes[q]
     return nc, k, out
-
-
-_NO_BLOCKS = np.zeros((0, 0), dtype=np.uint8)
-_NO_ENDS = np.zeros((2, 0))
-_NO_HIT = np.zeros(0, dtype=np.bool_)
 
 
 class VacatedTrace:
@@ -139,12 +99,6 @@ class VacatedTrace:
         self._beams = -1
         self._work = np.zeros(0, dtype=np.int64)
         self._window = np.zeros((0, 0), dtype=np.uint8)
-        #: the block summary of the level array ``_blocks_of`` (a weak reference: the trace does not keep a map
-        #: alive) at offsets ``_blocks_at``, up to date with the level's ``raised_count`` ``_blocks_seen``
-        self._blocks = _NO_BLOCKS
-        self._blocks_of: weakref.ref | None = None
-        self._blocks_at = (0, 0)
-        self._blocks_seen = 0
 
     def _prepare(self, res: float, beams: int) -> None:
         """The parameters for cells of ``res`` (m) and buffers for ``beams`` beams (the values
@@ -163,40 +117,6 @@ class VacatedTrace:
         self._work = np.empty(128 * beams + 2 * g, dtype=np.int64)
         self._beams = beams
 
-    def _summary(self, view: MapView) -> tuple[np.ndarray, bool, np.ndarray, np.ndarray]:
-        """(blocks, rebuild, ends, hit) for :func:`vacated_scan_kernel`: the block summary of ``view``'s level
-        array, whether it must be made anew, and the ray ends and hit flags of the level's integrations since
-        the last scan (:attr:`dynslam2d.slam.grid.GridLevel.raised`). No summary ((0, 0): every cell is read)
-        for a view of no level or a threshold ≤ 0 (an unknown cell, 0, would pass it; erasure makes cells
-        unknown)."""
-        lv = view.level
-        if lv is None or not self.occupied_logodds > 0.0:
-            return _NO_BLOCKS, False, _NO_ENDS, _NO_HIT
-        lo = view.logodds
-        raised = lv.raised  # type: ignore[attr-defined]
-        count = lv.raised_count  # type: ignore[attr-defined]
-        new = count - self._blocks_seen
-        self._blocks_seen = count
-        ref = self._blocks_of
-        recent = raised[len(raised) - new:] if 0 < new <= len(raised) else []
-        if ref is None or ref() is not lo or self._blocks_at != (view.i0, view.j0) or new < 0 or \
-                new > len(raised) or any(e is None for e in recent):
-            h, w = lo.shape
-            if self._blocks.shape != (-(-h // BLOCK), -(-w // BLOCK)):
-                self._blocks = np.zeros((-(-h // BLOCK), -(-w // BLOCK)), dtype=np.uint8)
-            self._blocks_of = weakref.ref(lo)
-            self._blocks_at = (view.i0, view.j0)
-            return self._blocks, True, _NO_ENDS, _NO_HIT
-        if not recent:
-            return self._blocks, False, _NO_ENDS, _NO_HIT
-        if len(recent) == 1:
-            ends, hit = recent[0]
-        else:
-            ends = np.concatenate([e[0] for e in recent], axis=1)
-            hit = np.concatenate([e[1] for e in recent])
-        return self._blocks, False, np.ascontiguousarray(ends, dtype=np.float64), \
-            np.ascontiguousarray(hit, dtype=np.bool_)
-
     def view(self, view: MapView, scan: Scan, pose: Pose2D) -> MapView:
         """``view`` (the finest map level) as the tracker's map evidence reads it for ``scan`` at ``pose``: the
         outlines that yield and persisted (:class:`VacatedHistory`) count as observed free (a copy; else ``view``
@@ -213,10 +133,9 @@ class VacatedTrace:
             self._prepare(res, n)
         cos_a, sin_a = scan.trig()
         valid = scan.valid_view()  # (the kernel only reads it: no copy)
-        blocks, rebuild, ends, hit = self._summary(view)
         nc, k, out = vacated_scan_kernel(ranges, cos_a, sin_a, valid, float(pose.x), float(pose.y),
                                          float(pose.theta), view.logodds, view.i0, view.j0, self.params, self._work,
-                                         self._window, blocks, rebuild, ends, hit)
+                                         self._window)
         if k == 0:  # no candidate (most scans)
             self.history.none()
             return view

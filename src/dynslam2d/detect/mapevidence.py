@@ -36,15 +36,12 @@ class MapView:
         logodds: (H, W) float32 log-odds, indexed [row, col] = [y, x] in cells; 0 = unknown.
         i0, j0: absolute cell index of column 0 / row 0 (cell (i, j) is centred at (i·res, j·res)).
         resolution: cell side, m.
-        level: the :class:`dynslam2d.slam.grid.GridLevel` whose array ``logodds`` is (None: a copy or another
-            array), for readers that keep something derived from it up to date (its ``raised`` record).
     """
 
     logodds: np.ndarray
     i0: int
     j0: int
     resolution: float
-    level: object | None = None
 
     @classmethod
     def of_level(cls, level: object) -> MapView | None:
@@ -52,7 +49,7 @@ class MapView:
         lo = level.logodds
         if lo.size == 0:
             return None
-        return cls(lo, int(level.i0), int(level.j0), float(level.resolution), level)
+        return cls(lo, int(level.i0), int(level.j0), float(level.resolution))
 
 
 @njit(cache=True)
@@ -133,67 +130,21 @@ def map_evidence(points: np.ndarray, view: MapView | None, occupied_logodds: flo
 # footprints").
 
 
-#: Side of the blocks of the map summary the trace skips by (array cells; a power of two): :func:`block_summary`.
-BLOCK = 8
-_BLOCK_SHIFT = 3
-_BLOCK_MASK = BLOCK - 1
-#: The summary's largest distance (blocks): "this far or farther".
-BLOCK_FAR = 8
-
-
-@njit(cache=True)
-def near_block(blocks: np.ndarray, r: int, c: int) -> None:  # pragma: no cover - numba
-    """In the block summary ``blocks`` (:func:`block_summary`), count block (``r``, ``c``) as holding a long-occupied
-    cell: every block's distance becomes at most its Chebyshev distance (blocks) from it."""
-    bh, bw = blocks.shape
-    for rr in range(max(r - BLOCK_FAR + 1, 0), min(r + BLOCK_FAR, bh)):
-        for cc in range(max(c - BLOCK_FAR + 1, 0), min(c + BLOCK_FAR, bw)):
-            d = max(abs(rr - r), abs(cc - c))
-            if blocks[rr, cc] > d:
-                blocks[rr, cc] = d
-
-
-def block_summary(logodds: np.ndarray, occ_thr: float) -> np.ndarray:
-    """(ceil(H / BLOCK), ceil(W / BLOCK)) uint8 summary of the (H, W) map ``logodds`` in blocks of ``BLOCK`` ×
-    ``BLOCK`` array cells (block (R, C): rows ``R·BLOCK …``, columns ``C·BLOCK …``): each block's Chebyshev distance
-    (blocks, at most ``BLOCK_FAR``) from the nearest block holding a cell with log-odds ≥ ``occ_thr`` (0: it holds
-    one). The exact summary :func:`seen_through_structure_kernel` may skip by (it may also be given smaller values)."""
-    h, w = logodds.shape
-    hb = -(-h // BLOCK)
-    wb = -(-w // BLOCK)
-    pad = np.zeros((hb * BLOCK, wb * BLOCK), dtype=bool)
-    pad[:h, :w] = logodds >= occ_thr
-    occ = pad.reshape(hb, BLOCK, wb, BLOCK).any(axis=(1, 3))
-    out = np.full((hb, wb), BLOCK_FAR, dtype=np.uint8)
-    for r, c in zip(*np.nonzero(occ)):
-        near_block(out, int(r), int(c))
-    return out
-
-
 @njit(cache=True)
 def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx: np.ndarray,
                                   cy: np.ndarray, clear: np.ndarray, core: float, occ_thr: float,
-                                  out_r: np.ndarray, out_c: np.ndarray, depth: float,
-                                  blocks: np.ndarray) -> int:  # pragma: no cover
+                                  out_r: np.ndarray, out_c: np.ndarray, depth: float = 0.0) -> int:  # pragma: no cover
     """Cells with log-odds ≥ ``occ_thr`` that the clearing segments from (``ox``, ``oy``) to (``cx``, ``cy``)
     (world cell units, m / resolution; only where ``clear``) pass through within ``core`` cells of the cell
     centre across the ray's major axis (the traversal of :func:`dynslam2d.slam.cleanup._mark_ray`), and at
     least ``depth`` (cells) nearer to the origin than the clearing ends of the beam and both its neighbours
     (``k ± 1``, which must clear).
-    ``blocks``: (0, 0) (or any shape but the one below: not used), or the map's block summary
-    ((ceil(H / BLOCK), ceil(W / BLOCK)), :func:`block_summary`), each block's value at most its distance from the
-    nearest block holding a cell with log-odds ≥ ``occ_thr`` (0 for those): a beam's cells are read from the map only
-    from its first to its last cell in a block of value 0, found by jumps over the others (the same result).
     Writes array rows / columns into ``out_r`` / ``out_c`` (possibly repeated) and returns their number
     (at most the arrays' length)."""
     h = logodds.shape[0]
     w = logodds.shape[1]
     cap = out_r.shape[0]
     flat = logodds.ravel()  # (a view: the map is C-contiguous)
-    use_blocks = blocks.shape[0] == (h + _BLOCK_MASK) >> _BLOCK_SHIFT and blocks.shape[1] == (w + _BLOCK_MASK) >> \
-        _BLOCK_SHIFT and h > 0
-    bw = blocks.shape[1]
-    bflat = blocks.ravel()  # (a view: the summary is C-contiguous)
     n = 0
     for k in range(1, cx.shape[0] - 1):
         # both neighbouring beams must clear at least as far: the silhouette edge of a round object (a ray
@@ -234,47 +185,14 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
             step = -1
             start = min(a0, a_off + a_len - 1)
             cnt = start - max(a1, int(math.ceil(m0 - along)) - 1, a_off) + 1
-        if cnt <= 0:  # (no step inside the grid: e.g. a laser outside it walking away; the second loop would run
-            continue  # from t = cnt to −1, off the grid)
+        if cnt <= 0:  # (no step inside the grid: a laser outside it walking away; the pass from the first to the
+            continue  # last hit below would run from t = cnt to −1, off the grid)
         # a branch-free first pass (it vectorises): most beams pass no long-occupied cell at all. One loop per major
         # axis, each reading the flat map at row · w + column (no per-cell choice of the axes: ≈ ×0.85 on negative_2)
         first = cnt
         last = -1
-        # with a summary, only the steps t0 … t1 − 1 from the first to the last cell in a block at most one block from
-        # one holding a long-occupied cell (or outside the grid), found by jumps from both ends: a cell whose block is
-        # d ≥ 2 blocks (Chebyshev) from any such block has only cells of blocks without one within 8·(d − 1) cells,
-        # and a step moves the cell by one along the major axis and by less than 1 + 1e-9 (rounding) across it, so
-        # the next 8·(d − 1) steps from it hold no hit. Then (without a summary: over all steps) the pass over the map.
-        t0 = 0
-        t1 = cnt
-        if use_blocks:
-            while t0 < cnt:
-                a = start + step * t0
-                bi = int(math.floor(n0 + slope * (a - m0) + 0.5)) - b_off
-                if bi < 0 or bi >= b_len:
-                    break
-                la = a - a_off
-                d = np.int64(bflat[(bi >> _BLOCK_SHIFT) * bw + (la >> _BLOCK_SHIFT)] if x_major else
-                             bflat[(la >> _BLOCK_SHIFT) * bw + (bi >> _BLOCK_SHIFT)])
-                if d <= 1:
-                    break
-                t0 += BLOCK * (d - 1)
-            t1 = t0
-            t = cnt - 1
-            while t > t0:
-                a = start + step * t
-                bi = int(math.floor(n0 + slope * (a - m0) + 0.5)) - b_off
-                if bi < 0 or bi >= b_len:
-                    break
-                la = a - a_off
-                d = np.int64(bflat[(bi >> _BLOCK_SHIFT) * bw + (la >> _BLOCK_SHIFT)] if x_major else
-                             bflat[(la >> _BLOCK_SHIFT) * bw + (bi >> _BLOCK_SHIFT)])
-                if d <= 1:
-                    break
-                t -= BLOCK * (d - 1)
-            t1 = max(t, t0) + 1 if t0 < cnt else t0
         if x_major:  # (a: the column, b: the row)
-            for t in range(t0, t1):
+            for t in range(cnt):
                 a = start + step * t
                 bi = int(math.floor(n0 + slope * (a - m0) + 0.5)) - b_off
                 inside = (bi >= 0) & (bi < b_len)
@@ -283,7 +201,7 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
                 first = min(first, t if hit else cnt)
                 last = max(last, t if hit else -1)
         else:  # (a: the row, b: the column)
-            for t in range(t0, t1):
+            for t in range(cnt):
                 a = start + step * t
                 bi = int(math.floor(n0 + slope * (a - m0) + 0.5)) - b_off
                 inside = (bi >= 0) & (bi < b_len)
@@ -321,20 +239,18 @@ def vacated_outlines_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy
     return vacated_core(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, depth, near_thr, occ32, max_side,
                         min_cells, res, min_extent, min_share, np.empty(64 * n, dtype=np.int64),
                         np.empty(64 * n, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
-                        np.zeros((2 * max_side + 1, 2 * max_side + 1), dtype=np.uint8),
-                        np.zeros((0, 0), dtype=np.uint8))
+                        np.zeros((2 * max_side + 1, 2 * max_side + 1), dtype=np.uint8))
 
 
 @njit(cache=True)
 def vacated_core(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx: np.ndarray, cy: np.ndarray,
                  clear: np.ndarray, core: float, occ_thr: float, depth: float, near_thr: float, occ32: np.float32,
                  max_side: int, min_cells: int, res: float, min_extent: float, min_share: float, out_r: np.ndarray,
-                 out_c: np.ndarray, gr: np.ndarray, gc: np.ndarray, window: np.ndarray, blocks: np.ndarray
+                 out_c: np.ndarray, gr: np.ndarray, gc: np.ndarray, window: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:  # pragma: no cover - numba
     """:func:`vacated_outlines_kernel` on buffers the caller keeps between scans: ``out_r`` / ``out_c`` (64 ·
     beams) for the seen-through cells, ``gr`` / ``gc`` (``max_side``² + 1) for a growth, ``window``
-    (2 · ``max_side`` + 1 square, all 0; left all 0) for the cells of a growth; ``blocks``: the map's block
-    summary or (0, 0) (:func:`seen_through_structure_kernel`).
+    (2 · ``max_side`` + 1 square, all 0; left all 0) for the cells of a growth.
 
     Nothing when fewer than ``min_cells`` cells are seen through. Else the distinct seen-through cells are taken in
     order of their code ``row · W + col``; each one not yet in an outline grows its 8-connected component of cells
@@ -347,8 +263,7 @@ def vacated_core(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx
     Returns the yielding outlines' rows and columns, one outline after the other (each in its growth order),
     their sizes and the number of distinct seen-through cells (0 when fewer than ``min_cells`` were found).
     """
-    n = seen_through_structure_kernel(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, out_r, out_c, depth,
-                                      blocks)
+    n = seen_through_structure_kernel(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, out_r, out_c, depth)
     if n < min_cells:
         return out_r[:0], out_c[:0], out_r[:0], 0
     h = logodds.shape[0]

@@ -35,8 +35,6 @@ _NO_CLEAR = np.zeros((0, 2))
 #: the probability memo of the ray kernel (raycast._prob), shared by every map of the process: an entry depends on
 #: the log-odds value alone, and the kernel holds the GIL, so no two calls use it at once (48 KiB)
 _PROB_MEMO = new_prob_memo()
-#: How many integrations :attr:`GridLevel.raised` remembers (a reader that missed more rebuilds what it keeps).
-_RAISED_KEEP = 4
 
 
 class MapTooLargeError(RuntimeError):
@@ -57,11 +55,6 @@ class GridLevel:
         prob: (H, W) float32 occupancy probability cache, kept in step with ``logodds``.
         uidx: (H, W) int32 per-cell update index (−1 = never updated), as OccGridMapBase's updateIndex.
         i0, j0: absolute cell index of array column 0 / row 0.
-        raised: what the last integrations (at most ``_RAISED_KEEP``, newest last) may have raised: (ray ends
-            (2, n) map frame m, hit (n,) bool) — only a hit's end cell gains log-odds (a free update adds the
-            negative ``l_free``; erasure only takes evidence away) — or None (any cell may have). With
-            ``raised_count`` (integrations noted since the level was made) a reader such as the vacated-footprint
-            trace's block summary (dynslam2d/vacated.py) brings what it derived from the log-odds up to date.
     """
 
     def __init__(self, resolution: float, growth_margin_cells: int = 100) -> None:
@@ -75,15 +68,6 @@ class GridLevel:
         self.j0 = 0
         self.update_counter = 0  # hector's currUpdateIndex (grows by 3 per scan)
         self.n_grows = 0
-        self.raised: list[tuple[np.ndarray, np.ndarray] | None] = []
-        self.raised_count = 0
-
-    def note_raised(self, ends: np.ndarray, hit: np.ndarray, l_free: float) -> None:
-        """Remember an integration of rays to ``ends`` (2, n) (map frame, m) with ``hit`` (n,) (:attr:`raised`)."""
-        self.raised.append((ends, hit) if l_free <= 0.0 else None)
-        self.raised_count += 1
-        if len(self.raised) > _RAISED_KEEP:
-            del self.raised[0]
 
     # ---- geometry -------------------------------------------------------------------
     @property
@@ -231,7 +215,6 @@ class GridLevel:
         jmin = int(min(s_abs[1], e_abs[:, 1].min()))
         jmax = int(max(s_abs[1], e_abs[:, 1].max()))
         self.ensure(imin, jmin, imax, jmax)
-        self.note_raised(np.asarray(ends_xy, dtype=np.float64).T, hit, l_free)
         ex = np.ascontiguousarray(e_abs[:, 0] - self.i0)
         ey = np.ascontiguousarray(e_abs[:, 1] - self.j0)
         return self.integrate_cells(int(s_abs[0] - self.i0), int(s_abs[1] - self.j0), ex, ey, hit,
@@ -363,7 +346,6 @@ class MultiResMap:
         for lv, g in zip(levels, grown):
             if g is not None:
                 lv._grow(g)  # (GridLevel.ensure)
-        levels[0].note_raised(ends_t, hit, self.l_free)
         n_lv = len(levels)
         if n_lv == _FUSED_LEVELS:  # the default map: every level in one kernel call, the arguments written out
             a, b, c = levels
