@@ -83,3 +83,26 @@ def test_speed_respects_the_acceleration_bound(bound) -> None:
         assert dv > 0.5  # the jump shows up as a speed jump (control)
     else:
         assert dv <= bound / 20.0 + 1e-9
+
+
+def test_a_laser_outside_the_grid_walking_away_reads_nothing_off_the_grid() -> None:
+    """The vacated-footprint walk of a beam with no step inside the grid finds nothing (docs/speed.md, pass vac2: it
+    read the rows beyond the map's end). The map is rows 5…14 of a larger array of long-occupied cells, so a read past
+    its last row would find "long-occupied" cells outside the map."""
+    from dynslam2d.detect.mapevidence import seen_through_structure_kernel
+
+    big = np.full((40, 30), 8.0, dtype=np.float32)
+    lo = big[5:15]  # (C-contiguous: the rows after it are long-occupied memory)
+    n = 7
+    cx = 15.0 + np.linspace(-3.0, 3.0, n)  # the laser at column 15, row 22 (above the map's rows 0…9), beams going up
+    cy = np.full(n, 35.0)
+    out_r = np.zeros(64 * n, dtype=np.int64)
+    out_c = np.zeros(64 * n, dtype=np.int64)
+    got = seen_through_structure_kernel(lo, 0, 0, 15.0, 22.0, cx, cy, np.ones(n, dtype=np.bool_), 0.5, 6.0, out_r,
+                                        out_c, 0.0)
+    assert got == 0
+    # the same beams from inside the map see through its long-occupied rows above the laser
+    cy_in = np.full(n, 9.0)
+    got_in = seen_through_structure_kernel(lo, 0, 0, 15.0, 1.0, cx, cy_in, np.ones(n, dtype=np.bool_), 0.5, 6.0, out_r,
+                                           out_c, 0.0)
+    assert got_in > 0 and out_r[:got_in].max() <= 9 and out_r[:got_in].min() >= 0

@@ -185,6 +185,8 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
             step = -1
             start = min(a0, a_off + a_len - 1)
             cnt = start - max(a1, int(math.ceil(m0 - along)) - 1, a_off) + 1
+        if cnt <= 0:  # (no step inside the grid: a laser outside it walking away; the pass from the first to the
+            continue  # last hit below would run from t = cnt to −1, off the grid)
         # a branch-free first pass (it vectorises): most beams pass no long-occupied cell at all. One loop per major
         # axis, each reading the flat map at row · w + column (no per-cell choice of the axes: ≈ ×0.85 on negative_2)
         first = cnt
