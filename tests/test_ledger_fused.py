@@ -74,17 +74,22 @@ def test_record_cells_equals_the_single_step_kernels(seed: int, n_lv: int) -> No
     ui_t = tuple(lv[1] for lv in levels) + (np.zeros((0, 0), np.int32),) * pad
     i0_t = tuple(lv[2] for lv in levels) + (0,) * pad
     j0_t = tuple(lv[3] for lv in levels) + (0,) * pad
-    got = lk.record_cells(allb, lens, ids, r, cos_a, sin_a, vm, removed, 0.1, 10.0, c, s, px, py, rs, lo_t, ui_t,
-                          i0_t, j0_t, True)
-    ok, g_ids, g_keys, g_cells, g_lo, g_ui, g_bounds, g_present, g_kb, g_kbb, g_valid, g_uids, g_counts, g_ends = got
+    removed[beams[5]] = True  # (track 5 keeps no beam)
+    idl = np.concatenate((ids, lens))
+    status, blk, small, g_kb = lk.record_cells(allb, idl, r, cos_a, sin_a, vm, removed, 0.1, 10.0, c, s, px, py, rs,
+                                               lo_t, ui_t, i0_t, j0_t, True)
+    m = blk.shape[1]
+    g_ids, g_keys, g_cells, g_ui = blk[0], blk[1], np.ascontiguousarray(blk[2:4].T), blk[4]
+    g_lo = blk[5].view(np.float64)
+    n_t = ids.shape[0]
+    g_bounds, g_present, g_kbb = small[:n_lv + 1], small[n_lv + 1:n_lv + 1 + n_t], small[n_lv + 1 + n_t:]
+    assert small.shape[0] == n_lv + 1 + n_t + n_t + 1
     # the single steps
     owner = lk.beam_owners(n, allb, ends, ids)
     uids = np.array(sorted(set(ids.tolist())), dtype=np.int64)
     packed, params, valid, counts = lk.scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, 0.1, 10.0, c, s, px,
                                                   py, rs)
-    assert ok and params.shape[0] > 0
-    assert np.array_equal(g_valid, valid) and np.array_equal(g_uids, uids) and np.array_equal(g_counts, counts)
-    assert np.array_equal(g_ends, ends)
+    assert status == lk.PACKED and params.shape[0] > 0
     packed.sort()
     w_ids, w_keys, w_cells, w_bounds = lk.unpack_cells(packed, params, uids, n_lv)
     for u, v in ((g_ids, w_ids), (g_keys, w_keys), (g_cells, w_cells), (g_bounds, w_bounds)):
@@ -93,19 +98,22 @@ def test_record_cells_equals_the_single_step_kernels(seed: int, n_lv: int) -> No
     for k, (lo, ui, i0, j0) in enumerate(levels):
         a, b = int(w_bounds[k]), int(w_bounds[k + 1])
         w_lo, w_ui, _, out = lk.read_cells(lo, ui, w_cells[a:b], i0, j0)
-        assert np.array_equal(g_lo[a:b], w_lo) and np.array_equal(g_ui[a:b], w_ui)
+        assert np.array_equal(g_lo[a:b].view(np.int64), w_lo.view(np.int64)) and np.array_equal(g_ui[a:b], w_ui)
         n_out += out
-    assert n_out > 0 and g_ids.shape[0] > 20  # (cells outside the arrays were read)
+    assert n_out > 0 and m > 20  # (cells outside the arrays were read)
     kept = set(uids[counts > 0].tolist())
-    assert g_present.tolist() == [t in kept for t in ids.tolist()]
+    assert g_present.tolist() == [int(t in kept) for t in ids.tolist()]
+    assert 0 < g_present.sum() < n_t  # (a track whose kept beams are all removed or invalid is left out)
     w_kb, w_kbb = lk.kept_beams(valid, allb, ends)
     assert np.array_equal(g_kb, w_kb) and g_kb.dtype == np.int32 and np.array_equal(g_kbb, w_kbb)
-    # without the kept beams; and with every beam removed: the packed path is not taken, no track keeps a beam
-    assert lk.record_cells(allb, lens, ids, r, cos_a, sin_a, vm, removed, 0.1, 10.0, c, s, px, py, rs, lo_t, ui_t,
-                           i0_t, j0_t, False)[8].shape[0] == 0
-    none = lk.record_cells(allb, lens, ids, r, cos_a, sin_a, vm, np.ones(n, dtype=bool), 0.1, 10.0, c, s, px, py,
+    # without the kept beams: no kept-beam bounds; and with every beam removed: nothing to record
+    st2, blk2, small2, kb2 = lk.record_cells(allb, idl, r, cos_a, sin_a, vm, removed, 0.1, 10.0, c, s, px, py, rs,
+                                             lo_t, ui_t, i0_t, j0_t, False)
+    assert st2 == lk.PACKED and kb2.shape[0] == 0 and np.array_equal(small2, small[:n_lv + 1 + n_t])
+    assert np.array_equal(blk2, blk)
+    none = lk.record_cells(allb, idl, r, cos_a, sin_a, vm, np.ones(n, dtype=bool), 0.1, 10.0, c, s, px, py,
                            rs, lo_t, ui_t, i0_t, j0_t, True)
-    assert not none[0] and not none[12].any()
+    assert none[0] == lk.NO_KEPT and none[1].shape == (6, 0) and none[2].shape[0] == none[3].shape[0] == 0
 
 
 def test_record_cells_leaves_values_beyond_an_int64_to_the_level_by_level_path() -> None:
@@ -121,9 +129,9 @@ def test_record_cells_leaves_values_beyond_an_int64_to_the_level_by_level_path()
     rs = np.array([0.05, 0.1, 0.2])
     lo = np.zeros((4, 4), np.float32)
     ui = np.zeros((4, 4), np.int32)
-    got = lk.record_cells(allb, lens, ids, r, cos_a, sin_a, vm, np.zeros(r.shape[0], dtype=bool), 0.0, 1e13, 1.0,
-                          0.0, 0.0, 0.0, rs, (lo,) * 3, (ui,) * 3, (0,) * 3, (0,) * 3, True)
-    assert not got[0] and got[10][5] and got[12].sum() > 0 and np.array_equal(got[11], np.unique(ids))
+    got = lk.record_cells(allb, np.concatenate((ids, lens)), r, cos_a, sin_a, vm, np.zeros(r.shape[0], dtype=bool),
+                          0.0, 1e13, 1.0, 0.0, 0.0, 0.0, rs, (lo,) * 3, (ui,) * 3, (0,) * 3, (0,) * 3, True)
+    assert got[0] == lk.PLAIN and got[1].shape == (6, 0)
 
 
 @pytest.mark.parametrize("bits", [0, 1, 7, 11, 12, 23, 33, 45, 62])
@@ -174,9 +182,13 @@ def test_level_rows_equal_update_rows_per_level(seed: int) -> None:
         levels_before.append((lo, ui))
     cat = [np.concatenate([p[q] for p in per]) for q in range(5)]
     bounds = np.concatenate(([0], np.cumsum([p[0].shape[0] for p in per]))).astype(np.int64)
+    # record_cells' block (id, key, i, j, update index before, log-odds before's bits) and its small outputs (the
+    # level bounds, then values level_rows must not read)
+    blk = np.ascontiguousarray(np.vstack((cat[0], cat[1], cat[2].T, cat[4], cat[3].view(np.int64))))
+    small = np.concatenate((bounds, [1, 0, 1, 5, 9]))
     rows, t_id, t_bnd, t_lv = lk.level_rows(
         tuple(lv[0] for lv in levels_after), tuple(lv[1] for lv in levels_after), tuple(lv[2] for lv in levels_after),
-        tuple(lv[3] for lv in levels_after), n_lv, cat[0], cat[1], np.ascontiguousarray(cat[2]), cat[3], cat[4], bounds)
+        tuple(lv[3] for lv in levels_after), n_lv, blk, small)
     groups = []  # (track id, level, its rows) from update_rows, level by level
     for k, ((lo2, ui2, i0, j0), (ids, keys, cells, before, ub)) in enumerate(zip(levels_after, per)):
         f = lk.read_cells(lo2, ui2, cells, i0, j0)[2]

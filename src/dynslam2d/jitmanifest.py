@@ -55,15 +55,14 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
      "float64, Array(int8, 1, 'C'),)"),
     ('dynslam2d.slam.ledgerkernels.record_cells',
-     "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), "
-     "Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, 'C'), Array(bool, 1, "
-     "'A'), float64, float64, float64, float64, float64, float64, Array(float64, 1, 'C'), "
-     "UniTuple(Array(float32, 2, 'C', False, aligned=True), 3), UniTuple(Array(int32, 2, 'C', False, "
-     'aligned=True), 3), UniTuple(int64, 3), UniTuple(int64, 3), bool,)'),
+     "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C', True), "
+     "Array(float64, 1, 'C', True), Array(bool, 1, 'C'), Array(bool, 1, 'A'), float64, float64, float64, "
+     "float64, float64, float64, Array(float64, 1, 'C'), UniTuple(Array(float32, 2, 'C', False, "
+     "aligned=True), 3), UniTuple(Array(int32, 2, 'C', False, aligned=True), 3), UniTuple(int64, 3), "
+     'UniTuple(int64, 3), bool,)'),
     ('dynslam2d.slam.ledgerkernels.level_rows',
      "(UniTuple(Array(float32, 2, 'C', False, aligned=True), 3), UniTuple(Array(int32, 2, 'C', False, "
-     "aligned=True), 3), UniTuple(int64, 3), UniTuple(int64, 3), int64, Array(int64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(int64, 2, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), "
+     "aligned=True), 3), UniTuple(int64, 3), UniTuple(int64, 3), int64, Array(int64, 2, 'C'), "
      "Array(int64, 1, 'C'),)"),
     ('dynslam2d.slam.raycast.integrate_levels',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), float64, float64, float64, float64, "

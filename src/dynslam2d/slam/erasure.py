@@ -472,22 +472,26 @@ class PendingUpdate:
     (track ids, cell keys, cells, log-odds before, update index before), sorted by track id, each (track,
     cell) once.
 
-    Held either per level (:attr:`per_level`) or, from the fused kernels, as the five arrays of all levels one after
-    the other with the levels' bounds (``fused``: ids, keys, cells, log-odds, update index, bounds (L + 1,));
-    :attr:`per_level` then gives the levels' slices of them."""
+    Held either per level (:attr:`per_level`) or, from the fused kernels, as
+    :func:`~dynslam2d.slam.ledgerkernels.record_cells` returned them (``fused``: the (6, m) block of all levels'
+    cells — rows track id, key, i, j, update index before, log-odds before's float64 bits — and ``small``, whose
+    first ``n_levels + 1`` values are the levels' column bounds); :attr:`per_level` then gives the levels' slices."""
 
-    __slots__ = ("_per_level", "fused")
+    __slots__ = ("_per_level", "fused", "n_levels")
 
-    def __init__(self, per_level: list | None = None, fused: tuple | None = None) -> None:
+    def __init__(self, per_level: list | None = None, fused: tuple | None = None, n_levels: int = 0) -> None:
         self._per_level = per_level
         self.fused = fused
+        self.n_levels = n_levels
 
     @property
     def per_level(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
         if self._per_level is None:
-            *arrays, bounds = self.fused
-            bounds = bounds.tolist()
-            self._per_level = [tuple(x[a:b] for x in arrays) for a, b in zip(bounds, bounds[1:])]
+            blk, small = self.fused
+            bounds = small[:self.n_levels + 1].tolist()
+            before = blk[5].view(np.float64)
+            self._per_level = [(blk[0, a:b], blk[1, a:b], np.ascontiguousarray(blk[2:4, a:b].T), before[a:b],
+                                blk[4, a:b]) for a, b in zip(bounds, bounds[1:])]
         return self._per_level
 
 
@@ -527,6 +531,8 @@ class EvidenceLedger:
         self._oldest_ended = math.inf  # the smallest last_seen among the ended ledgers, s
         #: live track id → [box where it stands, stamp it began standing there, last stamp it stood there]
         self._first: dict[int, list] = {}
+        self._rs: np.ndarray | None = None  # the levels' cell sides, m (of the levels list ``_rs_of``)
+        self._rs_of: list | None = None
         #: absolute finest-level cells whose evidence was erased (for map.png), with the count of events
         self.erased_cells: set[tuple[int, int]] = set()
         self.stats = {"erasures": 0, "tracks_erased": 0, "cells_changed": 0, "cells_to_unknown": 0,
@@ -552,65 +558,76 @@ class EvidenceLedger:
                 nb.append(b.shape[0])
         if not mine:
             return None
-        ids = np.array(tids, dtype=np.int64)
-        lens = np.array(nb, dtype=np.int64)
+        idl = np.array(tids + nb, dtype=np.int64)  # (the ids, then the beam counts: one array, one argument)
         allb = np.concatenate(blist).astype(np.int64, copy=False)
         c, s = math.cos(pose.theta), math.sin(pose.theta)
         levels = hmap.levels
+        n_lv = len(levels)
+        rs = self._rs
+        if rs is None or self._rs_of is not levels or rs.shape[0] != n_lv:  # (a map's levels keep their sides)
+            rs = self._rs = np.array([lv.resolution for lv in levels], dtype=np.float64)
+            self._rs_of = levels
         want_kb = self.keep_beams and index >= 0
         # in one call: each beam's track (a later track's claim wins), the kept beams (valid, inside the laser's
         # ranges, not removed), their map-frame points (the values of pose.transform_points), every point's
         # (level, track, cell) packed and sorted, the distinct ones no unowned point shares decoded and their cells
         # read on (up to) three levels, which tracks keep beams and, for the loop closer, their kept beams
-        (packed_ok, ids_s, key_s, cells_s, before, ub, bounds, present, kb_all, kb_b, valid, uids, counts,
-         ends) = lk.record_cells(allb, lens, ids, scan.ranges, *scan.trig(), scan.valid_mask(), removed,
-                              self.laser_min_dist, self.laser_max_dist, c, s, float(pose.x), float(pose.y),
-                              np.array([lv.resolution for lv in levels], dtype=np.float64), *_level_arrays(levels),
-                              want_kb)
-        if packed_ok:
-            for k in range(_FUSED, len(levels)):  # (levels beyond the fused kernel's three)
-                lv, a, b = levels[k], int(bounds[k]), int(bounds[k + 1])
-                before[a:b], ub[a:b] = lk.read_cells(lv.logodds, lv.uidx, cells_s[a:b], lv.i0, lv.j0)[:2]
-            pending = PendingUpdate(fused=(ids_s, key_s, cells_s, before, ub, bounds))
-            present = present.tolist()
-        elif not counts.any():  # (no kept beam of any track)
+        status, blk, small, kb_all = lk.record_cells(allb, idl, scan.ranges, *scan.trig(), scan.valid_mask(), removed,
+                                                     self.laser_min_dist, self.laser_max_dist, c, s, float(pose.x),
+                                                     float(pose.y), rs, *_level_arrays(levels), want_kb)
+        if status == 0:  # (ledgerkernels.PACKED)
+            if n_lv > _FUSED:  # (levels beyond the fused kernel's three)
+                bf = blk[5].view(np.float64)
+                for k in range(_FUSED, n_lv):
+                    lv, a, b = levels[k], int(small[k]), int(small[k + 1])
+                    cells = np.ascontiguousarray(blk[2:4, a:b].T)
+                    bf[a:b], blk[4, a:b] = lk.read_cells(lv.logodds, lv.uidx, cells, lv.i0, lv.j0)[:2]
+            pending = PendingUpdate(fused=(blk, small), n_levels=n_lv)
+            sm = small.tolist()
+            present = sm[n_lv + 1:n_lv + 1 + len(mine)]
+            kb = sm[n_lv + 1 + len(mine):]
+        elif status == 1:  # (ledgerkernels.NO_KEPT: no kept beam of any track)
             return None
         else:  # (cells beyond the packed values' range: level by level)
-            pending, present, kb_all, kb_b = self._pending_plain(scan, c, s, pose, allb, ends, ids, uids, valid,
-                                                                 counts, hmap, want_kb)
+            pending, present, kb_all, kb_b = self._pending_plain(scan, c, s, pose, allb, idl, removed, hmap, want_kb)
+            kb = kb_b.tolist() if want_kb else None
         ledgers = self._ledgers
-        n_lv = len(levels)
         if want_kb:  # every track's kept beams, split per track
-            kb = kb_b.tolist()
             at = int(index)
-            for t, keep, a, b in zip(mine, present, kb, kb[1:]):
+            for t, tid, keep, a, b in zip(mine, tids, present, kb, kb[1:]):
                 if keep:  # (else every beam of it removed)
-                    led = ledgers.get(t.id)
+                    led = ledgers.get(tid)
                     if led is None:
-                        led = ledgers[t.id] = self._new_ledger(t, t.stamp, n_lv)
+                        led = ledgers[tid] = self._new_ledger(t, t.stamp, n_lv)
                     if b > a:  # (the bounds, not a view: a view costs more per track and holds the same array)
                         led.kb.append((at, kb_all, a, b))
         else:
-            for t, keep in zip(mine, present):
-                if keep and t.id not in ledgers:
-                    ledgers[t.id] = self._new_ledger(t, t.stamp, n_lv)
+            for t, tid, keep in zip(mine, tids, present):
+                if keep and tid not in ledgers:
+                    ledgers[tid] = self._new_ledger(t, t.stamp, n_lv)
         return pending
 
-    def _pending_plain(self, scan: Scan, c: float, s: float, pose: Pose2D, allb: np.ndarray, ends: np.ndarray,
-                       ids: np.ndarray, uids: np.ndarray, valid: np.ndarray, counts: np.ndarray, hmap: MultiResMap,
-                       want_kb: bool) -> tuple[PendingUpdate, list, np.ndarray | None, np.ndarray | None]:
+    def _pending_plain(self, scan: Scan, c: float, s: float, pose: Pose2D, allb: np.ndarray, idl: np.ndarray,
+                       removed: np.ndarray, hmap: MultiResMap, want_kb: bool
+                       ) -> tuple[PendingUpdate, list, np.ndarray | None, np.ndarray | None]:
         """:meth:`before_update`'s level-by-level path (cells beyond the packed values' range): (the pending
-        update, per track of ``ids`` whether it keeps beams, the kept beams and their per-track bounds or None)."""
+        update, per track of ``idl``'s ids whether it keeps beams, the kept beams and their per-track bounds or
+        None). The kept beams as :func:`~dynslam2d.slam.ledgerkernels.record_cells` keeps them."""
         from dynslam2d.slam.ledgerkernels import beam_owners, kept_beams
+        n_t = idl.shape[0] // 2
+        ids = idl[:n_t]
+        ends = np.concatenate(([0], np.cumsum(idl[n_t:]))).astype(np.int64)
         r = scan.ranges
         cos_a, sin_a = scan.trig()
+        # (the kernel's test: valid, laser_min_dist < r < laser_max_dist, not removed; NaN compares False)
+        valid = scan.valid_mask() & (r > self.laser_min_dist) & (r < self.laser_max_dist) & ~removed
         owner = beam_owners(r.shape[0], allb, ends, ids)
         idx = np.flatnonzero(valid)
         own = owner[idx]
         mine_b = own >= 0
         lx, ly = r[idx] * cos_a[idx], r[idx] * sin_a[idx]
         pts = np.column_stack((c * lx - s * ly + pose.x, s * lx + c * ly + pose.y))
-        kept = set(uids[counts > 0].tolist())
+        kept = set(own[mine_b].tolist())
         present = [tid in kept for tid in ids.tolist()]
         kb_all, kb_b = kept_beams(valid, allb, ends) if want_kb else (None, None)
         return PendingUpdate(self._level_cells_plain(pts, mine_b, own[mine_b], hmap)), present, kb_all, kb_b
@@ -694,9 +711,7 @@ class EvidenceLedger:
             # one block of rows (cell keys, update index before / after, log-odds' bits, level) of the updated cells
             # of every level in (track, level) order, the cells re-read from the levels' current arrays, and per
             # track its column range and levels
-            ids, keys, cells, before, ub, bounds = pending.fused
-            rows, tid_t, bnd_t, lv_t = lk.level_rows(*_level_arrays(levels), len(levels), ids, keys, cells, before,
-                                                     ub, bounds)
+            rows, tid_t, bnd_t, lv_t = lk.level_rows(*_level_arrays(levels), len(levels), *pending.fused)
         else:
             rows, tid_t, bnd_t, lv_t = self._level_groups(pending, levels)
         # one entry per track in its ledger: the records get the rows when the ledger settles, which its bounds

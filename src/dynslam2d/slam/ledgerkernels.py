@@ -460,53 +460,84 @@ def _radix_sort(a):  # pragma: no cover - numba
 
 
 _B1 = types.boolean[::1]
-_RECORD_SIG = types.Tuple((
-    types.boolean, _I1, _I1, types.int64[:, ::1], _F1, _I1, _I1, _B1, types.int32[::1], _I1, _B1, _I1, _I1, _I1))(
-    _I1, _I1, _I1, _F1, _F1_RO, _F1_RO, _B1, types.boolean[:], *(types.float64,) * 6, _F1,
+#: (status, the (6, m) cell block, the small int64 outputs, the kept beams): four outputs where pass ledger14's
+#: version boxed fourteen (≈ 0.45 µs per boxed array warm, pass ledger15)
+_RECORD_SIG = types.Tuple((types.int64, types.int64[:, ::1], _I1, types.int32[::1]))(
+    _I1, _I1, _F1, _F1_RO, _F1_RO, _B1, types.boolean[:], *(types.float64,) * 6, _F1,
     _LO3, _UI3, _IT3, _IT3, types.boolean)
+#: :func:`record_cells`' status: the cells are in the block; no kept beam of any track (nothing to record); the
+#: values would not fit (the caller's level-by-level path)
+PACKED, NO_KEPT, PLAIN = 0, 1, 2
 
 
 @njit(_RECORD_SIG, cache=True)
-def record_cells(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px, py, rs, logodds, uidx, i0, j0,
+def record_cells(beams, idl, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px, py, rs, logodds, uidx, i0, j0,
                  want_kb):  # pragma: no cover - numba
     """Everything the evidence ledger reads before a map update, in one call: each beam's owner track
-    (:func:`beam_owners`, track ``t`` with id ``ids[t]`` listing the next ``lens[t]`` of ``beams``), the kept beams'
-    points packed (:func:`scan_cells`; levels of cell side ``rs``), sorted, decoded (:func:`unpack_cells`) and their
-    cells read on the first ``min(L, 3)`` levels (``logodds``, ``uidx``, offsets ``i0``, ``j0``: 3-tuples, padded).
-    Returns (packed path taken — False when the values would not fit, then only the last five outputs are set;
-    track ids, cell keys, (m, 2) cells, log-odds before, update index before (0, −1 outside a level's array and on
-    levels ≥ 3), level bounds (L + 1,), per track whether a kept beam of it is left, with ``want_kb`` the kept beams
-    and their per-track bounds (:func:`kept_beams`), the kept-beam mask (n,), the distinct track ids ``uids``
-    ascending, kept beams per distinct track, the tracks' ends in ``beams`` (T + 1,))."""
-    packed, params, valid, counts, uids, ends = _track_points(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin,
-                                                              rmax, c, s, px, py, rs)
+    (:func:`beam_owners`; ``idl`` (2T,): the T tracks' ids, then their numbers of beams — track ``t`` lists the next
+    ``idl[T + t]`` of ``beams``), the kept beams' points packed (:func:`scan_cells`; levels of cell side ``rs``),
+    sorted, decoded (:func:`unpack_cells`) and their cells read on the first ``min(L, 3)`` levels (``logodds``,
+    ``uidx``, offsets ``i0``, ``j0``: 3-tuples, padded). Returns (status — :data:`PACKED`, or :data:`NO_KEPT` /
+    :data:`PLAIN` with the other outputs empty; the cells as a (6, m) block of rows: track id, cell key, cell i,
+    cell j, update index before (−1 outside a level's array and on levels ≥ 3, which the caller reads) and the
+    float64 bits of the log-odds before (0 there); ``small``: the level bounds (L + 1,), per track whether a kept
+    beam of it is left (T,: 0 / 1) and, with ``want_kb``, the kept beams' per-track bounds (T + 1,); with
+    ``want_kb`` the kept beams (:func:`kept_beams`), else empty)."""
+    n_t = idl.shape[0] // 2
+    ids = idl[:n_t].copy()
+    packed, params, valid, counts, uids, ends = _track_points(beams, idl[n_t:], ids, r, cos_a, sin_a, vm, removed,
+                                                              rmin, rmax, c, s, px, py, rs)
     n_lv = rs.shape[0]
     if params.shape[0] == 0:
-        e = np.zeros(0, dtype=np.int64)
-        return (False, e, e, np.zeros((0, 2), dtype=np.int64), np.zeros(0), e, e, np.zeros(0, dtype=np.bool_),
-                np.zeros(0, dtype=np.int32), e, valid, uids, counts, ends)
+        status = PLAIN
+        if counts.shape[0] == 0 or counts.max() == 0:
+            status = NO_KEPT
+        return (status, np.zeros((6, 0), dtype=np.int64), np.zeros(0, dtype=np.int64),
+                np.zeros(0, dtype=np.int32))
     _radix_sort(packed)
     out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b = _read_levels(
         packed, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, valid, beams, ends, want_kb)
-    return True, out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b, valid, uids, counts, ends
+    m = out_ids.shape[0]
+    blk = np.empty((6, m), dtype=np.int64)
+    lob = lo.view(np.int64)
+    for t in range(m):
+        blk[0, t] = out_ids[t]
+        blk[1, t] = keys[t]
+        blk[2, t] = cells[t, 0]
+        blk[3, t] = cells[t, 1]
+        blk[4, t] = ui[t]
+        blk[5, t] = lob[t]
+    n_kb = kb_b.shape[0]
+    small = np.empty(n_lv + 1 + n_t + n_kb, dtype=np.int64)
+    for k in range(n_lv + 1):
+        small[k] = bounds[k]
+    for t in range(n_t):
+        small[n_lv + 1 + t] = 1 if present[t] else 0
+    for t in range(n_kb):
+        small[n_lv + 1 + n_t + t] = kb_b[t]
+    return PACKED, blk, small, kb
 
 
 _ROWS_SIG = types.Tuple((types.int64[:, ::1], _I1, _I1, _I1))(
-    _LO3, _UI3, _IT3, _IT3, types.int64, _I1, _I1, types.int64[:, ::1], _F1, _I1, _I1)
+    _LO3, _UI3, _IT3, _IT3, types.int64, types.int64[:, ::1], _I1)
 
 
 @njit(_ROWS_SIG, cache=True)
-def level_rows(logodds, uidx, i0, j0, n_lv, ids, keys, cells, before, ub, bounds):  # pragma: no cover - numba
+def level_rows(logodds, uidx, i0, j0, n_lv, blk, small):  # pragma: no cover - numba
     """:func:`update_rows` of every level (``n_lv`` ≤ 3) in one call, the cells re-read after the map update from
     the levels' current arrays and offsets (a level may have grown), the rows written in (track id, level) order:
     ((5, m) rows: key, update index before, after, added log-odds' bits and the row's level; per track with rows,
     in id order: its id (T,), its rows' column bounds (T + 1,: track ``t``'s rows are ``[b[t], b[t + 1])``, its
     levels' rows one after the other) and the levels it has rows on (T,: bit ``k`` for level ``k``)). A track's
-    rows of one level are the rows :func:`update_rows` gives it on that level, in the same order. The cells of
-    level ``k`` are ``bounds[k]:bounds[k + 1]`` of ``ids``, ``keys``, ``cells``, ``before`` and ``ub`` (what
-    :func:`record_cells` read), sorted by track id within a level. (Pass ledger14: one column range per track, so
-    that the ledger settles an update's rows of a track with one slice, slam/erasure.py ``_Ledger.settle``.)"""
-    n = ids.shape[0]
+    rows of one level are the rows :func:`update_rows` gives it on that level, in the same order. ``blk`` and
+    ``small`` are what :func:`record_cells` returned (the cells of level ``k`` are columns ``small[k]:small[k + 1]``
+    of ``blk``, sorted by track id within a level). (Pass ledger14: one column range per track, so that the ledger
+    settles an update's rows of a track with one slice, slam/erasure.py ``_Ledger.settle``.)"""
+    n = blk.shape[1]
+    ids = blk[0]
+    keys = blk[1]
+    ub = blk[4]
+    before = blk[5].copy().view(np.float64)
     delta = np.empty(n)
     ua = np.empty(n, dtype=np.int64)
     # groups (a track's updated rows on one level), level by level, each level's in id order: id, the input
@@ -525,9 +556,9 @@ def level_rows(logodds, uidx, i0, j0, n_lv, ids, keys, cells, before, ub, bounds
         cj0 = j0[k]
         lg[k] = g
         first = True
-        for t in range(bounds[k], bounds[k + 1]):
-            col = cells[t, 0] - ci0
-            row = cells[t, 1] - cj0
+        for t in range(small[k], small[k + 1]):
+            col = blk[2, t] - ci0
+            row = blk[3, t] - cj0
             after = 0.0
             v = -1
             if col >= 0 and row >= 0 and col < w and row < h:
