@@ -194,7 +194,10 @@ def main() -> None:
             print(f"{name}: match_multires µs per call, other {mo:.0f}, this {mt:.0f} (×{mt / mo:.2f}); "
                   f"results {'identical' if same else 'DIFFERENT'}")
         if "ledger" in args.part:
-            parts = ledger_ab(scans, other_module(args.other, "slam/erasure.py", "other_erasure"))
+            other_erasure = other_module(args.other, "slam/erasure.py", "other_erasure")
+            if hasattr(other_erasure, "_lk"):  # (its own kernels: the two checkouts' kernels may differ in arguments)
+                other_erasure._lk = other_module(args.other, "slam/ledgerkernels.py", "other_ledgerkernels")
+            parts = ledger_ab(scans, other_erasure)
             o, t = sum(v[0] for v in parts.values()), sum(v[1] for v in parts.values())
             detail = ", ".join(f"{m} {a:.3f} → {b:.3f}" for m, (a, b) in parts.items())
             print(f"{name}: ledger ms per scan other → this: {o:.3f} → {t:.3f} (×{t / o:.2f}); {detail}; "

@@ -258,3 +258,57 @@ def test_ledger_records_the_same_rows_through_the_fused_and_the_level_by_level_p
             for x, y in ((ra.key, rb.key), (ra.delta, rb.delta), (ra.pure, rb.pure), (ra.last, rb.last)):
                 assert np.array_equal(x, y)
     assert cells > 100 and a.summary() == b.summary()
+
+
+def _room_tracks(stamp: float) -> list:
+    from dynslam2d.types import Box, Track
+
+    return [Track(id=tid, state="confirmed", stamp=stamp, box=Box(1.0, 0.5, 0.0, 0.4, 0.4), velocity=np.zeros(2),
+                  covariance=np.eye(4), age=1.0, hits=1, misses=0, kind="rect", in_m=False, m_reason="", beams=beams,
+                  n_points=int(beams.shape[0]))
+            for tid, beams in ((7, np.arange(100, 160)), (2, np.arange(400, 430)))]
+
+
+def test_before_update_reads_each_maps_own_cell_sides() -> None:
+    """One ledger used with two maps of other resolutions (pass ledger15 keeps the levels' cell sides per map): the
+    second map's cells are those a fresh ledger reads on it; the scan's cached valid mask (handed to the kernel
+    without a copy) is left as it was."""
+    from conftest import paper_room_scan
+
+    from dynslam2d.detect.memoryconfig import MemoryConfig
+    from dynslam2d.slam import HectorSlam, SlamConfig
+    from dynslam2d.slam.erasure import EvidenceLedger
+    from dynslam2d.types import Pose2D
+
+    maps = [HectorSlam(SlamConfig(map_resolution=r)) for r in (0.05, 0.07)]
+    pose = Pose2D(0.3, -0.4, 0.2)
+    scan = paper_room_scan(pose)
+    for slam in maps:
+        slam.update_map(scan, Pose2D(), force=True)
+    mask = scan.valid_view().copy()
+    removed = np.zeros(scan.ranges.shape[0], dtype=bool)
+    cfg = MemoryConfig()
+    reused = EvidenceLedger(cfg, 0.1, 30.0)
+    reused.before_update(scan, pose, _room_tracks(0.0), removed, maps[0].map)
+    got = reused.before_update(scan, pose, _room_tracks(0.0), removed, maps[1].map).fused
+    want = EvidenceLedger(cfg, 0.1, 30.0).before_update(scan, pose, _room_tracks(0.0), removed, maps[1].map).fused
+    first = EvidenceLedger(cfg, 0.1, 30.0).before_update(scan, pose, _room_tracks(0.0), removed, maps[0].map).fused
+    assert got[0].shape[1] > 50 and np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+    assert not np.array_equal(got[0][2:4], first[0][2:4])  # (other cells on the other map)
+    assert np.array_equal(scan.valid_view(), mask)
+
+
+def test_erase_entering_without_a_track_in_the_removal_set_does_nothing() -> None:
+    """An empty removal set returns at once (pass ledger15): nothing erased, no ledger started or changed; the
+    same track in the set starts its stay (``m_start``)."""
+    from dynslam2d.detect.memoryconfig import MemoryConfig
+    from dynslam2d.slam import HectorSlam, SlamConfig
+    from dynslam2d.slam.erasure import EvidenceLedger
+
+    slam = HectorSlam(SlamConfig())
+    led = EvidenceLedger(MemoryConfig(), 0.1, 30.0)
+    tracks = _room_tracks(0.0)
+    led.observe(tracks, set(), 0.0)
+    assert led.erase_entering(tracks, set(), 0.0, slam.map) == 0 and not led._ledgers
+    assert led.erase_entering(tracks, {7}, 0.1, slam.map) == 0
+    assert set(led._ledgers) == {7} and led._ledgers[7].m_start == (1.0, 0.5)

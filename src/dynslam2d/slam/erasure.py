@@ -572,9 +572,10 @@ class EvidenceLedger:
         # ranges, not removed), their map-frame points (the values of pose.transform_points), every point's
         # (level, track, cell) packed and sorted, the distinct ones no unowned point shares decoded and their cells
         # read on (up to) three levels, which tracks keep beams and, for the loop closer, their kept beams
-        status, blk, small, kb_all = lk.record_cells(allb, idl, scan.ranges, *scan.trig(), scan.valid_mask(), removed,
-                                                     self.laser_min_dist, self.laser_max_dist, c, s, float(pose.x),
-                                                     float(pose.y), rs, *_level_arrays(levels), want_kb)
+        # (the scan's own valid mask, not a copy: the kernel only reads it)
+        status, blk, small, kb_all = lk.record_cells(allb, idl, scan.ranges, *scan.trig(), scan.valid_view(),
+                                                     removed, self.laser_min_dist, self.laser_max_dist, c, s,
+                                                     float(pose.x), float(pose.y), rs, *_level_arrays(levels), want_kb)
         if status == 0:  # (ledgerkernels.PACKED)
             if n_lv > _FUSED:  # (levels beyond the fused kernel's three)
                 bf = blk[5].view(np.float64)
@@ -620,7 +621,7 @@ class EvidenceLedger:
         r = scan.ranges
         cos_a, sin_a = scan.trig()
         # (the kernel's test: valid, laser_min_dist < r < laser_max_dist, not removed; NaN compares False)
-        valid = scan.valid_mask() & (r > self.laser_min_dist) & (r < self.laser_max_dist) & ~removed
+        valid = scan.valid_view() & (r > self.laser_min_dist) & (r < self.laser_max_dist) & ~removed
         owner = beam_owners(r.shape[0], allb, ends, ids)
         idx = np.flatnonzero(valid)
         own = owner[idx]
@@ -845,7 +846,7 @@ class EvidenceLedger:
         """Erase the evidence of every live track in the removal set ``removing`` (ids) that has moved
         ``erase_min_travel`` from where it was first removed, with the evidence of ended tracks that stood
         where it was first seen. Returns the number of cells changed on the finest level."""
-        if not self.config.erase:
+        if not self.config.erase or not removing:  # (no track in the removal set: nothing to erase or to start)
             return 0
         changed = 0
         for t in tracks:
