@@ -25,6 +25,7 @@ from dynslam2d.detect.kernels import (
     mask_fractions,
     measure_batch,
     merge_leg_pairs,
+    merge_legs,
     segment_means,
     world_points,
 )
@@ -391,6 +392,15 @@ def test_merge_leg_pairs_matches_the_numpy_merge() -> None:
     want = _merge_numpy(first, second, px, py, beams, starts, npts, kinds, fits, lohi, rel)
     for g, w in zip(got, want):
         assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes()
+    # the tracker's one-dispatch form: leg_pairs' pairs, then the same merged arrays
+    both = merge_legs(px, py, beams, starts, npts, kinds, fits, lohi, rel, 0.35, 0.6)
+    assert len(both) == 12 and both[0].tolist() == first.tolist() and both[1].tolist() == second.tolist()
+    for g, w in zip(both[2:], want):
+        assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes()
+    # no pair within reach: the argument arrays themselves come back, with empty pairs, indices and beams
+    none = merge_legs(px, py, beams, starts, npts, kinds, fits, lohi, rel, 0.35, 0.0)
+    assert none[0].shape == none[1].shape == none[2].shape == none[11].shape == (0,)
+    assert all(a is b for a, b in zip(none[3:11], (kinds, fits, lohi, rel, starts, npts, px, py)))
 
 
 def test_lu_solve3_matches_lapack_and_flags_singular() -> None:

@@ -44,8 +44,10 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.freespace._ref_arrays',
      "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, "
      'float64,)'),
-    ('dynslam2d.detect.kernels.leg_pairs',
-     "(Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), float64, float64,)"),
+    ('dynslam2d.detect.kernels.merge_legs',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
+     "Array(int64, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
+     "Array(bool, 3, 'C'), float64, float64,)"),
     ('dynslam2d.detect.kernels.measure_batch',
      "(Array(int64, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), "
@@ -140,8 +142,4 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), float64, float64, float64, float64, Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64, "
      'bool, float64, float64,)'),
-    ('dynslam2d.detect.kernels.merge_leg_pairs',
-     "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int8, 1, 'C'), "
-     "Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(bool, 3, 'C'),)"),
 )

@@ -263,7 +263,7 @@ def mask_fractions(masks: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # (inlined into merge_legs: compiled once there)
 def merge_leg_pairs(first: np.ndarray, second: np.ndarray, px: np.ndarray, py: np.ndarray, beams: np.ndarray,
                     starts: np.ndarray, npts: np.ndarray, kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray,
                     rel: np.ndarray) -> tuple:
@@ -352,6 +352,22 @@ def merge_leg_pairs(first: np.ndarray, second: np.ndarray, px: np.ndarray, py: n
         lohi2[row, L_HI1] = hi0
         lohi2[row, L_HI2] = hi1
     return ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams
+
+
+@njit(cache=True)
+def merge_legs(px: np.ndarray, py: np.ndarray, beams: np.ndarray, starts: np.ndarray, npts: np.ndarray,
+               kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray, leg_max_extent: float,
+               pair_distance: float) -> tuple:
+    """``Tracker._merge_legs``'s two kernels in one dispatch (docs/speed.md, pass detp5): the pairs of
+    :func:`leg_pairs` (``leg_max_extent``, ``pair_distance``; m) and, when there is one, :func:`merge_leg_pairs` of
+    them. Returns (first, second) followed by :func:`merge_leg_pairs`' ten results; without a pair the argument arrays
+    themselves (numba returns an argument as its own Python object) and empty index / beam arrays."""
+    first, second = leg_pairs(lohi, npts, fits, leg_max_extent, pair_distance)
+    if first.shape[0] == 0:
+        return first, second, first, kinds, fits, lohi, rel, starts, npts, px, py, first
+    ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams = merge_leg_pairs(
+        first, second, px, py, beams, starts, npts, kinds, fits, lohi, rel)
+    return first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams
 
 
 @njit(cache=True)
@@ -981,7 +997,7 @@ def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.n
     return d2, near, ok
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # (inlined into merge_legs: compiled once there)
 def leg_pairs(lohi: np.ndarray, npts: np.ndarray, fits: np.ndarray, leg_max_extent: float,
               pair_distance: float) -> tuple:
     """The pairs of legs that ``Tracker._merge_legs`` merges into people, in one pass (map frame, m).

@@ -10,9 +10,8 @@ import numpy as np
 
 from dynslam2d.detect.kernels import (
     classify_batch,
-    leg_pairs,
     measure_batch,
-    merge_leg_pairs,
+    merge_legs,
     select_detections,
     world_points,
 )
@@ -136,14 +135,13 @@ class TrackDetect:
         detection, measured at the middle of the two legs with the point model. A leg swinging forward while
         the other stands does not move the person's centre by a full stride, so its speed does not jump.
         Returns the detection list and the per-detection batch arrays, merged pairs appended at the end (the
-        arrays by :func:`dynslam2d.detect.kernels.merge_leg_pairs`; ``beams``: the beams of ``px``, ``py``)."""
+        pairs and arrays by :func:`dynslam2d.detect.kernels.merge_legs`; ``beams``: the beams of ``px``, ``py``)."""
         fc = self.config.fit
-        first, second = leg_pairs(lohi, npts, fits, float(fc.leg_max_extent), float(fc.leg_pair_distance))
+        first, second, ki, kinds, fits, lohi, rel, starts, npts, px, py, mbeams = merge_legs(
+            px, py, beams, starts, npts, kinds, fits, lohi, rel, float(fc.leg_max_extent), float(fc.leg_pair_distance))
         m = first.shape[0]
-        if m == 0:
+        if m == 0:  # (the arrays are the arguments themselves)
             return dets, kinds, fits, lohi, rel, starts, npts, px, py
-        ki, kinds, fits, lohi, rel, starts, npts, px, py, mbeams = merge_leg_pairs(
-            first, second, px, py, beams, starts, npts, kinds, fits, lohi, rel)
         new_dets = [dets[j] for j in ki.tolist()]
         row = len(new_dets)
         n0 = px.shape[0] - mbeams.shape[0]
