@@ -31,9 +31,9 @@ import math
 from typing import Literal
 
 import numpy as np
-from numba import njit
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.types import Pose2D, Scan
 
 FilterMode = Literal["none", "fixed", "adaptive", "box"]

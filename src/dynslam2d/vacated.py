@@ -17,9 +17,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from dynslam2d.detect.mapevidence import MapView, VacatedHistory, VacatedOutlines, vacated_core, yielding_view
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.slam.cleanconfig import CleanConfig
 from dynslam2d.slam.cleanup import _scan_geometry
 from dynslam2d.types import Pose2D, Scan

@@ -19,10 +19,10 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from dynslam2d.detect.frozen import fast_init
 from dynslam2d.detect.kernels import seen_through_refs
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.types import Pose2D, Scan, wrap_angle
 
 

@@ -19,7 +19,6 @@ import math
 
 import llvmlite.ir as _lir
 import numpy as np
-from numba import njit
 from numba.core import types as _nbtypes
 from numba.extending import intrinsic as _intrinsic
 
@@ -50,6 +49,7 @@ from dynslam2d.detect.layout import (
 from dynslam2d.detect.mapevidence import map_evidence_kernel
 from dynslam2d.detect.shapes import circle_center_fixed_radius
 from dynslam2d.detect.vehicles import _admit_long
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
 # indices into the fit-parameter array
 _P_POINT_MAX_POINTS = 0

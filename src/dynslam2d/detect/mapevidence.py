@@ -25,7 +25,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
 
 @dataclass(frozen=True, slots=True, eq=False)

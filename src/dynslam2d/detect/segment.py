@@ -21,10 +21,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from dynslam2d.detect.config import SegmentConfig
 from dynslam2d.detect.frozen import fast_init
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.types import Scan
 
 

@@ -20,7 +20,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from dynslam2d.detect.layout import (
     F_CENTROID_X,
@@ -32,6 +31,7 @@ from dynslam2d.detect.layout import (
     F_THETA,
     N_FIT_COLS,
 )
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
 CRITERIA = {"area": 0, "closeness": 1, "variance": 2}
 

@@ -19,11 +19,11 @@ Frames: map frame; units m.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.layout import F_HI1, F_HI2, F_LO1, F_LO2
 from dynslam2d.detect.mapevidence import MapView, map_evidence_kernel
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
 
 def extent_limit(config: DetectConfig) -> float:

@@ -20,9 +20,9 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
 from dynslam2d.gridmap import GridMap
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.types import Pose2D
 
 #: Label of a beam that hit static structure (per-beam ground-truth labels).

@@ -67,9 +67,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
 from dynslam2d.gridmap import GridMap
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.slam.cleanconfig import CleanConfig
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.types import Pose2D, Scan

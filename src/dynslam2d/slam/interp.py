@@ -9,7 +9,8 @@ out-of-bounds points get value 0 and gradient 0, as in the reference.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
 
 @njit(cache=True)

@@ -33,7 +33,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, types
+from numba import types
+
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
 _KEY_SHIFT = 4294967296
 #: packed values must stay below this (they are int64)

@@ -20,10 +20,11 @@ import math
 
 import numpy as np
 from llvmlite import ir as _lir
-from numba import njit
 from numba import types as _nbtypes
 from numba.core import cgutils
 from numba.extending import intrinsic as _intrinsic
+
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
 #: placeholders of the inputs :func:`_rays` does not use on a call (its other way of giving the rays)
 _NO_ENDS = np.zeros((2, 0))

@@ -1,0 +1,61 @@
+"""numba's boxing of returned arrays without a per-array unpickle, and ``njit`` for the kernel modules.
+
+numba (0.54 and later, ``numba.core.boxing.box_array``) hands every NumPy array a compiled function returns to
+Python through ``PythonAPI.nrt_adapt_ndarray_to_python``, which embeds the array's Python class (``np.ndarray``)
+as pickled bytes and calls ``numba.core.serialize._numba_unpickle`` at run time, once per returned array: two
+bytes objects, an int and a Python call to a memo lookup, 0.2–0.5 µs (docs/speed.md, pass unpickle). The
+pipeline's kernels return about 86 arrays per scan. :func:`box_arrays_from_env` registers a boxer that reads the
+class from the compiled function's environment constants instead (a list look-up, as numba already does for the
+array's dtype): the same array object, no Python call. It changes only how kernels compiled after it box their
+returned arrays; the kernel modules import ``njit`` from here so that it is in place before any kernel compiles,
+and the numba cache keys entries by the source file, so those modules' kernels are compiled again with it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from numba import njit  # noqa: F401 - re-exported: the kernel modules' njit, with the boxer below in place
+from numba.core import boxing, pythonapi, types
+
+
+def _box_array_from_env(typ: Any, val: Any, c: Any) -> Any:
+    """numba's ``box_array`` (NRT path), with the array's Python class read from the environment's constants.
+
+    ``NRT_adapt_ndarray_to_python_acqref`` borrows the class (``PyArray_NewFromDescr`` does not steal it), and
+    ``read_const`` returns a borrowed reference, as for the dtype on the line before."""
+    if not c.context.enable_nrt:
+        return boxing.box_array(typ, val, c)
+    from llvmlite import ir
+    from numba.np import numpy_support
+
+    np_dtype = numpy_support.as_dtype(typ.dtype)
+    dtypeptr = c.env_manager.read_const(c.env_manager.add_const(np_dtype))
+    pytype = c.env_manager.read_const(c.env_manager.add_const(typ.box_type))
+    api = c.pyapi
+    intty = ir.IntType(32)
+    fnty = ir.FunctionType(api.pyobj, [api.voidptr, api.pyobj, intty, intty, api.pyobj])
+    fn = api._get_function(fnty, name="NRT_adapt_ndarray_to_python_acqref")
+    fn.args[0].add_attribute("captures(none)")
+    ndim = c.context.get_constant(types.int32, typ.ndim)
+    writable = c.context.get_constant(types.int32, int(typ.mutable))
+    aryptr = c.builder.alloca(val.type)
+    c.builder.store(val, aryptr)
+    newary = c.builder.call(fn, [c.builder.bitcast(aryptr, api.voidptr), pytype, ndim, writable, dtypeptr])
+    c.context.nrt.decref(c.builder, typ, val)  # NRT_adapt... acquired its own reference (numba's box_array)
+    return newary
+
+
+def box_arrays_from_env() -> bool:
+    """Register :func:`_box_array_from_env` as numba's boxer of arrays (``types.Array``) in this process.
+
+    Returns whether it did; does nothing when called again or when numba's registry differs."""
+    registry = getattr(pythonapi, "_boxers", None)
+    functions = getattr(registry, "functions", None)
+    if not isinstance(functions, dict) or functions.get(types.Array) is not boxing.box_array:
+        return False
+    functions[types.Array] = _box_array_from_env
+    return True
+
+
+box_arrays_from_env()
