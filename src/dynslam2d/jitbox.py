@@ -27,6 +27,7 @@ def _box_array_from_env(typ: Any, val: Any, c: Any) -> Any:
     if not c.context.enable_nrt:
         return boxing.box_array(typ, val, c)
     from llvmlite import ir
+    from numba.core import cgutils
     from numba.np import numpy_support
 
     np_dtype = numpy_support.as_dtype(typ.dtype)
@@ -35,12 +36,12 @@ def _box_array_from_env(typ: Any, val: Any, c: Any) -> Any:
     api = c.pyapi
     intty = ir.IntType(32)
     fnty = ir.FunctionType(api.pyobj, [api.voidptr, api.pyobj, intty, intty, api.pyobj])
+    # numba also marks the first argument as not captured; that hint's spelling differs between llvmlite
+    # versions ("nocapture", "captures(none)"), and the call is the same without it.
     fn = api._get_function(fnty, name="NRT_adapt_ndarray_to_python_acqref")
-    fn.args[0].add_attribute("captures(none)")
     ndim = c.context.get_constant(types.int32, typ.ndim)
     writable = c.context.get_constant(types.int32, int(typ.mutable))
-    aryptr = c.builder.alloca(val.type)
-    c.builder.store(val, aryptr)
+    aryptr = cgutils.alloca_once_value(c.builder, val)
     newary = c.builder.call(fn, [c.builder.bitcast(aryptr, api.voidptr), pytype, ndim, writable, dtypeptr])
     c.context.nrt.decref(c.builder, typ, val)  # NRT_adapt... acquired its own reference (numba's box_array)
     return newary
