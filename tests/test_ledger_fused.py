@@ -186,9 +186,11 @@ def test_level_rows_equal_update_rows_per_level(seed: int) -> None:
     # level bounds, then values level_rows must not read)
     blk = np.ascontiguousarray(np.vstack((cat[0], cat[1], cat[2].T, cat[4], cat[3].view(np.int64))))
     small = np.concatenate((bounds, [1, 0, 1, 5, 9]))
+    blk_before = blk.copy()
     rows, t_id, t_bnd, t_lv = lk.level_rows(
         tuple(lv[0] for lv in levels_after), tuple(lv[1] for lv in levels_after), tuple(lv[2] for lv in levels_after),
         tuple(lv[3] for lv in levels_after), n_lv, blk, small)
+    assert np.array_equal(blk, blk_before)  # (it reads the log-odds before through a view of the block: not written)
     groups = []  # (track id, level, its rows) from update_rows, level by level
     for k, ((lo2, ui2, i0, j0), (ids, keys, cells, before, ub)) in enumerate(zip(levels_after, per)):
         f = lk.read_cells(lo2, ui2, cells, i0, j0)[2]

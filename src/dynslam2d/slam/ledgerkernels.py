@@ -539,7 +539,7 @@ def level_rows(logodds, uidx, i0, j0, n_lv, blk, small):  # pragma: no cover - n
     ids = blk[0]
     keys = blk[1]
     ub = blk[4]
-    before = blk[5].copy().view(np.float64)
+    before = blk[5].view(np.float64)  # (a view of the block's row: only read; pass ledger16 dropped its copy)
     delta = np.empty(n)
     ua = np.empty(n, dtype=np.int64)
     # groups (a track's updated rows on one level), level by level, each level's in id order: id, the input

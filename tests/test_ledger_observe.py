@@ -1,0 +1,236 @@
+"""``EvidenceLedger.observe`` (slam/erasure.py; pass ledger16 made it cheaper per scan) against a frozen copy of
+pass ledger15's version, on random track sequences: births, ends (tentative and confirmed, with and without
+pending rows), standing and moving tracks, tracks in and out of the removal set, ledgers started before and
+after a track's first report, stays in the removal set, repeated ids in one scan's list. After every scan the
+two ledgers' whole state must be the same: each live track's standing box (in the dict's order), every ledger's
+fields, the ended ledgers in order (the order of linked erasures) with their packed rows, the oldest ended stamp
+and the counters."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dynslam2d.detect.memoryconfig import MemoryConfig
+from dynslam2d.slam import erasure as er
+from dynslam2d.slam.erasure import EvidenceLedger
+from dynslam2d.types import Box, Track
+
+
+def _observe_ref(self: EvidenceLedger, tracks: list, removing: set, stamp: float) -> None:
+    """``EvidenceLedger.observe`` as pass ledger15 left it (the specification)."""
+    reach = self.config.link_margin + 0.5
+    stand = self.config.stand_speed
+    first = self._first
+    ledgers = self._ledgers
+    hypot = math.hypot
+    for t in tracks:
+        tid = t.id
+        a = first.get(tid)
+        out = tid not in removing
+        if a is None:
+            first[tid] = [er._box_key(t), stamp, stamp]
+        elif out and hypot(*t.velocity.tolist()) < stand:
+            b, f = t.box, a[0]
+            if hypot(b.px - f[0], b.py - f[1]) <= reach:
+                a[2] = stamp
+            else:
+                first[tid] = [er._box_key(t), stamp, stamp]
+        if out:
+            led = ledgers.get(tid)
+            if led is not None:
+                if led.m_start is not None:
+                    led.m_start, led.skip, led.linked = None, False, False
+                led.last_track = t
+                led.last_seen = stamp
+                if not led.confirmed and t.state != "tentative":
+                    led.confirmed = True
+    live = {t.id for t in tracks}
+    if len(first) > len(live):
+        self._first = {tid: b for tid, b in first.items() if tid in live}
+    for tid in [i for i in ledgers if i not in live]:
+        led = ledgers.pop(tid)
+        if led.last_track is not None:
+            led.last_box = er._box_key(led.last_track)
+        if led.confirmed:
+            led.pack()
+            self._ended[tid] = led
+            self._oldest_ended = min(self._oldest_ended, led.last_seen)
+        else:
+            self._drop(led)
+    keep = self.config.ledger_keep_s
+    if self._ended and stamp - self._oldest_ended > keep:
+        for tid in [i for i, led in self._ended.items() if stamp - led.last_seen > keep]:
+            self._drop(self._ended.pop(tid))
+        self._oldest_ended = min((led.last_seen for led in self._ended.values()), default=math.inf)
+
+
+def _new_ledger_ref(self: EvidenceLedger, t: Track, stamp: float, n_levels: int) -> er._Ledger:
+    """``EvidenceLedger._new_ledger`` as pass ledger15 left it."""
+    here = er._box_key(t)
+    box, t0, _ = self._first.get(t.id) or (here, stamp, stamp)
+    return er._Ledger(t.id, box, t0, here, stamp, None, n_levels, self.config.max_ledger_cells)
+
+
+def _track(tid: int, state: str, stamp: float, x: float, y: float, v: float, size: float) -> Track:
+    vel = np.array([v, 0.0]) if tid % 2 else np.array([0.0, -v])
+    return Track(id=tid, state=state, stamp=stamp, box=Box(x, y, 0.3, size, 0.5 * size), velocity=vel,
+                 covariance=np.eye(4), age=1.0, hits=1, misses=0, kind="rect", in_m=False,
+                 m_reason="", beams=np.zeros(0, dtype=np.int64), n_points=0)
+
+
+def _ledger_state(led) -> tuple:
+    """A ledger's fields; a live ledger's last report out of the removal set, its stamp and whether one was not
+    tentative as they stand (pass ledger16 keeps them in the track's standing entry, ``seen``, until it ends)."""
+    ent = [(r.tobytes(), r.shape, a, b, lv if type(lv) is int else tuple(lv)) for r, a, b, lv in led.ent]
+    last, seen, conf = led.last_track, led.last_seen, led.confirmed
+    a = getattr(led, "seen", None)
+    if a is not None:
+        if a[3] is not None:
+            last, seen = a[3], a[4]
+        conf = conf or a[5]
+    return (led.id, led.first_box, led.first_t, led.last_box, seen, led.m_start, led.linked, conf,
+            led.skip, id(last), ent, led.recs is None, led.nb_rows, led.nb_chunks)
+
+
+def _state(led: EvidenceLedger) -> tuple:
+    return ([(k, a[:3]) for k, a in led._first.items()], [(k, _ledger_state(v)) for k, v in led._ledgers.items()],
+            [(k, _ledger_state(v)) for k, v in led._ended.items()], led._oldest_ended, dict(led.stats))
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_observe_keeps_the_same_state_as_pass_ledger15s(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    cfg = MemoryConfig(ledger_keep_s=float(rng.choice([0.5, 2.0, 600.0])), link_margin=0.5, stand_speed=0.25)
+    new = EvidenceLedger(cfg, 0.1, 30.0)
+    ref = EvidenceLedger(cfg, 0.1, 30.0)
+    pool: dict[int, list] = {}  # id → [state, x, y, standing, size]
+    next_id = 1
+    stamp = 0.0
+    stand = cfg.stand_speed
+    reach = cfg.link_margin + 0.5
+    removing: set[int] = set()
+    blocks = [rng.integers(-50, 50, (5, 40)).astype(np.int64) for _ in range(4)]
+    for b in blocks:
+        b[4] = rng.integers(0, 3, 40)
+    n_scans = 160
+    seen_ended = 0
+    for scan in range(n_scans):
+        stamp += float(rng.choice([0.1, 0.1, 0.35]))
+        for tid in [i for i in pool if rng.random() < 0.08]:  # ends
+            del pool[tid]
+        for _ in range(int(rng.integers(0, 4))):  # births
+            x, y = rng.integers(-20, 20, 2) / 4
+            pool[next_id] = ["tentative", float(x), float(y), bool(rng.random() < 0.6), float(rng.uniform(0.2, 2.0))]
+            next_id += 1
+        tracks = []
+        for tid, p in pool.items():
+            if p[0] == "tentative" and rng.random() < 0.3:
+                p[0] = "confirmed"
+            elif p[0] != "tentative" and rng.random() < 0.1:
+                p[0] = "coasting" if p[0] == "confirmed" else "confirmed"
+            if rng.random() < 0.05:
+                p[3] = not p[3]
+            # positions on a 0.25 m grid, speeds and steps exactly at the limits too (reach = 1 m, stand = 0.25 m/s:
+            # both tests' boundaries are hit exactly)
+            if p[3]:  # standing: at most the speed limit, mostly within reach of where it stood
+                v = float(rng.choice([0.0, 0.125, stand]))
+                step = float(rng.choice([0.0, 0.25, reach, reach, reach + 0.25]))
+            else:
+                v, step = float(rng.choice([stand + 0.125, 1.0])), float(rng.choice([0.0, 0.5, 2.0]))
+            if rng.random() < 0.5:
+                p[1] += step * float(rng.choice([-1.0, 1.0]))
+            else:
+                p[2] += step * float(rng.choice([-1.0, 1.0]))
+            tracks.append(_track(tid, p[0], stamp, p[1], p[2], v, p[4]))
+        rng.shuffle(tracks)
+        if tracks and rng.random() < 0.1:
+            tracks.append(tracks[int(rng.integers(len(tracks)))])  # (an id listed twice)
+        # the removal set: mostly the same movers as before, some ids of ended tracks too
+        removing = {i for i in removing if rng.random() < 0.85} | {t.id for t in tracks if rng.random() < 0.06}
+        _observe_ref(ref, tracks, set(removing), stamp)
+        new.observe(tracks, set(removing), stamp)
+        assert _state(new) == _state(ref), scan
+        # after observe: ledgers started (before_update / erase_entering), stays in the removal set, rows recorded
+        for t in tracks:
+            r = rng.random()
+            u = float(rng.random())
+            for x, make in ((ref, _new_ledger_ref), (new, EvidenceLedger._new_ledger)):
+                led = x._ledgers.get(t.id)
+                if led is None and r < 0.25:
+                    x._ledgers[t.id] = led = make(x, t, t.stamp, 3)
+                if led is None:
+                    continue
+                if t.id in removing and led.m_start is None and u < 0.5:  # (as erase_entering starts a stay)
+                    led.m_start, led.skip, led.linked = (t.box.px, t.box.py), u < 0.2, u < 0.3
+                    x._stay.add(t.id)
+                if u < 0.4:
+                    k = int(4 * u / 0.4) % 4
+                    led.ent.append((blocks[k], 3 * k, 3 * k + 5 + k, 7))
+                    led.nb_rows += 5 + k
+                    led.nb_chunks += 1
+        assert _state(new) == _state(ref), scan
+        if rng.random() < 0.05:  # a ledger started before the track is first reported
+            early = _track(next_id, "confirmed", stamp, 0.0, 0.0, 0.0, 1.0)
+            ref._ledgers[next_id] = _new_ledger_ref(ref, early, stamp, 3)
+            new._ledgers[next_id] = new._new_ledger(early, stamp, 3)
+        seen_ended = max(seen_ended, len(new._ended))
+    assert new.stats["cells_recorded"] > 0 and seen_ended > 0  # (dropped ledgers counted, ended ones kept)
+
+
+def test_a_stay_that_erase_entering_starts_ends_when_the_track_is_out_of_the_set_again() -> None:
+    """``erase_entering`` starts a stay (``m_start``, ``skip``, ``linked``) that ``observe`` keeps while the track is
+    in the removal set and ends at its first report out of it (pass ledger16 finds those ledgers by ``_stay``)."""
+    from dynslam2d.slam import HectorSlam, SlamConfig
+
+    slam = HectorSlam(SlamConfig())
+    led = EvidenceLedger(MemoryConfig(), 0.1, 30.0)
+    led.observe([_track(7, "confirmed", 0.0, 1.0, 0.5, 0.0, 0.4)], set(), 0.0)
+    led.erase_entering([_track(7, "confirmed", 0.1, 1.0, 0.5, 0.0, 0.4)], {7}, 0.1, slam.map)
+    l7 = led._ledgers[7]
+    assert l7.m_start == (1.0, 0.5) and l7.skip and l7.linked  # (it did not stand long enough: its stay skips)
+    led.observe([_track(7, "confirmed", 0.2, 1.5, 0.5, 1.0, 0.4)], {7}, 0.2)
+    assert l7.m_start == (1.0, 0.5) and l7.skip and l7.linked
+    led.observe([_track(7, "confirmed", 0.3, 2.0, 0.5, 1.0, 0.4)], set(), 0.3)
+    assert l7.m_start is None and not l7.skip and not l7.linked and not led._stay
+    led.observe([], set(), 0.4)  # (it ends: its last report out of the set gives its last box and stamp)
+    assert led._ended[7] is l7 and l7.last_box == (2.0, 0.5, 0.2) and l7.last_seen == 0.3 and l7.seen is None
+
+
+def test_before_update_records_only_the_tracks_with_beams_in_their_order() -> None:
+    """``before_update`` hands the kernel the tracks that list beams (pass ledger16 collects them with
+    comprehensions): tracks without beams (None, empty) change nothing — the block, the small array and the kept
+    beams equal those of the tracks with beams alone — a track listing one beam is recorded, and ledgers start
+    only for tracks that keep a beam, with their kept beams."""
+    from conftest import paper_room_scan
+
+    from dynslam2d.slam import HectorSlam, SlamConfig
+    from dynslam2d.types import Pose2D
+
+    slam = HectorSlam(SlamConfig())
+    pose = Pose2D(0.3, -0.4, 0.2)
+    scan = paper_room_scan(pose)
+    slam.update_map(scan, Pose2D(), force=True)
+    removed = np.zeros(scan.ranges.shape[0], dtype=bool)
+    removed[300:320] = True  # (track 5's beams: it keeps none)
+
+    def tr(tid: int, beams) -> Track:
+        t = _track(tid, "confirmed", 0.0, 1.0, 0.5, 0.0, 0.4)
+        return Track(**{**{f: getattr(t, f) for f in Track.__dataclass_fields__}, "beams": beams,
+                        "n_points": 0 if beams is None else len(beams)})
+
+    with_beams = [tr(9, np.arange(100, 160)), tr(4, np.array([200])), tr(5, np.arange(300, 320)),
+                  tr(2, np.arange(400, 430))]
+    mixed = [tr(1, None), with_beams[0], tr(3, np.zeros(0, dtype=np.int64)), *with_beams[1:], tr(8, None)]
+    got, want = (EvidenceLedger(MemoryConfig(), 0.1, 30.0, keep_beams=True) for _ in range(2))
+    p_got = got.before_update(scan, pose, mixed, removed, slam.map, 3)
+    p_want = want.before_update(scan, pose, with_beams, removed, slam.map, 3)
+    assert p_got.fused[0].shape[1] > 50 and np.array_equal(p_got.fused[0], p_want.fused[0])
+    assert np.array_equal(p_got.fused[1], p_want.fused[1])
+    assert 4 in p_got.fused[0][0] and 5 not in p_got.fused[0][0]  # (the one-beam track's cell, none of track 5)
+    assert list(got._ledgers) == [9, 4, 2]
+    assert [(i, b.tolist()) for i, b in got._ledgers[4].beams] == [(3, [200])]
+    assert got._ledgers[9].beams[0][1].tolist() == list(range(100, 160))
+    assert EvidenceLedger(MemoryConfig(), 0.1, 30.0).before_update(scan, pose, mixed[2:3], removed, slam.map) is None
