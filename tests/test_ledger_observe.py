@@ -1,5 +1,5 @@
-"""``EvidenceLedger.observe`` (slam/erasure.py; pass ledger16 made it cheaper per scan) against a frozen copy of
-pass ledger15's version, on random track sequences: births, ends (tentative and confirmed, with and without
+"""``EvidenceLedger.observe`` (slam/erasure.py; pass ledger16 unpacks each track's velocity) against a frozen copy
+of pass ledger15's version, on random track sequences: births, ends (tentative and confirmed, with and without
 pending rows), standing and moving tracks, tracks in and out of the removal set, ledgers started before and
 after a track's first report, stays in the removal set, repeated ids in one scan's list. After every scan the
 two ledgers' whole state must be the same: each live track's standing box (in the dict's order), every ledger's
@@ -67,13 +67,6 @@ def _observe_ref(self: EvidenceLedger, tracks: list, removing: set, stamp: float
         self._oldest_ended = min((led.last_seen for led in self._ended.values()), default=math.inf)
 
 
-def _new_ledger_ref(self: EvidenceLedger, t: Track, stamp: float, n_levels: int) -> er._Ledger:
-    """``EvidenceLedger._new_ledger`` as pass ledger15 left it."""
-    here = er._box_key(t)
-    box, t0, _ = self._first.get(t.id) or (here, stamp, stamp)
-    return er._Ledger(t.id, box, t0, here, stamp, None, n_levels, self.config.max_ledger_cells)
-
-
 def _track(tid: int, state: str, stamp: float, x: float, y: float, v: float, size: float) -> Track:
     vel = np.array([v, 0.0]) if tid % 2 else np.array([0.0, -v])
     return Track(id=tid, state=state, stamp=stamp, box=Box(x, y, 0.3, size, 0.5 * size), velocity=vel,
@@ -82,21 +75,13 @@ def _track(tid: int, state: str, stamp: float, x: float, y: float, v: float, siz
 
 
 def _ledger_state(led) -> tuple:
-    """A ledger's fields; a live ledger's last report out of the removal set, its stamp and whether one was not
-    tentative as they stand (pass ledger16 keeps them in the track's standing entry, ``seen``, until it ends)."""
     ent = [(r.tobytes(), r.shape, a, b, lv if type(lv) is int else tuple(lv)) for r, a, b, lv in led.ent]
-    last, seen, conf = led.last_track, led.last_seen, led.confirmed
-    a = getattr(led, "seen", None)
-    if a is not None:
-        if a[3] is not None:
-            last, seen = a[3], a[4]
-        conf = conf or a[5]
-    return (led.id, led.first_box, led.first_t, led.last_box, seen, led.m_start, led.linked, conf,
-            led.skip, id(last), ent, led.recs is None, led.nb_rows, led.nb_chunks)
+    return (led.id, led.first_box, led.first_t, led.last_box, led.last_seen, led.m_start, led.linked, led.confirmed,
+            led.skip, id(led.last_track), ent, led.recs is None, led.nb_rows, led.nb_chunks)
 
 
 def _state(led: EvidenceLedger) -> tuple:
-    return ([(k, a[:3]) for k, a in led._first.items()], [(k, _ledger_state(v)) for k, v in led._ledgers.items()],
+    return (list(led._first.items()), [(k, _ledger_state(v)) for k, v in led._ledgers.items()],
             [(k, _ledger_state(v)) for k, v in led._ended.items()], led._oldest_ended, dict(led.stats))
 
 
@@ -157,15 +142,14 @@ def test_observe_keeps_the_same_state_as_pass_ledger15s(seed: int) -> None:
         for t in tracks:
             r = rng.random()
             u = float(rng.random())
-            for x, make in ((ref, _new_ledger_ref), (new, EvidenceLedger._new_ledger)):
+            for x in (ref, new):
                 led = x._ledgers.get(t.id)
                 if led is None and r < 0.25:
-                    x._ledgers[t.id] = led = make(x, t, t.stamp, 3)
+                    x._ledgers[t.id] = led = x._new_ledger(t, t.stamp, 3)
                 if led is None:
                     continue
                 if t.id in removing and led.m_start is None and u < 0.5:  # (as erase_entering starts a stay)
                     led.m_start, led.skip, led.linked = (t.box.px, t.box.py), u < 0.2, u < 0.3
-                    x._stay.add(t.id)
                 if u < 0.4:
                     k = int(4 * u / 0.4) % 4
                     led.ent.append((blocks[k], 3 * k, 3 * k + 5 + k, 7))
@@ -174,7 +158,7 @@ def test_observe_keeps_the_same_state_as_pass_ledger15s(seed: int) -> None:
         assert _state(new) == _state(ref), scan
         if rng.random() < 0.05:  # a ledger started before the track is first reported
             early = _track(next_id, "confirmed", stamp, 0.0, 0.0, 0.0, 1.0)
-            ref._ledgers[next_id] = _new_ledger_ref(ref, early, stamp, 3)
+            ref._ledgers[next_id] = ref._new_ledger(early, stamp, 3)
             new._ledgers[next_id] = new._new_ledger(early, stamp, 3)
         seen_ended = max(seen_ended, len(new._ended))
     assert new.stats["cells_recorded"] > 0 and seen_ended > 0  # (dropped ledgers counted, ended ones kept)
@@ -182,7 +166,8 @@ def test_observe_keeps_the_same_state_as_pass_ledger15s(seed: int) -> None:
 
 def test_a_stay_that_erase_entering_starts_ends_when_the_track_is_out_of_the_set_again() -> None:
     """``erase_entering`` starts a stay (``m_start``, ``skip``, ``linked``) that ``observe`` keeps while the track is
-    in the removal set and ends at its first report out of it (pass ledger16 finds those ledgers by ``_stay``)."""
+    in the removal set and ends at its first report out of it; the track's last report out of the set gives the
+    ended ledger's last box and stamp."""
     from dynslam2d.slam import HectorSlam, SlamConfig
 
     slam = HectorSlam(SlamConfig())
@@ -194,9 +179,9 @@ def test_a_stay_that_erase_entering_starts_ends_when_the_track_is_out_of_the_set
     led.observe([_track(7, "confirmed", 0.2, 1.5, 0.5, 1.0, 0.4)], {7}, 0.2)
     assert l7.m_start == (1.0, 0.5) and l7.skip and l7.linked
     led.observe([_track(7, "confirmed", 0.3, 2.0, 0.5, 1.0, 0.4)], set(), 0.3)
-    assert l7.m_start is None and not l7.skip and not l7.linked and not led._stay
+    assert l7.m_start is None and not l7.skip and not l7.linked
     led.observe([], set(), 0.4)  # (it ends: its last report out of the set gives its last box and stamp)
-    assert led._ended[7] is l7 and l7.last_box == (2.0, 0.5, 0.2) and l7.last_seen == 0.3 and l7.seen is None
+    assert led._ended[7] is l7 and l7.last_box == (2.0, 0.5, 0.2) and l7.last_seen == 0.3
 
 
 def test_before_update_records_only_the_tracks_with_beams_in_their_order() -> None:
