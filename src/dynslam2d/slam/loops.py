@@ -51,6 +51,7 @@ import numpy as np
 
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.correlative import correlative_search, even_indices
+from dynslam2d.slam.graphdist import graph_distances
 from dynslam2d.slam.grid import GridLevel, MultiResMap
 from dynslam2d.slam.jumps import JumpCheck
 from dynslam2d.slam.loopconfig import LoopConfig
@@ -534,24 +535,13 @@ class LoopCloser:
         """((n_nodes,) summed translation deviation (m) of the edges on the graph's shortest path from
         ``node`` to every node (keyframe chain and accepted loops; inf beyond the far radius's cap),
         (n_nodes,) summed heading deviation (rad) of the edges on the path that minimises it)."""
-        # imported here: scipy.sparse costs start-up time and memory only a run that searches needs
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import dijkstra
-
         c = self.config
-        n = self.graph.n_nodes
-        out = []
         ij, weights = self._edges.arrays()
-        for col, limit in ((0, max(c.max_far_radius - c.search_radius, 0.0) / c.far_sigmas), (1, np.inf)):
-            if not ij.shape[0]:
-                d = np.full(n, np.inf)
-                d[node] = 0.0
-            else:
-                w = weights[:, col] + 1e-9  # csgraph drops zero weights
-                m = coo_matrix((w, (ij[:, 0], ij[:, 1])), shape=(n, n)).tocsr()
-                d = dijkstra(m, directed=False, indices=node, limit=limit)
-            out.append(d)
-        return out[0], out[1]
+        # both sums in one kernel call (the values of scipy.sparse.csgraph.dijkstra on the weights + 1e-9, row 0 up to
+        # the far radius's cap: slam/graphdist.py)
+        d = graph_distances(ij, weights, self.graph.n_nodes, node,
+                            max(c.max_far_radius - c.search_radius, 0.0) / c.far_sigmas)
+        return d[0], d[1]
 
     def _far_search(self, node: int, est: np.ndarray, pts: np.ndarray, skip: set[int],
                     allowed: np.ndarray | None = None, count: int | None = None) -> int:
