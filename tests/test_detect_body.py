@@ -167,3 +167,36 @@ def test_info_finds_the_body_in_a_bag_and_suggests_a_footprint(tmp_path, capsys)
     assert "cannot tell its body from a wall" in " ".join(out.split())
     code, out, _ = run_cli(capsys, "info", str(bag), "--json", "--body-scans", "0")
     assert "body" not in json.loads(out)
+
+
+def test_the_first_mask_is_the_scans_valid_mask_written_in_the_drop_pass() -> None:
+    """Pass rest18: ``mask`` on a scan without its valid mask yet has ``_drop_body`` write it (finite and within
+    [range_min, range_max], both limits included) and the scan keeps it; a scan holding its mask keeps that one; the
+    drops equal the array expressions' on both paths."""
+    rng = np.random.default_rng(3)
+    lo, hi = 0.1, 8.0
+    r = rng.uniform(0.0, 9.0, 400)
+    r[:12] = [np.nan, np.inf, -np.inf, lo, hi, np.nextafter(lo, 0.0), np.nextafter(hi, 9.0), 0.0, -1.0,
+              np.nextafter(lo, 1.0), np.nextafter(hi, 0.0), 0.3]
+    body = BodyFilter(FootprintConfig())
+    drop_r = np.where(rng.random(400) < 0.3, rng.uniform(0.0, 5.0, 400), 0.0)
+    drop_r[3] = drop_r[4] = drop_r[9] = drop_r[11] = 10.0  # (beams at and next to the limits are body beams)
+    tol = float(FootprintConfig().auto_tolerance)
+    for cached in (False, True):
+        scan = Scan(stamp=1.0, angle_min=-1.0, angle_increment=0.005, ranges=r.copy(), range_min=lo, range_max=hi)
+        held = scan.valid_view() if cached else None
+        body.mask(scan)  # (the first call makes the per-beam state: then the drop ranges are set)
+        body._drop_r = drop_r.copy()
+        scan = Scan(stamp=1.0, angle_min=-1.0, angle_increment=0.005, ranges=r.copy(), range_min=lo, range_max=hi)
+        if cached:
+            held = scan.valid_view()
+        assert scan.has_valid_mask() is cached
+        drop = body.mask(scan)
+        want = np.isfinite(r) & (r >= lo) & (r <= hi)
+        assert scan.has_valid_mask()
+        np.testing.assert_array_equal(scan.valid_view(), want)
+        assert want[3] and want[4] and not want[5] and not want[6]  # (both limits inside, one ulp out outside)
+        if cached:
+            assert scan.valid_view() is held
+        np.testing.assert_array_equal(drop, want & (drop_r > 0.0) & (r <= drop_r + tol))
+        assert drop[3] and drop[4] and not drop[5] and not drop[6]

@@ -240,3 +240,30 @@ def test_far_away_pose_cannot_exhaust_memory() -> None:
     # growth within the limit still works
     assert slam.update_map(scan_at(Pose2D(), 0.3), Pose2D(30.0, 0.0, 0.0), force=True)
     assert slam.memory_bytes > mem
+
+
+def test_the_points_a_map_update_integrates_are_always_finite() -> None:
+    """Pass rest18 dropped ``_integrate``'s finite test of every point: the points come from ``_gate`` (both callers),
+    which keeps only valid (finite, within the sensor's limits) returns times finite beam cosines and sines. Ranges
+    NaN, ±inf, negative, far beyond the sensor's limit and exactly at it, with laser_max_dist infinite: every point
+    finite, the map update the same as with the finite test."""
+    n = 361
+    r = np.linspace(0.5, 9.0, n)
+    r[::7] = np.nan
+    r[1::7] = np.inf
+    r[2::7] = -np.inf
+    r[3::7] = 1e308
+    r[4::7] = -1.0
+    r[5::7] = 30.0
+    for cfg in (SlamConfig(), SlamConfig(laser_max_dist=math.inf, clear_no_return_dist=0.0)):
+        slam = HectorSlam(cfg)
+        scan = Scan(stamp=0.0, angle_min=-math.pi, angle_increment=2.0 * math.pi / n, ranges=r, range_min=0.1,
+                    range_max=30.0)
+        pts, clear, *_ = slam._gate(scan, True)
+        assert pts.shape[0] > 0 and np.all(np.isfinite(pts)) and np.all(np.isfinite(clear))
+        assert slam.update_map(scan, Pose2D(0.3, -0.2, 0.4), force=True)
+        ref = HectorSlam(cfg)
+        ok = np.all(np.isfinite(pts), axis=1)
+        ref.map.integrate(Pose2D(0.3, -0.2, 0.4), pts[ok], clear if clear.shape[0] else None)
+        for a, b in zip(slam.map.levels, ref.map.levels):
+            assert np.array_equal(a.logodds, b.logodds) and (a.i0, a.j0) == (b.i0, b.j0)

@@ -12,8 +12,8 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(float64, float64, Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(int32, 1, 'C'), Array(float64, 2, 'C'), Array(int32, 1, 'C'), float64,)"),
     ('dynslam2d.detect.body._drop_body',
-     "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), float64, bool, Array(bool, 1, "
-     "'C'),)"),
+     "(Array(float64, 1, 'C'), float64, float64, Array(bool, 1, 'C'), bool, Array(float64, 1, 'C'), "
+     "float64, bool, Array(bool, 1, 'C'),)"),
     ('dynslam2d.slam.matcher.gated_points',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), float64, float64, float64, float64, float64, bool,)"),

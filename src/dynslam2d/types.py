@@ -234,6 +234,17 @@ class Scan:
             valid = self._valid
         return valid
 
+    def has_valid_mask(self) -> bool:
+        """Whether the scan holds its :meth:`valid_mask` already (computed by a first call, or adopted)."""
+        return self._valid is not None
+
+    def adopt_valid_mask(self, valid: np.ndarray) -> None:
+        """Keep ``valid`` as the scan's :meth:`valid_mask` (no limits): for a caller that computed exactly those values
+        in a pass of its own (:meth:`dynslam2d.detect.body.BodyFilter.mask`). ``valid`` must be a (n,) bool array that
+        nobody writes to afterwards; a mask the scan holds already is kept."""
+        if self._valid is None:
+            object.__setattr__(self, "_valid", valid)
+
     def points(self, mask: np.ndarray | None = None) -> np.ndarray:
         """(m, 2) Cartesian points in the sensor frame, m, of the beams in ``mask``
         (default: the valid beams). Paper Eq. 4: s_i = (r_i cos α_i, r_i sin α_i)."""

@@ -165,14 +165,20 @@ def _observe_beams(r, valid, max_range, tol, ref, seen, same_n, start, moved, bo
 
 
 @njit(cache=True)
-def _drop_body(ranges, valid, drop_r, tol, footprint, drop):  # pragma: no cover - numba
+def _drop_body(ranges, lo, hi, valid, fill, drop_r, tol, footprint, drop):  # pragma: no cover - numba
     """:meth:`BodyFilter.mask`'s automatic part, in place: a ``valid`` return on a beam with a drop range
     ``drop_r`` > 0 (m) is dropped when its range is at most ``drop_r + tol``; with a ``footprint`` only beams not
-    yet in ``drop``. Returns how many it dropped (the values of the array expressions it replaced)."""
+    yet in ``drop``. With ``fill`` it first writes ``valid`` itself: :meth:`Scan.valid_mask` of ``ranges`` with the
+    sensor limits ``lo``, ``hi`` (m; finite and within [lo, hi], the same tests as its array expression), in the
+    same pass (the scan's first mask: one call instead of five NumPy operations, pass rest18). Returns how many it
+    dropped (the values of the array expressions it replaced)."""
     count = 0
     for i in range(ranges.shape[0]):
+        r = ranges[i]
+        if fill:
+            valid[i] = math.isfinite(r) and r >= lo and r <= hi
         d = drop_r[i]
-        if valid[i] and d > 0.0 and ranges[i] <= d + tol and not (footprint and drop[i]):
+        if valid[i] and d > 0.0 and r <= d + tol and not (footprint and drop[i]):
             drop[i] = True
             count += 1
     return count
@@ -220,16 +226,22 @@ class BodyFilter:
         n = scan.n_beams
         if n != self._n:
             self._reset(n)
-        valid = scan.valid_view()  # (only read here: no copy)
         drop = np.zeros(n, dtype=bool)
+        auto = getattr(self.config, "auto", False)
+        fill = auto and self.polygon is None and not scan.has_valid_mask()
+        # (the scan's first mask: the kernel below writes it in its pass over the beams, the scan keeps it)
+        valid = np.empty(n, dtype=bool) if fill else scan.valid_view()  # (only read here: no copy)
         if self.polygon is not None and valid.any():
             pts = scan.points(valid)
             inside = points_in_polygon(pts, self.polygon)
             drop[np.flatnonzero(valid)[inside]] = True
             self.footprint_dropped += int(inside.sum())
-        if getattr(self.config, "auto", False):  # (without body beams every drop range is 0: nothing dropped)
-            self.auto_dropped += _drop_body(scan.ranges, valid, self._drop_r, float(self.config.auto_tolerance),
+        if auto:  # (without body beams every drop range is 0: nothing dropped)
+            self.auto_dropped += _drop_body(scan.ranges, float(scan.range_min), float(scan.range_max), valid, fill,
+                                            self._drop_r, float(self.config.auto_tolerance),
                                             self.polygon is not None, drop)
+            if fill:
+                scan.adopt_valid_mask(valid)
         self.scans += 1
         return drop
 

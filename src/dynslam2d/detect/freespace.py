@@ -15,6 +15,7 @@ Occluded places (a beam ending before ρ) and places outside the reference field
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from collections import deque
 from dataclasses import dataclass
 
@@ -77,9 +78,11 @@ class FreeSpaceMemory:
         self.margin = float(margin)
         self.max_age = max(float(max_age), max(self.ref_ages) + 0.5)
         self._buf: deque[_Ref] = deque()
+        self._descents = 0  # neighbours in the buffer whose stamps go back (0: time-ordered, :meth:`_refs` bisects)
 
     def clear(self) -> None:
         self._buf.clear()
+        self._descents = 0
 
     @staticmethod
     def make_ref(scan: Scan, pose: Pose2D, valid: np.ndarray) -> _Ref:
@@ -97,23 +100,54 @@ class FreeSpaceMemory:
 
     def add(self, scan: Scan, pose: Pose2D, valid: np.ndarray, ref: _Ref | None = None) -> None:
         """Remember ``scan`` (taken at ``pose``, map frame); ``valid`` marks beams with a return."""
-        self._buf.append(ref if ref is not None else self.make_ref(scan, pose, valid))
-        while self._buf and scan.stamp - self._buf[0].stamp > self.max_age:
-            self._buf.popleft()
+        buf = self._buf
+        new = ref if ref is not None else self.make_ref(scan, pose, valid)
+        if buf and new.stamp < buf[-1].stamp:
+            self._descents += 1
+        buf.append(new)
+        while buf and scan.stamp - buf[0].stamp > self.max_age:
+            if len(buf) > 1 and buf[1].stamp < buf[0].stamp:
+                self._descents -= 1
+            buf.popleft()
 
     def _refs(self, now: float) -> list[_Ref]:
+        """The buffered scans nearest each of :attr:`ref_ages` before ``now`` (s), each once, older than 0 s."""
         out: list[_Ref] = []
-        if not self._buf:
+        buf = self._buf
+        if not buf:
             return out
-        ages = [now - b.stamp for b in self._buf]
+        if self._descents:  # (stamps that go back: every buffered age compared)
+            ages = [now - b.stamp for b in buf]
+            for a in self.ref_ages:
+                # the buffered scan whose age is nearest a (the first on ties, as np.argmin; ages are finite): min
+                # keeps its first item and replaces it only by a smaller one, and index finds that item's first
+                # position (an equal item before it would have been kept), so this is the loop "j = i where d <
+                # best" in C
+                dev = [abs(x - a) for x in ages]
+                j = dev.index(min(dev))
+                if ages[j] > 0.0 and buf[j] not in out:
+                    out.append(buf[j])
+            return out
+        # time-ordered (pass rest18): the ages now − stamp do not grow along the buffer (a rounded difference is
+        # monotone), so |age − a| falls to the last age ≥ a and rises from the first age < a: the first nearest is
+        # the first of the equal deviations ending at index k − 1, or index k — the same scan as the scan of every
+        # age above, in a bisection
+        n = len(buf)
         for a in self.ref_ages:
-            # the buffered scan whose age is nearest a (the first on ties, as np.argmin; ages are finite): min keeps
-            # its first item and replaces it only by a smaller one, and index finds that item's first position (an
-            # equal item before it would have been kept), so this is the loop "j = i where d < best" in C
-            dev = [abs(x - a) for x in ages]
-            j = dev.index(min(dev))
-            if ages[j] > 0.0 and self._buf[j] not in out:
-                out.append(self._buf[j])
+            k = bisect_right(buf, -a, key=lambda b: -(now - b.stamp))  # (the first index whose age is < a)
+            if k == 0:
+                j = 0
+            else:
+                d = (now - buf[k - 1].stamp) - a
+                if k < n and a - (now - buf[k].stamp) < d:
+                    j = k
+                else:
+                    j = k - 1
+                    while j > 0 and (now - buf[j - 1].stamp) - a == d:
+                        j -= 1
+            b = buf[j]
+            if now - b.stamp > 0.0 and b not in out:
+                out.append(b)
         return out
 
     def seen_through(self, points: np.ndarray, now: float) -> np.ndarray:
