@@ -214,7 +214,7 @@ def _levels_state(m: MultiResMap) -> list[tuple]:
             for lv in m.levels]
 
 
-@pytest.mark.parametrize("n_levels", [3, 2])
+@pytest.mark.parametrize("n_levels", [4, 3, 2])
 def test_fused_scan_call_takes_the_growth_way_exactly_when_a_level_must_grow(
         n_levels: int, monkeypatch: pytest.MonkeyPatch) -> None:
     """MultiResMap.integrate's one kernel call (ends, bounds, every level) integrates a scan only when every level

@@ -137,14 +137,15 @@ def test_dropped_ledger_record_counts_the_cells_folding_would() -> None:
 def test_multires_integrate_equals_per_level_integration() -> None:
     """MultiResMap.integrate (bounds from the extreme ends, every level's end cells and rays in one kernel call)
     writes every level exactly as GridLevel.integrate does level by level, with and without the grazing stop and
-    clearing rays, on maps of 2, 3 (the fused kernel) and 4 levels (the per-level loop)."""
+    clearing rays, on maps of 2, 3, 4 (the fused kernel; 4: the loop closer's submaps, pass rest18) and 5 levels (the
+    per-level loop)."""
     from conftest import scan_rays
 
     from dynslam2d.slam.grid import MultiResMap
 
     rng = np.random.default_rng(3)
-    # 3 levels and fewer: one kernel call for all (integrate_levels); 4: level by level in Python
-    for grazing, n_levels in ((0.0, 3), (1.5, 3), (0.0, 2), (1.5, 4)):
+    # 4 levels and fewer: one kernel call for all (integrate_levels); 5: level by level in Python
+    for grazing, n_levels in ((0.0, 3), (1.5, 3), (0.0, 2), (1.5, 4), (0.0, 4), (1.5, 5)):
         fast = MultiResMap(0.05, n_levels, -0.4, 0.9, grazing_cells=grazing)
         plain = MultiResMap(0.05, n_levels, -0.4, 0.9, grazing_cells=grazing)
         pose = Pose2D(0.3, -0.2, 0.1)

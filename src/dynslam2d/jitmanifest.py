@@ -68,9 +68,9 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(int64, 1, 'C'),)"),
     ('dynslam2d.slam.raycast.integrate_levels',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), float64, float64, float64, float64, "
-     "UniTuple(Array(float32, 2, 'C', False, aligned=True), 3), UniTuple(Array(float32, 2, 'C', False, "
-     "aligned=True), 3), UniTuple(Array(int32, 2, 'C', False, aligned=True), 3), int64, UniTuple(float64, "
-     "3), UniTuple(int64, 3), UniTuple(int64, 3), UniTuple(int64, 3), Array(float64, 1, 'C'), bool, "
+     "UniTuple(Array(float32, 2, 'C', False, aligned=True), 4), UniTuple(Array(float32, 2, 'C', False, "
+     "aligned=True), 4), UniTuple(Array(int32, 2, 'C', False, aligned=True), 4), int64, UniTuple(float64, "
+     "4), UniTuple(int64, 4), UniTuple(int64, 4), UniTuple(int64, 4), Array(float64, 1, 'C'), bool, "
      "int64, float64, float64, float64, Array(int64, 1, 'C'), Array(float32, 1, 'C'),)"),
     ('dynslam2d.slam.raycast.ray_ends',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), float64, float64, float64, float64,)"),

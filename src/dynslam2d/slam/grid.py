@@ -25,9 +25,10 @@ from dynslam2d.types import Pose2D
 
 #: Bytes per cell: float32 log-odds + float32 probability cache + int32 update index.
 _BYTES_PER_CELL = 12
-#: The most levels :meth:`MultiResMap.integrate` updates in one kernel call (the default map has 3; the level
-#: tuples are padded to this length with empty arrays: one kernel specialisation).
-_FUSED_LEVELS = 3
+#: The most levels :meth:`MultiResMap.integrate` updates in one kernel call (the default map has 3, the loop closer's
+#: submaps 4 — pass rest18: they took the per-level loop before; the level tuples are padded to this length with empty
+#: arrays: one kernel specialisation).
+_FUSED_LEVELS = 4
 _NO_F32 = np.zeros((0, 0), dtype=np.float32)
 _NO_I32 = np.zeros((0, 0), dtype=np.int32)
 _NO_STOP = np.zeros(0)
@@ -319,15 +320,16 @@ class MultiResMap:
         map is over its limit. The cells are written in ``raycast._rays``."""
         levels = self.levels
         n_lv = len(levels)
-        if n_lv == _FUSED_LEVELS:  # (the default map: the arguments written out)
+        if n_lv == 3:  # (the default map: the arguments written out, padded to four levels)
             la, lb, lc = levels
             n0 = integrate_levels(
-                hits, clear, c, s, ox, oy, (la.logodds, lb.logodds, lc.logodds), (la.prob, lb.prob, lc.prob),
-                (la.uidx, lb.uidx, lc.uidx), 3, (la.resolution, lb.resolution, lc.resolution), (la.i0, lb.i0, lc.i0),
-                (la.j0, lb.j0, lc.j0), (la.update_counter, lb.update_counter, lc.update_counter),
+                hits, clear, c, s, ox, oy, (la.logodds, lb.logodds, lc.logodds, _NO_F32),
+                (la.prob, lb.prob, lc.prob, _NO_F32), (la.uidx, lb.uidx, lc.uidx, _NO_I32), 3,
+                (la.resolution, lb.resolution, lc.resolution, 1.0), (la.i0, lb.i0, lc.i0, 0), (la.j0, lb.j0, lc.j0, 0),
+                (la.update_counter, lb.update_counter, lc.update_counter, 0),
                 stop if stop is not None else _NO_STOP, stop is not None,
                 -1 if self.max_bytes is None else self.max_bytes, self.l_free, self.l_occ, self.cap, *self._memo)
-        else:  # (fewer levels: the tuples padded to three, one kernel specialisation)
+        else:  # (other counts: the tuples padded to four, one kernel specialisation)
             pad = _FUSED_LEVELS - n_lv
             n0 = integrate_levels(
                 hits, clear, c, s, ox, oy, tuple(lv.logodds for lv in levels) + (_NO_F32,) * pad,

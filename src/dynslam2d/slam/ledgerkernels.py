@@ -340,7 +340,8 @@ def update_rows(logodds, uidx, f, ids, keys, before, ub):  # pragma: no cover - 
 
 
 
-#: levels the fused kernels take (3-tuples of level arrays, padded with empty ones; slam/grid.py's ``_FUSED_LEVELS``)
+#: levels the fused kernels take (3-tuples of level arrays, padded with empty ones; the map update's own kernel takes
+#: four, slam/grid.py's ``_FUSED_LEVELS``)
 FUSED_LEVELS = 3
 _LO3 = types.UniTuple(types.float32[:, ::1], FUSED_LEVELS)
 _UI3 = types.UniTuple(types.int32[:, ::1], FUSED_LEVELS)

@@ -361,7 +361,7 @@ def integrate_levels(hits, clear, c, s, x, y, logodds, prob, uidx, n_levels, res
                      max_bytes, l_free, l_occ, cap, keys, vals):  # pragma: no cover - numba
     """One scan into every level in one call, when every level holds it already: the rays' ends in the map frame
     from the ``hits`` (n_hit, 2) then the ``clear`` (m, 2) ends (laser frame, m) moved by the pose (``x``, ``y``,
-    cos ``c``, sin ``s``) as :func:`ray_ends` computes them, then per level ``k`` < ``n_levels`` (3-tuples
+    cos ``c``, sin ``s``) as :func:`ray_ends` computes them, then per level ``k`` < ``n_levels`` (4-tuples
     ``logodds``, ``prob``, ``uidx``, cell side ``res`` m, array offsets ``i0``, ``j0``, update counter ``counter``
     before this scan) the rays from the pose's cell ``floor(x / r + 0.5)``, ``floor(y / r + 0.5)`` to the ends'
     cells (``floor(v / r + 0.5)``, OccGridMapBase::updateByScan's rounding, minus the offsets) by
