@@ -346,15 +346,9 @@ class PoseGraph:
             H = H[3:, 3:]
             b = b[3:]
             diag = H.diagonal()
-            dpos = _diagonal_positions(H)
             improved = False
             for _ in range(8):
-                damp = lam * np.maximum(diag, 1e-9) + 1e-12
-                if dpos is not None:  # H + diags(damp) without SciPy's general sum: the same matrix
-                    A = H.copy()
-                    A.data[dpos] += damp
-                else:
-                    A = H + sp.diags(damp)
+                A = _damped(H, lam * np.maximum(diag, 1e-9) + 1e-12, sp)  # = H + sp.diags(…), the same matrix
                 try:
                     # symmetric positive definite: a symmetric fill-reducing ordering, no pivoting
                     dx = -splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
@@ -383,25 +377,30 @@ class PoseGraph:
         return it, cost0, cost
 
 
-def _diagonal_positions(h: object) -> np.ndarray | None:
-    """Positions in ``h.data`` of the diagonal entries of a square CSC matrix ``h`` in canonical form (sorted
-    indices, no duplicates), or None unless every diagonal entry is stored and no stored value is zero. Then
-    ``h + diags(d)`` (d > 0) is ``h`` with ``d`` added at those positions: SciPy's sum of two canonical matrices
-    keeps ``h``'s structure and order, adds the two values where both have an entry (x + d, one rounding either
-    way) and keeps ``h``'s value elsewhere (x + 0 = x; it drops only entries that sum to zero, and a stored zero
-    is the one case where x + 0 would be dropped or change the sign of a −0)."""
-    if not h.has_canonical_format or h.shape[0] != h.shape[1]:
-        return None
-    data = h.data
-    if data.size and not np.all(data != 0.0):
-        return None
+def _damped(h: object, damp: np.ndarray, sp: object) -> object:
+    """``h + sp.diags(damp)`` for a square CSC matrix ``h`` in canonical form (sorted indices, no duplicates) whose
+    diagonal entries are all stored, and ``damp`` > 0: the same matrix (structure, order and values) without
+    SciPy's general sparse sum. SciPy's sum of two canonical matrices merges each column's sorted entries, adds
+    the two values where both have one (h_ii + d_i: one rounding either way), keeps ``h``'s value elsewhere
+    (x + 0) and drops every entry whose sum is zero — here ``h``'s stored zeros off the diagonal (the Jacobians'
+    structural zeros give some). Any other ``h`` goes through SciPy's sum."""
     n = h.shape[0]
+    if h.shape[0] != h.shape[1] or not h.has_canonical_format:
+        return h + sp.diags(damp)
     indptr = h.indptr
-    cols = np.repeat(np.arange(n), np.diff(indptr))
-    pos = np.flatnonzero(h.indices == cols)
-    if pos.shape[0] != n:
-        return None
-    return pos
+    cols = np.repeat(np.arange(n, dtype=indptr.dtype), np.diff(indptr))
+    on_diag = h.indices == cols
+    if int(np.count_nonzero(on_diag)) != n:
+        return h + sp.diags(damp)
+    data = h.data.copy()
+    data[on_diag] += damp
+    keep = data != 0.0
+    if keep.all():
+        return sp.csc_matrix((data, h.indices.copy(), indptr.copy()), shape=h.shape)
+    counts = np.bincount(cols[keep], minlength=n)
+    ptr = np.zeros(n + 1, dtype=indptr.dtype)
+    np.cumsum(counts, out=ptr[1:])
+    return sp.csc_matrix((data[keep], h.indices[keep], ptr), shape=h.shape)
 
 
 def relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
