@@ -210,12 +210,32 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
         pr = wr * dth[k] * dth[k]
         # every top block of rotation k in one pass over the points: each block's sum gets the points in order,
         # as a pass of its own would add them (the same float64 values)
-        for q in range(na2):
-            acc[q] = 0.0
-        for i in range(n):
-            base = qy[k, i] * ww + qx[k, i]
+        if na == 2:  # (the usual case, four scalar sums)
+            t0 = toff[0]
+            t1 = toff[1]
+            t2 = toff[2]
+            t3 = toff[3]
+            a0 = 0.0
+            a1 = 0.0
+            a2 = 0.0
+            a3 = 0.0
+            for i in range(n):
+                base = qy[k, i] * ww + qx[k, i]
+                a0 += top[base + t0]
+                a1 += top[base + t1]
+                a2 += top[base + t2]
+                a3 += top[base + t3]
+            acc[0] = a0
+            acc[1] = a1
+            acc[2] = a2
+            acc[3] = a3
+        else:
             for q in range(na2):
-                acc[q] += top[base + toff[q]]
+                acc[q] = 0.0
+            for i in range(n):
+                base = qy[k, i] * ww + qx[k, i]
+                for q in range(na2):
+                    acc[q] += top[base + toff[q]]
         for a in range(na):
             for b in range(na):
                 q = a * na + b
