@@ -192,25 +192,57 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
     top_dx = np.empty(ntop, dtype=np.int64)
     top_dy = np.empty(ntop, dtype=np.int64)
     top_s = np.empty(ntop)
+    # the top blocks' offsets into the table and their translation penalties, the same for every rotation
+    na2 = na * na
+    toff = np.empty(na2, dtype=np.int64)
+    tpen = np.empty(na2)
+    for a in range(na):
+        dx = -w + a * step
+        mx = _min_abs(dx, min(dx + step - 1, w))
+        for b in range(na):
+            dy = -w + b * step
+            my = _min_abs(dy, min(dy + step - 1, w))
+            toff[a * na + b] = dy * ww + dx
+            tpen[a * na + b] = wt_cell2 * (mx * mx + my * my)
+    acc = np.empty(na2)
     c = 0
     for k in range(nrot):
         pr = wr * dth[k] * dth[k]
+        # every top block of rotation k in one pass over the points: each block's sum gets the points in order,
+        # as a pass of its own would add them (the same float64 values)
+        if na == 2:  # (the usual case, four scalar sums)
+            t0 = toff[0]
+            t1 = toff[1]
+            t2 = toff[2]
+            t3 = toff[3]
+            a0 = 0.0
+            a1 = 0.0
+            a2 = 0.0
+            a3 = 0.0
+            for i in range(n):
+                base = qy[k, i] * ww + qx[k, i]
+                a0 += top[base + t0]
+                a1 += top[base + t1]
+                a2 += top[base + t2]
+                a3 += top[base + t3]
+            acc[0] = a0
+            acc[1] = a1
+            acc[2] = a2
+            acc[3] = a3
+        else:
+            for q in range(na2):
+                acc[q] = 0.0
+            for i in range(n):
+                base = qy[k, i] * ww + qx[k, i]
+                for q in range(na2):
+                    acc[q] += top[base + toff[q]]
         for a in range(na):
-            dx = -w + a * step
-            ex = min(dx + step - 1, w)
-            mx = _min_abs(dx, ex)
             for b in range(na):
-                dy = -w + b * step
-                ey = min(dy + step - 1, w)
-                my = _min_abs(dy, ey)
+                q = a * na + b
                 top_k[c] = k
-                top_dx[c] = dx
-                top_dy[c] = dy
-                off = dy * ww + dx
-                ps = 0.0
-                for i in range(n):  # point by point, in order
-                    ps += top[qy[k, i] * ww + qx[k, i] + off]
-                top_s[c] = ps / n - pr - wt_cell2 * (mx * mx + my * my)
+                top_dx[c] = -w + a * step
+                top_dy[c] = -w + b * step
+                top_s[c] = acc[q] / n - pr - tpen[q]
                 c += 1
     # best bound first: a stable merge sort by descending bound (ties in block order), written out here
     # because numba's np.argsort compiles its quicksort machinery, about 1.5 s of a first run's compile
@@ -301,35 +333,79 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
                         m += 1
                     rhi[k] = m
             nc = 0
-            for ix in range(2):
-                cdx = dx + ix * half
-                if cdx > w:
-                    continue
-                ex = min(cdx + half - 1, w)
-                mx = _min_abs(cdx, ex)
-                for iy in range(2):
-                    cdy = dy + iy * half
-                    if cdy > w:
+            tl = tab[h - 1]
+            if dx + half <= w and dy + half <= w:
+                # all four children: their four sums in one pass over the cells (each child's sum gets the same
+                # terms in the same order as a pass of its own, so the same float64 values)
+                off = dy * ww + dx
+                o01 = off + half * ww
+                o10 = off + half
+                o11 = o01 + half
+                b00 = 0.0
+                b01 = 0.0
+                b10 = 0.0
+                b11 = 0.0
+                if rlo[k] >= 0:  # (the sums over distinct cells: see below)
+                    for j in range(rlo[k], rhi[k]):
+                        cj = cell[j]
+                        q = count[j]
+                        b00 += q * tl[cj + off]
+                        b01 += q * tl[cj + o01]
+                        b10 += q * tl[cj + o10]
+                        b11 += q * tl[cj + o11]
+                else:
+                    for i in range(n):  # point by point, in order
+                        cj = qy[k, i] * ww + qx[k, i]
+                        b00 += tl[cj + off]
+                        b01 += tl[cj + o01]
+                        b10 += tl[cj + o10]
+                        b11 += tl[cj + o11]
+                mx0 = _min_abs(dx, dx + half - 1)
+                mx1 = _min_abs(dx + half, min(dx + 2 * half - 1, w))
+                my0 = _min_abs(dy, dy + half - 1)
+                my1 = _min_abs(dy + half, min(dy + 2 * half - 1, w))
+                cs[0] = b00 / n - pr - wt_cell2 * (mx0 * mx0 + my0 * my0)
+                cs[1] = b01 / n - pr - wt_cell2 * (mx0 * mx0 + my1 * my1)
+                cs[2] = b10 / n - pr - wt_cell2 * (mx1 * mx1 + my0 * my0)
+                cs[3] = b11 / n - pr - wt_cell2 * (mx1 * mx1 + my1 * my1)
+                cx[0] = dx
+                cy[0] = dy
+                cx[1] = dx
+                cy[1] = dy + half
+                cx[2] = dx + half
+                cy[2] = dy
+                cx[3] = dx + half
+                cy[3] = dy + half
+                nc = 4
+            else:
+                for ix in range(2):
+                    cdx = dx + ix * half
+                    if cdx > w:
                         continue
-                    ey = min(cdy + half - 1, w)
-                    my = _min_abs(cdy, ey)
-                    off = cdy * ww + cdx
-                    tl = tab[h - 1]
-                    bs = 0.0
-                    if rlo[k] >= 0:
-                        # Σ count × value over the distinct cells: the same float64 sum as adding the points one by
-                        # one in any order, because the table values are multiples of 2^−24 in [0, 1] (2p − 1 of a
-                        # float32 p ≥ 0.5 is exact, a multiple of 2^−23, its half a multiple of 2^−24) and n ≤ 2^29
-                        # of them (count × value ≤ n) sum without rounding
-                        for j in range(rlo[k], rhi[k]):
-                            bs += count[j] * tl[cell[j] + off]
-                    else:
-                        for i in range(n):  # point by point, in order
-                            bs += tl[qy[k, i] * ww + qx[k, i] + off]
-                    cs[nc] = bs / n - pr - wt_cell2 * (mx * mx + my * my)
-                    cx[nc] = cdx
-                    cy[nc] = cdy
-                    nc += 1
+                    ex = min(cdx + half - 1, w)
+                    mx = _min_abs(cdx, ex)
+                    for iy in range(2):
+                        cdy = dy + iy * half
+                        if cdy > w:
+                            continue
+                        ey = min(cdy + half - 1, w)
+                        my = _min_abs(cdy, ey)
+                        off = cdy * ww + cdx
+                        bs = 0.0
+                        if rlo[k] >= 0:
+                            # Σ count × value over the distinct cells: the same float64 sum as adding the points one
+                            # by one in any order, because the table values are multiples of 2^−24 in [0, 1] (2p − 1
+                            # of a float32 p ≥ 0.5 is exact, a multiple of 2^−23, its half a multiple of 2^−24) and
+                            # n ≤ 2^29 of them (count × value ≤ n) sum without rounding
+                            for j in range(rlo[k], rhi[k]):
+                                bs += count[j] * tl[cell[j] + off]
+                        else:
+                            for i in range(n):  # point by point, in order
+                                bs += tl[qy[k, i] * ww + qx[k, i] + off]
+                        cs[nc] = bs / n - pr - wt_cell2 * (mx * mx + my * my)
+                        cx[nc] = cdx
+                        cy[nc] = cdy
+                        nc += 1
             # push children in ascending score so the best is explored first
             for _ in range(nc):
                 j = 0

@@ -266,6 +266,10 @@ class LoopCloser:
         self._new_loops = 0
         self._cache: OrderedDict[int, MultiResMap] = OrderedDict()
         self._cache_size = _SUBMAP_CACHE  # grids kept built (the second search keeps more: it jumps between places)
+        # submap → its far-search level (far_level), kept for every submap built (≈ 10–20 kB each at 0.4 m) after its
+        # grid leaves the cache: a far search whose correlative match is refused reads nothing else, so it needs
+        # no rebuild (the same level: a submap's inputs change only through drop_beams, which drops both)
+        self._far_levels: dict[int, GridLevel] = {}
         # translation deviation (m) of every chain edge and accepted loop, keyed (i, j): the far search's
         # uncertainty is their sum along the graph's shortest path; and their heading deviations, rad:
         # drift_rad_per_m × length, plus far_weak_turn across a weak match
@@ -357,6 +361,7 @@ class LoopCloser:
             n += int((~kf.removed[b]).sum())
             kf.removed[b] = True
             self._cache.pop(k // self.config.submap_keyframes, None)  # its submap is rebuilt without them
+            self._far_levels.pop(k // self.config.submap_keyframes, None)
         return n
 
     def _add_keyframe(self, index: int, stamp: float, p: np.ndarray, scan: Scan, removed: np.ndarray,
@@ -445,8 +450,7 @@ class LoopCloser:
             return grid
         c = self.slam
         first, last, anchor = self._submap_range(s)
-        top = max(self.config.search_level, self.config.far_level if self.config.far_search else 0)
-        grid = MultiResMap(c.map_resolution, max(top + 1, 2), c.logodds_free,
+        grid = MultiResMap(c.map_resolution, self._n_levels(), c.logodds_free,
                            c.logodds_occupied, c.occupied_logodds_cap, c.map_growth_margin)
         a = self.keyframes[anchor].frontend
         for k in range(first, last + 1):
@@ -456,10 +460,17 @@ class LoopCloser:
                 grid.integrate(Pose2D(float(rel[0]), float(rel[1]), float(rel[2])), pts)
         for lv in grid.levels:  # the searches read only the probabilities (issue 13 item 3: 2/3 of each grid)
             _keep_probabilities(lv)
+        if self.config.far_search:
+            self._far_levels[s] = grid.levels[min(self.config.far_level, len(grid.levels) - 1)]
         self._cache[s] = grid
         if len(self._cache) > self._cache_size:
             self._cache.popitem(last=False)
         return grid
+
+    def _n_levels(self) -> int:
+        """Levels of a submap grid: the search level and the far search's, at least two."""
+        top = max(self.config.search_level, self.config.far_level if self.config.far_search else 0)
+        return max(top + 1, 2)
 
     # ---- loop search ----------------------------------------------------------------------
     def _estimate(self, node: int) -> np.ndarray:
@@ -780,9 +791,16 @@ class LoopCloser:
         c = self.config
         sc = self.slam
         _first, _last, anchor = self._submap_range(s)
-        grid = self._submap(s)
-        lvl = grid.levels[min(c.search_level if level is None else level, len(grid.levels) - 1)]
-        levels = grid.levels[:max(c.search_level + 1, 2)]  # the refinement as without the far search's level
+        grid = self._cache.get(s)
+        lvl = None
+        if grid is None and level is not None and c.far_search:
+            # the far level of a submap built before: no rebuild unless the match gets as far as its refinement
+            far = self._far_levels.get(s)
+            if far is not None and min(level, self._n_levels() - 1) == min(c.far_level, self._n_levels() - 1):
+                lvl = far
+        if lvl is None:
+            grid = self._submap(s)
+            lvl = grid.levels[min(c.search_level if level is None else level, len(grid.levels) - 1)]
         # one search: below min_score it returns None (and prunes what cannot reach it), the runner-up pass runs only
         # for a match good enough to become a candidate and stops once the margin is lost (the same candidates as
         # a search without the bounds followed by a second search with the runner-up)
@@ -794,6 +812,8 @@ class LoopCloser:
         margin = cr.score - (cr.runner_up or 0.0)
         if margin < min_margin:
             return None
+        grid = self._submap(s)
+        levels = grid.levels[:max(c.search_level + 1, 2)]  # the refinement as without the far search's level
         refined = refine_supported(levels, pts, cr.pose, 2 * lvl.resolution, c, sc)
         if refined is None:
             return None
@@ -888,6 +908,7 @@ class LoopCloser:
                                np.array([k.frontend for k in self.keyframes]).reshape(-1, 3), nodes)
         loops = [(self.graph.edges[k].i, self.graph.edges[k].j) for k in active]
         self._cache.clear()  # no search after the last one: its submap grids go before the map is re-rendered
+        self._far_levels.clear()
         self.stats["total_ms"] += (time.perf_counter() - t0) * 1e3
         stats = dict(self.stats)
         stats.update({"keyframes": len(self.keyframes), "submaps": len(self.keyframes) // self.config.submap_keyframes,

@@ -108,6 +108,8 @@ class PoseGraph:
         self._edges: list[Edge] = []
         #: edges given by :meth:`add_diag_edge` and not built yet, after those of ``_edges``
         self._pending: list[tuple[int, int, object, float, float, bool]] = []
+        #: during :meth:`optimise`: every edge's (i, j, z, info) arrays (the edges do not change inside it)
+        self._all: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     # ---- building -----------------------------------------------------------------------
     @property
@@ -177,12 +179,13 @@ class PoseGraph:
         p = self.poses if poses is None else poses
         if not self.edges:
             return np.zeros(0)
-        ii, jj, z, info = self._arrays(list(range(len(self.edges))))
+        ii, jj, z, info = self._all if self._all is not None else self._arrays(list(range(len(self.edges))))
         e = _edge_errors(p, ii, jj, z)[0]
         return np.einsum("ni,nij,nj->n", e, info, e)
 
     def _arrays(self, idx: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        ed = [self.edges[k] for k in idx]
+        edges = self.edges
+        ed = [edges[k] for k in idx]
         ii = np.array([e.i for e in ed], dtype=np.int64)
         jj = np.array([e.j for e in ed], dtype=np.int64)
         z = np.array([e.z for e in ed], dtype=np.float64).reshape(-1, 3)
@@ -203,12 +206,25 @@ class PoseGraph:
         rep = OptimiseReport()
         if self.n_nodes < 2 or not self.edges:
             return rep
+        # every edge's arrays once for the whole call (chi2 and each solve select rows of them: the same values as
+        # building them from the edges each time)
+        self._all = self._arrays(list(range(len(self.edges))))
+        try:
+            self._optimise(rep, kernel, kernel_scale, iterations, outlier_chi2, tol)
+        finally:
+            self._all = None
+        return rep
+
+    def _optimise(self, rep: OptimiseReport, kernel: str, kernel_scale: float, iterations: int,
+                  outlier_chi2: float | None, tol: float) -> None:
+        """:meth:`optimise`'s rounds (``rep`` filled in)."""
         for _round in range(10):
             # graduated non-convexity (Yang et al., RA-L 2020): start with a kernel so wide that every loop
             # counts, then narrow it; a kernel at its final width from the start would ignore the true loops
             # too while the drift they correct is still in the poses
             chi = self.chi2()
-            loop_chi = [chi[k] for k, e in enumerate(self.edges) if e.loop and e.active]
+            edges = self.edges
+            loop_chi = [chi[k] for k, e in enumerate(edges) if e.loop and e.active]
             # after pruning, the poses are already near the solution: no need to widen again
             wide = max(loop_chi) if loop_chi and kernel != "none" and _round == 0 else kernel_scale
             scale = max(wide if kernel == "dcs" else float(np.sqrt(wide)), kernel_scale)
@@ -229,14 +245,14 @@ class PoseGraph:
             if outlier_chi2 is None:
                 break
             chi = self.chi2()
-            bad = [k for k, e in enumerate(self.edges) if e.loop and e.active and chi[k] > outlier_chi2]
+            edges = self.edges
+            bad = [k for k, e in enumerate(edges) if e.loop and e.active and chi[k] > outlier_chi2]
             if not bad:
                 break
             for k in bad:
                 self.edges[k].active = False
                 self.edges[k].weight = 0.0
                 rep.rejected_loops.append(k)
-        return rep
 
     def _weights(self, chi: np.ndarray, loop: np.ndarray, kernel: str, scale: float) -> np.ndarray:
         w = np.ones_like(chi)
@@ -258,7 +274,8 @@ class PoseGraph:
         return float(np.sum(chi))
 
     def _solve(self, kernel: str, scale: float, iterations: int, tol: float) -> tuple[int, float, float]:
-        idx = [k for k, e in enumerate(self.edges) if e.active]
+        edges = self.edges
+        idx = [k for k, e in enumerate(edges) if e.active]
         if not idx:
             return 0, 0.0, 0.0
         # imported here, not with the module: scipy.sparse(.linalg) costs ~1 s and tens of MiB at start-up,
@@ -266,9 +283,13 @@ class PoseGraph:
         import scipy.sparse as sp
         from scipy.sparse.linalg import splu
 
-        ii, jj, z, info = self._arrays(idx)
+        if self._all is not None:
+            sel = np.array(idx, dtype=np.int64)
+            ii, jj, z, info = (a[sel] for a in self._all)
+        else:
+            ii, jj, z, info = self._arrays(idx)
         # the edges under the robust kernel: loops, and edges marked robust
-        loop = np.array([self.edges[k].loop or self.edges[k].robust for k in idx], dtype=bool)
+        loop = np.array([edges[k].loop or edges[k].robust for k in idx], dtype=bool)
         poses = self.poses.copy()
         n = self.n_nodes
 
@@ -327,7 +348,7 @@ class PoseGraph:
             diag = H.diagonal()
             improved = False
             for _ in range(8):
-                A = H + sp.diags(lam * np.maximum(diag, 1e-9) + 1e-12)
+                A = _damped(H, lam * np.maximum(diag, 1e-9) + 1e-12, sp)  # = H + sp.diags(…), the same matrix
                 try:
                     # symmetric positive definite: a symmetric fill-reducing ordering, no pivoting
                     dx = -splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
@@ -350,10 +371,36 @@ class PoseGraph:
             if not improved or rel < tol:
                 break
         w = self._weights(chi, loop, kernel, scale)
-        for k, wk in zip(idx, w):
-            self.edges[k].weight = float(wk)
+        for k, wk in zip(idx, w.tolist()):
+            edges[k].weight = wk
         self.set_poses(poses)
         return it, cost0, cost
+
+
+def _damped(h: object, damp: np.ndarray, sp: object) -> object:
+    """``h + sp.diags(damp)`` for a square CSC matrix ``h`` in canonical form (sorted indices, no duplicates) whose
+    diagonal entries are all stored, and ``damp`` > 0: the same matrix (structure, order and values) without
+    SciPy's general sparse sum. SciPy's sum of two canonical matrices merges each column's sorted entries, adds
+    the two values where both have one (h_ii + d_i: one rounding either way), keeps ``h``'s value elsewhere
+    (x + 0) and drops every entry whose sum is zero — here ``h``'s stored zeros off the diagonal (the Jacobians'
+    structural zeros give some). Any other ``h`` goes through SciPy's sum."""
+    n = h.shape[0]
+    if h.shape[0] != h.shape[1] or not h.has_canonical_format:
+        return h + sp.diags(damp)
+    indptr = h.indptr
+    cols = np.repeat(np.arange(n, dtype=indptr.dtype), np.diff(indptr))
+    on_diag = h.indices == cols
+    if int(np.count_nonzero(on_diag)) != n:
+        return h + sp.diags(damp)
+    data = h.data.copy()
+    data[on_diag] += damp
+    keep = data != 0.0
+    if keep.all():
+        return sp.csc_matrix((data, h.indices.copy(), indptr.copy()), shape=h.shape)
+    counts = np.bincount(cols[keep], minlength=n)
+    ptr = np.zeros(n + 1, dtype=indptr.dtype)
+    np.cumsum(counts, out=ptr[1:])
+    return sp.csc_matrix((data[keep], h.indices[keep], ptr), shape=h.shape)
 
 
 def relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
