@@ -121,12 +121,18 @@ def main() -> None:
         if args.cache is not None:
             args.cache.write_text(json.dumps(other, indent=1))
     this = run_all(args.data, names)
-    same = 0
+    same = absent = 0
     for n in names:
+        if this[n] is None or other.get(n) is None:  # a recording not under --data: nothing was compared
+            absent += 1
+            print(f"{n:<18} ABSENT     (no {INPUTS[n][0]} under {args.data}: pass --data)")
+            continue
         ok = this[n] == other.get(n)
         same += ok
         print(f"{n:<18} {'identical' if ok else 'DIFFERENT'}  this {this[n]}  other {other.get(n)}")
-    print(f"{same} / {len(names)} inputs identical")
+    print(f"{same} / {len(names)} inputs identical" + (f", {absent} absent (not compared)" if absent else ""))
+    if same != len(names):
+        sys.exit(1)
 
 
 if __name__ == "__main__":
