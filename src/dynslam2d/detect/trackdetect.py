@@ -149,18 +149,32 @@ class TrackDetect:
         pts[:, 0] = px[n0:]
         pts[:, 1] = py[n0:]
         o = 0
+        append, new, cls = new_dets.append, object.__new__, ScanDetection
         for a, b in zip(first.tolist(), second.tolist()):
             da, db = dets[a], dets[b]
             na, nb = da.n_points, db.n_points
             n = na + nb
             # (centroid = circle centre = the legs' middle, lo / hi their box, no real bound, theta 0: rows of the
-            # merged arrays, as a scan detection's)
-            det = ScanDetection(mbeams[o:o + n], pts, KIND_POINT, 0.0, n, (da, db),  # (free: when read)
-                                (na * da.map_structure + nb * db.map_structure) / n,
-                                (na * da.map_free + nb * db.map_free) / n,
-                                (na * da.map_unknown + nb * db.map_unknown) / n, fits, lohi, rel, row, o)
+            # merged arrays, as a scan detection's). ScanDetection(mbeams[o:o + n], pts, KIND_POINT, 0.0, n, (da, db),
+            # <the point-weighted map evidence>, fits, lohi, rel, row, o) with person True, its slots set directly
+            # (as scan_detections does: no constructor call per pair); the free fraction is computed when read
+            det = new(cls)
+            det.beams = mbeams[o:o + n]
+            det._pts = pts
+            det._a0 = o
+            det.kind = KIND_POINT
+            det.theta = 0.0
+            det.n_points = n
+            det._ff = (da, db)
+            det.map_structure = (na * da.map_structure + nb * db.map_structure) / n
+            det.map_free = (na * da.map_free + nb * db.map_free) / n
+            det.map_unknown = (na * da.map_unknown + nb * db.map_unknown) / n
             det.person = True
-            new_dets.append(det)
+            det._fits = fits
+            det._lohi = lohi
+            det._rel = rel
+            det._j = row
+            append(det)
             row += 1
             o += n
         self.stats.merged_leg_pairs += m

@@ -216,6 +216,8 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # Kalman tracking but kept (and reported) while their object is seen, so that a parked mover keeps
         # its id and standing history until it leaves (_clutter_detections)
         self._dormant: list[_Track] = []
+        # False: no live track is remembered (the prediction skips its search for them; set by _remember, _revive)
+        self._maybe_remembered = False
         # … and the places of detections on structure that got no track: (m, 4) centre x, y (m, map frame), reach
         # (m) and the stamp last seen (s); like a dormant track, such a place keeps its detection from live tracks
         self._marks = np.zeros((0, 4))
@@ -377,10 +379,16 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         F, Q = _cv_matrices(dt, self.config.tracker.accel_noise)
         order = self._rows()
         tracks = self._tracks
-        # coasting through a stop: it stays where it stood (from k.x / k.P, before the rows are written)
-        still = [(i, self._stationary_prediction(tracks[i], F, dt)) for i in
-                 [i for i, k in enumerate(tracks) if k.remembered and k.misses > 0]] \
-            if self.config.memory.enabled else ()
+        # coasting through a stop: it stays where it stood (from k.x / k.P, before the rows are written). Only
+        # _remember makes a track remembered and it raises _maybe_remembered then: without it no track is, and the
+        # pass over the tracks is skipped; a pass that finds none lowers it
+        still = ()
+        if self._maybe_remembered and self.config.memory.enabled:
+            rem = [i for i, k in enumerate(tracks) if k.remembered]
+            if rem:
+                still = [(i, self._stationary_prediction(tracks[i], F, dt)) for i in rem if tracks[i].misses > 0]
+            else:
+                self._maybe_remembered = False
         if order.shape[0] >= 2:
             # numpy's products bit for bit, the rows written in the kernel (the tracks' x / P are views of them)
             X, P = cv_predict(self._X, self._P, order, F, Q)
@@ -435,9 +443,12 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         tracks = self._tracks
         Xs, Ps = self._stack()
         firm_r, tent_r, missed = [], [], []
-        for i, k in enumerate(tracks):  # (the state and misses: Python attributes)
+        veto: list[int] = []  # tracks in M or merged (_veto_merged's rows: found in this pass over the tracks)
+        for i, k in enumerate(tracks):  # (the state, misses and M flags: Python attributes)
             (firm_r if k.state != TENTATIVE else tent_r).append(i)
             missed.append(k.misses > 0)
+            if k.in_m or k.merged:
+                veto.append(i)
         # the tracks' sizes, flags and axis angles from their shape rows in one call ("known": a coasting track's size
         # is known if all(size_known) or it is not a rectangle)
         tsize, tmax, rect, theta, known = association_rows(self._G, self._Gi, self._rows(), np.array(missed))
@@ -454,7 +465,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         ok, det_ext = size_jump_gate(ok, self._batch.lohi, tmax, known, float(tc.max_size_jump_ratio),
                                      float(tc.max_size_jump))
         if self._map is not None:
-            ok = self._veto_merged(ok, dets, det_ext, tsize)
+            ok = self._veto_merged(ok, dets, det_ext, tsize, veto)
         if not _any_of(ok, axis=None):
             return []
         cost = np.where(ok, d2, _BIG)
@@ -492,13 +503,15 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         return pairs
 
     def _veto_merged(self, ok: np.ndarray, dets: list[Detection], det_ext: np.ndarray,
-                     tsize: np.ndarray) -> np.ndarray:
+                     tsize: np.ndarray, rows: list[int] | None = None) -> np.ndarray:
         """``ok`` without the pairs in which a detection is a track in M merged with long-standing structure: at
         least ``map_structure_stop`` of its points on long-occupied map cells and its longer side more than
         ``merge_size_jump`` beyond the track's, while the track's own points were not on structure (mean ≤
         ``map_structure_max``). A person walking up to a wall joins the wall's cluster; updating the person's track
         with it would carry M onto the wall. A track in M left with no detection leaves M (:meth:`_manage`) and
-        keeps refusing such detections (``merged``) until a detection of its own size updates it."""
+        keeps refusing such detections (``merged``) until a detection of its own size updates it. ``rows``: the
+        indices of the live tracks in M or merged, in their order (None: found here; :meth:`_associate` finds them in
+        its own pass over the tracks)."""
         tc = self.config.tracker
         if self._dormant or self._marks.shape[0]:
             # a dormant track, or the place of a detection on structure that got no track, keeps its object's
@@ -507,7 +520,8 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
             claimed = self._claims(dets)
             if claimed.any():
                 ok = ok & ~claimed[None, :]
-        rows = [i for i, k in enumerate(self._tracks) if k.in_m or k.merged]
+        if rows is None:
+            rows = [i for i, k in enumerate(self._tracks) if k.in_m or k.merged]
         if not rows:
             return ok
         cand = np.array([d.map_structure >= tc.map_structure_stop for d in dets])
@@ -705,4 +719,5 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         k.ride = []
         k.person, k.person_streak, k.rode = False, 0, False
         k.reason = "not in M: left the map structure it was retired on"
+        self._maybe_remembered = True  # (a revived track keeps its flags: _predict looks again)
         self._add_row(k, (z[0], z[1], 0.0, 0.0), P)

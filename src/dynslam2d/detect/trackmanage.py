@@ -287,6 +287,7 @@ class TrackManage:
             k.remembered = False
             return False
         k.remembered = True
+        self._maybe_remembered = True  # (the prediction looks for remembered tracks again: Tracker._predict)
         k.reason = (f"in M (remembered): stopped for {slow_for:.1f} s after moving {k.m_travel:.2f} m in M "
                     f"for {k.m_time:.1f} s")
         return True

@@ -37,9 +37,8 @@ class TrackReport:
                 vx, vy = self._X[order[i], 2:].tolist()
                 fast[i] = math.hypot(vx, vy) > slow
             boxes, _ = report_boxes(self._G, self._Gi, self._X, order, slow, fast)
-        X = self._X[order]  # (copies: the reports' own memory)
+        V = self._X[order, 2:]  # (copies: the reports' own memory)
         P = self._P[order]
-        V = X[:, 2:]
         kinds = self._Gi[order, GI_KIND].tolist()
         no_beams = np.zeros(0, dtype=np.int64)
         out = []
