@@ -40,6 +40,7 @@ class TrackManage:
         retire_s = tc.structure_retire_fraction
         # (the test of M's constants, the same products as in _dynamic)
         max_ssig, v_exit, nsus = tc.max_speed_sigma, tc.v_exit_ratio * tc.v_min, tc.sustain_updates
+        npu = tc.person_sustain_updates
         ride_n, ride_r2 = tc.ride_updates, tc.ride_max_range * tc.ride_max_range
         probe = self._free is not None
         slow_tail = f" m/s ≤ v_min {v_min:.2f}"  # (the most common reason's constant part)
@@ -140,6 +141,11 @@ class TrackManage:
                         k.reason = "not in M: tentative track"
                     elif speed <= v_min:
                         k.reason = f"not in M: speed {speed:.2f}{slow_tail}"  # (the most common reason)
+                    elif kfast < nsus and sig < max_ssig and k.person_streak < npu:
+                        # (_dynamic's outcome for a track not in M, faster than v_min with a certain velocity, not yet
+                        # for sustain_updates updates and no person test (person_streak below person_sustain_updates):
+                        # the second most common reason, inline; its tests before this one do not apply)
+                        k.reason = f"not in M: speed > v_min for {kfast}/{nsus} updates"
                     else:
                         self._dynamic(k, speed, sig, t)
                 if mem:
