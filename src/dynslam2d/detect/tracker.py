@@ -358,8 +358,9 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         rows = np.array([k.row for k in cand], dtype=np.int64)
         X, G = self._X, self._G  # (the candidates' centres and shapes: one contiguous gather per column)
         b = self._batch
-        idx = fragment_hosts(b.px, b.py, b.start, b.npts, np.array(dets, dtype=np.int64), X[rows, 0], X[rows, 1],
-                             G[rows, G_THETA], G[rows, G_SIZE0], G[rows, G_SIZE1],
+        idx = fragment_hosts(b.px, b.py, b.start, b.npts, np.array(dets, dtype=np.int64), X[:, 0].take(rows),
+                             X[:, 1].take(rows), G[:, G_THETA].take(rows), G[:, G_SIZE0].take(rows),
+                             G[:, G_SIZE1].take(rows),
                              float(self.config.fit.fragment_margin))
         return [cand[i] if i >= 0 else None for i in idx.tolist()]
 
@@ -466,7 +467,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
                                      float(tc.max_size_jump))
         if self._map is not None:
             ok = self._veto_merged(ok, dets, det_ext, tsize, veto)
-        if not _any_of(ok, axis=None):
+        if not np.count_nonzero(ok):  # (no pair allowed; count_nonzero: cheaper than any())
             return []
         cost = np.where(ok, d2, _BIG)
         # established tracks choose first; tentative ones share what is left
@@ -479,10 +480,10 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
             rows_idx = np.array(group, dtype=np.int64)
             if taken is None:
                 cols_idx = None
-                sub = cost[rows_idx]  # (nothing taken yet: every column)
+                sub = cost.take(rows_idx, axis=0)  # (nothing taken yet: every column; take: cost[rows_idx]'s values)
             else:
                 cols_idx = (~taken).nonzero()[0]
-                sub = cost[rows_idx[:, None], cols_idx]  # (one gather of the rows' free columns)
+                sub = cost.take(rows_idx, axis=0).take(cols_idx, axis=1)  # (the rows' free columns)
             if sub.size == 0:
                 continue
             rr, cc = linear_sum_assignment(sub)

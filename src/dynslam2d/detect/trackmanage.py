@@ -48,7 +48,7 @@ class TrackManage:
         # per track: its speed (Python's math.hypot, as the reasons print it), whether its covariance fails (tested on
         # the rows as they are, instead of a flag kept in step wherever P changes) and σ of its speed along the
         # velocity, from the state rows in one kernel call
-        speeds = list(_starmap(hypot, self._X[order, 2:].tolist()))
+        speeds = list(_starmap(hypot, self._X.take(order, axis=0)[:, 2:].tolist()))  # (take: X[order, 2:]'s values)
         bads, sigs = manage_rows(self._P, self._X, order, np.array(speeds), max_sig)
         bads, sigs = bads.tolist(), sigs.tolist()
         for k, speed, sig, bad in zip(tracks, speeds, sigs, bads):

@@ -240,7 +240,7 @@ class TrackRows:
         """(n, 4) states and (n, 4, 4) covariances of the live tracks (from the prediction when it ran)."""
         if self._stacked is None:
             order = self._rows()
-            self._stacked = (self._X[order], self._P[order])
+            self._stacked = (self._X.take(order, axis=0), self._P.take(order, axis=0))  # (X[order]'s values)
         return self._stacked
 
     def _rows(self) -> np.ndarray:

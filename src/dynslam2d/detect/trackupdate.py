@@ -79,8 +79,10 @@ class TrackUpdate:
             sig = self._size_sigma[npair] = np.full(npair, 0.05)
         mr = self._measure_rows(dis, sizes, has, radius, sig)
         Xs, Ps = self._stack()
-        X_prior = Xs[sel]  # (kalman_update_batch works on copies: the prior stays as it is)
-        Xn, Pn, ok = kalman_update_batch(X_prior, Ps[sel], mr.H, mr.zm, mr.Rm)
+        # (kalman_update_batch works on copies: the prior stays as it is. Rows gathered with take: the values of Xs[sel]
+        # and Ps[sel], a fraction of fancy indexing's cost on a 2-D / 3-D array; docs/speed.md, pass trk20)
+        X_prior = Xs.take(sel, axis=0)
+        Xn, Pn, ok = kalman_update_batch(X_prior, Ps.take(sel, axis=0), mr.H, mr.zm, mr.Rm)
         self._bound_acceleration(X_prior, Xn, self._tracks, pairs)
         self._stacked = None  # the tracks change below
         out = ok.tolist()
@@ -117,7 +119,8 @@ class TrackUpdate:
         # (the candidates' velocities as Python floats in one gather each, the bounded ones written in one scatter)
         after, hypot = tc.accel_bound_after, math.hypot
         nb = 0
-        for r, (pvx, pvy), (nvx, nvy) in zip(near.tolist(), X_prior[near, 2:].tolist(), X_new[near, 2:].tolist()):
+        for r, (pvx, pvy), (nvx, nvy) in zip(near.tolist(), X_prior.take(near, axis=0)[:, 2:].tolist(),
+                                                  X_new.take(near, axis=0)[:, 2:].tolist()):
             if tracks[pairs[r][0]].hits < after:
                 continue
             dvx = nvx - pvx
@@ -157,7 +160,7 @@ class TrackUpdate:
         if p is not None:
             # the centres in the map frame, one gather (their laser-frame centres below, on the floats one by one:
             # the roundings of the former elementwise numpy products and sums)
-            centres = self._X[trows, :2].tolist()
+            centres = self._X.take(trows, axis=0)[:, :2].tolist()
             ns = -s
         else:
             centres = [None] * len(pairs)
