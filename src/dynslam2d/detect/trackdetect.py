@@ -47,7 +47,8 @@ class TrackDetect:
         st = self.stats
         ranges = scan.ranges
         valid = scan.valid_mask()  # (a copy)
-        valid &= ranges > 0.0
+        if not scan.range_min > 0.0:  # (else every valid range is ≥ range_min > 0 already: the test changes nothing)
+            valid &= ranges > 0.0
         seg = segment_scan(scan, cfg.segment, valid, checked=True)
         self.last_segmentation = seg
         st.clusters += seg.n_clusters
