@@ -94,7 +94,6 @@ from dynslam2d.detect.tracktable import (  # noqa: F401  (_Track, _new_track, â€
     CONFIRMED,
     TENTATIVE,
     TrackRows,
-    _any_of,
     _new_track,
     _past_entry,
     _past_points,

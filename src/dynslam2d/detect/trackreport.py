@@ -10,7 +10,7 @@ import numpy as np
 from dynslam2d.detect.frozen import fast_init
 from dynslam2d.detect.kernels import GI_KIND, report_boxes
 from dynslam2d.detect.layout import KIND_CIRCLE, KIND_NAMES
-from dynslam2d.detect.tracktable import _HALF_PI, COASTING, CONFIRMED, _any_of
+from dynslam2d.detect.tracktable import _HALF_PI, COASTING, CONFIRMED
 from dynslam2d.types import Box, Track, wrap_angle
 
 _make_track = fast_init(Track)  # Track(...) / Box(...) without the frozen dataclass __init__ (detect/frozen.py)
@@ -32,7 +32,7 @@ class TrackReport:
         fast = np.empty(n, dtype=np.int8)  # (np.full without its Python wrapper)
         fast.fill(-1)
         boxes, undecided = report_boxes(self._G, self._Gi, self._X, order, slow, fast)
-        if _any_of(undecided):  # (a speed within an ulp of the limit: decided by math.hypot, as the reports were)
+        if np.count_nonzero(undecided):  # (a speed within an ulp of the limit: decided by math.hypot, as reported)
             for i in undecided.nonzero()[0].tolist():
                 vx, vy = self._X[order[i], 2:].tolist()
                 fast[i] = math.hypot(vx, vy) > slow

@@ -32,7 +32,6 @@ from dynslam2d.detect.measure import Detection, ScanDetection
 _HALF_PI = 0.5 * math.pi
 _TWO_PI = 2.0 * math.pi
 _BIG = 1e12
-_any_of = np.logical_or.reduce  # (ndarray.any without the Python wrapper)
 
 TENTATIVE = "tentative"
 CONFIRMED = "confirmed"
