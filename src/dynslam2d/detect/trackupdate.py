@@ -176,7 +176,7 @@ class TrackUpdate:
             past = k.past
             pa = k.past_a
             np0 = len(past)
-            past0 = (past, pa, np0) if ref is not None and np0 > pa else None
+            snap = ref is not None and np0 > pa  # (past, pa, np0: the entries' snapshot, put in the free entry below)
             if k.misses > 0:
                 # re-acquired after a gap: the free-space evidence must be rebuilt from this object
                 k.past = []  # (a new list: the snapshots of earlier updates may hold the old one)
@@ -200,7 +200,7 @@ class TrackUpdate:
             free = k.free
             # (vacated: this scan sees through its old points; computed when the entry is read, _free_values)
             # (the detection's own fraction too: det.free_fraction, computed when read)
-            free.append((det, ref, t, *past0) if past0 is not None else max(det.free_fraction, 0.0))
+            free.append((det, ref, t, past, pa, np0) if snap else max(det.free_fraction, 0.0))
             if len(free) > nsus:
                 del free[0]
             if p is not None:
