@@ -59,9 +59,16 @@ def _pyramid(t0: np.ndarray, max_height: int) -> np.ndarray:
 @njit(cache=True)
 def _score_pyramid(prob, max_height):  # pragma: no cover - numba
     """``_pyramid(_score_table(prob), max_height)`` in one kernel (float32, the same values: the table's
-    float32 2p − 1 and 0.5·m, and maxima, which are exact in any order; ``prob`` holds no NaN)."""
+    float32 2p − 1 and 0.5·m, and maxima, which are exact in any order; ``prob`` holds no NaN, and no value is
+    −0: every value is a maximum with +0 or half of one).
+
+    One pass per output (pass map20): a row's 3-wide maximum from its three cells, the table from the three rows'
+    maxima, and pyramid level h from the four cells (x, y), (x + s, y), (x, y + s), (x + s, y + s) of level h − 1
+    (s = 2^(h−1); the ones beyond the array's end left out, as the zeros outside would be) — instead of a
+    copy and one maximum per neighbour, each a pass over the whole array; the loops read and write rows (1-D
+    views). Every cell of the output is written, so it starts uninitialised."""
     hh, ww = prob.shape
-    out = np.zeros((max_height + 1, hh, ww), dtype=np.float32)
+    out = np.empty((max_height + 1, hh, ww), dtype=np.float32)
     zero = np.float32(0.0)
     two = np.float32(2.0)
     one = np.float32(1.0)
@@ -69,43 +76,46 @@ def _score_pyramid(prob, max_height):  # pragma: no cover - numba
     t = np.empty((hh, ww), dtype=np.float32)
     m = np.empty((hh, ww), dtype=np.float32)
     for y in range(hh):
+        pr = prob[y]
+        tr = t[y]
         for x in range(ww):
-            v = two * prob[y, x] - one
-            t[y, x] = max(v, zero)
-        # 3-wide max along the row
-        for x in range(ww):
-            m[y, x] = t[y, x]
-        for x in range(1, ww):
-            m[y, x] = max(m[y, x], t[y, x - 1])
-        for x in range(ww - 1):
-            m[y, x] = max(m[y, x], t[y, x + 1])
+            tr[x] = max(two * pr[x] - one, zero)
+        mr = m[y]  # 3-wide max along the row
+        if ww == 1:
+            mr[0] = tr[0]
+        else:
+            mr[0] = max(tr[0], tr[1])
+            for x in range(1, ww - 1):
+                mr[x] = max(max(tr[x - 1], tr[x]), tr[x + 1])
+            mr[ww - 1] = max(tr[ww - 2], tr[ww - 1])
     t0 = out[0]
     for y in range(hh):  # then 3-high max along the column, halved, and at least the cell's own value
+        b = m[y]
+        a = m[y - 1] if y >= 1 else b
+        c = m[y + 1] if y + 1 < hh else b
+        tr = t[y]
+        orow = t0[y]
         for x in range(ww):
-            t0[y, x] = m[y, x]
-        if y >= 1:
-            for x in range(ww):
-                t0[y, x] = max(t0[y, x], m[y - 1, x])
-        if y + 1 < hh:
-            for x in range(ww):
-                t0[y, x] = max(t0[y, x], m[y + 1, x])
-        for x in range(ww):
-            t0[y, x] = max(t[y, x], half * t0[y, x])
+            orow[x] = max(tr[x], half * max(max(a[x], b[x]), c[x]))
     for h in range(1, max_height + 1):
         s = 1 << (h - 1)
         prev = out[h - 1]
         cur = out[h]
-        for y in range(hh):  # max over [x, x + s) then [y, y + s) (0 outside: the values are ≥ 0)
-            for x in range(ww):
-                t[y, x] = prev[y, x]
-            for x in range(ww - s):
-                t[y, x] = max(t[y, x], prev[y, x + s])
-        for y in range(hh):
-            for x in range(ww):
-                cur[y, x] = t[y, x]
+        e = ww - s if ww > s else 0  # (the columns whose x + s is inside)
+        for y in range(hh):  # max over [x, x + s] × [y, y + s] (0 outside: the values are ≥ 0)
+            ra = prev[y]
+            crow = cur[y]
             if y + s < hh:
-                for x in range(ww):
-                    cur[y, x] = max(cur[y, x], t[y + s, x])
+                rb = prev[y + s]
+                for x in range(e):
+                    crow[x] = max(max(ra[x], ra[x + s]), max(rb[x], rb[x + s]))
+                for x in range(e, ww):
+                    crow[x] = max(ra[x], rb[x])
+            else:
+                for x in range(e):
+                    crow[x] = max(ra[x], ra[x + s])
+                for x in range(e, ww):
+                    crow[x] = ra[x]
     return out
 
 
