@@ -143,9 +143,10 @@ def test_score_pyramid_kernel_equals_the_array_table_and_pyramid(shape: tuple[in
         assert np.any((t0 > 0.0) & (np.maximum(2.0 * crop - 1.0, 0.0) == 0.0))  # the half-value smear reached
 
 
-def test_rotated_cells_kernel_equals_the_array_expressions() -> None:
+@pytest.mark.parametrize("n", [1, 7, 240])
+def test_rotated_cells_kernel_equals_the_array_expressions(n: int) -> None:
     rng = np.random.default_rng(3)
-    pc = rng.uniform(-300.0, 300.0, (240, 2))
+    pc = rng.uniform(-300.0, 300.0, (n, 2))
     pc[::3] = np.round(pc[::3] * 2.0) / 2.0  # half-cell values, where the rounding of floor(v + 0.5) decides
     th = 0.3 + np.arange(-20, 21) * 0.01
     mp = (123.25, -50.5)

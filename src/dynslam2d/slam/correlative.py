@@ -124,27 +124,33 @@ def _rotated_cells(pc, c, s, mx, my):  # pragma: no cover - numba
     """Nearest cells (qx, qy) (nrot, n) int64 of the points ``pc`` (n ≥ 1, 2, cells) turned by each row's (cos
     ``c``, sin ``s``) and moved by (``mx``, ``my``): floor(c·x − s·y + mx + 0.5), floor(s·x + c·y + my + 0.5), the
     same float64 operations in the same order as the array expressions they replace; and their (min qx, max qx,
-    min qy, max qy)."""
+    min qy, max qy).
+
+    The cells first, row by row from contiguous copies of the points' x and y, then the extremes in a second loop
+    (pass map20): with the running extremes in the cells' loop it did not vectorise (≈ 3× the time)."""
     nrot = c.shape[0]
     n = pc.shape[0]
     qx = np.empty((nrot, n), dtype=np.int64)
     qy = np.empty((nrot, n), dtype=np.int64)
-    x0 = y0 = np.iinfo(np.int64).max
-    x1 = y1 = np.iinfo(np.int64).min
+    px = np.ascontiguousarray(pc[:, 0])
+    py = np.ascontiguousarray(pc[:, 1])
     for k in range(nrot):
         ck = c[k]
         sk = s[k]
+        rx = qx[k]
+        ry = qy[k]
         for i in range(n):
-            px = pc[i, 0]
-            py = pc[i, 1]
-            a = int(math.floor(ck * px - sk * py + mx + 0.5))
-            b = int(math.floor(sk * px + ck * py + my + 0.5))
-            qx[k, i] = a
-            qy[k, i] = b
-            x0 = min(x0, a)
-            x1 = max(x1, a)
-            y0 = min(y0, b)
-            y1 = max(y1, b)
+            rx[i] = int(math.floor(ck * px[i] - sk * py[i] + mx + 0.5))
+            ry[i] = int(math.floor(sk * px[i] + ck * py[i] + my + 0.5))
+    x0 = y0 = np.iinfo(np.int64).max
+    x1 = y1 = np.iinfo(np.int64).min
+    fx = qx.ravel()
+    fy = qy.ravel()
+    for j in range(fx.shape[0]):
+        x0 = min(x0, fx[j])
+        x1 = max(x1, fx[j])
+        y0 = min(y0, fy[j])
+        y1 = max(y1, fy[j])
     return qx, qy, x0, x1, y0, y1
 
 
