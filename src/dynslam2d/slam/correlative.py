@@ -153,8 +153,8 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
     ``tab`` (Hmax+1, H·``ww``) float32: the score pyramid, each level flat, with zeros wherever a point's cell
     of some offset lies outside the searched map (every read is in range); ``qx, qy`` (nrot, n) int64 point
     cells at zero offset in that table. ``merge``: the table values are in [0, 1] — a rotation whose blocks are
-    split more than once is then read as its distinct cells with their point counts (built at its second split;
-    the same sums, see below), else point by point. ``dth`` (nrot,) rotation
+    split is then read as its distinct cells with their point counts (built at its first split; the same sums, see
+    below), else point by point. ``dth`` (nrot,) rotation
     offsets, rad; penalties ``wt_cell2`` per cell², ``wr`` per rad².
     ``excl`` (6,) int64 (k0, k1, dx0, dx1, dy0, dy1): candidates with k0 ≤ k ≤ k1, dx0 ≤ dx ≤ dx1 and dy0 ≤ dy ≤ dy1
     are left out (the runner-up search); k0 > k1 leaves nothing out.
@@ -176,10 +176,10 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
     nrot = qx.shape[0]
     n = qx.shape[1]
     step = 1 << hmax
-    # merged cell lists, built at a rotation's second split: entries rlo[k]:rhi[k] of cell / count (−1: none)
+    # merged cell lists, built at a rotation's first split: entries rlo[k]:rhi[k] of cell / count (−1: none); a
+    # rotation split once paid for its list too since the table reads are unsigned (docs/speed.md, pass loop20)
     rlo = np.full(nrot, -1, dtype=np.int64)
     rhi = np.empty(nrot, dtype=np.int64)
-    splits = np.zeros(nrot, dtype=np.int64)
     cell = np.empty(nrot * n if merge else 0, dtype=np.int64)
     count = np.empty(nrot * n if merge else 0)
     cap = 16
@@ -317,26 +317,24 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
             half = 1 << (h - 1)
             pr = wr * dth[k] * dth[k]
             if merge and rlo[k] < 0:
-                splits[k] += 1
-                if splits[k] >= 2:  # a rotation split once is read point by point: its list would rarely pay
-                    rlo[k] = m
-                    # its distinct cells in first-seen order with their point counts, found with an
-                    # open-addressing hash whose slots hold rotation k's cells where owner is k
-                    for i in range(n):
-                        cc = qy[k, i] * ww + qx[k, i]
-                        hs = (cc * 2654435761) & mask
-                        while owner[hs] == k and key[hs] != cc:
-                            hs = (hs + 1) & mask
-                        if owner[hs] == k:
-                            count[slot[hs]] += 1.0
-                            continue
-                        owner[hs] = k
-                        key[hs] = cc
-                        slot[hs] = m
-                        cell[m] = cc
-                        count[m] = 1.0
-                        m += 1
-                    rhi[k] = m
+                rlo[k] = m
+                # its distinct cells in first-seen order with their point counts, found with an
+                # open-addressing hash whose slots hold rotation k's cells where owner is k
+                for i in range(n):
+                    cc = qy[k, i] * ww + qx[k, i]
+                    hs = (cc * 2654435761) & mask
+                    while owner[hs] == k and key[hs] != cc:
+                        hs = (hs + 1) & mask
+                    if owner[hs] == k:
+                        count[slot[hs]] += 1.0
+                        continue
+                    owner[hs] = k
+                    key[hs] = cc
+                    slot[hs] = m
+                    cell[m] = cc
+                    count[m] = 1.0
+                    m += 1
+                rhi[k] = m
             nc = 0
             tl = tab[h - 1]
             if dx + half <= w and dy + half <= w:

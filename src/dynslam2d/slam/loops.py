@@ -687,7 +687,8 @@ class LoopCloser:
         best = np.full(int(sub.max()) + 1 if sub.size else 0, np.inf)
         np.minimum.at(best, sub, d)
         self.stats["place_ms"] += (time.perf_counter() - t0) * 1e3
-        return {s: float(v) for s, v in enumerate(best) if np.isfinite(v)}
+        # (Python floats from tolist: the same values, without a NumPy scalar and np.isfinite call per submap)
+        return {s: v for s, v in enumerate(best.tolist()) if math.isfinite(v)}
 
     def _submap_extent(self, s: int) -> float:
         """Largest distance of submap ``s``'s keyframes from its anchor (front-end poses), m."""

@@ -107,18 +107,27 @@ def _ring_correlation(q_cols: np.ndarray, cols: np.ndarray, n: int) -> np.ndarra
     rings = q_cols.shape[0]
     nf = q_cols.shape[1]
     out = np.empty((n, nf), dtype=np.complex128)
+    qr = np.empty((rings, nf))
+    qi = np.empty((rings, nf))
+    for r in range(rings):
+        for f in range(nf):
+            qr[r, f] = q_cols[r, f].real
+            qi[r, f] = q_cols[r, f].imag
+    re = np.empty(nf)
+    im = np.empty(nf)
     for i in range(n):
         for f in range(nf):
-            re = 0.0
-            im = 0.0
-            for r in range(rings):
-                a = q_cols[r, f]
+            re[f] = 0.0
+            im[f] = 0.0
+        for r in range(rings):  # ring by ring, each frequency's sums in ring order (the stored rows read in order)
+            for f in range(nf):
                 b = cols[i, r, f]
                 br = np.float64(b.real)
                 bi = -np.float64(b.imag)
-                re += a.real * br - a.imag * bi
-                im += a.real * bi + a.imag * br
-            out[i, f] = complex(re, im)
+                re[f] += qr[r, f] * br - qi[r, f] * bi
+                im[f] += qr[r, f] * bi + qi[r, f] * br
+        for f in range(nf):
+            out[i, f] = complex(re[f], im[f])
     return out
 
 
