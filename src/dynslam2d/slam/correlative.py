@@ -323,9 +323,9 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
                 # open-addressing hash whose slots hold rotation k's cells where owner is k
                 for i in range(n):
                     cc = qy[k, i] * ww + qx[k, i]
-                    hs = (cc * 2654435761) & mask
+                    hs = np.uint64((cc * 2654435761) & mask)  # (a slot ≥ 0: unsigned, as the table reads)
                     while owner[hs] == k and key[hs] != cc:
-                        hs = (hs + 1) & mask
+                        hs = np.uint64((hs + 1) & mask)
                     if owner[hs] == k:
                         count[slot[hs]] += 1.0
                         continue
@@ -350,7 +350,7 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
                 b10 = 0.0
                 b11 = 0.0
                 if rlo[k] >= 0:  # (the sums over distinct cells: see below)
-                    for j in range(rlo[k], rhi[k]):
+                    for j in range(np.uint64(rlo[k]), np.uint64(rhi[k])):
                         cj = cell[j]
                         q = count[j]
                         b00 += q * tl[np.uint64(cj + off)]
