@@ -121,16 +121,25 @@ def _rotated_cells(pc, c, s, mx, my):  # pragma: no cover - numba
     qy = np.empty((nrot, n), dtype=np.int64)
     x0 = y0 = np.iinfo(np.int64).max
     x1 = y1 = np.iinfo(np.int64).min
+    # the coordinates as two contiguous columns and each row's cells in a loop of their own, then its extent: the
+    # rounding loop vectorises (lane by lane the same operations, no reassociation or contraction without fastmath),
+    # ≈ 2.7 × faster than one loop that also tracks the extent (docs/speed.md, pass loop20)
+    px = np.empty(n)
+    py = np.empty(n)
+    for i in range(n):
+        px[i] = pc[i, 0]
+        py[i] = pc[i, 1]
     for k in range(nrot):
         ck = c[k]
         sk = s[k]
+        rx = qx[k]
+        ry = qy[k]
         for i in range(n):
-            px = pc[i, 0]
-            py = pc[i, 1]
-            a = int(math.floor(ck * px - sk * py + mx + 0.5))
-            b = int(math.floor(sk * px + ck * py + my + 0.5))
-            qx[k, i] = a
-            qy[k, i] = b
+            rx[i] = int(math.floor(ck * px[i] - sk * py[i] + mx + 0.5))
+            ry[i] = int(math.floor(sk * px[i] + ck * py[i] + my + 0.5))
+        for i in range(n):
+            a = rx[i]
+            b = ry[i]
             x0 = min(x0, a)
             x1 = max(x1, a)
             y0 = min(y0, b)
