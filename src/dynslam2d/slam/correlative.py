@@ -169,8 +169,8 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
     ``tab`` (Hmax+1, H·``ww``) float32: the score pyramid, each level flat, with zeros wherever a point's cell
     of some offset lies outside the searched map (every read is in range); ``qx, qy`` (nrot, n) int64 point
     cells at zero offset in that table. ``merge``: the table values are in [0, 1] — a rotation whose blocks are
-    split more than once is then read as its distinct cells with their point counts (built at its second split;
-    the same sums, see below), else point by point. ``dth`` (nrot,) rotation
+    split is then read as its distinct cells with their point counts (built at its first split; the same sums, see
+    below), else point by point. ``dth`` (nrot,) rotation
     offsets, rad; penalties ``wt_cell2`` per cell², ``wr`` per rad².
     ``excl`` (6,) int64 (k0, k1, dx0, dx1, dy0, dy1): candidates with k0 ≤ k ≤ k1, dx0 ≤ dx ≤ dx1 and dy0 ≤ dy ≤ dy1
     are left out (the runner-up search); k0 > k1 leaves nothing out.
@@ -182,15 +182,20 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
     fixed order is reached either way: every block on the way to it has a bound ≥ its score > ``floor``).
     ``stop``: the search returns as soon as its best exceeds ``stop`` (that candidate, not necessarily the best:
     the caller only needs to know some candidate beats ``stop``); +inf = never.
+
+    Every table read below is at an index ≥ 0 (the table holds every cell a point reads at any offset in
+    [−w, w]², from its first row and column: ``correlative_search``), passed as an unsigned integer: numba then
+    leaves out its negative-index wrap-around (a compare and select per read, ≈ 20 % of the far searches' time;
+    the same element is read, so the same values).
     """
     hmax = tab.shape[0] - 1
     nrot = qx.shape[0]
     n = qx.shape[1]
     step = 1 << hmax
-    # merged cell lists, built at a rotation's second split: entries rlo[k]:rhi[k] of cell / count (−1: none)
+    # merged cell lists, built at a rotation's first split: entries rlo[k]:rhi[k] of cell / count (−1: none); a
+    # rotation split once paid for its list too since the table reads are unsigned (docs/speed.md, pass loop20)
     rlo = np.full(nrot, -1, dtype=np.int64)
     rhi = np.empty(nrot, dtype=np.int64)
-    splits = np.zeros(nrot, dtype=np.int64)
     cell = np.empty(nrot * n if merge else 0, dtype=np.int64)
     count = np.empty(nrot * n if merge else 0)
     cap = 16
@@ -237,10 +242,10 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
             a3 = 0.0
             for i in range(n):
                 base = qy[k, i] * ww + qx[k, i]
-                a0 += top[base + t0]
-                a1 += top[base + t1]
-                a2 += top[base + t2]
-                a3 += top[base + t3]
+                a0 += top[np.uint64(base + t0)]
+                a1 += top[np.uint64(base + t1)]
+                a2 += top[np.uint64(base + t2)]
+                a3 += top[np.uint64(base + t3)]
             acc[0] = a0
             acc[1] = a1
             acc[2] = a2
@@ -251,7 +256,7 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
             for i in range(n):
                 base = qy[k, i] * ww + qx[k, i]
                 for q in range(na2):
-                    acc[q] += top[base + toff[q]]
+                    acc[q] += top[np.uint64(base + toff[q])]
         for a in range(na):
             for b in range(na):
                 q = a * na + b
@@ -293,6 +298,7 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
     sh = np.empty(cap, dtype=np.int64)
     ss = np.empty(cap)
     cs = np.empty(4)
+    sel = np.empty(4, dtype=np.int64)  # the children pushed, in push order
     cx = np.empty(4, dtype=np.int64)
     cy = np.empty(4, dtype=np.int64)
     for oi in range(ntop):
@@ -328,26 +334,24 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
             half = 1 << (h - 1)
             pr = wr * dth[k] * dth[k]
             if merge and rlo[k] < 0:
-                splits[k] += 1
-                if splits[k] >= 2:  # a rotation split once is read point by point: its list would rarely pay
-                    rlo[k] = m
-                    # its distinct cells in first-seen order with their point counts, found with an
-                    # open-addressing hash whose slots hold rotation k's cells where owner is k
-                    for i in range(n):
-                        cc = qy[k, i] * ww + qx[k, i]
-                        hs = (cc * 2654435761) & mask
-                        while owner[hs] == k and key[hs] != cc:
-                            hs = (hs + 1) & mask
-                        if owner[hs] == k:
-                            count[slot[hs]] += 1.0
-                            continue
-                        owner[hs] = k
-                        key[hs] = cc
-                        slot[hs] = m
-                        cell[m] = cc
-                        count[m] = 1.0
-                        m += 1
-                    rhi[k] = m
+                rlo[k] = m
+                # its distinct cells in first-seen order with their point counts, found with an
+                # open-addressing hash whose slots hold rotation k's cells where owner is k
+                for i in range(n):
+                    cc = qy[k, i] * ww + qx[k, i]
+                    hs = np.uint64((cc * 2654435761) & mask)  # (a slot ≥ 0: unsigned, as the table reads)
+                    while owner[hs] == k and key[hs] != cc:
+                        hs = np.uint64((hs + 1) & mask)
+                    if owner[hs] == k:
+                        count[slot[hs]] += 1.0
+                        continue
+                    owner[hs] = k
+                    key[hs] = cc
+                    slot[hs] = m
+                    cell[m] = cc
+                    count[m] = 1.0
+                    m += 1
+                rhi[k] = m
             nc = 0
             tl = tab[h - 1]
             if dx + half <= w and dy + half <= w:
@@ -362,20 +366,20 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
                 b10 = 0.0
                 b11 = 0.0
                 if rlo[k] >= 0:  # (the sums over distinct cells: see below)
-                    for j in range(rlo[k], rhi[k]):
+                    for j in range(np.uint64(rlo[k]), np.uint64(rhi[k])):
                         cj = cell[j]
                         q = count[j]
-                        b00 += q * tl[cj + off]
-                        b01 += q * tl[cj + o01]
-                        b10 += q * tl[cj + o10]
-                        b11 += q * tl[cj + o11]
+                        b00 += q * tl[np.uint64(cj + off)]
+                        b01 += q * tl[np.uint64(cj + o01)]
+                        b10 += q * tl[np.uint64(cj + o10)]
+                        b11 += q * tl[np.uint64(cj + o11)]
                 else:
                     for i in range(n):  # point by point, in order
                         cj = qy[k, i] * ww + qx[k, i]
-                        b00 += tl[cj + off]
-                        b01 += tl[cj + o01]
-                        b10 += tl[cj + o10]
-                        b11 += tl[cj + o11]
+                        b00 += tl[np.uint64(cj + off)]
+                        b01 += tl[np.uint64(cj + o01)]
+                        b10 += tl[np.uint64(cj + o10)]
+                        b11 += tl[np.uint64(cj + o11)]
                 mx0 = _min_abs(dx, dx + half - 1)
                 mx1 = _min_abs(dx + half, min(dx + 2 * half - 1, w))
                 my0 = _min_abs(dy, dy + half - 1)
@@ -414,28 +418,38 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
                             # of a float32 p ≥ 0.5 is exact, a multiple of 2^−23, its half a multiple of 2^−24) and
                             # n ≤ 2^29 of them (count × value ≤ n) sum without rounding
                             for j in range(rlo[k], rhi[k]):
-                                bs += count[j] * tl[cell[j] + off]
+                                bs += count[j] * tl[np.uint64(cell[j] + off)]
                         else:
                             for i in range(n):  # point by point, in order
-                                bs += tl[qy[k, i] * ww + qx[k, i] + off]
+                                bs += tl[np.uint64(qy[k, i] * ww + qx[k, i] + off)]
                         cs[nc] = bs / n - pr - wt_cell2 * (mx * mx + my * my)
                         cx[nc] = cdx
                         cy[nc] = cdy
                         nc += 1
-            # push children in ascending score so the best is explored first
-            for _ in range(nc):
-                j = 0
-                for q in range(1, nc):
-                    if cs[q] < cs[j]:
-                        j = q
-                if cs[j] > best:
-                    sk[sp] = k
-                    sdx[sp] = cx[j]
-                    sdy[sp] = cy[j]
-                    sh[sp] = h - 1
-                    ss[sp] = cs[j]
-                    sp += 1
-                cs[j] = 1e300
+            # push the children above best in ascending score, equal scores in child order (the order the former
+            # selection of the first smallest each round gave), so the best is explored first: the survivors picked
+            # first (in 62 % of the splits none survives) and sorted by insertion, strict comparisons keeping it stable
+            ns = 0
+            for q in range(nc):
+                if cs[q] > best:
+                    sel[ns] = q
+                    ns += 1
+            for p in range(1, ns):
+                v = sel[p]
+                cv = cs[v]
+                r = p
+                while r > 0 and cs[sel[r - 1]] > cv:
+                    sel[r] = sel[r - 1]
+                    r -= 1
+                sel[r] = v
+            for p in range(ns):
+                j = sel[p]
+                sk[sp] = k
+                sdx[sp] = cx[j]
+                sdy[sp] = cy[j]
+                sh[sp] = h - 1
+                ss[sp] = cs[j]
+                sp += 1
     return bk, bdx, bdy, best
 
 

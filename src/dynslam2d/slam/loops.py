@@ -70,6 +70,7 @@ _MAX_CANDIDATES = 3
 _QUERY_POINTS = 360
 #: Returns per keyframe that enter place descriptors (evenly sub-sampled).
 _PLACE_POINTS = 120
+_PLACE_BATCH = 16  # places described per call when the due ones are flushed (_place_flush)
 #: Keyframe edges across unsupported scans get their deviation multiplied by this.
 _WEAK_FACTOR = 10.0
 
@@ -607,18 +608,26 @@ class LoopCloser:
         return len(elig)
 
     def _describe(self, node: int, store: bool) -> None:
-        """The place descriptor of keyframe ``node``: the returns of the last ``place_keyframes`` keyframes (at most
-        _PLACE_POINTS each) in its laser frame, placed with the front end's relative poses; stored in the index if
-        ``store``, kept for this node's search."""
+        """The place descriptor of keyframe ``node`` (:meth:`_describe_many`)."""
+        self._describe_many([node], store)
+
+    def _describe_many(self, nodes: list[int], store: bool) -> None:
+        """The place descriptors of keyframes ``nodes``, in one batch (:meth:`PlaceIndex.describe_many`): each the
+        returns of the last ``place_keyframes`` keyframes (at most _PLACE_POINTS each) in its laser frame, placed
+        with the front end's relative poses; stored in the index in order if ``store``; the last one kept for its
+        node's search."""
         c = self.config
         t0 = time.perf_counter()
-        nodes = [k for k in range(max(node - c.place_keyframes + 1, 0), node + 1) if k in self._place_pts]
-        base = self.keyframes[node].frontend
-        rel = relative(base, np.array([self.keyframes[k].frontend for k in nodes]).reshape(-1, 3))
-        desc = self._places.describe(_place_points(rel, [self._place_returns(k) for k in nodes]))
+        clouds = []
+        for node in nodes:
+            window = [k for k in range(max(node - c.place_keyframes + 1, 0), node + 1) if k in self._place_pts]
+            base = self.keyframes[node].frontend
+            rel = relative(base, np.array([self.keyframes[k].frontend for k in window]).reshape(-1, 3))
+            clouds.append(_place_points(rel, [self._place_returns(k) for k in window]))
+        descs = self._places.describe_many(clouds)
         if store:
-            self._places.add(node, desc)
-        self._query_desc = (node, desc)
+            self._places.add_many(nodes, descs)
+        self._query_desc = (nodes[-1], descs[-1])
         self.stats["place_ms"] += (time.perf_counter() - t0) * 1e3
 
     def _place_returns(self, node: int) -> np.ndarray:
@@ -654,9 +663,13 @@ class LoopCloser:
         the keyframe, so the descriptors are bit-identical to those computed at keyframe time."""
         last = len(self.keyframes) - 1
         while self._place_due:
-            self._describe(self._place_due[0], True)
-            self._place_due.popleft()
-            self._place_drop(last)  # each place's returns freed as soon as described: memory never above eager
+            # _PLACE_BATCH places per call (one pass of NumPy over all their points): the returns of a batch's
+            # windows are all still held, since _place_drop frees only those before the oldest due place's window
+            batch = [self._place_due[i] for i in range(min(_PLACE_BATCH, len(self._place_due)))]
+            self._describe_many(batch, True)
+            for _ in batch:
+                self._place_due.popleft()
+            self._place_drop(last)  # each batch's returns freed as soon as described: memory never above eager
 
     def _place_ranks(self, node: int) -> dict[int, float]:
         """Submap → smallest place-descriptor distance of its stored keyframes to keyframe ``node``'s place."""
@@ -674,7 +687,8 @@ class LoopCloser:
         best = np.full(int(sub.max()) + 1 if sub.size else 0, np.inf)
         np.minimum.at(best, sub, d)
         self.stats["place_ms"] += (time.perf_counter() - t0) * 1e3
-        return {s: float(v) for s, v in enumerate(best) if np.isfinite(v)}
+        # (Python floats from tolist: the same values, without a NumPy scalar and np.isfinite call per submap)
+        return {s: v for s, v in enumerate(best.tolist()) if math.isfinite(v)}
 
     def _submap_extent(self, s: int) -> float:
         """Largest distance of submap ``s``'s keyframes from its anchor (front-end poses), m."""
