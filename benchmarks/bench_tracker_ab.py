@@ -309,7 +309,7 @@ def phases_ab(scans: list, other) -> dict[str, dict[str, float]]:
 #: functions of other modules that Tracker.update calls (module attributes of detect/tracker.py and its step modules)
 _SPLIT = ("segment_scan", "fit_clusters", "classify_batch", "admit_long_clusters", "map_evidence",
           "map_evidence_kernel", "gate_costs", "measure_batch", "kalman_update_batch", "fragment_hosts",
-          "segment_means", "linear_sum_assignment", "select_detections")
+          "segment_means", "linear_sum_assignment", "assign_groups", "select_detections")
 
 
 def split(scans: list) -> tuple[float, dict[str, float]]:

@@ -112,6 +112,8 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.size_jump_gate',
      "(Array(bool, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, "
      'float64,)'),
+    ('dynslam2d.detect.kernels_assign.assign_groups',
+     "(Array(bool, 2, 'C'), Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64,)"),
     ('dynslam2d.detect.kernels.pair_priors',
      "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int8, 1, 'C'), Array(float64, 1, 'C'),)"),

@@ -11,7 +11,8 @@ see docs/tracking.md):
    the box centre, white-noise-acceleration Q(dt));
 3. segment the scan (paper Eq. 1), transform the points into the map frame with the pose of
    the same scan, fit rectangle / circle / point models (paper Eq. 2);
-4. exclusive association: Hungarian (``scipy.optimize.linear_sum_assignment``) on the
+4. exclusive association: Hungarian (``scipy.optimize.linear_sum_assignment``'s algorithm, as a kernel:
+   :mod:`dynslam2d.detect.kernels_assign`) on the
    Mahalanobis distance of the centre innovation, gated by χ² and a Euclidean distance;
 5. Kalman update with the measurement of :func:`dynslam2d.detect.kernels.measure_batch` (which carries the
    track's size and heading: 90° ambiguity resolved against the track's axis), size and heading
@@ -69,6 +70,7 @@ from dynslam2d.detect.kernels import (
     gate_costs,
     size_jump_gate,
 )
+from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, assign_groups
 from dynslam2d.detect.layout import (
     KIND_CIRCLE,
     KIND_RECT,
@@ -76,7 +78,6 @@ from dynslam2d.detect.layout import (
     DetectionBatch,
     MeasureRows,
 )
-from dynslam2d.detect.lsap import linear_sum_assignment  # scipy's solver without all of scipy.optimize
 from dynslam2d.detect.mapevidence import MapView
 from dynslam2d.detect.measure import Detection
 from dynslam2d.detect.segment import Segmentation
@@ -442,10 +443,11 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         tc = self.config.tracker
         tracks = self._tracks
         Xs, Ps = self._stack()
-        firm_r, tent_r, missed = [], [], []
+        firm: list[bool] = []  # established (not tentative): they choose first
+        missed: list[bool] = []
         veto: list[int] = []  # tracks in M or merged (_veto_merged's rows: found in this pass over the tracks)
         for i, k in enumerate(tracks):  # (the state, misses and M flags: Python attributes)
-            (firm_r if k.state != TENTATIVE else tent_r).append(i)
+            firm.append(k.state != TENTATIVE)
             missed.append(k.misses > 0)
             if k.in_m or k.merged:
                 veto.append(i)
@@ -468,38 +470,16 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
             ok = self._veto_merged(ok, dets, det_ext, tsize, veto)
         if not np.count_nonzero(ok):  # (no pair allowed; count_nonzero: cheaper than any())
             return []
-        cost = np.where(ok, d2, _BIG)
-        # established tracks choose first; tentative ones share what is left
-        pairs: list[tuple[int, int]] = []
-        taken: np.ndarray | None = None  # detections taken by the established tracks
-        sel: list[tuple[np.ndarray, np.ndarray]] = []  # each group's (track, detection) index arrays
-        for group in (firm_r, tent_r):
-            if not group:
-                continue
-            rows_idx = np.array(group, dtype=np.int64)
-            if taken is None:
-                cols_idx = None
-                sub = cost.take(rows_idx, axis=0)  # (nothing taken yet: every column; take: cost[rows_idx]'s values)
-            else:
-                cols_idx = (~taken).nonzero()[0]
-                sub = cost.take(rows_idx, axis=0).take(cols_idx, axis=1)  # (the rows' free columns)
-            if sub.size == 0:
-                continue
-            rr, cc = linear_sum_assignment(sub)
-            ii = rows_idx[rr]
-            jj = cc if cols_idx is None else cols_idx[cc]
-            good = ok[ii, jj]
-            ii, jj = ii[good], jj[good]
-            pairs.extend(zip(ii.tolist(), jj.tolist()))
-            sel.append((ii, jj))
-            if group is firm_r and tent_r:  # (the columns left matter only to the tentative group)
-                taken = np.zeros(m, dtype=bool)
-                taken[jj] = True
+        # the gated costs, the established tracks' assignment, then the tentative tracks' on the detections left, each
+        # pair kept where the gates allow it: one kernel call (SciPy's solver written again step for step, the same
+        # pairs; detect/kernels_assign.py, docs/speed.md pass trk21)
+        status, ii, jj = assign_groups(ok, d2, np.array(firm), _BIG)
+        if status:
+            raise ValueError(LSAP_MESSAGES[status])  # (SciPy's error for such a cost matrix)
+        pairs = list(zip(ii.tolist(), jj.tolist()))
         # (the pairs as index arrays too, for _update_pairs: kept with the list they belong to)
         if pairs:
-            self._pair_arrays = (pairs, *(sel[0] if len(sel) == 1 else
-                                          (np.concatenate((sel[0][0], sel[1][0])),
-                                           np.concatenate((sel[0][1], sel[1][1])))))
+            self._pair_arrays = (pairs, ii, jj)
         return pairs
 
     def _veto_merged(self, ok: np.ndarray, dets: list[Detection], det_ext: np.ndarray,

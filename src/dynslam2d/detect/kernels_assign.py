@@ -1,0 +1,198 @@
+"""The association's assignment as one kernel call per scan (``Tracker._associate``, detect/tracker.py): the gated cost
+matrix, the established tracks' assignment, then the tentative tracks' on the detections left, each pair kept only
+where the gates allow it.
+
+The solver is SciPy's ``linear_sum_assignment`` (the shortest augmenting path algorithm of D. F. Crouse, "On
+implementing 2D rectangular assignment algorithms", IEEE TAES 52(4):1679–1696, 2016, pp. 1685–1686, as implemented
+in SciPy's ``scipy/optimize/rectangular_lsap/rectangular_lsap.cpp`` by P. M. Larsen, BSD licence) written again
+step for step: the same column order, the same tie rule and the same floating-point operations in the same order,
+so the same assignment bit for bit (``tests/test_detect_assign.py`` compares it with SciPy's). A Python call to
+SciPy per group and the numpy glue around it (the sub-matrices, the index maps, the gate filter) cost ≈ 40–60 µs
+per scan on the real recordings; the kernel does the same work in one call (docs/speed.md, pass trk21).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
+
+#: status codes of :func:`lsap` / :func:`assign_groups` (SciPy raises ValueError with these messages)
+LSAP_OK = 0
+LSAP_INFEASIBLE = 1
+LSAP_INVALID = 2
+LSAP_MESSAGES = {LSAP_INFEASIBLE: "cost matrix is infeasible",
+                 LSAP_INVALID: "matrix contains invalid numeric entries"}
+
+
+@njit(cache=True, inline="always")
+def lsap(cost: np.ndarray) -> tuple:
+    """SciPy's ``linear_sum_assignment(cost)`` (minimisation) of an (nr, nc) float64 matrix: (status, row indices,
+    column indices), the rows increasing; status :data:`LSAP_OK`, or :data:`LSAP_INVALID` for a NaN or −inf entry,
+    :data:`LSAP_INFEASIBLE` when no complete assignment has a finite cost (the index arrays are then empty). Crouse
+    2016's shortest augmenting path, as SciPy implements it (module docstring). Written with ``np.empty`` and loops
+    only (no ``np.full`` / ``np.argsort`` / slice assignment): each numpy helper a kernel uses is compiled once more
+    per signature on a cold run (issue 13 item 2). ``inline="always"``: compiled inside its one caller."""
+    nr0, nc0 = cost.shape
+    k = min(nr0, nc0)
+    a = np.empty(k, dtype=np.int64)
+    b = np.empty(k, dtype=np.int64)
+    if nr0 == 0 or nc0 == 0:
+        return LSAP_OK, a, b
+    transpose = nc0 < nr0  # a tall matrix is solved transposed
+    if transpose:
+        nr, nc = nc0, nr0
+    else:
+        nr, nc = nr0, nc0
+    c = np.empty(nr * nc)  # (row-major, transposed for a tall matrix)
+    for i in range(nr0):
+        for j in range(nc0):
+            if transpose:
+                c[j * nr0 + i] = cost[i, j]
+            else:
+                c[i * nc0 + j] = cost[i, j]
+    for q in range(nr * nc):
+        x = c[q]
+        if x != x or x == -np.inf:
+            return LSAP_INVALID, a[:0], b[:0]
+    u = np.empty(nr)
+    col4row = np.empty(nr, dtype=np.int64)
+    SR = np.empty(nr, dtype=np.bool_)
+    for i in range(nr):
+        u[i] = 0.0
+        col4row[i] = -1
+    v = np.empty(nc)
+    spc = np.empty(nc)  # shortest path costs
+    path = np.empty(nc, dtype=np.int64)
+    row4col = np.empty(nc, dtype=np.int64)
+    SC = np.empty(nc, dtype=np.bool_)
+    remaining = np.empty(nc, dtype=np.int64)
+    for j in range(nc):
+        v[j] = 0.0
+        path[j] = -1
+        row4col[j] = -1
+    for cur in range(nr):
+        # augmenting path from row cur
+        min_val = 0.0
+        nrem = nc
+        for it in range(nc):
+            remaining[it] = nc - it - 1  # (reverse order: SciPy's, a constant matrix gives the identity)
+            SC[it] = False
+            spc[it] = np.inf
+        for i in range(nr):
+            SR[i] = False
+        i = cur
+        sink = -1
+        while sink == -1:
+            index = -1
+            lowest = np.inf
+            SR[i] = True
+            base = i * nc
+            ui = u[i]
+            for it in range(nrem):
+                j = remaining[it]
+                r = min_val + c[base + j] - ui - v[j]
+                if r < spc[j]:
+                    path[j] = i
+                    spc[j] = r
+                # (ties: prefer a column that ends the path, SciPy's rule)
+                if spc[j] < lowest or (spc[j] == lowest and row4col[j] == -1):
+                    lowest = spc[j]
+                    index = it
+            min_val = lowest
+            if min_val == np.inf:
+                return LSAP_INFEASIBLE, a[:0], b[:0]
+            j = remaining[index]
+            if row4col[j] == -1:
+                sink = j
+            else:
+                i = row4col[j]
+            SC[j] = True
+            nrem -= 1
+            remaining[index] = remaining[nrem]
+        # the dual variables
+        u[cur] += min_val
+        for i in range(nr):
+            if SR[i] and i != cur:
+                u[i] += min_val - spc[col4row[i]]
+        for j in range(nc):
+            if SC[j]:
+                v[j] -= min_val - spc[j]
+        # augment the previous solution along the path
+        j = sink
+        while True:
+            i = path[j]
+            row4col[j] = i
+            jj = col4row[i]
+            col4row[i] = j
+            j = jj
+            if i == cur:
+                break
+    if transpose:
+        # by original row: the transposed problem's columns (original rows) in increasing order, each with its row
+        # (original column); col4row's values are distinct, so any sort gives SciPy's order
+        q = 0
+        for r in range(nc):
+            if row4col[r] >= 0:
+                a[q] = r
+                b[q] = row4col[r]
+                q += 1
+    else:
+        for q in range(nr):
+            a[q] = q
+            b[q] = col4row[q]
+    return LSAP_OK, a, b
+
+
+@njit(cache=True)
+def assign_groups(ok: np.ndarray, d2: np.ndarray, firm: np.ndarray, big: float) -> tuple:
+    """The association's pairs (``Tracker._associate``): the cost ``np.where(ok, d2, big)`` of the (n tracks, m
+    detections) gates ``ok`` and squared distances ``d2``; the established tracks (``firm``: (n,) bool, not
+    tentative) choose first by :func:`lsap` over every detection, then the tentative ones over the detections they
+    left (only those the established tracks' kept pairs took are removed); a pair stays only where ``ok`` allows it.
+    Returns (status, track indices, detection indices): the established group's pairs by increasing track index,
+    then the tentative group's; status as :func:`lsap` (the first group's failure stops)."""
+    n, m = ok.shape
+    k = min(n, m)
+    ii = np.empty(k, dtype=np.int64)
+    jj = np.empty(k, dtype=np.int64)
+    npair = 0
+    taken = np.empty(m, dtype=np.bool_)
+    for j in range(m):
+        taken[j] = False
+    rows = np.empty(n, dtype=np.int64)
+    cols = np.empty(m, dtype=np.int64)
+    for g in range(2):  # the established tracks, then the tentative ones (one call site of the inlined solver)
+        want = g == 0
+        nrow = 0
+        for i in range(n):
+            if firm[i] == want:
+                rows[nrow] = i
+                nrow += 1
+        if nrow == 0:
+            continue
+        ncol = 0
+        for j in range(m):
+            if not taken[j]:
+                cols[ncol] = j
+                ncol += 1
+        if ncol == 0:
+            continue
+        sub = np.empty((nrow, ncol))
+        for r in range(nrow):
+            ti = rows[r]
+            for q in range(ncol):
+                dj = cols[q]
+                sub[r, q] = d2[ti, dj] if ok[ti, dj] else big
+        status, rr, cc = lsap(sub)
+        if status != LSAP_OK:
+            return status, ii[:0], jj[:0]
+        for q in range(rr.shape[0]):
+            ti = rows[rr[q]]
+            dj = cols[cc[q]]
+            if ok[ti, dj]:
+                ii[npair] = ti
+                jj[npair] = dj
+                npair += 1
+                taken[dj] = True
+    return LSAP_OK, ii[:npair].copy(), jj[:npair].copy()
