@@ -399,7 +399,9 @@ class _Ledger:
         for k, (rec, c) in enumerate(zip(recs, chunks)):
             if not c:
                 continue
-            part = cat[:4, lab == k]  # (a copy: the level's rows in update order, each update's in its order)
+            # (a copy: the level's rows in update order, each update's in its order; compress, not
+            # cat[:4, lab == k]: the same values in a third to half the time, C- not F-ordered; _pk meets no kernel)
+            part = cat[:4].compress(lab == k, axis=1)
             rec.materialize()  # (references given by _LevelRecord.refer, if any, come first)
             n = rec._n_rows
             rec._pk = np.concatenate((rec._pk[:, :n], part), axis=1) if n else part
@@ -433,7 +435,7 @@ class _Ledger:
             if not c:
                 total += rec.new_cells() if rec is not None else 0
                 continue
-            mine = cat[0][lab == k]
+            mine = cat[0].compress(lab == k)
             cap = self.cap if rec is None else rec.cap
             if c == 1 and (rec is None or (not rec._n_rows and not rec.key.shape[0])):  # one update: each key once
                 total += min(mine.shape[0], cap)
@@ -555,7 +557,7 @@ class EvidenceLedger:
             return None
         blist = [t.beams for t in mine]
         tids = [t.id for t in mine]
-        idl = np.array(tids + [len(b) for b in blist], dtype=np.int64)  # (the ids, then the beam counts: one array)
+        idl = np.array(tids + list(map(len, blist)), dtype=np.int64)  # (the ids, then the beam counts: one array)
         allb = np.concatenate(blist).astype(np.int64, copy=False)
         c, s = math.cos(pose.theta), math.sin(pose.theta)
         levels = hmap.levels
@@ -819,8 +821,9 @@ class EvidenceLedger:
                     if not led.confirmed and t.state != "tentative":
                         led.confirmed = True
         live = {t.id for t in tracks}
-        if len(first) > len(live):
-            self._first = {tid: b for tid, b in first.items() if tid in live}
+        if len(first) > len(live):  # (deleted in place: a third of a rebuilt dict's time; only get reads it)
+            for tid in first.keys() - live:
+                del first[tid]
         for tid in [i for i in ledgers if i not in live]:  # (in the ledgers' order)
             led = ledgers.pop(tid)
             if led.last_track is not None:
