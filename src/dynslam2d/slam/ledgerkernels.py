@@ -492,9 +492,14 @@ def record_cells(beams, idl, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px,
                                                               rmin, rmax, c, s, px, py, rs)
     n_lv = rs.shape[0]
     if params.shape[0] == 0:
-        status = PLAIN
-        if counts.shape[0] == 0 or counts.max() == 0:
-            status = NO_KEPT
+        # no kept beam of any track: every count 0 (counts are >= 0; a loop instead of ``counts.max() == 0``,
+        # whose numba implementation (np.max with its take and comparator helpers) no other kernel of a run
+        # compiles: about 0.5 s of cold compile CPU)
+        status = NO_KEPT
+        for k in range(counts.shape[0]):
+            if counts[k] != 0:
+                status = PLAIN
+                break
         return (status, np.zeros((6, 0), dtype=np.int64), np.zeros(0, dtype=np.int64),
                 np.zeros(0, dtype=np.int32))
     _radix_sort(packed)
