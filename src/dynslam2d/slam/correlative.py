@@ -520,6 +520,44 @@ def _percentile95(v: np.ndarray) -> float:
     return b - d * (1 - t) if t >= 0.5 else a + d * t
 
 
+def _turn_refused(tab: np.ndarray, ww: int, qx0: np.ndarray, qy0: np.ndarray, merge: bool, w: int, dth: np.ndarray,
+                  n_half: int, angular_window: float, accept_turn: float, wt_cell2: float, wr: float, floor: float,
+                  min_score: float, min_margin: float, ec: int, runner_up_angle: float) -> bool:
+    """Whether the rotations within ±``accept_turn`` rad of the start (rows ``n_half`` ± j of ``dth``, a contiguous
+    block of the search's own rows, read from its own table) show that no pose of the whole search passes the
+    caller's ``min_score``, ``min_margin`` and ``accept_turn``: their best (:func:`branch_and_bound` over those rows,
+    with the search's ``floor``) is below ``min_score``, or their runner-up outside ±``ec`` cells / ±ek rows of it
+    leaves a margin below ``min_margin``. False (search every rotation) when the block is not much smaller than
+    the whole (no saving) or reaches half way round the circle (the runner-up neighbourhood of the whole search
+    wraps around it: :func:`_wrapped_rows`; within a block narrower than π the plain row distance is the circular
+    one).
+
+    Why a refusal here is the whole search's refusal, with B the whole search's best and B' the block's: B outside
+    the block lies beyond ``accept_turn`` (refused by the caller); B inside the block is B' (the block's rows, bounds
+    and search order are the whole search's), its score below ``min_score`` if B''s is, and the block's runner-up —
+    outside B's neighbourhood in the whole search too (its row distance is the circular one) — is a pose the whole
+    runner-up pass finds at least as good (cut short at the same ``stop``)."""
+    step = angular_window / max(n_half, 1)
+    if step <= 0.0:
+        return False
+    j = int(math.floor(accept_turn / step))
+    if j < 0 or 2 * j + 1 > (2 * n_half + 1) // 2 or 2.0 * j * step >= math.pi:
+        return False
+    lo, hi = n_half - j, n_half + j + 1
+    qx = np.ascontiguousarray(qx0[lo:hi])
+    qy = np.ascontiguousarray(qy0[lo:hi])
+    d = dth[lo:hi]
+    k, dx, dy, best = branch_and_bound(tab, ww, qx, qy, merge, w, d, wt_cell2, wr, _NO_EXCL, floor, math.inf)
+    if best < min_score:
+        return True
+    ek = int(math.ceil(runner_up_angle / step))
+    excl = np.array([k - ek, k + ek, dx - ec, dx + ec, dy - ec, dy + ec], dtype=np.int64)
+    stop = best - min_margin + 1e-9
+    _k2, _dx2, _dy2, s2 = branch_and_bound(tab, ww, qx, qy, merge, w, d, wt_cell2, wr, excl, -1e300, stop)
+    runner_up = float(s2) if s2 > -1e299 else 0.0
+    return float(best) - runner_up < min_margin
+
+
 #: Exclusion box that leaves nothing out (k0 > k1).
 _NO_EXCL = np.array([1, 0, 0, 0, 0, 0], dtype=np.int64)
 
@@ -560,6 +598,7 @@ def correlative_search(
     runner_up_wrap: bool = False,
     min_score: float | None = None,
     min_margin: float | None = None,
+    accept_turn: float | None = None,
 ) -> CorrelativeResult | None:
     """Search ``level`` around ``start_world`` for the best pose of laser-frame points ``pts_m`` (n, 2, m).
 
@@ -580,6 +619,16 @@ def correlative_search(
     stops at the first pose that makes the margin (score − runner_up) smaller than it, and ``runner_up`` is then
     that pose's score (a lower bound of the runner-up's, enough to refuse). Where the margin is at least
     ``min_margin`` the runner-up is the one found without it.
+
+    ``accept_turn`` (rad; with ``min_score``, ``min_margin`` and ``runner_up_distance``): the caller refuses a
+    best pose more than this from ``start_world``'s heading too (the loop closer's far search: the correction
+    the uncertainty allows, plus what its refinement may turn). The rotations within it are then searched first,
+    the same rows of the same table (:func:`_turn_refused`); when they prove that the whole search cannot
+    give a pose the caller accepts — their best is below ``min_score`` (the best of all rotations is then either
+    below it too or outside ``accept_turn``), or a pose among them outside the best one's runner-up neighbourhood
+    is within ``min_margin`` of it (then it is a runner-up of the best of all rotations too, unless that best lies
+    outside ``accept_turn``) — the search returns None without searching every rotation; otherwise it runs as
+    without it, with the same result.
     """
     if level.empty or pts_m.shape[0] == 0:
         return None
@@ -635,6 +684,12 @@ def correlative_search(
     if ox or oy:
         qx0 -= ox
         qy0 -= oy
+    if (accept_turn is not None and min_score is not None and min_margin is not None
+            and runner_up_distance is not None
+            and _turn_refused(tab, ww, qx0, qy0, merge, w, dth, n_half, angular_window, accept_turn,
+                              translation_weight * r * r, rotation_weight, floor, min_score, min_margin,
+                              int(math.ceil(runner_up_distance / r)), runner_up_angle)):
+        return None
     k, dx, dy, best = branch_and_bound(tab, ww, qx0, qy0, merge, w, dth, translation_weight * r * r, rotation_weight,
                                        _NO_EXCL, floor, math.inf)
     if min_score is not None and best < min_score:

@@ -71,6 +71,11 @@ _QUERY_POINTS = 360
 #: Returns per keyframe that enter place descriptors (evenly sub-sampled).
 _PLACE_POINTS = 120
 _PLACE_BATCH = 16  # places described per call when the due ones are flushed (_place_flush)
+#: Largest turn (rad) the Gauss–Newton refinement of a far search's correlative match is allowed for when the
+#: search first looks only at the rotations a far candidate may take (``_far_search``): a match turned farther
+#: than the candidate limit plus this is refused either way. The refinement starts at the match and moves it by
+#: a few cells at most (MIT CSAIL, Freiburg 079, Intel, negative_2: ≤ 2.9° over every far candidate; 0.25 rad = 14°).
+_REFINE_TURN = 0.25
 #: Keyframe edges across unsupported scans get their deviation multiplied by this.
 _WEAK_FACTOR = 10.0
 
@@ -591,12 +596,15 @@ class LoopCloser:
             dist = math.hypot(pred[0], pred[1])
             if dist > ext:  # the robot must be near the submap's keyframes to see what they saw
                 pred = np.array([pred[0] * ext / dist, pred[1] * ext / dist, pred[2]])
+            turn = c.angular_window + c.far_sigmas * dth
+            # the search covers every rotation (the margin counts rotated look-alikes), but a candidate must turn
+            # the estimate by at most ``turn``: the rotations within turn + _REFINE_TURN are searched first, and
+            # when they show that no pose can pass, the rest is not searched (correlative_search, accept_turn)
             cand = self._match_at(node, s, pts, pred, min(r, ext + c.far_margin), math.pi, c.far_min_margin,
-                                  c.far_level)
+                                  c.far_level, turn + _REFINE_TURN)
             if cand is None:
                 continue
             implied = self._implied(cand)
-            turn = c.angular_window + c.far_sigmas * dth
             jump = math.hypot(implied[0] - est[0], implied[1] - est[1])
             if jump > r or abs(math.remainder(implied[2] - est[2], math.tau)) > turn:
                 continue  # a correction larger than the uncertainty allows: a look-alike place, not a loop
@@ -798,10 +806,12 @@ class LoopCloser:
         return self._match_at(node, s, pts, pred, lin, ang, c.min_margin)
 
     def _match_at(self, node: int, s: int, pts: np.ndarray, pred: np.ndarray, lin: float, ang: float,
-                  min_margin: float, level: int | None = None) -> LoopCandidate | None:
+                  min_margin: float, level: int | None = None,
+                  accept_turn: float | None = None) -> LoopCandidate | None:
         """Correlative search of submap ``s`` for keyframe ``node``'s points ``pts`` within ±``lin`` m /
         ±``ang`` rad of ``pred`` (the keyframe in the anchor's frame), refined by Gauss–Newton; a candidate
-        if score, margin over the runner-up, support and spread pass."""
+        if score, margin over the runner-up, support and spread pass. ``accept_turn`` (rad): the caller refuses a
+        candidate whose correlative match turns ``pred`` by more than this (:func:`correlative_search`)."""
         c = self.config
         sc = self.slam
         _first, _last, anchor = self._submap_range(s)
@@ -820,7 +830,8 @@ class LoopCloser:
         # a search without the bounds followed by a second search with the runner-up)
         cr = correlative_search(lvl, pts, pred, lin, ang, None, c.search_points, sc.correlative_max_height, 0.0, 0.0,
                                 runner_up_distance=c.runner_up_distance, runner_up_angle=c.runner_up_angle,
-                                runner_up_wrap=c.runner_up_wrap, min_score=c.min_score, min_margin=min_margin)
+                                runner_up_wrap=c.runner_up_wrap, min_score=c.min_score, min_margin=min_margin,
+                                accept_turn=accept_turn)
         if cr is None or cr.score < c.min_score:
             return None
         margin = cr.score - (cr.runner_up or 0.0)
