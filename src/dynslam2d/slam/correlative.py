@@ -520,42 +520,71 @@ def _percentile95(v: np.ndarray) -> float:
     return b - d * (1 - t) if t >= 0.5 else a + d * t
 
 
-def _turn_refused(tab: np.ndarray, ww: int, qx0: np.ndarray, qy0: np.ndarray, merge: bool, w: int, dth: np.ndarray,
-                  n_half: int, angular_window: float, accept_turn: float, wt_cell2: float, wr: float, floor: float,
-                  min_score: float, min_margin: float, ec: int, runner_up_angle: float) -> bool:
-    """Whether the rotations within ±``accept_turn`` rad of the start (rows ``n_half`` ± j of ``dth``, a contiguous
-    block of the search's own rows, read from its own table) show that no pose of the whole search passes the
-    caller's ``min_score``, ``min_margin`` and ``accept_turn``: their best (:func:`branch_and_bound` over those rows,
-    with the search's ``floor``) is below ``min_score``, or their runner-up outside ±``ec`` cells / ±ek rows of it
-    leaves a margin below ``min_margin``. False (search every rotation) when the block is not much smaller than
-    the whole (no saving) or reaches half way round the circle (the runner-up neighbourhood of the whole search
-    wraps around it: :func:`_wrapped_rows`; within a block narrower than π the plain row distance is the circular
-    one).
+def _turn_first(tab: np.ndarray, ww: int, qx0: np.ndarray, qy0: np.ndarray, merge: bool, w: int, dth: np.ndarray,
+                n_half: int, angular_window: float, accept_turn: float, wt_cell2: float, wr: float, floor: float,
+                min_score: float, min_margin: float, ec: int, runner_up_angle: float,
+                ) -> tuple[int, int, int, int, float, int, int, int, float]:
+    """The search of :func:`correlative_search` with ``accept_turn`` rad: the rotations within it first (rows
+    ``n_half`` ± j of ``dth``, a contiguous block of the search's own rows read from its own table, in the same
+    order), then the others only as far as the caller's decision needs them.
 
-    Why a refusal here is the whole search's refusal, with B the whole search's best and B' the block's: B outside
-    the block lies beyond ``accept_turn`` (refused by the caller); B inside the block is B' (the block's rows, bounds
-    and search order are the whole search's), its score below ``min_score`` if B''s is, and the block's runner-up —
-    outside B's neighbourhood in the whole search too (its row distance is the circular one) — is a pose the whole
-    runner-up pass finds at least as good (cut short at the same ``stop``)."""
+    Returns (status, k, dx, dy, best, k2, dx2, dy2, runner-up score): status 0 = search every rotation as without
+    ``accept_turn`` (the block is not much smaller than the whole, reaches half way round the circle — where the
+    whole search's runner-up neighbourhood wraps around it, :func:`_wrapped_rows` — or its best lies within the
+    runner-up neighbourhood of its edge, or a pose outside it scores at least as high); 1 = no pose of the whole
+    search passes ``min_score``, ``min_margin`` and ``accept_turn``; 2 = the whole search's best and runner-up.
+
+    With B the whole search's best and B' the block's (:func:`branch_and_bound` over the block's rows with the
+    search's ``floor``; its rows, bounds and order are the whole search's, so the same pose):
+
+    * B' below ``min_score``: B is below it too or outside the block, beyond ``accept_turn`` (refused either way);
+    * B''s runner-up in the block (outside ±``ec`` cells / ±ek rows, cut short at the same ``stop``) within
+      ``min_margin`` of it: it is a runner-up of B = B' in the whole search too (within a block narrower than π the
+      plain row distance is the circular one), or B lies beyond ``accept_turn``;
+    * the rows outside the block searched with that ``stop``: a pose above it is the whole search's best (beyond
+      ``accept_turn``) or a runner-up of B' that loses the margin; otherwise their best is exact and below B''s
+      score, so B = B' (the first maximiser: every outside score is lower), and the whole search's runner-up is the
+      higher of the block's and theirs (the same score; the block's pose among equal scores).
+    """
+    none = (0, 0, 0, 0, 0.0, 0, 0, 0, 0.0)
     step = angular_window / max(n_half, 1)
     if step <= 0.0:
-        return False
+        return none
     j = int(math.floor(accept_turn / step))
     if j < 0 or 2 * j + 1 > (2 * n_half + 1) // 2 or 2.0 * j * step >= math.pi:
-        return False
+        return none
     lo, hi = n_half - j, n_half + j + 1
     qx = np.ascontiguousarray(qx0[lo:hi])
     qy = np.ascontiguousarray(qy0[lo:hi])
     d = dth[lo:hi]
     k, dx, dy, best = branch_and_bound(tab, ww, qx, qy, merge, w, d, wt_cell2, wr, _NO_EXCL, floor, math.inf)
     if best < min_score:
-        return True
+        return (1, *none[1:])
     ek = int(math.ceil(runner_up_angle / step))
     excl = np.array([k - ek, k + ek, dx - ec, dx + ec, dy - ec, dy + ec], dtype=np.int64)
     stop = best - min_margin + 1e-9
-    _k2, _dx2, _dy2, s2 = branch_and_bound(tab, ww, qx, qy, merge, w, d, wt_cell2, wr, excl, -1e300, stop)
+    k2, dx2, dy2, s2 = branch_and_bound(tab, ww, qx, qy, merge, w, d, wt_cell2, wr, excl, -1e300, stop)
     runner_up = float(s2) if s2 > -1e299 else 0.0
-    return float(best) - runner_up < min_margin
+    if float(best) - runner_up < min_margin:
+        return (1, *none[1:])
+    if k - ek < 0 or k + ek >= hi - lo:  # outside rows within the best's neighbourhood: the whole search decides
+        return none
+    ox = np.concatenate((qx0[:lo], qx0[hi:]))
+    oy = np.concatenate((qy0[:lo], qy0[hi:]))
+    od = np.concatenate((dth[:lo], dth[hi:]))
+    k3, dx3, dy3, s3 = branch_and_bound(tab, ww, ox, oy, merge, w, od, wt_cell2, wr, _NO_EXCL, -1e300, stop)
+    if s3 > stop:  # the best beyond accept_turn, or a runner-up that loses the margin
+        return (1, *none[1:])
+    if s3 >= best:  # (only when min_margin ≤ 1e-9: equal scores, the order decides)
+        return none
+    if s3 > s2:
+        k2, dx2, dy2, s2 = (k3 if k3 < lo else k3 + (hi - lo)), dx3, dy3, s3
+    else:
+        k2 += lo
+    runner_up = float(s2) if s2 > -1e299 else 0.0
+    if float(best) - runner_up < min_margin:
+        return (1, *none[1:])
+    return (2, k + lo, dx, dy, best, k2, dx2, dy2, s2)
 
 
 #: Exclusion box that leaves nothing out (k0 > k1).
@@ -623,12 +652,10 @@ def correlative_search(
     ``accept_turn`` (rad; with ``min_score``, ``min_margin`` and ``runner_up_distance``): the caller refuses a
     best pose more than this from ``start_world``'s heading too (the loop closer's far search: the correction
     the uncertainty allows, plus what its refinement may turn). The rotations within it are then searched first,
-    the same rows of the same table (:func:`_turn_refused`); when they prove that the whole search cannot
-    give a pose the caller accepts — their best is below ``min_score`` (the best of all rotations is then either
-    below it too or outside ``accept_turn``), or a pose among them outside the best one's runner-up neighbourhood
-    is within ``min_margin`` of it (then it is a runner-up of the best of all rotations too, unless that best lies
-    outside ``accept_turn``) — the search returns None without searching every rotation; otherwise it runs as
-    without it, with the same result.
+    the same rows of the same table, and the others only as far as the decision needs them (:func:`_turn_first`):
+    None when no pose of the whole search passes ``min_score``, ``min_margin`` and ``accept_turn`` (a search without
+    it may then return a pose the caller refuses); otherwise the result of the search without it (the same pose,
+    score and runner-up score; the runner-up pose is one of those with that score).
     """
     if level.empty or pts_m.shape[0] == 0:
         return None
@@ -684,12 +711,18 @@ def correlative_search(
     if ox or oy:
         qx0 -= ox
         qy0 -= oy
-    if (accept_turn is not None and min_score is not None and min_margin is not None
-            and runner_up_distance is not None
-            and _turn_refused(tab, ww, qx0, qy0, merge, w, dth, n_half, angular_window, accept_turn,
-                              translation_weight * r * r, rotation_weight, floor, min_score, min_margin,
-                              int(math.ceil(runner_up_distance / r)), runner_up_angle)):
-        return None
+    if accept_turn is not None and min_score is not None and min_margin is not None and runner_up_distance is not None:
+        st, k, dx, dy, best, k2, dx2, dy2, s2 = _turn_first(
+            tab, ww, qx0, qy0, merge, w, dth, n_half, angular_window, accept_turn, translation_weight * r * r,
+            rotation_weight, floor, min_score, min_margin, int(math.ceil(runner_up_distance / r)), runner_up_angle)
+        if st == 1:
+            return None
+        if st == 2:
+            out = CorrelativeResult(level.pose_to_world(np.array([mp[0] + dx, mp[1] + dy, th[k]])), float(best),
+                                    int(th.shape[0]))
+            out.runner_up = float(s2) if s2 > -1e299 else 0.0
+            out.runner_up_pose = level.pose_to_world(np.array([mp[0] + dx2, mp[1] + dy2, th[k2]]))
+            return out
     k, dx, dy, best = branch_and_bound(tab, ww, qx0, qy0, merge, w, dth, translation_weight * r * r, rotation_weight,
                                        _NO_EXCL, floor, math.inf)
     if min_score is not None and best < min_score:

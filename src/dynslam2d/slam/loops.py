@@ -71,10 +71,11 @@ _QUERY_POINTS = 360
 #: Returns per keyframe that enter place descriptors (evenly sub-sampled).
 _PLACE_POINTS = 120
 _PLACE_BATCH = 16  # places described per call when the due ones are flushed (_place_flush)
-#: Largest turn (rad) the Gauss–Newton refinement of a far search's correlative match is allowed for when the
-#: search first looks only at the rotations a far candidate may take (``_far_search``): a match turned farther
-#: than the candidate limit plus this is refused either way. The refinement starts at the match and moves it by
-#: a few cells at most (MIT CSAIL, Freiburg 079, Intel, negative_2: ≤ 2.9° over every far candidate; 0.25 rad = 14°).
+#: Turn (rad) beyond a far candidate's heading limit within which its correlative match may lie (the far search
+#: first searches only the rotations within limit + this, ``_far_search``; a match beyond them is refused even if
+#: the Gauss–Newton refinement turns it back within the limit). The refinement moves a match by a few cells and
+#: degrees at most (MIT CSAIL, Freiburg 079, Intel, negative_2: ≤ 2.9° over every far candidate; 0.25 rad = 14°),
+#: so the rule refuses nothing the limit itself would not.
 _REFINE_TURN = 0.25
 #: Keyframe edges across unsupported scans get their deviation multiplied by this.
 _WEAK_FACTOR = 10.0
@@ -836,6 +837,11 @@ class LoopCloser:
             return None
         margin = cr.score - (cr.runner_up or 0.0)
         if margin < min_margin:
+            return None
+        if accept_turn is not None and abs(math.remainder(float(cr.pose[2]) - float(pred[2]), math.tau)) > accept_turn:
+            # the match itself must lie within the rotations searched first (a refinement that turned it back
+            # within the caller's limit from beyond them is refused too): correlative_search's accept_turn then
+            # refuses exactly what this would
             return None
         grid = self._submap(s)
         levels = grid.levels[:max(c.search_level + 1, 2)]  # the refinement as without the far search's level
