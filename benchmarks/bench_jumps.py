@@ -161,8 +161,12 @@ def loops(inp: str, topic: str | None, nodes: str, sets: list[str]) -> None:
             cur["moved"] = (math.hypot(r.pose[0] - pred[0], r.pose[1] - pred[1]), math.degrees(r.pose[2] - pred[2]))
         return r
 
-    def match_at(self, node, s, pts, pred, lin, ang, min_margin, level=None):  # type: ignore[no-untyped-def]
+    def match_at(self, node, s, pts, pred, lin, ang, min_margin, level=None,  # type: ignore[no-untyped-def]
+                 accept_turn=None):
         cur.clear()
+        # without the far search's accept_turn: every search runs over all its rotations, so that its score and
+        # runner-up are printed (the same candidates: correlative_search's accept_turn refuses only what the far
+        # search refuses)
         cand = orig_match_at(self, node, s, pts, pred, lin, ang, min_margin, level)
         if a <= node < b and "score" in cur:
             c, sc = self.config, self.slam
