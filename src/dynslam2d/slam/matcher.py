@@ -131,58 +131,34 @@ def _sums(prob, xy, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
             for j in range(m):
                 cost += tb[0, j]
             continue
-        if swapped:  # (two loops: no loop-invariant branch inside the vectorised one)
-            for j in range(m):
-                fx = fb[0, j]
-                fy = fb[1, j]
-                p00 = qb[0, j]
-                p10 = qb[1, j]
-                p01 = qb[2, j]
-                p11 = qb[3, j]
-                mv = (1.0 - fy) * ((1.0 - fx) * p00 + fx * p10) + fy * ((1.0 - fx) * p01 + fx * p11)
-                r = 1.0 - mv
-                # Kohlbrecher et al. 2011 Eqs. 5–6 (the value's gradient) (hector_gradient_bug: the fractions swapped)
-                mx = (1.0 - fx) * (p10 - p00) + fx * (p11 - p01)
-                my = (1.0 - fy) * (p01 - p00) + fy * (p11 - p10)
-                dth = fb[3, j] * mx + fb[4, j] * my  # Kohlbrecher et al. 2011 Eq. 11
-                inb = fb[2, j] != 0.0
-                tb[0, j] = r * r if inb else 1.0
-                tb[1, j] = mv if inb else 0.0
-                tb[2, j] = r * mx if inb else 0.0
-                tb[3, j] = r * my if inb else 0.0
-                tb[4, j] = r * dth if inb else 0.0
-                tb[5, j] = mx * mx if inb else 0.0
-                tb[6, j] = mx * my if inb else 0.0
-                tb[7, j] = mx * dth if inb else 0.0
-                tb[8, j] = my * my if inb else 0.0
-                tb[9, j] = my * dth if inb else 0.0
-                tb[10, j] = dth * dth if inb else 0.0
-        else:
-            for j in range(m):
-                fx = fb[0, j]
-                fy = fb[1, j]
-                p00 = qb[0, j]
-                p10 = qb[1, j]
-                p01 = qb[2, j]
-                p11 = qb[3, j]
-                mv = (1.0 - fy) * ((1.0 - fx) * p00 + fx * p10) + fy * ((1.0 - fx) * p01 + fx * p11)
-                r = 1.0 - mv
-                # Kohlbrecher et al. 2011 Eqs. 5–6 (the value's gradient)
-                mx = (1.0 - fy) * (p10 - p00) + fy * (p11 - p01)
-                my = (1.0 - fx) * (p01 - p00) + fx * (p11 - p10)
-                dth = fb[3, j] * mx + fb[4, j] * my  # Kohlbrecher et al. 2011 Eq. 11
-                inb = fb[2, j] != 0.0
-                tb[0, j] = r * r if inb else 1.0
-                tb[1, j] = mv if inb else 0.0
-                tb[2, j] = r * mx if inb else 0.0
-                tb[3, j] = r * my if inb else 0.0
-                tb[4, j] = r * dth if inb else 0.0
-                tb[5, j] = mx * mx if inb else 0.0
-                tb[6, j] = mx * my if inb else 0.0
-                tb[7, j] = mx * dth if inb else 0.0
-                tb[8, j] = my * my if inb else 0.0
-                tb[9, j] = my * dth if inb else 0.0
-                tb[10, j] = dth * dth if inb else 0.0
+        for j in range(m):
+            fx = fb[0, j]
+            fy = fb[1, j]
+            p00 = qb[0, j]
+            p10 = qb[1, j]
+            p01 = qb[2, j]
+            p11 = qb[3, j]
+            mv = (1.0 - fy) * ((1.0 - fx) * p00 + fx * p10) + fy * ((1.0 - fx) * p01 + fx * p11)
+            r = 1.0 - mv
+            # Kohlbrecher et al. 2011 Eqs. 5–6 (the value's gradient); hector_gradient_bug (``swapped``) weighs
+            # the two differences of each with the other fraction
+            ax = fx if swapped else fy
+            ay = fy if swapped else fx
+            mx = (1.0 - ax) * (p10 - p00) + ax * (p11 - p01)
+            my = (1.0 - ay) * (p01 - p00) + ay * (p11 - p10)
+            dth = fb[3, j] * mx + fb[4, j] * my  # Kohlbrecher et al. 2011 Eq. 11
+            inb = fb[2, j] != 0.0
+            tb[0, j] = r * r if inb else 1.0
+            tb[1, j] = mv if inb else 0.0
+            tb[2, j] = r * mx if inb else 0.0
+            tb[3, j] = r * my if inb else 0.0
+            tb[4, j] = r * dth if inb else 0.0
+            tb[5, j] = mx * mx if inb else 0.0
+            tb[6, j] = mx * my if inb else 0.0
+            tb[7, j] = mx * dth if inb else 0.0
+            tb[8, j] = my * my if inb else 0.0
+            tb[9, j] = my * dth if inb else 0.0
+            tb[10, j] = dth * dth if inb else 0.0
         for j in range(m):
             cost += tb[0, j]
             summ += tb[1, j]
