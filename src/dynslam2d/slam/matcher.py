@@ -120,17 +120,6 @@ def _sums(prob, xy, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
             qb[1, j] = flat[k + np.uint64(1)]
             qb[2, j] = flat[k + uw]
             qb[3, j] = flat[k + uw + np.uint64(1)]
-        if not full:
-            for j in range(m):
-                fx = fb[0, j]
-                fy = fb[1, j]
-                # Kohlbrecher et al. 2011 Eq. 4 (bilinear value)
-                mv = (1.0 - fy) * ((1.0 - fx) * qb[0, j] + fx * qb[1, j]) + fy * ((1.0 - fx) * qb[2, j] + fx * qb[3, j])
-                r = 1.0 - mv
-                tb[0, j] = r * r if fb[2, j] != 0.0 else 1.0
-            for j in range(m):
-                cost += tb[0, j]
-            continue
         for j in range(m):
             fx = fb[0, j]
             fy = fb[1, j]
@@ -159,6 +148,10 @@ def _sums(prob, xy, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
             tb[8, j] = my * my if inb else 0.0
             tb[9, j] = my * dth if inb else 0.0
             tb[10, j] = dth * dth if inb else 0.0
+        if not full:
+            for j in range(m):
+                cost += tb[0, j]
+            continue
         for j in range(m):
             cost += tb[0, j]
             summ += tb[1, j]
