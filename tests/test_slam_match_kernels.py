@@ -13,7 +13,7 @@ from conftest import paper_room_scan, paper_room_slam
 from numba import njit
 
 from dynslam2d.slam.correlative import _pyramid, _rotated_cells, _score_pyramid, _score_table
-from dynslam2d.slam.matcher import _bearing_bin, evaluate, free_fraction, match_level, match_multires
+from dynslam2d.slam.matcher import _bearing_bin, _split_xy, _sums, evaluate, free_fraction, match_level, match_multires
 from dynslam2d.types import Pose2D, wrap_angle
 
 scan_at = paper_room_scan
@@ -157,3 +157,145 @@ def test_rotated_cells_kernel_equals_the_array_expressions(n: int) -> None:
     np.testing.assert_array_equal(qx, want_x)
     np.testing.assert_array_equal(qy, want_y)
     assert (x0, x1, y0, y1) == (want_x.min(), want_x.max(), want_y.min(), want_y.max())
+
+
+@njit(cache=False)
+def _sums_one_loop(prob, pts, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
+    """The matcher's pass as one loop over the points (``matcher._sums`` before pass front21, verbatim but for the
+    names): the reference its blocked, vectorised form must equal bit for bit."""
+    c = math.cos(th)
+    s = math.sin(th)
+    h, w = prob.shape
+    flat = np.ascontiguousarray(prob).reshape(-1)
+    xmax = w - 2
+    ymax = h - 2
+    cost = 0.0
+    summ = 0.0
+    n_in = 0
+    g0 = g1 = g2 = h00 = h01 = h02 = h11 = h12 = h22 = 0.0
+    for i in range(pts.shape[0]):
+        sx = pts[i, 0]
+        sy = pts[i, 1]
+        qx = c * sx - s * sy + x
+        qy = s * sx + c * sy + y
+        if not (qx >= 0.0 and qy >= 0.0 and qx <= xmax and qy <= ymax):
+            cost += 1.0
+            continue
+        x0 = int(qx)
+        y0 = int(qy)
+        fx = qx - x0
+        fy = qy - y0
+        k = np.uint64(y0) * np.uint64(w) + np.uint64(x0)
+        p00 = flat[k]
+        p10 = flat[k + np.uint64(1)]
+        p01 = flat[k + np.uint64(w)]
+        p11 = flat[k + np.uint64(w + 1)]
+        m = (1.0 - fy) * ((1.0 - fx) * p00 + fx * p10) + fy * ((1.0 - fx) * p01 + fx * p11)
+        r = 1.0 - m
+        cost += r * r
+        if not full:
+            continue
+        if swapped:
+            mx = (1.0 - fx) * (p10 - p00) + fx * (p11 - p01)
+            my = (1.0 - fy) * (p01 - p00) + fy * (p11 - p10)
+        else:
+            mx = (1.0 - fy) * (p10 - p00) + fy * (p11 - p01)
+            my = (1.0 - fx) * (p01 - p00) + fx * (p11 - p10)
+        summ += m
+        n_in += 1
+        dth = (-s * sx - c * sy) * mx + (c * sx - s * sy) * my
+        g0 += r * mx
+        g1 += r * my
+        g2 += r * dth
+        h00 += mx * mx
+        h01 += mx * my
+        h02 += mx * dth
+        h11 += my * my
+        h12 += my * dth
+        h22 += dth * dth
+    if full:
+        g[0] = g0
+        g[1] = g1
+        g[2] = g2
+        H[0, 0] = h00
+        H[0, 1] = h01
+        H[0, 2] = h02
+        H[1, 0] = h01
+        H[1, 1] = h11
+        H[1, 2] = h12
+        H[2, 0] = h02
+        H[2, 1] = h12
+        H[2, 2] = h22
+    return cost, summ, n_in
+
+
+def _blocked_pass(prob, pts, x, y, th, swapped, full):
+    H = np.full((3, 3), 7.0)
+    g = np.full(3, 7.0)
+    out = _sums(prob, _xy_rows(pts), x, y, th, swapped, np.bool_(full), H, g)
+    return out, H, g
+
+
+def _one_loop_pass(prob, pts, x, y, th, swapped, full):
+    H = np.full((3, 3), 7.0)
+    g = np.full(3, 7.0)
+    out = _sums_one_loop(prob, pts, x, y, th, swapped, full, H, g)
+    return out, H, g
+
+
+def _same(a, b) -> None:
+    (ca, sa, na), Ha, ga = a
+    (cb, sb, nb), Hb, gb = b
+    assert np.float64(ca).tobytes() == np.float64(cb).tobytes()
+    assert np.float64(sa).tobytes() == np.float64(sb).tobytes()
+    assert na == nb
+    assert Ha.tobytes() == Hb.tobytes() and ga.tobytes() == gb.tobytes()
+
+
+@pytest.mark.parametrize("level", [0, 1, 2])
+def test_blocked_pass_equals_the_one_loop_pass_on_a_mapped_room(level: int) -> None:
+    """``matcher._sums`` (blocked, vectorised; pass front21) against the one-loop pass on a real map: poses that
+    put every point inside, some outside and all outside, both gradient forms, with and without the gradient sums,
+    point counts on both sides of the block size."""
+    slam, first = mapped(3)
+    lv = slam.map.levels[level]
+    pts_m = slam.scan_points(scan_at(first.compose(Pose2D(0.12, -0.08, 0.05))))[0]
+    n_diff = 0
+    for n in (0, 1, 5, 127, 128, 129, 300, pts_m.shape[0]):
+        pts = np.ascontiguousarray(pts_m[:n] / lv.resolution)
+        for off in ((0.0, 0.0, 0.0), (0.37, -0.21, 0.07), (-3.0, 2.0, -0.4), (40.0, 0.0, 1.0), (0.0, -90.0, 3.1),
+                    (1e9, 0.0, 0.0), (math.nan, 0.0, 0.0), (0.0, 0.0, math.nan)):
+            mp = lv.pose_to_map(first.as_array())
+            x, y, th = mp[0] + off[0], mp[1] + off[1], mp[2] + off[2]
+            for swapped in (False, True):
+                for full in (True, False):
+                    want = _one_loop_pass(lv.prob, pts, x, y, th, swapped, full)
+                    _same(_blocked_pass(lv.prob, pts, x, y, th, swapped, full), want)
+                    n_diff += 0 < want[0][2] < n  # some points inside, some outside
+    assert n_diff > 0
+
+
+def test_blocked_pass_equals_the_one_loop_pass_on_random_and_tiny_maps() -> None:
+    """The same on random probability maps with tiny cells (subnormal-free but far from 0.5), maps of one and two
+    cells a side (no point can be inside a map narrower than two cells), and points on the cell lines and the
+    array's last interpolable row and column."""
+    rng = np.random.default_rng(21)
+    for shape in ((1, 1), (1, 5), (2, 2), (2, 9), (3, 3), (17, 40), (260, 131)):
+        for _ in range(4):
+            prob = rng.random(shape).astype(np.float32)
+            prob[rng.random(shape) < 0.1] = np.float32(1e-30)
+            h, w = shape
+            n = int(rng.integers(0, 400))
+            pts = np.column_stack([rng.uniform(-2.0, w + 1.0, n), rng.uniform(-2.0, h + 1.0, n)])
+            if n > 4:
+                pts[:4] = [[0.0, 0.0], [w - 2.0, h - 2.0], [w - 2.0, 0.5], [1.0, h - 2.0]]
+            for x, y, th in ((0.0, 0.0, 0.0), (0.3, -0.2, 0.01), (1.5, 0.25, -0.3)):
+                for swapped in (False, True):
+                    for full in (True, False):
+                        _same(_blocked_pass(prob, pts, x, y, th, swapped, full),
+                              _one_loop_pass(prob, pts, x, y, th, swapped, full))
+
+
+@njit(cache=False)
+def _xy_rows(pts):  # pragma: no cover - numba
+    return _split_xy(pts)

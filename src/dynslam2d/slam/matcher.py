@@ -35,24 +35,54 @@ _ZERO_PRIORS = np.zeros((3, 3, 3))
 _ZERO_PRIOR_VIEWS = tuple(_ZERO_PRIORS[:n] for n in range(4))
 
 
-@njit(cache=True)
-def _sums(prob, pts, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
-    """:func:`accumulate`'s pass; without ``full`` only the cost (H, g untouched; Σ M and n_inside returned as 0).
+#: points per block of :func:`_sums` (its scratch: (5 + 11, _BLOCK) float64, (4, _BLOCK) float32 and (_BLOCK,) uint64,
+#: ≈ 19 KiB: within the first-level cache)
+_BLOCK = 128
 
-    The same float64 operations in the same order as :func:`~dynslam2d.slam.interp.interp_value_grad` and the
-    sums over the points, so the same bits: the sums are kept in local variables instead of ``H`` / ``g`` (stored
-    once at the end) and the four cells read from the flat (C-order) array at one index (no negative-index
-    wrap-around code: an in-bounds point's cell indices are ≥ 0). An out-of-bounds point adds (1 − 0)² = 1 to
-    the cost and nothing else, as before."""
+
+@njit(cache=True, inline="always")
+def _split_xy(pts):  # pragma: no cover - numba
+    """The (n, 2) points as two contiguous rows (2, n) (the same values), for :func:`_sums`' vectorised loops."""
+    n = pts.shape[0]
+    xy = np.empty((2, n))
+    for i in range(n):
+        xy[0, i] = pts[i, 0]
+        xy[1, i] = pts[i, 1]
+    return xy
+
+
+@njit(cache=True)
+def _sums(prob, xy, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
+    """:func:`accumulate`'s pass over the points ``xy`` (2, n) (rows x and y, cells); without ``full`` only the cost
+    (H, g untouched; Σ M and n_inside returned as 0).
+
+    The same float64 (and float32: the cells' differences) operations per point as
+    :func:`~dynslam2d.slam.interp.interp_value_grad` and the same sums in point order, so the same bits as the
+    one-loop form (tests/test_slam_match_kernels.py keeps it as the reference): per block of ``_BLOCK`` points, a
+    loop with no loop-carried value and no branch (LLVM vectorises it) gives each point's cell, fractions and
+    in-bounds flag; a scalar loop reads the four cells; a second branch-free loop computes each point's eleven
+    terms (an out-of-bounds point's: cost 1, the others +0.0 — adding +0.0 to a sum that starts at +0.0 leaves
+    its bits unchanged: such a sum is never −0.0); the last loop adds them up in point order. An out-of-bounds
+    point reads cell 0 (in the array: a map with a point inside has w, h ≥ 2) and its values are not used."""
     c = math.cos(th)
     s = math.sin(th)
     h, w = prob.shape
     flat = np.ascontiguousarray(prob).reshape(-1)  # (a view of the level's C-contiguous cache)
     xmax = w - 2
     ymax = h - 2
+    n = xy.shape[1]
+    px = xy[0]
+    py = xy[1]
+    uw = np.uint64(w)
+    # per-block scratch, made here (not passed in: LLVM then knows the arrays do not overlap and vectorises the
+    # loops without run-time overlap checks)
+    fb = np.empty((5, _BLOCK))
+    tb = np.empty((11, _BLOCK))
+    qb = np.empty((4, _BLOCK), dtype=np.float32)
+    kb = np.empty(_BLOCK, dtype=np.uint64)
     cost = 0.0
     summ = 0.0
-    n_in = 0
+    n_in = 0.0
     g0 = 0.0
     g1 = 0.0
     g2 = 0.0
@@ -62,47 +92,79 @@ def _sums(prob, pts, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
     h11 = 0.0
     h12 = 0.0
     h22 = 0.0
-    for i in range(pts.shape[0]):
-        sx = pts[i, 0]
-        sy = pts[i, 1]
-        qx = c * sx - s * sy + x
-        qy = s * sx + c * sy + y
-        if not (qx >= 0.0 and qy >= 0.0 and qx <= xmax and qy <= ymax):  # (also rejects NaN)
+    if w < 2 or h < 2:  # (no point can be inside: each adds (1 − 0)² = 1; H and g below are zeros)
+        for _ in range(n):
             cost += 1.0
-            continue
-        x0 = int(qx)
-        y0 = int(qy)
-        fx = qx - x0
-        fy = qy - y0
-        k = np.uint64(y0) * np.uint64(w) + np.uint64(x0)
-        p00 = flat[k]
-        p10 = flat[k + np.uint64(1)]
-        p01 = flat[k + np.uint64(w)]
-        p11 = flat[k + np.uint64(w + 1)]
-        # Kohlbrecher et al. 2011 Eq. 4 (bilinear value), Eqs. 5–6 (its gradient)
-        m = (1.0 - fy) * ((1.0 - fx) * p00 + fx * p10) + fy * ((1.0 - fx) * p01 + fx * p11)
-        r = 1.0 - m
-        cost += r * r
+        n = 0
+    for b0 in range(0, n, _BLOCK):
+        m = min(_BLOCK, n - b0)
+        for j in range(m):
+            sx = px[np.uint64(b0 + j)]  # (unsigned: no negative-index select, so the loop vectorises)
+            sy = py[np.uint64(b0 + j)]
+            qx = c * sx - s * sy + x
+            qy = s * sx + c * sy + y
+            inb = (qx >= 0.0) & (qy >= 0.0) & (qx <= xmax) & (qy <= ymax)  # (also rejects NaN)
+            qx = qx if inb else 0.0
+            qy = qy if inb else 0.0
+            x0 = int(qx)
+            y0 = int(qy)
+            fb[0, j] = qx - x0
+            fb[1, j] = qy - y0
+            kb[j] = np.uint64(y0 * w + x0)
+            fb[2, j] = 1.0 if inb else 0.0
+            fb[3, j] = -s * sx - c * sy
+            fb[4, j] = c * sx - s * sy
+        for j in range(m):
+            k = kb[j]
+            qb[0, j] = flat[k]
+            qb[1, j] = flat[k + np.uint64(1)]
+            qb[2, j] = flat[k + uw]
+            qb[3, j] = flat[k + uw + np.uint64(1)]
+        for j in range(m):
+            fx = fb[0, j]
+            fy = fb[1, j]
+            p00 = qb[0, j]
+            p10 = qb[1, j]
+            p01 = qb[2, j]
+            p11 = qb[3, j]
+            mv = (1.0 - fy) * ((1.0 - fx) * p00 + fx * p10) + fy * ((1.0 - fx) * p01 + fx * p11)
+            r = 1.0 - mv
+            # Kohlbrecher et al. 2011 Eqs. 5–6 (the value's gradient); hector_gradient_bug (``swapped``) weighs
+            # the two differences of each with the other fraction
+            ax = fx if swapped else fy
+            ay = fy if swapped else fx
+            mx = (1.0 - ax) * (p10 - p00) + ax * (p11 - p01)
+            my = (1.0 - ay) * (p01 - p00) + ay * (p11 - p10)
+            dth = fb[3, j] * mx + fb[4, j] * my  # Kohlbrecher et al. 2011 Eq. 11
+            inb = fb[2, j] != 0.0
+            tb[0, j] = r * r if inb else 1.0
+            tb[1, j] = mv if inb else 0.0
+            tb[2, j] = r * mx if inb else 0.0
+            tb[3, j] = r * my if inb else 0.0
+            tb[4, j] = r * dth if inb else 0.0
+            tb[5, j] = mx * mx if inb else 0.0
+            tb[6, j] = mx * my if inb else 0.0
+            tb[7, j] = mx * dth if inb else 0.0
+            tb[8, j] = my * my if inb else 0.0
+            tb[9, j] = my * dth if inb else 0.0
+            tb[10, j] = dth * dth if inb else 0.0
         if not full:
+            for j in range(m):
+                cost += tb[0, j]
             continue
-        if swapped:
-            mx = (1.0 - fx) * (p10 - p00) + fx * (p11 - p01)
-            my = (1.0 - fy) * (p01 - p00) + fy * (p11 - p10)
-        else:
-            mx = (1.0 - fy) * (p10 - p00) + fy * (p11 - p01)
-            my = (1.0 - fx) * (p01 - p00) + fx * (p11 - p10)
-        summ += m
-        n_in += 1
-        dth = (-s * sx - c * sy) * mx + (c * sx - s * sy) * my  # Kohlbrecher et al. 2011 Eq. 11
-        g0 += r * mx
-        g1 += r * my
-        g2 += r * dth
-        h00 += mx * mx
-        h01 += mx * my
-        h02 += mx * dth
-        h11 += my * my
-        h12 += my * dth
-        h22 += dth * dth
+        for j in range(m):
+            cost += tb[0, j]
+            summ += tb[1, j]
+            g0 += tb[2, j]
+            g1 += tb[3, j]
+            g2 += tb[4, j]
+            h00 += tb[5, j]
+            h01 += tb[6, j]
+            h02 += tb[7, j]
+            h11 += tb[8, j]
+            h12 += tb[9, j]
+            h22 += tb[10, j]
+            n_in += fb[2, j]
     if full:
         g[0] = g0
         g[1] = g1
@@ -116,7 +178,7 @@ def _sums(prob, pts, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
         H[2, 0] = h02
         H[2, 1] = h12
         H[2, 2] = h22
-    return cost, summ, n_in
+    return cost, summ, int(n_in)
 
 
 @njit(cache=True)
@@ -126,7 +188,7 @@ def accumulate(prob, pts, x, y, th, swapped, H, g):  # pragma: no cover - numba
     cost = Σ (1−M)² over all points, out-of-bounds points counting M = 0;
     out-of-bounds points add nothing to H, g (as getCompleteHessianDerivs).
     """
-    return _sums(prob, pts, x, y, th, swapped, np.bool_(True), H, g)  # not a literal: _match_core's signature
+    return _sums(prob, _split_xy(pts), x, y, th, swapped, np.bool_(True), H, g)
 
 
 @njit(cache=True)
@@ -223,7 +285,8 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
             if lam_p[a, b] != 0.0:
                 use_prior = True
     gp = np.zeros(3)
-    raw, summ, n_in = accumulate(prob, pts, x, y, th, swapped, H, g)
+    xy = _split_xy(pts)  # (the points as two rows, once per level)
+    raw, summ, n_in = _sums(prob, xy, x, y, th, swapped, np.bool_(True), H, g)
     cost = raw
     if use_prior:
         cost += _prior_cost(x, y, th, prior, lam_p)
@@ -274,7 +337,7 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
             # iterations needs them only when the caller keeps this pose's H
             ends = it == n_iter - 1 or (nt < _CONVERGED_CELLS and abs(d[2]) < _CONVERGED_RAD)
             full = not ends or (keep and _round_trips(nx, ny, nth, res, i0, j0))
-            new_raw, new_summ, new_in = _sums(prob, pts, nx, ny, nth, swapped, full, H2, g2)
+            new_raw, new_summ, new_in = _sums(prob, xy, nx, ny, nth, swapped, full, H2, g2)
             new_cost = new_raw
             if use_prior:
                 new_cost += _prior_cost(nx, ny, nth, prior, lam_p)
@@ -295,7 +358,7 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
                     break
         else:
             x, y, th = nx, ny, nth
-            raw, summ, n_in = accumulate(prob, pts, x, y, th, swapped, H, g)
+            raw, summ, n_in = _sums(prob, xy, x, y, th, swapped, np.bool_(True), H, g)
             cost = raw
             if use_prior:
                 cost += _prior_cost(x, y, th, prior, lam_p)
