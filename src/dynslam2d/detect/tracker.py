@@ -505,13 +505,17 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         if not rows:
             return ok
         cand = np.array([d.map_structure >= tc.map_structure_stop for d in dets])
-        if not cand.any():
+        if not np.count_nonzero(cand):  # (count_nonzero: a fraction of ndarray.any's cost on a short array)
             return ok
         ok = ok.copy()
+        jump = tc.merge_size_jump
         for i in rows:
             k = self._tracks[i]
-            hit = ok[i] & cand & (det_ext > float(tsize[i].max()) + tc.merge_size_jump)
-            if hit.any() and (not (mev := k.mev) or sum([e[0] for e in mev]) / len(mev) <= tc.map_structure_max):
+            # (the track's larger size: float(tsize[i].max())'s value, NaN included, without ndarray.max's wrapper)
+            a, b = tsize[i].tolist()
+            hit = ok[i] & cand & (det_ext > (a if a >= b or a != a else b) + jump)
+            if np.count_nonzero(hit) and (not (mev := k.mev) or
+                                          sum([e[0] for e in mev]) / len(mev) <= tc.map_structure_max):
                 ok[i] &= ~hit
                 self._merged.add(k.id)
         return ok
