@@ -346,7 +346,7 @@ def test_circle_fits_are_bit_identical_to_the_plain_gauss_newton_loop() -> None:
     circles, a point at the centre (d = 0, skipped), collinear and repeated points (degenerate)."""
     rng = np.random.default_rng(23)
     clusters = []
-    for q in range(120):
+    for _q in range(120):
         n = int(rng.integers(3, 60))
         a0 = rng.uniform(0, 2 * math.pi)
         a = a0 + np.linspace(0.0, rng.uniform(0.3, 2 * math.pi), n)
