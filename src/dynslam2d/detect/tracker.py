@@ -504,16 +504,27 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
             rows = [i for i, k in enumerate(self._tracks) if k.in_m or k.merged]
         if not rows:
             return ok
-        cand = np.array([d.map_structure >= tc.map_structure_stop for d in dets])
-        if not np.count_nonzero(cand):  # (count_nonzero: a fraction of ndarray.any's cost on a short array)
+        stop = tc.map_structure_stop
+        flags = [d.map_structure >= stop for d in dets]
+        # the candidates' largest extent: a row whose threshold it does not pass has no pair to refuse (no array
+        # operation for it; docs/speed.md, pass trk22). With a NaN extent every row takes the array test
+        cext = [e for f, e in zip(flags, det_ext.tolist()) if f]
+        if not cext:
             return ok
-        ok = ok.copy()
+        top = math.inf if any(e != e for e in cext) else max(cext)
         jump = tc.merge_size_jump
+        cand = None
         for i in rows:
-            k = self._tracks[i]
             # (the track's larger size: float(tsize[i].max())'s value, NaN included, without ndarray.max's wrapper)
             a, b = tsize[i].tolist()
-            hit = ok[i] & cand & (det_ext > (a if a >= b or a != a else b) + jump)
+            thr = (a if a >= b or a != a else b) + jump
+            if not top > thr:
+                continue
+            if cand is None:
+                cand = np.array(flags)
+                ok = ok.copy()
+            k = self._tracks[i]
+            hit = ok[i] & cand & (det_ext > thr)
             if np.count_nonzero(hit) and (not (mev := k.mev) or
                                           sum([e[0] for e in mev]) / len(mev) <= tc.map_structure_max):
                 ok[i] &= ~hit
