@@ -375,10 +375,10 @@ def _veto_merged_reference(tr: Tracker, ok: np.ndarray, dets: list, det_ext: np.
 
 
 def test_merged_detection_veto_matches_the_row_by_row_test() -> None:
-    """The veto of detections merged with structure (``_veto_merged``: rows whose threshold no candidate's extent
-    passes skipped without an array operation, the row's larger size from its two floats) refuses the same pairs and
-    marks the same tracks as the row-by-row array test, on random gates, extents near the thresholds, sizes with
-    NaN, NaN extents and tracks whose own points were or were not on structure."""
+    """The veto of detections merged with structure (``_veto_merged``: each row's pairs found on Python floats and
+    bools, the row's larger size from its two floats) refuses the same pairs and marks the same tracks as the
+    row-by-row array test, on random gates, extents on the thresholds, sizes with NaN, NaN extents and tracks whose
+    own points were or were not on structure."""
     from types import SimpleNamespace
 
     rng = random.Random(5)

@@ -504,30 +504,29 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
             rows = [i for i, k in enumerate(self._tracks) if k.in_m or k.merged]
         if not rows:
             return ok
+        # the candidates (detections with at least map_structure_stop of their points on structure) and each row's
+        # pairs to refuse on Python floats and bools: a scan has ≈ 10 detections and 1–2 such rows, a few list
+        # operations instead of four array operations per row (the same comparisons, NaN compares False in both;
+        # docs/speed.md, pass trk22)
         stop = tc.map_structure_stop
-        flags = [d.map_structure >= stop for d in dets]
-        # the candidates' largest extent: a row whose threshold it does not pass has no pair to refuse (no array
-        # operation for it; docs/speed.md, pass trk22). With a NaN extent every row takes the array test
-        cext = [e for f, e in zip(flags, det_ext.tolist()) if f]
-        if not cext:
+        cand = [j for j, d in enumerate(dets) if d.map_structure >= stop]
+        if not cand:
             return ok
-        top = math.inf if any(e != e for e in cext) else max(cext)
+        ext = det_ext.tolist()
         jump = tc.merge_size_jump
-        cand = None
+        copied = False
         for i in rows:
             # (the track's larger size: float(tsize[i].max())'s value, NaN included, without ndarray.max's wrapper)
             a, b = tsize[i].tolist()
             thr = (a if a >= b or a != a else b) + jump
-            if not top > thr:
-                continue
-            if cand is None:
-                cand = np.array(flags)
-                ok = ok.copy()
-            k = self._tracks[i]
-            hit = ok[i] & cand & (det_ext > thr)
-            if np.count_nonzero(hit) and (not (mev := k.mev) or
-                                          sum([e[0] for e in mev]) / len(mev) <= tc.map_structure_max):
-                ok[i] &= ~hit
+            row = ok[i].tolist()
+            hit = [j for j in cand if row[j] and ext[j] > thr]
+            if hit and (not (mev := (k := self._tracks[i]).mev) or
+                        sum([e[0] for e in mev]) / len(mev) <= tc.map_structure_max):
+                if not copied:
+                    ok = ok.copy()
+                    copied = True
+                ok[i, hit] = False
                 self._merged.add(k.id)
         return ok
 
