@@ -262,3 +262,107 @@ def test_round_cluster_uses_circle_model_and_true_centre() -> None:
     m = measure(det, None, None, cfg)
     assert np.hypot(*(m.z - [3.0, 0.0])) < 0.01
     assert np.hypot(*(det.centroid - [3.0, 0.0])) > 0.1  # the centroid alone would be biased
+
+
+def _plain_circle(x: list[float], y: list[float]) -> list[float]:
+    """The circle fit of ``shapes._circle_one`` as plain Python on floats, with its Gauss–Newton loop in the form it
+    had before pass trk22 (distance, Jacobian and sums in one loop per point): cx, cy, r, rms."""
+    from dynslam2d.detect.shapes import _lu_solve3
+
+    n = len(x)
+    mx = my = 0.0
+    for i in range(n):
+        mx += x[i]
+        my += y[i]
+    mx /= n
+    my /= n
+    suu = suv = svv = suuu = svvv = suvv = svuu = 0.0
+    for i in range(n):
+        u = x[i] - mx
+        v = y[i] - my
+        suu += u * u
+        suv += u * v
+        svv += v * v
+        suuu += u * u * u
+        svvv += v * v * v
+        suvv += u * v * v
+        svuu += v * u * u
+    det = suu * svv - suv * suv
+    if n < 3 or abs(det) < 1e-12:
+        return [mx, my, 0.0, math.inf]
+    b1 = 0.5 * (suuu + suvv)
+    b2 = 0.5 * (svvv + svuu)
+    uc = (b1 * svv - b2 * suv) / det
+    vc = (suu * b2 - suv * b1) / det
+    cx, cy = uc + mx, vc + my
+    r = math.sqrt(uc * uc + vc * vc + (suu + svv) / n)
+    a = np.empty((3, 3))
+    step = np.empty(3)
+    for _ in range(5):
+        h00 = h01 = h02 = h11 = h12 = h22 = g0 = g1 = g2 = 0.0
+        for i in range(n):
+            dx = x[i] - cx
+            dy = y[i] - cy
+            d = math.sqrt(dx * dx + dy * dy)
+            if d < 1e-9:
+                continue
+            j0 = -dx / d
+            j1 = -dy / d
+            res = d - r
+            h00 += j0 * j0
+            h01 += j0 * j1
+            h02 += -j0
+            h11 += j1 * j1
+            h12 += -j1
+            h22 += 1.0
+            g0 += j0 * res
+            g1 += j1 * res
+            g2 += -res
+        a[:] = [[h00 + 1e-9, h01, h02], [h01, h11 + 1e-9, h12], [h02, h12, h22 + 1e-9]]
+        step[:] = [-g0, -g1, -g2]
+        if abs(_lu_solve3.py_func(a, step)) < 1e-15:
+            break
+        s0, s1, s2 = step.tolist()
+        cx += s0
+        cy += s1
+        r += s2
+        if abs(s0) + abs(s1) + abs(s2) < 1e-6:
+            break
+    if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(r)) or r <= 0.0:
+        return [mx, my, 0.0, math.inf]
+    ss = 0.0
+    for i in range(n):
+        dx = x[i] - cx  # ((x[i] - cx) ** 2 in the kernel: numba squares by a product; Python's ** calls pow)
+        dy = y[i] - cy
+        d = math.sqrt(dx * dx + dy * dy) - r
+        ss += d * d
+    return [cx, cy, r, math.sqrt(ss / n)]
+
+
+def test_circle_fits_are_bit_identical_to_the_plain_gauss_newton_loop() -> None:
+    """``_circle_one`` (its Gauss–Newton distances and Jacobians from a vectorised loop, ``_gn_terms``, pass trk22)
+    equals the plain one-loop fit bit for bit — through ``fit_circle`` and in ``fit_clusters``' circle columns, whose
+    work space is the rectangle search's (reused after it): noisy arcs of people and poles far from the origin, full
+    circles, a point at the centre (d = 0, skipped), collinear and repeated points (degenerate)."""
+    rng = np.random.default_rng(23)
+    clusters = []
+    for _q in range(120):
+        n = int(rng.integers(3, 60))
+        a0 = rng.uniform(0, 2 * math.pi)
+        a = a0 + np.linspace(0.0, rng.uniform(0.3, 2 * math.pi), n)
+        c = rng.uniform(-60, 60, 2)
+        r = rng.uniform(0.03, 0.6)
+        clusters.append(np.column_stack((c[0] + r * np.cos(a), c[1] + r * np.sin(a))) + rng.normal(0, 0.004, (n, 2)))
+    sq = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
+    clusters.append(np.vstack((sq, [[0.0, 0.0]])))  # a point at the fitted centre: its d is 0, it is skipped
+    clusters.append(np.column_stack((np.linspace(0, 1, 7), np.zeros(7))))  # collinear
+    clusters.append(np.array([[2.0, 3.0]] * 5))  # repeated
+    pts = np.vstack(clusters)
+    offsets = np.cumsum([0] + [c.shape[0] for c in clusters])
+    out = fit_clusters(pts[:, 0].copy(), pts[:, 1].copy(), offsets, np.ones(len(clusters), dtype=bool),
+                       search_angles(1.0), 2, 0.01, 3, 5)
+    for c, cl in enumerate(clusters):
+        want = _plain_circle(cl[:, 0].tolist(), cl[:, 1].tolist())
+        got = fit_circle(cl)
+        assert [float(v) for v in got] == want or (math.isnan(want[0]) and math.isnan(got[0])), c
+        assert out[c, 6:10].tolist() == want, c

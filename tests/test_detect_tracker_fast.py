@@ -353,3 +353,56 @@ def test_free_entries_snapshot_the_stored_points_and_the_m_of_n_counts_follow_th
     for e, want in held:
         got = e[3][e[4]:e[5]]
         assert len(got) == len(want) and all(a is b for a, b in zip(got, want))
+
+
+def _veto_merged_reference(tr: Tracker, ok: np.ndarray, dets: list, det_ext: np.ndarray, tsize: np.ndarray,
+                           rows: list[int]) -> tuple[np.ndarray, set[int]]:
+    """``Tracker._veto_merged`` as it was before pass trk22 (one row's array test after another), without dormant
+    tracks or marks: the pairs left and the ids it adds to ``_merged``."""
+    tc = tr.config.tracker
+    merged: set[int] = set()
+    cand = np.array([d.map_structure >= tc.map_structure_stop for d in dets])
+    if not cand.any():
+        return ok, merged
+    ok = ok.copy()
+    for i in rows:
+        k = tr._tracks[i]
+        hit = ok[i] & cand & (det_ext > float(tsize[i].max()) + tc.merge_size_jump)
+        if hit.any() and (not (mev := k.mev) or sum([e[0] for e in mev]) / len(mev) <= tc.map_structure_max):
+            ok[i] &= ~hit
+            merged.add(k.id)
+    return ok, merged
+
+
+def test_merged_detection_veto_matches_the_row_by_row_test() -> None:
+    """The veto of detections merged with structure (``_veto_merged``: each row's pairs found on Python floats and
+    bools, the row's larger size from its two floats) refuses the same pairs and marks the same tracks as the
+    row-by-row array test, on random gates, extents on the thresholds, sizes with NaN, NaN extents and tracks whose
+    own points were or were not on structure."""
+    from types import SimpleNamespace
+
+    rng = random.Random(5)
+    tr = Tracker(DetectConfig())
+    tc = tr.config.tracker
+    hits = 0
+    for case in range(400):
+        n, m = rng.randint(1, 8), rng.randint(1, 10)
+        tr._tracks = [SimpleNamespace(id=100 + i, mev=[(rng.random(), 0.0, 0.0) for _ in range(rng.randint(0, 3))])
+                      for i in range(n)]
+        dets = [SimpleNamespace(map_structure=rng.choice([0.0, tc.map_structure_stop, 1.0, rng.random()]))
+                for _ in range(m)]
+        tsize = np.array([[rng.uniform(0.1, 2.0), rng.uniform(0.1, 2.0)] for _ in range(n)])
+        det_ext = np.array([rng.uniform(0.1, 4.0) for _ in range(m)])
+        det_ext[rng.randrange(m)] = float(tsize.max()) + tc.merge_size_jump  # (a tie with a threshold)
+        if case % 7 == 0:
+            tsize[rng.randrange(n), rng.randrange(2)] = math.nan
+        if case % 11 == 0:
+            det_ext[rng.randrange(m)] = math.nan
+        ok = np.array([[rng.random() < 0.6 for _ in range(m)] for _ in range(n)])
+        rows = sorted(rng.sample(range(n), rng.randint(1, n)))
+        want, want_merged = _veto_merged_reference(tr, ok, dets, det_ext, tsize, rows)
+        tr._merged = set()
+        got = tr._veto_merged(ok.copy(), dets, det_ext, tsize, rows)
+        assert np.array_equal(got, want) and tr._merged == want_merged, case
+        hits += len(want_merged)
+    assert hits > 50  # (the cases refuse pairs, not only pass them)

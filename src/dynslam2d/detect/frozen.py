@@ -4,8 +4,8 @@ The ``__init__`` that :mod:`dataclasses` generates for a frozen class sets every
 ``object.__setattr__`` (its ``__setattr__`` raises), a few µs per object; a tracker step reports every live
 track, and on a recording with much clutter (``negative_2``: ≈ 35 live tracks per scan) building the
 reports was the largest single cost of the step. :func:`fast_init` returns a function that takes the same
-arguments as the class and sets the slots directly: on an unfrozen twin class with the same slots (plain
-attribute stores, the fastest way to fill slots from Python), whose instance then becomes an instance of the class
+arguments as the class and sets the slots directly: on an instance of an unfrozen twin class with the same slots
+(plain attribute stores, the fastest way to fill slots from Python), which then becomes an instance of the class
 by ``__class__`` assignment (allowed between classes of the same slot layout), else through the slots'
 descriptors; the object is the same (same type, same field values, frozen afterwards). Classes it cannot handle
 (no ``__slots__``, a ``__post_init__``, a field with a ``default_factory`` or ``init=False``) get the class itself back.
@@ -52,12 +52,15 @@ def fast_init(cls: type) -> Callable[..., Any]:
             env[f"_fi_dflt{i}"] = f.default
             params.append(f"{f.name}=_fi_dflt{i}")
     if _layout_twin_ok(cls):
-        # an unfrozen twin class with the same slots whose __init__ stores the fields (plain attribute stores) and
-        # then makes the object an instance of cls (``__class__`` assignment: the same layout, the values stay);
-        # calling the twin is the constructor
-        body = "".join(f"        self.{n} = {n}\n" for n in names)
-        src = (f"class make:\n    __slots__ = {tuple(cls.__slots__)!r}\n\n"
-               f"    def __init__(self, {', '.join(params)}):\n{body}        self.__class__ = _fi_cls\n")
+        # an instance of an unfrozen twin class with the same slots, its fields stored by plain attribute stores, then
+        # made an instance of cls (``__class__`` assignment: the same layout, the values stay). A function, not the
+        # twin's ``__init__``: calling a class goes through type.__call__, tp_new and slot_tp_init's look-up of
+        # ``__init__``, ≈ 0.3 µs per object more than a Python function call and ``object.__new__`` (docs/speed.md,
+        # pass trk22)
+        env["_fi_twin"] = type(f"_{cls.__name__}Twin", (), {"__slots__": tuple(cls.__slots__)})
+        body = "".join(f"    _fi_obj.{n} = {n}\n" for n in names)
+        src = (f"def make({', '.join(params)}):\n    _fi_obj = _fi_new(_fi_twin)\n{body}"
+               f"    _fi_obj.__class__ = _fi_cls\n    return _fi_obj\n")
     else:
         body = "".join(f"    _fi_set{i}(_fi_obj, {n})\n" for i, n in enumerate(names))
         src = f"def make({', '.join(params)}):\n    _fi_obj = _fi_new(_fi_cls)\n{body}    return _fi_obj\n"

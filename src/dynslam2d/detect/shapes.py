@@ -325,10 +325,28 @@ def _lu_solve3(a: np.ndarray, b: np.ndarray) -> float:
     return det
 
 
+@njit(cache=True, error_model="numpy")
+def _gn_terms(x: np.ndarray, y: np.ndarray, cx: float, cy: float, wd: np.ndarray, w0: np.ndarray,
+              w1: np.ndarray) -> None:
+    """Per point of ``x, y`` (m): the distance d to the centre (``cx``, ``cy``) into ``wd`` and the Jacobian of
+    |p − c| − R with respect to the centre, −dx / d and −dy / d, into ``w0``, ``w1`` (≥ n each; the Gauss–Newton step
+    of :func:`_circle_one`, which skips points with d < 1e-9, where these are inf / NaN: ``error_model="numpy"``,
+    no ZeroDivisionError branch, so the loop vectorises; each value is the same correctly rounded operation as in
+    a scalar loop)."""
+    for i in range(x.shape[0]):
+        dx = x[i] - cx
+        dy = y[i] - cy
+        d = math.sqrt(dx * dx + dy * dy)
+        wd[i] = d
+        w0[i] = -dx / d
+        w1[i] = -dy / d
+
+
 @njit(cache=True)
-def _circle_one(x: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
+def _circle_one(x: np.ndarray, y: np.ndarray, out: np.ndarray, wd: np.ndarray, w0: np.ndarray,
+                w1: np.ndarray) -> None:
     """Kåsa algebraic circle fit + 5 Gauss–Newton steps on |p − c| − R. out = cx, cy, r, rms
-    (NaN-free: r = 0 and rms = inf when the fit is degenerate)."""
+    (NaN-free: r = 0 and rms = inf when the fit is degenerate). ``wd``, ``w0``, ``w1``: work space (≥ n each)."""
     n = x.shape[0]
     mx = 0.0
     my = 0.0
@@ -381,14 +399,15 @@ def _circle_one(x: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
         g0 = 0.0
         g1 = 0.0
         g2 = 0.0
+        # (each point's distance and Jacobian first, in a loop without sums: numba vectorises its square roots and
+        # divisions; then the sums in the points' order, as before: the same values, docs/speed.md pass trk22)
+        _gn_terms(x, y, cx, cy, wd, w0, w1)
         for i in range(n):
-            dx = x[i] - cx
-            dy = y[i] - cy
-            d = math.sqrt(dx * dx + dy * dy)
+            d = wd[i]
             if d < 1e-9:
                 continue
-            j0 = -dx / d
-            j1 = -dy / d
+            j0 = w0[i]
+            j1 = w1[i]
             res = d - r
             h00 += j0 * j0
             h01 += j0 * j1
@@ -451,6 +470,7 @@ def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np
         nmax = max(nmax, offsets[c + 1] - offsets[c])
     c1 = np.empty(nmax)  # (work space of _fit_one, once per call)
     c2 = np.empty(nmax)
+    c3 = np.empty(nmax)
     order = np.empty(cos_t.shape[0] + 2 * max(stride, 1), dtype=np.int64)
     for c in range(k):
         a = offsets[c]
@@ -477,7 +497,7 @@ def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np
         for q in range(6):  # θ, lo1, hi1, lo2, hi2, rms (the order of _fit_one); element-wise: a slice
             out[c, F_THETA + q] = tmp[q]  # assignment compiles numba's shape-error formatting (~4 s cold)
         if n >= circle_min_points:
-            _circle_one(xs, ys, tmpc)
+            _circle_one(xs, ys, tmpc, c1, c2, c3)  # (c1, c2: free again after _fit_one)
             for q in range(4):  # cx, cy, r, rms (the order of _circle_one)
                 out[c, F_CIRCLE_X + q] = tmpc[q]
         else:
@@ -493,7 +513,8 @@ def fit_circle(points: np.ndarray) -> tuple[float, float, float, float]:
     out = np.empty(4)
     if pts.shape[0] == 0:
         return 0.0, 0.0, 0.0, math.inf
-    _circle_one(pts[:, 0].copy(), pts[:, 1].copy(), out)
+    n = pts.shape[0]
+    _circle_one(pts[:, 0].copy(), pts[:, 1].copy(), out, np.empty(n), np.empty(n), np.empty(n))
     return float(out[0]), float(out[1]), float(out[2]), float(out[3])
 
 

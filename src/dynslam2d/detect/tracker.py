@@ -504,15 +504,29 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
             rows = [i for i, k in enumerate(self._tracks) if k.in_m or k.merged]
         if not rows:
             return ok
-        cand = np.array([d.map_structure >= tc.map_structure_stop for d in dets])
-        if not cand.any():
+        # the candidates (detections with at least map_structure_stop of their points on structure) and each row's
+        # pairs to refuse on Python floats and bools: a scan has ≈ 10 detections and 1–2 such rows, a few list
+        # operations instead of four array operations per row (the same comparisons, NaN compares False in both;
+        # docs/speed.md, pass trk22)
+        stop = tc.map_structure_stop
+        cand = [j for j, d in enumerate(dets) if d.map_structure >= stop]
+        if not cand:
             return ok
-        ok = ok.copy()
+        ext = det_ext.tolist()
+        jump = tc.merge_size_jump
+        copied = False
         for i in rows:
-            k = self._tracks[i]
-            hit = ok[i] & cand & (det_ext > float(tsize[i].max()) + tc.merge_size_jump)
-            if hit.any() and (not (mev := k.mev) or sum([e[0] for e in mev]) / len(mev) <= tc.map_structure_max):
-                ok[i] &= ~hit
+            # (the track's larger size: float(tsize[i].max())'s value, NaN included, without ndarray.max's wrapper)
+            a, b = tsize[i].tolist()
+            thr = (a if a >= b or a != a else b) + jump
+            row = ok[i].tolist()
+            hit = [j for j in cand if row[j] and ext[j] > thr]
+            if hit and (not (mev := (k := self._tracks[i]).mev) or
+                        sum([e[0] for e in mev]) / len(mev) <= tc.map_structure_max):
+                if not copied:
+                    ok = ok.copy()
+                    copied = True
+                ok[i, hit] = False
                 self._merged.add(k.id)
         return ok
 

@@ -5,7 +5,6 @@ track memory (detect.memory). Split out of ``detect/tracker.py`` (docs/speed.md,
 from __future__ import annotations
 
 import math
-from itertools import starmap as _starmap
 
 import numpy as np
 
@@ -48,7 +47,8 @@ class TrackManage:
         # per track: its speed (Python's math.hypot, as the reasons print it), whether its covariance fails (tested on
         # the rows as they are, instead of a flag kept in step wherever P changes) and σ of its speed along the
         # velocity, from the state rows in one kernel call
-        speeds = list(_starmap(hypot, self._X.take(order, axis=0)[:, 2:].tolist()))  # (take: X[order, 2:]'s values)
+        # (take: X[order, 2:]'s values; its two columns as lists, not a list per track)
+        speeds = list(map(hypot, *self._X.take(order, axis=0)[:, 2:].T.tolist()))
         bads, sigs = manage_rows(self._P, self._X, order, np.array(speeds), max_sig)
         bads, sigs = bads.tolist(), sigs.tolist()
         for k, speed, sig, bad in zip(tracks, speeds, sigs, bads):

@@ -44,7 +44,8 @@ class TrackReport:
         no_beams = np.zeros(0, dtype=np.int64)
         out = []
         append, make_track, make_box, names = out.append, _make_track, _make_box, KIND_NAMES  # (locals: per track)
-        for k, (px, py, theta, length, width), kd, vel, cov in zip(tracks, boxes.tolist(), kinds, V, P):
+        # (the boxes' columns as five lists: the same floats as boxes.tolist()'s rows, without a list per track)
+        for k, px, py, theta, length, width, kd, vel, cov in zip(tracks, *boxes.T.tolist(), kinds, V, P):
             beams = k.beams if k.id in updated else no_beams
             in_m = k.in_m
             append(make_track(k.id, k.state, t, make_box(px, py, theta, length, width), vel, cov, t - k.born, k.hits,

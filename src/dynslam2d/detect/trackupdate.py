@@ -160,11 +160,12 @@ class TrackUpdate:
         if p is not None:
             # the centres in the map frame, one gather (their laser-frame centres below, on the floats one by one:
             # the roundings of the former elementwise numpy products and sums)
-            centres = self._X.take(trows, axis=0)[:, :2].tolist()
+            # (its two columns as lists: the same floats as the rows' tolist, without a list per pair)
+            cx_l, cy_l = self._X.take(trows, axis=0)[:, :2].T.tolist()
             ns = -s
         else:
-            centres = [None] * len(pairs)
-        for (ti, di), ok, cen in zip(pairs, applied, centres):
+            cx_l = cy_l = [None] * len(pairs)
+        for (ti, di), ok, x0, x1 in zip(pairs, applied, cx_l, cy_l):
             if not ok:
                 continue
             k, det = tracks[ti], dets[di]
@@ -204,7 +205,6 @@ class TrackUpdate:
             if len(free) > nsus:
                 del free[0]
             if p is not None:
-                x0, x1 = cen
                 dx = x0 - pose_x
                 dy = x1 - pose_y
                 ride = k.ride
