@@ -5,7 +5,8 @@ scan-to-scan noise. This runs this checkout's pipeline over an input once and re
 
   * ``fit_clusters`` (the tracker's shape fits, one call per scan),
   * ``vacated_outlines`` (the pipeline's vacated footprints, one call per scan with a map; timed while the
-    pipeline runs, both versions on the call's arguments, as the map is too large to keep a copy per scan),
+    pipeline runs, both versions on the call's arguments, as the map is too large to keep a copy per scan; only
+    in checkouts whose pipeline still calls it itself: later ones run it inside ``vacated.py``'s kernel call),
   * the free-space fractions read late: ``FreeTest.fraction`` (a detection's own fraction, all reference scans)
     and the vacated part of a track's entry (``FreeSpaceMemory.count_seen_by``; the other checkout's
     ``seen_through_by`` and ``np.count_nonzero`` where it has no ``count_seen_by``),
@@ -63,13 +64,16 @@ def record(scans: list, other_vacated, reps: int) -> tuple[dict, list]:
     keep a copy per scan) the minima over ``reps`` alternated calls (this ns, other ns) and whether the results
     were equal."""
     from dynslam2d import pipeline
-    from dynslam2d.detect import freespace, tracker
+    from dynslam2d.detect import freespace, trackdetect
     from dynslam2d.pipeline import Pipeline
 
     rec: dict[str, list] = {"fit_clusters": [], "free fraction": [], "vacated read": []}
     live: list[tuple[int, int, bool]] = []
     made: dict[int, tuple] = {}  # id(ref) → (scan, pose, valid) it was made from
-    fit0, vac0 = tracker.fit_clusters, pipeline.vacated_outlines
+    # (the pipeline calls vacated_outlines through its own module only in checkouts before the vacated-footprint
+    # kernel of vacated.py; later ones run it inside that kernel, timed by bench_vacate.py)
+    hook_vac = hasattr(pipeline, "vacated_outlines")
+    fit0, vac0 = trackdetect.fit_clusters, getattr(pipeline, "vacated_outlines", None)
     make0, frac0, count0 = freespace.FreeSpaceMemory.make_ref, freespace.FreeTest.fraction, \
         freespace.FreeSpaceMemory.count_seen_by
 
@@ -107,7 +111,9 @@ def record(scans: list, other_vacated, reps: int) -> tuple[dict, list]:
         rec["vacated read"].append(([made[id(ref)][1:]], self.margin, points.copy()))
         return count0(self, ref, points)
 
-    tracker.fit_clusters, pipeline.vacated_outlines = fit, vac
+    trackdetect.fit_clusters = fit
+    if hook_vac:
+        pipeline.vacated_outlines = vac
     freespace.FreeSpaceMemory.make_ref = staticmethod(make_ref)
     freespace.FreeTest.fraction, freespace.FreeSpaceMemory.count_seen_by = fraction, count_seen_by
     try:
@@ -115,7 +121,9 @@ def record(scans: list, other_vacated, reps: int) -> tuple[dict, list]:
         for s in scans:
             p.process(s)
     finally:
-        tracker.fit_clusters, pipeline.vacated_outlines = fit0, vac0
+        trackdetect.fit_clusters = fit0
+        if hook_vac:
+            pipeline.vacated_outlines = vac0
         freespace.FreeSpaceMemory.make_ref = staticmethod(make0)
         freespace.FreeTest.fraction, freespace.FreeSpaceMemory.count_seen_by = frac0, count0
     return rec, live
@@ -197,6 +205,9 @@ def main() -> None:
             to, tt = (sum(best[k]) / len(scans) / 1e3 for k in ("other", "this"))
             print(f"  {part:26s} {len(got):5d} calls  {to:8.2f} → {tt:8.2f}  (×{tt / to:.2f})  "
                   f"{'identical' if same else 'DIFFERENT'}")
+        if not live:
+            print(f"  {'vacated_outlines':26s} not called by this checkout's pipeline (benchmarks/bench_vacate.py)")
+            continue
         tt, to = (sum(x[q] for x in live) / len(scans) / 1e3 for q in (0, 1))
         print(f"  {'vacated_outlines':26s} {len(live):5d} calls  {to:8.2f} → {tt:8.2f}  (×{tt / to:.2f})  "
               f"{'identical' if all(x[2] for x in live) else 'DIFFERENT'}  (timed during the run)")
