@@ -68,8 +68,9 @@ def test_returned_arrays_need_no_unpickle() -> None:
 
 
 #: In a fresh interpreter and numba cache: compile a plain numba function of this script, then the matcher's
-#: ``gated_points`` (a kernel with a callee), counting LLVM function pipelines numba builds for each; with ``undo`` the
-#: per-function optimisation jitbox skips is put back first. Prints the counts and the kernel's outputs.
+#: ``gated_points`` (a kernel with a callee), counting the LLVM function pipelines and "cheap" module pipelines numba
+#: builds for each; with ``undo`` the optimisations jitbox skips are put back first. Prints the counts and the
+#: kernel's outputs.
 ONCE = r"""
 import json, sys
 import numpy as np
@@ -79,12 +80,18 @@ import dynslam2d.jitbox as jitbox
 library = codegen.CPUCodeLibrary
 if sys.argv[1] == "undo":
     library._optimize_functions = library._optimize_functions.__wrapped__
+    library._optimize_final_module = library._optimize_final_module.__wrapped__
 built = [0]
 orig = codegen.CPUCodegen._function_pass_manager
 def counting(self, **kw):
     built[0] += 1
     return orig(self, **kw)
 codegen.CPUCodegen._function_pass_manager = counting
+module = codegen.CPUCodegen._module_pass_manager
+def counting_cheap(self, **kw):
+    built[0] += kw.get("cost") == "cheap"
+    return module(self, **kw)
+codegen.CPUCodegen._module_pass_manager = counting_cheap
 @numba.njit
 def plain(x):
     return np.sqrt(x) * 2.0 + 1.0
@@ -106,8 +113,9 @@ print(json.dumps({"kernel": kernel, "plain": before, "same_as_python": same,
 
 
 def test_kernels_are_optimised_once_with_the_same_results(tmp_path) -> None:
-    """jitbox.one_llvm_optimisation: compiling a dynslam2d kernel builds no per-function LLVM pipeline (numba's
-    own: one per function of every module added), a numba function of another module still gets them; the kernel
+    """jitbox.one_llvm_optimisation: compiling a dynslam2d kernel builds no per-function LLVM pipeline and no cheap
+    module pipeline (numba's own: one per function of every module added, one per library), a numba function of
+    another module still gets them; the kernel
     returns the Python function's values, bit for bit the same as the kernel compiled with numba's two
     optimisations; installing again is refused."""
     import os
