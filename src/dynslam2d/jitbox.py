@@ -74,7 +74,7 @@ def one_llvm_optimisation() -> bool:
     "cheap" module pipeline (inlining and a few clean-ups, so that numba's reference-count pruning pass sees
     the operations in one function) and the full module pipeline at the same level, which runs the function
     pipeline on every function again after inlining and ends with the same pruning pass. The first two are
-    4–6 s of a cold run's 15–18 s of LLVM CPU and the full pipeline takes ≈ 2.5 s more without them. Only
+    4.5–5 s of a cold run's 15–18 s of LLVM CPU and the full pipeline takes ≈ 1.5 s more without them. Only
     compiles inside a dynslam2d kernel's (numba's ``numba:compile`` event of a dispatcher of this package on
     the stack: the kernel, its callees, numba's helpers it compiles) skip them, and only with numba's pruning
     pass on (``NUMBA_LLVM_REFPRUNE_PASS``, its default), so a kernel's code does not depend on which process,
