@@ -9,9 +9,10 @@ events, the CPU time each function spends in numba's compiler excluding the func
 
 Prints the process CPU of the whole run, the compile CPU summed over functions, their count (and the number of
 compilations: numba's helpers such as ``np.empty``'s are compiled once per signature), the time in Python's cyclic
-garbage collector (``gc.callbacks``; it lands on whichever function is compiling), the peak RSS and the largest
-functions; this profile runs with the background compile off (``DYNSLAM2D_COMPILE_WORKER=0``), so it counts all
-the compile work.
+garbage collector (``gc.callbacks``; it lands on whichever function is compiling), the peak RSS, the CPU inside
+llvmlite's calls (numba's ``numba:llvm_lock`` event: LLVM's IR parsing, optimisation and machine code) in all and
+per function, and the largest functions; this profile runs with the background compile off
+(``DYNSLAM2D_COMPILE_WORKER=0``), so it counts all the compile work.
 
 ``--wait`` instead measures what a user waits for: the README's first command from an empty cache as the command
 line runs it (the background compile on where there is a second CPU: do not pin it to one core with taskset),
@@ -67,6 +68,18 @@ class Exclusive(event.Listener):
         if stack:
             stack[-1][2] = now
 event.register("numba:compile", Exclusive())
+llvm, ll_t0 = {}, [0.0, 0]  # CPU inside llvmlite's calls (numba's "numba:llvm_lock" event; outermost only)
+class LLVM(event.Listener):
+    def on_start(self, ev):
+        ll_t0[1] += 1
+        if ll_t0[1] == 1:
+            ll_t0[0] = time.process_time()
+    def on_end(self, ev):
+        ll_t0[1] -= 1
+        if ll_t0[1] == 0:
+            name = stack[-1][0] if stack else "?"
+            llvm[name] = llvm.get(name, 0.0) + time.process_time() - ll_t0[0]
+event.register("numba:llvm_lock", LLVM())
 import gc, resource
 collector, gc_t0 = [0.0, 0, 0], [0.0]  # the cyclic garbage collector: CPU s, collections, full ones
 def _gc(phase, info):
@@ -79,6 +92,7 @@ def _gc(phase, info):
 gc.callbacks.append(_gc)
 """ + RUN_FIRST_COMMAND + r"""
 print(json.dumps({"process_cpu": time.process_time() - c0, "per": excl, "compilations": n[0], "gc": collector,
+                  "llvm": llvm,
                   "rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
 """
 
@@ -203,8 +217,12 @@ def main() -> None:
     if "gc" in data:
         print(f"garbage collector {data['gc'][0]:.1f} s CPU in {data['gc'][1]} collections ({data['gc'][2]} full; "
               f"within the figures above); peak RSS {data['rss_mib']:.0f} MiB; load average {os.getloadavg()[0]:.2f}")
+    llvm = data.get("llvm", {})
+    if llvm:
+        print(f"of the compile CPU, in LLVM (llvmlite's calls: IR parsing, optimisation, machine code): "
+              f"{sum(llvm.values()):.1f} s")
     for name, s in per[:args.top]:
-        print(f"{s:6.2f} s  {name}")
+        print(f"{s:6.2f} s  {name}" + (f"  (LLVM {llvm.get(name, 0.0):.2f} s)" if llvm else ""))
 
 
 if __name__ == "__main__":

@@ -65,3 +65,70 @@ def test_returned_arrays_need_no_unpickle() -> None:
     assert res["boxing"] == 0
     assert res["leaked"] == 0
     assert res["raise"] == 1
+
+
+#: In a fresh interpreter and numba cache: compile a plain numba function of this script, then the matcher's
+#: ``gated_points`` (a kernel with a callee), counting the LLVM function pipelines and "cheap" module pipelines numba
+#: builds for each; with ``undo`` the optimisations jitbox skips are put back first. Prints the counts and the
+#: kernel's outputs.
+ONCE = r"""
+import json, sys
+import numpy as np
+import numba
+from numba.core import codegen
+import dynslam2d.jitbox as jitbox
+library = codegen.CPUCodeLibrary
+if sys.argv[1] == "undo":
+    library._optimize_functions = library._optimize_functions.__wrapped__
+    library._optimize_final_module = library._optimize_final_module.__wrapped__
+built = [0]
+orig = codegen.CPUCodegen._function_pass_manager
+def counting(self, **kw):
+    built[0] += 1
+    return orig(self, **kw)
+codegen.CPUCodegen._function_pass_manager = counting
+module = codegen.CPUCodegen._module_pass_manager
+def counting_cheap(self, **kw):
+    built[0] += kw.get("cost") == "cheap"
+    return module(self, **kw)
+codegen.CPUCodegen._module_pass_manager = counting_cheap
+@numba.njit
+def plain(x):
+    return np.sqrt(x) * 2.0 + 1.0
+plain(np.arange(4.0))  # (also numba's one-time set-up: its runtime's functions)
+before = built[0]
+from dynslam2d.slam.matcher import gated_points
+a = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+r = 1.0 + 0.01 * np.arange(360.0) + 0.37 * np.sin(7 * a)
+r[::7] = np.inf
+args = (r, np.cos(a), np.sin(a), np.isfinite(r), 0.1, 30.0, 0.2, 25.0, 3.0, True)
+got = gated_points(*args)
+kernel = built[0] - before
+want = gated_points.py_func(*args)
+same = all(np.array_equal(g, w) for g, w in zip(got[:2], want[:2])) and got[2:] == want[2:]
+print(json.dumps({"kernel": kernel, "plain": before, "same_as_python": same,
+                  "out": [g.tolist() for g in got[:2]], "rest": [float(v) for v in got[2:]],
+                  "installed": jitbox.one_llvm_optimisation()}))
+"""
+
+
+def test_kernels_are_optimised_once_with_the_same_results(tmp_path) -> None:
+    """jitbox.one_llvm_optimisation: compiling a dynslam2d kernel builds no per-function LLVM pipeline and no cheap
+    module pipeline (numba's own: one per function of every module added, one per library), a numba function of
+    another module still gets them; the kernel
+    returns the Python function's values, bit for bit the same as the kernel compiled with numba's two
+    optimisations; installing again is refused."""
+    import os
+
+    res = {}
+    for mode in ("once", "undo"):
+        env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / mode)}
+        out = subprocess.run([sys.executable, "-c", ONCE, mode], capture_output=True, text=True, check=True, env=env,
+                             timeout=300)
+        res[mode] = json.loads(out.stdout.strip().splitlines()[-1])
+    once, undo = res["once"], res["undo"]
+    assert once["kernel"] == 0 and undo["kernel"] > 5
+    assert once["plain"] > 0 and undo["plain"] > 0
+    assert once["same_as_python"] and undo["same_as_python"]
+    assert once["out"] == undo["out"] and once["rest"] == undo["rest"] and len(once["out"][0]) > 300
+    assert not once["installed"]

@@ -1,4 +1,5 @@
-"""numba's boxing of returned arrays without a per-array unpickle, and ``njit`` for the kernel modules.
+"""numba's boxing of returned arrays without a per-array unpickle, one LLVM optimisation of the kernels instead of
+three, and ``njit`` for the kernel modules.
 
 numba (0.54 and later, ``numba.core.boxing.box_array``) hands every NumPy array a compiled function returns to
 Python through ``PythonAPI.nrt_adapt_ndarray_to_python``, which embeds the array's Python class (``np.ndarray``)
@@ -9,6 +10,10 @@ class from the compiled function's environment constants instead (a list look-up
 array's dtype): the same array object, no Python call. It changes only how kernels compiled after it box their
 returned arrays; the kernel modules import ``njit`` from here so that it is in place before any kernel compiles,
 and the numba cache keys entries by the source file, so those modules' kernels are compiled again with it.
+
+:func:`one_llvm_optimisation` leaves of numba's three LLVM optimisations of a kernel's code (the function pipeline
+on each IR module as it is added, a cheap and the full module pipeline on the linked library) the full module
+pipeline only: 5–10 % less cold compile CPU, the same results (docs/speed.md, pass cold21).
 """
 
 from __future__ import annotations
@@ -59,4 +64,64 @@ def box_arrays_from_env() -> bool:
     return True
 
 
+def one_llvm_optimisation() -> bool:
+    """Have numba optimise a dynslam2d kernel's LLVM IR once, with its full module pipeline only; returns whether it
+    installed that (False when called again or when numba's code library differs).
+
+    numba (``CPUCodeLibrary.add_ir_module``) runs LLVM's function pipeline at ``NUMBA_OPT`` on every function
+    of each IR module it adds to a library (the kernel's own code, its Python wrapper, the subroutines it
+    lowers), links the modules and the callees' optimised modules, then (``_optimize_final_module``) runs a
+    "cheap" module pipeline (inlining and a few clean-ups, so that numba's reference-count pruning pass sees
+    the operations in one function) and the full module pipeline at the same level, which runs the function
+    pipeline on every function again after inlining and ends with the same pruning pass. The first two are
+    4.5–5 s of a cold run's 15–18 s of LLVM CPU and the full pipeline takes ≈ 1.5 s more without them. Only
+    compiles inside a dynslam2d kernel's (numba's ``numba:compile`` event of a dispatcher of this package on
+    the stack: the kernel, its callees, numba's helpers it compiles) skip them, and only with numba's pruning
+    pass on (``NUMBA_LLVM_REFPRUNE_PASS``, its default), so a kernel's code does not depend on which process,
+    or in which order, compiled it; any other numba function compiled in the process is left as numba does
+    it. Installed when this module is imported, i.e. by every process that compiles a kernel (the run, its
+    background compile, tests, a library user): numba's cache does not record how an entry was optimised,
+    so no process may cache a kernel optimised another way. No pipeline allows floating-point reassociation
+    or contraction (no ``fastmath``), so the kernels compute the same numbers (``bench_digest.py``)."""
+    from numba.core import codegen, config, event
+
+    library = codegen.CPUCodeLibrary
+    optimise = getattr(library, "_optimize_functions", None)
+    final = getattr(library, "_optimize_final_module", None)
+    if optimise is None or final is None or getattr(optimise, "_dynslam2d_once", False):
+        return False
+    depth = [0]  # dynslam2d kernels being compiled in this process (nested: a kernel compiles its callees)
+
+    class _Kernels(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            func = getattr((ev.data or {}).get("dispatcher"), "py_func", None)
+            depth.append(depth[-1] + (getattr(func, "__module__", "") or "").startswith("dynslam2d."))
+
+        def on_end(self, ev: Any) -> None:
+            if len(depth) > 1:
+                depth.pop()
+
+    def optimise_once(self: Any, ll_module: Any) -> None:
+        if depth[-1] > 0:
+            ll_module.data_layout = self._codegen._data_layout  # (what numba's pass does first)
+            return
+        optimise(self, ll_module)
+
+    def optimise_final_once(self: Any) -> None:
+        if depth[-1] > 0 and config.LLVM_REFPRUNE_PASS:  # (numba's refprune pass ends the module pipeline too)
+            passes, builder = self._codegen._module_pass_manager()
+            passes.run(self._final_module, builder)
+            return
+        final(self)
+
+    optimise_once._dynslam2d_once = True  # type: ignore[attr-defined]
+    optimise_once.__wrapped__ = optimise  # type: ignore[attr-defined]
+    optimise_final_once.__wrapped__ = final  # type: ignore[attr-defined]
+    library._optimize_functions = optimise_once
+    library._optimize_final_module = optimise_final_once
+    event.register("numba:compile", _Kernels())
+    return True
+
+
 box_arrays_from_env()
+one_llvm_optimisation()
