@@ -166,32 +166,47 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
                 rep = rep & (stop[k] == stop[k - 1])
         walk[n_walk] = k
         n_walk += ok & (not rep)
+    # (3) each walked ray's walk: major and minor lengths and steps (flat indices), free cells, multiplier
+    setup = np.empty((7, n_walk), dtype=np.int64)
     for q in range(n_walk):
         k = walk[q]
         x1 = cx[k]
         y1 = cy[k]
-        hk = hit[k]
         dx = x1 - sx
         dy = y1 - sy
         adx = abs(dx)
         ady = abs(dy)
         stx = 1 if dx > 0 else -1
         sty = w if dy > 0 else -w  # (a step along y in flat indices)
-        if adx >= ady:
-            major, minor, d_major, d_minor = adx, ady, stx, sty
-        else:
-            major, minor, d_major, d_minor = ady, adx, sty, stx
+        xm = adx >= ady
+        major = adx if xm else ady
+        minor = ady if xm else adx
         skip = 0  # intermediate cell j major steps before the end lies j·L/major cells from it
         if use_stop and stop[k] > 1.0:
             skip = int((stop[k] - 1.0) * major / math.sqrt(float(dx * dx + dy * dy)))
             if skip > major - 1:
                 skip = major - 1
+        setup[0, q] = major
+        setup[1, q] = minor
+        setup[2, q] = stx if xm else sty
+        setup[3, q] = sty if xm else stx
         # the start cell (j = 0), then the first major − 1 − skip intermediate cells of the walk: free
-        n_free = major - skip
+        setup[4, q] = major - skip
+        setup[5, q] = ((1 << _MAGIC_SHIFT) + major - 1) // major  # ceil(2^42 / major)
+        setup[6, q] = y1 * w + x1
+    # (4) the walks, in the rays' order
+    for q in range(n_walk):
+        k = walk[q]
+        hk = hit[k]
+        major = setup[0, q]
+        minor = setup[1, q]
+        d_major = setup[2, q]
+        d_minor = setup[3, q]
+        n_free = setup[4, q]
         c = major // 2
         n_miss = 0  # cells whose probability the memo did not hold (computed at the end of the ray)
         if major < _MAGIC_MAX:
-            magic = ((1 << _MAGIC_SHIFT) + major - 1) // major  # ceil(2^42 / major)
+            magic = setup[5, q]
             t = c
             fb = f0
             for _ in range(n_free):
@@ -228,7 +243,7 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
                     ui[f] = free_idx
                 t += minor
                 fb += d_major
-        f = np.uint64(y1 * w + x1)
+        f = np.uint64(setup[6, q])
         u = ui[f]
         v = 0.0
         updated = False
