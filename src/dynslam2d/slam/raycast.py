@@ -119,7 +119,9 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
     recurrence, so no step waits for the one before. The cell updates are written out
     in the loop (helpers taking the arrays, called per cell, were slower in every trial; docs/speed.md); a memo
     miss is resolved at the end of the ray (no call inside the walk), and each new cell prefetches the lines of the cell
-    ``_PREFETCH`` steps on (new cells come in runs)."""
+    ``_PREFETCH`` steps on (new cells come in runs). The rays' end cells, which rays count and are walked, and
+    each walked ray's lengths, steps and multiplier are computed in loops over all rays before the walks (the end
+    cells vectorised), the walks after in the rays' order (docs/speed.md, pass map22)."""
     h, w = logodds.shape
     if sx < 0 or sy < 0 or sx >= w or sy >= h:
         return 0
