@@ -119,7 +119,9 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
     recurrence, so no step waits for the one before. The cell updates are written out
     in the loop (helpers taking the arrays, called per cell, were slower in every trial; docs/speed.md); a memo
     miss is resolved at the end of the ray (no call inside the walk), and each new cell prefetches the lines of the cell
-    ``_PREFETCH`` steps on (new cells come in runs)."""
+    ``_PREFETCH`` steps on (new cells come in runs). The rays' end cells, which rays count and are walked, and
+    each walked ray's lengths, steps and multiplier are computed in loops over all rays before the walks (the end
+    cells vectorised), the walks after in the rays' order (docs/speed.md, pass map22)."""
     h, w = logodds.shape
     if sx < 0 or sy < 0 or sx >= w or sy >= h:
         return 0
@@ -129,61 +131,84 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
     from_ends = ends.shape[1] > 0
     n = ends.shape[1] if from_ends else ex.shape[0]
     f0 = sy * w + sx
-    n_done = 0
     mask = keys.shape[0] - 1
     miss_f = np.empty(max(h, w) + 1, dtype=np.uint64)  # (a ray's cells: at most max(h, w))
     miss_v = np.empty(max(h, w) + 1)
-    px = -1  # the previous ray: end cell, hit flag, stop and whether it was integrated (1) or skipped (0)
-    py = -1
-    ph = False
-    ps = 0.0
-    pd = 0
+    # The rays' set-up in branch-free loops over all rays first (LLVM vectorises the end cells), the walks after,
+    # in the rays' order (the same cells written in the same order as one loop doing both).
+    # (1) the end cells
+    cx = np.empty(n, dtype=np.int64)
+    cy = np.empty(n, dtype=np.int64)
+    if from_ends:
+        e_x = ends[0]
+        e_y = ends[1]
+        for k in range(n):  # (OccGridMapBase::updateByScan's rounding)
+            cx[k] = int(math.floor(e_x[k] / r + 0.5)) - i0
+            cy[k] = int(math.floor(e_y[k] / r + 0.5)) - j0
+    else:
+        for k in range(n):
+            cx[k] = ex[k]
+            cy[k] = ey[k]
+    # (2) which rays count and which are walked: a ray counts when its end cell is inside the array and not the
+    # start cell; it is walked unless it repeats the ray before it (same start, end cell, kind and stop: the same
+    # cells, which hold this scan's update indices after that ray — free_idx or occ_idx, and they only grow within a
+    # scan — so walking it again would change nothing; whether it counts is the previous ray's answer too)
+    walk = np.empty(n, dtype=np.int64)
+    n_done = 0
+    n_walk = 0
     for k in range(n):
-        if from_ends:
-            x1 = int(math.floor(ends[0, k] / r + 0.5)) - i0
-            y1 = int(math.floor(ends[1, k] / r + 0.5)) - j0
-        else:
-            x1 = ex[k]
-            y1 = ey[k]
-        hk = hit[k]
-        sk = stop[k] if use_stop else 0.0
-        if k > 0 and x1 == px and y1 == py and hk == ph and sk == ps:
-            # the previous ray again (same start, end cell, kind and stop: the same cells): its cells hold this
-            # scan's update indices now (free_idx or occ_idx; they only grow within a scan), so walking it again
-            # would change nothing — counted as the previous one was
-            n_done += pd
-            continue
-        px = x1
-        py = y1
-        ph = hk
-        ps = sk
-        pd = 0
-        if x1 == sx and y1 == sy:
-            continue
-        if x1 < 0 or y1 < 0 or x1 >= w or y1 >= h:
-            continue
-        pd = 1
+        x1 = cx[k]
+        y1 = cy[k]
+        ok = ((x1 != sx) | (y1 != sy)) & (x1 >= 0) & (y1 >= 0) & (x1 < w) & (y1 < h)
+        n_done += ok
+        rep = False
+        if k > 0:
+            rep = (x1 == cx[k - 1]) & (y1 == cy[k - 1]) & (hit[k] == hit[k - 1])
+            if use_stop:
+                rep = rep & (stop[k] == stop[k - 1])
+        walk[n_walk] = k
+        n_walk += ok & (not rep)
+    # (3) each walked ray's walk: major and minor lengths and steps (flat indices), free cells, multiplier
+    setup = np.empty((7, n_walk), dtype=np.int64)
+    for q in range(n_walk):
+        k = walk[q]
+        x1 = cx[k]
+        y1 = cy[k]
         dx = x1 - sx
         dy = y1 - sy
         adx = abs(dx)
         ady = abs(dy)
         stx = 1 if dx > 0 else -1
         sty = w if dy > 0 else -w  # (a step along y in flat indices)
-        if adx >= ady:
-            major, minor, d_major, d_minor = adx, ady, stx, sty
-        else:
-            major, minor, d_major, d_minor = ady, adx, sty, stx
+        xm = adx >= ady
+        major = adx if xm else ady
+        minor = ady if xm else adx
         skip = 0  # intermediate cell j major steps before the end lies j·L/major cells from it
         if use_stop and stop[k] > 1.0:
             skip = int((stop[k] - 1.0) * major / math.sqrt(float(dx * dx + dy * dy)))
             if skip > major - 1:
                 skip = major - 1
+        setup[0, q] = major
+        setup[1, q] = minor
+        setup[2, q] = stx if xm else sty
+        setup[3, q] = sty if xm else stx
         # the start cell (j = 0), then the first major − 1 − skip intermediate cells of the walk: free
-        n_free = major - skip
+        setup[4, q] = major - skip
+        setup[5, q] = ((1 << _MAGIC_SHIFT) + major - 1) // major  # ceil(2^42 / major)
+        setup[6, q] = y1 * w + x1
+    # (4) the walks, in the rays' order
+    for q in range(n_walk):
+        k = walk[q]
+        hk = hit[k]
+        major = setup[0, q]
+        minor = setup[1, q]
+        d_major = setup[2, q]
+        d_minor = setup[3, q]
+        n_free = setup[4, q]
         c = major // 2
         n_miss = 0  # cells whose probability the memo did not hold (computed at the end of the ray)
         if major < _MAGIC_MAX:
-            magic = ((1 << _MAGIC_SHIFT) + major - 1) // major  # ceil(2^42 / major)
+            magic = setup[5, q]
             t = c
             fb = f0
             for _ in range(n_free):
@@ -220,7 +245,7 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
                     ui[f] = free_idx
                 t += minor
                 fb += d_major
-        f = np.uint64(y1 * w + x1)
+        f = np.uint64(setup[6, q])
         u = ui[f]
         v = 0.0
         updated = False
@@ -250,7 +275,6 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
                 n_miss += 1
         for i in range(n_miss):  # (the ray's cells are distinct: each written once, in the walk's order)
             pr[miss_f[i]] = _prob(miss_v[i], keys, vals)
-        n_done += 1
     return n_done
 
 
