@@ -20,6 +20,11 @@
 # The first lockstep after a change to a kernel module compiles that module's kernels inside its first input:
 # ab_1's first row can carry that compile (its mean reads far too high); quote ab_2.
 set -euo pipefail
+if [ $# -lt 2 ] || [ ! -d "$1/src/dynslam2d" ]; then
+  echo "usage: bash benchmarks/release_figures.sh PREV_CHECKOUT OUT_DIR [DATA_DIR]" \
+       "(PREV_CHECKOUT: a checkout of the previous release, with src/dynslam2d)" >&2
+  exit 2
+fi
 PREV=$(cd "$1" && pwd)
 OUT=$(mkdir -p "$2" && cd "$2" && pwd)
 REPO=$(cd "$(dirname "$0")/.." && pwd)
