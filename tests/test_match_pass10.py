@@ -228,11 +228,11 @@ def test_gated_points_counts_equal_close_count_and_angular_spread() -> None:
         lo, hi, min_d, max_d = 0.05, 10.0, float(rng.choice([0.0, 0.2, 0.25])), 9.0
         valid = np.isfinite(r) & (r >= lo) & (r <= hi)
         ca, sa = np.cos(a), np.sin(a)
-        pts, clear, nv, nc, bins = gated_points(r, ca, sa, valid, lo, hi, min_d, max_d, 3.0, True)
-        p2, c2, z1, z2, z3 = gated_points(r, ca, sa, valid, lo, hi, min_d, max_d, 3.0, False)
+        pts, clear, nv, nc, bins, ss = gated_points(r, ca, sa, valid, lo, hi, min_d, max_d, 3.0, True)
+        p2, c2, z1, z2, z3, z4 = gated_points(r, ca, sa, valid, lo, hi, min_d, max_d, 3.0, False)
         assert (nv, nc) == close_count(r, lo, hi, min_d)
         assert bins * BIN_ANGLE == angular_spread(pts)
-        assert (z1, z2, z3) == (0, 0, 0) and p2.tobytes() == pts.tobytes() and c2.tobytes() == clear.tobytes()
+        assert (z1, z2, z3, z4) == (0, 0, 0, 0.0) and p2.tobytes() == pts.tobytes() and c2.tobytes() == clear.tobytes()
         narrow += bins * BIN_ANGLE < 0.5
     assert narrow > 10
 

@@ -16,7 +16,7 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "float64, bool, Array(bool, 1, 'C'),)"),
     ('dynslam2d.slam.matcher.gated_points',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
-     "'C'), float64, float64, float64, float64, float64, bool,)"),
+     "'C'), float64, float64, float64, float64, float64, bool, Array(bool, 1, 'C'),)"),
     ('dynslam2d.detect.body._observe_beams',
      "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, 1, 'C'), "

@@ -253,13 +253,13 @@ class Pipeline:
         if np.count_nonzero(body):  # (``any`` of a short bool array costs four times as much)
             scan = scan.without(body)
         # 2. match with the known movers removed (their boxes advanced to this stamp).
-        match_scan = scan
+        drop = None  # (the matcher takes these beams as without a return: ``scan.without(drop)``, not copied)
         if self._moving and self.config.filter.mode != "none":
             dt = scan.stamp - self._last_stamp if self._last_stamp is not None else 0.0
             pre_removed, _ = self._exclude(scan, self.slam.predict(scan.stamp), self._moving_rows, dt)
             if np.count_nonzero(pre_removed):
-                match_scan = scan.without(pre_removed)
-        res = self.slam.match(match_scan)
+                drop = pre_removed
+        res = self.slam.match(scan, drop=drop)
         self.body.observe(raw, res.pose)
         t1 = time.perf_counter()
         # 3. track in the map frame with this scan's pose.
@@ -300,14 +300,15 @@ class Pipeline:
                 led.erased_beams.clear()
         # the thresholds are tested once: a scan that will not update the map builds no kept copy
         need = not res.rejected and self.slam.needs_map_update(res.pose)
-        kept = None
+        kept = None  # (the scan without the removed beams, for the loop closer: None = it makes its own when needed)
         if need or not (res.rejected or res.pose.is_finite()):  # (update_map counts a refused non-finite pose)
-            kept = scan.without(removed) if any_removed else scan
+            kept = None if any_removed else scan
             pending = None
             if led is not None and tracks and need:
                 pending = led.before_update(scan, res.pose, tracks, removed, self.slam.map,
                                             self.loops.next_index if self.loops is not None else -1)
-            updated = self.slam.update_map(kept, res.pose, force=need)
+            # (the removed beams as no return: the map of ``scan.without(removed)``, without the copy)
+            updated = self.slam.update_map(scan, res.pose, force=need, drop=removed if any_removed else None)
             if pending is not None and updated:
                 led.after_update(pending, self.slam.map)
         t4 = time.perf_counter()

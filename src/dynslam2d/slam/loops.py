@@ -55,7 +55,7 @@ from dynslam2d.slam.graphdist import graph_distances
 from dynslam2d.slam.grid import GridLevel, MultiResMap
 from dynslam2d.slam.jumps import JumpCheck
 from dynslam2d.slam.loopconfig import LoopConfig
-from dynslam2d.slam.matcher import degeneracy, evaluate, gated_points
+from dynslam2d.slam.matcher import degeneracy, evaluate, gated_points, no_drop
 from dynslam2d.slam.placedesc import PlaceIndex
 from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
 from dynslam2d.slam.rematch import refine_supported, rematch_keyframes
@@ -438,17 +438,21 @@ class LoopCloser:
         cur = self._kf_points
         if cur is not None and cur[0] is kf:  # the keyframe being added (read-only: callers copy or index)
             if cur[2] is None:
-                self._kf_points = cur = (kf, None, self._scan_points(cur[1] if cur[1] is not None else kf.kept()))
+                pts = self._scan_points(cur[1]) if cur[1] is not None else self._scan_points(kf.scan, kf.removed)
+                self._kf_points = cur = (kf, None, pts)
             return cur[2]
-        return self._scan_points(kf.kept())
+        return self._scan_points(kf.scan, kf.removed)
 
-    def _scan_points(self, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_points` of a keyframe's kept scan."""
+    def _scan_points(self, scan: Scan, removed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_points` of a keyframe's kept scan: ``scan`` with the beams ``removed`` ((n,) bool; None or another
+        shape: none) taken as without a return (:meth:`Keyframe.kept`'s scan, without its copy)."""
         c = self.slam
         cos_a, sin_a = scan.trig()
-        return gated_points(scan.ranges, cos_a, sin_a, scan.valid_mask(), float(scan.range_min), float(scan.range_max),
+        n = scan.ranges.shape[0]
+        drop = no_drop(n) if removed is None or removed.shape != (n,) else np.ascontiguousarray(removed, dtype=np.bool_)
+        return gated_points(scan.ranges, cos_a, sin_a, scan.valid_view(), float(scan.range_min), float(scan.range_max),
                             float(c.laser_min_dist), float(min(c.laser_max_dist, self.config.submap_max_range)), 0.0,
-                            False)[:2]
+                            False, drop)[:2]  # (the scan's own valid mask: the kernel only reads it)
 
     def _submap(self, s: int) -> MultiResMap:
         grid = self._cache.get(s)
@@ -652,7 +656,7 @@ class LoopCloser:
         if cur is not None and cur[0] is kf:  # the keyframe being added: its points are shared with its query
             pts, _ = self._points(kf)
         else:  # (Keyframe.kept with the removed beams of that time)
-            pts, _ = self._scan_points(kf.scan.without(rm) if rm.size and rm.any() else kf.scan)
+            pts, _ = self._scan_points(kf.scan, rm)
         if pts.shape[0] > _PLACE_POINTS:
             pts = pts[even_indices(pts.shape[0], _PLACE_POINTS)]
         pts = self._place_pts[node] = pts.astype(np.float32)

@@ -826,9 +826,27 @@ def _all_true(n: int) -> np.ndarray:
     return _ALL_TRUE[:n]
 
 
+#: a shared all-False mask: :func:`gated_points`' ``drop`` of a scan that drops nothing (one specialisation of the
+#: kernel for every caller; writeable as ``_ALL_TRUE``)
+_NO_DROP = np.zeros(2048, dtype=np.bool_)
+
+
+def no_drop(n: int) -> np.ndarray:
+    """(n,) False (a view of a shared buffer, grown when too short; never written): :func:`gated_points`' ``drop``
+    when no beam is dropped."""
+    global _NO_DROP
+    if n > _NO_DROP.shape[0]:
+        _NO_DROP = np.zeros(n, dtype=np.bool_)
+    return _NO_DROP[:n]
+
+
+#: points per block of numpy's einsum sum over an (n, 2) float64 array (its iterator's buffer: 8192 elements)
+_EINSUM_BLOCK = 4096
+
+
 @njit(cache=True)
 def gated_points(r, cos_a, sin_a, valid, range_min, range_max, min_dist, max_dist, clear_dist,
-                 stats):  # pragma: no cover - numba
+                 stats, drop=None):  # pragma: no cover - numba
     """``HectorSlam.scan_points`` of ranges ``r`` (m) with beam (cos, sin) ``cos_a``, ``sin_a`` and ``valid``
     returns (finite, within the sensor's limits): (returns (n, 2), clearing-ray ends (m, 2), n_valid, n_close,
     spread bins) in the laser frame, m — the valid returns strictly inside (``min_dist``, ``max_dist``) at
@@ -838,7 +856,11 @@ def gated_points(r, cos_a, sin_a, valid, range_min, range_max, min_dist, max_dis
 
     With ``stats`` also what the processor asks of every scan, from the same pass: :func:`close_count` of ``r``
     with (``range_min``, ``range_max``, ``min_dist``) as (n_valid, n_close), and the number of bearing bins
-    :func:`angular_spread` finds on the returns (every ``max(1, n // _SPREAD_POINTS)``-th one); else 0, 0, 0."""
+    :func:`angular_spread` finds on the returns (every ``max(1, n // _SPREAD_POINTS)``-th one), and the sum of the
+    returns' squared coordinates as :func:`degeneracy` sums them (:func:`_sum_squares`); else 0, 0, 0, 0.0.
+
+    ``drop`` (n,) bool: beams taken as having no return (range NaN) — the same outputs as for the ranges with NaN at
+    those beams and ``valid`` False there (``Scan.without(drop)``), without the copy of the scan."""
     n = r.shape[0]
     m = 0
     k = 0
@@ -846,6 +868,8 @@ def gated_points(r, cos_a, sin_a, valid, range_min, range_max, min_dist, max_dis
     n_close = 0
     for i in range(n):
         ri = r[i]
+        if drop is not None and drop[i]:
+            ri = math.nan
         if stats and math.isfinite(ri) and ri >= range_min and ri <= range_max:
             n_valid += 1
             if ri <= min_dist:
@@ -859,11 +883,14 @@ def gated_points(r, cos_a, sin_a, valid, range_min, range_max, min_dist, max_dis
     m = 0
     k = 0
     for i in range(n):
-        if valid[i] and r[i] > min_dist and r[i] < max_dist:
-            pts[m, 0] = r[i] * cos_a[i]
-            pts[m, 1] = r[i] * sin_a[i]
+        ri = r[i]
+        if drop is not None and drop[i]:
+            ri = math.nan
+        if valid[i] and ri > min_dist and ri < max_dist:
+            pts[m, 0] = ri * cos_a[i]
+            pts[m, 1] = ri * sin_a[i]
             m += 1
-        elif clear_dist > 0.0 and (not math.isfinite(r[i]) or r[i] > range_max or r[i] >= max_dist):
+        elif clear_dist > 0.0 and (not math.isfinite(ri) or ri > range_max or ri >= max_dist):
             clear[k, 0] = clear_dist * cos_a[i]
             clear[k, 1] = clear_dist * sin_a[i]
             k += 1
@@ -876,7 +903,42 @@ def gated_points(r, cos_a, sin_a, valid, range_min, range_max, min_dist, max_dis
             if not seen[b]:
                 seen[b] = True
                 bins += 1
-    return pts, clear, n_valid, n_close, bins
+    sumsq = _sum_squares(pts) if stats else 0.0
+    return pts, clear, n_valid, n_close, bins, sumsq
+
+
+@njit(cache=True, inline="always")
+def _sum_squares(pts):  # pragma: no cover - numba
+    """Σ x² + y² over the rows of ``pts`` (m, 2) float64, C-contiguous, in the order of NumPy's
+    ``einsum("ij,ij->", pts, pts)`` (2.x, x86-64-v2 baseline: no FMA), so the same bits: the flattened values
+    summed in two lanes (x and y), four rows a step with the last row added first, the rest row by row, the lanes
+    added at the end; blocks of ``_EINSUM_BLOCK`` rows (the iterator's buffer) summed that way each, and the block
+    sums added in order to 0.0. (The sum of :func:`degeneracy`'s ρ, from the pass that makes the points.)"""
+    m = pts.shape[0]
+    out = 0.0
+    s = 0
+    while s < m:
+        e = min(m, s + _EINSUM_BLOCK)
+        l0 = 0.0
+        l1 = 0.0
+        p = s
+        while e - p >= 4:
+            t0 = pts[p + 3, 0] * pts[p + 3, 0] + l0
+            t1 = pts[p + 3, 1] * pts[p + 3, 1] + l1
+            t0 = pts[p + 2, 0] * pts[p + 2, 0] + t0
+            t1 = pts[p + 2, 1] * pts[p + 2, 1] + t1
+            t0 = pts[p + 1, 0] * pts[p + 1, 0] + t0
+            t1 = pts[p + 1, 1] * pts[p + 1, 1] + t1
+            l0 = pts[p, 0] * pts[p, 0] + t0
+            l1 = pts[p, 1] * pts[p, 1] + t1
+            p += 4
+        while p < e:
+            l0 = pts[p, 0] * pts[p, 0] + l0
+            l1 = pts[p, 1] * pts[p, 1] + l1
+            p += 1
+        out = out + (l0 + l1)
+        s = e
+    return out
 
 
 @dataclass(slots=True)
@@ -934,14 +996,18 @@ class Degeneracy:
         return info
 
 
-def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, threshold: float) -> Degeneracy:
+def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, threshold: float,
+               sumsq: float | None = None) -> Degeneracy:
     """Degeneracy analysis of the level-0 Gauss–Newton Hessian ``hessian_cells`` (cells / rad units,
     cell side ``resolution`` m) for laser-frame points ``pts_m`` (n, 2, m); a direction is
-    degenerate when its normalized eigenvalue is below ``threshold`` × the largest.
+    degenerate when its normalized eigenvalue is below ``threshold`` × the largest. ``sumsq``: Σ x² + y² of
+    ``pts_m``, m², as :func:`gated_points` returns it with the points (else summed here: the same value).
 
     Closed-form 2×2 / scalar algebra (it runs on every scan)."""
     n = pts_m.shape[0]
-    rho = math.sqrt(float(_einsum("ij,ij->", pts_m, pts_m)) / n) if n else 1.0
+    if sumsq is None:
+        sumsq = float(_einsum("ij,ij->", pts_m, pts_m))
+    rho = math.sqrt(sumsq / n) if n else 1.0
     rho = max(rho, 1e-3)
     h = hessian_cells.tolist()
     k = 1.0 / resolution  # world (m, m, rad) → cells / rad

@@ -34,6 +34,7 @@ from dynslam2d.slam.matcher import (
     free_fraction,
     gated_points,
     match_multires,
+    no_drop,
     support_at,
 )
 from dynslam2d.slam.recovery import REJECT_AMBIGUOUS, ScanPeriod, needs_recovery, recover
@@ -286,7 +287,9 @@ class HectorSlam:
         self._sigma2: float | None = None  # running residual variance of accepted matches (probability²)
         self._dt: float | None = None  # stamp of the scan being matched minus the previous one's, s
         self._period = ScanPeriod()  # typical stamp gap (the motion gate's floor with recovery on)
-        self._last_points: tuple[Scan, np.ndarray, np.ndarray] | None = None  # scan_points of the last match
+        self._last_points: tuple[Scan | None, np.ndarray, np.ndarray] | None = None  # scan_points of the last match
+        #: (points, Σ x² + y² of them) of the last match's points (:meth:`_gate`), for :func:`degeneracy`
+        self._sumsq: tuple[np.ndarray, float] | None = None
         # (result, pose, (count, spread)): the support the matcher's kernel took at the pose _match_against_map gave
         # that result; :meth:`_support` uses it while the result still holds that same pose object
         self._support_of: tuple[MatchResult, Pose2D, tuple[int, float]] | None = None
@@ -339,16 +342,20 @@ class HectorSlam:
         """
         return self._gate(scan, False)[:2]
 
-    def _gate(self, scan: Scan, stats: bool) -> tuple[np.ndarray, np.ndarray, int, int, int]:
+    def _gate(self, scan: Scan, stats: bool, drop: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, int, int, int, float]:
         """:meth:`scan_points` and, with ``stats``, (valid returns, those within laser_min_dist, bearing bins of the
-        returns) for the too-close and narrow-view tests (:func:`~dynslam2d.slam.matcher.gated_points`)."""
+        returns, Σ x² + y² of the returns for :func:`~dynslam2d.slam.matcher.degeneracy`) for the too-close and
+        narrow-view tests (:func:`~dynslam2d.slam.matcher.gated_points`); ``drop`` (n,) bool: beams taken as without
+        a return (those of ``scan.without(drop)``)."""
         c = self.config
         cos_a, sin_a = scan.trig()
         valid = scan.valid_view()  # (the kernel only reads it: no copy)
         # (one kernel call for the gates, the points, the clearing-ray ends and the per-scan tests' counts)
         return gated_points(scan.ranges, cos_a, sin_a, valid, float(scan.range_min),
                             float(scan.range_max), float(c.laser_min_dist), float(c.laser_max_dist),
-                            float(c.clear_no_return_dist), stats)
+                            float(c.clear_no_return_dist), stats,
+                            no_drop(scan.ranges.shape[0]) if drop is None else drop)
 
     # ---- prediction --------------------------------------------------------------------
     def predict(self, stamp: float) -> Pose2D:
@@ -446,12 +453,14 @@ class HectorSlam:
         return c.max_linear_accel * k + c.gate_distance, c.max_angular_accel * k + c.gate_angle
 
     # ---- matching ----------------------------------------------------------------------
-    def match(self, scan: Scan, predicted: Pose2D | None = None, commit: bool = True) -> MatchResult:
+    def match(self, scan: Scan, predicted: Pose2D | None = None, commit: bool = True,
+              drop: np.ndarray | None = None) -> MatchResult:
         """Estimate the laser pose of ``scan`` against the current map; the map is not changed.
 
         ``predicted`` overrides the internal start estimate (previous pose, or constant velocity).
         With ``commit`` (default) the result becomes the processor's current pose (the start of
-        the next prediction) and the counters are updated; pass False to only look.
+        the next prediction) and the counters are updated; pass False to only look. ``drop`` (n,) bool:
+        match ``scan.without(drop)`` (those beams taken as without a return), the same result without the copy.
 
         Beyond the reference (issue 10): odometry / IMU / the motion model predict the pose;
         the prediction holds along directions the scan cannot constrain (degenerate Hessian);
@@ -462,8 +471,10 @@ class HectorSlam:
         """
         c = self.config
         t0 = time.perf_counter()
-        pts, clear, n_valid, n_close, spread_bins = self._gate(scan, True)
-        self._last_points = (scan, pts, clear)  # the map update of this same scan reuses them (read-only)
+        pts, clear, n_valid, n_close, spread_bins, sumsq = self._gate(scan, True, drop)
+        # the map update of this same scan reuses them (read-only; not those of a scan with beams dropped)
+        self._last_points = (scan if drop is None else None, pts, clear)
+        self._sumsq = (pts, sumsq)  # (degeneracy's Σ x² + y² of these points)
         self._dt = scan.stamp - self._last_stamp if self._last_stamp is not None else None
         start, gap = self._predict(scan.stamp)
         prior = self._prior(scan, start, gap)
@@ -608,7 +619,9 @@ class HectorSlam:
     def _apply_prior_and_gate(self, res: MatchResult, pts: np.ndarray, prior: _Prior, stamp: float) -> None:
         """Degeneracy analysis of the match; the prior along degenerate directions; the motion gate."""
         c = self.config
-        deg: Degeneracy = degeneracy(res.hessian, self.map.resolution, pts, c.degeneracy_threshold)
+        sq = self._sumsq
+        deg: Degeneracy = degeneracy(res.hessian, self.map.resolution, pts, c.degeneracy_threshold,
+                                     sq[1] if sq is not None and sq[0] is pts else None)
         # hysteresis: a degenerate direction stays degenerate until its ratio clearly rises above the threshold
         hi = _DEGENERACY_HYSTERESIS * c.degeneracy_threshold
         deg.translation_degenerate |= self._degenerate_prev[0] and deg.translation_ratio < hi
@@ -676,7 +689,9 @@ class HectorSlam:
             return
         self._fit(res, pts, Pose2D(float(p[0]), float(p[1]), float(wrap_angle(p[2]))))
         self._support(res, pts, res.pose)
-        deg = degeneracy(res.hessian, self.map.resolution, pts, c.degeneracy_threshold)
+        sq = self._sumsq
+        deg = degeneracy(res.hessian, self.map.resolution, pts, c.degeneracy_threshold,
+                         sq[1] if sq is not None and sq[0] is pts else None)
         res.degeneracy = deg.ratio
         res.degenerate = deg.any
         res.pose_source = SOURCE_RELOCALISED
@@ -902,17 +917,21 @@ class HectorSlam:
         c = self.config
         return dist > c.map_update_distance_thresh or abs(dth) > c.map_update_angle_thresh
 
-    def update_map(self, scan: Scan, pose: Pose2D, force: bool = False) -> bool:
+    def update_map(self, scan: Scan, pose: Pose2D, force: bool = False, drop: np.ndarray | None = None) -> bool:
         """Integrate ``scan`` taken at laser pose ``pose`` into every level, if the thresholds
         say so (or ``force``). Non-finite poses and scans with fewer than ``min_points`` returns
-        never touch the map. Returns True if the map was updated."""
+        never touch the map. ``drop`` (n,) bool: integrate ``scan.without(drop)`` (those beams taken as without a
+        return), the same map without the copy. Returns True if the map was updated."""
         if not pose.is_finite():
             self.counts["update_refused_non_finite"] += 1
             return False
         if not (force or self.needs_map_update(pose)):
             return False
         last = self._last_points
-        pts, clear = (last[1], last[2]) if last is not None and last[0] is scan else self.scan_points(scan)
+        if drop is None and last is not None and last[0] is scan:
+            pts, clear = last[1], last[2]
+        else:
+            pts, clear = self._gate(scan, False, drop)[:2]
         return self._integrate(pts, clear, pose)
 
     def _integrate(self, pts: np.ndarray, clear: np.ndarray, pose: Pose2D) -> bool:
