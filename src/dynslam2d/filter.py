@@ -569,7 +569,7 @@ def filter_scan_ids(
     cos_a, sin_a = scan.trig()
     if config.mode == "box" and config.speed_margin_time == 0.0:  # the default: one kernel call
         cap = math.inf if config.max_half_extent is None else float(config.max_half_extent)
-        return _rows_exclusion_kernel(scan.ranges, cos_a, sin_a, scan.valid_mask(), math.cos(pose.theta),
+        return _rows_exclusion_kernel(scan.ranges, cos_a, sin_a, scan.valid_view(), math.cos(pose.theta),
                                       math.sin(pose.theta), float(pose.x), float(pose.y),
                                       np.ascontiguousarray(boxes, dtype=np.float64),
                                       np.ascontiguousarray(ids, dtype=np.int64), float(dt),
@@ -579,7 +579,7 @@ def filter_scan_ids(
     centres = boxes[:, 0:2] + boxes[:, 5:7] * dt
     speeds = np.array([math.hypot(vx, vy) for vx, vy in boxes[:, 5:7].tolist()]) if config.mode == "box" else None
     ext = half_extents(config, boxes[:, 3], boxes[:, 4], speeds)
-    _scan_exclusion_kernel(scan.ranges, cos_a, sin_a, scan.valid_mask(), math.cos(pose.theta), math.sin(pose.theta),
+    _scan_exclusion_kernel(scan.ranges, cos_a, sin_a, scan.valid_view(), math.cos(pose.theta), math.sin(pose.theta),
                            float(pose.x), float(pose.y), centres, np.ascontiguousarray(boxes[:, 2]),
                            np.ascontiguousarray(ext[:, 0]), np.ascontiguousarray(ext[:, 1]),
                            np.ascontiguousarray(ids, dtype=np.int64), removed, removed_by)

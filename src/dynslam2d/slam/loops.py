@@ -268,7 +268,7 @@ class LoopCloser:
         sc = self.slam
         self._jumps = JumpCheck(sc.jump_shift, sc.jump_ratio, sc.jump_turn) if self.config.jump_weak else None
         self._path = 0.0
-        self._last_pose: np.ndarray | None = None
+        self._last_pose: tuple[float, float] | None = None  # (x, y) of the last finite pose, m
         self._opt_nodes = 0  # nodes covered by the last optimisation
         self._new_loops = 0
         self._cache: OrderedDict[int, MultiResMap] = OrderedDict()
@@ -322,13 +322,14 @@ class LoopCloser:
         score (0 … 1, mean occupancy at the endpoints; NaN = unknown); ``kept``: optional, ``scan`` with the
         ``removed`` beams set to no return, as the caller already built it (saves building it again)."""
         t0 = time.perf_counter()
-        p = np.array([pose.x, pose.y, pose.theta], dtype=np.float64)
-        x, y, th = p.tolist()
+        # (Python floats of the pose's float64 values; the keyframe's array is made from them, keyframes only)
+        x, y, th = float(pose.x), float(pose.y), float(pose.theta)
         finite = math.isfinite(x) and math.isfinite(y) and math.isfinite(th)
-        if self._last_pose is not None and finite:
-            self._path += math.hypot(x - self._last_pose[0], y - self._last_pose[1])
+        last = self._last_pose
+        if last is not None and finite:
+            self._path += math.hypot(x - last[0], y - last[1])
         if finite:
-            self._last_pose = p
+            self._last_pose = (x, y)
         self._frontend.append((x, y, th))
         if self._jumps is not None and self._jumps.update(stamp, x, y, th):
             weak = True  # the front end snapped back: the drift before it is for the loops to undo
@@ -336,7 +337,8 @@ class LoopCloser:
         if score == score:  # not NaN
             self._score_since_kf = min(self._score_since_kf, float(score))
         if keyframe and finite:
-            self._add_keyframe(len(self._frontend) - 1, stamp, p, scan, removed, kept)
+            self._add_keyframe(len(self._frontend) - 1, stamp, np.array([x, y, th], dtype=np.float64), scan, removed,
+                               kept)
         self._scan_node.append(len(self.keyframes) - 1)
         self.stats["total_ms"] += (time.perf_counter() - t0) * 1e3
 
