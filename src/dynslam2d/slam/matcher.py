@@ -922,20 +922,15 @@ def _sum_squares(pts):  # pragma: no cover - numba
         l0 = 0.0
         l1 = 0.0
         p = s
-        while e - p >= 4:
-            t0 = pts[p + 3, 0] * pts[p + 3, 0] + l0
-            t1 = pts[p + 3, 1] * pts[p + 3, 1] + l1
-            t0 = pts[p + 2, 0] * pts[p + 2, 0] + t0
-            t1 = pts[p + 2, 1] * pts[p + 2, 1] + t1
-            t0 = pts[p + 1, 0] * pts[p + 1, 0] + t0
-            t1 = pts[p + 1, 1] * pts[p + 1, 1] + t1
-            l0 = pts[p, 0] * pts[p, 0] + t0
-            l1 = pts[p, 1] * pts[p, 1] + t1
-            p += 4
         while p < e:
-            l0 = pts[p, 0] * pts[p, 0] + l0
-            l1 = pts[p, 1] * pts[p, 1] + l1
-            p += 1
+            # rows p … p + 3 of a full group of four are added last row first, the rest in order
+            q = p + 3 if e - p >= 4 else p
+            step = -1 if e - p >= 4 else 1
+            for _ in range(4 if e - p >= 4 else e - p):
+                l0 = pts[q, 0] * pts[q, 0] + l0
+                l1 = pts[q, 1] * pts[q, 1] + l1
+                q += step
+            p += 4 if e - p >= 4 else e - p
         out = out + (l0 + l1)
         s = e
     return out
