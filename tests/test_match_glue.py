@@ -89,13 +89,13 @@ def test_cached_valid_masks_are_read_not_copied_nor_written() -> None:
     assert scan.valid_view() is cached and scan.valid_mask() is not cached
     before = cached.copy()
     slam, _ = paper_room_slam()
-    pts, clear, n_valid, n_close, _ = slam._gate(scan, True)
+    pts, clear, n_valid, n_close, _, _ = slam._gate(scan, True)
     fresh = Scan(stamp=0.0, angle_min=-math.pi, angle_increment=2 * math.pi / 720, ranges=r.copy(), range_min=0.1,
                  range_max=30.0)
     assert fresh._valid is None
     assert Scan(stamp=0.0, angle_min=-math.pi, angle_increment=2 * math.pi / 720, ranges=r.copy(), range_min=0.1,
                 range_max=30.0).valid_view().sum() == before.sum()
-    pts2, clear2, n_valid2, n_close2, _ = slam._gate(fresh, True)  # (computes the mask on the way)
+    pts2, clear2, n_valid2, n_close2, _, _ = slam._gate(fresh, True)  # (computes the mask on the way)
     np.testing.assert_array_equal(pts, pts2)
     np.testing.assert_array_equal(clear, clear2)
     assert (n_valid, n_close) == (n_valid2, n_close2) == (int(before.sum()), n_close)
