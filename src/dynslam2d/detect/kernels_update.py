@@ -2,13 +2,15 @@
 physical acceleration bound of the updated states (``Tracker._bound_acceleration``).
 
 ``py_hypot`` is CPython's ``math.hypot`` for two coordinates (``Modules/mathmodule.c``, ``math_hypot`` →
-``vector_norm``, CPython 3.10–3.11: lossless power-of-two scaling, Dekker's exact split products (``dl_mul``,
-Dekker 1971, "A floating-point technique for extending the available precision", mul12), Neumaier's exact sums
-(``dl_fast_sum``) and one differential correction of the square root), operation for operation, so a kernel can
-decide and compute with the same float the tracker's Python did (libm's ``hypot``, which numba's ``math.hypot``
-calls, may differ from it by an ulp). numba compiles without fast-math, so no product and sum is contracted into
-an FMA and every operation is rounded alone, as in the C source. ``tests/test_detect_kernels_update.py`` compares
-it with ``math.hypot`` on millions of pairs and the edge values."""
+``vector_norm``: lossless power-of-two scaling, exact squares (``dl_mul``: Dekker 1971, "A floating-point technique
+for extending the available precision", mul12 on Veltkamp's splits — CPython 3.11's form, and 3.12's without a
+reliable fma; 3.12 and later take the low part with an fma, the same (hi, lo) of these squares: checked in plain
+Python against 3.11.7, 3.12.1 and 3.13.0's ``math.hypot``), the compensated sums (``dl_fast_sum``) and one
+differential correction of the square root), operation for operation, so a kernel can decide and compute with
+the same float the tracker's Python did (libm's ``hypot``, which numba's ``math.hypot`` calls, may differ from it
+by an ulp). numba compiles without fast-math, so no product and sum is contracted into an FMA and every operation
+is rounded alone, as in the C source. ``tests/test_detect_kernels_update.py`` compares it with the running
+interpreter's ``math.hypot`` on millions of pairs and the edge values."""
 
 from __future__ import annotations
 
@@ -40,7 +42,7 @@ def _dl_mul(x: float, y: float) -> tuple[float, float]:
 
 @njit(cache=True, inline="always")
 def py_hypot(a: float, b: float) -> float:
-    """``math.hypot(a, b)`` of CPython 3.10–3.11, bit for bit (module docstring): an infinity wins over a NaN, a
+    """``math.hypot(a, b)`` of CPython, bit for bit (module docstring): an infinity wins over a NaN, a
     NaN gives NaN, zeros give 0.0; subnormal inputs are scaled by DBL_MIN first, as there."""
     x0 = abs(a)
     x1 = abs(b)
