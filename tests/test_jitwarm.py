@@ -289,3 +289,56 @@ def test_lean_compile_drops_cfunc_wrappers_and_keeps_kernels_and_flag_semantics(
     assert got["0"]["cfunc"] and not got["1"]["cfunc"]
     assert got["0"]["out"] == got["1"]["out"] and len(got["1"]["out"]) > 5
     assert got["0"]["equal"] == got["1"]["equal"] == [True, False, True]
+
+
+REMEMBERED = r"""
+import json, re, sys
+import numpy as np
+from dynslam2d import jitcache, jitwarm
+on = sys.argv[3] == "1"
+if on:
+    assert jitcache.remembered_call_typing() and not jitcache.remembered_call_typing()  # (once)
+from numba.core import utils
+from numba.core.types import functions
+calls = [0, 0]  # calls typed, full template searches
+typed, search = functions.BaseFunction.get_call_type, utils.order_by_target_specificity
+def counted_typed(self, context, args, kws):
+    calls[0] += 1
+    return typed(self, context, args, kws)
+def counted_search(*a, **k):
+    calls[1] += 1
+    return search(*a, **k)
+functions.BaseFunction.get_call_type, utils.order_by_target_specificity = counted_typed, counted_search
+disp = jitwarm._dispatcher(sys.argv[1])
+disp.compile(jitwarm.parse_signature(sys.argv[2]))
+ir = disp.inspect_llvm(disp.signatures[0])
+ir = re.sub(r"B\d+v\d+|0x[0-9a-f]+", "", ir)  # numba's per-process function ids and dynamic names' addresses
+import numba
+@numba.njit
+def bad(x):
+    return min(x, "a")
+try:
+    bad(1.0)
+    error = ""
+except numba.core.errors.TypingError as e:
+    error = type(e).__name__ + str(e).split("\n")[0]
+print(json.dumps({"ir": ir, "error": error, "calls": calls}))
+"""
+
+
+def test_remembered_call_typing_gives_the_same_code_and_errors(tmp_path):
+    """jitcache.remembered_call_typing: a kernel with many repeated calls of numba's functions (the correlative
+    search's branch and bound) compiles to the same optimised LLVM IR as with numba's own template search, and a
+    call no template accepts raises the same typing error."""
+    name, sig = next((n, s) for n, s in KERNELS if n.endswith(".branch_and_bound"))
+    got = {}
+    for on in ("0", "1"):
+        env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / f"cache{on}")}
+        r = subprocess.run([sys.executable, "-c", REMEMBERED, name, sig, on], env=env, capture_output=True,
+                           text=True, timeout=300)
+        assert r.returncode == 0, r.stderr[-3000:]
+        got[on] = json.loads(r.stdout.strip().splitlines()[-1])
+    assert len(got["0"]["ir"]) > 10000 and got["0"]["ir"] == got["1"]["ir"]
+    assert got["0"]["error"].startswith("TypingError") and got["0"]["error"] == got["1"]["error"]
+    (typed0, search0), (typed1, search1) = got["0"]["calls"], got["1"]["calls"]
+    assert typed0 == typed1 > 500 and search0 == typed0 and search1 < typed1 / 3  # (most calls repeat a typed one)

@@ -156,10 +156,14 @@ def lean_numba_compile() -> bool:
       comparisons on that cold run whose stored values differ, each rebuilding both dicts through the options'
       Python properties. They now compare the stored values over the class's defaults (numba's property
       returns the stored value, else the option's default: the same dicts, built without 44 property calls).
+    - **Call typing remembered** (:func:`remembered_call_typing`): a call of one of numba's functions with
+      argument types typed before tries the template that accepted them first instead of every template again
+      (about a tenth of the compile CPU more; the same code).
 
-    Together about a tenth of the compile CPU (docs/speed.md). The command line and its background
-    compile call this first (they own the process); a library user's process is left as it is. Returns
-    whether it changed numba; does nothing when called again or when numba's internals differ."""
+    Together about a tenth of the compile CPU (docs/speed.md), and the remembered call typing about a tenth
+    more. The command line and its background compile call this first (they own the process); a library
+    user's process is left as it is. Returns whether it changed numba; does nothing when called again or when
+    numba's internals differ."""
     try:
         from numba.core import cpu, targetconfig
     except ImportError:  # pragma: no cover - numba is a dependency
@@ -197,6 +201,110 @@ def lean_numba_compile() -> bool:
     options.finalize = lean_finalize
     config.__hash__ = class_hash  # type: ignore[method-assign,assignment]
     config.__eq__ = fast_equal  # type: ignore[method-assign,assignment]
+    remembered_call_typing()
+    return True
+
+
+#: SHA-256 (first 16 hex digits) of the source of numba's ``BaseFunction.get_call_type`` that
+#: :func:`remembered_call_typing` re-implements (numba 0.68); any other source is left as it is.
+GET_CALL_TYPE_SOURCE = "6559c167bfc0ad36"
+
+
+def remembered_call_typing() -> bool:
+    """Have numba try, for a call it has typed before, the template that typed it first.
+
+    numba types every call of a function it implements (``operator.add``, ``min``, ``np.empty``, ``math.floor``,
+    …) by trying that function's templates in order until one accepts the argument types
+    (``BaseFunction.get_call_type``), and does so again at every call site: about 10 templates per call, ≈ 26 000
+    calls on a cold run of the README's first command, 95 % of them with argument types already typed for the
+    same function. Here the first success is remembered per (function type, typing context, target, argument
+    types, keyword types) as the template and the literal choice that accepted them; a later call with the same
+    key applies that template again (with its side effects: the overload it compiled and the implementation key
+    that lowering reads are set again, as numba's own loop sets them), skipping the templates that failed for
+    those types before. A template's answer depends only on the argument types (numba's types are interned; a
+    function given more templates is a new function type), so the same signature and code come out: every
+    compiled kernel of a cold run has the same optimised LLVM IR as without this (docs/speed.md, pass cold23).
+    A call that fails is never remembered, so errors are raised as before; should the remembered template not
+    accept the types again, numba's full search runs. Called by :func:`lean_numba_compile`; returns whether it
+    changed numba (not when called again, or when numba's ``get_call_type`` is not the one re-implemented)."""
+    import inspect
+
+    try:
+        from numba.core import errors, utils
+        from numba.core.target_extension import get_local_target
+        from numba.core.types import functions
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return False
+    base = functions.BaseFunction
+    original = base.get_call_type
+    if getattr(original, "_dynslam2d_remembered", False):
+        return False
+    try:
+        source = inspect.getsource(original)
+    except (OSError, TypeError):
+        return False
+    if hashlib.sha256(source.encode()).hexdigest()[:16] != GET_CALL_TYPE_SOURCE:
+        return False
+    unlit = functions._unlit_non_poison
+    remembered: dict[tuple[Any, ...], tuple[Any, bool]] = {}
+
+    def apply(temp: Any, uselit: bool, args: Any, kws: Any) -> Any:
+        if uselit:
+            return temp.apply(args, kws)
+        return temp.apply(tuple([unlit(a) for a in args]), {k: unlit(v) for k, v in kws.items()})
+
+    def get_call_type(self: Any, context: Any, args: Any, kws: Any) -> Any:
+        target_hw = get_local_target(context)
+        try:
+            key: tuple[Any, ...] | None = (self, context, target_hw, tuple(args), tuple(sorted(kws.items())))
+            hit = remembered.get(key)  # type: ignore[arg-type]
+        except TypeError:  # (an unhashable argument type: numba's search, not remembered)
+            key = hit = None
+        if hit is not None:
+            temp = hit[0](context)
+            try:
+                sig = apply(temp, hit[1], args, kws)
+            except errors.NumbaError:
+                sig = None
+            if sig is not None:
+                self._impl_keys[sig.args] = temp.get_impl_key(sig)
+                return sig
+        # numba's BaseFunction.get_call_type (0.68), remembering the template that succeeds
+        prefer_lit = [True, False]  # old behavior preferring literal
+        prefer_not = [False, True]  # new behavior preferring non-literal
+        failures = functions._ResolutionFailures(context, self, args, kws, depth=self._depth)
+        order = utils.order_by_target_specificity(target_hw, self.templates, fnkey=self.key[0])
+        self._depth += 1
+        for temp_cls in order:
+            temp = temp_cls(context)
+            choice = prefer_lit if temp.prefer_literal else prefer_not
+            for uselit in choice:
+                try:
+                    sig = apply(temp, uselit, args, kws)
+                except Exception as e:
+                    if not isinstance(e, errors.NumbaError):
+                        raise e
+                    sig = None
+                    failures.add_error(temp, False, e, uselit)
+                else:
+                    if sig is not None:
+                        self._impl_keys[sig.args] = temp.get_impl_key(sig)
+                        self._depth -= 1
+                        if key is not None:
+                            remembered[key] = (temp_cls, uselit)
+                        return sig
+                    registered_sigs = getattr(temp, "cases", None)
+                    if registered_sigs is not None:
+                        msg = "No match for registered cases:\n%s"
+                        msg = msg % "\n".join(f" * {x}" for x in registered_sigs)
+                    else:
+                        msg = "No match."
+                    failures.add_error(temp, True, msg, uselit)
+        failures.raise_error()
+
+    get_call_type._dynslam2d_remembered = True  # type: ignore[attr-defined]
+    get_call_type.__wrapped__ = original  # type: ignore[attr-defined]
+    base.get_call_type = get_call_type  # type: ignore[method-assign]
     return True
 
 

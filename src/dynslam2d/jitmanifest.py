@@ -127,13 +127,14 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(int64, 1, 'C'), Array(bool, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 2, 'C'), Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
      "Array(int8, 2, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64,)"),
-    ('dynslam2d.detect.kernels.manage_rows',
-     "(Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), "
-     'float64,)'),
+    ('dynslam2d.detect.kernels_update.manage_speed_rows',
+     "(Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64,)"),
     ('dynslam2d.detect.kernels.fragment_hosts',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
+    ('dynslam2d.detect.kernels_update.accel_bound',
+     "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64,)"),
     ('dynslam2d.detect.kernels.seen_through_refs',
      "(Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), int64, float64, Array(bool, 1, 'C'),)"),

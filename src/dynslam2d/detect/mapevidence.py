@@ -215,13 +215,14 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
             b = n0 + slope * (a - m0)
             ib = int(math.floor(b + 0.5))
             bi = ib - b_off
-            if bi < 0 or bi >= b_len or abs(b - ib) > core or \
-                    logodds[ar * (a - a_off) + br * bi, (1 - ar) * (a - a_off) + (1 - br) * bi] < occ_thr:
+            row = ar * (a - a_off) + br * bi  # (the cell (x, y) = (a, ib) or (ib, a): row y − j0, column x − i0)
+            col = (1 - ar) * (a - a_off) + (1 - br) * bi
+            if bi < 0 or bi >= b_len or abs(b - ib) > core or logodds[row, col] < occ_thr:
                 continue
-            x, y = (a, ib) if x_major else (ib, a)
-            if n < cap and (x - ox) ** 2 + (y - oy) ** 2 <= reach2:
-                out_r[n] = y - j0
-                out_c[n] = x - i0
+            # (x − ox)² + (y − oy)² in either axis order: the same two terms, and IEEE addition commutes
+            if n < cap and (a - m0) ** 2 + (ib - n0) ** 2 <= reach2:
+                out_r[n] = row
+                out_c[n] = col
                 n += 1
     return n
 

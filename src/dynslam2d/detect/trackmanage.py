@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from dynslam2d.detect.kernels import manage_rows
+from dynslam2d.detect.kernels_update import manage_speed_rows
 from dynslam2d.detect.tracktable import _NO_BEAMS, _TWO_PI, COASTING, CONFIRMED, TENTATIVE, _Track
 from dynslam2d.types import Pose2D, wrap_angle
 
@@ -18,10 +18,10 @@ class TrackManage:
 
     def _manage(self, t: float, updated: set[int]) -> None:
         """Track management (M of N, deletions, clutter retirement) and the test of M (paper Eq. 3) of the updated
-        tracks. The covariance test and the speed's σ of all live tracks come from their state rows in one kernel
-        call (``manage_rows``; the speeds are Python's ``math.hypot``, given to it); the test of M runs inline up to
-        its common outcomes (tentative, or not in M and at most v_min) with the scan's constants read once, the rest
-        in :meth:`_dynamic`."""
+        tracks. The covariance test, the speed's σ and the speed of all live tracks come from their state rows in
+        one kernel call (``manage_speed_rows``; the speeds are Python's ``math.hypot`` to the last bit); the test of
+        M runs inline up to its common outcomes (tentative, or not in M and at most v_min) with the scan's constants
+        read once, the rest in :meth:`_dynamic`."""
         tracks = self._tracks
         if not tracks:
             return
@@ -33,7 +33,6 @@ class TrackManage:
         merged = self._merged
         window, need_hits = tc.confirm_window, tc.confirm_hits
         max_coast, max_sig, max_speed = tc.max_coast_time, tc.max_position_sigma, tc.max_object_speed
-        hypot = math.hypot
         v_min = tc.v_min
         retire_n = tc.structure_retire_updates if self._map is not None else 0
         retire_s = tc.structure_retire_fraction
@@ -44,13 +43,11 @@ class TrackManage:
         probe = self._free is not None
         slow_tail = f" m/s ≤ v_min {v_min:.2f}"  # (the most common reason's constant part)
         order = self._rows()
-        # per track: its speed (Python's math.hypot, as the reasons print it), whether its covariance fails (tested on
-        # the rows as they are, instead of a flag kept in step wherever P changes) and σ of its speed along the
-        # velocity, from the state rows in one kernel call
-        # (take: X[order, 2:]'s values; its two columns as lists, not a list per track)
-        speeds = list(map(hypot, *self._X.take(order, axis=0)[:, 2:].T.tolist()))
-        bads, sigs = manage_rows(self._P, self._X, order, np.array(speeds), max_sig)
-        bads, sigs = bads.tolist(), sigs.tolist()
+        # per track: its speed (Python's math.hypot bit for bit, as the reasons print it), whether its covariance
+        # fails (tested on the rows as they are, instead of a flag kept in step wherever P changes) and σ of its speed
+        # along the velocity, from the state rows in one kernel call
+        bads, sigs, speeds = manage_speed_rows(self._P, self._X, order, max_sig)
+        bads, sigs, speeds = bads.tolist(), sigs.tolist(), speeds.tolist()
         for k, speed, sig, bad in zip(tracks, speeds, sigs, bads):
             kid = k.id
             is_upd = kid in updated

@@ -18,6 +18,7 @@ from dynslam2d.detect.kernels import (
     pair_priors,
     shape_update,
 )
+from dynslam2d.detect.kernels_update import accel_bound
 from dynslam2d.detect.layout import KIND_CIRCLE
 from dynslam2d.detect.measure import Detection
 from dynslam2d.detect.tracktable import _HALF_PI, _PAST_COMPACT, TENTATIVE, _past_points, _Track
@@ -116,23 +117,14 @@ class TrackUpdate:
         near = accel_candidates(X_prior, X_new, (0.999 * lim) ** 2)
         if near.shape[0] == 0:
             return
-        # (the candidates' velocities as Python floats in one gather each, the bounded ones written in one scatter)
-        after, hypot = tc.accel_bound_after, math.hypot
-        nb = 0
-        for r, (pvx, pvy), (nvx, nvy) in zip(near.tolist(), X_prior.take(near, axis=0)[:, 2:].tolist(),
-                                                  X_new.take(near, axis=0)[:, 2:].tolist()):
-            if tracks[pairs[r][0]].hits < after:
-                continue
-            dvx = nvx - pvx
-            dvy = nvy - pvy
-            d = hypot(dvx, dvy)
-            if d > lim:
-                # (written one element at a time: cheaper than a scatter of a few rows from a list of tuples)
-                X_new[r, 2] = pvx + dvx * lim / d
-                X_new[r, 3] = pvy + dvy * lim / d
-                nb += 1
-        if nb:
-            self.stats.accel_bounded += nb
+        # the exact test and the bound of the candidates whose track is established, in one kernel call (Python's
+        # math.hypot bit for bit: detect/kernels_update.py)
+        after = tc.accel_bound_after
+        rows = [r for r in near.tolist() if tracks[pairs[r][0]].hits >= after]
+        if rows:
+            nb = accel_bound(X_prior, X_new, np.array(rows, dtype=np.int64), float(lim))
+            if nb:
+                self.stats.accel_bounded += nb
 
     def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float,
                        applied: list[bool], trows: np.ndarray) -> None:

@@ -269,7 +269,9 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
     # because numba's np.argsort compiles its quicksort machinery, about 1.5 s of a first run's compile
     # (docs/speed.md). Only equal bounds are ordered differently from numba's quicksort; the results of
     # all 2514 searches of a MIT CSAIL run are the same either way
-    order = np.arange(ntop)
+    order = np.empty(ntop, dtype=np.int64)
+    for t in range(ntop):  # (np.arange: a helper of numba's compiled for this kernel alone, ≈ 0.1 s of a cold run)
+        order[t] = t
     buf = np.empty(ntop, dtype=np.int64)
     width = 1
     while width < ntop:

@@ -1,0 +1,165 @@
+"""Kernels of the tracker's update step (``detect/trackupdate.py``): Python's ``math.hypot`` to the last bit, and the
+physical acceleration bound of the updated states (``Tracker._bound_acceleration``).
+
+``py_hypot`` is CPython's ``math.hypot`` for two coordinates (``Modules/mathmodule.c``, ``math_hypot`` →
+``vector_norm``: lossless power-of-two scaling, exact squares (``dl_mul``: Dekker 1971, "A floating-point technique
+for extending the available precision", mul12 on Veltkamp's splits — CPython 3.11's form, and 3.12's without a
+reliable fma; 3.12 and later take the low part with an fma, the same (hi, lo) of these squares: checked in plain
+Python against 3.11.7, 3.12.1 and 3.13.0's ``math.hypot``), the compensated sums (``dl_fast_sum``) and one
+differential correction of the square root), operation for operation, so a kernel can decide and compute with
+the same float the tracker's Python did (libm's ``hypot``, which numba's ``math.hypot`` calls, may differ from it
+by an ulp). numba compiles without fast-math, so no product and sum is contracted into an FMA and every operation
+is rounded alone, as in the C source. ``tests/test_detect_kernels_update.py`` compares it with the running
+interpreter's ``math.hypot`` on millions of pairs and the edge values."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dynslam2d.jitbox import njit
+
+_DBL_MIN = 2.2250738585072014e-308  # the smallest normal double (C's DBL_MIN)
+_SPLIT = 134217729.0  # 2^27 + 1: Veltkamp's splitter for doubles (dl_split)
+
+
+@njit(cache=True, inline="always")
+def _dl_mul(x: float, y: float) -> tuple[float, float]:
+    """x·y as an unevaluated sum hi + lo, exactly (CPython's ``dl_mul``: Dekker's mul12 on Veltkamp's splits)."""
+    t = x * _SPLIT
+    xh = t - (t - x)
+    xl = x - xh
+    t = y * _SPLIT
+    yh = t - (t - y)
+    yl = y - yh
+    p = xh * yh
+    q = xh * yl + xl * yh
+    z = p + q
+    zz = p - z + q + xl * yl
+    return z, zz
+
+
+@njit(cache=True, inline="always")
+def py_hypot(a: float, b: float) -> float:
+    """``math.hypot(a, b)`` of CPython, bit for bit (module docstring): an infinity wins over a NaN, a
+    NaN gives NaN, zeros give 0.0; subnormal inputs are scaled by DBL_MIN first, as there."""
+    x0 = abs(a)
+    x1 = abs(b)
+    found_nan = False
+    mx = 0.0
+    if math.isnan(x0):
+        found_nan = True
+    elif x0 > mx:
+        mx = x0
+    if math.isnan(x1):
+        found_nan = True
+    elif x1 > mx:
+        mx = x1
+    if math.isinf(mx):
+        return mx
+    if found_nan:
+        return math.nan
+    if mx == 0.0:
+        return mx
+    mult = 1.0
+    _, max_e = math.frexp(mx)
+    if max_e < -1023:  # (ldexp(1.0, -max_e) would overflow: subnormals made normal, the result scaled back)
+        x0 /= _DBL_MIN
+        x1 /= _DBL_MIN
+        mx /= _DBL_MIN
+        mult = _DBL_MIN
+        _, max_e = math.frexp(mx)
+    scale = math.ldexp(1.0, -max_e)
+    csum = 1.0
+    frac1 = 0.0
+    frac2 = 0.0
+    for i in range(2):
+        x = (x0 if i == 0 else x1) * scale  # lossless scaling
+        ph, pl = _dl_mul(x, x)  # lossless squaring
+        hi = csum + ph  # lossless addition (dl_fast_sum)
+        lo = ph - (hi - csum)
+        csum = hi
+        frac1 += pl  # lossy additions
+        frac2 += lo
+    h = math.sqrt(csum - 1.0 + (frac1 + frac2))
+    ph, pl = _dl_mul(-h, h)
+    hi = csum + ph
+    lo = ph - (hi - csum)
+    csum = hi
+    frac1 += pl
+    frac2 += lo
+    x = csum - 1.0 + (frac1 + frac2)
+    h += x / (2.0 * h)  # differential correction
+    out = h / scale
+    return out if mult == 1.0 else mult * out
+
+
+@njit(cache=True)
+def hypot_rows(vx: np.ndarray, vy: np.ndarray) -> np.ndarray:
+    """(n,) ``math.hypot(vx[i], vy[i])`` bit for bit (:func:`py_hypot`): for the tests and the bound below."""
+    n = vx.shape[0]
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = py_hypot(vx[i], vy[i])
+    return out
+
+
+@njit(cache=True)
+def accel_bound(X_prior: np.ndarray, X_new: np.ndarray, rows: np.ndarray, lim: float) -> int:
+    """The physical acceleration bound, in place on ``X_new`` ((r, 4) states [x, y, vx, vy], m, m/s; row r's prior
+    ``X_prior[r]``) for the rows ``rows`` (the candidates of ``accel_candidates`` whose track is established, in
+    increasing order): a row whose velocity change (dvx, dvy) has norm d > ``lim`` (m/s; d Python's
+    ``math.hypot``, :func:`py_hypot`) gets the velocity pvx + dvx·lim / d, pvy + dvy·lim / d. Returns how many rows
+    were bounded. ``Tracker._bound_acceleration``'s former Python arithmetic, operation for operation."""
+    nb = 0
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        pvx = X_prior[r, 2]
+        pvy = X_prior[r, 3]
+        dvx = X_new[r, 2] - pvx
+        dvy = X_new[r, 3] - pvy
+        d = py_hypot(dvx, dvy)
+        if d > lim:
+            X_new[r, 2] = pvx + dvx * lim / d
+            X_new[r, 3] = pvy + dvy * lim / d
+            nb += 1
+    return nb
+
+
+@njit(cache=True)
+def manage_speed_rows(P: np.ndarray, X: np.ndarray, rows: np.ndarray, max_sig: float) -> tuple:
+    """``kernels.manage_rows`` with the speeds computed here: (n,) bool "covariance fails", (n,) σ of the speed
+    along the velocity (m/s) and (n,) the speed of the state rows ``rows`` (m/s), Python's ``math.hypot`` of the
+    velocity bit for bit (:func:`py_hypot`), as ``Tracker._manage``'s reasons print it — instead of a ``math.hypot``
+    per track in Python handed to the kernel. The tests and σ: ``manage_rows``' arithmetic, operation for operation
+    (``kernels.manage_rows`` stays, with its signature, for the older checkouts' step modules that
+    ``benchmarks/bench_tracker_ab.py`` loads against this checkout's kernels)."""
+    n = rows.shape[0]
+    bad = np.zeros(n, dtype=np.bool_)
+    sig = np.zeros(n)
+    speed = np.empty(n)
+    for i in range(n):
+        k = rows[i]
+        s = py_hypot(X[k, 2], X[k, 3])
+        speed[i] = s
+        fin = True
+        for a in range(4):
+            for b in range(4):
+                if not np.isfinite(P[k, a, b]):
+                    fin = False
+        p00 = P[k, 0, 0]
+        p11 = P[k, 1, 1]
+        if not fin or math.sqrt(p11 if p11 > p00 else p00) > max_sig:
+            bad[i] = True
+            continue
+        p22 = P[k, 2, 2]
+        p33 = P[k, 3, 3]
+        if s > 1e-9:
+            u0 = X[k, 2] / s
+            u1 = X[k, 3] / s
+            q = (u0 * p22 + u1 * P[k, 3, 2]) * u0 + (u0 * P[k, 2, 3] + u1 * p33) * u1
+            sig[i] = math.sqrt(0.0 if 0.0 > q else q)
+        else:
+            sig[i] = math.sqrt(p33 if p33 > p22 else p22)
+    return bad, sig, speed
