@@ -5,16 +5,27 @@ from __future__ import annotations
 
 import numpy as np
 
-import dynslam2d.detect.trackdetect as tracker_mod  # (_detect calls select_detections there)
+import dynslam2d.detect.trackdetect as tracker_mod  # (_detect calls detect_rows there)
 from dynslam2d.config import Config
 from dynslam2d.detect import kernels as K
 from dynslam2d.detect.config import DetectConfig
-from dynslam2d.detect.layout import F_HI1, F_HI2, F_LO1, F_LO2, N_FIT_COLS
+from dynslam2d.detect.layout import (
+    F_HI1,
+    F_HI2,
+    F_LO1,
+    F_LO2,
+    F_THETA,
+    FIT_CENTROID,
+    FIT_CIRCLE,
+    N_FIT_COLS,
+)
 from dynslam2d.detect.mapevidence import MapView, map_evidence, map_evidence_kernel
+from dynslam2d.detect.shapes import fit_clusters
 from dynslam2d.detect.vehicles import admit_long_clusters, long_kept
 from dynslam2d.inputs import open_source
 from dynslam2d.pipeline import Pipeline
 from dynslam2d.sim.simulation import SimSource
+from dynslam2d.types import Pose2D
 
 
 def _admit_numpy(keep, fits, offsets, px, py, view, config) -> int:
@@ -116,31 +127,60 @@ def _van_source() -> SimSource:
     return SimSource(_van_scene())
 
 
+def _detect_rows_ref(ranges, valid, cos_a, sin_a, c, s, x, y, beams, offsets, structure, wrapped, angles, criterion,
+                     d0, circle_min_points, stride, max_skip, range_max, dphi, class_extent, p, admit, max_extent,
+                     max_structure, min_free, has_map, lo, i0, j0, res, occ, free_thr, radius, merge, leg_max_extent,
+                     pair_distance):
+    """The calls detect_rows replaces (Tracker._detect before pass det23): world_points, fit_clusters,
+    classify_batch, the select_detections reference above, merge_legs, and the numpy column copies and
+    ``np.column_stack`` of the persons' points."""
+    ax, ay, px, py, pts = K.world_points(ranges, valid, cos_a, sin_a, c, s, x, y, beams)
+    fits = fit_clusters(px, py, offsets, ~structure, angles, criterion, d0, circle_min_points, stride)
+    keep, kinds, lohi, rel = K.classify_batch(px, py, beams, offsets, fits, structure, x, y, ranges, valid, ax, ay,
+                                              wrapped, max_skip, range_max, dphi, class_extent, p)
+    n_long = long_kept(keep, fits, max_extent).shape[0] if admit and has_map else 0
+    sel = _select_ref(keep, kinds, lohi, rel, fits, offsets, px, py, admit, max_extent, max_structure, min_free,
+                      has_map, lo, i0, j0, res, occ, free_thr, radius)
+    starts, npts, kinds, lohi, rel, fits, mfr = sel
+    empty = np.empty(0, dtype=np.int64)
+    if merge and starts.shape[0] > 1:
+        merged = K.merge_legs(px, py, beams, starts, npts, kinds, fits, lohi, rel, leg_max_extent, pair_distance)
+    else:
+        merged = (empty, empty, empty, kinds, fits, lohi, rel, starts, npts, px, py, empty)
+    px2, py2, mbeams, fits2 = merged[9], merged[10], merged[11], merged[4]
+    n0 = px2.shape[0] - mbeams.shape[0]
+    return (pts, *sel, *merged, np.column_stack((px2[n0:], py2[n0:])), fits2[:, F_THETA].copy(),
+            fits2[:, FIT_CENTROID].copy(), fits2[:, FIT_CIRCLE].copy()), n_long
+
+
 def test_fused_kernels_give_the_former_calls_results_in_whole_runs(monkeypatch):
-    """Every call of select_detections in two simulated runs (people seen from a
-    driving robot; a van longer than max_extent driving past, so the vehicle test runs with its map) returns what
-    the calls it replaces returned, bit for bit; the runs have detections, updates and vehicle-size clusters kept and
-    dropped."""
-    seen = {"select": 0, "admit": 0, "map": 0}
+    """Every call of detect_rows in three simulated runs (people seen from a driving robot; two people's legs, which
+    the tracker merges, seen from a slowly moving robot; a van longer than max_extent driving past, so the vehicle
+    test runs with its map) returns what the calls it replaces returned, bit for bit; the runs have detections, leg
+    pairs, updates and vehicle-size clusters kept and dropped."""
+    seen = {"calls": 0, "admit": 0, "map": 0, "pairs": 0}
 
-    def wrap(name, fused, ref):
-        def f(*a):
-            want = ref(*a)
-            got = fused(*a)
-            assert len(got) == len(want)
-            for g, w in zip(got, want):
-                assert _same(g, w), name
-            seen[name] += 1
-            if name == "select":
-                seen["map"] += bool(a[12])
-                seen["admit"] += bool(a[8] and a[12]) and bool(long_kept(a[0], a[4], a[9]).shape[0])
-            return got
-        return f
+    def fused(*a):
+        want, n_long = _detect_rows_ref(*a)
+        got = K.detect_rows(*a)
+        assert len(got) == len(want) == 24
+        for i, (g, w) in enumerate(zip(got, want)):
+            assert _same(g, w), i
+        seen["calls"] += 1
+        seen["map"] += bool(a[26])
+        seen["admit"] += bool(n_long)
+        seen["pairs"] += int(got[8].shape[0])
+        return got
 
-    monkeypatch.setattr(tracker_mod, "select_detections", wrap("select", K.select_detections, _select_ref))
-    for src in (open_source("sim:drive", seed=11, duration=6.0), _van_source()):
+    monkeypatch.setattr(tracker_mod, "detect_rows", fused)
+    from test_detect_people import RATE, render, scene
+
+    walkers = (render(Pose2D(0.2 * i / RATE, 0.0, 0.0), i / RATE, *scene(i / RATE, 2.0, 1.2), i)[0]
+               for i in range(int(6.0 * RATE)))
+    for src in (open_source("sim:drive", seed=11, duration=6.0), walkers, _van_source()):
         pipe = Pipeline(Config())
         for scan in src:
             pipe.process(scan)
-    assert seen["select"] > 100
-    assert seen["map"] > 100 and seen["admit"] > 10
+    assert seen["calls"] > 150
+    assert seen["map"] > 100 and seen["admit"] > 10 and seen["pairs"] > 20
+

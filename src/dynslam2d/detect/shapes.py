@@ -449,7 +449,7 @@ def _circle_one(x: np.ndarray, y: np.ndarray, out: np.ndarray, wd: np.ndarray, w
     out[3] = math.sqrt(ss / n)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # (inlined into kernels.detect_rows: compiled once there)
 def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np.ndarray, angles: np.ndarray,
                  criterion: int, d0: float, circle_min_points: int, stride: int = 1) -> np.ndarray:
     """Fit every cluster ``c`` with ``fit_mask[c]`` (points ``x, y[offsets[c]:offsets[c+1]]``).
