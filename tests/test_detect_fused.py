@@ -10,6 +10,9 @@ from dynslam2d.config import Config
 from dynslam2d.detect import kernels as K
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.layout import (
+    F_CIRCLE_R,
+    F_CIRCLE_RMS,
+    F_CIRCLE_X,
     F_HI1,
     F_HI2,
     F_LO1,
@@ -127,6 +130,9 @@ def _van_source() -> SimSource:
     return SimSource(_van_scene())
 
 
+SKIPPED = [0]  # circle fits skipped in the reference (counted over the test)
+
+
 def _detect_rows_ref(ranges, valid, cos_a, sin_a, c, s, x, y, beams, offsets, structure, wrapped, angles, criterion,
                      d0, circle_min_points, stride, max_skip, range_max, dphi, class_extent, p, admit, max_extent,
                      max_structure, min_free, has_map, lo, i0, j0, res, occ, free_thr, radius, merge, leg_max_extent,
@@ -135,9 +141,22 @@ def _detect_rows_ref(ranges, valid, cos_a, sin_a, c, s, x, y, beams, offsets, st
     classify_batch, the select_detections reference above, merge_legs, and the numpy column copies and
     ``np.column_stack`` of the persons' points."""
     ax, ay, px, py, pts = K.world_points(ranges, valid, cos_a, sin_a, c, s, x, y, beams)
-    fits = fit_clusters(px, py, offsets, ~structure, angles, criterion, d0, circle_min_points, stride)
+    full = fit_clusters(px, py, offsets, ~structure, angles, criterion, d0, circle_min_points, stride)
+    # the circle fits detect_rows skips: NaN columns (shapes.fit_cluster_rows), in plain Python
+    fits = full.copy()
+    for q in range(fits.shape[0]):
+        n = int(offsets[q + 1] - offsets[q])
+        e0, e1 = fits[q, F_HI1] - fits[q, F_LO1], fits[q, F_HI2] - fits[q, F_LO2]
+        if not structure[q] and n >= circle_min_points and (
+                n <= p[0] or max(e0, e1) < p[1] or max(e0, e1) > class_extent or min(e0, e1) < p[6] * p[3]):
+            fits[q, F_CIRCLE_X:F_CIRCLE_RMS + 1] = np.nan
     keep, kinds, lohi, rel = K.classify_batch(px, py, beams, offsets, fits, structure, x, y, ranges, valid, ax, ay,
                                               wrapped, max_skip, range_max, dphi, class_extent, p)
+    # (the classification never read a skipped circle: the same results as with every circle fitted)
+    want = K.classify_batch(px, py, beams, offsets, full, structure, x, y, ranges, valid, ax, ay, wrapped, max_skip,
+                            range_max, dphi, class_extent, p)
+    assert all(_same(g, w) for g, w in zip((keep, kinds, lohi, rel), want))
+    SKIPPED[0] += int(np.isnan(fits[:, F_CIRCLE_R]).sum())
     n_long = long_kept(keep, fits, max_extent).shape[0] if admit and has_map else 0
     sel = _select_ref(keep, kinds, lohi, rel, fits, offsets, px, py, admit, max_extent, max_structure, min_free,
                       has_map, lo, i0, j0, res, occ, free_thr, radius)
@@ -183,4 +202,40 @@ def test_fused_kernels_give_the_former_calls_results_in_whole_runs(monkeypatch):
             pipe.process(scan)
     assert seen["calls"] > 150
     assert seen["map"] > 100 and seen["admit"] > 10 and seen["pairs"] > 20
+    assert SKIPPED[0] > 200
 
+
+def test_skipped_circle_fits_are_fitted_when_read():
+    """The circle of every detection of two simulated runs (people and cars seen from a driving robot; two people's
+    legs seen from a slowly moving robot), read after the scan (a skipped fit is then made by
+    ``ScanDetection.circle``), is bit for bit the circle columns of ``fit_clusters`` on the detection's points
+    (every circle fitted); skipped fits occur in both runs."""
+    from test_detect_people import RATE, render, scene
+
+    from dynslam2d.detect import Tracker
+    from dynslam2d.detect.shapes import CRITERIA
+    from dynslam2d.sim import simulate
+
+    cfg = DetectConfig()
+    fc = cfg.fit
+    walkers = [(render(Pose2D(0.2 * i / RATE, 0.0, 0.0), i / RATE, *scene(i / RATE, 2.0, 1.2), i)[0],
+                Pose2D(0.2 * i / RATE, 0.0, 0.0)) for i in range(int(6.0 * RATE))]
+    drive = simulate("drive", duration=4.0)
+    runs = [walkers, list(zip(drive.scans, [Pose2D.from_array(q) for q in drive.ground_truth.poses_in("first")]))]
+    for run in runs:
+        tr = Tracker(cfg)
+        skipped = checked = 0
+        for scan, pose in run:
+            tr.update(scan, pose)
+            for d in tr.last_detections:
+                if d.person:
+                    continue
+                skipped += bool(np.isnan(d._fits[d._j, F_CIRCLE_R]))
+                pts = np.ascontiguousarray(d.points)
+                n = pts.shape[0]
+                want = fit_clusters(pts[:, 0].copy(), pts[:, 1].copy(), np.array([0, n]), np.ones(1, dtype=bool),
+                                    tr._angles, CRITERIA[fc.criterion], fc.closeness_d0, fc.circle_min_points,
+                                    fc.coarse_stride)[0, FIT_CIRCLE]
+                assert _same(d.circle, want)
+                checked += 1
+        assert skipped >= 5 and checked > 2 * skipped

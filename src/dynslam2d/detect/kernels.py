@@ -47,7 +47,7 @@ from dynslam2d.detect.layout import (
     SIZE_MEASURED,
 )
 from dynslam2d.detect.mapevidence import map_evidence_kernel
-from dynslam2d.detect.shapes import circle_center_fixed_radius, fit_clusters
+from dynslam2d.detect.shapes import circle_center_fixed_radius, fit_cluster_rows
 from dynslam2d.detect.vehicles import _admit_long
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
@@ -607,7 +607,11 @@ def detect_rows(ranges: np.ndarray, valid: np.ndarray, cos_a: np.ndarray, sin_a:
     fit_mask = np.empty(k, dtype=np.bool_)
     for q in range(k):
         fit_mask[q] = not structure[q]
-    fits0 = fit_clusters(px, py, offsets, fit_mask, angles, criterion, d0, circle_min_points, stride)
+    # (the circle fits the classification never reads skipped: shapes.fit_cluster_rows; a sensor-independent test)
+    depth = p[_P_CIRCLE_DEPTH_RATIO]
+    thin = depth * p[_P_CIRCLE_MIN_RADIUS] if depth >= 0.0 else -np.inf
+    fits0 = fit_cluster_rows(px, py, offsets, fit_mask, angles, criterion, d0, circle_min_points, stride, True,
+                             p[_P_POINT_MAX_POINTS], p[_P_POINT_MAX_EXTENT], class_extent, thin)
     keep, kinds0, lohi0, rel0 = classify_batch(px, py, beams, offsets, fits0, structure, x, y, ranges, valid, ax, ay,
                                                wrapped, max_skip, range_max, dphi, class_extent, p)
     starts, npts, kinds, lohi, rel, fits, mfr = select_detections(
