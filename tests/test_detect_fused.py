@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-import dynslam2d.detect.trackdetect as tracker_mod  # (_detect calls detect_rows there)
+import dynslam2d.detect.trackdetect as tracker_mod  # (_detect calls select_detections there)
 from dynslam2d.config import Config
 from dynslam2d.detect import kernels as K
+from dynslam2d.detect import shapes
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.layout import (
     F_CIRCLE_R,
@@ -17,9 +18,7 @@ from dynslam2d.detect.layout import (
     F_HI2,
     F_LO1,
     F_LO2,
-    F_THETA,
-    FIT_CENTROID,
-    FIT_CIRCLE,
+        FIT_CIRCLE,
     N_FIT_COLS,
 )
 from dynslam2d.detect.mapevidence import MapView, map_evidence, map_evidence_kernel
@@ -130,79 +129,83 @@ def _van_source() -> SimSource:
     return SimSource(_van_scene())
 
 
-SKIPPED = [0]  # circle fits skipped in the reference (counted over the test)
-
-
-def _detect_rows_ref(ranges, valid, cos_a, sin_a, c, s, x, y, beams, offsets, structure, wrapped, angles, criterion,
-                     d0, circle_min_points, stride, max_skip, range_max, dphi, class_extent, p, admit, max_extent,
-                     max_structure, min_free, has_map, lo, i0, j0, res, occ, free_thr, radius, merge, leg_max_extent,
-                     pair_distance):
-    """The calls detect_rows replaces (Tracker._detect before pass det23): world_points, fit_clusters,
-    classify_batch, the select_detections reference above, merge_legs, and the numpy column copies and
-    ``np.column_stack`` of the persons' points."""
-    ax, ay, px, py, pts = K.world_points(ranges, valid, cos_a, sin_a, c, s, x, y, beams)
-    full = fit_clusters(px, py, offsets, ~structure, angles, criterion, d0, circle_min_points, stride)
-    # the circle fits detect_rows skips: NaN columns (shapes.fit_cluster_rows), in plain Python
-    fits = full.copy()
-    for q in range(fits.shape[0]):
-        n = int(offsets[q + 1] - offsets[q])
-        e0, e1 = fits[q, F_HI1] - fits[q, F_LO1], fits[q, F_HI2] - fits[q, F_LO2]
-        if not structure[q] and n >= circle_min_points and (
-                n <= p[0] or max(e0, e1) < p[1] or max(e0, e1) > class_extent or min(e0, e1) < p[6] * p[3]):
-            fits[q, F_CIRCLE_X:F_CIRCLE_RMS + 1] = np.nan
-    keep, kinds, lohi, rel = K.classify_batch(px, py, beams, offsets, fits, structure, x, y, ranges, valid, ax, ay,
-                                              wrapped, max_skip, range_max, dphi, class_extent, p)
-    # (the classification never read a skipped circle: the same results as with every circle fitted)
-    want = K.classify_batch(px, py, beams, offsets, full, structure, x, y, ranges, valid, ax, ay, wrapped, max_skip,
-                            range_max, dphi, class_extent, p)
-    assert all(_same(g, w) for g, w in zip((keep, kinds, lohi, rel), want))
-    SKIPPED[0] += int(np.isnan(fits[:, F_CIRCLE_R]).sum())
-    n_long = long_kept(keep, fits, max_extent).shape[0] if admit and has_map else 0
-    sel = _select_ref(keep, kinds, lohi, rel, fits, offsets, px, py, admit, max_extent, max_structure, min_free,
-                      has_map, lo, i0, j0, res, occ, free_thr, radius)
-    starts, npts, kinds, lohi, rel, fits, mfr = sel
-    empty = np.empty(0, dtype=np.int64)
-    if merge and starts.shape[0] > 1:
-        merged = K.merge_legs(px, py, beams, starts, npts, kinds, fits, lohi, rel, leg_max_extent, pair_distance)
-    else:
-        merged = (empty, empty, empty, kinds, fits, lohi, rel, starts, npts, px, py, empty)
-    px2, py2, mbeams, fits2 = merged[9], merged[10], merged[11], merged[4]
-    n0 = px2.shape[0] - mbeams.shape[0]
-    return (pts, *sel, *merged, np.column_stack((px2[n0:], py2[n0:])), fits2[:, F_THETA].copy(),
-            fits2[:, FIT_CENTROID].copy(), fits2[:, FIT_CIRCLE].copy()), n_long
-
-
 def test_fused_kernels_give_the_former_calls_results_in_whole_runs(monkeypatch):
-    """Every call of detect_rows in three simulated runs (people seen from a driving robot; two people's legs, which
-    the tracker merges, seen from a slowly moving robot; a van longer than max_extent driving past, so the vehicle
-    test runs with its map) returns what the calls it replaces returned, bit for bit; the runs have detections, leg
-    pairs, updates and vehicle-size clusters kept and dropped."""
-    seen = {"calls": 0, "admit": 0, "map": 0, "pairs": 0}
+    """Every call of select_detections in two simulated runs (people seen from a
+    driving robot; a van longer than max_extent driving past, so the vehicle test runs with its map) returns what
+    the calls it replaces returned, bit for bit; the runs have detections, updates and vehicle-size clusters kept and
+    dropped."""
+    seen = {"select": 0, "admit": 0, "map": 0}
 
-    def fused(*a):
-        want, n_long = _detect_rows_ref(*a)
-        got = K.detect_rows(*a)
-        assert len(got) == len(want) == 24
-        for i, (g, w) in enumerate(zip(got, want)):
-            assert _same(g, w), i
-        seen["calls"] += 1
-        seen["map"] += bool(a[26])
-        seen["admit"] += bool(n_long)
-        seen["pairs"] += int(got[8].shape[0])
-        return got
+    def wrap(name, fused, ref):
+        def f(*a):
+            want = ref(*a)
+            got = fused(*a)
+            assert len(got) == len(want)
+            for g, w in zip(got, want):
+                assert _same(g, w), name
+            seen[name] += 1
+            if name == "select":
+                seen["map"] += bool(a[12])
+                seen["admit"] += bool(a[8] and a[12]) and bool(long_kept(a[0], a[4], a[9]).shape[0])
+            return got
+        return f
 
-    monkeypatch.setattr(tracker_mod, "detect_rows", fused)
-    from test_detect_people import RATE, render, scene
-
-    walkers = (render(Pose2D(0.2 * i / RATE, 0.0, 0.0), i / RATE, *scene(i / RATE, 2.0, 1.2), i)[0]
-               for i in range(int(6.0 * RATE)))
-    for src in (open_source("sim:drive", seed=11, duration=6.0), walkers, _van_source()):
+    monkeypatch.setattr(tracker_mod, "select_detections", wrap("select", K.select_detections, _select_ref))
+    for src in (open_source("sim:drive", seed=11, duration=6.0), _van_source()):
         pipe = Pipeline(Config())
         for scan in src:
             pipe.process(scan)
-    assert seen["calls"] > 150
-    assert seen["map"] > 100 and seen["admit"] > 10 and seen["pairs"] > 20
-    assert SKIPPED[0] > 200
+    assert seen["select"] > 100
+    assert seen["map"] > 100 and seen["admit"] > 10
+
+
+def _walkers():
+    """Scans of two people's legs (tests/test_detect_people.py's scene) seen from a slowly moving laser, with the
+    poses."""
+    from test_detect_people import RATE, render, scene
+
+    return [(render(Pose2D(0.2 * i / RATE, 0.0, 0.0), i / RATE, *scene(i / RATE, 2.0, 1.2), i)[0],
+             Pose2D(0.2 * i / RATE, 0.0, 0.0)) for i in range(int(6.0 * RATE))]
+
+
+def test_skipped_circle_fits_in_whole_runs(monkeypatch):
+    """Pass det23, in three simulated runs (people seen from a driving robot; two people's legs; a van): every
+    ``fit_cluster_rows`` call of the tracker gives ``fit_clusters``' rows (every circle fitted) with NaN circle columns
+    exactly on the rows that the plain-Python test below names, and the classification of every call is bit for bit
+    the classification of the same clusters with every circle fitted."""
+    seen = {"fits": 0, "skipped": 0}
+    full_fits: list = []
+
+    def fit_rows(*a):
+        got = shapes.fit_cluster_rows(*a)
+        x, y, offsets, mask, angles, crit, d0, cmin, stride, skip, pmax_n, pmax_ext, max_ext, thin = a
+        want = fit_clusters(x, y, offsets, mask, angles, crit, d0, cmin, stride)
+        full_fits[:] = [want]
+        want = want.copy()
+        for q in range(want.shape[0]):
+            n = int(offsets[q + 1] - offsets[q])
+            e0, e1 = want[q, F_HI1] - want[q, F_LO1], want[q, F_HI2] - want[q, F_LO2]
+            if skip and mask[q] and n >= cmin and (n <= pmax_n or max(e0, e1) < pmax_ext or max(e0, e1) > max_ext
+                                                   or min(e0, e1) < thin):
+                want[q, F_CIRCLE_X:F_CIRCLE_RMS + 1] = np.nan
+                seen["skipped"] += 1
+        assert _same(got, want)
+        seen["fits"] += 1
+        return got
+
+    def classify(*a):
+        got = K.classify_batch(*a)
+        want = K.classify_batch(*a[:4], full_fits[0], *a[5:])  # (every circle fitted)
+        assert all(_same(g, w) for g, w in zip(got, want))
+        return got
+
+    monkeypatch.setattr(tracker_mod, "fit_cluster_rows", fit_rows)
+    monkeypatch.setattr(tracker_mod, "classify_batch", classify)
+    for src in (open_source("sim:drive", seed=11, duration=6.0), [s for s, _ in _walkers()], _van_source()):
+        pipe = Pipeline(Config())
+        for scan in src:
+            pipe.process(scan)
+    assert seen["fits"] > 150 and seen["skipped"] > 20
 
 
 def test_skipped_circle_fits_are_fitted_when_read():
@@ -210,18 +213,14 @@ def test_skipped_circle_fits_are_fitted_when_read():
     legs seen from a slowly moving robot), read after the scan (a skipped fit is then made by
     ``ScanDetection.circle``), is bit for bit the circle columns of ``fit_clusters`` on the detection's points
     (every circle fitted); skipped fits occur in both runs."""
-    from test_detect_people import RATE, render, scene
-
     from dynslam2d.detect import Tracker
     from dynslam2d.detect.shapes import CRITERIA
     from dynslam2d.sim import simulate
 
     cfg = DetectConfig()
     fc = cfg.fit
-    walkers = [(render(Pose2D(0.2 * i / RATE, 0.0, 0.0), i / RATE, *scene(i / RATE, 2.0, 1.2), i)[0],
-                Pose2D(0.2 * i / RATE, 0.0, 0.0)) for i in range(int(6.0 * RATE))]
     drive = simulate("drive", duration=4.0)
-    runs = [walkers, list(zip(drive.scans, [Pose2D.from_array(q) for q in drive.ground_truth.poses_in("first")]))]
+    runs = [_walkers(), list(zip(drive.scans, [Pose2D.from_array(q) for q in drive.ground_truth.poses_in("first")]))]
     for run in runs:
         tr = Tracker(cfg)
         skipped = checked = 0

@@ -278,7 +278,7 @@ def test_detection_free_fractions_read_late_equal_the_test_of_their_scan() -> No
     class Lazy(Tracker):
         def _merge_legs(self, *args):
             out = super()._merge_legs(*args)
-            self.legs.update({id(d): d._ff for d in out if d.person})  # (the legs, merged away: not yet read)
+            self.legs.update({id(d): d._ff for d in out[0] if d.person})  # (the legs, merged away: not yet read)
             return out
 
     recorded: list[tuple] = []

@@ -25,15 +25,29 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.segment._segment_kernel',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 2, 'C'), bool, "
      'bool, float64, float64, float64, float64, float64, int64, bool, int64, int64,)'),
-    ('dynslam2d.detect.kernels.detect_rows',
+    ('dynslam2d.detect.kernels.world_points',
      "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
-     "float64, float64, float64, float64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, "
-     "'C'), bool, Array(float64, 1, 'C'), int64, float64, int64, int64, int64, float64, float64, float64, "
-     "Array(float64, 1, 'C'), bool, float64, float64, float64, bool, Array(float32, 2, 'C'), int64, "
-     'int64, float64, float64, float64, int64, bool, float64, float64,)'),
+     "float64, float64, float64, float64, Array(int64, 1, 'C'),)"),
+    ('dynslam2d.detect.shapes.fit_cluster_rows',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
+     "Array(float64, 1, 'C'), int64, float64, int64, int64, bool, float64, float64, float64, float64,)"),
+    ('dynslam2d.detect.kernels.classify_batch',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
+     "Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), Array(bool, "
+     "1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, int64, float64, float64, float64, "
+     "Array(float64, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels.select_detections',
+     "(Array(bool, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 2, 'C'), Array(bool, 3, 'C'), "
+     "Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, "
+     "float64, float64, float64, bool, Array(float32, 2, 'C'), int64, int64, float64, float64, float64, "
+     'int64,)'),
     ('dynslam2d.detect.freespace._ref_arrays',
      "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, "
      'float64,)'),
+    ('dynslam2d.detect.kernels.merge_legs',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
+     "Array(int64, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
+     "Array(bool, 3, 'C'), float64, float64,)"),
     ('dynslam2d.detect.kernels.measure_batch',
      "(Array(int64, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), "

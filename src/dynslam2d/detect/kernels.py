@@ -47,7 +47,7 @@ from dynslam2d.detect.layout import (
     SIZE_MEASURED,
 )
 from dynslam2d.detect.mapevidence import map_evidence_kernel
-from dynslam2d.detect.shapes import circle_center_fixed_radius, fit_cluster_rows
+from dynslam2d.detect.shapes import circle_center_fixed_radius
 from dynslam2d.detect.vehicles import _admit_long
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
@@ -214,7 +214,7 @@ def _endpoint_real(u: np.ndarray, v: np.ndarray, pos: int, k: int, lo_k: float, 
     return True
 
 
-@njit(cache=True, inline="always")  # (inlined into detect_rows: compiled once there)
+@njit(cache=True)
 def world_points(ranges: np.ndarray, valid: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, c: float, s: float,
                  x: float, y: float, beams: np.ndarray) -> tuple:
     """The scan's beams in the map frame (pose ``x, y`` and cos / sin ``c, s`` of its θ; ``cos_a``, ``sin_a``: the
@@ -354,7 +354,7 @@ def merge_leg_pairs(first: np.ndarray, second: np.ndarray, px: np.ndarray, py: n
     return ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams
 
 
-@njit(cache=True, inline="always")  # (inlined into detect_rows: compiled once there)
+@njit(cache=True)
 def merge_legs(px: np.ndarray, py: np.ndarray, beams: np.ndarray, starts: np.ndarray, npts: np.ndarray,
                kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray, leg_max_extent: float,
                pair_distance: float) -> tuple:
@@ -370,7 +370,7 @@ def merge_legs(px: np.ndarray, py: np.ndarray, beams: np.ndarray, starts: np.nda
     return first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams
 
 
-@njit(cache=True, inline="always")  # (inlined into detect_rows: compiled once there)
+@njit(cache=True)
 def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: np.ndarray, fits: np.ndarray,
                    structure: np.ndarray, sx: float, sy: float, ranges: np.ndarray, valid: np.ndarray,
                    ax: np.ndarray, ay: np.ndarray, wrapped: bool, max_skip: int, range_max: float, dphi: float,
@@ -511,7 +511,7 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
     return keep, kind, lohi, rel
 
 
-@njit(cache=True, inline="always")  # (inlined into detect_rows: compiled once there)
+@njit(cache=True)
 def select_detections(keep: np.ndarray, kinds: np.ndarray, lohi: np.ndarray, rel: np.ndarray, fits: np.ndarray,
                       offsets: np.ndarray, px: np.ndarray, py: np.ndarray, admit: bool, max_extent: float,
                       max_structure: float, min_free: float, has_map: bool, logodds: np.ndarray, i0: int, j0: int,
@@ -578,71 +578,6 @@ def select_detections(keep: np.ndarray, kinds: np.ndarray, lohi: np.ndarray, rel
     ev = np.zeros((3, total), dtype=np.bool_)
     map_evidence_kernel(det_px, det_py, logodds, i0, j0, res, occ_thr, free_thr, free_radius, ev[0], ev[1], ev[2])
     return starts, npts, s_kinds, s_lohi, s_rel, s_fits, mask_fractions(ev, det_off)
-
-
-@njit(cache=True)
-def detect_rows(ranges: np.ndarray, valid: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, c: float, s: float,
-                x: float, y: float, beams: np.ndarray, offsets: np.ndarray, structure: np.ndarray, wrapped: bool,
-                angles: np.ndarray, criterion: int, d0: float, circle_min_points: int, stride: int, max_skip: int,
-                range_max: float, dphi: float, class_extent: float, p: np.ndarray, admit: bool, max_extent: float,
-                max_structure: float, min_free: float, has_map: bool, logodds: np.ndarray, i0: int, j0: int,
-                res: float, occ_thr: float, free_thr: float, free_radius: int, merge: bool, leg_max_extent: float,
-                pair_distance: float) -> tuple:
-    """``Tracker._detect``'s chain of kernels in one dispatch (docs/speed.md, pass det23), each inlined here and
-    compiled once, inside this function: :func:`world_points` (pose ``x, y``, cos / sin ``c, s`` of its θ),
-    :func:`~dynslam2d.detect.shapes.fit_clusters` of the clusters not ``structure`` (``angles`` … ``stride``),
-    :func:`classify_batch` (sensor at ``x, y``; ``class_extent``: its ``max_extent``), :func:`select_detections`
-    (``admit`` … ``free_radius``) and, where ``merge`` and more than one detection, :func:`merge_legs`
-    (``leg_max_extent``, ``pair_distance``), with the per-detection columns that ``DetectionBatch`` holds. Map
-    frame, m, rad.
-
-    Returns ``(pts, starts, npts, kinds, lohi, rel, fits, fractions, first, second, ki, kinds2, fits2, lohi2, rel2,
-    starts2, npts2, px2, py2, mbeams, ppts, theta, centroid, circle)``: the (n, 2) points of every cluster and
-    :func:`select_detections`' seven results (the detections before the leg merge), :func:`merge_legs`' twelve
-    (without a pair, or without ``merge``: empty index arrays and the detections' arrays themselves), the persons'
-    (added, 2) points (the rows of ``px2, py2`` after the scan's points) and the merged detections' θ (m,), centroid
-    (m, 2) and circle (m, 3) columns of ``fits2``."""
-    ax, ay, px, py, pts = world_points(ranges, valid, cos_a, sin_a, c, s, x, y, beams)
-    k = structure.shape[0]
-    fit_mask = np.empty(k, dtype=np.bool_)
-    for q in range(k):
-        fit_mask[q] = not structure[q]
-    # (the circle fits the classification never reads skipped: shapes.fit_cluster_rows; a sensor-independent test)
-    depth = p[_P_CIRCLE_DEPTH_RATIO]
-    thin = depth * p[_P_CIRCLE_MIN_RADIUS] if depth >= 0.0 else -np.inf
-    fits0 = fit_cluster_rows(px, py, offsets, fit_mask, angles, criterion, d0, circle_min_points, stride, True,
-                             p[_P_POINT_MAX_POINTS], p[_P_POINT_MAX_EXTENT], class_extent, thin)
-    keep, kinds0, lohi0, rel0 = classify_batch(px, py, beams, offsets, fits0, structure, x, y, ranges, valid, ax, ay,
-                                               wrapped, max_skip, range_max, dphi, class_extent, p)
-    starts, npts, kinds, lohi, rel, fits, mfr = select_detections(
-        keep, kinds0, lohi0, rel0, fits0, offsets, px, py, admit, max_extent, max_structure, min_free, has_map,
-        logodds, i0, j0, res, occ_thr, free_thr, free_radius)
-    empty = np.empty(0, dtype=np.int64)
-    if merge and starts.shape[0] > 1:
-        first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams = merge_legs(
-            px, py, beams, starts, npts, kinds, fits, lohi, rel, leg_max_extent, pair_distance)
-    else:
-        first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams = (
-            empty, empty, empty, kinds, fits, lohi, rel, starts, npts, px, py, empty)
-    na = mbeams.shape[0]
-    n0 = px2.shape[0] - na
-    ppts = np.empty((na, 2))  # (np.column_stack's values)
-    for i in range(na):
-        ppts[i, 0] = px2[n0 + i]
-        ppts[i, 1] = py2[n0 + i]
-    m = starts2.shape[0]
-    theta = np.empty(m)
-    centroid = np.empty((m, 2))
-    circle = np.empty((m, 3))
-    for j in range(m):
-        theta[j] = fits2[j, F_THETA]
-        centroid[j, 0] = fits2[j, F_CENTROID_X]
-        centroid[j, 1] = fits2[j, F_CENTROID_Y]
-        circle[j, 0] = fits2[j, F_CIRCLE_X]
-        circle[j, 1] = fits2[j, F_CIRCLE_Y]
-        circle[j, 2] = fits2[j, F_CIRCLE_R]
-    return (pts, starts, npts, kinds, lohi, rel, fits, mfr, first, second, ki, kinds2, fits2, lohi2, rel2, starts2,
-            npts2, px2, py2, mbeams, ppts, theta, centroid, circle)
 
 
 @njit(cache=True)

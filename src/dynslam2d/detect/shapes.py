@@ -449,7 +449,7 @@ def _circle_one(x: np.ndarray, y: np.ndarray, out: np.ndarray, wd: np.ndarray, w
     out[3] = math.sqrt(ss / n)
 
 
-@njit(cache=True, inline="always")  # (a plain call of fit_cluster_rows: its body compiled once here)
+@njit(cache=True)  # (fit_cluster_rows without the skip; the tracker calls that one)
 def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np.ndarray, angles: np.ndarray,
                  criterion: int, d0: float, circle_min_points: int, stride: int = 1) -> np.ndarray:
     """Fit every cluster ``c`` with ``fit_mask[c]`` (points ``x, y[offsets[c]:offsets[c+1]]``).
@@ -463,7 +463,7 @@ def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np
                             0.0, 0.0, 0.0)
 
 
-@njit(cache=True, inline="always")  # (inlined into fit_clusters and kernels.detect_rows: compiled once in each)
+@njit(cache=True)
 def fit_cluster_rows(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np.ndarray, angles: np.ndarray,
                      criterion: int, d0: float, circle_min_points: int, stride: int, skip: bool,
                      point_max_points: float, point_max_extent: float, max_extent: float, thin: float) -> np.ndarray:

@@ -8,13 +8,37 @@ import math
 
 import numpy as np
 
-from dynslam2d.detect.kernels import detect_rows, measure_batch
-from dynslam2d.detect.layout import F_THETA, KIND_POINT, DetectionBatch, MeasureRows
+from dynslam2d.detect.kernels import (
+    _P_CIRCLE_DEPTH_RATIO,
+    _P_CIRCLE_MIN_RADIUS,
+    _P_POINT_MAX_EXTENT,
+    _P_POINT_MAX_POINTS,
+    classify_batch,
+    measure_batch,
+    merge_legs,
+    select_detections,
+    world_points,
+)
+from dynslam2d.detect.layout import (
+    F_THETA,
+    FIT_CENTROID,
+    FIT_CIRCLE,
+    KIND_POINT,
+    DetectionBatch,
+    MeasureRows,
+)
 from dynslam2d.detect.measure import Detection, ScanDetection, scan_detections
 from dynslam2d.detect.segment import segment_scan
-from dynslam2d.detect.shapes import CRITERIA
+from dynslam2d.detect.shapes import CRITERIA, fit_cluster_rows
 from dynslam2d.detect.vehicles import _NO_MAP, extent_limit
 from dynslam2d.types import Pose2D, Scan
+
+
+def _thin(depth_ratio: float, min_radius: float) -> float:
+    """The short side (m) below which a cluster cannot be a circle: ``circle_min_depth_ratio`` · ``circle_min_radius``
+    (a circle needs short side ≥ ratio · r with r ≥ the minimum radius; −inf for a negative ratio, which the
+    configuration refuses)."""
+    return depth_ratio * min_radius if depth_ratio >= 0.0 else -math.inf
 
 
 class TrackDetect:
@@ -47,28 +71,38 @@ class TrackDetect:
                 self._free.add(scan, pose, valid)
             return []
         cos_a, sin_a = self._beam_trig(scan)
-        # the beams in the map frame (pose.transform_points of the beams, invalid ones at the pose), the clusters'
-        # fits, the classification and bounds of every cluster (reference.classify_and_bound), the vehicle-size
-        # clusters' map test (detect/vehicles.py), the kept clusters' rows and their points' map evidence (per point:
-        # only the detections' points are tested; structure clusters, most of the points, are not detections) and
-        # the leg merge's pairs and arrays (_merge_legs): one kernel call (kernels.detect_rows)
+        # pose.transform_points of the beams (invalid ones at the pose), all beams and the clusters' ones
+        beams = seg.beams
+        ct, st_ = math.cos(pose.theta), math.sin(pose.theta)
+        ax, ay, px, py, pts = world_points(ranges, valid, cos_a, sin_a, ct, st_, float(pose.x),
+                                           float(pose.y), beams)
+        offsets = seg.offsets
+        ext_lim = extent_limit(cfg)
+        # (without the circle fits the classification below never reads: shapes.fit_cluster_rows, NaN columns that
+        # ScanDetection.circle fits when read)
+        fp = self._fit_p
+        fits = fit_cluster_rows(px, py, offsets, ~seg.structure, self._angles, CRITERIA[cfg.fit.criterion],
+                                cfg.fit.closeness_d0, cfg.fit.circle_min_points, cfg.fit.coarse_stride, True,
+                                fp.item(_P_POINT_MAX_POINTS), fp.item(_P_POINT_MAX_EXTENT), ext_lim,
+                                _thin(fp.item(_P_CIRCLE_DEPTH_RATIO), fp.item(_P_CIRCLE_MIN_RADIUS)))
+        # classify and bound every cluster (reference.classify_and_bound); then the vehicle-size clusters' map test
+        # (detect/vehicles.py), the kept clusters' rows and their points' map evidence in one call. The map test is
+        # per point, so only the detections' points are tested (structure clusters, most of the points, are not
+        # detections)
         view = self._map
-        fc, sc, tc = cfg.fit, cfg.segment, cfg.tracker
+        sc, tc = cfg.segment, cfg.tracker
         if view is None:
             lo, i0, j0, res = _NO_MAP, 0, 0, 1.0
         else:
             lo, i0, j0, res = view.logodds, int(view.i0), int(view.j0), float(view.resolution)
-        px0 = float(pose.x)
-        py0 = float(pose.y)
-        (pts, starts, npts, kinds, lohi, rel, fits, mfr, first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2,
-         px2, py2, mbeams, ppts, theta, centroid, circle) = detect_rows(
-            ranges, valid, cos_a, sin_a, math.cos(pose.theta), math.sin(pose.theta), px0, py0, seg.beams, seg.offsets,
-            seg.structure, seg.wrapped, self._angles, CRITERIA[fc.criterion], fc.closeness_d0, fc.circle_min_points,
-            fc.coarse_stride, int(sc.max_skip_beams), float(scan.range_max), abs(float(scan.angle_increment)),
-            extent_limit(cfg), self._fit_p, sc.vehicle_max_extent > sc.max_extent, float(sc.max_extent),
-            float(sc.vehicle_max_structure), float(sc.vehicle_min_free), view is not None, lo, i0, j0, res,
-            float(tc.map_occupied_logodds), float(tc.map_free_logodds), int(tc.map_free_radius), fc.person_merge,
-            float(fc.leg_max_extent), float(fc.leg_pair_distance))
+        keep, kinds, lohi, rel = classify_batch(px, py, beams, offsets, fits, seg.structure, float(pose.x),
+                                                float(pose.y), ranges, valid, ax, ay, seg.wrapped,
+                                                int(sc.max_skip_beams), float(scan.range_max),
+                                                abs(float(scan.angle_increment)), ext_lim, fp)
+        starts, npts, kinds, lohi, rel, fits, mfr = select_detections(
+            keep, kinds, lohi, rel, fits, offsets, px, py, sc.vehicle_max_extent > sc.max_extent,
+            float(sc.max_extent), float(sc.vehicle_max_structure), float(sc.vehicle_min_free), view is not None, lo,
+            i0, j0, res, float(tc.map_occupied_logodds), float(tc.map_free_logodds), int(tc.map_free_radius))
         nd = starts.shape[0]
         st.structure_clusters += seg.n_clusters - nd
         # free-space evidence per detection (0 where unknown). The free-space fraction is read for few detections
@@ -87,17 +121,17 @@ class TrackDetect:
             fs, ff, fu = mfr.tolist()
         # (their centroid, bounds, flags and circle stay rows of fits / lohi / rel until read, their points rows of pts:
         # ScanDetection; all made in one loop, scan_detections)
-        dets = scan_detections(seg.beams, pts, starts.tolist(), npts.tolist(), kinds.tolist(),
-                               (fits[:, F_THETA] if first.shape[0] else theta).tolist(), frac, fs, ff, fu, fits, lohi,
-                               rel)
-        if first.shape[0]:
-            dets = self._merge_legs(dets, first, second, ki, fits2, lohi2, rel2, mbeams, ppts)
+        dets = scan_detections(beams, pts, starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(),
+                               frac, fs, ff, fu, fits, lohi, rel)
+        if cfg.fit.person_merge and len(dets) > 1:
+            dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
+                                                                                 npts, px, py, beams)
         st.detections += len(dets)
         self.last_detections = dets
         if dets:
             m = len(dets)
-            self._batch = DetectionBatch(kind=kinds2, theta=theta, lohi=lohi2, rel=rel2, centroid=centroid,
-                                         circle=circle, px=px2, py=py2, start=starts2, npts=npts2)
+            self._batch = DetectionBatch(kinds, fits[:, F_THETA].copy(), lohi, rel, fits[:, FIT_CENTROID].copy(),
+                                         fits[:, FIT_CIRCLE].copy(), px, py, starts, npts)
             no_prior = self._no_prior.get(m)
             if no_prior is None:
                 # (no track prior: the same arrays for every scan with m detections; the kernel only reads them)
@@ -110,20 +144,27 @@ class TrackDetect:
             # structure only (_birth_state, _clutter_detections): one row's tolist each, not the whole arrays' per scan)
         return dets
 
-    def _merge_legs(self, dets: list[Detection], first: np.ndarray, second: np.ndarray, ki: np.ndarray,
-                    fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray, mbeams: np.ndarray,
-                    pts: np.ndarray) -> list[ScanDetection]:
+    def _merge_legs(self, dets: list[Detection], kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray,
+                    rel: np.ndarray, starts: np.ndarray, npts: np.ndarray, px: np.ndarray, py: np.ndarray,
+                    beams: np.ndarray) -> tuple:
         """People (leg_tracker, Leigh et al. ICRA 2015, pairs legs): two leg-sized detections (both sides
         ≤ ``fit.leg_max_extent``) whose centres lie within ``fit.leg_pair_distance`` become one person
         detection, measured at the middle of the two legs with the point model. A leg swinging forward while
         the other stands does not move the person's centre by a full stride, so its speed does not jump.
-        Returns the detection list, merged pairs appended at the end: the detections ``ki`` of ``dets`` (those in no
-        pair), then one per pair (``first[r]``, ``second[r]``), reading the merged ``fits``, ``lohi``, ``rel``, the
-        persons' beams ``mbeams`` and their (n, 2) points ``pts`` (the pairs and arrays by
-        :func:`dynslam2d.detect.kernels.merge_legs`, inside ``detect_rows``)."""
+        Returns the detection list and the per-detection batch arrays, merged pairs appended at the end (the
+        pairs and arrays by :func:`dynslam2d.detect.kernels.merge_legs`; ``beams``: the beams of ``px``, ``py``)."""
+        fc = self.config.fit
+        first, second, ki, kinds, fits, lohi, rel, starts, npts, px, py, mbeams = merge_legs(
+            px, py, beams, starts, npts, kinds, fits, lohi, rel, float(fc.leg_max_extent), float(fc.leg_pair_distance))
         m = first.shape[0]
+        if m == 0:  # (the arrays are the arguments themselves)
+            return dets, kinds, fits, lohi, rel, starts, npts, px, py
         new_dets = [dets[j] for j in ki.tolist()]
         row = len(new_dets)
+        n0 = px.shape[0] - mbeams.shape[0]
+        pts = np.empty((px.shape[0] - n0, 2))  # the persons' points, (n, 2) (np.column_stack's values)
+        pts[:, 0] = px[n0:]
+        pts[:, 1] = py[n0:]
         o = 0
         append, new, cls = new_dets.append, object.__new__, ScanDetection
         for a, b in zip(first.tolist(), second.tolist()):
@@ -154,7 +195,7 @@ class TrackDetect:
             row += 1
             o += n
         self.stats.merged_leg_pairs += m
-        return new_dets
+        return new_dets, kinds, fits, lohi, rel, starts, npts, px, py
 
     def _measure_rows(self, det: np.ndarray, sizes: np.ndarray, has_sizes: np.ndarray, radius: np.ndarray,
                       size_sigma: np.ndarray) -> MeasureRows:
