@@ -8,13 +8,26 @@ import numpy as np
 import dynslam2d.detect.trackdetect as tracker_mod  # (_detect calls select_detections there)
 from dynslam2d.config import Config
 from dynslam2d.detect import kernels as K
+from dynslam2d.detect import shapes
 from dynslam2d.detect.config import DetectConfig
-from dynslam2d.detect.layout import F_HI1, F_HI2, F_LO1, F_LO2, N_FIT_COLS
+from dynslam2d.detect.layout import (
+    F_CIRCLE_R,
+    F_CIRCLE_RMS,
+    F_CIRCLE_X,
+    F_HI1,
+    F_HI2,
+    F_LO1,
+    F_LO2,
+        FIT_CIRCLE,
+    N_FIT_COLS,
+)
 from dynslam2d.detect.mapevidence import MapView, map_evidence, map_evidence_kernel
+from dynslam2d.detect.shapes import fit_clusters
 from dynslam2d.detect.vehicles import admit_long_clusters, long_kept
 from dynslam2d.inputs import open_source
 from dynslam2d.pipeline import Pipeline
 from dynslam2d.sim.simulation import SimSource
+from dynslam2d.types import Pose2D
 
 
 def _admit_numpy(keep, fits, offsets, px, py, view, config) -> int:
@@ -144,3 +157,84 @@ def test_fused_kernels_give_the_former_calls_results_in_whole_runs(monkeypatch):
             pipe.process(scan)
     assert seen["select"] > 100
     assert seen["map"] > 100 and seen["admit"] > 10
+
+
+def _walkers():
+    """Scans of two people's legs (tests/test_detect_people.py's scene) seen from a slowly moving laser, with the
+    poses."""
+    from test_detect_people import RATE, render, scene
+
+    return [(render(Pose2D(0.2 * i / RATE, 0.0, 0.0), i / RATE, *scene(i / RATE, 2.0, 1.2), i)[0],
+             Pose2D(0.2 * i / RATE, 0.0, 0.0)) for i in range(int(6.0 * RATE))]
+
+
+def test_skipped_circle_fits_in_whole_runs(monkeypatch):
+    """Pass det23, in three simulated runs (people seen from a driving robot; two people's legs; a van): every
+    ``fit_cluster_rows`` call of the tracker gives ``fit_clusters``' rows (every circle fitted) with NaN circle columns
+    exactly on the rows that the plain-Python test below names, and the classification of every call is bit for bit
+    the classification of the same clusters with every circle fitted."""
+    seen = {"fits": 0, "skipped": 0}
+    full_fits: list = []
+
+    def fit_rows(*a):
+        got = shapes.fit_cluster_rows(*a)
+        x, y, offsets, mask, angles, crit, d0, cmin, stride, skip, pmax_n, pmax_ext, max_ext, thin = a
+        want = fit_clusters(x, y, offsets, mask, angles, crit, d0, cmin, stride)
+        full_fits[:] = [want]
+        want = want.copy()
+        for q in range(want.shape[0]):
+            n = int(offsets[q + 1] - offsets[q])
+            e0, e1 = want[q, F_HI1] - want[q, F_LO1], want[q, F_HI2] - want[q, F_LO2]
+            if skip and mask[q] and n >= cmin and (n <= pmax_n or max(e0, e1) < pmax_ext or max(e0, e1) > max_ext
+                                                   or min(e0, e1) < thin):
+                want[q, F_CIRCLE_X:F_CIRCLE_RMS + 1] = np.nan
+                seen["skipped"] += 1
+        assert _same(got, want)
+        seen["fits"] += 1
+        return got
+
+    def classify(*a):
+        got = K.classify_batch(*a)
+        want = K.classify_batch(*a[:4], full_fits[0], *a[5:])  # (every circle fitted)
+        assert all(_same(g, w) for g, w in zip(got, want))
+        return got
+
+    monkeypatch.setattr(tracker_mod, "fit_cluster_rows", fit_rows)
+    monkeypatch.setattr(tracker_mod, "classify_batch", classify)
+    for src in (open_source("sim:drive", seed=11, duration=6.0), [s for s, _ in _walkers()], _van_source()):
+        pipe = Pipeline(Config())
+        for scan in src:
+            pipe.process(scan)
+    assert seen["fits"] > 150 and seen["skipped"] > 20
+
+
+def test_skipped_circle_fits_are_fitted_when_read():
+    """The circle of every detection of two simulated runs (people and cars seen from a driving robot; two people's
+    legs seen from a slowly moving robot), read after the scan (a skipped fit is then made by
+    ``ScanDetection.circle``), is bit for bit the circle columns of ``fit_clusters`` on the detection's points
+    (every circle fitted); skipped fits occur in both runs."""
+    from dynslam2d.detect import Tracker
+    from dynslam2d.detect.shapes import CRITERIA
+    from dynslam2d.sim import simulate
+
+    cfg = DetectConfig()
+    fc = cfg.fit
+    drive = simulate("drive", duration=4.0)
+    runs = [_walkers(), list(zip(drive.scans, [Pose2D.from_array(q) for q in drive.ground_truth.poses_in("first")]))]
+    for run in runs:
+        tr = Tracker(cfg)
+        skipped = checked = 0
+        for scan, pose in run:
+            tr.update(scan, pose)
+            for d in tr.last_detections:
+                if d.person:
+                    continue
+                skipped += bool(np.isnan(d._fits[d._j, F_CIRCLE_R]))
+                pts = np.ascontiguousarray(d.points)
+                n = pts.shape[0]
+                want = fit_clusters(pts[:, 0].copy(), pts[:, 1].copy(), np.array([0, n]), np.ones(1, dtype=bool),
+                                    tr._angles, CRITERIA[fc.criterion], fc.closeness_d0, fc.circle_min_points,
+                                    fc.coarse_stride)[0, FIT_CIRCLE]
+                assert _same(d.circle, want)
+                checked += 1
+        assert skipped >= 5 and checked > 2 * skipped

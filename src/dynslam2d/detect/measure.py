@@ -33,7 +33,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from dynslam2d.detect.config import FitConfig
-from dynslam2d.detect.layout import FIT_CENTROID, FIT_CIRCLE, KIND_NAMES, LOHI_HI, LOHI_LO
+from dynslam2d.detect.layout import (
+    F_CIRCLE_R,
+    F_CIRCLE_RMS,
+    F_CIRCLE_X,
+    FIT_CENTROID,
+    FIT_CIRCLE,
+    KIND_NAMES,
+    LOHI_HI,
+    LOHI_LO,
+)
+from dynslam2d.detect.shapes import fit_circle
 
 
 @dataclass(slots=True, eq=False)
@@ -145,7 +155,19 @@ class ScanDetection(Detection):
         self._j = j
 
     centroid = _row_view("_fits", FIT_CENTROID, "(2,) mean of the points, m")
-    circle = _row_view("_fits", FIT_CIRCLE, "(3,) circle centre x, y and radius, m")
+
+    @property
+    def circle(self) -> np.ndarray:
+        """(3,) circle centre x, y and radius, m: a view of the row's circle columns. A row whose circle fit the tracker
+        skipped (NaN columns: a cluster the classification did not make a circle, ``shapes.fit_cluster_rows``) is
+        fitted first, with the same function on the same points (:func:`dynslam2d.detect.shapes.fit_circle`), and
+        the row kept."""
+        f = self._fits
+        j = self._j
+        r = f[j, F_CIRCLE_R]
+        if r != r:
+            f[j, F_CIRCLE_X:F_CIRCLE_RMS + 1] = fit_circle(self.points)
+        return f[j, FIT_CIRCLE]
     lo = _row_view("_lohi", LOHI_LO, "(2,) lower bounds along e1, e2, m")
     hi = _row_view("_lohi", LOHI_HI, "(2,) upper bounds along e1, e2, m")
     rel = _row_view("_rel", slice(None), "(2, 2) bool: bound [axis, lower / upper] is real")

@@ -449,7 +449,7 @@ def _circle_one(x: np.ndarray, y: np.ndarray, out: np.ndarray, wd: np.ndarray, w
     out[3] = math.sqrt(ss / n)
 
 
-@njit(cache=True)
+@njit(cache=True)  # (fit_cluster_rows without the skip; the tracker calls that one)
 def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np.ndarray, angles: np.ndarray,
                  criterion: int, d0: float, circle_min_points: int, stride: int = 1) -> np.ndarray:
     """Fit every cluster ``c`` with ``fit_mask[c]`` (points ``x, y[offsets[c]:offsets[c+1]]``).
@@ -459,6 +459,21 @@ def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np
     centroid x, y (columns named in :mod:`dynslam2d.detect.layout`, ``F_*``). Unfitted clusters
     hold only their centroid (other entries 0, rms inf).
     """
+    return fit_cluster_rows(x, y, offsets, fit_mask, angles, criterion, d0, circle_min_points, stride, False, 0.0,
+                            0.0, 0.0, 0.0)
+
+
+@njit(cache=True)
+def fit_cluster_rows(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np.ndarray, angles: np.ndarray,
+                     criterion: int, d0: float, circle_min_points: int, stride: int, skip: bool,
+                     point_max_points: float, point_max_extent: float, max_extent: float, thin: float) -> np.ndarray:
+    """:func:`fit_clusters`; where ``skip``, without the circle fit of a cluster whose circle the tracker's
+    classification (:func:`dynslam2d.detect.kernels.classify_batch`, the same expressions) never reads: a point
+    (n ≤ ``point_max_points`` or both sides < ``point_max_extent``), one not kept (a side > ``max_extent``, its
+    ``max_extent``) or one too thin to be a circle (short side < ``thin`` = ``circle_min_depth_ratio`` ·
+    ``circle_min_radius``: a circle needs short side ≥ ratio · r ≥ ratio · min radius). Such a row's four circle
+    columns are NaN (never a fit's value: a degenerate fit gives r = 0, rms = inf), which the classification's
+    radius test refuses; :class:`dynslam2d.detect.measure.ScanDetection` fits them when its ``circle`` is read."""
     k = offsets.shape[0] - 1
     out = np.zeros((k, N_FIT_COLS))
     cos_t = np.cos(angles)
@@ -496,6 +511,14 @@ def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np
         _fit_one(xs, ys, cos_t, sin_t, criterion, d0, tmp, stride, c1, c2, order)
         for q in range(6):  # θ, lo1, hi1, lo2, hi2, rms (the order of _fit_one); element-wise: a slice
             out[c, F_THETA + q] = tmp[q]  # assignment compiles numba's shape-error formatting (~4 s cold)
+        if n >= circle_min_points and skip:
+            e0 = tmp[2] - tmp[1]  # (hi1 − lo1, hi2 − lo2: the fit's sides, as classify_batch computes them)
+            e1 = tmp[4] - tmp[3]
+            if n <= point_max_points or max(e0, e1) < point_max_extent or max(e0, e1) > max_extent or \
+                    min(e0, e1) < thin:
+                for q in range(4):
+                    out[c, F_CIRCLE_X + q] = np.nan
+                continue
         if n >= circle_min_points:
             _circle_one(xs, ys, tmpc, c1, c2, c3)  # (c1, c2: free again after _fit_one)
             for q in range(4):  # cx, cy, r, rms (the order of _circle_one)

@@ -9,6 +9,10 @@ import math
 import numpy as np
 
 from dynslam2d.detect.kernels import (
+    _P_CIRCLE_DEPTH_RATIO,
+    _P_CIRCLE_MIN_RADIUS,
+    _P_POINT_MAX_EXTENT,
+    _P_POINT_MAX_POINTS,
     classify_batch,
     measure_batch,
     merge_legs,
@@ -25,9 +29,16 @@ from dynslam2d.detect.layout import (
 )
 from dynslam2d.detect.measure import Detection, ScanDetection, scan_detections
 from dynslam2d.detect.segment import segment_scan
-from dynslam2d.detect.shapes import CRITERIA, fit_clusters
+from dynslam2d.detect.shapes import CRITERIA, fit_cluster_rows
 from dynslam2d.detect.vehicles import _NO_MAP, extent_limit
 from dynslam2d.types import Pose2D, Scan
+
+
+def _thin(depth_ratio: float, min_radius: float) -> float:
+    """The short side (m) below which a cluster cannot be a circle: ``circle_min_depth_ratio`` · ``circle_min_radius``
+    (a circle needs short side ≥ ratio · r with r ≥ the minimum radius; −inf for a negative ratio, which the
+    configuration refuses)."""
+    return depth_ratio * min_radius if depth_ratio >= 0.0 else -math.inf
 
 
 class TrackDetect:
@@ -66,8 +77,14 @@ class TrackDetect:
         ax, ay, px, py, pts = world_points(ranges, valid, cos_a, sin_a, ct, st_, float(pose.x),
                                            float(pose.y), beams)
         offsets = seg.offsets
-        fits = fit_clusters(px, py, offsets, ~seg.structure, self._angles, CRITERIA[cfg.fit.criterion],
-                            cfg.fit.closeness_d0, cfg.fit.circle_min_points, cfg.fit.coarse_stride)
+        ext_lim = extent_limit(cfg)
+        # (without the circle fits the classification below never reads: shapes.fit_cluster_rows, NaN columns that
+        # ScanDetection.circle fits when read)
+        fp = self._fit_p
+        fits = fit_cluster_rows(px, py, offsets, ~seg.structure, self._angles, CRITERIA[cfg.fit.criterion],
+                                cfg.fit.closeness_d0, cfg.fit.circle_min_points, cfg.fit.coarse_stride, True,
+                                fp.item(_P_POINT_MAX_POINTS), fp.item(_P_POINT_MAX_EXTENT), ext_lim,
+                                _thin(fp.item(_P_CIRCLE_DEPTH_RATIO), fp.item(_P_CIRCLE_MIN_RADIUS)))
         # classify and bound every cluster (reference.classify_and_bound); then the vehicle-size clusters' map test
         # (detect/vehicles.py), the kept clusters' rows and their points' map evidence in one call. The map test is
         # per point, so only the detections' points are tested (structure clusters, most of the points, are not
@@ -81,7 +98,7 @@ class TrackDetect:
         keep, kinds, lohi, rel = classify_batch(px, py, beams, offsets, fits, seg.structure, float(pose.x),
                                                 float(pose.y), ranges, valid, ax, ay, seg.wrapped,
                                                 int(sc.max_skip_beams), float(scan.range_max),
-                                                abs(float(scan.angle_increment)), extent_limit(cfg), self._fit_p)
+                                                abs(float(scan.angle_increment)), ext_lim, fp)
         starts, npts, kinds, lohi, rel, fits, mfr = select_detections(
             keep, kinds, lohi, rel, fits, offsets, px, py, sc.vehicle_max_extent > sc.max_extent,
             float(sc.max_extent), float(sc.vehicle_max_structure), float(sc.vehicle_min_free), view is not None, lo,
@@ -113,9 +130,8 @@ class TrackDetect:
         self.last_detections = dets
         if dets:
             m = len(dets)
-            self._batch = DetectionBatch(kind=kinds, theta=fits[:, F_THETA].copy(), lohi=lohi, rel=rel,
-                                         centroid=fits[:, FIT_CENTROID].copy(), circle=fits[:, FIT_CIRCLE].copy(),
-                                         px=px, py=py, start=starts, npts=npts)
+            self._batch = DetectionBatch(kinds, fits[:, F_THETA].copy(), lohi, rel, fits[:, FIT_CENTROID].copy(),
+                                         fits[:, FIT_CIRCLE].copy(), px, py, starts, npts)
             no_prior = self._no_prior.get(m)
             if no_prior is None:
                 # (no track prior: the same arrays for every scan with m detections; the kernel only reads them)
