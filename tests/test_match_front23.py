@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import platform
 
 import numpy as np
 import pytest
@@ -15,6 +16,11 @@ try:
     from numpy._core._multiarray_umath import c_einsum
 except ImportError:  # pragma: no cover - another NumPy layout
     c_einsum = np.einsum
+
+#: NumPy's einsum order (two lanes, four rows a step) is what its x86-64 wheels build (baseline without FMA); another
+#: CPU's build (e.g. aarch64 with FMA) may round differently, so there the gate's sum is checked against the plain
+#: form of its own order and einsum within 1e-12 only.
+_EINSUM_ORDER_KNOWN = platform.machine().lower() in ("x86_64", "amd64")
 
 
 def _lanes(pts: np.ndarray) -> float:
@@ -60,7 +66,10 @@ def test_the_gates_sum_of_squares_is_einsums_and_the_plain_forms_bit_for_bit() -
         pts, _, _, _, _, ss = gated_points(r, ca, sa, valid, 0.05, 300.0, 0.2, 290.0, 3.0, True, no_drop(n))
         want = float(c_einsum("ij,ij->", pts, pts))
         assert math.copysign(1.0, ss) == 1.0
-        assert np.float64(ss).tobytes() == np.float64(want).tobytes() == np.float64(_lanes(pts)).tobytes(), n
+        assert np.float64(ss).tobytes() == np.float64(_lanes(pts)).tobytes(), n
+        if _EINSUM_ORDER_KNOWN:
+            assert np.float64(ss).tobytes() == np.float64(want).tobytes(), n
+        assert abs(ss - want) <= 1e-12 * max(ss, 1.0)
         assert abs(ss - float(np.sum(pts.astype(np.float64) ** 2))) <= 1e-12 * max(ss, 1.0)
 
 
@@ -99,8 +108,11 @@ def test_degeneracy_with_the_gates_sum_equals_its_own() -> None:
         for thr in (0.01, 0.045, 0.5):
             d1 = degeneracy(h, 0.05, pts, thr)
             d2 = degeneracy(h, 0.05, pts, thr, ss)
-            assert (d1.ratio, d1.rotation_ratio, d1.scale, d1.rotation_degenerate) == (
-                d2.ratio, d2.rotation_ratio, d2.scale, d2.rotation_degenerate)
+            if _EINSUM_ORDER_KNOWN:
+                assert (d1.ratio, d1.rotation_ratio, d1.scale, d1.rotation_degenerate) == (
+                    d2.ratio, d2.rotation_ratio, d2.scale, d2.rotation_degenerate)
+            else:
+                assert d1.scale == pytest.approx(d2.scale, rel=1e-12)
 
 
 @pytest.mark.parametrize("frac", [0.0, 0.1, 0.6])
