@@ -173,7 +173,7 @@ def test_lean_compile_gc_raises_generation_0_only_from_cpythons_defaults():
     try:
         gc.set_threshold(700, 10, 10)
         assert jitcache.lean_compile_gc()
-        assert gc.get_threshold() == jitcache.COMPILE_GC_THRESHOLD == (20000, 10, 10)
+        assert gc.get_threshold() == jitcache.COMPILE_GC_THRESHOLD == (20000, 100, 10)
         assert not jitcache.lean_compile_gc()  # (no longer the defaults)
         gc.set_threshold(5000, 5, 5)
         assert not jitcache.lean_compile_gc() and gc.get_threshold() == (5000, 5, 5)

@@ -312,7 +312,7 @@ def remembered_call_typing() -> bool:
 DEFAULT_GC_THRESHOLD = (700, 10, 10)
 
 #: The collector's thresholds in a process that compiles the kernels (:func:`lean_compile_gc`).
-COMPILE_GC_THRESHOLD = (20000, 10, 10)
+COMPILE_GC_THRESHOLD = (20000, 100, 10)
 
 
 def lean_compile_gc() -> bool:
@@ -325,7 +325,10 @@ def lean_compile_gc() -> bool:
     20 000 allocations instead of every 700 lets most of numba's temporaries die before a collection would
     promote them, so the old generation grows slowly: about 120–200 collections, one of them full, ≈ 2.5 s, for
     about 20 MB more peak memory while compiling (494–500 MB against 475 MB; docs/speed.md, "Cold compile pass 4").
-    Nothing a kernel computes changes.
+    Most of what then remained were the generation-1 collections (one per 10 young ones, ≈ 20 of 80–90 ms each,
+    walking every object that survived a young collection): one per 100 young ones instead (and so no full one)
+    takes 1.6 s of collector CPU instead of 2.7–3.2 s, for ≈ 100 MB more peak memory in a one-process compile
+    (563 MB against 457 MB; docs/speed.md, "pass cold24"). Nothing a kernel computes changes.
 
     The command line calls this when the kernel cache is cold (a warm run keeps CPython's defaults), and so does
     its background compile; a library user's process is left as it is. Leaves thresholds the program has
