@@ -233,3 +233,34 @@ def test_report_rows_is_report_boxes_with_the_python_speed_test() -> None:
     want = (boxes, X.take(rows, axis=0), P.take(rows, axis=0), Gi[:, GI_KIND].take(rows))
     for a, b in zip(got, want):
         assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def test_fragment_hosts_rows_is_fragment_hosts_after_the_gathers() -> None:
+    """``fragment_hosts_rows`` against ``_hosts_of_fragments``' former call (main at 4f30595): the five columns of
+    the candidate rows gathered with ``take``, then ``fragment_hosts`` — on 300 random scenes of boxes and point
+    clusters, some inside a box, some across two, some outside every one (hosts found and not found: checked)."""
+    from dynslam2d.detect.kernels import G_SIZE0, G_SIZE1, G_THETA, N_G, fragment_hosts
+    from dynslam2d.detect.kernels_update import fragment_hosts_rows
+
+    rng = np.random.default_rng(5)
+    found = missed = 0
+    for _ in range(300):
+        nrow, m = int(rng.integers(1, 40)), int(rng.integers(1, 12))
+        X = rng.uniform(-5.0, 5.0, (nrow, 4))
+        G = rng.uniform(-math.pi, math.pi, (nrow, N_G))
+        G[:, [G_SIZE0, G_SIZE1]] = rng.uniform(0.1, 3.0, (nrow, 2))
+        npts = rng.integers(1, 15, m)
+        start = np.concatenate(([0], np.cumsum(npts)[:-1])).astype(np.int64)
+        centres = X[rng.integers(0, nrow, m), :2] + rng.normal(scale=rng.choice([0.1, 1.0, 4.0]), size=(m, 2))
+        pts = np.repeat(centres, npts, axis=0) + rng.normal(scale=0.2, size=(int(npts.sum()), 2))
+        px, py = pts[:, 0].copy(), pts[:, 1].copy()
+        det = rng.permutation(m)[: int(rng.integers(1, m + 1))].astype(np.int64)
+        rows = rng.permutation(nrow)[: int(rng.integers(1, nrow + 1))].astype(np.int64)
+        margin = float(rng.choice([0.05, 0.3, 1.0]))
+        got = fragment_hosts_rows(px, py, start, npts, det, X, G, rows, margin)
+        want = fragment_hosts(px, py, start, npts, det, X[:, 0].take(rows), X[:, 1].take(rows),
+                              G[:, G_THETA].take(rows), G[:, G_SIZE0].take(rows), G[:, G_SIZE1].take(rows), margin)
+        assert got.dtype == want.dtype and got.tolist() == want.tolist()
+        found += int((got >= 0).sum())
+        missed += int((got < 0).sum())
+    assert found > 100 and missed > 100

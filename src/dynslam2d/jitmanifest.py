@@ -123,10 +123,10 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(int8, 2, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64,)"),
     ('dynslam2d.detect.kernels_update.manage_speed_rows',
      "(Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64,)"),
-    ('dynslam2d.detect.kernels.fragment_hosts',
+    ('dynslam2d.detect.kernels_update.fragment_hosts_rows',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
-     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
+     "Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
+     'float64,)'),
     ('dynslam2d.detect.kernels.seen_through_refs',
      "(Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), int64, float64, Array(bool, 1, 'C'),)"),

@@ -26,6 +26,7 @@ from dynslam2d.detect.kernels import (
     GI_KIND,
     accel_candidates,
     association_rows,
+    fragment_hosts,
     gate_costs,
     kalman_update_batch,
     size_jump_gate,
@@ -301,3 +302,26 @@ def report_rows(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, row
             out[i, 4] = sb
         out[i, 2] = (theta + math.pi) % _TWO_PI - math.pi  # wrap_angle
     return out, Xo, Po, kinds
+
+
+@njit(cache=True)
+def fragment_hosts_rows(px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray, det: np.ndarray,
+                        X: np.ndarray, G: np.ndarray, rows: np.ndarray, margin: float) -> np.ndarray:
+    """``kernels.fragment_hosts`` with the candidate boxes read from the state rows ``rows`` (centre ``X[rows, :2]``,
+    axis angle and sizes from the shape rows ``G``, m, rad, map frame) in the call instead of five gathers before
+    it (docs/speed.md, pass trk24): for each detection ``det[r]`` the index in ``rows`` of the box that holds every
+    point with the least overshoot below ``margin`` (m), −1 for none."""
+    nt = rows.shape[0]
+    tx = np.empty(nt)
+    ty = np.empty(nt)
+    tth = np.empty(nt)
+    ts0 = np.empty(nt)
+    ts1 = np.empty(nt)
+    for i in range(nt):
+        k = rows[i]
+        tx[i] = X[k, 0]
+        ty[i] = X[k, 1]
+        tth[i] = G[k, G_THETA]
+        ts0[i] = G[k, G_SIZE0]
+        ts1[i] = G[k, G_SIZE1]
+    return fragment_hosts(px, py, start, npts, det, tx, ty, tth, ts0, ts1, margin)

@@ -58,17 +58,13 @@ import numpy as np
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.freespace import FreeSpaceMemory
 from dynslam2d.detect.kernels import (
-    G_SIZE0,
-    G_SIZE1,
-    G_THETA,
     N_G,
     N_GI,
     cv_predict,
     fit_params,
-    fragment_hosts,
 )
 from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, assign_groups
-from dynslam2d.detect.kernels_update import association_gates
+from dynslam2d.detect.kernels_update import association_gates, fragment_hosts_rows
 from dynslam2d.detect.layout import (
     KIND_CIRCLE,
     KIND_RECT,
@@ -353,13 +349,11 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         cand = [k for k in self._tracks if k.id in updated and k.state == CONFIRMED]
         if not cand:
             return [None] * len(dets)
-        rows = np.array([k.row for k in cand], dtype=np.int64)
-        X, G = self._X, self._G  # (the candidates' centres and shapes: one contiguous gather per column)
         b = self._batch
-        idx = fragment_hosts(b.px, b.py, b.start, b.npts, np.array(dets, dtype=np.int64), X[:, 0].take(rows),
-                             X[:, 1].take(rows), G[:, G_THETA].take(rows), G[:, G_SIZE0].take(rows),
-                             G[:, G_SIZE1].take(rows),
-                             float(self.config.fit.fragment_margin))
+        # (the candidates' centres and shapes read from their rows in the kernel; docs/speed.md, pass trk24)
+        idx = fragment_hosts_rows(b.px, b.py, b.start, b.npts, np.array(dets, dtype=np.int64), self._X, self._G,
+                                  np.array([k.row for k in cand], dtype=np.int64),
+                                  float(self.config.fit.fragment_margin))
         return [cand[i] if i >= 0 else None for i in idx.tolist()]
 
     # ------------------------------------------------------------------ steps
