@@ -121,7 +121,7 @@ def hypot_rows(vx: np.ndarray, vy: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def accel_bound(X_prior: np.ndarray, X_new: np.ndarray, rows: np.ndarray, lim: float) -> int:
     """The physical acceleration bound, in place on ``X_new`` ((r, 4) states [x, y, vx, vy], m, m/s; row r's prior
     ``X_prior[r]``) for the rows ``rows`` (the candidates of ``accel_candidates`` whose track is established, in
