@@ -309,12 +309,16 @@ def phases_ab(scans: list, other) -> dict[str, dict[str, float]]:
 #: functions of other modules that Tracker.update calls (module attributes of detect/tracker.py and its step modules)
 _SPLIT = ("segment_scan", "fit_clusters", "classify_batch", "admit_long_clusters", "map_evidence",
           "map_evidence_kernel", "gate_costs", "measure_batch", "kalman_update_batch", "fragment_hosts",
-          "segment_means", "linear_sum_assignment", "assign_groups", "select_detections")
+          "segment_means", "linear_sum_assignment", "assign_groups", "select_detections", "cv_predict",
+          "association_rows", "size_jump_gate", "pair_priors", "shape_update", "accel_candidates", "accel_bound",
+          "manage_speed_rows", "manage_rows", "report_boxes", "world_points", "merge_legs", "association_gates",
+          "fragment_hosts_rows", "report_rows",
+          "kalman_pairs")
 
 
-def split(scans: list) -> tuple[float, dict[str, float]]:
+def split(scans: list) -> tuple[float, dict[str, tuple[float, float]]]:
     """Tracker.update CPU µs per scan of one run after a warm-up, and the part of it (µs per scan) spent in each
-    function of another module (:data:`_SPLIT` and the free-space memory's methods)."""
+    function of another module (:data:`_SPLIT` and the free-space memory's methods) with its calls per scan."""
     from dynslam2d.pipeline import Pipeline
 
     warm = Pipeline()
@@ -322,6 +326,7 @@ def split(scans: list) -> tuple[float, dict[str, float]]:
         warm.process(s)
     p = Pipeline()
     acc: collections.Counter = collections.Counter()
+    calls: collections.Counter = collections.Counter()
     # (in every tracker module that calls it: detect/tracker.py and its step modules; names a later version no longer
     # uses skipped)
     saved = {(m, n): getattr(m, n) for m in tracker_modules() for n in _SPLIT if hasattr(m, n)}
@@ -331,6 +336,7 @@ def split(scans: list) -> tuple[float, dict[str, float]]:
             t0 = time.thread_time_ns()
             r = f(*a, **k)
             acc[tag] += time.thread_time_ns() - t0
+            calls[tag] += 1
             return r
         return g
 
@@ -349,7 +355,7 @@ def split(scans: list) -> tuple[float, dict[str, float]]:
             setattr(m, n, f)
     n = len(scans)
     total = acc.pop("update") / 1e3 / n
-    return total, {k: v / 1e3 / n for k, v in acc.items()}
+    return total, {k: (v / 1e3 / n, calls[k] / n) for k, v in acc.items()}
 
 
 def stages(scans: list) -> tuple[float, dict[str, float]]:
@@ -406,11 +412,11 @@ def main() -> None:
         scans = load_scans(args.data, name)
         if args.split:
             total, parts = split(scans)
-            elsewhere = sum(parts.values())
+            elsewhere = sum(v for v, _ in parts.values())
             print(f"{name}: Tracker.update {total:.0f} µs CPU per scan; in other modules' functions {elsewhere:.0f} "
                   f"({100 * elsewhere / total:.0f} %), detect/tracker.py's own code {total - elsewhere:.0f}")
-            for k, v in sorted(parts.items(), key=lambda kv: -kv[1]):
-                print(f"  {k:<36} {v:6.0f} µs")
+            for k, (v, c) in sorted(parts.items(), key=lambda kv: -kv[1][0]):
+                print(f"  {k:<36} {v:6.1f} µs  {c:5.2f} calls ({v / c if c else 0.0:5.1f} µs each)")
         elif args.check:
             n, bad = check(scans, other)
             print(f"{name:<18} {n} scans: " + ("reports identical" if bad is None else f"DIFFERENT at scan {bad}"))

@@ -122,3 +122,145 @@ def test_manage_speed_rows_is_manage_rows_with_python_speeds() -> None:
     assert _bits(speed.tolist()) == _bits(speeds)
     assert bad.tolist() == bad0.tolist() and sig.tobytes() == sig0.tobytes()
     assert 0 < bad.sum() < n
+
+
+def _kalman_pairs_python(Xs, Ps, sel, H, zm, Rm, bound, hits, after, lim, X, P, trows) -> tuple:
+    """``Tracker._update_pairs``' Kalman step before ``kalman_pairs`` (main at 4f30595): two gathers, the kernel,
+    the acceleration bound's candidates filtered in Python and ``accel_bound``, two scatters (on ``X``, ``P``)."""
+    from dynslam2d.detect.kernels import kalman_update_batch
+
+    X_prior = Xs.take(sel, axis=0)
+    Xn, Pn, ok = kalman_update_batch(X_prior, Ps.take(sel, axis=0), H, zm, Rm)
+    nb = 0
+    if bound:
+        near = accel_candidates(X_prior, Xn, (0.999 * lim) ** 2)
+        rows = [r for r in near.tolist() if hits[r] >= after]
+        if rows:
+            nb = accel_bound(X_prior, Xn, np.array(rows, dtype=np.int64), float(lim))
+    if all(ok.tolist()):
+        X[trows] = Xn
+        P[trows] = Pn
+    else:
+        X[trows[ok]] = Xn[ok]
+        P[trows[ok]] = Pn[ok]
+    return ok, nb
+
+
+def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
+    """``association_gates`` against ``association_rows`` → ``gate_costs`` → ``size_jump_gate`` and ``kalman_pairs``
+    against the former Python of ``_update_pairs``, on every call of a tracker run over a simulated crowd and a
+    drive (bytes of every output and of the written state rows), and ``kalman_pairs`` again on the same calls with
+    a limit 30 × tighter (most established rows bounded) and with the bound off."""
+    from dynslam2d.detect import DetectConfig, Tracker
+    from dynslam2d.detect import kernels_update as ku
+    from dynslam2d.detect import tracker as trk
+    from dynslam2d.detect import trackupdate as tu
+    from dynslam2d.detect.kernels import association_rows, gate_costs, size_jump_gate
+    from dynslam2d.sim import simulate
+    from dynslam2d.types import Pose2D
+
+    seen = {"gates": 0, "kalman": 0, "bounded": 0, "not_ok": 0}
+
+    def gates(G, Gi, rows, missed, Xs, Ps, Z, R, gd, chi2, *rest):
+        batch, p, ratio, jump = rest[:10], rest[10], rest[11], rest[12]
+        got = ku.association_gates(G, Gi, rows, missed, Xs, Ps, Z, R, gd, chi2, *rest)
+        tsize, tmax, rect, theta, known = association_rows(G, Gi, rows, missed)
+        d2, _, ok = gate_costs(Xs, Ps, 0.5 * tmax, rect, theta, tsize, Z, R, gd, chi2, *batch, p)
+        ok, ext = size_jump_gate(ok, batch[2], tmax, known, ratio, jump)
+        for a, b in zip(got, (tsize, d2, ok, ext)):
+            assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+        seen["gates"] += 1
+        return got
+
+    def kalman(Xs, Ps, sel, H, zm, Rm, bound, hits, after, lim, lim2, X, P, trows):
+        bad = Rm.copy()
+        bad[0] = np.nan  # (a failed update: ok False, its row not written)
+        cases = [(bound, lim, Rm), (True, lim / 30.0, Rm), (False, lim, Rm), (True, lim / 30.0, bad)]
+        for bd, li, R in cases:
+            X1, P1, X2, P2 = X.copy(), P.copy(), X.copy(), P.copy()
+            ok1, nb1 = ku.kalman_pairs(Xs, Ps, sel, H, zm, R, bd, hits, after, li, (0.999 * li) ** 2, X1, P1, trows)
+            ok2, nb2 = _kalman_pairs_python(Xs, Ps, sel, H, zm, R, bd, hits, after, li, X2, P2, trows)
+            assert ok1.tobytes() == ok2.tobytes() and nb1 == nb2
+            assert X1.tobytes() == X2.tobytes() and P1.tobytes() == P2.tobytes()
+            seen["bounded"] += nb1
+            seen["not_ok"] += int((~ok1).sum())
+        seen["kalman"] += 1
+        return ku.kalman_pairs(Xs, Ps, sel, H, zm, Rm, bound, hits, after, lim, lim2, X, P, trows)
+
+    saved = trk.association_gates, tu.kalman_pairs
+    trk.association_gates, tu.kalman_pairs = gates, kalman
+    try:
+        for scene in ("crowd", "drive"):
+            sim = simulate(scene, duration=4.0)
+            tr = Tracker(DetectConfig())
+            for scan, pose in zip(sim.scans, sim.ground_truth.poses_in("first")):
+                tr.update(scan, Pose2D.from_array(pose))
+    finally:
+        trk.association_gates, tu.kalman_pairs = saved
+    assert seen["gates"] > 50 and seen["kalman"] > 50 and seen["bounded"] > 20 and seen["not_ok"] > 50
+
+
+def test_report_rows_is_report_boxes_with_the_python_speed_test() -> None:
+    """``report_rows`` against ``_report``'s former reads (main at 4f30595): ``report_boxes``, its undecided rows
+    decided by ``math.hypot`` and a second call, and the gathers of the states, covariances and kinds — on 20 000
+    random rows of every kind, with speeds drawn at, an ulp around and far from the limit and velocities where
+    libm's hypot differs from Python's (the undecided path is taken: checked)."""
+    from dynslam2d.detect.kernels import GI_KIND, N_G, N_GI, report_boxes
+    from dynslam2d.detect.kernels_update import report_rows
+    from dynslam2d.detect.layout import K_CIRCLE, K_POINT, K_RECT
+
+    rng = np.random.default_rng(11)
+    n, slow = 20_000, 0.15
+    X = rng.normal(size=(n + 5, 4)) * 3.0
+    ang = rng.uniform(-math.pi, math.pi, n + 5)
+    sp = np.where(rng.random(n + 5) < 0.5, slow, rng.uniform(0.0, 0.4, n + 5))
+    sp = sp * (1.0 + rng.choice([-2.2e-16, 0.0, 2.2e-16, 1e-13, -1e-13], n + 5))
+    X[:, 2] = sp * np.cos(ang)
+    X[:, 3] = sp * np.sin(ang)
+    P = rng.normal(size=(n + 5, 4, 4))
+    G = rng.uniform(-3.0, 3.0, (n + 5, N_G))
+    Gi = np.zeros((n + 5, N_GI), dtype=np.int8)
+    Gi[:, GI_KIND] = rng.choice([K_RECT, K_CIRCLE, K_POINT], n + 5)
+    rows = rng.permutation(n + 5)[:n].astype(np.int64)
+    fast = np.full(n, -1, dtype=np.int8)
+    boxes, undecided = report_boxes(G, Gi, X, rows, slow, fast)
+    assert np.count_nonzero(undecided) > 100
+    for i in undecided.nonzero()[0].tolist():
+        vx, vy = X[rows[i], 2:].tolist()
+        fast[i] = math.hypot(vx, vy) > slow
+    boxes, _ = report_boxes(G, Gi, X, rows, slow, fast)
+    got = report_rows(G, Gi, X, P, rows, slow)
+    want = (boxes, X.take(rows, axis=0), P.take(rows, axis=0), Gi[:, GI_KIND].take(rows))
+    for a, b in zip(got, want):
+        assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def test_fragment_hosts_rows_is_fragment_hosts_after_the_gathers() -> None:
+    """``fragment_hosts_rows`` against ``_hosts_of_fragments``' former call (main at 4f30595): the five columns of
+    the candidate rows gathered with ``take``, then ``fragment_hosts`` — on 300 random scenes of boxes and point
+    clusters, some inside a box, some across two, some outside every one (hosts found and not found: checked)."""
+    from dynslam2d.detect.kernels import G_SIZE0, G_SIZE1, G_THETA, N_G, fragment_hosts
+    from dynslam2d.detect.kernels_update import fragment_hosts_rows
+
+    rng = np.random.default_rng(5)
+    found = missed = 0
+    for _ in range(300):
+        nrow, m = int(rng.integers(1, 40)), int(rng.integers(1, 12))
+        X = rng.uniform(-5.0, 5.0, (nrow, 4))
+        G = rng.uniform(-math.pi, math.pi, (nrow, N_G))
+        G[:, [G_SIZE0, G_SIZE1]] = rng.uniform(0.1, 3.0, (nrow, 2))
+        npts = rng.integers(1, 15, m)
+        start = np.concatenate(([0], np.cumsum(npts)[:-1])).astype(np.int64)
+        centres = X[rng.integers(0, nrow, m), :2] + rng.normal(scale=rng.choice([0.1, 1.0, 4.0]), size=(m, 2))
+        pts = np.repeat(centres, npts, axis=0) + rng.normal(scale=0.2, size=(int(npts.sum()), 2))
+        px, py = pts[:, 0].copy(), pts[:, 1].copy()
+        det = rng.permutation(m)[: int(rng.integers(1, m + 1))].astype(np.int64)
+        rows = rng.permutation(nrow)[: int(rng.integers(1, nrow + 1))].astype(np.int64)
+        margin = float(rng.choice([0.05, 0.3, 1.0]))
+        got = fragment_hosts_rows(px, py, start, npts, det, X, G, rows, margin)
+        want = fragment_hosts(px, py, start, npts, det, X[:, 0].take(rows), X[:, 1].take(rows),
+                              G[:, G_THETA].take(rows), G[:, G_SIZE0].take(rows), G[:, G_SIZE1].take(rows), margin)
+        assert got.dtype == want.dtype and got.tolist() == want.tolist()
+        found += int((got >= 0).sum())
+        missed += int((got < 0).sum())
+    assert found > 100 and missed > 100

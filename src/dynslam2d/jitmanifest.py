@@ -53,9 +53,9 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.report_boxes',
-     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
-     "float64, Array(int8, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels_update.report_rows',
+     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
+     "Array(int64, 1, 'C'), float64,)"),
     ('dynslam2d.slam.ledgerkernels.record_cells',
      "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C', True), "
      "Array(float64, 1, 'C', True), Array(bool, 1, 'C'), Array(bool, 1, 'A'), float64, float64, float64, "
@@ -101,27 +101,21 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.cv_predict',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 2, 'C'),)"),
-    ('dynslam2d.detect.kernels.association_rows',
-     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.gate_costs',
-     "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), "
-     "Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
+    ('dynslam2d.detect.kernels_update.association_gates',
+     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
+     "Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
      "float64, float64, Array(int8, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, "
      "3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, "
-     "'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.size_jump_gate',
-     "(Array(bool, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, "
-     'float64,)'),
+     "'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), float64, float64,)"),
     ('dynslam2d.detect.kernels_assign.assign_groups',
      "(Array(bool, 2, 'C'), Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64,)"),
     ('dynslam2d.detect.kernels.pair_priors',
      "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int8, 1, 'C'), Array(float64, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.kalman_update_batch',
-     "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), "
-     "Array(float64, 3, 'C'),)"),
-    ('dynslam2d.detect.kernels.accel_candidates',
-     "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), float64,)"),
+    ('dynslam2d.detect.kernels_update.kalman_pairs',
+     "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(float64, 3, 'C'), "
+     "Array(float64, 2, 'C'), Array(float64, 3, 'C'), bool, Array(int64, 1, 'C'), int64, float64, "
+     "float64, Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'),)"),
     ('dynslam2d.detect.kernels.shape_update',
      "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(bool, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), "
@@ -129,12 +123,10 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(int8, 2, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64,)"),
     ('dynslam2d.detect.kernels_update.manage_speed_rows',
      "(Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64,)"),
-    ('dynslam2d.detect.kernels.fragment_hosts',
+    ('dynslam2d.detect.kernels_update.fragment_hosts_rows',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
-     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
-    ('dynslam2d.detect.kernels_update.accel_bound',
-     "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64,)"),
+     "Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
+     'float64,)'),
     ('dynslam2d.detect.kernels.seen_through_refs',
      "(Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), int64, float64, Array(bool, 1, 'C'),)"),

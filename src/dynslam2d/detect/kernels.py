@@ -700,7 +700,7 @@ def measure_batch(det: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np
     return z, R, H, zm, Rm, size_obs, size_kind
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def kalman_update_batch(X: np.ndarray, P: np.ndarray, H: np.ndarray, zm: np.ndarray, Rm: np.ndarray) -> tuple:
     """Kalman updates of many tracks with 2-row linear measurements.
 
@@ -856,7 +856,7 @@ def segment_means(values: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def fragment_hosts(px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray, det: np.ndarray,
                    tx: np.ndarray, ty: np.ndarray, tth: np.ndarray, ts0: np.ndarray, ts1: np.ndarray,
                    margin: float) -> np.ndarray:
@@ -890,7 +890,7 @@ def fragment_hosts(px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.n
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.ndarray, theta_box: np.ndarray,
                tsize: np.ndarray, Z: np.ndarray, R: np.ndarray, gate_distance: float, gate_chi2: float,
                kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray,
@@ -1077,7 +1077,7 @@ def leg_pairs(lohi: np.ndarray, npts: np.ndarray, fits: np.ndarray, leg_max_exte
     return first[:npair], second[:npair]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def size_jump_gate(ok: np.ndarray, lohi: np.ndarray, tmax: np.ndarray, known: np.ndarray, ratio: float,
                    jump: float) -> tuple:
     """The association's size-jump test (``Tracker._associate``) in one pass: (ok', det_ext) where det_ext (m,) is
@@ -1099,7 +1099,7 @@ def size_jump_gate(ok: np.ndarray, lohi: np.ndarray, tmax: np.ndarray, known: np
     return out, ext
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def accel_candidates(X_prior: np.ndarray, X_new: np.ndarray, lim2: float) -> np.ndarray:
     """Rows r whose velocity change from ``X_prior`` to ``X_new`` ((r, 4) states [x, y, vx, vy], m/s) has a squared
     norm above ``lim2`` ((m/s)²): the only rows the acceleration bound of ``Tracker._bound_acceleration`` tests
@@ -1311,7 +1311,7 @@ def report_boxes(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray,
     return out, undecided
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def association_rows(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, missed: np.ndarray) -> tuple:
     """The association's per-track inputs from the shape rows ``rows`` of the live tracks (in their order):
     (sizes (n, 2) m, longest side (n,) m as numpy's maximum, rectangle with a heading (n,) bool, axis angle (n,) rad,

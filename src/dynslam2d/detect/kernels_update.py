@@ -18,10 +18,26 @@ import math
 
 import numpy as np
 
+from dynslam2d.detect.kernels import (
+    G_RADIUS,
+    G_SIZE0,
+    G_SIZE1,
+    G_THETA,
+    GI_KIND,
+    accel_candidates,
+    association_rows,
+    fragment_hosts,
+    gate_costs,
+    kalman_update_batch,
+    size_jump_gate,
+)
+from dynslam2d.detect.layout import K_CIRCLE
 from dynslam2d.jitbox import njit
 
 _DBL_MIN = 2.2250738585072014e-308  # the smallest normal double (C's DBL_MIN)
 _SPLIT = 134217729.0  # 2^27 + 1: Veltkamp's splitter for doubles (dl_split)
+_HALF_PI = 0.5 * math.pi  # (kernels.py's constants, the same floats)
+_TWO_PI = 2.0 * math.pi
 
 
 @njit(cache=True, inline="always")
@@ -105,7 +121,7 @@ def hypot_rows(vx: np.ndarray, vy: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def accel_bound(X_prior: np.ndarray, X_new: np.ndarray, rows: np.ndarray, lim: float) -> int:
     """The physical acceleration bound, in place on ``X_new`` ((r, 4) states [x, y, vx, vy], m, m/s; row r's prior
     ``X_prior[r]``) for the rows ``rows`` (the candidates of ``accel_candidates`` whose track is established, in
@@ -163,3 +179,149 @@ def manage_speed_rows(P: np.ndarray, X: np.ndarray, rows: np.ndarray, max_sig: f
         else:
             sig[i] = math.sqrt(p33 if p33 > p22 else p22)
     return bad, sig, speed
+
+
+@njit(cache=True)
+def association_gates(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, missed: np.ndarray, Xs: np.ndarray,
+                      Ps: np.ndarray, Z: np.ndarray, R: np.ndarray, gate_distance: float, gate_chi2: float,
+                      kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray,
+                      circle: np.ndarray, px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray,
+                      p: np.ndarray, ratio: float, jump: float) -> tuple:
+    """``Tracker._associate``'s three gate kernels in one call: ``kernels.association_rows`` (the tracks' sizes,
+    longest sides, rectangle flags, axis angles and known-size flags from their shape rows ``rows``), then
+    ``kernels.gate_costs`` with the reach 0.5 × the longest side, then ``kernels.size_jump_gate``'s size-jump test
+    (``ratio``, ``jump`` m) — the same functions, so the same floats. Returns (tsize (n, 2) m, d2 (n, m), ok (n, m)
+    bool after the size-jump test, det_ext (m,) m). One dispatch instead of three: with the caches cold (the
+    pipeline's SLAM stages run between two updates) each call of a small kernel costs a few µs on its own
+    (docs/speed.md, pass trk24)."""
+    tsize, tmax, rect, theta_box, known = association_rows(G, Gi, rows, missed)
+    n = tmax.shape[0]
+    reach = np.empty(n)
+    for i in range(n):
+        reach[i] = 0.5 * tmax[i]
+    d2, _near, ok = gate_costs(Xs, Ps, reach, rect, theta_box, tsize, Z, R, gate_distance, gate_chi2, kind, theta,
+                               lohi, rel, centroid, circle, px, py, start, npts, p)
+    ok, det_ext = size_jump_gate(ok, lohi, tmax, known, ratio, jump)
+    return tsize, d2, ok, det_ext
+
+
+@njit(cache=True)
+def kalman_pairs(Xs: np.ndarray, Ps: np.ndarray, sel: np.ndarray, H: np.ndarray, zm: np.ndarray, Rm: np.ndarray,
+                 bound: bool, hits: np.ndarray, after: int, lim: float, lim2: float, X: np.ndarray, P: np.ndarray,
+                 trows: np.ndarray) -> tuple:
+    """``Tracker._update_pairs``' Kalman step in one call: the priors ``Xs[sel]``, ``Ps[sel]`` (the predicted (n, 4)
+    states and (n, 4, 4) covariances of the live tracks, rows ``sel`` of the pairs), ``kernels.kalman_update_batch``
+    with the pairs' measurements (H, zm, Rm), then — where ``bound`` — the physical acceleration bound
+    (``kernels.accel_candidates`` with ``lim2`` (m/s)², the candidates of pairs whose track has ``hits`` ≥ ``after``,
+    :func:`accel_bound` with ``lim`` m/s), and the updated states and covariances written into the state rows
+    ``trows`` of ``X`` / ``P`` where the update applied. The same functions in the same order as the former Python
+    (two gathers, three kernel calls, the filter of the candidates, two scatters): the same floats. Returns (ok (n,)
+    bool, the number of rows bounded). One dispatch instead of three (docs/speed.md, pass trk24)."""
+    n = sel.shape[0]
+    Xp = np.empty((n, 4))
+    Pp = np.empty((n, 4, 4))
+    for r in range(n):
+        q = sel[r]
+        for a in range(4):
+            Xp[r, a] = Xs[q, a]
+            for b in range(4):
+                Pp[r, a, b] = Ps[q, a, b]
+    Xn, Pn, ok = kalman_update_batch(Xp, Pp, H, zm, Rm)
+    nb = 0
+    if bound:
+        near = accel_candidates(Xp, Xn, lim2)
+        rows = np.empty(near.shape[0], dtype=np.int64)
+        m = 0
+        for i in range(near.shape[0]):
+            if hits[near[i]] >= after:
+                rows[m] = near[i]
+                m += 1
+        if m:
+            nb = accel_bound(Xp, Xn, rows[:m], lim)
+    for r in range(n):
+        if ok[r]:
+            q = trows[r]
+            for a in range(4):
+                X[q, a] = Xn[r, a]
+                for b in range(4):
+                    P[q, a, b] = Pn[r, a, b]
+    return ok, nb
+
+
+@njit(cache=True)
+def report_rows(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, rows: np.ndarray, slow: float) -> tuple:
+    """Everything ``Tracker._report`` reads from the state rows ``rows`` of the reported tracks, in one call:
+    (boxes (n, 5) centre x, y, heading, length, width (m, rad, map frame), states (n, 4) ``X[rows]``, covariances
+    (n, 4, 4) ``P[rows]``, kind codes (n,) int8). The boxes: ``kernels.report_boxes``' arithmetic, a track moving
+    when its speed — Python's ``math.hypot`` bit for bit (:func:`py_hypot`) — is above ``slow`` (m/s); so no speed
+    is left undecided for a second call as ``report_boxes`` (libm's hypot) leaves the ones within 1e-12 of the
+    limit (docs/speed.md, pass trk24). A moving box is headed along its velocity (the axis nearest it, its sides
+    swapped when that is the second axis), a still box along its longer side, a still circle at 0; the heading of
+    a box wrapped to [−π, π)."""
+    n = rows.shape[0]
+    out = np.empty((n, 5))
+    Xo = np.empty((n, 4))
+    Po = np.empty((n, 4, 4))
+    kinds = np.empty(n, dtype=np.int8)
+    for i in range(n):
+        k = rows[i]
+        for a in range(4):
+            Xo[i, a] = X[k, a]
+            for b in range(4):
+                Po[i, a, b] = P[k, a, b]
+        kd = Gi[k, GI_KIND]
+        kinds[i] = kd
+        vx = X[k, 2]
+        vy = X[k, 3]
+        moving = py_hypot(vx, vy) > slow
+        out[i, 0] = X[k, 0]
+        out[i, 1] = X[k, 1]
+        if kd == K_CIRCLE:
+            out[i, 2] = math.atan2(vy, vx) if moving else 0.0
+            out[i, 3] = out[i, 4] = 2.0 * G[k, G_RADIUS]
+            continue
+        sa = G[k, G_SIZE0]
+        sb = G[k, G_SIZE1]
+        tb = G[k, G_THETA]
+        if moving:
+            q = int(round(((math.atan2(vy, vx) - tb + math.pi) % _TWO_PI - math.pi) / _HALF_PI))
+            theta = tb + q * _HALF_PI
+            if q % 2 == 0:
+                out[i, 3] = sa
+                out[i, 4] = sb
+            else:
+                out[i, 3] = sb
+                out[i, 4] = sa
+        elif sb > sa:
+            theta = tb + _HALF_PI
+            out[i, 3] = sb
+            out[i, 4] = sa
+        else:
+            theta = tb
+            out[i, 3] = sa
+            out[i, 4] = sb
+        out[i, 2] = (theta + math.pi) % _TWO_PI - math.pi  # wrap_angle
+    return out, Xo, Po, kinds
+
+
+@njit(cache=True)
+def fragment_hosts_rows(px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray, det: np.ndarray,
+                        X: np.ndarray, G: np.ndarray, rows: np.ndarray, margin: float) -> np.ndarray:
+    """``kernels.fragment_hosts`` with the candidate boxes read from the state rows ``rows`` (centre ``X[rows, :2]``,
+    axis angle and sizes from the shape rows ``G``, m, rad, map frame) in the call instead of five gathers before
+    it (docs/speed.md, pass trk24): for each detection ``det[r]`` the index in ``rows`` of the box that holds every
+    point with the least overshoot below ``margin`` (m), −1 for none."""
+    nt = rows.shape[0]
+    tx = np.empty(nt)
+    ty = np.empty(nt)
+    tth = np.empty(nt)
+    ts0 = np.empty(nt)
+    ts1 = np.empty(nt)
+    for i in range(nt):
+        k = rows[i]
+        tx[i] = X[k, 0]
+        ty[i] = X[k, 1]
+        tth[i] = G[k, G_THETA]
+        ts0[i] = G[k, G_SIZE0]
+        ts1[i] = G[k, G_SIZE1]
+    return fragment_hosts(px, py, start, npts, det, tx, ty, tth, ts0, ts1, margin)

@@ -58,19 +58,13 @@ import numpy as np
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.freespace import FreeSpaceMemory
 from dynslam2d.detect.kernels import (
-    G_SIZE0,
-    G_SIZE1,
-    G_THETA,
     N_G,
     N_GI,
-    association_rows,
     cv_predict,
     fit_params,
-    fragment_hosts,
-    gate_costs,
-    size_jump_gate,
 )
 from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, assign_groups
+from dynslam2d.detect.kernels_update import association_gates, fragment_hosts_rows
 from dynslam2d.detect.layout import (
     KIND_CIRCLE,
     KIND_RECT,
@@ -355,13 +349,11 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         cand = [k for k in self._tracks if k.id in updated and k.state == CONFIRMED]
         if not cand:
             return [None] * len(dets)
-        rows = np.array([k.row for k in cand], dtype=np.int64)
-        X, G = self._X, self._G  # (the candidates' centres and shapes: one contiguous gather per column)
         b = self._batch
-        idx = fragment_hosts(b.px, b.py, b.start, b.npts, np.array(dets, dtype=np.int64), X[:, 0].take(rows),
-                             X[:, 1].take(rows), G[:, G_THETA].take(rows), G[:, G_SIZE0].take(rows),
-                             G[:, G_SIZE1].take(rows),
-                             float(self.config.fit.fragment_margin))
+        # (the candidates' centres and shapes read from their rows in the kernel; docs/speed.md, pass trk24)
+        idx = fragment_hosts_rows(b.px, b.py, b.start, b.npts, np.array(dets, dtype=np.int64), self._X, self._G,
+                                  np.array([k.row for k in cand], dtype=np.int64),
+                                  float(self.config.fit.fragment_margin))
         return [cand[i] if i >= 0 else None for i in idx.tolist()]
 
     # ------------------------------------------------------------------ steps
@@ -453,19 +445,18 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
                 veto.append(i)
         # the tracks' sizes, flags and axis angles from their shape rows in one call ("known": a coasting track's size
         # is known if all(size_known) or it is not a rectangle)
-        tsize, tmax, rect, theta, known = association_rows(self._G, self._Gi, self._rows(), np.array(missed))
-        reach = 0.5 * tmax
         # Mahalanobis gate and distance gate; a rectangle is measured again with the track's own sizes
-        # (a side the detection "measured" too short, e.g. a grazing side, must not break the association)
-        d2, near, ok = gate_costs(Xs, Ps, reach, rect, theta, tsize,
-                                  self._default.z, self._default.R, float(tc.gate_distance), float(tc.gate_chi2),
-                                  *self._batch, self._fit_p)
-        # a tracked object does not double its size from one scan to the next: a person track coasting
+        # (a side the detection "measured" too short, e.g. a grazing side, must not break the association).
+        # A tracked object does not double its size from one scan to the next: a person track coasting
         # past a wall must not take the wall's cluster (it would carry M onto the wall)
         # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
-        # later, a tracked object may touch another for a scan)
-        ok, det_ext = size_jump_gate(ok, self._batch.lohi, tmax, known, float(tc.max_size_jump_ratio),
-                                     float(tc.max_size_jump))
+        # later, a tracked object may touch another for a scan).
+        # (one kernel call: association_rows, gate_costs with the reach 0.5 × the longest side, size_jump_gate;
+        # docs/speed.md, pass trk24)
+        tsize, d2, ok, det_ext = association_gates(
+            self._G, self._Gi, self._rows(), np.array(missed), Xs, Ps, self._default.z, self._default.R,
+            float(tc.gate_distance), float(tc.gate_chi2), *self._batch, self._fit_p, float(tc.max_size_jump_ratio),
+            float(tc.max_size_jump))
         if self._map is not None:
             ok = self._veto_merged(ok, dets, det_ext, tsize, veto)
         if not np.count_nonzero(ok):  # (no pair allowed; count_nonzero: cheaper than any())

@@ -3,12 +3,10 @@ track, map frame. Split out of ``detect/tracker.py`` (docs/speed.md, pass trktab
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from dynslam2d.detect.frozen import fast_init
-from dynslam2d.detect.kernels import GI_KIND, report_boxes
+from dynslam2d.detect.kernels_update import report_rows
 from dynslam2d.detect.layout import KIND_CIRCLE, KIND_NAMES
 from dynslam2d.detect.tracktable import _HALF_PI, COASTING, CONFIRMED
 from dynslam2d.types import Box, Track, wrap_angle
@@ -25,22 +23,12 @@ class TrackReport:
         if not tracks:
             return []
         slow = 0.5 * self.config.tracker.v_min
-        # (speed: the boxes of all tracks from their rows in one kernel call; states and covariances stacked in one copy
-        # each, every report's velocity / covariance a row of them, its own memory apart from the tracker's)
-        order = self._rows()
-        n = order.shape[0]
-        fast = np.empty(n, dtype=np.int8)  # (np.full without its Python wrapper)
-        fast.fill(-1)
-        boxes, undecided = report_boxes(self._G, self._Gi, self._X, order, slow, fast)
-        if np.count_nonzero(undecided):  # (a speed within an ulp of the limit: decided by math.hypot, as reported)
-            for i in undecided.nonzero()[0].tolist():
-                vx, vy = self._X[order[i], 2:].tolist()
-                fast[i] = math.hypot(vx, vy) > slow
-            boxes, _ = report_boxes(self._G, self._Gi, self._X, order, slow, fast)
-        # (copies: the reports' own memory; take: the values of X[order], P[order], a fraction of fancy indexing's cost)
-        V = self._X.take(order, axis=0)[:, 2:]
-        P = self._P.take(order, axis=0)
-        kinds = self._Gi[:, GI_KIND].take(order).tolist()
+        # (speed: the boxes of all tracks, their states, covariances and kinds from their rows in one kernel call —
+        # the moving test on Python's math.hypot bit for bit —; every report's velocity / covariance a row of the
+        # copies, its own memory apart from the tracker's; docs/speed.md, pass trk24)
+        boxes, Xo, P, kinds = report_rows(self._G, self._Gi, self._X, self._P, self._rows(), slow)
+        V = Xo[:, 2:]
+        kinds = kinds.tolist()
         no_beams = np.zeros(0, dtype=np.int64)
         out = []
         append, make_track, make_box, names = out.append, _make_track, _make_box, KIND_NAMES  # (locals: per track)

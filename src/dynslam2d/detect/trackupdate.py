@@ -13,12 +13,10 @@ import numpy as np
 
 from dynslam2d.detect.kernels import (
     G_SIZE0,
-    accel_candidates,
-    kalman_update_batch,
     pair_priors,
     shape_update,
 )
-from dynslam2d.detect.kernels_update import accel_bound
+from dynslam2d.detect.kernels_update import kalman_pairs
 from dynslam2d.detect.layout import KIND_CIRCLE
 from dynslam2d.detect.measure import Detection
 from dynslam2d.detect.tracktable import _HALF_PI, _PAST_COMPACT, TENTATIVE, _past_points, _Track
@@ -82,49 +80,30 @@ class TrackUpdate:
         Xs, Ps = self._stack()
         # (kalman_update_batch works on copies: the prior stays as it is. Rows gathered with take: the values of Xs[sel]
         # and Ps[sel], a fraction of fancy indexing's cost on a 2-D / 3-D array; docs/speed.md, pass trk20)
-        X_prior = Xs.take(sel, axis=0)
-        Xn, Pn, ok = kalman_update_batch(X_prior, Ps.take(sel, axis=0), mr.H, mr.zm, mr.Rm)
-        self._bound_acceleration(X_prior, Xn, self._tracks, pairs)
-        self._stacked = None  # the tracks change below
-        out = ok.tolist()
-        # the new states and covariances into the tracks' rows of the state arrays, all at once (every update applied,
-        # the usual case: without the boolean selections)
-        if all(out):
-            self._X[trows] = Xn
-            self._P[trows] = Pn
-        else:
-            rows = trows[ok]
-            self._X[rows] = Xn[ok]
-            self._P[rows] = Pn[ok]
+        # the Kalman updates, the physical acceleration bound (once a track's velocity is established —
+        # ``accel_bound_after`` updates — one update may change it by at most ``max_accel``·dt: speeds no longer jump
+        # from scan to scan with the shape of a partial view or a leg swinging; the exact test with Python's
+        # math.hypot bit for bit, detect/kernels_update.py) and the new states and covariances written into the
+        # tracks' rows where applied: one kernel call (docs/speed.md, pass trk24)
         fc, tc = self.config.fit, self.config.tracker
+        bound = tc.max_accel is not None and self._dt > 0.0
+        if bound:
+            lim = tc.max_accel * self._dt
+            tracks = self._tracks
+            hits = np.array([tracks[i].hits for i, _ in pairs], dtype=np.int64)
+            ok, nb = kalman_pairs(Xs, Ps, sel, mr.H, mr.zm, mr.Rm, True, hits, tc.accel_bound_after, float(lim),
+                                  (0.999 * lim) ** 2, self._X, self._P, trows)
+            if nb:
+                self.stats.accel_bounded += nb
+        else:
+            ok, _ = kalman_pairs(Xs, Ps, sel, mr.H, mr.zm, mr.Rm, False, sel, 0, 0.0, 0.0, self._X, self._P, trows)
+        self._stacked = None  # the tracks changed
+        out = ok.tolist()
         shape_update(self._G, self._Gi, self._X, trows, dis, ok, b.kind, b.theta, b.lohi, b.rel, b.circle,
                      mr.size_obs, mr.size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
                      float(tc.heading_gain), float(tc.size_gain))
         self._update_tracks(pairs, dets, t, out, trows)
         return out
-
-    def _bound_acceleration(self, X_prior: np.ndarray, X_new: np.ndarray, tracks: list[_Track],
-                            pairs: list[tuple[int, int]]) -> None:
-        """Physical acceleration bound (in place on ``X_new``): once a track's velocity is established
-        (``accel_bound_after`` updates), one update may change it by at most ``max_accel``·dt — speeds no
-        longer jump from scan to scan with the shape of a partial view or a leg swinging. Row r of the
-        states belongs to ``tracks[pairs[r][0]]``."""
-        tc = self.config.tracker
-        if tc.max_accel is None or self._dt <= 0.0:
-            return
-        lim = tc.max_accel * self._dt
-        # (speed: only rows whose velocity change comes near the bound go through the exact test below)
-        near = accel_candidates(X_prior, X_new, (0.999 * lim) ** 2)
-        if near.shape[0] == 0:
-            return
-        # the exact test and the bound of the candidates whose track is established, in one kernel call (Python's
-        # math.hypot bit for bit: detect/kernels_update.py)
-        after = tc.accel_bound_after
-        rows = [r for r in near.tolist() if tracks[pairs[r][0]].hits >= after]
-        if rows:
-            nb = accel_bound(X_prior, X_new, np.array(rows, dtype=np.int64), float(lim))
-            if nb:
-                self.stats.accel_bounded += nb
 
     def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float,
                        applied: list[bool], trows: np.ndarray) -> None:
