@@ -1255,6 +1255,43 @@ def shape_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray,
         Gi[k, GI_KIND] = dk
 
 
+@njit(cache=True, inline="always")
+def box_row(out: np.ndarray, i: int, X: np.ndarray, G: np.ndarray, k: int, circle: bool, moving: bool) -> None:
+    """Row ``i`` of the reported boxes ``out`` (centre x, y, heading, length, width; m, rad, map frame) from the state
+    row ``k``: a moving track headed along its velocity (a box: the axis nearest it, its sides swapped when that is
+    the second axis), a still box along its longer side, a still circle at 0; a box's heading wrapped to [−π, π)
+    (``Tracker._report``'s arithmetic; shared by :func:`report_boxes` and ``kernels_update.report_rows``)."""
+    vx = X[k, 2]
+    vy = X[k, 3]
+    out[i, 0] = X[k, 0]
+    out[i, 1] = X[k, 1]
+    if circle:
+        out[i, 2] = math.atan2(vy, vx) if moving else 0.0
+        out[i, 3] = out[i, 4] = 2.0 * G[k, G_RADIUS]
+        return
+    sa = G[k, G_SIZE0]
+    sb = G[k, G_SIZE1]
+    tb = G[k, G_THETA]
+    if moving:
+        q = int(round(((math.atan2(vy, vx) - tb + math.pi) % _TWO_PI - math.pi) / _HALF_PI))
+        theta = tb + q * _HALF_PI
+        if q % 2 == 0:
+            out[i, 3] = sa
+            out[i, 4] = sb
+        else:
+            out[i, 3] = sb
+            out[i, 4] = sa
+    elif sb > sa:
+        theta = tb + _HALF_PI
+        out[i, 3] = sb
+        out[i, 4] = sa
+    else:
+        theta = tb
+        out[i, 3] = sa
+        out[i, 4] = sb
+    out[i, 2] = (theta + math.pi) % _TWO_PI - math.pi  # wrap_angle
+
+
 @njit(cache=True)
 def report_boxes(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray, slow: float,
                  fast: np.ndarray) -> tuple:
@@ -1281,33 +1318,7 @@ def report_boxes(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray,
             moving = h > slow
         else:
             moving = f == 1
-        out[i, 0] = X[k, 0]
-        out[i, 1] = X[k, 1]
-        if Gi[k, GI_KIND] == K_CIRCLE:
-            out[i, 2] = math.atan2(vy, vx) if moving else 0.0
-            out[i, 3] = out[i, 4] = 2.0 * G[k, G_RADIUS]
-            continue
-        sa = G[k, G_SIZE0]
-        sb = G[k, G_SIZE1]
-        tb = G[k, G_THETA]
-        if moving:
-            q = int(round(((math.atan2(vy, vx) - tb + math.pi) % _TWO_PI - math.pi) / _HALF_PI))
-            theta = tb + q * _HALF_PI
-            if q % 2 == 0:
-                out[i, 3] = sa
-                out[i, 4] = sb
-            else:
-                out[i, 3] = sb
-                out[i, 4] = sa
-        elif sb > sa:
-            theta = tb + _HALF_PI
-            out[i, 3] = sb
-            out[i, 4] = sa
-        else:
-            theta = tb
-            out[i, 3] = sa
-            out[i, 4] = sb
-        out[i, 2] = (theta + math.pi) % _TWO_PI - math.pi  # wrap_angle
+        box_row(out, i, X, G, k, Gi[k, GI_KIND] == K_CIRCLE, moving)
     return out, undecided
 
 

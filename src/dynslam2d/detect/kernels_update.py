@@ -19,13 +19,13 @@ import math
 import numpy as np
 
 from dynslam2d.detect.kernels import (
-    G_RADIUS,
     G_SIZE0,
     G_SIZE1,
     G_THETA,
     GI_KIND,
     accel_candidates,
     association_rows,
+    box_row,
     fragment_hosts,
     gate_costs,
     kalman_update_batch,
@@ -36,8 +36,6 @@ from dynslam2d.jitbox import njit
 
 _DBL_MIN = 2.2250738585072014e-308  # the smallest normal double (C's DBL_MIN)
 _SPLIT = 134217729.0  # 2^27 + 1: Veltkamp's splitter for doubles (dl_split)
-_HALF_PI = 0.5 * math.pi  # (kernels.py's constants, the same floats)
-_TWO_PI = 2.0 * math.pi
 
 
 @njit(cache=True, inline="always")
@@ -271,36 +269,7 @@ def report_rows(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, row
                 Po[i, a, b] = P[k, a, b]
         kd = Gi[k, GI_KIND]
         kinds[i] = kd
-        vx = X[k, 2]
-        vy = X[k, 3]
-        moving = py_hypot(vx, vy) > slow
-        out[i, 0] = X[k, 0]
-        out[i, 1] = X[k, 1]
-        if kd == K_CIRCLE:
-            out[i, 2] = math.atan2(vy, vx) if moving else 0.0
-            out[i, 3] = out[i, 4] = 2.0 * G[k, G_RADIUS]
-            continue
-        sa = G[k, G_SIZE0]
-        sb = G[k, G_SIZE1]
-        tb = G[k, G_THETA]
-        if moving:
-            q = int(round(((math.atan2(vy, vx) - tb + math.pi) % _TWO_PI - math.pi) / _HALF_PI))
-            theta = tb + q * _HALF_PI
-            if q % 2 == 0:
-                out[i, 3] = sa
-                out[i, 4] = sb
-            else:
-                out[i, 3] = sb
-                out[i, 4] = sa
-        elif sb > sa:
-            theta = tb + _HALF_PI
-            out[i, 3] = sb
-            out[i, 4] = sa
-        else:
-            theta = tb
-            out[i, 3] = sa
-            out[i, 4] = sb
-        out[i, 2] = (theta + math.pi) % _TWO_PI - math.pi  # wrap_angle
+        box_row(out, i, X, G, k, kd == K_CIRCLE, py_hypot(X[k, 2], X[k, 3]) > slow)
     return out, Xo, Po, kinds
 
 
