@@ -272,6 +272,25 @@ def test_warm_cache_is_not_cold_and_summary_reports_steady_speed(sim_run):
     assert _steady_speed(np.zeros(0))["steady_scans_per_s"] is None
 
 
+def test_cache_state_counts_the_kernels_a_run_needs_not_the_references_kept_for_tests():
+    """Kernels no run calls from Python (``report_boxes``, ``manage_rows``: the tests' references of the merged
+    kernels) stay uncompiled after every run; counted, they made a warm cache look cold (a second README run said
+    "compiling kernels" and started the background compile)."""
+    import importlib
+
+    from dynslam2d.jitcache import kernel_cache_state
+    from dynslam2d.jitmanifest import KERNELS
+
+    importlib.import_module("dynslam2d.pipeline")
+    needed = {k for k, _ in KERNELS}
+    refs = {"dynslam2d.detect.kernels.report_boxes", "dynslam2d.detect.kernels.manage_rows"}
+    assert not refs & needed
+    assert kernel_cache_state(needed=frozenset(refs)).total == 2
+    every = kernel_cache_state(needed=frozenset())
+    run = kernel_cache_state()
+    assert 20 <= run.total <= len(needed) and every.total >= run.total + len(refs)
+
+
 def test_terminal_table_keeps_its_title_on_one_line():
     import io
 

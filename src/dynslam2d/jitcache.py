@@ -468,19 +468,29 @@ def _has_valid_index(dispatcher: object) -> bool | None:
         return None
 
 
-def kernel_cache_state(prefix: str = "dynslam2d") -> KernelCacheState:
-    """Count the module-level numba kernels of the loaded ``prefix`` modules and those whose
-    compiled code numba's cache holds (import the pipeline first to load them all)."""
+def kernel_cache_state(prefix: str = "dynslam2d", needed: frozenset[str] | None = None) -> KernelCacheState:
+    """Count the module-level numba kernels of the loaded ``prefix`` modules that a run needs and those whose
+    compiled code numba's cache holds (import the pipeline first to load them all). ``needed``: the kernels'
+    "module.qualname"; by default those of :mod:`dynslam2d.jitmanifest` (what a run of ``dynslam2d run``
+    compiles), every loaded kernel when it is empty. Kernels no run calls from Python (a reference kept for the
+    tests, a callee compiled inside its caller) would otherwise count as missing after every run and make a warm
+    cache look cold."""
     try:
         from numba.core.registry import CPUDispatcher
     except ImportError:  # pragma: no cover - numba is a dependency
         return KernelCacheState(0, 0)
+    if needed is None:
+        from dynslam2d.jitmanifest import KERNELS
+
+        needed = frozenset(k for k, _ in KERNELS)
     total = cached = 0
     for name, module in list(sys.modules.items()):
         if module is None or not (name == prefix or name.startswith(prefix + ".")):
             continue
         for obj in list(vars(module).values()):
             if isinstance(obj, CPUDispatcher) and getattr(obj, "__module__", None) == name:
+                if needed and f"{name}.{obj.py_func.__qualname__}" not in needed:
+                    continue
                 state = _has_valid_index(obj)
                 if state is None:
                     continue
