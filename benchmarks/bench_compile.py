@@ -193,6 +193,18 @@ def wait(src: str) -> None:
           f"{os.getloadavg()[0]:.2f}; src {src}")
 
 
+def cold_probe(src: str, probe: str) -> dict:
+    """Run ``probe`` (Python code; argv[1] an output folder) on the checkout ``src`` with an empty numba cache and
+    no background compile, in a fresh process; its last stdout line parsed as JSON."""
+    env = dict(os.environ, PYTHONPATH=src, NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-cold-"),
+               DYNSLAM2D_COMPILE_WORKER="0")
+    out = tempfile.mkdtemp(prefix="bench-compile-") + "/run"
+    res = subprocess.run([sys.executable, "-c", probe, out], env=env, capture_output=True, text=True)
+    if res.returncode != 0:
+        raise SystemExit(res.stderr[-2000:])
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--src", default=str(Path(__file__).resolve().parents[1] / "src"))
@@ -203,13 +215,7 @@ def main() -> None:
     if args.wait or args.trace:
         (trace if args.trace else wait)(args.src)
         return
-    env = dict(os.environ, PYTHONPATH=args.src, NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-cold-"),
-               DYNSLAM2D_COMPILE_WORKER="0")
-    out = tempfile.mkdtemp(prefix="bench-compile-") + "/run"
-    res = subprocess.run([sys.executable, "-c", PROBE, out], env=env, capture_output=True, text=True)
-    if res.returncode != 0:
-        raise SystemExit(res.stderr[-2000:])
-    data = json.loads(res.stdout.strip().splitlines()[-1])
+    data = cold_probe(args.src, PROBE)
     per = sorted(data["per"].items(), key=lambda kv: -kv[1])
     print(f"process CPU {data['process_cpu']:.1f} s; compile CPU {sum(v for _, v in per):.1f} s "
           f"in {len(per)} functions ({data['compilations']} compilations: a function compiled for several "

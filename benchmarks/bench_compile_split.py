@@ -30,13 +30,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_compile import RUN_FIRST_COMMAND  # noqa: E402
+from bench_compile import RUN_FIRST_COMMAND, cold_probe  # noqa: E402
 
 PROBE = r"""
 import json, sys, time
@@ -168,13 +166,7 @@ def main() -> None:
     ap.add_argument("--top", type=int, default=15)
     ap.add_argument("--json", help="also write the raw per-function figures here")
     args = ap.parse_args()
-    env = dict(os.environ, PYTHONPATH=args.src, NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-cold-"),
-               DYNSLAM2D_COMPILE_WORKER="0")
-    out = tempfile.mkdtemp(prefix="bench-compile-") + "/run"
-    res = subprocess.run([sys.executable, "-c", PROBE, out], env=env, capture_output=True, text=True)
-    if res.returncode != 0:
-        raise SystemExit(res.stderr[-2000:])
-    data = json.loads(res.stdout.strip().splitlines()[-1])
+    data = cold_probe(args.src, PROBE)
     if args.json:
         Path(args.json).write_text(json.dumps(data))
     per: dict[str, dict[str, float]] = {}
