@@ -78,8 +78,7 @@ class TrackUpdate:
             sig = self._size_sigma[npair] = np.full(npair, 0.05)
         mr = self._measure_rows(dis, sizes, has, radius, sig)
         Xs, Ps = self._stack()
-        # (kalman_update_batch works on copies: the prior stays as it is. Rows gathered with take: the values of Xs[sel]
-        # and Ps[sel], a fraction of fancy indexing's cost on a 2-D / 3-D array; docs/speed.md, pass trk20)
+        # (the kernel updates copies of the stacked rows sel: the prior Xs / Ps stays as it is)
         # the Kalman updates, the physical acceleration bound (once a track's velocity is established —
         # ``accel_bound_after`` updates — one update may change it by at most ``max_accel``·dt: speeds no longer jump
         # from scan to scan with the shape of a partial view or a leg swinging; the exact test with Python's
