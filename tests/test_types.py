@@ -116,3 +116,35 @@ def test_absurd_angles_are_rejected():
         _scan(np.ones(3), angle_min=1e300)
     with pytest.raises(DynSlamError, match="outside"):
         _scan(np.ones(3), angle_increment=1e300)
+
+
+def test_copy_scan_writes_every_slot_and_without_matches_with_ranges():
+    """_copy_scan's one statement per slot: the setters' order is Scan.__slots__', every slot is copied (distinct
+    values in each), and ``without`` gives what ``with_ranges(np.where(mask, nan, ranges))`` gives, with the valid
+    mask of those ranges (computed or not yet computed on the source scan)."""
+    from dynslam2d.types import _SCAN_SLOTS, _copy_scan
+
+    assert Scan.__slots__ == _SCAN_SLOTS
+    rng = np.random.default_rng(3)
+    r = rng.uniform(0.05, 40.0, 200)
+    r[rng.random(200) < 0.2] = np.nan
+    s = Scan(stamp=12.5, angle_min=-1.5, angle_increment=0.015, ranges=r, range_min=0.1, range_max=30.0,
+             frame_id="front", intensities=rng.uniform(0, 1, 200), time_increment=1e-5, scan_time=0.05,
+             odom=Pose2D(1.0, 2.0, 0.3), yaw_rate=0.25)
+    _ = s.angles
+    for computed in (False, True):
+        if computed:
+            s.valid_view()
+        c = _copy_scan(s)
+        for name in Scan.__slots__:
+            assert getattr(c, name) is getattr(s, name), name
+        mask = rng.random(200) < 0.3
+        w = s.without(mask)
+        ref = s.with_ranges(np.where(mask, np.nan, s.ranges))
+        assert w.same_as(ref)
+        for name in Scan.__slots__:
+            if name not in ("ranges", "_valid"):
+                assert getattr(w, name) is getattr(s, name), name
+        assert (w._valid is None) == (not computed)
+        np.testing.assert_array_equal(w.valid_mask(), ref.valid_mask())
+        np.testing.assert_array_equal(s.ranges, r)  # the source is untouched
