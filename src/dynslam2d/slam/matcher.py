@@ -1003,24 +1003,26 @@ def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, 
     if sumsq is None:
         sumsq = float(_einsum("ij,ij->", pts_m, pts_m))
     rho = math.sqrt(sumsq / n) if n else 1.0
-    rho = max(rho, 1e-3)
-    h = hessian_cells.tolist()
+    rho = 1e-3 if 1e-3 > rho else rho  # (max(rho, 1e-3) without the call: the same value, NaN kept)
+    (h00, h01, h02), (h10, h11, h12), (h20, h21, h22) = hessian_cells.tolist()
     k = 1.0 / resolution  # world (m, m, rad) → cells / rad
-    a = h[0][0] * k * k
-    b = 0.5 * (h[0][1] + h[1][0]) * k * k
-    d = h[1][1] * k * k
-    u = 0.5 * (h[0][2] + h[2][0]) * k
-    v = 0.5 * (h[1][2] + h[2][1]) * k
-    r = h[2][2]
-    if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(d) and math.isfinite(u) and math.isfinite(v)
-            and math.isfinite(r)) or not a + d > 0.0:
+    a = h00 * k * k
+    b = 0.5 * (h01 + h10) * k * k
+    d = h11 * k * k
+    u = 0.5 * (h02 + h20) * k
+    v = 0.5 * (h12 + h21) * k
+    r = h22
+    isfinite = math.isfinite
+    if not (isfinite(a) and isfinite(b) and isfinite(d) and isfinite(u) and isfinite(v) and isfinite(r)) \
+            or not a + d > 0.0:
         return Degeneracy(0.0, 0.0, 0.0, np.array([1.0, 0.0]), rho, 0.0, True, True)
     if r > 1e-12 * (a + d):  # rotation marginalized (Schur complement)
         a2, b2, d2 = a - u * u / r, b - u * v / r, d - v * v / r
     else:  # the scan sees no rotation at all
         a2, b2, d2 = a, b, d
     half_tr = 0.5 * (a2 + d2)
-    disc = math.sqrt(max(0.25 * (a2 - d2) ** 2 + b2 * b2, 0.0))
+    disc = 0.25 * (a2 - d2) ** 2 + b2 * b2
+    disc = math.sqrt(0.0 if 0.0 > disc else disc)  # (max(…, 0.0) as a conditional: the same value, NaN kept)
     lam_max, lam_min = half_tr + disc, half_tr - disc
     if not lam_max > 0.0:
         return Degeneracy(0.0, 0.0, 0.0, np.array([1.0, 0.0]), rho, 0.0, True, True)
@@ -1033,9 +1035,9 @@ def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, 
         ax, ay = 0.0, 1.0
     nrm = math.hypot(ax, ay)
     axis = np.array([ax / nrm, ay / nrm]) if nrm > 0.0 else np.array([1.0, 0.0])
-    t_ratio = max(lam_min, 0.0) / lam_max
+    t_ratio = (0.0 if 0.0 > lam_min else lam_min) / lam_max
     det = a * d - b * b
     s_rot = r - (u * (d * u - b * v) + v * (a * v - b * u)) / det if det > 1e-300 * (a * d + 1e-300) else 0.0
-    r_ratio = max(s_rot, 0.0) / (rho * rho * lam_max)
-    return Degeneracy(min(t_ratio, r_ratio), t_ratio, r_ratio, axis, rho, lam_max,
+    r_ratio = (0.0 if 0.0 > s_rot else s_rot) / (rho * rho * lam_max)
+    return Degeneracy(r_ratio if r_ratio < t_ratio else t_ratio, t_ratio, r_ratio, axis, rho, lam_max,
                       t_ratio < threshold, r_ratio < threshold)
