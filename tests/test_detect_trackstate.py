@@ -279,3 +279,20 @@ def test_cv_predict_is_numpys_prediction_bit_for_bit() -> None:
         pytest.skip("numpy's BLAS here sums without one FMA per term (not OpenBLAS's dgemm), so the bitwise "
                     "comparison does not apply; the values agree to 1e-12")
     assert all(bitwise)
+
+
+def test_cv_fill_rewrites_the_prediction_matrices_of_each_step() -> None:
+    """``_cv_fill`` (the tracker's own F and Q arrays with this step's entries written, ``Tracker._predict``) leaves
+    them equal bit for bit to ``_cv_matrices``' new arrays for every step of a sequence of dt (1e-4 … 2 s, the same
+    two arrays reused from step to step, so an entry it forgot to rewrite would keep the previous step's value) and
+    noise densities."""
+    from dynslam2d.detect.tracker import _cv_fill, _cv_matrices
+
+    rng = np.random.default_rng(13)
+    F, Q = np.eye(4), np.zeros((4, 4))
+    for _ in range(2000):
+        dt = float(10.0 ** rng.uniform(-4, 0.3))
+        q = float(rng.uniform(0.0, 5.0))
+        _cv_fill(F, Q, dt, q)
+        F0, Q0 = _cv_matrices(dt, q)
+        assert F.tobytes() == F0.tobytes() and Q.tobytes() == Q0.tobytes()

@@ -130,8 +130,20 @@ class TrackerStats:
         return asdict(self)
 
 
+def _cv_fill(F: np.ndarray, Q: np.ndarray, dt: float, q: float) -> None:
+    """Write :func:`_cv_matrices`' values for a step of ``dt`` s into ``F`` (an identity but for its two dt entries)
+    and ``Q`` (zero but for its eight noise entries), (4, 4) each: the entries that change with dt, ten element
+    writes instead of two arrays built (``Tracker._predict``, once per scan; docs/speed.md, pass trk25)."""
+    q11, q12, q22 = q * dt ** 3 / 3.0, q * dt ** 2 / 2.0, q * dt
+    F[0, 2] = F[1, 3] = dt
+    Q[0, 0] = Q[1, 1] = q11
+    Q[0, 2] = Q[1, 3] = Q[2, 0] = Q[3, 1] = q12
+    Q[2, 2] = Q[3, 3] = q22
+
+
 def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
-    """Constant-velocity transition F and white-noise-acceleration Q for state [x, y, vx, vy]."""
+    """Constant-velocity transition F and white-noise-acceleration Q for state [x, y, vx, vy] (the continuous
+    white-noise acceleration model, Bar-Shalom, Li & Kirubarajan 2001, §6.2.2)."""
     q11, q12, q22 = q * dt ** 3 / 3.0, q * dt ** 2 / 2.0, q * dt
     # (flat lists reshaped: the same values, half the cost of nested lists)
     F = np.array([1.0, 0.0, dt, 0.0, 0.0, 1.0, 0.0, dt, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]).reshape(4, 4)
@@ -172,6 +184,9 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._G = np.zeros((_ROWS0, N_G))
         self._Gi = np.zeros((_ROWS0, N_GI), dtype=np.int8)
         self._rows_used = 0  # rows 0 … _rows_used − 1 have been handed out
+        # the prediction's F and Q (_cv_fill writes this step's entries into them; read only by the kernel and the
+        # rare paths of _predict, never kept beyond the scan)
+        self._FQ: tuple[np.ndarray, np.ndarray] = (np.eye(4), np.zeros((4, 4)))
         self._free_rows: list[int] = []  # rows of deleted tracks, reused first
         self._order: np.ndarray | None = None  # the rows of self._tracks in their order (None: to be built)
         self._next_id = 1
@@ -369,7 +384,8 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._stacked = None
         if not self._tracks or dt <= 0.0:
             return
-        F, Q = _cv_matrices(dt, self.config.tracker.accel_noise)
+        F, Q = self._FQ  # (the tracker's own two arrays, their dt entries written for this step)
+        _cv_fill(F, Q, dt, self.config.tracker.accel_noise)
         order = self._rows()
         tracks = self._tracks
         # coasting through a stop: it stays where it stood (from k.x / k.P, before the rows are written). Only
