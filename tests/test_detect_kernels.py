@@ -45,6 +45,7 @@ from dynslam2d.detect.layout import (
     DetectionBatch,
 )
 from dynslam2d.detect.reference import classify_and_bound, measure
+from dynslam2d.detect.segment import segment_points
 from dynslam2d.detect.shapes import CRITERIA, _lu_solve3
 from dynslam2d.sim import simulate
 from dynslam2d.types import Pose2D, Scan
@@ -337,6 +338,20 @@ def test_world_points_are_the_pose_transform_bit_for_bit(scenes) -> None:
         for g, w in zip(got, (ax, ay, ax[seg.beams], ay[seg.beams], np.column_stack((ax, ay))[seg.beams])):
             assert g.shape == w.shape and g.tobytes() == w.tobytes()
         assert (got[0][~valid] == pose.x).all()
+        # the tracker's form (pass det25): the segmentation kernel also returns these points, in the same call
+        both = segment_points(scan, cfg.segment, valid, float(pose.x), float(pose.y), pose.theta)
+        for f in ("labels", "beams", "offsets", "structure"):
+            g, w = getattr(both[0], f), getattr(seg, f)
+            assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes()
+        assert (both[0].wrapped, both[0].n_dropped) == (seg.wrapped, seg.n_dropped)
+        for g, w in zip(both[1:], got):
+            assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes()
+    # a scan without a valid beam: no cluster, every beam at the pose
+    scan, pose = scenes[0]
+    none = np.zeros(scan.n_beams, dtype=bool)
+    seg, ax, ay, px, py, pts = segment_points(scan, cfg.segment, none, float(pose.x), float(pose.y), pose.theta)
+    assert seg.n_clusters == 0 and px.shape == py.shape == (0,) and pts.shape == (0, 2)
+    assert (ax == pose.x).all() and (ay == pose.y).all()
 
 
 def _merge_numpy(first, second, px, py, beams, starts, npts, kinds, fits, lohi, rel):

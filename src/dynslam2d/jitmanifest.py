@@ -24,10 +24,8 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "float64, Array(bool, 1, 'C'),)"),
     ('dynslam2d.detect.segment._segment_kernel',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 2, 'C'), bool, "
-     'bool, float64, float64, float64, float64, float64, int64, bool, int64, int64,)'),
-    ('dynslam2d.detect.kernels.world_points',
-     "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
-     "float64, float64, float64, float64, Array(int64, 1, 'C'),)"),
+     'bool, float64, float64, float64, float64, float64, int64, bool, int64, int64, bool, Array(float64, '
+     "1, 'C'), Array(float64, 1, 'C'), float64, float64, float64, float64,)"),
     ('dynslam2d.detect.shapes.fit_cluster_rows',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
      "Array(float64, 1, 'C'), int64, float64, int64, int64, bool, float64, float64, float64, float64,)"),

@@ -214,7 +214,7 @@ def _endpoint_real(u: np.ndarray, v: np.ndarray, pos: int, k: int, lo_k: float, 
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # (inlined into the segmentation kernel: compiled once there, pass det25)
 def world_points(ranges: np.ndarray, valid: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, c: float, s: float,
                  x: float, y: float, beams: np.ndarray) -> tuple:
     """The scan's beams in the map frame (pose ``x, y`` and cos / sin ``c, s`` of its θ; ``cos_a``, ``sin_a``: the

@@ -24,6 +24,7 @@ import numpy as np
 
 from dynslam2d.detect.config import SegmentConfig
 from dynslam2d.detect.frozen import fast_init
+from dynslam2d.detect.kernels import world_points
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.types import Scan
 
@@ -118,10 +119,15 @@ def _link(ranges: np.ndarray, angles: np.ndarray, trig: np.ndarray, a: int, b: i
 @njit(cache=True)
 def _segment_kernel(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, trig: np.ndarray, fill_trig: bool,
                     fixed: bool, fixed_gap: float, lam: float, three_sigma: float, d_min: float, d_max: float,
-                    max_skip: int, wrap: bool, min_points: int, max_points: int) -> tuple:
+                    max_skip: int, wrap: bool, min_points: int, max_points: int, points: bool, cos_a: np.ndarray,
+                    sin_a: np.ndarray, pose_c: float, pose_s: float, pose_x: float, pose_y: float) -> tuple:
     """The whole segmentation in one pass: the valid beams of ``mask``, the links between consecutive ones (the
     last to the first when ``wrap`` and more than two beams are valid), the runs of linked beams → (labels, beams,
-    offsets, structure, n_dropped, wrapped). ``fill_trig``: fill ``trig`` first (:func:`_adjacent_trig`)."""
+    offsets, structure, n_dropped, wrapped, ax, ay, px, py, pts). ``fill_trig``: fill ``trig`` first
+    (:func:`_adjacent_trig`). Where ``points``, the last five are
+    :func:`~dynslam2d.detect.kernels.world_points` of the clusters' beams (``mask`` as its ``valid``; ``cos_a``,
+    ``sin_a`` the beam angles' cos / sin, ``pose_c``, ``pose_s`` the pose's θ's, ``pose_x``, ``pose_y`` its position;
+    map frame, m): the tracker's two calls as one (docs/speed.md, pass det25); else empty."""
     n = ranges.shape[0]
     if fill_trig:
         _adjacent_trig(angles, lam, trig)
@@ -146,10 +152,8 @@ def _segment_kernel(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, tr
     labels = np.full(n, -1, dtype=np.int32)
     beams = np.empty(m, dtype=np.int64)
     offsets = np.zeros(m + 1, dtype=np.int64)
-    if m == 0:
-        return labels, beams[:0], offsets[:1], np.zeros(0, dtype=np.bool_), 0, wrap
-    # start right after the last break so that no run is cut by the array end and clusters
-    # come in scan order (a cluster wrapping past the end comes first)
+    # start right after the last break so that no run is cut by the array end and clusters come in scan order (a
+    # cluster wrapping past the end comes first); no valid beam (m = 0): no run, no cluster, the same empty results
     start = 0
     if wrap:
         start = -1
@@ -184,7 +188,13 @@ def _segment_kernel(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, tr
     structure = np.empty(k, dtype=np.bool_)
     for c in range(k):
         structure[c] = offsets[c + 1] - offsets[c] > max_points
-    return labels, beams[:nb], offsets[:k + 1], structure, dropped, wrap
+    beams = beams[:nb]
+    if points:  # (one call site: world_points is inlined here, once)
+        ax, ay, px, py, pts = world_points(ranges, mask, cos_a, sin_a, pose_c, pose_s, pose_x, pose_y, beams)
+    else:
+        ax = ay = px = py = np.empty(0)
+        pts = np.empty((0, 2))
+    return labels, beams, offsets[:k + 1], structure, dropped, wrap, ax, ay, px, py, pts
 
 
 def is_full_circle(scan: Scan) -> bool:
@@ -215,27 +225,49 @@ def segment_scan(scan: Scan, config: SegmentConfig | None = None, valid: np.ndar
     Returns:
         A :class:`Segmentation`; a scan with no valid return gives zero clusters.
     """
-    cfg = config or SegmentConfig()
-    if checked and valid is not None:
-        mask = valid
-    else:
-        mask = scan.valid_mask() if valid is None else np.asarray(valid, dtype=bool) & scan.valid_mask()
-        mask &= scan.ranges > 0.0
+    if not (checked and valid is not None):
+        valid = scan.valid_mask() if valid is None else np.asarray(valid, dtype=bool) & scan.valid_mask()
+        valid &= scan.ranges > 0.0
+    return _segment(scan, config or SegmentConfig(), valid, None)[0]
+
+
+def segment_points(scan: Scan, config: SegmentConfig, valid: np.ndarray, pose_x: float, pose_y: float,
+                   pose_theta: float) -> tuple:
+    """:func:`segment_scan` with ``checked`` (``valid``: a C-contiguous bool mask of beams of ``scan.valid_mask()``
+    with a range > 0) and the beams in the map frame in the same call (the tracker's; docs/speed.md, pass det25):
+    ``(segmentation, ax, ay, px, py, pts)`` with :func:`~dynslam2d.detect.kernels.world_points`' results for the pose
+    (``pose_x``, ``pose_y`` in m, ``pose_theta`` in rad; invalid beams at the pose, ``px``, ``py``, ``pts`` the
+    clusters' beams in the segmentation's order)."""
+    return _segment(scan, config, valid, (math.cos(pose_theta), math.sin(pose_theta), pose_x, pose_y))
+
+
+_NO_TRIG = np.zeros(0)  # (cos / sin of no beams: segment_scan's call, which transforms no point)
+
+
+def _segment(scan: Scan, cfg: SegmentConfig, mask: np.ndarray, pose: tuple | None) -> tuple:
+    """The segmentation kernel's call for :func:`segment_scan` (``pose`` None) and :func:`segment_points` (``pose``:
+    cos θ, sin θ, x, y): (segmentation, ax, ay, px, py, pts)."""
     key = (scan.ranges.shape[0], scan.angle_min, scan.angle_increment)
     geo = _GEOMETRY.get(key)
     if geo is None:
         if len(_GEOMETRY) >= _GEOMETRY_MAX:
             _GEOMETRY.clear()
-        geo = _GEOMETRY[key] = (scan.angles, {})
-    angles, trigs = geo
+        a = scan.angles
+        geo = _GEOMETRY[key] = (a, {}, np.cos(a), np.sin(a))
+    angles, trigs, cos_a, sin_a = geo
     lam = math.radians(cfg.lambda_deg)
     trig = trigs.get(lam)
     fill = trig is None
     if fill:
         trig = trigs[lam] = np.zeros((max(key[0], 1), 4))
     wrap = {"auto": is_full_circle(scan), "always": True, "never": False}[cfg.wrap_around]
-    labels, beams, offsets, structure, dropped, wrapped = _segment_kernel(
+    if pose is None:
+        points, cos_a, sin_a, c, s, x, y = False, _NO_TRIG, _NO_TRIG, 1.0, 0.0, 0.0, 0.0
+    else:
+        points = True
+        c, s, x, y = pose
+    labels, beams, offsets, structure, dropped, wrapped, ax, ay, px, py, pts = _segment_kernel(
         scan.ranges, angles, mask, trig, fill, cfg.mode == "fixed", float(cfg.fixed_gap), lam,
         3.0 * float(cfg.sigma_r), float(cfg.d_min), float(cfg.d_max), int(cfg.max_skip_beams), wrap,
-        int(cfg.min_points), int(cfg.max_points))
-    return _make_segmentation(labels, beams, offsets, structure, wrapped, dropped)
+        int(cfg.min_points), int(cfg.max_points), points, cos_a, sin_a, c, s, x, y)
+    return _make_segmentation(labels, beams, offsets, structure, wrapped, dropped), ax, ay, px, py, pts

@@ -17,7 +17,6 @@ from dynslam2d.detect.kernels import (
     measure_batch,
     merge_legs,
     select_detections,
-    world_points,
 )
 from dynslam2d.detect.layout import (
     F_THETA,
@@ -28,7 +27,7 @@ from dynslam2d.detect.layout import (
     MeasureRows,
 )
 from dynslam2d.detect.measure import Detection, ScanDetection, scan_detections
-from dynslam2d.detect.segment import segment_scan
+from dynslam2d.detect.segment import segment_points
 from dynslam2d.detect.shapes import CRITERIA, fit_cluster_rows
 from dynslam2d.detect.vehicles import _NO_MAP, extent_limit
 from dynslam2d.types import Pose2D, Scan
@@ -44,15 +43,6 @@ def _thin(depth_ratio: float, min_radius: float) -> float:
 class TrackDetect:
     """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: the detection step (``_detect``, ``_merge_legs``)."""
 
-    def _beam_trig(self, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
-        """cos / sin of the beam angles, cached per beam geometry (sensor frame)."""
-        key = (scan.n_beams, float(scan.angle_min), float(scan.angle_increment))
-        if self._trig_key != key:
-            a = scan.angles
-            self._trig = (np.cos(a), np.sin(a))
-            self._trig_key = key
-        return self._trig
-
     def _detect(self, scan: Scan, pose: Pose2D) -> list[Detection]:
         cfg = self.config
         st = self.stats
@@ -60,7 +50,9 @@ class TrackDetect:
         valid = scan.valid_mask()  # (a copy)
         if not scan.range_min > 0.0:  # (else every valid range is ≥ range_min > 0 already: the test changes nothing)
             valid &= ranges > 0.0
-        seg = segment_scan(scan, cfg.segment, valid, checked=True)
+        # the segmentation and every beam in the map frame (pose.transform_points of the beams, invalid ones at the
+        # pose; all beams ax, ay and the clusters' ones px, py, pts) in one kernel call
+        seg, ax, ay, px, py, pts = segment_points(scan, cfg.segment, valid, float(pose.x), float(pose.y), pose.theta)
         self.last_segmentation = seg
         st.clusters += seg.n_clusters
         st.dropped_small_clusters += seg.n_dropped
@@ -70,12 +62,7 @@ class TrackDetect:
             if self._free is not None:
                 self._free.add(scan, pose, valid)
             return []
-        cos_a, sin_a = self._beam_trig(scan)
-        # pose.transform_points of the beams (invalid ones at the pose), all beams and the clusters' ones
         beams = seg.beams
-        ct, st_ = math.cos(pose.theta), math.sin(pose.theta)
-        ax, ay, px, py, pts = world_points(ranges, valid, cos_a, sin_a, ct, st_, float(pose.x),
-                                           float(pose.y), beams)
         offsets = seg.offsets
         ext_lim = extent_limit(cfg)
         # (without the circle fits the classification below never reads: shapes.fit_cluster_rows, NaN columns that
