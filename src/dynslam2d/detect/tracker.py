@@ -209,8 +209,6 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._body_key: np.ndarray | None = None  # body beams the grown mask below was made from
         self._body_grown: np.ndarray = np.zeros(0, dtype=bool)
         self._fit_p = fit_params(self.config.fit)
-        self._trig_key: tuple | None = None
-        self._trig: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
         self._batch: DetectionBatch | None = None  # per-detection arrays of the current scan (kernels)
         self._default: MeasureRows | None = None  # default measurements of the current scan's detections
         self._no_prior: dict[int, tuple] = {}  # measure_batch's "no track prior" arguments for m detections, by m
