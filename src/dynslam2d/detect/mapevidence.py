@@ -152,8 +152,10 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
         # tangent to it, a neighbour ending on it) does not see through it
         if not (clear[k] and clear[k - 1] and clear[k + 1]):
             continue
-        reach = math.sqrt(min((cx[k - 1] - ox) ** 2 + (cy[k - 1] - oy) ** 2,
-                              (cx[k + 1] - ox) ** 2 + (cy[k + 1] - oy) ** 2,
+        # (min of two, twice: numba compiles min/max once per argument count and type, and its 3-argument forms
+        # served only this kernel; the same comparisons in the same order as min of three)
+        reach = math.sqrt(min(min((cx[k - 1] - ox) ** 2 + (cy[k - 1] - oy) ** 2,
+                                  (cx[k + 1] - ox) ** 2 + (cy[k + 1] - oy) ** 2),
                               (cx[k] - ox) ** 2 + (cy[k] - oy) ** 2)) - depth
         if not reach > 0.0:
             continue
@@ -181,11 +183,11 @@ def seen_through_structure_kernel(logodds: np.ndarray, i0: int, j0: int, ox: flo
         if a1 >= a0:
             step = 1
             start = max(a0, a_off)
-            cnt = min(a1, int(math.floor(m0 + along)) + 1, a_off + a_len - 1) - start + 1
+            cnt = min(min(a1, int(math.floor(m0 + along)) + 1), a_off + a_len - 1) - start + 1
         else:
             step = -1
             start = min(a0, a_off + a_len - 1)
-            cnt = start - max(a1, int(math.ceil(m0 - along)) - 1, a_off) + 1
+            cnt = start - max(max(a1, int(math.ceil(m0 - along)) - 1), a_off) + 1
         if cnt <= 0:  # (no step inside the grid: a laser outside it walking away; the pass from the first to the
             continue  # last hit below would run from t = cnt to −1, off the grid)
         # a branch-free first pass (it vectorises): most beams pass no long-occupied cell at all. One loop per major
