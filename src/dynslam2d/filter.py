@@ -132,7 +132,7 @@ class FilterConfig(BaseModel):
         return MODE_ALIASES.get(value, value) if isinstance(value, str) else value
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _region_of(x: float, y: float, c: np.ndarray, ct: np.ndarray, st: np.ndarray, ha: np.ndarray,
                hb: np.ndarray) -> int:
     """Index ``j`` of the exclusion region that holds the point (``x``, ``y``), m, or −1 (paper Eq. 5–8).
@@ -176,7 +176,7 @@ def _exclusion_kernel(
             removed[i] = True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _scan_exclusion_kernel(
     ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray,
     pc: float, ps: float, px: float, py: float,
@@ -280,7 +280,7 @@ def observed_boxes_kernel(
         boxes[j, 4] = v1 - v0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _box_extents_kernel(boxes: np.ndarray, square: bool, margin: float, cap: float) -> np.ndarray:
     """:func:`half_extents` of mode ``box`` without a speed margin, for (k, ≥ 5) rows [p_x, p_y, θ, l, w, …]:
     (k, 2) half-extents, m, with the same floating-point operations (``cap`` = inf: no cap; a NaN side gives

@@ -242,7 +242,7 @@ def world_points(ranges: np.ndarray, valid: np.ndarray, cos_a: np.ndarray, sin_a
     return ax, ay, px, py, pts
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def mask_fractions(masks: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """(q, k) fraction of True in each segment ``masks[r, offsets[c]:offsets[c+1]]`` of each row r (0 for an empty
     segment): the count over the length, which is the value of :func:`segment_means` of the mask as 0 / 1 floats

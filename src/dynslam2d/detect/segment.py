@@ -64,7 +64,7 @@ class Segmentation:
         return np.diff(self.offsets)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _adjacent_trig(angles: np.ndarray, lam: float, trig: np.ndarray) -> None:
     """trig[a] = cos Δφ, sin Δφ, sin(λ − Δφ) and (Δφ ≥ λ) of beams a and a+1 (Δφ = |φ_{a+1} − φ_a|, folded to
     [0, π]): the trigonometry of :func:`_link` for adjacent beams, made once per beam geometry."""
@@ -78,7 +78,7 @@ def _adjacent_trig(angles: np.ndarray, lam: float, trig: np.ndarray) -> None:
         trig[a, 3] = 1.0 if dphi >= lam else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _link(ranges: np.ndarray, angles: np.ndarray, trig: np.ndarray, a: int, b: int, fixed: bool, fixed_gap: float,
           lam: float, three_sigma: float, d_min: float, d_max: float) -> bool:
     """Valid beams a and b belong to the same cluster (paper Eq. 1): the gap between their points is below the

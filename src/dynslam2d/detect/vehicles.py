@@ -32,7 +32,7 @@ def extent_limit(config: DetectConfig) -> float:
     return max(seg.max_extent, seg.vehicle_max_extent)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def long_kept(keep: np.ndarray, fits: np.ndarray, max_extent: float) -> np.ndarray:
     """Indices (ascending, int64) of the kept clusters (``keep``) whose fitted rectangle (``fits`` rows,
     :func:`~dynslam2d.detect.shapes.fit_clusters`) has a side longer than ``max_extent`` (m): numpy's
@@ -53,7 +53,7 @@ def long_kept(keep: np.ndarray, fits: np.ndarray, max_extent: float) -> np.ndarr
     return out[:m]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _admit_long(keep: np.ndarray, fits: np.ndarray, offsets: np.ndarray, px: np.ndarray, py: np.ndarray,
                 max_extent: float, has_map: bool, logodds: np.ndarray, i0: int, j0: int, res: float, occ_thr: float,
                 free_thr: float, free_radius: int, max_structure: float, min_free: float) -> int:

@@ -57,7 +57,7 @@ def _lower_bound(a, hi, v):  # pragma: no cover - numba
     return lo
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def beam_owners(n, beams, ends, ids):  # pragma: no cover - numba
     """(n,) int64: per beam of a scan of ``n`` beams, the id of the track that lists it (−1: none); track ``t``
     (id ``ids[t]``) lists ``beams[ends[t]:ends[t + 1]]`` (``ends`` (T + 1,), from 0). A beam two tracks list goes
@@ -76,7 +76,7 @@ def beam_owners(n, beams, ends, ids):  # pragma: no cover - numba
     return owner
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def kept_beams(valid, beams, ends):  # pragma: no cover - numba
     """(the beams ``b`` of ``beams`` with ``valid[b]``, as int32, in order; bounds (T + 1,) of each track's
     part of them) for tracks listing ``beams[ends[t]:ends[t + 1]]`` (``ends`` (T + 1,), from 0): numpy's
@@ -420,7 +420,7 @@ def _read_levels(u, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, vali
     return out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _radix_sort(a):  # pragma: no cover - numba
     """Sort the non-negative int64 values ``a`` in place (least significant digit first, at most 11 bits a digit:
     a few passes over the values, where a comparison sort of the ≈ 2000 values of a scan takes more)."""

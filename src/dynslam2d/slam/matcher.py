@@ -181,7 +181,7 @@ def _sums(prob, xy, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
     return cost, summ, int(n_in)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def accumulate(prob, pts, x, y, th, swapped, H, g):  # pragma: no cover - numba
     """Fill H (3, 3) and g (3,) at map pose (x, y, θ); return (cost, Σ M, n_inside).
 
@@ -191,7 +191,7 @@ def accumulate(prob, pts, x, y, th, swapped, H, g):  # pragma: no cover - numba
     return _sums(prob, _split_xy(pts), x, y, th, swapped, np.bool_(True), H, g)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def fraction_below(prob, pts, x, y, th, thresh):  # pragma: no cover - numba
     """Fraction of points whose interpolated probability at map pose (x, y, θ) is in bounds and
     below ``thresh`` — endpoints that land in space the map knows to be free."""
@@ -207,7 +207,7 @@ def fraction_below(prob, pts, x, y, th, thresh):  # pragma: no cover - numba
     return n / max(pts.shape[0], 1)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _solve3(A, b, out):  # pragma: no cover - numba
     """Solve the 3×3 system A·out = b by the adjugate; return False if A is (near) singular."""
     c00 = A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]
@@ -249,7 +249,7 @@ def _same_float(a, b):  # pragma: no cover - numba
     return a == b and (a != 0.0 or math.copysign(1.0, a) == math.copysign(1.0, b))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _round_trips(x, y, th, res, i0, j0):  # pragma: no cover - numba
     """Map pose (x, y, θ) comes back bit for bit from the world pose :func:`match_pyramid` makes of it (((x + i0)·res,
     (y + j0)·res, wrapped θ) and back: x / res − i0 …), so that its finest-level evaluation is this pose's sums."""
@@ -741,7 +741,7 @@ def _spread_kernel(pts, use, nb):  # pragma: no cover - numba
     return k
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _support_kernel(prob, pts_m, stride, inv_res, x, y, th, thresh, nb):  # pragma: no cover - numba
     """Over every ``stride``-th laser-frame point (m): count those whose interpolated probability at
     map pose (x cells, y cells, θ) exceeds ``thresh``; return (count, bearing bins they occupy)."""
