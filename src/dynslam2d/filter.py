@@ -316,7 +316,7 @@ def _rows_exclusion_kernel(
     removed_by = np.full(n, -1, dtype=np.int64)
     k = boxes.shape[0]
     centres = np.empty((k, 2))
-    th = np.empty(k, dtype=np.float64)
+    th = np.empty(k)
     for j in range(k):
         centres[j, 0] = boxes[j, 0] + boxes[j, 5] * dt
         centres[j, 1] = boxes[j, 1] + boxes[j, 6] * dt

@@ -249,7 +249,8 @@ def mask_fractions(masks: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     (every partial sum of 0 / 1 values is an exact integer, in any order)."""
     q = masks.shape[0]
     k = offsets.shape[0] - 1
-    out = np.zeros((q, k))
+    out = np.empty((q, k))
+    out[:] = 0.0
     for r in range(q):
         for c in range(k):
             a = offsets[c]
@@ -292,7 +293,8 @@ def merge_leg_pairs(first: np.ndarray, second: np.ndarray, px: np.ndarray, py: n
             q += 1
     nf = fits.shape[1]
     kinds2 = np.zeros(nk + m, dtype=np.int8)
-    fits2 = np.zeros((nk + m, nf))
+    fits2 = np.empty((nk + m, nf))
+    fits2[:] = 0.0
     lohi2 = np.empty((nk + m, 4))
     rel2 = np.zeros((nk + m, 2, 2), dtype=np.bool_)
     starts2 = np.empty(nk + m, dtype=np.int64)
@@ -395,7 +397,8 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
     kc = offsets.shape[0] - 1
     keep = np.zeros(kc, dtype=np.bool_)
     kind = np.zeros(kc, dtype=np.int8)
-    lohi = np.zeros((kc, 4))
+    lohi = np.empty((kc, 4))
+    lohi[:] = 0.0
     rel = np.zeros((kc, 2, 2), dtype=np.bool_)
     tol = p[_P_FACE_TOL]
     span = p[_P_MIN_FACE_SPAN]
@@ -562,7 +565,7 @@ def select_detections(keep: np.ndarray, kinds: np.ndarray, lohi: np.ndarray, rel
         for a in range(fits.shape[1]):
             s_fits[q, a] = fits[c, a]
     if not has_map:
-        return starts, npts, s_kinds, s_lohi, s_rel, s_fits, np.zeros((3, 0))
+        return starts, npts, s_kinds, s_lohi, s_rel, s_fits, np.empty((3, 0))
     det_px = np.empty(total)
     det_py = np.empty(total)
     det_off = np.empty(nd + 1, dtype=np.int64)
@@ -599,20 +602,29 @@ def measure_batch(det: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np
         stacked over rows: (r, 2), (r, 2, 2), (r, 2, 4), (r, 2), (r, 2, 2), (r, 2), (r, 2) int8.
     """
     nr = det.shape[0]
-    z = np.zeros((nr, 2))
-    R = np.zeros((nr, 2, 2))
-    H = np.zeros((nr, 2, 4))
-    zm = np.zeros((nr, 2))
-    Rm = np.zeros((nr, 2, 2))
-    size_obs = np.zeros((nr, 2))
+    z = np.empty((nr, 2))
+    z[:] = 0.0
+    R = np.empty((nr, 2, 2))
+    R[:] = 0.0
+    H = np.empty((nr, 2, 4))
+    H[:] = 0.0
+    zm = np.empty((nr, 2))
+    zm[:] = 0.0
+    Rm = np.empty((nr, 2, 2))
+    Rm[:] = 0.0
+    size_obs = np.empty((nr, 2))
+    size_obs[:] = 0.0
     size_kind = np.zeros((nr, 2), dtype=np.int8)
     sp2 = p[_P_SIGMA_POSITION] ** 2
     su2 = p[_P_SIGMA_UNOBS] ** 2
     sus2 = p[_P_SIGMA_UNOBS_SPEED] ** 2
-    uv = np.zeros(2)
-    var = np.zeros(2)
+    uv = np.empty(2)
+    uv[:] = 0.0
+    var = np.empty(2)
+    var[:] = 0.0
     obs = np.zeros(2, dtype=np.bool_)
-    sz = np.zeros(2)
+    sz = np.empty(2)
+    sz[:] = 0.0
     for r in range(nr):
         j = det[r]
         kd = kind[j]
@@ -848,7 +860,8 @@ def seen_through_refs(pts: np.ndarray, ranges_a: np.ndarray, par_a: np.ndarray, 
 def segment_means(values: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """(k,) mean of ``values[offsets[c]:offsets[c+1]]`` (0 for an empty segment)."""
     k = offsets.shape[0] - 1
-    out = np.zeros(k)
+    out = np.empty(k)
+    out[:] = 0.0
     for c in range(k):
         n = offsets[c + 1] - offsets[c]
         if n > 0:
@@ -866,7 +879,8 @@ def fragment_hosts(px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.n
     of a point is max(|u| − s0/2, |v| − s1/2) in the box frame; ties keep the first box."""
     nr = det.shape[0]
     nt = tx.shape[0]
-    out = -np.ones(nr, dtype=np.int64)
+    out = np.empty(nr, dtype=np.int64)
+    out[:] = -1
     for r in range(nr):
         j = det[r]
         a = start[j]
@@ -971,8 +985,10 @@ def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.n
             else:
                 sizes[r, 0] = tsize[i, 0]
                 sizes[r, 1] = tsize[i, 1]
+        has = np.empty(npair, dtype=np.bool_)
+        has[:] = True
         res = measure_batch(pj, kind, theta, lohi, rel, centroid, circle, px, py, start, npts, sizes,
-                            np.ones(npair, dtype=np.bool_), np.full(npair, -1.0), np.full(npair, 0.05), p)
+                            has, np.full(npair, -1.0), np.full(npair, 0.05), p)
         z2 = res[0]
         R2 = res[1]
         for r in range(npair):
@@ -1140,7 +1156,8 @@ def pair_priors(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, det: np.ndarray
     track that has a heading, a circle the radius of a circle track (the arithmetic of ``Tracker._update_pairs``)."""
     n = rows.shape[0]
     swap = np.zeros(n, dtype=np.bool_)
-    sizes = np.zeros((n, 2))
+    sizes = np.empty((n, 2))
+    sizes[:] = 0.0
     has = np.zeros(n, dtype=np.bool_)
     radius = np.full(n, -1.0)
     for r in range(n):
@@ -1358,7 +1375,8 @@ def manage_rows(P: np.ndarray, X: np.ndarray, rows: np.ndarray, speed: np.ndarra
     (each operation rounded alone; max(a, b) is a unless b > a)."""
     n = rows.shape[0]
     bad = np.zeros(n, dtype=np.bool_)
-    sig = np.zeros(n)
+    sig = np.empty(n)
+    sig[:] = 0.0
     for i in range(n):
         k = rows[i]
         fin = True

@@ -151,7 +151,8 @@ def manage_speed_rows(P: np.ndarray, X: np.ndarray, rows: np.ndarray, max_sig: f
     ``benchmarks/bench_tracker_ab.py`` loads against this checkout's kernels)."""
     n = rows.shape[0]
     bad = np.zeros(n, dtype=np.bool_)
-    sig = np.zeros(n)
+    sig = np.empty(n)
+    sig[:] = 0.0
     speed = np.empty(n)
     for i in range(n):
         k = rows[i]

@@ -328,8 +328,10 @@ def _scan_geometry(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin
     sides and reads as grazing, which only makes the margin larger. Margin =
     max(margin_m, grazing_cells·res / max(sin α, min_sin))."""
     n = ranges.shape[0]
-    lx = np.zeros(n)
-    ly = np.zeros(n)
+    lx = np.empty(n)
+    lx[:] = 0.0
+    ly = np.empty(n)
+    ly[:] = 0.0
     for i in range(n):
         if valid[i]:
             lx[i] = ranges[i] * cos_a[i]

@@ -128,8 +128,8 @@ def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, 
         valid[b] = ok
         if ok:
             m += 1
-    xs = np.empty(m, dtype=np.float64)
-    ys = np.empty(m, dtype=np.float64)
+    xs = np.empty(m)
+    ys = np.empty(m)
     rank = np.zeros(m, dtype=np.int64)
     p = 0
     n_own = 0
@@ -272,7 +272,8 @@ def read_cells(logodds, uidx, cells, i0, j0):  # pragma: no cover - numba
     ``cells`` (m, 2) on a level whose array starts at cell (``i0``, ``j0``); 0, −1, −1 outside the array."""
     h, w = logodds.shape
     m = cells.shape[0]
-    lo = np.zeros(m)
+    lo = np.empty(m)
+    lo[:] = 0.0
     ui = np.full(m, -1, dtype=np.int64)
     f = np.full(m, -1, dtype=np.int64)
     n_out = 0
@@ -393,7 +394,8 @@ def _read_levels(u, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, vali
     ``want_kb``, :func:`kept_beams` of ``valid``, ``beams``, ``ends`` (else empty))."""
     out_ids, keys, cells, bounds = unpack_cells(u, params, uids, n_lv)
     m = out_ids.shape[0]
-    lo = np.zeros(m)
+    lo = np.empty(m)
+    lo[:] = 0.0
     ui = np.full(m, -1, dtype=np.int64)
     for k in range(min(n_lv, FUSED_LEVELS)):
         a = logodds[k]
