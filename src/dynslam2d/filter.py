@@ -312,7 +312,8 @@ def _rows_exclusion_kernel(
     the (k, 7) rows ``boxes`` (the same operations as the array expression), their regions
     (:func:`_box_extents_kernel`) and the beams (:func:`_scan_exclusion_kernel`). Returns (removed, removed_by)."""
     n = ranges.shape[0]
-    removed = np.zeros(n, dtype=np.bool_)
+    removed = np.empty(n, dtype=np.bool_)
+    removed[:] = False
     removed_by = np.full(n, -1, dtype=np.int64)
     k = boxes.shape[0]
     centres = np.empty((k, 2))

@@ -142,7 +142,8 @@ def _pairwise_sum(a: np.ndarray, lo: int, n: int) -> float:
         return _pairwise_leaf(a, lo, n)
     los = np.empty(64, dtype=np.int64)
     ns = np.empty(64, dtype=np.int64)
-    state = np.zeros(64, dtype=np.int8)
+    state = np.empty(64, dtype=np.int8)
+    state[:] = 0
     vals = np.empty(64)
     top = 0
     vtop = 0
@@ -278,7 +279,8 @@ def merge_leg_pairs(first: np.ndarray, second: np.ndarray, px: np.ndarray, py: n
     concatenated)."""
     m = first.shape[0]
     k = starts.shape[0]
-    paired = np.zeros(k, dtype=np.bool_)
+    paired = np.empty(k, dtype=np.bool_)
+    paired[:] = False
     added = 0
     for r in range(m):
         paired[first[r]] = True
@@ -292,11 +294,13 @@ def merge_leg_pairs(first: np.ndarray, second: np.ndarray, px: np.ndarray, py: n
             ki[q] = j
             q += 1
     nf = fits.shape[1]
-    kinds2 = np.zeros(nk + m, dtype=np.int8)
+    kinds2 = np.empty(nk + m, dtype=np.int8)
+    kinds2[:] = 0
     fits2 = np.empty((nk + m, nf))
     fits2[:] = 0.0
     lohi2 = np.empty((nk + m, 4))
-    rel2 = np.zeros((nk + m, 2, 2), dtype=np.bool_)
+    rel2 = np.empty((nk + m, 2, 2), dtype=np.bool_)
+    rel2[:] = False
     starts2 = np.empty(nk + m, dtype=np.int64)
     npts2 = np.empty(nk + m, dtype=np.int64)
     for q in range(nk):
@@ -395,11 +399,14 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
         (``K_*``), (k, 4) refined bounds lo1, lo2, hi1, hi2 (m; columns ``L_*``), (k, 2, 2) bool real bounds.
     """
     kc = offsets.shape[0] - 1
-    keep = np.zeros(kc, dtype=np.bool_)
-    kind = np.zeros(kc, dtype=np.int8)
+    keep = np.empty(kc, dtype=np.bool_)
+    keep[:] = False
+    kind = np.empty(kc, dtype=np.int8)
+    kind[:] = 0
     lohi = np.empty((kc, 4))
     lohi[:] = 0.0
-    rel = np.zeros((kc, 2, 2), dtype=np.bool_)
+    rel = np.empty((kc, 2, 2), dtype=np.bool_)
+    rel[:] = False
     tol = p[_P_FACE_TOL]
     span = p[_P_MIN_FACE_SPAN]
     nmax = 0
@@ -578,7 +585,8 @@ def select_detections(keep: np.ndarray, kinds: np.ndarray, lohi: np.ndarray, rel
             det_py[o] = py[i]
             o += 1
         det_off[q + 1] = o
-    ev = np.zeros((3, total), dtype=np.bool_)
+    ev = np.empty((3, total), dtype=np.bool_)
+    ev[:] = False
     map_evidence_kernel(det_px, det_py, logodds, i0, j0, res, occ_thr, free_thr, free_radius, ev[0], ev[1], ev[2])
     return starts, npts, s_kinds, s_lohi, s_rel, s_fits, mask_fractions(ev, det_off)
 
@@ -614,7 +622,8 @@ def measure_batch(det: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np
     Rm[:] = 0.0
     size_obs = np.empty((nr, 2))
     size_obs[:] = 0.0
-    size_kind = np.zeros((nr, 2), dtype=np.int8)
+    size_kind = np.empty((nr, 2), dtype=np.int8)
+    size_kind[:] = 0
     sp2 = p[_P_SIGMA_POSITION] ** 2
     su2 = p[_P_SIGMA_UNOBS] ** 2
     sus2 = p[_P_SIGMA_UNOBS_SPEED] ** 2
@@ -622,7 +631,8 @@ def measure_batch(det: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np
     uv[:] = 0.0
     var = np.empty(2)
     var[:] = 0.0
-    obs = np.zeros(2, dtype=np.bool_)
+    obs = np.empty(2, dtype=np.bool_)
+    obs[:] = False
     sz = np.empty(2)
     sz[:] = 0.0
     for r in range(nr):
@@ -723,7 +733,8 @@ def kalman_update_batch(X: np.ndarray, P: np.ndarray, H: np.ndarray, zm: np.ndar
     nr = X.shape[0]
     Xn = X.copy()
     Pn = P.copy()
-    ok = np.zeros(nr, dtype=np.bool_)
+    ok = np.empty(nr, dtype=np.bool_)
+    ok[:] = False
     PHt = np.empty((4, 2))
     K = np.empty((4, 2))
     KHP = np.empty((4, 4))
@@ -924,7 +935,8 @@ def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.n
     n = Xs.shape[0]
     m = Z.shape[0]
     d2 = np.empty((n, m))
-    near = np.zeros((n, m), dtype=np.bool_)
+    near = np.empty((n, m), dtype=np.bool_)
+    near[:] = False
     pi = np.empty(n * m, dtype=np.int64)
     pj = np.empty(n * m, dtype=np.int64)
     npair = 0
@@ -1006,7 +1018,8 @@ def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.n
             alt = (s11 * e0 ** 2 - (s01 + s10) * e0 * e1 + s00 * e1 ** 2) / dd  # e2ᵀ s2⁻¹ e2
             if not d2[i, j] <= alt:
                 d2[i, j] = alt
-    ok = np.zeros((n, m), dtype=np.bool_)
+    ok = np.empty((n, m), dtype=np.bool_)
+    ok[:] = False
     for i in range(n):
         for j in range(m):
             ok[i, j] = math.isfinite(d2[i, j]) and d2[i, j] < gate_chi2 and near[i, j]
@@ -1075,7 +1088,8 @@ def leg_pairs(lohi: np.ndarray, npts: np.ndarray, fits: np.ndarray, leg_max_exte
                     i += 1
         order, buf = buf, order
         width *= 2
-    used = np.zeros(ns, dtype=np.bool_)
+    used = np.empty(ns, dtype=np.bool_)
+    used[:] = False
     first = np.empty(ns // 2, dtype=np.int64)
     second = np.empty(ns // 2, dtype=np.int64)
     npair = 0
@@ -1155,10 +1169,12 @@ def pair_priors(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, det: np.ndarray
     has (r,) bool, radius (r,) the track's circle radius (m; −1: none)). A rectangle detection gets the sizes of a
     track that has a heading, a circle the radius of a circle track (the arithmetic of ``Tracker._update_pairs``)."""
     n = rows.shape[0]
-    swap = np.zeros(n, dtype=np.bool_)
+    swap = np.empty(n, dtype=np.bool_)
+    swap[:] = False
     sizes = np.empty((n, 2))
     sizes[:] = 0.0
-    has = np.zeros(n, dtype=np.bool_)
+    has = np.empty(n, dtype=np.bool_)
+    has[:] = False
     radius = np.full(n, -1.0)
     for r in range(n):
         k = rows[r]
@@ -1321,7 +1337,8 @@ def report_boxes(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray,
     one by an ulp, and calls again)."""
     n = rows.shape[0]
     out = np.empty((n, 5))
-    undecided = np.zeros(n, dtype=np.bool_)
+    undecided = np.empty(n, dtype=np.bool_)
+    undecided[:] = False
     for i in range(n):
         k = rows[i]
         vx = X[k, 2]
@@ -1374,7 +1391,8 @@ def manage_rows(P: np.ndarray, X: np.ndarray, rows: np.ndarray, speed: np.ndarra
     speed ≤ 1e-9; 0 where the covariance fails). ``Tracker._manage``'s former Python arithmetic in the same order
     (each operation rounded alone; max(a, b) is a unless b > a)."""
     n = rows.shape[0]
-    bad = np.zeros(n, dtype=np.bool_)
+    bad = np.empty(n, dtype=np.bool_)
+    bad[:] = False
     sig = np.empty(n)
     sig[:] = 0.0
     for i in range(n):

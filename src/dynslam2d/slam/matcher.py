@@ -739,7 +739,8 @@ def _bearing_bin(x, y, nb):  # pragma: no cover - numba
 @njit(cache=True)
 def _spread_kernel(pts, use, nb):  # pragma: no cover - numba
     """Number of the ``nb`` bearing bins holding a point of ``pts`` (rows with ``use``)."""
-    seen = np.zeros(nb, dtype=np.bool_)
+    seen = np.empty(nb, dtype=np.bool_)
+    seen[:] = False
     k = 0
     for i in range(pts.shape[0]):
         if not use[i]:
@@ -757,7 +758,8 @@ def _support_kernel(prob, pts_m, stride, inv_res, x, y, th, thresh, nb):  # prag
     map pose (x cells, y cells, θ) exceeds ``thresh``; return (count, bearing bins they occupy)."""
     c = math.cos(th)
     s = math.sin(th)
-    seen = np.zeros(nb, dtype=np.bool_)
+    seen = np.empty(nb, dtype=np.bool_)
+    seen[:] = False
     n = 0
     k = 0
     for i in range(0, pts_m.shape[0], stride):
@@ -906,7 +908,8 @@ def gated_points(r, cos_a, sin_a, valid, range_min, range_max, min_dist, max_dis
             k += 1
     bins = 0
     if stats and m > 0:
-        seen = np.zeros(_N_BINS, dtype=np.bool_)
+        seen = np.empty(_N_BINS, dtype=np.bool_)
+        seen[:] = False
         for i in range(0, m, max(1, m // _SPREAD_POINTS)):
             b = _bearing_bin(pts[i, 0], pts[i, 1], seen.shape[0])  # (_N_BINS as an int64, not a literal:
             # the signature _support_kernel compiles, not a second one)
