@@ -314,7 +314,8 @@ def _rows_exclusion_kernel(
     n = ranges.shape[0]
     removed = np.empty(n, dtype=np.bool_)
     removed[:] = False
-    removed_by = np.full(n, -1, dtype=np.int64)
+    removed_by = np.empty(n, dtype=np.int64)
+    removed_by[:] = -1
     k = boxes.shape[0]
     centres = np.empty((k, 2))
     th = np.empty(k)

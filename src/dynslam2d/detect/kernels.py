@@ -999,8 +999,12 @@ def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.n
                 sizes[r, 1] = tsize[i, 1]
         has = np.empty(npair, dtype=np.bool_)
         has[:] = True
+        no_radius = np.empty(npair)
+        no_radius[:] = -1.0
+        sigma0 = np.empty(npair)
+        sigma0[:] = 0.05
         res = measure_batch(pj, kind, theta, lohi, rel, centroid, circle, px, py, start, npts, sizes,
-                            has, np.full(npair, -1.0), np.full(npair, 0.05), p)
+                            has, no_radius, sigma0, p)
         z2 = res[0]
         R2 = res[1]
         for r in range(npair):
@@ -1175,7 +1179,8 @@ def pair_priors(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, det: np.ndarray
     sizes[:] = 0.0
     has = np.empty(n, dtype=np.bool_)
     has[:] = False
-    radius = np.full(n, -1.0)
+    radius = np.empty(n)
+    radius[:] = -1.0
     for r in range(n):
         k = rows[r]
         j = det[r]

@@ -150,7 +150,8 @@ def _segment_kernel(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, tr
             continue
         if _link(ranges, angles, trig, a, b, fixed, fixed_gap, lam, three_sigma, d_min, d_max):
             links[j] = 1
-    labels = np.full(n, -1, dtype=np.int32)
+    labels = np.empty(n, dtype=np.int32)
+    labels[:] = -1
     beams = np.empty(m, dtype=np.int64)
     offsets = np.empty(m + 1, dtype=np.int64)
     offsets[:] = 0

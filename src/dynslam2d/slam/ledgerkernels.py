@@ -63,7 +63,8 @@ def beam_owners(n, beams, ends, ids):  # pragma: no cover - numba
     (id ``ids[t]``) lists ``beams[ends[t]:ends[t + 1]]`` (``ends`` (T + 1,), from 0). A beam two tracks list goes
     to the later one, as numpy's ``owner[beams_t] = ids[t]`` track after track; negative beams count from the end
     as numpy's indices do."""
-    owner = np.full(n, -1, dtype=np.int64)
+    owner = np.empty(n, dtype=np.int64)
+    owner[:] = -1
     for t in range(ids.shape[0]):
         tid = ids[t]
         for e in range(ends[t], ends[t + 1]):
@@ -278,8 +279,10 @@ def read_cells(logodds, uidx, cells, i0, j0):  # pragma: no cover - numba
     m = cells.shape[0]
     lo = np.empty(m)
     lo[:] = 0.0
-    ui = np.full(m, -1, dtype=np.int64)
-    f = np.full(m, -1, dtype=np.int64)
+    ui = np.empty(m, dtype=np.int64)
+    ui[:] = -1
+    f = np.empty(m, dtype=np.int64)
+    f[:] = -1
     n_out = 0
     for t in range(m):
         col = cells[t, 0] - i0
@@ -400,7 +403,8 @@ def _read_levels(u, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, vali
     m = out_ids.shape[0]
     lo = np.empty(m)
     lo[:] = 0.0
-    ui = np.full(m, -1, dtype=np.int64)
+    ui = np.empty(m, dtype=np.int64)
+    ui[:] = -1
     for k in range(min(n_lv, FUSED_LEVELS)):
         a = logodds[k]
         b = uidx[k]

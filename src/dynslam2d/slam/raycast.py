@@ -283,7 +283,9 @@ def _call_memo():  # pragma: no cover - numba
     """A small probability memo for one call (:func:`new_prob_memo` inside a kernel)."""
     keys = np.empty(_CALL_MEMO_SIZE, dtype=np.int64)
     keys[:] = 0
-    return keys, np.full(_CALL_MEMO_SIZE, 0.5, dtype=np.float32)
+    probs = np.empty(_CALL_MEMO_SIZE, dtype=np.float32)
+    probs[:] = 0.5
+    return keys, probs
 
 
 @njit(cache=True)
