@@ -312,11 +312,13 @@ def _rows_exclusion_kernel(
     the (k, 7) rows ``boxes`` (the same operations as the array expression), their regions
     (:func:`_box_extents_kernel`) and the beams (:func:`_scan_exclusion_kernel`). Returns (removed, removed_by)."""
     n = ranges.shape[0]
-    removed = np.zeros(n, dtype=np.bool_)
-    removed_by = np.full(n, -1, dtype=np.int64)
+    removed = np.empty(n, dtype=np.bool_)
+    removed[:] = False
+    removed_by = np.empty(n, dtype=np.int64)
+    removed_by[:] = -1
     k = boxes.shape[0]
     centres = np.empty((k, 2))
-    th = np.empty(k, dtype=np.float64)
+    th = np.empty(k)
     for j in range(k):
         centres[j, 0] = boxes[j, 0] + boxes[j, 5] * dt
         centres[j, 1] = boxes[j, 1] + boxes[j, 6] * dt

@@ -142,7 +142,8 @@ def _pairwise_sum(a: np.ndarray, lo: int, n: int) -> float:
         return _pairwise_leaf(a, lo, n)
     los = np.empty(64, dtype=np.int64)
     ns = np.empty(64, dtype=np.int64)
-    state = np.zeros(64, dtype=np.int8)
+    state = np.empty(64, dtype=np.int8)
+    state[:] = 0
     vals = np.empty(64)
     top = 0
     vtop = 0
@@ -249,7 +250,8 @@ def mask_fractions(masks: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     (every partial sum of 0 / 1 values is an exact integer, in any order)."""
     q = masks.shape[0]
     k = offsets.shape[0] - 1
-    out = np.zeros((q, k))
+    out = np.empty((q, k))
+    out[:] = 0.0
     for r in range(q):
         for c in range(k):
             a = offsets[c]
@@ -277,7 +279,8 @@ def merge_leg_pairs(first: np.ndarray, second: np.ndarray, px: np.ndarray, py: n
     concatenated)."""
     m = first.shape[0]
     k = starts.shape[0]
-    paired = np.zeros(k, dtype=np.bool_)
+    paired = np.empty(k, dtype=np.bool_)
+    paired[:] = False
     added = 0
     for r in range(m):
         paired[first[r]] = True
@@ -291,10 +294,13 @@ def merge_leg_pairs(first: np.ndarray, second: np.ndarray, px: np.ndarray, py: n
             ki[q] = j
             q += 1
     nf = fits.shape[1]
-    kinds2 = np.zeros(nk + m, dtype=np.int8)
-    fits2 = np.zeros((nk + m, nf))
+    kinds2 = np.empty(nk + m, dtype=np.int8)
+    kinds2[:] = 0
+    fits2 = np.empty((nk + m, nf))
+    fits2[:] = 0.0
     lohi2 = np.empty((nk + m, 4))
-    rel2 = np.zeros((nk + m, 2, 2), dtype=np.bool_)
+    rel2 = np.empty((nk + m, 2, 2), dtype=np.bool_)
+    rel2[:] = False
     starts2 = np.empty(nk + m, dtype=np.int64)
     npts2 = np.empty(nk + m, dtype=np.int64)
     for q in range(nk):
@@ -393,10 +399,14 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
         (``K_*``), (k, 4) refined bounds lo1, lo2, hi1, hi2 (m; columns ``L_*``), (k, 2, 2) bool real bounds.
     """
     kc = offsets.shape[0] - 1
-    keep = np.zeros(kc, dtype=np.bool_)
-    kind = np.zeros(kc, dtype=np.int8)
-    lohi = np.zeros((kc, 4))
-    rel = np.zeros((kc, 2, 2), dtype=np.bool_)
+    keep = np.empty(kc, dtype=np.bool_)
+    keep[:] = False
+    kind = np.empty(kc, dtype=np.int8)
+    kind[:] = 0
+    lohi = np.empty((kc, 4))
+    lohi[:] = 0.0
+    rel = np.empty((kc, 2, 2), dtype=np.bool_)
+    rel[:] = False
     tol = p[_P_FACE_TOL]
     span = p[_P_MIN_FACE_SPAN]
     nmax = 0
@@ -562,7 +572,7 @@ def select_detections(keep: np.ndarray, kinds: np.ndarray, lohi: np.ndarray, rel
         for a in range(fits.shape[1]):
             s_fits[q, a] = fits[c, a]
     if not has_map:
-        return starts, npts, s_kinds, s_lohi, s_rel, s_fits, np.zeros((3, 0))
+        return starts, npts, s_kinds, s_lohi, s_rel, s_fits, np.empty((3, 0))
     det_px = np.empty(total)
     det_py = np.empty(total)
     det_off = np.empty(nd + 1, dtype=np.int64)
@@ -575,7 +585,8 @@ def select_detections(keep: np.ndarray, kinds: np.ndarray, lohi: np.ndarray, rel
             det_py[o] = py[i]
             o += 1
         det_off[q + 1] = o
-    ev = np.zeros((3, total), dtype=np.bool_)
+    ev = np.empty((3, total), dtype=np.bool_)
+    ev[:] = False
     map_evidence_kernel(det_px, det_py, logodds, i0, j0, res, occ_thr, free_thr, free_radius, ev[0], ev[1], ev[2])
     return starts, npts, s_kinds, s_lohi, s_rel, s_fits, mask_fractions(ev, det_off)
 
@@ -599,20 +610,31 @@ def measure_batch(det: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np
         stacked over rows: (r, 2), (r, 2, 2), (r, 2, 4), (r, 2), (r, 2, 2), (r, 2), (r, 2) int8.
     """
     nr = det.shape[0]
-    z = np.zeros((nr, 2))
-    R = np.zeros((nr, 2, 2))
-    H = np.zeros((nr, 2, 4))
-    zm = np.zeros((nr, 2))
-    Rm = np.zeros((nr, 2, 2))
-    size_obs = np.zeros((nr, 2))
-    size_kind = np.zeros((nr, 2), dtype=np.int8)
+    z = np.empty((nr, 2))
+    z[:] = 0.0
+    R = np.empty((nr, 2, 2))
+    R[:] = 0.0
+    H = np.empty((nr, 2, 4))
+    H[:] = 0.0
+    zm = np.empty((nr, 2))
+    zm[:] = 0.0
+    Rm = np.empty((nr, 2, 2))
+    Rm[:] = 0.0
+    size_obs = np.empty((nr, 2))
+    size_obs[:] = 0.0
+    size_kind = np.empty((nr, 2), dtype=np.int8)
+    size_kind[:] = 0
     sp2 = p[_P_SIGMA_POSITION] ** 2
     su2 = p[_P_SIGMA_UNOBS] ** 2
     sus2 = p[_P_SIGMA_UNOBS_SPEED] ** 2
-    uv = np.zeros(2)
-    var = np.zeros(2)
-    obs = np.zeros(2, dtype=np.bool_)
-    sz = np.zeros(2)
+    uv = np.empty(2)
+    uv[:] = 0.0
+    var = np.empty(2)
+    var[:] = 0.0
+    obs = np.empty(2, dtype=np.bool_)
+    obs[:] = False
+    sz = np.empty(2)
+    sz[:] = 0.0
     for r in range(nr):
         j = det[r]
         kd = kind[j]
@@ -711,7 +733,8 @@ def kalman_update_batch(X: np.ndarray, P: np.ndarray, H: np.ndarray, zm: np.ndar
     nr = X.shape[0]
     Xn = X.copy()
     Pn = P.copy()
-    ok = np.zeros(nr, dtype=np.bool_)
+    ok = np.empty(nr, dtype=np.bool_)
+    ok[:] = False
     PHt = np.empty((4, 2))
     K = np.empty((4, 2))
     KHP = np.empty((4, 4))
@@ -848,7 +871,8 @@ def seen_through_refs(pts: np.ndarray, ranges_a: np.ndarray, par_a: np.ndarray, 
 def segment_means(values: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """(k,) mean of ``values[offsets[c]:offsets[c+1]]`` (0 for an empty segment)."""
     k = offsets.shape[0] - 1
-    out = np.zeros(k)
+    out = np.empty(k)
+    out[:] = 0.0
     for c in range(k):
         n = offsets[c + 1] - offsets[c]
         if n > 0:
@@ -866,7 +890,8 @@ def fragment_hosts(px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.n
     of a point is max(|u| − s0/2, |v| − s1/2) in the box frame; ties keep the first box."""
     nr = det.shape[0]
     nt = tx.shape[0]
-    out = -np.ones(nr, dtype=np.int64)
+    out = np.empty(nr, dtype=np.int64)
+    out[:] = -1
     for r in range(nr):
         j = det[r]
         a = start[j]
@@ -910,7 +935,8 @@ def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.n
     n = Xs.shape[0]
     m = Z.shape[0]
     d2 = np.empty((n, m))
-    near = np.zeros((n, m), dtype=np.bool_)
+    near = np.empty((n, m), dtype=np.bool_)
+    near[:] = False
     pi = np.empty(n * m, dtype=np.int64)
     pj = np.empty(n * m, dtype=np.int64)
     npair = 0
@@ -971,8 +997,14 @@ def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.n
             else:
                 sizes[r, 0] = tsize[i, 0]
                 sizes[r, 1] = tsize[i, 1]
+        has = np.empty(npair, dtype=np.bool_)
+        has[:] = True
+        no_radius = np.empty(npair)
+        no_radius[:] = -1.0
+        sigma0 = np.empty(npair)
+        sigma0[:] = 0.05
         res = measure_batch(pj, kind, theta, lohi, rel, centroid, circle, px, py, start, npts, sizes,
-                            np.ones(npair, dtype=np.bool_), np.full(npair, -1.0), np.full(npair, 0.05), p)
+                            has, no_radius, sigma0, p)
         z2 = res[0]
         R2 = res[1]
         for r in range(npair):
@@ -990,7 +1022,8 @@ def gate_costs(Xs: np.ndarray, Ps: np.ndarray, reach: np.ndarray, rect_trk: np.n
             alt = (s11 * e0 ** 2 - (s01 + s10) * e0 * e1 + s00 * e1 ** 2) / dd  # e2ᵀ s2⁻¹ e2
             if not d2[i, j] <= alt:
                 d2[i, j] = alt
-    ok = np.zeros((n, m), dtype=np.bool_)
+    ok = np.empty((n, m), dtype=np.bool_)
+    ok[:] = False
     for i in range(n):
         for j in range(m):
             ok[i, j] = math.isfinite(d2[i, j]) and d2[i, j] < gate_chi2 and near[i, j]
@@ -1059,7 +1092,8 @@ def leg_pairs(lohi: np.ndarray, npts: np.ndarray, fits: np.ndarray, leg_max_exte
                     i += 1
         order, buf = buf, order
         width *= 2
-    used = np.zeros(ns, dtype=np.bool_)
+    used = np.empty(ns, dtype=np.bool_)
+    used[:] = False
     first = np.empty(ns // 2, dtype=np.int64)
     second = np.empty(ns // 2, dtype=np.int64)
     npair = 0
@@ -1139,10 +1173,14 @@ def pair_priors(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, det: np.ndarray
     has (r,) bool, radius (r,) the track's circle radius (m; −1: none)). A rectangle detection gets the sizes of a
     track that has a heading, a circle the radius of a circle track (the arithmetic of ``Tracker._update_pairs``)."""
     n = rows.shape[0]
-    swap = np.zeros(n, dtype=np.bool_)
-    sizes = np.zeros((n, 2))
-    has = np.zeros(n, dtype=np.bool_)
-    radius = np.full(n, -1.0)
+    swap = np.empty(n, dtype=np.bool_)
+    swap[:] = False
+    sizes = np.empty((n, 2))
+    sizes[:] = 0.0
+    has = np.empty(n, dtype=np.bool_)
+    has[:] = False
+    radius = np.empty(n)
+    radius[:] = -1.0
     for r in range(n):
         k = rows[r]
         j = det[r]
@@ -1304,7 +1342,8 @@ def report_boxes(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray,
     one by an ulp, and calls again)."""
     n = rows.shape[0]
     out = np.empty((n, 5))
-    undecided = np.zeros(n, dtype=np.bool_)
+    undecided = np.empty(n, dtype=np.bool_)
+    undecided[:] = False
     for i in range(n):
         k = rows[i]
         vx = X[k, 2]
@@ -1357,8 +1396,10 @@ def manage_rows(P: np.ndarray, X: np.ndarray, rows: np.ndarray, speed: np.ndarra
     speed ≤ 1e-9; 0 where the covariance fails). ``Tracker._manage``'s former Python arithmetic in the same order
     (each operation rounded alone; max(a, b) is a unless b > a)."""
     n = rows.shape[0]
-    bad = np.zeros(n, dtype=np.bool_)
-    sig = np.zeros(n)
+    bad = np.empty(n, dtype=np.bool_)
+    bad[:] = False
+    sig = np.empty(n)
+    sig[:] = 0.0
     for i in range(n):
         k = rows[i]
         fin = True

@@ -150,8 +150,10 @@ def manage_speed_rows(P: np.ndarray, X: np.ndarray, rows: np.ndarray, max_sig: f
     (``kernels.manage_rows`` stays, with its signature, for the older checkouts' step modules that
     ``benchmarks/bench_tracker_ab.py`` loads against this checkout's kernels)."""
     n = rows.shape[0]
-    bad = np.zeros(n, dtype=np.bool_)
-    sig = np.zeros(n)
+    bad = np.empty(n, dtype=np.bool_)
+    bad[:] = False
+    sig = np.empty(n)
+    sig[:] = 0.0
     speed = np.empty(n)
     for i in range(n):
         k = rows[i]

@@ -240,10 +240,12 @@ def vacated_outlines_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy
     :func:`vacated_core` with buffers of its own."""
     n = cx.shape[0]
     cap = max_side * max_side + 1
+    seen = np.empty((2 * max_side + 1, 2 * max_side + 1), dtype=np.uint8)
+    seen[:] = 0
     return vacated_core(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, depth, near_thr, occ32, max_side,
                         min_cells, res, min_extent, min_share, np.empty(64 * n, dtype=np.int64),
                         np.empty(64 * n, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
-                        np.zeros((2 * max_side + 1, 2 * max_side + 1), dtype=np.uint8))
+                        seen)
 
 
 @njit(cache=True)
@@ -297,7 +299,8 @@ def vacated_core(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx
     sizes = np.empty(nc, dtype=np.int64)
     if nc < min_cells:
         return comp_r, comp_c, sizes[:0], nc
-    done = np.zeros(nc, dtype=np.bool_)
+    done = np.empty(nc, dtype=np.bool_)
+    done[:] = False
     side = 2 * max_side + 1  # window: cells of the current growth, around its start
     # a growth stops once its cells span more than max_side along an axis: it never holds more than max_side² + 1
     cap = max_side * max_side + 1

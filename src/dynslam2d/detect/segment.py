@@ -138,7 +138,8 @@ def _segment_kernel(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, tr
         m += 1 if mask[i] else 0
     wrap = wrap and m > 2
     # links[j] = 1 if valid beam j links to valid beam j+1 (the last one to the first when wrap)
-    links = np.zeros(m, dtype=np.uint8)
+    links = np.empty(m, dtype=np.uint8)
+    links[:] = 0
     for j in range(m):
         if j == m - 1 and not wrap:
             break
@@ -149,9 +150,11 @@ def _segment_kernel(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, tr
             continue
         if _link(ranges, angles, trig, a, b, fixed, fixed_gap, lam, three_sigma, d_min, d_max):
             links[j] = 1
-    labels = np.full(n, -1, dtype=np.int32)
+    labels = np.empty(n, dtype=np.int32)
+    labels[:] = -1
     beams = np.empty(m, dtype=np.int64)
-    offsets = np.zeros(m + 1, dtype=np.int64)
+    offsets = np.empty(m + 1, dtype=np.int64)
+    offsets[:] = 0
     # start right after the last break so that no run is cut by the array end and clusters come in scan order (a
     # cluster wrapping past the end comes first); no valid beam (m = 0): no run, no cluster, the same empty results
     start = 0

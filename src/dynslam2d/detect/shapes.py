@@ -475,7 +475,8 @@ def fit_cluster_rows(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask
     columns are NaN (never a fit's value: a degenerate fit gives r = 0, rms = inf), which the classification's
     radius test refuses; :class:`dynslam2d.detect.measure.ScanDetection` fits them when its ``circle`` is read."""
     k = offsets.shape[0] - 1
-    out = np.zeros((k, N_FIT_COLS))
+    out = np.empty((k, N_FIT_COLS))
+    out[:] = 0.0
     cos_t = np.cos(angles)
     sin_t = np.sin(angles)
     tmp = np.empty(6)

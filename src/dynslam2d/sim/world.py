@@ -56,8 +56,10 @@ def _cast_kernel(
     n = cos_a.shape[0]
     m = segs.shape[0]
     k = circles.shape[0]
-    dist = np.full(n, np.inf)
-    ids = np.full(n, -1, dtype=np.int32)
+    dist = np.empty(n)
+    dist[:] = np.inf
+    ids = np.empty(n, dtype=np.int32)
+    ids[:] = -1
     # per-segment constants
     wx = np.empty(m)
     wy = np.empty(m)

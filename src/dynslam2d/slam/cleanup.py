@@ -235,7 +235,8 @@ def _count_beams(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey, kept, 
     need = stride * (y1 - y0 + 1)
     if not resume:
         if mask.shape[0] < need:
-            mask = np.zeros(need, dtype=np.uint8)
+            mask = np.empty(need, dtype=np.uint8)
+            mask[:] = 0
         for k in range(cx.shape[0]):
             if clear[k]:
                 _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, cx[k] - fi0, cy[k] - fj0, core)
@@ -328,8 +329,10 @@ def _scan_geometry(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin
     sides and reads as grazing, which only makes the margin larger. Margin =
     max(margin_m, grazing_cells·res / max(sin α, min_sin))."""
     n = ranges.shape[0]
-    lx = np.zeros(n)
-    ly = np.zeros(n)
+    lx = np.empty(n)
+    lx[:] = 0.0
+    ly = np.empty(n)
+    ly[:] = 0.0
     for i in range(n):
         if valid[i]:
             lx[i] = ranges[i] * cos_a[i]
@@ -340,8 +343,10 @@ def _scan_geometry(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin
     ey = np.empty(n)
     cx = np.empty(n)
     cy = np.empty(n)
-    kept = np.zeros(n, dtype=np.bool_)
-    clear = np.zeros(n, dtype=np.bool_)
+    kept = np.empty(n, dtype=np.bool_)
+    kept[:] = False
+    clear = np.empty(n, dtype=np.bool_)
+    clear[:] = False
     ox = px / res
     oy = py / res
     for i in range(n):

@@ -24,7 +24,8 @@ def graph_distances(ij: np.ndarray, w: np.ndarray, n: int, source: int, limit0: 
     Unreachable nodes are ``inf``."""
     m = ij.shape[0]
     # adjacency in CSR form, both directions of every edge
-    deg = np.zeros(n + 1, dtype=np.int64)
+    deg = np.empty(n + 1, dtype=np.int64)
+    deg[:] = 0
     for e in range(m):
         deg[ij[e, 0] + 1] += 1
         deg[ij[e, 1] + 1] += 1
@@ -44,7 +45,8 @@ def graph_distances(ij: np.ndarray, w: np.ndarray, n: int, source: int, limit0: 
     out = np.empty((2, n))
     hv = np.empty(2 * m + 1)  # heap of (value, node); a node may sit in it more than once (stale entries skipped)
     hn = np.empty(2 * m + 1, dtype=np.int64)
-    done = np.zeros(n, dtype=np.bool_)
+    done = np.empty(n, dtype=np.bool_)
+    done[:] = False
     for col in range(2):
         limit = limit0 if col == 0 else np.inf
         d = out[col]

@@ -46,9 +46,12 @@ def interp_value_grad(prob, px, py, swapped):  # pragma: no cover - numba
 def interpolate(prob: np.ndarray, pts: np.ndarray, swapped: bool = False):  # pragma: no cover - numba
     """Vectorised :func:`interp_value_grad` over (n, 2) map points → three (n,) arrays."""
     n = pts.shape[0]
-    m = np.zeros(n)
-    gx = np.zeros(n)
-    gy = np.zeros(n)
+    m = np.empty(n)
+    m[:] = 0.0
+    gx = np.empty(n)
+    gx[:] = 0.0
+    gy = np.empty(n)
+    gy[:] = 0.0
     for i in range(n):
         v, a, b, _ = interp_value_grad(prob, pts[i, 0], pts[i, 1], swapped)
         m[i] = v

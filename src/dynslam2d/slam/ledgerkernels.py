@@ -63,7 +63,8 @@ def beam_owners(n, beams, ends, ids):  # pragma: no cover - numba
     (id ``ids[t]``) lists ``beams[ends[t]:ends[t + 1]]`` (``ends`` (T + 1,), from 0). A beam two tracks list goes
     to the later one, as numpy's ``owner[beams_t] = ids[t]`` track after track; negative beams count from the end
     as numpy's indices do."""
-    owner = np.full(n, -1, dtype=np.int64)
+    owner = np.empty(n, dtype=np.int64)
+    owner[:] = -1
     for t in range(ids.shape[0]):
         tid = ids[t]
         for e in range(ends[t], ends[t + 1]):
@@ -120,7 +121,8 @@ def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, 
     n = r.shape[0]
     n_tr = uids.shape[0]
     valid = np.empty(n, dtype=np.bool_)
-    counts = np.zeros(n_tr, dtype=np.int64)
+    counts = np.empty(n_tr, dtype=np.int64)
+    counts[:] = 0
     m = 0
     for b in range(n):
         rb = r[b]
@@ -128,9 +130,10 @@ def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, 
         valid[b] = ok
         if ok:
             m += 1
-    xs = np.empty(m, dtype=np.float64)
-    ys = np.empty(m, dtype=np.float64)
-    rank = np.zeros(m, dtype=np.int64)
+    xs = np.empty(m)
+    ys = np.empty(m)
+    rank = np.empty(m, dtype=np.int64)
+    rank[:] = 0
     p = 0
     n_own = 0
     for b in range(n):
@@ -147,7 +150,8 @@ def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, 
             counts[lo] += 1
             n_own += 1
         p += 1
-    empty = np.zeros(0, dtype=np.int64)
+    empty = np.empty(0, dtype=np.int64)
+    empty[:] = 0
     if n_own == 0:
         return empty, empty, valid, counts
     # every point's (level, owner, cell) as one int64 (owner 0 = no track, else 1 + rank)
@@ -223,7 +227,8 @@ def unpack_cells(u, params, uids, n_lv):  # pragma: no cover - numba
     ids = np.empty(n, dtype=np.int64)
     keys = np.empty(n, dtype=np.int64)
     cells = np.empty((n, 2), dtype=np.int64)
-    bounds = np.zeros(n_lv + 1, dtype=np.int64)
+    bounds = np.empty(n_lv + 1, dtype=np.int64)
+    bounds[:] = 0
     lvl = 0
     own = 0
     base = 0  # lvl · block + own · wij: the group's smallest value
@@ -272,9 +277,12 @@ def read_cells(logodds, uidx, cells, i0, j0):  # pragma: no cover - numba
     ``cells`` (m, 2) on a level whose array starts at cell (``i0``, ``j0``); 0, −1, −1 outside the array."""
     h, w = logodds.shape
     m = cells.shape[0]
-    lo = np.zeros(m)
-    ui = np.full(m, -1, dtype=np.int64)
-    f = np.full(m, -1, dtype=np.int64)
+    lo = np.empty(m)
+    lo[:] = 0.0
+    ui = np.empty(m, dtype=np.int64)
+    ui[:] = -1
+    f = np.empty(m, dtype=np.int64)
+    f[:] = -1
     n_out = 0
     for t in range(m):
         col = cells[t, 0] - i0
@@ -393,8 +401,10 @@ def _read_levels(u, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, vali
     ``want_kb``, :func:`kept_beams` of ``valid``, ``beams``, ``ends`` (else empty))."""
     out_ids, keys, cells, bounds = unpack_cells(u, params, uids, n_lv)
     m = out_ids.shape[0]
-    lo = np.zeros(m)
-    ui = np.full(m, -1, dtype=np.int64)
+    lo = np.empty(m)
+    lo[:] = 0.0
+    ui = np.empty(m, dtype=np.int64)
+    ui[:] = -1
     for k in range(min(n_lv, FUSED_LEVELS)):
         a = logodds[k]
         b = uidx[k]
@@ -415,8 +425,10 @@ def _read_levels(u, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, vali
     if want_kb:
         kb, kb_b = kept_beams(valid, beams, ends)
     else:
-        kb = np.zeros(0, dtype=np.int32)
-        kb_b = np.zeros(0, dtype=np.int64)
+        kb = np.empty(0, dtype=np.int32)
+        kb[:] = 0
+        kb_b = np.empty(0, dtype=np.int64)
+        kb_b[:] = 0
     return out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b
 
 
@@ -500,8 +512,8 @@ def record_cells(beams, idl, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px,
             if counts[k] != 0:
                 status = PLAIN
                 break
-        return (status, np.zeros((6, 0), dtype=np.int64), np.zeros(0, dtype=np.int64),
-                np.zeros(0, dtype=np.int32))
+        return (status, np.empty((6, 0), dtype=np.int64), np.empty(0, dtype=np.int64),
+                np.empty(0, dtype=np.int32))
     _radix_sort(packed)
     out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b = _read_levels(
         packed, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, valid, beams, ends, want_kb)
@@ -593,7 +605,8 @@ def level_rows(logodds, uidx, i0, j0, n_lv, blk, small):  # pragma: no cover - n
     rows = np.empty((5, m), dtype=np.int64)
     t_id = np.empty(g, dtype=np.int64)
     t_bnd = np.empty(g + 1, dtype=np.int64)
-    t_lv = np.zeros(g, dtype=np.int64)
+    t_lv = np.empty(g, dtype=np.int64)
+    t_lv[:] = 0
     pos = lg[:n_lv].copy()
     n_t = 0
     j = 0

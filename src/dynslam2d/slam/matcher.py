@@ -270,12 +270,18 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     trial step that, if accepted, ends the iterations (the last one, or converged) and whose H is not needed
     so runs the cost-only pass: its cost is the same sum (the rejected / accepted decision and the pose do not
     change), and the H, g it would have made are never read."""
-    H = np.zeros((3, 3))
-    g = np.zeros(3)
-    H2 = np.zeros((3, 3))  # H, g at a trial LM step (they become H, g when it is accepted)
-    g2 = np.zeros(3)
-    A = np.zeros((3, 3))
-    d = np.zeros(3)
+    H = np.empty((3, 3))
+    H[:] = 0.0
+    g = np.empty(3)
+    g[:] = 0.0
+    H2 = np.empty((3, 3))  # H, g at a trial LM step (they become H, g when it is accepted)
+    H2[:] = 0.0
+    g2 = np.empty(3)
+    g2[:] = 0.0
+    A = np.empty((3, 3))
+    A[:] = 0.0
+    d = np.empty(3)
+    d[:] = 0.0
     x = pose[0]
     y = pose[1]
     th = pose[2]
@@ -284,7 +290,8 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
         for b in range(3):
             if lam_p[a, b] != 0.0:
                 use_prior = True
-    gp = np.zeros(3)
+    gp = np.empty(3)
+    gp[:] = 0.0
     xy = _split_xy(pts)  # (the points as two rows, once per level)
     raw, summ, n_in = _sums(prob, xy, x, y, th, swapped, np.bool_(True), H, g)
     cost = raw
@@ -382,7 +389,8 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     units as ``pose``): the normal equations become (H + Λp)Δ = g + Λp(ξp − ξ). An all-zero
     ``lam_p`` is the plain matcher.
     """
-    H = np.zeros((3, 3))
+    H = np.empty((3, 3))
+    H[:] = 0.0
     x, y, th, n_acc, _, _, _ = _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
                                            max_trans, prior, lam_p, H, False, 1.0, 0.0, 0.0)
     out = np.empty(3)
@@ -415,7 +423,8 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     pose[1] = start[1]
     pose[2] = start[2]
     n_lv = geo.shape[0]
-    Hk = np.zeros((3, 3))
+    Hk = np.empty((3, 3))
+    Hk[:] = 0.0
     mp = np.empty(3)
     pp = np.empty(3)
     pts0 = np.empty((0, 2))  # level 0's / 1's scaled points once computed (C-contiguous, as pts_m / res)
@@ -494,7 +503,8 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
         return True, l_raw, l_summ, l_in, free, n_sup, k_sup
     if pts0.shape[0] != pts_m.shape[0]:
         pts0 = pts_m / res
-    g = np.zeros(3)
+    g = np.empty(3)
+    g[:] = 0.0
     cost, summ, n_in = accumulate(prob0, pts0, m0, m1, m2, np.bool_(False), H_out, g)  # not a literal: one signature
     return True, cost, summ, n_in, free, n_sup, k_sup
 
@@ -729,7 +739,8 @@ def _bearing_bin(x, y, nb):  # pragma: no cover - numba
 @njit(cache=True)
 def _spread_kernel(pts, use, nb):  # pragma: no cover - numba
     """Number of the ``nb`` bearing bins holding a point of ``pts`` (rows with ``use``)."""
-    seen = np.zeros(nb, dtype=np.bool_)
+    seen = np.empty(nb, dtype=np.bool_)
+    seen[:] = False
     k = 0
     for i in range(pts.shape[0]):
         if not use[i]:
@@ -747,7 +758,8 @@ def _support_kernel(prob, pts_m, stride, inv_res, x, y, th, thresh, nb):  # prag
     map pose (x cells, y cells, θ) exceeds ``thresh``; return (count, bearing bins they occupy)."""
     c = math.cos(th)
     s = math.sin(th)
-    seen = np.zeros(nb, dtype=np.bool_)
+    seen = np.empty(nb, dtype=np.bool_)
+    seen[:] = False
     n = 0
     k = 0
     for i in range(0, pts_m.shape[0], stride):
@@ -896,7 +908,8 @@ def gated_points(r, cos_a, sin_a, valid, range_min, range_max, min_dist, max_dis
             k += 1
     bins = 0
     if stats and m > 0:
-        seen = np.zeros(_N_BINS, dtype=np.bool_)
+        seen = np.empty(_N_BINS, dtype=np.bool_)
+        seen[:] = False
         for i in range(0, m, max(1, m // _SPREAD_POINTS)):
             b = _bearing_bin(pts[i, 0], pts[i, 1], seen.shape[0])  # (_N_BINS as an int64, not a literal:
             # the signature _support_kernel compiles, not a second one)

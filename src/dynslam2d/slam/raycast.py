@@ -281,7 +281,11 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
 @njit(cache=True, inline="always")
 def _call_memo():  # pragma: no cover - numba
     """A small probability memo for one call (:func:`new_prob_memo` inside a kernel)."""
-    return np.zeros(_CALL_MEMO_SIZE, dtype=np.int64), np.full(_CALL_MEMO_SIZE, 0.5, dtype=np.float32)
+    keys = np.empty(_CALL_MEMO_SIZE, dtype=np.int64)
+    keys[:] = 0
+    probs = np.empty(_CALL_MEMO_SIZE, dtype=np.float32)
+    probs[:] = 0.5
+    return keys, probs
 
 
 @njit(cache=True)
