@@ -842,8 +842,11 @@ class EvidenceLedger:
                 self._to_pack.append(led)
                 self._ended[tid] = led
                 self._oldest_ended = min(self._oldest_ended, led.last_seen)
-            else:
-                self._to_count.append(led)  # (its cells count in cells_recorded, in the next batch)
+            elif led.recs is None and len(led.ent) < 2:  # (no rows or one update's: counted without sorting)
+                self._drop(led)  # (its cells count in cells_recorded)
+            else:  # (in the next batch; the track is not read again: let it go now, not with the batch)
+                led.last_track = None
+                self._to_count.append(led)
         if len(self._to_pack) + len(self._to_count) >= _END_BATCH:
             self._finish_ended()
         keep = self.config.ledger_keep_s
@@ -860,7 +863,10 @@ class EvidenceLedger:
         the map's kernels, ran its dozen small NumPy calls about three times slower than in a row. Until then an
         ended ledger holds its entries' update blocks (at most ``_END_BATCH`` ledgers wait) and reads as packed
         (:meth:`_Ledger.settle` and :meth:`_Ledger.new_cells` take both forms); a dropped one is out of every
-        table and not changed any more."""
+        table and not changed any more. (Only dropped ledgers with the rows of two or more updates wait: the others
+        are counted without a sort at once, and a waiting one lets its track go — ledgers that wait longer outlive
+        more of the collector's young generations, and with every dropped ledger waiting the garbage collections
+        cost the map update about as much as the batches saved.)"""
         for led in self._to_pack:
             led.pack()
         for led in self._to_count:
