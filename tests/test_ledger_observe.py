@@ -231,4 +231,7 @@ def test_before_update_records_only_the_tracks_with_beams_in_their_order() -> No
     assert list(got._ledgers) == [9, 4, 2]
     assert [(i, b.tolist()) for i, b in got._ledgers[4].beams] == [(3, [200])]
     assert got._ledgers[9].beams[0][1].tolist() == list(range(100, 160))
+    got.before_update(scan, pose, mixed, removed, slam.map, 5)  # (a second update: the beams in update order)
+    assert [(i, b.tolist()) for i, b in got._ledgers[4].beams] == [(3, [200]), (5, [200])]
+    assert [i for i, _ in got._ledgers[2].beams] == [3, 5] and len(got._ledgers[2].kb) == 8  # (four items each)
     assert EvidenceLedger(MemoryConfig(), 0.1, 30.0).before_update(scan, pose, mixed[2:3], removed, slam.map) is None

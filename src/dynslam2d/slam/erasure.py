@@ -329,9 +329,11 @@ class _Ledger:
     linked: bool = False  # ended-track evidence already joined to a live track
     confirmed: bool = False  # the track was reported confirmed at least once (not only tentative clutter)
     skip: bool = False  # this stay in the removal set erases nothing (the track did not stand before it)
-    #: (scan index, the update's kept beams of all tracks, first, end) of the track's kept beams at every recorded
-    #: map update (only with keep_beams; :attr:`beams` slices them)
-    kb: list[tuple[int, np.ndarray, int, int]] = field(default_factory=list)
+    #: scan index, the update's kept beams of all tracks, first, end of the track's kept beams at every recorded
+    #: map update, four items per update one after the other (only with keep_beams; :attr:`beams` slices them; flat,
+    #: not a tuple per update: pass led26, a kept tuple per track and update drove a fifth of the garbage
+    #: collector's young-generation passes)
+    kb: list = field(default_factory=list)
     last_track: Track | None = None  # the track as last seen out of the removal set
     #: (update's (5, m) row block, first column, end column, levels with rows (bit k: level k)) per map update
     #: since the last :meth:`settle`
@@ -464,7 +466,8 @@ class _Ledger:
     @property
     def beams(self) -> list[tuple[int, np.ndarray]]:
         """(scan index, beams) of the track's kept beams at every recorded map update (only with keep_beams)."""
-        return [(i, kb[a:b]) for i, kb, a, b in self.kb]
+        kb = self.kb
+        return [(kb[q], kb[q + 1][kb[q + 2]:kb[q + 3]]) for q in range(0, len(kb), 4)]
 
     @property
     def n_cells(self) -> int:
@@ -606,7 +609,7 @@ class EvidenceLedger:
                     if led is None:
                         led = ledgers[tid] = self._new_ledger(t, t.stamp, n_lv)
                     if b > a:  # (the bounds, not a view: a view costs more per track and holds the same array)
-                        led.kb.append((at, kb_all, a, b))
+                        led.kb.extend((at, kb_all, a, b))  # (flat: the tuple dies here, not in a young generation)
         else:
             for t, tid, keep in zip(mine, tids, present):
                 if keep and tid not in ledgers:
