@@ -65,6 +65,8 @@ _COMPACT_CHUNKS = 64
 _PENDING_MIN = 16
 #: A record's row references to updates' shared row blocks are copied into its buffer when this many updates old.
 _REF_MAX_AGE = 64
+#: Ledgers that ended (confirmed: to pack) or were dropped (to count) wait for this many, then are done in one go.
+_END_BATCH = 16
 _EMPTY_I = np.zeros(0, dtype=np.int64)
 _EMPTY_F = np.zeros(0)
 _EMPTY_B = np.zeros(0, dtype=bool)
@@ -327,9 +329,11 @@ class _Ledger:
     linked: bool = False  # ended-track evidence already joined to a live track
     confirmed: bool = False  # the track was reported confirmed at least once (not only tentative clutter)
     skip: bool = False  # this stay in the removal set erases nothing (the track did not stand before it)
-    #: (scan index, the update's kept beams of all tracks, first, end) of the track's kept beams at every recorded
-    #: map update (only with keep_beams; :attr:`beams` slices them)
-    kb: list[tuple[int, np.ndarray, int, int]] = field(default_factory=list)
+    #: scan index, the update's kept beams of all tracks, first, end of the track's kept beams at every recorded
+    #: map update, four items per update one after the other (only with keep_beams; :attr:`beams` slices them; flat,
+    #: not a tuple per update: pass led26, a kept tuple per track and update drove a fifth of the garbage
+    #: collector's young-generation passes)
+    kb: list = field(default_factory=list)
     last_track: Track | None = None  # the track as last seen out of the removal set
     #: (update's (5, m) row block, first column, end column, levels with rows (bit k: level k)) per map update
     #: since the last :meth:`settle`
@@ -462,7 +466,8 @@ class _Ledger:
     @property
     def beams(self) -> list[tuple[int, np.ndarray]]:
         """(scan index, beams) of the track's kept beams at every recorded map update (only with keep_beams)."""
-        return [(i, kb[a:b]) for i, kb, a, b in self.kb]
+        kb = self.kb
+        return [(kb[q], kb[q + 1][kb[q + 2]:kb[q + 3]]) for q in range(0, len(kb), 4)]
 
     @property
     def n_cells(self) -> int:
@@ -531,6 +536,10 @@ class EvidenceLedger:
         self._ended: dict[int, _Ledger] = {}
         self._n_updates = 0  # after_update calls (the age of a record's row references)
         self._oldest_ended = math.inf  # the smallest last_seen among the ended ledgers, s
+        #: ended confirmed ledgers not packed yet and dropped ledgers whose new cells are not counted yet (done in
+        #: batches by :meth:`_finish_ended`)
+        self._to_pack: list[_Ledger] = []
+        self._to_count: list[_Ledger] = []
         #: live track id → [box where it stands, stamp it began standing there, last stamp it stood there]
         self._first: dict[int, list] = {}
         self._rs: np.ndarray | None = None  # the levels' cell sides, m (of the levels list ``_rs_of``)
@@ -600,7 +609,7 @@ class EvidenceLedger:
                     if led is None:
                         led = ledgers[tid] = self._new_ledger(t, t.stamp, n_lv)
                     if b > a:  # (the bounds, not a view: a view costs more per track and holds the same array)
-                        led.kb.append((at, kb_all, a, b))
+                        led.kb.extend((at, kb_all, a, b))  # (flat: the tuple dies here, not in a young generation)
         else:
             for t, tid, keep in zip(mine, tids, present):
                 if keep and tid not in ledgers:
@@ -831,17 +840,42 @@ class EvidenceLedger:
             if led.confirmed:  # tentative clutter (wall fragments, noise) is never linked
                 # an ended ledger gets no more rows: its entries' rows are copied out of the updates' shared row
                 # blocks into one array of their size (issue 13 item 3; one copy, where folding them here would
-                # sort them in the per-scan path and splitting them per level would copy each level apart)
-                led.pack()
+                # sort them in the per-scan path and splitting them per level would copy each level apart) — in
+                # the next batch (_finish_ended)
+                self._to_pack.append(led)
                 self._ended[tid] = led
                 self._oldest_ended = min(self._oldest_ended, led.last_seen)
-            else:
+            elif led.recs is None and len(led.ent) < 2:  # (no rows or one update's: counted without sorting)
                 self._drop(led)  # (its cells count in cells_recorded)
+            else:  # (in the next batch; the track is not read again: let it go now, not with the batch)
+                led.last_track = None
+                self._to_count.append(led)
+        if len(self._to_pack) + len(self._to_count) >= _END_BATCH:
+            self._finish_ended()
         keep = self.config.ledger_keep_s
         if self._ended and stamp - self._oldest_ended > keep:  # (a full pass only when one has expired)
             for tid in [i for i, led in self._ended.items() if stamp - led.last_seen > keep]:
                 self._drop(self._ended.pop(tid))
             self._oldest_ended = min((led.last_seen for led in self._ended.values()), default=math.inf)
+
+    def _finish_ended(self) -> None:
+        """Pack the ended ledgers and count the new cells of the dropped ones that :meth:`observe` set aside.
+
+        Done for a batch of them at once (pass led26): the same copies and sorts, with the same results, as one at
+        a time when each track ends, but back to back: in the pipeline one of them alone, between the tracker's and
+        the map's kernels, ran its dozen small NumPy calls about three times slower than in a row. Until then an
+        ended ledger holds its entries' update blocks (at most ``_END_BATCH`` ledgers wait) and reads as packed
+        (:meth:`_Ledger.settle` and :meth:`_Ledger.new_cells` take both forms); a dropped one is out of every
+        table and not changed any more. (Only dropped ledgers with the rows of two or more updates wait: the others
+        are counted without a sort at once, and a waiting one lets its track go — ledgers that wait longer outlive
+        more of the collector's young generations, and with every dropped ledger waiting the garbage collections
+        cost the map update about as much as the batches saved.)"""
+        for led in self._to_pack:
+            led.pack()
+        for led in self._to_count:
+            self._drop(led)
+        self._to_pack = []
+        self._to_count = []
 
     # ------------------------------------------------------------------ erasure
     def erase_entering(self, tracks: list[Track], removing: set[int], stamp: float, hmap: MultiResMap) -> int:
@@ -951,6 +985,7 @@ class EvidenceLedger:
         """Counters for summary.json's ``memory`` block."""
         if self._final is not None:
             return dict(self._final)
+        self._finish_ended()
         for led in (*self._ledgers.values(), *self._ended.values()):
             self._fold(led)
         return {**self.stats, "erased_cells_finest": len(self.erased_cells),
@@ -964,6 +999,8 @@ class EvidenceLedger:
         self._final = self.summary()
         self._ledgers = {}
         self._ended = {}
+        self._to_pack = []
+        self._to_count = []
         self._first = {}
         self._oldest_ended = math.inf
         self.erased_beams = []
