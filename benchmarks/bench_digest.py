@@ -1,10 +1,11 @@
 """Output digests of the whole pipeline on 12 inputs, to check a speed change leaves every output bit-identical
 (not run by pytest).
 
-For each input the pipeline (default configuration) runs over every scan; a SHA-256 digest is taken of
-everything a scan produced (pose, score, flags, removed beams and by which track, body beams, every track's id,
-state, box, velocity, covariance, hits, misses, kind, in_m, m_reason, beams) and, at the end, of every map
-level's log-odds, probability cache and update indices. Two checkouts agree when every line matches.
+For each input the pipeline (default configuration) runs over every scan, with the collector setting of
+``pipeline.run``'s loop (``bench_pipeline.scan_loop_gc``); a SHA-256 digest is taken of everything a scan
+produced (pose, score, flags, removed beams and by which track, body beams, every track's id, state, box,
+velocity, covariance, hits, misses, kind, in_m, m_reason, beams) and, at the end, of every map level's log-odds,
+probability cache and update indices. Two checkouts agree when every line matches.
 
     python benchmarks/bench_digest.py [--only negative_2 sim:crowd ...] [--json out.json]
     python benchmarks/bench_digest.py --compare ../main/src     # runs both checkouts, prints the differences
@@ -55,6 +56,8 @@ def _h(h, *arrays) -> None:
 
 def digest(data: Path, name: str) -> dict[str, str] | None:
     """{"steps": digest of every StepResult, "map": digest of the map levels, "scans": count}; None if absent."""
+    from bench_pipeline import scan_loop_gc  # (this script's folder)
+
     from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import Pipeline
 
@@ -65,18 +68,20 @@ def digest(data: Path, name: str) -> dict[str, str] | None:
     pipe = Pipeline()
     hs = hashlib.sha256()
     n = 0
-    for scan in open_source(path, topic):
-        s = pipe.process(scan)
-        n += 1
-        _h(hs, np.array([s.pose.x, s.pose.y, s.pose.theta, s.score, s.degeneracy, s.support_spread]),
-           np.array([s.map_updated, s.rejected, s.skipped, s.degenerate, s.low_support]),
-           np.array([s.support_points]), s.removed, s.removed_by, s.body)
-        hs.update(f"{s.reason}|{s.pose_source}|{s.slam_state}".encode())
-        for t in s.tracks:
-            b = t.box
-            hs.update(f"{t.id}|{t.state}|{t.kind}|{t.in_m}|{t.m_reason}|{t.hits}|{t.misses}|{t.remembered}".encode())
-            _h(hs, np.array([t.stamp, b.px, b.py, b.theta, b.length, b.width, t.age]), t.velocity, t.covariance,
-               t.beams if t.beams is not None else np.zeros(0))
+    with scan_loop_gc():  # pipeline.run's collector setting (a checkout without it: none)
+        for scan in open_source(path, topic):
+            s = pipe.process(scan)
+            n += 1
+            _h(hs, np.array([s.pose.x, s.pose.y, s.pose.theta, s.score, s.degeneracy, s.support_spread]),
+               np.array([s.map_updated, s.rejected, s.skipped, s.degenerate, s.low_support]),
+               np.array([s.support_points]), s.removed, s.removed_by, s.body)
+            hs.update(f"{s.reason}|{s.pose_source}|{s.slam_state}".encode())
+            for t in s.tracks:
+                b = t.box
+                hs.update(f"{t.id}|{t.state}|{t.kind}|{t.in_m}|{t.m_reason}|{t.hits}|{t.misses}|"
+                          f"{t.remembered}".encode())
+                _h(hs, np.array([t.stamp, b.px, b.py, b.theta, b.length, b.width, t.age]), t.velocity,
+                   t.covariance, t.beams if t.beams is not None else np.zeros(0))
     hm = hashlib.sha256()
     for lv in pipe.slam.map.levels:
         _h(hm, np.array([lv.i0, lv.j0, lv.update_counter]), lv.logodds, lv.prob, lv.uidx)

@@ -12,7 +12,8 @@ median and mean µs of each side and their ratios, and the mean per scan of all 
 Two pipelines share one process: their caches evict each other's data, so the per-call figures run higher than
 in ``bench_pipeline_ab.py --parts``; and the garbage collector is the process's: its passes land in either side.
 ``--gc`` prints the process's collections and their CPU (one pipeline per side is still two: use it on one
-checkout at a time, or compare ``--gc`` runs of ``--only``).
+checkout at a time, or compare ``--gc`` runs of ``--only``). The scan loop runs with the collector setting of
+``pipeline.run``'s loop (``bench_pipeline.scan_loop_gc``; none in a checkout before it).
 
     PYTHONPATH=src taskset -c 1 python benchmarks/bench_ledger_ab.py negative_2/right \\
         --other <base>/src/dynslam2d/slam/erasure.py [--reps 2]
@@ -31,6 +32,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
+from bench_pipeline import scan_loop_gc  # noqa: E402 - pipeline.run's collector setting (before it: none)
 
 WARMUP = 60
 METHODS = ("observe", "before_update", "after_update", "erase_entering")
@@ -105,9 +107,10 @@ def main() -> None:
         for tag, p in pipes.items():
             timed(p.ledger, tag)
         order = list(pipes.values())
-        for i, s in enumerate(scans):
-            for p in (order if i % 2 else order[::-1]):
-                p.process(s)
+        with scan_loop_gc():
+            for i, s in enumerate(scans):
+                for p in (order if i % 2 else order[::-1]):
+                    p.process(s)
         for tag, p in pipes.items():
             summaries[tag].append(p.ledger.summary())
     if not args.only and summaries["other"] != summaries["this"]:

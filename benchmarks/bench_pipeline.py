@@ -29,6 +29,7 @@ full compile instead of a cache load. Pin to one core with ``taskset -c 0`` for 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import tempfile
 import time
@@ -37,6 +38,17 @@ import numpy as np
 from scenes import ten_movers
 
 STAGES = ("match", "track", "filter", "map_update", "loops", "total")
+
+
+def scan_loop_gc() -> contextlib.AbstractContextManager:
+    """The collector setting ``pipeline.run`` makes for its scan loop (``dynslam2d.collector.scan_loop_gc``: a
+    raised generation-0 threshold), for a benchmark's own loop over ``Pipeline.process``; a checkout without it
+    (a base before pass gc27) gets CPython's collector as it is, as its ``run`` does."""
+    try:
+        from dynslam2d.collector import scan_loop_gc as scope
+    except ImportError:
+        return contextlib.nullcontext(False)
+    return scope()
 
 
 def _scans(name: str, duration: float) -> list:
@@ -73,13 +85,14 @@ def bench(name: str, scans: list) -> dict[str, object]:
     n_tracks, n_m, removed = [], [], 0
     t_loop = time.perf_counter()
     c_loop = time.thread_time()
-    for s in scans[1:]:
-        step = pipe.process(s)
-        for k in STAGES:
-            per_stage[k].append(step.timings[k])
-        n_tracks.append(len(step.tracks))
-        n_m.append(sum(t.in_m for t in step.tracks))
-        removed += int(step.removed.sum())
+    with scan_loop_gc():
+        for s in scans[1:]:
+            step = pipe.process(s)
+            for k in STAGES:
+                per_stage[k].append(step.timings[k])
+            n_tracks.append(len(step.tracks))
+            n_m.append(sum(t.in_m for t in step.tracks))
+            removed += int(step.removed.sum())
     wall = time.perf_counter() - t_loop
     cpu_ms = (time.thread_time() - c_loop) * 1e3 / max(len(scans) - 1, 1)
     stats = {k: (float(np.median(v)), float(np.percentile(v, 95))) for k, v in per_stage.items()}

@@ -7,7 +7,9 @@ scans with a throw-away pipeline, then process the scans one at a time when told
 ``i`` to one worker, waits, then to the other (which one goes first alternates with ``i``), so both run on the
 same core under the same load, scan by scan. Each worker times ``Pipeline.process`` in thread CPU time
 (``time.thread_time_ns``) and reports its stage timings (``StepResult.timings``) in thread CPU time too (the
-pipeline's ``time.perf_counter`` is swapped for ``time.thread_time`` in the worker). Printed per input: median
+pipeline's ``time.perf_counter`` is swapped for ``time.thread_time`` in the worker). Each worker's scan loop runs
+with its checkout's collector setting of ``pipeline.run``'s loop (``bench_pipeline.scan_loop_gc``: none in a
+checkout before it), as ``--parts``' loop does. Printed per input: median
 CPU ms per scan of each checkout, their ratio, the median of the per-scan ratios, and the median of every stage
 (``map_update``, ``loops`` and the whole pipeline also over the scans that updated the map).
 
@@ -41,6 +43,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
+from bench_pipeline import scan_loop_gc  # noqa: E402 - pipeline.run's collector setting (a checkout without it: none)
 
 WARMUP = 60
 
@@ -66,13 +69,14 @@ def worker(data: Path, name: str) -> None:
     pl.time = types.SimpleNamespace(perf_counter=time.thread_time)  # stage timings in thread CPU time
     pipe = pl.Pipeline()
     print(json.dumps({"scans": len(scans)}), flush=True)
-    for i, line in enumerate(sys.stdin):
-        if i >= len(scans) or line.strip() != "go":
-            break
-        t0 = time.thread_time_ns()
-        step = pipe.process(scans[i])
-        cpu = (time.thread_time_ns() - t0) / 1e6
-        print(json.dumps({"cpu": cpu, "t": step.timings, "u": bool(step.map_updated)}), flush=True)
+    with scan_loop_gc():
+        for i, line in enumerate(sys.stdin):
+            if i >= len(scans) or line.strip() != "go":
+                break
+            t0 = time.thread_time_ns()
+            step = pipe.process(scans[i])
+            cpu = (time.thread_time_ns() - t0) / 1e6
+            print(json.dumps({"cpu": cpu, "t": step.timings, "u": bool(step.map_updated)}), flush=True)
 
 
 def compare(data: Path, name: str, other: Path, reps: int) -> None:
@@ -197,14 +201,15 @@ def parts(data: Path, name: str) -> None:
            "map: needs_map_update", "body filter", "loops: add") + tuple(
                f"ledger: {k}" for k in ("before_update", "after_update", "observe", "erase_entering"))
     rows, upd = [], []
-    for s in scans:
-        acc.clear()
-        step = pipe.process(s)
-        r = dict(acc)
-        r["process: unattributed (whole minus the top-level parts)"] = r["process: whole"] - sum(
-            r.get(k, 0) for k in top)
-        rows.append(r)
-        upd.append(bool(step.map_updated))
+    with scan_loop_gc():
+        for s in scans:
+            acc.clear()
+            step = pipe.process(s)
+            r = dict(acc)
+            r["process: unattributed (whole minus the top-level parts)"] = r["process: whole"] - sum(
+                r.get(k, 0) for k in top)
+            rows.append(r)
+            upd.append(bool(step.map_updated))
     u = np.array(upd)
     print(f"{name}: {len(scans)} scans, {int(u.sum())} update the map; CPU µs per scan (median / mean)")
     tags = sorted({k for r in rows for k in r})

@@ -12,7 +12,8 @@ Issue 9's speed target: ≥ 500 scans/s median for the whole pipeline on one cor
   * ``sim:drive``   — the simulated corridor drive,
   * ``mit-csail``   — ``mit-csail/mit-csail.clf`` (a robot driving through an office building, laser only).
 
-The scans are read into memory first, so only ``Pipeline.process`` is timed (no bag decoding). For
+The scans are read into memory first, so only ``Pipeline.process`` is timed (no bag decoding), in a loop with
+the collector setting of ``pipeline.run``'s (``bench_pipeline.scan_loop_gc``; none in a checkout before it). For
 each input it reports
 
   * the first-call cost apart: the first ``process`` call of a throw-away pipeline in this process
@@ -49,7 +50,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from bench_pipeline import warm_up  # the same throw-away pipeline over the first scans
+from bench_pipeline import scan_loop_gc, warm_up  # the same throw-away pipeline over the first scans; run's collector
 
 STAGES = ("match", "track", "filter", "map_update", "loops", "total")
 REPO = Path(__file__).resolve().parents[1]
@@ -87,11 +88,12 @@ def one_run(scans: list) -> dict[str, float]:
     pipe = Pipeline()
     per: dict[str, list[float]] = {k: [] for k in STAGES}
     c0 = time.thread_time()
-    for i, s in enumerate(scans):
-        step = pipe.process(s)
-        if i:
-            for k in STAGES:
-                per[k].append(step.timings[k])
+    with scan_loop_gc():  # the collector setting of pipeline.run's loop (a checkout without it: none)
+        for i, s in enumerate(scans):
+            step = pipe.process(s)
+            if i:
+                for k in STAGES:
+                    per[k].append(step.timings[k])
     cpu = (time.thread_time() - c0) * 1e3 / len(scans)
     out = {"cpu_ms": cpu, "tracks_born": float(pipe.tracker.stats.tracks_born)}
     for k, v in per.items():

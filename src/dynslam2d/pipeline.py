@@ -25,6 +25,7 @@ from typing import Protocol
 
 import numpy as np
 
+from dynslam2d.collector import SCAN_LOOP_GC_THRESHOLD0, scan_loop_gc
 from dynslam2d.config import Config
 from dynslam2d.detect.body import BodyFilter
 from dynslam2d.detect.mapevidence import MapView, map_evidence
@@ -805,11 +806,15 @@ def run(
     config: Config | None = None,
     progress: ProgressFn | None = None,
     observers: Sequence[RunObserver] = (),
+    gc_threshold0: int | None = SCAN_LOOP_GC_THRESHOLD0,
 ) -> RunResult:
     """Run the pipeline over every scan of ``source``.
 
     ``progress(n_done, step)`` is called after every scan (the CLI draws its progress bar
-    from it); every observer sees every scan (see :class:`RunObserver`).
+    from it); every observer sees every scan (see :class:`RunObserver`). During the per-scan loop
+    Python's cyclic garbage collector collects its youngest generation every ``gc_threshold0``
+    allocations instead of CPython's 700 (:func:`dynslam2d.collector.scan_loop_gc`; the previous
+    thresholds come back when the loop ends or raises); None leaves the collector as it is.
     """
     pipe = Pipeline(config)
     source = apply_range_scale(source, pipe.config.laser, pipe.config.slam)
@@ -824,32 +829,33 @@ def run(
     compile0 = compile_seconds()
     last_scan: Scan | None = None
     n_done = 0
-    for scan in source:
-        step = pipe.process(scan)
-        last_scan = scan
-        pose = step.pose
-        per_scan.append((step.stamp, (pose.x, pose.y, pose.theta), step.score,
-                         (step.map_updated, step.rejected, step.skipped), step.low_support, step.degenerate,
-                         step.slam_state == "lost", step.degeneracy))
-        n_done += 1
-        removed_rows.append(step.removed)
-        if step.tracks:
-            stamp, code, codes = step.stamp, track_rows.code, track_rows.state_codes
-            track_rows.extend_records([
-                (stamp, t.id, codes[t.state] if t.state in codes else code(t.state), b.px, b.py, b.theta, b.length,
-                 b.width, float(vel[0]), float(vel[1]), bool(t.in_m), bool(t.remembered))
-                for t in step.tracks for b, vel in ((t.box, t.velocity),)])
-        for k, v in step.timings.items():
-            arr = timings.get(k)
-            if arr is None:
-                arr = timings[k] = GrowArray(np.float64)
-            arr.append(v)
-        for obs in observers:
-            obs.on_scan(scan, step, pipe)
-        if progress is not None:
-            progress(n_done, step)
-        if n_done % TRIM_EVERY_SCANS == 0:
-            release_free_memory()  # a long log's freed temporaries back to the OS (memtrim.py; ~ms per call)
+    with scan_loop_gc(gc_threshold0):  # fewer young collections while the scans run (collector.py)
+        for scan in source:
+            step = pipe.process(scan)
+            last_scan = scan
+            pose = step.pose
+            per_scan.append((step.stamp, (pose.x, pose.y, pose.theta), step.score,
+                             (step.map_updated, step.rejected, step.skipped), step.low_support, step.degenerate,
+                             step.slam_state == "lost", step.degeneracy))
+            n_done += 1
+            removed_rows.append(step.removed)
+            if step.tracks:
+                stamp, code, codes = step.stamp, track_rows.code, track_rows.state_codes
+                track_rows.extend_records([
+                    (stamp, t.id, codes[t.state] if t.state in codes else code(t.state), b.px, b.py, b.theta, b.length,
+                     b.width, float(vel[0]), float(vel[1]), bool(t.in_m), bool(t.remembered))
+                    for t in step.tracks for b, vel in ((t.box, t.velocity),)])
+            for k, v in step.timings.items():
+                arr = timings.get(k)
+                if arr is None:
+                    arr = timings[k] = GrowArray(np.float64)
+                arr.append(v)
+            for obs in observers:
+                obs.on_scan(scan, step, pipe)
+            if progress is not None:
+                progress(n_done, step)
+            if n_done % TRIM_EVERY_SCANS == 0:
+                release_free_memory()  # a long log's freed temporaries back to the OS (memtrim.py; ~ms per call)
     compile_s = compile_seconds() - compile0
     release_free_memory()  # the loop's freed temporaries, before the observers' end-of-run work (memtrim.py)
     rec = per_scan.view()
