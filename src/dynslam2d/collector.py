@@ -4,9 +4,10 @@ CPython collects its youngest generation whenever the number of tracked containe
 instances, …) allocated minus those freed since the last collection exceeds generation 0's threshold, 700 by
 default. The pipeline keeps a few thousand young containers alive from scan to scan (the tracker's detections,
 tracks and boxes, the evidence ledger's entries), so each of those collections walks them all — 250–330 µs each,
-about 20 per 434 scans of negative_2 /right_scan, ≈ 15 µs per scan — and finds little garbage: the pipeline's
-per-scan objects are freed by reference counting, not by the collector. :func:`scan_loop_gc` raises generation
-0's threshold for the duration of the loop and puts the previous thresholds back afterwards.
+about 20 per 434 scans of negative_2 /right_scan, ≈ 10–15 µs per scan — and finds no garbage there (0 objects
+collected; 28 in 1988 scans of MIT CSAIL): the pipeline's per-scan objects are freed by reference counting, not
+by the collector. :func:`scan_loop_gc` raises generation 0's threshold for the duration of the loop and puts the
+previous thresholds back afterwards.
 """
 
 from __future__ import annotations
