@@ -9,7 +9,8 @@ events, the CPU time each function spends in numba's compiler excluding the func
 
 Prints the process CPU of the whole run, the compile CPU summed over functions, their count (and the number of
 compilations: numba's helpers such as ``np.empty``'s are compiled once per signature), the time in Python's cyclic
-garbage collector (``gc.callbacks``; it lands on whichever function is compiling), the peak RSS, the CPU inside
+garbage collector (``gc.callbacks``; it lands on whichever function is compiling), the peak RSS, the system CPU and
+minor page faults of the process (``getrusage``), the CPU inside
 llvmlite's calls (numba's ``numba:llvm_lock`` event: LLVM's IR parsing, optimisation and machine code) in all and
 per function, and the largest functions; this profile runs with the background compile off
 (``DYNSLAM2D_COMPILE_WORKER=0``), so it counts all the compile work.
@@ -93,7 +94,9 @@ gc.callbacks.append(_gc)
 """ + RUN_FIRST_COMMAND + r"""
 print(json.dumps({"process_cpu": time.process_time() - c0, "per": excl, "compilations": n[0], "gc": collector,
                   "llvm": llvm,
-                  "rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+                  "rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                  "sys_cpu": resource.getrusage(resource.RUSAGE_SELF).ru_stime,
+                  "minflt": resource.getrusage(resource.RUSAGE_SELF).ru_minflt}))
 """
 
 
@@ -223,6 +226,8 @@ def main() -> None:
     if "gc" in data:
         print(f"garbage collector {data['gc'][0]:.1f} s CPU in {data['gc'][1]} collections ({data['gc'][2]} full; "
               f"within the figures above); peak RSS {data['rss_mib']:.0f} MiB; load average {os.getloadavg()[0]:.2f}")
+    if "minflt" in data:  # (system CPU and page faults: e.g. CPython's frame-stack chunks mapped per call, pass cold28)
+        print(f"of the process CPU, system {data['sys_cpu']:.1f} s; minor page faults {data['minflt']}")
     llvm = data.get("llvm", {})
     if llvm:
         print(f"of the compile CPU, in LLVM (llvmlite's calls: IR parsing, optimisation, machine code): "

@@ -132,3 +132,45 @@ def test_kernels_are_optimised_once_with_the_same_results(tmp_path) -> None:
     assert once["same_as_python"] and undo["same_as_python"]
     assert once["out"] == undo["out"] and once["rest"] == undo["rest"] and len(once["out"][0]) > 300
     assert not once["installed"]
+
+
+def test_bit_casts_match_numpy_views() -> None:
+    """jitbox.float_bits / float_from_bits / word_at (pass cold28): the bits NumPy's ``.view`` gives, on special
+    values (signed zeros, infinities, NaNs with payloads, subnormals) and random ones, and every word offset of a
+    byte array; arguments of other types are refused at typing."""
+    import numpy as np
+    import pytest
+    from numba.core.errors import TypingError
+
+    from dynslam2d.jitbox import float_bits, float_from_bits, njit, word_at
+
+    @njit(cache=False)
+    def casts(x, i, m):  # pragma: no cover - numba
+        fb = np.empty(x.shape[0], dtype=np.int64)
+        ff = np.empty(i.shape[0])
+        for k in range(x.shape[0]):
+            fb[k] = float_bits(x[k])
+        for k in range(i.shape[0]):
+            ff[k] = float_from_bits(i[k])
+        w = np.empty(m.shape[0] - 7, dtype=np.uint64)
+        for k in range(w.shape[0]):
+            w[k] = word_at(m, k)
+        return fb, ff, w
+
+    rng = np.random.default_rng(28)
+    special = np.array([0.0, -0.0, np.inf, -np.inf, 5e-324, -2.2e-308, 1.0, np.nan])
+    payload = np.array([0x7FF0000000000001, 0xFFF8000000000123 - (1 << 64)], dtype=np.int64).view(np.float64)
+    x = np.concatenate([special, payload, rng.normal(size=50) * 10.0 ** rng.integers(-300, 300, 50)])
+    i = np.concatenate([x.view(np.int64), rng.integers(-(1 << 63), (1 << 63) - 1, 50, dtype=np.int64)])
+    m = rng.integers(0, 256, 67, dtype=np.uint8)
+    fb, ff, w = casts(x, i, m)
+    assert np.array_equal(fb, x.view(np.int64))
+    assert np.array_equal(ff.view(np.int64), i)  # (bit for bit, NaN payloads included)
+    assert np.array_equal(w, [m[k:k + 8].view(np.uint64)[0] for k in range(60)])
+
+    @njit(cache=False)
+    def wrong(v):  # pragma: no cover - numba
+        return float_bits(v)
+
+    with pytest.raises(TypingError):
+        wrong(np.float32(1.0))

@@ -14,6 +14,10 @@ and the numba cache keys entries by the source file, so those modules' kernels a
 :func:`one_llvm_optimisation` leaves of numba's three LLVM optimisations of a kernel's code (the function pipeline
 on each IR module as it is added, a cheap and the full module pipeline on the linked library) the full module
 pipeline only: 5–10 % less cold compile CPU, the same results (docs/speed.md, pass cold21).
+
+:func:`float_bits`, :func:`float_from_bits` and :func:`word_at` reinterpret bits inside a kernel as NumPy's
+``.view`` does, lowered in place: numba compiles its ``.view`` of an array once per (array type, dtype) as a
+helper of its own with a compatibility check (≈ 0.1 s of cold compile CPU each; docs/speed.md, pass cold28).
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from typing import Any
 
 from numba import njit  # noqa: F401 - re-exported: the kernel modules' njit, with the boxer below in place
 from numba.core import boxing, pythonapi, types
+from numba.extending import intrinsic
 
 
 def _box_array_from_env(typ: Any, val: Any, c: Any) -> Any:
@@ -121,6 +126,56 @@ def one_llvm_optimisation() -> bool:
     library._optimize_final_module = optimise_final_once
     event.register("numba:compile", _Kernels())
     return True
+
+
+@intrinsic
+def float_bits(typingctx: Any, x: Any) -> Any:
+    """In a kernel: the int64 whose bits are those of the float64 ``x`` (``np.float64(x).view(np.int64)``; NaN
+    payloads and signed zeros kept)."""
+    if x != types.float64:
+        return None
+
+    def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+        from llvmlite import ir
+
+        return builder.bitcast(args[0], ir.IntType(64))
+
+    return types.int64(x), codegen
+
+
+@intrinsic
+def float_from_bits(typingctx: Any, i: Any) -> Any:
+    """In a kernel: the float64 whose bits are those of the int64 ``i`` (``np.int64(i).view(np.float64)``; the
+    inverse of :func:`float_bits`)."""
+    if i != types.int64:
+        return None
+
+    def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+        from llvmlite import ir
+
+        return builder.bitcast(args[0], ir.DoubleType())
+
+    return types.float64(i), codegen
+
+
+@intrinsic
+def word_at(typingctx: Any, a: Any, i: Any) -> Any:
+    """In a kernel: the uint64 made of the 8 bytes ``a[i:i + 8]`` of a C-contiguous 1-D uint8 array, in the
+    machine's byte order (``a[i:i + 8].view(np.uint64)[0]``). No bounds check: ``0 <= i`` and ``i + 8 <=
+    a.shape[0]`` are the caller's."""
+    if not (isinstance(a, types.Array) and a.dtype == types.uint8 and a.ndim == 1 and a.layout == "C"
+            and isinstance(i, types.Integer)):
+        return None
+
+    def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+        from llvmlite import ir
+
+        ary = context.make_array(sig.args[0])(context, builder, args[0])
+        at = context.cast(builder, args[1], sig.args[1], types.intp)
+        ptr = builder.bitcast(builder.gep(ary.data, [at]), ir.IntType(64).as_pointer())
+        return builder.load(ptr, align=1)
+
+    return types.uint64(a, i), codegen
 
 
 box_arrays_from_env()

@@ -159,6 +159,9 @@ def lean_numba_compile() -> bool:
     - **Call typing remembered** (:func:`remembered_call_typing`): a call of one of numba's functions with
       argument types typed before tries the template that accepted them first instead of every template again
       (about a tenth of the compile CPU more; the same code).
+    - **Compiles on a roomy frame stack** (:func:`roomy_compile_stack`): no 16 KiB chunk of CPython's frame
+      stack mapped and unmapped per call where the compiler's stack depth sits at a chunk's end (≈ 200 000
+      times on that cold run; 5–8 % of its compile CPU).
 
     Together about a tenth of the compile CPU (docs/speed.md), and the remembered call typing about a tenth
     more. The command line and its background compile call this first (they own the process); a library
@@ -202,6 +205,75 @@ def lean_numba_compile() -> bool:
     config.__hash__ = class_hash  # type: ignore[method-assign,assignment]
     config.__eq__ = fast_equal  # type: ignore[method-assign,assignment]
     remembered_call_typing()
+    roomy_compile_stack()
+    return True
+
+
+#: Value-stack slots reserved by :func:`roomy_call`'s frame (8 bytes each; never used): the frame, ≈ 1 MiB, does not fit
+#: CPython's 1 MiB data-stack chunk with the chunk's overhead, so the chunk made for it is 2 MiB, and the ≈ 1 MiB after
+#: the frame holds the frames of the call.
+ROOMY_STACK_SLOTS = 1 << 17
+
+
+def _call(fn: Any, *args: Any, **kwargs: Any) -> Any:
+    return fn(*args, **kwargs)
+
+
+def _roomy(func: Any) -> Any:
+    """``func`` with :data:`ROOMY_STACK_SLOTS` more value-stack slots in its frame (where frames live on CPython's
+    data stack, 3.11 and later; else ``func`` itself)."""
+    if sys.implementation.name != "cpython" or sys.version_info < (3, 11):
+        return func
+    code = func.__code__
+    return type(func)(code.replace(co_stacksize=code.co_stacksize + ROOMY_STACK_SLOTS), func.__globals__,
+                      "roomy_call")
+
+
+#: ``roomy_call(fn, *args, **kwargs)`` is ``fn(*args, **kwargs)`` run in a fresh 2 MiB chunk of CPython's frame stack
+#: (:func:`roomy_compile_stack`).
+roomy_call = _roomy(_call)
+
+
+def roomy_compile_stack() -> bool:
+    """Run each outermost numba compile of this process in a fresh 2 MiB chunk of CPython's frame stack, so that
+    no call in the compiler's inner loops pushes a frame across a chunk boundary.
+
+    CPython (3.11 and later) keeps Python frames on a per-thread stack of memory chunks, 16 KiB each by default
+    (``_PyThreadState_PushFrame``): a frame that does not fit in the current chunk gets a new chunk (``mmap``),
+    and popping the first frame of a chunk frees it (``munmap``). Where the compiler's stack depth sits at a
+    chunk's end, every call its loops make there maps and unmaps 16 KiB and faults its pages in: a cold run of
+    the README's first command (one process) made ≈ 200 000 such pairs, 38 000 of them in the SSA pass of one
+    kernel (``detect.mapevidence.seen_through_structure_kernel``: 0.3–0.5 s instead of 0.04 s). Which kernels
+    are hit depends on the depth of the Python stack when they compile, so one more frame above the compile
+    moves or removes it (docs/speed.md, pass cold28). Here numba's ``Dispatcher.compile``, when no compile is
+    running in the process, is called through :func:`roomy_call`, whose frame reserves
+    :data:`ROOMY_STACK_SLOTS` value-stack slots it never uses: CPython makes a 2 MiB chunk for it, and the
+    compile's frames (its callees' and numba's helpers' compiles included) fit in the ≈ 1 MiB after it; the
+    chunk's untouched pages are never faulted in, and it is freed when the compile returns (a load from the
+    cache goes the same way: one map and unmap). The compiled code is the same. Called by
+    :func:`lean_numba_compile`; returns whether it installed this (not when called again, nor before CPython
+    3.11, whose frames are objects of their own)."""
+    if roomy_call is _call:
+        return False
+    from numba.core import dispatcher
+
+    compile_ = dispatcher.Dispatcher.compile
+    if getattr(compile_, "_dynslam2d_roomy", False):
+        return False
+    depth = [0]
+
+    def compile_roomy(self: Any, sig: Any) -> Any:
+        if depth[0]:
+            return compile_(self, sig)
+        depth[0] += 1
+        try:
+            return roomy_call(compile_, self, sig)
+        finally:
+            depth[0] -= 1
+
+    compile_roomy._dynslam2d_roomy = True  # type: ignore[attr-defined]
+    compile_roomy.__wrapped__ = compile_  # type: ignore[attr-defined]
+    dispatcher.Dispatcher.compile = compile_roomy  # type: ignore[method-assign]
     return True
 
 

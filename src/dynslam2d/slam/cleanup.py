@@ -69,7 +69,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dynslam2d.gridmap import GridMap
-from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
+from dynslam2d.jitbox import njit, word_at  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.slam.cleanconfig import CleanConfig
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.types import Pose2D, Scan
@@ -240,7 +240,6 @@ def _count_beams(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey, kept, 
         for k in range(cx.shape[0]):
             if clear[k]:
                 _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, cx[k] - fi0, cy[k] - fj0, core)
-    words = mask[:need].view(np.uint64)
     per_row = stride // 8
     pass_code = 2 * scan_id
     cap = pool.shape[0]
@@ -251,9 +250,9 @@ def _count_beams(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey, kept, 
         tc = -1  # the tile column of the last cell counted in this row, and its pool row
         t = -1
         for q in range(per_row):
-            if words[r * per_row + q] == 0:
-                continue
             base = r * stride + q * 8
+            if word_at(mask, base) == 0:  # (8 cells at once: mask[base:base + 8].view(np.uint64)[0])
+                continue
             for jj in range(8):
                 if mask[base + jj] == 0:
                     continue

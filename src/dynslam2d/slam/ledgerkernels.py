@@ -35,7 +35,7 @@ import math
 import numpy as np
 from numba import types
 
-from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
+from dynslam2d.jitbox import float_bits, float_from_bits, njit  # numba's njit; bit casts lowered in place
 
 _KEY_SHIFT = 4294967296
 #: packed values must stay below this (they are int64)
@@ -519,14 +519,13 @@ def record_cells(beams, idl, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px,
         packed, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, valid, beams, ends, want_kb)
     m = out_ids.shape[0]
     blk = np.empty((6, m), dtype=np.int64)
-    lob = lo.view(np.int64)
     for t in range(m):
         blk[0, t] = out_ids[t]
         blk[1, t] = keys[t]
         blk[2, t] = cells[t, 0]
         blk[3, t] = cells[t, 1]
         blk[4, t] = ui[t]
-        blk[5, t] = lob[t]
+        blk[5, t] = float_bits(lo[t])  # (lo's float64 bits, as lo.view(np.int64) without numba's view helper)
     n_kb = kb_b.shape[0]
     small = np.empty(n_lv + 1 + n_t + n_kb, dtype=np.int64)
     for k in range(n_lv + 1):
@@ -557,7 +556,6 @@ def level_rows(logodds, uidx, i0, j0, n_lv, blk, small):  # pragma: no cover - n
     ids = blk[0]
     keys = blk[1]
     ub = blk[4]
-    before = blk[5].view(np.float64)  # (a view of the block's row: only read; pass ledger16 dropped its copy)
     delta = np.empty(n)
     ua = np.empty(n, dtype=np.int64)
     # groups (a track's updated rows on one level), level by level, each level's in id order: id, the input
@@ -585,7 +583,7 @@ def level_rows(logodds, uidx, i0, j0, n_lv, blk, small):  # pragma: no cover - n
                 after = a[row, col]
                 v = b[row, col]
             ua[t] = v
-            delta[t] = after - before[t]
+            delta[t] = after - float_from_bits(blk[5, t])  # (the log-odds before, stored as its bits)
             if v != ub[t]:  # else not updated (outside the array, or the ray was skipped)
                 if first or ids[t] != gid[g - 1]:
                     gid[g] = ids[t]
@@ -596,7 +594,6 @@ def level_rows(logodds, uidx, i0, j0, n_lv, blk, small):  # pragma: no cover - n
                 g_b[g - 1] = t + 1
                 g_n[g - 1] += 1
     lg[n_lv] = g
-    bits = delta.view(np.int64)
     # the groups in (track id, level) order (a merge of the levels' runs, each sorted by track id), their rows
     # written in that order; per track: id, column bounds, levels
     m = 0
@@ -628,7 +625,7 @@ def level_rows(logodds, uidx, i0, j0, n_lv, blk, small):  # pragma: no cover - n
             rows[0, j] = keys[t]
             rows[1, j] = ub[t]
             rows[2, j] = ua[t]
-            rows[3, j] = bits[t]
+            rows[3, j] = float_bits(delta[t])
             rows[4, j] = best
             j += 1
     t_bnd[n_t] = m
