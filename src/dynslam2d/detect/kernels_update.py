@@ -296,3 +296,93 @@ def fragment_hosts_rows(px: np.ndarray, py: np.ndarray, start: np.ndarray, npts:
         ts0[i] = G[k, G_SIZE0]
         ts1[i] = G[k, G_SIZE1]
     return fragment_hosts(px, py, start, npts, det, tx, ty, tth, ts0, ts1, margin)
+
+
+@njit(cache=True)
+def push_windows(rows: np.ndarray, det: np.ndarray, applied: np.ndarray, X: np.ndarray, mfr: np.ndarray,
+                 kept: np.ndarray, first: np.ndarray, second: np.ndarray, npts: np.ndarray, MEV: np.ndarray,
+                 MEVn: np.ndarray, RIDE: np.ndarray, RIDEn: np.ndarray, RNEAR: np.ndarray,
+                 use_map: bool, px: float, py: float, c: float, s: float, t: float, ride_time: float, ride_n: int,
+                 ride_r2: float) -> int:
+    """The riding and map-evidence windows of the tracks of associated pairs (track row ``rows[r]``, detection
+    ``det[r]``, where ``applied[r]``), pushed in place on their rows (``Tracker._update_tracks``' per-track lists
+    before pass trk26). Each window is left-aligned: entries 0 … n − 1 of the row, oldest first, n in ``…n``.
+
+    * ``RIDE`` (rows, R, 5), ``RIDEn``: (laser-frame x, y, map-frame x, y of the centre (m), stamp t (s)) per
+      update; the centre is the row of ``X`` after the update, the laser pose ``px``, ``py`` with cos / sin ``c``,
+      ``s`` of its heading (map frame). The oldest entries are dropped while more than ``MEV.shape[1]``
+      (sustain_updates) remain and the oldest is older than ``ride_time`` s. ``RNEAR``: the riding test's pre-test
+      of the new window — 0 fewer than ``ride_n`` entries (it cannot ride), 1 the last laser-frame centre farther
+      than √``ride_r2`` from the laser, 2 near (``Tracker._manage`` asks ``_rides_with_laser``).
+    * ``MEV`` (rows, sustain_updates, 3), ``MEVn``: the detection's map evidence (its fractions of points on
+      long-occupied, observed-free, never-observed cells), the last sustain_updates kept; only with ``use_map``.
+      ``mfr`` (3, nd): the scan's detections' before the leg merge (``select_detections``); with ``first`` not
+      empty, a merge made detection j from detection ``kept[j]`` for j < len(kept), and the later ones from the
+      pairs (``first[p]``, ``second[p]``): the point-weighted means of ``Tracker._merge_legs`` (``npts``: the points
+      of the detections before the merge), in its Python order of operations.
+
+    Returns the longest riding window after the push (the caller grows ``RIDE`` before it can overflow)."""
+    nsus = MEV.shape[1]
+    nkept = kept.shape[0]
+    nmerged = first.shape[0]
+    ns = -s
+    top = 0
+    for r in range(rows.shape[0]):
+        if not applied[r]:
+            continue
+        k = rows[r]
+        x0 = X[k, 0]
+        x1 = X[k, 1]
+        dx = x0 - px
+        dy = x1 - py
+        n = RIDEn[k]
+        # (the former append, then `while len(ride) > nsus and t - ride[0][4] > ride_time: del ride[0]`: the new
+        # entry is never older than ride_time, so the dropped ones are found before it is written)
+        d = 0
+        while n + 1 - d > nsus and t - RIDE[k, d, 4] > ride_time:
+            d += 1
+        if d:
+            for q in range(n - d):
+                for col in range(5):
+                    RIDE[k, q, col] = RIDE[k, q + d, col]
+            n -= d
+        lx = c * dx + s * dy
+        ly = ns * dx + c * dy
+        RIDE[k, n, 0] = lx
+        RIDE[k, n, 1] = ly
+        RIDE[k, n, 2] = x0
+        RIDE[k, n, 3] = x1
+        RIDE[k, n, 4] = t
+        n += 1
+        RIDEn[k] = n
+        if n > top:
+            top = n
+        if n < ride_n:
+            RNEAR[k] = 0
+        elif lx * lx + ly * ly > ride_r2:
+            RNEAR[k] = 1
+        else:
+            RNEAR[k] = 2
+        if use_map:
+            j = det[r]
+            m = MEVn[k]
+            if m == nsus:
+                for q in range(m - 1):
+                    for col in range(3):
+                        MEV[k, q, col] = MEV[k, q + 1, col]
+                m -= 1
+            if nmerged == 0:
+                for col in range(3):
+                    MEV[k, m, col] = mfr[col, j]
+            elif j < nkept:
+                for col in range(3):
+                    MEV[k, m, col] = mfr[col, kept[j]]
+            else:
+                a = first[j - nkept]
+                b = second[j - nkept]
+                na = npts[a]
+                nb = npts[b]
+                for col in range(3):
+                    MEV[k, m, col] = (na * mfr[col, a] + nb * mfr[col, b]) / (na + nb)
+            MEVn[k] = m + 1
+    return top
