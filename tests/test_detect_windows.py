@@ -1,5 +1,5 @@
 """The tracker's per-update windows as rows of arrays (docs/speed.md, pass trk26): the riding window and the map
-evidence, pushed for all updated tracks in one kernel call (``kernels_update.push_windows``) and read through
+evidence, pushed for all updated tracks in the shape update's kernel call (``kernels.shape_update``) and read through
 ``Tracker._ride`` / ``_mev``, against the per-track lists of tuples they replace (the list code kept here as the
 reference): on random pushes (trims by age, full windows, growth, re-acquisitions, merged legs' point-weighted
 evidence) and over whole pipeline runs with clutter retirement (births, re-acquisitions, dormant tracks revived)."""
@@ -12,7 +12,8 @@ import numpy as np
 
 from dynslam2d.config import Config
 from dynslam2d.detect import DetectConfig, Tracker
-from dynslam2d.detect.kernels_update import push_windows
+from dynslam2d.detect.kernels import N_G, N_GI, shape_update
+from dynslam2d.detect.layout import K_CIRCLE
 from dynslam2d.pipeline import Pipeline
 from dynslam2d.sim import simulate
 
@@ -39,6 +40,23 @@ def _near(ride: list, ride_n: int, r2: float) -> int:
         return 0
     lx, ly = ride[-1][:2]
     return 1 if lx * lx + ly * ly > r2 else 2
+
+
+def _push_windows(tr: Tracker, rows: np.ndarray, det: np.ndarray, applied: np.ndarray, X: np.ndarray, mfr: np.ndarray,
+                  kept: np.ndarray, first: np.ndarray, second: np.ndarray, npts: np.ndarray, use_map: bool,
+                  px: float, py: float, c: float, s: float, t: float, ride_time: float, ride_n: int,
+                  r2: float) -> int:
+    """The windows' push of ``shape_update`` into ``tr``'s rows, its shape part on circle detections (which write
+    only the shape rows G / Gi, never the centres in ``X`` the windows read)."""
+    m = int(det.max()) + 1 if det.shape[0] else 1
+    G = np.zeros((X.shape[0], N_G))
+    Gi = np.zeros((X.shape[0], N_GI), dtype=np.int8)
+    n = rows.shape[0]
+    return shape_update(G, Gi, X, rows, det, applied, np.full(m, K_CIRCLE, dtype=np.int8), np.zeros(m),
+                        np.zeros((m, 4)), np.zeros((m, 2, 2), dtype=bool), np.ones((m, 3)), np.zeros((n, 2)),
+                        np.zeros((n, 2), dtype=np.int8), np.zeros(n, dtype=bool), 0.5, 0.5, 0.3, 0.3, mfr, kept,
+                        first, second, npts, tr._MEV, tr._RIDE, tr._WN, use_map, px, py, c, s, t, ride_time, ride_n,
+                        r2)
 
 
 def test_push_windows_keeps_the_entries_of_the_former_lists() -> None:
@@ -106,10 +124,10 @@ def test_push_windows_keeps_the_entries_of_the_former_lists() -> None:
                         ride_time)
             trims += len(ride_l[r]) <= n0
             longest = max(longest, len(ride_l[r]))
-        top = push_windows(np.array(sel, dtype=np.int64), np.array(det, dtype=np.int64), np.array(applied, dtype=bool),
-                           X, mfr, np.array(kept, dtype=np.int64), np.array(first, dtype=np.int64),
-                           np.array(second, dtype=np.int64), npts, tr._MEV, tr._MEVn, tr._RIDE, tr._RIDEn, tr._RNEAR,
-                           use_map, *pose, t, ride_time, ride_n, r2)
+        top = _push_windows(tr, np.array(sel, dtype=np.int64), np.array(det, dtype=np.int64),
+                            np.array(applied, dtype=bool), X, mfr, np.array(kept, dtype=np.int64),
+                            np.array(first, dtype=np.int64), np.array(second, dtype=np.int64), npts, use_map, *pose, t,
+                            ride_time, ride_n, r2)
         if top >= tr._RIDE.shape[1]:
             tr._grow_ride()
             grown += 1
@@ -117,13 +135,13 @@ def test_push_windows_keeps_the_entries_of_the_former_lists() -> None:
             if ok and again:
                 tr._restart_windows(r, use_map)
         for r in range(rows):
-            n, nm = tr._RIDEn.item(r), tr._MEVn.item(r)
+            n, nm = tr._WN.item(r, 1), tr._WN.item(r, 0)
             assert tr._RIDE[r, :n].tolist() == [list(e) for e in ride_l[r]], (step, r)
             assert tr._MEV[r, :nm].tolist() == [list(e) for e in mev_l[r]], (step, r)
             full += nm == nsus
         for r, ok in zip(sel, applied):
             if ok:
-                assert tr._RNEAR.item(r) == _near(ride_l[r], ride_n, r2), (step, r)
+                assert tr._WN.item(r, 2) == _near(ride_l[r], ride_n, r2), (step, r)
     assert grown >= 1 and tr._RIDE.shape[1] > r0 and longest > r0  # windows outgrew the first length
     assert trims > 100 and merged > 20 and full > 500
 

@@ -108,7 +108,7 @@ class TrackDetect:
         if view is not None:
             fs, ff, fu = mfr.tolist()
             # (the detections' map evidence, (3, nd), as the updates push it into their tracks' windows; a leg merge
-            # below names its reordered and merged detections' sources: kernels_update.push_windows)
+            # below names its reordered and merged detections' sources: kernels.shape_update)
             self._mev_src = (mfr, _NO_IDX, _NO_IDX, _NO_IDX, _NO_IDX)
         # (their centroid, bounds, flags and circle stay rows of fits / lohi / rel until read, their points rows of pts:
         # ScanDetection; all made in one loop, scan_detections)

@@ -215,7 +215,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._batch: DetectionBatch | None = None  # per-detection arrays of the current scan (kernels)
         # the sources of the detections' map evidence (set by _detect with a map): (3, nd) fractions of points on
         # long-occupied, observed-free, never-observed cells of the scan's detections before the leg merge, and the
-        # merge's kept detections, pairs and point counts (empty: no merge; kernels_update.push_windows)
+        # merge's kept detections, pairs and point counts (empty: no merge; kernels.shape_update)
         self._mev_src: tuple = (np.zeros((3, 0)), _NO_IDX, _NO_IDX, _NO_IDX, _NO_IDX)
         self._default: MeasureRows | None = None  # default measurements of the current scan's detections
         self._no_prior: dict[int, tuple] = {}  # measure_batch's "no track prior" arguments for m detections, by m

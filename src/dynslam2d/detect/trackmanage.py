@@ -49,9 +49,9 @@ class TrackManage:
         bads, sigs, speeds = bads.tolist(), sigs.tolist(), speeds.tolist()
         # the riding pre-test of each updated track's window (0: fewer than ride_updates entries, it cannot ride;
         # 1: its last laser-frame centre farther than ride_max_range; 2: near), decided when the window was pushed
-        # (kernels_update.push_windows; a track not updated in this scan has its last push's, never read)
-        nears = self._RNEAR.take(order).tolist()
-        MEV, MEVn = self._MEV, self._MEVn
+        # (kernels.shape_update; a track not updated in this scan has its last push's, never read)
+        nears = self._WN[:, 2].take(order).tolist()
+        MEV, WN = self._MEV, self._WN
         for k, speed, sig, bad, near in zip(tracks, speeds, sigs, bads, nears):
             kid = k.id
             is_upd = kid in updated
@@ -99,7 +99,7 @@ class TrackManage:
                 st.tracks_deleted += 1
                 gone.append(k.row)
                 continue
-            if is_upd and retire_n and not k.was_in_m and not k.remembered and (nm := MEVn.item(k.row)) >= retire_n \
+            if is_upd and retire_n and not k.was_in_m and not k.remembered and (nm := WN.item(k.row, 0)) >= retire_n \
                     and speed < v_min and min(MEV[k.row, nm - retire_n:nm, 0].tolist()) >= retire_s:
                 # clutter retirement: a still track the map already holds as structure (docs/real.md "Speed");
                 # a confirmed one stays as a dormant track while its object is seen (_clutter_detections)

@@ -235,33 +235,33 @@ class TrackRows:
     per-update windows.
 
     The windows (docs/speed.md, pass trk26; were lists of tuples on each ``_Track``) are rows of arrays on the same
-    rows as the states, left-aligned (entries 0 … n − 1, oldest first), pushed for all the updated tracks in one
-    kernel call (:func:`dynslam2d.detect.kernels_update.push_windows`) and read through :meth:`_mev` / :meth:`_ride`:
+    rows as the states, left-aligned (entries 0 … n − 1, oldest first), pushed for all the updated tracks by the
+    shape update's kernel call (:func:`dynslam2d.detect.kernels.shape_update`) and read through :meth:`_mev` /
+    :meth:`_ride`:
 
-    * ``_MEV`` (rows, sustain_updates, 3), ``_MEVn``: the map evidence per update (the detection's fractions of points
-      on long-occupied, observed-free, never-observed map cells, mapevidence.py), the last sustain_updates;
-    * ``_RIDE`` (rows, R, 5), ``_RIDEn``: the riding test's window (laser-frame x, y, map-frame x, y of the centre (m),
-      stamp (s)) per update of the last ride_time s (at least sustain_updates of them); R doubles when a window
-      could outgrow it; ``_RNEAR``: the riding pre-test of each window's last push (push_windows)."""
+    * ``_MEV`` (rows, sustain_updates, 3): the map evidence per update (the detection's fractions of points on
+      long-occupied, observed-free, never-observed map cells, mapevidence.py), the last sustain_updates;
+    * ``_RIDE`` (rows, R, 5): the riding test's window (laser-frame x, y, map-frame x, y of the centre (m), stamp (s))
+      per update of the last ride_time s (at least sustain_updates of them); R doubles when a window could outgrow it;
+    * ``_WN`` (rows, 3) int64: per row the entries of ``_MEV``, the entries of ``_RIDE``, and the riding pre-test of
+      the window's last push (one array: one kernel argument)."""
 
     def _init_windows(self, rows: int, nsus: int) -> None:
         """The window arrays for ``rows`` rows and windows of ``nsus`` (sustain_updates) updates, all empty."""
         self._MEV = np.zeros((rows, nsus, 3))
-        self._MEVn = np.zeros(rows, dtype=np.int64)
         self._RIDE = np.zeros((rows, max(_RIDE0, nsus + 1), 5))
-        self._RIDEn = np.zeros(rows, dtype=np.int64)
-        self._RNEAR = np.zeros(rows, dtype=np.int8)
+        self._WN = np.zeros((rows, 3), dtype=np.int64)
 
     def _mev(self, k: _Track) -> np.ndarray:
         """(n, 3) map evidence of the live track ``k``'s last n ≤ sustain_updates updates, oldest first (a view)."""
         row = k.row
-        return self._MEV[row, :self._MEVn.item(row)]
+        return self._MEV[row, :self._WN.item(row, 0)]
 
     def _ride(self, k: _Track) -> np.ndarray:
         """(n, 5) riding window of the live track ``k`` (laser-frame x, y, map-frame x, y (m), stamp (s) per update),
         oldest first (a view)."""
         row = k.row
-        return self._RIDE[row, :self._RIDEn.item(row)]
+        return self._RIDE[row, :self._WN.item(row, 1)]
 
     def _start_windows(self, row: int, mev) -> None:
         """Row ``row``'s windows for a track starting (a birth, a revival): no riding entry, the map evidence
@@ -272,26 +272,28 @@ class TrackRows:
             M[row, 0, 0], M[row, 0, 1], M[row, 0, 2] = mev[0]
         elif n:
             self._MEV[row, :n] = mev
-        self._MEVn[row] = n
-        self._RIDEn[row] = 0
-        self._RNEAR[row] = 0
+        W = self._WN
+        W[row, 0] = n
+        W[row, 1] = 0
+        W[row, 2] = 0
 
     def _restart_windows(self, row: int, use_map: bool) -> None:
         """Row ``row``'s windows after a re-acquisition (the track had missed scans): only the entries pushed in this
         update are kept — the riding one and, with a map (``use_map``), the map evidence (the former lists cleared
         before the append)."""
-        n = self._RIDEn.item(row)
+        W = self._WN
+        n = W.item(row, 1)
         if n > 1:
             self._RIDE[row, 0] = self._RIDE[row, n - 1]
-        self._RIDEn[row] = 1
-        self._RNEAR[row] = 0  # (one entry: fewer than ride_updates ≥ 2)
+        W[row, 1] = 1
+        W[row, 2] = 0  # (one entry: fewer than ride_updates ≥ 2)
         if use_map:
-            n = self._MEVn.item(row)
+            n = W.item(row, 0)
             if n > 1:
                 self._MEV[row, 0] = self._MEV[row, n - 1]
-            self._MEVn[row] = 1
+            W[row, 0] = 1
         else:
-            self._MEVn[row] = 0
+            W[row, 0] = 0
 
     def _grow_ride(self) -> None:
         """Double the length of the riding windows (their entries kept)."""
@@ -334,7 +336,7 @@ class TrackRows:
                 Gi[:row] = self._Gi[:row]
                 self._X, self._P, self._G, self._Gi = X, P2, G, Gi
                 self._repoint()
-                for name in ("_MEV", "_MEVn", "_RIDE", "_RIDEn", "_RNEAR"):  # (the windows' rows, likewise)
+                for name in ("_MEV", "_RIDE", "_WN"):  # (the windows' rows, likewise)
                     a = getattr(self, name)
                     b = np.zeros((2 * row,) + a.shape[1:], dtype=a.dtype)
                     b[:row] = a[:row]

@@ -16,7 +16,7 @@ from dynslam2d.detect.kernels import (
     pair_priors,
     shape_update,
 )
-from dynslam2d.detect.kernels_update import kalman_pairs, push_windows
+from dynslam2d.detect.kernels_update import kalman_pairs
 from dynslam2d.detect.layout import KIND_CIRCLE
 from dynslam2d.detect.measure import Detection
 from dynslam2d.detect.tracktable import _HALF_PI, _PAST_COMPACT, TENTATIVE, _past_points, _Track
@@ -98,14 +98,14 @@ class TrackUpdate:
             ok, _ = kalman_pairs(Xs, Ps, sel, mr.H, mr.zm, mr.Rm, False, sel, 0, 0.0, 0.0, self._X, self._P, trows)
         self._stacked = None  # the tracks changed
         out = ok.tolist()
-        shape_update(self._G, self._Gi, self._X, trows, dis, ok, b.kind, b.theta, b.lohi, b.rel, b.circle,
-                     mr.size_obs, mr.size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
-                     float(tc.heading_gain), float(tc.size_gain))
-        # the riding and map-evidence windows of the updated tracks, from their new rows (docs/speed.md, pass trk26)
+        # the shapes and, in the same kernel call, the riding and map-evidence windows of the updated tracks from
+        # their new rows (docs/speed.md, pass trk26)
         p = self._pose
         c, s = self._pose_cs
-        top = push_windows(trows, dis, ok, self._X, *self._mev_src, self._MEV, self._MEVn, self._RIDE, self._RIDEn,
-                           self._RNEAR, self._map is not None, float(p.x), float(p.y), c, s, t, float(tc.ride_time),
+        top = shape_update(self._G, self._Gi, self._X, trows, dis, ok, b.kind, b.theta, b.lohi, b.rel, b.circle,
+                           mr.size_obs, mr.size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
+                           float(tc.heading_gain), float(tc.size_gain), *self._mev_src, self._MEV, self._RIDE,
+                           self._WN, self._map is not None, float(p.x), float(p.y), c, s, t, float(tc.ride_time),
                            int(tc.ride_updates), tc.ride_max_range * tc.ride_max_range)
         if top >= self._RIDE.shape[1]:  # (the next push could overflow a full window)
             self._grow_ride()
@@ -118,7 +118,7 @@ class TrackUpdate:
         the state arrays) whose Kalman and shape results are already in their rows (k.x, k.P, k.g, k.gi) where
         ``applied``; the scan's constants are read once (one loop over the pairs: the update of one track is a few µs
         of Python). The riding and map-evidence windows are pushed before, for all pairs in one kernel call
-        (``push_windows``); a re-acquired track's keep only that push's entries here."""
+        (``shape_update``); a re-acquired track's keep only that push's entries here."""
         cfg = self.config
         tc, fc = cfg.tracker, cfg.fit
         pmin_r, pmax_r = fc.person_min_radius, fc.person_max_radius
