@@ -96,8 +96,14 @@ def tracker_modules() -> list:
     return out
 
 
+#: the tracker's kernel modules, loaded from the other checkout with its tracker (a kernel's signature may differ
+#: between the checkouts: pass trk26 folded the windows' push into ``kernels.shape_update``)
+TRACKER_KERNEL_MODULES = ("kernels", "kernels_update")
+
+
 class _OtherParts(importlib.abc.MetaPathFinder):
-    """Finds ``dynslam2d.detect.track*`` (other than ``tracker``) in the other checkout while its tracker loads."""
+    """Finds ``dynslam2d.detect.track*`` (other than ``tracker``) and the tracker's kernel modules in the other
+    checkout while its tracker loads."""
 
     def __init__(self, folder: Path, names: set[str]) -> None:
         self.folder, self.names = folder, names
@@ -111,12 +117,14 @@ class _OtherParts(importlib.abc.MetaPathFinder):
 
 def other_tracker_module(src: Path):
     """The other checkout's ``dynslam2d/detect/tracker.py`` as a module of its own, with the other checkout's step
-    modules ``detect/track*.py`` if it has them (pass trktable split the tracker); every other import resolves to
-    this checkout. This checkout's step modules stay what ``dynslam2d.detect.track*`` names afterwards."""
+    modules ``detect/track*.py`` if it has them (pass trktable split the tracker) and its tracker kernel modules
+    (:data:`TRACKER_KERNEL_MODULES`, as the tracker's modules import them); every other import resolves to this
+    checkout. This checkout's modules stay what ``dynslam2d.detect.*`` names afterwards."""
     import dynslam2d.detect as pkg
 
     folder = src / "dynslam2d" / "detect"
-    parts = {p.stem for p in folder.glob("track*.py")} - {"tracker"}
+    parts = ({p.stem for p in folder.glob("track*.py")} - {"tracker"}) | {
+        n for n in TRACKER_KERNEL_MODULES if (folder / f"{n}.py").exists()}
     full = [f"dynslam2d.detect.{n}" for n in parts]
     saved = {n: sys.modules.pop(n) for n in full if n in sys.modules}
     attrs = {n: getattr(pkg, n) for n in parts if hasattr(pkg, n)}
@@ -226,9 +234,11 @@ def pipeline_ab(scans: list, other) -> tuple[float, float, float]:
     from dynslam2d.detect import tracker as this
     from dynslam2d.pipeline import Pipeline
 
-    warm = Pipeline()
-    for s in scans[:60]:
-        warm.process(s)
+    for mod in (other, this):  # (each checkout's tracker kernels: TRACKER_KERNEL_MODULES)
+        warm = Pipeline()
+        warm.tracker = mod.Tracker(warm.config.detect)
+        for s in scans[:60]:
+            warm.process(s)
     pipes = {}
     for tag, mod in (("other", other), ("this", this)):
         p = Pipeline()
@@ -265,9 +275,11 @@ def phases_ab(scans: list, other) -> dict[str, dict[str, float]]:
     from dynslam2d.detect import tracker as this
     from dynslam2d.pipeline import Pipeline
 
-    warm = Pipeline()
-    for s in scans:  # (every scan: a kernel first called late, e.g. on scan 339, would load in one side's timed run)
-        warm.process(s)
+    for mod in (other, this):  # (each checkout's tracker kernels: TRACKER_KERNEL_MODULES)
+        warm = Pipeline()
+        warm.tracker = mod.Tracker(warm.config.detect)
+        for s in scans:  # (every scan: a kernel first called late, e.g. on scan 339, would load in a timed run)
+            warm.process(s)
     acc: dict[str, collections.Counter] = {"other": collections.Counter(), "this": collections.Counter()}
     per: dict[str, dict[str, list[float]]] = {"other": collections.defaultdict(list),
                                               "this": collections.defaultdict(list)}

@@ -13,8 +13,7 @@ from dynslam2d.detect.tracker import _NO_STATE, _new_track, _Track
 
 def _args() -> dict:
     return dict(tid=7, t=1.25, birth_xy=np.array([1.0, 2.0]), g=(0.1, 1.0, 0.5, 0.0, 0.0, 0.0),
-                gi=(0, True, True, False), beams=np.arange(3), free=[0.3], mev=[(0.1, 0.2, 0.7)],
-                past=[(1.25, None)])
+                gi=(0, True, True, False), beams=np.arange(3), free=[0.3], past=[(1.25, None)])
 
 
 def test_new_track_sets_every_field_as_the_dataclass_does() -> None:
@@ -24,8 +23,7 @@ def test_new_track_sets_every_field_as_the_dataclass_does() -> None:
     a = _args()
     fast = _new_track(**a)
     ref = _Track(id=a["tid"], x=_NO_STATE, P=_NO_STATE, born=a["t"], last_hit=a["t"], birth_xy=a["birth_xy"], g=a["g"],
-                 gi=a["gi"], beams=a["beams"], free=a["free"], mev=a["mev"],
-                 past=a["past"])
+                 gi=a["gi"], beams=a["beams"], free=a["free"], past=a["past"])
     assert type(fast) is _Track
     names = [f.name for f in dataclasses.fields(_Track)]
     assert len(names) == len(_Track.__slots__) and len(names) > 30
@@ -36,13 +34,9 @@ def test_new_track_sets_every_field_as_the_dataclass_does() -> None:
             assert got is want or (got.dtype == want.dtype and np.array_equal(got, want)), name
         else:
             assert got == want, name
-    # the lists given are the track's own; the defaults are new lists per track (not shared between tracks)
+    # the lists given are the track's own (the riding and map-evidence windows are rows of the tracker's arrays since
+    # pass trk26: no list default is left to share between tracks)
     assert fast.free is a["free"] and fast.past is a["past"] and fast.birth_xy is a["birth_xy"]
-    other = _new_track(**_args())
-    for name in ("ride",):
-        assert getattr(fast, name) is not getattr(other, name), name
-    fast.ride.append((0.0, 0.0, 0.0, 0.0, 0.0))
-    assert other.ride == []
 
 
 def test_scan_detection_points_are_its_rows_of_the_scan_array() -> None:

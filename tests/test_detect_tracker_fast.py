@@ -387,8 +387,10 @@ def test_merged_detection_veto_matches_the_row_by_row_test() -> None:
     hits = 0
     for case in range(400):
         n, m = rng.randint(1, 8), rng.randint(1, 10)
-        tr._tracks = [SimpleNamespace(id=100 + i, mev=[(rng.random(), 0.0, 0.0) for _ in range(rng.randint(0, 3))])
-                      for i in range(n)]
+        tr._tracks = [SimpleNamespace(id=100 + i, row=i, mev=[(rng.random(), 0.0, 0.0)
+                                                              for _ in range(rng.randint(0, 3))]) for i in range(n)]
+        for k in tr._tracks:  # (the windows' rows that _veto_merged reads: Tracker._mev; the reference reads k.mev)
+            tr._start_windows(k.row, k.mev)
         dets = [SimpleNamespace(map_structure=rng.choice([0.0, tc.map_structure_stop, 1.0, rng.random()]))
                 for _ in range(m)]
         tsize = np.array([[rng.uniform(0.1, 2.0), rng.uniform(0.1, 2.0)] for _ in range(n)])

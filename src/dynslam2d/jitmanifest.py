@@ -118,7 +118,10 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(bool, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 2, 'C'), Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
-     "Array(int8, 2, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64,)"),
+     "Array(int8, 2, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, Array(float64, 2, "
+     "'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
+     "Array(float64, 3, 'C'), Array(float64, 3, 'C'), Array(int64, 2, 'C'), bool, float64, float64, "
+     'float64, float64, float64, float64, int64, float64,)'),
     ('dynslam2d.detect.kernels_update.manage_speed_rows',
      "(Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64,)"),
     ('dynslam2d.detect.kernels_update.fragment_hosts_rows',

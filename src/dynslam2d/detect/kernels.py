@@ -1211,7 +1211,10 @@ def _py_max(a: float, b: float) -> float:
 def shape_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray, det: np.ndarray,
                  applied: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray,
                  circle: np.ndarray, size_obs: np.ndarray, size_kind: np.ndarray, swap: np.ndarray,
-                 default_depth: float, default_depth_ratio: float, heading_gain: float, size_gain: float) -> None:
+                 default_depth: float, default_depth_ratio: float, heading_gain: float, size_gain: float,
+                 mfr: np.ndarray, kept: np.ndarray, first: np.ndarray, second: np.ndarray, npts: np.ndarray,
+                 MEV: np.ndarray, RIDE: np.ndarray, WN: np.ndarray, use_map: bool, px: float, py: float, c: float,
+                 s: float, t: float, ride_time: float, ride_n: int, ride_r2: float) -> int:
     """The shape update of the tracks of associated pairs (track row ``rows[r]``, detection ``det[r]``, where
     ``applied[r]``), in place on their rows of ``G`` / ``Gi`` (columns above) and, for a box grown past a partial
     view, of the states ``X`` (rows [x, y, vx, vy], m): a rectangle sets or smooths the heading (90° ambiguity;
@@ -1220,7 +1223,32 @@ def shape_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray,
     box away from its one real bound, its centre moving with it); a circle smooths the radius; a point detection of
     a point track takes its extent (at least 0.05 m). The kind becomes the detection's. ``size_obs`` / ``size_kind``
     / ``swap``: the measurement's per-axis sizes and kinds (``measure_batch``) and :func:`pair_priors`' swaps; the
-    arithmetic, in order, of ``Tracker._update_tracks`` before the per-track arrays (docs/tracking.md, item 2)."""
+    arithmetic, in order, of ``Tracker._update_tracks`` before the per-track arrays (docs/tracking.md, item 2).
+
+    Then, in the same loop (one kernel call per scan: docs/speed.md, pass trk26), the riding and map-evidence
+    windows of the updated track, pushed in place on its rows (``Tracker._update_tracks``' per-track lists before
+    pass trk26). Each window is left-aligned: entries 0 … n − 1 of the row, oldest first; ``WN`` (rows, 3) holds
+    per row n of ``MEV``, n of ``RIDE`` and the riding pre-test.
+
+    * ``RIDE`` (rows, R, 5): (laser-frame x, y, map-frame x, y of the centre (m), stamp t (s)) per update; the centre
+      is the row of ``X`` after the update (and the box growth above), the laser pose ``px``, ``py`` with cos / sin
+      ``c``, ``s`` of its heading (map frame). The oldest entries are dropped while more than ``MEV.shape[1]``
+      (sustain_updates) remain and the oldest is older than ``ride_time`` s. ``WN[k, 2]``: the riding test's
+      pre-test of the new window — 0 fewer than ``ride_n`` entries (it cannot ride), 1 the last laser-frame centre
+      farther than √``ride_r2`` from the laser, 2 near (``Tracker._manage`` asks ``_rides_with_laser``).
+    * ``MEV`` (rows, sustain_updates, 3): the detection's map evidence (its fractions of points on long-occupied,
+      observed-free, never-observed cells), the last sustain_updates kept; only with ``use_map``. ``mfr`` (3, nd):
+      the scan's detections' before the leg merge (``select_detections``); with ``first`` not empty, a merge made
+      detection j from detection ``kept[j]`` for j < len(kept), and the later ones from the pairs (``first[p]``,
+      ``second[p]``): the point-weighted means of ``Tracker._merge_legs`` (``npts``: the points of the detections
+      before the merge), in its Python order of operations.
+
+    Returns the longest riding window after the push (the caller grows ``RIDE`` before it can overflow)."""
+    nsus = MEV.shape[1]
+    nkept = kept.shape[0]
+    nmerged = first.shape[0]
+    ns = -s
+    top = 0
     for r in range(rows.shape[0]):
         if not applied[r]:
             continue
@@ -1291,6 +1319,55 @@ def shape_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, rows: np.ndarray,
             G[k, G_SIZE0] = _py_max(lohi[j, L_HI1] - lohi[j, L_LO1], 0.05)
             G[k, G_SIZE1] = _py_max(lohi[j, L_HI2] - lohi[j, L_LO2], 0.05)
         Gi[k, GI_KIND] = dk
+        # the windows (the former append, then `while len(ride) > nsus and t - ride[0][4] > ride_time: del ride[0]`:
+        # the new entry is never older than ride_time, so the dropped ones are found before it is written)
+        x0 = X[k, 0]
+        x1 = X[k, 1]
+        dx = x0 - px
+        dy = x1 - py
+        n = WN[k, 1]
+        d = 0
+        while n + 1 - d > nsus and t - RIDE[k, d, 4] > ride_time:
+            d += 1
+        if d:
+            for q in range(n - d):
+                for col in range(5):
+                    RIDE[k, q, col] = RIDE[k, q + d, col]
+            n -= d
+        lx = c * dx + s * dy  # (no FMA: numba compiles without fast-math, as the former Python floats)
+        ly = ns * dx + c * dy
+        RIDE[k, n, 0] = lx
+        RIDE[k, n, 1] = ly
+        RIDE[k, n, 2] = x0
+        RIDE[k, n, 3] = x1
+        RIDE[k, n, 4] = t
+        n += 1
+        WN[k, 1] = n
+        if n > top:
+            top = n
+        WN[k, 2] = 0 if n < ride_n else (1 if lx * lx + ly * ly > ride_r2 else 2)
+        if use_map:
+            m = WN[k, 0]
+            if m == nsus:
+                for q in range(m - 1):
+                    for col in range(3):
+                        MEV[k, q, col] = MEV[k, q + 1, col]
+                m -= 1
+            if nmerged == 0:
+                for col in range(3):
+                    MEV[k, m, col] = mfr[col, j]
+            elif j < nkept:
+                for col in range(3):
+                    MEV[k, m, col] = mfr[col, kept[j]]
+            else:
+                a = first[j - nkept]
+                b = second[j - nkept]
+                na = npts[a]
+                nb = npts[b]
+                for col in range(3):
+                    MEV[k, m, col] = (na * mfr[col, a] + nb * mfr[col, b]) / (na + nb)
+            WN[k, 0] = m + 1
+    return top
 
 
 @njit(cache=True, inline="always")

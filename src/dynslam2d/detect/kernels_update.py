@@ -296,3 +296,4 @@ def fragment_hosts_rows(px: np.ndarray, py: np.ndarray, start: np.ndarray, npts:
         ts0[i] = G[k, G_SIZE0]
         ts1[i] = G[k, G_SIZE1]
     return fragment_hosts(px, py, start, npts, det, tx, ty, tth, ts0, ts1, margin)
+

@@ -29,6 +29,7 @@ from dynslam2d.detect.layout import (
 from dynslam2d.detect.measure import Detection, ScanDetection, scan_detections
 from dynslam2d.detect.segment import segment_points
 from dynslam2d.detect.shapes import CRITERIA, fit_cluster_rows
+from dynslam2d.detect.tracktable import _NO_IDX
 from dynslam2d.detect.vehicles import _NO_MAP, extent_limit
 from dynslam2d.types import Pose2D, Scan
 
@@ -106,6 +107,9 @@ class TrackDetect:
             free.add(scan, pose, valid, self._cur_ref)
         if view is not None:
             fs, ff, fu = mfr.tolist()
+            # (the detections' map evidence, (3, nd), as the updates push it into their tracks' windows; a leg merge
+            # below names its reordered and merged detections' sources: kernels.shape_update)
+            self._mev_src = (mfr, _NO_IDX, _NO_IDX, _NO_IDX, _NO_IDX)
         # (their centroid, bounds, flags and circle stay rows of fits / lohi / rel until read, their points rows of pts:
         # ScanDetection; all made in one loop, scan_detections)
         dets = scan_detections(beams, pts, starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(),
@@ -141,6 +145,7 @@ class TrackDetect:
         Returns the detection list and the per-detection batch arrays, merged pairs appended at the end (the
         pairs and arrays by :func:`dynslam2d.detect.kernels.merge_legs`; ``beams``: the beams of ``px``, ``py``)."""
         fc = self.config.fit
+        npts0 = npts
         first, second, ki, kinds, fits, lohi, rel, starts, npts, px, py, mbeams = merge_legs(
             px, py, beams, starts, npts, kinds, fits, lohi, rel, float(fc.leg_max_extent), float(fc.leg_pair_distance))
         m = first.shape[0]
@@ -182,6 +187,8 @@ class TrackDetect:
             row += 1
             o += n
         self.stats.merged_leg_pairs += m
+        if self._map is not None:  # (the sources of the detections' map evidence in their new order: _detect)
+            self._mev_src = (self._mev_src[0], ki, first, second, npts0)
         return new_dets, kinds, fits, lohi, rel, starts, npts, px, py
 
     def _measure_rows(self, det: np.ndarray, sizes: np.ndarray, has_sizes: np.ndarray, radius: np.ndarray,

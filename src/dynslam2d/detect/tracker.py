@@ -83,6 +83,7 @@ from dynslam2d.detect.tracktable import (  # noqa: F401  (_Track, _new_track, �
     _BIG,
     _HALF_PI,
     _NO_BEAMS,
+    _NO_IDX,
     _NO_STATE,
     _ROWS0,
     COASTING,
@@ -183,6 +184,8 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # update and the reports read and write it for all tracks in one kernel call or gather each
         self._G = np.zeros((_ROWS0, N_G))
         self._Gi = np.zeros((_ROWS0, N_GI), dtype=np.int8)
+        # … and their windows of the last updates (map evidence, riding test: TrackRows, docs/speed.md pass trk26)
+        self._init_windows(_ROWS0, self.config.tracker.sustain_updates)
         self._rows_used = 0  # rows 0 … _rows_used − 1 have been handed out
         # the prediction's F and Q (_cv_fill writes this step's entries into them; read only by the kernel and the
         # rare paths of _predict, never kept beyond the scan)
@@ -210,6 +213,10 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._body_grown: np.ndarray = np.zeros(0, dtype=bool)
         self._fit_p = fit_params(self.config.fit)
         self._batch: DetectionBatch | None = None  # per-detection arrays of the current scan (kernels)
+        # the sources of the detections' map evidence (set by _detect with a map): (3, nd) fractions of points on
+        # long-occupied, observed-free, never-observed cells of the scan's detections before the leg merge, and the
+        # merge's kept detections, pairs and point counts (empty: no merge; kernels.shape_update)
+        self._mev_src: tuple = (np.zeros((3, 0)), _NO_IDX, _NO_IDX, _NO_IDX, _NO_IDX)
         self._default: MeasureRows | None = None  # default measurements of the current scan's detections
         self._no_prior: dict[int, tuple] = {}  # measure_batch's "no track prior" arguments for m detections, by m
         self._size_sigma: dict[int, np.ndarray] = {}  # measure_batch's size σ of n associated pairs (m), by n
@@ -526,8 +533,8 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
             thr = (a if a >= b or a != a else b) + jump
             row = ok[i].tolist()
             hit = [j for j in cand if row[j] and ext[j] > thr]
-            if hit and (not (mev := (k := self._tracks[i]).mev) or
-                        sum([e[0] for e in mev]) / len(mev) <= tc.map_structure_max):
+            if hit and (not (nm := (mev := self._mev(k := self._tracks[i])).shape[0]) or
+                        sum(mev[:, 0].tolist()) / nm <= tc.map_structure_max):
                 if not copied:
                     ok = ok.copy()
                     copied = True
@@ -547,12 +554,12 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         d = self._default  # reference.measure(det, None, None, cfg.fit) of every detection
         z = d.z[j]
         k = _new_track(self._next_id, t, z.copy(), g, gi, det.beams, [det],
-                       [(det.map_structure, det.map_free, det.map_unknown)] if has_map else [],
                        [_past_entry(t, det)] if has_free else [])
         if cfg.tracker.confirm_hits <= 1:
             k.state = CONFIRMED
         self._next_id += 1
         self._add_row(k, None, None)
+        self._start_windows(k.row, ((det.map_structure, det.map_free, det.map_unknown),) if has_map else ())
         # (the state and the initial covariance written into the new rows directly: _birth_state's values, without
         # the (4, 4) temporary it copies from)
         row = k.row
@@ -599,6 +606,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         x = k.x.copy()
         x[2:] = 0.0
         k.x, k.P, k.g, k.gi = x, k.P.copy(), k.g.copy(), k.gi.copy()
+        k.mev_kept = self._mev(k).copy()  # (its row's windows go with the row; a revival without a map keeps this)
         k.fast = 0
         k.slow_since = None
         k.reason = "not in M: still, on long-occupied map cells (retired as structure)"
@@ -711,12 +719,12 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         k.last_hit = t
         k.beams = det.beams
         k.free = [det.free_fraction]
-        if self._map is not None:
-            k.mev = [(det.map_structure, det.map_free, det.map_unknown)]
+        mev = ((det.map_structure, det.map_free, det.map_unknown),) if self._map is not None else k.mev_kept
+        k.mev_kept = None
         k.past = [_past_entry(t, det)] if self._free is not None else []
         k.past_a = 0
-        k.ride = []
         k.person, k.person_streak, k.rode = False, 0, False
         k.reason = "not in M: left the map structure it was retired on"
         self._maybe_remembered = True  # (a revived track keeps its flags: _predict looks again)
         self._add_row(k, (z[0], z[1], 0.0, 0.0), P)
+        self._start_windows(k.row, mev)  # (no riding entry; the map evidence of this detection, or as retired)

@@ -39,7 +39,6 @@ class TrackManage:
         # (the test of M's constants, the same products as in _dynamic)
         max_ssig, v_exit, nsus = tc.max_speed_sigma, tc.v_exit_ratio * tc.v_min, tc.sustain_updates
         npu = tc.person_sustain_updates
-        ride_n, ride_r2 = tc.ride_updates, tc.ride_max_range * tc.ride_max_range
         probe = self._free is not None
         slow_tail = f" m/s ≤ v_min {v_min:.2f}"  # (the most common reason's constant part)
         order = self._rows()
@@ -48,7 +47,12 @@ class TrackManage:
         # along the velocity, from the state rows in one kernel call
         bads, sigs, speeds = manage_speed_rows(self._P, self._X, order, max_sig)
         bads, sigs, speeds = bads.tolist(), sigs.tolist(), speeds.tolist()
-        for k, speed, sig, bad in zip(tracks, speeds, sigs, bads):
+        # the riding pre-test of each updated track's window (0: fewer than ride_updates entries, it cannot ride;
+        # 1: its last laser-frame centre farther than ride_max_range; 2: near), decided when the window was pushed
+        # (kernels.shape_update; a track not updated in this scan has its last push's, never read)
+        nears = self._WN[:, 2].take(order).tolist()
+        MEV, WN = self._MEV, self._WN
+        for k, speed, sig, bad, near in zip(tracks, speeds, sigs, bads, nears):
             kid = k.id
             is_upd = kid in updated
             if kid in merged and not is_upd and k.in_m:
@@ -95,8 +99,8 @@ class TrackManage:
                 st.tracks_deleted += 1
                 gone.append(k.row)
                 continue
-            if is_upd and retire_n and not k.was_in_m and not k.remembered and len(mev := k.mev) >= retire_n \
-                    and speed < v_min and min([e[0] for e in mev[-retire_n:]]) >= retire_s:
+            if is_upd and retire_n and not k.was_in_m and not k.remembered and (nm := WN.item(k.row, 0)) >= retire_n \
+                    and speed < v_min and min(MEV[k.row, nm - retire_n:nm, 0].tolist()) >= retire_s:
                 # clutter retirement: a still track the map already holds as structure (docs/real.md "Speed");
                 # a confirmed one stays as a dormant track while its object is seen (_clutter_detections)
                 st.deleted_structure += 1
@@ -121,10 +125,9 @@ class TrackManage:
                     pass  # left M
                 else:
                     rides = False
-                    if len(ride := k.ride) >= ride_n:  # (fewer: it cannot ride)
-                        lx, ly = ride[-1][:2]
-                        if lx * lx + ly * ly > ride_r2:
-                            k.rode = False  # (_rides_with_laser's first test, inline: most tracks are far from it)
+                    if near:  # (0: fewer than ride_updates entries, it cannot ride)
+                        if near == 1:
+                            k.rode = False  # (_rides_with_laser's first test, done: most tracks are far from it)
                         else:
                             rides = self._rides_with_laser(k)
                     if rides:
@@ -177,8 +180,8 @@ class TrackManage:
         along the velocity, m/s."""
         tc = self.config.tracker
         # the map evidence's columns as lists (the same floats in the same order: the same sums)
-        mev = k.mev
-        ms = [e[0] for e in mev]
+        mev = self._mev(k)  # ((n, 3) rows of the window; its columns as Python floats: the former lists' sums)
+        ms = mev[:, 0].tolist()
         # a track seen moving before re-enters M on the kinematic test: where it paused, the map wrote it
         use_map = self._map is not None and len(mev) > 0 and not k.was_in_m
         npu = tc.person_sustain_updates
@@ -236,8 +239,8 @@ class TrackManage:
         elif self._free is not None and (not (fr := self._free_values(k)) or sum(fr) / len(fr) < tc.free_min_fraction):
             k.reason = (f"not in M: points on free space {sum(fr) / max(len(fr), 1):.2f} < "
                         f"{tc.free_min_fraction:.2f} (static structure)")
-        elif use_map and not fast_person and sum(mf := [e[1] for e in mev]) / len(mf) < tc.map_free_min and not (
-                self._is_still() and sum(mu := [e[2] for e in mev]) / len(mu) >= 1.0 - tc.map_free_min):
+        elif use_map and not fast_person and sum(mf := mev[:, 1].tolist()) / len(mf) < tc.map_free_min and not (
+                self._is_still() and sum(mu := mev[:, 2].tolist()) / len(mu) >= 1.0 - tc.map_free_min):
             k.reason = (f"not in M: points in observed-free map cells {sum(mf) / len(mf):.2f} < "
                         f"{tc.map_free_min:.2f} (no map evidence of motion)")
         elif use_map and sum(ms) / len(ms) > tc.map_structure_max:
@@ -264,11 +267,11 @@ class TrackManage:
         tc = self.config.tracker
         if not use_map:
             return "kinematic"  # no map to ask (or seen moving before): the general displacement applies
-        last = k.mev[-n:]
-        mf = [e[1] for e in last]
+        last = self._mev(k)[-n:]
+        mf = last[:, 1].tolist()
         if sum(mf) / len(mf) >= tc.person_map_free_min:
             return "map"
-        fr, ms, mu = self._free_values(k)[-n:], [e[0] for e in last], [e[2] for e in last]
+        fr, ms, mu = self._free_values(k)[-n:], last[:, 0].tolist(), last[:, 2].tolist()
         if len(fr) < n or sum(fr) / len(fr) < tc.person_free_min or sum(ms) / len(ms) > tc.map_structure_max:
             return None
         return "free" if (sum(mf) + sum(mu)) / len(mf) >= 0.5 else None
@@ -388,14 +391,13 @@ class TrackManage:
                                     for _, x, y, th in self._pose_hist)
         return self._laser_still
 
-    @staticmethod
-    def _net_speed(k: _Track, n: int) -> float | None:
+    def _net_speed(self, k: _Track, n: int) -> float | None:
         """Net displacement of the track's centre over its last ``n`` updates divided by their time span, m/s
         (None with fewer updates): pose jitter and association noise give a speed but no net motion."""
-        ride = k.ride
-        if len(ride) < max(n, 2):
+        ride = self._ride(k)
+        if ride.shape[0] < max(n, 2):
             return None
-        (_, _, x0, y0, t0), (_, _, x1, y1, t1) = ride[-n], ride[-1]
+        (x0, y0, t0), (x1, y1, t1) = ride[-n, 2:].tolist(), ride[-1, 2:].tolist()
         dt = t1 - t0
         if dt <= 0.0:
             return None
@@ -407,10 +409,10 @@ class TrackManage:
         the spread, over its updates of the last ``ride_time`` seconds (at least ``ride_updates`` of them,
         spanning at least half of it): it moves with the robot (its body)."""
         tc = self.config.tracker
-        ride = k.ride
-        if len(ride) < tc.ride_updates:
+        ride = self._ride(k)
+        if ride.shape[0] < tc.ride_updates:
             return False
-        lx_last, ly_last = ride[-1][:2]
+        lx_last, ly_last = ride[-1, :2].tolist()
         if lx_last * lx_last + ly_last * ly_last > tc.ride_max_range * tc.ride_max_range:
             k.rode = False
             return False  # far from the laser (most tracks): no arrays built
@@ -418,15 +420,16 @@ class TrackManage:
         if self._body_near is not None and (nb == 0 or np.count_nonzero(self._body_near[k.beams]) / nb < 0.5):
             k.rode = False
             return False  # not where the robot's body was found
-        t_end = ride[-1][4]
-        n = sum(1 for e in ride if t_end - e[4] <= tc.ride_time)
-        if n < tc.ride_updates or t_end - ride[-n][4] < 0.5 * tc.ride_time:
+        stamps = ride[:, 4].tolist()
+        t_end = stamps[-1]
+        n = sum(1 for e in stamps if t_end - e <= tc.ride_time)
+        if n < tc.ride_updates or t_end - stamps[-n] < 0.5 * tc.ride_time:
             return False
-        lx = np.array([e[:2] for e in ride[-n:]])
+        lx = np.array(ride[-n:, :2])  # (C-ordered copies: the former arrays of the entries' lists)
         if float(np.hypot(lx[:, 0], lx[:, 1]).max()) > tc.ride_max_range:
             return False
         spread = float(np.hypot(*(lx - lx.mean(axis=0)).T).max())
-        mx = np.array([e[2:4] for e in ride[-n:]])
+        mx = np.array(ride[-n:, 2:4])
         moved = float(np.hypot(*(mx[-1] - mx[0])))
         # with a motionless laser the two frames agree: only motion far beyond the laser-frame spread rides;
         # once found riding, a track keeps riding until its laser-frame spread clearly exceeds the tolerance

@@ -37,10 +37,12 @@ TENTATIVE = "tentative"
 CONFIRMED = "confirmed"
 COASTING = "coasting"
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
+_NO_IDX = np.zeros(0, dtype=np.int64)  # no leg merge in this scan (Tracker._mev_src; shared, never written)
 _NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives it its row
 # a track's stored-points list starts anew once this many of its entries are out of date (_Track.past, past_a)
 _PAST_COMPACT = 8
 _ROWS0 = 64  # initial rows of the tracker's state arrays (doubled when full)
+_RIDE0 = 16  # initial length of the riding windows (TrackRows._RIDE; doubled when one could overflow)
 
 
 @dataclass(eq=False, slots=True)  # (slots: faster attribute access in the per-track loops)
@@ -69,16 +71,10 @@ class _Track:
     # free-space fraction per update; an entry may be a detection (a birth's) or a tuple (det, ref, t, past) until it
     # is read, its value not yet computed (Tracker._free_values)
     free: list[float] = field(default_factory=list)
-    # map evidence per update (mapevidence.py): (the detection's fractions of points on long-occupied, observed-free,
-    # never-observed map cells) as one tuple per update in one list (was three lists: fewer objects touched per scan)
-    mev: list[tuple[float, float, float]] = field(default_factory=list)
     person: bool = False  # the last detection was a merged pair of legs
     person_streak: int = 0  # consecutive updates with a merged pair of legs
     rode: bool = False  # judged riding with the laser (its body) at the last check
     was_in_m: bool = False  # has been in M before (seen moving): the map's word is not needed again
-    # (laser-frame x, y, map-frame x, y of its centre (m), stamp (s)) per update of the riding test's window: one list
-    # of one tuple per update (was three lists), fewer objects touched per scan (docs/speed.md, pass trk15)
-    ride: list[tuple[float, float, float, float, float]] = field(default_factory=list)
     # (stamp s, points array, a0, n) per update within the free-space memory's max age: the detection's (n, 2) points,
     # rows a0 … a0 + n − 1 of the array (its scan's), or the whole array for a0 < 0 (_past_entry, _past_points).
     # Append-only: the live entries are past[past_a:] (older ones are skipped by moving past_a, and dropped by
@@ -96,6 +92,9 @@ class _Track:
     m_travel: float = 0.0  # largest distance of its centre from m_start_xy while in M, m
     m_last_t: float | None = None  # stamp of its last update in M, s
     row: int = -1  # its row of the tracker's state arrays (Tracker._X / _P / _G / _Gi; x, P, g, gi are views of it)
+    # a dormant track's map-evidence window, (n, 3), copied from its row when retired (Tracker._retire; its revival
+    # without a map keeps it); None for a live track, whose windows are rows of the tracker's arrays (TrackRows)
+    mev_kept: np.ndarray | None = None
 
     # (the shape state as Python values, read from the rows: the tuples cannot be written in place by mistake)
     @property
@@ -162,8 +161,8 @@ class _Track:
 
 
 def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, beams: np.ndarray, free: list,
-               mev: list, past: list, _new=object.__new__) -> _Track:
-    """``_Track(id=tid, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t, birth_xy=…, g=…, gi=…, beams=…, free=…, mev=…,
+               past: list, _new=object.__new__) -> _Track:
+    """``_Track(id=tid, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t, birth_xy=…, g=…, gi=…, beams=…, free=…,
     past=…)`` with every other field at its default (a birth, :meth:`Tracker._birth`):
     the slots set directly, about a quarter of the dataclass ``__init__``'s cost with its keyword binding and default
     factories (``tests/test_detect_birth_fast.py`` compares every field with the dataclass's)."""
@@ -186,12 +185,10 @@ def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, be
     k.reason = "not in M: tentative track"
     k.beams = beams
     k.free = free
-    k.mev = mev
     k.person = False
     k.person_streak = 0
     k.rode = False
     k.was_in_m = False
-    k.ride = []
     k.past = past
     k.past_a = 0
     k.slow_since = None
@@ -203,6 +200,7 @@ def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, be
     k.m_travel = 0.0
     k.m_last_t = None
     k.row = -1
+    k.mev_kept = None
     return k
 
 
@@ -233,7 +231,76 @@ def _past_points(entry: tuple[float, np.ndarray, int, int]) -> np.ndarray:
 
 
 class TrackRows:
-    """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: the live tracks' rows of the state arrays."""
+    """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: the live tracks' rows of the state arrays and of the
+    per-update windows.
+
+    The windows (docs/speed.md, pass trk26; were lists of tuples on each ``_Track``) are rows of arrays on the same
+    rows as the states, left-aligned (entries 0 … n − 1, oldest first), pushed for all the updated tracks by the
+    shape update's kernel call (:func:`dynslam2d.detect.kernels.shape_update`) and read through :meth:`_mev` /
+    :meth:`_ride`:
+
+    * ``_MEV`` (rows, sustain_updates, 3): the map evidence per update (the detection's fractions of points on
+      long-occupied, observed-free, never-observed map cells, mapevidence.py), the last sustain_updates;
+    * ``_RIDE`` (rows, R, 5): the riding test's window (laser-frame x, y, map-frame x, y of the centre (m), stamp (s))
+      per update of the last ride_time s (at least sustain_updates of them); R doubles when a window could outgrow it;
+    * ``_WN`` (rows, 3) int64: per row the entries of ``_MEV``, the entries of ``_RIDE``, and the riding pre-test of
+      the window's last push (one array: one kernel argument)."""
+
+    def _init_windows(self, rows: int, nsus: int) -> None:
+        """The window arrays for ``rows`` rows and windows of ``nsus`` (sustain_updates) updates, all empty."""
+        self._MEV = np.zeros((rows, nsus, 3))
+        self._RIDE = np.zeros((rows, max(_RIDE0, nsus + 1), 5))
+        self._WN = np.zeros((rows, 3), dtype=np.int64)
+
+    def _mev(self, k: _Track) -> np.ndarray:
+        """(n, 3) map evidence of the live track ``k``'s last n ≤ sustain_updates updates, oldest first (a view)."""
+        row = k.row
+        return self._MEV[row, :self._WN.item(row, 0)]
+
+    def _ride(self, k: _Track) -> np.ndarray:
+        """(n, 5) riding window of the live track ``k`` (laser-frame x, y, map-frame x, y (m), stamp (s) per update),
+        oldest first (a view)."""
+        row = k.row
+        return self._RIDE[row, :self._WN.item(row, 1)]
+
+    def _start_windows(self, row: int, mev) -> None:
+        """Row ``row``'s windows for a track starting (a birth, a revival): no riding entry, the map evidence
+        ``mev`` (a sequence of (structure, free, unknown) rows, possibly empty)."""
+        n = len(mev)
+        if n == 1:  # (a birth's: its three values written one by one, cheaper than a row assigned from a tuple)
+            M = self._MEV
+            M[row, 0, 0], M[row, 0, 1], M[row, 0, 2] = mev[0]
+        elif n:
+            self._MEV[row, :n] = mev
+        W = self._WN
+        W[row, 0] = n
+        W[row, 1] = 0
+        W[row, 2] = 0
+
+    def _restart_windows(self, row: int, use_map: bool) -> None:
+        """Row ``row``'s windows after a re-acquisition (the track had missed scans): only the entries pushed in this
+        update are kept — the riding one and, with a map (``use_map``), the map evidence (the former lists cleared
+        before the append)."""
+        W = self._WN
+        n = W.item(row, 1)
+        if n > 1:
+            self._RIDE[row, 0] = self._RIDE[row, n - 1]
+        W[row, 1] = 1
+        W[row, 2] = 0  # (one entry: fewer than ride_updates ≥ 2)
+        if use_map:
+            n = W.item(row, 0)
+            if n > 1:
+                self._MEV[row, 0] = self._MEV[row, n - 1]
+            W[row, 0] = 1
+        else:
+            W[row, 0] = 0
+
+    def _grow_ride(self) -> None:
+        """Double the length of the riding windows (their entries kept)."""
+        R = self._RIDE
+        new = np.zeros((R.shape[0], 2 * R.shape[1], 5))
+        new[:, :R.shape[1]] = R
+        self._RIDE = new
 
     def _stack(self) -> tuple[np.ndarray, np.ndarray]:
         """(n, 4) states and (n, 4, 4) covariances of the live tracks (from the prediction when it ran)."""
@@ -269,6 +336,11 @@ class TrackRows:
                 Gi[:row] = self._Gi[:row]
                 self._X, self._P, self._G, self._Gi = X, P2, G, Gi
                 self._repoint()
+                for name in ("_MEV", "_RIDE", "_WN"):  # (the windows' rows, likewise)
+                    a = getattr(self, name)
+                    b = np.zeros((2 * row,) + a.shape[1:], dtype=a.dtype)
+                    b[:row] = a[:row]
+                    setattr(self, name, b)
         if x is not None:  # (None: the caller writes the state and covariance rows, _birth)
             self._X[row] = x
             self._P[row] = P

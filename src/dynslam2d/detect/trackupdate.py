@@ -98,9 +98,17 @@ class TrackUpdate:
             ok, _ = kalman_pairs(Xs, Ps, sel, mr.H, mr.zm, mr.Rm, False, sel, 0, 0.0, 0.0, self._X, self._P, trows)
         self._stacked = None  # the tracks changed
         out = ok.tolist()
-        shape_update(self._G, self._Gi, self._X, trows, dis, ok, b.kind, b.theta, b.lohi, b.rel, b.circle,
-                     mr.size_obs, mr.size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
-                     float(tc.heading_gain), float(tc.size_gain))
+        # the shapes and, in the same kernel call, the riding and map-evidence windows of the updated tracks from
+        # their new rows (docs/speed.md, pass trk26)
+        p = self._pose
+        c, s = self._pose_cs
+        top = shape_update(self._G, self._Gi, self._X, trows, dis, ok, b.kind, b.theta, b.lohi, b.rel, b.circle,
+                           mr.size_obs, mr.size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
+                           float(tc.heading_gain), float(tc.size_gain), *self._mev_src, self._MEV, self._RIDE,
+                           self._WN, self._map is not None, float(p.x), float(p.y), c, s, t, float(tc.ride_time),
+                           int(tc.ride_updates), tc.ride_max_range * tc.ride_max_range)
+        if top >= self._RIDE.shape[1]:  # (the next push could overflow a full window)
+            self._grow_ride()
         self._update_tracks(pairs, dets, t, out, trows)
         return out
 
@@ -109,15 +117,12 @@ class TrackUpdate:
         """The bookkeeping update of the tracks of ``pairs`` (track index, detection index; ``trows``: their rows of
         the state arrays) whose Kalman and shape results are already in their rows (k.x, k.P, k.g, k.gi) where
         ``applied``; the scan's constants are read once (one loop over the pairs: the update of one track is a few µs
-        of Python)."""
+        of Python). The riding and map-evidence windows are pushed before, for all pairs in one kernel call
+        (``shape_update``); a re-acquired track's keep only that push's entries here."""
         cfg = self.config
         tc, fc = cfg.tracker, cfg.fit
         pmin_r, pmax_r = fc.person_min_radius, fc.person_max_radius
-        window, nsus, ride_time = tc.confirm_window, tc.sustain_updates, tc.ride_time
-        p = self._pose
-        if p is not None:
-            pose_x, pose_y = p.x, p.y
-            c, s = self._pose_cs  # cos / sin of the pose's heading (once per scan)
+        window, nsus = tc.confirm_window, tc.sustain_updates
         use_map = self._map is not None
         max_age = self._free.max_age if self._free is not None else None
         ref = self._cur_ref if self._free is not None else None  # (the vacated-space test's reference: this scan)
@@ -127,15 +132,7 @@ class TrackUpdate:
         # (the detections' circle radii as floats, one conversion per scan: row di of the batch is detection di's fit
         # row, copied by the leg merge; float(det.circle[2]) would make a view per circle detection)
         radii = self._batch.circle[:, 2].tolist()
-        if p is not None:
-            # the centres in the map frame, one gather (their laser-frame centres below, on the floats one by one:
-            # the roundings of the former elementwise numpy products and sums)
-            # (its two columns as lists: the same floats as the rows' tolist, without a list per pair)
-            cx_l, cy_l = self._X.take(trows, axis=0)[:, :2].T.tolist()
-            ns = -s
-        else:
-            cx_l = cy_l = [None] * len(pairs)
-        for (ti, di), ok, x0, x1 in zip(pairs, applied, cx_l, cy_l):
+        for (ti, di), ok in zip(pairs, applied):
             if not ok:
                 continue
             k, det = tracks[ti], dets[di]
@@ -153,8 +150,7 @@ class TrackUpdate:
                 k.past = []  # (a new list: the snapshots of earlier updates may hold the old one)
                 k.past_a = 0
                 k.free.clear()
-                k.mev.clear()
-                k.ride.clear()
+                self._restart_windows(k.row, use_map)  # (the riding and map-evidence windows: this update's entries)
                 k.fast = 0
                 k.probation = k.in_m and not k.remembered  # a remembered track re-acquired where it stopped
                 k.misses = 0
@@ -174,18 +170,6 @@ class TrackUpdate:
             free.append((det, ref, t, past, pa, np0) if snap else max(det.free_fraction, 0.0))
             if len(free) > nsus:
                 del free[0]
-            if p is not None:
-                dx = x0 - pose_x
-                dy = x1 - pose_y
-                ride = k.ride
-                ride.append((c * dx + s * dy, ns * dx + c * dy, x0, x1, t))
-                while len(ride) > nsus and t - ride[0][4] > ride_time:
-                    del ride[0]
-            if use_map:
-                mev = k.mev
-                mev.append((det.map_structure, det.map_free, det.map_unknown))
-                if len(mev) > nsus:
-                    del mev[0]
             if max_age is not None:
                 past = k.past
                 past.append((t, det._pts, det._a0, det.n_points))  # (_past_entry of a scan detection, inline)
