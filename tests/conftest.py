@@ -181,3 +181,19 @@ def paper_room_slam_points():
     slam, first = paper_room_slam()
     pts, _ = slam.scan_points(paper_room_scan(first.compose(Pose2D(0.2, 0.0, 0.1))))
     return slam, pts
+
+
+# The tail of a subprocess script that checks a patched numba still raises its own typing error: sets ``error`` to
+# the error's type and first line ("" if none was raised). Used by the jit-patch tests (test_jitwarm,
+# test_jitcache_stack), whose scripts concatenate it.
+TYPING_ERROR_PROBE = r"""
+import numba
+@numba.njit
+def bad(x):
+    return min(x, "a")
+try:
+    bad(1.0)
+    error = ""
+except numba.core.errors.TypingError as e:
+    error = type(e).__name__ + str(e).split("\n")[0]
+"""

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import TYPING_ERROR_PROBE
 
 from dynslam2d import jitcache
 
@@ -74,15 +75,7 @@ def caller(x):
     for i in range(x.shape[0]):
         y[i] = callee(x[: i + 1])
     return y
-@numba.njit
-def bad(x):
-    return min(x, "a")
-try:
-    bad(1.0)
-    error = ""
-except numba.core.errors.TypingError as e:
-    error = type(e).__name__ + str(e).split("\n")[0]
-x = np.random.default_rng(5).normal(size=40)
+""" + TYPING_ERROR_PROBE + r"""x = np.random.default_rng(5).normal(size=40)
 out = caller(x)
 ir = re.sub(r"B\d+v\d+|0x[0-9a-f]+", "", caller.inspect_llvm(caller.signatures[0]))
 print(json.dumps({"out": out.tolist(), "ir": ir, "error": error,

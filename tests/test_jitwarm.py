@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import TYPING_ERROR_PROBE
 
 from dynslam2d import jitwarm
 from dynslam2d.jitmanifest import KERNELS
@@ -314,16 +315,7 @@ disp = jitwarm._dispatcher(sys.argv[1])
 disp.compile(jitwarm.parse_signature(sys.argv[2]))
 ir = disp.inspect_llvm(disp.signatures[0])
 ir = re.sub(r"B\d+v\d+|0x[0-9a-f]+", "", ir)  # numba's per-process function ids and dynamic names' addresses
-import numba
-@numba.njit
-def bad(x):
-    return min(x, "a")
-try:
-    bad(1.0)
-    error = ""
-except numba.core.errors.TypingError as e:
-    error = type(e).__name__ + str(e).split("\n")[0]
-print(json.dumps({"ir": ir, "error": error, "calls": calls}))
+""" + TYPING_ERROR_PROBE + r"""print(json.dumps({"ir": ir, "error": error, "calls": calls}))
 """
 
 
