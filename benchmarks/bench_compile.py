@@ -150,11 +150,14 @@ _log("run", "<exit>", time.time(), time.time(), "M", 0)
 
 TRACE_WORKER = TRACER + r"""
 import dynslam2d.jitwarm as jw
-_compile_kernels = jw.compile_kernels
-def _traced(*a, **k):
-    _install_tracer("bg")
-    return _compile_kernels(*a, **k)
-jw.compile_kernels = _traced
+def _traced(inner):
+    def traced(*a, **k):
+        _install_tracer("bg")
+        return inner(*a, **k)
+    return traced
+for _name in ("compile_kernels", "compile_balanced"):  # (whichever the checkout's main() calls)
+    if hasattr(jw, _name):
+        setattr(jw, _name, _traced(getattr(jw, _name)))
 jw.main(sys.argv[1:])
 """
 

@@ -255,6 +255,45 @@ def test_background_process_skips_a_kernel_the_run_is_compiling(tmp_path):
     assert json.loads(r.stdout.strip().splitlines()[-1]) == [[], [SMALL[0]]]
 
 
+BALANCED = r"""
+import json, sys
+from pathlib import Path
+from dynslam2d import jitwarm
+from dynslam2d.jitmanifest import KERNELS
+name, sig, folder = sys.argv[1], sys.argv[2], Path(sys.argv[3])
+other = next(k for k in KERNELS if k[0] == "dynslam2d.detect.kernels.cv_predict")
+board = jitwarm.CompileBoard(folder, "bg")
+(folder / f"run.{name}").touch()  # the run is compiling it
+first = jitwarm.compile_balanced([(name, sig), other], {name: 5.0}, board=board)
+(folder / f"run.{name}").unlink()
+second = jitwarm.compile_balanced([(name, sig), other], {}, board=board)
+third = jitwarm.compile_balanced([(name, sig), other], {}, board=board)
+print(json.dumps([first, second, third]))
+"""
+
+
+def test_balanced_order_takes_the_largest_kernel_the_run_will_not_reach_first():
+    # the run compiles pending kernels in order from run_at: before position 3 it has 0 + 1 + 1 + 5 = 7 s to go
+    pending = [(0, 1.0), (1, 1.0), (2, 5.0), (3, 1.0), (4, 3.0)]
+    assert jitwarm.next_kernel(pending, 0, 0.0) == 4  # 3 s fits before the run arrives (8 s); 5 s does not (2 s)
+    assert jitwarm.next_kernel(pending, 0, 4.0) == 2  # the run is 4 s from done with its kernel: 5 s fits at 2
+    # nothing fits: the most time to spare (the run waits 0.5 s for position 6, 1.5 s for position 5)
+    assert jitwarm.next_kernel([(5, 2.0), (6, 3.0)], 5, 0.5) == 1
+    # a kernel the run has passed without compiling it comes only when nothing is ahead of the run
+    assert jitwarm.next_kernel([(1, 9.0), (4, 1.0)], 3, 0.0) == 1
+    assert jitwarm.next_kernel([(1, 9.0)], 3, 0.0) == 0
+
+
+def test_balanced_compile_skips_what_the_run_compiles_or_has_cached(tmp_path):
+    env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    (tmp_path / "board").mkdir()
+    r = subprocess.run([sys.executable, "-c", BALANCED, *SMALL, str(tmp_path / "board")], env=env,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    other = "dynslam2d.detect.kernels.cv_predict"
+    assert json.loads(r.stdout.strip().splitlines()[-1]) == [[other], [SMALL[0]], []]
+
+
 LEAN = r"""
 import json, sys
 import numpy as np

@@ -1,6 +1,6 @@
 """The kernels a first run of ``dynslam2d run`` (sim:paper, default configuration) compiles, in order of
-first use, with the argument types of each (numba type names): what :mod:`dynslam2d.jitwarm` compiles in a second
-process, last-used first, while a cold run compiles in its own order.
+first use, with the argument types of each (numba type names) and its compile time: what :mod:`dynslam2d.jitwarm`
+compiles in a second process while a cold run compiles in its own order.
 
 Written by ``benchmarks/record_kernels.py`` (do not edit by hand); tests/test_jitwarm.py checks it against the
 signatures the kernels hold after a real run. A kernel missing here is compiled by the run itself, as before.
@@ -139,3 +139,42 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "'C'), float64, float64, float64, float64, Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64, "
      'bool, float64, float64,)'),
 )
+
+#: CPU time of each kernel's compile (s, the kernels it compiles in turn included) in a one-core cold run when
+#: recorded: the background compile's estimate of how far ahead of the run a kernel is (its order, docs/speed.md).
+COMPILE_S: dict[str, float] = {
+    'dynslam2d.sim.world._cast_kernel': 0.41,
+    'dynslam2d.detect.body._drop_body': 0.16,
+    'dynslam2d.slam.matcher.gated_points': 0.60,
+    'dynslam2d.detect.body._observe_beams': 0.21,
+    'dynslam2d.detect.segment._segment_kernel': 0.80,
+    'dynslam2d.detect.shapes.fit_cluster_rows': 1.97,
+    'dynslam2d.detect.kernels.classify_batch': 1.34,
+    'dynslam2d.detect.kernels.select_detections': 1.35,
+    'dynslam2d.detect.freespace._ref_arrays': 0.09,
+    'dynslam2d.detect.kernels.merge_legs': 1.15,
+    'dynslam2d.detect.kernels.measure_batch': 0.95,
+    'dynslam2d.detect.kernels_update.report_rows': 0.41,
+    'dynslam2d.slam.ledgerkernels.record_cells': 2.37,
+    'dynslam2d.slam.ledgerkernels.level_rows': 0.46,
+    'dynslam2d.slam.raycast.integrate_levels': 1.54,
+    'dynslam2d.slam.raycast.ray_ends': 0.15,
+    'dynslam2d.slam.cleanup._geometry_bounds': 0.53,
+    'dynslam2d.slam.cleanup._count_beams': 0.65,
+    'dynslam2d.slam.matcher.match_pyramid': 3.96,
+    'dynslam2d.slam.correlative._rotated_cells': 0.25,
+    'dynslam2d.slam.correlative._score_pyramid': 0.44,
+    'dynslam2d.slam.correlative.branch_and_bound': 1.58,
+    'dynslam2d.vacated.vacated_scan_kernel': 2.03,
+    'dynslam2d.detect.kernels.cv_predict': 0.22,
+    'dynslam2d.detect.kernels_update.association_gates': 1.31,
+    'dynslam2d.detect.kernels_assign.assign_groups': 1.04,
+    'dynslam2d.detect.kernels.pair_priors': 0.24,
+    'dynslam2d.detect.kernels_update.kalman_pairs': 1.27,
+    'dynslam2d.detect.kernels.shape_update': 0.86,
+    'dynslam2d.detect.kernels_update.manage_speed_rows': 0.41,
+    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.27,
+    'dynslam2d.detect.kernels.seen_through_refs': 0.22,
+    'dynslam2d.filter.observed_boxes_kernel': 0.22,
+    'dynslam2d.filter._rows_exclusion_kernel': 0.52,
+}

@@ -4,12 +4,13 @@ numba compiles a kernel on its first call, one after another, on one core: a fir
 first command waits for about 25 s of compiling. On a machine with a second core the command line starts
 one background process (:func:`start_background_compile`) when the kernel cache is cold. It imports the
 kernel modules and compiles the kernels of :data:`dynslam2d.jitmanifest.KERNELS` for their recorded
-signatures, last-used first, into the same numba cache folder, while the run compiles in its natural
-order. When the run reaches a kernel the background process has finished, numba's dispatcher finds it in
-the cache (``Dispatcher.compile`` looks in the cache before it compiles a new signature; numba writes an
-entry's data and index each to a temporary file renamed into place, so the run reads a whole entry or
-none and then compiles the kernel itself). A loaded kernel is the compiled code of the same source, so
-results do not change.
+signatures into the same numba cache folder, while the run compiles in its natural order: the largest
+kernel the run will not reach before it is compiled first (:func:`next_kernel`, from the recorded compile
+times), so that the two processes meet on a small kernel. When the run reaches a kernel the background
+process has finished, numba's dispatcher finds it in the cache (``Dispatcher.compile`` looks in the cache
+before it compiles a new signature; numba writes an entry's data and index each to a temporary file renamed
+into place, so the run reads a whole entry or none and then compiles the kernel itself). A loaded kernel is
+the compiled code of the same source, so results do not change.
 
 The two processes also tell each other which kernel each is compiling (:class:`CompileBoard`): where they
 meet, the run waits for a kernel the background process has already started instead of compiling it a
@@ -103,6 +104,14 @@ class CompileBoard:
     def busy(self, who: str, name: str) -> bool:
         """Whether process ``who`` ("run" or "bg") is compiling kernel ``name`` (module.qualname)."""
         return self._path(who, name).exists()
+
+    def busy_for(self, who: str, name: str) -> float | None:
+        """Seconds since process ``who`` started compiling kernel ``name`` (its mark's age), None when it is not
+        compiling it."""
+        try:
+            return max(time.time() - self._path(who, name).stat().st_mtime, 0.0)
+        except OSError:
+            return None
 
     def mark(self, name: str) -> None:
         try:
@@ -286,9 +295,92 @@ def compile_kernels(kernels: Iterable[tuple[str, str]], parent: int | None = Non
     return done
 
 
+def next_kernel(pending: list[tuple[int, float]], run_at: int, run_left: float) -> int:
+    """Which of the ``pending`` kernels the background process compiles next (a position in ``pending``).
+
+    ``pending``: (position in the run's order of first use, compile time s) of the kernels that neither process
+    has compiled nor is compiling, in that order; ``run_at``: the position of the kernel the run compiles now or
+    next; ``run_left``: s until it is done with that one (0 when it has not started it). The run reaches a
+    pending kernel once it has compiled the pending kernels before it (those at ``run_at`` or later; one the
+    background process has saved it only loads). The largest kernel the background process can compile before
+    the run reaches it, at the same speed: the large kernels go first, so that where the two processes meet,
+    the one arriving second waits for a small kernel only (``reversed(KERNELS)`` met on whichever kernel the
+    load put there: ``match_pyramid`` 4.7 s, ``record_cells`` 6.5 s). When no kernel fits, the one with the most
+    time to spare (the shortest wait for the run), and one the run has passed only when nothing is ahead of it.
+    """
+    fits, spare = -1, -1
+    fit_cost = spare_s = -float("inf")
+    ahead = run_left
+    for k, (at, cost) in enumerate(pending):
+        if at < run_at:
+            continue
+        if ahead - cost >= 0 and cost > fit_cost:
+            fits, fit_cost = k, cost
+        if ahead - cost > spare_s:
+            spare, spare_s = k, ahead - cost
+        ahead += cost
+    return fits if fits >= 0 else spare if spare >= 0 else len(pending) - 1
+
+
+def compile_balanced(kernels: Iterable[tuple[str, str]], costs: dict[str, float], parent: int | None = None,
+                     board: CompileBoard | None = None) -> list[str]:
+    """Compile the ``kernels`` (the run's order of first use) the run has not compiled, one at a time in the
+    order :func:`next_kernel` chooses from what the cache holds and the kernel the run is compiling
+    (``board``); ``costs``: each kernel's recorded compile time, s (:data:`dynslam2d.jitmanifest.COMPILE_S`; 1 s
+    where missing). Stops when process ``parent`` is gone or nothing is left for this process. Returns the
+    kernels compiled here."""
+    from dynslam2d.jitcache import _has_valid_index
+
+    waiting = dict(enumerate(kernels))
+    cost = {at: max(costs.get(name, 1.0), 0.01) for at, (name, _) in waiting.items()}
+    done: list[str] = []
+    wall = recorded = 0.0  # (this process's compile wall time against the recorded times: the speed now)
+    while waiting:
+        if parent is not None and os.getppid() != parent:
+            break
+        running: dict[int, float] = {}
+        for at, (name, _) in list(waiting.items()):
+            try:
+                age = board.busy_for("run", name) if board is not None else None
+                if age is not None:
+                    running[at] = age
+                elif _has_valid_index(_dispatcher(name)):
+                    del waiting[at]  # (the run compiled it)
+            except Exception:  # noqa: BLE001 - the run compiles what is missing, as without this process
+                del waiting[at]
+        pending = [(at, cost[at]) for at in sorted(waiting) if at not in running]
+        if not pending:
+            break
+        if running:
+            run_at = min(running)
+            run_left = max(cost[run_at] - running[run_at] * (recorded / wall if wall > 0 else 1.0), 0.0)
+        else:
+            run_at, run_left = pending[0][0], 0.0
+        at = pending[next_kernel(pending, run_at, run_left)][0]
+        name, sig = waiting.pop(at)
+        t0 = time.perf_counter()
+        try:
+            if board is not None and board.busy("run", name):
+                continue
+            disp = _dispatcher(name)
+            if _has_valid_index(disp):
+                continue
+            disp.compile(parse_signature(sig))
+        except Exception:  # noqa: BLE001 - the run compiles what is missing, as without this process
+            continue
+        finally:
+            if board is not None:
+                board.clear()  # (a kernel that failed to compile leaves no mark the run would wait on)
+        wall += time.perf_counter() - t0
+        recorded += cost[at]
+        done.append(name)
+    return done
+
+
 def main(argv: list[str] | None = None) -> None:
-    """``python -m dynslam2d.jitwarm PARENT_PID [BOARD_FOLDER]``: compile the manifest's kernels, last-used
-    first, telling the run through :class:`CompileBoard` which one it is compiling."""
+    """``python -m dynslam2d.jitwarm PARENT_PID [BOARD_FOLDER]``: compile the manifest's kernels the run has not
+    reached, large ones first (:func:`compile_balanced`), telling the run through :class:`CompileBoard` which one
+    it is compiling."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the run's to handle; it stops this process
     args = sys.argv[1:] if argv is None else argv
     parent = int(args[0]) if args else None
@@ -300,7 +392,7 @@ def main(argv: list[str] | None = None) -> None:
     load_blas_alone()
     lean_numba_compile()
     lean_compile_gc()
-    from dynslam2d.jitmanifest import KERNELS
+    from dynslam2d.jitmanifest import COMPILE_S, KERNELS
 
     board = CompileBoard(args[1], "bg") if len(args) > 1 else None
     if board is not None:
@@ -308,7 +400,7 @@ def main(argv: list[str] | None = None) -> None:
             board.install()
         except Exception:  # noqa: BLE001 - numba internals changed: compile without telling the run
             board = None
-    compile_kernels(reversed(KERNELS), parent, board)
+    compile_balanced(KERNELS, COMPILE_S, parent, board)
 
 
 if __name__ == "__main__":
