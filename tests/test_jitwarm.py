@@ -246,13 +246,19 @@ print(json.dumps([first, second]))
 """
 
 
-def test_background_process_skips_a_kernel_the_run_is_compiling(tmp_path):
+def _board_script(script: str, tmp_path: Path):
+    """Run ``script`` on the small kernel with an empty cache and board folder under ``tmp_path``; its last line's
+    JSON."""
     env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
     (tmp_path / "board").mkdir()
-    r = subprocess.run([sys.executable, "-c", SKIP_RUNS, *SMALL, str(tmp_path / "board")], env=env,
+    r = subprocess.run([sys.executable, "-c", script, *SMALL, str(tmp_path / "board")], env=env,
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-3000:]
-    assert json.loads(r.stdout.strip().splitlines()[-1]) == [[], [SMALL[0]]]
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def test_background_process_skips_a_kernel_the_run_is_compiling(tmp_path):
+    assert _board_script(SKIP_RUNS, tmp_path) == [[], [SMALL[0]]]
 
 
 BALANCED = r"""
@@ -285,13 +291,8 @@ def test_balanced_order_takes_the_largest_kernel_the_run_will_not_reach_first():
 
 
 def test_balanced_compile_skips_what_the_run_compiles_or_has_cached(tmp_path):
-    env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
-    (tmp_path / "board").mkdir()
-    r = subprocess.run([sys.executable, "-c", BALANCED, *SMALL, str(tmp_path / "board")], env=env,
-                       capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0, r.stderr[-3000:]
     other = "dynslam2d.detect.kernels.cv_predict"
-    assert json.loads(r.stdout.strip().splitlines()[-1]) == [[other], [SMALL[0]], []]
+    assert _board_script(BALANCED, tmp_path) == [[other], [SMALL[0]], []]
 
 
 LEAN = r"""

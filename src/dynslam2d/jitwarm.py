@@ -273,26 +273,33 @@ def compile_kernels(kernels: Iterable[tuple[str, str]], parent: int | None = Non
     """Compile each (kernel, signature) of ``kernels`` in the order given, skipping kernels whose cache
     already holds an entry or that the run is compiling (``board``: the run got there first); stop when
     process ``parent`` is gone. Returns the kernels compiled or loaded here."""
-    from dynslam2d.jitcache import _has_valid_index
-
     done = []
     for name, sig in kernels:
         if parent is not None and os.getppid() != parent:
             break
-        try:
-            if board is not None and board.busy("run", name):
-                continue
-            disp = _dispatcher(name)
-            if _has_valid_index(disp):
-                continue
-            disp.compile(parse_signature(sig))
-        except Exception:  # noqa: BLE001 - the run compiles what is missing, as without this process
-            continue
-        finally:
-            if board is not None:
-                board.clear()  # (a kernel that failed to compile leaves no mark the run would wait on)
-        done.append(name)
+        if _compile_one(name, sig, board):
+            done.append(name)
     return done
+
+
+def _compile_one(name: str, sig: str, board: CompileBoard | None) -> bool:
+    """Compile kernel ``name`` for signature ``sig`` here unless the run is compiling it (``board``) or the cache
+    already holds it; clears this process's mark on ``board`` afterwards. True when compiled here."""
+    from dynslam2d.jitcache import _has_valid_index
+
+    try:
+        if board is not None and board.busy("run", name):
+            return False
+        disp = _dispatcher(name)
+        if _has_valid_index(disp):
+            return False
+        disp.compile(parse_signature(sig))
+    except Exception:  # noqa: BLE001 - the run compiles what is missing, as without this process
+        return False
+    finally:
+        if board is not None:
+            board.clear()  # (a kernel that failed to compile leaves no mark the run would wait on)
+    return True
 
 
 def next_kernel(pending: list[tuple[int, float]], run_at: int, run_left: float) -> int:
@@ -359,18 +366,8 @@ def compile_balanced(kernels: Iterable[tuple[str, str]], costs: dict[str, float]
         at = pending[next_kernel(pending, run_at, run_left)][0]
         name, sig = waiting.pop(at)
         t0 = time.perf_counter()
-        try:
-            if board is not None and board.busy("run", name):
-                continue
-            disp = _dispatcher(name)
-            if _has_valid_index(disp):
-                continue
-            disp.compile(parse_signature(sig))
-        except Exception:  # noqa: BLE001 - the run compiles what is missing, as without this process
+        if not _compile_one(name, sig, board):
             continue
-        finally:
-            if board is not None:
-                board.clear()  # (a kernel that failed to compile leaves no mark the run would wait on)
         wall += time.perf_counter() - t0
         recorded += cost[at]
         done.append(name)
