@@ -141,6 +141,7 @@ class _Shim:  # the background process as the command line starts it, with the t
     def __getattr__(self, k):
         return getattr(__import__("subprocess"), k)
     def Popen(self, args, **kw):
+        _log("run", "<spawn background compile>", time.time(), time.time(), "M", 0)
         i = args.index("-m")
         return _Popen(args[:i] + ["-c", os.environ["TRACE_WORKER"]] + args[i + 2:], **kw)
 jw.subprocess = _Shim()
@@ -149,6 +150,7 @@ _log("run", "<exit>", time.time(), time.time(), "M", 0)
 """
 
 TRACE_WORKER = TRACER + r"""
+_log("bg", "<start>", time.time(), time.time(), "M", 0)
 import dynslam2d.jitwarm as jw
 def _traced(inner):
     def traced(*a, **k):

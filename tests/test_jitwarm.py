@@ -295,6 +295,52 @@ def test_balanced_compile_skips_what_the_run_compiles_or_has_cached(tmp_path):
     assert _board_script(BALANCED, tmp_path) == [[other], [SMALL[0]], []]
 
 
+INDEX_COMPILE = r"""
+import sys
+from dynslam2d import jitwarm
+jitwarm._dispatcher(sys.argv[1]).compile(jitwarm.parse_signature(sys.argv[2]))
+"""
+
+INDEX_READ = r"""
+import json, pickle, sys
+from dynslam2d import jitcache, jitwarm
+from dynslam2d.jitmanifest import KERNELS
+name, module = sys.argv[1], sys.argv[1].rpartition(".")[0]
+other = next(k for k, _ in KERNELS if k == "dynslam2d.detect.kernels.cv_predict")
+got = {"held": [jitcache.index_holds(name), jitcache.index_holds(other), jitwarm._cached(other)],
+       "imported": module in sys.modules, "foreign": jitcache.index_holds("numpy.linalg.norm")}
+exact = [jitcache._has_valid_index(jitwarm._dispatcher(k)) for k in (name, other)]
+got["exact"] = exact
+got["after_import"] = [jitcache.index_holds(k) for k in (name, other)]
+path = jitwarm._dispatcher(name)._cache._cache_file._index_path
+with open(path, "rb") as f:
+    version = pickle.load(f)
+    stamp, overloads = pickle.loads(f.read())
+stale = []
+for v, st in ((version, bytes(32)), ("0.0.0", stamp), (version, stamp)):
+    with open(path, "wb") as f:
+        pickle.dump(v, f, protocol=-1)
+        f.write(pickle.dumps((st, overloads), protocol=-1))
+    stale.append([jitcache.index_holds(name), jitcache._has_valid_index(jitwarm._dispatcher(name))])
+got["stale"] = stale
+print(json.dumps(got))
+"""
+
+
+def test_index_holds_tells_from_the_index_file_what_numba_would_without_importing(tmp_path):
+    """The background process's view of the cache (``jitcache.index_holds``) is numba's own (``_has_valid_index``):
+    a compiled kernel is held, another not, an index of another source or numba version is not; and it is read
+    without importing the kernel's module."""
+    env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    for script in (INDEX_COMPILE, INDEX_READ):
+        r = subprocess.run([sys.executable, "-c", script, *SMALL], env=env, capture_output=True, text=True,
+                           timeout=300)
+        assert r.returncode == 0, r.stderr[-3000:]
+    got = json.loads(r.stdout.strip().splitlines()[-1])
+    assert got == {"held": [True, False, False], "imported": False, "foreign": None, "exact": [True, False],
+                   "after_import": [True, False], "stale": [[False, False], [False, False], [True, True]]}, got
+
+
 LEAN = r"""
 import json, sys
 import numpy as np

@@ -540,6 +540,59 @@ def _has_valid_index(dispatcher: object) -> bool | None:
         return None
 
 
+def index_holds(name: str) -> bool | None:
+    """Whether numba's cache holds compiled code of kernel ``name`` (``module.qualname`` of a module-level kernel of
+    this package), told from its index file without importing the kernel's module: the answer of
+    :func:`_has_valid_index` for its dispatcher (an index written by this numba version for the kernel's source as it
+    is now, holding at least one signature).
+
+    numba (``UserProvidedCacheLocator``, ``CacheImpl``, ``IndexDataCacheFile``) keeps the index of a function of file
+    ``F`` in ``NUMBA_CACHE_DIR/<F's folder name>_<SHA-1 of F's folder>/<F's stem>.<qualname>-<first line>.pyXY.nbi``,
+    starting with the numba version and then the source stamp and the signatures. The first line of the function is
+    not known without its module, so every index of the name is read: one of another first line has another
+    source's stamp. None when this cannot be told here: the cache is not in ``NUMBA_CACHE_DIR`` (numba's in-tree or
+    user-wide folders, or other locator classes), ``name`` is not of this package, or numba's internals differ. Used
+    by the background compile (:mod:`dynslam2d.jitwarm`), which would otherwise import every kernel module to see
+    what the run has compiled."""
+    import glob
+    import pickle
+
+    try:
+        import numba
+        from numba.core import caching, config
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return None
+    module, _, qualname = name.rpartition(".")
+    package, _, rest = module.partition(".")
+    if package != __name__.partition(".")[0] or not rest or not config.CACHE_DIR or config.CACHE_LOCATOR_CLASSES:
+        return None
+    loaded = sys.modules.get(module)
+    source = getattr(loaded, "__file__", None) or os.path.join(os.path.dirname(__file__), *rest.split(".")) + ".py"
+    try:
+        folder = os.path.join(config.CACHE_DIR, caching._CacheLocator.get_suitable_cache_subpath(source))
+        st = os.stat(source)
+        stamp = caching._hash_source_file(source, st.st_mtime, st.st_size)
+        stem = os.path.splitext(os.path.basename(source))[0]
+        base = f"{stem}.{qualname}".replace("<", "").replace(">", "")
+        tail = f".py{sys.version_info[0]}{sys.version_info[1]}{getattr(sys, 'abiflags', '')}.nbi"
+        for path in glob.glob(os.path.join(glob.escape(folder), glob.escape(base + "-") + "*" + glob.escape(tail))):
+            if not path[len(folder) + len(base) + 2:-len(tail)].isdigit():
+                continue
+            try:
+                with open(path, "rb") as f:
+                    if pickle.load(f) != numba.__version__:
+                        continue
+                    data = f.read()
+            except FileNotFoundError:
+                continue
+            found, overloads = pickle.loads(data)
+            if found == stamp and overloads:
+                return True
+        return False
+    except Exception:  # noqa: BLE001 - numba internals changed: the caller imports the module and asks numba
+        return None
+
+
 def kernel_cache_state(prefix: str = "dynslam2d", needed: frozenset[str] | None = None) -> KernelCacheState:
     """Count the module-level numba kernels of the loaded ``prefix`` modules that a run needs and those whose
     compiled code numba's cache holds (import the pipeline first to load them all). ``needed``: the kernels'

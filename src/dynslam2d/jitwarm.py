@@ -282,6 +282,19 @@ def compile_kernels(kernels: Iterable[tuple[str, str]], parent: int | None = Non
     return done
 
 
+def _cached(name: str) -> bool:
+    """Whether numba's cache holds kernel ``name``: from its index file alone while its module is not imported here
+    (:func:`dynslam2d.jitcache.index_holds`: the background process imports only the modules of the kernels it
+    compiles, ≈ 0.3 s less before its first compile), else, or when that cannot tell, from its dispatcher."""
+    from dynslam2d.jitcache import _has_valid_index, index_holds
+
+    if name.rpartition(".")[0] not in sys.modules:
+        held = index_holds(name)
+        if held is not None:
+            return held
+    return bool(_has_valid_index(_dispatcher(name)))
+
+
 def _compile_one(name: str, sig: str, board: CompileBoard | None) -> bool:
     """Compile kernel ``name`` for signature ``sig`` here unless the run is compiling it (``board``) or the cache
     already holds it; clears this process's mark on ``board`` afterwards. True when compiled here."""
@@ -336,8 +349,6 @@ def compile_balanced(kernels: Iterable[tuple[str, str]], costs: dict[str, float]
     (``board``); ``costs``: each kernel's recorded compile time, s (:data:`dynslam2d.jitmanifest.COMPILE_S`; 1 s
     where missing). Stops when process ``parent`` is gone or nothing is left for this process. Returns the
     kernels compiled here."""
-    from dynslam2d.jitcache import _has_valid_index
-
     waiting = dict(enumerate(kernels))
     cost = {at: max(costs.get(name, 1.0), 0.01) for at, (name, _) in waiting.items()}
     done: list[str] = []
@@ -351,7 +362,7 @@ def compile_balanced(kernels: Iterable[tuple[str, str]], costs: dict[str, float]
                 age = board.busy_for("run", name) if board is not None else None
                 if age is not None:
                     running[at] = age
-                elif _has_valid_index(_dispatcher(name)):
+                elif _cached(name):
                     del waiting[at]  # (the run compiled it)
             except Exception:  # noqa: BLE001 - the run compiles what is missing, as without this process
                 del waiting[at]
