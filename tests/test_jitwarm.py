@@ -421,3 +421,77 @@ def test_remembered_call_typing_gives_the_same_code_and_errors(tmp_path):
     assert got["0"]["error"].startswith("TypingError") and got["0"]["error"] == got["1"]["error"]
     (typed0, search0), (typed1, search1) = got["0"]["calls"], got["1"]["calls"]
     assert typed0 == typed1 > 500 and search0 == typed0 and search1 < typed1 / 3  # (most calls repeat a typed one)
+
+
+LEAN_INLINE = r"""
+import copy, json, re, sys
+import numpy as np
+from dynslam2d import jitcache, jitwarm
+on = sys.argv[3] == "1"
+if on:
+    assert jitcache.lean_inlining() and not jitcache.lean_inlining()  # (once)
+copies, deep = [0], copy.deepcopy
+def counted(*a, **k):
+    copies[0] += 1
+    return deep(*a, **k)
+copy.deepcopy = counted
+disp = jitwarm._dispatcher(sys.argv[1])
+disp.compile(jitwarm.parse_signature(sys.argv[2]))
+ir = disp.inspect_llvm(disp.signatures[0])
+ir = re.sub(r"B\d+v\d+|0x[0-9a-f]+", "", ir)  # numba's per-process function ids and dynamic names' addresses
+import numba
+@numba.njit(inline="always")
+def sq(x):
+    y = x * x
+    return y
+@numba.njit
+def twice(a):
+    s = 0.0
+    for v in a:
+        s += sq(v) - sq(v + 1.0)
+    return s
+a = np.linspace(-3.0, 5.0, 17)
+value = [twice(a), float(np.sum(a * a - (a + 1.0) * (a + 1.0)))]
+@numba.njit(inline="always")
+def inner(x):
+    return min(x, "a")
+@numba.njit
+def outer(x):
+    return inner(x) + 1.0
+try:
+    outer(1.0)
+    error = ""
+except numba.core.errors.TypingError as e:
+    error = type(e).__name__ + str(e).split("\n")[0]
+print(json.dumps({"ir": ir, "copies": copies[0], "value": value, "error": error}))
+"""
+
+
+def test_lean_inlining_gives_the_same_code_and_errors_with_fewer_copies(tmp_path):
+    """jitcache.lean_inlining: a kernel with inline="always" callees (one inlined into another) compiles to the same
+    optimised LLVM IR with far fewer deep copies of IR objects; a callee inlined at two sites computes what NumPy does;
+    a typing error in an inlined callee is raised as before."""
+    name, sig = next((n, s) for n, s in KERNELS if n.endswith("._rows_exclusion_kernel"))
+    got = {}
+    for on in ("0", "1"):
+        env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / f"cache{on}")}
+        r = subprocess.run([sys.executable, "-c", LEAN_INLINE, name, sig, on], env=env, capture_output=True,
+                           text=True, timeout=300)
+        assert r.returncode == 0, r.stderr[-3000:]
+        got[on] = json.loads(r.stdout.strip().splitlines()[-1])
+    assert len(got["0"]["ir"]) > 10000 and got["0"]["ir"] == got["1"]["ir"]
+    assert got["1"]["copies"] < got["0"]["copies"] / 3, (got["0"]["copies"], got["1"]["copies"])
+    for on in ("0", "1"):
+        assert got[on]["value"][0] == pytest.approx(got[on]["value"][1], rel=1e-12)
+    assert got["0"]["error"].startswith("TypingError") and got["0"]["error"] == got["1"]["error"]
+
+
+def test_lean_inlining_leaves_another_numba_alone(monkeypatch):
+    from numba.core import inline_closurecall
+
+    from dynslam2d import jitcache
+
+    before = inline_closurecall.InlineWorker.inline_function
+    monkeypatch.setattr(jitcache, "INLINE_IR_SOURCE", "0" * 16)
+    assert not jitcache.lean_inlining()
+    assert inline_closurecall.InlineWorker.inline_function is before

@@ -162,6 +162,8 @@ def lean_numba_compile() -> bool:
     - **Compiles on a roomy frame stack** (:func:`roomy_compile_stack`): no 16 KiB chunk of CPython's frame
       stack mapped and unmapped per call where the compiler's stack depth sits at a chunk's end (≈ 200 000
       times on that cold run; 5–8 % of its compile CPU).
+    - **Inlining without copying the callee's IR twice** (:func:`lean_inlining`): three quarters of numba's
+      inlining pass.
 
     Together about a tenth of the compile CPU (docs/speed.md), and the remembered call typing about a tenth
     more. The command line and its background compile call this first (they own the process); a library
@@ -206,6 +208,7 @@ def lean_numba_compile() -> bool:
     config.__eq__ = fast_equal  # type: ignore[method-assign,assignment]
     remembered_call_typing()
     roomy_compile_stack()
+    lean_inlining()
     return True
 
 
@@ -377,6 +380,83 @@ def remembered_call_typing() -> bool:
     get_call_type._dynslam2d_remembered = True  # type: ignore[attr-defined]
     get_call_type.__wrapped__ = original  # type: ignore[attr-defined]
     base.get_call_type = get_call_type  # type: ignore[method-assign]
+    return True
+
+
+#: SHA-256 (first 16 hex digits) of the sources of numba's ``InlineWorker.inline_ir`` and ``inline_function`` that
+#: :func:`lean_inlining` rewrites (numba 0.68); any other source is left as it is.
+INLINE_IR_SOURCE = "26fd2b7600c9d929"
+INLINE_FUNCTION_SOURCE = "1b53f183258e659d"
+
+#: The two statements of ``inline_ir`` that copy the callee's IR block by block (``copy.deepcopy`` of each block with a
+#: memo of its own, the function's scope and every variable in it included).
+_COPY_CALLEE = "callee_ir = copy_ir(callee_ir)"
+_COPY_ORIGINAL = "callee_ir_original = copy_ir(callee_ir)"
+
+
+def lean_inlining() -> bool:
+    """Have numba inline an ``inline="always"`` function into its caller without copying the callee's IR twice.
+
+    numba's ``InlineWorker.inline_ir`` (numba.core.inline_closurecall) first deep-copies the callee's IR, block by block
+    ("it gets mutated"), then deep-copies that copy once more as "an unmutated copy to return"; each block's copy
+    copies the function's scope with all its variables again, so the two copies cost more than the callee's whole
+    untyped front end (``translate_bytecode`` to ``inline_closure_likes``) that ``inline_function`` runs to get the IR:
+    three quarters of numba's ``inline_inlinables`` pass on a cold run of the README's first command (docs/speed.md,
+    pass cold30). Here:
+
+    - the second copy is not made (``inline_ir`` returns None in its place): both of numba's callers of ``inline_ir``
+      (``InlineInlinables`` through ``inline_function``, and ``InlineOverloads``) discard it;
+    - ``inline_function``, whose callee IR is the one ``run_untyped_passes`` has just built for this call and nothing
+      else holds, inlines it without the first copy either (``InlineOverloads`` passes IR kept in its cache: it keeps
+      that copy).
+
+    The inlined statements are the same objects' copies or the objects themselves, with the same names and labels;
+    the blocks' scopes are set to the caller's as before. Every kernel of a cold run gets the same LLVM IR as without
+    this (docs/speed.md). The functions are numba's own source with those statements edited, compiled in numba's
+    module; done only when that source is the one checked here (:data:`INLINE_IR_SOURCE`,
+    :data:`INLINE_FUNCTION_SOURCE`). Called by :func:`lean_numba_compile`; returns whether it changed numba (not when
+    called again)."""
+    import inspect
+    import textwrap
+
+    try:
+        from numba.core import inline_closurecall
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return False
+    worker = inline_closurecall.InlineWorker
+    inline_ir, inline_function = worker.inline_ir, worker.inline_function
+    if getattr(inline_function, "_dynslam2d_lean", False):
+        return False
+    try:
+        source = textwrap.dedent(inspect.getsource(inline_ir))
+        function_source = inspect.getsource(inline_function)
+    except (OSError, TypeError):
+        return False
+    if (hashlib.sha256(inspect.getsource(inline_ir).encode()).hexdigest()[:16] != INLINE_IR_SOURCE
+            or hashlib.sha256(function_source.encode()).hexdigest()[:16] != INLINE_FUNCTION_SOURCE
+            or source.count(_COPY_CALLEE) != 1 or source.count(_COPY_ORIGINAL) != 1):
+        return False
+
+    def build(text: str, name: str) -> Any:
+        space = dict(vars(inline_closurecall))  # numba's module globals (the helpers inline_ir calls)
+        exec(compile(text.replace("def inline_ir(", f"def {name}(", 1), inline_closurecall.__file__, "exec"), space)
+        func = space[name]
+        return type(func)(func.__code__, vars(inline_closurecall), name, func.__defaults__)
+
+    kept = source.replace(_COPY_ORIGINAL, "callee_ir_original = None", 1)
+    no_copy = build(kept.replace(_COPY_CALLEE, "pass", 1), "inline_ir_fresh")
+    no_original = build(kept, "inline_ir")
+
+    def lean_function(self: Any, caller_ir: Any, block: Any, i: Any, function: Any, arg_typs: Any = None) -> Any:
+        callee_ir = self.run_untyped_passes(function)  # numba's inline_function, without the copy of a fresh IR
+        freevars = function.__code__.co_freevars
+        return no_copy(self, caller_ir, block, i, callee_ir, freevars, arg_typs=arg_typs)
+
+    no_original.__wrapped__ = inline_ir  # type: ignore[attr-defined]
+    lean_function._dynslam2d_lean = True  # type: ignore[attr-defined]
+    lean_function.__wrapped__ = inline_function  # type: ignore[attr-defined]
+    worker.inline_ir = no_original
+    worker.inline_function = lean_function
     return True
 
 
