@@ -495,3 +495,32 @@ def test_lean_inlining_leaves_another_numba_alone(monkeypatch):
     monkeypatch.setattr(jitcache, "INLINE_IR_SOURCE", "0" * 16)
     assert not jitcache.lean_inlining()
     assert inline_closurecall.InlineWorker.inline_function is before
+
+
+FIRST_COMPILE = r"""
+import json
+from numba.core import inline_closurecall
+from numba.core.types import functions
+from dynslam2d import jitcache
+import numba
+def installed():
+    return [getattr(functions.BaseFunction.get_call_type, "_dynslam2d_remembered", False),
+            getattr(inline_closurecall.InlineWorker.inline_function, "_dynslam2d_lean", False)]
+assert jitcache.lean_numba_compile()
+before = installed()
+@numba.njit
+def plus(x):
+    return x + 1
+value = plus(2)
+print(json.dumps({"before": before, "after": installed(), "value": value}))
+"""
+
+
+def test_lean_compile_reads_numbas_sources_only_when_it_compiles(tmp_path):
+    """lean_numba_compile installs the two source-checked rewrites of numba's functions at the first compile of the
+    process (a warm run, which only loads kernels, does not read numba's sources for them)."""
+    env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    r = subprocess.run([sys.executable, "-c", FIRST_COMPILE], env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert json.loads(r.stdout.strip().splitlines()[-1]) == {"before": [False, False], "after": [True, True],
+                                                              "value": 3}

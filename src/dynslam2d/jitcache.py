@@ -26,6 +26,7 @@ import os
 import shutil
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -156,14 +157,14 @@ def lean_numba_compile() -> bool:
       comparisons on that cold run whose stored values differ, each rebuilding both dicts through the options'
       Python properties. They now compare the stored values over the class's defaults (numba's property
       returns the stored value, else the option's default: the same dicts, built without 44 property calls).
-    - **Call typing remembered** (:func:`remembered_call_typing`): a call of one of numba's functions with
-      argument types typed before tries the template that accepted them first instead of every template again
-      (about a tenth of the compile CPU more; the same code).
+    - **Call typing remembered** (:func:`remembered_call_typing`, installed at the first compile): a call of one of
+      numba's functions with argument types typed before tries the template that accepted them first instead of
+      every template again (about a tenth of the compile CPU more; the same code).
     - **Compiles on a roomy frame stack** (:func:`roomy_compile_stack`): no 16 KiB chunk of CPython's frame
       stack mapped and unmapped per call where the compiler's stack depth sits at a chunk's end (≈ 200 000
       times on that cold run; 5–8 % of its compile CPU).
-    - **Inlining without copying the callee's IR twice** (:func:`lean_inlining`): three quarters of numba's
-      inlining pass.
+    - **Inlining without copying the callee's IR twice** (:func:`lean_inlining`, installed at the first compile):
+      three quarters of numba's inlining pass.
 
     Together about a tenth of the compile CPU (docs/speed.md), and the remembered call typing about a tenth
     more. The command line and its background compile call this first (they own the process); a library
@@ -206,10 +207,30 @@ def lean_numba_compile() -> bool:
     options.finalize = lean_finalize
     config.__hash__ = class_hash  # type: ignore[method-assign,assignment]
     config.__eq__ = fast_equal  # type: ignore[method-assign,assignment]
-    remembered_call_typing()
     roomy_compile_stack()
-    lean_inlining()
+    at_first_compile(remembered_call_typing, lean_inlining)  # (≈ 35 ms of reading numba's sources: not on a warm run)
     return True
+
+
+def at_first_compile(*installs: Callable[[], Any]) -> None:
+    """Call each of ``installs`` when numba first compiles a function in this process (its ``numba:compile`` event,
+    which a load from the cache does not raise), before that compile's passes run.
+
+    :func:`remembered_call_typing` and :func:`lean_inlining` read numba's sources to check what they re-implement
+    (≈ 15 ms each): a warm run, which loads every kernel from the cache, need not pay for them."""
+    from numba.core import event
+
+    pending = list(installs)
+
+    class _First(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            while pending:
+                pending.pop(0)()
+
+        def on_end(self, ev: Any) -> None:
+            pass
+
+    event.register("numba:compile", _First())
 
 
 #: Value-stack slots reserved by :func:`roomy_call`'s frame (8 bytes each; never used): the frame, ≈ 1 MiB, does not fit
