@@ -235,3 +235,26 @@ def test_before_update_records_only_the_tracks_with_beams_in_their_order() -> No
     assert [(i, b.tolist()) for i, b in got._ledgers[4].beams] == [(3, [200]), (5, [200])]
     assert [i for i, _ in got._ledgers[2].beams] == [3, 5] and len(got._ledgers[2].kb) == 8  # (four items each)
     assert EvidenceLedger(MemoryConfig(), 0.1, 30.0).before_update(scan, pose, mixed[2:3], removed, slam.map) is None
+
+
+def test_new_ledger_sets_every_field_as_the_dataclass_does() -> None:
+    """``EvidenceLedger._new_ledger`` sets the slots of a new ``_Ledger`` directly (pass led28): every field equals
+    that of the dataclass ``__init__`` with the same arguments — the first box from the standing boxes when the
+    track has one, else where it is —, and each ledger gets lists of its own."""
+    rng = np.random.default_rng(3)
+    cfg = MemoryConfig(max_ledger_cells=int(rng.integers(10, 5000)))
+    led = EvidenceLedger(cfg, 0.1, 30.0)
+    made = []
+    for tid in range(1, 40):
+        t = _track(tid, "tentative", 0.1 * tid, *rng.uniform(-5, 5, 2).tolist(), float(rng.uniform(0, 2)),
+                   float(rng.uniform(0.1, 3)))
+        if tid % 3:
+            led._first[tid] = [(float(tid), -1.0, 0.25 * tid), 0.05 * tid, 0.1 * tid]
+        n_lv = int(rng.integers(1, 5))
+        got = led._new_ledger(t, t.stamp, n_lv)
+        box, t0, _ = led._first.get(tid) or (er._box_key(t), t.stamp, t.stamp)
+        want = er._Ledger(tid, box, t0, er._box_key(t), t.stamp, None, n_lv, cfg.max_ledger_cells)
+        for f in er._Ledger.__dataclass_fields__:
+            assert getattr(got, f) == getattr(want, f) and type(getattr(got, f)) is type(getattr(want, f)), f
+        made.append(got)
+    assert len({id(x.ent) for x in made}) == len({id(x.kb) for x in made}) == len(made)
