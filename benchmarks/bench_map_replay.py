@@ -141,8 +141,13 @@ def inproc(path: Path, other: Path, sweeps: int, evict_mb: float) -> None:
         spec.loader.exec_module(mod)
         return mod
 
-    other_grid = load("slam/grid.py", "other_grid")
     other_rays = load("slam/raycast.py", "other_raycast")
+    this_rays = sys.modules["dynslam2d.slam.raycast"]
+    sys.modules["dynslam2d.slam.raycast"] = other_rays  # (the other grid.py imports the other kernel's names)
+    try:
+        other_grid = load("slam/grid.py", "other_grid")
+    finally:
+        sys.modules["dynslam2d.slam.raycast"] = this_rays
     for k in ("integrate_levels", "integrate_rays", "integrate_rays_stop", "ray_ends", "new_prob_memo"):
         if hasattr(other_rays, k):
             setattr(other_grid, k, getattr(other_rays, k))

