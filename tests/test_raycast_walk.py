@@ -185,7 +185,9 @@ def test_fast_probability_has_the_plain_form_bits_or_asks_for_it() -> None:
     """``_prob_fast`` on the log-odds a simulated map reaches (its float32 values, and those plus the free, the
     occupied and the undo-then-occupied increments, as the walk forms them in float64), on random values
     over its whole range, and on its edges: wherever it answers (not NaN), the plain form's bits; it asks (NaN)
-    for under 1 % of them, for every value beyond ±700 and for NaN."""
+    for under 1 % of them, for nearly every value whose probability lies on a float32 rounding boundary (where
+    rounding its own float64 value would give the wrong bits about half the time), for every value beyond ±700
+    and for NaN."""
     rng = np.random.default_rng(4)
     hmap = MultiResMap(0.05, 3, L_FREE, L_OCC, cap=50.0)
     for s in range(30):
@@ -204,6 +206,16 @@ def test_fast_probability_has_the_plain_form_bits_or_asks_for_it() -> None:
     answered = out == out
     assert np.array_equal(out[answered].view(np.int32), _plain(v[answered]).view(np.int32))
     assert np.count_nonzero(~answered) < 0.01 * v.size
+    # values whose probability lies on a float32 rounding boundary (the midpoint of two neighbours) to about 1e-16:
+    # the fast form's own float64 value (error ≈ 1e-11) rounds either way, so it must ask for nearly all of them
+    p32 = np.float32(rng.uniform(0.001, 0.999, 3000))
+    mid = (p32.astype(np.float64) + np.nextafter(p32, np.float32(1.0)).astype(np.float64)) / 2.0
+    v = np.log(mid) - np.log1p(-mid)
+    out = np.empty(v.size, np.float32)
+    _fast_all(v, out)
+    answered = out == out
+    assert np.array_equal(out[answered].view(np.int32), _plain(v[answered]).view(np.int32))
+    assert np.count_nonzero(answered) < 0.05 * v.size
     edge = np.array([700.0000000000001, -700.0000000000001, 745.0, -745.0, 1e308, -np.inf, np.inf, np.nan])
     out = np.empty(edge.size, np.float32)
     _fast_all(edge, out)
