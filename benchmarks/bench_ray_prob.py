@@ -4,9 +4,10 @@ Pass map30 replaced the ray kernel's probability memo by ``_prob_fast``: float32
 log-odds ``v``, computed branch-free in a vectorised loop, or NaN where it cannot guarantee the bits of the plain
 form ``np.float32(1.0 / (1.0 + math.exp(-v)))`` (its error bound in its docstring), which the kernel then
 computes. This checks the bound's claim exhaustively where the map's values live: for every float32 ``x`` with
-|x| ≤ ``--max`` (2.29e9 values for 700), on four float64 values — ``x`` itself, and the three the walk forms from a
-stored float32 log-odds: ``x + l_free`` (a free update), ``x + l_occ`` (an occupied one), ``(x − l_free) + l_occ``
-(an occupied update undoing this scan's free one), with the configuration's ``l_free`` / ``l_occ`` (default
+|x| ≤ ``--max`` (2.29e9 values for 700), on five float64 values — ``x`` itself (an occupied update at the cap), and
+the four the walk forms from a stored float32 log-odds: ``x + l_free`` (a free update), ``x + l_occ`` (an occupied
+one), ``(x − l_free) + l_occ`` (an occupied update undoing this scan's free one) and ``x − l_free`` (the same at
+the cap), with the configuration's ``l_free`` / ``l_occ`` (default
 ``SlamConfig``, or ``--factors FREE OCC``). Every log-odds a map of these settings stores is such an ``x`` (the
 cap keeps it below ``cap + l_occ``; the free side reaches −700 after ≈ 1 700 free updates of one cell), so every
 probability the kernel writes is one of these values. Printed per family: values, how many the fast form answered,
@@ -90,7 +91,7 @@ def main() -> None:
     if float(np.array(top, np.int32).view(np.float32)) > a.max:
         top -= 1
     families = {"x": (0.0, 0.0), "x + l_free": (l_free, 0.0), "x + l_occ": (l_occ, 0.0),
-                "(x - l_free) + l_occ": (-l_free, l_occ)}
+                "(x - l_free) + l_occ": (-l_free, l_occ), "x - l_free": (-l_free, 0.0)}
     q_fast = _q_fast() if a.raw else None
     print(f"every float32 x with |x| <= {a.max:g} ({2 * (top + 1):,} values, ±0 both), l_free {l_free!r}, "
           f"l_occ {l_occ!r}")
