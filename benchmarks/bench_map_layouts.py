@@ -39,8 +39,25 @@ from numba import types as nbt
 from numba.extending import intrinsic
 
 import dynslam2d.slam.grid as grid
-from dynslam2d.slam.raycast import _FIB, _MAGIC_SHIFT, _PREFETCH, _bits, _prefetch, _prob, ray_ends
+from dynslam2d.slam.raycast import _MAGIC_SHIFT, _PREFETCH, _bits, _prefetch, ray_ends
 from dynslam2d.types import Pose2D
+
+#: the probability memo's hash multiplier (Fibonacci hashing), as the ray kernel had it before pass map30
+_FIB = -7046029254386353131
+
+
+@njit(cache=True, inline="always")
+def _prob(v, keys, vals):  # pragma: no cover - numba
+    """The probability memo's value of float64 log-odds ``v`` (the ray kernel's ``_prob`` before pass map30
+    replaced the memo): float32(1 / (1 + exp(−v))), looked up by the bits of ``v``, computed and stored on a miss."""
+    key = _bits(v)
+    h = np.uint64(((key * _FIB) >> 50) & (keys.shape[0] - 1))
+    if keys[h] == key:
+        return vals[h]
+    p = np.float32(1.0 / (1.0 + math.exp(-v)))
+    keys[h] = key
+    vals[h] = p
+    return p
 
 #: per variant: ((stride, offset) of the log-odds, of the probability, of the update index) in 32-bit words of the
 #: level's buffer, for a level of ``n`` cells
@@ -229,7 +246,7 @@ def main() -> None:
     use_stop = st["grazing_cells"] > 0.0
     min_sin = math.sin(math.radians(st["min_incidence_deg"]))
     junk = np.zeros(max(int(args.evict * 1e6) // 8, 1))
-    keys, vals = grid._PROB_MEMO
+    keys, vals = np.zeros(4096, np.int64), np.full(4096, 0.5, np.float32)  # (the memo as the map kept it)
     times: dict[str, list[float]] = {v: [] for v in variants}
     for rep in range(args.reps):
         levels: dict[str, list[tuple]] = {}

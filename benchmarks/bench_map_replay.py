@@ -141,12 +141,17 @@ def inproc(path: Path, other: Path, sweeps: int, evict_mb: float) -> None:
         spec.loader.exec_module(mod)
         return mod
 
-    other_grid = load("slam/grid.py", "other_grid")
     other_rays = load("slam/raycast.py", "other_raycast")
+    this_rays = sys.modules["dynslam2d.slam.raycast"]
+    sys.modules["dynslam2d.slam.raycast"] = other_rays  # (the other grid.py imports the other kernel's names)
+    try:
+        other_grid = load("slam/grid.py", "other_grid")
+    finally:
+        sys.modules["dynslam2d.slam.raycast"] = this_rays
     for k in ("integrate_levels", "integrate_rays", "integrate_rays_stop", "ray_ends", "new_prob_memo"):
         if hasattr(other_rays, k):
             setattr(other_grid, k, getattr(other_rays, k))
-    other_memo = other_rays.new_prob_memo()
+    other_memo = other_rays.new_prob_memo() if hasattr(other_rays, "new_prob_memo") else None  # (before map30)
     with open(path, "rb") as fh:
         rec = pickle.load(fh)
     calls = [(Pose2D(x, y, t), h, c) for x, y, t, h, c in rec["calls"]]
@@ -155,7 +160,8 @@ def inproc(path: Path, other: Path, sweeps: int, evict_mb: float) -> None:
     maps = {}
     for sweep in range(sweeps + 1):
         maps = {"other": other_grid.MultiResMap(**rec["settings"]), "this": this_grid.MultiResMap(**rec["settings"])}
-        maps["other"]._memo = other_memo  # (the other checkout's memo arrays, as its module would give)
+        if other_memo is not None:
+            maps["other"]._memo = other_memo  # (the other checkout's memo arrays, as its module would give)
         for i, (pose, h, c) in enumerate(calls):
             for tag in (("other", "this") if (i + sweep) % 2 == 0 else ("this", "other")):
                 if evict_mb > 0:

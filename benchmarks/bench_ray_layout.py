@@ -13,13 +13,14 @@ between two map updates push the levels out of the caches). The variants, altern
   int32 buffer of 3 / 4 words per cell (float32 views for the log-odds and probability), one prefetch per new
   cell instead of three — the layout change's ceiling in this kernel;
 * ``huge``: the three arrays in 2 MiB-aligned memory advised ``MADV_HUGEPAGE`` (TLB misses);
-* ``no_memo``: the probability memo's lookup replaced by a constant 0.5 (wrong values, timing only: what the memo's
-  lookups and misses cost);
+* ``no_prob``: the probabilities not written (``_write_probs`` removed; wrong values, timing only: what writing
+  the probabilities costs — before pass map30 this was ``no_memo``, the probability memo's lookup replaced by a
+  constant);
 * ``no_prefetch``: the three prefetches removed.
 
 Printed per variant: the median and mean µs per scan (all three levels) of the per-scan medians over the
 repetitions, their ratios to ``kernel``, the median per-scan ratio, and whether the levels after a replay are
-byte-identical to the kernel's (``no_memo`` is not, by construction). Also the cache lines a scan's updated cells
+byte-identical to the kernel's (``no_prob`` is not, by construction). Also the cache lines a scan's updated cells
 occupy in each layout.
 
     PYTHONPATH=src taskset -c 0 python benchmarks/bench_ray_layout.py negative_2/right --data <data> --evict 16
@@ -42,6 +43,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
 
 _HUGE = 2 << 20
+#: ``raycast._write_probs`` for the interleaved cells (the probability the second word of ``_W``)
+_WRITE_CELLS = '''
+def _write_probs_cells(cf, cells, vals, probs, n):
+    for i in range(n):
+        probs[i] = _prob_fast(vals[i])
+    for i in range(n):
+        p = probs[i]
+        if p != p:
+            p = np.float32(1.0 / (1.0 + math.exp(-vals[i])))
+        cf[cells[i] * _W + np.uint64(1)] = p
+'''
 
 
 def record(data: Path, name: str) -> tuple[list[dict], list[tuple]]:
@@ -56,9 +68,9 @@ def record(data: Path, name: str) -> tuple[list[dict], list[tuple]]:
     orig = grid.integrate_levels
 
     def keep(hits, clear, c, s, x, y, lo, pr, ui, n_levels, res, i0, j0, counter, stop, use_stop, max_bytes,
-             l_free, l_occ, cap, keys, vals):
+             l_free, l_occ, cap):
         n = orig(hits, clear, c, s, x, y, lo, pr, ui, n_levels, res, i0, j0, counter, stop, use_stop, max_bytes,
-                 l_free, l_occ, cap, keys, vals)
+                 l_free, l_occ, cap)
         if n >= 0 and n_levels == 3:
             calls.append(dict(hits=hits.copy(), clear=clear.copy(), c=c, s=s, x=x, y=y, res=res, stop=stop.copy(),
                               use_stop=use_stop, l_free=l_free, l_occ=l_occ, cap=cap))
@@ -93,7 +105,7 @@ def variants() -> dict[str, object]:
         s = s.replace("    h, w = logodds.shape\n", "")
         s = re.sub(r"    lo = logodds.reshape\(h \* w\).*\n    pr = prob.reshape\(h \* w\)\n"
                    r"    ui = uidx.reshape\(h \* w\)\n", "", s)
-        s = s.replace("pr[miss_f[i]]", "cf[miss_f[i] * _W + np.uint64(1)]")
+        s = s.replace("_write_probs(pr, ", "_write_probs_cells(cf, ")
         s = re.sub(r"\blo\[([^\]]+)\]", r"cf[np.uint64(\1) * _W]", s)
         s = re.sub(r"\bpr\[([^\]]+)\]", r"cf[np.uint64(\1) * _W + np.uint64(1)]", s)
         s = re.sub(r"\bui\[([^\]]+)\]", r"ci[np.uint64(\1) * _W + np.uint64(2)]", s)
@@ -103,11 +115,13 @@ def variants() -> dict[str, object]:
         assert "lo[" not in s and "ui[" not in s and "pr[" not in s
         ns = dict(vars(rc))
         ns["_W"] = np.uint64(words)
+        exec(_WRITE_CELLS, ns)  # noqa: S102
+        ns["_write_probs_cells"] = njit(ns["_write_probs_cells"])
         exec(s, ns)  # noqa: S102
         out[f"cells{4 * words}"] = njit(ns["_rays"])
-    memo = ("                    if keys[e] == key:\n                        pr[f] = vals[e]\n")
-    assert memo in base
-    out["no_memo"] = build(base.replace(memo, "                    if True:\n                        pr[f] = 0.5\n"))
+    probs = "_write_probs(pr, upd_f, upd_v, upd_p, n_upd)"
+    assert base.count(probs) == 2
+    out["no_prob"] = build(base.replace(probs, "n_upd + 0"))
     pf = ["                    _prefetch(ui, g)\n", "                    _prefetch(lo, g)\n",
           "                    _prefetch(pr, g)\n"]
     s = base
@@ -156,12 +170,11 @@ def as_arrays(name: str, maps: list[tuple]) -> list[tuple]:
     return [(cf[0::words].copy(), cf[1::words].copy(), buf[2::words].copy()) for cf, buf, _, _ in maps]
 
 
-def replay(kern, name: str, maps: list[tuple], calls: list[dict], levels: list[tuple], memo,
+def replay(kern, name: str, maps: list[tuple], calls: list[dict], levels: list[tuple],
            evict: np.ndarray | None) -> np.ndarray:
     """µs per scan (all levels) of replaying ``calls`` into ``maps``."""
     import dynslam2d.slam.raycast as rc
 
-    keys, vals = memo
     per = np.empty(len(calls))
     for q, cl in enumerate(calls):
         ends, hit, _ = rc.ray_ends(cl["hits"], cl["clear"], cl["c"], cl["s"], cl["x"], cl["y"])
@@ -175,13 +188,13 @@ def replay(kern, name: str, maps: list[tuple], calls: list[dict], levels: list[t
             sy = int(np.floor(cl["y"] / r + 0.5)) - j0
             ctr = ctr0 + 3 * q
             args = (ctr + 1, ctr + 2, sx, sy, rc._NO_CELLS, rc._NO_CELLS, ends, r, i0, j0, hit, cl["stop"],
-                    cl["use_stop"], cl["l_free"], cl["l_occ"], cl["cap"], keys, vals)
+                    cl["use_stop"], cl["l_free"], cl["l_occ"], cl["cap"])
             kern(*maps[k], *args)
         per[q] = (time.perf_counter_ns() - t0) / 1e3
     return per
 
 
-def lines(calls: list[dict], levels: list[tuple], memo) -> np.ndarray:
+def lines(calls: list[dict], levels: list[tuple]) -> np.ndarray:
     """Per level, the mean per scan of: cells updated, cache lines they occupy in three arrays, in 12-byte and in
     16-byte cells (every tenth scan)."""
     import dynslam2d.slam.raycast as rc
@@ -199,7 +212,7 @@ def lines(calls: list[dict], levels: list[tuple], memo) -> np.ndarray:
             lo, pr, ui = maps[k]
             rc._rays(lo, pr, ui, ctr + 1, ctr + 2, int(np.floor(cl["x"] / r + 0.5)) - i0,
                      int(np.floor(cl["y"] / r + 0.5)) - j0, rc._NO_CELLS, rc._NO_CELLS, ends, r, i0, j0, hit,
-                     cl["stop"], cl["use_stop"], cl["l_free"], cl["l_occ"], cl["cap"], *memo)
+                     cl["stop"], cl["use_stop"], cl["l_free"], cl["l_occ"], cl["cap"])
             f = np.flatnonzero(ui.ravel() > ctr)
             acc[k] += (f.size, 3 * np.unique(f // 16).size,
                        np.unique(np.concatenate([(12 * f) // 64, (12 * f + 11) // 64])).size, np.unique(f // 4).size)
@@ -215,7 +228,6 @@ def main() -> None:
     ap.add_argument("--only", default="", help="comma-separated variants (default: all)")
     a = ap.parse_args()
     import dynslam2d.memtrim as mt
-    import dynslam2d.slam.raycast as rc
 
     mt.map_large_blocks()
     calls, levels = record(a.data, a.input)
@@ -223,12 +235,11 @@ def main() -> None:
     if a.only:
         kerns = {k: v for k, v in kerns.items() if k == "kernel" or k in a.only.split(",")}
     evict = np.zeros(int(a.evict * 2**20) // 8) if a.evict > 0 else None
-    memos = {k: rc.new_prob_memo() for k in kerns}
     ref = None
     same = {}
-    for k, kern in kerns.items():  # (compiles; the memo as after a run)
+    for k, kern in kerns.items():  # (compiles)
         maps = fresh(k, levels)
-        replay(kern, k, maps, calls, levels, memos[k], None)
+        replay(kern, k, maps, calls, levels, None)
         arrs = as_arrays(k, maps)
         if ref is None:
             ref = arrs
@@ -238,7 +249,7 @@ def main() -> None:
     times: dict[str, list[np.ndarray]] = {k: [] for k in names}
     for rep in range(a.reps):
         for k in (names if rep % 2 == 0 else names[::-1]):
-            times[k].append(replay(kerns[k], k, fresh(k, levels), calls, levels, memos[k], evict))
+            times[k].append(replay(kerns[k], k, fresh(k, levels), calls, levels, evict))
     base = np.median(np.array(times["kernel"]), axis=0)
     print(f"{a.input}: {len(calls)} map updates replayed into the final levels {[lv[0].shape for lv in levels]}, "
           f"{a.reps} repetitions, {a.evict:g} MB written before each scan; µs per scan (three levels)")
@@ -247,7 +258,7 @@ def main() -> None:
         print(f"  {k:<12} median {statistics.median(t):7.1f}  mean {t.mean():7.1f}  ratio of medians "
               f"{statistics.median(t) / statistics.median(base):.3f}  median per-scan ratio {np.median(t / base):.3f}"
               f"  mean ratio {t.mean() / base.mean():.3f}  levels identical: {same[k]}")
-    acc = lines(calls, levels, rc.new_prob_memo())
+    acc = lines(calls, levels)
     print("  per scan (every tenth), level: cells updated, cache lines in three arrays / 12-byte cells / 16-byte cells")
     for k in range(3):
         print(f"    {k}: {acc[k, 0]:8.0f}  {acc[k, 1]:7.0f} / {acc[k, 2]:7.0f} / {acc[k, 3]:7.0f}")

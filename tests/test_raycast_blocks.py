@@ -1,7 +1,8 @@
 """The ray kernel's set-up in loops before the walks (pass map22, slam/raycast.py ``_rays``): the rays' end cells,
 which rays count and which repeat the previous one, and each walked ray's lengths, steps and multiplier are computed
-for all rays first, the walks after in the rays' order. Compared bit for bit (the three level arrays, the probability
-memo, the returned count) with the one-loop form it replaced, kept below and compiled here."""
+for all rays first, the walks after in the rays' order; the probabilities of the updated cells in batches after the
+walks (pass map30). Compared bit for bit (the three level arrays, the returned count) with the one-loop form it
+replaced, kept below with each cell's probability computed in the plain form as it is updated, compiled here."""
 
 from __future__ import annotations
 
@@ -12,18 +13,14 @@ import pytest
 
 from dynslam2d.jitbox import njit
 from dynslam2d.slam.raycast import (
-    _FIB,
     _MAGIC_MAX,
     _MAGIC_SHIFT,
     _NO_CELLS,
     _NO_ENDS,
     _NO_STOP,
     _PREFETCH,
-    _bits,
     _prefetch,
-    _prob,
     _rays,
-    new_prob_memo,
 )
 
 L_FREE = -0.4054651081081643
@@ -32,9 +29,11 @@ L_OCC = 2.1972245773362196
 
 @njit(cache=True)
 def _rays_one_loop(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j0, hit, stop, use_stop,
-          l_free, l_occ, cap, keys, vals):  # pragma: no cover - numba
+          l_free, l_occ, cap):  # pragma: no cover - numba
     """The one-loop form of ``raycast._rays`` before pass map22 (each ray's end cell, repeat test and set-up
-    computed just before its walk), kept as the reference."""
+    computed just before its walk), kept as the reference; each updated cell's probability is the plain
+    float32(1 / (1 + exp(−v))) of its float64 log-odds, written as the cell is updated (before pass map30 a memo
+    gave those bits)."""
     h, w = logodds.shape
     if sx < 0 or sy < 0 or sx >= w or sy >= h:
         return 0
@@ -45,9 +44,6 @@ def _rays_one_loop(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends,
     n = ends.shape[1] if from_ends else ex.shape[0]
     f0 = sy * w + sx
     n_done = 0
-    mask = keys.shape[0] - 1
-    miss_f = np.empty(max(h, w) + 1, dtype=np.uint64)  # (a ray's cells: at most max(h, w))
-    miss_v = np.empty(max(h, w) + 1)
     px = -1  # the previous ray: end cell, hit flag, stop and whether it was integrated (1) or skipped (0)
     py = -1
     ph = False
@@ -96,7 +92,6 @@ def _rays_one_loop(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends,
         # the start cell (j = 0), then the first major − 1 − skip intermediate cells of the walk: free
         n_free = major - skip
         c = major // 2
-        n_miss = 0  # cells whose probability the memo did not hold (computed at the end of the ray)
         if major < _MAGIC_MAX:
             magic = ((1 << _MAGIC_SHIFT) + major - 1) // major  # ceil(2^42 / major)
             t = c
@@ -113,14 +108,7 @@ def _rays_one_loop(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends,
                     v = lo[f] + l_free
                     lo[f] = v
                     ui[f] = free_idx
-                    key = _bits(v)
-                    e = np.uint64(((key * _FIB) >> 50) & mask)
-                    if keys[e] == key:
-                        pr[f] = vals[e]
-                    else:  # (the memo's misses after the walk: no call inside the loop, no registers spilt)
-                        miss_f[n_miss] = f
-                        miss_v[n_miss] = v
-                        n_miss += 1
+                    pr[f] = np.float32(1.0 / (1.0 + math.exp(-v)))
                 t += minor
                 fb += d_major
         else:
@@ -131,7 +119,7 @@ def _rays_one_loop(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends,
                 if ui[f] < free_idx:
                     v = lo[f] + l_free
                     lo[f] = v
-                    pr[f] = _prob(v, keys, vals)
+                    pr[f] = np.float32(1.0 / (1.0 + math.exp(-v)))
                     ui[f] = free_idx
                 t += minor
                 fb += d_major
@@ -155,16 +143,7 @@ def _rays_one_loop(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends,
             ui[f] = free_idx
             updated = True
         if updated:
-            key = _bits(v)
-            e = np.uint64(((key * _FIB) >> 50) & mask)
-            if keys[e] == key:
-                pr[f] = vals[e]
-            else:
-                miss_f[n_miss] = f
-                miss_v[n_miss] = v
-                n_miss += 1
-        for i in range(n_miss):  # (the ray's cells are distinct: each written once, in the walk's order)
-            pr[miss_f[i]] = _prob(miss_v[i], keys, vals)
+            pr[f] = np.float32(1.0 / (1.0 + math.exp(-v)))
         n_done += 1
     return n_done
 
@@ -180,13 +159,12 @@ def _state(h: int, w: int, rng: np.random.Generator) -> tuple[np.ndarray, np.nda
 
 
 def _both(lo, pr, ui, sx, sy, ex, ey, ends, r, i0, j0, hit, stop, use_stop, cap=6.0) -> None:
-    """One call of each form on copies of the same level and memo; every output bit for bit equal."""
+    """One call of each form on copies of the same level; every output bit for bit equal."""
     out = []
     for fn in (_rays, _rays_one_loop):
         a, b, c = lo.copy(), pr.copy(), ui.copy()
-        keys, vals = new_prob_memo(64)  # (a small memo: collisions and misses)
-        n = fn(a, b, c, 31, 32, sx, sy, ex, ey, ends, r, i0, j0, hit, stop, use_stop, L_FREE, L_OCC, cap, keys, vals)
-        out.append((n, a, b, c, keys, vals))
+        n = fn(a, b, c, 31, 32, sx, sy, ex, ey, ends, r, i0, j0, hit, stop, use_stop, L_FREE, L_OCC, cap)
+        out.append((n, a, b, c))
     (n1, *arrs1), (n2, *arrs2) = out
     assert n1 == n2
     for x, y in zip(arrs1, arrs2):

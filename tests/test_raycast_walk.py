@@ -1,5 +1,6 @@
 """The ray kernel's walk (slam/raycast.py): minor offsets by multiply-shift (and division above its limit), the
-probability memo resolved after the walk, the prefetches — each against the plain cell-by-cell reference update."""
+probabilities written in batches after the walks by the fast exact form (or the plain one where it asks), the
+prefetches — each against the plain cell-by-cell reference update."""
 
 from __future__ import annotations
 
@@ -8,14 +9,17 @@ import math
 import numpy as np
 import pytest
 
+from dynslam2d.jitbox import njit
 from dynslam2d.slam.grid import GridLevel, MultiResMap
 from dynslam2d.slam.raycast import (
     _MAGIC_MAX,
     _MAGIC_SHIFT,
+    _PROB_BATCH,
+    _prob_fast,
+    _write_probs,
     bresenham_free_cells,
     integrate_rays,
     integrate_rays_stop,
-    new_prob_memo,
 )
 from dynslam2d.types import Pose2D
 
@@ -165,31 +169,96 @@ def test_rays_longer_than_the_multiply_shift_limit_equal_the_reference() -> None
     _check(h, w, sx, sy, ex, ey, hit, None, scans=2)
 
 
-def test_probability_memo_collisions_keep_values_exact() -> None:
-    """A memo of two entries (a collision on almost every new value) and the default memo give the same map as
-    each other; the default memo's entries all hold 1 / (1 + exp(−v)) of their key."""
-    rng = np.random.default_rng(2)
-    maps = [MultiResMap(0.05, 3, L_FREE, L_OCC, cap=8.0) for _ in range(2)]
-    maps[0]._memo = new_prob_memo(2)
-    for s in range(12):
-        pose = Pose2D(*rng.uniform(-0.3, 0.3, 2), float(rng.uniform(-3, 3)))
-        a = np.linspace(-2.0, 2.0, 300)
-        rr = rng.choice([1.0, 2.0, 3.5], a.size) + rng.normal(0.0, 0.03, a.size)
-        hits = np.column_stack((rr * np.cos(a), rr * np.sin(a)))
-        for m in maps:
-            m.integrate(pose, hits, hits[::7] * 1.3 if s % 3 else None)
-    for la, lb in zip(maps[0].levels, maps[1].levels):
-        assert np.array_equal(la.logodds, lb.logodds) and np.array_equal(la.prob, lb.prob)
-        assert np.array_equal(la.uidx, lb.uidx)
-    keys, vals = maps[1]._memo
-    v = keys.view(np.float64)
-    assert np.count_nonzero(keys) > 50  # (the memo was used)
-    assert np.array_equal(vals, (1.0 / (1.0 + np.exp(-v))).astype(np.float32))
+@njit(cache=True)
+def _fast_all(v: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - numba
+    for i in range(v.shape[0]):
+        out[i] = _prob_fast(v[i])
+
+
+def _plain(v: np.ndarray) -> np.ndarray:
+    """float32(1 / (1 + exp(−v))) element by element in Python floats (math.exp: the C library's exp, as the kernel's
+    plain form), of float64 ``v``."""
+    return np.array([1.0 / (1.0 + math.exp(-x)) if not x < -709.0 else 0.0 for x in v.tolist()]).astype(np.float32)
+
+
+def test_fast_probability_has_the_plain_form_bits_or_asks_for_it() -> None:
+    """``_prob_fast`` on the log-odds a simulated map reaches (its float32 values, and those plus the free, the
+    occupied and the undo-then-occupied increments, as the walk forms them in float64), on random values
+    over its whole range, and on its edges: wherever it answers (not NaN), the plain form's bits; it asks (NaN)
+    for under 1 % of them, for nearly every value whose probability lies on a float32 rounding boundary (where
+    rounding its own float64 value would give the wrong bits about half the time), for every value beyond ±700
+    and for NaN."""
+    rng = np.random.default_rng(4)
+    hmap = MultiResMap(0.05, 3, L_FREE, L_OCC, cap=50.0)
+    for s in range(30):
+        pose = Pose2D(float(0.02 * s), float(-0.01 * s), float(0.05 * s))
+        a = np.linspace(-2.5, 2.5, 400)
+        rr = rng.choice([1.0, 2.0, 3.5], a.size) + rng.normal(0.0, 0.05, a.size)
+        hmap.integrate(pose, np.column_stack((rr * np.cos(a), rr * np.sin(a))))
+    lo = np.unique(np.concatenate([lv.logodds.ravel() for lv in hmap.levels])).astype(np.float64)
+    assert lo.size > 200  # (the map's histories gave many values)
+    v = np.concatenate((lo, lo + L_FREE, lo + L_OCC, (lo - L_FREE) + L_OCC,
+                        rng.uniform(-700.0, 700.0, 20000), rng.uniform(-40.0, 40.0, 20000),
+                        np.float32(rng.uniform(-120.0, 60.0, 20000)).astype(np.float64),
+                        [0.0, -0.0, 700.0, -700.0, 1e-300, -1e-300, 17.0, 36.8, -87.3, -103.97]))
+    out = np.empty(v.size, np.float32)
+    _fast_all(v, out)
+    answered = out == out
+    assert np.array_equal(out[answered].view(np.int32), _plain(v[answered]).view(np.int32))
+    assert np.count_nonzero(~answered) < 0.01 * v.size
+    # values whose probability lies on a float32 rounding boundary (the midpoint of two neighbours) to about 1e-16:
+    # the fast form's own float64 value (error ≈ 1e-11) rounds either way, so it must ask for nearly all of them
+    p32 = np.float32(rng.uniform(0.001, 0.999, 3000))
+    mid = (p32.astype(np.float64) + np.nextafter(p32, np.float32(1.0)).astype(np.float64)) / 2.0
+    v = np.log(mid) - np.log1p(-mid)
+    out = np.empty(v.size, np.float32)
+    _fast_all(v, out)
+    answered = out == out
+    assert np.array_equal(out[answered].view(np.int32), _plain(v[answered]).view(np.int32))
+    assert np.count_nonzero(answered) < 0.05 * v.size
+    edge = np.array([700.0000000000001, -700.0000000000001, 745.0, -745.0, 1e308, -np.inf, np.inf, np.nan])
+    out = np.empty(edge.size, np.float32)
+    _fast_all(edge, out)
+    assert np.isnan(out).all()
+
+
+def test_probability_writes_keep_the_order_and_fall_back_to_the_plain_form() -> None:
+    """``_write_probs``: every listed cell gets the plain form's value, a cell listed twice the later one, values
+    the fast form asks about (beyond ±700, NaN) the plain form's (0, 1, NaN)."""
+    rng = np.random.default_rng(6)
+    n = 3000
+    cells = rng.integers(0, 500, n).astype(np.uint64)  # (many cells listed more than once)
+    vals = rng.uniform(-30.0, 30.0, n)
+    vals[::97] = rng.choice([800.0, -800.0, np.nan], vals[::97].size)
+    pr = np.full(500, 0.25, np.float32)
+    _write_probs(pr, cells, vals, np.empty(n, np.float32), n)
+    want = np.full(500, 0.25, np.float32)
+    for f, p in zip(cells.tolist(), _plain(vals).tolist()):
+        want[f] = p
+    assert np.array_equal(pr.view(np.int32), want.view(np.int32))
+
+
+def test_probability_batches_across_a_scan_equal_the_reference() -> None:
+    """More cells updated in one call than one probability batch holds (``_PROB_BATCH``), with rays whose end
+    cell lies on an earlier ray's path (a free update undone by an occupied one in a later batch): bit for bit
+    the reference over three scans."""
+    rng = np.random.default_rng(8)
+    h, w, sx, sy = 160, 150, 70, 80
+    a = np.sort(rng.uniform(-math.pi, math.pi, 900))
+    r = rng.uniform(3.0, 70.0, a.size)
+    ex = np.floor(sx + r * np.cos(a) + 0.5).astype(np.int64)
+    ey = np.floor(sy + r * np.sin(a) + 0.5).astype(np.int64)
+    hit = rng.random(a.size) < 0.9
+    ui = np.full((h, w), -1, np.int32)
+    integrate_rays(np.zeros((h, w), np.float32), np.full((h, w), 0.5, np.float32), ui, 1, 2, sx, sy, ex, ey, hit,
+                   L_FREE, L_OCC, 6.0)
+    assert np.count_nonzero(ui >= 1) > 3 * _PROB_BATCH
+    _check(h, w, sx, sy, ex, ey, hit, None, scans=3)
 
 
 def test_level_integrate_and_the_fused_call_agree_on_a_grown_map() -> None:
-    """GridLevel.integrate (the per-call memo of integrate_rays) and MultiResMap.integrate (the map's memo, every
-    level in one call, growth bounds computed once) write the same cells while the map grows in every direction."""
+    """GridLevel.integrate (integrate_rays per level) and MultiResMap.integrate (every level in one call, growth
+    bounds computed once) write the same cells while the map grows in every direction."""
     rng = np.random.default_rng(9)
     hmap = MultiResMap(0.1, 3, L_FREE, L_OCC, cap=5.0)
     ref = [GridLevel(lv.resolution, lv.growth_margin_cells) for lv in hmap.levels]

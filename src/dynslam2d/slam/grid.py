@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from dynslam2d.gridmap import GridMap
-from dynslam2d.slam.raycast import integrate_levels, integrate_rays, integrate_rays_stop, new_prob_memo, ray_ends
+from dynslam2d.slam.raycast import integrate_levels, integrate_rays, integrate_rays_stop, ray_ends
 from dynslam2d.types import Pose2D
 
 #: Bytes per cell: float32 log-odds + float32 probability cache + int32 update index.
@@ -33,9 +33,6 @@ _NO_F32 = np.zeros((0, 0), dtype=np.float32)
 _NO_I32 = np.zeros((0, 0), dtype=np.int32)
 _NO_STOP = np.zeros(0)
 _NO_CLEAR = np.zeros((0, 2))
-#: the probability memo of the ray kernel (raycast._prob), shared by every map of the process: an entry depends on
-#: the log-odds value alone, and the kernel holds the GIL, so no two calls use it at once (48 KiB)
-_PROB_MEMO = new_prob_memo()
 
 
 class MapTooLargeError(RuntimeError):
@@ -296,7 +293,6 @@ class MultiResMap:
         self.cap = float(cap)
         self.version = 0  # incremented by every integration
         self.max_bytes = max_bytes
-        self._memo = _PROB_MEMO  # the ray kernel's probability memo (raycast._prob), kept from scan to scan
 
     @property
     def resolution(self) -> float:
@@ -328,7 +324,7 @@ class MultiResMap:
                 (la.resolution, lb.resolution, lc.resolution, 1.0), (la.i0, lb.i0, lc.i0, 0), (la.j0, lb.j0, lc.j0, 0),
                 (la.update_counter, lb.update_counter, lc.update_counter, 0),
                 stop if stop is not None else _NO_STOP, stop is not None,
-                -1 if self.max_bytes is None else self.max_bytes, self.l_free, self.l_occ, self.cap, *self._memo)
+                -1 if self.max_bytes is None else self.max_bytes, self.l_free, self.l_occ, self.cap)
         else:  # (other counts: the tuples padded to four, one kernel specialisation)
             pad = _FUSED_LEVELS - n_lv
             n0 = integrate_levels(
@@ -339,7 +335,7 @@ class MultiResMap:
                 tuple(lv.i0 for lv in levels) + (0,) * pad, tuple(lv.j0 for lv in levels) + (0,) * pad,
                 tuple(lv.update_counter for lv in levels) + (0,) * pad,
                 stop if stop is not None else _NO_STOP, stop is not None,
-                -1 if self.max_bytes is None else self.max_bytes, self.l_free, self.l_occ, self.cap, *self._memo)
+                -1 if self.max_bytes is None else self.max_bytes, self.l_free, self.l_occ, self.cap)
         if n0 < 0:
             return -1
         for lv in levels:

@@ -11,7 +11,8 @@ Implements hector_mapping's ``OccGridMapBase::updateByScan`` / ``bresenham2D`` e
 
 Grid arrays are indexed ``[row, col]`` = ``[y, x]`` in cell units of the level.
 The probability cache (``prob``) is refreshed for every touched cell, so the matcher
-never needs a full-map recomputation.
+never needs a full-map recomputation; its values come from :func:`_prob_fast`, which gives the bits of
+``float32(1 / (1 + exp(−v)))`` or asks for that plain form where it cannot guarantee them.
 """
 
 from __future__ import annotations
@@ -43,18 +44,69 @@ def _bits(typingctx, v):
     return sig, codegen
 
 
-#: entries of a probability memo (:func:`new_prob_memo`; a power of two)
-MEMO_SIZE = 4096
 #: the walk computes a ray's minor-axis offsets with the multiply-shift below while its major length is less than
 #: this (exact there; longer rays divide)
 _MAGIC_MAX = 1 << 13
 _MAGIC_SHIFT = 42
-#: the memo's hash multiplier (Fibonacci hashing: 2^64 / golden ratio, as int64)
-_FIB = -7046029254386353131
 #: how many steps ahead of a new cell the walk prefetches the cells' lines
 _PREFETCH = 16
-#: entries of the memo :func:`integrate_rays` makes per call
-_CALL_MEMO_SIZE = 512
+#: updated cells a level's walks collect before their probabilities are written (:func:`_write_probs`; plus one
+#: ray's cells at most)
+_PROB_BATCH = 1024
+
+
+@_intrinsic
+def _from_bits(typingctx, v):
+    """The float64 whose IEEE-754 bits are the int64 ``v`` (a bit cast, no conversion)."""
+    sig = _nbtypes.float64(_nbtypes.int64)
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], _lir.DoubleType())
+
+    return sig, codegen
+
+
+@_intrinsic
+def _fdiv(typingctx, a, b):
+    """``a / b`` for float64 (IEEE division, no zero-divisor test: lets LLVM vectorise a loop holding it)."""
+    sig = _nbtypes.float64(_nbtypes.float64, _nbtypes.float64)
+
+    def codegen(context, builder, signature, args):
+        return builder.fdiv(args[0], args[1])
+
+    return sig, codegen
+
+
+@_intrinsic
+def _fma(typingctx, a, b, c):
+    """``a · b + c`` for float64 with one rounding (LLVM's ``llvm.fma``)."""
+    sig = _nbtypes.float64(_nbtypes.float64, _nbtypes.float64, _nbtypes.float64)
+
+    def codegen(context, builder, signature, args):
+        return builder.fma(*args)
+
+    return sig, codegen
+
+
+#: :func:`_prob_fast`: log2(e); 1.5 · 2^52 (adding it rounds a float64 below 2^51 to an integer) and its bits;
+#: the Taylor coefficients ln(2)^i / i! of 2^r, i = 0 … 9; the relative half-width of the interval that holds both
+#: the fast and the plain form's float64 value (2^−34 ≈ 5.8e-11, > 5 × the fast form's error bound)
+_LOG2E = 1.4426950408889634
+_ROUND = 6755399441055744.0
+_ROUND_BITS = 4843621399236968448
+_E0 = 1.0
+_E1 = 0.6931471805599453
+_E2 = 0.2402265069591007
+_E3 = 0.055504108664821576
+_E4 = 0.009618129107628477
+_E5 = 0.0013333558146428441
+_E6 = 0.00015403530393381606
+_E7 = 1.5252733804059838e-05
+_E8 = 1.3215486790144305e-06
+_E9 = 1.0178086009239696e-07
+_HALF_WIDTH = 2.0**-34
+#: beyond this |log-odds| :func:`_prob_fast` gives NaN (2^k below stays a normal float64)
+_FAST_MAX = 700.0
 
 
 @_intrinsic
@@ -76,50 +128,79 @@ def _prefetch(typingctx, arr, idx):
     return sig, codegen
 
 
-def new_prob_memo(size: int = MEMO_SIZE) -> tuple[np.ndarray, np.ndarray]:
-    """An empty probability memo for :func:`integrate_levels`: (int64 keys, float32 values), ``size`` (a power of
-    two) entries, each valid from the start (key 0 = the bits of log-odds 0.0, value 0.5 = its probability)."""
-    return np.zeros(size, dtype=np.int64), np.full(size, 0.5, dtype=np.float32)
+@njit(cache=True, inline="always")
+def _prob_fast(v):  # pragma: no cover - numba
+    """The probability cache's value of float64 log-odds ``v``, float32(1 / (1 + exp(−v))) (hector_mapping
+    GridMapLogOdds.h ``getGridProbability``: odds / (1 + odds), odds = exp(v)), with the bits of the plain form
+    ``np.float32(1.0 / (1.0 + math.exp(-v)))`` — or NaN where it cannot guarantee them (≈ 0.1 % of values, and
+    |v| > ``_FAST_MAX``): the caller then computes the plain form. Branch-free, so a loop of it vectorises.
+
+    exp(−v) = 2^k · 2^r with y = −v · log2(e) rounded (absolute error ≤ 2.3e-13 for |v| ≤ 700, i.e. a relative
+    error ≤ 1.6e-13 of exp), k = round(y), r = y − k ∈ [−½, ½] exact; 2^r = e^u, |u| = |r| ln 2 ≤ 0.347, by its
+    Taylor polynomial of degree 9 in fused multiply-adds (remainder ≤ u^10 / 10! · e^|u| ≤ 9.8e-12 relative,
+    roundings ≤ 3e-15); 2^k exact. So q = 1 / (1 + exp(−v)) computed from it is within 1.0e-11 (relative) of the
+    true value, and the plain form's float64 value (libm's exp within 1 ulp, two roundings) within 5e-16: both lie
+    in [q (1 − δ), q (1 + δ)], δ = ``_HALF_WIDTH``. Rounding to float32 is monotonic, so when both ends of that
+    interval round to the same float32 the plain form rounds to it too. (``benchmarks/bench_ray_prob.py`` checks it
+    against the plain form on every float32 in [−700, 700] and on the values the map's updates reach.)"""
+    ok = abs(v) <= _FAST_MAX  # (False for NaN)
+    y = (-v if ok else 0.0) * _LOG2E
+    t = y + _ROUND
+    r = y - (t - _ROUND)
+    p = _fma(_E9, r, _E8)
+    p = _fma(p, r, _E7)
+    p = _fma(p, r, _E6)
+    p = _fma(p, r, _E5)
+    p = _fma(p, r, _E4)
+    p = _fma(p, r, _E3)
+    p = _fma(p, r, _E2)
+    p = _fma(p, r, _E1)
+    p = _fma(p, r, _E0)
+    q = _fdiv(1.0, 1.0 + p * _from_bits((_bits(t) - _ROUND_BITS + 1023) << 52))  # (1 + 2^k · 2^r; |k| ≤ 1010)
+    a = np.float32(q * (1.0 - _HALF_WIDTH))
+    b = np.float32(q * (1.0 + _HALF_WIDTH))
+    return a if ok & (a == b) else np.float32(np.nan)
 
 
 @njit(cache=True, inline="always")
-def _prob(v, keys, vals):  # pragma: no cover - numba
-    """The probability cache's value of float64 log-odds ``v``: float32(1 / (1 + exp(−v))), looked up by the bits
-    of ``v`` in the direct-mapped memo (``keys``, ``vals``) and computed (and stored there) on a miss. The value is a
-    function of ``v`` alone, so the memo gives the bits ``exp`` gives; a map's log-odds take a few thousand values
-    (sums of the same two increments), so nearly every touched cell is a hit."""
-    key = _bits(v)
-    h = np.uint64(((key * _FIB) >> 50) & (keys.shape[0] - 1))
-    if keys[h] == key:
-        return vals[h]
-    p = np.float32(1.0 / (1.0 + math.exp(-v)))
-    keys[h] = key
-    vals[h] = p
-    return p
+def _write_probs(pr, cells, vals, probs, n):  # pragma: no cover - numba
+    """``pr[cells[i]] = float32(1 / (1 + exp(−vals[i])))`` for i < ``n``, in that order (a cell listed twice keeps
+    the later value): :func:`_prob_fast` in one vectorised loop into ``probs`` (float32 scratch, ≥ n), then the
+    writes, with the plain form where it gave NaN. (Inlined: :func:`_rays` calls it at one place, which compiles
+    ≈ 0.17 s less than a function of its own.)"""
+    for i in range(n):
+        probs[i] = _prob_fast(vals[i])
+    for i in range(n):
+        p = probs[i]
+        if p != p:
+            p = np.float32(1.0 / (1.0 + math.exp(-vals[i])))
+        pr[cells[i]] = p
 
 
 @njit(cache=True)
 def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j0, hit, stop, use_stop,
-          l_free, l_occ, cap, keys, vals):  # pragma: no cover - numba
+          l_free, l_occ, cap):  # pragma: no cover - numba
     """Rays from array cell (``sx``, ``sy``) into one level (arrays ``logodds``, ``prob``, ``uidx`` (H, W),
     C-contiguous): to cells (``ex[k]``, ``ey[k]``) or, when ``ends`` has columns, to the cells of the map-frame
     ends ``ends`` (2, n), m (``floor(v / r + 0.5)`` minus the offsets ``i0``, ``j0``: OccGridMapBase::updateByScan's
     rounding). ``hit[k]`` True: the start and intermediate cells free, the endpoint occupied; False: every cell
     free. With ``use_stop`` the last ``stop[k]`` cells of a ray (its endpoint included) get no free update.
     Rays with the start or end cell outside the array, or ending in the start cell, are skipped whole. Returns
-    the number of rays integrated. ``keys``, ``vals``: the probability memo (:func:`new_prob_memo`).
+    the number of rays integrated.
 
     Free update (OccGridMapBase::updateSetFree): at most one per cell per scan (update index ``free_idx``);
     occupied (updateSetOccupied): at most one, winning over this scan's free update, which it undoes first; a
     hit adds ``l_occ`` only while the log-odds is below ``cap`` (GridMapLogOdds.h); the probability cache is
-    refreshed in every touched cell (:func:`_prob`). The cells are those of the reference's integer Bresenham walk
+    refreshed in every touched cell, from the float64 log-odds before its float32 store (:func:`_write_probs`).
+    The cells are those of the reference's integer Bresenham walk
     (OccGridMapBase::bresenham2D: major axis = larger |Δ|, ties to x, error starting at |Δmajor|/2): after j steps
     along the major axis the walk has made ``(major // 2 + j·minor) // major`` minor steps, computed per cell with
     a multiply and a shift (exact below ``_MAGIC_MAX``, Granlund & Montgomery, PLDI 1994) instead of the error
     recurrence, so no step waits for the one before. The cell updates are written out
-    in the loop (helpers taking the arrays, called per cell, were slower in every trial; docs/speed.md); a memo
-    miss is resolved at the end of the ray (no call inside the walk), and each new cell prefetches the lines of the cell
-    ``_PREFETCH`` steps on (new cells come in runs). The rays' end cells, which rays count and are walked, and
+    in the loop (helpers taking the arrays, called per cell, were slower in every trial; docs/speed.md); the walks
+    list each updated cell and its new log-odds, whose probabilities are written in one vectorised pass per
+    ``_PROB_BATCH`` cells (:func:`_write_probs`, in the walks' order), and each new cell prefetches the lines of the
+    cell ``_PREFETCH`` steps on (new cells come in runs). The rays' end cells, which rays count and are walked, and
     each walked ray's lengths, steps and multiplier are computed in loops over all rays before the walks (the end
     cells vectorised), the walks after in the rays' order (docs/speed.md, pass map22)."""
     h, w = logodds.shape
@@ -131,9 +212,12 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
     from_ends = ends.shape[1] > 0
     n = ends.shape[1] if from_ends else ex.shape[0]
     f0 = sy * w + sx
-    mask = keys.shape[0] - 1
-    miss_f = np.empty(max(h, w) + 1, dtype=np.uint64)  # (a ray's cells: at most max(h, w))
-    miss_v = np.empty(max(h, w) + 1)
+    # the cells updated since the last _write_probs and their new log-odds (float64, before the float32 store)
+    n_buf = _PROB_BATCH + max(h, w) + 1  # (a ray's cells: at most max(h, w))
+    upd_f = np.empty(n_buf, dtype=np.uint64)
+    upd_v = np.empty(n_buf)
+    upd_p = np.empty(n_buf, dtype=np.float32)
+    n_upd = 0
     # The rays' set-up in branch-free loops over all rays first (LLVM vectorises the end cells), the walks after,
     # in the rays' order (the same cells written in the same order as one loop doing both).
     # (1) the end cells
@@ -197,7 +281,12 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
         setup[5, q] = ((1 << _MAGIC_SHIFT) + major - 1) // major  # ceil(2^42 / major)
         setup[6, q] = y1 * w + x1
     # (4) the walks, in the rays' order
-    for q in range(n_walk):
+    for q in range(n_walk + 1):
+        if n_upd > _PROB_BATCH or q == n_walk:
+            _write_probs(pr, upd_f, upd_v, upd_p, n_upd)
+            n_upd = 0
+            if q == n_walk:
+                break
         k = walk[q]
         hk = hit[k]
         major = setup[0, q]
@@ -206,7 +295,6 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
         d_minor = setup[3, q]
         n_free = setup[4, q]
         c = major // 2
-        n_miss = 0  # cells whose probability the memo did not hold (computed at the end of the ray)
         if major < _MAGIC_MAX:
             magic = setup[5, q]
             t = c
@@ -223,26 +311,23 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
                     v = lo[f] + l_free
                     lo[f] = v
                     ui[f] = free_idx
-                    key = _bits(v)
-                    e = np.uint64(((key * _FIB) >> 50) & mask)
-                    if keys[e] == key:
-                        pr[f] = vals[e]
-                    else:  # (the memo's misses after the walk: no call inside the loop, no registers spilt)
-                        miss_f[n_miss] = f
-                        miss_v[n_miss] = v
-                        n_miss += 1
+                    upd_f[n_upd] = f
+                    upd_v[n_upd] = v
+                    n_upd += 1
                 t += minor
                 fb += d_major
         else:
             t = c
             fb = f0
             for _ in range(n_free):
-                f = fb + (t // major) * d_minor
+                f = np.uint64(fb + (t // major) * d_minor)
                 if ui[f] < free_idx:
                     v = lo[f] + l_free
                     lo[f] = v
-                    pr[f] = _prob(v, keys, vals)
                     ui[f] = free_idx
+                    upd_f[n_upd] = f
+                    upd_v[n_upd] = v
+                    n_upd += 1
                 t += minor
                 fb += d_major
         f = np.uint64(setup[6, q])
@@ -265,27 +350,10 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
             ui[f] = free_idx
             updated = True
         if updated:
-            key = _bits(v)
-            e = np.uint64(((key * _FIB) >> 50) & mask)
-            if keys[e] == key:
-                pr[f] = vals[e]
-            else:
-                miss_f[n_miss] = f
-                miss_v[n_miss] = v
-                n_miss += 1
-        for i in range(n_miss):  # (the ray's cells are distinct: each written once, in the walk's order)
-            pr[miss_f[i]] = _prob(miss_v[i], keys, vals)
+            upd_f[n_upd] = f
+            upd_v[n_upd] = v
+            n_upd += 1
     return n_done
-
-
-@njit(cache=True, inline="always")
-def _call_memo():  # pragma: no cover - numba
-    """A small probability memo for one call (:func:`new_prob_memo` inside a kernel)."""
-    keys = np.empty(_CALL_MEMO_SIZE, dtype=np.int64)
-    keys[:] = 0
-    probs = np.empty(_CALL_MEMO_SIZE, dtype=np.float32)
-    probs[:] = 0.5
-    return keys, probs
 
 
 @njit(cache=True)
@@ -312,9 +380,8 @@ def integrate_rays(
     (OccGridMapBase::updateByScan); rays ending in the start cell are skipped. Returns the
     number of rays integrated.
     """
-    keys, vals = _call_memo()
     return _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, _NO_ENDS, 1.0, 0, 0, hit, _NO_STOP,
-                 False, l_free, l_occ, cap, keys, vals)
+                 False, l_free, l_occ, cap)
 
 
 @njit(cache=True)
@@ -379,14 +446,13 @@ def integrate_rays_stop(
     less than ``stop[k] − 1`` cells (along the ray) before its endpoint get no free update — the ray's last
     ``stop[k]`` cells, its endpoint cell included, which the reference never marks free. ``stop[k] ≤ 1``
     gives the reference's update exactly. (Where the stop comes from: ``MultiResMap.integrate``.)"""
-    keys, vals = _call_memo()
     return _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, _NO_ENDS, 1.0, 0, 0, hit, stop, True,
-                 l_free, l_occ, cap, keys, vals)
+                 l_free, l_occ, cap)
 
 
 @njit(cache=True)
 def integrate_levels(hits, clear, c, s, x, y, logodds, prob, uidx, n_levels, res, i0, j0, counter, stop, use_stop,
-                     max_bytes, l_free, l_occ, cap, keys, vals):  # pragma: no cover - numba
+                     max_bytes, l_free, l_occ, cap):  # pragma: no cover - numba
     """One scan into every level in one call, when every level holds it already: the rays' ends in the map frame
     from the ``hits`` (n_hit, 2) then the ``clear`` (m, 2) ends (laser frame, m) moved by the pose (``x``, ``y``,
     cos ``c``, sin ``s``) as :func:`ray_ends` computes them, then per level ``k`` < ``n_levels`` (4-tuples
@@ -394,8 +460,7 @@ def integrate_levels(hits, clear, c, s, x, y, logodds, prob, uidx, n_levels, res
     before this scan) the rays from the pose's cell ``floor(x / r + 0.5)``, ``floor(y / r + 0.5)`` to the ends'
     cells (``floor(v / r + 0.5)``, OccGridMapBase::updateByScan's rounding, minus the offsets) by
     :func:`integrate_rays` (or :func:`integrate_rays_stop` with ``use_stop``) with the level's update indices
-    ``counter + 1`` (free) and ``counter + 2`` (occupied). ``keys``, ``vals``: the map's probability memo
-    (:func:`new_prob_memo`, kept from scan to scan). Returns the number of rays integrated on level 0, or −1,
+    ``counter + 1`` (free) and ``counter + 2`` (occupied). Returns the number of rays integrated on level 0, or −1,
     having written nothing, when ``MultiResMap.integrate`` must take its other way: a level's arrays do not hold
     the start cell and the cells of the ends' extremes (the level must grow: ``GridLevel._grown_bounds``), the
     three arrays of a level differ in shape, an end is not finite, or the levels hold more than ``max_bytes``
@@ -425,7 +490,7 @@ def integrate_levels(hits, clear, c, s, x, y, logodds, prob, uidx, n_levels, res
         sx = int(math.floor(x / r + 0.5)) - i0[k]
         sy = int(math.floor(y / r + 0.5)) - j0[k]
         n_done = _rays(logodds[k], prob[k], uidx[k], counter[k] + 1, counter[k] + 2, sx, sy, _NO_CELLS,
-                       _NO_CELLS, ends, r, i0[k], j0[k], hit, stop, use_stop, l_free, l_occ, cap, keys, vals)
+                       _NO_CELLS, ends, r, i0[k], j0[k], hit, stop, use_stop, l_free, l_occ, cap)
         if k == 0:
             n0 = n_done
     return n0
