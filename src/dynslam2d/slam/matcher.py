@@ -18,6 +18,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import types as _nbtypes
+from numba.core import cgutils as _cgutils
+from numba.extending import intrinsic as _intrinsic
+from numba.np.arrayobj import populate_array as _populate_array
 
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.slam.grid import GridLevel
@@ -38,6 +42,36 @@ _ZERO_PRIOR_VIEWS = tuple(_ZERO_PRIORS[:n] for n in range(4))
 #: points per block of :func:`_sums` (its scratch: (5 + 11, _BLOCK) float64, (4, _BLOCK) float32 and (_BLOCK,) uint64,
 #: ≈ 19 KiB: within the first-level cache)
 _BLOCK = 128
+#: byte alignment of :func:`_stack_array`'s buffers (a cache line: the vectorised loops' stores do not straddle one)
+_STACK_ALIGN = 64
+
+
+@_intrinsic
+def _stack_array(typingctx, dtype, rows, cols):  # type: ignore[no-untyped-def]
+    """In a kernel: an uninitialised C-contiguous (``rows``, ``cols``) array of ``dtype`` (a NumPy scalar type; the
+    sizes integer constants) in the calling kernel's stack frame, aligned to ``_STACK_ALIGN`` bytes — ``np.empty``
+    without the allocator's call and its free. Made once per call of the kernel (the buffer is reserved in its entry
+    block, also when the call sits in a loop); the array and its views must not outlive that call (no meminfo: never
+    return or store it)."""
+    if not (isinstance(rows, _nbtypes.IntegerLiteral) and isinstance(cols, _nbtypes.IntegerLiteral)
+            and isinstance(dtype, _nbtypes.NumberClass)):
+        return None
+    dt = dtype.instance_type
+    n_rows, n_cols = rows.literal_value, cols.literal_value
+    arrty = _nbtypes.Array(dt, 2, "C")
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        lty = context.get_data_type(dt)
+        data = _cgutils.alloca_once(builder, lty, size=n_rows * n_cols)
+        data.align = _STACK_ALIGN
+        size = context.get_abi_sizeof(lty)
+        intp = context.get_value_type(_nbtypes.intp)
+        ary = context.make_array(arrty)(context, builder)
+        _populate_array(ary, data=data, shape=[intp(n_rows), intp(n_cols)],
+                        strides=[intp(n_cols * size), intp(size)], itemsize=intp(size), meminfo=None)
+        return ary._getvalue()
+
+    return arrty(dtype, rows, cols), codegen
 
 
 @njit(cache=True, inline="always")
@@ -75,11 +109,11 @@ def _sums(prob, xy, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
     py = xy[1]
     uw = np.uint64(w)
     # per-block scratch, made here (not passed in: LLVM then knows the arrays do not overlap and vectorises the
-    # loops without run-time overlap checks)
-    fb = np.empty((5, _BLOCK))
-    tb = np.empty((11, _BLOCK))
-    qb = np.empty((4, _BLOCK), dtype=np.float32)
-    kb = np.empty(_BLOCK, dtype=np.uint64)
+    # loops without run-time overlap checks), in this call's stack frame (no allocation and free on every pass)
+    fb = _stack_array(np.float64, 5, _BLOCK)
+    tb = _stack_array(np.float64, 11, _BLOCK)
+    qb = _stack_array(np.float32, 4, _BLOCK)
+    kb = _stack_array(np.uint64, 1, _BLOCK)[0]
     cost = 0.0
     summ = 0.0
     n_in = 0.0
@@ -270,17 +304,18 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     trial step that, if accepted, ends the iterations (the last one, or converged) and whose H is not needed
     so runs the cost-only pass: its cost is the same sum (the rejected / accepted decision and the pose do not
     change), and the H, g it would have made are never read."""
-    H = np.empty((3, 3))
+    # (the small work arrays in this call's stack frame: _stack_array, no allocation per level)
+    H = _stack_array(np.float64, 3, 3)
     H[:] = 0.0
-    g = np.empty(3)
+    g = _stack_array(np.float64, 1, 3)[0]
     g[:] = 0.0
-    H2 = np.empty((3, 3))  # H, g at a trial LM step (they become H, g when it is accepted)
+    H2 = _stack_array(np.float64, 3, 3)  # H, g at a trial LM step (they become H, g when it is accepted)
     H2[:] = 0.0
-    g2 = np.empty(3)
+    g2 = _stack_array(np.float64, 1, 3)[0]
     g2[:] = 0.0
-    A = np.empty((3, 3))
+    A = _stack_array(np.float64, 3, 3)
     A[:] = 0.0
-    d = np.empty(3)
+    d = _stack_array(np.float64, 1, 3)[0]
     d[:] = 0.0
     x = pose[0]
     y = pose[1]
@@ -290,7 +325,7 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
         for b in range(3):
             if lam_p[a, b] != 0.0:
                 use_prior = True
-    gp = np.empty(3)
+    gp = _stack_array(np.float64, 1, 3)[0]
     gp[:] = 0.0
     xy = _split_xy(pts)  # (the points as two rows, once per level)
     raw, summ, n_in = _sums(prob, xy, x, y, th, swapped, np.bool_(True), H, g)
