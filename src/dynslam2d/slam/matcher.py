@@ -458,10 +458,10 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     pose[1] = start[1]
     pose[2] = start[2]
     n_lv = geo.shape[0]
-    Hk = np.empty((3, 3))
+    Hk = _stack_array(np.float64, 3, 3)  # (the work arrays in this call's stack frame, as _match_core's)
     Hk[:] = 0.0
-    mp = np.empty(3)
-    pp = np.empty(3)
+    mp = _stack_array(np.float64, 1, 3)[0]
+    pp = _stack_array(np.float64, 1, 3)[0]
     pts0 = np.empty((0, 2))  # level 0's / 1's scaled points once computed (C-contiguous, as pts_m / res)
     pts1 = np.empty((0, 2))
     last0 = False  # the last iterations ran on level 0 (unswapped) ending at (lx, ly, lth)
@@ -538,7 +538,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
         return True, l_raw, l_summ, l_in, free, n_sup, k_sup
     if pts0.shape[0] != pts_m.shape[0]:
         pts0 = pts_m / res
-    g = np.empty(3)
+    g = _stack_array(np.float64, 1, 3)[0]
     g[:] = 0.0
     cost, summ, n_in = accumulate(prob0, pts0, m0, m1, m2, np.bool_(False), H_out, g)  # not a literal: one signature
     return True, cost, summ, n_in, free, n_sup, k_sup
