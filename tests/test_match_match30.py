@@ -16,7 +16,7 @@ from conftest import paper_room_scan, paper_room_slam
 from numba import njit
 
 import dynslam2d.slam.matcher as mt
-from dynslam2d.slam.matcher import _stack_array, match_level
+from dynslam2d.slam.matcher import _split_xy, _stack_array, match_level
 from dynslam2d.types import Pose2D
 
 
@@ -76,15 +76,15 @@ def _heap_level(prob, pts, pose, n_iter, swapped, use_lm, prior, lam_p, keep, re
     if _HEAP_CORE is None:
         _HEAP_CORE = _heap_match_core()
     H = np.zeros((3, 3))
-    out = _HEAP_CORE(prob, pts, pose, n_iter, swapped, use_lm, 0.1, 1e4, 0.2, 2.0, prior, lam_p, H, keep, res, i0,
-                     j0)
+    out = _HEAP_CORE(prob, _split_xy(pts), pose, n_iter, swapped, use_lm, 0.1, 1e4, 0.2, 2.0, prior, lam_p, H, keep,
+                     res, i0, j0)
     return out, H
 
 
 def _stack_level(prob, pts, pose, n_iter, swapped, use_lm, prior, lam_p, keep, res, i0, j0):
     H = np.zeros((3, 3))
-    out = mt._match_core(prob, pts, pose, n_iter, swapped, use_lm, 0.1, 1e4, 0.2, 2.0, prior, lam_p, H, keep, res,
-                         i0, j0)
+    out = mt._match_core(prob, _split_xy(pts), pose, n_iter, swapped, use_lm, 0.1, 1e4, 0.2, 2.0, prior, lam_p, H,
+                         keep, res, i0, j0)
     return out, H
 
 

@@ -293,10 +293,23 @@ def _round_trips(x, y, th, res, i0, j0):  # pragma: no cover - numba
     return _same_float(wx / res - i0, x) and _same_float(wy / res - j0, y) and _same_float(wth, th)
 
 
+@njit(cache=True, inline="always")
+def _scaled_rows(pts_m, res):  # pragma: no cover - numba
+    """``_split_xy(pts_m / res)`` in one pass: the (n, 2) points divided by ``res`` as two rows (2, n) (each value
+    the same division)."""
+    n = pts_m.shape[0]
+    xy = np.empty((2, n))
+    for i in range(n):
+        xy[0, i] = pts_m[i, 0] / res
+        xy[1, i] = pts_m[i, 1] / res
+    return xy
+
+
 @njit(cache=True)
-def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
+def _match_core(prob, xy, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
                 prior, lam_p, H_out, keep, res, i0, j0):  # pragma: no cover - numba
-    """:func:`match_level`'s iterations; returns (x, y, θ, accepted steps, cost, Σ M, n_inside) with H at the
+    """:func:`match_level`'s iterations on the points ``xy`` (2, n) (rows x and y, cells: :func:`_split_xy` of
+    match_level's); returns (x, y, θ, accepted steps, cost, Σ M, n_inside) with H at the
     returned pose in ``H_out`` (cost, Σ M and n_inside of :func:`accumulate` there: without the prior term).
 
     H, Σ M and n_inside at the returned pose are needed only with ``keep`` and when that pose survives
@@ -327,7 +340,6 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
                 use_prior = True
     gp = _stack_array(np.float64, 1, 3)[0]
     gp[:] = 0.0
-    xy = _split_xy(pts)  # (the points as two rows, once per level)
     raw, summ, n_in = _sums(prob, xy, x, y, th, swapped, np.bool_(True), H, g)
     cost = raw
     if use_prior:
@@ -426,7 +438,7 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     """
     H = np.empty((3, 3))
     H[:] = 0.0
-    x, y, th, n_acc, _, _, _ = _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
+    x, y, th, n_acc, _, _, _ = _match_core(prob, _split_xy(pts), pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
                                            max_trans, prior, lam_p, H, False, 1.0, 0.0, 0.0)
     out = np.empty(3)
     out[0] = x
@@ -462,8 +474,6 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     Hk[:] = 0.0
     mp = _stack_array(np.float64, 1, 3)[0]
     pp = _stack_array(np.float64, 1, 3)[0]
-    pts0 = np.empty((0, 2))  # level 0's / 1's scaled points once computed (C-contiguous, as pts_m / res)
-    pts1 = np.empty((0, 2))
     last0 = False  # the last iterations ran on level 0 (unswapped) ending at (lx, ly, lth)
     lx = ly = lth = 0.0
     l_raw = l_summ = 0.0
@@ -488,10 +498,10 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             pp[0] = mp[0]
             pp[1] = mp[1]
             pp[2] = mp[2]
-        pts = pts_m / res
+        xy = _scaled_rows(pts_m, res)  # (the level's points as rows, made once per level)
         prob = prob0 if k == 0 else (prob1 if k == 1 else prob2)
         # (only the finest level's H at its result is read, by the evaluation below)
-        x, y, th, _, raw, summ, n_in = _match_core(prob, pts, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
+        x, y, th, _, raw, summ, n_in = _match_core(prob, xy, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
                                                    max_trans, pp, lam_ps[k], Hk, want_fit and k == 0 and not swapped,
                                                    res, i0, j0)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
@@ -503,10 +513,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
         pose[1] = (y + j0) * res
         pose[2] = (th + math.pi) % (2.0 * math.pi) - math.pi  # wrap after each level (§2.5)
         last0 = k == 0 and not swapped
-        if k == 1:
-            pts1 = pts
         if k == 0:
-            pts0 = pts
             lx, ly, lth = x, y, th
             l_raw, l_summ, l_in = raw, summ, n_in
     if not want_fit or geo[0, 3] != 0.0:
@@ -516,9 +523,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     wth = (pose[2] + math.pi) % (2.0 * math.pi) - math.pi  # (the wrapped θ of Pose2D(x, y, wrap_angle(θ)))
     if geo[fl, 3] == 0.0:
         res = geo[fl, 0]
-        if fl == 0 or pts1.shape[0] != pts_m.shape[0]:
-            pts1 = pts_m / res
-        free = fraction_below(prob1 if fl == 1 else prob0, pts1, pose[0] / res - geo[fl, 1],
+        free = fraction_below(prob1 if fl == 1 else prob0, pts_m / res, pose[0] / res - geo[fl, 1],
                               pose[1] / res - geo[fl, 2], wth, free_thresh)
     res = geo[0, 0]
     m0 = pose[0] / res - geo[0, 1]
@@ -536,11 +541,10 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             for b in range(3):
                 H_out[a, b] = Hk[a, b]
         return True, l_raw, l_summ, l_in, free, n_sup, k_sup
-    if pts0.shape[0] != pts_m.shape[0]:
-        pts0 = pts_m / res
     g = _stack_array(np.float64, 1, 3)[0]
     g[:] = 0.0
-    cost, summ, n_in = accumulate(prob0, pts0, m0, m1, m2, np.bool_(False), H_out, g)  # not a literal: one signature
+    # (accumulate's pass on level 0's rows made in one go; np.bool_, not literals: _match_core's signature of _sums)
+    cost, summ, n_in = _sums(prob0, _scaled_rows(pts_m, res), m0, m1, m2, np.bool_(False), np.bool_(True), H_out, g)
     return True, cost, summ, n_in, free, n_sup, k_sup
 
 
