@@ -60,7 +60,7 @@ def worker(data: Path, name: str) -> None:
     if hasattr(mt, "map_large_blocks"):  # the allocator setting the command line makes (a checkout without it: none)
         mt.map_large_blocks()
 
-    rel, topic = INPUTS[name]
+    rel, topic = INPUTS.get(name, (name, None))  # any other built-in scene by its name (sim:paper: README command 1)
     scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
     warm = pl.Pipeline()
     for s in scans[:WARMUP]:
@@ -144,7 +144,7 @@ def parts(data: Path, name: str) -> None:
     from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import Pipeline
 
-    rel, topic = INPUTS[name]
+    rel, topic = INPUTS.get(name, (name, None))  # any other built-in scene by its name (sim:paper: README command 1)
     scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
     warm = Pipeline()
     for s in scans[:WARMUP]:
@@ -224,13 +224,16 @@ def parts(data: Path, name: str) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("inputs", nargs="+", choices=sorted(INPUTS))
+    ap.add_argument("inputs", nargs="+", help=f"{', '.join(sorted(INPUTS))} or another built-in scene (sim:NAME)")
     ap.add_argument("--other", type=Path, default=REPO.parent / "main" / "src", help="the other checkout's src/")
     ap.add_argument("--reps", type=int, default=1, help="lockstep runs per input (pooled)")
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     ap.add_argument("--parts", action="store_true", help="instead: per-part CPU of this checkout alone")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    for name in args.inputs:
+        if name not in INPUTS and not name.startswith("sim:"):
+            ap.error(f"unknown input {name!r}")
     if args.worker:
         worker(args.data, args.inputs[0])
         return

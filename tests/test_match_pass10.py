@@ -13,7 +13,7 @@ from conftest import paper_room_scan, paper_room_slam
 from numba import njit
 
 from dynslam2d.slam.interp import interp_value_grad
-from dynslam2d.slam.matcher import _match_core, _prior_cost, _round_trips, _solve3, _sums, accumulate
+from dynslam2d.slam.matcher import _match_core, _prior_cost, _round_trips, _solve3, _split_xy, _sums, accumulate
 from dynslam2d.types import Pose2D
 
 
@@ -198,8 +198,9 @@ def test_match_core_with_cost_only_trials_equals_the_full_passes(n_levels: int) 
                                                  start, lam_p, Hr)
                             for keep in (False, True):
                                 Hn = np.zeros((3, 3))
-                                got = _match_core(lv.prob, pts, start, n_iter, swapped, use_lm, 0.1, 1e4, 0.2, 2.0,
-                                                  start, lam_p, Hn, keep, lv.resolution, float(lv.i0), float(lv.j0))
+                                got = _match_core(lv.prob, _split_xy(pts), start, n_iter, swapped, use_lm, 0.1, 1e4,
+                                                  0.2, 2.0, start, lam_p, Hn, keep, lv.resolution, float(lv.i0),
+                                                  float(lv.j0))
                                 assert np.array(got[:4]).tobytes() == np.array(ref[:4]).tobytes()
                                 if keep and _round_trips(got[0], got[1], got[2], lv.resolution, float(lv.i0),
                                                          float(lv.j0)):

@@ -186,7 +186,7 @@ class Scan:
     def trig(self) -> tuple[np.ndarray, np.ndarray]:
         """(cos, sin) of :attr:`angles`, (n,) read-only arrays shared by every scan with the same beam
         geometry (elementwise the same values as ``np.cos(angles[m])`` for any selection ``m``)."""
-        key = (self.angle_min, self.angle_increment, self.n_beams)
+        key = (self.angle_min, self.angle_increment, self.ranges.shape[0])  # (n_beams: the same int)
         t = _TRIG.get(key)
         if t is None:
             a = self.angles

@@ -18,6 +18,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import types as _nbtypes
+from numba.core import cgutils as _cgutils
+from numba.extending import intrinsic as _intrinsic
+from numba.np.arrayobj import populate_array as _populate_array
 
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.slam.grid import GridLevel
@@ -38,6 +42,36 @@ _ZERO_PRIOR_VIEWS = tuple(_ZERO_PRIORS[:n] for n in range(4))
 #: points per block of :func:`_sums` (its scratch: (5 + 11, _BLOCK) float64, (4, _BLOCK) float32 and (_BLOCK,) uint64,
 #: ≈ 19 KiB: within the first-level cache)
 _BLOCK = 128
+#: byte alignment of :func:`_stack_array`'s buffers (a cache line: the vectorised loops' stores do not straddle one)
+_STACK_ALIGN = 64
+
+
+@_intrinsic
+def _stack_array(typingctx, dtype, rows, cols):  # type: ignore[no-untyped-def]
+    """In a kernel: an uninitialised C-contiguous (``rows``, ``cols``) array of ``dtype`` (a NumPy scalar type; the
+    sizes integer constants) in the calling kernel's stack frame, aligned to ``_STACK_ALIGN`` bytes — ``np.empty``
+    without the allocator's call and its free. Made once per call of the kernel (the buffer is reserved in its entry
+    block, also when the call sits in a loop); the array and its views must not outlive that call (no meminfo: never
+    return or store it)."""
+    if not (isinstance(rows, _nbtypes.IntegerLiteral) and isinstance(cols, _nbtypes.IntegerLiteral)
+            and isinstance(dtype, _nbtypes.NumberClass)):
+        return None
+    dt = dtype.instance_type
+    n_rows, n_cols = rows.literal_value, cols.literal_value
+    arrty = _nbtypes.Array(dt, 2, "C")
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        lty = context.get_data_type(dt)
+        data = _cgutils.alloca_once(builder, lty, size=n_rows * n_cols)
+        data.align = _STACK_ALIGN
+        size = context.get_abi_sizeof(lty)
+        intp = context.get_value_type(_nbtypes.intp)
+        ary = context.make_array(arrty)(context, builder)
+        _populate_array(ary, data=data, shape=[intp(n_rows), intp(n_cols)],
+                        strides=[intp(n_cols * size), intp(size)], itemsize=intp(size), meminfo=None)
+        return ary._getvalue()
+
+    return arrty(dtype, rows, cols), codegen
 
 
 @njit(cache=True, inline="always")
@@ -75,11 +109,11 @@ def _sums(prob, xy, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
     py = xy[1]
     uw = np.uint64(w)
     # per-block scratch, made here (not passed in: LLVM then knows the arrays do not overlap and vectorises the
-    # loops without run-time overlap checks)
-    fb = np.empty((5, _BLOCK))
-    tb = np.empty((11, _BLOCK))
-    qb = np.empty((4, _BLOCK), dtype=np.float32)
-    kb = np.empty(_BLOCK, dtype=np.uint64)
+    # loops without run-time overlap checks), in this call's stack frame (no allocation and free on every pass)
+    fb = _stack_array(np.float64, 5, _BLOCK)
+    tb = _stack_array(np.float64, 11, _BLOCK)
+    qb = _stack_array(np.float32, 4, _BLOCK)
+    kb = _stack_array(np.uint64, 1, _BLOCK)[0]
     cost = 0.0
     summ = 0.0
     n_in = 0.0
@@ -259,10 +293,23 @@ def _round_trips(x, y, th, res, i0, j0):  # pragma: no cover - numba
     return _same_float(wx / res - i0, x) and _same_float(wy / res - j0, y) and _same_float(wth, th)
 
 
+@njit(cache=True, inline="always")
+def _scaled_rows(pts_m, res):  # pragma: no cover - numba
+    """``_split_xy(pts_m / res)`` in one pass: the (n, 2) points divided by ``res`` as two rows (2, n) (each value
+    the same division)."""
+    n = pts_m.shape[0]
+    xy = np.empty((2, n))
+    for i in range(n):
+        xy[0, i] = pts_m[i, 0] / res
+        xy[1, i] = pts_m[i, 1] / res
+    return xy
+
+
 @njit(cache=True)
-def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
+def _match_core(prob, xy, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
                 prior, lam_p, H_out, keep, res, i0, j0):  # pragma: no cover - numba
-    """:func:`match_level`'s iterations; returns (x, y, θ, accepted steps, cost, Σ M, n_inside) with H at the
+    """:func:`match_level`'s iterations on the points ``xy`` (2, n) (rows x and y, cells: :func:`_split_xy` of
+    match_level's); returns (x, y, θ, accepted steps, cost, Σ M, n_inside) with H at the
     returned pose in ``H_out`` (cost, Σ M and n_inside of :func:`accumulate` there: without the prior term).
 
     H, Σ M and n_inside at the returned pose are needed only with ``keep`` and when that pose survives
@@ -270,17 +317,18 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     trial step that, if accepted, ends the iterations (the last one, or converged) and whose H is not needed
     so runs the cost-only pass: its cost is the same sum (the rejected / accepted decision and the pose do not
     change), and the H, g it would have made are never read."""
-    H = np.empty((3, 3))
+    # (the small work arrays in this call's stack frame: _stack_array, no allocation per level)
+    H = _stack_array(np.float64, 3, 3)
     H[:] = 0.0
-    g = np.empty(3)
+    g = _stack_array(np.float64, 1, 3)[0]
     g[:] = 0.0
-    H2 = np.empty((3, 3))  # H, g at a trial LM step (they become H, g when it is accepted)
+    H2 = _stack_array(np.float64, 3, 3)  # H, g at a trial LM step (they become H, g when it is accepted)
     H2[:] = 0.0
-    g2 = np.empty(3)
+    g2 = _stack_array(np.float64, 1, 3)[0]
     g2[:] = 0.0
-    A = np.empty((3, 3))
+    A = _stack_array(np.float64, 3, 3)
     A[:] = 0.0
-    d = np.empty(3)
+    d = _stack_array(np.float64, 1, 3)[0]
     d[:] = 0.0
     x = pose[0]
     y = pose[1]
@@ -290,9 +338,8 @@ def _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
         for b in range(3):
             if lam_p[a, b] != 0.0:
                 use_prior = True
-    gp = np.empty(3)
+    gp = _stack_array(np.float64, 1, 3)[0]
     gp[:] = 0.0
-    xy = _split_xy(pts)  # (the points as two rows, once per level)
     raw, summ, n_in = _sums(prob, xy, x, y, th, swapped, np.bool_(True), H, g)
     cost = raw
     if use_prior:
@@ -391,7 +438,7 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     """
     H = np.empty((3, 3))
     H[:] = 0.0
-    x, y, th, n_acc, _, _, _ = _match_core(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
+    x, y, th, n_acc, _, _, _ = _match_core(prob, _split_xy(pts), pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
                                            max_trans, prior, lam_p, H, False, 1.0, 0.0, 0.0)
     out = np.empty(3)
     out[0] = x
@@ -423,12 +470,10 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     pose[1] = start[1]
     pose[2] = start[2]
     n_lv = geo.shape[0]
-    Hk = np.empty((3, 3))
+    Hk = _stack_array(np.float64, 3, 3)  # (the work arrays in this call's stack frame, as _match_core's)
     Hk[:] = 0.0
-    mp = np.empty(3)
-    pp = np.empty(3)
-    pts0 = np.empty((0, 2))  # level 0's / 1's scaled points once computed (C-contiguous, as pts_m / res)
-    pts1 = np.empty((0, 2))
+    mp = _stack_array(np.float64, 1, 3)[0]
+    pp = _stack_array(np.float64, 1, 3)[0]
     last0 = False  # the last iterations ran on level 0 (unswapped) ending at (lx, ly, lth)
     lx = ly = lth = 0.0
     l_raw = l_summ = 0.0
@@ -453,10 +498,10 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             pp[0] = mp[0]
             pp[1] = mp[1]
             pp[2] = mp[2]
-        pts = pts_m / res
+        xy = _scaled_rows(pts_m, res)  # (the level's points as rows, made once per level)
         prob = prob0 if k == 0 else (prob1 if k == 1 else prob2)
         # (only the finest level's H at its result is read, by the evaluation below)
-        x, y, th, _, raw, summ, n_in = _match_core(prob, pts, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
+        x, y, th, _, raw, summ, n_in = _match_core(prob, xy, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
                                                    max_trans, pp, lam_ps[k], Hk, want_fit and k == 0 and not swapped,
                                                    res, i0, j0)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
@@ -468,10 +513,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
         pose[1] = (y + j0) * res
         pose[2] = (th + math.pi) % (2.0 * math.pi) - math.pi  # wrap after each level (§2.5)
         last0 = k == 0 and not swapped
-        if k == 1:
-            pts1 = pts
         if k == 0:
-            pts0 = pts
             lx, ly, lth = x, y, th
             l_raw, l_summ, l_in = raw, summ, n_in
     if not want_fit or geo[0, 3] != 0.0:
@@ -481,9 +523,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     wth = (pose[2] + math.pi) % (2.0 * math.pi) - math.pi  # (the wrapped θ of Pose2D(x, y, wrap_angle(θ)))
     if geo[fl, 3] == 0.0:
         res = geo[fl, 0]
-        if fl == 0 or pts1.shape[0] != pts_m.shape[0]:
-            pts1 = pts_m / res
-        free = fraction_below(prob1 if fl == 1 else prob0, pts1, pose[0] / res - geo[fl, 1],
+        free = fraction_below(prob1 if fl == 1 else prob0, pts_m / res, pose[0] / res - geo[fl, 1],
                               pose[1] / res - geo[fl, 2], wth, free_thresh)
     res = geo[0, 0]
     m0 = pose[0] / res - geo[0, 1]
@@ -501,11 +541,10 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             for b in range(3):
                 H_out[a, b] = Hk[a, b]
         return True, l_raw, l_summ, l_in, free, n_sup, k_sup
-    if pts0.shape[0] != pts_m.shape[0]:
-        pts0 = pts_m / res
-    g = np.empty(3)
+    g = _stack_array(np.float64, 1, 3)[0]
     g[:] = 0.0
-    cost, summ, n_in = accumulate(prob0, pts0, m0, m1, m2, np.bool_(False), H_out, g)  # not a literal: one signature
+    # (accumulate's pass on level 0's rows made in one go; np.bool_, not literals: _match_core's signature of _sums)
+    cost, summ, n_in = _sums(prob0, _scaled_rows(pts_m, res), m0, m1, m2, np.bool_(False), np.bool_(True), H_out, g)
     return True, cost, summ, n_in, free, n_sup, k_sup
 
 

@@ -628,8 +628,8 @@ class HectorSlam:
         deg.rotation_degenerate |= self._degenerate_prev[1] and deg.rotation_ratio < hi
         self._degenerate_prev = (deg.translation_degenerate, deg.rotation_degenerate)
         res.degeneracy = deg.ratio
-        res.degenerate = deg.any
-        if deg.any and prior.kind is not None and c.prior_weight > 0.0 and prior.pose.is_finite():
+        res.degenerate = degenerate = deg.translation_degenerate or deg.rotation_degenerate  # (Degeneracy.any)
+        if degenerate and prior.kind is not None and c.prior_weight > 0.0 and prior.pose.is_finite():
             info = deg.prior_information(c.prior_weight, prior.axes)
             if np.any(info):
                 pp = prior.pose.as_array()
@@ -726,7 +726,8 @@ class HectorSlam:
             mode == "auto"
             and (big_motion or res.time_gap or self._force_search or self._n_accepted < _WARMUP_SEARCHES)
         )
-        best_p, best_s = self._refine_cached(ctx, start)
+        # (the first refine of the scan: :meth:`_refine_cached` with nothing refined yet, without its look-up)
+        best_p, best_s = refined[start.tobytes()] = self._refine_once(ctx, start)
         if mode != "never" and not pre_search and self._score_avg is not None:
             pre_search = best_s < c.poor_match_ratio * self._score_avg
         if pre_search:
