@@ -405,18 +405,25 @@ ir = re.sub(r"B\d+v\d+|0x[0-9a-f]+", "", ir)  # numba's per-process function ids
 """
 
 
+def _off_and_on(script: str, kernel_suffix: str, tmp_path) -> dict:
+    """``script``'s JSON result for the manifest kernel whose name ends in ``kernel_suffix``, run in a fresh process
+    with the rewrite off ("0") and on ("1"), each with its own empty numba cache."""
+    name, sig = next((n, s) for n, s in KERNELS if n.endswith(kernel_suffix))
+    got = {}
+    for on in ("0", "1"):
+        env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / f"cache{on}")}
+        r = subprocess.run([sys.executable, "-c", script, name, sig, on], env=env, capture_output=True,
+                           text=True, timeout=300)
+        assert r.returncode == 0, r.stderr[-3000:]
+        got[on] = json.loads(r.stdout.strip().splitlines()[-1])
+    return got
+
+
 def test_remembered_call_typing_gives_the_same_code_and_errors(tmp_path):
     """jitcache.remembered_call_typing: a kernel with many repeated calls of numba's functions (the correlative
     search's branch and bound) compiles to the same optimised LLVM IR as with numba's own template search, and a
     call no template accepts raises the same typing error."""
-    name, sig = next((n, s) for n, s in KERNELS if n.endswith(".branch_and_bound"))
-    got = {}
-    for on in ("0", "1"):
-        env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / f"cache{on}")}
-        r = subprocess.run([sys.executable, "-c", REMEMBERED, name, sig, on], env=env, capture_output=True,
-                           text=True, timeout=300)
-        assert r.returncode == 0, r.stderr[-3000:]
-        got[on] = json.loads(r.stdout.strip().splitlines()[-1])
+    got = _off_and_on(REMEMBERED, ".branch_and_bound", tmp_path)
     assert len(got["0"]["ir"]) > 10000 and got["0"]["ir"] == got["1"]["ir"]
     assert got["0"]["error"].startswith("TypingError") and got["0"]["error"] == got["1"]["error"]
     (typed0, search0), (typed1, search1) = got["0"]["calls"], got["1"]["calls"]
@@ -471,14 +478,7 @@ def test_lean_inlining_gives_the_same_code_and_errors_with_fewer_copies(tmp_path
     """jitcache.lean_inlining: a kernel with inline="always" callees (one inlined into another) compiles to the same
     optimised LLVM IR with far fewer deep copies of IR objects; a callee inlined at two sites computes what NumPy does;
     a typing error in an inlined callee is raised as before."""
-    name, sig = next((n, s) for n, s in KERNELS if n.endswith("._rows_exclusion_kernel"))
-    got = {}
-    for on in ("0", "1"):
-        env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / f"cache{on}")}
-        r = subprocess.run([sys.executable, "-c", LEAN_INLINE, name, sig, on], env=env, capture_output=True,
-                           text=True, timeout=300)
-        assert r.returncode == 0, r.stderr[-3000:]
-        got[on] = json.loads(r.stdout.strip().splitlines()[-1])
+    got = _off_and_on(LEAN_INLINE, "._rows_exclusion_kernel", tmp_path)
     assert len(got["0"]["ir"]) > 10000 and got["0"]["ir"] == got["1"]["ir"]
     assert got["1"]["copies"] < got["0"]["copies"] / 3, (got["0"]["copies"], got["1"]["copies"])
     for on in ("0", "1"):
