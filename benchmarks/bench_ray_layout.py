@@ -43,17 +43,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
 
 _HUGE = 2 << 20
-#: ``raycast._write_probs`` for the interleaved cells (the probability the second word of ``_W``)
-_WRITE_CELLS = '''
-def _write_probs_cells(cf, cells, vals, probs, n):
-    for i in range(n):
-        probs[i] = _prob_fast(vals[i])
-    for i in range(n):
-        p = probs[i]
-        if p != p:
-            p = np.float32(1.0 / (1.0 + math.exp(-vals[i])))
-        cf[cells[i] * _W + np.uint64(1)] = p
-'''
 
 
 def record(data: Path, name: str) -> tuple[list[dict], list[tuple]]:
@@ -100,6 +89,11 @@ def variants() -> dict[str, object]:
         exec(src, ns)  # noqa: S102 - the kernel's own source, rewritten
         return njit(ns["_rays"])
 
+    # raycast._write_probs for the interleaved cells (the probability the second word of ``_W``), from its own source
+    write_cells = re.sub(r"@njit\(.*\)\n", "", inspect.getsource(rc._write_probs.py_func))
+    write_cells = write_cells.replace("def _write_probs(pr, ", "def _write_probs_cells(cf, ")
+    assert write_cells.count("pr[cells[i]] = p") == 1
+    write_cells = write_cells.replace("pr[cells[i]] = p", "cf[cells[i] * _W + np.uint64(1)] = p")
     for words in (3, 4):
         s = base.replace("def _rays(logodds, prob, uidx,", "def _rays(cf, ci, h, w,")
         s = s.replace("    h, w = logodds.shape\n", "")
@@ -115,12 +109,12 @@ def variants() -> dict[str, object]:
         assert "lo[" not in s and "ui[" not in s and "pr[" not in s
         ns = dict(vars(rc))
         ns["_W"] = np.uint64(words)
-        exec(_WRITE_CELLS, ns)  # noqa: S102
+        exec(write_cells, ns)  # noqa: S102
         ns["_write_probs_cells"] = njit(ns["_write_probs_cells"])
         exec(s, ns)  # noqa: S102
         out[f"cells{4 * words}"] = njit(ns["_rays"])
     probs = "_write_probs(pr, upd_f, upd_v, upd_p, n_upd)"
-    assert base.count(probs) == 2
+    assert base.count(probs) == 1
     out["no_prob"] = build(base.replace(probs, "n_upd + 0"))
     pf = ["                    _prefetch(ui, g)\n", "                    _prefetch(lo, g)\n",
           "                    _prefetch(pr, g)\n"]
