@@ -44,17 +44,24 @@ def _geometry(ranges, cos_a, sin_a, valid, px, py, th, res, margin, grazing, min
     return cx, cy, clear
 
 
+@njit(cache=False, inline="always")
+def _beam_reach(k, ox, oy, cx, cy, clear, depth):  # pragma: no cover
+    """seen_through_structure_kernel's per-beam test: the reach (cells) of beam ``k`` short of the nearest clearing
+    end of it and its two neighbours, or −1 where the three do not all clear (the same comparisons in its order)."""
+    if not (clear[k] and clear[k - 1] and clear[k + 1]):
+        return -1.0
+    return math.sqrt(min(min((cx[k - 1] - ox) ** 2 + (cy[k - 1] - oy) ** 2,
+                             (cx[k + 1] - ox) ** 2 + (cy[k + 1] - oy) ** 2),
+                         (cx[k] - ox) ** 2 + (cy[k] - oy) ** 2)) - depth
+
+
 @njit(cache=False)
 def _walk_stats(ox, oy, cx, cy, clear, depth):  # pragma: no cover
     """Beams that pass the neighbour test and have a reach, and the cells of their first pass (before clipping)."""
     nb = 0
     cells = 0
     for k in range(1, cx.shape[0] - 1):
-        if not (clear[k] and clear[k - 1] and clear[k + 1]):
-            continue
-        reach = math.sqrt(min(min((cx[k - 1] - ox) ** 2 + (cy[k - 1] - oy) ** 2,
-                                  (cx[k + 1] - ox) ** 2 + (cy[k + 1] - oy) ** 2),
-                              (cx[k] - ox) ** 2 + (cy[k] - oy) ** 2)) - depth
+        reach = _beam_reach(k, ox, oy, cx, cy, clear, depth)
         if not reach > 0.0:
             continue
         nb += 1
@@ -129,11 +136,7 @@ def _walk(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, out_r, out_c, d
     cap = out_r.shape[0]
     n = 0
     for k in range(1, cx.shape[0] - 1):
-        if not (clear[k] and clear[k - 1] and clear[k + 1]):
-            continue
-        reach = math.sqrt(min(min((cx[k - 1] - ox) ** 2 + (cy[k - 1] - oy) ** 2,
-                                  (cx[k + 1] - ox) ** 2 + (cy[k + 1] - oy) ** 2),
-                              (cx[k] - ox) ** 2 + (cy[k] - oy) ** 2)) - depth
+        reach = _beam_reach(k, ox, oy, cx, cy, clear, depth)
         if not reach > 0.0:
             continue
         reach2 = reach * reach
