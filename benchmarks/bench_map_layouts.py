@@ -227,6 +227,8 @@ def main() -> None:
     ap.add_argument("--derived", action="store_true", help="count the cells whose cached probability differs "
                     "from the one of their stored float32 log-odds")
     args = ap.parse_args()
+    if args.reps < 2:
+        ap.error("--reps must be at least 2: the first sweep compiles and is not timed")
     variants = args.variants.split(",")
     with open(args.recording, "rb") as fh:
         rec = pickle.load(fh)
