@@ -16,7 +16,7 @@ from conftest import paper_room_scan, paper_room_slam
 
 import dynslam2d.slam.matcher as mt
 import dynslam2d.slam.processor as pr
-from dynslam2d.types import Pose2D, wrap_angle
+from dynslam2d.types import Pose2D, Scan, wrap_angle
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
@@ -142,3 +142,55 @@ def test_match_multires_start_copies() -> None:
     assert outs[3] == want and all(o == outs[0] for o in outs[:3] + outs[4:])
     empty = mt.match_multires(levels, pts[:0], base, 4, 6)
     assert empty is not base and empty.tobytes() == base.tobytes()
+
+
+def test_a_scans_trig_is_kept_by_its_first_call_and_shared_by_its_copies() -> None:
+    r = np.linspace(1.0, 5.0, 90)
+    s = Scan(stamp=1.0, angle_min=-1.2, angle_increment=0.02, ranges=r, range_min=0.1, range_max=30.0)
+    t = s.trig()
+    assert s.trig() is t and s._trig is t
+    np.testing.assert_array_equal(t[0], np.cos(s.angles))
+    np.testing.assert_array_equal(t[1], np.sin(s.angles))
+    drop = np.zeros(90, dtype=bool)
+    drop[::3] = True
+    assert s.without(drop).trig() is t
+    assert s.with_odometry(Pose2D()).trig() is t
+    other = Scan(stamp=1.0, angle_min=-1.0, angle_increment=0.02, ranges=r[:50], range_min=0.1, range_max=30.0)
+    assert other._trig is None and other.trig()[0].shape == (50,)  # (another geometry: its own arrays)
+    np.testing.assert_array_equal(other.trig()[0], np.cos(other.angles))
+
+
+def test_pose_compose_and_inverse_wrap_as_wrap_angle() -> None:
+    rng = np.random.default_rng(11)
+    for _ in range(300):
+        a = Pose2D(*rng.normal(0.0, 3.0, 2), float(rng.uniform(-7.0, 7.0)))
+        b = Pose2D(*rng.normal(0.0, 3.0, 2), float(rng.uniform(-7.0, 7.0)))
+        assert a.compose(b).theta == float(wrap_angle(a.theta + b.theta))
+        assert a.inverse().theta == float(wrap_angle(-a.theta))
+        assert np.array([a.compose(b).theta]).tobytes() == np.array([float(wrap_angle(a.theta + b.theta))]).tobytes()
+
+
+def test_step_result_fields_keep_the_order_process_passes_them_in() -> None:
+    """``Pipeline.process`` builds its StepResult positionally: the field order it assumes, and a real step's fields
+    holding what their names say."""
+    from dynslam2d.pipeline import Pipeline, StepResult
+
+    assert [f.name for f in dataclasses.fields(StepResult)] == [
+        "index", "stamp", "pose", "score", "map_updated", "rejected", "skipped", "reason", "tracks", "removed",
+        "removed_by", "timings", "degeneracy", "degenerate", "support_points", "support_spread", "low_support",
+        "pose_source", "slam_state", "body"]
+    pipe = Pipeline()
+    first = Pose2D(0.3, -0.2, 0.1)
+    for k in range(3):
+        scan = paper_room_scan(first.compose(Pose2D(0.05 * k, 0.0, 0.0)), stamp=0.1 * k)
+        step = pipe.process(scan)
+    assert step.index == 2 and step.stamp == scan.stamp and isinstance(step.pose, Pose2D)
+    assert isinstance(step.score, float) and 0.0 < step.score <= 1.0
+    assert isinstance(step.map_updated, bool) and step.rejected is False and step.skipped is False
+    assert step.reason is None and isinstance(step.tracks, list)
+    assert step.removed.dtype == np.bool_ and step.removed_by.dtype == np.int64
+    assert step.removed.shape == step.removed_by.shape == step.body.shape == scan.ranges.shape
+    assert set(step.timings) == {"match", "track", "filter", "map_update", "loops", "total"}
+    assert isinstance(step.degeneracy, float) and isinstance(step.degenerate, bool)
+    assert isinstance(step.support_points, int) and step.support_points > 0 and step.support_spread > 0.0
+    assert step.low_support is False and step.pose_source == "scan" and step.slam_state == "tracking"
