@@ -288,7 +288,8 @@ class Pipeline:
                 self._spare_structure(scan, res.pose, moving, removed, removed_by)
                 any_removed = bool(_count_nonzero(removed))
             elif fc.spare_structure_vehicles:
-                big = [t.id for t in moving if max(t.box.length, t.box.width) > self.config.detect.segment.max_extent]
+                lim = self.config.detect.segment.max_extent  # (read once, not per track)
+                big = [t.id for t in moving if max(t.box.length, t.box.width) > lim]
                 if big:
                     self._spare_structure(scan, res.pose, moving, removed, removed_by, np.array(big))
                     any_removed = bool(_count_nonzero(removed))
@@ -326,20 +327,13 @@ class Pipeline:
         self._moving = moving
         self._moving_rows = kept_rows[0] if kept_rows else _NO_ROWS
         self._last_stamp = scan.stamp
+        # (positional, in StepResult's field order — the keywords' parsing was a third of its cost; the fields named
+        # in the comments, tests/test_match_match32.py checks the order)
         return StepResult(
-            index=self.slam.n_scans - 1,
-            stamp=scan.stamp,
-            pose=res.pose,
-            score=res.score,
-            map_updated=updated,
-            rejected=res.rejected,
-            skipped=res.skipped,
-            reason=res.reason,
-            tracks=tracks,
-            removed=removed,
-            removed_by=removed_by,
-            body=body,
-            timings={
+            self.slam.n_scans - 1, scan.stamp, res.pose, res.score,  # index, stamp, pose, score
+            updated, res.rejected, res.skipped, res.reason,  # map_updated, rejected, skipped, reason
+            tracks, removed, removed_by,  # tracks, removed, removed_by
+            {  # timings
                 "match": (t1 - t0) * 1e3,
                 "track": (t2 - t1) * 1e3,
                 "filter": (t3 - t2) * 1e3,
@@ -347,13 +341,8 @@ class Pipeline:
                 "loops": (t5 - t4) * 1e3,
                 "total": (t5 - t0) * 1e3,
             },
-            degeneracy=res.degeneracy,
-            degenerate=res.degenerate,
-            support_points=res.support_points,
-            support_spread=res.support_spread,
-            low_support=res.low_support,
-            pose_source=res.pose_source,
-            slam_state=res.state,
+            res.degeneracy, res.degenerate, res.support_points, res.support_spread,  # degeneracy … support_spread
+            res.low_support, res.pose_source, res.state, body,  # low_support, pose_source, slam_state, body
         )
 
     def gridmap(self) -> GridMap:

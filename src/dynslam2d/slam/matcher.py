@@ -31,6 +31,8 @@ from dynslam2d.slam.interp import interp_value_grad
 #: it only saves time (the reference always runs all steps).
 _CONVERGED_CELLS = 1e-3
 _CONVERGED_RAD = 1e-5
+#: float64's dtype (an array's ``dtype is _F64``: the cheap form of ``== np.float64`` for the arrays NumPy makes)
+_F64 = np.dtype(np.float64)
 #: The all-zero prior information (no prior).
 _ZERO3 = np.zeros((3, 3))
 #: all-zero prior information of up to three levels (read only)
@@ -630,12 +632,15 @@ def match_multires(
     ``support_thresh`` a third item: :func:`support_at` ``(levels[0], pts_m, x, y, wrap_angle(θ), support_thresh)``.
     Returns the world pose (3,).
     """
-    pose = np.array(start_world, dtype=np.float64)
+    # (a float64 array's copy: np.array's values, C order, without its dtype conversion machinery)
+    pose = start_world.copy() if type(start_world) is np.ndarray and start_world.dtype is _F64 else np.array(
+        start_world, dtype=np.float64)
     if pts_m.shape[0] == 0:
         return pose
     use_prior = prior_world is not None and prior_info is not None and bool(np.any(prior_info))
     n_lv = len(levels)
-    if n_lv <= 3 and pts_m.dtype == np.float64 and pts_m.flags.c_contiguous:
+    dt = pts_m.dtype
+    if n_lv <= 3 and (dt is _F64 or dt == np.float64) and pts_m.flags.c_contiguous:
         # every level in one kernel call (match_pyramid), the finest level's evaluation with it (other point
         # arrays take the loop below: their scaled copies have the loop's dtype and layout)
         geo = _level_geometry(levels)
@@ -882,13 +887,23 @@ def _all_true(n: int) -> np.ndarray:
 _NO_DROP = np.zeros(2048, dtype=np.bool_)
 
 
+#: n → ``no_drop(n)``'s view, made once per beam count (a scan source has one or two; the views stay all False)
+_NO_DROP_VIEWS: dict[int, np.ndarray] = {}
+
+
 def no_drop(n: int) -> np.ndarray:
     """(n,) False (a view of a shared buffer, grown when too short; never written): :func:`gated_points`' ``drop``
     when no beam is dropped."""
+    v = _NO_DROP_VIEWS.get(n)
+    if v is not None:
+        return v
     global _NO_DROP
     if n > _NO_DROP.shape[0]:
         _NO_DROP = np.zeros(n, dtype=np.bool_)
-    return _NO_DROP[:n]
+    v = _NO_DROP[:n]
+    if len(_NO_DROP_VIEWS) < 64:
+        _NO_DROP_VIEWS[n] = v
+    return v
 
 
 #: points per block of numpy's einsum sum over an (n, 2) float64 array (its iterator's buffer: 8192 elements)

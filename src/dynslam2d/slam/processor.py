@@ -395,7 +395,13 @@ class HectorSlam:
             delta = self._last_odom.between(odom)
             return _Prior(last.compose(delta), "odometry", all_axes, True, delta)
         v = self._model_rates() if self._state == STATE_TRACKING else None
-        cv = _compose(last, v[0] * dt, v[1] * dt, v[2] * dt) if v is not None else last
+        if v is not None:  # (_compose(last, v[0] * dt, v[1] * dt, v[2] * dt) inline: the same operations)
+            vx, vy, vth = v[0] * dt, v[1] * dt, v[2] * dt
+            c_, s_ = math.cos(last.theta), math.sin(last.theta)
+            cv = Pose2D(last.x + c_ * vx - s_ * vy, last.y + s_ * vx + c_ * vy,
+                        (last.theta + vth + math.pi) % (2.0 * math.pi) - math.pi)
+        else:
+            cv = last
         w = scan.yaw_rate
         if c.use_odometry and w is not None and math.isfinite(w) and dt > 0.0:
             w0 = self._last_yaw_rate if self._last_yaw_rate is not None else w
@@ -424,7 +430,9 @@ class HectorSlam:
             return None
         c, s_ = math.cos(p1.theta), math.sin(p1.theta)
         dx, dy = p1.x - p0.x, p1.y - p0.y
-        return (c * dx + s_ * dy) / dt, (-s_ * dx + c * dy) / dt, float(wrap_angle(p1.theta - p0.theta)) / dt
+        # (float(wrap_angle(a)) inline: the same operations without the call)
+        return (c * dx + s_ * dy) / dt, (-s_ * dx + c * dy) / dt, float(
+            (p1.theta - p0.theta + math.pi) % (2.0 * math.pi) - math.pi) / dt
 
     def _moving_prediction(self) -> np.ndarray | None:
         """The last pose advanced by the motion model's velocity over the current stamp gap (floored at the
@@ -486,7 +494,7 @@ class HectorSlam:
                 predicted = None
             else:
                 start = predicted
-        first = self.map.empty
+        first = self.map.levels[0].logodds.size == 0  # (MultiResMap.empty without its two property calls)
         zero = np.zeros((3, 3))
         res = MatchResult(
             pose=start, start=start, _covariance=None, hessian=zero,
@@ -500,7 +508,8 @@ class HectorSlam:
             self._use_prediction(res, prior, None)
         elif first:
             res.covariance = np.zeros((3, 3))
-        elif self._too_close_counts(n_valid, n_close):
+        elif not c.laser_min_dist <= 0.0 and n_valid > 0 and n_close > c.too_close_fraction * n_valid:
+            # (:meth:`_too_close_counts` of the counts, inline: the same tests on every scan without the call)
             self._use_prediction(res, prior, PREDICT_TOO_CLOSE)
         elif spread_bins * BIN_ANGLE < c.min_sector:  # angular_spread(pts)
             self._use_prediction(res, prior, PREDICT_NARROW)
@@ -513,7 +522,9 @@ class HectorSlam:
                 self._use_prediction(res, prior, PREDICT_LOST)
         else:
             self._odometry_start = prior.kind == "odometry" and predicted is None
-            self._match_tracking(res, pts, prior, scan.stamp, self._odometry_information(prior))
+            # (_odometry_information is None unless the prior is the odometry's: the call only then)
+            self._match_tracking(res, pts, prior, scan.stamp,
+                                 self._odometry_information(prior) if prior.kind == "odometry" else None)
             self._odometry_start = False  # (the laser-only seed below starts without the odometry's motion)
             if res.low_support and prior.kind == "odometry" and predicted is None:
                 # odometry is a prior, not a replacement: when the odometry-seeded match finds little
@@ -614,13 +625,14 @@ class HectorSlam:
         res.score = fit.score
         res.sigma2 = fit.cost / max(pts.shape[0] - 3, 1)
         sigma2 = c.covariance_sigma**2 if c.covariance_sigma is not None else res.sigma2
-        res._covariance, res._covariance_of = None, (fit.hessian, sigma2, self.map.resolution)  # lazy
+        # (lazy; the finest level's cell side: MultiResMap.resolution without its property call)
+        res._covariance, res._covariance_of = None, (fit.hessian, sigma2, self.map.levels[0].resolution)
 
     def _apply_prior_and_gate(self, res: MatchResult, pts: np.ndarray, prior: _Prior, stamp: float) -> None:
         """Degeneracy analysis of the match; the prior along degenerate directions; the motion gate."""
         c = self.config
         sq = self._sumsq
-        deg: Degeneracy = degeneracy(res.hessian, self.map.resolution, pts, c.degeneracy_threshold,
+        deg: Degeneracy = degeneracy(res.hessian, self.map.levels[0].resolution, pts, c.degeneracy_threshold,
                                      sq[1] if sq is not None and sq[0] is pts else None)
         # hysteresis: a degenerate direction stays degenerate until its ratio clearly rises above the threshold
         hi = _DEGENERACY_HYSTERESIS * c.degeneracy_threshold
@@ -637,7 +649,13 @@ class HectorSlam:
                 if np.all(np.isfinite(p)):
                     self._fit(res, pts, Pose2D(float(p[0]), float(p[1]), float(wrap_angle(p[2]))))
                     res.pose_source = SOURCE_SCAN_PRIOR
-        self._support(res, pts, res.pose)
+        # (:meth:`_support` inline: the matcher's support while the result still holds the pose it was taken at)
+        of = self._support_of
+        if of is not None and of[0] is res and of[1] is res.pose:
+            res.support_points, res.support_spread = of[2]
+            res.low_support = res.support_points < c.support_min_points or res.support_spread < c.support_min_spread
+        else:
+            self._support(res, pts, res.pose)
         # the motion gate refuses only weak matches: a well-supported one skips the deviation and the limits (pure
         # arithmetic, the same outcome)
         if prior.gate and res.low_support and self._last_stamp is not None:
@@ -738,7 +756,8 @@ class HectorSlam:
                 res.used_correlative = True
         ambiguous = False
         jump_d, jump_a = c.max_jump_distance, c.max_jump_angle
-        if needs_recovery(c, self._dt, best_s, self._score_avg):
+        if c.recovery and self._score_avg is not None and needs_recovery(c, self._dt, best_s, self._score_avg):
+            # (needs_recovery's own first test, before the call: False without recovery or a score average)
             # large-motion recovery (slam/recovery.py): a window grown with the gap, best vs runner-up
             rec = recover(c, levels, pts, start, best_p, best_s, self._dt,
                           lambda seed: self._refine_cached(ctx, seed)[0], self._moving_prediction())
@@ -754,9 +773,15 @@ class HectorSlam:
             res.rejected = True
             res.reason = REJECT_NON_FINITE
             return
-        th = _wrap(bth)
+        pi = math.pi
+        th = (bth + pi) % (2.0 * pi) - pi  # (_wrap(bth))
         pose = Pose2D(bx, by, th)
-        dx, dy, dth = _between(res.start, pose)
+        # _between(res.start, pose) inline (the same float operations in the same order, as in _between / _wrap)
+        a = res.start
+        ca, sa = math.cos(a.theta), math.sin(a.theta)
+        ix, iy, ith = -ca * a.x - sa * a.y, sa * a.x - ca * a.y, (-a.theta + pi) % (2.0 * pi) - pi
+        ca, sa = math.cos(ith), math.sin(ith)
+        dx, dy, dth = ix + ca * bx - sa * by, iy + sa * bx + ca * by, (ith + th + pi) % (2.0 * pi) - pi
         if math.hypot(dx, dy) > jump_d or abs(dth) > jump_a:
             res.rejected = True
             res.reason = REJECT_JUMP
@@ -815,7 +840,8 @@ class HectorSlam:
             c.max_translation_step, prior_pose, prior_info, fit=fitted, free_thresh=FREE_SPACE_PROB,
             support_thresh=c.support_probability,
         )
-        if not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
+        x, y, th = p.tolist()  # (Python floats: one conversion instead of three element reads)
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
             return p, -1.0
         if fitted:
             fit, free, sup = fitted
@@ -853,7 +879,12 @@ class HectorSlam:
             self.counts["degenerate"] += 1
         self._last_odom = scan.odom if scan.odom is not None and scan.odom.is_finite() else None
         self._last_yaw_rate = scan.yaw_rate if scan.yaw_rate is not None and math.isfinite(scan.yaw_rate) else None
-        self._update_state(stamp, res)
+        ps = res.pose_source
+        if res.first or ps == SOURCE_RELOCALISED or ps == SOURCE_PREDICTION:
+            self._update_state(stamp, res)
+        else:  # (:meth:`_update_state` of a matched scan, inline: nearly every scan)
+            self._unsupported_since = None
+            res.state = self._state
         if self._last_stamp is not None:
             self._period.add(stamp - self._last_stamp)
         if res.skipped and res.pose_source != SOURCE_PREDICTION:
@@ -911,7 +942,7 @@ class HectorSlam:
         """True on the first scan or once the pose moved beyond the distance / angle thresholds
         from the last map update (HectorSlamProcessor::update)."""
         last = self._last_map_pose
-        if last is None or self.map.empty:
+        if last is None or self.map.levels[0].logodds.size == 0:  # (MultiResMap.empty without its property calls)
             return True
         dth = _wrap(_wrap(-last.theta) + pose.theta)  # the θ of last.between(pose) (its x, y are not read)
         dist = math.hypot(pose.x - last.x, pose.y - last.y)
