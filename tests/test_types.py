@@ -148,3 +148,17 @@ def test_copy_scan_writes_every_slot_and_without_matches_with_ranges():
         assert (w._valid is None) == (not computed)
         np.testing.assert_array_equal(w.valid_mask(), ref.valid_mask())
         np.testing.assert_array_equal(s.ranges, r)  # the source is untouched
+
+
+def test_dataclasses_replace_does_not_carry_another_scans_caches():
+    """``dataclasses.replace`` builds a new scan from the constructor's fields: the cached angles, (cos, sin)
+    and valid mask of the old scan are caches, not fields, so the new scan computes its own."""
+    import dataclasses
+
+    old = Scan(stamp=0.0, angle_min=-1.0, angle_increment=0.5, ranges=np.array([1.0, 2.0, 3.0, 4.0, 5.0]),
+               range_min=0.1, range_max=10.0)
+    old.angles, old.trig(), old.valid_view()  # fill the caches
+    new = dataclasses.replace(old, angle_min=-0.5, ranges=np.array([1.0, np.nan, 3.0, 20.0, 5.0]))
+    np.testing.assert_array_equal(new.angles, [-0.5, 0.0, 0.5, 1.0, 1.5])
+    np.testing.assert_array_equal(new.trig()[0], np.cos(new.angles))
+    np.testing.assert_array_equal(new.valid_view(), [True, False, True, False, True])

@@ -144,8 +144,9 @@ class Scan:
     scan_time: float = 0.0
     odom: Pose2D | None = None
     yaw_rate: float | None = None
-    _angles: np.ndarray | None = field(default=None, repr=False, compare=False)
-    _valid: np.ndarray | None = field(default=None, repr=False, compare=False)
+    # (caches, not constructor arguments: ``dataclasses.replace`` must not carry another scan's angles or mask)
+    _angles: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
+    _valid: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
     #: :meth:`trig`'s (cos, sin), kept by its first call (several stages ask for it on every scan)
     _trig: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False, compare=False)
 
