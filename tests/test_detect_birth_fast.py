@@ -44,10 +44,10 @@ def test_scan_detection_points_are_its_rows_of_the_scan_array() -> None:
     own points, that array itself; a point set assigned later replaces them."""
     pts = np.arange(20.0).reshape(10, 2)
     fits, lohi, rel = np.zeros((3, 12)), np.zeros((3, 4)), np.zeros((3, 2, 2), dtype=bool)
-    d = ScanDetection(np.arange(4), pts, "rect", 0.0, 4, 0.0, 0.0, 0.0, 0.0, fits, lohi, rel, 1, 3)
+    d = ScanDetection(np.arange(4), pts, "rect", 4, 0.0, fits, lohi, rel, None, 1, 3)
     assert d.points.tolist() == pts[3:7].tolist() and np.shares_memory(d.points, pts)
     own = np.ones((2, 2))
-    e = ScanDetection(np.arange(2), own, "rect", 0.0, 2, 0.0, 0.0, 0.0, 0.0, fits, lohi, rel, 0)
+    e = ScanDetection(np.arange(2), own, "rect", 2, 0.0, fits, lohi, rel, None, 0)
     assert e.points is own
     d.points = own
     assert d.points is own
@@ -94,8 +94,10 @@ def test_reference_choice_is_the_first_nearest_age_also_with_repeated_stamps() -
 
 def test_scan_detections_are_the_constructors_detections() -> None:
     """``scan_detections`` gives, slot for slot, the detections that ``ScanDetection(...)`` makes one by one (the
-    shared arrays themselves, the beams as views of the scan's beams with the same values)."""
-    from dynslam2d.detect.layout import KIND_NAMES
+    shared arrays themselves, the beams as views of the scan's beams with the same values), with and without the map
+    evidence; the axis angle and the map evidence are Python floats of the fit row and the evidence column (0.0
+    without a map)."""
+    from dynslam2d.detect.layout import F_THETA, KIND_NAMES
     from dynslam2d.detect.measure import scan_detections
 
     rng = np.random.default_rng(3)
@@ -105,19 +107,22 @@ def test_scan_detections_are_the_constructors_detections() -> None:
     pts = rng.normal(size=(beams.shape[0], 2))
     kinds = rng.integers(0, len(KIND_NAMES), size=12).astype(np.int8)
     fits, lohi, rel = rng.normal(size=(12, 12)), rng.normal(size=(12, 4)), rng.random((12, 2, 2)) < 0.5
-    theta, fs, ff, fu = rng.random((4, 12)).tolist()
     test = object()  # (a scan's free-space test: shared by every detection)
-    got = scan_detections(beams, pts, starts.tolist(), npts.tolist(), kinds.tolist(), theta, test, fs, ff, fu, fits,
-                          lohi, rel)
-    assert len(got) == 12
-    for j, d in enumerate(got):
-        a0, n = int(starts[j]), int(npts[j])
-        want = ScanDetection(beams[a0:a0 + n], pts, KIND_NAMES[int(kinds[j])], theta[j], n, test, fs[j], ff[j], fu[j],
-                             fits, lohi, rel, j, a0)
-        assert type(d) is ScanDetection
-        for name in ScanDetection.__slots__ + ("kind", "theta", "n_points", "map_structure", "map_free", "map_unknown",
-                                               "person"):
-            g, w = getattr(d, name), getattr(want, name)
-            assert g is w or g == w, name
-        assert np.shares_memory(d.beams, beams) and d.beams.tolist() == want.beams.tolist()
-        assert d.points.tolist() == want.points.tolist() and d.centroid.tolist() == want.centroid.tolist()
+    for mev in (rng.random((3, 12)), None):
+        got = scan_detections(beams, pts, starts.tolist(), npts.tolist(), kinds.tolist(), test, fits, lohi, rel, mev)
+        assert len(got) == 12
+        for j, d in enumerate(got):
+            a0, n = int(starts[j]), int(npts[j])
+            want = ScanDetection(beams[a0:a0 + n], pts, KIND_NAMES[int(kinds[j])], n, test, fits, lohi, rel, mev, j,
+                                 a0)
+            assert type(d) is ScanDetection
+            for name in ScanDetection.__slots__ + ("kind", "theta", "n_points", "map_structure", "map_free",
+                                                   "map_unknown", "person"):
+                g, w = getattr(d, name), getattr(want, name)
+                assert g is w or g == w, name
+            assert np.shares_memory(d.beams, beams) and d.beams.tolist() == want.beams.tolist()
+            assert d.points.tolist() == want.points.tolist() and d.centroid.tolist() == want.centroid.tolist()
+            ev = [d.map_structure, d.map_free, d.map_unknown]
+            assert type(d.theta) is float and d.theta == fits[j, F_THETA]
+            assert all(type(v) is float for v in ev)
+            assert ev == (mev[:, j].tolist() if mev is not None else [0.0, 0.0, 0.0])

@@ -37,6 +37,7 @@ from dynslam2d.detect.layout import (
     F_CIRCLE_R,
     F_CIRCLE_RMS,
     F_CIRCLE_X,
+    F_THETA,
     FIT_CENTROID,
     FIT_CIRCLE,
     KIND_NAMES,
@@ -118,43 +119,65 @@ def _row_view(array: str, cols: slice, doc: str) -> property:
     return property(get, doc=doc)
 
 
-class ScanDetection(Detection):
-    """A :class:`Detection` of the tracker's current scan whose small per-detection arrays (``centroid``, ``lo``,
-    ``hi``, ``rel``, ``circle``) are read from the scan's fit and bound arrays when asked for (views of their rows,
-    the values of a :class:`Detection` built with them), not sliced when the detection is made: the tracker makes
-    one per cluster per scan and reads them for few. A copy (``copy`` / ``pickle``) is a plain :class:`Detection`.
+def _mev_value(row: int, doc: str) -> property:
+    """A read-only property: row ``row`` (structure, free, unknown) of the scan's (3, nd) map-evidence array ``_mev`` at
+    column ``self._j``, as a Python float (0.0 without a map: ``_mev`` None)."""
 
-    ``fits``: the scan's (k, N_FIT_COLS) fit rows (:func:`dynslam2d.detect.shapes.fit_clusters`), ``lohi``: (k, 4)
-    bounds lo1, lo2, hi1, hi2, ``rel``: (k, 2, 2) real-bound flags (:mod:`dynslam2d.detect.layout`); ``j``: this
-    detection's row of them; ``a0``: when ≥ 0, ``points`` is the scan's array of every detection's points and this
-    detection's are its rows from ``a0`` on (``n_points`` of them).
+    def get(self: ScanDetection) -> float:
+        m = self._mev
+        return 0.0 if m is None else m.item(row, self._j)
+
+    return property(get, doc=doc)
+
+
+class ScanDetection(Detection):
+    """A :class:`Detection` of the tracker's current scan whose small per-detection values are read from the scan's
+    arrays when asked for, not made when the detection is made: the tracker makes one per cluster per scan and reads
+    them for few. ``centroid``, ``lo``, ``hi``, ``rel``, ``circle`` are views of rows of the scan's fit and bound
+    arrays (the values of a :class:`Detection` built with them); ``theta`` and ``map_structure`` / ``map_free`` /
+    ``map_unknown`` are Python floats read from the fit row and the map-evidence column (docs/speed.md, pass det32:
+    boxed floats kept by every detection cost their free, scans later, in cache misses). A copy (``copy`` /
+    ``pickle``) is a plain :class:`Detection`.
+
+    ``fits``: the scan's (k, N_FIT_COLS) fit rows (:func:`dynslam2d.detect.shapes.fit_clusters`; ``theta`` is column
+    ``F_THETA``), ``lohi``: (k, 4) bounds lo1, lo2, hi1, hi2, ``rel``: (k, 2, 2) real-bound flags
+    (:mod:`dynslam2d.detect.layout`); ``mev``: (3, k) fractions of the points on long-occupied, observed-free and
+    never-observed map cells (:mod:`dynslam2d.detect.mapevidence`), or None without a map (all three 0); ``j``: this
+    detection's row of them (column of ``mev``); ``a0``: when ≥ 0, ``points`` is the scan's array of every
+    detection's points and this detection's are its rows from ``a0`` on (``n_points`` of them).
 
     ``free_fraction`` may be given as a float, or left to be computed when first read (few are read): as an object
     with ``fraction(points)`` (the scan's free-space test, :class:`dynslam2d.detect.freespace.FreeTest`), or as a
     pair of scan detections (a merged pair of legs: their fractions weighted by their point counts)."""
 
-    __slots__ = ("_fits", "_lohi", "_rel", "_j", "_ff", "_pts", "_a0")
+    __slots__ = ("_fits", "_lohi", "_rel", "_j", "_ff", "_pts", "_a0", "_mev")
 
-    def __init__(self, beams: np.ndarray, points: np.ndarray, kind: str, theta: float, n_points: int,
-                 free_fraction: float | object, map_structure: float, map_free: float, map_unknown: float,
-                 fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray, j: int, a0: int = -1) -> None:
+    def __init__(self, beams: np.ndarray, points: np.ndarray, kind: str, n_points: int, free_fraction: float | object,
+                 fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray, mev: np.ndarray | None, j: int,
+                 a0: int = -1) -> None:
         self.beams = beams
         self._pts = points
         self._a0 = a0
         self.kind = kind
-        self.theta = theta
         self.n_points = n_points
         self._ff = free_fraction
-        self.map_structure = map_structure
-        self.map_free = map_free
-        self.map_unknown = map_unknown
         self.person = False
         self._fits = fits
         self._lohi = lohi
         self._rel = rel
+        self._mev = mev
         self._j = j
 
     centroid = _row_view("_fits", FIT_CENTROID, "(2,) mean of the points, m")
+
+    @property
+    def theta(self) -> float:
+        """Rectangle axis angle of e1, rad in [0, π/2): the row's ``F_THETA`` column (0 for a merged pair of legs)."""
+        return self._fits.item(self._j, F_THETA)
+
+    map_structure = _mev_value(0, "fraction of the points on long-occupied map cells (0 without a map)")
+    map_free = _mev_value(1, "fraction of the points on observed-free map cells (0 without a map)")
+    map_unknown = _mev_value(2, "fraction of the points on never-observed map cells (0 without a map)")
 
     @property
     def circle(self) -> np.ndarray:
@@ -214,34 +237,29 @@ class ScanDetection(Detection):
 
 
 def scan_detections(beams: np.ndarray, points: np.ndarray, starts: list[int], npts: list[int], kinds: list[int],
-                    theta: list[float], free_fraction: float | object, map_structure: list[float],
-                    map_free: list[float], map_unknown: list[float], fits: np.ndarray, lohi: np.ndarray,
-                    rel: np.ndarray, _new=object.__new__) -> list[ScanDetection]:
-    """The scan detections of one scan, detection j being ``ScanDetection(beams[a0:a0 + n], points, KIND_NAMES[kd],
-    theta[j], n, free_fraction, map_structure[j], map_free[j], map_unknown[j], fits, lohi, rel, j, a0)`` with
-    ``a0, n, kd = starts[j], npts[j], kinds[j]`` (``beams`` / ``points``: the scan's concatenated beams and (n, 2)
-    map-frame points of its detections; every detection shares ``free_fraction``, the scan's free-space test or 0):
-    the slots set directly in one loop, without a constructor call per detection (the tracker makes ≈ 30 per scan).
+                    free_fraction: float | object, fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray,
+                    mev: np.ndarray | None, _new=object.__new__) -> list[ScanDetection]:
+    """The scan detections of one scan, detection j being ``ScanDetection(beams[a0:a0 + n], points, KIND_NAMES[kd], n,
+    free_fraction, fits, lohi, rel, mev, j, a0)`` with ``a0, n, kd = starts[j], npts[j], kinds[j]`` (``beams`` /
+    ``points``: the scan's concatenated beams and (n, 2) map-frame points of its detections; every detection shares
+    ``free_fraction``, the scan's free-space test or 0, and the scan's (3, nd) map evidence ``mev`` or None): the
+    slots set directly in one loop, without a constructor call per detection (the tracker makes ≈ 30 per scan).
     ``tests/test_detect_birth_fast.py`` compares every slot with the constructor's."""
     out = []
     append, names, cls = out.append, KIND_NAMES, ScanDetection
-    for j, a0, n, kd, th, fs, ff, fu in zip(range(len(starts)), starts, npts, kinds, theta, map_structure, map_free,
-                                             map_unknown):
+    for j, a0, n, kd in zip(range(len(starts)), starts, npts, kinds):
         d = _new(cls)
         d.beams = beams[a0:a0 + n]
         d._pts = points
         d._a0 = a0
         d.kind = names[kd]
-        d.theta = th
         d.n_points = n
         d._ff = free_fraction
-        d.map_structure = fs
-        d.map_free = ff
-        d.map_unknown = fu
         d.person = False
         d._fits = fits
         d._lohi = lohi
         d._rel = rel
+        d._mev = mev
         d._j = j
         append(d)
     return out
