@@ -110,74 +110,115 @@ class Detection:
         return out
 
 
+class ScanArrays:
+    """One scan's detection arrays, shared by its :class:`ScanDetection` objects (each holds this record and its row).
+
+    ``beams``: the concatenated beam indices of the detections' points, ``pts``: their (n, 2) map-frame points, m;
+    detection j's are rows ``starts[j] − off`` … ``+ npts[j] − 1`` of them (``off``: 0 for the scan's clusters, the
+    number of points before the persons' for the merged pairs of legs, whose ``starts`` index the batch's points
+    after the merge). ``kinds``: (k,) int8 kind codes (:data:`dynslam2d.detect.layout.KIND_NAMES`); ``fits``: (k,
+    N_FIT_COLS) fit rows (:func:`dynslam2d.detect.shapes.fit_clusters`), ``lohi``: (k, 4) bounds lo1, lo2, hi1, hi2,
+    ``rel``: (k, 2, 2) real-bound flags (:mod:`dynslam2d.detect.layout`); ``mev``: (3, k) fractions of the points on
+    long-occupied, observed-free and never-observed map cells (:mod:`dynslam2d.detect.mapevidence`), or None
+    without a map."""
+
+    __slots__ = ("beams", "pts", "off", "starts", "npts", "kinds", "fits", "lohi", "rel", "mev")
+
+    def __init__(self, beams: np.ndarray, pts: np.ndarray, off: int, starts: np.ndarray, npts: np.ndarray,
+                 kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray,
+                 mev: np.ndarray | None) -> None:
+        self.beams = beams
+        self.pts = pts
+        self.off = off
+        self.starts = starts
+        self.npts = npts
+        self.kinds = kinds
+        self.fits = fits
+        self.lohi = lohi
+        self.rel = rel
+        self.mev = mev
+
+
 def _row_view(array: str, cols: slice, doc: str) -> property:
-    """A read-only property: the columns ``cols`` of row ``self._j`` of the array attribute ``array`` (a view)."""
+    """A read-only property: the columns ``cols`` of row ``self._j`` of the scan's array ``array`` (a
+    :class:`ScanArrays` attribute; a view)."""
 
     def get(self: ScanDetection) -> np.ndarray:
-        return getattr(self, array)[self._j, cols]
+        return getattr(self._s, array)[self._j, cols]
 
     return property(get, doc=doc)
 
 
 def _mev_value(row: int, doc: str) -> property:
-    """A read-only property: row ``row`` (structure, free, unknown) of the scan's (3, nd) map-evidence array ``_mev`` at
-    column ``self._j``, as a Python float (0.0 without a map: ``_mev`` None)."""
+    """A read-only property: row ``row`` (structure, free, unknown) of the scan's (3, k) map-evidence array at column
+    ``self._j``, as a Python float (0.0 without a map: ``mev`` None)."""
 
     def get(self: ScanDetection) -> float:
-        m = self._mev
+        m = self._s.mev
         return 0.0 if m is None else m.item(row, self._j)
 
     return property(get, doc=doc)
 
 
 class ScanDetection(Detection):
-    """A :class:`Detection` of the tracker's current scan whose small per-detection values are read from the scan's
-    arrays when asked for, not made when the detection is made: the tracker makes one per cluster per scan and reads
-    them for few. ``centroid``, ``lo``, ``hi``, ``rel``, ``circle`` are views of rows of the scan's fit and bound
-    arrays (the values of a :class:`Detection` built with them); ``theta`` and ``map_structure`` / ``map_free`` /
-    ``map_unknown`` are Python floats read from the fit row and the map-evidence column (docs/speed.md, pass det32:
-    boxed floats kept by every detection cost their free, scans later, in cache misses). A copy (``copy`` /
+    """A :class:`Detection` of the tracker's current scan: the scan's arrays (:class:`ScanArrays`, ``_s``) and its row
+    ``_j`` of them. Its values are read from them when asked for, not made when the detection is made (the tracker
+    makes one per cluster per scan and reads them for few; a detection kept scans later costs its free in cache
+    misses per object it owns, docs/speed.md, passes det31 and det32): ``beams`` and ``points`` are views of its rows
+    of the scan's beams and points, ``centroid``, ``lo``, ``hi``, ``rel``, ``circle`` of its fit and bound rows (the
+    values of a :class:`Detection` built with them); ``kind``, ``n_points``, ``theta`` and ``map_structure`` /
+    ``map_free`` / ``map_unknown`` are Python values of its row and map-evidence column. The tracker's per-pair
+    readers take the scan's batch arrays by index instead (``Tracker._update_tracks``). A copy (``copy`` /
     ``pickle``) is a plain :class:`Detection`.
-
-    ``fits``: the scan's (k, N_FIT_COLS) fit rows (:func:`dynslam2d.detect.shapes.fit_clusters`; ``theta`` is column
-    ``F_THETA``), ``lohi``: (k, 4) bounds lo1, lo2, hi1, hi2, ``rel``: (k, 2, 2) real-bound flags
-    (:mod:`dynslam2d.detect.layout`); ``mev``: (3, k) fractions of the points on long-occupied, observed-free and
-    never-observed map cells (:mod:`dynslam2d.detect.mapevidence`), or None without a map (all three 0); ``j``: this
-    detection's row of them (column of ``mev``); ``a0``: when ≥ 0, ``points`` is the scan's array of every
-    detection's points and this detection's are its rows from ``a0`` on (``n_points`` of them).
 
     ``free_fraction`` may be given as a float, or left to be computed when first read (few are read): as an object
     with ``fraction(points)`` (the scan's free-space test, :class:`dynslam2d.detect.freespace.FreeTest`), or as a
     pair of scan detections (a merged pair of legs: their fractions weighted by their point counts)."""
 
-    __slots__ = ("_fits", "_lohi", "_rel", "_j", "_ff", "_pts", "_a0", "_mev")
+    __slots__ = ("_s", "_j", "_ff")
 
-    def __init__(self, beams: np.ndarray, points: np.ndarray, kind: str, n_points: int, free_fraction: float | object,
-                 fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray, mev: np.ndarray | None, j: int,
-                 a0: int = -1) -> None:
-        self.beams = beams
-        self._pts = points
-        self._a0 = a0
-        self.kind = kind
-        self.n_points = n_points
-        self._ff = free_fraction
-        self.person = False
-        self._fits = fits
-        self._lohi = lohi
-        self._rel = rel
-        self._mev = mev
+    def __init__(self, arrays: ScanArrays, j: int, free_fraction: float | object = 0.0,
+                 person: bool = False) -> None:
+        self._s = arrays
         self._j = j
+        self._ff = free_fraction
+        self.person = person
 
-    centroid = _row_view("_fits", FIT_CENTROID, "(2,) mean of the points, m")
+    @property
+    def beams(self) -> np.ndarray:
+        """(n,) beam indices of the cluster in scan order: a view of the scan's beams, made when read."""
+        s = self._s
+        j = self._j
+        a = s.starts.item(j) - s.off
+        return s.beams[a:a + s.npts.item(j)]
+
+    @property
+    def points(self) -> np.ndarray:
+        """(n, 2) map-frame points, m: a view of the scan's points, made when read."""
+        s = self._s
+        j = self._j
+        a = s.starts.item(j) - s.off
+        return s.pts[a:a + s.npts.item(j)]
+
+    @property
+    def n_points(self) -> int:
+        """Number of points."""
+        return self._s.npts.item(self._j)
+
+    @property
+    def kind(self) -> str:
+        """"rect", "circle" or "point" (:data:`dynslam2d.detect.layout.KIND_NAMES` of the row's kind code)."""
+        return KIND_NAMES[self._s.kinds.item(self._j)]
 
     @property
     def theta(self) -> float:
         """Rectangle axis angle of e1, rad in [0, π/2): the row's ``F_THETA`` column (0 for a merged pair of legs)."""
-        return self._fits.item(self._j, F_THETA)
+        return self._s.fits.item(self._j, F_THETA)
 
     map_structure = _mev_value(0, "fraction of the points on long-occupied map cells (0 without a map)")
     map_free = _mev_value(1, "fraction of the points on observed-free map cells (0 without a map)")
     map_unknown = _mev_value(2, "fraction of the points on never-observed map cells (0 without a map)")
+    centroid = _row_view("fits", FIT_CENTROID, "(2,) mean of the points, m")
 
     @property
     def circle(self) -> np.ndarray:
@@ -185,28 +226,15 @@ class ScanDetection(Detection):
         skipped (NaN columns: a cluster the classification did not make a circle, ``shapes.fit_cluster_rows``) is
         fitted first, with the same function on the same points (:func:`dynslam2d.detect.shapes.fit_circle`), and
         the row kept."""
-        f = self._fits
+        f = self._s.fits
         j = self._j
         r = f[j, F_CIRCLE_R]
         if r != r:
             f[j, F_CIRCLE_X:F_CIRCLE_RMS + 1] = fit_circle(self.points)
         return f[j, FIT_CIRCLE]
-    lo = _row_view("_lohi", LOHI_LO, "(2,) lower bounds along e1, e2, m")
-    hi = _row_view("_lohi", LOHI_HI, "(2,) upper bounds along e1, e2, m")
-    rel = _row_view("_rel", slice(None), "(2, 2) bool: bound [axis, lower / upper] is real")
-
-    @property
-    def points(self) -> np.ndarray:
-        """(n, 2) map-frame points, m: rows ``a0 … a0 + n_points − 1`` of the ``points`` given (a view made when read:
-        the tracker reads a detection's points for few detections per scan), or that array itself when no ``a0``
-        (≥ 0) was given."""
-        a0 = self._a0
-        return self._pts if a0 < 0 else self._pts[a0:a0 + self.n_points]
-
-    @points.setter
-    def points(self, value: np.ndarray) -> None:
-        self._pts = value
-        self._a0 = -1
+    lo = _row_view("lohi", LOHI_LO, "(2,) lower bounds along e1, e2, m")
+    hi = _row_view("lohi", LOHI_HI, "(2,) upper bounds along e1, e2, m")
+    rel = _row_view("rel", slice(None), "(2, 2) bool: bound [axis, lower / upper] is real")
 
     @property
     def free_fraction(self) -> float:
@@ -236,31 +264,20 @@ class ScanDetection(Detection):
                            self.map_unknown, self.person)
 
 
-def scan_detections(beams: np.ndarray, points: np.ndarray, starts: list[int], npts: list[int], kinds: list[int],
-                    free_fraction: float | object, fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray,
-                    mev: np.ndarray | None, _new=object.__new__) -> list[ScanDetection]:
-    """The scan detections of one scan, detection j being ``ScanDetection(beams[a0:a0 + n], points, KIND_NAMES[kd], n,
-    free_fraction, fits, lohi, rel, mev, j, a0)`` with ``a0, n, kd = starts[j], npts[j], kinds[j]`` (``beams`` /
-    ``points``: the scan's concatenated beams and (n, 2) map-frame points of its detections; every detection shares
-    ``free_fraction``, the scan's free-space test or 0, and the scan's (3, nd) map evidence ``mev`` or None): the
-    slots set directly in one loop, without a constructor call per detection (the tracker makes ≈ 30 per scan).
-    ``tests/test_detect_birth_fast.py`` compares every slot with the constructor's."""
+def scan_detections(arrays: ScanArrays, free_fraction: float | object,
+                    _new=object.__new__) -> list[ScanDetection]:
+    """The scan detections of one scan (``arrays``: its :class:`ScanArrays`), detection j being
+    ``ScanDetection(arrays, j, free_fraction)`` (every detection shares ``free_fraction``, the scan's free-space test
+    or 0): the slots set directly in one loop, without a constructor call per detection (the tracker makes ≈ 30 per
+    scan). ``tests/test_detect_birth_fast.py`` compares every slot with the constructor's."""
     out = []
-    append, names, cls = out.append, KIND_NAMES, ScanDetection
-    for j, a0, n, kd in zip(range(len(starts)), starts, npts, kinds):
+    append, cls = out.append, ScanDetection
+    for j in range(arrays.starts.shape[0]):
         d = _new(cls)
-        d.beams = beams[a0:a0 + n]
-        d._pts = points
-        d._a0 = a0
-        d.kind = names[kd]
-        d.n_points = n
+        d._s = arrays
+        d._j = j
         d._ff = free_fraction
         d.person = False
-        d._fits = fits
-        d._lohi = lohi
-        d._rel = rel
-        d._mev = mev
-        d._j = j
         append(d)
     return out
 

@@ -22,11 +22,10 @@ from dynslam2d.detect.layout import (
     F_THETA,
     FIT_CENTROID,
     FIT_CIRCLE,
-    KIND_POINT,
     DetectionBatch,
     MeasureRows,
 )
-from dynslam2d.detect.measure import Detection, ScanDetection, scan_detections
+from dynslam2d.detect.measure import Detection, ScanArrays, ScanDetection, scan_detections
 from dynslam2d.detect.segment import segment_points
 from dynslam2d.detect.shapes import CRITERIA, fit_cluster_rows
 from dynslam2d.detect.tracktable import _NO_IDX
@@ -110,9 +109,9 @@ class TrackDetect:
             # (the detections' map evidence, (3, nd), as the updates push it into their tracks' windows; a leg merge
             # below names its reordered and merged detections' sources: kernels.shape_update)
             self._mev_src = (mfr, _NO_IDX, _NO_IDX, _NO_IDX, _NO_IDX)
-        # (their centroid, bounds, flags, circle, axis angle and map evidence stay rows of fits / lohi / rel / mev until
-        # read, their points rows of pts: ScanDetection; all made in one loop, scan_detections)
-        dets = scan_detections(beams, pts, starts.tolist(), npts.tolist(), kinds.tolist(), frac, fits, lohi, rel, mev)
+        # (each detection is the scan's arrays and its row: its beams, points, kind, counts, fit values and map evidence
+        # are read from them when asked for, ScanDetection; all made in one loop, scan_detections)
+        dets = scan_detections(ScanArrays(beams, pts, 0, starts, npts, kinds, fits, lohi, rel, mev), frac)
         if cfg.fit.person_merge and len(dets) > 1:
             dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
                                                                                  npts, px, py, beams, mev)
@@ -157,40 +156,30 @@ class TrackDetect:
         pts = np.empty((px.shape[0] - n0, 2))  # the persons' points, (n, 2) (np.column_stack's values)
         pts[:, 0] = px[n0:]
         pts[:, 1] = py[n0:]
+        # (the persons are rows row … of the merged arrays: their beams and points rows starts − n0 of mbeams / pts;
+        # centroid = circle centre = the legs' middle, lo / hi their box, no real bound, theta 0, kind point; their map
+        # evidence, point-weighted, in their columns of mmev, the kept detections keeping their own columns of mev).
+        # ScanDetection(arrays, row, (da, db), True) per pair, its slots set directly (as scan_detections does: no
+        # constructor call per pair); the free fraction is computed when read
         mmev = None if mev is None else np.empty((3, row + m))
-        o = 0
+        arrays = ScanArrays(mbeams, pts, n0, starts, npts, kinds, fits, lohi, rel, mmev)
         append, new, cls = new_dets.append, object.__new__, ScanDetection
         for a, b in zip(first.tolist(), second.tolist()):
-            da, db = dets[a], dets[b]
-            na, nb = da.n_points, db.n_points
-            n = na + nb
             if mmev is not None:
-                # the person's map evidence, point-weighted, (na·e_a + nb·e_b) / n per evidence row on Python floats, in
-                # its column of mmev (the kept detections keep their own columns of mev; a few pairs per scan: cheaper
-                # than the array expression's eight small operations)
+                # (na·e_a + nb·e_b) / n per evidence row, on Python floats (a few pairs per scan: cheaper than the
+                # array expression's eight small operations)
+                na, nb = npts0.item(a), npts0.item(b)
+                n = na + nb
                 mmev[0, row] = (na * mev.item(0, a) + nb * mev.item(0, b)) / n
                 mmev[1, row] = (na * mev.item(1, a) + nb * mev.item(1, b)) / n
                 mmev[2, row] = (na * mev.item(2, a) + nb * mev.item(2, b)) / n
-            # (centroid = circle centre = the legs' middle, lo / hi their box, no real bound, theta 0: rows of the
-            # merged arrays, as a scan detection's). ScanDetection(mbeams[o:o + n], pts, KIND_POINT, n, (da, db), fits,
-            # lohi, rel, mmev, row, o) with person True, its slots set directly (as scan_detections does: no
-            # constructor call per pair); the free fraction is computed when read
             det = new(cls)
-            det.beams = mbeams[o:o + n]
-            det._pts = pts
-            det._a0 = o
-            det.kind = KIND_POINT
-            det.n_points = n
-            det._ff = (da, db)
-            det.person = True
-            det._fits = fits
-            det._lohi = lohi
-            det._rel = rel
-            det._mev = mmev
+            det._s = arrays
             det._j = row
+            det._ff = (dets[a], dets[b])
+            det.person = True
             append(det)
             row += 1
-            o += n
         self.stats.merged_leg_pairs += m
         if self._map is not None:  # (the sources of the detections' map evidence in their new order: _detect)
             self._mev_src = (self._mev_src[0], ki, first, second, npts0)
