@@ -47,8 +47,40 @@ from dynslam2d.detect.layout import (
 from dynslam2d.detect.shapes import fit_circle
 
 
+class DetectionShape:
+    """What a detection derives from its fit (its extent, the fit frame's coordinates, default sizes): the methods of
+    :class:`Detection` and :class:`ScanDetection` (no slots of its own: a scan detection keeps only its scan's arrays
+    and its row, docs/speed.md, pass det32)."""
+
+    __slots__ = ()
+
+    @property
+    def extent(self) -> np.ndarray:
+        return self.hi - self.lo
+
+    def to_uv(self, xy: np.ndarray) -> np.ndarray:
+        """Map-frame (…, 2) points → (e1, e2) coordinates of the fit."""
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        xy = np.asarray(xy, dtype=np.float64)
+        return np.stack((c * xy[..., 0] + s * xy[..., 1], -s * xy[..., 0] + c * xy[..., 1]), axis=-1)
+
+    def from_uv(self, uv: np.ndarray) -> np.ndarray:
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        return np.array([c * uv[0] - s * uv[1], s * uv[0] + c * uv[1]])
+
+    def default_sizes(self, cfg: FitConfig) -> np.ndarray:
+        """Sizes along e1, e2 to assume when no track knows them: the extent where both bounds
+        are real, else max(extent, min(default_depth, default_depth_ratio · other extent)), m."""
+        ext = self.extent
+        out = ext.copy()
+        for k in (0, 1):
+            if not (self.rel[k, 0] and self.rel[k, 1]):
+                out[k] = max(ext[k], min(cfg.default_depth, cfg.default_depth_ratio * max(ext[1 - k], 0.0)))
+        return out
+
+
 @dataclass(slots=True, eq=False)
-class Detection:
+class Detection(DetectionShape):
     """One cluster, fitted, in the map frame.
 
     Attributes:
@@ -85,29 +117,6 @@ class Detection:
     map_unknown: float = 0.0
     person: bool = False
 
-    @property
-    def extent(self) -> np.ndarray:
-        return self.hi - self.lo
-
-    def to_uv(self, xy: np.ndarray) -> np.ndarray:
-        """Map-frame (…, 2) points → (e1, e2) coordinates of the fit."""
-        c, s = math.cos(self.theta), math.sin(self.theta)
-        xy = np.asarray(xy, dtype=np.float64)
-        return np.stack((c * xy[..., 0] + s * xy[..., 1], -s * xy[..., 0] + c * xy[..., 1]), axis=-1)
-
-    def from_uv(self, uv: np.ndarray) -> np.ndarray:
-        c, s = math.cos(self.theta), math.sin(self.theta)
-        return np.array([c * uv[0] - s * uv[1], s * uv[0] + c * uv[1]])
-
-    def default_sizes(self, cfg: FitConfig) -> np.ndarray:
-        """Sizes along e1, e2 to assume when no track knows them: the extent where both bounds
-        are real, else max(extent, min(default_depth, default_depth_ratio · other extent)), m."""
-        ext = self.extent
-        out = ext.copy()
-        for k in (0, 1):
-            if not (self.rel[k, 0] and self.rel[k, 1]):
-                out[k] = max(ext[k], min(cfg.default_depth, cfg.default_depth_ratio * max(ext[1 - k], 0.0)))
-        return out
 
 
 class ScanArrays:
@@ -160,12 +169,14 @@ def _mev_value(row: int, doc: str) -> property:
     return property(get, doc=doc)
 
 
-class ScanDetection(Detection):
-    """A :class:`Detection` of the tracker's current scan: the scan's arrays (:class:`ScanArrays`, ``_s``) and its row
-    ``_j`` of them. Its values are read from them when asked for, not made when the detection is made (the tracker
-    makes one per cluster per scan and reads them for few; a detection kept scans later costs its free in cache
-    misses per object it owns, docs/speed.md, passes det31 and det32): ``beams`` and ``points`` are views of its rows
-    of the scan's beams and points, ``centroid``, ``lo``, ``hi``, ``rel``, ``circle`` of its fit and bound rows (the
+class ScanDetection(DetectionShape):
+    """A detection of the tracker's current scan, with the fields of a :class:`Detection` (read-only but
+    ``free_fraction`` and ``person``): the scan's arrays (:class:`ScanArrays`, ``_s``) and its row ``_j`` of them, in
+    an object of four slots (not a subclass of the dataclass, whose fifteen slots every detection would carry). Its
+    values are read from the arrays when asked for, not made when the detection is made (the tracker makes one per
+    cluster per scan and reads them for few; a detection kept scans later costs its free in cache misses per object
+    and cache line it owns, docs/speed.md, passes det31 and det32): ``beams`` and ``points`` are views of its rows of
+    the scan's beams and points, ``centroid``, ``lo``, ``hi``, ``rel``, ``circle`` of its fit and bound rows (the
     values of a :class:`Detection` built with them); ``kind``, ``n_points``, ``theta`` and ``map_structure`` /
     ``map_free`` / ``map_unknown`` are Python values of its row and map-evidence column. The tracker's per-pair
     readers take the scan's batch arrays by index instead (``Tracker._update_tracks``). A copy (``copy`` /
@@ -175,7 +186,7 @@ class ScanDetection(Detection):
     with ``fraction(points)`` (the scan's free-space test, :class:`dynslam2d.detect.freespace.FreeTest`), or as a
     pair of scan detections (a merged pair of legs: their fractions weighted by their point counts)."""
 
-    __slots__ = ("_s", "_j", "_ff")
+    __slots__ = ("_s", "_j", "_ff", "person")
 
     def __init__(self, arrays: ScanArrays, j: int, free_fraction: float | object = 0.0,
                  person: bool = False) -> None:

@@ -18,7 +18,7 @@ from dynslam2d.detect.kernels import (
 )
 from dynslam2d.detect.kernels_update import kalman_pairs
 from dynslam2d.detect.layout import K_CIRCLE
-from dynslam2d.detect.measure import Detection
+from dynslam2d.detect.measure import Detection, ScanDetection
 from dynslam2d.detect.tracktable import _HALF_PI, _PAST_COMPACT, TENTATIVE, _past_points, _Track
 
 
@@ -234,7 +234,7 @@ class TrackUpdate:
         """The free-space fraction of one entry of a track's ``free`` list (:meth:`_free_values`): a float, a detection
         (a birth's: its fraction) or a tuple (an update's, its floor the detection)."""
         if type(entry) is not tuple:
-            return entry.free_fraction if isinstance(entry, Detection) else entry
+            return entry.free_fraction if isinstance(entry, (Detection, ScanDetection)) else entry
         det, ref, t, past, a, b = entry
         return max(det.free_fraction, self._vacated_one(ref, t, past[a:b]))
 
