@@ -39,19 +39,31 @@ def test_new_track_sets_every_field_as_the_dataclass_does() -> None:
     assert fast.free is a["free"] and fast.past is a["past"] and fast.birth_xy is a["birth_xy"]
 
 
-def test_scan_detection_points_are_its_rows_of_the_scan_array() -> None:
-    """A scan detection given the scan's points and its first row reads its own rows (a view of them); given only its
-    own points, that array itself; a point set assigned later replaces them."""
+def _arrays(off: int = 0):
+    """A scan's arrays (ScanArrays) of three detections, starts ``off`` + (0, 4, 6): 3 + 4 + 2 rows of 10 beams / points
+    (the first three before them: another detection's)."""
+    from dynslam2d.detect.measure import ScanArrays
+
     pts = np.arange(20.0).reshape(10, 2)
-    fits, lohi, rel = np.zeros((3, 12)), np.zeros((3, 4)), np.zeros((3, 2, 2), dtype=bool)
-    d = ScanDetection(np.arange(4), pts, "rect", 0.0, 4, 0.0, 0.0, 0.0, 0.0, fits, lohi, rel, 1, 3)
-    assert d.points.tolist() == pts[3:7].tolist() and np.shares_memory(d.points, pts)
-    own = np.ones((2, 2))
-    e = ScanDetection(np.arange(2), own, "rect", 0.0, 2, 0.0, 0.0, 0.0, 0.0, fits, lohi, rel, 0)
-    assert e.points is own
-    d.points = own
-    assert d.points is own
-    assert d.__reduce__()[1][1] is own  # (a copy is a Detection with these points)
+    fits, lohi, rel = np.arange(36.0).reshape(3, 12), np.zeros((3, 4)), np.zeros((3, 2, 2), dtype=bool)
+    starts, npts = np.array([3, 7, 9]) + off, np.array([4, 2, 1])
+    return ScanArrays(np.arange(10) * 2, pts, off, starts, npts, np.array([2, 0, 1], dtype=np.int8), fits, lohi, rel,
+                      None)
+
+
+def test_scan_detection_points_are_its_rows_of_the_scan_array() -> None:
+    """A scan detection reads its own rows of the scan's points and beams (views of them), from its first row
+    ``starts[j] − off`` (``off``: the merged pairs' arrays start after the scan's points), and copies to a plain
+    Detection holding those points."""
+    for off in (0, 57):
+        s = _arrays(off)
+        d = ScanDetection(s, 1, 0.25)
+        assert d.points.tolist() == s.pts[7:9].tolist() and np.shares_memory(d.points, s.pts)
+        assert d.beams.tolist() == [14, 16] and np.shares_memory(d.beams, s.beams)
+        assert d.n_points == 2 and type(d.n_points) is int and d.kind == "point" and d.person is False
+        assert d.free_fraction == 0.25 and d.theta == 12.0 and d.map_free == 0.0
+        c = d.__reduce__()[1]
+        assert c[1].tolist() == s.pts[7:9].tolist()  # (a copy is a Detection with these points)
 
 
 def _refs_loop(mem, now: float) -> list:
@@ -94,9 +106,11 @@ def test_reference_choice_is_the_first_nearest_age_also_with_repeated_stamps() -
 
 def test_scan_detections_are_the_constructors_detections() -> None:
     """``scan_detections`` gives, slot for slot, the detections that ``ScanDetection(...)`` makes one by one (the
-    shared arrays themselves, the beams as views of the scan's beams with the same values)."""
-    from dynslam2d.detect.layout import KIND_NAMES
-    from dynslam2d.detect.measure import scan_detections
+    shared arrays themselves), with and without the map evidence; each reads the values of its row: the beams and
+    points as views of the scan's, the kind, point count, axis angle and map evidence as Python values (0.0 without a
+    map)."""
+    from dynslam2d.detect.layout import F_THETA, KIND_NAMES
+    from dynslam2d.detect.measure import ScanArrays, scan_detections
 
     rng = np.random.default_rng(3)
     npts = rng.integers(1, 9, size=12)
@@ -105,19 +119,70 @@ def test_scan_detections_are_the_constructors_detections() -> None:
     pts = rng.normal(size=(beams.shape[0], 2))
     kinds = rng.integers(0, len(KIND_NAMES), size=12).astype(np.int8)
     fits, lohi, rel = rng.normal(size=(12, 12)), rng.normal(size=(12, 4)), rng.random((12, 2, 2)) < 0.5
-    theta, fs, ff, fu = rng.random((4, 12)).tolist()
     test = object()  # (a scan's free-space test: shared by every detection)
-    got = scan_detections(beams, pts, starts.tolist(), npts.tolist(), kinds.tolist(), theta, test, fs, ff, fu, fits,
-                          lohi, rel)
-    assert len(got) == 12
-    for j, d in enumerate(got):
-        a0, n = int(starts[j]), int(npts[j])
-        want = ScanDetection(beams[a0:a0 + n], pts, KIND_NAMES[int(kinds[j])], theta[j], n, test, fs[j], ff[j], fu[j],
-                             fits, lohi, rel, j, a0)
-        assert type(d) is ScanDetection
-        for name in ScanDetection.__slots__ + ("kind", "theta", "n_points", "map_structure", "map_free", "map_unknown",
-                                               "person"):
-            g, w = getattr(d, name), getattr(want, name)
-            assert g is w or g == w, name
-        assert np.shares_memory(d.beams, beams) and d.beams.tolist() == want.beams.tolist()
-        assert d.points.tolist() == want.points.tolist() and d.centroid.tolist() == want.centroid.tolist()
+    for mev in (rng.random((3, 12)), None):
+        arrays = ScanArrays(beams, pts, 0, starts, npts, kinds, fits, lohi, rel, mev)
+        got = scan_detections(arrays, test)
+        assert len(got) == 12
+        for j, d in enumerate(got):
+            a0, n = int(starts[j]), int(npts[j])
+            want = ScanDetection(arrays, j, test)
+            assert type(d) is ScanDetection
+            for name in ScanDetection.__slots__ + ("person",):
+                g, w = getattr(d, name), getattr(want, name)
+                assert g is w or g == w, name
+            assert d._s is arrays and d.person is False and d._ff is test
+            assert np.shares_memory(d.beams, beams) and d.beams.tolist() == beams[a0:a0 + n].tolist()
+            assert np.shares_memory(d.points, pts) and d.points.tolist() == pts[a0:a0 + n].tolist()
+            assert d.centroid.tolist() == fits[j, 10:12].tolist() and d.lo.tolist() == lohi[j, :2].tolist()
+            assert d.kind == KIND_NAMES[int(kinds[j])] and d.n_points == n and type(d.n_points) is int
+            ev = [d.map_structure, d.map_free, d.map_unknown]
+            assert type(d.theta) is float and d.theta == fits[j, F_THETA]
+            assert all(type(v) is float for v in ev)
+            assert ev == (mev[:, j].tolist() if mev is not None else [0.0, 0.0, 0.0])
+
+
+def test_merged_pairs_of_legs_read_their_rows_of_the_merged_arrays() -> None:
+    """A merged pair of legs (Tracker._merge_legs) reads, from the merge's arrays, what it was given one by one before
+    pass det32: the kind "point", axis angle 0, the legs' point counts summed, the first leg's beams and points then
+    the second's, and the point-weighted map evidence (na·e_a + nb·e_b) / n of its legs bit for bit; the other
+    detections keep theirs. On two people standing / walking on legs seen from a moving laser, the map evidence given
+    as random fractions (the tracker has no map here)."""
+    from test_detect_people import RATE, render, scene
+
+    from dynslam2d.detect import DetectConfig, Tracker
+    from dynslam2d.types import Pose2D
+
+    rng = np.random.default_rng(5)
+    seen = []
+
+    class Check(Tracker):
+        def _merge_legs(self, dets, *args):
+            args, mev = args[:9], rng.random((3, len(dets)))  # (the arrays; the map evidence given instead of None)
+            before = [(d.kind, d.theta, d.n_points, d.beams.tolist(), d.points.tolist()) for d in dets]
+            out = super()._merge_legs(dets, *args, mev)
+            new = out[0]
+            kept = [d for d in new if not d.person]
+            for d in kept:  # (the kept detections, unchanged)
+                j = dets.index(d)
+                assert (d.kind, d.theta, d.n_points, d.beams.tolist(), d.points.tolist()) == before[j]
+            for d in new[len(kept):]:
+                assert d.person and type(d) is ScanDetection
+                da, db = d._ff
+                a, b = dets.index(da), dets.index(db)
+                na, nb = before[a][2], before[b][2]
+                n = na + nb
+                assert d.kind == "point" and d.theta == 0.0 and d.n_points == n
+                assert d.beams.tolist() == before[a][3] + before[b][3]
+                assert d.points.tolist() == before[a][4] + before[b][4]
+                ev = [d.map_structure, d.map_free, d.map_unknown]
+                ea, eb = mev[:, a].tolist(), mev[:, b].tolist()
+                assert ev == [(na * x + nb * y) / n for x, y in zip(ea, eb)]
+                seen.append(d)
+            return out
+
+    tr = Check(DetectConfig())
+    for i in range(int(6.0 * RATE)):
+        pose = Pose2D(0.2 * i / RATE, 0.0, 0.0)
+        tr.update(render(pose, i / RATE, *scene(i / RATE, 2.0, 1.2), i)[0], pose)
+    assert len(seen) > 20

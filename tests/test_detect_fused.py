@@ -229,7 +229,7 @@ def test_skipped_circle_fits_are_fitted_when_read():
             for d in tr.last_detections:
                 if d.person:
                     continue
-                skipped += bool(np.isnan(d._fits[d._j, F_CIRCLE_R]))
+                skipped += bool(np.isnan(d._s.fits[d._j, F_CIRCLE_R]))
                 pts = np.ascontiguousarray(d.points)
                 n = pts.shape[0]
                 want = fit_clusters(pts[:, 0].copy(), pts[:, 1].copy(), np.array([0, n]), np.ones(1, dtype=bool),

@@ -180,7 +180,7 @@ def test_scan_detections_read_the_rows_of_their_scans_fit_arrays() -> None:
     import dataclasses
     import pickle
 
-    from dynslam2d.detect.measure import Detection, ScanDetection
+    from dynslam2d.detect.measure import Detection, ScanArrays, ScanDetection
 
     tr = Tracker(DetectConfig())
     seen = 0
@@ -189,7 +189,7 @@ def test_scan_detections_read_the_rows_of_their_scans_fit_arrays() -> None:
         tr.update(_scan(pose, -1.0 + 0.05 * i, i / 15.0, i), pose)
         for det in tr.last_detections:
             if det.person:
-                continue  # (a merged pair of legs is a plain Detection)
+                continue  # (a merged pair of legs: its centroid is the legs' middle, not its points' mean)
             assert isinstance(det, ScanDetection)
             seen += 1
             pts = det.points
@@ -205,10 +205,14 @@ def test_scan_detections_read_the_rows_of_their_scans_fit_arrays() -> None:
     fits = np.arange(2 * N_FIT_COLS, dtype=np.float64).reshape(2, N_FIT_COLS)
     lohi = np.array([[0.0, 1.0, 2.0, 3.0], [4.0, 5.0, 6.0, 7.0]])
     rel = np.array([[[True, False], [False, True]], [[False, False], [True, True]]])
-    d = ScanDetection(np.arange(2), np.zeros((2, 2)), "rect", 0.5, 2, 0.1, 0.2, 0.3, 0.4, fits, lohi, rel, 1)
+    mev = np.array([[0.0, 0.2], [0.0, 0.3], [0.0, 0.4]])
+    s = ScanArrays(np.arange(3), np.zeros((3, 2)), 0, np.array([0, 1]), np.array([1, 2]),
+                   np.array([2, 2], dtype=np.int8), fits, lohi, rel, mev)
+    d = ScanDetection(s, 1, 0.1)
     assert d.centroid.tolist() == [fits[1, F_CENTROID_X], fits[1, F_CENTROID_Y]]
     assert d.lo.tolist() == [4.0, 5.0] and d.hi.tolist() == [6.0, 7.0] and d.rel.tolist() == rel[1].tolist()
     assert d.extent.tolist() == [2.0, 2.0] and d.person is False and d.map_unknown == 0.4
+    assert d.theta == fits[1, 0] and d.map_structure == 0.2 and d.free_fraction == 0.1
 
 
 def test_free_space_entries_read_late_hold_the_vacated_fraction_of_their_scan() -> None:

@@ -37,6 +37,7 @@ from dynslam2d.detect.layout import (
     F_CIRCLE_R,
     F_CIRCLE_RMS,
     F_CIRCLE_X,
+    F_THETA,
     FIT_CENTROID,
     FIT_CIRCLE,
     KIND_NAMES,
@@ -46,8 +47,40 @@ from dynslam2d.detect.layout import (
 from dynslam2d.detect.shapes import fit_circle
 
 
+class DetectionShape:
+    """What a detection derives from its fit (its extent, the fit frame's coordinates, default sizes): the methods of
+    :class:`Detection` and :class:`ScanDetection` (no slots of its own: a scan detection keeps only its scan's arrays
+    and its row, docs/speed.md, pass det32)."""
+
+    __slots__ = ()
+
+    @property
+    def extent(self) -> np.ndarray:
+        return self.hi - self.lo
+
+    def to_uv(self, xy: np.ndarray) -> np.ndarray:
+        """Map-frame (…, 2) points → (e1, e2) coordinates of the fit."""
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        xy = np.asarray(xy, dtype=np.float64)
+        return np.stack((c * xy[..., 0] + s * xy[..., 1], -s * xy[..., 0] + c * xy[..., 1]), axis=-1)
+
+    def from_uv(self, uv: np.ndarray) -> np.ndarray:
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        return np.array([c * uv[0] - s * uv[1], s * uv[0] + c * uv[1]])
+
+    def default_sizes(self, cfg: FitConfig) -> np.ndarray:
+        """Sizes along e1, e2 to assume when no track knows them: the extent where both bounds
+        are real, else max(extent, min(default_depth, default_depth_ratio · other extent)), m."""
+        ext = self.extent
+        out = ext.copy()
+        for k in (0, 1):
+            if not (self.rel[k, 0] and self.rel[k, 1]):
+                out[k] = max(ext[k], min(cfg.default_depth, cfg.default_depth_ratio * max(ext[1 - k], 0.0)))
+        return out
+
+
 @dataclass(slots=True, eq=False)
-class Detection:
+class Detection(DetectionShape):
     """One cluster, fitted, in the map frame.
 
     Attributes:
@@ -84,77 +117,119 @@ class Detection:
     map_unknown: float = 0.0
     person: bool = False
 
-    @property
-    def extent(self) -> np.ndarray:
-        return self.hi - self.lo
 
-    def to_uv(self, xy: np.ndarray) -> np.ndarray:
-        """Map-frame (…, 2) points → (e1, e2) coordinates of the fit."""
-        c, s = math.cos(self.theta), math.sin(self.theta)
-        xy = np.asarray(xy, dtype=np.float64)
-        return np.stack((c * xy[..., 0] + s * xy[..., 1], -s * xy[..., 0] + c * xy[..., 1]), axis=-1)
 
-    def from_uv(self, uv: np.ndarray) -> np.ndarray:
-        c, s = math.cos(self.theta), math.sin(self.theta)
-        return np.array([c * uv[0] - s * uv[1], s * uv[0] + c * uv[1]])
+class ScanArrays:
+    """One scan's detection arrays, shared by its :class:`ScanDetection` objects (each holds this record and its row).
 
-    def default_sizes(self, cfg: FitConfig) -> np.ndarray:
-        """Sizes along e1, e2 to assume when no track knows them: the extent where both bounds
-        are real, else max(extent, min(default_depth, default_depth_ratio · other extent)), m."""
-        ext = self.extent
-        out = ext.copy()
-        for k in (0, 1):
-            if not (self.rel[k, 0] and self.rel[k, 1]):
-                out[k] = max(ext[k], min(cfg.default_depth, cfg.default_depth_ratio * max(ext[1 - k], 0.0)))
-        return out
+    ``beams``: the concatenated beam indices of the detections' points, ``pts``: their (n, 2) map-frame points, m;
+    detection j's are rows ``starts[j] − off`` … ``+ npts[j] − 1`` of them (``off``: 0 for the scan's clusters, the
+    number of points before the persons' for the merged pairs of legs, whose ``starts`` index the batch's points
+    after the merge). ``kinds``: (k,) int8 kind codes (:data:`dynslam2d.detect.layout.KIND_NAMES`); ``fits``: (k,
+    N_FIT_COLS) fit rows (:func:`dynslam2d.detect.shapes.fit_clusters`), ``lohi``: (k, 4) bounds lo1, lo2, hi1, hi2,
+    ``rel``: (k, 2, 2) real-bound flags (:mod:`dynslam2d.detect.layout`); ``mev``: (3, k) fractions of the points on
+    long-occupied, observed-free and never-observed map cells (:mod:`dynslam2d.detect.mapevidence`), or None
+    without a map."""
+
+    __slots__ = ("beams", "pts", "off", "starts", "npts", "kinds", "fits", "lohi", "rel", "mev")
+
+    def __init__(self, beams: np.ndarray, pts: np.ndarray, off: int, starts: np.ndarray, npts: np.ndarray,
+                 kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray,
+                 mev: np.ndarray | None) -> None:
+        self.beams = beams
+        self.pts = pts
+        self.off = off
+        self.starts = starts
+        self.npts = npts
+        self.kinds = kinds
+        self.fits = fits
+        self.lohi = lohi
+        self.rel = rel
+        self.mev = mev
 
 
 def _row_view(array: str, cols: slice, doc: str) -> property:
-    """A read-only property: the columns ``cols`` of row ``self._j`` of the array attribute ``array`` (a view)."""
+    """A read-only property: the columns ``cols`` of row ``self._j`` of the scan's array ``array`` (a
+    :class:`ScanArrays` attribute; a view)."""
 
     def get(self: ScanDetection) -> np.ndarray:
-        return getattr(self, array)[self._j, cols]
+        return getattr(self._s, array)[self._j, cols]
 
     return property(get, doc=doc)
 
 
-class ScanDetection(Detection):
-    """A :class:`Detection` of the tracker's current scan whose small per-detection arrays (``centroid``, ``lo``,
-    ``hi``, ``rel``, ``circle``) are read from the scan's fit and bound arrays when asked for (views of their rows,
-    the values of a :class:`Detection` built with them), not sliced when the detection is made: the tracker makes
-    one per cluster per scan and reads them for few. A copy (``copy`` / ``pickle``) is a plain :class:`Detection`.
+def _mev_value(row: int, doc: str) -> property:
+    """A read-only property: row ``row`` (structure, free, unknown) of the scan's (3, k) map-evidence array at column
+    ``self._j``, as a Python float (0.0 without a map: ``mev`` None)."""
 
-    ``fits``: the scan's (k, N_FIT_COLS) fit rows (:func:`dynslam2d.detect.shapes.fit_clusters`), ``lohi``: (k, 4)
-    bounds lo1, lo2, hi1, hi2, ``rel``: (k, 2, 2) real-bound flags (:mod:`dynslam2d.detect.layout`); ``j``: this
-    detection's row of them; ``a0``: when ≥ 0, ``points`` is the scan's array of every detection's points and this
-    detection's are its rows from ``a0`` on (``n_points`` of them).
+    def get(self: ScanDetection) -> float:
+        m = self._s.mev
+        return 0.0 if m is None else m.item(row, self._j)
+
+    return property(get, doc=doc)
+
+
+class ScanDetection(DetectionShape):
+    """A detection of the tracker's current scan, with the fields of a :class:`Detection` (read-only but
+    ``free_fraction`` and ``person``): the scan's arrays (:class:`ScanArrays`, ``_s``) and its row ``_j`` of them, in
+    an object of four slots (not a subclass of the dataclass, whose fifteen slots every detection would carry). Its
+    values are read from the arrays when asked for, not made when the detection is made (the tracker makes one per
+    cluster per scan and reads them for few; a detection kept scans later costs its free in cache misses per object
+    and cache line it owns, docs/speed.md, passes det31 and det32): ``beams`` and ``points`` are views of its rows of
+    the scan's beams and points, ``centroid``, ``lo``, ``hi``, ``rel``, ``circle`` of its fit and bound rows (the
+    values of a :class:`Detection` built with them); ``kind``, ``n_points``, ``theta`` and ``map_structure`` /
+    ``map_free`` / ``map_unknown`` are Python values of its row and map-evidence column. The tracker's per-pair
+    readers take the scan's batch arrays by index instead (``Tracker._update_tracks``). A copy (``copy`` /
+    ``pickle``) is a plain :class:`Detection`.
 
     ``free_fraction`` may be given as a float, or left to be computed when first read (few are read): as an object
     with ``fraction(points)`` (the scan's free-space test, :class:`dynslam2d.detect.freespace.FreeTest`), or as a
     pair of scan detections (a merged pair of legs: their fractions weighted by their point counts)."""
 
-    __slots__ = ("_fits", "_lohi", "_rel", "_j", "_ff", "_pts", "_a0")
+    __slots__ = ("_s", "_j", "_ff", "person")
 
-    def __init__(self, beams: np.ndarray, points: np.ndarray, kind: str, theta: float, n_points: int,
-                 free_fraction: float | object, map_structure: float, map_free: float, map_unknown: float,
-                 fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray, j: int, a0: int = -1) -> None:
-        self.beams = beams
-        self._pts = points
-        self._a0 = a0
-        self.kind = kind
-        self.theta = theta
-        self.n_points = n_points
-        self._ff = free_fraction
-        self.map_structure = map_structure
-        self.map_free = map_free
-        self.map_unknown = map_unknown
-        self.person = False
-        self._fits = fits
-        self._lohi = lohi
-        self._rel = rel
+    def __init__(self, arrays: ScanArrays, j: int, free_fraction: float | object = 0.0,
+                 person: bool = False) -> None:
+        self._s = arrays
         self._j = j
+        self._ff = free_fraction
+        self.person = person
 
-    centroid = _row_view("_fits", FIT_CENTROID, "(2,) mean of the points, m")
+    @property
+    def beams(self) -> np.ndarray:
+        """(n,) beam indices of the cluster in scan order: a view of the scan's beams, made when read."""
+        s = self._s
+        j = self._j
+        a = s.starts.item(j) - s.off
+        return s.beams[a:a + s.npts.item(j)]
+
+    @property
+    def points(self) -> np.ndarray:
+        """(n, 2) map-frame points, m: a view of the scan's points, made when read."""
+        s = self._s
+        j = self._j
+        a = s.starts.item(j) - s.off
+        return s.pts[a:a + s.npts.item(j)]
+
+    @property
+    def n_points(self) -> int:
+        """Number of points."""
+        return self._s.npts.item(self._j)
+
+    @property
+    def kind(self) -> str:
+        """"rect", "circle" or "point" (:data:`dynslam2d.detect.layout.KIND_NAMES` of the row's kind code)."""
+        return KIND_NAMES[self._s.kinds.item(self._j)]
+
+    @property
+    def theta(self) -> float:
+        """Rectangle axis angle of e1, rad in [0, π/2): the row's ``F_THETA`` column (0 for a merged pair of legs)."""
+        return self._s.fits.item(self._j, F_THETA)
+
+    map_structure = _mev_value(0, "fraction of the points on long-occupied map cells (0 without a map)")
+    map_free = _mev_value(1, "fraction of the points on observed-free map cells (0 without a map)")
+    map_unknown = _mev_value(2, "fraction of the points on never-observed map cells (0 without a map)")
+    centroid = _row_view("fits", FIT_CENTROID, "(2,) mean of the points, m")
 
     @property
     def circle(self) -> np.ndarray:
@@ -162,28 +237,15 @@ class ScanDetection(Detection):
         skipped (NaN columns: a cluster the classification did not make a circle, ``shapes.fit_cluster_rows``) is
         fitted first, with the same function on the same points (:func:`dynslam2d.detect.shapes.fit_circle`), and
         the row kept."""
-        f = self._fits
+        f = self._s.fits
         j = self._j
         r = f[j, F_CIRCLE_R]
         if r != r:
             f[j, F_CIRCLE_X:F_CIRCLE_RMS + 1] = fit_circle(self.points)
         return f[j, FIT_CIRCLE]
-    lo = _row_view("_lohi", LOHI_LO, "(2,) lower bounds along e1, e2, m")
-    hi = _row_view("_lohi", LOHI_HI, "(2,) upper bounds along e1, e2, m")
-    rel = _row_view("_rel", slice(None), "(2, 2) bool: bound [axis, lower / upper] is real")
-
-    @property
-    def points(self) -> np.ndarray:
-        """(n, 2) map-frame points, m: rows ``a0 … a0 + n_points − 1`` of the ``points`` given (a view made when read:
-        the tracker reads a detection's points for few detections per scan), or that array itself when no ``a0``
-        (≥ 0) was given."""
-        a0 = self._a0
-        return self._pts if a0 < 0 else self._pts[a0:a0 + self.n_points]
-
-    @points.setter
-    def points(self, value: np.ndarray) -> None:
-        self._pts = value
-        self._a0 = -1
+    lo = _row_view("lohi", LOHI_LO, "(2,) lower bounds along e1, e2, m")
+    hi = _row_view("lohi", LOHI_HI, "(2,) upper bounds along e1, e2, m")
+    rel = _row_view("rel", slice(None), "(2, 2) bool: bound [axis, lower / upper] is real")
 
     @property
     def free_fraction(self) -> float:
@@ -213,36 +275,20 @@ class ScanDetection(Detection):
                            self.map_unknown, self.person)
 
 
-def scan_detections(beams: np.ndarray, points: np.ndarray, starts: list[int], npts: list[int], kinds: list[int],
-                    theta: list[float], free_fraction: float | object, map_structure: list[float],
-                    map_free: list[float], map_unknown: list[float], fits: np.ndarray, lohi: np.ndarray,
-                    rel: np.ndarray, _new=object.__new__) -> list[ScanDetection]:
-    """The scan detections of one scan, detection j being ``ScanDetection(beams[a0:a0 + n], points, KIND_NAMES[kd],
-    theta[j], n, free_fraction, map_structure[j], map_free[j], map_unknown[j], fits, lohi, rel, j, a0)`` with
-    ``a0, n, kd = starts[j], npts[j], kinds[j]`` (``beams`` / ``points``: the scan's concatenated beams and (n, 2)
-    map-frame points of its detections; every detection shares ``free_fraction``, the scan's free-space test or 0):
-    the slots set directly in one loop, without a constructor call per detection (the tracker makes ≈ 30 per scan).
-    ``tests/test_detect_birth_fast.py`` compares every slot with the constructor's."""
+def scan_detections(arrays: ScanArrays, free_fraction: float | object,
+                    _new=object.__new__) -> list[ScanDetection]:
+    """The scan detections of one scan (``arrays``: its :class:`ScanArrays`), detection j being
+    ``ScanDetection(arrays, j, free_fraction)`` (every detection shares ``free_fraction``, the scan's free-space test
+    or 0): the slots set directly in one loop, without a constructor call per detection (the tracker makes ≈ 30 per
+    scan). ``tests/test_detect_birth_fast.py`` compares every slot with the constructor's."""
     out = []
-    append, names, cls = out.append, KIND_NAMES, ScanDetection
-    for j, a0, n, kd, th, fs, ff, fu in zip(range(len(starts)), starts, npts, kinds, theta, map_structure, map_free,
-                                             map_unknown):
+    append, cls = out.append, ScanDetection
+    for j in range(arrays.starts.shape[0]):
         d = _new(cls)
-        d.beams = beams[a0:a0 + n]
-        d._pts = points
-        d._a0 = a0
-        d.kind = names[kd]
-        d.theta = th
-        d.n_points = n
-        d._ff = free_fraction
-        d.map_structure = fs
-        d.map_free = ff
-        d.map_unknown = fu
-        d.person = False
-        d._fits = fits
-        d._lohi = lohi
-        d._rel = rel
+        d._s = arrays
         d._j = j
+        d._ff = free_fraction
+        d.person = False
         append(d)
     return out
 

@@ -22,11 +22,10 @@ from dynslam2d.detect.layout import (
     F_THETA,
     FIT_CENTROID,
     FIT_CIRCLE,
-    KIND_POINT,
     DetectionBatch,
     MeasureRows,
 )
-from dynslam2d.detect.measure import Detection, ScanDetection, scan_detections
+from dynslam2d.detect.measure import Detection, ScanArrays, ScanDetection, scan_detections
 from dynslam2d.detect.segment import segment_points
 from dynslam2d.detect.shapes import CRITERIA, fit_cluster_rows
 from dynslam2d.detect.tracktable import _NO_IDX
@@ -98,25 +97,24 @@ class TrackDetect:
         # memory's references now, before it gains this scan) and computes its fraction when first read
         # (ScanDetection.free_fraction)
         frac = 0.0
-        fs = ff = fu = [0.0] * nd
         free = self._free
         if free is not None:
             self._cur_ref = free.make_ref(scan, pose, valid)
             if nd and (test := free.test_at(float(scan.stamp))) is not None:
                 frac = test
             free.add(scan, pose, valid, self._cur_ref)
+        mev = None
         if view is not None:
-            fs, ff, fu = mfr.tolist()
+            mev = mfr
             # (the detections' map evidence, (3, nd), as the updates push it into their tracks' windows; a leg merge
             # below names its reordered and merged detections' sources: kernels.shape_update)
             self._mev_src = (mfr, _NO_IDX, _NO_IDX, _NO_IDX, _NO_IDX)
-        # (their centroid, bounds, flags and circle stay rows of fits / lohi / rel until read, their points rows of pts:
-        # ScanDetection; all made in one loop, scan_detections)
-        dets = scan_detections(beams, pts, starts.tolist(), npts.tolist(), kinds.tolist(), fits[:, F_THETA].tolist(),
-                               frac, fs, ff, fu, fits, lohi, rel)
+        # (each detection is the scan's arrays and its row: its beams, points, kind, counts, fit values and map evidence
+        # are read from them when asked for, ScanDetection; all made in one loop, scan_detections)
+        dets = scan_detections(ScanArrays(beams, pts, 0, starts, npts, kinds, fits, lohi, rel, mev), frac)
         if cfg.fit.person_merge and len(dets) > 1:
             dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
-                                                                                 npts, px, py, beams)
+                                                                                 npts, px, py, beams, mev)
         st.detections += len(dets)
         self.last_detections = dets
         if dets:
@@ -137,13 +135,14 @@ class TrackDetect:
 
     def _merge_legs(self, dets: list[Detection], kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray,
                     rel: np.ndarray, starts: np.ndarray, npts: np.ndarray, px: np.ndarray, py: np.ndarray,
-                    beams: np.ndarray) -> tuple:
+                    beams: np.ndarray, mev: np.ndarray | None = None) -> tuple:
         """People (leg_tracker, Leigh et al. ICRA 2015, pairs legs): two leg-sized detections (both sides
         ≤ ``fit.leg_max_extent``) whose centres lie within ``fit.leg_pair_distance`` become one person
         detection, measured at the middle of the two legs with the point model. A leg swinging forward while
         the other stands does not move the person's centre by a full stride, so its speed does not jump.
         Returns the detection list and the per-detection batch arrays, merged pairs appended at the end (the
-        pairs and arrays by :func:`dynslam2d.detect.kernels.merge_legs`; ``beams``: the beams of ``px``, ``py``)."""
+        pairs and arrays by :func:`dynslam2d.detect.kernels.merge_legs`; ``beams``: the beams of ``px``, ``py``;
+        ``mev``: the detections' (3, nd) map evidence, or None without a map)."""
         fc = self.config.fit
         npts0 = npts
         first, second, ki, kinds, fits, lohi, rel, starts, npts, px, py, mbeams = merge_legs(
@@ -157,35 +156,30 @@ class TrackDetect:
         pts = np.empty((px.shape[0] - n0, 2))  # the persons' points, (n, 2) (np.column_stack's values)
         pts[:, 0] = px[n0:]
         pts[:, 1] = py[n0:]
-        o = 0
+        # (the persons are rows row … of the merged arrays: their beams and points rows starts − n0 of mbeams / pts;
+        # centroid = circle centre = the legs' middle, lo / hi their box, no real bound, theta 0, kind point; their map
+        # evidence, point-weighted, in their columns of mmev, the kept detections keeping their own columns of mev).
+        # ScanDetection(arrays, row, (da, db), True) per pair, its slots set directly (as scan_detections does: no
+        # constructor call per pair); the free fraction is computed when read
+        mmev = None if mev is None else np.empty((3, row + m))
+        arrays = ScanArrays(mbeams, pts, n0, starts, npts, kinds, fits, lohi, rel, mmev)
         append, new, cls = new_dets.append, object.__new__, ScanDetection
         for a, b in zip(first.tolist(), second.tolist()):
-            da, db = dets[a], dets[b]
-            na, nb = da.n_points, db.n_points
-            n = na + nb
-            # (centroid = circle centre = the legs' middle, lo / hi their box, no real bound, theta 0: rows of the
-            # merged arrays, as a scan detection's). ScanDetection(mbeams[o:o + n], pts, KIND_POINT, 0.0, n, (da, db),
-            # <the point-weighted map evidence>, fits, lohi, rel, row, o) with person True, its slots set directly
-            # (as scan_detections does: no constructor call per pair); the free fraction is computed when read
+            if mmev is not None:
+                # (na·e_a + nb·e_b) / n per evidence row, on Python floats (a few pairs per scan: cheaper than the
+                # array expression's eight small operations)
+                na, nb = npts0.item(a), npts0.item(b)
+                n = na + nb
+                mmev[0, row] = (na * mev.item(0, a) + nb * mev.item(0, b)) / n
+                mmev[1, row] = (na * mev.item(1, a) + nb * mev.item(1, b)) / n
+                mmev[2, row] = (na * mev.item(2, a) + nb * mev.item(2, b)) / n
             det = new(cls)
-            det.beams = mbeams[o:o + n]
-            det._pts = pts
-            det._a0 = o
-            det.kind = KIND_POINT
-            det.theta = 0.0
-            det.n_points = n
-            det._ff = (da, db)
-            det.map_structure = (na * da.map_structure + nb * db.map_structure) / n
-            det.map_free = (na * da.map_free + nb * db.map_free) / n
-            det.map_unknown = (na * da.map_unknown + nb * db.map_unknown) / n
-            det.person = True
-            det._fits = fits
-            det._lohi = lohi
-            det._rel = rel
+            det._s = arrays
             det._j = row
+            det._ff = (dets[a], dets[b])
+            det.person = True
             append(det)
             row += 1
-            o += n
         self.stats.merged_leg_pairs += m
         if self._map is not None:  # (the sources of the detections' map evidence in their new order: _detect)
             self._mev_src = (self._mev_src[0], ki, first, second, npts0)

@@ -67,6 +67,7 @@ from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, assign_groups
 from dynslam2d.detect.kernels_update import association_gates, fragment_hosts_rows
 from dynslam2d.detect.layout import (
     KIND_CIRCLE,
+    KIND_NAMES,
     KIND_RECT,
     SIZE_MEASURED,
     DetectionBatch,
@@ -547,8 +548,9 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
         cfg = self.config
         size, known = self._birth_shape(det, j)
-        kind = det.kind
-        g, gi = _shape_rows(det.theta, size, known, self._batch.circle.item(j, 2) if kind == KIND_CIRCLE else 0.0,
+        b = self._batch  # (the detection's kind and axis angle: its batch row, not its properties, ScanDetection)
+        kind = KIND_NAMES[b.kind.item(j)]
+        g, gi = _shape_rows(b.theta.item(j), size, known, b.circle.item(j, 2) if kind == KIND_CIRCLE else 0.0,
                             kind, kind == KIND_RECT)
         has_map, has_free = self._map is not None, self._free is not None
         d = self._default  # reference.measure(det, None, None, cfg.fit) of every detection
@@ -587,9 +589,9 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
     def _birth_shape(self, det: Detection, j: int) -> tuple[list[float], list[bool]]:
         """The sizes (m) and known-size flags of a track started from detection ``det`` (index ``j`` of this scan's
         detections)."""
-        kind = det.kind
+        b = self._batch
+        kind = KIND_NAMES[b.kind.item(j)]
         if kind == KIND_RECT:
-            b = self._batch
             size = _default_sizes(b.lohi[j].tolist(), b.rel[j].tolist(), self.config.fit)
             sk0, sk1 = self._default.size_kind[j].tolist()
             return size, [sk0 == SIZE_MEASURED, sk1 == SIZE_MEASURED]

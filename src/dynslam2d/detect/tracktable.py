@@ -220,7 +220,9 @@ def _past_entry(t: float, det: Detection) -> tuple[float, np.ndarray, int, int]:
     array and row span a scan detection keeps (no view made; :func:`_past_points` makes it when read, the late
     vacated-space test), or a plain detection's own points."""
     if type(det) is ScanDetection:
-        return t, det._pts, det._a0, det.n_points
+        s = det._s
+        j = det._j
+        return t, s.pts, s.starts.item(j) - s.off, s.npts.item(j)
     return t, det.points, -1, 0
 
 

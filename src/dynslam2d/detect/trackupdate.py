@@ -17,8 +17,8 @@ from dynslam2d.detect.kernels import (
     shape_update,
 )
 from dynslam2d.detect.kernels_update import kalman_pairs
-from dynslam2d.detect.layout import KIND_CIRCLE
-from dynslam2d.detect.measure import Detection
+from dynslam2d.detect.layout import K_CIRCLE
+from dynslam2d.detect.measure import Detection, ScanDetection
 from dynslam2d.detect.tracktable import _HALF_PI, _PAST_COMPACT, TENTATIVE, _past_points, _Track
 
 
@@ -129,16 +129,24 @@ class TrackUpdate:
         tracks = self._tracks
         upd, used = self._upd_sets
         upd_add, used_add = upd.add, used.add
-        # (the detections' circle radii as floats, one conversion per scan: row di of the batch is detection di's fit
-        # row, copied by the leg merge; float(det.circle[2]) would make a view per circle detection)
-        radii = self._batch.circle[:, 2].tolist()
+        # (the detections' circle radii, kinds, first points and point counts as Python values, one conversion per
+        # scan: row di of the batch is detection di's row, copied by the leg merge; the detection's own properties
+        # (ScanDetection) would read them one by one, and float(det.circle[2]) would make a view per circle detection)
+        b = self._batch
+        radii = b.circle[:, 2].tolist()
+        kinds = b.kind.tolist()
+        starts = b.start.tolist()
+        npts = b.npts.tolist()
         for (ti, di), ok in zip(pairs, applied):
             if not ok:
                 continue
             k, det = tracks[ti], dets[di]
             upd_add(k.id)
             used_add(di)
-            dkind = det.kind
+            # (the detection's rows of its scan's beams and points: ScanDetection.beams / points, from the batch)
+            arrays = det._s
+            a0 = starts[di] - arrays.off
+            n = npts[di]
             # (the stored points before this update: their vacated-space fraction is computed when first read)
             # ((the list, first, end): the entries are never changed in place, so this is their snapshot)
             past = k.past
@@ -155,7 +163,7 @@ class TrackUpdate:
                 k.probation = k.in_m and not k.remembered  # a remembered track re-acquired where it stopped
                 k.misses = 0
             k.merged = False
-            person = det.person or (dkind == KIND_CIRCLE and pmin_r <= radii[di] <= pmax_r)
+            person = det.person or (kinds[di] == K_CIRCLE and pmin_r <= radii[di] <= pmax_r)
             k.person = person
             k.person_streak = k.person_streak + 1 if person else 0
             k.hits += 1
@@ -163,7 +171,7 @@ class TrackUpdate:
             if k.hist_n < window:  # (the M-of-N counts: only the first window is read)
                 k.hist_n += 1
                 k.hist_hits += 1
-            k.beams = det.beams
+            k.beams = arrays.beams[a0:a0 + n]
             free = k.free
             # (vacated: this scan sees through its old points; computed when the entry is read, _free_values)
             # (the detection's own fraction too: det.free_fraction, computed when read)
@@ -172,7 +180,7 @@ class TrackUpdate:
                 del free[0]
             if max_age is not None:
                 past = k.past
-                past.append((t, det._pts, det._a0, det.n_points))  # (_past_entry of a scan detection, inline)
+                past.append((t, arrays.pts, a0, n))  # (_past_entry of a scan detection, inline)
                 pa = k.past_a
                 n = len(past)
                 while pa < n and t - past[pa][0] > max_age:
@@ -226,7 +234,7 @@ class TrackUpdate:
         """The free-space fraction of one entry of a track's ``free`` list (:meth:`_free_values`): a float, a detection
         (a birth's: its fraction) or a tuple (an update's, its floor the detection)."""
         if type(entry) is not tuple:
-            return entry.free_fraction if isinstance(entry, Detection) else entry
+            return entry.free_fraction if isinstance(entry, (Detection, ScanDetection)) else entry
         det, ref, t, past, a, b = entry
         return max(det.free_fraction, self._vacated_one(ref, t, past[a:b]))
 
