@@ -8,9 +8,11 @@ import math
 
 import numpy as np
 
-from dynslam2d.detect.kernels_update import manage_speed_rows
+from dynslam2d.detect.kernels_update import RIDE_FAR, RIDE_JUDGE, RIDE_OFF_BODY, manage_speed_rows, ride_window
 from dynslam2d.detect.tracktable import _NO_BEAMS, _TWO_PI, COASTING, CONFIRMED, TENTATIVE, _Track
 from dynslam2d.types import Pose2D, wrap_angle
+
+_NO_BODY = np.zeros(0, dtype=np.bool_)  # (ride_window's body beams when no body was found: never read)
 
 
 class TrackManage:
@@ -409,28 +411,16 @@ class TrackManage:
         the spread, over its updates of the last ``ride_time`` seconds (at least ``ride_updates`` of them,
         spanning at least half of it): it moves with the robot (its body)."""
         tc = self.config.tracker
-        ride = self._ride(k)
-        if ride.shape[0] < tc.ride_updates:
+        # (the window's tests and its spread and motion in one kernel call: the former NumPy forms' floats;
+        # docs/speed.md, pass mgr32)
+        body = self._body_near
+        outcome, spread, moved = ride_window(self._RIDE, self._WN, k.row, k.beams,
+                                             _NO_BODY if body is None else body, body is not None,
+                                             int(tc.ride_updates), float(tc.ride_max_range), float(tc.ride_time))
+        if outcome != RIDE_JUDGE:
+            if outcome == RIDE_FAR or outcome == RIDE_OFF_BODY:
+                k.rode = False  # far from the laser (most tracks), or not where the robot's body was found
             return False
-        lx_last, ly_last = ride[-1, :2].tolist()
-        if lx_last * lx_last + ly_last * ly_last > tc.ride_max_range * tc.ride_max_range:
-            k.rode = False
-            return False  # far from the laser (most tracks): no arrays built
-        nb = k.beams.shape[0]
-        if self._body_near is not None and (nb == 0 or np.count_nonzero(self._body_near[k.beams]) / nb < 0.5):
-            k.rode = False
-            return False  # not where the robot's body was found
-        stamps = ride[:, 4].tolist()
-        t_end = stamps[-1]
-        n = sum(1 for e in stamps if t_end - e <= tc.ride_time)
-        if n < tc.ride_updates or t_end - stamps[-n] < 0.5 * tc.ride_time:
-            return False
-        lx = np.array(ride[-n:, :2])  # (C-ordered copies: the former arrays of the entries' lists)
-        if float(np.hypot(lx[:, 0], lx[:, 1]).max()) > tc.ride_max_range:
-            return False
-        spread = float(np.hypot(*(lx - lx.mean(axis=0)).T).max())
-        mx = np.array(ride[-n:, 2:4])
-        moved = float(np.hypot(*(mx[-1] - mx[0])))
         # with a motionless laser the two frames agree: only motion far beyond the laser-frame spread rides;
         # once found riding, a track keeps riding until its laser-frame spread clearly exceeds the tolerance
         # (a circle fit replacing a rectangle shifts the centre of a body part by a few cm)
