@@ -15,6 +15,12 @@ from dynslam2d.types import Pose2D, wrap_angle
 _NO_BODY = np.zeros(0, dtype=np.bool_)  # (ride_window's body beams when no body was found: never read)
 
 
+def _fast_reason_texts(nsus: int) -> tuple[str, ...]:
+    """The reasons of a track not in M that has been faster than v_min for 0 … ``nsus`` − 1 of the ``nsus``
+    (sustain_updates) updates it needs, by that count (the same texts every scan: formatted once per tracker)."""
+    return tuple(f"not in M: speed > v_min for {kfast}/{nsus} updates" for kfast in range(nsus))
+
+
 class TrackManage:
     """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: management and the test of M (``_manage``, ``_dynamic``)."""
 
@@ -54,10 +60,13 @@ class TrackManage:
         # (kernels.shape_update; a track not updated in this scan has its last push's, never read)
         nears = self._WN[:, 2].take(order).tolist()
         MEV, WN = self._MEV, self._WN
+        fast_reasons = self._fast_reasons
+        if len(fast_reasons) != nsus:
+            fast_reasons = self._fast_reasons = _fast_reason_texts(nsus)
         for k, speed, sig, bad, near in zip(tracks, speeds, sigs, bads, nears):
             kid = k.id
             is_upd = kid in updated
-            if kid in merged and not is_upd and k.in_m:
+            if merged and kid in merged and not is_upd and k.in_m:  # (merged: empty in most scans)
                 k.in_m = False
                 k.merged = True
                 k.fast = 0
@@ -147,7 +156,7 @@ class TrackManage:
                         # (_dynamic's outcome for a track not in M, faster than v_min with a certain velocity, not yet
                         # for sustain_updates updates and no person test (person_streak below person_sustain_updates):
                         # the second most common reason, inline; its tests before this one do not apply)
-                        k.reason = f"not in M: speed > v_min for {kfast}/{nsus} updates"
+                        k.reason = fast_reasons[kfast]  # (0 ≤ kfast < nsus here)
                     else:
                         self._dynamic(k, speed, sig, t)
                 if mem:
@@ -162,6 +171,9 @@ class TrackManage:
             self._free_rows.extend(gone)
             self._order = None
         self._tracks = keep
+
+    # (_fast_reason_texts(sustain_updates): the tracker's own from its first _manage on)
+    _fast_reasons: tuple[str, ...] = ()
 
     def _probation_fails(self, k: _Track) -> bool:
         """End the probation of ``k`` (in M, re-acquired after a gap, with ``sustain_updates`` free-space fractions):
