@@ -127,6 +127,10 @@ def test_report_built_in_place_is_the_constructors_report(monkeypatch) -> None:
         return got
 
     tr._report = both
+    coasted = updated = 0
     for i in range(60):
-        tr.update(_scan(pose, -3.0 + 0.05 * i, i / 15.0, i), pose)
-    assert steps >= 50
+        # (every 7th scan the box is outside the room: its track coasts, reported without beams)
+        out = tr.update(_scan(pose, 50.0 if i % 7 == 6 else -3.0 + 0.05 * i, i / 15.0, i), pose)
+        coasted += sum(t.n_points == 0 for t in out)
+        updated += sum(t.n_points > 0 for t in out)
+    assert steps >= 50 and coasted >= 5 and updated >= 40
