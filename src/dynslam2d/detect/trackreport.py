@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dynslam2d.detect.frozen import fast_init
+from dynslam2d.detect.frozen import _layout_twin_ok, fast_init
 from dynslam2d.detect.kernels_update import report_rows
 from dynslam2d.detect.layout import KIND_CIRCLE, KIND_NAMES
 from dynslam2d.detect.tracktable import _HALF_PI, COASTING, CONFIRMED
@@ -23,7 +23,7 @@ _TRACK_SLOTS = ("id", "state", "stamp", "box", "velocity", "covariance", "age", 
                 "m_reason", "beams", "n_points", "remembered")
 _BOX_SLOTS = ("px", "py", "theta", "length", "width")
 _INLINE = (_make_track is not Track and _make_box is not Box and tuple(Track.__slots__) == _TRACK_SLOTS
-           and tuple(Box.__slots__) == _BOX_SLOTS)
+           and tuple(Box.__slots__) == _BOX_SLOTS and _layout_twin_ok(Track) and _layout_twin_ok(Box))
 _TrackTwin = type("_TrackTwin", (), {"__slots__": _TRACK_SLOTS})
 _BoxTwin = type("_BoxTwin", (), {"__slots__": _BOX_SLOTS})
 
