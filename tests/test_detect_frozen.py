@@ -89,3 +89,48 @@ def test_history_is_bounded_and_reports_own_their_arrays() -> None:
     box[0].covariance[:] = 1e6  # a caller scribbling on its report
     box[0].velocity[:] = 99.0
     assert np.array_equal(k.P, cov_before) and float(np.hypot(k.x[2], k.x[3])) < 1.0
+
+
+def test_report_built_in_place_is_the_constructors_report(monkeypatch) -> None:
+    """``Tracker._report`` builds the live tracks' reports in its loop (``trackreport._INLINE``): on every step of a
+    box driven past the laser (clutter tracks born, confirmed, coasting and deleted around it), the same reports as
+    the loop that calls the ``fast_init`` constructors — every field, floats and arrays bit for bit, the same types,
+    no attribute of the twin classes left — and the reports are frozen."""
+    from dynslam2d.detect import trackreport
+
+    assert trackreport._INLINE  # the in-place form is the one the tracker runs
+    tr = Tracker(DetectConfig())
+    pose = Pose2D(0.0, -2.0, 0.0)
+    orig = tr._report
+    steps = 0
+
+    def both(t, updated):
+        nonlocal steps
+        got = orig(t, updated)
+        monkeypatch.setattr(trackreport, "_INLINE", False)
+        want = orig(t, updated)
+        monkeypatch.setattr(trackreport, "_INLINE", True)
+        assert len(got) == len(want)
+        for a, b in zip(got, want):
+            assert type(a) is Track and type(a.box) is Box and not hasattr(a, "__dict__")
+            fa, fb = _fields(a), _fields(b)
+            assert [type(v) for v in fa] == [type(v) for v in fb]
+            for u, w in zip(fa, fb):
+                if isinstance(u, np.ndarray):
+                    assert u.dtype == w.dtype and u.shape == w.shape and u.tobytes() == w.tobytes()
+                else:
+                    assert u == w
+        for a in got:
+            with pytest.raises(dataclasses.FrozenInstanceError):
+                a.box.px = 0.0  # type: ignore[misc]
+        steps += bool(got)
+        return got
+
+    tr._report = both
+    coasted = updated = 0
+    for i in range(60):
+        # (every 7th scan the box is outside the room: its track coasts, reported without beams)
+        out = tr.update(_scan(pose, 50.0 if i % 7 == 6 else -3.0 + 0.05 * i, i / 15.0, i), pose)
+        coasted += sum(t.n_points == 0 for t in out)
+        updated += sum(t.n_points > 0 for t in out)
+    assert steps >= 50 and coasted >= 5 and updated >= 40

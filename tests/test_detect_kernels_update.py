@@ -264,3 +264,71 @@ def test_fragment_hosts_rows_is_fragment_hosts_after_the_gathers() -> None:
         found += int((got >= 0).sum())
         missed += int((got < 0).sum())
     assert found > 100 and missed > 100
+
+
+def _ride_python(R, W, row, beams, body_near, ride_updates, ride_r, ride_time) -> tuple:
+    """``Tracker._rides_with_laser``'s tests and floats before ``ride_window`` (main at 1c7c2d9): the window as a view,
+    the body beams by fancy indexing, the stamps as a list, the last n entries' NumPy copies, ``np.hypot``, ``mean`` and
+    ``max``. Returns (outcome, spread, moved) as ``ride_window`` does."""
+    from dynslam2d.detect import kernels_update as ku
+
+    ride = R[row, :W.item(row, 1)]
+    if ride.shape[0] < ride_updates:
+        return ku.RIDE_FEW, 0.0, 0.0
+    lx_last, ly_last = ride[-1, :2].tolist()
+    if lx_last * lx_last + ly_last * ly_last > ride_r * ride_r:
+        return ku.RIDE_FAR, 0.0, 0.0
+    nb = beams.shape[0]
+    if body_near is not None and (nb == 0 or np.count_nonzero(body_near[beams]) / nb < 0.5):
+        return ku.RIDE_OFF_BODY, 0.0, 0.0
+    stamps = ride[:, 4].tolist()
+    t_end = stamps[-1]
+    n = sum(1 for e in stamps if t_end - e <= ride_time)
+    if n < ride_updates or t_end - stamps[-n] < 0.5 * ride_time:
+        return ku.RIDE_SHORT, 0.0, 0.0
+    lx = np.array(ride[-n:, :2])
+    if float(np.hypot(lx[:, 0], lx[:, 1]).max()) > ride_r:
+        return ku.RIDE_OUT, 0.0, 0.0
+    spread = float(np.hypot(*(lx - lx.mean(axis=0)).T).max())
+    mx = np.array(ride[-n:, 2:4])
+    return ku.RIDE_JUDGE, spread, float(np.hypot(*(mx[-1] - mx[0])))
+
+
+def test_ride_window_is_the_former_numpy_riding_test() -> None:
+    """``ride_window`` against the former Python / NumPy form of ``_rides_with_laser``'s tests, on random riding
+    windows (rows of a shared array in a random order, 0–40 entries, stamps at 10–40 Hz with gaps so that n within
+    ``ride_time`` varies, laser-frame centres near and beyond ``ride_max_range``, a NaN now and then), with and
+    without the body beams: the same outcome on every window and the spread and motion bit for bit; every outcome
+    reached."""
+    from dynslam2d.detect import kernels_update as ku
+
+    rng = np.random.default_rng(11)
+    rows, L = 64, 48
+    seen = set()
+    nbeams = 720
+    for rep in range(4000):
+        R = np.zeros((rows, L, 5))
+        W = np.zeros((rows, 3), dtype=np.int64)
+        row = int(rng.integers(rows))
+        m = int(rng.integers(0, 41))
+        W[row, 1] = m
+        dt = rng.uniform(0.025, 0.1, size=m) * rng.choice([1.0, 1.0, 1.0, 6.0], size=m)
+        R[row, :m, 4] = 100.0 + np.cumsum(dt)
+        centre = rng.normal(size=2) * rng.choice([0.2, 0.5, 0.8])
+        R[row, :m, :2] = centre + rng.normal(size=(m, 2)) * rng.choice([1e-3, 0.02, 0.3])
+        R[row, :m, 2:4] = rng.normal(size=2) * 5 + np.cumsum(rng.normal(size=(m, 2)) * 0.05, axis=0)
+        if m and rep % 37 == 0:
+            R[row, int(rng.integers(m)), int(rng.integers(4))] = np.nan
+        beams = np.sort(rng.choice(nbeams, size=int(rng.integers(0, 30)), replace=False)).astype(np.int64)
+        body = None
+        if rep % 2:
+            body = np.zeros(nbeams, dtype=bool)
+            body[rng.choice(nbeams, size=int(rng.integers(0, nbeams)), replace=False)] = True
+        args = (int(rng.choice([2, 3, 5])), float(rng.choice([0.6, 1.0])), float(rng.choice([0.3, 0.5, 1.0])))
+        want = _ride_python(R, W, row, beams, body, *args)
+        got = ku.ride_window(R, W, row, beams, np.zeros(0, dtype=np.bool_) if body is None else body,
+                             body is not None, *args)
+        assert got[0] == want[0], (rep, got, want)
+        assert _bits([got[1], got[2]]) == _bits([want[1], want[2]]), (rep, got, want)
+        seen.add(got[0])
+    assert seen == {ku.RIDE_FEW, ku.RIDE_FAR, ku.RIDE_OFF_BODY, ku.RIDE_SHORT, ku.RIDE_OUT, ku.RIDE_JUDGE}

@@ -297,3 +297,76 @@ def fragment_hosts_rows(px: np.ndarray, py: np.ndarray, start: np.ndarray, npts:
         ts1[i] = G[k, G_SIZE1]
     return fragment_hosts(px, py, start, npts, det, tx, ty, tth, ts0, ts1, margin)
 
+
+
+#: outcomes of :func:`ride_window` (``Tracker._rides_with_laser``'s tests, in their order)
+RIDE_FEW = 0  # fewer than ride_updates entries in the window: it cannot ride
+RIDE_FAR = 1  # its last laser-frame centre farther than ride_max_range from the laser
+RIDE_OFF_BODY = 2  # fewer than half its beams near the robot's body (or none)
+RIDE_SHORT = 3  # fewer than ride_updates entries within ride_time, or spanning less than half of it
+RIDE_OUT = 4  # one of those entries' laser-frame centres beyond ride_max_range
+RIDE_JUDGE = 5  # judged by the spread and the motion returned
+
+
+@njit(cache=True)
+def ride_window(R: np.ndarray, W: np.ndarray, row: int, beams: np.ndarray, body_near: np.ndarray, has_body: bool,
+                ride_updates: int, ride_r: float, ride_time: float) -> tuple:
+    """``Tracker._rides_with_laser``'s arithmetic on row ``row`` of the riding windows (``R`` (rows, L, 5): laser-frame
+    x, y, map-frame x, y (m), stamp (s) per update, oldest first; ``W[row, 1]`` entries) in one call: (outcome, spread,
+    moved) with the outcome one of ``RIDE_*`` — its tests in order, the first that stops it — and, for
+    :data:`RIDE_JUDGE`, the largest distance of the last n laser-frame centres from their mean (m) and the map-frame
+    distance between the first and last of them (m), n the entries within ``ride_time`` (s) of the last one.
+    ``beams``: the track's beams in this scan; ``body_near`` (scan beams,) bool: near the robot's body, read only
+    with ``has_body``; ``ride_r``: ride_max_range, m. The former NumPy forms, operation for operation: ``np.hypot`` is
+    libm's ``hypot`` as numba's; the mean over the entries NumPy's axis-0 reduction (the rows added in order from the
+    first, then divided by n); a largest value NaN if any is (NumPy's ``max``)."""
+    m = W[row, 1]
+    if m < ride_updates:
+        return RIDE_FEW, 0.0, 0.0
+    lx_last = R[row, m - 1, 0]
+    ly_last = R[row, m - 1, 1]
+    if lx_last * lx_last + ly_last * ly_last > ride_r * ride_r:
+        return RIDE_FAR, 0.0, 0.0
+    if has_body:
+        nb = beams.shape[0]
+        if nb == 0:
+            return RIDE_OFF_BODY, 0.0, 0.0
+        cnt = 0
+        for i in range(nb):
+            if body_near[beams[i]]:
+                cnt += 1
+        if cnt / nb < 0.5:
+            return RIDE_OFF_BODY, 0.0, 0.0
+    t_end = R[row, m - 1, 4]
+    n = 0
+    for i in range(m):
+        if t_end - R[row, i, 4] <= ride_time:
+            n += 1
+    if n < ride_updates or t_end - R[row, m - n, 4] < 0.5 * ride_time:
+        return RIDE_SHORT, 0.0, 0.0
+    a = m - n
+    top = 0.0
+    for i in range(a, m):
+        h = np.hypot(R[row, i, 0], R[row, i, 1])
+        if i == a or h > top or h != h:
+            top = h
+        if top != top:
+            break
+    if top > ride_r:
+        return RIDE_OUT, 0.0, 0.0
+    sx = R[row, a, 0]
+    sy = R[row, a, 1]
+    for i in range(a + 1, m):
+        sx += R[row, i, 0]
+        sy += R[row, i, 1]
+    mx = sx / n
+    my = sy / n
+    spread = 0.0
+    for i in range(a, m):
+        h = np.hypot(R[row, i, 0] - mx, R[row, i, 1] - my)
+        if i == a or h > spread or h != h:
+            spread = h
+        if spread != spread:
+            break
+    moved = np.hypot(R[row, m - 1, 2] - R[row, a, 2], R[row, m - 1, 3] - R[row, a, 3])
+    return RIDE_JUDGE, spread, moved

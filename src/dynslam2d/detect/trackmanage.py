@@ -8,9 +8,17 @@ import math
 
 import numpy as np
 
-from dynslam2d.detect.kernels_update import manage_speed_rows
+from dynslam2d.detect.kernels_update import RIDE_FAR, RIDE_JUDGE, RIDE_OFF_BODY, manage_speed_rows, ride_window
 from dynslam2d.detect.tracktable import _NO_BEAMS, _TWO_PI, COASTING, CONFIRMED, TENTATIVE, _Track
 from dynslam2d.types import Pose2D, wrap_angle
+
+_NO_BODY = np.zeros(0, dtype=np.bool_)  # (ride_window's body beams when no body was found: never read)
+
+
+def _fast_reason_texts(nsus: int) -> tuple[str, ...]:
+    """The reasons of a track not in M that has been faster than v_min for 0 … ``nsus`` − 1 of the ``nsus``
+    (sustain_updates) updates it needs, by that count (the same texts every scan: formatted once per tracker)."""
+    return tuple(f"not in M: speed > v_min for {kfast}/{nsus} updates" for kfast in range(nsus))
 
 
 class TrackManage:
@@ -52,10 +60,13 @@ class TrackManage:
         # (kernels.shape_update; a track not updated in this scan has its last push's, never read)
         nears = self._WN[:, 2].take(order).tolist()
         MEV, WN = self._MEV, self._WN
+        fast_reasons = self._fast_reasons
+        if len(fast_reasons) != nsus:
+            fast_reasons = self._fast_reasons = _fast_reason_texts(nsus)
         for k, speed, sig, bad, near in zip(tracks, speeds, sigs, bads, nears):
             kid = k.id
             is_upd = kid in updated
-            if kid in merged and not is_upd and k.in_m:
+            if merged and kid in merged and not is_upd and k.in_m:  # (merged: empty in most scans)
                 k.in_m = False
                 k.merged = True
                 k.fast = 0
@@ -145,7 +156,7 @@ class TrackManage:
                         # (_dynamic's outcome for a track not in M, faster than v_min with a certain velocity, not yet
                         # for sustain_updates updates and no person test (person_streak below person_sustain_updates):
                         # the second most common reason, inline; its tests before this one do not apply)
-                        k.reason = f"not in M: speed > v_min for {kfast}/{nsus} updates"
+                        k.reason = fast_reasons[kfast]  # (0 ≤ kfast < nsus here)
                     else:
                         self._dynamic(k, speed, sig, t)
                 if mem:
@@ -160,6 +171,9 @@ class TrackManage:
             self._free_rows.extend(gone)
             self._order = None
         self._tracks = keep
+
+    # (_fast_reason_texts(sustain_updates): the tracker's own from its first _manage on)
+    _fast_reasons: tuple[str, ...] = ()
 
     def _probation_fails(self, k: _Track) -> bool:
         """End the probation of ``k`` (in M, re-acquired after a gap, with ``sustain_updates`` free-space fractions):
@@ -409,28 +423,16 @@ class TrackManage:
         the spread, over its updates of the last ``ride_time`` seconds (at least ``ride_updates`` of them,
         spanning at least half of it): it moves with the robot (its body)."""
         tc = self.config.tracker
-        ride = self._ride(k)
-        if ride.shape[0] < tc.ride_updates:
+        # (the window's tests and its spread and motion in one kernel call: the former NumPy forms' floats;
+        # docs/speed.md, pass mgr32)
+        body = self._body_near
+        outcome, spread, moved = ride_window(self._RIDE, self._WN, k.row, k.beams,
+                                             _NO_BODY if body is None else body, body is not None,
+                                             int(tc.ride_updates), float(tc.ride_max_range), float(tc.ride_time))
+        if outcome != RIDE_JUDGE:
+            if outcome == RIDE_FAR or outcome == RIDE_OFF_BODY:
+                k.rode = False  # far from the laser (most tracks), or not where the robot's body was found
             return False
-        lx_last, ly_last = ride[-1, :2].tolist()
-        if lx_last * lx_last + ly_last * ly_last > tc.ride_max_range * tc.ride_max_range:
-            k.rode = False
-            return False  # far from the laser (most tracks): no arrays built
-        nb = k.beams.shape[0]
-        if self._body_near is not None and (nb == 0 or np.count_nonzero(self._body_near[k.beams]) / nb < 0.5):
-            k.rode = False
-            return False  # not where the robot's body was found
-        stamps = ride[:, 4].tolist()
-        t_end = stamps[-1]
-        n = sum(1 for e in stamps if t_end - e <= tc.ride_time)
-        if n < tc.ride_updates or t_end - stamps[-n] < 0.5 * tc.ride_time:
-            return False
-        lx = np.array(ride[-n:, :2])  # (C-ordered copies: the former arrays of the entries' lists)
-        if float(np.hypot(lx[:, 0], lx[:, 1]).max()) > tc.ride_max_range:
-            return False
-        spread = float(np.hypot(*(lx - lx.mean(axis=0)).T).max())
-        mx = np.array(ride[-n:, 2:4])
-        moved = float(np.hypot(*(mx[-1] - mx[0])))
         # with a motionless laser the two frames agree: only motion far beyond the laser-frame spread rides;
         # once found riding, a track keeps riding until its laser-frame spread clearly exceeds the tolerance
         # (a circle fit replacing a rectangle shifts the centre of a body part by a few cm)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dynslam2d.detect.frozen import fast_init
+from dynslam2d.detect.frozen import _layout_twin_ok, fast_init
 from dynslam2d.detect.kernels_update import report_rows
 from dynslam2d.detect.layout import KIND_CIRCLE, KIND_NAMES
 from dynslam2d.detect.tracktable import _HALF_PI, COASTING, CONFIRMED
@@ -13,6 +13,19 @@ from dynslam2d.types import Box, Track, wrap_angle
 
 _make_track = fast_init(Track)  # Track(...) / Box(...) without the frozen dataclass __init__ (detect/frozen.py)
 _make_box = fast_init(Box)
+
+# The live tracks' reports are built in _report's loop itself, fast_init's way without its two calls per track: an
+# instance of an unfrozen twin class with the same slots, its fields stored by plain attribute stores, then made an
+# instance of Track / Box by ``__class__`` assignment (the same objects, frozen afterwards; docs/speed.md, pass
+# mgr32). Only while the two classes have exactly the slots that loop stores (every field, none left unset) and
+# Python allows the assignment; otherwise the loop calls the constructors above.
+_TRACK_SLOTS = ("id", "state", "stamp", "box", "velocity", "covariance", "age", "hits", "misses", "kind", "in_m",
+                "m_reason", "beams", "n_points", "remembered")
+_BOX_SLOTS = ("px", "py", "theta", "length", "width")
+_INLINE = (_make_track is not Track and _make_box is not Box and tuple(Track.__slots__) == _TRACK_SLOTS
+           and tuple(Box.__slots__) == _BOX_SLOTS and _layout_twin_ok(Track) and _layout_twin_ok(Box))
+_TrackTwin = type("_TrackTwin", (), {"__slots__": _TRACK_SLOTS})
+_BoxTwin = type("_BoxTwin", (), {"__slots__": _BOX_SLOTS})
 
 
 class TrackReport:
@@ -31,13 +44,50 @@ class TrackReport:
         kinds = kinds.tolist()
         no_beams = np.zeros(0, dtype=np.int64)
         out = []
-        append, make_track, make_box, names = out.append, _make_track, _make_box, KIND_NAMES  # (locals: per track)
+        append, names = out.append, KIND_NAMES  # (locals: per track)
         # (the boxes' columns as five lists: the same floats as boxes.tolist()'s rows, without a list per track)
-        for k, px, py, theta, length, width, kd, vel, cov in zip(tracks, *boxes.T.tolist(), kinds, V, P):
-            beams = k.beams if k.id in updated else no_beams
-            in_m = k.in_m
-            append(make_track(k.id, k.state, t, make_box(px, py, theta, length, width), vel, cov, t - k.born, k.hits,
-                              k.misses, names[kd], in_m, k.reason, beams, len(beams), k.remembered and in_m))
+        columns = zip(tracks, *boxes.T.tolist(), kinds, V, P)
+        if not _INLINE:
+            make_track, make_box = _make_track, _make_box
+            for k, px, py, theta, length, width, kd, vel, cov in columns:
+                beams = k.beams if k.id in updated else no_beams
+                in_m = k.in_m
+                append(make_track(k.id, k.state, t, make_box(px, py, theta, length, width), vel, cov, t - k.born,
+                                  k.hits, k.misses, names[kd], in_m, k.reason, beams, len(beams),
+                                  k.remembered and in_m))
+            return out
+        # the same objects built in place (_INLINE above): every slot of _TRACK_SLOTS / _BOX_SLOTS stored, in order
+        new, track_twin, box_twin, track_cls, box_cls = object.__new__, _TrackTwin, _BoxTwin, Track, Box
+        for k, px, py, theta, length, width, kd, vel, cov in columns:
+            b = new(box_twin)
+            b.px = px
+            b.py = py
+            b.theta = theta
+            b.length = length
+            b.width = width
+            b.__class__ = box_cls
+            r = new(track_twin)
+            r.id = kid = k.id
+            r.state = k.state
+            r.stamp = t
+            r.box = b
+            r.velocity = vel
+            r.covariance = cov
+            r.age = t - k.born
+            r.hits = k.hits
+            r.misses = k.misses
+            r.kind = names[kd]
+            r.in_m = in_m = k.in_m
+            r.m_reason = k.reason
+            if kid in updated:
+                r.beams = beams = k.beams
+                r.n_points = len(beams)
+            else:
+                r.beams = no_beams
+                r.n_points = 0
+            r.remembered = k.remembered and in_m
+            r.__class__ = track_cls
+            append(r)
         return out
 
     def _dormant_reports(self, t: float) -> list[Track]:
