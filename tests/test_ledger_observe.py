@@ -68,6 +68,20 @@ def _observe_ref(self: EvidenceLedger, tracks: list, removing: set, stamp: float
         self._oldest_ended = min((led.last_seen for led in self._ended.values()), default=math.inf)
 
 
+class _DictLedger(EvidenceLedger):
+    """The ledger with its standing boxes in a dict, ``{id: [box, t0, t1]}`` (pass ledger15's form; pass led32 keeps
+    them in id-indexed arrays)."""
+
+    _first = None  # (an attribute of the instance: shadows the property)
+
+    def __init__(self, *a, **kw) -> None:
+        super().__init__(*a, **kw)
+        self._first = {}
+
+    def _first_of(self, tid: int):
+        return self._first.get(tid)
+
+
 def _track(tid: int, state: str, stamp: float, x: float, y: float, v: float, size: float) -> Track:
     vel = np.array([v, 0.0]) if tid % 2 else np.array([0.0, -v])
     return Track(id=tid, state=state, stamp=stamp, box=Box(x, y, 0.3, size, 0.5 * size), velocity=vel,
@@ -85,9 +99,9 @@ def _state(led: EvidenceLedger, full: bool = True) -> tuple:
     """The ledger's whole state; without ``full``, only what does not wait for :meth:`EvidenceLedger._finish_ended`
     (the ended ledgers' ids and stamps, not their packed rows; not the counters)."""
     if not full:
-        return (list(led._first.items()), [(k, _ledger_state(v)) for k, v in led._ledgers.items()],
+        return (sorted(led._first.items()), [(k, _ledger_state(v)) for k, v in led._ledgers.items()],
                 [(k, v.last_seen, v.last_box, id(v.last_track)) for k, v in led._ended.items()], led._oldest_ended)
-    return (list(led._first.items()), [(k, _ledger_state(v)) for k, v in led._ledgers.items()],
+    return (sorted(led._first.items()), [(k, _ledger_state(v)) for k, v in led._ledgers.items()],
             [(k, _ledger_state(v)) for k, v in led._ended.items()], led._oldest_ended, dict(led.stats))
 
 
@@ -98,7 +112,7 @@ def test_observe_keeps_the_same_state_as_pass_ledger15s(seed: int, monkeypatch) 
         monkeypatch.setattr(er, "_END_BATCH", 3)
     cfg = MemoryConfig(ledger_keep_s=float(rng.choice([0.5, 2.0, 600.0])), link_margin=0.5, stand_speed=0.25)
     new = EvidenceLedger(cfg, 0.1, 30.0)
-    ref = EvidenceLedger(cfg, 0.1, 30.0)
+    ref = _DictLedger(cfg, 0.1, 30.0)
     pool: dict[int, list] = {}  # id → [state, x, y, standing, size]
     next_id = 1
     stamp = 0.0
@@ -249,7 +263,7 @@ def test_new_ledger_sets_every_field_as_the_dataclass_does() -> None:
         t = _track(tid, "tentative", 0.1 * tid, *rng.uniform(-5, 5, 2).tolist(), float(rng.uniform(0, 2)),
                    float(rng.uniform(0.1, 3)))
         if tid % 3:
-            led._first[tid] = [(float(tid), -1.0, 0.25 * tid), 0.05 * tid, 0.1 * tid]
+            led._set_first(tid, (float(tid), -1.0, 0.25 * tid), 0.05 * tid, 0.1 * tid)
         n_lv = int(rng.integers(1, 5))
         got = led._new_ledger(t, t.stamp, n_lv)
         box, t0, _ = led._first.get(tid) or (er._box_key(t), t.stamp, t.stamp)
@@ -258,3 +272,40 @@ def test_new_ledger_sets_every_field_as_the_dataclass_does() -> None:
             assert getattr(got, f) == getattr(want, f) and type(getattr(got, f)) is type(getattr(want, f)), f
         made.append(got)
     assert len({id(x.ent) for x in made}) == len({id(x.kb) for x in made}) == len(made)
+
+
+@pytest.mark.parametrize("scene", ["sim:stop-and-go", "sim:crowd"])
+def test_observe_with_the_tracker_rows_keeps_the_boxes_of_the_reports(scene: str) -> None:
+    """In the pipeline, ``observe`` reads the live reports' centres and velocities from the tracker's state rows
+    (pass led32: ``ledgerkernels.stand_marks``): at every scan those rows hold each live report's box centre and
+    velocity, and the standing boxes are those of a ledger that reads the reports themselves (the kernel's other
+    input) and of one with pass ledger15's dict form — new boxes, stays, moves and the dormant reports included."""
+    from dynslam2d.inputs import open_source
+    from dynslam2d.pipeline import Pipeline
+
+    p = Pipeline()
+    led = p.ledger
+    plain = EvidenceLedger(led.config, led.laser_min_dist, led.laser_max_dist)
+    ref = _DictLedger(led.config, led.laser_min_dist, led.laser_max_dist)
+    seen = {"rows": 0, "other": 0, "stays": 0}
+    observe = led.observe
+
+    def checked(tracks, removing, stamp, states=None):
+        X, rows = states
+        n = rows.shape[0]
+        assert n <= len(tracks)
+        want = [(t.box.px, t.box.py, *t.velocity.tolist()) for t in tracks[:n]]
+        assert X[rows].tolist() == [list(w) for w in want]
+        seen["rows"] += n
+        seen["other"] += len(tracks) - n
+        observe(tracks, removing, stamp, states)
+        plain.observe(tracks, removing, stamp)
+        _observe_ref(ref, tracks, set(removing), stamp)
+        got = led._first
+        assert got == plain._first == dict(sorted(ref._first.items()))
+        seen["stays"] += sum(b[2] > b[1] for b in got.values())
+
+    led.observe = checked
+    for scan in open_source(scene, seed=5, duration=12.0):
+        p.process(scan)
+    assert seen["rows"] > 100 and seen["stays"] > 50, seen

@@ -78,6 +78,9 @@ for _a in (_EMPTY_I, _EMPTY_F, _EMPTY_B, _EMPTY_I4, _EMPTY_I5):
 _FUSED = 3
 _NO_F32 = np.zeros((0, 0), dtype=np.float32)
 _NO_I32 = np.zeros((0, 0), dtype=np.int32)
+#: empty inputs of ``stand_marks`` (writable: its signature's arrays are; it only reads them)
+_NO_X = np.zeros((0, 4))
+_NO_IDS = np.zeros(0, dtype=np.int64)
 
 
 #: slam/ledgerkernels.py once imported (at first use, :func:`_kernels`): its explicit signatures compile (or load from
@@ -540,8 +543,13 @@ class EvidenceLedger:
         #: batches by :meth:`_finish_ended`)
         self._to_pack: list[_Ledger] = []
         self._to_count: list[_Ledger] = []
-        #: live track id → [box where it stands, stamp it began standing there, last stamp it stood there]
-        self._first: dict[int, list] = {}
+        #: the standing boxes, id-indexed (pass led32; :meth:`observe`, ``ledgerkernels.stand_marks``): row ``id`` =
+        #: (centre x, y, half size of the box where the track stands (m, map frame), stamp it began standing there,
+        #: last stamp it stood there (s)), valid when ``_mark[id]`` is the number of the last :meth:`observe` call,
+        #: ``_obs`` (every track of that call's reports has one; :meth:`_first_of` reads them)
+        self._F = np.zeros((0, 5))
+        self._mark = np.zeros(0, dtype=np.int64)
+        self._obs = 1
         self._rs: np.ndarray | None = None  # the levels' cell sides, m (of the levels list ``_rs_of``)
         self._rs_of: list | None = None
         #: absolute finest-level cells whose evidence was erased (for map.png), with the count of events
@@ -695,7 +703,7 @@ class EvidenceLedger:
         tid = t.id
         b = t.box
         here = (float(b.px), float(b.py), 0.5 * float(max(b.length, b.width)))  # (_box_key, inlined)
-        box, t0, _ = self._first.get(tid) or (here, stamp, stamp)
+        box, t0, _ = self._first_of(tid) or (here, stamp, stamp)
         led = _new(_Ledger)
         led.id = tid
         led.first_box = box
@@ -825,40 +833,90 @@ class EvidenceLedger:
         """Count the new cells of ``led``, a ledger that is dropped, as :meth:`_fold` would."""
         self.stats["cells_recorded"] += led.new_cells()
 
-    def observe(self, tracks: list[Track], removing: set[int], stamp: float) -> None:
-        """Keep each live track's last box; move ledgers of ended tracks aside; drop old ones."""
-        reach = self.config.link_margin + 0.5
-        stand = self.config.stand_speed
-        first = self._first
+    def _first_of(self, tid: int) -> tuple[tuple[float, float, float], float, float] | None:
+        """Where live track ``tid`` stands as of the last :meth:`observe`: ((centre x, y, half size) m, map frame,
+        stamp it began standing there, last stamp it stood there, s); None if it was not in that call's reports."""
+        if 0 <= tid < self._mark.shape[0] and self._mark[tid] == self._obs:
+            x, y, h, t0, t1 = self._F[tid].tolist()
+            return (x, y, h), t0, t1
+        return None
+
+    @property
+    def _first(self) -> dict[int, list]:
+        """The standing boxes as ``{id: [(x, y, half size), t0, t1]}`` in id order (for tests and inspection)."""
+        live = np.flatnonzero(self._mark == self._obs).tolist()
+        return {tid: list(self._first_of(tid)) for tid in live}
+
+    def _set_first(self, tid: int, box: tuple[float, float, float], t0: float, t1: float) -> None:
+        """Set live track ``tid``'s standing box (as :meth:`observe` would have; for tests)."""
+        self._room(tid + 1)
+        self._F[tid] = (*box, t0, t1)
+        self._mark[tid] = self._obs
+
+    def _room(self, n: int) -> None:
+        """Make the id-indexed standing boxes hold ids below ``n`` (at least doubling)."""
+        cap = self._mark.shape[0]
+        if n > cap:
+            cap = max(n, 2 * cap, 64)
+            F = np.zeros((cap, 5))
+            F[:self._F.shape[0]] = self._F
+            mark = np.zeros(cap, dtype=np.int64)
+            mark[:self._mark.shape[0]] = self._mark
+            self._F, self._mark = F, mark
+
+    def observe(self, tracks: list[Track], removing: set[int], stamp: float,
+                states: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """Keep each live track's last box; move ledgers of ended tracks aside; drop old ones.
+
+        ``states``: the tracker's state array and the rows of its live reports, ``(X, rows)``
+        (``Tracker._X``, ``Tracker._rows()``; the first ``len(rows)`` of ``tracks`` are those reports, in that order,
+        each box centre and velocity the values of its row: x, y (m), vx, vy (m/s), map frame); None: read from
+        the reports themselves."""
+        lk = _lk or _kernels()
+        ids = [t.id for t in tracks]
+        nr = 0
+        if states is not None:
+            X, rows = states
+            nr = rows.shape[0]
+            if nr > len(tracks):  # (not the reports of these rows)
+                nr = 0
+        if not nr:
+            X, rows = _NO_X, _NO_IDS
+        # the other reports (the tracker's dormant ones, or all without ``states``): centre and velocity as rows
+        if len(tracks) > nr:
+            E = np.array([(t.box.px, t.box.py, *t.velocity.tolist()) for t in tracks[nr:]], dtype=np.float64)
+        else:
+            E = _NO_X
+        ida = np.array(ids, dtype=np.int64)
+        rm = np.fromiter(removing, np.int64, len(removing)) if removing else _NO_IDS
+        self._obs = c = self._obs + 1
+        # (one kernel call where the per-track test cost ≈ 0.45 µs a track in Python, pass led28)
+        args = (X, rows, E, ida, rm)
+        cfg = self.config
+        new = lk.stand_marks(*args, self._F, self._mark, c, stamp, cfg.stand_speed, cfg.link_margin + 0.5)
+        if new.shape[0] and new[0] < 0:
+            if new[0] == -1:
+                raise ValueError("track ids must not be negative")
+            self._room(int(-1 - new[0]))
+            new = lk.stand_marks(*args, self._F, self._mark, c, stamp, cfg.stand_speed, cfg.link_margin + 0.5)
+        if new.shape[0]:  # (a new standing box: its half size, _box_key's)
+            F = self._F
+            for i in new.tolist():
+                b = tracks[i].box
+                F[ids[i], 2] = 0.5 * float(max(b.length, b.width))
         ledgers = self._ledgers
-        hypot = math.hypot
-        for t in tracks:  # (one pass: where each track stands, and its ledger's last sight)
-            tid = t.id
-            a = first.get(tid)
-            out = tid not in removing
-            if a is None:
-                first[tid] = [_box_key(t), stamp, stamp]
-            elif out:
-                vx, vy = t.velocity.tolist()  # (unpacked: a star call of the list costs ≈ 0.1 µs more per track)
-                if hypot(vx, vy) < stand:
-                    b, f = t.box, a[0]
-                    if hypot(b.px - f[0], b.py - f[1]) <= reach:
-                        a[2] = stamp  # still standing where it stood
-                    else:
-                        first[tid] = [_box_key(t), stamp, stamp]  # standing at a new place
-            if out:
-                led = ledgers.get(tid)
-                if led is not None:
-                    if led.m_start is not None:  # out of the removal set (again); skip and linked are only set
-                        led.m_start, led.skip, led.linked = None, False, False  # (with m_start)
-                    led.last_track = t  # (its box becomes last_box when the track ends)
-                    led.last_seen = stamp
-                    if not led.confirmed and t.state != "tentative":
-                        led.confirmed = True
-        live = {t.id for t in tracks}
-        if len(first) > len(live):  # (deleted in place: a third of a rebuilt dict's time; only get reads it)
-            for tid in first.keys() - live:
-                del first[tid]
+        for t, tid in zip(tracks, ids):  # (each ledger's last sight)
+            if tid in removing:
+                continue
+            led = ledgers.get(tid)
+            if led is not None:
+                if led.m_start is not None:  # out of the removal set (again); skip and linked are only set
+                    led.m_start, led.skip, led.linked = None, False, False  # (with m_start)
+                led.last_track = t  # (its box becomes last_box when the track ends)
+                led.last_seen = stamp
+                if not led.confirmed and t.state != "tentative":
+                    led.confirmed = True
+        live = set(ids)
         for tid in [i for i in ledgers if i not in live]:  # (in the ledgers' order)
             led = ledgers.pop(tid)
             if led.last_track is not None:
@@ -921,7 +979,7 @@ class EvidenceLedger:
             x, y = float(t.box.px), float(t.box.py)
             if led.m_start is None:
                 led.m_start = (x, y)
-                (fx, fy, fh), f_t, last_t = self._first.get(t.id, (led.first_box, led.first_t, led.first_t))
+                (fx, fy, fh), f_t, last_t = self._first_of(t.id) or (led.first_box, led.first_t, led.first_t)
                 led.first_box, led.first_t = (fx, fy, fh), f_t
                 # only what stood before it moved wrote evidence worth erasing (a person born walking enters
                 # M within a second: its few early hits are left to the clean-up pass), and only it may be
@@ -1027,7 +1085,8 @@ class EvidenceLedger:
         self._ended = {}
         self._to_pack = []
         self._to_count = []
-        self._first = {}
+        self._F = np.zeros((0, 5))
+        self._mark = np.zeros(0, dtype=np.int64)
         self._oldest_ended = math.inf
         self.erased_beams = []
 

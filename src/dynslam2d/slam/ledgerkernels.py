@@ -18,6 +18,8 @@ they replaced computed (``tests/test_ledger_kernels.py`` checks them against it 
   array indices (−1 outside);
 * :func:`update_rows`: after the update, the rows (key, update index before, after, added log-odds' bits) of the
   cells the update changed, and the per-track groups of those rows;
+* :func:`stand_marks`: the per-scan standing test of ``EvidenceLedger.observe`` over the tracker's state rows
+  (pass led32; one specialisation, declared);
 * :func:`record_cells` = beam_owners, the distinct track ids, scan_cells, a radix sort, unpack_cells, the reads of
   three levels and kept_beams; :func:`level_rows` = update_rows of three levels, re-reading by cell, the rows
   written in (track, level) order with their level as a fifth row.
@@ -35,6 +37,7 @@ import math
 import numpy as np
 from numba import types
 
+from dynslam2d.detect.kernels_update import py_hypot
 from dynslam2d.jitbox import float_bits, float_from_bits, njit  # numba's njit; bit casts lowered in place
 
 _KEY_SHIFT = 4294967296
@@ -630,3 +633,85 @@ def level_rows(logodds, uidx, i0, j0, n_lv, blk, small):  # pragma: no cover - n
             j += 1
     t_bnd[n_t] = m
     return rows, t_id[:n_t], t_bnd[:n_t + 1], t_lv[:n_t]
+
+
+_F2 = types.float64[:, ::1]
+#: :func:`stand_marks`' signature (one specialisation, compiled or loaded when the module is imported)
+_STAND_SIG = _I1(_F2, _I1, _F2, _I1, _I1, _F2, _I1, types.int64, types.float64, types.float64, types.float64)
+
+
+@njit(_STAND_SIG, cache=True)
+def stand_marks(X, rows, E, ids, rm, F, mark, c, stamp, stand, reach):  # pragma: no cover - numba
+    """``EvidenceLedger.observe``'s standing test of one scan's reports, in report order (slam/erasure.py).
+
+    Report ``i`` (id ``ids[i]``) is at ``X[rows[i], 0:2]`` with velocity ``X[rows[i], 2:4]`` for ``i`` below
+    ``rows``' length (the tracker's state rows: a live report's box centre and velocity are that row's values),
+    else at ``E[i - len(rows), 0:2]`` with velocity ``E[…, 2:4]`` (m, m/s, map frame). The standing boxes are
+    id-indexed: ``F[id]`` = (centre x, y, half size, stamp it began standing there, last stamp it stood there),
+    valid when ``mark[id] >= c - 1`` (it was reported in the previous call, ``c - 1``, or earlier in this one).
+    In the order of the reports: a report without a standing box gets one where it is (``F[id, 0:2]``, both
+    stamps ``stamp``; its half size is the caller's to write: the indices of those reports are returned); one
+    not in the removal set ``rm`` (ids) that is slower than ``stand`` (m/s) stood there still (the last stamp
+    set to ``stamp``) when its centre is within ``reach`` (m) of the box's, else starts standing where it is
+    (as a new one). Speeds and distances are Python's ``math.hypot`` bit for bit (``kernels_update.py_hypot``).
+    Every report's ``mark`` becomes ``c``. Returns the indices of the reports given a new box; ``[-1]`` for a
+    negative id and ``[-1 - n]`` when ``F`` and ``mark`` need ``n`` rows (nothing is written then)."""
+    n = ids.shape[0]
+    nr = rows.shape[0]
+    cap = mark.shape[0]
+    hi = -1
+    for i in range(n):
+        if ids[i] < 0:
+            out = np.empty(1, dtype=np.int64)
+            out[0] = -1
+            return out
+        hi = max(hi, ids[i])
+    if hi >= cap:
+        out = np.empty(1, dtype=np.int64)
+        out[0] = -2 - hi
+        return out
+    new = np.empty(n, dtype=np.int64)
+    m = 0
+    for i in range(n):
+        tid = ids[i]
+        if i < nr:
+            k = rows[i]
+            x = X[k, 0]
+            y = X[k, 1]
+            vx = X[k, 2]
+            vy = X[k, 3]
+        else:
+            x = E[i - nr, 0]
+            y = E[i - nr, 1]
+            vx = E[i - nr, 2]
+            vy = E[i - nr, 3]
+        start = mark[tid] < c - 1
+        if not start:
+            out_of_m = True
+            for j in range(rm.shape[0]):
+                if rm[j] == tid:
+                    out_of_m = False
+                    break
+            if out_of_m:
+                # the speed, then (slower than stand) the distance to the box: one call site of py_hypot (each site
+                # inlines its code: ≈ 0.15–0.3 s of cold compile a site)
+                a, b = vx, vy
+                for q in range(2):
+                    h = py_hypot(a, b)
+                    if q == 0:
+                        if not h < stand:
+                            break
+                        a, b = x - F[tid, 0], y - F[tid, 1]
+                    elif h <= reach:
+                        F[tid, 4] = stamp  # still standing where it stood
+                    else:
+                        start = True  # standing at a new place
+        if start:
+            F[tid, 0] = x
+            F[tid, 1] = y
+            F[tid, 3] = stamp
+            F[tid, 4] = stamp
+            new[m] = i
+            m += 1
+        mark[tid] = c
+    return new[:m]
