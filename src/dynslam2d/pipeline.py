@@ -301,7 +301,7 @@ class Pipeline:
             removing = {t.id for t in moving} if filter_active(self.config.filter, len(moving)) else set()
             # (the tracker's state rows of its live reports: the ledger's standing test reads them in one kernel call)
             trk = self.tracker
-            led.observe(tracks, removing, scan.stamp, (trk._X, trk._rows()))
+            led.observe(tracks, removing, scan.stamp, trk.report_states())
             led.erase_entering(tracks, removing, scan.stamp, self.slam.map)
             if led.erased_beams:  # the loop closure's keyframes leave them out too (re-render, clean-up recount)
                 if self.loops is not None:

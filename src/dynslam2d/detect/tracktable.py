@@ -311,6 +311,13 @@ class TrackRows:
             self._stacked = (self._X.take(order, axis=0), self._P.take(order, axis=0))  # (X[order]'s values)
         return self._stacked
 
+    def report_states(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(X, rows)``: the tracker's Kalman state array ``X`` (m, 4) — [x, y, vx, vy] in the map frame, m and
+        m/s — and the int64 row of each live track in the order of the last :meth:`update`'s live reports, so that
+        ``X[rows[i]]`` is report i's centre and velocity. ``X`` is the tracker's own array, not a copy: read it
+        before the next update and do not write it (the ledger's standing test reads it in one kernel call)."""
+        return self._X, self._rows()
+
     def _rows(self) -> np.ndarray:
         """The state-array rows of the live tracks, in their order (int64)."""
         if self._order is None:
