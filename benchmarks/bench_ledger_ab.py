@@ -6,8 +6,10 @@ by pytest).
 scan by scan (which one goes first alternates), the first with the other file's ``EvidenceLedger`` (loaded as a
 module of its own, everything else this checkout's), and the thread CPU of each ledger method
 (``observe``, ``before_update``, ``after_update``, ``erase_entering``) is timed in place. Both ledgers' summaries
-must be equal at the end (the same counters: the two files record the same evidence). Printed: per method the
-median and mean µs of each side and their ratios, and the mean per scan of all four.
+must be equal at the end (the same counters: the two files record the same evidence). The kernels
+(``slam/ledgerkernels.py``) are this checkout's on both sides unless ``--kernels`` gives the other side the
+``ledgerkernels.py`` beside its file. Printed: per method the median and mean µs of each side and their ratios, and
+the mean per scan of all four.
 
 Two pipelines share one process: their caches evict each other's data, so the per-call figures run higher than
 in ``bench_pipeline_ab.py --parts``; and the garbage collector is the process's: its passes land in either side.
@@ -16,7 +18,7 @@ checkout at a time, or compare ``--gc`` runs of ``--only``). The scan loop runs 
 ``pipeline.run``'s loop (``bench_pipeline.scan_loop_gc``; none in a checkout before it).
 
     PYTHONPATH=src taskset -c 1 python benchmarks/bench_ledger_ab.py negative_2/right \\
-        --other <base>/src/dynslam2d/slam/erasure.py [--reps 2]
+        --other <base>/src/dynslam2d/slam/erasure.py [--reps 2] [--kernels]
     PYTHONPATH=src taskset -c 1 python benchmarks/bench_ledger_ab.py negative_2/right --only --gc
 """
 
@@ -39,12 +41,21 @@ WARMUP = 60
 METHODS = ("observe", "before_update", "after_update", "erase_entering")
 
 
-def _load(path: Path):
+def _load(path: Path, name: str = "erasure_other"):
     """The module at ``path`` (an ``erasure.py``), imported under a name of its own."""
-    spec = importlib.util.spec_from_file_location("erasure_other", path)
+    spec = importlib.util.spec_from_file_location(name, path)
     mod = importlib.util.module_from_spec(spec)
-    sys.modules["erasure_other"] = mod  # (dataclasses look their module up while the class is made)
+    sys.modules[name] = mod  # (dataclasses look their module up while the class is made)
     spec.loader.exec_module(mod)
+    return mod
+
+
+def _load_other(path: Path, kernels: bool):
+    """The other ``erasure.py``; with ``kernels``, its ledger reads the ``ledgerkernels.py`` beside it (imported
+    under a name of its own, numba's cache its own) instead of this checkout's."""
+    mod = _load(path)
+    if kernels:
+        mod._lk = _load(path.with_name("ledgerkernels.py"), "ledgerkernels_other")
     return mod
 
 
@@ -53,6 +64,8 @@ def main() -> None:
     ap.add_argument("input", choices=sorted(INPUTS))
     ap.add_argument("--other", type=Path, help="the other erasure.py")
     ap.add_argument("--only", action="store_true", help="this checkout's ledger alone (one pipeline)")
+    ap.add_argument("--kernels", action="store_true",
+                    help="the other side also with the ledgerkernels.py beside its erasure.py (else this checkout's)")
     ap.add_argument("--reps", type=int, default=1)
     ap.add_argument("--gc", action="store_true", help="also the garbage collector's passes and CPU")
     ap.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[2] / "shared" / "data")
@@ -66,7 +79,7 @@ def main() -> None:
 
     rel, topic = INPUTS[args.input]
     scans = list(open_source(rel if rel.startswith("sim:") else str(args.data / rel), topic))
-    sides = {"this": this} if args.only else {"other": _load(args.other), "this": this}
+    sides = {"this": this} if args.only else {"other": _load_other(args.other, args.kernels), "this": this}
     tn = time.thread_time_ns
     times: dict[tuple[str, str], list[int]] = {}
     gc_ns = [0, 0]
