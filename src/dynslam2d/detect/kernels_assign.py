@@ -32,25 +32,34 @@ def lsap(cost: np.ndarray) -> tuple:
     :data:`LSAP_INFEASIBLE` when no complete assignment has a finite cost (the index arrays are then empty). Crouse
     2016's shortest augmenting path, as SciPy implements it (module docstring). Written with ``np.empty`` and loops
     only (no ``np.full`` / ``np.argsort`` / slice assignment): each numpy helper a kernel uses is compiled once more
-    per signature on a cold run (issue 13 item 2). ``inline="always"``: compiled inside its one caller."""
+    per signature on a cold run (issue 13 item 2). The solver itself is :func:`lsap_flat` (inlined in each caller)."""
     nr0, nc0 = cost.shape
-    k = min(nr0, nc0)
-    a = np.empty(k, dtype=np.int64)
-    b = np.empty(k, dtype=np.int64)
-    if nr0 == 0 or nc0 == 0:
-        return LSAP_OK, a, b
     transpose = nc0 < nr0  # a tall matrix is solved transposed
-    if transpose:
-        nr, nc = nc0, nr0
-    else:
-        nr, nc = nr0, nc0
-    c = np.empty(nr * nc)  # (row-major, transposed for a tall matrix)
+    c = np.empty(nr0 * nc0)  # (row-major, transposed for a tall matrix)
     for i in range(nr0):
         for j in range(nc0):
             if transpose:
                 c[j * nr0 + i] = cost[i, j]
             else:
                 c[i * nc0 + j] = cost[i, j]
+    return lsap_flat(c, nr0, nc0)
+
+
+@njit(cache=True, inline="always")
+def lsap_flat(c: np.ndarray, nr0: int, nc0: int) -> tuple:
+    """:func:`lsap` of the (nr0, nc0) cost matrix given as ``c``: its entries row-major, transposed (column-major)
+    when the matrix is tall (nc0 < nr0), the layout the solver works in (``c`` is only read). For a caller that
+    builds the matrix entry by entry (:func:`assign_groups`): no second copy of it."""
+    k = min(nr0, nc0)
+    a = np.empty(k, dtype=np.int64)
+    b = np.empty(k, dtype=np.int64)
+    if nr0 == 0 or nc0 == 0:
+        return LSAP_OK, a, b
+    transpose = nc0 < nr0
+    if transpose:
+        nr, nc = nc0, nr0
+    else:
+        nr, nc = nr0, nc0
     for q in range(nr * nc):
         x = c[q]
         if x != x or x == -np.inf:
@@ -178,13 +187,20 @@ def assign_groups(ok: np.ndarray, d2: np.ndarray, firm: np.ndarray, big: float) 
                 ncol += 1
         if ncol == 0:
             continue
-        sub = np.empty((nrow, ncol))
+        # the group's cost matrix written straight in the solver's layout (lsap's copy of it, without a matrix
+        # before it: one (nrow, ncol) buffer less per group)
+        transpose = ncol < nrow
+        c = np.empty(nrow * ncol)
         for r in range(nrow):
             ti = rows[r]
             for q in range(ncol):
                 dj = cols[q]
-                sub[r, q] = d2[ti, dj] if ok[ti, dj] else big
-        status, rr, cc = lsap(sub)
+                x = d2[ti, dj] if ok[ti, dj] else big
+                if transpose:
+                    c[q * nrow + r] = x
+                else:
+                    c[r * ncol + q] = x
+        status, rr, cc = lsap_flat(c, nrow, ncol)
         if status != LSAP_OK:
             return status, ii[:0], jj[:0]
         for q in range(rr.shape[0]):
