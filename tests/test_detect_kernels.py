@@ -407,15 +407,30 @@ def test_merge_leg_pairs_matches_the_numpy_merge() -> None:
     want = _merge_numpy(first, second, px, py, beams, starts, npts, kinds, fits, lohi, rel)
     for g, w in zip(got, want):
         assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes()
-    # the tracker's one-dispatch form: leg_pairs' pairs, then the same merged arrays
-    both = merge_legs(px, py, beams, starts, npts, kinds, fits, lohi, rel, 0.35, 0.6)
-    assert len(both) == 12 and both[0].tolist() == first.tolist() and both[1].tolist() == second.tolist()
-    for g, w in zip(both[2:], want):
+    # the tracker's one-dispatch form: leg_pairs' pairs, then the same merged arrays, the persons' points (n, 2) and
+    # their map evidence, the point-weighted means of the legs' columns (Tracker._merge_legs' former per-pair Python)
+    mev = rng.random((3, 24))
+    both = merge_legs(px, py, beams, starts, npts, kinds, fits, lohi, rel, mev, 0.35, 0.6)
+    assert len(both) == 14 and both[0].tolist() == first.tolist() and both[1].tolist() == second.tolist()
+    for g, w in zip(both[2:12], want):
         assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes()
-    # no pair within reach: the argument arrays themselves come back, with empty pairs, indices and beams
-    none = merge_legs(px, py, beams, starts, npts, kinds, fits, lohi, rel, 0.35, 0.0)
-    assert none[0].shape == none[1].shape == none[2].shape == none[11].shape == (0,)
+    n0 = px.shape[0]
+    pts, mmev = both[12], both[13]
+    assert pts.tobytes() == np.column_stack((want[7][n0:], want[8][n0:])).tobytes()
+    nk = both[2].shape[0]
+    assert mmev.shape == (3, nk + first.shape[0])
+    for r, (a, b) in enumerate(zip(first.tolist(), second.tolist())):
+        na, nb = npts.item(a), npts.item(b)
+        for e in range(3):
+            assert mmev[e, nk + r] == (na * mev.item(e, a) + nb * mev.item(e, b)) / (na + nb)
+    # without a map: no evidence column
+    assert merge_legs(px, py, beams, starts, npts, kinds, fits, lohi, rel, np.empty((3, 0)), 0.35, 0.6)[13].shape \
+        == (3, 0)
+    # no pair within reach: the argument arrays themselves come back, with empty pairs, indices, beams and points
+    none = merge_legs(px, py, beams, starts, npts, kinds, fits, lohi, rel, mev, 0.35, 0.0)
+    assert none[0].shape == none[1].shape == none[2].shape == none[11].shape == (0,) and none[12].shape == (0, 2)
     assert all(a is b for a, b in zip(none[3:11], (kinds, fits, lohi, rel, starts, npts, px, py)))
+    assert none[13] is mev
 
 
 def test_lu_solve3_matches_lapack_and_flags_singular() -> None:

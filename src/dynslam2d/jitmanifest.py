@@ -45,7 +45,7 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.merge_legs',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
-     "Array(bool, 3, 'C'), float64, float64,)"),
+     "Array(bool, 3, 'C'), Array(float64, 2, 'C'), float64, float64,)"),
     ('dynslam2d.detect.kernels.measure_batch',
      "(Array(int64, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), "

@@ -362,18 +362,44 @@ def merge_leg_pairs(first: np.ndarray, second: np.ndarray, px: np.ndarray, py: n
 
 @njit(cache=True)
 def merge_legs(px: np.ndarray, py: np.ndarray, beams: np.ndarray, starts: np.ndarray, npts: np.ndarray,
-               kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray, leg_max_extent: float,
-               pair_distance: float) -> tuple:
+               kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray, mev: np.ndarray,
+               leg_max_extent: float, pair_distance: float) -> tuple:
     """``Tracker._merge_legs``'s two kernels in one dispatch (docs/speed.md, pass detp5): the pairs of
     :func:`leg_pairs` (``leg_max_extent``, ``pair_distance``; m) and, when there is one, :func:`merge_leg_pairs` of
-    them. Returns (first, second) followed by :func:`merge_leg_pairs`' ten results; without a pair the argument arrays
-    themselves (numba returns an argument as its own Python object) and empty index / beam arrays."""
+    them. Returns (first, second) followed by :func:`merge_leg_pairs`' ten results, the persons' points ``pts``
+    ((added, 2): ``px2``, ``py2`` after the first ``len(px)``, m) and the merged rows' map evidence ``mmev``
+    (3, nk + m): column nk + r of pair r is the point-weighted mean (na·e_a + nb·e_b) / (na + nb) of the legs'
+    columns of ``mev`` (the detections' (3, nd) map evidence; (3, 0) without a map, then ``mmev`` is (3, 0) too; the
+    kept rows' columns 0 … nk − 1 are not written: the kept detections read their own ``mev``). Without a pair the
+    argument arrays themselves (numba returns an argument as its own Python object; ``mev`` as ``mmev``) and empty
+    index / beam / point arrays (docs/speed.md, pass det33: the points and the evidence here, not per pair in
+    Python)."""
     first, second = leg_pairs(lohi, npts, fits, leg_max_extent, pair_distance)
     if first.shape[0] == 0:
-        return first, second, first, kinds, fits, lohi, rel, starts, npts, px, py, first
+        return first, second, first, kinds, fits, lohi, rel, starts, npts, px, py, first, np.empty((0, 2)), mev
     ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams = merge_leg_pairs(
         first, second, px, py, beams, starts, npts, kinds, fits, lohi, rel)
-    return first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams
+    n0 = px.shape[0]
+    added = mbeams.shape[0]
+    pts = np.empty((added, 2))
+    for i in range(added):
+        pts[i, 0] = px2[n0 + i]
+        pts[i, 1] = py2[n0 + i]
+    m = first.shape[0]
+    nk = ki.shape[0]
+    if mev.shape[1] == 0:
+        mmev = np.empty((3, 0))
+    else:
+        mmev = np.empty((3, nk + m))
+        for r in range(m):
+            a = first[r]
+            b = second[r]
+            na = npts[a]
+            nb = npts[b]
+            n = na + nb
+            for e in range(3):
+                mmev[e, nk + r] = (na * mev[e, a] + nb * mev[e, b]) / n
+    return first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams, pts, mmev
 
 
 @njit(cache=True)

@@ -32,6 +32,9 @@ from dynslam2d.detect.tracktable import _NO_IDX
 from dynslam2d.detect.vehicles import _NO_MAP, extent_limit
 from dynslam2d.types import Pose2D, Scan
 
+#: no map evidence (the leg merge's ``mev`` argument without a map: no column; shared, never written)
+_NO_MEV = np.zeros((3, 0))
+
 
 def _thin(depth_ratio: float, min_radius: float) -> float:
     """The short side (m) below which a cluster cannot be a circle: ``circle_min_depth_ratio`` · ``circle_min_radius``
@@ -141,38 +144,29 @@ class TrackDetect:
         detection, measured at the middle of the two legs with the point model. A leg swinging forward while
         the other stands does not move the person's centre by a full stride, so its speed does not jump.
         Returns the detection list and the per-detection batch arrays, merged pairs appended at the end (the
-        pairs and arrays by :func:`dynslam2d.detect.kernels.merge_legs`; ``beams``: the beams of ``px``, ``py``;
-        ``mev``: the detections' (3, nd) map evidence, or None without a map)."""
+        pairs, arrays, the persons' points and map evidence by :func:`dynslam2d.detect.kernels.merge_legs`;
+        ``beams``: the beams of ``px``, ``py``; ``mev``: the detections' (3, nd) map evidence, or None without a
+        map)."""
         fc = self.config.fit
         npts0 = npts
-        first, second, ki, kinds, fits, lohi, rel, starts, npts, px, py, mbeams = merge_legs(
-            px, py, beams, starts, npts, kinds, fits, lohi, rel, float(fc.leg_max_extent), float(fc.leg_pair_distance))
+        first, second, ki, kinds, fits, lohi, rel, starts, npts, px, py, mbeams, pts, mmev = merge_legs(
+            px, py, beams, starts, npts, kinds, fits, lohi, rel, _NO_MEV if mev is None else mev,
+            float(fc.leg_max_extent), float(fc.leg_pair_distance))
         m = first.shape[0]
         if m == 0:  # (the arrays are the arguments themselves)
             return dets, kinds, fits, lohi, rel, starts, npts, px, py
         new_dets = [dets[j] for j in ki.tolist()]
         row = len(new_dets)
-        n0 = px.shape[0] - mbeams.shape[0]
-        pts = np.empty((px.shape[0] - n0, 2))  # the persons' points, (n, 2) (np.column_stack's values)
-        pts[:, 0] = px[n0:]
-        pts[:, 1] = py[n0:]
-        # (the persons are rows row … of the merged arrays: their beams and points rows starts − n0 of mbeams / pts;
-        # centroid = circle centre = the legs' middle, lo / hi their box, no real bound, theta 0, kind point; their map
-        # evidence, point-weighted, in their columns of mmev, the kept detections keeping their own columns of mev).
-        # ScanDetection(arrays, row, (da, db), True) per pair, its slots set directly (as scan_detections does: no
-        # constructor call per pair); the free fraction is computed when read
-        mmev = None if mev is None else np.empty((3, row + m))
-        arrays = ScanArrays(mbeams, pts, n0, starts, npts, kinds, fits, lohi, rel, mmev)
+        # (the persons are rows row … of the merged arrays: their beams and points rows starts − n0 of mbeams / pts
+        # (the persons' points, (n, 2)); centroid = circle centre = the legs' middle, lo / hi their box, no real
+        # bound, theta 0, kind point; their map evidence, point-weighted, in their columns of mmev, the kept
+        # detections keeping their own columns of mev: all made by the kernel). ScanDetection(arrays, row, (da, db),
+        # True) per pair, its slots set directly (as scan_detections does: no constructor call per pair); the free
+        # fraction is computed when read
+        arrays = ScanArrays(mbeams, pts, px.shape[0] - mbeams.shape[0], starts, npts, kinds, fits, lohi, rel,
+                            None if mev is None else mmev)
         append, new, cls = new_dets.append, object.__new__, ScanDetection
         for a, b in zip(first.tolist(), second.tolist()):
-            if mmev is not None:
-                # (na·e_a + nb·e_b) / n per evidence row, on Python floats (a few pairs per scan: cheaper than the
-                # array expression's eight small operations)
-                na, nb = npts0.item(a), npts0.item(b)
-                n = na + nb
-                mmev[0, row] = (na * mev.item(0, a) + nb * mev.item(0, b)) / n
-                mmev[1, row] = (na * mev.item(1, a) + nb * mev.item(1, b)) / n
-                mmev[2, row] = (na * mev.item(2, a) + nb * mev.item(2, b)) / n
             det = new(cls)
             det._s = arrays
             det._j = row
