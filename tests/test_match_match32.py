@@ -104,7 +104,10 @@ def test_the_inlined_jump_test_is_between(monkeypatch: pytest.MonkeyPatch) -> No
     assert 10 < refused < 50
 
 
-def test_no_drop_views_are_all_false_shared_and_survive_growth() -> None:
+def test_no_drop_views_are_all_false_shared_and_survive_growth(monkeypatch) -> None:
+    # (a fresh cache: earlier tests may have filled the shared one's 64 entries with other beam counts)
+    monkeypatch.setattr(mt, "_NO_DROP_VIEWS", {})
+    monkeypatch.setattr(mt, "_NO_DROP", np.zeros(mt._NO_DROP.shape[0], dtype=np.bool_))
     a = mt.no_drop(361)
     assert a.shape == (361,) and a.dtype == np.bool_ and not a.any() and a.flags.c_contiguous
     assert mt.no_drop(361) is a
