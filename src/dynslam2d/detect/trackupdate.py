@@ -112,7 +112,7 @@ class TrackUpdate:
         self._update_tracks(pairs, dets, t, out, trows)
         return out
 
-    def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float,
+    def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[ScanDetection], t: float,
                        applied: list[bool], trows: np.ndarray) -> None:
         """The bookkeeping update of the tracks of ``pairs`` (track index, detection index; ``trows``: their rows of
         the state arrays) whose Kalman and shape results are already in their rows (k.x, k.P, k.g, k.gi) where
@@ -146,7 +146,7 @@ class TrackUpdate:
             # (the detection's rows of its scan's beams and points: ScanDetection.beams / points, from the batch)
             arrays = det._s
             a0 = starts[di] - arrays.off
-            n = npts[di]
+            npt = npts[di]
             # (the stored points before this update: their vacated-space fraction is computed when first read)
             # ((the list, first, end): the entries are never changed in place, so this is their snapshot)
             past = k.past
@@ -171,7 +171,7 @@ class TrackUpdate:
             if k.hist_n < window:  # (the M-of-N counts: only the first window is read)
                 k.hist_n += 1
                 k.hist_hits += 1
-            k.beams = arrays.beams[a0:a0 + n]
+            k.beams = arrays.beams[a0:a0 + npt]
             free = k.free
             # (vacated: this scan sees through its old points; computed when the entry is read, _free_values)
             # (the detection's own fraction too: det.free_fraction, computed when read)
@@ -180,7 +180,7 @@ class TrackUpdate:
                 del free[0]
             if max_age is not None:
                 past = k.past
-                past.append((t, arrays.pts, a0, n))  # (_past_entry of a scan detection, inline)
+                past.append((t, arrays.pts, a0, npt))  # (_past_entry of a scan detection, inline)
                 pa = k.past_a
                 n = len(past)
                 while pa < n and t - past[pa][0] > max_age:

@@ -869,7 +869,7 @@ class EvidenceLedger:
         """Keep each live track's last box; move ledgers of ended tracks aside; drop old ones.
 
         ``states``: the tracker's state array and the rows of its live reports, ``(X, rows)``
-        (``Tracker._X``, ``Tracker._rows()``; the first ``len(rows)`` of ``tracks`` are those reports, in that order,
+        (``Tracker.report_states()``; the first ``len(rows)`` of ``tracks`` are those reports, in that order,
         each box centre and velocity the values of its row: x, y (m), vx, vy (m/s), map frame); None: read from
         the reports themselves."""
         lk = _lk or _kernels()

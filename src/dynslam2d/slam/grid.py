@@ -300,7 +300,7 @@ class MultiResMap:
 
     @property
     def empty(self) -> bool:
-        return self.levels[0].empty
+        return self.levels[0].logodds.size == 0  # (the finest level's GridLevel.empty, read directly: every scan)
 
     @property
     def memory_bytes(self) -> int:

@@ -494,7 +494,7 @@ class HectorSlam:
                 predicted = None
             else:
                 start = predicted
-        first = self.map.levels[0].logodds.size == 0  # (MultiResMap.empty without its two property calls)
+        first = self.map.empty
         zero = np.zeros((3, 3))
         res = MatchResult(
             pose=start, start=start, _covariance=None, hessian=zero,
@@ -625,14 +625,13 @@ class HectorSlam:
         res.score = fit.score
         res.sigma2 = fit.cost / max(pts.shape[0] - 3, 1)
         sigma2 = c.covariance_sigma**2 if c.covariance_sigma is not None else res.sigma2
-        # (lazy; the finest level's cell side: MultiResMap.resolution without its property call)
-        res._covariance, res._covariance_of = None, (fit.hessian, sigma2, self.map.levels[0].resolution)
+        res._covariance, res._covariance_of = None, (fit.hessian, sigma2, self.map.resolution)  # lazy
 
     def _apply_prior_and_gate(self, res: MatchResult, pts: np.ndarray, prior: _Prior, stamp: float) -> None:
         """Degeneracy analysis of the match; the prior along degenerate directions; the motion gate."""
         c = self.config
         sq = self._sumsq
-        deg: Degeneracy = degeneracy(res.hessian, self.map.levels[0].resolution, pts, c.degeneracy_threshold,
+        deg: Degeneracy = degeneracy(res.hessian, self.map.resolution, pts, c.degeneracy_threshold,
                                      sq[1] if sq is not None and sq[0] is pts else None)
         # hysteresis: a degenerate direction stays degenerate until its ratio clearly rises above the threshold
         hi = _DEGENERACY_HYSTERESIS * c.degeneracy_threshold
@@ -942,7 +941,7 @@ class HectorSlam:
         """True on the first scan or once the pose moved beyond the distance / angle thresholds
         from the last map update (HectorSlamProcessor::update)."""
         last = self._last_map_pose
-        if last is None or self.map.levels[0].logodds.size == 0:  # (MultiResMap.empty without its property calls)
+        if last is None or self.map.empty:
             return True
         dth = _wrap(_wrap(-last.theta) + pose.theta)  # the θ of last.between(pose) (its x, y are not read)
         dist = math.hypot(pose.x - last.x, pose.y - last.y)
