@@ -21,6 +21,38 @@ def _fast_reason_texts(nsus: int) -> tuple[str, ...]:
     return tuple(f"not in M: speed > v_min for {kfast}/{nsus} updates" for kfast in range(nsus))
 
 
+# the reasons of a track not in M at most v_min by the speed rounded to 0.01 m/s, looked up instead of formatted when
+# v_min is at most this (m/s; _slow_reason_texts)
+_SLOW_TEXTS_MAX = 10.0
+
+
+def _slow_reason_texts(v_min: float) -> tuple[str, ...]:
+    """The reasons "not in M: speed S m/s ≤ v_min V" of a track not in M whose speed (m/s) prints as S = i / 100 with
+    two decimals, by i = 0 … ⌊100·v_min⌋ + 1 (every S a speed ≤ ``v_min`` can print as; formatted once per tracker);
+    empty for ``v_min`` above :data:`_SLOW_TEXTS_MAX` or not finite (then the reasons are formatted per track)."""
+    if not 0.0 <= v_min <= _SLOW_TEXTS_MAX:
+        return ()
+    tail = f" m/s ≤ v_min {v_min:.2f}"
+    return tuple(f"not in M: speed {i / 100:.2f}{tail}" for i in range(int(v_min * 100.0) + 2))
+
+
+def _slow_reason(speed: float, texts: tuple[str, ...], tail: str) -> str:
+    """``f"not in M: speed {speed:.2f}{tail}"`` for a speed 0 ≤ ``speed`` ≤ v_min (m/s) from ``texts``
+    (:func:`_slow_reason_texts` of that v_min; ``tail`` its constant end): the speed rounded to two decimals as
+    ``format`` rounds it (to the nearest, ties to even, of the float's exact value) is that of 100·speed, whose float
+    product differs from the exact one by far less than 10⁻⁹ — so where its fraction is not within 10⁻⁷ of ½ (a tie,
+    or one the product could move across) the nearest integer is the index; there the text is formatted.
+    ``TrackManage._manage`` runs these lines inline (the most common reason, ≈ 17 a scan on negative_2)."""
+    q = speed * 100.0
+    i = int(q)
+    f = q - i
+    if f < 0.4999999 and texts:
+        return texts[i]
+    if f > 0.5000001 and texts:
+        return texts[i + 1]
+    return f"not in M: speed {speed:.2f}{tail}"
+
+
 class TrackManage:
     """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: management and the test of M (``_manage``, ``_dynamic``)."""
 
@@ -63,68 +95,52 @@ class TrackManage:
         fast_reasons = self._fast_reasons
         if len(fast_reasons) != nsus:
             fast_reasons = self._fast_reasons = _fast_reason_texts(nsus)
+        slow_v, slow_texts = self._slow_reasons
+        if slow_v != v_min:
+            slow_texts = _slow_reason_texts(v_min)
+            self._slow_reasons = (v_min, slow_texts)
         for k, speed, sig, bad, near in zip(tracks, speeds, sigs, bads, nears):
-            kid = k.id
-            is_upd = kid in updated
-            if merged and kid in merged and not is_upd and k.in_m:  # (merged: empty in most scans)
-                k.in_m = False
-                k.merged = True
-                k.fast = 0
-                k.reason = "left M: merged with long-occupied map structure (its detection joined a wall's cluster)"
-            if not is_upd:
-                k.misses += 1
-                if k.in_m and not k.remembered and k.slow_since is not None and mem and self._hidden(k):
-                    # stopped in M and hidden (something in front of it) before m_exit_time: it cannot finish its
-                    # stop while unseen, so it is remembered now (if eligible) instead of being deleted after
-                    # max_coast_time (a track that just vanishes in plain view, a false one, is not)
-                    self._remember(k, t - k.slow_since)
-                if k.hist_n < window:  # (the M-of-N counts: only the first window is read)
-                    k.hist_n += 1
-                k.beams = _NO_BEAMS
-                if k.state == CONFIRMED:
-                    k.state = COASTING
-            elif k.state == COASTING:
-                k.state = CONFIRMED
-            if k.state == TENTATIVE:
-                nh, n = k.hist_hits, k.hist_n  # (hits and updates among its first confirm_window updates)
-                if nh >= need_hits:
-                    k.state = CONFIRMED
-                elif nh + (window - n) < need_hits or k.misses > 0 and n >= window:
-                    st.deleted_tentative += 1
+            # (an updated track and one without detection apart: each branch reads its state once, and the tests that
+            # cannot apply to it are not made; the same tests in the same order as one loop would make them)
+            if k.id in updated:
+                state = k.state
+                if state == COASTING:
+                    k.state = state = CONFIRMED
+                elif state == TENTATIVE:
+                    nh, n = k.hist_hits, k.hist_n  # (hits and updates among its first confirm_window updates)
+                    if nh >= need_hits:
+                        k.state = state = CONFIRMED
+                    elif nh + (window - n) < need_hits or k.misses > 0 and n >= window:
+                        st.deleted_tentative += 1
+                        st.tracks_deleted += 1
+                        gone.append(k.row)
+                        continue
+                if bad:
+                    st.deleted_covariance += 1
                     st.tracks_deleted += 1
                     gone.append(k.row)
                     continue
-            if k.state == COASTING and t - k.last_hit > max_coast and not (
-                    k.remembered and self._remembered_coasts(k, t)):
-                st.deleted_coasting += 1
-                st.tracks_deleted += 1
-                gone.append(k.row)
-                continue
-            if bad:
-                st.deleted_covariance += 1
-                st.tracks_deleted += 1
-                gone.append(k.row)
-                continue
-            if speed > max_speed:
-                st.deleted_speed += 1
-                st.tracks_deleted += 1
-                gone.append(k.row)
-                continue
-            if is_upd and retire_n and not k.was_in_m and not k.remembered and (nm := WN.item(k.row, 0)) >= retire_n \
-                    and speed < v_min and min(MEV[k.row, nm - retire_n:nm, 0].tolist()) >= retire_s:
-                # clutter retirement: a still track the map already holds as structure (docs/real.md "Speed");
-                # a confirmed one stays as a dormant track while its object is seen (_clutter_detections)
-                st.deleted_structure += 1
-                if k.state == TENTATIVE:
+                if speed > max_speed:
+                    st.deleted_speed += 1
                     st.tracks_deleted += 1
-                else:
-                    self._retire(k)
-                gone.append(k.row)
-                continue
-            if is_upd:
+                    gone.append(k.row)
+                    continue
+                if retire_n and not k.was_in_m and not k.remembered and (nm := WN.item(k.row, 0)) >= retire_n \
+                        and speed < v_min and min(MEV[k.row, nm - retire_n:nm, 0].tolist()) >= retire_s:
+                    # clutter retirement: a still track the map already holds as structure (docs/real.md "Speed");
+                    # a confirmed one stays as a dormant track while its object is seen (_clutter_detections)
+                    st.deleted_structure += 1
+                    if state == TENTATIVE:
+                        st.tracks_deleted += 1
+                    else:
+                        self._retire(k)
+                    gone.append(k.row)
+                    continue
                 # paper Eq. 3 with persistence, certainty and displacement conditions (the start of _dynamic, inline)
-                kfast = k.fast + 1 if speed > v_min and sig < max_ssig else 0
-                k.fast = kfast
+                if speed > v_min and sig < max_ssig:
+                    k.fast = kfast = k.fast + 1
+                else:
+                    k.fast = kfast = 0
                 if speed < v_exit:
                     if k.slow_since is None:
                         k.slow_since = t
@@ -132,26 +148,34 @@ class TrackManage:
                     pass  # a remembered stop ends only on M's sustained fast test, not on one scan of speed jitter
                 else:
                     k.slow_since = None
-                if k.in_m and k.probation and probe and len(k.free) >= nsus and self._probation_fails(k):
+                in_m = k.in_m
+                if in_m and k.probation and probe and len(k.free) >= nsus and self._probation_fails(k):
                     pass  # left M
                 else:
-                    rides = False
-                    if near:  # (0: fewer than ride_updates entries, it cannot ride)
-                        if near == 1:
-                            k.rode = False  # (_rides_with_laser's first test, done: most tracks are far from it)
-                        else:
-                            rides = self._rides_with_laser(k)
-                    if rides:
+                    # (near 0: fewer than ride_updates entries, it cannot ride; 1: far from the laser,
+                    # _rides_with_laser's first test done (most tracks); 2: the whole test)
+                    if near == 1:
+                        k.rode = False
+                    if near > 1 and self._rides_with_laser(k):
                         k.in_m = False
                         k.fast = 0
                         k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
-                    elif k.in_m:
+                    elif in_m:
                         self._dynamic(k, speed, sig, t)
-                    elif k.state == TENTATIVE:
+                    elif state == TENTATIVE:
                         # (speed: most tracks are short-lived tentative clutter; nothing else changes them)
                         k.reason = "not in M: tentative track"
                     elif speed <= v_min:
-                        k.reason = f"not in M: speed {speed:.2f}{slow_tail}"  # (the most common reason)
+                        # (the most common reason: looked up by the speed in hundredths, _slow_reason inline)
+                        q = speed * 100.0
+                        i = int(q)
+                        f = q - i
+                        if f < 0.4999999 and slow_texts:
+                            k.reason = slow_texts[i]
+                        elif f > 0.5000001 and slow_texts:
+                            k.reason = slow_texts[i + 1]
+                        else:
+                            k.reason = f"not in M: speed {speed:.2f}{slow_tail}"
                     elif kfast < nsus and sig < max_ssig and k.person_streak < npu:
                         # (_dynamic's outcome for a track not in M, faster than v_min with a certain velocity, not yet
                         # for sustain_updates updates and no person test (person_streak below person_sustain_updates):
@@ -166,6 +190,50 @@ class TrackManage:
                         # with m_start_xy None, m_last_t is None, m_time and m_travel 0.0: set after it, reset with it)
                         k.m_start_xy, k.m_last_t, k.remembered = None, None, False
                         k.m_time = k.m_travel = 0.0
+            else:
+                if merged and k.in_m and k.id in merged:  # (merged: empty in most scans)
+                    k.in_m = False
+                    k.merged = True
+                    k.fast = 0
+                    k.reason = "left M: merged with long-occupied map structure (its detection joined a wall's cluster)"
+                k.misses += 1
+                if k.in_m and not k.remembered and k.slow_since is not None and mem and self._hidden(k):
+                    # stopped in M and hidden (something in front of it) before m_exit_time: it cannot finish its
+                    # stop while unseen, so it is remembered now (if eligible) instead of being deleted after
+                    # max_coast_time (a track that just vanishes in plain view, a false one, is not)
+                    self._remember(k, t - k.slow_since)
+                if k.hist_n < window:  # (the M-of-N counts: only the first window is read)
+                    k.hist_n += 1
+                k.beams = _NO_BEAMS
+                state = k.state
+                if state == CONFIRMED:
+                    k.state = COASTING
+                elif state == TENTATIVE:
+                    nh, n = k.hist_hits, k.hist_n  # (hits and updates among its first confirm_window updates)
+                    if nh >= need_hits:
+                        k.state = CONFIRMED
+                    elif nh + (window - n) < need_hits or k.misses > 0 and n >= window:
+                        st.deleted_tentative += 1
+                        st.tracks_deleted += 1
+                        gone.append(k.row)
+                        continue
+                    state = None  # (tentative or confirmed now: not coasting)
+                if state is not None and t - k.last_hit > max_coast and not (
+                        k.remembered and self._remembered_coasts(k, t)):  # (coasting: was confirmed or coasting)
+                    st.deleted_coasting += 1
+                    st.tracks_deleted += 1
+                    gone.append(k.row)
+                    continue
+                if bad:
+                    st.deleted_covariance += 1
+                    st.tracks_deleted += 1
+                    gone.append(k.row)
+                    continue
+                if speed > max_speed:
+                    st.deleted_speed += 1
+                    st.tracks_deleted += 1
+                    gone.append(k.row)
+                    continue
             keep.append(k)
         if gone:
             self._free_rows.extend(gone)
@@ -174,6 +242,8 @@ class TrackManage:
 
     # (_fast_reason_texts(sustain_updates): the tracker's own from its first _manage on)
     _fast_reasons: tuple[str, ...] = ()
+    # (v_min and _slow_reason_texts(v_min): the tracker's own from its first _manage on)
+    _slow_reasons: tuple[float, tuple[str, ...]] = (math.nan, ())
 
     def _probation_fails(self, k: _Track) -> bool:
         """End the probation of ``k`` (in M, re-acquired after a gap, with ``sustain_updates`` free-space fractions):
