@@ -2,13 +2,16 @@
 replaced: the most common reason looked up by the speed in hundredths instead of formatted (random speeds, ties,
 neighbours of the rounding boundaries, several v_min), and ``TrackManage._manage``'s loop split into updated tracks
 and tracks without detection against the former single loop (below, as it was) on every scan of simulated scenes
-that reach its branches (M, memory, coasting and every deletion, clutter retirement)."""
+that reach its branches (M, memory, coasting and every deletion, clutter retirement); a birth's state and covariance
+written through its rows' views."""
 
 from __future__ import annotations
 
 import copy
 import math
 import random
+
+import numpy as np
 
 from dynslam2d.config import Config
 from dynslam2d.detect import trackmanage
@@ -235,3 +238,27 @@ def test_manage_is_the_former_single_loop_on_simulated_scenes() -> None:
                 "deleted_coasting", "deleted_structure"):
         assert total[key] > 0, (key, total)
     assert trackmanage._SLOW_TEXTS_MAX >= 1.0
+
+
+def test_birth_writes_the_birth_state_into_its_rows() -> None:
+    """Every birth of sim:crowd writes ``_birth_state``'s centre (zero velocity) and covariance into the new track's
+    rows of the state arrays (through the views ``k.x`` / ``k.P``), bit for bit, and those views stay the rows."""
+    pipe = Pipeline(Config())
+    tr = pipe.tracker
+    own = tr._birth
+    births = 0
+
+    def checked(det, t, j):
+        nonlocal births
+        z, P, _, _ = tr._birth_state(det, j)
+        own(det, t, j)
+        k = tr._tracks[-1]
+        assert tr._X[k.row].tobytes() == np.array([z[0], z[1], 0.0, 0.0]).tobytes()
+        assert tr._P[k.row].tobytes() == P.tobytes()
+        assert k.x.base is tr._X and k.P.base is tr._P
+        births += 1
+
+    tr._birth = checked
+    for s in simulate("crowd", duration=10.0).scans:
+        pipe.process(s)
+    assert births >= 10
