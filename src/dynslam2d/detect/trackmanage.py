@@ -61,7 +61,9 @@ class TrackManage:
         tracks. The covariance test, the speed's σ and the speed of all live tracks come from their state rows in
         one kernel call (``manage_speed_rows``; the speeds are Python's ``math.hypot`` to the last bit); the test of
         M runs inline up to its common outcomes (tentative, or not in M and at most v_min) with the scan's constants
-        read once, the rest in :meth:`_dynamic`."""
+        read once, the rest in :meth:`_dynamic`. Updated tracks and tracks without detection take separate branches
+        (each reads its state once; the tests that cannot apply are not made) and the most common reason is looked up
+        (:func:`_slow_reason`, inline; docs/speed.md pass mgr34)."""
         tracks = self._tracks
         if not tracks:
             return
