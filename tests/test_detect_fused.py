@@ -185,15 +185,17 @@ def test_skipped_circle_fits_in_whole_runs(monkeypatch):
     def fit_rows(*a):
         got = shapes.fit_cluster_rows(*a)
         x, y, offsets, mask, angles, trig, crit, d0, cmin, stride, skip, pmax_n, pmax_ext, max_ext, thin, maxr, \
-            ratio = a
+            depth, ratio = a
         want = fit_clusters(x, y, offsets, mask, angles, crit, d0, cmin, stride)
         full_fits[:] = [want]
         want = want.copy()
         for q in range(want.shape[0]):
             n = int(offsets[q + 1] - offsets[q])
             e0, e1 = want[q, F_HI1] - want[q, F_LO1], want[q, F_HI2] - want[q, F_LO2]
-            # (pass fit34: longer than any accepted circle's 2·max radius + √(2n)·rms, with the kernel's margin)
-            reach = (2.0 * maxr + math.sqrt(2.0 * n) * ratio * want[q, F_RECT_RMS]) * (1.0 + 1e-9) + 1e-9 * (
+            # (pass fit34: longer than any accepted circle's 2r + √(2n)·rms, r ≤ max radius and ≤ short side / depth
+            # ratio, with the kernel's margin)
+            r_top = min(maxr, min(e0, e1) / depth) if depth > 0.0 else maxr
+            reach = (2.0 * r_top + math.sqrt(2.0 * n) * ratio * want[q, F_RECT_RMS]) * (1.0 + 1e-9) + 1e-9 * (
                 1.0 + abs(want[q, F_CENTROID_X]) + abs(want[q, F_CENTROID_Y]) + max(e0, e1))
             long_ = max(e0, e1) >= reach
             if skip and mask[q] and n >= cmin and (n <= pmax_n or max(e0, e1) < pmax_ext or max(e0, e1) > max_ext
@@ -202,7 +204,8 @@ def test_skipped_circle_fits_in_whole_runs(monkeypatch):
                 seen["skipped"] += 1
                 if long_:  # (the full fit's circle fails the classification's radius or residual test)
                     seen["long"] += 1
-                    assert not (full_fits[0][q, F_CIRCLE_R] <= maxr
+                    cr = full_fits[0][q, F_CIRCLE_R]
+                    assert not (cr <= maxr and min(e0, e1) >= depth * cr
                                 and full_fits[0][q, F_CIRCLE_RMS] < ratio * want[q, F_RECT_RMS])
         assert _same(got, want)
         seen["fits"] += 1

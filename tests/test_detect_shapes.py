@@ -393,8 +393,8 @@ def _reach_clusters(rng: np.random.Generator) -> list[np.ndarray]:
 def test_circle_reach_is_a_bound_of_the_circle_fits() -> None:
     """Pass fit34: on every cluster the rectangle's longest side is at most 2r + √(2n)·rms of its circle fit (r its
     radius, rms its residual: shapes._circle_reach's lemma, here on the full fits of arcs, walls and L-shapes), so a
-    side from ``_circle_reach`` on can have no circle with r ≤ the maximum radius and rms < ratio · the rectangle's
-    rms; and the bound does skip clusters."""
+    side from ``_circle_reach`` on can have no circle with r ≤ the maximum radius, short side ≥ depth ratio · r and
+    rms < ratio · the rectangle's rms; and the bound does skip clusters."""
     rng = np.random.default_rng(34)
     clusters = _reach_clusters(rng)
     pts = np.vstack(clusters)
@@ -406,13 +406,14 @@ def test_circle_reach_is_a_bound_of_the_circle_fits() -> None:
         n = int(offsets[c + 1] - offsets[c])
         th, lo1, hi1, lo2, hi2, rect_rms, _, _, r, rms, mx, my = out[c].tolist()
         side = max(hi1 - lo1, hi2 - lo2)
+        short = min(hi1 - lo1, hi2 - lo2)
         if r > 0.0:
             assert side <= 2.0 * r + math.sqrt(2.0 * n) * rms * (1.0 + 1e-12) + 1e-12, c
-        for max_r, ratio in ((0.45, 0.6), (0.6, 1.0), (0.3, 3.0)):
-            if side >= _circle_reach(n, rect_rms, mx, my, side, max_r, ratio):
+        for max_r, depth, ratio in ((0.45, 0.5, 0.6), (0.6, 0.0, 1.0), (0.3, 1.0, 3.0), (0.45, 0.25, 0.6)):
+            if side >= _circle_reach(n, rect_rms, mx, my, side, short, max_r, depth, ratio):
                 skipped += 1
-                assert not (r <= max_r and rms < ratio * rect_rms), (c, max_r, ratio)
-    assert skipped > 40
+                assert not (r <= max_r and short >= depth * r and rms < ratio * rect_rms), (c, max_r, depth, ratio)
+    assert skipped > 80
 
 
 def test_kept_trig_table_gives_the_same_rows() -> None:
@@ -430,7 +431,7 @@ def test_kept_trig_table_gives_the_same_rows() -> None:
         for stride in (1, 5):
             want = fit_clusters(pts[:, 0].copy(), pts[:, 1].copy(), offsets, mask, angles, criterion, 0.01, 5, stride)
             got = fit_cluster_rows(pts[:, 0].copy(), pts[:, 1].copy(), offsets, mask, angles, trig, criterion, 0.01,
-                                   5, stride, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+                                   5, stride, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
             assert got.tobytes() == want.tobytes(), (criterion, stride)
     a = angles.tolist()
     assert trig[0].tolist() == [math.cos(t) for t in a] and trig[1].tolist() == [math.sin(t) for t in a]

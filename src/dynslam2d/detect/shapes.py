@@ -461,21 +461,26 @@ def _circle_one(x: np.ndarray, y: np.ndarray, out: np.ndarray, wd: np.ndarray, w
 
 
 @njit(cache=True, inline="always")
-def _circle_reach(n: int, rect_rms: float, mx: float, my: float, ext: float, max_radius: float,
-                  ratio: float) -> float:
-    """A side length (m) from which a cluster of ``n`` points whose rectangle fit has rms ``rect_rms`` (m) cannot
-    be a circle the classification accepts (``classify_batch``: radius r ≤ ``max_radius`` and circle rms
-    < ``ratio`` · ``rect_rms``); ``mx``, ``my``: the cluster's centroid and ``ext`` its longest side, m.
+def _circle_reach(n: int, rect_rms: float, mx: float, my: float, ext: float, short: float, max_radius: float,
+                  depth_ratio: float, ratio: float) -> float:
+    """A side length (m) from which a cluster of ``n`` points whose rectangle fit has rms ``rect_rms`` (m), longest
+    side ``ext`` and shortest side ``short`` (m) cannot be a circle the classification accepts (``classify_batch``:
+    radius r ≤ ``max_radius``, ``short`` ≥ ``depth_ratio`` · r and circle rms < ``ratio`` · ``rect_rms``); ``mx``,
+    ``my``: the cluster's centroid, m.
 
     With c the circle's centre, Dᵢ = |pᵢ − c| and δᵢ = Dᵢ − r: the two points a, b at the ends of a side of the
     rectangle are that side's length apart along a unit axis, so side ≤ D_a + D_b ≤ 2r + |δ_a| + |δ_b|
-    ≤ 2r + √(2(δ_a² + δ_b²)) ≤ 2r + √(2·Σδᵢ²) = 2r + √(2n)·rms, and an accepted circle has r ≤ ``max_radius``
-    and rms < ``ratio`` · ``rect_rms``. The float values (the sides from the rounded projections, the rms
-    from rounded distances summed in order, the product with ``ratio``) are within a relative n·2⁻⁵² and an
-    absolute 2⁻⁵⁰·(|x| + |y|) of those: the margin below (10⁻⁹ relative, 10⁻⁹·(1 + |mx| + |my| + ext) m) covers
-    clusters of up to 10⁶ points. NaN or inf ``rect_rms`` gives NaN or inf: never reached."""
-    r = (2.0 * max_radius + math.sqrt(2.0 * n) * ratio * rect_rms) * (1.0 + 1e-9)
-    return r + 1e-9 * (1.0 + abs(mx) + abs(my) + ext)
+    ≤ 2r + √(2(δ_a² + δ_b²)) ≤ 2r + √(2·Σδᵢ²) = 2r + √(2n)·rms, and an accepted circle has r ≤ ``max_radius``,
+    r ≤ ``short`` / ``depth_ratio`` (when > 0) and rms < ``ratio`` · ``rect_rms``. The float values (the sides
+    from the rounded projections, the rms from rounded distances summed in order, the products with the ratios)
+    are within a relative n·2⁻⁵² and an absolute 2⁻⁵⁰·(|x| + |y|) of those: the margin below (10⁻⁹ relative,
+    10⁻⁹·(1 + |mx| + |my| + ext) m) covers clusters of up to 10⁶ points. NaN or inf ``rect_rms`` gives NaN or
+    inf: never reached."""
+    r = max_radius
+    if depth_ratio > 0.0:
+        r = min(r, short / depth_ratio)
+    reach = (2.0 * r + math.sqrt(2.0 * n) * ratio * rect_rms) * (1.0 + 1e-9)
+    return reach + 1e-9 * (1.0 + abs(mx) + abs(my) + ext)
 
 
 @njit(cache=True)  # (fit_cluster_rows without the skip; the tracker calls that one)
@@ -491,21 +496,22 @@ def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np
     trig = np.empty((3, angles.shape[0]))
     trig[0, 0] = np.nan  # (a new table: fit_cluster_rows fills it)
     return fit_cluster_rows(x, y, offsets, fit_mask, angles, trig, criterion, d0, circle_min_points, stride, False,
-                            0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+                            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 @njit(cache=True)
 def fit_cluster_rows(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np.ndarray, angles: np.ndarray,
                      trig: np.ndarray, criterion: int, d0: float, circle_min_points: int, stride: int, skip: bool,
                      point_max_points: float, point_max_extent: float, max_extent: float, thin: float,
-                     circle_max_radius: float, residual_ratio: float) -> np.ndarray:
+                     circle_max_radius: float, depth_ratio: float, residual_ratio: float) -> np.ndarray:
     """:func:`fit_clusters`; where ``skip``, without the circle fit of a cluster whose circle the tracker's
     classification (:func:`dynslam2d.detect.kernels.classify_batch`, the same expressions) never reads: a point
     (n ≤ ``point_max_points`` or both sides < ``point_max_extent``), one not kept (a side > ``max_extent``, its
     ``max_extent``) or one too thin to be a circle (short side < ``thin`` = ``circle_min_depth_ratio`` ·
     ``circle_min_radius``: a circle needs short side ≥ ratio · r ≥ ratio · min radius) or one too long for any
-    circle the classification accepts (:func:`_circle_reach`, with ``circle_max_radius`` and the classification's
-    ``residual_ratio``). Such a row's four circle
+    circle the classification accepts (:func:`_circle_reach`, with ``circle_max_radius``,
+    ``circle_min_depth_ratio`` as ``depth_ratio`` and ``circle_residual_ratio`` as ``residual_ratio``). Such a row's
+    four circle
     columns are NaN (never a fit's value: a degenerate fit gives r = 0, rms = inf), which the classification's
     radius test refuses; :class:`dynslam2d.detect.measure.ScanDetection` fits them when its ``circle`` is read.
 
@@ -561,7 +567,8 @@ def fit_cluster_rows(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask
             if n <= point_max_points or max(e0, e1) < point_max_extent or max(e0, e1) > max_extent or \
                     min(e0, e1) < thin or max(e0, e1) >= _circle_reach(n, tmp[5], out[c, F_CENTROID_X],
                                                                        out[c, F_CENTROID_Y], max(e0, e1),
-                                                                       circle_max_radius, residual_ratio):
+                                                                       min(e0, e1), circle_max_radius,
+                                                                       depth_ratio, residual_ratio):
                 for q in range(4):
                     out[c, F_CIRCLE_X + q] = np.nan
                 continue

@@ -87,7 +87,8 @@ class TrackDetect:
                                 cfg.fit.closeness_d0, cfg.fit.circle_min_points, cfg.fit.coarse_stride, True,
                                 fp.item(_P_POINT_MAX_POINTS), fp.item(_P_POINT_MAX_EXTENT), ext_lim,
                                 _thin(fp.item(_P_CIRCLE_DEPTH_RATIO), fp.item(_P_CIRCLE_MIN_RADIUS)),
-                                fp.item(_P_CIRCLE_MAX_RADIUS), fp.item(_P_CIRCLE_RES_RATIO))
+                                fp.item(_P_CIRCLE_MAX_RADIUS), fp.item(_P_CIRCLE_DEPTH_RATIO),
+                                fp.item(_P_CIRCLE_RES_RATIO))
         # classify and bound every cluster (reference.classify_and_bound); then the vehicle-size clusters' map test
         # (detect/vehicles.py), the kept clusters' rows and their points' map evidence in one call. The map test is
         # per point, so only the detections' points are tested (structure clusters, most of the points, are not
