@@ -3,6 +3,8 @@ tracker's kernels fused, pass 11")."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 import dynslam2d.detect.trackdetect as tracker_mod  # (_detect calls select_detections there)
@@ -11,6 +13,8 @@ from dynslam2d.detect import kernels as K
 from dynslam2d.detect import shapes
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.layout import (
+    F_CENTROID_X,
+    F_CENTROID_Y,
     F_CIRCLE_R,
     F_CIRCLE_RMS,
     F_CIRCLE_X,
@@ -18,6 +22,7 @@ from dynslam2d.detect.layout import (
     F_HI2,
     F_LO1,
     F_LO2,
+    F_RECT_RMS,
         FIT_CIRCLE,
     N_FIT_COLS,
 )
@@ -169,26 +174,39 @@ def _walkers():
 
 
 def test_skipped_circle_fits_in_whole_runs(monkeypatch):
-    """Pass det23, in three simulated runs (people seen from a driving robot; two people's legs; a van): every
-    ``fit_cluster_rows`` call of the tracker gives ``fit_clusters``' rows (every circle fitted) with NaN circle columns
-    exactly on the rows that the plain-Python test below names, and the classification of every call is bit for bit
-    the classification of the same clusters with every circle fitted."""
-    seen = {"fits": 0, "skipped": 0}
+    """Passes det23 and fit34, in three simulated runs (people seen from a driving robot; two people's legs; a van):
+    every ``fit_cluster_rows`` call of the tracker gives ``fit_clusters``' rows (every circle fitted) with NaN circle
+    columns exactly on the rows that the plain-Python test below names, a cluster skipped as too long for a circle
+    has a full fit the classification refuses, and the classification of every call is bit for bit the
+    classification of the same clusters with every circle fitted."""
+    seen = {"fits": 0, "skipped": 0, "long": 0}
     full_fits: list = []
 
     def fit_rows(*a):
         got = shapes.fit_cluster_rows(*a)
-        x, y, offsets, mask, angles, crit, d0, cmin, stride, skip, pmax_n, pmax_ext, max_ext, thin = a
+        x, y, offsets, mask, angles, trig, crit, d0, cmin, stride, skip, pmax_n, pmax_ext, max_ext, thin, maxr, \
+            depth, ratio = a
         want = fit_clusters(x, y, offsets, mask, angles, crit, d0, cmin, stride)
         full_fits[:] = [want]
         want = want.copy()
         for q in range(want.shape[0]):
             n = int(offsets[q + 1] - offsets[q])
             e0, e1 = want[q, F_HI1] - want[q, F_LO1], want[q, F_HI2] - want[q, F_LO2]
+            # (pass fit34: longer than any accepted circle's 2r + √(2n)·rms, r ≤ max radius and ≤ short side / depth
+            # ratio, with the kernel's margin)
+            r_top = min(maxr, min(e0, e1) / depth) if depth > 0.0 else maxr
+            reach = (2.0 * r_top + math.sqrt(2.0 * n) * ratio * want[q, F_RECT_RMS]) * (1.0 + 1e-9) + 1e-9 * (
+                1.0 + abs(want[q, F_CENTROID_X]) + abs(want[q, F_CENTROID_Y]) + max(e0, e1))
+            long_ = max(e0, e1) >= reach
             if skip and mask[q] and n >= cmin and (n <= pmax_n or max(e0, e1) < pmax_ext or max(e0, e1) > max_ext
-                                                   or min(e0, e1) < thin):
+                                                   or min(e0, e1) < thin or long_):
                 want[q, F_CIRCLE_X:F_CIRCLE_RMS + 1] = np.nan
                 seen["skipped"] += 1
+                if long_:  # (the full fit's circle fails the classification's radius or residual test)
+                    seen["long"] += 1
+                    cr = full_fits[0][q, F_CIRCLE_R]
+                    assert not (cr <= maxr and min(e0, e1) >= depth * cr
+                                and full_fits[0][q, F_CIRCLE_RMS] < ratio * want[q, F_RECT_RMS])
         assert _same(got, want)
         seen["fits"] += 1
         return got
@@ -205,7 +223,7 @@ def test_skipped_circle_fits_in_whole_runs(monkeypatch):
         pipe = Pipeline(Config())
         for scan in src:
             pipe.process(scan)
-    assert seen["fits"] > 150 and seen["skipped"] > 20
+    assert seen["fits"] > 150 and seen["skipped"] > 20 and seen["long"] > 5
 
 
 def test_skipped_circle_fits_are_fitted_when_read():

@@ -10,7 +10,7 @@ import pytest
 from dynslam2d.detect import FitConfig, fit_circle, fit_clusters, fit_rectangle, search_angles
 from dynslam2d.detect.layout import SIZE_LOWER, SIZE_MEASURED
 from dynslam2d.detect.reference import classify_and_bound, measure
-from dynslam2d.detect.shapes import CRITERIA
+from dynslam2d.detect.shapes import CRITERIA, _circle_reach, fit_cluster_rows
 from dynslam2d.types import Box, wrap_angle
 
 
@@ -366,3 +366,73 @@ def test_circle_fits_are_bit_identical_to_the_plain_gauss_newton_loop() -> None:
         got = fit_circle(cl)
         assert [float(v) for v in got] == want or (math.isnan(want[0]) and math.isnan(got[0])), c
         assert out[c, 6:10].tolist() == want, c
+
+
+def _reach_clusters(rng: np.random.Generator) -> list[np.ndarray]:
+    """Arcs (radius 0.05–0.6 m, 20°–360°, noise up to 5 cm, some with an outlier), noisy walls and L-shapes, far
+    from the origin as in the map frame."""
+    out = []
+    for q in range(160):
+        cx, cy = rng.uniform(-60, 60, 2)
+        n = int(rng.integers(5, 80))
+        if q % 3:
+            r = rng.uniform(0.05, 0.6)
+            a0 = rng.uniform(0, 2 * math.pi)
+            a = a0 + np.linspace(0.0, math.radians(rng.uniform(20, 360)), n)
+            pts = np.column_stack((cx + r * np.cos(a), cy + r * np.sin(a))) + rng.normal(0, rng.uniform(0, 0.05),
+                                                                                          (n, 2))
+            if q % 5 == 0:
+                pts[n // 2] += rng.uniform(-0.5, 0.5, 2)
+        else:
+            pts = l_shape(cx, cy, rng.uniform(0, math.pi), rng.uniform(0.3, 4.0), rng.uniform(0.0, 1.0),
+                          max(n // 2, 3), rng.uniform(0, 0.04), q)
+        out.append(pts)
+    return out
+
+
+def test_circle_reach_is_a_bound_of_the_circle_fits() -> None:
+    """Pass fit34: on every cluster the rectangle's longest side is at most 2r + √(2n)·rms of its circle fit (r its
+    radius, rms its residual: shapes._circle_reach's lemma, here on the full fits of arcs, walls and L-shapes), so a
+    side from ``_circle_reach`` on can have no circle with r ≤ the maximum radius, short side ≥ depth ratio · r and
+    rms < ratio · the rectangle's rms; and the bound does skip clusters."""
+    rng = np.random.default_rng(34)
+    clusters = _reach_clusters(rng)
+    pts = np.vstack(clusters)
+    offsets = np.cumsum([0] + [c.shape[0] for c in clusters])
+    out = fit_clusters(pts[:, 0].copy(), pts[:, 1].copy(), offsets, np.ones(len(clusters), dtype=bool),
+                       search_angles(1.0), CRITERIA["variance"], 0.01, 5, 5)
+    skipped = 0
+    for c in range(len(clusters)):
+        n = int(offsets[c + 1] - offsets[c])
+        th, lo1, hi1, lo2, hi2, rect_rms, _, _, r, rms, mx, my = out[c].tolist()
+        side = max(hi1 - lo1, hi2 - lo2)
+        short = min(hi1 - lo1, hi2 - lo2)
+        if r > 0.0:
+            assert side <= 2.0 * r + math.sqrt(2.0 * n) * rms * (1.0 + 1e-12) + 1e-12, c
+        for max_r, depth, ratio in ((0.45, 0.5, 0.6), (0.6, 0.0, 1.0), (0.3, 1.0, 3.0), (0.45, 0.25, 0.6)):
+            if side >= _circle_reach(n, rect_rms, mx, my, side, short, max_r, depth, ratio):
+                skipped += 1
+                assert not (r <= max_r and short >= depth * r and rms < ratio * rect_rms), (c, max_r, depth, ratio)
+    assert skipped > 80
+
+
+def test_kept_trig_table_gives_the_same_rows() -> None:
+    """Pass fit34: ``fit_cluster_rows`` fills a new (NaN) table with the angles' cos, sin and atan2 (libm's, as
+    Python's math), and calls with the kept table give ``fit_clusters``' rows bit for bit (every criterion and
+    stride), as does the first call."""
+    rng = np.random.default_rng(5)
+    clusters = _reach_clusters(rng)[:60]
+    pts = np.vstack(clusters)
+    offsets = np.cumsum([0] + [c.shape[0] for c in clusters])
+    angles = search_angles(1.0)
+    mask = np.ones(len(clusters), dtype=bool)
+    trig = np.full((3, angles.shape[0]), np.nan)
+    for criterion in (0, 1, 2):
+        for stride in (1, 5):
+            want = fit_clusters(pts[:, 0].copy(), pts[:, 1].copy(), offsets, mask, angles, criterion, 0.01, 5, stride)
+            got = fit_cluster_rows(pts[:, 0].copy(), pts[:, 1].copy(), offsets, mask, angles, trig, criterion, 0.01,
+                                   5, stride, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            assert got.tobytes() == want.tobytes(), (criterion, stride)
+    a = angles.tolist()
+    assert trig[0].tolist() == [math.cos(t) for t in a] and trig[1].tolist() == [math.sin(t) for t in a]
+    assert trig[2].tolist() == [math.atan2(math.sin(t), math.cos(t)) for t in a]

@@ -169,18 +169,20 @@ def _near_side_known(n: int, lo: float, hi: float, total: float) -> int:
 
 
 @njit(cache=True)
-def _fit_one(x: np.ndarray, y: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray, criterion: int,
-             d0: float, out: np.ndarray, stride: int, c1: np.ndarray, c2: np.ndarray, order: np.ndarray) -> None:
-    """Best angle over ``cos_t, sin_t`` by the Zhang et al. 2017 criterion (larger is better): every angle (stride
-    1), or every stride-th angle and then the angles around the best one (coarse-to-fine). ``c1``, ``c2`` (≥ n) and
-    ``order`` (≥ len(cos_t) + 2·stride) are work space.
+def _fit_one(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: float, out: np.ndarray,
+             stride: int, w: np.ndarray, order: np.ndarray) -> None:
+    """Best angle over the table ``trig`` (rows cos θ, sin θ, atan2(sin θ, cos θ): :func:`fit_cluster_rows`) by
+    the Zhang et al. 2017 criterion (larger is better): every angle (stride 1), or every stride-th angle and then
+    the angles around the best one (coarse-to-fine). ``c1``, ``c2``, ``b1``, ``b2`` (≥ n) and ``order``
+    (≥ K + 2·stride) are work space.
 
     One loop scores every angle in turn (the angles to score listed in ``order``, the fine ones appended once the
     coarse best is known): no call per angle. Each point's edge is decided per axis from the sums of squares to
     both edges (Zhang: the group goes to the nearer edge), by :func:`_near_side_known` when the float comparison
-    is certain, else by the sums themselves."""
+    is certain, else by the sums themselves. The best angle's projections and bounds are kept as it is scored (the
+    buffers swapped, not copied): the result's bounds and rms need no projection of their own."""
     n = x.shape[0]
-    kk = cos_t.shape[0]
+    kk = trig.shape[1]
     step = max(stride, 1)
     nq = 0
     for k in range(0, kk, step):
@@ -189,11 +191,15 @@ def _fit_one(x: np.ndarray, y: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray,
     ncoarse = nq
     best = -np.inf
     best_k = 0
+    cur = 0  # (rows cur, cur + 1 of w: this angle's projections; rows bst, bst + 1: best_k's, once kept)
+    bst = 2
+    kept = False
+    blo1 = bhi1 = blo2 = bhi2 = 0.0
     q = 0
     while q < nq:
         k = order[q]
-        c = cos_t[k]
-        s = sin_t[k]
+        c = trig[0, k]
+        s = trig[1, k]
         lo1 = np.inf
         hi1 = -np.inf
         lo2 = np.inf
@@ -203,8 +209,8 @@ def _fit_one(x: np.ndarray, y: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray,
         for i in range(n):
             u = c * x[i] + s * y[i]
             v = -s * x[i] + c * y[i]
-            c1[i] = u
-            c2[i] = v
+            w[cur, i] = u
+            w[cur + 1, i] = v
             t1 += u
             t2 += v
             lo1 = min(lo1, u)
@@ -222,10 +228,10 @@ def _fit_one(x: np.ndarray, y: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray,
                 sa2 = 0.0
                 sb2 = 0.0
                 for i in range(n):
-                    sa1 += (hi1 - c1[i]) ** 2
-                    sb1 += (c1[i] - lo1) ** 2
-                    sa2 += (hi2 - c2[i]) ** 2
-                    sb2 += (c2[i] - lo2) ** 2
+                    sa1 += (hi1 - w[cur, i]) ** 2
+                    sb1 += (w[cur, i] - lo1) ** 2
+                    sa2 += (hi2 - w[cur + 1, i]) ** 2
+                    sb2 += (w[cur + 1, i] - lo2) ** 2
                 use_hi1 = sa1 < sb1
                 use_hi2 = sa2 < sb2
             else:
@@ -234,8 +240,8 @@ def _fit_one(x: np.ndarray, y: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray,
             if criterion == 1:
                 sc = 0.0
                 for i in range(n):
-                    d1 = hi1 - c1[i] if use_hi1 else c1[i] - lo1
-                    d2 = hi2 - c2[i] if use_hi2 else c2[i] - lo2
+                    d1 = hi1 - w[cur, i] if use_hi1 else w[cur, i] - lo1
+                    d2 = hi2 - w[cur + 1, i] if use_hi2 else w[cur + 1, i] - lo2
                     sc += 1.0 / max(min(d1, d2), d0)
             else:
                 s1 = 0.0
@@ -245,8 +251,8 @@ def _fit_one(x: np.ndarray, y: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray,
                 q2 = 0.0
                 m2 = 0
                 for i in range(n):
-                    d1 = hi1 - c1[i] if use_hi1 else c1[i] - lo1
-                    d2 = hi2 - c2[i] if use_hi2 else c2[i] - lo2
+                    d1 = hi1 - w[cur, i] if use_hi1 else w[cur, i] - lo1
+                    d2 = hi2 - w[cur + 1, i] if use_hi2 else w[cur + 1, i] - lo2
                     if d1 < d2:
                         s1 += d1
                         q1 += d1 * d1
@@ -259,26 +265,31 @@ def _fit_one(x: np.ndarray, y: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray,
                 v2 = q2 / m2 - (s2 / m2) ** 2 if m2 > 0 else 0.0
                 sc = -v1 - v2
         if q < ncoarse:
-            if sc > best + 1e-12:
-                best = sc
-                best_k = k
-        elif sc > best + 1e-12 or (abs(sc - best) <= 1e-12 and k < best_k):
+            take = sc > best + 1e-12
+        else:
+            take = sc > best + 1e-12 or (abs(sc - best) <= 1e-12 and k < best_k)
+        if take:
             best = sc
             best_k = k
+            blo1, bhi1, blo2, bhi2 = lo1, hi1, lo2, hi2
+            bst = cur
+            cur = 2 - cur
+            kept = True
         q += 1
         if q == ncoarse and step > 1:  # the fine angles: within one coarse step of the coarse best
             for dk in range(-step + 1, step):
                 if dk != 0:
                     order[nq] = (best_k + dk) % kk
                     nq += 1
-    c = cos_t[best_k]
-    s = sin_t[best_k]
-    lo1, hi1, lo2, hi2 = _project(x, y, c, s, c1, c2)
+    if kept:  # (the same products and bounds as _project's of best_k, made when best_k was scored)
+        lo1, hi1, lo2, hi2 = blo1, bhi1, blo2, bhi2
+    else:  # (no angle accepted: NaN scores)
+        lo1, hi1, lo2, hi2 = _project(x, y, trig[0, best_k], trig[1, best_k], w[bst], w[bst + 1])
     ss = 0.0
     for i in range(n):
-        r = min(min(hi1 - c1[i], c1[i] - lo1), min(hi2 - c2[i], c2[i] - lo2))
+        r = min(min(hi1 - w[bst, i], w[bst, i] - lo1), min(hi2 - w[bst + 1, i], w[bst + 1, i] - lo2))
         ss += r * r
-    out[0] = math.atan2(s, c)
+    out[0] = trig[2, best_k]
     out[1] = lo1
     out[2] = hi1
     out[3] = lo2
@@ -449,6 +460,29 @@ def _circle_one(x: np.ndarray, y: np.ndarray, out: np.ndarray, wd: np.ndarray, w
     out[3] = math.sqrt(ss / n)
 
 
+@njit(cache=True, inline="always")
+def _circle_reach(n: int, rect_rms: float, mx: float, my: float, ext: float, short: float, max_radius: float,
+                  depth_ratio: float, ratio: float) -> float:
+    """A side length (m) from which a cluster of ``n`` points whose rectangle fit has rms ``rect_rms`` (m), longest
+    side ``ext`` and shortest side ``short`` (m) cannot be a circle the classification accepts (``classify_batch``:
+    radius r ≤ ``max_radius``, ``short`` ≥ ``depth_ratio`` · r and circle rms < ``ratio`` · ``rect_rms``); ``mx``,
+    ``my``: the cluster's centroid, m.
+
+    With c the circle's centre, Dᵢ = |pᵢ − c| and δᵢ = Dᵢ − r: the two points a, b at the ends of a side of the
+    rectangle are that side's length apart along a unit axis, so side ≤ D_a + D_b ≤ 2r + |δ_a| + |δ_b|
+    ≤ 2r + √(2(δ_a² + δ_b²)) ≤ 2r + √(2·Σδᵢ²) = 2r + √(2n)·rms, and an accepted circle has r ≤ ``max_radius``,
+    r ≤ ``short`` / ``depth_ratio`` (when > 0) and rms < ``ratio`` · ``rect_rms``. The float values (the sides
+    from the rounded projections, the rms from rounded distances summed in order, the products with the ratios)
+    are within a relative n·2⁻⁵² and an absolute 2⁻⁵⁰·(|x| + |y|) of those: the margin below (10⁻⁹ relative,
+    10⁻⁹·(1 + |mx| + |my| + ext) m) covers clusters of up to 10⁶ points. NaN or inf ``rect_rms`` gives NaN or
+    inf: never reached."""
+    r = max_radius
+    if depth_ratio > 0.0:
+        r = min(r, short / depth_ratio)
+    reach = (2.0 * r + math.sqrt(2.0 * n) * ratio * rect_rms) * (1.0 + 1e-9)
+    return reach + 1e-9 * (1.0 + abs(mx) + abs(my) + ext)
+
+
 @njit(cache=True)  # (fit_cluster_rows without the skip; the tracker calls that one)
 def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np.ndarray, angles: np.ndarray,
                  criterion: int, d0: float, circle_min_points: int, stride: int = 1) -> np.ndarray:
@@ -459,26 +493,40 @@ def fit_clusters(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np
     centroid x, y (columns named in :mod:`dynslam2d.detect.layout`, ``F_*``). Unfitted clusters
     hold only their centroid (other entries 0, rms inf).
     """
-    return fit_cluster_rows(x, y, offsets, fit_mask, angles, criterion, d0, circle_min_points, stride, False, 0.0,
-                            0.0, 0.0, 0.0)
+    trig = np.empty((3, angles.shape[0]))
+    trig[0, 0] = np.nan  # (a new table: fit_cluster_rows fills it)
+    return fit_cluster_rows(x, y, offsets, fit_mask, angles, trig, criterion, d0, circle_min_points, stride, False,
+                            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 @njit(cache=True)
 def fit_cluster_rows(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask: np.ndarray, angles: np.ndarray,
-                     criterion: int, d0: float, circle_min_points: int, stride: int, skip: bool,
-                     point_max_points: float, point_max_extent: float, max_extent: float, thin: float) -> np.ndarray:
+                     trig: np.ndarray, criterion: int, d0: float, circle_min_points: int, stride: int, skip: bool,
+                     point_max_points: float, point_max_extent: float, max_extent: float, thin: float,
+                     circle_max_radius: float, depth_ratio: float, residual_ratio: float) -> np.ndarray:
     """:func:`fit_clusters`; where ``skip``, without the circle fit of a cluster whose circle the tracker's
     classification (:func:`dynslam2d.detect.kernels.classify_batch`, the same expressions) never reads: a point
     (n ≤ ``point_max_points`` or both sides < ``point_max_extent``), one not kept (a side > ``max_extent``, its
     ``max_extent``) or one too thin to be a circle (short side < ``thin`` = ``circle_min_depth_ratio`` ·
-    ``circle_min_radius``: a circle needs short side ≥ ratio · r ≥ ratio · min radius). Such a row's four circle
+    ``circle_min_radius``: a circle needs short side ≥ ratio · r ≥ ratio · min radius) or one too long for any
+    circle the classification accepts (:func:`_circle_reach`, with ``circle_max_radius``,
+    ``circle_min_depth_ratio`` as ``depth_ratio`` and ``circle_residual_ratio`` as ``residual_ratio``). Such a row's
+    four circle
     columns are NaN (never a fit's value: a degenerate fit gives r = 0, rms = inf), which the classification's
-    radius test refuses; :class:`dynslam2d.detect.measure.ScanDetection` fits them when its ``circle`` is read."""
+    radius test refuses; :class:`dynslam2d.detect.measure.ScanDetection` fits them when its ``circle`` is read.
+
+    ``trig``: (3, len(angles)) table of the angles' cos, sin and atan2(sin, cos) (the result's θ), which this fills
+    when ``trig[0, 0]`` is NaN (a new table) and otherwise reads as it is: a caller that keeps it for its next calls
+    with the same ``angles`` saves 3 transcendental functions per angle and call (docs/speed.md, pass fit34)."""
     k = offsets.shape[0] - 1
     out = np.empty((k, N_FIT_COLS))
     out[:] = 0.0
-    cos_t = np.cos(angles)
-    sin_t = np.sin(angles)
+    if np.isnan(trig[0, 0]):
+        for j in range(angles.shape[0]):  # (np.cos / np.sin of the angles, then θ = atan2 of the pair, as before)
+            trig[0, j] = np.cos(angles[j])
+            trig[1, j] = np.sin(angles[j])
+        for j in range(angles.shape[0]):
+            trig[2, j] = math.atan2(trig[1, j], trig[0, j])
     tmp = np.empty(6)
     tmpc = np.empty(4)
     nmax = 0
@@ -487,7 +535,8 @@ def fit_cluster_rows(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask
     c1 = np.empty(nmax)  # (work space of _fit_one, once per call)
     c2 = np.empty(nmax)
     c3 = np.empty(nmax)
-    order = np.empty(cos_t.shape[0] + 2 * max(stride, 1), dtype=np.int64)
+    w4 = np.empty((4, nmax))
+    order = np.empty(angles.shape[0] + 2 * max(stride, 1), dtype=np.int64)
     for c in range(k):
         a = offsets[c]
         b = offsets[c + 1]
@@ -509,19 +558,22 @@ def fit_cluster_rows(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask
             out[c, F_RECT_RMS] = np.inf
             out[c, F_CIRCLE_RMS] = np.inf
             continue
-        _fit_one(xs, ys, cos_t, sin_t, criterion, d0, tmp, stride, c1, c2, order)
+        _fit_one(xs, ys, trig, criterion, d0, tmp, stride, w4, order)
         for q in range(6):  # θ, lo1, hi1, lo2, hi2, rms (the order of _fit_one); element-wise: a slice
             out[c, F_THETA + q] = tmp[q]  # assignment compiles numba's shape-error formatting (~4 s cold)
         if n >= circle_min_points and skip:
             e0 = tmp[2] - tmp[1]  # (hi1 − lo1, hi2 − lo2: the fit's sides, as classify_batch computes them)
             e1 = tmp[4] - tmp[3]
             if n <= point_max_points or max(e0, e1) < point_max_extent or max(e0, e1) > max_extent or \
-                    min(e0, e1) < thin:
+                    min(e0, e1) < thin or max(e0, e1) >= _circle_reach(n, tmp[5], out[c, F_CENTROID_X],
+                                                                       out[c, F_CENTROID_Y], max(e0, e1),
+                                                                       min(e0, e1), circle_max_radius,
+                                                                       depth_ratio, residual_ratio):
                 for q in range(4):
                     out[c, F_CIRCLE_X + q] = np.nan
                 continue
         if n >= circle_min_points:
-            _circle_one(xs, ys, tmpc, c1, c2, c3)  # (c1, c2: free again after _fit_one)
+            _circle_one(xs, ys, tmpc, c1, c2, c3)  # (c1, c2, c3: free again after _fit_one)
             for q in range(4):  # cx, cy, r, rms (the order of _circle_one)
                 out[c, F_CIRCLE_X + q] = tmpc[q]
         else:

@@ -10,7 +10,9 @@ import numpy as np
 
 from dynslam2d.detect.kernels import (
     _P_CIRCLE_DEPTH_RATIO,
+    _P_CIRCLE_MAX_RADIUS,
     _P_CIRCLE_MIN_RADIUS,
+    _P_CIRCLE_RES_RATIO,
     _P_POINT_MAX_EXTENT,
     _P_POINT_MAX_POINTS,
     classify_batch,
@@ -46,6 +48,11 @@ def _thin(depth_ratio: float, min_radius: float) -> float:
 class TrackDetect:
     """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: the detection step (``_detect``, ``_merge_legs``)."""
 
+    #: the rectangle search's table of cos, sin and atan2 of ``_angles`` (``shapes.fit_cluster_rows`` fills it on
+    #: the first call) and the angles it was made for
+    _fit_trig: np.ndarray | None = None
+    _fit_trig_of: np.ndarray | None = None
+
     def _detect(self, scan: Scan, pose: Pose2D) -> list[Detection]:
         cfg = self.config
         st = self.stats
@@ -71,10 +78,17 @@ class TrackDetect:
         # (without the circle fits the classification below never reads: shapes.fit_cluster_rows, NaN columns that
         # ScanDetection.circle fits when read)
         fp = self._fit_p
-        fits = fit_cluster_rows(px, py, offsets, ~seg.structure, self._angles, CRITERIA[cfg.fit.criterion],
+        angles = self._angles
+        trig = self._fit_trig
+        if trig is None or self._fit_trig_of is not angles:
+            trig = self._fit_trig = np.full((3, angles.shape[0]), np.nan)
+            self._fit_trig_of = angles
+        fits = fit_cluster_rows(px, py, offsets, ~seg.structure, angles, trig, CRITERIA[cfg.fit.criterion],
                                 cfg.fit.closeness_d0, cfg.fit.circle_min_points, cfg.fit.coarse_stride, True,
                                 fp.item(_P_POINT_MAX_POINTS), fp.item(_P_POINT_MAX_EXTENT), ext_lim,
-                                _thin(fp.item(_P_CIRCLE_DEPTH_RATIO), fp.item(_P_CIRCLE_MIN_RADIUS)))
+                                _thin(fp.item(_P_CIRCLE_DEPTH_RATIO), fp.item(_P_CIRCLE_MIN_RADIUS)),
+                                fp.item(_P_CIRCLE_MAX_RADIUS), fp.item(_P_CIRCLE_DEPTH_RATIO),
+                                fp.item(_P_CIRCLE_RES_RATIO))
         # classify and bound every cluster (reference.classify_and_bound); then the vehicle-size clusters' map test
         # (detect/vehicles.py), the kept clusters' rows and their points' map evidence in one call. The map test is
         # per point, so only the detections' points are tested (structure clusters, most of the points, are not
