@@ -165,6 +165,8 @@ def lean_numba_compile() -> bool:
       times on that cold run; 5–8 % of its compile CPU).
     - **Inlining without copying the callee's IR twice** (:func:`lean_inlining`, installed at the first compile):
       three quarters of numba's inlining pass.
+    - **No machine code for a kernel compiled only as a callee** (:func:`lazy_callee_code`, installed at the first
+      compile): its caller links its optimised IR anyway; the code is made when Python calls it.
 
     Together about a tenth of the compile CPU (docs/speed.md), and the remembered call typing about a tenth
     more. The command line and its background compile call this first (they own the process); a library
@@ -208,7 +210,7 @@ def lean_numba_compile() -> bool:
     config.__hash__ = class_hash  # type: ignore[method-assign,assignment]
     config.__eq__ = fast_equal  # type: ignore[method-assign,assignment]
     roomy_compile_stack()
-    at_first_compile(remembered_call_typing, lean_inlining)  # (≈ 35 ms of reading numba's sources: not on a warm run)
+    at_first_compile(remembered_call_typing, lean_inlining, lazy_callee_code)  # (reading numba's sources: not warm)
     return True
 
 
@@ -478,6 +480,195 @@ def lean_inlining() -> bool:
     lean_function.__wrapped__ = inline_function  # type: ignore[attr-defined]
     worker.inline_ir = no_original
     worker.inline_function = lean_function
+    return True
+
+
+#: SHA-256 (first 16 hex digits) of the sources of numba's functions whose behaviour :func:`lazy_callee_code` relies on
+#: or re-does in part (numba 0.68); any other source is left as it is.
+LAZY_SOURCES = {
+    "Dispatcher.compile": "0ab4aee15e79bb1d",
+    "Dispatcher.add_overload": "3cd1a51507868539",
+    "Dispatcher.get_overload": "7dd56f622edd2016",
+    "Dispatcher.get_impl_key": "a43b40607b476035",
+    "CPUCodeLibrary._finalize_final_module": "95bbf4fcbb90ed99",
+    "CPUContext.get_executable": "3892c8a654a2ca69",
+    "Cache._save_overload": "cfe1bb44a31657d2",
+}
+
+
+class LazyEntry:
+    """Stand-in for the entry point (numba's Python-callable wrapper of the machine code) of a kernel compiled only
+    because another kernel calls it (:func:`lazy_callee_code`): what numba's ``get_executable`` needs to make the real
+    one. Not callable; numba's dispatcher never holds it in its table of callable signatures."""
+
+    __slots__ = ("context", "library", "fndesc", "env")
+
+    def __init__(self, context: Any, library: Any, fndesc: Any, env: Any) -> None:
+        self.context, self.library, self.fndesc, self.env = context, library, fndesc, env
+
+
+def _lazy_sources_checked() -> dict[str, Any] | None:
+    """numba's functions named in :data:`LAZY_SOURCES`, when their sources are the ones checked; else None."""
+    import inspect
+
+    try:
+        from numba.core import caching, codegen, cpu, dispatcher, types
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return None
+    found = {
+        "Dispatcher.compile": dispatcher.Dispatcher.compile,
+        "Dispatcher.add_overload": dispatcher.Dispatcher.add_overload,
+        "Dispatcher.get_overload": dispatcher.Dispatcher.get_overload,
+        "Dispatcher.get_impl_key": types.Dispatcher.get_impl_key,
+        "CPUCodeLibrary._finalize_final_module": codegen.CPUCodeLibrary._finalize_final_module,
+        "CPUContext.get_executable": cpu.CPUContext.get_executable,
+        "Cache._save_overload": caching.Cache._save_overload,
+    }
+    for name, func in found.items():
+        try:
+            source = inspect.getsource(func)  # (of numba's own function where a wrapper names it __wrapped__)
+        except (OSError, TypeError):
+            return None
+        if hashlib.sha256(source.encode()).hexdigest()[:16] != LAZY_SOURCES[name]:
+            return None
+    return found
+
+
+def lazy_callee_code() -> bool:
+    """Have numba make the machine code of a dynslam2d kernel that it compiles only because another kernel calls it
+    when Python first asks for that kernel, not when it compiles it.
+
+    A kernel ``f`` that calls a kernel ``g`` compiles ``g`` while typing the call (``Dispatcher.get_call_template``):
+    numba optimises ``g``'s library, compiles it to machine code (MCJIT ``finalize_object``), takes the address of
+    its Python wrapper (``CPUContext.get_executable``) and writes ``g`` to the cache (its machine code and bitcode).
+    ``f`` then links ``g``'s optimised IR into its own library and optimises and compiles it again: ``g``'s own
+    machine code, wrapper and cache entry serve only a later call of ``g`` from Python, which the README's first
+    command never makes (``g`` is not in :mod:`dynslam2d.jitmanifest`), and a warm run loads ``f`` whole from the
+    cache without ``g`` (docs/speed.md, passes cold25, cold30 and cold34). Here, for a dynslam2d kernel compiled
+    while another compile is in progress (numba's ``numba:compile`` events):
+
+    - ``get_executable`` returns a :class:`LazyEntry` instead of the wrapper, and ``g``'s library, once optimised
+      (as numba does it, when ``f`` links it), is not handed to the execution engine (no machine code);
+    - the dispatcher keeps the compile result for typing and linking (``overloads``) but not in its table of
+      callable signatures, and no cache entry is written for it;
+    - the caller's lowering finds ``g``'s code under that stand-in (numba keys a kernel's implementation by its entry
+      point: ``types.Dispatcher.get_impl_key``, ``Dispatcher.get_overload``, ``insert_user_function``);
+    - when Python calls ``g`` (``Dispatcher.compile`` outside any compile, ``_compile_for_args``),
+      the library is handed to the engine and compiled, the wrapper made, the signature entered in the table and
+      written to the cache: what numba would have done at the compile, from the same optimised IR.
+
+    ``f``'s library links the same optimised IR of ``g``, so every kernel's code is the same. A library whose IR refers
+    to numba's run-time linker (recursion: ``.numba.unresolved$`` names) is compiled as numba does. Done only when
+    numba's sources are the ones checked (:data:`LAZY_SOURCES`); called by :func:`lean_numba_compile` at the first
+    compile, so it touches only the command line's processes. Returns whether it changed numba."""
+    import weakref
+
+    found = _lazy_sources_checked()
+    if found is None or getattr(found["Dispatcher.add_overload"], "_dynslam2d_lazy", False):
+        return False
+    from numba.core import caching, codegen, cpu, dispatcher, event, sigutils
+
+    compile_, add_overload = dispatcher.Dispatcher.compile, found["Dispatcher.add_overload"]
+    compile_for_args = dispatcher.Dispatcher._compile_for_args
+    finalize_final, get_executable = found["CPUCodeLibrary._finalize_final_module"], found["CPUContext.get_executable"]
+    save = found["Cache._save_overload"]
+    unresolved = codegen.RuntimeLinker.PREFIX
+    lazy = [False]  # per compile in progress (numba's "numba:compile" events): whether it is a kernel's callee
+
+    class _Callees(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            func = getattr((ev.data or {}).get("dispatcher"), "py_func", None)
+            module = getattr(func, "__module__", "") or ""
+            lazy.append(len(lazy) > 1 and module.startswith("dynslam2d."))
+
+        def on_end(self, ev: Any) -> None:
+            if len(lazy) > 1:
+                lazy.pop()
+
+    def lazy_executable(self: Any, library: Any, fndesc: Any, env: Any) -> Any:
+        if lazy[-1] and not library._finalized:  # (a library loaded from the cache is finalized: numba's way)
+            library._dynslam2d_lazy = True
+            return LazyEntry(self, library, fndesc, env)
+        return get_executable(self, library, fndesc, env)
+
+    def lazy_finalize_final(self: Any) -> None:
+        module = self._final_module
+        if not getattr(self, "_dynslam2d_lazy", False) or any(
+                g.name.startswith(unresolved) for g in module.global_variables):
+            self._dynslam2d_lazy = False
+            return finalize_final(self)
+        # numba's _finalize_final_module up to the engine: its checks and the module's library for the object cache
+        self._finalize_dynamic_globals()
+        self._verify_declare_only_symbols()
+        module._CPUCodeLibrary__library = weakref.proxy(self)  # (numba's name-mangled attribute)
+        self._finalized = True
+        return None
+
+    def to_engine(library: Any) -> None:
+        """The rest of numba's _finalize_final_module for a library :func:`lazy_finalize_final` kept back."""
+        library._ensure_finalized()
+        if getattr(library, "_dynslam2d_lazy", False):
+            library._dynslam2d_lazy = False
+            cleanup = library._codegen._add_module(library._final_module)
+            if cleanup:
+                weakref.finalize(library, cleanup)
+            library._finalize_specific()
+
+    def materialise(disp: Any, args: tuple[Any, ...]) -> Any:
+        cres = disp.overloads[args]
+        entry = cres.entry_point
+        to_engine(entry.library)
+        cfunc = get_executable(entry.context, entry.library, entry.fndesc, entry.env)
+        try:
+            entry.context.remove_user_function(entry)
+        except KeyError:
+            pass
+        entry.context.insert_user_function(cfunc, entry.fndesc, [entry.library])
+        cres = cres._replace(entry_point=cfunc)
+        add_overload(disp, cres)
+        disp._cache.save_overload(args, cres)
+        return cfunc
+
+    def lazy_add_overload(self: Any, cres: Any) -> None:
+        if isinstance(cres.entry_point, LazyEntry):
+            self.overloads[tuple(cres.signature.args)] = cres  # (typing and linking only: not callable)
+            return
+        add_overload(self, cres)
+
+    def lazy_compile(self: Any, sig: Any) -> Any:
+        if len(lazy) == 1:  # not inside a compile: a call from Python, which needs the machine code
+            args = tuple(sigutils.normalize_signature(sig)[0])
+            existing = self.overloads.get(args)
+            if existing is not None and isinstance(existing.entry_point, LazyEntry):
+                with dispatcher.global_compiler_lock:
+                    return materialise(self, args)
+        return compile_(self, sig)
+
+    def lazy_compile_for_args(self: Any, *args: Any, **kws: Any) -> Any:
+        entry = compile_for_args(self, *args, **kws)
+        if isinstance(entry, LazyEntry):  # (a call from Python made while compiling)
+            args_ = next(a for a, c in self.overloads.items() if c.entry_point is entry)
+            with dispatcher.global_compiler_lock:
+                return materialise(self, args_)
+        return entry
+
+    def lazy_save(self: Any, sig: Any, data: Any) -> None:
+        if isinstance(getattr(data, "entry_point", None), LazyEntry):
+            return
+        save(self, sig, data)
+
+    for new, old in ((lazy_add_overload, add_overload), (lazy_compile, compile_),
+                     (lazy_compile_for_args, compile_for_args), (lazy_finalize_final, finalize_final),
+                     (lazy_executable, get_executable), (lazy_save, save)):
+        new.__wrapped__ = old  # type: ignore[attr-defined]
+    lazy_add_overload._dynslam2d_lazy = True  # type: ignore[attr-defined]
+    event.register("numba:compile", _Callees())
+    dispatcher.Dispatcher.add_overload = lazy_add_overload  # type: ignore[method-assign]
+    dispatcher.Dispatcher.compile = lazy_compile  # type: ignore[method-assign]
+    dispatcher.Dispatcher._compile_for_args = lazy_compile_for_args  # type: ignore[method-assign]
+    codegen.CPUCodeLibrary._finalize_final_module = lazy_finalize_final  # type: ignore[method-assign]
+    cpu.CPUContext.get_executable = lazy_executable  # type: ignore[method-assign]
+    caching.Cache._save_overload = lazy_save  # type: ignore[method-assign]
     return True
 
 
