@@ -19,6 +19,13 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
+try:  # np.count_nonzero(a) without axis is this C function behind a Python wrapper and its dispatch (every scan)
+    from numpy._core.multiarray import count_nonzero as _count_nonzero
+except ImportError:  # pragma: no cover - another NumPy layout
+    _count_nonzero = np.count_nonzero
+
+_BOOL = np.dtype(np.bool_)
+
 
 class GrowArray:
     """An append-only array of rows of dtype ``dtype`` and shape ``shape`` (doubling growth)."""
@@ -83,13 +90,19 @@ class BitRows(Sequence[np.ndarray]):
         self._widths: set[int] = set()
 
     def append(self, row: np.ndarray) -> None:
-        r = np.asarray(row, dtype=bool).ravel()
-        self._start.append(len(self._bits))
-        self._len.append(r.size)
-        self._bits.extend(np.packbits(r))
-        self.total_bits += r.size
-        self.total_set += int(np.count_nonzero(r))
-        self._widths.add(r.size)
+        # (a 1-D bool array, what the pipeline gives on every scan, as it is: np.asarray(…, bool).ravel() of it is
+        # the same values; its width tested against the set before adding it)
+        r = row if type(row) is np.ndarray and row.dtype is _BOOL and row.ndim == 1 else np.asarray(
+            row, dtype=bool).ravel()
+        size = r.size
+        bits = self._bits
+        self._start.append(bits._n)  # (len(self._bits))
+        self._len.append(size)
+        bits.extend(np.packbits(r))
+        self.total_bits += size
+        self.total_set += int(_count_nonzero(r))  # (np.count_nonzero(r) without its Python wrapper)
+        if size not in self._widths:
+            self._widths.add(size)
 
     def __len__(self) -> int:
         return len(self._start)
@@ -181,8 +194,15 @@ class TrackRows(Sequence[tuple]):
         """Append rows given in storage order ``(stamp, id, state code, x, y, heading, length, width, vx, vy,
         in_M, remembered)`` (codes from :meth:`code`) in one array write: the values :meth:`append` stores (one
         scan's live tracks at once in :func:`dynslam2d.pipeline.run`)."""
-        if records:
-            self._rows.extend(np.array(records, dtype=_TRACK_DTYPE))
+        k = len(records)
+        if k:
+            rows = self._rows
+            rows._reserve(k)
+            n = rows._n
+            # (the tuples converted straight into the buffer's rows: np.array(records, dtype=_TRACK_DTYPE)'s values
+            # without that array and its copy)
+            rows._buf[n:n + k] = records
+            rows._n = n + k
 
     def __len__(self) -> int:
         return len(self._rows)
