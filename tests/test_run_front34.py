@@ -30,6 +30,10 @@ def _same(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> bool:
 
 
 def test_stage_timings_rows_match_per_stage_arrays():
+    st = pl._StageTimings()
+    st.add({})
+    st.add({"match": 1.0})  # (no stages on the first scan, then one)
+    assert _same(st.arrays(), _old_timings([{}, {"match": 1.0}]))
     rng = np.random.default_rng(3)
     keys = ["match", "track", "filter", "map_update", "loops", "total"]
     steps = [dict(zip(keys, rng.exponential(size=6).tolist())) for _ in range(700)]  # (past the 256-row buffer)
@@ -76,9 +80,17 @@ def test_bitrows_append_fast_path_matches_old_form():
         b.append(row)
     assert type(b.total_set) is int and b.total_set == a.total_set and b.total_bits == a.total_bits
     assert b._widths == a._widths and b.uniform == a.uniform
-    for g in ("_bits", "_start", "_len"):
-        assert getattr(a, g).view().tobytes() == getattr(b, g).view().tobytes()
-    assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    assert a._bits.view().tobytes() == b._bits.view().tobytes()
+    assert list(a._start) == list(b._start) and list(a._len) == list(b._len)
+    assert len(a) == len(b) == len(inputs) and b.nbytes > 0
+    for i in (0, 5, -1, -600, len(inputs) - 1):
+        assert np.array_equal(b[i], np.asarray(inputs[i], dtype=bool).ravel()) and b[i].dtype == np.bool_
+    assert all(np.array_equal(x, y) for x, y in zip(a, b)) and [len(r) for r in b[3:9]] == [len(r) for r in a[3:9]]
+    u = BitRows()
+    rows = [r for r in inputs if isinstance(r, np.ndarray) and r.shape == (720,)]
+    for r in rows:
+        u.append(r)
+    assert u.uniform and np.array_equal(u.stack(), np.array(rows)) and BitRows().stack().shape == (0, 0)
 
 
 def test_extend_records_writes_the_rows_np_array_made():

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import time
+from array import array
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -801,14 +802,15 @@ def _track_records(stamp: float, tracks: list[Track], track_rows: TrackRows) -> 
 
 
 class _StageTimings:
-    """:attr:`StepResult.timings` of every scan of a run as one float64 row per scan (one append a scan instead of
-    one per stage); :meth:`arrays` gives :attr:`RunResult.timings_ms`: per stage, in first-seen order, the values of
-    the scans that had it. The stages are the first scan's; a scan with other stages (never from
+    """:attr:`StepResult.timings` of every scan of a run, the values of each scan appended to one C float64 array of the
+    standard library (one C call a scan, where six ``GrowArray.append`` calls cost a Python method and a NumPy item
+    assignment each); :meth:`arrays` gives :attr:`RunResult.timings_ms`: per stage, in first-seen order, the values
+    of the scans that had it. The stages are the first scan's; a scan with other stages (never from
     :meth:`Pipeline.process`) turns the rows into per-stage lists."""
 
     def __init__(self) -> None:
         self._keys: list[str] | None = None
-        self._rows: GrowArray | None = None
+        self._vals = array("d")  # the scans' values, row after row (len(_keys) per scan)
         self._other: dict[str, list[float]] | None = None  # per stage, once a scan's stages differed
 
     def add(self, timings: dict[str, float]) -> None:
@@ -816,13 +818,12 @@ class _StageTimings:
         keys = self._keys
         if keys is None:
             keys = self._keys = list(timings)
-            self._rows = GrowArray(np.float64, (len(keys),))
         other = self._other
         if other is None:
             if list(timings) == keys:
-                self._rows.append(tuple(timings.values()))
+                self._vals.extend(timings.values())
                 return
-            rows = self._rows.view()  # (the rows so far as per-stage lists)
+            rows = self._rows()  # (the rows so far as per-stage lists)
             other = self._other = {k: rows[:, i].tolist() for i, k in enumerate(keys)}
         for k, v in timings.items():
             col = other.get(k)
@@ -830,13 +831,18 @@ class _StageTimings:
                 col = other[k] = []
             col.append(v)
 
+    def _rows(self) -> np.ndarray:
+        """(scans, stages) float64 copy of the values."""
+        k = len(self._keys or ())
+        return np.array(self._vals, dtype=np.float64).reshape(-1, k) if k else np.zeros((0, 0))
+
     def arrays(self) -> dict[str, np.ndarray]:
         """Stage name → float64 ms of the scans that had that stage (empty before any scan)."""
         if self._other is not None:
             return {k: np.array(v, dtype=np.float64) for k, v in self._other.items()}
         if self._keys is None:
             return {}
-        rows = self._rows.view()
+        rows = self._rows()
         return {k: rows[:, i].copy() for i, k in enumerate(self._keys)}
 
 

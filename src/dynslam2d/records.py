@@ -15,6 +15,7 @@ so code written for the former lists keeps working.
 
 from __future__ import annotations
 
+from array import array
 from collections.abc import Iterator, Sequence
 
 import numpy as np
@@ -83,8 +84,10 @@ class BitRows(Sequence[np.ndarray]):
 
     def __init__(self) -> None:
         self._bits = GrowArray(np.uint8, capacity=4096)
-        self._start = GrowArray(np.int64)
-        self._len = GrowArray(np.int32)
+        # (each row's first byte and length as C int64 arrays of the standard library: an append is one C call, where
+        # a GrowArray's costs a Python method and a NumPy item assignment — on every scan of a run)
+        self._start = array("q")
+        self._len = array("q")
         self.total_bits = 0
         self.total_set = 0
         self._widths: set[int] = set()
@@ -115,7 +118,7 @@ class BitRows(Sequence[np.ndarray]):
             i += n
         if not 0 <= i < n:
             raise IndexError(i)
-        s, k = int(self._start.view()[i]), int(self._len.view()[i])
+        s, k = self._start[i], self._len[i]
         return np.unpackbits(self._bits.view()[s : s + (k + 7) // 8], count=k).astype(bool)
 
     def __iter__(self) -> Iterator[np.ndarray]:
@@ -134,14 +137,14 @@ class BitRows(Sequence[np.ndarray]):
             return np.zeros((0, 0), dtype=bool)
         if not self.uniform:
             raise ValueError("rows differ in length")
-        width = int(self._len.view()[0])
+        width = self._len[0]
         per = (width + 7) // 8
         packed = self._bits.view()[: n * per].reshape(n, per)
         return np.unpackbits(packed, axis=1, count=width).astype(bool)
 
     @property
     def nbytes(self) -> int:
-        return self._bits.nbytes + self._start.nbytes + self._len.nbytes
+        return self._bits.nbytes + self._start.itemsize * len(self._start) + self._len.itemsize * len(self._len)
 
 
 #: Track states, stored as small integers in :class:`TrackRows`.
