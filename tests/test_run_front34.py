@@ -80,17 +80,27 @@ def test_bitrows_append_fast_path_matches_old_form():
         b.append(row)
     assert type(b.total_set) is int and b.total_set == a.total_set and b.total_bits == a.total_bits
     assert b._widths == a._widths and b.uniform == a.uniform
-    assert a._bits.view().tobytes() == b._bits.view().tobytes()
-    assert list(a._start) == list(b._start) and list(a._len) == list(b._len)
+    assert list(a._len) == list(b._len)
+    kept = [i for i, row in enumerate(inputs) if np.asarray(row, dtype=bool).any()]  # (rows with a set bit keep bytes)
+    assert [i for i, s in enumerate(b._start) if s >= 0] == kept and all(s == -1 for s in b._start if s < 0)
+    assert b._bits.view().tobytes() == b"".join(a._bits.view()[a._start[i]:a._start[i] + (a._len[i] + 7) // 8]
+                                                 .tobytes() for i in kept)
     assert len(a) == len(b) == len(inputs) and b.nbytes > 0
     for i in (0, 5, -1, -600, len(inputs) - 1):
         assert np.array_equal(b[i], np.asarray(inputs[i], dtype=bool).ravel()) and b[i].dtype == np.bool_
     assert all(np.array_equal(x, y) for x, y in zip(a, b)) and [len(r) for r in b[3:9]] == [len(r) for r in a[3:9]]
     u = BitRows()
     rows = [r for r in inputs if isinstance(r, np.ndarray) and r.shape == (720,)]
+    rows[3:3] = [np.zeros(720, dtype=bool)] * 3  # (rows without a set bit between others)
+    rows.append(np.zeros(720, dtype=bool))
     for r in rows:
         u.append(r)
     assert u.uniform and np.array_equal(u.stack(), np.array(rows)) and BitRows().stack().shape == (0, 0)
+    z = BitRows()
+    for _ in range(4):
+        z.append(np.zeros(13, dtype=bool))
+    assert np.array_equal(z.stack(), np.zeros((4, 13), dtype=bool)) and z.total_set == 0 and len(z._bits) == 0
+    assert np.array_equal(z[-1], np.zeros(13, dtype=bool)) and z[-1].dtype == np.bool_
 
 
 def test_extend_records_writes_the_rows_np_array_made():

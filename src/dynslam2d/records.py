@@ -80,7 +80,8 @@ class GrowArray:
 
 
 class BitRows(Sequence[np.ndarray]):
-    """Bool rows of any length, packed 8 per byte; ``rows[i]`` is a fresh (len_i,) bool array."""
+    """Bool rows of any length, packed 8 per byte (a row without a set bit keeps no bytes); ``rows[i]`` is a fresh
+    (len_i,) bool array."""
 
     def __init__(self) -> None:
         self._bits = GrowArray(np.uint8, capacity=4096)
@@ -98,12 +99,16 @@ class BitRows(Sequence[np.ndarray]):
         r = row if type(row) is np.ndarray and row.dtype is _BOOL and row.ndim == 1 else np.asarray(
             row, dtype=bool).ravel()
         size = r.size
-        bits = self._bits
-        self._start.append(bits._n)  # (len(self._bits))
+        n_set = int(_count_nonzero(r))  # (np.count_nonzero(r) without its Python wrapper)
+        if n_set:
+            bits = self._bits
+            self._start.append(bits._n)  # (len(self._bits))
+            bits.extend(np.packbits(r))
+        else:  # a row without a set bit (nearly every scan's removed beams) keeps no bytes: start −1
+            self._start.append(-1)
         self._len.append(size)
-        bits.extend(np.packbits(r))
         self.total_bits += size
-        self.total_set += int(_count_nonzero(r))  # (np.count_nonzero(r) without its Python wrapper)
+        self.total_set += n_set
         if size not in self._widths:
             self._widths.add(size)
 
@@ -119,6 +124,8 @@ class BitRows(Sequence[np.ndarray]):
         if not 0 <= i < n:
             raise IndexError(i)
         s, k = self._start[i], self._len[i]
+        if s < 0:
+            return np.zeros(k, dtype=bool)
         return np.unpackbits(self._bits.view()[s : s + (k + 7) // 8], count=k).astype(bool)
 
     def __iter__(self) -> Iterator[np.ndarray]:
@@ -139,8 +146,12 @@ class BitRows(Sequence[np.ndarray]):
             raise ValueError("rows differ in length")
         width = self._len[0]
         per = (width + 7) // 8
-        packed = self._bits.view()[: n * per].reshape(n, per)
-        return np.unpackbits(packed, axis=1, count=width).astype(bool)
+        kept = np.flatnonzero(np.array(self._start, dtype=np.int64) >= 0)  # (rows with bytes, stored in their order)
+        out = np.zeros((n, width), dtype=bool)
+        if kept.size:
+            packed = self._bits.view()[: kept.size * per].reshape(kept.size, per)
+            out[kept] = np.unpackbits(packed, axis=1, count=width).astype(bool)
+        return out
 
     @property
     def nbytes(self) -> int:
