@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import time
+from array import array
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -784,6 +785,67 @@ _SCAN_RECORD = np.dtype([("stamp", np.float64), ("pose", np.float64, (3,)), ("sc
 TRIM_EVERY_SCANS = 1000
 
 
+def _track_records(stamp: float, tracks: list[Track], track_rows: TrackRows) -> list[tuple]:
+    """One scan's live tracks as :meth:`TrackRows.extend_records` rows (stamp, id, state code, box, velocity, in M,
+    remembered): the velocity's two floats from one ``tolist`` (``float(v[0])``, ``float(v[1])``'s values), the
+    flags as ``bool``."""
+    codes, code = track_rows.state_codes, track_rows.code
+    out = []
+    append = out.append
+    for t in tracks:
+        b = t.box
+        st = t.state
+        vx, vy = t.velocity.tolist()
+        append((stamp, t.id, codes[st] if st in codes else code(st), b.px, b.py, b.theta, b.length, b.width, vx, vy,
+                bool(t.in_m), bool(t.remembered)))
+    return out
+
+
+class _StageTimings:
+    """:attr:`StepResult.timings` of every scan of a run, the values of each scan appended to one C float64 array of the
+    standard library (one C call a scan, where six ``GrowArray.append`` calls cost a Python method and a NumPy item
+    assignment each); :meth:`arrays` gives :attr:`RunResult.timings_ms`: per stage, in first-seen order, the values
+    of the scans that had it. The stages are the first scan's; a scan with other stages (never from
+    :meth:`Pipeline.process`) turns the rows into per-stage lists."""
+
+    def __init__(self) -> None:
+        self._keys: list[str] | None = None
+        self._vals = array("d")  # the scans' values, row after row (len(_keys) per scan)
+        self._other: dict[str, list[float]] | None = None  # per stage, once a scan's stages differed
+
+    def add(self, timings: dict[str, float]) -> None:
+        """Record one scan's stage timings (ms)."""
+        keys = self._keys
+        if keys is None:
+            keys = self._keys = list(timings)
+        other = self._other
+        if other is None:
+            if list(timings) == keys:
+                self._vals.extend(timings.values())
+                return
+            rows = self._rows()  # (the rows so far as per-stage lists)
+            other = self._other = {k: rows[:, i].tolist() for i, k in enumerate(keys)}
+        for k, v in timings.items():
+            col = other.get(k)
+            if col is None:
+                col = other[k] = []
+            col.append(v)
+
+    def _rows(self) -> np.ndarray:
+        """(scans, stages) float64 copy of the values."""
+        k = len(self._keys or ())
+        return np.array(self._vals, dtype=np.float64).reshape(-1, k) if k else np.zeros((0, 0))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Stage name → float64 ms of the scans that had that stage (empty before any scan)."""
+        if self._other is not None:
+            return {k: np.array(v, dtype=np.float64) for k, v in self._other.items()}
+        if self._keys is None:
+            return {}
+        rows = self._rows()
+        return {k: rows[:, i].copy() for i, k in enumerate(self._keys)}
+
+
 class RunObserver(Protocol):
     """Something that watches a run scan by scan: a bag writer, an animation, a live viewer.
 
@@ -820,7 +882,7 @@ def run(
     per_scan = GrowArray(_SCAN_RECORD)
     removed_rows = BitRows()
     track_rows = TrackRows()
-    timings: dict[str, GrowArray] = {}
+    stage_ms = _StageTimings()
     t0 = time.perf_counter()
     compile0 = compile_seconds()
     last_scan: Scan | None = None
@@ -836,16 +898,8 @@ def run(
             n_done += 1
             removed_rows.append(step.removed)
             if step.tracks:
-                stamp, code, codes = step.stamp, track_rows.code, track_rows.state_codes
-                track_rows.extend_records([
-                    (stamp, t.id, codes[t.state] if t.state in codes else code(t.state), b.px, b.py, b.theta, b.length,
-                     b.width, float(vel[0]), float(vel[1]), bool(t.in_m), bool(t.remembered))
-                    for t in step.tracks for b, vel in ((t.box, t.velocity),)])
-            for k, v in step.timings.items():
-                arr = timings.get(k)
-                if arr is None:
-                    arr = timings[k] = GrowArray(np.float64)
-                arr.append(v)
+                track_rows.extend_records(_track_records(step.stamp, step.tracks, track_rows))
+            stage_ms.add(step.timings)
             for obs in observers:
                 obs.on_scan(scan, step, pipe)
             if progress is not None:
@@ -900,7 +954,7 @@ def run(
         skipped=flag_arr[:, 2],
         removed_rows=removed_rows,
         track_rows=track_rows,
-        timings_ms={k: v.view().copy() for k, v in timings.items()},
+        timings_ms=stage_ms.arrays(),
         grid=grid,
         logodds=logodds,
         wall_time_s=wall,

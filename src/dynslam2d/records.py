@@ -15,9 +15,17 @@ so code written for the former lists keeps working.
 
 from __future__ import annotations
 
+from array import array
 from collections.abc import Iterator, Sequence
 
 import numpy as np
+
+try:  # np.count_nonzero(a) without axis is this C function behind a Python wrapper and its dispatch (every scan)
+    from numpy._core.multiarray import count_nonzero as _count_nonzero
+except ImportError:  # pragma: no cover - another NumPy layout
+    _count_nonzero = np.count_nonzero
+
+_BOOL = np.dtype(np.bool_)
 
 
 class GrowArray:
@@ -72,24 +80,37 @@ class GrowArray:
 
 
 class BitRows(Sequence[np.ndarray]):
-    """Bool rows of any length, packed 8 per byte; ``rows[i]`` is a fresh (len_i,) bool array."""
+    """Bool rows of any length, packed 8 per byte (a row without a set bit keeps no bytes); ``rows[i]`` is a fresh
+    (len_i,) bool array."""
 
     def __init__(self) -> None:
         self._bits = GrowArray(np.uint8, capacity=4096)
-        self._start = GrowArray(np.int64)
-        self._len = GrowArray(np.int32)
+        # (each row's first byte and length as C int64 arrays of the standard library: an append is one C call, where
+        # a GrowArray's costs a Python method and a NumPy item assignment — on every scan of a run)
+        self._start = array("q")
+        self._len = array("q")
         self.total_bits = 0
         self.total_set = 0
         self._widths: set[int] = set()
 
     def append(self, row: np.ndarray) -> None:
-        r = np.asarray(row, dtype=bool).ravel()
-        self._start.append(len(self._bits))
-        self._len.append(r.size)
-        self._bits.extend(np.packbits(r))
-        self.total_bits += r.size
-        self.total_set += int(np.count_nonzero(r))
-        self._widths.add(r.size)
+        # (a 1-D bool array, what the pipeline gives on every scan, as it is: np.asarray(…, bool).ravel() of it is
+        # the same values; its width tested against the set before adding it)
+        r = row if type(row) is np.ndarray and row.dtype is _BOOL and row.ndim == 1 else np.asarray(
+            row, dtype=bool).ravel()
+        size = r.size
+        n_set = int(_count_nonzero(r))  # (np.count_nonzero(r) without its Python wrapper)
+        if n_set:
+            bits = self._bits
+            self._start.append(bits._n)  # (len(self._bits))
+            bits.extend(np.packbits(r))
+        else:  # a row without a set bit (nearly every scan's removed beams) keeps no bytes: start −1
+            self._start.append(-1)
+        self._len.append(size)
+        self.total_bits += size
+        self.total_set += n_set
+        if size not in self._widths:
+            self._widths.add(size)
 
     def __len__(self) -> int:
         return len(self._start)
@@ -102,7 +123,9 @@ class BitRows(Sequence[np.ndarray]):
             i += n
         if not 0 <= i < n:
             raise IndexError(i)
-        s, k = int(self._start.view()[i]), int(self._len.view()[i])
+        s, k = self._start[i], self._len[i]
+        if s < 0:
+            return np.zeros(k, dtype=bool)
         return np.unpackbits(self._bits.view()[s : s + (k + 7) // 8], count=k).astype(bool)
 
     def __iter__(self) -> Iterator[np.ndarray]:
@@ -121,14 +144,18 @@ class BitRows(Sequence[np.ndarray]):
             return np.zeros((0, 0), dtype=bool)
         if not self.uniform:
             raise ValueError("rows differ in length")
-        width = int(self._len.view()[0])
+        width = self._len[0]
         per = (width + 7) // 8
-        packed = self._bits.view()[: n * per].reshape(n, per)
-        return np.unpackbits(packed, axis=1, count=width).astype(bool)
+        kept = np.flatnonzero(np.array(self._start, dtype=np.int64) >= 0)  # (rows with bytes, stored in their order)
+        out = np.zeros((n, width), dtype=bool)
+        if kept.size:
+            packed = self._bits.view()[: kept.size * per].reshape(kept.size, per)
+            out[kept] = np.unpackbits(packed, axis=1, count=width).astype(bool)
+        return out
 
     @property
     def nbytes(self) -> int:
-        return self._bits.nbytes + self._start.nbytes + self._len.nbytes
+        return self._bits.nbytes + self._start.itemsize * len(self._start) + self._len.itemsize * len(self._len)
 
 
 #: Track states, stored as small integers in :class:`TrackRows`.
@@ -181,8 +208,15 @@ class TrackRows(Sequence[tuple]):
         """Append rows given in storage order ``(stamp, id, state code, x, y, heading, length, width, vx, vy,
         in_M, remembered)`` (codes from :meth:`code`) in one array write: the values :meth:`append` stores (one
         scan's live tracks at once in :func:`dynslam2d.pipeline.run`)."""
-        if records:
-            self._rows.extend(np.array(records, dtype=_TRACK_DTYPE))
+        k = len(records)
+        if k:
+            rows = self._rows
+            rows._reserve(k)
+            n = rows._n
+            # (the tuples converted straight into the buffer's rows: np.array(records, dtype=_TRACK_DTYPE)'s values
+            # without that array and its copy)
+            rows._buf[n:n + k] = records
+            rows._n = n + k
 
     def __len__(self) -> int:
         return len(self._rows)
