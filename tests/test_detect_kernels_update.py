@@ -348,11 +348,14 @@ def _update_pairs_separate(G, Gi, X, P, Xs, Ps, sel, trows, dis, missed, kind, t
                            kept, first, second, mnpts, MEV, RIDE, WN, use_map, *rest) -> tuple:
     """``Tracker._update_pairs`` before ``update_pairs`` (main at 10af139): ``pair_priors``, ``measure_batch``,
     ``kalman_pairs`` and ``shape_update`` called one by one from Python, then ``_restart_windows`` of each
-    re-acquired track whose update applied (in ``_update_tracks``' loop over the pairs)."""
+    re-acquired track whose update applied (in ``_update_tracks``' loop over the pairs), and what ``_update_tracks``
+    read per pair: ``ok``, the batch's ``start`` and ``npts`` as lists and the person's circle test on Python
+    floats."""
     from types import SimpleNamespace
 
     from dynslam2d.detect import kernels as K
     from dynslam2d.detect import kernels_update as ku
+    from dynslam2d.detect.layout import K_CIRCLE
     from dynslam2d.detect.tracktable import TrackRows
 
     n = sel.shape[0]
@@ -360,28 +363,33 @@ def _update_pairs_separate(G, Gi, X, P, Xs, Ps, sel, trows, dis, missed, kind, t
     mr = K.measure_batch(dis, kind, theta, lohi, rel, centroid, circle, bpx, bpy, start, npts, sizes, has, radius,
                          np.full(n, size_sigma), p)
     ok, nb = ku.kalman_pairs(Xs, Ps, sel, mr[2], mr[3], mr[4], bound, hits, after, lim, lim2, X, P, trows)
+    *rest, pmin_r, pmax_r = rest
     top = K.shape_update(G, Gi, X, trows, dis, ok, kind, theta, lohi, rel, circle, mr[5], mr[6], swaps, dd, ddr, hg,
                          sg, mfr, kept, first, second, mnpts, MEV, RIDE, WN, use_map, *rest)
     rows = SimpleNamespace(_WN=WN, _RIDE=RIDE, _MEV=MEV)
     for r, applied in enumerate(ok.tolist()):
         if applied and missed[sel[r]]:
             TrackRows._restart_windows(rows, int(trows[r]), use_map)
-    return ok, nb, top
+    radii, kinds, starts, counts = circle[:, 2].tolist(), kind.tolist(), start.tolist(), npts.tolist()
+    info = [[int(a), starts[j], counts[j], int(kinds[j] == K_CIRCLE and pmin_r <= radii[j] <= pmax_r)]
+            for a, j in zip(ok.tolist(), dis.tolist())]
+    return nb, top, np.array(info, dtype=np.int64).reshape(n, 4), ok.tolist().count(False)
 
 
 def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
     """``update_pairs`` against ``pair_priors`` → ``measure_batch`` → ``kalman_pairs`` → ``shape_update`` and the
     re-acquired tracks' ``_restart_windows`` in Python, on every call of two pipeline runs (sim:drive with its map
-    evidence, sim:crowd with the tracker's map evidence off): the results and the bytes of every array the call
-    writes (states, covariances, shape rows, windows), each call also with a limit 30 × tighter (most established
-    rows bounded) and with every track taken as re-acquired, on copies."""
+    evidence, sim:crowd with the tracker's map evidence off): the results (the per-pair rows ``_update_tracks``
+    reads, with the person's circle test) and the bytes of every array the call writes (states, covariances, shape
+    rows, windows), each call also with a limit 30 × tighter (most established
+    rows bounded), with every track taken as re-acquired and with a failed update, on copies."""
     from dynslam2d.config import Config
     from dynslam2d.detect import kernels_update as ku
     from dynslam2d.detect import trackupdate as tu
     from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import Pipeline
 
-    seen = {"calls": 0, "bounded": 0, "restarted": 0, "use_map": 0}
+    seen = {"calls": 0, "bounded": 0, "restarted": 0, "use_map": 0, "rejected": 0}
 
     def merged(*a):
         a = list(a)
@@ -391,7 +399,10 @@ def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
         tight[22] = True
         every = list(a)
         every[9] = np.ones_like(a[9])
-        cases += [tight, every]
+        bad = list(a)
+        bad[5] = a[5].copy()
+        bad[5][a[6][0]] = np.nan  # (the first pair's prior covariance: its update fails, ok False, its row unwritten)
+        cases += [tight, every, bad]
         for case in cases:
             outs = []
             for f in (ku.update_pairs, _update_pairs_separate):
@@ -399,9 +410,11 @@ def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
                 for i in (0, 1, 2, 3, 36, 37, 38):  # (the arrays the call writes: copies)
                     c[i] = c[i].copy()
                 got = f(*c)
-                outs.append((got[0].tobytes(), got[1], got[2], [c[i].tobytes() for i in (0, 1, 2, 3, 36, 37, 38)]))
+                written = [c[i].tobytes() for i in (0, 1, 2, 3, 36, 37, 38)]
+                outs.append((got[0], got[1], got[2].tobytes(), got[3], written))
             assert outs[0] == outs[1]
-            seen["bounded"] += outs[0][1]
+            seen["bounded"] += outs[0][0]
+            seen["rejected"] += outs[0][3]
         seen["restarted"] += int((a[9][a[6]]).sum())
         seen["use_map"] += bool(a[39])
         seen["calls"] += 1
@@ -419,4 +432,4 @@ def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
     finally:
         tu.update_pairs = saved
     assert seen["calls"] > 100 and seen["bounded"] > 20 and seen["restarted"] > 5
-    assert 20 < seen["use_map"] < seen["calls"]
+    assert 20 < seen["use_map"] < seen["calls"] and seen["rejected"] > 0

@@ -261,7 +261,7 @@ def update_pairs(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xs
                  default_depth_ratio: float, heading_gain: float, size_gain: float, mfr: np.ndarray,
                  kept: np.ndarray, first: np.ndarray, second: np.ndarray, mnpts: np.ndarray, MEV: np.ndarray,
                  RIDE: np.ndarray, WN: np.ndarray, use_map: bool, px: float, py: float, c: float, s: float, t: float,
-                 ride_time: float, ride_n: int, ride_r2: float) -> tuple:
+                 ride_time: float, ride_n: int, ride_r2: float, pmin_r: float, pmax_r: float) -> tuple:
     """``Tracker._update_pairs``' four kernels in one call, the same functions in the same order (so the same
     floats): ``kernels.pair_priors`` (the priors of the pairs: track rows ``trows``, detections ``dis``),
     ``kernels.measure_batch`` (the detections' arrays ``kind`` … ``npts`` of the scan's
@@ -272,9 +272,12 @@ def update_pairs(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xs
     pose). Then the windows of the re-acquired tracks restarted: a pair whose update applied and whose track
     ``missed`` (per live track, indexed by ``sel``) its last scans keeps only this push's entries
     (``TrackRows._restart_windows``: the riding window's and, with ``use_map``, the map evidence's; without a map
-    that window is emptied). Returns (ok (n,) bool: the Kalman update applied, the number of rows bounded, the
-    longest riding window after the push, before the restarts). One dispatch instead of four, and none of the
-    intermediate arrays (priors, measurements) boxed for Python and unboxed again (docs/speed.md, pass upd34)."""
+    that window is emptied). Returns (the number of rows bounded, the longest riding window after the push, before
+    the restarts, ``info`` (n, 4) int64, the number of pairs whose update did not apply): per pair 1 where the Kalman
+    update applied (else 0), the detection's ``start`` and ``npts`` and 1 where it is a circle whose radius is within
+    [``pmin_r``, ``pmax_r``] m (a person's; else 0) — what ``Tracker._update_tracks`` reads per pair, in one array.
+    One dispatch instead of four, and none of the intermediate arrays (priors, measurements) boxed for Python and
+    unboxed again (docs/speed.md, pass upd34)."""
     n = dis.shape[0]
     swaps, sizes, has, radius = pair_priors(G, Gi, trows, dis, kind, theta)
     sig = np.empty(n)
@@ -302,7 +305,17 @@ def update_pairs(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xs
                 WN[k, 0] = 1
             else:
                 WN[k, 0] = 0
-    return ok, nb, top
+    info = np.empty((n, 4), dtype=np.int64)
+    nrej = 0
+    for r in range(n):
+        j = dis[r]
+        info[r, 0] = 1 if ok[r] else 0
+        nrej += 0 if ok[r] else 1
+        info[r, 1] = start[j]
+        info[r, 2] = npts[j]
+        rad = circle[j, 2]
+        info[r, 3] = 1 if kind[j] == K_CIRCLE and pmin_r <= rad and rad <= pmax_r else 0
+    return nb, top, info, nrej
 
 
 @njit(cache=True)

@@ -327,7 +327,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         used: set[int] = set()
         self._upd_sets = (updated, used)
         if pairs:
-            st.rejected_updates += self._update_pairs(pairs, dets, t).count(False)
+            st.rejected_updates += self._update_pairs(pairs, dets, t)
         self._manage(t, updated)
         unused = [di for di in range(len(dets)) if di not in used]
         if (self._map is not None and self.config.tracker.structure_birth_min <= 1.0) or self._dormant or \

@@ -13,7 +13,6 @@ import numpy as np
 
 from dynslam2d.detect.kernels import G_SIZE0
 from dynslam2d.detect.kernels_update import update_pairs
-from dynslam2d.detect.layout import K_CIRCLE
 from dynslam2d.detect.measure import Detection, ScanDetection
 from dynslam2d.detect.tracktable import _HALF_PI, _PAST_COMPACT, TENTATIVE, _past_points, _Track
 
@@ -49,12 +48,12 @@ def _nearest_age(stamps: list[float], n: int, t: float, a: float, bisect_left=bi
 class TrackUpdate:
     """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: the update step (``_update_pairs``, ``_update_tracks``)."""
 
-    def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float) -> list[bool]:
-        """Kalman and shape updates of the associated (track, detection) pairs; True where applied.
+    def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float) -> int:
+        """Kalman and shape updates of the associated (track, detection) pairs; returns how many did not apply.
 
         The track priors of the measurements (each track's sizes / radius), the measurements, the Kalman updates and
-        the shape updates run as one kernel call each on the tracks' rows (:mod:`dynslam2d.detect.kernels`); the
-        bookkeeping stays per track (:meth:`_update_tracks`)."""
+        the shape updates run as one kernel call on the tracks' rows (:func:`dynslam2d.detect.kernels_update.
+        update_pairs`); the bookkeeping stays per track (:meth:`_update_tracks`)."""
         npair = len(pairs)
         pa = self._pair_arrays
         if pa is not None and pa[0] is pairs:  # (the association's index arrays of these pairs, its missed flags)
@@ -87,46 +86,39 @@ class TrackUpdate:
             bound, lim, hits = False, 0.0, sel
         p = self._pose
         c, s = self._pose_cs
-        ok, nb, top = update_pairs(
+        nb, top, info, nrej = update_pairs(
             self._G, self._Gi, self._X, self._P, Xs, Ps, sel, trows, dis, missed, *b, 0.05, self._fit_p, bound, hits,
             tc.accel_bound_after if bound else 0, float(lim), (0.999 * lim) ** 2 if bound else 0.0,
             float(fc.default_depth), float(fc.default_depth_ratio), float(tc.heading_gain), float(tc.size_gain),
             *self._mev_src, self._MEV, self._RIDE, self._WN, self._map is not None, float(p.x), float(p.y), c, s, t,
-            float(tc.ride_time), int(tc.ride_updates), tc.ride_max_range * tc.ride_max_range)
+            float(tc.ride_time), int(tc.ride_updates), tc.ride_max_range * tc.ride_max_range,
+            float(fc.person_min_radius), float(fc.person_max_radius))
         if nb:
             self.stats.accel_bounded += nb
         self._stacked = None  # the tracks changed
-        out = ok.tolist()
         if top >= self._RIDE.shape[1]:  # (the next push could overflow a full window)
             self._grow_ride()
-        self._update_tracks(pairs, dets, t, out, trows)
-        return out
+        self._update_tracks(pairs, dets, t, info.tolist())
+        return nrej
 
     def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[ScanDetection], t: float,
-                       applied: list[bool], trows: np.ndarray) -> None:
-        """The bookkeeping update of the tracks of ``pairs`` (track index, detection index; ``trows``: their rows of
-        the state arrays) whose Kalman and shape results are already in their rows (k.x, k.P, k.g, k.gi) where
-        ``applied``; the scan's constants are read once (one loop over the pairs: the update of one track is a few µs
-        of Python). The riding and map-evidence windows are pushed before, for all pairs in one kernel call
-        (``shape_update``); a re-acquired track's keep only that push's entries here."""
-        cfg = self.config
-        tc, fc = cfg.tracker, cfg.fit
-        pmin_r, pmax_r = fc.person_min_radius, fc.person_max_radius
+                       info: list[list[int]]) -> None:
+        """The bookkeeping update of the tracks of ``pairs`` (track index, detection index) whose Kalman and shape
+        results are already in their rows (k.x, k.P, k.g, k.gi) where applied; ``info``: per pair [applied (1 / 0),
+        the detection's first point in the batch, its point count, 1 if it is a circle of a person's radius]
+        (``update_pairs``' rows, one conversion per scan: the detection's own properties (ScanDetection) would read
+        them one by one); the scan's constants are read once (one loop over the pairs: the update of one track is a
+        few µs of Python). The riding and map-evidence windows are pushed before, for all pairs in the same kernel
+        call, and a re-acquired track's restarted there to that push's entries."""
+        tc = self.config.tracker
         window, nsus = tc.confirm_window, tc.sustain_updates
         max_age = self._free.max_age if self._free is not None else None
         ref = self._cur_ref if self._free is not None else None  # (the vacated-space test's reference: this scan)
         tracks = self._tracks
         upd, used = self._upd_sets
         upd_add, used_add = upd.add, used.add
-        # (the detections' circle radii, kinds, first points and point counts as Python values, one conversion per
-        # scan: row di of the batch is detection di's row, copied by the leg merge; the detection's own properties
-        # (ScanDetection) would read them one by one, and float(det.circle[2]) would make a view per circle detection)
-        b = self._batch
-        radii = b.circle[:, 2].tolist()
-        kinds = b.kind.tolist()
-        starts = b.start.tolist()
-        npts = b.npts.tolist()
-        for (ti, di), ok in zip(pairs, applied):
+        # (row di of the batch, read by the kernel for info, is detection di's row, copied by the leg merge)
+        for (ti, di), (ok, start, npt, circle_person) in zip(pairs, info):
             if not ok:
                 continue
             k, det = tracks[ti], dets[di]
@@ -134,8 +126,7 @@ class TrackUpdate:
             used_add(di)
             # (the detection's rows of its scan's beams and points: ScanDetection.beams / points, from the batch)
             arrays = det._s
-            a0 = starts[di] - arrays.off
-            npt = npts[di]
+            a0 = start - arrays.off
             # (the stored points before this update: their vacated-space fraction is computed when first read)
             # ((the list, first, end): the entries are never changed in place, so this is their snapshot)
             past = k.past
@@ -151,7 +142,7 @@ class TrackUpdate:
                 k.probation = k.in_m and not k.remembered  # a remembered track re-acquired where it stopped
                 k.misses = 0
             k.merged = False
-            person = det.person or (kinds[di] == K_CIRCLE and pmin_r <= radii[di] <= pmax_r)
+            person = det.person or circle_person == 1
             k.person = person
             k.person_streak = k.person_streak + 1 if person else 0
             k.hits += 1
