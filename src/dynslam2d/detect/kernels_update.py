@@ -208,7 +208,7 @@ def association_gates(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, missed: n
     return tsize, d2, ok, det_ext
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # (compiled inside update_pairs, its one caller in a run: pass upd34)
 def kalman_pairs(Xs: np.ndarray, Ps: np.ndarray, sel: np.ndarray, H: np.ndarray, zm: np.ndarray, Rm: np.ndarray,
                  bound: bool, hits: np.ndarray, after: int, lim: float, lim2: float, X: np.ndarray, P: np.ndarray,
                  trows: np.ndarray) -> tuple:
