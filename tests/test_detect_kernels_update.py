@@ -155,7 +155,7 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
     from dynslam2d.detect import kernels_update as ku
     from dynslam2d.detect import tracker as trk
     from dynslam2d.detect import trackupdate as tu
-    from dynslam2d.detect.kernels import association_rows, gate_costs, size_jump_gate
+    from dynslam2d.detect.kernels import association_rows, gate_costs, measure_batch, pair_priors, size_jump_gate
     from dynslam2d.sim import simulate
     from dynslam2d.types import Pose2D
 
@@ -187,8 +187,17 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
         seen["kalman"] += 1
         return ku.kalman_pairs(Xs, Ps, sel, H, zm, Rm, bound, hits, after, lim, lim2, X, P, trows)
 
-    saved = trk.association_gates, tu.kalman_pairs
-    trk.association_gates, tu.kalman_pairs = gates, kalman
+    def merged(*a):
+        # (since pass upd34 kalman_pairs runs inside update_pairs: its inputs are made here as update_pairs makes them)
+        G, Gi, X, P, Xs, Ps, sel, trows, dis, _missed = a[:10]
+        batch, sig, p, bound, hits, after, lim, lim2 = a[10:20], a[20], a[21], a[22], a[23], a[24], a[25], a[26]
+        swaps, sizes, has, radius = pair_priors(G, Gi, trows, dis, batch[0], batch[1])
+        mr = measure_batch(dis, *batch, sizes, has, radius, np.full(sel.shape[0], sig), p)
+        kalman(Xs, Ps, sel, mr[2], mr[3], mr[4], bound, hits, after, lim, lim2, X.copy(), P.copy(), trows)
+        return ku.update_pairs(*a)
+
+    saved = trk.association_gates, tu.update_pairs
+    trk.association_gates, tu.update_pairs = gates, merged
     try:
         for scene in ("crowd", "drive"):
             sim = simulate(scene, duration=4.0)
@@ -196,7 +205,7 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
             for scan, pose in zip(sim.scans, sim.ground_truth.poses_in("first")):
                 tr.update(scan, Pose2D.from_array(pose))
     finally:
-        trk.association_gates, tu.kalman_pairs = saved
+        trk.association_gates, tu.update_pairs = saved
     assert seen["gates"] > 50 and seen["kalman"] > 50 and seen["bounded"] > 20 and seen["not_ok"] > 50
 
 
@@ -332,3 +341,95 @@ def test_ride_window_is_the_former_numpy_riding_test() -> None:
         assert _bits([got[1], got[2]]) == _bits([want[1], want[2]]), (rep, got, want)
         seen.add(got[0])
     assert seen == {ku.RIDE_FEW, ku.RIDE_FAR, ku.RIDE_OFF_BODY, ku.RIDE_SHORT, ku.RIDE_OUT, ku.RIDE_JUDGE}
+
+
+def _update_pairs_separate(G, Gi, X, P, Xs, Ps, sel, trows, dis, missed, kind, theta, lohi, rel, centroid, circle,
+                           bpx, bpy, start, npts, size_sigma, p, bound, hits, after, lim, lim2, dd, ddr, hg, sg, mfr,
+                           kept, first, second, mnpts, MEV, RIDE, WN, use_map, *rest) -> tuple:
+    """``Tracker._update_pairs`` before ``update_pairs`` (main at 10af139): ``pair_priors``, ``measure_batch``,
+    ``kalman_pairs`` and ``shape_update`` called one by one from Python, then ``_restart_windows`` of each
+    re-acquired track whose update applied (in ``_update_tracks``' loop over the pairs), and what ``_update_tracks``
+    read per pair: ``ok``, the batch's ``start`` and ``npts`` as lists and the person's circle test on Python
+    floats."""
+    from types import SimpleNamespace
+
+    from dynslam2d.detect import kernels as K
+    from dynslam2d.detect import kernels_update as ku
+    from dynslam2d.detect.layout import K_CIRCLE
+    from dynslam2d.detect.tracktable import TrackRows
+
+    n = sel.shape[0]
+    swaps, sizes, has, radius = K.pair_priors(G, Gi, trows, dis, kind, theta)
+    mr = K.measure_batch(dis, kind, theta, lohi, rel, centroid, circle, bpx, bpy, start, npts, sizes, has, radius,
+                         np.full(n, size_sigma), p)
+    ok, nb = ku.kalman_pairs(Xs, Ps, sel, mr[2], mr[3], mr[4], bound, hits, after, lim, lim2, X, P, trows)
+    *rest, pmin_r, pmax_r = rest
+    top = K.shape_update(G, Gi, X, trows, dis, ok, kind, theta, lohi, rel, circle, mr[5], mr[6], swaps, dd, ddr, hg,
+                         sg, mfr, kept, first, second, mnpts, MEV, RIDE, WN, use_map, *rest)
+    rows = SimpleNamespace(_WN=WN, _RIDE=RIDE, _MEV=MEV)
+    for r, applied in enumerate(ok.tolist()):
+        if applied and missed[sel[r]]:
+            TrackRows._restart_windows(rows, int(trows[r]), use_map)
+    radii, kinds, starts, counts = circle[:, 2].tolist(), kind.tolist(), start.tolist(), npts.tolist()
+    info = [[int(a), starts[j], counts[j], int(kinds[j] == K_CIRCLE and pmin_r <= radii[j] <= pmax_r)]
+            for a, j in zip(ok.tolist(), dis.tolist())]
+    return nb, top, np.array(info, dtype=np.int64).reshape(n, 4), ok.tolist().count(False)
+
+
+def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
+    """``update_pairs`` against ``pair_priors`` → ``measure_batch`` → ``kalman_pairs`` → ``shape_update`` and the
+    re-acquired tracks' ``_restart_windows`` in Python, on every call of two pipeline runs (sim:drive with its map
+    evidence, sim:crowd with the tracker's map evidence off): the results (the per-pair rows ``_update_tracks``
+    reads, with the person's circle test) and the bytes of every array the call writes (states, covariances, shape
+    rows, windows), each call also with a limit 30 × tighter (most established
+    rows bounded), with every track taken as re-acquired and with a failed update, on copies."""
+    from dynslam2d.config import Config
+    from dynslam2d.detect import kernels_update as ku
+    from dynslam2d.detect import trackupdate as tu
+    from dynslam2d.inputs import open_source
+    from dynslam2d.pipeline import Pipeline
+
+    seen = {"calls": 0, "bounded": 0, "restarted": 0, "use_map": 0, "rejected": 0}
+
+    def merged(*a):
+        a = list(a)
+        cases = [a]
+        tight = list(a)
+        tight[25], tight[26] = a[25] / 30.0, (0.999 * a[25] / 30.0) ** 2
+        tight[22] = True
+        every = list(a)
+        every[9] = np.ones_like(a[9])
+        bad = list(a)
+        bad[5] = a[5].copy()
+        bad[5][a[6][0]] = np.nan  # (the first pair's prior covariance: its update fails, ok False, its row unwritten)
+        cases += [tight, every, bad]
+        for case in cases:
+            outs = []
+            for f in (ku.update_pairs, _update_pairs_separate):
+                c = list(case)
+                for i in (0, 1, 2, 3, 36, 37, 38):  # (the arrays the call writes: copies)
+                    c[i] = c[i].copy()
+                got = f(*c)
+                written = [c[i].tobytes() for i in (0, 1, 2, 3, 36, 37, 38)]
+                outs.append((got[0], got[1], got[2].tobytes(), got[3], written))
+            assert outs[0] == outs[1]
+            seen["bounded"] += outs[0][0]
+            seen["rejected"] += outs[0][3]
+        seen["restarted"] += int((a[9][a[6]]).sum())
+        seen["use_map"] += bool(a[39])
+        seen["calls"] += 1
+        return ku.update_pairs(*a)
+
+    saved = tu.update_pairs
+    tu.update_pairs = merged
+    try:
+        for name, use_map in (("sim:drive", True), ("sim:crowd", False)):
+            cfg = Config()
+            cfg.detect.tracker.map_evidence = use_map
+            pipe = Pipeline(cfg)
+            for scan in open_source(name, seed=11, duration=6.0):
+                pipe.process(scan)
+    finally:
+        tu.update_pairs = saved
+    assert seen["calls"] > 100 and seen["bounded"] > 20 and seen["restarted"] > 5
+    assert 20 < seen["use_map"] < seen["calls"] and seen["rejected"] > 0

@@ -29,6 +29,9 @@ from dynslam2d.detect.kernels import (
     fragment_hosts,
     gate_costs,
     kalman_update_batch,
+    measure_batch,
+    pair_priors,
+    shape_update,
     size_jump_gate,
 )
 from dynslam2d.detect.layout import K_CIRCLE
@@ -205,7 +208,7 @@ def association_gates(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, missed: n
     return tsize, d2, ok, det_ext
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # (compiled inside update_pairs, its one caller in a run: pass upd34)
 def kalman_pairs(Xs: np.ndarray, Ps: np.ndarray, sel: np.ndarray, H: np.ndarray, zm: np.ndarray, Rm: np.ndarray,
                  bound: bool, hits: np.ndarray, after: int, lim: float, lim2: float, X: np.ndarray, P: np.ndarray,
                  trows: np.ndarray) -> tuple:
@@ -246,6 +249,73 @@ def kalman_pairs(Xs: np.ndarray, Ps: np.ndarray, sel: np.ndarray, H: np.ndarray,
                 for b in range(4):
                     P[q, a, b] = Pn[r, a, b]
     return ok, nb
+
+
+@njit(cache=True)
+def update_pairs(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xs: np.ndarray, Ps: np.ndarray,
+                 sel: np.ndarray, trows: np.ndarray, dis: np.ndarray, missed: np.ndarray, kind: np.ndarray,
+                 theta: np.ndarray,
+                 lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray, circle: np.ndarray, bpx: np.ndarray,
+                 bpy: np.ndarray, start: np.ndarray, npts: np.ndarray, size_sigma: float, p: np.ndarray,
+                 bound: bool, hits: np.ndarray, after: int, lim: float, lim2: float, default_depth: float,
+                 default_depth_ratio: float, heading_gain: float, size_gain: float, mfr: np.ndarray,
+                 kept: np.ndarray, first: np.ndarray, second: np.ndarray, mnpts: np.ndarray, MEV: np.ndarray,
+                 RIDE: np.ndarray, WN: np.ndarray, use_map: bool, px: float, py: float, c: float, s: float, t: float,
+                 ride_time: float, ride_n: int, ride_r2: float, pmin_r: float, pmax_r: float) -> tuple:
+    """``Tracker._update_pairs``' four kernels in one call, the same functions in the same order (so the same
+    floats): ``kernels.pair_priors`` (the priors of the pairs: track rows ``trows``, detections ``dis``),
+    ``kernels.measure_batch`` (the detections' arrays ``kind`` … ``npts`` of the scan's
+    :class:`~dynslam2d.detect.layout.DetectionBatch`, each pair's size σ ``size_sigma`` m, fit parameters ``p``),
+    :func:`kalman_pairs` (``Xs`` / ``Ps``: the predicted states of the live tracks, ``sel`` the pairs' indices of
+    them; ``bound`` … ``lim2`` its acceleration bound) and ``kernels.shape_update`` (its arguments from
+    ``default_depth`` on; ``mfr`` … ``mnpts`` the map-evidence sources, ``px``, ``py``, ``c``, ``s`` the laser
+    pose). Then the windows of the re-acquired tracks restarted: a pair whose update applied and whose track
+    ``missed`` (per live track, indexed by ``sel``) its last scans keeps only this push's entries
+    (``TrackRows._restart_windows``: the riding window's and, with ``use_map``, the map evidence's; without a map
+    that window is emptied). Returns (the number of rows bounded, the longest riding window after the push, before
+    the restarts, ``info`` (n, 4) int64, the number of pairs whose update did not apply): per pair 1 where the Kalman
+    update applied (else 0), the detection's ``start`` and ``npts`` and 1 where it is a circle whose radius is within
+    [``pmin_r``, ``pmax_r``] m (a person's; else 0) — what ``Tracker._update_tracks`` reads per pair, in one array.
+    One dispatch instead of four, and none of the intermediate arrays (priors, measurements) boxed for Python and
+    unboxed again (docs/speed.md, pass upd34)."""
+    n = dis.shape[0]
+    swaps, sizes, has, radius = pair_priors(G, Gi, trows, dis, kind, theta)
+    sig = np.empty(n)
+    sig[:] = size_sigma
+    _z, _R, H, zm, Rm, size_obs, size_kind = measure_batch(dis, kind, theta, lohi, rel, centroid, circle, bpx, bpy,
+                                                          start, npts, sizes, has, radius, sig, p)
+    ok, nb = kalman_pairs(Xs, Ps, sel, H, zm, Rm, bound, hits, after, lim, lim2, X, P, trows)
+    top = shape_update(G, Gi, X, trows, dis, ok, kind, theta, lohi, rel, circle, size_obs, size_kind, swaps,
+                       default_depth, default_depth_ratio, heading_gain, size_gain, mfr, kept, first, second, mnpts,
+                       MEV, RIDE, WN, use_map, px, py, c, s, t, ride_time, ride_n, ride_r2)
+    for r in range(n):
+        if ok[r] and missed[sel[r]]:
+            k = trows[r]
+            m = WN[k, 1]
+            if m > 1:
+                for a in range(RIDE.shape[2]):
+                    RIDE[k, 0, a] = RIDE[k, m - 1, a]
+            WN[k, 1] = 1
+            WN[k, 2] = 0  # (one entry: fewer than ride_updates ≥ 2)
+            if use_map:
+                m = WN[k, 0]
+                if m > 1:
+                    for a in range(MEV.shape[2]):
+                        MEV[k, 0, a] = MEV[k, m - 1, a]
+                WN[k, 0] = 1
+            else:
+                WN[k, 0] = 0
+    info = np.empty((n, 4), dtype=np.int64)
+    nrej = 0
+    for r in range(n):
+        j = dis[r]
+        info[r, 0] = 1 if ok[r] else 0
+        nrej += 0 if ok[r] else 1
+        info[r, 1] = start[j]
+        info[r, 2] = npts[j]
+        rad = circle[j, 2]
+        info[r, 3] = 1 if kind[j] == K_CIRCLE and pmin_r <= rad and rad <= pmax_r else 0
+    return nb, top, info, nrej
 
 
 @njit(cache=True)

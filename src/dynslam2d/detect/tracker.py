@@ -100,6 +100,11 @@ from dynslam2d.detect.tracktable import (  # noqa: F401  (_Track, _new_track, �
 from dynslam2d.detect.trackupdate import TrackUpdate, _nearest_age  # noqa: F401  (_nearest_age: tests import it here)
 from dynslam2d.types import Pose2D, Scan, Track, wrap_angle
 
+try:  # np.count_nonzero(a) without axis is this C function behind a Python wrapper and its dispatch (as pipeline.py)
+    from numpy._core.multiarray import count_nonzero as _count_nonzero
+except ImportError:  # pragma: no cover - another NumPy layout
+    _count_nonzero = np.count_nonzero
+
 
 @dataclass
 class TrackerStats:
@@ -220,13 +225,13 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._mev_src: tuple = (np.zeros((3, 0)), _NO_IDX, _NO_IDX, _NO_IDX, _NO_IDX)
         self._default: MeasureRows | None = None  # default measurements of the current scan's detections
         self._no_prior: dict[int, tuple] = {}  # measure_batch's "no track prior" arguments for m detections, by m
-        self._size_sigma: dict[int, np.ndarray] = {}  # measure_batch's size σ of n associated pairs (m), by n
         self._stacked: tuple[np.ndarray, np.ndarray] | None = None  # predicted X, P of all tracks
         self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate)
         # this scan's ids of the updated tracks and indices of the detections they took (update, _update_tracks)
         self._upd_sets: tuple[set[int], set[int]] = (set(), set())
-        # the last association's pairs (the list it returned) with their track and detection index arrays (int64)
-        self._pair_arrays: tuple[list, np.ndarray, np.ndarray] | None = None
+        # the last association's pairs (the list it returned) with their track and detection index arrays (int64) and
+        # the live tracks' "missed their last scan" flags (bool)
+        self._pair_arrays: tuple[list, np.ndarray, np.ndarray, np.ndarray] | None = None
         # clutter retirement (structure_retire_updates): confirmed still tracks on map structure, out of the
         # Kalman tracking but kept (and reported) while their object is seen, so that a parked mover keeps
         # its id and standing history until it leaves (_clutter_detections)
@@ -322,7 +327,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         used: set[int] = set()
         self._upd_sets = (updated, used)
         if pairs:
-            st.rejected_updates += self._update_pairs(pairs, dets, t).count(False)
+            st.rejected_updates += self._update_pairs(pairs, dets, t)
         self._manage(t, updated)
         unused = [di for di in range(len(dets)) if di not in used]
         if (self._map is not None and self.config.tracker.structure_birth_min <= 1.0) or self._dormant or \
@@ -477,13 +482,14 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # later, a tracked object may touch another for a scan).
         # (one kernel call: association_rows, gate_costs with the reach 0.5 × the longest side, size_jump_gate;
         # docs/speed.md, pass trk24)
+        missed_a = np.array(missed, dtype=np.bool_)
         tsize, d2, ok, det_ext = association_gates(
-            self._G, self._Gi, self._rows(), np.array(missed, dtype=np.bool_), Xs, Ps, self._default.z,
+            self._G, self._Gi, self._rows(), missed_a, Xs, Ps, self._default.z,
             self._default.R, float(tc.gate_distance), float(tc.gate_chi2), *self._batch, self._fit_p,
             float(tc.max_size_jump_ratio), float(tc.max_size_jump))
         if self._map is not None:
             ok = self._veto_merged(ok, dets, det_ext, tsize, veto)
-        if not np.count_nonzero(ok):  # (no pair allowed; count_nonzero: cheaper than any())
+        if not _count_nonzero(ok):  # (no pair allowed; count_nonzero: cheaper than any(); its C function)
             return []
         # the gated costs, the established tracks' assignment, then the tentative tracks' on the detections left, each
         # pair kept where the gates allow it: one kernel call (SciPy's solver written again step for step, the same
@@ -492,9 +498,10 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         if status:
             raise ValueError(LSAP_MESSAGES[status])  # (SciPy's error for such a cost matrix)
         pairs = list(zip(ii.tolist(), jj.tolist()))
-        # (the pairs as index arrays too, for _update_pairs: kept with the list they belong to)
+        # (the pairs as index arrays too, and the tracks' missed flags, for _update_pairs: kept with the list they
+        # belong to)
         if pairs:
-            self._pair_arrays = (pairs, ii, jj)
+            self._pair_arrays = (pairs, ii, jj, missed_a)
         return pairs
 
     def _veto_merged(self, ok: np.ndarray, dets: list[Detection], det_ext: np.ndarray,

@@ -11,13 +11,8 @@ from itertools import chain as _chain
 
 import numpy as np
 
-from dynslam2d.detect.kernels import (
-    G_SIZE0,
-    pair_priors,
-    shape_update,
-)
-from dynslam2d.detect.kernels_update import kalman_pairs
-from dynslam2d.detect.layout import K_CIRCLE
+from dynslam2d.detect.kernels import G_SIZE0
+from dynslam2d.detect.kernels_update import update_pairs
 from dynslam2d.detect.measure import Detection, ScanDetection
 from dynslam2d.detect.tracktable import _HALF_PI, _PAST_COMPACT, TENTATIVE, _past_points, _Track
 
@@ -53,91 +48,77 @@ def _nearest_age(stamps: list[float], n: int, t: float, a: float, bisect_left=bi
 class TrackUpdate:
     """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: the update step (``_update_pairs``, ``_update_tracks``)."""
 
-    def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float) -> list[bool]:
-        """Kalman and shape updates of the associated (track, detection) pairs; True where applied.
+    def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float) -> int:
+        """Kalman and shape updates of the associated (track, detection) pairs; returns how many did not apply.
 
         The track priors of the measurements (each track's sizes / radius), the measurements, the Kalman updates and
-        the shape updates run as one kernel call each on the tracks' rows (:mod:`dynslam2d.detect.kernels`); the
-        bookkeeping stays per track (:meth:`_update_tracks`)."""
+        the shape updates run as one kernel call on the tracks' rows (:func:`dynslam2d.detect.kernels_update.
+        update_pairs`); the bookkeeping stays per track (:meth:`_update_tracks`)."""
         npair = len(pairs)
         pa = self._pair_arrays
-        if pa is not None and pa[0] is pairs:  # (the association's index arrays of these pairs)
-            sel, dis = pa[1], pa[2]
+        if pa is not None and pa[0] is pairs:  # (the association's index arrays of these pairs, its missed flags)
+            sel, dis, missed = pa[1], pa[2], pa[3]
         else:
             sel = np.fromiter(_chain.from_iterable(pairs), np.int64, 2 * npair).reshape(npair, 2)
             dis = sel[:, 1].copy()
             sel = sel[:, 0].copy()
+            missed = np.array([k.misses > 0 for k in self._tracks], dtype=np.bool_)
         self._pair_arrays = None
         b = self._batch
         trows = self._rows()[sel]
-        swaps, sizes, has, radius = pair_priors(self._G, self._Gi, trows, dis, b.kind, b.theta)
-        sig = self._size_sigma.get(npair)
-        if sig is None:  # (the measurements' size σ, the same array for every scan with npair pairs: only read)
-            if len(self._size_sigma) >= 64:
-                self._size_sigma.clear()
-            sig = self._size_sigma[npair] = np.full(npair, 0.05)
-        mr = self._measure_rows(dis, sizes, has, radius, sig)
         Xs, Ps = self._stack()
-        # (the kernel updates copies of the stacked rows sel: the prior Xs / Ps stays as it is)
-        # the Kalman updates, the physical acceleration bound (once a track's velocity is established —
+        # the track priors of the measurements (each track's sizes / radius), the measurements (size σ 0.05 m), the
+        # Kalman updates, the physical acceleration bound (once a track's velocity is established —
         # ``accel_bound_after`` updates — one update may change it by at most ``max_accel``·dt: speeds no longer jump
         # from scan to scan with the shape of a partial view or a leg swinging; the exact test with Python's
-        # math.hypot bit for bit, detect/kernels_update.py) and the new states and covariances written into the
-        # tracks' rows where applied: one kernel call (docs/speed.md, pass trk24)
+        # math.hypot bit for bit, detect/kernels_update.py), the new states and covariances written into the
+        # tracks' rows where applied (the kernel updates copies of the stacked rows sel: the prior Xs / Ps stays as
+        # it is), then the shapes and, in the same loop, the riding and map-evidence windows of the updated tracks
+        # from their new rows, and the windows of the re-acquired tracks (those that ``missed`` scans) restarted to
+        # this push's entries: one kernel call (docs/speed.md, passes trk24, trk26, upd34)
         fc, tc = self.config.fit, self.config.tracker
-        bound = tc.max_accel is not None and self._dt > 0.0
-        if bound:
+        if tc.max_accel is not None and self._dt > 0.0:
+            bound = True
             lim = tc.max_accel * self._dt
             tracks = self._tracks
             hits = np.array([tracks[i].hits for i, _ in pairs], dtype=np.int64)
-            ok, nb = kalman_pairs(Xs, Ps, sel, mr.H, mr.zm, mr.Rm, True, hits, tc.accel_bound_after, float(lim),
-                                  (0.999 * lim) ** 2, self._X, self._P, trows)
-            if nb:
-                self.stats.accel_bounded += nb
         else:
-            ok, _ = kalman_pairs(Xs, Ps, sel, mr.H, mr.zm, mr.Rm, False, sel, 0, 0.0, 0.0, self._X, self._P, trows)
-        self._stacked = None  # the tracks changed
-        out = ok.tolist()
-        # the shapes and, in the same kernel call, the riding and map-evidence windows of the updated tracks from
-        # their new rows (docs/speed.md, pass trk26)
+            bound, lim, hits = False, 0.0, sel
         p = self._pose
         c, s = self._pose_cs
-        top = shape_update(self._G, self._Gi, self._X, trows, dis, ok, b.kind, b.theta, b.lohi, b.rel, b.circle,
-                           mr.size_obs, mr.size_kind, swaps, float(fc.default_depth), float(fc.default_depth_ratio),
-                           float(tc.heading_gain), float(tc.size_gain), *self._mev_src, self._MEV, self._RIDE,
-                           self._WN, self._map is not None, float(p.x), float(p.y), c, s, t, float(tc.ride_time),
-                           int(tc.ride_updates), tc.ride_max_range * tc.ride_max_range)
+        nb, top, info, nrej = update_pairs(
+            self._G, self._Gi, self._X, self._P, Xs, Ps, sel, trows, dis, missed, *b, 0.05, self._fit_p, bound, hits,
+            tc.accel_bound_after if bound else 0, float(lim), (0.999 * lim) ** 2 if bound else 0.0,
+            float(fc.default_depth), float(fc.default_depth_ratio), float(tc.heading_gain), float(tc.size_gain),
+            *self._mev_src, self._MEV, self._RIDE, self._WN, self._map is not None, float(p.x), float(p.y), c, s, t,
+            float(tc.ride_time), int(tc.ride_updates), tc.ride_max_range * tc.ride_max_range,
+            float(fc.person_min_radius), float(fc.person_max_radius))
+        if nb:
+            self.stats.accel_bounded += nb
+        self._stacked = None  # the tracks changed
         if top >= self._RIDE.shape[1]:  # (the next push could overflow a full window)
             self._grow_ride()
-        self._update_tracks(pairs, dets, t, out, trows)
-        return out
+        self._update_tracks(pairs, dets, t, info.tolist())
+        return nrej
 
     def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[ScanDetection], t: float,
-                       applied: list[bool], trows: np.ndarray) -> None:
-        """The bookkeeping update of the tracks of ``pairs`` (track index, detection index; ``trows``: their rows of
-        the state arrays) whose Kalman and shape results are already in their rows (k.x, k.P, k.g, k.gi) where
-        ``applied``; the scan's constants are read once (one loop over the pairs: the update of one track is a few µs
-        of Python). The riding and map-evidence windows are pushed before, for all pairs in one kernel call
-        (``shape_update``); a re-acquired track's keep only that push's entries here."""
-        cfg = self.config
-        tc, fc = cfg.tracker, cfg.fit
-        pmin_r, pmax_r = fc.person_min_radius, fc.person_max_radius
+                       info: list[list[int]]) -> None:
+        """The bookkeeping update of the tracks of ``pairs`` (track index, detection index) whose Kalman and shape
+        results are already in their rows (k.x, k.P, k.g, k.gi) where applied; ``info``: per pair [applied (1 / 0),
+        the detection's first point in the batch, its point count, 1 if it is a circle of a person's radius]
+        (``update_pairs``' rows, one conversion per scan: the detection's own properties (ScanDetection) would read
+        them one by one); the scan's constants are read once (one loop over the pairs: the update of one track is a
+        few µs of Python). The riding and map-evidence windows are pushed before, for all pairs in the same kernel
+        call, and a re-acquired track's restarted there to that push's entries."""
+        tc = self.config.tracker
         window, nsus = tc.confirm_window, tc.sustain_updates
-        use_map = self._map is not None
         max_age = self._free.max_age if self._free is not None else None
         ref = self._cur_ref if self._free is not None else None  # (the vacated-space test's reference: this scan)
         tracks = self._tracks
         upd, used = self._upd_sets
         upd_add, used_add = upd.add, used.add
-        # (the detections' circle radii, kinds, first points and point counts as Python values, one conversion per
-        # scan: row di of the batch is detection di's row, copied by the leg merge; the detection's own properties
-        # (ScanDetection) would read them one by one, and float(det.circle[2]) would make a view per circle detection)
-        b = self._batch
-        radii = b.circle[:, 2].tolist()
-        kinds = b.kind.tolist()
-        starts = b.start.tolist()
-        npts = b.npts.tolist()
-        for (ti, di), ok in zip(pairs, applied):
+        # (row di of the batch, read by the kernel for info, is detection di's row, copied by the leg merge)
+        for (ti, di), (ok, start, npt, circle_person) in zip(pairs, info):
             if not ok:
                 continue
             k, det = tracks[ti], dets[di]
@@ -145,8 +126,7 @@ class TrackUpdate:
             used_add(di)
             # (the detection's rows of its scan's beams and points: ScanDetection.beams / points, from the batch)
             arrays = det._s
-            a0 = starts[di] - arrays.off
-            npt = npts[di]
+            a0 = start - arrays.off
             # (the stored points before this update: their vacated-space fraction is computed when first read)
             # ((the list, first, end): the entries are never changed in place, so this is their snapshot)
             past = k.past
@@ -157,13 +137,12 @@ class TrackUpdate:
                 # re-acquired after a gap: the free-space evidence must be rebuilt from this object
                 k.past = []  # (a new list: the snapshots of earlier updates may hold the old one)
                 k.past_a = 0
-                k.free.clear()
-                self._restart_windows(k.row, use_map)  # (the riding and map-evidence windows: this update's entries)
+                k.free.clear()  # (the riding and map-evidence windows: restarted by the kernel, update_pairs)
                 k.fast = 0
                 k.probation = k.in_m and not k.remembered  # a remembered track re-acquired where it stopped
                 k.misses = 0
             k.merged = False
-            person = det.person or (kinds[di] == K_CIRCLE and pmin_r <= radii[di] <= pmax_r)
+            person = det.person or circle_person == 1
             k.person = person
             k.person_streak = k.person_streak + 1 if person else 0
             k.hits += 1
