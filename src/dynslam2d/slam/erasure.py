@@ -71,6 +71,9 @@ _PIN_COST = 64
 #: … and lays them out with this many rows more than twice what the live ids need (room for the next ids: a layout
 #: costs ≈ 0.1 ms in the pipeline, so one every few hundred new ids)
 _ROWS_ROOM = 512
+#: … but while every id fits below this many rows they are indexed by the id itself (no shift: a run's first ids —
+#: MIT CSAIL's 2675, negative_2's 1033 — cost no per-scan subtraction, ≈ 4 µs in the pipeline), 786 kB at most
+_ROWS_FLAT = 1 << 14
 #: Ledgers that ended (confirmed: to pack) or were dropped (to count) wait for this many, then are done in one go.
 _END_BATCH = 16
 _EMPTY_I = np.zeros(0, dtype=np.int64)
@@ -561,6 +564,7 @@ class EvidenceLedger:
         #: live ids below the window (``_pins``, sorted: row ``q`` is ``_pins[q]``'s; ``_pin``: id → row). Laid out
         #: again by :meth:`_rebase` from the live ids when an id does not fit
         self._s = 0
+        self._s0 = np.zeros((), dtype=np.int64)  # (``_s`` as a 0-d array)
         self._P = 0
         self._pins = _EMPTY_I
         self._pin: dict[int, int] = {}
@@ -588,8 +592,7 @@ class EvidenceLedger:
             return None
         blist = [t.beams for t in mine]
         tids = [t.id for t in mine]
-        # (the ids, then the beam counts: one array; np.fromiter of the list is faster than np.array of it)
-        idl = np.fromiter(tids + list(map(len, blist)), np.int64, 2 * len(tids))
+        idl = np.array(tids + list(map(len, blist)), dtype=np.int64)  # (the ids, then the beam counts: one array)
         allb = np.concatenate(blist).astype(np.int64, copy=False)
         c, s = math.cos(pose.theta), math.sin(pose.theta)
         levels = hmap.levels
@@ -913,9 +916,10 @@ class EvidenceLedger:
         """Lay ``_F`` / ``_mark`` out again for the ids of the valid rows (mark ``valid``) and ``ids``: a window
         from one of them to the largest with one row per id, the ids below it pinned, chosen to minimise
         ``_PIN_COST`` · pins + window (so at most ``_PIN_COST`` rows per id), the arrays twice that and
-        ``_ROWS_ROOM`` long; the valid rows keep their values and marks, every other row is zero. (Pass led34: the
-        id-indexed arrays grew by 48 bytes for every id a run ever saw, ≈ 11 MB over a 10-hour log.) The boxes a
-        standing test reads are only the valid rows', so no result changes."""
+        ``_ROWS_ROOM`` long — or, while every id is below ``_ROWS_FLAT``, row = id in arrays doubled up to it;
+        the valid rows keep their values and marks, every other row is zero. (Pass led34: the id-indexed arrays
+        grew by 48 bytes for every id a run ever saw, ≈ 11 MB over a 10-hour log.) The boxes a standing test reads
+        are only the valid rows', so no result changes."""
         mark = self._mark
         vs = np.flatnonzero(mark == valid)
         vid = self._ids_of(vs)
@@ -923,14 +927,14 @@ class EvidenceLedger:
         n = u.shape[0]
         if n and u[0] < 0:
             raise ValueError("track ids must not be negative")
-        if n:
-            top = int(u[-1])
+        top = int(u[-1]) if n else 0
+        if top < _ROWS_FLAT:  # (row = id, the arrays doubled up to _ROWS_FLAT)
+            k = w0 = 0
+            cap = min(max(64, 2 * mark.shape[0], top + 1), _ROWS_FLAT)
+        else:
             k = int(np.argmin(_PIN_COST * np.arange(n) + (top + 1 - u)))  # (the first minimum: the fewest pins)
             w0 = int(u[k])
-            size = k + top + 1 - w0
-        else:
-            k = w0 = size = 0
-        cap = 2 * size + _ROWS_ROOM
+            cap = 2 * (k + top + 1 - w0) + _ROWS_ROOM
         pins = u[:k]
         s = w0 - k
         F = np.zeros((cap, 5))
@@ -942,6 +946,7 @@ class EvidenceLedger:
         F[nq] = self._F[vs]
         mk[nq] = mark[vs]
         self._F, self._mark, self._s, self._P, self._pins = F, mk, s, k, pins
+        self._s0 = np.array(s, dtype=np.int64)
         self._pin = dict(zip(pins.tolist(), range(k)))
 
     def _room(self, n: int) -> None:
@@ -992,10 +997,12 @@ class EvidenceLedger:
             rm = np.array([i - s if i >= lo else get(i, -1) for i in removing], dtype=np.int64) if removing \
                 else _NO_IDS
         else:
-            ida = np.fromiter(ids, np.int64, len(ids))  # (faster than np.array of the list)
-            if s:
-                ida -= s
-            rm = np.array([i - s for i in removing], dtype=np.int64) if removing else _NO_IDS
+            ida = np.array(ids, dtype=np.int64)
+            rm = np.fromiter(removing, np.int64, len(removing)) if removing else _NO_IDS
+            if s:  # (beyond _ROWS_FLAT; a 0-d array: half the time of a Python int, whose value NumPy inspects)
+                ida -= self._s0
+                if removing:
+                    rm -= self._s0
         # (one kernel call where the per-track test cost ≈ 0.45 µs a track in Python, pass led28)
         cfg = self.config
         new = lk.stand_marks(X, rows, E, ida, rm, self._F, self._mark, c, stamp, cfg.stand_speed,
@@ -1011,11 +1018,13 @@ class EvidenceLedger:
                 self._room(int(-1 - new[0]))
             new = lk.stand_marks(X, rows, E, ida, rm, self._F, self._mark, c, stamp, cfg.stand_speed,
                                  cfg.link_margin + 0.5)
-        if new.shape[0]:  # (a new standing box: its half size, _box_key's)
-            F = self._F
-            for i, q in zip(new.tolist(), ida[new].tolist()):  # (rows as ints: a NumPy scalar index is slower)
+        if new.shape[0]:  # (a new standing box: its half size, _box_key's; the rows as ints, from the ids)
+            F, s, pin = self._F, self._s, self._pin
+            lo = s + self._P
+            for i in new.tolist():
                 b = tracks[i].box
-                F[q, 2] = 0.5 * float(max(b.length, b.width))
+                tid = ids[i]
+                F[tid - s if tid >= lo else pin[tid], 2] = 0.5 * float(max(b.length, b.width))
         ledgers = self._ledgers
         for t, tid in zip(tracks, ids):  # (each ledger's last sight)
             if tid in removing:
@@ -1200,6 +1209,7 @@ class EvidenceLedger:
         self._F = np.zeros((0, 5))
         self._mark = np.zeros(0, dtype=np.int64)
         self._s = self._P = 0
+        self._s0 = np.zeros((), dtype=np.int64)
         self._pins = _EMPTY_I
         self._pin = {}
         self._oldest_ended = math.inf
