@@ -309,3 +309,84 @@ def test_observe_with_the_tracker_rows_keeps_the_boxes_of_the_reports(scene: str
     for scan in open_source(scene, seed=5, duration=12.0):
         p.process(scan)
     assert seen["rows"] > 100 and seen["stays"] > 50, seen
+
+
+class _GrowingLedger(EvidenceLedger):
+    """The ledger with pass led32's layout of the standing boxes: one row per id ever seen, never laid out again."""
+
+    compact_ids = False
+
+
+def test_standing_boxes_stay_bounded_over_many_ids_and_keep_the_results(monkeypatch) -> None:
+    """Pass led34: the standing boxes' arrays hold rows for the live ids only. Over 3000 scans and ≈ 12000 track
+    ids (births and ends, two ids that live through the whole run and so get pinned below the window, ended ids
+    that come back — a revived dormant track keeps its id —, an id listed twice, removal sets with ids of ended
+    tracks, reports with and without the tracker's state rows) the arrays stay within ``2 · _PIN_COST`` rows per
+    id of the live set (about a thousand, where the growing layout ends with one per id ever seen), and after
+    every scan the standing boxes, and :meth:`EvidenceLedger._first_of` of live, ended, unseen and negative ids,
+    equal those of the growing layout and of pass ledger15's dict form. (Ids below ``_ROWS_FLAT`` are rows
+    themselves: 256 here, so that the run lays the rows out by the live ids again and again.)"""
+    monkeypatch.setattr(er, "_ROWS_FLAT", 256)
+    rng = np.random.default_rng(34)
+    cfg = MemoryConfig(link_margin=0.5, stand_speed=0.25)
+    new = EvidenceLedger(cfg, 0.1, 30.0)
+    grow = _GrowingLedger(cfg, 0.1, 30.0)
+    ref = _DictLedger(cfg, 0.1, 30.0)
+    pool: dict[int, list] = {1: [0.0, 0.0], 2: [5.0, 5.0]}  # id → [x, y] (ids 1, 2 never end)
+    ended: list[int] = []
+    next_id = 3
+    stamp = 0.0
+    removing: set[int] = set()
+    prev: set[int] = set()
+    most = 0
+    pinned = revived = 0
+    for scan in range(3000):
+        stamp += 0.1
+        for tid in [i for i in pool if i > 2 and rng.random() < 0.12]:
+            del pool[tid]
+            ended.append(tid)
+        for _ in range(int(rng.integers(2, 7))):
+            pool[next_id] = [float(rng.integers(-8, 8)) / 4, float(rng.integers(-8, 8)) / 4]
+            next_id += 1
+        if ended and rng.random() < 0.02:  # an ended id back (a revived dormant track keeps its id)
+            tid = ended.pop(int(rng.integers(len(ended))))
+            pool[tid] = [0.5, 0.5]
+            revived += tid < new._s + new._P
+        tracks = []
+        for tid, p in pool.items():
+            if rng.random() < 0.3:
+                p[int(rng.integers(2))] += float(rng.choice([0.25, 1.0, 1.5]))
+            v = float(rng.choice([0.0, 0.125, 0.25, 1.0]))
+            tracks.append(_track(tid, "confirmed", stamp, p[0], p[1], v, 0.5))
+        rng.shuffle(tracks)
+        if rng.random() < 0.1:
+            tracks.append(tracks[0])  # (an id listed twice)
+        removing = {i for i in removing if rng.random() < 0.8} | {t.id for t in tracks if rng.random() < 0.05}
+        if ended and rng.random() < 0.1:
+            removing.add(ended[-1])
+        states = None
+        if rng.random() < 0.5:  # (the tracker's rows for the first reports, as the pipeline hands them over)
+            nr = int(rng.integers(len(tracks) + 1))
+            X = np.array([(t.box.px, t.box.py, *t.velocity.tolist()) for t in tracks[:nr]] or np.zeros((0, 4)))
+            X = np.ascontiguousarray(X[::-1])
+            states = (X, np.arange(nr - 1, -1, -1, dtype=np.int64))
+        new.observe(tracks, set(removing), stamp, states)
+        grow.observe(tracks, set(removing), stamp, states)
+        _observe_ref(ref, tracks, set(removing), stamp)
+        got = new._first
+        assert got == grow._first == dict(sorted(ref._first.items())), scan
+        for tid in (*rng.integers(-3, next_id + 3, 6).tolist(), *ended[-3:]):
+            assert new._first_of(tid) == grow._first_of(tid), (scan, tid)
+        live = {t.id for t in tracks}
+        # (at most _PIN_COST rows per id of the live set and the reports, twice that for room)
+        assert new._F.shape[0] == new._mark.shape[0] <= max(er._ROWS_FLAT, 2 * er._PIN_COST * len(prev | live)
+                                                            + er._ROWS_ROOM), scan
+        prev = live
+        most = max(most, new._F.shape[0])
+        pinned = max(pinned, new._P)
+    assert next_id > 11000 and grow._F.shape[0] >= next_id  # (the growing layout: a row per id ever seen)
+    assert most <= 2048, most
+    assert pinned >= 2 and revived > 0  # (the long-lived ids were pinned; an id came back below the window)
+    with pytest.raises(ValueError):
+        new.observe([_track(-4, "confirmed", stamp, 0.0, 0.0, 0.0, 0.5)], set(), stamp + 0.1)
+

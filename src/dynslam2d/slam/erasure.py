@@ -65,6 +65,15 @@ _COMPACT_CHUNKS = 64
 _PENDING_MIN = 16
 #: A record's row references to updates' shared row blocks are copied into its buffer when this many updates old.
 _REF_MAX_AGE = 64
+#: :meth:`EvidenceLedger._rebase`: an id pinned below the standing boxes' window must save this many rows of it
+#: (a pinned layout maps the reports' ids one by one: ≈ 2 µs a scan while a long-lived id is pinned)
+_PIN_COST = 64
+#: … and lays them out with this many rows more than twice what the live ids need (room for the next ids: a layout
+#: costs ≈ 0.1 ms in the pipeline, so one every few hundred new ids)
+_ROWS_ROOM = 512
+#: … but while every id fits below this many rows they are indexed by the id itself (no shift: a run's first ids —
+#: MIT CSAIL's 2675, negative_2's 1033 — cost no per-scan subtraction, ≈ 4 µs in the pipeline), 786 kB at most
+_ROWS_FLAT = 1 << 14
 #: Ledgers that ended (confirmed: to pack) or were dropped (to count) wait for this many, then are done in one go.
 _END_BATCH = 16
 _EMPTY_I = np.zeros(0, dtype=np.int64)
@@ -543,13 +552,22 @@ class EvidenceLedger:
         #: batches by :meth:`_finish_ended`)
         self._to_pack: list[_Ledger] = []
         self._to_count: list[_Ledger] = []
-        #: the standing boxes, id-indexed (pass led32; :meth:`observe`, ``ledgerkernels.stand_marks``): row ``id`` =
+        #: the standing boxes (pass led32; :meth:`observe`, ``ledgerkernels.stand_marks``): an id's row (below) =
         #: (centre x, y, half size of the box where the track stands (m, map frame), stamp it began standing there,
-        #: last stamp it stood there (s)), valid when ``_mark[id]`` is the number of the last :meth:`observe` call,
+        #: last stamp it stood there (s)), valid when its ``_mark`` is the number of the last :meth:`observe` call,
         #: ``_obs`` (every track of that call's reports has one; :meth:`_first_of` reads them)
         self._F = np.zeros((0, 5))
         self._mark = np.zeros(0, dtype=np.int64)
         self._obs = 1
+        #: the id → row map of ``_F`` / ``_mark`` (pass led34: rows for the live ids only, not one per id ever seen):
+        #: an id at or above ``_s + _P`` has row ``id − _s`` (the window); the ``_P`` rows below it belong to the
+        #: live ids below the window (``_pins``, sorted: row ``q`` is ``_pins[q]``'s; ``_pin``: id → row). Laid out
+        #: again by :meth:`_rebase` from the live ids when an id does not fit
+        self._s = 0
+        self._s0 = np.zeros((), dtype=np.int64)  # (``_s`` as a 0-d array)
+        self._P = 0
+        self._pins = _EMPTY_I
+        self._pin: dict[int, int] = {}
         self._rs: np.ndarray | None = None  # the levels' cell sides, m (of the levels list ``_rs_of``)
         self._rs_of: list | None = None
         #: absolute finest-level cells whose evidence was erased (for map.png), with the count of events
@@ -836,25 +854,103 @@ class EvidenceLedger:
     def _first_of(self, tid: int) -> tuple[tuple[float, float, float], float, float] | None:
         """Where live track ``tid`` stands as of the last :meth:`observe`: ((centre x, y, half size) m, map frame,
         stamp it began standing there, last stamp it stood there, s); None if it was not in that call's reports."""
-        if 0 <= tid < self._mark.shape[0] and self._mark[tid] == self._obs:
-            x, y, h, t0, t1 = self._F[tid].tolist()
+        q = tid - self._s
+        if q < self._P:  # (below the window: a pinned id's row, or none)
+            q = self._pin.get(tid, -1)
+        if 0 <= q < self._mark.shape[0] and self._mark[q] == self._obs:
+            x, y, h, t0, t1 = self._F[q].tolist()
             return (x, y, h), t0, t1
         return None
 
     @property
     def _first(self) -> dict[int, list]:
         """The standing boxes as ``{id: [(x, y, half size), t0, t1]}`` in id order (for tests and inspection)."""
-        live = np.flatnonzero(self._mark == self._obs).tolist()
+        rows = np.flatnonzero(self._mark == self._obs)
+        live = sorted(self._ids_of(rows).tolist())
         return {tid: list(self._first_of(tid)) for tid in live}
 
     def _set_first(self, tid: int, box: tuple[float, float, float], t0: float, t1: float) -> None:
         """Set live track ``tid``'s standing box (as :meth:`observe` would have; for tests)."""
-        self._room(tid + 1)
-        self._F[tid] = (*box, t0, t1)
-        self._mark[tid] = self._obs
+        q = self._row(tid)
+        if q < 0 or q >= self._mark.shape[0]:
+            if self.compact_ids:
+                self._rebase([tid], self._obs)
+            else:
+                self._room(tid + 1)
+            q = self._row(tid)
+        self._F[q] = (*box, t0, t1)
+        self._mark[q] = self._obs
+
+    #: lay the standing boxes' rows out again by the live ids when an id does not fit (:meth:`_rebase`); False: one
+    #: row per id ever seen (pass led32's layout; the reference of tests/test_ledger_observe.py)
+    compact_ids = True
+
+    def _row(self, tid: int) -> int:
+        """Track ``tid``'s row in ``_F`` / ``_mark`` (−1: below the window and not pinned; may be beyond the
+        arrays)."""
+        q = tid - self._s
+        return self._pin.get(tid, -1) if q < self._P else q
+
+    def _rows_of(self, ids: list[int]) -> np.ndarray | None:
+        """(n,) int64: the rows of ``ids`` (an id below the window: a negative row when none is pinned, which
+        ``stand_marks`` refuses); None when a pinned layout has no row for one of them."""
+        s = self._s
+        if self._P:  # (ids pinned below the window, pass led34: one by one)
+            lo, get = s + self._P, self._pin.get
+            q = [i - s if i >= lo else get(i, -1) for i in ids]
+            return None if -1 in q else np.array(q, dtype=np.int64)
+        a = np.array(ids, dtype=np.int64)
+        if s:
+            a -= s
+        return a
+
+    def _ids_of(self, rows: np.ndarray) -> np.ndarray:
+        """The ids of ``rows`` (rows of ``_F`` / ``_mark``)."""
+        ids = rows + self._s
+        if self._P:
+            low = rows < self._P
+            ids[low] = self._pins[rows[low]]
+        return ids
+
+    def _rebase(self, ids: list[int], valid: int) -> None:
+        """Lay ``_F`` / ``_mark`` out again for the ids of the valid rows (mark ``valid``) and ``ids``: a window
+        from one of them to the largest with one row per id, the ids below it pinned, chosen to minimise
+        ``_PIN_COST`` · pins + window (so at most ``_PIN_COST`` rows per id), the arrays twice that and
+        ``_ROWS_ROOM`` long — or, while every id is below ``_ROWS_FLAT``, row = id in arrays doubled up to it;
+        the valid rows keep their values and marks, every other row is zero. (Pass led34: the id-indexed arrays
+        grew by 48 bytes for every id a run ever saw, ≈ 11 MB over a 10-hour log.) The boxes a standing test reads
+        are only the valid rows', so no result changes."""
+        mark = self._mark
+        vs = np.flatnonzero(mark == valid)
+        vid = self._ids_of(vs)
+        u = np.unique(np.concatenate((vid, np.array(ids, dtype=np.int64))))
+        n = u.shape[0]
+        if n and u[0] < 0:
+            raise ValueError("track ids must not be negative")
+        top = int(u[-1]) if n else 0
+        if top < _ROWS_FLAT:  # (row = id, the arrays doubled up to _ROWS_FLAT)
+            k = w0 = 0
+            cap = min(max(64, 2 * mark.shape[0], top + 1), _ROWS_FLAT)
+        else:
+            k = int(np.argmin(_PIN_COST * np.arange(n) + (top + 1 - u)))  # (the first minimum: the fewest pins)
+            w0 = int(u[k])
+            cap = 2 * (k + top + 1 - w0) + _ROWS_ROOM
+        pins = u[:k]
+        s = w0 - k
+        F = np.zeros((cap, 5))
+        mk = np.zeros(cap, dtype=np.int64)
+        nq = vid - s
+        if k:
+            low = vid < w0
+            nq[low] = np.searchsorted(pins, vid[low])
+        F[nq] = self._F[vs]
+        mk[nq] = mark[vs]
+        self._F, self._mark, self._s, self._P, self._pins = F, mk, s, k, pins
+        self._s0 = np.array(s, dtype=np.int64)
+        self._pin = dict(zip(pins.tolist(), range(k)))
 
     def _room(self, n: int) -> None:
-        """Make the id-indexed standing boxes hold ids below ``n`` (at least doubling)."""
+        """Make the id-indexed standing boxes hold ids below ``n`` (at least doubling; without :attr:`compact_ids`)."""
         cap = self._mark.shape[0]
         if n > cap:
             cap = max(n, 2 * cap, 64)
@@ -887,23 +983,48 @@ class EvidenceLedger:
             E = np.array([(t.box.px, t.box.py, *t.velocity.tolist()) for t in tracks[nr:]], dtype=np.float64)
         else:
             E = _NO_X
-        ida = np.array(ids, dtype=np.int64)
-        rm = np.fromiter(removing, np.int64, len(removing)) if removing else _NO_IDS
         self._obs = c = self._obs + 1
+        # the reports' and the removal set's rows of the standing boxes (_rows_of, inlined); the kernel compares rows
+        s = self._s
+        if self._P:  # (ids pinned below the window)
+            lo, get = s + self._P, self._pin.get
+            q = [i - s if i >= lo else get(i, -1) for i in ids]
+            if -1 in q:  # (an id below the window that is not pinned)
+                self._rebase(ids, c - 1)
+                s, lo, get = self._s, self._s + self._P, self._pin.get
+                q = [i - s if i >= lo else get(i, -1) for i in ids]
+            ida = np.array(q, dtype=np.int64)
+            rm = np.array([i - s if i >= lo else get(i, -1) for i in removing], dtype=np.int64) if removing \
+                else _NO_IDS
+        else:
+            ida = np.array(ids, dtype=np.int64)
+            rm = np.fromiter(removing, np.int64, len(removing)) if removing else _NO_IDS
+            if s:  # (beyond _ROWS_FLAT; a 0-d array: half the time of a Python int, whose value NumPy inspects)
+                ida -= self._s0
+                if removing:
+                    rm -= self._s0
         # (one kernel call where the per-track test cost ≈ 0.45 µs a track in Python, pass led28)
-        args = (X, rows, E, ida, rm)
         cfg = self.config
-        new = lk.stand_marks(*args, self._F, self._mark, c, stamp, cfg.stand_speed, cfg.link_margin + 0.5)
-        if new.shape[0] and new[0] < 0:
-            if new[0] == -1:
+        new = lk.stand_marks(X, rows, E, ida, rm, self._F, self._mark, c, stamp, cfg.stand_speed,
+                             cfg.link_margin + 0.5)
+        if new.shape[0] and new[0] < 0:  # (nothing written: a row below 0 (an id below the window) or beyond)
+            if self.compact_ids:
+                self._rebase(ids, c - 1)  # (a negative id raises)
+                ida = self._rows_of(ids)
+                rm = np.array([self._row(i) for i in removing], dtype=np.int64)
+            elif new[0] == -1:
                 raise ValueError("track ids must not be negative")
-            self._room(int(-1 - new[0]))
-            new = lk.stand_marks(*args, self._F, self._mark, c, stamp, cfg.stand_speed, cfg.link_margin + 0.5)
-        if new.shape[0]:  # (a new standing box: its half size, _box_key's)
-            F = self._F
+            else:
+                self._room(int(-1 - new[0]))
+            new = lk.stand_marks(X, rows, E, ida, rm, self._F, self._mark, c, stamp, cfg.stand_speed,
+                                 cfg.link_margin + 0.5)
+        if new.shape[0]:  # (a new standing box: its half size, _box_key's; the rows as ints, from the ids)
+            F, s, pin = self._F, self._s, self._pin
+            lo = s + self._P
             for i in new.tolist():
                 b = tracks[i].box
-                F[ids[i], 2] = 0.5 * float(max(b.length, b.width))
+                tid = ids[i]
+                F[tid - s if tid >= lo else pin[tid], 2] = 0.5 * float(max(b.length, b.width))
         ledgers = self._ledgers
         for t, tid in zip(tracks, ids):  # (each ledger's last sight)
             if tid in removing:
@@ -1087,6 +1208,10 @@ class EvidenceLedger:
         self._to_count = []
         self._F = np.zeros((0, 5))
         self._mark = np.zeros(0, dtype=np.int64)
+        self._s = self._P = 0
+        self._s0 = np.zeros((), dtype=np.int64)
+        self._pins = _EMPTY_I
+        self._pin = {}
         self._oldest_ended = math.inf
         self.erased_beams = []
 
