@@ -64,7 +64,7 @@ from dynslam2d.detect.kernels import (
     fit_params,
 )
 from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, assign_groups
-from dynslam2d.detect.kernels_update import association_gates, fragment_hosts_rows
+from dynslam2d.detect.kernels_update import association_gates, fragment_hosts_rows, update_params
 from dynslam2d.detect.layout import (
     KIND_CIRCLE,
     KIND_NAMES,
@@ -218,6 +218,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._body_key: np.ndarray | None = None  # body beams the grown mask below was made from
         self._body_grown: np.ndarray = np.zeros(0, dtype=bool)
         self._fit_p = fit_params(self.config.fit)
+        self._upd_p = update_params(self._fit_p, self.config.fit, tc)  # (update_pairs' configuration values)
         self._batch: DetectionBatch | None = None  # per-detection arrays of the current scan (kernels)
         # the sources of the detections' map evidence (set by _detect with a map): (3, nd) fractions of points on
         # long-occupied, observed-free, never-observed cells of the scan's detections before the leg merge, and the
