@@ -155,15 +155,26 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
     from dynslam2d.detect import kernels_update as ku
     from dynslam2d.detect import tracker as trk
     from dynslam2d.detect import trackupdate as tu
-    from dynslam2d.detect.kernels import association_rows, gate_costs, measure_batch, pair_priors, size_jump_gate
+    from dynslam2d.detect.kernels import (
+        _N_PARAMS,
+        association_rows,
+        gate_costs,
+        measure_batch,
+        pair_priors,
+        size_jump_gate,
+    )
     from dynslam2d.sim import simulate
     from dynslam2d.types import Pose2D
 
     seen = {"gates": 0, "kalman": 0, "bounded": 0, "not_ok": 0}
 
-    def gates(G, Gi, rows, missed, Xs, Ps, Z, R, gd, chi2, *rest):
-        batch, p, ratio, jump = rest[:10], rest[10], rest[11], rest[12]
-        got = ku.association_gates(G, Gi, rows, missed, Xs, Ps, Z, R, gd, chi2, *rest)
+    def gates(G, Gi, rows, missed, Xs, Ps, Z, R, *rest):
+        # (the configuration's values and the fit parameters: columns of one array since pass call35)
+        batch, q = rest[:10], rest[10]
+        gd, chi2, ratio, jump = (float(q[c]) for c in (ku.UP_GATE_DISTANCE, ku.UP_GATE_CHI2, ku.UP_JUMP_RATIO,
+                                                       ku.UP_JUMP))
+        p = q[:_N_PARAMS].copy()
+        got = ku.association_gates(G, Gi, rows, missed, Xs, Ps, Z, R, *rest)
         tsize, tmax, rect, theta, known = association_rows(G, Gi, rows, missed)
         d2, _, ok = gate_costs(Xs, Ps, 0.5 * tmax, rect, theta, tsize, Z, R, gd, chi2, *batch, p)
         ok, ext = size_jump_gate(ok, batch[2], tmax, known, ratio, jump)
@@ -363,9 +374,9 @@ def _old_args(a: tuple) -> list:
 
 
 def test_update_params_are_the_former_scalars() -> None:
-    """``update_params``' array: ``fit_params``' columns first (``measure_batch`` reads them), then the values
-    ``Tracker._update_pairs`` passed as scalars before pass call35, as the same floats, on the default configuration
-    and on one with every value changed (integers exact)."""
+    """``update_params``' array: ``fit_params``' columns first (``measure_batch`` and ``gate_costs`` read them), then
+    the values ``Tracker._update_pairs`` and ``Tracker._associate`` passed as scalars before pass call35, as the
+    same floats, on the default configuration and on one with every value changed (integers exact)."""
     from dynslam2d.detect import kernels_update as ku
     from dynslam2d.detect.config import DetectConfig
     from dynslam2d.detect.kernels import _N_PARAMS, fit_params
@@ -378,6 +389,7 @@ def test_update_params_are_the_former_scalars() -> None:
             fc.person_min_radius, fc.person_max_radius = 0.031, 0.29
             tc.heading_gain, tc.size_gain, tc.ride_time, tc.ride_max_range = 0.13, 0.21, 1.7, 2.3
             tc.accel_bound_after, tc.ride_updates = 7, 9
+            tc.gate_distance, tc.gate_chi2, tc.max_size_jump_ratio, tc.max_size_jump = 1.3, 11.5, 1.9, 0.45
         fp = fit_params(fc)
         q = ku.update_params(fp, fc, tc)
         assert q.dtype == np.float64 and q.shape == (ku._UP_N,) and q[:_N_PARAMS].tobytes() == fp.tobytes()
@@ -386,7 +398,9 @@ def test_update_params_are_the_former_scalars() -> None:
                 ku.UP_SIZE_GAIN: float(tc.size_gain), ku.UP_RIDE_TIME: float(tc.ride_time),
                 ku.UP_RIDE_R2: tc.ride_max_range * tc.ride_max_range,
                 ku.UP_PERSON_MIN_R: float(fc.person_min_radius), ku.UP_PERSON_MAX_R: float(fc.person_max_radius),
-                ku.UP_ACCEL_AFTER: tc.accel_bound_after, ku.UP_RIDE_N: tc.ride_updates}
+                ku.UP_ACCEL_AFTER: tc.accel_bound_after, ku.UP_RIDE_N: tc.ride_updates,
+                ku.UP_GATE_DISTANCE: float(tc.gate_distance), ku.UP_GATE_CHI2: float(tc.gate_chi2),
+                ku.UP_JUMP_RATIO: float(tc.max_size_jump_ratio), ku.UP_JUMP: float(tc.max_size_jump)}
         assert sorted(want) == list(range(_N_PARAMS, ku._UP_N))
         for col, v in want.items():
             assert q[col] == v and (not isinstance(v, int) or int(q[col]) == v), (col, q[col], v)

@@ -187,25 +187,25 @@ def manage_speed_rows(P: np.ndarray, X: np.ndarray, rows: np.ndarray, max_sig: f
 
 @njit(cache=True)
 def association_gates(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, missed: np.ndarray, Xs: np.ndarray,
-                      Ps: np.ndarray, Z: np.ndarray, R: np.ndarray, gate_distance: float, gate_chi2: float,
-                      kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray,
-                      circle: np.ndarray, px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray,
-                      p: np.ndarray, ratio: float, jump: float) -> tuple:
+                      Ps: np.ndarray, Z: np.ndarray, R: np.ndarray, kind: np.ndarray, theta: np.ndarray,
+                      lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray, circle: np.ndarray, px: np.ndarray,
+                      py: np.ndarray, start: np.ndarray, npts: np.ndarray, q: np.ndarray) -> tuple:
     """``Tracker._associate``'s three gate kernels in one call: ``kernels.association_rows`` (the tracks' sizes,
     longest sides, rectangle flags, axis angles and known-size flags from their shape rows ``rows``), then
-    ``kernels.gate_costs`` with the reach 0.5 × the longest side, then ``kernels.size_jump_gate``'s size-jump test
-    (``ratio``, ``jump`` m) — the same functions, so the same floats. Returns (tsize (n, 2) m, d2 (n, m), ok (n, m)
+    ``kernels.gate_costs`` with the reach 0.5 × the longest side (the gate distance, m, and χ² bound, the fit
+    parameters: ``q``, :func:`update_params`' array), then ``kernels.size_jump_gate``'s size-jump test (its ratio and
+    jump, m, from ``q``) — the same functions, so the same floats. Returns (tsize (n, 2) m, d2 (n, m), ok (n, m)
     bool after the size-jump test, det_ext (m,) m). One dispatch instead of three: with the caches cold (the
     pipeline's SLAM stages run between two updates) each call of a small kernel costs a few µs on its own
-    (docs/speed.md, pass trk24)."""
+    (docs/speed.md, passes trk24, call35)."""
     tsize, tmax, rect, theta_box, known = association_rows(G, Gi, rows, missed)
     n = tmax.shape[0]
     reach = np.empty(n)
     for i in range(n):
         reach[i] = 0.5 * tmax[i]
-    d2, _near, ok = gate_costs(Xs, Ps, reach, rect, theta_box, tsize, Z, R, gate_distance, gate_chi2, kind, theta,
-                               lohi, rel, centroid, circle, px, py, start, npts, p)
-    ok, det_ext = size_jump_gate(ok, lohi, tmax, known, ratio, jump)
+    d2, _near, ok = gate_costs(Xs, Ps, reach, rect, theta_box, tsize, Z, R, q[UP_GATE_DISTANCE], q[UP_GATE_CHI2],
+                               kind, theta, lohi, rel, centroid, circle, px, py, start, npts, q)
+    ok, det_ext = size_jump_gate(ok, lohi, tmax, known, q[UP_JUMP_RATIO], q[UP_JUMP])
     return tsize, d2, ok, det_ext
 
 
@@ -253,7 +253,7 @@ def kalman_pairs(Xs: np.ndarray, Ps: np.ndarray, sel: np.ndarray, H: np.ndarray,
 
 
 #: columns of :func:`update_params`' array (``Tracker._upd_p``): ``kernels.fit_params``' columns, then the tracker's
-#: and fit configuration's values ``update_pairs`` reads, fixed for a tracker's life
+#: and fit configuration's values ``update_pairs`` and ``association_gates`` read, fixed for a tracker's life
 UP_SIZE_SIGMA = _N_PARAMS  # the measurements' size σ, m
 UP_DEFAULT_DEPTH = _N_PARAMS + 1  # FitConfig.default_depth, m
 UP_DEFAULT_DEPTH_RATIO = _N_PARAMS + 2  # FitConfig.default_depth_ratio
@@ -265,17 +265,22 @@ UP_PERSON_MIN_R = _N_PARAMS + 7  # FitConfig.person_min_radius, m
 UP_PERSON_MAX_R = _N_PARAMS + 8  # FitConfig.person_max_radius, m
 UP_ACCEL_AFTER = _N_PARAMS + 9  # TrackerConfig.accel_bound_after (an integer, exact in a float64)
 UP_RIDE_N = _N_PARAMS + 10  # TrackerConfig.ride_updates (an integer, exact in a float64)
-_UP_N = _N_PARAMS + 11
+UP_GATE_DISTANCE = _N_PARAMS + 11  # TrackerConfig.gate_distance, m (association_gates)
+UP_GATE_CHI2 = _N_PARAMS + 12  # TrackerConfig.gate_chi2 (association_gates)
+UP_JUMP_RATIO = _N_PARAMS + 13  # TrackerConfig.max_size_jump_ratio (association_gates)
+UP_JUMP = _N_PARAMS + 14  # TrackerConfig.max_size_jump, m (association_gates)
+_UP_N = _N_PARAMS + 15
 
 
 def update_params(fit_p: np.ndarray, fc, tc, size_sigma: float = 0.05) -> np.ndarray:
-    """The parameters :func:`update_pairs` reads, packed in one float64 array, built once per tracker: ``fit_p``
-    (``kernels.fit_params``' array, which ``measure_batch`` reads; its columns first), then (columns ``UP_*``) the
-    values of ``fc`` (the tracker's :class:`~dynslam2d.detect.config.FitConfig`) and ``tc`` (its ``TrackerConfig``)
-    and ``size_sigma``, the measurements' size σ (m). One array argument instead of twelve (the fit parameters and
-    eleven scalars converted in Python and typed and unboxed by numba's dispatcher on every call; docs/speed.md,
-    pass call35). The values are the same floats the scalars were (``float(x)``; ``ride_max_range²`` computed as
-    before, in Python)."""
+    """The parameters :func:`update_pairs` and :func:`association_gates` read, packed in one float64 array, built
+    once per tracker: ``fit_p`` (``kernels.fit_params``' array, which ``measure_batch`` and ``gate_costs`` read; its
+    columns first), then (columns ``UP_*``) the values of ``fc`` (the tracker's
+    :class:`~dynslam2d.detect.config.FitConfig`) and ``tc`` (its ``TrackerConfig``) and ``size_sigma``, the
+    measurements' size σ (m). One array argument instead of twelve (update_pairs) and five (association_gates): the
+    fit parameters and scalars converted in Python and typed and unboxed by numba's dispatcher on every call
+    (docs/speed.md, pass call35). The values are the same floats the scalars were (``float(x)``;
+    ``ride_max_range²`` computed as before, in Python)."""
     q = np.empty(_UP_N)
     q[:_N_PARAMS] = fit_p
     q[UP_SIZE_SIGMA] = size_sigma
@@ -289,6 +294,10 @@ def update_params(fit_p: np.ndarray, fc, tc, size_sigma: float = 0.05) -> np.nda
     q[UP_PERSON_MAX_R] = float(fc.person_max_radius)
     q[UP_ACCEL_AFTER] = int(tc.accel_bound_after)
     q[UP_RIDE_N] = int(tc.ride_updates)
+    q[UP_GATE_DISTANCE] = float(tc.gate_distance)
+    q[UP_GATE_CHI2] = float(tc.gate_chi2)
+    q[UP_JUMP_RATIO] = float(tc.max_size_jump_ratio)
+    q[UP_JUMP] = float(tc.max_size_jump)
     return q
 
 
