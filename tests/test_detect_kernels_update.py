@@ -155,15 +155,26 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
     from dynslam2d.detect import kernels_update as ku
     from dynslam2d.detect import tracker as trk
     from dynslam2d.detect import trackupdate as tu
-    from dynslam2d.detect.kernels import association_rows, gate_costs, measure_batch, pair_priors, size_jump_gate
+    from dynslam2d.detect.kernels import (
+        _N_PARAMS,
+        association_rows,
+        gate_costs,
+        measure_batch,
+        pair_priors,
+        size_jump_gate,
+    )
     from dynslam2d.sim import simulate
     from dynslam2d.types import Pose2D
 
     seen = {"gates": 0, "kalman": 0, "bounded": 0, "not_ok": 0}
 
-    def gates(G, Gi, rows, missed, Xs, Ps, Z, R, gd, chi2, *rest):
-        batch, p, ratio, jump = rest[:10], rest[10], rest[11], rest[12]
-        got = ku.association_gates(G, Gi, rows, missed, Xs, Ps, Z, R, gd, chi2, *rest)
+    def gates(G, Gi, rows, missed, Xs, Ps, Z, R, *rest):
+        # (the configuration's values and the fit parameters: columns of one array since pass call35)
+        batch, q = rest[:10], rest[10]
+        gd, chi2, ratio, jump = (float(q[c]) for c in (ku.UP_GATE_DISTANCE, ku.UP_GATE_CHI2, ku.UP_JUMP_RATIO,
+                                                       ku.UP_JUMP))
+        p = q[:_N_PARAMS].copy()
+        got = ku.association_gates(G, Gi, rows, missed, Xs, Ps, Z, R, *rest)
         tsize, tmax, rect, theta, known = association_rows(G, Gi, rows, missed)
         d2, _, ok = gate_costs(Xs, Ps, 0.5 * tmax, rect, theta, tsize, Z, R, gd, chi2, *batch, p)
         ok, ext = size_jump_gate(ok, batch[2], tmax, known, ratio, jump)
@@ -189,8 +200,7 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
 
     def merged(*a):
         # (since pass upd34 kalman_pairs runs inside update_pairs: its inputs are made here as update_pairs makes them)
-        G, Gi, X, P, Xs, Ps, sel, trows, dis, _missed = a[:10]
-        batch, sig, p, bound, hits, after, lim, lim2 = a[10:20], a[20], a[21], a[22], a[23], a[24], a[25], a[26]
+        G, Gi, X, P, Xs, Ps, sel, trows, dis, _missed, *batch, sig, p, bound, hits, after, lim, lim2 = _old_args(a)[:27]
         swaps, sizes, has, radius = pair_priors(G, Gi, trows, dis, batch[0], batch[1])
         mr = measure_batch(dis, *batch, sizes, has, radius, np.full(sel.shape[0], sig), p)
         kalman(Xs, Ps, sel, mr[2], mr[3], mr[4], bound, hits, after, lim, lim2, X.copy(), P.copy(), trows)
@@ -343,6 +353,59 @@ def test_ride_window_is_the_former_numpy_riding_test() -> None:
     assert seen == {ku.RIDE_FEW, ku.RIDE_FAR, ku.RIDE_OFF_BODY, ku.RIDE_SHORT, ku.RIDE_OUT, ku.RIDE_JUDGE}
 
 
+def _old_args(a: tuple) -> list:
+    """``update_pairs``' arguments (this form: the pairs' state rows gathered in the kernel, the configuration's values
+    in one array ``q``, kernels_update.update_params) in the order of its form before pass call35 (main at 8df8347):
+    ``trows`` in place of ``rows``, then the size σ, the fit parameters, the bound's arguments with
+    ``accel_bound_after``, the shape update's four values, …, the riding window's three and the person's radii as
+    scalars, read from ``q``'s columns. The same array objects (the arrays the call writes stay the caller's)."""
+    from dynslam2d.detect import kernels_update as ku
+    from dynslam2d.detect.kernels import _N_PARAMS
+
+    G, Gi, X, P, Xs, Ps, sel, rows, dis, missed = a[:10]
+    batch = list(a[10:20])
+    q, bound, hits, lim, lim2 = a[20:25]
+    mev, use_map, px, py, c, s, t = list(a[25:33]), a[33], a[34], a[35], a[36], a[37], a[38]
+    f = q.tolist()
+    return [G, Gi, X, P, Xs, Ps, sel, rows[sel], dis, missed, *batch, f[ku.UP_SIZE_SIGMA], q[:_N_PARAMS].copy(),
+            bound, hits, int(f[ku.UP_ACCEL_AFTER]) if bound else 0, lim, lim2, f[ku.UP_DEFAULT_DEPTH],
+            f[ku.UP_DEFAULT_DEPTH_RATIO], f[ku.UP_HEADING_GAIN], f[ku.UP_SIZE_GAIN], *mev, use_map, px, py, c, s, t,
+            f[ku.UP_RIDE_TIME], int(f[ku.UP_RIDE_N]), f[ku.UP_RIDE_R2], f[ku.UP_PERSON_MIN_R], f[ku.UP_PERSON_MAX_R]]
+
+
+def test_update_params_are_the_former_scalars() -> None:
+    """``update_params``' array: ``fit_params``' columns first (``measure_batch`` and ``gate_costs`` read them), then
+    the values ``Tracker._update_pairs`` and ``Tracker._associate`` passed as scalars before pass call35, as the
+    same floats, on the default configuration and on one with every value changed (integers exact)."""
+    from dynslam2d.detect import kernels_update as ku
+    from dynslam2d.detect.config import DetectConfig
+    from dynslam2d.detect.kernels import _N_PARAMS, fit_params
+
+    for changed in (False, True):
+        cfg = DetectConfig()
+        fc, tc = cfg.fit, cfg.tracker
+        if changed:
+            fc.default_depth, fc.default_depth_ratio = 0.37, 0.61
+            fc.person_min_radius, fc.person_max_radius = 0.031, 0.29
+            tc.heading_gain, tc.size_gain, tc.ride_time, tc.ride_max_range = 0.13, 0.21, 1.7, 2.3
+            tc.accel_bound_after, tc.ride_updates = 7, 9
+            tc.gate_distance, tc.gate_chi2, tc.max_size_jump_ratio, tc.max_size_jump = 1.3, 11.5, 1.9, 0.45
+        fp = fit_params(fc)
+        q = ku.update_params(fp, fc, tc)
+        assert q.dtype == np.float64 and q.shape == (ku._UP_N,) and q[:_N_PARAMS].tobytes() == fp.tobytes()
+        want = {ku.UP_SIZE_SIGMA: 0.05, ku.UP_DEFAULT_DEPTH: float(fc.default_depth),
+                ku.UP_DEFAULT_DEPTH_RATIO: float(fc.default_depth_ratio), ku.UP_HEADING_GAIN: float(tc.heading_gain),
+                ku.UP_SIZE_GAIN: float(tc.size_gain), ku.UP_RIDE_TIME: float(tc.ride_time),
+                ku.UP_RIDE_R2: tc.ride_max_range * tc.ride_max_range,
+                ku.UP_PERSON_MIN_R: float(fc.person_min_radius), ku.UP_PERSON_MAX_R: float(fc.person_max_radius),
+                ku.UP_ACCEL_AFTER: tc.accel_bound_after, ku.UP_RIDE_N: tc.ride_updates,
+                ku.UP_GATE_DISTANCE: float(tc.gate_distance), ku.UP_GATE_CHI2: float(tc.gate_chi2),
+                ku.UP_JUMP_RATIO: float(tc.max_size_jump_ratio), ku.UP_JUMP: float(tc.max_size_jump)}
+        assert sorted(want) == list(range(_N_PARAMS, ku._UP_N))
+        for col, v in want.items():
+            assert q[col] == v and (not isinstance(v, int) or int(q[col]) == v), (col, q[col], v)
+
+
 def _update_pairs_separate(G, Gi, X, P, Xs, Ps, sel, trows, dis, missed, kind, theta, lohi, rel, centroid, circle,
                            bpx, bpy, start, npts, size_sigma, p, bound, hits, after, lim, lim2, dd, ddr, hg, sg, mfr,
                            kept, first, second, mnpts, MEV, RIDE, WN, use_map, *rest) -> tuple:
@@ -395,8 +458,8 @@ def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
         a = list(a)
         cases = [a]
         tight = list(a)
-        tight[25], tight[26] = a[25] / 30.0, (0.999 * a[25] / 30.0) ** 2
-        tight[22] = True
+        tight[23], tight[24] = a[23] / 30.0, (0.999 * a[23] / 30.0) ** 2
+        tight[21] = True
         every = list(a)
         every[9] = np.ones_like(a[9])
         bad = list(a)
@@ -405,18 +468,18 @@ def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
         cases += [tight, every, bad]
         for case in cases:
             outs = []
-            for f in (ku.update_pairs, _update_pairs_separate):
+            for f in (ku.update_pairs, lambda *c: _update_pairs_separate(*_old_args(c))):
                 c = list(case)
-                for i in (0, 1, 2, 3, 36, 37, 38):  # (the arrays the call writes: copies)
+                for i in (0, 1, 2, 3, 30, 31, 32):  # (the arrays the call writes: copies)
                     c[i] = c[i].copy()
                 got = f(*c)
-                written = [c[i].tobytes() for i in (0, 1, 2, 3, 36, 37, 38)]
+                written = [c[i].tobytes() for i in (0, 1, 2, 3, 30, 31, 32)]
                 outs.append((got[0], got[1], got[2].tobytes(), got[3], written))
             assert outs[0] == outs[1]
             seen["bounded"] += outs[0][0]
             seen["rejected"] += outs[0][3]
         seen["restarted"] += int((a[9][a[6]]).sum())
-        seen["use_map"] += bool(a[39])
+        seen["use_map"] += bool(a[33])
         seen["calls"] += 1
         return ku.update_pairs(*a)
 

@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from dynslam2d.detect.kernels import (
+    _N_PARAMS,
     G_SIZE0,
     G_SIZE1,
     G_THETA,
@@ -186,25 +187,25 @@ def manage_speed_rows(P: np.ndarray, X: np.ndarray, rows: np.ndarray, max_sig: f
 
 @njit(cache=True)
 def association_gates(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, missed: np.ndarray, Xs: np.ndarray,
-                      Ps: np.ndarray, Z: np.ndarray, R: np.ndarray, gate_distance: float, gate_chi2: float,
-                      kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray,
-                      circle: np.ndarray, px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray,
-                      p: np.ndarray, ratio: float, jump: float) -> tuple:
+                      Ps: np.ndarray, Z: np.ndarray, R: np.ndarray, kind: np.ndarray, theta: np.ndarray,
+                      lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray, circle: np.ndarray, px: np.ndarray,
+                      py: np.ndarray, start: np.ndarray, npts: np.ndarray, q: np.ndarray) -> tuple:
     """``Tracker._associate``'s three gate kernels in one call: ``kernels.association_rows`` (the tracks' sizes,
     longest sides, rectangle flags, axis angles and known-size flags from their shape rows ``rows``), then
-    ``kernels.gate_costs`` with the reach 0.5 × the longest side, then ``kernels.size_jump_gate``'s size-jump test
-    (``ratio``, ``jump`` m) — the same functions, so the same floats. Returns (tsize (n, 2) m, d2 (n, m), ok (n, m)
+    ``kernels.gate_costs`` with the reach 0.5 × the longest side (the gate distance, m, and χ² bound, the fit
+    parameters: ``q``, :func:`update_params`' array), then ``kernels.size_jump_gate``'s size-jump test (its ratio and
+    jump, m, from ``q``) — the same functions, so the same floats. Returns (tsize (n, 2) m, d2 (n, m), ok (n, m)
     bool after the size-jump test, det_ext (m,) m). One dispatch instead of three: with the caches cold (the
     pipeline's SLAM stages run between two updates) each call of a small kernel costs a few µs on its own
-    (docs/speed.md, pass trk24)."""
+    (docs/speed.md, passes trk24, call35)."""
     tsize, tmax, rect, theta_box, known = association_rows(G, Gi, rows, missed)
     n = tmax.shape[0]
     reach = np.empty(n)
     for i in range(n):
         reach[i] = 0.5 * tmax[i]
-    d2, _near, ok = gate_costs(Xs, Ps, reach, rect, theta_box, tsize, Z, R, gate_distance, gate_chi2, kind, theta,
-                               lohi, rel, centroid, circle, px, py, start, npts, p)
-    ok, det_ext = size_jump_gate(ok, lohi, tmax, known, ratio, jump)
+    d2, _near, ok = gate_costs(Xs, Ps, reach, rect, theta_box, tsize, Z, R, q[UP_GATE_DISTANCE], q[UP_GATE_CHI2],
+                               kind, theta, lohi, rel, centroid, circle, px, py, start, npts, q)
+    ok, det_ext = size_jump_gate(ok, lohi, tmax, known, q[UP_JUMP_RATIO], q[UP_JUMP])
     return tsize, d2, ok, det_ext
 
 
@@ -251,43 +252,100 @@ def kalman_pairs(Xs: np.ndarray, Ps: np.ndarray, sel: np.ndarray, H: np.ndarray,
     return ok, nb
 
 
+#: columns of :func:`update_params`' array (``Tracker._upd_p``): ``kernels.fit_params``' columns, then the tracker's
+#: and fit configuration's values ``update_pairs`` and ``association_gates`` read, fixed for a tracker's life
+UP_SIZE_SIGMA = _N_PARAMS  # the measurements' size σ, m
+UP_DEFAULT_DEPTH = _N_PARAMS + 1  # FitConfig.default_depth, m
+UP_DEFAULT_DEPTH_RATIO = _N_PARAMS + 2  # FitConfig.default_depth_ratio
+UP_HEADING_GAIN = _N_PARAMS + 3  # TrackerConfig.heading_gain
+UP_SIZE_GAIN = _N_PARAMS + 4  # TrackerConfig.size_gain
+UP_RIDE_TIME = _N_PARAMS + 5  # TrackerConfig.ride_time, s
+UP_RIDE_R2 = _N_PARAMS + 6  # TrackerConfig.ride_max_range², m²
+UP_PERSON_MIN_R = _N_PARAMS + 7  # FitConfig.person_min_radius, m
+UP_PERSON_MAX_R = _N_PARAMS + 8  # FitConfig.person_max_radius, m
+UP_ACCEL_AFTER = _N_PARAMS + 9  # TrackerConfig.accel_bound_after (an integer, exact in a float64)
+UP_RIDE_N = _N_PARAMS + 10  # TrackerConfig.ride_updates (an integer, exact in a float64)
+UP_GATE_DISTANCE = _N_PARAMS + 11  # TrackerConfig.gate_distance, m (association_gates)
+UP_GATE_CHI2 = _N_PARAMS + 12  # TrackerConfig.gate_chi2 (association_gates)
+UP_JUMP_RATIO = _N_PARAMS + 13  # TrackerConfig.max_size_jump_ratio (association_gates)
+UP_JUMP = _N_PARAMS + 14  # TrackerConfig.max_size_jump, m (association_gates)
+_UP_N = _N_PARAMS + 15
+
+
+def update_params(fit_p: np.ndarray, fc, tc, size_sigma: float = 0.05) -> np.ndarray:
+    """The parameters :func:`update_pairs` and :func:`association_gates` read, packed in one float64 array, built
+    once per tracker: ``fit_p`` (``kernels.fit_params``' array, which ``measure_batch`` and ``gate_costs`` read; its
+    columns first), then (columns ``UP_*``) the values of ``fc`` (the tracker's
+    :class:`~dynslam2d.detect.config.FitConfig`) and ``tc`` (its ``TrackerConfig``) and ``size_sigma``, the
+    measurements' size σ (m). One array argument instead of twelve (update_pairs) and five (association_gates): the
+    fit parameters and scalars converted in Python and typed and unboxed by numba's dispatcher on every call
+    (docs/speed.md, pass call35). The values are the same floats the scalars were (``float(x)``;
+    ``ride_max_range²`` computed as before, in Python)."""
+    q = np.empty(_UP_N)
+    q[:_N_PARAMS] = fit_p
+    q[UP_SIZE_SIGMA] = size_sigma
+    q[UP_DEFAULT_DEPTH] = float(fc.default_depth)
+    q[UP_DEFAULT_DEPTH_RATIO] = float(fc.default_depth_ratio)
+    q[UP_HEADING_GAIN] = float(tc.heading_gain)
+    q[UP_SIZE_GAIN] = float(tc.size_gain)
+    q[UP_RIDE_TIME] = float(tc.ride_time)
+    q[UP_RIDE_R2] = tc.ride_max_range * tc.ride_max_range
+    q[UP_PERSON_MIN_R] = float(fc.person_min_radius)
+    q[UP_PERSON_MAX_R] = float(fc.person_max_radius)
+    q[UP_ACCEL_AFTER] = int(tc.accel_bound_after)
+    q[UP_RIDE_N] = int(tc.ride_updates)
+    q[UP_GATE_DISTANCE] = float(tc.gate_distance)
+    q[UP_GATE_CHI2] = float(tc.gate_chi2)
+    q[UP_JUMP_RATIO] = float(tc.max_size_jump_ratio)
+    q[UP_JUMP] = float(tc.max_size_jump)
+    return q
+
+
 @njit(cache=True)
 def update_pairs(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xs: np.ndarray, Ps: np.ndarray,
-                 sel: np.ndarray, trows: np.ndarray, dis: np.ndarray, missed: np.ndarray, kind: np.ndarray,
-                 theta: np.ndarray,
-                 lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray, circle: np.ndarray, bpx: np.ndarray,
-                 bpy: np.ndarray, start: np.ndarray, npts: np.ndarray, size_sigma: float, p: np.ndarray,
-                 bound: bool, hits: np.ndarray, after: int, lim: float, lim2: float, default_depth: float,
-                 default_depth_ratio: float, heading_gain: float, size_gain: float, mfr: np.ndarray,
-                 kept: np.ndarray, first: np.ndarray, second: np.ndarray, mnpts: np.ndarray, MEV: np.ndarray,
-                 RIDE: np.ndarray, WN: np.ndarray, use_map: bool, px: float, py: float, c: float, s: float, t: float,
-                 ride_time: float, ride_n: int, ride_r2: float, pmin_r: float, pmax_r: float) -> tuple:
+                 sel: np.ndarray, rows: np.ndarray, dis: np.ndarray, missed: np.ndarray, kind: np.ndarray,
+                 theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray, circle: np.ndarray,
+                 bpx: np.ndarray, bpy: np.ndarray, start: np.ndarray, npts: np.ndarray, q: np.ndarray, bound: bool,
+                 hits: np.ndarray, lim: float, lim2: float, mfr: np.ndarray, kept: np.ndarray, first: np.ndarray,
+                 second: np.ndarray, mnpts: np.ndarray, MEV: np.ndarray, RIDE: np.ndarray, WN: np.ndarray,
+                 use_map: bool, px: float, py: float, c: float, s: float, t: float) -> tuple:
     """``Tracker._update_pairs``' four kernels in one call, the same functions in the same order (so the same
-    floats): ``kernels.pair_priors`` (the priors of the pairs: track rows ``trows``, detections ``dis``),
-    ``kernels.measure_batch`` (the detections' arrays ``kind`` … ``npts`` of the scan's
-    :class:`~dynslam2d.detect.layout.DetectionBatch`, each pair's size σ ``size_sigma`` m, fit parameters ``p``),
-    :func:`kalman_pairs` (``Xs`` / ``Ps``: the predicted states of the live tracks, ``sel`` the pairs' indices of
-    them; ``bound`` … ``lim2`` its acceleration bound) and ``kernels.shape_update`` (its arguments from
-    ``default_depth`` on; ``mfr`` … ``mnpts`` the map-evidence sources, ``px``, ``py``, ``c``, ``s`` the laser
-    pose). Then the windows of the re-acquired tracks restarted: a pair whose update applied and whose track
-    ``missed`` (per live track, indexed by ``sel``) its last scans keeps only this push's entries
-    (``TrackRows._restart_windows``: the riding window's and, with ``use_map``, the map evidence's; without a map
-    that window is emptied). Returns (the number of rows bounded, the longest riding window after the push, before
-    the restarts, ``info`` (n, 4) int64, the number of pairs whose update did not apply): per pair 1 where the Kalman
-    update applied (else 0), the detection's ``start`` and ``npts`` and 1 where it is a circle whose radius is within
-    [``pmin_r``, ``pmax_r``] m (a person's; else 0) — what ``Tracker._update_tracks`` reads per pair, in one array.
-    One dispatch instead of four, and none of the intermediate arrays (priors, measurements) boxed for Python and
-    unboxed again (docs/speed.md, pass upd34)."""
+    floats): ``kernels.pair_priors`` (the priors of the pairs: track rows ``trows = rows[sel]``, ``rows`` the state
+    rows of the live tracks, detections ``dis``), ``kernels.measure_batch`` (the detections' arrays ``kind`` …
+    ``npts`` of the scan's :class:`~dynslam2d.detect.layout.DetectionBatch`, each pair's size σ, the fit parameters
+    in ``q``'s first columns), :func:`kalman_pairs` (``Xs`` / ``Ps``: the predicted states of the live tracks,
+    ``sel`` the pairs' indices of them; ``bound``, ``hits``, ``lim``, ``lim2`` its acceleration bound) and
+    ``kernels.shape_update`` (``mfr`` … ``mnpts`` the map-evidence sources, ``px``, ``py``, ``c``, ``s`` the laser
+    pose, ``t`` the stamp). The configuration's values (the fit parameters, the size σ, the shape update's depth and
+    gains, the riding window's time, count and range², the person's radii, the bound's ``accel_bound_after``) come
+    in ``q``, :func:`update_params`' array (columns ``UP_*`` after ``kernels.fit_params``'). Then the windows of the
+    re-acquired tracks restarted: a pair whose update applied and whose track ``missed`` (per live track, indexed by
+    ``sel``) its last scans keeps only this push's entries (``TrackRows._restart_windows``: the riding window's and,
+    with ``use_map``, the map evidence's; without a map that window is emptied). Returns (the number of rows
+    bounded, the longest riding window after the push, before the restarts, ``info`` (n, 4) int64, the number of
+    pairs whose update did not apply): per pair 1 where the Kalman update applied (else 0), the detection's
+    ``start`` and ``npts`` and 1 where it is a circle whose radius is within the person's radii (else 0) — what
+    ``Tracker._update_tracks`` reads per pair, in one array. One dispatch instead of four, and none of the
+    intermediate arrays (priors, measurements) boxed for Python and unboxed again (docs/speed.md, passes upd34,
+    call35)."""
     n = dis.shape[0]
+    trows = np.empty(n, dtype=np.int64)
+    for r in range(n):
+        trows[r] = rows[sel[r]]
+    size_sigma = q[UP_SIZE_SIGMA]
+    after = int(q[UP_ACCEL_AFTER])
+    pmin_r = q[UP_PERSON_MIN_R]
+    pmax_r = q[UP_PERSON_MAX_R]
     swaps, sizes, has, radius = pair_priors(G, Gi, trows, dis, kind, theta)
     sig = np.empty(n)
     sig[:] = size_sigma
     _z, _R, H, zm, Rm, size_obs, size_kind = measure_batch(dis, kind, theta, lohi, rel, centroid, circle, bpx, bpy,
-                                                          start, npts, sizes, has, radius, sig, p)
+                                                          start, npts, sizes, has, radius, sig, q)
     ok, nb = kalman_pairs(Xs, Ps, sel, H, zm, Rm, bound, hits, after, lim, lim2, X, P, trows)
     top = shape_update(G, Gi, X, trows, dis, ok, kind, theta, lohi, rel, circle, size_obs, size_kind, swaps,
-                       default_depth, default_depth_ratio, heading_gain, size_gain, mfr, kept, first, second, mnpts,
-                       MEV, RIDE, WN, use_map, px, py, c, s, t, ride_time, ride_n, ride_r2)
+                       q[UP_DEFAULT_DEPTH], q[UP_DEFAULT_DEPTH_RATIO], q[UP_HEADING_GAIN], q[UP_SIZE_GAIN], mfr, kept,
+                       first, second, mnpts, MEV, RIDE, WN, use_map, px, py, c, s, t, q[UP_RIDE_TIME],
+                       int(q[UP_RIDE_N]), q[UP_RIDE_R2])
     for r in range(n):
         if ok[r] and missed[sel[r]]:
             k = trows[r]

@@ -64,7 +64,7 @@ from dynslam2d.detect.kernels import (
     fit_params,
 )
 from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, assign_groups
-from dynslam2d.detect.kernels_update import association_gates, fragment_hosts_rows
+from dynslam2d.detect.kernels_update import association_gates, fragment_hosts_rows, update_params
 from dynslam2d.detect.layout import (
     KIND_CIRCLE,
     KIND_NAMES,
@@ -218,6 +218,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._body_key: np.ndarray | None = None  # body beams the grown mask below was made from
         self._body_grown: np.ndarray = np.zeros(0, dtype=bool)
         self._fit_p = fit_params(self.config.fit)
+        self._upd_p = update_params(self._fit_p, self.config.fit, tc)  # (update_pairs' configuration values)
         self._batch: DetectionBatch | None = None  # per-detection arrays of the current scan (kernels)
         # the sources of the detections' map evidence (set by _detect with a map): (3, nd) fractions of points on
         # long-occupied, observed-free, never-observed cells of the scan's detections before the leg merge, and the
@@ -459,7 +460,6 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         n, m = len(self._tracks), len(dets)
         if n == 0 or m == 0:
             return []
-        tc = self.config.tracker
         tracks = self._tracks
         Xs, Ps = self._stack()
         firm: list[bool] = []  # established (not tentative): they choose first
@@ -483,10 +483,10 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # (one kernel call: association_rows, gate_costs with the reach 0.5 × the longest side, size_jump_gate;
         # docs/speed.md, pass trk24)
         missed_a = np.array(missed, dtype=np.bool_)
-        tsize, d2, ok, det_ext = association_gates(
-            self._G, self._Gi, self._rows(), missed_a, Xs, Ps, self._default.z,
-            self._default.R, float(tc.gate_distance), float(tc.gate_chi2), *self._batch, self._fit_p,
-            float(tc.max_size_jump_ratio), float(tc.max_size_jump))
+        # (the gates' configuration values and the fit parameters: the tracker's one array, pass call35)
+        dm = self._default
+        tsize, d2, ok, det_ext = association_gates(self._G, self._Gi, self._rows(), missed_a, Xs, Ps, dm.z, dm.R,
+                                                   *self._batch, self._upd_p)
         if self._map is not None:
             ok = self._veto_merged(ok, dets, det_ext, tsize, veto)
         if not _count_nonzero(ok):  # (no pair allowed; count_nonzero: cheaper than any(); its C function)

@@ -64,8 +64,6 @@ class TrackUpdate:
             sel = sel[:, 0].copy()
             missed = np.array([k.misses > 0 for k in self._tracks], dtype=np.bool_)
         self._pair_arrays = None
-        b = self._batch
-        trows = self._rows()[sel]
         Xs, Ps = self._stack()
         # the track priors of the measurements (each track's sizes / radius), the measurements (size σ 0.05 m), the
         # Kalman updates, the physical acceleration bound (once a track's velocity is established —
@@ -75,24 +73,24 @@ class TrackUpdate:
         # tracks' rows where applied (the kernel updates copies of the stacked rows sel: the prior Xs / Ps stays as
         # it is), then the shapes and, in the same loop, the riding and map-evidence windows of the updated tracks
         # from their new rows, and the windows of the re-acquired tracks (those that ``missed`` scans) restarted to
-        # this push's entries: one kernel call (docs/speed.md, passes trk24, trk26, upd34)
-        fc, tc = self.config.fit, self.config.tracker
+        # this push's entries: one kernel call (docs/speed.md, passes trk24, trk26, upd34). The configuration's
+        # values go as one array built with the tracker (``_upd_p``, kernels_update.update_params), the pairs'
+        # state rows are gathered in the kernel (``_rows()[sel]``): fewer arguments to type and unbox (pass call35)
+        tc = self.config.tracker
         if tc.max_accel is not None and self._dt > 0.0:
             bound = True
             lim = tc.max_accel * self._dt
             tracks = self._tracks
             hits = np.array([tracks[i].hits for i, _ in pairs], dtype=np.int64)
+            lim2 = (0.999 * lim) ** 2
         else:
-            bound, lim, hits = False, 0.0, sel
+            bound, lim, hits, lim2 = False, 0.0, sel, 0.0
         p = self._pose
         c, s = self._pose_cs
         nb, top, info, nrej = update_pairs(
-            self._G, self._Gi, self._X, self._P, Xs, Ps, sel, trows, dis, missed, *b, 0.05, self._fit_p, bound, hits,
-            tc.accel_bound_after if bound else 0, float(lim), (0.999 * lim) ** 2 if bound else 0.0,
-            float(fc.default_depth), float(fc.default_depth_ratio), float(tc.heading_gain), float(tc.size_gain),
-            *self._mev_src, self._MEV, self._RIDE, self._WN, self._map is not None, float(p.x), float(p.y), c, s, t,
-            float(tc.ride_time), int(tc.ride_updates), tc.ride_max_range * tc.ride_max_range,
-            float(fc.person_min_radius), float(fc.person_max_radius))
+            self._G, self._Gi, self._X, self._P, Xs, Ps, sel, self._rows(), dis, missed, *self._batch, self._upd_p,
+            bound, hits, float(lim), lim2, *self._mev_src, self._MEV, self._RIDE, self._WN,
+            self._map is not None, float(p.x), float(p.y), c, s, t)
         if nb:
             self.stats.accel_bounded += nb
         self._stacked = None  # the tracks changed
