@@ -76,6 +76,11 @@ _ROWS_ROOM = 512
 _ROWS_FLAT = 1 << 14
 #: Ledgers that ended (confirmed: to pack) or were dropped (to count) wait for this many, then are done in one go.
 _END_BATCH = 16
+#: kept-beam sweep: every this many map updates with kept beams, each live ledger whose kept beams (``_Ledger.kb``)
+#: go back before the previous sweep copies its own parts out of the updates' whole kept-beam arrays
+#: (:meth:`_Ledger.compact_beams`, issue 13 item 3): a ledger then holds at most the last ``2 ·`` this many updates'
+#: whole arrays, whatever the track's life; 0 = never (pass led34's layout, the tests' reference)
+_KB_SWEEP = 64
 _EMPTY_I = np.zeros(0, dtype=np.int64)
 _EMPTY_F = np.zeros(0)
 _EMPTY_B = np.zeros(0, dtype=bool)
@@ -346,6 +351,9 @@ class _Ledger:
     #: not a tuple per update: pass led26, a kept tuple per track and update drove a fifth of the garbage
     #: collector's young-generation passes)
     kb: list = field(default_factory=list)
+    #: the older kept beams, copied out of the updates' arrays (:meth:`compact_beams`): chunks of ((k, 3) int64
+    #: rows (scan index, first, end) into the chunk's int32 beams, the beams), in update order, before :attr:`kb`'s
+    kbc: list | None = None
     last_track: Track | None = None  # the track as last seen out of the removal set
     #: (update's (5, m) row block, first column, end column, levels with rows (bit k: level k)) per map update
     #: since the last :meth:`settle`
@@ -479,7 +487,33 @@ class _Ledger:
     def beams(self) -> list[tuple[int, np.ndarray]]:
         """(scan index, beams) of the track's kept beams at every recorded map update (only with keep_beams)."""
         kb = self.kb
-        return [(kb[q], kb[q + 1][kb[q + 2]:kb[q + 3]]) for q in range(0, len(kb), 4)]
+        out = [(kb[q], kb[q + 1][kb[q + 2]:kb[q + 3]]) for q in range(0, len(kb), 4)]
+        if self.kbc is not None:
+            old = [(i, cat[a:b]) for m, cat in self.kbc for i, a, b in m.tolist()]
+            out = old + out
+        return out
+
+    def compact_beams(self) -> None:
+        """Copy the track's own kept beams out of the updates' whole kept-beam arrays that :attr:`kb` refers to
+        (every track's beams of that update: ≈ 2.4 kB each on negative_2) into one chunk of :attr:`kbc`, and empty
+        :attr:`kb` (issue 13 item 3: a dormant track reported for hours held one whole array per map update).
+        :attr:`beams` gives the same (scan index, beams) in the same order."""
+        kb = self.kb
+        if not kb:
+            return
+        k = len(kb) >> 2
+        parts = [kb[q + 1][kb[q + 2]:kb[q + 3]] for q in range(0, len(kb), 4)]
+        cat = np.concatenate(parts) if k > 1 else parts[0].copy()
+        m = np.empty((k, 3), dtype=np.int64)
+        m[:, 0] = kb[0::4]
+        ln = np.subtract(kb[3::4], kb[2::4])
+        np.cumsum(ln, out=m[:, 2])
+        np.subtract(m[:, 2], ln, out=m[:, 1])
+        if self.kbc is None:
+            self.kbc = [(m, cat)]
+        else:
+            self.kbc.append((m, cat))
+        self.kb = []
 
     @property
     def n_cells(self) -> int:
@@ -534,6 +568,10 @@ def _box_key(t: Track) -> tuple[float, float, float]:
 class EvidenceLedger:
     """Per-track record of map evidence and its erasure (module docstring)."""
 
+    #: map updates with kept beams between two kept-beam sweeps (:meth:`_sweep_beams`); 0 = no sweep (pass led34's
+    #: kept beams: references to every update's whole array, the tests' reference)
+    kb_sweep: int = _KB_SWEEP
+
     def __init__(self, config: MemoryConfig, laser_min_dist: float, laser_max_dist: float,
                  keep_beams: bool = False) -> None:
         self.config = config
@@ -552,6 +590,10 @@ class EvidenceLedger:
         #: batches by :meth:`_finish_ended`)
         self._to_pack: list[_Ledger] = []
         self._to_count: list[_Ledger] = []
+        #: map updates with kept beams since the last kept-beam sweep, and the scan index of that sweep
+        #: (:meth:`_sweep_beams`)
+        self._kb_n = 0
+        self._kb_mark = -1
         #: the standing boxes (pass led32; :meth:`observe`, ``ledgerkernels.stand_marks``): an id's row (below) =
         #: (centre x, y, half size of the box where the track stands (m, map frame), stamp it began standing there,
         #: last stamp it stood there (s)), valid when its ``_mark`` is the number of the last :meth:`observe` call,
@@ -636,11 +678,27 @@ class EvidenceLedger:
                         led = ledgers[tid] = self._new_ledger(t, t.stamp, n_lv)
                     if b > a:  # (the bounds, not a view: a view costs more per track and holds the same array)
                         led.kb.extend((at, kb_all, a, b))  # (flat: the tuple dies here, not in a young generation)
+            self._kb_n += 1
+            if self._kb_n == self.kb_sweep:
+                self._sweep_beams(at)
         else:
             for t, tid, keep in zip(mine, tids, present):
                 if keep and tid not in ledgers:
                     ledgers[tid] = self._new_ledger(t, t.stamp, n_lv)
         return pending
+
+    def _sweep_beams(self, at: int) -> None:
+        """Every ``_KB_SWEEP`` map updates with kept beams (``at``: this update's scan index): each live ledger
+        with kept beams recorded before the previous sweep copies its own parts out (:meth:`_Ledger.compact_beams`),
+        so no live ledger refers to an update's whole kept-beam array older than two sweeps. Ledgers that start
+        between sweeps (mostly tentative tracks dropped a few scans later) are not copied until they outlive one."""
+        mark = self._kb_mark
+        for led in self._ledgers.values():
+            kb = led.kb
+            if kb and kb[0] < mark:
+                led.compact_beams()
+        self._kb_mark = at
+        self._kb_n = 0
 
     def _pending_plain(self, scan: Scan, c: float, s: float, pose: Pose2D, allb: np.ndarray, idl: np.ndarray,
                        removed: np.ndarray, hmap: MultiResMap, want_kb: bool
@@ -736,6 +794,7 @@ class EvidenceLedger:
         led.confirmed = False
         led.skip = False
         led.kb = []
+        led.kbc = None
         led.last_track = None
         led.ent = []
         led.ent0 = 0
@@ -1075,7 +1134,10 @@ class EvidenceLedger:
         are counted without a sort at once, and a waiting one lets its track go — ledgers that wait longer outlive
         more of the collector's young generations, and with every dropped ledger waiting the garbage collections
         cost the map update about as much as the batches saved.)"""
+        sweep = self.kb_sweep
         for led in self._to_pack:
+            if sweep and led.kb:  # (and its kept beams out of the updates' whole arrays: it gets no more)
+                led.compact_beams()
             led.pack()
         for led in self._to_count:
             self._drop(led)
@@ -1162,9 +1224,10 @@ class EvidenceLedger:
                 self.stats["cells_to_unknown"] += int(unknown.sum())
                 self.erased_cells.update(map(tuple, keys.tolist()))
             rec.clear()
-        if led.kb:
+        if led.kb or led.kbc is not None:
             self.erased_beams.extend(led.beams)
             led.kb = []
+            led.kbc = None
         self.stats["cells_changed"] += n0
         self.stats["erasures"] += 1
         self.stats["tracks_erased"] += 1
