@@ -668,15 +668,16 @@ class EvidenceLedger:
         return pending
 
     def _sweep_beams(self, at: int) -> None:
-        """Every ``_KB_SWEEP`` map updates with kept beams (``at``: this update's scan index): each ledger, live
-        or ended (kept ``ledger_keep_s`` for linking), with kept beams recorded before the previous sweep copies its
-        own parts out (one chunk of :attr:`_Ledger.kbc`), so no ledger refers to an update's whole kept-beam array
-        older than two sweeps. Ledgers that start between sweeps (mostly tentative tracks dropped a few scans
-        later) are not copied until they outlive one."""
+        """Every ``_KB_SWEEP`` map updates with kept beams (``at``: this update's scan index): each live ledger
+        with kept beams recorded before the previous sweep copies its own parts out (one chunk of
+        :attr:`_Ledger.kbc`), so no live ledger refers to an update's whole kept-beam array older than two sweeps
+        (an ended one keeps what it holds, ``ledger_keep_s`` at most: copying each of them once cost
+        ``before_update`` ≈ 13 µs a map update on negative_2). Ledgers that start between sweeps (mostly
+        tentative tracks dropped a few scans later) are not copied until they outlive one."""
         mark = self._kb_mark
         self._kb_mark = at
         self._kb_n = 0
-        todo = [led for tab in (self._ledgers, self._ended) for led in tab.values() if led.kb and led.kb[0] < mark]
+        todo = [led for led in self._ledgers.values() if led.kb and led.kb[0] < mark]
         if not todo:
             return
         # all of them in one gather (not a view and a concatenation per entry: ≈ 0.7 µs each in situ, ≈ 25
