@@ -107,9 +107,9 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels_update.association_gates',
      "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
      "Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
-     "float64, float64, Array(int8, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, "
-     "3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, "
-     "'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), float64, float64,)"),
+     "Array(int8, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, 3, 'C'), "
+     "Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
+     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'),)"),
     ('dynslam2d.detect.kernels_assign.assign_groups',
      "(Array(bool, 2, 'C'), Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64,)"),
     ('dynslam2d.detect.kernels_update.update_pairs',
@@ -118,11 +118,10 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(int64, 1, 'C'), Array(bool, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 2, 'C'), Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
-     "float64, Array(float64, 1, 'C'), bool, Array(int64, 1, 'C'), int64, float64, float64, float64, "
-     "float64, float64, float64, Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 3, 'C'), Array(float64, 3, 'C'), "
-     "Array(int64, 2, 'C'), bool, float64, float64, float64, float64, float64, float64, int64, float64, "
-     'float64, float64,)'),
+     "Array(float64, 1, 'C'), bool, Array(int64, 1, 'C'), float64, float64, Array(float64, 2, 'C'), "
+     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
+     "Array(float64, 3, 'C'), Array(float64, 3, 'C'), Array(int64, 2, 'C'), bool, float64, float64, "
+     'float64, float64, float64,)'),
     ('dynslam2d.detect.kernels_update.manage_speed_rows',
      "(Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64,)"),
     ('dynslam2d.detect.kernels_update.fragment_hosts_rows',
@@ -144,37 +143,37 @@ KERNELS: tuple[tuple[str, str], ...] = (
 #: CPU time of each kernel's compile (s, the kernels it compiles in turn included) in a one-core cold run when
 #: recorded: the background compile's estimate of how far ahead of the run a kernel is (its order, docs/speed.md).
 COMPILE_S: dict[str, float] = {
-    'dynslam2d.sim.world._cast_kernel': 0.40,
+    'dynslam2d.sim.world._cast_kernel': 0.39,
     'dynslam2d.detect.body._drop_body': 0.14,
-    'dynslam2d.slam.matcher.gated_points': 0.48,
-    'dynslam2d.detect.body._observe_beams': 0.18,
-    'dynslam2d.detect.segment._segment_kernel': 0.69,
-    'dynslam2d.detect.shapes.fit_cluster_rows': 1.65,
-    'dynslam2d.detect.kernels.classify_batch': 1.14,
-    'dynslam2d.detect.kernels.select_detections': 1.44,
-    'dynslam2d.detect.freespace._ref_arrays': 0.12,
-    'dynslam2d.detect.kernels.merge_legs': 1.32,
-    'dynslam2d.detect.kernels.measure_batch': 0.93,
-    'dynslam2d.detect.kernels_update.report_rows': 0.35,
+    'dynslam2d.slam.matcher.gated_points': 0.49,
+    'dynslam2d.detect.body._observe_beams': 0.19,
+    'dynslam2d.detect.segment._segment_kernel': 0.68,
+    'dynslam2d.detect.shapes.fit_cluster_rows': 1.70,
+    'dynslam2d.detect.kernels.classify_batch': 1.18,
+    'dynslam2d.detect.kernels.select_detections': 1.22,
+    'dynslam2d.detect.freespace._ref_arrays': 0.09,
+    'dynslam2d.detect.kernels.merge_legs': 1.14,
+    'dynslam2d.detect.kernels.measure_batch': 0.88,
+    'dynslam2d.detect.kernels_update.report_rows': 0.34,
     'dynslam2d.slam.ledgerkernels.record_cells': 2.05,
     'dynslam2d.slam.ledgerkernels.level_rows': 0.44,
     'dynslam2d.slam.ledgerkernels.stand_marks': 0.35,
     'dynslam2d.slam.raycast.integrate_levels': 1.39,
     'dynslam2d.slam.raycast.ray_ends': 0.08,
     'dynslam2d.slam.cleanup._geometry_bounds': 0.45,
-    'dynslam2d.slam.cleanup._count_beams': 0.57,
-    'dynslam2d.slam.matcher.match_pyramid': 2.34,
+    'dynslam2d.slam.cleanup._count_beams': 0.59,
+    'dynslam2d.slam.matcher.match_pyramid': 2.37,
     'dynslam2d.slam.correlative._rotated_cells': 0.24,
     'dynslam2d.slam.correlative._score_pyramid': 0.43,
-    'dynslam2d.slam.correlative.branch_and_bound': 1.46,
-    'dynslam2d.vacated.vacated_scan_kernel': 2.72,
-    'dynslam2d.detect.kernels.cv_predict': 0.22,
-    'dynslam2d.detect.kernels_update.association_gates': 1.34,
-    'dynslam2d.detect.kernels_assign.assign_groups': 0.89,
-    'dynslam2d.detect.kernels_update.update_pairs': 4.11,
-    'dynslam2d.detect.kernels_update.manage_speed_rows': 0.39,
-    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.33,
-    'dynslam2d.detect.kernels.seen_through_refs': 0.25,
-    'dynslam2d.filter.observed_boxes_kernel': 0.22,
-    'dynslam2d.filter._rows_exclusion_kernel': 0.50,
+    'dynslam2d.slam.correlative.branch_and_bound': 1.49,
+    'dynslam2d.vacated.vacated_scan_kernel': 2.77,
+    'dynslam2d.detect.kernels.cv_predict': 0.24,
+    'dynslam2d.detect.kernels_update.association_gates': 1.07,
+    'dynslam2d.detect.kernels_assign.assign_groups': 0.80,
+    'dynslam2d.detect.kernels_update.update_pairs': 2.74,
+    'dynslam2d.detect.kernels_update.manage_speed_rows': 0.34,
+    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.23,
+    'dynslam2d.detect.kernels.seen_through_refs': 0.20,
+    'dynslam2d.filter.observed_boxes_kernel': 0.18,
+    'dynslam2d.filter._rows_exclusion_kernel': 0.41,
 }
