@@ -547,8 +547,10 @@ def lazy_callee_code() -> bool:
     ``f`` then links ``g``'s optimised IR into its own library and optimises and compiles it again: ``g``'s own
     machine code, wrapper and cache entry serve only a later call of ``g`` from Python, which the README's first
     command never makes (``g`` is not in :mod:`dynslam2d.jitmanifest`), and a warm run loads ``f`` whole from the
-    cache without ``g`` (docs/speed.md, passes cold25, cold30 and cold34). Here, for a dynslam2d kernel compiled
-    while another compile is in progress (numba's ``numba:compile`` events):
+    cache without ``g`` (docs/speed.md, passes cold25, cold30 and cold34). numba's own helpers compiled for a kernel
+    (``@overload`` implementations such as ``np.empty``'s, compiled without a Python wrapper: never callable from
+    Python) are treated the same (pass cold35). Here, for a dynslam2d kernel or a function without a Python wrapper
+    compiled while another compile is in progress (numba's ``numba:compile`` events):
 
     - ``get_executable`` returns a :class:`LazyEntry` instead of the wrapper, and ``g``'s library, once optimised
       (as numba does it, when ``f`` links it), is not handed to the execution engine (no machine code);
@@ -580,9 +582,10 @@ def lazy_callee_code() -> bool:
 
     class _Callees(event.Listener):
         def on_start(self, ev: Any) -> None:
-            func = getattr((ev.data or {}).get("dispatcher"), "py_func", None)
-            module = getattr(func, "__module__", "") or ""
-            lazy.append(len(lazy) > 1 and module.startswith("dynslam2d."))
+            disp = (ev.data or {}).get("dispatcher")
+            module = getattr(getattr(disp, "py_func", None), "__module__", "") or ""
+            no_wrapper = bool((getattr(disp, "targetoptions", None) or {}).get("no_cpython_wrapper", False))
+            lazy.append(len(lazy) > 1 and (module.startswith("dynslam2d.") or no_wrapper))
 
         def on_end(self, ev: Any) -> None:
             if len(lazy) > 1:
