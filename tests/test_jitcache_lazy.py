@@ -31,6 +31,8 @@ valid = np.isfinite(r)
 out = matcher.gated_points(r, np.cos(ang), np.sin(ang), valid, 0.1, 30.0, 0.2, 25.0, 10.0, True)
 callee = matcher._bearing_bin
 entry = [type(c.entry_point).__name__ for c in callee.overloads.values()]
+import gc
+helpers = sorted({e.fndesc.modname for e in gc.get_objects() if isinstance(e, jitcache.LazyEntry)})
 cached = [jitcache.index_holds("dynslam2d.slam.matcher.gated_points"),
           jitcache.index_holds("dynslam2d.slam.matcher._bearing_bin")]
 xs, ys = rng.normal(size=200) * 5.0, rng.normal(size=200) * 5.0
@@ -38,15 +40,16 @@ bins = [callee(float(x), float(y), 64) for x, y in zip(xs, ys)]
 ref = [int(math.floor((math.atan2(y, x) + math.pi) / (2.0 * math.pi) * 64)) % 64 for x, y in zip(xs, ys)]
 after = [type(c.entry_point).__name__ for c in callee.overloads.values()]
 print(json.dumps({"out": [np.asarray(o).tolist() for o in out], "entry": entry, "cached": cached, "bins": bins,
-                  "ref": ref, "after": after,
+                  "ref": ref, "after": after, "helpers": helpers,
                   "cached_after": jitcache.index_holds("dynslam2d.slam.matcher._bearing_bin")}))
 """
 
 
 def test_lazy_callee_gives_the_same_results_and_its_code_when_python_calls_it(tmp_path):
-    """With lazy_callee_code: the caller computes what it computes with numba's own way; the callee, compiled only
-    for the caller, holds a stand-in entry and no cache entry (the caller has one); a call from Python then compiles
-    its machine code, computes the bearing bins Python's atan2 gives, and writes the callee's cache entry."""
+    """With lazy_callee_code: the caller computes what it computes with numba's own way; the callee (and numba's
+    helpers without a Python wrapper), compiled only for the caller, holds a stand-in entry and no cache entry (the
+    caller has one); a call from Python then compiles its machine code, computes the bearing bins Python's atan2
+    gives, and writes the callee's cache entry."""
     got = {}
     for on in ("0", "1"):
         env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / f"cache{on}")}
@@ -59,6 +62,8 @@ def test_lazy_callee_gives_the_same_results_and_its_code_when_python_calls_it(tm
     for on in ("0", "1"):
         assert got[on]["bins"] == got[on]["ref"]
     assert got["1"]["after"] == ["builtin_function_or_method"] and got["1"]["cached_after"]
+    # numba's own helpers compiled for the kernel without a Python wrapper (np.empty's impl: pass cold35) are lazy too
+    assert got["0"]["helpers"] == [] and any(m.startswith("numba.") for m in got["1"]["helpers"])
 
 
 def test_lazy_callee_code_leaves_another_numba_alone(monkeypatch):

@@ -167,6 +167,8 @@ def lean_numba_compile() -> bool:
       three quarters of numba's inlining pass.
     - **No machine code for a kernel compiled only as a callee** (:func:`lazy_callee_code`, installed at the first
       compile): its caller links its optimised IR anyway; the code is made when Python calls it.
+    - **No debug-logging calls in numba's SSA pass** (:func:`quiet_ssa_debug`, installed at the first compile): about
+      a million ``Logger.debug`` calls per cold run that log nothing.
 
     Together about a tenth of the compile CPU (docs/speed.md), and the remembered call typing about a tenth
     more. The command line and its background compile call this first (they own the process); a library
@@ -210,7 +212,8 @@ def lean_numba_compile() -> bool:
     config.__hash__ = class_hash  # type: ignore[method-assign,assignment]
     config.__eq__ = fast_equal  # type: ignore[method-assign,assignment]
     roomy_compile_stack()
-    at_first_compile(remembered_call_typing, lean_inlining, lazy_callee_code)  # (reading numba's sources: not warm)
+    at_first_compile(remembered_call_typing, lean_inlining, lazy_callee_code,  # (reading numba's sources: not warm)
+                     quiet_ssa_debug)
     return True
 
 
@@ -544,8 +547,10 @@ def lazy_callee_code() -> bool:
     ``f`` then links ``g``'s optimised IR into its own library and optimises and compiles it again: ``g``'s own
     machine code, wrapper and cache entry serve only a later call of ``g`` from Python, which the README's first
     command never makes (``g`` is not in :mod:`dynslam2d.jitmanifest`), and a warm run loads ``f`` whole from the
-    cache without ``g`` (docs/speed.md, passes cold25, cold30 and cold34). Here, for a dynslam2d kernel compiled
-    while another compile is in progress (numba's ``numba:compile`` events):
+    cache without ``g`` (docs/speed.md, passes cold25, cold30 and cold34). numba's own helpers compiled for a kernel
+    (``@overload`` implementations such as ``np.empty``'s, compiled without a Python wrapper: never callable from
+    Python) are treated the same (pass cold35). Here, for a dynslam2d kernel or a function without a Python wrapper
+    compiled while another compile is in progress (numba's ``numba:compile`` events):
 
     - ``get_executable`` returns a :class:`LazyEntry` instead of the wrapper, and ``g``'s library, once optimised
       (as numba does it, when ``f`` links it), is not handed to the execution engine (no machine code);
@@ -577,9 +582,10 @@ def lazy_callee_code() -> bool:
 
     class _Callees(event.Listener):
         def on_start(self, ev: Any) -> None:
-            func = getattr((ev.data or {}).get("dispatcher"), "py_func", None)
-            module = getattr(func, "__module__", "") or ""
-            lazy.append(len(lazy) > 1 and module.startswith("dynslam2d."))
+            disp = (ev.data or {}).get("dispatcher")
+            module = getattr(getattr(disp, "py_func", None), "__module__", "") or ""
+            no_wrapper = bool((getattr(disp, "targetoptions", None) or {}).get("no_cpython_wrapper", False))
+            lazy.append(len(lazy) > 1 and (module.startswith("dynslam2d.") or no_wrapper))
 
         def on_end(self, ev: Any) -> None:
             if len(lazy) > 1:
@@ -669,6 +675,94 @@ def lazy_callee_code() -> bool:
     codegen.CPUCodeLibrary._finalize_final_module = lazy_finalize_final  # type: ignore[method-assign]
     cpu.CPUContext.get_executable = lazy_executable  # type: ignore[method-assign]
     caching.Cache._save_overload = lazy_save  # type: ignore[method-assign]
+    return True
+
+
+#: SHA-256 (first 16 hex digits) of the source of numba's ``numba.core.ssa`` module that :func:`quiet_ssa_debug`
+#: rewrites (numba 0.68); any other source is left as it is.
+SSA_SOURCE = "d20accd92757fef6"
+
+
+class _NoDebugCalls:
+    """AST transformer: every ``_logger.debug(...)`` statement becomes ``pass`` (the other lines keep their numbers)."""
+
+    @staticmethod
+    def rewrite(tree: Any) -> int:
+        import ast
+
+        count = 0
+        for node in ast.walk(tree):
+            for field in ("body", "orelse", "finalbody"):
+                stmts = getattr(node, field, None)
+                if not isinstance(stmts, list):
+                    continue
+                for i, stmt in enumerate(stmts):
+                    call = getattr(stmt, "value", None) if isinstance(stmt, ast.Expr) else None
+                    func = getattr(call, "func", None)
+                    if (isinstance(call, ast.Call) and isinstance(func, ast.Attribute) and func.attr == "debug"
+                            and isinstance(func.value, ast.Name) and func.value.id == "_logger"):
+                        stmts[i] = ast.copy_location(ast.Pass(), stmt)
+                        count += 1
+        return count
+
+
+def quiet_ssa_debug() -> bool:
+    """Have numba's SSA reconstruction (``numba.core.ssa``) run without its ``_logger.debug`` calls.
+
+    ``reconstruct_ssa`` runs, for every variable assigned more than once in a function's IR, a pass over every
+    statement of every block, and logs each statement, each replacement and each definition looked up through
+    ``_logger.debug``: about 1.1 million calls of ``Logger.debug`` (each checking whether DEBUG is enabled, which it
+    is not) on a cold run of the README's first command, a few tenths of a second of CPU (docs/speed.md, passes cold34
+    and cold35). Here the functions of numba's ``ssa`` module get their own code compiled from numba's source with
+    each ``_logger.debug(...)`` statement replaced by ``pass`` (the arguments have no side effects: names, subscripts of
+    the pass's dicts and ``_lazy_pformat`` wrappers); every function object stays the same, so every reference to it
+    (imports by other modules, class attributes) runs the new code. The IR is the same statements; only the log lines
+    are not written. Done only when the module's source is the one checked here (:data:`SSA_SOURCE`) and its logger
+    does not log DEBUG at install; called by :func:`lean_numba_compile` at the first compile, so it touches only the
+    command line's processes. Returns whether it changed numba (not when called again)."""
+    import ast
+    import inspect
+    import logging
+
+    try:
+        from numba.core import ssa
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return False
+    if getattr(ssa, "_dynslam2d_quiet", False) or ssa._logger.isEnabledFor(logging.DEBUG):
+        return False
+    try:
+        source = inspect.getsource(ssa)
+    except (OSError, TypeError):
+        return False
+    if hashlib.sha256(source.encode()).hexdigest()[:16] != SSA_SOURCE:
+        return False
+    tree = ast.parse(source, ssa.__file__)
+    if not _NoDebugCalls.rewrite(tree):
+        return False
+    codes: dict[str, Any] = {}
+    pending = [compile(tree, ssa.__file__, "exec")]
+    while pending:
+        code = pending.pop()
+        for const in code.co_consts:
+            if inspect.iscode(const):
+                codes[const.co_qualname] = const
+                pending.append(const)
+    funcs: list[Any] = []
+    for value in vars(ssa).values():
+        if inspect.isfunction(value) and value.__module__ == ssa.__name__:
+            funcs.append(value)
+        elif inspect.isclass(value) and value.__module__ == ssa.__name__:
+            funcs.extend(v for v in vars(value).values() if inspect.isfunction(v))
+    swaps = []
+    for func in funcs:
+        new = codes.get(func.__code__.co_qualname)
+        if new is None or new.co_freevars != func.__code__.co_freevars:
+            return False
+        if new.co_code != func.__code__.co_code or new.co_names != func.__code__.co_names:
+            swaps.append((func, new))
+    for func, new in swaps:
+        func.__code__ = new
+    ssa._dynslam2d_quiet = True
     return True
 
 
