@@ -23,7 +23,7 @@ from dynslam2d.sim import simulate
 
 
 def test_slow_reason_is_the_formatted_reason() -> None:
-    """``_slow_reason`` (run inline by ``_manage``) gives ``f"not in M: speed {speed:.2f}{tail}"`` for every speed
+    """``_slow_reason`` gives ``f"not in M: speed {speed:.2f}{tail}"`` for every speed
     from 0 to v_min: random ones, the exact ties (k/8: 0.125 prints 0.12, 0.375 prints 0.38), the floats next to each
     half-hundredth and hundredth, and v_min itself; above _SLOW_TEXTS_MAX there is no table and it formats."""
     rng = random.Random(13)

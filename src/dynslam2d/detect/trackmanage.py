@@ -42,7 +42,7 @@ def _slow_reason(speed: float, texts: tuple[str, ...], tail: str) -> str:
     ``format`` rounds it (to the nearest, ties to even, of the float's exact value) is that of 100·speed, whose float
     product differs from the exact one by far less than 10⁻⁹ — so where its fraction is not within 10⁻⁷ of ½ (a tie,
     or one the product could move across) the nearest integer is the index; there the text is formatted.
-    ``TrackManage._manage`` runs these lines inline (the most common reason, ≈ 17 a scan on negative_2)."""
+    ``TrackManage._manage``'s most common reason (≈ 17 a scan on negative_2)."""
     q = speed * 100.0
     i = int(q)
     f = q - i
@@ -63,7 +63,7 @@ class TrackManage:
         M runs inline up to its common outcomes (tentative, or not in M and at most v_min) with the scan's constants
         read once, the rest in :meth:`_dynamic`. Updated tracks and tracks without detection take separate branches
         (each reads its state once; the tests that cannot apply are not made) and the most common reason is looked up
-        (:func:`_slow_reason`, inline; docs/speed.md pass mgr34)."""
+        (:func:`_slow_reason`; docs/speed.md pass mgr34)."""
         tracks = self._tracks
         if not tracks:
             return
@@ -83,6 +83,7 @@ class TrackManage:
         npu = tc.person_sustain_updates
         probe = self._free is not None
         slow_tail = f" m/s ≤ v_min {v_min:.2f}"  # (the most common reason's constant part)
+        slow_reason = _slow_reason  # (a local name: read once per scan)
         order = self._rows()
         # per track: its speed (Python's math.hypot bit for bit, as the reasons print it), whether its covariance
         # fails (tested on the rows as they are, instead of a flag kept in step wherever P changes) and σ of its speed
@@ -168,16 +169,8 @@ class TrackManage:
                         # (speed: most tracks are short-lived tentative clutter; nothing else changes them)
                         k.reason = "not in M: tentative track"
                     elif speed <= v_min:
-                        # (the most common reason: looked up by the speed in hundredths, _slow_reason inline)
-                        q = speed * 100.0
-                        i = int(q)
-                        f = q - i
-                        if f < 0.4999999 and slow_texts:
-                            k.reason = slow_texts[i]
-                        elif f > 0.5000001 and slow_texts:
-                            k.reason = slow_texts[i + 1]
-                        else:
-                            k.reason = f"not in M: speed {speed:.2f}{slow_tail}"
+                        # (the most common reason: looked up by the speed in hundredths)
+                        k.reason = slow_reason(speed, slow_texts, slow_tail)
                     elif kfast < nsus and sig < max_ssig and k.person_streak < npu:
                         # (_dynamic's outcome for a track not in M, faster than v_min with a certain velocity, not yet
                         # for sustain_updates updates and no person test (person_streak below person_sustain_updates):
