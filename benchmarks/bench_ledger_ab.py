@@ -26,10 +26,12 @@ from __future__ import annotations
 
 import argparse
 import gc
+import hashlib
 import importlib.util
 import inspect
 import statistics
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -52,10 +54,21 @@ def _load(path: Path, name: str = "erasure_other"):
 
 def _load_other(path: Path, kernels: bool):
     """The other ``erasure.py``; with ``kernels``, its ledger reads the ``ledgerkernels.py`` beside it (imported
-    under a name of its own, numba's cache its own) instead of this checkout's."""
+    under a name of its own, numba's cache its own) instead of this checkout's.
+
+    The kernels are loaded from a copy in a folder of the temporary directory named by the file's content, not
+    from the other checkout's path: numba keys its cache by the source's path and records the module's name in it,
+    so loading them from their own path under another name left cache entries that the other checkout's own
+    imports then loaded and failed on (``No module named 'ledgerkernels_other'``; pass led36)."""
     mod = _load(path)
     if kernels:
-        mod._lk = _load(path.with_name("ledgerkernels.py"), "ledgerkernels_other")
+        text = path.with_name("ledgerkernels.py").read_bytes()
+        folder = Path(tempfile.gettempdir()) / "bench_ledger_ab" / hashlib.sha1(text).hexdigest()[:16]
+        folder.mkdir(parents=True, exist_ok=True)
+        copy = folder / "ledgerkernels.py"
+        if not copy.exists() or copy.read_bytes() != text:
+            copy.write_bytes(text)
+        mod._lk = _load(copy, "ledgerkernels_other")
     return mod
 
 

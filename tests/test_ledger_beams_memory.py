@@ -84,6 +84,8 @@ def test_a_track_living_through_a_long_run_holds_only_its_own_beams() -> None:
         assert _retained(l9) <= bound, (i, _retained(l9), bound)
         assert len(l9.kb) <= 4 * 2 * got.kb_sweep
         compacted |= l9.kbc is not None
+        # (pass led36: the chunks' rows as int32, 12 bytes an entry)
+        assert all(m.dtype == np.int32 and m.nbytes == 12 * m.shape[0] for m, _ in l9.kbc or ())
         worst_old = max(worst_old, _retained(w9) - bound)
         if i % 50 == 0 or i == 1999:
             # no live ledger holds an older update's whole array than two sweeps

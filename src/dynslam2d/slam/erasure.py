@@ -353,7 +353,7 @@ class _Ledger:
     #: collector's young-generation passes)
     kb: list = field(default_factory=list)
     #: the older kept beams, copied out of the updates' arrays (:meth:`EvidenceLedger._sweep_beams`): chunks of
-    #: ((k, 3) int64 rows (scan index, first, end) into the chunk's beams, the int32 beams), in update order, before
+    #: ((k, 3) int32 rows (scan index, first, end) into the chunk's beams, the int32 beams), in update order, before
     #: :attr:`kb`'s
     kbc: list | None = None
     last_track: Track | None = None  # the track as last seen out of the removal set
@@ -694,7 +694,9 @@ class EvidenceLedger:
         g = dict(zip(uniq, itertools.accumulate([x.shape[0] for x in arrs], initial=0)))
         big = np.concatenate(arrs)
         n = len(srcs)
-        m = np.empty((n, 3), dtype=np.int64)
+        # (int32 rows: 12 bytes an entry, not 24 — scan indices and offsets into one sweep's kept beams stay far below
+        # 2^31; ``beams`` reads them as Python ints, so nothing read changes)
+        m = np.empty((n, 3), dtype=np.int32)
         m[:, 0] = at_l
         m[:, 1] = a
         m[:, 2] = b
@@ -708,7 +710,7 @@ class EvidenceLedger:
             k = len(led.kb) >> 2
             mine = m[q:q + k]
             c0, c1 = int(mine[0, 1]), int(mine[-1, 2])
-            mine = mine - np.array((0, c0, c0))
+            mine = mine - np.array((0, c0, c0), dtype=np.int32)
             part = (mine, cat[c0:c1].copy())
             kbc = led.kbc
             if kbc is None:
