@@ -237,3 +237,35 @@ def test_integrate_fast_path_is_general_path(levels: int, grazing: float) -> Non
         assert a.uidx.tobytes() == b.uidx.tobytes()
         assert (a.i0, a.j0, a.update_counter, a.n_grows) == (b.i0, b.j0, b.update_counter, b.n_grows)
     assert fast.levels[0].n_grows > 1
+
+
+def test_inline_gate_tracking_and_commit_motion() -> None:
+    """``match``'s gate is ``_gate``'s (points and clearing ends as bytes, with and without dropped beams), a matched
+    scan goes through ``_apply_prior_and_gate`` (its degeneracy and support set), and ``_commit``'s motion and velocity
+    are ``_between``'s (bits)."""
+    from dynslam2d.slam.processor import _between
+
+    slam = HectorSlam(SlamConfig(clear_no_return_dist=3.0))
+    n_checked = 0
+    for k, scan in enumerate(_scans(50)):
+        drop = None
+        if k % 5 == 4:
+            drop = np.zeros(scan.ranges.shape[0], dtype=bool)
+            drop[10:20] = True
+        want = slam._gate(scan, True, drop)
+        prev, prev_stamp = slam._last_pose, slam._last_stamp
+        res = slam.match(scan, drop=drop)
+        assert res.points.tobytes() == want[0].tobytes() and res.clear_points.tobytes() == want[1].tobytes()
+        assert res.n_points == want[0].shape[0]
+        if not res.first and res.reason is None:
+            assert math.isfinite(res.degeneracy) and res.support_points > 0
+        if prev is not None and not res.skipped:
+            dx, dy, dth = _between(prev, res.pose)
+            assert [_bits(a) for a in slam._last_motion] == [_bits(math.hypot(dx, dy)), _bits(abs(dth))]
+            dt = scan.stamp - prev_stamp
+            if 0.0 < dt <= slam.config.max_time_gap and not res.rejected:
+                assert [_bits(a) for a in slam._velocity] == [_bits(dx / dt), _bits(dy / dt), _bits(dth / dt)]
+                n_checked += 1
+        if not res.rejected and slam.needs_map_update(res.pose):
+            slam.update_map(scan, res.pose, drop=drop)
+    assert n_checked > 20

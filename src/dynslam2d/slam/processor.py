@@ -491,7 +491,13 @@ class HectorSlam:
         """
         c = self.config
         t0 = time.perf_counter()
-        pts, clear, n_valid, n_close, spread_bins, sumsq = self._gate(scan, True, drop)
+        # (:meth:`_gate` with its statistics, inline: the same kernel call)
+        cos_a, sin_a = scan.trig()
+        ranges = scan.ranges
+        pts, clear, n_valid, n_close, spread_bins, sumsq = gated_points(
+            ranges, cos_a, sin_a, scan.valid_view(), float(scan.range_min), float(scan.range_max),
+            float(c.laser_min_dist), float(c.laser_max_dist), float(c.clear_no_return_dist), True,
+            no_drop(ranges.shape[0]) if drop is None else drop)
         # the map update of this same scan reuses them (read-only; not those of a scan with beams dropped)
         self._last_points = (scan if drop is None else None, pts, clear)
         self._sumsq = (pts, sumsq)  # (degeneracy's Σ x² + y² of these points)
@@ -545,8 +551,15 @@ class HectorSlam:
         else:
             self._odometry_start = prior.kind == "odometry" and predicted is None
             # (_odometry_information is None unless the prior is the odometry's: the call only then)
-            self._match_tracking(res, pts, prior, scan.stamp,
-                                 self._odometry_information(prior) if prior.kind == "odometry" else None)
+            info = self._odometry_information(prior) if prior.kind == "odometry" else None
+            if info is None:  # (:meth:`_match_tracking` without an odometry prior, inline: the same steps)
+                self._match_against_map(res, pts)
+                if res.reason != REJECT_NON_FINITE and res.reason != REJECT_JUMP:
+                    self._apply_prior_and_gate(res, pts, prior, scan.stamp)
+                else:
+                    res.low_support = True  # pose = start estimate
+            else:
+                self._match_tracking(res, pts, prior, scan.stamp, info)
             self._odometry_start = False  # (the laser-only seed below starts without the odometry's motion)
             if res.low_support and prior.kind == "odometry" and predicted is None:
                 # odometry is a prior, not a replacement: when the odometry-seeded match finds little
@@ -919,7 +932,14 @@ class HectorSlam:
         prev = self._last_pose
         self._last_pose = res.pose
         if prev is not None:
-            dx, dy, dth = _between(prev, res.pose)
+            # (_between(prev, res.pose) inline: the same float operations in the same order)
+            p = res.pose
+            ca, sa = math.cos(prev.theta), math.sin(prev.theta)
+            ix, iy = -ca * prev.x - sa * prev.y, sa * prev.x - ca * prev.y
+            ith = (-prev.theta + math.pi) % (2.0 * math.pi) - math.pi
+            ca, sa = math.cos(ith), math.sin(ith)
+            dx, dy = ix + ca * p.x - sa * p.y, iy + sa * p.x + ca * p.y
+            dth = (ith + p.theta + math.pi) % (2.0 * math.pi) - math.pi
             self._last_motion = (math.hypot(dx, dy), abs(dth))
             dt = stamp - self._last_stamp if self._last_stamp is not None else 0.0
             if 0.0 < dt <= c.max_time_gap and not res.rejected:
