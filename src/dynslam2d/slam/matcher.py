@@ -1065,7 +1065,17 @@ def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, 
     degenerate when its normalized eigenvalue is below ``threshold`` × the largest. ``sumsq``: Σ x² + y² of
     ``pts_m``, m², as :func:`gated_points` returns it with the points (else summed here: the same value).
 
-    Closed-form 2×2 / scalar algebra (it runs on every scan)."""
+    Closed-form 2×2 / scalar algebra (it runs on every scan): :func:`degeneracy_values` as a :class:`Degeneracy`."""
+    ratio, t_ratio, r_ratio, ax, ay, rho, lam_max, t_deg, r_deg = degeneracy_values(
+        hessian_cells, resolution, pts_m, threshold, sumsq)
+    return Degeneracy(ratio, t_ratio, r_ratio, np.array([ax, ay]), rho, lam_max, t_deg, r_deg)
+
+
+def degeneracy_values(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, threshold: float,
+                      sumsq: float | None = None) -> tuple[float, float, float, float, float, float, float, bool, bool]:
+    """:func:`degeneracy`'s fields as a tuple, the axis as its two floats: (ratio, translation_ratio, rotation_ratio,
+    axis x, axis y, scale m, lam_max 1/m², translation_degenerate, rotation_degenerate) — the same values without the
+    record and the axis array (the processor builds them only when a prior needs the axis)."""
     n = pts_m.shape[0]
     if sumsq is None:
         sumsq = float(_einsum("ij,ij->", pts_m, pts_m))
@@ -1082,7 +1092,7 @@ def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, 
     isfinite = math.isfinite
     if not (isfinite(a) and isfinite(b) and isfinite(d) and isfinite(u) and isfinite(v) and isfinite(r)) \
             or not a + d > 0.0:
-        return Degeneracy(0.0, 0.0, 0.0, np.array([1.0, 0.0]), rho, 0.0, True, True)
+        return 0.0, 0.0, 0.0, 1.0, 0.0, rho, 0.0, True, True
     if r > 1e-12 * (a + d):  # rotation marginalized (Schur complement)
         a2, b2, d2 = a - u * u / r, b - u * v / r, d - v * v / r
     else:  # the scan sees no rotation at all
@@ -1092,7 +1102,7 @@ def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, 
     disc = math.sqrt(0.0 if 0.0 > disc else disc)  # (max(…, 0.0) as a conditional: the same value, NaN kept)
     lam_max, lam_min = half_tr + disc, half_tr - disc
     if not lam_max > 0.0:
-        return Degeneracy(0.0, 0.0, 0.0, np.array([1.0, 0.0]), rho, 0.0, True, True)
+        return 0.0, 0.0, 0.0, 1.0, 0.0, rho, 0.0, True, True
     # eigenvector of lam_min
     if abs(b2) > 1e-300:
         ax, ay = lam_min - d2, b2
@@ -1101,10 +1111,13 @@ def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, 
     else:
         ax, ay = 0.0, 1.0
     nrm = math.hypot(ax, ay)
-    axis = np.array([ax / nrm, ay / nrm]) if nrm > 0.0 else np.array([1.0, 0.0])
+    if nrm > 0.0:
+        ax, ay = ax / nrm, ay / nrm
+    else:
+        ax, ay = 1.0, 0.0
     t_ratio = (0.0 if 0.0 > lam_min else lam_min) / lam_max
     det = a * d - b * b
     s_rot = r - (u * (d * u - b * v) + v * (a * v - b * u)) / det if det > 1e-300 * (a * d + 1e-300) else 0.0
     r_ratio = (0.0 if 0.0 > s_rot else s_rot) / (rho * rho * lam_max)
-    return Degeneracy(r_ratio if r_ratio < t_ratio else t_ratio, t_ratio, r_ratio, axis, rho, lam_max,
-                      t_ratio < threshold, r_ratio < threshold)
+    return (r_ratio if r_ratio < t_ratio else t_ratio, t_ratio, r_ratio, ax, ay, rho, lam_max,
+            t_ratio < threshold, r_ratio < threshold)

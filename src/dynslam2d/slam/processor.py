@@ -30,6 +30,7 @@ from dynslam2d.slam.matcher import (
     LevelFit,
     covariance_world,
     degeneracy,
+    degeneracy_values,
     evaluate,
     free_fraction,
     gated_points,
@@ -394,23 +395,34 @@ class HectorSlam:
         if c.use_odometry and odom is not None and self._last_odom is not None and odom.is_finite():
             delta = self._last_odom.between(odom)
             return _Prior(last.compose(delta), "odometry", all_axes, True, delta)
-        v = self._model_rates() if self._state == STATE_TRACKING else None
-        if v is not None:  # (_compose(last, v[0] * dt, v[1] * dt, v[2] * dt) inline: the same operations)
-            vx, vy, vth = v[0] * dt, v[1] * dt, v[2] * dt
-            c_, s_ = math.cos(last.theta), math.sin(last.theta)
-            cv = Pose2D(last.x + c_ * vx - s_ * vy, last.y + s_ * vx + c_ * vy,
-                        (last.theta + vth + math.pi) % (2.0 * math.pi) - math.pi)
-        else:
-            cv = last
+        # (:meth:`_model_rates` inline while tracking: the same operations without the call)
+        moving = False
+        cv = last
+        h = self._history
+        if self._state == STATE_TRACKING and len(h) >= 2:
+            (t0, p0), (t1, p1) = h[0], h[-1]
+            dth = t1 - t0
+            if dth > 0.0:
+                moving = True
+                c_, s_ = math.cos(p1.theta), math.sin(p1.theta)
+                dx, dy = p1.x - p0.x, p1.y - p0.y
+                v0 = (c_ * dx + s_ * dy) / dth
+                v1 = (-s_ * dx + c_ * dy) / dth
+                v2 = float((p1.theta - p0.theta + math.pi) % (2.0 * math.pi) - math.pi) / dth
+                # (_compose(last, v0 * dt, v1 * dt, v2 * dt) inline: the same operations)
+                vx, vy, vth = v0 * dt, v1 * dt, v2 * dt
+                c_, s_ = math.cos(last.theta), math.sin(last.theta)
+                cv = Pose2D(last.x + c_ * vx - s_ * vy, last.y + s_ * vx + c_ * vy,
+                            (last.theta + vth + math.pi) % (2.0 * math.pi) - math.pi)
         w = scan.yaw_rate
         if c.use_odometry and w is not None and math.isfinite(w) and dt > 0.0:
             w0 = self._last_yaw_rate if self._last_yaw_rate is not None else w
             th = float(wrap_angle(last.theta + 0.5 * (w0 + w) * dt))  # trapezoidal integration of the rate
             axes = all_axes if c.motion_prior else _THETA_AXIS
-            return _Prior(Pose2D(cv.x, cv.y, th), "imu", axes, v is not None)
+            return _Prior(Pose2D(cv.x, cv.y, th), "imu", axes, moving)
         if c.motion_prior:
-            return _Prior(cv, "motion_model", all_axes, v is not None)
-        return _Prior(cv, None, all_axes, v is not None)
+            return _Prior(cv, "motion_model", all_axes, moving)
+        return _Prior(cv, None, all_axes, moving)
 
     def _model_velocity(self) -> np.ndarray | None:
         """(vx m/s, vy m/s, ω rad/s) of the motion model in the last pose's frame: the motion between the
@@ -479,12 +491,28 @@ class HectorSlam:
         """
         c = self.config
         t0 = time.perf_counter()
-        pts, clear, n_valid, n_close, spread_bins, sumsq = self._gate(scan, True, drop)
+        # (:meth:`_gate` with its statistics, inline: the same kernel call)
+        cos_a, sin_a = scan.trig()
+        ranges = scan.ranges
+        pts, clear, n_valid, n_close, spread_bins, sumsq = gated_points(
+            ranges, cos_a, sin_a, scan.valid_view(), float(scan.range_min), float(scan.range_max),
+            float(c.laser_min_dist), float(c.laser_max_dist), float(c.clear_no_return_dist), True,
+            no_drop(ranges.shape[0]) if drop is None else drop)
         # the map update of this same scan reuses them (read-only; not those of a scan with beams dropped)
         self._last_points = (scan if drop is None else None, pts, clear)
         self._sumsq = (pts, sumsq)  # (degeneracy's Σ x² + y² of these points)
-        self._dt = scan.stamp - self._last_stamp if self._last_stamp is not None else None
-        start, gap = self._predict(scan.stamp)
+        # (:meth:`_predict` inline: the same start estimate and gap from the same operations)
+        ls = self._last_stamp
+        dt = self._dt = scan.stamp - ls if ls is not None else None
+        gap = dt is not None and (dt < 0.0 or dt > c.max_time_gap)
+        last = self._last_pose
+        if last is None:
+            start = Pose2D()
+        elif c.constant_velocity and not gap and self._velocity is not None and dt is not None:
+            vx, vy, vth = self._velocity
+            start = last.compose(Pose2D(vx * dt, vy * dt, vth * dt))
+        else:
+            start = last
         prior = self._prior(scan, start, gap)
         laser_start = start
         if prior.kind in ("odometry", "imu"):
@@ -494,7 +522,7 @@ class HectorSlam:
                 predicted = None
             else:
                 start = predicted
-        first = self.map.empty
+        first = self.map.levels[0].logodds.size == 0  # (MultiResMap.empty, read directly)
         zero = np.zeros((3, 3))
         res = MatchResult(
             pose=start, start=start, _covariance=None, hessian=zero,
@@ -523,8 +551,15 @@ class HectorSlam:
         else:
             self._odometry_start = prior.kind == "odometry" and predicted is None
             # (_odometry_information is None unless the prior is the odometry's: the call only then)
-            self._match_tracking(res, pts, prior, scan.stamp,
-                                 self._odometry_information(prior) if prior.kind == "odometry" else None)
+            info = self._odometry_information(prior) if prior.kind == "odometry" else None
+            if info is None:  # (:meth:`_match_tracking` without an odometry prior, inline: the same steps)
+                self._match_against_map(res, pts)
+                if res.reason != REJECT_NON_FINITE and res.reason != REJECT_JUMP:
+                    self._apply_prior_and_gate(res, pts, prior, scan.stamp)
+                else:
+                    res.low_support = True  # pose = start estimate
+            else:
+                self._match_tracking(res, pts, prior, scan.stamp, info)
             self._odometry_start = False  # (the laser-only seed below starts without the odometry's motion)
             if res.low_support and prior.kind == "odometry" and predicted is None:
                 # odometry is a prior, not a replacement: when the odometry-seeded match finds little
@@ -625,22 +660,26 @@ class HectorSlam:
         res.score = fit.score
         res.sigma2 = fit.cost / max(pts.shape[0] - 3, 1)
         sigma2 = c.covariance_sigma**2 if c.covariance_sigma is not None else res.sigma2
-        res._covariance, res._covariance_of = None, (fit.hessian, sigma2, self.map.resolution)  # lazy
+        res._covariance, res._covariance_of = None, (fit.hessian, sigma2, self.map.levels[0].resolution)  # lazy
 
     def _apply_prior_and_gate(self, res: MatchResult, pts: np.ndarray, prior: _Prior, stamp: float) -> None:
         """Degeneracy analysis of the match; the prior along degenerate directions; the motion gate."""
         c = self.config
         sq = self._sumsq
-        deg: Degeneracy = degeneracy(res.hessian, self.map.resolution, pts, c.degeneracy_threshold,
-                                     sq[1] if sq is not None and sq[0] is pts else None)
+        # (degeneracy's values, the Degeneracy record made below only when a prior needs it)
+        ratio, t_ratio, r_ratio, ax, ay, rho, lam_max, t_deg, r_deg = degeneracy_values(
+            res.hessian, self.map.levels[0].resolution, pts, c.degeneracy_threshold,
+            sq[1] if sq is not None and sq[0] is pts else None)
         # hysteresis: a degenerate direction stays degenerate until its ratio clearly rises above the threshold
         hi = _DEGENERACY_HYSTERESIS * c.degeneracy_threshold
-        deg.translation_degenerate |= self._degenerate_prev[0] and deg.translation_ratio < hi
-        deg.rotation_degenerate |= self._degenerate_prev[1] and deg.rotation_ratio < hi
-        self._degenerate_prev = (deg.translation_degenerate, deg.rotation_degenerate)
-        res.degeneracy = deg.ratio
-        res.degenerate = degenerate = deg.translation_degenerate or deg.rotation_degenerate  # (Degeneracy.any)
+        prev = self._degenerate_prev
+        t_deg |= prev[0] and t_ratio < hi
+        r_deg |= prev[1] and r_ratio < hi
+        self._degenerate_prev = (t_deg, r_deg)
+        res.degeneracy = ratio
+        res.degenerate = degenerate = t_deg or r_deg  # (Degeneracy.any)
         if degenerate and prior.kind is not None and c.prior_weight > 0.0 and prior.pose.is_finite():
+            deg = Degeneracy(ratio, t_ratio, r_ratio, np.array([ax, ay]), rho, lam_max, t_deg, r_deg)
             info = deg.prior_information(c.prior_weight, prior.axes)
             if np.any(info):
                 pp = prior.pose.as_array()
@@ -893,7 +932,14 @@ class HectorSlam:
         prev = self._last_pose
         self._last_pose = res.pose
         if prev is not None:
-            dx, dy, dth = _between(prev, res.pose)
+            # (_between(prev, res.pose) inline: the same float operations in the same order)
+            p = res.pose
+            ca, sa = math.cos(prev.theta), math.sin(prev.theta)
+            ix, iy = -ca * prev.x - sa * prev.y, sa * prev.x - ca * prev.y
+            ith = (-prev.theta + math.pi) % (2.0 * math.pi) - math.pi
+            ca, sa = math.cos(ith), math.sin(ith)
+            dx, dy = ix + ca * p.x - sa * p.y, iy + sa * p.x + ca * p.y
+            dth = (ith + p.theta + math.pi) % (2.0 * math.pi) - math.pi
             self._last_motion = (math.hypot(dx, dy), abs(dth))
             dt = stamp - self._last_stamp if self._last_stamp is not None else 0.0
             if 0.0 < dt <= c.max_time_gap and not res.rejected:
@@ -941,19 +987,23 @@ class HectorSlam:
         """True on the first scan or once the pose moved beyond the distance / angle thresholds
         from the last map update (HectorSlamProcessor::update)."""
         last = self._last_map_pose
-        if last is None or self.map.empty:
+        if last is None or self.map.levels[0].logodds.size == 0:  # (MultiResMap.empty, read directly)
             return True
-        dth = _wrap(_wrap(-last.theta) + pose.theta)  # the θ of last.between(pose) (its x, y are not read)
-        dist = math.hypot(pose.x - last.x, pose.y - last.y)
+        # the θ of last.between(pose) (its x, y are not read): _wrap(_wrap(−θ_last) + θ), the two calls inline (the
+        # same float operations in the same order)
+        pi = math.pi
+        dth = ((-last.theta + pi) % (2.0 * pi) - pi + pose.theta + pi) % (2.0 * pi) - pi
         c = self.config
-        return dist > c.map_update_distance_thresh or abs(dth) > c.map_update_angle_thresh
+        return math.hypot(pose.x - last.x, pose.y - last.y) > c.map_update_distance_thresh \
+            or abs(dth) > c.map_update_angle_thresh
 
     def update_map(self, scan: Scan, pose: Pose2D, force: bool = False, drop: np.ndarray | None = None) -> bool:
         """Integrate ``scan`` taken at laser pose ``pose`` into every level, if the thresholds
         say so (or ``force``). Non-finite poses and scans with fewer than ``min_points`` returns
         never touch the map. ``drop`` (n,) bool: integrate ``scan.without(drop)`` (those beams taken as without a
         return), the same map without the copy. Returns True if the map was updated."""
-        if not pose.is_finite():
+        isfinite = math.isfinite
+        if not (isfinite(pose.x) and isfinite(pose.y) and isfinite(pose.theta)):  # (Pose2D.is_finite)
             self.counts["update_refused_non_finite"] += 1
             return False
         if not (force or self.needs_map_update(pose)):
@@ -963,7 +1013,17 @@ class HectorSlam:
             pts, clear = last[1], last[2]
         else:
             pts, clear = self._gate(scan, False, drop)[:2]
-        return self._integrate(pts, clear, pose)
+        # (:meth:`_integrate` inline, without its second finite test of the pose: the same steps)
+        if pts.shape[0] < self.config.min_points:
+            return False
+        try:
+            self.map.integrate(pose, pts, clear if clear.shape[0] else None)
+        except MapTooLargeError:
+            self.counts["map_too_large"] += 1
+            return False
+        self._last_map_pose = pose
+        self.n_map_updates += 1
+        return True
 
     def _integrate(self, pts: np.ndarray, clear: np.ndarray, pose: Pose2D) -> bool:
         if pts.shape[0] < self.config.min_points or not pose.is_finite():
