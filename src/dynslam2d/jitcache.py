@@ -213,7 +213,7 @@ def lean_numba_compile() -> bool:
     config.__eq__ = fast_equal  # type: ignore[method-assign,assignment]
     roomy_compile_stack()
     at_first_compile(remembered_call_typing, lean_inlining, lazy_callee_code,  # (reading numba's sources: not warm)
-                     quiet_ssa_debug)
+                     quiet_ssa_debug, lean_ir_analysis)
     return True
 
 
@@ -763,6 +763,165 @@ def quiet_ssa_debug() -> bool:
     for func, new in swaps:
         func.__code__ = new
     ssa._dynslam2d_quiet = True
+    return True
+
+
+#: SHA-256 (first 16 hex digits) of the sources of numba's ``Inst._rec_list_vars`` and ``compute_live_map`` that
+#: :func:`lean_ir_analysis` re-implements (numba 0.68); any other source is left as it is.
+REC_LIST_VARS_SOURCE = "054700e9100b6299"
+LIVE_MAP_SOURCE = "713c4c094977e93b"
+
+#: What :func:`_list_vars_into` does with a value of a type: 0 a variable, 1 an instruction (its ``list_vars()``),
+#: 2 a list or tuple, 3 a dict (its values), 4 anything else (nothing). Filled per type on first sight.
+_VAR, _INST, _SEQ, _DICT, _OTHER = range(5)
+
+
+def _list_vars_into(items: Any, out: list[Any], kinds: dict[type, int], var: type, inst: type) -> None:
+    """Append the numba IR variables found in ``items`` (an iterable of IR values) to ``out``, depth first, in
+    numba's ``Inst._rec_list_vars`` order."""
+    for v in items:
+        t = type(v)
+        if t is var:
+            out.append(v)
+            continue
+        k = kinds.get(t)
+        if k is None:
+            k = kinds[t] = (_VAR if isinstance(v, var) else _INST if isinstance(v, inst)
+                            else _SEQ if isinstance(v, (list, tuple)) else _DICT if isinstance(v, dict) else _OTHER)
+        if k == _VAR:
+            out.append(v)
+        elif k == _INST:
+            out.extend(v.list_vars())
+        elif k == _SEQ:
+            _list_vars_into(v, out, kinds, var, inst)
+        elif k == _DICT:
+            _list_vars_into(v.values(), out, kinds, var, inst)
+
+
+def _live_map_bits(cfg: Any, blocks: Any, var_use_map: Any, var_def_map: Any) -> dict[Any, set[str]]:
+    """numba's ``analysis.compute_live_map`` (0.68) with each block's variable sets as bits of one Python int.
+
+    The same two least fixed points: the variables defined or used on some path to each block's entry ("def
+    reach": a block's own uses and definitions, propagated to its successors in topological order), then the
+    variables live at each block's entry (its uses, plus what is live at a successor's entry, reachable at the
+    block and not defined in it, propagated backwards); each loop runs until no set grows, as numba's does. Returns
+    ``{block: set of names}`` for every block of ``blocks``, each set starting from the block's use set as numba's."""
+    topo_order = cfg.topo_order()
+    bit: dict[str, int] = {}
+    names: list[str] = []
+
+    def mask(vars_: Any) -> int:
+        m = 0
+        for name in vars_:
+            b = bit.get(name)
+            if b is None:
+                b = bit[name] = 1 << len(names)
+                names.append(name)
+            m |= b
+        return m
+
+    use = {o: mask(s) for o, s in var_use_map.items()}
+    dfn = {o: mask(s) for o, s in var_def_map.items()}
+    succs = {o: [d for d, _ in cfg.successors(o)] for o in topo_order}
+    reach: dict[Any, int] = {}
+    changed = True
+    while changed:  # numba's def_reach, to its fixed point
+        changed = False
+        for o in topo_order:
+            old = reach.get(o, 0)
+            r = old | dfn[o] | use[o]
+            if r != old:
+                reach[o] = r
+                changed = True
+            for d in succs[o]:
+                before = reach.get(d, 0)
+                after = before | r
+                if after != before:
+                    reach[d] = after
+                    changed = True
+    live = {o: use[o] for o in blocks.keys()}
+    preds = {o: [p for p, _ in cfg.predecessors(o)] for o in topo_order}
+    order = topo_order[::-1]
+    changed = True
+    while changed:  # numba's liveness, to its fixed point
+        changed = False
+        for o in order:
+            here = live[o]
+            for p in preds[o]:
+                before = live[p]
+                after = before | (here & reach.get(p, 0) & ~dfn[p])
+                if after != before:
+                    live[p] = after
+                    changed = True
+                    if p == o:
+                        here = after
+    live_map = {}
+    for o in blocks.keys():
+        found = set(var_use_map[o])
+        extra = live[o] & ~use[o]
+        while extra:
+            low = extra & -extra
+            found.add(names[low.bit_length() - 1])
+            extra ^= low
+        live_map[o] = found
+    return live_map
+
+
+def lean_ir_analysis() -> bool:
+    """Have numba list an IR statement's variables and compute its live-variable map with less Python work.
+
+    numba's untyped and typed passes (dead-code removal in every rewrite and inlining pass, the variables' ``del``
+    statements, lowering) call ``analysis.compute_use_defs`` and ``compute_live_map`` over a function's blocks again
+    and again; on a cold run of the README's first command they take ≈ 1 and ≈ 1.3 s of one-core CPU
+    (docs/speed.md, pass cold36):
+
+    - every statement's ``list_vars()`` walks its attributes with ``Inst._rec_list_vars``, one recursive call and one
+      new list per value (4.1 M calls per cold run): here one walk appends to one list, with each value's kind
+      (variable, instruction, list or tuple, dict, other) looked up by its type once; the same variables in the same
+      order;
+    - ``compute_live_map`` runs its two fixed points over Python sets of variable names, a union of up to a few
+      thousand names per block and successor on every round: here the same fixed points over bit masks (one bit per
+      variable), and the sets are built once at the end (:func:`_live_map_bits`).
+
+    The sets and lists hold the same variables (numba sorts what it emits from them), so every kernel gets the same
+    IR. ``compute_live_map`` keeps its function object (its code is swapped), so the modules that imported it by name
+    run the new code. Done only when numba's sources are the ones checked (:data:`REC_LIST_VARS_SOURCE`,
+    :data:`LIVE_MAP_SOURCE`); called by :func:`lean_numba_compile` at the first compile. Returns whether it changed
+    numba (not when called again)."""
+    import inspect
+
+    try:
+        from numba.core import analysis, ir
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return False
+    rec, live_map = ir.Inst._rec_list_vars, analysis.compute_live_map
+    if getattr(rec, "_dynslam2d_lean", False):
+        return False
+    try:
+        sources = inspect.getsource(rec), inspect.getsource(live_map)
+    except (OSError, TypeError):
+        return False
+    if (hashlib.sha256(sources[0].encode()).hexdigest()[:16] != REC_LIST_VARS_SOURCE
+            or hashlib.sha256(sources[1].encode()).hexdigest()[:16] != LIVE_MAP_SOURCE):
+        return False
+    kinds: dict[type, int] = {}
+    var, inst = ir.Var, ir.Inst
+
+    def rec_list_vars(self: Any, val: Any) -> list[Any]:
+        out: list[Any] = []
+        _list_vars_into((val,), out, kinds, var, inst)
+        return out
+
+    def compute_live_map(cfg: Any, blocks: Any, var_use_map: Any, var_def_map: Any) -> Any:
+        return _live_map_bits(cfg, blocks, var_use_map, var_def_map)
+
+    rec_list_vars._dynslam2d_lean = True  # type: ignore[attr-defined]
+    rec_list_vars.__wrapped__ = rec  # type: ignore[attr-defined]
+    ir.Inst._rec_list_vars = rec_list_vars  # type: ignore[method-assign]
+    numba_code = live_map.__code__
+    analysis._dynslam2d_live_map = _live_map_bits  # (the swapped code's one global)
+    live_map.__code__ = compute_live_map.__code__.replace(co_names=("_dynslam2d_live_map",))
+    live_map.__wrapped__ = type(live_map)(numba_code, vars(analysis), "compute_live_map")  # (numba's, for the tests)
     return True
 
 
