@@ -1,5 +1,5 @@
-"""numba's statement variables and live-variable map computed with less Python work give the same lists and sets
-(dynslam2d.jitcache.lean_ir_analysis, issue 13 item 2, docs/speed.md pass cold36)."""
+"""numba's statement variables, use / def sets and live-variable map computed with less Python work give the same lists
+and sets (dynslam2d.jitcache.lean_ir_analysis, issue 13 item 2, docs/speed.md pass cold36)."""
 
 from __future__ import annotations
 
@@ -19,10 +19,11 @@ import json
 from numba.core import analysis, compiler, ir, ssa
 from numba.core.analysis import compute_cfg_from_blocks, compute_use_defs
 from dynslam2d import jitcache
-numba_rec, numba_live = ir.Inst._rec_list_vars, analysis.compute_live_map
+numba_rec, numba_live, numba_ud = ir.Inst._rec_list_vars, analysis.compute_live_map, analysis.compute_use_defs
 assert jitcache.lean_ir_analysis() and not jitcache.lean_ir_analysis()  # (once)
-assert ir.Inst._rec_list_vars is not numba_rec and analysis.compute_live_map is numba_live  # (same object, new code)
-numba_live = numba_live.__wrapped__
+assert ir.Inst._rec_list_vars is not numba_rec  # (numba's functions: the same objects, new code)
+assert analysis.compute_live_map is numba_live and analysis.compute_use_defs is numba_ud
+numba_live, numba_ud = numba_live.__wrapped__, numba_ud.__wrapped__
 from dynslam2d.detect import kernels, kernels_update
 from dynslam2d.slam import matcher, raycast
 funcs = [matcher.gated_points, matcher._match_core, raycast._rays, kernels.measure_batch, kernels.shape_update,
@@ -41,6 +42,8 @@ for disp in funcs:
                 stmts += 1
         cfg = compute_cfg_from_blocks(fir.blocks)
         ud = compute_use_defs(fir.blocks)
+        ud_numba = numba_ud(fir.blocks)
+        assert ud.usemap == ud_numba.usemap and ud.defmap == ud_numba.defmap, disp
         ours = analysis.compute_live_map(cfg, fir.blocks, ud.usemap, ud.defmap)
         theirs = numba_live(cfg, fir.blocks, ud.usemap, ud.defmap)
         assert ours == theirs, disp
@@ -55,9 +58,11 @@ import json
 from numba.core import analysis, ir
 from dynslam2d import jitcache
 rec, code = ir.Inst._rec_list_vars, analysis.compute_live_map.__code__
+ud_code = analysis.compute_use_defs.__code__
 jitcache.LIVE_MAP_SOURCE = "0" * 16
 print(json.dumps({"installed": jitcache.lean_ir_analysis(),
-                  "same": ir.Inst._rec_list_vars is rec and analysis.compute_live_map.__code__ is code}))
+                  "same": ir.Inst._rec_list_vars is rec and analysis.compute_live_map.__code__ is code
+                  and analysis.compute_use_defs.__code__ is ud_code}))
 """
 
 

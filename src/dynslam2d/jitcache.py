@@ -766,10 +766,12 @@ def quiet_ssa_debug() -> bool:
     return True
 
 
-#: SHA-256 (first 16 hex digits) of the sources of numba's ``Inst._rec_list_vars`` and ``compute_live_map`` that
+#: SHA-256 (first 16 hex digits) of the sources of numba's ``Inst._rec_list_vars``, ``compute_live_map`` and
+#: ``compute_use_defs`` that
 #: :func:`lean_ir_analysis` re-implements (numba 0.68); any other source is left as it is.
 REC_LIST_VARS_SOURCE = "054700e9100b6299"
 LIVE_MAP_SOURCE = "713c4c094977e93b"
+USE_DEFS_SOURCE = "7b72d20324af61a6"
 
 #: What :func:`_list_vars_into` does with a value of a type: 0 a variable, 1 an instruction (its ``list_vars()``),
 #: 2 a list or tuple, 3 a dict (its values), 4 anything else (nothing). Filled per type on first sight.
@@ -867,6 +869,52 @@ def _live_map_bits(cfg: Any, blocks: Any, var_use_map: Any, var_def_map: Any) ->
     return live_map
 
 
+def _use_defs_one_walk(blocks: Any, ir_: Any, extensions: dict[type, Any], result: Any,
+                       kinds: dict[type, int]) -> Any:
+    """numba's ``analysis.compute_use_defs`` (0.68) with an assignment's right-hand side walked once.
+
+    numba lists the variables of an ``Assign``'s value (``value.list_vars()``) and then of the whole statement
+    (``Stmt.list_vars()``: every attribute's variables, the value's again). Here, for a statement of type ``Assign``
+    itself (whose ``list_vars`` is ``Stmt``'s), the statement's list is built from its attributes in their order with
+    the value's list reused: the same variables in the same order, the same use and definition sets."""
+    assign, inst, var = ir_.Assign, ir_.Inst, ir_.Var
+    plain = (ir_.Arg, ir_.Const, ir_.Global, ir_.FreeVar)
+    var_use_map: dict[Any, set[str]] = {}
+    var_def_map: dict[Any, set[str]] = {}
+    for offset, ir_block in blocks.items():
+        var_use_map[offset] = use_set = set()
+        var_def_map[offset] = def_set = set()
+        for stmt in ir_block.body:
+            if type(stmt) in extensions:
+                extensions[type(stmt)](stmt, use_set, def_set)
+                continue
+            stmt_vars = None
+            if isinstance(stmt, assign):
+                value = stmt.value
+                if isinstance(value, inst):
+                    rhs = value.list_vars()
+                    rhs_set: Any = set(v.name for v in rhs)
+                    if type(stmt) is assign:
+                        stmt_vars = []
+                        for v in stmt.__dict__.values():
+                            if v is value:
+                                stmt_vars.extend(rhs)
+                            else:
+                                _list_vars_into((v,), stmt_vars, kinds, var, inst)
+                elif isinstance(value, var):
+                    rhs_set = {value.name}
+                elif isinstance(value, plain):
+                    rhs_set = ()
+                else:
+                    raise AssertionError("unreachable", type(value))
+                if stmt.target.name not in rhs_set:
+                    def_set.add(stmt.target.name)
+            for v in stmt.list_vars() if stmt_vars is None else stmt_vars:
+                if v.name not in def_set:
+                    use_set.add(v.name)
+    return result(usemap=var_use_map, defmap=var_def_map)
+
+
 def lean_ir_analysis() -> bool:
     """Have numba list an IR statement's variables and compute its live-variable map with less Python work.
 
@@ -879,30 +927,36 @@ def lean_ir_analysis() -> bool:
       new list per value (4.1 M calls per cold run): here one walk appends to one list, with each value's kind
       (variable, instruction, list or tuple, dict, other) looked up by its type once; the same variables in the same
       order;
+    - ``compute_use_defs`` lists an assignment's value's variables and then the whole statement's, the value's
+      again: here once (:func:`_use_defs_one_walk`);
     - ``compute_live_map`` runs its two fixed points over Python sets of variable names, a union of up to a few
       thousand names per block and successor on every round: here the same fixed points over bit masks (one bit per
       variable), and the sets are built once at the end (:func:`_live_map_bits`).
 
     The sets and lists hold the same variables (numba sorts what it emits from them), so every kernel gets the same
-    IR. ``compute_live_map`` keeps its function object (its code is swapped), so the modules that imported it by name
-    run the new code. Done only when numba's sources are the ones checked (:data:`REC_LIST_VARS_SOURCE`,
-    :data:`LIVE_MAP_SOURCE`); called by :func:`lean_numba_compile` at the first compile. Returns whether it changed
+    IR. ``compute_live_map`` and ``compute_use_defs`` keep their function objects (their code is swapped), so the
+    modules that imported them by name run the new code; numba's code stays reachable as their ``__wrapped__``. Done
+    only when numba's sources are the ones checked (:data:`REC_LIST_VARS_SOURCE`, :data:`LIVE_MAP_SOURCE`,
+    :data:`USE_DEFS_SOURCE`); called by :func:`lean_numba_compile` at the first compile. Returns whether it changed
     numba (not when called again)."""
+    import functools
     import inspect
 
     try:
         from numba.core import analysis, ir
     except ImportError:  # pragma: no cover - numba is a dependency
         return False
-    rec, live_map = ir.Inst._rec_list_vars, analysis.compute_live_map
+    rec, live_map, use_defs = ir.Inst._rec_list_vars, analysis.compute_live_map, analysis.compute_use_defs
     if getattr(rec, "_dynslam2d_lean", False):
         return False
     try:
-        sources = inspect.getsource(rec), inspect.getsource(live_map)
+        sources = inspect.getsource(rec), inspect.getsource(live_map), inspect.getsource(use_defs)
     except (OSError, TypeError):
         return False
     if (hashlib.sha256(sources[0].encode()).hexdigest()[:16] != REC_LIST_VARS_SOURCE
-            or hashlib.sha256(sources[1].encode()).hexdigest()[:16] != LIVE_MAP_SOURCE):
+            or hashlib.sha256(sources[1].encode()).hexdigest()[:16] != LIVE_MAP_SOURCE
+            or hashlib.sha256(sources[2].encode()).hexdigest()[:16] != USE_DEFS_SOURCE
+            or ir.Assign.list_vars is not ir.Stmt.list_vars):
         return False
     kinds: dict[type, int] = {}
     var, inst = ir.Var, ir.Inst
@@ -915,6 +969,9 @@ def lean_ir_analysis() -> bool:
     def compute_live_map(cfg: Any, blocks: Any, var_use_map: Any, var_def_map: Any) -> Any:
         return _live_map_bits(cfg, blocks, var_use_map, var_def_map)
 
+    def compute_use_defs(blocks: Any) -> Any:
+        return _use_defs_one_walk(blocks)
+
     rec_list_vars._dynslam2d_lean = True  # type: ignore[attr-defined]
     rec_list_vars.__wrapped__ = rec  # type: ignore[attr-defined]
     ir.Inst._rec_list_vars = rec_list_vars  # type: ignore[method-assign]
@@ -922,6 +979,12 @@ def lean_ir_analysis() -> bool:
     analysis._dynslam2d_live_map = _live_map_bits  # (the swapped code's one global)
     live_map.__code__ = compute_live_map.__code__.replace(co_names=("_dynslam2d_live_map",))
     live_map.__wrapped__ = type(live_map)(numba_code, vars(analysis), "compute_live_map")  # (numba's, for the tests)
+    numba_code = use_defs.__code__
+    analysis._dynslam2d_use_defs = functools.partial(
+        _use_defs_one_walk, ir_=ir, extensions=analysis.ir_extension_usedefs, result=analysis._use_defs_result,
+        kinds=kinds)
+    use_defs.__code__ = compute_use_defs.__code__.replace(co_names=("_dynslam2d_use_defs",))
+    use_defs.__wrapped__ = type(use_defs)(numba_code, vars(analysis), "compute_use_defs")
     return True
 
 
