@@ -213,7 +213,7 @@ def lean_numba_compile() -> bool:
     config.__eq__ = fast_equal  # type: ignore[method-assign,assignment]
     roomy_compile_stack()
     at_first_compile(remembered_call_typing, lean_inlining, lazy_callee_code,  # (reading numba's sources: not warm)
-                     quiet_ssa_debug)
+                     quiet_ssa_debug, lean_ir_analysis)
     return True
 
 
@@ -763,6 +763,228 @@ def quiet_ssa_debug() -> bool:
     for func, new in swaps:
         func.__code__ = new
     ssa._dynslam2d_quiet = True
+    return True
+
+
+#: SHA-256 (first 16 hex digits) of the sources of numba's ``Inst._rec_list_vars``, ``compute_live_map`` and
+#: ``compute_use_defs`` that
+#: :func:`lean_ir_analysis` re-implements (numba 0.68); any other source is left as it is.
+REC_LIST_VARS_SOURCE = "054700e9100b6299"
+LIVE_MAP_SOURCE = "713c4c094977e93b"
+USE_DEFS_SOURCE = "7b72d20324af61a6"
+
+#: What :func:`_list_vars_into` does with a value of a type: 0 a variable, 1 an instruction (its ``list_vars()``),
+#: 2 a list or tuple, 3 a dict (its values), 4 anything else (nothing). Filled per type on first sight.
+_VAR, _INST, _SEQ, _DICT, _OTHER = range(5)
+
+
+def _list_vars_into(items: Any, out: list[Any], kinds: dict[type, int], var: type, inst: type) -> None:
+    """Append the numba IR variables found in ``items`` (an iterable of IR values) to ``out``, depth first, in
+    numba's ``Inst._rec_list_vars`` order."""
+    for v in items:
+        t = type(v)
+        if t is var:
+            out.append(v)
+            continue
+        k = kinds.get(t)
+        if k is None:
+            k = kinds[t] = (_VAR if isinstance(v, var) else _INST if isinstance(v, inst)
+                            else _SEQ if isinstance(v, (list, tuple)) else _DICT if isinstance(v, dict) else _OTHER)
+        if k == _VAR:
+            out.append(v)
+        elif k == _INST:
+            out.extend(v.list_vars())
+        elif k == _SEQ:
+            _list_vars_into(v, out, kinds, var, inst)
+        elif k == _DICT:
+            _list_vars_into(v.values(), out, kinds, var, inst)
+
+
+def _live_map_bits(cfg: Any, blocks: Any, var_use_map: Any, var_def_map: Any) -> dict[Any, set[str]]:
+    """numba's ``analysis.compute_live_map`` (0.68) with each block's variable sets as bits of one Python int.
+
+    The same two least fixed points: the variables defined or used on some path to each block's entry ("def
+    reach": a block's own uses and definitions, propagated to its successors in topological order), then the
+    variables live at each block's entry (its uses, plus what is live at a successor's entry, reachable at the
+    block and not defined in it, propagated backwards); each loop runs until no set grows, as numba's does. Returns
+    ``{block: set of names}`` for every block of ``blocks``, each set starting from the block's use set as numba's."""
+    topo_order = cfg.topo_order()
+    bit: dict[str, int] = {}
+    names: list[str] = []
+
+    def mask(vars_: Any) -> int:
+        m = 0
+        for name in vars_:
+            b = bit.get(name)
+            if b is None:
+                b = bit[name] = 1 << len(names)
+                names.append(name)
+            m |= b
+        return m
+
+    use = {o: mask(s) for o, s in var_use_map.items()}
+    dfn = {o: mask(s) for o, s in var_def_map.items()}
+    succs = {o: [d for d, _ in cfg.successors(o)] for o in topo_order}
+    reach: dict[Any, int] = {}
+    changed = True
+    while changed:  # numba's def_reach, to its fixed point
+        changed = False
+        for o in topo_order:
+            old = reach.get(o, 0)
+            r = old | dfn[o] | use[o]
+            if r != old:
+                reach[o] = r
+                changed = True
+            for d in succs[o]:
+                before = reach.get(d, 0)
+                after = before | r
+                if after != before:
+                    reach[d] = after
+                    changed = True
+    live = {o: use[o] for o in blocks.keys()}
+    preds = {o: [p for p, _ in cfg.predecessors(o)] for o in topo_order}
+    order = topo_order[::-1]
+    changed = True
+    while changed:  # numba's liveness, to its fixed point
+        changed = False
+        for o in order:
+            here = live[o]
+            for p in preds[o]:
+                before = live[p]
+                after = before | (here & reach.get(p, 0) & ~dfn[p])
+                if after != before:
+                    live[p] = after
+                    changed = True
+                    if p == o:
+                        here = after
+    live_map = {}
+    for o in blocks.keys():
+        found = set(var_use_map[o])
+        extra = live[o] & ~use[o]
+        while extra:
+            low = extra & -extra
+            found.add(names[low.bit_length() - 1])
+            extra ^= low
+        live_map[o] = found
+    return live_map
+
+
+def _use_defs_one_walk(blocks: Any, ir_: Any, extensions: dict[type, Any], result: Any,
+                       kinds: dict[type, int]) -> Any:
+    """numba's ``analysis.compute_use_defs`` (0.68) with an assignment's right-hand side walked once.
+
+    numba lists the variables of an ``Assign``'s value (``value.list_vars()``) and then of the whole statement
+    (``Stmt.list_vars()``: every attribute's variables, the value's again). Here, for a statement of type ``Assign``
+    itself (whose ``list_vars`` is ``Stmt``'s), the statement's list is built from its attributes in their order with
+    the value's list reused: the same variables in the same order, the same use and definition sets."""
+    assign, inst, var = ir_.Assign, ir_.Inst, ir_.Var
+    plain = (ir_.Arg, ir_.Const, ir_.Global, ir_.FreeVar)
+    var_use_map: dict[Any, set[str]] = {}
+    var_def_map: dict[Any, set[str]] = {}
+    for offset, ir_block in blocks.items():
+        var_use_map[offset] = use_set = set()
+        var_def_map[offset] = def_set = set()
+        for stmt in ir_block.body:
+            if type(stmt) in extensions:
+                extensions[type(stmt)](stmt, use_set, def_set)
+                continue
+            stmt_vars = None
+            if isinstance(stmt, assign):
+                value = stmt.value
+                if isinstance(value, inst):
+                    rhs = value.list_vars()
+                    rhs_set: Any = set(v.name for v in rhs)
+                    if type(stmt) is assign:
+                        stmt_vars = []
+                        for v in stmt.__dict__.values():
+                            if v is value:
+                                stmt_vars.extend(rhs)
+                            else:
+                                _list_vars_into((v,), stmt_vars, kinds, var, inst)
+                elif isinstance(value, var):
+                    rhs_set = {value.name}
+                elif isinstance(value, plain):
+                    rhs_set = ()
+                else:
+                    raise AssertionError("unreachable", type(value))
+                if stmt.target.name not in rhs_set:
+                    def_set.add(stmt.target.name)
+            for v in stmt.list_vars() if stmt_vars is None else stmt_vars:
+                if v.name not in def_set:
+                    use_set.add(v.name)
+    return result(usemap=var_use_map, defmap=var_def_map)
+
+
+def lean_ir_analysis() -> bool:
+    """Have numba list an IR statement's variables and compute its live-variable map with less Python work.
+
+    numba's untyped and typed passes (dead-code removal in every rewrite and inlining pass, the variables' ``del``
+    statements, lowering) call ``analysis.compute_use_defs`` and ``compute_live_map`` over a function's blocks again
+    and again; on a cold run of the README's first command they take ≈ 1 and ≈ 1.3 s of one-core CPU
+    (docs/speed.md, pass cold36):
+
+    - every statement's ``list_vars()`` walks its attributes with ``Inst._rec_list_vars``, one recursive call and one
+      new list per value (4.1 M calls per cold run): here one walk appends to one list, with each value's kind
+      (variable, instruction, list or tuple, dict, other) looked up by its type once; the same variables in the same
+      order;
+    - ``compute_use_defs`` lists an assignment's value's variables and then the whole statement's, the value's
+      again: here once (:func:`_use_defs_one_walk`);
+    - ``compute_live_map`` runs its two fixed points over Python sets of variable names, a union of up to a few
+      thousand names per block and successor on every round: here the same fixed points over bit masks (one bit per
+      variable), and the sets are built once at the end (:func:`_live_map_bits`).
+
+    The sets and lists hold the same variables (numba sorts what it emits from them), so every kernel gets the same
+    IR. ``compute_live_map`` and ``compute_use_defs`` keep their function objects (their code is swapped), so the
+    modules that imported them by name run the new code; numba's code stays reachable as their ``__wrapped__``. Done
+    only when numba's sources are the ones checked (:data:`REC_LIST_VARS_SOURCE`, :data:`LIVE_MAP_SOURCE`,
+    :data:`USE_DEFS_SOURCE`); called by :func:`lean_numba_compile` at the first compile. Returns whether it changed
+    numba (not when called again)."""
+    import functools
+    import inspect
+
+    try:
+        from numba.core import analysis, ir
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return False
+    rec, live_map, use_defs = ir.Inst._rec_list_vars, analysis.compute_live_map, analysis.compute_use_defs
+    if getattr(rec, "_dynslam2d_lean", False):
+        return False
+    try:
+        sources = inspect.getsource(rec), inspect.getsource(live_map), inspect.getsource(use_defs)
+    except (OSError, TypeError):
+        return False
+    if (hashlib.sha256(sources[0].encode()).hexdigest()[:16] != REC_LIST_VARS_SOURCE
+            or hashlib.sha256(sources[1].encode()).hexdigest()[:16] != LIVE_MAP_SOURCE
+            or hashlib.sha256(sources[2].encode()).hexdigest()[:16] != USE_DEFS_SOURCE
+            or ir.Assign.list_vars is not ir.Stmt.list_vars):
+        return False
+    kinds: dict[type, int] = {}
+    var, inst = ir.Var, ir.Inst
+
+    def rec_list_vars(self: Any, val: Any) -> list[Any]:
+        out: list[Any] = []
+        _list_vars_into((val,), out, kinds, var, inst)
+        return out
+
+    def compute_live_map(cfg: Any, blocks: Any, var_use_map: Any, var_def_map: Any) -> Any:
+        return _live_map_bits(cfg, blocks, var_use_map, var_def_map)
+
+    def compute_use_defs(blocks: Any) -> Any:
+        return _use_defs_one_walk(blocks)
+
+    rec_list_vars._dynslam2d_lean = True  # type: ignore[attr-defined]
+    rec_list_vars.__wrapped__ = rec  # type: ignore[attr-defined]
+    ir.Inst._rec_list_vars = rec_list_vars  # type: ignore[method-assign]
+    numba_code = live_map.__code__
+    analysis._dynslam2d_live_map = _live_map_bits  # (the swapped code's one global)
+    live_map.__code__ = compute_live_map.__code__.replace(co_names=("_dynslam2d_live_map",))
+    live_map.__wrapped__ = type(live_map)(numba_code, vars(analysis), "compute_live_map")  # (numba's, for the tests)
+    numba_code = use_defs.__code__
+    analysis._dynslam2d_use_defs = functools.partial(
+        _use_defs_one_walk, ir_=ir, extensions=analysis.ir_extension_usedefs, result=analysis._use_defs_result,
+        kinds=kinds)
+    use_defs.__code__ = compute_use_defs.__code__.replace(co_names=("_dynslam2d_use_defs",))
+    use_defs.__wrapped__ = type(use_defs)(numba_code, vars(analysis), "compute_use_defs")
     return True
 
 
