@@ -212,8 +212,10 @@ def lean_numba_compile() -> bool:
     config.__hash__ = class_hash  # type: ignore[method-assign,assignment]
     config.__eq__ = fast_equal  # type: ignore[method-assign,assignment]
     roomy_compile_stack()
+    from dynslam2d import jitssa  # numba's SSA pass and variable lists (pass ssa36)
+
     at_first_compile(remembered_call_typing, lean_inlining, lazy_callee_code,  # (reading numba's sources: not warm)
-                     quiet_ssa_debug, lean_ir_analysis)
+                     quiet_ssa_debug, lean_ir_analysis, jitssa.install)
     return True
 
 

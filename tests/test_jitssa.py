@@ -1,0 +1,132 @@
+"""numba's SSA pass run only on the statements holding each violator, and numba's variable lists in one traversal,
+give the same IR and code (dynslam2d.jitssa, issue 13 item 2, docs/speed.md pass ssa36)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SRC = str(ROOT / "src")
+
+#: Compiles the first ``argv[1]`` kernels of the README's first command (jitmanifest order; their callees and numba's
+#: helpers with them) in fresh dispatchers, with every SSA reconstruction run both ways on copies of its blocks and
+#: compared in full, and every statement's variable list compared with numba's (benchmarks/check_jitssa.py).
+SHADOW = r"""
+import json, sys
+sys.path.insert(0, sys.argv[2])
+import numba
+from check_jitssa import shadow
+from dynslam2d import jitmanifest, jitwarm
+stats = shadow()
+names = []
+for name, sig in jitmanifest.KERNELS[: int(sys.argv[1])]:
+    module, _, qual = name.rpartition(".")
+    disp = getattr(__import__(module, fromlist=[qual]), qual)
+    numba.njit(disp.py_func).compile(jitwarm.parse_signature(sig))
+    names.append(name)
+stats["kernels"] = names
+print(json.dumps(stats))
+"""
+
+#: argv[1] "1": dynslam2d.jitssa installed, "0": numba's own. Compiles the matcher's ``gated_points`` and the
+#: segmenter's kernel (loops, variables assigned in several blocks) in fresh dispatchers and prints their LLVM IR
+#: and results on a simulated scan.
+CODE = r"""
+import json, math, sys
+import numpy as np
+import numba
+from dynslam2d import jitssa
+if sys.argv[1] == "1":
+    assert jitssa.install() and not jitssa.install()  # (once)
+from numba.core import ir, ssa
+from dynslam2d.slam import matcher
+kernel = numba.njit(matcher.gated_points.py_func)
+rng = np.random.default_rng(7)
+n = 721
+ang = np.linspace(-math.pi, math.pi, n, endpoint=False)
+r = rng.uniform(0.05, 32.0, n)
+r[rng.random(n) < 0.1] = np.nan
+out = kernel(r, np.cos(ang), np.sin(ang), np.isfinite(r), 0.1, 30.0, 0.2, 25.0, 10.0, True)
+llvm = "\n".join(kernel.inspect_llvm().values())
+print(json.dumps({"llvm": llvm, "out": [np.asarray(o).tolist() for o in out],
+                  "installed": [bool(getattr(ssa._run_ssa, "_dynslam2d_sparse", False)),
+                                bool(getattr(ir.Inst, "_dynslam2d_fast", False))]}))
+"""
+
+#: Hand-made IR: a statement sharing its assigned expression with another (numba's pass would mutate the second
+#: through the first's copy), and the same IR without the sharing; both ways on copies, compared in full.
+SHARED = r"""
+import copy, json, sys, warnings
+sys.path.insert(0, sys.argv[1])
+from numba.core import compiler, ir, ssa
+from check_jitssa import dump
+from dynslam2d import jitssa
+from dynslam2d.slam import matcher
+assert jitssa.fast_list_vars()
+def both(blocks):
+    a_in, b_in = copy.deepcopy(blocks), copy.deepcopy(blocks)
+    before = jitssa.FALLBACKS[0]
+    with warnings.catch_warnings(record=True) as wa:
+        warnings.simplefilter("always")
+        a_out = ssa._run_ssa(dict(a_in))
+    with warnings.catch_warnings(record=True) as wb:
+        warnings.simplefilter("always")
+        b_out = jitssa.sparse_run_ssa(dict(b_in), ssa._run_ssa)
+    return dump(a_out, a_in, wa) == dump(b_out, b_in, wb), jitssa.FALLBACKS[0] - before
+blocks = compiler.run_frontend(matcher.gated_points.py_func).blocks
+plain = both(blocks)
+# share one expression between two assignments of a variable assigned in several blocks (an SSA violator)
+label, i, stmt = next((label, i, s) for label, blk in blocks.items() for i, s in enumerate(blk.body)
+                      if isinstance(s, ir.Assign) and isinstance(s.value, ir.Expr) and s.value.op == "binop")
+blk = blocks[label]
+twin = ir.Assign(value=stmt.value, target=blk.scope.redefine("twin", stmt.loc), loc=stmt.loc)
+blk.body.insert(i + 1, twin)
+print(json.dumps({"plain": plain, "shared": both(blocks)}))
+"""
+
+
+def _run(script: str, args: list[str], tmp_path: Path, tag: str) -> dict:
+    env = dict(os.environ, PYTHONPATH=SRC, NUMBA_CACHE_DIR=str(tmp_path / f"numba-{tag}"))
+    res = subprocess.run([sys.executable, "-c", script, *args], env=env, capture_output=True, text=True, check=True)
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def test_same_ssa_ir_on_the_first_commands_kernels(tmp_path: Path) -> None:
+    stats = _run(SHADOW, ["6", str(ROOT / "benchmarks")], tmp_path, "shadow")
+    assert len(stats["kernels"]) == 6
+    assert stats["calls"] >= 6 and stats["same"] == stats["calls"] and stats["differ"] == 0
+    assert stats["lists_same"] == stats["calls"] and stats["lists_differ"] == 0
+    assert stats["phis"] > 10 and stats["fallbacks"] == 0  # violators were rewritten, by the sparse pass itself
+
+
+def test_same_code_and_results(tmp_path: Path) -> None:
+    theirs, ours = _run(CODE, ["0"], tmp_path, "0"), _run(CODE, ["1"], tmp_path, "1")
+    assert theirs["installed"] == [False, False] and ours["installed"] == [True, True]
+    assert ours["llvm"] == theirs["llvm"] and "phi" in ours["llvm"]
+    assert ours["out"] == theirs["out"]
+
+
+def test_shared_ir_objects_go_to_numbas_pass(tmp_path: Path) -> None:
+    res = _run(SHARED, [str(ROOT / "benchmarks")], tmp_path, "shared")
+    assert res["plain"] == [True, 0]
+    assert res["shared"] == [True, 1]
+
+
+def test_other_sources_left_alone() -> None:
+    script = r"""
+import json
+from numba.core import ir, ssa
+from dynslam2d import jitssa
+before = (ssa._run_ssa, ir.Inst._rec_list_vars, ir.Stmt.list_vars, ir.Expr.list_vars)
+jitssa.SOURCES["ir"] = "0" * 16
+done = jitssa.install()
+after = (ssa._run_ssa, ir.Inst._rec_list_vars, ir.Stmt.list_vars, ir.Expr.list_vars)
+print(json.dumps({"done": done, "same": all(a is b for a, b in zip(before, after))}))
+"""
+    res = subprocess.run([sys.executable, "-c", script], env=dict(os.environ, PYTHONPATH=SRC), capture_output=True,
+                         text=True, check=True)
+    assert json.loads(res.stdout.strip().splitlines()[-1]) == {"done": False, "same": True}
