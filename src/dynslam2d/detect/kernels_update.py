@@ -189,28 +189,52 @@ def manage_speed_rows(P: np.ndarray, X: np.ndarray, rows: np.ndarray, max_sig: f
 def manage_counters(P: np.ndarray, X: np.ndarray, CI: np.ndarray, CL: np.ndarray, rows: np.ndarray, q: np.ndarray,
                     t: float) -> tuple:
     """``Tracker._manage``'s counter tests of the live tracks (state rows ``rows``) as one pass over their rows of the
-    counter table ``CI`` (columns ``C_*``) and last-hit stamps ``CL`` (s), with :func:`manage_speed_rows`' values
-    (the covariance test with max_position_sigma (m), σ of the speed along the velocity, the speed as Python's
-    ``math.hypot``): returns (outcome (n,) int8 (``MC_*``), σ (n,), speed (n,), m/s). The tests in the order of the
-    former per-track loop (docs/speed.md passes mgr34, cnt36); the configuration's values from ``q``
+    counter table ``CI`` (columns ``C_*``) and last-hit stamps ``CL`` (s), with :func:`manage_speed_rows`' values (its
+    arithmetic inline) (the covariance test with max_position_sigma (m), σ of the speed along the velocity, the speed as
+    Python's ``math.hypot``): returns (outcome (n,) int8 (``MC_*``), σ (n,), speed (n,), m/s). The tests in the order of
+    the former per-track loop (docs/speed.md passes mgr34, cnt36); the configuration's values from ``q``
     (:func:`update_params`' array: confirm_window, confirm_hits = ``need``, max_coast_time, max_object_speed,
-    max_position_sigma). An updated track (``C_UPD`` set by
-    :func:`update_pairs`; cleared here): coasting → confirmed; tentative → confirmed with ``need`` hits, deleted when
-    M of N (``need`` of the first ``window``) can no longer be reached; then deleted when its covariance fails or its
-    speed exceeds ``max_speed`` (m/s). A track without detection: misses + 1, the M-of-N count + 1 (within the first
-    ``window``), confirmed → coasting, the tentative test as above (nothing else for a tentative one then), a
-    confirmed or coasting one flagged ``MC_COAST`` when it has coasted more than ``max_coast`` (s) since its last hit
-    at stamp ``t``, then the covariance and speed deletions (an updated track's with ``MC_UPDATED``). The new states
-    and counts are written into ``CI``."""
+    max_position_sigma). An updated track (``C_UPD`` set by :func:`update_pairs`; cleared here): coasting → confirmed;
+    tentative → confirmed with ``need`` hits, deleted when M of N (``need`` of the first ``window``) can no longer be
+    reached; then deleted when its covariance fails or its speed exceeds ``max_speed`` (m/s). A track without detection:
+    misses + 1, the M-of-N count + 1 (within the first ``window``), confirmed → coasting, the tentative test as above
+    (nothing else for a tentative one then), a confirmed or coasting one flagged ``MC_COAST`` when it has coasted more
+    than ``max_coast`` (s) since its last hit at stamp ``t``, then the covariance and speed deletions (an updated
+    track's with ``MC_UPDATED``). The new states and counts are written into ``CI``."""
     n = rows.shape[0]
     out = np.empty(n, dtype=np.int8)
     window = int(q[UP_WINDOW])
     need = int(q[UP_NEED])
     max_coast = q[UP_MAX_COAST]
     max_speed = q[UP_MAX_SPEED]
-    bad, sig, speed = manage_speed_rows(P, X, rows, q[UP_MAX_POS_SIG])
+    max_sig = q[UP_MAX_POS_SIG]
+    sig = np.empty(n)
+    speed = np.empty(n)
     for i in range(n):
         k = rows[i]
+        # (manage_speed_rows' arithmetic for row k, operation for operation, here instead of called: no library of its
+        # own to compile in a run)
+        s = py_hypot(X[k, 2], X[k, 3])
+        speed[i] = s
+        sig[i] = 0.0
+        fin = True
+        for a in range(4):
+            for b in range(4):
+                if not np.isfinite(P[k, a, b]):
+                    fin = False
+        p00 = P[k, 0, 0]
+        p11 = P[k, 1, 1]
+        bad = not fin or math.sqrt(p11 if p11 > p00 else p00) > max_sig
+        if not bad:
+            p22 = P[k, 2, 2]
+            p33 = P[k, 3, 3]
+            if s > 1e-9:
+                u0 = X[k, 2] / s
+                u1 = X[k, 3] / s
+                v = (u0 * p22 + u1 * P[k, 3, 2]) * u0 + (u0 * P[k, 2, 3] + u1 * p33) * u1
+                sig[i] = math.sqrt(0.0 if 0.0 > v else v)
+            else:
+                sig[i] = math.sqrt(p33 if p33 > p22 else p22)
         st = CI[k, C_STATE]
         nh = CI[k, C_HIST_HITS]
         if CI[k, C_UPD] != 0:
@@ -245,8 +269,8 @@ def manage_counters(P: np.ndarray, X: np.ndarray, CI: np.ndarray, CL: np.ndarray
                     continue
             if st != ST_TENTATIVE and t - CL[k] > max_coast:
                 code += MC_COAST
-        if bad[i] or speed[i] > max_speed:
-            d = MC_DEL_COVARIANCE if bad[i] else MC_DEL_SPEED
+        if bad or s > max_speed:
+            d = MC_DEL_COVARIANCE if bad else MC_DEL_SPEED
             code = (code & MC_COAST) + d if code >= MC_KEPT else MC_UPDATED + d
         out[i] = code
     return out, sig, speed
