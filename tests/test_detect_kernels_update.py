@@ -168,17 +168,21 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
 
     seen = {"gates": 0, "kalman": 0, "bounded": 0, "not_ok": 0}
 
-    def gates(G, Gi, rows, missed, Xs, Ps, Z, R, *rest):
+    def gates(G, Gi, rows, CI, Xs, Ps, Z, R, *rest):
         # (the configuration's values and the fit parameters: columns of one array since pass call35)
         batch, q = rest[:10], rest[10]
         gd, chi2, ratio, jump = (float(q[c]) for c in (ku.UP_GATE_DISTANCE, ku.UP_GATE_CHI2, ku.UP_JUMP_RATIO,
                                                        ku.UP_JUMP))
         p = q[:_N_PARAMS].copy()
-        got = ku.association_gates(G, Gi, rows, missed, Xs, Ps, Z, R, *rest)
+        got = ku.association_gates(G, Gi, rows, CI, Xs, Ps, Z, R, *rest)
+        # (the flags from the counter table, pass cnt36: as _associate's loop over the tracks made them before)
+        missed = np.array([CI[r, ku.C_MISSES] > 0 for r in rows.tolist()], dtype=np.bool_)
+        firm = np.array([CI[r, ku.C_STATE] != ku.ST_TENTATIVE for r in rows.tolist()], dtype=np.bool_)
         tsize, tmax, rect, theta, known = association_rows(G, Gi, rows, missed)
         d2, _, ok = gate_costs(Xs, Ps, 0.5 * tmax, rect, theta, tsize, Z, R, gd, chi2, *batch, p)
         ok, ext = size_jump_gate(ok, batch[2], tmax, known, ratio, jump)
-        for a, b in zip(got, (tsize, d2, ok, ext)):
+        assert len(got) == 6
+        for a, b in zip(got, (tsize, d2, ok, ext, firm, missed)):
             assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
         seen["gates"] += 1
         return got
@@ -224,6 +228,7 @@ def test_report_rows_is_report_boxes_with_the_python_speed_test() -> None:
     decided by ``math.hypot`` and a second call, and the gathers of the states, covariances and kinds — on 20 000
     random rows of every kind, with speeds drawn at, an ulp around and far from the limit and velocities where
     libm's hypot differs from Python's (the undecided path is taken: checked)."""
+    from dynslam2d.detect import kernels_update as ku
     from dynslam2d.detect.kernels import GI_KIND, N_G, N_GI, report_boxes
     from dynslam2d.detect.kernels_update import report_rows
     from dynslam2d.detect.layout import K_CIRCLE, K_POINT, K_RECT
@@ -248,8 +253,12 @@ def test_report_rows_is_report_boxes_with_the_python_speed_test() -> None:
         vx, vy = X[rows[i], 2:].tolist()
         fast[i] = math.hypot(vx, vy) > slow
     boxes, _ = report_boxes(G, Gi, X, rows, slow, fast)
-    got = report_rows(G, Gi, X, P, rows, slow)
-    want = (boxes, X.take(rows, axis=0), P.take(rows, axis=0), Gi[:, GI_KIND].take(rows))
+    # (the counters: random rows of a counter table, pass cnt36)
+    CI = rng.integers(0, 1000, (n + 5, ku.N_C)).astype(np.int64)
+    got = report_rows(G, Gi, X, P, CI, rows, slow)
+    ints = np.stack([Gi[:, GI_KIND].take(rows).astype(np.int64)] + [CI[:, c].take(rows) for c in (
+        ku.C_STATE, ku.C_HITS, ku.C_MISSES)])
+    want = (boxes, X.take(rows, axis=0), P.take(rows, axis=0), ints)
     for a, b in zip(got, want):
         assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
 
@@ -358,14 +367,17 @@ def _old_args(a: tuple) -> list:
     in one array ``q``, kernels_update.update_params) in the order of its form before pass call35 (main at 8df8347):
     ``trows`` in place of ``rows``, then the size σ, the fit parameters, the bound's arguments with
     ``accel_bound_after``, the shape update's four values, …, the riding window's three and the person's radii as
-    scalars, read from ``q``'s columns. The same array objects (the arrays the call writes stay the caller's)."""
+    scalars, read from ``q``'s columns; the pairs' hits gathered from the counter table (``CI``, pass cnt36; its
+    counter writes are checked apart, :func:`_counters_python`). The same array objects (the arrays the call writes
+    stay the caller's)."""
     from dynslam2d.detect import kernels_update as ku
     from dynslam2d.detect.kernels import _N_PARAMS
 
     G, Gi, X, P, Xs, Ps, sel, rows, dis, missed = a[:10]
     batch = list(a[10:20])
-    q, bound, hits, lim, lim2 = a[20:25]
-    mev, use_map, px, py, c, s, t = list(a[25:33]), a[33], a[34], a[35], a[36], a[37], a[38]
+    q, bound, CI, CL, lim, lim2 = a[20:26]
+    hits = CI[rows[sel], ku.C_HITS].copy()  # (before the call's own counter writes)
+    mev, use_map, px, py, c, s, t = list(a[26:34]), a[34], a[35], a[36], a[37], a[38], a[39]
     f = q.tolist()
     return [G, Gi, X, P, Xs, Ps, sel, rows[sel], dis, missed, *batch, f[ku.UP_SIZE_SIGMA], q[:_N_PARAMS].copy(),
             bound, hits, int(f[ku.UP_ACCEL_AFTER]) if bound else 0, lim, lim2, f[ku.UP_DEFAULT_DEPTH],
@@ -388,7 +400,8 @@ def test_update_params_are_the_former_scalars() -> None:
             fc.default_depth, fc.default_depth_ratio = 0.37, 0.61
             fc.person_min_radius, fc.person_max_radius = 0.031, 0.29
             tc.heading_gain, tc.size_gain, tc.ride_time, tc.ride_max_range = 0.13, 0.21, 1.7, 2.3
-            tc.accel_bound_after, tc.ride_updates = 7, 9
+            tc.accel_bound_after, tc.ride_updates, tc.confirm_window, tc.confirm_hits = 7, 9, 6, 4
+            tc.max_coast_time, tc.max_object_speed, tc.max_position_sigma = 1.7, 13.5, 2.25
             tc.gate_distance, tc.gate_chi2, tc.max_size_jump_ratio, tc.max_size_jump = 1.3, 11.5, 1.9, 0.45
         fp = fit_params(fc)
         q = ku.update_params(fp, fc, tc)
@@ -400,7 +413,10 @@ def test_update_params_are_the_former_scalars() -> None:
                 ku.UP_PERSON_MIN_R: float(fc.person_min_radius), ku.UP_PERSON_MAX_R: float(fc.person_max_radius),
                 ku.UP_ACCEL_AFTER: tc.accel_bound_after, ku.UP_RIDE_N: tc.ride_updates,
                 ku.UP_GATE_DISTANCE: float(tc.gate_distance), ku.UP_GATE_CHI2: float(tc.gate_chi2),
-                ku.UP_JUMP_RATIO: float(tc.max_size_jump_ratio), ku.UP_JUMP: float(tc.max_size_jump)}
+                ku.UP_JUMP_RATIO: float(tc.max_size_jump_ratio), ku.UP_JUMP: float(tc.max_size_jump),
+                ku.UP_WINDOW: tc.confirm_window, ku.UP_NEED: tc.confirm_hits,
+                ku.UP_MAX_COAST: float(tc.max_coast_time), ku.UP_MAX_SPEED: float(tc.max_object_speed),
+                ku.UP_MAX_POS_SIG: float(tc.max_position_sigma)}
         assert sorted(want) == list(range(_N_PARAMS, ku._UP_N))
         for col, v in want.items():
             assert q[col] == v and (not isinstance(v, int) or int(q[col]) == v), (col, q[col], v)
@@ -439,13 +455,40 @@ def _update_pairs_separate(G, Gi, X, P, Xs, Ps, sel, trows, dis, missed, kind, t
     return nb, top, np.array(info, dtype=np.int64).reshape(n, 4), ok.tolist().count(False)
 
 
+def _counters_python(CI: np.ndarray, CL: np.ndarray, trows, applied, t: float, window: int) -> None:
+    """The counter lines of ``Tracker._update_tracks``' loop over the pairs before pass cnt36 (``k.hits += 1``,
+    ``k.last_hit = t``, the M-of-N counts within the first ``window``, ``k.misses = 0`` of a re-acquired track) on the
+    rows ``trows`` of the tracks whose update ``applied``, and the updated flag the management step reads."""
+    from dynslam2d.detect import kernels_update as ku
+
+    for k, a in zip(trows, applied):
+        if a:
+            CI[k, ku.C_HITS] += 1
+            CL[k] = t
+            if CI[k, ku.C_HIST_N] < window:
+                CI[k, ku.C_HIST_N] += 1
+                CI[k, ku.C_HIST_HITS] += 1
+            CI[k, ku.C_MISSES] = 0
+            CI[k, ku.C_UPD] = 1
+
+
+def _update_pairs_reference(c: list) -> tuple:
+    """:func:`_update_pairs_separate` of ``update_pairs``' arguments ``c``, then :func:`_counters_python`."""
+    from dynslam2d.detect import kernels_update as ku
+
+    got = _update_pairs_separate(*_old_args(c))
+    _counters_python(c[22], c[23], c[7][c[6]].tolist(), got[2][:, 0].tolist(), c[39], int(c[20][ku.UP_WINDOW]))
+    return got
+
+
 def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
     """``update_pairs`` against ``pair_priors`` → ``measure_batch`` → ``kalman_pairs`` → ``shape_update`` and the
     re-acquired tracks' ``_restart_windows`` in Python, on every call of two pipeline runs (sim:drive with its map
     evidence, sim:crowd with the tracker's map evidence off): the results (the per-pair rows ``_update_tracks``
     reads, with the person's circle test) and the bytes of every array the call writes (states, covariances, shape
-    rows, windows), each call also with a limit 30 × tighter (most established
-    rows bounded), with every track taken as re-acquired and with a failed update, on copies."""
+    rows, windows, the counter table and last hits against ``_update_tracks``' former counter lines, pass cnt36),
+    each call also with a limit 30 × tighter (most established rows bounded), with every track taken as re-acquired
+    and with a failed update, on copies."""
     from dynslam2d.config import Config
     from dynslam2d.detect import kernels_update as ku
     from dynslam2d.detect import trackupdate as tu
@@ -458,7 +501,7 @@ def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
         a = list(a)
         cases = [a]
         tight = list(a)
-        tight[23], tight[24] = a[23] / 30.0, (0.999 * a[23] / 30.0) ** 2
+        tight[24], tight[25] = a[24] / 30.0, (0.999 * a[24] / 30.0) ** 2
         tight[21] = True
         every = list(a)
         every[9] = np.ones_like(a[9])
@@ -468,18 +511,18 @@ def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
         cases += [tight, every, bad]
         for case in cases:
             outs = []
-            for f in (ku.update_pairs, lambda *c: _update_pairs_separate(*_old_args(c))):
+            for f in (ku.update_pairs, lambda *c: _update_pairs_reference(list(c))):
                 c = list(case)
-                for i in (0, 1, 2, 3, 30, 31, 32):  # (the arrays the call writes: copies)
+                for i in (0, 1, 2, 3, 22, 23, 31, 32, 33):  # (the arrays the call writes: copies)
                     c[i] = c[i].copy()
                 got = f(*c)
-                written = [c[i].tobytes() for i in (0, 1, 2, 3, 30, 31, 32)]
+                written = [c[i].tobytes() for i in (0, 1, 2, 3, 22, 23, 31, 32, 33)]
                 outs.append((got[0], got[1], got[2].tobytes(), got[3], written))
             assert outs[0] == outs[1]
             seen["bounded"] += outs[0][0]
             seen["rejected"] += outs[0][3]
         seen["restarted"] += int((a[9][a[6]]).sum())
-        seen["use_map"] += bool(a[33])
+        seen["use_map"] += bool(a[34])
         seen["calls"] += 1
         return ku.update_pairs(*a)
 

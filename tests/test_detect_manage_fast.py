@@ -1,6 +1,7 @@
-"""The management step's faster per-track loop (issue 13 speed, docs/speed.md pass mgr34) against the forms it
-replaced: the most common reason looked up by the speed in hundredths instead of formatted (random speeds, ties,
-neighbours of the rounding boundaries, several v_min), and ``TrackManage._manage``'s loop split into updated tracks
+"""The management step's faster per-track loop (issue 13 speed, docs/speed.md passes mgr34, cnt36: the counter tests
+on the counter table's columns in one kernel call) against the forms it replaced: the most common reason looked up
+by the speed in hundredths instead of formatted (random speeds, ties, neighbours of the rounding boundaries, several
+v_min), and ``TrackManage._manage``'s loop split into updated tracks
 and tracks without detection against the former single loop (below, as it was) on every scan of simulated scenes
 that reach its branches (M, memory, coasting and every deletion, clutter retirement); a birth's state and covariance
 written through its rows' views."""
@@ -15,7 +16,7 @@ import numpy as np
 
 from dynslam2d.config import Config
 from dynslam2d.detect import trackmanage
-from dynslam2d.detect.kernels_update import manage_speed_rows
+from dynslam2d.detect.kernels_update import C_UPD, manage_speed_rows
 from dynslam2d.detect.trackmanage import _fast_reason_texts, _slow_reason, _slow_reason_texts
 from dynslam2d.detect.tracktable import _NO_BEAMS, COASTING, CONFIRMED, TENTATIVE
 from dynslam2d.pipeline import Pipeline
@@ -206,6 +207,13 @@ def _run_both(cfg: Config, scans) -> dict[str, int]:
         before = tr.stats.as_dict()
         own(t, updated)
         assert _track_state(ref) == _track_state(tr)
+        # (pass cnt36: the counter tests run on the counter table's columns in manage_counters; the updated flags it
+        # read are cleared, and the kept updated confirmed tracks it hands to _hosts_of_fragments are those)
+        assert not tr._CI[tr._rows(), C_UPD].any()
+        firm, n = tr._firm_updated
+        assert n == len(tr._tracks)
+        assert firm == [k for k in tr._tracks if k.id in updated and k.state == CONFIRMED]
+        seen["firm"] = seen.get("firm", 0) + len(firm)
         seen["steps"] += 1
         for k in tr._tracks:
             seen["in_m"] += k.in_m
@@ -235,7 +243,7 @@ def test_manage_is_the_former_single_loop_on_simulated_scenes() -> None:
     seen2 = _run_both(cfg, simulate("crowd", duration=30.0).scans)
     total = {k: seen.get(k, 0) + seen2.get(k, 0) for k in set(seen) | set(seen2)}
     for key in ("steps", "upd_slow", "upd_fast", "in_m", "coasting", "remembered", "deleted_tentative",
-                "deleted_coasting", "deleted_structure"):
+                "deleted_coasting", "deleted_structure", "firm"):
         assert total[key] > 0, (key, total)
     assert trackmanage._SLOW_TEXTS_MAX >= 1.0
 

@@ -186,7 +186,98 @@ def manage_speed_rows(P: np.ndarray, X: np.ndarray, rows: np.ndarray, max_sig: f
 
 
 @njit(cache=True)
-def association_gates(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, missed: np.ndarray, Xs: np.ndarray,
+def manage_counters(P: np.ndarray, X: np.ndarray, CI: np.ndarray, CL: np.ndarray, rows: np.ndarray, q: np.ndarray,
+                    t: float) -> tuple:
+    """``Tracker._manage``'s counter tests of the live tracks (state rows ``rows``) as one pass over their rows of the
+    counter table ``CI`` (columns ``C_*``) and last-hit stamps ``CL`` (s), with :func:`manage_speed_rows`' values (its
+    arithmetic inline) (the covariance test with max_position_sigma (m), σ of the speed along the velocity, the speed as
+    Python's ``math.hypot``): returns (outcome (n,) int8 (``MC_*``), σ (n,), speed (n,), m/s). The tests in the order of
+    the former per-track loop (docs/speed.md passes mgr34, cnt36); the configuration's values from ``q``
+    (:func:`update_params`' array: confirm_window, confirm_hits = ``need``, max_coast_time, max_object_speed,
+    max_position_sigma). An updated track (``C_UPD`` set by :func:`update_pairs`; cleared here): coasting → confirmed;
+    tentative → confirmed with ``need`` hits, deleted when M of N (``need`` of the first ``window``) can no longer be
+    reached; then deleted when its covariance fails or its speed exceeds ``max_speed`` (m/s). A track without detection:
+    misses + 1, the M-of-N count + 1 (within the first ``window``), confirmed → coasting, the tentative test as above
+    (nothing else for a tentative one then), a confirmed or coasting one flagged ``MC_COAST`` when it has coasted more
+    than ``max_coast`` (s) since its last hit at stamp ``t``, then the covariance and speed deletions (an updated
+    track's with ``MC_UPDATED``). The new states and counts are written into ``CI``."""
+    n = rows.shape[0]
+    out = np.empty(n, dtype=np.int8)
+    window = int(q[UP_WINDOW])
+    need = int(q[UP_NEED])
+    max_coast = q[UP_MAX_COAST]
+    max_speed = q[UP_MAX_SPEED]
+    max_sig = q[UP_MAX_POS_SIG]
+    sig = np.empty(n)
+    speed = np.empty(n)
+    for i in range(n):
+        k = rows[i]
+        # (manage_speed_rows' arithmetic for row k, operation for operation, here instead of called: no library of its
+        # own to compile in a run)
+        s = py_hypot(X[k, 2], X[k, 3])
+        speed[i] = s
+        sig[i] = 0.0
+        fin = True
+        for a in range(4):
+            for b in range(4):
+                if not np.isfinite(P[k, a, b]):
+                    fin = False
+        p00 = P[k, 0, 0]
+        p11 = P[k, 1, 1]
+        bad = not fin or math.sqrt(p11 if p11 > p00 else p00) > max_sig
+        if not bad:
+            p22 = P[k, 2, 2]
+            p33 = P[k, 3, 3]
+            if s > 1e-9:
+                u0 = X[k, 2] / s
+                u1 = X[k, 3] / s
+                v = (u0 * p22 + u1 * P[k, 3, 2]) * u0 + (u0 * P[k, 2, 3] + u1 * p33) * u1
+                sig[i] = math.sqrt(0.0 if 0.0 > v else v)
+            else:
+                sig[i] = math.sqrt(p33 if p33 > p22 else p22)
+        st = CI[k, C_STATE]
+        nh = CI[k, C_HIST_HITS]
+        if CI[k, C_UPD] != 0:
+            CI[k, C_UPD] = 0
+            code = MC_UPD_FIRM
+            if st == ST_COASTING:
+                st = ST_CONFIRMED
+            elif st == ST_TENTATIVE:
+                hn = CI[k, C_HIST_N]
+                if nh >= need:
+                    st = ST_CONFIRMED
+                elif nh + (window - hn) < need or CI[k, C_MISSES] > 0 and hn >= window:
+                    out[i] = MC_UPDATED + MC_DEL_TENTATIVE
+                    continue
+                else:
+                    code = MC_UPD_TENTATIVE
+            CI[k, C_STATE] = st
+        else:
+            code = MC_KEPT
+            CI[k, C_MISSES] += 1
+            hn = CI[k, C_HIST_N]
+            if hn < window:
+                hn += 1
+                CI[k, C_HIST_N] = hn
+            if st == ST_CONFIRMED:
+                CI[k, C_STATE] = ST_COASTING
+            elif st == ST_TENTATIVE:
+                if nh >= need:
+                    CI[k, C_STATE] = ST_CONFIRMED
+                elif nh + (window - hn) < need or CI[k, C_MISSES] > 0 and hn >= window:
+                    out[i] = MC_DEL_TENTATIVE
+                    continue
+            if st != ST_TENTATIVE and t - CL[k] > max_coast:
+                code += MC_COAST
+        if bad or s > max_speed:
+            d = MC_DEL_COVARIANCE if bad else MC_DEL_SPEED
+            code = (code & MC_COAST) + d if code >= MC_KEPT else MC_UPDATED + d
+        out[i] = code
+    return out, sig, speed
+
+
+@njit(cache=True)
+def association_gates(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, CI: np.ndarray, Xs: np.ndarray,
                       Ps: np.ndarray, Z: np.ndarray, R: np.ndarray, kind: np.ndarray, theta: np.ndarray,
                       lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray, circle: np.ndarray, px: np.ndarray,
                       py: np.ndarray, start: np.ndarray, npts: np.ndarray, q: np.ndarray) -> tuple:
@@ -194,19 +285,26 @@ def association_gates(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, missed: n
     longest sides, rectangle flags, axis angles and known-size flags from their shape rows ``rows``), then
     ``kernels.gate_costs`` with the reach 0.5 × the longest side (the gate distance, m, and χ² bound, the fit
     parameters: ``q``, :func:`update_params`' array), then ``kernels.size_jump_gate``'s size-jump test (its ratio and
-    jump, m, from ``q``) — the same functions, so the same floats. Returns (tsize (n, 2) m, d2 (n, m), ok (n, m)
-    bool after the size-jump test, det_ext (m,) m). One dispatch instead of three: with the caches cold (the
+    jump, m, from ``q``) — the same functions, so the same floats; the tracks' "missed their last scan" flags (misses
+    > 0) and "established" flags (not tentative) read from their rows of the counter table ``CI`` (columns ``C_*``;
+    pass cnt36). Returns (tsize (n, 2) m, d2 (n, m), ok (n, m) bool after the size-jump test, det_ext (m,) m, firm
+    (n,) bool, missed (n,) bool). One dispatch instead of three: with the caches cold (the
     pipeline's SLAM stages run between two updates) each call of a small kernel costs a few µs on its own
     (docs/speed.md, passes trk24, call35)."""
+    n = rows.shape[0]
+    missed = np.empty(n, dtype=np.bool_)
+    firm = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        missed[i] = CI[rows[i], C_MISSES] > 0
+        firm[i] = CI[rows[i], C_STATE] != ST_TENTATIVE
     tsize, tmax, rect, theta_box, known = association_rows(G, Gi, rows, missed)
-    n = tmax.shape[0]
     reach = np.empty(n)
     for i in range(n):
         reach[i] = 0.5 * tmax[i]
     d2, _near, ok = gate_costs(Xs, Ps, reach, rect, theta_box, tsize, Z, R, q[UP_GATE_DISTANCE], q[UP_GATE_CHI2],
                                kind, theta, lohi, rel, centroid, circle, px, py, start, npts, q)
     ok, det_ext = size_jump_gate(ok, lohi, tmax, known, q[UP_JUMP_RATIO], q[UP_JUMP])
-    return tsize, d2, ok, det_ext
+    return tsize, d2, ok, det_ext, firm, missed
 
 
 @njit(cache=True, inline="always")  # (compiled inside update_pairs, its one caller in a run: pass upd34)
@@ -269,7 +367,36 @@ UP_GATE_DISTANCE = _N_PARAMS + 11  # TrackerConfig.gate_distance, m (association
 UP_GATE_CHI2 = _N_PARAMS + 12  # TrackerConfig.gate_chi2 (association_gates)
 UP_JUMP_RATIO = _N_PARAMS + 13  # TrackerConfig.max_size_jump_ratio (association_gates)
 UP_JUMP = _N_PARAMS + 14  # TrackerConfig.max_size_jump, m (association_gates)
-_UP_N = _N_PARAMS + 15
+UP_WINDOW = _N_PARAMS + 15  # TrackerConfig.confirm_window (an integer, exact in a float64; the M-of-N counts)
+UP_NEED = _N_PARAMS + 16  # TrackerConfig.confirm_hits (an integer; manage_counters)
+UP_MAX_COAST = _N_PARAMS + 17  # TrackerConfig.max_coast_time, s (manage_counters)
+UP_MAX_SPEED = _N_PARAMS + 18  # TrackerConfig.max_object_speed, m/s (manage_counters)
+UP_MAX_POS_SIG = _N_PARAMS + 19  # TrackerConfig.max_position_sigma, m (manage_counters)
+_UP_N = _N_PARAMS + 20
+
+# the columns of the tracker's counter table (``Tracker._CI``, int64, one row per state row; docs/speed.md pass cnt36)
+C_STATE = 0  # the track's state: ST_TENTATIVE, ST_CONFIRMED or ST_COASTING
+C_HITS = 1  # its updates (hits) since birth
+C_MISSES = 2  # consecutive scans without detection
+C_HIST_N = 3  # updates (hits and misses) among its first confirm_window scans (the M-of-N rule's count)
+C_HIST_HITS = 4  # hits among them
+C_UPD = 5  # 1: updated in this scan (written by update_pairs, read and cleared by manage_counters)
+N_C = 6
+ST_TENTATIVE = 0
+ST_CONFIRMED = 1
+ST_COASTING = 2
+# manage_counters' outcome per track: an updated track kept by the counter tests, tentative or not; a track without
+# detection kept; deleted (tentative by M of N, covariance, speed); plus MC_COAST when a track without detection has
+# coasted longer than max_coast_time (deleted unless its memory keeps it: decided in Python, then the outcome applies);
+# plus MC_UPDATED for the deletions of an updated track
+MC_UPD_TENTATIVE = 0
+MC_UPD_FIRM = 1
+MC_KEPT = 2
+MC_DEL_TENTATIVE = 3
+MC_DEL_COVARIANCE = 4
+MC_DEL_SPEED = 5
+MC_COAST = 8
+MC_UPDATED = 16
 
 
 def update_params(fit_p: np.ndarray, fc, tc, size_sigma: float = 0.05) -> np.ndarray:
@@ -298,6 +425,11 @@ def update_params(fit_p: np.ndarray, fc, tc, size_sigma: float = 0.05) -> np.nda
     q[UP_GATE_CHI2] = float(tc.gate_chi2)
     q[UP_JUMP_RATIO] = float(tc.max_size_jump_ratio)
     q[UP_JUMP] = float(tc.max_size_jump)
+    q[UP_WINDOW] = int(tc.confirm_window)
+    q[UP_NEED] = int(tc.confirm_hits)
+    q[UP_MAX_COAST] = float(tc.max_coast_time)
+    q[UP_MAX_SPEED] = float(tc.max_object_speed)
+    q[UP_MAX_POS_SIG] = float(tc.max_position_sigma)
     return q
 
 
@@ -306,26 +438,28 @@ def update_pairs(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xs
                  sel: np.ndarray, rows: np.ndarray, dis: np.ndarray, missed: np.ndarray, kind: np.ndarray,
                  theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray, circle: np.ndarray,
                  bpx: np.ndarray, bpy: np.ndarray, start: np.ndarray, npts: np.ndarray, q: np.ndarray, bound: bool,
-                 hits: np.ndarray, lim: float, lim2: float, mfr: np.ndarray, kept: np.ndarray, first: np.ndarray,
-                 second: np.ndarray, mnpts: np.ndarray, MEV: np.ndarray, RIDE: np.ndarray, WN: np.ndarray,
-                 use_map: bool, px: float, py: float, c: float, s: float, t: float) -> tuple:
-    """``Tracker._update_pairs``' four kernels in one call, the same functions in the same order (so the same
-    floats): ``kernels.pair_priors`` (the priors of the pairs: track rows ``trows = rows[sel]``, ``rows`` the state
-    rows of the live tracks, detections ``dis``), ``kernels.measure_batch`` (the detections' arrays ``kind`` …
-    ``npts`` of the scan's :class:`~dynslam2d.detect.layout.DetectionBatch`, each pair's size σ, the fit parameters
-    in ``q``'s first columns), :func:`kalman_pairs` (``Xs`` / ``Ps``: the predicted states of the live tracks,
-    ``sel`` the pairs' indices of them; ``bound``, ``hits``, ``lim``, ``lim2`` its acceleration bound) and
-    ``kernels.shape_update`` (``mfr`` … ``mnpts`` the map-evidence sources, ``px``, ``py``, ``c``, ``s`` the laser
+                 CI: np.ndarray, CL: np.ndarray, lim: float, lim2: float, mfr: np.ndarray, kept: np.ndarray,
+                 first: np.ndarray, second: np.ndarray, mnpts: np.ndarray, MEV: np.ndarray, RIDE: np.ndarray,
+                 WN: np.ndarray, use_map: bool, px: float, py: float, c: float, s: float, t: float) -> tuple:
+    """``Tracker._update_pairs``' four kernels in one call, the same functions in the same order (so the same floats):
+    ``kernels.pair_priors`` (the priors of the pairs: track rows ``trows = rows[sel]``, ``rows`` the state rows of the
+    live tracks, detections ``dis``), ``kernels.measure_batch`` (the detections' arrays ``kind`` … ``npts`` of the
+    scan's :class:`~dynslam2d.detect.layout.DetectionBatch`, each pair's size σ, the fit parameters in ``q``'s first
+    columns), :func:`kalman_pairs` (``Xs`` / ``Ps``: the predicted states of the live tracks, ``sel`` the pairs' indices
+    of them; ``bound``, ``lim``, ``lim2`` its acceleration bound, the tracks' hits read from the counter table ``CI``)
+    and ``kernels.shape_update`` (``mfr`` … ``mnpts`` the map-evidence sources, ``px``, ``py``, ``c``, ``s`` the laser
     pose, ``t`` the stamp). The configuration's values (the fit parameters, the size σ, the shape update's depth and
-    gains, the riding window's time, count and range², the person's radii, the bound's ``accel_bound_after``) come
-    in ``q``, :func:`update_params`' array (columns ``UP_*`` after ``kernels.fit_params``'). Then the windows of the
+    gains, the riding window's time, count and range², the person's radii, the bound's ``accel_bound_after``) come in
+    ``q``, :func:`update_params`' array (columns ``UP_*`` after ``kernels.fit_params``'). Then the windows of the
     re-acquired tracks restarted: a pair whose update applied and whose track ``missed`` (per live track, indexed by
     ``sel``) its last scans keeps only this push's entries (``TrackRows._restart_windows``: the riding window's and,
-    with ``use_map``, the map evidence's; without a map that window is emptied). Returns (the number of rows
-    bounded, the longest riding window after the push, before the restarts, ``info`` (n, 4) int64, the number of
-    pairs whose update did not apply): per pair 1 where the Kalman update applied (else 0), the detection's
-    ``start`` and ``npts`` and 1 where it is a circle whose radius is within the person's radii (else 0) — what
-    ``Tracker._update_tracks`` reads per pair, in one array. One dispatch instead of four, and none of the
+    with ``use_map``, the map evidence's; without a map that window is emptied), and the counters of the tracks whose
+    update applied written in their rows of ``CI`` (columns ``C_*``: hits + 1, misses 0, the M-of-N counts while fewer
+    than confirm_window, the updated flag ``C_UPD``) and ``CL`` (the last hit's stamp ``t``; docs/speed.md pass cnt36).
+    Returns (the number of rows bounded, the longest riding window after the push, before the restarts, ``info`` (n, 4)
+    int64, the number of pairs whose update did not apply): per pair 1 where the Kalman update applied (else 0), the
+    detection's ``start`` and ``npts`` and 1 where it is a circle whose radius is within the person's radii (else 0) —
+    what ``Tracker._update_tracks`` reads per pair, in one array. One dispatch instead of four, and none of the
     intermediate arrays (priors, measurements) boxed for Python and unboxed again (docs/speed.md, passes upd34,
     call35)."""
     n = dis.shape[0]
@@ -341,6 +475,9 @@ def update_pairs(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xs
     sig[:] = size_sigma
     _z, _R, H, zm, Rm, size_obs, size_kind = measure_batch(dis, kind, theta, lohi, rel, centroid, circle, bpx, bpy,
                                                           start, npts, sizes, has, radius, sig, q)
+    hits = np.empty(n, dtype=np.int64)
+    for r in range(n):
+        hits[r] = CI[trows[r], C_HITS]
     ok, nb = kalman_pairs(Xs, Ps, sel, H, zm, Rm, bound, hits, after, lim, lim2, X, P, trows)
     top = shape_update(G, Gi, X, trows, dis, ok, kind, theta, lohi, rel, circle, size_obs, size_kind, swaps,
                        q[UP_DEFAULT_DEPTH], q[UP_DEFAULT_DEPTH_RATIO], q[UP_HEADING_GAIN], q[UP_SIZE_GAIN], mfr, kept,
@@ -365,9 +502,19 @@ def update_pairs(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xs
                 WN[k, 0] = 0
     info = np.empty((n, 4), dtype=np.int64)
     nrej = 0
+    window = int(q[UP_WINDOW])
     for r in range(n):
         j = dis[r]
         info[r, 0] = 1 if ok[r] else 0
+        if ok[r]:  # (the counters of Tracker._update_tracks' loop as it was: hits, misses, last hit, M of N)
+            k = trows[r]
+            CI[k, C_HITS] += 1
+            CI[k, C_MISSES] = 0
+            CL[k] = t
+            if CI[k, C_HIST_N] < window:  # (only the first window is read)
+                CI[k, C_HIST_N] += 1
+                CI[k, C_HIST_HITS] += 1
+            CI[k, C_UPD] = 1
         nrej += 0 if ok[r] else 1
         info[r, 1] = start[j]
         info[r, 2] = npts[j]
@@ -377,10 +524,12 @@ def update_pairs(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xs
 
 
 @njit(cache=True)
-def report_rows(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, rows: np.ndarray, slow: float) -> tuple:
+def report_rows(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, CI: np.ndarray, rows: np.ndarray,
+                slow: float) -> tuple:
     """Everything ``Tracker._report`` reads from the state rows ``rows`` of the reported tracks, in one call:
     (boxes (n, 5) centre x, y, heading, length, width (m, rad, map frame), states (n, 4) ``X[rows]``, covariances
-    (n, 4, 4) ``P[rows]``, kind codes (n,) int8). The boxes: ``kernels.report_boxes``' arithmetic, a track moving
+    (n, 4, 4) ``P[rows]``, (4, n) int64: the kind codes and, from the counter table ``CI``, the state codes, hits and
+    misses (pass cnt36)). The boxes: ``kernels.report_boxes``' arithmetic, a track moving
     when its speed — Python's ``math.hypot`` bit for bit (:func:`py_hypot`) — is above ``slow`` (m/s); so no speed
     is left undecided for a second call as ``report_boxes`` (libm's hypot) leaves the ones within 1e-12 of the
     limit (docs/speed.md, pass trk24). A moving box is headed along its velocity (the axis nearest it, its sides
@@ -390,7 +539,7 @@ def report_rows(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, row
     out = np.empty((n, 5))
     Xo = np.empty((n, 4))
     Po = np.empty((n, 4, 4))
-    kinds = np.empty(n, dtype=np.int8)
+    ints = np.empty((4, n), dtype=np.int64)
     for i in range(n):
         k = rows[i]
         for a in range(4):
@@ -398,9 +547,12 @@ def report_rows(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, row
             for b in range(4):
                 Po[i, a, b] = P[k, a, b]
         kd = Gi[k, GI_KIND]
-        kinds[i] = kd
+        ints[0, i] = kd
+        ints[1, i] = CI[k, C_STATE]
+        ints[2, i] = CI[k, C_HITS]
+        ints[3, i] = CI[k, C_MISSES]
         box_row(out, i, X, G, k, kd == K_CIRCLE, py_hypot(X[k, 2], X[k, 3]) > slow)
-    return out, Xo, Po, kinds
+    return out, Xo, Po, ints
 
 
 @njit(cache=True)

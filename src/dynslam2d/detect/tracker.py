@@ -64,7 +64,12 @@ from dynslam2d.detect.kernels import (
     fit_params,
 )
 from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, assign_groups
-from dynslam2d.detect.kernels_update import association_gates, fragment_hosts_rows, update_params
+from dynslam2d.detect.kernels_update import (
+    N_C,
+    association_gates,
+    fragment_hosts_rows,
+    update_params,
+)
 from dynslam2d.detect.layout import (
     KIND_CIRCLE,
     KIND_NAMES,
@@ -190,6 +195,11 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # update and the reports read and write it for all tracks in one kernel call or gather each
         self._G = np.zeros((_ROWS0, N_G))
         self._Gi = np.zeros((_ROWS0, N_GI), dtype=np.int8)
+        # … and their counters (state code, hits, misses, the M-of-N counts; columns C_* of detect/kernels_update.py)
+        # and last hits' stamps (s): the update kernel writes them for the updated tracks, the management step tests
+        # and writes them as columns (docs/speed.md, pass cnt36)
+        self._CI = np.zeros((_ROWS0, N_C), dtype=np.int64)
+        self._CL = np.zeros(_ROWS0)
         # … and their windows of the last updates (map evidence, riding test: TrackRows, docs/speed.md pass trk26)
         self._init_windows(_ROWS0, self.config.tracker.sustain_updates)
         self._rows_used = 0  # rows 0 … _rows_used − 1 have been handed out
@@ -373,7 +383,11 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         """:meth:`_host_of_fragment` for several of this scan's detections (indices) in one kernel call."""
         if not dets:
             return []
-        cand = [k for k in self._tracks if k.id in updated and k.state == CONFIRMED]
+        # (the updated confirmed tracks: those _manage kept as such (its counter tests' outcome), then those revived
+        # since (_clutter_detections appends them), in the order of the live tracks; pass cnt36)
+        firm, n = self._firm_updated
+        cand = firm + [k for k in self._tracks[n:] if k.id in updated and k.state == CONFIRMED] \
+            if len(self._tracks) > n else firm
         if not cand:
             return [None] * len(dets)
         b = self._batch
@@ -462,16 +476,6 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
             return []
         tracks = self._tracks
         Xs, Ps = self._stack()
-        firm: list[bool] = []  # established (not tentative): they choose first
-        missed: list[bool] = []
-        veto: list[int] = []  # tracks in M or merged (_veto_merged's rows: found in this pass over the tracks)
-        # (the state, misses and M flags: Python attributes; the bool lists become arrays with their dtype given,
-        # ≈ 0.4 µs less each than NumPy inferring it; docs/speed.md, pass asc33)
-        for i, k in enumerate(tracks):
-            firm.append(k.state != TENTATIVE)
-            missed.append(k.misses > 0)
-            if k.in_m or k.merged:
-                veto.append(i)
         # the tracks' sizes, flags and axis angles from their shape rows in one call ("known": a coasting track's size
         # is known if all(size_known) or it is not a rectangle)
         # Mahalanobis gate and distance gate; a rectangle is measured again with the track's own sizes
@@ -482,19 +486,20 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # later, a tracked object may touch another for a scan).
         # (one kernel call: association_rows, gate_costs with the reach 0.5 × the longest side, size_jump_gate;
         # docs/speed.md, pass trk24)
-        missed_a = np.array(missed, dtype=np.bool_)
         # (the gates' configuration values and the fit parameters: the tracker's one array, pass call35)
         dm = self._default
-        tsize, d2, ok, det_ext = association_gates(self._G, self._Gi, self._rows(), missed_a, Xs, Ps, dm.z, dm.R,
-                                                   *self._batch, self._upd_p)
-        if self._map is not None:
-            ok = self._veto_merged(ok, dets, det_ext, tsize, veto)
+        # (and the tracks' flags established (not tentative: they choose first) and missed their last scan, from their
+        # rows of the counter table; docs/speed.md, pass cnt36)
+        tsize, d2, ok, det_ext, firm, missed_a = association_gates(self._G, self._Gi, self._rows(), self._CI, Xs, Ps,
+                                                                   dm.z, dm.R, *self._batch, self._upd_p)
+        if self._map is not None:  # (with the rows of the tracks in M or merged)
+            ok = self._veto_merged(ok, dets, det_ext, tsize, [i for i, k in enumerate(tracks) if k.in_m or k.merged])
         if not _count_nonzero(ok):  # (no pair allowed; count_nonzero: cheaper than any(); its C function)
             return []
         # the gated costs, the established tracks' assignment, then the tentative tracks' on the detections left, each
         # pair kept where the gates allow it: one kernel call (SciPy's solver written again step for step, the same
         # pairs; detect/kernels_assign.py, docs/speed.md pass trk21)
-        status, ii, jj = assign_groups(ok, d2, np.array(firm, dtype=np.bool_), _BIG)
+        status, ii, jj = assign_groups(ok, d2, firm, _BIG)
         if status:
             raise ValueError(LSAP_MESSAGES[status])  # (SciPy's error for such a cost matrix)
         pairs = list(zip(ii.tolist(), jj.tolist()))
@@ -566,10 +571,10 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         z = d.z[j]
         k = _new_track(self._next_id, t, z.copy(), g, gi, det.beams, [det],
                        [_past_entry(t, det)] if has_free else [])
-        if cfg.tracker.confirm_hits <= 1:
-            k.state = CONFIRMED
         self._next_id += 1
         self._add_row(k, None, None)
+        if cfg.tracker.confirm_hits <= 1:
+            k.state = CONFIRMED  # (in its counter row, which _add_row just made)
         self._start_windows(k.row, ((det.map_structure, det.map_free, det.map_unknown),) if has_map else ())
         # (the state and the initial covariance written into the new rows directly: _birth_state's values, without
         # the (4, 4) temporary it copies from; through k.x / k.P, the views of its rows that _add_row made, instead of
@@ -617,7 +622,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         ``_dormant``."""
         x = k.x.copy()
         x[2:] = 0.0
-        k.x, k.P, k.g, k.gi = x, k.P.copy(), k.g.copy(), k.gi.copy()
+        k.x, k.P, k.g, k.gi, k.ci, k.cl = x, k.P.copy(), k.g.copy(), k.gi.copy(), k.ci.copy(), k.cl.copy()
         k.mev_kept = self._mev(k).copy()  # (its row's windows go with the row; a revival without a map keeps this)
         k.fast = 0
         k.slow_since = None

@@ -8,8 +8,21 @@ import math
 
 import numpy as np
 
-from dynslam2d.detect.kernels_update import RIDE_FAR, RIDE_JUDGE, RIDE_OFF_BODY, manage_speed_rows, ride_window
-from dynslam2d.detect.tracktable import _NO_BEAMS, _TWO_PI, COASTING, CONFIRMED, TENTATIVE, _Track
+from dynslam2d.detect.kernels_update import (
+    MC_COAST,
+    MC_DEL_COVARIANCE,
+    MC_DEL_TENTATIVE,
+    MC_KEPT,
+    MC_UPD_FIRM,
+    MC_UPD_TENTATIVE,
+    MC_UPDATED,
+    RIDE_FAR,
+    RIDE_JUDGE,
+    RIDE_OFF_BODY,
+    manage_counters,
+    ride_window,
+)
+from dynslam2d.detect.tracktable import _NO_BEAMS, _TWO_PI, TENTATIVE, _Track
 from dynslam2d.types import Pose2D, wrap_angle
 
 _NO_BODY = np.zeros(0, dtype=np.bool_)  # (ride_window's body beams when no body was found: never read)
@@ -58,23 +71,25 @@ class TrackManage:
 
     def _manage(self, t: float, updated: set[int]) -> None:
         """Track management (M of N, deletions, clutter retirement) and the test of M (paper Eq. 3) of the updated
-        tracks. The covariance test, the speed's σ and the speed of all live tracks come from their state rows in
-        one kernel call (``manage_speed_rows``; the speeds are Python's ``math.hypot`` to the last bit); the test of
-        M runs inline up to its common outcomes (tentative, or not in M and at most v_min) with the scan's constants
-        read once, the rest in :meth:`_dynamic`. Updated tracks and tracks without detection take separate branches
-        (each reads its state once; the tests that cannot apply are not made) and the most common reason is looked up
-        (:func:`_slow_reason`; docs/speed.md pass mgr34)."""
+        tracks. The counter tests (M of N, coasting, the covariance and speed deletions) run on the counter table's
+        columns in one kernel call with the covariance test, the speed's σ and the speed of all live tracks from their
+        state rows (``manage_counters``; the speeds are Python's ``math.hypot`` to the last bit; docs/speed.md pass
+        cnt36): what stays per track in Python is what reads a track's objects — the coasting memory, the merged and
+        hidden tests of a track without detection, clutter retirement and the test of M, inline up to its common
+        outcomes (tentative, or not in M and at most v_min) with the scan's constants read once, the rest in
+        :meth:`_dynamic`; the most common reason is looked up (:func:`_slow_reason`; pass mgr34). ``updated``: the ids
+        of the tracks updated in this scan (their counter rows flagged by the update kernel, ``C_UPD``)."""
         tracks = self._tracks
         if not tracks:
+            self._firm_updated = ([], 0)
             return
         tc = self.config.tracker
         st = self.stats
         keep: list[_Track] = []
+        firm: list[_Track] = []  # the kept updated tracks that are confirmed, in their order (fragments' hosts)
         gone: list[int] = []  # the rows of the tracks deleted or retired here, in their order (births reuse them)
         mem = self.config.memory.enabled
         merged = self._merged
-        window, need_hits = tc.confirm_window, tc.confirm_hits
-        max_coast, max_sig, max_speed = tc.max_coast_time, tc.max_position_sigma, tc.max_object_speed
         v_min = tc.v_min
         retire_n = tc.structure_retire_updates if self._map is not None else 0
         retire_s = tc.structure_retire_fraction
@@ -85,11 +100,12 @@ class TrackManage:
         slow_tail = f" m/s ≤ v_min {v_min:.2f}"  # (the most common reason's constant part)
         slow_reason = _slow_reason  # (a local name: read once per scan)
         order = self._rows()
-        # per track: its speed (Python's math.hypot bit for bit, as the reasons print it), whether its covariance
-        # fails (tested on the rows as they are, instead of a flag kept in step wherever P changes) and σ of its speed
-        # along the velocity, from the state rows in one kernel call
-        bads, sigs, speeds = manage_speed_rows(self._P, self._X, order, max_sig)
-        bads, sigs, speeds = bads.tolist(), sigs.tolist(), speeds.tolist()
+        # per track: the counter tests' outcome (MC_*, the new states and counts written into the counter table), σ of
+        # its speed along the velocity and its speed (Python's math.hypot bit for bit, as the reasons print it), from
+        # its rows in one kernel call
+        # (the configuration's values: the tracker's one array, update_params)
+        codes, sigs, speeds = manage_counters(self._P, self._X, self._CI, self._CL, order, self._upd_p, t)
+        codes, sigs, speeds = codes.tolist(), sigs.tolist(), speeds.tolist()
         # the riding pre-test of each updated track's window (0: fewer than ride_updates entries, it cannot ride;
         # 1: its last laser-frame centre farther than ride_max_range; 2: near), decided when the window was pushed
         # (kernels.shape_update; a track not updated in this scan has its last push's, never read)
@@ -102,38 +118,15 @@ class TrackManage:
         if slow_v != v_min:
             slow_texts = _slow_reason_texts(v_min)
             self._slow_reasons = (v_min, slow_texts)
-        for k, speed, sig, bad, near in zip(tracks, speeds, sigs, bads, nears):
-            # (an updated track and one without detection apart: each branch reads its state once, and the tests that
-            # cannot apply to it are not made; the same tests in the same order as one loop would make them)
-            if k.id in updated:
-                state = k.state
-                if state == COASTING:
-                    k.state = state = CONFIRMED
-                elif state == TENTATIVE:
-                    nh, n = k.hist_hits, k.hist_n  # (hits and updates among its first confirm_window updates)
-                    if nh >= need_hits:
-                        k.state = state = CONFIRMED
-                    elif nh + (window - n) < need_hits or k.misses > 0 and n >= window:
-                        st.deleted_tentative += 1
-                        st.tracks_deleted += 1
-                        gone.append(k.row)
-                        continue
-                if bad:
-                    st.deleted_covariance += 1
-                    st.tracks_deleted += 1
-                    gone.append(k.row)
-                    continue
-                if speed > max_speed:
-                    st.deleted_speed += 1
-                    st.tracks_deleted += 1
-                    gone.append(k.row)
-                    continue
+        no_beams = _NO_BEAMS
+        for k, code, speed, sig, near in zip(tracks, codes, speeds, sigs, nears):
+            if code <= MC_UPD_FIRM:  # updated, kept by the counter tests (tentative: MC_UPD_TENTATIVE)
                 if retire_n and not k.was_in_m and not k.remembered and (nm := WN.item(k.row, 0)) >= retire_n \
                         and speed < v_min and min(MEV[k.row, nm - retire_n:nm, 0].tolist()) >= retire_s:
                     # clutter retirement: a still track the map already holds as structure (docs/real.md "Speed");
                     # a confirmed one stays as a dormant track while its object is seen (_clutter_detections)
                     st.deleted_structure += 1
-                    if state == TENTATIVE:
+                    if code == MC_UPD_TENTATIVE:
                         st.tracks_deleted += 1
                     else:
                         self._retire(k)
@@ -165,7 +158,7 @@ class TrackManage:
                         k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
                     elif in_m:
                         self._dynamic(k, speed, sig, t)
-                    elif state == TENTATIVE:
+                    elif code == MC_UPD_TENTATIVE:
                         # (speed: most tracks are short-lived tentative clutter; nothing else changes them)
                         k.reason = "not in M: tentative track"
                     elif speed <= v_min:
@@ -185,55 +178,51 @@ class TrackManage:
                         # with m_start_xy None, m_last_t is None, m_time and m_travel 0.0: set after it, reset with it)
                         k.m_start_xy, k.m_last_t, k.remembered = None, None, False
                         k.m_time = k.m_travel = 0.0
-            else:
+                keep.append(k)
+                if code == MC_UPD_FIRM:
+                    firm.append(k)
+                continue
+            if code < MC_UPDATED:  # without detection (the counters' tests done by the kernel, the deletions below)
                 if merged and k.in_m and k.id in merged:  # (merged: empty in most scans)
                     k.in_m = False
                     k.merged = True
                     k.fast = 0
                     k.reason = "left M: merged with long-occupied map structure (its detection joined a wall's cluster)"
-                k.misses += 1
                 if k.in_m and not k.remembered and k.slow_since is not None and mem and self._hidden(k):
                     # stopped in M and hidden (something in front of it) before m_exit_time: it cannot finish its
                     # stop while unseen, so it is remembered now (if eligible) instead of being deleted after
                     # max_coast_time (a track that just vanishes in plain view, a false one, is not)
                     self._remember(k, t - k.slow_since)
-                if k.hist_n < window:  # (the M-of-N counts: only the first window is read)
-                    k.hist_n += 1
-                k.beams = _NO_BEAMS
-                state = k.state
-                if state == CONFIRMED:
-                    k.state = COASTING
-                elif state == TENTATIVE:
-                    nh, n = k.hist_hits, k.hist_n  # (hits and updates among its first confirm_window updates)
-                    if nh >= need_hits:
-                        k.state = CONFIRMED
-                    elif nh + (window - n) < need_hits or k.misses > 0 and n >= window:
-                        st.deleted_tentative += 1
+                k.beams = no_beams
+                if code >= MC_COAST:  # coasted longer than max_coast_time (was confirmed or coasting)
+                    if not (k.remembered and self._remembered_coasts(k, t)):
+                        st.deleted_coasting += 1
                         st.tracks_deleted += 1
                         gone.append(k.row)
                         continue
-                    state = None  # (tentative or confirmed now: not coasting)
-                if state is not None and t - k.last_hit > max_coast and not (
-                        k.remembered and self._remembered_coasts(k, t)):  # (coasting: was confirmed or coasting)
-                    st.deleted_coasting += 1
-                    st.tracks_deleted += 1
-                    gone.append(k.row)
+                    code -= MC_COAST
+                if code == MC_KEPT:
+                    keep.append(k)
                     continue
-                if bad:
-                    st.deleted_covariance += 1
-                    st.tracks_deleted += 1
-                    gone.append(k.row)
-                    continue
-                if speed > max_speed:
-                    st.deleted_speed += 1
-                    st.tracks_deleted += 1
-                    gone.append(k.row)
-                    continue
-            keep.append(k)
+            # deleted by the counter tests
+            code &= ~MC_UPDATED
+            if code == MC_DEL_TENTATIVE:
+                st.deleted_tentative += 1
+            elif code == MC_DEL_COVARIANCE:
+                st.deleted_covariance += 1
+            else:
+                st.deleted_speed += 1
+            st.tracks_deleted += 1
+            gone.append(k.row)
         if gone:
             self._free_rows.extend(gone)
             self._order = None
         self._tracks = keep
+        self._firm_updated = (firm, len(keep))
+
+    # (the updated confirmed tracks the last _manage kept, in their order, and the number of tracks it kept: the
+    # candidate hosts of fragments, Tracker._hosts_of_fragments)
+    _firm_updated: tuple[list[_Track], int] = ([], 0)
 
     # (_fast_reason_texts(sustain_updates): the tracker's own from its first _manage on)
     _fast_reasons: tuple[str, ...] = ()

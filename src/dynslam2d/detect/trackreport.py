@@ -8,7 +8,7 @@ import numpy as np
 from dynslam2d.detect.frozen import _layout_twin_ok, fast_init
 from dynslam2d.detect.kernels_update import report_rows
 from dynslam2d.detect.layout import KIND_CIRCLE, KIND_NAMES
-from dynslam2d.detect.tracktable import _HALF_PI, COASTING, CONFIRMED
+from dynslam2d.detect.tracktable import _HALF_PI, COASTING, CONFIRMED, STATE_NAMES
 from dynslam2d.types import Box, Track, wrap_angle
 
 _make_track = fast_init(Track)  # Track(...) / Box(...) without the frozen dataclass __init__ (detect/frozen.py)
@@ -39,26 +39,28 @@ class TrackReport:
         # (speed: the boxes of all tracks, their states, covariances and kinds from their rows in one kernel call —
         # the moving test on Python's math.hypot bit for bit —; every report's velocity / covariance a row of the
         # copies, its own memory apart from the tracker's; docs/speed.md, pass trk24)
-        boxes, Xo, P, kinds = report_rows(self._G, self._Gi, self._X, self._P, self._rows(), slow)
+        # (and the kinds, states, hits and misses as four lists: the shape rows' and the counter table's columns, pass
+        # cnt36)
+        boxes, Xo, P, ints = report_rows(self._G, self._Gi, self._X, self._P, self._CI, self._rows(), slow)
         V = Xo[:, 2:]
-        kinds = kinds.tolist()
+        kinds, states, hits, misses = ints.tolist()
         no_beams = np.zeros(0, dtype=np.int64)
         out = []
         append, names = out.append, KIND_NAMES  # (locals: per track)
         # (the boxes' columns as five lists: the same floats as boxes.tolist()'s rows, without a list per track)
-        columns = zip(tracks, *boxes.T.tolist(), kinds, V, P)
+        snames = STATE_NAMES
+        columns = zip(tracks, *boxes.T.tolist(), kinds, V, P, states, hits, misses)
         if not _INLINE:
             make_track, make_box = _make_track, _make_box
-            for k, px, py, theta, length, width, kd, vel, cov in columns:
+            for k, px, py, theta, length, width, kd, vel, cov, sc, nh, nm in columns:
                 beams = k.beams if k.id in updated else no_beams
                 in_m = k.in_m
-                append(make_track(k.id, k.state, t, make_box(px, py, theta, length, width), vel, cov, t - k.born,
-                                  k.hits, k.misses, names[kd], in_m, k.reason, beams, len(beams),
-                                  k.remembered and in_m))
+                append(make_track(k.id, snames[sc], t, make_box(px, py, theta, length, width), vel, cov, t - k.born,
+                                  nh, nm, names[kd], in_m, k.reason, beams, len(beams), k.remembered and in_m))
             return out
         # the same objects built in place (_INLINE above): every slot of _TRACK_SLOTS / _BOX_SLOTS stored, in order
         new, track_twin, box_twin, track_cls, box_cls = object.__new__, _TrackTwin, _BoxTwin, Track, Box
-        for k, px, py, theta, length, width, kd, vel, cov in columns:
+        for k, px, py, theta, length, width, kd, vel, cov, sc, nh, nm in columns:
             b = new(box_twin)
             b.px = px
             b.py = py
@@ -68,14 +70,14 @@ class TrackReport:
             b.__class__ = box_cls
             r = new(track_twin)
             r.id = kid = k.id
-            r.state = k.state
+            r.state = snames[sc]
             r.stamp = t
             r.box = b
             r.velocity = vel
             r.covariance = cov
             r.age = t - k.born
-            r.hits = k.hits
-            r.misses = k.misses
+            r.hits = nh
+            r.misses = nm
             r.kind = names[kd]
             r.in_m = in_m = k.in_m
             r.m_reason = k.reason

@@ -26,6 +26,18 @@ from dynslam2d.detect.kernels import (
     N_G,
     N_GI,
 )
+from dynslam2d.detect.kernels_update import (
+    C_HIST_HITS,
+    C_HIST_N,
+    C_HITS,
+    C_MISSES,
+    C_STATE,
+    C_UPD,
+    N_C,
+    ST_COASTING,
+    ST_CONFIRMED,
+    ST_TENTATIVE,
+)
 from dynslam2d.detect.layout import KIND_CODES, KIND_NAMES
 from dynslam2d.detect.measure import Detection, ScanDetection
 
@@ -36,6 +48,14 @@ _BIG = 1e12
 TENTATIVE = "tentative"
 CONFIRMED = "confirmed"
 COASTING = "coasting"
+# the states by their code in the counter table (column C_STATE of Tracker._CI), and the codes by state
+STATE_NAMES = (TENTATIVE, CONFIRMED, COASTING)
+STATE_CODES = {TENTATIVE: ST_TENTATIVE, CONFIRMED: ST_CONFIRMED, COASTING: ST_COASTING}
+assert tuple(STATE_CODES[n] for n in STATE_NAMES) == (0, 1, 2)
+assert (C_STATE, C_HITS, C_MISSES, C_HIST_N, C_HIST_HITS, C_UPD, N_C) == (0, 1, 2, 3, 4, 5, 6)
+# a new track's counter row (_new_track): tentative, one hit, no miss, M of N 1 / 1, not flagged updated (an array:
+# ≈ 0.3 µs less to write into its row than a tuple)
+_CI_BIRTH = np.array((ST_TENTATIVE, 1, 0, 1, 1, 0), dtype=np.int64)
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
 _NO_IDX = np.zeros(0, dtype=np.int64)  # no leg merge in this scan (Tracker._mev_src; shared, never written)
 _NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives it its row
@@ -51,19 +71,17 @@ class _Track:
     x: np.ndarray  # [px, py, vx, vy], map frame
     P: np.ndarray  # 4×4
     born: float
-    last_hit: float
     birth_xy: np.ndarray
     # the shape state: views of the track's rows of the tracker's arrays (Tracker._G, _Gi; columns G_* / GI_* of
     # detect/kernels.py), read and written by the per-scan kernels; the properties below read them one track at a time
     g: np.ndarray  # (N_G,) float: axis angle, sizes, circle radius, largest partial views (rad, m)
     gi: np.ndarray  # (N_GI,) int8: kind code, has heading, known-size flags (both tuples until _add_row)
-    state: str = TENTATIVE
-    hits: int = 1
-    misses: int = 0
-    # the M-of-N rule's counts over the first confirm_window updates (all that it reads): how many updates (hits and
-    # misses) and how many hits; two ints instead of a list of bools per track (docs/speed.md, pass trk16)
-    hist_n: int = 1
-    hist_hits: int = 1
+    # the counters: views of the track's rows of the tracker's counter table (Tracker._CI, columns C_* of
+    # detect/kernels_update.py: state code, hits, misses, and the M-of-N rule's counts over the first confirm_window
+    # updates, all it reads) and of its last hit's stamp (Tracker._CL, s), read and written as columns by the update
+    # kernel and the management step (docs/speed.md, pass cnt36); the properties below read them one track at a time
+    ci: np.ndarray  # (N_C,) int64 (a tuple until _add_row)
+    cl: np.ndarray  # (1,) float64: the stamp of the last update, s (a tuple until _add_row)
     fast: int = 0
     in_m: bool = False
     reason: str = "not in M: tentative track"
@@ -95,6 +113,61 @@ class _Track:
     # a dormant track's map-evidence window, (n, 3), copied from its row when retired (Tracker._retire; its revival
     # without a map keeps it); None for a live track, whose windows are rows of the tracker's arrays (TrackRows)
     mev_kept: np.ndarray | None = None
+
+    # (the counters as Python values, read from the counter rows)
+    @property
+    def state(self) -> str:
+        """"tentative", "confirmed" or "coasting"."""
+        return STATE_NAMES[self.ci.item(C_STATE)]
+
+    @state.setter
+    def state(self, value: str) -> None:
+        self.ci[C_STATE] = STATE_CODES[value]
+
+    @property
+    def hits(self) -> int:
+        """Updates since birth."""
+        return self.ci.item(C_HITS)
+
+    @hits.setter
+    def hits(self, value: int) -> None:
+        self.ci[C_HITS] = value
+
+    @property
+    def misses(self) -> int:
+        """Consecutive scans without detection."""
+        return self.ci.item(C_MISSES)
+
+    @misses.setter
+    def misses(self, value: int) -> None:
+        self.ci[C_MISSES] = value
+
+    @property
+    def hist_n(self) -> int:
+        """Scans (hits and misses) among the first confirm_window since birth (M of N)."""
+        return self.ci.item(C_HIST_N)
+
+    @hist_n.setter
+    def hist_n(self, value: int) -> None:
+        self.ci[C_HIST_N] = value
+
+    @property
+    def hist_hits(self) -> int:
+        """Hits among them (M of N)."""
+        return self.ci.item(C_HIST_HITS)
+
+    @hist_hits.setter
+    def hist_hits(self, value: int) -> None:
+        self.ci[C_HIST_HITS] = value
+
+    @property
+    def last_hit(self) -> float:
+        """Stamp of the last update, s."""
+        return self.cl.item(0)
+
+    @last_hit.setter
+    def last_hit(self, value: float) -> None:
+        self.cl[0] = value
 
     # (the shape state as Python values, read from the rows: the tuples cannot be written in place by mistake)
     @property
@@ -162,8 +235,9 @@ class _Track:
 
 def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, beams: np.ndarray, free: list,
                past: list, _new=object.__new__) -> _Track:
-    """``_Track(id=tid, x=_NO_STATE, P=_NO_STATE, born=t, last_hit=t, birth_xy=…, g=…, gi=…, beams=…, free=…,
-    past=…)`` with every other field at its default (a birth, :meth:`Tracker._birth`):
+    """``_Track(id=tid, x=_NO_STATE, P=_NO_STATE, born=t, birth_xy=…, g=…, gi=…, ci=(tentative, 1 hit, 0 misses, 1, 1),
+    cl=(t,), beams=…, free=…, past=…)`` with every other field at its default (a birth, :meth:`Tracker._birth`; its
+    counters written into its row by ``_add_row``):
     the slots set directly, about a quarter of the dataclass ``__init__``'s cost with its keyword binding and default
     factories (``tests/test_detect_birth_fast.py`` compares every field with the dataclass's)."""
     k = _new(_Track)
@@ -171,15 +245,11 @@ def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, be
     k.x = _NO_STATE
     k.P = _NO_STATE
     k.born = t
-    k.last_hit = t
     k.birth_xy = birth_xy
     k.g = g
     k.gi = gi
-    k.state = TENTATIVE
-    k.hits = 1
-    k.misses = 0
-    k.hist_n = 1
-    k.hist_hits = 1
+    k.ci = _CI_BIRTH  # (shared, never written: _add_row copies it into the track's row and makes ci a view of that)
+    k.cl = (t,)
     k.fast = 0
     k.in_m = False
     k.reason = "not in M: tentative track"
@@ -343,7 +413,11 @@ class TrackRows:
                 Gi = np.zeros((2 * row, N_GI), dtype=np.int8)
                 G[:row] = self._G[:row]
                 Gi[:row] = self._Gi[:row]
-                self._X, self._P, self._G, self._Gi = X, P2, G, Gi
+                CI = np.zeros((2 * row, N_C), dtype=np.int64)
+                CL = np.zeros(2 * row)
+                CI[:row] = self._CI[:row]
+                CL[:row] = self._CL[:row]
+                self._X, self._P, self._G, self._Gi, self._CI, self._CL = X, P2, G, Gi, CI, CL
                 self._repoint()
                 for name in ("_MEV", "_RIDE", "_WN"):  # (the windows' rows, likewise)
                     a = getattr(self, name)
@@ -355,20 +429,26 @@ class TrackRows:
             self._P[row] = P
         self._G[row] = k.g
         self._Gi[row] = k.gi
+        self._CI[row] = k.ci
+        self._CL[row] = k.cl[0]
         k.row = row
         k.x = self._X[row]
         k.P = self._P[row]
         k.g = self._G[row]
         k.gi = self._Gi[row]
+        k.ci = self._CI[row]
+        k.cl = self._CL[row:row + 1]
         self._tracks.append(k)
         self._order = None
 
     def _repoint(self) -> None:
-        """Make the x / P / g / gi of the live tracks views of their rows of the (new) state arrays."""
-        X, P, G, Gi = self._X, self._P, self._G, self._Gi
+        """Make the x / P / g / gi / ci / cl of the live tracks views of their rows of the (new) state arrays."""
+        X, P, G, Gi, CI, CL = self._X, self._P, self._G, self._Gi, self._CI, self._CL
         for k in self._tracks:
             row = k.row
             k.x = X[row]
             k.P = P[row]
             k.g = G[row]
             k.gi = Gi[row]
+            k.ci = CI[row]
+            k.cl = CL[row:row + 1]

@@ -12,7 +12,7 @@ from itertools import chain as _chain
 import numpy as np
 
 from dynslam2d.detect.kernels import G_SIZE0
-from dynslam2d.detect.kernels_update import update_pairs
+from dynslam2d.detect.kernels_update import C_MISSES, update_pairs
 from dynslam2d.detect.measure import Detection, ScanDetection
 from dynslam2d.detect.tracktable import _HALF_PI, _PAST_COMPACT, TENTATIVE, _past_points, _Track
 
@@ -62,7 +62,7 @@ class TrackUpdate:
             sel = np.fromiter(_chain.from_iterable(pairs), np.int64, 2 * npair).reshape(npair, 2)
             dis = sel[:, 1].copy()
             sel = sel[:, 0].copy()
-            missed = np.array([k.misses > 0 for k in self._tracks], dtype=np.bool_)
+            missed = self._CI[self._rows(), C_MISSES] > 0
         self._pair_arrays = None
         Xs, Ps = self._stack()
         # the track priors of the measurements (each track's sizes / radius), the measurements (size σ 0.05 m), the
@@ -80,36 +80,36 @@ class TrackUpdate:
         if tc.max_accel is not None and self._dt > 0.0:
             bound = True
             lim = tc.max_accel * self._dt
-            tracks = self._tracks
-            hits = np.array([tracks[i].hits for i, _ in pairs], dtype=np.int64)
             lim2 = (0.999 * lim) ** 2
         else:
-            bound, lim, hits, lim2 = False, 0.0, sel, 0.0
+            bound, lim, lim2 = False, 0.0, 0.0
         p = self._pose
         c, s = self._pose_cs
         nb, top, info, nrej = update_pairs(
             self._G, self._Gi, self._X, self._P, Xs, Ps, sel, self._rows(), dis, missed, *self._batch, self._upd_p,
-            bound, hits, float(lim), lim2, *self._mev_src, self._MEV, self._RIDE, self._WN,
+            bound, self._CI, self._CL, float(lim), lim2, *self._mev_src, self._MEV, self._RIDE, self._WN,
             self._map is not None, float(p.x), float(p.y), c, s, t)
         if nb:
             self.stats.accel_bounded += nb
         self._stacked = None  # the tracks changed
         if top >= self._RIDE.shape[1]:  # (the next push could overflow a full window)
             self._grow_ride()
-        self._update_tracks(pairs, dets, t, info.tolist())
+        self._update_tracks(pairs, dets, t, info.tolist(), missed.tolist())
         return nrej
 
     def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[ScanDetection], t: float,
-                       info: list[list[int]]) -> None:
+                       info: list[list[int]], missed: list[bool]) -> None:
         """The bookkeeping update of the tracks of ``pairs`` (track index, detection index) whose Kalman and shape
         results are already in their rows (k.x, k.P, k.g, k.gi) where applied; ``info``: per pair [applied (1 / 0),
         the detection's first point in the batch, its point count, 1 if it is a circle of a person's radius]
         (``update_pairs``' rows, one conversion per scan: the detection's own properties (ScanDetection) would read
         them one by one); the scan's constants are read once (one loop over the pairs: the update of one track is a
         few µs of Python). The riding and map-evidence windows are pushed before, for all pairs in the same kernel
-        call, and a re-acquired track's restarted there to that push's entries."""
+        call, and a re-acquired track's restarted there to that push's entries; so are the counters (hits, misses,
+        last hit, M of N: columns of the counter table, pass cnt36). ``missed``: per live track, whether it had missed
+        scans before this update (its misses before the kernel reset them)."""
         tc = self.config.tracker
-        window, nsus = tc.confirm_window, tc.sustain_updates
+        nsus = tc.sustain_updates
         max_age = self._free.max_age if self._free is not None else None
         ref = self._cur_ref if self._free is not None else None  # (the vacated-space test's reference: this scan)
         tracks = self._tracks
@@ -131,23 +131,17 @@ class TrackUpdate:
             pa = k.past_a
             np0 = len(past)
             snap = ref is not None and np0 > pa  # (past, pa, np0: the entries' snapshot, put in the free entry below)
-            if k.misses > 0:
+            if missed[ti]:
                 # re-acquired after a gap: the free-space evidence must be rebuilt from this object
                 k.past = []  # (a new list: the snapshots of earlier updates may hold the old one)
                 k.past_a = 0
                 k.free.clear()  # (the riding and map-evidence windows: restarted by the kernel, update_pairs)
                 k.fast = 0
                 k.probation = k.in_m and not k.remembered  # a remembered track re-acquired where it stopped
-                k.misses = 0
             k.merged = False
             person = det.person or circle_person == 1
             k.person = person
             k.person_streak = k.person_streak + 1 if person else 0
-            k.hits += 1
-            k.last_hit = t
-            if k.hist_n < window:  # (the M-of-N counts: only the first window is read)
-                k.hist_n += 1
-                k.hist_hits += 1
             k.beams = arrays.beams[a0:a0 + npt]
             free = k.free
             # (vacated: this scan sees through its old points; computed when the entry is read, _free_values)
