@@ -54,7 +54,7 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'),)"),
     ('dynslam2d.detect.kernels_update.report_rows',
      "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
-     "Array(int64, 1, 'C'), float64,)"),
+     "Array(int64, 2, 'C'), Array(int64, 1, 'C'), float64,)"),
     ('dynslam2d.slam.ledgerkernels.record_cells',
      "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C', True), "
      "Array(float64, 1, 'C', True), Array(bool, 1, 'C'), Array(bool, 1, 'A'), float64, float64, float64, "
@@ -105,7 +105,7 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 2, 'C'),)"),
     ('dynslam2d.detect.kernels_update.association_gates',
-     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
+     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 2, 'C'), "
      "Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
      "Array(int8, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, 3, 'C'), "
      "Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
@@ -118,12 +118,13 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(int64, 1, 'C'), Array(bool, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 2, 'C'), Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
-     "Array(float64, 1, 'C'), bool, Array(int64, 1, 'C'), float64, float64, Array(float64, 2, 'C'), "
-     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
-     "Array(float64, 3, 'C'), Array(float64, 3, 'C'), Array(int64, 2, 'C'), bool, float64, float64, "
-     'float64, float64, float64,)'),
-    ('dynslam2d.detect.kernels_update.manage_speed_rows',
-     "(Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64,)"),
+     "Array(float64, 1, 'C'), bool, Array(int64, 2, 'C'), Array(float64, 1, 'C'), float64, float64, "
+     "Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
+     "Array(int64, 1, 'C'), Array(float64, 3, 'C'), Array(float64, 3, 'C'), Array(int64, 2, 'C'), bool, "
+     'float64, float64, float64, float64, float64,)'),
+    ('dynslam2d.detect.kernels_update.manage_counters',
+     "(Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(int64, 2, 'C'), Array(float64, 1, 'C'), "
+     "Array(int64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
     ('dynslam2d.detect.kernels_update.fragment_hosts_rows',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
@@ -143,37 +144,37 @@ KERNELS: tuple[tuple[str, str], ...] = (
 #: CPU time of each kernel's compile (s, the kernels it compiles in turn included) in a one-core cold run when
 #: recorded: the background compile's estimate of how far ahead of the run a kernel is (its order, docs/speed.md).
 COMPILE_S: dict[str, float] = {
-    'dynslam2d.sim.world._cast_kernel': 0.39,
+    'dynslam2d.sim.world._cast_kernel': 0.37,
     'dynslam2d.detect.body._drop_body': 0.14,
-    'dynslam2d.slam.matcher.gated_points': 0.49,
-    'dynslam2d.detect.body._observe_beams': 0.19,
-    'dynslam2d.detect.segment._segment_kernel': 0.68,
-    'dynslam2d.detect.shapes.fit_cluster_rows': 1.70,
-    'dynslam2d.detect.kernels.classify_batch': 1.18,
-    'dynslam2d.detect.kernels.select_detections': 1.22,
+    'dynslam2d.slam.matcher.gated_points': 0.42,
+    'dynslam2d.detect.body._observe_beams': 0.17,
+    'dynslam2d.detect.segment._segment_kernel': 0.60,
+    'dynslam2d.detect.shapes.fit_cluster_rows': 1.51,
+    'dynslam2d.detect.kernels.classify_batch': 1.04,
+    'dynslam2d.detect.kernels.select_detections': 1.10,
     'dynslam2d.detect.freespace._ref_arrays': 0.09,
-    'dynslam2d.detect.kernels.merge_legs': 1.14,
-    'dynslam2d.detect.kernels.measure_batch': 0.88,
+    'dynslam2d.detect.kernels.merge_legs': 1.01,
+    'dynslam2d.detect.kernels.measure_batch': 0.80,
     'dynslam2d.detect.kernels_update.report_rows': 0.34,
-    'dynslam2d.slam.ledgerkernels.record_cells': 2.05,
-    'dynslam2d.slam.ledgerkernels.level_rows': 0.44,
-    'dynslam2d.slam.ledgerkernels.stand_marks': 0.35,
-    'dynslam2d.slam.raycast.integrate_levels': 1.39,
-    'dynslam2d.slam.raycast.ray_ends': 0.08,
-    'dynslam2d.slam.cleanup._geometry_bounds': 0.45,
-    'dynslam2d.slam.cleanup._count_beams': 0.59,
-    'dynslam2d.slam.matcher.match_pyramid': 2.37,
-    'dynslam2d.slam.correlative._rotated_cells': 0.24,
-    'dynslam2d.slam.correlative._score_pyramid': 0.43,
-    'dynslam2d.slam.correlative.branch_and_bound': 1.49,
-    'dynslam2d.vacated.vacated_scan_kernel': 2.77,
-    'dynslam2d.detect.kernels.cv_predict': 0.24,
-    'dynslam2d.detect.kernels_update.association_gates': 1.07,
-    'dynslam2d.detect.kernels_assign.assign_groups': 0.80,
-    'dynslam2d.detect.kernels_update.update_pairs': 2.74,
-    'dynslam2d.detect.kernels_update.manage_speed_rows': 0.34,
-    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.23,
-    'dynslam2d.detect.kernels.seen_through_refs': 0.20,
-    'dynslam2d.filter.observed_boxes_kernel': 0.18,
-    'dynslam2d.filter._rows_exclusion_kernel': 0.41,
+    'dynslam2d.slam.ledgerkernels.record_cells': 1.85,
+    'dynslam2d.slam.ledgerkernels.level_rows': 0.41,
+    'dynslam2d.slam.ledgerkernels.stand_marks': 0.30,
+    'dynslam2d.slam.raycast.integrate_levels': 1.26,
+    'dynslam2d.slam.raycast.ray_ends': 0.07,
+    'dynslam2d.slam.cleanup._geometry_bounds': 0.42,
+    'dynslam2d.slam.cleanup._count_beams': 0.49,
+    'dynslam2d.slam.matcher.match_pyramid': 2.02,
+    'dynslam2d.slam.correlative._rotated_cells': 0.23,
+    'dynslam2d.slam.correlative._score_pyramid': 0.38,
+    'dynslam2d.slam.correlative.branch_and_bound': 2.01,
+    'dynslam2d.vacated.vacated_scan_kernel': 1.58,
+    'dynslam2d.detect.kernels.cv_predict': 0.20,
+    'dynslam2d.detect.kernels_update.association_gates': 1.02,
+    'dynslam2d.detect.kernels_assign.assign_groups': 0.75,
+    'dynslam2d.detect.kernels_update.update_pairs': 2.41,
+    'dynslam2d.detect.kernels_update.manage_counters': 0.39,
+    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.21,
+    'dynslam2d.detect.kernels.seen_through_refs': 0.19,
+    'dynslam2d.filter.observed_boxes_kernel': 0.17,
+    'dynslam2d.filter._rows_exclusion_kernel': 0.40,
 }
