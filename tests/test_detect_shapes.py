@@ -153,15 +153,20 @@ def test_batch_kernel_is_bit_identical_to_plain_sums_also_on_ties() -> None:
     clusters.append(np.array([[1.0, 2.0], [1.0, 2.0], [1.0, 2.0]]))  # zero width: always the sums
     pts = np.vstack(clusters)
     offsets = np.cumsum([0] + [c.shape[0] for c in clusters])
-    angles = search_angles(1.0)
-    cos_t, sin_t = np.cos(angles).tolist(), np.sin(angles).tolist()
-    for criterion in (0, 1, 2):
-        for stride in (1, 5):
-            out = fit_clusters(pts[:, 0].copy(), pts[:, 1].copy(), offsets, np.ones(len(clusters), dtype=bool),
-                               angles, criterion, 0.01, 5, stride)
-            for c, cl in enumerate(clusters):
-                want = _plain_rect_row(cl[:, 0].tolist(), cl[:, 1].tolist(), cos_t, sin_t, criterion, 0.01, stride)
-                assert out[c, :6].tolist() == want, (criterion, stride, c)
+    # (the kernel scores two angles per pass over the points, pass sim36: 1° with stride 4 has 23 coarse angles and
+    # 7° with stride 1 has 13, so a lone last angle in the coarse search and in the whole search; stride 7 has 12
+    # fine angles, stride 5 eight)
+    for step_deg, strides in ((1.0, (1, 4, 5, 7)), (7.0, (1, 2))):
+        angles = search_angles(step_deg)
+        cos_t, sin_t = np.cos(angles).tolist(), np.sin(angles).tolist()
+        for criterion in (0, 1, 2):
+            for stride in strides:
+                out = fit_clusters(pts[:, 0].copy(), pts[:, 1].copy(), offsets, np.ones(len(clusters), dtype=bool),
+                                   angles, criterion, 0.01, 5, stride)
+                for c, cl in enumerate(clusters):
+                    want = _plain_rect_row(cl[:, 0].tolist(), cl[:, 1].tolist(), cos_t, sin_t, criterion, 0.01,
+                                           stride)
+                    assert out[c, :6].tolist() == want, (step_deg, criterion, stride, c)
 
 
 @pytest.mark.parametrize("pts", [np.zeros((0, 2)), np.array([[1.0, 2.0]]), np.array([[1.0, 2.0], [1.0, 2.0]]),

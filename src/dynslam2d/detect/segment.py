@@ -207,8 +207,9 @@ def is_full_circle(scan: Scan) -> bool:
 
 
 #: per beam geometry (n, angle_min, angle_increment): the beam angles (:attr:`Scan.angles`, the same values for every
-#: scan of that geometry) and, per λ, the adjacent beams' trigonometry (:func:`_adjacent_trig`); a few entries
-_GEOMETRY: dict[tuple, tuple[np.ndarray, dict[float, np.ndarray]]] = {}
+#: scan of that geometry), per λ the adjacent beams' trigonometry (:func:`_adjacent_trig`), the angles' cos / sin and
+#: whether the beams cover 360° (:func:`is_full_circle`); a few entries
+_GEOMETRY: dict[tuple, tuple[np.ndarray, dict[float, np.ndarray], np.ndarray, np.ndarray, bool]] = {}
 _GEOMETRY_MAX = 16
 _make_segmentation = fast_init(Segmentation)  # (the frozen dataclass without its __init__'s object.__setattr__)
 
@@ -256,14 +257,22 @@ def _segment(scan: Scan, cfg: SegmentConfig, mask: np.ndarray, pose: tuple | Non
         if len(_GEOMETRY) >= _GEOMETRY_MAX:
             _GEOMETRY.clear()
         a = scan.angles
-        geo = _GEOMETRY[key] = (a, {}, np.cos(a), np.sin(a))
-    angles, trigs, cos_a, sin_a = geo
+        geo = _GEOMETRY[key] = (a, {}, np.cos(a), np.sin(a), is_full_circle(scan))
+    angles, trigs, cos_a, sin_a, full = geo
     lam = math.radians(cfg.lambda_deg)
     trig = trigs.get(lam)
     fill = trig is None
     if fill:
         trig = trigs[lam] = np.zeros((max(key[0], 1), 4))
-    wrap = {"auto": is_full_circle(scan), "always": True, "never": False}[cfg.wrap_around]
+    mode = cfg.wrap_around  # (``full``: is_full_circle of the key's beam count and increment, kept with them)
+    if mode == "auto":
+        wrap = full
+    elif mode == "always":
+        wrap = True
+    elif mode == "never":
+        wrap = False
+    else:
+        raise KeyError(mode)
     if pose is None:
         points, cos_a, sin_a, c, s, x, y = False, _NO_TRIG, _NO_TRIG, 1.0, 0.0, 0.0, 0.0
     else:

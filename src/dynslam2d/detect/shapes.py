@@ -169,18 +169,39 @@ def _near_side_known(n: int, lo: float, hi: float, total: float) -> int:
 
 
 @njit(cache=True)
+def _near_sides(w: np.ndarray, r: int, n: int, lo1: float, hi1: float, lo2: float, hi2: float) -> tuple[bool, bool]:
+    """The edges the points of one angle go to when :func:`_near_side_known` cannot tell (rows ``r``, ``r + 1`` of
+    ``w``: the n projections on the two axes, bounds ``lo``/``hi``): Σ(hi − cᵢ)² < Σ(cᵢ − lo)² per axis, the sums in
+    sequence."""
+    sa1 = 0.0
+    sb1 = 0.0
+    sa2 = 0.0
+    sb2 = 0.0
+    for i in range(n):
+        sa1 += (hi1 - w[r, i]) ** 2
+        sb1 += (w[r, i] - lo1) ** 2
+        sa2 += (hi2 - w[r + 1, i]) ** 2
+        sb2 += (w[r + 1, i] - lo2) ** 2
+    return sa1 < sb1, sa2 < sb2
+
+
+@njit(cache=True)
 def _fit_one(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: float, out: np.ndarray,
              stride: int, w: np.ndarray, order: np.ndarray) -> None:
     """Best angle over the table ``trig`` (rows cos θ, sin θ, atan2(sin θ, cos θ): :func:`fit_cluster_rows`) by
     the Zhang et al. 2017 criterion (larger is better): every angle (stride 1), or every stride-th angle and then
-    the angles around the best one (coarse-to-fine). ``c1``, ``c2``, ``b1``, ``b2`` (≥ n) and ``order``
-    (≥ K + 2·stride) are work space.
+    the angles around the best one (coarse-to-fine). ``w`` (6 rows ≥ n) and ``order`` (≥ K + 2·stride) are work
+    space.
 
-    One loop scores every angle in turn (the angles to score listed in ``order``, the fine ones appended once the
-    coarse best is known): no call per angle. Each point's edge is decided per axis from the sums of squares to
-    both edges (Zhang: the group goes to the nearer edge), by :func:`_near_side_known` when the float comparison
-    is certain, else by the sums themselves. The best angle's projections and bounds are kept as it is scored (the
-    buffers swapped, not copied): the result's bounds and rms need no projection of their own."""
+    One loop scores the angles to score (listed in ``order``, the fine ones appended once the coarse best is known)
+    two at a time: each pass over the points serves two angles, whose sums are independent chains of additions, so
+    the two overlap in the processor instead of each waiting for its own (pass sim36; every sum is still taken in
+    the points' order, and the angles are compared in the order of ``order``: the same floats and the same best
+    angle as one angle at a time). Each point's edge is decided per axis from the sums of squares to both edges
+    (Zhang: the group goes to the nearer edge), by :func:`_near_side_known` when the float comparison is certain,
+    else by the sums themselves. The best angle's projections and bounds are kept as it is scored (three row pairs
+    of ``w``: the best angle's and the two being scored), so the result's bounds and rms need no projection of
+    their own."""
     n = x.shape[0]
     kk = trig.shape[1]
     step = max(stride, 1)
@@ -191,104 +212,158 @@ def _fit_one(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0:
     ncoarse = nq
     best = -np.inf
     best_k = 0
-    cur = 0  # (rows cur, cur + 1 of w: this angle's projections; rows bst, bst + 1: best_k's, once kept)
-    bst = 2
+    bst = 2  # (row pair bst of w, rows 2·bst and 2·bst + 1: best_k's projections, once kept)
     kept = False
     blo1 = bhi1 = blo2 = bhi2 = 0.0
     q = 0
     while q < nq:
-        k = order[q]
-        c = trig[0, k]
-        s = trig[1, k]
-        lo1 = np.inf
-        hi1 = -np.inf
-        lo2 = np.inf
-        hi2 = -np.inf
-        t1 = 0.0
-        t2 = 0.0
+        two = q + 1 < nq  # (a lone last angle is scored twice and compared once)
+        ka = order[q]
+        kb = order[q + 1] if two else ka
+        ra = 2 * ((bst + 1) % 3)  # (the rows of the two row pairs that are not the best angle's)
+        rb = 2 * ((bst + 2) % 3)
+        ca = trig[0, ka]
+        sa = trig[1, ka]
+        cb = trig[0, kb]
+        sb = trig[1, kb]
+        lo1a = np.inf
+        hi1a = -np.inf
+        lo2a = np.inf
+        hi2a = -np.inf
+        lo1b = np.inf
+        hi1b = -np.inf
+        lo2b = np.inf
+        hi2b = -np.inf
+        t1a = 0.0
+        t2a = 0.0
+        t1b = 0.0
+        t2b = 0.0
         for i in range(n):
-            u = c * x[i] + s * y[i]
-            v = -s * x[i] + c * y[i]
-            w[cur, i] = u
-            w[cur + 1, i] = v
-            t1 += u
-            t2 += v
-            lo1 = min(lo1, u)
-            hi1 = max(hi1, u)
-            lo2 = min(lo2, v)
-            hi2 = max(hi2, v)
+            u = ca * x[i] + sa * y[i]
+            v = -sa * x[i] + ca * y[i]
+            w[ra, i] = u
+            w[ra + 1, i] = v
+            t1a += u
+            t2a += v
+            lo1a = min(lo1a, u)
+            hi1a = max(hi1a, u)
+            lo2a = min(lo2a, v)
+            hi2a = max(hi2a, v)
+            u = cb * x[i] + sb * y[i]
+            v = -sb * x[i] + cb * y[i]
+            w[rb, i] = u
+            w[rb + 1, i] = v
+            t1b += u
+            t2b += v
+            lo1b = min(lo1b, u)
+            hi1b = max(hi1b, u)
+            lo2b = min(lo2b, v)
+            hi2b = max(hi2b, v)
         if criterion == 0:
-            sc = -(hi1 - lo1) * (hi2 - lo2)
+            sca = -(hi1a - lo1a) * (hi2a - lo2a)
+            scb = -(hi1b - lo1b) * (hi2b - lo2b)
         else:
-            f1 = _near_side_known(n, lo1, hi1, t1)
-            f2 = _near_side_known(n, lo2, hi2, t2)
+            f1 = _near_side_known(n, lo1a, hi1a, t1a)
+            f2 = _near_side_known(n, lo2a, hi2a, t2a)
             if f1 < 0 or f2 < 0:
-                sa1 = 0.0
-                sb1 = 0.0
-                sa2 = 0.0
-                sb2 = 0.0
-                for i in range(n):
-                    sa1 += (hi1 - w[cur, i]) ** 2
-                    sb1 += (w[cur, i] - lo1) ** 2
-                    sa2 += (hi2 - w[cur + 1, i]) ** 2
-                    sb2 += (w[cur + 1, i] - lo2) ** 2
-                use_hi1 = sa1 < sb1
-                use_hi2 = sa2 < sb2
+                use_hi1a, use_hi2a = _near_sides(w, ra, n, lo1a, hi1a, lo2a, hi2a)
             else:
-                use_hi1 = f1 == 1
-                use_hi2 = f2 == 1
+                use_hi1a = f1 == 1
+                use_hi2a = f2 == 1
+            f1 = _near_side_known(n, lo1b, hi1b, t1b)
+            f2 = _near_side_known(n, lo2b, hi2b, t2b)
+            if f1 < 0 or f2 < 0:
+                use_hi1b, use_hi2b = _near_sides(w, rb, n, lo1b, hi1b, lo2b, hi2b)
+            else:
+                use_hi1b = f1 == 1
+                use_hi2b = f2 == 1
             if criterion == 1:
-                sc = 0.0
+                sca = 0.0
+                scb = 0.0
                 for i in range(n):
-                    d1 = hi1 - w[cur, i] if use_hi1 else w[cur, i] - lo1
-                    d2 = hi2 - w[cur + 1, i] if use_hi2 else w[cur + 1, i] - lo2
-                    sc += 1.0 / max(min(d1, d2), d0)
+                    d1 = hi1a - w[ra, i] if use_hi1a else w[ra, i] - lo1a
+                    d2 = hi2a - w[ra + 1, i] if use_hi2a else w[ra + 1, i] - lo2a
+                    sca += 1.0 / max(min(d1, d2), d0)
+                    d1 = hi1b - w[rb, i] if use_hi1b else w[rb, i] - lo1b
+                    d2 = hi2b - w[rb + 1, i] if use_hi2b else w[rb + 1, i] - lo2b
+                    scb += 1.0 / max(min(d1, d2), d0)
             else:
-                s1 = 0.0
-                q1 = 0.0
-                m1 = 0
-                s2 = 0.0
-                q2 = 0.0
-                m2 = 0
+                s1a = 0.0
+                q1a = 0.0
+                m1a = 0
+                s2a = 0.0
+                q2a = 0.0
+                m2a = 0
+                s1b = 0.0
+                q1b = 0.0
+                m1b = 0
+                s2b = 0.0
+                q2b = 0.0
+                m2b = 0
                 for i in range(n):
-                    d1 = hi1 - w[cur, i] if use_hi1 else w[cur, i] - lo1
-                    d2 = hi2 - w[cur + 1, i] if use_hi2 else w[cur + 1, i] - lo2
+                    d1 = hi1a - w[ra, i] if use_hi1a else w[ra, i] - lo1a
+                    d2 = hi2a - w[ra + 1, i] if use_hi2a else w[ra + 1, i] - lo2a
                     if d1 < d2:
-                        s1 += d1
-                        q1 += d1 * d1
-                        m1 += 1
+                        s1a += d1
+                        q1a += d1 * d1
+                        m1a += 1
                     else:
-                        s2 += d2
-                        q2 += d2 * d2
-                        m2 += 1
-                v1 = q1 / m1 - (s1 / m1) ** 2 if m1 > 0 else 0.0
-                v2 = q2 / m2 - (s2 / m2) ** 2 if m2 > 0 else 0.0
-                sc = -v1 - v2
+                        s2a += d2
+                        q2a += d2 * d2
+                        m2a += 1
+                    d1 = hi1b - w[rb, i] if use_hi1b else w[rb, i] - lo1b
+                    d2 = hi2b - w[rb + 1, i] if use_hi2b else w[rb + 1, i] - lo2b
+                    if d1 < d2:
+                        s1b += d1
+                        q1b += d1 * d1
+                        m1b += 1
+                    else:
+                        s2b += d2
+                        q2b += d2 * d2
+                        m2b += 1
+                v1 = q1a / m1a - (s1a / m1a) ** 2 if m1a > 0 else 0.0
+                v2 = q2a / m2a - (s2a / m2a) ** 2 if m2a > 0 else 0.0
+                sca = -v1 - v2
+                v1 = q1b / m1b - (s1b / m1b) ** 2 if m1b > 0 else 0.0
+                v2 = q2b / m2b - (s2b / m2b) ** 2 if m2b > 0 else 0.0
+                scb = -v1 - v2
+        # (the two angles compared in their order, as one at a time)
         if q < ncoarse:
-            take = sc > best + 1e-12
+            take = sca > best + 1e-12
         else:
-            take = sc > best + 1e-12 or (abs(sc - best) <= 1e-12 and k < best_k)
+            take = sca > best + 1e-12 or (abs(sca - best) <= 1e-12 and ka < best_k)
         if take:
-            best = sc
-            best_k = k
-            blo1, bhi1, blo2, bhi2 = lo1, hi1, lo2, hi2
-            bst = cur
-            cur = 2 - cur
+            best = sca
+            best_k = ka
+            blo1, bhi1, blo2, bhi2 = lo1a, hi1a, lo2a, hi2a
+            bst = ra // 2
             kept = True
-        q += 1
+        if two:
+            if q + 1 < ncoarse:
+                take = scb > best + 1e-12
+            else:
+                take = scb > best + 1e-12 or (abs(scb - best) <= 1e-12 and kb < best_k)
+            if take:
+                best = scb
+                best_k = kb
+                blo1, bhi1, blo2, bhi2 = lo1b, hi1b, lo2b, hi2b
+                bst = rb // 2
+                kept = True
+        q += 2 if two else 1
         if q == ncoarse and step > 1:  # the fine angles: within one coarse step of the coarse best
             for dk in range(-step + 1, step):
                 if dk != 0:
                     order[nq] = (best_k + dk) % kk
                     nq += 1
+    r = 2 * bst
     if kept:  # (the same products and bounds as _project's of best_k, made when best_k was scored)
         lo1, hi1, lo2, hi2 = blo1, bhi1, blo2, bhi2
     else:  # (no angle accepted: NaN scores)
-        lo1, hi1, lo2, hi2 = _project(x, y, trig[0, best_k], trig[1, best_k], w[bst], w[bst + 1])
+        lo1, hi1, lo2, hi2 = _project(x, y, trig[0, best_k], trig[1, best_k], w[r], w[r + 1])
     ss = 0.0
     for i in range(n):
-        r = min(min(hi1 - w[bst, i], w[bst, i] - lo1), min(hi2 - w[bst + 1, i], w[bst + 1, i] - lo2))
-        ss += r * r
+        d = min(min(hi1 - w[r, i], w[r, i] - lo1), min(hi2 - w[r + 1, i], w[r + 1, i] - lo2))
+        ss += d * d
     out[0] = trig[2, best_k]
     out[1] = lo1
     out[2] = hi1
@@ -535,7 +610,7 @@ def fit_cluster_rows(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask
     c1 = np.empty(nmax)  # (work space of _fit_one, once per call)
     c2 = np.empty(nmax)
     c3 = np.empty(nmax)
-    w4 = np.empty((4, nmax))
+    w4 = np.empty((6, nmax))
     order = np.empty(angles.shape[0] + 2 * max(stride, 1), dtype=np.int64)
     for c in range(k):
         a = offsets[c]
