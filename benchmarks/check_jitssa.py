@@ -10,10 +10,11 @@ redefinitions, the warnings); numba's result on the real blocks goes on to the c
 lists (``jitssa.fast_list_vars``) are installed first, and every statement's ``list_vars`` (and each assigned
 instruction's) is compared with numba's own, object by object, on each function's blocks; every call of
 ``analysis.compute_use_defs`` in the run gets numba's and ``jitssa.fast_compute_use_defs``'s sets compared (contents
-and iteration order) and returns numba's. Prints a JSON line: SSA calls, same, differing
-(each dumped to ``--out-dir``), statements, phi nodes, process CPU of numba's pass and of the sparse one (garbage
-collector off), fallbacks to numba's pass, variable lists same / differing, ``compute_use_defs`` calls same /
-differing and their CPU both ways.
+and iteration order) and returns numba's; so does every call of ``analysis.compute_live_map`` (numba's against
+``jitssa.fast_compute_live_map``: the blocks in order, each set's contents). Prints a JSON line: SSA calls, same,
+differing (each dumped to ``--out-dir``), statements, phi nodes, process CPU of numba's pass and of the sparse one
+(garbage collector off), fallbacks to numba's pass, variable lists same / differing, ``compute_use_defs`` and
+``compute_live_map`` calls same / differing and their CPU both ways.
 
     PYTHONPATH=src python benchmarks/check_jitssa.py [--out-dir DIR]
 
@@ -30,7 +31,6 @@ import os
 import sys
 import tempfile
 import time
-import types
 import warnings
 from pathlib import Path
 from typing import Any
@@ -103,15 +103,16 @@ def shadow(out_dir: str | None = None) -> dict[str, Any]:
     from dynslam2d import jitssa
 
     originals = [getattr(getattr(ir, c), n) for c, n in LIST_ATTRS]
-    numba_use_defs = types.FunctionType(analysis.compute_use_defs.__code__, analysis.__dict__)
-    if not (jitssa.fast_list_vars() and jitssa.sparse_ssa() and jitssa.lean_use_defs()):
+    if not (jitssa.fast_list_vars() and jitssa.sparse_ssa() and jitssa.lean_use_defs() and jitssa.bit_live_map()):
         raise RuntimeError("jitssa not installed (numba's sources differ, or installed before)")
+    numba_use_defs, numba_live_map = analysis.compute_use_defs.__wrapped__, analysis.compute_live_map.__wrapped__
     fasts = [getattr(getattr(ir, c), n) for c, n in LIST_ATTRS]
     numba_run_ssa = ssa._run_ssa._dynslam2d_original
     stats: dict[str, Any] = {"calls": 0, "same": 0, "differ": 0, "statements": 0, "phis": 0, "cpu_numba_s": 0.0,
                              "cpu_sparse_s": 0.0, "lists_same": 0, "lists_differ": 0, "fallbacks": 0,
                              "use_defs_same": 0, "use_defs_differ": 0, "cpu_use_defs_numba_s": 0.0,
-                             "cpu_use_defs_lean_s": 0.0}
+                             "cpu_use_defs_lean_s": 0.0, "live_maps_same": 0, "live_maps_differ": 0,
+                             "cpu_live_map_numba_s": 0.0, "cpu_live_map_bits_s": 0.0}
 
     def use_defs(blocks: Any) -> Any:  # numba's and jitssa's compute_use_defs: the same sets, filled in the same order
         t0 = time.process_time()
@@ -127,6 +128,20 @@ def shadow(out_dir: str | None = None) -> dict[str, Any]:
         return theirs
 
     analysis._dynslam2d_compute_use_defs = use_defs
+
+    def live_map(cfg: Any, blocks: Any, var_use_map: Any, var_def_map: Any) -> Any:  # numba's and jitssa's
+        t0 = time.process_time()
+        theirs = numba_live_map(cfg, blocks, var_use_map, var_def_map)
+        t1 = time.process_time()
+        ours = jitssa.fast_compute_live_map(cfg, blocks, var_use_map, var_def_map)
+        t2 = time.process_time()
+        stats["cpu_live_map_numba_s"] += t1 - t0
+        stats["cpu_live_map_bits_s"] += t2 - t1
+        same = list(theirs) == list(ours) and theirs == ours  # (numba sorts what it takes from these sets)
+        stats["live_maps_same" if same else "live_maps_differ"] += 1
+        return theirs
+
+    analysis._dynslam2d_compute_live_map = live_map
 
     def put(funcs: list[Any]) -> None:
         for (c, n), f in zip(LIST_ATTRS, funcs):

@@ -1,5 +1,6 @@
-"""numba's SSA pass run only on the statements holding each violator, and numba's variable lists in one traversal,
-give the same IR and code (dynslam2d.jitssa, issue 13 item 2, docs/speed.md pass ssa36)."""
+"""numba's SSA pass run only on the statements holding each violator, numba's variable lists in one traversal, its
+use / def sets with each assignment listed once and its live-variable map over bit masks give the same lists, sets, IR
+and code (dynslam2d.jitssa, issue 13 item 2, docs/speed.md passes cold36, ssa36, uni36)."""
 
 from __future__ import annotations
 
@@ -30,6 +31,68 @@ for name, sig in jitmanifest.KERNELS[: int(sys.argv[1])]:
     names.append(name)
 stats["kernels"] = names
 print(json.dumps(stats))
+"""
+
+#: numba's IR of real kernels (loops, branches, inlined calls, tuples and keyword arguments in expressions) before and
+#: after the SSA pass; every statement's variables (``list_vars`` of the statement and of its value, and
+#: ``_rec_list_vars`` of the statement, its attribute dict and its value), every function's use / def sets (contents
+#: and iteration order) and live map with numba's code and with jitssa's, compared in place.
+SAME = r"""
+import json
+from numba.core import analysis, compiler, ir, ssa
+from numba.core.analysis import compute_cfg_from_blocks
+from dynslam2d import jitssa
+ATTRS = (("Inst", "_rec_list_vars"), ("Stmt", "list_vars"), ("Expr", "list_vars"))
+def put(funcs):
+    for (c, n), f in zip(ATTRS, funcs):
+        setattr(getattr(ir, c), n, f)
+numba_lists = [getattr(getattr(ir, c), n) for c, n in ATTRS]
+numba_ud, numba_live = analysis.compute_use_defs, analysis.compute_live_map
+assert jitssa.install() and not jitssa.install()  # (once)
+fast_lists = [getattr(getattr(ir, c), n) for c, n in ATTRS]
+assert all(a is not b for a, b in zip(numba_lists, fast_lists))
+assert analysis.compute_use_defs is numba_ud and analysis.compute_live_map is numba_live  # (the same objects, new code)
+numba_ud, numba_live = numba_ud.__wrapped__, numba_live.__wrapped__
+from dynslam2d.detect import kernels, kernels_update
+from dynslam2d.slam import matcher, raycast
+funcs = [matcher.gated_points, matcher._match_core, raycast._rays, kernels.measure_batch, kernels.shape_update,
+         kernels_update.update_pairs, kernels_update.association_gates]
+def lists(fir):
+    out = []
+    for block in fir.blocks.values():
+        for stmt in block.body:
+            value = getattr(stmt, "value", None)
+            out.append([id(v) for v in stmt.list_vars()])
+            if isinstance(value, ir.Inst):
+                out.append([id(v) for v in value.list_vars()])
+            for val in (stmt, stmt.__dict__, value):
+                out.append([id(v) for v in ir.Inst._rec_list_vars(stmt, val)])
+    return out
+def use_defs(fir):
+    ud = analysis.compute_use_defs(fir.blocks)
+    return [{k: list(v) for k, v in m.items()} for m in ud], ud
+stmts = vars_ = blocks_n = live_n = 0
+for disp in funcs:
+    fir0 = compiler.run_frontend(disp.py_func)
+    for fir in (fir0, ssa.reconstruct_ssa(compiler.run_frontend(disp.py_func))):
+        ours = lists(fir)
+        ud_ours, ud = use_defs(fir)
+        put(numba_lists)
+        theirs = lists(fir)
+        analysis._dynslam2d_compute_use_defs, fast_ud = numba_ud, analysis._dynslam2d_compute_use_defs
+        ud_theirs, _ = use_defs(fir)
+        analysis._dynslam2d_compute_use_defs = fast_ud
+        put(fast_lists)
+        assert ours == theirs, disp
+        assert ud_ours == ud_theirs, disp
+        stmts += sum(len(b.body) for b in fir.blocks.values())
+        vars_ += sum(len(x) for x in ours)
+        cfg = compute_cfg_from_blocks(fir.blocks)
+        live = analysis.compute_live_map(cfg, fir.blocks, ud.usemap, ud.defmap)
+        assert list(live) == list(fir.blocks) and live == numba_live(cfg, fir.blocks, ud.usemap, ud.defmap), disp
+        blocks_n += len(live)
+        live_n += sum(len(v) for v in live.values())
+print(json.dumps({"stmts": stmts, "vars": vars_, "blocks": blocks_n, "live": live_n}))
 """
 
 #: argv[1] "1": dynslam2d.jitssa installed, "0": numba's own. Compiles the matcher's ``gated_points`` and the
@@ -103,6 +166,12 @@ def test_same_ssa_ir_on_the_first_commands_kernels(tmp_path: Path) -> None:
     assert stats["phis"] > 10 and stats["fallbacks"] == 0  # violators were rewritten, by the sparse pass itself
 
 
+def test_same_lists_use_defs_and_live_maps_on_real_kernels(tmp_path: Path) -> None:
+    res = _run(SAME, [], tmp_path, "same")
+    assert res["stmts"] > 5000 and res["vars"] > 30000  # every statement of seven kernels, twice
+    assert res["blocks"] > 500 and res["live"] > 1000  # blocks with variables live across them
+
+
 def test_same_code_and_results(tmp_path: Path) -> None:
     theirs, ours = _run(CODE, ["0"], tmp_path, "0"), _run(CODE, ["1"], tmp_path, "1")
     assert theirs["installed"] == [False, False] and ours["installed"] == [True, True]
@@ -121,10 +190,14 @@ def test_other_sources_left_alone() -> None:
 import json
 from numba.core import ir, ssa
 from dynslam2d import jitssa
-before = (ssa._run_ssa, ir.Inst._rec_list_vars, ir.Stmt.list_vars, ir.Expr.list_vars)
-jitssa.SOURCES["ir"] = "0" * 16
+from numba.core import analysis
+def now():
+    return (ssa._run_ssa, ir.Inst._rec_list_vars, ir.Stmt.list_vars, ir.Expr.list_vars,
+            analysis.compute_use_defs.__code__, analysis.compute_live_map.__code__)
+before = now()
+jitssa.SOURCES["analysis"] = "0" * 16
 done = jitssa.install()
-after = (ssa._run_ssa, ir.Inst._rec_list_vars, ir.Stmt.list_vars, ir.Expr.list_vars)
+after = now()
 print(json.dumps({"done": done, "same": all(a is b for a, b in zip(before, after))}))
 """
     res = subprocess.run([sys.executable, "-c", script], env=dict(os.environ, PYTHONPATH=SRC), capture_output=True,

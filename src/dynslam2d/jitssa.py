@@ -1,9 +1,11 @@
-"""numba's SSA reconstruction and its variable lists without the repeated full passes (issue 13 item 2).
+"""numba's SSA reconstruction, variable lists, use / def sets and live-variable map with less Python work (issue 13
+item 2).
 
-A cold run of the README's first command spends about a second of one core's CPU in numba's ``reconstruct_ssa`` pass
-and as much again listing the variables of IR statements (``ir.Inst._rec_list_vars``: about four million recursive
-calls, most of them from ``analysis.compute_use_defs``); docs/speed.md, passes cold35 and ssa36. Three
-source-checked replacements, installed by :func:`install` at the first compile of the command line's processes
+A cold run of the README's first command spends about a second of one core's CPU in numba's ``reconstruct_ssa`` pass,
+as much again listing the variables of IR statements (``ir.Inst._rec_list_vars``: about four million recursive calls,
+most of them from ``analysis.compute_use_defs``) and over a second in ``analysis.compute_live_map``; docs/speed.md,
+passes cold35, cold36, ssa36 and uni36 (which left one implementation of each here). Four source-checked
+replacements, installed by :func:`install` at the first compile of the command line's processes
 (:func:`dynslam2d.jitcache.lean_numba_compile`):
 
 - :func:`sparse_run_ssa` replaces ``numba.core.ssa._run_ssa``. numba's pass rewrites, for every variable assigned
@@ -16,6 +18,7 @@ source-checked replacements, installed by :func:`install` at the first compile o
 - :func:`fast_list_vars` gives ``ir.Inst._rec_list_vars`` and the ``list_vars`` of ``ir.Stmt`` and ``ir.Expr`` one
   traversal that appends to a single list instead of a list per visited value: the same variables in the same order.
 - :func:`lean_use_defs`: ``analysis.compute_use_defs`` lists an assignment's variables once instead of twice.
+- :func:`bit_live_map`: ``analysis.compute_live_map``'s fixed points over bit masks instead of sets of names.
 
 All are done only when numba's ``ssa.py``, ``ir.py``, ``ir_utils.py`` and ``analysis.py`` have the SHA-256 checked
 here (numba 0.68, :data:`SOURCES`); otherwise numba is left as it is.
@@ -31,7 +34,7 @@ from typing import Any
 #: SHA-256 (first 16 hex digits) of the numba files whose code the replacements reproduce or rely on (numba 0.68.1):
 #: ``ssa.py`` (the pass and its handlers), ``ir.py`` (``list_vars``, ``Block``, ``Scope.redefine``, the copy
 #: semantics of ``Expr``), ``ir_utils.py`` (``replace_vars_inner`` / ``replace_vars_stmt``, which the handlers call)
-#: and ``analysis.py`` (``compute_use_defs``).
+#: and ``analysis.py`` (``compute_use_defs``, ``compute_live_map``).
 SOURCES = {"ssa": "d20accd92757fef6", "ir": "e6c8061cecb65e68", "ir_utils": "6deaf6b1d9401cc4",
            "analysis": "04b7eefad8abb7c9"}
 
@@ -409,6 +412,25 @@ def _rewrite(current: dict[Any, Any], labels: list[Any], held: dict[Any, list[se
     return changed
 
 
+def _swap_code(name: str, params: str, impl: Any) -> bool:
+    """Have numba's ``analysis.<name>`` run ``impl``: the function object keeps its identity (modules imported it by
+    name) and its code becomes a call of ``analysis._dynslam2d_<name>`` (= ``impl``); numba's own stays reachable as
+    its ``__wrapped__`` (for tests and benchmarks/check_jitssa.py). Returns whether it changed numba."""
+    from numba.core import analysis
+
+    func = getattr(analysis, name)
+    space: dict[str, Any] = {}
+    exec(compile(f"def {name}({params}):\n    return _dynslam2d_{name}({params})\n", analysis.__file__, "exec"),
+         space)
+    code = space[name].__code__
+    if code.co_freevars != func.__code__.co_freevars or code.co_argcount != func.__code__.co_argcount:
+        return False
+    setattr(analysis, f"_dynslam2d_{name}", impl)
+    func.__wrapped__ = type(func)(func.__code__, vars(analysis), name)
+    func.__code__ = code
+    return True
+
+
 def lean_use_defs() -> bool:
     """Have numba's ``analysis.compute_use_defs`` (each block's used and defined variable names; about 1200 calls on
     a cold run of the README's first command, most from ``postproc.PostProcessor``) list an ``ir.Assign``'s
@@ -419,23 +441,26 @@ def lean_use_defs() -> bool:
     order). For an assignment with numba's three attributes the statement's list is the value's list (``list_vars``
     of an instruction, ``[value]`` of a variable, empty for a constant, global, free variable or argument) plus the
     target, so it is built from the first; any other statement is listed as numba does. The same sets, filled in
-    the same order (:func:`fast_compute_use_defs`). numba's function keeps its identity (several modules imported it
-    by name): its code becomes a call of this one. Done only when numba's sources are those checked
-    (:data:`SOURCES`). Returns whether it changed numba (not when called again)."""
+    the same order (:func:`fast_compute_use_defs`). Swapped in by :func:`_swap_code`. Done only when numba's sources
+    are those checked (:data:`SOURCES`). Returns whether it changed numba (not when called again)."""
     from numba.core import analysis
 
     if hasattr(analysis, "_dynslam2d_compute_use_defs") or not _sources_checked():
         return False
-    func = analysis.compute_use_defs
-    space: dict[str, Any] = {}
-    exec(compile("def compute_use_defs(blocks):\n    return _dynslam2d_compute_use_defs(blocks)\n",
-                 analysis.__file__, "exec"), space)
-    code = space["compute_use_defs"].__code__
-    if code.co_freevars != func.__code__.co_freevars or code.co_argcount != func.__code__.co_argcount:
+    return _swap_code("compute_use_defs", "blocks", fast_compute_use_defs)
+
+
+def bit_live_map() -> bool:
+    """Have numba's ``analysis.compute_live_map`` (the variables live at each block's entry; called with
+    ``compute_use_defs`` by every ``PostProcessor.run`` and dead-code removal) run its two fixed points over bit
+    masks instead of Python sets of names (:func:`fast_compute_live_map`, pass cold36). Swapped in by
+    :func:`_swap_code`. Done only when numba's sources are those checked (:data:`SOURCES`). Returns whether it
+    changed numba (not when called again)."""
+    from numba.core import analysis
+
+    if hasattr(analysis, "_dynslam2d_compute_live_map") or not _sources_checked():
         return False
-    analysis._dynslam2d_compute_use_defs = fast_compute_use_defs
-    func.__code__ = code
-    return True
+    return _swap_code("compute_live_map", "cfg, blocks, var_use_map, var_def_map", fast_compute_live_map)
 
 
 def fast_compute_use_defs(blocks: Any) -> Any:
@@ -491,9 +516,78 @@ def fast_compute_use_defs(blocks: Any) -> Any:
     return analysis._use_defs_result(usemap=var_use_map, defmap=var_def_map)
 
 
+def fast_compute_live_map(cfg: Any, blocks: Any, var_use_map: Any, var_def_map: Any) -> dict[Any, set[str]]:
+    """numba's ``analysis.compute_live_map`` (0.68) with each block's variable sets as bits of one Python int.
+
+    The same two least fixed points: the variables defined or used on some path to each block's entry ("def
+    reach": a block's own uses and definitions, propagated to its successors in topological order), then the
+    variables live at each block's entry (its uses, plus what is live at a successor's entry, reachable at the
+    block and not defined in it, propagated backwards); each loop runs until no set grows, as numba's does. Returns
+    ``{block: set of names}`` for every block of ``blocks``, each set starting from the block's use set as numba's."""
+    topo_order = cfg.topo_order()
+    bit: dict[str, int] = {}
+    names: list[str] = []
+
+    def mask(vars_: Any) -> int:
+        m = 0
+        for name in vars_:
+            b = bit.get(name)
+            if b is None:
+                b = bit[name] = 1 << len(names)
+                names.append(name)
+            m |= b
+        return m
+
+    use = {o: mask(s) for o, s in var_use_map.items()}
+    dfn = {o: mask(s) for o, s in var_def_map.items()}
+    succs = {o: [d for d, _ in cfg.successors(o)] for o in topo_order}
+    reach: dict[Any, int] = {}
+    changed = True
+    while changed:  # numba's def_reach, to its fixed point
+        changed = False
+        for o in topo_order:
+            old = reach.get(o, 0)
+            r = old | dfn[o] | use[o]
+            if r != old:
+                reach[o] = r
+                changed = True
+            for d in succs[o]:
+                before = reach.get(d, 0)
+                after = before | r
+                if after != before:
+                    reach[d] = after
+                    changed = True
+    live = {o: use[o] for o in blocks.keys()}
+    preds = {o: [p for p, _ in cfg.predecessors(o)] for o in topo_order}
+    order = topo_order[::-1]
+    changed = True
+    while changed:  # numba's liveness, to its fixed point
+        changed = False
+        for o in order:
+            here = live[o]
+            for p in preds[o]:
+                before = live[p]
+                after = before | (here & reach.get(p, 0) & ~dfn[p])
+                if after != before:
+                    live[p] = after
+                    changed = True
+                    if p == o:
+                        here = after
+    live_map = {}
+    for o in blocks.keys():
+        found = set(var_use_map[o])
+        extra = live[o] & ~use[o]
+        while extra:
+            low = extra & -extra
+            found.add(names[low.bit_length() - 1])
+            extra ^= low
+        live_map[o] = found
+    return live_map
+
+
 def install() -> bool:
-    """Install :func:`fast_list_vars`, :func:`lean_use_defs` and :func:`sparse_ssa` (numba's sources checked); returns
-    whether any was installed. Called by :func:`dynslam2d.jitcache.lean_numba_compile` at the first compile."""
-    lists = fast_list_vars()
-    use_defs = lean_use_defs()
-    return sparse_ssa() or lists or use_defs
+    """Install :func:`fast_list_vars`, :func:`lean_use_defs`, :func:`bit_live_map` and :func:`sparse_ssa` (numba's
+    sources checked); returns whether any was installed. Called by :func:`dynslam2d.jitcache.lean_numba_compile` at
+    the first compile."""
+    done = [fast_list_vars(), lean_use_defs(), bit_live_map(), sparse_ssa()]
+    return any(done)
