@@ -324,7 +324,7 @@ _SPLIT = ("segment_scan", "fit_clusters", "classify_batch", "admit_long_clusters
           "segment_means", "linear_sum_assignment", "assign_groups", "select_detections", "cv_predict",
           "association_rows", "size_jump_gate", "pair_priors", "shape_update", "accel_candidates", "accel_bound",
           "manage_speed_rows", "manage_rows", "report_boxes", "world_points", "merge_legs", "association_gates",
-          "fragment_hosts_rows", "report_rows",
+          "fragment_hosts_rows", "report_rows", "manage_counters",
           "kalman_pairs")
 
 

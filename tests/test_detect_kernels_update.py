@@ -99,12 +99,27 @@ def test_accel_bound_is_the_former_per_row_loop() -> None:
     assert bounded > 5000
 
 
-def test_manage_speed_rows_is_manage_rows_with_python_speeds() -> None:
-    """``manage_speed_rows`` gives ``manage_rows``' outcomes and σ with the speeds Python's math.hypot gives (the
-    values ``Tracker._manage`` handed to ``manage_rows`` before), bit for bit, on random rows in a shuffled order:
-    non-finite covariances, speeds at rest and below 1e-9, velocities whose libm hypot differs from math.hypot."""
+def test_manage_counters_speeds_are_manage_rows_with_python_speeds() -> None:
+    """``manage_counters`` gives ``manage_rows``' covariance outcomes and σ with the speeds Python's math.hypot gives
+    (the values ``Tracker._manage`` handed to ``manage_rows`` before pass cnt36), bit for bit, on random rows in a
+    shuffled order: non-finite covariances, speeds at rest and below 1e-9, velocities whose libm hypot differs from
+    math.hypot. All rows confirmed and updated, no speed limit: the outcome is "updated" or "updated, covariance
+    deleted" exactly where ``manage_rows`` says the covariance fails."""
     from dynslam2d.detect.kernels import manage_rows
-    from dynslam2d.detect.kernels_update import manage_speed_rows
+    from dynslam2d.detect.kernels_update import (
+        C_STATE,
+        C_UPD,
+        MC_DEL_COVARIANCE,
+        MC_UPD_FIRM,
+        MC_UPDATED,
+        ST_CONFIRMED,
+        UP_MAX_COAST,
+        UP_MAX_POS_SIG,
+        UP_MAX_SPEED,
+        UP_NEED,
+        UP_WINDOW,
+        manage_counters,
+    )
 
     rng = np.random.default_rng(5)
     n = 6000
@@ -118,10 +133,17 @@ def test_manage_speed_rows_is_manage_rows_with_python_speeds() -> None:
     speeds = list(map(math.hypot, X[rows, 2].tolist(), X[rows, 3].tolist()))
     assert any(s != float(h) for s, h in zip(speeds, np.hypot(X[rows, 2], X[rows, 3])))  # (libm's differs here)
     bad0, sig0 = manage_rows(P, X, rows, np.array(speeds), 1.5)
-    bad, sig, speed = manage_speed_rows(P, X, rows, 1.5)
+    CI = np.zeros((n, 6), dtype=np.int64)
+    CI[:, C_STATE] = ST_CONFIRMED
+    CI[:, C_UPD] = 1
+    q = np.zeros(UP_MAX_POS_SIG + 1)
+    q[UP_WINDOW], q[UP_NEED], q[UP_MAX_COAST], q[UP_MAX_SPEED], q[UP_MAX_POS_SIG] = 3, 2, 1.0, np.inf, 1.5
+    out, sig, speed = manage_counters(P, X, CI, np.zeros(n), rows, q, 0.0)
     assert _bits(speed.tolist()) == _bits(speeds)
-    assert bad.tolist() == bad0.tolist() and sig.tobytes() == sig0.tobytes()
-    assert 0 < bad.sum() < n
+    assert (out == MC_UPDATED + MC_DEL_COVARIANCE).tolist() == bad0.tolist()
+    assert set(out[~bad0].tolist()) == {MC_UPD_FIRM}
+    assert sig.tobytes() == sig0.tobytes()
+    assert 0 < bad0.sum() < n and not CI[:, C_UPD].any()
 
 
 def _kalman_pairs_python(Xs, Ps, sel, H, zm, Rm, bound, hits, after, lim, X, P, trows) -> tuple:

@@ -16,7 +16,8 @@ import numpy as np
 
 from dynslam2d.config import Config
 from dynslam2d.detect import trackmanage
-from dynslam2d.detect.kernels_update import C_UPD, manage_speed_rows
+from dynslam2d.detect.kernels import manage_rows
+from dynslam2d.detect.kernels_update import C_UPD
 from dynslam2d.detect.trackmanage import _fast_reason_texts, _slow_reason, _slow_reason_texts
 from dynslam2d.detect.tracktable import _NO_BEAMS, COASTING, CONFIRMED, TENTATIVE
 from dynslam2d.pipeline import Pipeline
@@ -68,8 +69,9 @@ def _former_manage(self, t: float, updated: set[int]) -> None:
     probe = self._free is not None
     slow_tail = f" m/s ≤ v_min {v_min:.2f}"
     order = self._rows()
-    bads, sigs, speeds = manage_speed_rows(self._P, self._X, order, max_sig)
-    bads, sigs, speeds = bads.tolist(), sigs.tolist(), speeds.tolist()
+    speeds = [math.hypot(self._X[k, 2], self._X[k, 3]) for k in order.tolist()]
+    bads, sigs = manage_rows(self._P, self._X, order, np.array(speeds), max_sig)
+    bads, sigs = bads.tolist(), sigs.tolist()
     nears = self._WN[:, 2].take(order).tolist()
     MEV, WN = self._MEV, self._WN
     fast_reasons = _fast_reason_texts(nsus)

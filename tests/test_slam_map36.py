@@ -1,9 +1,10 @@
 """Pass map36: the processor's and the map's per-scan Python written inline give the values of the forms they replace.
 
 ``degeneracy_values`` against ``degeneracy`` (every field, as bits), the processor's inlined prediction, motion
-model and map-update test against ``_predict`` / ``_model_rates`` / ``_wrap``, ``update_map`` against
-``_integrate``, and ``MultiResMap.integrate``'s fast path (ndarray points, the default three levels in one call)
-against its general path (points as lists, which take the conversion and ``_integrate_fused``).
+model and map-update test against ``_predict`` / ``_model_rates`` / ``_wrap``, ``update_map`` (the match's points
+reused) against ``_integrate`` of the match result's, and ``MultiResMap.integrate``'s fast path (ndarray points, the
+default three levels in one call) against its general path (points as lists, which take the conversion and
+``_integrate_fused``).
 """
 
 from __future__ import annotations
@@ -179,7 +180,8 @@ def test_inline_prediction_and_motion_model(constant_velocity: bool) -> None:
 
 
 def test_update_map_is_integrate() -> None:
-    """``update_map`` (``_integrate`` inline) leaves the map, counters and last map pose of ``_integrate``."""
+    """``update_map`` (the match's gated points reused, then ``_integrate``) leaves the map, counters and last map
+    pose of ``_integrate`` on the match result's points."""
     a, b = HectorSlam(SlamConfig()), HectorSlam(SlamConfig())
     for scan in _scans(40):
         ra, rb = a.match(scan), b.match(scan)

@@ -146,53 +146,14 @@ def accel_bound(X_prior: np.ndarray, X_new: np.ndarray, rows: np.ndarray, lim: f
 
 
 @njit(cache=True)
-def manage_speed_rows(P: np.ndarray, X: np.ndarray, rows: np.ndarray, max_sig: float) -> tuple:
-    """``kernels.manage_rows`` with the speeds computed here: (n,) bool "covariance fails", (n,) σ of the speed
-    along the velocity (m/s) and (n,) the speed of the state rows ``rows`` (m/s), Python's ``math.hypot`` of the
-    velocity bit for bit (:func:`py_hypot`), as ``Tracker._manage``'s reasons print it — instead of a ``math.hypot``
-    per track in Python handed to the kernel. The tests and σ: ``manage_rows``' arithmetic, operation for operation
-    (``kernels.manage_rows`` stays, with its signature, for the older checkouts' step modules that
-    ``benchmarks/bench_tracker_ab.py`` loads against this checkout's kernels)."""
-    n = rows.shape[0]
-    bad = np.empty(n, dtype=np.bool_)
-    bad[:] = False
-    sig = np.empty(n)
-    sig[:] = 0.0
-    speed = np.empty(n)
-    for i in range(n):
-        k = rows[i]
-        s = py_hypot(X[k, 2], X[k, 3])
-        speed[i] = s
-        fin = True
-        for a in range(4):
-            for b in range(4):
-                if not np.isfinite(P[k, a, b]):
-                    fin = False
-        p00 = P[k, 0, 0]
-        p11 = P[k, 1, 1]
-        if not fin or math.sqrt(p11 if p11 > p00 else p00) > max_sig:
-            bad[i] = True
-            continue
-        p22 = P[k, 2, 2]
-        p33 = P[k, 3, 3]
-        if s > 1e-9:
-            u0 = X[k, 2] / s
-            u1 = X[k, 3] / s
-            q = (u0 * p22 + u1 * P[k, 3, 2]) * u0 + (u0 * P[k, 2, 3] + u1 * p33) * u1
-            sig[i] = math.sqrt(0.0 if 0.0 > q else q)
-        else:
-            sig[i] = math.sqrt(p33 if p33 > p22 else p22)
-    return bad, sig, speed
-
-
-@njit(cache=True)
 def manage_counters(P: np.ndarray, X: np.ndarray, CI: np.ndarray, CL: np.ndarray, rows: np.ndarray, q: np.ndarray,
                     t: float) -> tuple:
     """``Tracker._manage``'s counter tests of the live tracks (state rows ``rows``) as one pass over their rows of the
-    counter table ``CI`` (columns ``C_*``) and last-hit stamps ``CL`` (s), with :func:`manage_speed_rows`' values (its
-    arithmetic inline) (the covariance test with max_position_sigma (m), σ of the speed along the velocity, the speed as
-    Python's ``math.hypot``): returns (outcome (n,) int8 (``MC_*``), σ (n,), speed (n,), m/s). The tests in the order of
-    the former per-track loop (docs/speed.md passes mgr34, cnt36); the configuration's values from ``q``
+    counter table ``CI`` (columns ``C_*``) and last-hit stamps ``CL`` (s), with ``kernels.manage_rows``' covariance
+    test (max_position_sigma, m) and σ of the speed along the velocity, operation for operation, and the speed as
+    Python's ``math.hypot`` bit for bit (:func:`py_hypot`, as the reasons print it): returns (outcome (n,) int8
+    (``MC_*``), σ (n,), speed (n,), m/s). The tests in the order of the former per-track loop (docs/speed.md passes
+    mgr34, cnt36); the configuration's values from ``q``
     (:func:`update_params`' array: confirm_window, confirm_hits = ``need``, max_coast_time, max_object_speed,
     max_position_sigma). An updated track (``C_UPD`` set by :func:`update_pairs`; cleared here): coasting → confirmed;
     tentative → confirmed with ``need`` hits, deleted when M of N (``need`` of the first ``window``) can no longer be
@@ -212,8 +173,8 @@ def manage_counters(P: np.ndarray, X: np.ndarray, CI: np.ndarray, CL: np.ndarray
     speed = np.empty(n)
     for i in range(n):
         k = rows[i]
-        # (manage_speed_rows' arithmetic for row k, operation for operation, here instead of called: no library of its
-        # own to compile in a run)
+        # (kernels.manage_rows' arithmetic for row k, operation for operation, here instead of called: no library of
+        # its own to compile in a run)
         s = py_hypot(X[k, 2], X[k, 3])
         speed[i] = s
         sig[i] = 0.0

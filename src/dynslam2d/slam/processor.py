@@ -1013,20 +1013,12 @@ class HectorSlam:
             pts, clear = last[1], last[2]
         else:
             pts, clear = self._gate(scan, False, drop)[:2]
-        # (:meth:`_integrate` inline, without its second finite test of the pose: the same steps)
-        if pts.shape[0] < self.config.min_points:
-            return False
-        try:
-            self.map.integrate(pose, pts, clear if clear.shape[0] else None)
-        except MapTooLargeError:
-            self.counts["map_too_large"] += 1
-            return False
-        self._last_map_pose = pose
-        self.n_map_updates += 1
-        return True
+        return self._integrate(pts, clear, pose)
 
     def _integrate(self, pts: np.ndarray, clear: np.ndarray, pose: Pose2D) -> bool:
-        if pts.shape[0] < self.config.min_points or not pose.is_finite():
+        """Integrate the gated points ``pts`` / no-return ends ``clear`` (laser frame, m) at the finite laser pose
+        ``pose`` (both callers test it first) unless fewer than ``min_points``; True if the map was updated."""
+        if pts.shape[0] < self.config.min_points:
             return False
         # (``pts`` are :meth:`_gate`'s, both callers': finite ranges of valid beams times the finite cos / sin of
         # validated beam angles, always finite — pass rest18 dropped the per-update finite test of every point)
@@ -1045,7 +1037,7 @@ class HectorSlam:
         res = self.match(scan, predicted)
         t0 = time.perf_counter()
         updated = False
-        if not res.rejected and self.needs_map_update(res.pose):
+        if not res.rejected and self.needs_map_update(res.pose) and res.pose.is_finite():
             updated = self._integrate(res.points, res.clear_points, res.pose)
         update_ms = (time.perf_counter() - t0) * 1e3
         return SlamStep(
