@@ -257,7 +257,7 @@ def pipeline_ab(scans: list, other) -> tuple[float, float, float]:
 #: the steps of Tracker.update that --phases times (methods of the tracker, each called from update; a name the
 #: checkout lacks counts 0)
 _PHASES = ("_predict", "_detect", "_associate", "_vacated", "_update_pairs", "_manage", "_clutter_detections",
-           "_hosts_of_fragments", "_birth", "_report")
+           "_hosts_of_fragments", "_birth", "_births", "_report")
 
 
 #: methods called inside those steps that --phases times too (not subtracted from the rest of update): the leg merge

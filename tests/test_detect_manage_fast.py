@@ -251,24 +251,26 @@ def test_manage_is_the_former_single_loop_on_simulated_scenes() -> None:
 
 
 def test_birth_writes_the_birth_state_into_its_rows() -> None:
-    """Every birth of sim:crowd writes ``_birth_state``'s centre (zero velocity) and covariance into the new track's
-    rows of the state arrays (through the views ``k.x`` / ``k.P``), bit for bit, and those views stay the rows."""
+    """Every birth of sim:crowd (a scan's births in one batch, ``_births``, pass trk38) writes ``_birth_state``'s
+    centre (zero velocity) and covariance into the new track's rows of the state arrays, bit for bit, and the
+    track's views ``k.x`` / ``k.P`` are those rows."""
     pipe = Pipeline(Config())
     tr = pipe.tracker
-    own = tr._birth
+    own = tr._births
     births = 0
 
-    def checked(det, t, j):
+    def checked(dets, t, js, updated):
         nonlocal births
-        z, P, _, _ = tr._birth_state(det, j)
-        own(det, t, j)
-        k = tr._tracks[-1]
-        assert tr._X[k.row].tobytes() == np.array([z[0], z[1], 0.0, 0.0]).tobytes()
-        assert tr._P[k.row].tobytes() == P.tobytes()
-        assert k.x.base is tr._X and k.P.base is tr._P
-        births += 1
+        states = [tr._birth_state(dets[j], j)[:2] for j in js]
+        own(dets, t, js, updated)
+        for k, (z, P) in zip(tr._tracks[len(tr._tracks) - len(js):], states):
+            assert tr._X[k.row].tobytes() == np.array([z[0], z[1], 0.0, 0.0]).tobytes()
+            assert tr._P[k.row].tobytes() == P.tobytes()
+            assert k.x.base is tr._X and k.P.base is tr._P
+            assert k.id in updated
+            births += 1
 
-    tr._birth = checked
+    tr._births = checked
     for s in simulate("crowd", duration=10.0).scans:
         pipe.process(s)
     assert births >= 10

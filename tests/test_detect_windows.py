@@ -148,7 +148,7 @@ def test_push_windows_keeps_the_entries_of_the_former_lists() -> None:
 
 class _Shadow(Tracker):
     """A tracker that keeps the former lists of tuples beside its windows (``_Track.ride`` / ``.mev`` before pass
-    trk26, by track id, with the list code of ``_update_tracks``, ``_birth``, ``_revive``) and compares them after
+    trk26, by track id, with the list code of ``_update_tracks``, ``_births``, ``_revive``) and compares them after
     every update."""
 
     def __init__(self, config: DetectConfig) -> None:
@@ -178,10 +178,12 @@ class _Shadow(Tracker):
             _push_lists(ride, mev, k.x.item(0), k.x.item(1), (p.x, p.y, c, s), t, ev, nsus, ride_time)
             self.seen["trimmed"] += len(ride) <= n0
 
-    def _birth(self, det, t, j) -> None:
-        super()._birth(det, t, j)
-        self.lists[self._tracks[-1].id] = ([], [(det.map_structure, det.map_free, det.map_unknown)]
-                                           if self._map is not None else [])
+    def _births(self, dets, t, js, updated) -> None:  # (the births of a scan in one batch, pass trk38)
+        super()._births(dets, t, js, updated)
+        for k, j in zip(self._tracks[len(self._tracks) - len(js):], js):
+            det = dets[j]
+            self.lists[k.id] = ([], [(det.map_structure, det.map_free, det.map_unknown)]
+                                if self._map is not None else [])
 
     def _revive(self, k, det, t, j) -> None:
         super()._revive(k, det, t, j)

@@ -52,6 +52,13 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'),)"),
+    ('dynslam2d.detect.kernels_update.birth_rows',
+     "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(int8, 2, 'C'), "
+     "Array(int64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 3, 'C'), Array(int64, 2, 'C'), "
+     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), "
+     "Array(float64, 2, 'C'), Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
+     "Array(float64, 3, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), "
+     'float64, bool, float64,)'),
     ('dynslam2d.detect.kernels_update.report_rows',
      "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
      "Array(int64, 2, 'C'), Array(int64, 1, 'C'), float64,)"),
@@ -155,6 +162,7 @@ COMPILE_S: dict[str, float] = {
     'dynslam2d.detect.freespace._ref_arrays': 0.09,
     'dynslam2d.detect.kernels.merge_legs': 1.01,
     'dynslam2d.detect.kernels.measure_batch': 0.80,
+    'dynslam2d.detect.kernels_update.birth_rows': 0.41,
     'dynslam2d.detect.kernels_update.report_rows': 0.34,
     'dynslam2d.slam.ledgerkernels.record_cells': 1.85,
     'dynslam2d.slam.ledgerkernels.level_rows': 0.41,

@@ -20,10 +20,16 @@ import numpy as np
 
 from dynslam2d.detect.kernels import (
     _N_PARAMS,
+    G_LB0,
+    G_LB1,
+    G_RADIUS,
     G_SIZE0,
     G_SIZE1,
     G_THETA,
+    GI_HEADING,
     GI_KIND,
+    GI_KNOWN0,
+    GI_KNOWN1,
     accel_candidates,
     association_rows,
     box_row,
@@ -35,7 +41,7 @@ from dynslam2d.detect.kernels import (
     shape_update,
     size_jump_gate,
 )
-from dynslam2d.detect.layout import K_CIRCLE
+from dynslam2d.detect.layout import K_CIRCLE, K_RECT, SIZE_MEASURED
 from dynslam2d.jitbox import njit
 
 _DBL_MIN = 2.2250738585072014e-308  # the smallest normal double (C's DBL_MIN)
@@ -538,6 +544,103 @@ def fragment_hosts_rows(px: np.ndarray, py: np.ndarray, start: np.ndarray, npts:
         ts1[i] = G[k, G_SIZE1]
     return fragment_hosts(px, py, start, npts, det, tx, ty, tth, ts0, ts1, margin)
 
+
+
+@njit(cache=True)
+def birth_rows(X: np.ndarray, P: np.ndarray, G: np.ndarray, Gi: np.ndarray, CI: np.ndarray, CL: np.ndarray,
+               MEV: np.ndarray, WN: np.ndarray, rows: np.ndarray, js: np.ndarray, kind: np.ndarray, theta: np.ndarray,
+               lohi: np.ndarray, rel: np.ndarray, circle: np.ndarray, z: np.ndarray, R: np.ndarray,
+               size_kind: np.ndarray, mev: np.ndarray, q: np.ndarray, speed_var: float, has_map: bool,
+               t: float) -> None:
+    """The rows of the tentative tracks born in one scan, in one call (``Tracker._births``; docs/speed.md, pass
+    trk38): birth i from the scan's detection ``js[i]`` (its rows of the batch arrays ``kind`` … ``circle`` and of
+    the default measurements ``z``, ``R``, ``size_kind``) gets row ``rows[i]`` of the state arrays: state [z, 0, 0]
+    (map frame, m, m/s), covariance R on the position and ``speed_var`` (init_speed_sigma², m²/s²) on each velocity
+    component, the shape row (axis angle, sizes and known flags of ``Tracker._birth_shape``: a rectangle's sizes
+    from its bounds with the default depth where a bound is not real (``q``'s ``UP_DEFAULT_DEPTH*`` columns), a
+    circle's its diameter, a point's its extent at least 0.05 m; the radius for a circle), the counter row
+    (tentative, one hit, no miss, M of N 1 / 1) and last hit ``t`` (s), and its windows: no riding entry, with a map
+    (``has_map``) the detection's map evidence ``mev[i]`` (structure, free, unknown) as the one entry. The same
+    floats as ``Tracker._birth``'s Python: Python's ``max`` / ``min`` (the first argument unless the second is
+    larger / smaller) written out."""
+    dd = q[UP_DEFAULT_DEPTH]
+    ratio = q[UP_DEFAULT_DEPTH_RATIO]
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        j = js[i]
+        kd = kind[j]
+        circ = 0.0
+        if kd == K_RECT:
+            e0 = lohi[j, 2] - lohi[j, 0]
+            e1 = lohi[j, 3] - lohi[j, 1]
+            if rel[j, 0, 0] and rel[j, 0, 1]:
+                s0 = e0
+            else:  # max(e0, min(dd, ratio * max(e1, 0.0)))
+                m = 0.0 if 0.0 > e1 else e1
+                m = ratio * m
+                m = m if m < dd else dd
+                s0 = m if m > e0 else e0
+            if rel[j, 1, 0] and rel[j, 1, 1]:
+                s1 = e1
+            else:
+                m = 0.0 if 0.0 > e0 else e0
+                m = ratio * m
+                m = m if m < dd else dd
+                s1 = m if m > e1 else e1
+            k0 = size_kind[j, 0] == SIZE_MEASURED
+            k1 = size_kind[j, 1] == SIZE_MEASURED
+        elif kd == K_CIRCLE:
+            circ = circle[j, 2]
+            s0 = 2.0 * circ
+            s1 = s0
+            k0 = True
+            k1 = True
+        else:  # max(extent, 0.05)
+            e0 = lohi[j, 2] - lohi[j, 0]
+            e1 = lohi[j, 3] - lohi[j, 1]
+            s0 = 0.05 if 0.05 > e0 else e0
+            s1 = 0.05 if 0.05 > e1 else e1
+            k0 = False
+            k1 = False
+        G[r, G_THETA] = theta[j]
+        G[r, G_SIZE0] = s0
+        G[r, G_SIZE1] = s1
+        G[r, G_RADIUS] = circ
+        G[r, G_LB0] = 0.0
+        G[r, G_LB1] = 0.0
+        Gi[r, GI_KIND] = kd
+        Gi[r, GI_HEADING] = 1 if kd == K_RECT else 0
+        Gi[r, GI_KNOWN0] = 1 if k0 else 0
+        Gi[r, GI_KNOWN1] = 1 if k1 else 0
+        CI[r, C_STATE] = ST_TENTATIVE
+        CI[r, C_HITS] = 1
+        CI[r, C_MISSES] = 0
+        CI[r, C_HIST_N] = 1
+        CI[r, C_HIST_HITS] = 1
+        CI[r, C_UPD] = 0
+        CL[r] = t
+        X[r, 0] = z[j, 0]
+        X[r, 1] = z[j, 1]
+        X[r, 2] = 0.0
+        X[r, 3] = 0.0
+        for a in range(4):
+            for b in range(4):
+                P[r, a, b] = 0.0
+        P[r, 0, 0] = R[j, 0, 0]
+        P[r, 0, 1] = R[j, 0, 1]
+        P[r, 1, 0] = R[j, 1, 0]
+        P[r, 1, 1] = R[j, 1, 1]
+        P[r, 2, 2] = speed_var
+        P[r, 3, 3] = speed_var
+        if has_map:
+            MEV[r, 0, 0] = mev[i, 0]
+            MEV[r, 0, 1] = mev[i, 1]
+            MEV[r, 0, 2] = mev[i, 2]
+            WN[r, 0] = 1
+        else:
+            WN[r, 0] = 0
+        WN[r, 1] = 0
+        WN[r, 2] = 0
 
 
 #: outcomes of :func:`ride_window` (``Tracker._rides_with_laser``'s tests, in their order)

@@ -67,6 +67,7 @@ from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, assign_groups
 from dynslam2d.detect.kernels_update import (
     N_C,
     association_gates,
+    birth_rows,
     fragment_hosts_rows,
     update_params,
 )
@@ -104,6 +105,8 @@ from dynslam2d.detect.tracktable import (  # noqa: F401  (_Track, _new_track, â€
 )
 from dynslam2d.detect.trackupdate import TrackUpdate, _nearest_age  # noqa: F401  (_nearest_age: tests import it here)
 from dynslam2d.types import Pose2D, Scan, Track, wrap_angle
+
+_NO_MEV = np.zeros((0, 3))  # (Tracker._births' map evidence without a map: never read)
 
 try:  # np.count_nonzero(a) without axis is this C function behind a Python wrapper and its dispatch (as pipeline.py)
     from numpy._core.multiarray import count_nonzero as _count_nonzero
@@ -346,18 +349,26 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
             unused = self._clutter_detections(dets, unused, t, updated)
         if self.config.tracker.confirm_hits > 1:  # births stay tentative: hosts can be found in one batch
             hosts = self._hosts_of_fragments(unused, updated)
+            # (â€¦ and the births made in one batch after them, in the same order: a birth changes no host; pass trk38)
+            born = []
+            for di, host in zip(unused, hosts):
+                if host is not None:  # a piece of an object already updated: its beams belong to it
+                    host.beams = np.concatenate((host.beams, dets[di].beams))
+                    st.merged_fragments += 1
+                else:
+                    born.append(di)
+            if born:
+                self._births(dets, t, born, updated)
         else:
-            hosts = [None] * len(unused)
-        for di, host in zip(unused, hosts):
-            det = dets[di]
-            if self.config.tracker.confirm_hits <= 1:
+            for di in unused:
+                det = dets[di]
                 host = self._host_of_fragment(det, updated)
-            if host is not None:  # a piece of an object already updated: its beams belong to it
-                host.beams = np.concatenate((host.beams, det.beams))
-                st.merged_fragments += 1
-                continue
-            self._birth(det, t, di)
-            updated.add(self._tracks[-1].id)
+                if host is not None:
+                    host.beams = np.concatenate((host.beams, det.beams))
+                    st.merged_fragments += 1
+                    continue
+                self._birth(det, t, di)
+                updated.add(self._tracks[-1].id)
         out = self._report(t, updated)
         if self._dormant:
             out.extend(self._dormant_reports(t))
@@ -588,6 +599,42 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         Pr[:2, :2] = d.R[j]
         Pr[2, 2] = Pr[3, 3] = cfg.tracker.init_speed_sigma ** 2
         self.stats.tracks_born += 1
+
+    def _births(self, dets: list[Detection], t: float, js: list[int], updated: set[int]) -> None:
+        """:meth:`_birth` of the detections ``js`` (indices of this scan's ``dets``, in that order), tentative tracks
+        (``confirm_hits`` > 1), their ids added to ``updated``: the rows taken one by one as :meth:`_birth` takes them,
+        then written for all births in one kernel call (state, covariance, shape, counters, windows:
+        ``kernels_update.birth_rows``, the same values), then each track's record made with views of its rows
+        (docs/speed.md, pass trk38)."""
+        tc = self.config.tracker
+        has_map, has_free = self._map is not None, self._free is not None
+        take = self._take_row
+        rows = [take() for _ in js]
+        bd = [dets[j] for j in js]
+        # (the detections' map evidence, as _start_windows pushes it: (nb, 3); without a map never read)
+        mev = np.array([(d.map_structure, d.map_free, d.map_unknown) for d in bd]) if has_map else _NO_MEV
+        b = self._batch
+        dm = self._default  # reference.measure(det, None, None, cfg.fit) of every detection
+        ja = np.array(js, dtype=np.int64)
+        X, P, G, Gi, CI, CL = self._X, self._P, self._G, self._Gi, self._CI, self._CL
+        birth_rows(X, P, G, Gi, CI, CL, self._MEV, self._WN, np.array(rows, dtype=np.int64), ja, b.kind, b.theta,
+                   b.lohi, b.rel, b.circle, dm.z, dm.R, dm.size_kind, mev, self._upd_p,
+                   float(tc.init_speed_sigma ** 2), has_map, t)
+        bxy = dm.z.take(ja, axis=0)  # (the birth places: the centres z, one array; each track's its row)
+        tracks, add, new, nid = self._tracks, updated.add, _new_track, self._next_id
+        for r, det, xy in zip(rows, bd, bxy):
+            k = new(nid, t, xy, G[r], Gi[r], det.beams, [det], [_past_entry(t, det)] if has_free else [])
+            k.row = r
+            k.x = X[r]
+            k.P = P[r]
+            k.ci = CI[r]
+            k.cl = CL[r:r + 1]
+            tracks.append(k)
+            add(nid)
+            nid += 1
+        self._next_id = nid
+        self._order = None
+        self.stats.tracks_born += len(js)
 
     def _birth_state(self, det: Detection, j: int) -> tuple[np.ndarray, np.ndarray, list[float], list[bool]]:
         """The measured centre z (2,), initial covariance P (4, 4), sizes and known-size flags of a track started

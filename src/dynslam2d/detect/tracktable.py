@@ -394,36 +394,41 @@ class TrackRows:
             self._order = np.array([k.row for k in self._tracks], dtype=np.int64)
         return self._order
 
+    def _take_row(self) -> int:
+        """A row of the state arrays for a new live track: a deleted track's (the last freed first), else the next
+        unused one, the arrays (and the windows') doubled when full with the live tracks' views re-pointed."""
+        if self._free_rows:
+            return self._free_rows.pop()
+        row = self._rows_used
+        self._rows_used += 1
+        if row == self._X.shape[0]:
+            X = np.zeros((2 * row, 4))
+            P2 = np.zeros((2 * row, 4, 4))
+            X[:row] = self._X[:row]
+            P2[:row] = self._P[:row]
+            G = np.zeros((2 * row, N_G))
+            Gi = np.zeros((2 * row, N_GI), dtype=np.int8)
+            G[:row] = self._G[:row]
+            Gi[:row] = self._Gi[:row]
+            CI = np.zeros((2 * row, N_C), dtype=np.int64)
+            CL = np.zeros(2 * row)
+            CI[:row] = self._CI[:row]
+            CL[:row] = self._CL[:row]
+            self._X, self._P, self._G, self._Gi, self._CI, self._CL = X, P2, G, Gi, CI, CL
+            self._repoint()
+            for name in ("_MEV", "_RIDE", "_WN"):  # (the windows' rows, likewise)
+                a = getattr(self, name)
+                b = np.zeros((2 * row,) + a.shape[1:], dtype=a.dtype)
+                b[:row] = a[:row]
+                setattr(self, name, b)
+        return row
+
     def _add_row(self, k: _Track, x, P: np.ndarray | None) -> None:
         """Append ``k`` to the live tracks with state ``x`` (4,) and covariance ``P`` (4, 4) (None: written by the
         caller into ``k.row`` afterwards): it gets a row of
         the state arrays (a deleted track's, else a new one; the arrays double when full) holding the values and
         its own shape rows ``k.g`` / ``k.gi``, and ``k.x`` / ``k.P`` / ``k.g`` / ``k.gi`` become views of it."""
-        if self._free_rows:
-            row = self._free_rows.pop()
-        else:
-            row = self._rows_used
-            self._rows_used += 1
-            if row == self._X.shape[0]:
-                X = np.zeros((2 * row, 4))
-                P2 = np.zeros((2 * row, 4, 4))
-                X[:row] = self._X[:row]
-                P2[:row] = self._P[:row]
-                G = np.zeros((2 * row, N_G))
-                Gi = np.zeros((2 * row, N_GI), dtype=np.int8)
-                G[:row] = self._G[:row]
-                Gi[:row] = self._Gi[:row]
-                CI = np.zeros((2 * row, N_C), dtype=np.int64)
-                CL = np.zeros(2 * row)
-                CI[:row] = self._CI[:row]
-                CL[:row] = self._CL[:row]
-                self._X, self._P, self._G, self._Gi, self._CI, self._CL = X, P2, G, Gi, CI, CL
-                self._repoint()
-                for name in ("_MEV", "_RIDE", "_WN"):  # (the windows' rows, likewise)
-                    a = getattr(self, name)
-                    b = np.zeros((2 * row,) + a.shape[1:], dtype=a.dtype)
-                    b[:row] = a[:row]
-                    setattr(self, name, b)
+        row = self._take_row()
         if x is not None:  # (None: the caller writes the state and covariance rows, _birth)
             self._X[row] = x
             self._P[row] = P
