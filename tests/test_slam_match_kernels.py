@@ -229,18 +229,23 @@ def _sums_one_loop(prob, pts, x, y, th, swapped, full, H, g):  # pragma: no cove
     return cost, summ, n_in
 
 
-def _blocked_pass(prob, pts, x, y, th, swapped, full):
+def _blocked_pass(prob, pts, x, y, th, swapped, full, stats=True):
     H = np.full((3, 3), 7.0)
     g = np.full(3, 7.0)
-    out = _sums(prob, _xy_rows(pts), x, y, th, swapped, np.bool_(full), H, g)
+    out = _sums(prob, _xy_rows(pts), x, y, th, swapped, np.bool_(full), np.bool_(stats), H, g)
     return out, H, g
 
 
-def _one_loop_pass(prob, pts, x, y, th, swapped, full):
+def _one_loop_pass(prob, pts, x, y, th, swapped, full, stats=True):
+    """The reference pass; without ``stats`` its Σ M and n_inside as 0 (what ``_sums`` returns then: pass map38)."""
     H = np.full((3, 3), 7.0)
     g = np.full(3, 7.0)
     out = _sums_one_loop(prob, pts, x, y, th, swapped, full, H, g)
-    return out, H, g
+    return (out if stats else (out[0], 0.0, 0)), H, g
+
+
+#: (full, stats) of the passes the matcher makes: the cost, H, g with and without Σ M / n_inside, the cost alone
+_MODES = ((True, True), (True, False), (False, True), (False, False))
 
 
 def _same(a, b) -> None:
@@ -255,8 +260,8 @@ def _same(a, b) -> None:
 @pytest.mark.parametrize("level", [0, 1, 2])
 def test_blocked_pass_equals_the_one_loop_pass_on_a_mapped_room(level: int) -> None:
     """``matcher._sums`` (blocked, vectorised; pass front21) against the one-loop pass on a real map: poses that
-    put every point inside, some outside and all outside, both gradient forms, with and without the gradient sums,
-    point counts on both sides of the block size."""
+    put every point inside, some outside and all outside, both gradient forms, with and without the gradient sums
+    (and Σ M / n_inside, pass map38), point counts on both sides of the block size."""
     slam, first = mapped(3)
     lv = slam.map.levels[level]
     pts_m = slam.scan_points(scan_at(first.compose(Pose2D(0.12, -0.08, 0.05))))[0]
@@ -268,10 +273,10 @@ def test_blocked_pass_equals_the_one_loop_pass_on_a_mapped_room(level: int) -> N
             mp = lv.pose_to_map(first.as_array())
             x, y, th = mp[0] + off[0], mp[1] + off[1], mp[2] + off[2]
             for swapped in (False, True):
-                for full in (True, False):
-                    want = _one_loop_pass(lv.prob, pts, x, y, th, swapped, full)
-                    _same(_blocked_pass(lv.prob, pts, x, y, th, swapped, full), want)
-                    n_diff += 0 < want[0][2] < n  # some points inside, some outside
+                for full, stats in _MODES:
+                    want = _one_loop_pass(lv.prob, pts, x, y, th, swapped, full, stats)
+                    _same(_blocked_pass(lv.prob, pts, x, y, th, swapped, full, stats), want)
+                    n_diff += full and stats and 0 < want[0][2] < n  # some points inside, some outside
     assert n_diff > 0
 
 
@@ -291,9 +296,9 @@ def test_blocked_pass_equals_the_one_loop_pass_on_random_and_tiny_maps() -> None
                 pts[:4] = [[0.0, 0.0], [w - 2.0, h - 2.0], [w - 2.0, 0.5], [1.0, h - 2.0]]
             for x, y, th in ((0.0, 0.0, 0.0), (0.3, -0.2, 0.01), (1.5, 0.25, -0.3)):
                 for swapped in (False, True):
-                    for full in (True, False):
-                        _same(_blocked_pass(prob, pts, x, y, th, swapped, full),
-                              _one_loop_pass(prob, pts, x, y, th, swapped, full))
+                    for full, stats in _MODES:
+                        _same(_blocked_pass(prob, pts, x, y, th, swapped, full, stats),
+                              _one_loop_pass(prob, pts, x, y, th, swapped, full, stats))
 
 
 @njit(cache=False)

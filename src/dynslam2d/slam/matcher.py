@@ -88,9 +88,10 @@ def _split_xy(pts):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _sums(prob, xy, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
+def _sums(prob, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cover - numba
     """:func:`accumulate`'s pass over the points ``xy`` (2, n) (rows x and y, cells); without ``full`` only the cost
-    (H, g untouched; Σ M and n_inside returned as 0).
+    (H, g untouched; Σ M and n_inside returned as 0); with ``full`` but without ``stats``, the cost, H and g (Σ M and
+    n_inside returned as 0: two sums fewer a point, pass map38).
 
     The same float64 (and float32: the cells' differences) operations per point as
     :func:`~dynslam2d.slam.interp.interp_value_grad` and the same sums in point order, so the same bits as the
@@ -188,6 +189,19 @@ def _sums(prob, xy, x, y, th, swapped, full, H, g):  # pragma: no cover - numba
             for j in range(m):
                 cost += tb[0, j]
             continue
+        if not stats:  # (the same sums of the cost, g and H, in the same order: each has its own accumulator)
+            for j in range(m):
+                cost += tb[0, j]
+                g0 += tb[2, j]
+                g1 += tb[3, j]
+                g2 += tb[4, j]
+                h00 += tb[5, j]
+                h01 += tb[6, j]
+                h02 += tb[7, j]
+                h11 += tb[8, j]
+                h12 += tb[9, j]
+                h22 += tb[10, j]
+            continue
         for j in range(m):
             cost += tb[0, j]
             summ += tb[1, j]
@@ -224,7 +238,7 @@ def accumulate(prob, pts, x, y, th, swapped, H, g):  # pragma: no cover - numba
     cost = Σ (1−M)² over all points, out-of-bounds points counting M = 0;
     out-of-bounds points add nothing to H, g (as getCompleteHessianDerivs).
     """
-    return _sums(prob, _split_xy(pts), x, y, th, swapped, np.bool_(True), H, g)
+    return _sums(prob, _split_xy(pts), x, y, th, swapped, np.bool_(True), np.bool_(True), H, g)
 
 
 @njit(cache=True, inline="always")
@@ -315,7 +329,8 @@ def _match_core(prob, xy, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
     returned pose in ``H_out`` (cost, Σ M and n_inside of :func:`accumulate` there: without the prior term).
 
     H, Σ M and n_inside at the returned pose are needed only with ``keep`` and when that pose survives
-    :func:`_round_trips` with (``res``, ``i0``, ``j0``) (else ``H_out``, Σ M and n_inside are unspecified). An LM
+    :func:`_round_trips` with (``res``, ``i0``, ``j0``) (else ``H_out``, Σ M and n_inside are unspecified: without
+    ``keep`` no pass sums Σ M and n_inside — two of the twelve sums a point, pass map38). An LM
     trial step that, if accepted, ends the iterations (the last one, or converged) and whose H is not needed
     so runs the cost-only pass: its cost is the same sum (the rejected / accepted decision and the pose do not
     change), and the H, g it would have made are never read."""
@@ -342,7 +357,7 @@ def _match_core(prob, xy, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
                 use_prior = True
     gp = _stack_array(np.float64, 1, 3)[0]
     gp[:] = 0.0
-    raw, summ, n_in = _sums(prob, xy, x, y, th, swapped, np.bool_(True), H, g)
+    raw, summ, n_in = _sums(prob, xy, x, y, th, swapped, np.bool_(True), keep, H, g)
     cost = raw
     if use_prior:
         cost += _prior_cost(x, y, th, prior, lam_p)
@@ -393,7 +408,7 @@ def _match_core(prob, xy, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
             # iterations needs them only when the caller keeps this pose's H
             ends = it == n_iter - 1 or (nt < _CONVERGED_CELLS and abs(d[2]) < _CONVERGED_RAD)
             full = not ends or (keep and _round_trips(nx, ny, nth, res, i0, j0))
-            new_raw, new_summ, new_in = _sums(prob, xy, nx, ny, nth, swapped, full, H2, g2)
+            new_raw, new_summ, new_in = _sums(prob, xy, nx, ny, nth, swapped, full, keep, H2, g2)
             new_cost = new_raw
             if use_prior:
                 new_cost += _prior_cost(nx, ny, nth, prior, lam_p)
@@ -414,7 +429,7 @@ def _match_core(prob, xy, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
                     break
         else:
             x, y, th = nx, ny, nth
-            raw, summ, n_in = _sums(prob, xy, x, y, th, swapped, np.bool_(True), H, g)
+            raw, summ, n_in = _sums(prob, xy, x, y, th, swapped, np.bool_(True), keep, H, g)
             cost = raw
             if use_prior:
                 cost += _prior_cost(x, y, th, prior, lam_p)
@@ -546,7 +561,8 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     g = _stack_array(np.float64, 1, 3)[0]
     g[:] = 0.0
     # (accumulate's pass on level 0's rows made in one go; np.bool_, not literals: _match_core's signature of _sums)
-    cost, summ, n_in = _sums(prob0, _scaled_rows(pts_m, res), m0, m1, m2, np.bool_(False), np.bool_(True), H_out, g)
+    yes = np.bool_(True)
+    cost, summ, n_in = _sums(prob0, _scaled_rows(pts_m, res), m0, m1, m2, np.bool_(False), yes, yes, H_out, g)
     return True, cost, summ, n_in, free, n_sup, k_sup
 
 
