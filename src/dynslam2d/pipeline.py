@@ -852,11 +852,37 @@ class RunObserver(Protocol):
     ``on_scan`` is called after every scan with the input scan, its result and the pipeline
     (whose ``slam.gridmap()`` is the current map); ``on_finish`` once at the end, before
     :func:`run` returns. Observers must not change the pipeline.
+
+    An observer that reads nothing of the pipeline but its ``config`` (only the scan and its result) may set
+    ``scan_batch`` (int, class or instance attribute) to more than 1: :func:`run` then makes its ``on_scan`` calls
+    late, for up to that many scans at a time, in scan order and all before ``on_finish`` (calls still pending
+    when the loop raises are dropped). The scan loop then runs that observer's work before one ``process`` call in
+    ``scan_batch`` instead of before each: its arrays no longer push the pipeline's out of the CPU caches every
+    scan (docs/speed.md, pass wall38).
     """
 
     def on_scan(self, scan: Scan, step: StepResult, pipeline: Pipeline) -> None: ...
 
     def on_finish(self, result: RunResult, pipeline: Pipeline) -> None: ...
+
+
+def _split_observers(observers: Sequence[RunObserver]) -> tuple[list[RunObserver], list[RunObserver], int]:
+    """``observers`` as (called after every scan, called late in batches, the batch in scans): an observer is late
+    when its ``scan_batch`` is more than 1; the batch is the smallest of theirs (each order kept)."""
+    now: list[RunObserver] = []
+    late: list[RunObserver] = []
+    for obs in observers:
+        (late if getattr(obs, "scan_batch", 1) > 1 else now).append(obs)
+    return now, late, min((int(getattr(obs, "scan_batch", 1)) for obs in late), default=1)
+
+
+def _feed(late: list[RunObserver], pending: list[tuple[Scan, StepResult]], pipe: Pipeline) -> None:
+    """The pending ``on_scan`` calls of the ``late`` observers, scan after scan (each scan: the observers in their
+    order, as :func:`run` calls the others); empties ``pending``."""
+    for scan, step in pending:
+        for obs in late:
+            obs.on_scan(scan, step, pipe)
+    pending.clear()
 
 
 def run(
@@ -887,6 +913,8 @@ def run(
     compile0 = compile_seconds()
     last_scan: Scan | None = None
     n_done = 0
+    now, late, batch = _split_observers(observers)
+    pending: list[tuple[Scan, StepResult]] = []  # the late observers' calls not made yet, in scan order
     with scan_loop_gc(gc_threshold0):  # fewer young collections while the scans run (collector.py)
         for scan in source:
             step = pipe.process(scan)
@@ -900,12 +928,17 @@ def run(
             if step.tracks:
                 track_rows.extend_records(_track_records(step.stamp, step.tracks, track_rows))
             stage_ms.add(step.timings)
-            for obs in observers:
+            for obs in now:
                 obs.on_scan(scan, step, pipe)
+            if late:
+                pending.append((scan, step))
+                if len(pending) >= batch:
+                    _feed(late, pending, pipe)
             if progress is not None:
                 progress(n_done, step)
             if n_done % TRIM_EVERY_SCANS == 0:
                 release_free_memory()  # a long log's freed temporaries back to the OS (memtrim.py; ~ms per call)
+        _feed(late, pending, pipe)  # (the last scans' late calls, before the map is released)
     compile_s = compile_seconds() - compile0
     release_free_memory()  # the loop's freed temporaries, before the observers' end-of-run work (memtrim.py)
     rec = per_scan.view()
