@@ -34,7 +34,7 @@ from dynslam2d.pipeline import TRACK_CSV_COLUMNS, RunResult
 from dynslam2d.slam.cleanup import CleanResult
 from dynslam2d.types import ScanSource
 from dynslam2d.viz.collect import RemovedPointsCollector
-from dynslam2d.viz.figures import write_figures
+from dynslam2d.viz.figures import figure_maps, write_figures
 
 
 def ground_truth_for(source: ScanSource, gt_dir: str | os.PathLike[str] | GroundTruthFiles | None,
@@ -245,6 +245,11 @@ def write_outputs(
         if run.loop is not None:
             run.loop.keyframes = []
     del final_lo
+    summary = run.summary()
+    evaluation = evaluate_result(run, gt, cleaned) if gt is not None else None
+    drawn = None
+    if release:  # the maps as the figures' grey indices now: no float64 map lives through the files below
+        drawn = figure_maps(run, cleaned)
     paths["config.yaml"] = write_text_atomic(out / "config.yaml", dump_config(run.config))
     paths["tracks.csv"] = write_text_atomic(out / "tracks.csv", tracks_csv(run))
     removed = run.removed
@@ -253,8 +258,7 @@ def write_outputs(
             # removed[i, b] is True where the filter removed beam b of scan i (stamps[i]).
             np.savez_compressed(fh, stamps=run.trajectory.stamps, removed=removed)
     paths["kept_mask.npz"] = out / "kept_mask.npz"
-    summary = run.summary()
-    evaluation = evaluate_result(run, gt, cleaned) if gt is not None else None
+    del removed
     if cleaned is not None:
         summary["cleanup"] = dict(cleaned.stats)
     metrics = None
@@ -269,7 +273,7 @@ def write_outputs(
     paths["summary.json"] = write_text_atomic(out / "summary.json", summary_text)
     # Figures: map.png, tracks.png and, with ground truth, errors.png (dynslam2d.viz.figures).
     release_free_memory()  # figures allocate much; start them from a trimmed heap (memtrim.py)
-    paths.update(write_figures(run, out, evaluation, collector, cleaned=cleaned, release=release))
+    paths.update(write_figures(run, out, evaluation, collector, cleaned=cleaned, release=release, drawn=drawn))
     # run.json LAST: a folder whose run.json does not say "complete" lacks files (docs/reliability.md).
     paths["run.json"] = write_marker(out, "complete", scans=run.n_scans, input=run.source.origin,
                                      files=sorted(paths))

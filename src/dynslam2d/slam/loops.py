@@ -686,6 +686,18 @@ class LoopCloser:
                 self._place_due.popleft()
             self._place_drop(last)  # each batch's returns freed as soon as described: memory never above eager
 
+    def release_places(self) -> None:
+        """Let the stored place descriptors and the keyframes' place returns go, for a caller done with the closer
+        after :meth:`finish` (which ran the last search that reads them): 5 MB on MIT CSAIL that the re-render and
+        the clean-up pass need not hold (issue 13 item 3). The index is empty afterwards: the closer must take no
+        further scan."""
+        if self._places is not None:
+            p = self._places
+            self._places = PlaceIndex(p.rings, p.sectors, p.max_range)
+        self._place_pts.clear()
+        self._place_due.clear()
+        self._query_desc = None
+
     def _place_ranks(self, node: int) -> dict[int, float]:
         """Submap → smallest place-descriptor distance of its stored keyframes to keyframe ``node``'s place."""
         c = self.config

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,7 @@ import numpy as np
 from dynslam2d.eval.runeval import RunEvaluation
 from dynslam2d.gridmap import GridMap
 from dynslam2d.pipeline import RunResult
+from dynslam2d.records import TrackRows
 from dynslam2d.slam.cleanup import CleanResult
 from dynslam2d.slam.confidence import stretches
 from dynslam2d.viz.collect import RemovedPointsCollector
@@ -30,6 +32,28 @@ def _loop_segments(result: RunResult) -> np.ndarray | None:
     return np.stack((nodes[ij[:, 0], :2], nodes[ij[:, 1], :2]), axis=1)
 
 
+@dataclass(frozen=True, eq=False)
+class FigureMaps:
+    """The two maps the figures draw, already as grey indices (:func:`figure_maps`): map.png's (the cleaned map after
+    a clean-up pass, else the online one) and tracks.png's faint online map."""
+
+    drawn: GreyMap
+    background: GreyMap
+
+
+def figure_maps(result: RunResult, cleaned: CleanResult | None = None) -> FigureMaps:
+    """The grey indices :func:`write_figures` draws with ``release=True``, made from ``result.grid`` and
+    ``cleaned.grid``, which become None (2 bytes per cell each where the float64 maps take 8; issue 13 item 3). A
+    caller that makes them before its other work (``write_outputs``: tracks.csv, kept_mask.npz, the summary) does
+    that work without either float64 map."""
+    background = tracks_background(result.grid)
+    drawn = GreyMap.of(cleaned.grid if cleaned is not None else result.grid)
+    result.grid = None  # type: ignore[assignment]
+    if cleaned is not None:
+        cleaned.grid = None  # type: ignore[assignment]
+    return FigureMaps(drawn, background)
+
+
 def write_figures(
     result: RunResult,
     out_dir: str | os.PathLike[str],
@@ -39,6 +63,7 @@ def write_figures(
     dpi: int = 120,
     cleaned: CleanResult | None = None,
     release: bool = False,
+    drawn: FigureMaps | None = None,
 ) -> dict[str, Path]:
     """Write the figures of ``result`` into ``out_dir`` (each atomically); return paths by name.
 
@@ -61,7 +86,10 @@ def write_figures(
 
     ``release``: the caller does not use ``result`` and ``cleaned`` afterwards (the command line): their maps are
     let go before matplotlib draws: tracks.png's faint copy of the online map and map.png's map are made first as
-    grey indices (2 bytes per cell; ``result.grid`` and ``cleaned.grid`` become None; issue 13 item 3).
+    grey indices (2 bytes per cell; ``result.grid`` and ``cleaned.grid`` become None; issue 13 item 3), or taken from
+    ``drawn`` (:func:`figure_maps`, made by the caller); the track rows go once the paths are built, the erased and
+    restored cells once map.png is drawn (``result.track_rows`` empty, ``result.erased`` None, ``cleaned.erased``
+    and ``cleaned.restored`` 0 × 0), so tracks.png is drawn without them.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -69,6 +97,8 @@ def write_figures(
     traj = result.trajectory
     last_stamp = float(traj.stamps[-1]) if len(traj) else None
     all_paths = track_paths(result.track_rows)
+    if release:  # (the paths hold what the figures draw of them)
+        result.track_rows = type(result.track_rows)() if isinstance(result.track_rows, TrackRows) else []
     ate_res = None
     ref_xy = None
     if evaluation is not None and len(evaluation.reference) and len(traj):
@@ -81,13 +111,15 @@ def write_figures(
     if ate_res is not None:
         title += f", ATE RMSE {ate_res.rmse:.3f} m"
     removed_xy = collector.points() if collector is not None else None
-    grid: GridMap | GreyMap = cleaned.grid if cleaned is not None else result.grid
-    background = tracks_background(result.grid) if release else result.grid
+    grid: GridMap | GreyMap
+    background: GridMap | GreyMap
     if release:  # both maps as the grey indices the figures draw (2 bytes per cell), before matplotlib's work
-        grid = GreyMap.of(grid)
-        result.grid = None  # type: ignore[assignment]
-        if cleaned is not None:
-            cleaned.grid = None  # type: ignore[assignment]
+        maps = drawn if drawn is not None else figure_maps(result, cleaned)
+        grid, background = maps.drawn, maps.background
+        del maps, drawn
+    else:
+        grid = cleaned.grid if cleaned is not None else result.grid
+        background = result.grid
     conf = result.confidence
     pc = result.pose_confidence() if conf else {}
     paths["map.png"] = plot_map(
@@ -103,6 +135,9 @@ def write_figures(
     )
     if release:
         del grid
+        result.erased = None  # type: ignore[attr-defined]
+        if cleaned is not None:
+            cleaned.erased = cleaned.restored = np.zeros((0, 0), dtype=bool)
     confirmed = sorted((p for p in all_paths.values() if p.ever_confirmed), key=lambda p: p.id)
     paths["tracks.png"] = plot_tracks(
         out / "tracks.png", confirmed, background, dpi=dpi,
@@ -152,4 +187,4 @@ def _memory_erased(result: RunResult, grid: GridMap | GreyMap) -> np.ndarray | N
     return erased
 
 
-__all__ = ["removed_beams", "tracks_title", "write_figures"]
+__all__ = ["FigureMaps", "figure_maps", "removed_beams", "tracks_title", "write_figures"]

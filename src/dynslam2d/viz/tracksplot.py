@@ -128,6 +128,7 @@ def plot_tracks(
                                 linestyles=ls, zorder=4 if flag else 3, capstyle="round" if flag else "butt")
             lc.set_array(np.concatenate(vals[flag]))
             ax.add_collection(lc)
+        segs[flag] = vals[flag] = []  # (the collection holds its own copies; these go before the drawing)
     if len(starts):
         ax.scatter(starts[:, 0], starts[:, 1], s=12, c="white", edgecolors="0.2", linewidths=0.8, zorder=5)
     # Labels: tracks in M first, then the longest paths, thinned (trackpaths.label_tracks).
