@@ -869,6 +869,10 @@ class CleanupRecorder:
     count differently, e.g. ``benchmarks/bench_erased.py`` keeps the counted scans to explain the erasures)."""
 
     counter_class: type[VisibilityCounter] = VisibilityCounter
+    #: it reads only the scan, its result and the pipeline's config: :func:`dynslam2d.pipeline.run` feeds it 32
+    #: scans at a time, so its counting does not push the pipeline's arrays out of the CPU caches every scan
+    #: (docs/speed.md, pass wall38)
+    scan_batch: int = 32
 
     def __init__(self, config: CleanConfig | None = None, slam: SlamConfig | None = None,
                  keep_counts: bool = True) -> None:

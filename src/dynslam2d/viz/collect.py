@@ -23,6 +23,10 @@ class RemovedPointsCollector:
         n_removed: total removed beams seen (before any subsampling).
     """
 
+    #: it reads only the scan and its result: :func:`dynslam2d.pipeline.run` feeds it 32 scans at a time
+    #: (docs/speed.md, pass wall38)
+    scan_batch: int = 32
+
     def __init__(self, per_scan: int = 200, max_points: int = 300_000) -> None:
         if per_scan < 1 or max_points < 1:
             raise ValueError("per_scan and max_points must be >= 1")
