@@ -170,9 +170,9 @@ def test_same_ssa_ir_on_the_first_commands_kernels(tmp_path: Path) -> None:
     assert stats["cfg_differ"] == 0 and stats["blocks_differ"] == 0
 
 
-#: A loop with two back edges (``continue`` in a ``for`` loop: numba's canonicalisation gives it a tail block, and its graph is then
-#: built again) and one without, compiled with every ``PostProcessor.run`` checked (benchmarks/check_jitssa.py's
-#: ``shared_cfg``); their results.
+#: A loop with two back edges (``continue`` in a ``for`` loop: numba's canonicalisation gives it a tail block, and
+#: its graph is then built again) and one without, compiled with every ``PostProcessor.run`` checked
+#: (benchmarks/check_jitssa.py's ``shared_cfg``); their results.
 LOOPS = r"""
 import json, sys
 sys.path.insert(0, sys.argv[1])
