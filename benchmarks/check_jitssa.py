@@ -14,7 +14,9 @@ and iteration order) and returns numba's; so does every call of ``analysis.compu
 ``jitssa.fast_compute_live_map``: the blocks in order, each set's contents). Prints a JSON line: SSA calls, same,
 differing (each dumped to ``--out-dir``), statements, phi nodes, process CPU of numba's pass and of the sparse one
 (garbage collector off), fallbacks to numba's pass, variable lists same / differing, ``compute_use_defs`` and
-``compute_live_map`` calls same / differing and their CPU both ways.
+``compute_live_map`` calls same / differing and their CPU both ways. Every ``PostProcessor.run`` also has
+``jitssa.canonical_blocks`` checked against numba's ``transforms.canonicalize_cfg`` and the control-flow graph it
+shares against numba's own of the same blocks (:func:`shared_cfg`, pass ud38).
 
     PYTHONPATH=src python benchmarks/check_jitssa.py [--out-dir DIR]
 
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import functools
 import gc
 import json
 import os
@@ -188,7 +191,83 @@ def shadow(out_dir: str | None = None) -> dict[str, Any]:
 
     check._dynslam2d_sparse = True  # type: ignore[attr-defined]
     ssa._run_ssa = check
+    shared_cfg(stats)
     return stats
+
+
+def _ordered(x: Any) -> Any:
+    """``x`` with every dict, set and sequence as a list in its iteration order (to compare orders too)."""
+    if isinstance(x, dict):
+        return [[_ordered(k), _ordered(v)] for k, v in x.items()]
+    if isinstance(x, (set, frozenset, list, tuple)):
+        return [_ordered(v) for v in x]
+    return x
+
+
+#: A control-flow graph's state (``numba.core.controlflow.CFGraph``): everything else is computed from it.
+CFG_STATE = ("_nodes", "_edge_data", "_entry_point", "_preds", "_succs", "_dead_nodes")
+
+
+def cfg_same(shared: Any, fresh: Any) -> bool:
+    """Whether the graph ``shared`` (``jitssa.canonical_blocks``') is ``fresh``'s equal (numba's own, built from the
+    same blocks): the same state with every set and dict in the same iteration order, and every analysis ``shared``
+    has already computed (its ``functools.cached_property`` values, loops and back edges) the same as ``fresh``'s."""
+    state = [_ordered(getattr(shared, name)) for name in CFG_STATE]
+    if state != [_ordered(getattr(fresh, name)) for name in CFG_STATE]:
+        return False
+    cached = [name for name in vars(shared) if name not in CFG_STATE and isinstance(
+        getattr(type(shared), name, None), functools.cached_property)]
+    return all(_ordered(vars(shared)[name]) == _ordered(getattr(fresh, name)) for name in cached)
+
+
+def shared_cfg(stats: dict[str, Any]) -> None:
+    """Install ``jitssa.shared_cfg`` and check every ``PostProcessor.run`` of the run: ``jitssa.canonical_blocks``
+    against numba's ``transforms.canonicalize_cfg`` (the same block objects under the same labels in the same order;
+    a loop's new tail block in the same place) and the graph it hands to ``VariableLifetime`` against numba's
+    ``compute_cfg_from_blocks`` of the new blocks (:func:`cfg_same`). Adds to ``stats``: calls, graphs shared and the
+    same, graphs differing, canonicalisations that rewrote a loop (numba's graph then), CPU of numba's
+    canonicalisation and second graph (with its back edges) against ``canonical_blocks``."""
+    from numba.core import analysis, transforms
+
+    from dynslam2d import jitssa
+
+    if not jitssa.shared_cfg():
+        raise RuntimeError("jitssa.shared_cfg not installed (numba's sources differ, or installed before)")
+    stats.update({"postproc_calls": 0, "cfg_same": 0, "cfg_differ": 0, "cfg_rewritten": 0, "blocks_differ": 0,
+                  "cpu_cfg_numba_s": 0.0, "cpu_cfg_shared_s": 0.0})
+    ours_fn, numba_fn = jitssa.canonical_blocks, transforms.canonicalize_cfg
+
+    def canonical(blocks: Any) -> Any:
+        stats["postproc_calls"] += 1
+        enabled = gc.isenabled()
+        gc.disable()
+        try:
+            t0 = time.process_time()
+            theirs = numba_fn(blocks)
+            fresh = analysis.compute_cfg_from_blocks(theirs)
+            fresh.topo_order()  # (its back edges: the live map's first question)
+            t1 = time.process_time()
+            ours, cfg = ours_fn(blocks)
+            t2 = time.process_time()
+        finally:
+            if enabled:
+                gc.enable()
+        stats["cpu_cfg_numba_s"] += t1 - t0
+        stats["cpu_cfg_shared_s"] += t2 - t1
+        def same_block(k: Any) -> bool:  # the same object, or both new (a loop's rewrite) with the same statements
+            a, b, given = ours[k], theirs[k], blocks.get(k)
+            return a is b or (a is not given and b is not given and [str(x) for x in a.body] == [
+                str(x) for x in b.body])
+
+        if ours is blocks or list(ours) != list(theirs) or not all(same_block(k) for k in theirs):
+            stats["blocks_differ"] += 1
+        if cfg is None:
+            stats["cfg_rewritten"] += 1
+        else:
+            stats["cfg_same" if cfg_same(cfg, analysis.compute_cfg_from_blocks(ours)) else "cfg_differ"] += 1
+        return ours, cfg
+
+    jitssa.canonical_blocks = canonical
 
 
 def main() -> None:

@@ -105,7 +105,7 @@ import numba
 from dynslam2d import jitssa
 if sys.argv[1] == "1":
     assert jitssa.install() and not jitssa.install()  # (once)
-from numba.core import ir, ssa
+from numba.core import ir, postproc, ssa
 from dynslam2d.slam import matcher
 kernel = numba.njit(matcher.gated_points.py_func)
 rng = np.random.default_rng(7)
@@ -117,7 +117,8 @@ out = kernel(r, np.cos(ang), np.sin(ang), np.isfinite(r), 0.1, 30.0, 0.2, 25.0, 
 llvm = "\n".join(kernel.inspect_llvm().values())
 print(json.dumps({"llvm": llvm, "out": [np.asarray(o).tolist() for o in out],
                   "installed": [bool(getattr(ssa._run_ssa, "_dynslam2d_sparse", False)),
-                                bool(getattr(ir.Inst, "_dynslam2d_fast", False))]}))
+                                bool(getattr(ir.Inst, "_dynslam2d_fast", False)),
+                                bool(getattr(postproc.PostProcessor.run, "_dynslam2d_shared_cfg", False))]}))
 """
 
 #: Hand-made IR: a statement sharing its assigned expression with another (numba's pass would mutate the second
@@ -164,6 +165,36 @@ def test_same_ssa_ir_on_the_first_commands_kernels(tmp_path: Path) -> None:
     assert stats["calls"] >= 6 and stats["same"] == stats["calls"] and stats["differ"] == 0
     assert stats["lists_same"] == stats["calls"] and stats["lists_differ"] == 0
     assert stats["phis"] > 10 and stats["fallbacks"] == 0  # violators were rewritten, by the sparse pass itself
+    assert stats["postproc_calls"] > 50 and stats["cfg_same"] > 50  # every PostProcessor.run's graph shared ...
+    assert stats["cfg_same"] + stats["cfg_rewritten"] == stats["postproc_calls"]  # ... unless a loop was rewritten
+    assert stats["cfg_differ"] == 0 and stats["blocks_differ"] == 0
+
+
+#: A loop with two back edges (``continue`` in a ``for`` loop: numba's canonicalisation gives it a tail block, and
+#: its graph is then built again) and one without, compiled with every ``PostProcessor.run`` checked
+#: (benchmarks/check_jitssa.py's ``shared_cfg``); their results.
+LOOPS = r"""
+import json, sys
+sys.path.insert(0, sys.argv[1])
+import numba
+from check_jitssa import shared_cfg
+stats = {}
+shared_cfg(stats)
+def two_back_edges(n):
+    s = 0
+    for i in range(n):
+        if i % 3 == 0:
+            continue
+        s += i
+    return s
+def one_back_edge(n):
+    s = 0.0
+    for i in range(n):
+        s += i * 0.5
+    return s
+stats["out"] = [numba.njit(two_back_edges)(10), numba.njit(one_back_edge)(10)]
+print(json.dumps(stats))
+"""
 
 
 def test_same_lists_use_defs_and_live_maps_on_real_kernels(tmp_path: Path) -> None:
@@ -174,9 +205,17 @@ def test_same_lists_use_defs_and_live_maps_on_real_kernels(tmp_path: Path) -> No
 
 def test_same_code_and_results(tmp_path: Path) -> None:
     theirs, ours = _run(CODE, ["0"], tmp_path, "0"), _run(CODE, ["1"], tmp_path, "1")
-    assert theirs["installed"] == [False, False] and ours["installed"] == [True, True]
+    assert theirs["installed"] == [False, False, False] and ours["installed"] == [True, True, True]
     assert ours["llvm"] == theirs["llvm"] and "phi" in ours["llvm"]
     assert ours["out"] == theirs["out"]
+
+
+def test_shared_cfg_is_numbas_graph(tmp_path: Path) -> None:
+    res = _run(LOOPS, [str(ROOT / "benchmarks")], tmp_path, "loops")
+    assert res["out"] == [27, 22.5]
+    assert res["cfg_rewritten"] >= 1 and res["cfg_same"] >= 10  # both paths taken
+    assert res["cfg_same"] + res["cfg_rewritten"] == res["postproc_calls"]
+    assert res["cfg_differ"] == 0 and res["blocks_differ"] == 0
 
 
 def test_shared_ir_objects_go_to_numbas_pass(tmp_path: Path) -> None:
@@ -190,12 +229,13 @@ def test_other_sources_left_alone() -> None:
 import json
 from numba.core import ir, ssa
 from dynslam2d import jitssa
-from numba.core import analysis
+from numba.core import analysis, postproc
 def now():
     return (ssa._run_ssa, ir.Inst._rec_list_vars, ir.Stmt.list_vars, ir.Expr.list_vars,
-            analysis.compute_use_defs.__code__, analysis.compute_live_map.__code__)
+            analysis.compute_use_defs.__code__, analysis.compute_live_map.__code__, postproc.PostProcessor.run)
 before = now()
 jitssa.SOURCES["analysis"] = "0" * 16
+jitssa.POSTPROC_SOURCES["postproc"] = "0" * 16
 done = jitssa.install()
 after = now()
 print(json.dumps({"done": done, "same": all(a is b for a, b in zip(before, after))}))

@@ -38,6 +38,10 @@ from typing import Any
 SOURCES = {"ssa": "d20accd92757fef6", "ir": "e6c8061cecb65e68", "ir_utils": "6deaf6b1d9401cc4",
            "analysis": "04b7eefad8abb7c9"}
 
+#: SHA-256 (first 16 hex digits) of the numba files :func:`shared_cfg` reproduces (numba 0.68.1): ``postproc.py``
+#: (``PostProcessor.run``, ``VariableLifetime``) and ``transforms.py`` (``canonicalize_cfg``).
+POSTPROC_SOURCES = {"postproc": "d83593cf83ef70f4", "transforms": "4d579adc3f819863"}
+
 #: How many functions' SSA reconstruction went through numba's own ``_run_ssa`` after the check in
 #: :func:`sparse_run_ssa` found IR objects shared between statements (see there); for tests and benchmarks.
 FALLBACKS = [0]
@@ -585,9 +589,102 @@ def fast_compute_live_map(cfg: Any, blocks: Any, var_use_map: Any, var_def_map: 
     return live_map
 
 
+def _postproc_checked() -> bool:
+    """Whether numba's ``postproc.py`` and ``transforms.py`` have the SHA-256 in :data:`POSTPROC_SOURCES`."""
+    key = tuple(sorted(POSTPROC_SOURCES.items()))
+    if key not in _CHECKED:
+        try:
+            from numba.core import postproc, transforms
+
+            _CHECKED[key] = all(
+                hashlib.sha256(Path(module.__file__).read_bytes()).hexdigest()[:16] == POSTPROC_SOURCES[name]
+                for name, module in (("postproc", postproc), ("transforms", transforms)))
+        except (ImportError, OSError, TypeError):  # pragma: no cover - numba is a dependency
+            _CHECKED[key] = False
+    return _CHECKED[key]
+
+
+def shared_cfg() -> bool:
+    """Have numba's ``postproc.PostProcessor.run`` (after every rewrite, inlining and legalisation pass: about 1100
+    calls on a cold run of the README's first command) build the function's control-flow graph once instead of twice
+    (:func:`shared_cfg_run`). Done only when numba's ``postproc.py`` and ``transforms.py`` are those checked
+    (:data:`POSTPROC_SOURCES`). Returns whether it changed numba (not when called again)."""
+    from numba.core import postproc, transforms
+
+    run = postproc.PostProcessor.run
+    if getattr(run, "_dynslam2d_shared_cfg", False) or not _postproc_checked():
+        return False
+    expected = transforms.canonicalize_cfg, transforms.canonicalize_cfg_single_backedge
+
+    def lean_run(self: Any, emit_dels: bool = False, extend_lifetimes: bool = False) -> None:
+        """numba's ``PostProcessor.run`` (canonical CFG, variable lifetimes, block entry variables, generator info,
+        ``del`` statements), the canonicalisation's control-flow graph reused (:func:`shared_cfg_run`)."""
+        if (transforms.canonicalize_cfg, transforms.canonicalize_cfg_single_backedge) != expected:  # replaced since
+            return run(self, emit_dels=emit_dels, extend_lifetimes=extend_lifetimes)
+        return shared_cfg_run(self, emit_dels, extend_lifetimes)
+
+    lean_run._dynslam2d_shared_cfg = True  # type: ignore[attr-defined]
+    lean_run.__wrapped__ = run  # type: ignore[attr-defined]
+    postproc.PostProcessor.run = lean_run
+    return True
+
+
+def canonical_blocks(blocks: Any) -> tuple[Any, Any]:
+    """numba's ``transforms.canonicalize_cfg(blocks)`` (a new dict of the blocks, each loop with several back edges
+    given one tail block), plus the control-flow graph it built of ``blocks`` when it rewrote no loop, else None.
+
+    numba builds ``compute_cfg_from_blocks(blocks)``, copies the dict and rewrites the loops with more than one back
+    edge (checked on the original blocks' terminators). With no such loop the copy is returned as it is: the same
+    blocks in the same order, so the graph of the copy that ``VariableLifetime.cfg`` would build next is this one's
+    equal (nodes and edges added in the same order; its lazily computed loops and back edges are functions of the
+    graph). With such a loop numba's own function runs (its graph differs from the rewritten blocks')."""
+    from numba.core import analysis, transforms
+
+    cfg = analysis.compute_cfg_from_blocks(blocks)
+    for loop in cfg.loops().values():  # numba's has_multiple_backedges
+        count = 0
+        for k in loop.body:
+            if loop.header in blocks[k].terminator.get_targets():
+                count += 1
+        if count > 1:
+            return transforms.canonicalize_cfg(blocks), None
+    return blocks.copy(), cfg
+
+
+def shared_cfg_run(self: Any, emit_dels: bool = False, extend_lifetimes: bool = False) -> None:
+    """numba 0.68's ``PostProcessor.run`` (``postproc.py``), statement for statement, with the control-flow graph of
+    :func:`canonical_blocks` given to the ``VariableLifetime`` (its ``cfg``, which numba would build again from the
+    same blocks right away) when the canonicalisation rewrote nothing."""
+    from numba.core import analysis, postproc
+
+    blocks, cfg = canonical_blocks(self.func_ir.blocks)
+    self.func_ir.blocks = blocks
+    vlt = postproc.VariableLifetime(self.func_ir.blocks)
+    if cfg is not None:
+        vlt.__dict__["cfg"] = cfg  # functools.cached_property's slot: VariableLifetime.cfg returns it
+    self.func_ir.variable_lifetime = vlt
+
+    bev = analysis.compute_live_variables(vlt.cfg, self.func_ir.blocks,
+                                          vlt.usedefs.defmap,
+                                          vlt.deadmaps.combined)
+    for offset, ir_block in self.func_ir.blocks.items():
+        self.func_ir.block_entry_vars[ir_block] = bev[offset]
+
+    if self.func_ir.is_generator:
+        self.func_ir.generator_info = postproc.GeneratorInfo()
+        self._compute_generator_info()
+    else:
+        self.func_ir.generator_info = None
+
+    # Emit del nodes, do this last as the generator info parsing generates
+    # and then strips dels as part of its analysis.
+    if emit_dels:
+        self._insert_var_dels(extend_lifetimes=extend_lifetimes)
+
+
 def install() -> bool:
-    """Install :func:`fast_list_vars`, :func:`lean_use_defs`, :func:`bit_live_map` and :func:`sparse_ssa` (numba's
-    sources checked); returns whether any was installed. Called by :func:`dynslam2d.jitcache.lean_numba_compile` at
-    the first compile."""
-    done = [fast_list_vars(), lean_use_defs(), bit_live_map(), sparse_ssa()]
+    """Install :func:`fast_list_vars`, :func:`lean_use_defs`, :func:`bit_live_map`, :func:`sparse_ssa` (numba's
+    sources checked) and :func:`shared_cfg`; returns whether any was installed. Called by
+    :func:`dynslam2d.jitcache.lean_numba_compile` at the first compile."""
+    done = [fast_list_vars(), lean_use_defs(), bit_live_map(), sparse_ssa(), shared_cfg()]
     return any(done)
