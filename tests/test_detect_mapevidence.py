@@ -169,3 +169,99 @@ def test_seen_through_kernel_equals_the_plain_walk(seed) -> None:
         assert list(zip(out_r[:got].tolist(), out_c[:got].tolist())) == want
         total += got
     assert total > 100
+
+
+def _free_steps_plain(lo, i0, j0, ox, oy, occ, cap):
+    """``_free_steps`` as its docstring states it, line by line: per octant (+x, −x, +y, −y; the minor coordinate
+    growing, shrinking) the largest d ≤ cap whose lines 0 … d from the laser's cell hold no cell ≥ occ from the
+    laser's minor cell − 2 to + line + 2 on that side; −1 everywhere with the laser off the grid."""
+    import math
+
+    h, w = lo.shape
+    c, r = math.floor(ox + 0.5) - i0, math.floor(oy + 0.5) - j0
+    if not (0 <= r < h and 0 <= c < w):
+        return [-1] * 8
+    out = []
+    for q in range(4):
+        sgn = 1 if q % 2 == 0 else -1
+        for side in range(2):
+            d = 0
+            while d <= cap:
+                lo_b, hi_b = (-2, d + 2) if side == 0 else (-d - 2, 2)
+                cells = [(r + b, c + sgn * d) if q < 2 else (r + sgn * d, c + b) for b in range(lo_b, hi_b + 1)]
+                if any(0 <= rr < h and 0 <= cc < w and lo[rr, cc] >= occ for rr, cc in cells):
+                    break
+                d += 1
+            out.append(min(d - 1, cap))
+    return out
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_free_steps_equal_their_definition(seed) -> None:
+    """mapevidence._free_steps (the free square by rings, then each octant's lines from its edge on) gives the
+    definition's value on random maps of a few blobs (cells exactly at the threshold among them), the laser inside,
+    on the edge of and outside the grid, on cell boundaries, with caps from 0 to 64 (pass det38)."""
+    import math
+
+    from dynslam2d.detect.mapevidence import _free_steps
+
+    rng = np.random.default_rng(seed)
+    positive = 0
+    for _ in range(150):
+        h, w = (int(v) for v in rng.integers(3, 90, 2))
+        lo = rng.normal(-1.0, 1.5, size=(h, w)).astype(np.float32)
+        for _ in range(int(rng.integers(0, 8))):
+            r, c = rng.integers(0, h), rng.integers(0, w)
+            lo[r:r + rng.integers(1, 4), c:c + rng.integers(1, 4)] = rng.choice([6.0, 7.5])
+        i0, j0 = (int(v) for v in rng.integers(-50, 50, 2))
+        ox, oy = i0 + rng.uniform(-4.0, w + 4.0), j0 + rng.uniform(-4.0, h + 4.0)
+        if rng.random() < 0.3:
+            ox, oy = math.floor(ox) + 0.5, math.floor(oy) - 0.5
+        cap = int(rng.choice([0, 1, 3, 10, 64]))
+        out = np.empty(8, dtype=np.int64)
+        _free_steps(lo, i0, j0, ox, oy, 6.0, cap, out)
+        want = _free_steps_plain(lo, i0, j0, ox, oy, 6.0, cap)
+        assert out.tolist() == want
+        positive += sum(v > 2 for v in want)
+    assert positive > 200
+
+
+@pytest.mark.parametrize("seed", [5, 6, 7])
+def test_seen_through_kernel_equals_the_plain_walk_in_open_space(seed) -> None:
+    """The walk's first pass starts after the steps _free_steps finds free (pass det38): on sparse maps (a few
+    long-occupied blobs at all distances from the laser, cells exactly at the threshold among them) the cells are
+    still the plain walk's, in the same order, with beams in every direction, the laser anywhere in a cell (on its
+    boundaries too), near the grid's edges and outside it, with and without depth."""
+    import math
+
+    from dynslam2d.detect.mapevidence import seen_through_structure_kernel
+
+    rng = np.random.default_rng(seed)
+    h, w, i0, j0 = 90, 110, -40, 12
+    total = 0
+    for trial in range(12):
+        lo = rng.normal(-1.0, 1.0, size=(h, w)).astype(np.float32)
+        for _ in range(int(rng.integers(2, 12))):
+            r, c = rng.integers(0, h - 3), rng.integers(0, w - 3)
+            lo[r:r + rng.integers(1, 4), c:c + rng.integers(1, 4)] = rng.choice([6.0, 9.0])
+        ox, oy = i0 + rng.uniform(0.0, w), j0 + rng.uniform(0.0, h)
+        if trial % 4 == 1:
+            ox, oy = math.floor(ox) + 0.5, math.floor(oy) + 0.5
+        elif trial % 4 == 2:
+            ox, oy = i0 + rng.uniform(-0.5, 2.0), j0 + h - rng.uniform(0.6, 2.0)
+        elif trial == 11:
+            ox = i0 - 7.3
+        n = 541
+        ang = np.sort(rng.uniform(-np.pi, np.pi, n))
+        ang[::37] = np.round(ang[::37] / (np.pi / 4)) * (np.pi / 4)  # (diagonals and axes: slopes ±1 and 0)
+        rng_m = rng.uniform(5.0, 140.0, n)
+        cx, cy = ox + rng_m * np.cos(ang), oy + rng_m * np.sin(ang)
+        clear = rng.random(n) < 0.95
+        depth = (0.0, 3.0)[trial % 2]
+        out_r = np.zeros(64 * n, dtype=np.int64)
+        out_c = np.zeros(64 * n, dtype=np.int64)
+        got = seen_through_structure_kernel(lo, i0, j0, ox, oy, cx, cy, clear, 0.5, 6.0, out_r, out_c, depth)
+        want = _seen_through_plain(lo, i0, j0, ox, oy, cx, cy, clear, 0.5, 6.0, depth)
+        assert list(zip(out_r[:got].tolist(), out_c[:got].tolist())) == want
+        total += got
+    assert total > 100
