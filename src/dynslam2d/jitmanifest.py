@@ -84,14 +84,6 @@ KERNELS: tuple[tuple[str, str], ...] = (
      'int64, float64, float64, float64,)'),
     ('dynslam2d.slam.raycast.ray_ends',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), float64, float64, float64, float64,)"),
-    ('dynslam2d.slam.cleanup._geometry_bounds',
-     "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
-     "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),
-    ('dynslam2d.slam.cleanup._count_beams',
-     "(Array(int32, 2, 'C'), Array(uint16, 3, 'C'), int64, int64, int64, int64, float64, float64, "
-     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), "
-     "Array(float64, 1, 'C'), Array(bool, 1, 'C'), int64, int64, int64, int64, float64, Array(uint8, 1, "
-     "'C'), bool,)"),
     ('dynslam2d.slam.matcher.match_pyramid',
      "(Array(float32, 2, 'C'), Array(float32, 2, 'C'), Array(float32, 2, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 2, 'C'), Array(float64, 1, 'C'), int64, int64, bool, bool, float64, float64, "
@@ -146,43 +138,51 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), float64, float64, float64, float64, Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64, "
      'bool, float64, float64,)'),
+    ('dynslam2d.slam.cleanup._geometry_bounds',
+     "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
+     "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),
+    ('dynslam2d.slam.cleanup._count_beams',
+     "(Array(int32, 2, 'C'), Array(uint16, 3, 'C'), int64, int64, int64, int64, float64, float64, "
+     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), "
+     "Array(float64, 1, 'C'), Array(bool, 1, 'C'), int64, int64, int64, int64, float64, Array(uint8, 1, "
+     "'C'), bool,)"),
 )
 
 #: CPU time of each kernel's compile (s, the kernels it compiles in turn included) in a one-core cold run when
 #: recorded: the background compile's estimate of how far ahead of the run a kernel is (its order, docs/speed.md).
 COMPILE_S: dict[str, float] = {
-    'dynslam2d.sim.world._cast_kernel': 0.37,
-    'dynslam2d.detect.body._drop_body': 0.14,
-    'dynslam2d.slam.matcher.gated_points': 0.42,
-    'dynslam2d.detect.body._observe_beams': 0.17,
-    'dynslam2d.detect.segment._segment_kernel': 0.60,
-    'dynslam2d.detect.shapes.fit_cluster_rows': 1.51,
-    'dynslam2d.detect.kernels.classify_batch': 1.04,
-    'dynslam2d.detect.kernels.select_detections': 1.10,
-    'dynslam2d.detect.freespace._ref_arrays': 0.09,
-    'dynslam2d.detect.kernels.merge_legs': 1.01,
-    'dynslam2d.detect.kernels.measure_batch': 0.80,
-    'dynslam2d.detect.kernels_update.birth_rows': 0.41,
-    'dynslam2d.detect.kernels_update.report_rows': 0.34,
-    'dynslam2d.slam.ledgerkernels.record_cells': 1.85,
-    'dynslam2d.slam.ledgerkernels.level_rows': 0.41,
-    'dynslam2d.slam.ledgerkernels.stand_marks': 0.30,
-    'dynslam2d.slam.raycast.integrate_levels': 1.26,
-    'dynslam2d.slam.raycast.ray_ends': 0.07,
-    'dynslam2d.slam.cleanup._geometry_bounds': 0.42,
-    'dynslam2d.slam.cleanup._count_beams': 0.49,
-    'dynslam2d.slam.matcher.match_pyramid': 2.02,
-    'dynslam2d.slam.correlative._rotated_cells': 0.23,
-    'dynslam2d.slam.correlative._score_pyramid': 0.38,
-    'dynslam2d.slam.correlative.branch_and_bound': 2.01,
-    'dynslam2d.vacated.vacated_scan_kernel': 1.58,
-    'dynslam2d.detect.kernels.cv_predict': 0.20,
-    'dynslam2d.detect.kernels_update.association_gates': 1.02,
-    'dynslam2d.detect.kernels_assign.assign_groups': 0.75,
-    'dynslam2d.detect.kernels_update.update_pairs': 2.41,
-    'dynslam2d.detect.kernels_update.manage_counters': 0.39,
-    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.21,
-    'dynslam2d.detect.kernels.seen_through_refs': 0.19,
-    'dynslam2d.filter.observed_boxes_kernel': 0.17,
-    'dynslam2d.filter._rows_exclusion_kernel': 0.40,
+    'dynslam2d.sim.world._cast_kernel': 0.65,
+    'dynslam2d.detect.body._drop_body': 0.23,
+    'dynslam2d.slam.matcher.gated_points': 0.76,
+    'dynslam2d.detect.body._observe_beams': 0.33,
+    'dynslam2d.detect.segment._segment_kernel': 1.15,
+    'dynslam2d.detect.shapes.fit_cluster_rows': 2.85,
+    'dynslam2d.detect.kernels.classify_batch': 1.17,
+    'dynslam2d.detect.kernels.select_detections': 1.26,
+    'dynslam2d.detect.freespace._ref_arrays': 0.10,
+    'dynslam2d.detect.kernels.merge_legs': 1.35,
+    'dynslam2d.detect.kernels.measure_batch': 1.14,
+    'dynslam2d.detect.kernels_update.birth_rows': 0.40,
+    'dynslam2d.detect.kernels_update.report_rows': 0.42,
+    'dynslam2d.slam.ledgerkernels.record_cells': 2.28,
+    'dynslam2d.slam.ledgerkernels.level_rows': 0.48,
+    'dynslam2d.slam.ledgerkernels.stand_marks': 0.36,
+    'dynslam2d.slam.raycast.integrate_levels': 1.46,
+    'dynslam2d.slam.raycast.ray_ends': 0.09,
+    'dynslam2d.slam.matcher.match_pyramid': 2.50,
+    'dynslam2d.slam.correlative._rotated_cells': 0.25,
+    'dynslam2d.slam.correlative._score_pyramid': 0.44,
+    'dynslam2d.slam.correlative.branch_and_bound': 1.59,
+    'dynslam2d.vacated.vacated_scan_kernel': 3.48,
+    'dynslam2d.detect.kernels.cv_predict': 0.23,
+    'dynslam2d.detect.kernels_update.association_gates': 1.20,
+    'dynslam2d.detect.kernels_assign.assign_groups': 1.04,
+    'dynslam2d.detect.kernels_update.update_pairs': 2.97,
+    'dynslam2d.detect.kernels_update.manage_counters': 0.61,
+    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.39,
+    'dynslam2d.detect.kernels.seen_through_refs': 0.28,
+    'dynslam2d.filter.observed_boxes_kernel': 0.23,
+    'dynslam2d.filter._rows_exclusion_kernel': 0.51,
+    'dynslam2d.slam.cleanup._geometry_bounds': 0.25,
+    'dynslam2d.slam.cleanup._count_beams': 0.68,
 }
