@@ -955,6 +955,8 @@ def run(
     frontend_trajectory = None
     grid: GridMap | None = None  # the written map; the front end's unless a render replaces it
     loop = pipe.loops.finish() if pipe.loops is not None else None
+    if pipe.loops is not None:  # (its last search is done: the place descriptors go before the re-render)
+        pipe.loops.release_places()
     if loop is not None and loop.corrected:
         t_render = time.perf_counter()
         grid_opt, lo_opt = render_map(loop, pipe.config.slam)
