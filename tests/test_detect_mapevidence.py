@@ -146,7 +146,6 @@ def test_seen_through_kernel_equals_the_plain_walk(seed) -> None:
     """seen_through_structure_kernel (branch-free first pass, windowed walk) gives the cells of the plain walk above,
     in the same order, on random maps of long-occupied blobs with beams in every direction (both major axes, both
     signs), some not clearing, the laser inside and outside the grid, with and without depth."""
-    from dynslam2d.detect.mapevidence import seen_through_structure_kernel
 
     rng = np.random.default_rng(seed)
     h, w, i0, j0 = 60, 80, -30, 7
@@ -162,13 +161,21 @@ def test_seen_through_kernel_equals_the_plain_walk(seed) -> None:
         cx = ox + rng_m * np.cos(ang)
         cy = oy + rng_m * np.sin(ang)
         clear = rng.random(n) < 0.9
-        out_r = np.zeros(64 * n, dtype=np.int64)
-        out_c = np.zeros(64 * n, dtype=np.int64)
-        got = seen_through_structure_kernel(lo, i0, j0, ox, oy, cx, cy, clear, 0.4, 6.0, out_r, out_c, depth)
-        want = _seen_through_plain(lo, i0, j0, ox, oy, cx, cy, clear, 0.4, 6.0, depth)
-        assert list(zip(out_r[:got].tolist(), out_c[:got].tolist())) == want
-        total += got
+        total += _walk_matches_plain(lo, i0, j0, ox, oy, cx, cy, clear, 0.4, depth)
     assert total > 100
+
+
+def _walk_matches_plain(lo, i0, j0, ox, oy, cx, cy, clear, core, depth) -> int:
+    """Run the kernel, assert its cells equal the plain walk's (same order), return how many it found."""
+    from dynslam2d.detect.mapevidence import seen_through_structure_kernel
+
+    n = cx.shape[0]
+    out_r = np.zeros(64 * n, dtype=np.int64)
+    out_c = np.zeros(64 * n, dtype=np.int64)
+    got = seen_through_structure_kernel(lo, i0, j0, ox, oy, cx, cy, clear, core, 6.0, out_r, out_c, depth)
+    want = _seen_through_plain(lo, i0, j0, ox, oy, cx, cy, clear, core, 6.0, depth)
+    assert list(zip(out_r[:got].tolist(), out_c[:got].tolist())) == want
+    return got
 
 
 def _free_steps_plain(lo, i0, j0, ox, oy, occ, cap):
@@ -234,7 +241,6 @@ def test_seen_through_kernel_equals_the_plain_walk_in_open_space(seed) -> None:
     boundaries too), near the grid's edges and outside it, with and without depth."""
     import math
 
-    from dynslam2d.detect.mapevidence import seen_through_structure_kernel
 
     rng = np.random.default_rng(seed)
     h, w, i0, j0 = 90, 110, -40, 12
@@ -258,10 +264,5 @@ def test_seen_through_kernel_equals_the_plain_walk_in_open_space(seed) -> None:
         cx, cy = ox + rng_m * np.cos(ang), oy + rng_m * np.sin(ang)
         clear = rng.random(n) < 0.95
         depth = (0.0, 3.0)[trial % 2]
-        out_r = np.zeros(64 * n, dtype=np.int64)
-        out_c = np.zeros(64 * n, dtype=np.int64)
-        got = seen_through_structure_kernel(lo, i0, j0, ox, oy, cx, cy, clear, 0.5, 6.0, out_r, out_c, depth)
-        want = _seen_through_plain(lo, i0, j0, ox, oy, cx, cy, clear, 0.5, 6.0, depth)
-        assert list(zip(out_r[:got].tolist(), out_c[:got].tolist())) == want
-        total += got
+        total += _walk_matches_plain(lo, i0, j0, ox, oy, cx, cy, clear, 0.5, depth)
     assert total > 100
