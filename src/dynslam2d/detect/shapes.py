@@ -392,7 +392,7 @@ def _fit_one(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0:
     out[5] = math.sqrt(ss / n)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _lane_edges(w: np.ndarray, j: int, n: int, lo1: float, hi1: float, t1: float, lo2: float, hi2: float,
                 t2: float) -> tuple[float, float]:
     """The edges the points of lane ``j`` of :func:`_score4` go to per axis, 1.0 for the far edge ``hi`` (Σ(hi − cᵢ)²
@@ -415,7 +415,7 @@ def _lane_edges(w: np.ndarray, j: int, n: int, lo1: float, hi1: float, t1: float
     return 1.0 if f1 == 1 else 0.0, 1.0 if f2 == 1 else 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _var_score(s1: float, q1: float, m1: float, s2: float, q2: float, m2: float) -> float:
     """The variance criterion's score −v1 − v2 from each group's sum, sum of squares and count (a float: the
     scalar code's int count converted for its divisions), as :func:`_fit_one`."""
