@@ -441,3 +441,52 @@ def test_kept_trig_table_gives_the_same_rows() -> None:
     a = angles.tolist()
     assert trig[0].tolist() == [math.cos(t) for t in a] and trig[1].tolist() == [math.sin(t) for t in a]
     assert trig[2].tolist() == [math.atan2(math.sin(t), math.cos(t)) for t in a]
+
+
+def test_four_lane_search_is_the_scalar_search_bit_for_bit() -> None:
+    """Pass det39: ``fit_cluster_rows`` scores the angles four at a time as lanes of one vector value
+    (``shapes._fit_vec`` / ``_score4``); its six rectangle values equal the former scalar kernel's
+    (``shapes._fit_one``, two angles a pass) bit for bit: noisy L-shapes, walls, arcs and single points far from
+    the origin, clusters of 1–70 points, clusters symmetric about their middle (ties of the edge sums, ties of
+    the scores), a zero-width cluster (the undecided edge, always summed), every criterion, angle counts and
+    strides whose coarse and fine lists are not multiples of four (the last group filled up)."""
+    from dynslam2d.detect.shapes import _fit_one, _fit_vec
+
+    rng = np.random.default_rng(39)
+    clusters = []
+    for q in range(60):
+        n = int(rng.integers(1, 70))
+        cx, cy = rng.uniform(-60, 60, 2)
+        kind = q % 4
+        if kind == 0:
+            clusters.append(l_shape(cx, cy, rng.uniform(0, math.pi), rng.uniform(0.1, 4.0), rng.uniform(0.05, 2.0),
+                                    max(n // 2, 2), rng.uniform(0, 0.03), q))
+        elif kind == 1:
+            a = rng.uniform(0, math.pi, n)
+            r = rng.uniform(0.05, 0.5)
+            clusters.append(np.column_stack((cx + r * np.cos(a), cy + r * np.sin(a))) + rng.normal(0, 0.005, (n, 2)))
+        elif kind == 2:
+            t = np.linspace(0, rng.uniform(0.5, 6.0), n)
+            h = rng.uniform(0, math.pi)
+            clusters.append(np.column_stack((cx + t * math.cos(h), cy + t * math.sin(h))) + rng.normal(0, 0.01, (n, 2)))
+        else:
+            clusters.append(rng.normal(0, 0.05, (n, 2)) + [cx, cy])
+    for q in range(8):  # symmetric grids: equal sums and equal scores at several angles
+        g = np.arange(-(q % 4) - 1, (q % 4) + 2, dtype=float) * 0.05
+        xx, yy = np.meshgrid(g, g if q % 2 else g[:2])
+        clusters.append(np.column_stack((xx.ravel() + (q - 4) * 3.0, yy.ravel() - 7.5)))
+    clusters.append(np.array([[1.0, 2.0], [1.0, 2.0], [1.0, 2.0]]))  # zero width
+    for step_deg, strides in ((1.0, (1, 3, 4, 5, 6, 7)), (7.0, (1, 2, 3)), (2.5, (5,))):
+        angles = search_angles(step_deg)
+        trig = np.vstack((np.cos(angles), np.sin(angles), np.arctan2(np.sin(angles), np.cos(angles))))
+        for criterion in (0, 1, 2):
+            for stride in strides:
+                for c, cl in enumerate(clusters):
+                    x, y = cl[:, 0].copy(), cl[:, 1].copy()
+                    n = x.shape[0]
+                    want, got = np.empty(6), np.empty(6)
+                    order = np.empty(angles.shape[0] + 2 * stride, dtype=np.int64)
+                    _fit_one(x, y, trig, criterion, 0.01, want, stride, np.empty((6, n)), order)
+                    _fit_vec(x, y, trig, criterion, 0.01, got, stride, np.empty(8 * n), order.copy(),
+                             np.empty(order.shape[0]), np.empty(n), np.empty(n))
+                    assert got.tobytes() == want.tobytes(), (step_deg, criterion, stride, c)

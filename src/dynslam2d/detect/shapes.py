@@ -5,7 +5,8 @@ axis angle θ in [0, π/2) with a 1° step, project the points on e1 = (cos θ, 
 e2 = (−sin θ, cos θ) and score the projection with the area, closeness or variance criterion;
 the best θ gives the bounds [lo1, hi1] × [lo2, hi2] of the rectangle in (e1, e2) coordinates.
 :func:`fit_rectangle` is the numpy version vectorised over all angles at once (one (n×2)·(2×K)
-product); :func:`fit_clusters` does the same for every cluster of a scan in one numba pass.
+product); :func:`fit_clusters` does the same for every cluster of a scan in one numba pass, four angles at a
+time as the lanes of one vector value (:mod:`dynslam2d.jitvec`).
 
 Circle: algebraic (Kåsa) fit refined by Gauss–Newton on the geometric residual — round
 movers (people) show an arc whose centroid lies ≈2R/π in front of the true centre.
@@ -32,6 +33,22 @@ from dynslam2d.detect.layout import (
     N_FIT_COLS,
 )
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
+from dynslam2d.jitvec import (
+    vadd,
+    vdiv,
+    vget,
+    vload,
+    vmax,
+    vmin,
+    vmul,
+    vneg,
+    vset,
+    vsplat,
+    vstore,
+    vsub,
+    vwhere,
+    vwhere_lt,
+)
 
 CRITERIA = {"area": 0, "closeness": 1, "variance": 2}
 
@@ -191,7 +208,8 @@ def _fit_one(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0:
     """Best angle over the table ``trig`` (rows cos θ, sin θ, atan2(sin θ, cos θ): :func:`fit_cluster_rows`) by
     the Zhang et al. 2017 criterion (larger is better): every angle (stride 1), or every stride-th angle and then
     the angles around the best one (coarse-to-fine). ``w`` (6 rows ≥ n) and ``order`` (≥ K + 2·stride) are work
-    space.
+    space. The scalar form: :func:`fit_cluster_rows` runs :func:`_fit_vec` (four angles as vector lanes, pass
+    det39), which ``tests/test_detect_shapes.py`` checks against this one bit for bit.
 
     One loop scores the angles to score (listed in ``order``, the fine ones appended once the coarse best is known)
     two at a time: each pass over the points serves two angles, whose sums are independent chains of additions, so
@@ -239,8 +257,10 @@ def _fit_one(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0:
         t1b = 0.0
         t2b = 0.0
         for i in range(n):
-            u = ca * x[i] + sa * y[i]
-            v = -sa * x[i] + ca * y[i]
+            xi = x[i]  # (read once: the stores into w below could alias x, y for the compiler, which reloaded them)
+            yi = y[i]
+            u = ca * xi + sa * yi
+            v = -sa * xi + ca * yi
             w[ra, i] = u
             w[ra + 1, i] = v
             t1a += u
@@ -249,8 +269,8 @@ def _fit_one(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0:
             hi1a = max(hi1a, u)
             lo2a = min(lo2a, v)
             hi2a = max(hi2a, v)
-            u = cb * x[i] + sb * y[i]
-            v = -sb * x[i] + cb * y[i]
+            u = cb * xi + sb * yi
+            v = -sb * xi + cb * yi
             w[rb, i] = u
             w[rb + 1, i] = v
             t1b += u
@@ -363,6 +383,177 @@ def _fit_one(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0:
     ss = 0.0
     for i in range(n):
         d = min(min(hi1 - w[r, i], w[r, i] - lo1), min(hi2 - w[r + 1, i], w[r + 1, i] - lo2))
+        ss += d * d
+    out[0] = trig[2, best_k]
+    out[1] = lo1
+    out[2] = hi1
+    out[3] = lo2
+    out[4] = hi2
+    out[5] = math.sqrt(ss / n)
+
+
+@njit(cache=True)
+def _lane_edges(w: np.ndarray, j: int, n: int, lo1: float, hi1: float, t1: float, lo2: float, hi2: float,
+                t2: float) -> tuple[float, float]:
+    """The edges the points of lane ``j`` of :func:`_score4` go to per axis, 1.0 for the far edge ``hi`` (Σ(hi − cᵢ)²
+    < Σ(cᵢ − lo)²), else 0.0: as :func:`_fit_one`, :func:`_near_side_known` from the bounds and the projections' sum
+    ``t`` when it is certain for both axes, else the sums in sequence (:func:`_near_sides`, the lane's projections
+    read from ``w``)."""
+    f1 = _near_side_known(n, lo1, hi1, t1)
+    f2 = _near_side_known(n, lo2, hi2, t2)
+    if f1 < 0 or f2 < 0:
+        sa1 = 0.0
+        sb1 = 0.0
+        sa2 = 0.0
+        sb2 = 0.0
+        for i in range(n):
+            sa1 += (hi1 - w[8 * i + j]) ** 2
+            sb1 += (w[8 * i + j] - lo1) ** 2
+            sa2 += (hi2 - w[8 * i + 4 + j]) ** 2
+            sb2 += (w[8 * i + 4 + j] - lo2) ** 2
+        return 1.0 if sa1 < sb1 else 0.0, 1.0 if sa2 < sb2 else 0.0
+    return 1.0 if f1 == 1 else 0.0, 1.0 if f2 == 1 else 0.0
+
+
+@njit(cache=True)
+def _var_score(s1: float, q1: float, m1: float, s2: float, q2: float, m2: float) -> float:
+    """The variance criterion's score −v1 − v2 from each group's sum, sum of squares and count (a float: the
+    scalar code's int count converted for its divisions), as :func:`_fit_one`."""
+    v1 = q1 / m1 - (s1 / m1) ** 2 if m1 > 0.0 else 0.0
+    v2 = q2 / m2 - (s2 / m2) ** 2 if m2 > 0.0 else 0.0
+    return -v1 - v2
+
+
+@njit(cache=True)
+def _score4(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: float, k0: int, k1: int, k2: int,
+            k3: int, w: np.ndarray) -> tuple[float, float, float, float]:
+    """The Zhang et al. 2017 scores (larger is better) of the four angles ``k0``…``k3`` of the table ``trig`` for
+    the points ``x``, ``y`` (m): :func:`_fit_one`'s score of each, the four angles as the lanes of one
+    ``<4 x double>`` value (:mod:`dynslam2d.jitvec`), so each pass over the points is one vector instruction per
+    operation for four angles (pass det39). Every lane is the same IEEE operation on the same operands as the
+    scalar code, every sum in the points' order: the same floats. ``w`` (≥ 8n) is work space: per point the four
+    projections on e1, then the four on e2."""
+    n = x.shape[0]
+    c = vset(trig[0, k0], trig[0, k1], trig[0, k2], trig[0, k3])
+    s = vset(trig[1, k0], trig[1, k1], trig[1, k2], trig[1, k3])
+    ns = vneg(s)
+    lo1 = vsplat(np.inf)
+    hi1 = vsplat(-np.inf)
+    lo2 = vsplat(np.inf)
+    hi2 = vsplat(-np.inf)
+    t1 = vsplat(0.0)
+    t2 = vsplat(0.0)
+    for i in range(n):
+        xi = vsplat(x[i])
+        yi = vsplat(y[i])
+        u = vadd(vmul(c, xi), vmul(s, yi))  # (c·x + s·y and −s·x + c·y, as _fit_one)
+        v = vadd(vmul(ns, xi), vmul(c, yi))
+        vstore(w, 8 * i, u)
+        vstore(w, 8 * i + 4, v)
+        t1 = vadd(t1, u)
+        t2 = vadd(t2, v)
+        lo1 = vmin(lo1, u)
+        hi1 = vmax(hi1, u)
+        lo2 = vmin(lo2, v)
+        hi2 = vmax(hi2, v)
+    if criterion == 0:
+        sc = vmul(vneg(vsub(hi1, lo1)), vsub(hi2, lo2))
+        return vget(sc, 0), vget(sc, 1), vget(sc, 2), vget(sc, 3)
+    # each axis' nearer edge per lane (1.0: the far edge hi): _near_side_known when certain, else the sums
+    a0, b0 = _lane_edges(w, 0, n, vget(lo1, 0), vget(hi1, 0), vget(t1, 0), vget(lo2, 0), vget(hi2, 0), vget(t2, 0))
+    a1, b1 = _lane_edges(w, 1, n, vget(lo1, 1), vget(hi1, 1), vget(t1, 1), vget(lo2, 1), vget(hi2, 1), vget(t2, 1))
+    a2, b2 = _lane_edges(w, 2, n, vget(lo1, 2), vget(hi1, 2), vget(t1, 2), vget(lo2, 2), vget(hi2, 2), vget(t2, 2))
+    a3, b3 = _lane_edges(w, 3, n, vget(lo1, 3), vget(hi1, 3), vget(t1, 3), vget(lo2, 3), vget(hi2, 3), vget(t2, 3))
+    use1 = vset(a0, a1, a2, a3)
+    use2 = vset(b0, b1, b2, b3)
+    if criterion == 1:
+        acc = vsplat(0.0)
+        one = vsplat(1.0)
+        d0v = vsplat(d0)
+        for i in range(n):
+            u = vload(w, 8 * i)
+            v = vload(w, 8 * i + 4)
+            d1 = vwhere(use1, vsub(hi1, u), vsub(u, lo1))
+            d2 = vwhere(use2, vsub(hi2, v), vsub(v, lo2))
+            acc = vadd(acc, vdiv(one, vmax(vmin(d1, d2), d0v)))  # (1 / max(min(d1, d2), d0))
+        return vget(acc, 0), vget(acc, 1), vget(acc, 2), vget(acc, 3)
+    s1 = vsplat(0.0)
+    q1 = vsplat(0.0)
+    m1 = vsplat(0.0)
+    s2 = vsplat(0.0)
+    q2 = vsplat(0.0)
+    m2 = vsplat(0.0)
+    one = vsplat(1.0)
+    for i in range(n):
+        u = vload(w, 8 * i)
+        v = vload(w, 8 * i + 4)
+        d1 = vwhere(use1, vsub(hi1, u), vsub(u, lo1))
+        d2 = vwhere(use2, vsub(hi2, v), vsub(v, lo2))
+        # (the point's group: each sum either gains the term or keeps its value, per lane; the branch's bits)
+        s1 = vwhere_lt(d1, d2, vadd(s1, d1), s1)
+        q1 = vwhere_lt(d1, d2, vadd(q1, vmul(d1, d1)), q1)
+        m1 = vwhere_lt(d1, d2, vadd(m1, one), m1)
+        s2 = vwhere_lt(d1, d2, s2, vadd(s2, d2))
+        q2 = vwhere_lt(d1, d2, q2, vadd(q2, vmul(d2, d2)))
+        m2 = vwhere_lt(d1, d2, m2, vadd(m2, one))
+    return (_var_score(vget(s1, 0), vget(q1, 0), vget(m1, 0), vget(s2, 0), vget(q2, 0), vget(m2, 0)),
+            _var_score(vget(s1, 1), vget(q1, 1), vget(m1, 1), vget(s2, 1), vget(q2, 1), vget(m2, 1)),
+            _var_score(vget(s1, 2), vget(q1, 2), vget(m1, 2), vget(s2, 2), vget(q2, 2), vget(m2, 2)),
+            _var_score(vget(s1, 3), vget(q1, 3), vget(m1, 3), vget(s2, 3), vget(q2, 3), vget(m2, 3)))
+
+
+@njit(cache=True)
+def _fit_vec(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: float, out: np.ndarray,
+             stride: int, w: np.ndarray, order: np.ndarray, sc: np.ndarray, c1: np.ndarray, c2: np.ndarray) -> None:
+    """:func:`_fit_one`'s result (θ, lo1, hi1, lo2, hi2, rms into ``out``) with the angles scored four at a time
+    (:func:`_score4`): the coarse angles (every stride-th), then the fine ones within one coarse step of the coarse
+    best, a last group of fewer than four filled up with its last angle (scored again, its score not read); the
+    scores compared in the same order with the same tie rules, and the best angle's bounds and rms from
+    :func:`_project`'s projections (the products and bounds its scoring made). Work space: ``w`` (≥ 8n),
+    ``order`` and ``sc`` (≥ K + 2·stride), ``c1``, ``c2`` (≥ n)."""
+    n = x.shape[0]
+    kk = trig.shape[1]
+    step = max(stride, 1)
+    nq = 0
+    for k in range(0, kk, step):
+        order[nq] = k
+        nq += 1
+    best = -np.inf
+    best_k = 0
+    q0 = 0
+    for phase in range(2):
+        for q in range(q0, nq, 4):
+            last = order[nq - 1]
+            k1 = order[q + 1] if q + 1 < nq else last
+            k2 = order[q + 2] if q + 2 < nq else last
+            k3 = order[q + 3] if q + 3 < nq else last
+            r0, r1, r2, r3 = _score4(x, y, trig, criterion, d0, order[q], k1, k2, k3, w)
+            sc[q] = r0
+            if q + 1 < nq:
+                sc[q + 1] = r1
+            if q + 2 < nq:
+                sc[q + 2] = r2
+            if q + 3 < nq:
+                sc[q + 3] = r3
+        for q in range(q0, nq):
+            if phase == 0:
+                take = sc[q] > best + 1e-12
+            else:
+                take = sc[q] > best + 1e-12 or (abs(sc[q] - best) <= 1e-12 and order[q] < best_k)
+            if take:
+                best = sc[q]
+                best_k = order[q]
+        if phase == 1 or step == 1:
+            break
+        q0 = nq  # the fine angles: within one coarse step of the coarse best
+        for dk in range(-step + 1, step):
+            if dk != 0:
+                order[nq] = (best_k + dk) % kk
+                nq += 1
+    lo1, hi1, lo2, hi2 = _project(x, y, trig[0, best_k], trig[1, best_k], c1, c2)
+    ss = 0.0
+    for i in range(n):
+        d = min(min(hi1 - c1[i], c1[i] - lo1), min(hi2 - c2[i], c2[i] - lo2))
         ss += d * d
     out[0] = trig[2, best_k]
     out[1] = lo1
@@ -610,8 +801,9 @@ def fit_cluster_rows(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask
     c1 = np.empty(nmax)  # (work space of _fit_one, once per call)
     c2 = np.empty(nmax)
     c3 = np.empty(nmax)
-    w4 = np.empty((6, nmax))
+    w8 = np.empty(8 * nmax)
     order = np.empty(angles.shape[0] + 2 * max(stride, 1), dtype=np.int64)
+    sc = np.empty(order.shape[0])
     for c in range(k):
         a = offsets[c]
         b = offsets[c + 1]
@@ -633,7 +825,7 @@ def fit_cluster_rows(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, fit_mask
             out[c, F_RECT_RMS] = np.inf
             out[c, F_CIRCLE_RMS] = np.inf
             continue
-        _fit_one(xs, ys, trig, criterion, d0, tmp, stride, w4, order)
+        _fit_vec(xs, ys, trig, criterion, d0, tmp, stride, w8, order, sc, c1, c2)
         for q in range(6):  # θ, lo1, hi1, lo2, hi2, rms (the order of _fit_one); element-wise: a slice
             out[c, F_THETA + q] = tmp[q]  # assignment compiles numba's shape-error formatting (~4 s cold)
         if n >= circle_min_points and skip:
