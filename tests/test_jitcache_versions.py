@@ -34,7 +34,14 @@ def test_fingerprint_follows_every_kernel_module_and_only_them(tmp_path: Path) -
     changed = kernel_sources_fingerprint(root)
     assert changed != first  # a callee's edit invalidates its callers' cached code too
     callee.rename(root / "sub" / "moved.py")
-    assert kernel_sources_fingerprint(root) != changed  # the path is part of it
+    moved = kernel_sources_fingerprint(root)
+    assert moved != changed  # the path is part of it
+    lanes = root / "lanes.py"  # an intrinsic's code lands in its callers' cached code, as a callee's does
+    lanes.write_text("from numba.extending import intrinsic\n\n@intrinsic\ndef op(typingctx, a):\n    return None\n")
+    with_lanes = kernel_sources_fingerprint(root)
+    assert with_lanes != moved
+    lanes.write_text(lanes.read_text().replace("return None", "return a"))
+    assert kernel_sources_fingerprint(root) != with_lanes
 
 
 def test_fingerprint_of_the_installed_package_is_its_cache_folder() -> None:

@@ -43,8 +43,10 @@ STALE_AFTER_DAYS = 14.0
 
 
 def kernel_sources_fingerprint(package_dir: Path | None = None) -> str:
-    """16 hex digits of the SHA-256 over the package's kernel modules (those mentioning ``njit``): paths and bytes.
+    """16 hex digits of the SHA-256 over the package's kernel modules: paths and bytes.
 
+    A kernel module mentions ``njit`` or ``intrinsic`` (numba intrinsics, such as :mod:`dynslam2d.jitvec`'s lane
+    operations, generate code inside the kernels that call them and are not in the kernels' own files).
     Any edit of a kernel module, including one whose kernels others call, gives a new fingerprint;
     reinstalling the same sources gives the same one. Reads the package's sources (about 1.6 MB, a few ms).
     """
@@ -52,7 +54,7 @@ def kernel_sources_fingerprint(package_dir: Path | None = None) -> str:
     digest = hashlib.sha256()
     for path in sorted(root.rglob("*.py")):
         data = path.read_bytes()
-        if b"njit" in data:
+        if b"njit" in data or b"intrinsic" in data:
             digest.update(path.relative_to(root).as_posix().encode() + b"\0")
             digest.update(data)
     return digest.hexdigest()[:16]
