@@ -171,6 +171,8 @@ def lean_numba_compile() -> bool:
       compile): its caller links its optimised IR anyway; the code is made when Python calls it.
     - **No debug-logging calls in numba's SSA pass** (:func:`quiet_ssa_debug`, installed at the first compile): about
       a million ``Logger.debug`` calls per cold run that log nothing.
+    - **llvmlite's IR printer with less Python work, ABI sizes remembered** (``jitprint.install``, at the first
+      compile): the text numba hands to LLVM, the same text.
 
     Together about a tenth of the compile CPU (docs/speed.md), and the remembered call typing about a tenth
     more. The command line and its background compile call this first (they own the process); a library
@@ -214,10 +216,12 @@ def lean_numba_compile() -> bool:
     config.__hash__ = class_hash  # type: ignore[method-assign,assignment]
     config.__eq__ = fast_equal  # type: ignore[method-assign,assignment]
     roomy_compile_stack()
-    from dynslam2d import jitssa  # numba's SSA pass, variable lists, use / def sets, live map (cold36, ssa36, uni36)
+    # numba's SSA pass, variable lists, use / def sets, live map (cold36, ssa36, uni36); llvmlite's IR printer and
+    # remembered ABI sizes (cmp39)
+    from dynslam2d import jitprint, jitssa
 
     at_first_compile(remembered_call_typing, lean_inlining, lazy_callee_code,  # (reading numba's sources: not warm)
-                     quiet_ssa_debug, jitssa.install)
+                     quiet_ssa_debug, jitssa.install, jitprint.install)
     return True
 
 
