@@ -461,10 +461,14 @@ def _score4(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: 
         return vget(sc, 0), vget(sc, 1), vget(sc, 2), vget(sc, 3)
     # each axis' nearer edge per lane (1.0: the far edge hi): _near_side_known when certain, else the sums; the lane
     # index as np.int64, not a literal constant: numba would compile _lane_edges once per literal (four times)
-    a0, b0 = _lane_edges(w, np.int64(0), n, vget(lo1, 0), vget(hi1, 0), vget(t1, 0), vget(lo2, 0), vget(hi2, 0), vget(t2, 0))
-    a1, b1 = _lane_edges(w, np.int64(1), n, vget(lo1, 1), vget(hi1, 1), vget(t1, 1), vget(lo2, 1), vget(hi2, 1), vget(t2, 1))
-    a2, b2 = _lane_edges(w, np.int64(2), n, vget(lo1, 2), vget(hi1, 2), vget(t1, 2), vget(lo2, 2), vget(hi2, 2), vget(t2, 2))
-    a3, b3 = _lane_edges(w, np.int64(3), n, vget(lo1, 3), vget(hi1, 3), vget(t1, 3), vget(lo2, 3), vget(hi2, 3), vget(t2, 3))
+    a0, b0 = _lane_edges(w, np.int64(0), n, vget(lo1, 0), vget(hi1, 0), vget(t1, 0),
+                         vget(lo2, 0), vget(hi2, 0), vget(t2, 0))
+    a1, b1 = _lane_edges(w, np.int64(1), n, vget(lo1, 1), vget(hi1, 1), vget(t1, 1),
+                         vget(lo2, 1), vget(hi2, 1), vget(t2, 1))
+    a2, b2 = _lane_edges(w, np.int64(2), n, vget(lo1, 2), vget(hi1, 2), vget(t1, 2),
+                         vget(lo2, 2), vget(hi2, 2), vget(t2, 2))
+    a3, b3 = _lane_edges(w, np.int64(3), n, vget(lo1, 3), vget(hi1, 3), vget(t1, 3),
+                         vget(lo2, 3), vget(hi2, 3), vget(t2, 3))
     use1 = vset(a0, a1, a2, a3)
     use2 = vset(b0, b1, b2, b3)
     if criterion == 1:
