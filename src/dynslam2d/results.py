@@ -34,9 +34,7 @@ from dynslam2d.pipeline import TRACK_CSV_COLUMNS, RunResult
 from dynslam2d.slam.cleanup import CleanResult
 from dynslam2d.types import ScanSource
 from dynslam2d.viz.collect import RemovedPointsCollector
-from dynslam2d.viz.figures import FigureMaps, figure_maps, write_figures
-from dynslam2d.viz.mapplot import GreyMap
-from dynslam2d.viz.tracksplot import tracks_background
+from dynslam2d.viz.figures import figure_maps, write_figures
 
 
 def ground_truth_for(source: ScanSource, gt_dir: str | os.PathLike[str] | GroundTruthFiles | None,
@@ -214,16 +212,6 @@ def write_outputs(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Path] = {}
-    # a clean-up result still to be made from this run's online map (CleanResult.pending), without ground truth to
-    # score both maps against: the online map's files first, then the cleaned map written over the online map's
-    # arrays (no cleaned copies: 14.5 + 7.3 MiB on MIT CSAIL, issue 13 item 3), then the cleaned map's files
-    in_place = (release and gt is None and cleaned is not None and cleaned.pending
-                and cleaned.cleans(run.grid, run.logodds))
-    background = None
-    if in_place:
-        online_files = _write_online_map(out, run)
-        background = tracks_background(run.grid)  # (tracks.png's faint online map, before it is cleaned)
-        cleaned.apply_in_place()  # type: ignore[union-attr]
     final_grid = cleaned.grid if cleaned is not None else run.grid
     final_lo = cleaned.logodds if cleaned is not None and cleaned.logodds is not None else run.logodds
     ypath, ppath = write_map(out / "map.yaml", final_grid)
@@ -234,7 +222,12 @@ def write_outputs(
             np.save(fh, np.asarray(final_lo, dtype=np.float32))  # (no copy of a float32 map)
     paths["map_logodds.npy"] = out / "map_logodds.npy"
     if cleaned is not None:
-        paths.update(online_files if in_place else _write_online_map(out, run))
+        ypath, ppath = write_map(out / "map_online.yaml", run.grid)
+        paths["map_online.yaml"], paths["map_online.pgm"] = ypath, ppath
+        with atomic_path(out / "map_logodds_online.npy") as tmp:
+            with tmp.open("wb") as fh:
+                np.save(fh, np.asarray(run.logodds, dtype=np.float32))
+        paths["map_logodds_online.npy"] = out / "map_logodds_online.npy"
     paths["trajectory.tum"] = write_tum(out / "trajectory.tum", run.trajectory, comment="laser pose in the map frame")
     if run.loop is not None:
         # loop closure (docs/slam.md): trajectory.tum is optimised, the front end's trajectory and the graph kept
@@ -255,12 +248,7 @@ def write_outputs(
     summary = run.summary()
     evaluation = evaluate_result(run, gt, cleaned) if gt is not None else None
     drawn = None
-    if background is not None:  # (in place: run.grid holds the cleaned map now; the online one's indices are made)
-        drawn = FigureMaps(GreyMap.of(cleaned.grid), background)  # type: ignore[union-attr]
-        run.grid = None  # type: ignore[assignment]
-        cleaned.grid = None  # type: ignore[assignment,union-attr]
-        del background
-    elif release:  # the maps as the figures' grey indices now: no float64 map lives through the files below
+    if release:  # the maps as the figures' grey indices now: no float64 map lives through the files below
         drawn = figure_maps(run, cleaned)
     paths["config.yaml"] = write_text_atomic(out / "config.yaml", dump_config(run.config))
     paths["tracks.csv"] = write_text_atomic(out / "tracks.csv", tracks_csv(run))
@@ -285,29 +273,11 @@ def write_outputs(
     paths["summary.json"] = write_text_atomic(out / "summary.json", summary_text)
     # Figures: map.png, tracks.png and, with ground truth, errors.png (dynslam2d.viz.figures).
     release_free_memory()  # figures allocate much; start them from a trimmed heap (memtrim.py)
-    # the grey indices handed over, not kept here: write_figures lets map.png's go before tracks.png (3.6 MiB on
-    # MIT CSAIL through tracks.png, the figures' highest point)
-    handed = [drawn]
-    del drawn
-    paths.update(write_figures(run, out, evaluation, collector, cleaned=cleaned, release=release,
-                               drawn=handed.pop()))
+    paths.update(write_figures(run, out, evaluation, collector, cleaned=cleaned, release=release, drawn=drawn))
     # run.json LAST: a folder whose run.json does not say "complete" lacks files (docs/reliability.md).
     paths["run.json"] = write_marker(out, "complete", scans=run.n_scans, input=run.source.origin,
                                      files=sorted(paths))
     return RunOutputs(paths, json.loads(summary_text), metrics, evaluation)
-
-
-def _write_online_map(out: Path, run: RunResult) -> dict[str, Path]:
-    """map_online.yaml / .pgm and map_logodds_online.npy of ``run``'s online map (with a clean-up pass); their
-    paths by name."""
-    paths: dict[str, Path] = {}
-    ypath, ppath = write_map(out / "map_online.yaml", run.grid)
-    paths["map_online.yaml"], paths["map_online.pgm"] = ypath, ppath
-    with atomic_path(out / "map_logodds_online.npy") as tmp:
-        with tmp.open("wb") as fh:
-            np.save(fh, np.asarray(run.logodds, dtype=np.float32))
-    paths["map_logodds_online.npy"] = out / "map_logodds_online.npy"
-    return paths
 
 
 __all__ = ["RunOutputs", "compute_metrics", "evaluate", "evaluate_folder", "evaluate_result", "ground_truth_for",

@@ -64,7 +64,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -687,6 +687,7 @@ class VisibilityCounter:
         return (last & 1) == 1
 
 
+@dataclass(eq=False)
 class CleanResult:
     """The cleaned map and what the pass did.
 
@@ -694,121 +695,22 @@ class CleanResult:
         grid: the cleaned map (erased cells at :data:`ERASED_PROBABILITY`), same cells as the online map.
         logodds: its log-odds (same cells), or None if no online log-odds was given.
         erased: (H, W) bool, cells occupied in the online map that the pass erased.
-        hits, through, switches: (H, W) uint16, scans that hit / passed through each cell (saturating at
-            :data:`COUNT_MAX`) and changes between hit and pass in each cell's scan sequence.
+        hits, through: (H, W) uint16, scans that hit / passed through each cell (saturating at
+            :data:`COUNT_MAX`).
+        switches: (H, W) uint16, changes between hit and pass in each cell's scan sequence.
         stats: numbers for summary.json / metrics.json (cells, m², seconds).
         restored: (H, W) bool, cells observed free in the online map that the pass put back as occupied (at
             :data:`RESTORED_PROBABILITY`), or None when not computed.
-
-    A result made with ``defer=True`` (:func:`clean_windows`, :class:`CleanupRecorder`) holds the online map and
-    its log-odds instead of cleaned copies (:attr:`pending`): :attr:`grid` and :attr:`logodds` make the copies
-    when first read, or :meth:`apply_in_place` writes the erased and restored cells over the online map's own
-    arrays once the caller has no more use for the online map (``results.write_outputs`` with ``release=True``,
-    after the online map's files: 14.5 + 7.3 MiB of copies fewer on MIT CSAIL; issue 13 item 3). Either way the
-    values are those of the copies.
     """
 
-    def __init__(self, grid: GridMap | None, logodds: np.ndarray | None, erased: np.ndarray, hits: np.ndarray,
-                 through: np.ndarray, switches: np.ndarray, stats: dict[str, float | int] | None = None,
-                 restored: np.ndarray | None = None) -> None:
-        self._grid = grid
-        self._logodds = logodds
-        self.erased = erased
-        self.hits = hits
-        self.through = through
-        self.switches = switches
-        self.stats: dict[str, float | int] = {} if stats is None else stats
-        self.restored = restored
-        self._online: GridMap | None = None  # (pending: the online map the cleaned one is made from)
-        self._online_logodds: np.ndarray | None = None
-
-    @classmethod
-    def deferred(cls, online: GridMap, logodds: np.ndarray | None, erased: np.ndarray, hits: np.ndarray,
-                 through: np.ndarray, switches: np.ndarray, stats: dict[str, float | int],
-                 restored: np.ndarray) -> CleanResult:
-        """A result whose cleaned map is made from ``online`` (and ``logodds``) when it is first read."""
-        out = cls(None, None, erased, hits, through, switches, stats, restored)
-        out._online = online
-        out._online_logodds = logodds
-        return out
-
-    @property
-    def pending(self) -> bool:
-        """The cleaned map is not made yet (:meth:`deferred`): :meth:`apply_in_place` can still make it without
-        copies."""
-        return self._online is not None
-
-    def cleans(self, online: GridMap | None, logodds: np.ndarray | None) -> bool:
-        """Whether this pending result cleans exactly these objects (the online map and its log-odds)."""
-        return self._online is not None and self._online is online and self._online_logodds is logodds
-
-    @property
-    def grid(self) -> GridMap:
-        if self._grid is None and self._online is not None:
-            online = self._online
-            self._grid = GridMap(_cleaned_prob(online.prob.copy(), self.erased, self.restored), online.resolution,
-                                 online.origin)
-            self._online = None
-        return self._grid  # type: ignore[return-value]
-
-    @grid.setter
-    def grid(self, value: GridMap | None) -> None:
-        self._grid = value
-        self._online = None
-
-    @property
-    def logodds(self) -> np.ndarray | None:
-        if self._logodds is None and self._online_logodds is not None:
-            self._logodds = _cleaned_logodds(self._online_logodds, self.erased, self.restored, in_place=False)
-            self._online_logodds = None
-        return self._logodds
-
-    @logodds.setter
-    def logodds(self, value: np.ndarray | None) -> None:
-        self._logodds = value
-        self._online_logodds = None
-
-    def apply_in_place(self) -> None:
-        """Make the pending cleaned map by writing the erased and restored cells into the online map's own
-        probability and log-odds arrays (the online map is the cleaned one afterwards; the log-odds are copied
-        only when their dtype is not the cleaned map's or they are read-only). Nothing to do when not
-        :attr:`pending`."""
-        online, lo = self._online, self._online_logodds
-        if online is None:
-            return
-        self._grid = GridMap(_cleaned_prob(online.prob, self.erased, self.restored), online.resolution,
-                             online.origin)
-        self._online = None
-        if lo is not None:
-            self._logodds = _cleaned_logodds(lo, self.erased, self.restored, in_place=True)
-            self._online_logodds = None
-
-
-def _cleaned_prob(prob: np.ndarray, erased: np.ndarray, restored: np.ndarray | None) -> np.ndarray:
-    """``prob`` (the online map's probabilities, or a copy of them) with the erased and restored cells written
-    (in place; returned)."""
-    prob[erased] = ERASED_PROBABILITY
-    if restored is not None:
-        prob[restored] = RESTORED_PROBABILITY
-    return prob
-
-
-def _cleaned_logodds(logodds: np.ndarray, erased: np.ndarray, restored: np.ndarray | None,
-                     in_place: bool) -> np.ndarray:
-    """The cleaned map's log-odds: ``logodds`` in the dtype of ``result_type(logodds, float32)`` (the SLAM's
-    float32 stays float32: no float64 copy of the map), with the erased and restored cells written when the
-    shapes agree; written into ``logodds`` itself with ``in_place`` when its dtype is that one and it is
-    writeable, into a copy otherwise."""
-    dt = np.result_type(logodds, np.float32)
-    if in_place and isinstance(logodds, np.ndarray) and logodds.dtype == dt and logodds.flags.writeable:
-        lo = logodds
-    else:
-        lo = np.array(logodds, dtype=dt, copy=True)
-    if lo.shape == erased.shape:
-        lo[erased] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
-        if restored is not None:
-            lo[restored] = math.log(RESTORED_PROBABILITY / (1.0 - RESTORED_PROBABILITY))
-    return lo
+    grid: GridMap
+    logodds: np.ndarray | None
+    erased: np.ndarray
+    hits: np.ndarray
+    through: np.ndarray
+    switches: np.ndarray
+    stats: dict[str, float | int] = field(default_factory=dict)
+    restored: np.ndarray | None = None
 
 
 def restore_rule(hits: np.ndarray, through: np.ndarray, config: CleanConfig) -> np.ndarray:
@@ -877,14 +779,11 @@ def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray |
 
 
 def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | None = None,
-                  occupied_threshold: float = 0.65, keep_counts: bool = True, t0: float | None = None,
-                  defer: bool = False) -> CleanResult:
+                  occupied_threshold: float = 0.65, keep_counts: bool = True, t0: float | None = None) -> CleanResult:
     """:func:`clean_map` from the counts read off the counter (:meth:`CountWindows.of`). With ``keep_counts``
     False the result's count windows are empty (0 × 0) and ``counts`` lets go of them once the rules are
     applied, before the cleaned copies of the map are made (issue 13 item 3: the command line keeps only the
-    map, the erased cells and the stats). ``t0``: when the pass started (``time.perf_counter``), for its time.
-    ``defer``: the result holds ``online`` and ``logodds`` and makes the cleaned map when it is read, or over them
-    (:meth:`CleanResult.apply_in_place`); the values are the same."""
+    map, the erased cells and the stats). ``t0``: when the pass started (``time.perf_counter``), for its time."""
     t0 = time.perf_counter() if t0 is None else t0
     c = counts.config
     hits, through, switches, latest_hit = counts.hits, counts.through, counts.switches, counts.latest_hit
@@ -910,6 +809,16 @@ def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | N
         del kept
         erased &= n_kept < c.revert_neighbors
         del n_kept
+    prob = online.prob.copy()
+    prob[erased] = ERASED_PROBABILITY
+    prob[restored] = RESTORED_PROBABILITY
+    lo = None
+    if logodds is not None:
+        # the input's dtype (the SLAM's log-odds are float32, written as float32): no float64 copy of the map
+        lo = np.array(logodds, dtype=np.result_type(logodds, np.float32), copy=True)
+        if lo.shape == erased.shape:
+            lo[erased] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
+            lo[restored] = math.log(RESTORED_PROBABILITY / (1.0 - RESTORED_PROBABILITY))
     area = online.resolution ** 2
     n_occ = int(occ.sum())
     del occ
@@ -924,11 +833,8 @@ def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | N
         "pass_time_s": float(counts.seconds + time.perf_counter() - t0),
         "counter_bytes": counts.nbytes,
     }
-    if defer:
-        return CleanResult.deferred(online, logodds, erased, hits, through, switches, stats, restored)
-    return CleanResult(GridMap(_cleaned_prob(online.prob.copy(), erased, restored), online.resolution, online.origin),
-                       None if logodds is None else _cleaned_logodds(logodds, erased, restored, in_place=False),
-                       erased, hits, through, switches, stats, restored)
+    return CleanResult(GridMap(prob, online.resolution, online.origin), lo, erased, hits, through, switches, stats,
+                       restored)
 
 
 def compare_online(online: GridMap, cleaned: CleanResult, tolerance: float = 0.10,
@@ -1014,10 +920,8 @@ class CleanupRecorder:
         counts = CountWindows.of(result.grid, self.counter)  # type: ignore[attr-defined]
         if not self.keep_counts:
             self.counter = None  # (26 MB on MIT CSAIL) before the rule's masks and the cleaned copies
-        # deferred: the cleaned map is made when read, or over the online map once its files are written
-        # (results.write_outputs with release=True)
         self.result = clean_windows(result.grid, counts, result.logodds,  # type: ignore[attr-defined]
-                                    keep_counts=self.keep_counts, t0=t0, defer=True)
+                                    keep_counts=self.keep_counts, t0=t0)
 
 
 
