@@ -80,3 +80,61 @@ def test_map_image_is_the_grid_and_has_no_map_sized_float_copies() -> None:
     want = mapplot._grey_colormap()(cells, bytes=True)[..., 0].astype(int)
     assert np.array_equal(centre, want)
     assert peak < 10 * h * w  # ≈ 6 bytes a cell here; matplotlib's own path: ≈ 22 (float32 copies of the map)
+
+
+def test_clean_up_returns_the_freed_count_windows_before_the_cleaned_copies(monkeypatch) -> None:
+    """``clean_windows(keep_counts=False)`` hands the count windows' freed memory back to the OS (memtrim) after it
+    lets them go and before it copies the map; the cleaned map is the one of ``keep_counts=True``."""
+    from dynslam2d.gridmap import GridMap
+    from dynslam2d.slam import cleanup
+    from dynslam2d.slam.cleanconfig import CleanConfig
+
+    rng = np.random.default_rng(2)
+    shape = (40, 50)
+    online = GridMap(np.where(rng.random(shape) < 0.2, np.nan, rng.random(shape)), 0.05, (0.0, 0.0))
+
+    def counts() -> cleanup.CountWindows:
+        r = np.random.default_rng(4)
+        win = [r.integers(0, 30, shape).astype(np.uint16) for _ in range(3)]
+        return cleanup.CountWindows(*win, r.random(shape) < 0.5, CleanConfig(), 10, 0, 0.0, 0)
+
+    seen: list[bool] = []
+    kept = counts()
+
+    def spy() -> bool:
+        seen.append(kept.hits.size == 0)  # the windows were let go before the call
+        return True
+
+    monkeypatch.setattr(cleanup, "release_free_memory", spy)
+    lean = cleanup.clean_windows(online, kept, keep_counts=False)
+    assert seen == [True]
+    full = cleanup.clean_windows(online, counts(), keep_counts=True)
+    assert seen == [True]  # (nothing to return when the windows are kept)
+    assert np.array_equal(lean.grid.prob, full.grid.prob, equal_nan=True)
+    assert np.array_equal(lean.erased, full.erased)
+
+
+def test_figure_maps_are_made_without_importing_matplotlib() -> None:
+    """The grey indices of map.png and tracks.png's background are made while the run's float64 maps are alive; they
+    need no matplotlib (its import holds ≈ 14 MiB, which then sits on top of those maps)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, numpy as np\n"
+            "from dynslam2d.gridmap import GridMap\n"
+            "from dynslam2d.viz.mapplot import GreyMap\n"
+            "from dynslam2d.viz.tracksplot import tracks_background\n"
+            "g = GridMap(np.random.default_rng(0).random((30, 40)), 0.05, (0.0, 0.0))\n"
+            "GreyMap.of(g); tracks_background(g)\n"
+            "print('matplotlib' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+def test_grey_levels_are_the_colormaps() -> None:
+    """The constant number of greys is the "gray" colormap's (matplotlib's default ``image.lut``): the indices of
+    :func:`grey_indices` are the colormap's own lookup."""
+    grey = mapplot._grey_colormap()
+    v = np.linspace(0.0, 1.0, 1001)
+    assert grey.N == mapplot.GREY_LEVELS
+    assert np.array_equal(grey(mapplot.grey_indices(v[None, :])[0]), grey(v))
