@@ -70,6 +70,7 @@ import numpy as np
 
 from dynslam2d.gridmap import GridMap
 from dynslam2d.jitbox import njit, word_at  # numba's njit, arrays returned without a per-array unpickle
+from dynslam2d.memtrim import release_free_memory
 from dynslam2d.slam.cleanconfig import CleanConfig
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.types import Pose2D, Scan
@@ -800,6 +801,9 @@ def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | N
         empty = np.zeros((0, 0), dtype=np.uint16)
         hits = through = switches = counts.hits = counts.through = counts.switches = empty
         latest_hit = counts.latest_hit = None
+        # the windows (2 bytes a cell each: below the allocator's mmap threshold on most maps, so their memory stays
+        # in the heap when freed) go back to the OS before the cleaned copies are made (memtrim.py)
+        release_free_memory()
     if c.revert_neighbors > 0:
         # Removert's "revert" step in 2D: a cell at the edge of structure that stays is kept.
         from scipy.ndimage import convolve

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -57,16 +58,24 @@ def draw_grey(ax: Any, img: np.ndarray, extent: tuple[float, float, float, float
 _ROWS_PER_CHUNK = 256
 
 
+#: Greys of the figures' maps: the "gray" colormap with this many colours (matplotlib's default ``image.lut``).
+#: A constant, so the maps become grey indices without importing matplotlib (≈ 14 MiB, while the run's float64 maps
+#: are still alive; issue 13 item 3).
+GREY_LEVELS = 256
+
+
 def _grey_colormap() -> Any:
+    """matplotlib's "gray" colormap with :data:`GREY_LEVELS` colours (itself unless ``image.lut`` is changed)."""
     from matplotlib import colormaps
 
-    return colormaps["gray"]
+    grey = colormaps["gray"]
+    return grey if grey.N == GREY_LEVELS else grey.resampled(GREY_LEVELS)
 
 
 def grey_indices(img: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """(H, W) uint16 index of each grey value of ``img`` (0 … 1) into the "gray" colormap's N colours:
-    the colormap's own lookup, floor(v·N) with 1.0 → N − 1 (values outside [0, 1] clipped)."""
-    n = _grey_colormap().N
+    """(H, W) uint16 index of each grey value of ``img`` (0 … 1) into the "gray" colormap's N = :data:`GREY_LEVELS`
+    colours: the colormap's own lookup, floor(v·N) with 1.0 → N − 1 (values outside [0, 1] clipped)."""
+    n = GREY_LEVELS
     if out is None:
         out = np.empty(img.shape, dtype=np.uint16)
     for r0 in range(0, img.shape[0], _ROWS_PER_CHUNK):
@@ -126,8 +135,76 @@ def draw_grey_indices(ax: Any, idx: np.ndarray, extent: tuple[float, float, floa
         if mask is not None and mask.shape == idx.shape and mask.any():
             idx[mask] = len(colours)
             colours = np.vstack((colours, to_rgba(colour)))
-    return ax.imshow(idx, cmap=ListedColormap(colours), norm=NoNorm(), origin="lower", extent=extent,
-                     interpolation="nearest", interpolation_stage="data", **kw)
+    im = ax.imshow(idx, cmap=ListedColormap(colours), norm=NoNorm(), origin="lower", extent=extent,
+                   interpolation="nearest", interpolation_stage="data", **kw)
+    im.__class__ = _index_image_class()  # the same pixels, sampled without map-sized float32 copies
+    return im
+
+
+def _picked(image: Any, n: int, out_len: int, t: Any, axis: int) -> np.ndarray:
+    """(out_len,) int64: the cell along ``axis`` (1: columns, 0: rows) of an ``n``-cell image that matplotlib's
+    nearest resampling under transform ``t`` (cells → output pixels) puts in each output column (row), −1 where the
+    pixel is outside the image. Found by resampling a one-cell-thick probe of the cell numbers (+1, so 0 marks
+    outside) stretched over the other axis: nearest resampling of an axis-aligned affine map picks columns and
+    rows independently, so the probe's picks are the image's."""
+    from matplotlib.image import _resample
+    from matplotlib.transforms import Affine2D
+
+    cells = np.arange(1, n + 1, dtype=np.float32)  # exact in float32 up to 2**24
+    if axis == 1:
+        got = _resample(image, cells[None, :], (1, out_len), Affine2D().scale(1.0, image._A.shape[0]) + t)[0]
+    else:
+        got = _resample(image, cells[:, None], (out_len, 1), Affine2D().scale(image._A.shape[1], 1.0) + t)[:, 0]
+    return got.astype(np.int64) - 1
+
+
+@functools.cache
+def _index_image_class() -> type:
+    """A matplotlib ``AxesImage`` for :func:`draw_grey_indices`' (H, W) colour indices (``NoNorm``,
+    ``interpolation="nearest"``, ``interpolation_stage="data"``, ``origin="lower"``, no alpha) that makes the
+    same RGBA pixels as ``AxesImage`` from the output pixels' cells only: matplotlib's own path converts the whole
+    image to float32, makes a float32 mask of it and a flipped contiguous copy of each to resample them (≈ 16 bytes
+    per cell: ≈ 30 MiB for MIT CSAIL's cleaned map while map.png is saved; issue 13 item 3). Here the picked column
+    and row of each output pixel come from matplotlib's resampler itself (:func:`_picked`), and the pixels are the
+    colormap's bytes of those cells."""
+    from matplotlib.colors import NoNorm
+    from matplotlib.image import AxesImage
+    from matplotlib.transforms import Affine2D, Bbox
+
+    class IndexImage(AxesImage):
+        def _make_image(self, A, in_bbox, out_bbox, clip_bbox, magnification=1.0,  # type: ignore[no-untyped-def]
+                        unsampled=False, round_to_pixel_border=True):
+            if (unsampled or A.ndim != 2 or self._interpolation_stage != "data" or not isinstance(self.norm, NoNorm)
+                    or self.get_interpolation() != "nearest" or self.origin != "lower" or self.get_alpha() is not None):
+                return super()._make_image(A, in_bbox, out_bbox, clip_bbox, magnification, unsampled,
+                                           round_to_pixel_border)
+            clipped = Bbox.intersection(out_bbox, clip_bbox)
+            if clipped is None:
+                return None, 0, 0, None
+            # matplotlib's own output box and transform (AxesImage._make_image): rounded to the output pixels
+            e = clipped.extents * magnification
+            if round_to_pixel_border:
+                e = np.array([np.floor(e[0] + 0.5), np.ceil(e[1] - 0.5 - 1e-8), np.floor(e[2] + 0.5 + 1e-8),
+                              np.ceil(e[3] - 0.5)])
+            box = Bbox.from_extents(e)
+            if box.width == 0 or box.height == 0:
+                return None, 0, 0, None
+            t = (Affine2D().scale(in_bbox.width / A.shape[1], in_bbox.height / A.shape[0])
+                 .translate(in_bbox.x0, in_bbox.y0) + self.get_transform()
+                 + Affine2D().scale(magnification).translate(-box.x0, -box.y0))
+            h, w = int(box.height), int(box.width)
+            cols = _picked(self, A.shape[1], w, t, 1)
+            rows = _picked(self, A.shape[0], h, t, 0)
+            # the colormap's bytes (what ``cmap(idx, bytes=True)`` takes them from), looked up per output pixel
+            lut = self.cmap(np.arange(self.cmap.N), bytes=True)
+            output = lut[np.asarray(A)[np.ix_(np.maximum(rows, 0), np.maximum(cols, 0))]]
+            if (rows < 0).any() or (cols < 0).any():  # pixels outside the image: matplotlib's value 0, transparent
+                outside = (rows < 0)[:, None] | (cols < 0)[None, :]
+                output[outside] = lut[0]
+                output[outside, 3] = 0
+            return output, box.x0 / magnification, box.y0 / magnification, t
+
+    return IndexImage
 
 
 def points_overlay(
