@@ -490,3 +490,55 @@ def test_four_lane_search_is_the_scalar_search_bit_for_bit() -> None:
                     _fit_vec(x, y, trig, criterion, 0.01, got, stride, np.empty(8 * n), order.copy(),
                              np.empty(order.shape[0]), np.empty(n), np.empty(n))
                     assert got.tobytes() == want.tobytes(), (step_deg, criterion, stride, c)
+
+
+def test_four_lane_edge_decision_is_the_scalar_one() -> None:
+    """Pass det40: ``shapes._side4`` decides the nearer edge of four lanes at once; a lane is decided exactly where
+    ``_near_side_known`` is (not −1), with its flag, so the search takes the scalar rule's edges: projections whose
+    sums sit on either side of the error bound (a factor 10^±2 around it), ties, zero and tiny widths, huge and
+    non-finite bounds, 1–200 points."""
+    from dynslam2d.detect.shapes import _U, _near_side_known, _side4
+    from dynslam2d.jitbox import njit
+    from dynslam2d.jitvec import vget, vset
+
+    @njit
+    def lanes(n, lo, hi, tot):
+        flag, dec = _side4(n, vset(lo[0], lo[1], lo[2], lo[3]), vset(hi[0], hi[1], hi[2], hi[3]),
+                           vset(tot[0], tot[1], tot[2], tot[3]))
+        out = np.empty((2, 4))
+        for j in range(4):
+            out[0, j] = vget(flag, j)
+            out[1, j] = vget(dec, j)
+        return out
+
+    rng = np.random.default_rng(40)
+    rows = []
+    for _ in range(3000):
+        n = int(rng.integers(1, 200))
+        lo = rng.normal(0, 10) * 10.0 ** rng.integers(-3, 4)
+        hi = lo + abs(rng.normal(0, 1)) * 10.0 ** rng.integers(-8, 3)
+        w, m = hi - lo, max(abs(hi), abs(lo))
+        bound = 8.0 * (n + 4) * _U * (4.0 * n * m + n * w)
+        e = rng.choice([-1.0, 1.0]) * bound * 10.0 ** rng.uniform(-2, 2)
+        rows.append((n, lo, hi, (n * (hi + lo) - e) / 2.0))
+    for lo, hi in ((1.0, 1.0), (0.0, 1e-101), (-1e101, 1.0), (0.0, np.inf), (np.nan, 1.0), (-np.inf, np.inf),
+                   (2.0, 3.0)):
+        for n in (1, 2, 7):
+            rows.append((n, lo, hi, n * (lo + hi) / 2.0))
+            rows.append((n, lo, hi, n * lo))
+    decided = 0
+    for q in range(0, len(rows) - 3, 4):
+        group = rows[q:q + 4]
+        for n in {r[0] for r in group}:  # (one n per call: the lanes share the point count)
+            lo, hi, tot = (np.array([r[i] if r[0] == n else 0.0 for r in group]) for i in (1, 2, 3))
+            with np.errstate(all="ignore"):
+                got = lanes(n, lo, hi, tot)
+            for j, r in enumerate(group):
+                if r[0] != n:
+                    continue
+                want = _near_side_known(n, r[1], r[2], r[3])
+                assert got[1, j] == (0.0 if want < 0 else 1.0), (r, want, got[:, j])
+                if want >= 0:
+                    decided += 1
+                    assert got[0, j] == float(want), (r, want, got[:, j])
+    assert 0 < decided < len(rows)

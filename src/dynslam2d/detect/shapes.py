@@ -34,8 +34,11 @@ from dynslam2d.detect.layout import (
 )
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.jitvec import (
+    vabs,
     vadd,
+    vall,
     vdiv,
+    vec4,
     vget,
     vload,
     vmax,
@@ -416,12 +419,38 @@ def _lane_edges(w: np.ndarray, j: int, n: int, lo1: float, hi1: float, t1: float
 
 
 @njit(cache=True)
-def _var_score(s1: float, q1: float, m1: float, s2: float, q2: float, m2: float) -> float:
-    """The variance criterion's score −v1 − v2 from each group's sum, sum of squares and count (a float: the
-    scalar code's int count converted for its divisions), as :func:`_fit_one`."""
-    v1 = q1 / m1 - (s1 / m1) ** 2 if m1 > 0.0 else 0.0
-    v2 = q2 / m2 - (s2 / m2) ** 2 if m2 > 0.0 else 0.0
-    return -v1 - v2
+def _side4(n: int, lo: vec4, hi: vec4, total: vec4) -> tuple:
+    """:func:`_near_side_known` of four lanes (each lane's ``lo``, ``hi`` and projections' sum ``total`` of one axis
+    of n points) with the same float operations per lane: (flag, decided), lanes of 1.0 / 0.0 — the flag 1.0 for the
+    far edge ``hi`` where decided; an undecided lane (0.0) is one where :func:`_near_side_known` returns −1."""
+    one = vsplat(1.0)
+    zero = vsplat(0.0)
+    w = vsub(hi, lo)
+    m = vmax(vabs(hi), vabs(lo))
+    ok = vwhere_lt(m, vsplat(1e100), vwhere_lt(vsplat(1e-100), w, one, zero), zero)  # (NaN: not ok)
+    e = vsub(vmul(vsplat(float(n)), vadd(hi, lo)), vmul(vsplat(2.0), total))
+    g = 8.0 * (n + 4) * _U
+    bound = vmul(vsplat(g), vadd(vmul(vsplat(4.0 * n), m), vmul(vsplat(float(n)), w)))
+    return vwhere_lt(e, zero, one, zero), vwhere_lt(bound, vabs(e), ok, zero)
+
+
+@njit(cache=True)
+def _edges4(n: int, lo1: vec4, hi1: vec4, t1: vec4, lo2: vec4, hi2: vec4, t2: vec4) -> tuple:
+    """The four lanes' edge flags of both axes from :func:`_side4` (``use1``, ``use2``: 1.0 for the far edge) and
+    whether every lane is decided on both axes; when not, the caller takes each lane's :func:`_lane_edges`."""
+    f1, d1 = _side4(n, lo1, hi1, t1)
+    f2, d2 = _side4(n, lo2, hi2, t2)
+    return f1, f2, vall(d1) and vall(d2)
+
+
+@njit(cache=True)
+def _var4(s: vec4, q: vec4, m: vec4) -> vec4:
+    """The variance criterion's group variance q / m − (s / m)² per lane from its sum, sum of squares and count (a
+    float: the scalar code's int count converted for its divisions), 0 where the count is 0, as :func:`_fit_one`
+    (``x ** 2`` of a float is numba's ``x · x``)."""
+    zero = vsplat(0.0)
+    a = vdiv(s, m)
+    return vwhere_lt(zero, m, vsub(vdiv(q, m), vmul(a, a)), zero)
 
 
 @njit(cache=True)
@@ -459,18 +488,22 @@ def _score4(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: 
     if criterion == 0:
         sc = vmul(vneg(vsub(hi1, lo1)), vsub(hi2, lo2))
         return vget(sc, 0), vget(sc, 1), vget(sc, 2), vget(sc, 3)
-    # each axis' nearer edge per lane (1.0: the far edge hi): _near_side_known when certain, else the sums; the lane
-    # index as np.int64, not a literal constant: numba would compile _lane_edges once per literal (four times)
-    a0, b0 = _lane_edges(w, np.int64(0), n, vget(lo1, 0), vget(hi1, 0), vget(t1, 0),
-                         vget(lo2, 0), vget(hi2, 0), vget(t2, 0))
-    a1, b1 = _lane_edges(w, np.int64(1), n, vget(lo1, 1), vget(hi1, 1), vget(t1, 1),
-                         vget(lo2, 1), vget(hi2, 1), vget(t2, 1))
-    a2, b2 = _lane_edges(w, np.int64(2), n, vget(lo1, 2), vget(hi1, 2), vget(t1, 2),
-                         vget(lo2, 2), vget(hi2, 2), vget(t2, 2))
-    a3, b3 = _lane_edges(w, np.int64(3), n, vget(lo1, 3), vget(hi1, 3), vget(t1, 3),
-                         vget(lo2, 3), vget(hi2, 3), vget(t2, 3))
-    use1 = vset(a0, a1, a2, a3)
-    use2 = vset(b0, b1, b2, b3)
+    # each axis' nearer edge per lane (1.0: the far edge hi): _near_side_known of the four lanes at once (_edges4:
+    # the same float operations per lane) when it is certain for every lane, else each lane's _lane_edges (its
+    # _near_side_known, or the sums when that cannot tell); the lane index as np.int64, not a literal constant: numba
+    # would compile _lane_edges once per literal (four times)
+    use1, use2, known = _edges4(n, lo1, hi1, t1, lo2, hi2, t2)
+    if not known:
+        a0, b0 = _lane_edges(w, np.int64(0), n, vget(lo1, 0), vget(hi1, 0), vget(t1, 0),
+                             vget(lo2, 0), vget(hi2, 0), vget(t2, 0))
+        a1, b1 = _lane_edges(w, np.int64(1), n, vget(lo1, 1), vget(hi1, 1), vget(t1, 1),
+                             vget(lo2, 1), vget(hi2, 1), vget(t2, 1))
+        a2, b2 = _lane_edges(w, np.int64(2), n, vget(lo1, 2), vget(hi1, 2), vget(t1, 2),
+                             vget(lo2, 2), vget(hi2, 2), vget(t2, 2))
+        a3, b3 = _lane_edges(w, np.int64(3), n, vget(lo1, 3), vget(hi1, 3), vget(t1, 3),
+                             vget(lo2, 3), vget(hi2, 3), vget(t2, 3))
+        use1 = vset(a0, a1, a2, a3)
+        use2 = vset(b0, b1, b2, b3)
     if criterion == 1:
         acc = vsplat(0.0)
         one = vsplat(1.0)
@@ -501,10 +534,8 @@ def _score4(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: 
         s2 = vwhere_lt(d1, d2, s2, vadd(s2, d2))
         q2 = vwhere_lt(d1, d2, q2, vadd(q2, vmul(d2, d2)))
         m2 = vwhere_lt(d1, d2, m2, vadd(m2, one))
-    return (_var_score(vget(s1, 0), vget(q1, 0), vget(m1, 0), vget(s2, 0), vget(q2, 0), vget(m2, 0)),
-            _var_score(vget(s1, 1), vget(q1, 1), vget(m1, 1), vget(s2, 1), vget(q2, 1), vget(m2, 1)),
-            _var_score(vget(s1, 2), vget(q1, 2), vget(m1, 2), vget(s2, 2), vget(q2, 2), vget(m2, 2)),
-            _var_score(vget(s1, 3), vget(q1, 3), vget(m1, 3), vget(s2, 3), vget(q2, 3), vget(m2, 3)))
+    sc = vsub(vneg(_var4(s1, q1, m1)), _var4(s2, q2, m2))  # (−v1 − v2)
+    return vget(sc, 0), vget(sc, 1), vget(sc, 2), vget(sc, 3)
 
 
 @njit(cache=True)
