@@ -419,38 +419,31 @@ def _lane_edges(w: np.ndarray, j: int, n: int, lo1: float, hi1: float, t1: float
 
 
 @njit(cache=True)
-def _side4(n: int, lo: vec4, hi: vec4, total: vec4) -> tuple:
-    """:func:`_near_side_known` of four lanes (each lane's ``lo``, ``hi`` and projections' sum ``total`` of one axis
-    of n points) with the same float operations per lane: (flag, decided), lanes of 1.0 / 0.0 — the flag 1.0 for the
-    far edge ``hi`` where decided; an undecided lane (0.0) is one where :func:`_near_side_known` returns −1."""
+def _edges4(n: int, lo1: vec4, hi1: vec4, t1: vec4, lo2: vec4, hi2: vec4, t2: vec4) -> tuple:
+    """:func:`_near_side_known` of the four lanes of both axes at once, with the same float operations per lane (each
+    lane's bounds ``lo``, ``hi`` and projections' sum ``t`` of n points): ``(use1, use2, known)``, the flags as lanes
+    of 1.0 (the far edge ``hi``) / 0.0, and True when every lane is decided on both axes (none where
+    :func:`_near_side_known` returns −1); when not, the caller takes each lane's :func:`_lane_edges`."""
     one = vsplat(1.0)
     zero = vsplat(0.0)
-    w = vsub(hi, lo)
-    m = vmax(vabs(hi), vabs(lo))
-    ok = vwhere_lt(m, vsplat(1e100), vwhere_lt(vsplat(1e-100), w, one, zero), zero)  # (NaN: not ok)
-    e = vsub(vmul(vsplat(float(n)), vadd(hi, lo)), vmul(vsplat(2.0), total))
-    g = 8.0 * (n + 4) * _U
-    bound = vmul(vsplat(g), vadd(vmul(vsplat(4.0 * n), m), vmul(vsplat(float(n)), w)))
-    return vwhere_lt(e, zero, one, zero), vwhere_lt(bound, vabs(e), ok, zero)
-
-
-@njit(cache=True)
-def _edges4(n: int, lo1: vec4, hi1: vec4, t1: vec4, lo2: vec4, hi2: vec4, t2: vec4) -> tuple:
-    """The four lanes' edge flags of both axes from :func:`_side4` (``use1``, ``use2``: 1.0 for the far edge) and
-    whether every lane is decided on both axes; when not, the caller takes each lane's :func:`_lane_edges`."""
-    f1, d1 = _side4(n, lo1, hi1, t1)
-    f2, d2 = _side4(n, lo2, hi2, t2)
-    return f1, f2, vall(d1) and vall(d2)
-
-
-@njit(cache=True)
-def _var4(s: vec4, q: vec4, m: vec4) -> vec4:
-    """The variance criterion's group variance q / m − (s / m)² per lane from its sum, sum of squares and count (a
-    float: the scalar code's int count converted for its divisions), 0 where the count is 0, as :func:`_fit_one`
-    (``x ** 2`` of a float is numba's ``x · x``)."""
-    zero = vsplat(0.0)
-    a = vdiv(s, m)
-    return vwhere_lt(zero, m, vsub(vdiv(q, m), vmul(a, a)), zero)
+    nv = vsplat(float(n))
+    n4 = vsplat(4.0 * n)
+    two = vsplat(2.0)
+    gv = vsplat(8.0 * (n + 4) * _U)
+    tiny = vsplat(1e-100)
+    huge = vsplat(1e100)
+    w = vsub(hi1, lo1)
+    m = vmax(vabs(hi1), vabs(lo1))
+    ok = vwhere_lt(m, huge, vwhere_lt(tiny, w, one, zero), zero)  # (w² and the terms normal; NaN: not ok)
+    e = vsub(vmul(nv, vadd(hi1, lo1)), vmul(two, t1))
+    known1 = vwhere_lt(vmul(gv, vadd(vmul(n4, m), vmul(nv, w))), vabs(e), ok, zero)
+    use1 = vwhere_lt(e, zero, one, zero)
+    w = vsub(hi2, lo2)
+    m = vmax(vabs(hi2), vabs(lo2))
+    ok = vwhere_lt(m, huge, vwhere_lt(tiny, w, one, zero), zero)
+    e = vsub(vmul(nv, vadd(hi2, lo2)), vmul(two, t2))
+    known2 = vwhere_lt(vmul(gv, vadd(vmul(n4, m), vmul(nv, w))), vabs(e), ok, zero)
+    return use1, vwhere_lt(e, zero, one, zero), vall(known1) and vall(known2)
 
 
 @njit(cache=True)
@@ -534,7 +527,14 @@ def _score4(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: 
         s2 = vwhere_lt(d1, d2, s2, vadd(s2, d2))
         q2 = vwhere_lt(d1, d2, q2, vadd(q2, vmul(d2, d2)))
         m2 = vwhere_lt(d1, d2, m2, vadd(m2, one))
-    sc = vsub(vneg(_var4(s1, q1, m1)), _var4(s2, q2, m2))  # (−v1 − v2)
+    # each group's variance q / m − (s / m)², 0 for an empty group (x ** 2 of a float is numba's x · x), and the
+    # score −v1 − v2, as _fit_one
+    zero = vsplat(0.0)
+    r1 = vdiv(s1, m1)
+    r2 = vdiv(s2, m2)
+    v1 = vwhere_lt(zero, m1, vsub(vdiv(q1, m1), vmul(r1, r1)), zero)
+    v2 = vwhere_lt(zero, m2, vsub(vdiv(q2, m2), vmul(r2, r2)), zero)
+    sc = vsub(vneg(v1), v2)
     return vget(sc, 0), vget(sc, 1), vget(sc, 2), vget(sc, 3)
 
 
