@@ -453,8 +453,10 @@ def _score4(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: 
     the points ``x``, ``y`` (m): :func:`_fit_one`'s score of each, the four angles as the lanes of one
     ``<4 x double>`` value (:mod:`dynslam2d.jitvec`), so each pass over the points is one vector instruction per
     operation for four angles (pass det39). Every lane is the same IEEE operation on the same operands as the
-    scalar code, every sum in the points' order: the same floats. ``w`` (≥ 8n) is work space: per point the four
-    projections on e1, then the four on e2."""
+    scalar code, every sum in the points' order: the same floats. The nearer edges of the four lanes are decided
+    at once by :func:`_edges4` when its error bound is certain for every lane, else per lane (:func:`_lane_edges`);
+    the variance scores are lanes too (pass det40). ``w`` (≥ 8n) is work space: per point the four projections on
+    e1, then the four on e2."""
     n = x.shape[0]
     c = vset(trig[0, k0], trig[0, k1], trig[0, k2], trig[0, k3])
     s = vset(trig[1, k0], trig[1, k1], trig[1, k2], trig[1, k3])
