@@ -515,7 +515,6 @@ def _score4(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: 
     m1 = vsplat(0.0)
     s2 = vsplat(0.0)
     q2 = vsplat(0.0)
-    m2 = vsplat(0.0)
     one = vsplat(1.0)
     for i in range(n):
         u = vload(w, 8 * i)
@@ -528,9 +527,9 @@ def _score4(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: 
         m1 = vwhere_lt(d1, d2, vadd(m1, one), m1)
         s2 = vwhere_lt(d1, d2, s2, vadd(s2, d2))
         q2 = vwhere_lt(d1, d2, q2, vadd(q2, vmul(d2, d2)))
-        m2 = vwhere_lt(d1, d2, m2, vadd(m2, one))
     # each group's variance q / m − (s / m)², 0 for an empty group (x ** 2 of a float is numba's x · x), and the
     # score −v1 − v2, as _fit_one
+    m2 = vsub(vsplat(float(n)), m1)  # (the other points: counts are exact integers)
     zero = vsplat(0.0)
     r1 = vdiv(s1, m1)
     r2 = vdiv(s2, m2)
