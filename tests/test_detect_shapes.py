@@ -490,3 +490,56 @@ def test_four_lane_search_is_the_scalar_search_bit_for_bit() -> None:
                     _fit_vec(x, y, trig, criterion, 0.01, got, stride, np.empty(8 * n), order.copy(),
                              np.empty(order.shape[0]), np.empty(n), np.empty(n))
                     assert got.tobytes() == want.tobytes(), (step_deg, criterion, stride, c)
+
+
+def test_four_lane_edge_decision_is_the_scalar_one() -> None:
+    """Pass det40: ``shapes._edges4`` decides the nearer edges of four lanes and both axes at once; it says "known"
+    exactly when ``_near_side_known`` decides every lane of both axes (not −1), and then gives its flags, so the search
+    takes the scalar rule's edges: projections whose sums sit on either side of the error bound (a factor 10^−0.5 …
+    10^2 around it), ties, zero and tiny widths, huge and non-finite bounds, 1–200 points, on either axis."""
+    from dynslam2d.detect.shapes import _U, _edges4, _near_side_known
+    from dynslam2d.jitbox import njit
+    from dynslam2d.jitvec import vget, vset
+
+    @njit
+    def lanes(n, b):  # (b: rows lo1, hi1, t1, lo2, hi2, t2 of four lanes)
+        use1, use2, known = _edges4(n, vset(b[0, 0], b[0, 1], b[0, 2], b[0, 3]),
+                                    vset(b[1, 0], b[1, 1], b[1, 2], b[1, 3]), vset(b[2, 0], b[2, 1], b[2, 2], b[2, 3]),
+                                    vset(b[3, 0], b[3, 1], b[3, 2], b[3, 3]), vset(b[4, 0], b[4, 1], b[4, 2], b[4, 3]),
+                                    vset(b[5, 0], b[5, 1], b[5, 2], b[5, 3]))
+        out = np.empty((2, 4))
+        for j in range(4):
+            out[0, j] = vget(use1, j)
+            out[1, j] = vget(use2, j)
+        return out, known
+
+    rng = np.random.default_rng(40)
+
+    def row(n: int) -> tuple[float, float, float]:
+        lo = rng.normal(0, 10) * 10.0 ** rng.integers(-3, 4)
+        hi = lo + abs(rng.normal(0, 1)) * 10.0 ** rng.integers(-8, 3)
+        w, m = hi - lo, max(abs(hi), abs(lo))
+        bound = 8.0 * (n + 4) * _U * (4.0 * n * m + n * w)
+        e = rng.choice([-1.0, 1.0]) * bound * 10.0 ** rng.uniform(-0.5, 2)
+        return lo, hi, (n * (hi + lo) - e) / 2.0
+
+    special = [(1.0, 1.0), (0.0, 1e-101), (-1e101, 1.0), (0.0, np.inf), (np.nan, 1.0), (-np.inf, np.inf)]
+    counts = [0, 0]
+    for q in range(3000):
+        n = int(rng.choice([1, 2, 7, 19, 200])) if q % 10 else int(rng.integers(1, 200))
+        rows = [row(n) for _ in range(4)]
+        if q % 50 == 0:  # (a special lane: never decided)
+            lo, hi = special[(q // 50) % len(special)]
+            rows[q % 4] = (lo, hi, n * (lo + hi) / 2.0)
+        fill = [(0.0, 1.0, 0.1 * n)] * 4  # (the other axis: decided, the near edge lo for any n)
+        axis = q % 2
+        b = np.array((rows + fill) if axis == 0 else (fill + rows)).reshape(2, 4, 3).transpose(0, 2, 1).reshape(6, 4)
+        with np.errstate(all="ignore"):
+            got, known = lanes(n, b)
+        want = [_near_side_known(n, *r) for r in rows]
+        assert known == all(f >= 0 for f in want), (n, rows, want)
+        counts[known] += 1
+        if known:
+            assert got[axis].tolist() == [float(f) for f in want], (n, rows, want, got)
+            assert got[1 - axis].tolist() == [float(_near_side_known(n, *fill[0]))] * 4
+    assert min(counts) > 300  # (both outcomes often)

@@ -6,7 +6,9 @@ import numpy as np
 
 from dynslam2d.jitbox import njit
 from dynslam2d.jitvec import (
+    vabs,
     vadd,
+    vall,
     vdiv,
     vget,
     vload,
@@ -79,3 +81,41 @@ def test_lane_operations_are_the_scalar_ones_bit_for_bit() -> None:
         want = _scalars(a, b, c, d)
     for r in range(10):
         assert got[r].tobytes() == want[r].tobytes(), r
+
+
+@njit
+def _abs_all(a: np.ndarray, flags: np.ndarray) -> tuple:
+    n = a.shape[0]
+    ab = np.empty(n)
+    for q in range(0, n, 4):
+        v = vabs(vload(a, q))
+        for j in range(4):
+            ab[q + j] = vget(v, j)
+    k = flags.shape[0] // 4
+    every = np.empty(k, dtype=np.bool_)
+    for r in range(k):
+        every[r] = vall(vload(flags, 4 * r))
+    return ab, every
+
+
+@njit
+def _abs_scalar(a: np.ndarray) -> np.ndarray:
+    out = np.empty(a.shape[0])
+    for i in range(a.shape[0]):
+        out[i] = abs(a[i])
+    return out
+
+
+def test_lane_abs_and_all_lanes_set() -> None:
+    """Pass det40: ``vabs`` gives numba's ``abs`` of each lane bit for bit (±0, ±inf, NaN, subnormals, random);
+    ``vall`` is True exactly when no lane of a flag vector is 0.0 (all 16 patterns of 0.0 / 1.0, and −0.0 counts as
+    0.0, a NaN lane as set, as ``vwhere`` reads them)."""
+    rng = np.random.default_rng(40)
+    a = np.concatenate([[0.0, -0.0, np.inf, -np.inf, np.nan, -np.nan, 5e-324, -5e-324], rng.normal(0, 10, 248)])
+    pats = [[(p >> j) & 1 for j in range(4)] for p in range(16)]
+    flags = np.array(pats + [[1.0, -0.0, 1.0, 1.0], [1.0, np.nan, 1.0, 1.0], [2.0, -1.0, 0.5, 1e-300]],
+                     dtype=float)
+    ab, every = _abs_all(a, flags.ravel())
+    assert ab.tobytes() == _abs_scalar(a).tobytes()
+    assert every.tolist() == [bool(np.all((f != 0.0) | np.isnan(f))) for f in flags]
+    assert every.tolist()[:16] == [p == 15 for p in range(16)]

@@ -9,13 +9,16 @@ Every operation is the IEEE operation of the scalar code on each lane: ``vadd`` 
 ``fsub``, ``fmul`` without fast-math flags (no contraction into FMA, as numba's scalar code), ``vneg`` is ``fneg``
 (numba's unary minus of a float), ``vmin(acc, u)`` / ``vmax(acc, u)`` are numba's ``min(acc, u)`` / ``max(acc, u)``
 of two floats (``select(u < acc, u, acc)``, ``select(u > acc, u, acc)``: the second argument only when the ordered
-comparison holds), so a kernel written with them gives the bits of the same kernel written per lane.
+comparison holds), ``vabs`` is ``fabs`` (numba's ``abs`` of a float), so a kernel written with them gives the bits of
+the same kernel written per lane. ``vall`` tells whether every lane of a 0.0 / 1.0 flag vector is set (one branch for
+four lanes).
 """
 
 from __future__ import annotations
 
 from llvmlite import ir
 from numba import types
+from numba.core import cgutils
 from numba.extending import intrinsic, models, register_model
 
 _VT = ir.VectorType(ir.DoubleType(), 4)
@@ -93,6 +96,25 @@ def vneg(typingctx, a):  # noqa: ANN001, ANN201 - numba intrinsic
     def codegen(context, builder, sig, args):
         return builder.fneg(args[0])
     return vec4(vec4), codegen
+
+
+@intrinsic
+def vabs(typingctx, a):  # noqa: ANN001, ANN201 - numba intrinsic
+    """Lane-wise |a| (LLVM's ``fabs``: the sign bit cleared, as numba's ``abs`` of a float)."""
+    def codegen(context, builder, sig, args):
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(_VT, [_VT]), "llvm.fabs.v4f64")
+        return builder.call(fn, [args[0]])
+    return vec4(vec4), codegen
+
+
+@intrinsic
+def vall(typingctx, m):  # noqa: ANN001, ANN201 - numba intrinsic
+    """True when no lane of ``m`` is 0.0 (``m``: lanes of 0.0 / 1.0 flags, as :func:`vwhere` reads them)."""
+    def codegen(context, builder, sig, args):
+        zero = ir.Constant(_VT, [0.0, 0.0, 0.0, 0.0])
+        bits = builder.bitcast(builder.fcmp_unordered("!=", args[0], zero), ir.IntType(4))
+        return builder.icmp_unsigned("==", bits, ir.Constant(ir.IntType(4), 15))
+    return types.boolean(vec4), codegen
 
 
 @intrinsic

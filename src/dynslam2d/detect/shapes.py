@@ -34,8 +34,11 @@ from dynslam2d.detect.layout import (
 )
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.jitvec import (
+    vabs,
     vadd,
+    vall,
     vdiv,
+    vec4,
     vget,
     vload,
     vmax,
@@ -416,12 +419,31 @@ def _lane_edges(w: np.ndarray, j: int, n: int, lo1: float, hi1: float, t1: float
 
 
 @njit(cache=True)
-def _var_score(s1: float, q1: float, m1: float, s2: float, q2: float, m2: float) -> float:
-    """The variance criterion's score −v1 − v2 from each group's sum, sum of squares and count (a float: the
-    scalar code's int count converted for its divisions), as :func:`_fit_one`."""
-    v1 = q1 / m1 - (s1 / m1) ** 2 if m1 > 0.0 else 0.0
-    v2 = q2 / m2 - (s2 / m2) ** 2 if m2 > 0.0 else 0.0
-    return -v1 - v2
+def _edges4(n: int, lo1: vec4, hi1: vec4, t1: vec4, lo2: vec4, hi2: vec4, t2: vec4) -> tuple:
+    """:func:`_near_side_known` of the four lanes of both axes at once, with the same float operations per lane (each
+    lane's bounds ``lo``, ``hi`` and projections' sum ``t`` of n points): ``(use1, use2, known)``, the flags as lanes
+    of 1.0 (the far edge ``hi``) / 0.0, and True when every lane is decided on both axes (none where
+    :func:`_near_side_known` returns −1); when not, the caller takes each lane's :func:`_lane_edges`."""
+    one = vsplat(1.0)
+    zero = vsplat(0.0)
+    nv = vsplat(float(n))
+    n4 = vsplat(4.0 * n)
+    two = vsplat(2.0)
+    gv = vsplat(8.0 * (n + 4) * _U)
+    tiny = vsplat(1e-100)
+    huge = vsplat(1e100)
+    w = vsub(hi1, lo1)
+    m = vmax(vabs(hi1), vabs(lo1))
+    ok = vwhere_lt(m, huge, vwhere_lt(tiny, w, one, zero), zero)  # (w² and the terms normal; NaN: not ok)
+    e = vsub(vmul(nv, vadd(hi1, lo1)), vmul(two, t1))
+    known1 = vwhere_lt(vmul(gv, vadd(vmul(n4, m), vmul(nv, w))), vabs(e), ok, zero)
+    use1 = vwhere_lt(e, zero, one, zero)
+    w = vsub(hi2, lo2)
+    m = vmax(vabs(hi2), vabs(lo2))
+    ok = vwhere_lt(m, huge, vwhere_lt(tiny, w, one, zero), zero)
+    e = vsub(vmul(nv, vadd(hi2, lo2)), vmul(two, t2))
+    known2 = vwhere_lt(vmul(gv, vadd(vmul(n4, m), vmul(nv, w))), vabs(e), ok, zero)
+    return use1, vwhere_lt(e, zero, one, zero), vall(known1) and vall(known2)
 
 
 @njit(cache=True)
@@ -431,8 +453,10 @@ def _score4(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: 
     the points ``x``, ``y`` (m): :func:`_fit_one`'s score of each, the four angles as the lanes of one
     ``<4 x double>`` value (:mod:`dynslam2d.jitvec`), so each pass over the points is one vector instruction per
     operation for four angles (pass det39). Every lane is the same IEEE operation on the same operands as the
-    scalar code, every sum in the points' order: the same floats. ``w`` (≥ 8n) is work space: per point the four
-    projections on e1, then the four on e2."""
+    scalar code, every sum in the points' order: the same floats. The nearer edges of the four lanes are decided
+    at once by :func:`_edges4` when its error bound is certain for every lane, else per lane (:func:`_lane_edges`);
+    the variance scores are lanes too (pass det40). ``w`` (≥ 8n) is work space: per point the four projections on
+    e1, then the four on e2."""
     n = x.shape[0]
     c = vset(trig[0, k0], trig[0, k1], trig[0, k2], trig[0, k3])
     s = vset(trig[1, k0], trig[1, k1], trig[1, k2], trig[1, k3])
@@ -459,18 +483,22 @@ def _score4(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: 
     if criterion == 0:
         sc = vmul(vneg(vsub(hi1, lo1)), vsub(hi2, lo2))
         return vget(sc, 0), vget(sc, 1), vget(sc, 2), vget(sc, 3)
-    # each axis' nearer edge per lane (1.0: the far edge hi): _near_side_known when certain, else the sums; the lane
-    # index as np.int64, not a literal constant: numba would compile _lane_edges once per literal (four times)
-    a0, b0 = _lane_edges(w, np.int64(0), n, vget(lo1, 0), vget(hi1, 0), vget(t1, 0),
-                         vget(lo2, 0), vget(hi2, 0), vget(t2, 0))
-    a1, b1 = _lane_edges(w, np.int64(1), n, vget(lo1, 1), vget(hi1, 1), vget(t1, 1),
-                         vget(lo2, 1), vget(hi2, 1), vget(t2, 1))
-    a2, b2 = _lane_edges(w, np.int64(2), n, vget(lo1, 2), vget(hi1, 2), vget(t1, 2),
-                         vget(lo2, 2), vget(hi2, 2), vget(t2, 2))
-    a3, b3 = _lane_edges(w, np.int64(3), n, vget(lo1, 3), vget(hi1, 3), vget(t1, 3),
-                         vget(lo2, 3), vget(hi2, 3), vget(t2, 3))
-    use1 = vset(a0, a1, a2, a3)
-    use2 = vset(b0, b1, b2, b3)
+    # each axis' nearer edge per lane (1.0: the far edge hi): _near_side_known of the four lanes at once (_edges4:
+    # the same float operations per lane) when it is certain for every lane, else each lane's _lane_edges (its
+    # _near_side_known, or the sums when that cannot tell); the lane index as np.int64, not a literal constant: numba
+    # would compile _lane_edges once per literal (four times)
+    use1, use2, known = _edges4(n, lo1, hi1, t1, lo2, hi2, t2)
+    if not known:
+        a0, b0 = _lane_edges(w, np.int64(0), n, vget(lo1, 0), vget(hi1, 0), vget(t1, 0),
+                             vget(lo2, 0), vget(hi2, 0), vget(t2, 0))
+        a1, b1 = _lane_edges(w, np.int64(1), n, vget(lo1, 1), vget(hi1, 1), vget(t1, 1),
+                             vget(lo2, 1), vget(hi2, 1), vget(t2, 1))
+        a2, b2 = _lane_edges(w, np.int64(2), n, vget(lo1, 2), vget(hi1, 2), vget(t1, 2),
+                             vget(lo2, 2), vget(hi2, 2), vget(t2, 2))
+        a3, b3 = _lane_edges(w, np.int64(3), n, vget(lo1, 3), vget(hi1, 3), vget(t1, 3),
+                             vget(lo2, 3), vget(hi2, 3), vget(t2, 3))
+        use1 = vset(a0, a1, a2, a3)
+        use2 = vset(b0, b1, b2, b3)
     if criterion == 1:
         acc = vsplat(0.0)
         one = vsplat(1.0)
@@ -487,7 +515,6 @@ def _score4(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: 
     m1 = vsplat(0.0)
     s2 = vsplat(0.0)
     q2 = vsplat(0.0)
-    m2 = vsplat(0.0)
     one = vsplat(1.0)
     for i in range(n):
         u = vload(w, 8 * i)
@@ -500,11 +527,16 @@ def _score4(x: np.ndarray, y: np.ndarray, trig: np.ndarray, criterion: int, d0: 
         m1 = vwhere_lt(d1, d2, vadd(m1, one), m1)
         s2 = vwhere_lt(d1, d2, s2, vadd(s2, d2))
         q2 = vwhere_lt(d1, d2, q2, vadd(q2, vmul(d2, d2)))
-        m2 = vwhere_lt(d1, d2, m2, vadd(m2, one))
-    return (_var_score(vget(s1, 0), vget(q1, 0), vget(m1, 0), vget(s2, 0), vget(q2, 0), vget(m2, 0)),
-            _var_score(vget(s1, 1), vget(q1, 1), vget(m1, 1), vget(s2, 1), vget(q2, 1), vget(m2, 1)),
-            _var_score(vget(s1, 2), vget(q1, 2), vget(m1, 2), vget(s2, 2), vget(q2, 2), vget(m2, 2)),
-            _var_score(vget(s1, 3), vget(q1, 3), vget(m1, 3), vget(s2, 3), vget(q2, 3), vget(m2, 3)))
+    # each group's variance q / m − (s / m)², 0 for an empty group (x ** 2 of a float is numba's x · x), and the
+    # score −v1 − v2, as _fit_one
+    m2 = vsub(vsplat(float(n)), m1)  # (the other points: counts are exact integers)
+    zero = vsplat(0.0)
+    r1 = vdiv(s1, m1)
+    r2 = vdiv(s2, m2)
+    v1 = vwhere_lt(zero, m1, vsub(vdiv(q1, m1), vmul(r1, r1)), zero)
+    v2 = vwhere_lt(zero, m2, vsub(vdiv(q2, m2), vmul(r2, r2)), zero)
+    sc = vsub(vneg(v1), v2)
+    return vget(sc, 0), vget(sc, 1), vget(sc, 2), vget(sc, 3)
 
 
 @njit(cache=True)
