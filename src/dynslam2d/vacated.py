@@ -153,7 +153,7 @@ class VacatedTrace:
         self._res = math.nan
         self._beams = -1
         self._work = np.zeros(0, dtype=np.int64)
-        self._window = np.zeros((0, 0), dtype=np.uint8)
+        self._window = np.zeros((0, 0), dtype=np.int64)
 
     def _prepare(self, res: float, beams: int) -> None:
         """The parameters for cells of ``res`` (m) and buffers for ``beams`` beams (the values
@@ -167,7 +167,7 @@ class VacatedTrace:
                                     float(np.float32(self.occupied_logodds)), float(max_side), float(self.min_cells),
                                     self.min_extent, self.min_share], dtype=np.float64)
             self._res = res
-            self._window = np.zeros((2 * max_side + 1, 2 * max_side + 1), dtype=np.uint8)
+            self._window = np.zeros((2 * max_side + 1, (2 * max_side + 64) >> 6), dtype=np.int64)
         g = int(self.params[_MAX_SIDE]) ** 2 + 1
         self._work = np.empty(128 * beams + 2 * g, dtype=np.int64)
         self._beams = beams
