@@ -99,7 +99,7 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.vacated.vacated_scan_kernel',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), float64, float64, float64, Array(float32, 2, 'C'), int64, int64, Array(float64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(int64, 2, 'C'),)"),
+     "Array(int64, 1, 'C'), Array(uint8, 2, 'C'),)"),
     ('dynslam2d.detect.kernels.cv_predict',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 2, 'C'),)"),
