@@ -21,6 +21,7 @@ import numpy as np
 from dynslam2d.detect.mapevidence import MapView, VacatedHistory, VacatedOutlines, vacated_core, yielding_view
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.slam.cleanconfig import CleanConfig
+from dynslam2d.slam.cleanup import _scan_geometry
 from dynslam2d.types import Pose2D, Scan
 
 #: Index of each parameter in :attr:`VacatedTrace.params` (what :func:`vacated_scan_kernel` reads).
@@ -46,69 +47,13 @@ def vacated_scan_kernel(ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray
     res = params[_RES]
     max_side = int(params[_MAX_SIDE])
     n = ranges.shape[0]
-    # The clearing ends (cx, cy) and ``clear`` of :func:`dynslam2d.slam.cleanup._scan_geometry`, the same operations
-    # in the same order, in one pass without its endpoints, ``kept`` and the beams' laser-frame arrays: the beam's
-    # point and its neighbours' are carried along (``l*_p``, ``l*_c``, ``l*_n``: the previous, this and the next).
-    margin_m = params[_MARGIN]
-    grazing = params[_GRAZING]
-    min_sin = params[_MIN_SIN]
-    ca = math.cos(th)
-    sa = math.sin(th)
-    ox = px / res
-    oy = py / res
-    cx = np.empty(n)
-    cy = np.empty(n)
-    clear = np.empty(n, dtype=np.bool_)
-    lx_p = ly_p = lx_c = ly_c = lx_n = ly_n = 0.0
-    v_p = v_c = False
-    v_n = n > 0 and valid[0]
-    if v_n:
-        lx_n = ranges[0] * cos_a[0]
-        ly_n = ranges[0] * sin_a[0]
-    for i in range(n):
-        lx_p, ly_p, v_p = lx_c, ly_c, v_c
-        lx_c, ly_c, v_c = lx_n, ly_n, v_n
-        v_n = i + 1 < n and valid[i + 1]
-        if v_n:
-            lx_n = ranges[i + 1] * cos_a[i + 1]
-            ly_n = ranges[i + 1] * sin_a[i + 1]
-        cx[i] = ox
-        cy[i] = oy
-        clear[i] = False
-        if not v_c:
-            continue
-        ax = bx = lx_c
-        ay = by = ly_c
-        has = False
-        if v_p:
-            ax = lx_p
-            ay = ly_p
-            has = True
-        if v_n:
-            bx = lx_n
-            by = ly_n
-            has = True
-        tx = bx - ax
-        ty = by - ay
-        tn = math.sqrt(tx * tx + ty * ty)
-        r = ranges[i]
-        sn = 1.0
-        if has and tn > 0.0 and r > 0.0:
-            sn = abs(lx_c * ty - ly_c * tx) / (tn * r)
-        if sn < min_sin:
-            sn = min_sin
-        margin = grazing * res / sn
-        if margin < margin_m:
-            margin = margin_m
-        if r > margin:
-            f = (r - margin) / r
-            cx[i] = ox + ((px + ca * lx_c - sa * ly_c) / res - ox) * f
-            cy[i] = oy + ((py + sa * lx_c + ca * ly_c) / res - oy) * f
-            clear[i] = True
+    # (``removed`` only makes the geometry's ``kept``, which is not read here: ``valid`` stands in for it)
+    _, _, cx, cy, _, clear = _scan_geometry(ranges, cos_a, sin_a, valid, valid, px, py, th, res, params[_MARGIN],
+                                            params[_GRAZING], params[_MIN_SIN])
     c = 64 * n
     g = max_side * max_side + 1
     rows, cols, sizes, nc = vacated_core(
-        logodds, i0, j0, ox, oy, cx, cy, clear, params[_CORE], params[_OCC], params[_DEPTH],
+        logodds, i0, j0, px / res, py / res, cx, cy, clear, params[_CORE], params[_OCC], params[_DEPTH],
         params[_NEAR], np.float32(params[_OCC32]), max_side, int(params[_MIN_CELLS]), res, params[_MIN_EXTENT],
         params[_MIN_SHARE], work[:c], work[c:2 * c], work[2 * c:2 * c + g], work[2 * c + g:2 * c + 2 * g], window)
     k = sizes.shape[0]
@@ -153,7 +98,7 @@ class VacatedTrace:
         self._res = math.nan
         self._beams = -1
         self._work = np.zeros(0, dtype=np.int64)
-        self._window = np.zeros((0, 0), dtype=np.int64)
+        self._window = np.zeros((0, 0), dtype=np.uint8)
 
     def _prepare(self, res: float, beams: int) -> None:
         """The parameters for cells of ``res`` (m) and buffers for ``beams`` beams (the values
@@ -167,7 +112,7 @@ class VacatedTrace:
                                     float(np.float32(self.occupied_logodds)), float(max_side), float(self.min_cells),
                                     self.min_extent, self.min_share], dtype=np.float64)
             self._res = res
-            self._window = np.zeros((2 * max_side + 1, (2 * max_side + 64) >> 6), dtype=np.int64)
+            self._window = np.zeros((2 * max_side + 1, 2 * max_side + 1), dtype=np.uint8)
         g = int(self.params[_MAX_SIDE]) ** 2 + 1
         self._work = np.empty(128 * beams + 2 * g, dtype=np.int64)
         self._beams = beams

@@ -303,7 +303,7 @@ def vacated_outlines_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy
     :func:`vacated_core` with buffers of its own."""
     n = cx.shape[0]
     cap = max_side * max_side + 1
-    seen = np.empty((2 * max_side + 1, (2 * max_side + 64) >> 6), dtype=np.int64)
+    seen = np.empty((2 * max_side + 1, 2 * max_side + 1), dtype=np.uint8)
     seen[:] = 0
     return vacated_core(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, depth, near_thr, occ32, max_side,
                         min_cells, res, min_extent, min_share, np.empty(64 * n, dtype=np.int64),
@@ -376,7 +376,7 @@ def vacated_core(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx
         c0 = codes[s] - r0 * w
         gr[0] = r0
         gc[0] = c0
-        window[max_side, max_side >> 6] = 1 << (max_side & 63)
+        window[max_side, max_side] = 1
         m = 1
         head = 0
         rmin = rmax = r0
@@ -401,10 +401,9 @@ def vacated_core(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx
                     if lr < 0 or lc < 0 or lr >= side or lc >= side:
                         ok = False
                         break
-                    bit = 1 << (lc & 63)
-                    if window[lr, lc >> 6] & bit:
+                    if window[lr, lc]:
                         continue
-                    window[lr, lc >> 6] |= bit
+                    window[lr, lc] = 1
                     if m >= cap:
                         ok = False
                         break
@@ -419,7 +418,7 @@ def vacated_core(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx
                         ok = False
                         break
         for q in range(m):
-            window[gr[q] - r0 + max_side, (gc[q] - c0 + max_side) >> 6] = 0
+            window[gr[q] - r0 + max_side, gc[q] - c0 + max_side] = 0
         if not ok and logodds[r0, c0] <= near_thr:
             # a start below near_thr joins the components around it: only it is known to fail
             done[s] = True
