@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dynslam2d.slam.cleanconfig import CleanConfig
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
 
@@ -47,7 +49,7 @@ def other_kernel(src: Path):
             mod = importlib.util.module_from_spec(spec)
             sys.modules[name] = mod
             spec.loader.exec_module(mod)
-        return mod.vacated_scan_kernel
+        return mod.vacated_scan_kernel, mod.VacatedTrace
     finally:
         sys.modules["dynslam2d.detect.mapevidence"] = this_me
         sys.modules["dynslam2d.vacated"] = this_vac
@@ -61,16 +63,21 @@ def run(name: str, data: Path, other_src: Path, warm: int = 30) -> None:
     rel, topic = INPUTS.get(name, (name, None))
     scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
     this_k = vac.vacated_scan_kernel
-    other_k = other_kernel(other_src)
+    other_k, other_trace = other_kernel(other_src)
     rec: list[tuple[str, int, int, bool]] = []
-    own: dict = {"i": 0, "bufs": None}
+    own: dict = {"i": 0, "bufs": None, "res": None}
 
     def both(ranges, cos_a, sin_a, valid, px, py, th, logodds, i0, j0, params, work, window):
         i = own["i"]
         own["i"] += 1
         bufs = own["bufs"]
-        if bufs is None or bufs[0].shape != work.shape or bufs[1].shape != window.shape:
-            bufs = own["bufs"] = (work.copy(), window.copy())
+        if bufs is None or bufs[0].shape != work.shape or own["res"] != params[0]:
+            # (the other checkout's own buffers: its window's layout may differ from this one's)
+            tr = other_trace(CleanConfig(), occupied_logodds=6.0, min_cells=1, max_extent=(params[9] - 0.5) * params[0],
+                             min_depth_m=0.0, min_extent=1.0, min_share=0.0, scans=1)
+            tr._prepare(float(params[0]), ranges.shape[0])
+            bufs = own["bufs"] = (tr._work, tr._window)
+            own["res"] = params[0]
         got = {}
         order = ("other", "this") if i % 2 == 0 else ("this", "other")
         for tag in order:

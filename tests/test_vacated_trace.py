@@ -130,3 +130,103 @@ def test_a_scan_without_beams_breaks_a_persistence_run_as_before() -> None:
         got_new.append(trace.view(view, s, pose) is not view)
         got_old.append(_old_view(view, s, pose, hist, clean) is not view)
     assert got_new == got_old == [False, False, False, False, False, True]
+
+
+def _grown_outlines(lo: np.ndarray, cells: list[tuple[int, int]], near: float, occ32: float, max_side: int,
+                    min_cells: int, res: float, min_extent: float, min_share: float
+                    ) -> tuple[list[int], list[int], list[int], int]:
+    """vacated_core's outlines from the seen-through cells ``cells`` (row, column) as its docstring defines them,
+    with a Python set for the cells of a growth (the kernel keeps them in a window about the start)."""
+    h, w = lo.shape
+    codes = sorted({r * w + c for r, c in cells})
+    nc = len(codes)
+    if len(cells) < min_cells or nc < min_cells:
+        return [], [], [], nc if len(cells) >= min_cells else 0
+    done = [False] * nc
+    out_r: list[int] = []
+    out_c: list[int] = []
+    sizes: list[int] = []
+    for s, code in enumerate(codes):
+        if done[s]:
+            continue
+        r0, c0 = divmod(code, w)
+        grown = [(r0, c0)]
+        member = {(r0, c0)}
+        ok = True
+        head = 0
+        while head < len(grown) and ok:
+            r, c = grown[head]
+            head += 1
+            for dr in (-1, 0, 1):
+                for dc in (-1, 0, 1):
+                    rr, cc = r + dr, c + dc
+                    if (dr, dc) == (0, 0) or not (0 <= rr < h and 0 <= cc < w) or lo[rr, cc] <= near:
+                        continue
+                    if abs(rr - r0) > max_side or abs(cc - c0) > max_side or len(grown) >= max_side ** 2 + 1 and \
+                            (rr, cc) not in member:
+                        ok = False
+                    elif (rr, cc) not in member:
+                        member.add((rr, cc))
+                        grown.append((rr, cc))
+                        rs = [p[0] for p in grown]
+                        cs = [p[1] for p in grown]
+                        ok = max(rs) - min(rs) < max_side and max(cs) - min(cs) < max_side
+                    if not ok:
+                        break
+                if not ok:
+                    break
+        if not ok and lo[r0, c0] <= near:
+            done[s] = True
+            continue
+        longocc = [p for p in grown if lo[p] >= occ32]
+        seen = 0
+        for p in longocc:
+            q = p[0] * w + p[1]
+            if q in codes:
+                done[codes.index(q)] = True
+                seen += 1
+        rs = [p[0] for p in grown]
+        cs = [p[1] for p in grown]
+        if ok and seen >= min_cells and max(max(rs) - min(rs), max(cs) - min(cs)) * res > min_extent and \
+                seen >= min_share * len(longocc):
+            out_r += rs
+            out_c += cs
+            sizes.append(len(grown))
+    return out_r, out_c, sizes, nc
+
+
+def test_the_outlines_growth_equals_its_definition_on_random_maps() -> None:
+    """vacated_core's outlines (the growth in its window, kept between starts) against their definition on maps of
+    random outlines 1-3 cells thick, walls longer than the window and cells exactly at near_thr (max_side 70)."""
+    from dynslam2d.detect.mapevidence import seen_through_structure_kernel, vacated_outlines_kernel
+
+    rng = np.random.default_rng(7)
+    yielded = 0
+    for trial in range(40):
+        lo = np.full((260, 260), -1.0, dtype=np.float32)
+        for _ in range(rng.integers(3, 12)):  # rectangle outlines of 1-3 cell thick walls, some of them long walls
+            r, c = rng.integers(0, 250, size=2)
+            hh, ww = rng.integers(2, 150 if trial % 3 else 80, size=2)
+            t = int(rng.integers(1, 4))
+            v = float(rng.choice([0.4, 3.0, 7.0]))
+            lo[r:r + hh, c:c + t] = lo[r:r + hh, c + ww:c + ww + t] = v
+            lo[r:r + t, c:c + ww] = lo[r + hh:r + hh + t, c:c + ww + t] = v
+        lo[rng.random(lo.shape) < 0.02] = 6.5
+        lo[rng.random(lo.shape) < 0.02] = 0.5  # (exactly near_thr: outside the outlines)
+        ox, oy = rng.uniform(20.0, 240.0, size=2)
+        a = np.linspace(-math.pi, math.pi, 900, endpoint=False)
+        d = rng.uniform(60.0, 300.0)
+        cx, cy = ox + d * np.cos(a), oy + d * np.sin(a)
+        clear = np.ones(900, dtype=bool)
+        args = (lo, 0, 0, ox, oy, cx, cy, clear, 0.5, 6.0)
+        max_side, min_cells, res, min_extent = 70, int(rng.integers(1, 4)), 0.05, float(rng.uniform(0.2, 2.0))
+        got_r, got_c, got_s, got_nc = vacated_outlines_kernel(*args, 0.0, 0.5, np.float32(6.0), max_side, min_cells,
+                                                              res, min_extent, 0.1)
+        out_r = np.empty(64 * 900, dtype=np.int64)
+        out_c = np.empty(64 * 900, dtype=np.int64)
+        n = seen_through_structure_kernel(*args, out_r, out_c, 0.0)
+        want = _grown_outlines(lo, list(zip(out_r[:n].tolist(), out_c[:n].tolist())), 0.5, 6.0, max_side, min_cells,
+                               res, min_extent, 0.1)
+        assert (got_r.tolist(), got_c.tolist(), got_s.tolist(), got_nc) == want
+        yielded += len(want[2])
+    assert yielded > 20
