@@ -429,7 +429,32 @@ def run_aot(args: argparse.Namespace) -> None:
 
 NONUMBA = r"""
 import importlib.abc, importlib.machinery, json, os, sys, types
-from unittest import mock
+
+
+class Anything:
+    # every numba / llvmlite name the run's modules touch at import: callable, subscriptable, with any attribute
+    def __init__(self, *a, **k):
+        pass
+
+    def __call__(self, *a, **k):
+        return Anything()
+
+    def __getattr__(self, attr):
+        if attr.startswith("__"):
+            raise AttributeError(attr)
+        return Anything()
+
+    def __getitem__(self, key):
+        return Anything()
+
+    def __mro_entries__(self, bases):
+        return (AnyBase,)
+
+
+class AnyBase:
+    # the base of a class the modules derive from a numba name
+    def __init__(self, *a, **k):
+        pass
 
 work, name, inp, out = sys.argv[1:5]
 AOT = {}
@@ -461,7 +486,7 @@ class Stub(types.ModuleType):
         if attr[:1].isupper():  # a class name (isinstance checks, bases): an empty class
             value = type(attr, (), {"__init__": lambda self, *a, **k: None})
         else:
-            value = mock.MagicMock(name=f"{self.__name__}.{attr}")
+            value = Anything()
         setattr(self, attr, value)
         return value
 
@@ -544,7 +569,7 @@ print(json.dumps({"VmHWM_MiB": hwm, "RSS_before_run_MiB": floor,
 def run_nonumba(args: argparse.Namespace) -> None:
     """``dynslam2d run INPUT`` in a fresh interpreter where ``numba`` and ``llvmlite`` are empty stand-ins (their
     ``njit`` returns a placeholder that calls the AOT export of ``--work``/``--name`` whose argument types fit; every
-    other name a MagicMock): the peak RSS of a run without numba's import, contexts or kernels. ``--work`` holds
+    other name an inert stand-in): the peak RSS of a run without numba's import, contexts or kernels. ``--work`` holds
     ``held.json`` (the signatures a JIT run held) and a module built from it (``build-all --held``)."""
     t0 = time.perf_counter()
     res = subprocess.run([sys.executable, "-c", NONUMBA, args.work, args.name, args.input, args.out],
