@@ -11,7 +11,7 @@
     PYTHONPATH=src python benchmarks/study_aot.py --work W --name aotheld build-all --fresh-flags --held W/held.json
     PYTHONPATH=src python benchmarks/study_aot.py --work W --name aotheld run-nonumba INPUT --out OUT  # no numba
 
-Everything goes to ``--work`` (default /tmp/aot40). ``capture`` runs ``dynslam2d run INPUT`` with numba's
+Everything goes to ``--work`` (default <temp dir>/dynslam2d-aot). ``capture`` runs ``dynslam2d run INPUT`` with numba's
 dispatcher call patched to deep-copy the arguments of the studied kernels' first calls (every ``--every``-th, at
 most ``--keep``), and stops the run once each kernel has them. ``build`` exports each kernel's Python function
 (``Dispatcher.py_func``) with the signature it compiled for in the capture (its return type included) through
@@ -35,6 +35,7 @@ import os
 import pickle
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -623,7 +624,7 @@ def memory_all(args: argparse.Namespace) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--work", default="/tmp/aot40")
+    ap.add_argument("--work", default=str(Path(tempfile.gettempdir()) / "dynslam2d-aot"))
     ap.add_argument("--name", default="aotkernels", help="the AOT extension module's name")
     sub = ap.add_subparsers(dest="cmd", required=True)
     p = sub.add_parser("capture")
