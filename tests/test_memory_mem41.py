@@ -92,3 +92,22 @@ def test_a_packed_ledger_holds_its_rows_squeezed_and_settles_to_them() -> None:
         assert np.array_equal(ra._pk, rb._pk)
         assert ra.compact() == rb.compact()
         assert np.array_equal(ra.key, rb.key) and np.array_equal(ra.delta.view(np.int64), rb.delta.view(np.int64))
+
+
+def test_rows_squeezed_together_equal_rows_squeezed_alone() -> None:
+    """``_squeeze_many`` (the ended ledgers of a batch) gives each ledger the array ``_squeeze_rows`` gives it alone
+    (spans, inexact log-odds and rows kept as they are differ from ledger to ledger)."""
+    rng = np.random.default_rng(5)
+    for t in range(30):
+        cats = []
+        for k in range(int(rng.integers(1, 17))):
+            n = int(rng.integers(1, 300))
+            c = _rows(rng, n, [1, 200, 70000][k % 3], [3, 300, 70000][(k + t) % 3], bool((k + t) % 4))
+            if (k + t) % 9 == 0:
+                c[2, 0] = 1 << 40
+            cats.append(c)
+        together = er._squeeze_many(cats)
+        for c, got in zip(cats, together):
+            alone = _squeeze_rows(c)
+            assert got.dtype == alone.dtype and got.shape == alone.shape and np.array_equal(got, alone)
+            assert np.array_equal(_unsqueeze_rows(got), c)

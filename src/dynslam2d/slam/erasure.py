@@ -128,42 +128,70 @@ _SQ_INT = {1: np.dtype(np.uint8), 2: np.dtype(np.uint16), 4: np.dtype(np.uint32)
 
 def _squeeze_rows(cat: np.ndarray) -> np.ndarray:
     """A packed ledger's (5, n) int64 rows (key, update index before, after, added log-odds' float64 bits, level;
-    n ≥ 1) as one uint8 array of about 14 bytes a row instead of 40 (issue 13 item 3: MIT CSAIL's ended ledgers,
-    kept ``ledger_keep_s`` for linking, held ≈ 14 MB of such rows at the loop's end). The five integer parts —
-    the key as two halves (``key + 2^31``'s high and low 32 bits: the cell's i and j + 2^31, any int64 key comes
-    back), the update indices and the level — are stored minus each part's smallest value in one unsigned dtype
-    wide enough for every part's span (uint8 … uint32; the rows as they are when a span needs more); the added
-    log-odds as float32, with the float64 bits of those float32 does not hold exactly listed apart (≈ 6 % of MIT
-    CSAIL's rows). :func:`_unsqueeze_rows` returns exactly ``cat``."""
-    n = cat.shape[1]
-    v = np.empty((5, n), dtype=np.int64)
+    n ≥ 1) as one uint8 array of about 14 bytes a row instead of 40 (:func:`_squeeze_many` of one)."""
+    return _squeeze_many([cat])[0]
+
+
+def _squeeze_many(cats: list[np.ndarray]) -> list[np.ndarray]:
+    """Packed ledgers' (5, n) int64 rows (key, update index before, after, added log-odds' float64 bits, level;
+    n ≥ 1 each), each as one uint8 array of about 14 bytes a row instead of 40 (issue 13 item 3: MIT CSAIL's ended
+    ledgers, kept ``ledger_keep_s`` for linking, held ≈ 14 MB of such rows at the loop's end). The five integer
+    parts — the key as two halves (``key + 2^31``'s high and low 32 bits: the cell's i and j + 2^31, any int64 key
+    comes back), the update indices and the level — are stored minus each part's smallest value in one unsigned
+    dtype wide enough for every part's span (uint8 … uint32; the rows as they are, a copy, when a span needs
+    more); the added log-odds as float32, with the float64 bits of those float32 does not hold exactly listed
+    apart (≈ 6 % of MIT CSAIL's rows). :func:`_unsqueeze_rows` returns exactly each ``cat``. The work common to
+    all of them is done once over their rows side by side (the ledgers that end are packed in batches:
+    ``EvidenceLedger._finish_ended``; one at a time this cost ≈ 20 µs a scan on MIT CSAIL)."""
+    if len(cats) == 1:
+        cat = cats[0]
+    else:
+        cat = np.concatenate(cats, axis=1)
+    ns = [c.shape[1] for c in cats]
+    starts = np.zeros(len(cats), dtype=np.int64)
+    if len(cats) > 1:
+        np.cumsum(ns[:-1], out=starts[1:])
+    n_all = cat.shape[1]
+    v = np.empty((5, n_all), dtype=np.int64)
     hi = v[0]
     np.add(cat[0], _HALF, out=hi)  # (wraps around for keys within 2^31 of int64's top: so does the way back)
     np.bitwise_and(hi, _KEY_SHIFT - 1, out=v[1])
     hi >>= 32
     v[2:4] = cat[1:3]
     v[4] = cat[4]
-    lo = v.min(axis=1)
-    span = int((v.max(axis=1) - lo).max())  # (a part whose span overflows int64 gives a negative one)
-    if not 0 <= span < 1 << 32:
-        return cat.copy()  # (not squeezed: beyond the encoding's range)
-    size = 1 if span < 1 << 8 else 2 if span < 1 << 16 else 4
+    lo = np.minimum.reduceat(v, starts, axis=1)
+    span = (np.maximum.reduceat(v, starts, axis=1) - lo).max(axis=0).tolist()  # (an overflowing span: negative)
     d64 = cat[3].view(np.float64)
     d32 = d64.astype(np.float32)
     # (equal values are equal bits: the cast keeps a zero's sign; a NaN is unequal and kept as its bits)
-    bad = np.flatnonzero(d32 != d64)
-    m = bad.shape[0]
-    h = 8 * (_SQ_HEAD + 2 * m)
-    buf = np.empty(h + 4 * n + 5 * size * n, dtype=np.uint8)
-    head = buf[:h].view(np.int64)
-    head[0], head[1], head[2] = n, size, m
-    head[3:8] = lo
-    if m:
-        head[_SQ_HEAD:_SQ_HEAD + m] = bad
-        head[_SQ_HEAD + m:] = cat[3, bad]
-    buf[h:h + 4 * n].view(np.float32)[:] = d32
-    np.subtract(v, lo[:, None], out=buf[h + 4 * n:].view(_SQ_INT[size]).reshape(5, n), casting="unsafe")
-    return buf
+    bad = d32 != d64
+    n_bad = np.add.reduceat(bad, starts, dtype=np.int64).tolist() if n_all else [0] * len(cats)
+    bad_at = np.flatnonzero(bad) if any(n_bad) else _EMPTY_I
+    out = []
+    q = 0
+    los = lo.T.tolist()
+    for k, (c, n, a) in enumerate(zip(cats, ns, starts.tolist())):
+        sp = span[k]
+        if not 0 <= sp < 1 << 32:
+            out.append(c.copy())  # (not squeezed: beyond the encoding's range)
+            q += n_bad[k]
+            continue
+        size = 1 if sp < 1 << 8 else 2 if sp < 1 << 16 else 4
+        m = n_bad[k]
+        h = 8 * (_SQ_HEAD + 2 * m)
+        buf = np.empty(h + 4 * n + 5 * size * n, dtype=np.uint8)
+        head = buf[:h].view(np.int64)
+        head[:_SQ_HEAD] = (n, size, m, *los[k])
+        if m:
+            at = bad_at[q:q + m]
+            head[_SQ_HEAD:_SQ_HEAD + m] = at - a
+            head[_SQ_HEAD + m:] = cat[3, at]
+            q += m
+        buf[h:h + 4 * n].view(np.float32)[:] = d32[a:a + n]
+        np.subtract(v[:, a:a + n], lo[:, k:k + 1], out=buf[h + 4 * n:].view(_SQ_INT[size]).reshape(5, n),
+                    casting="unsafe")
+        out.append(buf)
+    return out
 
 
 def _unsqueeze_rows(buf: np.ndarray) -> np.ndarray:
@@ -474,15 +502,15 @@ class _Ledger:
         entry, its per-level update counts with it), so that the ledger holds no update's block alive: for a
         ledger that gets no more rows (its track ended; issue 13 item 3), in one copy where :meth:`settle` would
         copy each level's rows apart — the levels are split when the records are read (pass ledger14)."""
+        _pack_all([self])
+
+    def unpacked_rows(self) -> tuple[np.ndarray, list[int]] | None:
+        """:meth:`pack`'s rows and per-level update counts, or None when there is nothing to pack (no entry, or
+        packed already)."""
         ent = self.ent
-        if not ent or (len(ent) == 1 and type(ent[0][3]) is not int):  # (nothing, or packed already)
-            return
-        cat, chunks = self._rows()
-        n = cat.shape[1]
-        # (squeezed: 13–40 bytes a row instead of 40, the same rows when read; :func:`_squeeze_rows`)
-        self.ent = [(_squeeze_rows(cat) if n else cat.copy(), 0, n, chunks)]
-        for rec in self.recs or ():  # (records a previous settle made: their pending buffers are exact already)
-            rec.shrink()
+        if not ent or (len(ent) == 1 and type(ent[0][3]) is not int):
+            return None
+        return self._rows()
 
     def settle(self) -> None:
         """Copy every entry's rows into their level records' pending buffers, after the rows they hold (one copy
@@ -572,6 +600,26 @@ class _Ledger:
     @property
     def n_cells(self) -> int:
         return sum(len(lv) for lv in self.levels)
+
+
+def _pack_all(leds: list[_Ledger]) -> None:
+    """:meth:`_Ledger.pack` of every ledger of ``leds``, their rows squeezed together (:func:`_squeeze_many`)."""
+    todo = []
+    for led in leds:
+        got = led.unpacked_rows()
+        if got is not None:
+            todo.append((led, *got))
+    full = [(led, cat, chunks) for led, cat, chunks in todo if cat.shape[1]]
+    for led, cat, chunks in todo:
+        if not cat.shape[1]:  # (an entry without rows: kept as it is)
+            led.ent = [(cat.copy(), 0, 0, chunks)]
+    if full:
+        # (squeezed: about 14 bytes a row instead of 40, the same rows when read)
+        for (led, cat, chunks), buf in zip(full, _squeeze_many([cat for _, cat, _ in full])):
+            led.ent = [(buf, 0, cat.shape[1], chunks)]
+    for led, _, _ in todo:
+        for rec in led.recs or ():  # (records a previous settle made: their pending buffers are exact already)
+            rec.shrink()
 
 
 class PendingUpdate:
@@ -1234,8 +1282,7 @@ class EvidenceLedger:
         are counted without a sort at once, and a waiting one lets its track go — ledgers that wait longer outlive
         more of the collector's young generations, and with every dropped ledger waiting the garbage collections
         cost the map update about as much as the batches saved.)"""
-        for led in self._to_pack:
-            led.pack()
+        _pack_all(self._to_pack)
         for led in self._to_count:
             self._drop(led)
         self._to_pack = []
