@@ -90,7 +90,9 @@ def _track(tid: int, state: str, stamp: float, x: float, y: float, v: float, siz
 
 
 def _ledger_state(led) -> tuple:
-    ent = [(r.tobytes(), r.shape, a, b, lv if type(lv) is int else tuple(lv)) for r, a, b, lv in led.ent]
+    # (each entry's rows as they read: an ended ledger's are squeezed, with the batch it was packed in, pass mem41)
+    ent = [(er._unsqueeze_rows(r, a, b).tobytes(), b - a, lv if type(lv) is int else tuple(lv))
+           for r, a, b, lv in led.ent]
     return (led.id, led.first_box, led.first_t, led.last_box, led.last_seen, led.m_start, led.linked, led.confirmed,
             led.skip, id(led.last_track), ent, led.recs is None, led.nb_rows, led.nb_chunks)
 

@@ -94,20 +94,34 @@ def test_a_packed_ledger_holds_its_rows_squeezed_and_settles_to_them() -> None:
         assert np.array_equal(ra.key, rb.key) and np.array_equal(ra.delta.view(np.int64), rb.delta.view(np.int64))
 
 
-def test_rows_squeezed_together_equal_rows_squeezed_alone() -> None:
-    """``_squeeze_many`` (the ended ledgers of a batch) gives each ledger the array ``_squeeze_rows`` gives it alone
-    (spans, inexact log-odds and rows kept as they are differ from ledger to ledger)."""
+def test_ledgers_packed_together_read_back_their_own_rows() -> None:
+    """``_pack_all`` (the ended ledgers of a batch) squeezes every ledger's entries into one array, each ledger's
+    entry its range of columns: each settles to the rows of its own entries, whatever the others hold (a ledger
+    packed before among them, inexact log-odds); with a part beyond 32 bits every ledger keeps its plain rows."""
     rng = np.random.default_rng(5)
     for t in range(30):
-        cats = []
+        leds, refs = [], []
         for k in range(int(rng.integers(1, 17))):
-            n = int(rng.integers(1, 300))
-            c = _rows(rng, n, [1, 200, 70000][k % 3], [3, 300, 70000][(k + t) % 3], bool((k + t) % 4))
-            if (k + t) % 9 == 0:
-                c[2, 0] = 1 << 40
-            cats.append(c)
-        together = er._squeeze_many(cats)
-        for c, got in zip(cats, together):
-            alone = _squeeze_rows(c)
-            assert got.dtype == alone.dtype and got.shape == alone.shape and np.array_equal(got, alone)
-            assert np.array_equal(_unsqueeze_rows(got), c)
+            led = _Ledger(k, (0.0, 0.0, 0.0), 0.0, (0.0, 0.0, 0.0), 0.0, None, 3, 100000)
+            blocks = []
+            for _ in range(int(rng.integers(1, 5))):
+                n = int(rng.integers(1, 200))
+                c = _rows(rng, n, [1, 200, 70000][k % 3], [3, 300, 70000][(k + t) % 3], bool((k + t) % 4))
+                led.ent.append((c, 0, n, 7))
+                blocks.append(c)
+            if k == 1:
+                led.pack()  # (a packed entry, then more update entries)
+                c = _rows(rng, 30, 50, 50, True)
+                led.ent.append((c, 0, 30, 7))
+                blocks.append(c)
+            leds.append(led)
+            refs.append(np.concatenate(blocks, axis=1))
+        if t % 10 == 9:
+            refs[0][2, 0] = leds[0].ent[0][0][2, 0] = 1 << 40
+        er._pack_all(leds)
+        bufs = {id(led.ent[0][0]) for led in leds}
+        for led, ref in zip(leds, refs):
+            (buf, a, b, _), = led.ent
+            assert b - a == ref.shape[1] and np.array_equal(led._rows()[0], ref)
+            assert (buf.ndim == 2) == (t % 10 == 9)
+        assert len(bufs) == (len(leds) if t % 10 == 9 else 1)

@@ -119,105 +119,88 @@ def _decode(keys: np.ndarray) -> np.ndarray:
     return np.column_stack(((keys - j) // _KEY_SHIFT, j))
 
 
-#: :func:`_squeeze_rows`' header, int64: n, the integer parts' item size, the inexact log-odds' count, then the
-#: smallest value of each integer part (the key's high and low half, update index before, after, level)
+#: :func:`_squeeze_cols`' header, int64: columns N, the integer parts' item size, the inexact log-odds' count M,
+#: then the smallest value of each integer part (the key's high and low half, update index before, after, level)
 _SQ_HEAD = 8
 #: the integer parts' dtypes by item size (their values minus the part's smallest one)
-_SQ_INT = {1: np.dtype(np.uint8), 2: np.dtype(np.uint16), 4: np.dtype(np.uint32), 8: np.dtype(np.int64)}
+_SQ_INT = {1: np.dtype(np.uint8), 2: np.dtype(np.uint16), 4: np.dtype(np.uint32)}
+
+
+def _squeeze_cols(blocks: list[np.ndarray]) -> np.ndarray | None:
+    """Ledger rows — (5, n) int64 blocks: cell key, update index before, after, added log-odds' float64 bits,
+    level — side by side as one uint8 array of about 14 bytes a column instead of 40 (issue 13 item 3: MIT CSAIL's
+    ended ledgers, kept ``ledger_keep_s`` for linking, held ≈ 14 MB of such rows at the loop's end); None when an
+    integer part spans 2^32 or more (then the caller keeps the rows as they are). :func:`_unsqueeze_rows` gives any
+    range of the columns back exactly.
+
+    The five integer parts — the key as two halves (``key + 2^31``'s high and low 32 bits: the cell's i and
+    j + 2^31; any int64 key comes back), the update indices and the level — are stored minus each part's smallest
+    value, in the narrowest unsigned dtype that holds every part's span; the added log-odds as float32, with the
+    columns and float64 bits of those float32 does not hold exactly listed apart (≈ 6 % of MIT CSAIL's rows).
+    Layout: int64 header (``_SQ_HEAD``), M inexact columns, their M bits, N float32, (5, N) integers."""
+    cat = blocks[0] if len(blocks) == 1 else np.concatenate(blocks, axis=1)
+    n = cat.shape[1]
+    t = cat[0] + _HALF  # (wraps around for keys within 2^31 of int64's top: so does the way back)
+    low = t & (_KEY_SHIFT - 1)
+    t >>= 32
+    parts = (t, low, cat[1], cat[2], cat[4])
+    lo = [int(x.min()) for x in parts]
+    span = max(int(x.max()) - m for x, m in zip(parts, lo))  # (Python ints: no overflow)
+    if span >= 1 << 32:
+        return None
+    size = 1 if span < 1 << 8 else 2 if span < 1 << 16 else 4
+    d64 = cat[3].view(np.float64)
+    d32 = d64.astype(np.float32)
+    bad = np.flatnonzero(d32 != d64)  # (equal values are equal bits: the cast keeps a zero's sign; NaN is unequal)
+    m = bad.shape[0]
+    h = 8 * (_SQ_HEAD + 2 * m)
+    buf = np.empty(h + 4 * n + 5 * size * n, dtype=np.uint8)
+    head = buf[:h].view(np.int64)
+    head[:_SQ_HEAD] = (n, size, m, *lo)
+    if m:
+        head[_SQ_HEAD:_SQ_HEAD + m] = bad
+        head[_SQ_HEAD + m:] = cat[3, bad]
+    buf[h:h + 4 * n].view(np.float32)[:] = d32
+    ints = buf[h + 4 * n:].view(_SQ_INT[size]).reshape(5, n)
+    for r, (x, m0) in enumerate(zip(parts, lo)):
+        np.subtract(x, m0, out=ints[r], casting="unsafe")  # (0 … span: the cast keeps it)
+    return buf
 
 
 def _squeeze_rows(cat: np.ndarray) -> np.ndarray:
-    """A packed ledger's (5, n) int64 rows (key, update index before, after, added log-odds' float64 bits, level;
-    n ≥ 1) as one uint8 array of about 14 bytes a row instead of 40 (:func:`_squeeze_many` of one)."""
-    return _squeeze_many([cat])[0]
+    """One block of rows as :func:`_squeeze_cols` stores it, or a copy of it when it cannot."""
+    buf = _squeeze_cols([cat]) if cat.shape[1] else None
+    return cat.copy() if buf is None else buf
 
 
-def _squeeze_many(cats: list[np.ndarray]) -> list[np.ndarray]:
-    """Packed ledgers' (5, n) int64 rows (key, update index before, after, added log-odds' float64 bits, level;
-    n ≥ 1 each), each as one uint8 array of about 14 bytes a row instead of 40 (issue 13 item 3: MIT CSAIL's ended
-    ledgers, kept ``ledger_keep_s`` for linking, held ≈ 14 MB of such rows at the loop's end). The five integer
-    parts — the key as two halves (``key + 2^31``'s high and low 32 bits: the cell's i and j + 2^31, any int64 key
-    comes back), the update indices and the level — are stored minus each part's smallest value in one unsigned
-    dtype wide enough for every part's span (uint8 … uint32; the rows as they are, a copy, when a span needs
-    more); the added log-odds as float32, with the float64 bits of those float32 does not hold exactly listed
-    apart (≈ 6 % of MIT CSAIL's rows). :func:`_unsqueeze_rows` returns exactly each ``cat``. The work common to
-    all of them is done once over their rows side by side (the ledgers that end are packed in batches:
-    ``EvidenceLedger._finish_ended``; one at a time this cost ≈ 20 µs a scan on MIT CSAIL)."""
-    if len(cats) == 1:
-        cat = cats[0]
-    else:
-        cat = np.concatenate(cats, axis=1)
-    ns = [c.shape[1] for c in cats]
-    starts = np.zeros(len(cats), dtype=np.int64)
-    if len(cats) > 1:
-        np.cumsum(ns[:-1], out=starts[1:])
-    n_all = cat.shape[1]
-    v = np.empty((5, n_all), dtype=np.int64)
-    hi = v[0]
-    np.add(cat[0], _HALF, out=hi)  # (wraps around for keys within 2^31 of int64's top: so does the way back)
-    np.bitwise_and(hi, _KEY_SHIFT - 1, out=v[1])
-    hi >>= 32
-    v[2:4] = cat[1:3]
-    v[4] = cat[4]
-    lo = np.minimum.reduceat(v, starts, axis=1)
-    span = (np.maximum.reduceat(v, starts, axis=1) - lo).max(axis=0).tolist()  # (an overflowing span: negative)
-    d64 = cat[3].view(np.float64)
-    d32 = d64.astype(np.float32)
-    # (equal values are equal bits: the cast keeps a zero's sign; a NaN is unequal and kept as its bits)
-    bad = d32 != d64
-    n_bad = np.add.reduceat(bad, starts, dtype=np.int64).tolist() if n_all else [0] * len(cats)
-    bad_at = np.flatnonzero(bad) if any(n_bad) else _EMPTY_I
-    out = []
-    q = 0
-    los = lo.T.tolist()
-    for k, (c, n, a) in enumerate(zip(cats, ns, starts.tolist())):
-        sp = span[k]
-        if not 0 <= sp < 1 << 32:
-            out.append(c.copy())  # (not squeezed: beyond the encoding's range)
-            q += n_bad[k]
-            continue
-        size = 1 if sp < 1 << 8 else 2 if sp < 1 << 16 else 4
-        m = n_bad[k]
-        h = 8 * (_SQ_HEAD + 2 * m)
-        buf = np.empty(h + 4 * n + 5 * size * n, dtype=np.uint8)
-        head = buf[:h].view(np.int64)
-        head[:_SQ_HEAD] = (n, size, m, *los[k])
-        if m:
-            at = bad_at[q:q + m]
-            head[_SQ_HEAD:_SQ_HEAD + m] = at - a
-            head[_SQ_HEAD + m:] = cat[3, at]
-            q += m
-        buf[h:h + 4 * n].view(np.float32)[:] = d32[a:a + n]
-        np.subtract(v[:, a:a + n], lo[:, k:k + 1], out=buf[h + 4 * n:].view(_SQ_INT[size]).reshape(5, n),
-                    casting="unsafe")
-        out.append(buf)
-    return out
-
-
-def _unsqueeze_rows(buf: np.ndarray) -> np.ndarray:
-    """The (5, n) int64 rows :func:`_squeeze_rows` stored in ``buf`` (a new array; a copy when they were kept as
-    they are)."""
+def _unsqueeze_rows(buf: np.ndarray, a: int = 0, b: int | None = None) -> np.ndarray:
+    """Columns ``a:b`` (all when ``b`` is None) of the (5, N) int64 rows :func:`_squeeze_cols` stored in ``buf``
+    (a new array; ``buf`` may also be the rows themselves, kept as they are)."""
     if buf.ndim == 2:
-        return buf.copy()
-    n, size, m, li, lj, lb, la, ll = buf[:8 * _SQ_HEAD].view(np.int64).tolist()
+        return buf[:, a:b].copy()
+    n_all, size, m, l0, l1, l2, l3, l4 = buf[:8 * _SQ_HEAD].view(np.int64).tolist()
+    if b is None:
+        b = n_all
     h = 8 * (_SQ_HEAD + 2 * m)
-    v = buf[h + 4 * n:].view(_SQ_INT[size]).reshape(5, n)
-    out = np.empty((5, n), dtype=np.int64)
-    out[0] = v[0]
-    out[1:3] = v[2:4]
-    out[4] = v[4]
+    ints = buf[h + 4 * n_all:h + (4 + 5 * size) * n_all].view(_SQ_INT[size]).reshape(5, n_all)[:, a:b]
+    out = np.empty((5, b - a), dtype=np.int64)
     k = out[0]
-    k += li  # (the key's high half, then the key: high · 2^32 + low − 2^31, wrapping around as the way there)
+    k[:] = ints[0]
+    k += l0  # (the key's high half, then the key: high · 2^32 + low − 2^31, wrapping around as the way there)
     k <<= 32
-    k += v[1]
-    k += lj - _HALF
-    out[1] += lb
-    out[2] += la
-    out[4] += ll
-    np.copyto(out[3].view(np.float64), buf[h:h + 4 * n].view(np.float32))
+    k += ints[1]
+    k += l1 - _HALF
+    out[1:3] = ints[2:4]
+    out[1] += l2
+    out[2] += l3
+    out[4] = ints[4]
+    out[4] += l4
+    np.copyto(out[3].view(np.float64), buf[h:h + 4 * n_all].view(np.float32)[a:b])
     if m:
-        head = buf[:h].view(np.int64)
-        out[3, head[_SQ_HEAD:_SQ_HEAD + m]] = head[_SQ_HEAD + m:]
+        cols = buf[8 * _SQ_HEAD:8 * _SQ_HEAD + 8 * m].view(np.int64)
+        i, j = np.searchsorted(cols, (a, b)).tolist()
+        if j > i:
+            out[3, cols[i:j] - a] = buf[8 * _SQ_HEAD + 8 * m:h].view(np.int64)[i:j]
     return out
 
 def _member(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -474,19 +457,22 @@ class _Ledger:
 
     def _rows(self) -> tuple[np.ndarray, list[int]]:
         """The entries' rows, one after the other ((5, n): the record rows and their level; a view when there is
-        one entry), and per level the number of updates with rows on it."""
+        one entry of an update's block), and per level the number of updates with rows on it."""
         ent = self.ent
         if len(ent) == 1:
             rows, a, b, lv = ent[0]
-            cat = rows[:, a:b] if rows.ndim == 2 else _unsqueeze_rows(rows)  # (a packed ledger's, :meth:`pack`)
-            lvs = [lv]
+            cat = rows[:, a:b] if rows.ndim == 2 else _unsqueeze_rows(rows, a, b)  # (packed: squeezed, _pack_all)
         else:
-            cat = np.concatenate([rows[:, a:b] if rows.ndim == 2 else _unsqueeze_rows(rows) for rows, a, b, _ in ent],
-                                 axis=1)
-            lvs = [e[3] for e in ent]
+            cat = np.concatenate([rows[:, a:b] if rows.ndim == 2 else _unsqueeze_rows(rows, a, b)
+                                  for rows, a, b, _ in ent], axis=1)
+        return cat, self._chunks()
+
+    def _chunks(self) -> list[int]:
+        """Per level, the number of updates with rows on it in the entries."""
+        lvs = [e[3] for e in self.ent]
         n_lv = self.n_levels
         if lvs.count((1 << n_lv) - 1) == len(lvs):  # (the usual case: rows on every level in every update)
-            return cat, [len(lvs)] * n_lv
+            return [len(lvs)] * n_lv
         chunks = [0] * n_lv
         for x in lvs:
             if type(x) is int:  # (an update's levels as bits)
@@ -495,7 +481,7 @@ class _Ledger:
             else:  # (a packed entry's updates per level, :meth:`pack`)
                 for k in range(n_lv):
                     chunks[k] += x[k]
-        return cat, chunks
+        return chunks
 
     def pack(self) -> None:
         """Copy the entries' rows out of the updates' shared row blocks into one array of exactly their rows (one
@@ -503,14 +489,6 @@ class _Ledger:
         ledger that gets no more rows (its track ended; issue 13 item 3), in one copy where :meth:`settle` would
         copy each level's rows apart — the levels are split when the records are read (pass ledger14)."""
         _pack_all([self])
-
-    def unpacked_rows(self) -> tuple[np.ndarray, list[int]] | None:
-        """:meth:`pack`'s rows and per-level update counts, or None when there is nothing to pack (no entry, or
-        packed already)."""
-        ent = self.ent
-        if not ent or (len(ent) == 1 and type(ent[0][3]) is not int):
-            return None
-        return self._rows()
 
     def settle(self) -> None:
         """Copy every entry's rows into their level records' pending buffers, after the rows they hold (one copy
@@ -603,24 +581,36 @@ class _Ledger:
 
 
 def _pack_all(leds: list[_Ledger]) -> None:
-    """:meth:`_Ledger.pack` of every ledger of ``leds``, their rows squeezed together (:func:`_squeeze_many`)."""
+    """:meth:`_Ledger.pack` of every ledger of ``leds``: all their entries' rows squeezed side by side into one
+    array (:func:`_squeeze_cols`; each ledger's entry: its range of columns), the common work done once over the
+    batch (the ledgers that end are packed in batches, ``EvidenceLedger._finish_ended``; one at a time, ≈ 25 NumPy
+    calls each, this cost the map update ≈ 20 µs a scan on MIT CSAIL). The array goes when the batch's last
+    ledger does: they ended together and expire together, ``ledger_keep_s`` after their last sight."""
     todo = []
+    blocks = []
+    n = 0
     for led in leds:
-        got = led.unpacked_rows()
-        if got is not None:
-            todo.append((led, *got))
-    full = [(led, cat, chunks) for led, cat, chunks in todo if cat.shape[1]]
-    for led, cat, chunks in todo:
-        if not cat.shape[1]:  # (an entry without rows: kept as it is)
-            led.ent = [(cat.copy(), 0, 0, chunks)]
-    if full:
-        # (squeezed: about 14 bytes a row instead of 40, the same rows when read)
-        for (led, cat, chunks), buf in zip(full, _squeeze_many([cat for _, cat, _ in full])):
-            led.ent = [(buf, 0, cat.shape[1], chunks)]
-    for led, _, _ in todo:
+        ent = led.ent
+        if not ent or (len(ent) == 1 and type(ent[0][3]) is not int):  # (nothing, or packed already)
+            continue
+        a = n
+        for rows, i, j, _ in ent:
+            blocks.append(rows[:, i:j] if rows.ndim == 2 else _unsqueeze_rows(rows, i, j))
+            n += j - i
+        todo.append((led, a, n, led._chunks()))
+    if not todo:
+        return
+    buf = _squeeze_cols(blocks) if n else None
+    if buf is None:  # (no rows, or beyond the squeezed form's range: the rows as they are, one array per ledger)
+        cat = np.concatenate(blocks, axis=1) if blocks else _EMPTY_I5
+        for led, a, b, chunks in todo:
+            led.ent = [(cat[:, a:b].copy(), 0, b - a, chunks)]
+    else:
+        for led, a, b, chunks in todo:
+            led.ent = [(buf, a, b, chunks)]
+    for led, _, _, _ in todo:
         for rec in led.recs or ():  # (records a previous settle made: their pending buffers are exact already)
             rec.shrink()
-
 
 class PendingUpdate:
     """Cells and log-odds read before one map update (:meth:`EvidenceLedger.before_update`): per map level
