@@ -158,7 +158,13 @@ def _detect_rows_ref(*a):
     if a[30] and starts.shape[0] > 1:
         merged = K.merge_legs(px, py, beams, starts, npts, kinds, sfits, lohi, rel, mfr, a[31], a[32])
     f = merged[4]
-    return (*sel, *merged, f[:, F_THETA].copy(), f[:, FIT_CENTROID].copy(), f[:, FIT_CIRCLE].copy())
+    cols = (f[:, F_THETA].copy(), f[:, FIT_CENTROID].copy(), f[:, FIT_CIRCLE].copy())
+    # (and the final rows' default measurements, as Tracker._measure_rows made them before pass trk41)
+    m = f.shape[0]
+    kinds2, lohi2, rel2, starts2, npts2, px2, py2 = (merged[i] for i in (3, 5, 6, 7, 8, 9, 10))
+    default = K.measure_batch(np.arange(m), kinds2, cols[0], lohi2, rel2, cols[1], cols[2], px2, py2, starts2, npts2,
+                              np.zeros((m, 2)), np.zeros(m, dtype=bool), np.full(m, -1.0), np.zeros(m), a[17])
+    return (*sel, *merged, *cols, *default)
 
 
 def _written(got, i, g, w):
@@ -180,7 +186,7 @@ def test_fused_kernels_give_the_former_calls_results_in_whole_runs(monkeypatch):
     def rows(*a):
         want = _detect_rows_ref(*a)
         got = K.detect_rows(*a)
-        assert len(got) == len(want) == 24
+        assert len(got) == len(want) == 31
         for i, (g, w) in enumerate(zip(got, want)):
             assert _same(*_written(got, i, g, w)), i
         seen["calls"] += 1
@@ -241,7 +247,7 @@ def test_skipped_circle_fits_in_whole_runs(monkeypatch):
         want = K.detect_rows(*a[:4], full_fits[0], *a[5:])  # (every circle fitted)
         # (the classification, the selection and the merge: all but the fit rows and circle columns, which differ
         # where a circle was skipped)
-        assert all(_same(*_written(got, i, got[i], want[i])) for i in range(24) if i not in (5, 11, 23))
+        assert all(_same(*_written(got, i, got[i], want[i])) for i in range(31) if i not in (5, 11, 23))
         return got
 
     monkeypatch.setattr(tracker_mod, "fit_cluster_rows", fit_rows)

@@ -636,7 +636,8 @@ def detect_rows(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: np.n
     pts, mmev; with no pair: empty ``first`` / ``second`` / ``ki`` / ``mbeams`` / ``pts`` and the selected rows'
     arrays, ``px``, ``py`` and the fractions in the other places) and the final rows' (merged where a pair was
     merged) ``theta`` (nf,), ``centroid`` (nf, 2) and ``circle`` (nf, 3) fit columns as C-contiguous copies
-    (``DetectionBatch``'s columns)."""
+    (``DetectionBatch``'s columns), then the final rows' default measurements, :func:`measure_batch`'s seven results
+    (``MeasureRows``' fields) with no track prior (rows ``0 … nf − 1``, sizes 0 not given, radius −1, size σ 0)."""
     keep, kinds0, lohi0, rel0 = classify_batch(px, py, beams, offsets, fits, structure, sx, sy, ranges, valid, ax, ay,
                                                wrapped, max_skip, range_max, dphi, max_extent, p)
     starts, npts, kinds, lohi, rel, sfits, mfr = select_detections(
@@ -664,8 +665,17 @@ def detect_rows(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: np.n
         circle[q, 0] = fits2[q, F_CIRCLE_X]
         circle[q, 1] = fits2[q, F_CIRCLE_Y]
         circle[q, 2] = fits2[q, F_CIRCLE_R]
+    # the final rows' default measurements (no track prior: every row its own detection, no sizes, no radius, size σ
+    # 0), as Tracker._measure_rows made them in a call of its own (pass trk41)
+    det = np.arange(nf)
+    sizes = np.zeros((nf, 2))
+    has_sizes = np.zeros(nf, dtype=np.bool_)
+    radius = np.full(nf, -1.0)
+    size_sigma = np.zeros(nf)
+    z, R, H, zm, Rm, size_obs, size_kind = measure_batch(det, kinds2, theta, lohi2, rel2, centroid, circle, px2, py2,
+                                                         starts2, npts2, sizes, has_sizes, radius, size_sigma, p)
     return (starts, npts, kinds, lohi, rel, sfits, mfr, first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2,
-            px2, py2, mbeams, pts, mmev, theta, centroid, circle)
+            px2, py2, mbeams, pts, mmev, theta, centroid, circle, z, R, H, zm, Rm, size_obs, size_kind)
 
 
 @njit(cache=True)

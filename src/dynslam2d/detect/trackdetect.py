@@ -99,9 +99,10 @@ class TrackDetect:
         else:
             lo, i0, j0, res = view.logodds, int(view.i0), int(view.j0), float(view.resolution)
         # (then, where people are merged and there are two detections or more, the leg pairs merged, and the final
-        # rows' DetectionBatch columns: the three kernels in one call, kernels.detect_rows, pass fus40)
+        # rows' DetectionBatch columns: the three kernels in one call, kernels.detect_rows, pass fus40; and the final
+        # rows' default measurements, ``default``: MeasureRows' fields, pass trk41)
         (starts, npts, kinds, lohi, rel, fits, mfr, first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2,
-         py2, mbeams, mpts, mmev, theta, centroid, circle) = detect_rows(
+         py2, mbeams, mpts, mmev, theta, centroid, circle, *default) = detect_rows(
             px, py, beams, offsets, fits, seg.structure, float(pose.x), float(pose.y), ranges, valid, ax, ay,
             seg.wrapped, int(sc.max_skip_beams), float(scan.range_max), abs(float(scan.angle_increment)), ext_lim, fp,
             sc.vehicle_max_extent > sc.max_extent, float(sc.max_extent), float(sc.vehicle_max_structure),
@@ -139,18 +140,15 @@ class TrackDetect:
         self.last_detections = dets
         if dets:
             m = len(dets)
-            if fits is not kfits:  # (rows other than the kernel's final ones: a subclass' _merge_legs)
-                theta, centroid, circle = (fits[:, F_THETA].copy(), fits[:, FIT_CENTROID].copy(),
-                                           fits[:, FIT_CIRCLE].copy())
-            self._batch = DetectionBatch(kinds, theta, lohi, rel, centroid, circle, px, py, starts, npts)
-            no_prior = self._no_prior.get(m)
-            if no_prior is None:
-                # (no track prior: the same arrays for every scan with m detections; the kernel only reads them)
-                if len(self._no_prior) >= 64:
-                    self._no_prior.clear()
-                no_prior = self._no_prior[m] = (np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool),
-                                                np.full(m, -1.0), np.zeros(m))
-            self._default = self._measure_rows(*no_prior)
+            if fits is kfits:  # (the kernel's final rows: their columns and default measurements made there)
+                self._batch = DetectionBatch(kinds, theta, lohi, rel, centroid, circle, px, py, starts, npts)
+                self._default = MeasureRows(*default)
+            else:  # (rows other than the kernel's final ones: a subclass' _merge_legs)
+                self._batch = DetectionBatch(kinds, fits[:, F_THETA].copy(), lohi, rel, fits[:, FIT_CENTROID].copy(),
+                                             fits[:, FIT_CIRCLE].copy(), px, py, starts, npts)
+                # (no track prior: every row its own detection, no sizes, no radius, size σ 0)
+                self._default = self._measure_rows(np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool),
+                                                   np.full(m, -1.0), np.zeros(m))
             # (the detections' bounds and real-bound flags: read as Python lists by row, for births and detections on
             # structure only (_birth_state, _clutter_detections): one row's tolist each, not the whole arrays' per scan)
         return dets
