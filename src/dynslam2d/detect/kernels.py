@@ -658,6 +658,14 @@ def detect_rows(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: np.n
     theta = np.empty(nf)
     centroid = np.empty((nf, 2))
     circle = np.empty((nf, 3))
+    # (and the default measurements' "no track prior" arguments below: every row its own detection, no sizes, no
+    # radius, size σ 0 — np.empty and this loop rather than np.arange / np.zeros / np.full, whose implementations
+    # would be compiled for this kernel alone)
+    det = np.empty(nf, dtype=np.int64)
+    sizes = np.empty((nf, 2))
+    has_sizes = np.empty(nf, dtype=np.bool_)
+    radius = np.empty(nf)
+    size_sigma = np.empty(nf)
     for q in range(nf):
         theta[q] = fits2[q, F_THETA]
         centroid[q, 0] = fits2[q, F_CENTROID_X]
@@ -665,13 +673,13 @@ def detect_rows(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: np.n
         circle[q, 0] = fits2[q, F_CIRCLE_X]
         circle[q, 1] = fits2[q, F_CIRCLE_Y]
         circle[q, 2] = fits2[q, F_CIRCLE_R]
-    # the final rows' default measurements (no track prior: every row its own detection, no sizes, no radius, size σ
-    # 0), as Tracker._measure_rows made them in a call of its own (pass trk41)
-    det = np.arange(nf)
-    sizes = np.zeros((nf, 2))
-    has_sizes = np.zeros(nf, dtype=np.bool_)
-    radius = np.full(nf, -1.0)
-    size_sigma = np.zeros(nf)
+        det[q] = q
+        sizes[q, 0] = 0.0
+        sizes[q, 1] = 0.0
+        has_sizes[q] = False
+        radius[q] = -1.0
+        size_sigma[q] = 0.0
+    # the final rows' default measurements, as Tracker._measure_rows made them in a call of its own (pass trk41)
     z, R, H, zm, Rm, size_obs, size_kind = measure_batch(det, kinds2, theta, lohi2, rel2, centroid, circle, px2, py2,
                                                          starts2, npts2, sizes, has_sizes, radius, size_sigma, p)
     return (starts, npts, kinds, lohi, rel, sfits, mfr, first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2,
