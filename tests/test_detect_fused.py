@@ -1,5 +1,5 @@
-"""The detect path's fused kernels give the results of the calls they replace, bit for bit (docs/speed.md, "The
-tracker's kernels fused, pass 11")."""
+"""The detect path's fused kernels (select_detections, pass 11; detect_rows, pass fus40) give the results of the
+calls they replace, bit for bit (docs/speed.md, "The tracker's kernels fused, pass 11")."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-import dynslam2d.detect.trackdetect as tracker_mod  # (_detect calls select_detections there)
+import dynslam2d.detect.trackdetect as tracker_mod  # (_detect calls detect_rows there)
 from dynslam2d.config import Config
 from dynslam2d.detect import kernels as K
 from dynslam2d.detect import shapes
@@ -23,7 +23,9 @@ from dynslam2d.detect.layout import (
     F_LO1,
     F_LO2,
     F_RECT_RMS,
-        FIT_CIRCLE,
+    F_THETA,
+    FIT_CENTROID,
+    FIT_CIRCLE,
     N_FIT_COLS,
 )
 from dynslam2d.detect.mapevidence import MapView, map_evidence, map_evidence_kernel
@@ -134,36 +136,6 @@ def _van_source() -> SimSource:
     return SimSource(_van_scene())
 
 
-def test_fused_kernels_give_the_former_calls_results_in_whole_runs(monkeypatch):
-    """Every call of select_detections in two simulated runs (people seen from a
-    driving robot; a van longer than max_extent driving past, so the vehicle test runs with its map) returns what
-    the calls it replaces returned, bit for bit; the runs have detections, updates and vehicle-size clusters kept and
-    dropped."""
-    seen = {"select": 0, "admit": 0, "map": 0}
-
-    def wrap(name, fused, ref):
-        def f(*a):
-            want = ref(*a)
-            got = fused(*a)
-            assert len(got) == len(want)
-            for g, w in zip(got, want):
-                assert _same(g, w), name
-            seen[name] += 1
-            if name == "select":
-                seen["map"] += bool(a[12])
-                seen["admit"] += bool(a[8] and a[12]) and bool(long_kept(a[0], a[4], a[9]).shape[0])
-            return got
-        return f
-
-    monkeypatch.setattr(tracker_mod, "select_detections", wrap("select", K.select_detections, _select_ref))
-    for src in (open_source("sim:drive", seed=11, duration=6.0), _van_source()):
-        pipe = Pipeline(Config())
-        for scan in src:
-            pipe.process(scan)
-    assert seen["select"] > 100
-    assert seen["map"] > 100 and seen["admit"] > 10
-
-
 def _walkers():
     """Scans of two people's legs (tests/test_detect_people.py's scene) seen from a slowly moving laser, with the
     poses."""
@@ -171,6 +143,65 @@ def _walkers():
 
     return [(render(Pose2D(0.2 * i / RATE, 0.0, 0.0), i / RATE, *scene(i / RATE, 2.0, 1.2), i)[0],
              Pose2D(0.2 * i / RATE, 0.0, 0.0)) for i in range(int(6.0 * RATE))]
+
+
+def _detect_rows_ref(*a):
+    """The calls detect_rows replaces (Tracker._detect before pass fus40): classify_batch, the former calls of
+    select_detections (_select_ref), merge_legs where people are merged and there are two detections or more, and
+    the final rows' fit columns copied as DetectionBatch's were."""
+    px, py, beams, offsets, fits = a[:5]
+    keep, kinds, lohi, rel = K.classify_batch(*a[:18])
+    sel = _select_ref(keep, kinds, lohi, rel, fits, offsets, px, py, *a[18:30])
+    starts, npts, kinds, lohi, rel, sfits, mfr = sel
+    none = np.empty(0, dtype=np.int64)
+    merged = (none, none, none, kinds, sfits, lohi, rel, starts, npts, px, py, none, np.empty((0, 2)), mfr)
+    if a[30] and starts.shape[0] > 1:
+        merged = K.merge_legs(px, py, beams, starts, npts, kinds, sfits, lohi, rel, mfr, a[31], a[32])
+    f = merged[4]
+    cols = (f[:, F_THETA].copy(), f[:, FIT_CENTROID].copy(), f[:, FIT_CIRCLE].copy())
+    # (and the final rows' default measurements, as Tracker._measure_rows made them before pass trk41)
+    m = f.shape[0]
+    kinds2, lohi2, rel2, starts2, npts2, px2, py2 = (merged[i] for i in (3, 5, 6, 7, 8, 9, 10))
+    default = K.measure_batch(np.arange(m), kinds2, cols[0], lohi2, rel2, cols[1], cols[2], px2, py2, starts2, npts2,
+                              np.zeros((m, 2)), np.zeros(m, dtype=bool), np.full(m, -1.0), np.zeros(m), a[17])
+    return (*sel, *merged, *cols, *default)
+
+
+def _written(got, i, g, w):
+    """Result i of two detect_rows results (``g``, ``w``) as far as it is written: the merged map evidence (i = 20)
+    only in the persons' columns when a pair was merged (merge_legs leaves the kept rows' columns unwritten)."""
+    if i == 20 and got[7].shape[0]:
+        nk = got[9].shape[0]
+        return g[:, nk:], w[:, nk:]
+    return g, w
+
+
+def test_fused_kernels_give_the_former_calls_results_in_whole_runs(monkeypatch):
+    """Every call of detect_rows in three simulated runs (people seen from a driving robot; a van longer than
+    max_extent driving past, so the vehicle test runs with its map; two people's legs, so pairs of legs are merged)
+    returns what the calls it replaces returned, bit for bit; the runs have detections, updates, vehicle-size
+    clusters kept and dropped and merged pairs."""
+    seen = {"calls": 0, "admit": 0, "map": 0, "pairs": 0}
+
+    def rows(*a):
+        want = _detect_rows_ref(*a)
+        got = K.detect_rows(*a)
+        assert len(got) == len(want) == 31
+        for i, (g, w) in enumerate(zip(got, want)):
+            assert _same(*_written(got, i, g, w)), i
+        seen["calls"] += 1
+        seen["map"] += bool(a[22])
+        seen["admit"] += bool(a[18] and a[22]) and bool(long_kept(K.classify_batch(*a[:18])[0], a[4], a[19]).shape[0])
+        seen["pairs"] += got[7].shape[0]
+        return got
+
+    monkeypatch.setattr(tracker_mod, "detect_rows", rows)
+    for src in (open_source("sim:drive", seed=11, duration=6.0), _van_source(), [s for s, _ in _walkers()]):
+        pipe = Pipeline(Config())
+        for scan in src:
+            pipe.process(scan)
+    assert seen["calls"] > 150
+    assert seen["map"] > 100 and seen["admit"] > 10 and seen["pairs"] > 20
 
 
 def test_skipped_circle_fits_in_whole_runs(monkeypatch):
@@ -212,13 +243,15 @@ def test_skipped_circle_fits_in_whole_runs(monkeypatch):
         return got
 
     def classify(*a):
-        got = K.classify_batch(*a)
-        want = K.classify_batch(*a[:4], full_fits[0], *a[5:])  # (every circle fitted)
-        assert all(_same(g, w) for g, w in zip(got, want))
+        got = K.detect_rows(*a)
+        want = K.detect_rows(*a[:4], full_fits[0], *a[5:])  # (every circle fitted)
+        # (the classification, the selection and the merge: all but the fit rows and circle columns, which differ
+        # where a circle was skipped)
+        assert all(_same(*_written(got, i, got[i], want[i])) for i in range(31) if i not in (5, 11, 23))
         return got
 
     monkeypatch.setattr(tracker_mod, "fit_cluster_rows", fit_rows)
-    monkeypatch.setattr(tracker_mod, "classify_batch", classify)
+    monkeypatch.setattr(tracker_mod, "detect_rows", classify)
     for src in (open_source("sim:drive", seed=11, duration=6.0), [s for s, _ in _walkers()], _van_source()):
         pipe = Pipeline(Config())
         for scan in src:

@@ -138,7 +138,9 @@ def test_manage_counters_speeds_are_manage_rows_with_python_speeds() -> None:
     CI[:, C_UPD] = 1
     q = np.zeros(UP_MAX_POS_SIG + 1)
     q[UP_WINDOW], q[UP_NEED], q[UP_MAX_COAST], q[UP_MAX_SPEED], q[UP_MAX_POS_SIG] = 3, 2, 1.0, np.inf, 1.5
-    out, sig, speed = manage_counters(P, X, CI, np.zeros(n), rows, q, 0.0)
+    WN = rng.integers(0, 3, size=(n, 3))
+    out, sig, speed, near = manage_counters(P, X, CI, np.zeros(n), WN, rows, q, 0.0)
+    assert near.tolist() == WN[rows, 2].tolist()  # (the windows' riding pre-test, read in the same call: pass trk41)
     assert _bits(speed.tolist()) == _bits(speeds)
     assert (out == MC_UPDATED + MC_DEL_COVARIANCE).tolist() == bad0.tolist()
     assert set(out[~bad0].tolist()) == {MC_UPD_FIRM}

@@ -30,28 +30,15 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(float64, 2, 'C'), int64, float64, int64, int64, bool, float64, "
      'float64, float64, float64, float64, float64, float64,)'),
-    ('dynslam2d.detect.kernels.classify_batch',
+    ('dynslam2d.detect.kernels.detect_rows',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), Array(bool, "
      "1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, int64, float64, float64, float64, "
-     "Array(float64, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels.select_detections',
-     "(Array(bool, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 2, 'C'), Array(bool, 3, 'C'), "
-     "Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, "
-     "float64, float64, float64, bool, Array(float32, 2, 'C'), int64, int64, float64, float64, float64, "
-     'int64,)'),
+     "Array(float64, 1, 'C'), bool, float64, float64, float64, bool, Array(float32, 2, 'C'), int64, "
+     'int64, float64, float64, float64, int64, bool, float64, float64,)'),
     ('dynslam2d.detect.freespace._ref_arrays',
      "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, "
      'float64,)'),
-    ('dynslam2d.detect.kernels.merge_legs',
-     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
-     "Array(bool, 3, 'C'), Array(float64, 2, 'C'), float64, float64,)"),
-    ('dynslam2d.detect.kernels.measure_batch',
-     "(Array(int64, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), "
-     "Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), "
-     "Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
-     "Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'),)"),
     ('dynslam2d.detect.kernels_update.birth_rows',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(int8, 2, 'C'), "
      "Array(int64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 3, 'C'), Array(int64, 2, 'C'), "
@@ -123,7 +110,7 @@ KERNELS: tuple[tuple[str, str], ...] = (
      'float64, float64, float64, float64, float64,)'),
     ('dynslam2d.detect.kernels_update.manage_counters',
      "(Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(int64, 2, 'C'), Array(float64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
+     "Array(int64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
     ('dynslam2d.detect.kernels_update.fragment_hosts_rows',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
@@ -151,38 +138,35 @@ KERNELS: tuple[tuple[str, str], ...] = (
 #: CPU time of each kernel's compile (s, the kernels it compiles in turn included) in a one-core cold run when
 #: recorded: the background compile's estimate of how far ahead of the run a kernel is (its order, docs/speed.md).
 COMPILE_S: dict[str, float] = {
-    'dynslam2d.sim.world._cast_kernel': 0.65,
-    'dynslam2d.detect.body._drop_body': 0.24,
-    'dynslam2d.slam.matcher.gated_points': 0.75,
-    'dynslam2d.detect.body._observe_beams': 0.31,
-    'dynslam2d.detect.segment._segment_kernel': 1.06,
-    'dynslam2d.detect.shapes.fit_cluster_rows': 2.50,
-    'dynslam2d.detect.kernels.classify_batch': 1.15,
-    'dynslam2d.detect.kernels.select_detections': 1.22,
+    'dynslam2d.sim.world._cast_kernel': 0.41,
+    'dynslam2d.detect.body._drop_body': 0.15,
+    'dynslam2d.slam.matcher.gated_points': 0.47,
+    'dynslam2d.detect.body._observe_beams': 0.19,
+    'dynslam2d.detect.segment._segment_kernel': 0.65,
+    'dynslam2d.detect.shapes.fit_cluster_rows': 2.03,
+    'dynslam2d.detect.kernels.detect_rows': 6.06,
     'dynslam2d.detect.freespace._ref_arrays': 0.10,
-    'dynslam2d.detect.kernels.merge_legs': 1.17,
-    'dynslam2d.detect.kernels.measure_batch': 0.98,
-    'dynslam2d.detect.kernels_update.birth_rows': 0.40,
-    'dynslam2d.detect.kernels_update.report_rows': 0.41,
-    'dynslam2d.slam.ledgerkernels.record_cells': 2.41,
-    'dynslam2d.slam.ledgerkernels.level_rows': 0.54,
-    'dynslam2d.slam.ledgerkernels.stand_marks': 0.39,
-    'dynslam2d.slam.raycast.integrate_levels': 1.65,
+    'dynslam2d.detect.kernels_update.birth_rows': 0.37,
+    'dynslam2d.detect.kernels_update.report_rows': 0.42,
+    'dynslam2d.slam.ledgerkernels.record_cells': 2.36,
+    'dynslam2d.slam.ledgerkernels.level_rows': 0.53,
+    'dynslam2d.slam.ledgerkernels.stand_marks': 0.37,
+    'dynslam2d.slam.raycast.integrate_levels': 1.50,
     'dynslam2d.slam.raycast.ray_ends': 0.09,
-    'dynslam2d.slam.matcher.match_pyramid': 3.85,
-    'dynslam2d.slam.correlative._rotated_cells': 0.25,
-    'dynslam2d.slam.correlative._score_pyramid': 0.41,
-    'dynslam2d.slam.correlative.branch_and_bound': 1.40,
-    'dynslam2d.vacated.vacated_scan_kernel': 2.43,
+    'dynslam2d.slam.matcher.match_pyramid': 3.44,
+    'dynslam2d.slam.correlative._rotated_cells': 0.28,
+    'dynslam2d.slam.correlative._score_pyramid': 0.46,
+    'dynslam2d.slam.correlative.branch_and_bound': 1.46,
+    'dynslam2d.vacated.vacated_scan_kernel': 2.59,
     'dynslam2d.detect.kernels.cv_predict': 0.23,
-    'dynslam2d.detect.kernels_update.association_gates': 1.44,
-    'dynslam2d.detect.kernels_assign.assign_groups': 1.32,
-    'dynslam2d.detect.kernels_update.update_pairs': 3.22,
-    'dynslam2d.detect.kernels_update.manage_counters': 0.50,
-    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.25,
-    'dynslam2d.detect.kernels.seen_through_refs': 0.23,
-    'dynslam2d.filter.observed_boxes_kernel': 0.22,
-    'dynslam2d.filter._rows_exclusion_kernel': 0.61,
-    'dynslam2d.slam.cleanup._geometry_bounds': 0.23,
-    'dynslam2d.slam.cleanup._count_beams': 0.67,
+    'dynslam2d.detect.kernels_update.association_gates': 1.14,
+    'dynslam2d.detect.kernels_assign.assign_groups': 0.95,
+    'dynslam2d.detect.kernels_update.update_pairs': 2.80,
+    'dynslam2d.detect.kernels_update.manage_counters': 0.48,
+    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.24,
+    'dynslam2d.detect.kernels.seen_through_refs': 0.22,
+    'dynslam2d.filter.observed_boxes_kernel': 0.19,
+    'dynslam2d.filter._rows_exclusion_kernel': 0.47,
+    'dynslam2d.slam.cleanup._geometry_bounds': 0.22,
+    'dynslam2d.slam.cleanup._count_beams': 0.60,
 }

@@ -360,7 +360,7 @@ def merge_leg_pairs(first: np.ndarray, second: np.ndarray, px: np.ndarray, py: n
     return ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # (inlined into detect_rows: compiled once there, pass fus40)
 def merge_legs(px: np.ndarray, py: np.ndarray, beams: np.ndarray, starts: np.ndarray, npts: np.ndarray,
                kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray, rel: np.ndarray, mev: np.ndarray,
                leg_max_extent: float, pair_distance: float) -> tuple:
@@ -402,7 +402,7 @@ def merge_legs(px: np.ndarray, py: np.ndarray, beams: np.ndarray, starts: np.nda
     return first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams, pts, mmev
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # (inlined into detect_rows: compiled once there, pass fus40)
 def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: np.ndarray, fits: np.ndarray,
                    structure: np.ndarray, sx: float, sy: float, ranges: np.ndarray, valid: np.ndarray,
                    ax: np.ndarray, ay: np.ndarray, wrapped: bool, max_skip: int, range_max: float, dphi: float,
@@ -547,7 +547,7 @@ def classify_batch(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: n
     return keep, kind, lohi, rel
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # (inlined into detect_rows: compiled once there, pass fus40)
 def select_detections(keep: np.ndarray, kinds: np.ndarray, lohi: np.ndarray, rel: np.ndarray, fits: np.ndarray,
                       offsets: np.ndarray, px: np.ndarray, py: np.ndarray, admit: bool, max_extent: float,
                       max_structure: float, min_free: float, has_map: bool, logodds: np.ndarray, i0: int, j0: int,
@@ -615,6 +615,75 @@ def select_detections(keep: np.ndarray, kinds: np.ndarray, lohi: np.ndarray, rel
     ev[:] = False
     map_evidence_kernel(det_px, det_py, logodds, i0, j0, res, occ_thr, free_thr, free_radius, ev[0], ev[1], ev[2])
     return starts, npts, s_kinds, s_lohi, s_rel, s_fits, mask_fractions(ev, det_off)
+
+
+@njit(cache=True)
+def detect_rows(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: np.ndarray, fits: np.ndarray,
+                structure: np.ndarray, sx: float, sy: float, ranges: np.ndarray, valid: np.ndarray, ax: np.ndarray,
+                ay: np.ndarray, wrapped: bool, max_skip: int, range_max: float, dphi: float, max_extent: float,
+                p: np.ndarray, admit: bool, seg_max_extent: float, max_structure: float, min_free: float,
+                has_map: bool, logodds: np.ndarray, i0: int, j0: int, res: float, occ_thr: float, free_thr: float,
+                free_radius: int, merge: bool, leg_max_extent: float, pair_distance: float) -> tuple:
+    """``Tracker._detect``'s three kernels that always run back to back in one call (docs/speed.md, pass fus40: each
+    small kernel costs 2-4x its warm time inside a scan): :func:`classify_batch` (its 18 arguments, ``max_extent``
+    the classification's extent limit, m), :func:`select_detections` (``admit``, ``seg_max_extent`` = its
+    ``max_extent``, m, ``max_structure``, ``min_free``, ``has_map`` and the map ``logodds`` / ``i0`` / ``j0`` /
+    ``res`` with the thresholds; map frame) and, where ``merge`` and there are two detections or more,
+    :func:`merge_legs` (``leg_max_extent``, ``pair_distance``, m) on the selected rows and their map evidence.
+
+    Returns ``select_detections``' seven results (the scan's detections: starts, npts, kinds, lohi, rel, fits,
+    fractions), ``merge_legs``' fourteen (first, second, ki, kinds, fits, lohi, rel, starts, npts, px, py, mbeams,
+    pts, mmev; with no pair: empty ``first`` / ``second`` / ``ki`` / ``mbeams`` / ``pts`` and the selected rows'
+    arrays, ``px``, ``py`` and the fractions in the other places) and the final rows' (merged where a pair was
+    merged) ``theta`` (nf,), ``centroid`` (nf, 2) and ``circle`` (nf, 3) fit columns as C-contiguous copies
+    (``DetectionBatch``'s columns), then the final rows' default measurements, :func:`measure_batch`'s seven results
+    (``MeasureRows``' fields) with no track prior (rows ``0 … nf − 1``, sizes 0 not given, radius −1, size σ 0)."""
+    keep, kinds0, lohi0, rel0 = classify_batch(px, py, beams, offsets, fits, structure, sx, sy, ranges, valid, ax, ay,
+                                               wrapped, max_skip, range_max, dphi, max_extent, p)
+    starts, npts, kinds, lohi, rel, sfits, mfr = select_detections(
+        keep, kinds0, lohi0, rel0, fits, offsets, px, py, admit, seg_max_extent, max_structure, min_free, has_map,
+        logodds, i0, j0, res, occ_thr, free_thr, free_radius)
+    if merge and starts.shape[0] > 1:
+        first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams, pts, mmev = merge_legs(
+            px, py, beams, starts, npts, kinds, sfits, lohi, rel, mfr, leg_max_extent, pair_distance)
+    else:
+        first = np.empty(0, dtype=np.int64)
+        second = first
+        ki = first
+        kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2 = kinds, sfits, lohi, rel, starts, npts, px, py
+        mbeams = first
+        pts = np.empty((0, 2))
+        mmev = mfr
+    nf = fits2.shape[0]
+    theta = np.empty(nf)
+    centroid = np.empty((nf, 2))
+    circle = np.empty((nf, 3))
+    # (and the default measurements' "no track prior" arguments below: every row its own detection, no sizes, no
+    # radius, size σ 0 — np.empty and this loop rather than np.arange / np.zeros / np.full, whose implementations
+    # would be compiled for this kernel alone)
+    det = np.empty(nf, dtype=np.int64)
+    sizes = np.empty((nf, 2))
+    has_sizes = np.empty(nf, dtype=np.bool_)
+    radius = np.empty(nf)
+    size_sigma = np.empty(nf)
+    for q in range(nf):
+        theta[q] = fits2[q, F_THETA]
+        centroid[q, 0] = fits2[q, F_CENTROID_X]
+        centroid[q, 1] = fits2[q, F_CENTROID_Y]
+        circle[q, 0] = fits2[q, F_CIRCLE_X]
+        circle[q, 1] = fits2[q, F_CIRCLE_Y]
+        circle[q, 2] = fits2[q, F_CIRCLE_R]
+        det[q] = q
+        sizes[q, 0] = 0.0
+        sizes[q, 1] = 0.0
+        has_sizes[q] = False
+        radius[q] = -1.0
+        size_sigma[q] = 0.0
+    # the final rows' default measurements, as Tracker._measure_rows made them in a call of its own (pass trk41)
+    z, R, H, zm, Rm, size_obs, size_kind = measure_batch(det, kinds2, theta, lohi2, rel2, centroid, circle, px2, py2,
+                                                         starts2, npts2, sizes, has_sizes, radius, size_sigma, p)
+    return (starts, npts, kinds, lohi, rel, sfits, mfr, first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2,
+            px2, py2, mbeams, pts, mmev, theta, centroid, circle, z, R, H, zm, Rm, size_obs, size_kind)
 
 
 @njit(cache=True)

@@ -152,13 +152,14 @@ def accel_bound(X_prior: np.ndarray, X_new: np.ndarray, rows: np.ndarray, lim: f
 
 
 @njit(cache=True)
-def manage_counters(P: np.ndarray, X: np.ndarray, CI: np.ndarray, CL: np.ndarray, rows: np.ndarray, q: np.ndarray,
-                    t: float) -> tuple:
+def manage_counters(P: np.ndarray, X: np.ndarray, CI: np.ndarray, CL: np.ndarray, WN: np.ndarray, rows: np.ndarray,
+                    q: np.ndarray, t: float) -> tuple:
     """``Tracker._manage``'s counter tests of the live tracks (state rows ``rows``) as one pass over their rows of the
     counter table ``CI`` (columns ``C_*``) and last-hit stamps ``CL`` (s), with ``kernels.manage_rows``' covariance
     test (max_position_sigma, m) and σ of the speed along the velocity, operation for operation, and the speed as
     Python's ``math.hypot`` bit for bit (:func:`py_hypot`, as the reasons print it): returns (outcome (n,) int8
-    (``MC_*``), σ (n,), speed (n,), m/s). The tests in the order of the former per-track loop (docs/speed.md passes
+    (``MC_*``), σ (n,), speed (n,), m/s, and the riding pre-test of the tracks' windows, ``WN[rows, 2]`` (n,) int64,
+    ``TrackRows``' window counts, pass trk41). The tests in the order of the former per-track loop (docs/speed.md passes
     mgr34, cnt36); the configuration's values from ``q``
     (:func:`update_params`' array: confirm_window, confirm_hits = ``need``, max_coast_time, max_object_speed,
     max_position_sigma). An updated track (``C_UPD`` set by :func:`update_pairs`; cleared here): coasting → confirmed;
@@ -177,8 +178,10 @@ def manage_counters(P: np.ndarray, X: np.ndarray, CI: np.ndarray, CL: np.ndarray
     max_sig = q[UP_MAX_POS_SIG]
     sig = np.empty(n)
     speed = np.empty(n)
+    near = np.empty(n, dtype=np.int64)
     for i in range(n):
         k = rows[i]
+        near[i] = WN[k, 2]
         # (kernels.manage_rows' arithmetic for row k, operation for operation, here instead of called: no library of
         # its own to compile in a run)
         s = py_hypot(X[k, 2], X[k, 3])
@@ -240,7 +243,7 @@ def manage_counters(P: np.ndarray, X: np.ndarray, CI: np.ndarray, CL: np.ndarray
             d = MC_DEL_COVARIANCE if bad else MC_DEL_SPEED
             code = (code & MC_COAST) + d if code >= MC_KEPT else MC_UPDATED + d
         out[i] = code
-    return out, sig, speed
+    return out, sig, speed, near
 
 
 @njit(cache=True)

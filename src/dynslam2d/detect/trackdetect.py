@@ -15,10 +15,9 @@ from dynslam2d.detect.kernels import (
     _P_CIRCLE_RES_RATIO,
     _P_POINT_MAX_EXTENT,
     _P_POINT_MAX_POINTS,
-    classify_batch,
+    detect_rows,
     measure_batch,
     merge_legs,
-    select_detections,
 )
 from dynslam2d.detect.layout import (
     F_THETA,
@@ -99,14 +98,17 @@ class TrackDetect:
             lo, i0, j0, res = _NO_MAP, 0, 0, 1.0
         else:
             lo, i0, j0, res = view.logodds, int(view.i0), int(view.j0), float(view.resolution)
-        keep, kinds, lohi, rel = classify_batch(px, py, beams, offsets, fits, seg.structure, float(pose.x),
-                                                float(pose.y), ranges, valid, ax, ay, seg.wrapped,
-                                                int(sc.max_skip_beams), float(scan.range_max),
-                                                abs(float(scan.angle_increment)), ext_lim, fp)
-        starts, npts, kinds, lohi, rel, fits, mfr = select_detections(
-            keep, kinds, lohi, rel, fits, offsets, px, py, sc.vehicle_max_extent > sc.max_extent,
-            float(sc.max_extent), float(sc.vehicle_max_structure), float(sc.vehicle_min_free), view is not None, lo,
-            i0, j0, res, float(tc.map_occupied_logodds), float(tc.map_free_logodds), int(tc.map_free_radius))
+        # (then, where people are merged and there are two detections or more, the leg pairs merged, and the final
+        # rows' DetectionBatch columns: the three kernels in one call, kernels.detect_rows, pass fus40; and the final
+        # rows' default measurements, ``default``: MeasureRows' fields, pass trk41)
+        (starts, npts, kinds, lohi, rel, fits, mfr, first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2,
+         py2, mbeams, mpts, mmev, theta, centroid, circle, *default) = detect_rows(
+            px, py, beams, offsets, fits, seg.structure, float(pose.x), float(pose.y), ranges, valid, ax, ay,
+            seg.wrapped, int(sc.max_skip_beams), float(scan.range_max), abs(float(scan.angle_increment)), ext_lim, fp,
+            sc.vehicle_max_extent > sc.max_extent, float(sc.max_extent), float(sc.vehicle_max_structure),
+            float(sc.vehicle_min_free), view is not None, lo, i0, j0, res, float(tc.map_occupied_logodds),
+            float(tc.map_free_logodds), int(tc.map_free_radius), bool(cfg.fit.person_merge),
+            float(cfg.fit.leg_max_extent), float(cfg.fit.leg_pair_distance))
         nd = starts.shape[0]
         st.structure_clusters += seg.n_clusters - nd
         # free-space evidence per detection (0 where unknown). The free-space fraction is read for few detections
@@ -129,30 +131,31 @@ class TrackDetect:
         # (each detection is the scan's arrays and its row: its beams, points, kind, counts, fit values and map evidence
         # are read from them when asked for, ScanDetection; all made in one loop, scan_detections)
         dets = scan_detections(ScanArrays(beams, pts, 0, starts, npts, kinds, fits, lohi, rel, mev), frac)
-        if cfg.fit.person_merge and len(dets) > 1:
-            dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(dets, kinds, fits, lohi, rel, starts,
-                                                                                 npts, px, py, beams, mev)
+        kfits = fits2 if first.shape[0] else fits  # (the rows detect_rows' theta, centroid and circle are of)
+        if first.shape[0]:  # (a pair merged: _merge_legs makes the persons' detections of the kernel's merge)
+            dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(
+                dets, kinds, fits, lohi, rel, starts, npts, px, py, beams, mev,
+                (first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams, mpts, mmev))
         st.detections += len(dets)
         self.last_detections = dets
         if dets:
             m = len(dets)
-            self._batch = DetectionBatch(kinds, fits[:, F_THETA].copy(), lohi, rel, fits[:, FIT_CENTROID].copy(),
-                                         fits[:, FIT_CIRCLE].copy(), px, py, starts, npts)
-            no_prior = self._no_prior.get(m)
-            if no_prior is None:
-                # (no track prior: the same arrays for every scan with m detections; the kernel only reads them)
-                if len(self._no_prior) >= 64:
-                    self._no_prior.clear()
-                no_prior = self._no_prior[m] = (np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool),
-                                                np.full(m, -1.0), np.zeros(m))
-            self._default = self._measure_rows(*no_prior)
+            if fits is kfits:  # (the kernel's final rows: their columns and default measurements made there)
+                self._batch = DetectionBatch(kinds, theta, lohi, rel, centroid, circle, px, py, starts, npts)
+                self._default = MeasureRows(*default)
+            else:  # (rows other than the kernel's final ones: a subclass' _merge_legs)
+                self._batch = DetectionBatch(kinds, fits[:, F_THETA].copy(), lohi, rel, fits[:, FIT_CENTROID].copy(),
+                                             fits[:, FIT_CIRCLE].copy(), px, py, starts, npts)
+                # (no track prior: every row its own detection, no sizes, no radius, size σ 0)
+                self._default = self._measure_rows(np.arange(m), np.zeros((m, 2)), np.zeros(m, dtype=bool),
+                                                   np.full(m, -1.0), np.zeros(m))
             # (the detections' bounds and real-bound flags: read as Python lists by row, for births and detections on
             # structure only (_birth_state, _clutter_detections): one row's tolist each, not the whole arrays' per scan)
         return dets
 
     def _merge_legs(self, dets: list[Detection], kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray,
                     rel: np.ndarray, starts: np.ndarray, npts: np.ndarray, px: np.ndarray, py: np.ndarray,
-                    beams: np.ndarray, mev: np.ndarray | None = None) -> tuple:
+                    beams: np.ndarray, mev: np.ndarray | None = None, merged: tuple | None = None) -> tuple:
         """People (leg_tracker, Leigh et al. ICRA 2015, pairs legs): two leg-sized detections (both sides
         ≤ ``fit.leg_max_extent``) whose centres lie within ``fit.leg_pair_distance`` become one person
         detection, measured at the middle of the two legs with the point model. A leg swinging forward while
@@ -160,12 +163,14 @@ class TrackDetect:
         Returns the detection list and the per-detection batch arrays, merged pairs appended at the end (the
         pairs, arrays, the persons' points and map evidence by :func:`dynslam2d.detect.kernels.merge_legs`;
         ``beams``: the beams of ``px``, ``py``; ``mev``: the detections' (3, nd) map evidence, or None without a
-        map)."""
+        map; ``merged``: ``merge_legs``' results on these arguments when already made, by
+        :func:`dynslam2d.detect.kernels.detect_rows` in ``_detect``)."""
         fc = self.config.fit
         npts0 = npts
-        first, second, ki, kinds, fits, lohi, rel, starts, npts, px, py, mbeams, pts, mmev = merge_legs(
-            px, py, beams, starts, npts, kinds, fits, lohi, rel, _NO_MEV if mev is None else mev,
-            float(fc.leg_max_extent), float(fc.leg_pair_distance))
+        if merged is None:
+            merged = merge_legs(px, py, beams, starts, npts, kinds, fits, lohi, rel, _NO_MEV if mev is None else mev,
+                                float(fc.leg_max_extent), float(fc.leg_pair_distance))
+        first, second, ki, kinds, fits, lohi, rel, starts, npts, px, py, mbeams, pts, mmev = merged
         m = first.shape[0]
         if m == 0:  # (the arrays are the arguments themselves)
             return dets, kinds, fits, lohi, rel, starts, npts, px, py

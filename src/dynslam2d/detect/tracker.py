@@ -238,7 +238,6 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # merge's kept detections, pairs and point counts (empty: no merge; kernels.shape_update)
         self._mev_src: tuple = (np.zeros((3, 0)), _NO_IDX, _NO_IDX, _NO_IDX, _NO_IDX)
         self._default: MeasureRows | None = None  # default measurements of the current scan's detections
-        self._no_prior: dict[int, tuple] = {}  # measure_batch's "no track prior" arguments for m detections, by m
         self._stacked: tuple[np.ndarray, np.ndarray] | None = None  # predicted X, P of all tracks
         self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate)
         # this scan's ids of the updated tracks and indices of the detections they took (update, _update_tracks)

@@ -97,27 +97,28 @@ class TrackManage:
         max_ssig, v_exit, nsus = tc.max_speed_sigma, tc.v_exit_ratio * tc.v_min, tc.sustain_updates
         npu = tc.person_sustain_updates
         probe = self._free is not None
-        slow_tail = f" m/s ≤ v_min {v_min:.2f}"  # (the most common reason's constant part)
         slow_reason = _slow_reason  # (a local name: read once per scan)
         order = self._rows()
         # per track: the counter tests' outcome (MC_*, the new states and counts written into the counter table), σ of
         # its speed along the velocity and its speed (Python's math.hypot bit for bit, as the reasons print it), from
         # its rows in one kernel call
         # (the configuration's values: the tracker's one array, update_params)
-        codes, sigs, speeds = manage_counters(self._P, self._X, self._CI, self._CL, order, self._upd_p, t)
-        codes, sigs, speeds = codes.tolist(), sigs.tolist(), speeds.tolist()
-        # the riding pre-test of each updated track's window (0: fewer than ride_updates entries, it cannot ride;
+        # (and the riding pre-test of each updated track's window (0: fewer than ride_updates entries, it cannot ride;
         # 1: its last laser-frame centre farther than ride_max_range; 2: near), decided when the window was pushed
-        # (kernels.shape_update; a track not updated in this scan has its last push's, never read)
-        nears = self._WN[:, 2].take(order).tolist()
+        # (kernels.shape_update; a track not updated in this scan has its last push's, never read), read from its row
+        # in the same call: pass trk41)
         MEV, WN = self._MEV, self._WN
+        codes, sigs, speeds, nears = manage_counters(self._P, self._X, self._CI, self._CL, WN, order, self._upd_p, t)
+        codes, sigs, speeds, nears = codes.tolist(), sigs.tolist(), speeds.tolist(), nears.tolist()
         fast_reasons = self._fast_reasons
         if len(fast_reasons) != nsus:
             fast_reasons = self._fast_reasons = _fast_reason_texts(nsus)
-        slow_v, slow_texts = self._slow_reasons
-        if slow_v != v_min:
+        # (the most common reason's texts and constant part, made again only for another v_min object: pass trk41)
+        slow_v, slow_texts, slow_tail = self._slow_reasons
+        if slow_v is not v_min:
             slow_texts = _slow_reason_texts(v_min)
-            self._slow_reasons = (v_min, slow_texts)
+            slow_tail = f" m/s ≤ v_min {v_min:.2f}"
+            self._slow_reasons = (v_min, slow_texts, slow_tail)
         no_beams = _NO_BEAMS
         for k, code, speed, sig, near in zip(tracks, codes, speeds, sigs, nears):
             if code <= MC_UPD_FIRM:  # updated, kept by the counter tests (tentative: MC_UPD_TENTATIVE)
@@ -226,8 +227,8 @@ class TrackManage:
 
     # (_fast_reason_texts(sustain_updates): the tracker's own from its first _manage on)
     _fast_reasons: tuple[str, ...] = ()
-    # (v_min and _slow_reason_texts(v_min): the tracker's own from its first _manage on)
-    _slow_reasons: tuple[float, tuple[str, ...]] = (math.nan, ())
+    # (v_min, _slow_reason_texts(v_min) and the reasons' tail: the tracker's own from its first _manage on)
+    _slow_reasons: tuple[float, tuple[str, ...], str] = (math.nan, (), "")
 
     def _probation_fails(self, k: _Track) -> bool:
         """End the probation of ``k`` (in M, re-acquired after a gap, with ``sustain_updates`` free-space fractions):
