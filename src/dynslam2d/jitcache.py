@@ -504,7 +504,6 @@ LAZY_SOURCES = {
     "CPUCodeLibrary._finalize_final_module": "95bbf4fcbb90ed99",
     "CPUContext.get_executable": "3892c8a654a2ca69",
     "Cache._save_overload": "cfe1bb44a31657d2",
-    "CPUCodeLibrary.finalize": "4b4c34b83488a72f",
     "CPUCodeLibrary._get_module_for_linking": "56dde0e0555b5ec8",
 }
 
@@ -540,7 +539,6 @@ def _lazy_sources_checked() -> dict[str, Any] | None:
         "CPUCodeLibrary._finalize_final_module": codegen.CPUCodeLibrary._finalize_final_module,
         "CPUContext.get_executable": cpu.CPUContext.get_executable,
         "Cache._save_overload": caching.Cache._save_overload,
-        "CPUCodeLibrary.finalize": codegen.CPUCodeLibrary.finalize,
         "CPUCodeLibrary._get_module_for_linking": codegen.CPUCodeLibrary._get_module_for_linking,
     }
     for name, func in found.items():
