@@ -595,6 +595,8 @@ def lazy_callee_code() -> bool:
         return False
     from numba.core import caching, codegen, cpu, dispatcher, event, sigutils
 
+    from dynslam2d import jitbox  # noqa: F401 - its LLVM optimisation in place first (the one wrapped below)
+
     compile_, add_overload = dispatcher.Dispatcher.compile, found["Dispatcher.add_overload"]
     optimise_final = codegen.CPUCodeLibrary._optimize_final_module  # (jitbox's one_llvm_optimisation, or numba's)
     compile_for_args = dispatcher.Dispatcher._compile_for_args
