@@ -198,7 +198,7 @@ def dump(folder: str, asm: bool = False) -> None:
         def dumped_specific(self: Any) -> Any:
             text = self._codegen._tm.emit_assembly(self._final_module.clone())
             n = seen[self.name] = seen.get(self.name, 0) + 1
-            name = re.sub(r"[^A-Za-z0-9_.]+", "_", self.name)[:150]
+            name = re.sub(r"[^A-Za-z0-9_.]+", "_", re.sub(r"0x[0-9a-fA-F]+", "", self.name))[:150]
             Path(folder, f"asm-{name}-{n}.s").write_text(re.sub(r"\$-?\d{9,}", "$?", masked(text)))
             return specific(self)
 
