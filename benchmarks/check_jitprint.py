@@ -15,7 +15,8 @@ differing and how many were answered from memory.
 after LLVM's optimisation; with ``--plain`` jitprint is not installed (llvmlite's own code throughout), so two runs
 (``PYTHONHASHSEED=0``) can be compared file by file (:func:`masked` hides object addresses).
 
-    PYTHONPATH=src python benchmarks/check_jitprint.py [--out-dir DIR] [--dump DIR [--plain]]
+    PYTHONPATH=src python benchmarks/check_jitprint.py [--out-dir DIR] [--dump DIR [--plain] [--asm]
+        [--callees-optimised]]
 
 Not run by pytest (tests/test_jitprint.py runs the same check on a few kernels).
 """
@@ -183,10 +184,25 @@ def masked(text: str) -> str:
     return re.sub(r"inttoptr \(i64 \d+", "inttoptr (i64 ?", text)
 
 
-def dump(folder: str) -> None:
+def dump(folder: str, asm: bool = False) -> None:
     """Write every module handed to ``add_ir_module`` (its text, as numba gives it to LLVM) and every library's final
-    module after LLVM's optimisation (masked) to ``folder``, numbered in compile order."""
+    module after LLVM's optimisation (masked) to ``folder``, numbered in compile order; with ``asm`` also the
+    assembly of every library that gets machine code (``asm-<library>-<n>.s``, from a copy of its final module,
+    addresses masked), named by library so that two runs compare file by file whatever their order."""
     from numba.core import codegen
+
+    if asm:
+        seen: dict[str, int] = {}
+        specific = codegen.JITCodeLibrary._finalize_specific
+
+        def dumped_specific(self: Any) -> Any:
+            text = self._codegen._tm.emit_assembly(self._final_module.clone())
+            n = seen[self.name] = seen.get(self.name, 0) + 1
+            name = re.sub(r"[^A-Za-z0-9_.]+", "_", re.sub(r"0x[0-9a-fA-F]+", "", self.name))[:150]
+            Path(folder, f"asm-{name}-{n}.s").write_text(re.sub(r"\$-?\d{9,}", "$?", masked(text)))
+            return specific(self)
+
+        codegen.JITCodeLibrary._finalize_specific = dumped_specific
 
     Path(folder).mkdir(parents=True, exist_ok=True)
     count = [0]
@@ -213,12 +229,17 @@ def main() -> None:
     ap.add_argument("--out-dir", help="where to write the dumps of differing modules")
     ap.add_argument("--dump", help="write every module and final module to this folder (no comparison)")
     ap.add_argument("--plain", action="store_true", help="with --dump: llvmlite's own printer and ABI queries")
+    ap.add_argument("--asm", action="store_true", help="with --dump: also each library's assembly")
+    ap.add_argument("--callees-optimised", action="store_true",
+                    help="jitcache.CALLEE_OPTIMISED_IN_CALLER off: a lazy callee optimised before its callers link it")
     args = ap.parse_args()
     work = tempfile.mkdtemp(prefix="check_jitprint-")
     os.environ["NUMBA_CACHE_DIR"] = str(Path(work, "numba"))
     os.environ["DYNSLAM2D_COMPILE_WORKER"] = "0"
     from dynslam2d import jitcache, jitprint
 
+    if args.callees_optimised:
+        jitcache.CALLEE_OPTIMISED_IN_CALLER = False
     for name in ("plain_numba_errors", "load_blas_alone", "lean_numba_compile"):
         getattr(jitcache, name)()
     stats: dict[str, Any] = {}
@@ -227,7 +248,7 @@ def main() -> None:
             jitprint.SOURCES = {**jitprint.SOURCES, "values": "0" * 16}  # (its install at the first compile: off)
         import dynslam2d.jitbox  # noqa: F401  (its optimisation wrappers first, as in a run; dump wraps them)
 
-        dump(args.dump)
+        dump(args.dump, asm=args.asm)
         stats["plain"] = args.plain
     else:
         stats = shadow(out_dir=args.out_dir)

@@ -504,7 +504,12 @@ LAZY_SOURCES = {
     "CPUCodeLibrary._finalize_final_module": "95bbf4fcbb90ed99",
     "CPUContext.get_executable": "3892c8a654a2ca69",
     "Cache._save_overload": "cfe1bb44a31657d2",
+    "CPUCodeLibrary._get_module_for_linking": "56dde0e0555b5ec8",
 }
+
+
+#: Whether :func:`lazy_callee_code` also leaves a lazy callee's LLVM optimisation to the kernels that link its code.
+CALLEE_OPTIMISED_IN_CALLER = True
 
 
 class LazyEntry:
@@ -534,6 +539,7 @@ def _lazy_sources_checked() -> dict[str, Any] | None:
         "CPUCodeLibrary._finalize_final_module": codegen.CPUCodeLibrary._finalize_final_module,
         "CPUContext.get_executable": cpu.CPUContext.get_executable,
         "Cache._save_overload": caching.Cache._save_overload,
+        "CPUCodeLibrary._get_module_for_linking": codegen.CPUCodeLibrary._get_module_for_linking,
     }
     for name, func in found.items():
         try:
@@ -570,10 +576,18 @@ def lazy_callee_code() -> bool:
       the library is handed to the engine and compiled, the wrapper made, the signature entered in the table and
       written to the cache: what numba would have done at the compile, from the same optimised IR.
 
-    ``f``'s library links the same optimised IR of ``g``, so every kernel's code is the same. A library whose IR refers
-    to numba's run-time linker (recursion: ``.numba.unresolved$`` names) is compiled as numba does. Done only when
-    numba's sources are the ones checked (:data:`LAZY_SOURCES`); called by :func:`lean_numba_compile` at the first
-    compile, so it touches only the command line's processes. Returns whether it changed numba."""
+    With :data:`CALLEE_OPTIMISED_IN_CALLER` (pass cmp41), ``g``'s library is not optimised either: ``f`` links ``g``'s
+    IR as numba lowered it and optimises it once, in its own module pipeline, which simplifies every function
+    bottom-up before its inliner looks at it. LLVM's module pipeline of ``g`` alone was ≈ 1.2 s of a cold run's
+    ≈ 7 s of optimisation (docs/speed.md, pass cmp41), done again in ``f``. ``g``'s optimisation is run when Python
+    first calls ``g`` (as a compile of ``g``, before its machine code), on ``g``'s own module only: callers linked
+    ``g``'s unoptimised IR, and later callers link it too. The callers' code is not the same as with ``g``
+    optimised first (no pipeline reassociates or contracts floating point, no ``fastmath``: the same numbers).
+
+    A library whose IR refers to numba's run-time linker (recursion: ``.numba.unresolved$`` names) is compiled as
+    numba does. Done only when numba's sources are the ones checked (:data:`LAZY_SOURCES`); called by
+    :func:`lean_numba_compile` at the first compile, so it touches only the command line's processes. Returns
+    whether it changed numba."""
     import weakref
 
     found = _lazy_sources_checked()
@@ -581,7 +595,10 @@ def lazy_callee_code() -> bool:
         return False
     from numba.core import caching, codegen, cpu, dispatcher, event, sigutils
 
+    from dynslam2d import jitbox  # noqa: F401 - its LLVM optimisation in place first (the one wrapped below)
+
     compile_, add_overload = dispatcher.Dispatcher.compile, found["Dispatcher.add_overload"]
+    optimise_final = codegen.CPUCodeLibrary._optimize_final_module  # (jitbox's one_llvm_optimisation, or numba's)
     compile_for_args = dispatcher.Dispatcher._compile_for_args
     finalize_final, get_executable = found["CPUCodeLibrary._finalize_final_module"], found["CPUContext.get_executable"]
     save = found["Cache._save_overload"]
@@ -605,10 +622,30 @@ def lazy_callee_code() -> bool:
             return LazyEntry(self, library, fndesc, env)
         return get_executable(self, library, fndesc, env)
 
+    def recursive(module: Any) -> bool:
+        return any(g.name.startswith(unresolved) for g in module.global_variables)
+
+    def lazy_optimise_final(self: Any) -> None:
+        if getattr(self, "_dynslam2d_lazy", False) and not recursive(self._final_module):
+            self._dynslam2d_unoptimised = True  # (its callers optimise its code; Python's first call: optimise_own)
+            return None
+        return optimise_final(self)
+
+    def optimise_own(disp: Any, args: tuple[Any, ...], cres: Any, library: Any) -> None:
+        """The optimisation :func:`lazy_optimise_final` left out, before ``library``'s machine code, as a compile of
+        ``disp`` (numba's "numba:compile" event: the pipeline ``optimise_final`` runs inside a kernel's compile),
+        with the IR its callers link kept as it was."""
+        library._dynslam2d_unoptimised = False
+        if library._get_module_for_linking() is library._final_module:
+            library._shared_module = library._final_module.clone()
+        data = {"dispatcher": disp, "args": args, "return_type": cres.signature.return_type}
+        with event.trigger_event("numba:compile", data=data):
+            optimise_final(library)
+        library._final_module.verify()
+
     def lazy_finalize_final(self: Any) -> None:
         module = self._final_module
-        if not getattr(self, "_dynslam2d_lazy", False) or any(
-                g.name.startswith(unresolved) for g in module.global_variables):
+        if not getattr(self, "_dynslam2d_lazy", False) or recursive(module):
             self._dynslam2d_lazy = False
             return finalize_final(self)
         # numba's _finalize_final_module up to the engine: its checks and the module's library for the object cache
@@ -618,11 +655,13 @@ def lazy_callee_code() -> bool:
         self._finalized = True
         return None
 
-    def to_engine(library: Any) -> None:
+    def to_engine(disp: Any, args: tuple[Any, ...], cres: Any, library: Any) -> None:
         """The rest of numba's _finalize_final_module for a library :func:`lazy_finalize_final` kept back."""
         library._ensure_finalized()
         if getattr(library, "_dynslam2d_lazy", False):
             library._dynslam2d_lazy = False
+            if getattr(library, "_dynslam2d_unoptimised", False):
+                optimise_own(disp, args, cres, library)
             cleanup = library._codegen._add_module(library._final_module)
             if cleanup:
                 weakref.finalize(library, cleanup)
@@ -631,7 +670,7 @@ def lazy_callee_code() -> bool:
     def materialise(disp: Any, args: tuple[Any, ...]) -> Any:
         cres = disp.overloads[args]
         entry = cres.entry_point
-        to_engine(entry.library)
+        to_engine(disp, args, cres, entry.library)
         cfunc = get_executable(entry.context, entry.library, entry.fndesc, entry.env)
         try:
             entry.context.remove_user_function(entry)
@@ -681,6 +720,9 @@ def lazy_callee_code() -> bool:
     dispatcher.Dispatcher.compile = lazy_compile  # type: ignore[method-assign]
     dispatcher.Dispatcher._compile_for_args = lazy_compile_for_args  # type: ignore[method-assign]
     codegen.CPUCodeLibrary._finalize_final_module = lazy_finalize_final  # type: ignore[method-assign]
+    if CALLEE_OPTIMISED_IN_CALLER:
+        lazy_optimise_final.__wrapped__ = optimise_final  # type: ignore[attr-defined]
+        codegen.CPUCodeLibrary._optimize_final_module = lazy_optimise_final  # type: ignore[method-assign]
     cpu.CPUContext.get_executable = lazy_executable  # type: ignore[method-assign]
     caching.Cache._save_overload = lazy_save  # type: ignore[method-assign]
     return True
