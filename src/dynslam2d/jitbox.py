@@ -22,11 +22,41 @@ helper of its own with a compatibility check (≈ 0.1 s of cold compile CPU each
 
 from __future__ import annotations
 
+import importlib
 from typing import Any
 
-from numba import njit  # noqa: F401 - re-exported: the kernel modules' njit, with the boxer below in place
-from numba.core import boxing, pythonapi, types
-from numba.extending import intrinsic
+from dynslam2d import jitaot as _jitaot
+
+#: The AOT-compiled kernels this process uses instead of numba (:mod:`dynslam2d.jitaot`), or None: numba's JIT.
+AOT = _jitaot.table()
+
+if AOT is None:
+    from numba import njit  # noqa: F401 - re-exported: the kernel modules' njit, with the boxer below in place
+    from numba.core import boxing, pythonapi, types
+    from numba.extending import intrinsic
+else:  # no numba in this process: the kernels are the AOT module's, numba's names inert stand-ins
+    njit = AOT.njit
+    boxing = pythonapi = types = _jitaot.INERT
+    intrinsic = _jitaot.inert_intrinsic
+    from dynslam2d import jitcache as _jitcache
+
+    _jitcache._CLOCK._installed = True  # nothing compiles: compile_seconds() stays 0 without importing numba
+
+
+def numba_import(*names: str) -> Any:
+    """The numba / llvmlite objects named (``"numba.core.cgutils"``, ``"numba.extending.intrinsic"``, a module or
+    a module's attribute) for a kernel module's import lines: imported as ``from ... import ...`` would, or, when
+    the AOT module replaces numba (:data:`AOT`), inert stand-ins (``intrinsic``: one whose intrinsics raise when
+    called from Python) and nothing imported. One name gives the object, several a tuple."""
+    out = []
+    for name in names:
+        parent, _, attr = name.rpartition(".")
+        if AOT is not None:
+            out.append(_jitaot.inert_intrinsic if attr == "intrinsic" else _jitaot.INERT)
+            continue
+        module = importlib.import_module(parent)
+        out.append(getattr(module, attr) if hasattr(module, attr) else importlib.import_module(name))
+    return out[0] if len(out) == 1 else tuple(out)
 
 
 def _box_array_from_env(typ: Any, val: Any, c: Any) -> Any:
@@ -178,5 +208,6 @@ def word_at(typingctx: Any, a: Any, i: Any) -> Any:
     return types.uint64(a, i), codegen
 
 
-box_arrays_from_env()
-one_llvm_optimisation()
+if AOT is None:
+    box_arrays_from_env()
+    one_llvm_optimisation()
