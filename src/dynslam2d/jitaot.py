@@ -6,10 +6,10 @@ folder (:func:`aot_dir`, beside numba's cache, so it survives reinstalls), with 
 (:func:`current_key`: the kernel sources' fingerprint, the numba version it was built with, the Python version and
 the CPU's identity) and its exports (kernel, export name, numba argument types as text).
 
-When that module is present and its key is this process's (:func:`table`), :mod:`dynslam2d.jitbox`'s ``njit``
+When that module is present and its key is this process's (:func:`table`), :mod:`dynslam2d.jitbox`'s kernel decorator
 returns, at import, a plain Python function per kernel that checks its arguments (:func:`make_kernel`) and calls
 the module's export of those types, and the kernel modules import no numba and no llvmlite at all: their
-module-level numba names (``types``, ``intrinsic``, llvmlite's ``ir`` ...) are inert stand-ins (:data:`INERT`). The
+module-level numba names (``types``, the lowering hooks, llvmlite's ``ir`` ...) are inert stand-ins (:data:`INERT`). The
 exports compute the bits the JIT kernels compute (no fast-math, same LLVM, same CPU). With no valid module, or with
 ``DYNSLAM2D_KERNELS=jit``, nothing here is used and the kernels are numba's dispatchers as before.
 
@@ -214,15 +214,11 @@ def _check_expr(t: Any, x: str, env: dict[str, Any]) -> str:
     if isinstance(t, ArraySpec):
         dname = f"_d_{t.dtype}"
         env[dname] = np.dtype("bool" if t.dtype == "bool" else t.dtype)
-        flags = []
-        if t.layout == "C":
-            flags.append(f"{x}.flags.c_contiguous")
-        elif t.layout == "F":
-            flags.append(f"{x}.flags.f_contiguous")
-        if not t.readonly:
-            flags.append(f"{x}.flags.writeable")
-        return (f"(isinstance({x}, _nd) and {x}.ndim == {t.ndim} and ({x}.dtype is {dname} or {x}.dtype == {dname})"
-                + "".join(f" and {f}" for f in flags) + ")")
+        # one flags look-up: numpy's carray / farray are C- / F-contiguous, aligned and writable
+        flag = {("C", False): "carray", ("C", True): "c_contiguous", ("F", False): "farray",
+                ("F", True): "f_contiguous", ("A", False): "writeable"}.get((t.layout, t.readonly))
+        return (f"((type({x}) is _nd or isinstance({x}, _nd)) and ({x}.dtype is {dname} or {x}.dtype == {dname}) "
+                f"and {x}.ndim == {t.ndim}" + (f" and {x}.flags.{flag})" if flag else ")"))
     if isinstance(t, TupleSpec):
         inner = " and ".join(_check_expr(item, f"{x}[{k}]", env) for k, item in enumerate(t.items))
         return f"(type({x}) is tuple and len({x}) == {len(t.items)}" + (f" and {inner})" if inner else ")")
@@ -313,8 +309,8 @@ class KernelTable:
         for qual, rows in info["exports"].items():
             self.exports[qual] = [(getattr(module, name), parse_types(text)) for name, text in rows]
 
-    def njit(self, *args: Any, **kwargs: Any) -> Any:
-        """numba's ``njit`` for the kernel modules when the AOT module is used: a decorated kernel becomes
+    def decorator(self, *args: Any, **kwargs: Any) -> Any:
+        """numba's kernel decorator for the kernel modules when the AOT module is used: a decorated kernel becomes
         :func:`make_kernel`'s function over its exports, or a function that raises when called if the module
         has none (a kernel only other kernels call, compiled into them)."""
         import types as pytypes
@@ -380,25 +376,6 @@ class _Inert:
 #: The one inert stand-in (:class:`_Inert`).
 INERT = _Inert()
 
-
-def inert_intrinsic(*args: Any, **kwargs: Any) -> Any:
-    """numba's ``intrinsic`` when the AOT module replaces numba: the intrinsic lives in the compiled kernels only;
-    the name holds a function that raises when called from Python."""
-    def stand_in(fn: Callable[..., Any]) -> Callable[..., Any]:
-        def intrinsic_stand_in(*a: Any, **k: Any) -> Any:
-            raise DynSlamError(f"{fn.__module__}.{fn.__qualname__} is a numba intrinsic: only kernels call it")
-
-        intrinsic_stand_in.__name__ = fn.__name__
-        intrinsic_stand_in.__qualname__ = fn.__qualname__
-        intrinsic_stand_in.__module__ = fn.__module__
-        return intrinsic_stand_in
-
-    if len(args) == 1 and callable(args[0]) and not kwargs:
-        return stand_in(args[0])
-    return stand_in
-
-
-# --- building ---------------------------------------------------------------------------------------------------
 
 class BuildError(DynSlamError):
     """The AOT module cannot be built here (no C compiler, no setuptools, a kernel pycc rejects)."""

@@ -23,9 +23,29 @@ helper of its own with a compatibility check (≈ 0.1 s of cold compile CPU each
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from typing import Any
 
 from dynslam2d import jitaot as _jitaot
+from dynslam2d.errors import DynSlamError
+
+
+def inert_intrinsic(*args: Any, **kwargs: Any) -> Any:
+    """numba's ``intrinsic`` when the AOT module replaces numba: the intrinsic lives in the compiled kernels only;
+    the name holds a function that raises when called from Python."""
+    def stand_in(fn: Callable[..., Any]) -> Callable[..., Any]:
+        def intrinsic_stand_in(*a: Any, **k: Any) -> Any:
+            raise DynSlamError(f"{fn.__module__}.{fn.__qualname__} is a numba intrinsic: only kernels call it")
+
+        intrinsic_stand_in.__name__ = fn.__name__
+        intrinsic_stand_in.__qualname__ = fn.__qualname__
+        intrinsic_stand_in.__module__ = fn.__module__
+        return intrinsic_stand_in
+
+    if len(args) == 1 and callable(args[0]) and not kwargs:
+        return stand_in(args[0])
+    return stand_in
+
 
 #: The AOT-compiled kernels this process uses instead of numba (:mod:`dynslam2d.jitaot`), or None: numba's JIT.
 AOT = _jitaot.table()
@@ -35,9 +55,9 @@ if AOT is None:
     from numba.core import boxing, pythonapi, types
     from numba.extending import intrinsic
 else:  # no numba in this process: the kernels are the AOT module's, numba's names inert stand-ins
-    njit = AOT.njit
+    njit = AOT.decorator
     boxing = pythonapi = types = _jitaot.INERT
-    intrinsic = _jitaot.inert_intrinsic
+    intrinsic = inert_intrinsic
     from dynslam2d import jitcache as _jitcache
 
     _jitcache._CLOCK._installed = True  # nothing compiles: compile_seconds() stays 0 without importing numba
@@ -52,7 +72,7 @@ def numba_import(*names: str) -> Any:
     for name in names:
         parent, _, attr = name.rpartition(".")
         if AOT is not None:
-            out.append(_jitaot.inert_intrinsic if attr == "intrinsic" else _jitaot.INERT)
+            out.append(inert_intrinsic if attr == "intrinsic" else _jitaot.INERT)
             continue
         module = importlib.import_module(parent)
         out.append(getattr(module, attr) if hasattr(module, attr) else importlib.import_module(name))
