@@ -122,6 +122,10 @@ def built(tmp_path_factory: pytest.TempPathFactory) -> Path:
 RUN = r"""
 import json, sys
 from dynslam2d.cli import main
+if sys.argv[2] == "fallback":  # a call of types the AOT module lacks first: the whole process turns to numba
+    import numpy as np
+    from dynslam2d.detect.freespace import _ref_arrays
+    _ref_arrays(np.ones(4, np.float32), np.ones(4, bool), -1.5, 0.2, 0.0, 0.0, 0.0, 0.1, 30.0)
 sys.argv = ["dynslam2d", "run", "sim:paper", "--duration", "4", "--out", sys.argv[1], "-q"]
 try:
     main()
@@ -139,21 +143,25 @@ RESULTS = ("map_logodds.npy", "map_logodds_online.npy", "kept_mask.npz", "map.pg
 
 def test_aot_run_gives_the_jit_runs_bytes_without_numba(built: Path, tmp_path: Path) -> None:
     out = {}
-    for mode in ("jit", "auto"):
-        res = subprocess.run([sys.executable, "-c", RUN, str(tmp_path / mode)], env=_env(built, mode),
+    for mode in ("jit", "auto", "fallback"):
+        env = _env(built, "auto" if mode == "fallback" else mode)
+        res = subprocess.run([sys.executable, "-c", RUN, str(tmp_path / mode), mode], env=env,
                              capture_output=True, text=True, timeout=600)
         assert res.returncode == 0, res.stderr[-2000:]
         out[mode] = json.loads(res.stdout.strip().splitlines()[-1])
     assert out["jit"] == {"numba": True, "llvmlite": True, "aot": False}
     assert out["auto"] == {"numba": False, "llvmlite": False, "aot": True}
+    assert out["fallback"] == {"numba": True, "llvmlite": True, "aot": False}  # switched to numba's kernels
     compared = 0
     for name in RESULTS:
-        a, b = tmp_path / "jit" / name, tmp_path / "auto" / name
-        assert a.is_file() == b.is_file(), name
-        if a.is_file():
-            assert a.read_bytes() == b.read_bytes(), name
-            compared += 1
-    assert compared >= 6
+        a = tmp_path / "jit" / name
+        for other in ("auto", "fallback"):
+            b = tmp_path / other / name
+            assert a.is_file() == b.is_file(), name
+            if a.is_file():
+                assert a.read_bytes() == b.read_bytes(), (other, name)
+                compared += 1
+    assert compared >= 12
 
 
 CALL = r"""
@@ -178,7 +186,9 @@ print("numba" in sys.modules, type(good).__name__)
 
 
 def test_aot_kernel_refuses_wrong_arrays_without_crashing(built: Path) -> None:
-    res = subprocess.run([sys.executable, "-c", CALL], env=_env(built), capture_output=True, text=True, timeout=120)
+    # DYNSLAM2D_KERNELS=aot: the AOT module and no fallback to numba
+    res = subprocess.run([sys.executable, "-c", CALL], env=_env(built, "aot"), capture_output=True, text=True,
+                         timeout=120)
     assert res.returncode == 0, res.stderr[-2000:]
     lines = res.stdout.strip().splitlines()
     assert lines[-1] == "False tuple"
@@ -229,3 +239,35 @@ def test_kernels_status_and_clear_commands(built: Path, tmp_path: Path) -> None:
                          capture_output=True, text=True, timeout=120)
     assert res.returncode == 0 and "removed 2" in res.stdout
     assert not jitaot.status(copy).present
+
+
+FALLBACK = r"""
+import json, sys, numpy as np
+from dynslam2d.detect import freespace
+from dynslam2d.slam import correlative
+from dynslam2d.detect.freespace import _ref_arrays
+started_without_numba = "numba" not in sys.modules
+r = np.linspace(1.0, 5.0, 16)
+ok = np.ones(16, dtype=bool)
+args = (-1.5, 0.2, 0.0, 0.0, 0.0, 0.1, 30.0)
+out = [_ref_arrays(r.astype(np.float32), ok, *args), _ref_arrays(r, ok, *args)]
+prob = np.random.default_rng(1).random((12, 10))  # float64: the AOT module has float32 only
+out.append(correlative._score_pyramid(prob, 2))
+out.append(correlative._score_pyramid(prob.astype(np.float32), 2))
+print(json.dumps({"started_without_numba": started_without_numba, "numba": "numba" in sys.modules,
+                  "module_kernel": type(freespace._ref_arrays).__name__,
+                  "bytes": [[np.asarray(a).tobytes().hex() for a in (o if isinstance(o, tuple) else (o,))]
+                            for o in out]}))
+"""
+
+
+def test_types_the_module_lacks_fall_back_to_numba(built: Path) -> None:
+    res = {}
+    for mode in ("auto", "jit"):
+        run = subprocess.run([sys.executable, "-c", FALLBACK], env=_env(built, mode), capture_output=True, text=True,
+                             timeout=300)
+        assert run.returncode == 0, run.stderr[-2000:]
+        res[mode] = json.loads(run.stdout.strip().splitlines()[-1])
+    assert res["auto"]["started_without_numba"] and res["auto"]["numba"]
+    assert res["auto"]["module_kernel"] == "CPUDispatcher"  # the module's global is numba's dispatcher now
+    assert res["auto"]["bytes"] == res["jit"]["bytes"]

@@ -64,8 +64,10 @@ def aot_dir() -> Path:
 
 
 def mode() -> str:
-    """``jit`` when ``DYNSLAM2D_KERNELS`` asks for numba's kernels, else ``auto``."""
-    return "jit" if os.environ.get(MODE_ENV, "").strip().lower() == "jit" else "auto"
+    """``DYNSLAM2D_KERNELS``: ``jit`` (numba's kernels), ``aot`` (the AOT module and no fallback to numba: arguments
+    of types it lacks raise) or ``auto`` (the default: the AOT module when valid, numba for what it lacks)."""
+    value = os.environ.get(MODE_ENV, "").strip().lower()
+    return value if value in ("jit", "aot") else "auto"
 
 
 def cpu_identity() -> str:
@@ -277,11 +279,14 @@ def make_kernel(py_func: Callable[..., Any], qual: str, exports: list[tuple[Call
         env[f"_e{k}"] = fn
         cond = " and ".join(_check_expr(t, p, env) for t, p in zip(types, params)) or "True"
         lines.append(f"    if {cond}:\n        return _e{k}({', '.join(params)})")
-    lines.append(f"    _miss(({', '.join(params)}{',' if params else ''}))")
+    lines.append(f"    return _miss(({', '.join(params)}{',' if params else ''}))")
     named = [(getattr(fn, "__name__", "?"), types) for fn, types in exports]
 
-    def _miss(args: tuple[Any, ...]) -> None:
-        raise KernelArgumentError(_mismatch(qual, params, named, args))
+    def _miss(args: tuple[Any, ...]) -> Any:
+        dispatcher = to_jit(qual)
+        if dispatcher is None:
+            raise KernelArgumentError(_mismatch(qual, params, named, args))
+        return dispatcher(*args)
 
     env["_miss"] = _miss
     exec(compile("\n".join(lines), f"<aot kernel {qual}>", "exec"), env)  # noqa: S102 - generated from types only
@@ -320,6 +325,7 @@ class KernelTable:
         return self.kernel
 
     def kernel(self, py_func: Callable[..., Any]) -> Callable[..., Any]:
+        note_module(py_func.__module__)
         qual = f"{py_func.__module__}.{py_func.__qualname__}"
         return make_kernel(py_func, qual, self.exports.get(qual, []))
 
@@ -349,6 +355,60 @@ def table() -> KernelTable | None:
                 loaded = None  # numba's kernels, as without a module
     _TABLE.append(loaded)
     return loaded
+
+
+#: The kernel modules in the order they first used the AOT module's stand-ins (their imports complete before).
+_MODULES: list[str] = []
+#: After :func:`to_jit` switched this process to numba: each kernel's dispatcher by ``module.qualname``.
+_DISPATCHERS: dict[str, Any] = {}
+
+
+def note_module(name: str) -> None:
+    """Record kernel module ``name`` (:data:`_MODULES`) for :func:`to_jit`."""
+    if name not in _MODULES:
+        _MODULES.append(name)
+
+
+def _is_stand_in(value: Any) -> bool:
+    return (getattr(value, "aot_exports", None) is not None or getattr(value, "aot_stand_in", False)
+            or isinstance(value, _Inert) or (isinstance(value, type) and issubclass(value, _Inert))
+            or isinstance(getattr(value, "__self__", None), KernelTable))
+
+
+def to_jit(qual: str) -> Any:
+    """numba's dispatcher of kernel ``qual`` for a call whose argument types the AOT module lacks; None when
+    ``DYNSLAM2D_KERNELS=aot`` or numba is not installed (the caller raises :class:`KernelArgumentError`).
+
+    The first such call turns the whole process to numba: :mod:`dynslam2d.jitbox` and every kernel module (in the
+    order they were imported) are executed again from their sources into fresh namespaces with numba's names, and
+    each global of the real module that held a stand-in (a kernel's wrapper, a lowering hook, a numba type or a value
+    made of them) gets the new object: numba resolves a kernel's callees from its module's globals when it compiles,
+    so every kernel then compiles (or loads from numba's cache) as without the AOT module. Calls whose types the
+    module has keep going to it (the same bits); the others go to the dispatchers, also through wrappers other
+    modules imported."""
+    if not _DISPATCHERS:
+        import builtins
+        import importlib.util
+
+        if not _TABLE or _TABLE[0] is None or mode() == "aot" or importlib.util.find_spec("numba") is None:
+            return None  # (no AOT module in use here: nothing to switch)
+        _TABLE[0] = None  # jitbox's new namespace imports numba
+        for name in ["dynslam2d.jitbox", *[m for m in _MODULES if m != "dynslam2d.jitbox"]]:
+            module = sys.modules[name]
+            fresh: dict[str, Any] = {"__name__": name, "__file__": module.__file__, "__spec__": module.__spec__,
+                                     "__package__": module.__package__, "__builtins__": builtins}
+            path = str(module.__file__)
+            with open(path, "rb") as fh:
+                exec(compile(fh.read(), path, "exec"), fresh)  # noqa: S102 - the package's own module
+            real = vars(module)
+            for key, value in list(real.items()):
+                if (name == "dynslam2d.jitbox" or _is_stand_in(value)) and key in fresh and not key.startswith("__"):
+                    real[key] = fresh[key]
+            for value in fresh.values():
+                func = getattr(value, "py_func", None)
+                if func is not None and hasattr(value, "overloads") and func.__module__ == name:
+                    _DISPATCHERS[f"{name}.{func.__qualname__}"] = value
+    return _DISPATCHERS.get(qual)
 
 
 class _Inert:

@@ -23,6 +23,7 @@ helper of its own with a compatibility check (≈ 0.1 s of cold compile CPU each
 from __future__ import annotations
 
 import importlib
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -40,6 +41,7 @@ def inert_intrinsic(*args: Any, **kwargs: Any) -> Any:
         intrinsic_stand_in.__name__ = fn.__name__
         intrinsic_stand_in.__qualname__ = fn.__qualname__
         intrinsic_stand_in.__module__ = fn.__module__
+        intrinsic_stand_in.aot_stand_in = True  # type: ignore[attr-defined]
         return intrinsic_stand_in
 
     if len(args) == 1 and callable(args[0]) and not kwargs:
@@ -72,6 +74,7 @@ def numba_import(*names: str) -> Any:
     for name in names:
         parent, _, attr = name.rpartition(".")
         if AOT is not None:
+            _jitaot.note_module(sys._getframe(1).f_globals.get("__name__", ""))
             out.append(inert_intrinsic if attr == "intrinsic" else _jitaot.INERT)
             continue
         module = importlib.import_module(parent)
