@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import os
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -967,6 +968,10 @@ def _cold_start() -> tuple[bool, Any]:
     started). Loads the pipeline's kernel modules to tell, after making numba's compiles leaner
     (:func:`dynslam2d.jitcache.lean_numba_compile`: about a tenth less cold compile, the same kernels); on a cold
     cache also Python's garbage collector (:func:`dynslam2d.jitcache.lean_compile_gc`)."""
+    from dynslam2d.jitbox import AOT
+
+    if AOT is not None:  # the AOT-compiled kernels (dynslam2d kernels build): nothing to compile, numba not imported
+        return False, None
     from dynslam2d.jitcache import lean_numba_compile
 
     lean_numba_compile()
@@ -1699,6 +1704,110 @@ def eval_relations(
     _emit(out, as_json, _stats_table(f"relations {relations.name} vs {estimate}", rows))
 
 
+kernels_app = typer.Typer(cls=_Group, help="The kernels compiled ahead of time for this machine (docs/kernels.md).",
+                          no_args_is_help=True)
+app.add_typer(kernels_app, name="kernels")
+
+
+@kernels_app.command("build")
+def kernels_build(
+    inputs: Annotated[list[str] | None, typer.Option(
+        "--input", help="Also run this recording (bag, CARMEN log, sim:<scenario>) to collect the kernel types it "
+                        "uses; repeat for more. Simulated scenes, a bag and a CARMEN log are always run.")] = None,
+    cpu: Annotated[str, typer.Option("--cpu", help="LLVM CPU name the code is compiled for [host: this CPU].")] =
+        "host",
+    duration: Annotated[float, typer.Option("--duration", min=1.0, help="Simulated seconds per scene run [12].")] =
+        12.0,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress display.")] = False,
+) -> None:
+    """Compile every kernel a run uses into one extension module for this machine (about a minute of one CPU; needs
+    a C compiler and setuptools). Later runs load it instead of numba: no compile, less memory."""
+    import subprocess
+
+    from dynslam2d.jitaot import MODE_ENV, aot_dir, build_requirements
+
+    why = build_requirements()
+    if why:
+        raise DynSlamError(why)
+    folder = aot_dir()
+    env = dict(os.environ, **{MODE_ENV: "jit", "DYNSLAM2D_COMPILE_WORKER": "0"})
+    child = "import sys; from dynslam2d.kernelbuild import _child_main; sys.exit(_child_main(sys.argv))"
+    cmd = [sys.executable, "-c", child, str(folder), cpu, f"{duration:g}", *(inputs or [])]
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    done: dict[str, Any] = {}
+    with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), console=err_console,
+                  disable=quiet) as bar:
+        task = bar.add_task("building kernels", total=None)
+        with subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
+            assert proc.stdout is not None
+            compiled = total = 0
+            for line in proc.stdout:
+                try:
+                    msg = json.loads(line)
+                except ValueError:
+                    continue
+                stage = msg.get("stage")
+                if stage == "run":
+                    bar.update(task, description=f"collecting kernel types: run {msg['k'] + 1}/{msg['n']} "
+                                                 f"{msg['input']}")
+                elif stage == "compile":
+                    bar.update(task, description=f"compiling {msg['signatures']} kernel signatures")
+                    total = msg["signatures"]
+                elif stage == "kernel":
+                    compiled += 1
+                    bar.update(task, description=f"compiling kernels {compiled}/{total}: {msg['name']}")
+                elif stage in ("done", "error"):
+                    done = msg
+            err = proc.stderr.read() if proc.stderr is not None else ""
+    if done.get("stage") == "error":
+        raise DynSlamError(f"kernels build: {done['message']}")
+    if done.get("stage") != "done":
+        last = [ln for ln in err.splitlines() if ln.strip()][-1:] or ["no output"]
+        raise DynSlamError(f"kernels build failed (exit {proc.returncode}): {last[0]}")
+    info = done["info"]
+    n_sig = sum(len(v) for v in info["exports"].values())
+    console.print(f"built {len(info['exports'])} kernels ({n_sig} signatures, {info['bytes'] / 2**20:.1f} MiB) for "
+                  f"CPU {info['cpu_target']} in {info['build_s']:.0f} s: {folder}")
+
+
+@kernels_app.command("status")
+def kernels_status(
+    as_json: Annotated[bool, typer.Option("--json", help="Print the status as JSON.")] = False,
+) -> None:
+    """Whether an AOT kernel module is present and valid for this machine, and where."""
+    from dynslam2d.jitaot import MODE_ENV, status
+
+    st = status()
+    used = st.valid and st.mode != "jit"
+    row = {"folder": str(st.folder), "present": st.present, "valid": st.valid, "reason": st.reason,
+           "used": used, "mode": st.mode, "kernels": len(st.info.get("exports", {})),
+           "signatures": sum(len(v) for v in st.info.get("exports", {}).values()), "built": st.info.get("built"),
+           "cpu_target": st.info.get("cpu_target"), "bytes": st.info.get("bytes")}
+    if as_json:
+        console.print_json(json.dumps(row))
+        return
+    table = Table(show_header=False, box=None)
+    table.add_row("folder", str(st.folder))
+    table.add_row("module", "present" if st.present else "none")
+    table.add_row("status", st.reason)
+    if st.present and st.info:
+        table.add_row("kernels", f"{row['kernels']} ({row['signatures']} signatures), built {row['built']} for CPU "
+                                 f"{row['cpu_target']}")
+    table.add_row("runs use", "the AOT kernels" if used else
+                  f"numba's JIT kernels ({MODE_ENV}=jit)" if st.valid else "numba's JIT kernels")
+    _show(table)
+
+
+@kernels_app.command("clear")
+def kernels_clear() -> None:
+    """Delete the AOT kernel module: runs use numba's JIT kernels again."""
+    from dynslam2d.jitaot import aot_dir, clear
+
+    gone = clear()
+    console.print(f"removed {len(gone)} file(s) from {aot_dir()}" if gone else f"no AOT kernel module in {aot_dir()}")
+
+
 def _one_line(text: str) -> str:
     """An error message on one line (YAML and library messages may span several), with control
     characters escaped so that binary junk quoted in a message cannot garble the terminal."""
@@ -1718,7 +1827,10 @@ def main() -> None:
 
     map_large_blocks()  # freed map-sized arrays go back to the OS, not into a fragmented heap (memtrim.py)
     plain_numba_errors()  # no colorama round trip per numba typing attempt: a shorter cold compile (docs/speed.md)
-    load_blas_alone()  # numba's BLAS check without the whole of scipy.linalg (about 17 MiB, docs/speed.md)
+    from dynslam2d.jitaot import table
+
+    if table() is None:  # (with the AOT-compiled kernels numba is not imported and checks no BLAS)
+        load_blas_alone()  # numba's BLAS check without the whole of scipy.linalg (about 17 MiB, docs/speed.md)
     try:
         app()
     except DynSlamError as exc:

@@ -22,11 +22,64 @@ helper of its own with a compatibility check (≈ 0.1 s of cold compile CPU each
 
 from __future__ import annotations
 
+import importlib
+import sys
+from collections.abc import Callable
 from typing import Any
 
-from numba import njit  # noqa: F401 - re-exported: the kernel modules' njit, with the boxer below in place
-from numba.core import boxing, pythonapi, types
-from numba.extending import intrinsic
+from dynslam2d import jitaot as _jitaot
+from dynslam2d.errors import DynSlamError
+
+
+def inert_intrinsic(*args: Any, **kwargs: Any) -> Any:
+    """numba's ``intrinsic`` when the AOT module replaces numba: the intrinsic lives in the compiled kernels only;
+    the name holds a function that raises when called from Python."""
+    def stand_in(fn: Callable[..., Any]) -> Callable[..., Any]:
+        def intrinsic_stand_in(*a: Any, **k: Any) -> Any:
+            raise DynSlamError(f"{fn.__module__}.{fn.__qualname__} is a numba intrinsic: only kernels call it")
+
+        intrinsic_stand_in.__name__ = fn.__name__
+        intrinsic_stand_in.__qualname__ = fn.__qualname__
+        intrinsic_stand_in.__module__ = fn.__module__
+        intrinsic_stand_in.aot_stand_in = True  # type: ignore[attr-defined]
+        return intrinsic_stand_in
+
+    if len(args) == 1 and callable(args[0]) and not kwargs:
+        return stand_in(args[0])
+    return stand_in
+
+
+#: The AOT-compiled kernels this process uses instead of numba (:mod:`dynslam2d.jitaot`), or None: numba's JIT.
+AOT = _jitaot.table()
+
+if AOT is None:
+    from numba import njit  # noqa: F401 - re-exported: the kernel modules' njit, with the boxer below in place
+    from numba.core import boxing, pythonapi, types
+    from numba.extending import intrinsic
+else:  # no numba in this process: the kernels are the AOT module's, numba's names inert stand-ins
+    njit = AOT.decorator
+    boxing = pythonapi = types = _jitaot.INERT
+    intrinsic = inert_intrinsic
+    from dynslam2d import jitcache as _jitcache
+
+    _jitcache._CLOCK._installed = True  # nothing compiles: compile_seconds() stays 0 without importing numba
+
+
+def numba_import(*names: str) -> Any:
+    """The numba / llvmlite objects named (``"numba.core.cgutils"``, ``"numba.extending.intrinsic"``, a module or
+    a module's attribute) for a kernel module's import lines: imported as ``from ... import ...`` would, or, when
+    the AOT module replaces numba (:data:`AOT`), inert stand-ins (``intrinsic``: one whose intrinsics raise when
+    called from Python) and nothing imported. One name gives the object, several a tuple."""
+    out = []
+    for name in names:
+        parent, _, attr = name.rpartition(".")
+        if AOT is not None:
+            _jitaot.note_module(sys._getframe(1).f_globals.get("__name__", ""))
+            out.append(inert_intrinsic if attr == "intrinsic" else _jitaot.INERT)
+            continue
+        module = importlib.import_module(parent)
+        out.append(getattr(module, attr) if hasattr(module, attr) else importlib.import_module(name))
+    return out[0] if len(out) == 1 else tuple(out)
 
 
 def _box_array_from_env(typ: Any, val: Any, c: Any) -> Any:
@@ -178,5 +231,6 @@ def word_at(typingctx: Any, a: Any, i: Any) -> Any:
     return types.uint64(a, i), codegen
 
 
-box_arrays_from_env()
-one_llvm_optimisation()
+if AOT is None:
+    box_arrays_from_env()
+    one_llvm_optimisation()

@@ -16,10 +16,11 @@ four lanes).
 
 from __future__ import annotations
 
-from llvmlite import ir
-from numba import types
-from numba.core import cgutils
-from numba.extending import intrinsic, models, register_model
+from dynslam2d.jitbox import numba_import  # numba's names, or inert stand-ins when the AOT kernels replace numba
+
+ir, types, cgutils, intrinsic, models, register_model = numba_import(
+    "llvmlite.ir", "numba.types", "numba.core.cgutils", "numba.extending.intrinsic", "numba.extending.models",
+    "numba.extending.register_model")
 
 _VT = ir.VectorType(ir.DoubleType(), 4)
 _I32 = ir.IntType(32)

@@ -17,10 +17,7 @@ from __future__ import annotations
 
 import math
 
-import llvmlite.ir as _lir
 import numpy as np
-from numba.core import types as _nbtypes
-from numba.extending import intrinsic as _intrinsic
 
 from dynslam2d.detect.config import FitConfig
 from dynslam2d.detect.layout import (
@@ -49,7 +46,9 @@ from dynslam2d.detect.layout import (
 from dynslam2d.detect.mapevidence import map_evidence_kernel
 from dynslam2d.detect.shapes import circle_center_fixed_radius
 from dynslam2d.detect.vehicles import _admit_long
-from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
+from dynslam2d.jitbox import njit, numba_import  # numba's njit (or the AOT kernels'), numba's names
+
+_lir, _nbtypes, _intrinsic = numba_import("llvmlite.ir", "numba.core.types", "numba.extending.intrinsic")
 
 # indices into the fit-parameter array
 _P_POINT_MAX_POINTS = 0

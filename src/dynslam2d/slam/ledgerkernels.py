@@ -35,10 +35,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import types
 
 from dynslam2d.detect.kernels_update import py_hypot
-from dynslam2d.jitbox import float_bits, float_from_bits, njit  # numba's njit; bit casts lowered in place
+from dynslam2d.jitbox import float_bits, float_from_bits, njit, numba_import  # bit casts lowered in place
+
+types = numba_import("numba.types")  # (an inert stand-in when the AOT kernels replace numba)
 
 _KEY_SHIFT = 4294967296
 #: packed values must stay below this (they are int64)

@@ -18,14 +18,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import types as _nbtypes
-from numba.core import cgutils as _cgutils
-from numba.extending import intrinsic as _intrinsic
-from numba.np.arrayobj import populate_array as _populate_array
 
-from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
+from dynslam2d.jitbox import njit, numba_import  # numba's njit (or the AOT kernels'), numba's names
 from dynslam2d.slam.grid import GridLevel
 from dynslam2d.slam.interp import interp_value_grad
+
+_nbtypes, _cgutils, _intrinsic, _populate_array = numba_import(
+    "numba.types", "numba.core.cgutils", "numba.extending.intrinsic", "numba.np.arrayobj.populate_array")
 
 #: An accepted LM step smaller than this (cells and rad) ends the iterations on a level early;
 #: it only saves time (the reference always runs all steps).

@@ -20,12 +20,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from llvmlite import ir as _lir
-from numba import types as _nbtypes
-from numba.core import cgutils
-from numba.extending import intrinsic as _intrinsic
 
-from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
+from dynslam2d.jitbox import njit, numba_import  # numba's njit (or the AOT kernels'), numba's names
+
+_lir, _nbtypes, cgutils, _intrinsic = numba_import(
+    "llvmlite.ir", "numba.types", "numba.core.cgutils", "numba.extending.intrinsic")
 
 #: placeholders of the inputs :func:`_rays` does not use on a call (its other way of giving the rays)
 _NO_ENDS = np.zeros((2, 0))

@@ -1,0 +1,474 @@
+"""The kernels compiled ahead of time for this machine: one extension module that replaces numba at run time.
+
+``dynslam2d kernels build`` compiles every kernel signature a run uses (:mod:`dynslam2d.kernelbuild`, in a child:
+numba's ``numba.pycc`` with a C compiler) into one extension module for this machine's CPU, in the kernel cache
+folder (:func:`aot_dir`, beside numba's cache, so it survives reinstalls), with a sidecar JSON that holds its key
+(:func:`current_key`: the kernel sources' fingerprint, the numba version it was built with, the Python version and
+the CPU's identity) and its exports (kernel, export name, numba argument types as text).
+
+When that module is present and its key is this process's (:func:`table`), :mod:`dynslam2d.jitbox`'s kernel decorator
+returns, at import, a plain Python function per kernel that checks its arguments (:func:`make_kernel`) and calls
+the module's export of those types, and the kernel modules import no numba and no llvmlite at all: their
+module-level numba names (``types``, the lowering hooks, llvmlite's ``ir`` ...) are inert stand-ins (:data:`INERT`). The
+exports compute the bits the JIT kernels compute (no fast-math, same LLVM, same CPU). With no valid module, or with
+``DYNSLAM2D_KERNELS=jit``, nothing here is used and the kernels are numba's dispatchers as before.
+
+pycc's functions do not check their arguments (a float32 array for a float64 one reads garbage or crashes), so the
+wrapper checks each argument against the exported types: an array's type, dtype, ndim, C-contiguity and
+writability, a scalar's Python or NumPy type, a tuple's length and items. Arguments that fit no export raise
+:class:`KernelArgumentError` naming the kernel, the argument and the expected type (this release has no switch back
+to numba inside a process that started without it: set ``DYNSLAM2D_KERNELS=jit`` or rebuild with the input that
+needs it, ``dynslam2d kernels build --input``). docs/kernels.md.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from dynslam2d.errors import DynSlamError
+
+#: Environment variable choosing the kernels: ``auto`` (the AOT module when valid, else numba; the default) or
+#: ``jit`` (numba's JIT kernels even when a valid AOT module is present).
+MODE_ENV = "DYNSLAM2D_KERNELS"
+#: Environment variable naming the folder of the AOT module (default :func:`aot_dir`'s).
+DIR_ENV = "DYNSLAM2D_KERNELS_DIR"
+#: The extension module's name (and file stem).
+MODULE_NAME = "dynslam2d_aot_kernels"
+#: The sidecar JSON beside it: key, exports, build figures.
+SIDECAR = f"{MODULE_NAME}.json"
+#: Format of the sidecar; a different one is not loaded.
+FORMAT = 1
+
+
+class KernelArgumentError(DynSlamError, TypeError):
+    """A kernel of the AOT module called with arguments of types no export has."""
+
+
+def aot_dir() -> Path:
+    """The folder of the AOT module: ``$DYNSLAM2D_KERNELS_DIR`` or ``<cache root>/../aot``
+    (``~/.cache/dynslam2d/aot`` by default, beside numba's cache folder)."""
+    given = os.environ.get(DIR_ENV)
+    if given:
+        return Path(given)
+    from dynslam2d.jitcache import cache_root
+
+    return cache_root().parent / "aot"
+
+
+def mode() -> str:
+    """``DYNSLAM2D_KERNELS``: ``jit`` (numba's kernels), ``aot`` (the AOT module and no fallback to numba: arguments
+    of types it lacks raise) or ``auto`` (the default: the AOT module when valid, numba for what it lacks)."""
+    value = os.environ.get(MODE_ENV, "").strip().lower()
+    return value if value in ("jit", "aot") else "auto"
+
+
+def cpu_identity() -> str:
+    """16 hex digits identifying this CPU model and its features: the first processor's vendor, model name and
+    flags in /proc/cpuinfo (``Features`` / ``CPU part`` on ARM), with the machine type; read without llvmlite."""
+    parts = [platform.machine()]
+    try:
+        with open("/proc/cpuinfo", encoding="latin-1") as fh:
+            text = fh.read().split("\n\n")[0]
+        for line in text.splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() in ("vendor_id", "model name", "flags", "Features", "CPU implementer", "CPU part",
+                               "cpu family", "model"):
+                parts.append(f"{key.strip()}={value.strip()}")
+    except OSError:
+        parts.append(platform.processor())
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
+
+
+def numba_version() -> str:
+    """The installed numba's version, from its distribution metadata (numba is not imported)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("numba")
+    except PackageNotFoundError:
+        return "none"
+
+
+def current_key() -> dict[str, str]:
+    """What a valid AOT module must have been built for: this process's kernel sources, numba, Python and CPU."""
+    from dynslam2d.jitcache import kernel_sources_fingerprint
+
+    return {"sources": kernel_sources_fingerprint(), "numba": numba_version(),
+            "python": f"{sys.implementation.cache_tag}-{platform.python_version()}", "cpu": cpu_identity()}
+
+
+@dataclass
+class KernelsStatus:
+    """What :func:`status` found: the folder, whether a module is there and usable, and why not."""
+
+    folder: Path
+    present: bool
+    valid: bool
+    reason: str
+    mode: str
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+def _module_path(folder: Path, info: dict[str, Any]) -> Path:
+    return folder / str(info.get("file", ""))
+
+
+def status(folder: Path | None = None) -> KernelsStatus:
+    """Whether ``folder`` (default :func:`aot_dir`) holds an AOT module this process would load, and if not why."""
+    folder = folder if folder is not None else aot_dir()
+    side = folder / SIDECAR
+    md = mode()
+    if not side.is_file():
+        return KernelsStatus(folder, False, False, "no AOT module built (dynslam2d kernels build)", md)
+    try:
+        info = json.loads(side.read_text())
+    except (OSError, ValueError) as exc:
+        return KernelsStatus(folder, True, False, f"unreadable {SIDECAR} ({exc})", md)
+    if info.get("format") != FORMAT or not isinstance(info.get("exports"), dict):
+        return KernelsStatus(folder, True, False, "built by another version of dynslam2d", md, info)
+    if not _module_path(folder, info).is_file() or not str(info.get("file", "")):
+        return KernelsStatus(folder, True, False, "the extension module file is missing", md, info)
+    key, now = info.get("key", {}), current_key()
+    stale = [k for k in now if key.get(k) != now[k]]
+    if stale:
+        what = {"sources": "the kernel sources changed", "numba": "another numba version",
+                "python": "another Python", "cpu": "another CPU"}
+        return KernelsStatus(folder, True, False, "stale: " + ", ".join(what[k] for k in stale), md, info)
+    return KernelsStatus(folder, True, True, "valid", md, info)
+
+
+# --- argument types: numba's type text (jitwarm.signature_text) read without numba ---------------------------
+
+@dataclass(frozen=True)
+class ArraySpec:
+    dtype: str
+    ndim: int
+    layout: str
+    readonly: bool = False
+
+    def text(self) -> str:
+        return f"Array({self.dtype}, {self.ndim}, {self.layout!r}{', True' if self.readonly else ''})"
+
+
+@dataclass(frozen=True)
+class TupleSpec:
+    items: tuple[Any, ...]
+
+    def text(self) -> str:
+        return "Tuple(" + ", ".join(_text(t) for t in self.items) + ")"
+
+
+#: Scalar numba type names an export may take, with the NumPy scalar type numba gives that name.
+SCALARS = ("float64", "float32", "int64", "int32", "int16", "int8", "uint64", "uint32", "uint16", "uint8", "bool",
+           "complex128", "complex64")
+
+
+def _text(t: Any) -> str:
+    return t if isinstance(t, str) else t.text()
+
+
+def _array(dtype: str, ndim: int, layout: str, readonly: bool = False, aligned: bool = True) -> ArraySpec:
+    if not aligned:
+        raise ValueError("unaligned array")
+    return ArraySpec(dtype, ndim, layout, bool(readonly))
+
+
+class _Unsupported(ValueError):
+    pass
+
+
+def parse_types(text: str) -> list[Any]:
+    """The argument types of a signature text: an :class:`ArraySpec`, a :class:`TupleSpec` or a scalar's numba
+    name per argument; raises ValueError for a type an export cannot take (literals, omitted, numba's own)."""
+    names: dict[str, Any] = {s: s for s in SCALARS}
+    names.update(Array=_array, UniTuple=lambda t, n: TupleSpec((t,) * n), Tuple=lambda *ts: TupleSpec(tuple(ts)),
+                 False_=False, True_=True)
+
+    class _Names(dict):
+        def __missing__(self, key: str) -> Any:
+            raise _Unsupported(key)
+
+    try:
+        value = eval(text.replace("aligned=True", "True"), {"__builtins__": {}, "False": False, "True": True},
+                     _Names(names))  # noqa: S307 - numba type names only (the project's own build sidecar)
+    except (_Unsupported, SyntaxError, TypeError) as exc:
+        raise ValueError(f"unsupported type in {text}: {exc}") from None
+    if not isinstance(value, tuple):
+        value = (value,)
+    for t in value:
+        if isinstance(t, str) and t not in SCALARS:
+            raise ValueError(f"unsupported type {t} in {text}")
+    return list(value)
+
+
+def _check_expr(t: Any, x: str, env: dict[str, Any]) -> str:
+    """A Python expression that holds when the value ``x`` is exactly of type ``t`` for numba (its ``typeof``)."""
+    import numpy as np
+
+    if isinstance(t, ArraySpec):
+        dname = f"_d_{t.dtype}"
+        env[dname] = np.dtype("bool" if t.dtype == "bool" else t.dtype)
+        # one flags look-up: numpy's carray / farray are C- / F-contiguous, aligned and writable
+        flag = {("C", False): "carray", ("C", True): "c_contiguous", ("F", False): "farray",
+                ("F", True): "f_contiguous", ("A", False): "writeable"}.get((t.layout, t.readonly))
+        return (f"((type({x}) is _nd or isinstance({x}, _nd)) and ({x}.dtype is {dname} or {x}.dtype == {dname}) "
+                f"and {x}.ndim == {t.ndim}" + (f" and {x}.flags.{flag})" if flag else ")"))
+    if isinstance(t, TupleSpec):
+        inner = " and ".join(_check_expr(item, f"{x}[{k}]", env) for k, item in enumerate(t.items))
+        return f"(type({x}) is tuple and len({x}) == {len(t.items)}" + (f" and {inner})" if inner else ")")
+    sname = f"_s_{t}"
+    env[sname] = np.bool_ if t == "bool" else getattr(np, t)
+    py = {"float64": "float", "int64": "int", "bool": "bool", "complex128": "complex"}.get(t)
+    return f"(type({x}) is {py} or type({x}) is {sname})" if py else f"(type({x}) is {sname})"
+
+
+def describe(x: Any) -> str:
+    """An argument's type as an error message shows it."""
+    import numpy as np
+
+    if isinstance(x, np.ndarray):
+        layout = "C" if x.flags.c_contiguous else "F" if x.flags.f_contiguous else "A"
+        return f"Array({x.dtype}, {x.ndim}, {layout!r}{'' if x.flags.writeable else ', read-only'})"
+    if isinstance(x, tuple):
+        return "tuple(" + ", ".join(describe(v) for v in x) + ")"
+    return type(x).__name__
+
+
+def _mismatch(qual: str, params: list[str], exports: list[tuple[str, list[Any]]], args: tuple[Any, ...]) -> str:
+    """The message of :class:`KernelArgumentError`: the first argument that fits no export of the kernel."""
+    if not exports:
+        return (f"kernel {qual} is not in the AOT kernel module (no run of its build called it from Python); run "
+                f"with {MODE_ENV}=jit or rebuild it with the input that needs it (dynslam2d kernels build --input)")
+    env: dict[str, Any] = {"_nd": __import__("numpy").ndarray}
+    for k, name in enumerate(params):
+        expected = [types[k] for _n, types in exports if k < len(types)]
+        if k >= len(args) or not expected:
+            continue
+        fits = [eval(_check_expr(t, "x", env), env, {"x": args[k]}) for t in expected]  # noqa: S307 - our expressions
+        if not any(fits):
+            want = " or ".join(sorted({_text(t) for t in expected}))
+            return (f"kernel {qual}: argument {name!r} (position {k}) is {describe(args[k])}, the AOT kernel module "
+                    f"takes {want}; run with {MODE_ENV}=jit or rebuild it (dynslam2d kernels build)")
+    return (f"kernel {qual}: these {len(args)} arguments fit none of the AOT kernel module's "
+            f"{len(exports)} signature(s); run with {MODE_ENV}=jit or rebuild it (dynslam2d kernels build)")
+
+
+def make_kernel(py_func: Callable[..., Any], qual: str, exports: list[tuple[Callable[..., Any], list[Any]]]
+                ) -> Callable[..., Any]:
+    """A plain function with ``py_func``'s parameters (and defaults) that calls the first export whose argument
+    types the arguments have, and raises :class:`KernelArgumentError` when none fits. ``exports``: (compiled
+    function, argument types of :func:`parse_types`) in order of preference."""
+    import inspect
+
+    import numpy as np
+
+    params = [p.name for p in inspect.signature(py_func).parameters.values()]
+    env: dict[str, Any] = {"_nd": np.ndarray}
+    lines = [f"def _kernel({', '.join(params)}):"]
+    for k, (fn, types) in enumerate(exports):
+        if len(types) != len(params):
+            continue
+        env[f"_e{k}"] = fn
+        cond = " and ".join(_check_expr(t, p, env) for t, p in zip(types, params)) or "True"
+        lines.append(f"    if {cond}:\n        return _e{k}({', '.join(params)})")
+    lines.append(f"    return _miss(({', '.join(params)}{',' if params else ''}))")
+    named = [(getattr(fn, "__name__", "?"), types) for fn, types in exports]
+
+    def _miss(args: tuple[Any, ...]) -> Any:
+        dispatcher = to_jit(qual)
+        if dispatcher is None:
+            raise KernelArgumentError(_mismatch(qual, params, named, args))
+        return dispatcher(*args)
+
+    env["_miss"] = _miss
+    exec(compile("\n".join(lines), f"<aot kernel {qual}>", "exec"), env)  # noqa: S102 - generated from types only
+    fn = env["_kernel"]
+    fn.__name__ = py_func.__name__
+    fn.__defaults__ = py_func.__defaults__
+    fn.__module__ = py_func.__module__
+    fn.__qualname__ = py_func.__qualname__
+    fn.__doc__ = py_func.__doc__
+    fn.py_func = py_func  # as numba's dispatchers have it
+    fn.aot_exports = [(getattr(e, "__name__", "?"), [_text(t) for t in types]) for e, types in exports]
+    return fn
+
+
+# --- the loaded module ------------------------------------------------------------------------------------------
+
+class KernelTable:
+    """The loaded AOT module's exports by kernel (``module.qualname``)."""
+
+    def __init__(self, module: Any, info: dict[str, Any], folder: Path) -> None:
+        self.module = module
+        self.info = info
+        self.folder = folder
+        self.exports: dict[str, list[tuple[Callable[..., Any], list[Any]]]] = {}
+        for qual, rows in info["exports"].items():
+            self.exports[qual] = [(getattr(module, name), parse_types(text)) for name, text in rows]
+
+    def decorator(self, *args: Any, **kwargs: Any) -> Any:
+        """numba's kernel decorator for the kernel modules when the AOT module is used: a decorated kernel becomes
+        :func:`make_kernel`'s function over its exports, or a function that raises when called if the module
+        has none (a kernel only other kernels call, compiled into them)."""
+        import types as pytypes
+
+        if len(args) == 1 and isinstance(args[0], pytypes.FunctionType) and not kwargs:
+            return self.kernel(args[0])
+        return self.kernel
+
+    def kernel(self, py_func: Callable[..., Any]) -> Callable[..., Any]:
+        note_module(py_func.__module__)
+        qual = f"{py_func.__module__}.{py_func.__qualname__}"
+        return make_kernel(py_func, qual, self.exports.get(qual, []))
+
+
+_TABLE: list[KernelTable | None] = []
+
+
+def table() -> KernelTable | None:
+    """The AOT module of :func:`aot_dir` loaded into this process when it is valid for it (:func:`status`) and
+    ``DYNSLAM2D_KERNELS`` is not ``jit``; None otherwise. Decided once per process (the first call)."""
+    if _TABLE:
+        return _TABLE[0]
+    loaded = None
+    if mode() != "jit" and "numba" not in sys.modules:
+        st = status()
+        if st.valid:
+            import importlib.util
+
+            path = _module_path(st.folder, st.info)
+            try:
+                spec = importlib.util.spec_from_file_location(MODULE_NAME, path)
+                if spec is not None and spec.loader is not None:
+                    module = importlib.util.module_from_spec(spec)
+                    spec.loader.exec_module(module)
+                    loaded = KernelTable(module, st.info, st.folder)
+            except (ImportError, OSError, AttributeError, ValueError):
+                loaded = None  # numba's kernels, as without a module
+    _TABLE.append(loaded)
+    return loaded
+
+
+#: The kernel modules in the order they first used the AOT module's stand-ins (their imports complete before).
+_MODULES: list[str] = []
+#: After :func:`to_jit` switched this process to numba: each kernel's dispatcher by ``module.qualname``.
+_DISPATCHERS: dict[str, Any] = {}
+
+
+def note_module(name: str) -> None:
+    """Record kernel module ``name`` (:data:`_MODULES`) for :func:`to_jit`."""
+    if name not in _MODULES:
+        _MODULES.append(name)
+
+
+def _is_stand_in(value: Any) -> bool:
+    return (getattr(value, "aot_exports", None) is not None or getattr(value, "aot_stand_in", False)
+            or isinstance(value, _Inert) or (isinstance(value, type) and issubclass(value, _Inert))
+            or isinstance(getattr(value, "__self__", None), KernelTable))
+
+
+def to_jit(qual: str) -> Any:
+    """numba's dispatcher of kernel ``qual`` for a call whose argument types the AOT module lacks; None when
+    ``DYNSLAM2D_KERNELS=aot`` or numba is not installed (the caller raises :class:`KernelArgumentError`).
+
+    The first such call turns the whole process to numba: :mod:`dynslam2d.jitbox` and every kernel module (in the
+    order they were imported) are executed again from their sources into fresh namespaces with numba's names, and
+    each global of the real module that held a stand-in (a kernel's wrapper, a lowering hook, a numba type or a value
+    made of them) gets the new object: numba resolves a kernel's callees from its module's globals when it compiles,
+    so every kernel then compiles (or loads from numba's cache) as without the AOT module. Calls whose types the
+    module has keep going to it (the same bits); the others go to the dispatchers, also through wrappers other
+    modules imported."""
+    if not _DISPATCHERS:
+        import builtins
+        import importlib.util
+
+        if not _TABLE or _TABLE[0] is None or mode() == "aot" or importlib.util.find_spec("numba") is None:
+            return None  # (no AOT module in use here: nothing to switch)
+        _TABLE[0] = None  # jitbox's new namespace imports numba
+        for name in ["dynslam2d.jitbox", *[m for m in _MODULES if m != "dynslam2d.jitbox"]]:
+            module = sys.modules[name]
+            fresh: dict[str, Any] = {"__name__": name, "__file__": module.__file__, "__spec__": module.__spec__,
+                                     "__package__": module.__package__, "__builtins__": builtins}
+            path = str(module.__file__)
+            with open(path, "rb") as fh:
+                exec(compile(fh.read(), path, "exec"), fresh)  # noqa: S102 - the package's own module
+            real = vars(module)
+            for key, value in list(real.items()):
+                if (name == "dynslam2d.jitbox" or _is_stand_in(value)) and key in fresh and not key.startswith("__"):
+                    real[key] = fresh[key]
+            for value in fresh.values():
+                func = getattr(value, "py_func", None)
+                if func is not None and hasattr(value, "overloads") and func.__module__ == name:
+                    _DISPATCHERS[f"{name}.{func.__qualname__}"] = value
+    return _DISPATCHERS.get(qual)
+
+
+class _Inert:
+    """A stand-in for every numba or llvmlite name a kernel module uses at import when the AOT module replaces
+    numba: callable, subscriptable, with any attribute, usable as a base class; it does nothing."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        pass
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        return INERT
+
+    def __getattr__(self, attr: str) -> Any:
+        if attr.startswith("__"):
+            raise AttributeError(attr)
+        return INERT
+
+    def __getitem__(self, key: Any) -> Any:
+        return INERT
+
+    def __mro_entries__(self, bases: tuple[Any, ...]) -> tuple[type, ...]:
+        return (_Inert,)
+
+
+#: The one inert stand-in (:class:`_Inert`).
+INERT = _Inert()
+
+
+class BuildError(DynSlamError):
+    """The AOT module cannot be built here (no C compiler, no setuptools, a kernel pycc rejects)."""
+
+
+def build_requirements() -> str | None:
+    """Why the AOT module cannot be built in this environment (one line), or None when it can."""
+    import importlib.util
+    import shutil
+    import sysconfig
+
+    cc = os.environ.get("CC") or sysconfig.get_config_var("CC") or "cc"
+    if shutil.which(cc.split()[0]) is None and shutil.which("gcc") is None and shutil.which("cc") is None:
+        return f"no C compiler found ({cc.split()[0]}, gcc, cc): install one (e.g. apt install gcc) to build kernels"
+    if importlib.util.find_spec("setuptools") is None:
+        return "setuptools is not installed: pip install setuptools to build kernels"
+    if importlib.util.find_spec("numba") is None:
+        return "numba is not installed"
+    return None
+
+
+def export_name(qual: str, k: int) -> str:
+    """The AOT module's name of a kernel's ``k``-th signature."""
+    mod, _, name = qual.rpartition(".")
+    return f"{mod.replace('.', '_')}__{name.replace('.', '_')}__{k}"
+
+
+def clear(folder: Path | None = None) -> list[Path]:
+    """Delete the AOT module and its sidecar from ``folder`` (default :func:`aot_dir`); returns what it deleted."""
+    folder = folder if folder is not None else aot_dir()
+    gone = []
+    for path in sorted(folder.glob(f"{MODULE_NAME}*")) if folder.is_dir() else []:
+        if path.is_file():
+            path.unlink()
+            gone.append(path)
+    return gone
