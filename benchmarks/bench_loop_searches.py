@@ -5,10 +5,10 @@ what a search is made of, over one fresh pipeline per input (after the throw-awa
 compile or cache load is timed), in thread CPU time:
 
   * the closer's methods (``add``, ``_search``, ``_far_search``, ``_match_at``, ``_submap``, ``_place_ranks``,
-    ``_place_flush``, ``_optimise``, ``_uncertainty``, ``_verify_far``) and the kernels and helpers inside a
-    search (``branch_and_bound``, ``_turn_first``, ``_score_pyramid``, ``_rotated_cells``, ``_percentile95``,
-    ``_admissible``, ``refine_supported``, the place index's ``describe_many`` / ``add_many`` / ``distances``):
-    calls, ms per call, µs per scan (nested parts are inside their callers' figures);
+    ``_place_flush``, ``_optimise``, ``_uncertainty``, ``_verify_far``, ``_build_far_level``) and the kernels and
+    helpers inside a search (``branch_and_bound``, ``_turn_first``, ``_score_pyramid``, ``_rotated_cells``,
+    ``_percentile95``, ``_admissible``, ``refine_supported``, the place index's ``describe_many`` / ``add_many`` /
+    ``distances``): calls, ms per call, µs per scan (nested parts are inside their callers' figures);
   * the correlative searches split into local and far ones (count, mean / median / max ms, how many returned a
     pose), the submap grids built (cache misses) against those found built, the far searches' outcome in
     ``_turn_first`` (status: 1 = refused, 2 = decided on the turn block, 0 = whole search; and the number of
@@ -35,7 +35,7 @@ from bench_pipeline import warm_up  # noqa: E402
 
 #: the loop closer's methods timed (bound on the instance)
 METHODS = ("add", "_search", "_far_search", "_match_at", "_submap", "_place_ranks", "_place_flush", "_optimise",
-           "_uncertainty", "_verify_far")
+           "_uncertainty", "_verify_far", "_build_far_level")
 
 
 def profile(name: str, scans: list) -> str:
@@ -141,8 +141,8 @@ def profile(name: str, scans: list) -> str:
                      + ", ".join(f"{k}: {c}" for k, c in sorted(status.items())))
     if admissible:
         lines.append(f"_admissible (pruning below min_score allowed): {admissible[True]} yes, {admissible[False]} no")
-    lines.append("closer stats: " + ", ".join(f"{k} {val:.1f}" if isinstance(val, float) else f"{k} {val}"
-                                              for k, val in lc.stats.items() if val))
+    lines.append("closer stats (counts): " + ", ".join(f"{k} {val}"
+                                              for k, val in lc.stats.items() if val and not k.endswith("_ms")))
     return "\n".join(lines)
 
 
