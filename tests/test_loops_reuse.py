@@ -1,6 +1,7 @@
 """The loop closer's reuse of work (docs/speed.md, pass loop18): every result stays the one of the former path.
 
-* far searches read a submap's kept far level instead of rebuilding the submap;
+* far searches read a submap's kept far level instead of rebuilding the submap, and build that level alone for a
+  submap never built (pass lcl41);
 * the pose graph builds its edge arrays once per optimisation and adds the Levenberg–Marquardt damping to H's
   diagonal itself instead of SciPy's general sparse sum.
 """
@@ -26,11 +27,19 @@ class _NoKeep(dict):
         pass
 
 
-def _run(scans: list, front: np.ndarray, keep: bool, drop_at: int | None = None, drop_sub: int = -1) -> tuple:
+def _whole_grid(lc: LoopCloser) -> None:
+    """Let ``lc``'s far searches build a submap's whole grid where they need its far level (the former path)."""
+    lc._build_far_level = lambda s: lc._submap(s).levels[min(lc.config.far_level, lc._n_levels() - 1)]
+
+
+def _run(scans: list, front: np.ndarray, keep: bool, drop_at: int | None = None, drop_sub: int = -1,
+         alone: bool | None = None) -> tuple:
     lc = LoopCloser(LoopConfig(), SlamConfig())
     lc._cache_size = 1  # evict at once: every far search on an older submap would rebuild it
     if not keep:
         lc._far_levels = _NoKeep()
+    if not (keep if alone is None else alone):
+        _whole_grid(lc)
     builds = [0]
     submap = lc._submap
 
@@ -78,6 +87,32 @@ def test_drop_beams_drops_the_far_level_of_its_submap(far_runs: tuple) -> None:
     lc, res, _b, s = _run(scans, front, True, drop_at=len(scans) * 3 // 4)
     _lc0, res0, _b0, _s = _run(scans, front, False, drop_at=len(scans) * 3 // 4, drop_sub=s)
     _same(res, res0)
+
+
+def test_far_level_built_alone_is_the_whole_grids_level(far_runs: tuple) -> None:
+    _scans_, _front, (lc, _res, _b, _s), _old = far_runs
+    lc2 = LoopCloser(lc.config, lc.slam)
+    lc2.keyframes = lc.keyframes
+    k = min(lc.config.far_level, lc._n_levels() - 1)
+    n = len(lc.keyframes) // lc.config.submap_keyframes
+    assert n >= 5
+    for s in range(n):
+        whole = lc2._submap(s).levels[k]
+        cached = list(lc2._cache)
+        alone = lc2._build_far_level(s)
+        assert lc2._far_levels[s] is alone and list(lc2._cache) == cached  # kept with the far levels, not cached
+        assert alone.resolution == whole.resolution and alone.shape == whole.shape
+        assert (alone.i0, alone.j0) == (whole.i0, whole.j0)
+        assert alone.prob.dtype == whole.prob.dtype and np.array_equal(alone.prob, whole.prob)
+        assert alone.prob.any()
+
+
+def test_far_levels_built_alone_give_the_same_loops_with_fewer_submap_builds(far_runs: tuple) -> None:
+    scans, front, (_lc, res, builds, _s), _old = far_runs
+    lc0, res0, builds0, _s0 = _run(scans, front, True, alone=False)
+    _same(res, res0)
+    assert lc0.stats["far_searches"] > 20
+    assert builds < builds0  # far searches of submaps never built build their far level alone
 
 
 def _random_h(rng: np.random.Generator, diag: bool = True) -> sp.csc_matrix:

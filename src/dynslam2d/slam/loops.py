@@ -480,6 +480,30 @@ class LoopCloser:
             self._cache.popitem(last=False)
         return grid
 
+    def _build_far_level(self, s: int) -> GridLevel:
+        """Submap ``s``'s far-search level alone (kept in ``_far_levels``, not in the grid cache): what a far search
+        reads of a submap unless its match gets as far as the refinement (MIT CSAIL, negative_2: most far searches
+        of a submap never built refuse it before that; the level at ``map_resolution·2^far_level`` costs a fraction
+        of the whole grid, whose finest level has 64 times its cells). Bit-identical to the level :meth:`_submap`
+        builds: a :class:`MultiResMap` updates every level from the full scan at the same pose, each on its own
+        (Kohlbrecher et al. 2011, §IV-C), and a one-level map at that resolution (``map_resolution * 2**k``, the
+        same float) with the same growth margin gets the same cells, the same scans in the same order."""
+        c = self.slam
+        k = min(self.config.far_level, self._n_levels() - 1)
+        first, last, anchor = self._submap_range(s)
+        grid = MultiResMap(c.map_resolution * 2**k, 1, c.logodds_free, c.logodds_occupied, c.occupied_logodds_cap,
+                           c.map_growth_margin)
+        a = self.keyframes[anchor].frontend
+        for j in range(first, last + 1):
+            pts, _ = self._points(self.keyframes[j])
+            if pts.shape[0]:
+                rel = relative(a, self.keyframes[j].frontend)
+                grid.integrate(Pose2D(float(rel[0]), float(rel[1]), float(rel[2])), pts)
+        lv = grid.levels[0]
+        _keep_probabilities(lv)
+        self._far_levels[s] = lv
+        return lv
+
     def _n_levels(self) -> int:
         """Levels of a submap grid: the search level and the far search's, at least two."""
         top = max(self.config.search_level, self.config.far_level if self.config.far_search else 0)
@@ -836,11 +860,13 @@ class LoopCloser:
         _first, _last, anchor = self._submap_range(s)
         grid = self._cache.get(s)
         lvl = None
-        if grid is None and level is not None and c.far_search:
-            # the far level of a submap built before: no rebuild unless the match gets as far as its refinement
-            far = self._far_levels.get(s)
-            if far is not None and min(level, self._n_levels() - 1) == min(c.far_level, self._n_levels() - 1):
-                lvl = far
+        if grid is None and level is not None and c.far_search \
+                and min(level, self._n_levels() - 1) == min(c.far_level, self._n_levels() - 1):
+            # the far level of a submap built before: no rebuild unless the match gets as far as its refinement;
+            # of a submap never built (or dropped by drop_beams), that level alone (_build_far_level)
+            lvl = self._far_levels.get(s)
+            if lvl is None:
+                lvl = self._build_far_level(s)
         if lvl is None:
             grid = self._submap(s)
             lvl = grid.levels[min(c.search_level if level is None else level, len(grid.levels) - 1)]
