@@ -252,6 +252,17 @@ def test_cold_numba_cache_is_announced(tmp_path):
     assert "compiling kernels (first run only" in r.stderr
 
 
+def test_a_compiling_run_suggests_the_kernels_built_ahead_of_time(capsys):
+    """After a run that compiled (JIT), one line points to `dynslam2d kernels build`; after a warm run, none."""
+    from dynslam2d import cli
+
+    cli._suggest_kernel_build(False)
+    assert capsys.readouterr().err == ""
+    cli._suggest_kernel_build(True)
+    err = " ".join(capsys.readouterr().err.split())
+    assert "dynslam2d kernels build" in err and "docs/kernels.md" in err
+
+
 def test_warm_cache_is_not_cold_and_summary_reports_steady_speed(sim_run):
     import importlib
 
