@@ -16,7 +16,6 @@ from conftest import paper_room_scan, paper_room_slam
 from numba import njit
 
 import dynslam2d.slam.matcher as mt
-from dynslam2d.slam.interp import _NO_LO
 from dynslam2d.slam.matcher import _split_xy, _stack_array, match_level
 from dynslam2d.types import Pose2D
 
@@ -77,15 +76,15 @@ def _heap_level(prob, pts, pose, n_iter, swapped, use_lm, prior, lam_p, keep, re
     if _HEAP_CORE is None:
         _HEAP_CORE = _heap_match_core()
     H = np.zeros((3, 3))
-    out = _HEAP_CORE(prob, _NO_LO, _split_xy(pts), pose, n_iter, swapped, use_lm, 0.1, 1e4, 0.2, 2.0, prior, lam_p, H,
-                     keep, res, i0, j0)
+    out = _HEAP_CORE(prob, _split_xy(pts), pose, n_iter, swapped, use_lm, 0.1, 1e4, 0.2, 2.0, prior, lam_p, H, keep,
+                     res, i0, j0)
     return out, H
 
 
 def _stack_level(prob, pts, pose, n_iter, swapped, use_lm, prior, lam_p, keep, res, i0, j0):
     H = np.zeros((3, 3))
-    out = mt._match_core(prob, _NO_LO, _split_xy(pts), pose, n_iter, swapped, use_lm, 0.1, 1e4, 0.2, 2.0, prior,
-                         lam_p, H, keep, res, i0, j0)
+    out = mt._match_core(prob, _split_xy(pts), pose, n_iter, swapped, use_lm, 0.1, 1e4, 0.2, 2.0, prior, lam_p, H,
+                         keep, res, i0, j0)
     return out, H
 
 
@@ -124,7 +123,7 @@ def test_match_core_with_stack_arrays_equals_the_heap_form(level: int) -> None:
                             assert hs.tobytes() == hh.tobytes()
                             n_runs += 1
         # the public per-level kernel (the same _match_core) on the same points
-        out, n_acc = match_level(lv.prob, _NO_LO, pts, lv.pose_to_map(np.zeros(3)), 4, False, True, 0.1, 1e4, 0.2, 2.0,
+        out, n_acc = match_level(lv.prob, pts, lv.pose_to_map(np.zeros(3)), 4, False, True, 0.1, 1e4, 0.2, 2.0,
                                  lv.pose_to_map(np.zeros(3)), np.zeros((3, 3)))
         (xh, yh, th, nh, _, _, _), _ = _heap_level(lv.prob, pts, lv.pose_to_map(np.zeros(3)), 4, False, True,
                                                    lv.pose_to_map(np.zeros(3)), np.zeros((3, 3)), False, 1.0, 0.0,

@@ -12,7 +12,7 @@ import pytest
 from conftest import paper_room_scan, paper_room_slam
 from numba import njit
 
-from dynslam2d.slam.interp import _NO_LO, interp_value_grad
+from dynslam2d.slam.interp import interp_value_grad
 from dynslam2d.slam.matcher import _match_core, _prior_cost, _round_trips, _solve3, _split_xy, _sums, accumulate
 from dynslam2d.types import Pose2D
 
@@ -33,7 +33,7 @@ def old_accumulate(prob, pts, x, y, th, swapped, H, g):  # pragma: no cover - nu
         sy = pts[i, 1]
         qx = c * sx - s * sy + x
         qy = s * sx + c * sy + y
-        m, mx, my, inside = interp_value_grad(prob, _NO_LO, qx, qy, swapped)
+        m, mx, my, inside = interp_value_grad(prob, qx, qy, swapped)
         r = 1.0 - m
         cost += r * r
         if not inside:
@@ -167,11 +167,11 @@ def test_sums_equal_the_interp_accumulate_bit_for_bit() -> None:
         for swapped in (False, True):
             H0, g0, H1, g1 = np.full((3, 3), 7.0), np.full(3, 7.0), np.full((3, 3), 5.0), np.full(3, 5.0)
             ref = old_accumulate(prob, pts, x, y, th, swapped, H0, g0)
-            got = accumulate(prob, _NO_LO, pts, x, y, th, swapped, H1, g1)
+            got = accumulate(prob, pts, x, y, th, swapped, H1, g1)
             assert ref == got and H0.tobytes() == H1.tobytes() and g0.tobytes() == g1.tobytes()
             H2 = np.full((3, 3), 5.0)
             xy = np.ascontiguousarray(pts.T)  # (rows x, y)
-            cost, summ, n_in = _sums(prob, _NO_LO, xy, x, y, th, swapped, False, True, H2, g1)
+            cost, summ, n_in = _sums(prob, xy, x, y, th, swapped, False, True, H2, g1)
             assert (cost, summ, n_in) == (ref[0], 0.0, 0) and np.all(H2 == 5.0)
             n_out += pts.shape[0] - ref[2]
     assert n_out > 1000  # out-of-bounds points were exercised
@@ -199,8 +199,8 @@ def test_match_core_with_cost_only_trials_equals_the_full_passes(n_levels: int) 
                                                  start, lam_p, Hr)
                             for keep in (False, True):
                                 Hn = np.zeros((3, 3))
-                                got = _match_core(lv.prob, _NO_LO, _split_xy(pts), start, n_iter, swapped, use_lm, 0.1,
-                                                  1e4, 0.2, 2.0, start, lam_p, Hn, keep, lv.resolution, float(lv.i0),
+                                got = _match_core(lv.prob, _split_xy(pts), start, n_iter, swapped, use_lm, 0.1, 1e4,
+                                                  0.2, 2.0, start, lam_p, Hn, keep, lv.resolution, float(lv.i0),
                                                   float(lv.j0))
                                 assert np.array(got[:4]).tobytes() == np.array(ref[:4]).tobytes()
                                 if keep and _round_trips(got[0], got[1], got[2], lv.resolution, float(lv.i0),

@@ -13,7 +13,6 @@ from conftest import paper_room_scan, paper_room_slam
 from numba import njit
 
 from dynslam2d.slam.correlative import _pyramid, _rotated_cells, _score_pyramid, _score_table
-from dynslam2d.slam.interp import _NO_LO
 from dynslam2d.slam.matcher import _bearing_bin, _split_xy, _sums, evaluate, free_fraction, match_level, match_multires
 from dynslam2d.types import Pose2D, wrap_angle
 
@@ -41,8 +40,7 @@ def level_loop(levels, pts, start, it_coarse, it_finest, swapped, use_lm, prior_
             lam = S @ prior_info @ S
         else:
             pp, lam = mp, np.zeros((3, 3))
-        out, _ = match_level(lv.prob, lv.prob_lo, pts / lv.resolution, mp, n_iter, swapped, use_lm, 0.1, 1e4, 0.2, 2.0,
-                             pp, lam)
+        out, _ = match_level(lv.prob, pts / lv.resolution, mp, n_iter, swapped, use_lm, 0.1, 1e4, 0.2, 2.0, pp, lam)
         pose = lv.pose_to_world(out)
         pose[2] = (pose[2] + math.pi) % (2.0 * math.pi) - math.pi
     return pose, out
@@ -234,7 +232,7 @@ def _sums_one_loop(prob, pts, x, y, th, swapped, full, H, g):  # pragma: no cove
 def _blocked_pass(prob, pts, x, y, th, swapped, full, stats=True):
     H = np.full((3, 3), 7.0)
     g = np.full(3, 7.0)
-    out = _sums(prob, _NO_LO, _xy_rows(pts), x, y, th, swapped, np.bool_(full), np.bool_(stats), H, g)
+    out = _sums(prob, _xy_rows(pts), x, y, th, swapped, np.bool_(full), np.bool_(stats), H, g)
     return out, H, g
 
 

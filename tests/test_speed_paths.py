@@ -14,7 +14,6 @@ from conftest import paper_room_scan, paper_room_slam
 from dynslam2d.slam import HectorSlam, SlamConfig
 from dynslam2d.slam.erasure import _LevelRecord
 from dynslam2d.slam.grid import GridLevel
-from dynslam2d.slam.interp import _NO_LO
 from dynslam2d.slam.matcher import _solve3, accumulate, covariance_world, match_level
 from dynslam2d.types import Pose2D, Scan
 
@@ -28,7 +27,7 @@ def lm_reference(prob, pts, pose, n_iter, lam0, lam_max, max_rot, max_trans):
     """The LM loop with a cost-only pass at every trial step and H, g recomputed at an accepted pose."""
     H, g, Hs, gs, d = np.zeros((3, 3)), np.zeros(3), np.zeros((3, 3)), np.zeros(3), np.zeros(3)
     x, y, th = pose
-    cost, _, _ = accumulate(prob, _NO_LO, pts, x, y, th, False, H, g)
+    cost, _, _ = accumulate(prob, pts, x, y, th, False, H, g)
     lam, steps = lam0, {"accepted": 0, "rejected": 0}
     for _ in range(n_iter):
         if H[0, 0] == 0.0 or H[1, 1] == 0.0:
@@ -47,10 +46,10 @@ def lm_reference(prob, pts, pose, n_iter, lam0, lam_max, max_rot, max_trans):
             d[0] *= max_trans / nt
             d[1] *= max_trans / nt
         nx, ny, nth = x + d[0], y + d[1], th + d[2]
-        new_cost, _, _ = accumulate(prob, _NO_LO, pts, nx, ny, nth, False, Hs, gs)  # cost only (H, g thrown away)
+        new_cost, _, _ = accumulate(prob, pts, nx, ny, nth, False, Hs, gs)  # cost only (H, g thrown away)
         if new_cost < cost:
             x, y, th = nx, ny, nth
-            cost, _, _ = accumulate(prob, _NO_LO, pts, x, y, th, False, H, g)
+            cost, _, _ = accumulate(prob, pts, x, y, th, False, H, g)
             lam = max(lam * 0.1, 1e-7)
             steps["accepted"] += 1
             if nt < 1e-3 and abs(d[2]) < 1e-5:
@@ -72,8 +71,7 @@ def test_lm_one_pass_trial_step_equals_separate_cost_and_derivative_passes() -> 
         for off in ((0.0, 0.0, 0.0), (1.5, -1.0, 0.08), (-2.0, 0.5, -0.12), (0.3, 0.3, 0.3)):
             start = lv.pose_to_map(np.array(off))
             want, steps = lm_reference(lv.prob, pm, start, 12, 0.1, 1e4, 0.2, 2.0)
-            got, n_acc = match_level(lv.prob, _NO_LO, pm, start, 12, False, True, 0.1, 1e4, 0.2, 2.0, start,
-                                     np.zeros((3, 3)))
+            got, n_acc = match_level(lv.prob, pm, start, 12, False, True, 0.1, 1e4, 0.2, 2.0, start, np.zeros((3, 3)))
             np.testing.assert_array_equal(got, want)  # bit-identical, not merely close
             assert n_acc == steps["accepted"]
             for key in seen:

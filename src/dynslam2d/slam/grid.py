@@ -56,22 +56,13 @@ class GridLevel:
     Attributes:
         resolution: cell side, m.
         logodds: (H, W) float32 log-odds, 0 = unknown (hector_mapping GridMapLogOdds.h).
-        prob: (H, W) float32 occupancy probability cache, kept in step with ``logodds``; with ``lazy_prob`` a cell
-            never written holds 0.0 instead of 0.5 (read as 0.5 by the matcher's kernels, see :attr:`prob_lo`).
+        prob: (H, W) float32 occupancy probability cache, kept in step with ``logodds``.
         uidx: (H, W) int32 per-cell update index (−1 = never updated), as OccGridMapBase's updateIndex.
         i0, j0: absolute cell index of array column 0 / row 0.
-        lazy_prob: the probability cache is made zero-filled (``np.zeros``: the OS maps a page only when a cell in
-            it is written, as for the log-odds; a 0.5 fill touches every page). A cell whose stored probability is
-            ±0.0 and whose log-odds is 0 reads as 0.5 (:func:`~dynslam2d.slam.interp.interp_value_grad`,
-            ``matcher._sums``): a written probability is 0.0 only where the log-odds is below −103 (float32
-            underflow of 1 / (1 + exp(−l))), and a log-odds of ±0 always has the probability 0.5. So every read
-            gives the value of the 0.5-filled cache. Off for maps whose log-odds are let go (the loop closer's
-            submaps keep only the probabilities).
     """
 
-    def __init__(self, resolution: float, growth_margin_cells: int = 100, lazy_prob: bool = False) -> None:
+    def __init__(self, resolution: float, growth_margin_cells: int = 100) -> None:
         self.resolution = float(resolution)
-        self.lazy_prob = bool(lazy_prob)
         self.growth_margin_cells = max(int(growth_margin_cells), 1)
         self.logodds: np.ndarray
         self.prob: np.ndarray
@@ -119,12 +110,6 @@ class GridLevel:
             [(mpose[0] + self.i0) * self.resolution, (mpose[1] + self.j0) * self.resolution, mpose[2]],
             dtype=np.float64,
         )
-
-    @property
-    def prob_lo(self) -> np.ndarray:
-        """The matcher kernels' ``lo`` argument: the log-odds with :attr:`lazy_prob` (a zero-filled probability
-        cache), else an empty array (every cell read as stored)."""
-        return self.logodds if self.lazy_prob else _NO_F32
 
     @property
     def nbytes(self) -> int:
@@ -188,16 +173,15 @@ class GridLevel:
         # into the strips around it — not the whole array filled and then the old part written over (the loop
         # closer's submaps grow on most keyframes they take in; ≈ 40 % less time per growth).
         for name, fill, dtype in _LEVEL_ARRAYS:
-            if (name == "logodds" and nh * nw * 4 >= _ZEROED_BYTES) or (name == "prob" and self.lazy_prob):
+            if name == "logodds" and nh * nw * 4 >= _ZEROED_BYTES:
                 # a large level's log-odds (0 = unknown) in zeroed memory, only the old array's non-zero cells
                 # copied (a −0.0 is: its bits are not zero): pages no ray reached are never touched and take no
-                # memory (12.5 % of MIT CSAIL's finest level was ever updated; docs/speed.md pass mem39); the same
-                # for a lazy_prob level's probability cache (its cells never written are 0.0; pass mem42)
+                # memory (12.5 % of MIT CSAIL's finest level was ever updated; docs/speed.md pass mem39)
                 new = np.zeros((nh, nw), dtype=dtype)
                 if w > 0:
-                    old = getattr(self, name)
+                    old = self.logodds
                     np.copyto(new[r0:r0 + h, c0:c0 + w], old, where=old.view(np.int32) != 0)
-                setattr(self, name, new)
+                self.logodds = new
                 continue
             new = np.empty((nh, nw), dtype=dtype)
             if w > 0:
@@ -313,13 +297,11 @@ class MultiResMap:
         max_bytes: int | None = None,
         grazing_cells: float = 0.0,
         min_incidence_deg: float = 5.0,
-        lazy_prob: bool = False,
     ) -> None:
         self.grazing_cells = float(grazing_cells)  # 0 = the reference's free update (see grazing_stop)
         self.min_sin = math.sin(math.radians(min_incidence_deg))
         self.levels = [
-            GridLevel(resolution * 2**k, growth_margin_cells=math.ceil(growth_margin / (resolution * 2**k)),
-                      lazy_prob=lazy_prob)
+            GridLevel(resolution * 2**k, growth_margin_cells=math.ceil(growth_margin / (resolution * 2**k)))
             for k in range(levels)
         ]
         self.l_free = float(l_free)

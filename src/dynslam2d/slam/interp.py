@@ -12,17 +12,10 @@ import numpy as np
 
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
-#: :func:`interp_value_grad`'s ``lo`` of a probability cache filled with 0.5 (every cell read as stored)
-_NO_LO = np.zeros((0, 0), dtype=np.float32)
-
 
 @njit(cache=True)
-def interp_value_grad(prob, lo, px, py, swapped):  # pragma: no cover - numba
+def interp_value_grad(prob, px, py, swapped):  # pragma: no cover - numba
     """(M, ∂M/∂x, ∂M/∂y, inside) at map point (px, py), gradient per cell.
-
-    ``lo``: the level's log-odds when its probability cache ``prob`` is zero-filled (a stored 0.0 on a cell whose
-    log-odds is 0 reads as 0.5, the value of a cell never updated: :attr:`GridLevel.lazy_prob`), else an empty
-    array.
 
     ``swapped`` reproduces the reference's swapped weights (interpMapValueWithDerivatives,
     hector_slam issue #16);
@@ -39,15 +32,6 @@ def interp_value_grad(prob, lo, px, py, swapped):  # pragma: no cover - numba
     p10 = prob[y0, x0 + 1]
     p01 = prob[y0 + 1, x0]
     p11 = prob[y0 + 1, x0 + 1]
-    if lo.shape[0] > 0:  # (a zero-filled cache: its never-written cells read as 0.5)
-        if p00 == 0.0 and lo[y0, x0] == 0.0:
-            p00 = np.float32(0.5)
-        if p10 == 0.0 and lo[y0, x0 + 1] == 0.0:
-            p10 = np.float32(0.5)
-        if p01 == 0.0 and lo[y0 + 1, x0] == 0.0:
-            p01 = np.float32(0.5)
-        if p11 == 0.0 and lo[y0 + 1, x0 + 1] == 0.0:
-            p11 = np.float32(0.5)
     m = (1.0 - fy) * ((1.0 - fx) * p00 + fx * p10) + fy * ((1.0 - fx) * p01 + fx * p11)
     if swapped:
         mx = (1.0 - fx) * (p10 - p00) + fx * (p11 - p01)
@@ -69,7 +53,7 @@ def interpolate(prob: np.ndarray, pts: np.ndarray, swapped: bool = False):  # pr
     gy = np.empty(n)
     gy[:] = 0.0
     for i in range(n):
-        v, a, b, _ = interp_value_grad(prob, _NO_LO, pts[i, 0], pts[i, 1], swapped)
+        v, a, b, _ = interp_value_grad(prob, pts[i, 0], pts[i, 1], swapped)
         m[i] = v
         gx[i] = a
         gy[i] = b

@@ -87,12 +87,8 @@ def _split_xy(pts):  # pragma: no cover - numba
     return xy
 
 
-#: a never-written cell's probability (float32 0.5) in a zero-filled cache (:attr:`GridLevel.lazy_prob`)
-_HALF = np.float32(0.5)
-
-
 @njit(cache=True)
-def _sums(prob, lo, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cover - numba
+def _sums(prob, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cover - numba
     """:func:`accumulate`'s pass over the points ``xy`` (2, n) (rows x and y, cells); without ``full`` only the cost
     (H, g untouched; Σ M and n_inside returned as 0); with ``full`` but without ``stats``, the cost, H and g (Σ M and
     n_inside returned as 0: two sums fewer a point, pass map38).
@@ -104,16 +100,11 @@ def _sums(prob, lo, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cov
     in-bounds flag; a scalar loop reads the four cells; a second branch-free loop computes each point's eleven
     terms (an out-of-bounds point's: cost 1, the others +0.0 — adding +0.0 to a sum that starts at +0.0 leaves
     its bits unchanged: such a sum is never −0.0); the last loop adds them up in point order. An out-of-bounds
-    point reads cell 0 (in the array: a map with a point inside has w, h ≥ 2) and its values are not used.
-
-    ``lo``: the level's log-odds when its probability cache is zero-filled (:attr:`GridLevel.lazy_prob`: a stored
-    +0.0 or −0.0 on a cell whose log-odds is 0 reads as 0.5, :func:`_cell_prob`), else an empty array."""
+    point reads cell 0 (in the array: a map with a point inside has w, h ≥ 2) and its values are not used."""
     c = math.cos(th)
     s = math.sin(th)
     h, w = prob.shape
     flat = np.ascontiguousarray(prob).reshape(-1)  # (a view of the level's C-contiguous cache)
-    lazy = lo.shape[0] > 0
-    lflat = np.ascontiguousarray(lo).reshape(-1)
     xmax = w - 2
     ymax = h - 2
     n = xy.shape[1]
@@ -160,28 +151,12 @@ def _sums(prob, lo, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cov
             fb[2, j] = 1.0 if inb else 0.0
             fb[3, j] = -s * sx - c * sy
             fb[4, j] = c * sx - s * sy
-        if lazy:  # (a zero-filled cache: its never-written cells read as 0.5, the values of a 0.5-filled one;
-            # both loads and a select, no branch: a quarter or more of the cells read are unknown, unpredictably)
-            for j in range(m):
-                k = kb[j]
-                k1 = k + np.uint64(1)
-                k2 = k + uw
-                k3 = k2 + np.uint64(1)
-                q0 = flat[k]
-                q1 = flat[k1]
-                q2 = flat[k2]
-                q3 = flat[k3]
-                qb[0, j] = _HALF if (q0 == 0.0) & (lflat[k] == 0.0) else q0
-                qb[1, j] = _HALF if (q1 == 0.0) & (lflat[k1] == 0.0) else q1
-                qb[2, j] = _HALF if (q2 == 0.0) & (lflat[k2] == 0.0) else q2
-                qb[3, j] = _HALF if (q3 == 0.0) & (lflat[k3] == 0.0) else q3
-        else:
-            for j in range(m):
-                k = kb[j]
-                qb[0, j] = flat[k]
-                qb[1, j] = flat[k + np.uint64(1)]
-                qb[2, j] = flat[k + uw]
-                qb[3, j] = flat[k + uw + np.uint64(1)]
+        for j in range(m):
+            k = kb[j]
+            qb[0, j] = flat[k]
+            qb[1, j] = flat[k + np.uint64(1)]
+            qb[2, j] = flat[k + uw]
+            qb[3, j] = flat[k + uw + np.uint64(1)]
         for j in range(m):
             fx = fb[0, j]
             fy = fb[1, j]
@@ -257,17 +232,17 @@ def _sums(prob, lo, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cov
 
 
 @njit(cache=True, inline="always")
-def accumulate(prob, lo, pts, x, y, th, swapped, H, g):  # pragma: no cover - numba
+def accumulate(prob, pts, x, y, th, swapped, H, g):  # pragma: no cover - numba
     """Fill H (3, 3) and g (3,) at map pose (x, y, θ); return (cost, Σ M, n_inside).
 
     cost = Σ (1−M)² over all points, out-of-bounds points counting M = 0;
     out-of-bounds points add nothing to H, g (as getCompleteHessianDerivs).
     """
-    return _sums(prob, lo, _split_xy(pts), x, y, th, swapped, np.bool_(True), np.bool_(True), H, g)
+    return _sums(prob, _split_xy(pts), x, y, th, swapped, np.bool_(True), np.bool_(True), H, g)
 
 
 @njit(cache=True, inline="always")
-def fraction_below(prob, lo, pts, x, y, th, thresh):  # pragma: no cover - numba
+def fraction_below(prob, pts, x, y, th, thresh):  # pragma: no cover - numba
     """Fraction of points whose interpolated probability at map pose (x, y, θ) is in bounds and
     below ``thresh`` — endpoints that land in space the map knows to be free."""
     c = math.cos(th)
@@ -276,7 +251,7 @@ def fraction_below(prob, lo, pts, x, y, th, thresh):  # pragma: no cover - numba
     for i in range(pts.shape[0]):
         sx = pts[i, 0]
         sy = pts[i, 1]
-        m, _, _, inside = interp_value_grad(prob, lo, c * sx - s * sy + x, s * sx + c * sy + y, np.bool_(False))
+        m, _, _, inside = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, np.bool_(False))
         if inside and m < thresh:
             n += 1
     return n / max(pts.shape[0], 1)
@@ -347,7 +322,7 @@ def _scaled_rows(pts_m, res):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _match_core(prob, lo, xy, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
+def _match_core(prob, xy, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
                 prior, lam_p, H_out, keep, res, i0, j0):  # pragma: no cover - numba
     """:func:`match_level`'s iterations on the points ``xy`` (2, n) (rows x and y, cells: :func:`_split_xy` of
     match_level's); returns (x, y, θ, accepted steps, cost, Σ M, n_inside) with H at the
@@ -382,7 +357,7 @@ def _match_core(prob, lo, xy, pose, n_iter, swapped, use_lm, lam0, lam_max, max_
                 use_prior = True
     gp = _stack_array(np.float64, 1, 3)[0]
     gp[:] = 0.0
-    raw, summ, n_in = _sums(prob, lo, xy, x, y, th, swapped, np.bool_(True), keep, H, g)
+    raw, summ, n_in = _sums(prob, xy, x, y, th, swapped, np.bool_(True), keep, H, g)
     cost = raw
     if use_prior:
         cost += _prior_cost(x, y, th, prior, lam_p)
@@ -433,7 +408,7 @@ def _match_core(prob, lo, xy, pose, n_iter, swapped, use_lm, lam0, lam_max, max_
             # iterations needs them only when the caller keeps this pose's H
             ends = it == n_iter - 1 or (nt < _CONVERGED_CELLS and abs(d[2]) < _CONVERGED_RAD)
             full = not ends or (keep and _round_trips(nx, ny, nth, res, i0, j0))
-            new_raw, new_summ, new_in = _sums(prob, lo, xy, nx, ny, nth, swapped, full, keep, H2, g2)
+            new_raw, new_summ, new_in = _sums(prob, xy, nx, ny, nth, swapped, full, keep, H2, g2)
             new_cost = new_raw
             if use_prior:
                 new_cost += _prior_cost(nx, ny, nth, prior, lam_p)
@@ -454,7 +429,7 @@ def _match_core(prob, lo, xy, pose, n_iter, swapped, use_lm, lam0, lam_max, max_
                     break
         else:
             x, y, th = nx, ny, nth
-            raw, summ, n_in = _sums(prob, lo, xy, x, y, th, swapped, np.bool_(True), keep, H, g)
+            raw, summ, n_in = _sums(prob, xy, x, y, th, swapped, np.bool_(True), keep, H, g)
             cost = raw
             if use_prior:
                 cost += _prior_cost(x, y, th, prior, lam_p)
@@ -466,7 +441,7 @@ def _match_core(prob, lo, xy, pose, n_iter, swapped, use_lm, lam0, lam_max, max_
 
 
 @njit(cache=True)
-def match_level(prob, lo, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
+def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
                 prior, lam_p):  # pragma: no cover
     """Run ``n_iter`` GN/LM steps on one level from map pose ``pose`` (x, y cells, θ rad).
 
@@ -480,8 +455,8 @@ def match_level(prob, lo, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max
     """
     H = np.empty((3, 3))
     H[:] = 0.0
-    x, y, th, n_acc, _, _, _ = _match_core(prob, lo, _split_xy(pts), pose, n_iter, swapped, use_lm, lam0, lam_max,
-                                           max_rot, max_trans, prior, lam_p, H, False, 1.0, 0.0, 0.0)
+    x, y, th, n_acc, _, _, _ = _match_core(prob, _split_xy(pts), pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
+                                           max_trans, prior, lam_p, H, False, 1.0, 0.0, 0.0)
     out = np.empty(3)
     out[0] = x
     out[1] = y
@@ -490,8 +465,8 @@ def match_level(prob, lo, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max
 
 
 @njit(cache=True)
-def match_pyramid(prob0, prob1, prob2, lo0, lo1, lo2, geo, pts_m, start, it_coarse, it_finest, swapped, use_lm,
-                  lam0, lam_max, max_rot, max_trans, use_prior, prior_world, lam_ps, want_fit, free_thresh, H_out,
+def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, swapped, use_lm, lam0, lam_max,
+                  max_rot, max_trans, use_prior, prior_world, lam_ps, want_fit, free_thresh, H_out,
                   pose, support_thresh):  # pragma: no cover
     """:func:`match_multires` on a map of at most three levels in one call (the same arithmetic as its Python
     loop): ``prob0`` … ``prob2`` the levels' probability caches (finest first; unused ones any array), ``geo``
@@ -542,9 +517,8 @@ def match_pyramid(prob0, prob1, prob2, lo0, lo1, lo2, geo, pts_m, start, it_coar
             pp[2] = mp[2]
         xy = _scaled_rows(pts_m, res)  # (the level's points as rows, made once per level)
         prob = prob0 if k == 0 else (prob1 if k == 1 else prob2)
-        lo = lo0 if k == 0 else (lo1 if k == 1 else lo2)
         # (only the finest level's H at its result is read, by the evaluation below)
-        x, y, th, _, raw, summ, n_in = _match_core(prob, lo, xy, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
+        x, y, th, _, raw, summ, n_in = _match_core(prob, xy, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
                                                    max_trans, pp, lam_ps[k], Hk, want_fit and k == 0 and not swapped,
                                                    res, i0, j0)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
@@ -566,8 +540,8 @@ def match_pyramid(prob0, prob1, prob2, lo0, lo1, lo2, geo, pts_m, start, it_coar
     wth = (pose[2] + math.pi) % (2.0 * math.pi) - math.pi  # (the wrapped θ of Pose2D(x, y, wrap_angle(θ)))
     if geo[fl, 3] == 0.0:
         res = geo[fl, 0]
-        free = fraction_below(prob1 if fl == 1 else prob0, lo1 if fl == 1 else lo0, pts_m / res,
-                              pose[0] / res - geo[fl, 1], pose[1] / res - geo[fl, 2], wth, free_thresh)
+        free = fraction_below(prob1 if fl == 1 else prob0, pts_m / res, pose[0] / res - geo[fl, 1],
+                              pose[1] / res - geo[fl, 2], wth, free_thresh)
     res = geo[0, 0]
     m0 = pose[0] / res - geo[0, 1]
     m1 = pose[1] / res - geo[0, 2]
@@ -576,7 +550,7 @@ def match_pyramid(prob0, prob1, prob2, lo0, lo1, lo2, geo, pts_m, start, it_coar
     k_sup = 0
     if support_thresh == support_thresh:  # (not NaN) support_at's arithmetic: (x / res − i0, y / res − j0, θ)
         stride = max(1, pts_m.shape[0] // _SUPPORT_POINTS)
-        n_sup, k_sup = _support_kernel(prob0, lo0, pts_m, stride, 1.0 / res, m0, m1, wth, support_thresh,
+        n_sup, k_sup = _support_kernel(prob0, pts_m, stride, 1.0 / res, m0, m1, wth, support_thresh,
                                        np.int64(_N_BINS))  # (an int64, not a literal: the Python call's signature)
         n_sup *= stride
     if last0 and _same_float(m0, lx) and _same_float(m1, ly) and _same_float(m2, lth):
@@ -588,7 +562,7 @@ def match_pyramid(prob0, prob1, prob2, lo0, lo1, lo2, geo, pts_m, start, it_coar
     g[:] = 0.0
     # (accumulate's pass on level 0's rows made in one go; np.bool_, not literals: _match_core's signature of _sums)
     yes = np.bool_(True)
-    cost, summ, n_in = _sums(prob0, lo0, _scaled_rows(pts_m, res), m0, m1, m2, np.bool_(False), yes, yes, H_out, g)
+    cost, summ, n_in = _sums(prob0, _scaled_rows(pts_m, res), m0, m1, m2, np.bool_(False), yes, yes, H_out, g)
     return True, cost, summ, n_in, free, n_sup, k_sup
 
 
@@ -639,8 +613,7 @@ def evaluate(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, swappe
     if level.empty or pts_m.shape[0] == 0:
         return LevelFit(H, float(pts_m.shape[0]), 0.0, 0)
     mp = level.pose_to_map(pose_world)
-    cost, summ, n_in = accumulate(level.prob, level.prob_lo, pts_m / level.resolution, mp[0], mp[1], mp[2], swapped,
-                                  H, g)
+    cost, summ, n_in = accumulate(level.prob, pts_m / level.resolution, mp[0], mp[1], mp[2], swapped, H, g)
     return LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in))
 
 
@@ -697,12 +670,10 @@ def match_multires(
         else:
             lam_ps, pw = _ZERO_PRIOR_VIEWS[n_lv], pose
         p0 = levels[0].prob
-        q0 = levels[0].prob_lo
         H = np.empty((3, 3))
         out = np.empty(3)  # (filled by the kernel: a new array is cheaper made here than returned from numba)
         fitted, cost, summ, n_in, free, n_sup, k_sup = match_pyramid(
-            p0, levels[1].prob if n_lv > 1 else p0, levels[2].prob if n_lv > 2 else p0, q0,
-            levels[1].prob_lo if n_lv > 1 else q0, levels[2].prob_lo if n_lv > 2 else q0, geo, pts_m, pose,
+            p0, levels[1].prob if n_lv > 1 else p0, levels[2].prob if n_lv > 2 else p0, geo, pts_m, pose,
             iterations_coarse, iterations_finest, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
             use_prior, pw, lam_ps, fit is not None, free_thresh, H, out,
             math.nan if support_thresh is None else support_thresh,
@@ -728,8 +699,8 @@ def match_multires(
         else:
             pp, lam_k = mp, _ZERO3
         out, _ = match_level(
-            lv.prob, lv.prob_lo, pts_m / lv.resolution, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
-            max_trans_cells, pp, lam_k,
+            lv.prob, pts_m / lv.resolution, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
+            pp, lam_k,
         )
         if not (math.isfinite(out[0]) and math.isfinite(out[1]) and math.isfinite(out[2])):
             return np.full(3, np.nan)
@@ -744,7 +715,7 @@ def free_fraction(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, t
     if level.empty or pts_m.shape[0] == 0:
         return 0.0
     mp = level.pose_to_map(pose_world)
-    return float(fraction_below(level.prob, level.prob_lo, pts_m / level.resolution, mp[0], mp[1], mp[2], thresh))
+    return float(fraction_below(level.prob, pts_m / level.resolution, mp[0], mp[1], mp[2], thresh))
 
 
 def covariance_world(hessian: np.ndarray, sigma2: float, resolution: float) -> np.ndarray:
@@ -842,7 +813,7 @@ def _spread_kernel(pts, use, nb):  # pragma: no cover - numba
 
 
 @njit(cache=True, inline="always")
-def _support_kernel(prob, lo, pts_m, stride, inv_res, x, y, th, thresh, nb):  # pragma: no cover - numba
+def _support_kernel(prob, pts_m, stride, inv_res, x, y, th, thresh, nb):  # pragma: no cover - numba
     """Over every ``stride``-th laser-frame point (m): count those whose interpolated probability at
     map pose (x cells, y cells, θ) exceeds ``thresh``; return (count, bearing bins they occupy)."""
     c = math.cos(th)
@@ -854,7 +825,7 @@ def _support_kernel(prob, lo, pts_m, stride, inv_res, x, y, th, thresh, nb):  # 
     for i in range(0, pts_m.shape[0], stride):
         sx = pts_m[i, 0] * inv_res
         sy = pts_m[i, 1] * inv_res
-        m, _, _, inside = interp_value_grad(prob, lo, c * sx - s * sy + x, s * sx + c * sy + y, np.bool_(False))
+        m, _, _, inside = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, np.bool_(False))
         if inside and m > thresh:
             n += 1
             b = _bearing_bin(pts_m[i, 0], pts_m[i, 1], nb)
@@ -887,8 +858,8 @@ def support(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, thresh:
         return 0, 0.0
     stride = max(1, pts_m.shape[0] // _SUPPORT_POINTS)
     mp = level.pose_to_map(pose_world)
-    n, bins = _support_kernel(level.prob, level.prob_lo, pts_m, stride, 1.0 / level.resolution, mp[0], mp[1], mp[2],
-                              thresh, _N_BINS)
+    n, bins = _support_kernel(level.prob, pts_m, stride, 1.0 / level.resolution, mp[0], mp[1], mp[2], thresh,
+                              _N_BINS)
     return int(n) * stride, bins * (2.0 * math.pi / _N_BINS)
 
 
@@ -900,8 +871,8 @@ def support_at(level: GridLevel, pts_m: np.ndarray, x: float, y: float, theta: f
         return 0, 0.0
     stride = max(1, pts_m.shape[0] // _SUPPORT_POINTS)
     r = level.resolution
-    n, bins = _support_kernel(level.prob, level.prob_lo, pts_m, stride, 1.0 / r, float(x) / r - level.i0,
-                              float(y) / r - level.j0, float(theta), thresh, _N_BINS)
+    n, bins = _support_kernel(level.prob, pts_m, stride, 1.0 / r, float(x) / r - level.i0, float(y) / r - level.j0,
+                              float(theta), thresh, _N_BINS)
     return int(n) * stride, bins * (2.0 * math.pi / _N_BINS)
 
 

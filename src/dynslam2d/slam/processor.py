@@ -258,7 +258,6 @@ class HectorSlam:
             c.map_resolution, c.map_levels, c.logodds_free, c.logodds_occupied,
             c.occupied_logodds_cap, c.map_growth_margin, int(c.max_map_memory_mb * 1e6),
             c.grazing_stop_cells, c.grazing_min_incidence_deg,
-            lazy_prob=True,  # (the probability caches zero-filled: pages no ray reached hold no memory; pass mem42)
         )
         self.counts: Counter[str] = Counter()
         self.n_scans = 0
