@@ -15,6 +15,11 @@ from pathlib import Path
 
 import pytest
 
+#: The suite tests numba's JIT kernels (their compile clock, cache, manifest, IR), in this process and in the
+#: processes it starts, even when the user has built the kernels ahead of time (``dynslam2d kernels build``): a valid
+#: AOT module would replace them. The AOT path has its own tests (tests/test_jitaot.py), which set the mode per process.
+os.environ["DYNSLAM2D_KERNELS"] = "jit"
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("DYNSLAM2D_SHARED_DATA", REPO_ROOT.parent / "shared" / "data"))
 
