@@ -227,6 +227,9 @@ def test_kernels_status_and_clear_commands(built: Path, tmp_path: Path) -> None:
                          capture_output=True, text=True, timeout=120)
     row = json.loads(res.stdout)
     assert row["valid"] and row["used"] and row["kernels"] >= 30 and row["folder"] == str(built)
+    # the build left its module under its content-hash name, the sidecar naming it, its lock file: nothing else
+    assert sorted(p.name for p in built.iterdir()) == sorted([jitaot.SIDECAR, jitaot.LOCK, row["file"]])
+    assert row["file"].startswith(f"{jitaot.MODULE_NAME}-{row['sha256'][:16]}.") and row["numba"] and row["built"]
     empty = tmp_path / "none"
     res = subprocess.run([sys.executable, "-m", "dynslam2d", "kernels", "status", "--json"], env=_env(empty),
                          capture_output=True, text=True, timeout=120)
@@ -271,3 +274,20 @@ def test_types_the_module_lacks_fall_back_to_numba(built: Path) -> None:
     assert res["auto"]["started_without_numba"] and res["auto"]["numba"]
     assert res["auto"]["module_kernel"] == "CPUDispatcher"  # the module's global is numba's dispatcher now
     assert res["auto"]["bytes"] == res["jit"]["bytes"]
+
+
+def test_batch_workers_use_the_aot_module(built: Path, tmp_path: Path) -> None:
+    # every process of `dynslam2d batch -j 2` (the command and its two spawned workers) lists its imports on stderr;
+    # with a valid module none imports numba, with DYNSLAM2D_KERNELS=jit the workers do (the probe sees them)
+    imported = {}
+    for mode in ("auto", "jit"):
+        env = dict(_env(built, mode), PYTHONPROFILEIMPORTTIME="1")
+        res = subprocess.run([sys.executable, "-m", "dynslam2d", "batch", "sim:paper", "--set",
+                              "filter.mode=none,box", "--duration", "2", "-j", "2", "-o", str(tmp_path / mode)],
+                             env=env, capture_output=True, text=True, timeout=600)
+        assert res.returncode == 0, res.stderr[-3000:]
+        rows = [ln.rsplit("|", 1)[-1].strip() for ln in res.stderr.splitlines() if ln.startswith("import time:")]
+        imported[mode] = {"numba": rows.count("numba"), "llvmlite": rows.count("llvmlite"),
+                          "workers": rows.count("dynslam2d.slam.matcher")}
+    assert imported["auto"]["numba"] == imported["auto"]["llvmlite"] == 0, imported
+    assert imported["auto"]["workers"] >= 2 and imported["jit"]["numba"] >= 2, imported

@@ -1734,12 +1734,14 @@ def kernels_build(
     a C compiler and setuptools). Later runs load it instead of numba: no compile, less memory."""
     import subprocess
 
-    from dynslam2d.jitaot import MODE_ENV, aot_dir, build_requirements
+    from dynslam2d.jitaot import MODE_ENV, aot_dir, build_lock, build_requirements
 
     why = build_requirements()
     if why:
         raise DynSlamError(why)
     folder = aot_dir()
+    with build_lock(folder):  # at once: a folder that cannot be written, another build running (the child locks)
+        pass
     env = dict(os.environ, **{MODE_ENV: "jit", "DYNSLAM2D_COMPILE_WORKER": "0"})
     child = "import sys; from dynslam2d.kernelbuild import _child_main; sys.exit(_child_main(sys.argv))"
     cmd = [sys.executable, "-c", child, str(folder), cpu, f"{duration:g}", *(inputs or [])]
@@ -1749,7 +1751,8 @@ def kernels_build(
     with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), console=err_console,
                   disable=quiet) as bar:
         task = bar.add_task("building kernels", total=None)
-        with subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
+        with subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc, \
+                _note_interrupt("kernels build stopped: the previous kernel module (if any) is still in use"):
             assert proc.stdout is not None
             compiled = total = 0
             for line in proc.stdout:
@@ -1781,6 +1784,16 @@ def kernels_build(
                   f"CPU {info['cpu_target']} in {info['build_s']:.0f} s: {folder}")
 
 
+@contextlib.contextmanager
+def _note_interrupt(message: str) -> Iterator[None]:
+    """Print ``message`` on stderr when Ctrl-C interrupts the block (then interrupted as before)."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        err_console.print(Text(message, style="yellow"))
+        raise
+
+
 @kernels_app.command("status")
 def kernels_status(
     as_json: Annotated[bool, typer.Option("--json", help="Print the status as JSON.")] = False,
@@ -1793,7 +1806,8 @@ def kernels_status(
     row = {"folder": str(st.folder), "present": st.present, "valid": st.valid, "reason": st.reason,
            "used": used, "mode": st.mode, "kernels": len(st.info.get("exports", {})),
            "signatures": sum(len(v) for v in st.info.get("exports", {}).values()), "built": st.info.get("built"),
-           "cpu_target": st.info.get("cpu_target"), "bytes": st.info.get("bytes")}
+           "cpu_target": st.info.get("cpu_target"), "bytes": st.info.get("bytes"), "file": st.info.get("file"),
+           "numba": st.info.get("numba_imported"), "cpu": st.info.get("cpu_name"), "sha256": st.info.get("sha256")}
     if as_json:
         console.print_json(json.dumps(row))
         return
@@ -1802,8 +1816,9 @@ def kernels_status(
     table.add_row("module", "present" if st.present else "none")
     table.add_row("status", st.reason)
     if st.present and st.info:
-        table.add_row("kernels", f"{row['kernels']} ({row['signatures']} signatures), built {row['built']} for CPU "
-                                 f"{row['cpu_target']}")
+        table.add_row("file", f"{row['file']} ({(row['bytes'] or 0) / 2**20:.1f} MiB)")
+        table.add_row("kernels", f"{row['kernels']} ({row['signatures']} signatures), built {row['built']} with "
+                                 f"numba {row['numba']} for CPU {row['cpu_target']} ({row['cpu'] or 'unknown'})")
     table.add_row("runs use", "the AOT kernels" if used else
                   f"numba's JIT kernels ({MODE_ENV}=jit)" if st.valid else "numba's JIT kernels")
     _show(table)
@@ -1811,7 +1826,8 @@ def kernels_status(
 
 @kernels_app.command("clear")
 def kernels_clear() -> None:
-    """Delete the AOT kernel module: runs use numba's JIT kernels again."""
+    """Delete the AOT kernel module (every file a build made in its folder, nothing else): runs use numba's JIT
+    kernels again."""
     from dynslam2d.jitaot import aot_dir, clear
 
     gone = clear()

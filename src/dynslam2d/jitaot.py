@@ -4,7 +4,9 @@
 numba's ``numba.pycc`` with a C compiler) into one extension module for this machine's CPU, in the kernel cache
 folder (:func:`aot_dir`, beside numba's cache, so it survives reinstalls), with a sidecar JSON that holds its key
 (:func:`current_key`: the kernel sources' fingerprint, the numba version it was built with, the Python version and
-the CPU's identity) and its exports (kernel, export name, numba argument types as text).
+the CPU's identity), its exports (kernel, export name, numba argument types as text) and the module file's name,
+size and SHA-256. :func:`install` writes the module under its content-hash name and then the sidecar in one rename,
+under the folder's lock (:func:`build_lock`): a run loads the module its sidecar names, checked, or none.
 
 When that module is present and its key is this process's (:func:`table`), :mod:`dynslam2d.jitbox`'s kernel decorator
 returns, at import, a plain Python function per kernel that checks its arguments (:func:`make_kernel`) and calls
@@ -27,8 +29,10 @@ import hashlib
 import json
 import os
 import platform
+import re
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,10 +46,17 @@ MODE_ENV = "DYNSLAM2D_KERNELS"
 DIR_ENV = "DYNSLAM2D_KERNELS_DIR"
 #: The extension module's name (and file stem).
 MODULE_NAME = "dynslam2d_aot_kernels"
-#: The sidecar JSON beside it: key, exports, build figures.
+#: The sidecar JSON beside it: key, exports, build figures, and the module file it goes with (its name holds the
+#: file's content hash; the sidecar is written last, so replacing it switches module and sidecar at once).
 SIDECAR = f"{MODULE_NAME}.json"
-#: Format of the sidecar; a different one is not loaded.
-FORMAT = 1
+#: The lock file a build (and ``kernels clear``) holds: one build per folder at a time.
+LOCK = f"{MODULE_NAME}.lock"
+#: Format of the sidecar; a different one is not loaded (1: aot41's, a module file without content hash).
+FORMAT = 2
+#: The module files a build writes (``dynslam2d_aot_kernels-<16 hex of its SHA-256>.<abi>.so``; aot41's had no hash)
+MODULE_FILE = re.compile(rf"^{MODULE_NAME}(-[0-9a-f]{{16}})?(\.[A-Za-z0-9_-]+)*\.(so|pyd)$")
+#: A build's temporary files while it writes (never named by a sidecar, so never loaded; the next build removes them)
+TEMP_FILE = re.compile(rf"^\.{MODULE_NAME}.*\.tmp-[0-9]+-[0-9a-f]+$")
 
 
 class KernelArgumentError(DynSlamError, TypeError):
@@ -121,21 +132,44 @@ def _module_path(folder: Path, info: dict[str, Any]) -> Path:
     return folder / str(info.get("file", ""))
 
 
+def file_digest(path: Path) -> str:
+    """The SHA-256 of a file's content, hex (about 1 ms for the 1.4 MiB module)."""
+    with open(path, "rb") as fh:
+        return hashlib.sha256(fh.read()).hexdigest()
+
+
 def status(folder: Path | None = None) -> KernelsStatus:
-    """Whether ``folder`` (default :func:`aot_dir`) holds an AOT module this process would load, and if not why."""
+    """Whether ``folder`` (default :func:`aot_dir`) holds an AOT module this process would load, and if not why.
+
+    Valid: the sidecar's format is this version's, it names a module file (a plain name matching
+    :data:`MODULE_FILE`) whose size and SHA-256 are the sidecar's, and its key is :func:`current_key`. A folder that
+    cannot be read (permissions, a file in the way) is "no module": runs use numba's kernels."""
     folder = folder if folder is not None else aot_dir()
-    side = folder / SIDECAR
     md = mode()
+    try:
+        return _status(folder, md)
+    except OSError as exc:
+        return KernelsStatus(folder, False, False, f"cannot read {folder} ({exc.strerror or exc})", md)
+
+
+def _status(folder: Path, md: str) -> KernelsStatus:
+    side = folder / SIDECAR
     if not side.is_file():
         return KernelsStatus(folder, False, False, "no AOT module built (dynslam2d kernels build)", md)
     try:
         info = json.loads(side.read_text())
     except (OSError, ValueError) as exc:
         return KernelsStatus(folder, True, False, f"unreadable {SIDECAR} ({exc})", md)
-    if info.get("format") != FORMAT or not isinstance(info.get("exports"), dict):
-        return KernelsStatus(folder, True, False, "built by another version of dynslam2d", md, info)
-    if not _module_path(folder, info).is_file() or not str(info.get("file", "")):
+    if not isinstance(info, dict) or info.get("format") != FORMAT or not isinstance(info.get("exports"), dict):
+        return KernelsStatus(folder, True, False, "built by another version of dynslam2d (build again)", md,
+                             info if isinstance(info, dict) else {})
+    name = str(info.get("file", ""))
+    path = folder / name
+    if not MODULE_FILE.match(name) or not path.is_file():
         return KernelsStatus(folder, True, False, "the extension module file is missing", md, info)
+    if path.stat().st_size != info.get("bytes") or file_digest(path) != info.get("sha256"):
+        return KernelsStatus(folder, True, False, f"the module file {name} does not match its sidecar "
+                                                  "(build again)", md, info)
     key, now = info.get("key", {}), current_key()
     stale = [k for k in now if key.get(k) != now[k]]
     if stale:
@@ -340,8 +374,12 @@ def table() -> KernelTable | None:
         return _TABLE[0]
     loaded = None
     if mode() != "jit" and "numba" not in sys.modules:
-        st = status()
-        if st.valid:
+        # twice: a build that switched to a new module between this process reading the sidecar and loading the
+        # file it named has removed that file; the sidecar then names the new one
+        for _attempt in range(2):
+            st = status()
+            if not st.valid:
+                break
             import importlib.util
 
             path = _module_path(st.folder, st.info)
@@ -351,8 +389,11 @@ def table() -> KernelTable | None:
                     module = importlib.util.module_from_spec(spec)
                     spec.loader.exec_module(module)
                     loaded = KernelTable(module, st.info, st.folder)
+                break
             except (ImportError, OSError, AttributeError, ValueError):
                 loaded = None  # numba's kernels, as without a module
+                if path.is_file():
+                    break
     _TABLE.append(loaded)
     return loaded
 
@@ -463,12 +504,127 @@ def export_name(qual: str, k: int) -> str:
     return f"{mod.replace('.', '_')}__{name.replace('.', '_')}__{k}"
 
 
+def cpu_name() -> str:
+    """This CPU's model name from /proc/cpuinfo (``platform.processor()`` elsewhere), for ``kernels status``."""
+    try:
+        with open("/proc/cpuinfo", encoding="latin-1") as fh:
+            for line in fh:
+                key, _, value = line.partition(":")
+                if key.strip() in ("model name", "Model", "Processor"):
+                    return value.strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def unwritable(folder: Path, exc: OSError) -> str:
+    """The one-line error of a kernel folder that cannot be written."""
+    why = exc.strerror or type(exc).__name__
+    return (f"cannot write the kernel folder {folder} ({why}); set {DIR_ENV} to a writable folder "
+            f"(runs are not affected: they use numba's JIT kernels)")
+
+
+@contextmanager
+def build_lock(folder: Path) -> Iterator[None]:
+    """Hold ``folder``'s lock file (:data:`LOCK`, created with the folder) while a build or a clear changes it.
+
+    Raises :class:`BuildError` at once, with one line, when the folder cannot be written (naming it and
+    ``DYNSLAM2D_KERNELS_DIR``) or when another process holds the lock (a build running). An ``flock`` lock: the
+    system releases it when its process ends, however it ends (Ctrl-C, a crash), so no stale lock remains."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd = os.open(folder / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as exc:
+        raise BuildError(unwritable(folder, exc)) from None
+    try:
+        try:
+            import fcntl
+        except ImportError:  # (not a POSIX system: no lock; the sidecar's atomic switch still holds)
+            fcntl = None  # type: ignore[assignment]
+        if fcntl is not None:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = os.read(fd, 32).decode("ascii", "replace").strip() or "?"
+                raise BuildError(f"another `dynslam2d kernels build` (pid {holder}) is writing {folder}: wait for "
+                                 f"it to finish (the module it replaces stays in use until then)") from None
+            except OSError:
+                pass  # a file system without flock: the sidecar's atomic switch still holds
+        os.ftruncate(fd, 0)
+        os.lseek(fd, 0, os.SEEK_SET)
+        os.write(fd, str(os.getpid()).encode())  # (for the message of a second build)
+        yield
+    finally:
+        os.close(fd)
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file of this process in the same folder (:data:`TEMP_FILE`),
+    synced, then renamed over ``path``: a reader sees the old file or the new one, never a part."""
+    import secrets
+
+    tmp = path.parent / f".{path.name}.tmp-{os.getpid()}-{secrets.token_hex(4)}"
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def install(folder: Path, module_file: Path, info: dict[str, Any]) -> dict[str, Any]:
+    """Put the built extension ``module_file`` and its sidecar ``info`` into ``folder`` (call under
+    :func:`build_lock`); returns the sidecar written.
+
+    The module goes to a new file named by its content hash (``dynslam2d_aot_kernels-<16 hex>.<abi>.so``), then
+    the sidecar, which names that file with its size and SHA-256, replaces the old sidecar in one rename: a run
+    reads the old sidecar (and loads the old module, still there) or the new one (the new module, complete before).
+    Interrupted anywhere, the folder holds the previous valid pair, at most with an unnamed module file or a
+    temporary file that no sidecar names. After the switch the other module files and temporary files are removed
+    (a process that loaded one keeps its mapping; one about to load it reads the new sidecar again)."""
+    data = module_file.read_bytes()
+    digest = hashlib.sha256(data).hexdigest()
+    suffix = module_file.name[len(MODULE_NAME):] if module_file.name.startswith(MODULE_NAME) else ".so"
+    name = f"{MODULE_NAME}-{digest[:16]}{suffix}"
+    info = dict(info, format=FORMAT, file=name, bytes=len(data), sha256=digest)
+    _write_atomic(folder / name, data)
+    _write_atomic(folder / SIDECAR, json.dumps(info, indent=1).encode())  # the switch
+    try:
+        dfd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(dfd)  # the renames on disk before the old module goes
+        finally:
+            os.close(dfd)
+    except OSError:
+        pass
+    for path in folder.iterdir():
+        if path.name != name and (MODULE_FILE.match(path.name) or TEMP_FILE.match(path.name)):
+            try:
+                path.unlink()
+            except OSError:
+                pass
+    return info
+
+
 def clear(folder: Path | None = None) -> list[Path]:
-    """Delete the AOT module and its sidecar from ``folder`` (default :func:`aot_dir`); returns what it deleted."""
+    """Delete every file a build made in ``folder`` (default :func:`aot_dir`): the module files, the sidecar,
+    temporary files of an interrupted build and the lock file, nothing else; returns them. Raises
+    :class:`BuildError` while a build is running there or when the folder cannot be written."""
     folder = folder if folder is not None else aot_dir()
+    try:
+        if not folder.is_dir():
+            return []
+    except OSError:
+        return []
     gone = []
-    for path in sorted(folder.glob(f"{MODULE_NAME}*")) if folder.is_dir() else []:
-        if path.is_file():
-            path.unlink()
-            gone.append(path)
+    with build_lock(folder):
+        for path in sorted(folder.iterdir()):
+            if path.name == SIDECAR or MODULE_FILE.match(path.name) or TEMP_FILE.match(path.name):
+                if path.is_file():
+                    path.unlink()
+                    gone.append(path)
+        (folder / LOCK).unlink()  # last, while held: a build starting now makes a new lock file
     return gone

@@ -4,14 +4,15 @@ child process that uses numba's JIT kernels.
 The build runs representative inputs through ``dynslam2d run`` (:func:`representative_runs`), records the argument
 types of every kernel call from Python, adds :mod:`dynslam2d.jitmanifest`'s signatures and compiles each (kernel,
 types) with its return type through ``numba.pycc`` (pending deprecation in numba, kept until a replacement exists;
-docs/kernels.md) for this machine's CPU, then writes the module and its sidecar JSON (key and exports) atomically
-into :func:`dynslam2d.jitaot.aot_dir`. Progress goes to a callback; the child process writes it as JSON lines.
+docs/kernels.md) for this machine's CPU, then installs the module and its sidecar JSON (key and exports) into
+:func:`dynslam2d.jitaot.aot_dir` with one atomic switch (:func:`dynslam2d.jitaot.install`), holding the folder's
+lock (:func:`dynslam2d.jitaot.build_lock`) from the start: one build per folder at a time. Progress goes to a
+callback; the child process writes it as JSON lines.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import sys
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -21,12 +22,14 @@ from dynslam2d.errors import DynSlamError
 from dynslam2d.jitaot import (
     FORMAT,
     MODULE_NAME,
-    SIDECAR,
     BuildError,
     aot_dir,
+    build_lock,
     build_requirements,
+    cpu_name,
     current_key,
     export_name,
+    install,
     parse_types,
     table,
 )
@@ -109,17 +112,23 @@ def build(folder: Path | None = None, *, inputs: Iterable[str] = (), cpu: str = 
     :func:`representative_runs`, records the argument types of every kernel call from Python, adds the manifest's
     (:mod:`dynslam2d.jitmanifest`), and compiles each (kernel, types) with its return type through
     ``numba.pycc`` for ``cpu`` (LLVM's name; ``host`` this machine's). ``progress(stage, data)`` is told of each
-    step. Returns the sidecar's content. Raises :class:`BuildError` when the environment cannot build."""
-    import shutil
+    step. Returns the sidecar's content. Raises :class:`BuildError` when the environment cannot build, the folder
+    cannot be written or another build holds its lock; an interrupted build leaves the folder's previous module in
+    use (:func:`dynslam2d.jitaot.install`)."""
+    why = build_requirements()
+    if why:
+        raise BuildError(why)
+    folder = folder if folder is not None else aot_dir()
+    with build_lock(folder):  # before a minute of work: a clear error when another build runs
+        return _build(folder, inputs, cpu, progress or (lambda stage, data: None), duration)
+
+
+def _build(folder: Path, inputs: Iterable[str], cpu: str, note: Callable[[str, dict[str, Any]], None],
+           duration: float) -> dict[str, Any]:
     import tempfile
     import time
     import warnings
 
-    why = build_requirements()
-    if why:
-        raise BuildError(why)
-    note = progress or (lambda stage, data: None)
-    folder = folder if folder is not None else aot_dir()
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -215,18 +224,11 @@ def build(folder: Path | None = None, *, inputs: Iterable[str] = (), cpu: str = 
         finally:
             pycc_compiler.compile_extra = plain_compile_extra
         so = next(out.glob(f"{MODULE_NAME}*"))
-        folder.mkdir(parents=True, exist_ok=True)
-        info = {"format": FORMAT, "key": key, "file": so.name, "cpu_target": cpu,
+        info = {"format": FORMAT, "key": key, "cpu_target": cpu, "cpu_name": cpu_name(),
                 "numba_imported": numba.__version__, "exports": exports, "skipped": skipped,
-                "build_s": round(time.perf_counter() - t0, 1), "bytes": so.stat().st_size,
+                "build_s": round(time.perf_counter() - t0, 1),
                 "built": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
-        (folder / SIDECAR).unlink(missing_ok=True)  # no valid sidecar beside a half-copied module
-        tmp_so = folder / (so.name + ".tmp")
-        shutil.copyfile(so, tmp_so)
-        os.replace(tmp_so, folder / so.name)
-        tmp_side = folder / (SIDECAR + ".tmp")
-        tmp_side.write_text(json.dumps(info, indent=1))
-        os.replace(tmp_side, folder / SIDECAR)
+        info = install(folder, so, info)
     return info
 
 
