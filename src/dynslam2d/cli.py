@@ -1719,6 +1719,27 @@ kernels_app = typer.Typer(cls=_Group, help="The kernels compiled ahead of time f
 app.add_typer(kernels_app, name="kernels")
 
 
+def _kernel_build_child(argv: list[str]) -> int:
+    """The child process of ``dynslam2d kernels build``: ``python -c "...; _kernel_build_child(sys.argv)" FOLDER CPU
+    DURATION [INPUT ...]`` runs :func:`dynslam2d.kernelbuild.build` with its progress as JSON lines on stdout (what
+    the parent shows) and a last line ``{"stage": "done", "info": sidecar}`` or
+    ``{"stage": "error", "message": ...}``."""
+    from dynslam2d.kernelbuild import build
+
+    def note(stage: str, data: dict[str, Any]) -> None:
+        sys.stdout.write(json.dumps({"stage": stage, **data}) + "\n")
+        sys.stdout.flush()
+
+    folder, cpu, duration, *inputs = argv[1:]
+    try:
+        info = build(Path(folder), inputs=inputs, cpu=cpu, progress=note, duration=float(duration))
+    except DynSlamError as exc:
+        note("error", {"message": str(exc)})
+        return 2
+    note("done", {"info": info})
+    return 0
+
+
 @kernels_app.command("build")
 def kernels_build(
     inputs: Annotated[list[str] | None, typer.Option(
@@ -1743,7 +1764,7 @@ def kernels_build(
     with build_lock(folder):  # at once: a folder that cannot be written, another build running (the child locks)
         pass
     env = dict(os.environ, **{MODE_ENV: "jit", "DYNSLAM2D_COMPILE_WORKER": "0"})
-    child = "import sys; from dynslam2d.kernelbuild import _child_main; sys.exit(_child_main(sys.argv))"
+    child = "import sys; from dynslam2d.cli import _kernel_build_child; sys.exit(_kernel_build_child(sys.argv))"
     cmd = [sys.executable, "-c", child, str(folder), cpu, f"{duration:g}", *(inputs or [])]
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 

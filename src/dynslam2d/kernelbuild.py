@@ -7,18 +7,15 @@ types) with its return type through ``numba.pycc`` (pending deprecation in numba
 docs/kernels.md) for this machine's CPU, then installs the module and its sidecar JSON (key and exports) into
 :func:`dynslam2d.jitaot.aot_dir` with one atomic switch (:func:`dynslam2d.jitaot.install`), holding the folder's
 lock (:func:`dynslam2d.jitaot.build_lock`) from the start: one build per folder at a time. Progress goes to a
-callback; the child process writes it as JSON lines.
+callback (the command line's child process, ``dynslam2d.cli._kernel_build_child``, writes it as JSON lines).
 """
 
 from __future__ import annotations
 
-import json
-import sys
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-from dynslam2d.errors import DynSlamError
 from dynslam2d.jitaot import (
     FORMAT,
     MODULE_NAME,
@@ -230,25 +227,3 @@ def _build(folder: Path, inputs: Iterable[str], cpu: str, note: Callable[[str, d
                 "built": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
         info = install(folder, so, info)
     return info
-
-
-def _child_main(argv: list[str]) -> int:
-    """``python -c "...; _child_main(sys.argv)" FOLDER CPU DURATION [INPUT ...]``: :func:`build` with its progress as
-    JSON lines on stdout (what ``dynslam2d kernels build`` shows) and a last line ``{"done": sidecar}`` or
-    ``{"error": message}``."""
-    def note(stage: str, data: dict[str, Any]) -> None:
-        sys.stdout.write(json.dumps({"stage": stage, **data}) + "\n")
-        sys.stdout.flush()
-
-    folder, cpu, duration, *inputs = argv[1:]
-    try:
-        info = build(Path(folder), inputs=inputs, cpu=cpu, progress=note, duration=float(duration))
-    except DynSlamError as exc:
-        note("error", {"message": str(exc)})
-        return 2
-    note("done", {"info": info})
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(_child_main(sys.argv))
