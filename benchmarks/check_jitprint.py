@@ -16,7 +16,7 @@ after LLVM's optimisation; with ``--plain`` jitprint is not installed (llvmlite'
 (``PYTHONHASHSEED=0``) can be compared file by file (:func:`masked` hides object addresses).
 
     PYTHONPATH=src python benchmarks/check_jitprint.py [--out-dir DIR] [--dump DIR [--plain] [--asm]
-        [--callees-optimised]]
+        [--callees-optimised] [--numba-meminfos]]
 
 Not run by pytest (tests/test_jitprint.py runs the same check on a few kernels).
 """
@@ -232,6 +232,8 @@ def main() -> None:
     ap.add_argument("--asm", action="store_true", help="with --dump: also each library's assembly")
     ap.add_argument("--callees-optimised", action="store_true",
                     help="jitcache.CALLEE_OPTIMISED_IN_CALLER off: a lazy callee optimised before its callers link it")
+    ap.add_argument("--numba-meminfos", action="store_true",
+                    help="numba's own get_meminfos (jitprint.lean_meminfos not installed)")
     args = ap.parse_args()
     work = tempfile.mkdtemp(prefix="check_jitprint-")
     os.environ["NUMBA_CACHE_DIR"] = str(Path(work, "numba"))
@@ -240,6 +242,8 @@ def main() -> None:
 
     if args.callees_optimised:
         jitcache.CALLEE_OPTIMISED_IN_CALLER = False
+    if args.numba_meminfos:
+        jitprint.MEMINFO_SOURCES = {}  # (its install at the first compile: off)
     for name in ("plain_numba_errors", "load_blas_alone", "lean_numba_compile"):
         getattr(jitcache, name)()
     stats: dict[str, Any] = {}

@@ -274,8 +274,124 @@ def abi_sizes() -> bool:
     return True
 
 
+#: SHA-256 (first 16 hex digits) of the source of the numba 0.68 methods :func:`lean_meminfos` reproduces
+#: (``NRTContext.get_meminfos``) or relies on (the data models' ``traverse``: the member types it lists do not depend
+#: on the builder, and nothing is emitted until a getter is called).
+MEMINFO_SOURCES = {"NRTContext.get_meminfos": "4681e04e53a8b209", "DataModel.traverse": "08a7001b07cce7d1",
+                   "UniTupleModel.traverse": "124a6ba7aa2c09cb", "StructModel.traverse": "0d7305fcf43d2f37",
+                   "OptionalModel.traverse": "f2ca15e9f8af1561"}
+
+
+def _meminfo_sources() -> tuple[Any, tuple[Any, ...]] | None:
+    """numba's ``NRTContext.get_meminfos`` and the ``traverse`` methods named in :data:`MEMINFO_SOURCES` when their
+    sources are the ones checked; else None."""
+    import inspect
+
+    try:
+        from numba.core.datamodel import models
+        from numba.core.runtime import context
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return None
+    found = {"NRTContext.get_meminfos": context.NRTContext.get_meminfos,
+             "DataModel.traverse": models.DataModel.traverse, "UniTupleModel.traverse": models.UniTupleModel.traverse,
+             "StructModel.traverse": models.StructModel.traverse,
+             "OptionalModel.traverse": models.OptionalModel.traverse}
+    for name, func in found.items():
+        try:
+            source = inspect.getsource(func)
+        except (OSError, TypeError):
+            return None
+        if hashlib.sha256(source.encode()).hexdigest()[:16] != MEMINFO_SOURCES.get(name):
+            return None
+    return found["NRTContext.get_meminfos"], tuple(v for k, v in found.items() if k.endswith(".traverse"))
+
+
+#: Kernels (``module.function``) whose reference counts keep numba's own ``get_meminfos``, dead extracts included:
+#: in ``raycast.integrate_levels`` the dead extracts of an array's shape and strides, emitted at the ``incref`` right
+#: after a level's array is picked from a tuple, are where LLVM's common-subexpression elimination merges the
+#: kernel's later extracts of the same fields; without them the register allocation of its level loop changes and
+#: its map update was 3-5 % slower in lockstep (docs/speed.md, passes cmp40 and cmp43). Every other library's
+#: assembly is the same either way (``benchmarks/check_jitprint.py --dump DIR --asm [--numba-meminfos]``).
+NUMBA_MEMINFOS_IN = frozenset({"dynslam2d.slam.raycast.integrate_levels"})
+
+
+def _mangled_stems(name: str) -> tuple[str, str]:
+    """The starts of the mangled names numba gives function ``name`` (``module.function``) and its CPython wrapper,
+    without the ABI tags and argument types that follow (``B…`` / ``E…``)."""
+    from numba.core.funcdesc import default_mangler
+
+    stem = default_mangler(name, ())[:-1]  # ("_ZN9dynslam2d…16integrate_levelsE" without its "E")
+    return stem, "_ZN7cpython" + stem[3:]
+
+
+def lean_meminfos() -> bool:
+    """Have numba's reference-count lowering extract from a value only the members that hold a reference-counted
+    pointer; returns whether it changed numba (not when called again, nor when numba's sources differ).
+
+    ``NRTContext.get_meminfos`` (every ``incref`` / ``decref`` numba emits: ≈ 50 000 on a cold run of the README's
+    first command) walks the value's data model and, for every member, emits the member's ``extractvalue`` (an
+    optional's ``select``) before looking into it: all seven fields of an array's struct and every element of its
+    shape and strides tuples, of which only the meminfo pointer is used; the rest is dead code that llvmlite builds
+    and prints and LLVM parses and deletes. :func:`lean_get_meminfos` asks first whether a member's type can hold a
+    meminfo (the same walk over the models' member types, remembered per type) and emits the getter only for those:
+    the same list of ``(type, meminfo)``, the same ``incref`` / ``decref`` calls on the same values, without the dead
+    instructions. Only models whose ``traverse`` is one of numba's checked ones are skipped; any other member is
+    extracted as numba does, and so is every member in the kernels of :data:`NUMBA_MEMINFOS_IN`."""
+    found = _meminfo_sources()
+    if found is None or getattr(found[0], "_dynslam2d_meminfos", False):
+        return False
+    from numba.core.runtime import context
+
+    original, known = found
+    known_set = set(known)
+
+    def needs(dmm: Any, ty: Any) -> bool:
+        """Whether numba's ``get_meminfos`` can return a meminfo for a value of type ``ty`` (conservative: True)."""
+        memo = dmm.__dict__.setdefault("_dynslam2d_meminfo", {})
+        hit = memo.get(ty)
+        if hit is not None:
+            return hit
+        model = dmm[ty]
+        if type(model).traverse not in known_set:
+            memo[ty] = True
+            return True
+        memo[ty] = True  # (while walking: a type met again inside itself counts as holding one)
+        result = bool(model.has_nrt_meminfo()) or any(needs(dmm, member) for member, _ in model.traverse(None))
+        memo[ty] = result
+        return result
+
+    stems = tuple(stem for name in NUMBA_MEMINFOS_IN for stem in _mangled_stems(name))
+    kept: dict[str, bool] = {}
+
+    def lean_get_meminfos(self: Any, builder: Any, ty: Any, val: Any) -> list[Any]:
+        fname = builder.function.name
+        keep = kept.get(fname)
+        if keep is None:
+            keep = kept[fname] = any(fname.startswith(s) and fname[len(s):len(s) + 1] in ("B", "E") for s in stems)
+        if keep:
+            return original(self, builder, ty, val)
+        dmm = self._context.data_model_manager
+        if not needs(dmm, ty):
+            return []
+        datamodel = dmm[ty]
+        members = datamodel.traverse(builder)
+        meminfos = []
+        if datamodel.has_nrt_meminfo():
+            mi = datamodel.get_nrt_meminfo(builder, val)
+            meminfos.append((ty, mi))
+        for mtyp, getter in members:
+            if needs(dmm, mtyp):
+                meminfos.extend(self.get_meminfos(builder, mtyp, getter(val)))
+        return meminfos
+
+    lean_get_meminfos._dynslam2d_meminfos = True  # type: ignore[attr-defined]
+    lean_get_meminfos.__wrapped__ = original  # type: ignore[attr-defined]
+    context.NRTContext.get_meminfos = lean_get_meminfos  # type: ignore[method-assign]
+    return True
+
+
 def install() -> bool:
-    """Install :func:`fast_blocks` and :func:`abi_sizes`; returns whether either was installed. Called by
-    :func:`dynslam2d.jitcache.lean_numba_compile` at the first compile."""
-    done = [fast_blocks(), abi_sizes()]
+    """Install :func:`fast_blocks`, :func:`abi_sizes` and :func:`lean_meminfos`; returns whether any was installed.
+    Called by :func:`dynslam2d.jitcache.lean_numba_compile` at the first compile."""
+    done = [fast_blocks(), abi_sizes(), lean_meminfos()]
     return any(done)
