@@ -16,7 +16,7 @@ after LLVM's optimisation; with ``--plain`` jitprint is not installed (llvmlite'
 (``PYTHONHASHSEED=0``) can be compared file by file (:func:`masked` hides object addresses).
 
     PYTHONPATH=src python benchmarks/check_jitprint.py [--out-dir DIR] [--dump DIR [--plain] [--asm]
-        [--callees-optimised] [--numba-meminfos]]
+        [--callees-optimised] [--numba-meminfos]] [--input PATH]
 
 Not run by pytest (tests/test_jitprint.py runs the same check on a few kernels).
 """
@@ -232,6 +232,7 @@ def main() -> None:
     ap.add_argument("--asm", action="store_true", help="with --dump: also each library's assembly")
     ap.add_argument("--callees-optimised", action="store_true",
                     help="jitcache.CALLEE_OPTIMISED_IN_CALLER off: a lazy callee optimised before its callers link it")
+    ap.add_argument("--input", help="run this input instead of the README's sim:paper (a path or sim:NAME)")
     ap.add_argument("--numba-meminfos", action="store_true",
                     help="numba's own get_meminfos (jitprint.lean_meminfos not installed)")
     args = ap.parse_args()
@@ -258,7 +259,8 @@ def main() -> None:
         stats = shadow(out_dir=args.out_dir)
     from dynslam2d.cli import main as cli
 
-    sys.argv = ["dynslam2d", "run", "--out", str(Path(work, "out")), "--force", "-q"]
+    sys.argv = ["dynslam2d", "run", *([args.input] if args.input else []), "--out", str(Path(work, "out")), "--force",
+                "-q"]
     try:
         cli()
     except SystemExit:
