@@ -131,9 +131,9 @@ try:
     main()
 except SystemExit as exc:
     assert exc.code in (0, None), exc.code
-from dynslam2d import jitbox
+from dynslam2d import jitaot, jitbox
 print(json.dumps({"numba": "numba" in sys.modules, "llvmlite": "llvmlite" in sys.modules,
-                  "aot": jitbox.AOT is not None}))
+                  "aot": jitbox.AOT is not None, "in_use": jitaot.in_use(), "note": jitaot.unused_reason("IN")}))
 """
 
 #: Result files of a run that hold what the kernels computed (the summary and run.json hold timings).
@@ -149,9 +149,14 @@ def test_aot_run_gives_the_jit_runs_bytes_without_numba(built: Path, tmp_path: P
                              capture_output=True, text=True, timeout=600)
         assert res.returncode == 0, res.stderr[-2000:]
         out[mode] = json.loads(res.stdout.strip().splitlines()[-1])
-    assert out["jit"] == {"numba": True, "llvmlite": True, "aot": False}
-    assert out["auto"] == {"numba": False, "llvmlite": False, "aot": True}
-    assert out["fallback"] == {"numba": True, "llvmlite": True, "aot": False}  # switched to numba's kernels
+    notes = {mode: out[mode].pop("note") for mode in out}
+    assert out["jit"] == {"numba": True, "llvmlite": True, "aot": False, "in_use": "jit"}
+    assert out["auto"] == {"numba": False, "llvmlite": False, "aot": True, "in_use": "aot"}
+    # switched to numba's kernels by the first call (float32 ranges), and the run's note names that kernel
+    assert out["fallback"] == {"numba": True, "llvmlite": True, "aot": False, "in_use": "aot+jit"}
+    assert notes["jit"] is None and notes["auto"] is None  # (jit: the user's choice, nothing to say)
+    assert "lack the argument types of a call of dynslam2d.detect.freespace._ref_arrays" in notes["fallback"]
+    assert "dynslam2d kernels build --input IN" in notes["fallback"]
     compared = 0
     for name in RESULTS:
         a = tmp_path / "jit" / name
@@ -291,3 +296,29 @@ def test_batch_workers_use_the_aot_module(built: Path, tmp_path: Path) -> None:
                           "workers": rows.count("dynslam2d.slam.matcher")}
     assert imported["auto"]["numba"] == imported["auto"]["llvmlite"] == 0, imported
     assert imported["auto"]["workers"] >= 2 and imported["jit"]["numba"] >= 2, imported
+
+
+def test_ray_workers_use_the_kernels_the_driver_chose(built: Path, tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    # Ray started here before the choice: its workers inherit this process's environment (the suite's
+    # DYNSLAM2D_KERNELS=jit, no kernel folder), so only the tasks' runtime_env gives them the driver's later one
+    ray = pytest.importorskip("ray", reason="Ray is not installed (the optional extra: pip install "
+                                            "'dynslam2d[cluster]')")
+    from dynslam2d.batch import make_jobs, run_batch
+
+    started = not ray.is_initialized()
+    if started:
+        ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)
+    kernels = {}
+    try:
+        for mode in ("auto", "jit"):
+            monkeypatch.setenv(jitaot.MODE_ENV, mode)
+            monkeypatch.setenv(jitaot.DIR_ENV, str(built))
+            res = run_batch(make_jobs(["sim:paper"], [], None, {"duration": 2.0}), tmp_path / mode, ray="auto")
+            assert [o.status for o in res.outcomes] == ["done"], [o.error for o in res.outcomes]
+            kernels[mode] = res.outcomes[0].value["kernels"]  # the worker's jitaot.in_use()
+            assert json.loads((tmp_path / mode / "batch.json").read_text())["runs"][0]["kernels"] == kernels[mode]
+    finally:
+        if started:
+            ray.shutdown()
+    assert kernels == {"auto": "aot", "jit": "jit"}

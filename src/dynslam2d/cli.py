@@ -695,7 +695,7 @@ def run(
     console.print(Text.assemble("results in ", (str(out), "bold")))
     if write_bag is not None:
         console.print(Text.assemble("bag for RViz / Foxglove: ", (str(write_bag), "bold"), " (docs/ros.md)"))
-    _suggest_kernel_build(compiling)
+    _suggest_kernel_build(compiling, input)
 
 
 def _check_run_options(input: str, topic: str | None, viewer: str, numbers: dict[str, float | None]) -> None:
@@ -995,10 +995,17 @@ def _say_if_compiling(show: bool, cold: bool) -> None:
         err_console.print(Text("compiling kernels (first run only; later runs start at once) …", style="yellow"))
 
 
-def _suggest_kernel_build(compiled: bool) -> None:
-    """After a run that compiled the kernels (numba's JIT), one line on stderr on the kernels built ahead of time:
-    later runs then start without numba (docs/kernels.md). Nothing after a run that loaded them."""
-    if compiled:
+def _suggest_kernel_build(compiled: bool, input: str = "RECORDING") -> None:
+    """After a run, one dim line on stderr on the kernels built ahead of time (docs/kernels.md): why a built module
+    was not used (stale after an upgrade, naming the part of its key that differs; a call of types it lacks, naming
+    the kernel; :func:`dynslam2d.jitaot.unused_reason`), else, after a run that compiled numba's kernels, that
+    ``dynslam2d kernels build`` exists. Nothing after a run that used the module throughout."""
+    from dynslam2d.jitaot import unused_reason
+
+    why = unused_reason(input)
+    if why is not None:
+        err_console.print(Text(f"{why} (docs/kernels.md)", style="dim"))
+    elif compiled:
         err_console.print(Text("the kernels are cached for later runs; `dynslam2d kernels build` compiles them ahead "
                                "of time for this machine: runs then start without numba and use about 125 MiB less "
                                "memory (docs/kernels.md)", style="dim"))
@@ -1828,7 +1835,8 @@ def kernels_status(
            "used": used, "mode": st.mode, "kernels": len(st.info.get("exports", {})),
            "signatures": sum(len(v) for v in st.info.get("exports", {}).values()), "built": st.info.get("built"),
            "cpu_target": st.info.get("cpu_target"), "bytes": st.info.get("bytes"), "file": st.info.get("file"),
-           "numba": st.info.get("numba_imported"), "cpu": st.info.get("cpu_name"), "sha256": st.info.get("sha256")}
+           "numba": st.info.get("numba_imported"), "cpu": st.info.get("cpu_name"), "sha256": st.info.get("sha256"),
+           "stale": list(st.stale)}
     if as_json:
         console.print_json(json.dumps(row))
         return

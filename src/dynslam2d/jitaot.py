@@ -126,6 +126,9 @@ class KernelsStatus:
     reason: str
     mode: str
     info: dict[str, Any] = field(default_factory=dict)
+    #: The parts of the module's key that differ from this process's (``sources``, ``numba``, ``python``, ``cpu``;
+    #: empty unless the module is stale).
+    stale: tuple[str, ...] = ()
 
 
 def _module_path(folder: Path, info: dict[str, Any]) -> Path:
@@ -171,12 +174,26 @@ def _status(folder: Path, md: str) -> KernelsStatus:
         return KernelsStatus(folder, True, False, f"the module file {name} does not match its sidecar "
                                                   "(build again)", md, info)
     key, now = info.get("key", {}), current_key()
-    stale = [k for k in now if key.get(k) != now[k]]
+    key = key if isinstance(key, dict) else {}
+    stale = tuple(k for k in now if key.get(k) != now[k])
     if stale:
-        what = {"sources": "the kernel sources changed", "numba": "another numba version",
-                "python": "another Python", "cpu": "another CPU"}
-        return KernelsStatus(folder, True, False, "stale: " + ", ".join(what[k] for k in stale), md, info)
+        return KernelsStatus(folder, True, False, "stale: " + ", ".join(_stale_part(k, key, info, now) for k in stale),
+                             md, info, stale)
     return KernelsStatus(folder, True, True, "valid", md, info)
+
+
+def _stale_part(part: str, key: dict[str, Any], info: dict[str, Any], now: dict[str, str]) -> str:
+    """What changed in one part of a stale module's key, as ``kernels status`` and a run's note say it."""
+    if part == "sources":
+        return "the kernel sources changed (dynslam2d updated or edited since the build)"
+    if part == "numba":
+        return f"another numba version (built with {key.get('numba', '?')}, now {now['numba']})"
+    if part == "python":
+        return f"another Python (built for {key.get('python', '?')}, now {now['python']})"
+    built_on, here = str(info.get("cpu_name") or "?"), cpu_name()
+    if built_on == here:
+        return f"another CPU (the same model, {here}, with other feature flags)"
+    return f"another CPU (built on {built_on}, this is {here})"
 
 
 # --- argument types: numba's type text (jitwarm.signature_text) read without numba ---------------------------
@@ -365,6 +382,8 @@ class KernelTable:
 
 
 _TABLE: list[KernelTable | None] = []
+#: Why :func:`table` decided on numba's kernels although a module is built (:func:`unused_reason`), once decided.
+_WHY: list[str] = []
 
 
 def table() -> KernelTable | None:
@@ -373,12 +392,20 @@ def table() -> KernelTable | None:
     if _TABLE:
         return _TABLE[0]
     loaded = None
-    if mode() != "jit" and "numba" not in sys.modules:
+    if mode() != "jit" and "numba" in sys.modules:
+        st = status()
+        if st.valid:
+            _WHY.append("the kernels built ahead of time were not used, numba was imported before dynslam2d; "
+                        "numba's kernels ran instead")
+    elif mode() != "jit":
         # twice: a build that switched to a new module between this process reading the sidecar and loading the
         # file it named has removed that file; the sidecar then names the new one
         for _attempt in range(2):
             st = status()
             if not st.valid:
+                if st.present:
+                    _WHY.append(f"the kernels built ahead of time were not used, {st.reason}; numba's kernels ran "
+                                "instead: run `dynslam2d kernels build` again")
                 break
             import importlib.util
 
@@ -390,18 +417,45 @@ def table() -> KernelTable | None:
                     spec.loader.exec_module(module)
                     loaded = KernelTable(module, st.info, st.folder)
                 break
-            except (ImportError, OSError, AttributeError, ValueError):
+            except (ImportError, OSError, AttributeError, ValueError) as exc:
                 loaded = None  # numba's kernels, as without a module
                 if path.is_file():
+                    _WHY.append(f"the kernels built ahead of time were not used, {path.name} failed to load "
+                                f"({type(exc).__name__}: {' '.join(str(exc).split())}); numba's kernels ran "
+                                "instead: run `dynslam2d kernels build` again")
                     break
     _TABLE.append(loaded)
     return loaded
+
+
+def in_use() -> str:
+    """Which kernels this process runs: ``aot`` (the AOT module's), ``jit`` (numba's: no valid module,
+    ``DYNSLAM2D_KERNELS=jit``, or numba imported first) or ``aot+jit`` (it started on the AOT module and a call of
+    argument types the module lacks switched it to numba's, :func:`to_jit`)."""
+    if _FALLBACK:
+        return "aot+jit"
+    return "aot" if table() is not None else "jit"
+
+
+def unused_reason(recording: str = "RECORDING") -> str | None:
+    """One line on why this process did not run (all of) the kernels built ahead of time although a module is in
+    :func:`aot_dir`: stale (which part of its key differs, :func:`status`), not matching its sidecar, failed to
+    load, numba imported first, or a call of types the module lacks (which kernel, and the remedy). None when
+    the module ran throughout, when none is built and when ``DYNSLAM2D_KERNELS=jit`` chose numba. For the command
+    line to show after a run (this module prints nothing); ``recording``: the input the remedy names."""
+    table()
+    if _FALLBACK:
+        return (f"the kernels built ahead of time lack the argument types of a call of {_FALLBACK[0]}: numba's "
+                f"kernels ran from then on; `dynslam2d kernels build --input {recording}` adds them")
+    return _WHY[0] if _WHY else None
 
 
 #: The kernel modules in the order they first used the AOT module's stand-ins (their imports complete before).
 _MODULES: list[str] = []
 #: After :func:`to_jit` switched this process to numba: each kernel's dispatcher by ``module.qualname``.
 _DISPATCHERS: dict[str, Any] = {}
+#: The kernel whose call switched this process to numba (:func:`to_jit`), for :func:`unused_reason`.
+_FALLBACK: list[str] = []
 
 
 def note_module(name: str) -> None:
@@ -434,6 +488,7 @@ def to_jit(qual: str) -> Any:
         if not _TABLE or _TABLE[0] is None or mode() == "aot" or importlib.util.find_spec("numba") is None:
             return None  # (no AOT module in use here: nothing to switch)
         _TABLE[0] = None  # jitbox's new namespace imports numba
+        _FALLBACK.append(qual)
         for name in ["dynslam2d.jitbox", *[m for m in _MODULES if m != "dynslam2d.jitbox"]]:
             module = sys.modules[name]
             fresh: dict[str, Any] = {"__name__": name, "__file__": module.__file__, "__spec__": module.__spec__,
@@ -492,7 +547,8 @@ def build_requirements() -> str | None:
     if shutil.which(cc.split()[0]) is None and shutil.which("gcc") is None and shutil.which("cc") is None:
         return f"no C compiler found ({cc.split()[0]}, gcc, cc): install one (e.g. apt install gcc) to build kernels"
     if importlib.util.find_spec("setuptools") is None:
-        return "setuptools is not installed: pip install setuptools to build kernels"
+        return ('setuptools is not installed: pip install "dynslam2d[aot]" (or pip install setuptools) to build '
+                "kernels")
     if importlib.util.find_spec("numba") is None:
         return "numba is not installed"
     return None

@@ -14,6 +14,7 @@ on the worker — a shared path on a cluster.
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -69,7 +70,7 @@ def _pool(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int, done: Cal
     import multiprocessing as mp
 
     # "spawn": every worker starts a fresh interpreter (no inherited threads or numba state),
-    # as a Ray worker does; the kernels come from numba's on-disk cache.
+    # as a Ray worker does; the kernels come from the AOT module (docs/kernels.md) or numba's on-disk cache.
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
         pending = {pool.submit(call_job, fn, job): i for i, job in enumerate(jobs)}
         while pending:
@@ -101,7 +102,7 @@ def _ray(fn: Callable[[Any], Any], jobs: Sequence[Any], address: str, done: Call
         except Exception as exc:
             raise DynSlamError(f"--ray {address}: cannot connect to the Ray cluster ({one_line(exc)}); "
                                f"start one with 'ray start --head' or give its address") from None
-    remote = ray.remote(num_cpus=1, max_retries=0)(call_job)
+    remote = ray.remote(num_cpus=1, max_retries=0, **_ray_kernel_env())(call_job)
     refs = {remote.remote(fn, job): i for i, job in enumerate(jobs)}
     while refs:
         ready, _ = ray.wait(list(refs), num_returns=1)
@@ -112,6 +113,17 @@ def _ray(fn: Callable[[Any], Any], jobs: Sequence[Any], address: str, done: Call
             except Exception as exc:  # the task's worker died
                 out = Outcome(str(getattr(jobs[i], "name", i)), "failed", error=one_line(exc))
             done(i, out)
+
+
+def _ray_kernel_env() -> dict[str, Any]:
+    """Ray task options that give the workers this process's choice of kernels (docs/kernels.md): the variables
+    ``DYNSLAM2D_KERNELS`` and ``DYNSLAM2D_KERNELS_DIR`` when set here, through the tasks' ``runtime_env`` (a Ray
+    worker's environment is otherwise its node's ``ray start`` shell's, or this process's at the first ``ray.init``).
+    Unset here, a worker uses its own machine's default kernel folder (each node builds its module for its CPU)."""
+    from dynslam2d.jitaot import DIR_ENV, MODE_ENV
+
+    env = {k: os.environ[k] for k in (MODE_ENV, DIR_ENV) if os.environ.get(k)}
+    return {"runtime_env": {"env_vars": env}} if env else {}
 
 
 def map_jobs(

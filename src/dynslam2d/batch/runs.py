@@ -88,7 +88,8 @@ def finished_value(folder: Path, job: Job | None = None) -> dict[str, Any] | Non
 
 
 def run_job(job: Job) -> dict[str, Any]:
-    """Worker: run ``job`` like ``dynslam2d run`` into ``job.options["folder"]``; return its summary and metrics.
+    """Worker: run ``job`` like ``dynslam2d run`` into ``job.options["folder"]``; return its summary and metrics,
+    and ``kernels``: which kernels this worker process ran (:func:`dynslam2d.jitaot.in_use`).
 
     The folder is planned as ``run --force`` would (an earlier incomplete attempt is
     replaced; a foreign non-empty folder is refused). On any error the folder is discarded.
@@ -132,6 +133,9 @@ def run_job(job: Job) -> dict[str, Any]:
     value = finished_value(target)
     if value is None:
         raise DynSlamError(f"{target}: the results folder is not complete after the run")
+    from dynslam2d.jitaot import in_use
+
+    value["kernels"] = in_use()  # which kernels this worker ran (batch.json; docs/kernels.md)
     return value
 
 
