@@ -202,7 +202,7 @@ def _run_both(cfg: Config, scans) -> dict[str, int]:
     tr = pipe.tracker
     own = tr._manage
     seen = {"steps": 0, "upd_slow": 0, "upd_fast": 0, "in_m": 0, "coasting": 0, "remembered": 0, "in_m_moving": 0,
-            "in_m_tracked": 0, "left_on_structure": 0}
+            "in_m_tracked": 0, "left_on_structure": 0, "in_m_moving_person": 0}
 
     def both(t, updated):
         ref = copy.deepcopy(tr, {id(tr._map): tr._map, id(tr._scan): tr._scan})
@@ -228,6 +228,8 @@ def _run_both(cfg: Config, scans) -> dict[str, int]:
             # tracks in M that left it on structure instead)
             seen["in_m_moving"] += k.id in updated and k.in_m and k.reason.startswith("in M: speed")
             seen["in_m_tracked"] += k.id in updated and k.in_m and k.m_last_t == t
+            seen["in_m_moving_person"] += k.id in updated and k.in_m and k.reason.startswith("in M: speed") and \
+                k.person_streak >= cfg.detect.tracker.person_sustain_updates
             seen["left_on_structure"] += k.reason.endswith("of its points on long-occupied map cells (structure)")
         for key, v in tr.stats.as_dict().items():
             if key.startswith("deleted_"):
@@ -251,7 +253,8 @@ def test_manage_is_the_former_single_loop_on_simulated_scenes() -> None:
     seen2 = _run_both(cfg, simulate("crowd", duration=30.0).scans)
     total = {k: seen.get(k, 0) + seen2.get(k, 0) for k in set(seen) | set(seen2)}
     for key in ("steps", "upd_slow", "upd_fast", "in_m", "coasting", "remembered", "deleted_tentative",
-                "deleted_coasting", "deleted_structure", "firm", "in_m_moving", "in_m_tracked"):
+                "deleted_coasting", "deleted_structure", "firm", "in_m_moving", "in_m_tracked",
+                "in_m_moving_person"):
         assert total[key] > 0, (key, total)
     assert trackmanage._SLOW_TEXTS_MAX >= 1.0
 

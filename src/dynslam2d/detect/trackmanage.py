@@ -159,13 +159,14 @@ class TrackManage:
                         k.in_m = False
                         k.fast = 0
                         k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
-                    elif in_m and k.slow_since is None and k.person_streak < npu and not (
-                            on_map and (nm := WN.item(k.row, 0)) and nm >= nsus
-                            and sum(MEV[k.row, :nm, 0].tolist()) / nm >= s_exit):
-                        # (_dynamic's outcome for a track in M that is not slow, without a person test (person_streak
-                        # below person_sustain_updates) and not leaving M on structure: the most common outcome of a
-                        # track in M, inline with its memory bookkeeping; the same floats: the window's sum in its
-                        # order, np.hypot of the same differences (pass trk43))
+                    elif in_m and k.slow_since is None and (k.was_in_m or k.person_streak < npu or not on_map) \
+                            and not (on_map and (nm := WN.item(k.row, 0)) and nm >= nsus
+                                     and sum(MEV[k.row, :nm, 0].tolist()) / nm >= s_exit):
+                        # (_dynamic's outcome for a track in M that is not slow and not leaving M on structure, whose
+                        # person test asks no map (seen moving before, no map, or no person test: person_streak below
+                        # person_sustain_updates; _person_moved_in's "kinematic", which changes nothing): the most
+                        # common outcome of a track in M, inline with its memory bookkeeping; the same floats: the
+                        # window's sum in its order, np.hypot of the same differences (pass trk43))
                         k.remembered = False  # moving again
                         x = k.x
                         x0, x1 = x.item(0), x.item(1)
