@@ -76,9 +76,10 @@ class TrackManage:
         state rows (``manage_counters``; the speeds are Python's ``math.hypot`` to the last bit; docs/speed.md pass
         cnt36): what stays per track in Python is what reads a track's objects — the coasting memory, the merged and
         hidden tests of a track without detection, clutter retirement and the test of M, inline up to its common
-        outcomes (tentative, or not in M and at most v_min) with the scan's constants read once, the rest in
-        :meth:`_dynamic`; the most common reason is looked up (:func:`_slow_reason`; pass mgr34). ``updated``: the ids
-        of the tracks updated in this scan (their counter rows flagged by the update kernel, ``C_UPD``)."""
+        outcomes (tentative, not in M and at most v_min, or in M and moving on: pass trk43) with the scan's constants
+        read once, the rest in :meth:`_dynamic`; the most common reason is looked up (:func:`_slow_reason`; pass
+        mgr34). ``updated``: the ids of the tracks updated in this scan (their counter rows flagged by the update
+        kernel, ``C_UPD``)."""
         tracks = self._tracks
         if not tracks:
             self._firm_updated = ([], 0)
