@@ -201,7 +201,8 @@ def _run_both(cfg: Config, scans) -> dict[str, int]:
     pipe = Pipeline(cfg)
     tr = pipe.tracker
     own = tr._manage
-    seen = {"steps": 0, "upd_slow": 0, "upd_fast": 0, "in_m": 0, "coasting": 0, "remembered": 0}
+    seen = {"steps": 0, "upd_slow": 0, "upd_fast": 0, "in_m": 0, "coasting": 0, "remembered": 0, "in_m_moving": 0,
+            "in_m_tracked": 0, "left_on_structure": 0, "in_m_moving_person": 0}
 
     def both(t, updated):
         ref = copy.deepcopy(tr, {id(tr._map): tr._map, id(tr._scan): tr._scan})
@@ -223,6 +224,13 @@ def _run_both(cfg: Config, scans) -> dict[str, int]:
             seen["remembered"] += k.remembered
             seen["upd_slow"] += k.id in updated and k.reason.endswith(f"≤ v_min {cfg.detect.tracker.v_min:.2f}")
             seen["upd_fast"] += k.id in updated and k.reason.startswith("not in M: speed > v_min for")
+            # (pass trk43: _dynamic's outcome for a moving track in M, inline, with its memory bookkeeping; and the
+            # tracks in M that left it on structure instead)
+            seen["in_m_moving"] += k.id in updated and k.in_m and k.reason.startswith("in M: speed")
+            seen["in_m_tracked"] += k.id in updated and k.in_m and k.m_last_t == t
+            seen["in_m_moving_person"] += k.id in updated and k.in_m and k.reason.startswith("in M: speed") and \
+                k.person_streak >= cfg.detect.tracker.person_sustain_updates
+            seen["left_on_structure"] += k.reason.endswith("of its points on long-occupied map cells (structure)")
         for key, v in tr.stats.as_dict().items():
             if key.startswith("deleted_"):
                 seen[key] = seen.get(key, 0) + v - before[key]
@@ -245,9 +253,20 @@ def test_manage_is_the_former_single_loop_on_simulated_scenes() -> None:
     seen2 = _run_both(cfg, simulate("crowd", duration=30.0).scans)
     total = {k: seen.get(k, 0) + seen2.get(k, 0) for k in set(seen) | set(seen2)}
     for key in ("steps", "upd_slow", "upd_fast", "in_m", "coasting", "remembered", "deleted_tentative",
-                "deleted_coasting", "deleted_structure", "firm"):
+                "deleted_coasting", "deleted_structure", "firm", "in_m_moving", "in_m_tracked",
+                "in_m_moving_person"):
         assert total[key] > 0, (key, total)
     assert trackmanage._SLOW_TEXTS_MAX >= 1.0
+
+
+def test_manage_is_the_former_single_loop_where_tracks_in_m_leave_it_on_structure() -> None:
+    """With ``map_structure_exit`` 0 every track in M with a full map-evidence window leaves it on long-occupied map
+    cells (``_dynamic``'s first test), which the management step's inline outcome of a moving track in M must leave
+    to ``_dynamic`` (pass trk43): every scan of sim:stop-and-go as the former loop left it."""
+    cfg = Config()
+    cfg.detect.tracker.map_structure_exit = 0.0  # (every track in M with a full window: its mean is ≥ 0)
+    seen = _run_both(cfg, simulate("stop-and-go", duration=25.0).scans)
+    assert seen["left_on_structure"] > 0, seen
 
 
 def test_birth_writes_the_birth_state_into_its_rows() -> None:

@@ -76,9 +76,10 @@ class TrackManage:
         state rows (``manage_counters``; the speeds are Python's ``math.hypot`` to the last bit; docs/speed.md pass
         cnt36): what stays per track in Python is what reads a track's objects — the coasting memory, the merged and
         hidden tests of a track without detection, clutter retirement and the test of M, inline up to its common
-        outcomes (tentative, or not in M and at most v_min) with the scan's constants read once, the rest in
-        :meth:`_dynamic`; the most common reason is looked up (:func:`_slow_reason`; pass mgr34). ``updated``: the ids
-        of the tracks updated in this scan (their counter rows flagged by the update kernel, ``C_UPD``)."""
+        outcomes (tentative, not in M and at most v_min, or in M and moving on: pass trk43) with the scan's constants
+        read once, the rest in :meth:`_dynamic`; the most common reason is looked up (:func:`_slow_reason`; pass
+        mgr34). ``updated``: the ids of the tracks updated in this scan (their counter rows flagged by the update
+        kernel, ``C_UPD``)."""
         tracks = self._tracks
         if not tracks:
             self._firm_updated = ([], 0)
@@ -98,6 +99,8 @@ class TrackManage:
         npu = tc.person_sustain_updates
         probe = self._free is not None
         slow_reason = _slow_reason  # (a local name: read once per scan)
+        # (_dynamic's first test of a track in M, the structure exit, with the scan's constants: pass trk43)
+        on_map, s_exit, hypot = self._map is not None, tc.map_structure_exit, np.hypot
         order = self._rows()
         # per track: the counter tests' outcome (MC_*, the new states and counts written into the counter table), σ of
         # its speed along the velocity and its speed (Python's math.hypot bit for bit, as the reasons print it), from
@@ -157,6 +160,31 @@ class TrackManage:
                         k.in_m = False
                         k.fast = 0
                         k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
+                    elif in_m and k.slow_since is None and (k.was_in_m or k.person_streak < npu or not on_map) \
+                            and not (on_map and (nm := WN.item(k.row, 0)) and nm >= nsus
+                                     and sum(MEV[k.row, :nm, 0].tolist()) / nm >= s_exit):
+                        # (_dynamic's outcome for a track in M that is not slow and not leaving M on structure, whose
+                        # person test asks no map (seen moving before, no map, or no person test: person_streak below
+                        # person_sustain_updates; _person_moved_in's "kinematic", which changes nothing): the most
+                        # common outcome of a track in M, inline with its memory bookkeeping; the same floats: the
+                        # window's sum in its order, np.hypot of the same differences (pass trk43))
+                        k.remembered = False  # moving again
+                        x = k.x
+                        x0, x1 = x.item(0), x.item(1)
+                        bxy = k.birth_xy
+                        k.reason = (f"in M: speed {speed:.2f} m/s, moved "
+                                    f"{float(hypot(x0 - bxy.item(0), x1 - bxy.item(1))):.2f} m since birth")
+                        if mem:  # (_memory_bookkeeping of a track in M, inline)
+                            if (sxy := k.m_start_xy) is None:
+                                k.m_start_xy = sxy = (x0, x1)
+                            elif (lt := k.m_last_t) is not None:
+                                k.m_time += t - lt
+                            k.m_last_t = t
+                            k.m_travel = max(k.m_travel, math.hypot(x0 - sxy[0], x1 - sxy[1]))
+                        keep.append(k)
+                        if code == MC_UPD_FIRM:
+                            firm.append(k)
+                        continue
                     elif in_m:
                         self._dynamic(k, speed, sig, t)
                     elif code == MC_UPD_TENTATIVE:
