@@ -47,7 +47,7 @@ class MapTooLargeError(RuntimeError):
 _ZEROED_BYTES = 1 << 20
 #: A level's per-cell arrays: (attribute, value of a cell never updated, dtype), in the order :meth:`GridLevel.ensure`
 #: grows them (the log-odds last: the tracker's view of the last scan's map keeps the old ones until the next scan).
-_LEVEL_ARRAYS = (("prob", 0.5, np.float32), ("uidx", -1, np.int32), ("logodds", 0.0, np.float32))
+_LEVEL_ARRAYS = (("prob", 0.5, np.float32), ("uidx", 0, np.int32), ("logodds", 0.0, np.float32))
 
 
 class GridLevel:
@@ -57,7 +57,9 @@ class GridLevel:
         resolution: cell side, m.
         logodds: (H, W) float32 log-odds, 0 = unknown (hector_mapping GridMapLogOdds.h).
         prob: (H, W) float32 occupancy probability cache, kept in step with ``logodds``.
-        uidx: (H, W) int32 per-cell update index (−1 = never updated), as OccGridMapBase's updateIndex.
+        uidx: (H, W) int32 per-cell update index, as OccGridMapBase's updateIndex, 0 = never updated (the reference's
+            −1: a scan's indices are ≥ 1, so every comparison with them reads the same; 0 lets a large level's
+            array be zeroed memory whose pages no ray reached are never touched, docs/speed.md pass mem43).
         i0, j0: absolute cell index of array column 0 / row 0.
     """
 
@@ -173,15 +175,16 @@ class GridLevel:
         # into the strips around it — not the whole array filled and then the old part written over (the loop
         # closer's submaps grow on most keyframes they take in; ≈ 40 % less time per growth).
         for name, fill, dtype in _LEVEL_ARRAYS:
-            if name == "logodds" and nh * nw * 4 >= _ZEROED_BYTES:
-                # a large level's log-odds (0 = unknown) in zeroed memory, only the old array's non-zero cells
-                # copied (a −0.0 is: its bits are not zero): pages no ray reached are never touched and take no
-                # memory (12.5 % of MIT CSAIL's finest level was ever updated; docs/speed.md pass mem39)
+            if name != "prob" and nh * nw * 4 >= _ZEROED_BYTES:
+                # a large level's log-odds (0 = unknown) and update indices (0 = never) in zeroed memory, only the
+                # old array's non-zero cells copied (a −0.0 is: its bits are not zero): pages no ray reached are
+                # never touched and take no memory (12.5 % of MIT CSAIL's finest level was ever updated;
+                # docs/speed.md passes mem39 and mem43)
                 new = np.zeros((nh, nw), dtype=dtype)
                 if w > 0:
-                    old = self.logodds
+                    old = getattr(self, name)
                     np.copyto(new[r0:r0 + h, c0:c0 + w], old, where=old.view(np.int32) != 0)
-                self.logodds = new
+                setattr(self, name, new)
                 continue
             new = np.empty((nh, nw), dtype=dtype)
             if w > 0:
@@ -268,7 +271,7 @@ class GridLevel:
         """(row0, row1, col0, col1) half-open array bounds of the observed cells, or None."""
         if self.empty:
             return None
-        seen = self.uidx >= 0
+        seen = self.uidx > 0
         rows = np.flatnonzero(seen.any(axis=1))
         if rows.size == 0:
             return None
@@ -466,7 +469,7 @@ class MultiResMap:
             return GridMap(np.full((1, 1), np.nan), lv.resolution, lv.corner_origin())
         b = lv.known_bounds() if crop else None
         r0, r1, c0, c1 = b if b is not None else (0, lv.shape[0], 0, lv.shape[1])
-        prob = logistic_map(lv.logodds[r0:r1, c0:c1], lv.uidx[r0:r1, c0:c1] < 0)
+        prob = logistic_map(lv.logodds[r0:r1, c0:c1], lv.uidx[r0:r1, c0:c1] < 1)
         return GridMap(prob, lv.resolution, lv.corner_origin(r0, c0))
 
     def export_logodds(self, level: int = 0, crop: bool = True) -> tuple[np.ndarray, tuple[float, float]]:
