@@ -16,6 +16,7 @@ world/r_k − j0)``: continuous, in cells, with array cell (col, row) centred at
 from __future__ import annotations
 
 import math
+import mmap
 
 import numpy as np
 
@@ -48,6 +49,15 @@ _ZEROED_BYTES = 1 << 20
 #: A level's per-cell arrays: (attribute, value of a cell never updated, dtype), in the order :meth:`GridLevel.ensure`
 #: grows them (the log-odds last: the tracker's view of the last scan's map keeps the old ones until the next scan).
 _LEVEL_ARRAYS = (("prob", 0.5, np.float32), ("uidx", 0, np.int32), ("logodds", 0.0, np.float32))
+
+
+def _zeroed(shape: tuple[int, int], dtype: type) -> np.ndarray:
+    """A C-contiguous zero array in its own anonymous memory map: its pages take no memory until written, whatever
+    the allocator's state (``np.zeros``' calloc clears a block the heap reuses, touching every page: glibc serves
+    blocks below its adaptive mmap threshold, up to 32 MiB, from the heap); unmapped when the array goes."""
+    dt = np.dtype(dtype)
+    n = shape[0] * shape[1]
+    return np.frombuffer(mmap.mmap(-1, max(n * dt.itemsize, 1)), dtype=dt, count=n).reshape(shape)
 
 
 class GridLevel:
@@ -180,7 +190,7 @@ class GridLevel:
                 # old array's non-zero cells copied (a −0.0 is: its bits are not zero): pages no ray reached are
                 # never touched and take no memory (12.5 % of MIT CSAIL's finest level was ever updated;
                 # docs/speed.md passes mem39 and mem43)
-                new = np.zeros((nh, nw), dtype=dtype)
+                new = _zeroed((nh, nw), dtype)
                 if w > 0:
                     old = getattr(self, name)
                     np.copyto(new[r0:r0 + h, c0:c0 + w], old, where=old.view(np.int32) != 0)
