@@ -71,3 +71,45 @@ def test_cells_with_update_index_zero_read_as_never_updated() -> None:
     export = _MapExport.of(m)
     assert np.array_equal(export.unknown, crop)
     np.testing.assert_array_equal(export.gridmap().prob, m.to_gridmap(0).prob)
+
+
+def _resident_pages(a: np.ndarray) -> int:
+    """Pages of ``a``'s memory that are resident (mincore(2); the arrays tested are page-aligned)."""
+    import ctypes
+    import mmap
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    page = mmap.PAGESIZE
+    addr = a.__array_interface__["data"][0]
+    start = addr - addr % page
+    n = (addr + a.nbytes - start + page - 1) // page
+    vec = (ctypes.c_ubyte * n)()
+    assert libc.mincore(ctypes.c_void_p(start), ctypes.c_size_t(n * page), vec) == 0, ctypes.get_errno()
+    return sum(v & 1 for v in vec)
+
+
+def _written_pages(a: np.ndarray) -> int:
+    """Pages of ``a`` (page-aligned, C-contiguous) that hold a non-zero byte."""
+    b = a.reshape(-1).view(np.uint8)
+    page = 4096
+    pad = np.zeros(-b.shape[0] % page, dtype=np.uint8)
+    return int(np.concatenate((b, pad)).reshape(-1, page).any(axis=1).sum())
+
+
+def test_grown_zeroed_arrays_hold_only_their_written_pages_after_heap_reuse() -> None:
+    """The grown log-odds and update indices are resident only on the pages that hold a written cell, also when
+    the allocator has a large freed heap block at hand (which ``np.zeros``' calloc would clear, touching every
+    page): the arrays have their own memory maps."""
+    big = np.ones(24 * 2**20, dtype=np.uint8)  # (freed: glibc's mmap threshold rises to its size)
+    del big
+    heap = np.ones(12 * 2**20, dtype=np.uint8)  # (now from the heap, its pages resident; freed for reuse)
+    del heap
+    lv = GridLevel(0.05)
+    lv.ensure(0, 0, 99, 99)
+    lv.integrate(np.array([2.0, 2.0]), np.array([[4.0, 3.0], [1.0, 4.5]]), np.array([True, True]), -0.4, 0.85, 50.0)
+    lv.ensure(-600, -600, 799, 799)  # 1600 × 1600 cells with the margins, 9.8 MiB an array
+    assert lv.uidx.nbytes > 4 * 2**20
+    for name in ("uidx", "logodds"):
+        a = getattr(lv, name)
+        assert _resident_pages(a) <= _written_pages(a) <= 200, name  # (of 2500 pages)
+    assert _resident_pages(lv.prob) >= lv.prob.nbytes // 4096  # (the cache is filled with 0.5: every page)
