@@ -135,7 +135,7 @@ def test_scan_cells_refuse_values_beyond_int64_and_far_cells() -> None:
 
 
 def _read_reference(logodds, uidx, cells, i0, j0):
-    """``EvidenceLedger._read``: log-odds and update index of absolute cells, 0 and 0 (never updated) outside the array."""
+    """``EvidenceLedger._read``: log-odds and update index of absolute cells, 0 and 0 (never) outside the array."""
     n = cells.shape[0]
     h, w = logodds.shape
     col, row = cells[:, 0] - i0, cells[:, 1] - j0

@@ -42,9 +42,9 @@ class MapTooLargeError(RuntimeError):
     """Integrating a scan would grow the map beyond its memory limit (the scan is not integrated)."""
 
 
-#: Bytes from which a level's grown log-odds array is made zeroed, with only the old array's non-zero cells copied
-#: (:meth:`GridLevel._grow`; smaller arrays, e.g. the loop closer's submaps, which grow often, are filled and copied
-#: whole: calloc clears small blocks anyway).
+#: Bytes from which a level's grown log-odds and update-index arrays are made zeroed (:func:`_zeroed`), with only the
+#: old array's rows that hold a non-zero cell copied (:meth:`GridLevel._grow`; smaller arrays, e.g. the loop closer's
+#: submaps, which grow often, are filled and copied whole).
 _ZEROED_BYTES = 1 << 20
 #: A level's per-cell arrays: (attribute, value of a cell never updated, dtype), in the order :meth:`GridLevel.ensure`
 #: grows them (the log-odds last: the tracker's view of the last scan's map keeps the old ones until the next scan).
