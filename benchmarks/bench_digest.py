@@ -84,7 +84,9 @@ def digest(data: Path, name: str) -> dict[str, str] | None:
                    t.covariance, t.beams if t.beams is not None else np.zeros(0))
     hm = hashlib.sha256()
     for lv in pipe.slam.map.levels:
-        _h(hm, np.array([lv.i0, lv.j0, lv.update_counter]), lv.logodds, lv.prob, lv.uidx)
+        # (a never-updated cell's update index is −1 before pass mem43, 0 since: hashed as 0 for both; a scan's
+        # indices are >= 1)
+        _h(hm, np.array([lv.i0, lv.j0, lv.update_counter]), lv.logodds, lv.prob, np.maximum(lv.uidx, 0))
     if pipe.ledger is not None:
         hm.update(json.dumps(pipe.ledger.summary(), sort_keys=True).encode())
     return {"scans": str(n), "steps": hs.hexdigest()[:16], "map": hm.hexdigest()[:16]}

@@ -135,11 +135,11 @@ def test_scan_cells_refuse_values_beyond_int64_and_far_cells() -> None:
 
 
 def _read_reference(logodds, uidx, cells, i0, j0):
-    """``EvidenceLedger._read``: log-odds and update index of absolute cells, 0 and −1 outside the array."""
+    """``EvidenceLedger._read``: log-odds and update index of absolute cells, 0 and 0 (never) outside the array."""
     n = cells.shape[0]
     h, w = logodds.shape
     col, row = cells[:, 0] - i0, cells[:, 1] - j0
-    lo, ui = np.zeros(n), np.full(n, -1, dtype=np.int64)
+    lo, ui = np.zeros(n), np.zeros(n, dtype=np.int64)
     ok = (col >= 0) & (row >= 0) & (col < w) & (row < h)
     lo[ok] = logodds[row[ok], col[ok]]
     ui[ok] = uidx[row[ok], col[ok]]
@@ -154,7 +154,7 @@ def test_read_and_update_rows_equal_the_numpy_after_update(seed: int) -> None:
     rng = np.random.default_rng(100 + seed)
     h, w = int(rng.integers(1, 40)), int(rng.integers(1, 40))
     logodds = rng.normal(0.0, 2.0, (h, w)).astype(np.float32)
-    uidx = rng.integers(-1, 5, (h, w)).astype(np.int32)
+    uidx = rng.integers(0, 5, (h, w)).astype(np.int32)
     i0, j0 = int(rng.integers(-10, 10)), int(rng.integers(-10, 10))
     m = int(rng.integers(0, 200))
     cells = np.column_stack((rng.integers(i0 - 5, i0 + w + 5, m), rng.integers(j0 - 5, j0 + h + 5, m)))

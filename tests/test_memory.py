@@ -186,7 +186,7 @@ def test_erasure_takes_out_exactly_what_the_track_wrote(free_before):
         np.testing.assert_allclose(lv0.logodds[rows, cols], lo_b[rows, cols], atol=1e-5)
         assert (lv0.prob[rows, cols] < 0.5).all()  # free again
     else:
-        assert (lv0.uidx[rows, cols] == -1).all() and (lv0.logodds[rows, cols] == 0).all()  # unknown again
+        assert (lv0.uidx[rows, cols] == 0).all() and (lv0.logodds[rows, cols] == 0).all()  # unknown again
         assert np.isnan(slam.gridmap(0).prob).sum() > 0
     # every other cell of every level is byte-identical
     for k, (lv, (lo, pr, ui, i0, j0)) in enumerate(zip(slam.map.levels, snap)):

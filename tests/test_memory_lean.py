@@ -185,13 +185,13 @@ def test_map_export_is_the_logistic_of_the_logodds_in_about_one_float64_per_cell
     lv = m.levels[0]
     lv.ensure(0, 0, 899, 599)  # 600 × 900 cells with margins
     lv.logodds[:] = rng.normal(0.0, 4.0, lv.shape).astype(np.float32)
-    lv.uidx[:] = np.where(rng.uniform(size=lv.shape) < 0.7, 7, -1).astype(np.int32)
-    lv.uidx[:40] = -1  # unobserved rows: the export crops them
+    lv.uidx[:] = np.where(rng.uniform(size=lv.shape) < 0.7, 7, 0).astype(np.int32)
+    lv.uidx[:40] = 0  # unobserved rows: the export crops them
     grid, peak = _traced_peak(m.to_gridmap, 0)
     r0, r1, c0, c1 = lv.known_bounds()
     lo = lv.logodds[r0:r1, c0:c1].astype(np.float64)
     expected = 1.0 / (1.0 + np.exp(-lo))
-    expected[lv.uidx[r0:r1, c0:c1] < 0] = np.nan
+    expected[lv.uidx[r0:r1, c0:c1] < 1] = np.nan
     np.testing.assert_array_equal(grid.prob, expected)  # bit for bit (NaN where unobserved)
     cells = grid.prob.size
     assert cells > 400_000
@@ -434,7 +434,7 @@ def test_level_growth_holds_the_old_level_and_one_new_array_not_both_levels() ->
         np.testing.assert_array_equal(arr[r0:r0 + h, c0:c0 + w], old)
     grown = np.ones(lv.shape, dtype=bool)
     grown[r0:r0 + h, c0:c0 + w] = False
-    assert (lv.logodds[grown] == 0).all() and (lv.prob[grown] == 0.5).all() and (lv.uidx[grown] == -1).all()
+    assert (lv.logodds[grown] == 0).all() and (lv.prob[grown] == 0.5).all() and (lv.uidx[grown] == 0).all()
 
 
 def test_map_export_after_freeing_what_it_does_not_read_is_the_same() -> None:
@@ -448,7 +448,7 @@ def test_map_export_after_freeing_what_it_does_not_read_is_the_same() -> None:
     for lv in m.levels:
         lv.ensure(0, 0, 399, 299)
         lv.logodds[:] = rng.normal(0.0, 3.0, lv.shape).astype(np.float32)
-        lv.uidx[:] = np.where(rng.uniform(size=lv.shape) < 0.6, 4, -1).astype(np.int32)
+        lv.uidx[:] = np.where(rng.uniform(size=lv.shape) < 0.6, 4, 0).astype(np.int32)
     a = _MapExport.of(m)
     _release_unexported(m)
     assert m.levels[0].prob.size == 0 and all(lv.nbytes == 0 for lv in m.levels[1:])

@@ -13,7 +13,7 @@ def _filled_grow(level: GridLevel, b: tuple[int, int, int, int]) -> dict[str, np
     """The arrays a growth to bounds ``b`` must give: each old array in its place, its fill value around it."""
     h, w = level.shape
     out = {}
-    for name, fill, dtype in (("prob", 0.5, np.float32), ("uidx", -1, np.int32), ("logodds", 0.0, np.float32)):
+    for name, fill, dtype in (("prob", 0.5, np.float32), ("uidx", 0, np.int32), ("logodds", 0.0, np.float32)):
         new = np.full((b[3] - b[1], b[2] - b[0]), fill, dtype=dtype)
         r0, c0 = level.j0 - b[1], level.i0 - b[0]
         new[r0:r0 + h, c0:c0 + w] = getattr(level, name)

@@ -23,7 +23,7 @@ def cell(level: GridLevel, i: int, j: int) -> float:
 
 
 def touched(level: GridLevel) -> set[tuple[int, int]]:
-    rows, cols = np.nonzero(level.uidx >= 0)
+    rows, cols = np.nonzero(level.uidx > 0)
     return {(int(c) + level.i0, int(r) + level.j0) for r, c in zip(rows, cols)}
 
 
@@ -353,13 +353,13 @@ def test_ray_ends_equal_the_pose_transform_and_numpy_extremes(seed: int) -> None
 @pytest.mark.parametrize("seed", range(6))
 def test_growth_writes_every_cell_once_with_the_old_content_and_the_fill(seed: int) -> None:
     """Pass rest18: ``GridLevel._grow`` writes the old arrays into their place and the fill values (probability 0.5,
-    update index −1, log-odds 0) into the strips around them in an uninitialised array; every array equals the
+    update index 0, log-odds 0) into the strips around them in an uninitialised array; every array equals the
     earlier fill-then-copy growth exactly, whichever sides grow. The allocator is handed memory full of garbage of
     the arrays' sizes first, so that a strip left unwritten shows."""
     rng = np.random.default_rng(seed)
     lv = GridLevel(0.05)
     lv._grow((-7, 3, 13, 19))  # (from empty: every cell the fill)
-    assert np.all(lv.prob == np.float32(0.5)) and np.all(lv.uidx == -1) and np.all(lv.logodds == 0.0)
+    assert np.all(lv.prob == np.float32(0.5)) and np.all(lv.uidx == 0) and np.all(lv.logodds == 0.0)
     for _ in range(8):
         h, w = lv.shape
         lv.prob[...] = rng.random((h, w), dtype=np.float32)
@@ -368,7 +368,7 @@ def test_growth_writes_every_cell_once_with_the_old_content_and_the_fill(seed: i
         grow = rng.integers(0, 4, 4) * rng.integers(0, 2, 4)  # (some sides, by 0-3 cells; sometimes none)
         b = (lv.i0 - int(grow[0]), lv.j0 - int(grow[1]), lv.i0 + w + int(grow[2]), lv.j0 + h + int(grow[3]))
         want = {}
-        for name, fill, dtype in (("prob", 0.5, np.float32), ("uidx", -1, np.int32), ("logodds", 0.0, np.float32)):
+        for name, fill, dtype in (("prob", 0.5, np.float32), ("uidx", 0, np.int32), ("logodds", 0.0, np.float32)):
             ref = np.full((b[3] - b[1], b[2] - b[0]), fill, dtype=dtype)
             ref[lv.j0 - b[1]:lv.j0 - b[1] + h, lv.i0 - b[0]:lv.i0 - b[0] + w] = getattr(lv, name)
             want[name] = ref

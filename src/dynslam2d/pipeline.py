@@ -740,7 +740,7 @@ class _MapExport:
                        lv.corner_origin())
         b = lv.known_bounds()
         r0, r1, c0, c1 = b if b is not None else (0, lv.shape[0], 0, lv.shape[1])
-        return cls(lv.logodds[r0:r1, c0:c1].copy(), lv.uidx[r0:r1, c0:c1] < 0, lv.resolution,
+        return cls(lv.logodds[r0:r1, c0:c1].copy(), lv.uidx[r0:r1, c0:c1] < 1, lv.resolution,
                    lv.corner_origin(r0, c0))
 
     def gridmap(self) -> GridMap:

@@ -340,7 +340,7 @@ class _LevelRecord:
         delta = np.concatenate((self.delta, pk[3, :n].view(np.float64)))
         ub = np.concatenate((self.last, pk[1, :n]))
         ua = np.concatenate((self.last, pk[2, :n]))
-        start_pure = np.concatenate((self.pure, pk[1, :n] < 0))
+        start_pure = np.concatenate((self.pure, pk[1, :n] < 1))  # (update index 0: never updated)
         self._pk = _EMPTY_I4
         self._n_rows = self._n_buf = 0
         self._n_chunks = 0
@@ -942,17 +942,18 @@ class EvidenceLedger:
 
     @staticmethod
     def _read(lv, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """log-odds (float64) and update index of absolute cells (0 and −1 outside the level's array)."""
+        """log-odds (float64) and update index of absolute cells (0 and 0 — never updated — outside the level's
+        array)."""
         n = cells.shape[0]
         if lv.empty or n == 0:
-            return np.zeros(n), np.full(n, -1, dtype=np.int64)
+            return np.zeros(n), np.zeros(n, dtype=np.int64)
         h, w = lv.shape
         col = cells[:, 0] - lv.i0
         row = cells[:, 1] - lv.j0
         if col.min() >= 0 and row.min() >= 0 and col.max() < w and row.max() < h:  # all inside (the usual case)
             return lv.logodds[row, col].astype(np.float64), lv.uidx[row, col].astype(np.int64)
         lo = np.zeros(n)
-        ui = np.full(n, -1, dtype=np.int64)
+        ui = np.zeros(n, dtype=np.int64)
         ok = (col >= 0) & (row >= 0) & (col < w) & (row < h)
         lo[ok] = lv.logodds[row[ok], col[ok]]
         ui[ok] = lv.uidx[row[ok], col[ok]]
@@ -1352,7 +1353,7 @@ class EvidenceLedger:
             new = np.where(unknown, 0.0, cur - delta).astype(np.float32)
             lv.logodds[row, col] = new
             lv.prob[row, col] = np.where(unknown, 0.5, 1.0 / (1.0 + np.exp(-new.astype(np.float64))))
-            lv.uidx[row, col] = np.where(unknown, -1, lv.uidx[row, col])
+            lv.uidx[row, col] = np.where(unknown, 0, lv.uidx[row, col])  # (0: never updated)
             if k == 0:
                 n0 = int(col.shape[0])
                 self.stats["cells_to_unknown"] += int(unknown.sum())

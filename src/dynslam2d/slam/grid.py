@@ -16,6 +16,7 @@ world/r_k − j0)``: continuous, in cells, with array cell (col, row) centred at
 from __future__ import annotations
 
 import math
+import mmap
 
 import numpy as np
 
@@ -41,13 +42,32 @@ class MapTooLargeError(RuntimeError):
     """Integrating a scan would grow the map beyond its memory limit (the scan is not integrated)."""
 
 
-#: Bytes from which a level's grown log-odds array is made zeroed, with only the old array's non-zero cells copied
-#: (:meth:`GridLevel._grow`; smaller arrays, e.g. the loop closer's submaps, which grow often, are filled and copied
-#: whole: calloc clears small blocks anyway).
+#: Bytes from which a level's grown log-odds and update-index arrays are made zeroed (:func:`_zeroed`), with only the
+#: old array's rows that hold a non-zero cell copied (:meth:`GridLevel._grow`; smaller arrays, e.g. the loop closer's
+#: submaps, which grow often, are filled and copied whole).
 _ZEROED_BYTES = 1 << 20
 #: A level's per-cell arrays: (attribute, value of a cell never updated, dtype), in the order :meth:`GridLevel.ensure`
 #: grows them (the log-odds last: the tracker's view of the last scan's map keeps the old ones until the next scan).
-_LEVEL_ARRAYS = (("prob", 0.5, np.float32), ("uidx", -1, np.int32), ("logodds", 0.0, np.float32))
+_LEVEL_ARRAYS = (("prob", 0.5, np.float32), ("uidx", 0, np.int32), ("logodds", 0.0, np.float32))
+
+
+def _zeroed(shape: tuple[int, int], dtype: type) -> np.ndarray:
+    """A C-contiguous zero array in its own anonymous memory map: its pages take no memory until written, whatever
+    the allocator's state (``np.zeros``' calloc clears a block the heap reuses, touching every page: glibc serves
+    blocks below its adaptive mmap threshold, up to 32 MiB, from the heap); unmapped when the array goes."""
+    dt = np.dtype(dtype)
+    n = shape[0] * shape[1]
+    return np.frombuffer(mmap.mmap(-1, max(n * dt.itemsize, 1)), dtype=dt, count=n).reshape(shape)
+
+
+def _copy_written_rows(dst: np.ndarray, src: np.ndarray) -> None:
+    """``dst[...] = src`` (2-D, same shape; ``dst`` zeroed) for the rows of ``src`` that hold a cell whose bits are
+    not all zero, each run of such rows as one slice copy: the rows of zeros are left untouched (their pages take
+    no memory). A plain copy's speed where ``np.copyto(..., where=mask)`` took 24 times as long (a per-cell mask)."""
+    rows = src.view(np.int32).any(axis=1).view(np.int8)
+    edges = np.flatnonzero(np.diff(rows, prepend=np.int8(0), append=np.int8(0)))
+    for a, b in zip(edges[::2].tolist(), edges[1::2].tolist()):
+        dst[a:b] = src[a:b]
 
 
 class GridLevel:
@@ -57,7 +77,9 @@ class GridLevel:
         resolution: cell side, m.
         logodds: (H, W) float32 log-odds, 0 = unknown (hector_mapping GridMapLogOdds.h).
         prob: (H, W) float32 occupancy probability cache, kept in step with ``logodds``.
-        uidx: (H, W) int32 per-cell update index (−1 = never updated), as OccGridMapBase's updateIndex.
+        uidx: (H, W) int32 per-cell update index, as OccGridMapBase's updateIndex, 0 = never updated (the reference's
+            −1: a scan's indices are ≥ 1, so every comparison with them reads the same; 0 lets a large level's
+            array be zeroed memory whose pages no ray reached are never touched, docs/speed.md pass mem43).
         i0, j0: absolute cell index of array column 0 / row 0.
     """
 
@@ -173,15 +195,15 @@ class GridLevel:
         # into the strips around it — not the whole array filled and then the old part written over (the loop
         # closer's submaps grow on most keyframes they take in; ≈ 40 % less time per growth).
         for name, fill, dtype in _LEVEL_ARRAYS:
-            if name == "logodds" and nh * nw * 4 >= _ZEROED_BYTES:
-                # a large level's log-odds (0 = unknown) in zeroed memory, only the old array's non-zero cells
-                # copied (a −0.0 is: its bits are not zero): pages no ray reached are never touched and take no
-                # memory (12.5 % of MIT CSAIL's finest level was ever updated; docs/speed.md pass mem39)
-                new = np.zeros((nh, nw), dtype=dtype)
+            if name != "prob" and nh * nw * 4 >= _ZEROED_BYTES:
+                # a large level's log-odds (0 = unknown) and update indices (0 = never) in zeroed memory, only the
+                # old array's rows that hold a non-zero cell copied (a −0.0 does: its bits are not zero): pages no
+                # ray reached are never touched and take no memory (12.5 % of MIT CSAIL's finest level was ever
+                # updated; docs/speed.md passes mem39 and mem43)
+                new = _zeroed((nh, nw), dtype)
                 if w > 0:
-                    old = self.logodds
-                    np.copyto(new[r0:r0 + h, c0:c0 + w], old, where=old.view(np.int32) != 0)
-                self.logodds = new
+                    _copy_written_rows(new[r0:r0 + h, c0:c0 + w], getattr(self, name))
+                setattr(self, name, new)
                 continue
             new = np.empty((nh, nw), dtype=dtype)
             if w > 0:
@@ -268,7 +290,7 @@ class GridLevel:
         """(row0, row1, col0, col1) half-open array bounds of the observed cells, or None."""
         if self.empty:
             return None
-        seen = self.uidx >= 0
+        seen = self.uidx > 0
         rows = np.flatnonzero(seen.any(axis=1))
         if rows.size == 0:
             return None
@@ -466,7 +488,7 @@ class MultiResMap:
             return GridMap(np.full((1, 1), np.nan), lv.resolution, lv.corner_origin())
         b = lv.known_bounds() if crop else None
         r0, r1, c0, c1 = b if b is not None else (0, lv.shape[0], 0, lv.shape[1])
-        prob = logistic_map(lv.logodds[r0:r1, c0:c1], lv.uidx[r0:r1, c0:c1] < 0)
+        prob = logistic_map(lv.logodds[r0:r1, c0:c1], lv.uidx[r0:r1, c0:c1] < 1)
         return GridMap(prob, lv.resolution, lv.corner_origin(r0, c0))
 
     def export_logodds(self, level: int = 0, crop: bool = True) -> tuple[np.ndarray, tuple[float, float]]:

@@ -14,8 +14,8 @@ they replaced computed (``tests/test_ledger_kernels.py`` checks them against it 
 * :func:`unpack_cells`: from the sorted packed values, each distinct (level, owner > 0, cell) that no owner-0
   value shares (a cell another kept beam of the scan hits is the structure's), decoded to track id, cell key
   ``i·2^32 + j`` and cell (i, j), in (level, track, cell) order;
-* :func:`read_cells`: log-odds and update index of cells (0 and −1 outside the level's array) and their flat
-  array indices (−1 outside);
+* :func:`read_cells`: log-odds and update index of cells (0 and 0 — never updated — outside the level's array)
+  and their flat array indices (−1 outside);
 * :func:`update_rows`: after the update, the rows (key, update index before, after, added log-odds' bits) of the
   cells the update changed, and the per-track groups of those rows;
 * :func:`stand_marks`: the per-scan standing test of ``EvidenceLedger.observe`` over the tracker's state rows
@@ -278,13 +278,14 @@ def unpack_cells(u, params, uids, n_lv):  # pragma: no cover - numba
 @njit(cache=True)
 def read_cells(logodds, uidx, cells, i0, j0):  # pragma: no cover - numba
     """(log-odds (float64), update index (int64), flat index into the (H, W) arrays, number outside) of absolute
-    ``cells`` (m, 2) on a level whose array starts at cell (``i0``, ``j0``); 0, −1, −1 outside the array."""
+    ``cells`` (m, 2) on a level whose array starts at cell (``i0``, ``j0``); 0, 0 (never updated), −1 outside the
+    array."""
     h, w = logodds.shape
     m = cells.shape[0]
     lo = np.empty(m)
     lo[:] = 0.0
     ui = np.empty(m, dtype=np.int64)
-    ui[:] = -1
+    ui[:] = 0
     f = np.empty(m, dtype=np.int64)
     f[:] = -1
     n_out = 0
@@ -304,7 +305,7 @@ def read_cells(logodds, uidx, cells, i0, j0):  # pragma: no cover - numba
 def update_rows(logodds, uidx, f, ids, keys, before, ub):  # pragma: no cover - numba
     """After a map update: ((4, m) rows — cell key, update index before, update index after, the added log-odds'
     float64 bits — of the cells whose update index changed; the track id of each group of rows; the groups'
-    bounds (g + 1,)), from the cells' flat indices ``f`` (−1: outside the array, read as log-odds 0 and index −1)
+    bounds (g + 1,)), from the cells' flat indices ``f`` (−1: outside the array, read as log-odds 0 and index 0)
     and what :func:`read_cells` read before the update. ``ids`` is sorted, so each track's rows are one group."""
     w = logodds.shape[1]
     n = f.shape[0]
@@ -316,7 +317,7 @@ def update_rows(logodds, uidx, f, ids, keys, before, ub):  # pragma: no cover - 
     for t in range(n):
         ft = f[t]
         after = 0.0
-        u = -1
+        u = 0
         if ft >= 0:
             row = ft // w
             col = ft - row * w
@@ -399,7 +400,7 @@ def _read_levels(u, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, vali
                 ):  # pragma: no cover - numba
     """:func:`unpack_cells` of the sorted packed values ``u`` and the read of its cells on the first
     ``min(n_lv, 3)`` levels (``logodds``, ``uidx``: the levels' arrays, padded; ``i0``, ``j0``: their offsets), in one
-    call: (track ids, cell keys, (m, 2) cells, log-odds before (float64), update index before (int64; 0 and −1
+    call: (track ids, cell keys, (m, 2) cells, log-odds before (float64), update index before (int64; 0 and 0
     outside a level's array and on levels ≥ 3, which the caller reads), level bounds (L + 1,), per track ``t`` of
     ``ids`` whether any kept beam of it is left (``counts`` of its id's rank in ``uids`` > 0), and, with
     ``want_kb``, :func:`kept_beams` of ``valid``, ``beams``, ``ends`` (else empty))."""
@@ -408,7 +409,7 @@ def _read_levels(u, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, vali
     lo = np.empty(m)
     lo[:] = 0.0
     ui = np.empty(m, dtype=np.int64)
-    ui[:] = -1
+    ui[:] = 0
     for k in range(min(n_lv, FUSED_LEVELS)):
         a = logodds[k]
         b = uidx[k]
@@ -498,7 +499,7 @@ def record_cells(beams, idl, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px,
     sorted, decoded (:func:`unpack_cells`) and their cells read on the first ``min(L, 3)`` levels (``logodds``,
     ``uidx``, offsets ``i0``, ``j0``: 3-tuples, padded). Returns (status — :data:`PACKED`, or :data:`NO_KEPT` /
     :data:`PLAIN` with the other outputs empty; the cells as a (6, m) block of rows: track id, cell key, cell i,
-    cell j, update index before (−1 outside a level's array and on levels ≥ 3, which the caller reads) and the
+    cell j, update index before (0 outside a level's array and on levels ≥ 3, which the caller reads) and the
     float64 bits of the log-odds before (0 there); ``small``: the level bounds (L + 1,), per track whether a kept
     beam of it is left (T,: 0 / 1) and, with ``want_kb``, the kept beams' per-track bounds (T + 1,); with
     ``want_kb`` the kept beams (:func:`kept_beams`), else empty)."""
@@ -592,7 +593,7 @@ def level_rows(logodds, uidx, i0, j0, n_lv, blk, small):  # pragma: no cover - n
             col = blk[2, t] - ci0
             row = blk[3, t] - cj0
             after = 0.0
-            v = -1
+            v = 0
             if col >= 0 and row >= 0 and col < w and row < h:
                 after = a[row, col]
                 v = b[row, col]
