@@ -16,17 +16,18 @@ in a way that could change anything: ``far_after`` and ``far_searches`` only gat
 
 ``time``: the ``loops`` stage's mean per scan under each policy, in process (thread CPU of ``LoopCloser.add``,
 all scans; one fresh pipeline per run after a throw-away warm-up; policies alternated round by round), and whether
-the final keyframe poses equal the first policy's; it also runs the policies of ``DESC_CAPS`` (not settings: the
-run's far search skips a submap whose place-descriptor distance is above the cap, patched in process)::
+the final keyframe poses equal the first policy's::
 
     taskset -c 1 python benchmarks/study_far_searches.py time --data <data> --rounds 3 [--only negative_2 ...]
 
 ``ranks``: every far search of a default run in process, with the place-descriptor distance of the submap
 searched and whether it returned a pose, passed the jump check and was accepted::
 
-    taskset -c 1 python benchmarks/study_far_searches.py ranks --data <data> --only negative_2 mit-csail intel
+    taskset -c 1 python benchmarks/study_far_searches.py ranks --data <data> --only negative_2 mit-csail intel \
+        [--policies cap=off]
 
-The default policy's settings: ``loop.far_after=20``, ``loop.far_searches=4`` (slam/loopconfig.py).
+The default policy's settings: ``loop.far_after=20``, ``loop.far_searches=4``, ``loop.far_max_place_distance=0.66``,
+``loop.far_best_place_distance=0.74`` (slam/loopconfig.py; ``cap=off`` = the far search before pass far43).
 """
 
 from __future__ import annotations
@@ -45,6 +46,10 @@ import numpy as np
 #: policy name → overrides (dotted config keys)
 POLICIES: dict[str, dict[str, object]] = {
     "default": {},
+    # the place-distance caps of the run's far search (pass far43; default 0.66, the best-ranked submap 0.74): off, and
+    # the single absolute cap of pass far42's study
+    "cap=off": {"loop.far_max_place_distance": 2.0},
+    "cap=0.70": {"loop.far_max_place_distance": 0.70, "loop.far_best_place_distance": 0.70},
     "far_after=40": {"loop.far_after": 40.0},
     "far_after=inf": {"loop.far_after": 1.0e9},  # no far search during the run (the second search stays)
     "far_searches=2": {"loop.far_searches": 2},
@@ -129,8 +134,8 @@ def _run_one(data: Path, name: str, policy: str, out: Path) -> dict[str, object]
     lc = summ.get("loop_closure", {})
     r: dict[str, object] = {"input": name, "policy": policy, "dir": str(d), "wall_s": round(wall, 1),
                             "scans": summ.get("scans")}
-    for k in ("keyframes", "far_searches", "far_candidates", "far_loops", "loops_accepted", "loops_active",
-              "second_searches", "second_loops", "corrected"):
+    for k in ("keyframes", "far_searches", "far_skipped", "far_candidates", "far_loops", "loops_accepted",
+              "loops_active", "second_searches", "second_loops", "corrected"):
         r[k] = lc.get(k)
     m = d / "metrics.json"
     if m.exists():
@@ -188,11 +193,6 @@ def sweep(args: argparse.Namespace) -> None:
         Path(args.json).write_text(json.dumps(rows, indent=1))
 
 
-#: policies not expressible as settings (simulated in process by ``time`` only): the run's far search skips a
-#: submap whose place-descriptor distance to the keyframe is above the cap (the second search is left as it is)
-DESC_CAPS: dict[str, float] = {"desc<=0.70": 0.70}
-
-
 def _config(policy: str):  # noqa: ANN202
     from dynslam2d.config import Config, config_from_dict, set_key
 
@@ -206,16 +206,11 @@ def _config(policy: str):  # noqa: ANN202
 def _timed_run(scans: list, policy: str) -> tuple[float, float, dict[str, float], np.ndarray]:
     """One fresh pipeline: (loops stage mean µs a scan in thread CPU, whole loop CPU ms a scan, far counters,
     the keyframes' optimised poses after ``finish``)."""
-    import math
-
     from dynslam2d.pipeline import Pipeline
     from dynslam2d.slam.loops import LoopCloser
 
     acc = [0]
-    add, ranks_f, match_f = LoopCloser.add, LoopCloser._place_ranks, LoopCloser._match_at
-    cap = DESC_CAPS.get(policy)
-    last_rank: dict[int, float] = {}
-    skipped = [0]
+    add = LoopCloser.add
 
     def timed(self, *a, **k):  # noqa: ANN001, ANN002, ANN003, ANN202
         t0 = time.thread_time_ns()
@@ -224,21 +219,7 @@ def _timed_run(scans: list, policy: str) -> tuple[float, float, dict[str, float]
         finally:
             acc[0] += time.thread_time_ns() - t0
 
-    def place_ranks(self, node):  # noqa: ANN001, ANN202
-        r = ranks_f(self, node)
-        last_rank.clear()
-        last_rank.update(r)
-        return r
-
-    def match_at(self, node, s, pts, pred, lin, ang, *a, **k):  # noqa: ANN001, ANN002, ANN003, ANN202
-        if ang == math.pi and self._second is None and last_rank.get(s, 2.0) > cap:
-            skipped[0] += 1
-            return None
-        return match_f(self, node, s, pts, pred, lin, ang, *a, **k)
-
     LoopCloser.add = timed
-    if cap is not None:
-        LoopCloser._place_ranks, LoopCloser._match_at = place_ranks, match_at
     try:
         pipe = Pipeline(_config(policy))
         c0 = time.thread_time()
@@ -248,9 +229,8 @@ def _timed_run(scans: list, policy: str) -> tuple[float, float, dict[str, float]
         st = dict(pipe.loops.stats)
         nodes = pipe.loops.finish().node_poses.copy()
     finally:
-        LoopCloser.add, LoopCloser._place_ranks, LoopCloser._match_at = add, ranks_f, match_f
-    out = {k: st.get(k, 0) for k in ("far_searches", "far_loops", "loops_accepted")}
-    out["far_searches"] -= skipped[0]
+        LoopCloser.add = add
+    out = {k: st.get(k, 0) for k in ("far_searches", "far_skipped", "far_loops", "loops_accepted")}
     return acc[0] / 1e3 / len(scans), cpu, out, nodes
 
 
@@ -298,17 +278,25 @@ def _open(data: Path, name: str) -> list:
     return list(open_source(rel if rel.startswith("sim:") else str(data / rel), **kw))
 
 
-def _far_log(scans: list) -> list[dict[str, object]]:
+def _far_log(scans: list, policy: str = "default") -> list[dict[str, object]]:
     """One default run in process; a row per far search (:func:`ranks`)."""
     import math
 
     from dynslam2d.pipeline import Pipeline
     from dynslam2d.slam.loops import LoopCloser
 
-    saved = {k: getattr(LoopCloser, k) for k in ("_place_ranks", "_match_at", "_verify_far", "_far_verified")}
+    saved = {k: getattr(LoopCloser, k) for k in ("_place_ranks", "_match_at", "_verify_far", "_far_verified",
+                                                 "_far_pick")}
     rows: list[dict[str, object]] = []
     last_rank: dict[int, float] = {}
+    picked: dict[int, tuple[int, float]] = {}  # submap → (its rank among the searches picked, the first's distance)
     accepted: set[tuple[int, int]] = set()
+
+    def far_pick(self, node, elig, count, _f=saved["_far_pick"]):  # noqa: ANN001, ANN202
+        out = _f(self, node, elig, count)
+        picked.clear()
+        picked.update({e[2]: (i, float(elig[0][0])) for i, e in enumerate(elig[:count])})
+        return out
 
     def place_ranks(self, node, _f=saved["_place_ranks"]):  # noqa: ANN001, ANN202
         r = _f(self, node)
@@ -321,7 +309,10 @@ def _far_log(scans: list) -> list[dict[str, object]]:
         if ang == math.pi:  # a far search (every rotation)
             srt = sorted(last_rank.values())
             d = last_rank.get(s, 2.0)
+            pk, best = picked.get(s, (-1, 2.0))
             rows.append({"node": node, "submap": s, "dist": d, "rank": srt.index(d) if d in srt else -1,
+                         "pick": pk, "best": best, "cover": self._place_cover(node, s),
+                         "next": last_rank.get(s + 1, 2.0),
                          "second": self._second is not None, "pose": cand is not None, "verify": False,
                          "accepted": False, "path": self.keyframes[node].path - self._loop_path})
         return cand
@@ -341,8 +332,9 @@ def _far_log(scans: list) -> list[dict[str, object]]:
 
     LoopCloser._place_ranks, LoopCloser._match_at = place_ranks, match_at
     LoopCloser._verify_far, LoopCloser._far_verified = verify_far, far_verified
+    LoopCloser._far_pick = far_pick
     try:
-        pipe = Pipeline(_config("default"))
+        pipe = Pipeline(_config(policy))
         for sc in scans:
             pipe.process(sc)
         pipe.loops.finish()
@@ -360,7 +352,7 @@ def ranks(args: argparse.Namespace) -> None:
     the search returned a pose, passed the jump check, and whether it was accepted as a loop (with its partners)."""
     names = [n for n in INPUTS if not args.only or any(o in n for o in args.only)]
     for name in names:
-        rows = _far_log(_open(args.data, name))
+        rows = _far_log(_open(args.data, name), args.policies[0] if args.policies else "default")
         run = [r for r in rows if not r["second"]]
         print(f"== {name}: {len(run)} far searches during the run ({len(rows) - len(run)} by the second search)")
         for lab, sel in (("returned a pose", [r for r in run if r["pose"]]),
@@ -368,14 +360,21 @@ def ranks(args: argparse.Namespace) -> None:
                          ("accepted", [r for r in run if r["accepted"]]),
                          ("refused", [r for r in run if not r["pose"]])):
             ds = sorted(float(r["dist"]) for r in sel)
-            rk = collections_count(int(r["rank"]) for r in sel)
-            print(f"  {lab:<22} {len(sel):4d}  descriptor distance "
+            rk = collections_count(int(r["pick"]) for r in sel)
+            gap = sorted(float(r["dist"]) - float(r["best"]) for r in sel)
+            cv = sorted(min(float(r["dist"]), float(r["cover"])) for r in sel)
+            print(f"  {lab:<22} {len(sel):4d}  place distance for the caps "
+                  + (f"min {cv[0]:.3f} median {statistics.median(cv):.3f} max {cv[-1]:.3f}" if cv else "—")
+                  + f"\n  {'':<22}       descriptor distance "
                   + (f"min {ds[0]:.3f} median {statistics.median(ds):.3f} max {ds[-1]:.3f}" if ds else "—")
-                  + f"  rank {rk}")
+                  + (f"  above the best picked: median {statistics.median(gap):.3f} max {gap[-1]:.3f}" if gap else "")
+                  + f"  rank among the picked {rk}")
         for r in run:
             if r["pose"]:
-                print(f"    node {r['node']} submap {r['submap']} dist {r['dist']:.3f} rank {r['rank']} "
-                      f"path since loop {r['path']:.1f} m verify {r['verify']} accepted {r['accepted']}")
+                print(f"    node {r['node']} submap {r['submap']} dist {r['dist']:.3f} for the caps {r['cover']:.3f} "
+                      f"(best picked {r['best']:.3f}, "
+                      f"rank {r['pick']}) path since loop {r['path']:.1f} m verify {r['verify']} "
+                      f"accepted {r['accepted']}")
         if args.json:
             Path(args.json).with_suffix(f".{name.replace('/', '_').replace(':', '_')}.json").write_text(
                 json.dumps(rows))
@@ -394,7 +393,7 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=Path(os.environ.get("DYNSLAM2D_DATA", "../shared/data")))
     ap.add_argument("--out", default="study_far", help="sweep: run folders go here (<scratch>)")
     ap.add_argument("--only", nargs="*", help="inputs whose name contains one of these")
-    ap.add_argument("--policies", nargs="*", help="policies (default: all of POLICIES; time also: DESC_CAPS)")
+    ap.add_argument("--policies", nargs="*", help="policies (default: all of POLICIES)")
     ap.add_argument("--all", action="store_true", help="sweep: every policy even where the default does no far search")
     ap.add_argument("--json", help="sweep: write the rows here")
     ap.add_argument("--rounds", type=int, default=3)

@@ -104,6 +104,20 @@ class LoopConfig(BaseModel):
         4, ge=0,
         description="Far submaps searched per searched keyframe (the first far_searches by far_rank), count.",
     )
+    far_max_place_distance: float = Field(
+        0.66, ge=0.0, le=2.0,
+        description="The far search during the run skips a submap (of the far_searches it would search) whose place "
+        "distance to the keyframe's place is above this (place-descriptor distance, 0 … 2, smaller = more alike; the "
+        "smallest over the places stored at the submap's keyframes and those after it whose window still holds its "
+        "anchor): such searches found nothing on the recordings measured (docs/slam.md, 'Place descriptor'). 2 = off "
+        "(every one searched, as before). Only with far_rank: descriptor; the second search is not capped.",
+    )
+    far_best_place_distance: float = Field(
+        0.74, ge=0.0, le=2.0,
+        description="… except the best-ranked of them (the most alike), searched up to this place distance (or "
+        "far_max_place_distance if larger): a true loop to a place that looks unlike every stored one is still the "
+        "most alike of them (negative_2 /left_scan: 0.686).",
+    )
     far_margin: float = Field(
         3.0, ge=0.0,
         description="A far search covers the submap's keyframes' extent around its anchor plus this much, m "

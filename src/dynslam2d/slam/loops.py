@@ -294,6 +294,8 @@ class LoopCloser:
         self._places = (PlaceIndex(c.place_rings, c.place_sectors, c.place_max_range)
                         if c.far_search and c.far_rank == "descriptor" else None)
         self._query_desc: tuple[int, np.ndarray] | None = None  # (node, descriptor) of the latest keyframe
+        # (stored places' keys, their distances to the query) of the last ranking (_place_ranks)
+        self._place_dist: tuple[np.ndarray, np.ndarray] = (np.zeros(0, np.int64), np.zeros(0))
         # node → its returns for the descriptors (see _place_due): (keyframe, its removed beams at the keyframe) until
         # a descriptor first reads them (_place_returns), then the returns (≤ 1 kB)
         self._place_pts: dict[int, np.ndarray | tuple[Keyframe, np.ndarray]] = {}
@@ -306,7 +308,7 @@ class LoopCloser:
         #: while a keyframe is added: (keyframe, its kept scan or None, its points once computed), see _points
         self._kf_points: tuple | None = None
         self.stats: dict[str, float] = {"searches": 0, "candidates": 0, "loops_accepted": 0, "optimisations": 0,
-                                        "far_searches": 0, "far_candidates": 0, "far_loops": 0,
+                                        "far_searches": 0, "far_skipped": 0, "far_candidates": 0, "far_loops": 0,
                                         "far_deferred": 0, "rematch_edges": 0, "rematch_checked": 0, "rematch_ms": 0.0,
                                         "second_searches": 0, "second_loops": 0, "second_rounds": 0, "second_ms": 0.0,
                                         "place_ms": 0.0,
@@ -618,7 +620,7 @@ class LoopCloser:
             rank = self._place_ranks(node)
             elig = [(rank.get(s, 2.0), d, s, r, dth) for _last, d, s, r, dth in elig]
         elig.sort()
-        for _last, _d, s, r, dth in elig[:c.far_searches if count is None else count]:
+        for _last, _d, s, r, dth in self._far_pick(node, elig, c.far_searches if count is None else count):
             self._far_last[s] = node
             self.stats["far_searches"] += 1
             _first, _l, anchor = self._submap_range(s)
@@ -645,6 +647,40 @@ class LoopCloser:
             if self._second_tried is not None:
                 self._second_tried.append(cand)
         return len(elig)
+
+    def _far_pick(self, node: int, elig: list[tuple[float, float, int, float, float]],
+                  count: int) -> list[tuple[float, float, int, float, float]]:
+        """The far searches keyframe ``node`` runs of the sorted eligible submaps ``elig`` (rows (place-descriptor
+        distance, or the node of the last far search with ``far_rank: oldest``; distance / far radius; submap; far
+        radius m; heading deviation rad)): the first ``count``, of which the run's far search (not the second
+        search) skips those whose place distance (:meth:`_place_cover`) is above ``far_max_place_distance`` — the
+        first of them, the best-ranked, only above ``far_best_place_distance`` if that is larger. On the recordings
+        measured every far search above these caps found nothing (docs/slam.md, "Place descriptor");
+        ``stats["far_skipped"]`` counts the skipped ones."""
+        c = self.config
+        picked = elig[:count]
+        if self._places is None or self._second is not None or not picked or c.far_max_place_distance >= 2.0:
+            return picked
+        best = max(c.far_best_place_distance, c.far_max_place_distance)
+        kept = [e for i, e in enumerate(picked)
+                if self._place_cover(node, e[2]) <= (best if i == 0 else c.far_max_place_distance)]
+        self.stats["far_skipped"] += len(picked) - len(kept)
+        return kept
+
+    def _place_cover(self, node: int, s: int) -> float:
+        """Submap ``s``'s place distance for the caps of :meth:`_far_pick`: the smallest distance to keyframe
+        ``node``'s place, in the last ranking (:meth:`_place_ranks`), of the places stored at the submap's
+        keyframes and of those after it whose descriptor window (the ``place_keyframes`` keyframes up to the
+        place) still holds the submap's anchor — they saw what the far search matches against — but not the
+        query's own window (places up to ``node − place_keyframes``: a place sharing keyframes with the query
+        looks alike for that reason alone). 2.0 = no such place. Never above the submap's rank."""
+        keys, d = self._place_dist
+        pk = self.config.place_keyframes
+        first, last, anchor = self._submap_range(s)
+        hi = max(last, min(anchor + pk - 1, node - pk))
+        lo = int(np.searchsorted(keys, first, side="left"))  # (keys: stored nodes, ascending)
+        hi = int(np.searchsorted(keys, hi, side="right"))
+        return float(d[lo:hi].min()) if hi > lo else 2.0
 
     def _describe(self, node: int, store: bool) -> None:
         """The place descriptor of keyframe ``node`` (:meth:`_describe_many`)."""
@@ -721,6 +757,7 @@ class LoopCloser:
         self._place_pts.clear()
         self._place_due.clear()
         self._query_desc = None
+        self._place_dist = (np.zeros(0, np.int64), np.zeros(0))
 
     def _place_ranks(self, node: int) -> dict[int, float]:
         """Submap → smallest place-descriptor distance of its stored keyframes to keyframe ``node``'s place."""
@@ -734,6 +771,7 @@ class LoopCloser:
         else:
             self._describe(node, False)
             keys, d, _shift = self._places.distances(self._query_desc[1])
+        self._place_dist = (keys, d)
         sub = keys // c.submap_keyframes
         best = np.full(int(sub.max()) + 1 if sub.size else 0, np.inf)
         np.minimum.at(best, sub, d)
