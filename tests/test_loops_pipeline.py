@@ -37,6 +37,9 @@ def test_loop_closure_off_is_the_front_end_and_on_keeps_it(loop_runs: tuple) -> 
     assert on.loop is not None and on.loop.stats["loops_active"] >= 3
     s = on.summary()["loop_closure"]
     assert s["enabled"] and s["loops_active"] == on.loop.stats["loops_active"]
+    # every loop closer counter reaches summary.json, the far searches skipped by the place cap among them
+    for key in ("searches", "far_searches", "far_skipped", "far_candidates", "far_loops"):
+        assert s[key] == on.loop.stats[key], key
     # the simulated front end hardly drifts: the loops agree with it, the result is no worse
     def ate(poses: np.ndarray) -> float:
         return float(np.sqrt(np.mean(np.sum((poses[:, :2] - (gt[:, :2] - gt[0, :2])) ** 2, axis=1))))

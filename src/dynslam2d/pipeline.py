@@ -577,7 +577,7 @@ class RunResult:
             if k in st:
                 out[k] = st[k]
         for k in ("keyframes", "submaps", "searches", "candidates", "loops_accepted", "loops_active", "loops_rejected",
-                  "optimisations", "far_searches", "far_candidates", "far_loops"):
+                  "optimisations", "far_searches", "far_skipped", "far_candidates", "far_loops"):
             out[k] = int(st.get(k, 0))
         for k in ("total_ms", "render_ms"):
             out[k] = round(float(st.get(k, 0.0)), 1)
