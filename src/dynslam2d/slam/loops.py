@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import math
 import time
+from array import array
 from collections import OrderedDict, deque
 from dataclasses import dataclass, field
 
@@ -60,7 +61,7 @@ from dynslam2d.slam.placedesc import PlaceIndex
 from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
 from dynslam2d.slam.rematch import refine_supported, rematch_keyframes
 from dynslam2d.slam.secondsearch import run_second_search
-from dynslam2d.types import Pose2D, Scan, wrap_angle
+from dynslam2d.types import Pose2D, Scan, _copy_scan, wrap_angle
 
 #: Submap grids kept built at a time (each a few MB).
 _SUBMAP_CACHE = 6
@@ -79,6 +80,14 @@ _PLACE_BATCH = 16  # places described per call when the due ones are flushed (_p
 _REFINE_TURN = 0.25
 #: Keyframe edges across unsupported scans get their deviation multiplied by this.
 _WEAK_FACTOR = 10.0
+#: Keyframes whose ranges are packed at a time (:meth:`LoopCloser._pack_keyframes`): the packing's NumPy calls are
+#: made once per batch, not per keyframe (the loop closer's median scan does no packing).
+_PACK_BATCH = 32
+#: Decimal scales tried for a keyframe's ranges (ranges = integer codes / scale), the first that gives every range
+#: back bit for bit: whole metres, decimetres, centimetres (MIT CSAIL's CARMEN log), millimetres.
+_PACK_SCALES = (1.0, 10.0, 100.0, 1000.0)
+_NO_BEAMS = np.zeros(0, dtype=bool)  # a keyframe's ``removed`` when the filter removed none of its beams
+_NO_RANGES = np.zeros(0, dtype=np.float64)  # the ranges of a packed keyframe's scan shell (never read)
 
 
 def _keep_probabilities(lv: GridLevel) -> None:
@@ -133,21 +142,71 @@ class Keyframe:
     """A scan written into the front end's map: its node, its front-end pose and its beams.
 
     ``scan`` has the robot's own body removed; ``removed`` marks the beams the dynamic filter
-    removed (kept out of submaps and loop queries, and of the re-rendered map).
+    removed (kept out of submaps and loop queries, and of the re-rendered map; an empty array when it removed none).
+    Once packed (:meth:`pack`) the keyframe keeps its ranges as integer codes of a decimal scale (``codes /
+    scale`` is every range bit for bit: uint16 centimetres for MIT CSAIL's log, 2 bytes a beam instead of 8) or as
+    float32 when every range is a float32 value, and ``scan`` is rebuilt on every read from a shell of the scan's
+    other fields (its valid mask is computed again: the same values).
     """
 
     scan_index: int
     stamp: float
     frontend: np.ndarray
-    scan: Scan
+    _scan: Scan  # the scan; once packed, a shell with every field but the ranges
     removed: np.ndarray
     path: float  # path length of the front end up to this keyframe, m
+    _codes: np.ndarray | None = None  # packed ranges (None: not packed, ``_scan`` holds them)
+    _scale: float = 0.0  # ranges = codes / scale (0: the codes are the ranges' values, float32 or float64)
+
+    @property
+    def scan(self) -> Scan:
+        """The keyframe's scan (a new :class:`Scan` on each read once packed; its ranges are the scan's, bit for
+        bit)."""
+        codes = self._codes
+        if codes is None:
+            return self._scan
+        return _copy_scan(self._scan, self.ranges(), None)
+
+    def ranges(self) -> np.ndarray:
+        """(n,) float64 ranges of the scan, m (a new array once packed)."""
+        codes = self._codes
+        if codes is None:
+            return self._scan.ranges
+        if self._scale:
+            return codes.astype(np.float64) / self._scale
+        return codes.astype(np.float64)
+
+    @property
+    def n_beams(self) -> int:
+        codes = self._codes
+        return int((self._scan.ranges if codes is None else codes).shape[0])
 
     def kept(self) -> Scan:
         """The scan with the removed beams set to "no return"."""
         if self.removed.size and self.removed.any():
             return self.scan.without(self.removed)
         return self.scan
+
+
+def _pack_codes(r: np.ndarray, scales: tuple[float, ...]) -> tuple[np.ndarray, float] | None:
+    """(codes, scale) of the (k, n) float64 ranges ``r``: the narrowest unsigned codes (uint16, uint32) of the first
+    decimal ``scale`` for which ``codes.astype(float64) / scale`` is ``r`` bit for bit (the expression
+    :meth:`Keyframe.ranges` reads them back with; a division is correctly rounded, so a range written with at most
+    that many decimals comes back as the float its text was parsed to); else float32 codes (scale 0) if every range
+    is a float32 value; None if neither holds."""
+    bits = r.view(np.int64)
+    if r.size and bool(np.isfinite(r).all()) and float(r.min()) >= 0.0:
+        top = float(r.max())
+        for s in scales:
+            if top * s >= 4294967295.0:
+                break
+            codes = np.rint(r * s).astype(np.uint16 if top * s < 65535.0 else np.uint32)
+            if np.array_equal((codes.astype(np.float64) / s).view(np.int64), bits):
+                return codes, s
+    f = r.astype(np.float32)
+    if np.array_equal(f.astype(np.float64).view(np.int64), bits):
+        return f, 0.0
+    return None
 
 
 @dataclass(slots=True)
@@ -257,8 +316,11 @@ class LoopCloser:
         self.keyframes: list[Keyframe] = []
         self.candidates: list[LoopCandidate] = []
         self.loop_edges: list[int] = []  # edge indices in the graph
-        self._scan_node: list[int] = []  # per scan: its last keyframe's node (−1 before the first)
-        self._frontend: list[tuple[float, float, float]] = []
+        # per scan: its last keyframe's node (−1 before the first), and its front-end pose (x, y m, θ rad) as three
+        # float64 values in a row: C arrays of the standard library, 8 and 24 bytes a scan (a list of tuples of
+        # Python floats took 136)
+        self._scan_node = array("q")
+        self._frontend = array("d")
         # per keyframe, the edge from the one before it: a scan it spans was weak; the lowest match score of
         # those scans (NaN: none given)
         self.kf_weak: list[bool] = []
@@ -273,6 +335,7 @@ class LoopCloser:
         self._new_loops = 0
         self._cache: OrderedDict[int, MultiResMap] = OrderedDict()
         self._cache_size = _SUBMAP_CACHE  # grids kept built (the second search keeps more: it jumps between places)
+        self._unpacked: list[int] = []  # keyframes whose ranges are not packed yet (_pack_keyframes), ascending
         # submap → its far-search level (far_level), kept for every submap built (≈ 10–20 kB each at 0.4 m) after its
         # grid leaves the cache: a far search whose correlative match is refused reads nothing else, so it needs
         # no rebuild (the same level: a submap's inputs change only through drop_beams, which drops both)
@@ -330,22 +393,22 @@ class LoopCloser:
             self._path += math.hypot(x - last[0], y - last[1])
         if finite:
             self._last_pose = (x, y)
-        self._frontend.append((x, y, th))
+        self._frontend.extend((x, y, th))
         if self._jumps is not None and self._jumps.update(stamp, x, y, th):
             weak = True  # the front end snapped back: the drift before it is for the loops to undo
         self._weak_since_kf |= bool(weak)
         if score == score:  # not NaN
             self._score_since_kf = min(self._score_since_kf, float(score))
         if keyframe and finite:
-            self._add_keyframe(len(self._frontend) - 1, stamp, np.array([x, y, th], dtype=np.float64), scan, removed,
-                               kept)
+            self._add_keyframe(len(self._frontend) // 3 - 1, stamp, np.array([x, y, th], dtype=np.float64), scan,
+                               removed, kept)
         self._scan_node.append(len(self.keyframes) - 1)
         self.stats["total_ms"] += (time.perf_counter() - t0) * 1e3
 
     @property
     def next_index(self) -> int:
         """The scan index the next :meth:`add` call gets (keyframes keep it as ``scan_index``)."""
-        return len(self._frontend)
+        return len(self._frontend) // 3
 
     def drop_beams(self, items: list[tuple[int, np.ndarray]]) -> int:
         """Mark beams of earlier keyframes removed after the fact: ``items`` are (scan index, beam indices)
@@ -361,8 +424,8 @@ class LoopCloser:
             if k >= index.shape[0] or index[k] != scan_index:
                 continue
             kf = self.keyframes[k]
-            if kf.removed.shape != kf.scan.ranges.shape:
-                kf.removed = np.zeros(kf.scan.ranges.shape[0], dtype=bool)
+            if kf.removed.shape != (kf.n_beams,):
+                kf.removed = np.zeros(kf.n_beams, dtype=bool)
             else:  # a copy: the array may be the caller's (the pipeline's StepResult.removed of that scan)
                 kf.removed = kf.removed.copy()
             b = np.asarray(beams, dtype=np.int64)
@@ -383,6 +446,41 @@ class LoopCloser:
             self._add_keyframe_node(kf, p)
         finally:
             self._kf_points = None
+        self._unpacked.append(len(self.keyframes) - 1)
+        if len(self._unpacked) >= _PACK_BATCH:
+            self._pack_keyframes()
+
+    def _pack_keyframes(self) -> None:
+        """Pack the ranges of the keyframes added since the last call (:meth:`Keyframe.ranges` reads them back bit
+        for bit; issue 13 item 3: 3.7 MB of float64 ranges on MIT CSAIL become 0.9 MB of uint16 centimetres), one
+        batch per beam count, and let a ``removed`` mask without a removed beam go (an empty array reads the
+        same everywhere: :meth:`Keyframe.kept`, :meth:`_scan_points`, the clean-up pass's recount)."""
+        kfs = [self.keyframes[k] for k in self._unpacked]
+        self._unpacked.clear()
+        groups: dict[int, list[Keyframe]] = {}
+        for kf in kfs:
+            if kf.removed.size and not kf.removed.any():
+                kf.removed = _NO_BEAMS
+            if kf._codes is None:
+                groups.setdefault(kf._scan.ranges.shape[0], []).append(kf)
+        for group in groups.values():
+            packed = _pack_codes(np.stack([kf._scan.ranges for kf in group]), _PACK_SCALES)
+            if packed is None:  # (a keyframe with a range no code holds: each on its own, float64 at worst)
+                for kf in group:
+                    one = _pack_codes(kf._scan.ranges[None], _PACK_SCALES)
+                    self._pack_one(kf, *(one if one is not None else (kf._scan.ranges[None], 0.0)))
+                continue
+            codes, scale = packed
+            for i, kf in enumerate(group):
+                self._pack_one(kf, codes[i:i + 1], scale)
+
+    @staticmethod
+    def _pack_one(kf: Keyframe, codes: np.ndarray, scale: float) -> None:
+        """Keyframe ``kf`` keeps ``codes`` ((1, n): its row of a batch) and ``scale`` instead of its scan's ranges;
+        its scan becomes a shell without ranges and valid mask."""
+        kf._codes = codes[0]
+        kf._scale = scale
+        kf._scan = _copy_scan(kf._scan, _NO_RANGES, None)
 
     def _add_keyframe_node(self, kf: Keyframe, p: np.ndarray) -> None:
         c = self.config
@@ -960,7 +1058,9 @@ class LoopCloser:
     def finish(self) -> LoopResult:
         """Final full optimisation; every scan's optimised pose."""
         t0 = time.perf_counter()
-        frontend = np.asarray(self._frontend, dtype=np.float64).reshape(-1, 3)
+        if self._unpacked:
+            self._pack_keyframes()
+        frontend = np.frombuffer(self._frontend, dtype=np.float64).reshape(-1, 3).copy()
         active = [k for k in self.loop_edges if self.graph.edges[k].active]
         if self.loop_edges:
             self._optimise(final=True)
@@ -979,7 +1079,7 @@ class LoopCloser:
         nodes = self.graph.poses.copy()
         poses = frontend.copy()
         if corrected and nodes.shape[0]:
-            poses = scan_poses(frontend, np.asarray(self._scan_node, dtype=np.int64),
+            poses = scan_poses(frontend, np.frombuffer(self._scan_node, dtype=np.int64),
                                np.array([k.frontend for k in self.keyframes]).reshape(-1, 3), nodes)
         loops = [(self.graph.edges[k].i, self.graph.edges[k].j) for k in active]
         self._cache.clear()  # no search after the last one: its submap grids go before the map is re-rendered
