@@ -1,5 +1,5 @@
 """The loop closer's keyframes keep their ranges packed (issue 13 item 3, docs/speed.md pass mem44): every range
-reads back bit for bit, in the narrowest codes that hold it, and the closer's per-scan poses live in C arrays."""
+reads back bit for bit, in the narrowest codes that hold it; the closer's per-scan poses and nodes move into arrays."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from dynslam2d.slam import loops
 from dynslam2d.slam.loops import _PACK_BATCH, _PACK_SCALES, LoopCloser, _pack_codes
 from dynslam2d.types import Pose2D, Scan
 
@@ -98,7 +99,7 @@ def test_closer_packs_its_keyframes_and_gives_the_same_scans_and_points() -> Non
             assert _same_bits(kf.kept().ranges, sc.without(rm).ranges)
         res = closer.finish()
         assert all(kf._codes is not None for kf in kfs)  # finish packs the rest
-        # the per-scan poses kept in C arrays give the front end's poses back
+        # the per-scan poses moved into arrays give the front end's poses back
         want_poses = np.array([[0.5 * k, 0.1 * math.sin(k), 0.02 * k] for k in range(n_kf + 3)])
         assert np.array_equal(res.frontend, want_poses) and closer.next_index == n_kf + 3
         assert res.keyframe_scans.tolist() == [k for k in range(n_kf + 3) if k % 23 != 22]
@@ -114,3 +115,33 @@ def test_drop_beams_after_packing_marks_the_beams() -> None:
     assert kf._codes is not None and kf.removed.size == 0
     assert closer.drop_beams([(3, np.array([1, 2, 500]))]) == 2
     assert kf.removed.shape == (181,) and kf.removed.sum() == 2 and kf.removed[1] and kf.removed[2]
+
+
+def test_poses_moved_into_arrays_give_the_scans_poses_and_nodes(monkeypatch) -> None:
+    rng = np.random.default_rng(5)
+    monkeypatch.setattr(loops, "_POSE_CHUNK", 7)  # several chunks and a rest in the lists
+    closer, ref = LoopCloser(), LoopCloser()
+    monkeypatch.setattr(loops, "_POSE_CHUNK", 10**9)  # (ref: every pose in the lists, as before the chunks)
+    ref._chunk_poses = lambda: None
+    poses = []
+    for k in range(40):
+        sc = _scan(k, rng, "cm")
+        p = (float(rng.normal(0.0, 9.0)), float(rng.normal(0.0, 9.0)), float(rng.uniform(-3.0, 3.0)))
+        poses.append(p)
+        for c, chunk in ((closer, 7), (ref, 10**9)):
+            monkeypatch.setattr(loops, "_POSE_CHUNK", chunk)
+            c.add(sc.stamp, Pose2D(*p), sc, np.zeros(sc.n_beams, dtype=bool), keyframe=k % 3 == 0)
+    assert closer._n_chunked == 35 and len(closer._scan_node) == 5 and closer.next_index == 40
+    assert [kf.scan_index for kf in closer.keyframes] == list(range(0, 40, 3))
+    got = closer.finish()
+    assert np.array_equal(got.frontend, np.array(poses)) and got.frontend.flags.c_contiguous
+    # the optimised scan poses come from each scan's node: force a correction to compare them
+    for c in (closer, ref):
+        c.graph.set_poses(c.graph.poses + np.array([0.3, -0.2, 0.05]))
+    a = loops.scan_poses(got.frontend, np.concatenate(closer._pose_chunks)[:, 0].astype(np.int64),
+                         np.array([kf.frontend for kf in closer.keyframes]), closer.graph.poses)
+    nodes = np.asarray(ref._scan_node, dtype=np.int64)
+    b = loops.scan_poses(np.asarray(ref._frontend), nodes, np.array([kf.frontend for kf in ref.keyframes]),
+                         ref.graph.poses)
+    assert nodes.tolist() == [k // 3 for k in range(40)]
+    assert np.array_equal(a.view(np.int64), b.view(np.int64))

@@ -13,7 +13,8 @@ kept as it is):
   grid in the frame of its middle keyframe (the *anchor*), built from the keyframes' filtered
   scans (the beams the dynamic filter removed never enter it) at their front-end poses relative
   to the anchor. Grids are built when needed and a few are cached; what is kept for good is
-  the keyframes' scans.
+  the keyframes' scans, their ranges packed in the narrowest codes that give them back bit for bit
+  (:class:`Keyframe`).
 * **Loop search**: on every ``search_every``-th keyframe, finished submaps whose anchor lies
   within a radius of the current pose estimate (grown with the path travelled since the submap:
   the front end's uncertainty) are searched with the correlative branch-and-bound matcher
@@ -44,7 +45,6 @@ from __future__ import annotations
 
 import math
 import time
-from array import array
 from collections import OrderedDict, deque
 from dataclasses import dataclass, field
 
@@ -86,6 +86,8 @@ _PACK_BATCH = 32
 #: Decimal scales tried for a keyframe's ranges (ranges = integer codes / scale), the first that gives every range
 #: back bit for bit: whole metres, decimetres, centimetres (MIT CSAIL's CARMEN log), millimetres.
 _PACK_SCALES = (1.0, 10.0, 100.0, 1000.0)
+#: Scans whose front-end poses and nodes the closer keeps in lists before it moves them into an array.
+_POSE_CHUNK = 1024
 _NO_BEAMS = np.zeros(0, dtype=bool)  # a keyframe's ``removed`` when the filter removed none of its beams
 _NO_RANGES = np.zeros(0, dtype=np.float64)  # the ranges of a packed keyframe's scan shell (never read)
 
@@ -316,11 +318,13 @@ class LoopCloser:
         self.keyframes: list[Keyframe] = []
         self.candidates: list[LoopCandidate] = []
         self.loop_edges: list[int] = []  # edge indices in the graph
-        # per scan: its last keyframe's node (−1 before the first), and its front-end pose (x, y m, θ rad) as three
-        # float64 values in a row: C arrays of the standard library, 8 and 24 bytes a scan (a list of tuples of
-        # Python floats took 136)
-        self._scan_node = array("q")
-        self._frontend = array("d")
+        # per scan: its last keyframe's node (−1 before the first) and its front-end pose (x, y m, θ rad): the last
+        # scans' in lists (one append a scan), every _POSE_CHUNK scans moved into (n, 4) float64 arrays (node, x,
+        # y, θ; 32 bytes a scan where a tuple of three Python floats and an int took 140–170)
+        self._scan_node: list[int] = []
+        self._frontend: list[tuple[float, float, float]] = []
+        self._pose_chunks: list[np.ndarray] = []
+        self._n_chunked = 0  # scans moved into _pose_chunks
         # per keyframe, the edge from the one before it: a scan it spans was weak; the lowest match score of
         # those scans (NaN: none given)
         self.kf_weak: list[bool] = []
@@ -393,22 +397,38 @@ class LoopCloser:
             self._path += math.hypot(x - last[0], y - last[1])
         if finite:
             self._last_pose = (x, y)
-        self._frontend.extend((x, y, th))
+        self._frontend.append((x, y, th))
         if self._jumps is not None and self._jumps.update(stamp, x, y, th):
             weak = True  # the front end snapped back: the drift before it is for the loops to undo
         self._weak_since_kf |= bool(weak)
         if score == score:  # not NaN
             self._score_since_kf = min(self._score_since_kf, float(score))
         if keyframe and finite:
-            self._add_keyframe(len(self._frontend) // 3 - 1, stamp, np.array([x, y, th], dtype=np.float64), scan,
-                               removed, kept)
+            self._add_keyframe(self._n_chunked + len(self._frontend) - 1, stamp, np.array([x, y, th], dtype=np.float64),
+                               scan, removed, kept)
         self._scan_node.append(len(self.keyframes) - 1)
+        if len(self._scan_node) >= _POSE_CHUNK:
+            self._chunk_poses()
         self.stats["total_ms"] += (time.perf_counter() - t0) * 1e3
+
+    def _chunk_poses(self) -> None:
+        """Move the scans' nodes and front-end poses from the lists into one (n, 4) float64 array (node, x, y, θ):
+        the same float64 values, ``np.asarray`` of the tuples as :meth:`finish` made them (a node is an integer
+        below 2^53, exact in float64)."""
+        if not self._scan_node:
+            return
+        chunk = np.empty((len(self._scan_node), 4), dtype=np.float64)
+        chunk[:, 0] = self._scan_node
+        chunk[:, 1:] = np.asarray(self._frontend, dtype=np.float64).reshape(-1, 3)
+        self._pose_chunks.append(chunk)
+        self._n_chunked += chunk.shape[0]
+        self._scan_node.clear()
+        self._frontend.clear()
 
     @property
     def next_index(self) -> int:
         """The scan index the next :meth:`add` call gets (keyframes keep it as ``scan_index``)."""
-        return len(self._frontend) // 3
+        return self._n_chunked + len(self._frontend)
 
     def drop_beams(self, items: list[tuple[int, np.ndarray]]) -> int:
         """Mark beams of earlier keyframes removed after the fact: ``items`` are (scan index, beam indices)
@@ -1060,7 +1080,10 @@ class LoopCloser:
         t0 = time.perf_counter()
         if self._unpacked:
             self._pack_keyframes()
-        frontend = np.frombuffer(self._frontend, dtype=np.float64).reshape(-1, 3).copy()
+        self._chunk_poses()
+        rows = np.concatenate(self._pose_chunks) if self._pose_chunks else np.zeros((0, 4))
+        frontend = np.ascontiguousarray(rows[:, 1:])
+        scan_node = rows[:, 0].astype(np.int64)
         active = [k for k in self.loop_edges if self.graph.edges[k].active]
         if self.loop_edges:
             self._optimise(final=True)
@@ -1079,7 +1102,7 @@ class LoopCloser:
         nodes = self.graph.poses.copy()
         poses = frontend.copy()
         if corrected and nodes.shape[0]:
-            poses = scan_poses(frontend, np.frombuffer(self._scan_node, dtype=np.int64),
+            poses = scan_poses(frontend, scan_node,
                                np.array([k.frontend for k in self.keyframes]).reshape(-1, 3), nodes)
         loops = [(self.graph.edges[k].i, self.graph.edges[k].j) for k in active]
         self._cache.clear()  # no search after the last one: its submap grids go before the map is re-rendered
