@@ -340,6 +340,7 @@ class LoopCloser:
         self._cache: OrderedDict[int, MultiResMap] = OrderedDict()
         self._cache_size = _SUBMAP_CACHE  # grids kept built (the second search keeps more: it jumps between places)
         self._unpacked: list[int] = []  # keyframes whose ranges are not packed yet (_pack_keyframes), ascending
+        self._pack_scales = _PACK_SCALES  # the decimal scales in the order tried: the last one that held first
         # submap → its far-search level (far_level), kept for every submap built (≈ 10–20 kB each at 0.4 m) after its
         # grid leaves the cache: a far search whose correlative match is refused reads nothing else, so it needs
         # no rebuild (the same level: a submap's inputs change only through drop_beams, which drops both)
@@ -484,13 +485,15 @@ class LoopCloser:
             if kf._codes is None:
                 groups.setdefault(kf._scan.ranges.shape[0], []).append(kf)
         for group in groups.values():
-            packed = _pack_codes(np.stack([kf._scan.ranges for kf in group]), _PACK_SCALES)
+            packed = _pack_codes(np.stack([kf._scan.ranges for kf in group]), self._pack_scales)
             if packed is None:  # (a keyframe with a range no code holds: each on its own, float64 at worst)
                 for kf in group:
-                    one = _pack_codes(kf._scan.ranges[None], _PACK_SCALES)
+                    one = _pack_codes(kf._scan.ranges[None], self._pack_scales)
                     self._pack_one(kf, *(one if one is not None else (kf._scan.ranges[None], 0.0)))
                 continue
             codes, scale = packed
+            if scale and scale != self._pack_scales[0]:  # (the next batch of a log is likely written alike)
+                self._pack_scales = (scale, *(x for x in _PACK_SCALES if x != scale))
             for i, kf in enumerate(group):
                 self._pack_one(kf, codes[i:i + 1], scale)
 
@@ -500,6 +503,7 @@ class LoopCloser:
         its scan becomes a shell without ranges and valid mask."""
         kf._codes = codes[0]
         kf._scale = scale
+        kf._scan.trig()  # (the shell keeps the scan's (cos, sin): its own ranges are empty)
         kf._scan = _copy_scan(kf._scan, _NO_RANGES, None)
 
     def _add_keyframe_node(self, kf: Keyframe, p: np.ndarray) -> None:
@@ -558,19 +562,36 @@ class LoopCloser:
         cur = self._kf_points
         if cur is not None and cur[0] is kf:  # the keyframe being added (read-only: callers copy or index)
             if cur[2] is None:
-                pts = self._scan_points(cur[1]) if cur[1] is not None else self._scan_points(kf.scan, kf.removed)
+                pts = self._scan_points(cur[1]) if cur[1] is not None else self._kf_scan_points(kf, kf.removed)
                 self._kf_points = cur = (kf, None, pts)
             return cur[2]
-        return self._scan_points(kf.scan, kf.removed)
+        return self._kf_scan_points(kf, kf.removed)
 
-    def _scan_points(self, scan: Scan, removed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def _kf_scan_points(self, kf: Keyframe, removed: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_scan_points` of keyframe ``kf``'s scan; of a packed keyframe from its decoded ranges and their valid
+        mask (:meth:`Scan.valid_mask`'s tests: finite — every range of decimal codes is — and within the scan's
+        range limits) without rebuilding its :class:`Scan`."""
+        if kf._codes is None:
+            return self._scan_points(kf._scan, removed)
+        sh = kf._scan
+        r = kf.ranges()
+        lo, hi = sh.range_min, sh.range_max
+        valid = (r >= lo) & (r <= hi) if kf._scale else np.isfinite(r) & (r >= lo) & (r <= hi)
+        return self._scan_points(sh, removed, r, valid)
+
+    def _scan_points(self, scan: Scan, removed: np.ndarray | None = None, ranges: np.ndarray | None = None,
+                     valid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_points` of a keyframe's kept scan: ``scan`` with the beams ``removed`` ((n,) bool; None or another
-        shape: none) taken as without a return (:meth:`Keyframe.kept`'s scan, without its copy)."""
+        shape: none) taken as without a return (:meth:`Keyframe.kept`'s scan, without its copy). ``ranges`` and
+        ``valid``: the scan's ranges and valid mask when ``scan`` is a packed keyframe's shell (its beam geometry and
+        limits only)."""
         c = self.slam
         cos_a, sin_a = scan.trig()
-        n = scan.ranges.shape[0]
+        r = scan.ranges if ranges is None else ranges
+        n = r.shape[0]
         drop = no_drop(n) if removed is None or removed.shape != (n,) else np.ascontiguousarray(removed, dtype=np.bool_)
-        return gated_points(scan.ranges, cos_a, sin_a, scan.valid_view(), float(scan.range_min), float(scan.range_max),
+        return gated_points(r, cos_a, sin_a, scan.valid_view() if valid is None else valid, float(scan.range_min),
+                            float(scan.range_max),
                             float(c.laser_min_dist), float(min(c.laser_max_dist, self.config.submap_max_range)), 0.0,
                             False, drop)[:2]  # (the scan's own valid mask: the kernel only reads it)
 
@@ -800,7 +821,7 @@ class LoopCloser:
         if cur is not None and cur[0] is kf:  # the keyframe being added: its points are shared with its query
             pts, _ = self._points(kf)
         else:  # (Keyframe.kept with the removed beams of that time)
-            pts, _ = self._scan_points(kf.scan, rm)
+            pts, _ = self._kf_scan_points(kf, rm)
         if pts.shape[0] > _PLACE_POINTS:
             pts = pts[even_indices(pts.shape[0], _PLACE_POINTS)]
         pts = self._place_pts[node] = pts.astype(np.float32)
