@@ -192,16 +192,16 @@ class Keyframe:
 
 def _pack_codes(r: np.ndarray, scales: tuple[float, ...]) -> tuple[np.ndarray, float] | None:
     """(codes, scale) of the (k, n) float64 ranges ``r``: the narrowest unsigned codes (uint16, uint32) of the first
-    decimal ``scale`` for which ``codes.astype(float64) / scale`` is ``r`` bit for bit (the expression
-    :meth:`Keyframe.ranges` reads them back with; a division is correctly rounded, so a range written with at most
-    that many decimals comes back as the float its text was parsed to); else float32 codes (scale 0) if every range
-    is a float32 value; None if neither holds."""
+    decimal ``scale`` of ``scales`` (in their order) for which ``codes.astype(float64) / scale`` is ``r`` bit for bit
+    (the expression :meth:`Keyframe.ranges` reads them back with; a division is correctly rounded, so a range written
+    with at most that many decimals comes back as the float its text was parsed to); else float32 codes (scale 0) if
+    every range is a float32 value; None if neither holds."""
     bits = r.view(np.int64)
     if r.size and bool(np.isfinite(r).all()) and float(r.min()) >= 0.0:
         top = float(r.max())
         for s in scales:
             if top * s >= 4294967295.0:
-                break
+                continue
             codes = np.rint(r * s).astype(np.uint16 if top * s < 65535.0 else np.uint32)
             if np.array_equal((codes.astype(np.float64) / s).view(np.int64), bits):
                 return codes, s
@@ -320,7 +320,7 @@ class LoopCloser:
         self.loop_edges: list[int] = []  # edge indices in the graph
         # per scan: its last keyframe's node (−1 before the first) and its front-end pose (x, y m, θ rad): the last
         # scans' in lists (one append a scan), every _POSE_CHUNK scans moved into (n, 4) float64 arrays (node, x,
-        # y, θ; 32 bytes a scan where a tuple of three Python floats and an int took 140–170)
+        # y, θ; 32 bytes a scan where a tuple of three Python floats and an int took ≈ 170)
         self._scan_node: list[int] = []
         self._frontend: list[tuple[float, float, float]] = []
         self._pose_chunks: list[np.ndarray] = []
