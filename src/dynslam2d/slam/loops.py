@@ -13,7 +13,8 @@ kept as it is):
   grid in the frame of its middle keyframe (the *anchor*), built from the keyframes' filtered
   scans (the beams the dynamic filter removed never enter it) at their front-end poses relative
   to the anchor. Grids are built when needed and a few are cached; what is kept for good is
-  the keyframes' scans.
+  the keyframes' scans, their ranges packed in the narrowest codes that give them back bit for bit
+  (:class:`Keyframe`).
 * **Loop search**: on every ``search_every``-th keyframe, finished submaps whose anchor lies
   within a radius of the current pose estimate (grown with the path travelled since the submap:
   the front end's uncertainty) are searched with the correlative branch-and-bound matcher
@@ -60,7 +61,7 @@ from dynslam2d.slam.placedesc import PlaceIndex
 from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
 from dynslam2d.slam.rematch import refine_supported, rematch_keyframes
 from dynslam2d.slam.secondsearch import run_second_search
-from dynslam2d.types import Pose2D, Scan, wrap_angle
+from dynslam2d.types import Pose2D, Scan, _copy_scan, wrap_angle
 
 #: Submap grids kept built at a time (each a few MB).
 _SUBMAP_CACHE = 6
@@ -79,6 +80,16 @@ _PLACE_BATCH = 16  # places described per call when the due ones are flushed (_p
 _REFINE_TURN = 0.25
 #: Keyframe edges across unsupported scans get their deviation multiplied by this.
 _WEAK_FACTOR = 10.0
+#: Keyframes whose ranges are packed at a time (:meth:`LoopCloser._pack_keyframes`): the packing's NumPy calls are
+#: made once per batch, not per keyframe (the loop closer's median scan does no packing).
+_PACK_BATCH = 32
+#: Decimal scales tried for a keyframe's ranges (ranges = integer codes / scale), the first that gives every range
+#: back bit for bit: whole metres, decimetres, centimetres (MIT CSAIL's CARMEN log), millimetres.
+_PACK_SCALES = (1.0, 10.0, 100.0, 1000.0)
+#: Scans whose front-end poses and nodes the closer keeps in lists before it moves them into an array.
+_POSE_CHUNK = 1024
+_NO_BEAMS = np.zeros(0, dtype=bool)  # a keyframe's ``removed`` when the filter removed none of its beams
+_NO_RANGES = np.zeros(0, dtype=np.float64)  # the ranges of a packed keyframe's scan shell (never read)
 
 
 def _keep_probabilities(lv: GridLevel) -> None:
@@ -133,21 +144,71 @@ class Keyframe:
     """A scan written into the front end's map: its node, its front-end pose and its beams.
 
     ``scan`` has the robot's own body removed; ``removed`` marks the beams the dynamic filter
-    removed (kept out of submaps and loop queries, and of the re-rendered map).
+    removed (kept out of submaps and loop queries, and of the re-rendered map; an empty array when it removed none).
+    Once packed (:meth:`pack`) the keyframe keeps its ranges as integer codes of a decimal scale (``codes /
+    scale`` is every range bit for bit: uint16 centimetres for MIT CSAIL's log, 2 bytes a beam instead of 8) or as
+    float32 when every range is a float32 value, and ``scan`` is rebuilt on every read from a shell of the scan's
+    other fields (its valid mask is computed again: the same values).
     """
 
     scan_index: int
     stamp: float
     frontend: np.ndarray
-    scan: Scan
+    _scan: Scan  # the scan; once packed, a shell with every field but the ranges
     removed: np.ndarray
     path: float  # path length of the front end up to this keyframe, m
+    _codes: np.ndarray | None = None  # packed ranges (None: not packed, ``_scan`` holds them)
+    _scale: float = 0.0  # ranges = codes / scale (0: the codes are the ranges' values, float32 or float64)
+
+    @property
+    def scan(self) -> Scan:
+        """The keyframe's scan (a new :class:`Scan` on each read once packed; its ranges are the scan's, bit for
+        bit)."""
+        codes = self._codes
+        if codes is None:
+            return self._scan
+        return _copy_scan(self._scan, self.ranges(), None)
+
+    def ranges(self) -> np.ndarray:
+        """(n,) float64 ranges of the scan, m (a new array once packed)."""
+        codes = self._codes
+        if codes is None:
+            return self._scan.ranges
+        if self._scale:
+            return codes.astype(np.float64) / self._scale
+        return codes.astype(np.float64)
+
+    @property
+    def n_beams(self) -> int:
+        codes = self._codes
+        return int((self._scan.ranges if codes is None else codes).shape[0])
 
     def kept(self) -> Scan:
         """The scan with the removed beams set to "no return"."""
         if self.removed.size and self.removed.any():
             return self.scan.without(self.removed)
         return self.scan
+
+
+def _pack_codes(r: np.ndarray, scales: tuple[float, ...]) -> tuple[np.ndarray, float] | None:
+    """(codes, scale) of the (k, n) float64 ranges ``r``: the narrowest unsigned codes (uint16, uint32) of the first
+    decimal ``scale`` of ``scales`` (in their order) for which ``codes.astype(float64) / scale`` is ``r`` bit for bit
+    (the expression :meth:`Keyframe.ranges` reads them back with; a division is correctly rounded, so a range written
+    with at most that many decimals comes back as the float its text was parsed to); else float32 codes (scale 0) if
+    every range is a float32 value; None if neither holds."""
+    bits = r.view(np.int64)
+    if r.size and bool(np.isfinite(r).all()) and float(r.min()) >= 0.0:
+        top = float(r.max())
+        for s in scales:
+            if top * s >= 4294967295.0:
+                continue
+            codes = np.rint(r * s).astype(np.uint16 if top * s < 65535.0 else np.uint32)
+            if np.array_equal((codes.astype(np.float64) / s).view(np.int64), bits):
+                return codes, s
+    f = r.astype(np.float32)
+    if np.array_equal(f.astype(np.float64).view(np.int64), bits):
+        return f, 0.0
+    return None
 
 
 @dataclass(slots=True)
@@ -257,8 +318,13 @@ class LoopCloser:
         self.keyframes: list[Keyframe] = []
         self.candidates: list[LoopCandidate] = []
         self.loop_edges: list[int] = []  # edge indices in the graph
-        self._scan_node: list[int] = []  # per scan: its last keyframe's node (−1 before the first)
+        # per scan: its last keyframe's node (−1 before the first) and its front-end pose (x, y m, θ rad): the last
+        # scans' in lists (one append a scan), every _POSE_CHUNK scans moved into (n, 4) float64 arrays (node, x,
+        # y, θ; 32 bytes a scan where a tuple of three Python floats and an int took ≈ 170)
+        self._scan_node: list[int] = []
         self._frontend: list[tuple[float, float, float]] = []
+        self._pose_chunks: list[np.ndarray] = []
+        self._n_chunked = 0  # scans moved into _pose_chunks
         # per keyframe, the edge from the one before it: a scan it spans was weak; the lowest match score of
         # those scans (NaN: none given)
         self.kf_weak: list[bool] = []
@@ -273,6 +339,8 @@ class LoopCloser:
         self._new_loops = 0
         self._cache: OrderedDict[int, MultiResMap] = OrderedDict()
         self._cache_size = _SUBMAP_CACHE  # grids kept built (the second search keeps more: it jumps between places)
+        self._unpacked: list[int] = []  # keyframes whose ranges are not packed yet (_pack_keyframes), ascending
+        self._pack_scales = _PACK_SCALES  # the decimal scales in the order tried: the last one that held first
         # submap → its far-search level (far_level), kept for every submap built (≈ 10–20 kB each at 0.4 m) after its
         # grid leaves the cache: a far search whose correlative match is refused reads nothing else, so it needs
         # no rebuild (the same level: a submap's inputs change only through drop_beams, which drops both)
@@ -339,15 +407,31 @@ class LoopCloser:
         if score == score:  # not NaN
             self._score_since_kf = min(self._score_since_kf, float(score))
         if keyframe and finite:
-            self._add_keyframe(len(self._frontend) - 1, stamp, np.array([x, y, th], dtype=np.float64), scan, removed,
-                               kept)
+            self._add_keyframe(self._n_chunked + len(self._frontend) - 1, stamp, np.array([x, y, th], dtype=np.float64),
+                               scan, removed, kept)
         self._scan_node.append(len(self.keyframes) - 1)
+        if len(self._scan_node) >= _POSE_CHUNK:
+            self._chunk_poses()
         self.stats["total_ms"] += (time.perf_counter() - t0) * 1e3
+
+    def _chunk_poses(self) -> None:
+        """Move the scans' nodes and front-end poses from the lists into one (n, 4) float64 array (node, x, y, θ):
+        the same float64 values, ``np.asarray`` of the tuples as :meth:`finish` made them (a node is an integer
+        below 2^53, exact in float64)."""
+        if not self._scan_node:
+            return
+        chunk = np.empty((len(self._scan_node), 4), dtype=np.float64)
+        chunk[:, 0] = self._scan_node
+        chunk[:, 1:] = np.asarray(self._frontend, dtype=np.float64).reshape(-1, 3)
+        self._pose_chunks.append(chunk)
+        self._n_chunked += chunk.shape[0]
+        self._scan_node.clear()
+        self._frontend.clear()
 
     @property
     def next_index(self) -> int:
         """The scan index the next :meth:`add` call gets (keyframes keep it as ``scan_index``)."""
-        return len(self._frontend)
+        return self._n_chunked + len(self._frontend)
 
     def drop_beams(self, items: list[tuple[int, np.ndarray]]) -> int:
         """Mark beams of earlier keyframes removed after the fact: ``items`` are (scan index, beam indices)
@@ -363,8 +447,8 @@ class LoopCloser:
             if k >= index.shape[0] or index[k] != scan_index:
                 continue
             kf = self.keyframes[k]
-            if kf.removed.shape != kf.scan.ranges.shape:
-                kf.removed = np.zeros(kf.scan.ranges.shape[0], dtype=bool)
+            if kf.removed.shape != (kf.n_beams,):
+                kf.removed = np.zeros(kf.n_beams, dtype=bool)
             else:  # a copy: the array may be the caller's (the pipeline's StepResult.removed of that scan)
                 kf.removed = kf.removed.copy()
             b = np.asarray(beams, dtype=np.int64)
@@ -385,6 +469,44 @@ class LoopCloser:
             self._add_keyframe_node(kf, p)
         finally:
             self._kf_points = None
+        self._unpacked.append(len(self.keyframes) - 1)
+        if len(self._unpacked) >= _PACK_BATCH:
+            self._pack_keyframes()
+
+    def _pack_keyframes(self) -> None:
+        """Pack the ranges of the keyframes added since the last call (:meth:`Keyframe.ranges` reads them back bit
+        for bit; issue 13 item 3: 3.7 MB of float64 ranges on MIT CSAIL become 0.9 MB of uint16 centimetres), one
+        batch per beam count, and let a ``removed`` mask without a removed beam go (an empty array reads the
+        same everywhere: :meth:`Keyframe.kept`, :meth:`_scan_points`, the clean-up pass's recount)."""
+        kfs = [self.keyframes[k] for k in self._unpacked]
+        self._unpacked.clear()
+        groups: dict[int, list[Keyframe]] = {}
+        for kf in kfs:
+            if kf.removed.size and not kf.removed.any():
+                kf.removed = _NO_BEAMS
+            if kf._codes is None:
+                groups.setdefault(kf._scan.ranges.shape[0], []).append(kf)
+        for group in groups.values():
+            packed = _pack_codes(np.stack([kf._scan.ranges for kf in group]), self._pack_scales)
+            if packed is None:  # (a keyframe with a range no code holds: each on its own, float64 at worst)
+                for kf in group:
+                    one = _pack_codes(kf._scan.ranges[None], self._pack_scales)
+                    self._pack_one(kf, *(one if one is not None else (kf._scan.ranges[None], 0.0)))
+                continue
+            codes, scale = packed
+            if scale and scale != self._pack_scales[0]:  # (the next batch of a log is likely written alike)
+                self._pack_scales = (scale, *(x for x in _PACK_SCALES if x != scale))
+            for i, kf in enumerate(group):
+                self._pack_one(kf, codes[i:i + 1], scale)
+
+    @staticmethod
+    def _pack_one(kf: Keyframe, codes: np.ndarray, scale: float) -> None:
+        """Keyframe ``kf`` keeps ``codes`` ((1, n): its row of a batch) and ``scale`` instead of its scan's ranges;
+        its scan becomes a shell without ranges and valid mask."""
+        kf._codes = codes[0]
+        kf._scale = scale
+        kf._scan.trig()  # (the shell keeps the scan's (cos, sin): its own ranges are empty)
+        kf._scan = _copy_scan(kf._scan, _NO_RANGES, None)
 
     def _add_keyframe_node(self, kf: Keyframe, p: np.ndarray) -> None:
         c = self.config
@@ -442,19 +564,36 @@ class LoopCloser:
         cur = self._kf_points
         if cur is not None and cur[0] is kf:  # the keyframe being added (read-only: callers copy or index)
             if cur[2] is None:
-                pts = self._scan_points(cur[1]) if cur[1] is not None else self._scan_points(kf.scan, kf.removed)
+                pts = self._scan_points(cur[1]) if cur[1] is not None else self._kf_scan_points(kf, kf.removed)
                 self._kf_points = cur = (kf, None, pts)
             return cur[2]
-        return self._scan_points(kf.scan, kf.removed)
+        return self._kf_scan_points(kf, kf.removed)
 
-    def _scan_points(self, scan: Scan, removed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def _kf_scan_points(self, kf: Keyframe, removed: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_scan_points` of keyframe ``kf``'s scan; of a packed keyframe from its decoded ranges and their valid
+        mask (:meth:`Scan.valid_mask`'s tests: finite — every range of decimal codes is — and within the scan's
+        range limits) without rebuilding its :class:`Scan`."""
+        if kf._codes is None:
+            return self._scan_points(kf._scan, removed)
+        sh = kf._scan
+        r = kf.ranges()
+        lo, hi = sh.range_min, sh.range_max
+        valid = (r >= lo) & (r <= hi) if kf._scale else np.isfinite(r) & (r >= lo) & (r <= hi)
+        return self._scan_points(sh, removed, r, valid)
+
+    def _scan_points(self, scan: Scan, removed: np.ndarray | None = None, ranges: np.ndarray | None = None,
+                     valid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_points` of a keyframe's kept scan: ``scan`` with the beams ``removed`` ((n,) bool; None or another
-        shape: none) taken as without a return (:meth:`Keyframe.kept`'s scan, without its copy)."""
+        shape: none) taken as without a return (:meth:`Keyframe.kept`'s scan, without its copy). ``ranges`` and
+        ``valid``: the scan's ranges and valid mask when ``scan`` is a packed keyframe's shell (its beam geometry and
+        limits only)."""
         c = self.slam
         cos_a, sin_a = scan.trig()
-        n = scan.ranges.shape[0]
+        r = scan.ranges if ranges is None else ranges
+        n = r.shape[0]
         drop = no_drop(n) if removed is None or removed.shape != (n,) else np.ascontiguousarray(removed, dtype=np.bool_)
-        return gated_points(scan.ranges, cos_a, sin_a, scan.valid_view(), float(scan.range_min), float(scan.range_max),
+        return gated_points(r, cos_a, sin_a, scan.valid_view() if valid is None else valid, float(scan.range_min),
+                            float(scan.range_max),
                             float(c.laser_min_dist), float(min(c.laser_max_dist, self.config.submap_max_range)), 0.0,
                             False, drop)[:2]  # (the scan's own valid mask: the kernel only reads it)
 
@@ -718,7 +857,7 @@ class LoopCloser:
         if cur is not None and cur[0] is kf:  # the keyframe being added: its points are shared with its query
             pts, _ = self._points(kf)
         else:  # (Keyframe.kept with the removed beams of that time)
-            pts, _ = self._scan_points(kf.scan, rm)
+            pts, _ = self._kf_scan_points(kf, rm)
         if pts.shape[0] > _PLACE_POINTS:
             pts = pts[even_indices(pts.shape[0], _PLACE_POINTS)]
         pts = self._place_pts[node] = pts.astype(np.float32)
@@ -998,7 +1137,12 @@ class LoopCloser:
     def finish(self) -> LoopResult:
         """Final full optimisation; every scan's optimised pose."""
         t0 = time.perf_counter()
-        frontend = np.asarray(self._frontend, dtype=np.float64).reshape(-1, 3)
+        if self._unpacked:
+            self._pack_keyframes()
+        self._chunk_poses()
+        rows = np.concatenate(self._pose_chunks) if self._pose_chunks else np.zeros((0, 4))
+        frontend = np.ascontiguousarray(rows[:, 1:])
+        scan_node = rows[:, 0].astype(np.int64)
         active = [k for k in self.loop_edges if self.graph.edges[k].active]
         if self.loop_edges:
             self._optimise(final=True)
@@ -1017,7 +1161,7 @@ class LoopCloser:
         nodes = self.graph.poses.copy()
         poses = frontend.copy()
         if corrected and nodes.shape[0]:
-            poses = scan_poses(frontend, np.asarray(self._scan_node, dtype=np.int64),
+            poses = scan_poses(frontend, scan_node,
                                np.array([k.frontend for k in self.keyframes]).reshape(-1, 3), nodes)
         loops = [(self.graph.edges[k].i, self.graph.edges[k].j) for k in active]
         self._cache.clear()  # no search after the last one: its submap grids go before the map is re-rendered
