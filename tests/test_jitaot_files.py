@@ -21,11 +21,13 @@ ABI = ".cpython-311-x86_64-linux-gnu.so"
 
 
 def _env(folder: Path) -> dict[str, str]:
+    """A child process's environment: this checkout's sources, kernels folder ``folder``, mode auto, no compile
+    worker, a terminal wide enough that no message wraps."""
     env = dict(os.environ, PYTHONPATH=SRC + os.pathsep + os.environ.get("PYTHONPATH", ""))
     env[jitaot.DIR_ENV] = str(folder)
     env[jitaot.MODE_ENV] = "auto"
     env["DYNSLAM2D_COMPILE_WORKER"] = "0"
-    env["COLUMNS"] = "300"
+    env["COLUMNS"] = "400"
     return env
 
 

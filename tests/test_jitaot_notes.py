@@ -5,27 +5,15 @@ differs, a module that fails to load. Fake module files, as in test_jitaot_files
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from test_jitaot_files import ABI, _env
 
 from dynslam2d import jitaot
 from dynslam2d.jitaot import SIDECAR, install, status
-
-SRC = str(Path(__file__).resolve().parents[1] / "src")
-ABI = ".cpython-311-x86_64-linux-gnu.so"
-
-
-def _env(folder: Path) -> dict[str, str]:
-    env = dict(os.environ, PYTHONPATH=SRC + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    env[jitaot.DIR_ENV] = str(folder)
-    env[jitaot.MODE_ENV] = "auto"
-    env["DYNSLAM2D_COMPILE_WORKER"] = "0"
-    env["COLUMNS"] = "400"
-    return env
 
 
 def _install(folder: Path, content: bytes = b"not an ELF file" * 10, **key: str) -> None:

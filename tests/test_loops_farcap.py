@@ -8,13 +8,11 @@ import math
 import numpy as np
 import pydantic
 import pytest
-from test_loops import _loop_path, _scans
-from test_loops_place import _cluttered_world
+from test_loops_place import _jumped_front_end
 
 from dynslam2d.slam.config import SlamConfig
 from dynslam2d.slam.loopconfig import LoopConfig
 from dynslam2d.slam.loops import LoopCloser
-from dynslam2d.slam.posegraph import compose, relative
 from dynslam2d.types import Pose2D
 
 _OFF = {"far_max_place_distance": 2.0}
@@ -22,16 +20,9 @@ _OFF = {"far_max_place_distance": 2.0}
 
 @pytest.fixture(scope="module")
 def jumped() -> tuple:
-    """A lap and a bit around the cluttered block whose front end jumps 7 m at scan 250 (flagged weak), as
-    test_loops_place's ``broken_front_end``: far searches run from 20 m of path on, and only a far search ties the
-    keyframes after the jump back."""
-    gt = _loop_path(laps=1.1)
-    rel = relative(gt[:-1], gt[1:])
-    rel[250] = compose(rel[250], np.array([5.0, 5.0, 0.0]))
-    front = [gt[0]]
-    for z in rel:
-        front.append(compose(front[-1], z))
-    return gt, np.array(front), _scans(_cluttered_world(), gt)
+    """A lap and a bit around the cluttered block whose front end jumps 7 m at scan 250 (flagged weak):
+    far searches run from 20 m of path on, and only a far search ties the keyframes after the jump back."""
+    return _jumped_front_end()
 
 
 class _Old(LoopCloser):

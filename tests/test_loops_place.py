@@ -62,19 +62,23 @@ def test_place_descriptor_sees_the_same_place_turned() -> None:
     assert abs(turn - 1.0) < 0.11
 
 
-@pytest.fixture(scope="module")
-def broken_front_end() -> tuple:
+def _jumped_front_end() -> tuple:
     """A front end that jumps 7 m (5 m, 5 m) at scan 250 of a lap around the cluttered block, flagged weak (as
     a match after a time gap is): from there on every pose is 7 m off, beyond the local search (radius
-    2 m + drift), so only the far search can tie the keyframes after the jump to the submaps before it."""
-    world = _cluttered_world()
+    2 m + drift), so only the far search can tie the keyframes after the jump to the submaps before it.
+    Returns (ground truth, front-end poses, scans)."""
     gt = _loop_path(laps=1.1)
     rel = relative(gt[:-1], gt[1:])
     rel[250] = compose(rel[250], np.array([5.0, 5.0, 0.0]))
     front = [gt[0]]
     for z in rel:
         front.append(compose(front[-1], z))
-    return gt, np.array(front), _scans(world, gt)
+    return gt, np.array(front), _scans(_cluttered_world(), gt)
+
+
+@pytest.fixture(scope="module")
+def broken_front_end() -> tuple:
+    return _jumped_front_end()
 
 
 def _run(gt: np.ndarray, front: np.ndarray, scans: list, config: LoopConfig) -> tuple:
