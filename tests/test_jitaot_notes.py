@@ -88,3 +88,21 @@ def test_a_module_that_fails_to_load_is_named(tmp_path: Path) -> None:
     empty = subprocess.run([sys.executable, "-c", probe], env=_env(tmp_path / "none"), capture_output=True, text=True,
                            timeout=300)
     assert empty.stdout.split() == ["jit", "None"]  # no module built: nothing to say
+
+
+def test_a_module_of_another_sidecar_format_gives_the_remedy_once(tmp_path: Path) -> None:
+    """A module built by an older dynslam2d (another sidecar format, as after an upgrade): ``status`` says "build
+    again", and the line after a run names the reason and the remedy once, not twice."""
+    _install(tmp_path / "k")
+    side = tmp_path / "k" / SIDECAR
+    info = json.loads(side.read_text())
+    side.write_text(json.dumps({**info, "format": -1}))
+    st = status(tmp_path / "k")
+    assert st.present and not st.valid and st.reason == "built by another version of dynslam2d (build again)"
+    probe = "import dynslam2d.pipeline; from dynslam2d import jitaot; print(jitaot.unused_reason())"
+    res = subprocess.run([sys.executable, "-c", probe], env=_env(tmp_path / "k"), capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    note = res.stdout.strip()
+    assert note == ("the kernels built ahead of time were not used, built by another version of dynslam2d; numba's "
+                    "kernels ran instead: run `dynslam2d kernels build` again")

@@ -404,7 +404,8 @@ def table() -> KernelTable | None:
             st = status()
             if not st.valid:
                 if st.present:
-                    _WHY.append(f"the kernels built ahead of time were not used, {st.reason}; numba's kernels ran "
+                    why = st.reason.removesuffix(" (build again)")  # the remedy follows once
+                    _WHY.append(f"the kernels built ahead of time were not used, {why}; numba's kernels ran "
                                 "instead: run `dynslam2d kernels build` again")
                 break
             import importlib.util
