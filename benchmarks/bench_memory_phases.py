@@ -118,6 +118,7 @@ def main() -> None:
     for name, mib in phases.peak.items():
         print(f"{name:<28} peak RSS {mib:7.1f} MiB")
     print(f"{'process ru_maxrss':<28} {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:7.1f} MiB")
+    print(f"outputs in {out}/run")
 
 
 if __name__ == "__main__":

@@ -574,10 +574,11 @@ def test_tracks_figure_draws_one_collection_per_kind_and_caps_labels(tmp_path, m
                                 np.array(["confirmed"] * n), Box(*xy[-1], 0.0, 0.5, 0.5)))
     seen = {}
     real_save = tracksplot.save_png
+    from matplotlib.collections import LineCollection  # (tracks.png's are a subclass: pass mem46)
 
     def spy(fig, path, dpi):
         ax = fig.axes[0]
-        seen["collections"] = len([c for c in ax.collections if type(c).__name__ == "LineCollection"])
+        seen["collections"] = len([c for c in ax.collections if isinstance(c, LineCollection)])
         seen["labels"] = len([t for t in ax.texts if type(t).__name__ == "Annotation" and t.get_text().isdigit()])
         return real_save(fig, path, dpi)
 

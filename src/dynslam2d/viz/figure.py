@@ -25,17 +25,29 @@ def new_figure(figsize: tuple[float, float], dpi: float | None = None, layout: s
     return fig
 
 
+def drop_renderer(fig: Any) -> None:
+    """Free the Agg renderer ``fig``'s canvas caches and its pixel buffer (width × height × 4 bytes); the next
+    draw makes a new one."""
+    canvas = getattr(fig, "canvas", None)
+    if canvas is not None and hasattr(canvas, "renderer"):
+        del canvas.renderer
+        canvas._lastKey = None  # (FigureCanvasAgg reuses its renderer when this key matches)
+
+
 def save_png(fig: Any, path: str | os.PathLike[str], dpi: int = 120) -> Path:
     """Write matplotlib figure ``fig`` as a PNG at ``path`` (atomically), then empty it: its artists (the map
     images and their resampled copies) and the canvas's Agg pixel buffer are freed now, not when the garbage
     collector next finds the figure's reference cycles, so the next figure of a run is not drawn on top of them
-    (docs/speed.md, memory). The figure is not drawn again after this."""
+    (docs/speed.md, memory). The renderer a layout step left on the canvas goes before savefig makes its own.
+    The figure is not drawn again after this."""
     path = Path(path)
+    # a layout step (tight_layout) measured the text on an Agg renderer at the figure's dpi, which the canvas keeps
+    # with its pixel buffer; savefig draws on a new one at ``dpi`` (or clears and redraws that one): dropped first,
+    # the two buffers are never held together (docs/speed.md, pass mem46)
+    drop_renderer(fig)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
     fig.clear()
-    canvas = getattr(fig, "canvas", None)
-    if canvas is not None and hasattr(canvas, "renderer"):
-        del canvas.renderer  # FigureCanvasAgg's cached renderer holds the pixel buffer (width × height × 4 bytes)
+    drop_renderer(fig)
     release_free_memory()  # and what they held back to the OS (memtrim.py)
     return path

@@ -25,6 +25,45 @@ MAX_SEGMENTS = 60_000
 MAP_FADE = 0.35
 
 
+class SegmentPaths(Sequence):  # type: ignore[type-arg]
+    """A line collection's paths made on demand from one (n, 2, 2) array of segments (m): the ``Path`` of
+    segment i is built when the renderer asks for item i and dropped once drawn.
+
+    matplotlib's ``LineCollection`` keeps one ``Path`` object with its own vertex view per segment (≈ 9 MiB for
+    :data:`MAX_SEGMENTS` segments); Agg draws a collection path by path, asking its sequence for each
+    (``draw_path_collection``, ``get_path_collection_extents``), so this sequence draws the same pixels from
+    the one array (docs/speed.md, pass mem46)."""
+
+    def __init__(self, segments: np.ndarray) -> None:
+        self.segments = segments
+
+    def __len__(self) -> int:
+        return len(self.segments)
+
+    def __getitem__(self, i):  # type: ignore[no-untyped-def]
+        from matplotlib.path import Path as MplPath
+
+        if isinstance(i, slice):
+            return [MplPath(s) for s in self.segments[i]]
+        return MplPath(self.segments[i])
+
+
+def _line_collection(segments: np.ndarray, **kwargs):  # type: ignore[no-untyped-def]
+    """A ``LineCollection`` of ``segments`` ((n, 2, 2) float64, m) whose paths are a :class:`SegmentPaths`."""
+    from matplotlib.collections import LineCollection
+
+    class _Lines(LineCollection):  # type: ignore[misc]
+        def set_segments(self, segments):  # type: ignore[no-untyped-def]
+            if segments is None:
+                return
+            self._paths = SegmentPaths(np.asarray(segments, dtype=float))
+            self.stale = True
+
+        set_verts = set_paths = set_segments
+
+    return _Lines(segments, **kwargs)
+
+
 def tracks_background(grid: GridMap) -> GreyMap:
     """The faint map :func:`plot_tracks` draws under the paths, as grey indices: what it keeps of ``grid``."""
     return GreyMap(occupancy_indices(grid, fade=MAP_FADE), grid.extent)
@@ -71,7 +110,6 @@ def plot_tracks(
     position; each starts with a small circle. ``grid`` (optional) is drawn faintly underneath for context (or
     :func:`tracks_background` of it, computed before).
     """
-    from matplotlib.collections import LineCollection
     from matplotlib.colors import Normalize
     from matplotlib.lines import Line2D
 
@@ -124,7 +162,7 @@ def plot_tracks(
                 vals[flag].append(spd[sel])
     for flag, lw, alpha, ls in ((False, 1.0, 0.45, (0, (2, 2))), (True, 2.6, 1.0, "solid")):
         if segs[flag]:
-            lc = LineCollection(np.concatenate(segs[flag]), cmap=cmap, norm=norm, linewidths=lw, alpha=alpha,
+            lc = _line_collection(np.concatenate(segs[flag]), cmap=cmap, norm=norm, linewidths=lw, alpha=alpha,
                                 linestyles=ls, zorder=4 if flag else 3, capstyle="round" if flag else "butt")
             lc.set_array(np.concatenate(vals[flag]))
             ax.add_collection(lc)
