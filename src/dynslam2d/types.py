@@ -241,7 +241,7 @@ class Scan:
         r = self.ranges
         # (NaN compares False without a floating-point warning in NumPy's comparisons: no errstate context, whose
         # enter and exit cost more than the three tests on a scan)
-        valid = np.isfinite(r) & (r >= lo) & (r <= hi)
+        valid = ranges_valid(r, lo, hi)
         if min_range is None and max_range is None:
             # computed once per scan (the pipeline's stages ask 5-6 times; a copy costs a fraction of
             # the tests) and handed out as copies, which callers may change; ranges never change
@@ -346,6 +346,12 @@ class Scan:
 _SCAN_SLOTS = ("stamp", "angle_min", "angle_increment", "ranges", "range_min", "range_max", "frame_id", "intensities",
                "angle_max", "time_increment", "scan_time", "odom", "yaw_rate", "_angles", "_valid", "_trig")
 _NEW = object.__new__
+
+
+def ranges_valid(ranges: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """(n,) bool: the ``ranges`` (m) that hold a return, finite and within [``lo``, ``hi``] m (:meth:`Scan.valid_mask`;
+    the loop closer's packed keyframes test their decoded ranges the same way)."""
+    return np.isfinite(ranges) & (ranges >= lo) & (ranges <= hi)
 
 
 def _copy_scan(scan: Scan, ranges: np.ndarray | None = None, valid: np.ndarray | None = None) -> Scan:

@@ -61,7 +61,7 @@ from dynslam2d.slam.placedesc import PlaceIndex
 from dynslam2d.slam.posegraph import PoseGraph, compose, diag_info, relative
 from dynslam2d.slam.rematch import refine_supported, rematch_keyframes
 from dynslam2d.slam.secondsearch import run_second_search
-from dynslam2d.types import Pose2D, Scan, _copy_scan, wrap_angle
+from dynslam2d.types import Pose2D, Scan, _copy_scan, ranges_valid, wrap_angle
 
 #: Submap grids kept built at a time (each a few MB).
 _SUBMAP_CACHE = 6
@@ -571,15 +571,12 @@ class LoopCloser:
 
     def _kf_scan_points(self, kf: Keyframe, removed: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_scan_points` of keyframe ``kf``'s scan; of a packed keyframe from its decoded ranges and their valid
-        mask (:meth:`Scan.valid_mask`'s tests: finite — every range of decimal codes is — and within the scan's
-        range limits) without rebuilding its :class:`Scan`."""
+        mask (:func:`ranges_valid`, the tests of :meth:`Scan.valid_mask`) without rebuilding its :class:`Scan`."""
         if kf._codes is None:
             return self._scan_points(kf._scan, removed)
         sh = kf._scan
         r = kf.ranges()
-        lo, hi = sh.range_min, sh.range_max
-        valid = (r >= lo) & (r <= hi) if kf._scale else np.isfinite(r) & (r >= lo) & (r <= hi)
-        return self._scan_points(sh, removed, r, valid)
+        return self._scan_points(sh, removed, r, ranges_valid(r, sh.range_min, sh.range_max))
 
     def _scan_points(self, scan: Scan, removed: np.ndarray | None = None, ranges: np.ndarray | None = None,
                      valid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
