@@ -1,0 +1,152 @@
+"""The tracker's kernels one by one: thread CPU in situ (first-called in the pipeline) against replayed warm (not run
+by pytest).
+
+Every kernel call of the ``track`` stage (segmentation, rectangle fit, ``detect_rows``, the association's gates and
+solver, the update, the management's counters, the reports, the prediction, the fragments' hosts, the births) is
+wrapped where the tracker's modules call it: after a 60-scan warm-up (a throw-away pipeline) one pipeline runs over
+the input with ``pipeline.run``'s collector setting, each call is timed in thread CPU time and its arguments are
+copied (arrays below 200 000 elements; larger ones, the map, are kept by reference). Then each kernel's recorded
+calls are replayed back to back, ``--reps`` times (fresh copies of the array arguments before each call, outside
+the timing); the least of the repetitions' medians is the warm figure. Printed per kernel: the in-situ median, the
+warm median, their ratio and the calls a scan. A no-op kernel called at the start of every ``Tracker.update`` gives
+the fixed cost of a first call in situ against its warm dispatch.
+
+    PYTHONPATH=src taskset -c 1 python benchmarks/bench_track_kernels.py negative_2/right sim:paper [--reps 3]
+        [--data <data>]
+
+Inputs: the names of ``bench_digest.py`` or a built-in scene (``sim:NAME``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_digest import INPUTS  # noqa: E402
+from bench_pipeline import scan_loop_gc  # noqa: E402
+
+WARMUP = 60
+BIG = 200_000  # arrays with more elements are not copied (the map view's log-odds)
+# (module, name): where the tracker's steps look the kernels up
+TARGETS = [("dynslam2d.detect.segment", "_segment_kernel"), ("dynslam2d.detect.trackdetect", "fit_cluster_rows"),
+           ("dynslam2d.detect.trackdetect", "detect_rows"), ("dynslam2d.detect.tracker", "cv_predict"),
+           ("dynslam2d.detect.tracker", "association_gates"), ("dynslam2d.detect.tracker", "assign_groups"),
+           ("dynslam2d.detect.trackupdate", "update_pairs"), ("dynslam2d.detect.trackmanage", "manage_counters"),
+           ("dynslam2d.detect.tracker", "fragment_hosts_rows"), ("dynslam2d.detect.tracker", "birth_rows"),
+           ("dynslam2d.detect.trackreport", "report_rows")]
+
+
+def _copy(args: tuple) -> tuple:
+    return tuple(a.copy() if isinstance(a, np.ndarray) and a.size < BIG else a for a in args)
+
+
+def run(name: str, data: Path, reps: int) -> None:
+    import importlib
+
+    from dynslam2d.detect import tracker as tracker_mod
+    from dynslam2d.inputs import open_source
+    from dynslam2d.jitbox import njit
+    from dynslam2d.pipeline import Pipeline
+
+    @njit(cache=False)  # (a probe of the benchmark's own, a few ms to compile)
+    def _noop(a: np.ndarray) -> int:
+        return a.shape[0]
+
+    clock = time.thread_time_ns
+    calls: dict[str, list] = {n: [] for _, n in TARGETS}
+    situ: dict[str, list] = {n: [] for _, n in TARGETS}
+    noop: list[int] = []
+    on = [False]
+    undo = []
+
+    def wrap(n: str, f):
+        def timed(*a):
+            if not on[0]:
+                return f(*a)
+            calls[n].append(_copy(a))
+            t0 = clock()
+            r = f(*a)
+            situ[n].append(clock() - t0)
+            return r
+        return timed
+
+    kernels = {}
+    for modname, n in TARGETS:
+        mod = importlib.import_module(modname)
+        kernels[n] = getattr(mod, n)
+        undo.append((mod, n, kernels[n]))
+        setattr(mod, n, wrap(n, kernels[n]))
+    probe = np.zeros(4)
+    _noop(probe)
+    update = tracker_mod.Tracker.update
+
+    def probed(self, *a, **k):
+        if on[0]:
+            t0 = clock()
+            _noop(probe)
+            noop.append(clock() - t0)
+        return update(self, *a, **k)
+
+    tracker_mod.Tracker.update = probed
+    try:
+        rel, topic = INPUTS.get(name, (name, None))
+        scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+        warm = Pipeline()
+        for s in scans[:WARMUP]:
+            warm.process(s)
+        del warm
+        pipe = Pipeline()
+        on[0] = True
+        with scan_loop_gc():
+            for s in scans:
+                pipe.process(s)
+        on[0] = False
+    finally:
+        tracker_mod.Tracker.update = update
+        for mod, n, f in undo:
+            setattr(mod, n, f)
+    print(f"{name}: {len(scans)} scans; thread CPU µs a call, medians: in situ / replayed warm (ratio), calls a scan")
+    tot_s = tot_w = 0.0
+    for _, n in TARGETS:
+        if not calls[n]:
+            continue
+        f = kernels[n]
+        best = np.inf
+        for _ in range(reps):
+            ts = []
+            for a in calls[n]:
+                a2 = _copy(a)
+                t0 = clock()
+                f(*a2)
+                ts.append(clock() - t0)
+            best = min(best, float(np.median(ts)))
+        si = float(np.median(situ[n]))
+        per = len(calls[n]) / len(scans)
+        tot_s += si * per
+        tot_w += best * per
+        print(f"  {n:22s} {si / 1e3:7.1f} / {best / 1e3:6.1f} (×{si / best:.2f})  {per:.2f}")
+    print(f"  {'all, a scan':22s} {tot_s / 1e3:7.1f} / {tot_w / 1e3:6.1f} (×{tot_s / tot_w:.2f})")
+    t0 = clock()
+    for _ in range(10_000):
+        _noop(probe)
+    print(f"  no-op kernel: in situ {np.median(noop) / 1e3:.2f}, warm {(clock() - t0) / 1e7:.2f}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("inputs", nargs="+", help=f"{', '.join(sorted(INPUTS))} or a built-in scene (sim:NAME)")
+    ap.add_argument("--reps", type=int, default=3)
+    ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
+    args = ap.parse_args()
+    for name in args.inputs:
+        run(name, args.data, args.reps)
+
+
+if __name__ == "__main__":
+    main()
