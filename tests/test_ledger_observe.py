@@ -89,12 +89,19 @@ def _track(tid: int, state: str, stamp: float, x: float, y: float, v: float, siz
                  m_reason="", beams=np.zeros(0, dtype=np.int64), n_points=0)
 
 
-def _ledger_state(led) -> tuple:
+def _ledger_state(led, ended: bool = False) -> tuple:
     # (each entry's rows as they read: an ended ledger's are squeezed, with the batch it was packed in, pass mem41)
     ent = [(er._unsqueeze_rows(r, a, b).tobytes(), b - a, lv if type(lv) is int else tuple(lv))
            for r, a, b, lv in led.ent]
+    # (an ended ledger's track is never read again: pass ldg47 lets it go when the track ends, the reference keeps it;
+    # checked apart, _ended_tracks)
     return (led.id, led.first_box, led.first_t, led.last_box, led.last_seen, led.m_start, led.linked, led.confirmed,
-            led.skip, id(led.last_track), ent, led.recs is None, led.nb_rows, led.nb_chunks)
+            led.skip, None if ended else id(led.last_track), ent, led.recs is None, led.nb_rows, led.nb_chunks)
+
+
+def _ended_tracks(led: EvidenceLedger) -> list:
+    """The tracks the ended ledgers still hold."""
+    return [v.last_track for v in led._ended.values() if v.last_track is not None]
 
 
 def _state(led: EvidenceLedger, full: bool = True) -> tuple:
@@ -102,9 +109,9 @@ def _state(led: EvidenceLedger, full: bool = True) -> tuple:
     (the ended ledgers' ids and stamps, not their packed rows; not the counters)."""
     if not full:
         return (sorted(led._first.items()), [(k, _ledger_state(v)) for k, v in led._ledgers.items()],
-                [(k, v.last_seen, v.last_box, id(v.last_track)) for k, v in led._ended.items()], led._oldest_ended)
+                [(k, v.last_seen, v.last_box) for k, v in led._ended.items()], led._oldest_ended)
     return (sorted(led._first.items()), [(k, _ledger_state(v)) for k, v in led._ledgers.items()],
-            [(k, _ledger_state(v)) for k, v in led._ended.items()], led._oldest_ended, dict(led.stats))
+            [(k, _ledger_state(v, True)) for k, v in led._ended.items()], led._oldest_ended, dict(led.stats))
 
 
 @pytest.mark.parametrize("seed", range(12))
@@ -164,6 +171,7 @@ def test_observe_keeps_the_same_state_as_pass_ledger15s(seed: int, monkeypatch) 
         # (pass led26: ended ledgers are packed and dropped ones counted in batches; at most _END_BATCH wait)
         assert len(new._to_pack) + len(new._to_count) < er._END_BATCH
         assert _state(new, False) == _state(ref, False), scan
+        assert not _ended_tracks(new), scan  # (the reference's ended ledgers hold theirs)
         if rng.random() < 0.2 or scan == n_scans - 1:
             new._finish_ended()
             assert _state(new) == _state(ref), scan
@@ -191,6 +199,30 @@ def test_observe_keeps_the_same_state_as_pass_ledger15s(seed: int, monkeypatch) 
             new._ledgers[next_id] = new._new_ledger(early, stamp, 3)
         seen_ended = max(seen_ended, len(new._ended))
     assert new.stats["cells_recorded"] > 0 and seen_ended > 0  # (dropped ledgers counted, ended ones kept)
+    assert _ended_tracks(ref)  # (the reference's ended ledgers do hold tracks: the test above can fail)
+
+
+def test_an_ended_ledger_lets_its_track_and_the_scans_arrays_go() -> None:
+    """Pass ldg47 (issue 13 item 3): a ledger whose track ended keeps its last box and stamp but not the track's
+    last report, which held that scan's report arrays (velocity and covariance rows, the beams' batch) for
+    ``ledger_keep_s``; nothing else refers to it, so the report and its arrays are freed when the track ends."""
+    import gc
+    import weakref
+
+    led = EvidenceLedger(MemoryConfig(ledger_keep_s=600.0), 0.1, 30.0)
+    t = _track(7, "confirmed", 0.0, 1.0, 0.5, 0.0, 0.4)
+    cov = np.eye(4)[None].repeat(3, axis=0)  # (a scan's reports' covariances; a report's is its row: a view)
+    t = Track(**{**{f: getattr(t, f) for f in Track.__dataclass_fields__}, "covariance": cov[1]})
+    led._ledgers[7] = led._new_ledger(t, 0.0, 3)
+    led.observe([t], set(), 0.0)
+    assert led._ledgers[7].last_track is t
+    gone = weakref.ref(cov)
+    del t, cov
+    led.observe([], set(), 0.1)  # (it ends, confirmed: kept for linking)
+    gc.collect()
+    l7 = led._ended[7]
+    assert l7.last_box == (1.0, 0.5, 0.2) and l7.last_seen == 0.0
+    assert l7.last_track is None and gone() is None
 
 
 def test_a_stay_that_erase_entering_starts_ends_when_the_track_is_out_of_the_set_again() -> None:

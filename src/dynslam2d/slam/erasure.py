@@ -440,7 +440,7 @@ class _Ledger:
     #: ((k, 3) int32 rows (scan index, first, end) into the chunk's beams, the int32 beams), in update order, before
     #: :attr:`kb`'s
     kbc: list | None = None
-    last_track: Track | None = None  # the track as last seen out of the removal set
+    last_track: Track | None = None  # the track as last seen out of the removal set (None once the track ended)
     #: (update's (5, m) row block, first column, end column, levels with rows (bit k: level k)) per map update
     #: since the last :meth:`settle`
     ent: list = field(default_factory=list)
@@ -1240,6 +1240,10 @@ class EvidenceLedger:
             led = ledgers.pop(tid)
             if led.last_track is not None:
                 led.last_box = _box_key(led.last_track)
+                # (nothing reads an ended ledger's track again: kept, each held its scan's report arrays — the
+                # velocity's and covariance's rows, the detections' beams — for ``ledger_keep_s``, ≈ 3 MiB of
+                # MIT CSAIL's ended ledgers at the loop's end; pass ldg47)
+                led.last_track = None
             if led.confirmed:  # tentative clutter (wall fragments, noise) is never linked
                 # an ended ledger gets no more rows: its entries' rows are copied out of the updates' shared row
                 # blocks into one array of their size (issue 13 item 3; one copy, where folding them here would
@@ -1250,8 +1254,7 @@ class EvidenceLedger:
                 self._oldest_ended = min(self._oldest_ended, led.last_seen)
             elif led.recs is None and len(led.ent) < 2:  # (no rows or one update's: counted without sorting)
                 self._drop(led)  # (its cells count in cells_recorded)
-            else:  # (in the next batch; the track is not read again: let it go now, not with the batch)
-                led.last_track = None
+            else:  # (counted in the next batch)
                 self._to_count.append(led)
         if len(self._to_pack) + len(self._to_count) >= _END_BATCH:
             self._finish_ended()
