@@ -511,21 +511,32 @@ REFRESH_SOURCES = {"BaseContext.refresh": "83e8f5cc63a7fee8", "BaseContext.insta
                    "init_all": "8cad7f8ebbb5530e"}
 
 
+def _registry_lists(ctx: Any) -> tuple[tuple[Any, ...], tuple[int, ...]]:
+    """The registries numba's target context ``ctx`` and its typing context have loaders for, and every list each
+    loader streams (``registry_items``), in the contexts' order."""
+    regs: list[Any] = []
+    lists: list[Any] = []
+    for c in (ctx, ctx.typing_context):
+        for reg, loader in c._registries.items():
+            regs.append(reg)
+            lists.extend(getattr(reg, name) for name in loader.registry_items)
+    return tuple(regs), tuple(lists)
+
+
 def _registrations_seen(ctx: Any) -> tuple[Any, ...]:
-    """What a refresh of numba's target context ``ctx`` could still install: for it and its typing context, the
-    registries it has loaders for (by identity) and the length of each list each loader streams, with whether numba's
-    run-time system and extension entry points are initialised."""
+    """What a refresh of numba's target context ``ctx`` could still install: whether numba's run-time system and
+    extension entry points are initialised, how many registries each context has loaders for, and the length of
+    every list those loaders stream (the lists of :func:`_registry_lists`, kept on the context while the registries
+    are the same ones)."""
     from numba.core import entrypoints
     from numba.core.runtime import rtsys
 
-    out: list[Any] = [rtsys._init, entrypoints._already_initialized]
-    for c in (ctx, ctx.typing_context):
-        regs = c._registries
-        out.append(len(regs))
-        for reg, loader in regs.items():
-            out.append(id(reg))  # (the dict holds the registry: its id is not reused while it is there)
-            out.extend(len(getattr(reg, name)) for name in loader.registry_items)
-    return tuple(out)
+    sizes = (len(ctx._registries), len(ctx.typing_context._registries))
+    kept = ctx.__dict__.get("_dynslam2d_lists")
+    if kept is None or kept[0] != sizes:
+        regs, lists = _registry_lists(ctx)
+        kept = ctx._dynslam2d_lists = (sizes, regs, lists)  # (holds the registries: their lists stay these objects)
+    return (rtsys._init, entrypoints._already_initialized, sizes, *map(len, kept[2]))
 
 
 def lean_refresh() -> bool:
