@@ -169,6 +169,8 @@ def lean_numba_compile() -> bool:
       three quarters of numba's inlining pass.
     - **No machine code for a kernel compiled only as a callee** (:func:`lazy_callee_code`, installed at the first
       compile): its caller links its optimised IR anyway; the code is made when Python calls it.
+    - **No context refresh that would install nothing** (:func:`lean_refresh`, installed at the first compile): ≈ 4 700
+      refreshes per cold run after a lookup that misses on purpose.
     - **No debug-logging calls in numba's SSA pass** (:func:`quiet_ssa_debug`, installed at the first compile): about
       a million ``Logger.debug`` calls per cold run that log nothing.
     - **llvmlite's IR printer with less Python work, ABI sizes remembered** (``jitprint.install``, at the first
@@ -222,7 +224,7 @@ def lean_numba_compile() -> bool:
     from dynslam2d import jitprint, jitssa
 
     at_first_compile(remembered_call_typing, lean_inlining, lazy_callee_code,  # (reading numba's sources: not warm)
-                     quiet_ssa_debug, jitssa.install, jitprint.install)
+                     quiet_ssa_debug, jitssa.install, jitprint.install, lean_refresh)
     return True
 
 
@@ -492,6 +494,117 @@ def lean_inlining() -> bool:
     lean_function.__wrapped__ = inline_function  # type: ignore[attr-defined]
     worker.inline_ir = no_original
     worker.inline_function = lean_function
+    return True
+
+
+#: SHA-256 (first 16 hex digits) of the sources of the numba 0.68 functions :func:`lean_refresh` relies on: what a
+#: context refresh does (both contexts' ``refresh``, ``load_additional_registries``, ``_load_builtins``), how a registry
+#: is installed (``install_registry``: only the registrations appended since its loader last read) and the loaders'
+#: streams; any other source is left as it is.
+REFRESH_SOURCES = {"BaseContext.refresh": "83e8f5cc63a7fee8", "BaseContext.install_registry": "bdaf4e9db8fe66e2",
+                   "CPUContext.load_additional_registries": "0383d5716d370fa9",
+                   "typing.BaseContext.refresh": "1440782349211fb6",
+                   "typing.BaseContext._load_builtins": "0dd81dada6654089",
+                   "typing.BaseContext.install_registry": "8b38bc0cff80e2fe",
+                   "typing.Context.load_additional_registries": "a99a8a1a62aa8bb5",
+                   "BaseRegistryLoader": "62eb98cb0c91ce1d", "stream_list": "34549f7d2c7ea9c9",
+                   "init_all": "8cad7f8ebbb5530e"}
+
+
+def _registry_lists(ctx: Any) -> tuple[tuple[Any, ...], tuple[int, ...]]:
+    """The registries numba's target context ``ctx`` and its typing context have loaders for, and every list each
+    loader streams (``registry_items``), in the contexts' order."""
+    regs: list[Any] = []
+    lists: list[Any] = []
+    for c in (ctx, ctx.typing_context):
+        for reg, loader in c._registries.items():
+            regs.append(reg)
+            lists.extend(getattr(reg, name) for name in loader.registry_items)
+    return tuple(regs), tuple(lists)
+
+
+def _registrations_seen(ctx: Any) -> tuple[Any, ...]:
+    """What a refresh of numba's target context ``ctx`` could still install: whether numba's run-time system and
+    extension entry points are initialised, how many registries each context has loaders for, and the length of
+    every list those loaders stream (the lists of :func:`_registry_lists`, kept on the context while the registries
+    are the same ones)."""
+    from numba.core import entrypoints
+    from numba.core.runtime import rtsys
+
+    sizes = (len(ctx._registries), len(ctx.typing_context._registries))
+    kept = ctx.__dict__.get("_dynslam2d_lists")
+    if kept is None or kept[0] != sizes:
+        regs, lists = _registry_lists(ctx)
+        kept = ctx._dynslam2d_lists = (sizes, regs, lists)  # (holds the registries: their lists stay these objects)
+    return (rtsys._init, entrypoints._already_initialized, sizes, *map(len, kept[2]))
+
+
+def lean_refresh() -> bool:
+    """Have numba skip a target context's refresh when it would install nothing.
+
+    ``BaseContext.get_function`` refreshes the context (``refresh``: the CPU context's additional registries, the
+    builtin registry, the typing context's registries, ≈ 30 ``from … import`` statements and 17 registries asked for
+    new registrations) whenever a lookup misses, before it looks again; numba's array structures miss on purpose
+    (``make_array``'s ``_make_refs`` asks for an ``__array__`` implementation that plain arrays do not have, at every
+    array value the lowering touches), and so do ``static_getitem`` / ``static_setitem`` before their fallbacks, and
+    every overload template refreshes the target context: ≈ 4 700 refreshes on a cold run of the README's first
+    command, all but a handful installing nothing. A registry is installed incrementally (its loader streams only
+    the registrations appended since it last read, ``utils.stream_list``), so a refresh installs nothing when no
+    list of a registry either context has a loader for grew since a refresh during which none grew (the fixed
+    modules imported, the fixed registries loaded then, numba's run-time system and entry points initialised):
+    :func:`_registrations_seen` before and after each full refresh; when it is unchanged since a refresh that left
+    it unchanged, the call returns at once. The contexts' tables are then the same as numba's refresh leaves them,
+    so every lookup, and every kernel's IR and code, is the same. A context whose class overrides the additional
+    registries is refreshed as numba does. Called by :func:`lean_numba_compile` at the first compile; returns whether
+    it changed numba (not when called again, nor when numba's sources differ, :data:`REFRESH_SOURCES`)."""
+    import inspect
+
+    try:
+        from numba.core import base, cpu, entrypoints, utils
+        from numba.core.typing import context as typing_context
+        from numba.core.typing import templates
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return False
+    refresh = base.BaseContext.refresh
+    if getattr(refresh, "_dynslam2d_refresh", False):
+        return False
+    found = {"BaseContext.refresh": refresh, "BaseContext.install_registry": base.BaseContext.install_registry,
+             "CPUContext.load_additional_registries": cpu.CPUContext.load_additional_registries,
+             "typing.BaseContext.refresh": typing_context.BaseContext.refresh,
+             "typing.BaseContext._load_builtins": typing_context.BaseContext._load_builtins,
+             "typing.BaseContext.install_registry": typing_context.BaseContext.install_registry,
+             "typing.Context.load_additional_registries": typing_context.Context.load_additional_registries,
+             "BaseRegistryLoader": templates.BaseRegistryLoader, "stream_list": utils.stream_list,
+             "init_all": entrypoints.init_all}
+    for name, func in found.items():
+        try:
+            source = inspect.getsource(func)
+        except (OSError, TypeError):
+            return False
+        if hashlib.sha256(source.encode()).hexdigest()[:16] != REFRESH_SOURCES.get(name):
+            return False
+    checked = {cpu.CPUContext: (cpu.CPUContext.load_additional_registries, typing_context.Context)}
+
+    def lean(self: Any) -> None:
+        kinds = checked.get(type(self))
+        typing = getattr(self, "typing_context", None)
+        if (kinds is None or type(self).load_additional_registries is not kinds[0] or type(typing) is not kinds[1]
+                or type(self).install_registry is not base.BaseContext.install_registry):
+            refresh(self)
+            return
+        clean = self.__dict__.get("_dynslam2d_refreshed")
+        if clean is not None and clean == _registrations_seen(self):
+            return
+        before = _registrations_seen(self)
+        self.__dict__.pop("_dynslam2d_refreshed", None)
+        refresh(self)
+        after = _registrations_seen(self)
+        if after == before:  # (nothing grew during it: every loader has read its whole list)
+            self._dynslam2d_refreshed = after
+
+    lean._dynslam2d_refresh = True  # type: ignore[attr-defined]
+    lean.__wrapped__ = refresh  # type: ignore[attr-defined]
+    base.BaseContext.refresh = lean  # type: ignore[method-assign]
     return True
 
 
