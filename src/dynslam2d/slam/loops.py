@@ -581,12 +581,15 @@ class LoopCloser:
                 # of a run never rank far places, and the descriptor is most of a keyframe's cost (docs/slam.md)
                 self._place_due.append(node)
             self._place_drop(node)
-        every = c.search_every * (c.tracked_search_every if self._recent_loop(node) is not None else 1)
+        recent = self._recent_loop(node)
+        every = c.search_every * (c.tracked_search_every if recent is not None else 1)
         if self._pending:
             self._pending_far(node)
+            recent = self._recent_loop(node)  # (a far candidate verified by this keyframe is a loop accepted)
         if node % every == 0:
-            self._search(node)
-        self._confirm(node)
+            self._search(node, recent)
+        if self.candidates:  # (none: _confirm would only make the empty list again)
+            self._confirm(node)
         if self._new_loops >= c.optimise_every or (
                 self._new_loops >= 2 and node - self._opt_nodes >= 3 * c.optimise_every):
             self._optimise(final=False)
@@ -718,7 +721,8 @@ class LoopCloser:
         the front end's relative pose."""
         return self.graph.pose(node)
 
-    def _search(self, node: int) -> None:
+    def _search(self, node: int, recent: LoopCandidate | None) -> None:
+        """The loop searches of keyframe ``node``; ``recent``: :meth:`_recent_loop` of it, as the caller found it."""
         c = self.config
         t0 = time.perf_counter()
         kf = self.keyframes[node]
@@ -726,7 +730,6 @@ class LoopCloser:
         n_sub = (node + 1) // c.submap_keyframes  # finished submaps
         if node < c.submap_keyframes:
             return
-        recent = self._recent_loop(node)
         if recent is not None:
             # a loop a few keyframes ago: it and the keyframe chain since predict this pose well, so the
             # search needs only a small window around that prediction
