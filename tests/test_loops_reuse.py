@@ -41,13 +41,13 @@ def _run(scans: list, front: np.ndarray, keep: bool, drop_at: int | None = None,
     if not (keep if alone is None else alone):
         _whole_grid(lc)
     builds = [0]
-    submap = lc._submap
+    submap = lc._submap_grid
 
     def counted(s: int):  # noqa: ANN202
         builds[0] += s not in lc._cache
         return submap(s)
 
-    lc._submap = counted
+    lc._submap_grid = counted
     for k, (s, p) in enumerate(zip(scans, front)):
         lc.add(s.stamp, Pose2D(*p), s, np.zeros(s.ranges.shape, bool), keyframe=k % 2 == 0)
         if drop_at is not None and k == drop_at:

@@ -1,0 +1,114 @@
+"""The loop closer's memory (docs/speed.md, pass lcm47): what it keeps is smaller, every result the same bit for bit.
+
+* a cached submap keeps its levels below the search level (read only by a match's refinement) sparse: the cells of
+  the probability cache that are not 0.5, given back dense as the same float32 bits;
+* the place index stores its spectra in blocks of places allocated once (no growth slack, no copies), with the
+  distances of one array of them all.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_loops import _block_loop_world, _drifted, _loop_path, _scans
+
+import dynslam2d.slam.loops as lp
+import dynslam2d.slam.placedesc as pd
+from dynslam2d.slam.config import SlamConfig
+from dynslam2d.slam.loopconfig import LoopConfig
+from dynslam2d.slam.loops import LoopCloser
+from dynslam2d.types import Pose2D
+
+
+def _run(scans: list, front: np.ndarray, sparse: bool, monkeypatch: pytest.MonkeyPatch) -> tuple:
+    with monkeypatch.context() as m:
+        if not sparse:
+            m.setattr(lp, "_make_sparse", lambda grid, k: None)
+        lc = LoopCloser(LoopConfig(), SlamConfig())
+        for k, (s, p) in enumerate(zip(scans, front)):
+            lc.add(s.stamp, Pose2D(*p), s, np.zeros(s.ranges.shape, bool), keyframe=k % 2 == 0)
+        res = lc.finish()
+        grids = {}  # every submap's grid as the searches hold it
+        for s in range(len(lc.keyframes) // lc.config.submap_keyframes):
+            lc._cache.clear()
+            grids[s] = lc._submap_grid(s)
+    return lc, res, grids
+
+
+@pytest.fixture(scope="module")
+def runs() -> tuple:
+    world = _block_loop_world()
+    gt = _loop_path()
+    front = _drifted(gt, 0.006)  # the far search closes this loop (test_loops.py)
+    scans = _scans(world, gt)
+    mp = pytest.MonkeyPatch()
+    try:
+        return _run(scans, front, True, mp), _run(scans, front, False, mp)
+    finally:
+        mp.undo()
+
+
+def test_sparse_levels_give_the_dense_levels_bit_for_bit(runs: tuple) -> None:
+    (lc, _res, grids), (_lc0, _res0, dense) = runs
+    assert len(grids) >= 5
+    n_sparse = 0
+    for s, grid in grids.items():
+        ref = dense[s]
+        assert not ref.sparse
+        for k, (lv, lv0) in enumerate(zip(grid.levels, ref.levels)):
+            got = grid.dense_level(k)
+            assert got.shape == lv0.shape and (got.i0, got.j0) == (lv0.i0, lv0.j0) and got.resolution == lv0.resolution
+            assert got.prob.dtype == np.float32 and got.prob.tobytes() == lv0.prob.tobytes(), (s, k)
+            if k in grid.sparse:
+                n_sparse += 1
+                assert k < lc.config.search_level  # the searched levels and the far level stay dense
+                assert np.isnan(lv.prob).all() and lv.prob.strides == (0, 0)  # the cache itself is not held
+                idx, vals = grid.sparse[k]
+                assert idx.nbytes + vals.nbytes < lv0.prob.nbytes / 2
+            else:
+                assert lv.prob is got.prob
+        whole = lc._submap(s)  # for callers outside the searches: every level dense
+        assert all(a.prob.tobytes() == b.prob.tobytes() for a, b in zip(whole.levels, ref.levels))
+    assert n_sparse >= len(grids)  # (the finest level at least of every submap)
+
+
+def test_sparse_levels_give_the_same_loops_and_poses(runs: tuple) -> None:
+    (lc, res, _g), (lc0, res0, _g0) = runs
+    assert lc.stats["far_loops"] >= 3 and lc.stats["loops_accepted"] >= 5 and res.corrected
+    assert np.array_equal(res.poses, res0.poses) and np.array_equal(res.node_poses, res0.node_poses)
+    assert res.loops == res0.loops
+    assert {k: v for k, v in res.stats.items() if not k.endswith("_ms")} == {
+        k: v for k, v in res0.stats.items() if not k.endswith("_ms")}
+
+
+def test_place_spectra_in_blocks_give_the_distances_of_one_array() -> None:
+    rng = np.random.default_rng(47)
+    idx = pd.PlaceIndex(20, 60, 15.0)
+    clouds = [rng.normal(0.0, 4.0, (int(rng.integers(5, 200)), 2)) for _ in range(2 * pd._BLOCK + 37)]
+    keys = [5 * i + 2 for i in range(len(clouds))]
+    a = 0
+    for b in (1, 17, pd._BLOCK - 3, pd._BLOCK + 9, 30, 1000):  # batches across the blocks' edges
+        idx.add_many(keys[a:a + b], idx.describe_many(clouds[a:a + b]))
+        a += b
+    n = len(clouds)
+    assert len(idx) == n and len(idx._col_blocks) == -(-n // pd._BLOCK)  # no block beyond the last place's
+    cols, occ, count = pd._spectra_many(idx.describe_many(clouds))
+    assert idx._cols.tobytes() == cols.astype(np.complex64).tobytes()
+    assert idx._occ.tobytes() == occ.astype(np.complex64).tobytes()
+    all_cols = cols.astype(np.complex64)
+    for q in (clouds[3], clouds[pd._BLOCK], rng.normal(0.0, 3.0, (80, 2))):
+        qc, qo, qn = pd._spectra(idx.describe(q))
+        # the former path: one kernel call over one array of every stored place
+        corr = np.fft.irfft(pd._ring_correlation(qc, all_cols, n), n=60, axis=1)
+        overlap = np.fft.irfft(qo[None, :] * np.conj(occ.astype(np.complex64)), n=60, axis=1)
+        d = 1.0 - corr / np.maximum(qn + count[:, None].astype(np.float64) - np.rint(overlap), 1.0)
+        best = np.argmin(d, axis=1)
+        k2, d2, s2 = idx.distances(idx.describe(q))
+        assert k2.tolist() == keys and s2.tolist() == best.tolist()
+        assert d2.tobytes() == np.clip(d[np.arange(n), best], 0.0, 1.0).tobytes()
+        for upto in (1, pd._BLOCK, pd._BLOCK + 1, n - 1):
+            assert idx.distances(idx.describe(q), upto)[1].tobytes() == d2[:upto].tobytes()
+    key = keys[pd._BLOCK + 5]
+    assert idx.distances_of(key)[1].tobytes() == idx._distances(
+        all_cols[pd._BLOCK + 5].astype(np.complex128), occ[pd._BLOCK + 5].astype(np.complex64).astype(np.complex128),
+        int(count[pd._BLOCK + 5]), n)[1].tobytes()
