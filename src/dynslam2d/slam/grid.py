@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import mmap
+import weakref
 
 import numpy as np
 
@@ -34,6 +35,7 @@ _NO_F32 = np.zeros((0, 0), dtype=np.float32)
 _NO_I32 = np.zeros((0, 0), dtype=np.int32)
 _NO_STOP = np.zeros(0)
 _NO_CLEAR = np.zeros((0, 2))
+_NO_ROWS = np.zeros((0, 0), dtype=np.float32)
 #: float64's dtype (an array's ``dtype is _F64``: the cheap form of ``== np.float64`` for the arrays NumPy makes)
 _F64 = np.dtype(np.float64)
 
@@ -55,9 +57,18 @@ def _zeroed(shape: tuple[int, int], dtype: type) -> np.ndarray:
     """A C-contiguous zero array in its own anonymous memory map: its pages take no memory until written, whatever
     the allocator's state (``np.zeros``' calloc clears a block the heap reuses, touching every page: glibc serves
     blocks below its adaptive mmap threshold, up to 32 MiB, from the heap); unmapped when the array goes."""
+    return _zeroed_map(shape, dtype)[0]
+
+
+def _zeroed_map(shape: tuple[int, int], dtype: type) -> tuple[np.ndarray, mmap.mmap]:
+    """:func:`_zeroed`'s array and its memory map, private (``MAP_PRIVATE``: a map that :meth:`GridLevel._grow` can
+    extend in place with ``mremap``; a shared anonymous map's new pages would be past the end of its shared memory
+    object)."""
     dt = np.dtype(dtype)
     n = shape[0] * shape[1]
-    return np.frombuffer(mmap.mmap(-1, max(n * dt.itemsize, 1)), dtype=dt, count=n).reshape(shape)
+    flags = getattr(mmap, "MAP_PRIVATE", 0) | getattr(mmap, "MAP_ANONYMOUS", 0)
+    mm = mmap.mmap(-1, max(n * dt.itemsize, 1), flags=flags) if flags else mmap.mmap(-1, max(n * dt.itemsize, 1))
+    return np.frombuffer(mm, dtype=dt, count=n).reshape(shape), mm
 
 
 def _copy_written_rows(dst: np.ndarray, src: np.ndarray) -> None:
@@ -89,6 +100,10 @@ class GridLevel:
         self.logodds: np.ndarray
         self.prob: np.ndarray
         self.uidx: np.ndarray
+        #: the memory maps of the arrays made by :func:`_zeroed_map` (name → (weak reference to the map, address of
+        #: the array's data); weak: an array replaced from outside lets its map go): :meth:`_grow` extends them in
+        #: place when the level grows by rows at its top
+        self._maps: dict[str, tuple[weakref.ref, int]] = {}
         self.release()
         self.i0 = 0
         self.j0 = 0
@@ -143,6 +158,7 @@ class GridLevel:
         for name, fill, dtype in _LEVEL_ARRAYS:
             if not names or name in names:
                 setattr(self, name, np.full((0, 0), fill, dtype=dtype))
+                self._maps.pop(name, None)
 
     # ---- growth -----------------------------------------------------------------------
     def _grown_bounds(self, imin: int, jmin: int, imax: int, jmax: int) -> tuple[int, int, int, int] | None:
@@ -200,11 +216,15 @@ class GridLevel:
                 # old array's rows that hold a non-zero cell copied (a −0.0 does: its bits are not zero): pages no
                 # ray reached are never touched and take no memory (12.5 % of MIT CSAIL's finest level was ever
                 # updated; docs/speed.md passes mem39 and mem43)
-                new = _zeroed((nh, nw), dtype)
+                if w == nw and r0 == 0 and self._extend_rows(name, dtype, h, nh):
+                    continue
+                new, mm = _zeroed_map((nh, nw), dtype)
                 if w > 0:
                     _copy_written_rows(new[r0:r0 + h, c0:c0 + w], getattr(self, name))
                 setattr(self, name, new)
+                self._maps[name] = (weakref.ref(mm), new.__array_interface__["data"][0])
                 continue
+            self._maps.pop(name, None)
             new = np.empty((nh, nw), dtype=dtype)
             if w > 0:
                 new[r0:r0 + h, c0:c0 + w] = getattr(self, name)
@@ -217,6 +237,31 @@ class GridLevel:
             setattr(self, name, new)
         self.i0, self.j0 = ni0, nj0
         self.n_grows += 1
+
+    def _extend_rows(self, name: str, dtype: type, h: int, nh: int) -> bool:
+        """Grow array ``name`` ((``h``, W), made by :func:`_zeroed_map`) to ``nh`` rows at its top in place: its memory
+        map extended (``mremap``: the old pages are kept where they are, nothing is copied or read, the new rows are
+        zero pages not yet touched), the same content as a new zeroed array with the old one copied into its first
+        rows. False, with the array unchanged, when it is not its map's array any more, when another array still
+        views it (a map cannot be resized then) or the system has no ``mremap``: :meth:`_grow` copies instead."""
+        entry = self._maps.get(name)
+        mm = None if entry is None else entry[0]()
+        cur = getattr(self, name)
+        if mm is None or cur.__array_interface__["data"][0] != entry[1] or cur.shape[0] != h:
+            return False
+        w = cur.shape[1]
+        setattr(self, name, _NO_ROWS)
+        del cur  # (the map's only views must go before it can be resized)
+        dt = np.dtype(dtype)
+        try:
+            mm.resize(max(nh * w * dt.itemsize, 1))
+        except (BufferError, OSError, SystemError, ValueError, TypeError):
+            setattr(self, name, np.frombuffer(mm, dtype=dt, count=h * w).reshape(h, w))
+            return False
+        new = np.frombuffer(mm, dtype=dt, count=nh * w).reshape(nh, w)
+        setattr(self, name, new)
+        self._maps[name] = (weakref.ref(mm), new.__array_interface__["data"][0])
+        return True
 
     def cell_bounds(self, origin_xy: np.ndarray, ends_xy: np.ndarray) -> tuple[int, int, int, int]:
         """(imin, jmin, imax, jmax) absolute cells covering a ray origin and its ends (world, m)."""
