@@ -511,16 +511,26 @@ REFRESH_SOURCES = {"BaseContext.refresh": "83e8f5cc63a7fee8", "BaseContext.insta
                    "init_all": "8cad7f8ebbb5530e"}
 
 
-def _registry_lists(ctx: Any) -> tuple[tuple[Any, ...], tuple[int, ...]]:
-    """The registries numba's target context ``ctx`` and its typing context have loaders for, and every list each
-    loader streams (``registry_items``), in the contexts' order."""
+#: Whether :func:`lean_refresh`, when only lists of registries grew since a refresh that installed nothing, installs
+#: just the registries whose lists grew (in the refresh's order, :func:`_install_grown`) instead of numba's full
+#: refresh (pass cmp48).
+GROWN_ONLY = True
+
+
+def _registry_lists(ctx: Any) -> tuple[tuple[Any, ...], tuple[Any, ...], dict[tuple[int, int], tuple[int, int]]]:
+    """The registries numba's target context ``ctx`` and its typing context have loaders for, every list each
+    loader streams (``registry_items``), in the contexts' order, and where each registry's lists are among them
+    (``(0 target / 1 typing, id(registry))`` -> ``(start, stop)``)."""
     regs: list[Any] = []
     lists: list[Any] = []
-    for c in (ctx, ctx.typing_context):
+    spans: dict[tuple[int, int], tuple[int, int]] = {}
+    for which, c in enumerate((ctx, ctx.typing_context)):
         for reg, loader in c._registries.items():
             regs.append(reg)
+            start = len(lists)
             lists.extend(getattr(reg, name) for name in loader.registry_items)
-    return tuple(regs), tuple(lists)
+            spans[(which, id(reg))] = (start, len(lists))
+    return tuple(regs), tuple(lists), spans
 
 
 def _registrations_seen(ctx: Any) -> tuple[Any, ...]:
@@ -534,9 +544,56 @@ def _registrations_seen(ctx: Any) -> tuple[Any, ...]:
     sizes = (len(ctx._registries), len(ctx.typing_context._registries))
     kept = ctx.__dict__.get("_dynslam2d_lists")
     if kept is None or kept[0] != sizes:
-        regs, lists = _registry_lists(ctx)
-        kept = ctx._dynslam2d_lists = (sizes, regs, lists)  # (holds the registries: their lists stay these objects)
+        regs, lists, spans = _registry_lists(ctx)
+        kept = ctx._dynslam2d_lists = (sizes, regs, lists, spans)  # (holds the registries: their lists stay these)
     return (rtsys._init, entrypoints._already_initialized, sizes, *map(len, kept[2]))
+
+
+def _refresh_order() -> tuple[tuple[Any, ...], tuple[Any, ...]]:
+    """The registries numba 0.68's refresh installs, in its order: the target context's (``CPUContext``'s
+    ``load_additional_registries``, then ``builtin_registry``) and the typing context's (``Context``'s
+    ``load_additional_registries``, then ``_load_builtins``); the sources are checked (:data:`REFRESH_SOURCES`).
+    Called only after a full refresh (which imported these modules): importing them earlier could change the order
+    in which numba's modules register their implementations."""
+    from numba.core import base
+    from numba.core import typing as ty
+    from numba.core.typing import templates
+    from numba.cpython import cmathimpl, mathimpl, printimpl, randomimpl
+    from numba.experimental.jitclass.base import ClassBuilder
+    from numba.misc import cffiimpl
+    from numba.np import npyimpl
+
+    target = (cmathimpl.registry, cffiimpl.registry, mathimpl.registry, npyimpl.registry, printimpl.registry,
+              randomimpl.registry, ClassBuilder.class_impl_registry, base.builtin_registry)
+    names = ("cffi_utils", "cmathdecl", "enumdecl", "listdecl", "mathdecl", "npydecl", "setdecl", "dictdecl")
+    typing = (*(getattr(ty, name).registry for name in names), templates.builtin_registry)
+    return target, typing
+
+
+def _install_grown(ctx: Any, clean: tuple[Any, ...], seen: tuple[Any, ...], order: list[Any]) -> bool:
+    """What numba's refresh of ``ctx`` does when, since the refresh that left the record ``clean``, only lists of
+    registries grew (``seen``: the same run-time system, entry points and loaders): install, in the refresh's
+    ``order``, each registry of it one of whose lists is longer than in ``clean`` when its turn comes; the other
+    installs of that refresh stream nothing, and its imports are of modules imported already (``order``: a list,
+    filled with :func:`_refresh_order` at the first call). Returns False, having installed nothing, when a registry of
+    ``order`` has no loader in its context."""
+    kept = ctx.__dict__.get("_dynslam2d_lists")
+    if kept is None or kept[0] != seen[2] or seen[:3] != clean[:3]:
+        return False
+    lists, spans = kept[2], kept[3]
+    if not order:
+        order.extend(_refresh_order())
+    turns = []
+    for which, (c, regs) in enumerate(zip((ctx, ctx.typing_context), order)):
+        for reg in regs:
+            span = spans.get((which, id(reg)))
+            if span is None or c._registries.get(reg) is None:
+                return False
+            turns.append((c, reg, span))
+    for c, reg, (start, stop) in turns:
+        if any(len(lists[k]) > clean[3 + k] for k in range(start, stop)):
+            c.install_registry(reg)
+    return True
 
 
 def lean_refresh() -> bool:
@@ -584,6 +641,7 @@ def lean_refresh() -> bool:
         if hashlib.sha256(source.encode()).hexdigest()[:16] != REFRESH_SOURCES.get(name):
             return False
     checked = {cpu.CPUContext: (cpu.CPUContext.load_additional_registries, typing_context.Context)}
+    order: list[Any] = []  # (the refresh's registries, read at the first partial install)
 
     def lean(self: Any) -> None:
         kinds = checked.get(type(self))
@@ -593,9 +651,16 @@ def lean_refresh() -> bool:
             refresh(self)
             return
         clean = self.__dict__.get("_dynslam2d_refreshed")
-        if clean is not None and clean == _registrations_seen(self):
-            return
         before = _registrations_seen(self)
+        if clean is not None and clean == before:
+            return
+        if GROWN_ONLY and clean is not None and _install_grown(self, clean, before, order):
+            after = _registrations_seen(self)
+            if after == before:  # (nothing grew during it: every loader of the refresh's registries read its list)
+                self._dynslam2d_refreshed = after
+            else:
+                self.__dict__.pop("_dynslam2d_refreshed", None)
+            return
         self.__dict__.pop("_dynslam2d_refreshed", None)
         refresh(self)
         after = _registrations_seen(self)
