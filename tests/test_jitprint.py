@@ -135,6 +135,29 @@ print(json.dumps({"same": ours == theirs + theirs, "pairs": theirs, "remembered"
                   "named": named_ours == [named_theirs, named_theirs]}))
 """
 
+#: Constants made by calling types (``ir.IntType(64)(5)``, ``Type.__call__``) with llvmlite's own method, then after
+#: :func:`jitprint.constant_calls`: each constant's class, type and text.
+CONSTANTS = r"""
+import json
+from llvmlite import ir
+from dynslam2d import jitprint
+i8, i64, f64 = ir.IntType(8), ir.IntType(64), ir.DoubleType()
+st = ir.LiteralStructType([i64, f64])
+cases = [(i8, 3), (i64, -7), (ir.IntType(1), True), (f64, 1.5), (ir.FloatType(), 0.25), (i8.as_pointer(), None),
+         (ir.ArrayType(i8, 3), [1, 2, 3]), (st, [ir.Constant(i64, 4), 2.5]), (ir.VectorType(f64, 2), [1.0, 2.0]),
+         (ir.ArrayType(i8, 2), bytearray(b"ab")), (st, ir.Undefined), (i64, None)]
+def made():
+    out = []
+    for t, v in cases:
+        c = t(v)
+        out.append([type(c).__name__, c.type is t, str(c)])
+    return out
+theirs = made()
+installed = [jitprint.constant_calls(), jitprint.constant_calls()]
+print(json.dumps({"theirs": theirs, "ours": made(), "installed": installed,
+                  "replaced": getattr(ir.types.Type.__call__, "_dynslam2d_constant", False)}))
+"""
+
 
 def _run(script: str, args: list[str]) -> dict:
     out = subprocess.run([sys.executable, "-c", script, *args], env={"PYTHONPATH": SRC, "PATH": "/usr/bin:/bin"},
@@ -164,6 +187,13 @@ def test_remembered_abi_sizes() -> None:
     assert any(size != align for size, align in stats["pairs"])
 
 
+def test_constants_from_type_calls() -> None:
+    stats = _run(CONSTANTS, [])
+    assert stats["installed"] == [True, False] and stats["replaced"]
+    assert stats["ours"] == stats["theirs"]
+    assert len(stats["theirs"]) == 12 and all(same_type for _, same_type, _ in stats["theirs"])
+
+
 def test_other_sources_left_alone(monkeypatch) -> None:
     from llvmlite.ir import types, values
     from numba.core.runtime import context
@@ -172,8 +202,9 @@ def test_other_sources_left_alone(monkeypatch) -> None:
 
     # (numba's sources changed too: else lean_meminfos installs, and the answer would depend on the test order)
     descr, size, meminfos = values.Block.descr, types.Type.get_abi_size, context.NRTContext.get_meminfos
+    call = types.Type.__call__
     monkeypatch.setattr(jitprint, "SOURCES", {**jitprint.SOURCES, "instructions": "0" * 16})
     monkeypatch.setattr(jitprint, "MEMINFO_SOURCES", {**jitprint.MEMINFO_SOURCES, "DataModel.traverse": "0" * 16})
     assert not jitprint.install()
-    assert values.Block.descr is descr and types.Type.get_abi_size is size
+    assert values.Block.descr is descr and types.Type.get_abi_size is size and types.Type.__call__ is call
     assert context.NRTContext.get_meminfos is meminfos
