@@ -112,3 +112,34 @@ def test_place_spectra_in_blocks_give_the_distances_of_one_array() -> None:
     assert idx.distances_of(key)[1].tobytes() == idx._distances(
         all_cols[pd._BLOCK + 5].astype(np.complex128), occ[pd._BLOCK + 5].astype(np.complex64).astype(np.complex128),
         int(count[pd._BLOCK + 5]), n)[1].tobytes()
+
+
+def test_dense_level_cache_follows_the_grid(runs: tuple) -> None:
+    """The one-entry cache of rebuilt dense levels (docs/speed.md, pass lcm48): a repeat is the cached level, a
+    level of another grid — or of the same submap rebuilt after ``drop_beams`` — the bits of its own rebuild, in
+    the reused buffer (no 0.5 left out, no cells of the grid before)."""
+    (lc, _res, grids), _dense = runs
+    ks = sorted({k for g in grids.values() for k in g.sparse})
+    assert ks
+    order = [0, 0, 1, 0, 2, 2, 1, len(grids) - 1, 0]
+    for s in order:
+        lc._cache[s] = grids[s]  # (the grids the searches hold)
+        for k in ks:
+            if k not in grids[s].sparse:
+                continue
+            got = lc._dense(grids[s], k)
+            assert got.prob.tobytes() == grids[s].dense_level(k).prob.tobytes(), (s, k)
+            assert lc._dense(grids[s], k) is got  # the repeat: no rebuild
+    assert all(buf.base is None for buf in lc._dense_bufs.values())  # one buffer a level, reused
+    # submap 0 changes: its keyframes' beams dropped, the grid rebuilt (another object)
+    k0 = ks[0]
+    before = lc._dense(grids[0], k0).prob.copy()
+    kfs = lc.keyframes[:lc.config.submap_keyframes]
+    n = lc.drop_beams([(kf.scan_index, np.arange(0, kf.n_beams, 2)) for kf in kfs])
+    assert n > 0 and 0 not in lc._cache
+    new = lc._submap_grid(0)
+    got = lc._dense(new, k0)
+    ref = new.dense_level(k0).prob
+    assert got.prob.tobytes() == ref.tobytes() and ref.tobytes() != before.tobytes()
+    lc._cache.clear()
+    lc._dense_forget()

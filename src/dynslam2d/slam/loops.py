@@ -119,12 +119,23 @@ class _SubmapGrid(MultiResMap):
     def dense_level(self, k: int) -> GridLevel:
         """Level ``k`` with its whole probability cache (a shallow copy of a sparse level with the cache rebuilt:
         0.5 everywhere, the stored cells' values written back; the same float32 bits)."""
+        return self.dense_level_into(k, None)
+
+    def dense_level_into(self, k: int, buf: np.ndarray | None) -> GridLevel:
+        """:meth:`dense_level`, a sparse level's cache rebuilt in the flat float32 buffer ``buf`` (its first
+        cells, reshaped; a new array if ``buf`` is None or too short): no new allocation (nor its first-touch page
+        faults) for a caller that owns ``buf`` and no longer reads what it held."""
         lv = self.levels[k]
         sp = self.sparse.get(k)
         if sp is None:
             return lv
         idx, vals = sp
-        prob = np.full(lv.shape, 0.5, dtype=np.float32)
+        n = lv.shape[0] * lv.shape[1]
+        if buf is None or buf.shape[0] < n:
+            prob = np.full(lv.shape, 0.5, dtype=np.float32)
+        else:
+            prob = buf[:n].reshape(lv.shape)
+            prob.fill(0.5)
         prob.reshape(-1)[idx] = vals
         out = copy.copy(lv)
         out.prob = prob
@@ -380,6 +391,9 @@ class LoopCloser:
         self._new_loops = 0
         self._cache: OrderedDict[int, _SubmapGrid] = OrderedDict()
         self._cache_size = _SUBMAP_CACHE  # grids kept built (the second search keeps more: it jumps between places)
+        self._dense_grid: _SubmapGrid | None = None  # the one-entry cache of rebuilt dense levels (_dense)
+        self._dense_levels: dict[int, GridLevel] = {}
+        self._dense_bufs: dict[int, np.ndarray] = {}  # by level: the flat float32 buffers they are rebuilt in
         self._unpacked: list[int] = []  # keyframes whose ranges are not packed yet (_pack_keyframes), ascending
         self._pack_scales = _PACK_SCALES  # the decimal scales in the order tried: the last one that held first
         # submap → its far-search level (far_level), kept for every submap built (≈ 10–20 kB each at 0.4 m) after its
@@ -496,7 +510,9 @@ class LoopCloser:
             b = b[(b >= 0) & (b < kf.removed.shape[0])]
             n += int((~kf.removed[b]).sum())
             kf.removed[b] = True
-            self._cache.pop(k // self.config.submap_keyframes, None)  # its submap is rebuilt without them
+            gone = self._cache.pop(k // self.config.submap_keyframes, None)  # its submap is rebuilt without them
+            if gone is not None:
+                self._dense_forget(gone)
             self._far_levels.pop(k // self.config.submap_keyframes, None)
         return n
 
@@ -651,7 +667,37 @@ class LoopCloser:
     def _refine_levels(self, s: int) -> list[GridLevel]:
         """The levels a match in submap ``s`` is refined on (``levels[:max(search_level + 1, 2)]``), dense."""
         grid = self._submap_grid(s)
-        return [grid.dense_level(k) for k in range(min(max(self.config.search_level + 1, 2), len(grid.levels)))]
+        return [self._dense(grid, k) for k in range(min(max(self.config.search_level + 1, 2), len(grid.levels)))]
+
+    def _dense(self, grid: _SubmapGrid, k: int) -> GridLevel:
+        """``grid.dense_level(k)`` for the searches, with a one-entry cache: the dense levels last rebuilt, of one
+        grid object (a grid rebuilt or dropped from the cache is another object; on MIT CSAIL 86 of 250 rebuilds
+        repeat the one before). A level of another grid is rebuilt in level ``k``'s reused flat buffer
+        (:meth:`_SubmapGrid.dense_level_into`, grown when too short): the levels given before for another grid
+        are then no longer valid — the searches (:meth:`_match_at`) hold them only within one match, of one
+        submap."""
+        if k not in grid.sparse:
+            return grid.levels[k]
+        if self._dense_grid is not grid:
+            self._dense_grid = grid
+            self._dense_levels = {}
+        lv = self._dense_levels.get(k)
+        if lv is None:
+            shape = grid.levels[k].shape
+            buf = self._dense_bufs.get(k)
+            if buf is None or buf.shape[0] < shape[0] * shape[1]:
+                buf = self._dense_bufs[k] = np.empty(shape[0] * shape[1], dtype=np.float32)
+            lv = self._dense_levels[k] = grid.dense_level_into(k, buf)
+        return lv
+
+    def _dense_forget(self, grid: _SubmapGrid | None = None) -> None:
+        """Forget the one-entry cache of dense levels (:meth:`_dense`) if it is ``grid``'s (any grid's if None;
+        then its buffers too)."""
+        if grid is None or grid is self._dense_grid:
+            self._dense_grid = None
+            self._dense_levels = {}
+        if grid is None:
+            self._dense_bufs = {}
 
     def _submap_grid(self, s: int) -> _SubmapGrid:
         """Submap ``s``'s cached grid (built if not cached): only the probability caches are kept, those of the
@@ -683,7 +729,7 @@ class LoopCloser:
             self._far_levels[s] = grid.levels[far]
         self._cache[s] = grid
         if len(self._cache) > self._cache_size:
-            self._cache.popitem(last=False)
+            self._dense_forget(self._cache.popitem(last=False)[1])
         return grid
 
     def _build_far_level(self, s: int) -> GridLevel:
@@ -1111,7 +1157,7 @@ class LoopCloser:
                 lvl = self._build_far_level(s)
         if lvl is None:
             grid = self._submap_grid(s)
-            lvl = grid.dense_level(min(c.search_level if level is None else level, len(grid.levels) - 1))
+            lvl = self._dense(grid, min(c.search_level if level is None else level, len(grid.levels) - 1))
         # one search: below min_score it returns None (and prunes what cannot reach it), the runner-up pass runs only
         # for a match good enough to become a candidate and stops once the margin is lost (the same candidates as
         # a search without the bounds followed by a second search with the runner-up)
@@ -1229,6 +1275,7 @@ class LoopCloser:
                                np.array([k.frontend for k in self.keyframes]).reshape(-1, 3), nodes)
         loops = [(self.graph.edges[k].i, self.graph.edges[k].j) for k in active]
         self._cache.clear()  # no search after the last one: its submap grids go before the map is re-rendered
+        self._dense_forget()
         self._far_levels.clear()
         self.stats["total_ms"] += (time.perf_counter() - t0) * 1e3
         stats = dict(self.stats)
