@@ -10,7 +10,8 @@
 #                           the first pair runs beside a real table, the second alone with the cache warm
 #   real_{a,b}{1,2,3}/      bench_real.py tables on core 1 (docs/real.md "Today's figures": run 3 is the quiet one,
 #                           runs 1-2 had the lockstep or bench_pipeline on the other core)
-#   pipe_{a,b}.txt          bench_pipeline.py on core 0 (README "Speed" table)
+#   pipe_{a,b}.txt          bench_pipeline.py on core 0 beside a real table (README "Speed": this slot's figures;
+#                           the table comes from side-by-side pairs, this release and the previous one at once)
 #   mit_{a,b}{1,2}.txt      MIT CSAIL in wall time, core 1 (1: with bench_memory on core 0, 2: alone)
 #   mem_{a,b}.txt           bench_memory.py peak RSS on MIT CSAIL (README memory sentence)
 #   comp_{a,b}{1,2}.txt     cold compile wait of the README's first command (needs chrt, i.e. root)
