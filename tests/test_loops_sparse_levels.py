@@ -130,7 +130,8 @@ def test_dense_level_cache_follows_the_grid(runs: tuple) -> None:
             got = lc._dense(grids[s], k)
             assert got.prob.tobytes() == grids[s].dense_level(k).prob.tobytes(), (s, k)
             assert lc._dense(grids[s], k) is got  # the repeat: no rebuild
-    assert all(buf.base is None for buf in lc._dense_bufs.values())  # one buffer a level, reused
+    assert len(lc._dense_entries) == 1  # outside a far verification: one grid's levels
+    assert all(buf.base is None for ent in lc._dense_entries.values() for buf in ent[2].values())  # reused buffers
     # submap 0 changes: its keyframes' beams dropped, the grid rebuilt (another object)
     k0 = ks[0]
     before = lc._dense(grids[0], k0).prob.copy()
@@ -141,5 +142,42 @@ def test_dense_level_cache_follows_the_grid(runs: tuple) -> None:
     got = lc._dense(new, k0)
     ref = new.dense_level(k0).prob
     assert got.prob.tobytes() == ref.tobytes() and ref.tobytes() != before.tobytes()
+    lc._cache.clear()
+    lc._dense_forget()
+
+
+def test_dense_level_cache_holds_three_grids_while_verifying(runs: tuple) -> None:
+    """While a far candidate is verified (pass lcm49) the cache keeps the dense levels of three grids (its partners
+    go to submaps s − 1, s, s + 1 in turn): a return to any of them is the cached level, a fourth grid evicts the
+    least recently used one and is rebuilt bit for bit in its buffers; after the verification one entry is kept."""
+    (lc, _res, grids), _dense = runs
+    ks = sorted({k for g in grids.values() for k in g.sparse})
+    subs = [s for s in sorted(grids) if ks[0] in grids[s].sparse]
+    assert len(subs) >= 4
+    lc._dense_forget()
+    lc._verifying += 1
+    try:
+        got = {}
+        for s in subs[:3]:
+            lc._cache[s] = grids[s]
+            got[s] = lc._dense(grids[s], ks[0])
+        for s in subs[:3]:  # returns to each of the three: no rebuild
+            assert lc._dense(grids[s], ks[0]) is got[s]
+            assert got[s].prob.tobytes() == grids[s].dense_level(ks[0]).prob.tobytes(), s
+        bufs = lc._dense_entries[id(grids[subs[0]])][2]
+        fourth = lc._dense(grids[subs[3]], ks[0])  # evicts subs[0], the least recently used, into its buffers
+        assert id(grids[subs[0]]) not in lc._dense_entries and len(lc._dense_entries) == 3
+        assert lc._dense_entries[id(grids[subs[3]])][2] is bufs
+        assert fourth.prob.tobytes() == grids[subs[3]].dense_level(ks[0]).prob.tobytes()
+        for s in subs[1:3]:  # the two others untouched by the fourth's rebuild
+            assert lc._dense(grids[s], ks[0]) is got[s]
+            assert got[s].prob.tobytes() == grids[s].dense_level(ks[0]).prob.tobytes(), s
+    finally:
+        lc._verifying -= 1
+    lc._dense_trim()
+    assert list(lc._dense_entries) == [id(grids[subs[2]])]
+    again = lc._dense(grids[subs[0]], ks[0])  # one entry again: the next grid takes the kept entry's buffers
+    assert len(lc._dense_entries) == 1
+    assert again.prob.tobytes() == grids[subs[0]].dense_level(ks[0]).prob.tobytes()
     lc._cache.clear()
     lc._dense_forget()

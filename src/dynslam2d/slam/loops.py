@@ -105,6 +105,9 @@ def _keep_probabilities(lv: GridLevel) -> None:
 
 #: The bits of a probability-cache cell never updated (float32 0.5): a sparse level stores only the other cells.
 _HALF_BITS = int(np.float32(0.5).view(np.int32))
+#: Grids whose rebuilt dense levels the closer keeps while a far candidate is verified (LoopCloser._dense): its
+#: partners are matched against submaps s − 1, s and s + 1 in turn.
+_DENSE_VERIFY = 3
 
 
 class _SubmapGrid(MultiResMap):
@@ -391,9 +394,12 @@ class LoopCloser:
         self._new_loops = 0
         self._cache: OrderedDict[int, _SubmapGrid] = OrderedDict()
         self._cache_size = _SUBMAP_CACHE  # grids kept built (the second search keeps more: it jumps between places)
-        self._dense_grid: _SubmapGrid | None = None  # the one-entry cache of rebuilt dense levels (_dense)
-        self._dense_levels: dict[int, GridLevel] = {}
-        self._dense_bufs: dict[int, np.ndarray] = {}  # by level: the flat float32 buffers they are rebuilt in
+        # the cache of rebuilt dense levels (_dense): id(grid) → (grid, its dense levels by level, the flat float32
+        # buffers they are rebuilt in by level), least recently used first; one entry outside a far verification
+        self._dense_entries: OrderedDict[int, tuple[_SubmapGrid, dict[int, GridLevel], dict[int, np.ndarray]]] = \
+            OrderedDict()
+        self._dense_spare: dict[int, np.ndarray] = {}  # the buffers of an entry forgotten, for the next one
+        self._verifying = 0  # > 0 inside _verify_far / _pending_far
         self._unpacked: list[int] = []  # keyframes whose ranges are not packed yet (_pack_keyframes), ascending
         self._pack_scales = _PACK_SCALES  # the decimal scales in the order tried: the last one that held first
         # submap → its far-search level (far_level), kept for every submap built (≈ 10–20 kB each at 0.4 m) after its
@@ -670,34 +676,66 @@ class LoopCloser:
         return [self._dense(grid, k) for k in range(min(max(self.config.search_level + 1, 2), len(grid.levels)))]
 
     def _dense(self, grid: _SubmapGrid, k: int) -> GridLevel:
-        """``grid.dense_level(k)`` for the searches, with a one-entry cache: the dense levels last rebuilt, of one
-        grid object (a grid rebuilt or dropped from the cache is another object; on MIT CSAIL 86 of 250 rebuilds
-        repeat the one before). A level of another grid is rebuilt in level ``k``'s reused flat buffer
-        (:meth:`_SubmapGrid.dense_level_into`, grown when too short): the levels given before for another grid
-        are then no longer valid — the searches (:meth:`_match_at`) hold them only within one match, of one
-        submap."""
+        """``grid.dense_level(k)`` for the searches, from a small cache of the dense levels last rebuilt, by grid
+        object (a grid rebuilt or dropped from the cache is another object): one grid's entry (on MIT CSAIL 86 of
+        250 rebuilds repeat the one before), :data:`_DENSE_VERIFY` grids' while a far candidate is being verified
+        (:meth:`_dense_cap`: its partners are matched against submaps ``s − 1``, ``s``, ``s + 1`` in turn, keyframe
+        after keyframe; on negative_2 /left_scan 109 rebuilds of each sparse level fall to 24). A new entry rebuilds
+        its levels in the buffers of the entry it evicts (:meth:`_SubmapGrid.dense_level_into`, a buffer grown when
+        too short): the levels given before for an evicted grid are then no longer valid — the searches
+        (:meth:`_match_at`) hold them only within one match, of one submap."""
         if k not in grid.sparse:
             return grid.levels[k]
-        if self._dense_grid is not grid:
-            self._dense_grid = grid
-            self._dense_levels = {}
-        lv = self._dense_levels.get(k)
+        ent = self._dense_entries.get(id(grid))  # (an entry holds its grid: its id is not reused meanwhile)
+        if ent is None:
+            ent = self._dense_entries[id(grid)] = (grid, {}, self._dense_take())
+        else:
+            self._dense_entries.move_to_end(id(grid))
+        levels, bufs = ent[1], ent[2]
+        lv = levels.get(k)
         if lv is None:
             shape = grid.levels[k].shape
-            buf = self._dense_bufs.get(k)
+            buf = bufs.get(k)
             if buf is None or buf.shape[0] < shape[0] * shape[1]:
-                buf = self._dense_bufs[k] = np.empty(shape[0] * shape[1], dtype=np.float32)
-            lv = self._dense_levels[k] = grid.dense_level_into(k, buf)
+                buf = bufs[k] = np.empty(shape[0] * shape[1], dtype=np.float32)
+            lv = levels[k] = grid.dense_level_into(k, buf)
         return lv
 
+    def _dense_cap(self) -> int:
+        """Grids whose dense levels :meth:`_dense` keeps: :data:`_DENSE_VERIFY` while a far candidate is verified
+        (inside :meth:`_verify_far` or :meth:`_pending_far`, or while one waits for partners), else one."""
+        return _DENSE_VERIFY if self._verifying or self._pending else 1
+
+    def _dense_take(self) -> dict[int, np.ndarray]:
+        """Room for one more entry of :meth:`_dense`: the least recently used entries evicted down to
+        :meth:`_dense_cap` − 1; the buffers of the first evicted (else those of an entry forgotten) for the new
+        one, those of the others freed."""
+        bufs = None
+        while self._dense_entries and len(self._dense_entries) >= self._dense_cap():
+            b = self._dense_entries.popitem(last=False)[1][2]
+            if bufs is None:
+                bufs = b
+        if bufs is None:
+            bufs, self._dense_spare = self._dense_spare, {}
+        return bufs
+
+    def _dense_trim(self) -> None:
+        """After a far verification: keep only the most recent entry of :meth:`_dense` if no candidate waits (the
+        others' buffers freed: the closer holds one grid's dense levels between verifications, pass lcm48's
+        memory)."""
+        while len(self._dense_entries) > self._dense_cap():
+            self._dense_entries.popitem(last=False)
+
     def _dense_forget(self, grid: _SubmapGrid | None = None) -> None:
-        """Forget the one-entry cache of dense levels (:meth:`_dense`) if it is ``grid``'s (any grid's if None;
-        then its buffers too)."""
-        if grid is None or grid is self._dense_grid:
-            self._dense_grid = None
-            self._dense_levels = {}
+        """Forget ``grid``'s entry of :meth:`_dense` (its buffers kept for the next entry if none are), or every
+        entry and buffer if None."""
         if grid is None:
-            self._dense_bufs = {}
+            self._dense_entries.clear()
+            self._dense_spare = {}
+            return
+        ent = self._dense_entries.pop(id(grid), None)
+        if ent is not None and ent[0] is grid and not self._dense_spare:
+            self._dense_spare = ent[2]
 
     def _submap_grid(self, s: int) -> _SubmapGrid:
         """Submap ``s``'s cached grid (built if not cached): only the probability caches are kept, those of the
@@ -1049,12 +1087,17 @@ class LoopCloser:
         c = self.config
         node = cand.node
         partners: list[LoopCandidate] = []
-        for k in range(node - 1, max(node - 1 - max(c.consistency_window, 1), -1), -1):
-            o = self._far_partner(cand, s, k)
-            if o is not None:
-                partners.append(o)
-        if not self._far_verified(cand, partners) and c.consistency_window > 0:
-            self._pending.append((cand, s, partners))
+        self._verifying += 1
+        try:
+            for k in range(node - 1, max(node - 1 - max(c.consistency_window, 1), -1), -1):
+                o = self._far_partner(cand, s, k)
+                if o is not None:
+                    partners.append(o)
+            if not self._far_verified(cand, partners) and c.consistency_window > 0:
+                self._pending.append((cand, s, partners))
+        finally:
+            self._verifying -= 1
+        self._dense_trim()
 
     def _far_partner(self, cand: LoopCandidate, s: int, k: int) -> LoopCandidate | None:
         """Keyframe ``k`` matched against submap ``s`` and its neighbours around the pose far candidate ``cand``
@@ -1104,17 +1147,22 @@ class LoopCloser:
         """Try the new keyframe ``node`` as a partner of far candidates not yet verified (within
         ``consistency_window`` keyframes after them)."""
         keep = []
-        for cand, s, partners in self._pending:
-            if node - cand.node > self.config.consistency_window:
-                continue
-            o = self._far_partner(cand, s, node)
-            if o is not None:
-                partners.append(o)
-                if self._far_verified(cand, partners):
-                    self.stats["far_deferred"] += 1
+        self._verifying += 1
+        try:
+            for cand, s, partners in self._pending:
+                if node - cand.node > self.config.consistency_window:
                     continue
-            keep.append((cand, s, partners))
+                o = self._far_partner(cand, s, node)
+                if o is not None:
+                    partners.append(o)
+                    if self._far_verified(cand, partners):
+                        self.stats["far_deferred"] += 1
+                        continue
+                keep.append((cand, s, partners))
+        finally:
+            self._verifying -= 1
         self._pending = keep
+        self._dense_trim()
 
     def _recent_loop(self, node: int) -> LoopCandidate | None:
         """The latest accepted loop candidate within ``consistency_window`` keyframes of ``node``."""
