@@ -2,14 +2,17 @@
 by pytest).
 
 Every kernel call of the ``track`` stage (segmentation, rectangle fit, ``detect_rows``, the association's gates and
-solver, the update, the management's counters, the reports, the prediction, the fragments' hosts, the births) is
-wrapped where the tracker's modules call it: after a 60-scan warm-up (a throw-away pipeline) one pipeline runs over
-the input with ``pipeline.run``'s collector setting, each call is timed in thread CPU time and its arguments are
-copied (arrays below 200 000 elements; larger ones, the map, are kept by reference). Then each kernel's recorded
-calls are replayed back to back, ``--reps`` times (fresh copies of the array arguments before each call, outside
-the timing); the least of the repetitions' medians is the warm figure. Printed per kernel: the in-situ median, the
-warm median, their ratio and the calls a scan. A no-op kernel called at the start of every ``Tracker.update`` gives
-the fixed cost of a first call in situ against its warm dispatch.
+solver, the update, the management's counters, the reports, the prediction, the fragments' hosts, the births, the
+free-space memory's reference and test) is wrapped where the tracker's modules call it: after a 60-scan warm-up (a
+throw-away pipeline) one pipeline runs over the input with ``pipeline.run``'s collector setting, each call is timed
+in thread CPU time and its arguments are copied (arrays below 200 000 elements; larger ones, the map, are kept by
+reference). Then each kernel's recorded calls are replayed back to back, ``--reps`` times (fresh copies of the array
+arguments before each call, outside the timing); the least of the repetitions' medians is the warm figure. Printed
+per kernel: the in-situ median, the warm median, their ratio, the calls a scan and the arguments a call. A no-op
+kernel called at the start of every ``Tracker.update`` gives the fixed cost of a first call in situ against its warm
+dispatch; the same kernel called again right after it, the part of that cost a second call of the same kernel does
+not pay; then a no- op with 33 arguments (16 arrays of 700 floats, 17 floats: as many as ``detect_rows``') on even
+scans and one with its 16 arrays alone on odd ones, the in-situ price of the arguments.
 
     PYTHONPATH=src taskset -c 1 python benchmarks/bench_track_kernels.py negative_2/right sim:paper [--reps 3]
         [--data <data>]
@@ -39,7 +42,8 @@ TARGETS = [("dynslam2d.detect.segment", "_segment_kernel"), ("dynslam2d.detect.t
            ("dynslam2d.detect.tracker", "association_gates"), ("dynslam2d.detect.tracker", "assign_groups"),
            ("dynslam2d.detect.trackupdate", "update_pairs"), ("dynslam2d.detect.trackmanage", "manage_counters"),
            ("dynslam2d.detect.tracker", "fragment_hosts_rows"), ("dynslam2d.detect.tracker", "birth_rows"),
-           ("dynslam2d.detect.trackreport", "report_rows")]
+           ("dynslam2d.detect.trackreport", "report_rows"), ("dynslam2d.detect.freespace", "_ref_arrays"),
+           ("dynslam2d.detect.freespace", "seen_through_refs")]
 
 
 def _copy(args: tuple) -> tuple:
@@ -58,10 +62,22 @@ def run(name: str, data: Path, reps: int) -> None:
     def _noop(a: np.ndarray) -> int:
         return a.shape[0]
 
+    @njit(cache=False)  # (… and one with 33 arguments, as many as detect_rows': 16 arrays, 17 floats)
+    def _noop33(a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11, a12, a13, a14, a15,  # noqa: ANN001
+                f0, f1, f2, f3, f4, f5, f6, f7, f8, f9, f10, f11, f12, f13, f14, f15, f16) -> int:  # noqa: ANN001
+        return a0.shape[0]
+
+    @njit(cache=False)  # (… and one with its 16 arrays alone: the 17 floats' price is the difference)
+    def _noop16(a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11, a12, a13, a14, a15) -> int:  # noqa: ANN001
+        return a0.shape[0]
+
     clock = time.thread_time_ns
     calls: dict[str, list] = {n: [] for _, n in TARGETS}
     situ: dict[str, list] = {n: [] for _, n in TARGETS}
     noop: list[int] = []
+    noop2: list[int] = []  # (the same no-op called again right after the first)
+    noop33: list[int] = []  # (the 33-argument no-op, called after them)
+    noop16: list[int] = []  # (the 16-array no-op, on every other scan in its place)
     on = [False]
     undo = []
 
@@ -84,13 +100,27 @@ def run(name: str, data: Path, reps: int) -> None:
         setattr(mod, n, wrap(n, kernels[n]))
     probe = np.zeros(4)
     _noop(probe)
+    arrs = [np.zeros(700) for _ in range(16)]
+    args33 = (*arrs, *[float(i) for i in range(17)])
+    _noop33(*args33)
+    _noop16(*arrs)
     update = tracker_mod.Tracker.update
 
     def probed(self, *a, **k):
         if on[0]:
             t0 = clock()
             _noop(probe)
-            noop.append(clock() - t0)
+            t1 = clock()
+            _noop(probe)
+            t2 = clock()
+            if len(noop) % 2:
+                _noop16(*arrs)
+            else:
+                _noop33(*args33)
+            t3 = clock()
+            (noop16 if len(noop) % 2 else noop33).append(t3 - t2)
+            noop.append(t1 - t0)
+            noop2.append(t2 - t1)
         return update(self, *a, **k)
 
     tracker_mod.Tracker.update = probed
@@ -111,8 +141,9 @@ def run(name: str, data: Path, reps: int) -> None:
         tracker_mod.Tracker.update = update
         for mod, n, f in undo:
             setattr(mod, n, f)
-    print(f"{name}: {len(scans)} scans; thread CPU µs a call, medians: in situ / replayed warm (ratio), calls a scan")
-    tot_s = tot_w = 0.0
+    print(f"{name}: {len(scans)} scans; thread CPU µs a call, medians: in situ / replayed warm (ratio), calls a scan, "
+          "arguments a call")
+    tot_s = tot_w = n_args = 0.0
     for _, n in TARGETS:
         if not calls[n]:
             continue
@@ -130,12 +161,25 @@ def run(name: str, data: Path, reps: int) -> None:
         per = len(calls[n]) / len(scans)
         tot_s += si * per
         tot_w += best * per
-        print(f"  {n:22s} {si / 1e3:7.1f} / {best / 1e3:6.1f} (×{si / best:.2f})  {per:.2f}")
-    print(f"  {'all, a scan':22s} {tot_s / 1e3:7.1f} / {tot_w / 1e3:6.1f} (×{tot_s / tot_w:.2f})")
+        na = len(calls[n][0])
+        n_args += na * per
+        print(f"  {n:22s} {si / 1e3:7.1f} / {best / 1e3:6.1f} (×{si / best:.2f})  {per:.2f}  {na}")
+    print(f"  {'all, a scan':22s} {tot_s / 1e3:7.1f} / {tot_w / 1e3:6.1f} (×{tot_s / tot_w:.2f})  "
+          f"{n_args:.0f} arguments")
     t0 = clock()
     for _ in range(10_000):
         _noop(probe)
-    print(f"  no-op kernel: in situ {np.median(noop) / 1e3:.2f}, warm {(clock() - t0) / 1e7:.2f}")
+    w1 = (clock() - t0) / 1e7
+    t0 = clock()
+    for _ in range(10_000):
+        _noop33(*args33)
+    w33 = (clock() - t0) / 1e7
+    t0 = clock()
+    for _ in range(10_000):
+        _noop16(*arrs)
+    print(f"  no-op kernel: in situ {np.median(noop) / 1e3:.2f} (called again: {np.median(noop2) / 1e3:.2f}), "
+          f"warm {w1:.2f}; after it, 33 arguments: in situ {np.median(noop33) / 1e3:.2f}, warm {w33:.2f}; "
+          f"16 arrays: in situ {np.median(noop16) / 1e3:.2f}, warm {(clock() - t0) / 1e7:.2f}")
 
 
 def main() -> None:
