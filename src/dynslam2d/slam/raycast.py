@@ -300,19 +300,22 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
             fb = f0
             for _ in range(n_free):
                 f = np.uint64(fb + ((t * magic) >> _MAGIC_SHIFT) * d_minor)  # (unsigned: no negative-index test)
-                if ui[f] < free_idx:
-                    # a cell seen for the first time this scan: the cells _PREFETCH steps on are likely new too
-                    g = np.uint64(fb + _PREFETCH * d_major + (((t + _PREFETCH * minor) * magic) >> _MAGIC_SHIFT)
-                                  * d_minor)
-                    _prefetch(ui, g)
-                    _prefetch(lo, g)
-                    _prefetch(pr, g)
-                    v = lo[f] + l_free
-                    lo[f] = v
-                    ui[f] = free_idx
-                    upd_f[n_upd] = f
-                    upd_v[n_upd] = v
-                    n_upd += 1
+                # branch-free: a cell seen already this scan (update index ≥ free_idx, so its lines were written
+                # this scan) gets its own log-odds and index written back, and its listing is overwritten
+                g = np.uint64(fb + _PREFETCH * d_major + (((t + _PREFETCH * minor) * magic) >> _MAGIC_SHIFT)
+                              * d_minor)
+                _prefetch(ui, g)
+                _prefetch(lo, g)
+                _prefetch(pr, g)
+                u = ui[f]
+                new = u < free_idx
+                o = lo[f]
+                v = o + l_free
+                lo[f] = v if new else o
+                ui[f] = free_idx if new else u
+                upd_f[n_upd] = f
+                upd_v[n_upd] = v
+                n_upd += new
                 t += minor
                 fb += d_major
         else:
