@@ -198,10 +198,12 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
     recurrence, so no step waits for the one before. The cell updates are written out
     in the loop (helpers taking the arrays, called per cell, were slower in every trial; docs/speed.md); the walks
     list each updated cell and its new log-odds, whose probabilities are written in one vectorised pass per
-    ``_PROB_BATCH`` cells (:func:`_write_probs`, in the walks' order), and each new cell prefetches the lines of the
-    cell ``_PREFETCH`` steps on (new cells come in runs). The rays' end cells, which rays count and are walked, and
-    each walked ray's lengths, steps and multiplier are computed in loops over all rays before the walks (the end
-    cells vectorised), the walks after in the rays' order (docs/speed.md, pass map22)."""
+    ``_PROB_BATCH`` cells (:func:`_write_probs`, in the walks' order), and each walked cell prefetches the lines of
+    the cell ``_PREFETCH`` steps on. The free walk has no branch on whether a cell is new this scan (a cell already
+    updated in this scan gets its own log-odds and update index written back and is not listed: the same values;
+    the branch mispredicted where runs of new and seen cells alternate, pass upd48). The rays' end cells, which rays
+    count and are walked, and each walked ray's lengths, steps and multiplier are computed in loops over all rays
+    before the walks (the end cells vectorised), the walks after in the rays' order (docs/speed.md, pass map22)."""
     h, w = logodds.shape
     if sx < 0 or sy < 0 or sx >= w or sy >= h:
         return 0
