@@ -198,10 +198,12 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
     recurrence, so no step waits for the one before. The cell updates are written out
     in the loop (helpers taking the arrays, called per cell, were slower in every trial; docs/speed.md); the walks
     list each updated cell and its new log-odds, whose probabilities are written in one vectorised pass per
-    ``_PROB_BATCH`` cells (:func:`_write_probs`, in the walks' order), and each new cell prefetches the lines of the
-    cell ``_PREFETCH`` steps on (new cells come in runs). The rays' end cells, which rays count and are walked, and
-    each walked ray's lengths, steps and multiplier are computed in loops over all rays before the walks (the end
-    cells vectorised), the walks after in the rays' order (docs/speed.md, pass map22)."""
+    ``_PROB_BATCH`` cells (:func:`_write_probs`, in the walks' order), and each walked cell prefetches the lines of
+    the cell ``_PREFETCH`` steps on. The free walk has no branch on whether a cell is new this scan (a cell already
+    updated in this scan gets its own log-odds and update index written back and is not listed: the same values;
+    the branch mispredicted where runs of new and seen cells alternate, pass upd48). The rays' end cells, which rays
+    count and are walked, and each walked ray's lengths, steps and multiplier are computed in loops over all rays
+    before the walks (the end cells vectorised), the walks after in the rays' order (docs/speed.md, pass map22)."""
     h, w = logodds.shape
     if sx < 0 or sy < 0 or sx >= w or sy >= h:
         return 0
@@ -300,19 +302,22 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
             fb = f0
             for _ in range(n_free):
                 f = np.uint64(fb + ((t * magic) >> _MAGIC_SHIFT) * d_minor)  # (unsigned: no negative-index test)
-                if ui[f] < free_idx:
-                    # a cell seen for the first time this scan: the cells _PREFETCH steps on are likely new too
-                    g = np.uint64(fb + _PREFETCH * d_major + (((t + _PREFETCH * minor) * magic) >> _MAGIC_SHIFT)
-                                  * d_minor)
-                    _prefetch(ui, g)
-                    _prefetch(lo, g)
-                    _prefetch(pr, g)
-                    v = lo[f] + l_free
-                    lo[f] = v
-                    ui[f] = free_idx
-                    upd_f[n_upd] = f
-                    upd_v[n_upd] = v
-                    n_upd += 1
+                # branch-free: a cell seen already this scan (update index ≥ free_idx, so its lines were written
+                # this scan) gets its own log-odds and index written back, and its listing is overwritten
+                g = np.uint64(fb + _PREFETCH * d_major + (((t + _PREFETCH * minor) * magic) >> _MAGIC_SHIFT)
+                              * d_minor)
+                _prefetch(ui, g)
+                _prefetch(lo, g)
+                _prefetch(pr, g)
+                u = ui[f]
+                new = u < free_idx
+                o = lo[f]
+                v = o + l_free
+                lo[f] = v if new else o
+                ui[f] = free_idx if new else u
+                upd_f[n_upd] = f
+                upd_v[n_upd] = v
+                n_upd += new
                 t += minor
                 fb += d_major
         else:
