@@ -625,6 +625,19 @@ LAZY_SOURCES = {
 #: Whether :func:`lazy_callee_code` also leaves a lazy callee's LLVM optimisation to the kernels that link its code.
 CALLEE_OPTIMISED_IN_CALLER = True
 
+#: Lazy callees (``module.function``) whose own function, once optimised in the first kernel that links it, is
+#: linked optimised into the later kernels that link it instead of being optimised again in each (pass cmp49; with
+#: :data:`CALLEE_OPTIMISED_IN_CALLER`). Only kernels whose callers' machine code was checked to be the same as when
+#: each optimises the callee itself (``benchmarks/check_jitprint.py --dump D --asm``): LLVM's code generator made a
+#: different instruction choice for two other callees linked this way from the same optimised IR (docs/speed.md,
+#: pass cmp49). ``measure_batch``: ≈ 15 000 IR instructions, linked by ``detect_rows``, ``association_gates`` and
+#: ``update_pairs``.
+CALLEE_OPTIMISED_ONCE = frozenset({"dynslam2d.detect.kernels.measure_batch"})
+
+#: Suffix of the name given, in the module a later caller links, to the callee's unoptimised copy that
+#: :data:`CALLEE_OPTIMISED_ONCE` leaves unused.
+UNUSED_SUFFIX = "$dynslam2d_unused"
+
 
 class LazyEntry:
     """Stand-in for the entry point (numba's Python-callable wrapper of the machine code) of a kernel compiled only
@@ -663,6 +676,40 @@ def _lazy_sources_checked() -> dict[str, Any] | None:
         if hashlib.sha256(source.encode()).hexdigest()[:16] != LAZY_SOURCES[name]:
             return None
     return found
+
+
+def optimised_once(first: Any, kernel: str, linked: Any) -> tuple[Any, Any] | None:
+    """For :data:`CALLEE_OPTIMISED_ONCE`: the two modules a later caller of a lazy callee links instead of the
+    callee's unoptimised module ``linked`` — that module with the callee's own function ``kernel`` renamed out of
+    the way (:data:`UNUSED_SUFFIX`: the caller's calls are left to a declaration, so its pipeline does not optimise
+    the callee again, and the unused copy is dropped), and, linked after the caller's optimisation, ``kernel``
+    as the first caller's library ``first`` has it optimised, with the functions and globals it uses (everything
+    else of that library dropped by LLVM's global dead-code elimination); None when ``first`` has no optimised
+    definition of ``kernel`` (inlined, or not yet compiled)."""
+    import llvmlite.binding as ll
+
+    if first is None or not first._finalized or getattr(first, "_dynslam2d_lazy", False):
+        return None
+    try:
+        if first._final_module.get_function(kernel).is_declaration:
+            return None
+        unused = linked.clone()
+        unused.get_function(kernel).name = kernel + UNUSED_SUFFIX
+    except NameError:
+        return None
+    optimised = first._final_module.clone()
+    linkages: dict[str, Any] = {}
+    for value in [*optimised.functions, *optimised.global_variables]:
+        if not value.is_declaration and not value.name.startswith("llvm."):
+            linkages[value.name] = value.linkage
+            value.linkage = "external" if value.name == kernel else "internal"
+    manager = ll.ModulePassManager()
+    manager.add_global_dead_code_eliminate_pass()
+    manager.run(optimised, ll.create_pass_builder(first._codegen._tm, ll.create_pipeline_tuning_options()))
+    for value in [*optimised.functions, *optimised.global_variables]:
+        if value.name in linkages:
+            value.linkage = linkages[value.name]
+    return unused, optimised
 
 
 def lazy_callee_code() -> bool:
@@ -716,6 +763,7 @@ def lazy_callee_code() -> bool:
     compile_for_args = dispatcher.Dispatcher._compile_for_args
     finalize_final, get_executable = found["CPUCodeLibrary._finalize_final_module"], found["CPUContext.get_executable"]
     save = found["Cache._save_overload"]
+    for_linking = found["CPUCodeLibrary._get_module_for_linking"]
     unresolved = codegen.RuntimeLinker.PREFIX
     lazy = [False]  # per compile in progress (numba's "numba:compile" events): whether it is a kernel's callee
 
@@ -733,6 +781,8 @@ def lazy_callee_code() -> bool:
     def lazy_executable(self: Any, library: Any, fndesc: Any, env: Any) -> Any:
         if lazy[-1] and not library._finalized:  # (a library loaded from the cache is finalized: numba's way)
             library._dynslam2d_lazy = True
+            if f"{fndesc.modname}.{fndesc.qualname}" in CALLEE_OPTIMISED_ONCE:
+                library._dynslam2d_kernel = fndesc.mangled_name
             return LazyEntry(self, library, fndesc, env)
         return get_executable(self, library, fndesc, env)
 
@@ -742,8 +792,43 @@ def lazy_callee_code() -> bool:
     def lazy_optimise_final(self: Any) -> None:
         if getattr(self, "_dynslam2d_lazy", False) and not recursive(self._final_module):
             self._dynslam2d_unoptimised = True  # (its callers optimise its code; Python's first call: optimise_own)
+            self._dynslam2d_links_raw = True  # (what callers link stays unoptimised: optimise_own keeps a clone)
             return None
-        return optimise_final(self)
+        later = self.__dict__.pop("_dynslam2d_link_after", ())
+        optimise_final(self)
+        for optimised in later:  # (CALLEE_OPTIMISED_ONCE: callees' functions optimised in their first caller)
+            self._final_module.link_in(optimised, preserve=True)
+        return None
+
+    finalizing: list[Any] = []  # libraries being finalized, innermost last (a caller links its callees' modules)
+    finalize_library = codegen.CPUCodeLibrary.finalize
+
+    def tracked_finalize(self: Any) -> None:
+        finalizing.append(self)
+        try:
+            finalize_library(self)
+        finally:
+            finalizing.pop()
+
+    def once_for_linking(self: Any) -> Any:
+        module = for_linking(self)
+        kernel = getattr(self, "_dynslam2d_kernel", None)
+        if not (kernel and finalizing and getattr(self, "_dynslam2d_links_raw", False)):
+            return module
+        caller = finalizing[-1]
+        if caller is self or getattr(caller, "_dynslam2d_lazy", False):  # (a lazy caller stays unoptimised)
+            return module
+        once = self.__dict__.get("_dynslam2d_once", False)  # (False: not tried yet)
+        if once is False:
+            first = self.__dict__.get("_dynslam2d_first_caller")
+            if first is None:  # the first caller optimises the callee's code, as in numba's way
+                self._dynslam2d_first_caller = weakref.ref(caller)
+                return module
+            once = self._dynslam2d_once = optimised_once(first(), kernel, module)
+        if not once:
+            return module
+        caller.__dict__.setdefault("_dynslam2d_link_after", []).append(once[1])
+        return once[0]
 
     def optimise_own(disp: Any, args: tuple[Any, ...], cres: Any, library: Any) -> None:
         """The optimisation :func:`lazy_optimise_final` left out, before ``library``'s machine code, as a compile of
@@ -837,6 +922,11 @@ def lazy_callee_code() -> bool:
     if CALLEE_OPTIMISED_IN_CALLER:
         lazy_optimise_final.__wrapped__ = optimise_final  # type: ignore[attr-defined]
         codegen.CPUCodeLibrary._optimize_final_module = lazy_optimise_final  # type: ignore[method-assign]
+        if CALLEE_OPTIMISED_ONCE:
+            tracked_finalize.__wrapped__ = finalize_library  # type: ignore[attr-defined]
+            once_for_linking.__wrapped__ = for_linking  # type: ignore[attr-defined]
+            codegen.CPUCodeLibrary.finalize = tracked_finalize  # type: ignore[method-assign]
+            codegen.CPUCodeLibrary._get_module_for_linking = once_for_linking  # type: ignore[method-assign]
     cpu.CPUContext.get_executable = lazy_executable  # type: ignore[method-assign]
     caching.Cache._save_overload = lazy_save  # type: ignore[method-assign]
     return True
