@@ -31,7 +31,10 @@ def _run(scans: list, front: np.ndarray, sparse: bool, monkeypatch: pytest.Monke
         grids = {}  # every submap's grid as the searches hold it
         for s in range(len(lc.keyframes) // lc.config.submap_keyframes):
             lc._cache.clear()
+            lc._dense_forget()
             grids[s] = lc._submap_grid(s)
+            lp._sparsify_late(grids[s])  # (as when it leaves the recent set of dense levels, pass lcm50)
+        lc._dense_forget()
     return lc, res, grids
 
 
@@ -179,5 +182,39 @@ def test_dense_level_cache_holds_three_grids_while_verifying(runs: tuple) -> Non
     again = lc._dense(grids[subs[0]], ks[0])  # one entry again: the next grid takes the kept entry's buffers
     assert len(lc._dense_entries) == 1
     assert again.prob.tobytes() == grids[subs[0]].dense_level(ks[0]).prob.tobytes()
+    lc._cache.clear()
+    lc._dense_forget()
+
+
+def test_built_grid_is_its_own_dense_entry_until_it_leaves(runs: tuple) -> None:
+    """A grid just built keeps its levels due to be sparse dense as the most recent entry of the dense-level cache
+    (pass lcm50): a refinement right after the build reads them with no rebuild; the next grid's entry evicts it,
+    makes it sparse then (the same bits back), and its former caches become the buffers a later rebuild fills."""
+    (lc, _res, grids), (_lc0, _res0, dense) = runs
+    a, b = 1, 2  # (not submap 0, whose keyframes' beams test_dense_level_cache_follows_the_grid drops)
+    lc._cache.clear()
+    lc._dense_forget()
+    g0 = lc._submap_grid(a)
+    ks = list(g0.late)
+    assert ks and not g0.sparse and list(lc._dense_entries) == [id(g0)]
+    for k in ks:
+        assert lc._dense(g0, k) is g0.levels[k]  # its own cache: no rebuild
+        assert g0.levels[k].prob.tobytes() == dense[a].levels[k].prob.tobytes(), k
+    whole = lc._submap(a)  # for callers outside the searches: copies, not the caches reused later
+    assert all(whole.levels[k].prob is not g0.levels[k].prob for k in ks)
+    g1 = lc._submap_grid(b)  # the next grid's entry evicts g0's: g0 made sparse now
+    own1 = {k: g1.levels[k].prob for k in g1.late}
+    assert list(lc._dense_entries) == [id(g1)] and not g0.late
+    assert set(g0.sparse) == set(grids[a].sparse) and set(g1.late) == set(grids[b].sparse)
+    for k in g0.sparse:
+        assert np.isnan(g0.levels[k].prob).all() and g0.levels[k].prob.strides == (0, 0)
+    back = {k: lc._dense(g0, k) for k in ks}  # g0 rebuilt: g1 evicted and made sparse, its caches g0's buffers
+    assert list(lc._dense_entries) == [id(g0)] and set(g1.sparse) == set(own1)
+    for k in ks:
+        assert back[k].prob.tobytes() == dense[a].levels[k].prob.tobytes(), k
+        assert g1.dense_level(k).prob.tobytes() == dense[b].levels[k].prob.tobytes(), k
+        assert whole.levels[k].prob.tobytes() == dense[a].levels[k].prob.tobytes(), k
+        if back[k].prob.size <= own1[k].size:
+            assert np.shares_memory(back[k].prob, own1[k])
     lc._cache.clear()
     lc._dense_forget()
