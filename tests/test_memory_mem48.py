@@ -1,6 +1,6 @@
 """Memory pass mem48 (issue 13 item 3): a saved figure's artists are collected before the next figure is drawn,
 and ``write_outputs(release=True)`` lets the cleaned map's float64 probabilities and log-odds go as soon as they are
-written, before the online map's files are written."""
+written (the log-odds files first), before the online map's files are written."""
 
 from __future__ import annotations
 
@@ -49,16 +49,17 @@ def test_released_outputs_let_the_cleaned_map_go_before_the_online_map_is_writte
     assert cleaned is not None and cleaned.logodds is not None
     cleaned_ref = weakref.ref(cleaned.grid.prob)  # (the float64 probabilities)
     expect_summary = res.summary()
-    seen: list[tuple[str, bool, bool, bool]] = []
+    seen: list[tuple[str, bool, bool, bool, int]] = []
     write_map = R.write_map
 
     def spy(path, grid):  # type: ignore[no-untyped-def]
-        seen.append((path.name, cleaned.grid is None, cleaned.logodds is None, cleaned_ref() is None))
+        seen.append((path.name, cleaned.grid is None, cleaned.logodds is None, cleaned_ref() is None, res.logodds.size))
         return write_map(path, grid)
 
     monkeypatch.setattr(R, "write_map", spy)
     out = R.write_outputs(res, tmp_path, cleaned=cleaned, release=True)
-    assert seen == [("map.yaml", False, False, False), ("map_online.yaml", True, True, True)]
+    # both log-odds written and gone before the maps; the cleaned map gone before the online map's files
+    assert seen == [("map.yaml", False, True, False, 0), ("map_online.yaml", True, True, True, 0)]
     drop = ("wall_time_s", "scans_per_s")
     assert {k: v for k, v in out.summary.items() if k not in drop and k in expect_summary} == \
         R.json.loads(R.metrics_json({k: v for k, v in expect_summary.items() if k not in drop}))

@@ -218,32 +218,35 @@ def write_outputs(
     if release:  # read before the maps go one by one below (the summary reads the online map's shape only)
         summary = run.summary()
         evaluation = evaluate_result(run, gt, cleaned) if gt is not None else None
-    final_grid = cleaned.grid if cleaned is not None else run.grid
+    # the log-odds files first, each let go once written, then the maps (map.png's grey indices made from the
+    # cleaned one, which goes before the online map's files): at most the two float64 maps and no log-odds live
+    # at once (issue 13 item 3, pass mem48; the files are the same, only their order of writing differs)
     final_lo = cleaned.logodds if cleaned is not None and cleaned.logodds is not None else run.logodds
-    ypath, ppath = write_map(out / "map.yaml", final_grid)
-    paths["map.yaml"], paths["map.pgm"] = ypath, ppath
-    del final_grid  # (a reference here kept the drawn map through the figures, which let it go when done)
     with atomic_path(out / "map_logodds.npy") as tmp:
         with tmp.open("wb") as fh:
             np.save(fh, np.asarray(final_lo, dtype=np.float32))  # (no copy of a float32 map)
     paths["map_logodds.npy"] = out / "map_logodds.npy"
     del final_lo
-    cleaned_grey = None
     if release and cleaned is not None:
-        # the cleaned map is written: map.png's grey indices now, and its float64 map and log-odds go before the
-        # online map's files are written (one float64 map at a time; issue 13 item 3, pass mem48)
-        cleaned_grey = GreyMap.of(cleaned.grid)
-        cleaned.grid = None  # type: ignore[assignment]
         cleaned.logodds = None
     if cleaned is not None:
-        ypath, ppath = write_map(out / "map_online.yaml", run.grid)
-        paths["map_online.yaml"], paths["map_online.pgm"] = ypath, ppath
         with atomic_path(out / "map_logodds_online.npy") as tmp:
             with tmp.open("wb") as fh:
                 np.save(fh, np.asarray(run.logodds, dtype=np.float32))
         paths["map_logodds_online.npy"] = out / "map_logodds_online.npy"
     if release:  # nothing below reads them (the figures draw the maps' probabilities)
         run.logodds = np.zeros((0, 0), dtype=np.float32)
+    final_grid = cleaned.grid if cleaned is not None else run.grid
+    ypath, ppath = write_map(out / "map.yaml", final_grid)
+    paths["map.yaml"], paths["map.pgm"] = ypath, ppath
+    del final_grid  # (a reference here kept the drawn map through the figures, which let it go when done)
+    cleaned_grey = None
+    if release and cleaned is not None:  # map.png's grey indices now; the cleaned float64 map goes
+        cleaned_grey = GreyMap.of(cleaned.grid)
+        cleaned.grid = None  # type: ignore[assignment]
+    if cleaned is not None:
+        ypath, ppath = write_map(out / "map_online.yaml", run.grid)
+        paths["map_online.yaml"], paths["map_online.pgm"] = ypath, ppath
     paths["trajectory.tum"] = write_tum(out / "trajectory.tum", run.trajectory, comment="laser pose in the map frame")
     if run.loop is not None:
         # loop closure (docs/slam.md): trajectory.tum is optimised, the front end's trajectory and the graph kept
