@@ -1,6 +1,7 @@
 """Memory pass mem48 (issue 13 item 3): a saved figure's artists are collected before the next figure is drawn,
 and ``write_outputs(release=True)`` lets the cleaned map's float64 probabilities and log-odds go as soon as they are
-written (the log-odds files first), before the online map's files are written."""
+written (the log-odds files first), before the online map's files are written; the restored cells go before
+map.png."""
 
 from __future__ import annotations
 
@@ -56,10 +57,22 @@ def test_released_outputs_let_the_cleaned_map_go_before_the_online_map_is_writte
         seen.append((path.name, cleaned.grid is None, cleaned.logodds is None, cleaned_ref() is None, res.logodds.size))
         return write_map(path, grid)
 
+    import dynslam2d.viz.figures as F
+
+    plot_map = F.plot_map
+
+    def map_spy(*a, **k):  # type: ignore[no-untyped-def]
+        seen.append(("map.png", cleaned.grid is None, cleaned.logodds is None, cleaned.restored.size == 0,
+                     res.logodds.size))
+        return plot_map(*a, **k)
+
     monkeypatch.setattr(R, "write_map", spy)
+    monkeypatch.setattr(F, "plot_map", map_spy)
     out = R.write_outputs(res, tmp_path, cleaned=cleaned, release=True)
     # both log-odds written and gone before the maps; the cleaned map gone before the online map's files
-    assert seen == [("map.yaml", False, True, False, 0), ("map_online.yaml", True, True, True, 0)]
+    # (and the restored cells, never drawn, before map.png)
+    assert seen == [("map.yaml", False, True, False, 0), ("map_online.yaml", True, True, True, 0),
+                    ("map.png", True, True, True, 0)]
     drop = ("wall_time_s", "scans_per_s")
     assert {k: v for k, v in out.summary.items() if k not in drop and k in expect_summary} == \
         R.json.loads(R.metrics_json({k: v for k, v in expect_summary.items() if k not in drop}))
