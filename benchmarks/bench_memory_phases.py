@@ -51,8 +51,9 @@ class Phases:
             time.sleep(0.01)
 
 
-def wrap(phases: Phases, module: str, attr: str, label: str, after: str) -> None:
-    """Mark ``label`` when ``module.attr`` (``Class.method`` allowed) starts and ``after`` when it returns."""
+def wrap(phases: Phases, module: str, attr: str, label: str, after: str | None) -> None:
+    """Mark ``label`` when ``module.attr`` (``Class.method`` allowed) starts and ``after`` when it returns (None: the
+    phase it started in)."""
     owner = importlib.import_module(module)
     *path, name = attr.split(".")
     for p in path:
@@ -61,11 +62,12 @@ def wrap(phases: Phases, module: str, attr: str, label: str, after: str) -> None
 
     @functools.wraps(fn)
     def marked(*a, **k):
+        before = phases.current
         phases.mark(label)
         try:
             return fn(*a, **k)
         finally:
-            phases.mark(after)
+            phases.mark(before if after is None else after)
 
     setattr(owner, name, marked)
 
@@ -106,6 +108,10 @@ def main() -> None:
     wrap(phases, "dynslam2d.results", "write_outputs", "results files", "end")
     wrap(phases, "dynslam2d.results", "figure_maps", "results: grey maps", "results files")
     wrap(phases, "dynslam2d.results", "write_figures", "figures", "results files after the figures")
+    # inside the results files (pass mem48): the map files, the summary, the grey indices made outside figure_maps
+    wrap(phases, "dynslam2d.results", "write_map", "results: map files", None)
+    wrap(phases, "dynslam2d.pipeline", "RunResult.summary", "results: summary", None)
+    wrap(phases, "dynslam2d.results", "tracks_csv", "results: tracks.csv", None)
     wrap(phases, "dynslam2d.viz.figures", "plot_map", "figures: map.png", "figures")
     wrap(phases, "dynslam2d.viz.figures", "plot_tracks", "figures: tracks.png", "figures")
     out = tempfile.mkdtemp(prefix="bench-memory-phases-")

@@ -35,6 +35,7 @@ from dynslam2d.slam.cleanup import CleanResult
 from dynslam2d.types import ScanSource
 from dynslam2d.viz.collect import RemovedPointsCollector
 from dynslam2d.viz.figures import figure_maps, write_figures
+from dynslam2d.viz.mapplot import GreyMap
 
 
 def ground_truth_for(source: ScanSource, gt_dir: str | os.PathLike[str] | GroundTruthFiles | None,
@@ -212,22 +213,40 @@ def write_outputs(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Path] = {}
-    final_grid = cleaned.grid if cleaned is not None else run.grid
+    summary: dict[str, Any] | None = None
+    evaluation: RunEvaluation | None = None
+    if release:  # read before the maps go one by one below (the summary reads the online map's shape only)
+        summary = run.summary()
+        evaluation = evaluate_result(run, gt, cleaned) if gt is not None else None
+    # the log-odds files first, each let go once written, then the maps (map.png's grey indices made from the
+    # cleaned one, which goes before the online map's files): at most the two float64 maps and no log-odds live
+    # at once (issue 13 item 3, pass mem48; the files are the same, only their order of writing differs)
     final_lo = cleaned.logodds if cleaned is not None and cleaned.logodds is not None else run.logodds
-    ypath, ppath = write_map(out / "map.yaml", final_grid)
-    paths["map.yaml"], paths["map.pgm"] = ypath, ppath
-    del final_grid  # (a reference here kept the drawn map through the figures, which let it go when done)
     with atomic_path(out / "map_logodds.npy") as tmp:
         with tmp.open("wb") as fh:
             np.save(fh, np.asarray(final_lo, dtype=np.float32))  # (no copy of a float32 map)
     paths["map_logodds.npy"] = out / "map_logodds.npy"
+    del final_lo
+    if release and cleaned is not None:
+        cleaned.logodds = None
     if cleaned is not None:
-        ypath, ppath = write_map(out / "map_online.yaml", run.grid)
-        paths["map_online.yaml"], paths["map_online.pgm"] = ypath, ppath
         with atomic_path(out / "map_logodds_online.npy") as tmp:
             with tmp.open("wb") as fh:
                 np.save(fh, np.asarray(run.logodds, dtype=np.float32))
         paths["map_logodds_online.npy"] = out / "map_logodds_online.npy"
+    if release:  # nothing below reads them (the figures draw the maps' probabilities)
+        run.logodds = np.zeros((0, 0), dtype=np.float32)
+    final_grid = cleaned.grid if cleaned is not None else run.grid
+    ypath, ppath = write_map(out / "map.yaml", final_grid)
+    paths["map.yaml"], paths["map.pgm"] = ypath, ppath
+    del final_grid  # (a reference here kept the drawn map through the figures, which let it go when done)
+    cleaned_grey = None
+    if release and cleaned is not None:  # map.png's grey indices now; the cleaned float64 map goes
+        cleaned_grey = GreyMap.of(cleaned.grid)
+        cleaned.grid = None  # type: ignore[assignment]
+    if cleaned is not None:
+        ypath, ppath = write_map(out / "map_online.yaml", run.grid)
+        paths["map_online.yaml"], paths["map_online.pgm"] = ypath, ppath
     paths["trajectory.tum"] = write_tum(out / "trajectory.tum", run.trajectory, comment="laser pose in the map frame")
     if run.loop is not None:
         # loop closure (docs/slam.md): trajectory.tum is optimised, the front end's trajectory and the graph kept
@@ -238,18 +257,15 @@ def write_outputs(
                                                      comment="laser pose in the map frame, front end before loop "
                                                              "closure")
         paths["graph.g2o"] = write_g2o(out / "graph.g2o", run.loop.graph)
-    if release:  # nothing below reads them (the figures draw the maps' probabilities)
-        run.logodds = np.zeros((0, 0), dtype=np.float32)
-        if cleaned is not None:
-            cleaned.logodds = None
-        if run.loop is not None:
-            run.loop.keyframes = []
-    del final_lo
-    summary = run.summary()
-    evaluation = evaluate_result(run, gt, cleaned) if gt is not None else None
+    if release and run.loop is not None:
+        run.loop.keyframes = []
+    if summary is None:
+        summary = run.summary()
+        evaluation = evaluate_result(run, gt, cleaned) if gt is not None else None
     drawn = None
     if release:  # the maps as the figures' grey indices now: no float64 map lives through the files below
-        drawn = figure_maps(run, cleaned)
+        drawn = figure_maps(run, cleaned, drawn=cleaned_grey)
+        del cleaned_grey
     paths["config.yaml"] = write_text_atomic(out / "config.yaml", dump_config(run.config))
     paths["tracks.csv"] = write_text_atomic(out / "tracks.csv", tracks_csv(run))
     removed = run.removed

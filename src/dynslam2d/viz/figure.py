@@ -7,6 +7,7 @@ figure manager (nothing to close, nothing leaks when a caller forgets).
 
 from __future__ import annotations
 
+import gc
 import os
 from pathlib import Path
 from typing import Any
@@ -37,9 +38,9 @@ def drop_renderer(fig: Any) -> None:
 def save_png(fig: Any, path: str | os.PathLike[str], dpi: int = 120) -> Path:
     """Write matplotlib figure ``fig`` as a PNG at ``path`` (atomically), then empty it: its artists (the map
     images and their resampled copies) and the canvas's Agg pixel buffer are freed now, not when the garbage
-    collector next finds the figure's reference cycles, so the next figure of a run is not drawn on top of them
-    (docs/speed.md, memory). The renderer a layout step left on the canvas goes before savefig makes its own.
-    The figure is not drawn again after this."""
+    collector next finds the figure's reference cycles (collected here: pass mem48), so the next figure of a run is
+    not drawn on top of them (docs/speed.md, memory). The renderer a layout step left on the canvas goes before
+    savefig makes its own. The figure is not drawn again after this."""
     path = Path(path)
     # a layout step (tight_layout) measured the text on an Agg renderer at the figure's dpi, which the canvas keeps
     # with its pixel buffer; savefig draws on a new one at ``dpi`` (or clears and redraws that one): dropped first,
@@ -49,5 +50,10 @@ def save_png(fig: Any, path: str | os.PathLike[str], dpi: int = 120) -> Path:
         fig.savefig(tmp, dpi=dpi, format="png")
     fig.clear()
     drop_renderer(fig)
+    # the artists ``clear`` let go are reference cycles (an axes and its children point at each other): the cyclic
+    # collector frees them, with the map images' resampled copies and caches, now rather than when it next runs a
+    # full collection (not before the next figure: MIT CSAIL's tracks.png was drawn on top of map.png's ≈ 13 MiB;
+    # docs/speed.md, pass mem48)
+    gc.collect()
     release_free_memory()  # and what they held back to the OS (memtrim.py)
     return path

@@ -41,13 +41,15 @@ class FigureMaps:
     background: GreyMap
 
 
-def figure_maps(result: RunResult, cleaned: CleanResult | None = None) -> FigureMaps:
+def figure_maps(result: RunResult, cleaned: CleanResult | None = None, drawn: GreyMap | None = None) -> FigureMaps:
     """The grey indices :func:`write_figures` draws with ``release=True``, made from ``result.grid`` and
     ``cleaned.grid``, which become None (2 bytes per cell each where the float64 maps take 8; issue 13 item 3). A
     caller that makes them before its other work (``write_outputs``: tracks.csv, kept_mask.npz, the summary) does
-    that work without either float64 map."""
+    that work without either float64 map. ``drawn``: map.png's grey indices made already (``GreyMap.of`` of the
+    cleaned map, whose float64 map the caller let go; pass mem48), used as they are."""
     background = tracks_background(result.grid)
-    drawn = GreyMap.of(cleaned.grid if cleaned is not None else result.grid)
+    if drawn is None:
+        drawn = GreyMap.of(cleaned.grid if cleaned is not None else result.grid)
     result.grid = None  # type: ignore[assignment]
     if cleaned is not None:
         cleaned.grid = None  # type: ignore[assignment]
@@ -89,7 +91,8 @@ def write_figures(
     grey indices (2 bytes per cell; ``result.grid`` and ``cleaned.grid`` become None; issue 13 item 3), or taken from
     ``drawn`` (:func:`figure_maps`, made by the caller); the track rows go once the paths are built, the erased and
     restored cells once map.png is drawn (``result.track_rows`` empty, ``result.erased`` None, ``cleaned.erased``
-    and ``cleaned.restored`` 0 × 0), so tracks.png is drawn without them.
+    and ``cleaned.restored`` 0 × 0; the restored cells, never drawn, before map.png), so tracks.png is drawn without
+    them.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -117,6 +120,8 @@ def write_figures(
         maps = drawn if drawn is not None else figure_maps(result, cleaned)
         grid, background = maps.drawn, maps.background
         del maps, drawn
+        if cleaned is not None:  # (the restored cells are never drawn: they go before matplotlib's import; pass mem48)
+            cleaned.restored = np.zeros((0, 0), dtype=bool)
     else:
         grid = cleaned.grid if cleaned is not None else result.grid
         background = result.grid
