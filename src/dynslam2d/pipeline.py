@@ -331,7 +331,7 @@ class Pipeline:
         self._moving_rows = kept_rows[0] if kept_rows else _NO_ROWS
         self._last_stamp = scan.stamp
         # (positional, in StepResult's field order — the keywords' parsing was a third of its cost; the fields named
-        # in the comments, tests/test_match_match32.py checks the order)
+        # in the comments, tests/test_match_inlined_glue.py checks the order)
         return StepResult(
             self.slam.n_scans - 1, scan.stamp, res.pose, res.score,  # index, stamp, pose, score
             updated, res.rejected, res.skipped, res.reason,  # map_updated, rejected, skipped, reason

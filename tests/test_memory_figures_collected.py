@@ -10,7 +10,7 @@ import weakref
 
 import numpy as np
 from conftest import ScanList
-from test_memory_mem38 import _loop_run
+from test_memory_released_outputs import _loop_run
 
 from dynslam2d.config import Config
 from dynslam2d.pipeline import run
