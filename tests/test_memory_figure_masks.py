@@ -90,3 +90,40 @@ def test_released_figures_let_the_erased_masks_go_before_map_png(tmp_path, monke
     R.write_outputs(res, tmp_path, cleaned=cleaned, release=True)
     painted = ((style.ERASED, n_erased),) if n_erased else ()
     assert seen["at_map"] == (None, 0, None, None, painted)
+
+
+def _overlay_png(img: np.ndarray, extent: tuple[float, float, float, float], figsize: tuple[float, float],
+                 stock: bool, limits: tuple[float, float, float, float] | None) -> bytes:
+    import io
+
+
+    ax = new_figure(figsize).subplots()
+    mapplot.draw_grey_indices(ax, np.full((10, 10), 200, dtype=np.uint16), extent)
+    im = ax.imshow(img, origin="lower", extent=extent, interpolation="nearest", zorder=2)
+    if not stock:
+        im.__class__ = mapplot._index_image_class()  # as plot_map draws points_overlay's image
+    if limits is not None:
+        ax.set_xlim(limits[0], limits[1])
+        ax.set_ylim(limits[2], limits[3])
+    ax.set_aspect("equal")
+    buf = io.BytesIO()
+    ax.figure.savefig(buf, format="png", dpi=120)
+    return buf.getvalue()
+
+
+@pytest.mark.parametrize("shape, extent, figsize, limits", [
+    ((557, 490), (0.0, 49.0, 0.0, 55.7), (10.7, 9.7), None),  # negative_2's removed points: fewer pixels than cells
+    ((40, 60), (0.0, 3.0, 0.0, 2.0), (8.0, 6.0), None),  # more pixels than cells
+    ((77, 31), (1.3, 2.85, -0.2, 3.65), (5.0, 7.0), None),
+    ((200, 300), (0.0, 15.0, 0.0, 10.0), (8.0, 6.0), (-2.0, 20.0, 1.5, 9.0)),  # axes wider than the map, and cut
+])
+def test_points_overlay_pixels_equal_matplotlibs(shape, extent, figsize, limits) -> None:
+    """The removed points' RGBA overlay drawn from the output pixels' cells gives matplotlib's own PNG bytes, its
+    premultiplied-alpha arithmetic included (opacities between the overlay's 0.35 and 1)."""
+    rng = np.random.default_rng(sum(shape))
+    n = shape[0] * shape[1] * 2  # (counts of 1 to ~8 a cell: opacities between 0.35 and 1)
+    xy = np.column_stack((rng.uniform(extent[0], extent[1], n), rng.uniform(extent[2], extent[3], n)))
+    cell = (extent[1] - extent[0]) / shape[1]
+    img, ext = mapplot.points_overlay(xy, extent, cell, style.REMOVED)
+    assert len(np.unique(img[..., 3])) > 3
+    assert _overlay_png(img, ext, figsize, False, limits) == _overlay_png(img, ext, figsize, True, limits)

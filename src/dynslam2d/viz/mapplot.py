@@ -205,8 +205,10 @@ def _index_image_class() -> type:
     class IndexImage(AxesImage):
         def _make_image(self, A, in_bbox, out_bbox, clip_bbox, magnification=1.0,  # type: ignore[no-untyped-def]
                         unsampled=False, round_to_pixel_border=True):
-            if (unsampled or A.ndim != 2 or self._interpolation_stage != "data" or not isinstance(self.norm, NoNorm)
-                    or self.get_interpolation() != "nearest" or self.origin != "lower" or self.get_alpha() is not None):
+            indexed = A.ndim == 2 and self._interpolation_stage == "data" and isinstance(self.norm, NoNorm)
+            rgba = A.ndim == 3 and A.shape[-1] == 4 and A.dtype == np.float32  # (points_overlay's)
+            if (unsampled or not (indexed or rgba) or self.get_interpolation() != "nearest" or self.origin != "lower"
+                    or self.get_alpha() is not None):
                 return super()._make_image(A, in_bbox, out_bbox, clip_bbox, magnification, unsampled,
                                            round_to_pixel_border)
             clipped = Bbox.intersection(out_bbox, clip_bbox)
@@ -226,22 +228,44 @@ def _index_image_class() -> type:
             h, w = int(box.height), int(box.width)
             cols = _picked(self, A.shape[1], w, t, 1)
             rows = _picked(self, A.shape[0], h, t, 0)
-            # the colormap's bytes (what ``cmap(idx, bytes=True)`` takes them from), looked up per output pixel
-            lut = self.cmap(np.arange(self.cmap.N), bytes=True)
-            cells = np.asarray(A)
             rows_in, cols_in = np.maximum(rows, 0), np.maximum(cols, 0)
+            if indexed:  # the colormap's bytes (what ``cmap(idx, bytes=True)`` takes them from), per output pixel
+                lut, cells = self.cmap(np.arange(self.cmap.N), bytes=True), np.asarray(A)
+            else:  # an RGBA image: each cell's bytes as matplotlib's RGBA path makes them (_cell_bytes)
+                lut, cells = _cell_bytes(self, np.asarray(A)), None
             output = np.empty((h, w, 4), dtype=np.uint8)
             # a block of output rows at a time: no (h, w) array of the picked indices beside the pixels (MIT CSAIL's
             # map.png: 2.3 MiB while the figure is saved; pass mem49)
             for r0 in range(0, h, _ROWS_PER_CHUNK):
-                output[r0:r0 + _ROWS_PER_CHUNK] = lut[cells[np.ix_(rows_in[r0:r0 + _ROWS_PER_CHUNK], cols_in)]]
+                rr = rows_in[r0:r0 + _ROWS_PER_CHUNK]
+                output[r0:r0 + _ROWS_PER_CHUNK] = (lut[cells[np.ix_(rr, cols_in)]] if cells is not None
+                                                   else lut[rr[:, None] * A.shape[1] + cols_in[None, :]])
             if (rows < 0).any() or (cols < 0).any():  # pixels outside the image: matplotlib's value 0, transparent
                 outside = (rows < 0)[:, None] | (cols < 0)[None, :]
-                output[outside] = lut[0]
+                output[outside] = lut[0] if indexed else 0
                 output[outside, 3] = 0
             return output, box.x0 / magnification, box.y0 / magnification, t
 
     return IndexImage
+
+
+def _cell_bytes(image: Any, A: np.ndarray) -> np.ndarray:
+    """(H·W, 4) uint8: the pixel matplotlib's RGBA path (``_ImageBase._make_image``, matplotlib 3.11: premultiplied by
+    its alpha, resampled, divided by the resampled alpha, ``to_rgba(bytes=True)``) makes of each cell of the (H, W, 4)
+    float32 image ``A`` under ``image``'s nearest resampling: a pixel takes one cell's value through the same
+    arithmetic whatever the scale, so the cells resampled one to one give every pixel's bytes (pass mem49)."""
+    from matplotlib.image import _resample
+    from matplotlib.transforms import Affine2D
+
+    alpha_in = A[..., 3]
+    if (alpha_in != 1).any():
+        A = A * alpha_in[..., None]
+        A[..., 3] = alpha_in
+    res = _resample(image, A, A.shape[:2], Affine2D())
+    alpha_out = res[..., 3].copy()
+    res /= np.where(alpha_out != 0, alpha_out, 1)[..., None]
+    res[..., 3] = alpha_out
+    return np.asarray(image.to_rgba(res, bytes=True, norm=False)).reshape(-1, 4)
 
 
 def points_overlay(
@@ -412,7 +436,10 @@ def plot_map(
         # At least ~1.5 px per square at 8 in × dpi so that single points stay visible.
         cell = max(grid.resolution, (extent[1] - extent[0]) / (8.0 * dpi / 1.5))
         img, ext = points_overlay(np.asarray(removed_xy, dtype=np.float64), extent, cell, style.REMOVED)
-        ax.imshow(img, origin="lower", extent=ext, interpolation="nearest", zorder=2)
+        im = ax.imshow(img, origin="lower", extent=ext, interpolation="nearest", zorder=2)
+        # the same pixels from the output pixels' cells only: matplotlib resamples the whole overlay into output-sized
+        # float32 RGBA copies (negative_2's map.png: ≈ 25 MiB while it is saved; pass mem49)
+        im.__class__ = _index_image_class()
         n_rm = len(removed_xy) if removed_count is None else int(removed_count)
         handles.append(Patch(color=style.REMOVED, label=removed_label(n_rm, len(removed_xy))))
     if reference_xy is not None and len(reference_xy):
