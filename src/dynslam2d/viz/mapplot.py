@@ -133,12 +133,22 @@ def paint_grey(grey: GreyMap, paint: Sequence[tuple[np.ndarray | None, str]]) ->
     idx = grey.indices
     painted = list(grey.painted)
     for mask, colour in paint:
-        if mask is not None and mask.shape == idx.shape and mask.any():
-            if GREY_LEVELS + len(painted) > np.iinfo(idx.dtype).max:
-                idx = idx.astype(np.uint16)
-            idx[mask] = GREY_LEVELS + len(painted)
+        done = _paint_cells(idx, mask, GREY_LEVELS + len(painted))
+        if done is not None:
+            idx = done
             painted.append((colour, int(np.count_nonzero(mask))))
     return GreyMap(idx, grey.extent, grey.resolution, tuple(painted))
+
+
+def _paint_cells(idx: np.ndarray, mask: np.ndarray | None, index: int) -> np.ndarray | None:
+    """``idx`` with the cells of ``mask`` set to ``index`` (in place, or in a uint16 copy when ``index`` does not
+    fit ``idx``'s type); None, ``idx`` untouched, when ``mask`` is None, shaped otherwise or empty."""
+    if mask is None or mask.shape != idx.shape or not mask.any():
+        return None
+    if index > np.iinfo(idx.dtype).max:  # (a uint8 map's 256 greys leave no index for a colour)
+        idx = idx.astype(np.uint16)
+    idx[mask] = index
+    return idx
 
 
 def draw_grey_indices(ax: Any, idx: np.ndarray, extent: tuple[float, float, float, float],
@@ -156,10 +166,9 @@ def draw_grey_indices(ax: Any, idx: np.ndarray, extent: tuple[float, float, floa
         colours = np.vstack((colours, to_rgba(colour)))
     layers = list(paint) + ([(erased, erased_colour)] if erased_colour is not None else [])
     for mask, colour in layers:
-        if mask is not None and mask.shape == idx.shape and mask.any():
-            if len(colours) > np.iinfo(idx.dtype).max:  # (a uint8 map's 256 greys leave no index for a colour)
-                idx = idx.astype(np.uint16)
-            idx[mask] = len(colours)
+        done = _paint_cells(idx, mask, len(colours))
+        if done is not None:
+            idx = done
             colours = np.vstack((colours, to_rgba(colour)))
     im = ax.imshow(idx, cmap=ListedColormap(colours), norm=NoNorm(), origin="lower", extent=extent,
                    interpolation="nearest", interpolation_stage="data", **kw)
