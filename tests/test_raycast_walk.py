@@ -14,6 +14,7 @@ from dynslam2d.slam.grid import GridLevel, MultiResMap
 from dynslam2d.slam.raycast import (
     _MAGIC_MAX,
     _MAGIC_SHIFT,
+    _PREFETCH,
     _PROB_BATCH,
     _prob_fast,
     _write_probs,
@@ -157,6 +158,23 @@ def test_repeated_rays_are_skipped_only_when_they_would_change_nothing() -> None
     assert integrate_rays_stop(lo, pr, ui, 1, 2, sx, sy, exa, eya, hit, stop, L_FREE, L_OCC, 6.0) == 11
     cells = bresenham_free_cells(sx, sy, 30, 38)
     assert (ui[cells[:, 1], cells[:, 0]] == 1).all()  # stop 1 after stop 9: the ray's last cells made free too
+
+
+def test_single_rays_of_every_length_around_the_prefetch_distance_equal_the_reference() -> None:
+    """The free walk runs in two parts, the cells whose cell _PREFETCH steps on is still on the ray and the last ones:
+    one ray at a time (no other ray's cells to hide a cell walked too far or left out), every major length from 1
+    to 2·_PREFETCH + 3 in four octants, with and without a stop that leaves 0, 1, ... cells before the end
+    unwalked, as a return and as a clearing ray: bit for bit the reference."""
+    h, w, sx, sy = 100, 100, 50, 50
+    for major in range(1, 2 * _PREFETCH + 4):
+        for dx, dy in ((major, major // 3), (-(major // 2), major), (-major, -(major // 5)), (major // 4, -major)):
+            ex, ey = [sx + dx], [sy + dy]
+            length = math.hypot(dx, dy)
+            for hit in (True, False):
+                _check(h, w, sx, sy, ex, ey, np.array([hit]), None, scans=2)
+                for skip in (1, 2, _PREFETCH - 1, _PREFETCH, _PREFETCH + 1):
+                    stop = np.array([1.0 + (skip + 0.5) * length / major])
+                    _check(h, w, sx, sy, ex, ey, np.array([hit]), stop, scans=2)
 
 
 def test_rays_longer_than_the_multiply_shift_limit_equal_the_reference() -> None:

@@ -47,7 +47,7 @@ def _bits(typingctx, v):
 #: this (exact there; longer rays divide)
 _MAGIC_MAX = 1 << 13
 _MAGIC_SHIFT = 42
-#: how many steps ahead of a new cell the walk prefetches the cells' lines
+#: how many steps ahead of a walked cell the walk prefetches the cells' lines (up to the ray's end cell)
 _PREFETCH = 16
 #: updated cells a level's walks collect before their probabilities are written (:func:`_write_probs`; plus one
 #: ray's cells at most)
@@ -199,7 +199,8 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
     in the loop (helpers taking the arrays, called per cell, were slower in every trial; docs/speed.md); the walks
     list each updated cell and its new log-odds, whose probabilities are written in one vectorised pass per
     ``_PROB_BATCH`` cells (:func:`_write_probs`, in the walks' order), and each walked cell prefetches the lines of
-    the cell ``_PREFETCH`` steps on. The free walk has no branch on whether a cell is new this scan (a cell already
+    the cell ``_PREFETCH`` steps on while that cell is on the ray (its end cell included; no lines beyond a ray's
+    end are fetched, pass upd49). The free walk has no branch on whether a cell is new this scan (a cell already
     updated in this scan gets its own log-odds and update index written back and is not listed: the same values;
     the branch mispredicted where runs of new and seen cells alternate, pass upd48). The rays' end cells, which rays
     count and are walked, and each walked ray's lengths, steps and multiplier are computed in loops over all rays
@@ -300,26 +301,34 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
             magic = setup[5, q]
             t = c
             fb = f0
-            for _ in range(n_free):
-                f = np.uint64(fb + ((t * magic) >> _MAGIC_SHIFT) * d_minor)  # (unsigned: no negative-index test)
-                # branch-free: a cell seen already this scan (update index ≥ free_idx, so its lines were written
-                # this scan) gets its own log-odds and index written back, and its listing is overwritten
-                g = np.uint64(fb + _PREFETCH * d_major + (((t + _PREFETCH * minor) * magic) >> _MAGIC_SHIFT)
-                              * d_minor)
-                _prefetch(ui, g)
-                _prefetch(lo, g)
-                _prefetch(pr, g)
-                u = ui[f]
-                new = u < free_idx
-                o = lo[f]
-                v = o + l_free
-                lo[f] = v if new else o
-                ui[f] = free_idx if new else u
-                upd_f[n_upd] = f
-                upd_v[n_upd] = v
-                n_upd += new
-                t += minor
-                fb += d_major
+            # two runs of the same walk: the cells whose cell _PREFETCH steps on is still on the ray (the end cell,
+            # step major, included) prefetch it, the last ones do not (no lines beyond the ray's end fetched)
+            j_pf = min(n_free, max(major - _PREFETCH + 1, 0))
+            j = 0
+            for pf in (True, False):
+                j_end = j_pf if pf else n_free
+                for _ in range(j, j_end):
+                    f = np.uint64(fb + ((t * magic) >> _MAGIC_SHIFT) * d_minor)  # (unsigned: no negative-index test)
+                    if pf:
+                        g = np.uint64(fb + _PREFETCH * d_major + (((t + _PREFETCH * minor) * magic) >> _MAGIC_SHIFT)
+                                      * d_minor)
+                        _prefetch(ui, g)
+                        _prefetch(lo, g)
+                        _prefetch(pr, g)
+                    # branch-free: a cell seen already this scan (update index ≥ free_idx, so its lines were
+                    # written this scan) gets its own log-odds and index written back, and its listing is overwritten
+                    u = ui[f]
+                    new = u < free_idx
+                    o = lo[f]
+                    v = o + l_free
+                    lo[f] = v if new else o
+                    ui[f] = free_idx if new else u
+                    upd_f[n_upd] = f
+                    upd_v[n_upd] = v
+                    n_upd += new
+                    t += minor
+                    fb += d_major
+                j = j_end
         else:
             t = c
             fb = f0
