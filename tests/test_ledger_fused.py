@@ -116,6 +116,42 @@ def test_record_cells_equals_the_single_step_kernels(seed: int, n_lv: int) -> No
     assert none[0] == lk.NO_KEPT and none[1].shape == (6, 0) and none[2].shape[0] == none[3].shape[0] == 0
 
 
+@pytest.mark.parametrize("first", [0, 1, 2])
+def test_record_cells_keeps_every_distinct_value_around_runs_of_repeats(first: int) -> None:
+    """Every kept beam a track's, each beam's cell its own except runs of equal ranges (repeated packed values) at
+    the start (after ``first`` single values), in the middle and at the end: record_cells' repeat removal before
+    the sort keeps each distinct value once — the cells equal those of the single steps (np.sort, unpack_cells),
+    the first values of the scan included."""
+    n = 40
+    r = 1.0 + 0.3 * np.arange(n)
+    r[first:first + 4] = r[first]
+    r[20:25] = r[20]
+    r[n - 3:] = r[n - 3]
+    cos_a = np.ones(n)
+    sin_a = np.zeros(n)  # every beam along x: a range is a cell
+    cos_a.flags.writeable = sin_a.flags.writeable = False
+    vm = np.ones(n, dtype=bool)
+    removed = np.zeros(n, dtype=bool)
+    ids = np.array([7, 3], dtype=np.int64)
+    allb = np.arange(n, dtype=np.int64)
+    lens = np.array([25, n - 25], dtype=np.int64)
+    rs = np.array([0.05, 0.1, 0.2])
+    lv = (np.zeros((1, 1), np.float32), np.zeros((1, 1), np.int32), 0, 0)
+    status, blk, small, _ = lk.record_cells(allb, np.concatenate((ids, lens)), r, cos_a, sin_a, vm, removed, 0.1,
+                                            100.0, 1.0, 0.0, 0.0, 0.0, rs, (lv[0],) * 3, (lv[1],) * 3, (0,) * 3,
+                                            (0,) * 3, False)
+    owner = lk.beam_owners(n, allb, np.array([0, 25, n], dtype=np.int64), ids)
+    uids = np.array([3, 7], dtype=np.int64)
+    packed, params, _, _ = lk.scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, 0.1, 100.0, 1.0, 0.0, 0.0, 0.0,
+                                         rs)
+    packed.sort()
+    w_ids, w_keys, w_cells, w_bounds = lk.unpack_cells(packed, params, uids, 3)
+    assert status == lk.PACKED
+    assert np.array_equal(blk[0], w_ids) and np.array_equal(blk[1], w_keys) and np.array_equal(small[:4], w_bounds)
+    assert np.array_equal(blk[2:4].T, w_cells)
+    assert w_bounds[1] == n - 3 - 4 - 2  # (level 0: one cell a distinct range)
+
+
 def test_record_cells_leaves_values_beyond_an_int64_to_the_level_by_level_path() -> None:
     """A point far away (cells beyond the packed values' range): not packed, but the kept beams, track ids and
     counts are returned for the level-by-level path."""

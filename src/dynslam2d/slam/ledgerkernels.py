@@ -521,13 +521,14 @@ def record_cells(beams, idl, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px,
                 np.empty(0, dtype=np.int32))
     # a value equal to the one before it goes (the sorted values' repeats are skipped by unpack_cells anyway):
     # neighbouring beams of a track hit the same cell, most of all on the coarse levels, so about two thirds of
-    # the values of a negative_2 scan go before the sort (≈ 1850 → 650; pass led33)
-    n_u = 0
-    for p in range(packed.shape[0]):
+    # the values of a negative_2 scan go before the sort (≈ 1850 → 650; pass led33). Branch-free: each value is
+    # written after the kept ones and kept when it differs from the last kept one (there is at least one value:
+    # params are non-empty only when a kept beam has a track)
+    n_u = 1
+    for p in range(1, packed.shape[0]):
         v = packed[p]
-        if n_u == 0 or v != packed[n_u - 1]:
-            packed[n_u] = v
-            n_u += 1
+        packed[n_u] = v
+        n_u += v != packed[n_u - 1]
     u = packed[:n_u]
     _radix_sort(u)
     out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b = _read_levels(
