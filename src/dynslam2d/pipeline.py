@@ -614,8 +614,8 @@ def render_map(loop: LoopResult, slam_config: SlamConfig, poses: np.ndarray | No
     _presize_render(slam, loop, at)
     for kf, p in zip(loop.keyframes, at):
         slam.update_map(kf.kept(), Pose2D(float(p[0]), float(p[1]), float(p[2])), force=True)
-    out = _MapExport.of(slam.map)
-    del slam  # its level (12 bytes per cell) goes before the float64 map is made (issue 13 item 3)
+    out = _MapExport.of(slam.map, take=True)  # (each of the level's arrays let go once read)
+    del slam  # (the rest of the renderer goes before the float64 map is made: issue 13 item 3)
     return out.gridmap(), out.logodds
 
 
@@ -733,15 +733,25 @@ class _MapExport:
     origin: tuple[float, float]  # world (x, y) of the lower-left corner of cell (0, 0), m
 
     @classmethod
-    def of(cls, hmap: MultiResMap) -> _MapExport:
+    def of(cls, hmap: MultiResMap, take: bool = False) -> _MapExport:
+        """The export of ``hmap``'s finest level. ``take``: let go of the level's arrays as they are read — its
+        update indices once the unknown mask is made, then its log-odds once copied (the level is left empty) —
+        so the export's copies are not made beside the whole level (issue 13 item 3: the end of the run loop and
+        of the loop closure's re-render). Only frees memory no one else holds a view of."""
         lv = hmap.levels[0]
         if lv.empty:
             return cls(np.zeros((1, 1), dtype=np.float32), np.ones((1, 1), dtype=bool), lv.resolution,
                        lv.corner_origin())
         b = lv.known_bounds()
         r0, r1, c0, c1 = b if b is not None else (0, lv.shape[0], 0, lv.shape[1])
-        return cls(lv.logodds[r0:r1, c0:c1].copy(), lv.uidx[r0:r1, c0:c1] < 1, lv.resolution,
-                   lv.corner_origin(r0, c0))
+        origin = lv.corner_origin(r0, c0)
+        unknown = lv.uidx[r0:r1, c0:c1] < 1
+        if take:
+            lv.release("uidx", "prob")
+        logodds = lv.logodds[r0:r1, c0:c1].copy()
+        if take:
+            lv.release()
+        return cls(logodds, unknown, lv.resolution, origin)
 
     def gridmap(self) -> GridMap:
         """The map as probabilities, NaN = never observed: the values of :meth:`MultiResMap.to_gridmap`."""
@@ -759,6 +769,14 @@ def _release_unexported(hmap: MultiResMap) -> None:
             lv.release()
 
 
+def _drop_views(pipe: Pipeline) -> None:
+    """Let go of the views of the finest level held outside the map, so that freeing the level's arrays frees
+    their memory: the tracker keeps the last scan's view of it (its log-odds array, 12.5 MB on MIT CSAIL), which
+    would keep that level alive through the export, the re-render and the clean-up pass."""
+    pipe.tracker._map = None
+    pipe._view = None  # (the pipeline's own view of it, _evidence_view)
+
+
 def _release_map(pipe: Pipeline, front: _MapExport) -> None:
     """Replace the front end's map arrays by empty ones (after the run, once the results hold their own
     copies): memory for the loop closure's re-render and the results (docs/speed.md). ``front`` is the
@@ -766,10 +784,7 @@ def _release_map(pipe: Pipeline, front: _MapExport) -> None:
     pipe._released_grid = front
     for lv in pipe.slam.map.levels:
         lv.release()
-    # the tracker keeps the last scan's view of the finest level (its log-odds array, 12.5 MB on MIT CSAIL),
-    # which would keep that level alive through the re-render and the clean-up pass
-    pipe.tracker._map = None
-    pipe._view = None  # (the pipeline's own view of it, _evidence_view)
+    _drop_views(pipe)
     if pipe.ledger is not None:
         pipe.ledger.release()  # its per-track records (tens of MB on MIT CSAIL); the summary stays
     release_free_memory()
@@ -946,7 +961,8 @@ def run(
     summary = pipe.slam.summary()
     memory_bytes = pipe.slam.memory_bytes
     _release_unexported(pipe.slam.map)  # the export below reads only the finest level's log-odds and indices
-    front = _MapExport.of(pipe.slam.map)  # (its float64 map is made once the run knows it keeps it)
+    _drop_views(pipe)  # (no view then keeps the level's arrays alive when the export lets them go)
+    front = _MapExport.of(pipe.slam.map, take=True)  # (its float64 map is made once the run knows it keeps it)
     logodds = front.logodds
     # the front end's map is in ``front`` now: free its levels before the loop closure's final optimisation and
     # re-render build theirs (issue 13 item 3; observers' on_finish get the pipeline without its map arrays)

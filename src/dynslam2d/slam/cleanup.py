@@ -714,6 +714,47 @@ class CleanResult:
     restored: np.ndarray | None = None
 
 
+#: :class:`GridMap`'s own storage of ``prob`` (a slot), under :class:`_CleanedGrid`'s property
+_PROB_SLOT = GridMap.__dict__["prob"]
+
+
+class _CleanedGrid(GridMap):
+    """The cleaned map as :func:`clean_windows` makes it — the online map's probabilities, erased cells at
+    :data:`ERASED_PROBABILITY`, restored ones at :data:`RESTORED_PROBABILITY` — made when ``prob`` is first read,
+    not at the end of the pass: the pass's end and the results' start no longer hold a second float64 map beside
+    the online one (8 bytes a cell, 14.5 MB on MIT CSAIL; issue 13 item 3). Until then it holds the online map and
+    the two masks (which must not change before); afterwards it is a plain :class:`GridMap`."""
+
+    __slots__ = ("_parts",)
+
+    def __init__(self, online: GridMap, erased: np.ndarray, restored: np.ndarray) -> None:  # noqa: D107
+        self._parts: tuple[GridMap, np.ndarray, np.ndarray] | None = (online, erased, restored)
+        self.resolution = online.resolution
+        self.origin = online.origin
+
+    @property  # type: ignore[override]
+    def prob(self) -> np.ndarray:
+        parts = self._parts
+        if parts is not None:
+            online, erased, restored = parts
+            prob = online.prob.copy()
+            prob[erased] = ERASED_PROBABILITY
+            prob[restored] = RESTORED_PROBABILITY
+            _PROB_SLOT.__set__(self, prob)
+            self._parts = None
+        return _PROB_SLOT.__get__(self)
+
+    @prob.setter
+    def prob(self, value: np.ndarray) -> None:
+        _PROB_SLOT.__set__(self, np.asarray(value, dtype=np.float64))
+        self._parts = None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        parts = self._parts
+        return parts[0].shape if parts is not None else _PROB_SLOT.__get__(self).shape  # (without making it)
+
+
 def restore_rule(hits: np.ndarray, through: np.ndarray, config: CleanConfig) -> np.ndarray:
     """Cells (bool, same shape) hit often and (almost) never seen through: ``H ≥ restore_min_hits`` and
     ``T ≤ restore_through_ratio·H`` (all False when ``restore_min_hits`` is 0). Applied to the online map's
@@ -784,7 +825,9 @@ def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | N
     """:func:`clean_map` from the counts read off the counter (:meth:`CountWindows.of`). With ``keep_counts``
     False the result's count windows are empty (0 × 0) and ``counts`` lets go of them once the rules are
     applied, before the cleaned copies of the map are made (issue 13 item 3: the command line keeps only the
-    map, the erased cells and the stats). ``t0``: when the pass started (``time.perf_counter``), for its time."""
+    map, the erased cells and the stats), and the result's float64 map is made when first read
+    (:class:`_CleanedGrid`: ``online`` and the result's masks must not change before). ``t0``: when the pass
+    started (``time.perf_counter``), for its time."""
     t0 = time.perf_counter() if t0 is None else t0
     c = counts.config
     hits, through, switches, latest_hit = counts.hits, counts.through, counts.switches, counts.latest_hit
@@ -813,9 +856,14 @@ def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | N
         del kept
         erased &= n_kept < c.revert_neighbors
         del n_kept
-    prob = online.prob.copy()
-    prob[erased] = ERASED_PROBABILITY
-    prob[restored] = RESTORED_PROBABILITY
+    n_occ = int(occ.sum())
+    del occ  # (one byte a cell) before the cleaned copies are made, the pass's highest point (issue 13 item 3)
+    if keep_counts:
+        grid = GridMap(online.prob.copy(), online.resolution, online.origin)
+        grid.prob[erased] = ERASED_PROBABILITY
+        grid.prob[restored] = RESTORED_PROBABILITY
+    else:  # (the command line's pass: the cleaned float64 map made when the results first read it)
+        grid = _CleanedGrid(online, erased, restored)
     lo = None
     if logodds is not None:
         # the input's dtype (the SLAM's log-odds are float32, written as float32): no float64 copy of the map
@@ -824,8 +872,6 @@ def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | N
             lo[erased] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
             lo[restored] = math.log(RESTORED_PROBABILITY / (1.0 - RESTORED_PROBABILITY))
     area = online.resolution ** 2
-    n_occ = int(occ.sum())
-    del occ
     stats: dict[str, float | int] = {
         "occupied_cells_online": n_occ,
         "erased_cells": int(erased.sum()),
@@ -837,8 +883,7 @@ def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | N
         "pass_time_s": float(counts.seconds + time.perf_counter() - t0),
         "counter_bytes": counts.nbytes,
     }
-    return CleanResult(GridMap(prob, online.resolution, online.origin), lo, erased, hits, through, switches, stats,
-                       restored)
+    return CleanResult(grid, lo, erased, hits, through, switches, stats, restored)
 
 
 def compare_online(online: GridMap, cleaned: CleanResult, tolerance: float = 0.10,
