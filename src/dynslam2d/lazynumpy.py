@@ -5,8 +5,8 @@ imports ``scipy._lib._array_api``, which copies NumPy's whole namespace (``array
 ``clone_module``: ``from numpy import *`` and ``getattr`` of every name ``dir(numpy)`` lists). NumPy loads its
 submodules on first attribute access, so that copy imports ``numpy.f2py`` (with ``charset_normalizer`` and
 about 90 text codecs), ``numpy.testing`` (with ``unittest``), ``numpy.polynomial``, ``numpy.ctypeslib`` and
-the legacy ``numpy.core`` / ``rec`` / ``char`` / ``strings`` namespaces, none of which a run uses: ≈ 8–10 MiB of
-a MIT CSAIL run's peak resident memory (docs/speed.md, pass mem51).
+the legacy ``numpy.core`` / ``rec`` / ``char`` / ``strings`` namespaces, none of which a run uses: ≈ 7 MiB of
+a MIT CSAIL run's peak resident memory with the AOT kernels, ≈ 4 MiB with JIT ones (docs/speed.md, pass mem51).
 
 :func:`defer_numpy_submodules` registers each of them, when not imported yet, as a module whose code runs at
 its first attribute access (the standard library's :class:`importlib.util.LazyLoader`), and as NumPy's
