@@ -1878,8 +1878,10 @@ def main() -> None:
     atomic, so an interrupted run leaves no half-written file under a final name.
     """
     from dynslam2d.jitcache import load_blas_alone, plain_numba_errors
+    from dynslam2d.lazynumpy import defer_numpy_submodules
     from dynslam2d.memtrim import map_large_blocks
 
+    defer_numpy_submodules()  # SciPy's copy of NumPy's namespace imports none of f2py, testing, ... (lazynumpy.py)
     map_large_blocks()  # freed map-sized arrays go back to the OS, not into a fragmented heap (memtrim.py)
     plain_numba_errors()  # no colorama round trip per numba typing attempt: a shorter cold compile (docs/speed.md)
     from dynslam2d.jitaot import table

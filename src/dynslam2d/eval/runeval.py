@@ -12,17 +12,18 @@ downstream computes any of it again. Formulas: docs/metrics.md.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from dynslam2d.eval.maps import CellSets, MapMetrics, cell_sets, map_metrics_of
-from dynslam2d.eval.motionclass import MotionRemoval, TimeToM, removal_by_motion, time_to_m
-from dynslam2d.eval.removal import RemovalMetrics, match_scans, removal_metrics
-from dynslam2d.eval.trajectory import AteResult, ate
-from dynslam2d.gridmap import GridMap
-from dynslam2d.io.groundtruth import GroundTruthFiles
-from dynslam2d.trajectory import Trajectory
+if TYPE_CHECKING:  # the scoring modules are imported on use: a run without ground truth never needs them
+    from dynslam2d.eval.maps import CellSets, MapMetrics
+    from dynslam2d.eval.motionclass import MotionRemoval, TimeToM
+    from dynslam2d.eval.removal import RemovalMetrics
+    from dynslam2d.eval.trajectory import AteResult
+    from dynslam2d.gridmap import GridMap
+    from dynslam2d.io.groundtruth import GroundTruthFiles
+    from dynslam2d.trajectory import Trajectory
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,6 +95,8 @@ def association_max_dt(reference: Trajectory) -> float:
 
 def score_map(grid: GridMap, gt: GroundTruthFiles, ate_result: AteResult) -> MapScore:
     """``grid`` (the run's map frame) against the ground-truth map, through the ATE alignment."""
+    from dynslam2d.eval.maps import cell_sets, map_metrics_of
+
     sets = cell_sets(grid, gt.static_map, transform=ate_result.alignment)
     return MapScore(sets, map_metrics_of(sets))
 
@@ -121,6 +124,10 @@ def evaluate_run(
     - with ``tracks`` (tracks.csv rows, :data:`dynslam2d.io.runfolder.TRACK_DTYPE`): how fast
       walking movers enter M (:func:`dynslam2d.eval.motionclass.time_to_m`).
     """
+    from dynslam2d.eval.motionclass import removal_by_motion, time_to_m
+    from dynslam2d.eval.removal import match_scans, removal_metrics
+    from dynslam2d.eval.trajectory import ate
+
     max_dt = association_max_dt(gt.trajectory)
     res = ate(gt.trajectory, trajectory, align=True, max_dt=max_dt)
     a = res.alignment

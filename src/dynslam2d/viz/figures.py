@@ -5,10 +5,10 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from dynslam2d.eval.runeval import RunEvaluation
 from dynslam2d.gridmap import GridMap
 from dynslam2d.pipeline import RunResult
 from dynslam2d.records import TrackRows
@@ -16,10 +16,12 @@ from dynslam2d.slam.cleanup import CleanResult
 from dynslam2d.slam.confidence import stretches
 from dynslam2d.viz import style
 from dynslam2d.viz.collect import RemovedPointsCollector
-from dynslam2d.viz.errorsplot import map_difference_of, plot_errors
 from dynslam2d.viz.mapplot import GreyMap, paint_grey, plot_map
 from dynslam2d.viz.trackpaths import TrackPath, boxes_to_draw, track_paths, tracks_to_draw
 from dynslam2d.viz.tracksplot import plot_tracks, tracks_background
+
+if TYPE_CHECKING:
+    from dynslam2d.eval.runeval import RunEvaluation
 
 
 def _loop_segments(result: RunResult) -> np.ndarray | None:
@@ -158,6 +160,8 @@ def write_figures(
         title=f"{name}\n{tracks_title(all_paths)}",
     )
     if evaluation is not None and ate_res is not None:
+        from dynslam2d.viz.errorsplot import map_difference_of, plot_errors  # ground truth only
+
         diff = map_difference_of(evaluation.map.sets)  # the map drawn: the cleaned one after a clean-up pass
         spans = {k: stretches(traj.stamps, conf[k]) for k in ("degenerate", "low_support", "lost") if k in conf}
         note = ""
