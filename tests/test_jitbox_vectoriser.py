@@ -1,0 +1,88 @@
+"""A kernel in dynslam2d.jitbox.LOOPS_NOT_VECTORISED is optimised without LLVM's loop vectoriser, every other kernel
+with numba's pipeline, and both compute the same numbers (issue 13 item 2, docs/speed.md pass cmp50)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from dynslam2d import jitbox
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+
+#: argv[1] "1": the probe's kernel ``scaled`` in LOOPS_NOT_VECTORISED, "0": not. Two kernels of a module named inside
+#: the package (so that numba's compiles are a dynslam2d kernel's) with the same loops; prints their results and
+#: whether their optimised code holds vector loops.
+SCRIPT = r'''
+import json, sys, types
+import numpy as np
+from dynslam2d import jitbox
+MOD = "dynslam2d._vectoriser_probe"
+if sys.argv[1] == "1":
+    jitbox.LOOPS_NOT_VECTORISED = frozenset({MOD + ".scaled"})
+source = """
+import numpy as np
+from numba import njit
+@njit
+def scaled(a, b, n):
+    out = np.empty(n)
+    total = 0
+    for i in range(n):
+        out[i] = a[i] * 2.5 + b[i]
+        total += i * 3
+    return out, total
+@njit
+def other(a, b, n):
+    out = np.empty(n)
+    total = 0
+    for i in range(n):
+        out[i] = a[i] * 2.5 + b[i]
+        total += i * 3
+    return out, total
+"""
+module = types.ModuleType(MOD)
+sys.modules[MOD] = module
+exec(compile(source, "<vectoriser_probe>", "exec"), module.__dict__)
+a = np.linspace(-3.0, 7.0, 101)
+b = np.cos(a)
+res = {}
+for name in ("scaled", "other"):
+    kernel = getattr(module, name)
+    out, total = kernel(a, b, a.size)
+    ir = kernel.overloads[kernel.signatures[0]].library.get_llvm_str()
+    res[name] = {"out": out.tobytes().hex(), "total": int(total), "vector": "vector.body" in ir}
+print(json.dumps(res))
+'''
+
+
+def _probe(listed: str, tmp_path: Path) -> dict[str, dict[str, object]]:
+    env = {"PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / listed), "PATH": "/usr/bin:/bin"}
+    done = subprocess.run([sys.executable, "-c", SCRIPT, listed], env=env, capture_output=True, text=True,
+                          timeout=300, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_listed_kernel_is_not_vectorised_and_computes_the_same(tmp_path: Path) -> None:
+    plain = _probe("0", tmp_path)
+    listed = _probe("1", tmp_path)
+    assert plain["scaled"]["vector"] and plain["other"]["vector"]  # numba's pipeline vectorises these loops
+    assert not listed["scaled"]["vector"]
+    assert listed["other"]["vector"]  # a kernel not listed keeps numba's pipeline
+    for name in ("scaled", "other"):
+        assert listed[name]["out"] == plain[name]["out"] and listed[name]["total"] == plain[name]["total"]
+
+
+def test_pipeline_sources_guard(monkeypatch: object) -> None:
+    assert jitbox._pipeline_sources_checked()  # the numba this project pins
+    monkeypatch.setitem(jitbox.PIPELINE_SOURCES, "CPUCodegen._pass_builder", "0" * 16)  # type: ignore[attr-defined]
+    assert not jitbox._pipeline_sources_checked()
+
+
+def test_listed_kernels_exist() -> None:
+    import importlib
+
+    for name in jitbox.LOOPS_NOT_VECTORISED:
+        module, qualname = name.rsplit(".", 1)
+        assert hasattr(importlib.import_module(module), qualname), name
