@@ -84,12 +84,12 @@ def grey_indices(img: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
-def occupancy_indices(grid: GridMap, fade: float | None = None) -> np.ndarray:
+def occupancy_indices(grid: GridMap, fade: float | None = None, dtype: type = np.uint16) -> np.ndarray:
     """:func:`grey_indices` of :func:`occupancy_image` (optionally faded towards white,
     ``1 − fade·(1 − grey)``), computed a block of rows at a time: the same values without the map-sized
-    float64 copies."""
+    float64 copies. ``dtype``: the indices' (uint8 holds the :data:`GREY_LEVELS` greys but no painted colour)."""
     prob = grid.prob
-    out = np.empty(prob.shape, dtype=np.uint16)
+    out = np.empty(prob.shape, dtype=dtype)
     for r0 in range(0, prob.shape[0], _ROWS_PER_CHUNK):
         part = prob[r0:r0 + _ROWS_PER_CHUNK]
         img = 1.0 - np.nan_to_num(part, nan=0.5)
@@ -106,9 +106,12 @@ class GreyMap:
     (xmin, xmax, ymin, ymax), m, and cell size, m (0 when not given): 2 bytes per cell where the :class:`GridMap`
     takes 8 (issue 13 item 3)."""
 
-    indices: np.ndarray  # (H, W) uint16, row 0 at the bottom
+    indices: np.ndarray  # (H, W) uint16 (uint8: tracks.png's faint map, never painted), row 0 at the bottom
     extent: tuple[float, float, float, float]
     resolution: float = 0.0
+    #: Colours already painted into ``indices`` (:func:`paint_grey`), in order (index GREY_LEVELS + k for the k-th),
+    #: each with its number of cells.
+    painted: tuple[tuple[str, int], ...] = ()
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -121,23 +124,60 @@ class GreyMap:
         return cls(occupancy_indices(grid, fade), grid.extent, float(grid.resolution))
 
 
+def paint_grey(grey: GreyMap, paint: Sequence[tuple[np.ndarray | None, str]]) -> GreyMap:
+    """``grey`` with the cells of each ``(mask, colour)`` of ``paint`` ((H, W) bool masks on its cells; later layers
+    over earlier ones; empty or differently shaped masks skipped) painted into its indices (in place; a uint16 copy
+    of uint8 indices), as :func:`draw_grey_indices` paints them, and the colours with their cell counts recorded in
+    ``painted``: the masks are not needed to draw it (they go before matplotlib's import; issue 13 item 3, pass
+    mem49). Needs no matplotlib."""
+    idx = grey.indices
+    painted = list(grey.painted)
+    for mask, colour in paint:
+        done = _paint_cells(idx, mask, GREY_LEVELS + len(painted))
+        if done is not None:
+            idx = done
+            painted.append((colour, int(np.count_nonzero(mask))))
+    return GreyMap(idx, grey.extent, grey.resolution, tuple(painted))
+
+
+def _paint_cells(idx: np.ndarray, mask: np.ndarray | None, index: int) -> np.ndarray | None:
+    """``idx`` with the cells of ``mask`` set to ``index`` (in place, or in a uint16 copy when ``index`` does not
+    fit ``idx``'s type); None, ``idx`` untouched, when ``mask`` is None, shaped otherwise or empty."""
+    if mask is None or mask.shape != idx.shape or not mask.any():
+        return None
+    if index > np.iinfo(idx.dtype).max:  # (a uint8 map's 256 greys leave no index for a colour)
+        idx = idx.astype(np.uint16)
+    idx[mask] = index
+    return idx
+
+
 def draw_grey_indices(ax: Any, idx: np.ndarray, extent: tuple[float, float, float, float],
                       erased: np.ndarray | None = None, erased_colour: str | None = None,
-                      paint: Sequence[tuple[np.ndarray | None, str]] = (), **kw: Any) -> Any:
+                      paint: Sequence[tuple[np.ndarray | None, str]] = (), painted: Sequence[str] = (),
+                      **kw: Any) -> Any:
     """:func:`draw_grey` of grey indices already computed (:func:`grey_indices`, :func:`occupancy_indices`;
-    ``idx`` is painted over in place)."""
+    ``idx`` is painted over in place, or a uint16 copy of a uint8 ``idx`` when a painted colour needs an index past
+    255). ``painted``: the colours :func:`paint_grey` painted into ``idx`` already (``GreyMap.painted``'s)."""
     from matplotlib.colors import ListedColormap, NoNorm, to_rgba
 
     grey = _grey_colormap()
     colours = grey(np.arange(grey.N))
+    for colour in painted:
+        colours = np.vstack((colours, to_rgba(colour)))
     layers = list(paint) + ([(erased, erased_colour)] if erased_colour is not None else [])
     for mask, colour in layers:
-        if mask is not None and mask.shape == idx.shape and mask.any():
-            idx[mask] = len(colours)
+        done = _paint_cells(idx, mask, len(colours))
+        if done is not None:
+            idx = done
             colours = np.vstack((colours, to_rgba(colour)))
     im = ax.imshow(idx, cmap=ListedColormap(colours), norm=NoNorm(), origin="lower", extent=extent,
                    interpolation="nearest", interpolation_stage="data", **kw)
     im.__class__ = _index_image_class()  # the same pixels, sampled without map-sized float32 copies
+    # imshow keeps a masked copy of ``idx`` (matplotlib's ``safe_masked_invalid(copy=True)``; no cell is masked, the
+    # indices being integers): the image draws ``idx`` itself instead, so the figure holds the map's indices once, not
+    # twice, while it is saved (MIT CSAIL: 3.6 MiB; issue 13 item 3, pass mem49). The caller does not change ``idx``
+    # after this.
+    im._A = np.ma.array(idx, copy=False)
     return im
 
 
@@ -174,8 +214,10 @@ def _index_image_class() -> type:
     class IndexImage(AxesImage):
         def _make_image(self, A, in_bbox, out_bbox, clip_bbox, magnification=1.0,  # type: ignore[no-untyped-def]
                         unsampled=False, round_to_pixel_border=True):
-            if (unsampled or A.ndim != 2 or self._interpolation_stage != "data" or not isinstance(self.norm, NoNorm)
-                    or self.get_interpolation() != "nearest" or self.origin != "lower" or self.get_alpha() is not None):
+            indexed = A.ndim == 2 and self._interpolation_stage == "data" and isinstance(self.norm, NoNorm)
+            rgba = A.ndim == 3 and A.shape[-1] == 4 and A.dtype == np.float32  # (points_overlay's)
+            if (unsampled or not (indexed or rgba) or self.get_interpolation() != "nearest" or self.origin != "lower"
+                    or self.get_alpha() is not None):
                 return super()._make_image(A, in_bbox, out_bbox, clip_bbox, magnification, unsampled,
                                            round_to_pixel_border)
             clipped = Bbox.intersection(out_bbox, clip_bbox)
@@ -195,16 +237,44 @@ def _index_image_class() -> type:
             h, w = int(box.height), int(box.width)
             cols = _picked(self, A.shape[1], w, t, 1)
             rows = _picked(self, A.shape[0], h, t, 0)
-            # the colormap's bytes (what ``cmap(idx, bytes=True)`` takes them from), looked up per output pixel
-            lut = self.cmap(np.arange(self.cmap.N), bytes=True)
-            output = lut[np.asarray(A)[np.ix_(np.maximum(rows, 0), np.maximum(cols, 0))]]
+            rows_in, cols_in = np.maximum(rows, 0), np.maximum(cols, 0)
+            if indexed:  # the colormap's bytes (what ``cmap(idx, bytes=True)`` takes them from), per output pixel
+                lut, cells = self.cmap(np.arange(self.cmap.N), bytes=True), np.asarray(A)
+            else:  # an RGBA image: each cell's bytes as matplotlib's RGBA path makes them (_cell_bytes)
+                lut, cells = _cell_bytes(self, np.asarray(A)), None
+            output = np.empty((h, w, 4), dtype=np.uint8)
+            # a block of output rows at a time: no (h, w) array of the picked indices beside the pixels (MIT CSAIL's
+            # map.png: 2.3 MiB while the figure is saved; pass mem49)
+            for r0 in range(0, h, _ROWS_PER_CHUNK):
+                rr = rows_in[r0:r0 + _ROWS_PER_CHUNK]
+                output[r0:r0 + _ROWS_PER_CHUNK] = (lut[cells[np.ix_(rr, cols_in)]] if cells is not None
+                                                   else lut[rr[:, None] * A.shape[1] + cols_in[None, :]])
             if (rows < 0).any() or (cols < 0).any():  # pixels outside the image: matplotlib's value 0, transparent
                 outside = (rows < 0)[:, None] | (cols < 0)[None, :]
-                output[outside] = lut[0]
+                output[outside] = lut[0] if indexed else 0
                 output[outside, 3] = 0
             return output, box.x0 / magnification, box.y0 / magnification, t
 
     return IndexImage
+
+
+def _cell_bytes(image: Any, A: np.ndarray) -> np.ndarray:
+    """(H·W, 4) uint8: the pixel matplotlib's RGBA path (``_ImageBase._make_image``, matplotlib 3.11: premultiplied by
+    its alpha, resampled, divided by the resampled alpha, ``to_rgba(bytes=True)``) makes of each cell of the (H, W, 4)
+    float32 image ``A`` under ``image``'s nearest resampling: a pixel takes one cell's value through the same
+    arithmetic whatever the scale, so the cells resampled one to one give every pixel's bytes (pass mem49)."""
+    from matplotlib.image import _resample
+    from matplotlib.transforms import Affine2D
+
+    alpha_in = A[..., 3]
+    if (alpha_in != 1).any():
+        A = A * alpha_in[..., None]
+        A[..., 3] = alpha_in
+    res = _resample(image, A, A.shape[:2], Affine2D())
+    alpha_out = res[..., 3].copy()
+    res /= np.where(alpha_out != 0, alpha_out, 1)[..., None]
+    res[..., 3] = alpha_out
+    return np.asarray(image.to_rgba(res, bytes=True, norm=False)).reshape(-1, 4)
 
 
 def points_overlay(
@@ -349,32 +419,36 @@ def plot_map(
     fig = new_figure((fw + 2.7, fh))
     ax = fig.subplots()
     handles: list[Any] = []
-    has_erased = erased is not None and erased.shape == grid.shape and bool(erased.any())
-    has_mem = memory_erased is not None and memory_erased.shape == grid.shape and bool(memory_erased.any())
+    # the cells a GreyMap has painted in already (paint_grey: the masks let go before the figure), by colour
+    pre = dict(grid.painted) if isinstance(grid, GreyMap) else {}
+    has_erased = style.ERASED in pre or (erased is not None and erased.shape == grid.shape and bool(erased.any()))
+    has_mem = style.MEMORY_ERASED in pre or (memory_erased is not None and memory_erased.shape == grid.shape
+                                             and bool(memory_erased.any()))
     # one image with the erased cells painted in (opaque, so the same pixels as an overlay); the
     # clean-up's cells over retroactive erasure's
     paint = [(m, c) for m, c, on in ((memory_erased, style.MEMORY_ERASED, has_mem), (erased, style.ERASED, has_erased))
-             if on]
+             if on and c not in pre]
     draw_grey_indices(ax, grid.indices if isinstance(grid, GreyMap) else occupancy_indices(grid), extent,
-                      paint=paint)
+                      paint=paint, painted=list(pre))
     # the three greys of occupancy_image
     handles += [Patch(facecolor="black", edgecolor="0.3", label="occupied"),
                 Patch(facecolor="white", edgecolor="0.3", label="free"),
                 Patch(facecolor=str(UNKNOWN_GREY), edgecolor="0.3", label="not observed")]
     if has_mem:
-        assert memory_erased is not None
-        n_me = int(memory_erased.sum())
+        n_me = pre[style.MEMORY_ERASED] if style.MEMORY_ERASED in pre else int(memory_erased.sum())  # type: ignore[union-attr]
         handles.append(Patch(color=style.MEMORY_ERASED,
                              label=f"erased when a parked\nobject left ({n_me * grid.resolution ** 2:.2f} m²)"))
     if has_erased:
-        assert erased is not None
-        n_er = int(erased.sum())
+        n_er = pre[style.ERASED] if style.ERASED in pre else int(erased.sum())  # type: ignore[union-attr]
         handles.append(Patch(color=style.ERASED, label=f"erased by clean-up ({n_er * grid.resolution ** 2:.2f} m²)"))
     if removed_xy is not None and len(removed_xy):
         # At least ~1.5 px per square at 8 in × dpi so that single points stay visible.
         cell = max(grid.resolution, (extent[1] - extent[0]) / (8.0 * dpi / 1.5))
         img, ext = points_overlay(np.asarray(removed_xy, dtype=np.float64), extent, cell, style.REMOVED)
-        ax.imshow(img, origin="lower", extent=ext, interpolation="nearest", zorder=2)
+        im = ax.imshow(img, origin="lower", extent=ext, interpolation="nearest", zorder=2)
+        # the same pixels from the output pixels' cells only: matplotlib resamples the whole overlay into output-sized
+        # float32 RGBA copies (negative_2's map.png: ≈ 25 MiB while it is saved; pass mem49)
+        im.__class__ = _index_image_class()
         n_rm = len(removed_xy) if removed_count is None else int(removed_count)
         handles.append(Patch(color=style.REMOVED, label=removed_label(n_rm, len(removed_xy))))
     if reference_xy is not None and len(reference_xy):

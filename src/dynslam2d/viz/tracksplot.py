@@ -65,8 +65,10 @@ def _line_collection(segments: np.ndarray, **kwargs):  # type: ignore[no-untyped
 
 
 def tracks_background(grid: GridMap) -> GreyMap:
-    """The faint map :func:`plot_tracks` draws under the paths, as grey indices: what it keeps of ``grid``."""
-    return GreyMap(occupancy_indices(grid, fade=MAP_FADE), grid.extent)
+    """The faint map :func:`plot_tracks` draws under the paths, as grey indices: what it keeps of ``grid``. One byte
+    per cell (never painted: uint8 holds its :data:`~dynslam2d.viz.mapplot.GREY_LEVELS` greys; it lives through
+    map.png, 1.8 MiB on MIT CSAIL; pass mem49)."""
+    return GreyMap(occupancy_indices(grid, fade=MAP_FADE, dtype=np.uint8), grid.extent)
 
 
 def _speed_cmap():  # type: ignore[no-untyped-def]
