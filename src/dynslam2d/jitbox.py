@@ -125,11 +125,32 @@ def box_arrays_from_env() -> bool:
 
 
 #: Kernels (``module.qualname``) whose module pipeline runs without LLVM's loop vectoriser (its interleaving
-#: of scalar loops left on):
-#: ≈ 0.2–0.55 s of cold compile CPU for ``detect_rows`` (with ``measure_batch``, which it optimises first for its
-#: three callers), the track stage's time per scan unchanged (docs/speed.md, pass cmp50). The vectoriser keeps the
-#: order of floating-point operations without ``fastmath``, so the numbers are the same either way.
-LOOPS_NOT_VECTORISED = frozenset({"dynslam2d.detect.kernels.detect_rows"})
+#: of scalar loops left on), each with the SHA-256 (16 hex digits) of its Python source as measured: a kernel whose
+#: source is another one (edited since) gets numba's pipeline again until its stage is measured anew and the hash
+#: renewed (``tests/test_jitbox_vectoriser.py`` says which). ``detect_rows`` (with ``measure_batch``, which it
+#: optimises first for its three callers): ≈ 0.2–0.55 s of cold compile CPU (pass cmp50); ``record_cells``,
+#: ``assign_groups``: ≈ 0.1 s each (pass cmp51); the track stage's time per scan unchanged. Not
+#: ``vacated_scan_kernel``: it optimises ``_scan_geometry`` first for ``_geometry_bounds`` too (the post-loop
+#: clean-up, which no lockstep run measures; jitcache's ``CALLEE_OPTIMISED_ONCE``). The vectoriser keeps the order of
+#: floating-point operations without ``fastmath``, so the numbers are the same either way.
+LOOPS_NOT_VECTORISED = {
+    "dynslam2d.detect.kernels.detect_rows": "b6db1d7a692ba8fc",
+    "dynslam2d.detect.kernels_assign.assign_groups": "231f863e608ec456",
+    "dynslam2d.slam.ledgerkernels.record_cells": "2b2deba5b3e8fe0a",
+}
+
+
+def source_hash(func: Any) -> str:
+    """SHA-256 (16 hex digits) of the Python source of ``func`` ("" when it has none)."""
+    import hashlib
+    import inspect
+
+    try:
+        source = inspect.getsource(func)
+    except (OSError, TypeError):
+        return ""
+    return hashlib.sha256(source.encode()).hexdigest()[:16]
+
 
 #: SHA-256 (16 hex digits) of numba's functions whose module pipeline :func:`_module_pipeline` builds, as checked;
 #: any other numba source: numba's pipeline for every kernel.
@@ -145,9 +166,6 @@ STUDY_ENV = "DYNSLAM2D_LOOPS_NOT_VECTORISED"
 
 
 def _pipeline_sources_checked() -> bool:
-    import hashlib
-    import inspect
-
     from numba.core import codegen, llvm_bindings
 
     found = {
@@ -155,31 +173,28 @@ def _pipeline_sources_checked() -> bool:
         "CPUCodegen._pass_builder": codegen.CPUCodegen._pass_builder,
         "create_pass_builder": llvm_bindings.create_pass_builder,
     }
-    for name, func in found.items():
-        try:
-            source = inspect.getsource(func)
-        except (OSError, TypeError):
-            return False
-        if hashlib.sha256(source.encode()).hexdigest()[:16] != PIPELINE_SOURCES.get(name):
-            return False
-    return True
+    return all(source_hash(func) == PIPELINE_SOURCES.get(name) for name, func in found.items())
 
 
-def _not_vectorised(kernel: str) -> bool:
+def _not_vectorised(kernel: str, func: Any) -> bool:
+    """Whether the kernel ``kernel`` (``module.qualname``), the Python function ``func``, goes without the loop
+    vectoriser: listed in :data:`LOOPS_NOT_VECTORISED` with its source's hash, or named by :data:`STUDY_ENV`."""
     import os
 
-    if kernel in LOOPS_NOT_VECTORISED:
+    listed = LOOPS_NOT_VECTORISED.get(kernel)
+    if listed and source_hash(func) == listed:
         return True
     study = {name.strip() for name in os.environ.get(STUDY_ENV, "").split(",") if name.strip()}
     return "*" in study or kernel.rsplit(".", 1)[-1] in study
 
 
-def _module_pipeline(library: Any, kernel: str, checked: bool) -> Any:
+def _module_pipeline(library: Any, kernel: str, checked: bool, func: Any = None) -> Any:
     """numba's full module pipeline (``CPUCodegen._module_pass_manager()``) for ``library``, the code of the kernel
-    ``kernel`` (``module.qualname``, "" for a library of another function); for a kernel :func:`_not_vectorised`
-    (and numba's sources as ``checked``) the same pipeline with LLVM's loop vectoriser off."""
+    ``kernel`` (``module.qualname``, "" for a library of another function; ``func`` its Python function); for a
+    kernel :func:`_not_vectorised` (and numba's sources as ``checked``) the same pipeline with LLVM's loop
+    vectoriser off."""
     codegen = library._codegen
-    if not (kernel and checked and _not_vectorised(kernel)):
+    if not (kernel and checked and _not_vectorised(kernel, func)):
         return codegen._module_pass_manager()
     import llvmlite.binding as ll
     from numba.core import config
@@ -223,7 +238,8 @@ def one_llvm_optimisation() -> bool:
         return False
     depth = [0]  # dynslam2d kernels being compiled in this process (nested: a kernel compiles its callees)
     checked = _pipeline_sources_checked()
-    names = [("", "")]  # (qualname, module.qualname) of the innermost dynslam2d kernel being compiled
+    names: list[tuple[str, str, Any]] = [("", "", None)]  # (qualname, module.qualname, function) of the innermost
+    # dynslam2d kernel being compiled
 
     class _Kernels(event.Listener):
         def on_start(self, ev: Any) -> None:
@@ -232,7 +248,7 @@ def one_llvm_optimisation() -> bool:
             ours = module.startswith("dynslam2d.")
             depth.append(depth[-1] + ours)
             qualname = getattr(func, "__qualname__", "") if ours else ""
-            names.append((qualname, f"{module}.{qualname}") if ours else names[-1])
+            names.append((qualname, f"{module}.{qualname}", func) if ours else names[-1])
 
         def on_end(self, ev: Any) -> None:
             if len(depth) > 1:
@@ -247,8 +263,8 @@ def one_llvm_optimisation() -> bool:
 
     def optimise_final_once(self: Any) -> None:
         if depth[-1] > 0 and config.LLVM_REFPRUNE_PASS:  # (numba's refprune pass ends the module pipeline too)
-            qualname, kernel = names[-1]
-            passes, builder = _module_pipeline(self, kernel if self.name == qualname else "", checked)
+            qualname, kernel, func = names[-1]
+            passes, builder = _module_pipeline(self, kernel if self.name == qualname else "", checked, func)
             passes.run(self._final_module, builder)
             return
         final(self)
