@@ -100,4 +100,5 @@ def test_listed_kernels_exist_as_measured() -> None:
     for name, digest in jitbox.LOOPS_NOT_VECTORISED.items():
         module, qualname = name.rsplit(".", 1)
         kernel = getattr(importlib.import_module(module), qualname)
-        assert jitbox.source_hash(kernel.py_func) == digest, f"{name} edited since measured (see this test's doc)"
+        now = jitbox.source_hash(kernel.py_func)
+        assert now == digest, f"{name} edited since measured (its source's hash now {now!r}; see this test's doc)"
