@@ -32,11 +32,13 @@ from numba import njit
 @njit
 def callee(a, k):
     out = np.empty(a.size)
-    for i in range(a.size):
+    n = a.size
+    for i in range(n):
         v = math.sqrt(abs(a[i])) * k + i
         if v > 10.0:
             v = math.log(v)
-        out[i] = v / (1.0 + a[i] * a[i])
+        w = abs(a[i]) / v if v > 0.0 else math.nan  # (a select, and below an integer remainder by a variable:
+        out[i] = v / (1.0 + a[i] * a[i]) + w + (i * 7 + int(v)) % n  # what LLVM's code generator rewrites in place)
     if a.size == 0:
         raise ValueError("empty")
     return out

@@ -13,7 +13,9 @@ and the numba cache keys entries by the source file, so those modules' kernels a
 
 :func:`one_llvm_optimisation` leaves of numba's three LLVM optimisations of a kernel's code (the function pipeline
 on each IR module as it is added, a cheap and the full module pipeline on the linked library) the full module
-pipeline only: 5–10 % less cold compile CPU, the same results (docs/speed.md, pass cold21).
+pipeline only: 5–10 % less cold compile CPU, the same results (docs/speed.md, pass cold21). The kernels in
+:data:`LOOPS_NOT_VECTORISED` go through that pipeline without LLVM's loop vectoriser, where it costs compile time
+and buys no run time (pass cmp50).
 
 :func:`float_bits`, :func:`float_from_bits` and :func:`word_at` reinterpret bits inside a kernel as NumPy's
 ``.view`` does, lowered in place: numba compiles its ``.view`` of an array once per (array type, dtype) as a
@@ -122,6 +124,92 @@ def box_arrays_from_env() -> bool:
     return True
 
 
+#: Kernels (``module.qualname``) whose module pipeline runs without LLVM's loop vectoriser (its interleaving
+#: of scalar loops left on), each with the SHA-256 (16 hex digits) of its Python source as measured: a kernel whose
+#: source is another one (edited since) gets numba's pipeline again until its stage is measured anew and the hash
+#: renewed (``tests/test_jitbox_vectoriser.py`` says which). ``detect_rows`` (with ``measure_batch``, which it
+#: optimises first for its three callers): ≈ 0.2–0.55 s of cold compile CPU (pass cmp50); ``record_cells``,
+#: ``assign_groups``: ≈ 0.1 s each (pass cmp51); the track stage's time per scan unchanged. Not
+#: ``vacated_scan_kernel``: it optimises ``_scan_geometry`` first for ``_geometry_bounds`` too (the post-loop
+#: clean-up, which no lockstep run measures; jitcache's ``CALLEE_OPTIMISED_ONCE``). The vectoriser keeps the order of
+#: floating-point operations without ``fastmath``, so the numbers are the same either way.
+LOOPS_NOT_VECTORISED = {
+    "dynslam2d.detect.kernels.detect_rows": "b6db1d7a692ba8fc",
+    "dynslam2d.detect.kernels_assign.assign_groups": "231f863e608ec456",
+    "dynslam2d.slam.ledgerkernels.record_cells": "2b2deba5b3e8fe0a",
+}
+
+
+def source_hash(func: Any) -> str:
+    """SHA-256 (16 hex digits) of the Python source of ``func`` ("" when it has none)."""
+    import hashlib
+    import inspect
+
+    try:
+        source = inspect.getsource(func)
+    except (OSError, TypeError):
+        return ""
+    return hashlib.sha256(source.encode()).hexdigest()[:16]
+
+
+#: SHA-256 (16 hex digits) of numba's functions whose module pipeline :func:`_module_pipeline` builds, as checked;
+#: any other numba source: numba's pipeline for every kernel.
+PIPELINE_SOURCES = {
+    "CPUCodegen._module_pass_manager": "3f01da96a94f708b",
+    "CPUCodegen._pass_builder": "035dd9dd5f6dedc5",
+    "create_pass_builder": "0386a7194196ad35",
+}
+
+#: Study knob (benchmarks only, with an empty ``NUMBA_CACHE_DIR``: numba's cache does not record the pipeline):
+#: comma-separated kernel qualnames, or ``*`` for every kernel, compiled without the loop vectoriser too.
+STUDY_ENV = "DYNSLAM2D_LOOPS_NOT_VECTORISED"
+
+
+def _pipeline_sources_checked() -> bool:
+    from numba.core import codegen, llvm_bindings
+
+    found = {
+        "CPUCodegen._module_pass_manager": codegen.CPUCodegen._module_pass_manager,
+        "CPUCodegen._pass_builder": codegen.CPUCodegen._pass_builder,
+        "create_pass_builder": llvm_bindings.create_pass_builder,
+    }
+    return all(source_hash(func) == PIPELINE_SOURCES.get(name) for name, func in found.items())
+
+
+def _not_vectorised(kernel: str, func: Any) -> bool:
+    """Whether the kernel ``kernel`` (``module.qualname``), the Python function ``func``, goes without the loop
+    vectoriser: listed in :data:`LOOPS_NOT_VECTORISED` with its source's hash, or named by :data:`STUDY_ENV`."""
+    import os
+
+    listed = LOOPS_NOT_VECTORISED.get(kernel)
+    if listed and source_hash(func) == listed:
+        return True
+    study = {name.strip() for name in os.environ.get(STUDY_ENV, "").split(",") if name.strip()}
+    return "*" in study or kernel.rsplit(".", 1)[-1] in study
+
+
+def _module_pipeline(library: Any, kernel: str, checked: bool, func: Any = None) -> Any:
+    """numba's full module pipeline (``CPUCodegen._module_pass_manager()``) for ``library``, the code of the kernel
+    ``kernel`` (``module.qualname``, "" for a library of another function; ``func`` its Python function); for a
+    kernel :func:`_not_vectorised` (and numba's sources as ``checked``) the same pipeline with LLVM's loop
+    vectoriser off."""
+    codegen = library._codegen
+    if not (kernel and checked and _not_vectorised(kernel, func)):
+        return codegen._module_pass_manager()
+    import llvmlite.binding as ll
+    from numba.core import config
+    from numba.core.codegen import _parse_refprune_flags
+
+    tuning = ll.create_pipeline_tuning_options()  # (numba's create_pass_builder, loop vectoriser off)
+    tuning.speed_level = config.OPT
+    tuning.slp_vectorization = config.SLP_VECTORIZE
+    tuning.loop_vectorization = False
+    builder = ll.create_pass_builder(codegen._tm, tuning)
+    passes = builder.getModulePassManager()
+    passes.add_refprune_pass(_parse_refprune_flags())  # (one_llvm_optimisation runs only with numba's refprune)
+    return passes, builder
+
+
 def one_llvm_optimisation() -> bool:
     """Have numba optimise a dynslam2d kernel's LLVM IR once, with its full module pipeline only; returns whether it
     installed that (False when called again or when numba's code library differs).
@@ -149,15 +237,23 @@ def one_llvm_optimisation() -> bool:
     if optimise is None or final is None or getattr(optimise, "_dynslam2d_once", False):
         return False
     depth = [0]  # dynslam2d kernels being compiled in this process (nested: a kernel compiles its callees)
+    checked = _pipeline_sources_checked()
+    names: list[tuple[str, str, Any]] = [("", "", None)]  # (qualname, module.qualname, function) of the innermost
+    # dynslam2d kernel being compiled
 
     class _Kernels(event.Listener):
         def on_start(self, ev: Any) -> None:
             func = getattr((ev.data or {}).get("dispatcher"), "py_func", None)
-            depth.append(depth[-1] + (getattr(func, "__module__", "") or "").startswith("dynslam2d."))
+            module = getattr(func, "__module__", "") or ""
+            ours = module.startswith("dynslam2d.")
+            depth.append(depth[-1] + ours)
+            qualname = getattr(func, "__qualname__", "") if ours else ""
+            names.append((qualname, f"{module}.{qualname}", func) if ours else names[-1])
 
         def on_end(self, ev: Any) -> None:
             if len(depth) > 1:
                 depth.pop()
+                names.pop()
 
     def optimise_once(self: Any, ll_module: Any) -> None:
         if depth[-1] > 0:
@@ -167,7 +263,8 @@ def one_llvm_optimisation() -> bool:
 
     def optimise_final_once(self: Any) -> None:
         if depth[-1] > 0 and config.LLVM_REFPRUNE_PASS:  # (numba's refprune pass ends the module pipeline too)
-            passes, builder = self._codegen._module_pass_manager()
+            qualname, kernel, func = names[-1]
+            passes, builder = _module_pipeline(self, kernel if self.name == qualname else "", checked, func)
             passes.run(self._final_module, builder)
             return
         final(self)

@@ -628,11 +628,15 @@ CALLEE_OPTIMISED_IN_CALLER = True
 #: Lazy callees (``module.function``) whose own function, once optimised in the first kernel that links it, is
 #: linked optimised into the later kernels that link it instead of being optimised again in each (pass cmp49; with
 #: :data:`CALLEE_OPTIMISED_IN_CALLER`). Only kernels whose callers' machine code was checked to be the same as when
-#: each optimises the callee itself (``benchmarks/check_jitprint.py --dump D --asm``): LLVM's code generator made a
-#: different instruction choice for two other callees linked this way from the same optimised IR (docs/speed.md,
-#: pass cmp49). ``measure_batch``: ≈ 15 000 IR instructions, linked by ``detect_rows``, ``association_gates`` and
-#: ``update_pairs``.
-CALLEE_OPTIMISED_ONCE = frozenset({"dynslam2d.detect.kernels.measure_batch"})
+#: each optimises the callee itself (``benchmarks/check_jitprint.py --dump D --asm``, passes cmp49 and cmp51).
+#: ``measure_batch``: ≈ 15 000 IR instructions, linked by ``detect_rows``, ``association_gates`` and
+#: ``update_pairs``; ``_bearing_bin`` by ``gated_points`` and ``match_pyramid``; ``_scan_geometry`` by
+#: ``vacated_scan_kernel`` and ``_geometry_bounds``.
+CALLEE_OPTIMISED_ONCE = frozenset({
+    "dynslam2d.detect.kernels.measure_batch",
+    "dynslam2d.slam.matcher._bearing_bin",
+    "dynslam2d.slam.cleanup._scan_geometry",
+})
 
 #: Suffix of the name given, in the module a later caller links, to the callee's unoptimised copy that
 #: :data:`CALLEE_OPTIMISED_ONCE` leaves unused.
@@ -678,23 +682,19 @@ def _lazy_sources_checked() -> dict[str, Any] | None:
     return found
 
 
-def optimised_once(first: Any, kernel: str, linked: Any) -> tuple[Any, Any] | None:
-    """For :data:`CALLEE_OPTIMISED_ONCE`: the two modules a later caller of a lazy callee links instead of the
-    callee's unoptimised module ``linked`` — that module with the callee's own function ``kernel`` renamed out of
-    the way (:data:`UNUSED_SUFFIX`: the caller's calls are left to a declaration, so its pipeline does not optimise
-    the callee again, and the unused copy is dropped), and, linked after the caller's optimisation, ``kernel``
-    as the first caller's library ``first`` has it optimised, with the functions and globals it uses (everything
-    else of that library dropped by LLVM's global dead-code elimination); None when ``first`` has no optimised
-    definition of ``kernel`` (inlined, or not yet compiled)."""
+def optimised_callee(first: Any, kernel: str) -> Any | None:
+    """For :data:`CALLEE_OPTIMISED_ONCE`: the lazy callee's function ``kernel`` as the library ``first`` (its first
+    caller) has it right after LLVM's optimisation, with the functions and globals it uses (a clone of that final
+    module, everything else dropped by LLVM's global dead-code elimination, linkages restored); None when ``first``
+    has no definition of ``kernel`` (inlined everywhere). Taken before ``first``'s machine code: MCJIT's code
+    generator rewrites the module it compiles in place (CodeGenPrepare's slow-division bypass, select sinking,
+    ``freeze``, hoisted constants; pass cmp51), and a copy taken after that compiles to other instructions when a
+    later caller's code generator runs those rewrites on it again."""
     import llvmlite.binding as ll
 
-    if first is None or not first._finalized or getattr(first, "_dynslam2d_lazy", False):
-        return None
     try:
         if first._final_module.get_function(kernel).is_declaration:
             return None
-        unused = linked.clone()
-        unused.get_function(kernel).name = kernel + UNUSED_SUFFIX
     except NameError:
         return None
     optimised = first._final_module.clone()
@@ -709,6 +709,22 @@ def optimised_once(first: Any, kernel: str, linked: Any) -> tuple[Any, Any] | No
     for value in [*optimised.functions, *optimised.global_variables]:
         if value.name in linkages:
             value.linkage = linkages[value.name]
+    return optimised
+
+
+def optimised_once(optimised: Any, kernel: str, linked: Any) -> tuple[Any, Any] | None:
+    """For :data:`CALLEE_OPTIMISED_ONCE`: the two modules a later caller of a lazy callee links instead of the
+    callee's unoptimised module ``linked`` — that module with the callee's own function ``kernel`` renamed out of
+    the way (:data:`UNUSED_SUFFIX`: the caller's calls are left to a declaration, so its pipeline does not optimise
+    the callee again, and the unused copy is dropped), and, linked after the caller's optimisation, ``optimised``
+    (:func:`optimised_callee` of the first caller); None when there is no such module."""
+    if optimised is None:
+        return None
+    try:
+        unused = linked.clone()
+        unused.get_function(kernel).name = kernel + UNUSED_SUFFIX
+    except NameError:
+        return None
     return unused, optimised
 
 
@@ -798,6 +814,8 @@ def lazy_callee_code() -> bool:
         optimise_final(self)
         for optimised in later:  # (CALLEE_OPTIMISED_ONCE: callees' functions optimised in their first caller)
             self._final_module.link_in(optimised, preserve=True)
+        for callee in self.__dict__.pop("_dynslam2d_first_of", ()):  # (before this library's machine code)
+            callee._dynslam2d_optimised = optimised_callee(self, callee._dynslam2d_kernel)
         return None
 
     finalizing: list[Any] = []  # libraries being finalized, innermost last (a caller links its callees' modules)
@@ -820,11 +838,11 @@ def lazy_callee_code() -> bool:
             return module
         once = self.__dict__.get("_dynslam2d_once", False)  # (False: not tried yet)
         if once is False:
-            first = self.__dict__.get("_dynslam2d_first_caller")
-            if first is None:  # the first caller optimises the callee's code, as in numba's way
-                self._dynslam2d_first_caller = weakref.ref(caller)
+            if not self.__dict__.get("_dynslam2d_first_caller", False):  # the first caller optimises the callee's
+                self._dynslam2d_first_caller = True  # code, as in numba's way, and keeps it (lazy_optimise_final)
+                caller.__dict__.setdefault("_dynslam2d_first_of", []).append(self)
                 return module
-            once = self._dynslam2d_once = optimised_once(first(), kernel, module)
+            once = self._dynslam2d_once = optimised_once(self.__dict__.get("_dynslam2d_optimised"), kernel, module)
         if not once:
             return module
         caller.__dict__.setdefault("_dynslam2d_link_after", []).append(once[1])
