@@ -145,10 +145,22 @@ def _walkers():
              Pose2D(0.2 * i / RATE, 0.0, 0.0)) for i in range(int(6.0 * RATE))]
 
 
+def _scalar_args(a, cfg: DetectConfig) -> tuple:
+    """detect_rows' arguments ``a`` with the configuration's values as the scalars Tracker._detect passed before
+    pass trk49 (made from ``cfg`` as it made them, not read back from ``p``'s ``DR_*`` columns; ``p``'s fit columns
+    stay where the classification and ``measure_batch`` read them)."""
+    sc, fc, tc = cfg.segment, cfg.fit, cfg.tracker
+    return (*a[:13], int(sc.max_skip_beams), a[13], a[14], max(sc.max_extent, sc.vehicle_max_extent), a[15],
+            sc.vehicle_max_extent > sc.max_extent, float(sc.max_extent), float(sc.vehicle_max_structure),
+            float(sc.vehicle_min_free), *a[16:21], float(tc.map_occupied_logodds), float(tc.map_free_logodds),
+            int(tc.map_free_radius), bool(fc.person_merge), float(fc.leg_max_extent), float(fc.leg_pair_distance))
+
+
 def _detect_rows_ref(*a):
-    """The calls detect_rows replaces (Tracker._detect before pass fus40): classify_batch, the former calls of
-    select_detections (_select_ref), merge_legs where people are merged and there are two detections or more, and
-    the final rows' fit columns copied as DetectionBatch's were."""
+    """The calls detect_rows replaces (Tracker._detect before pass fus40), ``a`` its former arguments
+    (:func:`_scalar_args`): classify_batch, the former calls of select_detections (_select_ref), merge_legs where
+    people are merged and there are two detections or more, and the final rows' fit columns copied as
+    DetectionBatch's were."""
     px, py, beams, offsets, fits = a[:5]
     keep, kinds, lohi, rel = K.classify_batch(*a[:18])
     sel = _select_ref(keep, kinds, lohi, rel, fits, offsets, px, py, *a[18:30])
@@ -183,15 +195,18 @@ def test_fused_kernels_give_the_former_calls_results_in_whole_runs(monkeypatch):
     clusters kept and dropped and merged pairs."""
     seen = {"calls": 0, "admit": 0, "map": 0, "pairs": 0}
 
+    cfg = Config().detect  # (the runs' detection configuration)
+
     def rows(*a):
-        want = _detect_rows_ref(*a)
+        o = _scalar_args(a, cfg)
+        want = _detect_rows_ref(*o)
         got = K.detect_rows(*a)
         assert len(got) == len(want) == 31
         for i, (g, w) in enumerate(zip(got, want)):
             assert _same(*_written(got, i, g, w)), i
         seen["calls"] += 1
-        seen["map"] += bool(a[22])
-        seen["admit"] += bool(a[18] and a[22]) and bool(long_kept(K.classify_batch(*a[:18])[0], a[4], a[19]).shape[0])
+        seen["map"] += bool(o[22])
+        seen["admit"] += bool(o[18] and o[22]) and bool(long_kept(K.classify_batch(*o[:18])[0], o[4], o[19]).shape[0])
         seen["pairs"] += got[7].shape[0]
         return got
 

@@ -24,8 +24,8 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "float64, Array(bool, 1, 'C'),)"),
     ('dynslam2d.detect.segment._segment_kernel',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 2, 'C'), bool, "
-     'bool, float64, float64, float64, float64, float64, int64, bool, int64, int64, bool, Array(float64, '
-     "1, 'C'), Array(float64, 1, 'C'), float64, float64, float64, float64,)"),
+     "Array(float64, 1, 'C'), bool, bool, Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, "
+     'float64, float64, float64,)'),
     ('dynslam2d.detect.shapes.fit_cluster_rows',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
      "Array(float64, 1, 'C'), Array(float64, 2, 'C'), int64, float64, int64, int64, bool, float64, "
@@ -33,9 +33,8 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.detect_rows',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), Array(bool, "
-     "1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, int64, float64, float64, float64, "
-     "Array(float64, 1, 'C'), bool, float64, float64, float64, bool, Array(float32, 2, 'C'), int64, "
-     'int64, float64, float64, float64, int64, bool, float64, float64,)'),
+     "1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, float64, float64, Array(float64, 1, "
+     "'C'), bool, Array(float32, 2, 'C'), int64, int64, float64,)"),
     ('dynslam2d.detect.freespace._ref_arrays',
      "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, "
      'float64,)'),
@@ -138,35 +137,35 @@ KERNELS: tuple[tuple[str, str], ...] = (
 #: CPU time of each kernel's compile (s, the kernels it compiles in turn included) in a one-core cold run when
 #: recorded: the background compile's estimate of how far ahead of the run a kernel is (its order, docs/speed.md).
 COMPILE_S: dict[str, float] = {
-    'dynslam2d.sim.world._cast_kernel': 0.41,
-    'dynslam2d.detect.body._drop_body': 0.15,
-    'dynslam2d.slam.matcher.gated_points': 0.47,
-    'dynslam2d.detect.body._observe_beams': 0.19,
-    'dynslam2d.detect.segment._segment_kernel': 0.65,
-    'dynslam2d.detect.shapes.fit_cluster_rows': 2.03,
-    'dynslam2d.detect.kernels.detect_rows': 6.06,
-    'dynslam2d.detect.freespace._ref_arrays': 0.10,
-    'dynslam2d.detect.kernels_update.birth_rows': 0.37,
-    'dynslam2d.detect.kernels_update.report_rows': 0.42,
-    'dynslam2d.slam.ledgerkernels.record_cells': 2.36,
-    'dynslam2d.slam.ledgerkernels.level_rows': 0.53,
-    'dynslam2d.slam.ledgerkernels.stand_marks': 0.37,
-    'dynslam2d.slam.raycast.integrate_levels': 1.50,
-    'dynslam2d.slam.raycast.ray_ends': 0.09,
-    'dynslam2d.slam.matcher.match_pyramid': 3.44,
-    'dynslam2d.slam.correlative._rotated_cells': 0.28,
-    'dynslam2d.slam.correlative._score_pyramid': 0.46,
-    'dynslam2d.slam.correlative.branch_and_bound': 1.46,
-    'dynslam2d.vacated.vacated_scan_kernel': 2.59,
-    'dynslam2d.detect.kernels.cv_predict': 0.23,
-    'dynslam2d.detect.kernels_update.association_gates': 1.14,
-    'dynslam2d.detect.kernels_assign.assign_groups': 0.95,
-    'dynslam2d.detect.kernels_update.update_pairs': 2.80,
-    'dynslam2d.detect.kernels_update.manage_counters': 0.48,
-    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.24,
-    'dynslam2d.detect.kernels.seen_through_refs': 0.22,
-    'dynslam2d.filter.observed_boxes_kernel': 0.19,
-    'dynslam2d.filter._rows_exclusion_kernel': 0.47,
-    'dynslam2d.slam.cleanup._geometry_bounds': 0.22,
-    'dynslam2d.slam.cleanup._count_beams': 0.60,
+    'dynslam2d.sim.world._cast_kernel': 0.40,
+    'dynslam2d.detect.body._drop_body': 0.14,
+    'dynslam2d.slam.matcher.gated_points': 0.44,
+    'dynslam2d.detect.body._observe_beams': 0.18,
+    'dynslam2d.detect.segment._segment_kernel': 0.66,
+    'dynslam2d.detect.shapes.fit_cluster_rows': 1.63,
+    'dynslam2d.detect.kernels.detect_rows': 4.52,
+    'dynslam2d.detect.freespace._ref_arrays': 0.09,
+    'dynslam2d.detect.kernels_update.birth_rows': 0.33,
+    'dynslam2d.detect.kernels_update.report_rows': 0.36,
+    'dynslam2d.slam.ledgerkernels.record_cells': 1.79,
+    'dynslam2d.slam.ledgerkernels.level_rows': 0.44,
+    'dynslam2d.slam.ledgerkernels.stand_marks': 0.33,
+    'dynslam2d.slam.raycast.integrate_levels': 1.18,
+    'dynslam2d.slam.raycast.ray_ends': 0.08,
+    'dynslam2d.slam.matcher.match_pyramid': 2.86,
+    'dynslam2d.slam.correlative._rotated_cells': 0.24,
+    'dynslam2d.slam.correlative._score_pyramid': 0.41,
+    'dynslam2d.slam.correlative.branch_and_bound': 1.40,
+    'dynslam2d.vacated.vacated_scan_kernel': 1.80,
+    'dynslam2d.detect.kernels.cv_predict': 0.22,
+    'dynslam2d.detect.kernels_update.association_gates': 1.10,
+    'dynslam2d.detect.kernels_assign.assign_groups': 0.74,
+    'dynslam2d.detect.kernels_update.update_pairs': 2.39,
+    'dynslam2d.detect.kernels_update.manage_counters': 0.50,
+    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.21,
+    'dynslam2d.detect.kernels.seen_through_refs': 0.20,
+    'dynslam2d.filter.observed_boxes_kernel': 0.18,
+    'dynslam2d.filter._rows_exclusion_kernel': 0.41,
+    'dynslam2d.slam.cleanup._geometry_bounds': 0.24,
+    'dynslam2d.slam.cleanup._count_beams': 0.53,
 }

@@ -98,6 +98,48 @@ def fit_params(cfg: FitConfig) -> np.ndarray:
     return p
 
 
+#: columns of :func:`detect_params`' array (``Tracker._det_p``): :func:`fit_params`' columns, then the detection
+#: configuration's values :func:`detect_rows` reads, fixed for a tracker's life
+DR_MAX_SKIP = _N_PARAMS  # SegmentConfig.max_skip_beams (an integer, exact in a float64)
+DR_EXT_LIM = _N_PARAMS + 1  # vehicles.extent_limit: the classification's longest side, m
+DR_ADMIT = _N_PARAMS + 2  # 1.0 where SegmentConfig.vehicle_max_extent > max_extent (the vehicle test runs), else 0.0
+DR_SEG_MAX_EXTENT = _N_PARAMS + 3  # SegmentConfig.max_extent, m
+DR_MAX_STRUCTURE = _N_PARAMS + 4  # SegmentConfig.vehicle_max_structure
+DR_MIN_FREE = _N_PARAMS + 5  # SegmentConfig.vehicle_min_free
+DR_OCC = _N_PARAMS + 6  # TrackerConfig.map_occupied_logodds
+DR_FREE = _N_PARAMS + 7  # TrackerConfig.map_free_logodds
+DR_FREE_RADIUS = _N_PARAMS + 8  # TrackerConfig.map_free_radius, cells (an integer, exact in a float64)
+DR_MERGE = _N_PARAMS + 9  # 1.0 where FitConfig.person_merge, else 0.0
+DR_LEG_MAX_EXTENT = _N_PARAMS + 10  # FitConfig.leg_max_extent, m
+DR_PAIR_DISTANCE = _N_PARAMS + 11  # FitConfig.leg_pair_distance, m
+_DR_N = _N_PARAMS + 12
+
+
+def detect_params(fit_p: np.ndarray, sc, fc: FitConfig, tc, ext_lim: float) -> np.ndarray:
+    """The parameters :func:`detect_rows` reads, packed in one float64 array built once per tracker: ``fit_p``
+    (:func:`fit_params`' array, which the classification and ``measure_batch`` read; its columns first), then
+    (columns ``DR_*``) the values of ``sc`` (the tracker's ``SegmentConfig``), ``fc`` (its ``FitConfig``), ``tc`` (its
+    ``TrackerConfig``) and ``ext_lim`` (``vehicles.extent_limit``, m). One array argument instead of twelve scalars,
+    each converted in Python and typed and unboxed by numba's dispatcher on every call (≈ 0.1 µs each in situ;
+    docs/speed.md, passes trk48, trk49). The values are the same floats the scalars were; the integers and flags
+    exact in a float64."""
+    q = np.empty(_DR_N)
+    q[:_N_PARAMS] = fit_p
+    q[DR_MAX_SKIP] = int(sc.max_skip_beams)
+    q[DR_EXT_LIM] = float(ext_lim)
+    q[DR_ADMIT] = 1.0 if sc.vehicle_max_extent > sc.max_extent else 0.0
+    q[DR_SEG_MAX_EXTENT] = float(sc.max_extent)
+    q[DR_MAX_STRUCTURE] = float(sc.vehicle_max_structure)
+    q[DR_MIN_FREE] = float(sc.vehicle_min_free)
+    q[DR_OCC] = float(tc.map_occupied_logodds)
+    q[DR_FREE] = float(tc.map_free_logodds)
+    q[DR_FREE_RADIUS] = int(tc.map_free_radius)
+    q[DR_MERGE] = 1.0 if fc.person_merge else 0.0
+    q[DR_LEG_MAX_EXTENT] = float(fc.leg_max_extent)
+    q[DR_PAIR_DISTANCE] = float(fc.leg_pair_distance)
+    return q
+
+
 @njit(cache=True)
 def _pairwise_leaf(a: np.ndarray, lo: int, n: int) -> float:
     """numpy's pairwise summation of a[lo:lo+n] for n ≤ 128 (8 interleaved partial sums)."""
@@ -619,16 +661,16 @@ def select_detections(keep: np.ndarray, kinds: np.ndarray, lohi: np.ndarray, rel
 @njit(cache=True)
 def detect_rows(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: np.ndarray, fits: np.ndarray,
                 structure: np.ndarray, sx: float, sy: float, ranges: np.ndarray, valid: np.ndarray, ax: np.ndarray,
-                ay: np.ndarray, wrapped: bool, max_skip: int, range_max: float, dphi: float, max_extent: float,
-                p: np.ndarray, admit: bool, seg_max_extent: float, max_structure: float, min_free: float,
-                has_map: bool, logodds: np.ndarray, i0: int, j0: int, res: float, occ_thr: float, free_thr: float,
-                free_radius: int, merge: bool, leg_max_extent: float, pair_distance: float) -> tuple:
+                ay: np.ndarray, wrapped: bool, range_max: float, dphi: float, p: np.ndarray, has_map: bool,
+                logodds: np.ndarray, i0: int, j0: int, res: float) -> tuple:
     """``Tracker._detect``'s three kernels that always run back to back in one call (docs/speed.md, pass fus40: each
-    small kernel costs 2-4x its warm time inside a scan): :func:`classify_batch` (its 18 arguments, ``max_extent``
-    the classification's extent limit, m), :func:`select_detections` (``admit``, ``seg_max_extent`` = its
-    ``max_extent``, m, ``max_structure``, ``min_free``, ``has_map`` and the map ``logodds`` / ``i0`` / ``j0`` /
-    ``res`` with the thresholds; map frame) and, where ``merge`` and there are two detections or more,
-    :func:`merge_legs` (``leg_max_extent``, ``pair_distance``, m) on the selected rows and their map evidence.
+    small kernel costs 2-4x its warm time inside a scan): :func:`classify_batch` (its 18 arguments, ``max_skip``
+    and ``max_extent`` the columns ``DR_MAX_SKIP``, ``DR_EXT_LIM`` of ``p``), :func:`select_detections` (``admit``,
+    its ``max_extent``, ``max_structure``, ``min_free`` and the map thresholds from ``p``'s ``DR_*`` columns,
+    ``has_map`` and the map ``logodds`` / ``i0`` / ``j0`` / ``res``; map frame) and, where ``p[DR_MERGE]`` and there
+    are two detections or more, :func:`merge_legs` (``leg_max_extent``, ``pair_distance`` from ``p``, m) on the
+    selected rows and their map evidence. ``p``: :func:`detect_params`' array (the configuration's values, built once
+    per tracker: one argument instead of twelve, docs/speed.md pass trk49).
 
     Returns ``select_detections``' seven results (the scan's detections: starts, npts, kinds, lohi, rel, fits,
     fractions), ``merge_legs``' fourteen (first, second, ki, kinds, fits, lohi, rel, starts, npts, px, py, mbeams,
@@ -638,13 +680,14 @@ def detect_rows(px: np.ndarray, py: np.ndarray, beams: np.ndarray, offsets: np.n
     (``DetectionBatch``'s columns), then the final rows' default measurements, :func:`measure_batch`'s seven results
     (``MeasureRows``' fields) with no track prior (rows ``0 … nf − 1``, sizes 0 not given, radius −1, size σ 0)."""
     keep, kinds0, lohi0, rel0 = classify_batch(px, py, beams, offsets, fits, structure, sx, sy, ranges, valid, ax, ay,
-                                               wrapped, max_skip, range_max, dphi, max_extent, p)
+                                               wrapped, int(p[DR_MAX_SKIP]), range_max, dphi, p[DR_EXT_LIM], p)
     starts, npts, kinds, lohi, rel, sfits, mfr = select_detections(
-        keep, kinds0, lohi0, rel0, fits, offsets, px, py, admit, seg_max_extent, max_structure, min_free, has_map,
-        logodds, i0, j0, res, occ_thr, free_thr, free_radius)
-    if merge and starts.shape[0] > 1:
+        keep, kinds0, lohi0, rel0, fits, offsets, px, py, p[DR_ADMIT] != 0.0, p[DR_SEG_MAX_EXTENT],
+        p[DR_MAX_STRUCTURE], p[DR_MIN_FREE], has_map, logodds, i0, j0, res, p[DR_OCC], p[DR_FREE],
+        int(p[DR_FREE_RADIUS]))
+    if p[DR_MERGE] != 0.0 and starts.shape[0] > 1:
         first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams, pts, mmev = merge_legs(
-            px, py, beams, starts, npts, kinds, sfits, lohi, rel, mfr, leg_max_extent, pair_distance)
+            px, py, beams, starts, npts, kinds, sfits, lohi, rel, mfr, p[DR_LEG_MAX_EXTENT], p[DR_PAIR_DISTANCE])
     else:
         first = np.empty(0, dtype=np.int64)
         second = first

@@ -116,18 +116,59 @@ def _link(ranges: np.ndarray, angles: np.ndarray, trig: np.ndarray, a: int, b: i
     return gap2 < thr * thr
 
 
+#: columns of :func:`segment_params`' array (the segmentation's configuration values, ``_segment_kernel``'s ``q``)
+SP_FIXED = 0  # 1.0 where SegmentConfig.mode is "fixed", else 0.0
+SP_FIXED_GAP = 1  # SegmentConfig.fixed_gap, m
+SP_LAMBDA = 2  # SegmentConfig.lambda_deg in rad
+SP_THREE_SIGMA = 3  # 3 · SegmentConfig.sigma_r, m
+SP_D_MIN = 4  # SegmentConfig.d_min, m
+SP_D_MAX = 5  # SegmentConfig.d_max, m
+SP_MAX_SKIP = 6  # SegmentConfig.max_skip_beams (an integer, exact in a float64)
+SP_MIN_POINTS = 7  # SegmentConfig.min_points (an integer)
+SP_MAX_POINTS = 8  # SegmentConfig.max_points (an integer)
+_SP_N = 9
+
+
+def segment_params(cfg: SegmentConfig) -> tuple[float, str, np.ndarray]:
+    """``cfg``'s values the segmentation reads on every scan, made once: (λ in rad, the wrap-around mode, the float64
+    array of columns ``SP_*`` that :func:`_segment_kernel` reads). One array argument instead of nine scalars, each
+    converted in Python and typed and unboxed by numba's dispatcher on every call (docs/speed.md, passes trk48,
+    trk49); the same floats the scalars were, the integers and the flag exact in a float64."""
+    lam = math.radians(cfg.lambda_deg)
+    q = np.empty(_SP_N)
+    q[SP_FIXED] = 1.0 if cfg.mode == "fixed" else 0.0
+    q[SP_FIXED_GAP] = float(cfg.fixed_gap)
+    q[SP_LAMBDA] = lam
+    q[SP_THREE_SIGMA] = 3.0 * float(cfg.sigma_r)
+    q[SP_D_MIN] = float(cfg.d_min)
+    q[SP_D_MAX] = float(cfg.d_max)
+    q[SP_MAX_SKIP] = int(cfg.max_skip_beams)
+    q[SP_MIN_POINTS] = int(cfg.min_points)
+    q[SP_MAX_POINTS] = int(cfg.max_points)
+    return lam, cfg.wrap_around, q
+
+
 @njit(cache=True)
 def _segment_kernel(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, trig: np.ndarray, fill_trig: bool,
-                    fixed: bool, fixed_gap: float, lam: float, three_sigma: float, d_min: float, d_max: float,
-                    max_skip: int, wrap: bool, min_points: int, max_points: int, points: bool, cos_a: np.ndarray,
-                    sin_a: np.ndarray, pose_c: float, pose_s: float, pose_x: float, pose_y: float) -> tuple:
+                    q: np.ndarray, wrap: bool, points: bool, cos_a: np.ndarray, sin_a: np.ndarray, pose_c: float,
+                    pose_s: float, pose_x: float, pose_y: float) -> tuple:
     """The whole segmentation in one pass: the valid beams of ``mask``, the links between consecutive ones (the
     last to the first when ``wrap`` and more than two beams are valid), the runs of linked beams → (labels, beams,
-    offsets, structure, n_dropped, wrapped, ax, ay, px, py, pts). ``fill_trig``: fill ``trig`` first
+    offsets, structure, n_dropped, wrapped, ax, ay, px, py, pts). ``q``: :func:`segment_params`' array (the mode
+    flag, gap, λ, 3σ_r, d_min, d_max, max_skip_beams, min_points, max_points). ``fill_trig``: fill ``trig`` first
     (:func:`_adjacent_trig`). Where ``points``, the last five are
     :func:`~dynslam2d.detect.kernels.world_points` of the clusters' beams (``mask`` as its ``valid``; ``cos_a``,
     ``sin_a`` the beam angles' cos / sin, ``pose_c``, ``pose_s`` the pose's θ's, ``pose_x``, ``pose_y`` its position;
     map frame, m): the tracker's two calls as one (docs/speed.md, pass det25); else empty."""
+    fixed = q[SP_FIXED] != 0.0
+    fixed_gap = q[SP_FIXED_GAP]
+    lam = q[SP_LAMBDA]
+    three_sigma = q[SP_THREE_SIGMA]
+    d_min = q[SP_D_MIN]
+    d_max = q[SP_D_MAX]
+    max_skip = int(q[SP_MAX_SKIP])
+    min_points = int(q[SP_MIN_POINTS])
+    max_points = int(q[SP_MAX_POINTS])
     n = ranges.shape[0]
     if fill_trig:
         _adjacent_trig(angles, lam, trig)
@@ -236,21 +277,24 @@ def segment_scan(scan: Scan, config: SegmentConfig | None = None, valid: np.ndar
 
 
 def segment_points(scan: Scan, config: SegmentConfig, valid: np.ndarray, pose_x: float, pose_y: float,
-                   pose_theta: float) -> tuple:
+                   pose_theta: float, params: tuple | None = None) -> tuple:
     """:func:`segment_scan` with ``checked`` (``valid``: a C-contiguous bool mask of beams of ``scan.valid_mask()``
     with a range > 0) and the beams in the map frame in the same call (the tracker's; docs/speed.md, pass det25):
     ``(segmentation, ax, ay, px, py, pts)`` with :func:`~dynslam2d.detect.kernels.world_points`' results for the pose
     (``pose_x``, ``pose_y`` in m, ``pose_theta`` in rad; invalid beams at the pose, ``px``, ``py``, ``pts`` the
-    clusters' beams in the segmentation's order)."""
-    return _segment(scan, config, valid, (math.cos(pose_theta), math.sin(pose_theta), pose_x, pose_y))
+    clusters' beams in the segmentation's order). ``params``: :func:`segment_params` of ``config`` when made already
+    (the tracker's, once)."""
+    return _segment(scan, config, valid, (math.cos(pose_theta), math.sin(pose_theta), pose_x, pose_y), params)
 
 
 _NO_TRIG = np.zeros(0)  # (cos / sin of no beams: segment_scan's call, which transforms no point)
 
 
-def _segment(scan: Scan, cfg: SegmentConfig, mask: np.ndarray, pose: tuple | None) -> tuple:
+def _segment(scan: Scan, cfg: SegmentConfig, mask: np.ndarray, pose: tuple | None, params: tuple | None = None) \
+        -> tuple:
     """The segmentation kernel's call for :func:`segment_scan` (``pose`` None) and :func:`segment_points` (``pose``:
-    cos θ, sin θ, x, y): (segmentation, ax, ay, px, py, pts)."""
+    cos θ, sin θ, x, y): (segmentation, ax, ay, px, py, pts). ``params``: :func:`segment_params` of ``cfg`` (None:
+    made here)."""
     key = (scan.ranges.shape[0], scan.angle_min, scan.angle_increment)
     geo = _GEOMETRY.get(key)
     if geo is None:
@@ -259,12 +303,12 @@ def _segment(scan: Scan, cfg: SegmentConfig, mask: np.ndarray, pose: tuple | Non
         a = scan.angles
         geo = _GEOMETRY[key] = (a, {}, np.cos(a), np.sin(a), is_full_circle(scan))
     angles, trigs, cos_a, sin_a, full = geo
-    lam = math.radians(cfg.lambda_deg)
+    lam, mode, q = segment_params(cfg) if params is None else params
     trig = trigs.get(lam)
     fill = trig is None
     if fill:
         trig = trigs[lam] = np.zeros((max(key[0], 1), 4))
-    mode = cfg.wrap_around  # (``full``: is_full_circle of the key's beam count and increment, kept with them)
+    # (the wrap-around mode; ``full``: is_full_circle of the key's beam count and increment, kept with them)
     if mode == "auto":
         wrap = full
     elif mode == "always":
@@ -279,7 +323,5 @@ def _segment(scan: Scan, cfg: SegmentConfig, mask: np.ndarray, pose: tuple | Non
         points = True
         c, s, x, y = pose
     labels, beams, offsets, structure, dropped, wrapped, ax, ay, px, py, pts = _segment_kernel(
-        scan.ranges, angles, mask, trig, fill, cfg.mode == "fixed", float(cfg.fixed_gap), lam,
-        3.0 * float(cfg.sigma_r), float(cfg.d_min), float(cfg.d_max), int(cfg.max_skip_beams), wrap,
-        int(cfg.min_points), int(cfg.max_points), points, cos_a, sin_a, c, s, x, y)
+        scan.ranges, angles, mask, trig, fill, q, wrap, points, cos_a, sin_a, c, s, x, y)
     return _make_segmentation(labels, beams, offsets, structure, wrapped, dropped), ax, ay, px, py, pts

@@ -15,6 +15,7 @@ from dynslam2d.detect.kernels import (
     _P_CIRCLE_RES_RATIO,
     _P_POINT_MAX_EXTENT,
     _P_POINT_MAX_POINTS,
+    detect_params,
     detect_rows,
     measure_batch,
     merge_legs,
@@ -27,7 +28,7 @@ from dynslam2d.detect.layout import (
     MeasureRows,
 )
 from dynslam2d.detect.measure import Detection, ScanArrays, ScanDetection, scan_detections
-from dynslam2d.detect.segment import segment_points
+from dynslam2d.detect.segment import segment_params, segment_points
 from dynslam2d.detect.shapes import CRITERIA, fit_cluster_rows
 from dynslam2d.detect.tracktable import _NO_IDX
 from dynslam2d.detect.vehicles import _NO_MAP, extent_limit
@@ -52,6 +53,22 @@ class TrackDetect:
     _fit_trig: np.ndarray | None = None
     _fit_trig_of: np.ndarray | None = None
 
+    def _detect_setup(self) -> None:
+        """The detection step's configuration values, made once per tracker (after ``_fit_p``): ``_seg_p``, the
+        segmentation's (:func:`~dynslam2d.detect.segment.segment_params`), ``_det_p``,
+        :func:`~dynslam2d.detect.kernels.detect_params`' array for ``detect_rows``, and ``_fit_args``,
+        ``fit_cluster_rows``' twelve scalar arguments as one tuple (the same Python objects the call converted on
+        every scan: the same types for numba's dispatcher, the same floats; docs/speed.md pass trk49)."""
+        cfg = self.config
+        fc, fp = cfg.fit, self._fit_p
+        ext_lim = extent_limit(cfg)
+        self._seg_p = segment_params(cfg.segment)
+        self._det_p = detect_params(fp, cfg.segment, fc, cfg.tracker, ext_lim)
+        self._fit_args = (CRITERIA[fc.criterion], fc.closeness_d0, fc.circle_min_points, fc.coarse_stride, True,
+                          fp.item(_P_POINT_MAX_POINTS), fp.item(_P_POINT_MAX_EXTENT), ext_lim,
+                          _thin(fp.item(_P_CIRCLE_DEPTH_RATIO), fp.item(_P_CIRCLE_MIN_RADIUS)),
+                          fp.item(_P_CIRCLE_MAX_RADIUS), fp.item(_P_CIRCLE_DEPTH_RATIO), fp.item(_P_CIRCLE_RES_RATIO))
+
     def _detect(self, scan: Scan, pose: Pose2D) -> list[Detection]:
         cfg = self.config
         st = self.stats
@@ -61,7 +78,8 @@ class TrackDetect:
             valid &= ranges > 0.0
         # the segmentation and every beam in the map frame (pose.transform_points of the beams, invalid ones at the
         # pose; all beams ax, ay and the clusters' ones px, py, pts) in one kernel call
-        seg, ax, ay, px, py, pts = segment_points(scan, cfg.segment, valid, float(pose.x), float(pose.y), pose.theta)
+        seg, ax, ay, px, py, pts = segment_points(scan, cfg.segment, valid, float(pose.x), float(pose.y), pose.theta,
+                                                  self._seg_p)
         self.last_segmentation = seg
         st.clusters += seg.n_clusters
         st.dropped_small_clusters += seg.n_dropped
@@ -73,42 +91,32 @@ class TrackDetect:
             return []
         beams = seg.beams
         offsets = seg.offsets
-        ext_lim = extent_limit(cfg)
         # (without the circle fits the classification below never reads: shapes.fit_cluster_rows, NaN columns that
-        # ScanDetection.circle fits when read)
-        fp = self._fit_p
+        # ScanDetection.circle fits when read; its configuration values made once, _detect_setup)
         angles = self._angles
         trig = self._fit_trig
         if trig is None or self._fit_trig_of is not angles:
             trig = self._fit_trig = np.full((3, angles.shape[0]), np.nan)
             self._fit_trig_of = angles
-        fits = fit_cluster_rows(px, py, offsets, ~seg.structure, angles, trig, CRITERIA[cfg.fit.criterion],
-                                cfg.fit.closeness_d0, cfg.fit.circle_min_points, cfg.fit.coarse_stride, True,
-                                fp.item(_P_POINT_MAX_POINTS), fp.item(_P_POINT_MAX_EXTENT), ext_lim,
-                                _thin(fp.item(_P_CIRCLE_DEPTH_RATIO), fp.item(_P_CIRCLE_MIN_RADIUS)),
-                                fp.item(_P_CIRCLE_MAX_RADIUS), fp.item(_P_CIRCLE_DEPTH_RATIO),
-                                fp.item(_P_CIRCLE_RES_RATIO))
+        fits = fit_cluster_rows(px, py, offsets, ~seg.structure, angles, trig, *self._fit_args)
         # classify and bound every cluster (reference.classify_and_bound); then the vehicle-size clusters' map test
         # (detect/vehicles.py), the kept clusters' rows and their points' map evidence in one call. The map test is
         # per point, so only the detections' points are tested (structure clusters, most of the points, are not
         # detections)
         view = self._map
-        sc, tc = cfg.segment, cfg.tracker
         if view is None:
             lo, i0, j0, res = _NO_MAP, 0, 0, 1.0
         else:
             lo, i0, j0, res = view.logodds, int(view.i0), int(view.j0), float(view.resolution)
         # (then, where people are merged and there are two detections or more, the leg pairs merged, and the final
         # rows' DetectionBatch columns: the three kernels in one call, kernels.detect_rows, pass fus40; and the final
-        # rows' default measurements, ``default``: MeasureRows' fields, pass trk41)
+        # rows' default measurements, ``default``: MeasureRows' fields, pass trk41; the configuration's values in
+        # one array made once, _det_p, pass trk49)
         (starts, npts, kinds, lohi, rel, fits, mfr, first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2,
          py2, mbeams, mpts, mmev, theta, centroid, circle, *default) = detect_rows(
             px, py, beams, offsets, fits, seg.structure, float(pose.x), float(pose.y), ranges, valid, ax, ay,
-            seg.wrapped, int(sc.max_skip_beams), float(scan.range_max), abs(float(scan.angle_increment)), ext_lim, fp,
-            sc.vehicle_max_extent > sc.max_extent, float(sc.max_extent), float(sc.vehicle_max_structure),
-            float(sc.vehicle_min_free), view is not None, lo, i0, j0, res, float(tc.map_occupied_logodds),
-            float(tc.map_free_logodds), int(tc.map_free_radius), bool(cfg.fit.person_merge),
-            float(cfg.fit.leg_max_extent), float(cfg.fit.leg_pair_distance))
+            seg.wrapped, float(scan.range_max), abs(float(scan.angle_increment)), self._det_p, view is not None, lo,
+            i0, j0, res)
         nd = starts.shape[0]
         st.structure_clusters += seg.n_clusters - nd
         # free-space evidence per detection (0 where unknown). The free-space fraction is read for few detections

@@ -232,6 +232,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._body_grown: np.ndarray = np.zeros(0, dtype=bool)
         self._fit_p = fit_params(self.config.fit)
         self._upd_p = update_params(self._fit_p, self.config.fit, tc)  # (update_pairs' configuration values)
+        self._detect_setup()  # (detect_rows' and fit_cluster_rows' configuration values: _det_p, _fit_args)
         self._batch: DetectionBatch | None = None  # per-detection arrays of the current scan (kernels)
         # the sources of the detections' map evidence (set by _detect with a map): (3, nd) fractions of points on
         # long-occupied, observed-free, never-observed cells of the scan's detections before the leg merge, and the
