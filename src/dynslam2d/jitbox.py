@@ -134,9 +134,9 @@ def box_arrays_from_env() -> bool:
 #: clean-up, which no lockstep run measures; jitcache's ``CALLEE_OPTIMISED_ONCE``). The vectoriser keeps the order of
 #: floating-point operations without ``fastmath``, so the numbers are the same either way.
 LOOPS_NOT_VECTORISED = {
-    "dynslam2d.detect.kernels.detect_rows": "b6db1d7a692ba8fc",
+    "dynslam2d.detect.kernels.detect_rows": "9e8f98ec441beb51",
     "dynslam2d.detect.kernels_assign.assign_groups": "231f863e608ec456",
-    "dynslam2d.slam.ledgerkernels.record_cells": "2b2deba5b3e8fe0a",
+    "dynslam2d.slam.ledgerkernels.record_cells": "a06d27988772373c",
 }
 
 
