@@ -31,7 +31,7 @@ from dynslam2d.io.summary import input_report
 from dynslam2d.io.trajectory import Trajectory, write_tum
 from dynslam2d.memtrim import release_free_memory
 from dynslam2d.pipeline import TRACK_CSV_COLUMNS, RunResult
-from dynslam2d.slam.cleanup import CleanResult
+from dynslam2d.slam.cleanup import CleanedLogodds, CleanResult
 from dynslam2d.types import ScanSource
 from dynslam2d.viz.collect import RemovedPointsCollector
 from dynslam2d.viz.figures import figure_maps, write_figures
@@ -224,7 +224,10 @@ def write_outputs(
     final_lo = cleaned.logodds if cleaned is not None and cleaned.logodds is not None else run.logodds
     with atomic_path(out / "map_logodds.npy") as tmp:
         with tmp.open("wb") as fh:
-            np.save(fh, np.asarray(final_lo, dtype=np.float32))  # (no copy of a float32 map)
+            if isinstance(final_lo, CleanedLogodds):  # (written a band of rows at a time: no copy of the map)
+                final_lo.write_npy(fh, np.float32)
+            else:
+                np.save(fh, np.asarray(final_lo, dtype=np.float32))  # (no copy of a float32 map)
     paths["map_logodds.npy"] = out / "map_logodds.npy"
     del final_lo
     if release and cleaned is not None:
