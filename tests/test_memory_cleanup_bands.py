@@ -13,8 +13,7 @@ import weakref
 import numpy as np
 import pytest
 
-from dynslam2d.slam import HectorSlam, SlamConfig
-from dynslam2d.slam import cleanup
+from dynslam2d.slam import HectorSlam, SlamConfig, cleanup
 from dynslam2d.slam.cleanconfig import CleanConfig
 from dynslam2d.types import Pose2D, Scan
 

@@ -44,13 +44,16 @@ class FigureMaps:
     background: GreyMap
 
 
-def figure_maps(result: RunResult, cleaned: CleanResult | None = None, drawn: GreyMap | None = None) -> FigureMaps:
+def figure_maps(result: RunResult, cleaned: CleanResult | None = None, drawn: GreyMap | None = None,
+                background: GreyMap | None = None) -> FigureMaps:
     """The grey indices :func:`write_figures` draws with ``release=True``, made from ``result.grid`` and
     ``cleaned.grid``, which become None (2 bytes per cell each where the float64 maps take 8; issue 13 item 3). A
     caller that makes them before its other work (``write_outputs``: tracks.csv, kept_mask.npz, the summary) does
     that work without either float64 map. ``drawn``: map.png's grey indices made already (``GreyMap.of`` of the
-    cleaned map, whose float64 map the caller let go; pass mem48), used as they are."""
-    background = tracks_background(result.grid)
+    cleaned map, whose float64 map the caller let go; pass mem48), used as they are; ``background``: tracks.png's
+    faint map (:func:`tracks_background` of the online map) made already, likewise."""
+    if background is None:
+        background = tracks_background(result.grid)
     if drawn is None:
         drawn = GreyMap.of(cleaned.grid if cleaned is not None else result.grid)
     result.grid = None  # type: ignore[assignment]
