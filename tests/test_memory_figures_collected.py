@@ -1,7 +1,7 @@
 """Memory pass mem48 (issue 13 item 3): a saved figure's artists are collected before the next figure is drawn,
-and ``write_outputs(release=True)`` lets the cleaned map's float64 probabilities and log-odds go as soon as they are
-written (the log-odds files first), before the online map's files are written; the restored cells go before
-map.png."""
+and ``write_outputs(release=True)`` lets the log-odds go as soon as they are written (the log-odds files first), writes
+the online map's files and then the cleaned map's, made over the online map's array (pass mem53), which goes before
+map.png; the restored cells go before map.png."""
 
 from __future__ import annotations
 
@@ -48,13 +48,14 @@ def test_released_outputs_let_the_cleaned_map_go_before_the_online_map_is_writte
     res = run(ScanList(scans, meta), cfg, observers=[rec])
     cleaned = rec.result
     assert cleaned is not None and cleaned.logodds is not None
-    cleaned_ref = weakref.ref(cleaned.grid.prob)  # (the float64 probabilities)
+    online_ref = weakref.ref(res.grid.prob)  # (the online float64 probabilities: the cleaned map is made over them)
     expect_summary = res.summary()
     seen: list[tuple[str, bool, bool, bool, int]] = []
     write_map = R.write_map
 
     def spy(path, grid):  # type: ignore[no-untyped-def]
-        seen.append((path.name, cleaned.grid is None, cleaned.logodds is None, cleaned_ref() is None, res.logodds.size))
+        seen.append((path.name, cleaned.grid is None, cleaned.logodds is None, grid.prob is online_ref(),
+                     res.logodds.size))
         return write_map(path, grid)
 
     import dynslam2d.viz.figures as F
@@ -69,10 +70,11 @@ def test_released_outputs_let_the_cleaned_map_go_before_the_online_map_is_writte
     monkeypatch.setattr(R, "write_map", spy)
     monkeypatch.setattr(F, "plot_map", map_spy)
     out = R.write_outputs(res, tmp_path, cleaned=cleaned, release=True)
-    # both log-odds written and gone before the maps; the cleaned map gone before the online map's files
-    # (and the restored cells, never drawn, before map.png)
-    assert seen == [("map.yaml", False, True, False, 0), ("map_online.yaml", True, True, True, 0),
+    # both log-odds written and gone before the maps; the online map's files first, then the cleaned map made over
+    # the online map's array (pass mem53), gone before map.png (and the restored cells, never drawn, before it)
+    assert seen == [("map_online.yaml", False, True, True, 0), ("map.yaml", False, True, True, 0),
                     ("map.png", True, True, True, 0)]
+    assert online_ref() is None
     drop = ("wall_time_s", "scans_per_s")
     assert {k: v for k, v in out.summary.items() if k not in drop and k in expect_summary} == \
         R.json.loads(R.metrics_json({k: v for k, v in expect_summary.items() if k not in drop}))

@@ -31,11 +31,12 @@ from dynslam2d.io.summary import input_report
 from dynslam2d.io.trajectory import Trajectory, write_tum
 from dynslam2d.memtrim import release_free_memory
 from dynslam2d.pipeline import TRACK_CSV_COLUMNS, RunResult
-from dynslam2d.slam.cleanup import CleanResult
+from dynslam2d.slam.cleanup import CleanedLogodds, CleanResult
 from dynslam2d.types import ScanSource
 from dynslam2d.viz.collect import RemovedPointsCollector
 from dynslam2d.viz.figures import figure_maps, write_figures
 from dynslam2d.viz.mapplot import GreyMap
+from dynslam2d.viz.tracksplot import tracks_background
 
 
 def ground_truth_for(source: ScanSource, gt_dir: str | os.PathLike[str] | GroundTruthFiles | None,
@@ -224,7 +225,10 @@ def write_outputs(
     final_lo = cleaned.logodds if cleaned is not None and cleaned.logodds is not None else run.logodds
     with atomic_path(out / "map_logodds.npy") as tmp:
         with tmp.open("wb") as fh:
-            np.save(fh, np.asarray(final_lo, dtype=np.float32))  # (no copy of a float32 map)
+            if isinstance(final_lo, CleanedLogodds):  # (written a band of rows at a time: no copy of the map)
+                final_lo.write_npy(fh, np.float32)
+            else:
+                np.save(fh, np.asarray(final_lo, dtype=np.float32))  # (no copy of a float32 map)
     paths["map_logodds.npy"] = out / "map_logodds.npy"
     del final_lo
     if release and cleaned is not None:
@@ -236,15 +240,26 @@ def write_outputs(
         paths["map_logodds_online.npy"] = out / "map_logodds_online.npy"
     if release:  # nothing below reads them (the figures draw the maps' probabilities)
         run.logodds = np.zeros((0, 0), dtype=np.float32)
+    cleaned_grey = background = None
+    if release and cleaned is not None and hasattr(cleaned.grid, "make_over"):  # (the pass's map, not made yet)
+        # the online map's files and tracks.png's faint map first, then the cleaned map made over the online map's
+        # own array (the same values): one float64 map lives here instead of two (issue 13 item 3, pass mem53)
+        paths["map.yaml"] = paths["map.pgm"] = out / "map.yaml"  # (the keys in their usual order; set below)
+        ypath, ppath = write_map(out / "map_online.yaml", run.grid)
+        paths["map_online.yaml"], paths["map_online.pgm"] = ypath, ppath
+        background = tracks_background(run.grid)
+        online, run.grid = run.grid, None  # type: ignore[assignment]
+        if not cleaned.grid.make_over(online):
+            run.grid = online  # (not made from this online map: made in a copy below, as before)
+        del online
     final_grid = cleaned.grid if cleaned is not None else run.grid
     ypath, ppath = write_map(out / "map.yaml", final_grid)
     paths["map.yaml"], paths["map.pgm"] = ypath, ppath
     del final_grid  # (a reference here kept the drawn map through the figures, which let it go when done)
-    cleaned_grey = None
     if release and cleaned is not None:  # map.png's grey indices now; the cleaned float64 map goes
         cleaned_grey = GreyMap.of(cleaned.grid)
         cleaned.grid = None  # type: ignore[assignment]
-    if cleaned is not None:
+    if cleaned is not None and "map_online.yaml" not in paths:
         ypath, ppath = write_map(out / "map_online.yaml", run.grid)
         paths["map_online.yaml"], paths["map_online.pgm"] = ypath, ppath
     paths["trajectory.tum"] = write_tum(out / "trajectory.tum", run.trajectory, comment="laser pose in the map frame")
@@ -264,8 +279,8 @@ def write_outputs(
         evaluation = evaluate_result(run, gt, cleaned) if gt is not None else None
     drawn = None
     if release:  # the maps as the figures' grey indices now: no float64 map lives through the files below
-        drawn = figure_maps(run, cleaned, drawn=cleaned_grey)
-        del cleaned_grey
+        drawn = figure_maps(run, cleaned, drawn=cleaned_grey, background=background)
+        del cleaned_grey, background
     paths["config.yaml"] = write_text_atomic(out / "config.yaml", dump_config(run.config))
     paths["tracks.csv"] = write_text_atomic(out / "tracks.csv", tracks_csv(run))
     removed = run.removed

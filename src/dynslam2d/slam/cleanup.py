@@ -687,6 +687,24 @@ class VisibilityCounter:
         (last,) = self._grid_channels(grid, (_LAST,))
         return (last & 1) == 1
 
+    def rows(self, grid: GridMap, r0: int, n: int, latest: bool) -> tuple[np.ndarray, ...]:
+        """(hits, through, switches[, latest hit]) of ``grid``'s rows r0 … r0 + n − 1 (clipped to the grid), as
+        :meth:`window` and :meth:`latest_hit` give them on those rows: a band of the windows read from the tiles
+        without the whole windows (:func:`clean_windows`)."""
+        H, W = grid.shape
+        n = max(min(n, H - r0), 0)
+        g = self._overlap(grid)
+        channels = (_HIT, _THROUGH, _SWITCH, _LAST) if latest else (_HIT, _THROUGH, _SWITCH)
+        if g is None:
+            out = [np.zeros((n, W), dtype=np.uint16) for _ in channels]
+        else:
+            gi0, gj0 = g
+            out = _tile_channels(self._table, self._pool, gj0 - (self._tj0 << _TILE_SHIFT) + r0,
+                                 gi0 - (self._ti0 << _TILE_SHIFT), n, W, channels)
+        if latest:
+            out[3] = (out[3] & 1) == 1
+        return tuple(out)
+
 
 @dataclass(eq=False)
 class CleanResult:
@@ -694,7 +712,8 @@ class CleanResult:
 
     Attributes:
         grid: the cleaned map (erased cells at :data:`ERASED_PROBABILITY`), same cells as the online map.
-        logodds: its log-odds (same cells), or None if no online log-odds was given.
+        logodds: its log-odds (same cells), or None if no online log-odds was given; with ``keep_counts`` False
+            a :class:`CleanedLogodds` (made when read: ``np.asarray``).
         erased: (H, W) bool, cells occupied in the online map that the pass erased.
         hits, through: (H, W) uint16, scans that hit / passed through each cell (saturating at
             :data:`COUNT_MAX`).
@@ -705,7 +724,7 @@ class CleanResult:
     """
 
     grid: GridMap
-    logodds: np.ndarray | None
+    logodds: np.ndarray | CleanedLogodds | None
     erased: np.ndarray
     hits: np.ndarray
     through: np.ndarray
@@ -749,10 +768,64 @@ class _CleanedGrid(GridMap):
         _PROB_SLOT.__set__(self, np.asarray(value, dtype=np.float64))
         self._parts = None
 
+    def make_over(self, online: GridMap) -> bool:
+        """Make the cleaned probabilities in ``online``'s own array (the same values ``prob`` makes in a copy) when
+        this map is not made yet and was made from ``online``; True if so. ``online`` must not be read afterwards
+        (its ``prob`` is this map's, cleaned): for a caller done with the online map (the results' files, once the
+        online map's are written; issue 13 item 3: one float64 map instead of two)."""
+        parts = self._parts
+        if parts is None or parts[0] is not online or not online.prob.flags.writeable:
+            return False
+        _, erased, restored = parts
+        prob = online.prob
+        prob[erased] = ERASED_PROBABILITY
+        prob[restored] = RESTORED_PROBABILITY
+        _PROB_SLOT.__set__(self, prob)
+        self._parts = None
+        return True
+
     @property
     def shape(self) -> tuple[int, int]:
         parts = self._parts
         return parts[0].shape if parts is not None else _PROB_SLOT.__get__(self).shape  # (without making it)
+
+
+class CleanedLogodds:
+    """The cleaned log-odds as :func:`clean_windows` makes them — a copy of the online map's log-odds (in
+    ``dtype``), erased cells at logit(:data:`ERASED_PROBABILITY`), restored ones at
+    logit(:data:`RESTORED_PROBABILITY`) — without the copy: ``np.asarray`` makes it (a new array each time) and
+    :meth:`write_npy` writes its ``.npy`` file a band of rows at a time (the bytes ``np.save`` writes of the
+    copy). The pass's end and the results' map files then hold the online log-odds only (4 bytes a cell, 7.3 MB
+    on MIT CSAIL; issue 13 item 3). The online log-odds and the two masks must not change while it is read."""
+
+    __slots__ = ("_logodds", "_erased", "_restored", "dtype")
+
+    def __init__(self, logodds: np.ndarray, erased: np.ndarray, restored: np.ndarray, dtype: np.dtype) -> None:  # noqa: D107
+        self._logodds, self._erased, self._restored, self.dtype = logodds, erased, restored, np.dtype(dtype)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self._logodds.shape
+
+    def _rows(self, r0: int, r1: int) -> np.ndarray:
+        """Rows r0 … r1 − 1 of the cleaned log-odds (a new array)."""
+        lo = np.array(self._logodds[r0:r1], dtype=self.dtype, copy=True)
+        lo[self._erased[r0:r1]] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
+        lo[self._restored[r0:r1]] = math.log(RESTORED_PROBABILITY / (1.0 - RESTORED_PROBABILITY))
+        return lo
+
+    def __array__(self, dtype: np.dtype | None = None, copy: bool | None = None) -> np.ndarray:
+        lo = self._rows(0, self.shape[0])
+        return lo if dtype is None else lo.astype(dtype, copy=False)
+
+    def write_npy(self, fh: object, dtype: np.dtype = np.float32) -> None:
+        """The ``.npy`` file of ``np.asarray(self, dtype)`` into the binary file ``fh``, :data:`_RULE_ROWS` rows
+        at a time: format 1.0's header as ``np.save`` writes it for a C-ordered array, then the rows' bytes."""
+        dt = np.dtype(dtype)
+        np.lib.format.write_array_header_1_0(fh, {"descr": np.lib.format.dtype_to_descr(dt), "fortran_order": False,
+                                                  "shape": self.shape})
+        for r0 in range(0, self.shape[0], _RULE_ROWS):
+            fh.write(self._rows(r0, r0 + _RULE_ROWS).astype(dt, copy=False).tobytes())  # type: ignore[attr-defined]
 
 
 def restore_rule(hits: np.ndarray, through: np.ndarray, config: CleanConfig) -> np.ndarray:
@@ -790,7 +863,9 @@ _RULE_ROWS = 256
 class CountWindows:
     """What :func:`clean_map` reads from a :class:`VisibilityCounter`, on the online map's cells: the count windows
     (:meth:`VisibilityCounter.window`), the latest-touch mask (None when the rule does not use it) and the counter's
-    numbers for the stats. Taking them first lets a caller free the counter before the cleaned copies are made."""
+    numbers for the stats. Taking them first lets a caller free the counter before the cleaned copies are made.
+    :meth:`banded` instead holds the counter (:attr:`counter`) and no windows: :func:`clean_windows` reads them a
+    band of rows at a time from its tiles and lets the counter go once the rules are applied."""
 
     hits: np.ndarray
     through: np.ndarray
@@ -801,6 +876,8 @@ class CountWindows:
     too_large: int
     seconds: float
     nbytes: int
+    #: the counter the windows are read from band by band (:meth:`banded`), None when they are held
+    counter: VisibilityCounter | None = None
 
     @classmethod
     def of(cls, online: GridMap, counter: VisibilityCounter) -> CountWindows:
@@ -809,6 +886,15 @@ class CountWindows:
         latest_hit = counter.latest_hit(online) if c.rehit_min_hits > 0 else None
         return cls(hits, through, switches, latest_hit, c, int(counter.scans), int(counter.too_large),
                    float(counter.seconds), counter.nbytes)
+
+    @classmethod
+    def banded(cls, counter: VisibilityCounter) -> CountWindows:
+        """The counter's numbers and the counter itself, no dense window (0 × 0): for :func:`clean_windows` with
+        ``keep_counts`` False, which reads the windows :data:`_RULE_ROWS` rows at a time (issue 13 item 3: the
+        three uint16 windows and the latest-hit mask, 7 bytes a cell, never live beside the counter's tiles)."""
+        empty = np.zeros((0, 0), dtype=np.uint16)
+        return cls(empty, empty, empty, None, counter.config, int(counter.scans), int(counter.too_large),
+                   float(counter.seconds), counter.nbytes, counter)
 
 
 def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray | None = None,
@@ -831,19 +917,32 @@ def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | N
     t0 = time.perf_counter() if t0 is None else t0
     c = counts.config
     hits, through, switches, latest_hit = counts.hits, counts.through, counts.switches, counts.latest_hit
+    counter = counts.counter
+    if counter is not None and keep_counts:
+        raise ValueError("banded count windows (CountWindows.banded) are not kept: use keep_counts=False")
+    latest = c.rehit_min_hits > 0
     occ = online.occupied(occupied_threshold)
     erased = np.empty(occ.shape, dtype=bool)
     restored = np.empty(occ.shape, dtype=bool)
     for r0 in range(0, occ.shape[0], _RULE_ROWS):  # a block of rows at a time: no map-sized float64 temporaries
         rows = slice(r0, r0 + _RULE_ROWS)
-        erased[rows] = erase_rule(hits[rows], through[rows], switches[rows], c,
-                                  None if latest_hit is None else latest_hit[rows]) & occ[rows]
+        if counter is not None:  # (the band of the windows, read from the counter's tiles)
+            band = counter.rows(online, r0, _RULE_ROWS, latest)
+            h_r, t_r, s_r, l_r = band[0], band[1], band[2], band[3] if latest else None
+            del band
+        else:
+            h_r, t_r, s_r = hits[rows], through[rows], switches[rows]
+            l_r = None if latest_hit is None else latest_hit[rows]
+        erased[rows] = erase_rule(h_r, t_r, s_r, c, l_r) & occ[rows]
         # observed free in the online map (unknown cells were never cleared: nothing to restore there)
-        restored[rows] = restore_rule(hits[rows], through[rows], c) & ~occ[rows] & np.isfinite(online.prob[rows])
+        restored[rows] = restore_rule(h_r, t_r, c) & ~occ[rows] & np.isfinite(online.prob[rows])
+        del h_r, t_r, s_r, l_r
+    del counter
     if not keep_counts:
         empty = np.zeros((0, 0), dtype=np.uint16)
         hits = through = switches = counts.hits = counts.through = counts.switches = empty
         latest_hit = counts.latest_hit = None
+        counts.counter = None  # (the counter's tiles, when the caller let go of it too)
         # the windows (2 bytes a cell each: below the allocator's mmap threshold on most maps, so their memory stays
         # in the heap when freed) go back to the OS before the cleaned copies are made (memtrim.py)
         release_free_memory()
@@ -867,10 +966,14 @@ def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | N
     lo = None
     if logodds is not None:
         # the input's dtype (the SLAM's log-odds are float32, written as float32): no float64 copy of the map
-        lo = np.array(logodds, dtype=np.result_type(logodds, np.float32), copy=True)
-        if lo.shape == erased.shape:
-            lo[erased] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
-            lo[restored] = math.log(RESTORED_PROBABILITY / (1.0 - RESTORED_PROBABILITY))
+        dtype = np.result_type(logodds, np.float32)
+        if not keep_counts and np.shape(logodds) == erased.shape:  # (the command line's: made when read, or written)
+            lo = CleanedLogodds(logodds, erased, restored, dtype)
+        else:
+            lo = np.array(logodds, dtype=dtype, copy=True)
+            if lo.shape == erased.shape:
+                lo[erased] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
+                lo[restored] = math.log(RESTORED_PROBABILITY / (1.0 - RESTORED_PROBABILITY))
     area = online.resolution ** 2
     stats: dict[str, float | int] = {
         "occupied_cells_online": n_occ,
@@ -966,9 +1069,11 @@ class CleanupRecorder:
             for kf, p in zip(loop.keyframes, poses):
                 self.counter.add(kf.scan, p, kf.removed if kf.removed.size else None)
         t0 = time.perf_counter()
-        counts = CountWindows.of(result.grid, self.counter)  # type: ignore[attr-defined]
-        if not self.keep_counts:
-            self.counter = None  # (26 MB on MIT CSAIL) before the rule's masks and the cleaned copies
+        if self.keep_counts:
+            counts = CountWindows.of(result.grid, self.counter)  # type: ignore[attr-defined]
+        else:  # the windows read band by band; the counter (its tiles) goes once the rules are applied
+            counts = CountWindows.banded(self.counter)
+            self.counter = None
         self.result = clean_windows(result.grid, counts, result.logodds,  # type: ignore[attr-defined]
                                     keep_counts=self.keep_counts, t0=t0)
 
@@ -1003,6 +1108,6 @@ def scan_clearing(ranges: np.ndarray, angles: np.ndarray | tuple[np.ndarray, np.
     return (float(pose.x) / resolution, float(pose.y) / resolution), cx, cy, clear
 
 
-__all__ = ["ERASED_PROBABILITY", "RESTORED_PROBABILITY", "CleanResult", "CleanupRecorder", "CountWindows",
-           "VisibilityCounter", "clean_map", "clean_windows", "compare_online", "erase_rule", "restore_rule",
-           "scan_clearing"]
+__all__ = ["ERASED_PROBABILITY", "RESTORED_PROBABILITY", "CleanResult", "CleanedLogodds", "CleanupRecorder",
+           "CountWindows", "VisibilityCounter", "clean_map", "clean_windows", "compare_online", "erase_rule",
+           "restore_rule", "scan_clearing"]

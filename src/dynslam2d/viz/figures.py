@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from dynslam2d.gridmap import GridMap
+from dynslam2d.memtrim import release_free_memory
 from dynslam2d.pipeline import RunResult
 from dynslam2d.records import TrackRows
 from dynslam2d.slam.cleanup import CleanResult
@@ -44,13 +45,16 @@ class FigureMaps:
     background: GreyMap
 
 
-def figure_maps(result: RunResult, cleaned: CleanResult | None = None, drawn: GreyMap | None = None) -> FigureMaps:
+def figure_maps(result: RunResult, cleaned: CleanResult | None = None, drawn: GreyMap | None = None,
+                background: GreyMap | None = None) -> FigureMaps:
     """The grey indices :func:`write_figures` draws with ``release=True``, made from ``result.grid`` and
     ``cleaned.grid``, which become None (2 bytes per cell each where the float64 maps take 8; issue 13 item 3). A
     caller that makes them before its other work (``write_outputs``: tracks.csv, kept_mask.npz, the summary) does
     that work without either float64 map. ``drawn``: map.png's grey indices made already (``GreyMap.of`` of the
-    cleaned map, whose float64 map the caller let go; pass mem48), used as they are."""
-    background = tracks_background(result.grid)
+    cleaned map, whose float64 map the caller let go; pass mem48), used as they are; ``background``: tracks.png's
+    faint map (:func:`tracks_background` of the online map) made already, likewise."""
+    if background is None:
+        background = tracks_background(result.grid)
     if drawn is None:
         drawn = GreyMap.of(cleaned.grid if cleaned is not None else result.grid)
     result.grid = None  # type: ignore[assignment]
@@ -133,6 +137,10 @@ def write_figures(
             result.erased = None  # type: ignore[attr-defined]
             if cleaned is not None:
                 cleaned.erased = np.zeros((0, 0), dtype=bool)
+        # the masks (1 byte a cell, below the allocator's mmap threshold) lie under later blocks of the heap, which
+        # keeps their pages when they are freed: back to the OS before matplotlib's import and map.png (memtrim.py;
+        # MIT CSAIL: ≈ 2 MiB off map.png's peak once the clean-up pass no longer leaves its windows below them)
+        release_free_memory()
     else:
         grid = cleaned.grid if cleaned is not None else result.grid
         background = result.grid
