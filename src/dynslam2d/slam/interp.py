@@ -21,7 +21,10 @@ _HALF_BITS = 0x3F000000
 @_intrinsic
 def cell_prob(typingctx, word):
     """In a kernel: the float32 probability of a probability cache word (uint32; slam/grid.py ``encode_probs``):
-    ``word`` XOR the bits of 0.5, bit cast to float32 (no conversion: every bit kept)."""
+    ``word`` XOR the bits of 0.5, bit cast to float32 (no conversion: every bit kept). Typed for uint32 only: a
+    kernel given a float array fails to compile instead of converting its values."""
+    if word != _nbtypes.uint32:
+        return None
     sig = _nbtypes.float32(_nbtypes.uint32)
 
     def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
