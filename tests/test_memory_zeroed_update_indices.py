@@ -17,9 +17,9 @@ def _rss_bytes() -> int:
         return int(fh.read().split()[1]) * 4096
 
 
-def test_a_large_grown_level_touches_only_its_probability_cache() -> None:
-    """Growing a level with a few updated cells to 3000 × 3000 cells (34 MiB an array): the probability cache is
-    filled (0.5, every page resident); the log-odds and the update indices stay untouched zeroed memory outside
+def test_a_large_grown_level_touches_none_of_its_new_cells() -> None:
+    """Growing a level with a few updated cells to 3000 × 3000 cells (34 MiB an array): the log-odds, the update
+    indices and (since pass mem52: its words, 0 = 0.5) the probability cache stay untouched zeroed memory outside
     the old array, and keep their values."""
     lv = GridLevel(0.05)
     lv.ensure(0, 0, 99, 99)
@@ -101,9 +101,9 @@ def _copied_pages(a: np.ndarray, r0: int, c0: int, h: int, w: int) -> int:
 
 
 def test_grown_zeroed_arrays_hold_only_their_written_pages_after_heap_reuse() -> None:
-    """The grown log-odds and update indices are resident only on the pages of the old array's written rows, also when
-    the allocator has a large freed heap block at hand (which ``np.zeros``' calloc would clear, touching every
-    page): the arrays have their own memory maps."""
+    """The grown log-odds, update indices and probability cache words are resident only on the pages of the old
+    array's written rows, also when the allocator has a large freed heap block at hand (which ``np.zeros``' calloc
+    would clear, touching every page): the arrays have their own memory maps."""
     big = np.ones(24 * 2**20, dtype=np.uint8)  # (freed: glibc's mmap threshold rises to its size)
     del big
     heap = np.ones(12 * 2**20, dtype=np.uint8)  # (now from the heap, its pages resident; freed for reuse)
