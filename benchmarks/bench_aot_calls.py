@@ -27,7 +27,8 @@ from dynslam2d.slam.correlative import _score_pyramid
 from dynslam2d import jitbox
 r = np.linspace(1.0, 5.0, 360)
 ok = np.ones(360, dtype=bool)
-prob = np.random.default_rng(0).random((40, 40)).astype(np.float32)
+prob = (np.random.default_rng(0).random((40, 40)).astype(np.float32).view(np.uint32)
+        ^ np.uint32(0x3F000000))  # (a level's probability cache words, slam/grid.py encode_probs)
 cases = {"_ref_arrays": (_ref_arrays, (r, ok, -1.5, 0.01, 0.0, 0.0, 0.0, 0.1, 30.0)),
          "_score_pyramid": (_score_pyramid, (prob, 2))}
 out = {"aot": jitbox.AOT is not None}

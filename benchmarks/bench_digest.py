@@ -86,7 +86,10 @@ def digest(data: Path, name: str) -> dict[str, str] | None:
     for lv in pipe.slam.map.levels:
         # (a never-updated cell's update index is −1 before pass mem43, 0 since: hashed as 0 for both; a scan's
         # indices are >= 1)
-        _h(hm, np.array([lv.i0, lv.j0, lv.update_counter]), lv.logodds, lv.prob, np.maximum(lv.uidx, 0))
+        # (the probability cache's uint32 words since pass mem52 — a float32's bits XOR 0.5's — hashed decoded, as the
+        # float32 probabilities of before)
+        prob = lv.prob if lv.prob.dtype != np.uint32 else (lv.prob ^ np.uint32(0x3F000000)).view(np.float32)
+        _h(hm, np.array([lv.i0, lv.j0, lv.update_counter]), lv.logodds, prob, np.maximum(lv.uidx, 0))
     if pipe.ledger is not None:
         hm.update(json.dumps(pipe.ledger.summary(), sort_keys=True).encode())
     return {"scans": str(n), "steps": hs.hexdigest()[:16], "map": hm.hexdigest()[:16]}

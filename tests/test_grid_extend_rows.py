@@ -71,13 +71,13 @@ def test_extend_rows_refuses_an_array_that_is_not_its_maps() -> None:
     lv = GridLevel(0.05)
     lv.ensure(0, 0, 599, 599)  # (800 × 800 cells with the margins, 2.4 MiB an array: zeroed memory maps)
     h, w = lv.shape
-    assert set(lv._maps) == {"logodds", "uidx"}
+    assert set(lv._maps) == {"logodds", "prob", "uidx"}
     lv.logodds = lv.logodds.copy()
     lv.logodds[3, 4] = 1.5
     assert not lv._extend_rows("logodds", np.float32, h, h + 100)
     assert lv.logodds.shape == (h, w) and lv.logodds[3, 4] == 1.5
-    lv.ensure(lv.i0, lv.j0, lv.i0 + w - 1, lv.j0 + h + 5)  # (a top growth: the log-odds copied, the indices extended)
+    lv.ensure(lv.i0, lv.j0, lv.i0 + w - 1, lv.j0 + h + 5)  # (a top growth: the log-odds copied, the others extended)
     assert lv.shape[1] == w and lv.shape[0] > h
     assert lv.logodds.shape == lv.uidx.shape == lv.prob.shape and lv.logodds[3, 4] == 1.5
-    assert lv.logodds.sum() == 1.5 and not lv.uidx.any() and (lv.prob == 0.5).all()
-    assert set(lv._maps) == {"logodds", "uidx"}
+    assert lv.logodds.sum() == 1.5 and not lv.uidx.any() and not lv.prob.any()  # (0: probability 0.5)
+    assert set(lv._maps) == {"logodds", "prob", "uidx"}

@@ -259,9 +259,12 @@ r = np.linspace(1.0, 5.0, 16)
 ok = np.ones(16, dtype=bool)
 args = (-1.5, 0.2, 0.0, 0.0, 0.0, 0.1, 30.0)
 out = [_ref_arrays(r.astype(np.float32), ok, *args), _ref_arrays(r, ok, *args)]
-prob = np.random.default_rng(1).random((12, 10))  # float64: the AOT module has float32 only
+from dynslam2d.slam.grid import encode_probs
+prob = encode_probs(np.random.default_rng(1).random((12, 10)))  # (a level's probability cache words)
+frozen = prob.copy()
+frozen.flags.writeable = False  # read-only: a type the AOT module lacks
+out.append(correlative._score_pyramid(frozen, 2))
 out.append(correlative._score_pyramid(prob, 2))
-out.append(correlative._score_pyramid(prob.astype(np.float32), 2))
 print(json.dumps({"started_without_numba": started_without_numba, "numba": "numba" in sys.modules,
                   "module_kernel": type(freespace._ref_arrays).__name__,
                   "bytes": [[np.asarray(a).tobytes().hex() for a in (o if isinstance(o, tuple) else (o,))]

@@ -61,7 +61,7 @@ def test_sparse_levels_give_the_dense_levels_bit_for_bit(runs: tuple) -> None:
         for k, (lv, lv0) in enumerate(zip(grid.levels, ref.levels)):
             got = grid.dense_level(k)
             assert got.shape == lv0.shape and (got.i0, got.j0) == (lv0.i0, lv0.j0) and got.resolution == lv0.resolution
-            assert got.prob.dtype == np.float32 and got.prob.tobytes() == lv0.prob.tobytes(), (s, k)
+            assert got.prob.dtype == np.uint32 and got.prob.tobytes() == lv0.prob.tobytes(), (s, k)  # (words)
             if k in grid.sparse:
                 n_sparse += 1
                 assert k < lc.config.search_level  # the searched levels and the far level stay dense

@@ -403,7 +403,7 @@ def test_level_growth_holds_the_old_level_and_one_new_array_not_both_levels() ->
     old level on top of the new one (the old code's peak: old + new). Content and geometry are kept."""
     import tracemalloc
 
-    from dynslam2d.slam.grid import GridLevel
+    from dynslam2d.slam.grid import GridLevel, encode_probs
 
     rng = np.random.default_rng(3)
     lv = GridLevel(0.05)
@@ -411,7 +411,7 @@ def test_level_growth_holds_the_old_level_and_one_new_array_not_both_levels() ->
     try:
         lv.ensure(0, 0, 799, 599)
         lv.logodds[:] = rng.normal(0.0, 3.0, lv.shape).astype(np.float32)
-        lv.prob[:] = rng.uniform(size=lv.shape).astype(np.float32)
+        lv.prob[:] = encode_probs(rng.uniform(size=lv.shape).astype(np.float32))
         lv.uidx[:] = rng.integers(-1, 50, lv.shape).astype(np.int32)
         before = {k: getattr(lv, k).copy() for k in ("logodds", "prob", "uidx")}
         i0, j0, (h, w) = lv.i0, lv.j0, lv.shape
@@ -434,7 +434,7 @@ def test_level_growth_holds_the_old_level_and_one_new_array_not_both_levels() ->
         np.testing.assert_array_equal(arr[r0:r0 + h, c0:c0 + w], old)
     grown = np.ones(lv.shape, dtype=bool)
     grown[r0:r0 + h, c0:c0 + w] = False
-    assert (lv.logodds[grown] == 0).all() and (lv.prob[grown] == 0.5).all() and (lv.uidx[grown] == 0).all()
+    assert (lv.logodds[grown] == 0).all() and (lv.prob[grown] == 0).all() and (lv.uidx[grown] == 0).all()
 
 
 def test_map_export_after_freeing_what_it_does_not_read_is_the_same() -> None:

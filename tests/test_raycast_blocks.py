@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from dynslam2d.jitbox import njit
+from dynslam2d.slam.grid import decode_probs, encode_probs
 from dynslam2d.slam.raycast import (
     _MAGIC_MAX,
     _MAGIC_SHIFT,
@@ -161,10 +162,10 @@ def _state(h: int, w: int, rng: np.random.Generator) -> tuple[np.ndarray, np.nda
 def _both(lo, pr, ui, sx, sy, ex, ey, ends, r, i0, j0, hit, stop, use_stop, cap=6.0) -> None:
     """One call of each form on copies of the same level; every output bit for bit equal."""
     out = []
-    for fn in (_rays, _rays_one_loop):
-        a, b, c = lo.copy(), pr.copy(), ui.copy()
+    for fn in (_rays, _rays_one_loop):  # (the kernel's cache of words, decoded; the reference's float32 one)
+        a, b, c = lo.copy(), encode_probs(pr) if fn is _rays else pr.copy(), ui.copy()
         n = fn(a, b, c, 31, 32, sx, sy, ex, ey, ends, r, i0, j0, hit, stop, use_stop, L_FREE, L_OCC, cap)
-        out.append((n, a, b, c))
+        out.append((n, a, decode_probs(b) if fn is _rays else b, c))
     (n1, *arrs1), (n2, *arrs2) = out
     assert n1 == n2
     for x, y in zip(arrs1, arrs2):

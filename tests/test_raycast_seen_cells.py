@@ -10,6 +10,7 @@ import math
 import numpy as np
 from test_raycast_walk import L_FREE, L_OCC, _check
 
+from dynslam2d.slam.grid import decode_probs
 from dynslam2d.slam.raycast import integrate_rays
 
 
@@ -24,7 +25,7 @@ def test_cells_seen_earlier_in_the_scan_keep_their_update() -> None:
     values, probabilities and indices."""
     h, w, sx, sy = 21, 40, 10, 10
     lo = np.zeros((h, w), np.float32)
-    pr = np.full((h, w), 0.5, np.float32)
+    pr = np.zeros((h, w), np.uint32)  # (the cache's words: 0.5 everywhere)
     ui = np.zeros((h, w), np.int32)
     ex = np.array([20, 30, 20, 25], np.int64)
     ey = np.array([10, 10, 10, 10], np.int64)
@@ -43,7 +44,7 @@ def test_cells_seen_earlier_in_the_scan_keep_their_update() -> None:
         want_pr[10, x] = _sig(v)
         want_ui[10, x] = 2
     assert np.array_equal(lo, want_lo)
-    assert np.array_equal(pr, want_pr)
+    assert np.array_equal(decode_probs(pr), want_pr)
     assert np.array_equal(ui, want_ui)
 
 

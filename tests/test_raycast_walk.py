@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dynslam2d.jitbox import njit
-from dynslam2d.slam.grid import GridLevel, MultiResMap
+from dynslam2d.slam.grid import GridLevel, MultiResMap, decode_probs, encode_probs
 from dynslam2d.slam.raycast import (
     _MAGIC_MAX,
     _MAGIC_SHIFT,
@@ -68,9 +68,9 @@ def _reference(lo, pr, ui, sx, sy, ex, ey, hit, stop, free_idx, occ_idx, cap) ->
 def _check(h: int, w: int, sx: int, sy: int, ex, ey, hit, stop, scans: int, cap: float = 6.0) -> None:
     """Integrate the same rays ``scans`` times with the kernel and the reference; every array equal after each."""
     lo = np.zeros((h, w), np.float32)
-    pr = np.full((h, w), 0.5, np.float32)
+    pr = np.zeros((h, w), np.uint32)  # (the cache's words: 0.5 everywhere)
     ui = np.full((h, w), -1, np.int32)
-    rlo, rpr, rui = lo.astype(np.float64), pr.astype(np.float64), ui.astype(np.int64)
+    rlo, rpr, rui = lo.astype(np.float64), decode_probs(pr).astype(np.float64), ui.astype(np.int64)
     ex, ey = np.asarray(ex, np.int64), np.asarray(ey, np.int64)
     for s in range(scans):
         fi, oi = 3 * s + 1, 3 * s + 2
@@ -80,7 +80,7 @@ def _check(h: int, w: int, sx: int, sy: int, ex, ey, hit, stop, scans: int, cap:
             integrate_rays_stop(lo, pr, ui, fi, oi, sx, sy, ex, ey, hit, stop, L_FREE, L_OCC, cap)
         _reference(rlo, rpr, rui, sx, sy, ex, ey, hit, stop, fi, oi, cap)
         assert np.array_equal(lo, rlo.astype(np.float32))
-        assert np.array_equal(pr, rpr.astype(np.float32))
+        assert np.array_equal(decode_probs(pr).view(np.int32), rpr.astype(np.float32).view(np.int32))
         assert np.array_equal(ui, rui.astype(np.int32))
 
 
@@ -148,7 +148,7 @@ def test_repeated_rays_are_skipped_only_when_they_would_change_nothing() -> None
     _check(h, w, sx, sy, ex, ey, hit, None, scans=3)
     _check(h, w, sx, sy, ex, ey, hit, stop, scans=3)
     lo = np.zeros((h, w), np.float32)
-    pr = np.full((h, w), 0.5, np.float32)
+    pr = np.zeros((h, w), np.uint32)  # (the cache's words: 0.5 everywhere)
     ui = np.full((h, w), -1, np.int32)
     exa, eya = np.asarray(ex, np.int64), np.asarray(ey, np.int64)
     assert integrate_rays(lo, pr, ui, 1, 2, sx, sy, exa, eya, hit, L_FREE, L_OCC, 6.0) == 11
@@ -248,12 +248,12 @@ def test_probability_writes_keep_the_order_and_fall_back_to_the_plain_form() -> 
     cells = rng.integers(0, 500, n).astype(np.uint64)  # (many cells listed more than once)
     vals = rng.uniform(-30.0, 30.0, n)
     vals[::97] = rng.choice([800.0, -800.0, np.nan], vals[::97].size)
-    pr = np.full(500, 0.25, np.float32)
+    pr = encode_probs(np.full(500, 0.25, np.float32))
     _write_probs(pr, cells, vals, np.empty(n, np.float32), n)
     want = np.full(500, 0.25, np.float32)
     for f, p in zip(cells.tolist(), _plain(vals).tolist()):
         want[f] = p
-    assert np.array_equal(pr.view(np.int32), want.view(np.int32))
+    assert np.array_equal(decode_probs(pr).view(np.int32), want.view(np.int32))
 
 
 def test_probability_batches_across_a_scan_equal_the_reference() -> None:
@@ -268,7 +268,7 @@ def test_probability_batches_across_a_scan_equal_the_reference() -> None:
     ey = np.floor(sy + r * np.sin(a) + 0.5).astype(np.int64)
     hit = rng.random(a.size) < 0.9
     ui = np.full((h, w), -1, np.int32)
-    integrate_rays(np.zeros((h, w), np.float32), np.full((h, w), 0.5, np.float32), ui, 1, 2, sx, sy, ex, ey, hit,
+    integrate_rays(np.zeros((h, w), np.float32), np.zeros((h, w), np.uint32), ui, 1, 2, sx, sy, ex, ey, hit,
                    L_FREE, L_OCC, 6.0)
     assert np.count_nonzero(ui >= 1) > 3 * _PROB_BATCH
     _check(h, w, sx, sy, ex, ey, hit, None, scans=3)

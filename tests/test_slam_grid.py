@@ -9,7 +9,7 @@ import pytest
 from conftest import scan_rays
 
 from dynslam2d.slam import HectorSlam, SlamConfig
-from dynslam2d.slam.grid import GridLevel, MultiResMap
+from dynslam2d.slam.grid import GridLevel, MultiResMap, decode_probs, encode_probs
 from dynslam2d.slam.raycast import bresenham_free_cells
 from dynslam2d.types import Pose2D, Scan
 
@@ -91,8 +91,8 @@ def test_ray_integration_hand_worked_example() -> None:
         assert cell(lv, *c) == pytest.approx(L_OCC, abs=1e-6)
     # probability cache follows the log-odds
     j, i = 0 - lv.j0, 5 - lv.i0
-    assert lv.prob[j, i] == pytest.approx(0.9, abs=1e-6)
-    assert lv.prob[0 - lv.j0, 1 - lv.i0] == pytest.approx(0.4, abs=1e-6)
+    assert decode_probs(lv.prob)[j, i] == pytest.approx(0.9, abs=1e-6)
+    assert decode_probs(lv.prob)[0 - lv.j0, 1 - lv.i0] == pytest.approx(0.4, abs=1e-6)
 
     # a second scan adds exactly one more observation per cell
     lv.integrate(np.zeros(2), ends[::-1].copy(), np.ones(3, bool), L_FREE, L_OCC, 50.0)
@@ -143,7 +143,7 @@ def _reference_rays(lv: GridLevel, sx: int, sy: int, ex, ey, hit, stop, free_idx
         if lv.uidx[y, x] < free_idx:
             v = float(lv.logodds[y, x]) + L_FREE
             lv.logodds[y, x] = v
-            lv.prob[y, x] = 1.0 / (1.0 + math.exp(-v))
+            lv.prob[y, x] = encode_probs(1.0 / (1.0 + math.exp(-v)))
             lv.uidx[y, x] = free_idx
 
     for k in range(len(ex)):
@@ -166,7 +166,7 @@ def _reference_rays(lv: GridLevel, sx: int, sy: int, ex, ey, hit, stop, free_idx
                 if v < cap:
                     v += L_OCC
                 lv.logodds[y1, x1] = v
-                lv.prob[y1, x1] = 1.0 / (1.0 + math.exp(-v))
+                lv.prob[y1, x1] = encode_probs(1.0 / (1.0 + math.exp(-v)))
                 lv.uidx[y1, x1] = occ_idx
         else:
             free(x1, y1)
@@ -359,20 +359,20 @@ def test_growth_writes_every_cell_once_with_the_old_content_and_the_fill(seed: i
     rng = np.random.default_rng(seed)
     lv = GridLevel(0.05)
     lv._grow((-7, 3, 13, 19))  # (from empty: every cell the fill)
-    assert np.all(lv.prob == np.float32(0.5)) and np.all(lv.uidx == 0) and np.all(lv.logodds == 0.0)
+    assert np.all(decode_probs(lv.prob) == np.float32(0.5)) and np.all(lv.uidx == 0) and np.all(lv.logodds == 0.0)
     for _ in range(8):
         h, w = lv.shape
-        lv.prob[...] = rng.random((h, w), dtype=np.float32)
+        lv.prob[...] = encode_probs(rng.random((h, w), dtype=np.float32))
         lv.uidx[...] = rng.integers(0, 1000, (h, w), dtype=np.int32)
         lv.logodds[...] = rng.normal(0.0, 3.0, (h, w)).astype(np.float32)
         grow = rng.integers(0, 4, 4) * rng.integers(0, 2, 4)  # (some sides, by 0-3 cells; sometimes none)
         b = (lv.i0 - int(grow[0]), lv.j0 - int(grow[1]), lv.i0 + w + int(grow[2]), lv.j0 + h + int(grow[3]))
         want = {}
-        for name, fill, dtype in (("prob", 0.5, np.float32), ("uidx", 0, np.int32), ("logodds", 0.0, np.float32)):
+        for name, fill, dtype in (("prob", 0, np.uint32), ("uidx", 0, np.int32), ("logodds", 0.0, np.float32)):
             ref = np.full((b[3] - b[1], b[2] - b[0]), fill, dtype=dtype)
             ref[lv.j0 - b[1]:lv.j0 - b[1] + h, lv.i0 - b[0]:lv.i0 - b[0] + w] = getattr(lv, name)
             want[name] = ref
-        junk = [np.full(a.shape, v, dtype=a.dtype) for a, v in ((want["prob"], np.nan), (want["uidx"], 7),
+        junk = [np.full(a.shape, v, dtype=a.dtype) for a, v in ((want["prob"], 0x7FC00000), (want["uidx"], 7),
                                                                   (want["logodds"], 9.0))]
         del junk
         lv._grow(b)

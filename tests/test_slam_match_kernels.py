@@ -13,6 +13,7 @@ from conftest import paper_room_scan, paper_room_slam
 from numba import njit
 
 from dynslam2d.slam.correlative import _pyramid, _rotated_cells, _score_pyramid, _score_table
+from dynslam2d.slam.grid import decode_probs, encode_probs
 from dynslam2d.slam.matcher import _bearing_bin, _split_xy, _sums, evaluate, free_fraction, match_level, match_multires
 from dynslam2d.types import Pose2D, wrap_angle
 
@@ -135,11 +136,11 @@ def test_score_pyramid_kernel_equals_the_array_table_and_pyramid(shape: tuple[in
     crop = big[2:2 + shape[0], 3:3 + shape[1]]  # a strided crop, as the search passes
     for hmax in range(7):  # (up to blocks wider and higher than the array: 2^(h−1) ≥ its sides)
         want = _pyramid(_score_table(crop), hmax)
-        got = _score_pyramid(crop, hmax)
+        got = _score_pyramid(encode_probs(big)[2:2 + shape[0], 3:3 + shape[1]], hmax)  # (the cache's words)
         assert got.dtype == want.dtype == np.float32
         np.testing.assert_array_equal(got.view(np.int32), want.view(np.int32))  # (bit for bit)
     if min(shape) >= 3:
-        t0 = _score_pyramid(crop, 0)[0]
+        t0 = _score_pyramid(encode_probs(big)[2:2 + shape[0], 3:3 + shape[1]], 0)[0]
         assert np.any((t0 > 0.0) & (np.maximum(2.0 * crop - 1.0, 0.0) == 0.0))  # the half-value smear reached
 
 
@@ -274,7 +275,7 @@ def test_blocked_pass_equals_the_one_loop_pass_on_a_mapped_room(level: int) -> N
             x, y, th = mp[0] + off[0], mp[1] + off[1], mp[2] + off[2]
             for swapped in (False, True):
                 for full, stats in _MODES:
-                    want = _one_loop_pass(lv.prob, pts, x, y, th, swapped, full, stats)
+                    want = _one_loop_pass(decode_probs(lv.prob), pts, x, y, th, swapped, full, stats)
                     _same(_blocked_pass(lv.prob, pts, x, y, th, swapped, full, stats), want)
                     n_diff += full and stats and 0 < want[0][2] < n  # some points inside, some outside
     assert n_diff > 0
@@ -297,7 +298,7 @@ def test_blocked_pass_equals_the_one_loop_pass_on_random_and_tiny_maps() -> None
             for x, y, th in ((0.0, 0.0, 0.0), (0.3, -0.2, 0.01), (1.5, 0.25, -0.3)):
                 for swapped in (False, True):
                     for full, stats in _MODES:
-                        _same(_blocked_pass(prob, pts, x, y, th, swapped, full, stats),
+                        _same(_blocked_pass(encode_probs(prob), pts, x, y, th, swapped, full, stats),
                               _one_loop_pass(prob, pts, x, y, th, swapped, full, stats))
 
 

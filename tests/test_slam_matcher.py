@@ -11,6 +11,7 @@ from conftest import paper_room_scan
 
 from dynslam2d.slam import HectorSlam, SlamConfig
 from dynslam2d.slam.correlative import correlative_search
+from dynslam2d.slam.grid import encode_probs
 from dynslam2d.slam.interp import interpolate
 from dynslam2d.slam.matcher import covariance_world, evaluate, match_multires
 from dynslam2d.types import Pose2D, wrap_angle
@@ -45,14 +46,14 @@ def test_interpolation_value_and_gradient_match_finite_differences() -> None:
     # keep away from cell borders so the central difference stays inside one bilinear patch
     frac = pts - np.floor(pts)
     pts = pts[np.all((frac > 0.01) & (frac < 0.99), axis=1)]
-    m, gx, gy = interpolate(P, pts, False)
+    m, gx, gy = interpolate(encode_probs(P), pts, False)
     h = 1e-5
     for k, (x, y) in enumerate(pts):
         assert m[k] == pytest.approx(_bilinear(P, x, y), abs=1e-6)
         assert gx[k] == pytest.approx((_bilinear(P, x + h, y) - _bilinear(P, x - h, y)) / (2 * h), abs=1e-5)
         assert gy[k] == pytest.approx((_bilinear(P, x, y + h) - _bilinear(P, x, y - h)) / (2 * h), abs=1e-5)
     # at cell centres the value is the cell's probability
-    m, _, _ = interpolate(P, np.array([[3.0, 2.0], [0.0, 0.0]]), False)
+    m, _, _ = interpolate(encode_probs(P), np.array([[3.0, 2.0], [0.0, 0.0]]), False)
     np.testing.assert_allclose(m, [P[2, 3], P[0, 0]], atol=1e-7)
 
 
@@ -60,8 +61,8 @@ def test_swapped_gradient_option_reproduces_reference_bug() -> None:
     P = np.zeros((3, 3), dtype=np.float32)  # in bounds needs x ≤ W−2
     P[:2, :2] = [[0.0, 1.0], [0.2, 0.9]]
     x, y = 0.2, 0.7  # fx ≠ fy
-    _, gx, gy = interpolate(P, np.array([[x, y]]), False)
-    _, bx, by = interpolate(P, np.array([[x, y]]), True)
+    _, gx, gy = interpolate(encode_probs(P), np.array([[x, y]]), False)
+    _, bx, by = interpolate(encode_probs(P), np.array([[x, y]]), True)
     p00, p10, p01, p11 = 0.0, 1.0, 0.2, 0.9
     assert gx[0] == pytest.approx((1 - y) * (p10 - p00) + y * (p11 - p01), abs=1e-6)
     assert bx[0] == pytest.approx((1 - x) * (p10 - p00) + x * (p11 - p01), abs=1e-6)  # §2.2 code form
@@ -71,7 +72,7 @@ def test_swapped_gradient_option_reproduces_reference_bug() -> None:
 
 def test_out_of_bounds_and_nan_points_contribute_nothing() -> None:
     P = np.full((4, 4), 0.9, dtype=np.float32)
-    m, gx, gy = interpolate(P, np.array([[-0.1, 1.0], [2.5, 2.01], [np.nan, 1.0], [1.0, np.inf]]), False)
+    m, gx, gy = interpolate(encode_probs(P), np.array([[-0.1, 1.0], [2.5, 2.01], [np.nan, 1.0], [1.0, np.inf]]), False)
     np.testing.assert_array_equal(m, 0.0)
     np.testing.assert_array_equal(gx, 0.0)
     np.testing.assert_array_equal(gy, 0.0)

@@ -25,6 +25,7 @@ import numpy as np
 
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.slam.grid import GridLevel
+from dynslam2d.slam.interp import cell_prob
 
 
 def _score_table(prob: np.ndarray) -> np.ndarray:
@@ -58,7 +59,8 @@ def _pyramid(t0: np.ndarray, max_height: int) -> np.ndarray:
 
 @njit(cache=True)
 def _score_pyramid(prob, max_height):  # pragma: no cover - numba
-    """``_pyramid(_score_table(prob), max_height)`` in one kernel (float32, the same values: the table's
+    """``_pyramid(_score_table(prob), max_height)`` in one kernel, ``prob`` a level's probability cache words
+    ((H, W) uint32, slam/grid.py ``encode_probs``; decoded as read) (float32, the same values: the table's
     float32 2p − 1 and 0.5·m, and maxima, which are exact in any order; ``prob`` holds no NaN, and no value is
     −0: every value is a maximum with +0 or half of one).
 
@@ -79,7 +81,7 @@ def _score_pyramid(prob, max_height):  # pragma: no cover - numba
         pr = prob[y]
         tr = t[y]
         for x in range(ww):
-            tr[x] = max(two * pr[x] - one, zero)
+            tr[x] = max(two * cell_prob(pr[x]) - one, zero)
         mr = m[y]  # 3-wide max along the row
         if ww == 1:
             mr[0] = tr[0]
@@ -696,7 +698,7 @@ def correlative_search(
     if c1 <= c0 or r1 <= r0:
         return None
     crop = level.prob[r0:r1, c0:c1]
-    pyr = _score_pyramid(crop if crop.dtype == np.float32 else crop.astype(np.float32), hmax)  # = _pyramid(
+    pyr = _score_pyramid(crop, hmax)  # = _pyramid(
     # _score_table(crop), hmax): one pass per level in a kernel instead of a dozen array temporaries
     qx -= c0  # (fresh contiguous arrays from the kernel: shifted in place)
     qy -= r0

@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dynslam2d.detect.memoryconfig import MemoryConfig
-from dynslam2d.slam.grid import MultiResMap
+from dynslam2d.slam.grid import MultiResMap, encode_probs
 from dynslam2d.types import Pose2D, Scan, Track
 
 #: (i, j) cell → one int64 key: i·2^32 + j (|i|, |j| < 2^31)
@@ -1355,7 +1355,7 @@ class EvidenceLedger:
             unknown = pure & (lv.uidx[row, col] == last)
             new = np.where(unknown, 0.0, cur - delta).astype(np.float32)
             lv.logodds[row, col] = new
-            lv.prob[row, col] = np.where(unknown, 0.5, 1.0 / (1.0 + np.exp(-new.astype(np.float64))))
+            lv.prob[row, col] = encode_probs(np.where(unknown, 0.5, 1.0 / (1.0 + np.exp(-new.astype(np.float64)))))
             lv.uidx[row, col] = np.where(unknown, 0, lv.uidx[row, col])  # (0: never updated)
             if k == 0:
                 n0 = int(col.shape[0])

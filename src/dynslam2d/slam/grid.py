@@ -25,7 +25,7 @@ from dynslam2d.gridmap import GridMap
 from dynslam2d.slam.raycast import integrate_levels, integrate_rays, integrate_rays_stop, ray_ends
 from dynslam2d.types import Pose2D
 
-#: Bytes per cell: float32 log-odds + float32 probability cache + int32 update index.
+#: Bytes per cell: float32 log-odds + 32-bit probability cache + int32 update index.
 _BYTES_PER_CELL = 12
 #: The most levels :meth:`MultiResMap.integrate` updates in one kernel call (the default map has 3, the loop closer's
 #: submaps 4 — pass rest18: they took the per-level loop before; the level tuples are padded to this length with empty
@@ -33,6 +33,7 @@ _BYTES_PER_CELL = 12
 _FUSED_LEVELS = 4
 _NO_F32 = np.zeros((0, 0), dtype=np.float32)
 _NO_I32 = np.zeros((0, 0), dtype=np.int32)
+_NO_U32 = np.zeros((0, 0), dtype=np.uint32)
 _NO_STOP = np.zeros(0)
 _NO_CLEAR = np.zeros((0, 2))
 _NO_ROWS = np.zeros((0, 0), dtype=np.float32)
@@ -50,7 +51,23 @@ class MapTooLargeError(RuntimeError):
 _ZEROED_BYTES = 1 << 20
 #: A level's per-cell arrays: (attribute, value of a cell never updated, dtype), in the order :meth:`GridLevel.ensure`
 #: grows them (the log-odds last: the tracker's view of the last scan's map keeps the old ones until the next scan).
-_LEVEL_ARRAYS = (("prob", 0.5, np.float32), ("uidx", 0, np.int32), ("logodds", 0.0, np.float32))
+_LEVEL_ARRAYS = (("prob", 0, np.uint32), ("uidx", 0, np.int32), ("logodds", 0.0, np.float32))
+#: The bits of float32 0.5: a level's probability cache holds each cell's float32 probability's bits XOR these
+#: (:func:`encode_probs`), so a cell never updated (0.5) is a zero word — a large level's cache lives in zeroed
+#: memory like its log-odds, and only its pages holding an updated cell take memory (docs/speed.md pass mem52).
+#: Decoding is the same XOR and a bit cast: no rounding, every value's bits kept.
+PROB_HALF_BITS = 0x3F000000
+
+
+def encode_probs(p: np.ndarray) -> np.ndarray:
+    """The probability cache's words (uint32) of probabilities ``p`` (rounded to float32 first): bits XOR
+    :data:`PROB_HALF_BITS`."""
+    return np.asarray(p, dtype=np.float32).view(np.uint32) ^ np.uint32(PROB_HALF_BITS)
+
+
+def decode_probs(words: np.ndarray) -> np.ndarray:
+    """The float32 probabilities of probability cache words ``words`` (uint32; a new array, same shape)."""
+    return (np.asarray(words, dtype=np.uint32) ^ np.uint32(PROB_HALF_BITS)).view(np.float32)
 
 
 def _zeroed(shape: tuple[int, int], dtype: type) -> np.ndarray:
@@ -87,7 +104,8 @@ class GridLevel:
     Attributes:
         resolution: cell side, m.
         logodds: (H, W) float32 log-odds, 0 = unknown (hector_mapping GridMapLogOdds.h).
-        prob: (H, W) float32 occupancy probability cache, kept in step with ``logodds``.
+        prob: (H, W) uint32 occupancy probability cache, kept in step with ``logodds``: each cell's float32
+            probability's bits XOR :data:`PROB_HALF_BITS` (0 = 0.5, never updated; :func:`decode_probs`).
         uidx: (H, W) int32 per-cell update index, as OccGridMapBase's updateIndex, 0 = never updated (the reference's
             −1: a scan's indices are ≥ 1, so every comparison with them reads the same; 0 lets a large level's
             array be zeroed memory whose pages no ray reached are never touched, docs/speed.md pass mem43).
@@ -211,11 +229,11 @@ class GridLevel:
         # into the strips around it — not the whole array filled and then the old part written over (the loop
         # closer's submaps grow on most keyframes they take in; ≈ 40 % less time per growth).
         for name, fill, dtype in _LEVEL_ARRAYS:
-            if name != "prob" and nh * nw * 4 >= _ZEROED_BYTES:
-                # a large level's log-odds (0 = unknown) and update indices (0 = never) in zeroed memory, only the
-                # old array's rows that hold a non-zero cell copied (a −0.0 does: its bits are not zero): pages no
-                # ray reached are never touched and take no memory (12.5 % of MIT CSAIL's finest level was ever
-                # updated; docs/speed.md passes mem39 and mem43)
+            if nh * nw * 4 >= _ZEROED_BYTES:
+                # a large level's log-odds (0 = unknown), probability cache (0 = 0.5) and update indices (0 = never)
+                # in zeroed memory, only the old array's rows that hold a non-zero cell copied (a −0.0 does: its
+                # bits are not zero): pages no ray reached are never touched and take no memory (12.5 % of MIT
+                # CSAIL's finest level was ever updated; docs/speed.md passes mem39, mem43 and mem52)
                 if w == nw and r0 == 0 and self._extend_rows(name, dtype, h, nh):
                     continue
                 new, mm = _zeroed_map((nh, nw), dtype)
@@ -403,7 +421,7 @@ class MultiResMap:
             la, lb, lc = levels
             n0 = integrate_levels(
                 hits, clear, c, s, ox, oy, (la.logodds, lb.logodds, lc.logodds, _NO_F32),
-                (la.prob, lb.prob, lc.prob, _NO_F32), (la.uidx, lb.uidx, lc.uidx, _NO_I32), 3,
+                (la.prob, lb.prob, lc.prob, _NO_U32), (la.uidx, lb.uidx, lc.uidx, _NO_I32), 3,
                 (la.resolution, lb.resolution, lc.resolution, 1.0), (la.i0, lb.i0, lc.i0, 0), (la.j0, lb.j0, lc.j0, 0),
                 (la.update_counter, lb.update_counter, lc.update_counter, 0),
                 stop if stop is not None else _NO_STOP, stop is not None,
@@ -412,7 +430,7 @@ class MultiResMap:
             pad = _FUSED_LEVELS - n_lv
             n0 = integrate_levels(
                 hits, clear, c, s, ox, oy, tuple(lv.logodds for lv in levels) + (_NO_F32,) * pad,
-                tuple(lv.prob for lv in levels) + (_NO_F32,) * pad,
+                tuple(lv.prob for lv in levels) + (_NO_U32,) * pad,
                 tuple(lv.uidx for lv in levels) + (_NO_I32,) * pad, n_lv,
                 tuple(lv.resolution for lv in levels) + (1.0,) * pad,
                 tuple(lv.i0 for lv in levels) + (0,) * pad, tuple(lv.j0 for lv in levels) + (0,) * pad,
@@ -458,7 +476,7 @@ class MultiResMap:
             mb = self.max_bytes
             n0 = integrate_levels(
                 hits, clear, c, s, ox, oy, (la.logodds, lb.logodds, lc.logodds, _NO_F32),
-                (la.prob, lb.prob, lc.prob, _NO_F32), (la.uidx, lb.uidx, lc.uidx, _NO_I32), 3,
+                (la.prob, lb.prob, lc.prob, _NO_U32), (la.uidx, lb.uidx, lc.uidx, _NO_I32), 3,
                 (la.resolution, lb.resolution, lc.resolution, 1.0), (la.i0, lb.i0, lc.i0, 0), (la.j0, lb.j0, lc.j0, 0),
                 (la.update_counter, lb.update_counter, lc.update_counter, 0), _NO_STOP, False,
                 -1 if mb is None else mb, self.l_free, self.l_occ, self.cap)

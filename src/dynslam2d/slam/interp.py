@@ -10,12 +10,34 @@ from __future__ import annotations
 
 import numpy as np
 
-from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
+from dynslam2d.jitbox import njit, numba_import  # numba's njit, arrays returned without a per-array unpickle
+
+_lir, _nbtypes, _intrinsic = numba_import("llvmlite.ir", "numba.types", "numba.extending.intrinsic")
+
+#: the bits of float32 0.5 (slam/grid.py's ``PROB_HALF_BITS``: a probability cache word is a float32's bits XOR them)
+_HALF_BITS = 0x3F000000
+
+
+@_intrinsic
+def cell_prob(typingctx, word):
+    """In a kernel: the float32 probability of a probability cache word (uint32; slam/grid.py ``encode_probs``):
+    ``word`` XOR the bits of 0.5, bit cast to float32 (no conversion: every bit kept). Typed for uint32 only: a
+    kernel given a float array fails to compile instead of converting its values."""
+    if word != _nbtypes.uint32:
+        return None
+    sig = _nbtypes.float32(_nbtypes.uint32)
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        i32 = _lir.IntType(32)
+        return builder.bitcast(builder.xor(args[0], i32(_HALF_BITS)), _lir.FloatType())
+
+    return sig, codegen
 
 
 @njit(cache=True)
 def interp_value_grad(prob, px, py, swapped):  # pragma: no cover - numba
-    """(M, ∂M/∂x, ∂M/∂y, inside) at map point (px, py), gradient per cell.
+    """(M, ∂M/∂x, ∂M/∂y, inside) at map point (px, py) of probability cache ``prob`` ((H, W) uint32 words,
+    slam/grid.py ``encode_probs``), gradient per cell.
 
     ``swapped`` reproduces the reference's swapped weights (interpMapValueWithDerivatives,
     hector_slam issue #16);
@@ -28,10 +50,10 @@ def interp_value_grad(prob, px, py, swapped):  # pragma: no cover - numba
     y0 = int(py)
     fx = px - x0
     fy = py - y0
-    p00 = prob[y0, x0]
-    p10 = prob[y0, x0 + 1]
-    p01 = prob[y0 + 1, x0]
-    p11 = prob[y0 + 1, x0 + 1]
+    p00 = cell_prob(prob[y0, x0])
+    p10 = cell_prob(prob[y0, x0 + 1])
+    p01 = cell_prob(prob[y0 + 1, x0])
+    p11 = cell_prob(prob[y0 + 1, x0 + 1])
     m = (1.0 - fy) * ((1.0 - fx) * p00 + fx * p10) + fy * ((1.0 - fx) * p01 + fx * p11)
     if swapped:
         mx = (1.0 - fx) * (p10 - p00) + fx * (p11 - p01)

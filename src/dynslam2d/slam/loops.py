@@ -103,8 +103,6 @@ def _keep_probabilities(lv: GridLevel) -> None:
     lv.uidx = np.broadcast_to(np.full((), -1, dtype=np.int32), shape)
 
 
-#: The bits of a probability-cache cell never updated (float32 0.5): a sparse level stores only the other cells.
-_HALF_BITS = int(np.float32(0.5).view(np.int32))
 #: Grids whose rebuilt dense levels the closer keeps while a far candidate is verified (LoopCloser._dense): its
 #: partners are matched against submaps s − 1, s and s + 1 in turn.
 _DENSE_VERIFY = 3
@@ -113,10 +111,10 @@ _DENSE_VERIFY = 3
 class _SubmapGrid(MultiResMap):
     """A cached submap grid (:meth:`LoopCloser._submap_grid`) whose levels below the search level — read only by a
     match's refinement and support, not by the correlative searches — may be kept sparse: ``sparse[k]`` = (flat
-    indices (int32), float32 values) of the cells of level ``k``'s probability cache whose bits are not 0.5's, and
-    the level's own ``prob`` a read-only NaN broadcast of its shape (a read of it by mistake gives NaN, a write
-    fails). :meth:`dense_level` gives the level back bit for bit. A grid just built holds those levels dense until
-    it leaves the recent set of :meth:`LoopCloser._dense` (``late``)."""
+    indices (int32), uint32 words) of the cells of level ``k``'s probability cache whose word is not 0 (0.5), and
+    the level's own ``prob`` a read-only float32 NaN broadcast of its shape (a kernel reading it by mistake fails
+    on its type, a write fails). :meth:`dense_level` gives the level back bit for bit. A grid just built holds those
+    levels dense until it leaves the recent set of :meth:`LoopCloser._dense` (``late``)."""
 
     sparse: dict[int, tuple[np.ndarray, np.ndarray]]
     #: levels still dense that are made sparse when the grid leaves the recent set of :meth:`LoopCloser._dense`
@@ -125,11 +123,11 @@ class _SubmapGrid(MultiResMap):
 
     def dense_level(self, k: int) -> GridLevel:
         """Level ``k`` with its whole probability cache (a shallow copy of a sparse level with the cache rebuilt:
-        0.5 everywhere, the stored cells' values written back; the same float32 bits)."""
+        0 (0.5) everywhere, the stored cells' words written back; the same bits)."""
         return self.dense_level_into(k, None)
 
     def dense_level_into(self, k: int, buf: np.ndarray | None) -> GridLevel:
-        """:meth:`dense_level`, a sparse level's cache rebuilt in the flat float32 buffer ``buf`` (its first
+        """:meth:`dense_level`, a sparse level's cache rebuilt in the flat uint32 buffer ``buf`` (its first
         cells, reshaped; a new array if ``buf`` is None or too short): no new allocation (nor its first-touch page
         faults) for a caller that owns ``buf`` and no longer reads what it held."""
         lv = self.levels[k]
@@ -139,10 +137,10 @@ class _SubmapGrid(MultiResMap):
         idx, vals = sp
         n = lv.shape[0] * lv.shape[1]
         if buf is None or buf.shape[0] < n:
-            prob = np.full(lv.shape, 0.5, dtype=np.float32)
+            prob = np.zeros(lv.shape, dtype=np.uint32)
         else:
             prob = buf[:n].reshape(lv.shape)
-            prob.fill(0.5)
+            prob.fill(0)
         prob.reshape(-1)[idx] = vals
         out = copy.copy(lv)
         out.prob = prob
@@ -154,7 +152,7 @@ def _make_sparse(grid: _SubmapGrid, k: int) -> None:
     (8 bytes a cell not 0.5 against 4 a cell: MIT CSAIL's submaps hold 6–15 % of such cells at 0.05–0.1 m)."""
     lv = grid.levels[k]
     flat = lv.prob.reshape(-1)
-    idx = np.flatnonzero(flat.view(np.int32) != _HALF_BITS)
+    idx = np.flatnonzero(flat)  # (the cache's words: 0 is 0.5)
     if 2 * idx.shape[0] >= flat.shape[0] or flat.shape[0] >= 2**31:
         return
     grid.sparse[k] = (idx.astype(np.int32), flat[idx])
@@ -163,8 +161,8 @@ def _make_sparse(grid: _SubmapGrid, k: int) -> None:
 
 def _sparsify_late(grid: _SubmapGrid) -> dict[int, np.ndarray]:
     """Make ``grid``'s levels still dense that are due to be sparse (``grid.late``, see
-    :meth:`LoopCloser._submap_grid`) sparse now (:func:`_make_sparse`); their former float32 caches, flat, by level
-    (only those made sparse and contiguous: they are then no longer the grid's, a buffer to rebuild in)."""
+    :meth:`LoopCloser._submap_grid`) sparse now (:func:`_make_sparse`); their former caches (uint32 words), flat, by
+    level (only those made sparse and contiguous: they are then no longer the grid's, a buffer to rebuild in)."""
     bufs: dict[int, np.ndarray] = {}
     for k in grid.late:
         prob = grid.levels[k].prob
@@ -412,7 +410,7 @@ class LoopCloser:
         self._new_loops = 0
         self._cache: OrderedDict[int, _SubmapGrid] = OrderedDict()
         self._cache_size = _SUBMAP_CACHE  # grids kept built (the second search keeps more: it jumps between places)
-        # the cache of rebuilt dense levels (_dense): id(grid) → (grid, its dense levels by level, the flat float32
+        # the cache of rebuilt dense levels (_dense): id(grid) → (grid, its dense levels by level, the flat uint32
         # buffers they are rebuilt in by level), least recently used first; one entry outside a far verification
         self._dense_entries: OrderedDict[int, tuple[_SubmapGrid, dict[int, GridLevel], dict[int, np.ndarray]]] = \
             OrderedDict()
@@ -722,7 +720,7 @@ class LoopCloser:
             shape = grid.levels[k].shape
             buf = bufs.get(k)
             if buf is None or buf.shape[0] < shape[0] * shape[1]:
-                buf = bufs[k] = np.empty(shape[0] * shape[1], dtype=np.float32)
+                buf = bufs[k] = np.empty(shape[0] * shape[1], dtype=np.uint32)
             lv = levels[k] = grid.dense_level_into(k, buf)
         return lv
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from dynslam2d.jitbox import njit, numba_import  # numba's njit (or the AOT kernels'), numba's names
 from dynslam2d.slam.grid import GridLevel
-from dynslam2d.slam.interp import interp_value_grad
+from dynslam2d.slam.interp import cell_prob, interp_value_grad
 
 _nbtypes, _cgutils, _intrinsic, _populate_array = numba_import(
     "numba.types", "numba.core.cgutils", "numba.extending.intrinsic", "numba.np.arrayobj.populate_array")
@@ -152,10 +152,10 @@ def _sums(prob, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cover -
             fb[4, j] = c * sx - s * sy
         for j in range(m):
             k = kb[j]
-            qb[0, j] = flat[k]
-            qb[1, j] = flat[k + np.uint64(1)]
-            qb[2, j] = flat[k + uw]
-            qb[3, j] = flat[k + uw + np.uint64(1)]
+            qb[0, j] = cell_prob(flat[k])  # (the cache's words decoded: slam/grid.py encode_probs)
+            qb[1, j] = cell_prob(flat[k + np.uint64(1)])
+            qb[2, j] = cell_prob(flat[k + uw])
+            qb[3, j] = cell_prob(flat[k + uw + np.uint64(1)])
         for j in range(m):
             fx = fb[0, j]
             fy = fb[1, j]

@@ -10,7 +10,8 @@ Implements hector_mapping's ``OccGridMapBase::updateByScan`` / ``bresenham2D`` e
 * a hit is added only while the log-odds is below the cap; the free side is unbounded.
 
 Grid arrays are indexed ``[row, col]`` = ``[y, x]`` in cell units of the level.
-The probability cache (``prob``) is refreshed for every touched cell, so the matcher
+The probability cache (``prob``, uint32 words: a float32's bits XOR those of 0.5, slam/grid.py ``encode_probs``)
+is refreshed for every touched cell, so the matcher
 never needs a full-map recomputation; its values come from :func:`_prob_fast`, which gives the bits of
 ``float32(1 / (1 + exp(−v)))`` or asks for that plain form where it cannot guarantee them.
 """
@@ -52,6 +53,18 @@ _PREFETCH = 16
 #: updated cells a level's walks collect before their probabilities are written (:func:`_write_probs`; plus one
 #: ray's cells at most)
 _PROB_BATCH = 1024
+
+
+@_intrinsic
+def _prob_word(typingctx, p):
+    """The probability cache's word of float32 ``p``: its bits XOR those of 0.5 (slam/grid.py ``encode_probs``)."""
+    sig = _nbtypes.uint32(_nbtypes.float32)
+
+    def codegen(context, builder, signature, args):
+        i32 = _lir.IntType(32)
+        return builder.xor(builder.bitcast(args[0], i32), i32(0x3F000000))
+
+    return sig, codegen
 
 
 @_intrinsic
@@ -163,17 +176,17 @@ def _prob_fast(v):  # pragma: no cover - numba
 
 @njit(cache=True, inline="always")
 def _write_probs(pr, cells, vals, probs, n):  # pragma: no cover - numba
-    """``pr[cells[i]] = float32(1 / (1 + exp(−vals[i])))`` for i < ``n``, in that order (a cell listed twice keeps
-    the later value): :func:`_prob_fast` in one vectorised loop into ``probs`` (float32 scratch, ≥ n), then the
-    writes, with the plain form where it gave NaN. (Inlined: :func:`_rays` calls it at one place, which compiles
-    ≈ 0.17 s less than a function of its own.)"""
+    """``pr[cells[i]] =`` the cache word (:func:`_prob_word`) of ``float32(1 / (1 + exp(−vals[i])))`` for
+    i < ``n``, in that order (a cell listed twice keeps the later value): :func:`_prob_fast` in one vectorised loop
+    into ``probs`` (float32 scratch, ≥ n), then the writes, with the plain form where it gave NaN. (Inlined:
+    :func:`_rays` calls it at one place, which compiles ≈ 0.17 s less than a function of its own.)"""
     for i in range(n):
         probs[i] = _prob_fast(vals[i])
     for i in range(n):
         p = probs[i]
         if p != p:
             p = np.float32(1.0 / (1.0 + math.exp(-vals[i])))
-        pr[cells[i]] = p
+        pr[cells[i]] = _prob_word(p)
 
 
 @njit(cache=True)
