@@ -21,7 +21,7 @@ from dynslam2d.slam.correlative import (
     _wrapped_rows,
     correlative_search,
 )
-from dynslam2d.slam.grid import GridLevel
+from dynslam2d.slam.grid import GridLevel, decode_probs, encode_probs
 
 # ---- the code before (slam/correlative.py at the previous release), kept to compare against -------------------
 
@@ -224,7 +224,7 @@ def reference_search(
     if c1 <= c0 or r1 <= r0:
         return None
     crop = level.prob[r0:r1, c0:c1]
-    pyr = _score_pyramid(crop if crop.dtype == np.float32 else crop.astype(np.float32), hmax)  # = _pyramid(
+    pyr = _score_pyramid(crop, hmax)  # = _pyramid(
     # _score_table(crop), hmax): one pass per level in a kernel instead of a dozen array temporaries
     qx -= c0  # (fresh contiguous arrays from the kernel: shifted in place)
     qy -= r0
@@ -306,10 +306,10 @@ def test_search_equals_it_on_a_probability_above_one() -> None:
     slam, pts = _level_and_points()
     lv = slam.map.levels[1]
     saved = lv.prob
-    prob = np.array(saved, dtype=np.float32, copy=True)
+    prob = decode_probs(saved)  # (the cache holds words: slam/grid.py encode_probs)
     prob[prob > 0.9] = 1e9  # table values 2e9: float64 sums of them and of multiples of 2^−24 round
     try:
-        lv.prob = prob
+        lv.prob = encode_probs(prob)
         for th in (0.0, 1.0, -2.5):
             start = np.array([0.1, -0.2, th])
             _same(correlative_search(lv, pts, start, 0.8, 0.5, None, 150, 4),
