@@ -13,7 +13,7 @@ from dynslam2d.eval.trajectory import AteResult
 from dynslam2d.gridmap import GridMap
 from dynslam2d.types import Pose2D
 from dynslam2d.viz import style
-from dynslam2d.viz.figure import new_figure, save_png
+from dynslam2d.viz.figure import new_figure, save_png, tight_layout
 from dynslam2d.viz.mapplot import draw_scale_bar, map_figure_size
 
 # Classes of :attr:`MapDifference.classes`, painted in this order.
@@ -159,7 +159,7 @@ def plot_errors(
     ax_m.set_title("map difference" + (f"\n{map_note}" if map_note else ""), fontsize="medium")
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
+    tight_layout(fig)
     return save_png(fig, path, dpi)
 
 

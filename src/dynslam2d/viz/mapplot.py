@@ -14,7 +14,7 @@ import numpy as np
 from dynslam2d.gridmap import GridMap
 from dynslam2d.types import Box
 from dynslam2d.viz import style
-from dynslam2d.viz.figure import new_figure, save_png
+from dynslam2d.viz.figure import new_figure, save_png, tight_layout
 from dynslam2d.viz.trackpaths import TrackPath, label_tracks
 
 
@@ -510,5 +510,5 @@ def plot_map(
     if handles:
         ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small",
                   framealpha=0.9, borderaxespad=0.0)
-    fig.tight_layout()
+    tight_layout(fig)
     return save_png(fig, path, dpi)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from dynslam2d.gridmap import GridMap
-from dynslam2d.viz.figure import new_figure, save_png
+from dynslam2d.viz.figure import new_figure, save_png, tight_layout
 from dynslam2d.viz.mapplot import GreyMap, draw_grey_indices, frame_metric_axes, map_figure_size, occupancy_indices
 from dynslam2d.viz.trackpaths import MAX_LABELS, TrackPath, label_tracks
 
@@ -192,7 +192,7 @@ def plot_tracks(
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.07), ncol=3, fontsize="small",
               framealpha=0.9).set_zorder(20)
     ax.set_title(title or f"{len(tracks)} tracks, coloured by speed")
-    fig.tight_layout()
+    tight_layout(fig)
     return save_png(fig, path, dpi)
 
 
