@@ -737,6 +737,22 @@ class CleanResult:
 _PROB_SLOT = GridMap.__dict__["prob"]
 
 
+def _mark_probs(prob: np.ndarray, erased: np.ndarray, restored: np.ndarray) -> np.ndarray:
+    """``prob`` (probabilities, in place) with the erased cells at :data:`ERASED_PROBABILITY` and the restored ones
+    at :data:`RESTORED_PROBABILITY`: the cleaned map's values; returns ``prob``."""
+    prob[erased] = ERASED_PROBABILITY
+    prob[restored] = RESTORED_PROBABILITY
+    return prob
+
+
+def _mark_logodds(lo: np.ndarray, erased: np.ndarray, restored: np.ndarray) -> np.ndarray:
+    """``lo`` (log-odds, in place) with the erased and restored cells at the logits of :data:`ERASED_PROBABILITY`
+    and :data:`RESTORED_PROBABILITY`: the cleaned log-odds; returns ``lo``."""
+    lo[erased] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
+    lo[restored] = math.log(RESTORED_PROBABILITY / (1.0 - RESTORED_PROBABILITY))
+    return lo
+
+
 class _CleanedGrid(GridMap):
     """The cleaned map as :func:`clean_windows` makes it — the online map's probabilities, erased cells at
     :data:`ERASED_PROBABILITY`, restored ones at :data:`RESTORED_PROBABILITY` — made when ``prob`` is first read,
@@ -756,10 +772,7 @@ class _CleanedGrid(GridMap):
         parts = self._parts
         if parts is not None:
             online, erased, restored = parts
-            prob = online.prob.copy()
-            prob[erased] = ERASED_PROBABILITY
-            prob[restored] = RESTORED_PROBABILITY
-            _PROB_SLOT.__set__(self, prob)
+            _PROB_SLOT.__set__(self, _mark_probs(online.prob.copy(), erased, restored))
             self._parts = None
         return _PROB_SLOT.__get__(self)
 
@@ -777,10 +790,7 @@ class _CleanedGrid(GridMap):
         if parts is None or parts[0] is not online or not online.prob.flags.writeable:
             return False
         _, erased, restored = parts
-        prob = online.prob
-        prob[erased] = ERASED_PROBABILITY
-        prob[restored] = RESTORED_PROBABILITY
-        _PROB_SLOT.__set__(self, prob)
+        _PROB_SLOT.__set__(self, _mark_probs(online.prob, erased, restored))
         self._parts = None
         return True
 
@@ -810,9 +820,7 @@ class CleanedLogodds:
     def _rows(self, r0: int, r1: int) -> np.ndarray:
         """Rows r0 … r1 − 1 of the cleaned log-odds (a new array)."""
         lo = np.array(self._logodds[r0:r1], dtype=self.dtype, copy=True)
-        lo[self._erased[r0:r1]] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
-        lo[self._restored[r0:r1]] = math.log(RESTORED_PROBABILITY / (1.0 - RESTORED_PROBABILITY))
-        return lo
+        return _mark_logodds(lo, self._erased[r0:r1], self._restored[r0:r1])
 
     def __array__(self, dtype: np.dtype | None = None, copy: bool | None = None) -> np.ndarray:
         lo = self._rows(0, self.shape[0])
@@ -958,9 +966,7 @@ def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | N
     n_occ = int(occ.sum())
     del occ  # (one byte a cell) before the cleaned copies are made, the pass's highest point (issue 13 item 3)
     if keep_counts:
-        grid = GridMap(online.prob.copy(), online.resolution, online.origin)
-        grid.prob[erased] = ERASED_PROBABILITY
-        grid.prob[restored] = RESTORED_PROBABILITY
+        grid = GridMap(_mark_probs(online.prob.copy(), erased, restored), online.resolution, online.origin)
     else:  # (the command line's pass: the cleaned float64 map made when the results first read it)
         grid = _CleanedGrid(online, erased, restored)
     lo = None
@@ -972,8 +978,7 @@ def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | N
         else:
             lo = np.array(logodds, dtype=dtype, copy=True)
             if lo.shape == erased.shape:
-                lo[erased] = math.log(ERASED_PROBABILITY / (1.0 - ERASED_PROBABILITY))
-                lo[restored] = math.log(RESTORED_PROBABILITY / (1.0 - RESTORED_PROBABILITY))
+                _mark_logodds(lo, erased, restored)
     area = online.resolution ** 2
     stats: dict[str, float | int] = {
         "occupied_cells_online": n_occ,
