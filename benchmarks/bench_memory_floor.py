@@ -7,9 +7,9 @@ kernel cache — the floor under any peak with numba in the process.
 First runs ``dynslam2d run INPUT --out TMP -q`` (which also fills the cache) and records the signature of every
 kernel the run held; then, in a fresh interpreter, imports step by step and loads those kernels one at a time
 (``Dispatcher.compile`` with a warm cache loads the cached code), printing the RSS after each step, the kernels
-that added most, and the cache's size on disk. The loop closure's ``scipy.sparse`` imports (its pose graph's
-solver and shortest paths, imported when a run first needs them) are measured last. Not run by pytest; numbers go
-to docs/speed.md with this command.
+that added most, and the cache's size on disk. The loop closure's ``scipy.sparse`` import and SciPy's SuperLU and
+connected components loaded without their packages (lazyscipy.py; when a run first needs them) are measured last.
+Not run by pytest; numbers go to docs/speed.md with this command.
 """
 
 from __future__ import annotations
@@ -79,8 +79,10 @@ for name, sig in kernels:
     disp.compile(args)
     per.append((name, rss() - r0))
 rows.append((f"+ all {len(per)} kernels the run calls, from the cache", rss()))
-import scipy.sparse.linalg, scipy.sparse.csgraph  # noqa: E401
-rows.append(("+ scipy.sparse(.linalg, .csgraph): the loop closure's solver", rss()))
+import scipy.sparse
+from dynslam2d import lazyscipy
+lazyscipy._loaded("superlu"), lazyscipy._loaded("components")  # the loop closure's SciPy parts (pass mem60)
+rows.append(("+ scipy.sparse, SuperLU and connected components: the loop closure's", rss()))
 print(json.dumps({"rows": rows, "per": per, "skipped": skipped}))
 """
 

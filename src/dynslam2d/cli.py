@@ -1879,9 +1879,11 @@ def main() -> None:
     """
     from dynslam2d.jitcache import load_blas_alone, plain_numba_errors
     from dynslam2d.lazynumpy import defer_numpy_submodules
+    from dynslam2d.lazyscipy import defer_scipy_submodules
     from dynslam2d.memtrim import map_large_blocks
 
     defer_numpy_submodules()  # SciPy's copy of NumPy's namespace imports none of f2py, testing, ... (lazynumpy.py)
+    defer_scipy_submodules()  # scipy.ndimage's import leaves scipy.special unexecuted (lazyscipy.py)
     map_large_blocks()  # freed map-sized arrays go back to the OS, not into a fragmented heap (memtrim.py)
     plain_numba_errors()  # no colorama round trip per numba typing attempt: a shorter cold compile (docs/speed.md)
     from dynslam2d.jitaot import table

@@ -281,7 +281,8 @@ class PoseGraph:
         # imported here, not with the module: scipy.sparse(.linalg) costs ~1 s and tens of MiB at start-up,
         # and only a run that optimises a graph needs it (docs/speed.md)
         import scipy.sparse as sp
-        from scipy.sparse.linalg import splu
+
+        from dynslam2d.lazyscipy import splu
 
         if self._all is not None:
             sel = np.array(idx, dtype=np.int64)

@@ -41,7 +41,8 @@ def ties(closer: LoopCloser) -> np.ndarray:
     below ``weak_score``: nodes with different labels are the pairs the loops do not tie yet (connected components
     of the graph without those edges)."""
     from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+
+    from dynslam2d.lazyscipy import connected_components
 
     c = closer.config
     g = closer.graph
