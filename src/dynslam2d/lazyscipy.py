@@ -25,6 +25,7 @@ import functools
 import importlib.abc
 import importlib.machinery
 import importlib.util
+import os
 import sys
 import warnings
 from collections.abc import Callable, Sequence
@@ -53,7 +54,7 @@ def _load_alone(names: Sequence[str]) -> ModuleType:
                 module = sys.modules[name]
                 continue
             *pkg, leaf = name.split(".")[1:]
-            folder = "/".join([root, *pkg])
+            folder = os.path.join(root, *pkg)
             spec = importlib.machinery.PathFinder.find_spec(leaf, [folder])
             if spec is None or spec.loader is None or spec.origin is None:
                 raise ImportError(f"{name} not found in {folder}")
@@ -68,7 +69,8 @@ def _load_alone(names: Sequence[str]) -> ModuleType:
             sys.modules[name] = module
             added.append(name)
             loader.exec_module(module)
-        assert module is not None
+        if module is None:
+            raise ImportError("no module named")
         return module
     except BaseException:
         for name in added:
