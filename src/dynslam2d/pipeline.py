@@ -1097,6 +1097,7 @@ def run(
         packed = _PackedExport.of(front)
         if packed is not None:
             front = logodds = pipe._released_grid = None  # type: ignore[assignment]
+            release_free_memory()  # (the packing's temporaries, in the heap's pages, before the render's level)
         t_render = time.perf_counter()
         grid_opt, lo_opt = render_map(loop, pipe.config.slam)
         loop.stats["render_ms"] = (time.perf_counter() - t_render) * 1e3
