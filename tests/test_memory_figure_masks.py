@@ -94,14 +94,19 @@ def test_released_figures_let_the_erased_masks_go_before_map_png(tmp_path, monke
 
 def _overlay_png(img: np.ndarray, extent: tuple[float, float, float, float], figsize: tuple[float, float],
                  stock: bool, limits: tuple[float, float, float, float] | None) -> bytes:
-    import io
-
-
     ax = new_figure(figsize).subplots()
     mapplot.draw_grey_indices(ax, np.full((10, 10), 200, dtype=np.uint16), extent)
     im = ax.imshow(img, origin="lower", extent=extent, interpolation="nearest", zorder=2)
     if not stock:
         im.__class__ = mapplot._index_image_class()  # as plot_map draws points_overlay's image
+    return saved_png(ax, limits)
+
+
+def saved_png(ax, limits: tuple[float, float, float, float] | None) -> bytes:  # type: ignore[no-untyped-def]
+    """PNG bytes (120 dpi) of ``ax``'s figure with its axes limited to ``limits`` (xmin, xmax, ymin, ymax), equal
+    aspect."""
+    import io
+
     if limits is not None:
         ax.set_xlim(limits[0], limits[1])
         ax.set_ylim(limits[2], limits[3])

@@ -616,7 +616,8 @@ def render_map(loop: LoopResult, slam_config: SlamConfig, poses: np.ndarray | No
         slam.update_map(kf.kept(), Pose2D(float(p[0]), float(p[1]), float(p[2])), force=True)
     out = _MapExport.of(slam.map, take=True)  # (each of the level's arrays let go once read)
     del slam  # (the rest of the renderer goes before the float64 map is made: issue 13 item 3)
-    return out.gridmap(), out.logodds
+    # the float64 map made when read: a render the map check refuses never makes it (MIT CSAIL: 14.5 MiB; pass mem61)
+    return ExportGridMap(out.logodds, out.unknown, out.resolution, out.origin), out.logodds
 
 
 def render_written_map(loop: LoopResult, slam_config: SlamConfig) -> tuple[GridMap, np.ndarray] | None:
@@ -756,6 +757,123 @@ class _MapExport:
     def gridmap(self) -> GridMap:
         """The map as probabilities, NaN = never observed: the values of :meth:`MultiResMap.to_gridmap`."""
         return GridMap(logistic_map(self.logodds, self.unknown), self.resolution, self.origin)
+
+
+class ExportGridMap(GridMap):
+    """A map exported as float32 log-odds and a mask of its never-updated cells (:class:`_MapExport`) whose float64
+    probabilities (``logistic_map``'s, NaN = never observed) are made when ``prob`` is first read: the run's online
+    map goes through the loop closure's map check and the clean-up pass (which reads it a band of rows at a time,
+    :meth:`prob_rows`) without its 8 bytes a cell (14.5 MiB on MIT CSAIL; issue 13 item 3, pass mem61). Once its
+    log-odds are written, :meth:`pack` holds them packed, so the float64 map is made without them beside it. The
+    log-odds and the mask must not change before; afterwards it is a plain :class:`GridMap`."""
+
+    __slots__ = ("_export",)
+
+    def __init__(self, logodds: np.ndarray, unknown: np.ndarray, resolution: float,  # noqa: D107
+                 origin: tuple[float, float]) -> None:
+        self._export: _MapExport | _PackedExport | None = _MapExport(logodds, unknown, resolution, origin)
+        self.resolution = resolution
+        self.origin = origin
+
+    @property  # type: ignore[override]
+    def prob(self) -> np.ndarray:
+        export = self._export
+        if isinstance(export, _MapExport):
+            _GRID_PROB.__set__(self, logistic_map(export.logodds, export.unknown))
+        elif export is not None:  # (packed: made a band of rows at a time)
+            prob = np.empty(export.shape, dtype=np.float64)
+            for r0 in range(0, export.shape[0], _PROB_ROWS):
+                prob[r0:r0 + _PROB_ROWS] = self.prob_rows(r0, r0 + _PROB_ROWS)
+            _GRID_PROB.__set__(self, prob)
+        self._export = None
+        return _GRID_PROB.__get__(self)
+
+    @prob.setter
+    def prob(self, value: np.ndarray) -> None:
+        _GRID_PROB.__set__(self, np.asarray(value, dtype=np.float64))
+        self._export = None
+
+    @property
+    def made(self) -> bool:
+        """Whether the float64 probabilities exist (were read or set)."""
+        return self._export is None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        export = self._export
+        if export is None:
+            return _GRID_PROB.__get__(self).shape  # type: ignore[no-any-return]
+        return export.shape if isinstance(export, _PackedExport) else export.unknown.shape  # type: ignore[return-value]
+
+    def prob_rows(self, r0: int, r1: int) -> np.ndarray:
+        """Rows ``r0`` … ``r1`` − 1 of ``prob`` (the same values), without making the whole map when not made."""
+        export = self._export
+        if export is None:
+            return _GRID_PROB.__get__(self)[r0:r1]
+        if isinstance(export, _PackedExport):
+            return logistic_map(*export.rows(r0, r1))
+        return logistic_map(export.logodds[r0:r1], export.unknown[r0:r1])
+
+    def pack(self) -> bool:
+        """Hold the log-odds and the mask packed (:class:`_PackedExport`) until the map is made: for a caller whose
+        other references to the log-odds are gone (the results, once the log-odds files are written; MIT CSAIL:
+        9.1 → ≈ 1.3 MiB beside the float64 map as it is made). True if packed now."""
+        if isinstance(self._export, _MapExport):
+            packed = _PackedExport.of(self._export)
+            if packed is not None:
+                self._export = packed
+                return True
+        return False
+
+
+#: :class:`GridMap`'s own storage of ``prob`` (a slot), under :class:`ExportGridMap`'s property
+_GRID_PROB = GridMap.__dict__["prob"]
+#: Rows of a packed :class:`ExportGridMap` made into probabilities at a time (float64 temporaries of a few MB).
+_PROB_ROWS = 256
+
+
+@dataclass(eq=False)
+class _PackedExport:
+    """A :class:`_MapExport` held small: its never-updated mask as bits and its log-odds at the updated cells only
+    (every other cell's log-odds is 0, checked when packing), with each row's first updated cell. While the loop
+    closure re-renders the map the front end's export no longer lies beside the re-render's level (MIT CSAIL: 9.1 →
+    ≈ 1.3 MiB; pass mem61), nor the run's log-odds beside its float64 map as the results make it."""
+
+    bits: np.ndarray  # np.packbits of the never-updated mask, C order
+    values: np.ndarray  # float32 log-odds of the updated cells, C order
+    starts: np.ndarray  # (H + 1,) int64: index in ``values`` of each row's first updated cell
+    shape: tuple[int, int]
+    resolution: float
+    origin: tuple[float, float]
+
+    @classmethod
+    def of(cls, export: _MapExport) -> _PackedExport | None:
+        """``export`` packed; None when a never-updated cell holds a log-odds other than 0 (not packed then)."""
+        lo, unknown = export.logodds, export.unknown
+        if _count_nonzero(lo[unknown]):
+            return None
+        known = ~unknown
+        starts = np.zeros(unknown.shape[0] + 1, dtype=np.int64)
+        np.cumsum(np.count_nonzero(known, axis=1), out=starts[1:])
+        return cls(np.packbits(unknown, axis=None), lo[known], starts, unknown.shape, export.resolution,
+                   export.origin)
+
+    def rows(self, r0: int, r1: int) -> tuple[np.ndarray, np.ndarray]:
+        """(log-odds, never-updated mask) of rows ``r0`` … ``r1`` − 1, as packed."""
+        r1 = min(r1, self.shape[0])
+        w = self.shape[1]
+        # the band's bits: whole bytes around its cells, cut to them
+        b0, b1 = (r0 * w) // 8, -(-(r1 * w) // 8)
+        bits = np.unpackbits(self.bits[b0:b1])[r0 * w - 8 * b0:r0 * w - 8 * b0 + (r1 - r0) * w]
+        unknown = bits.view(bool).reshape(r1 - r0, w)
+        lo = np.zeros(unknown.shape, dtype=np.float32)
+        lo[~unknown] = self.values[self.starts[r0]:self.starts[r1]]
+        return lo, unknown
+
+    def unpack(self) -> _MapExport:
+        """The export as it was packed (the same arrays' values)."""
+        lo, unknown = self.rows(0, self.shape[0])
+        return _MapExport(lo, unknown, self.resolution, self.origin)
 
 
 def _release_unexported(hmap: MultiResMap) -> None:
@@ -974,9 +1092,19 @@ def run(
     if pipe.loops is not None:  # (its last search is done: the place descriptors go before the re-render)
         pipe.loops.release_places()
     if loop is not None and loop.corrected:
+        # the front end's export packed while the re-render's level is built beside it, unpacked for the map check
+        # (the same values; issue 13 item 3, pass mem61)
+        packed = _PackedExport.of(front)
+        if packed is not None:
+            front = logodds = pipe._released_grid = None  # type: ignore[assignment]
+            release_free_memory()  # (the packing's temporaries, in the heap's pages, before the render's level)
         t_render = time.perf_counter()
         grid_opt, lo_opt = render_map(loop, pipe.config.slam)
         loop.stats["render_ms"] = (time.perf_counter() - t_render) * 1e3
+        if packed is not None:
+            front = pipe._released_grid = packed.unpack()
+            logodds = front.logodds
+            del packed
         if keep_optimised(loop, logodds, lo_opt, pipe.config.loop):
             frontend_trajectory = trajectory
             trajectory = Trajectory(trajectory.stamps, loop.poses)
@@ -990,9 +1118,9 @@ def run(
         loop.stats["written_render_ms"] = (time.perf_counter() - t_render) * 1e3
         if written is not None:
             grid, logodds = written
-    if grid is None:
-        grid = front.gridmap()
-        pipe._released_grid = grid  # (the same map, made now: Pipeline.gridmap need not make it again)
+    if grid is None:  # (its float64 map made when first read: not through the clean-up pass; pass mem61)
+        grid = ExportGridMap(front.logodds, front.unknown, front.resolution, front.origin)
+        pipe._released_grid = grid  # (the same map: Pipeline.gridmap returns it)
     del front
     wall = time.perf_counter() - t0
     result = RunResult(

@@ -240,6 +240,10 @@ def write_outputs(
         paths["map_logodds_online.npy"] = out / "map_logodds_online.npy"
     if release:  # nothing below reads them (the figures draw the maps' probabilities)
         run.logodds = np.zeros((0, 0), dtype=np.float32)
+        # a map made when read (the run's online map, pipeline.ExportGridMap) holds its log-odds packed now: its
+        # float64 map is made below without them beside it (MIT CSAIL: 9.1 MiB; issue 13 item 3, pass mem61)
+        if hasattr(run.grid, "pack"):
+            run.grid.pack()  # (no bound method kept here: it would keep the map through the figures)
     cleaned_grey = background = None
     if release and cleaned is not None and hasattr(cleaned.grid, "make_over"):  # (the pass's map, not made yet)
         # the online map's files and tracks.png's faint map first, then the cleaned map made over the online map's

@@ -905,6 +905,13 @@ class CountWindows:
                    float(counter.seconds), counter.nbytes, counter)
 
 
+def _prob_rows(grid: GridMap, r0: int, r1: int) -> np.ndarray:
+    """Rows ``r0`` … ``r1`` − 1 of ``grid.prob``; from a map that makes its probabilities when read and offers them
+    by rows (``prob_rows``: :class:`dynslam2d.pipeline.ExportGridMap`), without making the whole map."""
+    rows = getattr(grid, "prob_rows", None)
+    return rows(r0, r1) if rows is not None else grid.prob[r0:r1]
+
+
 def clean_map(online: GridMap, counter: VisibilityCounter, logodds: np.ndarray | None = None,
               occupied_threshold: float = 0.65) -> CleanResult:
     """Erase the cells of ``online`` (occupied: p > ``occupied_threshold``) that ``counter``
@@ -929,11 +936,15 @@ def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | N
     if counter is not None and keep_counts:
         raise ValueError("banded count windows (CountWindows.banded) are not kept: use keep_counts=False")
     latest = c.rehit_min_hits > 0
-    occ = online.occupied(occupied_threshold)
+    occ = np.empty(online.shape, dtype=bool)
     erased = np.empty(occ.shape, dtype=bool)
     restored = np.empty(occ.shape, dtype=bool)
     for r0 in range(0, occ.shape[0], _RULE_ROWS):  # a block of rows at a time: no map-sized float64 temporaries
         rows = slice(r0, r0 + _RULE_ROWS)
+        # the online map's probabilities a band at a time: a map made when read (the run's, pipeline.ExportGridMap)
+        # is not made by the pass (issue 13 item 3, pass mem61)
+        prob = _prob_rows(online, r0, r0 + _RULE_ROWS)
+        occ[rows] = GridMap(prob, online.resolution, online.origin).occupied(occupied_threshold)
         if counter is not None:  # (the band of the windows, read from the counter's tiles)
             band = counter.rows(online, r0, _RULE_ROWS, latest)
             h_r, t_r, s_r, l_r = band[0], band[1], band[2], band[3] if latest else None
@@ -943,8 +954,8 @@ def clean_windows(online: GridMap, counts: CountWindows, logodds: np.ndarray | N
             l_r = None if latest_hit is None else latest_hit[rows]
         erased[rows] = erase_rule(h_r, t_r, s_r, c, l_r) & occ[rows]
         # observed free in the online map (unknown cells were never cleared: nothing to restore there)
-        restored[rows] = restore_rule(h_r, t_r, c) & ~occ[rows] & np.isfinite(online.prob[rows])
-        del h_r, t_r, s_r, l_r
+        restored[rows] = restore_rule(h_r, t_r, c) & ~occ[rows] & np.isfinite(prob)
+        del h_r, t_r, s_r, l_r, prob
     del counter
     if not keep_counts:
         empty = np.zeros((0, 0), dtype=np.uint16)

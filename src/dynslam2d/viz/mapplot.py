@@ -170,14 +170,17 @@ def draw_grey_indices(ax: Any, idx: np.ndarray, extent: tuple[float, float, floa
         if done is not None:
             idx = done
             colours = np.vstack((colours, to_rgba(colour)))
-    im = ax.imshow(idx, cmap=ListedColormap(colours), norm=NoNorm(), origin="lower", extent=extent,
+    # imshow keeps a masked copy of its array (matplotlib's ``safe_masked_invalid(copy=True)``; no cell is masked, the
+    # indices being integers): the image draws ``idx`` itself instead, so the figure holds the map's indices once, not
+    # twice, while it is saved (MIT CSAIL: 3.6 MiB; issue 13 item 3, pass mem49). imshow is given a 1 × 2 stand-in of
+    # ``idx``'s type and range (the norm's limits, as of ``idx``), so the copy is not even made (pass mem61: it
+    # stayed in the heap's pages). The caller does not change ``idx`` after this.
+    stand_in = np.array([[idx.min(), idx.max()]], dtype=idx.dtype) if idx.size and extent is not None else idx
+    im = ax.imshow(stand_in, cmap=ListedColormap(colours), norm=NoNorm(), origin="lower", extent=extent,
                    interpolation="nearest", interpolation_stage="data", **kw)
     im.__class__ = _index_image_class()  # the same pixels, sampled without map-sized float32 copies
-    # imshow keeps a masked copy of ``idx`` (matplotlib's ``safe_masked_invalid(copy=True)``; no cell is masked, the
-    # indices being integers): the image draws ``idx`` itself instead, so the figure holds the map's indices once, not
-    # twice, while it is saved (MIT CSAIL: 3.6 MiB; issue 13 item 3, pass mem49). The caller does not change ``idx``
-    # after this.
     im._A = np.ma.array(idx, copy=False)
+    im._imcache = None
     return im
 
 
@@ -198,6 +201,11 @@ def _picked(image: Any, n: int, out_len: int, t: Any, axis: int) -> np.ndarray:
     return got.astype(np.int64) - 1
 
 
+#: Output rows of an index image made and drawn at a time (:func:`_index_image_class`): bounds the image's pixels
+#: held while a figure is saved to a band of rows (≈ 0.3 MiB at map.png's width; issue 13 item 3, pass mem61).
+_DRAW_ROWS = 64
+
+
 @functools.cache
 def _index_image_class() -> type:
     """A matplotlib ``AxesImage`` for :func:`draw_grey_indices`' (H, W) colour indices (``NoNorm``,
@@ -206,23 +214,31 @@ def _index_image_class() -> type:
     image to float32, makes a float32 mask of it and a flipped contiguous copy of each to resample them (≈ 16 bytes
     per cell: ≈ 30 MiB for MIT CSAIL's cleaned map while map.png is saved; issue 13 item 3). Here the picked column
     and row of each output pixel come from matplotlib's resampler itself (:func:`_picked`), and the pixels are the
-    colormap's bytes of those cells."""
+    colormap's bytes of those cells. Drawn on an Agg canvas, the pixels are made and blended :data:`_DRAW_ROWS`
+    output rows at a time (Agg blends each pixel of an image placed at whole pixels on its own: the same canvas
+    bytes; pass mem61), not as one output-sized image (MIT CSAIL's map.png: ≈ 5 MiB)."""
+    from matplotlib.artist import allow_rasterization
     from matplotlib.colors import NoNorm
     from matplotlib.image import AxesImage
-    from matplotlib.transforms import Affine2D, Bbox
+    from matplotlib.transforms import Affine2D, Bbox, TransformedBbox
 
     class IndexImage(AxesImage):
-        def _make_image(self, A, in_bbox, out_bbox, clip_bbox, magnification=1.0,  # type: ignore[no-untyped-def]
-                        unsampled=False, round_to_pixel_border=True):
+        def _own_path(self, A, unsampled):  # type: ignore[no-untyped-def]
+            """None when matplotlib's own path makes this image's pixels, else whether ``A`` holds indices."""
             indexed = A.ndim == 2 and self._interpolation_stage == "data" and isinstance(self.norm, NoNorm)
             rgba = A.ndim == 3 and A.shape[-1] == 4 and A.dtype == np.float32  # (points_overlay's)
             if (unsampled or not (indexed or rgba) or self.get_interpolation() != "nearest" or self.origin != "lower"
                     or self.get_alpha() is not None):
-                return super()._make_image(A, in_bbox, out_bbox, clip_bbox, magnification, unsampled,
-                                           round_to_pixel_border)
+                return None
+            return indexed
+
+        def _pixel_bands(self, A, in_bbox, out_bbox, clip_bbox, magnification, round_to_pixel_border,  # type: ignore[no-untyped-def]
+                         indexed):
+            """(x0, y0, t, h, w, bands): ``_make_image``'s offset and transform, the output's size and an iterator
+            of (first output row, that band's (n, w, 4) uint8 pixels); None when nothing is drawn."""
             clipped = Bbox.intersection(out_bbox, clip_bbox)
             if clipped is None:
-                return None, 0, 0, None
+                return None
             # matplotlib's own output box and transform (AxesImage._make_image): rounded to the output pixels
             e = clipped.extents * magnification
             if round_to_pixel_border:
@@ -230,7 +246,7 @@ def _index_image_class() -> type:
                               np.ceil(e[3] - 0.5)])
             box = Bbox.from_extents(e)
             if box.width == 0 or box.height == 0:
-                return None, 0, 0, None
+                return None
             t = (Affine2D().scale(in_bbox.width / A.shape[1], in_bbox.height / A.shape[0])
                  .translate(in_bbox.x0, in_bbox.y0) + self.get_transform()
                  + Affine2D().scale(magnification).translate(-box.x0, -box.y0))
@@ -242,18 +258,70 @@ def _index_image_class() -> type:
                 lut, cells = self.cmap(np.arange(self.cmap.N), bytes=True), np.asarray(A)
             else:  # an RGBA image: each cell's bytes as matplotlib's RGBA path makes them (_cell_bytes)
                 lut, cells = _cell_bytes(self, np.asarray(A)), None
+            cols_out = cols < 0
+
+            def bands():  # type: ignore[no-untyped-def]
+                # a block of output rows at a time: no (h, w) array of the picked indices (pass mem49)
+                for r0 in range(0, h, _DRAW_ROWS):
+                    rr = rows_in[r0:r0 + _DRAW_ROWS]
+                    band = (lut[cells[np.ix_(rr, cols_in)]] if cells is not None
+                            else lut[rr[:, None] * A.shape[1] + cols_in[None, :]])
+                    rows_out = rows[r0:r0 + _DRAW_ROWS] < 0
+                    if rows_out.any() or cols_out.any():  # pixels outside the image: matplotlib's value 0, transparent
+                        outside = rows_out[:, None] | cols_out[None, :]
+                        band[outside] = lut[0] if indexed else 0
+                        band[outside, 3] = 0
+                    yield r0, band
+
+            return box.x0 / magnification, box.y0 / magnification, t, h, w, bands()
+
+        def _make_image(self, A, in_bbox, out_bbox, clip_bbox, magnification=1.0,  # type: ignore[no-untyped-def]
+                        unsampled=False, round_to_pixel_border=True):
+            indexed = self._own_path(A, unsampled)
+            if indexed is None:
+                return super()._make_image(A, in_bbox, out_bbox, clip_bbox, magnification, unsampled,
+                                           round_to_pixel_border)
+            plan = self._pixel_bands(A, in_bbox, out_bbox, clip_bbox, magnification, round_to_pixel_border, indexed)
+            if plan is None:
+                return None, 0, 0, None
+            x0, y0, t, h, w, bands = plan
             output = np.empty((h, w, 4), dtype=np.uint8)
-            # a block of output rows at a time: no (h, w) array of the picked indices beside the pixels (MIT CSAIL's
-            # map.png: 2.3 MiB while the figure is saved; pass mem49)
-            for r0 in range(0, h, _ROWS_PER_CHUNK):
-                rr = rows_in[r0:r0 + _ROWS_PER_CHUNK]
-                output[r0:r0 + _ROWS_PER_CHUNK] = (lut[cells[np.ix_(rr, cols_in)]] if cells is not None
-                                                   else lut[rr[:, None] * A.shape[1] + cols_in[None, :]])
-            if (rows < 0).any() or (cols < 0).any():  # pixels outside the image: matplotlib's value 0, transparent
-                outside = (rows < 0)[:, None] | (cols < 0)[None, :]
-                output[outside] = lut[0] if indexed else 0
-                output[outside, 3] = 0
-            return output, box.x0 / magnification, box.y0 / magnification, t
+            for r0, band in bands:
+                output[r0:r0 + len(band)] = band
+            return output, x0, y0, t
+
+        @allow_rasterization
+        def draw(self, renderer):  # type: ignore[no-untyped-def]
+            """``AxesImage.draw``; on a renderer that places images at whole pixels (Agg), a band of
+            :data:`_DRAW_ROWS` output rows at a time: the image's row r at ``y0 + r`` (``draw_image`` puts the
+            image's first row at its ``y``, the bottom), each pixel blended as in the whole image."""
+            if (not self.get_visible() or self.get_array().size == 0 or not hasattr(renderer, "_renderer")
+                    or (renderer.option_scale_image() and self._check_unsampled_image())):
+                return super().draw(renderer)
+            magnification = renderer.get_image_magnification()
+            indexed = self._own_path(self._A, False)
+            if indexed is None or magnification != 1.0:
+                return super().draw(renderer)
+            # AxesImage.make_image's boxes
+            x1, x2, y1, y2 = self.get_extent()
+            bbox = Bbox(np.array([[x1, y1], [x2, y2]]))
+            clip = ((self.get_clip_box() or self.axes.bbox) if self.get_clip_on()
+                    else self.get_figure(root=True).bbox)
+            plan = self._pixel_bands(self._A, bbox, TransformedBbox(bbox, self.get_transform()), clip,
+                                     magnification, True, indexed)
+            if plan is None or plan[0] != int(plan[0]) or plan[1] != int(plan[1]):
+                return super().draw(renderer)
+            x0, y0, _t, _h, _w, bands = plan
+            gc = renderer.new_gc()
+            self._set_gc_clip(gc)
+            gc.set_alpha(self._get_scalar_alpha())
+            gc.set_url(self.get_url())
+            gc.set_gid(self.get_gid())
+            for r0, band in bands:
+                renderer.draw_image(gc, x0, y0 + r0, band)
+            gc.restore()
+            self.stale = False
+            return None
 
     return IndexImage
 
