@@ -103,6 +103,13 @@ def record(scans: list, other_vacated, reps: int) -> tuple[dict, list]:
         made[id(ref)] = (ref, scan, pose, valid.copy())  # (the ref kept: its id stays its own)
         return ref
 
+    ref_of0 = getattr(freespace.FreeSpaceMemory, "ref_of", None)
+
+    def ref_of(scan, pose, r, par):  # (the tracker's since pass trk60: the arrays made by the segmentation's kernel)
+        ref = ref_of0(scan, pose, r, par)
+        made[id(ref)] = (ref, scan, pose, r < np.inf)  # (its mask: the valid beams' ranges are finite, the others inf)
+        return ref
+
     def fraction(self, points):
         rec["free fraction"].append(([made[id(r)][1:] for r in self.refs], self.margin, points.copy()))
         return frac0(self, points)
@@ -115,6 +122,8 @@ def record(scans: list, other_vacated, reps: int) -> tuple[dict, list]:
     if hook_vac:
         pipeline.vacated_outlines = vac
     freespace.FreeSpaceMemory.make_ref = staticmethod(make_ref)
+    if ref_of0 is not None:
+        freespace.FreeSpaceMemory.ref_of = staticmethod(ref_of)
     freespace.FreeTest.fraction, freespace.FreeSpaceMemory.count_seen_by = fraction, count_seen_by
     try:
         p = Pipeline()
@@ -125,6 +134,8 @@ def record(scans: list, other_vacated, reps: int) -> tuple[dict, list]:
         if hook_vac:
             pipeline.vacated_outlines = vac0
         freespace.FreeSpaceMemory.make_ref = staticmethod(make0)
+        if ref_of0 is not None:
+            freespace.FreeSpaceMemory.ref_of = staticmethod(ref_of0)
         freespace.FreeTest.fraction, freespace.FreeSpaceMemory.count_seen_by = frac0, count0
     return rec, live
 

@@ -87,10 +87,18 @@ def record(scans: list) -> dict[str, list]:
         rec["make_ref"].append(((scan, pose, valid.copy()), {}))
         return make0(scan, pose, valid)
 
+    ref_of0 = getattr(freespace.FreeSpaceMemory, "ref_of", None)
+
+    def ref_of(scan, pose, r, par):  # (the tracker's since pass trk60: recorded as the make_ref call it stands for)
+        rec["make_ref"].append(((scan, pose, r < float("inf")), {}))  # (the mask: valid ranges finite, others inf)
+        return ref_of0(scan, pose, r, par)
+
     try:
         for (m, n), f in saved.items():
             setattr(m, n, wrap(f, n))
         freespace.FreeSpaceMemory.make_ref = staticmethod(make_ref)
+        if ref_of0 is not None:
+            freespace.FreeSpaceMemory.ref_of = staticmethod(ref_of)
         p = Pipeline()
         for s in scans:
             p.process(s)
@@ -98,6 +106,8 @@ def record(scans: list) -> dict[str, list]:
         for (m, n), f in saved.items():
             setattr(m, n, f)
         freespace.FreeSpaceMemory.make_ref = staticmethod(make0)
+        if ref_of0 is not None:
+            freespace.FreeSpaceMemory.ref_of = staticmethod(ref_of0)
     return rec
 
 

@@ -356,7 +356,7 @@ def split(scans: list) -> tuple[float, dict[str, tuple[float, float]]]:
         for (m, n), f in saved.items():
             setattr(m, n, timed(f, n))
         if p.tracker._free is not None:
-            for n in ("seen_through", "seen_through_by", "count_seen_by", "make_ref", "add"):
+            for n in ("seen_through", "seen_through_by", "count_seen_by", "make_ref", "ref_of", "add"):
                 if hasattr(p.tracker._free, n):  # (names of either checkout's memory)
                     setattr(p.tracker._free, n, timed(getattr(p.tracker._free, n), f"free-space memory ({n})"))
         p.tracker.update = timed(p.tracker.update, "update")

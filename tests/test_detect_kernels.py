@@ -349,7 +349,7 @@ def test_world_points_are_the_pose_transform_bit_for_bit(scenes) -> None:
     # a scan without a valid beam: no cluster, every beam at the pose
     scan, pose = scenes[0]
     none = np.zeros(scan.n_beams, dtype=bool)
-    seg, ax, ay, px, py, pts = segment_points(scan, cfg.segment, none, float(pose.x), float(pose.y), pose.theta)
+    seg, ax, ay, px, py, pts, _, _ = segment_points(scan, cfg.segment, none, float(pose.x), float(pose.y), pose.theta)
     assert seg.n_clusters == 0 and px.shape == py.shape == (0,) and pts.shape == (0, 2)
     assert (ax == pose.x).all() and (ay == pose.y).all()
 

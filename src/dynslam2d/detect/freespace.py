@@ -98,6 +98,14 @@ class FreeSpaceMemory:
                              1.0 if full else 0.0, reach)
         return _make_ref(float(scan.stamp), pose, r, amin, inc, full, reach, par)
 
+    @staticmethod
+    def ref_of(scan: Scan, pose: Pose2D, r: np.ndarray, par: np.ndarray) -> _Ref:
+        """The reference :meth:`make_ref` builds from ``scan`` at ``pose``, of its arrays made already (``r``, ``par``:
+        :func:`dynslam2d.detect.segment.segment_points`' with ``ref``, in the segmentation's kernel call; docs/speed.md,
+        pass trk60): angle_min, increment, the full-circle flag and range_max read back from ``par``."""
+        _, _, _, amin, inc, full, reach = par.tolist()
+        return _make_ref(float(scan.stamp), pose, r, amin, inc, full != 0.0, reach, par)
+
     def add(self, scan: Scan, pose: Pose2D, valid: np.ndarray, ref: _Ref | None = None) -> None:
         """Remember ``scan`` (taken at ``pose``, map frame); ``valid`` marks beams with a return."""
         buf = self._buf

@@ -151,7 +151,8 @@ def segment_params(cfg: SegmentConfig) -> tuple[float, str, np.ndarray]:
 @njit(cache=True)
 def _segment_kernel(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, trig: np.ndarray, fill_trig: bool,
                     q: np.ndarray, wrap: bool, points: bool, cos_a: np.ndarray, sin_a: np.ndarray, pose_c: float,
-                    pose_s: float, pose_x: float, pose_y: float) -> tuple:
+                    pose_s: float, pose_x: float, pose_y: float, ref: bool, pose_th: float, gpar: np.ndarray,
+                    reach: float) -> tuple:
     """The whole segmentation in one pass: the valid beams of ``mask``, the links between consecutive ones (the
     last to the first when ``wrap`` and more than two beams are valid), the runs of linked beams → (labels, beams,
     offsets, structure, n_dropped, wrapped, ax, ay, px, py, pts). ``q``: :func:`segment_params`' array (the mode
@@ -159,7 +160,11 @@ def _segment_kernel(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, tr
     (:func:`_adjacent_trig`). Where ``points``, the last five are
     :func:`~dynslam2d.detect.kernels.world_points` of the clusters' beams (``mask`` as its ``valid``; ``cos_a``,
     ``sin_a`` the beam angles' cos / sin, ``pose_c``, ``pose_s`` the pose's θ's, ``pose_x``, ``pose_y`` its position;
-    map frame, m): the tracker's two calls as one (docs/speed.md, pass det25); else empty."""
+    map frame, m): the tracker's two calls as one (docs/speed.md, pass det25); else empty. Where ``ref``, two more:
+    the free-space reference's arrays of this scan (:meth:`~dynslam2d.detect.freespace.FreeSpaceMemory.make_ref`:
+    the ranges, +inf where ``mask`` is False, and the (7,) row of the pose's inverse — ``pose_th`` its θ, rad — then
+    ``gpar``'s angle_min, increment and full-circle flag and ``reach``, the scan's range_max, m), the free-space
+    memory's kernel folded into this call (docs/speed.md, pass trk60); else two empty arrays."""
     fixed = q[SP_FIXED] != 0.0
     fixed_gap = q[SP_FIXED_GAP]
     lam = q[SP_LAMBDA]
@@ -238,7 +243,21 @@ def _segment_kernel(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, tr
     else:
         ax = ay = px = py = np.empty(0)
         pts = np.empty((0, 2))
-    return labels, beams, offsets[:k + 1], structure, dropped, wrap, ax, ay, px, py, pts
+    if ref:  # (FreeSpaceMemory.make_ref's arrays, _ref_arrays' loop and its arithmetic of Pose2D.inverse)
+        rr = np.empty(n)
+        for i in range(n):
+            rr[i] = ranges[i] if mask[i] else np.inf
+        par = np.empty(7)
+        par[0] = -pose_c * pose_x - pose_s * pose_y
+        par[1] = pose_s * pose_x - pose_c * pose_y
+        par[2] = (-pose_th + math.pi) % (2.0 * math.pi) - math.pi  # (types.wrap_angle, Python's float modulo)
+        par[3] = gpar[0]
+        par[4] = gpar[1]
+        par[5] = gpar[2]
+        par[6] = reach
+    else:
+        rr = par = np.empty(0)
+    return labels, beams, offsets[:k + 1], structure, dropped, wrap, ax, ay, px, py, pts, rr, par
 
 
 def is_full_circle(scan: Scan) -> bool:
@@ -248,9 +267,10 @@ def is_full_circle(scan: Scan) -> bool:
 
 
 #: per beam geometry (n, angle_min, angle_increment): the beam angles (:attr:`Scan.angles`, the same values for every
-#: scan of that geometry), per λ the adjacent beams' trigonometry (:func:`_adjacent_trig`), the angles' cos / sin and
-#: whether the beams cover 360° (:func:`is_full_circle`); a few entries
-_GEOMETRY: dict[tuple, tuple[np.ndarray, dict[float, np.ndarray], np.ndarray, np.ndarray, bool]] = {}
+#: scan of that geometry), per λ the adjacent beams' trigonometry (:func:`_adjacent_trig`), the angles' cos / sin,
+#: whether the beams cover 360° (:func:`is_full_circle`) and (angle_min, increment, 1.0 / 0.0 for that flag) as the
+#: float64 array a free-space reference's row holds (``_segment_kernel``'s ``gpar``); a few entries
+_GEOMETRY: dict[tuple, tuple[np.ndarray, dict[float, np.ndarray], np.ndarray, np.ndarray, bool, np.ndarray]] = {}
 _GEOMETRY_MAX = 16
 _make_segmentation = fast_init(Segmentation)  # (the frozen dataclass without its __init__'s object.__setattr__)
 
@@ -277,32 +297,37 @@ def segment_scan(scan: Scan, config: SegmentConfig | None = None, valid: np.ndar
 
 
 def segment_points(scan: Scan, config: SegmentConfig, valid: np.ndarray, pose_x: float, pose_y: float,
-                   pose_theta: float, params: tuple | None = None) -> tuple:
+                   pose_theta: float, params: tuple | None = None, ref: bool = False) -> tuple:
     """:func:`segment_scan` with ``checked`` (``valid``: a C-contiguous bool mask of beams of ``scan.valid_mask()``
     with a range > 0) and the beams in the map frame in the same call (the tracker's; docs/speed.md, pass det25):
-    ``(segmentation, ax, ay, px, py, pts)`` with :func:`~dynslam2d.detect.kernels.world_points`' results for the pose
-    (``pose_x``, ``pose_y`` in m, ``pose_theta`` in rad; invalid beams at the pose, ``px``, ``py``, ``pts`` the
+    ``(segmentation, ax, ay, px, py, pts, r, par)`` with :func:`~dynslam2d.detect.kernels.world_points`' results for
+    the pose (``pose_x``, ``pose_y`` in m, ``pose_theta`` in rad; invalid beams at the pose, ``px``, ``py``, ``pts`` the
     clusters' beams in the segmentation's order). ``params``: :func:`segment_params` of ``config`` when made already
-    (the tracker's, once)."""
-    return _segment(scan, config, valid, (math.cos(pose_theta), math.sin(pose_theta), pose_x, pose_y), params)
+    (the tracker's, once). ``r``, ``par``: where ``ref``, the arrays of the scan's free-space reference at the pose
+    (:meth:`dynslam2d.detect.freespace.FreeSpaceMemory.ref_of`; ``valid`` as its mask), made in the same kernel call
+    (docs/speed.md, pass trk60); else empty."""
+    return _segment(scan, config, valid, (math.cos(pose_theta), math.sin(pose_theta), pose_x, pose_y, pose_theta),
+                    params, ref)
 
 
 _NO_TRIG = np.zeros(0)  # (cos / sin of no beams: segment_scan's call, which transforms no point)
 
 
-def _segment(scan: Scan, cfg: SegmentConfig, mask: np.ndarray, pose: tuple | None, params: tuple | None = None) \
-        -> tuple:
+def _segment(scan: Scan, cfg: SegmentConfig, mask: np.ndarray, pose: tuple | None, params: tuple | None = None,
+             ref: bool = False) -> tuple:
     """The segmentation kernel's call for :func:`segment_scan` (``pose`` None) and :func:`segment_points` (``pose``:
-    cos θ, sin θ, x, y): (segmentation, ax, ay, px, py, pts). ``params``: :func:`segment_params` of ``cfg`` (None:
-    made here)."""
+    cos θ, sin θ, x, y, θ): (segmentation, ax, ay, px, py, pts, r, par). ``params``: :func:`segment_params` of ``cfg``
+    (None: made here); ``ref``: with the free-space reference's arrays ``r``, ``par`` (needs ``pose``)."""
     key = (scan.ranges.shape[0], scan.angle_min, scan.angle_increment)
     geo = _GEOMETRY.get(key)
     if geo is None:
         if len(_GEOMETRY) >= _GEOMETRY_MAX:
             _GEOMETRY.clear()
         a = scan.angles
-        geo = _GEOMETRY[key] = (a, {}, np.cos(a), np.sin(a), is_full_circle(scan))
-    angles, trigs, cos_a, sin_a, full = geo
+        full = is_full_circle(scan)
+        geo = _GEOMETRY[key] = (a, {}, np.cos(a), np.sin(a), full,
+                                np.array([float(scan.angle_min), float(scan.angle_increment), 1.0 if full else 0.0]))
+    angles, trigs, cos_a, sin_a, full, gpar = geo
     lam, mode, q = segment_params(cfg) if params is None else params
     trig = trigs.get(lam)
     fill = trig is None
@@ -318,10 +343,11 @@ def _segment(scan: Scan, cfg: SegmentConfig, mask: np.ndarray, pose: tuple | Non
     else:
         raise KeyError(mode)
     if pose is None:
-        points, cos_a, sin_a, c, s, x, y = False, _NO_TRIG, _NO_TRIG, 1.0, 0.0, 0.0, 0.0
+        points, cos_a, sin_a, c, s, x, y, th = False, _NO_TRIG, _NO_TRIG, 1.0, 0.0, 0.0, 0.0, 0.0
     else:
         points = True
-        c, s, x, y = pose
-    labels, beams, offsets, structure, dropped, wrapped, ax, ay, px, py, pts = _segment_kernel(
-        scan.ranges, angles, mask, trig, fill, q, wrap, points, cos_a, sin_a, c, s, x, y)
-    return _make_segmentation(labels, beams, offsets, structure, wrapped, dropped), ax, ay, px, py, pts
+        c, s, x, y, th = pose
+    labels, beams, offsets, structure, dropped, wrapped, ax, ay, px, py, pts, r, par = _segment_kernel(
+        scan.ranges, angles, mask, trig, fill, q, wrap, points, cos_a, sin_a, c, s, x, y, ref and points, th, gpar,
+        float(scan.range_max) if ref else 0.0)
+    return _make_segmentation(labels, beams, offsets, structure, wrapped, dropped), ax, ay, px, py, pts, r, par

@@ -73,21 +73,27 @@ class TrackDetect:
         cfg = self.config
         st = self.stats
         ranges = scan.ranges
-        valid = scan.valid_mask()  # (a copy)
-        if not scan.range_min > 0.0:  # (else every valid range is ≥ range_min > 0 already: the test changes nothing)
+        # (every valid range is ≥ range_min > 0 already where range_min > 0: the scan's own mask, not a copy — nothing
+        # below writes to it, the kernels and the free-space reference only read it; else a copy without the zeros)
+        if scan.range_min > 0.0:
+            valid = scan.valid_view()
+        else:
+            valid = scan.valid_mask()  # (a copy)
             valid &= ranges > 0.0
         # the segmentation and every beam in the map frame (pose.transform_points of the beams, invalid ones at the
-        # pose; all beams ax, ay and the clusters' ones px, py, pts) in one kernel call
-        seg, ax, ay, px, py, pts = segment_points(scan, cfg.segment, valid, float(pose.x), float(pose.y), pose.theta,
-                                                  self._seg_p)
+        # pose; all beams ax, ay and the clusters' ones px, py, pts) in one kernel call, with the free-space memory's
+        # reference of this scan (its arrays: FreeSpaceMemory.make_ref's, pass trk60)
+        free = self._free
+        seg, ax, ay, px, py, pts, rr, rpar = segment_points(scan, cfg.segment, valid, float(pose.x), float(pose.y),
+                                                            pose.theta, self._seg_p, free is not None)
         self.last_segmentation = seg
         st.clusters += seg.n_clusters
         st.dropped_small_clusters += seg.n_dropped
         self._batch = None
         if seg.n_clusters == 0:
             self.last_detections = []
-            if self._free is not None:
-                self._free.add(scan, pose, valid)
+            if free is not None:
+                free.add(scan, pose, valid, free.ref_of(scan, pose, rr, rpar))
             return []
         beams = seg.beams
         offsets = seg.offsets
@@ -124,9 +130,8 @@ class TrackDetect:
         # memory's references now, before it gains this scan) and computes its fraction when first read
         # (ScanDetection.free_fraction)
         frac = 0.0
-        free = self._free
         if free is not None:
-            self._cur_ref = free.make_ref(scan, pose, valid)
+            self._cur_ref = free.ref_of(scan, pose, rr, rpar)
             if nd and (test := free.test_at(float(scan.stamp))) is not None:
                 frac = test
             free.add(scan, pose, valid, self._cur_ref)

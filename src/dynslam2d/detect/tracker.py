@@ -332,7 +332,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
                     self._motion_prior(k)
         dets = self._detect(scan, pose)
         self._merged = set()
-        if not dets and not scan.valid_mask().any():
+        if not dets and not scan.valid_view().any():  # (the scan's own mask: only read)
             st.empty_scans += 1
         pairs = self._associate(dets)
         # (the ids of the updated tracks and the detections they took: filled by _update_tracks in its loop over the
