@@ -212,6 +212,7 @@ class _CheckedRanks(LoopCloser):
     def __init__(self, *a: object, **k: object) -> None:
         super().__init__(*a, **k)
         self.checks: list[tuple] = []
+        self._rank_min = 0  # (every ranking restricted, whatever the number of places)
 
     def _place_ranks(self, node: int) -> dict[int, float]:
         need = self._rank_need
@@ -237,6 +238,7 @@ def test_far_ranking_of_the_eligible_submaps_equals_the_whole_ranking(broken_fro
     the run's poses are those of a closer that ranks every place."""
     gt, front, scans = broken_front_end
     lc, res, _err, _first = _run(gt, front, scans, LoopConfig(far_searches=1))
+    assert lc._rank_min == 128 and len(lc._places) < 128  # (this run's own rankings: every place compared)
     checked = _CheckedRanks(LoopConfig(far_searches=1), SlamConfig())
     for k, (s, p) in enumerate(zip(scans, front)):
         checked.add(s.stamp, Pose2D(*p), s, np.zeros(s.ranges.shape, bool), keyframe=k % 2 == 0, weak=k == 251)

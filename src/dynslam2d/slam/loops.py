@@ -103,6 +103,11 @@ def _keep_probabilities(lv: GridLevel) -> None:
     lv.uidx = np.broadcast_to(np.full((), -1, dtype=np.int32), shape)
 
 
+#: Stored places above which a far search's ranking compares the query with its eligible submaps' places only
+#: (LoopCloser._rank_rows): below, choosing the rows (≈ 13 µs) costs about what it saves (≈ 14 µs of 120 for half
+#: of 105 places on negative_2 /right_scan, pass neg60); MIT CSAIL's 633 places: ≈ 0.50 → 0.25 ms a ranking.
+_RANK_ROWS_MIN = 2 * 64
+
 #: Grids whose rebuilt dense levels the closer keeps while a far candidate is verified (LoopCloser._dense): its
 #: partners are matched against submaps s − 1, s and s + 1 in turn.
 _DENSE_VERIFY = 3
@@ -441,6 +446,7 @@ class LoopCloser:
         self._query_desc: tuple[int, np.ndarray] | None = None  # (node, descriptor) of the latest keyframe
         # while _far_search ranks places: (node, its eligible submaps), so that _place_ranks compares only their places
         self._rank_need: tuple[int, list[int]] | None = None
+        self._rank_min = _RANK_ROWS_MIN
         # (stored places' keys, their distances to the query) of the last ranking (_place_ranks)
         self._place_dist: tuple[np.ndarray, np.ndarray] = (np.zeros(0, np.int64), np.zeros(0))
         # node → its returns for the descriptors (see _place_due): (keyframe, its removed beams at the keyframe) until
@@ -1103,15 +1109,16 @@ class LoopCloser:
 
     def _place_ranks(self, node: int) -> dict[int, float]:
         """Submap → smallest place-descriptor distance of its stored keyframes to keyframe ``node``'s place: of every
-        submap with a stored place, or while :meth:`_far_search` ranks its eligible submaps (``_rank_need``), of
-        those submaps only (and ``_place_dist`` then holds only the places :meth:`_place_cover` reads for them:
-        :meth:`_rank_rows`). Each place's distance is computed on its own, so the values are those of the whole
-        ranking."""
+        submap with a stored place, or while :meth:`_far_search` ranks its eligible submaps (``_rank_need``) and more
+        than :data:`_RANK_ROWS_MIN` places are stored, of those submaps only (``_place_dist`` then holds only the
+        places :meth:`_place_cover` reads for them: :meth:`_rank_rows`). Each place's distance is computed on its
+        own, so the values are those of the whole ranking."""
         c = self.config
         self._place_flush()
         t0 = time.perf_counter()
         need = self._rank_need
-        rows = self._rank_rows(node, need[1]) if need is not None and need[0] == node else None
+        rows = (self._rank_rows(node, need[1])
+                if need is not None and need[0] == node and len(self._places) > self._rank_min else None)
         if self._query_desc is not None and self._query_desc[0] == node:
             keys, d, _shift = self._places.distances(self._query_desc[1], rows=rows)
         elif node in self._places:  # a stored place (the second search: older keyframes' returns are gone)
