@@ -183,3 +183,72 @@ def test_lazy_place_descriptors_equal_the_eager_ones(broken_front_end: tuple) ->
     # the lazy closer holds returns of the keyframes of the places due and their windows only: after a flush at
     # most place_keyframes keyframes again
     assert len(lazy._place_pts) <= lazy.config.place_keyframes
+
+
+def test_distances_of_some_rows_equal_those_rows_of_all() -> None:
+    """:meth:`PlaceIndex.distances` over a subset of the stored rows (the far search's eligible submaps, pass neg60)
+    gives those rows of the whole ranking bit for bit, within a block, across blocks and for the last partial one."""
+    rng = np.random.default_rng(3)
+    idx = PlaceIndex(20, 60, 15.0)
+    descs = (rng.random((150, 20, 60)) < 0.06).astype(np.float32)  # three blocks of 64 places
+    idx.add_many(list(range(0, 300, 2)), descs)
+    q = (rng.random((20, 60)) < 0.06).astype(np.float32)
+    whole = idx.distances(q)
+    subsets = [np.arange(150), np.zeros(0, np.int64), np.array([0]), np.array([63, 64]), np.arange(60, 140, 3),
+               np.array([5, 70, 149]), np.sort(rng.choice(150, 40, replace=False))]
+    for rows in subsets:
+        part = idx.distances(q, rows=rows)
+        for a, b in zip(part, whole):
+            assert a.tobytes() == b[rows].tobytes(), rows
+        part = idx.distances_of(40, rows=rows)
+        for a, b in zip(part, idx.distances_of(40)):
+            assert a.tobytes() == b[rows].tobytes(), rows
+    assert idx.distances(q, upto=100, rows=np.array([3, 99, 120]))[0].tolist() == [6, 198]
+
+
+class _CheckedRanks(LoopCloser):
+    """The loop closer that ranks every stored place too at each far search, for the test below."""
+
+    def __init__(self, *a: object, **k: object) -> None:
+        super().__init__(*a, **k)
+        self.checks: list[tuple] = []
+        self._rank_min = 0  # (every ranking restricted, whatever the number of places)
+
+    def _place_ranks(self, node: int) -> dict[int, float]:
+        need = self._rank_need
+        self._rank_need = None
+        full = super()._place_ranks(node)
+        whole = self._place_dist
+        self._rank_need = need
+        rank = super()._place_ranks(node)
+        part = self._place_dist
+        covers = []
+        for s in need[1] if need is not None else []:
+            self._place_dist = whole
+            a = self._place_cover(node, s)
+            self._place_dist = part
+            covers.append((a, self._place_cover(node, s)))
+        self.checks.append((need, rank, full, covers, len(part[0]), len(whole[0])))
+        return rank
+
+
+def test_far_ranking_of_the_eligible_submaps_equals_the_whole_ranking(broken_front_end: tuple) -> None:
+    """The far search compares the query with the eligible submaps' places only (and those after each that
+    _place_cover reads): every eligible submap's rank and place cover are the whole ranking's, bit for bit, and
+    the run's poses are those of a closer that ranks every place."""
+    gt, front, scans = broken_front_end
+    lc, res, _err, _first = _run(gt, front, scans, LoopConfig(far_searches=1))
+    assert lc._rank_min == 128 and len(lc._places) < 128  # (this run's own rankings: every place compared)
+    checked = _CheckedRanks(LoopConfig(far_searches=1), SlamConfig())
+    for k, (s, p) in enumerate(zip(scans, front)):
+        checked.add(s.stamp, Pose2D(*p), s, np.zeros(s.ranges.shape, bool), keyframe=k % 2 == 0, weak=k == 251)
+    res2 = checked.finish()
+    assert np.array_equal(res.poses, res2.poses)
+    runs = [c for c in checked.checks if c[0] is not None]
+    assert len(runs) >= 5
+    assert any(n_part < n_whole for *_x, n_part, n_whole in runs)  # some rankings really left places out
+    for need, rank, full, covers, _n_part, _n_whole in runs:
+        for s in need[1]:
+            assert rank.get(s, 2.0) == full.get(s, 2.0), s
+        for a, b in covers:
+            assert a == b

@@ -103,6 +103,11 @@ def _keep_probabilities(lv: GridLevel) -> None:
     lv.uidx = np.broadcast_to(np.full((), -1, dtype=np.int32), shape)
 
 
+#: Stored places above which a far search's ranking compares the query with its eligible submaps' places only
+#: (LoopCloser._rank_rows): below, choosing the rows (≈ 13 µs) costs about what it saves (≈ 14 µs of 120 for half
+#: of 105 places on negative_2 /right_scan, pass neg60); MIT CSAIL's 633 places: ≈ 0.50 → 0.25 ms a ranking.
+_RANK_ROWS_MIN = 2 * 64
+
 #: Grids whose rebuilt dense levels the closer keeps while a far candidate is verified (LoopCloser._dense): its
 #: partners are matched against submaps s − 1, s and s + 1 in turn.
 _DENSE_VERIFY = 3
@@ -439,6 +444,9 @@ class LoopCloser:
         self._places = (PlaceIndex(c.place_rings, c.place_sectors, c.place_max_range)
                         if c.far_search and c.far_rank == "descriptor" else None)
         self._query_desc: tuple[int, np.ndarray] | None = None  # (node, descriptor) of the latest keyframe
+        # while _far_search ranks places: (node, its eligible submaps), so that _place_ranks compares only their places
+        self._rank_need: tuple[int, list[int]] | None = None
+        self._rank_min = _RANK_ROWS_MIN
         # (stored places' keys, their distances to the query) of the last ranking (_place_ranks)
         self._place_dist: tuple[np.ndarray, np.ndarray] = (np.zeros(0, np.int64), np.zeros(0))
         # node → its returns for the descriptors (see _place_due): (keyframe, its removed beams at the keyframe) until
@@ -951,8 +959,13 @@ class LoopCloser:
             if d <= r:
                 elig.append((self._far_last.get(s, -1), d / r, s, r, float(heading[anchor])))
         if self._places is not None and elig:
-            # the submaps that look most like this place first (Scan Context ranking), not the least recently searched
-            rank = self._place_ranks(node)
+            # the submaps that look most like this place first (Scan Context ranking), not the least recently searched;
+            # only the eligible submaps' places (and those _place_cover reads for them) are compared with the query
+            self._rank_need = (node, [e[2] for e in elig])
+            try:
+                rank = self._place_ranks(node)
+            finally:
+                self._rank_need = None
             elig = [(rank.get(s, 2.0), d, s, r, dth) for _last, d, s, r, dth in elig]
         elig.sort()
         for _last, _d, s, r, dth in self._far_pick(node, elig, c.far_searches if count is None else count):
@@ -1095,17 +1108,24 @@ class LoopCloser:
         self._place_dist = (np.zeros(0, np.int64), np.zeros(0))
 
     def _place_ranks(self, node: int) -> dict[int, float]:
-        """Submap → smallest place-descriptor distance of its stored keyframes to keyframe ``node``'s place."""
+        """Submap → smallest place-descriptor distance of its stored keyframes to keyframe ``node``'s place: of every
+        submap with a stored place, or while :meth:`_far_search` ranks its eligible submaps (``_rank_need``) and more
+        than :data:`_RANK_ROWS_MIN` places are stored, of those submaps only (``_place_dist`` then holds only the
+        places :meth:`_place_cover` reads for them: :meth:`_rank_rows`). Each place's distance is computed on its
+        own, so the values are those of the whole ranking."""
         c = self.config
         self._place_flush()
         t0 = time.perf_counter()
+        need = self._rank_need
+        rows = (self._rank_rows(node, need[1])
+                if need is not None and need[0] == node and len(self._places) > self._rank_min else None)
         if self._query_desc is not None and self._query_desc[0] == node:
-            keys, d, _shift = self._places.distances(self._query_desc[1])
+            keys, d, _shift = self._places.distances(self._query_desc[1], rows=rows)
         elif node in self._places:  # a stored place (the second search: older keyframes' returns are gone)
-            keys, d, _shift = self._places.distances_of(node)
+            keys, d, _shift = self._places.distances_of(node, rows=rows)
         else:
             self._describe(node, False)
-            keys, d, _shift = self._places.distances(self._query_desc[1])
+            keys, d, _shift = self._places.distances(self._query_desc[1], rows=rows)
         self._place_dist = (keys, d)
         sub = keys // c.submap_keyframes
         best = np.full(int(sub.max()) + 1 if sub.size else 0, np.inf)
@@ -1113,6 +1133,24 @@ class LoopCloser:
         self.stats["place_ms"] += (time.perf_counter() - t0) * 1e3
         # (Python floats from tolist: the same values, without a NumPy scalar and np.isfinite call per submap)
         return {s: v for s, v in enumerate(best.tolist()) if math.isfinite(v)}
+
+    def _rank_rows(self, node: int, subs: list[int]) -> np.ndarray:
+        """Ascending rows of the place index (its stored keys ascend) that a ranking of submaps ``subs`` for keyframe
+        ``node`` reads: for each submap the places :meth:`_place_cover` reads — keys ``first`` … ``max(last,
+        min(anchor + place_keyframes − 1, node − place_keyframes))``, which hold the submap's own places (``first`` …
+        ``last``, its rank)."""
+        keys = self._places.keys
+        n = self.config.submap_keyframes
+        pk = self.config.place_keyframes
+        s = np.asarray(subs, dtype=np.int64)
+        first = s * n
+        hi = np.maximum(first + n - 1, np.minimum(first + n // 2 + pk - 1, node - pk))
+        lo = np.searchsorted(keys, first, side="left")
+        up = np.searchsorted(keys, hi, side="right")
+        mark = np.zeros(keys.shape[0] + 1, dtype=np.int64)  # +1 where a range starts, −1 past its end
+        np.add.at(mark, lo, 1)
+        np.add.at(mark, up, -1)
+        return np.flatnonzero(np.cumsum(mark[:-1]) > 0)
 
     def _submap_extent(self, s: int) -> float:
         """Largest distance of submap ``s``'s keyframes from its anchor (front-end poses), m."""

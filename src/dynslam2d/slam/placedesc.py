@@ -254,47 +254,78 @@ class PlaceIndex:
             self._row[key] = k + i
         self._n = need
 
-    def distances(self, desc: np.ndarray, upto: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Distance of the query ``desc`` to every stored place (the first ``upto`` if given).
+    def distances(self, desc: np.ndarray, upto: int | None = None,
+                  rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Distance of the query ``desc`` to every stored place (the first ``upto`` if given; only the rows ``rows``
+        of those if given: ascending (m,) int indices into the stored places, in the order added).
 
         Returns (keys (n,), d (n,) in [0, 1], shift (n,) sectors): at the best shift, query sector j faces the
         stored place's sector j − shift, i.e. the query's frame is the stored one turned by
-        −shift·2π/sectors rad (for places seen from the same position).
+        −shift·2π/sectors rad (for places seen from the same position). Each place's row is computed on its own,
+        so a row's values are the same whichever rows are asked for.
         """
         n = self._n if upto is None else min(int(upto), self._n)
         if n == 0:
             return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
-        return self._distances(*_spectra(desc), n)
+        return self._distances(*_spectra(desc), n, rows)
 
     def __contains__(self, key: object) -> bool:
         return isinstance(key, (int, np.integer)) and int(key) in self._row
 
-    def distances_of(self, key: int, upto: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def distances_of(self, key: int, upto: int | None = None,
+                     rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`distances` with the stored place ``key`` as the query (its descriptor is not kept, its spectra
         are; KeyError if it was not stored)."""
         k = self._row[int(key)]
         n = self._n if upto is None else min(int(upto), self._n)
         b, r = divmod(k, _BLOCK)
         return self._distances(self._col_blocks[b][r].astype(np.complex128),
-                               self._occ_blocks[b][r].astype(np.complex128), int(self._count[k]), n)
+                               self._occ_blocks[b][r].astype(np.complex128), int(self._count[k]), n, rows)
 
-    def _distances(self, q_cols: np.ndarray, q_occ: np.ndarray, q_count: int,
-                   n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(keys, d, shift) of the first ``n`` stored places against a query given by its spectra (_spectra)."""
-        if n == 0:
-            return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
+    def _distances(self, q_cols: np.ndarray, q_occ: np.ndarray, q_count: int, n: int,
+                   rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(keys, d, shift) of the first ``n`` stored places (only the rows ``rows`` of them if given: ascending
+        indices below ``n``) against a query given by its spectra (_spectra)."""
+        if rows is not None:
+            rows = np.asarray(rows, dtype=np.int64)
+            rows = rows[rows < n]
+            if rows.shape[0] == n:  # (every row: the whole blocks, no gather)
+                rows = None
+        if rows is None:
+            if n == 0:
+                return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
+            nb = -(-n // _BLOCK)
+            # block by block: each place's row is computed on its own, so the rows are those of one call over them all
+            parts = [_ring_correlation(q_cols, self._col_blocks[b], min(_BLOCK, n - b * _BLOCK)) for b in range(nb)]
+            occ = _rows(self._occ_blocks, n, (self._nf,))
+            count = self._count[:n]
+            keys = self._keys[:n].copy()
+        else:
+            m = rows.shape[0]
+            if m == 0:
+                return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
+            # the asked rows gathered block by block (each row's values as in the whole blocks: see above)
+            blk = rows // _BLOCK
+            cuts = np.flatnonzero(np.diff(blk)) + 1
+            parts = []
+            occs = []
+            for seg in np.split(rows, cuts) if cuts.size else [rows]:
+                b = int(seg[0]) // _BLOCK
+                r = seg - b * _BLOCK
+                parts.append(_ring_correlation(q_cols, self._col_blocks[b][r], r.shape[0]))
+                occs.append(self._occ_blocks[b][r])
+            occ = occs[0] if len(occs) == 1 else np.concatenate(occs)
+            count = self._count[rows]
+            keys = self._keys[rows]
+            n = m
         s = self.sectors
         # Σ_j Σ_r a[r, j] b[r, j − shift] for every shift: circular cross-correlation, summed over the rings
-        # (block by block: each place's row is computed on its own, so the rows are those of one call over them all)
-        nb = -(-n // _BLOCK)
-        parts = [_ring_correlation(q_cols, self._col_blocks[b], min(_BLOCK, n - b * _BLOCK)) for b in range(nb)]
-        corr = np.fft.irfft(parts[0] if nb == 1 else np.concatenate(parts), n=s, axis=1)
-        occ = _rows(self._occ_blocks, n, (self._nf,))
+        corr = np.fft.irfft(parts[0] if len(parts) == 1 else np.concatenate(parts), n=s, axis=1)
         overlap = np.fft.irfft(q_occ[None, :] * np.conj(occ), n=s, axis=1)
-        union = q_count + self._count[:n, None].astype(np.float64) - np.rint(overlap)
+        union = q_count + count[:, None].astype(np.float64) - np.rint(overlap)
         d = 1.0 - corr / np.maximum(union, 1.0)
         best = np.argmin(d, axis=1)
-        return self._keys[:n].copy(), np.clip(d[np.arange(n), best], 0.0, 1.0), best.astype(np.int64)
+        return keys, np.clip(d[np.arange(n), best], 0.0, 1.0), best.astype(np.int64)
 
 
 __all__ = ["PlaceIndex", "polar_descriptor", "polar_descriptors"]
