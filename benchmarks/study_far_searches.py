@@ -335,6 +335,9 @@ def _far_log(scans: list, policy: str = "default") -> list[dict[str, object]]:
     LoopCloser._far_pick = far_pick
     try:
         pipe = Pipeline(_config(policy))
+        # every place ranked, as before pass neg60 (a run ranks only the eligible submaps' places above
+        # _RANK_ROWS_MIN stored places: the same values, but this study's "next" column reads other submaps')
+        pipe.loops._rank_min = 1 << 62
         for sc in scans:
             pipe.process(sc)
         pipe.loops.finish()
