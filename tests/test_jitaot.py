@@ -171,17 +171,17 @@ def test_aot_run_gives_the_jit_runs_bytes_without_numba(built: Path, tmp_path: P
 
 CALL = r"""
 import sys, numpy as np
-from dynslam2d.detect.freespace import _ref_arrays
+from dynslam2d.slam.raycast import ray_ends
 from dynslam2d.jitaot import KernelArgumentError
 assert "numba" not in sys.modules
-r = np.linspace(1.0, 5.0, 16)
-ok = np.ones(16, dtype=bool)
-good = _ref_arrays(r, ok, -1.5, 0.2, 0.0, 0.0, 0.0, 0.1, 30.0)
-bad = {"dtype": (r.astype(np.float32), ok), "ndim": (r.reshape(4, 4), ok), "strided": (np.repeat(r, 2)[::2], ok),
-       "mask": (r, ok.astype(np.uint8))}
+h = np.linspace(1.0, 5.0, 16).reshape(8, 2)
+cl = np.linspace(-2.0, 2.0, 8).reshape(4, 2)
+good = ray_ends(h, cl, 1.0, 0.0, 0.0, 0.0)
+bad = {"dtype": (h.astype(np.float32), cl), "ndim": (h.ravel(), cl), "strided": (np.repeat(h, 2, axis=0)[::2], cl),
+       "clear": (h, cl.astype(np.int64))}
 for what, (a, m) in bad.items():
     try:
-        _ref_arrays(a, m, -1.5, 0.2, 0.0, 0.0, 0.0, 0.1, 30.0)
+        ray_ends(a, m, 1.0, 0.0, 0.0, 0.0)
     except KernelArgumentError as exc:
         print(what, "refused:", exc)
     else:
@@ -197,7 +197,7 @@ def test_aot_kernel_refuses_wrong_arrays_without_crashing(built: Path) -> None:
     assert res.returncode == 0, res.stderr[-2000:]
     lines = res.stdout.strip().splitlines()
     assert lines[-1] == "False tuple"
-    assert len([ln for ln in lines if "refused: kernel dynslam2d.detect.freespace._ref_arrays" in ln]) == 4, lines
+    assert len([ln for ln in lines if "refused: kernel dynslam2d.slam.raycast.ray_ends" in ln]) == 4, lines
 
 
 def test_stale_or_foreign_module_is_not_loaded(built: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
