@@ -1,7 +1,7 @@
 """Pass mem63 (issue 13 item 3): the clean-up counter's tile pool (slam/cleanup.py ``VisibilityCounter``) is made
 anew only when the counted extent grows, with a row for every tile of the extent in zeroed memory of its own (its
 unwritten rows take no memory), instead of growing by a scan's beams or a quarter with a copy each time (MIT CSAIL:
-160 copies, heap blocks of up to 5 MiB). The counts themselves are checked against the former path in
+283 copies, heap blocks of up to 5 MiB). The counts themselves are checked against the former path in
 tests/test_cleanup_counter_speed.py."""
 
 from __future__ import annotations

@@ -633,8 +633,8 @@ class VisibilityCounter:
         """At least ``free`` unused rows in the tile pool, or a row for every tile of the extent: the pool, when it
         has fewer, is made anew with a row for every tile of the extent, copying the rows in use, in zeroed memory
         of its own (``grid._zeroed``: its pages take memory when first written, so only the rows in use count).
-        (Issue 13 item 3, pass mem63: it grew by a quarter or a scan's beams, 5–10 copies between two growths of the
-        extent on MIT CSAIL, 160 in all, each a new heap block of up to 5 MiB beside the old one — heap pages that
+        (Issue 13 item 3, pass mem63: it grew by a quarter or a scan's beams, 12–96 copies for one size of the extent on
+        MIT CSAIL, 283 in all, each a new heap block of up to 5 MiB beside the old one — heap pages that
         stayed resident while the scan loop's peak came.)"""
         cap, n, tiles = self._pool.shape[0], self._n_tiles, self._table.size
         free = min(free, tiles - n)
