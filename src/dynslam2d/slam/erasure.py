@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -173,11 +174,40 @@ def _squeeze_rows(cat: np.ndarray) -> np.ndarray:
     return cat.copy() if buf is None else buf
 
 
-def _unsqueeze_rows(buf: np.ndarray, a: int = 0, b: int | None = None) -> np.ndarray:
+class _Zipped:
+    """A :func:`_squeeze_cols` buffer deflated (zlib, level 1; issue 13 item 3, pass mem63): MIT CSAIL's ended
+    ledgers, kept ``ledger_keep_s`` for linking, held 3.3 MiB of squeezed rows at the scan loop's peak (scan 1285)
+    and 5.4 MiB near its end, about a fifth of that deflated. Read (only when a ledger is linked or dropped) through
+    :func:`_unsqueeze_rows`, which inflates it: the same bytes, so the same rows. ``ndim`` is 1 as the squeezed
+    buffer's (the entries' readers tell a squeezed buffer from plain rows by it)."""
+
+    __slots__ = ("data", "nbytes")
+    ndim = 1
+
+    def __init__(self, buf: np.ndarray) -> None:
+        self.data = zlib.compress(buf, 1)  # (level 1: ≈ 5× smaller on MIT CSAIL's rows; 6 is 20 % smaller, 3× slower)
+        self.nbytes = buf.nbytes  # (the squeezed buffer's, inflated)
+
+    def inflate(self) -> np.ndarray:
+        """The squeezed buffer (read-only uint8): the last one inflated is kept, the ledgers of a batch being
+        read one after another (they ended together and expire together)."""
+        global _INFLATED
+        if _INFLATED[0] is not self:
+            _INFLATED = (self, np.frombuffer(zlib.decompress(self.data, bufsize=self.nbytes), dtype=np.uint8))
+        return _INFLATED[1]
+
+
+#: the :class:`_Zipped` buffer inflated last and its bytes (≤ one packed batch's squeezed rows, ≈ 0.1 MB)
+_INFLATED: tuple[_Zipped | None, np.ndarray] = (None, np.zeros(0, dtype=np.uint8))
+
+
+def _unsqueeze_rows(buf: np.ndarray | _Zipped, a: int = 0, b: int | None = None) -> np.ndarray:
     """Columns ``a:b`` (all when ``b`` is None) of the (5, N) int64 rows :func:`_squeeze_cols` stored in ``buf``
-    (a new array; ``buf`` may also be the rows themselves, kept as they are)."""
+    (a new array; ``buf`` may also be the rows themselves, kept as they are, or the squeezed buffer deflated)."""
     if buf.ndim == 2:
         return buf[:, a:b].copy()
+    if type(buf) is _Zipped:
+        buf = buf.inflate()
     n_all, size, m, l0, l1, l2, l3, l4 = buf[:8 * _SQ_HEAD].view(np.int64).tolist()
     if b is None:
         b = n_all
@@ -580,12 +610,13 @@ class _Ledger:
         return sum(len(lv) for lv in self.levels)
 
 
-def _pack_all(leds: list[_Ledger]) -> None:
+def _pack_all(leds: list[_Ledger], deflate: bool = False) -> None:
     """:meth:`_Ledger.pack` of every ledger of ``leds``: all their entries' rows squeezed side by side into one
     array (:func:`_squeeze_cols`; each ledger's entry: its range of columns), the common work done once over the
     batch (the ledgers that end are packed in batches, ``EvidenceLedger._finish_ended``; one at a time, ≈ 25 NumPy
     calls each, this cost the map update ≈ 20 µs a scan on MIT CSAIL). The array goes when the batch's last
-    ledger does: they ended together and expire together, ``ledger_keep_s`` after their last sight."""
+    ledger does: they ended together and expire together, ``ledger_keep_s`` after their last sight. ``deflate``:
+    the squeezed array kept deflated (:class:`_Zipped`; the pipeline's batches)."""
     todo = []
     blocks = []
     n = 0
@@ -606,8 +637,9 @@ def _pack_all(leds: list[_Ledger]) -> None:
         for led, a, b, chunks in todo:
             led.ent = [(cat[:, a:b].copy(), 0, b - a, chunks)]
     else:
+        kept = _Zipped(buf) if deflate else buf
         for led, a, b, chunks in todo:
-            led.ent = [(buf, a, b, chunks)]
+            led.ent = [(kept, a, b, chunks)]
     for led, _, _, _ in todo:
         for rec in led.recs or ():  # (records a previous settle made: their pending buffers are exact already)
             rec.shrink()
@@ -1276,7 +1308,7 @@ class EvidenceLedger:
         are counted without a sort at once, and a waiting one lets its track go — ledgers that wait longer outlive
         more of the collector's young generations, and with every dropped ledger waiting the garbage collections
         cost the map update about as much as the batches saved.)"""
-        _pack_all(self._to_pack)
+        _pack_all(self._to_pack, deflate=True)
         for led in self._to_count:
             self._drop(led)
         self._to_pack = []
