@@ -1007,8 +1007,8 @@ def _suggest_kernel_build(compiled: bool, input: str = "RECORDING") -> None:
         err_console.print(Text(f"{why} (docs/kernels.md)", style="dim"))
     elif compiled:
         err_console.print(Text("the kernels are cached for later runs; `dynslam2d kernels build` compiles them ahead "
-                               "of time for this machine: runs then start without numba and use about 125 MiB less "
-                               "memory (docs/kernels.md)", style="dim"))
+                               "of time for this machine: runs then start without numba and use about half the memory "
+                               "(docs/kernels.md)", style="dim"))
 
 
 def _steady_rows(summary: dict[str, Any], compiling: bool) -> list[tuple[str, str]]:
