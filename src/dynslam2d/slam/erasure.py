@@ -151,7 +151,8 @@ def _squeeze_cols(blocks: list[np.ndarray]) -> np.ndarray | None:
         return None
     size = 1 if span < 1 << 8 else 2 if span < 1 << 16 else 4
     d64 = cat[3].view(np.float64)
-    d32 = d64.astype(np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):  # (values float32 cannot hold are listed apart below)
+        d32 = d64.astype(np.float32)
     bad = np.flatnonzero(d32 != d64)  # (equal values are equal bits: the cast keeps a zero's sign; NaN is unequal)
     m = bad.shape[0]
     h = 8 * (_SQ_HEAD + 2 * m)
