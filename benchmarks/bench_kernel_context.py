@@ -55,7 +55,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
 from bench_pipeline import scan_loop_gc  # noqa: E402
-from bench_track_kernels import TARGETS, WARMUP, _copy  # noqa: E402
+from bench_track_kernels import TARGETS, _copy, warmed_scans  # noqa: E402
 
 clock = time.thread_time_ns
 MBS = (1, 4, 16)
@@ -253,17 +253,10 @@ def _per_kernel(calls_by_scan: list) -> dict:
 def run(name: str, data: Path, rounds: int) -> None:
     from numba.core.runtime import _nrt_python as nrt
 
-    from dynslam2d.inputs import open_source
-    from dynslam2d.pipeline import Pipeline
 
-    rel, topic = INPUTS.get(name, (name, None))
-    scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+    scans = warmed_scans(name, data)
     w = Wrapped()
     try:
-        warm = Pipeline()
-        for s in scans[:WARMUP]:
-            warm.process(s)
-        del warm
         print(f"{name}: {len(scans)} scans; the track stage's kernels, µs a scan (median over scans; thread CPU)")
         for rnd in range(rounds):
             clean, upd, f_clean = _situ(scans, w, "clean")

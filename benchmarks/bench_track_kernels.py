@@ -46,6 +46,20 @@ TARGETS = [("dynslam2d.detect.segment", "_segment_kernel"), ("dynslam2d.detect.t
            ("dynslam2d.detect.freespace", "seen_through_refs")]
 
 
+
+def warmed_scans(name: str, data: Path) -> list:
+    """The scans of input ``name`` (a key of bench_digest's ``INPUTS`` or ``sim:NAME``; recordings under ``data``),
+    after a throw-away pipeline ran their first :data:`WARMUP` scans (kernels loaded, caches warm)."""
+    from dynslam2d.inputs import open_source
+    from dynslam2d.pipeline import Pipeline
+
+    rel, topic = INPUTS.get(name, (name, None))
+    scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+    warm = Pipeline()
+    for s in scans[:WARMUP]:
+        warm.process(s)
+    return scans
+
 def _copy(args: tuple) -> tuple:
     return tuple(a.copy() if isinstance(a, np.ndarray) and a.size < BIG else a for a in args)
 
@@ -54,7 +68,6 @@ def run(name: str, data: Path, reps: int) -> None:
     import importlib
 
     from dynslam2d.detect import tracker as tracker_mod
-    from dynslam2d.inputs import open_source
     from dynslam2d.jitbox import njit
     from dynslam2d.pipeline import Pipeline
 
@@ -125,12 +138,7 @@ def run(name: str, data: Path, reps: int) -> None:
 
     tracker_mod.Tracker.update = probed
     try:
-        rel, topic = INPUTS.get(name, (name, None))
-        scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
-        warm = Pipeline()
-        for s in scans[:WARMUP]:
-            warm.process(s)
-        del warm
+        scans = warmed_scans(name, data)
         pipe = Pipeline()
         on[0] = True
         with scan_loop_gc():

@@ -43,7 +43,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
 from bench_pipeline import scan_loop_gc  # noqa: E402
-from bench_track_kernels import TARGETS, WARMUP  # noqa: E402
+from bench_track_kernels import TARGETS, warmed_scans  # noqa: E402
 
 clock = time.thread_time_ns
 
@@ -216,17 +216,10 @@ def lines(scans: list, kern: Kernels) -> tuple[Counter, Counter, Counter]:
 
 
 def run(name: str, data: Path, top: int, line_scans: int) -> None:
-    from dynslam2d.inputs import open_source
-    from dynslam2d.pipeline import Pipeline
 
-    rel, topic = INPUTS.get(name, (name, None))
-    scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+    scans = warmed_scans(name, data)
     kern = Kernels()
     try:
-        warm = Pipeline()
-        for s in scans[:WARMUP]:
-            warm.process(s)
-        del warm
         n = len(scans)
         upd, ker = clean(scans, kern)
         upd_a, ker_a = np.array(upd) / 1e3, np.array(ker) / 1e3
