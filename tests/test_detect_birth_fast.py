@@ -98,6 +98,7 @@ def test_reference_choice_is_the_first_nearest_age_also_with_repeated_stamps() -
         for _ in range(rng.randint(1, 30)):
             x += rng.choice([0.0, 0.0, 0.0667, 0.1, 0.25, 0.5])
             mem._buf.append(_Ref(x, None, None, 0.0, 0.0, False, 0.0, None))
+            mem._stamps.append(x)  # (the memory's stamps list, kept with its buffer by add)
         now = x + rng.choice([0.0, 0.0667, 0.3, 0.55, 0.8, 2.0])
         got = [id(r) for r in mem._refs(now)]
         assert got == [id(r) for r in _refs_loop(mem, now)]

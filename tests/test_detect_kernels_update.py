@@ -474,8 +474,10 @@ def _update_pairs_separate(G, Gi, X, P, Xs, Ps, sel, trows, dis, missed, kind, t
         if applied and missed[sel[r]]:
             TrackRows._restart_windows(rows, int(trows[r]), use_map)
     radii, kinds, starts, counts = circle[:, 2].tolist(), kind.tolist(), start.tolist(), npts.tolist()
-    info = [[int(a), starts[j], counts[j], int(kinds[j] == K_CIRCLE and pmin_r <= radii[j] <= pmax_r)]
-            for a, j in zip(ok.tolist(), dis.tolist())]
+    # (the applied flag 2 for a re-acquired track's update: ``_update_tracks``' former ``missed`` list, pass trk71)
+    info = [[(2 if missed[i] else 1) if a else 0, starts[j], counts[j],
+             int(kinds[j] == K_CIRCLE and pmin_r <= radii[j] <= pmax_r)]
+            for a, j, i in zip(ok.tolist(), dis.tolist(), sel.tolist())]
     return nb, top, np.array(info, dtype=np.int64).reshape(n, 4), ok.tolist().count(False)
 
 

@@ -63,3 +63,38 @@ def test_refs_by_bisection_equal_the_scan_of_every_age() -> None:
         mem.clear()
         assert mem._descents == 0 and mem._refs(t) == []
     assert n_fast > 10000  # (the bisection ran on most queries)
+
+
+def test_refs_where_the_stamps_bisection_is_off_by_rounding() -> None:
+    """Pass trk71: ``_refs`` bisects the stamps list at now − a and corrects with the exact test (now − stamp < a);
+    with reads landing on the reference ages of the stamps (± an ulp) and stamps an ulp apart, on unix-time stamps
+    (≈ 1.7e9 s, the bisection one index late) and on stamps from 0 s (now − stamp inexact: one late or early), the
+    correction runs both ways and the choice is still the scan of every age, scan for scan (without the step back
+    it is not)."""
+    import math
+    from bisect import bisect_right
+
+    rng = np.random.default_rng(71)
+    pose = Pose2D(0.0, 0.0, 0.0)
+    off = {-1: 0, 1: 0}
+    for case in range(40):
+        mem = FreeSpaceMemory(ref_ages=(0.3, 0.8, 0.1 * (1 + case % 5)), max_age=1.5)
+        t = 1.7e9 + float(rng.uniform(0.0, 1e4)) if case % 2 else float(rng.uniform(0.0, 0.05))
+        for _ in range(40):
+            r = int(rng.integers(3))  # (a step, an ulp — two stamps at nearly the same age — or a fixed period)
+            t = t + float(rng.uniform(0.01, 0.12)) if r == 0 else math.nextafter(t, math.inf) if r == 1 else t + 0.05
+            s = _scan(t)
+            mem.add(s, pose, s.valid_view())
+            assert mem._stamps == [b.stamp for b in mem._buf]
+            stamps = mem._stamps
+            nows = [x + a for x in stamps[-8:] for a in mem.ref_ages]
+            nows += [math.nextafter(x, math.inf) for x in nows] + [math.nextafter(x, -math.inf) for x in nows]
+            for now in nows:
+                for a in mem.ref_ages:
+                    exact = next((i for i, x in enumerate(stamps) if now - x < a), len(stamps))
+                    k = bisect_right(stamps, now - a)
+                    if k != exact:
+                        off[1 if k > exact else -1] += 1
+                want = _old_refs(mem, now)
+                assert [id(b) for b in mem._refs(now)] == [id(b) for b in want]
+    assert off[1] > 10 and off[-1] > 10  # (both corrections ran)

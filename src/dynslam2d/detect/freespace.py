@@ -78,10 +78,15 @@ class FreeSpaceMemory:
         self.margin = float(margin)
         self.max_age = max(float(max_age), max(self.ref_ages) + 0.5)
         self._buf: deque[_Ref] = deque()
+        # the buffered references' stamps (s), in the buffer's order: what :meth:`add` and :meth:`_refs` read, a
+        # float list searched by a plain bisection instead of the references' attributes through a key function
+        # (docs/speed.md, pass trk71)
+        self._stamps: list[float] = []
         self._descents = 0  # neighbours in the buffer whose stamps go back (0: time-ordered, :meth:`_refs` bisects)
 
     def clear(self) -> None:
         self._buf.clear()
+        self._stamps.clear()
         self._descents = 0
 
     @staticmethod
@@ -108,15 +113,19 @@ class FreeSpaceMemory:
 
     def add(self, scan: Scan, pose: Pose2D, valid: np.ndarray, ref: _Ref | None = None) -> None:
         """Remember ``scan`` (taken at ``pose``, map frame); ``valid`` marks beams with a return."""
-        buf = self._buf
+        buf, stamps = self._buf, self._stamps
         new = ref if ref is not None else self.make_ref(scan, pose, valid)
-        if buf and new.stamp < buf[-1].stamp:
+        st = new.stamp
+        if stamps and st < stamps[-1]:
             self._descents += 1
         buf.append(new)
-        while buf and scan.stamp - buf[0].stamp > self.max_age:
-            if len(buf) > 1 and buf[1].stamp < buf[0].stamp:
+        stamps.append(st)
+        now, max_age = scan.stamp, self.max_age
+        while stamps and now - stamps[0] > max_age:
+            if len(stamps) > 1 and stamps[1] < stamps[0]:
                 self._descents -= 1
             buf.popleft()
+            del stamps[0]
 
     def _refs(self, now: float) -> list[_Ref]:
         """The buffered scans nearest each of :attr:`ref_ages` before ``now`` (s), each once, older than 0 s."""
@@ -125,7 +134,7 @@ class FreeSpaceMemory:
         if not buf:
             return out
         if self._descents:  # (stamps that go back: every buffered age compared)
-            ages = [now - b.stamp for b in buf]
+            ages = [now - x for x in self._stamps]
             for a in self.ref_ages:
                 # the buffered scan whose age is nearest a (the first on ties, as np.argmin; ages are finite): min
                 # keeps its first item and replaces it only by a smaller one, and index finds that item's first
@@ -140,21 +149,30 @@ class FreeSpaceMemory:
         # monotone), so |age − a| falls to the last age ≥ a and rises from the first age < a: the first nearest is
         # the first of the equal deviations ending at index k − 1, or index k — the same scan as the scan of every
         # age above, in a bisection
-        n = len(buf)
+        # The first index whose age is < a, without a key function (pass trk71): the stamps' bisection at now − a,
+        # then the exact test (now − stamp < a, the ages' rounded differences) one step back or forward while it
+        # disagrees — the test is monotone along the buffer, so this is the first index where it holds, the index
+        # ``bisect_right(buf, -a, key=lambda b: -(now - b.stamp))`` gave
+        stamps = self._stamps
+        n = len(stamps)
         for a in self.ref_ages:
-            k = bisect_right(buf, -a, key=lambda b: -(now - b.stamp))  # (the first index whose age is < a)
+            k = bisect_right(stamps, now - a)
+            while k > 0 and now - stamps[k - 1] < a:
+                k -= 1
+            while k < n and not now - stamps[k] < a:  # (a guard: not seen to change the choice in the tests)
+                k += 1
             if k == 0:
                 j = 0
             else:
-                d = (now - buf[k - 1].stamp) - a
-                if k < n and a - (now - buf[k].stamp) < d:
+                d = (now - stamps[k - 1]) - a
+                if k < n and a - (now - stamps[k]) < d:
                     j = k
                 else:
                     j = k - 1
-                    while j > 0 and (now - buf[j - 1].stamp) - a == d:
+                    while j > 0 and (now - stamps[j - 1]) - a == d:
                         j -= 1
             b = buf[j]
-            if now - b.stamp > 0.0 and b not in out:
+            if now - stamps[j] > 0.0 and b not in out:
                 out.append(b)
         return out
 

@@ -427,7 +427,8 @@ def update_pairs(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xs
     update applied written in their rows of ``CI`` (columns ``C_*``: hits + 1, misses 0, the M-of-N counts while fewer
     than confirm_window, the updated flag ``C_UPD``) and ``CL`` (the last hit's stamp ``t``; docs/speed.md pass cnt36).
     Returns (the number of rows bounded, the longest riding window after the push, before the restarts, ``info`` (n, 4)
-    int64, the number of pairs whose update did not apply): per pair 1 where the Kalman update applied (else 0), the
+    int64, the number of pairs whose update did not apply): per pair 1 where the Kalman update applied (2 where it
+    applied and the track ``missed``: re-acquired; 0 where it did not), the
     detection's ``start`` and ``npts`` and 1 where it is a circle whose radius is within the person's radii (else 0) —
     what ``Tracker._update_tracks`` reads per pair, in one array. One dispatch instead of four, and none of the
     intermediate arrays (priors, measurements) boxed for Python and unboxed again (docs/speed.md, passes upd34,
@@ -475,7 +476,7 @@ def update_pairs(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xs
     window = int(q[UP_WINDOW])
     for r in range(n):
         j = dis[r]
-        info[r, 0] = 1 if ok[r] else 0
+        info[r, 0] = (2 if missed[sel[r]] else 1) if ok[r] else 0  # (2: re-acquired, pass trk71)
         if ok[r]:  # (the counters of Tracker._update_tracks' loop as it was: hits, misses, last hit, M of N)
             k = trows[r]
             CI[k, C_HITS] += 1

@@ -89,8 +89,8 @@ class _Track:
     # free-space fraction per update; an entry may be a detection (a birth's) or a tuple (det, ref, t, past) until it
     # is read, its value not yet computed (Tracker._free_values)
     free: list[float] = field(default_factory=list)
-    person: bool = False  # the last detection was a merged pair of legs
-    person_streak: int = 0  # consecutive updates with a merged pair of legs
+    # consecutive updates with a merged pair of legs or a person's circle (``person``: the last one was, > 0)
+    person_streak: int = 0
     rode: bool = False  # judged riding with the laser (its body) at the last check
     was_in_m: bool = False  # has been in M before (seen moving): the map's word is not needed again
     # (stamp s, points array, a0, n) per update within the free-space memory's max age: the detection's (n, 2) points,
@@ -113,6 +113,19 @@ class _Track:
     # a dormant track's map-evidence window, (n, 3), copied from its row when retired (Tracker._retire; its revival
     # without a map keeps it); None for a live track, whose windows are rows of the tracker's arrays (TrackRows)
     mev_kept: np.ndarray | None = None
+
+    @property
+    def person(self) -> bool:
+        """The last detection was a merged pair of legs or a circle of a person's radius (``person_streak`` > 0: the
+        update sets both, so only the streak is stored; docs/speed.md, pass trk71)."""
+        return self.person_streak > 0
+
+    @person.setter
+    def person(self, value: bool) -> None:
+        if not value:
+            self.person_streak = 0
+        elif self.person_streak == 0:
+            self.person_streak = 1
 
     # (the counters as Python values, read from the counter rows)
     @property
@@ -255,7 +268,6 @@ def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, be
     k.reason = "not in M: tentative track"
     k.beams = beams
     k.free = free
-    k.person = False
     k.person_streak = 0
     k.rode = False
     k.was_in_m = False

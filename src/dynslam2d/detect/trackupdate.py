@@ -94,24 +94,32 @@ class TrackUpdate:
         self._stacked = None  # the tracks changed
         if top >= self._RIDE.shape[1]:  # (the next push could overflow a full window)
             self._grow_ride()
-        self._update_tracks(pairs, dets, t, info.tolist(), missed.tolist())
+        self._update_tracks(pairs, dets, t, info.tolist())
         return nrej
 
     def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[ScanDetection], t: float,
-                       info: list[list[int]], missed: list[bool]) -> None:
+                       info: list[list[int]]) -> None:
         """The bookkeeping update of the tracks of ``pairs`` (track index, detection index) whose Kalman and shape
-        results are already in their rows (k.x, k.P, k.g, k.gi) where applied; ``info``: per pair [applied (1 / 0),
-        the detection's first point in the batch, its point count, 1 if it is a circle of a person's radius]
-        (``update_pairs``' rows, one conversion per scan: the detection's own properties (ScanDetection) would read
-        them one by one); the scan's constants are read once (one loop over the pairs: the update of one track is a
-        few µs of Python). The riding and map-evidence windows are pushed before, for all pairs in the same kernel
-        call, and a re-acquired track's restarted there to that push's entries; so are the counters (hits, misses,
-        last hit, M of N: columns of the counter table, pass cnt36). ``missed``: per live track, whether it had missed
-        scans before this update (its misses before the kernel reset them)."""
-        tc = self.config.tracker
-        nsus = tc.sustain_updates
-        max_age = self._free.max_age if self._free is not None else None
-        ref = self._cur_ref if self._free is not None else None  # (the vacated-space test's reference: this scan)
+        results are already in their rows (k.x, k.P, k.g, k.gi) where applied; ``info``: per pair [applied: 0 no,
+        1 yes, 2 yes and the track is re-acquired (it had missed scans before this update), the detection's first
+        point in the batch, its point count, 1 if it is a circle of a person's radius] (``update_pairs``' rows, one
+        conversion per scan: the detection's own properties (ScanDetection) would read them one by one); the scan's
+        constants are read once (one loop over the pairs: the update of one track is a few µs of Python). The riding
+        and map-evidence windows are pushed before, for all pairs in the same kernel call, and a re-acquired track's
+        restarted there to that push's entries; so are the counters (hits, misses, last hit, M of N: columns of the
+        counter table, pass cnt36).
+
+        Per pair, in this order: the track's id into the updated set and the detection into the used one; the
+        free-space entry (for a re-acquired track its window, speed count and probation restarted first) made of the
+        stored points as they were before this update; the flags and the beams; then, with a free-space memory, the
+        detection's points stored (the entries older than its max age skipped, the list started anew every
+        ``_PAST_COMPACT`` of them; a re-acquired track's on a new list). The loop is written for the common case (an
+        applied update of a tracked object, the free-space memory on): the re-acquired and the no-memory cases are
+        the branches (docs/speed.md, pass trk71)."""
+        nsus = self.config.tracker.sustain_updates
+        fm = self._free
+        ref = self._cur_ref if fm is not None else None  # (the vacated-space test's reference: this scan)
+        max_age = fm.max_age if fm is not None else 0.0
         tracks = self._tracks
         upd, used = self._upd_sets
         upd_add, used_add = upd.add, used.add
@@ -130,36 +138,37 @@ class TrackUpdate:
             past = k.past
             pa = k.past_a
             np0 = len(past)
-            snap = ref is not None and np0 > pa  # (past, pa, np0: the entries' snapshot, put in the free entry below)
-            if missed[ti]:
+            free = k.free
+            if ok == 2:
                 # re-acquired after a gap: the free-space evidence must be rebuilt from this object
                 k.past = []  # (a new list: the snapshots of earlier updates may hold the old one)
                 k.past_a = 0
-                k.free.clear()  # (the riding and map-evidence windows: restarted by the kernel, update_pairs)
+                free.clear()  # (the riding and map-evidence windows: restarted by the kernel, update_pairs)
                 k.fast = 0
                 k.probation = k.in_m and not k.remembered  # a remembered track re-acquired where it stopped
-            k.merged = False
-            person = det.person or circle_person == 1
-            k.person = person
-            k.person_streak = k.person_streak + 1 if person else 0
-            k.beams = arrays.beams[a0:a0 + npt]
-            free = k.free
             # (vacated: this scan sees through its old points; computed when the entry is read, _free_values)
             # (the detection's own fraction too: det.free_fraction, computed when read)
-            free.append((det, ref, t, past, pa, np0) if snap else max(det.free_fraction, 0.0))
+            free.append((det, ref, t, past, pa, np0) if np0 > pa and ref is not None
+                        else max(det.free_fraction, 0.0))
             if len(free) > nsus:
                 del free[0]
-            if max_age is not None:
+            k.merged = False
+            # (k.person, the last detection a merged pair of legs or a person's circle: person_streak > 0)
+            k.person_streak = k.person_streak + 1 if det.person or circle_person == 1 else 0
+            k.beams = arrays.beams[a0:a0 + npt]
+            if fm is None:
+                continue
+            if ok == 2:
                 past = k.past
-                past.append((t, arrays.pts, a0, npt))  # (_past_entry of a scan detection, inline)
-                pa = k.past_a
-                n = len(past)
-                while pa < n and t - past[pa][0] > max_age:
-                    pa += 1
-                if pa >= _PAST_COMPACT:  # (a new list of the live entries: the old one stays with its snapshots)
-                    k.past = past[pa:]
-                    pa = 0
-                k.past_a = pa
+                pa = np0 = 0
+            past.append((t, arrays.pts, a0, npt))  # (_past_entry of a scan detection, inline)
+            np0 += 1
+            while pa < np0 and t - past[pa][0] > max_age:
+                pa += 1
+            if pa >= _PAST_COMPACT:  # (a new list of the live entries: the old one stays with its snapshots)
+                k.past = past[pa:]
+                pa = 0
+            k.past_a = pa
 
     def _motion_prior(self, k: _Track) -> None:
         """Hidden side of a moving box whose other side is measured: a side parallel to the motion is
