@@ -28,7 +28,7 @@ def test_new_track_sets_every_field_as_the_dataclass_does() -> None:
                  ci=np.array([0, 1, 0, 1, 1, 0]), cl=(a["t"],), beams=a["beams"], free=a["free"], past=a["past"])
     assert type(fast) is _Track
     names = [f.name for f in dataclasses.fields(_Track)]
-    assert len(names) == len(_Track.__slots__) and len(names) >= 30
+    assert len(names) == len(_Track.__slots__) and len(names) >= 29  # (person: a property, pass trk71)
     for name in names:
         got, want = getattr(fast, name), getattr(ref, name)
         assert type(got) is type(want), name

@@ -156,11 +156,11 @@ class _Shadow(Tracker):
         self.lists: dict[int, tuple[list, list]] = {}
         self.seen = {"reacq": 0, "trimmed": 0, "full": 0, "revived": 0, "compared": 0}
 
-    def _update_tracks(self, pairs, dets, t, info, missed) -> None:
+    def _update_tracks(self, pairs, dets, t, info) -> None:
         applied = [row[0] for row in info]  # (update_pairs' per-pair rows: applied first, pass upd34)
-        # (missed: the tracks' misses before the update kernel reset them, per live track; pass cnt36)
-        again = {self._tracks[ti].id for (ti, _), ok in zip(pairs, applied) if ok and missed[ti]}
-        super()._update_tracks(pairs, dets, t, info, missed)
+        # (applied 2: the track had missed scans before the update kernel reset its misses; pass trk71)
+        again = {self._tracks[ti].id for (ti, _), ok in zip(pairs, applied) if ok == 2}
+        super()._update_tracks(pairs, dets, t, info)
         nsus, ride_time = self.config.tracker.sustain_updates, self.config.tracker.ride_time
         p = self._pose
         c, s = self._pose_cs
