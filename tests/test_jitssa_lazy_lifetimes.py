@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SRC = str(ROOT / "src")
 
 #: argv[1] "lazy": dynslam2d.jitssa installed; "eager": installed with the lifetimes computed in every run (numba's
-#: way). Compiles, in fresh dispatchers, the matcher's ``gated_points``, a loop with two back edges, a function with
+#: way). Compiles, in fresh dispatchers, the matcher's ``gated_points``, a loop left by ``break``, a function with
 #: ``literal_unroll`` over a heterogeneous tuple and one inlining an ``inline="always"`` callee (numba's inlining
 #: runs ``PostProcessor.run(emit_dels=True)``); prints their LLVM IR, results and how many runs left the lifetimes
 #: lazy.
@@ -37,13 +37,14 @@ def counted(self, emit_dels=False, extend_lifetimes=False):
     lazy["deadmaps" not in self.func_ir.variable_lifetime.__dict__] += 1
 postproc.PostProcessor.run = counted
 from dynslam2d.slam import matcher
-def two_back_edges(n):
-    s = 0
-    for i in range(n):
-        if i % 3 == 0:
-            continue
-        s += i
-    return s
+def early_exit(n):
+    k, acc = 0, 1.0
+    while k < n:
+        acc = acc * 1.5 - k
+        if acc < 0.0:
+            break
+        k += 1
+    return acc + k
 def unrolled(n):
     t = (1, 2.5, n, 4j)
     s = 0.0
@@ -63,7 +64,7 @@ n = 721
 ang = np.linspace(-math.pi, math.pi, n, endpoint=False)
 r = rng.uniform(0.05, 32.0, n)
 r[rng.random(n) < 0.1] = np.nan
-kernels = [numba.njit(matcher.gated_points.py_func), numba.njit(two_back_edges), numba.njit(unrolled),
+kernels = [numba.njit(matcher.gated_points.py_func), numba.njit(early_exit), numba.njit(unrolled),
            numba.njit(inlines)]
 outs = [kernels[0](r, np.cos(ang), np.sin(ang), np.isfinite(r), 0.1, 30.0, 0.2, 25.0, 10.0, True),
         kernels[1](10), kernels[2](3), kernels[3](r[:50].copy())]
