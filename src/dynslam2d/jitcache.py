@@ -173,6 +173,8 @@ def lean_numba_compile() -> bool:
       refreshes per cold run after a lookup that misses on purpose.
     - **No debug-logging calls in numba's SSA pass** (:func:`quiet_ssa_debug`, installed at the first compile): about
       a million ``Logger.debug`` calls per cold run that log nothing.
+    - **llvmlite's builder placed before a block's last instruction without a search** (:func:`lean_positions`,
+      installed at the first compile): numba's ``alloca`` placements in the entry block.
     - **llvmlite's IR printer with less Python work, ABI sizes remembered** (``jitprint.install``, at the first
       compile): the text numba hands to LLVM, the same text; and numba's reference counts without the dead
       extracts of every member of a value (≈ a quarter of the IR instructions; the same machine code).
@@ -224,7 +226,44 @@ def lean_numba_compile() -> bool:
     from dynslam2d import jitprint, jitssa
 
     at_first_compile(remembered_call_typing, lean_inlining, lazy_callee_code,  # (reading numba's sources: not warm)
-                     quiet_ssa_debug, jitssa.install, jitprint.install, lean_refresh)
+                     quiet_ssa_debug, jitssa.install, jitprint.install, lean_refresh, lean_positions)
+    return True
+
+
+#: SHA-256 (16 hex digits) of llvmlite 0.50's ``IRBuilder.position_before`` as :func:`lean_positions` checks it.
+POSITION_BEFORE_SOURCE = "a7fcbfdba4fcafe7"
+
+
+def lean_positions() -> bool:
+    """Have llvmlite's ``IRBuilder.position_before`` find an instruction that ends its block without searching the
+    block (pass cmp70).
+
+    numba puts every ``alloca`` of a function in its entry block (``cgutils.alloca_once``: ``goto_entry_block``,
+    which positions the builder before the block's terminator); llvmlite finds the terminator's place with
+    ``list.index`` over the block's instructions, thousands in a large kernel: ≈ 8 000 calls and 0.15 s of one core
+    on a cold run of the README's first command. An instruction is in its block's list once (llvmlite inserts each
+    new instruction object once; they compare by identity), so when it is the list's last element its index is the
+    list's length less one: the same position. Any other instruction is searched for as llvmlite does. Done only
+    when llvmlite's function has the source checked (:data:`POSITION_BEFORE_SOURCE`). Returns whether it changed
+    llvmlite (not when called again)."""
+    from llvmlite.ir import builder
+
+    from dynslam2d.jitbox import source_hash
+
+    own = builder.IRBuilder.position_before
+    if getattr(own, "_dynslam2d_lean", False) or source_hash(own) != POSITION_BEFORE_SOURCE:
+        return False
+
+    def position_before(self: Any, instr: Any) -> None:
+        self._block = instr.parent
+        instructions = self._block.instructions
+        self._anchor = (len(instructions) - 1 if instructions and instructions[-1] is instr
+                        else instructions.index(instr))
+
+    position_before._dynslam2d_lean = True  # type: ignore[attr-defined]
+    position_before.__wrapped__ = own  # type: ignore[attr-defined]
+    position_before.__doc__ = own.__doc__
+    builder.IRBuilder.position_before = position_before
     return True
 
 

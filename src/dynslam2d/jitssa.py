@@ -19,6 +19,9 @@ replacements, installed by :func:`install` at the first compile of the command l
   traversal that appends to a single list instead of a list per visited value: the same variables in the same order.
 - :func:`lean_use_defs`: ``analysis.compute_use_defs`` lists an assignment's variables once instead of twice.
 - :func:`bit_live_map`: ``analysis.compute_live_map``'s fixed points over bit masks instead of sets of names.
+- :func:`lazy_lifetimes` (pass cmp70): ``PostProcessor.run`` leaves the variable lifetimes (use / def sets, live and
+  dead maps, block entry variables) to numba's lazy ``VariableLifetime`` where nothing reads them: ≈ 780 of ≈ 1 130
+  computations per cold run skipped, the same IR and code.
 
 All are done only when numba's ``ssa.py``, ``ir.py``, ``ir_utils.py`` and ``analysis.py`` have the SHA-256 checked
 here (numba 0.68, :data:`SOURCES`); otherwise numba is left as it is.
@@ -654,7 +657,8 @@ def canonical_blocks(blocks: Any) -> tuple[Any, Any]:
 def shared_cfg_run(self: Any, emit_dels: bool = False, extend_lifetimes: bool = False) -> None:
     """numba 0.68's ``PostProcessor.run`` (``postproc.py``), statement for statement, with the control-flow graph of
     :func:`canonical_blocks` given to the ``VariableLifetime`` (its ``cfg``, which numba would build again from the
-    same blocks right away) when the canonicalisation rewrote nothing."""
+    same blocks right away) when the canonicalisation rewrote nothing; with :func:`lazy_lifetimes` installed it stops
+    after installing the ``VariableLifetime`` where nothing reads what the rest computes."""
     from numba.core import analysis, postproc
 
     blocks, cfg = canonical_blocks(self.func_ir.blocks)
@@ -663,6 +667,9 @@ def shared_cfg_run(self: Any, emit_dels: bool = False, extend_lifetimes: bool = 
     if cfg is not None:
         vlt.__dict__["cfg"] = cfg  # functools.cached_property's slot: VariableLifetime.cfg returns it
     self.func_ir.variable_lifetime = vlt
+    if _LIFETIMES_LAZY[0] and not emit_dels and not self.func_ir.is_generator and not _UNROLLING[0]:
+        self.func_ir.generator_info = None  # (numba's, for a function that is no generator)
+        return  # the analyses left to the VariableLifetime's cached properties: see lazy_lifetimes
 
     bev = analysis.compute_live_variables(vlt.cfg, self.func_ir.blocks,
                                           vlt.usedefs.defmap,
@@ -682,9 +689,93 @@ def shared_cfg_run(self: Any, emit_dels: bool = False, extend_lifetimes: bool = 
         self._insert_var_dels(extend_lifetimes=extend_lifetimes)
 
 
+#: Whether :func:`shared_cfg_run` leaves a function's variable lifetimes to be computed when read (set by
+#: :func:`lazy_lifetimes`), and whether numba's ``literal_unroll`` pass is transforming a function (its runs eager).
+_LIFETIMES_LAZY = [False]
+_UNROLLING = [0]
+
+#: SHA-256 (first 16 hex digits) of the numba 0.68.1 files read to establish what :func:`lazy_lifetimes` relies on:
+#: who reads ``FunctionIR.variable_lifetime`` and ``block_entry_vars`` (``untyped_passes.py``: ``literal_unroll``;
+#: ``transforms.py`` and ``withcontexts.py``: loop and with-lifting; ``pylowering.py``: object mode; ``ir.py``).
+LAZY_SOURCES = {"untyped_passes": "2f1ab65c656a235e", "withcontexts": "6350053b3e42a8f5",
+                "pylowering": "3893331f00aeb23d"}
+
+
+def _lazy_checked() -> bool:
+    """Whether numba's files have the SHA-256 in :data:`LAZY_SOURCES` and :data:`POSTPROC_SOURCES`."""
+    key = tuple(sorted(LAZY_SOURCES.items()))
+    if key not in _CHECKED:
+        try:
+            from numba.core import pylowering, untyped_passes, withcontexts
+
+            files = {"untyped_passes": untyped_passes, "withcontexts": withcontexts, "pylowering": pylowering}
+            _CHECKED[key] = all(hashlib.sha256(Path(files[name].__file__).read_bytes()).hexdigest()[:16] == digest
+                                for name, digest in LAZY_SOURCES.items())
+        except (ImportError, OSError, TypeError):  # pragma: no cover - numba is a dependency
+            _CHECKED[key] = False
+    return _CHECKED[key] and _postproc_checked()
+
+
+def _unrolls(func_ir: Any) -> bool:
+    """Whether ``func_ir`` assigns numba's ``literal_unroll`` (a global or free variable): numba's own test at the
+    start of its ``literal_unroll`` pass (``LiteralUnroll.run_pass``), which transforms nothing otherwise."""
+    from numba.core import ir
+    from numba.misc.special import literal_unroll
+
+    for block in func_ir.blocks.values():
+        for stmt in block.find_insts(ir.Assign):
+            if isinstance(stmt.value, (ir.Global, ir.FreeVar)) and stmt.value.value is literal_unroll:
+                return True
+    return False
+
+
+def lazy_lifetimes() -> bool:
+    """Have :func:`shared_cfg_run` (numba's ``PostProcessor.run``, ≈ 1 100 calls on a cold run of the README's first
+    command, after every pass that changes a function's IR) leave the function's variable lifetimes to numba's own
+    lazy ``VariableLifetime`` instead of computing them all each time (pass cmp70).
+
+    numba's ``run`` builds a ``VariableLifetime`` (its ``cfg``, ``usedefs``, ``livemap`` and ``deadmaps`` are cached
+    properties, computed when first read) and then reads them all at once to fill ``FunctionIR.block_entry_vars``
+    (``analysis.compute_live_variables``): ≈ 2.5 s of one core's CPU on that run, and the next ``run`` replaces the
+    lot. ``block_entry_vars`` is read only by object-mode lowering (``pylowering.py``) and for generators (``run``
+    itself); ``deadmaps`` only by ``run`` (``block_entry_vars``, ``del`` statements); the ``livemap`` only by loop
+    lifting (object mode), with-lifting (right after a ``run`` of its own: nothing changed in between, the same
+    sets) and the ``literal_unroll`` pass, which changes statements before it reads it. So ``run`` now stops after
+    installing the ``VariableLifetime`` (control-flow graph as :func:`shared_cfg_run` has it) when it emits no
+    ``del`` statements, the function is no generator and no ``literal_unroll`` pass is running (its ``run`` calls are
+    numba's, and the lifetimes of the IR it starts from are computed when it starts: the same IR as at the last
+    ``run``). The command line's processes compile no kernel in object mode (``njit`` only; ``tests/test_jitssa.py``
+    checks the kernel modules hold no ``objmode``, ``forceobj``, ``literal_unroll`` or generator kernel). The
+    compiled code is the same (``benchmarks/check_jitprint.py --dump D --asm``: every library's assembly). Returns
+    whether it changed numba (not when called again; not with other ``postproc.py`` / ``transforms.py`` sources)."""
+    from numba.core import untyped_passes
+
+    if _LIFETIMES_LAZY[0] or not _lazy_checked():
+        return False
+    unroll = untyped_passes.LiteralUnroll.run_pass
+
+    def eager_unroll(self: Any, state: Any) -> Any:
+        if not _unrolls(state.func_ir):
+            return unroll(self, state)  # (returns at once: nothing to unroll)
+        vlt = getattr(state.func_ir, "variable_lifetime", None)
+        if vlt is not None:  # what numba's run computed when it ran: the IR is as that run left it
+            vlt.deadmaps  # noqa: B018 - cached property: usedefs, livemap, deadmaps computed now
+        _UNROLLING[0] += 1
+        try:
+            return unroll(self, state)
+        finally:
+            _UNROLLING[0] -= 1
+
+    eager_unroll.__wrapped__ = unroll  # type: ignore[attr-defined]
+    untyped_passes.LiteralUnroll.run_pass = eager_unroll
+    _LIFETIMES_LAZY[0] = True
+    return True
+
+
 def install() -> bool:
     """Install :func:`fast_list_vars`, :func:`lean_use_defs`, :func:`bit_live_map`, :func:`sparse_ssa` (numba's
-    sources checked) and :func:`shared_cfg`; returns whether any was installed. Called by
+    sources checked), :func:`shared_cfg` and :func:`lazy_lifetimes`; returns whether any was installed. Called by
     :func:`dynslam2d.jitcache.lean_numba_compile` at the first compile."""
     done = [fast_list_vars(), lean_use_defs(), bit_live_map(), sparse_ssa(), shared_cfg()]
+    done.append(done[-1] and lazy_lifetimes())
     return any(done)
