@@ -4,9 +4,13 @@ The pipeline packs the ledgers of tracks that ended in batches (``EvidenceLedger
 squeezed (``_squeeze_cols``, pass mem41), are kept zlib-deflated until a ledger is linked or dropped and its rows
 read (``_unsqueeze_rows`` inflates them). Reading must give every row's exact int64 values — the key, the update
 indices, the level and the added log-odds' float64 bits — at the extremes each part may take, from any range of
-columns, with several deflated buffers read in turn (the last one inflated is kept)."""
+columns, with several deflated buffers read in turn (the last one inflated is kept). Pass neg70: the batches stay
+plain until the plain rows the ended ledgers hold pass ``_DEFLATE_FROM``, then they and every later batch are
+deflated (oldest first)."""
 
 from __future__ import annotations
+
+import mmap
 
 import numpy as np
 
@@ -119,8 +123,8 @@ def test_the_pipeline_batches_are_deflated_and_read_as_the_plain_ones(monkeypatc
 def test_ended_rows_stay_plain_until_the_held_ones_pass_the_threshold_then_oldest_first(monkeypatch) -> None:  # noqa: ANN001
     """Pass neg70: the batches stay plain while the plain rows the ended ledgers still hold stay within
     ``_DEFLATE_FROM`` (a batch no ledger holds any more does not count); past it, every new batch is deflated and
-    the plain ones kept before, oldest first, at least ``_DEFLATE_STEP`` bytes a batch; every ledger reads its
-    rows the same throughout."""
+    the plain ones kept before, oldest first, at least ``_DEFLATE_STEP`` bytes a batch; a plain batch lives in a
+    memory map of its own; every ledger reads its rows the same throughout."""
     rng = np.random.default_rng(5)
     el = EvidenceLedger(MemoryConfig(), 0.1, 30.0)
     monkeypatch.setattr(er, "_DEFLATE_STEP", 1)
@@ -147,6 +151,11 @@ def test_ended_rows_stay_plain_until_the_held_ones_pass_the_threshold_then_oldes
             for led, ref in zip(leds, refs):
                 if led in held:
                     assert np.array_equal(led._rows()[0], ref)
+            buf = held[0].ent[0][0]
+            if type(buf) is not _Zipped:  # (kept plain in a memory map of its own: unmapped when it goes)
+                while isinstance(buf, np.ndarray):
+                    buf = buf.base
+                assert isinstance(buf.obj if isinstance(buf, memoryview) else buf, mmap.mmap)
             out.append("zip" if type(held[0].ent[0][0]) is _Zipped else "plain")
         return out
 

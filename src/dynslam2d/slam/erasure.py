@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dynslam2d.detect.memoryconfig import MemoryConfig
-from dynslam2d.slam.grid import MultiResMap, encode_probs
+from dynslam2d.slam.grid import MultiResMap, _zeroed, encode_probs
 from dynslam2d.types import Pose2D, Scan, Track
 
 #: (i, j) cell → one int64 key: i·2^32 + j (|i|, |j| < 2^31)
@@ -135,7 +135,7 @@ _SQ_HEAD = 8
 _SQ_INT = {1: np.dtype(np.uint8), 2: np.dtype(np.uint16), 4: np.dtype(np.uint32)}
 
 
-def _squeeze_cols(blocks: list[np.ndarray]) -> np.ndarray | None:
+def _squeeze_cols(blocks: list[np.ndarray], mapped: bool = False) -> np.ndarray | None:
     """Ledger rows — (5, n) int64 blocks: cell key, update index before, after, added log-odds' float64 bits,
     level — side by side as one uint8 array of about 14 bytes a column instead of 40 (issue 13 item 3: MIT CSAIL's
     ended ledgers, kept ``ledger_keep_s`` for linking, held ≈ 14 MB of such rows at the loop's end); None when an
@@ -146,7 +146,9 @@ def _squeeze_cols(blocks: list[np.ndarray]) -> np.ndarray | None:
     j + 2^31; any int64 key comes back), the update indices and the level — are stored minus each part's smallest
     value, in the narrowest unsigned dtype that holds every part's span; the added log-odds as float32, with the
     columns and float64 bits of those float32 does not hold exactly listed apart (≈ 6 % of MIT CSAIL's rows).
-    Layout: int64 header (``_SQ_HEAD``), M inexact columns, their M bits, N float32, (5, N) integers."""
+    Layout: int64 header (``_SQ_HEAD``), M inexact columns, their M bits, N float32, (5, N) integers. ``mapped``: the
+    array in an anonymous memory map of its own (``grid._zeroed``), returned to the system when it goes (pass neg70:
+    the batches kept plain, then deflated, left their blocks as holes in the heap, ≈ 0.8 MiB on MIT CSAIL)."""
     cat = blocks[0] if len(blocks) == 1 else np.concatenate(blocks, axis=1)
     n = cat.shape[1]
     t = cat[0] + _HALF  # (wraps around for keys within 2^31 of int64's top: so does the way back)
@@ -164,7 +166,8 @@ def _squeeze_cols(blocks: list[np.ndarray]) -> np.ndarray | None:
     bad = np.flatnonzero(d32 != d64)  # (equal values are equal bits: the cast keeps a zero's sign; NaN is unequal)
     m = bad.shape[0]
     h = 8 * (_SQ_HEAD + 2 * m)
-    buf = np.empty(h + 4 * n + 5 * size * n, dtype=np.uint8)
+    nb = h + 4 * n + 5 * size * n
+    buf = _zeroed((1, nb), np.uint8).reshape(nb) if mapped else np.empty(nb, dtype=np.uint8)
     head = buf[:h].view(np.int64)
     head[:_SQ_HEAD] = (n, size, m, *lo)
     if m:
@@ -619,13 +622,14 @@ class _Ledger:
         return sum(len(lv) for lv in self.levels)
 
 
-def _pack_all(leds: list[_Ledger], deflate: bool = False) -> np.ndarray | _Zipped | None:
+def _pack_all(leds: list[_Ledger], deflate: bool = False, mapped: bool = False) -> np.ndarray | _Zipped | None:
     """:meth:`_Ledger.pack` of every ledger of ``leds``: all their entries' rows squeezed side by side into one
     array (:func:`_squeeze_cols`; each ledger's entry: its range of columns), the common work done once over the
     batch (the ledgers that end are packed in batches, ``EvidenceLedger._finish_ended``; one at a time, ≈ 25 NumPy
     calls each, this cost the map update ≈ 20 µs a scan on MIT CSAIL). The array goes when the batch's last
     ledger does: they ended together and expire together, ``ledger_keep_s`` after their last sight. ``deflate``:
-    the squeezed array kept deflated (:class:`_Zipped`). Returns the squeezed array kept (deflated or not), None
+    the squeezed array kept deflated (:class:`_Zipped`); ``mapped``: kept plain in a memory map of its own
+    (:func:`_squeeze_cols`). Returns the squeezed array kept (deflated or not), None
     when there is none (nothing packed, or the rows kept as they are)."""
     todo = []
     blocks = []
@@ -641,7 +645,7 @@ def _pack_all(leds: list[_Ledger], deflate: bool = False) -> np.ndarray | _Zippe
         todo.append((led, a, n, led._chunks()))
     if not todo:
         return None
-    buf = _squeeze_cols(blocks) if n else None
+    buf = _squeeze_cols(blocks, mapped and not deflate) if n else None
     if buf is None:  # (no rows, or beyond the squeezed form's range: the rows as they are, one array per ledger)
         cat = np.concatenate(blocks, axis=1) if blocks else _EMPTY_I5
         for led, a, b, chunks in todo:
@@ -1325,7 +1329,7 @@ class EvidenceLedger:
         are counted without a sort at once, and a waiting one lets its track go — ledgers that wait longer outlive
         more of the collector's young generations, and with every dropped ledger waiting the garbage collections
         cost the map update about as much as the batches saved.)"""
-        kept = _pack_all(self._to_pack, deflate=self._deflating)
+        kept = _pack_all(self._to_pack, deflate=self._deflating, mapped=True)
         if kept is not None and not self._deflating:
             self._plain.append((kept.nbytes, [led.id for led in self._to_pack]))
             self._plain_bytes += kept.nbytes
