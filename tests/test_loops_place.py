@@ -206,6 +206,26 @@ def test_distances_of_some_rows_equal_those_rows_of_all() -> None:
     assert idx.distances(q, upto=100, rows=np.array([3, 99, 120]))[0].tolist() == [6, 198]
 
 
+def test_the_stored_querys_spectra_rank_as_its_descriptor() -> None:
+    """The spectra :meth:`PlaceIndex.add_many` returns for its last descriptor (the latest keyframe's query, pass
+    neg70: not computed again for its ranking) give the ranking of that descriptor bit for bit, in batches of one
+    and of several places, whole and over some rows; a descriptor of real returns, as the closer makes them."""
+    rng = np.random.default_rng(8)
+    idx = PlaceIndex(20, 60, 15.0)
+    key = 0
+    for k in (1, 5, 16, 1, 64, 3):
+        clouds = [rng.normal(0.0, 6.0, (int(rng.integers(20, 400)), 2)) for _ in range(k)]
+        descs = idx.describe_many(clouds)
+        spectra = idx.add_many(list(range(key, key + k)), descs)
+        key += k
+        for rows in (None, np.arange(0, key, 3)):
+            a = idx.distances(descs[-1], rows=rows, spectra=spectra)
+            b = idx.distances(descs[-1], rows=rows)
+            for x, y in zip(a, b):
+                assert x.tobytes() == y.tobytes()
+    assert idx.add_many([], idx.describe_many([])) is None
+
+
 class _CheckedRanks(LoopCloser):
     """The loop closer that ranks every stored place too at each far search, for the test below."""
 

@@ -4,9 +4,13 @@ The pipeline packs the ledgers of tracks that ended in batches (``EvidenceLedger
 squeezed (``_squeeze_cols``, pass mem41), are kept zlib-deflated until a ledger is linked or dropped and its rows
 read (``_unsqueeze_rows`` inflates them). Reading must give every row's exact int64 values — the key, the update
 indices, the level and the added log-odds' float64 bits — at the extremes each part may take, from any range of
-columns, with several deflated buffers read in turn (the last one inflated is kept)."""
+columns, with several deflated buffers read in turn (the last one inflated is kept). Pass neg70: the batches stay
+plain until the plain rows the ended ledgers hold pass ``_DEFLATE_FROM``, then they and every later batch are
+deflated (oldest first)."""
 
 from __future__ import annotations
+
+import mmap
 
 import numpy as np
 
@@ -68,11 +72,11 @@ def zlib_inflate(z: _Zipped) -> bytes:
     return zlib.decompress(z.data)
 
 
-def _ledgers(rng: np.random.Generator) -> tuple[list[_Ledger], list[_Ledger], list[np.ndarray]]:
-    """Two copies of a batch of ledgers with random entries of rows at the extremes (three levels), and their
-    rows."""
+def _ledgers(rng: np.random.Generator, id0: int = 0) -> tuple[list[_Ledger], list[_Ledger], list[np.ndarray]]:
+    """Two copies of a batch of ledgers (ids ``id0`` on) with random entries of rows at the extremes (three
+    levels), and their rows."""
     leds, twins, refs = [], [], []
-    for k in range(12):
+    for k in range(id0, id0 + 12):
         led = _Ledger(k, (0.0, 0.0, 0.0), 0.0, (0.0, 0.0, 0.0), 0.0, None, 3, 100000)
         twin = _Ledger(k, (0.0, 0.0, 0.0), 0.0, (0.0, 0.0, 0.0), 0.0, None, 3, 100000)
         blocks = []
@@ -91,12 +95,15 @@ def _ledgers(rng: np.random.Generator) -> tuple[list[_Ledger], list[_Ledger], li
     return leds, twins, refs
 
 
-def test_the_pipeline_batches_are_deflated_and_read_as_the_plain_ones() -> None:
-    """``EvidenceLedger._finish_ended`` keeps a batch's squeezed rows deflated, one buffer for the batch: each
-    ledger reads its own rows, counts the new cells and settles to the records of its twin packed squeezed alone."""
+def test_the_pipeline_batches_are_deflated_and_read_as_the_plain_ones(monkeypatch) -> None:  # noqa: ANN001
+    """``EvidenceLedger._finish_ended`` keeps a batch's squeezed rows deflated (past its threshold), one buffer for
+    the batch: each ledger reads its own rows, counts the new cells and settles to the records of its twin packed
+    squeezed alone."""
+    monkeypatch.setattr(er, "_DEFLATE_FROM", 0)
     rng = np.random.default_rng(11)
     leds, twins, refs = _ledgers(rng)
     el = EvidenceLedger(MemoryConfig(), 0.1, 30.0)
+    el._ended.update((led.id, led) for led in leds)
     el._to_pack = list(leds)
     el._finish_ended()
     er._pack_all(twins)
@@ -111,3 +118,59 @@ def test_the_pipeline_batches_are_deflated_and_read_as_the_plain_ones() -> None:
         for ra, rb in zip(led.recs, twin.recs):
             assert ra._n_rows == rb._n_rows and ra._n_chunks == rb._n_chunks
             assert np.array_equal(ra._pk, rb._pk)
+
+
+def test_ended_rows_stay_plain_until_the_held_ones_pass_the_threshold_then_oldest_first(monkeypatch) -> None:  # noqa: ANN001
+    """Pass neg70: the batches stay plain while the plain rows the ended ledgers still hold stay within
+    ``_DEFLATE_FROM`` (a batch no ledger holds any more does not count); past it, every new batch is deflated and
+    the plain ones kept before, oldest first, at least ``_DEFLATE_STEP`` bytes a batch; a plain batch lives in a
+    memory map of its own; every ledger reads its rows the same throughout."""
+    rng = np.random.default_rng(5)
+    el = EvidenceLedger(MemoryConfig(), 0.1, 30.0)
+    monkeypatch.setattr(er, "_DEFLATE_STEP", 1)
+    batches = []
+
+    made = [_ledgers(rng, 100 * k) for k in range(6)]
+    nb = [_squeeze_cols(refs).nbytes for _, _, refs in made]
+
+    def pack(k: int) -> None:
+        leds, _, refs = made[k]
+        batches.append((leds, refs))
+        el._ended.update((led.id, led) for led in leds)
+        el._to_pack = list(leds)
+        el._finish_ended()
+
+    def kinds() -> list[str]:
+        out = []
+        for leds, refs in batches:
+            held = [led for led in leds if el._ended.get(led.id) is led]
+            if not held:
+                out.append("gone")
+                continue
+            assert len({id(led.ent[0][0]) for led in held}) == 1
+            for led, ref in zip(leds, refs):
+                if led in held:
+                    assert np.array_equal(led._rows()[0], ref)
+            buf = held[0].ent[0][0]
+            if type(buf) is not _Zipped:  # (kept plain in a memory map of its own: unmapped when it goes)
+                while isinstance(buf, np.ndarray):
+                    buf = buf.base
+                assert isinstance(buf.obj if isinstance(buf, memoryview) else buf, mmap.mmap)
+            out.append("zip" if type(held[0].ent[0][0]) is _Zipped else "plain")
+        return out
+
+    monkeypatch.setattr(er, "_DEFLATE_FROM", 1 << 40)
+    pack(0)
+    pack(1)
+    assert kinds() == ["plain", "plain"] and not el._deflating
+    for led in batches[0][0]:  # (batch 0 dropped: its bytes no longer count)
+        del el._ended[led.id]
+    monkeypatch.setattr(er, "_DEFLATE_FROM", nb[1] + nb[2])
+    pack(2)
+    assert kinds() == ["gone", "plain", "plain"] and not el._deflating
+    pack(3)  # (batches 1–3 pass it: batch 3 packed plain, the oldest held one deflated)
+    assert el._deflating and kinds() == ["gone", "zip", "plain", "plain"]
+    pack(4)
+    assert kinds() == ["gone", "zip", "zip", "plain", "zip"]
+    pack(5)
+    assert kinds() == ["gone", "zip", "zip", "zip", "zip", "zip"] and not el._plain

@@ -46,12 +46,13 @@ from __future__ import annotations
 import itertools
 import math
 import zlib
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from dynslam2d.detect.memoryconfig import MemoryConfig
-from dynslam2d.slam.grid import MultiResMap, encode_probs
+from dynslam2d.slam.grid import MultiResMap, _zeroed, encode_probs
 from dynslam2d.types import Pose2D, Scan, Track
 
 #: (i, j) cell → one int64 key: i·2^32 + j (|i|, |j| < 2^31)
@@ -78,6 +79,13 @@ _ROWS_ROOM = 512
 _ROWS_FLAT = 1 << 14
 #: Ledgers that ended (confirmed: to pack) or were dropped (to count) wait for this many, then are done in one go.
 _END_BATCH = 16
+#: The ended ledgers' squeezed rows are kept plain until those kept plain pass this many bytes; from then on the
+#: ledger deflates every batch (:class:`_Zipped`) and the plain ones kept before it, oldest first, this many bytes
+#: more a batch (issue 13 items 1 and 3, pass neg70): deflating cost the map update's mean ×1.03–1.07 on runs whose
+#: ended rows stay small (negative_2: ≤ 1.5 MiB, sim:paper 0.4 MiB over the whole run), while MIT CSAIL passes
+#: 2 MiB near scan 920 and its ended rows are deflated again by scan ≈ 1080, before its loop's peaks (1285, 1913)
+_DEFLATE_FROM = 2 << 20
+_DEFLATE_STEP = 256 << 10
 #: kept-beam sweep: every this many map updates with kept beams, each live ledger whose kept beams (``_Ledger.kb``)
 #: go back before the previous sweep copies its own parts out of the updates' whole kept-beam arrays
 #: (:meth:`EvidenceLedger._sweep_beams`, issue 13 item 3): a live ledger then holds at most the last ``2 ·`` this
@@ -127,7 +135,7 @@ _SQ_HEAD = 8
 _SQ_INT = {1: np.dtype(np.uint8), 2: np.dtype(np.uint16), 4: np.dtype(np.uint32)}
 
 
-def _squeeze_cols(blocks: list[np.ndarray]) -> np.ndarray | None:
+def _squeeze_cols(blocks: list[np.ndarray], mapped: bool = False) -> np.ndarray | None:
     """Ledger rows — (5, n) int64 blocks: cell key, update index before, after, added log-odds' float64 bits,
     level — side by side as one uint8 array of about 14 bytes a column instead of 40 (issue 13 item 3: MIT CSAIL's
     ended ledgers, kept ``ledger_keep_s`` for linking, held ≈ 14 MB of such rows at the loop's end); None when an
@@ -138,7 +146,9 @@ def _squeeze_cols(blocks: list[np.ndarray]) -> np.ndarray | None:
     j + 2^31; any int64 key comes back), the update indices and the level — are stored minus each part's smallest
     value, in the narrowest unsigned dtype that holds every part's span; the added log-odds as float32, with the
     columns and float64 bits of those float32 does not hold exactly listed apart (≈ 6 % of MIT CSAIL's rows).
-    Layout: int64 header (``_SQ_HEAD``), M inexact columns, their M bits, N float32, (5, N) integers."""
+    Layout: int64 header (``_SQ_HEAD``), M inexact columns, their M bits, N float32, (5, N) integers. ``mapped``: the
+    array in an anonymous memory map of its own (``grid._zeroed``), returned to the system when it goes (pass neg70:
+    the batches kept plain, then deflated, left their blocks as holes in the heap, ≈ 0.8 MiB on MIT CSAIL)."""
     cat = blocks[0] if len(blocks) == 1 else np.concatenate(blocks, axis=1)
     n = cat.shape[1]
     t = cat[0] + _HALF  # (wraps around for keys within 2^31 of int64's top: so does the way back)
@@ -156,7 +166,8 @@ def _squeeze_cols(blocks: list[np.ndarray]) -> np.ndarray | None:
     bad = np.flatnonzero(d32 != d64)  # (equal values are equal bits: the cast keeps a zero's sign; NaN is unequal)
     m = bad.shape[0]
     h = 8 * (_SQ_HEAD + 2 * m)
-    buf = np.empty(h + 4 * n + 5 * size * n, dtype=np.uint8)
+    nb = h + 4 * n + 5 * size * n
+    buf = _zeroed((1, nb), np.uint8).reshape(nb) if mapped else np.empty(nb, dtype=np.uint8)
     head = buf[:h].view(np.int64)
     head[:_SQ_HEAD] = (n, size, m, *lo)
     if m:
@@ -611,13 +622,15 @@ class _Ledger:
         return sum(len(lv) for lv in self.levels)
 
 
-def _pack_all(leds: list[_Ledger], deflate: bool = False) -> None:
+def _pack_all(leds: list[_Ledger], deflate: bool = False, mapped: bool = False) -> np.ndarray | _Zipped | None:
     """:meth:`_Ledger.pack` of every ledger of ``leds``: all their entries' rows squeezed side by side into one
     array (:func:`_squeeze_cols`; each ledger's entry: its range of columns), the common work done once over the
     batch (the ledgers that end are packed in batches, ``EvidenceLedger._finish_ended``; one at a time, ≈ 25 NumPy
     calls each, this cost the map update ≈ 20 µs a scan on MIT CSAIL). The array goes when the batch's last
     ledger does: they ended together and expire together, ``ledger_keep_s`` after their last sight. ``deflate``:
-    the squeezed array kept deflated (:class:`_Zipped`; the pipeline's batches)."""
+    the squeezed array kept deflated (:class:`_Zipped`); ``mapped``: kept plain in a memory map of its own
+    (:func:`_squeeze_cols`). Returns the squeezed array kept (deflated or not), None
+    when there is none (nothing packed, or the rows kept as they are)."""
     todo = []
     blocks = []
     n = 0
@@ -631,8 +644,8 @@ def _pack_all(leds: list[_Ledger], deflate: bool = False) -> None:
             n += j - i
         todo.append((led, a, n, led._chunks()))
     if not todo:
-        return
-    buf = _squeeze_cols(blocks) if n else None
+        return None
+    buf = _squeeze_cols(blocks, mapped and not deflate) if n else None
     if buf is None:  # (no rows, or beyond the squeezed form's range: the rows as they are, one array per ledger)
         cat = np.concatenate(blocks, axis=1) if blocks else _EMPTY_I5
         for led, a, b, chunks in todo:
@@ -644,6 +657,7 @@ def _pack_all(leds: list[_Ledger], deflate: bool = False) -> None:
     for led, _, _, _ in todo:
         for rec in led.recs or ():  # (records a previous settle made: their pending buffers are exact already)
             rec.shrink()
+    return None if buf is None else kept
 
 class PendingUpdate:
     """Cells and log-odds read before one map update (:meth:`EvidenceLedger.before_update`): per map level
@@ -715,6 +729,12 @@ class EvidenceLedger:
         #: batches by :meth:`_finish_ended`)
         self._to_pack: list[_Ledger] = []
         self._to_count: list[_Ledger] = []
+        #: the batches whose squeezed rows are kept plain, oldest first: (their bytes, the batch's track ids), an
+        #: upper bound of their bytes (exact after :meth:`_plain_held`), and whether the ledger deflates
+        #: (:data:`_DEFLATE_FROM`)
+        self._plain: deque[tuple[int, list[int]]] = deque()
+        self._plain_bytes = 0
+        self._deflating = False
         #: map updates with kept beams since the last kept-beam sweep, and the scan index of that sweep
         #: (:meth:`_sweep_beams`)
         self._kb_n = 0
@@ -1309,11 +1329,54 @@ class EvidenceLedger:
         are counted without a sort at once, and a waiting one lets its track go — ledgers that wait longer outlive
         more of the collector's young generations, and with every dropped ledger waiting the garbage collections
         cost the map update about as much as the batches saved.)"""
-        _pack_all(self._to_pack, deflate=True)
+        kept = _pack_all(self._to_pack, deflate=self._deflating, mapped=True)
+        if kept is not None and not self._deflating:
+            self._plain.append((kept.nbytes, [led.id for led in self._to_pack]))
+            self._plain_bytes += kept.nbytes
+            if self._plain_bytes > _DEFLATE_FROM:
+                self._plain_bytes = sum(nb for nb, _ in self._plain_held())
+                self._deflating = self._plain_bytes > _DEFLATE_FROM
+        if self._deflating and self._plain:
+            self._deflate_plain()
         for led in self._to_count:
             self._drop(led)
         self._to_pack = []
         self._to_count = []
+
+    def _held(self, tids: list[int]) -> tuple[np.ndarray | None, list[_Ledger]]:
+        """The plain squeezed array of the batch of ``tids`` and its ended ledgers that still hold it ((None, [])
+        when none does: linked, dropped or settled since)."""
+        buf, leds = None, []
+        for tid in tids:
+            led = self._ended.get(tid)
+            if led is None or len(led.ent) != 1:
+                continue
+            rows = led.ent[0][0]
+            if buf is None and type(rows) is np.ndarray and rows.ndim == 1:
+                buf = rows
+            if rows is buf:
+                leds.append(led)
+        return buf, leds
+
+    def _plain_held(self) -> deque[tuple[int, list[int]]]:
+        """:attr:`_plain` without the batches no ended ledger holds any more."""
+        self._plain = deque(e for e in self._plain if self._held(e[1])[0] is not None)
+        return self._plain
+
+    def _deflate_plain(self) -> None:
+        """Deflate the oldest batches kept plain, at least :data:`_DEFLATE_STEP` bytes of them (the same bytes
+        inflated, so the same rows: :func:`_unsqueeze_rows`)."""
+        done = 0
+        while self._plain and done < _DEFLATE_STEP:
+            nb, tids = self._plain.popleft()
+            buf, leds = self._held(tids)
+            if buf is None:
+                continue
+            z = _Zipped(buf)
+            for led in leds:
+                _, a, b, chunks = led.ent[0]
+                led.ent = [(z, a, b, chunks)]
+            done += nb
 
     # ------------------------------------------------------------------ erasure
     def erase_entering(self, tracks: list[Track], removing: set[int], stamp: float, hmap: MultiResMap) -> int:
@@ -1440,6 +1503,9 @@ class EvidenceLedger:
         self._ended = {}
         self._to_pack = []
         self._to_count = []
+        self._plain = deque()
+        self._plain_bytes = 0
+        self._deflating = False
         self._F = np.zeros((0, 5))
         self._mark = np.zeros(0, dtype=np.int64)
         self._s = self._P = 0

@@ -443,7 +443,8 @@ class LoopCloser:
         # place descriptors of every place_every-th keyframe: the far search ranks submaps by them
         self._places = (PlaceIndex(c.place_rings, c.place_sectors, c.place_max_range)
                         if c.far_search and c.far_rank == "descriptor" else None)
-        self._query_desc: tuple[int, np.ndarray] | None = None  # (node, descriptor) of the latest keyframe
+        #: (node, descriptor, its spectra if stored: :meth:`PlaceIndex.add_many`) of the latest keyframe
+        self._query_desc: tuple[int, np.ndarray, tuple | None] | None = None
         # while _far_search ranks places: (node, its eligible submaps), so that _place_ranks compares only their places
         self._rank_need: tuple[int, list[int]] | None = None
         self._rank_min = _RANK_ROWS_MIN
@@ -1048,9 +1049,8 @@ class LoopCloser:
             rel = relative(base, np.array([self.keyframes[k].frontend for k in window]).reshape(-1, 3))
             clouds.append(_place_points(rel, [self._place_returns(k) for k in window]))
         descs = self._places.describe_many(clouds)
-        if store:
-            self._places.add_many(nodes, descs)
-        self._query_desc = (nodes[-1], descs[-1])
+        spectra = self._places.add_many(nodes, descs) if store else None
+        self._query_desc = (nodes[-1], descs[-1], spectra)
         self.stats["place_ms"] += (time.perf_counter() - t0) * 1e3
 
     def _place_returns(self, node: int) -> np.ndarray:
@@ -1120,7 +1120,7 @@ class LoopCloser:
         rows = (self._rank_rows(node, need[1])
                 if need is not None and need[0] == node and len(self._places) > self._rank_min else None)
         if self._query_desc is not None and self._query_desc[0] == node:
-            keys, d, _shift = self._places.distances(self._query_desc[1], rows=rows)
+            keys, d, _shift = self._places.distances(self._query_desc[1], rows=rows, spectra=self._query_desc[2])
         elif node in self._places:  # a stored place (the second search: older keyframes' returns are gone)
             keys, d, _shift = self._places.distances_of(node, rows=rows)
         else:

@@ -213,14 +213,19 @@ class PlaceIndex:
         """(k, rings, sectors): :meth:`describe` of each point set in ``points`` (:func:`polar_descriptors`)."""
         return polar_descriptors(points, self.rings, self.sectors, self.max_range)
 
-    def add_many(self, keys: list[int], descs: np.ndarray) -> None:
+    def add_many(self, keys: list[int], descs: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
         """Store places ``keys`` with descriptors ``descs`` ((k, rings, sectors)), in order: the same index as
-        :meth:`add` of each in turn."""
+        :meth:`add` of each in turn. Returns the last descriptor's spectra as :func:`_spectra` gives them (the
+        same values: :func:`_spectra_many`), to be its query's (:meth:`distances`' ``spectra``), or None if
+        ``keys`` is empty."""
         if descs.shape != (len(keys), self.rings, self.sectors):
             raise ValueError(f"PlaceIndex.add_many: descriptors shape {descs.shape}, "
                              f"expected {(len(keys), self.rings, self.sectors)}")
-        if keys:
-            self._store([int(k) for k in keys], *_spectra_many(descs))
+        if not keys:
+            return None
+        cols, occ, count = _spectra_many(descs)
+        self._store([int(k) for k in keys], cols, occ, count)
+        return cols[-1], occ[-1], int(count[-1])
 
     def _store(self, keys: list[int], cols: np.ndarray, occ: np.ndarray, count: np.ndarray) -> None:
         """Append the spectra of places ``keys`` (rows of ``cols``, ``occ``, ``count``): the spectra into their blocks
@@ -254,10 +259,12 @@ class PlaceIndex:
             self._row[key] = k + i
         self._n = need
 
-    def distances(self, desc: np.ndarray, upto: int | None = None,
-                  rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def distances(self, desc: np.ndarray, upto: int | None = None, rows: np.ndarray | None = None,
+                  spectra: tuple[np.ndarray, np.ndarray, int] | None = None,
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Distance of the query ``desc`` to every stored place (the first ``upto`` if given; only the rows ``rows``
-        of those if given: ascending (m,) int indices into the stored places, in the order added).
+        of those if given: ascending (m,) int indices into the stored places, in the order added). ``spectra``:
+        ``desc``'s spectra if the caller has them (:meth:`add_many` returned them; pass neg70: not computed again).
 
         Returns (keys (n,), d (n,) in [0, 1], shift (n,) sectors): at the best shift, query sector j faces the
         stored place's sector j − shift, i.e. the query's frame is the stored one turned by
@@ -267,7 +274,7 @@ class PlaceIndex:
         n = self._n if upto is None else min(int(upto), self._n)
         if n == 0:
             return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
-        return self._distances(*_spectra(desc), n, rows)
+        return self._distances(*(_spectra(desc) if spectra is None else spectra), n, rows)
 
     def __contains__(self, key: object) -> bool:
         return isinstance(key, (int, np.integer)) and int(key) in self._row
