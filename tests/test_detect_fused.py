@@ -364,7 +364,7 @@ def test_structure_column_is_the_detections_own_values():
             dets = tr.last_detections
             if not dets or tr._map is None:
                 continue
-            tr._ms = None  # (read afresh, not a list an earlier step of this scan read)
+            tr._ms = None  # (read afresh, not the list an earlier step of this scan read)
             got = tr._structure_column(dets)
             assert got == [d.map_structure for d in dets]
             assert tr._ms_ev is not None

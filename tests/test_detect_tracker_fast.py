@@ -408,7 +408,7 @@ def test_merged_detection_veto_matches_the_row_by_row_test() -> None:
         rows = sorted(rng.sample(range(n), rng.randint(1, n)))
         want, want_merged = _veto_merged_reference(tr, ok, dets, det_ext, tsize, rows)
         tr._merged = set()
-        got = tr._veto_merged(ok.copy(), [d.map_structure for d in dets], det_ext, tsize, rows)
+        got = tr._veto_merged(ok.copy(), dets, det_ext, tsize, rows)
         assert np.array_equal(got, want) and tr._merged == want_merged, case
         hits += len(want_merged)
     assert hits > 50  # (the cases refuse pairs, not only pass them)

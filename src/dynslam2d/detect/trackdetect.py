@@ -68,9 +68,9 @@ class TrackDetect:
     #: the first call) and the angles it was made for
     _fit_trig: np.ndarray | None = None
     _fit_trig_of: np.ndarray | None = None
-    #: this scan's ``map_structure`` column (:meth:`_structure_column`; None: not read yet) and the (3, nd) map
-    #: evidence of the final rows it is read from (None: from the detections)
-    _ms: list[float] | None = None
+    #: this scan's ``map_structure`` column (:meth:`_structure_column`: the detection list it is of and the list;
+    #: None: not read yet) and the (3, nd) map evidence of the final rows it is read from (None: from the detections)
+    _ms: tuple[list, list[float]] | None = None
     _ms_ev: np.ndarray | None = None
 
     def _detect_setup(self) -> None:
@@ -199,15 +199,15 @@ class TrackDetect:
         return dets
 
     def _structure_column(self, dets: list[Detection]) -> list[float]:
-        """``map_structure`` of this scan's detections ``dets`` in their order, Python floats (the fraction of each
-        one's points on long-occupied map cells, 0.0 without a map): the final rows' evidence row as one list, read
-        once a scan when first asked for (docs/speed.md, pass trk72), or the detections' own values (no map, or rows
-        of a subclass' ``_merge_legs``)."""
+        """``map_structure`` of the detections ``dets`` in their order, Python floats (the fraction of each one's
+        points on long-occupied map cells, 0.0 without a map): for this scan's detections the final rows' evidence
+        row as one list, read once a scan when first asked for (docs/speed.md, pass trk72); else (another list, no
+        map, or rows of a subclass' ``_merge_legs``) the detections' own values, kept for the same list."""
         ms = self._ms
-        if ms is None:
-            ev = self._ms_ev
-            ms = self._ms = ev[0].tolist() if ev is not None else [d.map_structure for d in dets]
-        return ms
+        if ms is None or ms[0] is not dets:
+            ev = self._ms_ev if dets is self.last_detections else None
+            ms = self._ms = (dets, ev[0].tolist() if ev is not None else [d.map_structure for d in dets])
+        return ms[1]
 
     def _merge_legs(self, dets: list[Detection], kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray,
                     rel: np.ndarray, starts: np.ndarray, npts: np.ndarray, px: np.ndarray, py: np.ndarray,

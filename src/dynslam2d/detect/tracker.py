@@ -501,8 +501,9 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # rows of the counter table; docs/speed.md, pass cnt36)
         tsize, d2, ok, det_ext, firm, missed_a = association_gates(self._G, self._Gi, self._rows(), self._CI, Xs, Ps,
                                                                    dm.z, dm.R, *self._batch, self._upd_p)
-        if self._map is not None:  # (the detections' structure fractions: one list a scan, _structure_column)
-            ok = self._veto_merged(ok, self._structure_column(dets), det_ext, tsize)
+        if self._map is not None:  # (with the rows of the tracks in M or merged)
+            ok = self._veto_merged(ok, dets, det_ext, tsize,
+                                   [i for i, k in enumerate(self._tracks) if k.in_m or k.merged])
         if not _count_nonzero(ok):  # (no pair allowed; count_nonzero: cheaper than any(); its C function)
             return []
         # the gated costs, the established tracks' assignment, then the tentative tracks' on the detections left, each
@@ -518,37 +519,36 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
             self._pair_arrays = (pairs, ii, jj, missed_a)
         return pairs
 
-    def _veto_merged(self, ok: np.ndarray, ms: list[float], det_ext: np.ndarray,
+    def _veto_merged(self, ok: np.ndarray, dets: list[Detection], det_ext: np.ndarray,
                      tsize: np.ndarray, rows: list[int] | None = None) -> np.ndarray:
         """``ok`` without the pairs in which a detection is a track in M merged with long-standing structure: at
         least ``map_structure_stop`` of its points on long-occupied map cells and its longer side more than
         ``merge_size_jump`` beyond the track's, while the track's own points were not on structure (mean ≤
         ``map_structure_max``). A person walking up to a wall joins the wall's cluster; updating the person's track
         with it would carry M onto the wall. A track in M left with no detection leaves M (:meth:`_manage`) and
-        keeps refusing such detections (``merged``) until a detection of its own size updates it. ``ms``: the
-        detections' ``map_structure`` fractions, Python floats in their order (:meth:`_structure_column`). ``rows``:
-        the indices of the live tracks in M or merged, in their order (None: found here, only where a detection is a
-        candidate)."""
+        keeps refusing such detections (``merged``) until a detection of its own size updates it. ``rows``: the
+        indices of the live tracks in M or merged, in their order (None: found here; :meth:`_associate` finds them in
+        its own pass over the tracks). The detections' ``map_structure`` values are read as one list
+        (:meth:`_structure_column`), only where there is such a row."""
         tc = self.config.tracker
         if self._dormant or self._marks.shape[0]:
             # a dormant track, or the place of a detection on structure that got no track, keeps its object's
             # detections on structure (_clutter_detections): no live track takes them, as the clutter track would
             # have kept them before it was retired (or without the rule, born on them)
-            claimed = self._claims(ms)
+            claimed = self._claims(self._structure_column(dets))
             if claimed.any():
                 ok = ok & ~claimed[None, :]
-        # the candidates (detections with at least map_structure_stop of their points on structure), then the rows
-        # (tracks in M or merged; found only where there is a candidate: docs/speed.md, pass trk72) and each row's
-        # pairs to refuse on Python floats and bools: a scan has ≈ 10 detections and 1–2 such rows, a few list
-        # operations instead of four array operations per row (the same comparisons, NaN compares False in both;
-        # docs/speed.md, pass trk22)
-        stop = tc.map_structure_stop
-        cand = [j for j, v in enumerate(ms) if v >= stop]
-        if not cand:
-            return ok
         if rows is None:
             rows = [i for i, k in enumerate(self._tracks) if k.in_m or k.merged]
         if not rows:
+            return ok
+        # the candidates (detections with at least map_structure_stop of their points on structure; their fractions
+        # one list a scan, _structure_column, pass trk72) and each row's pairs to refuse on Python floats and bools: a
+        # scan has ≈ 10 detections and 1–2 such rows, a few list operations instead of four array operations per row
+        # (the same comparisons, NaN compares False in both; docs/speed.md, pass trk22)
+        stop = tc.map_structure_stop
+        cand = [j for j, v in enumerate(self._structure_column(dets)) if v >= stop]
+        if not cand:
             return ok
         ext = det_ext.tolist()
         jump = tc.merge_size_jump
