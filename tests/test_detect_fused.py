@@ -1,5 +1,6 @@
-"""The detect path's fused kernels (select_detections, pass 11; detect_rows, pass fus40) give the results of the
-calls they replace, bit for bit (docs/speed.md, "The tracker's kernels fused, pass 11")."""
+"""The detect path's fused kernels (select_detections, pass 11; detect_rows, pass fus40; the whole chain,
+segment.detect_scan, pass trk72) give the results of the calls they replace, bit for bit (docs/speed.md, "The
+tracker's kernels fused, pass 11")."""
 
 from __future__ import annotations
 
@@ -7,9 +8,10 @@ import math
 
 import numpy as np
 
-import dynslam2d.detect.trackdetect as tracker_mod  # (_detect calls detect_rows there)
+import dynslam2d.detect.trackdetect as tracker_mod  # (_detect calls detect_scan there)
 from dynslam2d.config import Config
 from dynslam2d.detect import kernels as K
+from dynslam2d.detect import segment as S
 from dynslam2d.detect import shapes
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.layout import (
@@ -103,6 +105,49 @@ def _same(a, b) -> bool:
     """Equal arrays: dtype, shape and bytes (NaN payloads included)."""
     a, b = np.ascontiguousarray(a), np.ascontiguousarray(b)
     return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def chain(a, fit=shapes.fit_cluster_rows, rows=K.detect_rows) -> tuple:
+    """``segment.detect_scan(*a)`` as the three kernel calls ``Tracker._detect`` made from Python before pass trk72
+    (the segmentation, ``fit`` — ``fit_cluster_rows`` or a wrapper of it — on the clusters not marked as structure
+    with ``fq``'s values as the scalars ``Tracker._fit_args`` held, ``rows`` — ``detect_rows`` or a wrapper),
+    the kept rows' columns of a leg merge's map evidence written as the fused kernel writes them; the tables
+    ``trig`` / ``fit_trig`` the kernels fill are copies here, so the fused call after this one fills its own."""
+    (ranges, angles, mask, trig, fill, q, wrap, cos_a, sin_a, c, s, x, y, ref, th, gpar, range_max, fangles, ftrig, fq,
+     p, has_map, lo, i0, j0, res, dphi) = a
+    labels, beams, offsets, structure, dropped, wrapped, ax, ay, px, py, pts, rr, par = S._segment_kernel(
+        ranges, angles, mask, trig.copy(), fill, q, wrap, True, cos_a, sin_a, c, s, x, y, ref, th, gpar,
+        range_max if ref else 0.0)
+    fits = fit(px, py, offsets, ~structure, fangles, ftrig.copy(), int(fq[S.FQ_CRITERION]), fq.item(S.FQ_D0),
+               int(fq[S.FQ_CIRCLE_MIN_POINTS]), int(fq[S.FQ_STRIDE]), True, fq.item(S.FQ_POINT_MAX_POINTS),
+               fq.item(S.FQ_POINT_MAX_EXTENT), fq.item(S.FQ_MAX_EXTENT), fq.item(S.FQ_THIN),
+               fq.item(S.FQ_CIRCLE_MAX_RADIUS), fq.item(S.FQ_DEPTH_RATIO), fq.item(S.FQ_RESIDUAL_RATIO))
+    out = rows(px, py, beams, offsets, fits, structure, x, y, ranges, mask, ax, ay, wrapped, range_max, dphi, p,
+               has_map, lo, i0, j0, res)
+    ki, mmev = out[9], out[20]
+    if ki.shape[0] and mmev.shape[1]:
+        mmev[:, :ki.shape[0]] = out[6][:, ki]
+    return (labels, beams, offsets, structure, dropped, wrapped, pts, rr, par, *out)
+
+
+def same_chain(got: tuple, want: tuple) -> bool:
+    """Two results of ``detect_scan`` / :func:`chain`: equal arrays (:func:`_same`) and scalars."""
+    return len(got) == len(want) == 40 and all(
+        _same(g, w) if isinstance(g, np.ndarray) else type(g) is type(w) and g == w for g, w in zip(got, want))
+
+
+def chained(fit=shapes.fit_cluster_rows, rows=K.detect_rows, seen: dict | None = None):
+    """A stand-in for ``trackdetect.detect_scan`` that runs :func:`chain` (with ``fit`` and ``rows``) and then the
+    fused kernel, asserts both give the same results and returns the fused kernel's (``seen["chains"]`` counted)."""
+    def detect_scan(*a):
+        want = chain(a, fit, rows)
+        got = S.detect_scan(*a)
+        assert same_chain(got, want)
+        if seen is not None:
+            seen["chains"] = seen.get("chains", 0) + 1
+        return got
+
+    return detect_scan
 
 
 def _select_ref(keep, kinds, lohi, rel, fits, offsets, px, py, admit, max_extent, max_structure, min_free, has_map,
@@ -210,12 +255,12 @@ def test_fused_kernels_give_the_former_calls_results_in_whole_runs(monkeypatch):
         seen["pairs"] += got[7].shape[0]
         return got
 
-    monkeypatch.setattr(tracker_mod, "detect_rows", rows)
+    monkeypatch.setattr(tracker_mod, "detect_scan", chained(rows=rows, seen=seen))
     for src in (open_source("sim:drive", seed=11, duration=6.0), _van_source(), [s for s, _ in _walkers()]):
         pipe = Pipeline(Config())
         for scan in src:
             pipe.process(scan)
-    assert seen["calls"] > 150
+    assert seen["calls"] > 150 and seen["chains"] == seen["calls"]
     assert seen["map"] > 100 and seen["admit"] > 10 and seen["pairs"] > 20
 
 
@@ -265,8 +310,7 @@ def test_skipped_circle_fits_in_whole_runs(monkeypatch):
         assert all(_same(*_written(got, i, got[i], want[i])) for i in range(31) if i not in (5, 11, 23))
         return got
 
-    monkeypatch.setattr(tracker_mod, "fit_cluster_rows", fit_rows)
-    monkeypatch.setattr(tracker_mod, "detect_rows", classify)
+    monkeypatch.setattr(tracker_mod, "detect_scan", chained(fit_rows, classify))
     for src in (open_source("sim:drive", seed=11, duration=6.0), [s for s, _ in _walkers()], _van_source()):
         pipe = Pipeline(Config())
         for scan in src:
@@ -304,3 +348,27 @@ def test_skipped_circle_fits_are_fitted_when_read():
                 assert _same(d.circle, want)
                 checked += 1
         assert skipped >= 5 and checked > 2 * skipped
+
+
+def test_structure_column_is_the_detections_own_values():
+    """``Tracker._structure_column`` (the final rows' ``map_structure`` read as one list a scan, pass trk72) is, in
+    every scan of two runs with a map (people and cars seen from a driving robot; two people's legs, merged into
+    persons), each detection's own ``map_structure`` in their order, the merged persons' and the kept detections'
+    after a merge too."""
+    seen = {"scans": 0, "merged": 0, "on": 0}
+    for src in (open_source("sim:drive", seed=11, duration=6.0), [s for s, _ in _walkers()]):
+        pipe = Pipeline(Config())
+        for scan in src:
+            pipe.process(scan)
+            tr = pipe.tracker
+            dets = tr.last_detections
+            if not dets or tr._map is None:
+                continue
+            tr._ms = None  # (read afresh, not the list an earlier step of this scan read)
+            got = tr._structure_column(dets)
+            assert got == [d.map_structure for d in dets]
+            assert tr._ms_ev is not None
+            seen["scans"] += 1
+            seen["merged"] += any(d.person for d in dets)
+            seen["on"] += any(v > 0.0 for v in got)
+    assert seen["scans"] > 100 and seen["merged"] > 10 and seen["on"] > 10

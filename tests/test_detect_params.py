@@ -1,6 +1,6 @@
 """The detection step's configuration values packed once per tracker (docs/speed.md, pass trk49): the segmentation's
 (``segment.segment_params``), ``detect_rows``' (``kernels.detect_params``) and ``fit_cluster_rows``' arguments
-(``Tracker._fit_args``) are the values the tracker converted on every scan before, the same floats and types."""
+(``Tracker._fit_q``) are the values the tracker converted on every scan before, the same floats and types."""
 
 from __future__ import annotations
 
@@ -72,29 +72,40 @@ def test_segment_params_are_the_former_scalars() -> None:
         assert tl == lam and tm == mode and tq.tobytes() == q.tobytes()
 
 
-def test_fit_args_are_the_former_arguments() -> None:
-    """``Tracker._fit_args``: ``fit_cluster_rows``' twelve arguments after the arrays as ``_detect`` made them on
-    every scan before pass trk49, the same values and Python types (numba's dispatcher types them)."""
+def test_fit_q_holds_the_former_arguments() -> None:
+    """``Tracker._fit_q``: ``fit_cluster_rows``' eleven arguments after the arrays (but ``skip``, True in the kernel)
+    as ``_detect`` made them on every scan before pass trk49, in the columns ``segment.FQ_*`` that
+    ``segment.detect_scan`` reads: the same floats, the integers exact (the kernel makes them integers again, so the
+    callee is compiled for the same argument types)."""
     for cfg in _configs():
         fc, sc = cfg.fit, cfg.segment
         tr = Tracker(cfg)
         fp = tr._fit_p
         ratio, rmin = fp.item(K._P_CIRCLE_DEPTH_RATIO), fp.item(K._P_CIRCLE_MIN_RADIUS)
-        want = (CRITERIA[fc.criterion], fc.closeness_d0, fc.circle_min_points, fc.coarse_stride, True,
-                fp.item(K._P_POINT_MAX_POINTS), fp.item(K._P_POINT_MAX_EXTENT),
-                max(sc.max_extent, sc.vehicle_max_extent), ratio * rmin if ratio >= 0.0 else -math.inf,
-                fp.item(K._P_CIRCLE_MAX_RADIUS), ratio, fp.item(K._P_CIRCLE_RES_RATIO))
-        assert tr._fit_args == want
-        assert [type(v) for v in tr._fit_args] == [type(v) for v in want]
-
-
+        want = {S.FQ_CRITERION: CRITERIA[fc.criterion], S.FQ_D0: fc.closeness_d0,
+                S.FQ_CIRCLE_MIN_POINTS: fc.circle_min_points, S.FQ_STRIDE: fc.coarse_stride,
+                S.FQ_POINT_MAX_POINTS: fp.item(K._P_POINT_MAX_POINTS),
+                S.FQ_POINT_MAX_EXTENT: fp.item(K._P_POINT_MAX_EXTENT),
+                S.FQ_MAX_EXTENT: max(sc.max_extent, sc.vehicle_max_extent),
+                S.FQ_THIN: ratio * rmin if ratio >= 0.0 else -math.inf,
+                S.FQ_CIRCLE_MAX_RADIUS: fp.item(K._P_CIRCLE_MAX_RADIUS), S.FQ_DEPTH_RATIO: ratio,
+                S.FQ_RESIDUAL_RATIO: fp.item(K._P_CIRCLE_RES_RATIO)}
+        assert sorted(want) == list(range(S.N_FQ))
+        fq = tr._fit_q
+        assert fq.dtype == np.float64 and fq.shape == (S.N_FQ,) and fq.flags.c_contiguous
+        for col, v in want.items():
+            assert fq[col] == v, (col, fq[col], v)
+            if type(v) is int:
+                assert int(fq[col]) == v
+            else:
+                assert type(v) is float
 
 def test_detect_rows_reads_each_packed_value(monkeypatch) -> None:
     """``detect_rows`` with random values in ``p``'s ``DR_*`` columns (the vehicle test's limits and shares, the map
     thresholds and radius, the leg merge's flag and distances, the classification's skip and extent limit) gives,
     bit for bit, the calls it replaces with those values as scalars (tests/test_detect_fused.py's reference), on the
     tracker's calls of two simulated runs (a van longer than max_extent; two people's legs), each with a random map."""
-    from test_detect_fused import _detect_rows_ref, _same, _van_source, _walkers, _written
+    from test_detect_fused import _detect_rows_ref, _same, _van_source, _walkers, _written, chained
 
     import dynslam2d.detect.trackdetect as td
     from dynslam2d.config import Config
@@ -107,7 +118,7 @@ def test_detect_rows_reads_each_packed_value(monkeypatch) -> None:
             calls.append(tuple(x.copy() if isinstance(x, np.ndarray) else x for x in a))
         return K.detect_rows(*a)
 
-    monkeypatch.setattr(td, "detect_rows", capture)
+    monkeypatch.setattr(td, "detect_scan", chained(rows=capture))
     for src in (_van_source(), [s for s, _ in _walkers()]):
         pipe = Pipeline(Config())
         for scan in src:

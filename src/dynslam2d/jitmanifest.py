@@ -22,19 +22,12 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, 1, 'C'), "
      "Array(bool, 1, 'C'), Array(float64, 1, 'C'), float64, float64, float64, float64, float64, int64, "
      "float64, Array(bool, 1, 'C'),)"),
-    ('dynslam2d.detect.segment._segment_kernel',
+    ('dynslam2d.detect.segment.detect_scan',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 2, 'C'), bool, "
-     "Array(float64, 1, 'C'), bool, bool, Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, "
-     "float64, float64, float64, bool, float64, Array(float64, 1, 'C'), float64,)"),
-    ('dynslam2d.detect.shapes.fit_cluster_rows',
-     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(bool, 1, 'C'), "
-     "Array(float64, 1, 'C'), Array(float64, 2, 'C'), int64, float64, int64, int64, bool, float64, "
-     'float64, float64, float64, float64, float64, float64,)'),
-    ('dynslam2d.detect.kernels.detect_rows',
-     "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
-     "Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), Array(bool, "
-     "1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, float64, float64, Array(float64, 1, "
-     "'C'), bool, Array(float32, 2, 'C'), int64, int64, float64,)"),
+     "Array(float64, 1, 'C'), bool, Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, float64, "
+     "float64, float64, bool, float64, Array(float64, 1, 'C'), float64, Array(float64, 1, 'C'), "
+     "Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), bool, Array(float32, 2, "
+     "'C'), int64, int64, float64, float64,)"),
     ('dynslam2d.detect.kernels_update.birth_rows',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(int8, 2, 'C'), "
      "Array(int64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 3, 'C'), Array(int64, 2, 'C'), "
@@ -134,34 +127,32 @@ KERNELS: tuple[tuple[str, str], ...] = (
 #: CPU time of each kernel's compile (s, the kernels it compiles in turn included) in a one-core cold run when
 #: recorded: the background compile's estimate of how far ahead of the run a kernel is (its order, docs/speed.md).
 COMPILE_S: dict[str, float] = {
-    'dynslam2d.sim.world._cast_kernel': 0.46,
-    'dynslam2d.detect.body._drop_body': 0.17,
-    'dynslam2d.slam.matcher.gated_points': 0.51,
-    'dynslam2d.detect.body._observe_beams': 0.20,
-    'dynslam2d.detect.segment._segment_kernel': 0.84,
-    'dynslam2d.detect.shapes.fit_cluster_rows': 1.93,
-    'dynslam2d.detect.kernels.detect_rows': 5.22,
-    'dynslam2d.detect.kernels_update.birth_rows': 0.37,
-    'dynslam2d.detect.kernels_update.report_rows': 0.39,
-    'dynslam2d.slam.ledgerkernels.record_cells': 1.95,
-    'dynslam2d.slam.ledgerkernels.level_rows': 0.48,
-    'dynslam2d.slam.ledgerkernels.stand_marks': 0.35,
-    'dynslam2d.slam.raycast.integrate_levels': 1.38,
-    'dynslam2d.slam.raycast.ray_ends': 0.07,
-    'dynslam2d.slam.matcher.match_pyramid': 2.34,
+    'dynslam2d.sim.world._cast_kernel': 0.44,
+    'dynslam2d.detect.body._drop_body': 0.16,
+    'dynslam2d.slam.matcher.gated_points': 0.47,
+    'dynslam2d.detect.body._observe_beams': 0.19,
+    'dynslam2d.detect.segment.detect_scan': 8.58,
+    'dynslam2d.detect.kernels_update.birth_rows': 0.39,
+    'dynslam2d.detect.kernels_update.report_rows': 0.44,
+    'dynslam2d.slam.ledgerkernels.record_cells': 1.99,
+    'dynslam2d.slam.ledgerkernels.level_rows': 0.52,
+    'dynslam2d.slam.ledgerkernels.stand_marks': 0.38,
+    'dynslam2d.slam.raycast.integrate_levels': 1.50,
+    'dynslam2d.slam.raycast.ray_ends': 0.09,
+    'dynslam2d.slam.matcher.match_pyramid': 2.44,
     'dynslam2d.slam.correlative._rotated_cells': 0.28,
-    'dynslam2d.slam.correlative._score_pyramid': 0.44,
-    'dynslam2d.slam.correlative.branch_and_bound': 1.55,
-    'dynslam2d.vacated.vacated_scan_kernel': 3.30,
-    'dynslam2d.detect.kernels.cv_predict': 0.21,
-    'dynslam2d.detect.kernels_update.association_gates': 1.03,
-    'dynslam2d.detect.kernels_assign.assign_groups': 0.68,
-    'dynslam2d.detect.kernels_update.update_pairs': 2.46,
-    'dynslam2d.detect.kernels_update.manage_counters': 0.44,
-    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.23,
-    'dynslam2d.detect.kernels.seen_through_refs': 0.20,
-    'dynslam2d.filter.observed_boxes_kernel': 0.18,
-    'dynslam2d.filter._rows_exclusion_kernel': 0.43,
-    'dynslam2d.slam.cleanup._geometry_bounds': 0.18,
-    'dynslam2d.slam.cleanup._count_beams': 0.57,
+    'dynslam2d.slam.correlative._score_pyramid': 0.46,
+    'dynslam2d.slam.correlative.branch_and_bound': 3.33,
+    'dynslam2d.vacated.vacated_scan_kernel': 2.01,
+    'dynslam2d.detect.kernels.cv_predict': 0.23,
+    'dynslam2d.detect.kernels_update.association_gates': 1.44,
+    'dynslam2d.detect.kernels_assign.assign_groups': 0.79,
+    'dynslam2d.detect.kernels_update.update_pairs': 2.83,
+    'dynslam2d.detect.kernels_update.manage_counters': 0.65,
+    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.30,
+    'dynslam2d.detect.kernels.seen_through_refs': 0.26,
+    'dynslam2d.filter.observed_boxes_kernel': 0.23,
+    'dynslam2d.filter._rows_exclusion_kernel': 0.51,
+    'dynslam2d.slam.cleanup._geometry_bounds': 0.25,
+    'dynslam2d.slam.cleanup._count_beams': 0.83,
 }

@@ -24,7 +24,8 @@ import numpy as np
 
 from dynslam2d.detect.config import SegmentConfig
 from dynslam2d.detect.frozen import fast_init
-from dynslam2d.detect.kernels import world_points
+from dynslam2d.detect.kernels import detect_rows, world_points
+from dynslam2d.detect.shapes import fit_cluster_rows
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.types import Scan
 
@@ -313,11 +314,11 @@ def segment_points(scan: Scan, config: SegmentConfig, valid: np.ndarray, pose_x:
 _NO_TRIG = np.zeros(0)  # (cos / sin of no beams: segment_scan's call, which transforms no point)
 
 
-def _segment(scan: Scan, cfg: SegmentConfig, mask: np.ndarray, pose: tuple | None, params: tuple | None = None,
-             ref: bool = False) -> tuple:
-    """The segmentation kernel's call for :func:`segment_scan` (``pose`` None) and :func:`segment_points` (``pose``:
-    cos θ, sin θ, x, y, θ): (segmentation, ax, ay, px, py, pts, r, par). ``params``: :func:`segment_params` of ``cfg``
-    (None: made here); ``ref``: with the free-space reference's arrays ``r``, ``par`` (needs ``pose``)."""
+def _scan_args(scan: Scan, cfg: SegmentConfig, params: tuple | None) -> tuple:
+    """The segmentation kernel's per-geometry arguments for ``scan``: (angles, trig, fill_trig, cos_a, sin_a, gpar,
+    wrap, q) (:data:`_GEOMETRY`'s entry of its beam geometry, made on its first scan; ``trig`` the adjacent beams'
+    trigonometry for ``cfg``'s λ, ``fill_trig`` True where it is new and the kernel fills it; ``wrap`` the wrap-around
+    mode's answer; ``q``: :func:`segment_params`' array, ``params`` when given, else made here)."""
     key = (scan.ranges.shape[0], scan.angle_min, scan.angle_increment)
     geo = _GEOMETRY.get(key)
     if geo is None:
@@ -342,6 +343,15 @@ def _segment(scan: Scan, cfg: SegmentConfig, mask: np.ndarray, pose: tuple | Non
         wrap = False
     else:
         raise KeyError(mode)
+    return angles, trig, fill, cos_a, sin_a, gpar, wrap, q
+
+
+def _segment(scan: Scan, cfg: SegmentConfig, mask: np.ndarray, pose: tuple | None, params: tuple | None = None,
+             ref: bool = False) -> tuple:
+    """The segmentation kernel's call for :func:`segment_scan` (``pose`` None) and :func:`segment_points` (``pose``:
+    cos θ, sin θ, x, y, θ): (segmentation, ax, ay, px, py, pts, r, par). ``params``: :func:`segment_params` of ``cfg``
+    (None: made here); ``ref``: with the free-space reference's arrays ``r``, ``par`` (needs ``pose``)."""
+    angles, trig, fill, cos_a, sin_a, gpar, wrap, q = _scan_args(scan, cfg, params)
     if pose is None:
         points, cos_a, sin_a, c, s, x, y, th = False, _NO_TRIG, _NO_TRIG, 1.0, 0.0, 0.0, 0.0, 0.0
     else:
@@ -351,3 +361,62 @@ def _segment(scan: Scan, cfg: SegmentConfig, mask: np.ndarray, pose: tuple | Non
         scan.ranges, angles, mask, trig, fill, q, wrap, points, cos_a, sin_a, c, s, x, y, ref and points, th, gpar,
         float(scan.range_max) if ref else 0.0)
     return _make_segmentation(labels, beams, offsets, structure, wrapped, dropped), ax, ay, px, py, pts, r, par
+
+
+#: columns of the tracker's array of :func:`~dynslam2d.detect.shapes.fit_cluster_rows`' scalar arguments
+#: (:func:`detect_scan`'s ``fq``; ``Tracker._fit_q``): the integers exact in a float64, converted back in the kernel
+FQ_CRITERION = 0  # shapes.CRITERIA's code of FitConfig.criterion (an integer)
+FQ_D0 = 1  # FitConfig.closeness_d0, m
+FQ_CIRCLE_MIN_POINTS = 2  # FitConfig.circle_min_points (an integer)
+FQ_STRIDE = 3  # FitConfig.coarse_stride (an integer)
+FQ_POINT_MAX_POINTS = 4  # FitConfig.point_max_points
+FQ_POINT_MAX_EXTENT = 5  # FitConfig.point_max_extent, m
+FQ_MAX_EXTENT = 6  # vehicles.extent_limit, m
+FQ_THIN = 7  # the short side below which a cluster cannot be a circle, m (−inf: no such side)
+FQ_CIRCLE_MAX_RADIUS = 8  # FitConfig.circle_max_radius, m
+FQ_DEPTH_RATIO = 9  # FitConfig.circle_min_depth_ratio
+FQ_RESIDUAL_RATIO = 10  # FitConfig.circle_residual_ratio
+N_FQ = 11
+
+
+@njit(cache=True)
+def detect_scan(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, trig: np.ndarray, fill_trig: bool,
+                q: np.ndarray, wrap: bool, cos_a: np.ndarray, sin_a: np.ndarray, pose_c: float, pose_s: float,
+                pose_x: float, pose_y: float, ref: bool, pose_th: float, gpar: np.ndarray, range_max: float,
+                fit_angles: np.ndarray, fit_trig: np.ndarray, fq: np.ndarray, p: np.ndarray, has_map: bool,
+                logodds: np.ndarray, i0: int, j0: int, res: float, dphi: float) -> tuple:
+    """The tracker's detection chain in one call (docs/speed.md, pass trk72: one dispatch instead of three, and
+    none of the Python between them): :func:`_segment_kernel` with the beams in the map frame (its arguments as
+    :func:`segment_points` gives them, ``reach`` = ``range_max`` where ``ref``), the shape fits of the clusters not
+    marked as structure (:func:`~dynslam2d.detect.shapes.fit_cluster_rows` on ``fit_angles`` / ``fit_trig`` with
+    ``fq``'s ``FQ_*`` values, the circles the classification never reads skipped) and
+    :func:`~dynslam2d.detect.kernels.detect_rows` (``p``: ``detect_params``' array; the sensor at ``pose_x``,
+    ``pose_y``; ``range_max`` in m, ``dphi`` the beams' |increment| in rad; the map ``logodds`` / ``i0`` / ``j0`` /
+    ``res`` where ``has_map``). Returns the segmentation's (labels, beams, offsets, structure, n_dropped, wrapped),
+    the clusters' (m, 2) map-frame points ``pts``, the free-space reference's ``r``, ``par`` (empty without ``ref``),
+    then ``detect_rows``' 31 results, with the kept detections' columns of a leg merge's ``mmev`` (where a pair was
+    merged and ``has_map``) written too: column r < nk the kept detection ``ki[r]``'s column of the fractions (the
+    values its own detection reads), so that ``mmev`` holds every final row's evidence."""
+    # (True, typed as a bool and not as a literal: a literal argument would compile the callee once more)
+    yes = ranges.shape[0] >= 0
+    labels, beams, offsets, structure, dropped, wrapped, ax, ay, px, py, pts, rr, par = _segment_kernel(
+        ranges, angles, mask, trig, fill_trig, q, wrap, yes, cos_a, sin_a, pose_c, pose_s, pose_x, pose_y, ref,
+        pose_th, gpar, range_max if ref else 0.0)
+    k = structure.shape[0]
+    fit_mask = np.empty(k, dtype=np.bool_)
+    for c in range(k):
+        fit_mask[c] = not structure[c]
+    fits = fit_cluster_rows(px, py, offsets, fit_mask, fit_angles, fit_trig, int(fq[FQ_CRITERION]), fq[FQ_D0],
+                            int(fq[FQ_CIRCLE_MIN_POINTS]), int(fq[FQ_STRIDE]), yes, fq[FQ_POINT_MAX_POINTS],
+                            fq[FQ_POINT_MAX_EXTENT], fq[FQ_MAX_EXTENT], fq[FQ_THIN], fq[FQ_CIRCLE_MAX_RADIUS],
+                            fq[FQ_DEPTH_RATIO], fq[FQ_RESIDUAL_RATIO])
+    rows = detect_rows(px, py, beams, offsets, fits, structure, pose_x, pose_y, ranges, mask, ax, ay, wrapped,
+                       range_max, dphi, p, has_map, logodds, i0, j0, res)
+    mfr = rows[6]
+    ki = rows[9]
+    mmev = rows[20]
+    if ki.shape[0] and mmev.shape[1]:  # (a pair merged, with a map: the kept rows' columns)
+        for r in range(ki.shape[0]):
+            for e in range(3):
+                mmev[e, r] = mfr[e, ki[r]]
+    return (labels, beams, offsets, structure, dropped, wrapped, pts, rr, par) + rows

@@ -16,7 +16,6 @@ from dynslam2d.detect.kernels import (
     _P_POINT_MAX_EXTENT,
     _P_POINT_MAX_POINTS,
     detect_params,
-    detect_rows,
     measure_batch,
     merge_legs,
 )
@@ -28,8 +27,25 @@ from dynslam2d.detect.layout import (
     MeasureRows,
 )
 from dynslam2d.detect.measure import Detection, ScanArrays, ScanDetection, scan_detections
-from dynslam2d.detect.segment import segment_params, segment_points
-from dynslam2d.detect.shapes import CRITERIA, fit_cluster_rows
+from dynslam2d.detect.segment import (
+    FQ_CIRCLE_MAX_RADIUS,
+    FQ_CIRCLE_MIN_POINTS,
+    FQ_CRITERION,
+    FQ_D0,
+    FQ_DEPTH_RATIO,
+    FQ_MAX_EXTENT,
+    FQ_POINT_MAX_EXTENT,
+    FQ_POINT_MAX_POINTS,
+    FQ_RESIDUAL_RATIO,
+    FQ_STRIDE,
+    FQ_THIN,
+    N_FQ,
+    _make_segmentation,
+    _scan_args,
+    detect_scan,
+    segment_params,
+)
+from dynslam2d.detect.shapes import CRITERIA
 from dynslam2d.detect.tracktable import _NO_IDX
 from dynslam2d.detect.vehicles import _NO_MAP, extent_limit
 from dynslam2d.types import Pose2D, Scan
@@ -52,22 +68,37 @@ class TrackDetect:
     #: the first call) and the angles it was made for
     _fit_trig: np.ndarray | None = None
     _fit_trig_of: np.ndarray | None = None
+    #: this scan's ``map_structure`` column (:meth:`_structure_column`: the detection list it is of and the list;
+    #: None: not read yet) and the (3, nd) map evidence of the final rows it is read from (None: from the detections)
+    _ms: tuple[list, list[float]] | None = None
+    _ms_ev: np.ndarray | None = None
 
     def _detect_setup(self) -> None:
         """The detection step's configuration values, made once per tracker (after ``_fit_p``): ``_seg_p``, the
         segmentation's (:func:`~dynslam2d.detect.segment.segment_params`), ``_det_p``,
-        :func:`~dynslam2d.detect.kernels.detect_params`' array for ``detect_rows``, and ``_fit_args``,
-        ``fit_cluster_rows``' twelve scalar arguments as one tuple (the same Python objects the call converted on
-        every scan: the same types for numba's dispatcher, the same floats; docs/speed.md pass trk49)."""
+        :func:`~dynslam2d.detect.kernels.detect_params`' array for ``detect_rows``, and ``_fit_q``,
+        ``fit_cluster_rows``' eleven scalar arguments after its arrays (but ``skip``, True) as the float64 array of
+        columns ``segment.FQ_*`` that :func:`~dynslam2d.detect.segment.detect_scan` reads (the same floats the call
+        converted on every scan before pass trk49; the integers exact in a float64, made integers again in the
+        kernel; docs/speed.md passes trk49, trk72)."""
         cfg = self.config
         fc, fp = cfg.fit, self._fit_p
         ext_lim = extent_limit(cfg)
         self._seg_p = segment_params(cfg.segment)
         self._det_p = detect_params(fp, cfg.segment, fc, cfg.tracker, ext_lim)
-        self._fit_args = (CRITERIA[fc.criterion], fc.closeness_d0, fc.circle_min_points, fc.coarse_stride, True,
-                          fp.item(_P_POINT_MAX_POINTS), fp.item(_P_POINT_MAX_EXTENT), ext_lim,
-                          _thin(fp.item(_P_CIRCLE_DEPTH_RATIO), fp.item(_P_CIRCLE_MIN_RADIUS)),
-                          fp.item(_P_CIRCLE_MAX_RADIUS), fp.item(_P_CIRCLE_DEPTH_RATIO), fp.item(_P_CIRCLE_RES_RATIO))
+        fq = np.empty(N_FQ)
+        fq[FQ_CRITERION] = CRITERIA[fc.criterion]
+        fq[FQ_D0] = fc.closeness_d0
+        fq[FQ_CIRCLE_MIN_POINTS] = fc.circle_min_points
+        fq[FQ_STRIDE] = fc.coarse_stride
+        fq[FQ_POINT_MAX_POINTS] = fp.item(_P_POINT_MAX_POINTS)
+        fq[FQ_POINT_MAX_EXTENT] = fp.item(_P_POINT_MAX_EXTENT)
+        fq[FQ_MAX_EXTENT] = ext_lim
+        fq[FQ_THIN] = _thin(fp.item(_P_CIRCLE_DEPTH_RATIO), fp.item(_P_CIRCLE_MIN_RADIUS))
+        fq[FQ_CIRCLE_MAX_RADIUS] = fp.item(_P_CIRCLE_MAX_RADIUS)
+        fq[FQ_DEPTH_RATIO] = fp.item(_P_CIRCLE_DEPTH_RATIO)
+        fq[FQ_RESIDUAL_RATIO] = fp.item(_P_CIRCLE_RES_RATIO)
+        self._fit_q = fq
 
     def _detect(self, scan: Scan, pose: Pose2D) -> list[Detection]:
         cfg = self.config
@@ -80,51 +111,47 @@ class TrackDetect:
         else:
             valid = scan.valid_mask()  # (a copy)
             valid &= ranges > 0.0
-        # the segmentation and every beam in the map frame (pose.transform_points of the beams, invalid ones at the
-        # pose; all beams ax, ay and the clusters' ones px, py, pts) in one kernel call, with the free-space memory's
-        # reference of this scan (its arrays: FreeSpaceMemory.make_ref's, pass trk60)
+        # the whole chain in one kernel call (segment.detect_scan, pass trk72): the segmentation and every beam in
+        # the map frame (invalid ones at the pose), with the free-space memory's reference of this scan (its arrays:
+        # FreeSpaceMemory.make_ref's, pass trk60); the shape fits (without the circle fits the classification never
+        # reads: shapes.fit_cluster_rows, NaN columns that ScanDetection.circle fits when read); the classification
+        # and bounds of every cluster (reference.classify_and_bound), the vehicle-size clusters' map test
+        # (detect/vehicles.py), the kept clusters' rows and their points' map evidence; where people are merged and
+        # there are two detections or more, the leg pairs merged; the final rows' DetectionBatch columns and their
+        # default measurements (MeasureRows' fields): kernels.detect_rows, passes fus40, trk41. The configuration's
+        # values in arrays made once (_seg_p, _fit_q, _det_p: _detect_setup, passes trk49, trk72)
         free = self._free
-        seg, ax, ay, px, py, pts, rr, rpar = segment_points(scan, cfg.segment, valid, float(pose.x), float(pose.y),
-                                                            pose.theta, self._seg_p, free is not None)
-        self.last_segmentation = seg
-        st.clusters += seg.n_clusters
-        st.dropped_small_clusters += seg.n_dropped
-        self._batch = None
-        if seg.n_clusters == 0:
-            self.last_detections = []
-            if free is not None:
-                free.add(scan, pose, valid, free.ref_of(scan, pose, rr, rpar))
-            return []
-        beams = seg.beams
-        offsets = seg.offsets
-        # (without the circle fits the classification below never reads: shapes.fit_cluster_rows, NaN columns that
-        # ScanDetection.circle fits when read; its configuration values made once, _detect_setup)
         angles = self._angles
-        trig = self._fit_trig
-        if trig is None or self._fit_trig_of is not angles:
-            trig = self._fit_trig = np.full((3, angles.shape[0]), np.nan)
+        ftrig = self._fit_trig
+        if ftrig is None or self._fit_trig_of is not angles:
+            ftrig = self._fit_trig = np.full((3, angles.shape[0]), np.nan)
             self._fit_trig_of = angles
-        fits = fit_cluster_rows(px, py, offsets, ~seg.structure, angles, trig, *self._fit_args)
-        # classify and bound every cluster (reference.classify_and_bound); then the vehicle-size clusters' map test
-        # (detect/vehicles.py), the kept clusters' rows and their points' map evidence in one call. The map test is
-        # per point, so only the detections' points are tested (structure clusters, most of the points, are not
-        # detections)
         view = self._map
         if view is None:
             lo, i0, j0, res = _NO_MAP, 0, 0, 1.0
         else:
             lo, i0, j0, res = view.logodds, int(view.i0), int(view.j0), float(view.resolution)
-        # (then, where people are merged and there are two detections or more, the leg pairs merged, and the final
-        # rows' DetectionBatch columns: the three kernels in one call, kernels.detect_rows, pass fus40; and the final
-        # rows' default measurements, ``default``: MeasureRows' fields, pass trk41; the configuration's values in
-        # one array made once, _det_p, pass trk49)
-        (starts, npts, kinds, lohi, rel, fits, mfr, first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2,
-         py2, mbeams, mpts, mmev, theta, centroid, circle, *default) = detect_rows(
-            px, py, beams, offsets, fits, seg.structure, float(pose.x), float(pose.y), ranges, valid, ax, ay,
-            seg.wrapped, float(scan.range_max), abs(float(scan.angle_increment)), self._det_p, view is not None, lo,
-            i0, j0, res)
+        x, y, th = float(pose.x), float(pose.y), pose.theta
+        sangles, strig, fill, cos_a, sin_a, gpar, wrap, q = _scan_args(scan, cfg.segment, self._seg_p)
+        (labels, beams, offsets, structure, dropped, wrapped, pts, rr, rpar, starts, npts, kinds, lohi, rel, fits, mfr,
+         first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams, mpts, mmev, theta, centroid,
+         circle, *default) = detect_scan(
+            ranges, sangles, valid, strig, fill, q, wrap, cos_a, sin_a, math.cos(th), math.sin(th), x, y,
+            free is not None, th, gpar, float(scan.range_max), angles, ftrig, self._fit_q, self._det_p,
+            view is not None, lo, i0, j0, res, abs(float(scan.angle_increment)))
+        self.last_segmentation = _make_segmentation(labels, beams, offsets, structure, wrapped, dropped)
+        ncl = offsets.shape[0] - 1
+        st.clusters += ncl
+        st.dropped_small_clusters += dropped
+        self._batch = None
+        self._ms = self._ms_ev = None
+        if ncl == 0:
+            self.last_detections = []
+            if free is not None:
+                free.add(scan, pose, valid, free.ref_of(scan, pose, rr, rpar))
+            return []
         nd = starts.shape[0]
-        st.structure_clusters += seg.n_clusters - nd
+        st.structure_clusters += ncl - nd
         # free-space evidence per detection (0 where unknown). The free-space fraction is read for few detections
         # (births, updates whose entry is read: Tracker._free_values): each detection keeps this scan's test (the
         # memory's references now, before it gains this scan) and computes its fraction when first read
@@ -144,10 +171,13 @@ class TrackDetect:
         # (each detection is the scan's arrays and its row: its beams, points, kind, counts, fit values and map evidence
         # are read from them when asked for, ScanDetection; all made in one loop, scan_detections)
         dets = scan_detections(ScanArrays(beams, pts, 0, starts, npts, kinds, fits, lohi, rel, mev), frac)
-        kfits = fits2 if first.shape[0] else fits  # (the rows detect_rows' theta, centroid and circle are of)
-        if first.shape[0]:  # (a pair merged: _merge_legs makes the persons' detections of the kernel's merge)
+        px, py = px2, py2
+        merged = first.shape[0]
+        kfits = fits2 if merged else fits  # (the rows detect_rows' theta, centroid and circle are of)
+        if merged:  # (a pair merged: _merge_legs makes the persons' detections of the kernel's merge)
+            n0 = px2.shape[0] - mbeams.shape[0]  # (the detections' points before the persons')
             dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(
-                dets, kinds, fits, lohi, rel, starts, npts, px, py, beams, mev,
+                dets, kinds, fits, lohi, rel, starts, npts, px2[:n0], py2[:n0], beams, mev,
                 (first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams, mpts, mmev))
         st.detections += len(dets)
         self.last_detections = dets
@@ -156,6 +186,8 @@ class TrackDetect:
             if fits is kfits:  # (the kernel's final rows: their columns and default measurements made there)
                 self._batch = DetectionBatch(kinds, theta, lohi, rel, centroid, circle, px, py, starts, npts)
                 self._default = MeasureRows(*default)
+                # (their (3, nd) map evidence: the structure column read from it, _structure_column)
+                self._ms_ev = mmev if merged and mev is not None else mev
             else:  # (rows other than the kernel's final ones: a subclass' _merge_legs)
                 self._batch = DetectionBatch(kinds, fits[:, F_THETA].copy(), lohi, rel, fits[:, FIT_CENTROID].copy(),
                                              fits[:, FIT_CIRCLE].copy(), px, py, starts, npts)
@@ -165,6 +197,17 @@ class TrackDetect:
             # (the detections' bounds and real-bound flags: read as Python lists by row, for births and detections on
             # structure only (_birth_state, _clutter_detections): one row's tolist each, not the whole arrays' per scan)
         return dets
+
+    def _structure_column(self, dets: list[Detection]) -> list[float]:
+        """``map_structure`` of the detections ``dets`` in their order, Python floats (the fraction of each one's
+        points on long-occupied map cells, 0.0 without a map): for this scan's detections the final rows' evidence
+        row as one list, read once a scan when first asked for (docs/speed.md, pass trk72); else (another list, no
+        map, or rows of a subclass' ``_merge_legs``) the detections' own values, kept for the same list."""
+        ms = self._ms
+        if ms is None or ms[0] is not dets:
+            ev = self._ms_ev if dets is self.last_detections else None
+            ms = self._ms = (dets, ev[0].tolist() if ev is not None else [d.map_structure for d in dets])
+        return ms[1]
 
     def _merge_legs(self, dets: list[Detection], kinds: np.ndarray, fits: np.ndarray, lohi: np.ndarray,
                     rel: np.ndarray, starts: np.ndarray, npts: np.ndarray, px: np.ndarray, py: np.ndarray,

@@ -482,10 +482,8 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
 
 
     def _associate(self, dets: list[Detection]) -> list[tuple[int, int]]:
-        n, m = len(self._tracks), len(dets)
-        if n == 0 or m == 0:
+        if not self._tracks or not dets:
             return []
-        tracks = self._tracks
         Xs, Ps = self._stack()
         # the tracks' sizes, flags and axis angles from their shape rows in one call ("known": a coasting track's size
         # is known if all(size_known) or it is not a rectangle)
@@ -504,7 +502,8 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         tsize, d2, ok, det_ext, firm, missed_a = association_gates(self._G, self._Gi, self._rows(), self._CI, Xs, Ps,
                                                                    dm.z, dm.R, *self._batch, self._upd_p)
         if self._map is not None:  # (with the rows of the tracks in M or merged)
-            ok = self._veto_merged(ok, dets, det_ext, tsize, [i for i, k in enumerate(tracks) if k.in_m or k.merged])
+            ok = self._veto_merged(ok, dets, det_ext, tsize,
+                                   [i for i, k in enumerate(self._tracks) if k.in_m or k.merged])
         if not _count_nonzero(ok):  # (no pair allowed; count_nonzero: cheaper than any(); its C function)
             return []
         # the gated costs, the established tracks' assignment, then the tentative tracks' on the detections left, each
@@ -529,25 +528,26 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         with it would carry M onto the wall. A track in M left with no detection leaves M (:meth:`_manage`) and
         keeps refusing such detections (``merged``) until a detection of its own size updates it. ``rows``: the
         indices of the live tracks in M or merged, in their order (None: found here; :meth:`_associate` finds them in
-        its own pass over the tracks)."""
+        its own pass over the tracks). The detections' ``map_structure`` values are read as one list
+        (:meth:`_structure_column`), only where there is such a row."""
         tc = self.config.tracker
         if self._dormant or self._marks.shape[0]:
             # a dormant track, or the place of a detection on structure that got no track, keeps its object's
             # detections on structure (_clutter_detections): no live track takes them, as the clutter track would
             # have kept them before it was retired (or without the rule, born on them)
-            claimed = self._claims(dets)
+            claimed = self._claims(self._structure_column(dets))
             if claimed.any():
                 ok = ok & ~claimed[None, :]
         if rows is None:
             rows = [i for i, k in enumerate(self._tracks) if k.in_m or k.merged]
         if not rows:
             return ok
-        # the candidates (detections with at least map_structure_stop of their points on structure) and each row's
-        # pairs to refuse on Python floats and bools: a scan has ≈ 10 detections and 1–2 such rows, a few list
-        # operations instead of four array operations per row (the same comparisons, NaN compares False in both;
-        # docs/speed.md, pass trk22)
+        # the candidates (detections with at least map_structure_stop of their points on structure; their fractions
+        # one list a scan, _structure_column, pass trk72) and each row's pairs to refuse on Python floats and bools: a
+        # scan has ≈ 10 detections and 1–2 such rows, a few list operations instead of four array operations per row
+        # (the same comparisons, NaN compares False in both; docs/speed.md, pass trk22)
         stop = tc.map_structure_stop
-        cand = [j for j, d in enumerate(dets) if d.map_structure >= stop]
+        cand = [j for j, v in enumerate(self._structure_column(dets)) if v >= stop]
         if not cand:
             return ok
         ext = det_ext.tolist()
@@ -715,9 +715,10 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         new_marks = []
         margin = self.config.fit.fragment_margin
         out = []
+        ms = self._structure_column(dets) if unused else ()  # (the detections' map_structure, one list a scan)
         for r, di in enumerate(unused):
             det = dets[di]
-            on_structure = det.map_structure >= birth_max
+            on_structure = ms[di] >= birth_max
             if on_structure:
                 lo0, lo1, hi0, hi1 = self._batch.lohi[di].tolist()
                 reach = 0.5 * max(hi0 - lo0, hi1 - lo1) + margin
@@ -760,11 +761,13 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         c = self._batch.centroid[sel]  # (the detections' centroids, this scan's batch)
         return np.hypot(c[:, 0, None] - cen[None, :, 0], c[:, 1, None] - cen[None, :, 1]) - reach[None, :]
 
-    def _claims(self, dets: list[Detection]) -> np.ndarray:
-        """(n,) bool: the detection has at least ``structure_birth_min`` of its points on long-occupied cells and
-        is a dormant track's object or that of a kept place (:meth:`_claim_gaps`)."""
-        out = np.zeros(len(dets), dtype=bool)
-        sel = [di for di, d in enumerate(dets) if d.map_structure >= self.config.tracker.structure_birth_min]
+    def _claims(self, ms: list[float]) -> np.ndarray:
+        """(n,) bool: the detection has at least ``structure_birth_min`` of its points on long-occupied cells
+        (``ms``: the detections' ``map_structure``, :meth:`_structure_column`) and is a dormant track's object or that
+        of a kept place (:meth:`_claim_gaps`)."""
+        out = np.zeros(len(ms), dtype=bool)
+        smin = self.config.tracker.structure_birth_min
+        sel = [di for di, v in enumerate(ms) if v >= smin]
         if sel:
             out[sel] = (self._claim_gaps(sel, self._marks) <= 0.0).any(axis=1)
         return out
