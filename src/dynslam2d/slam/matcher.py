@@ -491,6 +491,8 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     mp = _stack_array(np.float64, 1, 3)[0]
     pp = _stack_array(np.float64, 1, 3)[0]
     last0 = False  # the last iterations ran on level 0 (unswapped) ending at (lx, ly, lth)
+    fl = min(1, n_lv - 1)  # the free fraction's level
+    xy_fl = np.empty((2, 0))  # its points as rows once its iterations made them (else made below)
     lx = ly = lth = 0.0
     l_raw = l_summ = 0.0
     l_in = 0
@@ -515,6 +517,8 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             pp[1] = mp[1]
             pp[2] = mp[2]
         xy = _scaled_rows(pts_m, res)  # (the level's points as rows, made once per level)
+        if k == fl:
+            xy_fl = xy  # (the free fraction's points below: the same divisions)
         prob = prob0 if k == 0 else (prob1 if k == 1 else prob2)
         # (only the finest level's H at its result is read, by the evaluation below)
         x, y, th, _, raw, summ, n_in = _match_core(prob, xy, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
@@ -534,13 +538,15 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             l_raw, l_summ, l_in = raw, summ, n_in
     if not want_fit or geo[0, 3] != 0.0:
         return False, 0.0, 0.0, 0, 0.0, 0, 0
-    fl = min(1, n_lv - 1)
     free = 0.0
     wth = (pose[2] + math.pi) % (2.0 * math.pi) - math.pi  # (the wrapped θ of Pose2D(x, y, wrap_angle(θ)))
     if geo[fl, 3] == 0.0:
         res = geo[fl, 0]
-        free = fraction_below(prob1 if fl == 1 else prob0, pts_m / res, pose[0] / res - geo[fl, 1],
-                              pose[1] / res - geo[fl, 2], wth, free_thresh)
+        if xy_fl.shape[1] != pts_m.shape[0]:  # (its level ran no iterations: pts_m / res as rows, made here)
+            xy_fl = _scaled_rows(pts_m, res)
+        # (fraction_below of pts_m / res: the same values from the rows the level's iterations divided)
+        free = _fraction_below_rows(prob1 if fl == 1 else prob0, xy_fl, pose[0] / res - geo[fl, 1],
+                                    pose[1] / res - geo[fl, 2], wth, free_thresh)
     res = geo[0, 0]
     m0 = pose[0] / res - geo[0, 1]
     m1 = pose[1] / res - geo[0, 2]
@@ -791,7 +797,9 @@ def _bearing_bin(x, y, nb):  # pragma: no cover - numba
     t = (a + math.pi) / two_pi * nb
     f = t - math.floor(t)
     if f >= _BIN_EDGE_MARGIN and f <= 1.0 - _BIN_EDGE_MARGIN:
-        return int(math.floor(t)) % nb
+        # (a is in [−π, π], so t in [0, nb] and, away from a bin edge, floor(t) in [0, nb − 1]: ``% nb`` would
+        # leave it as it is — without it, no integer division a point)
+        return int(math.floor(t))
     return int(math.floor((math.atan2(y, x) + math.pi) / two_pi * nb)) % nb
 
 
@@ -812,6 +820,45 @@ def _spread_kernel(pts, use, nb):  # pragma: no cover - numba
 
 
 @njit(cache=True, inline="always")
+def _interp_value(flat, w, h, px, py):  # pragma: no cover - numba
+    """:func:`~dynslam2d.slam.interp.interp_value_grad`'s value M at map point (``px``, ``py``) of a probability
+    cache of (h, w) words given as ``flat``, its C-order view, with the same operations; NaN where it is not inside (its
+    ``inside`` False, a NaN point included), so that ``M > t`` and ``M < t`` are ``inside and M > t`` and ``inside
+    and M < t`` (an inside M is finite: a blend of four probabilities)."""
+    if not (px >= 0.0 and py >= 0.0 and px <= w - 2 and py <= h - 2):  # also rejects NaN
+        return math.nan
+    x0 = int(px)
+    y0 = int(py)
+    fx = px - x0
+    fy = py - y0
+    k = y0 * w + x0
+    p00 = cell_prob(flat[k])
+    p10 = cell_prob(flat[k + 1])
+    p01 = cell_prob(flat[k + w])
+    p11 = cell_prob(flat[k + w + 1])
+    return (1.0 - fy) * ((1.0 - fx) * p00 + fx * p10) + fy * ((1.0 - fx) * p01 + fx * p11)
+
+
+@njit(cache=True, inline="always")
+def _fraction_below_rows(prob, xy, x, y, th, thresh):  # pragma: no cover - numba
+    """:func:`fraction_below` of the points ``xy`` (2, n) (rows x and y, cells: :func:`_scaled_rows` of the
+    laser-frame points, the division ``fraction_below``'s caller makes) at map pose (x, y, θ): the same count of
+    inside points below ``thresh`` over n."""
+    c = math.cos(th)
+    s = math.sin(th)
+    h, w = prob.shape
+    flat = np.ascontiguousarray(prob).reshape(-1)  # (a view of the level's C-contiguous cache)
+    n = 0
+    npt = xy.shape[1]
+    for i in range(npt):
+        sx = xy[0, i]
+        sy = xy[1, i]
+        if _interp_value(flat, w, h, c * sx - s * sy + x, s * sx + c * sy + y) < thresh:  # (NaN: not inside)
+            n += 1
+    return n / max(npt, 1)
+
+
+@njit(cache=True, inline="always")
 def _support_kernel(prob, pts_m, stride, inv_res, x, y, th, thresh, nb):  # pragma: no cover - numba
     """Over every ``stride``-th laser-frame point (m): count those whose interpolated probability at
     map pose (x cells, y cells, θ) exceeds ``thresh``; return (count, bearing bins they occupy)."""
@@ -821,11 +868,13 @@ def _support_kernel(prob, pts_m, stride, inv_res, x, y, th, thresh, nb):  # prag
     seen[:] = False
     n = 0
     k = 0
+    h, w = prob.shape
+    flat = np.ascontiguousarray(prob).reshape(-1)  # (a view of the level's C-contiguous cache)
     for i in range(0, pts_m.shape[0], stride):
         sx = pts_m[i, 0] * inv_res
         sy = pts_m[i, 1] * inv_res
-        m, _, _, inside = interp_value_grad(prob, c * sx - s * sy + x, s * sx + c * sy + y, np.bool_(False))
-        if inside and m > thresh:
+        # (interp_value_grad's value and inside test, inline on the flat cache: the same operations)
+        if _interp_value(flat, w, h, c * sx - s * sy + x, s * sx + c * sy + y) > thresh:
             n += 1
             b = _bearing_bin(pts_m[i, 0], pts_m[i, 1], nb)
             if not seen[b]:
