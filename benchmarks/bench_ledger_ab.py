@@ -38,6 +38,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
 from bench_pipeline import scan_loop_gc  # noqa: E402 - pipeline.run's collector setting (before it: none)
+from kernelwarm import preload  # noqa: E402
 
 WARMUP = 60
 METHODS = ("observe", "before_update", "after_update", "erase_entering")
@@ -128,6 +129,7 @@ def main() -> None:
         for s in scans[:WARMUP]:
             w.process(s)
     del w
+    preload(extra=sides.values())  # (kernels first called after the warm-up, either side's ledger's)
     if args.gc:
         gc.callbacks.append(on_gc)
         before = [g["collections"] for g in gc.get_stats()]

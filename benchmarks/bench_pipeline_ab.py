@@ -1,17 +1,20 @@
 """Whole-pipeline CPU time per scan and per stage of two checkouts, in lockstep (not run by pytest).
 
 ``bench_tracker_ab.py --pipeline`` swaps only ``detect/tracker.py``; a change anywhere else in the per-scan path
-(matcher, map update, evidence ledger, map evidence, filter, pipeline glue) needs both whole checkouts. Two
-worker processes, one per checkout (``PYTHONPATH``), each open the input, warm their kernels on its first 60
-scans with a throw-away pipeline, then process the scans one at a time when told to: the parent sends scan
-``i`` to one worker, waits, then to the other (which one goes first alternates with ``i``), so both run on the
-same core under the same load, scan by scan. Each worker times ``Pipeline.process`` in thread CPU time
-(``time.thread_time_ns``) and reports its stage timings (``StepResult.timings``) in thread CPU time too (the
-pipeline's ``time.perf_counter`` is swapped for ``time.thread_time`` in the worker). Each worker's scan loop runs
-with its checkout's collector setting of ``pipeline.run``'s loop (``bench_pipeline.scan_loop_gc``: none in a
-checkout before it), as ``--parts``' loop does. Printed per input: median
-CPU ms per scan of each checkout, their ratio, the median of the per-scan ratios, and the median of every stage
-(``map_update``, ``loops`` and the whole pipeline also over the scans that updated the map).
+(matcher, map update, evidence ledger, map evidence, filter, pipeline glue) needs both whole checkouts. Two worker
+processes, one per checkout (``PYTHONPATH``), each open the input, warm their kernels on its first 60 scans with a
+throw-away pipeline, then load every other kernel numba's cache holds and import the modules a run imports late
+(``bench_pipeline.warm_up``, ``kernelwarm.preload``: some kernels are first called after scan 60 and the first
+optimisation imports ``scipy.sparse``, loads that would count in the measured run; the kernels loaded or compiled
+and the modules imported in the measured runs are printed, 0 when the warm-up did its work), then process the scans
+one at a time when told to: the parent sends scan ``i`` to one worker, waits, then to the other (which one goes
+first alternates with ``i``), so both run on the same core under the same load, scan by scan. Each worker times
+``Pipeline.process`` in thread CPU time (``time.thread_time_ns``) and reports its stage timings
+(``StepResult.timings``) in thread CPU time too (the pipeline's ``time.perf_counter`` is swapped for
+``time.thread_time`` in the worker). Each worker's scan loop runs with its checkout's collector setting of
+``pipeline.run``'s loop (``bench_pipeline.scan_loop_gc``: none in a checkout before it), as ``--parts``' loop does.
+Printed per input: median CPU ms per scan of each checkout, their ratio, the median of the per-scan ratios, and the
+median of every stage (``map_update``, ``loops`` and the whole pipeline also over the scans that updated the map).
 
     taskset -c 1 python benchmarks/bench_pipeline_ab.py negative_2/right negative_2/left negative_2/rear \
         --other /work/main/src [--reps 1]
@@ -43,13 +46,15 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
-from bench_pipeline import scan_loop_gc  # noqa: E402 - pipeline.run's collector setting (a checkout without it: none)
+from bench_pipeline import scan_loop_gc, warm_up  # noqa: E402 - pipeline.run's collector setting; the warm-up
+from kernelwarm import kernel_cache_calls  # noqa: E402 - kernels loaded or compiled so far
 
 WARMUP = 60
 
 
-def worker(data: Path, name: str) -> None:
-    """Serve ``go`` lines on stdin: process the next scan, answer one JSON line (CPU ms, stage ms, updated)."""
+def worker(data: Path, name: str, preload: bool = True) -> None:
+    """Serve ``go`` lines on stdin: process the next scan, answer one JSON line (CPU ms, stage ms, updated); without
+    ``preload`` the warm-up loads nothing it did not reach (the warm-up before pass neg71)."""
     import time
     import types
 
@@ -62,13 +67,11 @@ def worker(data: Path, name: str) -> None:
 
     rel, topic = INPUTS.get(name, (name, None))  # any other built-in scene by its name (sim:paper: README command 1)
     scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
-    warm = pl.Pipeline()
-    for s in scans[:WARMUP]:
-        warm.process(s)
-    del warm
+    warm_up(scans, WARMUP, preload=preload)  # (and every kernel numba's cache holds loaded: none is loaded in the run)
     pl.time = types.SimpleNamespace(perf_counter=time.thread_time)  # stage timings in thread CPU time
     pipe = pl.Pipeline()
     print(json.dumps({"scans": len(scans)}), flush=True)
+    looked, modules = kernel_cache_calls(), len(sys.modules)
     with scan_loop_gc():
         for i, line in enumerate(sys.stdin):
             if i >= len(scans) or line.strip() != "go":
@@ -77,19 +80,25 @@ def worker(data: Path, name: str) -> None:
             step = pipe.process(scans[i])
             cpu = (time.thread_time_ns() - t0) / 1e6
             print(json.dumps({"cpu": cpu, "t": step.timings, "u": bool(step.map_updated)}), flush=True)
+    # kernels loaded or compiled and modules imported in the measured run
+    print(json.dumps({"loads": kernel_cache_calls() - looked, "imports": len(sys.modules) - modules}), flush=True)
 
 
-def compare(data: Path, name: str, other: Path, reps: int) -> None:
-    """Run both checkouts over ``name`` ``reps`` times in lockstep and print the comparison."""
+def compare(data: Path, name: str, other: Path, reps: int, old_warmup: bool = False) -> None:
+    """Run both checkouts over ``name`` ``reps`` times in lockstep and print the comparison (``old_warmup``: the
+    other side's warm-up without the preload, see ``--old-warmup``)."""
     cpu: dict[str, list[float]] = {"other": [], "this": []}
     stages: dict[str, dict[str, list[float]]] = {"other": {}, "this": {}}
     upd: dict[str, list[bool]] = {"other": [], "this": []}
+    loads = {"other": 0, "this": 0}
+    imports = {"other": 0, "this": 0}
     for _ in range(reps):
         procs = {}
         for tag, src in (("other", other.resolve()), ("this", REPO / "src")):
             env = dict(os.environ, PYTHONPATH=str(src))
+            late = ["--old-warmup"] if old_warmup and tag == "other" else []
             procs[tag] = subprocess.Popen(
-                [sys.executable, str(Path(__file__).resolve()), "--worker", name, "--data", str(data)],
+                [sys.executable, str(Path(__file__).resolve()), "--worker", name, "--data", str(data), *late],
                 env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
         n = min(json.loads(p.stdout.readline())["scans"] for p in procs.values())
         for i in range(n):
@@ -102,13 +111,18 @@ def compare(data: Path, name: str, other: Path, reps: int) -> None:
                 upd[tag].append(r["u"])
                 for k, v in r["t"].items():
                     stages[tag].setdefault(k, []).append(v)
-        for p in procs.values():
+        for tag, p in procs.items():
             p.stdin.close()
+            r = json.loads(p.stdout.readline())
+            loads[tag] += r["loads"]
+            imports[tag] += r["imports"]
             p.wait()
     mo, mt = statistics.median(cpu["other"]), statistics.median(cpu["this"])
     per = statistics.median(t / o for t, o in zip(cpu["this"], cpu["other"]))
     print(f"{name}: {len(cpu['this'])} scans, pipeline CPU ms/scan median: other {mo:.3f}, this {mt:.3f}, "
-          f"ratio {mt / mo:.3f} (median per-scan ratio {per:.3f})")
+          f"ratio {mt / mo:.3f} (median per-scan ratio {per:.3f}); inside the measured runs kernels loaded or "
+          f"compiled: other {loads['other']}, this {loads['this']}, modules imported: other {imports['other']}, "
+          f"this {imports['this']}")
     # the mean and the 95th percentile: work on a few scans (the loop closer's far searches) moves them, not the median
     (ao, at), (po, pt) = ((statistics.fmean(cpu[g]) for g in ("other", "this")),
                           (statistics.quantiles(cpu[g], n=20)[-1] for g in ("other", "this")))
@@ -146,9 +160,7 @@ def parts(data: Path, name: str) -> None:
 
     rel, topic = INPUTS.get(name, (name, None))  # any other built-in scene by its name (sim:paper: README command 1)
     scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
-    warm = Pipeline()
-    for s in scans[:WARMUP]:
-        warm.process(s)
+    warm_up(scans, WARMUP)
     acc: collections.Counter = collections.Counter()
 
     from cputimers import thread_cpu_wrapper
@@ -229,19 +241,22 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=1, help="lockstep runs per input (pooled)")
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     ap.add_argument("--parts", action="store_true", help="instead: per-part CPU of this checkout alone")
+    ap.add_argument("--old-warmup", action="store_true",
+                    help="the other side warms up as before pass neg71 (the kernels first called after the warm-up "
+                         "load inside its measured run): with --other this checkout, what that costs")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     for name in args.inputs:
         if name not in INPUTS and not name.startswith("sim:"):
             ap.error(f"unknown input {name!r}")
     if args.worker:
-        worker(args.data, args.inputs[0])
+        worker(args.data, args.inputs[0], preload=not args.old_warmup)
         return
     for name in args.inputs:
         if args.parts:
             parts(args.data, name)
         else:
-            compare(args.data, name, args.other, args.reps)
+            compare(args.data, name, args.other, args.reps, args.old_warmup)
 
 
 if __name__ == "__main__":

@@ -136,9 +136,10 @@ def test_score_pyramid_kernel_equals_the_array_table_and_pyramid(shape: tuple[in
     crop = big[2:2 + shape[0], 3:3 + shape[1]]  # a strided crop, as the search passes
     for hmax in range(7):  # (up to blocks wider and higher than the array: 2^(h−1) ≥ its sides)
         want = _pyramid(_score_table(crop), hmax)
-        got = _score_pyramid(encode_probs(big)[2:2 + shape[0], 3:3 + shape[1]], hmax)  # (the cache's words)
-        assert got.dtype == want.dtype == np.float32
-        np.testing.assert_array_equal(got.view(np.int32), want.view(np.int32))  # (bit for bit)
+        words = encode_probs(big)[2:2 + shape[0], 3:3 + shape[1]]  # (the cache's words)
+        for got in (_score_pyramid(words, hmax), _score_pyramid(np.ascontiguousarray(words), hmax)):
+            assert got.dtype == want.dtype == np.float32  # (a strided crop, and a whole level's rows: contiguous)
+            np.testing.assert_array_equal(got.view(np.int32), want.view(np.int32))  # (bit for bit)
     if min(shape) >= 3:
         t0 = _score_pyramid(encode_probs(big)[2:2 + shape[0], 3:3 + shape[1]], 0)[0]
         assert np.any((t0 > 0.0) & (np.maximum(2.0 * crop - 1.0, 0.0) == 0.0))  # the half-value smear reached

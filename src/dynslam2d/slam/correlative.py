@@ -68,7 +68,10 @@ def _score_pyramid(prob, max_height):  # pragma: no cover - numba
     maxima, and pyramid level h from the four cells (x, y), (x + s, y), (x, y + s), (x + s, y + s) of level h − 1
     (s = 2^(h−1); the ones beyond the array's end left out, as the zeros outside would be) — instead of a
     copy and one maximum per neighbour, each a pass over the whole array; the loops read and write rows (1-D
-    views). Every cell of the output is written, so it starts uninitialised."""
+    views). Cell x + s of a row is read as cell x of the row's view from s (pass neg71): the same cells, but with
+    the kernels' one LLVM optimisation (``jitbox.one_llvm_optimisation``) only this form of the loop is
+    vectorised (x + s indexing: ≈ 2.2× the time of the pyramid's levels on negative_2's crops). Every cell of the
+    output is written, so it starts uninitialised."""
     hh, ww = prob.shape
     out = np.empty((max_height + 1, hh, ww), dtype=np.float32)
     zero = np.float32(0.0)
@@ -109,13 +112,16 @@ def _score_pyramid(prob, max_height):  # pragma: no cover - numba
             crow = cur[y]
             if y + s < hh:
                 rb = prev[y + s]
+                ras = ra[s:]  # (cell x + s as cell x of a view: the loop vectorises, see the docstring)
+                rbs = rb[s:]
                 for x in range(e):
-                    crow[x] = max(max(ra[x], ra[x + s]), max(rb[x], rb[x + s]))
+                    crow[x] = max(max(ra[x], ras[x]), max(rb[x], rbs[x]))
                 for x in range(e, ww):
                     crow[x] = max(ra[x], rb[x])
             else:
+                ras = ra[s:]
                 for x in range(e):
-                    crow[x] = max(ra[x], ra[x + s])
+                    crow[x] = max(ra[x], ras[x])
                 for x in range(e, ww):
                     crow[x] = ra[x]
     return out
