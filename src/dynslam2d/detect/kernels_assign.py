@@ -13,6 +13,9 @@ per scan on the real recordings; the kernel does the same work in one call (docs
 
 from __future__ import annotations
 
+import math
+import sys
+
 import numpy as np
 
 from dynslam2d.detect.kernels_update import association_gates
@@ -24,6 +27,11 @@ LSAP_INFEASIBLE = 1
 LSAP_INVALID = 2
 LSAP_MESSAGES = {LSAP_INFEASIBLE: "cost matrix is infeasible",
                  LSAP_INVALID: "matrix contains invalid numeric entries"}
+
+#: whether the running interpreter's ``sum`` of floats is compensated (CPython 3.12 and later), so that
+#: :func:`veto_merged` sums as the former Python veto did (a constant of the compiled code; numba's cache is per
+#: interpreter version)
+_COMPENSATED_SUM = sys.version_info >= (3, 12)
 
 
 @njit(cache=True, inline="always")
@@ -224,8 +232,8 @@ def veto_merged(ok: np.ndarray, tsize: np.ndarray, det_ext: np.ndarray, rows: np
     long-occupied map cells, ≥ ``stop``) whose longer side ``det_ext`` exceeds the track's larger size ``tsize`` by
     more than ``jump`` (m; a NaN size makes the threshold NaN, as ``float(tsize[i].max())``: nothing refused), if the
     track's own points were not on structure: its map-evidence window (``MEV[rows[i], :WN[rows[i], 0], 0]``, the
-    structure fractions of its last updates) empty or of mean ≤ ``smax`` (summed left to right from 0.0, as
-    Python's ``sum`` of floats before Python 3.12). Returns the vetoed tracks' indices, in ``vrows``' order (NaN
+    structure fractions of its last updates) empty or of mean ≤ ``smax`` (summed as Python's ``sum`` of its floats
+    sums them, on the running interpreter's version). Returns the vetoed tracks' indices, in ``vrows``' order (NaN
     compares False everywhere, as in the former Python test, docs/speed.md passes trk22, trk72)."""
     m = ok.shape[1]
     nv = vrows.shape[0]
@@ -253,9 +261,24 @@ def veto_merged(ok: np.ndarray, tsize: np.ndarray, det_ext: np.ndarray, rows: np
         row = rows[i]
         nm = WN[row, 0]
         if nm:
-            s = 0.0
-            for u in range(nm):
-                s += MEV[row, u, 0]
+            # (Python's sum of the window's floats: 0 + the first, then the others left to right, compensated from
+            # Python 3.12 on (Neumaier's improved Kahan–Babuška sum, CPython's ``builtin_sum_impl``: the compensation
+            # added at the end where it is non-zero and finite))
+            s = 0.0 + MEV[row, 0, 0]
+            comp = 0.0
+            for u in range(1, nm):
+                x = MEV[row, u, 0]
+                if _COMPENSATED_SUM:
+                    t = s + x
+                    if abs(s) >= abs(x):
+                        comp += (s - t) + x
+                    else:
+                        comp += (x - t) + s
+                    s = t
+                else:
+                    s += x
+            if _COMPENSATED_SUM and comp != 0.0 and math.isfinite(comp):
+                s += comp
             if not s / nm <= smax:
                 continue
         for c in range(nc):
