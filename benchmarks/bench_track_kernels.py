@@ -38,7 +38,7 @@ WARMUP = 60
 BIG = 200_000  # arrays with more elements are not copied (the map view's log-odds)
 # (module, name): where the tracker's steps look the kernels up
 TARGETS = [("dynslam2d.detect.trackdetect", "detect_scan"), ("dynslam2d.detect.tracker", "cv_predict"),
-           ("dynslam2d.detect.tracker", "association_gates"), ("dynslam2d.detect.tracker", "assign_groups"),
+           ("dynslam2d.detect.tracker", "associate_scan"),
            ("dynslam2d.detect.trackupdate", "update_pairs"), ("dynslam2d.detect.trackmanage", "manage_counters"),
            ("dynslam2d.detect.tracker", "fragment_hosts_rows"), ("dynslam2d.detect.tracker", "birth_rows"),
            ("dynslam2d.detect.trackreport", "report_rows"), ("dynslam2d.detect.freespace", "_ref_arrays"),

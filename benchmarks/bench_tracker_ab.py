@@ -100,7 +100,7 @@ def tracker_modules() -> list:
 
 #: the tracker's kernel modules, loaded from the other checkout with its tracker (a kernel's signature may differ
 #: between the checkouts: pass trk26 folded the windows' push into ``kernels.shape_update``)
-TRACKER_KERNEL_MODULES = ("kernels", "kernels_update")
+TRACKER_KERNEL_MODULES = ("kernels", "kernels_update", "kernels_assign")
 
 
 class _OtherParts(importlib.abc.MetaPathFinder):
@@ -327,7 +327,7 @@ _SPLIT = ("segment_scan", "fit_clusters", "classify_batch", "admit_long_clusters
           "segment_means", "linear_sum_assignment", "assign_groups", "select_detections", "cv_predict",
           "association_rows", "size_jump_gate", "pair_priors", "shape_update", "accel_candidates", "accel_bound",
           "manage_speed_rows", "manage_rows", "report_boxes", "world_points", "merge_legs", "association_gates",
-          "fragment_hosts_rows", "report_rows", "manage_counters",
+          "fragment_hosts_rows", "report_rows", "manage_counters", "associate_scan",
           "kalman_pairs")
 
 

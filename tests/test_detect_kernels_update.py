@@ -171,10 +171,11 @@ def _kalman_pairs_python(Xs, Ps, sel, H, zm, Rm, bound, hits, after, lim, X, P, 
 
 
 def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
-    """``association_gates`` against ``association_rows`` → ``gate_costs`` → ``size_jump_gate`` and ``kalman_pairs``
-    against the former Python of ``_update_pairs``, on every call of a tracker run over a simulated crowd and a
-    drive (bytes of every output and of the written state rows), and ``kalman_pairs`` again on the same calls with
-    a limit 30 × tighter (most established rows bounded) and with the bound off."""
+    """``association_gates`` (inside ``associate_scan`` since pass trk75: checked on its arguments) against
+    ``association_rows`` → ``gate_costs`` → ``size_jump_gate`` and ``kalman_pairs`` against the former Python of
+    ``_update_pairs``, on every call of a tracker run over a simulated crowd and a drive (bytes of every output and
+    of the written state rows), and ``kalman_pairs`` again on the same calls with a limit 30 × tighter (most
+    established rows bounded) and with the bound off."""
     from dynslam2d.detect import DetectConfig, Tracker
     from dynslam2d.detect import kernels_update as ku
     from dynslam2d.detect import tracker as trk
@@ -187,6 +188,7 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
         pair_priors,
         size_jump_gate,
     )
+    from dynslam2d.detect.kernels_assign import associate_scan
     from dynslam2d.sim import simulate
     from dynslam2d.types import Pose2D
 
@@ -234,8 +236,13 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
         kalman(Xs, Ps, sel, mr[2], mr[3], mr[4], bound, hits, after, lim, lim2, X.copy(), P.copy(), trows)
         return ku.update_pairs(*a)
 
-    saved = trk.association_gates, tu.update_pairs
-    trk.association_gates, tu.update_pairs = gates, merged
+    def fused(*a):
+        # (since pass trk75 association_gates runs inside associate_scan: checked on its first 19 arguments)
+        gates(*a[:19])
+        return associate_scan(*a)
+
+    saved = trk.associate_scan, tu.update_pairs
+    trk.associate_scan, tu.update_pairs = fused, merged
     try:
         for scene in ("crowd", "drive"):
             sim = simulate(scene, duration=4.0)
@@ -243,7 +250,7 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
             for scan, pose in zip(sim.scans, sim.ground_truth.poses_in("first")):
                 tr.update(scan, Pose2D.from_array(pose))
     finally:
-        trk.association_gates, tu.update_pairs = saved
+        trk.associate_scan, tu.update_pairs = saved
     assert seen["gates"] > 50 and seen["kalman"] > 50 and seen["bounded"] > 20 and seen["not_ok"] > 50
 
 

@@ -15,6 +15,7 @@ from conftest import room_box_scan
 from dynslam2d.detect import DetectConfig, Tracker
 from dynslam2d.detect.freespace import FreeTest
 from dynslam2d.detect.kernels import segment_means
+from dynslam2d.detect.kernels_assign import veto_merged
 from dynslam2d.detect.layout import F_CENTROID_X, F_CENTROID_Y, N_FIT_COLS
 from dynslam2d.detect.tracker import _nearest_age, _past_points
 from dynslam2d.types import Pose2D, Scan
@@ -379,8 +380,9 @@ def _veto_merged_reference(tr: Tracker, ok: np.ndarray, dets: list, det_ext: np.
 
 
 def test_merged_detection_veto_matches_the_row_by_row_test() -> None:
-    """The veto of detections merged with structure (``_veto_merged``: each row's pairs found on Python floats and
-    bools, the row's larger size from its two floats) refuses the same pairs and marks the same tracks as the
+    """The veto of detections merged with structure (``kernels_assign.veto_merged``, inlined in ``associate_scan``
+    since pass trk75; before, ``Tracker._veto_merged``: each row's pairs found on Python floats and bools, the row's
+    larger size from its two floats) refuses the same pairs and marks the same tracks as the
     row-by-row array test, on random gates, extents on the thresholds, sizes with NaN, NaN extents and tracks whose
     own points were or were not on structure."""
     from types import SimpleNamespace
@@ -407,8 +409,10 @@ def test_merged_detection_veto_matches_the_row_by_row_test() -> None:
         ok = np.array([[rng.random() < 0.6 for _ in range(m)] for _ in range(n)])
         rows = sorted(rng.sample(range(n), rng.randint(1, n)))
         want, want_merged = _veto_merged_reference(tr, ok, dets, det_ext, tsize, rows)
-        tr._merged = set()
-        got = tr._veto_merged(ok.copy(), dets, det_ext, tsize, rows)
-        assert np.array_equal(got, want) and tr._merged == want_merged, case
+        got = ok.copy()
+        vetoed = veto_merged(got, tsize, det_ext, np.array([k.row for k in tr._tracks], dtype=np.int64),
+                             np.array(rows, dtype=np.int64), np.array([d.map_structure for d in dets]), tr._MEV,
+                             tr._WN, tc.map_structure_stop, tc.merge_size_jump, tc.map_structure_max)
+        assert np.array_equal(got, want) and {tr._tracks[i].id for i in vetoed.tolist()} == want_merged, case
         hits += len(want_merged)
     assert hits > 50  # (the cases refuse pairs, not only pass them)

@@ -79,14 +79,14 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.cv_predict',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 2, 'C'),)"),
-    ('dynslam2d.detect.kernels_update.association_gates',
+    ('dynslam2d.detect.kernels_assign.associate_scan',
      "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 2, 'C'), "
      "Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
      "Array(int8, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, 3, 'C'), "
      "Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'),)"),
-    ('dynslam2d.detect.kernels_assign.assign_groups',
-     "(Array(bool, 2, 'C'), Array(float64, 2, 'C'), Array(bool, 1, 'C'), float64,)"),
+     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), "
+     "Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 3, 'C'), Array(int64, 2, 'C'), "
+     'float64, float64, float64, float64,)'),
     ('dynslam2d.detect.kernels_update.update_pairs',
      "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
      "Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
@@ -145,8 +145,7 @@ COMPILE_S: dict[str, float] = {
     'dynslam2d.slam.correlative.branch_and_bound': 3.33,
     'dynslam2d.vacated.vacated_scan_kernel': 2.01,
     'dynslam2d.detect.kernels.cv_predict': 0.23,
-    'dynslam2d.detect.kernels_update.association_gates': 1.44,
-    'dynslam2d.detect.kernels_assign.assign_groups': 0.79,
+    'dynslam2d.detect.kernels_assign.associate_scan': 2.60,
     'dynslam2d.detect.kernels_update.update_pairs': 2.83,
     'dynslam2d.detect.kernels_update.manage_counters': 0.65,
     'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.30,

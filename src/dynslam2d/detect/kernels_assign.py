@@ -13,8 +13,12 @@ per scan on the real recordings; the kernel does the same work in one call (docs
 
 from __future__ import annotations
 
+import math
+import sys
+
 import numpy as np
 
+from dynslam2d.detect.kernels_update import association_gates
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
 #: status codes of :func:`lsap` / :func:`assign_groups` (SciPy raises ValueError with these messages)
@@ -23,6 +27,11 @@ LSAP_INFEASIBLE = 1
 LSAP_INVALID = 2
 LSAP_MESSAGES = {LSAP_INFEASIBLE: "cost matrix is infeasible",
                  LSAP_INVALID: "matrix contains invalid numeric entries"}
+
+#: whether the running interpreter's ``sum`` of floats is compensated (CPython 3.12 and later), so that
+#: :func:`veto_merged` sums as the former Python veto did (a constant of the compiled code; numba's cache is per
+#: interpreter version)
+_COMPENSATED_SUM = sys.version_info >= (3, 12)
 
 
 @njit(cache=True, inline="always")
@@ -212,3 +221,102 @@ def assign_groups(ok: np.ndarray, d2: np.ndarray, firm: np.ndarray, big: float) 
                 npair += 1
                 taken[dj] = True
     return LSAP_OK, ii[:npair].copy(), jj[:npair].copy()
+
+
+@njit(cache=True, inline="always")
+def veto_merged(ok: np.ndarray, tsize: np.ndarray, det_ext: np.ndarray, rows: np.ndarray, vrows: np.ndarray,
+                ms: np.ndarray, MEV: np.ndarray, WN: np.ndarray, stop: float, jump: float, smax: float) -> np.ndarray:
+    """The veto of detections merged with structure (``Tracker._associate``; inlined in :func:`associate_scan`):
+    ``ok`` ((n, m) bool, the gates) written False where a live track ``vrows[r]`` (indices of the tracks in M or
+    merged, in their order) would take a candidate detection (``ms``: each detection's fraction of points on
+    long-occupied map cells, ≥ ``stop``) whose longer side ``det_ext`` exceeds the track's larger size ``tsize`` by
+    more than ``jump`` (m; a NaN size makes the threshold NaN, as ``float(tsize[i].max())``: nothing refused), if the
+    track's own points were not on structure: its map-evidence window (``MEV[rows[i], :WN[rows[i], 0], 0]``, the
+    structure fractions of its last updates) empty or of mean ≤ ``smax`` (summed as Python's ``sum`` of its floats
+    sums them, on the running interpreter's version). Returns the vetoed tracks' indices, in ``vrows``' order (NaN
+    compares False everywhere, as in the former Python test, docs/speed.md passes trk22, trk72)."""
+    m = ok.shape[1]
+    nv = vrows.shape[0]
+    vetoed = np.empty(nv, dtype=np.int64)
+    nhit = 0
+    cand = np.empty(m if nv else 0, dtype=np.int64)
+    nc = 0
+    for j in range(cand.shape[0]):
+        if ms[j] >= stop:
+            cand[nc] = j
+            nc += 1
+    for r in range(nv if nc else 0):
+        i = vrows[r]
+        a = tsize[i, 0]
+        b = tsize[i, 1]
+        thr = (a if a >= b or a != a else b) + jump
+        hit = False
+        for c in range(nc):
+            j = cand[c]
+            if ok[i, j] and det_ext[j] > thr:
+                hit = True
+                break
+        if not hit:
+            continue
+        row = rows[i]
+        nm = WN[row, 0]
+        if nm:
+            # (Python's sum of the window's floats: 0 + the first, then the others left to right, compensated from
+            # Python 3.12 on (Neumaier's improved Kahan–Babuška sum, CPython's ``builtin_sum_impl``: the compensation
+            # added at the end where it is non-zero and finite))
+            s = 0.0 + MEV[row, 0, 0]
+            comp = 0.0
+            for u in range(1, nm):
+                x = MEV[row, u, 0]
+                if _COMPENSATED_SUM:
+                    t = s + x
+                    if abs(s) >= abs(x):
+                        comp += (s - t) + x
+                    else:
+                        comp += (x - t) + s
+                    s = t
+                else:
+                    s += x
+            if _COMPENSATED_SUM and comp != 0.0 and math.isfinite(comp):
+                s += comp
+            if not s / nm <= smax:
+                continue
+        for c in range(nc):
+            j = cand[c]
+            if ok[i, j] and det_ext[j] > thr:
+                ok[i, j] = False
+        vetoed[nhit] = i
+        nhit += 1
+    return vetoed[:nhit].copy()
+
+
+@njit(cache=True)
+def associate_scan(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, CI: np.ndarray, Xs: np.ndarray, Ps: np.ndarray,
+                   Z: np.ndarray, R: np.ndarray, kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray,
+                   rel: np.ndarray, centroid: np.ndarray, circle: np.ndarray, px: np.ndarray, py: np.ndarray,
+                   start: np.ndarray, npts: np.ndarray, q: np.ndarray, claimed: np.ndarray, vrows: np.ndarray,
+                   ms: np.ndarray, MEV: np.ndarray, WN: np.ndarray, stop: float, jump: float, smax: float,
+                   big: float) -> tuple:
+    """``Tracker._associate`` in one call (docs/speed.md, pass trk75): :func:`~dynslam2d.detect.kernels_update.
+    association_gates` (its arguments ``G`` … ``q``, the same function: the same floats), the detections another
+    object claims taken out of every pair (``claimed``: (m,) bool, or empty for none: a dormant track's or a kept
+    place's, found in Python), the veto of detections merged with structure, then :func:`assign_groups` with the
+    cost ``big`` outside the gates.
+
+    The veto: :func:`veto_merged` on the tracks ``vrows`` (empty without a map) with the thresholds ``stop``,
+    ``jump`` (m), ``smax``. Returns (status, track indices, detection indices, missed, vetoed):
+    :func:`assign_groups`' three, ``association_gates``' (n,) "missed their last scan" flags and the vetoed tracks'
+    indices in ``vrows``' order (their ids join ``Tracker._merged``). One dispatch and no Python between the gates
+    and the assignment instead of two kernel calls, the veto's list tests and the count of the
+    pairs allowed (an empty gate gives no pair either way)."""
+    tsize, d2, ok, det_ext, firm, missed = association_gates(G, Gi, rows, CI, Xs, Ps, Z, R, kind, theta, lohi, rel,
+                                                             centroid, circle, px, py, start, npts, q)
+    n, m = ok.shape
+    if claimed.shape[0]:
+        for j in range(m):
+            if claimed[j]:
+                for i in range(n):
+                    ok[i, j] = False
+    vetoed = veto_merged(ok, tsize, det_ext, rows, vrows, ms, MEV, WN, stop, jump, smax)
+    status, ii, jj = assign_groups(ok, d2, firm, big)
+    return status, ii, jj, missed, vetoed

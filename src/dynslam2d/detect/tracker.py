@@ -63,10 +63,9 @@ from dynslam2d.detect.kernels import (
     cv_predict,
     fit_params,
 )
-from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, assign_groups
+from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, associate_scan
 from dynslam2d.detect.kernels_update import (
     N_C,
-    association_gates,
     birth_rows,
     fragment_hosts_rows,
     update_params,
@@ -107,11 +106,10 @@ from dynslam2d.detect.trackupdate import TrackUpdate, _nearest_age  # noqa: F401
 from dynslam2d.types import Pose2D, Scan, Track, wrap_angle
 
 _NO_MEV = np.zeros((0, 3))  # (Tracker._births' map evidence without a map: never read)
-
-try:  # np.count_nonzero(a) without axis is this C function behind a Python wrapper and its dispatch (as pipeline.py)
-    from numpy._core.multiarray import count_nonzero as _count_nonzero
-except ImportError:  # pragma: no cover - another NumPy layout
-    _count_nonzero = np.count_nonzero
+# (associate_scan's arguments without a claimed detection / a track to veto: shared, never written)
+_NO_CLAIM = np.zeros(0, dtype=np.bool_)
+_NO_ROWS = np.zeros(0, dtype=np.int64)
+_NO_MS = np.zeros(0)
 
 
 @dataclass
@@ -485,89 +483,53 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         if not self._tracks or not dets:
             return []
         Xs, Ps = self._stack()
-        # the tracks' sizes, flags and axis angles from their shape rows in one call ("known": a coasting track's size
-        # is known if all(size_known) or it is not a rectangle)
-        # Mahalanobis gate and distance gate; a rectangle is measured again with the track's own sizes
-        # (a side the detection "measured" too short, e.g. a grazing side, must not break the association).
-        # A tracked object does not double its size from one scan to the next: a person track coasting
-        # past a wall must not take the wall's cluster (it would carry M onto the wall)
-        # (only for coasting tracks whose size is known: a bar first seen end-on may show its full length
-        # later, a tracked object may touch another for a scan).
-        # (one kernel call: association_rows, gate_costs with the reach 0.5 × the longest side, size_jump_gate;
-        # docs/speed.md, pass trk24)
-        # (the gates' configuration values and the fit parameters: the tracker's one array, pass call35)
+        # One kernel call (kernels_assign.associate_scan, docs/speed.md pass trk75): the gates (association_gates: the
+        # tracks' sizes, flags and axis angles from their shape rows; the Mahalanobis gate and distance gate, a
+        # rectangle measured again with the track's own sizes (a side the detection "measured" too short, e.g. a
+        # grazing side, must not break the association); the size-jump gate: a tracked object does not double its
+        # size from one scan to the next, a person track coasting past a wall must not take the wall's cluster — only
+        # for coasting tracks whose size is known; passes trk24, call35, cnt36), then with a map the detections
+        # claimed by a dormant track or a kept place taken out and the veto of detections merged with structure (see
+        # below), then the gated costs' assignment, the established tracks' first, then the tentative tracks' on the
+        # detections left, each pair kept where the gates allow it (SciPy's solver written again step for step, the
+        # same pairs; detect/kernels_assign.py, pass trk21).
+        #
+        # The veto: a detection in which a track in M merged with long-standing structure — at least
+        # map_structure_stop of its points on long-occupied map cells and its longer side more than merge_size_jump
+        # beyond the track's, while the track's own points were not on structure (mean ≤ map_structure_max) — is
+        # refused to that track. A person walking up to a wall joins the wall's cluster; updating the person's track
+        # with it would carry M onto the wall. A track in M left with no detection leaves M (_manage) and keeps
+        # refusing such detections (merged) until a detection of its own size updates it. A dormant track, or the
+        # place of a detection on structure that got no track, keeps its object's detections on structure
+        # (_clutter_detections): no live track takes them, as the clutter track would have kept them before it was
+        # retired (or without the rule, born on them).
+        tc = self.config.tracker
+        claimed, vrows, ms = _NO_CLAIM, _NO_ROWS, _NO_MS
+        if self._map is not None:
+            if self._dormant or self._marks.shape[0]:
+                claimed = self._claims(self._structure_column(dets))
+            rows = [i for i, k in enumerate(self._tracks) if k.in_m or k.merged]
+            if rows:  # (the tracks in M or merged, and the detections' structure fractions: _structure_column's)
+                vrows = np.array(rows, dtype=np.int64)
+                ev = self._ms_ev if dets is self.last_detections else None
+                ms = ev[0] if ev is not None else np.array(self._structure_column(dets), dtype=np.float64)
         dm = self._default
-        # (and the tracks' flags established (not tentative: they choose first) and missed their last scan, from their
-        # rows of the counter table; docs/speed.md, pass cnt36)
-        tsize, d2, ok, det_ext, firm, missed_a = association_gates(self._G, self._Gi, self._rows(), self._CI, Xs, Ps,
-                                                                   dm.z, dm.R, *self._batch, self._upd_p)
-        if self._map is not None:  # (with the rows of the tracks in M or merged)
-            ok = self._veto_merged(ok, dets, det_ext, tsize,
-                                   [i for i, k in enumerate(self._tracks) if k.in_m or k.merged])
-        if not _count_nonzero(ok):  # (no pair allowed; count_nonzero: cheaper than any(); its C function)
-            return []
-        # the gated costs, the established tracks' assignment, then the tentative tracks' on the detections left, each
-        # pair kept where the gates allow it: one kernel call (SciPy's solver written again step for step, the same
-        # pairs; detect/kernels_assign.py, docs/speed.md pass trk21)
-        status, ii, jj = assign_groups(ok, d2, firm, _BIG)
+        status, ii, jj, missed_a, vetoed = associate_scan(
+            self._G, self._Gi, self._rows(), self._CI, Xs, Ps, dm.z, dm.R, *self._batch, self._upd_p, claimed, vrows,
+            ms, self._MEV, self._WN, float(tc.map_structure_stop), float(tc.merge_size_jump),
+            float(tc.map_structure_max), _BIG)
         if status:
             raise ValueError(LSAP_MESSAGES[status])  # (SciPy's error for such a cost matrix)
+        if vetoed.shape[0]:
+            tracks, add = self._tracks, self._merged.add
+            for i in vetoed.tolist():
+                add(tracks[i].id)
         pairs = list(zip(ii.tolist(), jj.tolist()))
         # (the pairs as index arrays too, and the tracks' missed flags, for _update_pairs: kept with the list they
         # belong to)
         if pairs:
             self._pair_arrays = (pairs, ii, jj, missed_a)
         return pairs
-
-    def _veto_merged(self, ok: np.ndarray, dets: list[Detection], det_ext: np.ndarray,
-                     tsize: np.ndarray, rows: list[int] | None = None) -> np.ndarray:
-        """``ok`` without the pairs in which a detection is a track in M merged with long-standing structure: at
-        least ``map_structure_stop`` of its points on long-occupied map cells and its longer side more than
-        ``merge_size_jump`` beyond the track's, while the track's own points were not on structure (mean ≤
-        ``map_structure_max``). A person walking up to a wall joins the wall's cluster; updating the person's track
-        with it would carry M onto the wall. A track in M left with no detection leaves M (:meth:`_manage`) and
-        keeps refusing such detections (``merged``) until a detection of its own size updates it. ``rows``: the
-        indices of the live tracks in M or merged, in their order (None: found here; :meth:`_associate` finds them in
-        its own pass over the tracks). The detections' ``map_structure`` values are read as one list
-        (:meth:`_structure_column`), only where there is such a row."""
-        tc = self.config.tracker
-        if self._dormant or self._marks.shape[0]:
-            # a dormant track, or the place of a detection on structure that got no track, keeps its object's
-            # detections on structure (_clutter_detections): no live track takes them, as the clutter track would
-            # have kept them before it was retired (or without the rule, born on them)
-            claimed = self._claims(self._structure_column(dets))
-            if claimed.any():
-                ok = ok & ~claimed[None, :]
-        if rows is None:
-            rows = [i for i, k in enumerate(self._tracks) if k.in_m or k.merged]
-        if not rows:
-            return ok
-        # the candidates (detections with at least map_structure_stop of their points on structure; their fractions
-        # one list a scan, _structure_column, pass trk72) and each row's pairs to refuse on Python floats and bools: a
-        # scan has ≈ 10 detections and 1–2 such rows, a few list operations instead of four array operations per row
-        # (the same comparisons, NaN compares False in both; docs/speed.md, pass trk22)
-        stop = tc.map_structure_stop
-        cand = [j for j, v in enumerate(self._structure_column(dets)) if v >= stop]
-        if not cand:
-            return ok
-        ext = det_ext.tolist()
-        jump = tc.merge_size_jump
-        copied = False
-        for i in rows:
-            # (the track's larger size: float(tsize[i].max())'s value, NaN included, without ndarray.max's wrapper)
-            a, b = tsize[i].tolist()
-            thr = (a if a >= b or a != a else b) + jump
-            row = ok[i].tolist()
-            hit = [j for j in cand if row[j] and ext[j] > thr]
-            if hit and (not (nm := (mev := self._mev(k := self._tracks[i])).shape[0]) or
-                        sum(mev[:, 0].tolist()) / nm <= tc.map_structure_max):
-                if not copied:
-                    ok = ok.copy()
-                    copied = True
-                ok[i, hit] = False
-                self._merged.add(k.id)
-        return ok
-
 
     def _birth(self, det: Detection, t: float, j: int) -> None:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""

@@ -1,0 +1,112 @@
+"""The association as one kernel call (``kernels_assign.associate_scan``, docs/speed.md pass trk75) gives the results
+of the calls it replaced, bit for bit: ``association_gates``, the claimed detections taken out, the Python veto of
+detections merged with structure (``Tracker._veto_merged`` of pass trk72), the count of the pairs allowed and
+``assign_groups``."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import numpy as np
+
+import dynslam2d.detect.tracker as tracker_mod  # (_associate calls associate_scan there)
+from dynslam2d.config import Config
+from dynslam2d.detect import kernels_assign as ka
+from dynslam2d.detect import kernels_update as ku
+from dynslam2d.inputs import open_source
+from dynslam2d.pipeline import Pipeline
+
+
+def _former_veto(ok: np.ndarray, tsize: np.ndarray, det_ext: np.ndarray, rows: np.ndarray, vrows: list[int],
+                 ms: list[float], MEV: np.ndarray, WN: np.ndarray, stop: float, jump: float,
+                 smax: float) -> tuple[np.ndarray, list[int]]:
+    """``Tracker._veto_merged``'s per-row loop as pass trk72 left it (Python floats and lists; the track's map evidence
+    ``Tracker._mev``: its row's window): the pairs left and the vetoed tracks' indices in order."""
+    cand = [j for j, v in enumerate(ms) if v >= stop]
+    vetoed: list[int] = []
+    if not cand or not vrows:
+        return ok, vetoed
+    ext = det_ext.tolist()
+    copied = False
+    for i in vrows:
+        a, b = tsize[i].tolist()
+        thr = (a if a >= b or a != a else b) + jump
+        row = ok[i].tolist()
+        hit = [j for j in cand if row[j] and ext[j] > thr]
+        r = int(rows[i])
+        mev = MEV[r, :WN.item(r, 0)]
+        if hit and (not (nm := mev.shape[0]) or sum(mev[:, 0].tolist()) / nm <= smax):
+            if not copied:
+                ok = ok.copy()
+                copied = True
+            ok[i, hit] = False
+            vetoed.append(i)
+    return ok, vetoed
+
+
+def _former_chain(*args) -> tuple:
+    """``Tracker._associate``'s calls before pass trk75 on ``associate_scan``'s arguments: (status, ii, jj, missed,
+    vetoed)."""
+    gates, (claimed, vrows, ms, MEV, WN, stop, jump, smax, big) = args[:19], args[19:]
+    rows = args[2]
+    tsize, d2, ok, det_ext, firm, missed = ku.association_gates(*gates)
+    if claimed.shape[0] and claimed.any():
+        ok = ok & ~claimed[None, :]
+    ok, vetoed = _former_veto(ok, tsize, det_ext, rows, vrows.tolist(), ms.tolist(), MEV, WN, stop, jump, smax)
+    if not np.count_nonzero(ok):
+        return 0, np.zeros(0, np.int64), np.zeros(0, np.int64), missed, vetoed
+    status, ii, jj = ka.assign_groups(ok, d2, firm, big)
+    return status, ii, jj, missed, vetoed
+
+
+def _same(got: tuple, want: tuple) -> bool:
+    status, ii, jj, missed, vetoed = got
+    return (status == want[0] and ii.tolist() == want[1].tolist() and jj.tolist() == want[2].tolist()
+            and missed.dtype == want[3].dtype and missed.tobytes() == want[3].tobytes()
+            and vetoed.tolist() == want[4])
+
+
+def _checked_runs(fused) -> dict[str, int]:
+    """Pipelines (with their maps: the veto runs) over two short simulated runs, every ``associate_scan`` call of the
+    tracker replaced by ``fused`` and compared with :func:`_former_chain`; each call compared again with the veto's
+    thresholds loosened (every track in M or merged, a detection on structure a candidate, any size jump; a random
+    detection claimed) so that it refuses pairs. Returns counts of what the calls exercised."""
+    seen = {"calls": 0, "rows": 0, "vetoed": 0, "vetoed_loose": 0, "pairs": 0}
+    rng = random.Random(3)
+
+    def checked(*a):
+        got = fused(*a)
+        want = _former_chain(*a)
+        assert _same(got, want)
+        seen["calls"] += 1
+        seen["rows"] += a[20].shape[0] > 0
+        seen["vetoed"] += len(want[4])
+        seen["pairs"] += want[1].shape[0]
+        n, m = a[4].shape[0], a[6].shape[0]
+        claimed = np.array([rng.random() < 0.15 for _ in range(m)], dtype=np.bool_)
+        ms = np.array([rng.choice((0.0, 0.3, 1.0, math.nan)) for _ in range(m)])
+        loose = a[:19] + (claimed, np.arange(n, dtype=np.int64), ms, a[22], a[23], 0.3, -0.5, 0.6, a[27])
+        got2, want2 = fused(*loose), _former_chain(*loose)
+        assert _same(got2, want2)
+        seen["vetoed_loose"] += len(want2[4])
+        return got
+
+    saved = tracker_mod.associate_scan
+    tracker_mod.associate_scan = checked
+    try:
+        for name, seed in (("sim:crowd", 5), ("sim:drive", 11)):
+            pipe = Pipeline(Config())
+            for scan in open_source(name, seed=seed, duration=6.0):
+                pipe.process(scan)
+    finally:
+        tracker_mod.associate_scan = saved
+    return seen
+
+
+def test_associate_scan_is_the_former_calls_in_pipeline_runs() -> None:
+    """Every association of two simulated pipeline runs: the fused kernel's pairs, missed flags and vetoed tracks are
+    those of the former calls, as the runs have them and with the veto loosened so that it refuses pairs."""
+    seen = _checked_runs(ka.associate_scan)
+    assert seen["calls"] > 200 and seen["pairs"] > 1000 and seen["rows"] > 20 and seen["vetoed_loose"] > 100, seen
+
