@@ -80,15 +80,24 @@ def test_modules_freed_without_the_collector_and_the_same_code(tmp_path: Path) -
     assert ours["ir"] == theirs["ir"]
 
 
-def test_other_numba_left_alone() -> None:
-    script = r"""
-import json
+#: ``free_spent_ir`` with numba's ``add_ir_module`` (argv[1] "numba") or llvmlite's ``ir`` sources ("llvmlite") not as
+#: checked: prints whether it installed and whether numba's method is still its own.
+LEFT_ALONE = r"""
+import json, sys
 from numba.core import codegen
-from dynslam2d import jitcache
+from dynslam2d import jitcache, jitprint
 before = codegen.CPUCodeLibrary.add_ir_module
-jitcache.ADD_IR_MODULE_SOURCE = "0" * 16
+if sys.argv[1] == "numba":
+    jitcache.ADD_IR_MODULE_SOURCE = "0" * 16
+else:
+    jitprint.SOURCES = {**jitprint.SOURCES, "values": "0" * 16}
 print(json.dumps([jitcache.free_spent_ir(), codegen.CPUCodeLibrary.add_ir_module is before]))
 """
+
+
+def test_other_numba_or_llvmlite_left_alone() -> None:
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
-    res = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
-    assert res.stdout.strip().splitlines()[-1] == "[false, true]"
+    for which in ("numba", "llvmlite"):
+        res = subprocess.run([sys.executable, "-c", LEFT_ALONE, which], env=env, capture_output=True, text=True,
+                             check=True)
+        assert json.loads(res.stdout.strip().splitlines()[-1]) == [False, True], which
