@@ -12,7 +12,8 @@ within ``core`` ≤ 0.5 cells of its centre, with the walk's own per-step arithm
   out steps with no long-occupied cell);
 * the point (a, b) of the ray is then within 0.5 of the cell's centre, so the beam's direction is within
   asin(core / d) ≤ 1.003 core / d (d ≥ 4) of the cell's direction seen from the laser at distance d, found with an
-  atan2 approximation good to 1.2e-5 rad and one beam of margin; for d < 4 every beam is tested. The beams' angles
+  atan2 approximation good to 1.2e-5 rad (+ 8e-6 rad for the rounding of the beams' directions, ~1e-13 rad); for
+  d < 4 every beam is tested. The beams' angles
   are ``angle_min + k · increment`` (a scan's beams are uniform).
 
 The bitmap is rebuilt whole here when the map changed (its cost printed); in the library every map writer would
@@ -167,11 +168,11 @@ def _inverse(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, depth, bits,
                     k_lo, k_hi = 1, nb - 2
                     shifts = 0
                 else:
-                    # (asin(core / d) ≤ 1.003 core / d for d ≥ 4 and core ≤ 0.5; the approximation's 1.2e-5 rad; one
-                    # beam for the rounding of the beams' directions)
+                    # (asin(core / d) ≤ 1.003 core / d for d ≥ 4 and core ≤ 0.5; the approximation's 1.2e-5 rad and
+                    # more than the beams' directions' rounding: 2e-5 rad)
                     phi = _atan2_approx(ddy, ddx) - th - ang0
                     phi -= two_pi * math.floor(phi * inv_2pi)  # [0, 2π)
-                    hw = (1.003 * core / d + 2e-5) * inv_abs + 1.0
+                    hw = (1.003 * core / d + 2e-5) * inv_abs
                     kc = phi * inv_inc
                     shifts = 1
                 for sh in range(-1 if shifts else 0, 2 if shifts else 1):
@@ -296,8 +297,8 @@ def run(name: str, data: Path) -> None:
               f"mean x{pick.mean() / a[:, 0].mean():.3f}")
     b = st["builds"][1:]  # (the first compiles the scratch builder)
     spread = np.median(b) * (len(b) + 1) / len(rows)
-    print(f"  bitmap rebuilt whole {len(b) + 1} times, median {np.median(b):.1f} µs, {spread:.1f} µs a scan at the median"
-          " (the library would keep it by its writers instead; docs/speed.md pass vac73)")
+    print(f"  bitmap rebuilt whole {len(b) + 1} times, median {np.median(b):.1f} µs, {spread:.1f} µs a scan"
+          " at the median (the library would keep it by its writers instead; docs/speed.md pass vac73)")
 
 
 def main() -> None:
