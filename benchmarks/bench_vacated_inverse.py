@@ -37,7 +37,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
-from bench_vacated_walk import _beam_reach, _best, _geometry, _walk_stats  # noqa: E402
+from bench_vacated_walk import _beam_axis, _beam_reach, _best, _geometry, _walk_stats  # noqa: E402
 
 from dynslam2d.jitbox import njit  # noqa: E402
 
@@ -87,7 +87,6 @@ def _inverse(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, depth, bits,
     nb = cx.shape[0]
     # every beam's walk: axis, slope, walked major range [alo, ahi], reach²
     xm = np.zeros(nb, np.bool_)
-    ok = np.zeros(nb, np.bool_)
     sl = np.empty(nb)
     alo = np.empty(nb, np.int64)
     ahi = np.empty(nb, np.int64)
@@ -97,33 +96,10 @@ def _inverse(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, depth, bits,
         reach = _beam_reach(k, ox, oy, cx, cy, clear, depth)
         if not reach > 0.0:
             continue
-        dx = cx[k] - ox
-        dy = cy[k] - oy
-        x_major = abs(dx) >= abs(dy)
-        if x_major:
-            a0 = int(math.floor(ox + 0.5))
-            a1 = int(math.floor(cx[k] + 0.5))
-            slope = dy / dx if dx != 0.0 else 0.0
-            m0 = ox
-            a_off, a_len = i0, w
-        else:
-            a0 = int(math.floor(oy + 0.5))
-            a1 = int(math.floor(cy[k] + 0.5))
-            slope = dx / dy
-            m0 = oy
-            a_off, a_len = j0, h
-        along = (reach + 0.5) / math.sqrt(1.0 + slope * slope)
-        if a1 >= a0:
-            start = max(a0, a_off)
-            cnt = min(min(a1, int(math.floor(m0 + along)) + 1), a_off + a_len - 1) - start + 1
-            lo, hi = start, start + cnt - 1
-        else:
-            start = min(a0, a_off + a_len - 1)
-            cnt = start - max(max(a1, int(math.ceil(m0 - along)) - 1), a_off) + 1
-            lo, hi = start - cnt + 1, start
+        x_major, slope, _, _, _, _, _, _, _, start, step, cnt = _beam_axis(k, ox, oy, cx, cy, i0, j0, h, w, reach)
+        lo, hi = (start, start + cnt - 1) if step == 1 else (start - cnt + 1, start)
         if cnt <= 0:
             continue
-        ok[k] = True
         xm[k] = x_major
         sl[k] = slope
         alo[k] = lo

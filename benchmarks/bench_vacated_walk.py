@@ -127,6 +127,38 @@ def _dist_field(logodds, occ_thr, cap, out):  # pragma: no cover
                 out[r, c] = v
 
 
+@njit(cache=False, inline="always")
+def _beam_axis(k, ox, oy, cx, cy, i0, j0, h, w, reach):  # pragma: no cover
+    """seen_through_structure_kernel's walk of beam ``k`` with ``reach`` (cells), in its arithmetic: (x_major, slope,
+    m0, n0, a_off, b_off, b_len, ar, br, start, step, cnt) — steps ``start + step · t`` for t < cnt along the major
+    axis."""
+    dx = cx[k] - ox
+    dy = cy[k] - oy
+    x_major = abs(dx) >= abs(dy)
+    if x_major:
+        a0 = int(math.floor(ox + 0.5))
+        a1 = int(math.floor(cx[k] + 0.5))
+        slope = dy / dx if dx != 0.0 else 0.0
+        m0, n0 = ox, oy
+        a_off, a_len, b_off, b_len, ar, br = i0, w, j0, h, 0, 1
+    else:
+        a0 = int(math.floor(oy + 0.5))
+        a1 = int(math.floor(cy[k] + 0.5))
+        slope = dx / dy
+        m0, n0 = oy, ox
+        a_off, a_len, b_off, b_len, ar, br = j0, h, i0, w, 1, 0
+    along = (reach + 0.5) / math.sqrt(1.0 + slope * slope)
+    if a1 >= a0:
+        step = 1
+        start = max(a0, a_off)
+        cnt = min(min(a1, int(math.floor(m0 + along)) + 1), a_off + a_len - 1) - start + 1
+    else:
+        step = -1
+        start = min(a0, a_off + a_len - 1)
+        cnt = start - max(max(a1, int(math.ceil(m0 - along)) - 1), a_off) + 1
+    return x_major, slope, m0, n0, a_off, b_off, b_len, ar, br, start, step, cnt
+
+
 @njit(cache=False)
 def _walk(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, out_r, out_c, depth, mask, mode):  # pragma: no cover
     """seen_through_structure_kernel with its first pass skipping cells by ``mask``: mode 1 the dilated 8 × 8 block
@@ -140,30 +172,8 @@ def _walk(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, out_r, out_c, d
         if not reach > 0.0:
             continue
         reach2 = reach * reach
-        dx = cx[k] - ox
-        dy = cy[k] - oy
-        x_major = abs(dx) >= abs(dy)
-        if x_major:
-            a0 = int(math.floor(ox + 0.5))
-            a1 = int(math.floor(cx[k] + 0.5))
-            slope = dy / dx if dx != 0.0 else 0.0
-            m0, n0 = ox, oy
-            a_off, a_len, b_off, b_len, ar, br = i0, w, j0, h, 0, 1
-        else:
-            a0 = int(math.floor(oy + 0.5))
-            a1 = int(math.floor(cy[k] + 0.5))
-            slope = dx / dy
-            m0, n0 = oy, ox
-            a_off, a_len, b_off, b_len, ar, br = j0, h, i0, w, 1, 0
-        along = (reach + 0.5) / math.sqrt(1.0 + slope * slope)
-        if a1 >= a0:
-            step = 1
-            start = max(a0, a_off)
-            cnt = min(min(a1, int(math.floor(m0 + along)) + 1), a_off + a_len - 1) - start + 1
-        else:
-            step = -1
-            start = min(a0, a_off + a_len - 1)
-            cnt = start - max(max(a1, int(math.ceil(m0 - along)) - 1), a_off) + 1
+        x_major, slope, m0, n0, a_off, b_off, b_len, ar, br, start, step, cnt = _beam_axis(k, ox, oy, cx, cy, i0, j0, h,
+                                                                                             w, reach)
         if cnt <= 0:
             continue
         first = cnt
