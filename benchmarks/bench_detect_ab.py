@@ -1,33 +1,50 @@
-"""CPU time of the detection path's kernels of two checkouts on the same inputs (not run by pytest).
+"""CPU time of the tracker's detection step of two checkouts on the same inputs (not run by pytest).
 
 ``bench_pipeline_ab.py`` times whole pipelines; a change of a few tens of µs per scan in one kernel is below its
-scan-to-scan noise. This runs this checkout's pipeline over an input once and records the arguments of
+scan-to-scan noise. This measures, per input (the first ``--scans`` scans):
 
-  * ``fit_clusters`` (the tracker's shape fits, one call per scan),
-  * ``vacated_outlines`` (the pipeline's vacated footprints, one call per scan with a map; timed while the
-    pipeline runs, both versions on the call's arguments, as the map is too large to keep a copy per scan; only
-    in checkouts whose pipeline still calls it itself: later ones run it inside ``vacated.py``'s kernel call),
-  * the free-space fractions read late: ``FreeTest.fraction`` (a detection's own fraction, all reference scans)
-    and the vacated part of a track's entry (``FreeSpaceMemory.count_seen_by``; the other checkout's
-    ``seen_through_by`` and ``np.count_nonzero`` where it has no ``count_seen_by``),
+  * in lockstep, the detection step inside each checkout's own pipeline: two worker processes (one per checkout,
+    ``PYTHONPATH``) warm their kernels on the first 60 scans with a throw-away pipeline, then load every other
+    kernel numba's cache holds and the modules a run imports late (``kernelwarm.preload``), then process the scans
+    one at a time when told to, the parent sending scan ``i`` to one and then to the other (which one goes first
+    alternates with ``i``); each times, in thread CPU time (``time.thread_time_ns``), ``Tracker._detect`` (the
+    detection step as a whole: the scan's mask, the fused call, the free-space memory, the detections' objects, a
+    leg merge) and inside it ``detect_scan`` (the segmentation, shape fits, classification and ``detect_rows`` as
+    one kernel call since pass trk72; a checkout before it has none: "no calls"), and sends a digest of every
+    ``detect_scan`` result (arrays by dtype / shape / bytes) and the number of detections;
+  * replayed, the free-space fractions read late: ``FreeTest.fraction`` (a detection's own fraction, all
+    reference scans) and the vacated part of a track's entry (``FreeSpaceMemory.count_seen_by``; the other
+    checkout's ``seen_through_by`` and ``np.count_nonzero`` where it has no ``count_seen_by``), recorded from this
+    checkout's pipeline over the input and called with this checkout's and the other checkout's version (the
+    other's ``freespace.py`` and ``kernels.py`` loaded as modules of their own), the two alternately first,
+    ``--reps`` times, keeping each call's minimum; after one call of each (the warm-up) every kernel numba's cache
+    holds is loaded (``kernelwarm.preload``, both sides);
+  * ``vacated_outlines`` (the pipeline's vacated footprints) where this checkout's pipeline still calls it itself
+    (timed while the pipeline runs; later checkouts run it inside ``vacated.py``'s kernel call: bench_vacate.py).
 
-then calls each recorded call with this checkout's and the other checkout's version (the other's ``shapes.py``,
-``mapevidence.py``, ``freespace.py`` and ``kernels.py`` loaded as modules of their own), the two alternately
-first, ``--reps`` times, in thread CPU time (``time.thread_time_ns``), keeping each call's minimum. Printed per
-part: µs per scan (the sum of the minima over the scans of the input) of each checkout, their ratio, and whether
-every result was identical. A free-space read of the other checkout gets its own reference scans, made by its
-``make_ref`` from the same scan, pose and mask (untimed: the pipeline makes them once per scan); each read is
-timed with a fresh test (as the first read of a scan's test; later reads of the same scan's test reuse its packed
-references).
+Printed per part: µs per scan of each checkout (lockstep: the mean over the scans, with the medians; replayed: the
+sum of the per-call minima over the scans), their ratio, and whether every result was identical; then the kernels
+loaded or compiled inside the measured runs (0 when the warm-up and the preload did their work). A free-space read of
+the other checkout gets its own reference scans, made by its ``make_ref`` from the same scan, pose and mask
+(untimed: the pipeline makes them once per scan); each read is timed with a fresh test (as the first read of a
+scan's test; later reads of the same scan's test reuse its packed references).
 
-    taskset -c 0 python benchmarks/bench_detect_ab.py negative_2/right negative_2/left negative_2/rear \
-        --other /work/main/src [--reps 5]
+    taskset -c 0 python benchmarks/bench_detect_ab.py sim:paper negative_2/right negative_2/left negative_2/rear \
+        --other /work/main/src [--reps 5] [--scans N]
+
+Inputs: the names of ``bench_digest.py`` (paths under ``--data``) or any built-in scene (``sim:paper``). Both
+workers inherit this process's CPU affinity: pin the parent with ``taskset``.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import importlib.util
+import json
+import os
+import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -37,6 +54,118 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
+from kernelwarm import kernel_cache_calls, preload  # noqa: E402
+
+WARMUP = 60
+
+
+def load_scans(data: Path, name: str, limit: int | None) -> list:
+    """The first ``limit`` scans (all where None) of input ``name``: a ``bench_digest`` name or a built-in scene."""
+    from dynslam2d.inputs import open_source
+
+    rel, topic = INPUTS.get(name, (name, None))
+    scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+    return scans[:limit] if limit else scans
+
+
+def digest(values: tuple) -> str:
+    """A digest of a kernel call's results: arrays by dtype, shape and bytes, scalars by their repr."""
+    h = hashlib.blake2b(digest_size=16)
+    for v in values:
+        if isinstance(v, np.ndarray):
+            h.update(f"{v.dtype}{v.shape}".encode())
+            h.update(np.ascontiguousarray(v).tobytes())
+        else:
+            h.update(repr(v).encode())
+    return h.hexdigest()
+
+
+def worker(data: Path, name: str, limit: int | None) -> None:
+    """Serve ``go`` lines on stdin: process the next scan, answer one JSON line (thread CPU ns of
+    ``Tracker._detect`` and of ``detect_scan`` inside it, the ``detect_scan`` results' digest, the detections)."""
+    from bench_pipeline import warm_up
+
+    import dynslam2d.detect.trackdetect as td
+    from dynslam2d.pipeline import Pipeline
+
+    scans = load_scans(data, name, limit)
+    warm_up(scans, WARMUP)  # (and every kernel numba's cache holds loaded, the late imports made: kernelwarm.preload)
+    owner = next((c for c in vars(td).values() if isinstance(c, type) and "_detect" in vars(c)), None)
+    if owner is None:  # (a checkout whose tracker keeps _detect in tracker.py)
+        import dynslam2d.detect.tracker as owner_mod
+        owner = owner_mod.Tracker
+    det0, kern0 = owner._detect, getattr(td, "detect_scan", None)
+    cur: dict = {}
+
+    def kern(*a):
+        t0 = time.thread_time_ns()
+        out = kern0(*a)
+        cur["kernel"] = cur.get("kernel", 0) + time.thread_time_ns() - t0
+        cur.setdefault("outs", []).append(out)
+        return out
+
+    def detect(self, *a, **k):
+        t0 = time.thread_time_ns()
+        out = det0(self, *a, **k)
+        cur["detect"] = cur.get("detect", 0) + time.thread_time_ns() - t0
+        cur["n"] = cur.get("n", 0) + len(out)
+        return out
+
+    owner._detect = detect
+    if kern0 is not None:
+        td.detect_scan = kern
+    pipe = Pipeline()
+    print(json.dumps({"scans": len(scans)}), flush=True)
+    looked = kernel_cache_calls()
+    for i, line in enumerate(sys.stdin):
+        if i >= len(scans) or line.strip() != "go":
+            break
+        cur.clear()
+        pipe.process(scans[i])
+        outs = cur.get("outs")
+        print(json.dumps({"detect": cur.get("detect"), "kernel": cur.get("kernel"), "n": cur.get("n"),
+                          "h": None if outs is None else digest(tuple(v for o in outs for v in o))}), flush=True)
+    print(json.dumps({"loads": kernel_cache_calls() - looked}), flush=True)  # (inside the measured run)
+
+
+def lockstep(data: Path, name: str, other: Path, limit: int | None) -> tuple[int, dict, dict]:
+    """Both checkouts' workers over input ``name`` in lockstep: (scans, {tag: per-scan answers}, {tag: loads})."""
+    procs = {}
+    for tag, src in (("other", other.resolve()), ("this", REPO / "src")):
+        env = dict(os.environ, PYTHONPATH=str(src))
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", name, "--data", str(data)]
+        procs[tag] = subprocess.Popen(cmd + (["--scans", str(limit)] if limit else []), env=env,
+                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    n = min(json.loads(p.stdout.readline())["scans"] for p in procs.values())
+    got: dict[str, list] = {"other": [], "this": []}
+    for i in range(n):
+        for tag in (("other", "this") if i % 2 == 0 else ("this", "other")):
+            p = procs[tag]
+            p.stdin.write("go\n")
+            p.stdin.flush()
+            got[tag].append(json.loads(p.stdout.readline()))
+    loads = {}
+    for tag, p in procs.items():
+        p.stdin.close()
+        loads[tag] = json.loads(p.stdout.readline())["loads"]
+        if p.wait():
+            raise SystemExit(f"{tag} worker failed ({p.returncode})")
+    return n, got, loads
+
+
+def print_lockstep(n: int, got: dict) -> None:
+    """The lockstep parts' lines (module docstring)."""
+    for part, key in (("detect_scan (fused call)", "kernel"), ("Tracker._detect (the step)", "detect")):
+        vals = {tag: [r[key] for r in got[tag] if r[key] is not None] for tag in got}
+        if not vals["this"] or not vals["other"]:
+            print(f"  {part:26s} no calls ({', '.join(t for t in vals if not vals[t])})")
+            continue
+        to, tt = (sum(vals[t]) / n / 1e3 for t in ("other", "this"))
+        mo, mt = (statistics.median(vals[t]) / 1e3 for t in ("other", "this"))
+        same = all(a["h"] == b["h"] and a["n"] == b["n"] for a, b in zip(got["other"], got["this"]))
+        print(f"  {part:26s} {len(vals['this']):5d} calls  {to:8.2f} → {tt:8.2f}  (×{tt / to:.2f})  "
+              f"{'identical' if same else 'DIFFERENT'}  (lockstep in the run; medians {mo:.2f} → {mt:.2f}, "
+              f"×{mt / mo:.2f})")
 
 
 def load_other(src: Path, rel: str, name: str, deps: dict | None = None):
@@ -64,25 +193,18 @@ def record(scans: list, other_vacated, reps: int) -> tuple[dict, list]:
     keep a copy per scan) the minima over ``reps`` alternated calls (this ns, other ns) and whether the results
     were equal."""
     from dynslam2d import pipeline
-    from dynslam2d.detect import freespace, trackdetect
+    from dynslam2d.detect import freespace
     from dynslam2d.pipeline import Pipeline
 
-    rec: dict[str, list] = {"fit_clusters": [], "free fraction": [], "vacated read": []}
+    rec: dict[str, list] = {"free fraction": [], "vacated read": []}
     live: list[tuple[int, int, bool]] = []
     made: dict[int, tuple] = {}  # id(ref) → (scan, pose, valid) it was made from
     # (the pipeline calls vacated_outlines through its own module only in checkouts before the vacated-footprint
     # kernel of vacated.py; later ones run it inside that kernel, timed by bench_vacate.py)
     hook_vac = hasattr(pipeline, "vacated_outlines")
-    fit0, vac0 = trackdetect.fit_clusters, getattr(pipeline, "vacated_outlines", None)
+    vac0 = getattr(pipeline, "vacated_outlines", None)
     make0, frac0, count0 = freespace.FreeSpaceMemory.make_ref, freespace.FreeTest.fraction, \
         freespace.FreeSpaceMemory.count_seen_by
-
-    def copies(args: tuple) -> list:
-        return [a.copy() if isinstance(a, np.ndarray) else a for a in args]
-
-    def fit(*a):
-        rec["fit_clusters"].append(copies(a))
-        return fit0(*a)
 
     def vac(*a, **k):
         fn = {"this": vac0, "other": other_vacated}
@@ -118,7 +240,6 @@ def record(scans: list, other_vacated, reps: int) -> tuple[dict, list]:
         rec["vacated read"].append(([made[id(ref)][1:]], self.margin, points.copy()))
         return count0(self, ref, points)
 
-    trackdetect.fit_clusters = fit
     if hook_vac:
         pipeline.vacated_outlines = vac
     freespace.FreeSpaceMemory.make_ref = staticmethod(make_ref)
@@ -130,7 +251,6 @@ def record(scans: list, other_vacated, reps: int) -> tuple[dict, list]:
         for s in scans:
             p.process(s)
     finally:
-        trackdetect.fit_clusters = fit0
         if hook_vac:
             pipeline.vacated_outlines = vac0
         freespace.FreeSpaceMemory.make_ref = staticmethod(make0)
@@ -140,19 +260,15 @@ def record(scans: list, other_vacated, reps: int) -> tuple[dict, list]:
     return rec, live
 
 
-def callers(other_src: Path) -> dict:
+def callers(other_src: Path) -> tuple[dict, list]:
     """Per part: ((prepare, call) of this checkout, (prepare, call) of the other one): ``prepare`` turns one recorded
     call into the arguments of ``call`` (untimed: e.g. the reference scans of a free-space read, which the pipeline
-    makes once per scan), ``call`` returns a comparable result."""
-    from dynslam2d.detect import freespace, shapes
+    makes once per scan), ``call`` returns a comparable result; and the other checkout's modules loaded for them."""
+    from dynslam2d.detect import freespace
 
     o_kernels = load_other(other_src, "detect/kernels.py", "other_kernels")
-    o_shapes = load_other(other_src, "detect/shapes.py", "other_shapes")
     o_free = load_other(other_src, "detect/freespace.py", "other_freespace",
                         {"dynslam2d.detect.kernels": o_kernels})
-
-    def same(a):
-        return a
 
     def refs_of(mod):
         def prep(rec):
@@ -172,30 +288,37 @@ def callers(other_src: Path) -> dict:
         return int(np.count_nonzero(mem.seen_through_by(refs[0], points)))
 
     return {
-        "fit_clusters": ((same, lambda a: shapes.fit_clusters(*a).tobytes()),
-                         (same, lambda a: o_shapes.fit_clusters(*a).tobytes())),
         "free fraction": ((refs_of(freespace), fraction), (refs_of(o_free), fraction)),
         "vacated read": ((refs_of(freespace), read), (refs_of(o_free), read)),
-    }
+    }, [o_kernels, o_free]
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("inputs", nargs="+", choices=sorted(INPUTS))
+    ap.add_argument("inputs", nargs="+", help=f"{', '.join(sorted(INPUTS))} or a built-in scene (sim:paper)")
     ap.add_argument("--other", type=Path, default=REPO.parent / "main" / "src", help="the other checkout's src/")
-    ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--reps", type=int, default=5, help="repetitions of each replayed call")
+    ap.add_argument("--scans", type=int, default=None, help="only the first N scans of each input")
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
+    ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
-    from dynslam2d.inputs import open_source
+    bad = [n for n in args.inputs if n not in INPUTS and not n.startswith("sim:")]
+    if bad:
+        ap.error(f"unknown inputs {bad}; accepted: {', '.join(sorted(INPUTS))} or sim:<scene>")
+    if args.worker:
+        worker(args.data, args.inputs[0], args.scans)
+        return
 
-    calls = callers(args.other)
+    calls, other_mods = callers(args.other)
     o_me = load_other(args.other, "detect/mapevidence.py", "other_mapevidence")
     for name in args.inputs:
-        rel, topic = INPUTS[name]
-        scans = list(open_source(rel if rel.startswith("sim:") else str(args.data / rel), topic))
+        n_lock, got, lock_loads = lockstep(args.data, name, args.other, args.scans)
+        scans = load_scans(args.data, name, args.scans)
         rec, live = record(scans, o_me.vacated_outlines, args.reps)
-        print(f"{name}: {len(scans)} scans; µs per scan (sums of per-call minima over {args.reps} alternated "
-              "repetitions), other → this")
+        print(f"{name}: {len(scans)} scans; µs per scan (replayed: sums of per-call minima over {args.reps} "
+              "alternated repetitions), other → this")
+        print_lockstep(n_lock, got)
+        loads = {"other": lock_loads["other"], "this": lock_loads["this"]}
         for part, sides in calls.items():
             got = rec[part]
             if not got:
@@ -203,8 +326,10 @@ def main() -> None:
                 continue
             prepared = {tag: [prep(a) for a in got] for tag, (prep, _) in zip(("this", "other"), sides)}
             fn = {"this": sides[0][1], "other": sides[1][1]}
-            # (also the warm-up of both versions)
+            # (also the warm-up of both versions; then every kernel numba's cache holds, either side's, loaded)
             same = all(fn["this"](a) == fn["other"](b) for a, b in zip(prepared["this"], prepared["other"]))
+            preload(extra=other_mods)
+            looked = {"this": kernel_cache_calls(), "other": kernel_cache_calls("other_", extra=other_mods)}
             best = {"this": [float("inf")] * len(got), "other": [float("inf")] * len(got)}
             for r in range(args.reps):
                 for j in range(len(got)):
@@ -213,15 +338,19 @@ def main() -> None:
                         t0 = time.thread_time_ns()
                         f(a)
                         best[tag][j] = min(best[tag][j], time.thread_time_ns() - t0)
+            loads["this"] += kernel_cache_calls() - looked["this"]
+            loads["other"] += kernel_cache_calls("other_", extra=other_mods) - looked["other"]
             to, tt = (sum(best[k]) / len(scans) / 1e3 for k in ("other", "this"))
             print(f"  {part:26s} {len(got):5d} calls  {to:8.2f} → {tt:8.2f}  (×{tt / to:.2f})  "
                   f"{'identical' if same else 'DIFFERENT'}")
         if not live:
             print(f"  {'vacated_outlines':26s} not called by this checkout's pipeline (benchmarks/bench_vacate.py)")
-            continue
-        tt, to = (sum(x[q] for x in live) / len(scans) / 1e3 for q in (0, 1))
-        print(f"  {'vacated_outlines':26s} {len(live):5d} calls  {to:8.2f} → {tt:8.2f}  (×{tt / to:.2f})  "
-              f"{'identical' if all(x[2] for x in live) else 'DIFFERENT'}  (timed during the run)")
+        else:
+            tt, to = (sum(x[q] for x in live) / len(scans) / 1e3 for q in (0, 1))
+            print(f"  {'vacated_outlines':26s} {len(live):5d} calls  {to:8.2f} → {tt:8.2f}  (×{tt / to:.2f})  "
+                  f"{'identical' if all(x[2] for x in live) else 'DIFFERENT'}  (timed during the run)")
+        print(f"  inside the measured runs kernels loaded or compiled: other {loads['other']}, this {loads['this']}",
+              flush=True)
 
 
 if __name__ == "__main__":

@@ -5,7 +5,8 @@ This runs this checkout's pipeline over the first ``--scans`` scans of an input 
 
   * ``segment_scan`` (the breakpoint segmentation), ``fit_clusters`` (the shape fits), ``classify_batch``,
     ``admit_long_clusters`` (detect/vehicles.py), ``gate_costs`` and the tracker's ``measure_batch`` calls, as the
-    tracker calls them (``dynslam2d.detect.tracker``'s names),
+    tracker calls them (``dynslam2d.detect.tracker``'s names); since pass trk72 the tracker calls the first ones
+    as one kernel, ``detect_scan`` (detect/segment.py), recorded and compared where both checkouts have it,
   * ``FreeSpaceMemory.make_ref`` (the scan's free-space reference),
 
 then calls each recorded call with this checkout's and the other checkout's function (``--other``: its
@@ -44,7 +45,7 @@ _ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
 _ap.add_argument("--cache-dir", type=Path, default=Path.home() / ".cache" / "dynslam2d" / "numba-ab")
 
 _TRACKER_CALLS = ("segment_scan", "fit_clusters", "classify_batch", "admit_long_clusters", "select_detections",
-                  "detect_rows", "gate_costs", "measure_batch")
+                  "detect_rows", "gate_costs", "measure_batch", "detect_scan")
 
 
 def same(a, b) -> bool:
@@ -144,8 +145,10 @@ def main() -> None:
     from dynslam2d.detect import freespace, kernels, segment, shapes, vehicles
 
     o_k = load_other(args.other, "detect/kernels.py", "other_kernels")
-    o_seg = load_other(args.other, "detect/segment.py", "other_segment")
     o_sh = load_other(args.other, "detect/shapes.py", "other_shapes")
+    # (its segmentation with its own kernels and shape fits: detect_scan calls them, pass trk72)
+    o_seg = load_other(args.other, "detect/segment.py", "other_segment",
+                       {"dynslam2d.detect.kernels": o_k, "dynslam2d.detect.shapes": o_sh})
     o_veh = load_other(args.other, "detect/vehicles.py", "other_vehicles")
     o_free = load_other(args.other, "detect/freespace.py", "other_freespace", {"dynslam2d.detect.kernels": o_k})
     parts = {  # name: (this, other, mutates its arguments)
@@ -163,6 +166,10 @@ def main() -> None:
     # checkout that has it too; a checkout before it records the three names above instead)
     if hasattr(kernels, "detect_rows") and hasattr(o_k, "detect_rows"):
         parts["detect_rows"] = (kernels.detect_rows, o_k.detect_rows, False)
+    # (the segmentation, the shape fits and detect_rows in one call since pass trk72, the tracker's only detection
+    # kernel call: compared only against a checkout that has it too)
+    if hasattr(segment, "detect_scan") and hasattr(o_seg, "detect_scan"):
+        parts["detect_scan"] = (segment.detect_scan, o_seg.detect_scan, False)
     for name in args.inputs:
         scans = load_scans(args.data, name)[:args.scans]
         rec = record(scans)
