@@ -40,6 +40,7 @@ from dynslam2d.detect.segment import (
     FQ_STRIDE,
     FQ_THIN,
     N_FQ,
+    Segmentation,
     _make_segmentation,
     _scan_args,
     detect_scan,
@@ -76,6 +77,23 @@ class TrackDetect:
     #: key (beam count, angle_min, angle_increment) and ``_seg_p`` they were made for (None: none yet)
     _scan_geo: tuple | None = None
     _ms_ev: np.ndarray | None = None
+
+    #: :attr:`last_segmentation`'s value: a Segmentation, None, or the arguments of the one made when it is read
+    _seg: object = None
+
+    @property
+    def last_segmentation(self) -> Segmentation | None:
+        """The segmentation of the last scan :meth:`_detect` saw (its clusters, paper Eq. 1; None before the first):
+        made from the kernel's arrays when first read (nothing in the pipeline reads it per scan; docs/speed.md,
+        pass det81), the same object on every later read."""
+        s = self._seg
+        if type(s) is tuple:
+            s = self._seg = _make_segmentation(*s)
+        return s
+
+    @last_segmentation.setter
+    def last_segmentation(self, value: Segmentation | None) -> None:
+        self._seg = value
 
     def _detect_setup(self) -> None:
         """The detection step's configuration values, made once per tracker (after ``_fit_p``): ``_seg_p``, the
@@ -152,7 +170,7 @@ class TrackDetect:
             ranges, sangles, valid, strig, fill, q, wrap, cos_a, sin_a, math.cos(th), math.sin(th), x, y,
             free is not None, th, gpar, float(scan.range_max), angles, ftrig, self._fit_q, self._det_p,
             view is not None, lo, i0, j0, res, abs(float(scan.angle_increment)))
-        self.last_segmentation = _make_segmentation(labels, beams, offsets, structure, wrapped, dropped)
+        self._seg = (labels, beams, offsets, structure, wrapped, dropped)  # (last_segmentation, made when read)
         ncl = offsets.shape[0] - 1
         st.clusters += ncl
         st.dropped_small_clusters += dropped
@@ -244,7 +262,7 @@ class TrackDetect:
         m = first.shape[0]
         if m == 0:  # (the arrays are the arguments themselves)
             return dets, kinds, fits, lohi, rel, starts, npts, px, py
-        new_dets = [dets[j] for j in ki.tolist()]
+        new_dets = list(map(dets.__getitem__, ki.tolist()))  # (the kept detections in their new order)
         row = len(new_dets)
         # (the persons are rows row … of the merged arrays: their beams and points rows starts − n0 of mbeams / pts
         # (the persons' points, (n, 2)); centroid = circle centre = the legs' middle, lo / hi their box, no real
