@@ -124,20 +124,7 @@ class FreeSpaceMemory:
             ft = object.__new__(FreeTest)
             ft.refs = tuple(refs)
             ft.margin = self.margin
-        # (add's body: the reference appended, the scans older than max_age at the scan's stamp dropped)
-        stamps = self._stamps
-        if stamps and st < stamps[-1]:
-            self._descents += 1
-        self._buf.append(ref)
-        stamps.append(st)
-        now, max_age = scan.stamp, self.max_age
-        if now - stamps[0] > max_age:
-            buf = self._buf
-            while stamps and now - stamps[0] > max_age:
-                if len(stamps) > 1 and stamps[1] < stamps[0]:
-                    self._descents -= 1
-                buf.popleft()
-                del stamps[0]
+        self.add(scan, pose, r, ref)  # (valid is not read when ref is given)
         return ref, ft
 
     def add(self, scan: Scan, pose: Pose2D, valid: np.ndarray, ref: _Ref | None = None) -> None:
