@@ -111,6 +111,22 @@ class FreeSpaceMemory:
         _, _, _, amin, inc, full, reach = par.tolist()
         return _make_ref(float(scan.stamp), pose, r, amin, inc, full != 0.0, reach, par)
 
+    def step(self, scan: Scan, pose: Pose2D, r: np.ndarray, par: np.ndarray, test: bool) -> tuple:
+        """The tracker's per-scan use in one call (docs/speed.md, pass det81): (ref, free test) where ref is
+        :meth:`ref_of` ``(scan, pose, r, par)`` and the test :meth:`test_at` at the scan's stamp made before the memory
+        gains the scan (None where ``test`` is False or there is no reference scan); then :meth:`add` of ``scan``
+        with ``ref``. The same references, the same test and the same buffer as the three calls."""
+        _, _, _, amin, inc, full, reach = par.tolist()
+        st = float(scan.stamp)
+        ref = _make_ref(st, pose, r, amin, inc, full != 0.0, reach, par)
+        ft = None
+        if test and self._buf and (refs := self._refs(st)):
+            ft = object.__new__(FreeTest)
+            ft.refs = tuple(refs)
+            ft.margin = self.margin
+        self.add(scan, pose, r, ref)  # (valid is not read when ref is given)
+        return ref, ft
+
     def add(self, scan: Scan, pose: Pose2D, valid: np.ndarray, ref: _Ref | None = None) -> None:
         """Remember ``scan`` (taken at ``pose``, map frame); ``valid`` marks beams with a return."""
         buf, stamps = self._buf, self._stamps

@@ -40,6 +40,7 @@ from dynslam2d.detect.segment import (
     FQ_STRIDE,
     FQ_THIN,
     N_FQ,
+    Segmentation,
     _make_segmentation,
     _scan_args,
     detect_scan,
@@ -52,6 +53,7 @@ from dynslam2d.types import Pose2D, Scan
 
 #: no map evidence (the leg merge's ``mev`` argument without a map: no column; shared, never written)
 _NO_MEV = np.zeros((3, 0))
+_tuple_new = tuple.__new__
 
 
 def _thin(depth_ratio: float, min_radius: float) -> float:
@@ -71,7 +73,27 @@ class TrackDetect:
     #: this scan's ``map_structure`` column (:meth:`_structure_column`: the detection list it is of and the list;
     #: None: not read yet) and the (3, nd) map evidence of the final rows it is read from (None: from the detections)
     _ms: tuple[list, list[float]] | None = None
+    #: the segmentation's per-geometry arguments (``segment._scan_args``' with ``fill`` False) for the beam geometry
+    #: key (beam count, angle_min, angle_increment) and ``_seg_p`` they were made for (None: none yet)
+    _scan_geo: tuple | None = None
     _ms_ev: np.ndarray | None = None
+
+    #: :attr:`last_segmentation`'s value: a Segmentation, None, or the arguments of the one made when it is read
+    _seg: object = None
+
+    @property
+    def last_segmentation(self) -> Segmentation | None:
+        """The segmentation of the last scan :meth:`_detect` saw (its clusters, paper Eq. 1; None before the first):
+        made from the kernel's arrays when first read (nothing in the pipeline reads it per scan; docs/speed.md,
+        pass det81), the same object on every later read."""
+        s = self._seg
+        if type(s) is tuple:
+            s = self._seg = _make_segmentation(*s)
+        return s
+
+    @last_segmentation.setter
+    def last_segmentation(self, value: Segmentation | None) -> None:
+        self._seg = value
 
     def _detect_setup(self) -> None:
         """The detection step's configuration values, made once per tracker (after ``_fit_p``): ``_seg_p``, the
@@ -132,14 +154,23 @@ class TrackDetect:
         else:
             lo, i0, j0, res = view.logodds, int(view.i0), int(view.j0), float(view.resolution)
         x, y, th = float(pose.x), float(pose.y), pose.theta
-        sangles, strig, fill, cos_a, sin_a, gpar, wrap, q = _scan_args(scan, cfg.segment, self._seg_p)
+        # (the segmentation's per-geometry arguments: _scan_args' once per beam geometry and tracker, kept with the
+        # geometry's key and with ``fill`` False after the first call, whose kernel call fills the trigonometry)
+        key = (ranges.shape[0], scan.angle_min, scan.angle_increment)
+        geo = self._scan_geo
+        if geo is None or geo[0] != key or geo[1] is not self._seg_p:
+            args = _scan_args(scan, cfg.segment, self._seg_p)
+            geo = self._scan_geo = (key, self._seg_p, args[:2] + (False,) + args[3:])
+        else:
+            args = geo[2]
+        sangles, strig, fill, cos_a, sin_a, gpar, wrap, q = args
         (labels, beams, offsets, structure, dropped, wrapped, pts, rr, rpar, starts, npts, kinds, lohi, rel, fits, mfr,
          first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams, mpts, mmev, theta, centroid,
          circle, *default) = detect_scan(
             ranges, sangles, valid, strig, fill, q, wrap, cos_a, sin_a, math.cos(th), math.sin(th), x, y,
             free is not None, th, gpar, float(scan.range_max), angles, ftrig, self._fit_q, self._det_p,
             view is not None, lo, i0, j0, res, abs(float(scan.angle_increment)))
-        self.last_segmentation = _make_segmentation(labels, beams, offsets, structure, wrapped, dropped)
+        self._seg = (labels, beams, offsets, structure, wrapped, dropped)  # (last_segmentation, made when read)
         ncl = offsets.shape[0] - 1
         st.clusters += ncl
         st.dropped_small_clusters += dropped
@@ -148,7 +179,7 @@ class TrackDetect:
         if ncl == 0:
             self.last_detections = []
             if free is not None:
-                free.add(scan, pose, valid, free.ref_of(scan, pose, rr, rpar))
+                free.step(scan, pose, rr, rpar, False)
             return []
         nd = starts.shape[0]
         st.structure_clusters += ncl - nd
@@ -157,11 +188,10 @@ class TrackDetect:
         # memory's references now, before it gains this scan) and computes its fraction when first read
         # (ScanDetection.free_fraction)
         frac = 0.0
-        if free is not None:
-            self._cur_ref = free.ref_of(scan, pose, rr, rpar)
-            if nd and (test := free.test_at(float(scan.stamp))) is not None:
+        if free is not None:  # (ref_of, test_at before the scan is added, add: one call, FreeSpaceMemory.step)
+            self._cur_ref, test = free.step(scan, pose, rr, rpar, nd != 0)
+            if test is not None:
                 frac = test
-            free.add(scan, pose, valid, self._cur_ref)
         mev = None
         if view is not None:
             mev = mfr
@@ -184,8 +214,10 @@ class TrackDetect:
         if dets:
             m = len(dets)
             if fits is kfits:  # (the kernel's final rows: their columns and default measurements made there)
-                self._batch = DetectionBatch(kinds, theta, lohi, rel, centroid, circle, px, py, starts, npts)
-                self._default = MeasureRows(*default)
+                # (the named tuples made by tuple.__new__ of their fields in order, as their generated __new__ does)
+                self._batch = _tuple_new(DetectionBatch, (kinds, theta, lohi, rel, centroid, circle, px, py, starts,
+                                                          npts))
+                self._default = _tuple_new(MeasureRows, default)
                 # (their (3, nd) map evidence: the structure column read from it, _structure_column)
                 self._ms_ev = mmev if merged and mev is not None else mev
             else:  # (rows other than the kernel's final ones: a subclass' _merge_legs)
@@ -230,7 +262,7 @@ class TrackDetect:
         m = first.shape[0]
         if m == 0:  # (the arrays are the arguments themselves)
             return dets, kinds, fits, lohi, rel, starts, npts, px, py
-        new_dets = [dets[j] for j in ki.tolist()]
+        new_dets = list(map(dets.__getitem__, ki.tolist()))  # (the kept detections in their new order)
         row = len(new_dets)
         # (the persons are rows row … of the merged arrays: their beams and points rows starts − n0 of mbeams / pts
         # (the persons' points, (n, 2)); centroid = circle centre = the legs' middle, lo / hi their box, no real
