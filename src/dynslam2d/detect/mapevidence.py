@@ -22,11 +22,15 @@ Frames: map frame (the finest map level's world coordinates), units m. The map i
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
+
+
+#: no long-occupied bitmap (:class:`MapView`'s default)
+_NO_BITS = np.zeros((0, 0), dtype=np.uint64)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -37,12 +41,16 @@ class MapView:
         logodds: (H, W) float32 log-odds, indexed [row, col] = [y, x] in cells; 0 = unknown.
         i0, j0: absolute cell index of column 0 / row 0 (cell (i, j) is centred at (i·res, j·res)).
         resolution: cell side, m.
+        occ_bits, occ_bits_thr: the level's long-occupied bitmap and its threshold (``GridLevel.occ_bits``: every
+            cell with log-odds ≥ the threshold has its bit set), or a (0, 0) array and NaN: none.
     """
 
     logodds: np.ndarray
     i0: int
     j0: int
     resolution: float
+    occ_bits: np.ndarray = field(default_factory=lambda: _NO_BITS)
+    occ_bits_thr: float = math.nan
 
     @classmethod
     def of_level(cls, level: object) -> MapView | None:
@@ -50,7 +58,8 @@ class MapView:
         lo = level.logodds
         if lo.size == 0:
             return None
-        return cls(lo, int(level.i0), int(level.j0), float(level.resolution))
+        return cls(lo, int(level.i0), int(level.j0), float(level.resolution),
+                   getattr(level, "occ_bits", _NO_BITS), float(getattr(level, "occ_bits_thr", math.nan)))
 
 
 @njit(cache=True)
