@@ -6,19 +6,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_vacated_trace import KW, RES, _map, _scan
 
 from dynslam2d.config import Config
 from dynslam2d.detect.mapevidence import MapView, seen_through_structure_kernel
 from dynslam2d.pipeline import Pipeline
 from dynslam2d.sim.scenarios import build_scenario
 from dynslam2d.sim.simulation import SimSource
-from dynslam2d.slam.erasure import EvidenceLedger
 from dynslam2d.slam.cleanconfig import CleanConfig
 from dynslam2d.slam.cleanup import scan_clearing
+from dynslam2d.slam.erasure import EvidenceLedger
 from dynslam2d.slam.grid import GridLevel
 from dynslam2d.types import Pose2D, Scan
 from dynslam2d.vacated import _CELLS_PER_BEAM, VacatedTrace, seen_through_inverse
-from test_vacated_trace import KW, RES, _map, _scan
 
 
 def _missing(lv: GridLevel) -> int:
