@@ -27,7 +27,8 @@ from dynslam2d.types import Pose2D, Scan
 #: Index of each parameter in :attr:`VacatedTrace.params` (what :func:`vacated_scan_kernel` reads).
 _RES, _MARGIN, _GRAZING, _MIN_SIN, _CORE, _OCC, _DEPTH, _NEAR, _OCC32, _MAX_SIDE, _MIN_CELLS, _MIN_EXTENT, \
     _MIN_SHARE = range(13)
-#: The inverse form runs when the clearing rays' cells (Σ over the clearing beams of their longer axis' extent) are
+#: The inverse form runs when the clearing rays' cells (Σ over the clearing beams of their longer axis' extent less the
+#: depth) are
 #: more than this many times the long-occupied cells within their reach (the walk reads ≈ 1.0–1.45 ns a cell, the
 #: inverse ≈ 20–30 ns a long-occupied cell; docs/speed.md, passes vac73 and vac77)
 _INVERSE_RATIO = 40.0
@@ -87,13 +88,14 @@ def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: f
     nb = cx.shape[0]
     if nb < 3:
         return -1
-    # (1) the walk's cost (Σ of the clearing rays' longer extents, cells) and the largest clearing distance
+    # (1) the walk's cost (Σ of the clearing rays' longer extents short of ``depth``, cells) and the largest clearing
+    # distance
     span = 0.0
     r2max = 0.0
     for k in range(nb):
         dx = cx[k] - ox
         dy = cy[k] - oy
-        span += max(abs(dx), abs(dy)) if clear[k] else 0.0
+        span += max(max(abs(dx), abs(dy)) - depth, 0.0) if clear[k] else 0.0
         r2max = max(r2max, dx * dx + dy * dy if clear[k] else 0.0)
     rmax = math.sqrt(r2max) - depth
     if not rmax > 0.0:

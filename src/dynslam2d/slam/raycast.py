@@ -191,7 +191,7 @@ def _write_probs(pr, cells, vals, probs, n):  # pragma: no cover - numba
 
 @njit(cache=True)
 def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j0, hit, stop, use_stop,
-          l_free, l_occ, cap, bits, bits_thr):  # pragma: no cover - numba
+          l_free, l_occ, cap):  # pragma: no cover - numba
     """Rays from array cell (``sx``, ``sy``) into one level (arrays ``logodds``, ``prob``, ``uidx`` (H, W),
     C-contiguous): to cells (``ex[k]``, ``ey[k]``) or, when ``ends`` has columns, to the cells of the map-frame
     ends ``ends`` (2, n), m (``floor(v / r + 0.5)`` minus the offsets ``i0``, ``j0``: OccGridMapBase::updateByScan's
@@ -217,12 +217,7 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
     updated in this scan gets its own log-odds and update index written back and is not listed: the same values;
     the branch mispredicted where runs of new and seen cells alternate, pass upd48). The rays' end cells, which rays
     count and are walked, and each walked ray's lengths, steps and multiplier are computed in loops over all rays
-    before the walks (the end cells vectorised), the walks after in the rays' order (docs/speed.md, pass map22).
-
-    ``bits`` (H, ⌈W / 64⌉) uint64, the level's long-occupied bitmap (:meth:`dynslam2d.slam.grid.GridLevel.
-    keep_long_occupied`; bit ``col & 63`` of word ``[row, col >> 6]``): an occupied update whose stored float32
-    log-odds, compared as float64, is ≥ ``bits_thr`` sets its cell's bit (NaN: no bitmap, nothing set). Free updates
-    only lower a cell (``l_free`` ≤ 0) and clear no bit (stale bits are allowed)."""
+    before the walks (the end cells vectorised), the walks after in the rays' order (docs/speed.md, pass map22)."""
     h, w = logodds.shape
     if sx < 0 or sy < 0 or sx >= w or sy >= h:
         return 0
@@ -375,9 +370,6 @@ def _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, ends, r, i0, j
                 lo[f] = v
                 ui[f] = occ_idx
                 updated = True
-                if lo[f] >= bits_thr:  # (the stored float32, as float64; False for NaN: no bitmap)
-                    x1 = cx[k]
-                    bits[cy[k], x1 >> 6] |= np.uint64(1) << np.uint64(x1 & 63)
         elif u < free_idx:
             v = lo[f] + l_free
             lo[f] = v
@@ -415,7 +407,7 @@ def integrate_rays(
     number of rays integrated.
     """
     return _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, _NO_ENDS, 1.0, 0, 0, hit, _NO_STOP,
-                 False, l_free, l_occ, cap, np.zeros((0, 0), dtype=np.uint64), math.nan)
+                 False, l_free, l_occ, cap)
 
 
 @njit(cache=True)
@@ -481,7 +473,7 @@ def integrate_rays_stop(
     ``stop[k]`` cells, its endpoint cell included, which the reference never marks free. ``stop[k] ≤ 1``
     gives the reference's update exactly. (Where the stop comes from: ``MultiResMap.integrate``.)"""
     return _rays(logodds, prob, uidx, free_idx, occ_idx, sx, sy, ex, ey, _NO_ENDS, 1.0, 0, 0, hit, stop, True,
-                 l_free, l_occ, cap, np.zeros((0, 0), dtype=np.uint64), math.nan)
+                 l_free, l_occ, cap)
 
 
 @njit(cache=True)
@@ -498,8 +490,13 @@ def integrate_levels(hits, clear, c, s, x, y, logodds, prob, uidx, n_levels, res
     having written nothing, when ``MultiResMap.integrate`` must take its other way: a level's arrays do not hold
     the start cell and the cells of the ends' extremes (the level must grow: ``GridLevel._grown_bounds``), the
     three arrays of a level differ in shape, an end is not finite, or the levels hold more than ``max_bytes``
-    (≥ 0; −1: no limit). Level 0's occupied updates keep its long-occupied bitmap ``bits`` for ``bits_thr`` (NaN:
-    none; :func:`_rays`); a bitmap not of level 0's rows and words is not written (nothing set: the caller's)."""
+    (≥ 0; −1: no limit).
+
+    ``bits`` (H, ⌈W / 64⌉) uint64: level 0's long-occupied bitmap (``GridLevel.occ_bits``; bit ``col & 63`` of word
+    ``[row, col >> 6]``) for ``bits_thr`` (NaN, or a bitmap not of level 0's shape: none). After level 0's rays, the
+    end cell of every hit (the only cells an occupied update raises; free updates add ``l_free`` ≤ 0) whose stored
+    float32 log-odds, compared as float64, is ≥ ``bits_thr`` gets its bit set — in a loop of its own, not in
+    :func:`_rays`' walks (their code stays as it was)."""
     ends, hit, box = ray_ends(hits, clear, c, s, x, y)
     if not (math.isfinite(box[0]) and math.isfinite(box[1]) and math.isfinite(box[2]) and math.isfinite(box[3])):
         return -1
@@ -524,13 +521,18 @@ def integrate_levels(hits, clear, c, s, x, y, logodds, prob, uidx, n_levels, res
         r = res[k]
         sx = int(math.floor(x / r + 0.5)) - i0[k]
         sy = int(math.floor(y / r + 0.5)) - j0[k]
-        # (level 0's bitmap threshold, NaN for the other levels and a bitmap not of level 0's shape: one call site)
-        thr = bits_thr if k == 0 and bits.shape[0] == logodds[0].shape[0] and \
-            bits.shape[1] == (logodds[0].shape[1] + 63) >> 6 else math.nan
         n_done = _rays(logodds[k], prob[k], uidx[k], counter[k] + 1, counter[k] + 2, sx, sy, _NO_CELLS,
-                       _NO_CELLS, ends, r, i0[k], j0[k], hit, stop, use_stop, l_free, l_occ, cap, bits, thr)
+                       _NO_CELLS, ends, r, i0[k], j0[k], hit, stop, use_stop, l_free, l_occ, cap)
         if k == 0:
             n0 = n_done
+            h, w = logodds[0].shape
+            if bits_thr == bits_thr and bits.shape[0] == h and bits.shape[1] == (w + 63) >> 6:
+                lo = logodds[0]
+                for q in range(hits.shape[0]):  # (the hits come first in ``ends``; _rays' rounding of their cells)
+                    col = int(math.floor(ends[0, q] / r + 0.5)) - i0[0]
+                    row = int(math.floor(ends[1, q] / r + 0.5)) - j0[0]
+                    if 0 <= col < w and 0 <= row < h and lo[row, col] >= bits_thr:
+                        bits[row, col >> 6] |= np.uint64(1) << np.uint64(col & 63)
     return n0
 
 
