@@ -68,7 +68,9 @@ def run(name: str, data: Path, other_src: Path, warm: int = 30) -> None:
     rec: list[tuple[str, int, int, bool]] = []
     own: dict = {"i": 0, "bufs": None, "res": None}
 
-    def both(ranges, cos_a, sin_a, valid, px, py, th, logodds, i0, j0, params, work, window):
+    def both(ranges, cos_a, sin_a, valid, px, py, th, logodds, i0, j0, params, work, window, *more):
+        # (``more``: this checkout's arguments after ``window`` — since pass vac77 the long-occupied bitmap and the
+        # beams' angles; an other checkout from before takes the first 13 only)
         i = own["i"]
         own["i"] += 1
         bufs = own["bufs"]
@@ -84,7 +86,8 @@ def run(name: str, data: Path, other_src: Path, warm: int = 30) -> None:
         for tag in order:
             k, w, win = (other_k, *bufs) if tag == "other" else (this_k, work, window)
             t0 = time.thread_time_ns()
-            r = k(ranges, cos_a, sin_a, valid, px, py, th, logodds, i0, j0, params, w, win)
+            r = k(ranges, cos_a, sin_a, valid, px, py, th, logodds, i0, j0, params, w, win,
+                  *(more if tag == "this" else ()))
             got[tag] = (time.thread_time_ns() - t0, r)
         a, b = got["this"][1], got["other"][1]
         same = a[0] == b[0] and a[1] == b[1] and np.array_equal(a[2], b[2])

@@ -16,7 +16,9 @@ within ``core`` ≤ 0.5 cells of its centre, with the walk's own per-step arithm
   d < 4 every beam is tested. The beams' angles
   are ``angle_min + k · increment`` (a scan's beams are uniform).
 
-The bitmap is rebuilt whole here when the map changed (its cost printed); in the library every map writer would
+Since pass vac77 the form is the library's (:func:`dynslam2d.vacated.seen_through_inverse`, forced on every call);
+the set-up / enumeration stage timings of the scratch form print 0. The bitmap is rebuilt whole here when the map
+changed (its cost printed); in the library every map writer would
 keep it (docs/speed.md, pass vac73). At every call of :func:`dynslam2d.vacated.vacated_scan_kernel` inside a
 pipeline run this prints the walk and the inverse form's times (warm, best of 3, and first-called in alternating
 order, before anything else reads the map), checks that both give the same cells with the same multiplicity (sorted
@@ -28,7 +30,6 @@ codes) on every call, and what a per-scan choice between the two would cost.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from pathlib import Path
@@ -37,9 +38,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
-from bench_vacated_walk import _beam_axis, _beam_reach, _best, _geometry, _walk_stats  # noqa: E402
+from bench_vacated_walk import _best, _geometry, _walk_stats  # noqa: E402
 
 from dynslam2d.jitbox import njit  # noqa: E402
+from dynslam2d.vacated import _CELLS_PER_BEAM, seen_through_inverse  # noqa: E402
 
 
 @njit(cache=False)
@@ -53,128 +55,17 @@ def _bitmap(logodds, occ_thr, bits):  # pragma: no cover
                 bits[r, c >> 6] |= np.uint64(1) << np.uint64(c & 63)
 
 
-#: de Bruijn sequence and table: the index of a word's lowest set bit from one multiplication
-_DEBRUIJN = np.uint64(0x03F79D71B4CB0A89)
-_DB_TABLE = np.array([0, 1, 48, 2, 57, 49, 28, 3, 61, 58, 50, 42, 38, 29, 17, 4, 62, 55, 59, 36, 53, 51, 43, 22, 45, 39,
-                      33, 30, 24, 18, 12, 5, 63, 47, 56, 27, 60, 41, 37, 16, 54, 35, 52, 21, 44, 32, 23, 11, 46, 26, 40,
-                      15, 34, 20, 31, 10, 25, 14, 19, 9, 13, 8, 7, 6], dtype=np.int64)
-
-
-@njit(cache=False, inline="always")
-def _atan2_approx(y, x):  # pragma: no cover
-    """atan2(y, x) within 1.2e-5 rad (a degree-9 odd polynomial on the octant, |z| ≤ 1; Abramowitz & Stegun
-    4.4.49's form), in (−π, π]."""
-    ax = abs(x)
-    ay = abs(y)
-    if ax >= ay:
-        z = ay / ax if ax > 0.0 else 0.0
-    else:
-        z = ax / ay
-    z2 = z * z
-    t = z * (0.9998660 + z2 * (-0.3302995 + z2 * (0.1801410 + z2 * (-0.0851330 + z2 * 0.0208351))))
-    if ax < ay:
-        t = 0.5 * math.pi - t
-    if x < 0.0:
-        t = math.pi - t
-    return -t if y < 0.0 else t
-
-
-@njit(cache=False)
 def _inverse(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, depth, bits, ang0, inc, th, out_r,
-             out_c, stage=2):  # pragma: no cover
-    """The walk's seen-through cells (with repeats), found from the bitmap ``bits`` (module docstring)."""
-    h, w = logodds.shape
-    nb = cx.shape[0]
-    # every beam's walk: axis, slope, walked major range [alo, ahi], reach²
-    xm = np.zeros(nb, np.bool_)
-    sl = np.empty(nb)
-    alo = np.empty(nb, np.int64)
-    ahi = np.empty(nb, np.int64)
-    rr2 = np.full(nb, -1.0)  # (−1: no walk, so the distance test below fails for it)
-    rmax = -1.0
-    for k in range(1, nb - 1):
-        reach = _beam_reach(k, ox, oy, cx, cy, clear, depth)
-        if not reach > 0.0:
-            continue
-        x_major, slope, _, _, _, _, _, _, _, start, step, cnt = _beam_axis(k, ox, oy, cx, cy, i0, j0, h, w, reach)
-        lo, hi = (start, start + cnt - 1) if step == 1 else (start - cnt + 1, start)
-        if cnt <= 0:
-            continue
-        xm[k] = x_major
-        sl[k] = slope
-        alo[k] = lo
-        ahi[k] = hi
-        rr2[k] = reach * reach
-        rmax = max(rmax, reach)
-    n = 0
-    if rmax < 0.0 or stage == 0:
+             out_c, stage=2):
+    """The walk's seen-through cells (with repeats), found from the bitmap ``bits``: the library's form
+    (:func:`dynslam2d.vacated.seen_through_inverse`, pass vac77; forced, ratio 0). ``stage`` < 2 (the scratch form's
+    set-up / enumeration stages, pass vac73) is not timed any more: 0 returned."""
+    if stage < 2:
         return 0
-    cap = out_r.shape[0]
-    # the rows / columns within the largest reach (+1) of the laser
-    r_lo = max(int(math.floor(oy - rmax)) - 1 - j0, 0)
-    r_hi = min(int(math.ceil(oy + rmax)) + 1 - j0, h - 1)
-    c_lo = max(int(math.floor(ox - rmax)) - 1 - i0, 0)
-    c_hi = min(int(math.ceil(ox + rmax)) + 1 - i0, w - 1)
-    two_pi = 2.0 * math.pi
-    inv_2pi = 1.0 / two_pi
-    inv_inc = 1.0 / inc
-    inv_abs = abs(inv_inc)
-    turn = two_pi * inv_inc  # (beams a turn; floor / ceil with hw ≥ 1 beam absorb this product's rounding)
-    for r in range(r_lo, r_hi + 1):
-        for wd in range(c_lo >> 6, (c_hi >> 6) + 1):
-            word = bits[r, wd]
-            while word != 0:
-                low = word & (~word + np.uint64(1))
-                word ^= low
-                c = (wd << 6) + _DB_TABLE[(low * _DEBRUIJN) >> np.uint64(58)]
-                if c < c_lo or c > c_hi or logodds[r, c] < occ_thr:
-                    continue
-                if stage == 1:
-                    n += 1
-                    continue
-                x = c + i0
-                y = r + j0
-                ddx = x - ox
-                ddy = y - oy
-                d2 = ddx * ddx + ddy * ddy
-                d = math.sqrt(d2)
-                if d > rmax + 1.0:
-                    continue
-                if d < 4.0:
-                    k_lo, k_hi = 1, nb - 2
-                    shifts = 0
-                else:
-                    # (asin(core / d) ≤ 1.003 core / d for d ≥ 4 and core ≤ 0.5; the approximation's 1.2e-5 rad and
-                    # more than the beams' directions' rounding: 2e-5 rad)
-                    phi = _atan2_approx(ddy, ddx) - th - ang0
-                    phi -= two_pi * math.floor(phi * inv_2pi)  # [0, 2π)
-                    hw = (1.003 * core / d + 2e-5) * inv_abs
-                    kc = phi * inv_inc
-                    shifts = 1
-                for sh in range(-1 if shifts else 0, 2 if shifts else 1):
-                    if shifts:
-                        kk = kc + sh * turn
-                        k_lo = max(int(math.floor(kk - hw)), 1)
-                        k_hi = min(int(math.ceil(kk + hw)), nb - 2)
-                    for k in range(k_lo, k_hi + 1):
-                        # (the walk's last test first: (a − m0)² + (ib − n0)² is this sum in either axis order)
-                        if not d2 <= rr2[k]:
-                            continue
-                        if xm[k]:
-                            a, ibc, m0, n0 = x, y, ox, oy
-                        else:
-                            a, ibc, m0, n0 = y, x, oy, ox
-                        if a < alo[k] or a > ahi[k]:
-                            continue
-                        b = n0 + sl[k] * (a - m0)
-                        ib = int(math.floor(b + 0.5))
-                        if ib != ibc or abs(b - ib) > core:
-                            continue
-                        if n < cap:
-                            out_r[n] = r
-                            out_c[n] = c
-                            n += 1
-    return n
+    nb = cx.shape[0]
+    iw = np.empty((2 * _CELLS_PER_BEAM + 3) * nb, np.int64)
+    return seen_through_inverse(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, depth, bits, ang0, inc, th,
+                                out_r, out_c, iw, np.empty(2 * nb), 0.0)
 
 
 #: Calls left out of the statistics (the first compiles the scratch kernels)

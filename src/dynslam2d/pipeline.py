@@ -187,6 +187,8 @@ class Pipeline:
                                      min_depth_m=tc.map_vacate_min_depth,
                                      min_extent=self.config.detect.segment.max_extent,
                                      min_share=tc.map_vacate_min_share, scans=tc.map_vacate_scans)
+        if tc.map_vacate_min_cells > 0 and tc.map_evidence:  # (the finest level's long-occupied cells, for the trace)
+            self.slam.map.keep_long_occupied(tc.map_occupied_logodds)
         #: the last :class:`MapView` of the finest level (a new one only when the level's array or offset changes)
         self._view: MapView | None = None
         #: the front end's final map once :func:`run` has freed its levels (``_release_map``): what

@@ -22,11 +22,14 @@ Frames: map frame (the finest map level's world coordinates), units m. The map i
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
+
+#: no long-occupied bitmap (:class:`MapView`'s default)
+_NO_BITS = np.zeros((0, 0), dtype=np.uint64)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -37,12 +40,16 @@ class MapView:
         logodds: (H, W) float32 log-odds, indexed [row, col] = [y, x] in cells; 0 = unknown.
         i0, j0: absolute cell index of column 0 / row 0 (cell (i, j) is centred at (i·res, j·res)).
         resolution: cell side, m.
+        occ_bits, occ_bits_thr: the level's long-occupied bitmap and its threshold (``GridLevel.occ_bits``: every
+            cell with log-odds ≥ the threshold has its bit set), or a (0, 0) array and NaN: none.
     """
 
     logodds: np.ndarray
     i0: int
     j0: int
     resolution: float
+    occ_bits: np.ndarray = field(default_factory=lambda: _NO_BITS)
+    occ_bits_thr: float = math.nan
 
     @classmethod
     def of_level(cls, level: object) -> MapView | None:
@@ -50,7 +57,8 @@ class MapView:
         lo = level.logodds
         if lo.size == 0:
             return None
-        return cls(lo, int(level.i0), int(level.j0), float(level.resolution))
+        return cls(lo, int(level.i0), int(level.j0), float(level.resolution),
+                   getattr(level, "occ_bits", _NO_BITS), float(getattr(level, "occ_bits_thr", math.nan)))
 
 
 @njit(cache=True)
@@ -315,7 +323,7 @@ def vacated_outlines_kernel(logodds: np.ndarray, i0: int, j0: int, ox: float, oy
 def vacated_core(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx: np.ndarray, cy: np.ndarray,
                  clear: np.ndarray, core: float, occ_thr: float, depth: float, near_thr: float, occ32: np.float32,
                  max_side: int, min_cells: int, res: float, min_extent: float, min_share: float, out_r: np.ndarray,
-                 out_c: np.ndarray, gr: np.ndarray, gc: np.ndarray, window: np.ndarray
+                 out_c: np.ndarray, gr: np.ndarray, gc: np.ndarray, window: np.ndarray, n_seen: int = -1
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:  # pragma: no cover - numba
     """:func:`vacated_outlines_kernel` on buffers the caller keeps between scans: ``out_r`` / ``out_c`` (64 ·
     beams) for the seen-through cells, ``gr`` / ``gc`` (``max_side``² + 1) for a growth, ``window``
@@ -331,8 +339,11 @@ def vacated_core(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx
     float32 map with a Python float.
     Returns the yielding outlines' rows and columns, one outline after the other (each in its growth order),
     their sizes and the number of distinct seen-through cells (0 when fewer than ``min_cells`` were found).
+    ``n_seen`` ≥ 0: the caller found the seen-through cells already (the same cells with the same repeats, in any
+    order: ``out_r`` / ``out_c``' first ``n_seen``; ``dynslam2d.vacated``'s inverse form), the walk is not run.
     """
-    n = seen_through_structure_kernel(logodds, i0, j0, ox, oy, cx, cy, clear, core, occ_thr, out_r, out_c, depth)
+    n = n_seen if n_seen >= 0 else seen_through_structure_kernel(logodds, i0, j0, ox, oy, cx, cy, clear, core,
+                                                                 occ_thr, out_r, out_c, depth)
     if n < min_cells:
         return out_r[:0], out_c[:0], out_r[:0], 0
     h = logodds.shape[0]

@@ -1451,6 +1451,7 @@ class EvidenceLedger:
             unknown = pure & (lv.uidx[row, col] == last)
             new = np.where(unknown, 0.0, cur - delta).astype(np.float32)
             lv.logodds[row, col] = new
+            lv.mark_long_occupied(row, col)  # (a cell can rise with erase_min_share > 1: the level's bitmap, if kept)
             lv.prob[row, col] = encode_probs(np.where(unknown, 0.5, 1.0 / (1.0 + np.exp(-new.astype(np.float64)))))
             lv.uidx[row, col] = np.where(unknown, 0, lv.uidx[row, col])  # (0: never updated)
             if k == 0:

@@ -37,6 +37,8 @@ _NO_U32 = np.zeros((0, 0), dtype=np.uint32)
 _NO_STOP = np.zeros(0)
 _NO_CLEAR = np.zeros((0, 2))
 _NO_ROWS = np.zeros((0, 0), dtype=np.float32)
+#: a level without a long-occupied bitmap (:meth:`GridLevel.keep_long_occupied`)
+_NO_BITS = np.zeros((0, 0), dtype=np.uint64)
 #: float64's dtype (an array's ``dtype is _F64``: the cheap form of ``== np.float64`` for the arrays NumPy makes)
 _F64 = np.dtype(np.float64)
 
@@ -110,6 +112,11 @@ class GridLevel:
             −1: a scan's indices are ≥ 1, so every comparison with them reads the same; 0 lets a large level's
             array be zeroed memory whose pages no ray reached are never touched, docs/speed.md pass mem43).
         i0, j0: absolute cell index of array column 0 / row 0.
+        occ_bits: (H, ⌈W / 64⌉) uint64 bitmap of the long-occupied cells (bit ``col & 63`` of word ``[row, col >> 6]``)
+            for the threshold ``occ_bits_thr`` (NaN and a (0, 0) array: not kept; :meth:`keep_long_occupied`).
+            Invariant: every cell whose stored float32 log-odds, compared as float64, is ≥ ``occ_bits_thr`` has its
+            bit set; a set bit may be stale (its cell lowered since). Kept by every writer of the level: the
+            occupied updates (``raycast._rays``), growth, :meth:`mark_long_occupied` (the erasure).
     """
 
     def __init__(self, resolution: float, growth_margin_cells: int = 100) -> None:
@@ -122,6 +129,8 @@ class GridLevel:
         #: the array's data); weak: an array replaced from outside lets its map go): :meth:`_grow` extends them in
         #: place when the level grows by rows at its top
         self._maps: dict[str, tuple[weakref.ref, int]] = {}
+        self.occ_bits = _NO_BITS
+        self.occ_bits_thr = math.nan
         self.release()
         self.i0 = 0
         self.j0 = 0
@@ -177,6 +186,48 @@ class GridLevel:
             if not names or name in names:
                 setattr(self, name, np.full((0, 0), fill, dtype=dtype))
                 self._maps.pop(name, None)
+        if not names or "logodds" in names:
+            self.occ_bits = _NO_BITS if self.occ_bits_thr != self.occ_bits_thr else self._bits_of(None)
+
+    # ---- long-occupied bitmap ------------------------------------------------------------
+    def keep_long_occupied(self, thr: float) -> None:
+        """Keep :attr:`occ_bits` for log-odds ≥ ``thr`` (> 0: a never-updated cell, 0, is below it) from now on,
+        built from the level as it is (NaN: keep none)."""
+        thr = float(thr)
+        if not thr > 0.0:
+            self.occ_bits_thr = math.nan
+            self.occ_bits = _NO_BITS
+            return
+        self.occ_bits_thr = thr
+        self.occ_bits = self._bits_of(None)
+
+    def _bits_of(self, rows: np.ndarray | None) -> np.ndarray:
+        """A new bitmap of the level for :attr:`occ_bits_thr`, exact (no stale bit) on ``rows`` (array rows; None:
+        all) and 0 elsewhere."""
+        h, w = self.logodds.shape
+        nw = (w + 63) >> 6
+        out = np.zeros((h, nw), dtype=np.uint64)
+        if h == 0 or w == 0:
+            return out
+        lo = self.logodds if rows is None else self.logodds[rows]
+        occ = np.zeros((lo.shape[0], nw * 64), dtype=bool)
+        np.greater_equal(lo, np.float64(self.occ_bits_thr), out=occ[:, :w])  # (as float64: not NumPy's weak float)
+        words = np.packbits(occ, axis=1, bitorder="little").view("<u8")  # (bit c & 63 of word c >> 6)
+        if rows is None:
+            out[:] = words
+        else:
+            out[rows] = words
+        return out
+
+    def mark_long_occupied(self, row: np.ndarray, col: np.ndarray) -> None:
+        """After a write of the cells (``row``, ``col``) (array indices, int64) outside the ray kernel: set the bits
+        of those now ≥ :attr:`occ_bits_thr` (nothing when no bitmap is kept)."""
+        if self.occ_bits_thr != self.occ_bits_thr or row.shape[0] == 0:
+            return
+        up = self.logodds[row, col].astype(np.float64) >= self.occ_bits_thr
+        if up.any():
+            r, c = row[up], col[up]
+            np.bitwise_or.at(self.occ_bits, (r, c >> 6), np.left_shift(np.uint64(1), (c & 63).astype(np.uint64)))
 
     # ---- growth -----------------------------------------------------------------------
     def _grown_bounds(self, imin: int, jmin: int, imax: int, jmax: int) -> tuple[int, int, int, int] | None:
@@ -253,6 +304,12 @@ class GridLevel:
             else:
                 new.fill(fill)
             setattr(self, name, new)
+        if self.occ_bits_thr == self.occ_bits_thr:
+            # the bitmap of the grown level: the new cells are 0 (never updated), below the threshold; every old cell
+            # at or above it is on a row with a set bit (the invariant), so only those rows are re-read
+            old = self.occ_bits
+            rows = np.flatnonzero(old.any(axis=1)) + r0 if old.size else np.zeros(0, dtype=np.int64)
+            self.occ_bits = self._bits_of(rows)
         self.i0, self.j0 = ni0, nj0
         self.n_grows += 1
 
@@ -336,6 +393,15 @@ class GridLevel:
         free_idx = self.update_counter + 1
         occ_idx = self.update_counter + 2
         self.update_counter += 3
+        if self.occ_bits_thr == self.occ_bits_thr:  # (a kept bitmap on this rare way: rebuilt whole after the rays)
+            n = self._integrate_cells(sx, sy, ex, ey, hit, l_free, l_occ, cap, stop, free_idx, occ_idx)
+            self.occ_bits = self._bits_of(None)
+            return n
+        return self._integrate_cells(sx, sy, ex, ey, hit, l_free, l_occ, cap, stop, free_idx, occ_idx)
+
+    def _integrate_cells(self, sx: int, sy: int, ex: np.ndarray, ey: np.ndarray, hit: np.ndarray, l_free: float,
+                         l_occ: float, cap: float, stop: np.ndarray | None, free_idx: int, occ_idx: int) -> int:
+        """:meth:`integrate_cells`' kernel call with the scan's update indices."""
         if stop is not None:
             return int(integrate_rays_stop(
                 self.logodds, self.prob, self.uidx, free_idx, occ_idx, int(sx), int(sy), ex, ey,
@@ -399,6 +465,11 @@ class MultiResMap:
     def resolution(self) -> float:
         return self.levels[0].resolution
 
+    def keep_long_occupied(self, thr: float) -> None:
+        """Keep the finest level's bitmap of cells with log-odds ≥ ``thr`` (:meth:`GridLevel.keep_long_occupied`;
+        the vacated-footprint trace reads it). Not kept when a free update could raise a cell (``l_free`` > 0)."""
+        self.levels[0].keep_long_occupied(thr if self.l_free <= 0.0 else math.nan)
+
     @property
     def empty(self) -> bool:
         return self.levels[0].logodds.size == 0  # (the finest level's GridLevel.empty, read directly: every scan)
@@ -425,7 +496,8 @@ class MultiResMap:
                 (la.resolution, lb.resolution, lc.resolution, 1.0), (la.i0, lb.i0, lc.i0, 0), (la.j0, lb.j0, lc.j0, 0),
                 (la.update_counter, lb.update_counter, lc.update_counter, 0),
                 stop if stop is not None else _NO_STOP, stop is not None,
-                -1 if self.max_bytes is None else self.max_bytes, self.l_free, self.l_occ, self.cap)
+                -1 if self.max_bytes is None else self.max_bytes, self.l_free, self.l_occ, self.cap,
+                la.occ_bits, la.occ_bits_thr)
         else:  # (other counts: the tuples padded to four, one kernel specialisation)
             pad = _FUSED_LEVELS - n_lv
             n0 = integrate_levels(
@@ -436,7 +508,8 @@ class MultiResMap:
                 tuple(lv.i0 for lv in levels) + (0,) * pad, tuple(lv.j0 for lv in levels) + (0,) * pad,
                 tuple(lv.update_counter for lv in levels) + (0,) * pad,
                 stop if stop is not None else _NO_STOP, stop is not None,
-                -1 if self.max_bytes is None else self.max_bytes, self.l_free, self.l_occ, self.cap)
+                -1 if self.max_bytes is None else self.max_bytes, self.l_free, self.l_occ, self.cap,
+                levels[0].occ_bits, levels[0].occ_bits_thr)
         if n0 < 0:
             return -1
         for lv in levels:
@@ -479,7 +552,7 @@ class MultiResMap:
                 (la.prob, lb.prob, lc.prob, _NO_U32), (la.uidx, lb.uidx, lc.uidx, _NO_I32), 3,
                 (la.resolution, lb.resolution, lc.resolution, 1.0), (la.i0, lb.i0, lc.i0, 0), (la.j0, lb.j0, lc.j0, 0),
                 (la.update_counter, lb.update_counter, lc.update_counter, 0), _NO_STOP, False,
-                -1 if mb is None else mb, self.l_free, self.l_occ, self.cap)
+                -1 if mb is None else mb, self.l_free, self.l_occ, self.cap, la.occ_bits, la.occ_bits_thr)
             if n0 >= 0:
                 la.update_counter += 3
                 lb.update_counter += 3

@@ -478,7 +478,7 @@ def integrate_rays_stop(
 
 @njit(cache=True)
 def integrate_levels(hits, clear, c, s, x, y, logodds, prob, uidx, n_levels, res, i0, j0, counter, stop, use_stop,
-                     max_bytes, l_free, l_occ, cap):  # pragma: no cover - numba
+                     max_bytes, l_free, l_occ, cap, bits, bits_thr):  # pragma: no cover - numba
     """One scan into every level in one call, when every level holds it already: the rays' ends in the map frame
     from the ``hits`` (n_hit, 2) then the ``clear`` (m, 2) ends (laser frame, m) moved by the pose (``x``, ``y``,
     cos ``c``, sin ``s``) as :func:`ray_ends` computes them, then per level ``k`` < ``n_levels`` (4-tuples
@@ -490,7 +490,13 @@ def integrate_levels(hits, clear, c, s, x, y, logodds, prob, uidx, n_levels, res
     having written nothing, when ``MultiResMap.integrate`` must take its other way: a level's arrays do not hold
     the start cell and the cells of the ends' extremes (the level must grow: ``GridLevel._grown_bounds``), the
     three arrays of a level differ in shape, an end is not finite, or the levels hold more than ``max_bytes``
-    (≥ 0; −1: no limit)."""
+    (≥ 0; −1: no limit).
+
+    ``bits`` (H, ⌈W / 64⌉) uint64: level 0's long-occupied bitmap (``GridLevel.occ_bits``; bit ``col & 63`` of word
+    ``[row, col >> 6]``) for ``bits_thr`` (NaN, or a bitmap not of level 0's shape: none). After level 0's rays, the
+    end cell of every hit (the only cells an occupied update raises; free updates add ``l_free`` ≤ 0) whose stored
+    float32 log-odds, compared as float64, is ≥ ``bits_thr`` gets its bit set — in a loop of its own, not in
+    :func:`_rays`' walks (their code stays as it was)."""
     ends, hit, box = ray_ends(hits, clear, c, s, x, y)
     if not (math.isfinite(box[0]) and math.isfinite(box[1]) and math.isfinite(box[2]) and math.isfinite(box[3])):
         return -1
@@ -519,6 +525,14 @@ def integrate_levels(hits, clear, c, s, x, y, logodds, prob, uidx, n_levels, res
                        _NO_CELLS, ends, r, i0[k], j0[k], hit, stop, use_stop, l_free, l_occ, cap)
         if k == 0:
             n0 = n_done
+            h, w = logodds[0].shape
+            if bits_thr == bits_thr and bits.shape[0] == h and bits.shape[1] == (w + 63) >> 6:
+                lo = logodds[0]
+                for q in range(hits.shape[0]):  # (the hits come first in ``ends``; _rays' rounding of their cells)
+                    col = int(math.floor(ends[0, q] / r + 0.5)) - i0[0]
+                    row = int(math.floor(ends[1, q] / r + 0.5)) - j0[0]
+                    if 0 <= col < w and 0 <= row < h and lo[row, col] >= bits_thr:
+                        bits[row, col >> 6] |= np.uint64(1) << np.uint64(col & 63)
     return n0
 
 
