@@ -116,9 +116,8 @@ class FreeSpaceMemory:
         :meth:`ref_of` ``(scan, pose, r, par)`` and the test :meth:`test_at` at the scan's stamp made before the memory
         gains the scan (None where ``test`` is False or there is no reference scan); then :meth:`add` of ``scan``
         with ``ref``. The same references, the same test and the same buffer as the three calls."""
-        _, _, _, amin, inc, full, reach = par.tolist()
         st = float(scan.stamp)
-        ref = _make_ref(st, pose, r, amin, inc, full != 0.0, reach, par)
+        ref = self.ref_of(scan, pose, r, par)  # (through the class attribute: benchmarks hook it)
         ft = None
         if test and self._buf and (refs := self._refs(st)):
             ft = object.__new__(FreeTest)
