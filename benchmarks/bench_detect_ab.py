@@ -30,7 +30,7 @@ the other checkout gets its own reference scans, made by its ``make_ref`` from t
 scan's test; later reads of the same scan's test reuse its packed references).
 
     taskset -c 0 python benchmarks/bench_detect_ab.py sim:paper negative_2/right negative_2/left negative_2/rear \
-        --other /work/main/src [--reps 5] [--scans N]
+        --other <other checkout>/src [--reps 5] [--scans N]
 
 Inputs: the names of ``bench_digest.py`` (paths under ``--data``) or any built-in scene (``sim:paper``). Both
 workers inherit this process's CPU affinity: pin the parent with ``taskset``.

@@ -22,7 +22,7 @@ So this points numba at a cache folder of its own (``--cache-dir``, default ``~/
 before numba is imported (the first run there compiles every kernel once).
 
     taskset -c 0 python benchmarks/bench_detect_calls_ab.py negative_2/right negative_2/left negative_2/rear \
-        --other /work/main/src [--reps 7] [--scans 300]
+        --other <other checkout>/src [--reps 7] [--scans 300]
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ Printed per input: median CPU ms per scan of each checkout, their ratio, the med
 median of every stage (``map_update``, ``loops`` and the whole pipeline also over the scans that updated the map).
 
     taskset -c 1 python benchmarks/bench_pipeline_ab.py negative_2/right negative_2/left negative_2/rear \
-        --other /work/main/src [--reps 1]
+        --other <other checkout>/src [--reps 1]
 
 ``--parts`` instead runs this checkout alone (after the same warm-up) with thread-CPU timers around the parts of
 the per-scan path and prints, per part, the median and mean µs over the scans that update the map and over the

@@ -83,7 +83,7 @@ def main() -> None:
                     help="the other checkout's src/ (default: this one)")
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--flush", type=int, default=0, metavar="MB", help="touch MB of memory before every update")
-    ap.add_argument("--data", type=Path, default=Path("/work/shared/data"))
+    ap.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[2] / "shared" / "data")
     a = ap.parse_args()
     check_inputs(ap, a.inputs)
     other = other_tracker_module(a.other)

@@ -438,7 +438,7 @@ def compile_probe() -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("inputs", nargs="*")
-    ap.add_argument("--data", type=Path, default=Path("/work/shared/data"))
+    ap.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[2] / "shared" / "data")
     ap.add_argument("--compile", action="store_true", help="measure the cold compile in 3 fresh processes")
     ap.add_argument("--probe", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
