@@ -28,9 +28,8 @@ from dynslam2d.types import Pose2D, Scan
 _RES, _MARGIN, _GRAZING, _MIN_SIN, _CORE, _OCC, _DEPTH, _NEAR, _OCC32, _MAX_SIDE, _MIN_CELLS, _MIN_EXTENT, \
     _MIN_SHARE = range(13)
 #: The inverse form runs when the clearing rays' cells (Σ over the clearing beams of their longer axis' extent less the
-#: depth) are
-#: more than this many times the long-occupied cells within their reach (the walk reads ≈ 1.0–1.45 ns a cell, the
-#: inverse ≈ 20–30 ns a long-occupied cell; docs/speed.md, passes vac73 and vac77)
+#: depth) are more than this many times the long-occupied cells within their reach (the walk reads ≈ 1.0–1.45 ns a
+#: cell, the inverse ≈ 20–30 ns a long-occupied cell; docs/speed.md, passes vac73 and vac77)
 _INVERSE_RATIO = 40.0
 #: Long-occupied cells the inverse form takes at most, per beam (beyond: the walk)
 _CELLS_PER_BEAM = 16
