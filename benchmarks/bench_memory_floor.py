@@ -63,7 +63,9 @@ for name, _sig in kernels:
 rows.append(("+ the kernels' modules (signature-declared kernels load here)", rss()))
 import dynslam2d.cli, dynslam2d.pipeline  # noqa: E401
 rows.append(("+ the rest of a run's imports (cli, pipeline)", rss()))
-from dynslam2d.jitwarm import _dispatcher, parse_signature
+sys.path.insert(0, sys.argv[2])  # (benchmarks/: kernelwarm's parser reads literal types, ``Literal[int](64)``)
+from kernelwarm import parse_signature
+from dynslam2d.jitwarm import _dispatcher
 per = []
 skipped = []
 for name, sig in kernels:
@@ -126,7 +128,8 @@ def main() -> None:
             raise SystemExit(f"run failed: {res.stderr[-2000:]}")
         kfile = Path(tmp) / "kernels.json"
         kernels = json.loads(kfile.read_text())
-        res = subprocess.run([sys.executable, "-c", STEPS, str(kfile)], env=env, capture_output=True, text=True)
+        here = str(Path(__file__).resolve().parent)
+        res = subprocess.run([sys.executable, "-c", STEPS, str(kfile), here], env=env, capture_output=True, text=True)
         if res.returncode != 0:
             raise SystemExit(f"floor probe failed: {res.stderr[-2000:]}")
     out = json.loads(res.stdout.strip().splitlines()[-1])

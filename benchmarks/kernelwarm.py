@@ -20,10 +20,27 @@ warm-up's or an earlier one); only the process's memory grows (≈ 1-2 MiB for t
 
 from __future__ import annotations
 
+import argparse
+import json
+import re
 import sys
 from collections.abc import Iterable, Iterator
+from pathlib import Path
 from types import ModuleType
 from typing import Any
+
+#: every (kernel, argument types) that a run of the benchmarks' inputs (:data:`RECORD_INPUTS`) holds at its end with
+#: a cold cache, callees included; written by ``python benchmarks/kernelwarm.py --record`` (do not edit by hand)
+RUN_KERNELS = Path(__file__).with_name("run_kernels.json")
+
+#: the inputs :func:`record` runs: bench_digest.py's twelve (the six real recordings of the release lockstep, the
+#: other two leg_tracker bags and four sims) and the README's first command's sim:paper
+RECORD_INPUTS = ("negative_2/right", "negative_2/left", "negative_2/rear", "positive_1", "overtakes", "mit-csail",
+                 "positive_7", "demo", "sim:drive", "sim:crowd", "sim:stop-and-go", "sim:corridor", "sim:paper")
+
+#: numba's repr of a literal type, ``Literal[int](64)`` (a module constant one kernel passes to another, e.g.
+#: ``mapevidence._free_steps``'s ``cap``): read as ``literal(64)`` (``numba.core.types.literal``)
+_LITERAL = re.compile(r"Literal\[\w+\]\(")
 
 
 def _dispatchers(prefix: str, extra: Iterable[ModuleType] = ()) -> Iterator[Any]:
@@ -119,8 +136,156 @@ def load_late_imports() -> list[str]:
     return done
 
 
+def _project_types(prefix: str = "dynslam2d") -> dict[str, Any]:
+    """numba types the loaded ``prefix`` modules define, by their names (``dynslam2d.jitvec.vec4``: a callee's
+    argument type in the record)."""
+    from numba.core import types
+
+    out: dict[str, Any] = {}
+    for n, m in list(sys.modules.items()):
+        if m is not None and (n == prefix or n.startswith(prefix + ".")):
+            for v in list(vars(m).values()):
+                if isinstance(v, types.Type) and str(v).isidentifier():
+                    out.setdefault(str(v), v)
+    return out
+
+
+def parse_signature(text: str) -> tuple[Any, ...]:
+    """The numba argument types of a signature's text (``dynslam2d.jitwarm.signature_text``'s, as in
+    :mod:`dynslam2d.jitmanifest` and :data:`RUN_KERNELS`): ``dynslam2d.jitwarm.parse_signature``'s names (numba's
+    types), and also literal types (``Literal[int](64)``) and the types the loaded ``dynslam2d`` modules define
+    (import the kernel's module first)."""
+    from numba.core import types
+
+    names: dict[str, Any] = dict(vars(types))
+    names.update(_project_types())
+    names.update(bool=types.boolean, omitted=lambda default: types.Omitted(default), literal=types.literal)
+    sig = eval(_LITERAL.sub("literal(", text), {"__builtins__": {}}, names)  # noqa: S307 - recorded numba names only
+    return tuple(sig)
+
+
+def recorded_kernels(path: Path = RUN_KERNELS) -> list[tuple[str, str]]:
+    """The (kernel, signature text) pairs of :data:`RUN_KERNELS` and of :mod:`dynslam2d.jitmanifest` (the
+    process's checkout's), each once, the manifest's first; the record's part is empty when its file is missing."""
+    pairs: list[tuple[str, str]] = []
+    try:
+        from dynslam2d.jitmanifest import KERNELS
+        pairs += [(n, s) for n, s in KERNELS]
+    except ImportError:  # (a checkout before it)
+        pass
+    if path.is_file():
+        pairs += [(n, s) for n, s in json.loads(path.read_text())]
+    return list(dict.fromkeys(pairs))
+
+
+def _dispatcher(name: str) -> Any:
+    """The dispatcher ``module.attr`` of the process's checkout (its module imported when it is not yet)."""
+    import importlib
+
+    module, _, attr = name.rpartition(".")
+    return getattr(importlib.import_module(module), attr)
+
+
+def compile_recorded(kernels: Iterable[tuple[str, str]] | None = None) -> tuple[int, list[str]]:
+    """Compile, or load from numba's cache, each recorded (kernel, signature) (:func:`recorded_kernels` by default)
+    that the process's checkout's dispatcher does not hold yet: what :func:`load_cached_kernels` cannot load when the
+    cache does not hold it (a fresh checkout, or a kernel module changed since the cache was written: the
+    warm-up compiles what it reaches, the rest would compile inside the measured run). Returns (how many were
+    compiled or loaded, the pairs that failed: signature not parsed, or the kernel does not compile for it). A
+    kernel this checkout does not have (an older or newer checkout than the record) is skipped, not failed."""
+    done, failed = 0, []
+    for name, text in (recorded_kernels() if kernels is None else kernels):
+        try:
+            disp = _dispatcher(name)
+        except (ImportError, AttributeError):
+            continue
+        try:
+            args = parse_signature(text)
+            if args in disp.overloads or not getattr(disp, "_can_compile", True):
+                continue
+            disp.compile(args)
+        except Exception:  # noqa: BLE001 - left to the run, as without this call; reported to the caller
+            failed.append(f"{name} {text}")
+            continue
+        done += 1
+    return done, failed
+
+
 def preload(extra: Iterable[ModuleType] = ()) -> None:
-    """After a warm-up: :func:`load_cached_kernels` (``extra``: an A/B's other side's modules) and
-    :func:`load_late_imports`, so that the measured run loads nothing the warm-up did not reach."""
+    """After a warm-up: :func:`load_cached_kernels` (``extra``: an A/B's other side's modules),
+    :func:`compile_recorded` (the process's own checkout) and :func:`load_late_imports`, so that the measured run
+    loads or compiles nothing the warm-up did not reach."""
     load_cached_kernels(extra=extra)
+    compile_recorded()
     load_late_imports()
+
+
+def held_signatures(prefix: str = "dynslam2d") -> list[tuple[str, str]]:
+    """(kernel, signature text) of every overload the loaded ``prefix`` modules' dispatchers hold."""
+    from numba.core.registry import CPUDispatcher
+
+    from dynslam2d.jitwarm import signature_text
+
+    mods = [(n, m) for n, m in list(sys.modules.items())
+            if m is not None and (n == prefix or n.startswith(prefix + "."))]
+    return [(f"{n}.{attr}", signature_text(sig)) for n, m in mods for attr, obj in list(vars(m).items())
+            if isinstance(obj, CPUDispatcher) and obj.__module__ == n for sig in obj.signatures]
+
+
+def record(data: Path, inputs: Iterable[str] = RECORD_INPUTS) -> list[tuple[str, str]]:
+    """Run a ``Pipeline`` over every scan of each input (bench_digest.py's names; one missing under ``data`` is
+    skipped) in this process and return :func:`held_signatures`, sorted. Run it with an empty numba cache
+    (``NUMBA_CACHE_DIR``, as ``--record`` does) so that the callees a caller loaded from the cache would hide are
+    compiled and held too."""
+    from bench_digest import INPUTS
+    from bench_pipeline import scan_loop_gc
+
+    from dynslam2d.inputs import open_source
+    from dynslam2d.pipeline import Pipeline
+
+    for name in inputs:
+        rel, topic = INPUTS.get(name, (name, None))
+        path = rel if rel.startswith("sim:") else str(data / rel)
+        if not rel.startswith("sim:") and not Path(path).exists():
+            print(f"{name}: missing under {data}, skipped", file=sys.stderr)
+            continue
+        pipe = Pipeline()
+        with scan_loop_gc():
+            for scan in open_source(path, topic):
+                pipe.process(scan)
+        print(f"{name}: done, {len(held_signatures())} signatures held", file=sys.stderr)
+    return sorted(set(held_signatures()))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description="Record the kernels and signatures the benchmarks' inputs call "
+                                             f"(written to {RUN_KERNELS.name}, read by preload()), or check them.")
+    ap.add_argument("--record", action="store_true", help="run every input (cold numba cache in a temporary "
+                    "folder) and write the record")
+    ap.add_argument("--check", action="store_true", help="compile or load every recorded signature in this "
+                    "process and list the ones that fail")
+    ap.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[2] / "shared" / "data")
+    ap.add_argument("--inputs", nargs="+", default=list(RECORD_INPUTS))
+    args = ap.parse_args()
+    if args.record:
+        import os
+        import subprocess
+        import tempfile
+
+        if "NUMBA_CACHE_DIR" not in os.environ:
+            with tempfile.TemporaryDirectory(prefix="kernelwarm-record-") as tmp:
+                env = dict(os.environ, NUMBA_CACHE_DIR=tmp)
+                raise SystemExit(subprocess.call([sys.executable, __file__, *sys.argv[1:]], env=env))
+        pairs = record(args.data, args.inputs)
+        RUN_KERNELS.write_text(json.dumps(pairs, indent=0) + "\n")
+        print(f"{len(pairs)} signatures of {len({n for n, _ in pairs})} kernels written to {RUN_KERNELS}")
+    if args.check:
+        done, failed = compile_recorded()
+        print(f"{done} recorded signatures compiled or loaded, {len(failed)} failed")
+        for f in failed:
+            print(f"  failed: {f}")
+        raise SystemExit(1 if failed else 0)
+
+
+if __name__ == "__main__":
+    main()

@@ -18,8 +18,21 @@
 #   result_columns.txt      md5 of each table's result columns (every column but the four speed ones): all six
 #                           must agree when the two releases are bit-identical
 #
-# The first lockstep after a change to a kernel module compiles that module's kernels inside its first input:
-# ab_1's first row can carry that compile (its mean reads far too high); quote ab_2.
+#   ab_1s.txt, ab_2s.txt    the same locksteps in the other role: the previous release's own bench_pipeline_ab.py
+#                           with --other this checkout (one run per input, --reps 1: ≈ 1 min each; ab_1s fills the
+#                           wait for the real tables on core 1, ab_2s runs alone after ab_2)
+#   ab_roles_{1,2}.txt      both roles side by side per input and stage (benchmarks/ab_roles.py): new / previous
+#                           with the new release as "this", as "other", and their geometric mean, in which the
+#                           roles' bias (≈ 2-4 %) cancels; quote the geometric means of ab_roles_2
+#
+# The workers' warm-up compiles every kernel signature benchmarks/run_kernels.json records (kernelwarm.preload)
+# that numba's cache does not hold, so a lockstep right after a change to a kernel module no longer compiles the
+# kernels first called after the warm-up inside its first input (ab_1's first row, before pass bch88); each row
+# says how many kernels were loaded or compiled inside the measured runs (0 expected).
+#
+# Environment: RELEASE_INPUTS (space-separated bench_digest.py names) replaces the lockstep inputs,
+# RELEASE_AB_ONLY=1 runs only the four locksteps and the role tables (a check of this script: with
+# RELEASE_INPUTS="sim:drive" about 2 minutes).
 set -euo pipefail
 if [ $# -lt 2 ] || [ ! -d "$1/src/dynslam2d" ]; then
   echo "usage: bash benchmarks/release_figures.sh PREV_CHECKOUT OUT_DIR [DATA_DIR]" \
@@ -32,7 +45,7 @@ REPO=$(cd "$(dirname "$0")/.." && pwd)
 DATA=${3:-$REPO/../shared/data}
 DATA=$(cd "$DATA" && pwd)
 MIT=$DATA/mit-csail/mit-csail.clf
-INPUTS=(negative_2/right negative_2/left negative_2/rear positive_1 overtakes mit-csail sim:drive)
+read -r -a INPUTS <<< "${RELEASE_INPUTS:-negative_2/right negative_2/left negative_2/rear positive_1 overtakes mit-csail sim:drive}"
 cd "$REPO"
 export PYTHONPATH=$REPO/src
 
@@ -44,9 +57,26 @@ mit() {  # mit <src> <file>
   PYTHONPATH=$1 taskset -c 1 python benchmarks/bench_real_speed.py --data "$DATA" --only mit-csail --reps 3 > "$OUT/$2" 2>&1
 }
 
+ab() {  # ab <n>: the lockstep, new release as "this" (2 runs per input), then as "other" (the previous release's
+        # own script, 1 run per input; left out when the previous release has no bench_pipeline_ab.py)
+  taskset -c 0 python benchmarks/bench_pipeline_ab.py "${INPUTS[@]}" --data "$DATA" --other "$PREV/src" --reps 2 \
+    > "$OUT/ab_$1.txt" 2>&1
+  if [ -f "$PREV/benchmarks/bench_pipeline_ab.py" ]; then
+    (cd "$PREV" && PYTHONPATH=$PREV/src taskset -c 0 python benchmarks/bench_pipeline_ab.py "${INPUTS[@]}" \
+       --data "$DATA" --other "$REPO/src" --reps 1 > "$OUT/ab_$1s.txt" 2>&1)
+    python benchmarks/ab_roles.py "$OUT/ab_$1.txt" "$OUT/ab_$1s.txt" > "$OUT/ab_roles_$1.txt"
+  fi
+}
+
 uptime > "$OUT/load.txt"
-taskset -c 0 python benchmarks/bench_pipeline_ab.py "${INPUTS[@]}" --data "$DATA" --other "$PREV/src" --reps 2 \
-  > "$OUT/ab_1.txt" 2>&1 &
+if [ "${RELEASE_AB_ONLY:-0}" = 1 ]; then
+  ab 1
+  ab 2
+  uptime >> "$OUT/load.txt"
+  cat "$OUT"/ab_roles_*.txt 2> /dev/null || true
+  exit 0
+fi
+ab 1 &
 P=$!
 real "$REPO" real_a1
 real "$PREV" real_b1
@@ -77,11 +107,11 @@ real "$REPO" real_a3
 real "$PREV" real_b3
 mit "$PREV/src" mit_b2.txt
 mit "$REPO/src" mit_a2.txt
-taskset -c 0 python benchmarks/bench_pipeline_ab.py "${INPUTS[@]}" --data "$DATA" --other "$PREV/src" --reps 2 \
-  > "$OUT/ab_2.txt" 2>&1
+ab 2
 uptime >> "$OUT/load.txt"
 for t in "$OUT"/real_*/table.md; do
   printf '%s ' "$(basename "$(dirname "$t")")"
   grep '^|' "$t" | awk -F'|' '{for(i=2;i<=NF-4;i++) printf "%s|",$i; print ""}' | md5sum | cut -c1-32
 done > "$OUT/result_columns.txt"
 cat "$OUT/result_columns.txt"
+cat "$OUT"/ab_roles_2.txt 2> /dev/null || true

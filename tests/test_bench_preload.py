@@ -77,3 +77,64 @@ def test_preload_loads_every_cached_signature_and_the_run_then_loads_nothing(tmp
     finally:
         for n in (name, pkg):
             sys.modules.pop(n, None)
+
+
+LITERAL_SOURCE = '''
+import numpy as np
+from numba import njit
+
+CAP = 64
+
+
+@njit(cache=True)
+def capped(x, cap):
+    return min(x, cap)
+
+
+@njit(cache=True)
+def caller(x):
+    return capped(x, CAP)  # (a module constant: the callee is compiled for ``Literal[int](64)``)
+'''
+
+
+def test_a_literal_signature_is_parsed_and_compiled_by_the_preload(tmp_path, monkeypatch):
+    kw = _kernelwarm()
+    pkg = "bch88literal"
+    (tmp_path / pkg).mkdir()
+    (tmp_path / pkg / "__init__.py").write_text("")
+    (tmp_path / pkg / "kern.py").write_text(LITERAL_SOURCE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    name = f"{pkg}.kern"
+    try:
+        mod = _fresh(name)
+        assert mod.caller(100) == 64
+        held = kw.held_signatures(pkg)
+        literal = [(n, s) for n, s in held if "Literal[int](64)" in s]
+        assert [n for n, _ in literal] == [f"{name}.capped"], held
+        mod = _fresh(name)  # a new process's view
+        done, failed = kw.compile_recorded(held + [(f"{pkg}.gone.kernel", "(int64,)")])  # (one this side lacks)
+        assert failed == [] and done == 2
+        assert len(mod.capped.overloads) == 1 and len(mod.caller.overloads) == 1
+        assert kw.compile_recorded(held) == (0, [])  # (held already)
+        assert kw.compile_recorded([(f"{name}.capped", "(int64, Nonsense[int](3),)")])[1]  # a failure is listed
+    finally:
+        for n in (name, pkg):
+            sys.modules.pop(n, None)
+
+
+def test_every_recorded_kernel_parses_and_names_a_kernel_of_this_checkout():
+    """Each (kernel, signature) of jitmanifest.py and benchmarks/run_kernels.json reads back to the same text and
+    names a numba kernel: a signature the preload could not parse would be compiled inside a measured run."""
+    from numba.core.registry import CPUDispatcher
+
+    from dynslam2d.jitwarm import signature_text
+
+    kw = _kernelwarm()
+    pairs = kw.recorded_kernels()
+    assert len(pairs) > 40 and kw.RUN_KERNELS.is_file()
+    assert any("Literal[" in s for _, s in pairs)  # (mapevidence._free_steps's cap)
+    assert any("vec4" in s for _, s in pairs)  # (a type of the project's: jitvec.py)
+    for name, text in pairs:
+        module, _, attr = name.rpartition(".")
+        assert isinstance(getattr(importlib.import_module(module), attr), CPUDispatcher), name
+        assert signature_text(kw.parse_signature(text)) == text, name
