@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Re-measure the speed figures the README and docs/real.md quote, this checkout against a previous release, in the
-# order and pairing the docs describe (not run by pytest; about 15 minutes on a quiet 2-core machine).
+# order and pairing the docs describe (not run by pytest; about 15 minutes on a quiet 2-core machine: 13 before the
+# locksteps ran in both roles, pass bch88, which adds ≈ 1.5 min).
 #
 #   git worktree add --detach /some/where/prev <previous release>
 #   bash benchmarks/release_figures.sh /some/where/prev OUT_DIR [DATA_DIR]
