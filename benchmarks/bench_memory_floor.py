@@ -4,8 +4,9 @@ kernel cache — the floor under any peak with numba in the process.
 
     PYTHONPATH=src python benchmarks/bench_memory_floor.py ../shared/data/mit-csail/mit-csail.clf [--top 12]
 
-First runs ``dynslam2d run INPUT --out TMP -q`` (which also fills the cache) and records the signature of every
-kernel the run held; then, in a fresh interpreter, imports step by step and loads those kernels one at a time
+First runs ``dynslam2d run INPUT --out TMP -q`` twice (the first fills the cache) and records the signature of
+every kernel the second run held (read by ``kernelwarm.parse_signature``: literal types and the project's ``vec4``
+too); then, in a fresh interpreter, imports step by step and loads those kernels one at a time
 (``Dispatcher.compile`` with a warm cache loads the cached code), printing the RSS after each step, the kernels
 that added most, and the cache's size on disk. The loop closure's ``scipy.sparse`` import and SciPy's SuperLU and
 connected components loaded without their packages (lazyscipy.py; when a run first needs them) are measured last.
@@ -26,8 +27,8 @@ RECORD = r"""
 import json, sys
 from numba.core.registry import CPUDispatcher
 from dynslam2d.cli import main
-out, inp = sys.argv[1], sys.argv[2]
-sys.argv = ["dynslam2d", "run", inp, "--out", out + "/run", "-q"]
+out, inp, run = sys.argv[1], sys.argv[2], sys.argv[3]
+sys.argv = ["dynslam2d", "run", inp, "--out", out + "/" + run, "-q"]
 try:
     main()
 except SystemExit:
@@ -123,9 +124,13 @@ def main() -> None:
     args = ap.parse_args()
     env = dict(os.environ)
     with tempfile.TemporaryDirectory(prefix="bench-memory-floor-") as tmp:
-        res = subprocess.run([sys.executable, "-c", RECORD, tmp, args.input], env=env, capture_output=True, text=True)
-        if res.returncode != 0:
-            raise SystemExit(f"run failed: {res.stderr[-2000:]}")
+        # twice: the first run fills the cache (a cold cache: the callees compiled with their callers are held too,
+        # with signatures a warm run never loads apart), the second holds what a warm run calls from Python
+        for run in ("fill", "warm"):
+            res = subprocess.run([sys.executable, "-c", RECORD, tmp, args.input, run], env=env, capture_output=True,
+                                 text=True)
+            if res.returncode != 0:
+                raise SystemExit(f"run failed: {res.stderr[-2000:]}")
         kfile = Path(tmp) / "kernels.json"
         kernels = json.loads(kfile.read_text())
         here = str(Path(__file__).resolve().parent)
