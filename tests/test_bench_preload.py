@@ -38,14 +38,19 @@ def _fresh(name: str):
     return importlib.import_module(name)
 
 
+def _package(tmp_path: Path, monkeypatch, pkg: str, source: str) -> str:
+    """A package ``pkg`` with module ``kern`` holding ``source``, importable; returns the module's name."""
+    (tmp_path / pkg).mkdir()
+    (tmp_path / pkg / "__init__.py").write_text("")
+    (tmp_path / pkg / "kern.py").write_text(source)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    return f"{pkg}.kern"
+
+
 def test_preload_loads_every_cached_signature_and_the_run_then_loads_nothing(tmp_path, monkeypatch):
     kw = _kernelwarm()
     pkg = "neg71preload"
-    (tmp_path / pkg).mkdir()
-    (tmp_path / pkg / "__init__.py").write_text("")
-    (tmp_path / pkg / "kern.py").write_text(SOURCE)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    name = f"{pkg}.kern"
+    name = _package(tmp_path, monkeypatch, pkg, SOURCE)
     try:
         mod = _fresh(name)
         assert mod.plus_one(1) == 2 and mod.plus_one(1.5) == 2.5  # two signatures compiled and cached
@@ -100,11 +105,7 @@ def caller(x):
 def test_a_literal_signature_is_parsed_and_compiled_by_the_preload(tmp_path, monkeypatch):
     kw = _kernelwarm()
     pkg = "bch88literal"
-    (tmp_path / pkg).mkdir()
-    (tmp_path / pkg / "__init__.py").write_text("")
-    (tmp_path / pkg / "kern.py").write_text(LITERAL_SOURCE)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    name = f"{pkg}.kern"
+    name = _package(tmp_path, monkeypatch, pkg, LITERAL_SOURCE)
     try:
         mod = _fresh(name)
         assert mod.caller(100) == 64
