@@ -10,8 +10,13 @@ loads, after the warm-up, every signature numba's cache holds for every kernel o
 (the checkout the process imports, either side of an A/B): the measured run then finds them loaded.
 The pose graph's first optimisation imports ``scipy.sparse`` and loads SciPy's SuperLU (``dynslam2d.lazyscipy``) the
 same way, ≈ 90 ms of thread CPU, after the warm-up on negative_2 (its first loop); :func:`preload` does both after
-the warm-up. :func:`kernel_cache_calls` counts numba's cache look-ups (loads and compiles) so that a benchmark can
-show that none happened inside its measured run.
+the warm-up. The cache holds only what some run compiled for the source as it is now: in a fresh checkout, or after
+a kernel module changed (numba drops that module's index), those kernels were compiled inside the measured run
+(release 39's ``ab_1``). :func:`compile_recorded`, also in :func:`preload`, compiles (or loads) every signature
+:data:`RUN_KERNELS` records that the dispatchers still lack, so the warm-up pays that too. Re-record it
+(``python benchmarks/kernelwarm.py --record``) after a kernel's signature changes; ``--check`` compiles or loads
+each entry and lists the ones that fail. :func:`kernel_cache_calls` counts numba's cache look-ups (loads and
+compiles) so that a benchmark can show that none happened inside its measured run.
 
 Loading a signature the run never calls changes nothing it computes: numba dispatches a call to the overload of its
 exact argument types when it holds one, and a run's types are in the cache after any run of the same input (the
