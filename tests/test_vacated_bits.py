@@ -157,7 +157,7 @@ def test_the_inverse_form_finds_the_walks_cells_on_random_maps_with_stale_bits()
 
 def test_the_choice_takes_the_inverse_form_on_a_sparse_map_and_the_walk_on_a_dense_one() -> None:
     """The cost model (pass vac83): few long-occupied cells in reach → the inverse form runs (and finds the walk's
-    cells); many → −1 (the walk), then ``_RECOUNT`` − 1 scans decline without counting, then it counts again. Forced
+    cells); many → −1 (the walk), then the next ``_RECOUNT`` − 1 scans decline at once, then it counts again. Forced
     (cell cost 0) both forms give the same cells on the dense map too."""
     rng = np.random.default_rng(3)
     clean = CleanConfig()
@@ -189,11 +189,12 @@ def test_the_choice_takes_the_inverse_form_on_a_sparse_map_and_the_walk_on_a_den
             assert n > 0 and fw[2 * nb] == np.count_nonzero(lo >= 6.0)  # (every long-occupied cell is in reach)
             continue
         over = fw[2 * nb]
-        assert over > 0 and fw[2 * nb + 1] == 0
-        for s in range(1, _RECOUNT):  # declined from the memory: not counted again
+        assert over > 0 and fw[2 * nb + 1] == _RECOUNT - 1
+        for s in range(1, _RECOUNT):  # declined at once: not counted again
+            fw[2 * nb] = -5.0
             assert seen_through_inverse(*args, 1.0 / RES, bits, scan.angle_min, scan.angle_increment, pose.theta, ir,
                                         ic, iw, fw, _INV_CELL) == -1
-            assert fw[2 * nb + 1] == s and fw[2 * nb] == over
+            assert fw[2 * nb + 1] == _RECOUNT - 1 - s and fw[2 * nb] == -5.0
         assert seen_through_inverse(*args, 1.0 / RES, bits, scan.angle_min, scan.angle_increment, pose.theta, ir, ic,
                                     iw, fw, _INV_CELL) == -1
-        assert fw[2 * nb + 1] == 0  # (counted again)
+        assert fw[2 * nb] == over and fw[2 * nb + 1] == _RECOUNT - 1  # (counted again)

@@ -35,7 +35,7 @@ _RES, _MARGIN, _GRAZING, _MIN_SIN, _CORE, _OCC, _DEPTH, _NEAR, _OCC32, _MAX_SIDE
 _WALK_BEAM = 9.0
 _INV_WORD = 4.0
 _INV_CELL = 30.0
-#: Scans the choice keeps the walk without counting the cells again, when the last count was over the budget
+#: After a count of the cells over the budget, the choice keeps the walk for this many scans less one without looking
 #: (the count costs about as much as the inverse form's enumeration; the cells in reach change slowly between scans)
 _RECOUNT = 8
 #: Long-occupied cells the inverse form takes at most, per beam (beyond: the walk)
@@ -90,11 +90,15 @@ def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: f
     Runs only where the cost model (``_WALK_BEAM``, ``_INV_WORD``; ``cell``: the cost of an enumerated cell, ≤ 0:
     always) says it costs less than the walk and the cells fit the buffer ``iw`` (int64, 2 · ``_CELLS_PER_BEAM`` ·
     beams + 3 · beams; ``fw`` float64, 2 · beams, + 2 to remember the last count between scans: then while the last
-    count was over the budget, ``_RECOUNT`` − 1 scans of 8 decline without counting); −1 else, and when more than
+    count was over the budget, the next ``_RECOUNT`` − 1 scans decline at once); −1 else, and when more than
     ``out_r``' length are found (the walk's cap then decides which it keeps)."""
     h, w = logodds.shape
     nb = cx.shape[0]
     if nb < 3:
+        return -1
+    mem = fw.shape[0] >= 2 * nb + 2
+    if mem and cell > 0.0 and fw[2 * nb + 1] > 0.0:  # (a count over the budget fewer than _RECOUNT scans ago)
+        fw[2 * nb + 1] -= 1.0
         return -1
     # (1) the walk's cost (Σ of the clearing rays' longer extents short of ``depth``, cells) and the largest clearing
     # distance
@@ -115,16 +119,12 @@ def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: f
     c_hi = min(int(math.ceil(ox + rmax)) + 1 - i0, w - 1)
     capc = _CELLS_PER_BEAM * nb
     most = capc
-    mem = fw.shape[0] >= 2 * nb + 2
     if cell > 0.0:  # (cell ≤ 0: always, if the buffer holds them)
         budget = span + _WALK_BEAM * nb - _INV_WORD * max(r_hi - r_lo + 1, 0) * max((c_hi >> 6) - (c_lo >> 6) + 1, 0)
         most = min(capc, int(budget / cell)) if budget > 0.0 else -1
-        if mem:
-            if fw[2 * nb] > most and fw[2 * nb + 1] < _RECOUNT - 1:  # (over the budget last time: not counted again)
-                fw[2 * nb + 1] += 1.0
-                return -1
-            fw[2 * nb + 1] = 0.0
-            fw[2 * nb] = most + 1.0  # (the count when it stops over the budget)
+        if mem:  # (the count when it stops over the budget, and the scans to decline then; both reset below)
+            fw[2 * nb] = most + 1.0
+            fw[2 * nb + 1] = _RECOUNT - 1.0
         if most < 0:
             return -1
     m = 0
@@ -144,6 +144,7 @@ def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: f
                 m += 1
     if mem:
         fw[2 * nb] = m
+        fw[2 * nb + 1] = 0.0
     # (3) every beam's walk as the walk sets it up: axis, slope, walked major range [alo, ahi], reach²
     xm = iw[2 * capc:2 * capc + nb]
     alo = iw[2 * capc + nb:2 * capc + 2 * nb]
