@@ -18,7 +18,7 @@ from dynslam2d.slam.cleanup import scan_clearing
 from dynslam2d.slam.erasure import EvidenceLedger
 from dynslam2d.slam.grid import GridLevel
 from dynslam2d.types import Pose2D, Scan
-from dynslam2d.vacated import _CELLS_PER_BEAM, VacatedTrace, seen_through_inverse
+from dynslam2d.vacated import _CELLS_PER_BEAM, _INV_CELL, _RECOUNT, VacatedTrace, seen_through_inverse
 
 
 def _missing(lv: GridLevel) -> int:
@@ -153,3 +153,48 @@ def test_the_inverse_form_finds_the_walks_cells_on_random_maps_with_stale_bits()
         kept = VacatedTrace(clean, scans=1, **KW).view(MapView(lo, view.i0, view.j0, RES, bits, 6.0), scan, pose)
         assert np.array_equal(plain.logodds, kept.logodds)
     assert found > 100
+
+
+def test_the_choice_takes_the_inverse_form_on_a_sparse_map_and_the_walk_on_a_dense_one() -> None:
+    """The cost model (pass vac83): few long-occupied cells in reach → the inverse form runs (and finds the walk's
+    cells); many → −1 (the walk), then the next ``_RECOUNT`` − 1 scans decline at once, then it counts again. Forced
+    (cell cost 0) both forms give the same cells on the dense map too."""
+    rng = np.random.default_rng(3)
+    clean = CleanConfig()
+    sparse = _map(rng)
+    dense = sparse.logodds.copy()
+    dense[rng.random(dense.shape) < 0.08] = np.float32(9.0)
+    scan = _scan(np.random.default_rng(5), 0.0)
+    pose = Pose2D(0.1, -0.2, 0.4)
+    origin, cx, cy, clear = scan_clearing(scan.ranges, scan.trig(), scan.valid_mask(), pose, RES, clean)
+    nb = cx.shape[0]
+    for lo, chosen in ((sparse.logodds, True), (dense, False)):
+        bits = _bitmap(lo, KW["occupied_logodds"])
+        args = (lo, sparse.i0, sparse.j0, pose.x / RES, pose.y / RES, cx, cy, clear, clean.ray_core, 6.0)
+        wr, wc = np.empty(64 * nb, np.int64), np.empty(64 * nb, np.int64)
+        n = seen_through_structure_kernel(*args, wr, wc, 1.0 / RES)
+        fw = np.zeros(2 * nb + 2)
+        iw = np.empty((2 * _CELLS_PER_BEAM + 3) * nb, np.int64)
+        for cost in (_INV_CELL, 0.0):
+            ir, ic = np.empty(64 * nb, np.int64), np.empty(64 * nb, np.int64)
+            m = seen_through_inverse(*args, 1.0 / RES, bits, scan.angle_min, scan.angle_increment, pose.theta, ir,
+                                     ic, iw, fw if cost > 0.0 else np.empty(2 * nb), cost)
+            if cost > 0.0 and not chosen:
+                assert m == -1
+                continue
+            assert m == n
+            w = lo.shape[1]
+            assert np.array_equal(np.sort(wr[:n] * w + wc[:n]), np.sort(ir[:m] * w + ic[:m]))
+        if chosen:
+            assert n > 0 and fw[2 * nb] == np.count_nonzero(lo >= 6.0)  # (every long-occupied cell is in reach)
+            continue
+        over = fw[2 * nb]
+        assert over > 0 and fw[2 * nb + 1] == _RECOUNT - 1
+        for s in range(1, _RECOUNT):  # declined at once: not counted again
+            fw[2 * nb] = -5.0
+            assert seen_through_inverse(*args, 1.0 / RES, bits, scan.angle_min, scan.angle_increment, pose.theta, ir,
+                                        ic, iw, fw, _INV_CELL) == -1
+            assert fw[2 * nb + 1] == _RECOUNT - 1 - s and fw[2 * nb] == -5.0
+        assert seen_through_inverse(*args, 1.0 / RES, bits, scan.angle_min, scan.angle_increment, pose.theta, ir, ic,
+                                    iw, fw, _INV_CELL) == -1
+        assert fw[2 * nb] == over and fw[2 * nb + 1] == _RECOUNT - 1  # (counted again)

@@ -27,10 +27,17 @@ from dynslam2d.types import Pose2D, Scan
 #: Index of each parameter in :attr:`VacatedTrace.params` (what :func:`vacated_scan_kernel` reads).
 _RES, _MARGIN, _GRAZING, _MIN_SIN, _CORE, _OCC, _DEPTH, _NEAR, _OCC32, _MAX_SIDE, _MIN_CELLS, _MIN_EXTENT, \
     _MIN_SHARE = range(13)
-#: The inverse form runs when the clearing rays' cells (Σ over the clearing beams of their longer axis' extent less the
-#: depth) are more than this many times the long-occupied cells within their reach (the walk reads ≈ 1.0–1.45 ns a
-#: cell, the inverse ≈ 20–30 ns a long-occupied cell; docs/speed.md, passes vac73 and vac77)
-_INVERSE_RATIO = 40.0
+#: The per-scan choice's cost model, in cells of the walk's first pass (≈ 0.85–1.0 ns each): the walk costs its
+#: cells (Σ over the clearing beams of their longer axis' extent less the depth) + ``_WALK_BEAM`` a beam; the inverse
+#: form ``_INV_WORD`` a bitmap word of the reach's box + ``_INV_CELL`` a long-occupied cell enumerated in it (fitted by
+#: least squares on every call of sim:paper, sim:crowd, negative_2 /right, positive_1 and MIT CSAIL with both forms
+#: timed; it picks the faster form on all but ≈ 1 % of their total time; docs/speed.md, pass vac83)
+_WALK_BEAM = 9.0
+_INV_WORD = 4.0
+_INV_CELL = 30.0
+#: After a count of the cells over the budget, the choice keeps the walk for this many scans less one without looking
+#: (the count costs about as much as the inverse form's enumeration; the cells in reach change slowly between scans)
+_RECOUNT = 8
 #: Long-occupied cells the inverse form takes at most, per beam (beyond: the walk)
 _CELLS_PER_BEAM = 16
 #: de Bruijn sequence and table: the index of a 64-bit word's lowest set bit from one multiplication (Leiserson,
@@ -64,7 +71,7 @@ def _atan2_approx(y: float, x: float) -> float:  # pragma: no cover - numba
 def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx: np.ndarray, cy: np.ndarray,
                          clear: np.ndarray, core: float, occ_thr: float, depth: float, bits: np.ndarray, ang0: float,
                          inc: float, th: float, out_r: np.ndarray, out_c: np.ndarray, iw: np.ndarray, fw: np.ndarray,
-                         ratio: float) -> int:  # pragma: no cover - numba
+                         cell: float) -> int:  # pragma: no cover - numba
     """:func:`dynslam2d.detect.mapevidence.seen_through_structure_kernel`'s cells (the same cells with the same
     repeats, in another order) found from the other side, or −1 (nothing found) where its walk costs less.
 
@@ -80,12 +87,18 @@ def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: f
     the laser) of the cell's, found to 1.2e-5 rad (:func:`_atan2_approx`; + 8e-6 rad for the beams' own rounding);
     every beam is tested for d < 4.
 
-    Runs only when the clearing rays' cells are more than ``ratio`` times the enumerated cells and these fit the
-    buffer ``iw`` (int64, 2 · ``_CELLS_PER_BEAM`` · beams + 3 · beams; ``fw`` float64, 2 · beams); −1 else, and when
-    more than ``out_r``' length are found (the walk's cap then decides which it keeps)."""
+    Runs only where the cost model (``_WALK_BEAM``, ``_INV_WORD``; ``cell``: the cost of an enumerated cell, ≤ 0:
+    always) says it costs less than the walk and the cells fit the buffer ``iw`` (int64, 2 · ``_CELLS_PER_BEAM`` ·
+    beams + 3 · beams; ``fw`` float64, 2 · beams, + 2 to remember the last count between scans: then while the last
+    count was over the budget, the next ``_RECOUNT`` − 1 scans decline at once); −1 else, and when more than
+    ``out_r``' length are found (the walk's cap then decides which it keeps)."""
     h, w = logodds.shape
     nb = cx.shape[0]
     if nb < 3:
+        return -1
+    mem = fw.shape[0] >= 2 * nb + 2
+    if mem and cell > 0.0 and fw[2 * nb + 1] > 0.0:  # (a count over the budget fewer than _RECOUNT scans ago)
+        fw[2 * nb + 1] -= 1.0
         return -1
     # (1) the walk's cost (Σ of the clearing rays' longer extents short of ``depth``, cells) and the largest clearing
     # distance
@@ -99,13 +112,21 @@ def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: f
     rmax = math.sqrt(r2max) - depth
     if not rmax > 0.0:
         return -1
-    # (2) the long-occupied cells within rmax + 1 of the laser, at most span / ratio of them
-    capc = _CELLS_PER_BEAM * nb
-    most = min(capc, int(span / ratio)) if ratio > 0.0 else capc  # (ratio ≤ 0: always, if the buffer holds them)
+    # (2) the long-occupied cells within rmax + 1 of the laser, as many as the walk's cost leaves room for
     r_lo = max(int(math.floor(oy - rmax)) - 1 - j0, 0)
     r_hi = min(int(math.ceil(oy + rmax)) + 1 - j0, h - 1)
     c_lo = max(int(math.floor(ox - rmax)) - 1 - i0, 0)
     c_hi = min(int(math.ceil(ox + rmax)) + 1 - i0, w - 1)
+    capc = _CELLS_PER_BEAM * nb
+    most = capc
+    if cell > 0.0:  # (cell ≤ 0: always, if the buffer holds them)
+        budget = span + _WALK_BEAM * nb - _INV_WORD * max(r_hi - r_lo + 1, 0) * max((c_hi >> 6) - (c_lo >> 6) + 1, 0)
+        most = min(capc, int(budget / cell)) if budget > 0.0 else -1
+        if mem:  # (the count when it stops over the budget, and the scans to decline then; both reset below)
+            fw[2 * nb] = most + 1.0
+            fw[2 * nb + 1] = _RECOUNT - 1.0
+        if most < 0:
+            return -1
     m = 0
     for r in range(r_lo, r_hi + 1):
         for wd in range(c_lo >> 6, (c_hi >> 6) + 1):
@@ -121,6 +142,9 @@ def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: f
                 iw[2 * m] = r
                 iw[2 * m + 1] = c
                 m += 1
+    if mem:
+        fw[2 * nb] = m
+        fw[2 * nb + 1] = 0.0
     # (3) every beam's walk as the walk sets it up: axis, slope, walked major range [alo, ahi], reach²
     xm = iw[2 * capc:2 * capc + nb]
     alo = iw[2 * capc + nb:2 * capc + 2 * nb]
@@ -240,7 +264,7 @@ def vacated_scan_kernel(ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray
     parameters' threshold; else a (0, 0) array), the scan's first beam angle ``ang0`` and increment ``inc`` (rad),
     the seen-through cells come from :func:`seen_through_inverse` where it costs less than the walk (the same cells:
     the same result), with ``work`` longer by 2 · ``_CELLS_PER_BEAM`` · beams + 3 · beams and ``fwork`` (float64,
-    2 · beams).
+    2 · beams + 2, the last 2 kept between scans: 0 at first).
 
     Returns the number of distinct seen-through cells, the number of yielding outlines and, when there are any,
     one array holding their rows, their columns and their sizes one after the other (else an empty one)."""
@@ -259,7 +283,7 @@ def vacated_scan_kernel(ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray
             bits_thr <= params[_OCC]:
         n_seen = seen_through_inverse(logodds, i0, j0, ox, oy, cx, cy, clear, params[_CORE], params[_OCC],
                                       params[_DEPTH], bits, ang0, inc, th, work[:c], work[c:2 * c],
-                                      work[2 * c + 2 * g:], fwork, _INVERSE_RATIO)
+                                      work[2 * c + 2 * g:], fwork, _INV_CELL)
     rows, cols, sizes, nc = vacated_core(
         logodds, i0, j0, ox, oy, cx, cy, clear, params[_CORE], params[_OCC], params[_DEPTH],
         params[_NEAR], np.float32(params[_OCC32]), max_side, int(params[_MIN_CELLS]), res, params[_MIN_EXTENT],
@@ -325,7 +349,7 @@ class VacatedTrace:
             self._window = np.zeros((2 * max_side + 1, 2 * max_side + 1), dtype=np.uint8)
         g = int(self.params[_MAX_SIDE]) ** 2 + 1
         self._work = np.empty(128 * beams + 2 * g + (2 * _CELLS_PER_BEAM + 3) * beams, dtype=np.int64)
-        self._fwork = np.empty(2 * beams)
+        self._fwork = np.zeros(2 * beams + 2)  # (+ 2: the choice's last count)
         self._beams = beams
 
     def view(self, view: MapView, scan: Scan, pose: Pose2D) -> MapView:
