@@ -89,9 +89,9 @@ def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: f
 
     Runs only where the cost model (``_WALK_BEAM``, ``_INV_WORD``; ``cell``: the cost of an enumerated cell, ≤ 0:
     always) says it costs less than the walk and the cells fit the buffer ``iw`` (int64, 2 · ``_CELLS_PER_BEAM`` ·
-    beams + 3 · beams; ``fw`` float64, 2 · beams, + 2 to remember the last count between scans: then while the last
-    count was over the budget, the next ``_RECOUNT`` − 1 scans decline at once); −1 else, and when more than
-    ``out_r``' length are found (the walk's cap then decides which it keeps)."""
+    beams + 3 · beams; ``fw`` float64, 2 · beams, + 2 kept between scans: the last count, for its callers' checks,
+    and the scans left to decline: after a count over the budget the next ``_RECOUNT`` − 1 scans decline at once);
+    −1 else, and when more than ``out_r``' length are found (the walk's cap then decides which it keeps)."""
     h, w = logodds.shape
     nb = cx.shape[0]
     if nb < 3:
@@ -122,7 +122,7 @@ def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: f
     if cell > 0.0:  # (cell ≤ 0: always, if the buffer holds them)
         budget = span + _WALK_BEAM * nb - _INV_WORD * max(r_hi - r_lo + 1, 0) * max((c_hi >> 6) - (c_lo >> 6) + 1, 0)
         most = min(capc, int(budget / cell)) if budget > 0.0 else -1
-        if mem:  # (the count when it stops over the budget, and the scans to decline then; both reset below)
+        if mem:  # (the count if it stops over the budget, and the scans to decline then; both reset below)
             fw[2 * nb] = most + 1.0
             fw[2 * nb + 1] = _RECOUNT - 1.0
         if most < 0:
