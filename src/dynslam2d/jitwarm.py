@@ -14,7 +14,8 @@ the compiled code of the same source, so results do not change.
 
 The two processes also tell each other which kernel each is compiling (:class:`CompileBoard`): where they
 meet, the run waits for a kernel the background process has already started instead of compiling it a
-second time from the beginning, and the background process skips a kernel the run is compiling.
+second time from the beginning, and the background process skips a kernel the run is compiling. Each marks a
+kernel before it looks for the other's mark, so two processes that arrive at once cannot both compile it.
 
 The background process is not started when the cache is warm, on one usable CPU
 (``os.sched_getaffinity``), or when ``DYNSLAM2D_COMPILE_WORKER=0`` (also ``off``/``false``/``no``). It
@@ -85,17 +86,25 @@ def worker_wanted() -> bool:
 class CompileBoard:
     """Which dynslam2d kernels the run (``run``) and its background process (``bg``) are compiling right now.
 
-    One empty file per kernel and process in a folder both know (``<who>.<module>.<qualname>``), created
-    when numba starts compiling the kernel in that process (numba's ``numba:compile`` event, after its
-    cache lookup missed) and removed once numba has written it to the cache (``Cache.save_overload``).
-    :meth:`install` hooks both into this process's numba; in the run it also makes a cache lookup that
-    misses a kernel the background process is compiling wait until that process has saved it (or has
-    gone), then look again: the kernel is loaded instead of compiled twice. Only kernels whose dispatcher
-    caches to disk (``cache=True``) are marked, so every mark is removed by the save that follows."""
+    One empty file per kernel and process in a folder both know (``<who>.<module>.<qualname>``). A process
+    claims a kernel before an outermost compile of it (numba's cache lookup missed; a callee compiled inside
+    another kernel's compile is never written to the cache, so it is each process's own work): it first marks
+    the kernel, then looks for the other process's mark (:meth:`take`, :meth:`claim`). Marking before looking
+    (the order of Dekker's mutual exclusion, E. W. Dijkstra, "Cooperating sequential processes", 1965) means
+    two processes that arrive at once both see the other's mark, so they cannot both compile it: the
+    background process yields (removes its mark; skips the kernel, or waits and loads it) and the run waits
+    until the background process has saved the kernel or yielded, then looks in the cache again. A mark is
+    removed once numba has written the kernel to the cache (``Cache.save_overload``), when it is loaded
+    instead, or when its compile fails. The background process's own compiles at a module's import (a kernel
+    with declared signatures compiles when its module is imported: ``slam.ledgerkernels``) go through the
+    same claim, so that importing a module never compiles a kernel the run is compiling (pass cmp95).
+    :meth:`install` hooks this into the process's numba. Only kernels whose dispatcher caches to disk
+    (``cache=True``) are claimed, so every mark is removed by the save that follows."""
 
     def __init__(self, folder: str | Path, me: str) -> None:
         self.folder = Path(folder)
         self.me = me
+        self.other = "bg" if me == "run" else "run"
         self._undo: list[Callable[[], None]] = []
 
     def _path(self, who: str, name: str) -> Path:
@@ -128,24 +137,70 @@ class CompileBoard:
             except OSError:
                 pass
 
+    def claim(self, name: str) -> bool:
+        """Claim kernel ``name`` for this process without waiting: True when it holds the mark already (it claimed
+        it before, or the run marked it as this process's) or when, after marking it, the other process's mark is
+        not there; else its own mark is removed again and False (the other process compiles it)."""
+        if self.busy(self.me, name):
+            return True
+        self.mark(name)
+        if not self.busy(self.other, name):
+            return True
+        self.clear(name)
+        return False
+
+    def take(self, name: str, load: Callable[[], Any], other_alive: Callable[[], bool],
+             max_wait_s: float = 120.0) -> tuple[Any, float]:
+        """At a cache miss of kernel ``name`` before an outermost compile: claim it, or wait for the other process's
+        compile of it and load it (``load()``: numba's cache lookup, None on a miss). Returns (what ``load()``
+        returned, None: this process compiles it and holds its mark until the save; s waited).
+
+        The run marks and then waits while the background process's mark is there (the background process
+        yields where both marked), at most ``max_wait_s`` and while ``other_alive()``; the background process
+        (``bg``) marks, and where the run's mark is there too removes its own and waits for the run's compile the
+        same way. Either then looks in the cache again; on a miss (the other process yielded, failed or is gone)
+        it compiles the kernel itself, marked."""
+        t0 = time.perf_counter()
+        while True:
+            if self.me == "run":
+                self.mark(name)  # (before it looks: where both marked, the background process yields)
+                if not self.busy(self.other, name):
+                    return None, time.perf_counter() - t0
+            elif self.claim(name):
+                return None, time.perf_counter() - t0
+            while self.busy(self.other, name) and other_alive() and time.perf_counter() - t0 < max_wait_s:
+                time.sleep(0.005)
+            data = load()
+            if data is not None:
+                self.clear(name)
+                return data, time.perf_counter() - t0
+            if self.me == "run" or not other_alive() or time.perf_counter() - t0 >= max_wait_s:
+                self.mark(name)
+                return None, time.perf_counter() - t0
+            # (the background process: the run's mark went without a save; it failed or loaded it: claim again)
+
     def install(self, other_alive: Callable[[], bool] | None = None, max_wait_s: float = 120.0) -> None:
-        """Mark this process's kernel compiles; with ``other_alive`` (the run's side), wait at a cache miss
-        for a kernel the background process is compiling while ``other_alive()`` holds."""
+        """Claim this process's outermost kernel compiles at numba's cache misses (:meth:`take`, while
+        ``other_alive()`` holds: by default always), remove the mark when the kernel is saved or its compile
+        fails."""
         from numba.core import caching, event
 
         from dynslam2d.jitcache import add_compile_wait
 
-        board, other = self, "bg" if self.me == "run" else "run"
+        board = self
+        alive = other_alive or (lambda: True)
+        depth = [0]  # (compiles in progress in this process: a cache lookup at 0 is an outermost compile's)
 
-        class _Marker(event.Listener):
+        class _Depth(event.Listener):
             def on_start(self, ev: Any) -> None:
-                disp = (ev.data or {}).get("dispatcher")
-                name = _kernel_name(getattr(disp, "py_func", None))
-                if name is not None and isinstance(getattr(disp, "_cache", None), caching.Cache):
-                    board.mark(name)
+                depth[0] += 1
 
             def on_end(self, ev: Any) -> None:
-                pass
+                depth[0] -= 1
+                if depth[0] == 0 and (getattr(ev, "exc_details", None) or (None,))[0] is not None:
+                    name = _kernel_name(getattr((ev.data or {}).get("dispatcher"), "py_func", None))
+                    if name is not None:  # (a compile that failed is not saved: its mark goes here)
+                        board.clear(name)
 
         load, save = caching.Cache.load_overload, caching.Cache.save_overload
 
@@ -160,19 +215,16 @@ class CompileBoard:
         def load_overload(cache: Any, sig: Any, target_context: Any) -> Any:
             data = load(cache, sig, target_context)
             name = _kernel_name(getattr(cache, "_py_func", None))
-            if data is not None or name is None:
+            if data is not None or name is None or depth[0]:
                 return data
-            t0 = time.perf_counter()
-            while board.busy(other, name) and other_alive() and time.perf_counter() - t0 < max_wait_s:
-                time.sleep(0.005)
-            add_compile_wait(time.perf_counter() - t0)
-            return load(cache, sig, target_context)  # (also when the other saved it since the first look)
+            data, waited = board.take(name, lambda: load(cache, sig, target_context), alive, max_wait_s)
+            add_compile_wait(waited)
+            return data
 
-        listener = _Marker()
+        listener = _Depth()
         event.register("numba:compile", listener)
         caching.Cache.save_overload = save_overload
-        if other_alive is not None:
-            caching.Cache.load_overload = load_overload
+        caching.Cache.load_overload = load_overload
 
         def undo() -> None:
             event.unregister("numba:compile", listener)
@@ -301,10 +353,12 @@ def _compile_one(name: str, sig: str, board: CompileBoard | None) -> bool:
     from dynslam2d.jitcache import _has_valid_index
 
     try:
-        if board is not None and board.busy("run", name):
-            return False
+        if board is not None and not board.busy(board.me, name) and board.busy(board.other, name):
+            return False  # (before the import: it may compile the module's kernels with declared signatures)
         disp = _dispatcher(name)
         if _has_valid_index(disp):
+            return False
+        if board is not None and not board.claim(name):  # (the run may have started it during the import)
             return False
         disp.compile(parse_signature(sig))
     except Exception:  # noqa: BLE001 - the run compiles what is missing, as without this process
@@ -405,7 +459,7 @@ def main(argv: list[str] | None = None) -> None:
     board = CompileBoard(args[1], "bg") if len(args) > 1 else None
     if board is not None:
         try:
-            board.install()
+            board.install(other_alive=lambda: parent is None or os.getppid() == parent)
         except Exception:  # noqa: BLE001 - numba internals changed: compile without telling the run
             board = None
     compile_balanced(KERNELS, COMPILE_S, parent, board)
