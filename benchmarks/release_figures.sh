@@ -18,6 +18,9 @@
 #   comp_{a,b}{1,2}.txt     cold compile wait of the README's first command (needs chrt, i.e. root)
 #   result_columns.txt      md5 of each table's result columns (every column but the four speed ones): all six
 #                           must agree when the two releases are bit-identical
+#   slam.txt                bench_slam.py --markdown of this checkout, core 0, alone after the last lockstep: the
+#                           SLAM core alone on sim:static and MIT CSAIL, ending with docs/slam.md "Speed"'s table
+#                           rows, its command line and the load (paste the rows there)
 #
 #   ab_1s.txt, ab_2s.txt    the same locksteps in the other role: the previous release's own bench_pipeline_ab.py
 #                           with --other this checkout (one run per input, --reps 1: ≈ 1 min each; ab_1s fills the
@@ -109,6 +112,7 @@ real "$PREV" real_b3
 mit "$PREV/src" mit_b2.txt
 mit "$REPO/src" mit_a2.txt
 ab 2
+taskset -c 0 python benchmarks/bench_slam.py --markdown > "$OUT/slam.txt" 2>&1
 uptime >> "$OUT/load.txt"
 for t in "$OUT"/real_*/table.md; do
   printf '%s ' "$(basename "$(dirname "$t")")"
