@@ -1071,8 +1071,10 @@ def run(
                                  step.slam_state == "lost", step.degeneracy))
             n_done += 1
             removed_rows.append(step.removed)
-            if step.tracks and not track_rows.add_tracks(step.stamp, step.tracks):  # (packed; or the NumPy way:)
-                track_rows.extend_records(_track_records(step.stamp, step.tracks, track_rows))
+            tracks = step.tracks
+            # (a list of Track objects packed by struct; another sequence, or a value struct refuses: the NumPy way)
+            if tracks and (type(tracks) is not list or not track_rows.add_tracks(step.stamp, tracks)):
+                track_rows.extend_records(_track_records(step.stamp, tracks, track_rows))
             stage_ms.add(step.timings)
             for obs in now:
                 obs.on_scan(scan, step, pipe)
