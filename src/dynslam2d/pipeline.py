@@ -18,6 +18,7 @@ framework; :func:`run` drives it over a whole :class:`ScanSource`.
 from __future__ import annotations
 
 import math
+import struct
 import time
 from array import array
 from collections.abc import Callable, Iterable, Sequence
@@ -36,7 +37,7 @@ from dynslam2d.gridmap import GridMap
 from dynslam2d.jitcache import compile_seconds
 from dynslam2d.memtrim import release_free_memory
 from dynslam2d.rangescale import apply_range_scale
-from dynslam2d.records import BitRows, GrowArray, TrackRows
+from dynslam2d.records import BitRows, PackedGrowArray, TrackRows
 from dynslam2d.slam import HectorSlam
 from dynslam2d.slam.confidence import FLAGS
 from dynslam2d.slam.confidence import summarize as summarize_confidence
@@ -916,6 +917,9 @@ ProgressFn = Callable[[int, StepResult], None]
 _SCAN_RECORD = np.dtype([("stamp", np.float64), ("pose", np.float64, (3,)), ("score", np.float64),
                          ("flags", np.bool_, (3,)), ("low_support", np.bool_), ("degenerate", np.bool_),
                          ("lost", np.bool_), ("degeneracy", np.float64)])
+#: One :data:`_SCAN_RECORD` row's bytes from its twelve fields (native order, no padding: the dtype's layout).
+_PACK_SCAN = struct.Struct("=5d6?d").pack
+assert struct.calcsize("=5d6?d") == _SCAN_RECORD.itemsize
 #: :func:`run` returns the allocator's free heap memory to the OS every this many scans (memtrim.py).
 TRIM_EVERY_SCANS = 1000
 
@@ -1039,8 +1043,10 @@ def run(
     source = apply_range_scale(source, pipe.config.laser, pipe.config.slam)
     # Per-scan records in compact growable arrays (dynslam2d.records): a few hundred bytes
     # per scan instead of Python objects, so long logs do not exhaust memory. A scan's scalars go in one
-    # structured row (one array write per scan), its live tracks in one TrackRows.extend.
-    per_scan = GrowArray(_SCAN_RECORD)
+    # structured row given as its packed bytes (one struct call per scan), its live tracks likewise
+    # (TrackRows.add_tracks: one struct call per track); NumPy converts neither per scan (docs/speed.md, pass pip92).
+    per_scan = PackedGrowArray(_SCAN_RECORD)
+    add_row = per_scan.add_raw
     removed_rows = BitRows()
     track_rows = TrackRows()
     stage_ms = _StageTimings()
@@ -1055,13 +1061,20 @@ def run(
             step = pipe.process(scan)
             last_scan = scan
             pose = step.pose
-            per_scan.append((step.stamp, (pose.x, pose.y, pose.theta), step.score,
-                             (step.map_updated, step.rejected, step.skipped), step.low_support, step.degenerate,
-                             step.slam_state == "lost", step.degeneracy))
+            try:
+                add_row(_PACK_SCAN(step.stamp, pose.x, pose.y, pose.theta, step.score, step.map_updated, step.rejected,
+                                   step.skipped, step.low_support, step.degenerate, step.slam_state == "lost",
+                                   step.degeneracy))
+            except (TypeError, ValueError, OverflowError, struct.error):  # (a value only NumPy converts: None → NaN)
+                per_scan.append((step.stamp, (pose.x, pose.y, pose.theta), step.score,
+                                 (step.map_updated, step.rejected, step.skipped), step.low_support, step.degenerate,
+                                 step.slam_state == "lost", step.degeneracy))
             n_done += 1
             removed_rows.append(step.removed)
-            if step.tracks:
-                track_rows.extend_records(_track_records(step.stamp, step.tracks, track_rows))
+            tracks = step.tracks
+            # (a list of Track objects packed by struct; another sequence, or a value struct refuses: the NumPy way)
+            if tracks and (type(tracks) is not list or not track_rows.add_tracks(step.stamp, tracks)):
+                track_rows.extend_records(_track_records(step.stamp, tracks, track_rows))
             stage_ms.add(step.timings)
             for obs in now:
                 obs.on_scan(scan, step, pipe)

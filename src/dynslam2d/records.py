@@ -5,6 +5,8 @@ track rows. Kept as Python objects that cost ~8 KB per scan (1.5 GB at 200 000
 scans); here they live in growable numpy buffers:
 
 * :class:`GrowArray` — an (n, k) array with amortised O(1) append;
+* :class:`PackedGrowArray` — a :class:`GrowArray` whose rows can also be given as their bytes (one C call a row in
+  the run loop, where a NumPy row assignment converts a tuple field by field);
 * :class:`BitRows` — one bool row per scan (any length), stored as packed bits;
 * :class:`TrackRows` — the rows of :data:`dynslam2d.pipeline.TRACK_COLUMNS` in a
   structured array, read back as tuples.
@@ -15,8 +17,9 @@ so code written for the former lists keeps working.
 
 from __future__ import annotations
 
+import struct
 from array import array
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -79,12 +82,61 @@ class GrowArray:
         return int(self._buf.nbytes)
 
 
+class PackedGrowArray(GrowArray):
+    """A :class:`GrowArray` whose rows may also be added as their bytes (:meth:`add_raw`): the fields of each row
+    packed in the dtype's order without padding, native byte order (``struct.Struct("=…").pack``, the layout of a
+    NumPy structured dtype without ``align``). The bytes wait in a ``bytearray`` (one C append per row) and move into
+    the array's buffer in one copy when the rows are read (any method of :class:`GrowArray`) or when more than
+    ``chunk`` bytes wait (the waiting bytes stay below that: a long run's memory is the buffer's)."""
+
+    def __init__(self, dtype: object, shape: tuple[int, ...] = (), capacity: int = 256, chunk: int = 1 << 20) -> None:
+        super().__init__(dtype, shape, capacity)
+        self._raw = bytearray()
+        self._chunk = int(chunk)
+
+    def add_raw(self, raw: bytes | bytearray | memoryview) -> None:
+        """Add whole rows given as their packed bytes (a multiple of the row size)."""
+        waiting = self._raw
+        waiting += raw
+        if len(waiting) >= self._chunk:
+            self.settle()
+
+    def settle(self) -> None:
+        """Move the waiting bytes into the buffer (a no-op when none wait)."""
+        raw = self._raw
+        if raw:
+            self._raw = bytearray()  # (first: GrowArray.extend below reserves through _reserve, which settles)
+            buf = self._buf
+            GrowArray.extend(self, np.frombuffer(raw, dtype=buf.dtype).reshape(-1, *buf.shape[1:]))
+
+    def _reserve(self, k: int) -> None:
+        if self._raw:
+            self.settle()
+        GrowArray._reserve(self, k)
+
+    def __len__(self) -> int:
+        if self._raw:
+            self.settle()
+        return self._n
+
+    def view(self) -> np.ndarray:
+        if self._raw:
+            self.settle()
+        return self._buf[: self._n]
+
+    @property
+    def nbytes(self) -> int:
+        return int(self._buf.nbytes) + len(self._raw)
+
+
 class BitRows(Sequence[np.ndarray]):
     """Bool rows of any length, packed 8 per byte (a row without a set bit keeps no bytes); ``rows[i]`` is a fresh
     (len_i,) bool array."""
 
     def __init__(self) -> None:
-        self._bits = GrowArray(np.uint8, capacity=4096)
+        # (the packed rows appended as bytes: one C call a row; ``_used`` counts them, the next row's first byte)
+        self._bits = PackedGrowArray(np.uint8, capacity=4096)
+        self._used = 0
         # (each row's first byte and length as C int64 arrays of the standard library: an append is one C call, where
         # a GrowArray's costs a Python method and a NumPy item assignment — on every scan of a run)
         self._start = array("q")
@@ -101,9 +153,10 @@ class BitRows(Sequence[np.ndarray]):
         size = r.size
         n_set = int(_count_nonzero(r))  # (np.count_nonzero(r) without its Python wrapper)
         if n_set:
-            bits = self._bits
-            self._start.append(bits._n)  # (len(self._bits))
-            bits.extend(np.packbits(r))
+            packed = np.packbits(r)
+            self._start.append(self._used)
+            self._used += packed.shape[0]
+            self._bits.add_raw(packed.data)
         else:  # a row without a set bit (nearly every scan's removed beams) keeps no bytes: start −1
             self._start.append(-1)
         self._len.append(size)
@@ -167,6 +220,10 @@ _TRACK_DTYPE = np.dtype([
     ("vy", np.float64), ("in_M", np.bool_), ("remembered", np.bool_),
 ])
 
+#: One :data:`_TRACK_DTYPE` row's bytes from its fields (native order, no padding: the dtype's layout).
+_PACK_TRACK = struct.Struct("=dqb7d??").pack
+assert struct.calcsize("=dqb7d??") == _TRACK_DTYPE.itemsize
+
 
 class TrackRows(Sequence[tuple]):
     """Rows ``(stamp, id, state, x, y, heading, length, width, vx, vy, in_M)`` in a structured array.
@@ -178,7 +235,7 @@ class TrackRows(Sequence[tuple]):
     """
 
     def __init__(self) -> None:
-        self._rows = GrowArray(_TRACK_DTYPE, capacity=1024)
+        self._rows = PackedGrowArray(_TRACK_DTYPE, capacity=1024)
         self._state_codes: dict[str, int] = {s: i for i, s in enumerate(TRACK_STATES)}
         self._states: list[str] = list(TRACK_STATES)
 
@@ -203,6 +260,31 @@ class TrackRows(Sequence[tuple]):
     def state_codes(self) -> dict[str, int]:
         """State name → code of the states seen so far (read only; :meth:`code` adds new ones)."""
         return self._state_codes
+
+    def add_tracks(self, stamp: float, tracks: Iterable[object]) -> bool:
+        """Append one scan's live tracks (:class:`dynslam2d.types.Track`, map frame; what :meth:`extend_records`
+        stores of ``dynslam2d.pipeline._track_records``' rows, the same values): each row packed into its 75 bytes by
+        one ``struct`` call and added to the rows' waiting bytes (:class:`PackedGrowArray`) — the run loop's
+        per-scan record of its tracks, without a tuple per track converted field by field by NumPy. Returns False,
+        with nothing added, when a track has a state not coded yet or a value ``struct`` does not take (a ``None``
+        where NumPy stores NaN): the caller then adds the rows the NumPy way."""
+        rows = self._rows
+        raw = rows._raw
+        n0 = len(raw)
+        codes = self._state_codes
+        pack = _PACK_TRACK
+        try:
+            for t in tracks:
+                b = t.box  # type: ignore[attr-defined]
+                vx, vy = t.velocity.tolist()  # type: ignore[attr-defined]
+                raw += pack(stamp, t.id, codes[t.state], b.px, b.py, b.theta, b.length, b.width,  # type: ignore
+                            vx, vy, t.in_m, t.remembered)  # type: ignore[attr-defined]
+        except (KeyError, TypeError, ValueError, OverflowError, struct.error):  # (a new state name, or no float)
+            del raw[n0:]
+            return False
+        if len(raw) >= rows._chunk:
+            rows.settle()
+        return True
 
     def extend_records(self, records: Sequence[tuple]) -> None:
         """Append rows given in storage order ``(stamp, id, state code, x, y, heading, length, width, vx, vy,
@@ -252,4 +334,4 @@ class TrackRows(Sequence[tuple]):
         return self._rows.nbytes
 
 
-__all__ = ["BitRows", "GrowArray", "TRACK_STATES", "TrackRows"]
+__all__ = ["BitRows", "GrowArray", "PackedGrowArray", "TRACK_STATES", "TrackRows"]

@@ -1,0 +1,63 @@
+"""The run loop's packed records (pass pip92): ``TrackRows.add_tracks`` and ``PackedGrowArray.add_raw`` store the
+bytes the NumPy way stores (``extend_records`` of ``pipeline._track_records``, a structured row assignment), across
+the waiting bytes' flushes, reads in between, and the values ``struct`` refuses."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+import dynslam2d.pipeline as pl
+from dynslam2d.records import PackedGrowArray, TrackRows
+from dynslam2d.types import Box, Track
+
+
+def _track(rng: np.random.Generator, tid: int, state: str) -> Track:
+    b = Box(*rng.normal(size=5).tolist())
+    return Track(tid, state, 0.0, b, rng.normal(size=2), np.eye(4), 1.0, 3, 0, "person", bool(rng.random() < 0.5),
+                 "", np.zeros(0, dtype=np.int64), 0, bool(rng.random() < 0.3))
+
+
+def test_add_tracks_stores_what_extend_records_stores():
+    rng = np.random.default_rng(5)
+    a, b = TrackRows(), TrackRows()
+    b._rows._chunk = 75 * 7  # (flushed every few scans, mid-scan too)
+    fell_back = 0
+    for scan in range(300):
+        states = ["tentative", "confirmed", "coasting", "deleted"] + (["odd"] if scan == 40 else [])
+        tracks = [_track(rng, int(rng.integers(1, 999)), states[int(rng.integers(0, len(states)))])
+                  for _ in range(int(rng.integers(0, 9)))]
+        if scan == 41 and tracks:
+            tracks[0] = _track(rng, 7, "odd")  # (a code added by the NumPy way earlier: packed now)
+        if scan == 12:
+            tracks.append(Track(3, "confirmed", 0.0, Box(None, 1.0, 0.0, 1.0, 1.0), np.array([math.nan, -0.0]),  # type: ignore[arg-type]
+                                np.eye(4), 1.0, 1, 0, "box", np.bool_(True), "", np.zeros(0, dtype=np.int64), 0, 0))
+        stamp = 0.05 * scan
+        a.extend_records(pl._track_records(stamp, tracks, a))
+        if tracks and not b.add_tracks(stamp, tracks):
+            fell_back += 1
+            b.extend_records(pl._track_records(stamp, tracks, b))
+        if scan % 50 == 7:
+            assert len(a) == len(b)  # (a read between scans settles the waiting bytes)
+    assert fell_back >= 1
+    assert len(a) == len(b) and a.array().tobytes() == b.array().tobytes() and a.state_names() == b.state_names()
+    assert [r[2] for r in a] == [r[2] for r in b] and np.array_equal(a.remembered(), b.remembered())
+
+
+def test_packed_scan_rows_equal_structured_assignment():
+    rows = [(0.1 * i, (1.0 * i, -2.5, math.pi), 0.5 + i, (i % 2 == 0, False, i % 3 == 0), True, False, i % 5 == 0,
+             math.nan if i % 4 else 1e-3 * i) for i in range(700)]
+    g = PackedGrowArray(pl._SCAN_RECORD, capacity=4, chunk=54 * 100)
+    stored = []
+    for i, r in enumerate(rows):
+        st, (x, y, th), sc, (f0, f1, f2), lo, dg, lost, deg = r
+        g.add_raw(pl._PACK_SCAN(st, x, y, th, sc, f0, f1, f2, lo, dg, lost, deg))
+        stored.append(r)
+        if i == 333:
+            g.append(rows[0])  # (a NumPy row after waiting bytes keeps the order)
+            stored.append(rows[0])
+    a = np.zeros(len(stored), dtype=pl._SCAN_RECORD)
+    for i, r in enumerate(stored):
+        a[i] = r
+    assert len(g) == len(stored) and g.view().tobytes() == a.tobytes() and g.nbytes >= a.nbytes
