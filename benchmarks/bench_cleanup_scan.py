@@ -16,8 +16,10 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import shutil
 import statistics
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -29,7 +31,11 @@ from bench_digest import INPUTS  # noqa: E402
 
 
 def _load(src: Path, rel: str, name: str):  # type: ignore[no-untyped-def]
-    spec = importlib.util.spec_from_file_location(name, src / rel)
+    """The other checkout's module ``rel`` under the name ``name``, from a copy in a folder of its own (numba's
+    cache of its kernels goes there: in the checkout's own cache they would name a module it does not have)."""
+    copy = Path(tempfile.mkdtemp(prefix="bench_cleanup_scan_")) / f"{name}.py"
+    shutil.copyfile(src / rel, copy)
+    spec = importlib.util.spec_from_file_location(name, copy)
     mod = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
     sys.modules[name] = mod
     spec.loader.exec_module(mod)  # type: ignore[union-attr]
