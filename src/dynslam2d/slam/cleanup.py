@@ -62,6 +62,7 @@ Frames and units: world / map frame in m; cell (i, j) of the counters is absolut
 from __future__ import annotations
 
 import math
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -103,6 +104,12 @@ BYTES_PER_CELL = 8
 #: Largest scan number in the "last touch" array (2 · 32767 + 1 fits uint16); past it the counter renumbers the
 #: earlier touches (:meth:`VisibilityCounter._renumber`), which leaves every count the same.
 _ID_SPAN = 32767
+
+#: ``(1 << 8·k) · _BYTE_OF_BIT`` (uint64, wrapping) holds k in its top byte, k = 0 … 7: the place of a word's
+#: lowest marked byte without a loop (:func:`_count_beams`)
+_BYTE_OF_BIT = np.uint64(0x0001020304050607)
+#: the machine's byte order: byte k of a uint64 read from memory is its bits 8·k … 8·k + 7 when little-endian
+_LITTLE = sys.byteorder == "little"
 
 
 def _count_scan(counts: np.ndarray, last: np.ndarray, scan_id: int, ox: float, oy: float, hx: np.ndarray,
@@ -239,9 +246,11 @@ def _count_beams(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey, kept, 
         if mask.shape[0] < need:
             mask = np.empty(need, dtype=np.uint8)
             mask[:] = 0
+        idx = np.empty(max(x1 - x0, y1 - y0) + 1, dtype=np.int64)  # (a ray's steps inside the box: at most this)
+        val = np.empty(idx.shape[0], dtype=np.uint8)
         for k in range(cx.shape[0]):
             if clear[k]:
-                _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, cx[k] - fi0, cy[k] - fj0, core)
+                _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, cx[k] - fi0, cy[k] - fj0, core, idx, val)
     per_row = stride // 8
     pass_code = 2 * scan_id
     cap = pool.shape[0]
@@ -253,11 +262,13 @@ def _count_beams(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey, kept, 
         t = -1
         for q in range(per_row):
             base = r * stride + q * 8
-            if word_at(mask, base) == 0:  # (8 cells at once: mask[base:base + 8].view(np.uint64)[0])
-                continue
-            for jj in range(8):
-                if mask[base + jj] == 0:
-                    continue
+            word = word_at(mask, base)  # (8 cells at once: mask[base:base + 8].view(np.uint64)[0])
+            while word != 0:  # its marked bytes (each 0 or 1), lowest bit first: no branch per unmarked cell
+                low = word & (~word + np.uint64(1))  # the lowest set bit, 1 << 8 · (the byte's place in the word)
+                word ^= low
+                jj = np.int64((low * _BYTE_OF_BIT) >> np.uint64(56))  # that place (the multiply puts it on top)
+                if not _LITTLE:
+                    jj = 7 - jj
                 xa = x0 + q * 8 + jj + i0
                 if (xa >> _TILE_SHIFT) - ti0 != tc:
                     tc = (xa >> _TILE_SHIFT) - ti0
@@ -281,43 +292,69 @@ def _count_beams(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey, kept, 
 
 
 @njit(cache=True, inline="always")
-def _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, ex, ey, core):  # pragma: no cover - numba
+def _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, ex, ey, core, idx, val):  # pragma: no cover - numba
     """Mark in ``mask`` (rows of ``stride`` bytes from cell (x0, y0); cells beyond (x1, y1) dropped) the cells the
     segment ``(ox, oy)`` → ``(ex, ey)`` passes: one cell per step of the major axis, where the segment runs
-    within ``core`` of the cell centre across it."""
+    within ``core`` of the cell centre across it.
+
+    In two loops over the steps whose major coordinate lies in the box (the others are dropped): the first
+    computes each step's byte in ``mask`` and its mark into the scratch ``idx`` (int64) / ``val`` (uint8), as
+    long as the box's longer side, with no store into ``mask`` and no branch, so the compiler runs it on vector
+    registers; the second ors the marks in (a step whose cell is outside the box or #0 gets 0 into byte 0). Each
+    step's values are those of the one-loop walk: the major coordinate ``a`` is an integer held exactly in
+    float64, so ``(fa + k) − m0`` is the walk's ``a − m0`` bit for bit (docs/speed.md, pass cln96)."""
     dx = ex - ox
     dy = ey - oy
-    x_major = abs(dx) >= abs(dy)
-    if x_major:
+    if abs(dx) >= abs(dy):
         a0 = int(math.floor(ox + 0.5))
         a1 = int(math.floor(ex + 0.5))
         slope = dy / dx if dx != 0.0 else 0.0
         m0 = ox
         n0 = oy
+        lo_a = x0
+        hi_a = x1
+        lo_b = y0
+        hi_b = y1
+        sa = 1
+        sb = stride
     else:
         a0 = int(math.floor(oy + 0.5))
         a1 = int(math.floor(ey + 0.5))
         slope = dx / dy
         m0 = oy
         n0 = ox
-    step = 1 if a1 >= a0 else -1
-    a = a0
-    while True:
-        b = n0 + slope * (a - m0)
-        ib = int(math.floor(b + 0.5))
-        inside = np.uint8(abs(b - ib) <= core)  # or-ed in without a branch (one in five steps fails it)
-        if x_major:
-            x = a
-            y = ib
-        else:
-            x = ib
-            y = a
-        if x0 <= x <= x1 and y0 <= y <= y1:
-            i = (y - y0) * stride + (x - x0)
-            mask[i] = mask[i] | inside
-        if a == a1:
-            break
-        a += step
+        lo_a = y0
+        hi_a = y1
+        lo_b = x0
+        hi_b = x1
+        sa = stride
+        sb = 1
+    if a1 >= a0:  # the steps a = a0 + step · k, k = ka … kb, from a0 to a1 and inside [lo_a, hi_a]
+        step = 1
+        ka = max(lo_a - a0, 0)
+        kb = min(hi_a - a0, a1 - a0)
+    else:
+        step = -1
+        ka = max(a0 - hi_a, 0)
+        kb = min(a0 - lo_a, a0 - a1)
+    n = kb - ka + 1
+    if n <= 0:
+        return
+    fa = float(a0 + step * ka)
+    fs = float(step)
+    flo = float(lo_b)
+    fhi = float(hi_b)
+    base = (a0 + step * ka - lo_a) * sa - lo_b * sb
+    dk = step * sa
+    for k in range(n):
+        b = n0 + slope * ((fa + fs * k) - m0)
+        fl = math.floor(b + 0.5)
+        ok = (fl >= flo) & (fl <= fhi)
+        idx[k] = base + dk * k + np.int64(np.int32(fl)) * sb if ok else 0
+        val[k] = np.uint8((abs(b - fl) <= core) & ok)
+    for k in range(n):
+        i = idx[k]
+        mask[i] = mask[i] | val[k]
 
 
 @njit(cache=True)

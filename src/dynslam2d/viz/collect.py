@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from dynslam2d.pipeline import Pipeline, RunResult, StepResult
@@ -49,9 +51,16 @@ class RemovedPointsCollector:
             return
         stride = max(self._stride, int(np.ceil(idx.size / self.per_scan_limit)))
         idx = idx[::stride]
-        keep = np.zeros_like(mask)
-        keep[idx] = True
-        pts = step.pose.transform_points(scan.points(keep)).astype(np.float32)
+        # the kept beams' endpoints, sensor frame (Scan.points: Paper Eq. 4), then into the map frame with the
+        # scan's pose (Pose2D.transform_points), each value by the same float64 operations, rounded to float32 once
+        r = scan.ranges[idx]
+        cos_a, sin_a = scan.trig()
+        lx, ly = r * cos_a[idx], r * sin_a[idx]
+        pose = step.pose
+        c, s = math.cos(pose.theta), math.sin(pose.theta)
+        pts = np.empty((idx.size, 2), dtype=np.float32)
+        pts[:, 0] = c * lx - s * ly + pose.x
+        pts[:, 1] = s * lx + c * ly + pose.y
         self.stamps.append(float(scan.stamp))
         self.per_scan.append(pts)
         self._held += len(pts)
