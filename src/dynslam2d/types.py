@@ -65,11 +65,12 @@ class Pose2D:
         """Relative pose ``self⁻¹ ⊕ other``: ``other`` expressed in ``self``'s frame."""
         return self.inverse().compose(other)
 
-    def transform_points(self, points: np.ndarray) -> np.ndarray:
-        """Map (n, 2) points from this pose's child frame into its parent frame."""
+    def transform_points(self, points: np.ndarray, dtype: object = np.float64) -> np.ndarray:
+        """Map (n, 2) points from this pose's child frame into its parent frame, m. The arithmetic is float64;
+        ``dtype`` is the result's (float32: each value rounded once, without a float64 copy)."""
         c, s = math.cos(self.theta), math.sin(self.theta)
         pts = np.asarray(points, dtype=np.float64)
-        out = np.empty_like(pts)
+        out = np.empty(pts.shape, dtype=dtype)
         out[:, 0] = c * pts[:, 0] - s * pts[:, 1] + self.x
         out[:, 1] = s * pts[:, 0] + c * pts[:, 1] + self.y
         return out

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from dynslam2d.pipeline import Pipeline, RunResult, StepResult
@@ -51,16 +49,11 @@ class RemovedPointsCollector:
             return
         stride = max(self._stride, int(np.ceil(idx.size / self.per_scan_limit)))
         idx = idx[::stride]
-        # the kept beams' endpoints, sensor frame (Scan.points: Paper Eq. 4), then into the map frame with the
-        # scan's pose (Pose2D.transform_points), each value by the same float64 operations, rounded to float32 once
+        # the kept beams' endpoints in the sensor frame (Scan.points' Paper Eq. 4 at these indices), then in the map
+        # frame, rounded to float32 once
         r = scan.ranges[idx]
         cos_a, sin_a = scan.trig()
-        lx, ly = r * cos_a[idx], r * sin_a[idx]
-        pose = step.pose
-        c, s = math.cos(pose.theta), math.sin(pose.theta)
-        pts = np.empty((idx.size, 2), dtype=np.float32)
-        pts[:, 0] = c * lx - s * ly + pose.x
-        pts[:, 1] = s * lx + c * ly + pose.y
+        pts = step.pose.transform_points(np.column_stack((r * cos_a[idx], r * sin_a[idx])), dtype=np.float32)
         self.stamps.append(float(scan.stamp))
         self.per_scan.append(pts)
         self._held += len(pts)
