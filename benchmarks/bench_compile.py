@@ -6,6 +6,7 @@ events, the CPU time each function spends in numba's compiler excluding the func
     PYTHONPATH=src python benchmarks/bench_compile.py [--src src] [--top 25]
     PYTHONPATH=src python benchmarks/bench_compile.py --wait [--src src]
     PYTHONPATH=src python benchmarks/bench_compile.py --trace [--src src]
+    PYTHONPATH=src python benchmarks/bench_compile.py --split [--src src] [--top 25]
 
 Prints the process CPU of the whole run, the compile CPU summed over functions, their count (and the number of
 compilations: numba's helpers such as ``np.empty``'s are compiled once per signature), the time in Python's cyclic
@@ -21,7 +22,12 @@ and prints the wall time from interpreter start to exit, ``kernel_compile_s`` fr
 process CPU and the CPU of the processes it started (the background compile). ``--trace`` runs it the same way and
 prints the timeline of both processes: every ``Dispatcher.compile`` call of a dynslam2d kernel or numba helper that
 compiled (C) or loaded from the cache (L), with its start and end (s from the start), and which functions both
-processes compiled. Not run by pytest; numbers go to docs/speed.md with this command and the load average.
+processes compiled. ``--split`` runs the profile's cold run (background compile off) and splits its compile CPU
+the other way: by numba compiler pass (exclusive of the compiles a pass starts in turn: type inference compiles
+the callees it types), by LLVM phase (the module pipeline, machine code, parsing numba's IR text, linking the
+callees' modules), the Python wrappers numba builds for kernels called from Python and for those compiled only as
+another kernel's callee, and the functions compiled for more than one signature. Not run by pytest; numbers go
+to docs/speed.md with this command and the load average.
 """
 
 from __future__ import annotations
@@ -164,6 +170,74 @@ jw.main(sys.argv[1:])
 """
 
 
+SPLIT = PROBE.replace('event.register("numba:compile", Exclusive())', r"""
+event.register("numba:compile", Exclusive())
+from numba.core import codegen as _cg, compiler_machinery as _cm, cpu as _cpu
+passes, pass_stack, phases, sigs = {}, [], {}, []
+_run_pass = _cm.PassManager._runPass
+def _timed_pass(self, index, pss, state):  # exclusive CPU per numba pass
+    now = time.process_time()
+    if pass_stack:
+        pass_stack[-1][1] += now - pass_stack[-1][2]
+    pass_stack.append([pss.name(), 0.0, now])
+    try:
+        return _run_pass(self, index, pss, state)
+    finally:
+        now = time.process_time()
+        name, acc, t = pass_stack.pop()
+        passes[name] = passes.get(name, 0.0) + acc + now - t
+        if pass_stack:
+            pass_stack[-1][2] = now
+_cm.PassManager._runPass = _timed_pass
+def _phase(cls, attr, key):  # inclusive CPU of one of numba's LLVM steps (or of its wrapper builder)
+    plain = getattr(cls, attr)
+    def timed(*a, **k):
+        t = time.process_time()
+        try:
+            return plain(*a, **k)
+        finally:
+            row = phases.setdefault(key if key != "wrapper" else ("wrapper, callee" if len(stack) > 1
+                                                                    else "wrapper, called from Python"), [0.0, 0])
+            row[0] += time.process_time() - t
+            row[1] += 1
+    setattr(cls, attr, timed)
+import dynslam2d.jitbox  # (its LLVM pipeline in place first: the one timed)
+_phase(_cg.CPUCodeLibrary, "_optimize_final_module", "LLVM module pipeline")
+_phase(_cg.JITCodeLibrary, "_finalize_specific", "LLVM machine code")
+_phase(_cg.CPUCodeLibrary, "add_ir_module", "LLVM IR parse (numba's text)")
+_phase(_cg.CPUCodeLibrary, "add_linking_library", "LLVM linking callees")
+_phase(_cpu.CPUContext, "create_cpython_wrapper", "wrapper")
+class Sigs(event.Listener):
+    def on_start(self, ev):
+        f = getattr((ev.data or {}).get("dispatcher"), "py_func", None)
+        sigs.append([f"{f.__module__}.{f.__qualname__}" if f else "?", str((ev.data or {}).get("args"))])
+    def on_end(self, ev):
+        pass
+event.register("numba:compile", Sigs())
+""").replace('"llvm": llvm,', '"llvm": llvm, "passes": passes, "phases": phases, "sigs": sigs,')
+
+
+def split(src: str, top: int) -> None:
+    """The cold run's compile CPU by numba pass, LLVM phase, Python wrapper and signature (``--split``)."""
+    data = cold_probe(src, SPLIT)
+    total = sum(data["per"].values())
+    print(f"compile CPU {total:.1f} s in {len(data['per'])} functions; of it in LLVM "
+          f"{sum(data['llvm'].values()):.1f} s; load average {os.getloadavg()[0]:.2f}; src {src}")
+    print("numba passes (exclusive CPU; native_lowering holds the LLVM phases below):")
+    for name, s in sorted(data["passes"].items(), key=lambda kv: -kv[1])[:top]:
+        print(f"{s:6.2f} s  {name}")
+    print("LLVM phases and Python wrappers (inclusive CPU, calls):")
+    for name, (s, n) in sorted(data["phases"].items(), key=lambda kv: -kv[1][0]):
+        print(f"{s:6.2f} s  {n:4d}  {name}")
+    by: dict[str, list[str]] = {}
+    for name, args in data["sigs"]:
+        by.setdefault(name, []).append(args)
+    print("compiled for more than one signature (compiles, exclusive CPU of all):")
+    for name, args in sorted(by.items(), key=lambda kv: -len(kv[1])):
+        if len(args) > 1:
+            print(f"{len(args):4d}  {data['per'].get(name, 0.0):6.2f} s  {name}: " + "; ".join(sorted(set(args)))[:400])
+
+
 def trace(src: str) -> None:
     """One cold run as ``wait`` starts it, with both processes' compile and cache-load timeline."""
     folder = Path(tempfile.mkdtemp(prefix="bench-compile-"))
@@ -219,7 +293,12 @@ def main() -> None:
     ap.add_argument("--top", type=int, default=25)
     ap.add_argument("--wait", action="store_true", help="the wall-time wait of a cold run instead of the profile")
     ap.add_argument("--trace", action="store_true", help="the timeline of both processes' compiles and loads")
+    ap.add_argument("--split", action="store_true",
+                    help="compile CPU by numba pass, LLVM phase, Python wrapper and signature (background off)")
     args = ap.parse_args()
+    if args.split:
+        split(args.src, args.top)
+        return
     if args.wait or args.trace:
         (trace if args.trace else wait)(args.src)
         return
