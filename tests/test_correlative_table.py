@@ -29,7 +29,7 @@ def test_search_table_equals_the_pyramid_in_a_zeroed_table(pad: tuple[int, int, 
     buf = _table_buffer((hmax + 1) * hh * ww + 2 * ch * cw)
     buf[:] = np.nan  # (a buffer a former search wrote: every cell the table holds is written again)
     tab, merge = _search_table(words, r0, c0, ch, cw, hmax, top, left, hh, ww, buf)
-    assert tab.shape == (hmax + 1, hh * ww)
+    assert tab.shape == ((hmax + 1) * hh * ww,)
     np.testing.assert_array_equal(tab.reshape(want.shape).view(np.int32), want.view(np.int32))  # (bit for bit)
     assert bool(merge) is bool(pyr[0].max() <= 1.0) is True
     over = big.copy()

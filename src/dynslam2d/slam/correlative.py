@@ -57,27 +57,69 @@ def _pyramid(t0: np.ndarray, max_height: int) -> np.ndarray:
     return out
 
 
-@njit(cache=True, inline="always")
-def _pyramid_into(prob, r0, c0, ch, cw, max_height, flat, y0, x0, hh, ww, t, m):  # pragma: no cover - numba
-    """:func:`_score_pyramid`'s levels of the crop of ``prob`` at rows r0 … r0 + ch − 1 and columns c0 … c0 + cw −
-    1 (read as 1-D slices of ``prob``'s rows: contiguous where ``prob`` is, so that the loop vectorises — a 2-D view
-    of the crop has strided rows, ≈ 2× the kernel's time on MIT CSAIL's searches) written into the table ``flat``, a
-    C-order
-    (max_height + 1, hh, ww) float32 array as one row, at rows y0 … y0 + ch − 1 and columns x0 … x0 + cw − 1 of
-    each level (the other cells not written); returns how many level-0 values are not ≤ 1 (NaN included: 0 where
-    ``flat``'s level-0 maximum over these cells is ≤ 1, what ``max() <= 1.0`` tests). Row y of level h is the 1-D
-    slice of ``flat`` from ((h·hh + y0 + y)·ww + x0) (a contiguous view: the loops vectorise as on a 2-D array's
-    rows). ``t``, ``m``: (ch, cw) float32 work arrays (overwritten)."""
+@njit(cache=True)
+def _score_pyramid(prob, max_height):  # pragma: no cover - numba
+    """``_pyramid(_score_table(prob), max_height)`` in one kernel, ``prob`` a level's probability cache words
+    ((H, W) uint32, slam/grid.py ``encode_probs``; decoded as read) (float32, the same values: the table's
+    float32 2p − 1 and 0.5·m, and maxima, which are exact in any order; ``prob`` holds no NaN, and no value is
+    −0: every value is a maximum with +0 or half of one).
+
+    One pass per output (pass map20): a row's 3-wide maximum from its three cells, the table from the three rows'
+    maxima, and pyramid level h from the four cells (x, y), (x + s, y), (x, y + s), (x + s, y + s) of level h − 1
+    (s = 2^(h−1); the ones beyond the array's end left out, as the zeros outside would be) — instead of a
+    copy and one maximum per neighbour, each a pass over the whole array; the loops read and write rows (1-D
+    views). Cell x + s of a row is read as cell x of the row's view from s (pass neg71): the same cells, but with
+    the kernels' one LLVM optimisation (``jitbox.one_llvm_optimisation``) only this form of the loop is
+    vectorised (x + s indexing: ≈ 2.2× the time of the pyramid's levels on negative_2's crops). Every cell of the
+    output is written, so it starts uninitialised. The loops are :func:`_search_table`'s (this kernel is that one
+    with no margin, off the front end's path: the search's kernel alone is compiled on a cold run)."""
+    hh, ww = prob.shape
+    buf = np.empty((max_height + 3) * hh * ww, dtype=np.float32)
+    tab, _ = _search_table(prob, 0, 0, hh, ww, max_height, 0, 0, hh, ww, buf)
+    return tab.reshape(max_height + 1, hh, ww)
+
+
+@njit(cache=True)
+def _search_table(prob, r0, c0, ch, cw, max_height, y0, x0, hh, ww, buf):  # pragma: no cover - numba
+    """:func:`correlative_search`'s table in one kernel: :func:`_score_pyramid` of the crop of ``prob`` (a level's
+    whole cache; the crop's rows r0 … r0 + ch − 1, columns c0 … c0 + cw − 1, read as 1-D slices of ``prob``'s rows:
+    contiguous where ``prob`` is, so that the loop vectorises — a 2-D view of the crop has strided rows, ≈ 2× the
+    kernel's time on MIT CSAIL's searches) laid
+    at rows y0 … and columns x0 … of a (max_height + 1, hh, ww) float32 table returned flat (C order; the caller
+    reshapes it: numba's reshape is ≈ 0.1 s of the kernel's cold compile), zeros elsewhere (the same values as
+    the pyramid copied into ``np.zeros``: no second array, no copy), and whether its level-0 maximum is ≤ 1 (as
+    ``pyramid[0].max() <= 1.0``, NaN making it False) without another pass. The table and the pyramid's two
+    (ch, cw) work arrays are views of ``buf`` (float32, at least (max_height + 1)·hh·ww + 2·ch·cw long; reused
+    from call to call: no page of a fresh large array touched for the first time on every search). Row y of level
+    h is the 1-D slice of the table from ((h·hh + y)·ww) (a contiguous view: the loops vectorise as on a 2-D
+    array's rows); ``above`` counts the level-0 values not ≤ 1 (NaN included)."""
+    n = (max_height + 1) * hh * ww
+    flat = buf[:n]
+    zero = np.float32(0.0)
+    for h in range(max_height + 1):  # (only the cells outside the crop: the pyramid writes every cell inside)
+        for y in range(hh):
+            o = (h * hh + y) * ww
+            row = flat[o:o + ww]
+            if y < y0 or y >= y0 + ch:
+                for x in range(ww):
+                    row[x] = zero
+            else:
+                for x in range(x0):
+                    row[x] = zero
+                for x in range(x0 + cw, ww):
+                    row[x] = zero
+    tb = n  # the work rows: row y of t at tb + y·cw, of m at mb + y·cw (1-D slices: no reshape, whose
+    mb = n + ch * cw  # implementation is ≈ 0.1 s of the kernel's cold compile)
     zero = np.float32(0.0)
     two = np.float32(2.0)
     one = np.float32(1.0)
     half = np.float32(0.5)
     for y in range(ch):
         pr = prob[r0 + y][c0:c0 + cw]
-        tr = t[y]
+        tr = buf[tb + y * cw:tb + (y + 1) * cw]
         for x in range(cw):
             tr[x] = max(two * cell_prob(pr[x]) - one, zero)
-        mr = m[y]  # 3-wide max along the row
+        mr = buf[mb + y * cw:mb + (y + 1) * cw]  # 3-wide max along the row
         if cw == 1:
             mr[0] = tr[0]
         else:
@@ -87,10 +129,10 @@ def _pyramid_into(prob, r0, c0, ch, cw, max_height, flat, y0, x0, hh, ww, t, m):
             mr[cw - 1] = max(tr[cw - 2], tr[cw - 1])
     above = 0
     for y in range(ch):  # then 3-high max along the column, halved, and at least the cell's own value
-        b = m[y]
-        a = m[y - 1] if y >= 1 else b
-        c = m[y + 1] if y + 1 < ch else b
-        tr = t[y]
+        b = buf[mb + y * cw:mb + (y + 1) * cw]
+        a = buf[mb + (y - 1) * cw:mb + y * cw] if y >= 1 else b
+        c = buf[mb + (y + 1) * cw:mb + (y + 2) * cw] if y + 1 < ch else b
+        tr = buf[tb + y * cw:tb + (y + 1) * cw]
         o = (y0 + y) * ww + x0
         orow = flat[o:o + cw]
         for x in range(cw):
@@ -120,59 +162,7 @@ def _pyramid_into(prob, r0, c0, ch, cw, max_height, flat, y0, x0, hh, ww, t, m):
                     crow[x] = max(ra[x], ras[x])
                 for x in range(e, cw):
                     crow[x] = ra[x]
-    return above
-
-
-@njit(cache=True)
-def _score_pyramid(prob, max_height):  # pragma: no cover - numba
-    """``_pyramid(_score_table(prob), max_height)`` in one kernel, ``prob`` a level's probability cache words
-    ((H, W) uint32, slam/grid.py ``encode_probs``; decoded as read) (float32, the same values: the table's
-    float32 2p − 1 and 0.5·m, and maxima, which are exact in any order; ``prob`` holds no NaN, and no value is
-    −0: every value is a maximum with +0 or half of one).
-
-    One pass per output (pass map20): a row's 3-wide maximum from its three cells, the table from the three rows'
-    maxima, and pyramid level h from the four cells (x, y), (x + s, y), (x, y + s), (x + s, y + s) of level h − 1
-    (s = 2^(h−1); the ones beyond the array's end left out, as the zeros outside would be) — instead of a
-    copy and one maximum per neighbour, each a pass over the whole array; the loops read and write rows (1-D
-    views). Cell x + s of a row is read as cell x of the row's view from s (pass neg71): the same cells, but with
-    the kernels' one LLVM optimisation (``jitbox.one_llvm_optimisation``) only this form of the loop is
-    vectorised (x + s indexing: ≈ 2.2× the time of the pyramid's levels on negative_2's crops). Every cell of the
-    output is written, so it starts uninitialised (the loops: :func:`_pyramid_into`)."""
-    hh, ww = prob.shape
-    out = np.empty((max_height + 1, hh, ww), dtype=np.float32)
-    _pyramid_into(prob, 0, 0, hh, ww, max_height, out.reshape(-1), 0, 0, hh, ww, np.empty((hh, ww), dtype=np.float32),
-                  np.empty((hh, ww), dtype=np.float32))
-    return out
-
-
-@njit(cache=True)
-def _search_table(prob, r0, c0, ch, cw, max_height, y0, x0, hh, ww, buf):  # pragma: no cover - numba
-    """:func:`correlative_search`'s table in one kernel: :func:`_score_pyramid` of the crop of ``prob`` (a level's
-    whole cache; the crop's rows r0 … r0 + ch − 1, columns c0 … c0 + cw − 1: :func:`_pyramid_into`) laid
-    at rows y0 … and columns x0 … of a (max_height + 1, hh · ww) float32 table, zeros elsewhere (the same values as
-    the pyramid copied into ``np.zeros``: no second array, no copy), and whether its level-0 maximum is ≤ 1 (as
-    ``pyramid[0].max() <= 1.0``, NaN making it False) without another pass. The table and the pyramid's two
-    (ch, cw) work arrays are views of ``buf`` (float32, at least (max_height + 1)·hh·ww + 2·ch·cw long; reused
-    from call to call: no page of a fresh large array touched for the first time on every search)."""
-    n = (max_height + 1) * hh * ww
-    flat = buf[:n]
-    zero = np.float32(0.0)
-    for h in range(max_height + 1):  # (only the cells outside the crop: the pyramid writes every cell inside)
-        for y in range(hh):
-            o = (h * hh + y) * ww
-            row = flat[o:o + ww]
-            if y < y0 or y >= y0 + ch:
-                for x in range(ww):
-                    row[x] = zero
-            else:
-                for x in range(x0):
-                    row[x] = zero
-                for x in range(x0 + cw, ww):
-                    row[x] = zero
-    t = buf[n:n + ch * cw].reshape(ch, cw)
-    m = buf[n + ch * cw:n + 2 * ch * cw].reshape(ch, cw)
-    above = _pyramid_into(prob, r0, c0, ch, cw, max_height, flat, y0, x0, hh, ww, t, m)
-    return flat.reshape(max_height + 1, hh * ww), above == 0
+    return flat, above == 0
 
 
 #: the search tables' reused memory (:func:`_search_table`'s ``buf``), kept up to this many float32 values (4 MiB; a
@@ -199,12 +189,31 @@ _INT64_MAX = int(np.iinfo(np.int64).max)
 _INT64_MIN = int(np.iinfo(np.int64).min)
 
 
-@njit(cache=True, inline="always")
-def _cells_into(pc, c, s, mx, my, qx, qy):  # pragma: no cover - numba
-    """:func:`_rotated_cells`'s loops: the cells written into ``qx``, ``qy`` (nrot, n) int64; returns (min qx,
-    max qx, min qy, max qy)."""
+@njit(cache=True)
+def _rotated_cells(pc, c, s, mx, my):  # pragma: no cover - numba
+    """Nearest cells (qx, qy) (nrot, n) int64 of the points ``pc`` (n ≥ 1, 2, cells) turned by each row's (cos
+    ``c``, sin ``s``) and moved by (``mx``, ``my``): floor(c·x − s·y + mx + 0.5), floor(s·x + c·y + my + 0.5), the
+    same float64 operations in the same order as the array expressions they replace; and their (min qx, max qx,
+    min qy, max qy).
+
+    The cells first, row by row from contiguous copies of the points' x and y, then the extremes in a second loop
+    (pass map20): with the running extremes in the cells' loop it did not vectorise (≈ 3× the time). The loops are
+    :func:`_search_cells`' (with no shift; off the front end's path: only the search's kernel is compiled on a cold
+    run)."""
+    return _search_cells(pc, c, s, mx, my, -1)
+
+
+@njit(cache=True)
+def _search_cells(pc, c, s, mx, my, w):  # pragma: no cover - numba
+    """:func:`correlative_search`'s point cells in one kernel: :func:`_rotated_cells`' cells and extremes (min qx,
+    max qx, min qy, max qy), the cells then moved into the search table's frame — less the crop's first column c0 =
+    max(min qx − ``w`` − 1, 0) and the table's margin ox = min(0, min qx − c0 − ``w``), and the same in y (``w``
+    cells: the linear window) — in one more loop, instead of two in-place array subtractions per axis in Python (the
+    same int64 values: integer subtraction is exact). ``w`` < 0: the cells are not moved (:func:`_rotated_cells`)."""
     nrot = c.shape[0]
     n = pc.shape[0]
+    qx = np.empty((nrot, n), dtype=np.int64)
+    qy = np.empty((nrot, n), dtype=np.int64)
     px = np.empty(n)  # contiguous copies of x and y by a loop: numba's np.ascontiguousarray of a strided column
     py = np.empty(n)  # is a helper compiled for this kernel alone (≈ 0.12 s of a cold compile)
     for i in range(n):
@@ -227,41 +236,13 @@ def _cells_into(pc, c, s, mx, my, qx, qy):  # pragma: no cover - numba
         x1 = max(x1, fx[j])
         y0 = min(y0, fy[j])
         y1 = max(y1, fy[j])
-    return x0, x1, y0, y1
-
-
-@njit(cache=True)
-def _rotated_cells(pc, c, s, mx, my):  # pragma: no cover - numba
-    """Nearest cells (qx, qy) (nrot, n) int64 of the points ``pc`` (n ≥ 1, 2, cells) turned by each row's (cos
-    ``c``, sin ``s``) and moved by (``mx``, ``my``): floor(c·x − s·y + mx + 0.5), floor(s·x + c·y + my + 0.5), the
-    same float64 operations in the same order as the array expressions they replace; and their (min qx, max qx,
-    min qy, max qy).
-
-    The cells first, row by row from contiguous copies of the points' x and y, then the extremes in a second loop
-    (pass map20): with the running extremes in the cells' loop it did not vectorise (≈ 3× the time)."""
-    qx = np.empty((c.shape[0], pc.shape[0]), dtype=np.int64)
-    qy = np.empty((c.shape[0], pc.shape[0]), dtype=np.int64)
-    x0, x1, y0, y1 = _cells_into(pc, c, s, mx, my, qx, qy)
-    return qx, qy, x0, x1, y0, y1
-
-
-@njit(cache=True)
-def _search_cells(pc, c, s, mx, my, w):  # pragma: no cover - numba
-    """:func:`correlative_search`'s point cells in one kernel: :func:`_rotated_cells`' cells and extremes (min qx,
-    max qx, min qy, max qy), the cells then moved into the search table's frame — less the crop's first column c0 =
-    max(min qx − ``w`` − 1, 0) and the table's margin ox = min(0, min qx − c0 − ``w``), and the same in y (``w``
-    cells: the linear window) — in one more loop, instead of two in-place array subtractions per axis in Python (the
-    same int64 values: integer subtraction is exact)."""
-    qx = np.empty((c.shape[0], pc.shape[0]), dtype=np.int64)
-    qy = np.empty((c.shape[0], pc.shape[0]), dtype=np.int64)
-    x0, x1, y0, y1 = _cells_into(pc, c, s, mx, my, qx, qy)
-    c0 = max(x0 - w - 1, 0)
-    r0 = max(y0 - w - 1, 0)
-    sx = c0 + min(0, x0 - c0 - w)
-    sy = r0 + min(0, y0 - r0 - w)
-    fx = qx.ravel()
-    fy = qy.ravel()
-    for j in range(fx.shape[0]):
+    sx = sy = 0
+    if w >= 0:
+        c0 = max(x0 - w - 1, 0)
+        r0 = max(y0 - w - 1, 0)
+        sx = c0 + min(0, x0 - c0 - w)
+        sy = r0 + min(0, y0 - r0 - w)
+    for j in range(fx.shape[0]):  # (fx, fy: the flat views of the extremes' loop)
         fx[j] -= sx
         fy[j] -= sy
     return qx, qy, x0, x1, y0, y1
@@ -813,6 +794,7 @@ def correlative_search(
     hh = max(r1 - r0, qy_max - r0 + w + 1) - oy
     tab, merge = _search_table(level.prob, r0, c0, r1 - r0, c1 - c0, hmax, -oy, -ox, hh, ww,
                                _table_buffer((hmax + 1) * hh * ww + 2 * (r1 - r0) * (c1 - c0)))
+    tab = tab.reshape(hmax + 1, hh * ww)
     merge = bool(merge)
     floor = -1e300
     if min_score is not None and _admissible(tab[0].reshape(hh, ww)[-oy:r1 - r0 - oy, -ox:c1 - c0 - ox],
