@@ -1,14 +1,25 @@
 """The correlative search's two per-search kernels give what the array code they replace gave (issue 13, pass
 cor98): ``_search_table`` (the score pyramid of a crop of a level's cache written straight into the zero-padded
 search table, and the ≤ 1 test) against ``_score_pyramid`` copied into ``np.zeros``, on a reused buffer full of
-garbage; ``_search_cells`` against ``_rotated_cells`` less the crop's and the table's offsets."""
+garbage; ``_search_cells`` against ``_rotated_cells`` less the crop's and the table's offsets; ``_search_points``
+(pass cor100) against the subsample divided by the cell size and ``_percentile95`` of ``np.hypot``."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from dynslam2d.slam.correlative import _rotated_cells, _score_pyramid, _search_cells, _search_table, _table_buffer
+from dynslam2d.slam.correlative import (
+    _all_rows,
+    _percentile95,
+    _rotated_cells,
+    _score_pyramid,
+    _search_cells,
+    _search_points,
+    _search_table,
+    _table_buffer,
+    even_indices,
+)
 from dynslam2d.slam.grid import encode_probs
 
 
@@ -53,3 +64,21 @@ def test_search_cells_are_the_rotated_cells_in_the_table_frame(w: int) -> None:
         assert tuple(ext) == (x0, x1, y0, y1)
         np.testing.assert_array_equal(gx, qx - c0 - ox)
         np.testing.assert_array_equal(gy, qy - r0 - oy)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 19, 20, 21, 40, 239, 240, 241, 700])
+def test_search_points_equal_the_array_code(n: int) -> None:
+    rng = np.random.default_rng(n)
+    pts = rng.normal(0.0, 6.0, (n, 2))
+    pts[rng.uniform(size=n) < 0.3] = pts[0]  # repeated ranges: the order statistics among equal values
+    pts[rng.uniform(size=n) < 0.1, 1] = 0.0
+    r = 0.05
+    idx = even_indices(n, 240) if n > 240 else _all_rows(n)
+    pc, p95 = _search_points(pts, idx, r)
+    want = pts[idx] / r
+    assert pc.tobytes() == want.tobytes()
+    assert p95 == _percentile95(np.hypot(want[:, 0], want[:, 1]))
+    for _ in range(5):  # the ranges in other orders: ascending, descending, shuffled
+        for p in (np.sort(pts, axis=0), pts[::-1].copy(), rng.permutation(pts)):
+            got = _search_points(np.ascontiguousarray(p), _all_rows(n), r)[1]
+            assert got == _percentile95(np.hypot(p[:, 0] / r, p[:, 1] / r))

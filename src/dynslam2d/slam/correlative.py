@@ -249,6 +249,52 @@ def _search_cells(pc, c, s, mx, my, w):  # pragma: no cover - numba
 
 
 @njit(cache=True)
+def _search_points(pts, idx, r):  # pragma: no cover - numba
+    """:func:`correlative_search`'s points in one kernel: ``pts[idx] / r`` ((k, 2) float64 cells, ``pts`` (n, 2)
+    float64 m, ``idx`` (k ≥ 1,) int64 rows, ``r`` m a cell) and :func:`_percentile95` of their ranges
+    (``np.hypot`` of each row: the C library's ``hypot``, as NumPy's), instead of a fancy-indexed copy, a division,
+    a hypot and a partition in NumPy (≈ 40 µs of MIT CSAIL's searches). The two order statistics around the
+    virtual index (k − 1)·0.95 are the smallest of the k − lo largest ranges, kept in ascending order by insertion
+    (k − lo ≤ 0.05·k + 1 values: no sort or partition compiled), then :func:`_percentile95`'s interpolation, the same
+    float64 operations (the kernels compile without ``fastmath``: no contraction)."""
+    k = idx.shape[0]
+    pc = np.empty((k, 2))
+    vi = (k - 1) * 0.95
+    lo = int(math.floor(vi))
+    m = k - lo  # (sorted positions lo … k − 1: top[0] is position lo, top[1] position lo + 1)
+    top = np.empty(m)
+    nt = 0
+    for i in range(k):
+        j = idx[i]
+        x = pts[j, 0] / r
+        y = pts[j, 1] / r
+        pc[i, 0] = x
+        pc[i, 1] = y
+        v = math.hypot(x, y)
+        if nt < m:
+            q = nt
+            nt += 1
+        elif v > top[0]:
+            q = 0
+            while q + 1 < m and top[q + 1] < v:  # (drop top[0]: shift the smaller ones down)
+                top[q] = top[q + 1]
+                q += 1
+            top[q] = v
+            continue
+        else:
+            continue
+        while q > 0 and top[q - 1] > v:
+            top[q] = top[q - 1]
+            q -= 1
+        top[q] = v
+    a = top[0]
+    b = top[1] if m > 1 else top[0]
+    t = vi - lo
+    d = b - a
+    return pc, (b - d * (1 - t) if t >= 0.5 else a + d * t)
+
+
+@njit(cache=True)
 def _min_abs(lo, hi):  # pragma: no cover - numba
     if lo <= 0 <= hi:
         return 0
@@ -601,6 +647,14 @@ def even_indices(n: int, k: int) -> np.ndarray:
     return idx
 
 
+@functools.lru_cache(maxsize=256)
+def _all_rows(n: int) -> np.ndarray:
+    """(n,) read-only int64 indices 0 … n − 1 (:func:`_search_points`' rows when no subsample is taken)."""
+    idx = np.arange(n, dtype=np.int64)
+    idx.flags.writeable = False
+    return idx
+
+
 def _percentile95(v: np.ndarray) -> float:
     """``np.percentile(v, 95)`` of a 1-D float64 array without NaN (n ≥ 1), the same float64 operations: numpy's
     default "linear" method (Hyndman & Fan 1996, type 7) — virtual index (n − 1)·0.95, the two order statistics
@@ -759,12 +813,16 @@ def correlative_search(
         return None
     r = level.resolution
     n = pts_m.shape[0]
-    if n > max_points:
-        pts_m = pts_m[even_indices(n, max_points)]
-    pc = pts_m / r
-    ranges = np.hypot(pc[:, 0], pc[:, 1])
+    if angular_step is None and pts_m.dtype == np.float64:
+        # the subsample, its cells and their ranges' 95th percentile in one kernel
+        pc, p95 = _search_points(pts_m, even_indices(n, max_points) if n > max_points else _all_rows(n), float(r))
+    else:
+        if n > max_points:
+            pts_m = pts_m[even_indices(n, max_points)]
+        pc = pts_m / r
+        p95 = _percentile95(np.hypot(pc[:, 0], pc[:, 1])) if angular_step is None else 0.0
     if angular_step is None:
-        d = max(_percentile95(ranges), 1.0)
+        d = max(p95, 1.0)
         # Olson's rule: farthest point moves at most one cell
         angular_step = math.acos(max(-1.0, 1.0 - 1.0 / (2.0 * d * d)))
     n_half = int(math.ceil(angular_window / angular_step)) if angular_window > 0 else 0
