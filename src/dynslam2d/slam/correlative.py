@@ -71,60 +71,117 @@ def _score_pyramid(prob, max_height):  # pragma: no cover - numba
     views). Cell x + s of a row is read as cell x of the row's view from s (pass neg71): the same cells, but with
     the kernels' one LLVM optimisation (``jitbox.one_llvm_optimisation``) only this form of the loop is
     vectorised (x + s indexing: ≈ 2.2× the time of the pyramid's levels on negative_2's crops). Every cell of the
-    output is written, so it starts uninitialised."""
+    output is written, so it starts uninitialised. The loops are :func:`_search_table`'s (this kernel is that one
+    with no margin, off the front end's path: the search's kernel alone is compiled on a cold run)."""
     hh, ww = prob.shape
-    out = np.empty((max_height + 1, hh, ww), dtype=np.float32)
+    buf = np.empty((max_height + 3) * hh * ww, dtype=np.float32)
+    tab, _ = _search_table(prob, 0, 0, hh, ww, max_height, 0, 0, hh, ww, buf)
+    return tab.reshape(max_height + 1, hh, ww)
+
+
+@njit(cache=True)
+def _search_table(prob, r0, c0, ch, cw, max_height, y0, x0, hh, ww, buf):  # pragma: no cover - numba
+    """:func:`correlative_search`'s table in one kernel: :func:`_score_pyramid` of the crop of ``prob`` (a level's
+    whole cache; the crop's rows r0 … r0 + ch − 1, columns c0 … c0 + cw − 1, read as 1-D slices of ``prob``'s rows:
+    contiguous where ``prob`` is, so that the loop vectorises — a 2-D view of the crop has strided rows, ≈ 2× the
+    kernel's time on MIT CSAIL's searches) laid
+    at rows y0 … and columns x0 … of a (max_height + 1, hh, ww) float32 table returned flat (C order; the caller
+    reshapes it: numba's reshape is ≈ 0.1 s of the kernel's cold compile), zeros elsewhere (the same values as
+    the pyramid copied into ``np.zeros``: no second array, no copy), and whether its level-0 maximum is ≤ 1 (as
+    ``pyramid[0].max() <= 1.0``, NaN making it False) without another pass. The table and the pyramid's two
+    (ch, cw) work arrays are views of ``buf`` (float32, at least (max_height + 1)·hh·ww + 2·ch·cw long; reused
+    from call to call: no page of a fresh large array touched for the first time on every search). Row y of level
+    h is the 1-D slice of the table from ((h·hh + y)·ww) (a contiguous view: the loops vectorise as on a 2-D
+    array's rows); ``above`` counts the level-0 values not ≤ 1 (NaN included)."""
+    n = (max_height + 1) * hh * ww
+    flat = buf[:n]
+    zero = np.float32(0.0)
+    for h in range(max_height + 1):  # (only the cells outside the crop: the pyramid writes every cell inside)
+        for y in range(hh):
+            o = (h * hh + y) * ww
+            row = flat[o:o + ww]
+            if y < y0 or y >= y0 + ch:
+                for x in range(ww):
+                    row[x] = zero
+            else:
+                for x in range(x0):
+                    row[x] = zero
+                for x in range(x0 + cw, ww):
+                    row[x] = zero
+    tb = n  # the work rows: row y of t at tb + y·cw, of m at mb + y·cw (1-D slices: no reshape, whose
+    mb = n + ch * cw  # implementation is ≈ 0.1 s of the kernel's cold compile)
     zero = np.float32(0.0)
     two = np.float32(2.0)
     one = np.float32(1.0)
     half = np.float32(0.5)
-    t = np.empty((hh, ww), dtype=np.float32)
-    m = np.empty((hh, ww), dtype=np.float32)
-    for y in range(hh):
-        pr = prob[y]
-        tr = t[y]
-        for x in range(ww):
+    for y in range(ch):
+        pr = prob[r0 + y][c0:c0 + cw]
+        tr = buf[tb + y * cw:tb + (y + 1) * cw]
+        for x in range(cw):
             tr[x] = max(two * cell_prob(pr[x]) - one, zero)
-        mr = m[y]  # 3-wide max along the row
-        if ww == 1:
+        mr = buf[mb + y * cw:mb + (y + 1) * cw]  # 3-wide max along the row
+        if cw == 1:
             mr[0] = tr[0]
         else:
             mr[0] = max(tr[0], tr[1])
-            for x in range(1, ww - 1):
+            for x in range(1, cw - 1):
                 mr[x] = max(max(tr[x - 1], tr[x]), tr[x + 1])
-            mr[ww - 1] = max(tr[ww - 2], tr[ww - 1])
-    t0 = out[0]
-    for y in range(hh):  # then 3-high max along the column, halved, and at least the cell's own value
-        b = m[y]
-        a = m[y - 1] if y >= 1 else b
-        c = m[y + 1] if y + 1 < hh else b
-        tr = t[y]
-        orow = t0[y]
-        for x in range(ww):
-            orow[x] = max(tr[x], half * max(max(a[x], b[x]), c[x]))
+            mr[cw - 1] = max(tr[cw - 2], tr[cw - 1])
+    above = 0
+    for y in range(ch):  # then 3-high max along the column, halved, and at least the cell's own value
+        b = buf[mb + y * cw:mb + (y + 1) * cw]
+        a = buf[mb + (y - 1) * cw:mb + y * cw] if y >= 1 else b
+        c = buf[mb + (y + 1) * cw:mb + (y + 2) * cw] if y + 1 < ch else b
+        tr = buf[tb + y * cw:tb + (y + 1) * cw]
+        o = (y0 + y) * ww + x0
+        orow = flat[o:o + cw]
+        for x in range(cw):
+            v = max(tr[x], half * max(max(a[x], b[x]), c[x]))
+            orow[x] = v
+            above += 0 if v <= one else 1
     for h in range(1, max_height + 1):
         s = 1 << (h - 1)
-        prev = out[h - 1]
-        cur = out[h]
-        e = ww - s if ww > s else 0  # (the columns whose x + s is inside)
-        for y in range(hh):  # max over [x, x + s] × [y, y + s] (0 outside: the values are ≥ 0)
-            ra = prev[y]
-            crow = cur[y]
-            if y + s < hh:
-                rb = prev[y + s]
-                ras = ra[s:]  # (cell x + s as cell x of a view: the loop vectorises, see the docstring)
+        e = cw - s if cw > s else 0  # (the columns whose x + s is inside)
+        for y in range(ch):  # max over [x, x + s] × [y, y + s] (0 outside: the values are ≥ 0)
+            o = ((h - 1) * hh + y0 + y) * ww + x0
+            ra = flat[o:o + cw]
+            o = (h * hh + y0 + y) * ww + x0
+            crow = flat[o:o + cw]
+            if y + s < ch:
+                o = ((h - 1) * hh + y0 + y + s) * ww + x0
+                rb = flat[o:o + cw]
+                ras = ra[s:]  # (cell x + s as cell x of a view: the loop vectorises, see _score_pyramid)
                 rbs = rb[s:]
                 for x in range(e):
                     crow[x] = max(max(ra[x], ras[x]), max(rb[x], rbs[x]))
-                for x in range(e, ww):
+                for x in range(e, cw):
                     crow[x] = max(ra[x], rb[x])
             else:
                 ras = ra[s:]
                 for x in range(e):
                     crow[x] = max(ra[x], ras[x])
-                for x in range(e, ww):
+                for x in range(e, cw):
                     crow[x] = ra[x]
-    return out
+    return flat, above == 0
+
+
+#: the search tables' reused memory (:func:`_search_table`'s ``buf``), kept up to this many float32 values (4 MiB; a
+#: larger table, a wide search of the loop closer, gets an array of its own instead of a large one kept)
+_BUF_MAX = 1 << 20
+_BUF: list[np.ndarray] = [np.empty(0, dtype=np.float32)]
+
+
+def _table_buffer(size: int) -> np.ndarray:
+    """A float32 array of at least ``size`` values: the module's reused one (grown to twice the need, at most
+    ``_BUF_MAX``) or, beyond that, a fresh one. Its contents are overwritten by every search that uses it (the
+    searches run one at a time; a table is not read after its search returns)."""
+    buf = _BUF[0]
+    if buf.shape[0] >= size:
+        return buf
+    if size > _BUF_MAX:
+        return np.empty(size, dtype=np.float32)
+    buf = _BUF[0] = np.empty(min(2 * size, _BUF_MAX), dtype=np.float32)
+    return buf
 
 
 #: np.iinfo(np.int64)'s bounds as plain constants (numba compiles np.iinfo's implementation for its one caller here).
@@ -140,7 +197,19 @@ def _rotated_cells(pc, c, s, mx, my):  # pragma: no cover - numba
     min qy, max qy).
 
     The cells first, row by row from contiguous copies of the points' x and y, then the extremes in a second loop
-    (pass map20): with the running extremes in the cells' loop it did not vectorise (≈ 3× the time)."""
+    (pass map20): with the running extremes in the cells' loop it did not vectorise (≈ 3× the time). The loops are
+    :func:`_search_cells`' (with no shift; off the front end's path: only the search's kernel is compiled on a cold
+    run)."""
+    return _search_cells(pc, c, s, mx, my, -1)
+
+
+@njit(cache=True)
+def _search_cells(pc, c, s, mx, my, w):  # pragma: no cover - numba
+    """:func:`correlative_search`'s point cells in one kernel: :func:`_rotated_cells`' cells and extremes (min qx,
+    max qx, min qy, max qy), the cells then moved into the search table's frame — less the crop's first column c0 =
+    max(min qx − ``w`` − 1, 0) and the table's margin ox = min(0, min qx − c0 − ``w``), and the same in y (``w``
+    cells: the linear window) — in one more loop, instead of two in-place array subtractions per axis in Python (the
+    same int64 values: integer subtraction is exact). ``w`` < 0: the cells are not moved (:func:`_rotated_cells`)."""
     nrot = c.shape[0]
     n = pc.shape[0]
     qx = np.empty((nrot, n), dtype=np.int64)
@@ -167,7 +236,62 @@ def _rotated_cells(pc, c, s, mx, my):  # pragma: no cover - numba
         x1 = max(x1, fx[j])
         y0 = min(y0, fy[j])
         y1 = max(y1, fy[j])
+    sx = sy = 0
+    if w >= 0:
+        c0 = max(x0 - w - 1, 0)
+        r0 = max(y0 - w - 1, 0)
+        sx = c0 + min(0, x0 - c0 - w)
+        sy = r0 + min(0, y0 - r0 - w)
+    for j in range(fx.shape[0]):  # (fx, fy: the flat views of the extremes' loop)
+        fx[j] -= sx
+        fy[j] -= sy
     return qx, qy, x0, x1, y0, y1
+
+
+@njit(cache=True)
+def _search_points(pts, idx, r):  # pragma: no cover - numba
+    """:func:`correlative_search`'s points in one kernel: ``pts[idx] / r`` ((k, 2) float64 cells, ``pts`` (n, 2)
+    float64 m, ``idx`` (k ≥ 1,) int64 rows, ``r`` m a cell) and :func:`_percentile95` of their ranges
+    (``np.hypot`` of each row: the C library's ``hypot``, as NumPy's), instead of a fancy-indexed copy, a division,
+    a hypot and a partition in NumPy (≈ 40 µs of MIT CSAIL's searches). The two order statistics around the
+    virtual index (k − 1)·0.95 are the smallest of the k − lo largest ranges, kept in ascending order by insertion
+    (k − lo ≤ 0.05·k + 1 values: no sort or partition compiled), then :func:`_percentile95`'s interpolation, the same
+    float64 operations (the kernels compile without ``fastmath``: no contraction)."""
+    k = idx.shape[0]
+    pc = np.empty((k, 2))
+    vi = (k - 1) * 0.95
+    lo = int(math.floor(vi))
+    m = k - lo  # (sorted positions lo … k − 1: top[0] is position lo, top[1] position lo + 1)
+    top = np.empty(m)
+    nt = 0
+    for i in range(k):
+        j = idx[i]
+        x = pts[j, 0] / r
+        y = pts[j, 1] / r
+        pc[i, 0] = x
+        pc[i, 1] = y
+        v = math.hypot(x, y)
+        if nt < m:
+            q = nt
+            nt += 1
+        elif v > top[0]:
+            q = 0
+            while q + 1 < m and top[q + 1] < v:  # (drop top[0]: shift the smaller ones down)
+                top[q] = top[q + 1]
+                q += 1
+            top[q] = v
+            continue
+        else:
+            continue
+        while q > 0 and top[q - 1] > v:
+            top[q] = top[q - 1]
+            q -= 1
+        top[q] = v
+    a = top[0]
+    b = top[1] if m > 1 else top[0]
+    t = vi - lo
+    d = b - a
+    return pc, (b - d * (1 - t) if t >= 0.5 else a + d * t)
 
 
 @njit(cache=True)
@@ -523,6 +647,14 @@ def even_indices(n: int, k: int) -> np.ndarray:
     return idx
 
 
+@functools.lru_cache(maxsize=256)
+def _all_rows(n: int) -> np.ndarray:
+    """(n,) read-only int64 indices 0 … n − 1 (:func:`_search_points`' rows when no subsample is taken)."""
+    idx = np.arange(n, dtype=np.int64)
+    idx.flags.writeable = False
+    return idx
+
+
 def _percentile95(v: np.ndarray) -> float:
     """``np.percentile(v, 95)`` of a 1-D float64 array without NaN (n ≥ 1), the same float64 operations: numpy's
     default "linear" method (Hyndman & Fan 1996, type 7) — virtual index (n − 1)·0.95, the two order statistics
@@ -681,20 +813,26 @@ def correlative_search(
         return None
     r = level.resolution
     n = pts_m.shape[0]
-    if n > max_points:
-        pts_m = pts_m[even_indices(n, max_points)]
-    pc = pts_m / r
-    ranges = np.hypot(pc[:, 0], pc[:, 1])
+    if angular_step is None and pts_m.dtype == np.float64:
+        # the subsample, its cells and their ranges' 95th percentile in one kernel
+        pc, p95 = _search_points(pts_m, even_indices(n, max_points) if n > max_points else _all_rows(n), float(r))
+    else:
+        if n > max_points:
+            pts_m = pts_m[even_indices(n, max_points)]
+        pc = pts_m / r
+        p95 = _percentile95(np.hypot(pc[:, 0], pc[:, 1])) if angular_step is None else 0.0
     if angular_step is None:
-        d = max(_percentile95(ranges), 1.0)
+        d = max(p95, 1.0)
         # Olson's rule: farthest point moves at most one cell
         angular_step = math.acos(max(-1.0, 1.0 - 1.0 / (2.0 * d * d)))
     n_half = int(math.ceil(angular_window / angular_step)) if angular_window > 0 else 0
     dth = np.arange(-n_half, n_half + 1, dtype=np.float64) * (angular_window / max(n_half, 1))
     th = start_world[2] + dth
     mp = level.pose_to_map(np.asarray(start_world, dtype=np.float64))
-    qx, qy, qx_min, qx_max, qy_min, qy_max = _rotated_cells(pc, np.cos(th), np.sin(th), float(mp[0]), float(mp[1]))
     w = int(math.ceil(linear_window / r))
+    # the points' cells, already in the search table's frame (less c0 + ox, r0 + oy below)
+    qx0, qy0, qx_min, qx_max, qy_min, qy_max = _search_cells(pc, np.cos(th), np.sin(th), float(mp[0]), float(mp[1]),
+                                                             w)
     hmax = max(0, min(max_height, int(math.floor(math.log2(2 * w + 1))) if w > 0 else 0))
     H, W = level.shape
     c0 = max(qx_min - w - 1, 0)
@@ -703,34 +841,25 @@ def correlative_search(
     r1 = min(qy_max + w + 2, H)
     if c1 <= c0 or r1 <= r0:
         return None
-    crop = level.prob[r0:r1, c0:c1]
-    pyr = _score_pyramid(crop, hmax)  # = _pyramid(
-    # _score_table(crop), hmax): one pass per level in a kernel instead of a dozen array temporaries
-    qx -= c0  # (fresh contiguous arrays from the kernel: shifted in place)
-    qy -= r0
-    qx0, qy0 = qx, qy
-    floor = -1e300
-    if min_score is not None and _admissible(pyr[0], qx_min - c0 >= w, qy_min - r0 >= w, (1 << hmax) - 1):
-        # every block's bound is admissible: pruning the blocks below min_score keeps the result
-        # (branch_and_bound's docstring); otherwise the search runs without it
-        floor = math.nextafter(min_score, -math.inf)
-    # the pyramid laid into a table that holds every cell a point reads at any offset (zeros outside the crop:
-    # where the search read nothing), so that the search reads without range checks; where every table value is
-    # in [0, 1] the points on one cell are counted once with their number (branch_and_bound: the same sums)
+    # the crop's score pyramid (_pyramid(_score_table(crop), hmax), one pass per level in a kernel) laid into a table
+    # that holds every cell a point reads at any offset (zeros outside the crop: where the search read nothing), so
+    # that the search reads without range checks; where every table value is in [0, 1] (``merge``) the points on one
+    # cell are counted once with their number (branch_and_bound: the same sums). One kernel call writes the pyramid
+    # straight into the table and tests the values (no pyramid array copied into a zeroed one, no max() pass)
     ox = min(0, qx_min - c0 - w)
     oy = min(0, qy_min - r0 - w)
     ww = max(c1 - c0, qx_max - c0 + w + 1) - ox
     hh = max(r1 - r0, qy_max - r0 + w + 1) - oy
-    if ox == 0 and oy == 0 and ww == c1 - c0 and hh == r1 - r0:
-        tab = pyr.reshape(hmax + 1, hh * ww)
-    else:
-        tab = np.zeros((hmax + 1, hh, ww), dtype=np.float32)
-        tab[:, -oy:r1 - r0 - oy, -ox:c1 - c0 - ox] = pyr
-        tab = tab.reshape(hmax + 1, hh * ww)
-    merge = bool(pyr[0].max() <= 1.0)
-    if ox or oy:
-        qx0 -= ox
-        qy0 -= oy
+    tab, merge = _search_table(level.prob, r0, c0, r1 - r0, c1 - c0, hmax, -oy, -ox, hh, ww,
+                               _table_buffer((hmax + 1) * hh * ww + 2 * (r1 - r0) * (c1 - c0)))
+    tab = tab.reshape(hmax + 1, hh * ww)
+    merge = bool(merge)
+    floor = -1e300
+    if min_score is not None and _admissible(tab[0].reshape(hh, ww)[-oy:r1 - r0 - oy, -ox:c1 - c0 - ox],
+                                             qx_min - c0 >= w, qy_min - r0 >= w, (1 << hmax) - 1):
+        # every block's bound is admissible: pruning the blocks below min_score keeps the result
+        # (branch_and_bound's docstring); otherwise the search runs without it
+        floor = math.nextafter(min_score, -math.inf)
     if accept_turn is not None and min_score is not None and min_margin is not None and runner_up_distance is not None:
         st, k, dx, dy, best, k2, dx2, dy2, s2 = _turn_first(
             tab, ww, qx0, qy0, merge, w, dth, n_half, angular_window, accept_turn, translation_weight * r * r,
