@@ -47,11 +47,13 @@ import itertools
 import math
 import zlib
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from dynslam2d.detect.memoryconfig import MemoryConfig
+from dynslam2d.detect.trackreport import TrackReports
 from dynslam2d.slam.grid import MultiResMap, _zeroed, encode_probs
 from dynslam2d.types import Pose2D, Scan, Track
 
@@ -482,7 +484,9 @@ class _Ledger:
     #: ((k, 3) int32 rows (scan index, first, end) into the chunk's beams, the int32 beams), in update order, before
     #: :attr:`kb`'s
     kbc: list | None = None
-    last_track: Track | None = None  # the track as last seen out of the removal set (None once the track ended)
+    #: the track as last seen out of the removal set (None once the track ended): its ``Track``, or (its scan's
+    #: ``TrackReports``, its index there) while that report was not built (``TrackReports.sight``, pass trk90)
+    last_track: Track | tuple[TrackReports, int] | None = None
     #: (update's (5, m) row block, first column, end column, levels with rows (bit k: level k)) per map update
     #: since the last :meth:`settle`
     ent: list = field(default_factory=list)
@@ -704,6 +708,11 @@ def _box_key(t: Track) -> tuple[float, float, float]:
     return (float(b.px), float(b.py), 0.5 * float(max(b.length, b.width)))
 
 
+def _sight_key(sight: Track | tuple[TrackReports, int]) -> tuple[float, float, float]:
+    """:func:`_box_key` of a ledger's last sight (:attr:`_Ledger.last_track`)."""
+    return sight[0].box_key(sight[1]) if type(sight) is tuple else _box_key(sight)
+
+
 class EvidenceLedger:
     """Per-track record of map evidence and its erasure (module docstring)."""
 
@@ -765,20 +774,19 @@ class EvidenceLedger:
         self._final: dict[str, int] | None = None
 
     # ------------------------------------------------------------------ recording
-    def before_update(self, scan: Scan, pose: Pose2D, tracks: list[Track], removed: np.ndarray,
+    def before_update(self, scan: Scan, pose: Pose2D, tracks: Sequence[Track], removed: np.ndarray,
                       hmap: MultiResMap, index: int = -1) -> PendingUpdate | None:
         """Read, before the map update with ``scan`` (beams ``removed`` taken out) at ``pose``, the
         log-odds of the cells each track's kept beams will hit (removed beams, those of the tracks in the
         removal set, are not recorded). ``index`` is the scan's index in the run (kept with the beams when
-        ``keep_beams``). Returns None when nothing is to be recorded."""
+        ``keep_beams``). Returns None when nothing is to be recorded. ``tracks``: the tracker's reports (read from
+        their columns, no ``Track`` built) or any sequence of ``Track``."""
         lk = _lk or _kernels()
-        # the tracks with beams, their beams and ids (comprehensions: fewer byte codes per track than one loop with
-        # four appends, pass ledger16)
-        mine = [t for t in tracks if t.beams is not None and len(t.beams)]
+        reps = TrackReports.of_tracks(tracks)
+        # the indices of the reports with beams, their beams and ids (from the columns; pass trk90)
+        mine, blist, tids = reps.with_beams()
         if not mine:
             return None
-        blist = [t.beams for t in mine]
-        tids = [t.id for t in mine]
         idl = np.array(tids + list(map(len, blist)), dtype=np.int64)  # (the ids, then the beam counts: one array)
         allb = np.concatenate(blist).astype(np.int64, copy=False)
         c, s = math.cos(pose.theta), math.sin(pose.theta)
@@ -816,20 +824,20 @@ class EvidenceLedger:
         ledgers = self._ledgers
         if want_kb:  # every track's kept beams, split per track
             at = int(index)
-            for t, tid, keep, a, b in zip(mine, tids, present, kb, kb[1:]):
+            for i, tid, keep, a, b in zip(mine, tids, present, kb, kb[1:]):
                 if keep:  # (else every beam of it removed)
                     led = ledgers.get(tid)
                     if led is None:
-                        led = ledgers[tid] = self._new_ledger(t, t.stamp, n_lv)
+                        led = ledgers[tid] = self._new_ledger_at(tid, reps.box_key(i), reps.stamp_of(i), n_lv)
                     if b > a:  # (the bounds, not a view: a view costs more per track and holds the same array)
                         led.kb.extend((at, kb_all, a, b))  # (flat: the tuple dies here, not in a young generation)
             self._kb_n += 1
             if self._kb_n == self.kb_sweep:
                 self._sweep_beams(at)
         else:
-            for t, tid, keep in zip(mine, tids, present):
+            for i, tid, keep in zip(mine, tids, present):
                 if keep and tid not in ledgers:
-                    ledgers[tid] = self._new_ledger(t, t.stamp, n_lv)
+                    ledgers[tid] = self._new_ledger_at(tid, reps.box_key(i), reps.stamp_of(i), n_lv)
         return pending
 
     def _sweep_beams(self, at: int) -> None:
@@ -960,16 +968,19 @@ class EvidenceLedger:
             per_level.append((ids[sel], mk[sel], c, before, uidx))
         return per_level
 
-    def _new_ledger(self, t: Track, stamp: float, n_levels: int, _new=object.__new__) -> _Ledger:
+    def _new_ledger(self, t: Track, stamp: float, n_levels: int) -> _Ledger:
         """An empty ledger of ``t``; its first box is where the track was first reported.
 
         ``_Ledger(t.id, box, t0, here, stamp, None, n_levels, max_ledger_cells)`` with every other field at its
         default, the slots set directly (pass led28: ≈ 3.5 ledgers start per map update on negative_2, most of them
         tentative tracks' that are dropped a few scans later; the dataclass ``__init__`` with its two default
         factories cost about half as much again; ``tests/test_ledger_observe.py`` compares every field)."""
-        tid = t.id
-        b = t.box
-        here = (float(b.px), float(b.py), 0.5 * float(max(b.length, b.width)))  # (_box_key, inlined)
+        return self._new_ledger_at(t.id, _box_key(t), stamp, n_levels)
+
+    def _new_ledger_at(self, tid: int, here: tuple[float, float, float], stamp: float, n_levels: int,
+                       _new=object.__new__) -> _Ledger:
+        """:meth:`_new_ledger` of the track ``tid`` reported with the box ``here`` (:func:`_box_key`'s centre x, y
+        and half longer side, m, map frame) at ``stamp`` (s)."""
         box, t0, _ = self._first_of(tid) or (here, stamp, stamp)
         led = _new(_Ledger)
         led.id = tid
@@ -1211,16 +1222,18 @@ class EvidenceLedger:
             mark[:self._mark.shape[0]] = self._mark
             self._F, self._mark = F, mark
 
-    def observe(self, tracks: list[Track], removing: set[int], stamp: float,
+    def observe(self, tracks: Sequence[Track], removing: set[int], stamp: float,
                 states: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Keep each live track's last box; move ledgers of ended tracks aside; drop old ones.
 
-        ``states``: the tracker's state array and the rows of its live reports, ``(X, rows)``
-        (``Tracker.report_states()``; the first ``len(rows)`` of ``tracks`` are those reports, in that order,
-        each box centre and velocity the values of its row: x, y (m), vx, vy (m/s), map frame); None: read from
-        the reports themselves."""
+        ``tracks``: the tracker's reports (read from their columns, no ``Track`` built; a ledger keeps its track's
+        report as ``TrackReports.sight``) or any sequence of ``Track``. ``states``: the tracker's state array and
+        the rows of its live reports, ``(X, rows)`` (``Tracker.report_states()``; the first ``len(rows)`` of
+        ``tracks`` are those reports, in that order, each box centre and velocity the values of its row: x, y (m),
+        vx, vy (m/s), map frame); None: read from the reports themselves."""
         lk = _lk or _kernels()
-        ids = [t.id for t in tracks]
+        tracks = TrackReports.of_tracks(tracks)
+        ids = tracks.ids
         nr = 0
         if states is not None:
             X, rows = states
@@ -1273,26 +1286,27 @@ class EvidenceLedger:
             F, s, pin = self._F, self._s, self._pin
             lo = s + self._P
             for i in new.tolist():
-                b = tracks[i].box
                 tid = ids[i]
-                F[tid - s if tid >= lo else pin[tid], 2] = 0.5 * float(max(b.length, b.width))
+                F[tid - s if tid >= lo else pin[tid], 2] = tracks.box_key(i)[2]
         ledgers = self._ledgers
-        for t, tid in zip(tracks, ids):  # (each ledger's last sight)
+        sight, state_of = tracks.sight, tracks.state_of
+        for i, tid in enumerate(ids):  # (each ledger's last sight)
             if tid in removing:
                 continue
             led = ledgers.get(tid)
             if led is not None:
                 if led.m_start is not None:  # out of the removal set (again); skip and linked are only set
                     led.m_start, led.skip, led.linked = None, False, False  # (with m_start)
-                led.last_track = t  # (its box becomes last_box when the track ends)
+                # (its box becomes last_box when the track ends; the report kept unbuilt, pass trk90)
+                led.last_track = sight(i)
                 led.last_seen = stamp
-                if not led.confirmed and t.state != "tentative":
+                if not led.confirmed and state_of(i) != "tentative":
                     led.confirmed = True
         live = set(ids)
         for tid in [i for i in ledgers if i not in live]:  # (in the ledgers' order)
             led = ledgers.pop(tid)
             if led.last_track is not None:
-                led.last_box = _box_key(led.last_track)
+                led.last_box = _sight_key(led.last_track)
                 # (nothing reads an ended ledger's track again: kept, each held its scan's report arrays — the
                 # velocity's and covariance's rows, the detections' beams — for ``ledger_keep_s``, ≈ 3 MiB of
                 # MIT CSAIL's ended ledgers at the loop's end; pass ldg47)
@@ -1379,24 +1393,27 @@ class EvidenceLedger:
             done += nb
 
     # ------------------------------------------------------------------ erasure
-    def erase_entering(self, tracks: list[Track], removing: set[int], stamp: float, hmap: MultiResMap) -> int:
+    def erase_entering(self, tracks: Sequence[Track], removing: set[int], stamp: float, hmap: MultiResMap) -> int:
         """Erase the evidence of every live track in the removal set ``removing`` (ids) that has moved
         ``erase_min_travel`` from where it was first removed, with the evidence of ended tracks that stood
-        where it was first seen. Returns the number of cells changed on the finest level."""
+        where it was first seen. Returns the number of cells changed on the finest level. ``tracks``: the tracker's
+        reports (only the removal set's boxes read from their columns) or any sequence of ``Track``."""
         if not self.config.erase or not removing:  # (no track in the removal set: nothing to erase or to start)
             return 0
         changed = 0
-        for t in tracks:
-            if t.id not in removing:
+        reps = TrackReports.of_tracks(tracks)
+        for i, tid in enumerate(reps.ids):
+            if tid not in removing:
                 continue
-            led = self._ledgers.get(t.id)
+            here = reps.box_key(i)
+            led = self._ledgers.get(tid)
             if led is None:
-                led = self._new_ledger(t, stamp, len(hmap.levels))
-                self._ledgers[t.id] = led
-            x, y = float(t.box.px), float(t.box.py)
+                led = self._new_ledger_at(tid, here, stamp, len(hmap.levels))
+                self._ledgers[tid] = led
+            x, y = here[0], here[1]
             if led.m_start is None:
                 led.m_start = (x, y)
-                (fx, fy, fh), f_t, last_t = self._first_of(t.id) or (led.first_box, led.first_t, led.first_t)
+                (fx, fy, fh), f_t, last_t = self._first_of(tid) or (led.first_box, led.first_t, led.first_t)
                 led.first_box, led.first_t = (fx, fy, fh), f_t
                 # only what stood before it moved wrote evidence worth erasing (a person born walking enters
                 # M within a second: its few early hits are left to the clean-up pass), and only it may be
