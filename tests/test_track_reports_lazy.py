@@ -234,3 +234,24 @@ def test_the_ledger_from_the_columns_keeps_the_state_of_the_ledger_fed_objects(m
         erased += a.ledger.stats["cells_changed"]
     assert a.ledger.stats["erasures"] > 0 and erased > 0, a.ledger.stats
     assert a.gridmap().prob.tobytes() == b.gridmap().prob.tobytes()
+
+
+def test_erase_entering_from_the_movers_rows_keeps_the_state_of_the_reports_path() -> None:
+    """``EvidenceLedger.erase_entering`` given the pipeline's movers' ids and rows (pass trk97) and the same call
+    reading the reports' columns (``movers`` None), two pipelines in lockstep on a scene where movers stop, stand and
+    leave: after every scan the same ledger state and, at the end, the same map."""
+    a, b = pl.Pipeline(), pl.Pipeline()
+    orig = b.ledger.erase_entering
+    calls = {"with movers": 0}
+
+    def from_reports(tracks, removing, stamp, hmap, movers=None):
+        calls["with movers"] += movers is not None
+        return orig(tracks, removing, stamp, hmap)
+
+    b.ledger.erase_entering = from_reports
+    for scan in open_source("sim:stop-and-go", seed=2, duration=20.0):
+        sa, sb = a.process(scan), b.process(scan)
+        assert sa.removed_by.tobytes() == sb.removed_by.tobytes()
+        assert _ledger_state(a.ledger) == _ledger_state(b.ledger)
+    assert a.ledger.stats["erasures"] > 0 and calls["with movers"] > 20, (a.ledger.stats, calls)
+    assert a.gridmap().prob.tobytes() == b.gridmap().prob.tobytes()

@@ -314,7 +314,7 @@ class Pipeline:
             # (the tracker's state rows of its live reports: the ledger's standing test reads them in one kernel call)
             trk = self.tracker
             led.observe(tracks, removing, scan.stamp, trk.report_states())
-            led.erase_entering(tracks, removing, scan.stamp, self.slam.map)
+            led.erase_entering(tracks, removing, scan.stamp, self.slam.map, (moving, mrows) if removing else None)
             if led.erased_beams:  # the loop closure's keyframes leave them out too (re-render, clean-up recount)
                 if self.loops is not None:
                     self.loops.drop_beams(led.erased_beams)

@@ -173,6 +173,17 @@ class TrackReports(Sequence):
         extra = self._extra
         return self._cols[0] if not extra else [*self._cols[0], *[r.id for r in extra]]
 
+    @property
+    def dormant(self) -> list[Track]:
+        """The dormant tracks' reports (built, after the live ones; read only)."""
+        return self._extra
+
+    @property
+    def live_built(self) -> list[Track | None]:
+        """The live reports' ``Track`` where built, else None, in order (read only): :meth:`sight` of a live report
+        ``i`` is ``live_built[i]`` if not None, else ``(self, i)``."""
+        return self._built
+
     def _object(self, i: int) -> Track | None:
         """Report ``i``'s ``Track`` if it is built (every dormant one is), else None."""
         n = self._n

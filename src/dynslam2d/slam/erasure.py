@@ -1235,16 +1235,18 @@ class EvidenceLedger:
         tracks = TrackReports.of_tracks(tracks)
         ids = tracks.ids
         nr = 0
+        n_all = len(tracks)  # (once: a Python ``__len__``)
         if states is not None:
             X, rows = states
             nr = rows.shape[0]
-            if nr > len(tracks):  # (not the reports of these rows)
+            if nr > n_all:  # (not the reports of these rows)
                 nr = 0
         if not nr:
             X, rows = _NO_X, _NO_IDS
         # the other reports (the tracker's dormant ones, or all without ``states``): centre and velocity as rows
-        if len(tracks) > nr:
-            E = np.array([(t.box.px, t.box.py, *t.velocity.tolist()) for t in tracks[nr:]], dtype=np.float64)
+        if n_all > nr:  # (the dormant reports as their list when the rows are the live ones': no slice, pass trk97)
+            rest = tracks.dormant if nr == tracks.n_live else tracks[nr:]
+            E = np.array([(t.box.px, t.box.py, *t.velocity.tolist()) for t in rest], dtype=np.float64)
         else:
             E = _NO_X
         self._obs = c = self._obs + 1
@@ -1290,6 +1292,8 @@ class EvidenceLedger:
                 F[tid - s if tid >= lo else pin[tid], 2] = tracks.box_key(i)[2]
         ledgers = self._ledgers
         sight, state_of = tracks.sight, tracks.state_of
+        built = tracks.live_built  # (TrackReports.sight inlined for the live reports: no call a ledger, pass trk97)
+        nb = len(built)
         for i, tid in enumerate(ids):  # (each ledger's last sight)
             if tid in removing:
                 continue
@@ -1298,7 +1302,11 @@ class EvidenceLedger:
                 if led.m_start is not None:  # out of the removal set (again); skip and linked are only set
                     led.m_start, led.skip, led.linked = None, False, False  # (with m_start)
                 # (its box becomes last_box when the track ends; the report kept unbuilt, pass trk90)
-                led.last_track = sight(i)
+                if i < nb:
+                    r = built[i]
+                    led.last_track = r if r is not None else (tracks, i)
+                else:
+                    led.last_track = sight(i)
                 led.last_seen = stamp
                 if not led.confirmed and state_of(i) != "tentative":
                     led.confirmed = True
@@ -1393,24 +1401,40 @@ class EvidenceLedger:
             done += nb
 
     # ------------------------------------------------------------------ erasure
-    def erase_entering(self, tracks: Sequence[Track], removing: set[int], stamp: float, hmap: MultiResMap) -> int:
+    def erase_entering(self, tracks: Sequence[Track], removing: set[int], stamp: float, hmap: MultiResMap,
+                       movers: tuple[list[int], np.ndarray] | None = None) -> int:
         """Erase the evidence of every live track in the removal set ``removing`` (ids) that has moved
         ``erase_min_travel`` from where it was first removed, with the evidence of ended tracks that stood
         where it was first seen. Returns the number of cells changed on the finest level. ``tracks``: the tracker's
-        reports (only the removal set's boxes read from their columns) or any sequence of ``Track``."""
+        reports (only the removal set's boxes read from their columns) or any sequence of ``Track``. ``movers``:
+        the removal set's ids in their reports' order (``removing`` their set) and their (k, ≥ 5) box rows
+        [p_x, p_y, θ, l, w, …] as reported (m, rad, map frame; the pipeline's movers' rows): ``tracks`` is then not
+        read (a box only for a track not skipped, all of them as one ``tolist``; docs/speed.md, pass trk97)."""
         if not self.config.erase or not removing:  # (no track in the removal set: nothing to erase or to start)
             return 0
         changed = 0
-        reps = TrackReports.of_tracks(tracks)
-        for i, tid in enumerate(reps.ids):
-            if tid not in removing:
-                continue
-            here = reps.box_key(i)
-            led = self._ledgers.get(tid)
+        # the removal set's ids in their reports' order and their box rows: [p_x, p_y, θ, l, w, …] (``movers``'; as
+        # lists when first read) or the box keys (p_x, p_y, half size) read from the reports
+        if movers is not None:
+            mids, rows = movers[0], None
+        else:
+            reps = TrackReports.of_tracks(tracks)
+            ids = reps.ids
+            at = [i for i, tid in enumerate(ids) if tid in removing]
+            mids, rows = [ids[i] for i in at], [reps.box_key(i) for i in at]
+        ledgers = self._ledgers
+        for j, tid in enumerate(mids):
+            led = ledgers.get(tid)
+            if led is not None and led.skip and led.m_start is not None:  # (skipped below: its box not read, pass
+                continue  # trk97 — most walkers are born moving)
+            if rows is None:
+                rows = movers[1].tolist()
+            r = rows[j]
             if led is None:
+                here = r if len(r) == 3 else (r[0], r[1], 0.5 * max(r[3], r[4]))  # (_box_key's floats)
                 led = self._new_ledger_at(tid, here, stamp, len(hmap.levels))
                 self._ledgers[tid] = led
-            x, y = here[0], here[1]
+            x, y = r[0], r[1]
             if led.m_start is None:
                 led.m_start = (x, y)
                 (fx, fy, fh), f_t, last_t = self._first_of(tid) or (led.first_box, led.first_t, led.first_t)
