@@ -206,7 +206,7 @@ def test_mover_exclusions_equal_the_object_path(mode: str, monkeypatch) -> None:
 def _ledger_state(led: erasure.EvidenceLedger) -> tuple:
     def one(x) -> tuple:
         return (x.id, x.first_box, x.first_t, x.last_box, x.last_seen, x.m_start, x.linked, x.confirmed, x.skip,
-                None if x.last_track is None else erasure._sight_key(x.last_track), x.n_cells)
+                None if x.last_track is None else erasure._last_key(x), x.n_cells)
 
     return ([one(x) for x in led._ledgers.values()], [one(x) for x in led._ended.values()], dict(led.stats),
             led._F.tobytes(), sorted(led.erased_cells))

@@ -484,9 +484,11 @@ class _Ledger:
     #: ((k, 3) int32 rows (scan index, first, end) into the chunk's beams, the int32 beams), in update order, before
     #: :attr:`kb`'s
     kbc: list | None = None
-    #: the track as last seen out of the removal set (None once the track ended): its ``Track``, or (its scan's
-    #: ``TrackReports``, its index there) while that report was not built (``TrackReports.sight``, pass trk90)
-    last_track: Track | tuple[TrackReports, int] | None = None
+    #: the track as last seen out of the removal set (None once the track ended): its ``Track``, or its scan's
+    #: ``TrackReports`` (its index there :attr:`last_at`) while that report was not built (``TrackReports.sight``,
+    #: passes trk90, trk97: two slots, no tuple a ledger and scan)
+    last_track: Track | TrackReports | None = None
+    last_at: int = -1  # (last_track's report index when last_track is a TrackReports)
     #: (update's (5, m) row block, first column, end column, levels with rows (bit k: level k)) per map update
     #: since the last :meth:`settle`
     ent: list = field(default_factory=list)
@@ -709,8 +711,14 @@ def _box_key(t: Track) -> tuple[float, float, float]:
 
 
 def _sight_key(sight: Track | tuple[TrackReports, int]) -> tuple[float, float, float]:
-    """:func:`_box_key` of a ledger's last sight (:attr:`_Ledger.last_track`)."""
+    """:func:`_box_key` of a last sight (``TrackReports.sight``)."""
     return sight[0].box_key(sight[1]) if type(sight) is tuple else _box_key(sight)
+
+
+def _last_key(led: _Ledger) -> tuple[float, float, float]:
+    """:func:`_box_key` of ledger ``led``'s last sight (:attr:`_Ledger.last_track`, not None)."""
+    sight = led.last_track
+    return sight.box_key(led.last_at) if type(sight) is TrackReports else _box_key(sight)
 
 
 class EvidenceLedger:
@@ -998,6 +1006,7 @@ class EvidenceLedger:
         led.kb = []
         led.kbc = None
         led.last_track = None
+        led.last_at = -1
         led.ent = []
         led.ent0 = 0
         led.nb_rows = 0
@@ -1304,7 +1313,10 @@ class EvidenceLedger:
                 # (its box becomes last_box when the track ends; the report kept unbuilt, pass trk90)
                 if i < nb:
                     r = built[i]
-                    led.last_track = r if r is not None else (tracks, i)
+                    if r is None:
+                        led.last_track, led.last_at = tracks, i
+                    else:
+                        led.last_track = r
                 else:
                     led.last_track = sight(i)
                 led.last_seen = stamp
@@ -1314,7 +1326,7 @@ class EvidenceLedger:
         for tid in [i for i in ledgers if i not in live]:  # (in the ledgers' order)
             led = ledgers.pop(tid)
             if led.last_track is not None:
-                led.last_box = _sight_key(led.last_track)
+                led.last_box = _last_key(led)
                 # (nothing reads an ended ledger's track again: kept, each held its scan's report arrays — the
                 # velocity's and covariance's rows, the detections' beams — for ``ledger_keep_s``, ≈ 3 MiB of
                 # MIT CSAIL's ended ledgers at the loop's end; pass ldg47)
