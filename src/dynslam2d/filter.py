@@ -329,6 +329,38 @@ def _rows_exclusion_kernel(
     return removed, removed_by
 
 
+@njit(cache=True)
+def _movers_kernel(
+    ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray,
+    pc: float, ps: float, px: float, py: float, boxes: np.ndarray, X: np.ndarray, packed: np.ndarray,
+    beams: np.ndarray, exclude: bool, square: bool, margin: float, cap: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The movers' exclusion rows and, with ``exclude``, the beams they remove, in one call (:func:`mover_exclusions`).
+
+    ``packed``: k report indices, their k ids and the k running counts of their beams ``beams``; ``boxes`` (n, 5)
+    and ``X`` (n, 4) the reports' boxes and states (velocity in columns 2, 3). Returns the (k, 7) rows
+    [p_x, p_y, θ, l, w, v_x, v_y] of the movers' boxes and velocities, the same rows with each box grown to its
+    beams' points (:func:`observed_boxes_kernel`), and with ``exclude`` (mode ``box`` without a speed margin) the
+    removed / removed_by of :func:`_rows_exclusion_kernel` over the grown rows at ``dt`` 0 (else two empty arrays).
+    The same floating-point operations as those kernels called one after the other."""
+    k = packed.shape[0] // 3
+    kept = np.empty((k, 7))
+    for j in range(k):
+        i = packed[j]
+        for a in range(5):
+            kept[j, a] = boxes[i, a]
+        kept[j, 5] = X[i, 2]
+        kept[j, 6] = X[i, 3]
+    grown = kept.copy()
+    if beams.shape[0]:  # (a mover without beams keeps its box)
+        observed_boxes_kernel(ranges, cos_a, sin_a, pc, ps, px, py, beams, packed[2 * k:], grown)
+    if not exclude:
+        return kept, grown, np.zeros(0, dtype=np.bool_), np.zeros(0, dtype=np.int64)
+    removed, removed_by = _rows_exclusion_kernel(ranges, cos_a, sin_a, valid, pc, ps, px, py, grown,
+                                                 packed[k:2 * k], 0.0, square, margin, cap)
+    return kept, grown, removed, removed_by
+
+
 def exclusion_mask(
     points: np.ndarray,
     centres: np.ndarray,
@@ -588,6 +620,45 @@ def filter_scan_ids(
     return removed, removed_by
 
 
+def mover_exclusions(
+    config: FilterConfig,
+    scan: Scan,
+    pose: Pose2D,
+    boxes: np.ndarray,
+    states: np.ndarray,
+    packed: np.ndarray,
+    beams: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The exclusion of the objects of M read from the tracker's report columns, without a ``Track`` object.
+
+    Args:
+        config: the filter configuration.
+        scan: the scan; ``pose`` its laser pose in the map frame.
+        boxes: (n, 5) rows [p_x, p_y, θ, l, w] of the reports' boxes; ``states`` (n, 4) [x, y, v_x, v_y] (map frame,
+            m, rad, m/s): ``TrackReports.arrays``.
+        packed: int64, the k movers' report indices, their ids and the running count of their beams after each
+            (``TrackReports.mover_pack``); ``beams``: their beams, concatenated (int64).
+
+    Returns:
+        ``(kept, ids, removed, removed_by)``: (k, 7) rows [p_x, p_y, θ, l, w, v_x, v_y] of the movers' boxes and
+        velocities as reported, their (k,) int64 ids, and :func:`filter_scan_ids` of the rows with each box grown to
+        enclose its beams' finite returns in ``scan`` (paper §2.2: the exclusion box encloses the object's cluster;
+        ``observed_boxes_kernel``) — in one kernel call in the default mode (``box`` without a speed margin).
+    """
+    k = packed.shape[0] // 3
+    ids = packed[k:2 * k]
+    cos_a, sin_a = scan.trig()
+    one = config.mode == "box" and config.speed_margin_time == 0.0  # (filter_active: k > 0 movers, mode box)
+    cap = math.inf if config.max_half_extent is None else float(config.max_half_extent)
+    kept, grown, removed, removed_by = _movers_kernel(
+        scan.ranges, cos_a, sin_a, scan.valid_view(), math.cos(pose.theta), math.sin(pose.theta), float(pose.x),
+        float(pose.y), boxes, states, packed, beams, one and k > 0, config.default_shape == "square",
+        float(config.margin), cap)
+    if not (one and k > 0):
+        removed, removed_by = filter_scan_ids(config, scan, pose, grown, ids, 0.0)
+    return kept, ids, removed, removed_by
+
+
 __all__ = [
     "FilterConfig",
     "FilterMode",
@@ -598,4 +669,5 @@ __all__ = [
     "filter_scan_points",
     "half_extents",
     "half_sides",
+    "mover_exclusions",
 ]
