@@ -66,6 +66,23 @@ def _slow_reason(speed: float, texts: tuple[str, ...], tail: str) -> str:
     return f"not in M: speed {speed:.2f}{tail}"
 
 
+def _hypot_2f(dx: float, dy: float, hypot=math.hypot, np_hypot=np.hypot) -> str:
+    """``f"{float(np.hypot(dx, dy)):.2f}"`` (a distance in m, as the reasons print it) from Python's ``math.hypot``,
+    without NumPy's scalar ufunc call (≈ 1 µs; docs/speed.md, pass trk87). Both are within 1 ulp of the exact
+    distance (math.hypot: CPython's ``vector_norm``; np.hypot: the C library's ``hypot``), so they can differ by
+    2 ulp at most: the two-decimal text (the exact value of the float rounded to the nearest hundredth, ties to
+    even) is the same unless 100·d lies within far less than 10⁻⁷ of a tie (an odd multiple of ½) — there, and for
+    any distance of 10 km or more or not finite, the text is NumPy's own. ``TrackManage._manage``'s moving tracks in
+    M (≈ 4 a scan on sim:crowd)."""
+    d = hypot(dx, dy)
+    q = d * 100.0
+    if 0.0 <= q < 1e6:
+        f = q - int(q)
+        if f < 0.4999999 or f > 0.5000001:
+            return f"{d:.2f}"
+    return f"{float(np_hypot(dx, dy)):.2f}"
+
+
 class TrackManage:
     """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: management and the test of M (``_manage``, ``_dynamic``)."""
 
@@ -100,7 +117,7 @@ class TrackManage:
         probe = self._free is not None
         slow_reason = _slow_reason  # (a local name: read once per scan)
         # (_dynamic's first test of a track in M, the structure exit, with the scan's constants: pass trk43)
-        on_map, s_exit, hypot = self._map is not None, tc.map_structure_exit, np.hypot
+        on_map, s_exit, hypot_2f = self._map is not None, tc.map_structure_exit, _hypot_2f
         order = self._rows()
         # per track: the counter tests' outcome (MC_*, the new states and counts written into the counter table), σ of
         # its speed along the velocity and its speed (Python's math.hypot bit for bit, as the reasons print it), from
@@ -167,13 +184,13 @@ class TrackManage:
                         # person test asks no map (seen moving before, no map, or no person test: person_streak below
                         # person_sustain_updates; _person_moved_in's "kinematic", which changes nothing): the most
                         # common outcome of a track in M, inline with its memory bookkeeping; the same floats: the
-                        # window's sum in its order, np.hypot of the same differences (pass trk43))
+                        # window's sum in its order, np.hypot's text of the same differences (passes trk43, trk87))
                         k.remembered = False  # moving again
                         x = k.x
                         x0, x1 = x.item(0), x.item(1)
                         bxy = k.birth_xy
                         k.reason = (f"in M: speed {speed:.2f} m/s, moved "
-                                    f"{float(hypot(x0 - bxy.item(0), x1 - bxy.item(1))):.2f} m since birth")
+                                    f"{hypot_2f(x0 - bxy.item(0), x1 - bxy.item(1))} m since birth")
                         if mem:  # (_memory_bookkeeping of a track in M, inline)
                             if (sxy := k.m_start_xy) is None:
                                 k.m_start_xy = sxy = (x0, x1)
@@ -315,8 +332,9 @@ class TrackManage:
                 k.reason = f"in M (hysteresis): slow ({speed:.2f} m/s) for {slow_for:.1f} s"
             else:
                 k.remembered = False  # moving again
-                disp = float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))
-                k.reason = f"in M: speed {speed:.2f} m/s, moved {disp:.2f} m since birth"
+                x, bxy = k.x, k.birth_xy
+                k.reason = (f"in M: speed {speed:.2f} m/s, moved "
+                            f"{_hypot_2f(x.item(0) - bxy.item(0), x.item(1) - bxy.item(1))} m since birth")
             return
         if k.state == TENTATIVE:
             k.reason = "not in M: tentative track"
