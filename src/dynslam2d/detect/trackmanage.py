@@ -9,6 +9,10 @@ import math
 import numpy as np
 
 from dynslam2d.detect.kernels_update import (
+    AUX_EXIT,
+    AUX_NEAR,
+    AUX_RETIRE,
+    AUX_SLOW_SHIFT,
     MC_COAST,
     MC_DEL_COVARIANCE,
     MC_DEL_TENTATIVE,
@@ -19,7 +23,7 @@ from dynslam2d.detect.kernels_update import (
     RIDE_FAR,
     RIDE_JUDGE,
     RIDE_OFF_BODY,
-    manage_counters,
+    manage_scan,
     ride_window,
 )
 from dynslam2d.detect.tracktable import _NO_BEAMS, _TWO_PI, TENTATIVE, _Track
@@ -110,14 +114,13 @@ class TrackManage:
         merged = self._merged
         v_min = tc.v_min
         retire_n = tc.structure_retire_updates if self._map is not None else 0
-        retire_s = tc.structure_retire_fraction
         # (the test of M's constants, the same products as in _dynamic)
         max_ssig, v_exit, nsus = tc.max_speed_sigma, tc.v_exit_ratio * tc.v_min, tc.sustain_updates
         npu = tc.person_sustain_updates
         probe = self._free is not None
-        slow_reason = _slow_reason  # (a local name: read once per scan)
-        # (_dynamic's first test of a track in M, the structure exit, with the scan's constants: pass trk43)
-        on_map, s_exit, hypot_2f = self._map is not None, tc.map_structure_exit, _hypot_2f
+        # (_dynamic's first test of a track in M, the structure exit, with the scan's constants: pass trk43; its
+        # window mean in the kernel, manage_scan's AUX_EXIT)
+        on_map, hypot_2f = self._map is not None, _hypot_2f
         order = self._rows()
         # per track: the counter tests' outcome (MC_*, the new states and counts written into the counter table), σ of
         # its speed along the velocity and its speed (Python's math.hypot bit for bit, as the reasons print it), from
@@ -128,8 +131,11 @@ class TrackManage:
         # (kernels.shape_update; a track not updated in this scan has its last push's, never read), read from its row
         # in the same call: pass trk41)
         MEV, WN = self._MEV, self._WN
-        codes, sigs, speeds, nears = manage_counters(self._P, self._X, self._CI, self._CL, WN, order, self._upd_p, t)
-        codes, sigs, speeds, nears = codes.tolist(), sigs.tolist(), speeds.tolist(), nears.tolist()
+        # (and, in the same call, three values the loop below tested per track in Python, as bits of ``auxs``: the
+        # structure exit's window mean, clutter retirement's window minimum and the slow reason's text index:
+        # manage_scan, pass upd91)
+        codes, sigs, speeds, auxs = manage_scan(self._P, self._X, self._CI, self._CL, WN, MEV, order, self._upd_p, t)
+        codes, sigs, speeds, auxs = codes.tolist(), sigs.tolist(), speeds.tolist(), auxs.tolist()
         fast_reasons = self._fast_reasons
         if len(fast_reasons) != nsus:
             fast_reasons = self._fast_reasons = _fast_reason_texts(nsus)
@@ -140,10 +146,11 @@ class TrackManage:
             slow_tail = f" m/s ≤ v_min {v_min:.2f}"
             self._slow_reasons = (v_min, slow_texts, slow_tail)
         no_beams = _NO_BEAMS
-        for k, code, speed, sig, near in zip(tracks, codes, speeds, sigs, nears):
+        for k, code, speed, sig, aux in zip(tracks, codes, speeds, sigs, auxs):
             if code <= MC_UPD_FIRM:  # updated, kept by the counter tests (tentative: MC_UPD_TENTATIVE)
-                if retire_n and not k.was_in_m and not k.remembered and (nm := WN.item(k.row, 0)) >= retire_n \
-                        and speed < v_min and min(MEV[k.row, nm - retire_n:nm, 0].tolist()) >= retire_s:
+                # (AUX_RETIRE: structure_retire_updates window entries or more, the last that many each at least
+                # structure_retire_fraction, min(MEV[k.row, nm - retire_n:nm, 0].tolist()) >= retire_s; manage_scan)
+                if retire_n and aux & AUX_RETIRE and speed < v_min and not k.was_in_m and not k.remembered:
                     # clutter retirement: a still track the map already holds as structure (docs/real.md "Speed");
                     # a confirmed one stays as a dormant track while its object is seen (_clutter_detections)
                     st.deleted_structure += 1
@@ -171,6 +178,7 @@ class TrackManage:
                 else:
                     # (near 0: fewer than ride_updates entries, it cannot ride; 1: far from the laser,
                     # _rides_with_laser's first test done (most tracks); 2: the whole test)
+                    near = aux & AUX_NEAR
                     if near == 1:
                         k.rode = False
                     if near > 1 and self._rides_with_laser(k):
@@ -178,8 +186,7 @@ class TrackManage:
                         k.fast = 0
                         k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
                     elif in_m and k.slow_since is None and (k.was_in_m or k.person_streak < npu or not on_map) \
-                            and not (on_map and (nm := WN.item(k.row, 0)) and nm >= nsus
-                                     and sum(MEV[k.row, :nm, 0].tolist()) / nm >= s_exit):
+                            and not (on_map and aux & AUX_EXIT):
                         # (_dynamic's outcome for a track in M that is not slow and not leaving M on structure, whose
                         # person test asks no map (seen moving before, no map, or no person test: person_streak below
                         # person_sustain_updates; _person_moved_in's "kinematic", which changes nothing): the most
@@ -208,8 +215,10 @@ class TrackManage:
                         # (speed: most tracks are short-lived tentative clutter; nothing else changes them)
                         k.reason = "not in M: tentative track"
                     elif speed <= v_min:
-                        # (the most common reason: looked up by the speed in hundredths)
-                        k.reason = slow_reason(speed, slow_texts, slow_tail)
+                        # (the most common reason: looked up by the speed in hundredths, its text's index + 1 from
+                        # the kernel, 0 where _slow_reason formats it: near a rounding tie; manage_scan)
+                        k.reason = slow_texts[si - 1] if (si := aux >> AUX_SLOW_SHIFT) and slow_texts \
+                            else f"not in M: speed {speed:.2f}{slow_tail}"
                     elif kfast < nsus and sig < max_ssig and k.person_streak < npu:
                         # (_dynamic's outcome for a track not in M, faster than v_min with a certain velocity, not yet
                         # for sustain_updates updates and no person test (person_streak below person_sustain_updates):
