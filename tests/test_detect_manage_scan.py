@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from dynslam2d.detect.kernels_update import (
+    _UP_N,
     AUX_EXIT,
     AUX_NEAR,
     AUX_RETIRE,
@@ -24,7 +25,6 @@ from dynslam2d.detect.kernels_update import (
     UP_S_EXIT,
     UP_SUSTAIN,
     UP_WINDOW,
-    _UP_N,
     manage_counters,
     manage_scan,
 )
