@@ -98,9 +98,10 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(float64, 3, 'C'), Array(float64, 3, 'C'), Array(int64, 2, 'C'), bool, "
      'float64, float64, float64, float64, float64,)'),
-    ('dynslam2d.detect.kernels_update.manage_counters',
+    ('dynslam2d.detect.kernels_update.manage_scan',
      "(Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(int64, 2, 'C'), Array(float64, 1, 'C'), "
-     "Array(int64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), float64,)"),
+     "Array(int64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), "
+     'float64,)'),
     ('dynslam2d.detect.kernels_update.fragment_hosts_rows',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
@@ -111,11 +112,7 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.filter._movers_kernel',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), float64, float64, float64, float64, Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
-     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), bool, bool, float64, float64,)"),
-    ('dynslam2d.filter._rows_exclusion_kernel',
-     "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
-     "'C'), float64, float64, float64, float64, Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64, "
-     'bool, float64, float64,)'),
+     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), float64, bool, bool, bool, float64, float64,)"),
     ('dynslam2d.slam.cleanup._geometry_bounds',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),
@@ -129,31 +126,30 @@ KERNELS: tuple[tuple[str, str], ...] = (
 #: CPU time of each kernel's compile (s, the kernels it compiles in turn included) in a one-core cold run when
 #: recorded: the background compile's estimate of how far ahead of the run a kernel is (its order, docs/speed.md).
 COMPILE_S: dict[str, float] = {
-    'dynslam2d.sim.world._cast_kernel': 0.57,
-    'dynslam2d.detect.body._drop_body': 0.21,
-    'dynslam2d.slam.matcher.gated_points': 0.56,
+    'dynslam2d.sim.world._cast_kernel': 0.45,
+    'dynslam2d.detect.body._drop_body': 0.18,
+    'dynslam2d.slam.matcher.gated_points': 0.59,
     'dynslam2d.detect.body._observe_beams': 0.20,
-    'dynslam2d.detect.segment.detect_scan': 9.57,
-    'dynslam2d.detect.kernels_update.birth_rows': 0.56,
-    'dynslam2d.detect.kernels_update.report_rows': 0.55,
-    'dynslam2d.slam.ledgerkernels.record_cells': 2.41,
-    'dynslam2d.slam.ledgerkernels.level_rows': 0.61,
+    'dynslam2d.detect.segment.detect_scan': 8.54,
+    'dynslam2d.detect.kernels_update.birth_rows': 0.36,
+    'dynslam2d.detect.kernels_update.report_rows': 0.41,
+    'dynslam2d.slam.ledgerkernels.record_cells': 1.88,
+    'dynslam2d.slam.ledgerkernels.level_rows': 0.50,
     'dynslam2d.slam.ledgerkernels.stand_marks': 0.36,
-    'dynslam2d.slam.raycast.integrate_levels': 1.57,
-    'dynslam2d.slam.raycast.ray_ends': 0.08,
-    'dynslam2d.slam.matcher.match_pyramid': 2.63,
-    'dynslam2d.slam.correlative._rotated_cells': 0.32,
-    'dynslam2d.slam.correlative._score_pyramid': 0.57,
-    'dynslam2d.slam.correlative.branch_and_bound': 1.79,
-    'dynslam2d.vacated.vacated_scan_kernel': 3.12,
-    'dynslam2d.detect.kernels.cv_predict': 0.49,
-    'dynslam2d.detect.kernels_assign.associate_scan': 4.09,
-    'dynslam2d.detect.kernels_update.update_pairs': 3.69,
-    'dynslam2d.detect.kernels_update.manage_counters': 0.54,
-    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.27,
-    'dynslam2d.detect.kernels.seen_through_refs': 0.26,
-    'dynslam2d.filter._movers_kernel': 1.24,
-    'dynslam2d.filter._rows_exclusion_kernel': 0.41,
-    'dynslam2d.slam.cleanup._geometry_bounds': 0.23,
-    'dynslam2d.slam.cleanup._count_beams': 0.76,
+    'dynslam2d.slam.raycast.integrate_levels': 1.45,
+    'dynslam2d.slam.raycast.ray_ends': 0.09,
+    'dynslam2d.slam.matcher.match_pyramid': 2.34,
+    'dynslam2d.slam.correlative._rotated_cells': 0.26,
+    'dynslam2d.slam.correlative._score_pyramid': 0.51,
+    'dynslam2d.slam.correlative.branch_and_bound': 1.51,
+    'dynslam2d.vacated.vacated_scan_kernel': 2.87,
+    'dynslam2d.detect.kernels.cv_predict': 0.45,
+    'dynslam2d.detect.kernels_assign.associate_scan': 2.94,
+    'dynslam2d.detect.kernels_update.update_pairs': 2.73,
+    'dynslam2d.detect.kernels_update.manage_scan': 0.62,
+    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.24,
+    'dynslam2d.detect.kernels.seen_through_refs': 0.22,
+    'dynslam2d.filter._movers_kernel': 0.90,
+    'dynslam2d.slam.cleanup._geometry_bounds': 0.19,
+    'dynslam2d.slam.cleanup._count_beams': 0.60,
 }
