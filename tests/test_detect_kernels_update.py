@@ -434,6 +434,8 @@ def test_update_params_are_the_former_scalars() -> None:
             tc.accel_bound_after, tc.ride_updates, tc.confirm_window, tc.confirm_hits = 7, 9, 6, 4
             tc.max_coast_time, tc.max_object_speed, tc.max_position_sigma = 1.7, 13.5, 2.25
             tc.gate_distance, tc.gate_chi2, tc.max_size_jump_ratio, tc.max_size_jump = 1.3, 11.5, 1.9, 0.45
+            tc.map_structure_exit, tc.sustain_updates = 0.63, 5
+            tc.structure_retire_updates, tc.structure_retire_fraction = 3, 0.55
         fp = fit_params(fc)
         q = ku.update_params(fp, fc, tc)
         assert q.dtype == np.float64 and q.shape == (ku._UP_N,) and q[:_N_PARAMS].tobytes() == fp.tobytes()
@@ -447,7 +449,9 @@ def test_update_params_are_the_former_scalars() -> None:
                 ku.UP_JUMP_RATIO: float(tc.max_size_jump_ratio), ku.UP_JUMP: float(tc.max_size_jump),
                 ku.UP_WINDOW: tc.confirm_window, ku.UP_NEED: tc.confirm_hits,
                 ku.UP_MAX_COAST: float(tc.max_coast_time), ku.UP_MAX_SPEED: float(tc.max_object_speed),
-                ku.UP_MAX_POS_SIG: float(tc.max_position_sigma)}
+                ku.UP_MAX_POS_SIG: float(tc.max_position_sigma), ku.UP_S_EXIT: float(tc.map_structure_exit),
+                ku.UP_SUSTAIN: tc.sustain_updates, ku.UP_RETIRE_N: tc.structure_retire_updates or 0,
+                ku.UP_RETIRE_S: float(tc.structure_retire_fraction)}
         assert sorted(want) == list(range(_N_PARAMS, ku._UP_N))
         for col, v in want.items():
             assert q[col] == v and (not isinstance(v, int) or int(q[col]) == v), (col, q[col], v)

@@ -478,7 +478,7 @@ def test_lean_inlining_gives_the_same_code_and_errors_with_fewer_copies(tmp_path
     """jitcache.lean_inlining: a kernel with inline="always" callees (one inlined into another) compiles to the same
     optimised LLVM IR with far fewer deep copies of IR objects; a callee inlined at two sites computes what NumPy does;
     a typing error in an inlined callee is raised as before."""
-    got = _off_and_on(LEAN_INLINE, "._rows_exclusion_kernel", tmp_path)
+    got = _off_and_on(LEAN_INLINE, "._movers_kernel", tmp_path)
     assert len(got["0"]["ir"]) > 10000 and got["0"]["ir"] == got["1"]["ir"]
     assert got["1"]["copies"] < got["0"]["copies"] / 3, (got["0"]["copies"], got["1"]["copies"])
     for on in ("0", "1"):

@@ -9,6 +9,7 @@ import copy
 import dataclasses
 import math
 import pickle
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from conftest import paper_room_scan, paper_room_slam
 
 import dynslam2d.slam.matcher as mt
 import dynslam2d.slam.processor as pr
-from dynslam2d.types import Pose2D, Scan, wrap_angle
+from dynslam2d.types import Pose2D, Scan, Track, wrap_angle
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
@@ -190,7 +191,8 @@ def test_step_result_fields_keep_the_order_process_passes_them_in() -> None:
     assert step.index == 2 and step.stamp == scan.stamp and isinstance(step.pose, Pose2D)
     assert isinstance(step.score, float) and 0.0 < step.score <= 1.0
     assert isinstance(step.map_updated, bool) and step.rejected is False and step.skipped is False
-    assert step.reason is None and isinstance(step.tracks, list)
+    # (the tracker's reports: a sequence of Track, built when read — TrackReports, passes trk70 / trk90)
+    assert step.reason is None and isinstance(step.tracks, Sequence) and all(isinstance(t, Track) for t in step.tracks)
     assert step.removed.dtype == np.bool_ and step.removed_by.dtype == np.int64
     assert step.removed.shape == step.removed_by.shape == step.body.shape == scan.ranges.shape
     assert set(step.timings) == {"match", "track", "filter", "map_update", "loops", "total"}

@@ -204,8 +204,8 @@ def _scan_exclusion_kernel(
             removed[i] = True
 
 
-@njit(cache=True)
-def observed_boxes_kernel(
+@njit(cache=True, inline="always")
+def _grow_boxes(
     ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, pc: float, ps: float, px: float, py: float,
     beams: np.ndarray, ends: np.ndarray, boxes: np.ndarray,
 ) -> None:
@@ -280,6 +280,16 @@ def observed_boxes_kernel(
         boxes[j, 4] = v1 - v0
 
 
+@njit(cache=True)
+def observed_boxes_kernel(
+    ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, pc: float, ps: float, px: float, py: float,
+    beams: np.ndarray, ends: np.ndarray, boxes: np.ndarray,
+) -> None:
+    """:func:`_grow_boxes` as a kernel of its own (the pipeline's per-scan path inlines the body in
+    :func:`_movers_kernel` instead: one compile of it, not two)."""
+    _grow_boxes(ranges, cos_a, sin_a, pc, ps, px, py, beams, ends, boxes)
+
+
 @njit(cache=True, inline="always")
 def _box_extents_kernel(boxes: np.ndarray, square: bool, margin: float, cap: float) -> np.ndarray:
     """:func:`half_extents` of mode ``box`` without a speed margin, for (k, ≥ 5) rows [p_x, p_y, θ, l, w, …]:
@@ -302,8 +312,8 @@ def _box_extents_kernel(boxes: np.ndarray, square: bool, margin: float, cap: flo
     return out
 
 
-@njit(cache=True)
-def _rows_exclusion_kernel(
+@njit(cache=True, inline="always")
+def _rows_exclusion(
     ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray,
     pc: float, ps: float, px: float, py: float, boxes: np.ndarray, ids: np.ndarray, dt: float,
     square: bool, margin: float, cap: float,
@@ -327,6 +337,66 @@ def _rows_exclusion_kernel(
     _scan_exclusion_kernel(ranges, cos_a, sin_a, valid, pc, ps, px, py, centres, th, ext[:, 0].copy(),
                            ext[:, 1].copy(), ids, removed, removed_by)
     return removed, removed_by
+
+
+@njit(cache=True)
+def _rows_exclusion_kernel(
+    ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray,
+    pc: float, ps: float, px: float, py: float, boxes: np.ndarray, ids: np.ndarray, dt: float,
+    square: bool, margin: float, cap: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_rows_exclusion` as a kernel of its own (:func:`filter_scan_ids` calls :func:`_movers_kernel`, which
+    inlines the same body: the run compiles it once)."""
+    return _rows_exclusion(ranges, cos_a, sin_a, valid, pc, ps, px, py, boxes, ids, dt, square, margin, cap)
+
+
+@njit(cache=True)
+def _movers_kernel(
+    ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray,
+    pc: float, ps: float, px: float, py: float, boxes: np.ndarray, X: np.ndarray, packed: np.ndarray,
+    beams: np.ndarray, dt: float, gather: bool, exclude: bool, square: bool, margin: float, cap: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The movers' exclusion rows and, with ``exclude``, the beams they remove, in one call (:func:`mover_exclusions`);
+    without ``gather``, the exclusion of given rows (:func:`filter_scan_ids`' default mode).
+
+    With ``gather``: ``packed`` holds k report indices, their k ids and the k running counts of their beams
+    ``beams``; ``boxes`` (n, 5) and ``X`` (n, 4) are the reports' boxes and states (velocity in columns 2, 3).
+    Returns the (k, 7) rows [p_x, p_y, θ, l, w, v_x, v_y] of the movers' boxes and velocities, the same rows with
+    each box grown to its beams' points (:func:`_grow_boxes`), and with ``exclude`` (mode ``box`` without a speed
+    margin) the removed / removed_by of :func:`_rows_exclusion` over the grown rows at ``dt`` (else two empty
+    arrays). Without ``gather``: ``boxes`` are (k, 7) rows and ``packed`` their k ids; the rows are returned
+    twice, as they are, with their exclusion at ``dt`` (``X`` and ``beams`` unread).
+
+    One kernel for both calls of a scan, each body inlined once: the run compiles the exclusion once (a kernel
+    calling another kernel links and optimises the callee's code a second time: ≈ +0.8 s of cold compile CPU,
+    docs/speed.md, pass trk97). The same floating-point operations as the kernels called one after the other."""
+    if gather:
+        k = packed.shape[0] // 3
+        kept = np.empty((k, 7))
+        for j in range(k):
+            i = packed[j]
+            for a in range(5):
+                kept[j, a] = boxes[i, a]
+            kept[j, 5] = X[i, 2]
+            kept[j, 6] = X[i, 3]
+        grown = kept.copy()
+        if beams.shape[0]:  # (a mover without beams keeps its box)
+            _grow_boxes(ranges, cos_a, sin_a, pc, ps, px, py, beams, packed[2 * k:], grown)
+        ids = packed[k:2 * k]
+    else:
+        kept = boxes
+        grown = boxes
+        ids = packed
+    if not exclude:
+        return kept, grown, np.zeros(0, dtype=np.bool_), np.zeros(0, dtype=np.int64)
+    removed, removed_by = _rows_exclusion(ranges, cos_a, sin_a, valid, pc, ps, px, py, grown, ids, dt, square,
+                                          margin, cap)
+    return kept, grown, removed, removed_by
+
+
+#: :func:`_movers_kernel`'s unread inputs without ``gather`` (the reports' states, the movers' beams).
+_NO_STATES = np.zeros((0, 4))
+_NO_BEAMS = np.zeros(0, dtype=np.int64)
 
 
 def exclusion_mask(
@@ -571,11 +641,12 @@ def filter_scan_ids(
     cos_a, sin_a = scan.trig()
     if config.mode == "box" and config.speed_margin_time == 0.0:  # the default: one kernel call
         cap = math.inf if config.max_half_extent is None else float(config.max_half_extent)
-        return _rows_exclusion_kernel(scan.ranges, cos_a, sin_a, scan.valid_view(), math.cos(pose.theta),
-                                      math.sin(pose.theta), float(pose.x), float(pose.y),
-                                      np.ascontiguousarray(boxes, dtype=np.float64),
-                                      np.ascontiguousarray(ids, dtype=np.int64), float(dt),
-                                      config.default_shape == "square", float(config.margin), cap)
+        out = _movers_kernel(scan.ranges, cos_a, sin_a, scan.valid_view(), math.cos(pose.theta),
+                             math.sin(pose.theta), float(pose.x), float(pose.y),
+                             np.ascontiguousarray(boxes, dtype=np.float64), _NO_STATES,
+                             np.ascontiguousarray(ids, dtype=np.int64), _NO_BEAMS, float(dt), False, True,
+                             config.default_shape == "square", float(config.margin), cap)
+        return out[2], out[3]
     removed = np.zeros(n, dtype=bool)
     removed_by = np.full(n, -1, dtype=np.int64)
     centres = boxes[:, 0:2] + boxes[:, 5:7] * dt
@@ -588,6 +659,45 @@ def filter_scan_ids(
     return removed, removed_by
 
 
+def mover_exclusions(
+    config: FilterConfig,
+    scan: Scan,
+    pose: Pose2D,
+    boxes: np.ndarray,
+    states: np.ndarray,
+    packed: np.ndarray,
+    beams: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The exclusion of the objects of M read from the tracker's report columns, without a ``Track`` object.
+
+    Args:
+        config: the filter configuration.
+        scan: the scan; ``pose`` its laser pose in the map frame.
+        boxes: (n, 5) rows [p_x, p_y, θ, l, w] of the reports' boxes; ``states`` (n, 4) [x, y, v_x, v_y] (map frame,
+            m, rad, m/s): ``TrackReports.arrays``.
+        packed: int64, the k movers' report indices, their ids and the running count of their beams after each
+            (``TrackReports.mover_pack``); ``beams``: their beams, concatenated (int64).
+
+    Returns:
+        ``(kept, ids, removed, removed_by)``: (k, 7) rows [p_x, p_y, θ, l, w, v_x, v_y] of the movers' boxes and
+        velocities as reported, their (k,) int64 ids, and :func:`filter_scan_ids` of the rows with each box grown to
+        enclose its beams' finite returns in ``scan`` (paper §2.2: the exclusion box encloses the object's cluster;
+        ``observed_boxes_kernel``) — in one kernel call in the default mode (``box`` without a speed margin).
+    """
+    k = packed.shape[0] // 3
+    ids = packed[k:2 * k]
+    cos_a, sin_a = scan.trig()
+    one = config.mode == "box" and config.speed_margin_time == 0.0  # (filter_active: k > 0 movers, mode box)
+    cap = math.inf if config.max_half_extent is None else float(config.max_half_extent)
+    kept, grown, removed, removed_by = _movers_kernel(
+        scan.ranges, cos_a, sin_a, scan.valid_view(), math.cos(pose.theta), math.sin(pose.theta), float(pose.x),
+        float(pose.y), boxes, states, packed, beams, 0.0, True, one and k > 0, config.default_shape == "square",
+        float(config.margin), cap)
+    if not (one and k > 0):
+        removed, removed_by = filter_scan_ids(config, scan, pose, grown, ids, 0.0)
+    return kept, ids, removed, removed_by
+
+
 __all__ = [
     "FilterConfig",
     "FilterMode",
@@ -598,4 +708,5 @@ __all__ = [
     "filter_scan_points",
     "half_extents",
     "half_sides",
+    "mover_exclusions",
 ]

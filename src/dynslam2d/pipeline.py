@@ -32,7 +32,8 @@ from dynslam2d.config import Config
 from dynslam2d.detect.body import BodyFilter
 from dynslam2d.detect.mapevidence import MapView, map_evidence
 from dynslam2d.detect.tracker import Tracker
-from dynslam2d.filter import filter_active, filter_scan_ids, observed_boxes_kernel
+from dynslam2d.detect.trackreport import TrackReports
+from dynslam2d.filter import filter_active, filter_scan_ids, mover_exclusions, observed_boxes_kernel
 from dynslam2d.gridmap import GridMap
 from dynslam2d.jitcache import compile_seconds
 from dynslam2d.memtrim import release_free_memory
@@ -70,7 +71,8 @@ class StepResult:
         rejected: the match was judged bad and kept out of the map (``reason`` says why).
         skipped: the scan held too little to match (``reason`` says why).
         reason: skip / reject reason, or None.
-        tracks: live tracks after this scan (map frame), each with ``in_m``.
+        tracks: live tracks after this scan (map frame), each with ``in_m``: a sequence of ``Track`` built when read
+            (the tracker's :class:`dynslam2d.detect.trackreport.TrackReports`).
         removed: (beams,) bool, True where the filter removed the beam from the map update.
         removed_by: (beams,) int, id of the track whose exclusion zone removed the beam (−1 = kept).
         timings: wall time per stage, ms ("match", "track", "filter", "map_update", "loops" = the loop
@@ -95,7 +97,7 @@ class StepResult:
     rejected: bool
     skipped: bool
     reason: str | None
-    tracks: list[Track] = field(default_factory=list)
+    tracks: Sequence[Track] = field(default_factory=list)
     removed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     removed_by: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     timings: dict[str, float] = field(default_factory=dict)
@@ -173,8 +175,8 @@ class Pipeline:
         self.slam = HectorSlam(self.config.slam)
         self.tracker = Tracker(self.config.detect)
         self.body = BodyFilter(self.config.detect.footprint)
-        self._moving: list[Track] = []  # tracks in M after the previous scan
-        #: :func:`_box_rows` of ``_moving``, kept by :func:`_observed_rows` before it grew the boxes
+        self._moving: list[int] = []  # the ids of the tracks in M after the previous scan
+        #: :func:`_box_rows` of the tracks in M after the previous scan, before their boxes were grown
         self._moving_rows: tuple[np.ndarray, np.ndarray] = _NO_ROWS
         self._last_stamp: float | None = None
         self._no_remover = np.zeros(0, dtype=np.int64)  # −1 per beam: what _exclude copies when nothing is excluded
@@ -213,10 +215,10 @@ class Pipeline:
             return np.zeros(n, dtype=bool), kept.copy()
         return filter_scan_ids(self.config.filter, scan, pose, rows[0], rows[1], dt)
 
-    def _spare_structure(self, scan: Scan, pose: Pose2D, moving: list[Track], removed: np.ndarray,
+    def _spare_structure(self, scan: Scan, pose: Pose2D, own_beams: np.ndarray, removed: np.ndarray,
                          removed_by: np.ndarray, only_ids: np.ndarray | None = None) -> None:
-        """In place: beams inside an exclusion region that are not the object's own (not among the beams of a
-        track in M in this scan) and whose point lies on long-occupied map structure stay in the scan
+        """In place: beams inside an exclusion region that are not the object's own (not among ``own_beams``, the
+        beams of the tracks in M in this scan) and whose point lies on long-occupied map structure stay in the scan
         (``filter.spare_structure``; the same structure test as the tracker's map evidence,
         ``detect.tracker.map_occupied_logodds``). The region's margin is for range noise and box-fit error; a
         walker passing close to a wall seen at a grazing angle would otherwise take a strip of the wall with it.
@@ -225,9 +227,7 @@ class Pipeline:
         if view is None:
             return
         own = np.zeros(removed.shape[0], dtype=bool)
-        for t in moving:
-            if t.beams is not None and len(t.beams):
-                own[t.beams] = True
+        own[own_beams] = True
         cand = np.flatnonzero(removed & ~own & (np.isin(removed_by, only_ids) if only_ids is not None else True))
         if cand.shape[0] == 0:
             return
@@ -276,37 +276,46 @@ class Pipeline:
         tracks = self.tracker.update(scan, res.pose, self._evidence_view(scan, res.pose),
                                      self.body.body if self.config.detect.footprint.auto else None)
         t2 = time.perf_counter()
-        # 4. the dynamic set M and its exclusion zones (paper Eq. 3, 5-8).
-        moving = [t for t in tracks if t.in_m]
-        if res.low_support and self.config.filter.trusted_pose_only:
+        # 4. the dynamic set M and its exclusion zones (paper Eq. 3, 5-8), from the reports' columns: no Track
+        # object built for them (docs/speed.md, pass trk90)
+        if type(tracks) is not TrackReports:  # (a tracker returning plain Track objects: its columns made from them)
+            tracks = TrackReports.of_tracks(tracks)
+        moving = tracks.moving_index()  # (indices of the reports in M)
+        if moving and res.low_support and self.config.filter.trusted_pose_only:
             # an untrusted pose makes structure look like motion: only movers removed before stay removed
-            known = {t.id for t in self._moving}
-            moving = [t for t in moving if t.id in known]
-        kept_rows: list[tuple[np.ndarray, np.ndarray]] = []
-        rows = _observed_rows(moving, scan, res.pose, kept_rows) if moving else _NO_ROWS
-        removed, removed_by = self._exclude(scan, res.pose, rows, 0.0)
-        any_removed = bool(_count_nonzero(removed)) if moving else False  # (no rows: nothing removed)
+            known, ids = set(self._moving), tracks.ids
+            moving = [i for i in moving if ids[i] in known]
+        if moving:
+            # (the movers' boxes and velocities as rows, grown to their beams' points and their exclusion, one kernel)
+            packed, own, moving = tracks.mover_pack(moving)  # (moving: now the movers' ids)
+            mrows, mids, removed, removed_by = mover_exclusions(self.config.filter, scan, res.pose, *tracks.arrays,
+                                                               packed, own)
+            any_removed = bool(_count_nonzero(removed))
+        else:
+            mrows, mids = _NO_ROWS
+            removed, removed_by = self._exclude(scan, res.pose, _NO_ROWS, 0.0)
+            any_removed = False  # (no rows: nothing removed)
         fc = self.config.filter
         if any_removed and fc.mode == "box":
             if fc.spare_structure:
-                self._spare_structure(scan, res.pose, moving, removed, removed_by)
+                self._spare_structure(scan, res.pose, own, removed, removed_by)
                 any_removed = bool(_count_nonzero(removed))
             elif fc.spare_structure_vehicles:
                 lim = self.config.detect.segment.max_extent  # (read once, not per track)
-                big = [t.id for t in moving if max(t.box.length, t.box.width) > lim]
+                big = [tid for tid, (length, width) in zip(moving, mrows[:, 3:5].tolist()) if max(length, width) > lim]
                 if big:
-                    self._spare_structure(scan, res.pose, moving, removed, removed_by, np.array(big))
+                    self._spare_structure(scan, res.pose, own, removed, removed_by, np.array(big))
                     any_removed = bool(_count_nonzero(removed))
         t3 = time.perf_counter()
         # 5. map update with the filtered scan only.
         updated = False
         led = self.ledger
         if led is not None:  # what a track wrote while it stood is taken out once it moves (slam/erasure.py)
-            removing = {t.id for t in moving} if filter_active(self.config.filter, len(moving)) else set()
+            removing = set(moving) if filter_active(self.config.filter, len(moving)) else set()
             # (the tracker's state rows of its live reports: the ledger's standing test reads them in one kernel call)
             trk = self.tracker
             led.observe(tracks, removing, scan.stamp, trk.report_states())
-            led.erase_entering(tracks, removing, scan.stamp, self.slam.map)
+            led.erase_entering(tracks, removing, scan.stamp, self.slam.map, (moving, mrows) if removing else None)
             if led.erased_beams:  # the loop closure's keyframes leave them out too (re-render, clean-up recount)
                 if self.loops is not None:
                     self.loops.drop_beams(led.erased_beams)
@@ -331,7 +340,7 @@ class Pipeline:
                            res.score, kept)
         t5 = time.perf_counter()
         self._moving = moving
-        self._moving_rows = kept_rows[0] if kept_rows else _NO_ROWS
+        self._moving_rows = (mrows, mids)
         self._last_stamp = scan.stamp
         # (positional, in StepResult's field order — the keywords' parsing was a third of its cost; the fields named
         # in the comments, tests/test_match_inlined_glue.py checks the order)
@@ -929,6 +938,8 @@ def _track_records(stamp: float, tracks: list[Track], track_rows: TrackRows) -> 
     remembered): the velocity's two floats from one ``tolist`` (``float(v[0])``, ``float(v[1])``'s values), the
     flags as ``bool``."""
     codes, code = track_rows.state_codes, track_rows.code
+    if type(tracks) is TrackReports:  # (from the reports' columns, no Track object built; passes trk70, trk90)
+        return tracks.records(stamp, codes, code)
     out = []
     append = out.append
     for t in tracks:

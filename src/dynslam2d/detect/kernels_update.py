@@ -154,6 +154,45 @@ def accel_bound(X_prior: np.ndarray, X_new: np.ndarray, rows: np.ndarray, lim: f
 @njit(cache=True)
 def manage_counters(P: np.ndarray, X: np.ndarray, CI: np.ndarray, CL: np.ndarray, WN: np.ndarray, rows: np.ndarray,
                     q: np.ndarray, t: float) -> tuple:
+    """:func:`manage_scan` without the map-evidence tests: the fourth output is the riding pre-test alone (``WN[rows,
+    2]``), ``q`` needs no column after ``UP_MAX_POS_SIG`` (tests and studies; the tracker calls :func:`manage_scan`)."""
+    return _manage_rows(P, X, CI, CL, WN, np.empty((0, 1, 3)), rows, q, t, False)
+
+
+@njit(cache=True)
+def manage_scan(P: np.ndarray, X: np.ndarray, CI: np.ndarray, CL: np.ndarray, WN: np.ndarray, MEV: np.ndarray,
+                rows: np.ndarray, q: np.ndarray, t: float) -> tuple:
+    """``Tracker._manage``'s one kernel call a scan: :func:`manage_counters`' counter tests, σ and speeds, its fourth
+    output ``aux`` (n,) int64 the riding pre-test (bits 0–1, ``AUX_NEAR``) plus three per-track values of the test
+    of M that ``_manage``'s loop read in Python (its Python now tests a bit), from the tracks' map-evidence windows
+    ``MEV`` (rows, w, 3; column 0 the fraction of the points on long-occupied map cells) with counts ``WN[:, 0]``
+    and the speed (docs/speed.md, pass upd91):
+
+    * ``AUX_EXIT``: the structure exit of a track in M (``_dynamic``'s first test): at least ``sustain_updates``
+      (``q[UP_SUSTAIN]``) entries, and their column-0 mean ≥ ``map_structure_exit`` (``q[UP_S_EXIT]``) — the sum
+      from 0.0 left to right divided by the count, Python's ``sum(list) / n`` bit for bit (CPython 3.11's float
+      ``sum`` adds in order from its int start 0; 3.12's compensated sum would differ: the tests compare it with
+      the running interpreter's).
+    * ``AUX_RETIRE``: clutter retirement's window test: ``structure_retire_updates`` (``q[UP_RETIRE_N]`` > 0)
+      entries or more, and the smallest of the last that many ≥ ``structure_retire_fraction`` (``q[UP_RETIRE_S]``;
+      Python's ``min``: the first entry kept unless a later one compares smaller, so a NaN first stays).
+    * bits ``AUX_SLOW_SHIFT`` on: 1 + the index of the slow reason's text (``trackmanage._slow_reason``: the
+      speed in hundredths, rounded as ``format`` rounds it), 0 where it must be formatted (within 10⁻⁷ of a tie)
+      or the speed is above ``_SLOW_TEXTS_MAX`` (10 m/s) or not a number."""
+    return _manage_rows(P, X, CI, CL, WN, MEV, rows, q, t, True)
+
+
+# manage_scan's fourth output per track: the riding pre-test (0 / 1 / 2, TrackRows' WN[:, 2]) in its low two bits,
+# the structure exit and the retirement window flags, and 1 + the slow reason's text index from bit AUX_SLOW_SHIFT on
+AUX_NEAR = 3
+AUX_EXIT = 4
+AUX_RETIRE = 8
+AUX_SLOW_SHIFT = 4
+
+
+@njit(cache=True, inline="always")
+def _manage_rows(P: np.ndarray, X: np.ndarray, CI: np.ndarray, CL: np.ndarray, WN: np.ndarray, MEV: np.ndarray,
+                 rows: np.ndarray, q: np.ndarray, t: float, ev: bool) -> tuple:
     """``Tracker._manage``'s counter tests of the live tracks (state rows ``rows``) as one pass over their rows of the
     counter table ``CI`` (columns ``C_*``) and last-hit stamps ``CL`` (s), with ``kernels.manage_rows``' covariance
     test (max_position_sigma, m) and σ of the speed along the velocity, operation for operation, and the speed as
@@ -179,13 +218,45 @@ def manage_counters(P: np.ndarray, X: np.ndarray, CI: np.ndarray, CL: np.ndarray
     sig = np.empty(n)
     speed = np.empty(n)
     near = np.empty(n, dtype=np.int64)
+    if ev:
+        s_exit = q[UP_S_EXIT]
+        nsus = int(q[UP_SUSTAIN])
+        retire_n = int(q[UP_RETIRE_N])
+        retire_s = q[UP_RETIRE_S]
+    else:
+        s_exit, nsus, retire_n, retire_s = 0.0, 0, 0, 0.0
     for i in range(n):
         k = rows[i]
-        near[i] = WN[k, 2]
+        a = WN[k, 2]
+        if ev:
+            nm = WN[k, 0]
+            if nm != 0 and nm >= nsus:
+                acc = 0.0
+                for j in range(nm):
+                    acc += MEV[k, j, 0]
+                if acc / nm >= s_exit:
+                    a += AUX_EXIT
+            if retire_n > 0 and nm >= retire_n:
+                lo = MEV[k, nm - retire_n, 0]
+                for j in range(nm - retire_n + 1, nm):
+                    v = MEV[k, j, 0]
+                    if v < lo:
+                        lo = v
+                if lo >= retire_s:
+                    a += AUX_RETIRE
+        near[i] = a
         # (kernels.manage_rows' arithmetic for row k, operation for operation, here instead of called: no library of
         # its own to compile in a run)
         s = py_hypot(X[k, 2], X[k, 3])
         speed[i] = s
+        if ev and s <= 10.0:  # (the slow reason's text index: trackmanage._slow_reason's arithmetic)
+            sq = s * 100.0
+            si = int(sq)
+            sf = sq - si
+            if sf < 0.4999999:
+                near[i] += (si + 1) << AUX_SLOW_SHIFT
+            elif sf > 0.5000001:
+                near[i] += (si + 2) << AUX_SLOW_SHIFT
         sig[i] = 0.0
         fin = True
         for a in range(4):
@@ -342,7 +413,11 @@ UP_NEED = _N_PARAMS + 16  # TrackerConfig.confirm_hits (an integer; manage_count
 UP_MAX_COAST = _N_PARAMS + 17  # TrackerConfig.max_coast_time, s (manage_counters)
 UP_MAX_SPEED = _N_PARAMS + 18  # TrackerConfig.max_object_speed, m/s (manage_counters)
 UP_MAX_POS_SIG = _N_PARAMS + 19  # TrackerConfig.max_position_sigma, m (manage_counters)
-_UP_N = _N_PARAMS + 20
+UP_S_EXIT = _N_PARAMS + 20  # TrackerConfig.map_structure_exit (manage_scan)
+UP_SUSTAIN = _N_PARAMS + 21  # TrackerConfig.sustain_updates (an integer; manage_scan)
+UP_RETIRE_N = _N_PARAMS + 22  # TrackerConfig.structure_retire_updates (an integer, 0 for None; manage_scan)
+UP_RETIRE_S = _N_PARAMS + 23  # TrackerConfig.structure_retire_fraction (manage_scan)
+_UP_N = _N_PARAMS + 24
 
 # the columns of the tracker's counter table (``Tracker._CI``, int64, one row per state row; docs/speed.md pass cnt36)
 C_STATE = 0  # the track's state: ST_TENTATIVE, ST_CONFIRMED or ST_COASTING
@@ -400,6 +475,10 @@ def update_params(fit_p: np.ndarray, fc, tc, size_sigma: float = 0.05) -> np.nda
     q[UP_MAX_COAST] = float(tc.max_coast_time)
     q[UP_MAX_SPEED] = float(tc.max_object_speed)
     q[UP_MAX_POS_SIG] = float(tc.max_position_sigma)
+    q[UP_S_EXIT] = float(tc.map_structure_exit)
+    q[UP_SUSTAIN] = int(tc.sustain_updates)
+    q[UP_RETIRE_N] = int(tc.structure_retire_updates or 0)
+    q[UP_RETIRE_S] = float(tc.structure_retire_fraction)
     return q
 
 

@@ -84,7 +84,7 @@ from dynslam2d.detect.segment import Segmentation
 from dynslam2d.detect.shapes import search_angles
 from dynslam2d.detect.trackdetect import TrackDetect
 from dynslam2d.detect.trackmanage import TrackManage
-from dynslam2d.detect.trackreport import TrackReport
+from dynslam2d.detect.trackreport import TrackReport, TrackReports
 from dynslam2d.detect.tracktable import (  # noqa: F401  (_Track, _new_track, â€¦ : the names tests import from here)
     _BIG,
     _HALF_PI,
@@ -103,7 +103,7 @@ from dynslam2d.detect.tracktable import (  # noqa: F401  (_Track, _new_track, â€
     _Track,
 )
 from dynslam2d.detect.trackupdate import TrackUpdate, _nearest_age  # noqa: F401  (_nearest_age: tests import it here)
-from dynslam2d.types import Pose2D, Scan, Track, wrap_angle
+from dynslam2d.types import Pose2D, Scan, wrap_angle
 
 _NO_MEV = np.zeros((0, 3))  # (Tracker._births' map evidence without a map: never read)
 # (associate_scan's arguments without a claimed detection / a track to veto: shared, never written)
@@ -274,8 +274,10 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         return len(self._tracks)
 
     def update(self, scan: Scan, pose: Pose2D, map_view: MapView | None = None,
-               body_beams: np.ndarray | None = None) -> list[Track]:
-        """Process one scan with the laser pose of the same scan (map frame); return the live tracks.
+               body_beams: np.ndarray | None = None) -> TrackReports:
+        """Process one scan with the laser pose of the same scan (map frame); return the live tracks' reports: a
+        sequence of :class:`dynslam2d.types.Track` (the live tracks', then the dormant ones'), each built when first
+        read (:class:`dynslam2d.detect.trackreport.TrackReports`, its values as of this scan).
 
         ``map_view``: the SLAM map built from earlier scans (finest level, read only); with it and
         ``tracker.map_evidence`` the set M also needs the map's agreement (docs/tracking.md).

@@ -9,6 +9,10 @@ import math
 import numpy as np
 
 from dynslam2d.detect.kernels_update import (
+    AUX_EXIT,
+    AUX_NEAR,
+    AUX_RETIRE,
+    AUX_SLOW_SHIFT,
     MC_COAST,
     MC_DEL_COVARIANCE,
     MC_DEL_TENTATIVE,
@@ -19,7 +23,7 @@ from dynslam2d.detect.kernels_update import (
     RIDE_FAR,
     RIDE_JUDGE,
     RIDE_OFF_BODY,
-    manage_counters,
+    manage_scan,
     ride_window,
 )
 from dynslam2d.detect.tracktable import _NO_BEAMS, _TWO_PI, TENTATIVE, _Track
@@ -66,6 +70,23 @@ def _slow_reason(speed: float, texts: tuple[str, ...], tail: str) -> str:
     return f"not in M: speed {speed:.2f}{tail}"
 
 
+def _hypot_2f(dx: float, dy: float, hypot=math.hypot, np_hypot=np.hypot) -> str:
+    """``f"{float(np.hypot(dx, dy)):.2f}"`` (a distance in m, as the reasons print it) from Python's ``math.hypot``,
+    without NumPy's scalar ufunc call (≈ 1 µs; docs/speed.md, pass trk87). Both are within 1 ulp of the exact
+    distance (math.hypot: CPython's ``vector_norm``; np.hypot: the C library's ``hypot``), so they can differ by
+    2 ulp at most: the two-decimal text (the exact value of the float rounded to the nearest hundredth, ties to
+    even) is the same unless 100·d lies within far less than 10⁻⁷ of a tie (an odd multiple of ½) — there, and for
+    any distance of 10 km or more or not finite, the text is NumPy's own. ``TrackManage._manage``'s moving tracks in
+    M (≈ 4 a scan on sim:crowd)."""
+    d = hypot(dx, dy)
+    q = d * 100.0
+    if 0.0 <= q < 1e6:
+        f = q - int(q)
+        if f < 0.4999999 or f > 0.5000001:
+            return f"{d:.2f}"
+    return f"{float(np_hypot(dx, dy)):.2f}"
+
+
 class TrackManage:
     """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: management and the test of M (``_manage``, ``_dynamic``)."""
 
@@ -93,14 +114,13 @@ class TrackManage:
         merged = self._merged
         v_min = tc.v_min
         retire_n = tc.structure_retire_updates if self._map is not None else 0
-        retire_s = tc.structure_retire_fraction
         # (the test of M's constants, the same products as in _dynamic)
         max_ssig, v_exit, nsus = tc.max_speed_sigma, tc.v_exit_ratio * tc.v_min, tc.sustain_updates
         npu = tc.person_sustain_updates
         probe = self._free is not None
-        slow_reason = _slow_reason  # (a local name: read once per scan)
-        # (_dynamic's first test of a track in M, the structure exit, with the scan's constants: pass trk43)
-        on_map, s_exit, hypot = self._map is not None, tc.map_structure_exit, np.hypot
+        # (_dynamic's first test of a track in M, the structure exit, with the scan's constants: pass trk43; its
+        # window mean in the kernel, manage_scan's AUX_EXIT)
+        on_map, hypot_2f = self._map is not None, _hypot_2f
         order = self._rows()
         # per track: the counter tests' outcome (MC_*, the new states and counts written into the counter table), σ of
         # its speed along the velocity and its speed (Python's math.hypot bit for bit, as the reasons print it), from
@@ -111,8 +131,11 @@ class TrackManage:
         # (kernels.shape_update; a track not updated in this scan has its last push's, never read), read from its row
         # in the same call: pass trk41)
         MEV, WN = self._MEV, self._WN
-        codes, sigs, speeds, nears = manage_counters(self._P, self._X, self._CI, self._CL, WN, order, self._upd_p, t)
-        codes, sigs, speeds, nears = codes.tolist(), sigs.tolist(), speeds.tolist(), nears.tolist()
+        # (and, in the same call, three values the loop below tested per track in Python, as bits of ``auxs``: the
+        # structure exit's window mean, clutter retirement's window minimum and the slow reason's text index:
+        # manage_scan, pass upd91)
+        codes, sigs, speeds, auxs = manage_scan(self._P, self._X, self._CI, self._CL, WN, MEV, order, self._upd_p, t)
+        codes, sigs, speeds, auxs = codes.tolist(), sigs.tolist(), speeds.tolist(), auxs.tolist()
         fast_reasons = self._fast_reasons
         if len(fast_reasons) != nsus:
             fast_reasons = self._fast_reasons = _fast_reason_texts(nsus)
@@ -123,10 +146,11 @@ class TrackManage:
             slow_tail = f" m/s ≤ v_min {v_min:.2f}"
             self._slow_reasons = (v_min, slow_texts, slow_tail)
         no_beams = _NO_BEAMS
-        for k, code, speed, sig, near in zip(tracks, codes, speeds, sigs, nears):
+        for k, code, speed, sig, aux in zip(tracks, codes, speeds, sigs, auxs):
             if code <= MC_UPD_FIRM:  # updated, kept by the counter tests (tentative: MC_UPD_TENTATIVE)
-                if retire_n and not k.was_in_m and not k.remembered and (nm := WN.item(k.row, 0)) >= retire_n \
-                        and speed < v_min and min(MEV[k.row, nm - retire_n:nm, 0].tolist()) >= retire_s:
+                # (AUX_RETIRE: structure_retire_updates window entries or more, the last that many each at least
+                # structure_retire_fraction, min(MEV[k.row, nm - retire_n:nm, 0].tolist()) >= retire_s; manage_scan)
+                if retire_n and aux & AUX_RETIRE and speed < v_min and not k.was_in_m and not k.remembered:
                     # clutter retirement: a still track the map already holds as structure (docs/real.md "Speed");
                     # a confirmed one stays as a dormant track while its object is seen (_clutter_detections)
                     st.deleted_structure += 1
@@ -154,6 +178,7 @@ class TrackManage:
                 else:
                     # (near 0: fewer than ride_updates entries, it cannot ride; 1: far from the laser,
                     # _rides_with_laser's first test done (most tracks); 2: the whole test)
+                    near = aux & AUX_NEAR
                     if near == 1:
                         k.rode = False
                     if near > 1 and self._rides_with_laser(k):
@@ -161,19 +186,18 @@ class TrackManage:
                         k.fast = 0
                         k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
                     elif in_m and k.slow_since is None and (k.was_in_m or k.person_streak < npu or not on_map) \
-                            and not (on_map and (nm := WN.item(k.row, 0)) and nm >= nsus
-                                     and sum(MEV[k.row, :nm, 0].tolist()) / nm >= s_exit):
+                            and not (on_map and aux & AUX_EXIT):
                         # (_dynamic's outcome for a track in M that is not slow and not leaving M on structure, whose
                         # person test asks no map (seen moving before, no map, or no person test: person_streak below
                         # person_sustain_updates; _person_moved_in's "kinematic", which changes nothing): the most
                         # common outcome of a track in M, inline with its memory bookkeeping; the same floats: the
-                        # window's sum in its order, np.hypot of the same differences (pass trk43))
+                        # window's sum in its order, np.hypot's text of the same differences (passes trk43, trk87))
                         k.remembered = False  # moving again
                         x = k.x
                         x0, x1 = x.item(0), x.item(1)
                         bxy = k.birth_xy
                         k.reason = (f"in M: speed {speed:.2f} m/s, moved "
-                                    f"{float(hypot(x0 - bxy.item(0), x1 - bxy.item(1))):.2f} m since birth")
+                                    f"{hypot_2f(x0 - bxy.item(0), x1 - bxy.item(1))} m since birth")
                         if mem:  # (_memory_bookkeeping of a track in M, inline)
                             if (sxy := k.m_start_xy) is None:
                                 k.m_start_xy = sxy = (x0, x1)
@@ -191,8 +215,10 @@ class TrackManage:
                         # (speed: most tracks are short-lived tentative clutter; nothing else changes them)
                         k.reason = "not in M: tentative track"
                     elif speed <= v_min:
-                        # (the most common reason: looked up by the speed in hundredths)
-                        k.reason = slow_reason(speed, slow_texts, slow_tail)
+                        # (the most common reason: looked up by the speed in hundredths, its text's index + 1 from
+                        # the kernel, 0 where _slow_reason formats it: near a rounding tie; manage_scan)
+                        k.reason = slow_texts[si - 1] if (si := aux >> AUX_SLOW_SHIFT) and slow_texts \
+                            else f"not in M: speed {speed:.2f}{slow_tail}"
                     elif kfast < nsus and sig < max_ssig and k.person_streak < npu:
                         # (_dynamic's outcome for a track not in M, faster than v_min with a certain velocity, not yet
                         # for sustain_updates updates and no person test (person_streak below person_sustain_updates):
@@ -315,8 +341,9 @@ class TrackManage:
                 k.reason = f"in M (hysteresis): slow ({speed:.2f} m/s) for {slow_for:.1f} s"
             else:
                 k.remembered = False  # moving again
-                disp = float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))
-                k.reason = f"in M: speed {speed:.2f} m/s, moved {disp:.2f} m since birth"
+                x, bxy = k.x, k.birth_xy
+                k.reason = (f"in M: speed {speed:.2f} m/s, moved "
+                            f"{_hypot_2f(x.item(0) - bxy.item(0), x.item(1) - bxy.item(1))} m since birth")
             return
         if k.state == TENTATIVE:
             k.reason = "not in M: tentative track"

@@ -47,11 +47,13 @@ import itertools
 import math
 import zlib
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from dynslam2d.detect.memoryconfig import MemoryConfig
+from dynslam2d.detect.trackreport import TrackReports
 from dynslam2d.slam.grid import MultiResMap, _zeroed, encode_probs
 from dynslam2d.types import Pose2D, Scan, Track
 
@@ -482,7 +484,11 @@ class _Ledger:
     #: ((k, 3) int32 rows (scan index, first, end) into the chunk's beams, the int32 beams), in update order, before
     #: :attr:`kb`'s
     kbc: list | None = None
-    last_track: Track | None = None  # the track as last seen out of the removal set (None once the track ended)
+    #: the track as last seen out of the removal set (None once the track ended): its ``Track``, or its scan's
+    #: ``TrackReports`` (its index there :attr:`last_at`) while that report was not built (``TrackReports.sight``,
+    #: passes trk90, trk97: two slots, no tuple a ledger and scan)
+    last_track: Track | TrackReports | None = None
+    last_at: int = -1  # (last_track's report index when last_track is a TrackReports)
     #: (update's (5, m) row block, first column, end column, levels with rows (bit k: level k)) per map update
     #: since the last :meth:`settle`
     ent: list = field(default_factory=list)
@@ -704,6 +710,17 @@ def _box_key(t: Track) -> tuple[float, float, float]:
     return (float(b.px), float(b.py), 0.5 * float(max(b.length, b.width)))
 
 
+def _sight_key(sight: Track | tuple[TrackReports, int]) -> tuple[float, float, float]:
+    """:func:`_box_key` of a last sight (``TrackReports.sight``)."""
+    return sight[0].box_key(sight[1]) if type(sight) is tuple else _box_key(sight)
+
+
+def _last_key(led: _Ledger) -> tuple[float, float, float]:
+    """:func:`_box_key` of ledger ``led``'s last sight (:attr:`_Ledger.last_track`, not None)."""
+    sight = led.last_track
+    return sight.box_key(led.last_at) if type(sight) is TrackReports else _box_key(sight)
+
+
 class EvidenceLedger:
     """Per-track record of map evidence and its erasure (module docstring)."""
 
@@ -765,20 +782,19 @@ class EvidenceLedger:
         self._final: dict[str, int] | None = None
 
     # ------------------------------------------------------------------ recording
-    def before_update(self, scan: Scan, pose: Pose2D, tracks: list[Track], removed: np.ndarray,
+    def before_update(self, scan: Scan, pose: Pose2D, tracks: Sequence[Track], removed: np.ndarray,
                       hmap: MultiResMap, index: int = -1) -> PendingUpdate | None:
         """Read, before the map update with ``scan`` (beams ``removed`` taken out) at ``pose``, the
         log-odds of the cells each track's kept beams will hit (removed beams, those of the tracks in the
         removal set, are not recorded). ``index`` is the scan's index in the run (kept with the beams when
-        ``keep_beams``). Returns None when nothing is to be recorded."""
+        ``keep_beams``). Returns None when nothing is to be recorded. ``tracks``: the tracker's reports (read from
+        their columns, no ``Track`` built) or any sequence of ``Track``."""
         lk = _lk or _kernels()
-        # the tracks with beams, their beams and ids (comprehensions: fewer byte codes per track than one loop with
-        # four appends, pass ledger16)
-        mine = [t for t in tracks if t.beams is not None and len(t.beams)]
+        reps = TrackReports.of_tracks(tracks)
+        # the indices of the reports with beams, their beams and ids (from the columns; pass trk90)
+        mine, blist, tids = reps.with_beams()
         if not mine:
             return None
-        blist = [t.beams for t in mine]
-        tids = [t.id for t in mine]
         idl = np.array(tids + list(map(len, blist)), dtype=np.int64)  # (the ids, then the beam counts: one array)
         allb = np.concatenate(blist).astype(np.int64, copy=False)
         c, s = math.cos(pose.theta), math.sin(pose.theta)
@@ -816,20 +832,20 @@ class EvidenceLedger:
         ledgers = self._ledgers
         if want_kb:  # every track's kept beams, split per track
             at = int(index)
-            for t, tid, keep, a, b in zip(mine, tids, present, kb, kb[1:]):
+            for i, tid, keep, a, b in zip(mine, tids, present, kb, kb[1:]):
                 if keep:  # (else every beam of it removed)
                     led = ledgers.get(tid)
                     if led is None:
-                        led = ledgers[tid] = self._new_ledger(t, t.stamp, n_lv)
+                        led = ledgers[tid] = self._new_ledger_at(tid, reps.box_key(i), reps.stamp_of(i), n_lv)
                     if b > a:  # (the bounds, not a view: a view costs more per track and holds the same array)
                         led.kb.extend((at, kb_all, a, b))  # (flat: the tuple dies here, not in a young generation)
             self._kb_n += 1
             if self._kb_n == self.kb_sweep:
                 self._sweep_beams(at)
         else:
-            for t, tid, keep in zip(mine, tids, present):
+            for i, tid, keep in zip(mine, tids, present):
                 if keep and tid not in ledgers:
-                    ledgers[tid] = self._new_ledger(t, t.stamp, n_lv)
+                    ledgers[tid] = self._new_ledger_at(tid, reps.box_key(i), reps.stamp_of(i), n_lv)
         return pending
 
     def _sweep_beams(self, at: int) -> None:
@@ -960,16 +976,19 @@ class EvidenceLedger:
             per_level.append((ids[sel], mk[sel], c, before, uidx))
         return per_level
 
-    def _new_ledger(self, t: Track, stamp: float, n_levels: int, _new=object.__new__) -> _Ledger:
+    def _new_ledger(self, t: Track, stamp: float, n_levels: int) -> _Ledger:
         """An empty ledger of ``t``; its first box is where the track was first reported.
 
         ``_Ledger(t.id, box, t0, here, stamp, None, n_levels, max_ledger_cells)`` with every other field at its
         default, the slots set directly (pass led28: ≈ 3.5 ledgers start per map update on negative_2, most of them
         tentative tracks' that are dropped a few scans later; the dataclass ``__init__`` with its two default
         factories cost about half as much again; ``tests/test_ledger_observe.py`` compares every field)."""
-        tid = t.id
-        b = t.box
-        here = (float(b.px), float(b.py), 0.5 * float(max(b.length, b.width)))  # (_box_key, inlined)
+        return self._new_ledger_at(t.id, _box_key(t), stamp, n_levels)
+
+    def _new_ledger_at(self, tid: int, here: tuple[float, float, float], stamp: float, n_levels: int,
+                       _new=object.__new__) -> _Ledger:
+        """:meth:`_new_ledger` of the track ``tid`` reported with the box ``here`` (:func:`_box_key`'s centre x, y
+        and half longer side, m, map frame) at ``stamp`` (s)."""
         box, t0, _ = self._first_of(tid) or (here, stamp, stamp)
         led = _new(_Ledger)
         led.id = tid
@@ -987,6 +1006,7 @@ class EvidenceLedger:
         led.kb = []
         led.kbc = None
         led.last_track = None
+        led.last_at = -1
         led.ent = []
         led.ent0 = 0
         led.nb_rows = 0
@@ -1211,27 +1231,31 @@ class EvidenceLedger:
             mark[:self._mark.shape[0]] = self._mark
             self._F, self._mark = F, mark
 
-    def observe(self, tracks: list[Track], removing: set[int], stamp: float,
+    def observe(self, tracks: Sequence[Track], removing: set[int], stamp: float,
                 states: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Keep each live track's last box; move ledgers of ended tracks aside; drop old ones.
 
-        ``states``: the tracker's state array and the rows of its live reports, ``(X, rows)``
-        (``Tracker.report_states()``; the first ``len(rows)`` of ``tracks`` are those reports, in that order,
-        each box centre and velocity the values of its row: x, y (m), vx, vy (m/s), map frame); None: read from
-        the reports themselves."""
+        ``tracks``: the tracker's reports (read from their columns, no ``Track`` built; a ledger keeps its track's
+        report as ``TrackReports.sight``) or any sequence of ``Track``. ``states``: the tracker's state array and
+        the rows of its live reports, ``(X, rows)`` (``Tracker.report_states()``; the first ``len(rows)`` of
+        ``tracks`` are those reports, in that order, each box centre and velocity the values of its row: x, y (m),
+        vx, vy (m/s), map frame); None: read from the reports themselves."""
         lk = _lk or _kernels()
-        ids = [t.id for t in tracks]
+        tracks = TrackReports.of_tracks(tracks)
+        ids = tracks.ids
         nr = 0
+        n_all = len(tracks)  # (once: a Python ``__len__``)
         if states is not None:
             X, rows = states
             nr = rows.shape[0]
-            if nr > len(tracks):  # (not the reports of these rows)
+            if nr > n_all:  # (not the reports of these rows)
                 nr = 0
         if not nr:
             X, rows = _NO_X, _NO_IDS
         # the other reports (the tracker's dormant ones, or all without ``states``): centre and velocity as rows
-        if len(tracks) > nr:
-            E = np.array([(t.box.px, t.box.py, *t.velocity.tolist()) for t in tracks[nr:]], dtype=np.float64)
+        if n_all > nr:  # (the dormant reports as their list when the rows are the live ones': no slice, pass trk97)
+            rest = tracks.dormant if nr == tracks.n_live else tracks[nr:]
+            E = np.array([(t.box.px, t.box.py, *t.velocity.tolist()) for t in rest], dtype=np.float64)
         else:
             E = _NO_X
         self._obs = c = self._obs + 1
@@ -1273,26 +1297,36 @@ class EvidenceLedger:
             F, s, pin = self._F, self._s, self._pin
             lo = s + self._P
             for i in new.tolist():
-                b = tracks[i].box
                 tid = ids[i]
-                F[tid - s if tid >= lo else pin[tid], 2] = 0.5 * float(max(b.length, b.width))
+                F[tid - s if tid >= lo else pin[tid], 2] = tracks.box_key(i)[2]
         ledgers = self._ledgers
-        for t, tid in zip(tracks, ids):  # (each ledger's last sight)
+        sight, state_of = tracks.sight, tracks.state_of
+        built = tracks.live_built  # (TrackReports.sight inlined for the live reports: no call a ledger, pass trk97)
+        nb = len(built)
+        for i, tid in enumerate(ids):  # (each ledger's last sight)
             if tid in removing:
                 continue
             led = ledgers.get(tid)
             if led is not None:
                 if led.m_start is not None:  # out of the removal set (again); skip and linked are only set
                     led.m_start, led.skip, led.linked = None, False, False  # (with m_start)
-                led.last_track = t  # (its box becomes last_box when the track ends)
+                # (its box becomes last_box when the track ends; the report kept unbuilt, pass trk90)
+                if i < nb:
+                    r = built[i]
+                    if r is None:
+                        led.last_track, led.last_at = tracks, i
+                    else:
+                        led.last_track = r
+                else:
+                    led.last_track = sight(i)
                 led.last_seen = stamp
-                if not led.confirmed and t.state != "tentative":
+                if not led.confirmed and state_of(i) != "tentative":
                     led.confirmed = True
         live = set(ids)
         for tid in [i for i in ledgers if i not in live]:  # (in the ledgers' order)
             led = ledgers.pop(tid)
             if led.last_track is not None:
-                led.last_box = _box_key(led.last_track)
+                led.last_box = _last_key(led)
                 # (nothing reads an ended ledger's track again: kept, each held its scan's report arrays — the
                 # velocity's and covariance's rows, the detections' beams — for ``ledger_keep_s``, ≈ 3 MiB of
                 # MIT CSAIL's ended ledgers at the loop's end; pass ldg47)
@@ -1379,24 +1413,43 @@ class EvidenceLedger:
             done += nb
 
     # ------------------------------------------------------------------ erasure
-    def erase_entering(self, tracks: list[Track], removing: set[int], stamp: float, hmap: MultiResMap) -> int:
+    def erase_entering(self, tracks: Sequence[Track], removing: set[int], stamp: float, hmap: MultiResMap,
+                       movers: tuple[list[int], np.ndarray] | None = None) -> int:
         """Erase the evidence of every live track in the removal set ``removing`` (ids) that has moved
         ``erase_min_travel`` from where it was first removed, with the evidence of ended tracks that stood
-        where it was first seen. Returns the number of cells changed on the finest level."""
+        where it was first seen. Returns the number of cells changed on the finest level. ``tracks``: the tracker's
+        reports (only the removal set's boxes read from their columns) or any sequence of ``Track``. ``movers``:
+        the removal set's ids in their reports' order (``removing`` their set) and their (k, ≥ 5) box rows
+        [p_x, p_y, θ, l, w, …] as reported (m, rad, map frame; the pipeline's movers' rows): ``tracks`` is then not
+        read (a box only for a track not skipped, all of them as one ``tolist``; docs/speed.md, pass trk97)."""
         if not self.config.erase or not removing:  # (no track in the removal set: nothing to erase or to start)
             return 0
         changed = 0
-        for t in tracks:
-            if t.id not in removing:
-                continue
-            led = self._ledgers.get(t.id)
+        # the removal set's ids in their reports' order and their box rows: [p_x, p_y, θ, l, w, …] (``movers``'; as
+        # lists when first read) or the box keys (p_x, p_y, half size) read from the reports
+        if movers is not None:
+            mids, rows = movers[0], None
+        else:
+            reps = TrackReports.of_tracks(tracks)
+            ids = reps.ids
+            at = [i for i, tid in enumerate(ids) if tid in removing]
+            mids, rows = [ids[i] for i in at], [reps.box_key(i) for i in at]
+        ledgers = self._ledgers
+        for j, tid in enumerate(mids):
+            led = ledgers.get(tid)
+            if led is not None and led.skip and led.m_start is not None:  # (skipped below: its box not read, pass
+                continue  # trk97 — most walkers are born moving)
+            if rows is None:
+                rows = movers[1].tolist()
+            r = rows[j]
             if led is None:
-                led = self._new_ledger(t, stamp, len(hmap.levels))
-                self._ledgers[t.id] = led
-            x, y = float(t.box.px), float(t.box.py)
+                here = r if len(r) == 3 else (r[0], r[1], 0.5 * max(r[3], r[4]))  # (_box_key's floats)
+                led = self._new_ledger_at(tid, here, stamp, len(hmap.levels))
+                self._ledgers[tid] = led
+            x, y = r[0], r[1]
             if led.m_start is None:
                 led.m_start = (x, y)
-                (fx, fy, fh), f_t, last_t = self._first_of(t.id) or (led.first_box, led.first_t, led.first_t)
+                (fx, fy, fh), f_t, last_t = self._first_of(tid) or (led.first_box, led.first_t, led.first_t)
                 led.first_box, led.first_t = (fx, fy, fh), f_t
                 # only what stood before it moved wrote evidence worth erasing (a person born walking enters
                 # M within a second: its few early hits are left to the clean-up pass), and only it may be
