@@ -115,44 +115,44 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), float64, float64, float64, float64, Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64, "
      'bool, float64, float64,)'),
-    ('dynslam2d.slam.cleanup._geometry_bounds',
+    ('dynslam2d.slam.cleanup._add_scan',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
-     "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),
-    ('dynslam2d.slam.cleanup._count_beams',
-     "(Array(int32, 2, 'C'), Array(uint16, 3, 'C'), int64, int64, int64, int64, float64, float64, "
-     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), "
-     "Array(float64, 1, 'C'), Array(bool, 1, 'C'), int64, int64, int64, int64, float64, Array(uint8, 1, "
-     "'C'), bool,)"),
+     "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64, float64, "
+     "float64, Array(int32, 2, 'C'), Array(uint16, 3, 'C'), int64, int64, int64, int64, int64, int64, "
+     "int64, int64, float64, Array(uint8, 1, 'C'),)"),
+    ('dynslam2d.viz.collect._removed_points',
+     "(Array(bool, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C', True), "
+     "Array(float64, 1, 'C', True), int64, int64, float64, float64, float64, float64,)"),
 )
 
 #: CPU time of each kernel's compile (s, the kernels it compiles in turn included) in a one-core cold run when
 #: recorded: the background compile's estimate of how far ahead of the run a kernel is (its order, docs/speed.md).
 COMPILE_S: dict[str, float] = {
-    'dynslam2d.sim.world._cast_kernel': 0.44,
-    'dynslam2d.detect.body._drop_body': 0.16,
-    'dynslam2d.slam.matcher.gated_points': 0.50,
+    'dynslam2d.sim.world._cast_kernel': 0.47,
+    'dynslam2d.detect.body._drop_body': 0.21,
+    'dynslam2d.slam.matcher.gated_points': 0.56,
     'dynslam2d.detect.body._observe_beams': 0.20,
-    'dynslam2d.detect.segment.detect_scan': 9.28,
-    'dynslam2d.detect.kernels_update.birth_rows': 0.37,
-    'dynslam2d.detect.kernels_update.report_rows': 0.36,
-    'dynslam2d.slam.ledgerkernels.record_cells': 2.02,
-    'dynslam2d.slam.ledgerkernels.level_rows': 0.75,
-    'dynslam2d.slam.ledgerkernels.stand_marks': 0.47,
-    'dynslam2d.slam.raycast.integrate_levels': 1.56,
-    'dynslam2d.slam.raycast.ray_ends': 0.11,
-    'dynslam2d.slam.matcher.match_pyramid': 2.18,
-    'dynslam2d.slam.correlative._rotated_cells': 0.25,
-    'dynslam2d.slam.correlative._score_pyramid': 0.47,
-    'dynslam2d.slam.correlative.branch_and_bound': 1.36,
-    'dynslam2d.vacated.vacated_scan_kernel': 3.27,
-    'dynslam2d.detect.kernels.cv_predict': 0.51,
-    'dynslam2d.detect.kernels_assign.associate_scan': 2.60,
-    'dynslam2d.detect.kernels_update.update_pairs': 2.88,
-    'dynslam2d.detect.kernels_update.manage_counters': 0.47,
-    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.22,
-    'dynslam2d.detect.kernels.seen_through_refs': 0.21,
-    'dynslam2d.filter.observed_boxes_kernel': 0.19,
-    'dynslam2d.filter._rows_exclusion_kernel': 0.46,
-    'dynslam2d.slam.cleanup._geometry_bounds': 0.18,
-    'dynslam2d.slam.cleanup._count_beams': 0.53,
+    'dynslam2d.detect.segment.detect_scan': 9.66,
+    'dynslam2d.detect.kernels_update.birth_rows': 0.45,
+    'dynslam2d.detect.kernels_update.report_rows': 0.61,
+    'dynslam2d.slam.ledgerkernels.record_cells': 2.69,
+    'dynslam2d.slam.ledgerkernels.level_rows': 0.58,
+    'dynslam2d.slam.ledgerkernels.stand_marks': 0.44,
+    'dynslam2d.slam.raycast.integrate_levels': 1.69,
+    'dynslam2d.slam.raycast.ray_ends': 0.10,
+    'dynslam2d.slam.matcher.match_pyramid': 2.93,
+    'dynslam2d.slam.correlative._rotated_cells': 0.40,
+    'dynslam2d.slam.correlative._score_pyramid': 0.74,
+    'dynslam2d.slam.correlative.branch_and_bound': 2.16,
+    'dynslam2d.vacated.vacated_scan_kernel': 3.78,
+    'dynslam2d.detect.kernels.cv_predict': 0.24,
+    'dynslam2d.detect.kernels_assign.associate_scan': 3.03,
+    'dynslam2d.detect.kernels_update.update_pairs': 3.02,
+    'dynslam2d.detect.kernels_update.manage_counters': 0.51,
+    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.27,
+    'dynslam2d.detect.kernels.seen_through_refs': 0.24,
+    'dynslam2d.filter.observed_boxes_kernel': 0.28,
+    'dynslam2d.filter._rows_exclusion_kernel': 0.59,
+    'dynslam2d.slam.cleanup._add_scan': 1.41,
+    'dynslam2d.viz.collect._removed_points': 0.17,
 }
