@@ -180,6 +180,15 @@ def _tile_channels(table: np.ndarray, pool: np.ndarray, r0: int, c0: int, h: int
 @njit(cache=True)
 def _count_beams(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0, j0, h, w, core,
                  mask, resume):  # pragma: no cover - numba
+    """:func:`_count_beams_inline` as a kernel of its own (the counter's resume after the pool ran full,
+    :func:`_count_scan`)."""
+    return _count_beams_inline(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0, j0,
+                               h, w, core, mask, resume)
+
+
+@njit(cache=True, inline="always")
+def _count_beams_inline(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0, j0, h, w,
+                        core, mask, resume):  # pragma: no cover - numba
     """:func:`_count_scan` of the beams as :func:`_scan_geometry` gives them (world cell units) into the counter's
     tiles: hits at ``(ex, ey)[kept]``, clearing segments to ``(cx, cy)[clear]``, all shifted by the counted
     extent's first cell ``(i0, j0)`` here (the same float64 subtractions numpy's ``ex[kept] - i0`` does) instead
@@ -438,6 +447,14 @@ def _scan_geometry(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin
 @njit(cache=True)
 def _geometry_bounds(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin_m, grazing_cells,
                      min_sin):  # pragma: no cover - numba
+    """:func:`_geometry_bounds_inline` as a kernel of its own."""
+    return _geometry_bounds_inline(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin_m, grazing_cells,
+                                   min_sin)
+
+
+@njit(cache=True, inline="always")
+def _geometry_bounds_inline(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin_m, grazing_cells,
+                            min_sin):  # pragma: no cover - numba
     """:func:`_scan_geometry` (same arguments) and the absolute cells (imin, jmin, imax, jmax) of the laser
     and the valid endpoints (:meth:`VisibilityCounter._cell_bounds`: the same minima and maxima, exact, and
     roundings) in one call, without the masked copies (``valid`` must hold a beam)."""
@@ -476,7 +493,9 @@ def _add_scan(ranges, cos_a, sin_a, valid_in, removed, px, py, th, res, margin_m
     jmax): answer :data:`_DONE` or :data:`_FULL` (counted; the rest as :func:`_count_beams` leaves it),
     :data:`_NO_BEAM` (nothing done), :data:`_GROW` (nothing done; the absolute cells the extent must hold) or
     :data:`_POOL` (nothing done: the caller reserves rows and calls again). The same operations in the same order
-    as the step-by-step calls, so the counts are the same bit for bit (docs/speed.md, pass cln102)."""
+    as the step-by-step calls, so the counts are the same bit for bit; the two kernels' bodies are inlined here
+    (numba's IR), so a run compiles them once, not once on their own and again inlined (docs/speed.md, pass
+    cln102)."""
     n = ranges.shape[0]
     valid = np.empty(n, dtype=np.bool_)
     some = False
@@ -491,14 +510,14 @@ def _add_scan(ranges, cos_a, sin_a, valid_in, removed, px, py, th, res, margin_m
     if removed.shape[0] == n:
         for i in range(n):
             rem[i] = removed[i]
-    ex, ey, cx, cy, kept, clear, imin, jmin, imax, jmax = _geometry_bounds(
+    ex, ey, cx, cy, kept, clear, imin, jmin, imax, jmax = _geometry_bounds_inline(
         ranges, cos_a, sin_a, valid, rem, px, py, th, res, margin_m, grazing_cells, min_sin)
     if h == 0 or imin < i0 or jmin < j0 or imax >= i0 + w or jmax >= j0 + h:
         return mask, n_tiles, _GROW, imin, jmin, imax, jmax
     if pool.shape[0] - n_tiles < min(n, table.size - n_tiles):
         return mask, n_tiles, _POOL, imin, jmin, imax, jmax
-    mask, n_tiles, full = _count_beams(table, pool, n_tiles, ti0, tj0, scan_id, px / res - i0, py / res - j0, ex, ey,
-                                       kept, cx, cy, clear, i0, j0, h, w, core, mask, False)
+    mask, n_tiles, full = _count_beams_inline(table, pool, n_tiles, ti0, tj0, scan_id, px / res - i0, py / res - j0,
+                                              ex, ey, kept, cx, cy, clear, i0, j0, h, w, core, mask, False)
     return mask, n_tiles, _FULL if full else _DONE, imin, jmin, imax, jmax
 
 
