@@ -18,7 +18,7 @@ the next scan. Per scan:
   observes, not the one whose loop body made it);
 * ``records``: the rest of the loop body between the end of ``process`` and the loop's next request (the scan's
   records, the stage timings, the progress callback, ``release_free_memory`` every ``TRIM_EVERY_SCANS``);
-* ``whole``: their sum — the scan as ``dynslam2d run`` pays it.
+* ``whole``: their sum — the scan as ``dynslam2d run`` pays it; ``outside process``: ``whole`` − ``process``.
 
 Printed per input: the median and the mean of each (ms a scan for ``whole`` and ``process``, µs for the others), the
 throughput ``1000 / mean whole ms`` (scans/s), and the end of the run after the loop once (``run``'s export, the loop
@@ -214,6 +214,8 @@ def figures(side: dict[str, object]) -> dict[str, tuple[float, float]]:
         v = per[part]
         k = 1e3 if part in ("whole", "process") else 1.0
         out[part] = (statistics.median(v) / k, statistics.fmean(v) / k)
+    outside = [w - q for w, q in zip(per["whole"], per["process"])]  # (µs: the loop's work besides process)
+    out["outside process"] = (statistics.median(outside), statistics.fmean(outside))
     rate = 1e3 / out["whole"][1]
     out["scans/s"] = (rate, rate)
     end = statistics.median(side["end_ms"])  # type: ignore[arg-type]
@@ -228,7 +230,7 @@ def report(name: str, res: dict[str, dict[str, object]]) -> dict[str, dict[str, 
     two = "other" in fig
     print(f"{name}: {n} scans, dynslam2d run's scan loop, thread CPU, median / mean"
           + (" (other → this, ratio)" if two else ""))
-    for part in (*PARTS, "scans/s", "end"):
+    for part in (*PARTS, "outside process", "scans/s", "end"):
         unit = {"whole": "ms", "process": "ms", "scans/s": "", "end": "ms once"}.get(part, "µs")
         label = f"{part} ({unit})" if unit else part
         t = fig["this"][part]
