@@ -116,44 +116,44 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), float64, float64, float64, float64, Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
      "Array(int64, 1, 'C'), Array(int64, 1, 'C'), float64, bool, bool, bool, float64, float64,)"),
-    ('dynslam2d.slam.cleanup._geometry_bounds',
+    ('dynslam2d.slam.cleanup._add_scan',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
-     "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64,)"),
-    ('dynslam2d.slam.cleanup._count_beams',
-     "(Array(int32, 2, 'C'), Array(uint16, 3, 'C'), int64, int64, int64, int64, float64, float64, "
-     "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), "
-     "Array(float64, 1, 'C'), Array(bool, 1, 'C'), int64, int64, int64, int64, float64, Array(uint8, 1, "
-     "'C'), bool,)"),
+     "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64, float64, "
+     "float64, Array(int32, 2, 'C'), Array(uint16, 3, 'C'), int64, int64, int64, int64, int64, int64, "
+     "int64, int64, float64, Array(uint8, 1, 'C'),)"),
+    ('dynslam2d.viz.collect._removed_points',
+     "(Array(bool, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C', True), "
+     "Array(float64, 1, 'C', True), int64, int64, float64, float64, float64, float64,)"),
 )
 
 #: CPU time of each kernel's compile (s, the kernels it compiles in turn included) in a one-core cold run when
 #: recorded: the background compile's estimate of how far ahead of the run a kernel is (its order, docs/speed.md).
 COMPILE_S: dict[str, float] = {
-    'dynslam2d.sim.world._cast_kernel': 0.38,
-    'dynslam2d.detect.body._drop_body': 0.17,
-    'dynslam2d.slam.matcher.gated_points': 0.46,
+    'dynslam2d.sim.world._cast_kernel': 0.39,
+    'dynslam2d.detect.body._drop_body': 0.14,
+    'dynslam2d.slam.matcher.gated_points': 0.42,
     'dynslam2d.detect.body._observe_beams': 0.17,
-    'dynslam2d.detect.segment.detect_scan': 7.40,
-    'dynslam2d.detect.kernels_update.birth_rows': 0.32,
-    'dynslam2d.detect.kernels_update.report_rows': 0.39,
-    'dynslam2d.slam.ledgerkernels.record_cells': 1.71,
-    'dynslam2d.slam.ledgerkernels.level_rows': 0.43,
-    'dynslam2d.slam.ledgerkernels.stand_marks': 0.30,
-    'dynslam2d.slam.raycast.integrate_levels': 1.49,
-    'dynslam2d.slam.raycast.ray_ends': 0.09,
-    'dynslam2d.slam.matcher.match_pyramid': 2.41,
+    'dynslam2d.detect.segment.detect_scan': 8.06,
+    'dynslam2d.detect.kernels_update.birth_rows': 0.31,
+    'dynslam2d.detect.kernels_update.report_rows': 0.33,
+    'dynslam2d.slam.ledgerkernels.record_cells': 1.64,
+    'dynslam2d.slam.ledgerkernels.level_rows': 0.41,
+    'dynslam2d.slam.ledgerkernels.stand_marks': 0.29,
+    'dynslam2d.slam.raycast.integrate_levels': 1.33,
+    'dynslam2d.slam.raycast.ray_ends': 0.07,
+    'dynslam2d.slam.matcher.match_pyramid': 2.17,
     'dynslam2d.slam.correlative._search_points': 0.17,
     'dynslam2d.slam.correlative._search_cells': 0.31,
     'dynslam2d.slam.correlative._search_table': 0.71,
-    'dynslam2d.slam.correlative.branch_and_bound': 1.39,
-    'dynslam2d.vacated.vacated_scan_kernel': 3.96,
-    'dynslam2d.detect.kernels.cv_predict': 0.24,
-    'dynslam2d.detect.kernels_assign.associate_scan': 2.76,
-    'dynslam2d.detect.kernels_update.update_pairs': 2.69,
-    'dynslam2d.detect.kernels_update.manage_scan': 0.65,
-    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.23,
-    'dynslam2d.detect.kernels.seen_through_refs': 0.27,
-    'dynslam2d.filter._movers_kernel': 1.13,
-    'dynslam2d.slam.cleanup._geometry_bounds': 0.18,
-    'dynslam2d.slam.cleanup._count_beams': 0.54,
+    'dynslam2d.slam.correlative.branch_and_bound': 1.41,
+    'dynslam2d.vacated.vacated_scan_kernel': 3.36,
+    'dynslam2d.detect.kernels.cv_predict': 0.22,
+    'dynslam2d.detect.kernels_assign.associate_scan': 2.81,
+    'dynslam2d.detect.kernels_update.update_pairs': 2.55,
+    'dynslam2d.detect.kernels_update.manage_scan': 0.56,
+    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.21,
+    'dynslam2d.detect.kernels.seen_through_refs': 0.20,
+    'dynslam2d.filter._movers_kernel': 0.86,
+    'dynslam2d.slam.cleanup._add_scan': 0.80,
+    'dynslam2d.viz.collect._removed_points': 0.17,
 }

@@ -111,6 +111,9 @@ _BYTE_OF_BIT = np.uint64(0x0001020304050607)
 #: the machine's byte order: byte k of a uint64 read from memory is its bits 8·k … 8·k + 7 when little-endian
 _LITTLE = sys.byteorder == "little"
 
+#: no beam removed (:meth:`VisibilityCounter.add` without the filter's mask)
+_NO_BEAMS = np.zeros(0, dtype=np.bool_)
+
 
 def _count_scan(counts: np.ndarray, last: np.ndarray, scan_id: int, ox: float, oy: float, hx: np.ndarray,
                 hy: np.ndarray, cx: np.ndarray, cy: np.ndarray, core: float) -> None:
@@ -177,6 +180,15 @@ def _tile_channels(table: np.ndarray, pool: np.ndarray, r0: int, c0: int, h: int
 @njit(cache=True)
 def _count_beams(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0, j0, h, w, core,
                  mask, resume):  # pragma: no cover - numba
+    """:func:`_count_beams_inline` as a kernel of its own (the counter's resume after the pool ran full,
+    :func:`_count_scan`)."""
+    return _count_beams_inline(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0, j0,
+                               h, w, core, mask, resume)
+
+
+@njit(cache=True, inline="always")
+def _count_beams_inline(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey, kept, cx, cy, clear, i0, j0, h, w,
+                        core, mask, resume):  # pragma: no cover - numba
     """:func:`_count_scan` of the beams as :func:`_scan_geometry` gives them (world cell units) into the counter's
     tiles: hits at ``(ex, ey)[kept]``, clearing segments to ``(cx, cy)[clear]``, all shifted by the counted
     extent's first cell ``(i0, j0)`` here (the same float64 subtractions numpy's ``ex[kept] - i0`` does) instead
@@ -435,6 +447,14 @@ def _scan_geometry(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin
 @njit(cache=True)
 def _geometry_bounds(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin_m, grazing_cells,
                      min_sin):  # pragma: no cover - numba
+    """:func:`_geometry_bounds_inline` as a kernel of its own."""
+    return _geometry_bounds_inline(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin_m, grazing_cells,
+                                   min_sin)
+
+
+@njit(cache=True, inline="always")
+def _geometry_bounds_inline(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin_m, grazing_cells,
+                            min_sin):  # pragma: no cover - numba
     """:func:`_scan_geometry` (same arguments) and the absolute cells (imin, jmin, imax, jmax) of the laser
     and the valid endpoints (:meth:`VisibilityCounter._cell_bounds`: the same minima and maxima, exact, and
     roundings) in one call, without the masked copies (``valid`` must hold a beam)."""
@@ -452,6 +472,53 @@ def _geometry_bounds(ranges, cos_a, sin_a, valid, removed, px, py, th, res, marg
             hi_y = max(hi_y, ey[i])
     return (ex, ey, cx, cy, kept, clear, int(math.floor(lo_x + 0.5)), int(math.floor(lo_y + 0.5)),
             int(math.floor(hi_x + 0.5)), int(math.floor(hi_y + 0.5)))
+
+
+#: :func:`_add_scan`'s answers: the scan counted; no beam held a return (nothing done); the extent must grow
+#: to the returned cells first; the tile pool needs free rows first; the pool ran full while the passes were
+#: counted (the rest of them still marked in the mask: :meth:`VisibilityCounter._resume`)
+_DONE, _NO_BEAM, _GROW, _POOL, _FULL = 0, 1, 2, 3, 4
+
+
+@njit(cache=True)
+def _add_scan(ranges, cos_a, sin_a, valid_in, removed, px, py, th, res, margin_m, grazing_cells, min_sin, min_dist,
+              max_dist, table, pool, n_tiles, ti0, tj0, scan_id, i0, j0, h, w, core, mask):  # pragma: no cover - numba
+    """:meth:`VisibilityCounter.add`'s work on one scan in one call: the beams with a return (``valid_in``, the
+    scan's :meth:`Scan.valid_mask`) within (``min_dist``, ``max_dist``) m (NaN compares False, as NumPy's tests),
+    their geometry and cell bounds (:func:`_geometry_bounds`; ``removed`` (n,) bool or, when it is not the scan's
+    length, no beam removed), the extent's test (:meth:`VisibilityCounter._ensure`: cells (``i0``, ``j0``) …
+    (``i0 + w − 1``, ``j0 + h − 1``)), the pool's free rows (:meth:`VisibilityCounter._reserve_tiles`: one per
+    beam, or a row for every tile of ``table``) and the counting (:func:`_count_beams`, laser at
+    (``px``, ``py``) m / ``res`` − (``i0``, ``j0``) cells). Returns (mask, rows in use, answer, imin, jmin, imax,
+    jmax): answer :data:`_DONE` or :data:`_FULL` (counted; the rest as :func:`_count_beams` leaves it),
+    :data:`_NO_BEAM` (nothing done), :data:`_GROW` (nothing done; the absolute cells the extent must hold) or
+    :data:`_POOL` (nothing done: the caller reserves rows and calls again). The same operations in the same order
+    as the step-by-step calls, so the counts are the same bit for bit; the two kernels' bodies are inlined here
+    (numba's IR), so a run compiles them once, not once on their own and again inlined (docs/speed.md, pass
+    cln102)."""
+    n = ranges.shape[0]
+    valid = np.empty(n, dtype=np.bool_)
+    some = False
+    for i in range(n):
+        r = ranges[i]
+        v = valid_in[i] and r > min_dist and r < max_dist
+        valid[i] = v
+        some = some or v
+    if not some:
+        return mask, n_tiles, _NO_BEAM, 0, 0, 0, 0
+    rem = np.zeros(n, dtype=np.bool_)
+    if removed.shape[0] == n:
+        for i in range(n):
+            rem[i] = removed[i]
+    ex, ey, cx, cy, kept, clear, imin, jmin, imax, jmax = _geometry_bounds_inline(
+        ranges, cos_a, sin_a, valid, rem, px, py, th, res, margin_m, grazing_cells, min_sin)
+    if h == 0 or imin < i0 or jmin < j0 or imax >= i0 + w or jmax >= j0 + h:
+        return mask, n_tiles, _GROW, imin, jmin, imax, jmax
+    if pool.shape[0] - n_tiles < min(n, table.size - n_tiles):
+        return mask, n_tiles, _POOL, imin, jmin, imax, jmax
+    mask, n_tiles, full = _count_beams_inline(table, pool, n_tiles, ti0, tj0, scan_id, px / res - i0, py / res - j0,
+                                              ex, ey, kept, cx, cy, clear, i0, j0, h, w, core, mask, False)
+    return mask, n_tiles, _FULL if full else _DONE, imin, jmin, imax, jmax
 
 
 class VisibilityCounter:
@@ -629,7 +696,49 @@ class VisibilityCounter:
 
     def add(self, scan: Scan, pose: Pose2D, removed: np.ndarray | None = None) -> None:
         """Count one scan taken at laser pose ``pose`` (map frame); ``removed`` (beams,) bool
-        marks the beams the dynamic filter took out (no hit; they still pass through)."""
+        marks the beams the dynamic filter took out (no hit; they still pass through).
+
+        One kernel call a scan (:func:`_add_scan`: the beams' validity, geometry, bounds and counting); Python only
+        when the extent grows, the tile pool needs rows, or the scan numbers are renumbered (docs/speed.md, pass
+        cln102; :meth:`add_steps` is the same count call by call)."""
+        t0 = time.perf_counter()
+        if self.scans + 1 - self._id_base > _ID_SPAN:  # (once in 32767 counted scans: the steps, renumbering)
+            self.add_steps(scan, pose, removed)
+            return
+        c, res = self.config, self.resolution
+        n = scan.ranges.shape[0]
+        if removed is None or removed.shape != (n,):
+            removed = _NO_BEAMS
+        elif removed.dtype != np.bool_:
+            removed = np.asarray(removed, dtype=np.bool_)
+        cos_a, sin_a = scan.trig()
+        px, py, th = float(pose.x), float(pose.y), float(pose.theta)
+        s = self.slam
+        while True:
+            self._mask, self._n_tiles, answer, imin, jmin, imax, jmax = _add_scan(
+                scan.ranges, cos_a, sin_a, scan.valid_view(), removed, px, py, th, res, float(c.margin_m),
+                float(c.grazing_cells), math.sin(math.radians(c.min_incidence_deg)), float(s.laser_min_dist),
+                float(s.laser_max_dist), self._table, self._pool, self._n_tiles, self._ti0, self._tj0,
+                self.scans + 1 - self._id_base, self.i0, self.j0, self._h, self._w, float(c.ray_core), self._mask)
+            if answer == _GROW:
+                if not self._ensure(imin, jmin, imax, jmax):
+                    self.too_large += 1  # the SLAM refuses such scans too ('map_too_large')
+                    self.seconds += time.perf_counter() - t0
+                    return
+            elif answer == _POOL:
+                self._reserve_tiles(n)
+            else:
+                break
+        if answer == _FULL:  # (the pool ran full: the geometry again, the rest of the passes counted as _count does)
+            ex, ey, cx, cy, kept, clear, *_ = _geometry_bounds(*self._geometry_args(scan, pose, self._valid(scan),
+                                                                                      removed))
+            self._count(ex, ey, kept, cx, cy, clear, pose.x / res, pose.y / res, float(c.ray_core), resume=True)
+        self.scans += 1
+        self.seconds += time.perf_counter() - t0
+
+    def add_steps(self, scan: Scan, pose: Pose2D, removed: np.ndarray | None = None) -> None:
+        """:meth:`add` call by call (validity, geometry and bounds, extent, renumbering, counting): the counts
+        :meth:`add` makes in one kernel call, for the renumbering scan and the tests."""
         t0 = time.perf_counter()
         c, res = self.config, self.resolution
         valid = self._valid(scan)
@@ -651,11 +760,12 @@ class VisibilityCounter:
         self.seconds += time.perf_counter() - t0
 
     def _count(self, ex: np.ndarray, ey: np.ndarray, kept: np.ndarray, cx: np.ndarray, cy: np.ndarray,
-               clear: np.ndarray, ox: float, oy: float, core: float) -> None:
+               clear: np.ndarray, ox: float, oy: float, core: float, resume: bool = False) -> None:
         """One scan's beams (:func:`_scan_geometry`, world cell units; laser at (ox, oy)) into the tiles: a free
-        pool row for every beam first (the hits), more when the passes need them (:func:`_count_beams`)."""
-        self._reserve_tiles(ex.shape[0])  # (each beam's hit allocates at most one tile)
-        resume = False
+        pool row for every beam first (the hits), more when the passes need them (:func:`_count_beams`).
+        ``resume``: the scan's hits are counted and its remaining passes marked in the mask already (the pool ran
+        full in :func:`_add_scan`): rows for them, then the rest."""
+        self._reserve_tiles(ex.shape[0] + 1 if resume else ex.shape[0])  # (each beam's hit allocates at most one tile)
         while True:
             self._mask, self._n_tiles, full = _count_beams(
                 self._table, self._pool, self._n_tiles, self._ti0, self._tj0, self.scans + 1 - self._id_base,

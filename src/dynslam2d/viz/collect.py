@@ -2,10 +2,43 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from dynslam2d.jitbox import njit
 from dynslam2d.pipeline import Pipeline, RunResult, StepResult
 from dynslam2d.types import Scan
+
+
+@njit(cache=True)
+def _removed_points(removed, valid, ranges, cos_a, sin_a, stride_min, limit, c, s, x, y):  # pragma: no cover - numba
+    """The removed beams with a return (``removed`` and ``valid``, (n,) bool) and the map-frame endpoints of every
+    ``stride``-th of them, ``stride`` = max(``stride_min``, ⌈count / ``limit``⌉): (count, (k, 2) float32 m). The
+    endpoints are :meth:`Scan.points`' (Paper Eq. 4: ``r·cos a``, ``r·sin a`` with the scan's (``cos_a``,
+    ``sin_a``)) moved by the pose (``c``, ``s`` = cos, sin of its heading; ``x``, ``y``) as
+    :meth:`Pose2D.transform_points` does — the same float64 operations in the same order — each rounded to float32
+    once (:meth:`RemovedPointsCollector.on_scan` in one call: no index, point or transformed arrays of NumPy)."""
+    n = removed.shape[0]
+    idx = np.empty(n, dtype=np.int64)
+    m = 0
+    for i in range(n):
+        if removed[i] and valid[i]:
+            idx[m] = i
+            m += 1
+    if m == 0:
+        return 0, np.empty((0, 2), dtype=np.float32)
+    stride = max(stride_min, int(math.ceil(m / limit)))
+    k = (m + stride - 1) // stride
+    out = np.empty((k, 2), dtype=np.float32)
+    for j in range(k):
+        i = idx[j * stride]
+        r = ranges[i]
+        px = r * cos_a[i]
+        py = r * sin_a[i]
+        out[j, 0] = np.float32(c * px - s * py + x)
+        out[j, 1] = np.float32(s * px + c * py + y)
+    return m, out
 
 
 class RemovedPointsCollector:
@@ -42,18 +75,15 @@ class RemovedPointsCollector:
         removed = np.asarray(step.removed, dtype=bool)
         if removed.shape != scan.ranges.shape or not removed.any():
             return
-        mask = removed & scan.valid_mask()
-        idx = np.flatnonzero(mask)
-        self.n_removed += idx.size
-        if idx.size == 0:
-            return
-        stride = max(self._stride, int(np.ceil(idx.size / self.per_scan_limit)))
-        idx = idx[::stride]
-        # the kept beams' endpoints in the sensor frame (Scan.points' Paper Eq. 4 at these indices), then in the map
-        # frame, rounded to float32 once
-        r = scan.ranges[idx]
+        # the removed beams with a return, every stride-th of them in the map frame, float32 (one kernel call)
         cos_a, sin_a = scan.trig()
-        pts = step.pose.transform_points(np.column_stack((r * cos_a[idx], r * sin_a[idx])), dtype=np.float32)
+        pose = step.pose
+        count, pts = _removed_points(removed, scan.valid_view(), scan.ranges, cos_a, sin_a, self._stride,
+                                     self.per_scan_limit, math.cos(pose.theta), math.sin(pose.theta), float(pose.x),
+                                     float(pose.y))
+        self.n_removed += count
+        if count == 0:
+            return
         self.stamps.append(float(scan.stamp))
         self.per_scan.append(pts)
         self._held += len(pts)
