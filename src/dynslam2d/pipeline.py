@@ -1083,9 +1083,12 @@ def run(
             n_done += 1
             removed_rows.append(step.removed)
             tracks = step.tracks
-            # (a list of Track objects packed by struct; another sequence, or a value struct refuses: the NumPy way)
+            # (a list of Track objects, or the tracker's reports' rows, packed by struct; a value struct refuses: the
+            # NumPy way)
             if tracks and (type(tracks) is not list or not track_rows.add_tracks(step.stamp, tracks)):
-                track_rows.extend_records(_track_records(step.stamp, tracks, track_rows))
+                recs = _track_records(step.stamp, tracks, track_rows)
+                if not track_rows.add_records(recs):
+                    track_rows.extend_records(recs)
             stage_ms.add(step.timings)
             for obs in now:
                 obs.on_scan(scan, step, pipe)
