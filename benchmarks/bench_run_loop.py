@@ -27,11 +27,13 @@ closer's end, the observers' ``on_finish``: the clean-up pass), ms.
 With ``--other <checkout>/src`` the two checkouts run in two worker processes in lockstep (the parent lets one worker
 do one scan's loop body, then the other; which goes first alternates with the scan; the end of the run one after the
 other), so both see the same load; run it also from the other checkout's copy of this script with ``--other`` this
-one (both roles, docs/speed.md). ``--markdown`` prints the figures of this checkout as rows for the README beside
-``bench_pipeline.py``'s table, with the command and the machine's load.
+one (both roles, docs/speed.md) — or, where the other checkout has no copy of it, from this copy with ``--this
+<other>/src --other <this checkout>/src`` (the side named "this" is the one ``--this`` names). ``--markdown`` prints
+the figures of this checkout as rows for the README beside ``bench_pipeline.py``'s table, with the command and the
+machine's load.
 
     taskset -c 0 python benchmarks/bench_run_loop.py sim:paper sim:crowd negative_2/right mit-csail \\
-        [--other <base>/src] [--reps 1] [--data <data>] [--markdown]
+        [--other <base>/src] [--this <src>] [--reps 1] [--data <data>] [--markdown]
 
 Inputs: the names of ``bench_digest.py`` or any built-in scene (``sim:NAME``). Both workers inherit this process's
 CPU affinity: pin the parent with ``taskset``.
@@ -267,6 +269,9 @@ def markdown(rows: list[tuple[str, dict[str, tuple[float, float]]]], argv: list[
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("inputs", nargs="+", help=f"{', '.join(sorted(INPUTS))} or another built-in scene (sim:NAME)")
+    ap.add_argument("--this", type=Path, default=REPO / "src",
+                    help="the src/ of the side named 'this' (default: this script's checkout); with --other the "
+                         "second role of a lockstep whose other checkout has no copy of this script")
     ap.add_argument("--other", type=Path, default=None, help="the other checkout's src/: lockstep A/B")
     ap.add_argument("--reps", type=int, default=1, help="runs per input (pooled)")
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
@@ -279,7 +284,7 @@ def main() -> None:
     if args.worker:
         worker(args.data, args.inputs[0])
         return
-    sides = {"this": REPO / "src"}
+    sides = {"this": args.this.resolve()}
     if args.other is not None:
         sides = {"other": args.other.resolve(), **sides}
     rows = []
