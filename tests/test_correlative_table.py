@@ -82,3 +82,18 @@ def test_search_points_equal_the_array_code(n: int) -> None:
         for p in (np.sort(pts, axis=0), pts[::-1].copy(), rng.permutation(pts)):
             got = _search_points(np.ascontiguousarray(p), _all_rows(n), r)[1]
             assert got == _percentile95(np.hypot(p[:, 0] / r, p[:, 1] / r))
+
+
+def test_table_buffer_keeps_at_most_one_mebibyte() -> None:
+    """Pass mem107: the reused search buffer is kept up to 1 MiB (MIT CSAIL's widest searches, ≈ 3 MiB, get arrays
+    of their own); a larger kept buffer stays resident all run, on the AOT run's peak memory."""
+    import dynslam2d.slam.correlative as correlative
+
+    kept = correlative._BUF[0]
+    try:
+        for size in (1000, 200_000, 774_150, 2_000_000):
+            buf = _table_buffer(size)
+            assert buf.shape[0] >= size
+            assert correlative._BUF[0].nbytes <= 1 << 20
+    finally:
+        correlative._BUF[0] = kept

@@ -165,9 +165,11 @@ def _search_table(prob, r0, c0, ch, cw, max_height, y0, x0, hh, ww, buf):  # pra
     return flat, above == 0
 
 
-#: the search tables' reused memory (:func:`_search_table`'s ``buf``), kept up to this many float32 values (4 MiB; a
-#: larger table, a wide search of the loop closer, gets an array of its own instead of a large one kept)
-_BUF_MAX = 1 << 20
+#: the search tables' reused memory (:func:`_search_table`'s ``buf``), kept up to this many float32 values (1 MiB; a
+#: larger table, a wide search of the loop closer, gets an array of its own instead of a large one kept). Pass mem107:
+#: at 4 MiB the kept buffer held ≈ 3 MiB resident for the whole run (MIT CSAIL's largest search needs 774 150
+#: values), +3 MiB on the AOT run's peak; at 1 MiB 19 of its 617 searches take a fresh array (as all did before)
+_BUF_MAX = 1 << 18
 _BUF: list[np.ndarray] = [np.empty(0, dtype=np.float32)]
 
 
