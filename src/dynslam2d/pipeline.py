@@ -1083,9 +1083,10 @@ def run(
             n_done += 1
             removed_rows.append(step.removed)
             tracks = step.tracks
-            # (a list of Track objects, or the tracker's reports' rows, packed by struct; a value struct refuses: the
-            # NumPy way)
-            if tracks and (type(tracks) is not list or not track_rows.add_tracks(step.stamp, tracks)):
+            # (the tracker's reports from their columns, one call per column; a list of Track objects packed by
+            # struct; else, or a value refused, their rows as tuples: packed by struct, or the NumPy way)
+            if tracks and not (tracks.add_rows(step.stamp, track_rows) if type(tracks) is TrackReports
+                               else type(tracks) is list and track_rows.add_tracks(step.stamp, tracks)):
                 recs = _track_records(step.stamp, tracks, track_rows)
                 if not track_rows.add_records(recs):
                     track_rows.extend_records(recs)
