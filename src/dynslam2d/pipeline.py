@@ -1054,8 +1054,9 @@ def run(
     source = apply_range_scale(source, pipe.config.laser, pipe.config.slam)
     # Per-scan records in compact growable arrays (dynslam2d.records): a few hundred bytes
     # per scan instead of Python objects, so long logs do not exhaust memory. A scan's scalars go in one
-    # structured row given as its packed bytes (one struct call per scan), its live tracks likewise
-    # (TrackRows.add_tracks: one struct call per track); NumPy converts neither per scan (docs/speed.md, pass pip92).
+    # structured row given as its packed bytes (one struct call per scan), its live tracks from the tracker's report
+    # columns (TrackReports.add_rows: one C call per column, pass rec105; a list of Track objects: one struct call per
+    # track, TrackRows.add_tracks); NumPy converts neither per scan (docs/speed.md, passes pip92, rec105).
     per_scan = PackedGrowArray(_SCAN_RECORD)
     add_row = per_scan.add_raw
     removed_rows = BitRows()
