@@ -7,8 +7,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 import dynslam2d.pipeline as pl
+from dynslam2d import records
+from dynslam2d.detect.trackreport import TrackReports
 from dynslam2d.records import PackedGrowArray, TrackRows
 from dynslam2d.types import Box, Track
 
@@ -86,3 +89,72 @@ def test_add_records_stores_what_extend_records_stores():
     assert fell_back == 1
     assert len(a) == len(b) and a.array().tobytes() == b.array().tobytes()
     assert np.array_equal(a.remembered(), b.remembered())
+
+
+def _reports(rng: np.random.Generator, t: float, n: int, snames: tuple[str, ...] | None = None) -> TrackReports:
+    """Reports of ``n`` live tracks as ``Tracker._report`` makes them (random columns)."""
+    boxes, xo = rng.normal(size=(n, 5)), rng.normal(size=(n, 4))
+    nst = 3 if snames is None else len(snames)
+    ints = [[0] * n, [int(rng.integers(0, nst)) for _ in range(n)], [1] * n, [0] * n]
+    in_m = tuple(bool(rng.random() < 0.5) for _ in range(n))
+    cols = (tuple(int(rng.integers(1, 999)) for _ in range(n)), (0.0,) * n, in_m, ("",) * n,
+            tuple(bool(rng.random() < 0.5) for _ in range(n)), (np.zeros(0, dtype=np.int64),) * n)
+    r = TrackReports(t, boxes, xo, np.zeros((n, 4, 4)), ints, cols, frozenset())
+    if snames is not None:
+        r._snames = snames
+    return r
+
+
+def test_add_rows_stores_what_extend_records_stores(monkeypatch: pytest.MonkeyPatch):
+    """The run loop's record of the tracker's reports from their columns (``TrackReports.add_rows`` →
+    ``TrackRows.add_columns``, pass rec105): the bytes ``extend_records`` stores for ``_track_records``' rows,
+    across the waiting columns' settling (a small chunk), reads in between, rows added as bytes between them (a list
+    of ``Track``), the fallbacks (dormant reports, a state name not coded yet) and a state code table not the
+    tracker's."""
+    monkeypatch.setattr(records, "_COLUMN_CHUNK", 23)
+    rng = np.random.default_rng(11)
+    a, b = TrackRows(), TrackRows()
+    used = fell_back = 0
+    for scan in range(300):
+        stamp = 0.05 * scan
+        n = int(rng.integers(0, 9))
+        tracks: object
+        if scan in (30, 31):  # (a name the rows have not coded: the reports' order codes it, then a mapped table)
+            tracks = _reports(rng, stamp, n + 1, ("tentative", "odd", "confirmed", "coasting"))
+        elif scan % 37 == 5:
+            tracks = [_track(rng, int(rng.integers(1, 999)), "confirmed") for _ in range(n)]
+        else:
+            tracks = _reports(rng, stamp, n)
+            if scan % 41 == 2:
+                tracks.extend([_track(rng, 5, "coasting")])
+        a.extend_records(pl._track_records(stamp, tracks, a))  # type: ignore[arg-type]
+        if tracks:
+            if type(tracks) is TrackReports and tracks.add_rows(stamp, b):
+                used += 1
+            elif not (type(tracks) is list and b.add_tracks(stamp, tracks)):
+                fell_back += 1
+                recs = pl._track_records(stamp, tracks, b)  # type: ignore[arg-type]
+                if not b.add_records(recs):
+                    b.extend_records(recs)
+        if scan % 50 == 7:
+            assert len(a) == len(b) and a[-1] == b[-1]  # (a read between scans settles the waiting columns)
+    assert used > 200 and fell_back >= 8
+    assert len(a) == len(b) and a.array().tobytes() == b.array().tobytes() and a.state_names() == b.state_names()
+    assert list(a) == list(b) and np.array_equal(a.remembered(), b.remembered())
+
+
+def test_add_columns_refuses_without_adding():
+    """A value the C calls refuse (an id beyond int64, a ``None`` stamp or flag, a strided box array, a negative
+    code) adds nothing; ints as flags are stored as their truth, remembered as ``operator.and_`` with in M."""
+    rows = TrackRows()
+    boxes, xv = np.arange(10.0).reshape(2, 5), np.arange(8.0).reshape(2, 4)
+    assert rows.add_columns(1.0, (1, 2), [1, 2], boxes, xv, (2, 0), (1, 3))
+    assert not rows.add_columns(2.0, (1, 2**63), [1, 1], boxes, xv, (1, 1), (0, 0))
+    assert not rows.add_columns(None, (1, 2), [1, 1], boxes, xv, (1, 1), (0, 0))  # type: ignore[arg-type]
+    assert not rows.add_columns(2.0, (1, 2), [1, 1], boxes, xv, (None, 1), (0, 0))  # type: ignore[arg-type]
+    assert not rows.add_columns(2.0, (1, 2), [1, -1], boxes, xv, (1, 1), (0, 0))
+    assert not rows.add_columns(2.0, (1, 2), [1, 1], np.asfortranarray(boxes), xv, (1, 1), (0, 0))
+    ref = TrackRows()
+    ref.extend_records([(1.0, 1, 1, *range(5), 2.0, 3.0, True, False), (1.0, 2, 2, *range(5, 10), 6.0, 7.0, False,
+                                                                       False)])
+    assert len(rows) == 2 and rows.array().tobytes() == ref.array().tobytes()

@@ -1054,8 +1054,9 @@ def run(
     source = apply_range_scale(source, pipe.config.laser, pipe.config.slam)
     # Per-scan records in compact growable arrays (dynslam2d.records): a few hundred bytes
     # per scan instead of Python objects, so long logs do not exhaust memory. A scan's scalars go in one
-    # structured row given as its packed bytes (one struct call per scan), its live tracks likewise
-    # (TrackRows.add_tracks: one struct call per track); NumPy converts neither per scan (docs/speed.md, pass pip92).
+    # structured row given as its packed bytes (one struct call per scan), its live tracks from the tracker's report
+    # columns (TrackReports.add_rows: one C call per column, pass rec105; a list of Track objects: one struct call per
+    # track, TrackRows.add_tracks); NumPy converts neither per scan (docs/speed.md, passes pip92, rec105).
     per_scan = PackedGrowArray(_SCAN_RECORD)
     add_row = per_scan.add_raw
     removed_rows = BitRows()
@@ -1083,9 +1084,10 @@ def run(
             n_done += 1
             removed_rows.append(step.removed)
             tracks = step.tracks
-            # (a list of Track objects, or the tracker's reports' rows, packed by struct; a value struct refuses: the
-            # NumPy way)
-            if tracks and (type(tracks) is not list or not track_rows.add_tracks(step.stamp, tracks)):
+            # (the tracker's reports from their columns, one call per column; a list of Track objects packed by
+            # struct; else, or a value refused, their rows as tuples: packed by struct, or the NumPy way)
+            if tracks and not (tracks.add_rows(step.stamp, track_rows) if type(tracks) is TrackReports
+                               else type(tracks) is list and track_rows.add_tracks(step.stamp, tracks)):
                 recs = _track_records(step.stamp, tracks, track_rows)
                 if not track_rows.add_records(recs):
                     track_rows.extend_records(recs)

@@ -220,6 +220,20 @@ _TRACK_DTYPE = np.dtype([
     ("vy", np.float64), ("in_M", np.bool_), ("remembered", np.bool_),
 ])
 
+#: Rows waiting in :class:`TrackRows`' columns before they move into its buffer (≈ 75 bytes each).
+_COLUMN_CHUNK = 1 << 13
+
+
+def _new_wait() -> tuple[array | bytearray, ...]:
+    """Empty waiting columns of :class:`TrackRows`: the scans' stamps (s) and row counts, then per row its id, state
+    code (a byte), box (5 float64's bytes), state [x, y, v_x, v_y] (4 float64's bytes), in M and remembered (a byte
+    each)."""
+    return array("d"), array("q"), array("q"), bytearray(), bytearray(), bytearray(), bytearray(), bytearray()
+
+
+_F64 = np.dtype(np.float64)
+
+
 #: One :data:`_TRACK_DTYPE` row's bytes from its fields (native order, no padding: the dtype's layout).
 _PACK_TRACK = struct.Struct("=dqb7d??").pack
 assert struct.calcsize("=dqb7d??") == _TRACK_DTYPE.itemsize
@@ -238,6 +252,76 @@ class TrackRows(Sequence[tuple]):
         self._rows = PackedGrowArray(_TRACK_DTYPE, capacity=1024)
         self._state_codes: dict[str, int] = {s: i for i, s in enumerate(TRACK_STATES)}
         self._states: list[str] = list(TRACK_STATES)
+        # :meth:`add_columns`' rows waiting column by column (C arrays of the standard library, one C call per
+        # column and scan), moved into the structured buffer when read or when _COLUMN_CHUNK rows wait
+        self._wait: tuple[array | bytearray, ...] = _new_wait()
+
+    def _settle(self) -> None:
+        """Move the rows waiting in columns (:meth:`add_columns`) into the structured buffer, after its rows."""
+        stamps, counts, ids, states, boxes, xv, in_m, rem = self._wait
+        k = len(ids)
+        if not k:
+            return
+        self._wait = _new_wait()
+        rows = self._rows
+        rows._reserve(k)  # (settles the waiting bytes first: they are older)
+        n = rows._n
+        seg = rows._buf[n:n + k]
+        seg["stamp"] = np.repeat(np.frombuffer(stamps, np.float64), np.frombuffer(counts, np.int64))
+        seg["id"] = np.frombuffer(ids, np.int64)
+        seg["state"] = np.frombuffer(states, np.int8)
+        b = np.frombuffer(boxes, np.float64).reshape(k, 5)
+        for j, name in enumerate(("x", "y", "heading", "length", "width")):
+            seg[name] = b[:, j]
+        v = np.frombuffer(xv, np.float64).reshape(k, 4)
+        seg["vx"] = v[:, 2]
+        seg["vy"] = v[:, 3]
+        m = np.frombuffer(in_m, np.uint8)
+        # (a flag's truth, as struct's "?" stores it; remembered: the truth of ``remembered & in_M``, operator.and_)
+        seg["in_M"] = m != 0
+        seg["remembered"] = (np.frombuffer(rem, np.uint8) & m) != 0
+        rows._n = n + k
+
+    def add_columns(self, stamp: float, ids: Sequence[int], states: Sequence[int], boxes: np.ndarray,
+                    xv: np.ndarray, in_m: Sequence[int], remembered: Sequence[int]) -> bool:
+        """Append one scan's ``k = len(ids)`` rows given as columns — state codes (from :meth:`code`), ``boxes``
+        (k, 5) float64 C-ordered [x, y, heading, length, width] (m, rad, map frame), ``xv`` (k, 4) float64 C-ordered
+        states [x, y, v_x, v_y] (m, m/s; the velocities kept), the in-M and remembered flags (bools, or ints
+        0..255) — the tracker's reports' columns (``TrackReports.add_rows``): each column added to the rows waiting
+        column by column in one C call, without a tuple per row. The bytes :meth:`extend_records` stores for the
+        rows ``zip(repeat(stamp), ids, states, *boxes.T, *xv[:, 2:].T, in_m, map(operator.and_, remembered,
+        in_m))``. Returns False, with nothing added, when a value is one the C calls do not take (a ``None``, an
+        id beyond int64, a negative code) or the shapes differ: the caller then adds the rows another way."""
+        k = len(ids)
+        if (boxes.shape != (k, 5) or xv.shape != (k, 4) or boxes.dtype != _F64 or xv.dtype != _F64
+                or len(self._states) > 128):  # (codes beyond int8: struct refuses them)
+            return False
+        if self._rows._raw:
+            self._rows.settle()  # (the rows waiting as bytes are older: into the buffer first)
+        stamps, counts, wid, wst, wbox, wxv, win, wrem = self._wait
+        n0 = len(wid)
+        try:
+            st, fm, fr = bytes(states), bytes(in_m), bytes(remembered)
+            if not len(st) == len(fm) == len(fr) == k:
+                return False
+            wid.extend(ids)
+            if len(wid) != n0 + k:
+                raise ValueError
+            stamps.append(stamp)
+            wbox += memoryview(boxes)  # (an array's bytes, C order; a memoryview: not NumPy's ``+``)
+            wxv += memoryview(xv)
+        except (TypeError, ValueError, OverflowError, BufferError):  # (no float / int; not C-ordered)
+            del wid[n0:], wbox[n0 * 40:], wxv[n0 * 32:]
+            if len(stamps) > len(counts):
+                stamps.pop()
+            return False
+        counts.append(k)
+        wst += st
+        win += fm
+        wrem += fr
+        if n0 + k >= _COLUMN_CHUNK:
+            self._settle()
+        return True
 
     def _code(self, state: str) -> int:
         code = self._state_codes.get(state)
@@ -248,6 +332,8 @@ class TrackRows(Sequence[tuple]):
         return code
 
     def append(self, row: Sequence[object], remembered: bool = False) -> None:
+        if self._wait[2]:
+            self._settle()
         stamp, tid, state, x, y, th, ln, wd, vx, vy, in_m = row
         self._rows.append((stamp, tid, self._code(str(state)), x, y, th, ln, wd, vx, vy, bool(in_m),
                            bool(remembered)))
@@ -268,6 +354,8 @@ class TrackRows(Sequence[tuple]):
         per-scan record of its tracks, without a tuple per track converted field by field by NumPy. Returns False,
         with nothing added, when a track has a state not coded yet or a value ``struct`` does not take (a ``None``
         where NumPy stores NaN): the caller then adds the rows the NumPy way."""
+        if self._wait[2]:
+            self._settle()
         rows = self._rows
         raw = rows._raw
         n0 = len(raw)
@@ -292,6 +380,8 @@ class TrackRows(Sequence[tuple]):
         per-scan record of the tracker's reports (``TrackReports.records``), without NumPy converting each tuple field
         by field. Returns False, with nothing added, when a value is one ``struct`` does not take (a ``None`` where
         NumPy stores NaN): the caller then calls :meth:`extend_records` with the same rows."""
+        if self._wait[2]:
+            self._settle()
         rows = self._rows
         raw = rows._raw
         n0 = len(raw)
@@ -312,6 +402,8 @@ class TrackRows(Sequence[tuple]):
         scan's live tracks at once in :func:`dynslam2d.pipeline.run`)."""
         k = len(records)
         if k:
+            if self._wait[2]:
+                self._settle()
             rows = self._rows
             rows._reserve(k)
             n = rows._n
@@ -321,7 +413,7 @@ class TrackRows(Sequence[tuple]):
             rows._n = n + k
 
     def __len__(self) -> int:
-        return len(self._rows)
+        return len(self._rows) + len(self._wait[2])
 
     def _tuple(self, r: np.void) -> tuple:
         return (float(r["stamp"]), int(r["id"]), self._states[int(r["state"])], float(r["x"]), float(r["y"]),
@@ -330,20 +422,22 @@ class TrackRows(Sequence[tuple]):
 
     def __getitem__(self, i):  # type: ignore[no-untyped-def, override]
         if isinstance(i, slice):
-            return [self._tuple(r) for r in self._rows.view()[i]]
-        return self._tuple(self._rows.view()[i])
+            return [self._tuple(r) for r in self.array()[i]]
+        return self._tuple(self.array()[i])
 
     def __iter__(self) -> Iterator[tuple]:
-        for r in self._rows.view():
+        for r in self.array():
             yield self._tuple(r)
 
     def array(self) -> np.ndarray:
         """The rows as a structured array (fields as in :data:`TRACK_COLUMNS`; ``state`` coded)."""
+        if self._wait[2]:
+            self._settle()
         return self._rows.view()
 
     def remembered(self) -> np.ndarray:
         """(n,) bool: the row's track is in M only because it moved before and stopped (track memory)."""
-        return self._rows.view()["remembered"]
+        return self.array()["remembered"]
 
     def state_names(self) -> list[str]:
         """State name of each code in :meth:`array`'s ``state`` field."""
@@ -351,7 +445,7 @@ class TrackRows(Sequence[tuple]):
 
     @property
     def nbytes(self) -> int:
-        return self._rows.nbytes
+        return self._rows.nbytes + sum(a.itemsize * len(a) if isinstance(a, array) else len(a) for a in self._wait)
 
 
 __all__ = ["BitRows", "GrowArray", "PackedGrowArray", "TRACK_STATES", "TrackRows"]

@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Sequence
 from itertools import compress, repeat
 from operator import and_, attrgetter
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,6 +15,9 @@ from dynslam2d.detect.kernels_update import report_rows
 from dynslam2d.detect.layout import KIND_CIRCLE, KIND_NAMES
 from dynslam2d.detect.tracktable import _HALF_PI, COASTING, CONFIRMED, STATE_NAMES
 from dynslam2d.types import Box, Track, wrap_angle
+
+if TYPE_CHECKING:
+    from dynslam2d.records import TrackRows
 
 _make_track = fast_init(Track)  # Track(...) / Box(...) without the frozen dataclass __init__ (detect/frozen.py)
 _make_box = fast_init(Box)
@@ -42,6 +46,7 @@ _NO_BOXES = np.zeros((0, 5))
 _NO_X = np.zeros((0, 4))
 _NO_P = np.zeros((0, 4, 4))
 _NO_COLS: tuple[tuple, ...] = ((),) * 6
+_SAME_CODES = list(range(len(STATE_NAMES)))  # (the tracker's state codes where TrackRows codes them alike)
 
 
 class TrackReports(Sequence):
@@ -315,6 +320,25 @@ class TrackReports(Sequence):
                 built[i] = r
             out.append(r)
         return out
+
+    def add_rows(self, stamp: float, rows: TrackRows) -> bool:
+        """Append the reports to ``rows`` (``dynslam2d.records.TrackRows``) from the columns, one call per column
+        (:meth:`TrackRows.add_columns`): the rows :meth:`records` gives, without a tuple per track. Returns False, with
+        nothing added, when they are not all live reports of a scan, a state name has no code in ``rows`` yet (it gets
+        one in the reports' order from :meth:`records`) or ``rows`` refuses a value: the caller then adds
+        :meth:`records`."""
+        if self._t is None or self._extra or not self._n:
+            return False
+        codes = rows.state_codes
+        sc = [codes.get(s) for s in self._snames]
+        if sc == _SAME_CODES[:len(sc)]:
+            states: list[int] = self._states
+        elif None in sc:
+            return False
+        else:
+            states = [sc[i] for i in self._states]
+        ids, _, in_ms, _, rems, _ = self._cols
+        return rows.add_columns(stamp, ids, states, self._boxes, self._Xo, in_ms, rems)
 
     def records(self, stamp: float, codes: dict[str, int], code: Callable[[str], int]) -> list[tuple]:
         """The reports as ``TrackRows.extend_records`` rows (stamp, id, state code, box, velocity, in M, remembered),
