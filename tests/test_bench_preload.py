@@ -39,7 +39,12 @@ def _fresh(name: str):
 
 
 def _package(tmp_path: Path, monkeypatch, pkg: str, source: str) -> str:
-    """A package ``pkg`` with module ``kern`` holding ``source``, importable; returns the module's name."""
+    """A package ``pkg`` with module ``kern`` holding ``source``, importable, its kernels cached in a folder of this
+    test only (a cache left by an earlier run at the same temporary path cannot stand in for a compile); returns the
+    module's name."""
+    from numba.core import config
+
+    monkeypatch.setattr(config, "CACHE_DIR", str(tmp_path / "numba-cache"))
     (tmp_path / pkg).mkdir()
     (tmp_path / pkg / "__init__.py").write_text("")
     (tmp_path / pkg / "kern.py").write_text(source)
