@@ -66,31 +66,6 @@ def test_packed_scan_rows_equal_structured_assignment():
     assert len(g) == len(stored) and g.view().tobytes() == a.tobytes() and g.nbytes >= a.nbytes
 
 
-def test_add_records_stores_what_extend_records_stores():
-    """The tracker's reports' rows (``TrackReports.records``, what the run loop records since the reports became
-    arrays) packed by ``struct``: the bytes ``extend_records`` stores, NumPy scalars and a refused ``None`` included."""
-    rng = np.random.default_rng(8)
-    a, b = TrackRows(), TrackRows()
-    b._rows._chunk = 75 * 5
-    fell_back = 0
-    for scan in range(200):
-        recs = [(0.05 * scan, int(rng.integers(1, 999)), int(rng.integers(0, 4)), *rng.normal(size=7).tolist(),
-                 bool(rng.random() < 0.5), bool(rng.random() < 0.3)) for _ in range(int(rng.integers(0, 9)))]
-        if scan == 9 and recs:
-            recs[0] = (recs[0][0], np.int64(5), np.int8(1), *map(np.float64, recs[0][3:10]), np.bool_(True), False)
-        if scan == 17:
-            recs.append((0.85, 4, 2, None, 1.0, 0.0, 1.0, 1.0, math.nan, -0.0, True, False))
-        a.extend_records(recs)
-        if not b.add_records(recs):
-            fell_back += 1
-            b.extend_records(recs)
-        if scan % 40 == 3:
-            assert len(a) == len(b)
-    assert fell_back == 1
-    assert len(a) == len(b) and a.array().tobytes() == b.array().tobytes()
-    assert np.array_equal(a.remembered(), b.remembered())
-
-
 def _reports(rng: np.random.Generator, t: float, n: int, snames: tuple[str, ...] | None = None) -> TrackReports:
     """Reports of ``n`` live tracks as ``Tracker._report`` makes them (random columns)."""
     boxes, xo = rng.normal(size=(n, 5)), rng.normal(size=(n, 4))
@@ -133,9 +108,7 @@ def test_add_rows_stores_what_extend_records_stores(monkeypatch: pytest.MonkeyPa
                 used += 1
             elif not (type(tracks) is list and b.add_tracks(stamp, tracks)):
                 fell_back += 1
-                recs = pl._track_records(stamp, tracks, b)  # type: ignore[arg-type]
-                if not b.add_records(recs):
-                    b.extend_records(recs)
+                b.extend_records(pl._track_records(stamp, tracks, b))  # type: ignore[arg-type]
         if scan % 50 == 7:
             assert len(a) == len(b) and a[-1] == b[-1]  # (a read between scans settles the waiting columns)
     assert used > 200 and fell_back >= 8
