@@ -131,3 +131,47 @@ def test_add_columns_refuses_without_adding():
     ref.extend_records([(1.0, 1, 1, *range(5), 2.0, 3.0, True, False), (1.0, 2, 2, *range(5, 10), 6.0, 7.0, False,
                                                                        False)])
     assert len(rows) == 2 and rows.array().tobytes() == ref.array().tobytes()
+
+
+def test_run_writes_the_records_each_scan_would_write():
+    """``pipeline.run`` writes its records ``RECORD_BATCH`` scans at a time (pass rec110): the scan rows, removed
+    bits, track rows and stage timings are those written one scan at a time as each scan's result came out of
+    ``Pipeline.process`` (an observer called every scan), 100 scans of sim:crowd — the last 4 after the last whole
+    batch — with tracks on most of them."""
+    from itertools import islice
+
+    from dynslam2d.config import Config
+    from dynslam2d.inputs import open_source
+
+    full = open_source("sim:crowd", None)
+
+    class First:
+        meta = full.meta
+
+        def __iter__(self):  # type: ignore[no-untyped-def]
+            return islice(iter(full), 100)
+
+    class EachScan:
+        def __init__(self) -> None:
+            self.ref = pl._RunRecords()
+            self.n_tracks = 0
+
+        def on_scan(self, scan, step, pipeline) -> None:  # type: ignore[no-untyped-def]
+            self.ref.add([step])
+            self.n_tracks += len(step.tracks)
+
+        def on_finish(self, result, pipeline) -> None:  # type: ignore[no-untyped-def]
+            pass
+
+    obs = EachScan()
+    res = pl.run(First(), Config(), observers=[obs])
+    ref = obs.ref
+    assert pl.RECORD_BATCH > 1 and res.n_scans == 100 and 100 % pl.RECORD_BATCH and obs.n_tracks > 200
+    assert res.scores.tobytes() == ref.per_scan.view()["score"].tobytes()
+    assert res.trajectory.poses.tobytes() == ref.per_scan.view()["pose"].tobytes()
+    assert len(res.removed_rows) == 100 and res.removed_rows.stack().tobytes() == ref.removed.stack().tobytes()
+    assert res.removed_rows.total_set == ref.removed.total_set > 0
+    assert res.track_rows.array().tobytes() == ref.tracks.array().tobytes()
+    assert res.track_rows.state_names() == ref.tracks.state_names()
+    want = ref.stages.arrays()
+    assert list(res.timings_ms) == list(want) and all(res.timings_ms[k].tobytes() == want[k].tobytes() for k in want)

@@ -1025,10 +1025,8 @@ class _RunRecords:
         ``TrackRows.add_tracks``); NumPy converts neither (docs/speed.md, passes pip92, rec105). The rest — a
         value only NumPy converts (a ``None`` stored as NaN), dormant reports, a state name not coded yet — the NumPy
         way (``extend_records`` of :func:`_track_records`' tuples)."""
+        # (record by record, each loop over the scans: its code stays in the first cache levels)
         add_row = self.per_scan.add_raw
-        add_bits = self.removed.append
-        track_rows = self.tracks
-        add_stages = self.stages.add
         for step in steps:
             pose = step.pose
             try:
@@ -1039,11 +1037,17 @@ class _RunRecords:
                 self.per_scan.append((step.stamp, (pose.x, pose.y, pose.theta), step.score,
                                       (step.map_updated, step.rejected, step.skipped), step.low_support,
                                       step.degenerate, step.slam_state == "lost", step.degeneracy))
+        add_bits = self.removed.append
+        for step in steps:
             add_bits(step.removed)
+        track_rows = self.tracks
+        for step in steps:
             tracks = step.tracks
             if tracks and not (tracks.add_rows(step.stamp, track_rows) if type(tracks) is TrackReports
                                else type(tracks) is list and track_rows.add_tracks(step.stamp, tracks)):
                 track_rows.extend_records(_track_records(step.stamp, tracks, track_rows))
+        add_stages = self.stages.add
+        for step in steps:
             add_stages(step.timings)
         steps.clear()
 
