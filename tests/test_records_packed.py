@@ -66,31 +66,6 @@ def test_packed_scan_rows_equal_structured_assignment():
     assert len(g) == len(stored) and g.view().tobytes() == a.tobytes() and g.nbytes >= a.nbytes
 
 
-def test_add_records_stores_what_extend_records_stores():
-    """The tracker's reports' rows (``TrackReports.records``, what the run loop records since the reports became
-    arrays) packed by ``struct``: the bytes ``extend_records`` stores, NumPy scalars and a refused ``None`` included."""
-    rng = np.random.default_rng(8)
-    a, b = TrackRows(), TrackRows()
-    b._rows._chunk = 75 * 5
-    fell_back = 0
-    for scan in range(200):
-        recs = [(0.05 * scan, int(rng.integers(1, 999)), int(rng.integers(0, 4)), *rng.normal(size=7).tolist(),
-                 bool(rng.random() < 0.5), bool(rng.random() < 0.3)) for _ in range(int(rng.integers(0, 9)))]
-        if scan == 9 and recs:
-            recs[0] = (recs[0][0], np.int64(5), np.int8(1), *map(np.float64, recs[0][3:10]), np.bool_(True), False)
-        if scan == 17:
-            recs.append((0.85, 4, 2, None, 1.0, 0.0, 1.0, 1.0, math.nan, -0.0, True, False))
-        a.extend_records(recs)
-        if not b.add_records(recs):
-            fell_back += 1
-            b.extend_records(recs)
-        if scan % 40 == 3:
-            assert len(a) == len(b)
-    assert fell_back == 1
-    assert len(a) == len(b) and a.array().tobytes() == b.array().tobytes()
-    assert np.array_equal(a.remembered(), b.remembered())
-
-
 def _reports(rng: np.random.Generator, t: float, n: int, snames: tuple[str, ...] | None = None) -> TrackReports:
     """Reports of ``n`` live tracks as ``Tracker._report`` makes them (random columns)."""
     boxes, xo = rng.normal(size=(n, 5)), rng.normal(size=(n, 4))
@@ -133,9 +108,7 @@ def test_add_rows_stores_what_extend_records_stores(monkeypatch: pytest.MonkeyPa
                 used += 1
             elif not (type(tracks) is list and b.add_tracks(stamp, tracks)):
                 fell_back += 1
-                recs = pl._track_records(stamp, tracks, b)  # type: ignore[arg-type]
-                if not b.add_records(recs):
-                    b.extend_records(recs)
+                b.extend_records(pl._track_records(stamp, tracks, b))  # type: ignore[arg-type]
         if scan % 50 == 7:
             assert len(a) == len(b) and a[-1] == b[-1]  # (a read between scans settles the waiting columns)
     assert used > 200 and fell_back >= 8
@@ -158,3 +131,47 @@ def test_add_columns_refuses_without_adding():
     ref.extend_records([(1.0, 1, 1, *range(5), 2.0, 3.0, True, False), (1.0, 2, 2, *range(5, 10), 6.0, 7.0, False,
                                                                        False)])
     assert len(rows) == 2 and rows.array().tobytes() == ref.array().tobytes()
+
+
+def test_run_writes_the_records_each_scan_would_write():
+    """``pipeline.run`` writes its records ``RECORD_BATCH`` scans at a time (pass rec110): the scan rows, removed
+    bits, track rows and stage timings are those written one scan at a time as each scan's result came out of
+    ``Pipeline.process`` (an observer called every scan), 100 scans of sim:crowd — the last 4 after the last whole
+    batch — with tracks on most of them."""
+    from itertools import islice
+
+    from dynslam2d.config import Config
+    from dynslam2d.inputs import open_source
+
+    full = open_source("sim:crowd", None)
+
+    class First:
+        meta = full.meta
+
+        def __iter__(self):  # type: ignore[no-untyped-def]
+            return islice(iter(full), 100)
+
+    class EachScan:
+        def __init__(self) -> None:
+            self.ref = pl._RunRecords()
+            self.n_tracks = 0
+
+        def on_scan(self, scan, step, pipeline) -> None:  # type: ignore[no-untyped-def]
+            self.ref.add([step])
+            self.n_tracks += len(step.tracks)
+
+        def on_finish(self, result, pipeline) -> None:  # type: ignore[no-untyped-def]
+            pass
+
+    obs = EachScan()
+    res = pl.run(First(), Config(), observers=[obs])
+    ref = obs.ref
+    assert pl.RECORD_BATCH > 1 and res.n_scans == 100 and 100 % pl.RECORD_BATCH and obs.n_tracks > 200
+    assert res.scores.tobytes() == ref.per_scan.view()["score"].tobytes()
+    assert res.trajectory.poses.tobytes() == ref.per_scan.view()["pose"].tobytes()
+    assert len(res.removed_rows) == 100 and res.removed_rows.stack().tobytes() == ref.removed.stack().tobytes()
+    assert res.removed_rows.total_set == ref.removed.total_set > 0
+    assert res.track_rows.array().tobytes() == ref.tracks.array().tobytes()
+    assert res.track_rows.state_names() == ref.tracks.state_names()
+    want = ref.stages.arrays()
+    assert list(res.timings_ms) == list(want) and all(res.timings_ms[k].tobytes() == want[k].tobytes() for k in want)

@@ -996,6 +996,62 @@ class _StageTimings:
         return {k: rows[:, i].copy() for i, k in enumerate(self._keys)}
 
 
+#: :func:`run` writes the scans' records (:class:`_RunRecords`) this many scans at a time.
+RECORD_BATCH = 32
+
+
+class _RunRecords:
+    """The per-scan records of :func:`run` in compact growable arrays (:mod:`dynslam2d.records`: a few hundred bytes
+    a scan instead of Python objects, so long logs do not exhaust memory): :attr:`per_scan` the scans' scalars
+    (:data:`_SCAN_RECORD`), :attr:`removed` the removed-beam masks, :attr:`tracks` the live tracks' rows,
+    :attr:`stages` the stage timings (ms).
+
+    :meth:`add` writes the records of several scans at once (:data:`RECORD_BATCH` in :func:`run`): the same rows in
+    the same order as one scan at a time, but the loop over the scans runs with its code and data in the CPU caches,
+    where one scan's records right after ``Pipeline.process`` (whose arrays pushed them out) cost 3–6 times as much
+    (docs/speed.md, pass rec110). A :class:`StepResult` is not changed after ``process`` returns it (the late
+    observers read it later too: :class:`RunObserver`)."""
+
+    def __init__(self) -> None:
+        self.per_scan = PackedGrowArray(_SCAN_RECORD)
+        self.removed = BitRows()
+        self.tracks = TrackRows()
+        self.stages = _StageTimings()
+
+    def add(self, steps: list[StepResult]) -> None:
+        """Record ``steps`` (in scan order) and empty the list. A scan's scalars go in one structured row given as
+        its packed bytes (one ``struct`` call), its live tracks from the tracker's report columns
+        (``TrackReports.add_rows``: one C call per column; a list of ``Track`` objects: one ``struct`` call per track,
+        ``TrackRows.add_tracks``); NumPy converts neither (docs/speed.md, passes pip92, rec105). The rest — a
+        value only NumPy converts (a ``None`` stored as NaN), dormant reports, a state name not coded yet — the NumPy
+        way (``extend_records`` of :func:`_track_records`' tuples)."""
+        # (record by record, each loop over the scans: its code stays in the first cache levels)
+        add_row = self.per_scan.add_raw
+        for step in steps:
+            pose = step.pose
+            try:
+                add_row(_PACK_SCAN(step.stamp, pose.x, pose.y, pose.theta, step.score, step.map_updated, step.rejected,
+                                   step.skipped, step.low_support, step.degenerate, step.slam_state == "lost",
+                                   step.degeneracy))
+            except (TypeError, ValueError, OverflowError, struct.error):  # (a value only NumPy converts: None → NaN)
+                self.per_scan.append((step.stamp, (pose.x, pose.y, pose.theta), step.score,
+                                      (step.map_updated, step.rejected, step.skipped), step.low_support,
+                                      step.degenerate, step.slam_state == "lost", step.degeneracy))
+        add_bits = self.removed.append
+        for step in steps:
+            add_bits(step.removed)
+        track_rows = self.tracks
+        for step in steps:
+            tracks = step.tracks
+            if tracks and not (tracks.add_rows(step.stamp, track_rows) if type(tracks) is TrackReports
+                               else type(tracks) is list and track_rows.add_tracks(step.stamp, tracks)):
+                track_rows.extend_records(_track_records(step.stamp, tracks, track_rows))
+        add_stages = self.stages.add
+        for step in steps:
+            add_stages(step.timings)
+        steps.clear()
+
+
 class RunObserver(Protocol):
     """Something that watches a run scan by scan: a bag writer, an animation, a live viewer.
 
@@ -1052,16 +1108,10 @@ def run(
     """
     pipe = Pipeline(config)
     source = apply_range_scale(source, pipe.config.laser, pipe.config.slam)
-    # Per-scan records in compact growable arrays (dynslam2d.records): a few hundred bytes
-    # per scan instead of Python objects, so long logs do not exhaust memory. A scan's scalars go in one
-    # structured row given as its packed bytes (one struct call per scan), its live tracks from the tracker's report
-    # columns (TrackReports.add_rows: one C call per column, pass rec105; a list of Track objects: one struct call per
-    # track, TrackRows.add_tracks); NumPy converts neither per scan (docs/speed.md, passes pip92, rec105).
-    per_scan = PackedGrowArray(_SCAN_RECORD)
-    add_row = per_scan.add_raw
-    removed_rows = BitRows()
-    track_rows = TrackRows()
-    stage_ms = _StageTimings()
+    # Per-scan records in compact growable arrays (dynslam2d.records), written RECORD_BATCH scans at a time
+    # (_RunRecords; docs/speed.md, passes pip92, rec105, rec110).
+    records = _RunRecords()
+    waiting: list[StepResult] = []  # the scans whose records are not written yet, in scan order
     t0 = time.perf_counter()
     compile0 = compile_seconds()
     last_scan: Scan | None = None
@@ -1072,26 +1122,10 @@ def run(
         for scan in source:
             step = pipe.process(scan)
             last_scan = scan
-            pose = step.pose
-            try:
-                add_row(_PACK_SCAN(step.stamp, pose.x, pose.y, pose.theta, step.score, step.map_updated, step.rejected,
-                                   step.skipped, step.low_support, step.degenerate, step.slam_state == "lost",
-                                   step.degeneracy))
-            except (TypeError, ValueError, OverflowError, struct.error):  # (a value only NumPy converts: None → NaN)
-                per_scan.append((step.stamp, (pose.x, pose.y, pose.theta), step.score,
-                                 (step.map_updated, step.rejected, step.skipped), step.low_support, step.degenerate,
-                                 step.slam_state == "lost", step.degeneracy))
             n_done += 1
-            removed_rows.append(step.removed)
-            tracks = step.tracks
-            # (the tracker's reports from their columns, one call per column; a list of Track objects packed by
-            # struct; else, or a value refused, their rows as tuples: packed by struct, or the NumPy way)
-            if tracks and not (tracks.add_rows(step.stamp, track_rows) if type(tracks) is TrackReports
-                               else type(tracks) is list and track_rows.add_tracks(step.stamp, tracks)):
-                recs = _track_records(step.stamp, tracks, track_rows)
-                if not track_rows.add_records(recs):
-                    track_rows.extend_records(recs)
-            stage_ms.add(step.timings)
+            waiting.append(step)
+            if len(waiting) >= RECORD_BATCH:
+                records.add(waiting)
             for obs in now:
                 obs.on_scan(scan, step, pipe)
             if late:
@@ -1103,8 +1137,10 @@ def run(
             if n_done % TRIM_EVERY_SCANS == 0:
                 release_free_memory()  # a long log's freed temporaries back to the OS (memtrim.py; ~ms per call)
         _feed(late, pending, pipe)  # (the last scans' late calls, before the map is released)
+        records.add(waiting)  # (the last scans' records)
     compile_s = compile_seconds() - compile0
     release_free_memory()  # the loop's freed temporaries, before the observers' end-of-run work (memtrim.py)
+    per_scan, removed_rows, track_rows, stage_ms = records.per_scan, records.removed, records.tracks, records.stages
     rec = per_scan.view()
     flag_arr = rec["flags"].copy()
     summary = pipe.slam.summary()

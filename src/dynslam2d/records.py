@@ -374,28 +374,6 @@ class TrackRows(Sequence[tuple]):
             rows.settle()
         return True
 
-    def add_records(self, records: Iterable[tuple]) -> bool:
-        """Append rows given in :meth:`extend_records`' storage order, each packed into its 75 bytes by one ``struct``
-        call and added to the rows' waiting bytes, as :meth:`add_tracks` does for ``Track`` objects: the run loop's
-        per-scan record of the tracker's reports (``TrackReports.records``), without NumPy converting each tuple field
-        by field. Returns False, with nothing added, when a value is one ``struct`` does not take (a ``None`` where
-        NumPy stores NaN): the caller then calls :meth:`extend_records` with the same rows."""
-        if self._wait[2]:
-            self._settle()
-        rows = self._rows
-        raw = rows._raw
-        n0 = len(raw)
-        pack = _PACK_TRACK
-        try:
-            for r in records:
-                raw += pack(*r)
-        except (TypeError, ValueError, OverflowError, struct.error):  # (no float, or a code out of int8's range)
-            del raw[n0:]
-            return False
-        if len(raw) >= rows._chunk:
-            rows.settle()
-        return True
-
     def extend_records(self, records: Sequence[tuple]) -> None:
         """Append rows given in storage order ``(stamp, id, state code, x, y, heading, length, width, vx, vy,
         in_M, remembered)`` (codes from :meth:`code`) in one array write: the values :meth:`append` stores (one
