@@ -1322,10 +1322,8 @@ class EvidenceLedger:
                 led.last_seen = stamp
                 if not led.confirmed and state_of(i) != "tentative":
                     led.confirmed = True
-        # (the ended ledgers' ids by one C-level set difference; the Python walk over every ledger only when one
-        # ended, pass neg112)
-        gone = ledgers.keys() - ids
-        for tid in [i for i in ledgers if i in gone] if gone else ():  # (in the ledgers' order)
+        live = set(ids)
+        for tid in [i for i in ledgers if i not in live]:  # (in the ledgers' order)
             led = ledgers.pop(tid)
             if led.last_track is not None:
                 led.last_box = _last_key(led)
