@@ -186,7 +186,7 @@ class Pipeline:
         #: :func:`_box_rows` of the tracks in M after the previous scan, before their boxes were grown
         self._moving_rows: tuple[np.ndarray, np.ndarray] = _NO_ROWS
         self._last_stamp: float | None = None
-        self._no_remover = np.zeros(0, dtype=np.int64)  # −1 per beam: what a scan without an exclusion copies (_exclude, process)
+        self._no_remover = np.zeros(0, dtype=np.int64)  # −1 per beam, copied by _exclude and process
         # loop closure behind the front end (slam/loops.py); it never changes the front end's poses or map
         self.loops = LoopCloser(self.config.loop, self.config.slam) if self.config.loop.enabled else None
         mem = self.config.detect.memory
