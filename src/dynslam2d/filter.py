@@ -355,7 +355,7 @@ def _movers_kernel(
     ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray,
     pc: float, ps: float, px: float, py: float, boxes: np.ndarray, X: np.ndarray, packed: np.ndarray,
     beams: np.ndarray, dt: float, gather: bool, exclude: bool, square: bool, margin: float, cap: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, float]:
     """The movers' exclusion rows and, with ``exclude``, the beams they remove, in one call (:func:`mover_exclusions`);
     without ``gather``, the exclusion of given rows (:func:`filter_scan_ids`' default mode).
 
@@ -365,7 +365,11 @@ def _movers_kernel(
     each box grown to its beams' points (:func:`_grow_boxes`), and with ``exclude`` (mode ``box`` without a speed
     margin) the removed / removed_by of :func:`_rows_exclusion` over the grown rows at ``dt`` (else two empty
     arrays). Without ``gather``: ``boxes`` are (k, 7) rows and ``packed`` their k ids; the rows are returned
-    twice, as they are, with their exclusion at ``dt`` (``X`` and ``beams`` unread).
+    twice, as they are, with their exclusion at ``dt`` (``X`` and ``beams`` unread). Last, two numbers the
+    pipeline would otherwise compute in Python (pass neg112): the count of removed beams (0 without ``exclude``) and,
+    with ``gather``, the largest of the movers' longer sides as Python's ``max(l, w)`` gives them (``w if w > l else
+    l``, m, of the rows as reported; a NaN side skipped as ``> lim`` skips it; −inf without a row or ``gather``), so
+    that ``side > lim`` says whether some mover's ``max(l, w) > lim``.
 
     One kernel for both calls of a scan, each body inlined once: the run compiles the exclusion once (a kernel
     calling another kernel links and optimises the callee's code a second time: ≈ +0.8 s of cold compile CPU,
@@ -387,11 +391,23 @@ def _movers_kernel(
         kept = boxes
         grown = boxes
         ids = packed
+    side = -np.inf
+    if gather:
+        for j in range(kept.shape[0]):
+            length = kept[j, 3]
+            width = kept[j, 4]
+            m = width if width > length else length  # Python's max(length, width)
+            if m > side:  # (a NaN m: never greater, as never > lim)
+                side = m
     if not exclude:
-        return kept, grown, np.zeros(0, dtype=np.bool_), np.zeros(0, dtype=np.int64)
+        return kept, grown, np.zeros(0, dtype=np.bool_), np.zeros(0, dtype=np.int64), 0, side
     removed, removed_by = _rows_exclusion(ranges, cos_a, sin_a, valid, pc, ps, px, py, grown, ids, dt, square,
                                           margin, cap)
-    return kept, grown, removed, removed_by
+    count = 0
+    for i in range(removed.shape[0]):
+        if removed[i]:
+            count += 1
+    return kept, grown, removed, removed_by, count, side
 
 
 #: :func:`_movers_kernel`'s unread inputs without ``gather`` (the reports' states, the movers' beams).
@@ -667,7 +683,7 @@ def mover_exclusions(
     states: np.ndarray,
     packed: np.ndarray,
     beams: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, float]:
     """The exclusion of the objects of M read from the tracker's report columns, without a ``Track`` object.
 
     Args:
@@ -679,23 +695,26 @@ def mover_exclusions(
             (``TrackReports.mover_pack``); ``beams``: their beams, concatenated (int64).
 
     Returns:
-        ``(kept, ids, removed, removed_by)``: (k, 7) rows [p_x, p_y, θ, l, w, v_x, v_y] of the movers' boxes and
-        velocities as reported, their (k,) int64 ids, and :func:`filter_scan_ids` of the rows with each box grown to
-        enclose its beams' finite returns in ``scan`` (paper §2.2: the exclusion box encloses the object's cluster;
-        ``observed_boxes_kernel``) — in one kernel call in the default mode (``box`` without a speed margin).
+        ``(kept, ids, removed, removed_by, count, side)``: (k, 7) rows [p_x, p_y, θ, l, w, v_x, v_y] of the movers'
+        boxes and velocities as reported, their (k,) int64 ids, and :func:`filter_scan_ids` of the rows with each box
+        grown to enclose its beams' finite returns in ``scan`` (paper §2.2: the exclusion box encloses the object's
+        cluster; ``observed_boxes_kernel``) — in one kernel call in the default mode (``box`` without a speed
+        margin); the number of removed beams; the largest longer side of the kept rows, m, as Python's ``max(l, w)``
+        (NaN sides skipped, −inf for no row): some mover's ``max(l, w) > lim`` exactly when ``side > lim``.
     """
     k = packed.shape[0] // 3
     ids = packed[k:2 * k]
     cos_a, sin_a = scan.trig()
     one = config.mode == "box" and config.speed_margin_time == 0.0  # (filter_active: k > 0 movers, mode box)
     cap = math.inf if config.max_half_extent is None else float(config.max_half_extent)
-    kept, grown, removed, removed_by = _movers_kernel(
+    kept, grown, removed, removed_by, count, side = _movers_kernel(
         scan.ranges, cos_a, sin_a, scan.valid_view(), math.cos(pose.theta), math.sin(pose.theta), float(pose.x),
         float(pose.y), boxes, states, packed, beams, 0.0, True, one and k > 0, config.default_shape == "square",
         float(config.margin), cap)
     if not (one and k > 0):
         removed, removed_by = filter_scan_ids(config, scan, pose, grown, ids, 0.0)
-    return kept, ids, removed, removed_by
+        count = int(np.count_nonzero(removed))
+    return kept, ids, removed, removed_by, count, side
 
 
 __all__ = [

@@ -167,6 +167,13 @@ def _observed_rows(tracks: list[Track], scan: Scan, pose: Pose2D,
     return rows, ids
 
 
+def _vehicle_ids(ids: list[int], rows: np.ndarray, lim: float) -> list[int]:
+    """The ids ``ids[j]`` of the rows ``rows`` ((k, ≥ 5) [p_x, p_y, θ, l, w, …], m) whose longer box side exceeds
+    ``lim``, m: Python's ``max(l, w) > lim`` (``w if w > l else l``: a NaN length wins, a NaN width loses), from
+    one ``tolist`` of the whole rows (no column slice)."""
+    return [tid for tid, r in zip(ids, rows.tolist()) if (r[4] if r[4] > r[3] else r[3]) > lim]
+
+
 class Pipeline:
     """Scans in; poses, tracks, removed beams and a map out. One :meth:`process` call per scan."""
 
@@ -179,7 +186,7 @@ class Pipeline:
         #: :func:`_box_rows` of the tracks in M after the previous scan, before their boxes were grown
         self._moving_rows: tuple[np.ndarray, np.ndarray] = _NO_ROWS
         self._last_stamp: float | None = None
-        self._no_remover = np.zeros(0, dtype=np.int64)  # −1 per beam: what _exclude copies when nothing is excluded
+        self._no_remover = np.zeros(0, dtype=np.int64)  # −1 per beam, copied by _exclude and process
         # loop closure behind the front end (slam/loops.py); it never changes the front end's poses or map
         self.loops = LoopCloser(self.config.loop, self.config.slam) if self.config.loop.enabled else None
         mem = self.config.detect.memory
@@ -281,41 +288,47 @@ class Pipeline:
         if type(tracks) is not TrackReports:  # (a tracker returning plain Track objects: its columns made from them)
             tracks = TrackReports.of_tracks(tracks)
         moving = tracks.moving_index()  # (indices of the reports in M)
-        if moving and res.low_support and self.config.filter.trusted_pose_only:
+        fc = self.config.filter
+        if moving and res.low_support and fc.trusted_pose_only:
             # an untrusted pose makes structure look like motion: only movers removed before stay removed
             known, ids = set(self._moving), tracks.ids
             moving = [i for i in moving if ids[i] in known]
-        if moving:
+        if not moving:  # (most scans: nothing removed; _exclude's arrays without its call, pass neg112)
+            mrows, mids = _NO_ROWS
+            n = scan.ranges.shape[0]
+            removed_by = self._no_remover
+            if removed_by.shape[0] != n:
+                removed_by = self._no_remover = np.full(n, -1, dtype=np.int64)
+            removed, removed_by = np.zeros(n, dtype=bool), removed_by.copy()
+            any_removed = False
+        else:
             # (the movers' boxes and velocities as rows, grown to their beams' points and their exclusion, one kernel)
             packed, own, moving = tracks.mover_pack(moving)  # (moving: now the movers' ids)
-            mrows, mids, removed, removed_by = mover_exclusions(self.config.filter, scan, res.pose, *tracks.arrays,
-                                                               packed, own)
-            any_removed = bool(_count_nonzero(removed))
-        else:
-            mrows, mids = _NO_ROWS
-            removed, removed_by = self._exclude(scan, res.pose, _NO_ROWS, 0.0)
-            any_removed = False  # (no rows: nothing removed)
-        fc = self.config.filter
-        if any_removed and fc.mode == "box":
-            if fc.spare_structure:
-                self._spare_structure(scan, res.pose, own, removed, removed_by)
-                any_removed = bool(_count_nonzero(removed))
-            elif fc.spare_structure_vehicles:
-                lim = self.config.detect.segment.max_extent  # (read once, not per track)
-                big = [tid for tid, (length, width) in zip(moving, mrows[:, 3:5].tolist()) if max(length, width) > lim]
-                if big:
-                    self._spare_structure(scan, res.pose, own, removed, removed_by, np.array(big))
+            # (with the count of removed beams and the movers' longest side, from the kernel: pass neg112)
+            mrows, mids, removed, removed_by, count, side = mover_exclusions(fc, scan, res.pose, *tracks.arrays,
+                                                                             packed, own)
+            any_removed = count > 0
+            if any_removed and fc.mode == "box":
+                if fc.spare_structure:
+                    self._spare_structure(scan, res.pose, own, removed, removed_by)
                     any_removed = bool(_count_nonzero(removed))
+                elif fc.spare_structure_vehicles:
+                    lim = self.config.detect.segment.max_extent  # (read once, not per track)
+                    big = _vehicle_ids(moving, mrows, lim) if side > lim else None  # (no vehicle: no list)
+                    if big:
+                        self._spare_structure(scan, res.pose, own, removed, removed_by, np.array(big))
+                        any_removed = bool(_count_nonzero(removed))
         t3 = time.perf_counter()
         # 5. map update with the filtered scan only.
         updated = False
         led = self.ledger
         if led is not None:  # what a track wrote while it stood is taken out once it moves (slam/erasure.py)
-            removing = set(moving) if filter_active(self.config.filter, len(moving)) else set()
+            removing = set(moving) if moving and filter_active(fc, len(moving)) else set()
             # (the tracker's state rows of its live reports: the ledger's standing test reads them in one kernel call)
             trk = self.tracker
             led.observe(tracks, removing, scan.stamp, trk.report_states())
-            led.erase_entering(tracks, removing, scan.stamp, self.slam.map, (moving, mrows) if removing else None)
+            if removing:  # (without a removal set erase_entering returns at once: no call, pass neg112)
+                led.erase_entering(tracks, removing, scan.stamp, self.slam.map, (moving, mrows))
             if led.erased_beams:  # the loop closure's keyframes leave them out too (re-render, clean-up recount)
                 if self.loops is not None:
                     self.loops.drop_beams(led.erased_beams)
