@@ -165,10 +165,12 @@ def test_single_rays_of_every_length_around_the_prefetch_distance_equal_the_refe
     one ray at a time (no other ray's cells to hide a cell walked too far or left out), every major length from 1
     to 2·_PREFETCH + 3 in four octants, with and without a stop that leaves 0, 1, ... cells before the end
     unwalked, as a return and as a clearing ray: bit for bit the reference."""
-    h, w, sx, sy = 100, 100, 50, 50
+    n = 2 * (2 * _PREFETCH + 4) + 1  # (every ray's end inside the array: a ray ending outside is skipped whole)
+    h, w, sx, sy = n, n, n // 2, n // 2
     for major in range(1, 2 * _PREFETCH + 4):
         for dx, dy in ((major, major // 3), (-(major // 2), major), (-major, -(major // 5)), (major // 4, -major)):
             ex, ey = [sx + dx], [sy + dy]
+            assert 0 <= ex[0] < w and 0 <= ey[0] < h
             length = math.hypot(dx, dy)
             for hit in (True, False):
                 _check(h, w, sx, sy, ex, ey, np.array([hit]), None, scans=2)

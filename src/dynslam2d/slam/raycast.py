@@ -49,7 +49,7 @@ def _bits(typingctx, v):
 _MAGIC_MAX = 1 << 13
 _MAGIC_SHIFT = 42
 #: how many steps ahead of a walked cell the walk prefetches the cells' lines (up to the ray's end cell)
-_PREFETCH = 16
+_PREFETCH = 32
 #: updated cells a level's walks collect before their probabilities are written (:func:`_write_probs`; plus one
 #: ray's cells at most)
 _PROB_BATCH = 1024
