@@ -80,6 +80,25 @@ def digest(values: tuple) -> str:
     return h.hexdigest()
 
 
+def forty(out: tuple, a: tuple) -> tuple:
+    """A ``detect_scan`` call's results (``a``: its arguments) in the 40 places they had before pass det109, which
+    returns 27 (the segmentation's labels and structure left to ``segment.segmentation_of``, the leg merge's arrays
+    one tuple or None): the two layouts' digests compare."""
+    if len(out) != 27:
+        return out
+    from dynslam2d.detect.segment import SP_MAX_POINTS, segmentation_of
+
+    beams, offsets, dropped, wrapped, pts, rr, par, *rows7 = out[:14]
+    merged, px2, py2 = out[14:17]
+    seg = segmentation_of(beams, offsets, a[0].shape[0], int(a[5][SP_MAX_POINTS]), wrapped, dropped)
+    if merged is None:  # (no pair: detect_rows' empty arrays and the selected rows again)
+        none = np.empty(0, dtype=np.int64)
+        starts, npts, kinds, lohi, rel, sfits, mfr = rows7
+        merged = (none, none, none, kinds, sfits, lohi, rel, starts, npts, none, np.empty((0, 2)), mfr)
+    return (seg.labels, beams, offsets, seg.structure, dropped, wrapped, pts, rr, par, *rows7, *merged[:9], px2, py2,
+            *merged[9:], *out[17:])
+
+
 def worker(data: Path, name: str, limit: int | None) -> None:
     """Serve ``go`` lines on stdin: process the next scan, answer one JSON line (thread CPU ns of
     ``Tracker._detect`` and of ``detect_scan`` inside it, the ``detect_scan`` results' digest, the detections)."""
@@ -101,7 +120,7 @@ def worker(data: Path, name: str, limit: int | None) -> None:
         t0 = time.thread_time_ns()
         out = kern0(*a)
         cur["kernel"] = cur.get("kernel", 0) + time.thread_time_ns() - t0
-        cur.setdefault("outs", []).append(out)
+        cur.setdefault("outs", []).append((out, a))  # (in the places of before pass det109 after the scan: forty)
         return out
 
     def detect(self, *a, **k):
@@ -124,7 +143,8 @@ def worker(data: Path, name: str, limit: int | None) -> None:
         pipe.process(scans[i])
         outs = cur.get("outs")
         print(json.dumps({"detect": cur.get("detect"), "kernel": cur.get("kernel"), "n": cur.get("n"),
-                          "h": None if outs is None else digest(tuple(v for o in outs for v in o))}), flush=True)
+                          "h": None if outs is None else digest(tuple(v for o, a in outs for v in forty(o, a)))}),
+              flush=True)
     print(json.dumps({"loads": kernel_cache_calls() - looked}), flush=True)  # (inside the measured run)
 
 

@@ -130,8 +130,25 @@ def chain(a, fit=shapes.fit_cluster_rows, rows=K.detect_rows) -> tuple:
     return (labels, beams, offsets, structure, dropped, wrapped, pts, rr, par, *out)
 
 
+def unpacked(got: tuple, n: int, max_points: int) -> tuple:
+    """``segment.detect_scan``'s 27 results (pass det109) in the 40 places of :func:`chain`'s: the segmentation's
+    labels and structure by ``segment.segmentation_of`` (``n`` beams, ``max_points``), the leg merge's tuple unpacked
+    where a pair was merged, and where none was its empty arrays and the selected rows again (as ``detect_rows``
+    returns them)."""
+    beams, offsets, dropped, wrapped, pts, rr, par, *rows7 = got[:14]
+    merged, px2, py2 = got[14:17]
+    seg = S.segmentation_of(beams, offsets, n, max_points, wrapped, dropped)
+    if merged is None:
+        none = np.empty(0, dtype=np.int64)
+        starts, npts, kinds, lohi, rel, sfits, mfr = rows7
+        merged = (none, none, none, kinds, sfits, lohi, rel, starts, npts, none, np.empty((0, 2)), mfr)
+    return (seg.labels, beams, offsets, seg.structure, dropped, wrapped, pts, rr, par, *rows7, *merged[:9], px2, py2,
+            *merged[9:], *got[17:])
+
+
 def same_chain(got: tuple, want: tuple) -> bool:
-    """Two results of ``detect_scan`` / :func:`chain`: equal arrays (:func:`_same`) and scalars."""
+    """Two results of ``detect_scan`` / :func:`chain` (``got`` already :func:`unpacked`): equal arrays
+    (:func:`_same`) and scalars."""
     return len(got) == len(want) == 40 and all(
         _same(g, w) if isinstance(g, np.ndarray) else type(g) is type(w) and g == w for g, w in zip(got, want))
 
@@ -142,7 +159,8 @@ def chained(fit=shapes.fit_cluster_rows, rows=K.detect_rows, seen: dict | None =
     def detect_scan(*a):
         want = chain(a, fit, rows)
         got = S.detect_scan(*a)
-        assert same_chain(got, want)
+        assert len(got) == 27 and (got[14] is None) == (want[16].shape[0] == 0)  # (None: no pair merged)
+        assert same_chain(unpacked(got, a[0].shape[0], int(a[5][S.SP_MAX_POINTS])), want)
         if seen is not None:
             seen["chains"] = seen.get("chains", 0) + 1
         return got

@@ -10,7 +10,7 @@ import numpy as np
 
 from dynslam2d.detect import DetectConfig, Tracker
 from dynslam2d.detect.freespace import FreeSpaceMemory
-from dynslam2d.detect.segment import segment_scan
+from dynslam2d.detect.segment import segment_scan, segmentation_of
 from dynslam2d.sim import simulate
 from dynslam2d.types import Pose2D, Scan
 
@@ -84,3 +84,27 @@ def test_last_segmentation_of_two_geometries_in_turn() -> None:
     assert checked > 10
     tr.last_segmentation = None
     assert tr.last_segmentation is None
+
+
+def test_segmentation_of_gives_the_kernels_labels_and_structure_at_the_size_limit() -> None:
+    """``segmentation_of`` (pass det109: ``detect_scan`` returns neither labels nor structure) makes, from a
+    segmentation's beams and offsets, the labels and structure flags the segmentation kernel made, bit for bit, with
+    ``max_points`` set to each cluster size of the scans in turn, so that clusters of exactly the limit (not
+    structure) and of one point more (structure) both occur."""
+    scans = simulate("crowd", duration=1.0).scans[::5]
+    cfg = DetectConfig().segment
+    at_limit = over = 0
+    for scan in scans:
+        valid = scan.valid_mask() & (scan.ranges > 0.0)
+        sizes = np.diff(segment_scan(scan, cfg, valid).offsets)
+        for limit in sorted(set(sizes.tolist()))[:6]:
+            cfg.max_points = limit
+            want = segment_scan(scan, cfg, valid)
+            got = segmentation_of(want.beams, want.offsets, scan.ranges.shape[0], limit, want.wrapped, want.n_dropped)
+            for f in ("labels", "beams", "offsets", "structure"):
+                g, w = getattr(got, f), getattr(want, f)
+                assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes(), f
+            assert got.wrapped == want.wrapped and got.n_dropped == want.n_dropped
+            at_limit += int(np.count_nonzero(np.diff(want.offsets) == limit))
+            over += int(np.count_nonzero(want.structure))
+    assert at_limit > 20 and over > 20

@@ -392,11 +392,14 @@ def detect_scan(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, trig: 
     ``fq``'s ``FQ_*`` values, the circles the classification never reads skipped) and
     :func:`~dynslam2d.detect.kernels.detect_rows` (``p``: ``detect_params``' array; the sensor at ``pose_x``,
     ``pose_y``; ``range_max`` in m, ``dphi`` the beams' |increment| in rad; the map ``logodds`` / ``i0`` / ``j0`` /
-    ``res`` where ``has_map``). Returns the segmentation's (labels, beams, offsets, structure, n_dropped, wrapped),
-    the clusters' (m, 2) map-frame points ``pts``, the free-space reference's ``r``, ``par`` (empty without ``ref``),
-    then ``detect_rows``' 31 results, with the kept detections' columns of a leg merge's ``mmev`` (where a pair was
-    merged and ``has_map``) written too: column r < nk the kept detection ``ki[r]``'s column of the fractions (the
-    values its own detection reads), so that ``mmev`` holds every final row's evidence."""
+    ``res`` where ``has_map``). Returns the segmentation's (beams, offsets, n_dropped, wrapped) (its labels and
+    structure flags: :func:`segmentation_of`), the clusters' (m, 2) map-frame points ``pts``, the free-space
+    reference's ``r``, ``par`` (empty without ``ref``), then ``detect_rows``' 31 results in their order but that the
+    leg merge's first ten and its ``mmev`` (first, second, ki, kinds, fits, lohi, rel, starts, npts; mbeams, pts,
+    mmev) come as one tuple where a pair was merged and as None where none was, its ``px``, ``py`` following it
+    (27 values: pass det109). ``mmev``'s kept detections' columns (where a pair was merged and ``has_map``) are
+    written too: column r < nk the kept detection ``ki[r]``'s column of the fractions (the values its own detection
+    reads), so that ``mmev`` holds every final row's evidence."""
     # (True, typed as a bool and not as a literal: a literal argument would compile the callee once more)
     yes = ranges.shape[0] >= 0
     labels, beams, offsets, structure, dropped, wrapped, ax, ay, px, py, pts, rr, par = _segment_kernel(
@@ -410,13 +413,30 @@ def detect_scan(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, trig: 
                             int(fq[FQ_CIRCLE_MIN_POINTS]), int(fq[FQ_STRIDE]), yes, fq[FQ_POINT_MAX_POINTS],
                             fq[FQ_POINT_MAX_EXTENT], fq[FQ_MAX_EXTENT], fq[FQ_THIN], fq[FQ_CIRCLE_MAX_RADIUS],
                             fq[FQ_DEPTH_RATIO], fq[FQ_RESIDUAL_RATIO])
-    rows = detect_rows(px, py, beams, offsets, fits, structure, pose_x, pose_y, ranges, mask, ax, ay, wrapped,
-                       range_max, dphi, p, has_map, logodds, i0, j0, res)
-    mfr = rows[6]
-    ki = rows[9]
-    mmev = rows[20]
+    (starts, npts, kinds, lohi, rel, sfits, mfr, first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2,
+     py2, mbeams, mpts, mmev, theta, centroid, circle, z, R, H, zm, Rm, size_obs, size_kind) = detect_rows(
+        px, py, beams, offsets, fits, structure, pose_x, pose_y, ranges, mask, ax, ay, wrapped, range_max, dphi, p,
+        has_map, logodds, i0, j0, res)
     if ki.shape[0] and mmev.shape[1]:  # (a pair merged, with a map: the kept rows' columns)
         for r in range(ki.shape[0]):
             for e in range(3):
                 mmev[e, r] = mfr[e, ki[r]]
-    return (labels, beams, offsets, structure, dropped, wrapped, pts, rr, par) + rows
+    # (the leg merge's twelve arrays as one tuple where a pair was merged, else None: without a pair they are empty or
+    # the selected rows again, and each array returned costs Python a boxed object, ≈ 0.2–0.3 µs; pass det109)
+    merged = (first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, mbeams, mpts, mmev) if first.shape[0] \
+        else None
+    return (beams, offsets, dropped, wrapped, pts, rr, par, starts, npts, kinds, lohi, rel, sfits, mfr, merged, px2,
+            py2, theta, centroid, circle, z, R, H, zm, Rm, size_obs, size_kind)
+
+
+def segmentation_of(beams: np.ndarray, offsets: np.ndarray, n: int, max_points: int, wrapped: bool,
+                    dropped: int) -> Segmentation:
+    """The :class:`Segmentation` :func:`_segment_kernel` returns, from its ``beams``, ``offsets`` (the clusters' beam
+    indices), the scan's beam count ``n``, ``SegmentConfig.max_points``, ``wrapped`` and the dropped count: its
+    ``labels`` (cluster c on the beams ``beams[offsets[c]:offsets[c + 1]]``, −1 elsewhere; int32) and ``structure``
+    (more than ``max_points`` points) made as the kernel makes them. :func:`detect_scan` returns neither (the
+    tracker reads them only when ``last_segmentation`` is read; pass det109)."""
+    sizes = np.diff(offsets)
+    labels = np.full(n, -1, dtype=np.int32)
+    labels[beams] = np.repeat(np.arange(sizes.shape[0], dtype=np.int32), sizes)
+    return _make_segmentation(labels, beams, offsets, sizes > max_points, wrapped, dropped)

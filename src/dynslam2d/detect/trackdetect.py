@@ -40,11 +40,12 @@ from dynslam2d.detect.segment import (
     FQ_STRIDE,
     FQ_THIN,
     N_FQ,
+    SP_MAX_POINTS,
     Segmentation,
-    _make_segmentation,
     _scan_args,
     detect_scan,
     segment_params,
+    segmentation_of,
 )
 from dynslam2d.detect.shapes import CRITERIA
 from dynslam2d.detect.tracktable import _NO_IDX
@@ -87,8 +88,9 @@ class TrackDetect:
         made from the kernel's arrays when first read (nothing in the pipeline reads it per scan; docs/speed.md,
         pass det81), the same object on every later read."""
         s = self._seg
-        if type(s) is tuple:
-            s = self._seg = _make_segmentation(*s)
+        if type(s) is tuple:  # (q: the segmentation's segment_params array)
+            beams, offsets, n, q, wrapped, dropped = s
+            s = self._seg = segmentation_of(beams, offsets, n, int(q[SP_MAX_POINTS]), wrapped, dropped)
         return s
 
     @last_segmentation.setter
@@ -164,13 +166,13 @@ class TrackDetect:
         else:
             args = geo[2]
         sangles, strig, fill, cos_a, sin_a, gpar, wrap, q = args
-        (labels, beams, offsets, structure, dropped, wrapped, pts, rr, rpar, starts, npts, kinds, lohi, rel, fits, mfr,
-         first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams, mpts, mmev, theta, centroid,
-         circle, *default) = detect_scan(
+        (beams, offsets, dropped, wrapped, pts, rr, rpar, starts, npts, kinds, lohi, rel, fits, mfr, mg, px, py,
+         theta, centroid, circle, *default) = detect_scan(
             ranges, sangles, valid, strig, fill, q, wrap, cos_a, sin_a, math.cos(th), math.sin(th), x, y,
             free is not None, th, gpar, float(scan.range_max), angles, ftrig, self._fit_q, self._det_p,
             view is not None, lo, i0, j0, res, abs(float(scan.angle_increment)))
-        self._seg = (labels, beams, offsets, structure, wrapped, dropped)  # (last_segmentation, made when read)
+        # (last_segmentation, made when read: segment.segmentation_of)
+        self._seg = (beams, offsets, ranges.shape[0], q, wrapped, dropped)
         ncl = offsets.shape[0] - 1
         st.clusters += ncl
         st.dropped_small_clusters += dropped
@@ -201,14 +203,13 @@ class TrackDetect:
         # (each detection is the scan's arrays and its row: its beams, points, kind, counts, fit values and map evidence
         # are read from them when asked for, ScanDetection; all made in one loop, scan_detections)
         dets = scan_detections(ScanArrays(beams, pts, 0, starts, npts, kinds, fits, lohi, rel, mev), frac)
-        px, py = px2, py2
-        merged = first.shape[0]
-        kfits = fits2 if merged else fits  # (the rows detect_rows' theta, centroid and circle are of)
-        if merged:  # (a pair merged: _merge_legs makes the persons' detections of the kernel's merge)
-            n0 = px2.shape[0] - mbeams.shape[0]  # (the detections' points before the persons')
+        kfits = fits  # (the rows detect_rows' theta, centroid and circle are of)
+        if mg is not None:  # (a pair merged: _merge_legs makes the persons' detections of the kernel's merge)
+            first, second, ki, kinds2, kfits, lohi2, rel2, starts2, npts2, mbeams, mpts, mmev = mg
+            n0 = px.shape[0] - mbeams.shape[0]  # (the detections' points before the persons')
             dets, kinds, fits, lohi, rel, starts, npts, px, py = self._merge_legs(
-                dets, kinds, fits, lohi, rel, starts, npts, px2[:n0], py2[:n0], beams, mev,
-                (first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2, py2, mbeams, mpts, mmev))
+                dets, kinds, fits, lohi, rel, starts, npts, px[:n0], py[:n0], beams, mev,
+                (first, second, ki, kinds2, kfits, lohi2, rel2, starts2, npts2, px, py, mbeams, mpts, mmev))
         st.detections += len(dets)
         self.last_detections = dets
         if dets:
@@ -219,7 +220,7 @@ class TrackDetect:
                                                           npts))
                 self._default = _tuple_new(MeasureRows, default)
                 # (their (3, nd) map evidence: the structure column read from it, _structure_column)
-                self._ms_ev = mmev if merged and mev is not None else mev
+                self._ms_ev = mmev if mg is not None and mev is not None else mev
             else:  # (rows other than the kernel's final ones: a subclass' _merge_legs)
                 self._batch = DetectionBatch(kinds, fits[:, F_THETA].copy(), lohi, rel, fits[:, FIT_CENTROID].copy(),
                                              fits[:, FIT_CIRCLE].copy(), px, py, starts, npts)
