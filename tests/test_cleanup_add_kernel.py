@@ -137,3 +137,34 @@ def test_collector_kernel_is_the_numpy_steps() -> None:
     assert len(new.per_scan) == len(old.per_scan)
     for a, b in zip(new.per_scan, old.per_scan):
         assert a.dtype == b.dtype == np.float32 and a.tobytes() == b.tobytes()
+
+
+def test_pool_running_full_counts_as_a_large_pool(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The passes stopped by a full pool and resumed (the rest of the scan's marked cells, put back into the mask's
+    word the walk had cleared: pass cln113) give the counts of a pool that never runs full."""
+    rng = np.random.default_rng(5)
+    slam = SlamConfig(map_resolution=0.05, max_map_memory_mb=100.0)
+    scans = []
+    for k in range(12):
+        n = int(rng.integers(100, 400))
+        pose = Pose2D(25.0 * k, 10.0 * (k % 3), float(rng.uniform(-math.pi, math.pi)))
+        scans.append((_scan(rng, 0.2 * k, n, 30.0), pose, _removed(rng, n, k)))
+    large = cl.VisibilityCounter(0.05, CleanConfig(), slam)
+    for scan, pose, removed in scans:
+        large.add(scan, pose, removed)
+    resumed = []
+    count = cl.VisibilityCounter._count
+
+    def spy(self, *a, **k):  # type: ignore[no-untyped-def]
+        resumed.append(bool(k.get("resume", False)))
+        return count(self, *a, **k)
+
+    monkeypatch.setattr(cl.VisibilityCounter, "_reserve_tiles", _small_reserve)
+    monkeypatch.setattr(cl.VisibilityCounter, "_count", spy)
+    small = cl.VisibilityCounter(0.05, CleanConfig(), slam)
+    for scan, pose, removed in scans:
+        small.add(scan, pose, removed)
+    assert sum(resumed) >= 4, "the small pool ran full while the passes were counted"
+    assert int(large.through.astype(np.int64).sum()) > 10_000
+    for a, b in zip(_state(small), _state(large)):
+        assert np.array_equal(a, b)

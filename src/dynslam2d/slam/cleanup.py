@@ -70,7 +70,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dynslam2d.gridmap import GridMap
-from dynslam2d.jitbox import njit, word_at  # numba's njit, arrays returned without a per-array unpickle
+from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.memtrim import release_free_memory
 from dynslam2d.slam.cleanconfig import CleanConfig
 from dynslam2d.slam.config import SlamConfig
@@ -255,17 +255,18 @@ def _count_beams_inline(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey,
     stride = (x1 - x0 + 8) // 8 * 8  # whole 8-byte words per row
     need = stride * (y1 - y0 + 1)
     if not resume:
-        if mask.shape[0] < need:
-            mask = np.empty(need, dtype=np.uint8)
+        if mask.shape[0] < need + 8:  # (one word past the box's rows: the byte the steps without a mark go to)
+            mask = np.empty(need + 8, dtype=np.uint8)
             mask[:] = 0
         idx = np.empty(max(x1 - x0, y1 - y0) + 1, dtype=np.int64)  # (a ray's steps inside the box: at most this)
-        val = np.empty(idx.shape[0], dtype=np.uint8)
         for k in range(cx.shape[0]):
             if clear[k]:
-                _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, cx[k] - fi0, cy[k] - fj0, core, idx, val)
+                _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, cx[k] - fi0, cy[k] - fj0, core, idx, need)
+        mask[need] = 0  # (the spare byte: the mask is zero outside the box's marked cells)
     per_row = stride // 8
     pass_code = 2 * scan_id
     cap = pool.shape[0]
+    words = mask.view(np.uint64)  # (8 cells a word; the mask's length is whole words: rows of whole words)
     for r in range(y1 - y0 + 1):
         ya = y0 + r + j0
         rt = (ya >> _TILE_SHIFT) - tj0
@@ -273,8 +274,11 @@ def _count_beams_inline(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey,
         tc = -1  # the tile column of the last cell counted in this row, and its pool row
         t = -1
         for q in range(per_row):
-            base = r * stride + q * 8
-            word = word_at(mask, base)  # (8 cells at once: mask[base:base + 8].view(np.uint64)[0])
+            wi = r * per_row + q
+            word = words[wi]
+            if word == 0:
+                continue
+            words[wi] = 0  # the word's cells cleared at once (put back below if the pool runs full)
             while word != 0:  # its marked bytes (each 0 or 1), lowest bit first: no branch per unmarked cell
                 low = word & (~word + np.uint64(1))  # the lowest set bit, 1 << 8 · (the byte's place in the word)
                 word ^= low
@@ -287,11 +291,11 @@ def _count_beams_inline(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey,
                     t = table[rt, tc]
                     if t < 0:
                         if n_tiles == cap:
-                            return mask, n_tiles, True  # this cell and the rest still marked
+                            words[wi] = word | low  # this cell and the rest still marked
+                            return mask, n_tiles, True
                         t = n_tiles
                         table[rt, tc] = t
                         n_tiles += 1
-                mask[base + jj] = 0
                 c = in_tile | (xa & _TILE_MASK)
                 lt = pool[t, c, 3]
                 if (lt >> 1) != scan_id:  # not hit by this scan
@@ -304,16 +308,18 @@ def _count_beams_inline(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey,
 
 
 @njit(cache=True, inline="always")
-def _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, ex, ey, core, idx, val):  # pragma: no cover - numba
+def _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, ex, ey, core, idx, spare):  # pragma: no cover - numba
     """Mark in ``mask`` (rows of ``stride`` bytes from cell (x0, y0); cells beyond (x1, y1) dropped) the cells the
     segment ``(ox, oy)`` → ``(ex, ey)`` passes: one cell per step of the major axis, where the segment runs
     within ``core`` of the cell centre across it.
 
     In two loops over the steps whose major coordinate lies in the box (the others are dropped): the first
-    computes each step's byte in ``mask`` and its mark into the scratch ``idx`` (int64) / ``val`` (uint8), as
-    long as the box's longer side, with no store into ``mask`` and no branch, so the compiler runs it on vector
-    registers; the second ors the marks in (a step whose cell is outside the box or #0 gets 0 into byte 0). Each
-    step's values are those of the one-loop walk: the major coordinate ``a`` is an integer held exactly in
+    computes each step's byte in ``mask`` into the scratch ``idx`` (int64, as long as the box's longer side), with
+    no store into ``mask`` and no branch, so the compiler runs it on vector registers; the second stores 1 into
+    those bytes: a step whose cell is outside the box or off the ray's core goes to the byte ``spare`` instead
+    (past the box's rows; the caller zeroes it after the rays). A store without the load an or needs (pass
+    cln113: was ``mask[i] | val[k]``, a step off the core or the box or-ing 0 into byte 0); the same cells marked.
+    Each step's values are those of the one-loop walk: the major coordinate ``a`` is an integer held exactly in
     float64, so ``(fa + k) − m0`` is the walk's ``a − m0`` bit for bit (docs/speed.md, pass cln96)."""
     dx = ex - ox
     dy = ey - oy
@@ -361,12 +367,10 @@ def _mark_ray(mask, x0, y0, x1, y1, stride, ox, oy, ex, ey, core, idx, val):  # 
     for k in range(n):
         b = n0 + slope * ((fa + fs * k) - m0)
         fl = math.floor(b + 0.5)
-        ok = (fl >= flo) & (fl <= fhi)
-        idx[k] = base + dk * k + np.int64(np.int32(fl)) * sb if ok else 0
-        val[k] = np.uint8((abs(b - fl) <= core) & ok)
+        on = (fl >= flo) & (fl <= fhi) & (abs(b - fl) <= core)
+        idx[k] = base + dk * k + np.int64(np.int32(fl)) * sb if on else spare
     for k in range(n):
-        i = idx[k]
-        mask[i] = mask[i] | val[k]
+        mask[idx[k]] = 1
 
 
 @njit(cache=True)
