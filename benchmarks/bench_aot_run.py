@@ -4,7 +4,9 @@
 
 Each pair runs ``dynslam2d run INPUT --out SCRATCH/<mode><k> -q`` once with ``DYNSLAM2D_KERNELS=jit`` and once with
 the AOT module (``auto``; a valid module is required: ``dynslam2d kernels build``), in turn first. Per run: peak
-RSS (``/usr/bin/time``'s maximum resident set size of the process), wall time of the process, the summary's first
+RSS (``peak_mib``: the process's own ``VmHWM`` at its end where Linux gives it; ``time_mib``: ``/usr/bin/time``'s
+maximum resident set size; the two agree here, and both read ≈ 4 MiB lower than the same run started from a shell:
+docs/speed.md, pass mem116 and its lead's note), wall time of the process, the summary's first
 scan time and steady scans/s, and whether numba was imported (the run's ``kernel_compile_s`` is 0 either way with a
 warm cache). Then every result file other than summary.json / run.json (timings) of each AOT run compared byte for
 byte with the JIT run of its pair. Prints one line per run and the medians. Not run by pytest; numbers go to
@@ -31,8 +33,14 @@ try:
     main()
 except SystemExit as exc:
     assert exc.code in (0, None), exc.code
+hwm = None
+try:  # the process's own peak resident set (Linux), beside /usr/bin/time's %M
+    with open("/proc/self/status") as st:
+        hwm = next((int(line.split()[1]) for line in st if line.startswith("VmHWM:")), None)
+except OSError:
+    pass
 with open(out + ".modules.json", "w") as fh:
-    json.dump({"numba": "numba" in sys.modules, "llvmlite": "llvmlite" in sys.modules}, fh)
+    json.dump({"numba": "numba" in sys.modules, "llvmlite": "llvmlite" in sys.modules, "vmhwm_kib": hwm}, fh)
 """
 
 TIMINGS = ("summary.json", "run.json")
@@ -48,7 +56,10 @@ def one(inp: str, out: Path, mode: str) -> dict[str, float]:
         raise SystemExit(res.stderr[-3000:])
     summary = json.loads((out / "summary.json").read_text())
     mods = json.loads(Path(str(out) + ".modules.json").read_text())
-    return {"peak_mib": int(res.stderr.strip().splitlines()[-1]) / 1024, "wall_s": wall,
+    time_kib = int(res.stderr.strip().splitlines()[-1])
+    hwm_kib = mods.get("vmhwm_kib")
+    # peak_mib: the run's own VmHWM where the kernel gives it, else /usr/bin/time's %M (time_mib; pass mem116)
+    return {"peak_mib": (hwm_kib if hwm_kib else time_kib) / 1024, "time_mib": time_kib / 1024, "wall_s": wall,
             "first_scan_ms": summary["first_scan_ms"], "steady_scans_per_s": summary["steady_scans_per_s"],
             "compile_s": summary.get("kernel_compile_s", 0.0), "numba": mods["numba"]}
 
