@@ -186,7 +186,7 @@ class Pipeline:
         #: :func:`_box_rows` of the tracks in M after the previous scan, before their boxes were grown
         self._moving_rows: tuple[np.ndarray, np.ndarray] = _NO_ROWS
         self._last_stamp: float | None = None
-        self._no_remover = np.zeros(0, dtype=np.int64)  # −1 per beam, copied by _exclude and process
+        self._no_remover = np.zeros(0, dtype=np.int64)  # −1 per beam, copied by _nothing_removed
         # loop closure behind the front end (slam/loops.py); it never changes the front end's poses or map
         self.loops = LoopCloser(self.config.loop, self.config.slam) if self.config.loop.enabled else None
         mem = self.config.detect.memory
@@ -215,12 +215,16 @@ class Pipeline:
         """Beams of ``scan`` (at ``pose``) inside the exclusion zones of the boxes ``rows``
         (:func:`_box_rows`) advanced by ``dt``, s: (removed, id of the remover or −1)."""
         if not rows[0].shape[0]:  # nothing to exclude (filter_scan_ids would return the same)
-            n = scan.ranges.shape[0]
-            kept = self._no_remover
-            if kept.shape[0] != n:
-                kept = self._no_remover = np.full(n, -1, dtype=np.int64)
-            return np.zeros(n, dtype=bool), kept.copy()
+            return self._nothing_removed(scan.ranges.shape[0])
         return filter_scan_ids(self.config.filter, scan, pose, rows[0], rows[1], dt)
+
+    def _nothing_removed(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """(removed, removed_by) of an ``n``-beam scan from which nothing is removed: all False and all −1, new
+        arrays each call (the −1 row kept and copied, not filled again)."""
+        kept = self._no_remover
+        if kept.shape[0] != n:
+            kept = self._no_remover = np.full(n, -1, dtype=np.int64)
+        return np.zeros(n, dtype=bool), kept.copy()
 
     def _spare_structure(self, scan: Scan, pose: Pose2D, own_beams: np.ndarray, removed: np.ndarray,
                          removed_by: np.ndarray, only_ids: np.ndarray | None = None) -> None:
@@ -295,11 +299,7 @@ class Pipeline:
             moving = [i for i in moving if ids[i] in known]
         if not moving:  # (most scans: nothing removed; _exclude's arrays without its call, pass neg112)
             mrows, mids = _NO_ROWS
-            n = scan.ranges.shape[0]
-            removed_by = self._no_remover
-            if removed_by.shape[0] != n:
-                removed_by = self._no_remover = np.full(n, -1, dtype=np.int64)
-            removed, removed_by = np.zeros(n, dtype=bool), removed_by.copy()
+            removed, removed_by = self._nothing_removed(scan.ranges.shape[0])
             any_removed = False
         else:
             # (the movers' boxes and velocities as rows, grown to their beams' points and their exclusion, one kernel)
