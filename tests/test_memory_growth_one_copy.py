@@ -116,3 +116,22 @@ def test_the_pipelines_map_view_never_holds_the_old_log_odds_at_a_growth(monkeyp
         assert refs == 0, dtype
         if _LINUX and zeroed:  # (a smaller old array came from the heap: freed when it goes)
             assert released and nonzero == 0, dtype
+
+
+def test_the_copy_writes_only_the_blocks_spans_of_written_cells() -> None:
+    """The zeros outside each block's span of non-zero cells are not written (their pages stay untouched): a
+    destination of sentinel bytes keeps them there, and every non-zero cell (a −0.0 too) is copied."""
+    rng = np.random.default_rng(9)
+    src = np.zeros((37, 300), dtype=np.float32)
+    src[3:9, 40:60] = rng.normal(0.0, 2.0, (6, 20)).astype(np.float32)
+    src[20, 250] = -0.0
+    src[33:37, 5:7] = 1.5
+    dst = np.full(src.shape, np.nan, dtype=np.float32)
+    grid_module._copy_written_rows(dst, src)
+    written = ~np.isnan(dst)
+    assert np.array_equal(dst[written].view(np.uint32), src[written].view(np.uint32))
+    assert (src.view(np.uint32)[~written] == 0).all()  # every non-zero cell copied
+    k = grid_module._SPAN_ROWS
+    assert k == 8  # (blocks: rows 0-7 and 8-15 hold columns 40-59, 16-23 column 250, 32-36 columns 5-6)
+    assert written.sum() == 8 * 20 + 8 * 20 + 8 * 1 + 5 * 2
+    assert not written[:, 61:249].any() and not written[k * 3:k * 4].any()
