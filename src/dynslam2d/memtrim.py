@@ -37,8 +37,11 @@ _M_TRIM_THRESHOLD = -1
 _M_MMAP_THRESHOLD = -3
 #: Blocks from this size on get their own mapping, returned to the OS when freed (:func:`map_large_blocks`).
 MMAP_THRESHOLD_BYTES = 4 * 1024 * 1024
-#: Free memory at the heap's top that glibc keeps rather than returning it at once (:func:`map_large_blocks`).
-TRIM_THRESHOLD_BYTES = 8 * 1024 * 1024
+#: Free memory at the heap's top that glibc keeps rather than returning it at once (:func:`map_large_blocks`). 3 MiB:
+#: with 8 MiB up to that much freed memory stayed resident at the heap's top under MIT CSAIL's last peaks (the loop
+#: closure's pose-graph solve); 3 MiB lowers the peak by about 1 MiB for about 7 more page faults a scan in the
+#: run loop, 1 MiB by a little more for twice the faults (docs/speed.md, pass mem120).
+TRIM_THRESHOLD_BYTES = 3 * 1024 * 1024
 
 
 def map_large_blocks(threshold: int = MMAP_THRESHOLD_BYTES, trim: int = TRIM_THRESHOLD_BYTES) -> bool:

@@ -30,9 +30,11 @@ from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per
 
 #: no long-occupied bitmap (:class:`MapView`'s default)
 _NO_BITS = np.zeros((0, 0), dtype=np.uint64)
+#: the log-odds of a view whose level is growing (:meth:`MapView.detach`)
+_NO_LOGODDS = np.zeros((0, 0), dtype=np.float32)
 
 
-@dataclass(frozen=True, slots=True, eq=False)
+@dataclass(frozen=True, slots=True, eq=False, weakref_slot=True)
 class MapView:
     """Read-only view of one log-odds grid level.
 
@@ -53,12 +55,33 @@ class MapView:
 
     @classmethod
     def of_level(cls, level: object) -> MapView | None:
-        """A view of a :class:`dynslam2d.slam.grid.GridLevel` (None while the level is empty)."""
+        """A view of a :class:`dynslam2d.slam.grid.GridLevel` (None while the level is empty). It follows the
+        level's growth (``GridLevel.follow``): when the level grows it is pointed at the grown arrays and offsets,
+        the same cells with the same values, as a view made after the growth (it views the level's live arrays,
+        as any view does between growths), and it never keeps the old arrays alive while the level copies them
+        (docs/speed.md, pass mem120)."""
         lo = level.logodds
         if lo.size == 0:
             return None
-        return cls(lo, int(level.i0), int(level.j0), float(level.resolution),
+        view = cls(lo, int(level.i0), int(level.j0), float(level.resolution),
                    getattr(level, "occ_bits", _NO_BITS), float(getattr(level, "occ_bits_thr", math.nan)))
+        follow = getattr(level, "follow", None)
+        if follow is not None:
+            follow(view)
+        return view
+
+    def detach(self) -> None:
+        """Let go of the level's arrays while it grows (``GridLevel.follow``): empty arrays until :meth:`follow`."""
+        object.__setattr__(self, "logodds", _NO_LOGODDS)  # (frozen to its readers; only its level re-points it)
+        object.__setattr__(self, "occ_bits", _NO_BITS)
+
+    def follow(self, level: object) -> None:
+        """Take ``level``'s current arrays and offsets (after its growth), as :meth:`of_level` would."""
+        for name, value in (("logodds", level.logodds), ("i0", int(level.i0)), ("j0", int(level.j0)),
+                            ("resolution", float(level.resolution)),
+                            ("occ_bits", getattr(level, "occ_bits", _NO_BITS)),
+                            ("occ_bits_thr", float(getattr(level, "occ_bits_thr", math.nan)))):
+            object.__setattr__(self, name, value)
 
 
 @njit(cache=True)

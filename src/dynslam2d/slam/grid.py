@@ -17,7 +17,10 @@ from __future__ import annotations
 
 import math
 import mmap
+import sys
 import weakref
+from functools import cache
+from typing import Protocol
 
 import numpy as np
 
@@ -41,6 +44,16 @@ _NO_ROWS = np.zeros((0, 0), dtype=np.float32)
 _NO_BITS = np.zeros((0, 0), dtype=np.uint64)
 #: float64's dtype (an array's ``dtype is _F64``: the cheap form of ``== np.float64`` for the arrays NumPy makes)
 _F64 = np.dtype(np.float64)
+
+
+class LevelFollower(Protocol):
+    """A view of a :class:`GridLevel`'s arrays that follows the level's growth (:meth:`GridLevel.follow`)."""
+
+    def detach(self) -> None:
+        """Let go of the level's arrays (the level is about to replace them)."""
+
+    def follow(self, level: GridLevel) -> None:
+        """Take the level's current arrays and offsets."""
 
 
 class MapTooLargeError(RuntimeError):
@@ -90,14 +103,91 @@ def _zeroed_map(shape: tuple[int, int], dtype: type) -> tuple[np.ndarray, mmap.m
     return np.frombuffer(mm, dtype=dt, count=n).reshape(shape), mm
 
 
-def _copy_written_rows(dst: np.ndarray, src: np.ndarray) -> None:
-    """``dst[...] = src`` (2-D, same shape; ``dst`` zeroed) for the rows of ``src`` that hold a cell whose bits are
-    not all zero, each run of such rows as one slice copy: the rows of zeros are left untouched (their pages take
-    no memory). A plain copy's speed where ``np.copyto(..., where=mask)`` took 24 times as long (a per-cell mask)."""
-    rows = src.view(np.int32).any(axis=1).view(np.int8)
-    edges = np.flatnonzero(np.diff(rows, prepend=np.int8(0), append=np.int8(0)))
-    for a, b in zip(edges[::2].tolist(), edges[1::2].tolist()):
-        dst[a:b] = src[a:b]
+#: Bytes of the old array :func:`_copy_written_rows` copies before it gives their pages back (a page multiple): the
+#: growth's transient above the old level is about this, not a whole new array (docs/speed.md, pass mem120).
+_RELEASE_BLOCK = 1 << 18
+#: Rows per block whose span of written columns :func:`_copy_written_rows` copies as one slice.
+_SPAN_ROWS = 8
+#: ``madvise``'s "drop these pages" (a private anonymous map's pages read as zeros afterwards); None without it.
+_MADV_DONTNEED = getattr(mmap, "MADV_DONTNEED", None)
+
+
+def _holder_counts(arr: np.ndarray, entry: tuple[weakref.ref, int] | None) -> tuple[int, int, int, int] | None:
+    """The reference counts of ``arr`` (a level's array), of the array and memoryview that hold its memory and of its
+    memory map (``entry``: a ``GridLevel._maps`` entry), as seen from a call with ``arr`` in one name of the caller;
+    None when ``arr`` is not that map's whole array as :func:`_zeroed_map` made it. A view of ``arr`` (a slice: its
+    base is the 1-D array) or another array of the map (a memoryview of it) raises a count."""
+    mm = None if entry is None else entry[0]()
+    if mm is None or arr.__array_interface__["data"][0] != entry[1]:
+        return None
+    base = arr.base
+    buf = getattr(base, "base", None)
+    if not isinstance(base, np.ndarray) or not isinstance(buf, memoryview) or buf.obj is not mm:
+        return None
+    return sys.getrefcount(arr), sys.getrefcount(base), sys.getrefcount(buf), sys.getrefcount(mm)
+
+
+@cache
+def _sole_counts() -> tuple[int, int, int, int] | None:
+    """:func:`_holder_counts` of an array of :func:`_zeroed_map` that nothing views, held by one name (this
+    interpreter's counts: measured, not assumed)."""
+    arr, mm = _zeroed_map((1, 1), np.float32)
+    entry = (weakref.ref(mm), arr.__array_interface__["data"][0])
+    del mm
+    return _holder_counts(arr, entry)
+
+
+def _copy_written_rows(dst: np.ndarray, src: np.ndarray, release: mmap.mmap | None = None) -> None:
+    """``dst[...] = src`` (2-D, same shape; ``dst`` zeroed) for the cells of ``src`` whose bits are not all zero:
+    per block of :data:`_SPAN_ROWS` rows, the columns from the block's first to its last such cell, as one slice copy
+    (blocks without one are skipped). The zeros left out are not written, so the pages of ``dst`` that would hold only
+    zeros are never touched and take no memory: whole rows copied touched ≈ 4 % more pages on MIT CSAIL's finest
+    level than its non-zero cells need (docs/speed.md, pass mem120). A plain copy's speed where
+    ``np.copyto(..., where=mask)`` took 24 times as long (a per-cell mask).
+
+    ``release``: the memory map whose first bytes are ``src`` (C-contiguous), which nothing reads after this call:
+    each block of about :data:`_RELEASE_BLOCK` bytes of ``src`` copied, its whole pages are given back to the system
+    (``MADV_DONTNEED``), so the old and the new array are never both resident (``src`` reads as zeros after)."""
+    h, w = src.shape
+    if h == 0 or w == 0:
+        return
+    k = _SPAN_ROWS
+    nb = -(-h // k)
+    words = src.view(np.int32)
+    occ = np.empty((nb, w), dtype=bool)  # (a block's columns holding a non-zero cell)
+    np.any(words[:h // k * k].reshape(-1, k, w), axis=1, out=occ[:h // k])
+    if h % k:
+        np.any(words[h // k * k:], axis=0, out=occ[-1])
+    first = occ.argmax(axis=1).tolist()
+    stop = (w - occ[:, ::-1].argmax(axis=1)).tolist()
+    blocks = np.flatnonzero(occ.any(axis=1)).tolist()
+    del occ
+    if release is None or _MADV_DONTNEED is None or not src.flags.c_contiguous:
+        for b in blocks:
+            a, e, c, d = b * k, min(b * k + k, h), first[b], stop[b]
+            dst[a:e, c:d] = src[a:e, c:d]
+        return
+    row_bytes = src.strides[0]
+    done = 0  # bytes of ``src`` given back so far (a page multiple)
+    for b in blocks:
+        a, e, c, d = b * k, min(b * k + k, h), first[b], stop[b]
+        dst[a:e, c:d] = src[a:e, c:d]
+        if (e * row_bytes - done) >= _RELEASE_BLOCK:
+            done = _give_back(release, done, e * row_bytes)
+    _give_back(release, done, h * row_bytes)
+
+
+def _give_back(mm: mmap.mmap, start: int, end: int) -> int:
+    """Give the whole pages of ``mm``'s bytes [``start``, ``end``) back to the system (``start`` a page multiple);
+    returns the end of what was given back (``start`` when less than a page)."""
+    stop = end - end % mmap.PAGESIZE
+    if stop > start:
+        try:
+            mm.madvise(_MADV_DONTNEED, start, stop - start)
+        except (OSError, ValueError):  # (a system that refuses: the pages go when the array does)
+            return start
+        return stop
+    return start
 
 
 class GridLevel:
@@ -129,6 +219,8 @@ class GridLevel:
         #: the array's data); weak: an array replaced from outside lets its map go): :meth:`_grow` extends them in
         #: place when the level grows by rows at its top
         self._maps: dict[str, tuple[weakref.ref, int]] = {}
+        #: the views that follow the level's growth (:meth:`follow`)
+        self._followers: weakref.WeakSet[LevelFollower] = weakref.WeakSet()
         self.occ_bits = _NO_BITS
         self.occ_bits_thr = math.nan
         self.release()
@@ -273,6 +365,11 @@ class GridLevel:
         ni0, nj0, ni1, nj1 = b
         nw, nh = ni1 - ni0, nj1 - nj0
         c0, r0 = self.i0 - ni0, self.j0 - nj0
+        # the views of the level (the tracker's map evidence) let the old arrays go first: only the level holds them
+        # while they are copied, so their pages can be given back block by block (pass mem120)
+        followers = list(self._followers) if self._followers else ()
+        for v in followers:
+            v.detach()
         # one array at a time, each old one let go before the next new one is made: the transient is the old
         # level plus one new array, not old and new levels side by side (MIT CSAIL's last growth of the finest
         # level: 47 instead of 67 MiB; docs/speed.md "Memory, eighth pass").
@@ -289,7 +386,14 @@ class GridLevel:
                     continue
                 new, mm = _zeroed_map((nh, nw), dtype)
                 if w > 0:
-                    _copy_written_rows(new[r0:r0 + h, c0:c0 + w], getattr(self, name))
+                    old = getattr(self, name)
+                    setattr(self, name, new)  # (the level lets the old array go before it is copied)
+                    # (its pages given back while it is copied only when nothing else views it: the counts of the
+                    # references to it and to what holds its memory are those of an array held by one name)
+                    sole = _holder_counts(old, self._maps.get(name)) == _sole_counts()
+                    old_map = self._maps[name][0]() if sole else None
+                    _copy_written_rows(new[r0:r0 + h, c0:c0 + w], old, old_map)
+                    del old, old_map
                 setattr(self, name, new)
                 self._maps[name] = (weakref.ref(mm), new.__array_interface__["data"][0])
                 continue
@@ -312,6 +416,14 @@ class GridLevel:
             self.occ_bits = self._bits_of(rows)
         self.i0, self.j0 = ni0, nj0
         self.n_grows += 1
+        for v in followers:
+            v.follow(self)
+
+    def follow(self, view: LevelFollower) -> None:
+        """Keep ``view`` (which holds this level's arrays) in step with the level: when the level grows, ``view``
+        lets the old arrays go before they are copied (:meth:`LevelFollower.detach`) and is pointed at the grown
+        ones after (:meth:`LevelFollower.follow`), as a view made after the growth would be. Held weakly."""
+        self._followers.add(view)
 
     def _extend_rows(self, name: str, dtype: type, h: int, nh: int) -> bool:
         """Grow array ``name`` ((``h``, W), made by :func:`_zeroed_map`) to ``nh`` rows at its top in place: its memory
