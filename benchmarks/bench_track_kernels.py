@@ -1,18 +1,17 @@
 """The tracker's kernels one by one: thread CPU in situ (first-called in the pipeline) against replayed warm (not run
 by pytest).
 
-Every kernel call of the ``track`` stage (segmentation, rectangle fit, ``detect_rows``, the association's gates and
-solver, the update, the management's counters, the reports, the prediction, the fragments' hosts, the births, the
-free-space memory's reference and test) is wrapped where the tracker's modules call it: after a 60-scan warm-up (a
-throw-away pipeline) one pipeline runs over the input with ``pipeline.run``'s collector setting, each call is timed
-in thread CPU time and its arguments are copied (arrays below 200 000 elements; larger ones, the map, are kept by
-reference). Then each kernel's recorded calls are replayed back to back, ``--reps`` times (fresh copies of the array
-arguments before each call, outside the timing); the least of the repetitions' medians is the warm figure. Printed
-per kernel: the in-situ median, the warm median, their ratio, the calls a scan and the arguments a call. A no-op
-kernel called at the start of every ``Tracker.update`` gives the fixed cost of a first call in situ against its warm
-dispatch; the same kernel called again right after it, the part of that cost a second call of the same kernel does
-not pay; then a no- op with 33 arguments (16 arrays of 700 floats, 17 floats: as many as ``detect_rows``') on even
-scans and one with its 16 arrays alone on odd ones, the in-situ price of the arguments.
+Every kernel call of the ``track`` stage (inside ``Tracker.update``) is wrapped where the tracker's modules call it
+(:func:`track_targets` finds them in the modules, so a renamed or moved kernel is followed, not missed): after a
+60-scan warm-up (a throw-away pipeline) one pipeline runs over the input with ``pipeline.run``'s collector setting,
+each call is timed in thread CPU time and its arguments are copied (arrays below 200 000 elements; larger ones, the
+map, are kept by reference). Then each kernel's recorded calls are replayed back to back, ``--reps`` times (fresh
+copies of the array arguments before each call, outside the timing); the least of the repetitions' medians is the
+warm figure. Printed per kernel: the in-situ median, the warm median, their ratio, the calls a scan and the
+arguments a call. A no-op kernel called at the start of every ``Tracker.update`` gives the fixed cost of a first
+call in situ against its warm dispatch; the same kernel called again right after it, the part of that cost a second
+call of the same kernel does not pay; then a no- op with 33 arguments (16 arrays of 700 floats, 17 floats: as many
+as ``detect_rows``') on even scans and one with its 16 arrays alone on odd ones, the in-situ price of the arguments.
 
     PYTHONPATH=src taskset -c 1 python benchmarks/bench_track_kernels.py negative_2/right sim:paper [--reps 3]
         [--data <data>]
@@ -36,14 +35,51 @@ from bench_pipeline import scan_loop_gc  # noqa: E402
 
 WARMUP = 60
 BIG = 200_000  # arrays with more elements are not copied (the map view's log-odds)
-# (module, name): where the tracker's steps look the kernels up
-TARGETS = [("dynslam2d.detect.trackdetect", "detect_scan"), ("dynslam2d.detect.tracker", "cv_predict"),
-           ("dynslam2d.detect.tracker", "associate_scan"),
-           ("dynslam2d.detect.trackupdate", "update_pairs"), ("dynslam2d.detect.trackmanage", "manage_counters"),
-           ("dynslam2d.detect.tracker", "fragment_hosts_rows"), ("dynslam2d.detect.tracker", "birth_rows"),
-           ("dynslam2d.detect.trackreport", "report_rows"), ("dynslam2d.detect.freespace", "_ref_arrays"),
-           ("dynslam2d.detect.freespace", "seen_through_refs")]
+#: The modules whose Python the ``track`` stage runs: the kernels are wrapped where these look them up.
+TRACK_MODULES = ("tracker", "trackdetect", "trackupdate", "trackmanage", "trackreport", "tracktable", "freespace",
+                 "segment", "mapevidence", "measure", "shapes", "vehicles", "body")
 
+
+def _is_kernel(obj: object) -> bool:
+    """A numba dispatcher (JIT) or an AOT kernel (both keep the Python function as ``py_func``)."""
+    return callable(obj) and hasattr(obj, "py_func")
+
+
+def track_targets() -> list[tuple[str, str]]:
+    """(module, name) of every kernel the track stage's modules (:data:`TRACK_MODULES`) call from Python, derived
+    from the modules themselves so that a renamed or moved kernel cannot leave a stale name here: each module's
+    attributes that are kernels, less those another kernel of the same module names (numba binds a kernel's callees
+    when it compiles: a wrapper there would not be called, and would break a compile)."""
+    import importlib
+
+    out = []
+    for short in TRACK_MODULES:
+        modname = f"dynslam2d.detect.{short}"
+        mod = importlib.import_module(modname)
+        kern = {n: v for n, v in vars(mod).items() if _is_kernel(v)}
+        callees = {c for v in kern.values() for c in v.py_func.__code__.co_names}
+        out += [(modname, n) for n in sorted(kern) if n not in callees]
+    seen: dict[str, object] = {}
+    for modname, n in out:  # (a name is a key of the tables below: one kernel per name)
+        f = getattr(importlib.import_module(modname), n)
+        if seen.setdefault(n, f) is not f:
+            raise RuntimeError(f"two different kernels named {n} (the last in {modname}): give them distinct keys")
+    if not out:
+        raise RuntimeError(f"no kernel found in {TRACK_MODULES}: the track stage's modules were renamed or moved")
+    return out
+
+
+def check_targets(targets: list[tuple[str, str]]) -> None:
+    """Raise with the stale names if a (module, name) of ``targets`` is no longer a kernel of its module."""
+    import importlib
+
+    stale = [f"{m}.{n}" for m, n in targets if not _is_kernel(getattr(importlib.import_module(m), n, None))]
+    if stale:
+        raise RuntimeError(f"not kernels of their modules (renamed or moved?): {', '.join(stale)}")
+
+
+#: (module, name): where the track stage's modules look its kernels up (derived: :func:`track_targets`).
+TARGETS = track_targets()
 
 
 def warmed_scans(name: str, data: Path) -> list:
@@ -90,7 +126,8 @@ def run(name: str, data: Path, reps: int) -> None:
     noop2: list[int] = []  # (the same no-op called again right after the first)
     noop33: list[int] = []  # (the 33-argument no-op, called after them)
     noop16: list[int] = []  # (the 16-array no-op, on every other scan in its place)
-    on = [False]
+    on = [False]  # (inside Tracker.update)
+    active = [False]  # (the measured pipeline, not the warm-up)
     undo = []
 
     def wrap(n: str, f):
@@ -119,7 +156,7 @@ def run(name: str, data: Path, reps: int) -> None:
     update = tracker_mod.Tracker.update
 
     def probed(self, *a, **k):
-        if on[0]:
+        if active[0]:
             t0 = clock()
             _noop(probe)
             t1 = clock()
@@ -133,17 +170,21 @@ def run(name: str, data: Path, reps: int) -> None:
             (noop16 if len(noop) % 2 else noop33).append(t3 - t2)
             noop.append(t1 - t0)
             noop2.append(t2 - t1)
-        return update(self, *a, **k)
+        on[0] = active[0]  # (only the track stage's calls: some kernels are also called by other stages)
+        try:
+            return update(self, *a, **k)
+        finally:
+            on[0] = False
 
     tracker_mod.Tracker.update = probed
     try:
         scans = warmed_scans(name, data)
         pipe = Pipeline()
-        on[0] = True
+        active[0] = True
         with scan_loop_gc():
             for s in scans:
                 pipe.process(s)
-        on[0] = False
+        active[0] = False
     finally:
         tracker_mod.Tracker.update = update
         for mod, n, f in undo:
@@ -151,7 +192,7 @@ def run(name: str, data: Path, reps: int) -> None:
     print(f"{name}: {len(scans)} scans; thread CPU µs a call, medians: in situ / replayed warm (ratio), calls a scan, "
           "arguments a call")
     tot_s = tot_w = n_args = 0.0
-    for _, n in TARGETS:
+    for n in dict.fromkeys(n for _, n in TARGETS):  # (a kernel looked up in two modules: one row)
         if not calls[n]:
             continue
         f = kernels[n]
