@@ -49,9 +49,9 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "aligned=True), 3), UniTuple(int64, 3), UniTuple(int64, 3), int64, Array(int64, 2, 'C'), "
      "Array(int64, 1, 'C'),)"),
     ('dynslam2d.slam.ledgerkernels.stand_marks',
-     "(Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), int64, float64, float64, "
-     'float64,)'),
+     "(Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
+     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), int64, "
+     'float64, float64, float64,)'),
     ('dynslam2d.slam.raycast.integrate_levels',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), float64, float64, float64, float64, "
      "UniTuple(Array(float32, 2, 'C', False, aligned=True), 4), UniTuple(Array(uint32, 2, 'C', False, "
