@@ -1251,10 +1251,11 @@ class EvidenceLedger:
         ``tracks`` are those reports, in that order, each box centre and velocity the values of its row: x, y (m),
         vx, vy (m/s), map frame); None: read from the reports themselves."""
         lk = _lk or _kernels()
-        tracks = TrackReports.of_tracks(tracks)
+        if type(tracks) is not TrackReports:
+            tracks = TrackReports.of_tracks(tracks)
         ids = tracks.ids
         nr = 0
-        n_all = len(tracks)  # (once: a Python ``__len__``)
+        n_all = len(ids)  # (the reports' count: ``len(tracks)`` without its Python ``__len__``)
         if states is not None:
             X, rows = states
             nr = rows.shape[0]
@@ -1316,15 +1317,16 @@ class EvidenceLedger:
         fresh = self._fresh  # (the ledgers started since the previous call: not seen in it)
         stays = self._stays
         if prev is not None:
-            if prev[4]:
-                stays.update(prev[4])  # (a stay is started only for an id of the removal set)
+            p_rm = prev[4]
+            if p_rm:  # (a stay is started only for an id of the removal set; one that is still in it goes on)
+                stays.update(p_rm - removing if removing else p_rm)
             if not prev[5]:  # (its sights all written already)
                 prev = None
-        if prev is not None and removing:  # (the previous call's sights of the ledgers now in the set)
-            for tid in removing:
-                led = ledgers.get(tid)
-                if led is not None:
-                    self._close_sight(led, tid, prev, fresh)
+            elif removing:  # (the previous call's sights of the ledgers that entered the set since)
+                for tid in (removing - p_rm if p_rm else removing):
+                    led = ledgers.get(tid)
+                    if led is not None:
+                        self._close_sight(led, tid, prev, fresh)
         if len(live) != n_all:  # (an id listed twice: every sight written at once, as before pass glu121)
             self._sight_all(tracks, ids, removing, stamp)
             self._sc = (tracks, ids, stamp, live, removing, False)
