@@ -487,7 +487,9 @@ class _Ledger:
     kbc: list | None = None
     #: the track as last seen out of the removal set (None once the track ended): its ``Track``, or its scan's
     #: ``TrackReports`` (its index there :attr:`last_at`) while that report was not built (``TrackReports.sight``,
-    #: passes trk90, trk97: two slots, no tuple a ledger and scan)
+    #: passes trk90, trk97: two slots, no tuple a ledger and scan). With ``last_seen``, written lazily since pass
+    #: glu121: while the track is seen out of the removal set they are the last ``observe`` call's, written only when
+    #: the track enters the set or ends (``EvidenceLedger._sync_sights`` writes them for a reader of a live ledger)
     last_track: Track | TrackReports | None = None
     last_at: int = -1  # (last_track's report index when last_track is a TrackReports)
     #: (update's (5, m) row block, first column, end column, levels with rows (bit k: level k)) per map update
