@@ -253,3 +253,34 @@ def test_beam_owners_give_each_beam_to_the_last_track_listing_it(seed: int) -> N
     assert (got[beams[-1]] == 99).all()
     with pytest.raises(IndexError):
         lk.beam_owners(3, np.array([3], dtype=np.int64), np.array([0, 1], dtype=np.int64), ids[:1])
+
+
+def test_stand_marks_writes_the_half_size_of_each_new_box_as_box_key_does() -> None:
+    """Pass obs114: ``stand_marks`` writes a new standing box's half size (``F[id, 2]``) itself — from the live
+    reports' boxes ``B`` (``0.5 * max(l, w)``, Python's ``max``: l unless w > l, NaN in either place included) and
+    from ``E[…, 4]`` for the others — bit for bit ``erasure._box_key``'s; a standing report's stays unchanged."""
+    nan = math.nan
+    lw = [(2.0, 1.0), (1.0, 2.0), (1.5, 1.5), (1.0, nan), (nan, 1.0), (-0.0, 0.0), (0.3, 0.1 + 0.2)]
+    n_live = len(lw)
+    B = np.array([(0.1 * i, -0.2 * i, 0.3, ln, wd) for i, (ln, wd) in enumerate(lw)], dtype=np.float64)
+    X = np.array([(0.1 * i, -0.2 * i, 0.0, 0.0) for i in range(n_live)], dtype=np.float64)
+    rows = np.arange(n_live, dtype=np.int64)
+    E = np.array([(5.0, 6.0, 0.0, 0.0, 0.75), (7.0, 8.0, 0.0, 0.0, nan)], dtype=np.float64)
+    ids = np.arange(n_live + 2, dtype=np.int64)[::-1].copy()
+    F = np.full((16, 5), -9.0)
+    mark = np.full(16, -5, dtype=np.int64)
+    none = np.zeros(0, dtype=np.int64)
+    new = lk.stand_marks(X, rows, B, E, ids, none, F, mark, 1, 10.0, 0.1, 0.5)
+    assert new.tolist() == list(range(n_live + 2))
+    want = [0.5 * max(ln, wd) for ln, wd in lw] + [0.75, nan]
+    got = [F[t, 2] for t in ids.tolist()]
+    assert [math.copysign(1, g) if g == 0 else g for g in got if g == g] == \
+        [math.copysign(1, g) if g == 0 else g for g in want if g == g]
+    assert [g != g for g in got] == [g != g for g in want]
+    # (the next scan, nobody moved: every box stands; a changed size does not rewrite it)
+    B2 = B.copy()
+    B2[:, 3:5] = 4.0
+    E2 = E.copy()
+    E2[:, 4] = 4.0
+    assert lk.stand_marks(X, rows, B2, E2, ids, none, F, mark, 2, 11.0, 0.1, 0.5).shape[0] == 0
+    assert [F[t, 2] != F[t, 2] or F[t, 2] == g for t, g in zip(ids.tolist(), got)] == [True] * len(got)

@@ -107,6 +107,7 @@ def _ended_tracks(led: EvidenceLedger) -> list:
 def _state(led: EvidenceLedger, full: bool = True) -> tuple:
     """The ledger's whole state; without ``full``, only what does not wait for :meth:`EvidenceLedger._finish_ended`
     (the ended ledgers' ids and stamps, not their packed rows; not the counters)."""
+    led._sync_sights()  # (pass glu121: the live ledgers' last sights written as they read)
     if not full:
         return (sorted(led._first.items()), [(k, _ledger_state(v)) for k, v in led._ledgers.items()],
                 [(k, v.last_seen, v.last_box) for k, v in led._ended.items()], led._oldest_ended)
@@ -122,6 +123,9 @@ def test_observe_keeps_the_same_state_as_pass_ledger15s(seed: int, monkeypatch) 
     cfg = MemoryConfig(ledger_keep_s=float(rng.choice([0.5, 2.0, 600.0])), link_margin=0.5, stand_speed=0.25)
     new = EvidenceLedger(cfg, 0.1, 30.0)
     ref = _DictLedger(cfg, 0.1, 30.0)
+    # (pass glu121: a ledger read only every seventh scan, so that its last sights are written from the call that
+    # saw them when the track enters the removal set or ends, not when the state is read)
+    lazy = EvidenceLedger(cfg, 0.1, 30.0)
     pool: dict[int, list] = {}  # id → [state, x, y, standing, size]
     next_id = 1
     stamp = 0.0
@@ -168,6 +172,7 @@ def test_observe_keeps_the_same_state_as_pass_ledger15s(seed: int, monkeypatch) 
         removing = {i for i in removing if rng.random() < 0.85} | {t.id for t in tracks if rng.random() < 0.06}
         _observe_ref(ref, tracks, set(removing), stamp)
         new.observe(tracks, set(removing), stamp)
+        lazy.observe(tracks, set(removing), stamp)
         # (pass led26: ended ledgers are packed and dropped ones counted in batches; at most _END_BATCH wait)
         assert len(new._to_pack) + len(new._to_count) < er._END_BATCH
         assert _state(new, False) == _state(ref, False), scan
@@ -175,11 +180,13 @@ def test_observe_keeps_the_same_state_as_pass_ledger15s(seed: int, monkeypatch) 
         if rng.random() < 0.2 or scan == n_scans - 1:
             new._finish_ended()
             assert _state(new) == _state(ref), scan
+        if scan % 7 == 6:
+            assert _state(lazy, False) == _state(ref, False), scan
         # after observe: ledgers started (before_update / erase_entering), stays in the removal set, rows recorded
         for t in tracks:
             r = rng.random()
             u = float(rng.random())
-            for x in (ref, new):
+            for x in (ref, new, lazy):
                 led = x._ledgers.get(t.id)
                 if led is None and r < 0.25:
                     x._ledgers[t.id] = led = x._new_ledger(t, t.stamp, 3)
@@ -197,9 +204,12 @@ def test_observe_keeps_the_same_state_as_pass_ledger15s(seed: int, monkeypatch) 
             early = _track(next_id, "confirmed", stamp, 0.0, 0.0, 0.0, 1.0)
             ref._ledgers[next_id] = ref._new_ledger(early, stamp, 3)
             new._ledgers[next_id] = new._new_ledger(early, stamp, 3)
+            lazy._ledgers[next_id] = lazy._new_ledger(early, stamp, 3)
         seen_ended = max(seen_ended, len(new._ended))
     assert new.stats["cells_recorded"] > 0 and seen_ended > 0  # (dropped ledgers counted, ended ones kept)
     assert _ended_tracks(ref)  # (the reference's ended ledgers do hold tracks: the test above can fail)
+    lazy._finish_ended()
+    assert _state(lazy) == _state(ref)
 
 
 def test_an_ended_ledger_lets_its_track_and_the_scans_arrays_go() -> None:
@@ -215,6 +225,7 @@ def test_an_ended_ledger_lets_its_track_and_the_scans_arrays_go() -> None:
     t = Track(**{**{f: getattr(t, f) for f in Track.__dataclass_fields__}, "covariance": cov[1]})
     led._ledgers[7] = led._new_ledger(t, 0.0, 3)
     led.observe([t], set(), 0.0)
+    led._sync_sights()  # (pass glu121: written when read)
     assert led._ledgers[7].last_track is t
     gone = weakref.ref(cov)
     del t, cov

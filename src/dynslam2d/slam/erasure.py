@@ -106,6 +106,7 @@ _NO_F32 = np.zeros((0, 0), dtype=np.float32)
 _NO_I32 = np.zeros((0, 0), dtype=np.int32)
 #: empty inputs of ``stand_marks`` (writable: its signature's arrays are; it only reads them)
 _NO_X = np.zeros((0, 4))
+_NO_B = np.zeros((0, 5))  # (no boxes; no E rows: centre, velocity and half size)
 _NO_IDS = np.zeros(0, dtype=np.int64)
 
 
@@ -486,7 +487,9 @@ class _Ledger:
     kbc: list | None = None
     #: the track as last seen out of the removal set (None once the track ended): its ``Track``, or its scan's
     #: ``TrackReports`` (its index there :attr:`last_at`) while that report was not built (``TrackReports.sight``,
-    #: passes trk90, trk97: two slots, no tuple a ledger and scan)
+    #: passes trk90, trk97: two slots, no tuple a ledger and scan). With ``last_seen``, written lazily since pass
+    #: glu121: while the track is seen out of the removal set they are the last ``observe`` call's, written only when
+    #: the track enters the set or ends (``EvidenceLedger._sync_sights`` writes them for a reader of a live ledger)
     last_track: Track | TrackReports | None = None
     last_at: int = -1  # (last_track's report index when last_track is a TrackReports)
     #: (update's (5, m) row block, first column, end column, levels with rows (bit k: level k)) per map update
@@ -780,6 +783,15 @@ class EvidenceLedger:
                       "ended_ledgers_linked": 0, "cells_recorded": 0}
         #: :meth:`summary` once :meth:`release` let the records go (nothing is recorded after that)
         self._final: dict[str, int] | None = None
+        #: the last :meth:`observe` call's sights (pass glu121): (reports, ids, stamp, set of ids, removal set, lazy);
+        #: a live ledger whose id it has out of the removal set, and that existed then, has its last sight there
+        #: (written when read, :meth:`_sync_sights`, or when it stops being seen); lazy False: all written already
+        self._sc: tuple | None = None
+        self._fresh: set[int] = set()  # the ids of the ledgers started since the last observe call
+        self._unconf: dict[int, _Ledger] = {}  # the live ledgers not confirmed yet, by id
+        self._stays: set[int] = set()  # ids whose stay erase_entering started since the last observe call
+        #: the last observe call's ids, their rows, the window start ``_s`` then, its removal set and that set's rows
+        self._rows_cache: tuple = ((), _NO_IDS, -1, set(), _NO_IDS)
 
     # ------------------------------------------------------------------ recording
     def before_update(self, scan: Scan, pose: Pose2D, tracks: Sequence[Track], removed: np.ndarray,
@@ -1011,6 +1023,8 @@ class EvidenceLedger:
         led.ent0 = 0
         led.nb_rows = 0
         led.nb_chunks = 0
+        self._fresh.add(tid)  # (not seen in the last observe call: pass glu121's lazy sights)
+        self._unconf[tid] = led
         return led
 
     @staticmethod
@@ -1241,23 +1255,27 @@ class EvidenceLedger:
         ``tracks`` are those reports, in that order, each box centre and velocity the values of its row: x, y (m),
         vx, vy (m/s), map frame); None: read from the reports themselves."""
         lk = _lk or _kernels()
-        tracks = TrackReports.of_tracks(tracks)
+        if type(tracks) is not TrackReports:
+            tracks = TrackReports.of_tracks(tracks)
         ids = tracks.ids
         nr = 0
-        n_all = len(tracks)  # (once: a Python ``__len__``)
+        n_all = len(ids)  # (the reports' count: ``len(tracks)`` without its Python ``__len__``)
         if states is not None:
             X, rows = states
             nr = rows.shape[0]
-            if nr > n_all:  # (not the reports of these rows)
+            if nr > tracks.n_live:  # (not the live reports of these rows)
                 nr = 0
-        if not nr:
-            X, rows = _NO_X, _NO_IDS
+        if nr:
+            B = tracks.arrays[0]  # (their boxes: the half sizes of new standing boxes, in the kernel, pass obs114)
+        else:
+            X, rows, B = _NO_X, _NO_IDS, _NO_B
         # the other reports (the tracker's dormant ones, or all without ``states``): centre and velocity as rows
         if n_all > nr:  # (the dormant reports as their list when the rows are the live ones': no slice, pass trk97)
             rest = tracks.dormant if nr == tracks.n_live else tracks[nr:]
-            E = np.array([(t.box.px, t.box.py, *t.velocity.tolist()) for t in rest], dtype=np.float64)
+            E = np.array([(b.px, b.py, *t.velocity.tolist(), 0.5 * float(max(b.length, b.width)))
+                          for t, b in ((t, t.box) for t in rest)], dtype=np.float64)  # (_box_key's half size)
         else:
-            E = _NO_X
+            E = _NO_B
         self._obs = c = self._obs + 1
         # the reports' and the removal set's rows of the standing boxes (_rows_of, inlined); the kernel compares rows
         s = self._s
@@ -1272,15 +1290,27 @@ class EvidenceLedger:
             rm = np.array([i - s if i >= lo else get(i, -1) for i in removing], dtype=np.int64) if removing \
                 else _NO_IDS
         else:
-            ida = np.array(ids, dtype=np.int64)
-            rm = np.fromiter(removing, np.int64, len(removing)) if removing else _NO_IDS
-            if s:  # (beyond _ROWS_FLAT; a 0-d array: half the time of a Python int, whose value NumPy inspects)
-                ida -= self._s0
-                if removing:
+            # (the last call's arrays again when its ids, or its removal set, and the window are the same: most
+            # scans of the simulated scenes; the kernel only reads them; pass glu121)
+            ck = self._rows_cache
+            if ck[2] == s and ids == ck[0]:
+                ida = ck[1]
+            else:
+                ida = np.array(ids, dtype=np.int64)
+                if s:  # (beyond _ROWS_FLAT; a 0-d array: half the time of a Python int, whose value NumPy inspects)
+                    ida -= self._s0
+            if not removing:
+                rm = _NO_IDS
+            elif ck[2] == s and removing == ck[3]:
+                rm = ck[4]
+            else:
+                rm = np.fromiter(removing, np.int64, len(removing))
+                if s:
                     rm -= self._s0
+            self._rows_cache = (ids, ida, s, removing, rm)
         # (one kernel call where the per-track test cost ≈ 0.45 µs a track in Python, pass led28)
         cfg = self.config
-        new = lk.stand_marks(X, rows, E, ida, rm, self._F, self._mark, c, stamp, cfg.stand_speed,
+        new = lk.stand_marks(X, rows, B, E, ida, rm, self._F, self._mark, c, stamp, cfg.stand_speed,
                              cfg.link_margin + 0.5)
         if new.shape[0] and new[0] < 0:  # (nothing written: a row below 0 (an id below the window) or beyond)
             if self.compact_ids:
@@ -1291,41 +1321,58 @@ class EvidenceLedger:
                 raise ValueError("track ids must not be negative")
             else:
                 self._room(int(-1 - new[0]))
-            new = lk.stand_marks(X, rows, E, ida, rm, self._F, self._mark, c, stamp, cfg.stand_speed,
+            new = lk.stand_marks(X, rows, B, E, ida, rm, self._F, self._mark, c, stamp, cfg.stand_speed,
                                  cfg.link_margin + 0.5)
-        if new.shape[0]:  # (a new standing box: its half size, _box_key's; the rows as ints, from the ids)
-            F, s, pin = self._F, self._s, self._pin
-            lo = s + self._P
-            for i in new.tolist():
-                tid = ids[i]
-                F[tid - s if tid >= lo else pin[tid], 2] = tracks.box_key(i)[2]
         ledgers = self._ledgers
-        sight, state_of = tracks.sight, tracks.state_of
-        built = tracks.live_built  # (TrackReports.sight inlined for the live reports: no call a ledger, pass trk97)
-        nb = len(built)
-        for i, tid in enumerate(ids):  # (each ledger's last sight)
-            if tid in removing:
-                continue
-            led = ledgers.get(tid)
-            if led is not None:
-                if led.m_start is not None:  # out of the removal set (again); skip and linked are only set
-                    led.m_start, led.skip, led.linked = None, False, False  # (with m_start)
-                # (its box becomes last_box when the track ends; the report kept unbuilt, pass trk90)
-                if i < nb:
-                    r = built[i]
-                    if r is None:
-                        led.last_track, led.last_at = tracks, i
-                    else:
-                        led.last_track = r
-                else:
-                    led.last_track = sight(i)
-                led.last_seen = stamp
-                if not led.confirmed and state_of(i) != "tentative":
-                    led.confirmed = True
         live = set(ids)
+        # each ledger's last sight out of the removal set, kept lazily (pass glu121): a ledger seen out of the set in
+        # the last call takes that call's report as its last sight when it is read (``_sync_sights``) or when it
+        # stops being seen (it enters the set or ends: written below, from the previous call); only the stays'
+        # resets and the unconfirmed ledgers' state test are made here, for the few ledgers they concern
+        prev = self._sc
+        fresh = self._fresh  # (the ledgers started since the previous call: not seen in it)
+        stays = self._stays
+        if prev is not None:
+            p_rm = prev[4]
+            if p_rm:  # (a stay is started only for an id of the removal set; one that is still in it goes on)
+                stays.update(p_rm - removing if removing else p_rm)
+            if not prev[5]:  # (its sights all written already)
+                prev = None
+            elif removing:  # (the previous call's sights of the ledgers that entered the set since)
+                for tid in (removing - p_rm if p_rm else removing):
+                    led = ledgers.get(tid)
+                    if led is not None:
+                        self._close_sight(led, tid, prev, fresh)
+        if len(live) != n_all:  # (an id listed twice: every sight written at once, as before pass glu121)
+            self._sight_all(tracks, ids, removing, stamp)
+            self._sc = (tracks, ids, stamp, live, removing, False)
+        else:
+            self._sc = (tracks, ids, stamp, live, removing, True)
+            if stays:
+                for tid in stays:  # out of the removal set (again): the stay ends (skip and linked only with m_start)
+                    led = ledgers.get(tid)
+                    if led is not None and led.m_start is not None and tid in live and tid not in removing:
+                        led.m_start, led.skip, led.linked = None, False, False
+                stays.clear()
+            unconf = self._unconf
+            if unconf:  # (the ledgers not confirmed yet: confirmed when seen out of the set in a state past tentative)
+                state_of = tracks.state_of
+                for tid in [tid for tid in unconf if tid in live and tid not in removing
+                            and state_of(ids.index(tid)) != "tentative"]:
+                    unconf.pop(tid).confirmed = True
         for tid in [i for i in ledgers if i not in live]:  # (in the ledgers' order)
             led = ledgers.pop(tid)
-            if led.last_track is not None:
+            if self._unconf:
+                self._unconf.pop(tid, None)
+            if prev is not None and tid in prev[3] and tid not in prev[4] and tid not in fresh:
+                # (seen out of the set in the previous call: its last box and stamp from that report, as
+                # _close_sight then _last_key give them)
+                i = prev[1].index(tid)
+                r = prev[0].sight(i)
+                led.last_box = prev[0].box_key(i) if type(r) is tuple else _box_key(r)
+                led.last_seen = prev[2]
+                led.last_track = None
+            elif led.last_track is not None:
                 led.last_box = _last_key(led)
                 # (nothing reads an ended ledger's track again: kept, each held its scan's report arrays — the
                 # velocity's and covariance's rows, the detections' beams — for ``ledger_keep_s``, ≈ 3 MiB of
@@ -1343,6 +1390,8 @@ class EvidenceLedger:
                 self._drop(led)  # (its cells count in cells_recorded)
             else:  # (counted in the next batch)
                 self._to_count.append(led)
+        if fresh:
+            fresh.clear()
         if len(self._to_pack) + len(self._to_count) >= _END_BATCH:
             self._finish_ended()
         keep = self.config.ledger_keep_s
@@ -1350,6 +1399,58 @@ class EvidenceLedger:
             for tid in [i for i, led in self._ended.items() if stamp - led.last_seen > keep]:
                 self._drop(self._ended.pop(tid))
             self._oldest_ended = min((led.last_seen for led in self._ended.values()), default=math.inf)
+
+    @staticmethod
+    def _close_sight(led: _Ledger, tid: int, prev: tuple, fresh: set[int]) -> None:
+        """Write ledger ``led``'s (track ``tid``) last sight from the previous :meth:`observe` call ``prev``
+        (:attr:`_sc`) if it was seen out of the removal set there (and already existed): its report kept as
+        ``TrackReports.sight`` gives it, and that call's stamp."""
+        reps, ids, stamp, live, rm = prev[:5]
+        if tid in live and tid not in rm and tid not in fresh:
+            i = ids.index(tid)  # (ids unique in a lazy call)
+            r = reps.sight(i)
+            if type(r) is tuple:
+                led.last_track, led.last_at = reps, i
+            else:
+                led.last_track = r
+            led.last_seen = stamp
+
+    def _sync_sights(self) -> None:
+        """Write every live ledger's last sight that the last :meth:`observe` call left to be read (for tests and
+        inspection: the fields then read as if every sight had been written in the call)."""
+        prev = self._sc
+        if prev is None or not prev[5]:
+            return
+        for tid, led in self._ledgers.items():
+            self._close_sight(led, tid, prev, self._fresh)
+
+    def _sight_all(self, tracks: TrackReports, ids: Sequence[int], removing: set[int], stamp: float) -> None:
+        """Every live ledger's last sight, stay and confirmation written from the reports ``tracks`` (ids ``ids``)
+        at ``stamp``, s (:meth:`observe`'s loop before pass glu121; used when an id is listed twice)."""
+        ledgers = self._ledgers
+        sight, state_of = tracks.sight, tracks.state_of
+        built = tracks.live_built
+        nb = len(built)
+        for i, tid in enumerate(ids):  # (each ledger's last sight)
+            if tid in removing:
+                continue
+            led = ledgers.get(tid)
+            if led is not None:
+                if led.m_start is not None:  # out of the removal set (again); skip and linked are only set
+                    led.m_start, led.skip, led.linked = None, False, False  # (with m_start)
+                if i < nb:
+                    r = built[i]
+                    if r is None:
+                        led.last_track, led.last_at = tracks, i
+                    else:
+                        led.last_track = r
+                else:
+                    led.last_track = sight(i)
+                led.last_seen = stamp
+                if not led.confirmed and state_of(i) != "tentative":
+                    led.confirmed = True
+                    self._unconf.pop(tid, None)
+        self._stays.clear()
 
     def _finish_ended(self) -> None:
         """Pack the ended ledgers and count the new cells of the dropped ones that :meth:`observe` set aside.
@@ -1449,6 +1550,7 @@ class EvidenceLedger:
             x, y = r[0], r[1]
             if led.m_start is None:
                 led.m_start = (x, y)
+                self._stays.add(tid)
                 (fx, fy, fh), f_t, last_t = self._first_of(tid) or (led.first_box, led.first_t, led.first_t)
                 led.first_box, led.first_t = (fx, fy, fh), f_t
                 # only what stood before it moved wrote evidence worth erasing (a person born walking enters
@@ -1554,6 +1656,11 @@ class EvidenceLedger:
         this starts from empty records; :meth:`summary` keeps returning the counters of the release."""
         self._final = self.summary()
         self._ledgers = {}
+        self._sc = None
+        self._fresh = set()
+        self._unconf = {}
+        self._stays = set()
+        self._rows_cache = ((), _NO_IDS, -1, set(), _NO_IDS)
         self._ended = {}
         self._to_pack = []
         self._to_count = []

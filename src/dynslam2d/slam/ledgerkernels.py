@@ -650,20 +650,23 @@ def level_rows(logodds, uidx, i0, j0, n_lv, blk, small):  # pragma: no cover - n
 
 _F2 = types.float64[:, ::1]
 #: :func:`stand_marks`' signature (one specialisation, compiled or loaded when the module is imported)
-_STAND_SIG = _I1(_F2, _I1, _F2, _I1, _I1, _F2, _I1, types.int64, types.float64, types.float64, types.float64)
+_STAND_SIG = _I1(_F2, _I1, _F2, _F2, _I1, _I1, _F2, _I1, types.int64, types.float64, types.float64, types.float64)
 
 
 @njit(_STAND_SIG, cache=True)
-def stand_marks(X, rows, E, ids, rm, F, mark, c, stamp, stand, reach):  # pragma: no cover - numba
+def stand_marks(X, rows, B, E, ids, rm, F, mark, c, stamp, stand, reach):  # pragma: no cover - numba
     """``EvidenceLedger.observe``'s standing test of one scan's reports, in report order (slam/erasure.py).
 
     Report ``i`` (id ``ids[i]``) is at ``X[rows[i], 0:2]`` with velocity ``X[rows[i], 2:4]`` for ``i`` below
     ``rows``' length (the tracker's state rows: a live report's box centre and velocity are that row's values),
-    else at ``E[i - len(rows), 0:2]`` with velocity ``E[…, 2:4]`` (m, m/s, map frame). The standing boxes are
+    else at ``E[i - len(rows), 0:2]`` with velocity ``E[…, 2:4]`` (m, m/s, map frame); its box's half longer side
+    (m) is ``0.5 * max(l, w)`` of ``B[i, 3:5]`` (the live reports' boxes [p_x, p_y, θ, l, w], report order), else
+    ``E[…, 4]``. The standing boxes are
     id-indexed: ``F[id]`` = (centre x, y, half size, stamp it began standing there, last stamp it stood there),
     valid when ``mark[id] >= c - 1`` (it was reported in the previous call, ``c - 1``, or earlier in this one).
-    In the order of the reports: a report without a standing box gets one where it is (``F[id, 0:2]``, both
-    stamps ``stamp``; its half size is the caller's to write: the indices of those reports are returned); one
+    In the order of the reports: a report without a standing box gets one where it is (``F[id, 0:3]``, both
+    stamps ``stamp``; the half size written here since pass obs114, the caller's before: the indices of those
+    reports are returned); one
     not in the removal set ``rm`` (ids) that is slower than ``stand`` (m/s) stood there still (the last stamp
     set to ``stamp``) when its centre is within ``reach`` (m) of the box's, else starts standing where it is
     (as a new one). Speeds and distances are Python's ``math.hypot`` bit for bit (``kernels_update.py_hypot``).
@@ -722,6 +725,11 @@ def stand_marks(X, rows, E, ids, rm, F, mark, c, stamp, stand, reach):  # pragma
         if start:
             F[tid, 0] = x
             F[tid, 1] = y
+            if i < nr:  # (Python's ``max(ln, wd)``: ln unless wd > ln, NaN included; erasure._box_key)
+                ln, wd = B[i, 3], B[i, 4]
+                F[tid, 2] = 0.5 * (wd if wd > ln else ln)
+            else:
+                F[tid, 2] = E[i - nr, 4]
             F[tid, 3] = stamp
             F[tid, 4] = stamp
             new[m] = i
