@@ -412,7 +412,7 @@ def test_doomed_clusters_are_not_fitted_and_the_results_stay(monkeypatch):
         _, _, offsets, structure, _, _, _, _, px, py, _, _, _ = S._segment_kernel(
             ranges, angles, mask, trig.copy(), fill, q, wrap, True, cos_a, sin_a, c, s, x, y, ref, th, gpar,
             range_max if ref else 0.0)
-        doomed = doomed_clusters(px, py, offsets, structure, p[K.DR_EXT_LIM], p[K.DR_ADMIT] != 0.0,
+        doomed = doomed_clusters(px, py, offsets, structure, ftrig, p[K.DR_EXT_LIM], p[K.DR_ADMIT] != 0.0,
                                  p[K.DR_SEG_MAX_EXTENT], has_map, lo, i0, j0, res, p[K.DR_OCC], p[K.DR_FREE],
                                  int(p[K.DR_FREE_RADIUS]), p[K.DR_MAX_STRUCTURE], p[K.DR_MIN_FREE])
         fits = fit_clusters(px, py, offsets, ~structure, fangles, int(fq[S.FQ_CRITERION]), fq.item(S.FQ_D0),

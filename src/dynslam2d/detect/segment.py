@@ -420,9 +420,9 @@ def detect_scan(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, trig: 
     k = structure.shape[0]
     # (the clusters the classification drops whatever their fit, not fitted: passed to detect_rows as structure, the
     # classification's only read of it; pass det118)
-    doomed = doomed_clusters(px, py, offsets, structure, p[DR_EXT_LIM], p[DR_ADMIT] != 0.0, p[DR_SEG_MAX_EXTENT],
-                             has_map, logodds, i0, j0, res, p[DR_OCC], p[DR_FREE], int(p[DR_FREE_RADIUS]),
-                             p[DR_MAX_STRUCTURE], p[DR_MIN_FREE])
+    doomed = doomed_clusters(px, py, offsets, structure, fit_trig, p[DR_EXT_LIM], p[DR_ADMIT] != 0.0,
+                             p[DR_SEG_MAX_EXTENT], has_map, logodds, i0, j0, res, p[DR_OCC], p[DR_FREE],
+                             int(p[DR_FREE_RADIUS]), p[DR_MAX_STRUCTURE], p[DR_MIN_FREE])
     fit_mask = np.empty(k, dtype=np.bool_)
     for c in range(k):
         fit_mask[c] = not doomed[c]
