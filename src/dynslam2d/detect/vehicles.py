@@ -202,8 +202,11 @@ def doomed_clusters(px: np.ndarray, py: np.ndarray, offsets: np.ndarray, structu
                 doomed[c] = True
                 continue
             n = b + 1 - a
-            qx = px[a:b + 1].copy()
-            qy = py[a:b + 1].copy()
+            qx = np.empty(n)
+            qy = np.empty(n)
+            for i in range(n):
+                qx[i] = px[a + i]
+                qy[i] = py[a + i]
             st = np.empty(n, dtype=np.bool_)
             fr = np.empty(n, dtype=np.bool_)
             un = np.empty(n, dtype=np.bool_)
