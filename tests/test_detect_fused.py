@@ -390,3 +390,50 @@ def test_structure_column_is_the_detections_own_values():
             seen["merged"] += any(d.person for d in dets)
             seen["on"] += any(v > 0.0 for v in got)
     assert seen["scans"] > 100 and seen["merged"] > 10 and seen["on"] > 10
+
+
+def test_doomed_clusters_are_not_fitted_and_the_results_stay(monkeypatch):
+    """Pass det118: ``detect_scan`` does not fit the clusters whose end points are more than √2 · the limit apart
+    (``vehicles.doomed_clusters``: too long for the classification, or long and refused by the vehicle test's map
+    shares), and every result stays bit for bit the chain's, which fits every cluster (:func:`chained`), on every
+    tracker call of sim:crowd (walls longer than the limits) and the van scene (a long cluster the map test keeps).
+    Each doomed cluster's full fit has a side longer than ``segment.max_extent`` (longer than the extent limit where
+    doomed as too long) and none is a detection; long clusters the map test keeps occur, as do both kinds of
+    doomed clusters."""
+    from dynslam2d.detect.vehicles import doomed_clusters
+
+    seen = {"too_long": 0, "refused": 0, "tested_kept": 0}
+    fused = chained(seen=seen)
+
+    def detect_scan(*a):
+        got = fused(*a)
+        (ranges, angles, mask, trig, fill, q, wrap, cos_a, sin_a, c, s, x, y, ref, th, gpar, range_max, fangles,
+         ftrig, fq, p, has_map, lo, i0, j0, res, dphi) = a
+        _, _, offsets, structure, _, _, _, _, px, py, _, _, _ = S._segment_kernel(
+            ranges, angles, mask, trig.copy(), fill, q, wrap, True, cos_a, sin_a, c, s, x, y, ref, th, gpar,
+            range_max if ref else 0.0)
+        doomed = doomed_clusters(px, py, offsets, structure, ftrig, p[K.DR_EXT_LIM], p[K.DR_ADMIT] != 0.0,
+                                 p[K.DR_SEG_MAX_EXTENT], has_map, lo, i0, j0, res, p[K.DR_OCC], p[K.DR_FREE],
+                                 int(p[K.DR_FREE_RADIUS]), p[K.DR_MAX_STRUCTURE], p[K.DR_MIN_FREE])
+        fits = fit_clusters(px, py, offsets, ~structure, fangles, int(fq[S.FQ_CRITERION]), fq.item(S.FQ_D0),
+                            int(fq[S.FQ_CIRCLE_MIN_POINTS]), int(fq[S.FQ_STRIDE]))
+        side = np.maximum(fits[:, F_HI1] - fits[:, F_LO1], fits[:, F_HI2] - fits[:, F_LO2])
+        starts = set(got[7].tolist())  # (the detections' first points: the kept clusters)
+        for cl in np.flatnonzero(doomed & ~structure).tolist():
+            assert side[cl] > p[K.DR_SEG_MAX_EXTENT] and int(offsets[cl]) not in starts
+            if side[cl] > p[K.DR_EXT_LIM]:
+                seen["too_long"] += 1
+            else:
+                seen["refused"] += 1
+        chord = np.hypot(px[offsets[1:] - 1] - px[offsets[:-1]], py[offsets[1:] - 1] - py[offsets[:-1]])
+        tested = (chord / math.sqrt(2.0) > p[K.DR_SEG_MAX_EXTENT] * 1.001) & (side <= p[K.DR_EXT_LIM]) & ~structure
+        seen["tested_kept"] += int((tested & ~doomed).sum()) if has_map else 0
+        return got
+
+    monkeypatch.setattr(tracker_mod, "detect_scan", detect_scan)
+    for src in (open_source("sim:crowd", duration=8.0), _van_source()):
+        pipe = Pipeline(Config())
+        for scan in src:
+            pipe.process(scan)
+    assert seen["chains"] > 150
+    assert seen["too_long"] > 50 and seen["refused"] > 50 and seen["tested_kept"] > 5, seen

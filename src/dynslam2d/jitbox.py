@@ -143,7 +143,7 @@ LOOPS_NOT_VECTORISED = {
     "dynslam2d.detect.kernels_assign.assign_groups": "231f863e608ec456",
     "dynslam2d.slam.ledgerkernels.record_cells": "a06d27988772373c",
     "dynslam2d.detect.shapes.fit_cluster_rows": "4df79f952e43f675",
-    "dynslam2d.detect.segment.detect_scan": "32e984a5ea021e26",
+    "dynslam2d.detect.segment.detect_scan": "5813f765c424848a",
 }
 
 

@@ -24,8 +24,20 @@ import numpy as np
 
 from dynslam2d.detect.config import SegmentConfig
 from dynslam2d.detect.frozen import fast_init
-from dynslam2d.detect.kernels import detect_rows, world_points
+from dynslam2d.detect.kernels import (
+    DR_ADMIT,
+    DR_EXT_LIM,
+    DR_FREE,
+    DR_FREE_RADIUS,
+    DR_MAX_STRUCTURE,
+    DR_MIN_FREE,
+    DR_OCC,
+    DR_SEG_MAX_EXTENT,
+    detect_rows,
+    world_points,
+)
 from dynslam2d.detect.shapes import fit_cluster_rows
+from dynslam2d.detect.vehicles import doomed_clusters
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 from dynslam2d.types import Scan
 
@@ -406,16 +418,21 @@ def detect_scan(ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray, trig: 
         ranges, angles, mask, trig, fill_trig, q, wrap, yes, cos_a, sin_a, pose_c, pose_s, pose_x, pose_y, ref,
         pose_th, gpar, range_max if ref else 0.0)
     k = structure.shape[0]
+    # (the clusters the classification drops whatever their fit, not fitted: passed to detect_rows as structure, the
+    # classification's only read of it; pass det118)
+    doomed = doomed_clusters(px, py, offsets, structure, fit_trig, p[DR_EXT_LIM], p[DR_ADMIT] != 0.0,
+                             p[DR_SEG_MAX_EXTENT], has_map, logodds, i0, j0, res, p[DR_OCC], p[DR_FREE],
+                             int(p[DR_FREE_RADIUS]), p[DR_MAX_STRUCTURE], p[DR_MIN_FREE])
     fit_mask = np.empty(k, dtype=np.bool_)
     for c in range(k):
-        fit_mask[c] = not structure[c]
+        fit_mask[c] = not doomed[c]
     fits = fit_cluster_rows(px, py, offsets, fit_mask, fit_angles, fit_trig, int(fq[FQ_CRITERION]), fq[FQ_D0],
                             int(fq[FQ_CIRCLE_MIN_POINTS]), int(fq[FQ_STRIDE]), yes, fq[FQ_POINT_MAX_POINTS],
                             fq[FQ_POINT_MAX_EXTENT], fq[FQ_MAX_EXTENT], fq[FQ_THIN], fq[FQ_CIRCLE_MAX_RADIUS],
                             fq[FQ_DEPTH_RATIO], fq[FQ_RESIDUAL_RATIO])
     (starts, npts, kinds, lohi, rel, sfits, mfr, first, second, ki, kinds2, fits2, lohi2, rel2, starts2, npts2, px2,
      py2, mbeams, mpts, mmev, theta, centroid, circle, z, R, H, zm, Rm, size_obs, size_kind) = detect_rows(
-        px, py, beams, offsets, fits, structure, pose_x, pose_y, ranges, mask, ax, ay, wrapped, range_max, dphi, p,
+        px, py, beams, offsets, fits, doomed, pose_x, pose_y, ranges, mask, ax, ay, wrapped, range_max, dphi, p,
         has_map, logodds, i0, j0, res)
     if ki.shape[0] and mmev.shape[1]:  # (a pair merged, with a map: the kept rows' columns)
         for r in range(ki.shape[0]):

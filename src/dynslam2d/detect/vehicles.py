@@ -18,6 +18,8 @@ Frames: map frame; units m.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from dynslam2d.detect.config import DetectConfig
@@ -105,6 +107,121 @@ def _admit_long(keep: np.ndarray, fits: np.ndarray, offsets: np.ndarray, px: np.
     return kept
 
 
+@njit(cache=True, inline="always")
+def _three_point_side(px: np.ndarray, py: np.ndarray, a: int, b: int, trig: np.ndarray, low: float) -> float:
+    """The minimum over the table ``trig``'s angles (rows cos, sin) of the longer span of three points' projections
+    (points ``a``, ``b`` and the one of ``a`` … ``b`` farthest from their chord; map frame, m), each projection the
+    expression of :func:`~dynslam2d.detect.shapes._project`: a lower bound of the longer side of the cluster's
+    fitted rectangle, whatever angle the search picks (:func:`doomed_clusters`). Stops at the first angle whose span
+    is ``low`` or less (and returns it): such a cluster is not doomed."""
+    xa = px[a]
+    ya = py[a]
+    dx = px[b] - xa
+    dy = py[b] - ya
+    m = a
+    far = -1.0
+    for i in range(a + 1, b):
+        d = abs(dx * (py[i] - ya) - dy * (px[i] - xa))
+        if d > far:
+            far = d
+            m = i
+    xb = px[b]
+    yb = py[b]
+    xm = px[m]
+    ym = py[m]
+    best = math.inf
+    for k in range(trig.shape[1]):
+        c = trig[0, k]
+        s = trig[1, k]
+        u0 = c * xa + s * ya
+        u1 = c * xb + s * yb
+        u2 = c * xm + s * ym
+        v0 = -s * xa + c * ya
+        v1 = -s * xb + c * yb
+        v2 = -s * xm + c * ym
+        su = max(max(u0, u1), u2) - min(min(u0, u1), u2)
+        sv = max(max(v0, v1), v2) - min(min(v0, v1), v2)
+        span = max(su, sv)
+        if not span > low:
+            return span
+        best = min(best, span)
+    return best
+
+
+@njit(cache=True, inline="always")
+def doomed_clusters(px: np.ndarray, py: np.ndarray, offsets: np.ndarray, structure: np.ndarray, trig: np.ndarray,
+                    ext_lim: float, admit: bool, max_extent: float, has_map: bool, logodds: np.ndarray, i0: int,
+                    j0: int, res: float, occ_thr: float, free_thr: float, free_radius: int, max_structure: float,
+                    min_free: float) -> np.ndarray:
+    """(k,) bool: the clusters marked as ``structure`` and those the classification drops whatever their rectangle
+    fit (:func:`~dynslam2d.detect.kernels.classify_batch`'s side test against ``ext_lim`` and, where ``admit``,
+    :func:`_admit_long`'s map test of the clusters longer than ``max_extent``), found before the fit so that the
+    tracker does not fit them (pass det118). ``px``, ``py``: the clusters' map-frame points (m), cluster c's
+    ``offsets[c]`` … ``offsets[c + 1] − 1``; the map and its thresholds as :func:`_admit_long` takes them.
+
+    Bound: the fit's box holds every point, so along its two axes the first and last points are at least their
+    chord's components apart, and the larger component is at least chord / √2: the longer fitted side ≥ chord / √2
+    at every angle the search may choose. The floats (each side a difference of two rounded projections, the
+    table's cos / sin of norm 1 within 2⁻⁵²) stay within a relative 2⁻⁵⁰ and an absolute 2⁻⁵⁰·(|x| + |y|) of that:
+    the margin below (10⁻⁹ relative and 10⁻⁹·(1 + the end points' |coordinates|) m) covers them. Where that bound
+    decides nothing but the chord is longer than the lower limit, a tighter one without margin: the search picks one
+    angle of the table ``trig`` (rows cos, sin: :func:`~dynslam2d.detect.shapes.fit_cluster_rows`' table, filled;
+    a NaN table: not used), and at each angle the fit's sides are the spans of the points' projections, computed
+    as :func:`~dynslam2d.detect.shapes._project` computes them, so they are at least the spans of three of them
+    (the end points and the point farthest from their chord: an L's corner), bit for bit; the minimum over the
+    table's angles of the longer of those two spans bounds the side the classification reads. A cluster whose
+    bound is above ``ext_lim`` is too long for the classification; one above ``max_extent`` (with ``admit``) is
+    one of the long clusters :func:`_admit_long` tests, and is dropped where its points fail that test (the same
+    kernel per point, the same comparisons; without a map every long cluster fails). A non-finite chord: never
+    doomed."""
+    k = structure.shape[0]
+    doomed = np.empty(k, dtype=np.bool_)
+    for c in range(k):
+        doomed[c] = structure[c]
+        a = offsets[c]
+        b = offsets[c + 1] - 1
+        if structure[c] or b <= a:
+            continue
+        xa = px[a]
+        ya = py[a]
+        xb = px[b]
+        yb = py[b]
+        dx = xb - xa
+        dy = yb - ya
+        side = (math.sqrt(dx * dx + dy * dy) * 0.7071067811865476 * (1.0 - 1e-9)
+                - 1e-9 * (1.0 + abs(xa) + abs(ya) + abs(xb) + abs(yb)))
+        if not side < math.inf:
+            continue
+        low = max_extent if admit else ext_lim
+        if side <= low and math.sqrt(dx * dx + dy * dy) > low and trig[0, 0] == trig[0, 0]:
+            side = _three_point_side(px, py, a, b, trig, low)
+        if side > ext_lim:
+            doomed[c] = True
+        elif admit and side > max_extent:
+            if not has_map:
+                doomed[c] = True
+                continue
+            n = b + 1 - a
+            qx = np.empty(n)
+            qy = np.empty(n)
+            for i in range(n):
+                qx[i] = px[a + i]
+                qy[i] = py[a + i]
+            st = np.empty(n, dtype=np.bool_)
+            fr = np.empty(n, dtype=np.bool_)
+            un = np.empty(n, dtype=np.bool_)
+            map_evidence_kernel(qx, qy, logodds, i0, j0, res, occ_thr, free_thr, free_radius, st, fr, un)
+            ns = 0
+            nf = 0
+            for i in range(n):
+                if st[i]:
+                    ns += 1
+                if fr[i]:
+                    nf += 1
+            doomed[c] = not (float(ns) / float(n) <= max_structure and float(nf) / float(n) >= min_free)
+    return doomed
+
+
 _NO_MAP = np.zeros((0, 0), dtype=np.float32)
 
 
@@ -125,4 +242,4 @@ def admit_long_clusters(keep: np.ndarray, fits: np.ndarray, offsets: np.ndarray,
                        float(seg.vehicle_min_free))
 
 
-__all__ = ["admit_long_clusters", "extent_limit", "long_kept"]
+__all__ = ["admit_long_clusters", "doomed_clusters", "extent_limit", "long_kept"]
