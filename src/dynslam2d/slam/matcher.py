@@ -21,7 +21,7 @@ import numpy as np
 
 from dynslam2d.jitbox import njit, numba_import  # numba's njit (or the AOT kernels'), numba's names
 from dynslam2d.slam.grid import GridLevel
-from dynslam2d.slam.interp import cell_prob, interp_value_grad
+from dynslam2d.slam.interp import cell_prob, cell_prob_pair, interp_value_grad
 
 _nbtypes, _cgutils, _intrinsic, _populate_array = numba_import(
     "numba.types", "numba.core.cgutils", "numba.extending.intrinsic", "numba.np.arrayobj.populate_array")
@@ -152,10 +152,9 @@ def _sums(prob, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cover -
             fb[4, j] = c * sx - s * sy
         for j in range(m):
             k = kb[j]
-            qb[0, j] = cell_prob(flat[k])  # (the cache's words decoded: slam/grid.py encode_probs)
-            qb[1, j] = cell_prob(flat[k + np.uint64(1)])
-            qb[2, j] = cell_prob(flat[k + uw])
-            qb[3, j] = cell_prob(flat[k + uw + np.uint64(1)])
+            # (the cache's words decoded: slam/grid.py encode_probs; each row's two cells from one 8-byte load)
+            qb[0, j], qb[1, j] = cell_prob_pair(flat, k)
+            qb[2, j], qb[3, j] = cell_prob_pair(flat, k + uw)
         for j in range(m):
             fx = fb[0, j]
             fy = fb[1, j]
@@ -832,10 +831,8 @@ def _interp_value(flat, w, h, px, py):  # pragma: no cover - numba
     fx = px - x0
     fy = py - y0
     k = y0 * w + x0
-    p00 = cell_prob(flat[k])
-    p10 = cell_prob(flat[k + 1])
-    p01 = cell_prob(flat[k + w])
-    p11 = cell_prob(flat[k + w + 1])
+    p00, p10 = cell_prob_pair(flat, k)  # (each row's two cells from one 8-byte load)
+    p01, p11 = cell_prob_pair(flat, k + w)
     return (1.0 - fy) * ((1.0 - fx) * p00 + fx * p10) + fy * ((1.0 - fx) * p01 + fx * p11)
 
 
@@ -996,31 +993,36 @@ def gated_points(r, cos_a, sin_a, valid, range_min, range_max, min_dist, max_dis
     k = 0
     n_valid = 0
     n_close = 0
+    # one branch-free pass classifies every beam (1: a return kept as a point, 2: a clearing ray, 0: neither) and
+    # counts; the second pass only reads the class (the same tests as before, each made once: the same outputs)
+    kind = np.empty(n, dtype=np.uint8)
+    clearing = clear_dist > 0.0
     for i in range(n):
         ri = r[i]
-        if drop is not None and drop[i]:
-            ri = math.nan
-        if stats and math.isfinite(ri) and ri >= range_min and ri <= range_max:
-            n_valid += 1
-            if ri <= min_dist:
-                n_close += 1
-        if valid[i] and ri > min_dist and ri < max_dist:
-            m += 1
-        elif clear_dist > 0.0 and (not math.isfinite(ri) or ri > range_max or ri >= max_dist):
-            k += 1
+        if drop is not None:
+            ri = math.nan if drop[i] else ri
+        fin = math.isfinite(ri)
+        if stats:
+            v = fin & (ri >= range_min) & (ri <= range_max)
+            n_valid += 1 if v else 0
+            n_close += 1 if v & (ri <= min_dist) else 0
+        p = valid[i] & (ri > min_dist) & (ri < max_dist)
+        q = (not p) & clearing & ((not fin) | (ri > range_max) | (ri >= max_dist))
+        m += 1 if p else 0
+        k += 1 if q else 0
+        kind[i] = 1 if p else (2 if q else 0)
     pts = np.empty((m, 2))
     clear = np.empty((k, 2))
     m = 0
     k = 0
     for i in range(n):
-        ri = r[i]
-        if drop is not None and drop[i]:
-            ri = math.nan
-        if valid[i] and ri > min_dist and ri < max_dist:
+        c = kind[i]
+        if c == 1:
+            ri = r[i]  # (a dropped beam is never a point: its range is read as it is)
             pts[m, 0] = ri * cos_a[i]
             pts[m, 1] = ri * sin_a[i]
             m += 1
-        elif clear_dist > 0.0 and (not math.isfinite(ri) or ri > range_max or ri >= max_dist):
+        elif c == 2:
             clear[k, 0] = clear_dist * cos_a[i]
             clear[k, 1] = clear_dist * sin_a[i]
             k += 1
