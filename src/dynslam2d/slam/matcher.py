@@ -21,7 +21,7 @@ import numpy as np
 
 from dynslam2d.jitbox import njit, numba_import  # numba's njit (or the AOT kernels'), numba's names
 from dynslam2d.slam.grid import GridLevel
-from dynslam2d.slam.interp import cell_prob, cell_prob_pair, interp_value_grad
+from dynslam2d.slam.interp import cell_prob_pair, interp_value_grad
 
 _nbtypes, _cgutils, _intrinsic, _populate_array = numba_import(
     "numba.types", "numba.core.cgutils", "numba.extending.intrinsic", "numba.np.arrayobj.populate_array")
@@ -155,6 +155,17 @@ def _sums(prob, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cover -
             # (the cache's words decoded: slam/grid.py encode_probs; each row's two cells from one 8-byte load)
             qb[0, j], qb[1, j] = cell_prob_pair(flat, k)
             qb[2, j], qb[3, j] = cell_prob_pair(flat, k + uw)
+        if not full:  # (the cost alone: only each point's (1 − M)², the same operations as below)
+            for j in range(m):
+                fx = fb[0, j]
+                fy = fb[1, j]
+                mv = (1.0 - fy) * ((1.0 - fx) * qb[0, j] + fx * qb[1, j]) \
+                    + fy * ((1.0 - fx) * qb[2, j] + fx * qb[3, j])
+                r = 1.0 - mv
+                tb[0, j] = r * r if fb[2, j] != 0.0 else 1.0
+            for j in range(m):
+                cost += tb[0, j]
+            continue
         for j in range(m):
             fx = fb[0, j]
             fy = fb[1, j]
@@ -183,10 +194,6 @@ def _sums(prob, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cover -
             tb[8, j] = my * my if inb else 0.0
             tb[9, j] = my * dth if inb else 0.0
             tb[10, j] = dth * dth if inb else 0.0
-        if not full:
-            for j in range(m):
-                cost += tb[0, j]
-            continue
         if not stats:  # (the same sums of the cost, g and H, in the same order: each has its own accumulator)
             for j in range(m):
                 cost += tb[0, j]
