@@ -12,7 +12,7 @@ from numba import njit
 
 from dynslam2d.slam.grid import encode_probs
 from dynslam2d.slam.interp import cell_prob, cell_prob_pair
-from dynslam2d.slam.matcher import _scaled_rows, _sums, gated_points, no_drop
+from dynslam2d.slam.matcher import _degeneracy_kernel, _scaled_rows, _sums, gated_points, no_drop
 from dynslam2d.types import Pose2D
 
 
@@ -101,3 +101,77 @@ def test_gated_points_equal_the_mask_reference_with_drops_and_bad_ranges() -> No
         assert pts.tobytes() == want[0].tobytes() and pts.shape == want[0].shape
         assert ends.tobytes() == want[1].tobytes() and ends.shape == want[1].shape
         assert (n_valid, n_close) == want[2:]
+
+
+def test_the_matchers_degeneracy_values_are_the_processors_bit_for_bit() -> None:
+    """``match_multires(..., degeneracy_threshold=t)``'s fit holds :func:`degeneracy_values` of its Hessian (the axis
+    normalised by ``unit_axis``): every value's bits, on the paper room at poses around its first one, with the gate's
+    Σ x² + y² and without it."""
+    from dynslam2d.slam.matcher import degeneracy_values, match_multires, unit_axis
+
+    slam, pose = paper_room_slam()
+    rng = np.random.default_rng(5)
+    n_deg = 0
+    for i in range(40):
+        start = Pose2D(pose.x + rng.normal(0.0, 0.1), pose.y + rng.normal(0.0, 0.1), pose.theta + rng.normal(0, 0.05))
+        pts, _, _, _, _, sumsq = gated_points(*_gate_args(slam, paper_room_scan(start)))
+        if i % 3 == 0:  # a few points only: a weak, often degenerate Hessian
+            pts = np.ascontiguousarray(pts[rng.integers(0, pts.shape[0], 12)])
+            sumsq = None
+        for t in (0.05, 0.5):
+            fit: list = []
+            match_multires(slam.map.levels, pts, start.as_array(), 4, 6, fit=fit, free_thresh=0.45,
+                           degeneracy_threshold=t, sumsq=sumsq)
+            got = list(fit[0].degeneracy)
+            got[3], got[4] = unit_axis(got[3], got[4])
+            want = degeneracy_values(fit[0].hessian, slam.map.levels[0].resolution, pts, t, sumsq)
+            assert np.array(got[:7]).tobytes() == np.array(want[:7]).tobytes()
+            assert tuple(got[7:]) == tuple(want[7:])
+            n_deg += int(want[7] or want[8])
+    assert n_deg > 0
+
+
+def _gate_args(slam, scan):  # type: ignore[no-untyped-def]
+    c = slam.config
+    cos_a, sin_a = scan.trig()
+    return (scan.ranges, cos_a, sin_a, scan.valid_view(), float(scan.range_min), float(scan.range_max),
+            float(c.laser_min_dist), float(c.laser_max_dist), float(c.clear_no_return_dist), True,
+            no_drop(scan.ranges.shape[0]))
+
+
+@njit(cache=False)
+def _kernel_values(Hs, res, n, sumsq, t):  # pragma: no cover - numba
+    out = np.empty((Hs.shape[0], 9))
+    two = 2.0 + 0.0 * t  # (a run-time 2.0, as match_multires passes it)
+    for i in range(Hs.shape[0]):
+        r0, r1, r2, ax, ay, rho, lam, t_deg, r_deg = _degeneracy_kernel(Hs[i], res, n, sumsq, t, two)
+        out[i, 0] = r0
+        out[i, 1] = r1
+        out[i, 2] = r2
+        out[i, 3] = ax
+        out[i, 4] = ay
+        out[i, 5] = rho
+        out[i, 6] = lam
+        out[i, 7] = 1.0 if t_deg else 0.0
+        out[i, 8] = 1.0 if r_deg else 0.0
+    return out
+
+
+def test_the_degeneracy_kernel_equals_degeneracy_values_on_many_hessians() -> None:
+    """Random symmetric and asymmetric Hessians (thousands: ``x ** 2`` of CPython — the C library's ``pow`` — and
+    ``x * x`` differ for about one value in a thousand, so a kernel squaring by multiplication fails here)."""
+    from dynslam2d.slam.matcher import degeneracy_values, unit_axis
+
+    rng = np.random.default_rng(9)
+    Hs = rng.normal(0.0, 1.0, (6000, 3, 3)) * rng.choice([1e-3, 1.0, 1e3, 1e5], (6000, 1, 1))
+    Hs[: 3000] = Hs[: 3000] @ Hs[: 3000].transpose(0, 2, 1)  # (positive semi-definite ones)
+    Hs[5990:, 2, 2] = 0.0
+    pts = rng.normal(0.0, 4.0, (300, 2))
+    sumsq = float(np.einsum("ij,ij->", pts, pts))
+    got = _kernel_values(Hs, 0.05, pts.shape[0], sumsq, 0.1)
+    for i in range(Hs.shape[0]):
+        want = degeneracy_values(Hs[i], 0.05, pts, 0.1, sumsq)
+        ax, ay = unit_axis(got[i, 3], got[i, 4])
+        row = (got[i, 0], got[i, 1], got[i, 2], ax, ay, got[i, 5], got[i, 6])
+        assert np.array(row).tobytes() == np.array(want[:7]).tobytes(), i
+        assert (got[i, 7] != 0.0, got[i, 8] != 0.0) == tuple(want[7:])

@@ -15,7 +15,7 @@ Per level, H = Σ JᵀJ and g = Σ (1−M)·J with J = (Mx, My, ∇M·∂S/∂θ
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -469,10 +469,65 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     return out, n_acc
 
 
+@njit(cache=True, inline="always")
+def _degeneracy_kernel(H, resolution, n, sumsq, threshold, two):  # pragma: no cover - numba
+    """:func:`degeneracy_values` of ``H`` (3, 3) in a kernel, the same float operations in the same order, except
+    that the weakest axis (ax, ay) is returned before its normalisation (:func:`unit_axis`: Python's
+    ``math.hypot`` is not numba's). ``two`` is 2.0 given at run time: ``x ** two`` then calls the C library's
+    ``pow``, as CPython's ``x ** 2`` does (a literal 2 would be compiled to ``x * x``, which rounds differently for
+    about one value in a thousand)."""
+    rho = math.sqrt(sumsq / n) if n else 1.0
+    rho = 1e-3 if 1e-3 > rho else rho
+    k = 1.0 / resolution  # world (m, m, rad) → cells / rad
+    a = H[0, 0] * k * k
+    b = 0.5 * (H[0, 1] + H[1, 0]) * k * k
+    d = H[1, 1] * k * k
+    u = 0.5 * (H[0, 2] + H[2, 0]) * k
+    v = 0.5 * (H[1, 2] + H[2, 1]) * k
+    r = H[2, 2]
+    if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(d) and math.isfinite(u) and math.isfinite(v)
+            and math.isfinite(r)) or not a + d > 0.0:
+        return 0.0, 0.0, 0.0, 1.0, 0.0, rho, 0.0, True, True
+    if r > 1e-12 * (a + d):  # rotation marginalized (Schur complement)
+        a2 = a - u * u / r
+        b2 = b - u * v / r
+        d2 = d - v * v / r
+    else:
+        a2 = a
+        b2 = b
+        d2 = d
+    half_tr = 0.5 * (a2 + d2)
+    disc = 0.25 * (a2 - d2) ** two + b2 * b2
+    disc = math.sqrt(0.0 if 0.0 > disc else disc)
+    lam_max = half_tr + disc
+    lam_min = half_tr - disc
+    if not lam_max > 0.0:
+        return 0.0, 0.0, 0.0, 1.0, 0.0, rho, 0.0, True, True
+    if abs(b2) > 1e-300:
+        ax = lam_min - d2
+        ay = b2
+    elif a2 <= d2:
+        ax = 1.0
+        ay = 0.0
+    else:
+        ax = 0.0
+        ay = 1.0
+    t_ratio = (0.0 if 0.0 > lam_min else lam_min) / lam_max
+    det = a * d - b * b
+    s_rot = r - (u * (d * u - b * v) + v * (a * v - b * u)) / det if det > 1e-300 * (a * d + 1e-300) else 0.0
+    r_ratio = (0.0 if 0.0 > s_rot else s_rot) / (rho * rho * lam_max)
+    return (r_ratio if r_ratio < t_ratio else t_ratio, t_ratio, r_ratio, ax, ay, rho, lam_max,
+            t_ratio < threshold, r_ratio < threshold)
+
+
+#: :func:`match_pyramid`'s degeneracy values when it computes none
+_NO_DEGENERACY = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, False, False)
+
+
 @njit(cache=True)
 def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, swapped, use_lm, lam0, lam_max,
                   max_rot, max_trans, use_prior, prior_world, lam_ps, want_fit, free_thresh, H_out,
-                  pose, support_thresh):  # pragma: no cover
+                  pose, support_thresh, deg_thresh, sumsq, two):  # pragma: no cover
     """:func:`match_multires` on a map of at most three levels in one call (the same arithmetic as its Python
     loop): ``prob0`` … ``prob2`` the levels' probability caches (finest first; unused ones any array), ``geo``
     (L, 4) per level (cell side m, i0, j0, 1.0 if empty), ``pts_m`` (n, 2) laser-frame points m, ``start`` the
@@ -487,7 +542,9 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     :func:`free_fraction` below ``free_thresh`` on level min(1, L − 1) at the returned pose with θ wrapped once more
     (as ``Pose2D(x, y, wrap_angle(θ))``); and, unless ``support_thresh`` is NaN, the support count and bins are
     :func:`support_at`'s (count already scaled by the stride; bins, not rad) above ``support_thresh`` on level 0 at
-    that same pose (else 0, 0)."""
+    that same pose (else 0, 0). Unless ``deg_thresh`` is NaN, the last value returned is :func:`degeneracy_values`
+    of that H with ``deg_thresh`` and ``sumsq`` (Σ x² + y² of ``pts_m``, m², NaN: summed here), its axis not
+    normalised (:func:`_degeneracy_kernel`; ``two`` = 2.0); else ``_NO_DEGENERACY``."""
     pose[0] = start[0]
     pose[1] = start[1]
     pose[2] = start[2]
@@ -534,7 +591,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             pose[0] = np.nan
             pose[1] = np.nan
             pose[2] = np.nan
-            return False, 0.0, 0.0, 0, 0.0, 0, 0
+            return False, 0.0, 0.0, 0, 0.0, 0, 0, _NO_DEGENERACY
         pose[0] = (x + i0) * res
         pose[1] = (y + j0) * res
         pose[2] = (th + math.pi) % (2.0 * math.pi) - math.pi  # wrap after each level (§2.5)
@@ -543,7 +600,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             lx, ly, lth = x, y, th
             l_raw, l_summ, l_in = raw, summ, n_in
     if not want_fit or geo[0, 3] != 0.0:
-        return False, 0.0, 0.0, 0, 0.0, 0, 0
+        return False, 0.0, 0.0, 0, 0.0, 0, 0, _NO_DEGENERACY
     free = 0.0
     wth = (pose[2] + math.pi) % (2.0 * math.pi) - math.pi  # (the wrapped θ of Pose2D(x, y, wrap_angle(θ)))
     if geo[fl, 3] == 0.0:
@@ -568,13 +625,19 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
         for a in range(3):
             for b in range(3):
                 H_out[a, b] = Hk[a, b]
-        return True, l_raw, l_summ, l_in, free, n_sup, k_sup
-    g = _stack_array(np.float64, 1, 3)[0]
-    g[:] = 0.0
-    # (accumulate's pass on level 0's rows made in one go; np.bool_, not literals: _match_core's signature of _sums)
-    yes = np.bool_(True)
-    cost, summ, n_in = _sums(prob0, _scaled_rows(pts_m, res), m0, m1, m2, np.bool_(False), yes, yes, H_out, g)
-    return True, cost, summ, n_in, free, n_sup, k_sup
+        cost, summ, n_in = l_raw, l_summ, l_in
+    else:
+        g = _stack_array(np.float64, 1, 3)[0]
+        g[:] = 0.0
+        # (accumulate's pass on level 0's rows made in one go; np.bool_, not literals: _match_core's signature of
+        # _sums)
+        yes = np.bool_(True)
+        cost, summ, n_in = _sums(prob0, _scaled_rows(pts_m, res), m0, m1, m2, np.bool_(False), yes, yes, H_out, g)
+    dg = _NO_DEGENERACY
+    if deg_thresh == deg_thresh:  # (not NaN) the processor's degeneracy analysis of this H, in the same call
+        dg = _degeneracy_kernel(H_out, res, pts_m.shape[0], _sum_squares(pts_m) if sumsq != sumsq else sumsq,
+                                deg_thresh, two)
+    return True, cost, summ, n_in, free, n_sup, k_sup, dg
 
 
 #: level geometry key → (L, 4) float64 array of match_pyramid's ``geo`` (see _level_geometry); a few maps
@@ -615,6 +678,9 @@ class LevelFit:
     cost: float
     score: float
     n_inside: int
+    #: :func:`degeneracy_values` of ``hessian`` (axis not normalised: :func:`unit_axis`) when the matcher's call
+    #: computed it (``match_multires``' ``degeneracy_threshold``), else None
+    degeneracy: tuple | None = field(default=None, compare=False, repr=False)
 
 
 def evaluate(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, swapped: bool = False) -> LevelFit:
@@ -645,6 +711,8 @@ def match_multires(
     fit: list | None = None,
     free_thresh: float = 0.5,
     support_thresh: float | None = None,
+    degeneracy_threshold: float | None = None,
+    sumsq: float | None = None,
 ) -> np.ndarray:
     """Coarse-to-fine matching (Kohlbrecher et al., SSRR 2011 §IV-C; MapRepMultiMap::matchData):
     from the coarsest level down to level 0,
@@ -656,7 +724,9 @@ def match_multires(
     ``fit``: a list that receives ``[evaluate(levels[0], pts_m, pose), free_fraction(levels[min(1, L − 1)], pts_m,
     (x, y, wrap_angle(θ)), free_thresh)]`` of the returned pose when it is finite (from the same kernel call; on a
     map of more than three levels, or for points that are not a C-contiguous float64 array, it stays empty), and with
-    ``support_thresh`` a third item: :func:`support_at` ``(levels[0], pts_m, x, y, wrap_angle(θ), support_thresh)``.
+    ``support_thresh`` a third item: :func:`support_at` ``(levels[0], pts_m, x, y, wrap_angle(θ), support_thresh)``;
+    with ``degeneracy_threshold`` the fit's ``degeneracy`` holds :func:`degeneracy_values` of its Hessian with that
+    threshold and ``sumsq`` (Σ x² + y² of ``pts_m``, m², or None), the axis not normalised.
     Returns the world pose (3,).
     """
     # (a float64 array's copy: np.array's values, C order, without its dtype conversion machinery)
@@ -683,14 +753,17 @@ def match_multires(
         p0 = levels[0].prob
         H = np.empty((3, 3))
         out = np.empty(3)  # (filled by the kernel: a new array is cheaper made here than returned from numba)
-        fitted, cost, summ, n_in, free, n_sup, k_sup = match_pyramid(
+        fitted, cost, summ, n_in, free, n_sup, k_sup, dg = match_pyramid(
             p0, levels[1].prob if n_lv > 1 else p0, levels[2].prob if n_lv > 2 else p0, geo, pts_m, pose,
             iterations_coarse, iterations_finest, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
             use_prior, pw, lam_ps, fit is not None, free_thresh, H, out,
             math.nan if support_thresh is None else support_thresh,
+            math.nan if degeneracy_threshold is None else degeneracy_threshold,
+            math.nan if sumsq is None else sumsq, 2.0,
         )
         if fitted and fit is not None:
-            fit[:] = [LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in)), float(free)]
+            fit[:] = [LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in),
+                               None if degeneracy_threshold is None else dg), float(free)]
             if support_thresh is not None:
                 fit.append((int(n_sup), k_sup * BIN_ANGLE))
         return out
@@ -1144,6 +1217,14 @@ def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, 
     return Degeneracy(ratio, t_ratio, r_ratio, np.array([ax, ay]), rho, lam_max, t_deg, r_deg)
 
 
+def unit_axis(ax: float, ay: float) -> tuple[float, float]:
+    """(ax, ay) divided by its length ((1, 0) for a zero vector): :func:`degeneracy_values`' weakest axis."""
+    nrm = math.hypot(ax, ay)
+    if nrm > 0.0:
+        return ax / nrm, ay / nrm
+    return 1.0, 0.0
+
+
 def degeneracy_values(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, threshold: float,
                       sumsq: float | None = None) -> tuple[float, float, float, float, float, float, float, bool, bool]:
     """:func:`degeneracy`'s fields as a tuple, the axis as its two floats: (ratio, translation_ratio, rotation_ratio,
@@ -1183,11 +1264,7 @@ def degeneracy_values(hessian_cells: np.ndarray, resolution: float, pts_m: np.nd
         ax, ay = 1.0, 0.0
     else:
         ax, ay = 0.0, 1.0
-    nrm = math.hypot(ax, ay)
-    if nrm > 0.0:
-        ax, ay = ax / nrm, ay / nrm
-    else:
-        ax, ay = 1.0, 0.0
+    ax, ay = unit_axis(ax, ay)
     t_ratio = (0.0 if 0.0 > lam_min else lam_min) / lam_max
     det = a * d - b * b
     s_rot = r - (u * (d * u - b * v) + v * (a * v - b * u)) / det if det > 1e-300 * (a * d + 1e-300) else 0.0
