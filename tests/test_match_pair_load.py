@@ -106,7 +106,7 @@ def test_gated_points_equal_the_mask_reference_with_drops_and_bad_ranges() -> No
 def test_the_matchers_degeneracy_values_are_the_processors_bit_for_bit() -> None:
     """``match_multires(..., degeneracy_threshold=t)``'s fit holds :func:`degeneracy_values` of its Hessian (the axis
     normalised by ``unit_axis``): every value's bits, on the paper room at poses around its first one, with the gate's
-    Σ x² + y² and without it."""
+    Σ x² + y² (and none without it)."""
     from dynslam2d.slam.matcher import degeneracy_values, match_multires, unit_axis
 
     slam, pose = paper_room_slam()
@@ -117,7 +117,7 @@ def test_the_matchers_degeneracy_values_are_the_processors_bit_for_bit() -> None
         pts, _, _, _, _, sumsq = gated_points(*_gate_args(slam, paper_room_scan(start)))
         if i % 3 == 0:  # a few points only: a weak, often degenerate Hessian
             pts = np.ascontiguousarray(pts[rng.integers(0, pts.shape[0], 12)])
-            sumsq = None
+            sumsq = float(np.einsum("ij,ij->", pts, pts))
         for t in (0.05, 0.5):
             fit: list = []
             match_multires(slam.map.levels, pts, start.as_array(), 4, 6, fit=fit, free_thresh=0.45,
@@ -129,6 +129,9 @@ def test_the_matchers_degeneracy_values_are_the_processors_bit_for_bit() -> None
             assert tuple(got[7:]) == tuple(want[7:])
             n_deg += int(want[7] or want[8])
     assert n_deg > 0
+    fit = []
+    match_multires(slam.map.levels, pts, start.as_array(), 4, 6, fit=fit, degeneracy_threshold=0.1)
+    assert fit[0].degeneracy is None  # (without the gate's Σ x² + y²: the processor computes it)
 
 
 def _gate_args(slam, scan):  # type: ignore[no-untyped-def]

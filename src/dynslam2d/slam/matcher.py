@@ -543,8 +543,8 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     (as ``Pose2D(x, y, wrap_angle(θ))``); and, unless ``support_thresh`` is NaN, the support count and bins are
     :func:`support_at`'s (count already scaled by the stride; bins, not rad) above ``support_thresh`` on level 0 at
     that same pose (else 0, 0). Unless ``deg_thresh`` is NaN, the last value returned is :func:`degeneracy_values`
-    of that H with ``deg_thresh`` and ``sumsq`` (Σ x² + y² of ``pts_m``, m², NaN: summed here), its axis not
-    normalised (:func:`_degeneracy_kernel`; ``two`` = 2.0); else ``_NO_DEGENERACY``."""
+    of that H with ``deg_thresh`` and ``sumsq`` (Σ x² + y² of ``pts_m``, m²), its axis not normalised
+    (:func:`_degeneracy_kernel`; ``two`` = 2.0); else ``_NO_DEGENERACY``."""
     pose[0] = start[0]
     pose[1] = start[1]
     pose[2] = start[2]
@@ -635,8 +635,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
         cost, summ, n_in = _sums(prob0, _scaled_rows(pts_m, res), m0, m1, m2, np.bool_(False), yes, yes, H_out, g)
     dg = _NO_DEGENERACY
     if deg_thresh == deg_thresh:  # (not NaN) the processor's degeneracy analysis of this H, in the same call
-        dg = _degeneracy_kernel(H_out, res, pts_m.shape[0], _sum_squares(pts_m) if sumsq != sumsq else sumsq,
-                                deg_thresh, two)
+        dg = _degeneracy_kernel(H_out, res, pts_m.shape[0], sumsq, deg_thresh, two)
     return True, cost, summ, n_in, free, n_sup, k_sup, dg
 
 
@@ -725,8 +724,9 @@ def match_multires(
     (x, y, wrap_angle(θ)), free_thresh)]`` of the returned pose when it is finite (from the same kernel call; on a
     map of more than three levels, or for points that are not a C-contiguous float64 array, it stays empty), and with
     ``support_thresh`` a third item: :func:`support_at` ``(levels[0], pts_m, x, y, wrap_angle(θ), support_thresh)``;
-    with ``degeneracy_threshold`` the fit's ``degeneracy`` holds :func:`degeneracy_values` of its Hessian with that
-    threshold and ``sumsq`` (Σ x² + y² of ``pts_m``, m², or None), the axis not normalised.
+    with ``degeneracy_threshold`` and ``sumsq`` (Σ x² + y² of ``pts_m``, m², as :func:`gated_points` gives it) the
+    fit's ``degeneracy`` holds :func:`degeneracy_values` of its Hessian with them, the axis not normalised (else
+    None).
     Returns the world pose (3,).
     """
     # (a float64 array's copy: np.array's values, C order, without its dtype conversion machinery)
@@ -758,12 +758,12 @@ def match_multires(
             iterations_coarse, iterations_finest, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
             use_prior, pw, lam_ps, fit is not None, free_thresh, H, out,
             math.nan if support_thresh is None else support_thresh,
-            math.nan if degeneracy_threshold is None else degeneracy_threshold,
+            math.nan if degeneracy_threshold is None or sumsq is None else degeneracy_threshold,
             math.nan if sumsq is None else sumsq, 2.0,
         )
         if fitted and fit is not None:
             fit[:] = [LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in),
-                               None if degeneracy_threshold is None else dg), float(free)]
+                               None if degeneracy_threshold is None or sumsq is None else dg), float(free)]
             if support_thresh is not None:
                 fit.append((int(n_sup), k_sup * BIN_ANGLE))
         return out
