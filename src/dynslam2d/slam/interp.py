@@ -34,6 +34,32 @@ def cell_prob(typingctx, word):
     return sig, codegen
 
 
+@_intrinsic
+def cell_prob_pair(typingctx, flat, k):
+    """In a kernel: ``(cell_prob(flat[k]), cell_prob(flat[k + 1]))`` of a probability cache's C-order words ``flat``
+    (1-D uint32, C-contiguous; ``k`` an integer, ``k + 1`` inside the array: not checked) from ONE 8-byte load of the
+    two adjacent words (a cell and its right neighbour: the bilinear interpolation's two cells of a row). The same
+    words, decoded as :func:`cell_prob` decodes each (XOR the bits of 0.5, bit cast): the same float32 values."""
+    if not (isinstance(flat, _nbtypes.Array) and flat.dtype == _nbtypes.uint32 and flat.ndim == 1
+            and flat.layout == "C" and isinstance(k, _nbtypes.Integer)):
+        return None
+    sig = _nbtypes.UniTuple(_nbtypes.float32, 2)(flat, k)
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        i32 = _lir.IntType(32)
+        vec = _lir.VectorType(i32, 2)
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        idx = context.cast(builder, args[1], signature.args[1], _nbtypes.intp)
+        ptr = builder.bitcast(builder.gep(ary.data, [idx]), vec.as_pointer())
+        words = builder.load(ptr, align=4)  # (the array's words are 4-byte aligned; no 8-byte alignment assumed)
+        half = _lir.Constant(vec, [i32(_HALF_BITS), i32(_HALF_BITS)])
+        probs = builder.bitcast(builder.xor(words, half), _lir.VectorType(_lir.FloatType(), 2))
+        out = [builder.extract_element(probs, i32(i)) for i in range(2)]
+        return context.make_tuple(builder, signature.return_type, out)
+
+    return sig, codegen
+
+
 @njit(cache=True)
 def interp_value_grad(prob, px, py, swapped):  # pragma: no cover - numba
     """(M, ∂M/∂x, ∂M/∂y, inside) at map point (px, py) of probability cache ``prob`` ((H, W) uint32 words,

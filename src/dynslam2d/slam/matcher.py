@@ -15,13 +15,13 @@ Per level, H = Σ JᵀJ and g = Σ (1−M)·J with J = (Mx, My, ∇M·∂S/∂θ
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from dynslam2d.jitbox import njit, numba_import  # numba's njit (or the AOT kernels'), numba's names
 from dynslam2d.slam.grid import GridLevel
-from dynslam2d.slam.interp import cell_prob, interp_value_grad
+from dynslam2d.slam.interp import cell_prob_pair, interp_value_grad
 
 _nbtypes, _cgutils, _intrinsic, _populate_array = numba_import(
     "numba.types", "numba.core.cgutils", "numba.extending.intrinsic", "numba.np.arrayobj.populate_array")
@@ -152,10 +152,20 @@ def _sums(prob, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cover -
             fb[4, j] = c * sx - s * sy
         for j in range(m):
             k = kb[j]
-            qb[0, j] = cell_prob(flat[k])  # (the cache's words decoded: slam/grid.py encode_probs)
-            qb[1, j] = cell_prob(flat[k + np.uint64(1)])
-            qb[2, j] = cell_prob(flat[k + uw])
-            qb[3, j] = cell_prob(flat[k + uw + np.uint64(1)])
+            # (the cache's words decoded: slam/grid.py encode_probs; each row's two cells from one 8-byte load)
+            qb[0, j], qb[1, j] = cell_prob_pair(flat, k)
+            qb[2, j], qb[3, j] = cell_prob_pair(flat, k + uw)
+        if not full:  # (the cost alone: only each point's (1 − M)², the same operations as below)
+            for j in range(m):
+                fx = fb[0, j]
+                fy = fb[1, j]
+                mv = (1.0 - fy) * ((1.0 - fx) * qb[0, j] + fx * qb[1, j]) \
+                    + fy * ((1.0 - fx) * qb[2, j] + fx * qb[3, j])
+                r = 1.0 - mv
+                tb[0, j] = r * r if fb[2, j] != 0.0 else 1.0
+            for j in range(m):
+                cost += tb[0, j]
+            continue
         for j in range(m):
             fx = fb[0, j]
             fy = fb[1, j]
@@ -184,10 +194,6 @@ def _sums(prob, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cover -
             tb[8, j] = my * my if inb else 0.0
             tb[9, j] = my * dth if inb else 0.0
             tb[10, j] = dth * dth if inb else 0.0
-        if not full:
-            for j in range(m):
-                cost += tb[0, j]
-            continue
         if not stats:  # (the same sums of the cost, g and H, in the same order: each has its own accumulator)
             for j in range(m):
                 cost += tb[0, j]
@@ -463,10 +469,65 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     return out, n_acc
 
 
+@njit(cache=True, inline="always")
+def _degeneracy_kernel(H, resolution, n, sumsq, threshold, two):  # pragma: no cover - numba
+    """:func:`degeneracy_values` of ``H`` (3, 3) in a kernel, the same float operations in the same order, except
+    that the weakest axis (ax, ay) is returned before its normalisation (:func:`unit_axis`: Python's
+    ``math.hypot`` is not numba's). ``two`` is 2.0 given at run time: ``x ** two`` then calls the C library's
+    ``pow``, as CPython's ``x ** 2`` does (a literal 2 would be compiled to ``x * x``, which rounds differently for
+    about one value in a thousand)."""
+    rho = math.sqrt(sumsq / n) if n else 1.0
+    rho = 1e-3 if 1e-3 > rho else rho
+    k = 1.0 / resolution  # world (m, m, rad) → cells / rad
+    a = H[0, 0] * k * k
+    b = 0.5 * (H[0, 1] + H[1, 0]) * k * k
+    d = H[1, 1] * k * k
+    u = 0.5 * (H[0, 2] + H[2, 0]) * k
+    v = 0.5 * (H[1, 2] + H[2, 1]) * k
+    r = H[2, 2]
+    if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(d) and math.isfinite(u) and math.isfinite(v)
+            and math.isfinite(r)) or not a + d > 0.0:
+        return 0.0, 0.0, 0.0, 1.0, 0.0, rho, 0.0, True, True
+    if r > 1e-12 * (a + d):  # rotation marginalized (Schur complement)
+        a2 = a - u * u / r
+        b2 = b - u * v / r
+        d2 = d - v * v / r
+    else:
+        a2 = a
+        b2 = b
+        d2 = d
+    half_tr = 0.5 * (a2 + d2)
+    disc = 0.25 * (a2 - d2) ** two + b2 * b2
+    disc = math.sqrt(0.0 if 0.0 > disc else disc)
+    lam_max = half_tr + disc
+    lam_min = half_tr - disc
+    if not lam_max > 0.0:
+        return 0.0, 0.0, 0.0, 1.0, 0.0, rho, 0.0, True, True
+    if abs(b2) > 1e-300:
+        ax = lam_min - d2
+        ay = b2
+    elif a2 <= d2:
+        ax = 1.0
+        ay = 0.0
+    else:
+        ax = 0.0
+        ay = 1.0
+    t_ratio = (0.0 if 0.0 > lam_min else lam_min) / lam_max
+    det = a * d - b * b
+    s_rot = r - (u * (d * u - b * v) + v * (a * v - b * u)) / det if det > 1e-300 * (a * d + 1e-300) else 0.0
+    r_ratio = (0.0 if 0.0 > s_rot else s_rot) / (rho * rho * lam_max)
+    return (r_ratio if r_ratio < t_ratio else t_ratio, t_ratio, r_ratio, ax, ay, rho, lam_max,
+            t_ratio < threshold, r_ratio < threshold)
+
+
+#: :func:`match_pyramid`'s degeneracy values when it computes none
+_NO_DEGENERACY = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, False, False)
+
+
 @njit(cache=True)
 def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, swapped, use_lm, lam0, lam_max,
                   max_rot, max_trans, use_prior, prior_world, lam_ps, want_fit, free_thresh, H_out,
-                  pose, support_thresh):  # pragma: no cover
+                  pose, support_thresh, deg_thresh, sumsq, two):  # pragma: no cover
     """:func:`match_multires` on a map of at most three levels in one call (the same arithmetic as its Python
     loop): ``prob0`` … ``prob2`` the levels' probability caches (finest first; unused ones any array), ``geo``
     (L, 4) per level (cell side m, i0, j0, 1.0 if empty), ``pts_m`` (n, 2) laser-frame points m, ``start`` the
@@ -481,7 +542,9 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     :func:`free_fraction` below ``free_thresh`` on level min(1, L − 1) at the returned pose with θ wrapped once more
     (as ``Pose2D(x, y, wrap_angle(θ))``); and, unless ``support_thresh`` is NaN, the support count and bins are
     :func:`support_at`'s (count already scaled by the stride; bins, not rad) above ``support_thresh`` on level 0 at
-    that same pose (else 0, 0)."""
+    that same pose (else 0, 0). Unless ``deg_thresh`` is NaN, the last value returned is :func:`degeneracy_values`
+    of that H with ``deg_thresh`` and ``sumsq`` (Σ x² + y² of ``pts_m``, m²), its axis not normalised
+    (:func:`_degeneracy_kernel`; ``two`` = 2.0); else ``_NO_DEGENERACY``."""
     pose[0] = start[0]
     pose[1] = start[1]
     pose[2] = start[2]
@@ -528,7 +591,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             pose[0] = np.nan
             pose[1] = np.nan
             pose[2] = np.nan
-            return False, 0.0, 0.0, 0, 0.0, 0, 0
+            return False, 0.0, 0.0, 0, 0.0, 0, 0, _NO_DEGENERACY
         pose[0] = (x + i0) * res
         pose[1] = (y + j0) * res
         pose[2] = (th + math.pi) % (2.0 * math.pi) - math.pi  # wrap after each level (§2.5)
@@ -537,7 +600,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
             lx, ly, lth = x, y, th
             l_raw, l_summ, l_in = raw, summ, n_in
     if not want_fit or geo[0, 3] != 0.0:
-        return False, 0.0, 0.0, 0, 0.0, 0, 0
+        return False, 0.0, 0.0, 0, 0.0, 0, 0, _NO_DEGENERACY
     free = 0.0
     wth = (pose[2] + math.pi) % (2.0 * math.pi) - math.pi  # (the wrapped θ of Pose2D(x, y, wrap_angle(θ)))
     if geo[fl, 3] == 0.0:
@@ -562,13 +625,18 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
         for a in range(3):
             for b in range(3):
                 H_out[a, b] = Hk[a, b]
-        return True, l_raw, l_summ, l_in, free, n_sup, k_sup
-    g = _stack_array(np.float64, 1, 3)[0]
-    g[:] = 0.0
-    # (accumulate's pass on level 0's rows made in one go; np.bool_, not literals: _match_core's signature of _sums)
-    yes = np.bool_(True)
-    cost, summ, n_in = _sums(prob0, _scaled_rows(pts_m, res), m0, m1, m2, np.bool_(False), yes, yes, H_out, g)
-    return True, cost, summ, n_in, free, n_sup, k_sup
+        cost, summ, n_in = l_raw, l_summ, l_in
+    else:
+        g = _stack_array(np.float64, 1, 3)[0]
+        g[:] = 0.0
+        # (accumulate's pass on level 0's rows made in one go; np.bool_, not literals: _match_core's signature of
+        # _sums)
+        yes = np.bool_(True)
+        cost, summ, n_in = _sums(prob0, _scaled_rows(pts_m, res), m0, m1, m2, np.bool_(False), yes, yes, H_out, g)
+    dg = _NO_DEGENERACY
+    if deg_thresh == deg_thresh:  # (not NaN) the processor's degeneracy analysis of this H, in the same call
+        dg = _degeneracy_kernel(H_out, res, pts_m.shape[0], sumsq, deg_thresh, two)
+    return True, cost, summ, n_in, free, n_sup, k_sup, dg
 
 
 #: level geometry key → (L, 4) float64 array of match_pyramid's ``geo`` (see _level_geometry); a few maps
@@ -609,6 +677,9 @@ class LevelFit:
     cost: float
     score: float
     n_inside: int
+    #: :func:`degeneracy_values` of ``hessian`` (axis not normalised: :func:`unit_axis`) when the matcher's call
+    #: computed it (``match_multires``' ``degeneracy_threshold``), else None
+    degeneracy: tuple | None = field(default=None, compare=False, repr=False)
 
 
 def evaluate(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, swapped: bool = False) -> LevelFit:
@@ -639,6 +710,8 @@ def match_multires(
     fit: list | None = None,
     free_thresh: float = 0.5,
     support_thresh: float | None = None,
+    degeneracy_threshold: float | None = None,
+    sumsq: float | None = None,
 ) -> np.ndarray:
     """Coarse-to-fine matching (Kohlbrecher et al., SSRR 2011 §IV-C; MapRepMultiMap::matchData):
     from the coarsest level down to level 0,
@@ -650,7 +723,10 @@ def match_multires(
     ``fit``: a list that receives ``[evaluate(levels[0], pts_m, pose), free_fraction(levels[min(1, L − 1)], pts_m,
     (x, y, wrap_angle(θ)), free_thresh)]`` of the returned pose when it is finite (from the same kernel call; on a
     map of more than three levels, or for points that are not a C-contiguous float64 array, it stays empty), and with
-    ``support_thresh`` a third item: :func:`support_at` ``(levels[0], pts_m, x, y, wrap_angle(θ), support_thresh)``.
+    ``support_thresh`` a third item: :func:`support_at` ``(levels[0], pts_m, x, y, wrap_angle(θ), support_thresh)``;
+    with ``degeneracy_threshold`` and ``sumsq`` (Σ x² + y² of ``pts_m``, m², as :func:`gated_points` gives it) the
+    fit's ``degeneracy`` holds :func:`degeneracy_values` of its Hessian with them, the axis not normalised (else
+    None).
     Returns the world pose (3,).
     """
     # (a float64 array's copy: np.array's values, C order, without its dtype conversion machinery)
@@ -677,14 +753,17 @@ def match_multires(
         p0 = levels[0].prob
         H = np.empty((3, 3))
         out = np.empty(3)  # (filled by the kernel: a new array is cheaper made here than returned from numba)
-        fitted, cost, summ, n_in, free, n_sup, k_sup = match_pyramid(
+        fitted, cost, summ, n_in, free, n_sup, k_sup, dg = match_pyramid(
             p0, levels[1].prob if n_lv > 1 else p0, levels[2].prob if n_lv > 2 else p0, geo, pts_m, pose,
             iterations_coarse, iterations_finest, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
             use_prior, pw, lam_ps, fit is not None, free_thresh, H, out,
             math.nan if support_thresh is None else support_thresh,
+            math.nan if degeneracy_threshold is None or sumsq is None else degeneracy_threshold,
+            math.nan if sumsq is None else sumsq, 2.0,
         )
         if fitted and fit is not None:
-            fit[:] = [LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in)), float(free)]
+            fit[:] = [LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in),
+                               None if degeneracy_threshold is None or sumsq is None else dg), float(free)]
             if support_thresh is not None:
                 fit.append((int(n_sup), k_sup * BIN_ANGLE))
         return out
@@ -832,10 +911,8 @@ def _interp_value(flat, w, h, px, py):  # pragma: no cover - numba
     fx = px - x0
     fy = py - y0
     k = y0 * w + x0
-    p00 = cell_prob(flat[k])
-    p10 = cell_prob(flat[k + 1])
-    p01 = cell_prob(flat[k + w])
-    p11 = cell_prob(flat[k + w + 1])
+    p00, p10 = cell_prob_pair(flat, k)  # (each row's two cells from one 8-byte load)
+    p01, p11 = cell_prob_pair(flat, k + w)
     return (1.0 - fy) * ((1.0 - fx) * p00 + fx * p10) + fy * ((1.0 - fx) * p01 + fx * p11)
 
 
@@ -996,31 +1073,36 @@ def gated_points(r, cos_a, sin_a, valid, range_min, range_max, min_dist, max_dis
     k = 0
     n_valid = 0
     n_close = 0
+    # one branch-free pass classifies every beam (1: a return kept as a point, 2: a clearing ray, 0: neither) and
+    # counts; the second pass only reads the class (the same tests as before, each made once: the same outputs)
+    kind = np.empty(n, dtype=np.uint8)
+    clearing = clear_dist > 0.0
     for i in range(n):
         ri = r[i]
-        if drop is not None and drop[i]:
-            ri = math.nan
-        if stats and math.isfinite(ri) and ri >= range_min and ri <= range_max:
-            n_valid += 1
-            if ri <= min_dist:
-                n_close += 1
-        if valid[i] and ri > min_dist and ri < max_dist:
-            m += 1
-        elif clear_dist > 0.0 and (not math.isfinite(ri) or ri > range_max or ri >= max_dist):
-            k += 1
+        if drop is not None:
+            ri = math.nan if drop[i] else ri
+        fin = math.isfinite(ri)
+        if stats:
+            v = fin & (ri >= range_min) & (ri <= range_max)
+            n_valid += 1 if v else 0
+            n_close += 1 if v & (ri <= min_dist) else 0
+        p = valid[i] & (ri > min_dist) & (ri < max_dist)
+        q = (not p) & clearing & ((not fin) | (ri > range_max) | (ri >= max_dist))
+        m += 1 if p else 0
+        k += 1 if q else 0
+        kind[i] = 1 if p else (2 if q else 0)
     pts = np.empty((m, 2))
     clear = np.empty((k, 2))
     m = 0
     k = 0
     for i in range(n):
-        ri = r[i]
-        if drop is not None and drop[i]:
-            ri = math.nan
-        if valid[i] and ri > min_dist and ri < max_dist:
+        c = kind[i]
+        if c == 1:
+            ri = r[i]  # (a dropped beam is never a point: its range is read as it is)
             pts[m, 0] = ri * cos_a[i]
             pts[m, 1] = ri * sin_a[i]
             m += 1
-        elif clear_dist > 0.0 and (not math.isfinite(ri) or ri > range_max or ri >= max_dist):
+        elif c == 2:
             clear[k, 0] = clear_dist * cos_a[i]
             clear[k, 1] = clear_dist * sin_a[i]
             k += 1
@@ -1135,6 +1217,14 @@ def degeneracy(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, 
     return Degeneracy(ratio, t_ratio, r_ratio, np.array([ax, ay]), rho, lam_max, t_deg, r_deg)
 
 
+def unit_axis(ax: float, ay: float) -> tuple[float, float]:
+    """(ax, ay) divided by its length ((1, 0) for a zero vector): :func:`degeneracy_values`' weakest axis."""
+    nrm = math.hypot(ax, ay)
+    if nrm > 0.0:
+        return ax / nrm, ay / nrm
+    return 1.0, 0.0
+
+
 def degeneracy_values(hessian_cells: np.ndarray, resolution: float, pts_m: np.ndarray, threshold: float,
                       sumsq: float | None = None) -> tuple[float, float, float, float, float, float, float, bool, bool]:
     """:func:`degeneracy`'s fields as a tuple, the axis as its two floats: (ratio, translation_ratio, rotation_ratio,
@@ -1174,11 +1264,7 @@ def degeneracy_values(hessian_cells: np.ndarray, resolution: float, pts_m: np.nd
         ax, ay = 1.0, 0.0
     else:
         ax, ay = 0.0, 1.0
-    nrm = math.hypot(ax, ay)
-    if nrm > 0.0:
-        ax, ay = ax / nrm, ay / nrm
-    else:
-        ax, ay = 1.0, 0.0
+    ax, ay = unit_axis(ax, ay)
     t_ratio = (0.0 if 0.0 > lam_min else lam_min) / lam_max
     det = a * d - b * b
     s_rot = r - (u * (d * u - b * v) + v * (a * v - b * u)) / det if det > 1e-300 * (a * d + 1e-300) else 0.0

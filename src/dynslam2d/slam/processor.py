@@ -37,6 +37,7 @@ from dynslam2d.slam.matcher import (
     match_multires,
     no_drop,
     support_at,
+    unit_axis,
 )
 from dynslam2d.slam.recovery import REJECT_AMBIGUOUS, ScanPeriod, needs_recovery, recover
 from dynslam2d.types import Pose2D, Scan, wrap_angle
@@ -294,6 +295,8 @@ class HectorSlam:
         # (result, pose, (count, spread)): the support the matcher's kernel took at the pose _match_against_map gave
         # that result; :meth:`_support` uses it while the result still holds that same pose object
         self._support_of: tuple[MatchResult, Pose2D, tuple[int, float]] | None = None
+        #: the last :meth:`_fit`'s evaluation (its ``degeneracy``: the matcher's analysis of its Hessian, if taken)
+        self._fit_of: LevelFit | None = None
 
     # ---- properties --------------------------------------------------------------------
     @property
@@ -655,6 +658,7 @@ class HectorSlam:
         c = self.config
         if fit is None:
             fit = evaluate(self.map.levels[0], pts, pose.as_array(), c.hector_gradient_bug)
+        self._fit_of = fit
         res.pose = pose
         res.hessian = fit.hessian
         res.score = fit.score
@@ -665,11 +669,17 @@ class HectorSlam:
     def _apply_prior_and_gate(self, res: MatchResult, pts: np.ndarray, prior: _Prior, stamp: float) -> None:
         """Degeneracy analysis of the match; the prior along degenerate directions; the motion gate."""
         c = self.config
-        sq = self._sumsq
-        # (degeneracy's values, the Degeneracy record made below only when a prior needs it)
-        ratio, t_ratio, r_ratio, ax, ay, rho, lam_max, t_deg, r_deg = degeneracy_values(
-            res.hessian, self.map.levels[0].resolution, pts, c.degeneracy_threshold,
-            sq[1] if sq is not None and sq[0] is pts else None)
+        # (degeneracy's values, the Degeneracy record made below only when a prior needs it): the matcher's, taken
+        # in its kernel call with this Hessian (the same threshold, points and Σ x² + y²), else computed here
+        fit = self._fit_of
+        dv = fit.degeneracy if fit is not None and fit.hessian is res.hessian else None
+        if dv is None:
+            sq = self._sumsq
+            ratio, t_ratio, r_ratio, ax, ay, rho, lam_max, t_deg, r_deg = degeneracy_values(
+                res.hessian, self.map.levels[0].resolution, pts, c.degeneracy_threshold,
+                sq[1] if sq is not None and sq[0] is pts else None)
+        else:
+            ratio, t_ratio, r_ratio, ax, ay, rho, lam_max, t_deg, r_deg = dv  # (the axis not normalised yet)
         # hysteresis: a degenerate direction stays degenerate until its ratio clearly rises above the threshold
         hi = _DEGENERACY_HYSTERESIS * c.degeneracy_threshold
         prev = self._degenerate_prev
@@ -679,6 +689,8 @@ class HectorSlam:
         res.degeneracy = ratio
         res.degenerate = degenerate = t_deg or r_deg  # (Degeneracy.any)
         if degenerate and prior.kind is not None and c.prior_weight > 0.0 and prior.pose.is_finite():
+            if dv is not None:
+                ax, ay = unit_axis(ax, ay)
             deg = Degeneracy(ratio, t_ratio, r_ratio, np.array([ax, ay]), rho, lam_max, t_deg, r_deg)
             info = deg.prior_information(c.prior_weight, prior.axes)
             if np.any(info):
@@ -872,11 +884,13 @@ class HectorSlam:
         c = self.config
         levels, pts, prior_pose, prior_info, fits, _ = ctx
         fitted: list = []  # level 0's evaluation and the free fraction at the result, from the matcher's call
+        sq = self._sumsq  # (and the degeneracy analysis of the evaluation's Hessian, from the same call)
         p = match_multires(
             levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
             c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
             c.max_translation_step, prior_pose, prior_info, fit=fitted, free_thresh=FREE_SPACE_PROB,
-            support_thresh=c.support_probability,
+            support_thresh=c.support_probability, degeneracy_threshold=c.degeneracy_threshold,
+            sumsq=sq[1] if sq is not None and sq[0] is pts else None,
         )
         x, y, th = p.tolist()  # (Python floats: one conversion instead of three element reads)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
