@@ -49,9 +49,9 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "aligned=True), 3), UniTuple(int64, 3), UniTuple(int64, 3), int64, Array(int64, 2, 'C'), "
      "Array(int64, 1, 'C'),)"),
     ('dynslam2d.slam.ledgerkernels.stand_marks',
-     "(Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), int64, float64, float64, "
-     'float64,)'),
+     "(Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
+     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), int64, "
+     'float64, float64, float64,)'),
     ('dynslam2d.slam.raycast.integrate_levels',
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), float64, float64, float64, float64, "
      "UniTuple(Array(float32, 2, 'C', False, aligned=True), 4), UniTuple(Array(uint32, 2, 'C', False, "
@@ -129,31 +129,31 @@ KERNELS: tuple[tuple[str, str], ...] = (
 #: CPU time of each kernel's compile (s, the kernels it compiles in turn included) in a one-core cold run when
 #: recorded: the background compile's estimate of how far ahead of the run a kernel is (its order, docs/speed.md).
 COMPILE_S: dict[str, float] = {
-    'dynslam2d.sim.world._cast_kernel': 0.49,
-    'dynslam2d.detect.body._drop_body': 0.16,
-    'dynslam2d.slam.matcher.gated_points': 0.51,
-    'dynslam2d.detect.body._observe_beams': 0.20,
-    'dynslam2d.detect.segment.detect_scan': 10.04,
-    'dynslam2d.detect.kernels_update.birth_rows': 0.36,
-    'dynslam2d.detect.kernels_update.report_rows': 0.38,
-    'dynslam2d.slam.ledgerkernels.record_cells': 2.05,
-    'dynslam2d.slam.ledgerkernels.level_rows': 0.64,
-    'dynslam2d.slam.ledgerkernels.stand_marks': 0.32,
-    'dynslam2d.slam.raycast.integrate_levels': 1.58,
+    'dynslam2d.sim.world._cast_kernel': 0.43,
+    'dynslam2d.detect.body._drop_body': 0.18,
+    'dynslam2d.slam.matcher.gated_points': 0.44,
+    'dynslam2d.detect.body._observe_beams': 0.18,
+    'dynslam2d.detect.segment.detect_scan': 8.32,
+    'dynslam2d.detect.kernels_update.birth_rows': 0.35,
+    'dynslam2d.detect.kernels_update.report_rows': 0.46,
+    'dynslam2d.slam.ledgerkernels.record_cells': 1.92,
+    'dynslam2d.slam.ledgerkernels.level_rows': 0.44,
+    'dynslam2d.slam.ledgerkernels.stand_marks': 0.34,
+    'dynslam2d.slam.raycast.integrate_levels': 1.32,
     'dynslam2d.slam.raycast.ray_ends': 0.08,
-    'dynslam2d.slam.matcher.match_pyramid': 2.36,
-    'dynslam2d.slam.correlative._search_points': 0.21,
-    'dynslam2d.slam.correlative._search_cells': 0.36,
-    'dynslam2d.slam.correlative._search_table': 0.93,
-    'dynslam2d.slam.correlative.branch_and_bound': 1.73,
-    'dynslam2d.vacated.vacated_scan_kernel': 3.35,
-    'dynslam2d.detect.kernels.cv_predict': 0.24,
-    'dynslam2d.detect.kernels_assign.associate_scan': 2.53,
-    'dynslam2d.detect.kernels_update.update_pairs': 2.39,
-    'dynslam2d.detect.kernels_update.manage_scan': 0.55,
+    'dynslam2d.slam.matcher.match_pyramid': 2.27,
+    'dynslam2d.slam.correlative._search_points': 0.16,
+    'dynslam2d.slam.correlative._search_cells': 0.31,
+    'dynslam2d.slam.correlative._search_table': 0.67,
+    'dynslam2d.slam.correlative.branch_and_bound': 1.33,
+    'dynslam2d.vacated.vacated_scan_kernel': 3.38,
+    'dynslam2d.detect.kernels.cv_predict': 0.19,
+    'dynslam2d.detect.kernels_assign.associate_scan': 2.61,
+    'dynslam2d.detect.kernels_update.update_pairs': 2.88,
+    'dynslam2d.detect.kernels_update.manage_scan': 0.49,
     'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.18,
     'dynslam2d.detect.kernels.seen_through_refs': 0.17,
     'dynslam2d.filter._movers_kernel': 0.82,
-    'dynslam2d.slam.cleanup._add_scan': 0.78,
-    'dynslam2d.viz.collect._removed_points': 0.14,
+    'dynslam2d.slam.cleanup._add_scan': 0.84,
+    'dynslam2d.viz.collect._removed_points': 0.15,
 }
