@@ -12,7 +12,9 @@ Parts: the whole ``Pipeline.process``; its top-level parts (body filter, the who
 methods, ``needs_map_update``, the map update, the loop closer's ``add``); inside the map view the
 vacated-footprint kernel; "unattributed" = whole minus the top-level parts (``process``'s own Python, the step
 record, the frame's teardown, and about 1 µs per wrapped call of this harness), and "outside the stages" = map
-view + body filter + exclusions + observed boxes + unattributed (what the view2 pass worked on).
+view + body filter + exclusions + observed boxes + unattributed (what the view2 pass worked on). Inside
+"unattributed" (pass prc124): the movers' exclusion from the report columns, the harness's own share (the calls of
+the top-level parts times a wrapper's cost outside its window, calibrated on a no-op in each worker) and the rest.
 
     taskset -c 0 python benchmarks/bench_parts_ab.py negative_2/right mit-csail sim:drive --other /tmp/base/src
 
@@ -22,11 +24,15 @@ Inputs: the names of ``bench_digest.py`` (paths under ``--data``).
 from __future__ import annotations
 
 import argparse
+import collections
 import json
 import os
 import subprocess
 import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -37,15 +43,59 @@ WARMUP = 60
 #: The top-level parts of ``Pipeline.process`` (what "unattributed" subtracts from the whole).
 TOP = ("body filter", "match", "map view (_evidence_view)", "tracker update", "exclusion (both calls)",
        "observed boxes (_observed_rows)", "ledger", "map: needs_map_update", "map update", "loops add")
+#: Inside "unattributed": the movers' exclusion from the report columns (``process`` calls them directly), the
+#: wrappers' own cost outside their timed windows (calibrated on a no-op: ≈ 0.8–1.2 µs a wrapped call, each
+#: top-level call's charged to ``process``), and what is left: ``process``'s own Python, the step record and the
+#: frame's teardown, plus the calls not wrapped (``scan.without`` of the body filter, ``moving_index``, ``predict``,
+#: ``report_states``, ``count_nonzero``) (pass prc124).
+MOVERS = "  movers' columns (mover_pack + mover_exclusions)"
+HARNESS = "  harness (wrappers' own, estimated)"
+OWN = "  process's own + calls not wrapped"
 #: The parts the view2 pass worked on ("outside the stages").
 OUTSIDE = ("map view (_evidence_view)", "body filter", "exclusion (both calls)", "observed boxes (_observed_rows)",
            "unattributed")
 
 
+def _counted_wrapper(acc: collections.Counter, calls: collections.Counter) -> Callable[[Any, str, str], None]:
+    """``cputimers.thread_cpu_wrapper`` that also counts the calls of each tag in ``calls`` (outside the window)."""
+
+    def wrap(obj: Any, attr: str, tag: str) -> None:
+        f = getattr(obj, attr)
+
+        def timed(*a: Any, **k: Any) -> Any:
+            calls[tag] += 1
+            t0 = time.thread_time_ns()
+            r = f(*a, **k)
+            acc[tag] += time.thread_time_ns() - t0
+            return r
+
+        setattr(obj, attr, timed)
+
+    return wrap
+
+
+def _wrapper_cost(make: Callable, n: int = 2000, reps: int = 25) -> float:
+    """Median thread CPU ns a wrapper made by ``make(acc, calls)`` adds outside its timed window per call (what
+    the caller is charged), measured on a method that does nothing."""
+
+    class _Noop:
+        def f(self, a: object, b: object = None) -> object:
+            return a
+
+    out = []
+    for _ in range(reps):
+        acc: collections.Counter = collections.Counter()
+        obj = _Noop()
+        make(acc, collections.Counter())(obj, "f", "noop")
+        t0 = time.thread_time_ns()
+        for _ in range(n):
+            obj.f(1, b=2)
+        out.append((time.thread_time_ns() - t0 - acc["noop"]) / n)
+    return sorted(out)[reps // 2]
+
+
 def worker(data: Path, name: str) -> None:
     """Serve ``go`` lines on stdin: process the next scan, answer one JSON line (ns per part, updated)."""
-    import collections
-
     import dynslam2d.detect.mapevidence as me
     import dynslam2d.memtrim as mt
     import dynslam2d.pipeline as pl
@@ -58,9 +108,9 @@ def worker(data: Path, name: str) -> None:
     warm_up(scans, WARMUP)  # (and every kernel numba's cache holds loaded: none is loaded in the measured run)
     acc: collections.Counter = collections.Counter()
 
-    from cputimers import thread_cpu_wrapper
-
-    wrap = thread_cpu_wrapper(acc)
+    calls: collections.Counter = collections.Counter()  # wrapped calls per scan and part
+    wrap = _counted_wrapper(acc, calls)
+    outside_ns = _wrapper_cost(_counted_wrapper)
 
     wrap(me, "vacated_outlines_kernel", "  vacated-footprint kernel")
     try:
@@ -85,14 +135,23 @@ def worker(data: Path, name: str) -> None:
             wrap(pipe.ledger, k, "ledger")
     if pipe.loops is not None:
         wrap(pipe.loops, "add", "loops add")
+    # (called by process itself, so far inside "unattributed": the movers' exclusion from the tracker's report columns)
+    import dynslam2d.detect.trackreport as tr
+    if hasattr(pl, "mover_exclusions"):
+        wrap(pl, "mover_exclusions", MOVERS)
+    if hasattr(tr.TrackReports, "mover_pack"):
+        wrap(tr.TrackReports, "mover_pack", MOVERS)
     print(json.dumps({"scans": len(scans)}), flush=True)
     for i, line in enumerate(sys.stdin):
         if i >= len(scans) or line.strip() != "go":
             break
         acc.clear()
+        calls.clear()
         step = pipe.process(scans[i])
         r = dict(acc)
         r["unattributed"] = r["whole"] - sum(r.get(k, 0) for k in TOP)
+        r[HARNESS] = outside_ns * sum(calls[k] for k in (*TOP, MOVERS))
+        r[OWN] = r["unattributed"] - r[HARNESS] - r.get(MOVERS, 0)
         r["outside the stages"] = sum(r.get(k, 0) for k in OUTSIDE)
         print(json.dumps({"p": r, "u": bool(step.map_updated)}), flush=True)
 
