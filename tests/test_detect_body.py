@@ -200,3 +200,39 @@ def test_the_first_mask_is_the_scans_valid_mask_written_in_the_drop_pass() -> No
             assert scan.valid_view() is held
         np.testing.assert_array_equal(drop, want & (drop_r > 0.0) & (r <= drop_r + tol))
         assert drop[3] and drop[4] and not drop[5] and not drop[6]
+
+
+@pytest.mark.parametrize("polygon, auto", [(None, True), ([(-0.4, -0.1), (0.1, -0.1), (0.1, 0.45), (-0.4, 0.45)], True),
+                                           ([(-0.4, -0.1), (0.1, -0.1), (0.1, 0.45), (-0.4, 0.45)], False)])
+def test_apply_is_mask_then_without(polygon, auto) -> None:
+    """Pass bdy122: ``apply`` writes the filtered scan in ``_drop_body``'s pass; its drop mask, ranges (NaN where
+    dropped) and valid mask equal ``mask`` + ``Scan.without`` bit for bit on the driving robot's scans (body beams
+    found after a few seconds; with a footprint every scan drops), and the scan itself comes back when
+    nothing is dropped. The filters' state and counts stay equal."""
+    cfg = FootprintConfig.model_construct(**{**FootprintConfig().model_dump(), "polygon": polygon, "auto": auto})
+    _, steps = drive(120)
+    a, b = BodyFilter(cfg), BodyFilter(cfg)
+    same = dropped = 0
+    for res, _, scan in steps:
+        s1 = Scan(stamp=scan.stamp, angle_min=scan.angle_min, angle_increment=scan.angle_increment,
+                  ranges=scan.ranges.copy(), range_min=scan.range_min, range_max=scan.range_max)
+        s2 = Scan(stamp=scan.stamp, angle_min=scan.angle_min, angle_increment=scan.angle_increment,
+                  ranges=scan.ranges.copy(), range_min=scan.range_min, range_max=scan.range_max)
+        d1, out = a.apply(s1)
+        d2 = b.mask(s2)
+        np.testing.assert_array_equal(d1, d2)
+        if not d2.any():
+            assert out is s1
+            same += 1
+        else:
+            want = s2.without(d2)
+            assert np.array_equal(out.ranges, want.ranges, equal_nan=True)
+            np.testing.assert_array_equal(out.valid_view(), want.valid_view())
+            np.testing.assert_array_equal(out.valid_view(), out.valid_mask(out.range_min, out.range_max))
+            assert out.stamp == s1.stamp and out.angle_min == s1.angle_min and out.trig()[0] is s1.trig()[0]
+            dropped += 1
+        a.observe(s1, res.pose)
+        b.observe(s2, res.pose)
+    assert dropped > 30 and (same > 10 if polygon is None else same == 0)  # (the footprint holds body returns)
+    np.testing.assert_array_equal(a.body, b.body)
+    assert a.report(steps[-1][2]) == b.report(steps[-1][2])

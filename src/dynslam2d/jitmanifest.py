@@ -13,15 +13,14 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "Array(int32, 1, 'C'), Array(float64, 2, 'C'), Array(int32, 1, 'C'), float64,)"),
     ('dynslam2d.detect.body._drop_body',
      "(Array(float64, 1, 'C'), float64, float64, Array(bool, 1, 'C'), bool, Array(float64, 1, 'C'), "
-     "float64, bool, Array(bool, 1, 'C'),)"),
+     "float64, bool, Array(bool, 1, 'C'), bool, Array(float64, 1, 'C'), Array(bool, 1, 'C'),)"),
     ('dynslam2d.slam.matcher.gated_points',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), float64, float64, float64, float64, float64, bool, Array(bool, 1, 'C'),)"),
     ('dynslam2d.detect.body._observe_beams',
-     "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), float64, float64, Array(float64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, 1, 'C'), "
-     "Array(bool, 1, 'C'), Array(float64, 1, 'C'), float64, float64, float64, float64, float64, int64, "
-     "float64, Array(bool, 1, 'C'),)"),
+     "(Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 2, 'C'), Array(int64, 2, 'C'), "
+     "Array(bool, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), "
+     "Array(float64, 1, 'C'), float64, float64, float64,)"),
     ('dynslam2d.detect.segment.detect_scan',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(float64, 2, 'C'), bool, "
      "Array(float64, 1, 'C'), bool, Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, float64, "

@@ -270,9 +270,7 @@ class Pipeline:
         t0 = time.perf_counter()
         # 0. the robot's own body is never structure nor a mover (detect/body.py)
         raw = scan
-        body = self.body.mask(scan)
-        if _count_nonzero(body):  # (``any`` of a short bool array costs four times as much)
-            scan = scan.without(body)
+        body, scan = self.body.apply(scan)  # (``scan`` itself when nothing is dropped)
         # 2. match with the known movers removed (their boxes advanced to this stamp).
         drop = None  # (the matcher takes these beams as without a return: ``scan.without(drop)``, not copied)
         if self._moving and self.config.filter.mode != "none":

@@ -27,7 +27,7 @@ import numpy as np
 
 from dynslam2d.errors import DynSlamError
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
-from dynslam2d.types import Pose2D, Scan
+from dynslam2d.types import Pose2D, Scan, _copy_scan
 
 
 def polygon_problem(polygon: list[tuple[float, float]] | np.ndarray) -> str | None:
@@ -121,57 +121,68 @@ def grow_polygon(hull: np.ndarray, margin: float) -> np.ndarray:
 
 
 @njit(cache=True)
-def _observe_beams(r, valid, max_range, tol, ref, seen, same_n, start, moved, body, body_r, px, py, pth, min_travel,
-                   min_turn, min_scans, share, new_body):  # pragma: no cover - numba
+def _observe_beams(r, valid, st, cnt, moved, body, body_r, new_body, prm, px, py, pth):  # pragma: no cover - numba
     """:meth:`BodyFilter.observe`'s per-beam update, in place, for ranges ``r`` (m) with ``valid`` returns at laser
-    pose (``px``, ``py``, ``pth``) (map frame, m / rad). A valid return within ``max_range`` is *near*; it is
-    *the same* when within ``tol`` of the beam's reference range ``ref``; ``seen`` / ``same_n`` count the beam's
-    returns and those at the reference range. A near return that is not the same, on a beam whose reference
-    explains less than half of its returns, starts the beam over from it (reference, counts 1, ``start`` pose,
-    not ``moved``). A beam that kept its range and is not ``moved`` yet becomes moved once the laser is
+    pose (``px``, ``py``, ``pth``) (map frame, m / rad). ``prm`` holds (max_range, tol, min_travel, min_turn,
+    min_scans, share) (:meth:`BodyFilter._params`); per beam ``st`` holds (ref, start x, start y, start theta) and
+    ``cnt`` (seen, same_n) (pass bdy122: packed, 12 arguments instead of 19). A valid return within ``max_range`` is
+    *near*; it is *the same* when within ``tol`` of the beam's reference range ``ref``; ``seen`` / ``same_n`` count
+    the beam's returns and those at the reference range. A near return that is not the same, on a beam whose
+    reference explains less than half of its returns, starts the beam over from it (reference, counts 1, ``start``
+    pose, not ``moved``). A beam that kept its range and is not ``moved`` yet becomes moved once the laser is
     ``min_travel`` (m) and ``min_turn`` (rad) away from its start pose: net motion away from where the range was
     first seen (summed increments would add up pose jitter). ``new_body`` gets the body beams: moved, at least
     ``min_scans`` returns at the reference range and at least ``share`` of all. Returns whether the body beams or
     their ranges differ from ``body`` / ``body_r``. (The same values as the array expressions it replaced, one
-    beam at a time: math.hypot is the C library's hypot as numpy's, % the same floored remainder.)"""
+    beam at a time: math.hypot is the C library's hypot as numpy's, % the same floored remainder; ``min_scans`` is
+    an integer held exactly as a float, so ``same_n >= min_scans`` is the integer comparison.)"""
+    max_range = prm[0]
+    tol = prm[1]
+    min_travel = prm[2]
+    min_turn = prm[3]
+    min_scans = prm[4]
+    share = prm[5]
     changed = False
     two_pi = 2.0 * math.pi
     for i in range(r.shape[0]):
         v = valid[i]
         near = v and r[i] <= max_range
-        same = near and abs(r[i] - ref[i]) <= tol
+        same = near and abs(r[i] - st[i, 0]) <= tol
         if v:
-            seen[i] += 1
+            cnt[i, 0] += 1
         if same:
-            same_n[i] += 1
+            cnt[i, 1] += 1
         # a beam whose reference range explains less than half of its returns starts over from this one
-        if near and not same and same_n[i] < 0.5 * seen[i]:
-            ref[i] = r[i]
-            same_n[i] = 1
-            seen[i] = 1
-            start[i, 0] = px
-            start[i, 1] = py
-            start[i, 2] = pth
+        if near and not same and cnt[i, 1] < 0.5 * cnt[i, 0]:
+            st[i, 0] = r[i]
+            cnt[i, 1] = 1
+            cnt[i, 0] = 1
+            st[i, 1] = px
+            st[i, 2] = py
+            st[i, 3] = pth
             moved[i] = False
         if same and not moved[i]:
-            if math.hypot(px - start[i, 0], py - start[i, 1]) >= min_travel and \
-                    abs((pth - start[i, 2] + math.pi) % two_pi - math.pi) >= min_turn:  # (types.wrap_angle)
+            if math.hypot(px - st[i, 1], py - st[i, 2]) >= min_travel and \
+                    abs((pth - st[i, 3] + math.pi) % two_pi - math.pi) >= min_turn:  # (types.wrap_angle)
                 moved[i] = True
-        b = moved[i] and same_n[i] >= min_scans and same_n[i] >= share * seen[i]
+        b = moved[i] and cnt[i, 1] >= min_scans and cnt[i, 1] >= share * cnt[i, 0]
         new_body[i] = b
-        if b != body[i] or (b and ref[i] != body_r[i]):
+        if b != body[i] or (b and st[i, 0] != body_r[i]):
             changed = True
     return changed
 
 
 @njit(cache=True)
-def _drop_body(ranges, lo, hi, valid, fill, drop_r, tol, footprint, drop):  # pragma: no cover - numba
+def _drop_body(ranges, lo, hi, valid, fill, drop_r, tol, footprint, drop, write, out_r, out_v):  # pragma: no cover
     """:meth:`BodyFilter.mask`'s automatic part, in place: a ``valid`` return on a beam with a drop range
     ``drop_r`` > 0 (m) is dropped when its range is at most ``drop_r + tol``; with a ``footprint`` only beams not
     yet in ``drop``. With ``fill`` it first writes ``valid`` itself: :meth:`Scan.valid_mask` of ``ranges`` with the
     sensor limits ``lo``, ``hi`` (m; finite and within [lo, hi], the same tests as its array expression), in the
-    same pass (the scan's first mask: one call instead of five NumPy operations, pass rest18). Returns how many it
-    dropped (the values of the array expressions it replaced)."""
+    same pass (the scan's first mask: one call instead of five NumPy operations, pass rest18). With ``write`` it
+    also writes the filtered scan's arrays in that pass (pass bdy122): ``out_r`` the ranges with NaN where ``drop``
+    (``Scan.without``'s ``np.copyto(ranges, nan, where=drop)``) and ``out_v`` its valid mask ``valid and not drop``
+    (``np.greater(valid, drop)``); without it they are not touched (size 0 is fine). Returns how many it dropped
+    (the values of the array expressions it replaced)."""
     count = 0
     for i in range(ranges.shape[0]):
         r = ranges[i]
@@ -181,7 +192,18 @@ def _drop_body(ranges, lo, hi, valid, fill, drop_r, tol, footprint, drop):  # pr
         if valid[i] and d > 0.0 and r <= d + tol and not (footprint and drop[i]):
             drop[i] = True
             count += 1
+        if write:
+            if drop[i]:
+                out_r[i] = np.nan
+                out_v[i] = False
+            else:
+                out_r[i] = r
+                out_v[i] = valid[i]
     return count
+
+
+_NO_R = np.zeros(0)  # (_drop_body's output arrays when it does not write them)
+_NO_V = np.zeros(0, dtype=np.bool_)
 
 
 class BodyFilter:
@@ -206,23 +228,50 @@ class BodyFilter:
         self.body = np.zeros(0, dtype=bool)  # beams found to look at the robot's body
         self._body_r = np.zeros(0)
         self._geom: tuple | None = None
+        self._dropping = False
         self.footprint_dropped = 0
         self.auto_dropped = 0
         self.scans = 0
 
     def _reset(self, n: int) -> None:
         self._n = n
-        self._ref = np.full(n, np.nan)
-        self._start = np.zeros((n, 3))
+        # per beam (ref m, start x m, start y m, start theta rad) and (seen, same_n): _observe_beams' packed state;
+        # ``_ref`` / ``_start`` / ``_seen`` / ``_same`` are views of its columns
+        self._st = np.zeros((n, 4))
+        self._st[:, 0] = np.nan
+        self._cnt = np.zeros((n, 2), dtype=np.int64)
+        self._ref = self._st[:, 0]
+        self._start = self._st[:, 1:]
+        self._seen = self._cnt[:, 0]
+        self._same = self._cnt[:, 1]
+        self._prm = self._params()
         self.body = np.zeros(n, dtype=bool)
         self._body_r = np.zeros(n)
         self._drop_r = np.zeros(n)
-        self._same = np.zeros(n, dtype=np.int64)
-        self._seen = np.zeros(n, dtype=np.int64)
+        self._dropping = False  # whether any drop range is > 0 (set where ``_drop_r`` changes)
         self._moved = np.zeros(n, dtype=bool)
+
+    def _params(self) -> np.ndarray:
+        """(6,) float64: ``_observe_beams``' settings (auto_max_range m, auto_tolerance m, auto_min_travel m,
+        auto_min_turn rad, auto_min_scans, auto_share), read from the config at the first scan (and at a change of
+        the beam count)."""
+        c = self.config
+        return np.array([float(getattr(c, "auto_max_range", 0.0)), float(getattr(c, "auto_tolerance", 0.0)),
+                         float(getattr(c, "auto_min_travel", 0.0)), float(getattr(c, "auto_min_turn", 0.0)),
+                         float(int(getattr(c, "auto_min_scans", 0))), float(getattr(c, "auto_share", 0.0))])
 
     def mask(self, scan: Scan) -> np.ndarray:
         """(beams,) bool: returns of ``scan`` to drop (inside the footprint, or on a body beam)."""
+        return self._mask(scan, False)[0]
+
+    def apply(self, scan: Scan) -> tuple[np.ndarray, Scan]:
+        """(:meth:`mask`'s drop mask, the scan without those returns): ``scan`` itself when nothing is dropped, else
+        ``scan.without(drop)``'s values (ranges NaN and not valid where dropped) written in the mask's own pass over
+        the beams (pass bdy122: one kernel pass instead of the mask's and four NumPy operations)."""
+        return self._mask(scan, True)
+
+    def _mask(self, scan: Scan, apply: bool) -> tuple[np.ndarray, Scan]:
+        """:meth:`mask` and, with ``apply``, :meth:`apply`'s filtered scan (else ``scan``)."""
         n = scan.n_beams
         if n != self._n:
             self._reset(n)
@@ -231,19 +280,28 @@ class BodyFilter:
         fill = auto and self.polygon is None and not scan.has_valid_mask()
         # (the scan's first mask: the kernel below writes it in its pass over the beams, the scan keeps it)
         valid = np.empty(n, dtype=bool) if fill else scan.valid_view()  # (only read here: no copy)
+        dropped = 0
         if self.polygon is not None and valid.any():
             pts = scan.points(valid)
             inside = points_in_polygon(pts, self.polygon)
             drop[np.flatnonzero(valid)[inside]] = True
-            self.footprint_dropped += int(inside.sum())
+            dropped = int(inside.sum())
+            self.footprint_dropped += dropped
+        out = scan
         if auto:  # (without body beams every drop range is 0: nothing dropped)
-            self.auto_dropped += _drop_body(scan.ranges, float(scan.range_min), float(scan.range_max), valid, fill,
-                                            self._drop_r, float(self.config.auto_tolerance),
-                                            self.polygon is not None, drop)
+            write = apply and (self._dropping or dropped > 0)
+            out_r, out_v = (np.empty(n), np.empty(n, dtype=bool)) if write else (_NO_R, _NO_V)
+            count = _drop_body(scan.ranges, float(scan.range_min), float(scan.range_max), valid, fill, self._drop_r,
+                               float(self.config.auto_tolerance), self.polygon is not None, drop, write, out_r, out_v)
+            self.auto_dropped += count
             if fill:
                 scan.adopt_valid_mask(valid)
+            if write and count + dropped > 0:
+                out = _copy_scan(scan, out_r, out_v)
+        elif apply and dropped > 0:
+            out = scan.without(drop)
         self.scans += 1
-        return drop
+        return drop, out
 
     def observe(self, scan: Scan, pose: Pose2D) -> None:
         """Update the automatic detection with ``scan`` and its laser pose (map frame)."""
@@ -253,21 +311,20 @@ class BodyFilter:
         n = scan.n_beams
         if n != self._n:
             self._reset(n)
-        tol = float(cfg.auto_tolerance)
         # per beam, in one pass (_observe_beams): the counts of returns and of returns at the reference range, the
         # restarts, the net motion test and the body beams
         body = np.empty(n, dtype=np.bool_)
         valid = scan.valid_view()  # (read only by the kernel: no copy)
-        if not _observe_beams(scan.ranges, valid, float(cfg.auto_max_range), tol, self._ref, self._seen,
-                              self._same, self._start, self._moved, self.body, self._body_r, float(pose.x),
-                              float(pose.y), float(pose.theta), float(cfg.auto_min_travel), float(cfg.auto_min_turn),
-                              int(cfg.auto_min_scans), float(cfg.auto_share), body):
+        if not _observe_beams(scan.ranges, valid, self._st, self._cnt, self._moved, self.body, self._body_r, body,
+                              self._prm, float(pose.x), float(pose.y), float(pose.theta)):
             return  # the same body beams at the same ranges (the usual case): the drop ranges stay as they are
+        tol = float(cfg.auto_tolerance)
         self.body = body
         self._body_r = np.where(self.body, self._ref, 0.0)
         # the beams next to a body edge see it part of the time (mixed returns): they drop returns up to
         # the nearby body range + 2 tolerances
         self._drop_r = self._body_r.copy()
+        self._dropping = bool((self._body_r > 0.0).any())  # (an edge beam's drop range needs a body beam's)
         k = int(cfg.auto_edge_beams)
         if k > 0 and self.body.any():
             grown = self._body_r.copy()
