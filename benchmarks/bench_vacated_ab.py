@@ -79,15 +79,16 @@ def run(name: str, data: Path, other_src: Path, warm: int = 30) -> None:
             tr = other_trace(CleanConfig(), occupied_logodds=6.0, min_cells=1, max_extent=(params[9] - 0.5) * params[0],
                              min_depth_m=0.0, min_extent=1.0, min_share=0.0, scans=1)
             tr._prepare(float(params[0]), ranges.shape[0])
-            bufs = own["bufs"] = (tr._work, tr._window)
+            bufs = own["bufs"] = (tr._work, tr._window, getattr(tr, "_fwork", None))
             own["res"] = params[0]
         got = {}
         order = ("other", "this") if i % 2 == 0 else ("this", "other")
         for tag in order:
-            k, w, win = (other_k, *bufs) if tag == "other" else (this_k, work, window)
+            k, w, win = (other_k, *bufs[:2]) if tag == "other" else (this_k, work, window)
+            # (an other checkout since pass vac83 takes the same extra arguments, with an ``fwork`` of its own)
+            extra = more if tag == "this" else ((bufs[2], *more[1:]) if bufs[2] is not None and more else ())
             t0 = time.thread_time_ns()
-            r = k(ranges, cos_a, sin_a, valid, px, py, th, logodds, i0, j0, params, w, win,
-                  *(more if tag == "this" else ()))
+            r = k(ranges, cos_a, sin_a, valid, px, py, th, logodds, i0, j0, params, w, win, *extra)
             got[tag] = (time.thread_time_ns() - t0, r)
         a, b = got["this"][1], got["other"][1]
         same = a[0] == b[0] and a[1] == b[1] and np.array_equal(a[2], b[2])

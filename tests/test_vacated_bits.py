@@ -4,6 +4,8 @@ above the threshold has its bit set (docs/speed.md, pass vac77)."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from test_vacated_trace import KW, RES, _map, _scan
@@ -18,7 +20,7 @@ from dynslam2d.slam.cleanup import scan_clearing
 from dynslam2d.slam.erasure import EvidenceLedger
 from dynslam2d.slam.grid import GridLevel
 from dynslam2d.types import Pose2D, Scan
-from dynslam2d.vacated import _CELLS_PER_BEAM, _INV_CELL, _RECOUNT, VacatedTrace, seen_through_inverse
+from dynslam2d.vacated import _CELLS_PER_BEAM, _INV_CELL, _RECOUNT, VacatedTrace, _atan2_approx, seen_through_inverse
 
 
 def _missing(lv: GridLevel) -> int:
@@ -132,6 +134,9 @@ def test_the_inverse_form_finds_the_walks_cells_on_random_maps_with_stale_bits()
         if trial % 3 == 0:  # (beams from another first angle and fewer beams)
             scan = Scan(stamp=0.0, angle_min=-2.0, angle_increment=4.0 / 480, ranges=scan.ranges[:481],
                         range_min=0.05, range_max=20.0)
+        elif trial % 3 == 1:  # (more than a turn of beams: the last beams' window wraps onto the first ones')
+            scan = Scan(stamp=0.0, angle_min=-3.0, angle_increment=2.0 * math.pi / 470, ranges=scan.ranges[:481],
+                        range_min=0.05, range_max=20.0)
         pose = Pose2D(0.37 * (trial % 5) - 0.7, 0.21 * (trial % 7) - 0.6, 0.3 * trial)
         origin, cx, cy, clear = scan_clearing(scan.ranges, scan.trig(), scan.valid_mask(), pose, RES, clean)
         ox, oy = pose.x / RES, pose.y / RES
@@ -198,3 +203,15 @@ def test_the_choice_takes_the_inverse_form_on_a_sparse_map_and_the_walk_on_a_den
         assert seen_through_inverse(*args, 1.0 / RES, bits, scan.angle_min, scan.angle_increment, pose.theta, ir, ic,
                                     iw, fw, _INV_CELL) == -1
         assert fw[2 * nb] == over and fw[2 * nb + 1] == _RECOUNT - 1  # (counted again)
+
+
+def test_the_branch_free_angle_is_atan2_within_its_bound_in_every_octant() -> None:
+    """``_atan2_approx`` (selects only since pass vac125, so the inverse form's per-cell loop vectorises): within
+    1.2e-5 rad of atan2 in every octant, on the axes, the diagonals and at the origin (0)."""
+    rng = np.random.default_rng(7)
+    pts = np.concatenate([rng.normal(size=(2000, 2)) * 50.0,
+                          np.array([[0.0, 0.0], [0.0, 3.0], [0.0, -3.0], [3.0, 0.0], [-3.0, 0.0], [2.0, 2.0],
+                                    [-2.0, 2.0], [2.0, -2.0], [-2.0, -2.0], [1e-9, -5.0], [-5.0, 1e-9]])])
+    for y, x in pts:
+        assert abs(_atan2_approx(y, x) - math.atan2(y, x)) <= 1.2e-5, (y, x)
+    assert _atan2_approx(0.0, 0.0) == 0.0

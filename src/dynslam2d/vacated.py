@@ -51,23 +51,20 @@ _DB_TABLE = np.array([0, 1, 48, 2, 57, 49, 28, 3, 61, 58, 50, 42, 38, 29, 17, 4,
 @njit(cache=True, inline="always")
 def _atan2_approx(y: float, x: float) -> float:  # pragma: no cover - numba
     """atan2(``y``, ``x``) within 1.2e-5 rad, in (−π, π]: a degree-9 odd polynomial in the octant's ratio (|z| ≤ 1;
-    Abramowitz & Stegun, Handbook of Mathematical Functions, 4.4.49's form)."""
+    Abramowitz & Stegun, Handbook of Mathematical Functions, 4.4.49's form). Branch-free (selects only), so a loop
+    calling it vectorises; the octant's ratio min / max is the smaller coordinate over the larger (0 at the origin)."""
     ax = abs(x)
     ay = abs(y)
-    if ax >= ay:
-        z = ay / ax if ax > 0.0 else 0.0
-    else:
-        z = ax / ay
+    hi = max(ax, ay)
+    z = min(ax, ay) / (hi if hi > 0.0 else 1.0)
     z2 = z * z
     t = z * (0.9998660 + z2 * (-0.3302995 + z2 * (0.1801410 + z2 * (-0.0851330 + z2 * 0.0208351))))
-    if ax < ay:
-        t = 0.5 * math.pi - t
-    if x < 0.0:
-        t = math.pi - t
+    t = 0.5 * math.pi - t if ax < ay else t
+    t = math.pi - t if x < 0.0 else t
     return -t if y < 0.0 else t
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: float, cx: np.ndarray, cy: np.ndarray,
                          clear: np.ndarray, core: float, occ_thr: float, depth: float, bits: np.ndarray, ang0: float,
                          inc: float, th: float, out_r: np.ndarray, out_c: np.ndarray, iw: np.ndarray, fw: np.ndarray,
@@ -200,30 +197,39 @@ def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: f
     inv_inc = 1.0 / inc
     inv_abs = abs(inv_inc)
     turn = two_pi * inv_inc  # (beams a turn; floor / ceil with a window of ≥ 1 beam absorb this product's rounding)
+    # (4a) each cell's distance², beam index and half window (beams) in one branch-free loop (it vectorises: the
+    # kernel's error model lets its divisions go unchecked; none divides by zero but the unused 1 / d at the laser)
+    kw = np.empty(3 * m)
+    cw = 1.003 * core
+    for q in range(m):
+        ddx = (iw[2 * q + 1] + i0) - ox
+        ddy = (iw[2 * q] + j0) - oy
+        d2 = ddx * ddx + ddy * ddy
+        phi = _atan2_approx(ddy, ddx) - th - ang0
+        phi -= two_pi * math.floor(phi * inv_2pi)  # [0, 2π)
+        kw[3 * q] = d2
+        kw[3 * q + 1] = phi * inv_inc
+        kw[3 * q + 2] = (cw / math.sqrt(d2) + 2e-5) * inv_abs
+    # (4b) the beams of each cell's window (the wrapped windows, sh = ±1, only where they can hold a beam)
     for q in range(m):
         r = iw[2 * q]
         c = iw[2 * q + 1]
         x = c + i0
         y = r + j0
-        ddx = x - ox
-        ddy = y - oy
-        d2 = ddx * ddx + ddy * ddy
+        d2 = kw[3 * q]
         d = math.sqrt(d2)
         if d > rmax + 1.0:
             continue
         near = d < 4.0
-        kc = 0.0
-        hw = 0.0
-        if not near:
-            phi = _atan2_approx(ddy, ddx) - th - ang0
-            phi -= two_pi * math.floor(phi * inv_2pi)  # [0, 2π)
-            hw = (1.003 * core / d + 2e-5) * inv_abs
-            kc = phi * inv_inc
+        kc = kw[3 * q + 1]
+        hw = kw[3 * q + 2]
         for sh in range(0 if near else -1, 1 if near else 2):
             if near:
                 k_lo, k_hi = 1, nb - 2
             else:
                 kk = kc + sh * turn
+                if (sh < 0 and not kk + hw > 0.0) or (sh > 0 and not kk - hw < nb - 1.0):
+                    continue  # (ceil(kk + hw) < 1, floor(kk − hw) > nb − 2: empty)
                 k_lo = max(int(math.floor(kk - hw)), 1)
                 k_hi = min(int(math.ceil(kk + hw)), nb - 2)
             for k in range(k_lo, k_hi + 1):
