@@ -318,7 +318,7 @@ def _beam_window(
     rad: float, a0: float, inc: float, out: np.ndarray,
 ) -> int:
     """The beams that can reach the disc of radius ``rad`` (m) about (``cx``, ``cy``) (map frame) from the sensor at
-    (``px``, ``py``) with heading cosine / sine ``pc``, ``ps``: up to 7 index ranges ``out[q] = [lo, hi)`` (one per
+    (``px``, ``py``) with heading cosine / sine ``pc``, ``ps``: up to 7 index ranges ``[out[2q], out[2q + 1])`` (one per
     2π shift of the disc's bearing), their count returned; −1 = every beam (the sensor within the disc, or a NaN).
 
     Beam ``i``'s angle is ``a0 + i·inc`` (rad, sensor frame; ``inc`` ≠ 0). A ray at angle α meets the disc only if
@@ -350,8 +350,8 @@ def _beam_window(
         if hi > n:
             hi = float(n)
         if lo < hi:
-            out[q, 0] = int(lo)
-            out[q, 1] = int(hi)
+            out[2 * q] = int(lo)
+            out[2 * q + 1] = int(hi)
             q += 1
     return q
 
@@ -389,7 +389,7 @@ def _windowed_exclusion(
     best[:] = np.inf
     found = np.empty(n, dtype=np.int64)
     found[:] = -1
-    wins = np.empty((7, 2), dtype=np.int64)
+    wins = np.empty(14, dtype=np.int64)
     cts = np.cos(th)  # (as _scan_exclusion_kernel)
     sts = np.sin(th)
     for j in range(k):
@@ -405,11 +405,11 @@ def _windowed_exclusion(
         if uniform:
             nw = _beam_window(cos_a, sin_a, pc, ps, px, py, cx, cy, math.sqrt(ha * ha + hb * hb), a0, inc, wins)
         if nw < 0:
-            wins[0, 0] = 0
-            wins[0, 1] = n
+            wins[0] = 0
+            wins[1] = n
             nw = 1
         for w in range(nw):
-            for i in range(wins[w, 0], wins[w, 1]):
+            for i in range(wins[2 * w], wins[2 * w + 1]):
                 if not valid[i]:
                     continue
                 r = ranges[i]
