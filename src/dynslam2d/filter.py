@@ -313,6 +313,125 @@ def _box_extents_kernel(boxes: np.ndarray, square: bool, margin: float, cap: flo
 
 
 @njit(cache=True, inline="always")
+def _beam_window(
+    cos_a: np.ndarray, sin_a: np.ndarray, pc: float, ps: float, px: float, py: float, cx: float, cy: float,
+    rad: float, a0: float, inc: float, out: np.ndarray,
+) -> int:
+    """The beams that can reach the disc of radius ``rad`` (m) about (``cx``, ``cy``) (map frame) from the sensor at
+    (``px``, ``py``) with heading cosine / sine ``pc``, ``ps``: up to 7 index ranges ``[out[2q], out[2q + 1])`` (one per
+    2π shift of the disc's bearing), their count returned; −1 = every beam (the sensor within the disc, or a NaN).
+
+    Beam ``i``'s angle is ``a0 + i·inc`` (rad, sensor frame; ``inc`` ≠ 0). A ray at angle α meets the disc only if
+    |α − φ| ≤ asin(rad / D) (mod 2π), φ and D the disc centre's bearing and distance in the sensor frame; the window
+    is widened by 2 beams and 1e-9 rad, far above the rounding of the beams' points (≈ 1e-16 relative), so that it
+    never drops a beam whose point the per-beam test would find in the box."""
+    dx = cx - px
+    dy = cy - py
+    sx = pc * dx + ps * dy
+    sy = -ps * dx + pc * dy
+    dist = math.sqrt(sx * sx + sy * sy)
+    if not (dist > rad * (1.0 + 1e-9) + 1e-9):  # (inside, or a NaN: every beam)
+        return -1
+    half = math.asin(rad / dist) + 1e-9
+    phi = math.atan2(sy, sx)
+    n = cos_a.shape[0]
+    q = 0
+    for m in range(-3, 4):  # beam angles within ±4π (Scan), φ within ±π
+        lo_a = phi - half + 2.0 * math.pi * m
+        hi_a = phi + half + 2.0 * math.pi * m
+        f0 = (lo_a - a0) / inc
+        f1 = (hi_a - a0) / inc
+        if f0 > f1:
+            f0, f1 = f1, f0
+        lo = math.floor(f0) - 2.0
+        hi = math.ceil(f1) + 3.0
+        if lo < 0.0:
+            lo = 0.0
+        if hi > n:
+            hi = float(n)
+        if lo < hi:
+            out[2 * q] = int(lo)
+            out[2 * q + 1] = int(hi)
+            q += 1
+    return q
+
+
+@njit(cache=True, inline="always")
+def _windowed_exclusion(
+    ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray,
+    pc: float, ps: float, px: float, py: float,
+    c: np.ndarray, th: np.ndarray, ext: np.ndarray, ids: np.ndarray,
+    removed: np.ndarray, removed_by: np.ndarray,
+) -> None:
+    """:func:`_scan_exclusion_kernel` (paper Eq. 4–8) with the same results, box by box over only the beams that can
+    reach the box's circumscribed disc (:func:`_beam_window`) instead of every beam against every box: each
+    beam's point is made with the same floating-point operations, and the boxes are visited in index order with
+    the same strict "nearer centre" test, so a beam's region is the one :func:`_region_of` gives. ``ext`` (k, 2)
+    half-extents, m. Falls back to every beam when the beam angles are not ``a0 + i·inc`` to 1e-9."""
+    n = ranges.shape[0]
+    k = c.shape[0]
+    if n == 0 or k == 0:
+        return
+    a0 = math.atan2(sin_a[0], cos_a[0])
+    inc = 0.0
+    uniform = n > 2
+    if uniform:
+        inc = math.atan2(cos_a[0] * sin_a[1] - sin_a[0] * cos_a[1], cos_a[0] * cos_a[1] + sin_a[0] * sin_a[1])
+        last = a0 + (n - 1) * inc
+        uniform = (abs(inc) > 1e-12 and abs(inc) < 0.5 and abs(math.cos(last) - cos_a[n - 1]) < 1e-9
+                   and abs(math.sin(last) - sin_a[n - 1]) < 1e-9)
+    if uniform:
+        for i in range(n):
+            if ranges[i] < 0.0:  # (a negative range's point is behind its beam: not in the window's reasoning)
+                uniform = False
+                break
+    best = np.empty(n)
+    best[:] = np.inf
+    found = np.empty(n, dtype=np.int64)
+    found[:] = -1
+    wins = np.empty(14, dtype=np.int64)
+    cts = np.cos(th)  # (as _scan_exclusion_kernel)
+    sts = np.sin(th)
+    for j in range(k):
+        ha = ext[j, 0]
+        hb = ext[j, 1]
+        if not (ha >= 0.0 and hb >= 0.0):  # a NaN (or negative) extent holds no point (Eq. 7 compares False)
+            continue
+        cx = c[j, 0]
+        cy = c[j, 1]
+        ct = cts[j]
+        st = sts[j]
+        nw = -1
+        if uniform:
+            nw = _beam_window(cos_a, sin_a, pc, ps, px, py, cx, cy, math.sqrt(ha * ha + hb * hb), a0, inc, wins)
+        if nw < 0:
+            wins[0] = 0
+            wins[1] = n
+            nw = 1
+        for w in range(nw):
+            for i in range(wins[2 * w], wins[2 * w + 1]):
+                if not valid[i]:
+                    continue
+                r = ranges[i]
+                lx = r * cos_a[i]
+                ly = r * sin_a[i]
+                dx = (pc * lx - ps * ly + px) - cx
+                dy = (ps * lx + pc * ly + py) - cy
+                u = ct * dx + st * dy
+                v = -st * dx + ct * dy
+                if abs(u) <= ha and abs(v) <= hb:
+                    d2 = dx * dx + dy * dy
+                    if d2 < best[i]:
+                        best[i] = d2
+                        found[i] = j
+    for i in range(n):
+        j = found[i]
+        if j >= 0:
+            removed_by[i] = ids[j]
+            removed[i] = True
+
+
+@njit(cache=True, inline="always")
 def _rows_exclusion(
     ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray,
     pc: float, ps: float, px: float, py: float, boxes: np.ndarray, ids: np.ndarray, dt: float,
@@ -334,8 +453,7 @@ def _rows_exclusion(
         centres[j, 1] = boxes[j, 1] + boxes[j, 6] * dt
         th[j] = boxes[j, 2]
     ext = _box_extents_kernel(boxes, square, margin, cap)
-    _scan_exclusion_kernel(ranges, cos_a, sin_a, valid, pc, ps, px, py, centres, th, ext[:, 0].copy(),
-                           ext[:, 1].copy(), ids, removed, removed_by)
+    _windowed_exclusion(ranges, cos_a, sin_a, valid, pc, ps, px, py, centres, th, ext, ids, removed, removed_by)
     return removed, removed_by
 
 

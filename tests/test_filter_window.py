@@ -1,0 +1,75 @@
+"""The movers' exclusion visits only each box's beam window (filter._windowed_exclusion, pass mov128): bit for bit
+the per-beam pass over every box (filter._scan_exclusion_kernel), on the simulator's scans, with overlapping boxes
+(nearest centre wins), a box around the sensor, NaN / infinite extents, and beam angles shifted by 2π or reversed."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dynslam2d.filter import _scan_exclusion_kernel, _windowed_exclusion
+from dynslam2d.sim import simulate
+
+
+def _both(ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray, pose: tuple[float, float, float],
+          c: np.ndarray, th: np.ndarray, ext: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    n = ranges.shape[0]
+    pc, ps, px, py = math.cos(pose[2]), math.sin(pose[2]), pose[0], pose[1]
+    ref, ref_by = np.zeros(n, dtype=bool), np.full(n, -1, dtype=np.int64)
+    _scan_exclusion_kernel(ranges, cos_a, sin_a, valid, pc, ps, px, py, c, th, ext[:, 0].copy(), ext[:, 1].copy(),
+                           ids, ref, ref_by)
+    got, got_by = np.zeros(n, dtype=bool), np.full(n, -1, dtype=np.int64)
+    _windowed_exclusion(ranges, cos_a, sin_a, valid, pc, ps, px, py, c, th, ext, ids, got, got_by)
+    np.testing.assert_array_equal(got, ref)
+    np.testing.assert_array_equal(got_by, ref_by)
+    return ref, ref_by
+
+
+@pytest.mark.parametrize("variant", ["as simulated", "angles + 2π", "reversed"])
+def test_windowed_exclusion_equals_every_beam(variant: str) -> None:
+    sim = simulate("crowd", duration=1.0)
+    rng = np.random.default_rng(7)
+    hits = 0
+    owners: set[int] = set()
+    for scan in sim.scans[::5]:
+        angles = scan.angles
+        ranges = scan.ranges.copy()
+        if variant == "angles + 2π":
+            angles = angles + 2.0 * math.pi
+        elif variant == "reversed":
+            angles, ranges = angles[::-1].copy(), ranges[::-1].copy()
+        cos_a, sin_a = np.cos(angles), np.sin(angles)
+        valid = np.isfinite(ranges)
+        pose = (float(rng.uniform(-1, 1)), float(rng.uniform(-1, 1)), float(rng.uniform(-4, 4)))
+        pc, ps = math.cos(pose[2]), math.sin(pose[2])
+        idx = rng.choice(np.flatnonzero(valid), 9)
+        lx, ly = ranges[idx] * cos_a[idx], ranges[idx] * sin_a[idx]
+        c = np.column_stack((pc * lx - ps * ly + pose[0], ps * lx + pc * ly + pose[1]))
+        c[1] = c[0] + 0.05  # overlapping boxes: the nearer centre wins
+        c[2] = pose[:2]  # a box around the sensor: every beam is a candidate
+        th = rng.uniform(-4, 4, 9)
+        ext = np.abs(rng.normal(0.4, 0.3, (9, 2)))
+        ext[3, 0] = np.nan  # holds no point
+        ext[4, 1] = np.inf  # a strip through the scene
+        ext[2] = (2.5, 2.5)  # (large enough to hold returns)
+        ids = np.arange(100, 109, dtype=np.int64)
+        removed, by = _both(ranges, cos_a, sin_a, valid, pose, c, th, ext, ids)
+        hits += int(removed.sum())
+        owners |= set(by[removed].tolist())
+    assert hits > 100
+    assert {100, 101, 102, 104} <= owners and 103 not in owners
+
+
+def test_windowed_exclusion_without_a_window() -> None:
+    """Beams that are not a0 + i·inc, or a negative range: every beam against every box, the same results."""
+    rng = np.random.default_rng(3)
+    angles = np.sort(rng.uniform(-3, 3, 300))
+    ranges = rng.uniform(0.5, 6, 300)
+    ranges[::7] *= -1.0
+    valid = np.ones(300, dtype=bool)
+    c = rng.uniform(-4, 4, (6, 2))
+    removed, _ = _both(ranges, np.cos(angles), np.sin(angles), valid, (0.1, 0.2, 0.3), c, rng.uniform(-3, 3, 6),
+                       np.full((6, 2), 1.5), np.arange(6, dtype=np.int64))
+    assert removed.any()
