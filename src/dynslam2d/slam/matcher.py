@@ -469,22 +469,25 @@ def match_level(prob, pts, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot
     return out, n_acc
 
 
-@njit(cache=True, inline="always")
-def _degeneracy_kernel(H, resolution, n, sumsq, threshold, two):  # pragma: no cover - numba
-    """:func:`degeneracy_values` of ``H`` (3, 3) in a kernel, the same float operations in the same order, except
-    that the weakest axis (ax, ay) is returned before its normalisation (:func:`unit_axis`: Python's
-    ``math.hypot`` is not numba's). ``two`` is 2.0 given at run time: ``x ** two`` then calls the C library's
-    ``pow``, as CPython's ``x ** 2`` does (a literal 2 would be compiled to ``x * x``, which rounds differently for
-    about one value in a thousand)."""
+def _degeneracy_math(h00: float, h01: float, h02: float, h10: float, h11: float, h12: float, h20: float,
+                     h21: float, h22: float, resolution: float, n: int, sumsq: float, threshold: float,
+                     two: float) -> tuple[float, float, float, float, float, float, float, bool, bool]:
+    """:func:`degeneracy_values` of the Hessian cells ``h00`` … ``h22`` (world units: m, m, rad) with ``n`` points of
+    Σ x² + y² = ``sumsq`` m², the weakest axis (ax, ay) returned before its normalisation (:func:`unit_axis`:
+    Python's ``math.hypot`` is not numba's). Plain Python, called as it is by :func:`degeneracy_values` and compiled
+    into :func:`match_pyramid` (:func:`_degeneracy_kernel`): one text, the same float operations in the same order
+    both ways. ``two`` is 2.0 given at run time: in a kernel ``x ** two`` then calls the C library's ``pow``, as
+    CPython's ``x ** 2`` does (a literal 2 would be compiled to ``x * x``, which rounds differently for about one
+    value in a thousand)."""
     rho = math.sqrt(sumsq / n) if n else 1.0
-    rho = 1e-3 if 1e-3 > rho else rho
+    rho = 1e-3 if 1e-3 > rho else rho  # (max(rho, 1e-3) without the call: the same value, NaN kept)
     k = 1.0 / resolution  # world (m, m, rad) → cells / rad
-    a = H[0, 0] * k * k
-    b = 0.5 * (H[0, 1] + H[1, 0]) * k * k
-    d = H[1, 1] * k * k
-    u = 0.5 * (H[0, 2] + H[2, 0]) * k
-    v = 0.5 * (H[1, 2] + H[2, 1]) * k
-    r = H[2, 2]
+    a = h00 * k * k
+    b = 0.5 * (h01 + h10) * k * k
+    d = h11 * k * k
+    u = 0.5 * (h02 + h20) * k
+    v = 0.5 * (h12 + h21) * k
+    r = h22
     if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(d) and math.isfinite(u) and math.isfinite(v)
             and math.isfinite(r)) or not a + d > 0.0:
         return 0.0, 0.0, 0.0, 1.0, 0.0, rho, 0.0, True, True
@@ -492,17 +495,18 @@ def _degeneracy_kernel(H, resolution, n, sumsq, threshold, two):  # pragma: no c
         a2 = a - u * u / r
         b2 = b - u * v / r
         d2 = d - v * v / r
-    else:
+    else:  # the scan sees no rotation at all
         a2 = a
         b2 = b
         d2 = d
     half_tr = 0.5 * (a2 + d2)
     disc = 0.25 * (a2 - d2) ** two + b2 * b2
-    disc = math.sqrt(0.0 if 0.0 > disc else disc)
+    disc = math.sqrt(0.0 if 0.0 > disc else disc)  # (max(…, 0.0) as a conditional: the same value, NaN kept)
     lam_max = half_tr + disc
     lam_min = half_tr - disc
     if not lam_max > 0.0:
         return 0.0, 0.0, 0.0, 1.0, 0.0, rho, 0.0, True, True
+    # eigenvector of lam_min
     if abs(b2) > 1e-300:
         ax = lam_min - d2
         ay = b2
@@ -518,6 +522,16 @@ def _degeneracy_kernel(H, resolution, n, sumsq, threshold, two):  # pragma: no c
     r_ratio = (0.0 if 0.0 > s_rot else s_rot) / (rho * rho * lam_max)
     return (r_ratio if r_ratio < t_ratio else t_ratio, t_ratio, r_ratio, ax, ay, rho, lam_max,
             t_ratio < threshold, r_ratio < threshold)
+
+
+_degeneracy_jit = njit(cache=True, inline="always")(_degeneracy_math)
+
+
+@njit(cache=True, inline="always")
+def _degeneracy_kernel(H, resolution, n, sumsq, threshold, two):  # pragma: no cover - numba
+    """:func:`_degeneracy_math` of ``H`` (3, 3) in a kernel (the axis not normalised)."""
+    return _degeneracy_jit(H[0, 0], H[0, 1], H[0, 2], H[1, 0], H[1, 1], H[1, 2], H[2, 0], H[2, 1], H[2, 2],
+                           resolution, n, sumsq, threshold, two)
 
 
 #: :func:`match_pyramid`'s degeneracy values when it computes none
@@ -1233,41 +1247,8 @@ def degeneracy_values(hessian_cells: np.ndarray, resolution: float, pts_m: np.nd
     n = pts_m.shape[0]
     if sumsq is None:
         sumsq = float(_einsum("ij,ij->", pts_m, pts_m))
-    rho = math.sqrt(sumsq / n) if n else 1.0
-    rho = 1e-3 if 1e-3 > rho else rho  # (max(rho, 1e-3) without the call: the same value, NaN kept)
     (h00, h01, h02), (h10, h11, h12), (h20, h21, h22) = hessian_cells.tolist()
-    k = 1.0 / resolution  # world (m, m, rad) → cells / rad
-    a = h00 * k * k
-    b = 0.5 * (h01 + h10) * k * k
-    d = h11 * k * k
-    u = 0.5 * (h02 + h20) * k
-    v = 0.5 * (h12 + h21) * k
-    r = h22
-    isfinite = math.isfinite
-    if not (isfinite(a) and isfinite(b) and isfinite(d) and isfinite(u) and isfinite(v) and isfinite(r)) \
-            or not a + d > 0.0:
-        return 0.0, 0.0, 0.0, 1.0, 0.0, rho, 0.0, True, True
-    if r > 1e-12 * (a + d):  # rotation marginalized (Schur complement)
-        a2, b2, d2 = a - u * u / r, b - u * v / r, d - v * v / r
-    else:  # the scan sees no rotation at all
-        a2, b2, d2 = a, b, d
-    half_tr = 0.5 * (a2 + d2)
-    disc = 0.25 * (a2 - d2) ** 2 + b2 * b2
-    disc = math.sqrt(0.0 if 0.0 > disc else disc)  # (max(…, 0.0) as a conditional: the same value, NaN kept)
-    lam_max, lam_min = half_tr + disc, half_tr - disc
-    if not lam_max > 0.0:
-        return 0.0, 0.0, 0.0, 1.0, 0.0, rho, 0.0, True, True
-    # eigenvector of lam_min
-    if abs(b2) > 1e-300:
-        ax, ay = lam_min - d2, b2
-    elif a2 <= d2:
-        ax, ay = 1.0, 0.0
-    else:
-        ax, ay = 0.0, 1.0
+    ratio, t_ratio, r_ratio, ax, ay, rho, lam_max, t_deg, r_deg = _degeneracy_math(
+        h00, h01, h02, h10, h11, h12, h20, h21, h22, resolution, n, sumsq, threshold, 2.0)
     ax, ay = unit_axis(ax, ay)
-    t_ratio = (0.0 if 0.0 > lam_min else lam_min) / lam_max
-    det = a * d - b * b
-    s_rot = r - (u * (d * u - b * v) + v * (a * v - b * u)) / det if det > 1e-300 * (a * d + 1e-300) else 0.0
-    r_ratio = (0.0 if 0.0 > s_rot else s_rot) / (rho * rho * lam_max)
-    return (r_ratio if r_ratio < t_ratio else t_ratio, t_ratio, r_ratio, ax, ay, rho, lam_max,
-            t_ratio < threshold, r_ratio < threshold)
+    return ratio, t_ratio, r_ratio, ax, ay, rho, lam_max, t_deg, r_deg
