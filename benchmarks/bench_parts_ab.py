@@ -58,20 +58,9 @@ OUTSIDE = ("map view (_evidence_view)", "body filter", "exclusion (both calls)",
 
 def _counted_wrapper(acc: collections.Counter, calls: collections.Counter) -> Callable[[Any, str, str], None]:
     """``cputimers.thread_cpu_wrapper`` that also counts the calls of each tag in ``calls`` (outside the window)."""
+    from cputimers import thread_cpu_wrapper
 
-    def wrap(obj: Any, attr: str, tag: str) -> None:
-        f = getattr(obj, attr)
-
-        def timed(*a: Any, **k: Any) -> Any:
-            calls[tag] += 1
-            t0 = time.thread_time_ns()
-            r = f(*a, **k)
-            acc[tag] += time.thread_time_ns() - t0
-            return r
-
-        setattr(obj, attr, timed)
-
-    return wrap
+    return thread_cpu_wrapper(acc, calls)
 
 
 def _wrapper_cost(make: Callable, n: int = 2000, reps: int = 25) -> float:

@@ -13,13 +13,17 @@ from collections.abc import Callable
 from typing import Any
 
 
-def thread_cpu_wrapper(acc: collections.Counter) -> Callable[[Any, str, str], None]:
-    """``wrap(obj, attr, tag)``: replace ``obj.attr`` by a call that adds its thread CPU ns to ``acc[tag]``."""
+def thread_cpu_wrapper(acc: collections.Counter,
+                       calls: collections.Counter | None = None) -> Callable[[Any, str, str], None]:
+    """``wrap(obj, attr, tag)``: replace ``obj.attr`` by a call that adds its thread CPU ns to ``acc[tag]`` and, with
+    ``calls``, counts each tag's calls there (outside the timed window)."""
 
     def wrap(obj: Any, attr: str, tag: str) -> None:
         f = getattr(obj, attr)
 
         def timed(*a: Any, **k: Any) -> Any:
+            if calls is not None:
+                calls[tag] += 1
             t0 = time.thread_time_ns()
             r = f(*a, **k)
             acc[tag] += time.thread_time_ns() - t0
