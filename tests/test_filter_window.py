@@ -1,6 +1,7 @@
 """The movers' exclusion visits only each box's beam window (filter._windowed_exclusion, pass mov128): bit for bit
-the per-beam pass over every box (filter._scan_exclusion_kernel), on the simulator's scans, with overlapping boxes
-(nearest centre wins), a box around the sensor, NaN / infinite extents, and beam angles shifted by 2π or reversed."""
+the per-beam pass over every box (`_every_beam` below, filter._region_of per beam), on the simulator's scans, with
+overlapping boxes (nearest centre wins), a box around the sensor, NaN / infinite extents, and beam angles shifted
+by 2π or reversed. filter_scan_ids' non-default modes use the windowed pass too."""
 
 from __future__ import annotations
 
@@ -9,8 +10,28 @@ import math
 import numpy as np
 import pytest
 
-from dynslam2d.filter import _scan_exclusion_kernel, _windowed_exclusion
+from dynslam2d.filter import _region_of, _windowed_exclusion
+from dynslam2d.jitbox import njit
 from dynslam2d.sim import simulate
+
+
+@njit(cache=True)
+def _every_beam(ranges, cos_a, sin_a, valid, pc, ps, px, py, c, th, ha, hb, ids, removed,
+                removed_by):  # pragma: no cover
+    """The reference: every valid beam's point (Scan.points, Pose2D.transform_points' operations) tested against
+    every box by filter._region_of (the library's per-beam pass before pass mov128)."""
+    ct = np.cos(th)
+    st = np.sin(th)
+    for i in range(ranges.shape[0]):
+        if not valid[i]:
+            continue
+        r = ranges[i]
+        lx = r * cos_a[i]
+        ly = r * sin_a[i]
+        j = _region_of(pc * lx - ps * ly + px, ps * lx + pc * ly + py, c, ct, st, ha, hb)
+        if j >= 0:
+            removed_by[i] = ids[j]
+            removed[i] = True
 
 
 def _both(ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray, pose: tuple[float, float, float],
@@ -18,8 +39,8 @@ def _both(ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.nd
     n = ranges.shape[0]
     pc, ps, px, py = math.cos(pose[2]), math.sin(pose[2]), pose[0], pose[1]
     ref, ref_by = np.zeros(n, dtype=bool), np.full(n, -1, dtype=np.int64)
-    _scan_exclusion_kernel(ranges, cos_a, sin_a, valid, pc, ps, px, py, c, th, ext[:, 0].copy(), ext[:, 1].copy(),
-                           ids, ref, ref_by)
+    _every_beam(ranges, cos_a, sin_a, valid, pc, ps, px, py, c, th, ext[:, 0].copy(), ext[:, 1].copy(), ids, ref,
+                ref_by)
     got, got_by = np.zeros(n, dtype=bool), np.full(n, -1, dtype=np.int64)
     _windowed_exclusion(ranges, cos_a, sin_a, valid, pc, ps, px, py, c, th, ext, ids, got, got_by)
     np.testing.assert_array_equal(got, ref)

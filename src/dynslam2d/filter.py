@@ -177,34 +177,6 @@ def _exclusion_kernel(
 
 
 @njit(cache=True, inline="always")
-def _scan_exclusion_kernel(
-    ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray,
-    pc: float, ps: float, px: float, py: float,
-    c: np.ndarray, th: np.ndarray, ha: np.ndarray, hb: np.ndarray, ids: np.ndarray,
-    removed: np.ndarray, removed_by: np.ndarray,
-) -> None:
-    """:func:`filter_scan` and the id lookup in one pass over the beams, in place: ``removed[i]`` and
-    ``removed_by[i]`` (the id ``ids[j]`` of the region that removed beam ``i``) for the valid beams.
-
-    Each valid beam's point is made as :meth:`Scan.points` (paper Eq. 4) and moved into the map frame as
-    :meth:`Pose2D.transform_points` (``pc``, ``ps`` = cos, sin of the pose's heading; ``px``, ``py`` its
-    position, m), with the same floating-point operations, then tested by :func:`_region_of`.
-    """
-    ct = np.cos(th)
-    st = np.sin(th)
-    for i in range(ranges.shape[0]):
-        if not valid[i]:
-            continue
-        r = ranges[i]
-        lx = r * cos_a[i]
-        ly = r * sin_a[i]
-        j = _region_of(pc * lx - ps * ly + px, ps * lx + pc * ly + py, c, ct, st, ha, hb)
-        if j >= 0:
-            removed_by[i] = ids[j]
-            removed[i] = True
-
-
-@njit(cache=True, inline="always")
 def _grow_boxes(
     ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, pc: float, ps: float, px: float, py: float,
     beams: np.ndarray, ends: np.ndarray, boxes: np.ndarray,
@@ -363,11 +335,12 @@ def _windowed_exclusion(
     c: np.ndarray, th: np.ndarray, ext: np.ndarray, ids: np.ndarray,
     removed: np.ndarray, removed_by: np.ndarray,
 ) -> None:
-    """:func:`_scan_exclusion_kernel` (paper Eq. 4–8) with the same results, box by box over only the beams that can
-    reach the box's circumscribed disc (:func:`_beam_window`) instead of every beam against every box: each
-    beam's point is made with the same floating-point operations, and the boxes are visited in index order with
-    the same strict "nearer centre" test, so a beam's region is the one :func:`_region_of` gives. ``ext`` (k, 2)
-    half-extents, m. Falls back to every beam when the beam angles are not ``a0 + i·inc`` to 1e-9."""
+    """The exclusion of a scan's valid beams (paper Eq. 4–8: each beam's point as :meth:`Scan.points`, moved
+    into the map frame as :meth:`Pose2D.transform_points`, tested as :func:`_region_of`), box by box over only the
+    beams that can reach the box's circumscribed disc (:func:`_beam_window`) instead of every beam against every
+    box: each beam's point is made with the same floating-point operations, and the boxes are visited in index
+    order with the same strict "nearer centre" test, so a beam's region is the one :func:`_region_of` gives.
+    ``ext`` (k, 2) half-extents, m. Falls back to every beam when the beam angles are not ``a0 + i·inc`` to 1e-9."""
     n = ranges.shape[0]
     k = c.shape[0]
     if n == 0 or k == 0:
@@ -390,7 +363,7 @@ def _windowed_exclusion(
     found = np.empty(n, dtype=np.int64)
     found[:] = -1
     wins = np.empty(14, dtype=np.int64)
-    cts = np.cos(th)  # (as _scan_exclusion_kernel)
+    cts = np.cos(th)  # (as _exclusion_kernel)
     sts = np.sin(th)
     for j in range(k):
         ha = ext[j, 0]
@@ -439,7 +412,7 @@ def _rows_exclusion(
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`filter_scan_ids` of mode ``box`` without a speed margin in one call: the centres ``p + v·dt`` of
     the (k, 7) rows ``boxes`` (the same operations as the array expression), their regions
-    (:func:`_box_extents_kernel`) and the beams (:func:`_scan_exclusion_kernel`). Returns (removed, removed_by)."""
+    (:func:`_box_extents_kernel`) and the beams (:func:`_windowed_exclusion`). Returns (removed, removed_by)."""
     n = ranges.shape[0]
     removed = np.empty(n, dtype=np.bool_)
     removed[:] = False
@@ -786,10 +759,11 @@ def filter_scan_ids(
     centres = boxes[:, 0:2] + boxes[:, 5:7] * dt
     speeds = np.array([math.hypot(vx, vy) for vx, vy in boxes[:, 5:7].tolist()]) if config.mode == "box" else None
     ext = half_extents(config, boxes[:, 3], boxes[:, 4], speeds)
-    _scan_exclusion_kernel(scan.ranges, cos_a, sin_a, scan.valid_view(), math.cos(pose.theta), math.sin(pose.theta),
-                           float(pose.x), float(pose.y), centres, np.ascontiguousarray(boxes[:, 2]),
-                           np.ascontiguousarray(ext[:, 0]), np.ascontiguousarray(ext[:, 1]),
-                           np.ascontiguousarray(ids, dtype=np.int64), removed, removed_by)
+    _windowed_exclusion(scan.ranges, cos_a, sin_a, scan.valid_view(), math.cos(pose.theta), math.sin(pose.theta),
+                        float(pose.x), float(pose.y), np.ascontiguousarray(centres, dtype=np.float64),
+                        np.ascontiguousarray(boxes[:, 2], dtype=np.float64),
+                        np.ascontiguousarray(ext, dtype=np.float64), np.ascontiguousarray(ids, dtype=np.int64),
+                        removed, removed_by)
     return removed, removed_by
 
 
