@@ -83,13 +83,13 @@ TARGETS = track_targets()
 
 
 def warmed_scans(name: str, data: Path) -> list:
-    """The scans of input ``name`` (a key of bench_digest's ``INPUTS`` or ``sim:NAME``; recordings under ``data``),
-    after a throw-away pipeline ran their first :data:`WARMUP` scans (kernels loaded, caches warm)."""
-    from dynslam2d.inputs import open_source
+    """The scans of input ``name`` (a key of bench_digest's ``INPUTS``, ``sim:NAME`` or ``ten-movers``; recordings
+    under ``data``), after a throw-away pipeline ran their first :data:`WARMUP` scans (kernels loaded, caches warm)."""
+    from bench_pipeline_ab import input_scans
+
     from dynslam2d.pipeline import Pipeline
 
-    rel, topic = INPUTS.get(name, (name, None))
-    scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+    scans = input_scans(data, name)
     warm = Pipeline()
     for s in scans[:WARMUP]:
         warm.process(s)

@@ -69,17 +69,17 @@ INPUTS: dict[str, tuple[str, str | None]] = dict(_ALL_INPUTS)
 
 def check_inputs(ap: argparse.ArgumentParser, names: list[str]) -> None:
     """Stop (``ap.error``, exit status 2) if a name is not in :data:`INPUTS`, listing the accepted names."""
-    bad = [n for n in names if n not in INPUTS]
+    bad = [n for n in names if n not in INPUTS and n != "ten-movers"]
     if bad:
         ap.error(f"unknown input{'s' if len(bad) > 1 else ''} {', '.join(map(repr, bad))}; "
                  f"accepted: {', '.join(INPUTS)}")
 
 
 def load_scans(data: Path, name: str) -> list:
-    from dynslam2d.inputs import open_source
+    """The scans of input ``name`` (:data:`INPUTS`, or ``ten-movers``: bench_pipeline_ab.input_scans)."""
+    from bench_pipeline_ab import input_scans
 
-    rel, topic = INPUTS[name]
-    return list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+    return input_scans(data, name)
 
 
 #: the tracker's modules: ``detect/tracker.py`` and the step modules it was split into (pass trktable); a name a
