@@ -807,6 +807,46 @@ def match_multires(
     return pose
 
 
+def match_fit(levels: list[GridLevel], pts_m: np.ndarray, start_world: np.ndarray, iterations_coarse: int,
+              iterations_finest: int, swapped: bool, use_lm: bool, lam0: float, lam_max: float, max_rot: float,
+              max_trans_cells: float, free_thresh: float, support_thresh: float | None,
+              degeneracy_threshold: float | None, sumsq: float | None
+              ) -> tuple[np.ndarray, LevelFit | None, float | None, tuple[int, float] | None]:
+    """:func:`match_multires` without a prior, its ``fit`` list returned: (world pose (3,) x m, y m, θ rad, level
+    0's :class:`LevelFit` there, the free fraction, the support (count, spread rad)), the last three None where
+    ``match_multires`` leaves the list empty (or without the support: ``support_thresh`` None). The same kernel call
+    with the same arguments, every argument positional: the processor's refine on every scan, without the keyword
+    binding and the list."""
+    n_lv = len(levels)
+    dt = pts_m.dtype
+    if not (n_lv <= 3 and pts_m.shape[0] != 0 and (dt is _F64 or dt == np.float64) and pts_m.flags.c_contiguous):
+        fit: list = []
+        p = match_multires(levels, pts_m, start_world, iterations_coarse, iterations_finest, swapped, use_lm, lam0,
+                           lam_max, max_rot, max_trans_cells, None, None, fit, free_thresh, support_thresh,
+                           degeneracy_threshold, sumsq)
+        if not fit:
+            return p, None, None, None
+        return p, fit[0], fit[1], fit[2] if len(fit) > 2 else None
+    # (match_multires' kernel path, its use_prior False)
+    pose = start_world.copy() if type(start_world) is np.ndarray and start_world.dtype is _F64 else np.array(
+        start_world, dtype=np.float64)
+    p0 = levels[0].prob
+    H = np.empty((3, 3))
+    out = np.empty(3)
+    no_deg = degeneracy_threshold is None or sumsq is None
+    fitted, cost, summ, n_in, free, n_sup, k_sup, dg = match_pyramid(
+        p0, levels[1].prob if n_lv > 1 else p0, levels[2].prob if n_lv > 2 else p0, _level_geometry(levels), pts_m,
+        pose, iterations_coarse, iterations_finest, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells, False,
+        pose, _ZERO_PRIOR_VIEWS[n_lv], True, free_thresh, H, out,
+        math.nan if support_thresh is None else support_thresh, math.nan if no_deg else degeneracy_threshold,
+        math.nan if sumsq is None else sumsq, 2.0,
+    )
+    if not fitted:
+        return out, None, None, None
+    return (out, LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in), None if no_deg else dg),
+            float(free), None if support_thresh is None else (int(n_sup), k_sup * BIN_ANGLE))
+
+
 def free_fraction(level: GridLevel, pts_m: np.ndarray, pose_world: np.ndarray, thresh: float) -> float:
     """Fraction of laser-frame points ``pts_m`` that fall on cells of ``level`` whose interpolated
     occupancy probability is below ``thresh`` at ``pose_world`` (0 on an empty level)."""

@@ -34,6 +34,7 @@ from dynslam2d.slam.matcher import (
     evaluate,
     free_fraction,
     gated_points,
+    match_fit,
     match_multires,
     no_drop,
     support_at,
@@ -81,6 +82,10 @@ _NO_MATCH_COVARIANCE = np.diag([1e6, 1e6, math.pi**2])
 #: ``MatchResult._covariance_of`` of a result not (yet) matched: its covariance is a copy of _NO_MATCH_COVARIANCE,
 #: made when first read (a matched scan replaces it in ``_fit`` before anyone reads it)
 _NO_MATCH: tuple = ()
+#: ``MatchResult.hessian`` of a result not (yet) matched: zeros, shared by every such result (read-only; a match
+#: replaces the array in ``_fit``, nothing writes into it)
+_ZERO_HESSIAN = np.zeros((3, 3))
+_ZERO_HESSIAN.flags.writeable = False
 
 
 def _wrap(a: float) -> float:
@@ -192,7 +197,8 @@ class _Prior:
     kind: str | None
     axes: np.ndarray
     gate: bool
-    delta: Pose2D | None = None  # the odometry increment since the previous scan (laser frame)
+    delta: tuple[float, float, float] | None = None  # (x m, y m, θ rad) of the odometry increment since the
+    # previous scan (laser frame): ``prev_odom.between(odom)``'s values
 
 
 @dataclass(slots=True)
@@ -396,8 +402,19 @@ class HectorSlam:
         dt = scan.stamp - self._last_stamp if self._last_stamp is not None else 0.0
         odom = scan.odom
         if c.use_odometry and odom is not None and self._last_odom is not None and odom.is_finite():
-            delta = self._last_odom.between(odom)
-            return _Prior(last.compose(delta), "odometry", all_axes, True, delta)
+            # (``d = last_odom.between(odom)``, ``last.compose(d)`` inline: the same float operations in the same
+            # order as Pose2D.inverse / compose, without the intermediate poses and the three method calls)
+            a = self._last_odom
+            pi = math.pi
+            ca, sa = math.cos(a.theta), math.sin(a.theta)
+            ix, iy, ith = -ca * a.x - sa * a.y, sa * a.x - ca * a.y, float((-a.theta + pi) % (2.0 * pi) - pi)
+            ca, sa = math.cos(ith), math.sin(ith)
+            dx, dy = ix + ca * odom.x - sa * odom.y, iy + sa * odom.x + ca * odom.y
+            dth = float((ith + odom.theta + pi) % (2.0 * pi) - pi)
+            ca, sa = math.cos(last.theta), math.sin(last.theta)
+            return _Prior(Pose2D(last.x + ca * dx - sa * dy, last.y + sa * dx + ca * dy,
+                                 float((last.theta + dth + pi) % (2.0 * pi) - pi)),
+                          "odometry", all_axes, True, (dx, dy, dth))
         # (:meth:`_model_rates` inline while tracking: the same operations without the call)
         moving = False
         cv = last
@@ -526,11 +543,11 @@ class HectorSlam:
             else:
                 start = predicted
         first = self.map.levels[0].logodds.size == 0  # (MultiResMap.empty, read directly)
-        zero = np.zeros((3, 3))
+        zero = _ZERO_HESSIAN
+        # (every field positionally, in the declaration order: the keyword form's values, ≈ 40 % less time)
         res = MatchResult(
-            pose=start, start=start, _covariance=None, hessian=zero,
-            score=0.0, n_points=int(pts.shape[0]), time_gap=gap, first=first, points=pts, clear_points=clear,
-            prior=prior.kind, state=self._state, _covariance_of=_NO_MATCH,
+            start, start, None, zero, 0.0, int(pts.shape[0]), 0.0, False, False, None, False, gap, first, 0.0, pts,
+            clear, math.nan, False, 0, 0.0, False, prior.kind, SOURCE_SCAN, self._state, math.nan, _NO_MATCH,
         )
         if pts.shape[0] < c.min_points:
             res.skipped = True
@@ -553,8 +570,9 @@ class HectorSlam:
                 self._use_prediction(res, prior, PREDICT_LOST)
         else:
             self._odometry_start = prior.kind == "odometry" and predicted is None
-            # (_odometry_information is None unless the prior is the odometry's: the call only then)
-            info = self._odometry_information(prior) if prior.kind == "odometry" else None
+            # (_odometry_information is None unless the prior is the odometry's and odometry_prior "all")
+            info = self._odometry_information(prior) if prior.kind == "odometry" and c.odometry_prior == "all" \
+                else None
             if info is None:  # (:meth:`_match_tracking` without an odometry prior, inline: the same steps)
                 self._match_against_map(res, pts)
                 if res.reason != REJECT_NON_FINITE and res.reason != REJECT_JUMP:
@@ -609,8 +627,9 @@ class HectorSlam:
         c = self.config
         if c.odometry_prior != "all" or prior.kind != "odometry" or prior.delta is None or self._sigma2 is None:
             return None
-        d = math.hypot(prior.delta.x, prior.delta.y)
-        a = abs(prior.delta.theta)
+        dx, dy, dth = prior.delta
+        d = math.hypot(dx, dy)
+        a = abs(dth)
         var_xy = c.odometry_noise_floor_xy**2 + (c.odometry_noise_translation * d) ** 2
         var_th = c.odometry_noise_floor_theta**2 + (c.odometry_noise_rotation * a) ** 2
         return self._sigma2 * np.diag([1.0 / var_xy, 1.0 / var_xy, 1.0 / var_th])
@@ -883,22 +902,29 @@ class HectorSlam:
         """Match from ``seed``: (pose, level 0's score there; −1 if not finite); its fit kept in ``ctx``'s fits."""
         c = self.config
         levels, pts, prior_pose, prior_info, fits, _ = ctx
-        fitted: list = []  # level 0's evaluation and the free fraction at the result, from the matcher's call
-        sq = self._sumsq  # (and the degeneracy analysis of the evaluation's Hessian, from the same call)
-        p = match_multires(
-            levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
-            c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
-            c.max_translation_step, prior_pose, prior_info, fit=fitted, free_thresh=FREE_SPACE_PROB,
-            support_thresh=c.support_probability, degeneracy_threshold=c.degeneracy_threshold,
-            sumsq=sq[1] if sq is not None and sq[0] is pts else None,
-        )
+        sq = self._sumsq  # (the degeneracy analysis of the evaluation's Hessian, from the same call)
+        if prior_pose is None:  # (the matcher's call without a prior: every argument positional, the fit returned)
+            p, fit, free, sup = match_fit(
+                levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
+                c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step, c.max_translation_step,
+                FREE_SPACE_PROB, c.support_probability, c.degeneracy_threshold,
+                sq[1] if sq is not None and sq[0] is pts else None)
+        else:
+            fitted: list = []  # level 0's evaluation and the free fraction at the result, from the matcher's call
+            p = match_multires(
+                levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
+                c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
+                c.max_translation_step, prior_pose, prior_info, fit=fitted, free_thresh=FREE_SPACE_PROB,
+                support_thresh=c.support_probability, degeneracy_threshold=c.degeneracy_threshold,
+                sumsq=sq[1] if sq is not None and sq[0] is pts else None,
+            )
+            fit, free, sup = (fitted[0], fitted[1], fitted[2] if len(fitted) > 2 else None) if fitted else (
+                None, None, None)
         x, y, th = p.tolist()  # (Python floats: one conversion instead of three element reads)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
             return p, -1.0
-        if fitted:
-            fit, free, sup = fitted
-        else:
-            fit, free, sup = evaluate(levels[0], pts, p), None, None
+        if fit is None:
+            fit = evaluate(levels[0], pts, p)
         fits[p.tobytes()] = (fit, free, sup)
         return p, fit.score
 
