@@ -99,3 +99,41 @@ def test_match_results_as_the_keyword_form_built_them(case: str) -> None:
     else:
         assert res.pose_source == pr.SOURCE_PREDICTION and res.reason == pr.SKIP_TOO_FEW_POINTS
         assert res.covariance.tobytes() == pr._NO_MATCH_COVARIANCE.tobytes()
+
+
+@pytest.mark.parametrize("kind", ["kernel", "float32", "empty", "no_support"])
+def test_match_fit_is_match_multires_with_its_fit_list(kind: str) -> None:
+    """``match_fit`` returns ``match_multires``' pose and its ``fit`` list's items (every bit) from seeds around the
+    paper room's pose, on the kernel path and the paths ``match_multires`` leaves the list empty on."""
+    from conftest import paper_room_slam_points
+
+    import dynslam2d.slam.matcher as mt
+
+    slam, pts = paper_room_slam_points()
+    if kind == "float32":
+        pts = pts.astype(np.float32)
+    elif kind == "empty":
+        pts = pts[:0]
+    c = slam.config
+    sup = None if kind == "no_support" else c.support_probability
+    sumsq = float((pts.astype(np.float64) ** 2).sum())
+    rng = np.random.default_rng(2)
+    levels = slam.map.levels
+    for _ in range(12):
+        seed = np.array([0.3, -0.4, 0.2]) + rng.normal(0.0, [0.1, 0.1, 0.08])
+        args = (levels, pts, seed, c.iterations_coarse, c.iterations_finest, False, True, c.lm_lambda_init,
+                c.lm_lambda_max, c.max_rotation_step, c.max_translation_step)
+        fit: list = []
+        want = mt.match_multires(*args, None, None, fit=fit, free_thresh=0.25, support_thresh=sup,
+                                 degeneracy_threshold=c.degeneracy_threshold, sumsq=sumsq)
+        p, f, free, s = mt.match_fit(*args, 0.25, sup, c.degeneracy_threshold, sumsq)
+        assert p.tobytes() == want.tobytes()
+        if kind in ("float32", "empty"):
+            assert not fit and f is None and free is None and s is None
+            continue
+        wf = fit[0]
+        assert f.hessian.tobytes() == wf.hessian.tobytes() and _bits(f.cost, f.score) == _bits(wf.cost, wf.score)
+        assert f.n_inside == wf.n_inside and type(f.cost) is type(wf.cost) and f.degeneracy == wf.degeneracy
+        assert _bits(free) == _bits(fit[1]) and type(free) is type(fit[1])
+        assert s == (fit[2] if len(fit) > 2 else None)
+        assert (s is None) is (kind == "no_support")
