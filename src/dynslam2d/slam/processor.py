@@ -790,18 +790,6 @@ class HectorSlam:
         c = self.config
         levels = self.map.levels
         start = res.start.as_array()
-
-        # pose bytes → (LevelFit, free fraction, support) of every refine of this scan: _fit, the free-space test and
-        # the support reuse them at the same pose (the winner is not always the latest refine: a correlative seed that
-        # refines to a lower score leaves the first refine's pose)
-        fits: dict[bytes, tuple[LevelFit, float | None, tuple[int, float] | None]] = {}
-        # seed bytes → (pose, score) of every refine of this scan: the map and the points do not change within the
-        # scan, so a seed refined before (a correlative search's pose equal to the start, or a recovery seed equal
-        # to an earlier one) refines to the same pose. (Methods, not closures made on every scan: most scans refine
-        # once and search nothing.)
-        refined: dict[bytes, tuple[np.ndarray, float]] = {}
-        ctx = (levels, pts, prior_pose, prior_info, fits, refined)
-
         mode = c.correlative_mode
         # a start the odometry predicted already holds the previous scan's motion: large motion alone does not
         # trigger the search there (search_on_motion_with_odometry); the poor-match trigger below still does
@@ -813,12 +801,14 @@ class HectorSlam:
             mode == "auto"
             and (big_motion or res.time_gap or self._force_search or self._n_accepted < _WARMUP_SEARCHES)
         )
-        # (the first refine of the scan: :meth:`_refine_cached` with nothing refined yet, without its look-up)
-        best_p, best_s = refined[start.tobytes()] = self._refine_once(ctx, start)
+        # (the first refine of the scan; the per-scan caches of :meth:`_scan_context` are made only for a second one)
+        best_p, best_s, first_fit = self._refine_fit(levels, pts, prior_pose, prior_info, start)
+        ctx = None
         if mode != "never" and not pre_search and self._score_avg is not None:
             pre_search = best_s < c.poor_match_ratio * self._score_avg
         if pre_search:
             self.pre_searches += 1
+            ctx = self._scan_context(levels, pts, prior_pose, prior_info, start, best_p, best_s, first_fit)
             found = self._search(ctx, start)
             if found is not None and found[1] > best_s:
                 best_p, best_s = found
@@ -828,6 +818,8 @@ class HectorSlam:
         if c.recovery and self._score_avg is not None and needs_recovery(c, self._dt, best_s, self._score_avg):
             # (needs_recovery's own first test, before the call: False without recovery or a score average)
             # large-motion recovery (slam/recovery.py): a window grown with the gap, best vs runner-up
+            if ctx is None:
+                ctx = self._scan_context(levels, pts, prior_pose, prior_info, start, best_p, best_s, first_fit)
             rec = recover(c, levels, pts, start, best_p, best_s, self._dt,
                           lambda seed: self._refine_cached(ctx, seed)[0], self._moving_prediction())
             if rec is not None:
@@ -857,7 +849,7 @@ class HectorSlam:
             return
         # a refine's free fraction was taken at (x, y, wrap_angle(θ)) of its result: this pose when the result is
         # best_p
-        best_fit = fits.get(best_p.tobytes())
+        best_fit = ctx[4].get(best_p.tobytes()) if ctx is not None else first_fit
         at = None
         # a refine's evaluation at this same pose (its H, cost and score: evaluate with the same gradient weights),
         # instead of evaluating it again; the pose's bytes are best_p's when wrapping left θ's bits as they were
@@ -868,7 +860,8 @@ class HectorSlam:
             at_fit = best_fit
         else:
             at = pose.as_array()
-            at_fit = fits.get(at.tobytes())
+            # (the first refine's entry is keyed by best_p's bytes, which are not at's: θ's bits differ)
+            at_fit = ctx[4].get(at.tobytes()) if ctx is not None else None
         self._fit(res, pts, pose, at_fit[0] if at_fit is not None else None)
         avg = self._score_avg
         free = best_fit[1] if best_fit is not None else None
@@ -898,35 +891,50 @@ class HectorSlam:
             out = refined[key] = self._refine_once(ctx, seed)
         return out
 
+    def _scan_context(self, levels: list, pts: np.ndarray, prior_pose: np.ndarray | None,
+                      prior_info: np.ndarray | None, start: np.ndarray, p: np.ndarray, score: float,
+                      entry: tuple | None) -> tuple:
+        """The per-scan caches of a scan that refines more than once, holding its first refine (``start`` → ``p``,
+        ``score``, its fit ``entry``): (levels, points, prior pose, prior information, fits, refined).
+
+        fits: pose bytes → (LevelFit, free fraction, support) of every refine of this scan: _fit, the free-space test
+        and the support reuse them at the same pose (the winner is not always the latest refine: a correlative seed
+        that refines to a lower score leaves the first refine's pose). refined: seed bytes → (pose, score) of every
+        refine of this scan: the map and the points do not change within the scan, so a seed refined before (a
+        correlative search's pose equal to the start, or a recovery seed equal to an earlier one) refines to the
+        same pose."""
+        fits: dict[bytes, tuple[LevelFit, float | None, tuple[int, float] | None]] = {}
+        if entry is not None:
+            fits[p.tobytes()] = entry
+        refined: dict[bytes, tuple[np.ndarray, float]] = {start.tobytes(): (p, score)}
+        return levels, pts, prior_pose, prior_info, fits, refined
+
     def _refine_once(self, ctx: tuple, seed: np.ndarray) -> tuple[np.ndarray, float]:
         """Match from ``seed``: (pose, level 0's score there; −1 if not finite); its fit kept in ``ctx``'s fits."""
+        p, score, entry = self._refine_fit(ctx[0], ctx[1], ctx[2], ctx[3], seed)
+        if entry is not None:
+            ctx[4][p.tobytes()] = entry
+        return p, score
+
+    def _refine_fit(self, levels: list, pts: np.ndarray, prior_pose: np.ndarray | None,
+                    prior_info: np.ndarray | None, seed: np.ndarray
+                    ) -> tuple[np.ndarray, float, tuple[LevelFit, float | None, tuple[int, float] | None] | None]:
+        """Match from ``seed`` (world x m, y m, θ rad): (pose, level 0's score there, (its LevelFit, free fraction,
+        support)); −1 and None if the pose is not finite."""
         c = self.config
-        levels, pts, prior_pose, prior_info, fits, _ = ctx
         sq = self._sumsq  # (the degeneracy analysis of the evaluation's Hessian, from the same call)
-        if prior_pose is None:  # (the matcher's call without a prior: every argument positional, the fit returned)
-            p, fit, free, sup = match_fit(
-                levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
-                c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step, c.max_translation_step,
-                FREE_SPACE_PROB, c.support_probability, c.degeneracy_threshold,
-                sq[1] if sq is not None and sq[0] is pts else None)
-        else:
-            fitted: list = []  # level 0's evaluation and the free fraction at the result, from the matcher's call
-            p = match_multires(
-                levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
-                c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step,
-                c.max_translation_step, prior_pose, prior_info, fit=fitted, free_thresh=FREE_SPACE_PROB,
-                support_thresh=c.support_probability, degeneracy_threshold=c.degeneracy_threshold,
-                sumsq=sq[1] if sq is not None and sq[0] is pts else None,
-            )
-            fit, free, sup = (fitted[0], fitted[1], fitted[2] if len(fitted) > 2 else None) if fitted else (
-                None, None, None)
+        # (level 0's evaluation, the free fraction and the support at the result, from the matcher's call)
+        p, fit, free, sup = match_fit(
+            levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug, c.step_mode == "lm",
+            c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step, c.max_translation_step, FREE_SPACE_PROB,
+            c.support_probability, c.degeneracy_threshold, sq[1] if sq is not None and sq[0] is pts else None,
+            prior_pose, prior_info)
         x, y, th = p.tolist()  # (Python floats: one conversion instead of three element reads)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
-            return p, -1.0
+            return p, -1.0, None
         if fit is None:
             fit = evaluate(levels[0], pts, p)
-        fits[p.tobytes()] = (fit, free, sup)
-        return p, fit.score
+        return p, fit.score, (fit, free, sup)
 
     def _search(self, ctx: tuple, start: np.ndarray) -> tuple[np.ndarray, float] | None:
         """The front end's correlative search around ``start``, its pose refined; None if it found nothing."""
