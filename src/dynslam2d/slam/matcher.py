@@ -762,17 +762,29 @@ def match_fit(levels: list[GridLevel], pts_m: np.ndarray, start_world: np.ndarra
     (world pose (3,) x m, y m, θ rad, level 0's :class:`LevelFit` there, the free fraction, the support (count,
     spread rad)), the last three None where ``match_multires`` leaves the list empty (``want_fit`` False, a pose that
     is not finite, more than three levels, points that are not a C-contiguous float64 array; the support also
-    without ``support_thresh``). Maps of at most three levels take one :func:`match_pyramid` call (every level and
-    the evaluation), the others :func:`_match_levels`."""
+    without ``support_thresh``). :func:`match_fit_at` of the start's three float64 values."""
+    sx, sy, sth = (start_world if type(start_world) is np.ndarray and start_world.dtype is _F64 else np.array(
+        start_world, dtype=np.float64)).tolist()
+    return match_fit_at(levels, pts_m, sx, sy, sth, iterations_coarse, iterations_finest, swapped, use_lm, lam0,
+                        lam_max, max_rot, max_trans_cells, free_thresh, support_thresh, degeneracy_threshold, sumsq,
+                        prior_world, prior_info, want_fit)
+
+
+def match_fit_at(levels: list[GridLevel], pts_m: np.ndarray, sx: float, sy: float, sth: float, iterations_coarse: int,
+                 iterations_finest: int, swapped: bool, use_lm: bool, lam0: float, lam_max: float, max_rot: float,
+                 max_trans_cells: float, free_thresh: float, support_thresh: float | None,
+                 degeneracy_threshold: float | None, sumsq: float | None, prior_world: np.ndarray | None = None,
+                 prior_info: np.ndarray | None = None, want_fit: bool = True,
+                 ) -> tuple[np.ndarray, LevelFit | None, float | None, tuple[int, float] | None]:
+    """:func:`match_fit` from the start (``sx`` m, ``sy`` m, ``sth`` rad; Python floats) without its array (the
+    processor's first refine of a scan, from its start pose's floats). Maps of at most three levels take one
+    :func:`match_pyramid` call (every level and the evaluation), the others :func:`_match_levels`."""
     n_lv = len(levels)
     dt = pts_m.dtype
     if not (n_lv <= 3 and pts_m.shape[0] != 0 and (dt is _F64 or dt == np.float64) and pts_m.flags.c_contiguous):
         # (other point arrays take the loop: their scaled copies have the loop's dtype and layout)
-        return _match_levels(levels, pts_m, start_world, iterations_coarse, iterations_finest, swapped, use_lm, lam0,
-                             lam_max, max_rot, max_trans_cells, prior_world, prior_info), None, None, None
-    # (the start's three floats: the float64 values np.array(start_world, dtype=np.float64) holds)
-    sx, sy, sth = (start_world if type(start_world) is np.ndarray and start_world.dtype is _F64 else np.array(
-        start_world, dtype=np.float64)).tolist()
+        return _match_levels(levels, pts_m, np.array([sx, sy, sth]), iterations_coarse, iterations_finest, swapped,
+                             use_lm, lam0, lam_max, max_rot, max_trans_cells, prior_world, prior_info), None, None, None
     if prior_world is not None and prior_info is not None and bool(np.any(prior_info)):
         info = np.asarray(prior_info, dtype=np.float64)
         lam_ps = np.empty((n_lv, 3, 3))

@@ -34,7 +34,7 @@ from dynslam2d.slam.matcher import (
     evaluate,
     free_fraction,
     gated_points,
-    match_fit,
+    match_fit_at,
     match_multires,
     no_drop,
     support_at,
@@ -789,7 +789,7 @@ class HectorSlam:
                            prior_pose: np.ndarray | None = None, prior_info: np.ndarray | None = None) -> None:
         c = self.config
         levels = self.map.levels
-        start = res.start.as_array()
+        start = None  # (res.start.as_array(), made when a search, the recovery or the caches read it)
         mode = c.correlative_mode
         # a start the odometry predicted already holds the previous scan's motion: large motion alone does not
         # trigger the search there (search_on_motion_with_odometry); the poor-match trigger below still does
@@ -802,12 +802,15 @@ class HectorSlam:
             and (big_motion or res.time_gap or self._force_search or self._n_accepted < _WARMUP_SEARCHES)
         )
         # (the first refine of the scan; the per-scan caches of :meth:`_scan_context` are made only for a second one)
-        best_p, best_s, first_fit = self._refine_fit(levels, pts, prior_pose, prior_info, start)
+        a = res.start
+        best_p, best_s, first_fit = self._refine_fit(levels, pts, prior_pose, prior_info, float(a.x), float(a.y),
+                                                     float(a.theta))  # (the floats of res.start.as_array())
         ctx = None
         if mode != "never" and not pre_search and self._score_avg is not None:
             pre_search = best_s < c.poor_match_ratio * self._score_avg
         if pre_search:
             self.pre_searches += 1
+            start = res.start.as_array()
             ctx = self._scan_context(levels, pts, prior_pose, prior_info, start, best_p, best_s, first_fit)
             found = self._search(ctx, start)
             if found is not None and found[1] > best_s:
@@ -819,6 +822,7 @@ class HectorSlam:
             # (needs_recovery's own first test, before the call: False without recovery or a score average)
             # large-motion recovery (slam/recovery.py): a window grown with the gap, best vs runner-up
             if ctx is None:
+                start = res.start.as_array()
                 ctx = self._scan_context(levels, pts, prior_pose, prior_info, start, best_p, best_s, first_fit)
             rec = recover(c, levels, pts, start, best_p, best_s, self._dt,
                           lambda seed: self._refine_cached(ctx, seed)[0], self._moving_prediction())
@@ -911,24 +915,25 @@ class HectorSlam:
 
     def _refine_once(self, ctx: tuple, seed: np.ndarray) -> tuple[np.ndarray, float]:
         """Match from ``seed``: (pose, level 0's score there; −1 if not finite); its fit kept in ``ctx``'s fits."""
-        p, score, entry = self._refine_fit(ctx[0], ctx[1], ctx[2], ctx[3], seed)
+        sx, sy, sth = np.asarray(seed, dtype=np.float64).tolist()  # (the matcher's float64 start)
+        p, score, entry = self._refine_fit(ctx[0], ctx[1], ctx[2], ctx[3], sx, sy, sth)
         if entry is not None:
             ctx[4][p.tobytes()] = entry
         return p, score
 
     def _refine_fit(self, levels: list, pts: np.ndarray, prior_pose: np.ndarray | None,
-                    prior_info: np.ndarray | None, seed: np.ndarray
+                    prior_info: np.ndarray | None, sx: float, sy: float, sth: float
                     ) -> tuple[np.ndarray, float, tuple[LevelFit, float | None, tuple[int, float] | None] | None]:
-        """Match from ``seed`` (world x m, y m, θ rad): (pose, level 0's score there, (its LevelFit, free fraction,
-        support)); −1 and None if the pose is not finite."""
+        """Match from the world pose (``sx`` m, ``sy`` m, ``sth`` rad): (pose, level 0's score there, (its LevelFit,
+        free fraction, support)); −1 and None if the pose is not finite."""
         c = self.config
         sq = self._sumsq  # (the degeneracy analysis of the evaluation's Hessian, from the same call)
         # (level 0's evaluation, the free fraction and the support at the result, from the matcher's call)
-        p, fit, free, sup = match_fit(
-            levels, pts, seed, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug, c.step_mode == "lm",
-            c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step, c.max_translation_step, FREE_SPACE_PROB,
-            c.support_probability, c.degeneracy_threshold, sq[1] if sq is not None and sq[0] is pts else None,
-            prior_pose, prior_info)
+        p, fit, free, sup = match_fit_at(
+            levels, pts, sx, sy, sth, c.iterations_coarse, c.iterations_finest, c.hector_gradient_bug,
+            c.step_mode == "lm", c.lm_lambda_init, c.lm_lambda_max, c.max_rotation_step, c.max_translation_step,
+            FREE_SPACE_PROB, c.support_probability, c.degeneracy_threshold,
+            sq[1] if sq is not None and sq[0] is pts else None, prior_pose, prior_info)
         x, y, th = p.tolist()  # (Python floats: one conversion instead of three element reads)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
             return p, -1.0, None
