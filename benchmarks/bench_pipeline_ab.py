@@ -54,11 +54,11 @@ WARMUP = 60
 
 def input_scans(data: Path, name: str) -> list:
     """The scans of input ``name``: a key of bench_digest's ``INPUTS`` (recordings under ``data``), any other
-    built-in scene by its name (``sim:paper``: README command 1), or ``ten-movers`` (bench_pipeline.py's scene with
-    10 movers, 30 s: the one furthest from the speed target)."""
+    built-in scene by its name (``sim:paper``: README command 1), or ``ten-movers`` / ``sim:ten-movers``
+    (bench_pipeline.py's scene with 10 movers, 30 s: the one furthest from the speed target)."""
     from dynslam2d.inputs import open_source
 
-    if name == "ten-movers":
+    if name in ("ten-movers", "sim:ten-movers"):
         from scenes import ten_movers
 
         return list(ten_movers(30.0).scans)

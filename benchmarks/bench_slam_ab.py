@@ -3,9 +3,10 @@
 Whole runs on a shared machine vary by ±25 % between runs of the same code; this compares the two versions of a
 component on identical calls, alternately, in thread CPU time (``time.thread_time_ns``):
 
-  * ``matcher``: ``match_multires`` calls of this checkout's pipeline (scans 50–260, their map levels copied) are
-    replayed through the other checkout's ``slam/matcher.py`` and this one's, 5 times each, the versions
-    alternately; prints µs per call (median of the 5 sweeps) and whether every result is identical;
+  * ``matcher``: ``match_multires`` calls of this checkout's pipeline (its refines through ``match_fit_at`` too;
+    scans 50–260, their map levels copied) are replayed through the other checkout's ``slam/matcher.py`` and this
+    one's, 5 times each, the versions alternately; prints µs per call (median of the 5 sweeps) and whether every
+    result is identical;
   * ``ledger``: the pipeline's ``EvidenceLedger`` (this checkout) and one of the other checkout's
     ``slam/erasure.py`` get the same ``observe`` / ``before_update`` / ``after_update`` calls in lockstep (the
     other ledger's erasure acts on a copy of the map), each method's two versions alternately; prints ms per
@@ -65,20 +66,33 @@ def matcher_ab(scans: list, other) -> tuple[float, float, bool, int]:
     calls = []
     f = proc.match_multires
 
-    def grab(levels, *a, **k):
+    def keep(levels, a):
         if 50 < p.slam.n_scans <= 260:
             lv_copy = [copy.copy(lv) for lv in levels]
             for lv in lv_copy:
                 lv.prob = lv.prob.copy()
             calls.append((lv_copy, a))  # (replayed without the keyword outputs ``fit`` / ``free_thresh``)
+
+    def grab(levels, *a, **k):
+        keep(levels, a)
         return f(levels, *a, **k)
 
+    f_at = getattr(proc, "match_fit_at", None)  # (the processor's refine: match_multires from the start's floats)
+
+    def grab_at(levels, pts, sx, sy, sth, *a):
+        keep(levels, (pts, np.array([sx, sy, sth]), *a[:8], *a[12:14]))  # (as match_multires' positional call)
+        return f_at(levels, pts, sx, sy, sth, *a)
+
     proc.match_multires = grab
+    if f_at is not None:
+        proc.match_fit_at = grab_at
     try:
         for s in scans[:261]:
             p.process(s)
     finally:
         proc.match_multires = f
+        if f_at is not None:
+            proc.match_fit_at = f_at
     same = all(np.array_equal(other.match_multires(lv, *a), this.match_multires(lv, *a), equal_nan=True)
                for lv, a in calls)  # (also the warm-up of both versions)
     preload(extra=(other,))

@@ -48,6 +48,8 @@ def test_the_refine_fit_is_reused_exactly_when_the_wrapped_pose_has_the_refines_
         return np.array([0.02, 0.0, theta])
 
     monkeypatch.setattr(pr, "match_multires", fake)
+    monkeypatch.setattr(pr, "match_fit_at", lambda levels, pts, x, y, th, *a: (np.array([0.02, 0.0, theta]), mark, 0.0,
+                                                                                None))
     slam.config.max_jump_angle = 10.0  # (θ far from the start must not be refused as a jump)
     res = slam.match(scan, predicted=start, commit=False)
     assert res.reason != pr.REJECT_JUMP

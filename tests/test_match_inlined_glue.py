@@ -97,6 +97,7 @@ def test_the_inlined_jump_test_is_between(monkeypatch: pytest.MonkeyPatch) -> No
         got = np.array([start.x + rng.normal(0.0, 0.15), start.y + rng.normal(0.0, 0.15),
                         start.theta + rng.normal(0.0, 0.3)])
         monkeypatch.setattr(pr, "match_multires", lambda *a, g=got, **k: g.copy())
+        monkeypatch.setattr(pr, "match_fit_at", lambda *a, g=got, **k: (g.copy(), None, None, None))
         res = slam.match(scan, predicted=start, commit=False)
         dx, dy, dth = pr._between(res.start, Pose2D(got[0], got[1], pr._wrap(float(got[2]))))
         assert (res.reason == pr.REJECT_JUMP) == (math.hypot(dx, dy) > c.max_jump_distance

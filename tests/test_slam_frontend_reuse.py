@@ -87,10 +87,11 @@ def test_a_search_seed_equal_to_the_start_is_not_refined_twice(monkeypatch) -> N
 
     slam = HectorSlam(SlamConfig(correlative_mode="always"))
     calls = []
-    real = proc_mod.match_multires
+    real, real_fit = proc_mod.match_multires, proc_mod.match_fit_at
     monkeypatch.setattr(proc_mod, "correlative_search",
                         lambda level, pts, start, *a, **k: CorrelativeResult(np.array(start, dtype=np.float64), 1.0, 1))
     monkeypatch.setattr(proc_mod, "match_multires", lambda *a, **k: calls.append(1) or real(*a, **k))
+    monkeypatch.setattr(proc_mod, "match_fit_at", lambda *a, **k: calls.append(1) or real_fit(*a, **k))
     for s, e in zip(scans(), expect, strict=True):
         n0 = len(calls)
         step = slam.process(s)

@@ -149,6 +149,7 @@ def test_non_finite_values_never_reach_the_map(monkeypatch: pytest.MonkeyPatch) 
     assert same_map(before, map_snapshot(slam))
     # a matcher that blows up: reported, pose falls back to the start, the map is untouched
     monkeypatch.setattr(proc_mod, "match_multires", lambda *a, **k: np.array([np.nan, 0.0, 0.0]))
+    monkeypatch.setattr(proc_mod, "match_fit_at", lambda *a, **k: (np.array([np.nan, 0.0, 0.0]), None, None, None))
     pose_before = slam.pose
     bad = slam.process(scan_at(Pose2D(1.5, 0, 0.5), 0.3))
     assert bad.rejected and bad.reason == "non_finite_pose" and not bad.map_updated
@@ -162,12 +163,15 @@ def test_jump_and_score_collapse_are_rejected(monkeypatch: pytest.MonkeyPatch) -
     for k in range(1, 4):
         slam.process(scan_at(Pose2D(0.05 * k, 0, 0), 0.05 * k))
     before = map_snapshot(slam)
-    real = proc_mod.match_multires
+    real, real_fit = proc_mod.match_multires, proc_mod.match_fit_at
     monkeypatch.setattr(proc_mod, "match_multires", lambda lv, pts, s, *a, **k: s + np.array([14.0, 0.0, 0.0]))
+    monkeypatch.setattr(proc_mod, "match_fit_at",
+                        lambda lv, pts, x, y, th, *a, **k: (np.array([x + 14.0, y, th]), None, None, None))
     jump = slam.process(scan_at(Pose2D(0.6, 0, 0.3), 0.2))
     assert jump.rejected and jump.reason == "jump" and not jump.map_updated
     assert same_map(before, map_snapshot(slam))
     monkeypatch.setattr(proc_mod, "match_multires", real)
+    monkeypatch.setattr(proc_mod, "match_fit_at", real_fit)
     # a scan of a different room: the score collapses, the scan is not written
     other = raw_scan(np.full(360, 0.7), 0.25)
     res = slam.process(other)

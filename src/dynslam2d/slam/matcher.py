@@ -539,16 +539,17 @@ _NO_DEGENERACY = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, False, False)
 
 
 @njit(cache=True)
-def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, swapped, use_lm, lam0, lam_max,
-                  max_rot, max_trans, use_prior, prior_world, lam_ps, want_fit, free_thresh, H_out,
+def match_pyramid(prob0, prob1, prob2, geo, pts_m, sx, sy, sth, it_coarse, it_finest, swapped, use_lm, lam0, lam_max,
+                  max_rot, max_trans, use_prior, px, py, pth, lam_ps, want_fit, free_thresh, H_out,
                   pose, support_thresh, deg_thresh, sumsq, two):  # pragma: no cover
     """:func:`match_multires` on a map of at most three levels in one call (the same arithmetic as its Python
     loop): ``prob0`` … ``prob2`` the levels' probability caches (finest first; unused ones any array), ``geo``
-    (L, 4) per level (cell side m, i0, j0, 1.0 if empty), ``pts_m`` (n, 2) laser-frame points m, ``start`` the
-    world pose (x m, y m, θ rad); ``prior_world`` (3,) with ``lam_ps`` (L, 3, 3) the prior per level in its cell
-    units when ``use_prior``.
+    (L, 4) per level (cell side m, i0, j0, 1.0 if empty), ``pts_m`` (n, 2) laser-frame points m, (``sx``, ``sy``,
+    ``sth``) the start world pose (x m, y m, θ rad); (``px``, ``py``, ``pth``) the prior's world pose with ``lam_ps``
+    (L, 3, 3) the prior per level in its cell units when ``use_prior`` (poses as floats, not arrays: two array
+    arguments fewer to dispatch, and no copy of the caller's start).
 
-    Writes the world pose into ``pose`` (3,) (not ``start``'s array) and returns (fitted, cost, Σ M, n_inside,
+    Writes the world pose into ``pose`` (3,) and returns (fitted, cost, Σ M, n_inside,
     free, support count, support bins). With ``want_fit`` and a finite result on a
     non-empty finest level, ``fitted`` is True and H (in ``H_out``), cost, Σ M and n_inside are :func:`evaluate`'s
     at the returned pose on level 0 (unswapped weights): the last iteration's sums when that iteration ran on
@@ -559,9 +560,9 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
     that same pose (else 0, 0). Unless ``deg_thresh`` is NaN, the last value returned is :func:`degeneracy_values`
     of that H with ``deg_thresh`` and ``sumsq`` (Σ x² + y² of ``pts_m``, m²), its axis not normalised
     (:func:`_degeneracy_kernel`; ``two`` = 2.0); else ``_NO_DEGENERACY``."""
-    pose[0] = start[0]
-    pose[1] = start[1]
-    pose[2] = start[2]
+    pose[0] = sx
+    pose[1] = sy
+    pose[2] = sth
     n_lv = geo.shape[0]
     Hk = _stack_array(np.float64, 3, 3)  # (the work arrays in this call's stack frame, as _match_core's)
     Hk[:] = 0.0
@@ -586,9 +587,9 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, start, it_coarse, it_finest, 
         mp[1] = pose[1] / res - j0
         mp[2] = pose[2]
         if use_prior:
-            pp[0] = prior_world[0] / res - i0
-            pp[1] = prior_world[1] / res - j0
-            pp[2] = mp[2] + (prior_world[2] - mp[2] + math.pi) % (2.0 * math.pi) - math.pi  # same branch as θ
+            pp[0] = px / res - i0
+            pp[1] = py / res - j0
+            pp[2] = mp[2] + (pth - mp[2] + math.pi) % (2.0 * math.pi) - math.pi  # same branch as θ
         else:
             pp[0] = mp[0]
             pp[1] = mp[1]
@@ -740,48 +741,90 @@ def match_multires(
     ``support_thresh`` a third item: :func:`support_at` ``(levels[0], pts_m, x, y, wrap_angle(θ), support_thresh)``;
     with ``degeneracy_threshold`` and ``sumsq`` (Σ x² + y² of ``pts_m``, m², as :func:`gated_points` gives it) the
     fit's ``degeneracy`` holds :func:`degeneracy_values` of its Hessian with them, the axis not normalised (else
-    None).
+    None). :func:`match_fit` returns these items instead of filling a list.
     Returns the world pose (3,).
     """
+    p, lf, free, sup = match_fit(levels, pts_m, start_world, iterations_coarse, iterations_finest, swapped, use_lm,
+                                 lam0, lam_max, max_rot, max_trans_cells, free_thresh, support_thresh,
+                                 degeneracy_threshold, sumsq, prior_world, prior_info, fit is not None)
+    if lf is not None and fit is not None:
+        fit[:] = [lf, free] if sup is None else [lf, free, sup]
+    return p
+
+
+def match_fit(levels: list[GridLevel], pts_m: np.ndarray, start_world: np.ndarray, iterations_coarse: int,
+              iterations_finest: int, swapped: bool, use_lm: bool, lam0: float, lam_max: float, max_rot: float,
+              max_trans_cells: float, free_thresh: float, support_thresh: float | None,
+              degeneracy_threshold: float | None, sumsq: float | None, prior_world: np.ndarray | None = None,
+              prior_info: np.ndarray | None = None, want_fit: bool = True,
+              ) -> tuple[np.ndarray, LevelFit | None, float | None, tuple[int, float] | None]:
+    """:func:`match_multires` (the same arguments, every one positional) with its ``fit`` list's items returned:
+    (world pose (3,) x m, y m, θ rad, level 0's :class:`LevelFit` there, the free fraction, the support (count,
+    spread rad)), the last three None where ``match_multires`` leaves the list empty (``want_fit`` False, a pose that
+    is not finite, more than three levels, points that are not a C-contiguous float64 array; the support also
+    without ``support_thresh``). :func:`match_fit_at` of the start's three float64 values."""
+    sx, sy, sth = (start_world if type(start_world) is np.ndarray and start_world.dtype is _F64 else np.array(
+        start_world, dtype=np.float64)).tolist()
+    return match_fit_at(levels, pts_m, sx, sy, sth, iterations_coarse, iterations_finest, swapped, use_lm, lam0,
+                        lam_max, max_rot, max_trans_cells, free_thresh, support_thresh, degeneracy_threshold, sumsq,
+                        prior_world, prior_info, want_fit)
+
+
+def match_fit_at(levels: list[GridLevel], pts_m: np.ndarray, sx: float, sy: float, sth: float, iterations_coarse: int,
+                 iterations_finest: int, swapped: bool, use_lm: bool, lam0: float, lam_max: float, max_rot: float,
+                 max_trans_cells: float, free_thresh: float, support_thresh: float | None,
+                 degeneracy_threshold: float | None, sumsq: float | None, prior_world: np.ndarray | None = None,
+                 prior_info: np.ndarray | None = None, want_fit: bool = True,
+                 ) -> tuple[np.ndarray, LevelFit | None, float | None, tuple[int, float] | None]:
+    """:func:`match_fit` from the start (``sx`` m, ``sy`` m, ``sth`` rad; Python floats) without its array (the
+    processor's first refine of a scan, from its start pose's floats). Maps of at most three levels take one
+    :func:`match_pyramid` call (every level and the evaluation), the others :func:`_match_levels`."""
+    n_lv = len(levels)
+    dt = pts_m.dtype
+    if not (n_lv <= 3 and pts_m.shape[0] != 0 and (dt is _F64 or dt == np.float64) and pts_m.flags.c_contiguous):
+        # (other point arrays take the loop: their scaled copies have the loop's dtype and layout)
+        return _match_levels(levels, pts_m, np.array([sx, sy, sth]), iterations_coarse, iterations_finest, swapped,
+                             use_lm, lam0, lam_max, max_rot, max_trans_cells, prior_world, prior_info), None, None, None
+    if prior_world is not None and prior_info is not None and bool(np.any(prior_info)):
+        info = np.asarray(prior_info, dtype=np.float64)
+        lam_ps = np.empty((n_lv, 3, 3))
+        for k, lv in enumerate(levels):
+            S = np.diag([lv.resolution, lv.resolution, 1.0])  # cells → m
+            lam_ps[k] = S @ info @ S
+        px, py, pth = np.asarray(prior_world, dtype=np.float64).tolist()
+        use_prior = True
+    else:
+        lam_ps, px, py, pth, use_prior = _ZERO_PRIOR_VIEWS[n_lv], sx, sy, sth, False
+    p0 = levels[0].prob
+    H = np.empty((3, 3))
+    out = np.empty(3)  # (filled by the kernel: a new array is cheaper made here than returned from numba)
+    no_deg = degeneracy_threshold is None or sumsq is None
+    fitted, cost, summ, n_in, free, n_sup, k_sup, dg = match_pyramid(
+        p0, levels[1].prob if n_lv > 1 else p0, levels[2].prob if n_lv > 2 else p0, _level_geometry(levels), pts_m,
+        sx, sy, sth, iterations_coarse, iterations_finest, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
+        use_prior, px, py, pth, lam_ps, want_fit, free_thresh, H, out,
+        math.nan if support_thresh is None else support_thresh, math.nan if no_deg else degeneracy_threshold,
+        math.nan if sumsq is None else sumsq, 2.0,
+    )
+    if not fitted:
+        return out, None, None, None
+    return (out, LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in), None if no_deg else dg),
+            float(free), None if support_thresh is None else (int(n_sup), k_sup * BIN_ANGLE))
+
+
+def _match_levels(levels: list[GridLevel], pts_m: np.ndarray, start_world: np.ndarray, iterations_coarse: int,
+                  iterations_finest: int, swapped: bool, use_lm: bool, lam0: float, lam_max: float, max_rot: float,
+                  max_trans_cells: float, prior_world: np.ndarray | None, prior_info: np.ndarray | None
+                  ) -> np.ndarray:
+    """:func:`match_multires`' pose by one :func:`match_level` call per level (any number of levels, any point
+    array; no evaluation); a copy of the start for no points."""
     # (a float64 array's copy: np.array's values, C order, without its dtype conversion machinery)
     pose = start_world.copy() if type(start_world) is np.ndarray and start_world.dtype is _F64 else np.array(
         start_world, dtype=np.float64)
     if pts_m.shape[0] == 0:
         return pose
     use_prior = prior_world is not None and prior_info is not None and bool(np.any(prior_info))
-    n_lv = len(levels)
-    dt = pts_m.dtype
-    if n_lv <= 3 and (dt is _F64 or dt == np.float64) and pts_m.flags.c_contiguous:
-        # every level in one kernel call (match_pyramid), the finest level's evaluation with it (other point
-        # arrays take the loop below: their scaled copies have the loop's dtype and layout)
-        geo = _level_geometry(levels)
-        if use_prior:
-            info = np.asarray(prior_info, dtype=np.float64)
-            lam_ps = np.empty((n_lv, 3, 3))
-            for k, lv in enumerate(levels):
-                S = np.diag([lv.resolution, lv.resolution, 1.0])  # cells → m
-                lam_ps[k] = S @ info @ S
-            pw = np.asarray(prior_world, dtype=np.float64)
-        else:
-            lam_ps, pw = _ZERO_PRIOR_VIEWS[n_lv], pose
-        p0 = levels[0].prob
-        H = np.empty((3, 3))
-        out = np.empty(3)  # (filled by the kernel: a new array is cheaper made here than returned from numba)
-        fitted, cost, summ, n_in, free, n_sup, k_sup, dg = match_pyramid(
-            p0, levels[1].prob if n_lv > 1 else p0, levels[2].prob if n_lv > 2 else p0, geo, pts_m, pose,
-            iterations_coarse, iterations_finest, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
-            use_prior, pw, lam_ps, fit is not None, free_thresh, H, out,
-            math.nan if support_thresh is None else support_thresh,
-            math.nan if degeneracy_threshold is None or sumsq is None else degeneracy_threshold,
-            math.nan if sumsq is None else sumsq, 2.0,
-        )
-        if fitted and fit is not None:
-            fit[:] = [LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in),
-                               None if degeneracy_threshold is None or sumsq is None else dg), float(free)]
-            if support_thresh is not None:
-                fit.append((int(n_sup), k_sup * BIN_ANGLE))
-        return out
-    for k in range(n_lv - 1, -1, -1):
+    for k in range(len(levels) - 1, -1, -1):
         lv = levels[k]
         if lv.empty:
             continue
