@@ -48,22 +48,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
 from bench_pipeline import scan_loop_gc, warm_up  # noqa: E402 - pipeline.run's collector setting; the warm-up
 from kernelwarm import kernel_cache_calls  # noqa: E402 - kernels loaded or compiled so far
+from scenes import input_scans  # noqa: E402 - an input's scans (bench_digest's, a built-in scene or ten-movers)
 
 WARMUP = 60
-
-
-def input_scans(data: Path, name: str) -> list:
-    """The scans of input ``name``: a key of bench_digest's ``INPUTS`` (recordings under ``data``), any other
-    built-in scene by its name (``sim:paper``: README command 1), or ``ten-movers`` / ``sim:ten-movers``
-    (bench_pipeline.py's scene with 10 movers, 30 s: the one furthest from the speed target)."""
-    from dynslam2d.inputs import open_source
-
-    if name in ("ten-movers", "sim:ten-movers"):
-        from scenes import ten_movers
-
-        return list(ten_movers(30.0).scans)
-    rel, topic = INPUTS.get(name, (name, None))
-    return list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
 
 
 def worker(data: Path, name: str, preload: bool = True) -> None:

@@ -85,7 +85,7 @@ TARGETS = track_targets()
 def warmed_scans(name: str, data: Path) -> list:
     """The scans of input ``name`` (a key of bench_digest's ``INPUTS``, ``sim:NAME`` or ``ten-movers``; recordings
     under ``data``), after a throw-away pipeline ran their first :data:`WARMUP` scans (kernels loaded, caches warm)."""
-    from bench_pipeline_ab import input_scans
+    from scenes import input_scans
 
     from dynslam2d.pipeline import Pipeline
 

@@ -76,8 +76,8 @@ def check_inputs(ap: argparse.ArgumentParser, names: list[str]) -> None:
 
 
 def load_scans(data: Path, name: str) -> list:
-    """The scans of input ``name`` (:data:`INPUTS`, or ``ten-movers``: bench_pipeline_ab.input_scans)."""
-    from bench_pipeline_ab import input_scans
+    """The scans of input ``name`` (:data:`INPUTS`, or ``ten-movers``: scenes.input_scans)."""
+    from scenes import input_scans
 
     return input_scans(data, name)
 

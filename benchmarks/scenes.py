@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 
@@ -20,3 +21,17 @@ def ten_movers(duration: float):
         shape = Circle(float(rng.uniform(0.2, 0.25))) if k % 5 not in (0, 3) else Rect(0.8, 0.5)
         movers.append(Mover(k, f"mover-{k}", shape, walk))
     return simulate(dataclasses.replace(base, movers=tuple(movers), name="ten-movers"))
+
+
+def input_scans(data: Path, name: str) -> list:
+    """The scans of input ``name``: a key of bench_digest's ``INPUTS`` (recordings under ``data``), any other
+    built-in scene by its name (``sim:paper``: README command 1), or ``ten-movers`` / ``sim:ten-movers``
+    (:func:`ten_movers`, 30 s as bench_pipeline.py's default: the scene furthest from the speed target)."""
+    if name in ("ten-movers", "sim:ten-movers"):
+        return list(ten_movers(30.0).scans)
+    from bench_digest import INPUTS
+
+    from dynslam2d.inputs import open_source
+
+    rel, topic = INPUTS.get(name, (name, None))
+    return list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
