@@ -10,7 +10,7 @@ import random
 
 import numpy as np
 
-import dynslam2d.detect.tracker as tracker_mod  # (_associate calls associate_scan there)
+import dynslam2d.detect.tracker as tracker_mod  # (_associate_update calls associate_update there)
 from dynslam2d.config import Config
 from dynslam2d.detect import kernels_assign as ka
 from dynslam2d.detect import kernels_update as ku
@@ -92,15 +92,17 @@ def _checked_runs(fused) -> dict[str, int]:
         seen["vetoed_loose"] += len(want2[4])
         return got
 
-    saved = tracker_mod.associate_scan
-    tracker_mod.associate_scan = checked
+    # (since pass trk108 the tracker calls associate_update, which calls associate_scan: its Python runs instead, its
+    # calls through kernels_assign's names)
+    saved = tracker_mod.associate_update, ka.associate_scan
+    tracker_mod.associate_update, ka.associate_scan = ka.associate_update.py_func, checked
     try:
         for name, seed in (("sim:crowd", 5), ("sim:drive", 11)):
             pipe = Pipeline(Config())
             for scan in open_source(name, seed=seed, duration=6.0):
                 pipe.process(scan)
     finally:
-        tracker_mod.associate_scan = saved
+        tracker_mod.associate_update, ka.associate_scan = saved
     return seen
 
 
@@ -110,3 +112,69 @@ def test_associate_scan_is_the_former_calls_in_pipeline_runs() -> None:
     seen = _checked_runs(ka.associate_scan)
     assert seen["calls"] > 200 and seen["pairs"] > 1000 and seen["rows"] > 20 and seen["vetoed_loose"] > 100, seen
 
+
+
+#: associate_update's arguments that the update writes: X, P, CI, CL, MEV, RIDE, WN
+_WRITTEN = (2, 3, 5, 6, 25, 26, 27)
+
+
+def _former_pair_calls(*a: object) -> tuple:
+    """``Tracker._associate`` then ``Tracker._update_pairs`` as they called their kernels before pass trk108 (main at
+    5d1894d), on ``associate_update``'s arguments ``a``: ``associate_scan``, then, with pairs and status 0,
+    ``update_pairs`` with the pairs' index arrays as ``sel`` / ``dis`` and the association's missed flags."""
+    G, Gi, X, P, rows, CI, CL, Xs, Ps, Z, R = a[:11]
+    batch, q = a[11:21], a[21]
+    claimed, vrows, ms, MEV, RIDE, WN, stop, jump, smax, big, bound, lim, lim2 = a[22:35]
+    mev, (use_map, lx, ly, c, s, t) = a[35:40], a[40:46]
+    status, ii, jj, missed, vetoed = ka.associate_scan(G, Gi, rows, CI, Xs, Ps, Z, R, *batch, q, claimed, vrows, ms,
+                                                       MEV, WN, stop, jump, smax, big)
+    if status or not ii.shape[0]:
+        return status, ii, jj, vetoed, 0, 0, np.empty((0, 4), dtype=np.int64), 0
+    nb, top, info, nrej = ku.update_pairs(G, Gi, X, P, Xs, Ps, ii, rows, jj, missed, *batch, q, bound, CI, CL, lim,
+                                          lim2, *mev, MEV, RIDE, WN, use_map, lx, ly, c, s, t)
+    return status, ii, jj, vetoed, nb, top, info, nrej
+
+
+def _outcome(f, a: list) -> tuple:
+    """``f``'s results on copies of the arrays the update writes, and those arrays' bytes after the call."""
+    c = list(a)
+    for i in _WRITTEN:
+        c[i] = c[i].copy()
+    got = f(*c)
+    out = [v.tobytes() if isinstance(v, np.ndarray) else v for v in got]
+    return out, [c[i].tobytes() for i in _WRITTEN]
+
+
+def test_associate_update_is_the_two_former_calls_in_pipeline_runs() -> None:
+    """``associate_update`` (pass trk108) against ``associate_scan`` then ``update_pairs`` as the tracker called them
+    before, on every call of two simulated pipeline runs (sim:drive with the map evidence, sim:crowd without): the
+    pairs, vetoed tracks, bounded and rejected counts, ``info`` rows and the bytes of every array the update writes;
+    each call also with a limit 30 × tighter (most established rows bounded)."""
+    seen = {"calls": 0, "pairs": 0, "bounded": 0, "use_map": 0}
+
+    def checked(*a):
+        a = list(a)
+        tight = list(a)
+        tight[32], tight[33], tight[34] = True, a[33] / 30.0, (0.999 * a[33] / 30.0) ** 2
+        for case in (a, tight):
+            got, want = _outcome(ka.associate_update, case), _outcome(_former_pair_calls, case)
+            assert got == want
+            seen["bounded"] += want[0][4]
+        seen["pairs"] += len(got[0][1]) // 8
+        seen["use_map"] += bool(a[40])
+        seen["calls"] += 1
+        return ka.associate_update(*a)
+
+    saved = tracker_mod.associate_update
+    tracker_mod.associate_update = checked
+    try:
+        for name, use_map in (("sim:drive", True), ("sim:crowd", False)):
+            cfg = Config()
+            cfg.detect.tracker.map_evidence = use_map
+            pipe = Pipeline(cfg)
+            for scan in open_source(name, seed=11, duration=6.0):
+                pipe.process(scan)
+    finally:
+        tracker_mod.associate_update = saved
+    assert seen["calls"] > 100 and seen["pairs"] > 500 and seen["bounded"] > 20, seen
+    assert 20 < seen["use_map"] < seen["calls"], seen

@@ -177,9 +177,9 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
     of the written state rows), and ``kalman_pairs`` again on the same calls with a limit 30 × tighter (most
     established rows bounded) and with the bound off."""
     from dynslam2d.detect import DetectConfig, Tracker
+    from dynslam2d.detect import kernels_assign as ka
     from dynslam2d.detect import kernels_update as ku
     from dynslam2d.detect import tracker as trk
-    from dynslam2d.detect import trackupdate as tu
     from dynslam2d.detect.kernels import (
         _N_PARAMS,
         association_rows,
@@ -241,8 +241,10 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
         gates(*a[:19])
         return associate_scan(*a)
 
-    saved = trk.associate_scan, tu.update_pairs
-    trk.associate_scan, tu.update_pairs = fused, merged
+    # (since pass trk108 both run inside associate_update: its Python runs instead, its calls through kernels_assign's
+    # names)
+    saved = trk.associate_update, ka.associate_scan, ka.update_pairs
+    trk.associate_update, ka.associate_scan, ka.update_pairs = ka.associate_update.py_func, fused, merged
     try:
         for scene in ("crowd", "drive"):
             sim = simulate(scene, duration=4.0)
@@ -250,7 +252,7 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
             for scan, pose in zip(sim.scans, sim.ground_truth.poses_in("first")):
                 tr.update(scan, Pose2D.from_array(pose))
     finally:
-        trk.associate_scan, tu.update_pairs = saved
+        trk.associate_update, ka.associate_scan, ka.update_pairs = saved
     assert seen["gates"] > 50 and seen["kalman"] > 50 and seen["bounded"] > 20 and seen["not_ok"] > 50
 
 
@@ -527,8 +529,9 @@ def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
     each call also with a limit 30 × tighter (most established rows bounded), with every track taken as re-acquired
     and with a failed update, on copies."""
     from dynslam2d.config import Config
+    from dynslam2d.detect import kernels_assign as ka
     from dynslam2d.detect import kernels_update as ku
-    from dynslam2d.detect import trackupdate as tu
+    from dynslam2d.detect import tracker as trk
     from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import Pipeline
 
@@ -563,8 +566,10 @@ def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
         seen["calls"] += 1
         return ku.update_pairs(*a)
 
-    saved = tu.update_pairs
-    tu.update_pairs = merged
+    # (since pass trk108 update_pairs runs inside associate_update: its Python runs instead, its calls through
+    # kernels_assign's names)
+    saved = trk.associate_update, ka.update_pairs
+    trk.associate_update, ka.update_pairs = ka.associate_update.py_func, merged
     try:
         for name, use_map in (("sim:drive", True), ("sim:crowd", False)):
             cfg = Config()
@@ -573,6 +578,6 @@ def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
             for scan in open_source(name, seed=11, duration=6.0):
                 pipe.process(scan)
     finally:
-        tu.update_pairs = saved
+        trk.associate_update, ka.update_pairs = saved
     assert seen["calls"] > 100 and seen["bounded"] > 20 and seen["restarted"] > 5
     assert 20 < seen["use_map"] < seen["calls"] and seen["rejected"] > 0

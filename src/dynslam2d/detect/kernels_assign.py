@@ -18,7 +18,7 @@ import sys
 
 import numpy as np
 
-from dynslam2d.detect.kernels_update import association_gates
+from dynslam2d.detect.kernels_update import association_gates, update_pairs
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
 #: status codes of :func:`lsap` / :func:`assign_groups` (SciPy raises ValueError with these messages)
@@ -320,3 +320,34 @@ def associate_scan(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, CI: np.ndarr
     vetoed = veto_merged(ok, tsize, det_ext, rows, vrows, ms, MEV, WN, stop, jump, smax)
     status, ii, jj = assign_groups(ok, d2, firm, big)
     return status, ii, jj, missed, vetoed
+
+
+@njit(cache=True)
+def associate_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, rows: np.ndarray, CI: np.ndarray,
+                     CL: np.ndarray, Xs: np.ndarray, Ps: np.ndarray, Z: np.ndarray, R: np.ndarray, kind: np.ndarray,
+                     theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray, circle: np.ndarray,
+                     px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray, q: np.ndarray,
+                     claimed: np.ndarray, vrows: np.ndarray, ms: np.ndarray, MEV: np.ndarray, RIDE: np.ndarray,
+                     WN: np.ndarray, stop: float, jump: float, smax: float, big: float, bound: bool, lim: float,
+                     lim2: float, mfr: np.ndarray, kept: np.ndarray, first: np.ndarray, second: np.ndarray,
+                     mnpts: np.ndarray, use_map: bool, lx: float, ly: float, c: float, s: float, t: float) -> tuple:
+    """``Tracker._associate_update`` in one call: :func:`associate_scan` (its arguments by the same names), then,
+    when it found pairs and its status is ``LSAP_OK``, :func:`dynslam2d.detect.kernels_update.update_pairs` on them
+    (the pairs' track indices ``ii`` as its ``sel``, their detection indices ``jj`` as its ``dis``, the association's
+    ``missed`` flags; ``X``, ``P``, ``CL``, ``RIDE``, ``bound`` … ``mnpts``, ``use_map``, the laser pose ``lx``,
+    ``ly``, ``c``, ``s`` (m, map frame; cos and sin of its heading) and the stamp ``t`` (s) as that kernel's), the
+    same two functions in the same order on the same arrays as the two calls they replace (nothing in Python between
+    them fed the update: the same floats). Returns (status, ii, jj, vetoed, bounded rows, the longest riding window
+    after the push, ``info``, rejected pairs): :func:`associate_scan`'s first three and its vetoed tracks, then
+    ``update_pairs``' four (0, 0, an empty (0, 4) ``info`` and 0 when no update ran). One dispatch and one unboxing
+    of the ≈ 20 arrays both take instead of two, and no boxing of the pairs' arrays for the second call
+    (docs/speed.md, pass trk108)."""
+    status, ii, jj, missed, vetoed = associate_scan(G, Gi, rows, CI, Xs, Ps, Z, R, kind, theta, lohi, rel, centroid,
+                                                    circle, px, py, start, npts, q, claimed, vrows, ms, MEV, WN, stop,
+                                                    jump, smax, big)
+    if status != LSAP_OK or ii.shape[0] == 0:
+        return status, ii, jj, vetoed, 0, 0, np.empty((0, 4), dtype=np.int64), 0
+    nb, top, info, nrej = update_pairs(G, Gi, X, P, Xs, Ps, ii, rows, jj, missed, kind, theta, lohi, rel, centroid,
+                                       circle, px, py, start, npts, q, bound, CI, CL, lim, lim2, mfr, kept, first,
+                                       second, mnpts, MEV, RIDE, WN, use_map, lx, ly, c, s, t)
+    return status, ii, jj, vetoed, nb, top, info, nrej

@@ -63,7 +63,7 @@ from dynslam2d.detect.kernels import (
     cv_predict,
     fit_params,
 )
-from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, associate_scan
+from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, associate_update
 from dynslam2d.detect.kernels_update import (
     N_C,
     birth_rows,
@@ -106,7 +106,7 @@ from dynslam2d.detect.trackupdate import TrackUpdate, _nearest_age  # noqa: F401
 from dynslam2d.types import Pose2D, Scan, wrap_angle
 
 _NO_MEV = np.zeros((0, 3))  # (Tracker._births' map evidence without a map: never read)
-# (associate_scan's arguments without a claimed detection / a track to veto: shared, never written)
+# (associate_update's arguments without a claimed detection / a track to veto: shared, never written)
 _NO_CLAIM = np.zeros(0, dtype=np.bool_)
 _NO_ROWS = np.zeros(0, dtype=np.int64)
 _NO_MS = np.zeros(0)
@@ -243,7 +243,6 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._upd_sets: tuple[set[int], set[int]] = (set(), set())
         # the last association's pairs (the list it returned) with their track and detection index arrays (int64) and
         # the live tracks' "missed their last scan" flags (bool)
-        self._pair_arrays: tuple[list, np.ndarray, np.ndarray, np.ndarray] | None = None
         # clutter retirement (structure_retire_updates): confirmed still tracks on map structure, out of the
         # Kalman tracking but kept (and reported) while their object is seen, so that a parked mover keeps
         # its id and standing history until it leaves (_clutter_detections)
@@ -334,14 +333,12 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._merged = set()
         if not dets and not scan.valid_view().any():  # (the scan's own mask: only read)
             st.empty_scans += 1
-        pairs = self._associate(dets)
         # (the ids of the updated tracks and the detections they took: filled by _update_tracks in its loop over the
         # pairs, in the pairs' order)
         updated: set[int] = set()
         used: set[int] = set()
         self._upd_sets = (updated, used)
-        if pairs:
-            st.rejected_updates += self._update_pairs(pairs, dets, t)
+        st.rejected_updates += self._associate_update(dets, t)
         self._manage(t, updated)
         unused = [di for di in range(len(dets)) if di not in used]
         if (self._map is not None and self.config.tracker.structure_birth_min <= 1.0) or self._dormant or \
@@ -481,9 +478,13 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         return new
 
 
-    def _associate(self, dets: list[Detection]) -> list[tuple[int, int]]:
+    def _associate_update(self, dets: list[Detection], t: float) -> int:
+        """The association of the scan's detections ``dets`` to the live tracks and the update of the pairs found
+        (their Kalman and shape updates, then :meth:`_updated_pairs`), at the scan's stamp ``t`` (s); returns how
+        many pairs' updates did not apply. Both kernels run in one call (``kernels_assign.associate_update``, pass
+        trk108)."""
         if not self._tracks or not dets:
-            return []
+            return 0
         Xs, Ps = self._stack()
         # One kernel call (kernels_assign.associate_scan, docs/speed.md pass trk75): the gates (association_gates: the
         # tracks' sizes, flags and axis angles from their shape rows; the Mahalanobis gate and distance gate, a
@@ -515,23 +516,38 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
                 vrows = np.array(rows, dtype=np.int64)
                 ev = self._ms_ev if dets is self.last_detections else None
                 ms = ev[0] if ev is not None else np.array(self._structure_column(dets), dtype=np.float64)
+        #
+        # Then, in the same call (pass trk108: nothing in Python between the two fed the update), the update of the
+        # pairs found (kernels_update.update_pairs): the track priors of the measurements (each track's sizes /
+        # radius), the measurements (size σ 0.05 m), the Kalman updates, the physical acceleration bound (once a
+        # track's velocity is established — ``accel_bound_after`` updates — one update may change it by at most
+        # ``max_accel``·dt: speeds no longer jump from scan to scan with the shape of a partial view or a leg
+        # swinging; the exact test with Python's math.hypot bit for bit, detect/kernels_update.py), the new states
+        # and covariances written into the tracks' rows where applied (the kernel updates copies of the stacked rows:
+        # the prior Xs / Ps stays as it is), then the shapes and, in the same loop, the riding and map-evidence
+        # windows of the updated tracks from their new rows, and the windows of the re-acquired tracks (those that
+        # missed scans) restarted to this push's entries (passes trk24, trk26, upd34). The configuration's values go
+        # as one array built with the tracker (``_upd_p``, kernels_update.update_params; pass call35). The
+        # bookkeeping per track follows in Python (_updated_pairs, _update_tracks).
         dm = self._default
-        status, ii, jj, missed_a, vetoed = associate_scan(
-            self._G, self._Gi, self._rows(), self._CI, Xs, Ps, dm.z, dm.R, *self._batch, self._upd_p, claimed, vrows,
-            ms, self._MEV, self._WN, float(tc.map_structure_stop), float(tc.merge_size_jump),
-            float(tc.map_structure_max), _BIG)
+        bound, lim, lim2 = self._accel_limits()
+        p = self._pose
+        c, s = self._pose_cs
+        status, ii, jj, vetoed, nb, top, info, nrej = associate_update(
+            self._G, self._Gi, self._X, self._P, self._rows(), self._CI, self._CL, Xs, Ps, dm.z, dm.R, *self._batch,
+            self._upd_p, claimed, vrows, ms, self._MEV, self._RIDE, self._WN, float(tc.map_structure_stop),
+            float(tc.merge_size_jump), float(tc.map_structure_max), _BIG, bound, lim, lim2, *self._mev_src,
+            self._map is not None, float(p.x), float(p.y), c, s, t)
         if status:
             raise ValueError(LSAP_MESSAGES[status])  # (SciPy's error for such a cost matrix)
         if vetoed.shape[0]:
             tracks, add = self._tracks, self._merged.add
             for i in vetoed.tolist():
                 add(tracks[i].id)
-        pairs = list(zip(ii.tolist(), jj.tolist()))
-        # (the pairs as index arrays too, and the tracks' missed flags, for _update_pairs: kept with the list they
-        # belong to)
-        if pairs:
-            self._pair_arrays = (pairs, ii, jj, missed_a)
-        return pairs
+        if not ii.shape[0]:
+            return 0
+        self._updated_pairs(list(zip(ii.tolist(), jj.tolist())), dets, t, nb, top, info)
+        return nrej
 
     def _birth(self, det: Detection, t: float, j: int) -> None:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""
