@@ -114,8 +114,8 @@ def test_associate_scan_is_the_former_calls_in_pipeline_runs() -> None:
 
 
 
-#: associate_update's arguments that the update writes: X, P, CI, CL, MEV, RIDE, WN
-_WRITTEN = (2, 3, 5, 6, 25, 26, 27)
+#: associate_update's arguments that the update writes: G, Gi, X, P, CI, CL, MEV, RIDE, WN
+_WRITTEN = (0, 1, 2, 3, 5, 6, 25, 26, 27)
 
 
 def _former_pair_calls(*a: object) -> tuple:
