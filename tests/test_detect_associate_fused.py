@@ -145,6 +145,13 @@ def _outcome(f, a: list) -> tuple:
     return out, [c[i].tobytes() for i in _WRITTEN]
 
 
+def _with_map_evidence(on: bool) -> Config:
+    """The default configuration with the tracker's map evidence ``on`` or off."""
+    cfg = Config()
+    cfg.detect.tracker.map_evidence = on
+    return cfg
+
+
 def test_associate_update_is_the_two_former_calls_in_pipeline_runs() -> None:
     """``associate_update`` (pass trk108) against ``associate_scan`` then ``update_pairs`` as the tracker called them
     before, on every call of two simulated pipeline runs (sim:drive with the map evidence, sim:crowd without): the
@@ -169,9 +176,7 @@ def test_associate_update_is_the_two_former_calls_in_pipeline_runs() -> None:
     tracker_mod.associate_update = checked
     try:
         for name, use_map in (("sim:drive", True), ("sim:crowd", False)):
-            cfg = Config()
-            cfg.detect.tracker.map_evidence = use_map
-            pipe = Pipeline(cfg)
+            pipe = Pipeline(_with_map_evidence(use_map))
             for scan in open_source(name, seed=11, duration=6.0):
                 pipe.process(scan)
     finally:

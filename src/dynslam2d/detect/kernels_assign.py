@@ -1,4 +1,4 @@
-"""The association's assignment as one kernel call per scan (``Tracker._associate``, detect/tracker.py): the gated cost
+"""The association's assignment as one kernel call per scan (``Tracker._associate_update``): the gated cost
 matrix, the established tracks' assignment, then the tentative tracks' on the detections left, each pair kept only
 where the gates allow it.
 
@@ -226,7 +226,7 @@ def assign_groups(ok: np.ndarray, d2: np.ndarray, firm: np.ndarray, big: float) 
 @njit(cache=True, inline="always")
 def veto_merged(ok: np.ndarray, tsize: np.ndarray, det_ext: np.ndarray, rows: np.ndarray, vrows: np.ndarray,
                 ms: np.ndarray, MEV: np.ndarray, WN: np.ndarray, stop: float, jump: float, smax: float) -> np.ndarray:
-    """The veto of detections merged with structure (``Tracker._associate``; inlined in :func:`associate_scan`):
+    """The veto of detections merged with structure (``Tracker._associate_update``; inlined in :func:`associate_scan`):
     ``ok`` ((n, m) bool, the gates) written False where a live track ``vrows[r]`` (indices of the tracks in M or
     merged, in their order) would take a candidate detection (``ms``: each detection's fraction of points on
     long-occupied map cells, ≥ ``stop``) whose longer side ``det_ext`` exceeds the track's larger size ``tsize`` by

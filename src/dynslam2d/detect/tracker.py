@@ -238,11 +238,9 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._mev_src: tuple = (np.zeros((3, 0)), _NO_IDX, _NO_IDX, _NO_IDX, _NO_IDX)
         self._default: MeasureRows | None = None  # default measurements of the current scan's detections
         self._stacked: tuple[np.ndarray, np.ndarray] | None = None  # predicted X, P of all tracks
-        self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate)
+        self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate_update)
         # this scan's ids of the updated tracks and indices of the detections they took (update, _update_tracks)
         self._upd_sets: tuple[set[int], set[int]] = (set(), set())
-        # the last association's pairs (the list it returned) with their track and detection index arrays (int64) and
-        # the live tracks' "missed their last scan" flags (bool)
         # clutter retirement (structure_retire_updates): confirmed still tracks on map structure, out of the
         # Kalman tracking but kept (and reported) while their object is seen, so that a parked mover keeps
         # its id and standing history until it leaves (_clutter_detections)
