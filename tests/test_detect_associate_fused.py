@@ -121,18 +121,24 @@ _WRITTEN = (0, 1, 2, 3, 5, 6, 25, 26, 27)
 def _former_pair_calls(*a: object) -> tuple:
     """``Tracker._associate`` then ``Tracker._update_pairs`` as they called their kernels before pass trk108 (main at
     5d1894d), on ``associate_update``'s arguments ``a``: ``associate_scan``, then, with pairs and status 0,
-    ``update_pairs`` with the pairs' index arrays as ``sel`` / ``dis`` and the association's missed flags."""
+    ``update_pairs`` with the pairs' index arrays as ``sel`` / ``dis`` and the association's missed flags; then
+    (status 0) ``manage_scan`` as ``TrackManage._manage`` called it before pass trk117."""
     G, Gi, X, P, rows, CI, CL, Xs, Ps, Z, R = a[:11]
     batch, q = a[11:21], a[21]
     claimed, vrows, ms, MEV, RIDE, WN, stop, jump, smax, big, bound, lim, lim2 = a[22:35]
     mev, (use_map, lx, ly, c, s, t) = a[35:40], a[40:46]
     status, ii, jj, missed, vetoed = ka.associate_scan(G, Gi, rows, CI, Xs, Ps, Z, R, *batch, q, claimed, vrows, ms,
                                                        MEV, WN, stop, jump, smax, big)
-    if status or not ii.shape[0]:
-        return status, ii, jj, vetoed, 0, 0, np.empty((0, 4), dtype=np.int64), 0
-    nb, top, info, nrej = ku.update_pairs(G, Gi, X, P, Xs, Ps, ii, rows, jj, missed, *batch, q, bound, CI, CL, lim,
-                                          lim2, *mev, MEV, RIDE, WN, use_map, lx, ly, c, s, t)
-    return status, ii, jj, vetoed, nb, top, info, nrej
+    none = np.empty((0, 4), dtype=np.int64)
+    if status:
+        man0 = (np.empty(0, dtype=np.int8), np.empty(0), np.empty(0), np.empty(0, dtype=np.int64))
+        return status, ii, jj, vetoed, 0, 0, none, 0, man0
+    nb, top, info, nrej = 0, 0, none, 0
+    if ii.shape[0]:
+        nb, top, info, nrej = ku.update_pairs(G, Gi, X, P, Xs, Ps, ii, rows, jj, missed, *batch, q, bound, CI, CL,
+                                              lim, lim2, *mev, MEV, RIDE, WN, use_map, lx, ly, c, s, t)
+    # (then TrackManage._manage's kernel call, with the rows and stamp of the scan: pass trk117)
+    return status, ii, jj, vetoed, nb, top, info, nrej, ku.manage_scan(P, X, CI, CL, WN, MEV, rows, q, t)
 
 
 def _outcome(f, a: list) -> tuple:
@@ -141,7 +147,8 @@ def _outcome(f, a: list) -> tuple:
     for i in _WRITTEN:
         c[i] = c[i].copy()
     got = f(*c)
-    out = [v.tobytes() if isinstance(v, np.ndarray) else v for v in got]
+    out = [v.tobytes() if isinstance(v, np.ndarray) else v for v in got[:-1]]
+    out.append([(v.dtype.str, v.tobytes()) for v in got[-1]])  # (the management's four arrays)
     return out, [c[i].tobytes() for i in _WRITTEN]
 
 
@@ -155,8 +162,9 @@ def _with_map_evidence(on: bool) -> Config:
 def test_associate_update_is_the_two_former_calls_in_pipeline_runs() -> None:
     """``associate_update`` (pass trk108) against ``associate_scan`` then ``update_pairs`` as the tracker called them
     before, on every call of two simulated pipeline runs (sim:drive with the map evidence, sim:crowd without): the
-    pairs, vetoed tracks, bounded and rejected counts, ``info`` rows and the bytes of every array the update writes;
-    each call also with a limit 30 × tighter (most established rows bounded)."""
+    pairs, vetoed tracks, bounded and rejected counts, ``info`` rows, the management's four arrays (pass trk117) and
+    the bytes of every array the update writes; each call also with a limit 30 × tighter (most established rows
+    bounded)."""
     seen = {"calls": 0, "pairs": 0, "bounded": 0, "use_map": 0}
 
     def checked(*a):
@@ -183,3 +191,48 @@ def test_associate_update_is_the_two_former_calls_in_pipeline_runs() -> None:
         tracker_mod.associate_update = saved
     assert seen["calls"] > 100 and seen["pairs"] > 500 and seen["bounded"] > 20, seen
     assert 20 < seen["use_map"] < seen["calls"], seen
+
+
+def test_managed_rows_are_managed_at_manage_time() -> None:
+    """The management's arrays that ``associate_update`` makes (pass trk117) are the ones ``TrackManage._manage``
+    would make itself: every array ``manage_scan`` reads or writes (P, X, CI, CL, WN, MEV, the rows, the parameters)
+    has the same bytes when ``_manage`` reads the outputs as right after the fused call (nothing between writes them;
+    the test above shows the fused call's outputs are ``manage_scan``'s on them), on every scan of two simulated
+    pipeline runs (sim:drive with the map evidence, sim:crowd without); scans without an association (no track or no
+    detection) call ``manage_scan`` themselves."""
+    from dynslam2d.detect import trackmanage
+
+    seen = {"fused": 0, "own": 0}
+    former_manage, former_call = trackmanage.TrackManage._manage, tracker_mod.associate_update
+    after: list = []
+
+    def snap(self) -> list:
+        return [v.tobytes() for v in (self._P, self._X, self._CI, self._CL, self._WN, self._MEV, self._rows(),
+                                      self._upd_p)]
+
+    def call(*a):
+        out = former_call(*a)
+        X, P, rows, CI, CL = a[2:7]
+        after[:] = [(P.tobytes(), X.tobytes(), CI.tobytes(), CL.tobytes(), a[27].tobytes(), a[25].tobytes(),
+                     rows.tobytes(), a[21].tobytes())]
+        return out
+
+    def checked(self, t: float, updated: set[int]) -> None:
+        if self._managed is not None:
+            assert after and snap(self) == list(after[0])
+            seen["fused"] += 1
+        elif self._tracks:
+            seen["own"] += 1
+        after.clear()
+        former_manage(self, t, updated)
+        assert self._managed is None
+
+    trackmanage.TrackManage._manage, tracker_mod.associate_update = checked, call
+    try:
+        for name, use_map in (("sim:drive", True), ("sim:crowd", False)):
+            pipe = Pipeline(_with_map_evidence(use_map))
+            for scan in open_source(name, seed=11, duration=6.0):
+                pipe.process(scan)
+    finally:
+        trackmanage.TrackManage._manage, tracker_mod.associate_update = former_manage, former_call
+    assert seen["fused"] > 100, seen  # ("own": none in these two runs; the digest's real bags have them)

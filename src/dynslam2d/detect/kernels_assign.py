@@ -18,7 +18,7 @@ import sys
 
 import numpy as np
 
-from dynslam2d.detect.kernels_update import association_gates, update_pairs
+from dynslam2d.detect.kernels_update import association_gates, manage_scan, update_pairs
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
 #: status codes of :func:`lsap` / :func:`assign_groups` (SciPy raises ValueError with these messages)
@@ -341,13 +341,23 @@ def associate_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray
     after the push, ``info``, rejected pairs): :func:`associate_scan`'s first three and its vetoed tracks, then
     ``update_pairs``' four (0, 0, an empty (0, 4) ``info`` and 0 when no update ran). One dispatch and one unboxing
     of the ≈ 20 arrays both take instead of two, and no boxing of the pairs' arrays for the second call
-    (docs/speed.md, pass trk108)."""
+    (docs/speed.md, pass trk108).
+
+    Then, with status ``LSAP_OK``, :func:`dynslam2d.detect.kernels_update.manage_scan` on the same ``rows`` at ``t``
+    (``TrackManage._manage``'s counter tests, σ, speeds and bits of the live tracks: it reads only the state, counter
+    and window rows, which nothing in Python writes between the update and the management; pass trk117): returned
+    last as ``man`` (its four arrays), or empty arrays when the association failed (the caller raises)."""
     status, ii, jj, missed, vetoed = associate_scan(G, Gi, rows, CI, Xs, Ps, Z, R, kind, theta, lohi, rel, centroid,
                                                     circle, px, py, start, npts, q, claimed, vrows, ms, MEV, WN, stop,
                                                     jump, smax, big)
-    if status != LSAP_OK or ii.shape[0] == 0:
-        return status, ii, jj, vetoed, 0, 0, np.empty((0, 4), dtype=np.int64), 0
-    nb, top, info, nrej = update_pairs(G, Gi, X, P, Xs, Ps, ii, rows, jj, missed, kind, theta, lohi, rel, centroid,
-                                       circle, px, py, start, npts, q, bound, CI, CL, lim, lim2, mfr, kept, first,
-                                       second, mnpts, MEV, RIDE, WN, use_map, lx, ly, c, s, t)
-    return status, ii, jj, vetoed, nb, top, info, nrej
+    if status != LSAP_OK:
+        man0 = (np.empty(0, dtype=np.int8), np.empty(0), np.empty(0), np.empty(0, dtype=np.int64))
+        return status, ii, jj, vetoed, 0, 0, np.empty((0, 4), dtype=np.int64), 0, man0
+    nb, top, nrej = 0, 0, 0
+    info = np.empty((0, 4), dtype=np.int64)
+    if ii.shape[0]:
+        nb, top, info, nrej = update_pairs(G, Gi, X, P, Xs, Ps, ii, rows, jj, missed, kind, theta, lohi, rel,
+                                           centroid, circle, px, py, start, npts, q, bound, CI, CL, lim, lim2, mfr,
+                                           kept, first, second, mnpts, MEV, RIDE, WN, use_map, lx, ly, c, s, t)
+    man = manage_scan(P, X, CI, CL, WN, MEV, rows, q, t)
+    return status, ii, jj, vetoed, nb, top, info, nrej, man

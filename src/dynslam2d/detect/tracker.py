@@ -481,6 +481,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         (their Kalman and shape updates, then :meth:`_updated_pairs`), at the scan's stamp ``t`` (s); returns how
         many pairs' updates did not apply. Both kernels run in one call (``kernels_assign.associate_update``, pass
         trk108)."""
+        self._managed = None  # (the management kernel's outputs when this call ran it: _manage reads them)
         if not self._tracks or not dets:
             return 0
         Xs, Ps = self._stack()
@@ -531,7 +532,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         bound, lim, lim2 = self._accel_limits()
         p = self._pose
         c, s = self._pose_cs
-        status, ii, jj, vetoed, nb, top, info, nrej = associate_update(
+        status, ii, jj, vetoed, nb, top, info, nrej, self._managed = associate_update(
             self._G, self._Gi, self._X, self._P, self._rows(), self._CI, self._CL, Xs, Ps, dm.z, dm.R, *self._batch,
             self._upd_p, claimed, vrows, ms, self._MEV, self._RIDE, self._WN, float(tc.map_structure_stop),
             float(tc.merge_size_jump), float(tc.map_structure_max), _BIG, bound, lim, lim2, *self._mev_src,
