@@ -115,30 +115,38 @@ def test_associate_scan_is_the_former_calls_in_pipeline_runs() -> None:
 
 
 #: associate_update's arguments that the update writes: G, Gi, X, P, CI, CL, MEV, RIDE, WN
-_WRITTEN = (0, 1, 2, 3, 5, 6, 25, 26, 27)
+_WRITTEN = (0, 1, 2, 3, 5, 6, 23, 24, 25)
 
 
-def _former_pair_calls(*a: object) -> tuple:
+def _former_pair_calls(Xs: np.ndarray, Ps: np.ndarray):
     """``Tracker._associate`` then ``Tracker._update_pairs`` as they called their kernels before pass trk108 (main at
-    5d1894d), on ``associate_update``'s arguments ``a``: ``associate_scan``, then, with pairs and status 0,
-    ``update_pairs`` with the pairs' index arrays as ``sel`` / ``dis`` and the association's missed flags; then
-    (status 0) ``manage_scan`` as ``TrackManage._manage`` called it before pass trk117."""
-    G, Gi, X, P, rows, CI, CL, Xs, Ps, Z, R = a[:11]
-    batch, q = a[11:21], a[21]
-    claimed, vrows, ms, MEV, RIDE, WN, stop, jump, smax, big, bound, lim, lim2 = a[22:35]
-    mev, (use_map, lx, ly, c, s, t) = a[35:40], a[40:46]
-    status, ii, jj, missed, vetoed = ka.associate_scan(G, Gi, rows, CI, Xs, Ps, Z, R, *batch, q, claimed, vrows, ms,
-                                                       MEV, WN, stop, jump, smax, big)
-    none = np.empty((0, 4), dtype=np.int64)
-    if status:
-        man0 = (np.empty(0, dtype=np.int8), np.empty(0), np.empty(0), np.empty(0, dtype=np.int64))
-        return status, ii, jj, vetoed, 0, 0, none, 0, man0
-    nb, top, info, nrej = 0, 0, none, 0
-    if ii.shape[0]:
-        nb, top, info, nrej = ku.update_pairs(G, Gi, X, P, Xs, Ps, ii, rows, jj, missed, *batch, q, bound, CI, CL,
-                                              lim, lim2, *mev, MEV, RIDE, WN, use_map, lx, ly, c, s, t)
-    # (then TrackManage._manage's kernel call, with the rows and stamp of the scan: pass trk117)
-    return status, ii, jj, vetoed, nb, top, info, nrej, ku.manage_scan(P, X, CI, CL, WN, MEV, rows, q, t)
+    5d1894d), on ``associate_update``'s arguments ``a``, with the predicted rows ``Xs`` / ``Ps`` the tracker passed
+    then (its ``_stack()``) and the merge veto's thresholds and the cost outside the gates as the floats it passed
+    then (before pass trk129): ``associate_scan``, then, with pairs and status 0, ``update_pairs`` with the pairs'
+    index arrays as ``sel`` / ``dis`` and the association's missed flags; then (status 0) ``manage_scan`` as
+    ``TrackManage._manage`` called it before pass trk117."""
+
+    def calls(*a: object) -> tuple:
+        G, Gi, X, P, rows, CI, CL, Z, R = a[:9]
+        batch, q = a[9:19], a[19]
+        claimed, vrows, ms, MEV, RIDE, WN, bound, lim, lim2 = a[20:29]
+        mev, (use_map, lx, ly, c, s, t) = a[29:34], a[34:40]
+        tc = Config().detect.tracker
+        status, ii, jj, missed, vetoed = ka.associate_scan(
+            G, Gi, rows, CI, Xs, Ps, Z, R, *batch, q, claimed, vrows, ms, MEV, WN, float(tc.map_structure_stop),
+            float(tc.merge_size_jump), float(tc.map_structure_max), 1e12)
+        none = np.empty((0, 4), dtype=np.int64)
+        if status:
+            man0 = (np.empty(0, dtype=np.int8), np.empty(0), np.empty(0), np.empty(0, dtype=np.int64))
+            return status, ii, jj, vetoed, 0, 0, none, 0, man0
+        nb, top, info, nrej = 0, 0, none, 0
+        if ii.shape[0]:
+            nb, top, info, nrej = ku.update_pairs(G, Gi, X, P, Xs, Ps, ii, rows, jj, missed, *batch, q, bound, CI,
+                                                  CL, lim, lim2, *mev, MEV, RIDE, WN, use_map, lx, ly, c, s, t)
+        # (then TrackManage._manage's kernel call, with the rows and stamp of the scan: pass trk117)
+        return status, ii, jj, vetoed, nb, top, info, nrej, ku.manage_scan(P, X, CI, CL, WN, MEV, rows, q, t)
+
+    return calls
 
 
 def _outcome(f, a: list) -> tuple:
@@ -164,33 +172,61 @@ def test_associate_update_is_the_two_former_calls_in_pipeline_runs() -> None:
     before, on every call of two simulated pipeline runs (sim:drive with the map evidence, sim:crowd without): the
     pairs, vetoed tracks, bounded and rejected counts, ``info`` rows, the management's four arrays (pass trk117) and
     the bytes of every array the update writes; each call also with a limit 30 × tighter (most established rows
-    bounded)."""
-    seen = {"calls": 0, "pairs": 0, "bounded": 0, "use_map": 0}
+    bounded). The former calls get the predicted rows as the tracker stacked them before pass trk129 (the arrays
+    ``cv_predict`` returned in this scan, with the stationary predictions written into them; ``X.take(rows)`` where
+    it did not run), the fused kernel gathers them from the state rows itself."""
+    seen = {"calls": 0, "pairs": 0, "bounded": 0, "use_map": 0, "predicted": 0, "still": 0}
+    stacked: list = []
+    former_predict, former_cv = tracker_mod.Tracker._predict, tracker_mod.cv_predict
+
+    def cv(X, P, order, F, Q):
+        out = former_cv(X, P, order, F, Q)
+        stacked[:] = [out]
+        return out
+
+    def predict(self, dt: float) -> None:
+        stacked.clear()
+        # (the tracks _predict gives a stationary prediction, which the former _predict wrote into its stacked arrays
+        # too: its own test)
+        still = [i for i, k in enumerate(self._tracks) if k.remembered and k.misses > 0] \
+            if self._maybe_remembered and self.config.memory.enabled else []
+        former_predict(self, dt)
+        if stacked:
+            order, (Xs, Ps) = self._rows(), stacked[0]
+            for i in still:
+                Xs[i], Ps[i] = self._X[order[i]], self._P[order[i]]
+            seen["still"] += len(still)
 
     def checked(*a):
         a = list(a)
         tight = list(a)
-        tight[32], tight[33], tight[34] = True, a[33] / 30.0, (0.999 * a[33] / 30.0) ** 2
+        tight[26], tight[27], tight[28] = True, a[27] / 30.0, (0.999 * a[27] / 30.0) ** 2
+        if stacked:
+            Xs, Ps = stacked[0]
+            seen["predicted"] += 1
+        else:
+            Xs, Ps = a[2].take(a[4], axis=0), a[3].take(a[4], axis=0)
         for case in (a, tight):
-            got, want = _outcome(ka.associate_update, case), _outcome(_former_pair_calls, case)
+            got, want = _outcome(ka.associate_update, case), _outcome(_former_pair_calls(Xs, Ps), case)
             assert got == want
             seen["bounded"] += want[0][4]
         seen["pairs"] += len(got[0][1]) // 8
-        seen["use_map"] += bool(a[40])
+        seen["use_map"] += bool(a[34])
         seen["calls"] += 1
         return ka.associate_update(*a)
 
     saved = tracker_mod.associate_update
-    tracker_mod.associate_update = checked
+    tracker_mod.associate_update, tracker_mod.cv_predict, tracker_mod.Tracker._predict = checked, cv, predict
     try:
         for name, use_map in (("sim:drive", True), ("sim:crowd", False)):
             pipe = Pipeline(_with_map_evidence(use_map))
             for scan in open_source(name, seed=11, duration=6.0):
                 pipe.process(scan)
     finally:
-        tracker_mod.associate_update = saved
+        tracker_mod.associate_update, tracker_mod.cv_predict, tracker_mod.Tracker._predict = \
+            saved, former_cv, former_predict
     assert seen["calls"] > 100 and seen["pairs"] > 500 and seen["bounded"] > 20, seen
-    assert 20 < seen["use_map"] < seen["calls"], seen
+    assert 20 < seen["use_map"] < seen["calls"] and seen["predicted"] > 100, seen
 
 
 def test_managed_rows_are_managed_at_manage_time() -> None:
@@ -213,8 +249,8 @@ def test_managed_rows_are_managed_at_manage_time() -> None:
     def call(*a):
         out = former_call(*a)
         X, P, rows, CI, CL = a[2:7]
-        after[:] = [(P.tobytes(), X.tobytes(), CI.tobytes(), CL.tobytes(), a[27].tobytes(), a[25].tobytes(),
-                     rows.tobytes(), a[21].tobytes())]
+        after[:] = [(P.tobytes(), X.tobytes(), CI.tobytes(), CL.tobytes(), a[25].tobytes(), a[23].tobytes(),
+                     rows.tobytes(), a[19].tobytes())]
         return out
 
     def checked(self, t: float, updated: set[int]) -> None:

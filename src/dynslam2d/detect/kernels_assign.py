@@ -18,7 +18,15 @@ import sys
 
 import numpy as np
 
-from dynslam2d.detect.kernels_update import association_gates, manage_scan, update_pairs
+from dynslam2d.detect.kernels_update import (
+    UP_BIG,
+    UP_MERGE_JUMP,
+    UP_S_MAX,
+    UP_S_STOP,
+    association_gates,
+    manage_scan,
+    update_pairs,
+)
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
 #: status codes of :func:`lsap` / :func:`assign_groups` (SciPy raises ValueError with these messages)
@@ -324,13 +332,13 @@ def associate_scan(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, CI: np.ndarr
 
 @njit(cache=True)
 def associate_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, rows: np.ndarray, CI: np.ndarray,
-                     CL: np.ndarray, Xs: np.ndarray, Ps: np.ndarray, Z: np.ndarray, R: np.ndarray, kind: np.ndarray,
-                     theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray, circle: np.ndarray,
-                     px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray, q: np.ndarray,
-                     claimed: np.ndarray, vrows: np.ndarray, ms: np.ndarray, MEV: np.ndarray, RIDE: np.ndarray,
-                     WN: np.ndarray, stop: float, jump: float, smax: float, big: float, bound: bool, lim: float,
-                     lim2: float, mfr: np.ndarray, kept: np.ndarray, first: np.ndarray, second: np.ndarray,
-                     mnpts: np.ndarray, use_map: bool, lx: float, ly: float, c: float, s: float, t: float) -> tuple:
+                     CL: np.ndarray, Z: np.ndarray, R: np.ndarray, kind: np.ndarray, theta: np.ndarray,
+                     lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray, circle: np.ndarray, px: np.ndarray,
+                     py: np.ndarray, start: np.ndarray, npts: np.ndarray, q: np.ndarray, claimed: np.ndarray,
+                     vrows: np.ndarray, ms: np.ndarray, MEV: np.ndarray, RIDE: np.ndarray, WN: np.ndarray,
+                     bound: bool, lim: float, lim2: float, mfr: np.ndarray, kept: np.ndarray, first: np.ndarray,
+                     second: np.ndarray, mnpts: np.ndarray, use_map: bool, lx: float, ly: float, c: float, s: float,
+                     t: float) -> tuple:
     """``Tracker._associate_update`` in one call: :func:`associate_scan` (its arguments by the same names), then,
     when it found pairs and its status is ``LSAP_OK``, :func:`dynslam2d.detect.kernels_update.update_pairs` on them
     (the pairs' track indices ``ii`` as its ``sel``, their detection indices ``jj`` as its ``dis``, the association's
@@ -343,13 +351,21 @@ def associate_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray
     of the ≈ 20 arrays both take instead of two, and no boxing of the pairs' arrays for the second call
     (docs/speed.md, pass trk108).
 
+    Both kernels' predicted states ``Xs`` / ``Ps`` (the live tracks' rows, ``X[rows]``, ``P[rows]``: the prediction
+    wrote them there, and nothing writes those rows before the association) are gathered here, and the merge veto's
+    ``stop``, ``jump``, ``smax`` and the assignment's ``big`` read from ``q`` (columns ``UP_S_STOP`` …
+    ``UP_BIG``, :func:`~dynslam2d.detect.kernels_update.update_params`): two arrays and four floats fewer to type
+    and unbox a call (pass trk129).
+
     Then, with status ``LSAP_OK``, :func:`dynslam2d.detect.kernels_update.manage_scan` on the same ``rows`` at ``t``
     (``TrackManage._manage``'s counter tests, σ, speeds and bits of the live tracks: it reads only the state, counter
     and window rows, which nothing in Python writes between the update and the management; pass trk117): returned
     last as ``man`` (its four arrays), or empty arrays when the association failed (the caller raises)."""
+    Xs = X[rows]
+    Ps = P[rows]
     status, ii, jj, missed, vetoed = associate_scan(G, Gi, rows, CI, Xs, Ps, Z, R, kind, theta, lohi, rel, centroid,
-                                                    circle, px, py, start, npts, q, claimed, vrows, ms, MEV, WN, stop,
-                                                    jump, smax, big)
+                                                    circle, px, py, start, npts, q, claimed, vrows, ms, MEV, WN,
+                                                    q[UP_S_STOP], q[UP_MERGE_JUMP], q[UP_S_MAX], q[UP_BIG])
     if status != LSAP_OK:
         man0 = (np.empty(0, dtype=np.int8), np.empty(0), np.empty(0), np.empty(0, dtype=np.int64))
         return status, ii, jj, vetoed, 0, 0, np.empty((0, 4), dtype=np.int64), 0, man0

@@ -86,7 +86,6 @@ from dynslam2d.detect.trackdetect import TrackDetect
 from dynslam2d.detect.trackmanage import TrackManage
 from dynslam2d.detect.trackreport import TrackReport, TrackReports
 from dynslam2d.detect.tracktable import (  # noqa: F401  (_Track, _new_track, … : the names tests import from here)
-    _BIG,
     _HALF_PI,
     _NO_BEAMS,
     _NO_IDX,
@@ -237,7 +236,6 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # merge's kept detections, pairs and point counts (empty: no merge; kernels.shape_update)
         self._mev_src: tuple = (np.zeros((3, 0)), _NO_IDX, _NO_IDX, _NO_IDX, _NO_IDX)
         self._default: MeasureRows | None = None  # default measurements of the current scan's detections
-        self._stacked: tuple[np.ndarray, np.ndarray] | None = None  # predicted X, P of all tracks
         self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate_update)
         # this scan's ids of the updated tracks and indices of the detections they took (update, _update_tracks)
         self._upd_sets: tuple[set[int], set[int]] = (set(), set())
@@ -413,7 +411,6 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         return d / dt > tc.max_pose_speed or r / dt > tc.max_pose_rate
 
     def _predict(self, dt: float) -> None:
-        self._stacked = None
         if not self._tracks or dt <= 0.0:
             return
         F, Q = self._FQ  # (the tracker's own two arrays, their dt entries written for this step)
@@ -430,11 +427,12 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
                 still = [(i, self._stationary_prediction(tracks[i], F, dt)) for i in rem if tracks[i].misses > 0]
             else:
                 self._maybe_remembered = False
+        # (the predicted rows are read from the state arrays by the association's kernel: its stacked copies are not
+        # kept; pass trk129)
         if order.shape[0] >= 2:
             # numpy's products bit for bit, the rows written in the kernel (the tracks' x / P are views of them)
-            X, P = cv_predict(self._X, self._P, order, F, Q)
+            cv_predict(self._X, self._P, order, F, Q)
             for i, (x, p) in still:
-                X[i], P[i] = x, p
                 self._X[order[i]], self._P[order[i]] = x, p
         else:  # (one track: numpy's matrix-vector product, whose sums the kernel does not reproduce)
             X = self._X[order] @ F.T
@@ -443,7 +441,6 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
                 X[i], P[i] = x, p
             self._X[order] = X
             self._P[order] = P
-        self._stacked = (X, P)
 
     def _stationary_prediction(self, k: _Track, F: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Prediction of a remembered (stopped) track that is not detected, with a stationary motion model
@@ -472,7 +469,6 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         for name, value in self.__dict__.items():
             setattr(new, name, copy.deepcopy(value, memo))
         new._repoint()
-        new._stacked = None
         return new
 
 
@@ -484,7 +480,6 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._managed = None  # (the management kernel's outputs when this call ran it: _manage reads them)
         if not self._tracks or not dets:
             return 0
-        Xs, Ps = self._stack()
         # One kernel call (kernels_assign.associate_scan, docs/speed.md pass trk75): the gates (association_gates: the
         # tracks' sizes, flags and axis angles from their shape rows; the Mahalanobis gate and distance gate, a
         # rectangle measured again with the track's own sizes (a side the detection "measured" too short, e.g. a
@@ -505,7 +500,6 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # place of a detection on structure that got no track, keeps its object's detections on structure
         # (_clutter_detections): no live track takes them, as the clutter track would have kept them before it was
         # retired (or without the rule, born on them).
-        tc = self.config.tracker
         claimed, vrows, ms = _NO_CLAIM, _NO_ROWS, _NO_MS
         if self._map is not None:
             if self._dormant or self._marks.shape[0]:
@@ -533,9 +527,8 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         p = self._pose
         c, s = self._pose_cs
         status, ii, jj, vetoed, nb, top, info, nrej, self._managed = associate_update(
-            self._G, self._Gi, self._X, self._P, self._rows(), self._CI, self._CL, Xs, Ps, dm.z, dm.R, *self._batch,
-            self._upd_p, claimed, vrows, ms, self._MEV, self._RIDE, self._WN, float(tc.map_structure_stop),
-            float(tc.merge_size_jump), float(tc.map_structure_max), _BIG, bound, lim, lim2, *self._mev_src,
+            self._G, self._Gi, self._X, self._P, self._rows(), self._CI, self._CL, dm.z, dm.R, *self._batch,
+            self._upd_p, claimed, vrows, ms, self._MEV, self._RIDE, self._WN, bound, lim, lim2, *self._mev_src,
             self._map is not None, float(p.x), float(p.y), c, s, t)
         if status:
             raise ValueError(LSAP_MESSAGES[status])  # (SciPy's error for such a cost matrix)

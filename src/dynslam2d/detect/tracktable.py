@@ -43,7 +43,6 @@ from dynslam2d.detect.measure import Detection, ScanDetection
 
 _HALF_PI = 0.5 * math.pi
 _TWO_PI = 2.0 * math.pi
-_BIG = 1e12
 
 TENTATIVE = "tentative"
 CONFIRMED = "confirmed"
@@ -385,13 +384,6 @@ class TrackRows:
         new = np.zeros((R.shape[0], 2 * R.shape[1], 5))
         new[:, :R.shape[1]] = R
         self._RIDE = new
-
-    def _stack(self) -> tuple[np.ndarray, np.ndarray]:
-        """(n, 4) states and (n, 4, 4) covariances of the live tracks (from the prediction when it ran)."""
-        if self._stacked is None:
-            order = self._rows()
-            self._stacked = (self._X.take(order, axis=0), self._P.take(order, axis=0))  # (X[order]'s values)
-        return self._stacked
 
     def report_states(self) -> tuple[np.ndarray, np.ndarray]:
         """``(X, rows)``: the tracker's Kalman state array ``X`` (m, 4) — [x, y, vx, vy] in the map frame, m and
