@@ -114,8 +114,8 @@ def test_associate_scan_is_the_former_calls_in_pipeline_runs() -> None:
 
 
 
-#: associate_update's arguments that the update writes: G, Gi, X, P, CI, CL, MEV, RIDE, WN
-_WRITTEN = (0, 1, 2, 3, 5, 6, 23, 24, 25)
+#: associate_update's arguments that the update writes: the row tables' buffers F and Fi, Gi and RIDE
+_WRITTEN = (0, 1, 2, 20)
 
 
 def _former_pair_calls(Xs: np.ndarray, Ps: np.ndarray):
@@ -127,10 +127,11 @@ def _former_pair_calls(Xs: np.ndarray, Ps: np.ndarray):
     ``TrackManage._manage`` called it before pass trk117."""
 
     def calls(*a: object) -> tuple:
-        G, Gi, X, P, rows, CI, CL, Z, R = a[:9]
-        batch, q = a[9:19], a[19]
-        claimed, vrows, ms, MEV, RIDE, WN, bound, lim, lim2 = a[20:29]
-        mev, (use_map, lx, ly, c, s, t) = a[29:34], a[34:40]
+        F, Fi, Gi, rows, Z, R = a[:6]
+        X, P, G, CL, MEV, CI, WN = ku.row_tables.py_func(F, Fi, Gi.shape[0])  # (views: the update writes F, Fi)
+        batch, q = a[6:16], a[16]
+        claimed, vrows, ms, RIDE, bound, lim, lim2 = a[17:24]
+        mev, (use_map, lx, ly, c, s, t) = a[24:29], a[29:35]
         tc = Config().detect.tracker
         status, ii, jj, missed, vetoed = ka.associate_scan(
             G, Gi, rows, CI, Xs, Ps, Z, R, *batch, q, claimed, vrows, ms, MEV, WN, float(tc.map_structure_stop),
@@ -200,18 +201,19 @@ def test_associate_update_is_the_two_former_calls_in_pipeline_runs() -> None:
     def checked(*a):
         a = list(a)
         tight = list(a)
-        tight[26], tight[27], tight[28] = True, a[27] / 30.0, (0.999 * a[27] / 30.0) ** 2
+        tight[21], tight[22], tight[23] = True, a[22] / 30.0, (0.999 * a[22] / 30.0) ** 2
         if stacked:
             Xs, Ps = stacked[0]
             seen["predicted"] += 1
         else:
-            Xs, Ps = a[2].take(a[4], axis=0), a[3].take(a[4], axis=0)
+            X, P = ku.row_tables.py_func(a[0], a[1], a[2].shape[0])[:2]
+            Xs, Ps = X.take(a[3], axis=0), P.take(a[3], axis=0)
         for case in (a, tight):
             got, want = _outcome(ka.associate_update, case), _outcome(_former_pair_calls(Xs, Ps), case)
             assert got == want
             seen["bounded"] += want[0][4]
         seen["pairs"] += len(got[0][1]) // 8
-        seen["use_map"] += bool(a[34])
+        seen["use_map"] += bool(a[29])
         seen["calls"] += 1
         return ka.associate_update(*a)
 
@@ -248,9 +250,9 @@ def test_managed_rows_are_managed_at_manage_time() -> None:
 
     def call(*a):
         out = former_call(*a)
-        X, P, rows, CI, CL = a[2:7]
-        after[:] = [(P.tobytes(), X.tobytes(), CI.tobytes(), CL.tobytes(), a[25].tobytes(), a[23].tobytes(),
-                     rows.tobytes(), a[19].tobytes())]
+        X, P, _, CL, MEV, CI, WN = ku.row_tables.py_func(a[0], a[1], a[2].shape[0])
+        after[:] = [(P.tobytes(), X.tobytes(), CI.tobytes(), CL.tobytes(), WN.tobytes(), MEV.tobytes(),
+                     a[3].tobytes(), a[16].tobytes())]
         return out
 
     def checked(self, t: float, updated: set[int]) -> None:

@@ -25,6 +25,7 @@ from dynslam2d.detect.kernels_update import (
     UP_S_STOP,
     association_gates,
     manage_scan,
+    row_tables,
     update_pairs,
 )
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
@@ -331,11 +332,10 @@ def associate_scan(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, CI: np.ndarr
 
 
 @njit(cache=True)
-def associate_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, rows: np.ndarray, CI: np.ndarray,
-                     CL: np.ndarray, Z: np.ndarray, R: np.ndarray, kind: np.ndarray, theta: np.ndarray,
-                     lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray, circle: np.ndarray, px: np.ndarray,
-                     py: np.ndarray, start: np.ndarray, npts: np.ndarray, q: np.ndarray, claimed: np.ndarray,
-                     vrows: np.ndarray, ms: np.ndarray, MEV: np.ndarray, RIDE: np.ndarray, WN: np.ndarray,
+def associate_update(F: np.ndarray, Fi: np.ndarray, Gi: np.ndarray, rows: np.ndarray, Z: np.ndarray, R: np.ndarray,
+                     kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray,
+                     circle: np.ndarray, px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray,
+                     q: np.ndarray, claimed: np.ndarray, vrows: np.ndarray, ms: np.ndarray, RIDE: np.ndarray,
                      bound: bool, lim: float, lim2: float, mfr: np.ndarray, kept: np.ndarray, first: np.ndarray,
                      second: np.ndarray, mnpts: np.ndarray, use_map: bool, lx: float, ly: float, c: float, s: float,
                      t: float) -> tuple:
@@ -355,12 +355,15 @@ def associate_update(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray
     wrote them there, and nothing writes those rows before the association) are gathered here, and the merge veto's
     ``stop``, ``jump``, ``smax`` and the assignment's ``big`` read from ``q`` (columns ``UP_S_STOP`` …
     ``UP_BIG``, :func:`~dynslam2d.detect.kernels_update.update_params`): two arrays and four floats fewer to type
-    and unbox a call (pass trk129).
+    and unbox a call (pass trk129). The tracker's row tables ``G``, ``X``, ``P``, ``CL``, ``MEV`` come as views of
+    its float64 buffer ``F``, ``CI`` and ``WN`` of its int64 buffer ``Fi`` (:func:`~dynslam2d.detect.kernels_update.
+    row_tables`, with ``Gi``'s row count): two arguments instead of seven (pass trk129).
 
     Then, with status ``LSAP_OK``, :func:`dynslam2d.detect.kernels_update.manage_scan` on the same ``rows`` at ``t``
     (``TrackManage._manage``'s counter tests, σ, speeds and bits of the live tracks: it reads only the state, counter
     and window rows, which nothing in Python writes between the update and the management; pass trk117): returned
     last as ``man`` (its four arrays), or empty arrays when the association failed (the caller raises)."""
+    X, P, G, CL, MEV, CI, WN = row_tables(F, Fi, Gi.shape[0])
     Xs = X[rows]
     Ps = P[rows]
     status, ii, jj, missed, vetoed = associate_scan(G, Gi, rows, CI, Xs, Ps, Z, R, kind, theta, lohi, rel, centroid,

@@ -30,6 +30,7 @@ from dynslam2d.detect.kernels import (
     GI_KIND,
     GI_KNOWN0,
     GI_KNOWN1,
+    N_G,
     accel_candidates,
     association_rows,
     box_row,
@@ -432,6 +433,27 @@ C_HIST_N = 3  # updates (hits and misses) among its first confirm_window scans (
 C_HIST_HITS = 4  # hits among them
 C_UPD = 5  # 1: updated in this scan (written by update_pairs, read and cleared by manage_counters)
 N_C = 6
+
+
+@njit(cache=True, inline="always")
+def row_tables(F: np.ndarray, Fi: np.ndarray, n: int) -> tuple:
+    """The tracker's row tables for ``n`` rows as C-contiguous views of its two flat buffers (``TrackRows._F``,
+    ``_Fi``; pass trk129): from the float64 ``F`` the states ``X`` (n, 4) (m, m/s, map frame), covariances ``P``
+    (n, 4, 4), shape rows ``G`` (n, N_G), last hits' stamps ``CL`` (n,) (s) and map-evidence windows ``MEV``
+    (n, nsus, 3), one after the other; from the int64 ``Fi`` the counters ``CI`` (n, N_C) and window counts ``WN``
+    (n, 3). nsus (sustain_updates) follows from ``F``'s length. The same function makes the tracker's views
+    (its ``py_func``, NumPy's slices and reshapes) and a kernel's (numba's): one layout, and one array argument
+    for each buffer instead of seven (numba's dispatcher types and unboxes each array argument)."""
+    a = 4 * n
+    b = a + 16 * n
+    c = b + N_G * n
+    d = c + n
+    nsus = (F.shape[0] - d) // (3 * n)
+    e = N_C * n
+    return (F[:a].reshape((n, 4)), F[a:b].reshape((n, 4, 4)), F[b:c].reshape((n, N_G)), F[c:d],
+            F[d:].reshape((n, nsus, 3)), Fi[:e].reshape((n, N_C)), Fi[e:].reshape((n, 3)))
+
+
 ST_TENTATIVE = 0
 ST_CONFIRMED = 1
 ST_COASTING = 2

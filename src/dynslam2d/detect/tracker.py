@@ -58,14 +58,11 @@ import numpy as np
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.freespace import FreeSpaceMemory
 from dynslam2d.detect.kernels import (
-    N_G,
-    N_GI,
     cv_predict,
     fit_params,
 )
 from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, associate_update
 from dynslam2d.detect.kernels_update import (
-    N_C,
     birth_rows,
     fragment_hosts_rows,
     update_params,
@@ -189,19 +186,15 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # them at once, the reports copy them in one go); each _Track keeps its row for life (k.row; rows of
         # deleted tracks are reused by births) and its x / P are views of that row (re-pointed only when the
         # arrays grow, by doubling)
-        self._X = np.zeros((_ROWS0, 4))
-        self._P = np.zeros((_ROWS0, 4, 4))
+        # (_X (rows, 4), _P (rows, 4, 4))
         # … and their shape state (the same rows; columns G_* / GI_* of detect/kernels.py): the association, the shape
-        # update and the reports read and write it for all tracks in one kernel call or gather each
-        self._G = np.zeros((_ROWS0, N_G))
-        self._Gi = np.zeros((_ROWS0, N_GI), dtype=np.int8)
+        # update and the reports read and write it for all tracks in one kernel call or gather each (_G, _Gi)
         # … and their counters (state code, hits, misses, the M-of-N counts; columns C_* of detect/kernels_update.py)
         # and last hits' stamps (s): the update kernel writes them for the updated tracks, the management step tests
-        # and writes them as columns (docs/speed.md, pass cnt36)
-        self._CI = np.zeros((_ROWS0, N_C), dtype=np.int64)
-        self._CL = np.zeros(_ROWS0)
-        # … and their windows of the last updates (map evidence, riding test: TrackRows, docs/speed.md pass trk26)
-        self._init_windows(_ROWS0, self.config.tracker.sustain_updates)
+        # and writes them as columns (docs/speed.md, pass cnt36; _CI, _CL)
+        # … and their windows of the last updates (map evidence, riding test: TrackRows, docs/speed.md pass trk26;
+        # _MEV, _RIDE, _WN); all but _Gi and _RIDE views of two flat buffers (TrackRows._alloc_tables, pass trk129)
+        self._init_rows(_ROWS0, self.config.tracker.sustain_updates)
         self._rows_used = 0  # rows 0 … _rows_used − 1 have been handed out
         # the prediction's F and Q (_cv_fill writes this step's entries into them; read only by the kernel and the
         # rare paths of _predict, never kept beyond the scan)
@@ -468,6 +461,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         memo[id(self)] = new
         for name, value in self.__dict__.items():
             setattr(new, name, copy.deepcopy(value, memo))
+        new._table_views()  # (the tables as views of the copy's own buffers again)
         new._repoint()
         return new
 
@@ -527,9 +521,8 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         p = self._pose
         c, s = self._pose_cs
         status, ii, jj, vetoed, nb, top, info, nrej, self._managed = associate_update(
-            self._G, self._Gi, self._X, self._P, self._rows(), self._CI, self._CL, dm.z, dm.R, *self._batch,
-            self._upd_p, claimed, vrows, ms, self._MEV, self._RIDE, self._WN, bound, lim, lim2, *self._mev_src,
-            self._map is not None, float(p.x), float(p.y), c, s, t)
+            self._F, self._Fi, self._Gi, self._rows(), dm.z, dm.R, *self._batch, self._upd_p, claimed, vrows, ms,
+            self._RIDE, bound, lim, lim2, *self._mev_src, self._map is not None, float(p.x), float(p.y), c, s, t)
         if status:
             raise ValueError(LSAP_MESSAGES[status])  # (SciPy's error for such a cost matrix)
         if vetoed.shape[0]:
