@@ -58,6 +58,22 @@ def _scans(name: str, duration: float) -> list:
     return list(sim.scans)
 
 
+#: the A/B scripts' name for this script's ten-movers scene (30 s, the default duration here)
+TEN_MOVERS = "ten-movers"
+
+
+def named_scans(name: str, data, inputs: dict) -> list:
+    """The scans of input ``name`` for the A/B scripts: :data:`TEN_MOVERS` (this script's scene, 30 s), a name of
+    ``inputs`` (``bench_digest.INPUTS``: recorded files under ``data`` or ``sim:…``) or another built-in scene
+    (``sim:NAME``)."""
+    if name == TEN_MOVERS:
+        return _scans(name, 30.0)
+    from dynslam2d.inputs import open_source
+
+    rel, topic = inputs.get(name, (name, None))
+    return list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+
+
 def warm_up(scans: list, n: int = 60, preload: bool = True) -> tuple[float, float]:
     """Run a throw-away ``Pipeline`` over the first ``n`` scans so that the kernels are compiled (or loaded from the
     cache): some are first called only once tracks exist or are confirmed. Then (``preload``) load every other

@@ -40,7 +40,8 @@ speed change of the tracker must print "reports identical".
 
 Pin to one core with ``taskset -c N``. Inputs: every name of ``bench_digest.INPUTS`` (``negative_2/left|rear|right``,
 ``positive_7``, ``positive_1``, ``demo``, ``overtakes``, ``mit-csail``, ``sim:drive|crowd|stop-and-go|corridor``;
-recorded files under ``--data``); an unknown name stops with the list of accepted ones.
+recorded files under ``--data``) and ``ten-movers`` (bench_pipeline.py's scene, 30 s); an unknown name stops with the
+list of accepted ones.
 """
 
 from __future__ import annotations
@@ -60,7 +61,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS as _ALL_INPUTS  # noqa: E402  (the inputs the digest checks)
-from bench_pipeline import warm_up  # noqa: E402
+from bench_pipeline import TEN_MOVERS, named_scans, warm_up  # noqa: E402
 from kernelwarm import preload  # noqa: E402
 
 #: name → (input relative to the data folder or sim:…, topic): every input the digest knows
@@ -69,17 +70,14 @@ INPUTS: dict[str, tuple[str, str | None]] = dict(_ALL_INPUTS)
 
 def check_inputs(ap: argparse.ArgumentParser, names: list[str]) -> None:
     """Stop (``ap.error``, exit status 2) if a name is not in :data:`INPUTS`, listing the accepted names."""
-    bad = [n for n in names if n not in INPUTS]
+    bad = [n for n in names if n not in INPUTS and n != TEN_MOVERS]
     if bad:
         ap.error(f"unknown input{'s' if len(bad) > 1 else ''} {', '.join(map(repr, bad))}; "
                  f"accepted: {', '.join(INPUTS)}")
 
 
 def load_scans(data: Path, name: str) -> list:
-    from dynslam2d.inputs import open_source
-
-    rel, topic = INPUTS[name]
-    return list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+    return named_scans(name, data, INPUTS)
 
 
 #: the tracker's modules: ``detect/tracker.py`` and the step modules it was split into (pass trktable); a name a

@@ -438,6 +438,7 @@ def test_update_params_are_the_former_scalars() -> None:
             tc.gate_distance, tc.gate_chi2, tc.max_size_jump_ratio, tc.max_size_jump = 1.3, 11.5, 1.9, 0.45
             tc.map_structure_exit, tc.sustain_updates = 0.63, 5
             tc.structure_retire_updates, tc.structure_retire_fraction = 3, 0.55
+            tc.map_structure_stop, tc.merge_size_jump, tc.map_structure_max = 0.71, 0.33, 0.27
         fp = fit_params(fc)
         q = ku.update_params(fp, fc, tc)
         assert q.dtype == np.float64 and q.shape == (ku._UP_N,) and q[:_N_PARAMS].tobytes() == fp.tobytes()
@@ -453,7 +454,11 @@ def test_update_params_are_the_former_scalars() -> None:
                 ku.UP_MAX_COAST: float(tc.max_coast_time), ku.UP_MAX_SPEED: float(tc.max_object_speed),
                 ku.UP_MAX_POS_SIG: float(tc.max_position_sigma), ku.UP_S_EXIT: float(tc.map_structure_exit),
                 ku.UP_SUSTAIN: tc.sustain_updates, ku.UP_RETIRE_N: tc.structure_retire_updates or 0,
-                ku.UP_RETIRE_S: float(tc.structure_retire_fraction)}
+                ku.UP_RETIRE_S: float(tc.structure_retire_fraction),
+                # (the association's, passed as floats before pass trk129: the merge veto's three, the cost outside
+                # the gates)
+                ku.UP_S_STOP: float(tc.map_structure_stop), ku.UP_MERGE_JUMP: float(tc.merge_size_jump),
+                ku.UP_S_MAX: float(tc.map_structure_max), ku.UP_BIG: 1e12}
         assert sorted(want) == list(range(_N_PARAMS, ku._UP_N))
         for col, v in want.items():
             assert q[col] == v and (not isinstance(v, int) or int(q[col]) == v), (col, q[col], v)
