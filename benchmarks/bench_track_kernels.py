@@ -31,7 +31,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
-from bench_pipeline import scan_loop_gc  # noqa: E402
+from bench_pipeline import named_scans, scan_loop_gc  # noqa: E402
 
 WARMUP = 60
 BIG = 200_000  # arrays with more elements are not copied (the map view's log-odds)
@@ -83,13 +83,12 @@ TARGETS = track_targets()
 
 
 def warmed_scans(name: str, data: Path) -> list:
-    """The scans of input ``name`` (a key of bench_digest's ``INPUTS`` or ``sim:NAME``; recordings under ``data``),
-    after a throw-away pipeline ran their first :data:`WARMUP` scans (kernels loaded, caches warm)."""
-    from dynslam2d.inputs import open_source
+    """The scans of input ``name`` (a key of bench_digest's ``INPUTS``, ``sim:NAME`` or ``ten-movers``, bench_pipeline's
+    scene; recordings under ``data``), after a throw-away pipeline ran their first :data:`WARMUP` scans (kernels
+    loaded, caches warm)."""
     from dynslam2d.pipeline import Pipeline
 
-    rel, topic = INPUTS.get(name, (name, None))
-    scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+    scans = named_scans(name, data, INPUTS)
     warm = Pipeline()
     for s in scans[:WARMUP]:
         warm.process(s)

@@ -42,6 +42,8 @@ from dynslam2d.detect.kernels_update import (
 from dynslam2d.detect.layout import KIND_CODES, KIND_NAMES
 from dynslam2d.detect.measure import Detection, ScanDetection
 
+# (row_tables' Python function: the tracker's views of its row buffers, made by NumPy)
+_row_views = row_tables.py_func
 _HALF_PI = 0.5 * math.pi
 _TWO_PI = 2.0 * math.pi
 
@@ -354,7 +356,7 @@ class TrackRows:
         """``_X`` … ``_WN`` made again as views of ``_F`` and ``_Fi`` (after a copy of the tracker, whose arrays
         a deep copy makes separately)."""
         self._X, self._P, self._G, self._CL, self._MEV, self._CI, self._WN = \
-            row_tables.py_func(self._F, self._Fi, self._Gi.shape[0])
+            _row_views(self._F, self._Fi, self._Gi.shape[0])
 
     def _mev(self, k: _Track) -> np.ndarray:
         """(n, 3) map evidence of the live track ``k``'s last n ≤ sustain_updates updates, oldest first (a view)."""
