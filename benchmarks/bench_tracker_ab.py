@@ -258,9 +258,9 @@ def pipeline_ab(scans: list, other) -> tuple[float, float, float]:
 
 
 #: the steps of Tracker.update that --phases times (methods of the tracker, each called from update; a name the
-#: checkout lacks counts 0)
-_PHASES = ("_predict", "_detect", "_associate", "_vacated", "_update_pairs", "_manage", "_clutter_detections",
-           "_hosts_of_fragments", "_birth", "_births", "_report")
+#: checkout lacks counts 0; _associate_update: _associate and _update_pairs in one step since pass trk108)
+_PHASES = ("_predict", "_detect", "_associate", "_vacated", "_update_pairs", "_associate_update", "_manage",
+           "_clutter_detections", "_hosts_of_fragments", "_birth", "_births", "_report")
 
 
 #: methods called inside those steps that --phases times too (not subtracted from the rest of update): the leg merge

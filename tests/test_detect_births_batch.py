@@ -30,8 +30,9 @@ def _rows(tr, k) -> tuple:
     nm = tr._WN.item(r, 0)
     return (tr._X[r].tobytes(), tr._P[r].tobytes(), tr._G[r].tobytes(), tr._Gi[r].tobytes(), tr._CI[r].tobytes(),
             tr._CL[r].tobytes(), tr._WN[r].tobytes(), tr._MEV[r, :nm].tobytes(), np.asarray(k.birth_xy).tobytes(),
-            k.x.base is tr._X, k.P.base is tr._P, k.g.base is tr._G, k.gi.base is tr._Gi, k.ci.base is tr._CI,
-            k.cl.base is tr._CL)
+            # (each view of its own row: the tables are views of two buffers since pass trk129)
+            np.shares_memory(k.x, tr._X[r]), np.shares_memory(k.P, tr._P[r]), np.shares_memory(k.g, tr._G[r]),
+            np.shares_memory(k.gi, tr._Gi[r]), np.shares_memory(k.ci, tr._CI[r]), np.shares_memory(k.cl, tr._CL[r]))
 
 
 def _fields(k) -> tuple:

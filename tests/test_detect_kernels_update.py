@@ -177,9 +177,9 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
     of the written state rows), and ``kalman_pairs`` again on the same calls with a limit 30 × tighter (most
     established rows bounded) and with the bound off."""
     from dynslam2d.detect import DetectConfig, Tracker
+    from dynslam2d.detect import kernels_assign as ka
     from dynslam2d.detect import kernels_update as ku
     from dynslam2d.detect import tracker as trk
-    from dynslam2d.detect import trackupdate as tu
     from dynslam2d.detect.kernels import (
         _N_PARAMS,
         association_rows,
@@ -241,8 +241,10 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
         gates(*a[:19])
         return associate_scan(*a)
 
-    saved = trk.associate_scan, tu.update_pairs
-    trk.associate_scan, tu.update_pairs = fused, merged
+    # (since pass trk108 both run inside associate_update: its Python runs instead, its calls through kernels_assign's
+    # names)
+    saved = trk.associate_update, ka.associate_scan, ka.update_pairs
+    trk.associate_update, ka.associate_scan, ka.update_pairs = ka.associate_update.py_func, fused, merged
     try:
         for scene in ("crowd", "drive"):
             sim = simulate(scene, duration=4.0)
@@ -250,7 +252,7 @@ def test_merged_kernels_are_the_calls_they_replace_in_a_tracker_run() -> None:
             for scan, pose in zip(sim.scans, sim.ground_truth.poses_in("first")):
                 tr.update(scan, Pose2D.from_array(pose))
     finally:
-        trk.associate_scan, tu.update_pairs = saved
+        trk.associate_update, ka.associate_scan, ka.update_pairs = saved
     assert seen["gates"] > 50 and seen["kalman"] > 50 and seen["bounded"] > 20 and seen["not_ok"] > 50
 
 
@@ -436,6 +438,7 @@ def test_update_params_are_the_former_scalars() -> None:
             tc.gate_distance, tc.gate_chi2, tc.max_size_jump_ratio, tc.max_size_jump = 1.3, 11.5, 1.9, 0.45
             tc.map_structure_exit, tc.sustain_updates = 0.63, 5
             tc.structure_retire_updates, tc.structure_retire_fraction = 3, 0.55
+            tc.map_structure_stop, tc.merge_size_jump, tc.map_structure_max = 0.71, 0.33, 0.27
         fp = fit_params(fc)
         q = ku.update_params(fp, fc, tc)
         assert q.dtype == np.float64 and q.shape == (ku._UP_N,) and q[:_N_PARAMS].tobytes() == fp.tobytes()
@@ -451,7 +454,11 @@ def test_update_params_are_the_former_scalars() -> None:
                 ku.UP_MAX_COAST: float(tc.max_coast_time), ku.UP_MAX_SPEED: float(tc.max_object_speed),
                 ku.UP_MAX_POS_SIG: float(tc.max_position_sigma), ku.UP_S_EXIT: float(tc.map_structure_exit),
                 ku.UP_SUSTAIN: tc.sustain_updates, ku.UP_RETIRE_N: tc.structure_retire_updates or 0,
-                ku.UP_RETIRE_S: float(tc.structure_retire_fraction)}
+                ku.UP_RETIRE_S: float(tc.structure_retire_fraction),
+                # (the association's, passed as floats before pass trk129: the merge veto's three, the cost outside
+                # the gates)
+                ku.UP_S_STOP: float(tc.map_structure_stop), ku.UP_MERGE_JUMP: float(tc.merge_size_jump),
+                ku.UP_S_MAX: float(tc.map_structure_max), ku.UP_BIG: 1e12}
         assert sorted(want) == list(range(_N_PARAMS, ku._UP_N))
         for col, v in want.items():
             assert q[col] == v and (not isinstance(v, int) or int(q[col]) == v), (col, q[col], v)
@@ -527,8 +534,9 @@ def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
     each call also with a limit 30 × tighter (most established rows bounded), with every track taken as re-acquired
     and with a failed update, on copies."""
     from dynslam2d.config import Config
+    from dynslam2d.detect import kernels_assign as ka
     from dynslam2d.detect import kernels_update as ku
-    from dynslam2d.detect import trackupdate as tu
+    from dynslam2d.detect import tracker as trk
     from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import Pipeline
 
@@ -563,8 +571,10 @@ def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
         seen["calls"] += 1
         return ku.update_pairs(*a)
 
-    saved = tu.update_pairs
-    tu.update_pairs = merged
+    # (since pass trk108 update_pairs runs inside associate_update: its Python runs instead, its calls through
+    # kernels_assign's names)
+    saved = trk.associate_update, ka.update_pairs
+    trk.associate_update, ka.update_pairs = ka.associate_update.py_func, merged
     try:
         for name, use_map in (("sim:drive", True), ("sim:crowd", False)):
             cfg = Config()
@@ -573,6 +583,6 @@ def test_update_pairs_is_the_four_calls_it_replaces_in_pipeline_runs() -> None:
             for scan in open_source(name, seed=11, duration=6.0):
                 pipe.process(scan)
     finally:
-        tu.update_pairs = saved
+        trk.associate_update, ka.update_pairs = saved
     assert seen["calls"] > 100 and seen["bounded"] > 20 and seen["restarted"] > 5
     assert 20 < seen["use_map"] < seen["calls"] and seen["rejected"] > 0

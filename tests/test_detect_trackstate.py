@@ -91,7 +91,7 @@ def test_each_track_keeps_its_own_state_row_through_births_and_deletions() -> No
 def test_growth_and_deep_copy_change_no_report() -> None:
     ref = Tracker(DetectConfig())
     small = Tracker(DetectConfig())
-    small._X, small._P = np.zeros((1, 4)), np.zeros((1, 4, 4))  # doubled again and again
+    small._init_rows(1, small.config.tracker.sustain_updates)  # one row: doubled again and again
     copied = None
     for i in range(SCANS):
         scan = _scan(i)
@@ -102,6 +102,12 @@ def test_growth_and_deep_copy_change_no_report() -> None:
         elif copied is not None:
             assert _same(a, copied.update(scan, POSE))
     assert small._X.shape[0] >= 8 and copied is not None
+    # (the tables stay views of the two buffers through the doublings and in the copy: pass trk129)
+    for tr in (ref, small, copied):
+        for a in (tr._X, tr._P, tr._G, tr._CL, tr._MEV):
+            assert np.shares_memory(a, tr._F)
+        assert np.shares_memory(tr._CI, tr._Fi) and np.shares_memory(tr._WN, tr._Fi)
+        assert all(k.x.base is not None and np.shares_memory(k.x, tr._F) for k in tr._tracks)
 
 
 def test_a_track_whose_covariance_turns_non_finite_is_deleted() -> None:

@@ -61,8 +61,8 @@ KERNELS: tuple[tuple[str, str], ...] = (
      "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), float64, float64, float64, float64,)"),
     ('dynslam2d.slam.matcher.match_pyramid',
      "(Array(uint32, 2, 'C'), Array(uint32, 2, 'C'), Array(uint32, 2, 'C'), Array(float64, 2, 'C'), "
-     "Array(float64, 2, 'C'), float64, float64, float64, int64, int64, bool, bool, float64, float64, "
-     "float64, float64, bool, float64, float64, float64, Array(float64, 3, 'C'), bool, float64, "
+     "Array(float64, 2, 'C'), Array(float64, 1, 'C'), int64, int64, bool, bool, float64, float64, "
+     "float64, float64, bool, Array(float64, 1, 'C'), Array(float64, 3, 'C'), bool, float64, "
      "Array(float64, 2, 'C'), Array(float64, 1, 'C'), float64, float64, float64, float64,)"),
     ('dynslam2d.slam.correlative._search_points',
      "(Array(float64, 2, 'C'), Array(int64, 1, 'C', True), float64,)"),
@@ -82,28 +82,15 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.detect.kernels.cv_predict',
      "(Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 2, 'C'),)"),
-    ('dynslam2d.detect.kernels_assign.associate_scan',
-     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 2, 'C'), "
-     "Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
-     "Array(int8, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 2, 'C'), Array(bool, 3, 'C'), "
-     "Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(bool, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 3, 'C'), Array(int64, 2, 'C'), "
-     'float64, float64, float64, float64,)'),
-    ('dynslam2d.detect.kernels_update.update_pairs',
-     "(Array(float64, 2, 'C'), Array(int8, 2, 'C'), Array(float64, 2, 'C'), Array(float64, 3, 'C'), "
-     "Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(bool, 1, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), "
+    ('dynslam2d.detect.kernels_assign.associate_update',
+     "(Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int8, 2, 'C'), Array(int64, 1, 'C'), "
+     "Array(float64, 2, 'C'), Array(float64, 3, 'C'), Array(int8, 1, 'C'), Array(float64, 1, 'C'), "
      "Array(float64, 2, 'C'), Array(bool, 3, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
      "Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
-     "Array(float64, 1, 'C'), bool, Array(int64, 2, 'C'), Array(float64, 1, 'C'), float64, float64, "
-     "Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
-     "Array(int64, 1, 'C'), Array(float64, 3, 'C'), Array(float64, 3, 'C'), Array(int64, 2, 'C'), bool, "
-     'float64, float64, float64, float64, float64,)'),
-    ('dynslam2d.detect.kernels_update.manage_scan',
-     "(Array(float64, 3, 'C'), Array(float64, 2, 'C'), Array(int64, 2, 'C'), Array(float64, 1, 'C'), "
-     "Array(int64, 2, 'C'), Array(float64, 3, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), "
-     'float64,)'),
+     "Array(float64, 1, 'C'), Array(bool, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), "
+     "Array(float64, 3, 'C'), bool, float64, float64, Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
+     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), bool, float64, float64, float64, "
+     'float64, float64,)'),
     ('dynslam2d.detect.kernels_update.fragment_hosts_rows',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), "
      "Array(int64, 1, 'C'), Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), "
@@ -128,31 +115,29 @@ KERNELS: tuple[tuple[str, str], ...] = (
 #: CPU time of each kernel's compile (s, the kernels it compiles in turn included) in a one-core cold run when
 #: recorded: the background compile's estimate of how far ahead of the run a kernel is (its order, docs/speed.md).
 COMPILE_S: dict[str, float] = {
-    'dynslam2d.sim.world._cast_kernel': 0.37,
-    'dynslam2d.detect.body._drop_body': 0.19,
-    'dynslam2d.slam.matcher.gated_points': 0.42,
-    'dynslam2d.detect.body._observe_beams': 0.17,
-    'dynslam2d.detect.segment.detect_scan': 6.79,
-    'dynslam2d.detect.kernels_update.birth_rows': 0.27,
-    'dynslam2d.detect.kernels_update.report_rows': 0.32,
-    'dynslam2d.slam.ledgerkernels.record_cells': 1.61,
-    'dynslam2d.slam.ledgerkernels.level_rows': 0.37,
-    'dynslam2d.slam.ledgerkernels.stand_marks': 0.29,
-    'dynslam2d.slam.raycast.integrate_levels': 1.09,
-    'dynslam2d.slam.raycast.ray_ends': 0.07,
-    'dynslam2d.slam.matcher.match_pyramid': 1.77,
-    'dynslam2d.slam.correlative._search_points': 0.12,
+    'dynslam2d.sim.world._cast_kernel': 0.34,
+    'dynslam2d.detect.body._drop_body': 0.18,
+    'dynslam2d.slam.matcher.gated_points': 0.38,
+    'dynslam2d.detect.body._observe_beams': 0.15,
+    'dynslam2d.detect.segment.detect_scan': 7.08,
+    'dynslam2d.detect.kernels_update.birth_rows': 0.39,
+    'dynslam2d.detect.kernels_update.report_rows': 0.40,
+    'dynslam2d.slam.ledgerkernels.record_cells': 2.48,
+    'dynslam2d.slam.ledgerkernels.level_rows': 0.45,
+    'dynslam2d.slam.ledgerkernels.stand_marks': 0.44,
+    'dynslam2d.slam.raycast.integrate_levels': 1.39,
+    'dynslam2d.slam.raycast.ray_ends': 0.09,
+    'dynslam2d.slam.matcher.match_pyramid': 2.29,
+    'dynslam2d.slam.correlative._search_points': 0.14,
     'dynslam2d.slam.correlative._search_cells': 0.24,
-    'dynslam2d.slam.correlative._search_table': 0.57,
-    'dynslam2d.slam.correlative.branch_and_bound': 1.03,
-    'dynslam2d.vacated.vacated_scan_kernel': 2.80,
-    'dynslam2d.detect.kernels.cv_predict': 0.18,
-    'dynslam2d.detect.kernels_assign.associate_scan': 1.98,
-    'dynslam2d.detect.kernels_update.update_pairs': 2.00,
-    'dynslam2d.detect.kernels_update.manage_scan': 0.46,
-    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.18,
-    'dynslam2d.detect.kernels.seen_through_refs': 0.18,
-    'dynslam2d.filter._movers_kernel': 0.85,
-    'dynslam2d.slam.cleanup._add_scan': 0.77,
-    'dynslam2d.viz.collect._removed_points': 0.13,
+    'dynslam2d.slam.correlative._search_table': 0.60,
+    'dynslam2d.slam.correlative.branch_and_bound': 1.12,
+    'dynslam2d.vacated.vacated_scan_kernel': 3.13,
+    'dynslam2d.detect.kernels.cv_predict': 0.20,
+    'dynslam2d.detect.kernels_assign.associate_update': 4.78,
+    'dynslam2d.detect.kernels_update.fragment_hosts_rows': 0.16,
+    'dynslam2d.detect.kernels.seen_through_refs': 0.15,
+    'dynslam2d.filter._movers_kernel': 0.82,
+    'dynslam2d.slam.cleanup._add_scan': 0.72,
+    'dynslam2d.viz.collect._removed_points': 0.12,
 }

@@ -1,4 +1,4 @@
-"""The association's assignment as one kernel call per scan (``Tracker._associate``, detect/tracker.py): the gated cost
+"""The association's assignment as one kernel call per scan (``Tracker._associate_update``): the gated cost
 matrix, the established tracks' assignment, then the tentative tracks' on the detections left, each pair kept only
 where the gates allow it.
 
@@ -18,7 +18,16 @@ import sys
 
 import numpy as np
 
-from dynslam2d.detect.kernels_update import association_gates
+from dynslam2d.detect.kernels_update import (
+    UP_BIG,
+    UP_MERGE_JUMP,
+    UP_S_MAX,
+    UP_S_STOP,
+    association_gates,
+    manage_scan,
+    row_tables,
+    update_pairs,
+)
 from dynslam2d.jitbox import njit  # numba's njit, arrays returned without a per-array unpickle
 
 #: status codes of :func:`lsap` / :func:`assign_groups` (SciPy raises ValueError with these messages)
@@ -226,7 +235,7 @@ def assign_groups(ok: np.ndarray, d2: np.ndarray, firm: np.ndarray, big: float) 
 @njit(cache=True, inline="always")
 def veto_merged(ok: np.ndarray, tsize: np.ndarray, det_ext: np.ndarray, rows: np.ndarray, vrows: np.ndarray,
                 ms: np.ndarray, MEV: np.ndarray, WN: np.ndarray, stop: float, jump: float, smax: float) -> np.ndarray:
-    """The veto of detections merged with structure (``Tracker._associate``; inlined in :func:`associate_scan`):
+    """The veto of detections merged with structure (``Tracker._associate_update``; inlined in :func:`associate_scan`):
     ``ok`` ((n, m) bool, the gates) written False where a live track ``vrows[r]`` (indices of the tracks in M or
     merged, in their order) would take a candidate detection (``ms``: each detection's fraction of points on
     long-occupied map cells, ≥ ``stop``) whose longer side ``det_ext`` exceeds the track's larger size ``tsize`` by
@@ -320,3 +329,54 @@ def associate_scan(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, CI: np.ndarr
     vetoed = veto_merged(ok, tsize, det_ext, rows, vrows, ms, MEV, WN, stop, jump, smax)
     status, ii, jj = assign_groups(ok, d2, firm, big)
     return status, ii, jj, missed, vetoed
+
+
+@njit(cache=True)
+def associate_update(F: np.ndarray, Fi: np.ndarray, Gi: np.ndarray, rows: np.ndarray, Z: np.ndarray, R: np.ndarray,
+                     kind: np.ndarray, theta: np.ndarray, lohi: np.ndarray, rel: np.ndarray, centroid: np.ndarray,
+                     circle: np.ndarray, px: np.ndarray, py: np.ndarray, start: np.ndarray, npts: np.ndarray,
+                     q: np.ndarray, claimed: np.ndarray, vrows: np.ndarray, ms: np.ndarray, RIDE: np.ndarray,
+                     bound: bool, lim: float, lim2: float, mfr: np.ndarray, kept: np.ndarray, first: np.ndarray,
+                     second: np.ndarray, mnpts: np.ndarray, use_map: bool, lx: float, ly: float, c: float, s: float,
+                     t: float) -> tuple:
+    """``Tracker._associate_update`` in one call: :func:`associate_scan` (its arguments by the same names), then,
+    when it found pairs and its status is ``LSAP_OK``, :func:`dynslam2d.detect.kernels_update.update_pairs` on them
+    (the pairs' track indices ``ii`` as its ``sel``, their detection indices ``jj`` as its ``dis``, the association's
+    ``missed`` flags; ``X``, ``P``, ``CL``, ``RIDE``, ``bound`` … ``mnpts``, ``use_map``, the laser pose ``lx``,
+    ``ly``, ``c``, ``s`` (m, map frame; cos and sin of its heading) and the stamp ``t`` (s) as that kernel's), the
+    same two functions in the same order on the same arrays as the two calls they replace (nothing in Python between
+    them fed the update: the same floats). Returns (status, ii, jj, vetoed, bounded rows, the longest riding window
+    after the push, ``info``, rejected pairs): :func:`associate_scan`'s first three and its vetoed tracks, then
+    ``update_pairs``' four (0, 0, an empty (0, 4) ``info`` and 0 when no update ran). One dispatch and one unboxing
+    of the ≈ 20 arrays both take instead of two, and no boxing of the pairs' arrays for the second call
+    (docs/speed.md, pass trk108).
+
+    Both kernels' predicted states ``Xs`` / ``Ps`` (the live tracks' rows, ``X[rows]``, ``P[rows]``: the prediction
+    wrote them there, and nothing writes those rows before the association) are gathered here, and the merge veto's
+    ``stop``, ``jump``, ``smax`` and the assignment's ``big`` read from ``q`` (columns ``UP_S_STOP`` …
+    ``UP_BIG``, :func:`~dynslam2d.detect.kernels_update.update_params`): two arrays and four floats fewer to type
+    and unbox a call (pass trk129). The tracker's row tables ``G``, ``X``, ``P``, ``CL``, ``MEV`` come as views of
+    its float64 buffer ``F``, ``CI`` and ``WN`` of its int64 buffer ``Fi`` (:func:`~dynslam2d.detect.kernels_update.
+    row_tables`, with ``Gi``'s row count): two arguments instead of seven (pass trk129).
+
+    Then, with status ``LSAP_OK``, :func:`dynslam2d.detect.kernels_update.manage_scan` on the same ``rows`` at ``t``
+    (``TrackManage._manage``'s counter tests, σ, speeds and bits of the live tracks: it reads only the state, counter
+    and window rows, which nothing in Python writes between the update and the management; pass trk117): returned
+    last as ``man`` (its four arrays), or empty arrays when the association failed (the caller raises)."""
+    X, P, G, CL, MEV, CI, WN = row_tables(F, Fi, Gi.shape[0])
+    Xs = X[rows]
+    Ps = P[rows]
+    status, ii, jj, missed, vetoed = associate_scan(G, Gi, rows, CI, Xs, Ps, Z, R, kind, theta, lohi, rel, centroid,
+                                                    circle, px, py, start, npts, q, claimed, vrows, ms, MEV, WN,
+                                                    q[UP_S_STOP], q[UP_MERGE_JUMP], q[UP_S_MAX], q[UP_BIG])
+    if status != LSAP_OK:
+        man0 = (np.empty(0, dtype=np.int8), np.empty(0), np.empty(0), np.empty(0, dtype=np.int64))
+        return status, ii, jj, vetoed, 0, 0, np.empty((0, 4), dtype=np.int64), 0, man0
+    nb, top, nrej = 0, 0, 0
+    info = np.empty((0, 4), dtype=np.int64)
+    if ii.shape[0]:
+        nb, top, info, nrej = update_pairs(G, Gi, X, P, Xs, Ps, ii, rows, jj, missed, kind, theta, lohi, rel,
+                                           centroid, circle, px, py, start, npts, q, bound, CI, CL, lim, lim2, mfr,
+                                           kept, first, second, mnpts, MEV, RIDE, WN, use_map, lx, ly, c, s, t)
+    man = manage_scan(P, X, CI, CL, WN, MEV, rows, q, t)
+    return status, ii, jj, vetoed, nb, top, info, nrej, man

@@ -30,6 +30,7 @@ from dynslam2d.detect.kernels import (
     GI_KIND,
     GI_KNOWN0,
     GI_KNOWN1,
+    N_G,
     accel_candidates,
     association_rows,
     box_row,
@@ -417,7 +418,12 @@ UP_S_EXIT = _N_PARAMS + 20  # TrackerConfig.map_structure_exit (manage_scan)
 UP_SUSTAIN = _N_PARAMS + 21  # TrackerConfig.sustain_updates (an integer; manage_scan)
 UP_RETIRE_N = _N_PARAMS + 22  # TrackerConfig.structure_retire_updates (an integer, 0 for None; manage_scan)
 UP_RETIRE_S = _N_PARAMS + 23  # TrackerConfig.structure_retire_fraction (manage_scan)
-_UP_N = _N_PARAMS + 24
+UP_S_STOP = _N_PARAMS + 24  # TrackerConfig.map_structure_stop (the association's merge veto, veto_merged)
+UP_MERGE_JUMP = _N_PARAMS + 25  # TrackerConfig.merge_size_jump, m (veto_merged)
+UP_S_MAX = _N_PARAMS + 26  # TrackerConfig.map_structure_max (veto_merged)
+UP_BIG = _N_PARAMS + 27  # the assignment's cost outside the gates (_BIG; assign_groups)
+_UP_N = _N_PARAMS + 28
+_BIG = 1e12  # the association's cost of a pair outside the gates (assign_groups; the tracker's, tracktable)
 
 # the columns of the tracker's counter table (``Tracker._CI``, int64, one row per state row; docs/speed.md pass cnt36)
 C_STATE = 0  # the track's state: ST_TENTATIVE, ST_CONFIRMED or ST_COASTING
@@ -427,6 +433,27 @@ C_HIST_N = 3  # updates (hits and misses) among its first confirm_window scans (
 C_HIST_HITS = 4  # hits among them
 C_UPD = 5  # 1: updated in this scan (written by update_pairs, read and cleared by manage_counters)
 N_C = 6
+
+
+@njit(cache=True, inline="always")
+def row_tables(F: np.ndarray, Fi: np.ndarray, n: int) -> tuple:
+    """The tracker's row tables for ``n`` rows as C-contiguous views of its two flat buffers (``TrackRows._F``,
+    ``_Fi``; pass trk129): from the float64 ``F`` the states ``X`` (n, 4) (m, m/s, map frame), covariances ``P``
+    (n, 4, 4), shape rows ``G`` (n, N_G), last hits' stamps ``CL`` (n,) (s) and map-evidence windows ``MEV``
+    (n, nsus, 3), one after the other; from the int64 ``Fi`` the counters ``CI`` (n, N_C) and window counts ``WN``
+    (n, 3). nsus (sustain_updates) follows from ``F``'s length. The same function makes the tracker's views
+    (its ``py_func``, NumPy's slices and reshapes) and a kernel's (numba's): one layout, and one array argument
+    for each buffer instead of seven (numba's dispatcher types and unboxes each array argument)."""
+    a = 4 * n
+    b = a + 16 * n
+    c = b + N_G * n
+    d = c + n
+    nsus = (F.shape[0] - d) // (3 * n)
+    e = N_C * n
+    return (F[:a].reshape((n, 4)), F[a:b].reshape((n, 4, 4)), F[b:c].reshape((n, N_G)), F[c:d],
+            F[d:].reshape((n, nsus, 3)), Fi[:e].reshape((n, N_C)), Fi[e:].reshape((n, 3)))
+
+
 ST_TENTATIVE = 0
 ST_CONFIRMED = 1
 ST_COASTING = 2
@@ -452,7 +479,9 @@ def update_params(fit_p: np.ndarray, fc, tc, size_sigma: float = 0.05) -> np.nda
     measurements' size σ (m). One array argument instead of twelve (update_pairs) and five (association_gates): the
     fit parameters and scalars converted in Python and typed and unboxed by numba's dispatcher on every call
     (docs/speed.md, pass call35). The values are the same floats the scalars were (``float(x)``;
-    ``ride_max_range²`` computed as before, in Python)."""
+    ``ride_max_range²`` computed as before, in Python). The association's four constants (the merge veto's
+    ``map_structure_stop``, ``merge_size_jump``, ``map_structure_max`` and the assignment's cost ``big`` outside the
+    gates) too: ``kernels_assign.associate_update`` reads them from here (pass trk129)."""
     q = np.empty(_UP_N)
     q[:_N_PARAMS] = fit_p
     q[UP_SIZE_SIGMA] = size_sigma
@@ -479,6 +508,10 @@ def update_params(fit_p: np.ndarray, fc, tc, size_sigma: float = 0.05) -> np.nda
     q[UP_SUSTAIN] = int(tc.sustain_updates)
     q[UP_RETIRE_N] = int(tc.structure_retire_updates or 0)
     q[UP_RETIRE_S] = float(tc.structure_retire_fraction)
+    q[UP_S_STOP] = float(tc.map_structure_stop)
+    q[UP_MERGE_JUMP] = float(tc.merge_size_jump)
+    q[UP_S_MAX] = float(tc.map_structure_max)
+    q[UP_BIG] = _BIG
     return q
 
 

@@ -58,14 +58,11 @@ import numpy as np
 from dynslam2d.detect.config import DetectConfig
 from dynslam2d.detect.freespace import FreeSpaceMemory
 from dynslam2d.detect.kernels import (
-    N_G,
-    N_GI,
     cv_predict,
     fit_params,
 )
-from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, associate_scan
+from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, associate_update
 from dynslam2d.detect.kernels_update import (
-    N_C,
     birth_rows,
     fragment_hosts_rows,
     update_params,
@@ -86,7 +83,6 @@ from dynslam2d.detect.trackdetect import TrackDetect
 from dynslam2d.detect.trackmanage import TrackManage
 from dynslam2d.detect.trackreport import TrackReport, TrackReports
 from dynslam2d.detect.tracktable import (  # noqa: F401  (_Track, _new_track, … : the names tests import from here)
-    _BIG,
     _HALF_PI,
     _NO_BEAMS,
     _NO_IDX,
@@ -106,7 +102,7 @@ from dynslam2d.detect.trackupdate import TrackUpdate, _nearest_age  # noqa: F401
 from dynslam2d.types import Pose2D, Scan, wrap_angle
 
 _NO_MEV = np.zeros((0, 3))  # (Tracker._births' map evidence without a map: never read)
-# (associate_scan's arguments without a claimed detection / a track to veto: shared, never written)
+# (associate_update's arguments without a claimed detection / a track to veto: shared, never written)
 _NO_CLAIM = np.zeros(0, dtype=np.bool_)
 _NO_ROWS = np.zeros(0, dtype=np.int64)
 _NO_MS = np.zeros(0)
@@ -190,19 +186,15 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # them at once, the reports copy them in one go); each _Track keeps its row for life (k.row; rows of
         # deleted tracks are reused by births) and its x / P are views of that row (re-pointed only when the
         # arrays grow, by doubling)
-        self._X = np.zeros((_ROWS0, 4))
-        self._P = np.zeros((_ROWS0, 4, 4))
+        # (_X (rows, 4), _P (rows, 4, 4))
         # … and their shape state (the same rows; columns G_* / GI_* of detect/kernels.py): the association, the shape
-        # update and the reports read and write it for all tracks in one kernel call or gather each
-        self._G = np.zeros((_ROWS0, N_G))
-        self._Gi = np.zeros((_ROWS0, N_GI), dtype=np.int8)
+        # update and the reports read and write it for all tracks in one kernel call or gather each (_G, _Gi)
         # … and their counters (state code, hits, misses, the M-of-N counts; columns C_* of detect/kernels_update.py)
         # and last hits' stamps (s): the update kernel writes them for the updated tracks, the management step tests
-        # and writes them as columns (docs/speed.md, pass cnt36)
-        self._CI = np.zeros((_ROWS0, N_C), dtype=np.int64)
-        self._CL = np.zeros(_ROWS0)
-        # … and their windows of the last updates (map evidence, riding test: TrackRows, docs/speed.md pass trk26)
-        self._init_windows(_ROWS0, self.config.tracker.sustain_updates)
+        # and writes them as columns (docs/speed.md, pass cnt36; _CI, _CL)
+        # … and their windows of the last updates (map evidence, riding test: TrackRows, docs/speed.md pass trk26;
+        # _MEV, _RIDE, _WN); all but _Gi and _RIDE views of two flat buffers (TrackRows._alloc_tables, pass trk129)
+        self._init_rows(_ROWS0, self.config.tracker.sustain_updates)
         self._rows_used = 0  # rows 0 … _rows_used − 1 have been handed out
         # the prediction's F and Q (_cv_fill writes this step's entries into them; read only by the kernel and the
         # rare paths of _predict, never kept beyond the scan)
@@ -237,13 +229,9 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # merge's kept detections, pairs and point counts (empty: no merge; kernels.shape_update)
         self._mev_src: tuple = (np.zeros((3, 0)), _NO_IDX, _NO_IDX, _NO_IDX, _NO_IDX)
         self._default: MeasureRows | None = None  # default measurements of the current scan's detections
-        self._stacked: tuple[np.ndarray, np.ndarray] | None = None  # predicted X, P of all tracks
-        self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate)
+        self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate_update)
         # this scan's ids of the updated tracks and indices of the detections they took (update, _update_tracks)
         self._upd_sets: tuple[set[int], set[int]] = (set(), set())
-        # the last association's pairs (the list it returned) with their track and detection index arrays (int64) and
-        # the live tracks' "missed their last scan" flags (bool)
-        self._pair_arrays: tuple[list, np.ndarray, np.ndarray, np.ndarray] | None = None
         # clutter retirement (structure_retire_updates): confirmed still tracks on map structure, out of the
         # Kalman tracking but kept (and reported) while their object is seen, so that a parked mover keeps
         # its id and standing history until it leaves (_clutter_detections)
@@ -334,14 +322,12 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._merged = set()
         if not dets and not scan.valid_view().any():  # (the scan's own mask: only read)
             st.empty_scans += 1
-        pairs = self._associate(dets)
         # (the ids of the updated tracks and the detections they took: filled by _update_tracks in its loop over the
         # pairs, in the pairs' order)
         updated: set[int] = set()
         used: set[int] = set()
         self._upd_sets = (updated, used)
-        if pairs:
-            st.rejected_updates += self._update_pairs(pairs, dets, t)
+        st.rejected_updates += self._associate_update(dets, t)
         self._manage(t, updated)
         unused = [di for di in range(len(dets)) if di not in used]
         if (self._map is not None and self.config.tracker.structure_birth_min <= 1.0) or self._dormant or \
@@ -418,7 +404,6 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         return d / dt > tc.max_pose_speed or r / dt > tc.max_pose_rate
 
     def _predict(self, dt: float) -> None:
-        self._stacked = None
         if not self._tracks or dt <= 0.0:
             return
         F, Q = self._FQ  # (the tracker's own two arrays, their dt entries written for this step)
@@ -435,11 +420,12 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
                 still = [(i, self._stationary_prediction(tracks[i], F, dt)) for i in rem if tracks[i].misses > 0]
             else:
                 self._maybe_remembered = False
+        # (the predicted rows are read from the state arrays by the association's kernel: its stacked copies are not
+        # kept; pass trk129)
         if order.shape[0] >= 2:
             # numpy's products bit for bit, the rows written in the kernel (the tracks' x / P are views of them)
-            X, P = cv_predict(self._X, self._P, order, F, Q)
+            cv_predict(self._X, self._P, order, F, Q)
             for i, (x, p) in still:
-                X[i], P[i] = x, p
                 self._X[order[i]], self._P[order[i]] = x, p
         else:  # (one track: numpy's matrix-vector product, whose sums the kernel does not reproduce)
             X = self._X[order] @ F.T
@@ -448,7 +434,6 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
                 X[i], P[i] = x, p
             self._X[order] = X
             self._P[order] = P
-        self._stacked = (X, P)
 
     def _stationary_prediction(self, k: _Track, F: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Prediction of a remembered (stopped) track that is not detected, with a stationary motion model
@@ -476,15 +461,19 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         memo[id(self)] = new
         for name, value in self.__dict__.items():
             setattr(new, name, copy.deepcopy(value, memo))
+        new._table_views()  # (the tables as views of the copy's own buffers again)
         new._repoint()
-        new._stacked = None
         return new
 
 
-    def _associate(self, dets: list[Detection]) -> list[tuple[int, int]]:
+    def _associate_update(self, dets: list[Detection], t: float) -> int:
+        """The association of the scan's detections ``dets`` to the live tracks and the update of the pairs found
+        (their Kalman and shape updates, then :meth:`_updated_pairs`), at the scan's stamp ``t`` (s); returns how
+        many pairs' updates did not apply. Both kernels run in one call (``kernels_assign.associate_update``, pass
+        trk108)."""
+        self._managed = None  # (the management kernel's outputs when this call ran it: _manage reads them)
         if not self._tracks or not dets:
-            return []
-        Xs, Ps = self._stack()
+            return 0
         # One kernel call (kernels_assign.associate_scan, docs/speed.md pass trk75): the gates (association_gates: the
         # tracks' sizes, flags and axis angles from their shape rows; the Mahalanobis gate and distance gate, a
         # rectangle measured again with the track's own sizes (a side the detection "measured" too short, e.g. a
@@ -505,7 +494,6 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # place of a detection on structure that got no track, keeps its object's detections on structure
         # (_clutter_detections): no live track takes them, as the clutter track would have kept them before it was
         # retired (or without the rule, born on them).
-        tc = self.config.tracker
         claimed, vrows, ms = _NO_CLAIM, _NO_ROWS, _NO_MS
         if self._map is not None:
             if self._dormant or self._marks.shape[0]:
@@ -515,23 +503,36 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
                 vrows = np.array(rows, dtype=np.int64)
                 ev = self._ms_ev if dets is self.last_detections else None
                 ms = ev[0] if ev is not None else np.array(self._structure_column(dets), dtype=np.float64)
+        #
+        # Then, in the same call (pass trk108: nothing in Python between the two fed the update), the update of the
+        # pairs found (kernels_update.update_pairs): the track priors of the measurements (each track's sizes /
+        # radius), the measurements (size σ 0.05 m), the Kalman updates, the physical acceleration bound (once a
+        # track's velocity is established — ``accel_bound_after`` updates — one update may change it by at most
+        # ``max_accel``·dt: speeds no longer jump from scan to scan with the shape of a partial view or a leg
+        # swinging; the exact test with Python's math.hypot bit for bit, detect/kernels_update.py), the new states
+        # and covariances written into the tracks' rows where applied (the kernel updates copies of the stacked rows:
+        # the prior Xs / Ps stays as it is), then the shapes and, in the same loop, the riding and map-evidence
+        # windows of the updated tracks from their new rows, and the windows of the re-acquired tracks (those that
+        # missed scans) restarted to this push's entries (passes trk24, trk26, upd34). The configuration's values go
+        # as one array built with the tracker (``_upd_p``, kernels_update.update_params; pass call35). The
+        # bookkeeping per track follows in Python (_updated_pairs, _update_tracks).
         dm = self._default
-        status, ii, jj, missed_a, vetoed = associate_scan(
-            self._G, self._Gi, self._rows(), self._CI, Xs, Ps, dm.z, dm.R, *self._batch, self._upd_p, claimed, vrows,
-            ms, self._MEV, self._WN, float(tc.map_structure_stop), float(tc.merge_size_jump),
-            float(tc.map_structure_max), _BIG)
+        bound, lim, lim2 = self._accel_limits()
+        p = self._pose
+        c, s = self._pose_cs
+        status, ii, jj, vetoed, nb, top, info, nrej, self._managed = associate_update(
+            self._F, self._Fi, self._Gi, self._rows(), dm.z, dm.R, *self._batch, self._upd_p, claimed, vrows, ms,
+            self._RIDE, bound, lim, lim2, *self._mev_src, self._map is not None, float(p.x), float(p.y), c, s, t)
         if status:
             raise ValueError(LSAP_MESSAGES[status])  # (SciPy's error for such a cost matrix)
         if vetoed.shape[0]:
             tracks, add = self._tracks, self._merged.add
             for i in vetoed.tolist():
                 add(tracks[i].id)
-        pairs = list(zip(ii.tolist(), jj.tolist()))
-        # (the pairs as index arrays too, and the tracks' missed flags, for _update_pairs: kept with the list they
-        # belong to)
-        if pairs:
-            self._pair_arrays = (pairs, ii, jj, missed_a)
-        return pairs
+        if not ii.shape[0]:
+            return 0
+        self._updated_pairs(list(zip(ii.tolist(), jj.tolist())), dets, t, nb, top, info)
+        return nrej
 
     def _birth(self, det: Detection, t: float, j: int) -> None:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""

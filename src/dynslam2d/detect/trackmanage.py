@@ -134,7 +134,11 @@ class TrackManage:
         # (and, in the same call, three values the loop below tested per track in Python, as bits of ``auxs``: the
         # structure exit's window mean, clutter retirement's window minimum and the slow reason's text index:
         # manage_scan, pass upd91)
-        codes, sigs, speeds, auxs = manage_scan(self._P, self._X, self._CI, self._CL, WN, MEV, order, self._upd_p, t)
+        # (made by the association's call when it ran, on the same rows at the same t: nothing in Python between
+        # writes the rows it reads; pass trk117)
+        man, self._managed = self._managed, None
+        codes, sigs, speeds, auxs = man if man is not None else \
+            manage_scan(self._P, self._X, self._CI, self._CL, WN, MEV, order, self._upd_p, t)
         codes, sigs, speeds, auxs = codes.tolist(), sigs.tolist(), speeds.tolist(), auxs.tolist()
         fast_reasons = self._fast_reasons
         if len(fast_reasons) != nsus:
@@ -278,6 +282,10 @@ class TrackManage:
     # (the updated confirmed tracks the last _manage kept, in their order, and the number of tracks it kept: the
     # candidate hosts of fragments, Tracker._hosts_of_fragments)
     _firm_updated: tuple[list[_Track], int] = ([], 0)
+
+    # (manage_scan's four outputs for this scan's live tracks when Tracker._associate_update's kernel made them, else
+    # None: _manage calls it)
+    _managed: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     # (_fast_reason_texts(sustain_updates): the tracker's own from its first _manage on)
     _fast_reasons: tuple[str, ...] = ()

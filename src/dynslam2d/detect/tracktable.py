@@ -37,13 +37,15 @@ from dynslam2d.detect.kernels_update import (
     ST_COASTING,
     ST_CONFIRMED,
     ST_TENTATIVE,
+    row_tables,
 )
 from dynslam2d.detect.layout import KIND_CODES, KIND_NAMES
 from dynslam2d.detect.measure import Detection, ScanDetection
 
+# (row_tables' Python function: the tracker's views of its row buffers, made by NumPy)
+_row_views = row_tables.py_func
 _HALF_PI = 0.5 * math.pi
 _TWO_PI = 2.0 * math.pi
-_BIG = 1e12
 
 TENTATIVE = "tentative"
 CONFIRMED = "confirmed"
@@ -328,13 +330,33 @@ class TrackRows:
     * ``_RIDE`` (rows, R, 5): the riding test's window (laser-frame x, y, map-frame x, y of the centre (m), stamp (s))
       per update of the last ride_time s (at least sustain_updates of them); R doubles when a window could outgrow it;
     * ``_WN`` (rows, 3) int64: per row the entries of ``_MEV``, the entries of ``_RIDE``, and the riding pre-test of
-      the window's last push (one array: one kernel argument)."""
+      the window's last push (one array: one kernel argument).
 
-    def _init_windows(self, rows: int, nsus: int) -> None:
-        """The window arrays for ``rows`` rows and windows of ``nsus`` (sustain_updates) updates, all empty."""
-        self._MEV = np.zeros((rows, nsus, 3))
+    ``_X``, ``_P``, ``_G``, ``_CL``, ``_MEV`` are views of one float64 buffer ``_F``, ``_CI`` and ``_WN`` of one
+    int64 buffer ``_Fi`` (``kernels_update.row_tables``' layout, pass trk129): the association's kernel takes the
+    two buffers. Whatever replaces one of these tables must replace the buffers (:meth:`_alloc_tables`)."""
+
+    def _init_rows(self, rows: int, nsus: int) -> None:
+        """The row tables for ``rows`` rows and windows of ``nsus`` (sustain_updates) updates, all zero (the windows
+        empty): the shape flags ``_Gi`` and riding windows ``_RIDE`` as arrays of their own, the rest in the two flat
+        buffers (:meth:`_alloc_tables`)."""
+        self._Gi = np.zeros((rows, N_GI), dtype=np.int8)
         self._RIDE = np.zeros((rows, max(_RIDE0, nsus + 1), 5))
-        self._WN = np.zeros((rows, 3), dtype=np.int64)
+        self._alloc_tables(rows, nsus)
+
+    def _alloc_tables(self, rows: int, nsus: int) -> None:
+        """New zero buffers ``_F`` (float64) and ``_Fi`` (int64) for ``rows`` rows and ``nsus`` map-evidence entries,
+        and the tables ``_X``, ``_P``, ``_G``, ``_CL``, ``_MEV``, ``_CI``, ``_WN`` as their views (``row_tables``'
+        layout: the association's kernel takes the two buffers instead of the seven tables; pass trk129)."""
+        self._F = np.zeros(rows * (20 + N_G + 1 + 3 * nsus))
+        self._Fi = np.zeros(rows * (N_C + 3), dtype=np.int64)
+        self._table_views()
+
+    def _table_views(self) -> None:
+        """``_X`` … ``_WN`` made again as views of ``_F`` and ``_Fi`` (after a copy of the tracker, whose arrays
+        a deep copy makes separately)."""
+        self._X, self._P, self._G, self._CL, self._MEV, self._CI, self._WN = \
+            _row_views(self._F, self._Fi, self._Gi.shape[0])
 
     def _mev(self, k: _Track) -> np.ndarray:
         """(n, 3) map evidence of the live track ``k``'s last n ≤ sustain_updates updates, oldest first (a view)."""
@@ -386,13 +408,6 @@ class TrackRows:
         new[:, :R.shape[1]] = R
         self._RIDE = new
 
-    def _stack(self) -> tuple[np.ndarray, np.ndarray]:
-        """(n, 4) states and (n, 4, 4) covariances of the live tracks (from the prediction when it ran)."""
-        if self._stacked is None:
-            order = self._rows()
-            self._stacked = (self._X.take(order, axis=0), self._P.take(order, axis=0))  # (X[order]'s values)
-        return self._stacked
-
     def report_states(self) -> tuple[np.ndarray, np.ndarray]:
         """``(X, rows)``: the tracker's Kalman state array ``X`` (m, 4) — [x, y, vx, vy] in the map frame, m and
         m/s — and the int64 row of each live track in the order of the last :meth:`update`'s live reports, so that
@@ -413,26 +428,17 @@ class TrackRows:
             return self._free_rows.pop()
         row = self._rows_used
         self._rows_used += 1
-        if row == self._X.shape[0]:
-            X = np.zeros((2 * row, 4))
-            P2 = np.zeros((2 * row, 4, 4))
-            X[:row] = self._X[:row]
-            P2[:row] = self._P[:row]
-            G = np.zeros((2 * row, N_G))
-            Gi = np.zeros((2 * row, N_GI), dtype=np.int8)
-            G[:row] = self._G[:row]
-            Gi[:row] = self._Gi[:row]
-            CI = np.zeros((2 * row, N_C), dtype=np.int64)
-            CL = np.zeros(2 * row)
-            CI[:row] = self._CI[:row]
-            CL[:row] = self._CL[:row]
-            self._X, self._P, self._G, self._Gi, self._CI, self._CL = X, P2, G, Gi, CI, CL
-            self._repoint()
-            for name in ("_MEV", "_RIDE", "_WN"):  # (the windows' rows, likewise)
+        if row == self._Gi.shape[0]:
+            old = (self._X, self._P, self._G, self._CL, self._MEV, self._CI, self._WN)
+            for name in ("_Gi", "_RIDE"):  # (the arrays of their own)
                 a = getattr(self, name)
                 b = np.zeros((2 * row,) + a.shape[1:], dtype=a.dtype)
                 b[:row] = a[:row]
                 setattr(self, name, b)
+            self._alloc_tables(2 * row, self._MEV.shape[1])
+            for a, b in zip(old, (self._X, self._P, self._G, self._CL, self._MEV, self._CI, self._WN)):
+                b[:row] = a[:row]
+            self._repoint()
         return row
 
     def _add_row(self, k: _Track, x, P: np.ndarray | None) -> None:

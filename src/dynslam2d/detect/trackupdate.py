@@ -7,12 +7,10 @@ from __future__ import annotations
 
 import bisect
 import math
-from itertools import chain as _chain
 
 import numpy as np
 
 from dynslam2d.detect.kernels import G_SIZE0
-from dynslam2d.detect.kernels_update import C_MISSES, update_pairs
 from dynslam2d.detect.measure import Detection, ScanDetection
 from dynslam2d.detect.tracktable import _HALF_PI, _PAST_COMPACT, TENTATIVE, _past_points, _Track
 
@@ -46,56 +44,31 @@ def _nearest_age(stamps: list[float], n: int, t: float, a: float, bisect_left=bi
 
 
 class TrackUpdate:
-    """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: the update step (``_update_pairs``, ``_update_tracks``)."""
+    """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: the update step (``_updated_pairs``, ``_update_tracks``;
+    its kernel, ``update_pairs``, runs in the association's call: ``Tracker._associate_update``)."""
 
-    def _update_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float) -> int:
-        """Kalman and shape updates of the associated (track, detection) pairs; returns how many did not apply.
-
-        The track priors of the measurements (each track's sizes / radius), the measurements, the Kalman updates and
-        the shape updates run as one kernel call on the tracks' rows (:func:`dynslam2d.detect.kernels_update.
-        update_pairs`); the bookkeeping stays per track (:meth:`_update_tracks`)."""
-        npair = len(pairs)
-        pa = self._pair_arrays
-        if pa is not None and pa[0] is pairs:  # (the association's index arrays of these pairs, its missed flags)
-            sel, dis, missed = pa[1], pa[2], pa[3]
-        else:
-            sel = np.fromiter(_chain.from_iterable(pairs), np.int64, 2 * npair).reshape(npair, 2)
-            dis = sel[:, 1].copy()
-            sel = sel[:, 0].copy()
-            missed = self._CI[self._rows(), C_MISSES] > 0
-        self._pair_arrays = None
-        Xs, Ps = self._stack()
-        # the track priors of the measurements (each track's sizes / radius), the measurements (size σ 0.05 m), the
-        # Kalman updates, the physical acceleration bound (once a track's velocity is established —
-        # ``accel_bound_after`` updates — one update may change it by at most ``max_accel``·dt: speeds no longer jump
-        # from scan to scan with the shape of a partial view or a leg swinging; the exact test with Python's
-        # math.hypot bit for bit, detect/kernels_update.py), the new states and covariances written into the
-        # tracks' rows where applied (the kernel updates copies of the stacked rows sel: the prior Xs / Ps stays as
-        # it is), then the shapes and, in the same loop, the riding and map-evidence windows of the updated tracks
-        # from their new rows, and the windows of the re-acquired tracks (those that ``missed`` scans) restarted to
-        # this push's entries: one kernel call (docs/speed.md, passes trk24, trk26, upd34). The configuration's
-        # values go as one array built with the tracker (``_upd_p``, kernels_update.update_params), the pairs'
-        # state rows are gathered in the kernel (``_rows()[sel]``): fewer arguments to type and unbox (pass call35)
+    def _accel_limits(self) -> tuple[bool, float, float]:
+        """The physical acceleration bound of this scan's updates (``update_pairs``' ``bound``, ``lim``, ``lim2``):
+        whether it applies (``max_accel`` set and the scan's dt > 0), the largest change of a velocity in one update,
+        ``max_accel``·dt (m/s), and (0.999·lim)² ((m/s)²); (False, 0, 0) without it."""
         tc = self.config.tracker
         if tc.max_accel is not None and self._dt > 0.0:
-            bound = True
             lim = tc.max_accel * self._dt
-            lim2 = (0.999 * lim) ** 2
-        else:
-            bound, lim, lim2 = False, 0.0, 0.0
-        p = self._pose
-        c, s = self._pose_cs
-        nb, top, info, nrej = update_pairs(
-            self._G, self._Gi, self._X, self._P, Xs, Ps, sel, self._rows(), dis, missed, *self._batch, self._upd_p,
-            bound, self._CI, self._CL, float(lim), lim2, *self._mev_src, self._MEV, self._RIDE, self._WN,
-            self._map is not None, float(p.x), float(p.y), c, s, t)
+            return True, float(lim), (0.999 * lim) ** 2
+        return False, 0.0, 0.0
+
+    def _updated_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float, nb: int, top: int,
+                       info: np.ndarray) -> None:
+        """After ``update_pairs`` (``Tracker._associate_update``'s call) ran on ``pairs`` at the scan's stamp ``t``
+        (s): its count ``nb`` of bounded rows into the stats, the stacked states dropped (the tracks changed), the
+        riding window grown when its longest row ``top`` filled it, then the per-track bookkeeping
+        (:meth:`_update_tracks`) from its ``info`` rows."""
         if nb:
             self.stats.accel_bounded += nb
         self._stacked = None  # the tracks changed
         if top >= self._RIDE.shape[1]:  # (the next push could overflow a full window)
             self._grow_ride()
         self._update_tracks(pairs, dets, t, info.tolist())
-        return nrej
 
     def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[ScanDetection], t: float,
                        info: list[list[int]]) -> None:
