@@ -60,12 +60,10 @@ class TrackUpdate:
     def _updated_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float, nb: int, top: int,
                        info: np.ndarray) -> None:
         """After ``update_pairs`` (``Tracker._associate_update``'s call) ran on ``pairs`` at the scan's stamp ``t``
-        (s): its count ``nb`` of bounded rows into the stats, the stacked states dropped (the tracks changed), the
-        riding window grown when its longest row ``top`` filled it, then the per-track bookkeeping
-        (:meth:`_update_tracks`) from its ``info`` rows."""
+        (s): its count ``nb`` of bounded rows into the stats, the riding window grown when its longest row ``top``
+        filled it, then the per-track bookkeeping (:meth:`_update_tracks`) from its ``info`` rows."""
         if nb:
             self.stats.accel_bounded += nb
-        self._stacked = None  # the tracks changed
         if top >= self._RIDE.shape[1]:  # (the next push could overflow a full window)
             self._grow_ride()
         self._update_tracks(pairs, dets, t, info.tolist())
