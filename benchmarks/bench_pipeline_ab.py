@@ -52,6 +52,19 @@ from kernelwarm import kernel_cache_calls  # noqa: E402 - kernels loaded or comp
 WARMUP = 60
 
 
+def load_scans(data: Path, name: str) -> list:
+    """The scans of input ``name``: ``ten-movers`` (benchmarks/scenes.py, 30 s, the scene furthest from the per-scan
+    target), a ``bench_digest`` input (recorded files under ``data``) or another built-in scene (``sim:NAME``)."""
+    from dynslam2d.inputs import open_source
+
+    if name == "ten-movers":
+        from scenes import ten_movers
+
+        return list(ten_movers(30.0).scans)
+    rel, topic = INPUTS.get(name, (name, None))  # any other built-in scene by its name (sim:paper: README command 1)
+    return list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+
+
 def worker(data: Path, name: str, preload: bool = True) -> None:
     """Serve ``go`` lines on stdin: process the next scan, answer one JSON line (CPU ms, stage ms, updated); without
     ``preload`` the warm-up loads nothing it did not reach (the warm-up before pass neg71)."""
@@ -60,13 +73,11 @@ def worker(data: Path, name: str, preload: bool = True) -> None:
 
     import dynslam2d.memtrim as mt
     import dynslam2d.pipeline as pl
-    from dynslam2d.inputs import open_source
 
     if hasattr(mt, "map_large_blocks"):  # the allocator setting the command line makes (a checkout without it: none)
         mt.map_large_blocks()
 
-    rel, topic = INPUTS.get(name, (name, None))  # any other built-in scene by its name (sim:paper: README command 1)
-    scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+    scans = load_scans(data, name)
     warm_up(scans, WARMUP, preload=preload)  # (and every kernel numba's cache holds loaded: none is loaded in the run)
     pl.time = types.SimpleNamespace(perf_counter=time.thread_time)  # stage timings in thread CPU time
     pipe = pl.Pipeline()
@@ -155,11 +166,9 @@ def parts(data: Path, name: str) -> None:
     import dynslam2d.pipeline as pl
     import dynslam2d.slam.matcher as mt
     import dynslam2d.slam.processor as pr
-    from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import Pipeline
 
-    rel, topic = INPUTS.get(name, (name, None))  # any other built-in scene by its name (sim:paper: README command 1)
-    scans = list(open_source(rel if rel.startswith("sim:") else str(data / rel), topic))
+    scans = load_scans(data, name)
     warm_up(scans, WARMUP)
     acc: collections.Counter = collections.Counter()
 
@@ -236,7 +245,8 @@ def parts(data: Path, name: str) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("inputs", nargs="+", help=f"{', '.join(sorted(INPUTS))} or another built-in scene (sim:NAME)")
+    ap.add_argument("inputs", nargs="+",
+                    help=f"{', '.join(sorted(INPUTS))}, ten-movers or another built-in scene (sim:NAME)")
     ap.add_argument("--other", type=Path, default=REPO.parent / "main" / "src", help="the other checkout's src/")
     ap.add_argument("--reps", type=int, default=1, help="lockstep runs per input (pooled)")
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
@@ -247,7 +257,7 @@ def main() -> None:
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     for name in args.inputs:
-        if name not in INPUTS and not name.startswith("sim:"):
+        if name not in INPUTS and not name.startswith("sim:") and name != "ten-movers":
             ap.error(f"unknown input {name!r}")
     if args.worker:
         worker(args.data, args.inputs[0], preload=not args.old_warmup)
