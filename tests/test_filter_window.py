@@ -42,8 +42,9 @@ def _both(ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.nd
     _every_beam(ranges, cos_a, sin_a, valid, pc, ps, px, py, c, th, ext[:, 0].copy(), ext[:, 1].copy(), ids, ref,
                 ref_by)
     got, got_by = np.zeros(n, dtype=bool), np.full(n, -1, dtype=np.int64)
-    _windowed_exclusion(ranges, cos_a, sin_a, valid, pc, ps, px, py, c, th, ext, ids, got, got_by)
+    count = _windowed_exclusion(ranges, cos_a, sin_a, valid, pc, ps, px, py, c, th, ext, ids, got, got_by)
     np.testing.assert_array_equal(got, ref)
+    assert count == int(np.count_nonzero(ref))
     np.testing.assert_array_equal(got_by, ref_by)
     return ref, ref_by
 
@@ -94,3 +95,27 @@ def test_windowed_exclusion_without_a_window() -> None:
     removed, _ = _both(ranges, np.cos(angles), np.sin(angles), valid, (0.1, 0.2, 0.3), c, rng.uniform(-3, 3, 6),
                        np.full((6, 2), 1.5), np.arange(6, dtype=np.int64))
     assert removed.any()
+
+
+def test_windowed_exclusion_ties_and_overflowing_distances() -> None:
+    """A beam held by several boxes goes to the nearer centre, the lower index on a tie, whichever box comes first
+    (the held box's distance is computed again, pass mov133); a point whose squared distance overflows to inf is in
+    no box (inf < inf is False), as in the every-beam reference."""
+    n = 360
+    angles = np.linspace(-math.pi, math.pi, n, endpoint=False)
+    ranges = np.full(n, 3.0)
+    ranges[10:20] = 1e200  # (a strip box holds them; their squared distance overflows)
+    valid = np.ones(n, dtype=bool)
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    pose = (0.2, -0.1, 0.4)
+    pc, ps = math.cos(pose[2]), math.sin(pose[2])
+    p = np.column_stack((pc * 3.0 * cos_a - ps * 3.0 * sin_a + pose[0], ps * 3.0 * cos_a + pc * 3.0 * sin_a + pose[1]))
+    c = np.array([p[100] + 0.3, p[100], p[100], p[100] - 0.2, p[200] + 0.1, p[200], [0.0, 0.0]])
+    th = np.zeros(7)
+    ext = np.array([[1.0, 1.0], [0.6, 0.6], [0.6, 0.6], [0.9, 0.9], [0.8, 0.8], [0.4, 0.4], [np.inf, np.inf]])
+    ids = np.array([7, 3, 9, 1, 5, 2, 8], dtype=np.int64)
+    removed, by = _both(ranges, cos_a, sin_a, valid, pose, c, th, ext, ids)
+    assert by[100] == 3  # (boxes 1 and 2 tie at distance 0: the lower index, not box 0 nor 3)
+    assert by[200] == 2  # (box 5 comes after box 4 and is nearer)
+    assert not removed[10:20].any() and removed[30]  # (inf distance: no box; finite: the strip box 6)
+    assert set(by[removed].tolist()) >= {1, 3, 7, 2, 5, 8}

@@ -257,3 +257,18 @@ def test_erase_entering_from_the_movers_rows_keeps_the_state_of_the_reports_path
         assert _ledger_state(a.ledger) == _ledger_state(b.ledger)
     assert a.ledger.stats["erasures"] > 0 and calls["with movers"] > 20, (a.ledger.stats, calls)
     assert a.gridmap().prob.tobytes() == b.gridmap().prob.tobytes()
+
+
+def test_mover_pack_makes_int64_beams_of_any_integer_beams() -> None:
+    """The movers' beams concatenated as int64 whatever the integer type of each track's beams (pass mov133: the
+    concatenation's own dtype instead of an astype after it), the running counts after each mover."""
+    def track(tid: int, in_m: bool, beams) -> Track:
+        return Track(tid, "confirmed", 2.5, Box(1.0 + tid, -0.5, 0.25, 0.8, 1.1), np.array([0.5, -0.25]), np.eye(4),
+                     1.0, 3, 0, "rect", in_m, "r", beams, len(beams), in_m)
+
+    objs = [track(3, True, np.array([4, 5], dtype=np.int32)), track(9, False, np.array([1], dtype=np.int64)),
+            track(4, True, np.array([700, 2], dtype=np.int16)), track(6, True, np.zeros(0, dtype=np.int64))]
+    reps = TrackReports.of_tracks(objs)
+    packed, beams, mids = reps.mover_pack(reps.moving_index())
+    assert beams.dtype == np.int64 and beams.tolist() == [4, 5, 700, 2]
+    assert packed.dtype == np.int64 and packed.tolist() == [0, 2, 3, 3, 4, 6, 2, 4, 4] and mids == [3, 4, 6]

@@ -334,17 +334,23 @@ def _windowed_exclusion(
     pc: float, ps: float, px: float, py: float,
     c: np.ndarray, th: np.ndarray, ext: np.ndarray, ids: np.ndarray,
     removed: np.ndarray, removed_by: np.ndarray,
-) -> None:
+) -> int:
     """The exclusion of a scan's valid beams (paper Eq. 4–8: each beam's point as :meth:`Scan.points`, moved
     into the map frame as :meth:`Pose2D.transform_points`, tested as :func:`_region_of`), box by box over only the
     beams that can reach the box's circumscribed disc (:func:`_beam_window`) instead of every beam against every
     box: each beam's point is made with the same floating-point operations, and the boxes are visited in index
     order with the same strict "nearer centre" test, so a beam's region is the one :func:`_region_of` gives.
-    ``ext`` (k, 2) half-extents, m. Falls back to every beam when the beam angles are not ``a0 + i·inc`` to 1e-9."""
+    ``ext`` (k, 2) half-extents, m. Falls back to every beam when the beam angles are not ``a0 + i·inc`` to 1e-9.
+    ``removed`` / ``removed_by`` all False / −1 on entry; returns the number of removed beams.
+
+    During the boxes' loop ``removed_by`` holds the index of the beam's nearest box so far (−1: none), and the
+    squared distance to that box's centre is computed again from the beam's point when a later box holds the beam
+    (the same operations on the same values: the same number), instead of a per-beam array of best distances; the
+    indices become ids in one pass at the end, which counts the removed beams (pass mov133)."""
     n = ranges.shape[0]
     k = c.shape[0]
     if n == 0 or k == 0:
-        return
+        return 0
     a0 = math.atan2(sin_a[0], cos_a[0])
     inc = 0.0
     uniform = n > 2
@@ -353,15 +359,11 @@ def _windowed_exclusion(
         last = a0 + (n - 1) * inc
         uniform = (abs(inc) > 1e-12 and abs(inc) < 0.5 and abs(math.cos(last) - cos_a[n - 1]) < 1e-9
                    and abs(math.sin(last) - sin_a[n - 1]) < 1e-9)
-    if uniform:
-        for i in range(n):
-            if ranges[i] < 0.0:  # (a negative range's point is behind its beam: not in the window's reasoning)
-                uniform = False
-                break
-    best = np.empty(n)
-    best[:] = np.inf
-    found = np.empty(n, dtype=np.int64)
-    found[:] = -1
+    if uniform:  # (a negative range's point is behind its beam: not in the window's reasoning)
+        neg = False
+        for i in range(n):  # (without an early exit: a reduction LLVM vectorises)
+            neg |= ranges[i] < 0.0
+        uniform = not neg
     wins = np.empty(14, dtype=np.int64)
     cts = np.cos(th)  # (as _exclusion_kernel)
     sts = np.sin(th)
@@ -388,20 +390,31 @@ def _windowed_exclusion(
                 r = ranges[i]
                 lx = r * cos_a[i]
                 ly = r * sin_a[i]
-                dx = (pc * lx - ps * ly + px) - cx
-                dy = (ps * lx + pc * ly + py) - cy
+                gx = pc * lx - ps * ly + px
+                gy = ps * lx + pc * ly + py
+                dx = gx - cx
+                dy = gy - cy
                 u = ct * dx + st * dy
                 v = -st * dx + ct * dy
                 if abs(u) <= ha and abs(v) <= hb:
                     d2 = dx * dx + dy * dy
-                    if d2 < best[i]:
-                        best[i] = d2
-                        found[i] = j
+                    f = removed_by[i]
+                    if f < 0:
+                        best = np.inf
+                    else:  # (the held box's squared distance, as it was computed for it)
+                        ex = gx - c[f, 0]
+                        ey = gy - c[f, 1]
+                        best = ex * ex + ey * ey
+                    if d2 < best:
+                        removed_by[i] = j
+    count = 0
     for i in range(n):
-        j = found[i]
+        j = removed_by[i]
         if j >= 0:
             removed_by[i] = ids[j]
             removed[i] = True
+            count += 1
+    return count
 
 
 @njit(cache=True, inline="always")
@@ -409,10 +422,11 @@ def _rows_exclusion(
     ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray,
     pc: float, ps: float, px: float, py: float, boxes: np.ndarray, ids: np.ndarray, dt: float,
     square: bool, margin: float, cap: float,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, int]:
     """:func:`filter_scan_ids` of mode ``box`` without a speed margin in one call: the centres ``p + v·dt`` of
     the (k, 7) rows ``boxes`` (the same operations as the array expression), their regions
-    (:func:`_box_extents_kernel`) and the beams (:func:`_windowed_exclusion`). Returns (removed, removed_by)."""
+    (:func:`_box_extents_kernel`) and the beams (:func:`_windowed_exclusion`). Returns (removed, removed_by, the
+    number of removed beams)."""
     n = ranges.shape[0]
     removed = np.empty(n, dtype=np.bool_)
     removed[:] = False
@@ -426,8 +440,9 @@ def _rows_exclusion(
         centres[j, 1] = boxes[j, 1] + boxes[j, 6] * dt
         th[j] = boxes[j, 2]
     ext = _box_extents_kernel(boxes, square, margin, cap)
-    _windowed_exclusion(ranges, cos_a, sin_a, valid, pc, ps, px, py, centres, th, ext, ids, removed, removed_by)
-    return removed, removed_by
+    count = _windowed_exclusion(ranges, cos_a, sin_a, valid, pc, ps, px, py, centres, th, ext, ids, removed,
+                                removed_by)
+    return removed, removed_by, count
 
 
 @njit(cache=True)
@@ -438,7 +453,9 @@ def _rows_exclusion_kernel(
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`_rows_exclusion` as a kernel of its own (:func:`filter_scan_ids` calls :func:`_movers_kernel`, which
     inlines the same body: the run compiles it once)."""
-    return _rows_exclusion(ranges, cos_a, sin_a, valid, pc, ps, px, py, boxes, ids, dt, square, margin, cap)
+    removed, removed_by, _ = _rows_exclusion(ranges, cos_a, sin_a, valid, pc, ps, px, py, boxes, ids, dt, square,
+                                             margin, cap)
+    return removed, removed_by
 
 
 @njit(cache=True)
@@ -492,12 +509,8 @@ def _movers_kernel(
                 side = m
     if not exclude:
         return kept, grown, np.zeros(0, dtype=np.bool_), np.zeros(0, dtype=np.int64), 0, side
-    removed, removed_by = _rows_exclusion(ranges, cos_a, sin_a, valid, pc, ps, px, py, grown, ids, dt, square,
-                                          margin, cap)
-    count = 0
-    for i in range(removed.shape[0]):
-        if removed[i]:
-            count += 1
+    removed, removed_by, count = _rows_exclusion(ranges, cos_a, sin_a, valid, pc, ps, px, py, grown, ids, dt,
+                                                 square, margin, cap)
     return kept, grown, removed, removed_by, count, side
 
 

@@ -251,11 +251,13 @@ class TrackReports(Sequence):
         for i, tid in zip(idx, mids):
             if tid in upd:
                 b = bms[i]
-                if len(b):
+                nb = len(b)
+                if nb:
                     blist.append(b)
-                    total += len(b)
+                    total += nb
             ends.append(total)
-        beams = np.concatenate(blist).astype(np.int64, copy=False) if blist else _NO_BEAMS
+        # (the int64 concatenation in one call: no astype after it, pass mov133)
+        beams = np.concatenate(blist, dtype=np.int64) if blist else _NO_BEAMS
         return np.array(idx + mids + ends, dtype=np.int64), beams, mids
 
     def _build_many(self, idx: list[int]) -> list[Track]:
