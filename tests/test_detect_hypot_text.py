@@ -1,5 +1,5 @@
 """The moving tracks' reason text in ``TrackManage._manage`` (docs/speed.md, pass trk87): the distance since birth
-formatted from Python's ``math.hypot`` (:func:`dynslam2d.detect.trackmanage._hypot_2f`) must print as NumPy's
+formatted from Python's ``math.hypot`` (:func:`dynslam2d.detect.tracktable._hypot_2f`) must print as NumPy's
 ``np.hypot`` of the same differences did — the two differ in the last bit for about 0.6 % of the pairs, and where
 the distance is next to a tie of the two-decimal rounding the texts would differ."""
 
@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from dynslam2d.detect.trackmanage import _hypot_2f
+from dynslam2d.detect.tracktable import _hypot_2f
 
 
 def _numpy_text(dx: float, dy: float) -> str:

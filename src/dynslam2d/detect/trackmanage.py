@@ -70,23 +70,6 @@ def _slow_reason(speed: float, texts: tuple[str, ...], tail: str) -> str:
     return f"not in M: speed {speed:.2f}{tail}"
 
 
-def _hypot_2f(dx: float, dy: float, hypot=math.hypot, np_hypot=np.hypot) -> str:
-    """``f"{float(np.hypot(dx, dy)):.2f}"`` (a distance in m, as the reasons print it) from Python's ``math.hypot``,
-    without NumPy's scalar ufunc call (≈ 1 µs; docs/speed.md, pass trk87). Both are within 1 ulp of the exact
-    distance (math.hypot: CPython's ``vector_norm``; np.hypot: the C library's ``hypot``), so they can differ by
-    2 ulp at most: the two-decimal text (the exact value of the float rounded to the nearest hundredth, ties to
-    even) is the same unless 100·d lies within far less than 10⁻⁷ of a tie (an odd multiple of ½) — there, and for
-    any distance of 10 km or more or not finite, the text is NumPy's own. ``TrackManage._manage``'s moving tracks in
-    M (≈ 4 a scan on sim:crowd)."""
-    d = hypot(dx, dy)
-    q = d * 100.0
-    if 0.0 <= q < 1e6:
-        f = q - int(q)
-        if f < 0.4999999 or f > 0.5000001:
-            return f"{d:.2f}"
-    return f"{float(np_hypot(dx, dy)):.2f}"
-
-
 class TrackManage:
     """Mixin of :class:`dynslam2d.detect.tracker.Tracker`: management and the test of M (``_manage``, ``_dynamic``)."""
 
@@ -120,7 +103,7 @@ class TrackManage:
         probe = self._free is not None
         # (_dynamic's first test of a track in M, the structure exit, with the scan's constants: pass trk43; its
         # window mean in the kernel, manage_scan's AUX_EXIT)
-        on_map, hypot_2f = self._map is not None, _hypot_2f
+        on_map = self._map is not None
         order = self._rows()
         # per track: the counter tests' outcome (MC_*, the new states and counts written into the counter table), σ of
         # its speed along the velocity and its speed (Python's math.hypot bit for bit, as the reasons print it), from
@@ -188,7 +171,7 @@ class TrackManage:
                     if near > 1 and self._rides_with_laser(k):
                         k.in_m = False
                         k.fast = 0
-                        k.reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
+                        k._reason = "not in M: fixed in the laser frame while the laser moves (the robot's own body)"
                     elif in_m and k.slow_since is None and (k.was_in_m or k.person_streak < npu or not on_map) \
                             and not (on_map and aux & AUX_EXIT):
                         # (_dynamic's outcome for a track in M that is not slow and not leaving M on structure, whose
@@ -200,8 +183,8 @@ class TrackManage:
                         x = k.x
                         x0, x1 = x.item(0), x.item(1)
                         bxy = k.birth_xy
-                        k.reason = (f"in M: speed {speed:.2f} m/s, moved "
-                                    f"{hypot_2f(x0 - bxy.item(0), x1 - bxy.item(1))} m since birth")
+                        # (its reason's floats, formatted when read: tracktable.moved_reason, pass trk136)
+                        k._reason = (speed, x0 - bxy.item(0), x1 - bxy.item(1))
                         if mem:  # (_memory_bookkeeping of a track in M, inline)
                             if (sxy := k.m_start_xy) is None:
                                 k.m_start_xy = sxy = (x0, x1)
@@ -217,17 +200,17 @@ class TrackManage:
                         self._dynamic(k, speed, sig, t)
                     elif code == MC_UPD_TENTATIVE:
                         # (speed: most tracks are short-lived tentative clutter; nothing else changes them)
-                        k.reason = "not in M: tentative track"
+                        k._reason = "not in M: tentative track"
                     elif speed <= v_min:
                         # (the most common reason: looked up by the speed in hundredths, its text's index + 1 from
                         # the kernel, 0 where _slow_reason formats it: near a rounding tie; manage_scan)
-                        k.reason = slow_texts[si - 1] if (si := aux >> AUX_SLOW_SHIFT) and slow_texts \
+                        k._reason = slow_texts[si - 1] if (si := aux >> AUX_SLOW_SHIFT) and slow_texts \
                             else f"not in M: speed {speed:.2f}{slow_tail}"
                     elif kfast < nsus and sig < max_ssig and k.person_streak < npu:
                         # (_dynamic's outcome for a track not in M, faster than v_min with a certain velocity, not yet
                         # for sustain_updates updates and no person test (person_streak below person_sustain_updates):
                         # the second most common reason, inline; its tests before this one do not apply)
-                        k.reason = fast_reasons[kfast]  # (0 ≤ kfast < nsus here)
+                        k._reason = fast_reasons[kfast]  # (0 ≤ kfast < nsus here)
                     else:
                         self._dynamic(k, speed, sig, t)
                 if mem:
@@ -246,7 +229,8 @@ class TrackManage:
                     k.in_m = False
                     k.merged = True
                     k.fast = 0
-                    k.reason = "left M: merged with long-occupied map structure (its detection joined a wall's cluster)"
+                    k._reason = \
+                        "left M: merged with long-occupied map structure (its detection joined a wall's cluster)"
                 if k.in_m and not k.remembered and k.slow_since is not None and mem and self._hidden(k):
                     # stopped in M and hidden (something in front of it) before m_exit_time: it cannot finish its
                     # stop while unseen, so it is remembered now (if eligible) instead of being deleted after
@@ -300,7 +284,7 @@ class TrackManage:
         if sum(free) / len(free) < self.config.tracker.free_min_fraction:
             k.in_m = False
             k.fast = 0
-            k.reason = "left M: after a gap the detections show no motion into free space (a different, static object)"
+            k._reason = "left M: after a gap the detections show no motion into free space (a different, static object)"
             return True
         return False
 
@@ -324,7 +308,7 @@ class TrackManage:
                 sum(ms) / len(ms) >= tc.map_structure_exit:
             k.in_m = False
             k.fast = 0
-            k.reason = (f"left M: {sum(ms) / len(ms):.2f} of its points on long-occupied map cells "
+            k._reason = (f"left M: {sum(ms) / len(ms):.2f} of its points on long-occupied map cells "
                         "(structure)")
             return
         if k.in_m and have_map and k.slow_since is not None and t - k.slow_since >= tc.map_structure_stop_time \
@@ -334,7 +318,7 @@ class TrackManage:
             # reaching a wall): hysteresis would carry M onto the wall
             k.in_m = False
             k.fast = 0
-            k.reason = "left M: slowed down on long-occupied map cells (merged with structure)"
+            k._reason = "left M: slowed down on long-occupied map cells (merged with structure)"
             return
         if k.in_m:
             slow_for = 0.0 if k.slow_since is None else t - k.slow_since
@@ -343,45 +327,44 @@ class TrackManage:
             elif k.slow_since is not None and slow_for >= tc.m_exit_time:
                 k.in_m = False
                 k.remembered = False
-                k.reason = (f"left M: speed {speed:.2f} m/s below {tc.v_exit_ratio * tc.v_min:.2f} for "
+                k._reason = (f"left M: speed {speed:.2f} m/s below {tc.v_exit_ratio * tc.v_min:.2f} for "
                             f"{slow_for:.1f} s")
             elif k.slow_since is not None:
-                k.reason = f"in M (hysteresis): slow ({speed:.2f} m/s) for {slow_for:.1f} s"
+                k._reason = f"in M (hysteresis): slow ({speed:.2f} m/s) for {slow_for:.1f} s"
             else:
                 k.remembered = False  # moving again
                 x, bxy = k.x, k.birth_xy
-                k.reason = (f"in M: speed {speed:.2f} m/s, moved "
-                            f"{_hypot_2f(x.item(0) - bxy.item(0), x.item(1) - bxy.item(1))} m since birth")
+                k._reason = (speed, x.item(0) - bxy.item(0), x.item(1) - bxy.item(1))  # (tracktable.moved_reason)
             return
         if k.state == TENTATIVE:
-            k.reason = "not in M: tentative track"
+            k._reason = "not in M: tentative track"
         elif speed <= tc.v_min:
-            k.reason = f"not in M: speed {speed:.2f} m/s ≤ v_min {tc.v_min:.2f}"  # (the most common reason)
+            k._reason = f"not in M: speed {speed:.2f} m/s ≤ v_min {tc.v_min:.2f}"  # (the most common reason)
         elif sig >= tc.max_speed_sigma:
-            k.reason = f"not in M: velocity uncertain (σ {sig:.2f} m/s)"
+            k._reason = f"not in M: velocity uncertain (σ {sig:.2f} m/s)"
         elif k.fast < need:
-            k.reason = f"not in M: speed > v_min for {k.fast}/{need} updates"
+            k._reason = f"not in M: speed > v_min for {k.fast}/{need} updates"
         elif (net := self._net_speed(k, need)) is not None and net < tc.net_speed_ratio * tc.v_min:
-            k.reason = (f"not in M: net speed over the last {need} updates {net:.2f} m/s < "
+            k._reason = (f"not in M: net speed over the last {need} updates {net:.2f} m/s < "
                         f"{tc.net_speed_ratio * tc.v_min:.2f} (jitter, not motion)")
         elif (disp := float(np.hypot(k.x[0] - k.birth_xy[0], k.x[1] - k.birth_xy[1]))) < (
                 min_disp := tc.person_min_displacement if person_way == "map" else tc.min_displacement):
             # (the net displacement since birth is computed only here: most tracks stop at a test above)
-            k.reason = f"not in M: moved {disp:.2f} m < {min_disp:.2f} m since birth"
+            k._reason = f"not in M: moved {disp:.2f} m < {min_disp:.2f} m since birth"
         elif self._free is not None and (not (fr := self._free_values(k)) or sum(fr) / len(fr) < tc.free_min_fraction):
-            k.reason = (f"not in M: points on free space {sum(fr) / max(len(fr), 1):.2f} < "
+            k._reason = (f"not in M: points on free space {sum(fr) / max(len(fr), 1):.2f} < "
                         f"{tc.free_min_fraction:.2f} (static structure)")
         elif use_map and not fast_person and sum(mf := mev[:, 1].tolist()) / len(mf) < tc.map_free_min and not (
                 self._is_still() and sum(mu := mev[:, 2].tolist()) / len(mu) >= 1.0 - tc.map_free_min):
-            k.reason = (f"not in M: points in observed-free map cells {sum(mf) / len(mf):.2f} < "
+            k._reason = (f"not in M: points in observed-free map cells {sum(mf) / len(mf):.2f} < "
                         f"{tc.map_free_min:.2f} (no map evidence of motion)")
         elif use_map and sum(ms) / len(ms) > tc.map_structure_max:
-            k.reason = (f"not in M: points on long-occupied map cells {sum(ms) / len(ms):.2f} > "
+            k._reason = (f"not in M: points on long-occupied map cells {sum(ms) / len(ms):.2f} > "
                         f"{tc.map_structure_max:.2f} (structure)")
         else:
             k.in_m = True
             k.was_in_m = True
-            k.reason = (f"in M: speed {speed:.2f} m/s > v_min for {k.fast} updates, moved {disp:.2f} m "
+            k._reason = (f"in M: speed {speed:.2f} m/s > v_min for {k.fast} updates, moved {disp:.2f} m "
                         "since birth")
 
     def _person_moved_in(self, k: _Track, n: int, use_map: bool) -> str | None:
@@ -426,7 +409,7 @@ class TrackManage:
             return False
         k.remembered = True
         self._maybe_remembered = True  # (the prediction looks for remembered tracks again: Tracker._predict)
-        k.reason = (f"in M (remembered): stopped for {slow_for:.1f} s after moving {k.m_travel:.2f} m in M "
+        k._reason = (f"in M (remembered): stopped for {slow_for:.1f} s after moving {k.m_travel:.2f} m in M "
                     f"for {k.m_time:.1f} s")
         return True
 

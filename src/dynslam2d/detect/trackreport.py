@@ -13,7 +13,7 @@ import numpy as np
 from dynslam2d.detect.frozen import _layout_twin_ok, fast_init
 from dynslam2d.detect.kernels_update import report_rows
 from dynslam2d.detect.layout import KIND_CIRCLE, KIND_NAMES
-from dynslam2d.detect.tracktable import _HALF_PI, COASTING, CONFIRMED, STATE_NAMES
+from dynslam2d.detect.tracktable import _HALF_PI, COASTING, CONFIRMED, STATE_NAMES, moved_reason
 from dynslam2d.types import Box, Track, wrap_angle
 
 if TYPE_CHECKING:
@@ -38,8 +38,9 @@ _BoxTwin = type("_BoxTwin", (), {"__slots__": _BOX_SLOTS})
 
 #: The per-track Python fields a report snapshots at report time (the next ``update`` mutates the ``_Track``s):
 #: id, birth stamp (s), in M, reason, remembered, beams (one C-level ``map`` over the live tracks, a tuple each,
-#: transposed into six columns by ``zip``).
-_SNAP = attrgetter("id", "born", "in_m", "reason", "remembered", "beams")
+#: transposed into six columns by ``zip``). The reason as stored (``_Track._reason``): a text, or a moving track's
+#: three floats, formatted by ``moved_reason`` when its ``Track`` is built (docs/speed.md, pass trk136).
+_SNAP = attrgetter("id", "born", "in_m", "_reason", "remembered", "beams")
 _new = object.__new__
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # (the movers' beams when none has any; read only)
 _NO_BOXES = np.zeros((0, 5))
@@ -288,10 +289,13 @@ class TrackReports(Sequence):
                     if beams is None:
                         beams = self._no_beams = np.zeros(0, dtype=np.int64)
                 in_m = in_ms[i]
+                reason = reasons[i]
+                if reason.__class__ is not str:
+                    reason = moved_reason(*reason)
                 if not _INLINE:
                     built[i] = r = _make_track(tid, snames[states[i]], t, _make_box(px, py, theta, length, width),
                                                V[i], P[i], t - borns[i], hits[i], misses[i], knames[kinds[i]], in_m,
-                                               reasons[i], beams, len(beams), rems[i] and in_m)
+                                               reason, beams, len(beams), rems[i] and in_m)
                     out.append(r)
                     continue
                 # (every slot of _TRACK_SLOTS / _BOX_SLOTS stored, in order)
@@ -314,7 +318,7 @@ class TrackReports(Sequence):
                 r.misses = misses[i]
                 r.kind = knames[kinds[i]]
                 r.in_m = in_m
-                r.m_reason = reasons[i]
+                r.m_reason = reason
                 r.beams = beams
                 r.n_points = len(beams)
                 r.remembered = rems[i] and in_m

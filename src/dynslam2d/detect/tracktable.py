@@ -47,6 +47,32 @@ _row_views = row_tables.py_func
 _HALF_PI = 0.5 * math.pi
 _TWO_PI = 2.0 * math.pi
 
+
+def _hypot_2f(dx: float, dy: float, hypot=math.hypot, np_hypot=np.hypot) -> str:
+    """``f"{float(np.hypot(dx, dy)):.2f}"`` (a distance in m, as the reasons print it) from Python's ``math.hypot``,
+    without NumPy's scalar ufunc call (≈ 1 µs; docs/speed.md, pass trk87). Both are within 1 ulp of the exact
+    distance (math.hypot: CPython's ``vector_norm``; np.hypot: the C library's ``hypot``), so they can differ by
+    2 ulp at most: the two-decimal text (the exact value of the float rounded to the nearest hundredth, ties to
+    even) is the same unless 100·d lies within far less than 10⁻⁷ of a tie (an odd multiple of ½) — there, and for
+    any distance of 10 km or more or not finite, the text is NumPy's own. The moving tracks' reasons in
+    M (:func:`moved_reason`)."""
+    d = hypot(dx, dy)
+    q = d * 100.0
+    if 0.0 <= q < 1e6:
+        f = q - int(q)
+        if f < 0.4999999 or f > 0.5000001:
+            return f"{d:.2f}"
+    return f"{float(np_hypot(dx, dy)):.2f}"
+
+
+def moved_reason(speed: float, dx: float, dy: float) -> str:
+    """The reason of a track in M that moves: ``speed`` (m/s) and its centre's displacement since birth (``dx``,
+    ``dy``: the state's x, y minus ``birth_xy``, m, map frame) as ``TrackManage._manage`` / ``_dynamic`` printed it
+    every scan; now stored as these three floats (``_Track._reason``) and formatted only when the reason is read
+    (``_Track.reason``, ``TrackReports``' ``m_reason``): the same floats, the same text (docs/speed.md, pass trk136)."""
+    return f"in M: speed {speed:.2f} m/s, moved {_hypot_2f(dx, dy)} m since birth"
+
+
 TENTATIVE = "tentative"
 CONFIRMED = "confirmed"
 COASTING = "coasting"
@@ -86,7 +112,9 @@ class _Track:
     cl: np.ndarray  # (1,) float64: the stamp of the last update, s (a tuple until _add_row)
     fast: int = 0
     in_m: bool = False
-    reason: str = "not in M: tentative track"
+    # why it is or is not in M: the text, or for a moving track in M the three floats of :func:`moved_reason` (formatted
+    # when read: the ``reason`` property, the reports' ``m_reason``; docs/speed.md, pass trk136)
+    _reason: str | tuple[float, float, float] = "not in M: tentative track"
     beams: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     # free-space fraction per update; an entry may be a detection (a birth's) or a tuple (det, ref, t, past) until it
     # is read, its value not yet computed (Tracker._free_values)
@@ -115,6 +143,17 @@ class _Track:
     # a dormant track's map-evidence window, (n, 3), copied from its row when retired (Tracker._retire; its revival
     # without a map keeps it); None for a live track, whose windows are rows of the tracker's arrays (TrackRows)
     mev_kept: np.ndarray | None = None
+
+    @property
+    def reason(self) -> str:
+        """Why it is or is not in M (the report's ``m_reason``): the stored text, or :func:`moved_reason` of the
+        stored floats."""
+        r = self._reason
+        return r if r.__class__ is str else moved_reason(*r)
+
+    @reason.setter
+    def reason(self, value: str) -> None:
+        self._reason = value
 
     @property
     def person(self) -> bool:
@@ -267,7 +306,7 @@ def _new_track(tid: int, t: float, birth_xy: np.ndarray, g: tuple, gi: tuple, be
     k.cl = (t,)
     k.fast = 0
     k.in_m = False
-    k.reason = "not in M: tentative track"
+    k._reason = "not in M: tentative track"
     k.beams = beams
     k.free = free
     k.person_streak = 0
