@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dynslam2d import jitaot
+from dynslam2d import jitaot, jitmanifest
 from dynslam2d.jitaot import KernelArgumentError, make_kernel, parse_types
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
@@ -231,7 +231,10 @@ def test_kernels_status_and_clear_commands(built: Path, tmp_path: Path) -> None:
     res = subprocess.run([sys.executable, "-m", "dynslam2d", "kernels", "status", "--json"], env=_env(built),
                          capture_output=True, text=True, timeout=120)
     row = json.loads(res.stdout)
-    assert row["valid"] and row["used"] and row["kernels"] >= 30 and row["folder"] == str(built)
+    exports = json.loads((built / jitaot.SIDECAR).read_text())["exports"]
+    assert row["valid"] and row["used"] and row["kernels"] == len(exports) and row["folder"] == str(built)
+    # the build holds every kernel the README's first command compiles (the manifest's, recorded from a real run)
+    assert {qual for qual, _types in jitmanifest.KERNELS} <= set(exports)
     # the build left its module under its content-hash name, the sidecar naming it, its lock file: nothing else
     assert sorted(p.name for p in built.iterdir()) == sorted([jitaot.SIDECAR, jitaot.LOCK, row["file"]])
     assert row["file"].startswith(f"{jitaot.MODULE_NAME}-{row['sha256'][:16]}.") and row["numba"] and row["built"]
