@@ -220,15 +220,20 @@ def test_associate_update_is_the_two_former_calls_in_pipeline_runs() -> None:
     saved = tracker_mod.associate_update
     tracker_mod.associate_update, tracker_mod.cv_predict, tracker_mod.Tracker._predict = checked, cv, predict
     try:
-        for name, use_map in (("sim:drive", True), ("sim:crowd", False)):
-            pipe = Pipeline(_with_map_evidence(use_map))
-            for scan in open_source(name, seed=11, duration=6.0):
-                pipe.process(scan)
+        _run_two_scenes()
     finally:
         tracker_mod.associate_update, tracker_mod.cv_predict, tracker_mod.Tracker._predict = \
             saved, former_cv, former_predict
     assert seen["calls"] > 100 and seen["pairs"] > 500 and seen["bounded"] > 20, seen
     assert 20 < seen["use_map"] < seen["calls"] and seen["predicted"] > 100, seen
+
+
+def _run_two_scenes() -> None:
+    """Two simulated pipeline runs of 6 s (seed 11): sim:drive with the map evidence, sim:crowd without."""
+    for name, use_map in (("sim:drive", True), ("sim:crowd", False)):
+        pipe = Pipeline(_with_map_evidence(use_map))
+        for scan in open_source(name, seed=11, duration=6.0):
+            pipe.process(scan)
 
 
 def test_managed_rows_are_managed_at_manage_time() -> None:
@@ -267,10 +272,7 @@ def test_managed_rows_are_managed_at_manage_time() -> None:
 
     trackmanage.TrackManage._manage, tracker_mod.associate_update = checked, call
     try:
-        for name, use_map in (("sim:drive", True), ("sim:crowd", False)):
-            pipe = Pipeline(_with_map_evidence(use_map))
-            for scan in open_source(name, seed=11, duration=6.0):
-                pipe.process(scan)
+        _run_two_scenes()
     finally:
         trackmanage.TrackManage._manage, tracker_mod.associate_update = former_manage, former_call
     assert seen["fused"] > 100, seen  # ("own": none in these two runs; the digest's real bags have them)
