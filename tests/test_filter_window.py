@@ -119,3 +119,31 @@ def test_windowed_exclusion_ties_and_overflowing_distances() -> None:
     assert by[200] == 2  # (box 5 comes after box 4 and is nearer)
     assert not removed[10:20].any() and removed[30]  # (inf distance: no box; finite: the strip box 6)
     assert set(by[removed].tolist()) >= {1, 3, 7, 2, 5, 8}
+
+
+@pytest.mark.parametrize("negative_valid", [False, True])
+def test_windowed_exclusion_negative_ranges_valid_or_not(negative_valid: bool) -> None:
+    """Uniform beams with negative ranges (the real bags' scans hold them outside their valid interval): only a
+    valid negative range turns the window off (pass flt137); an invalid one is tested in no box either way. A box
+    behind the sensor holds the negative beams' points: when they are valid, the reference removes them and so must
+    the windowed pass (a window that ignored them would not); when not, neither removes them."""
+    n = 360
+    angles = np.linspace(-math.pi, math.pi, n, endpoint=False)
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    ranges = np.full(n, 3.0)
+    ranges[40:50] = -2.0  # (points at angle + π: behind their beams)
+    valid = np.ones(n, dtype=bool)
+    if not negative_valid:
+        valid[40:50] = False
+    pose = (0.3, -0.2, 0.7)
+    pc, ps = math.cos(pose[2]), math.sin(pose[2])
+    q = 45
+    lx, ly = -2.0 * cos_a[q], -2.0 * sin_a[q]
+    behind = (pc * lx - ps * ly + pose[0], ps * lx + pc * ly + pose[1])
+    lx, ly = 3.0 * cos_a[q + 180], 3.0 * sin_a[q + 180]
+    ahead = (pc * lx - ps * ly + pose[0], ps * lx + pc * ly + pose[1])
+    c = np.array([behind, ahead, [9.0, 9.0]])
+    ext = np.array([[0.3, 0.3], [0.3, 0.3], [0.5, 0.5]])
+    removed, by = _both(ranges, cos_a, sin_a, valid, pose, c, np.zeros(3), ext, np.array([4, 5, 6], dtype=np.int64))
+    assert removed[40:50].any() == negative_valid
+    assert (by == 5).any() and not (by == 6).any()

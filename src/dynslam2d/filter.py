@@ -340,7 +340,8 @@ def _windowed_exclusion(
     beams that can reach the box's circumscribed disc (:func:`_beam_window`) instead of every beam against every
     box: each beam's point is made with the same floating-point operations, and the boxes are visited in index
     order with the same strict "nearer centre" test, so a beam's region is the one :func:`_region_of` gives.
-    ``ext`` (k, 2) half-extents, m. Falls back to every beam when the beam angles are not ``a0 + i·inc`` to 1e-9.
+    ``ext`` (k, 2) half-extents, m. Falls back to every beam when the beam angles are not ``a0 + i·inc`` to 1e-9
+    or a valid beam has a negative range.
     ``removed`` / ``removed_by`` all False / −1 on entry; returns the number of removed beams.
 
     During the boxes' loop ``removed_by`` holds the index of the beam's nearest box so far (−1: none), and the
@@ -359,10 +360,12 @@ def _windowed_exclusion(
         last = a0 + (n - 1) * inc
         uniform = (abs(inc) > 1e-12 and abs(inc) < 0.5 and abs(math.cos(last) - cos_a[n - 1]) < 1e-9
                    and abs(math.sin(last) - sin_a[n - 1]) < 1e-9)
-    if uniform:  # (a negative range's point is behind its beam: not in the window's reasoning)
+    if uniform:  # (a valid negative range's point is behind its beam: not in the window's reasoning)
         neg = False
         for i in range(n):  # (without an early exit: a reduction LLVM vectorises)
-            neg |= ranges[i] < 0.0
+            # (only the valid beams: an invalid beam is tested in no box, window or not — the real bags' scans
+            # hold negative ranges outside their valid interval, which made them test every beam, pass flt137)
+            neg |= valid[i] & (ranges[i] < 0.0)
         uniform = not neg
     wins = np.empty(14, dtype=np.int64)
     cts = np.cos(th)  # (as _exclusion_kernel)
