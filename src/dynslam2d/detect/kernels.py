@@ -1308,7 +1308,8 @@ def pair_priors(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, det: np.ndarray
     the detections' kind codes and axis angles (rad) of the scan: (swap (r,) bool: the detection's first axis is the
     track's second (90° ambiguity of a box's axes), sizes (r, 2) the track's sizes along the detection's axes (m),
     has (r,) bool, radius (r,) the track's circle radius (m; −1: none)). A rectangle detection gets the sizes of a
-    track that has a heading, a circle the radius of a circle track (the arithmetic of ``Tracker._update_pairs``)."""
+    track that has a heading, a circle the radius of a circle track (the arithmetic of the tracker's pairs update,
+    ``Tracker._associate_update``)."""
     n = rows.shape[0]
     swap = np.empty(n, dtype=np.bool_)
     swap[:] = False

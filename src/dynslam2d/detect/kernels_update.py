@@ -353,7 +353,7 @@ def association_gates(G: np.ndarray, Gi: np.ndarray, rows: np.ndarray, CI: np.nd
 def kalman_pairs(Xs: np.ndarray, Ps: np.ndarray, sel: np.ndarray, H: np.ndarray, zm: np.ndarray, Rm: np.ndarray,
                  bound: bool, hits: np.ndarray, after: int, lim: float, lim2: float, X: np.ndarray, P: np.ndarray,
                  trows: np.ndarray) -> tuple:
-    """``Tracker._update_pairs``' Kalman step in one call: the priors ``Xs[sel]``, ``Ps[sel]`` (the predicted (n, 4)
+    """``Tracker._associate_update``' Kalman step in one call: the priors ``Xs[sel]``, ``Ps[sel]`` (the predicted (n, 4)
     states and (n, 4, 4) covariances of the live tracks, rows ``sel`` of the pairs), ``kernels.kalman_update_batch``
     with the pairs' measurements (H, zm, Rm), then — where ``bound`` — the physical acceleration bound
     (``kernels.accel_candidates`` with ``lim2`` (m/s)², the candidates of pairs whose track has ``hits`` ≥ ``after``,
@@ -423,7 +423,7 @@ UP_MERGE_JUMP = _N_PARAMS + 25  # TrackerConfig.merge_size_jump, m (veto_merged)
 UP_S_MAX = _N_PARAMS + 26  # TrackerConfig.map_structure_max (veto_merged)
 UP_BIG = _N_PARAMS + 27  # the assignment's cost outside the gates (_BIG; assign_groups)
 _UP_N = _N_PARAMS + 28
-_BIG = 1e12  # the association's cost of a pair outside the gates (assign_groups; the tracker's, tracktable)
+_BIG = 1e12  # the association's cost of a pair outside the gates (assign_groups, as update_params' UP_BIG)
 
 # the columns of the tracker's counter table (``Tracker._CI``, int64, one row per state row; docs/speed.md pass cnt36)
 C_STATE = 0  # the track's state: ST_TENTATIVE, ST_CONFIRMED or ST_COASTING
@@ -523,7 +523,8 @@ def update_pairs(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xs
                  CI: np.ndarray, CL: np.ndarray, lim: float, lim2: float, mfr: np.ndarray, kept: np.ndarray,
                  first: np.ndarray, second: np.ndarray, mnpts: np.ndarray, MEV: np.ndarray, RIDE: np.ndarray,
                  WN: np.ndarray, use_map: bool, px: float, py: float, c: float, s: float, t: float) -> tuple:
-    """``Tracker._update_pairs``' four kernels in one call, the same functions in the same order (so the same floats):
+    """The pairs' update of ``Tracker._associate_update``: four kernels in one call, the same functions in the same
+    order (so the same floats):
     ``kernels.pair_priors`` (the priors of the pairs: track rows ``trows = rows[sel]``, ``rows`` the state rows of the
     live tracks, detections ``dis``), ``kernels.measure_batch`` (the detections' arrays ``kind`` … ``npts`` of the
     scan's :class:`~dynslam2d.detect.layout.DetectionBatch`, each pair's size σ, the fit parameters in ``q``'s first

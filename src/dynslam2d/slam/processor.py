@@ -402,19 +402,10 @@ class HectorSlam:
         dt = scan.stamp - self._last_stamp if self._last_stamp is not None else 0.0
         odom = scan.odom
         if c.use_odometry and odom is not None and self._last_odom is not None and odom.is_finite():
-            # (``d = last_odom.between(odom)``, ``last.compose(d)`` inline: the same float operations in the same
-            # order as Pose2D.inverse / compose, without the intermediate poses and the three method calls)
-            a = self._last_odom
-            pi = math.pi
-            ca, sa = math.cos(a.theta), math.sin(a.theta)
-            ix, iy, ith = -ca * a.x - sa * a.y, sa * a.x - ca * a.y, float((-a.theta + pi) % (2.0 * pi) - pi)
-            ca, sa = math.cos(ith), math.sin(ith)
-            dx, dy = ix + ca * odom.x - sa * odom.y, iy + sa * odom.x + ca * odom.y
-            dth = float((ith + odom.theta + pi) % (2.0 * pi) - pi)
-            ca, sa = math.cos(last.theta), math.sin(last.theta)
-            return _Prior(Pose2D(last.x + ca * dx - sa * dy, last.y + sa * dx + ca * dy,
-                                 float((last.theta + dth + pi) % (2.0 * pi) - pi)),
-                          "odometry", all_axes, True, (dx, dy, dth))
+            # (``d = last_odom.between(odom)``, ``last.compose(d)``: the same float operations in the same order,
+            # without the intermediate poses)
+            dx, dy, dth = _between(self._last_odom, odom)
+            return _Prior(_compose(last, dx, dy, dth), "odometry", all_axes, True, (dx, dy, dth))
         # (:meth:`_model_rates` inline while tracking: the same operations without the call)
         moving = False
         cv = last
