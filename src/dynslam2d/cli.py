@@ -628,6 +628,7 @@ def run(
     _check_run_options(input, topic, viewer, {
         "--map-resolution": map_resolution, "--update-distance": update_distance, "--update-angle": update_angle,
         "--laser-min-dist": laser_min_dist, "--laser-max-dist": laser_max_dist, "--map-period": map_period})
+    early = _early_background_compile()  # an empty cache: the second CPU compiles while this process imports
     cfg = _run_config(config, {
         "map_resolution": map_resolution, "map_levels": map_levels,
         "map_update_distance_thresh": update_distance, "map_update_angle_thresh": update_angle,
@@ -646,7 +647,7 @@ def run(
     offset = parse_laser_offset(laser_offset) if laser_offset else None
     out = out or _default_out("run")
     folder = _plan_run_folder(out, force, inputs, write_bag)  # outputs first: reading a log can take long
-    compiling, background = _cold_start()  # before the input's first scan, which may need kernels already
+    compiling, background = _cold_start(early)  # before the input's first scan, which may need kernels already
     source = open_source(input, topic, seed=seed, duration=duration, skip_bad=skip_bad, odom=odom, imu=imu,
                          laser_offset=offset)
     mount = _laser_mount(source.meta) if frame == "base_link" else None
@@ -964,10 +965,27 @@ def _range_scale_row(summary: dict[str, Any]) -> list[tuple[str, str]]:
                             f"scans)")]
 
 
-def _cold_start() -> tuple[bool, Any]:
+def _early_background_compile() -> Any:
+    """The background compile (:mod:`dynslam2d.jitwarm`) started at once when numba's cache folder holds no index
+    file at all (:func:`dynslam2d.jitcache.cache_holds_no_index`: a first run), before this process imports the
+    configuration, numba and the kernel modules (≈ 0.7–1 s at the start of ``run``): the second CPU starts its
+    first kernel that much earlier. None otherwise (not started: the AOT-compiled kernels, a cache holding
+    something, or :func:`dynslam2d.jitwarm.worker_wanted` says no); :func:`_cold_start` then decides as before."""
+    from dynslam2d.jitaot import table
+    from dynslam2d.jitcache import cache_holds_no_index
+
+    if table() is not None or not cache_holds_no_index():
+        return None
+    from dynslam2d.jitwarm import start_background_compile
+
+    return start_background_compile()
+
+
+def _cold_start(background: Any = None) -> tuple[bool, Any]:
     """Whether numba must compile the kernels (a first run, or the first after an update), and then the
     background compile of the late kernels on a second CPU (:mod:`dynslam2d.jitwarm`; None when not
-    started). Loads the pipeline's kernel modules to tell, after making numba's compiles leaner
+    started; ``background``: the one :func:`_early_background_compile` started, which makes the cache cold).
+    Loads the pipeline's kernel modules to tell, after making numba's compiles leaner
     (:func:`dynslam2d.jitcache.lean_numba_compile`: about a tenth less cold compile, the same kernels); on a cold
     cache also Python's garbage collector (:func:`dynslam2d.jitcache.lean_compile_gc`)."""
     from dynslam2d.jitbox import AOT
@@ -981,12 +999,12 @@ def _cold_start() -> tuple[bool, Any]:
     from dynslam2d.jitcache import kernel_cache_state
     from dynslam2d.jitwarm import start_background_compile
 
-    cold = kernel_cache_state().cold
+    cold = background is not None or kernel_cache_state().cold
     if cold:
         from dynslam2d.jitcache import lean_compile_gc
 
         lean_compile_gc()  # fewer collections while numba compiles (about a sixth of the compile CPU)
-    return cold, start_background_compile() if cold else None
+    return cold, (background or start_background_compile()) if cold else None
 
 
 def _say_if_compiling(show: bool, cold: bool) -> None:

@@ -120,6 +120,23 @@ def use_default_cache_dir() -> str | None:
     return str(path)
 
 
+def cache_holds_no_index(folder: str | os.PathLike[str] | None = None) -> bool:
+    """Whether numba's cache folder (``folder``, by default ``NUMBA_CACHE_DIR``) holds no index file (``*.nbi``) at
+    all, or does not exist: every kernel a run needs must then be compiled. Told from the folder alone, without
+    importing numba or a kernel module (it stops at the first index file found: a few ms on a warm cache). False
+    when no folder is set (numba's in-tree ``__pycache__`` folders: the caller asks numba instead)."""
+    path = folder if folder is not None else os.environ.get(CACHE_ENV)
+    if not path:
+        return False
+    try:
+        for _, _, files in os.walk(path):
+            if any(name.endswith(".nbi") for name in files):
+                return False
+    except OSError:
+        return False
+    return True
+
+
 #: numba's switch for plain (uncoloured) error messages (numba.core.errors), read when numba is imported.
 PLAIN_ERRORS_ENV = "NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING"
 

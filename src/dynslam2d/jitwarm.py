@@ -454,6 +454,12 @@ def main(argv: list[str] | None = None) -> None:
     load_blas_alone()
     lean_numba_compile()
     lean_compile_gc()
+    import gc
+
+    # No cyclic collections at all in this short-lived process: numba's typing and lowering keep many objects alive,
+    # which each young collection walks again (≈ 1.6 s of CPU when one process compiles every kernel, for ≈ +50 MiB
+    # of peak memory while it compiles; docs/speed.md, passes cmp79 and cmp142). It exits when its kernels are done.
+    gc.disable()
     from dynslam2d.jitmanifest import COMPILE_S, KERNELS
 
     board = CompileBoard(args[1], "bg") if len(args) > 1 else None
