@@ -220,6 +220,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._dt = 0.0
         self._body_near: np.ndarray | None = None
         self._body_key: np.ndarray | None = None  # body beams the grown mask below was made from
+        self._body_bytes = b""  # (their bytes: the key is this tracker's own copy, never written)
         self._body_grown: np.ndarray = np.zeros(0, dtype=bool)
         self._fit_p = fit_params(self.config.fit)
         self._upd_p = update_params(self._fit_p, self.config.fit, tc)  # (update_pairs' configuration values)
@@ -276,18 +277,19 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         keeping pace elsewhere is not the body). None: every near track can."""
         st = self.stats
         self._body_near = None
-        if body_beams is not None and body_beams.shape[0] == scan.n_beams:
+        if body_beams is not None and body_beams.shape[0] == scan.ranges.shape[0]:  # (scan.n_beams, no property call)
             # the body beams rarely change: the grown mask is kept while they stay the same
             key = self._body_key
             # (np.array_equal's answer for the bool masks, without its Python wrapper: the same dtype, shape and bytes)
             if key is None or key.dtype != body_beams.dtype or key.shape != body_beams.shape or \
-                    key.tobytes() != body_beams.tobytes():
+                    self._body_bytes != body_beams.tobytes():
                 w = self.config.tracker.ride_beam_window
                 near = body_beams.astype(bool).copy()
                 for d in range(1, w + 1):
                     near[d:] |= body_beams[:-d]
                     near[:-d] |= body_beams[d:]
                 self._body_key = body_beams.copy()
+                self._body_bytes = self._body_key.tobytes()
                 self._body_grown = near
             self._body_near = self._body_grown
         self._map = map_view if self.config.tracker.map_evidence else None
