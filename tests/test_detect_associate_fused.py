@@ -139,13 +139,20 @@ def _former_pair_calls(Xs: np.ndarray, Ps: np.ndarray):
         none = np.empty((0, 4), dtype=np.int64)
         if status:
             man0 = (np.empty(0, dtype=np.int8), np.empty(0), np.empty(0), np.empty(0, dtype=np.int64))
-            return status, ii, jj, vetoed, 0, 0, none, 0, man0
+            return status, vetoed, 0, 0, np.empty((0, 6), dtype=np.int64), np.empty(0, dtype=np.int64), 0, man0
         nb, top, info, nrej = 0, 0, none, 0
         if ii.shape[0]:
             nb, top, info, nrej = ku.update_pairs(G, Gi, X, P, Xs, Ps, ii, rows, jj, missed, *batch, q, bound, CI,
                                                   CL, lim, lim2, *mev, MEV, RIDE, WN, use_map, lx, ly, c, s, t)
         # (then TrackManage._manage's kernel call, with the rows and stamp of the scan: pass trk117)
-        return status, ii, jj, vetoed, nb, top, info, nrej, ku.manage_scan(P, X, CI, CL, WN, MEV, rows, q, t)
+        man = ku.manage_scan(P, X, CI, CL, WN, MEV, rows, q, t)
+        # (then the tracker's Python before pass trk138: the pairs whose info flag is not 0, their rows, and the
+        # detections no such pair took — _update_tracks' loop test and used set, update's list of the unused)
+        applied = [[ti, di, *row] for ti, di, row in zip(ii.tolist(), jj.tolist(), info.tolist()) if row[0]]
+        used = {r[1] for r in applied}
+        unused = [di for di in range(batch[0].shape[0]) if di not in used]
+        return (status, vetoed, nb, top, np.array(applied, dtype=np.int64).reshape(-1, 6),
+                np.array(unused, dtype=np.int64), nrej, man)
 
     return calls
 
@@ -176,7 +183,7 @@ def test_associate_update_is_the_two_former_calls_in_pipeline_runs() -> None:
     bounded). The former calls get the predicted rows as the tracker stacked them before pass trk129 (the arrays
     ``cv_predict`` returned in this scan, with the stationary predictions written into them; ``X.take(rows)`` where
     it did not run), the fused kernel gathers them from the state rows itself."""
-    seen = {"calls": 0, "pairs": 0, "bounded": 0, "use_map": 0, "predicted": 0, "still": 0}
+    seen = {"calls": 0, "pairs": 0, "unused": 0, "bounded": 0, "use_map": 0, "predicted": 0, "still": 0}
     stacked: list = []
     former_predict, former_cv = tracker_mod.Tracker._predict, tracker_mod.cv_predict
 
@@ -211,8 +218,9 @@ def test_associate_update_is_the_two_former_calls_in_pipeline_runs() -> None:
         for case in (a, tight):
             got, want = _outcome(ka.associate_update, case), _outcome(_former_pair_calls(Xs, Ps), case)
             assert got == want
-            seen["bounded"] += want[0][4]
-        seen["pairs"] += len(got[0][1]) // 8
+            seen["bounded"] += want[0][2]  # (update_pairs' bounded rows)
+        seen["pairs"] += len(got[0][4]) // 48  # (the applied pairs' rows: six int64)
+        seen["unused"] += len(got[0][5]) // 8
         seen["use_map"] += bool(a[29])
         seen["calls"] += 1
         return ka.associate_update(*a)
@@ -224,7 +232,7 @@ def test_associate_update_is_the_two_former_calls_in_pipeline_runs() -> None:
     finally:
         tracker_mod.associate_update, tracker_mod.cv_predict, tracker_mod.Tracker._predict = \
             saved, former_cv, former_predict
-    assert seen["calls"] > 100 and seen["pairs"] > 500 and seen["bounded"] > 20, seen
+    assert seen["calls"] > 100 and seen["pairs"] > 500 and seen["bounded"] > 20 and seen["unused"] > 20, seen
     assert 20 < seen["use_map"] < seen["calls"] and seen["predicted"] > 100, seen
 
 

@@ -224,13 +224,12 @@ def test_free_space_entries_read_late_hold_the_vacated_fraction_of_their_scan() 
     expected: list[tuple[float | tuple, float]] = []
 
     class Eager(Tracker):
-        def _update_tracks(self, pairs, dets, t, applied, *rest):
+        def _update_tracks(self, applied, dets, t):
             vac = _vacated_reference(self, t)  # (this scan, before the update)
-            super()._update_tracks(pairs, dets, t, applied, *rest)
-            for (ti, di), ok in zip(pairs, applied):
-                if ok:
-                    k = self._tracks[ti]
-                    expected.append((k.free[-1], max(dets[di].free_fraction, vac.get(k.id, 0.0))))
+            super()._update_tracks(applied, dets, t)
+            for ti, di, *_info in applied:  # (the pairs whose update applied: pass trk138)
+                k = self._tracks[ti]
+                expected.append((k.free[-1], max(dets[di].free_fraction, vac.get(k.id, 0.0))))
 
     tr = Eager(DetectConfig())
     pose = Pose2D(-5.0, 0.0, 0.0)

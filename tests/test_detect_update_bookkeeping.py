@@ -1,7 +1,8 @@
 """Pass trk71: ``Tracker._update_tracks``' per-pair bookkeeping, written for the common case (the re-acquired flag
 from ``update_pairs``' ``info``, ``person`` kept as ``person_streak > 0``), leaves every updated track as the former
 loop did: its free-space entries (values, snapshots of the stored points, which list they hold), stored points and
-their first live entry, beams, flags and counters, and the updated / used sets in the same insertion order."""
+their first live entry, beams, flags and counters, and the updated set in the same insertion order (the used set is
+gone since pass trk138: the kernel lists the unused detections, tests/test_detect_associate_fused.py)."""
 
 from __future__ import annotations
 
@@ -14,16 +15,19 @@ from dynslam2d.sim import simulate
 from dynslam2d.types import Pose2D
 
 
-def _former_update_tracks(self, pairs, dets, t, info) -> None:
+def _former_update_tracks(self, applied, dets, t) -> None:
     """``_update_tracks`` as it was before pass trk71 (main at 8535922), its ``missed`` list read from the applied
-    flag 2 of ``info`` (the kernel's former 1 and its ``missed`` per track)."""
+    flag 2 of ``info`` (the kernel's former 1 and its ``missed`` per track); the pairs and ``info`` rows taken from
+    the kernel's applied rows (pass trk138), the detections taken into a set nothing reads any more."""
+    pairs = [(r[0], r[1]) for r in applied]
+    info = [r[2:] for r in applied]
     missed = {ti: ok == 2 for (ti, _), (ok, *_r) in zip(pairs, info)}
     tc = self.config.tracker
     nsus = tc.sustain_updates
     max_age = self._free.max_age if self._free is not None else None
     ref = self._cur_ref if self._free is not None else None
     tracks = self._tracks
-    upd, used = self._upd_sets
+    upd, used = self._updated, set()
     for (ti, di), (ok, start, npt, circle_person) in zip(pairs, info):
         if not ok:
             continue
@@ -85,8 +89,7 @@ def _past_key(past: list, a: int, b: int) -> list:
 
 def _state(tr: Tracker) -> tuple:
     """Everything the bookkeeping writes, comparable across two trackers (identities as relations within one)."""
-    upd, used = tr._upd_sets
-    out = [list(upd), list(used)]
+    out = [list(tr._updated)]
     for k in tr._tracks:
         free = []
         for e in k.free:
@@ -112,10 +115,10 @@ def test_update_bookkeeping_is_the_former_loop(free_space: bool) -> None:
     seen = {"reacquired": 0, "person": 0, "snap_old_list": 0, "updated": 0, "merged": 0}
     former = Tracker._update_tracks
 
-    def counting(self, pairs, dets, t, info):
-        seen["reacquired"] += sum(1 for r in info if r[0] == 2)
-        seen["updated"] += sum(1 for r in info if r[0])
-        return former(self, pairs, dets, t, info)
+    def counting(self, applied, dets, t):
+        seen["reacquired"] += sum(1 for r in applied if r[2] == 2)
+        seen["updated"] += sum(1 for r in applied if r[2])
+        return former(self, applied, dets, t)
 
     Tracker._update_tracks = counting
     try:

@@ -156,15 +156,15 @@ class _Shadow(Tracker):
         self.lists: dict[int, tuple[list, list]] = {}
         self.seen = {"reacq": 0, "trimmed": 0, "full": 0, "revived": 0, "compared": 0}
 
-    def _update_tracks(self, pairs, dets, t, info) -> None:
-        applied = [row[0] for row in info]  # (update_pairs' per-pair rows: applied first, pass upd34)
-        # (applied 2: the track had missed scans before the update kernel reset its misses; pass trk71)
-        again = {self._tracks[ti].id for (ti, _), ok in zip(pairs, applied) if ok == 2}
-        super()._update_tracks(pairs, dets, t, info)
+    def _update_tracks(self, applied, dets, t) -> None:
+        # (the pairs whose update applied, pass trk138: track, detection, then update_pairs' info row, its applied
+        # flag first, pass upd34; 2: the track had missed scans before the update kernel reset its misses, pass trk71)
+        again = {self._tracks[ti].id for ti, _di, ok, *_r in applied if ok == 2}
+        super()._update_tracks(applied, dets, t)
         nsus, ride_time = self.config.tracker.sustain_updates, self.config.tracker.ride_time
         p = self._pose
         c, s = self._pose_cs
-        for (ti, di), ok in zip(pairs, applied):
+        for ti, di, ok, *_r in applied:
             if not ok:
                 continue
             k, det = self._tracks[ti], dets[di]

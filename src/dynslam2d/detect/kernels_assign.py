@@ -345,9 +345,11 @@ def associate_update(F: np.ndarray, Fi: np.ndarray, Gi: np.ndarray, rows: np.nda
     ``missed`` flags; ``X``, ``P``, ``CL``, ``RIDE``, ``bound`` … ``mnpts``, ``use_map``, the laser pose ``lx``,
     ``ly``, ``c``, ``s`` (m, map frame; cos and sin of its heading) and the stamp ``t`` (s) as that kernel's), the
     same two functions in the same order on the same arrays as the two calls they replace (nothing in Python between
-    them fed the update: the same floats). Returns (status, ii, jj, vetoed, bounded rows, the longest riding window
-    after the push, ``info``, rejected pairs): :func:`associate_scan`'s first three and its vetoed tracks, then
-    ``update_pairs``' four (0, 0, an empty (0, 4) ``info`` and 0 when no update ran). One dispatch and one unboxing
+    them fed the update: the same floats). Returns (status, vetoed, bounded rows, the longest riding window after the
+    push, applied, unused, rejected pairs, man): :func:`associate_scan`'s status and vetoed tracks, ``update_pairs``'
+    counts (0, 0 when no update ran), its pairs whose update applied with their ``info`` rows and the detections no
+    such pair took (:func:`applied_pairs`: every detection when no update ran, none when the association failed),
+    then ``update_pairs``' count of the pairs that did not apply (0 when no update ran). One dispatch and one unboxing
     of the ≈ 20 arrays both take instead of two, and no boxing of the pairs' arrays for the second call
     (docs/speed.md, pass trk108).
 
@@ -371,7 +373,7 @@ def associate_update(F: np.ndarray, Fi: np.ndarray, Gi: np.ndarray, rows: np.nda
                                                     q[UP_S_STOP], q[UP_MERGE_JUMP], q[UP_S_MAX], q[UP_BIG])
     if status != LSAP_OK:
         man0 = (np.empty(0, dtype=np.int8), np.empty(0), np.empty(0), np.empty(0, dtype=np.int64))
-        return status, ii, jj, vetoed, 0, 0, np.empty((0, 4), dtype=np.int64), 0, man0
+        return status, vetoed, 0, 0, np.empty((0, 6), dtype=np.int64), np.empty(0, dtype=np.int64), 0, man0
     nb, top, nrej = 0, 0, 0
     info = np.empty((0, 4), dtype=np.int64)
     if ii.shape[0]:
@@ -379,4 +381,42 @@ def associate_update(F: np.ndarray, Fi: np.ndarray, Gi: np.ndarray, rows: np.nda
                                            centroid, circle, px, py, start, npts, q, bound, CI, CL, lim, lim2, mfr,
                                            kept, first, second, mnpts, MEV, RIDE, WN, use_map, lx, ly, c, s, t)
     man = manage_scan(P, X, CI, CL, WN, MEV, rows, q, t)
-    return status, ii, jj, vetoed, nb, top, info, nrej, man
+    applied, unused = applied_pairs(ii, jj, info, kind.shape[0])
+    return status, vetoed, nb, top, applied, unused, nrej, man
+
+
+@njit(cache=True, inline="always")
+def applied_pairs(ii: np.ndarray, jj: np.ndarray, info: np.ndarray, m: int) -> tuple:
+    """The pairs (track index ``ii``, detection index ``jj``) whose update applied, with their ``info`` rows
+    (``update_pairs``': applied flag 1 or 2, the detection's first point and point count, its person's-circle flag),
+    as one (na, 6) int64 array of rows [track index, detection index, flag, first point, point count, circle flag] in
+    the pairs' order, and the indices of the ``m`` detections no applied pair took, increasing: what
+    ``Tracker._update_tracks`` loops over and ``Tracker.update``'s unused detections (formerly a Python test of each
+    pair's flag and of each detection against a set; pass trk138). Inlined in :func:`associate_update`."""
+    n = ii.shape[0]
+    na = 0
+    for r in range(n):
+        if info[r, 0] != 0:
+            na += 1
+    out = np.empty((na, 6), dtype=np.int64)
+    taken = np.zeros(m, dtype=np.bool_)
+    a = 0
+    for r in range(n):
+        if info[r, 0] != 0:
+            out[a, 0] = ii[r]
+            out[a, 1] = jj[r]
+            for col in range(4):
+                out[a, 2 + col] = info[r, col]
+            taken[jj[r]] = True
+            a += 1
+    nu = 0
+    for j in range(m):
+        if not taken[j]:
+            nu += 1
+    unused = np.empty(nu, dtype=np.int64)
+    u = 0
+    for j in range(m):
+        if not taken[j]:
+            unused[u] = j
+            u += 1
+    return out, unused

@@ -199,6 +199,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # the prediction's F and Q (_cv_fill writes this step's entries into them; read only by the kernel and the
         # rare paths of _predict, never kept beyond the scan)
         self._FQ: tuple[np.ndarray, np.ndarray] = (np.eye(4), np.zeros((4, 4)))
+        self._FQ_of = (math.nan, math.nan)  # (the dt (s) and accel_noise _FQ holds the entries of; NaN: none yet)
         self._free_rows: list[int] = []  # rows of deleted tracks, reused first
         self._order: np.ndarray | None = None  # the rows of self._tracks in their order (None: to be built)
         self._next_id = 1
@@ -219,6 +220,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._dt = 0.0
         self._body_near: np.ndarray | None = None
         self._body_key: np.ndarray | None = None  # body beams the grown mask below was made from
+        self._body_bytes = b""  # (their bytes: the key is this tracker's own copy, never written)
         self._body_grown: np.ndarray = np.zeros(0, dtype=bool)
         self._fit_p = fit_params(self.config.fit)
         self._upd_p = update_params(self._fit_p, self.config.fit, tc)  # (update_pairs' configuration values)
@@ -230,8 +232,8 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._mev_src: tuple = (np.zeros((3, 0)), _NO_IDX, _NO_IDX, _NO_IDX, _NO_IDX)
         self._default: MeasureRows | None = None  # default measurements of the current scan's detections
         self._merged: set[int] = set()  # ids of tracks in M merged with structure in this scan (_associate_update)
-        # this scan's ids of the updated tracks and indices of the detections they took (update, _update_tracks)
-        self._upd_sets: tuple[set[int], set[int]] = (set(), set())
+        # this scan's ids of the updated tracks (update, _update_tracks)
+        self._updated: set[int] = set()
         # clutter retirement (structure_retire_updates): confirmed still tracks on map structure, out of the
         # Kalman tracking but kept (and reported) while their object is seen, so that a parked mover keeps
         # its id and standing history until it leaves (_clutter_detections)
@@ -275,18 +277,19 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         keeping pace elsewhere is not the body). None: every near track can."""
         st = self.stats
         self._body_near = None
-        if body_beams is not None and body_beams.shape[0] == scan.n_beams:
+        if body_beams is not None and body_beams.shape[0] == scan.ranges.shape[0]:  # (scan.n_beams, no property call)
             # the body beams rarely change: the grown mask is kept while they stay the same
             key = self._body_key
             # (np.array_equal's answer for the bool masks, without its Python wrapper: the same dtype, shape and bytes)
             if key is None or key.dtype != body_beams.dtype or key.shape != body_beams.shape or \
-                    key.tobytes() != body_beams.tobytes():
+                    self._body_bytes != body_beams.tobytes():
                 w = self.config.tracker.ride_beam_window
                 near = body_beams.astype(bool).copy()
                 for d in range(1, w + 1):
                     near[d:] |= body_beams[:-d]
                     near[:-d] |= body_beams[d:]
                 self._body_key = body_beams.copy()
+                self._body_bytes = self._body_key.tobytes()
                 self._body_grown = near
             self._body_near = self._body_grown
         self._map = map_view if self.config.tracker.map_evidence else None
@@ -322,14 +325,13 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._merged = set()
         if not dets and not scan.valid_view().any():  # (the scan's own mask: only read)
             st.empty_scans += 1
-        # (the ids of the updated tracks and the detections they took: filled by _update_tracks in its loop over the
-        # pairs, in the pairs' order)
+        # (the ids of the updated tracks: filled by _update_tracks in its loop over the pairs, in the pairs' order)
         updated: set[int] = set()
-        used: set[int] = set()
-        self._upd_sets = (updated, used)
-        st.rejected_updates += self._associate_update(dets, t)
+        self._updated = updated
+        # (the detections no applied pair took, increasing: the association's kernel lists them; pass trk138)
+        nrej, unused = self._associate_update(dets, t)
+        st.rejected_updates += nrej
         self._manage(t, updated)
-        unused = [di for di in range(len(dets)) if di not in used]
         if (self._map is not None and self.config.tracker.structure_birth_min <= 1.0) or self._dormant or \
                 self._marks.shape[0]:
             unused = self._clutter_detections(dets, unused, t, updated)
@@ -407,7 +409,11 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         if not self._tracks or dt <= 0.0:
             return
         F, Q = self._FQ  # (the tracker's own two arrays, their dt entries written for this step)
-        _cv_fill(F, Q, dt, self.config.tracker.accel_noise)
+        q = self.config.tracker.accel_noise
+        dt0, q0 = self._FQ_of
+        if dt != dt0 or q != q0:  # (the same step as the last scan's, as in a simulated scene: the entries are there)
+            _cv_fill(F, Q, dt, q)
+            self._FQ_of = (dt, q)
         order = self._rows()
         tracks = self._tracks
         # coasting through a stop: it stays where it stood (from k.x / k.P, before the rows are written). Only
@@ -466,14 +472,14 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         return new
 
 
-    def _associate_update(self, dets: list[Detection], t: float) -> int:
+    def _associate_update(self, dets: list[Detection], t: float) -> tuple[int, list[int]]:
         """The association of the scan's detections ``dets`` to the live tracks and the update of the pairs found
         (their Kalman and shape updates, then :meth:`_updated_pairs`), at the scan's stamp ``t`` (s); returns how
-        many pairs' updates did not apply. Both kernels run in one call (``kernels_assign.associate_update``, pass
-        trk108)."""
+        many pairs' updates did not apply and the indices of the detections that no applied update took, increasing.
+        Both kernels run in one call (``kernels_assign.associate_update``, pass trk108)."""
         self._managed = None  # (the management kernel's outputs when this call ran it: _manage reads them)
         if not self._tracks or not dets:
-            return 0
+            return 0, list(range(len(dets)))
         # One kernel call (kernels_assign.associate_scan, docs/speed.md pass trk75): the gates (association_gates: the
         # tracks' sizes, flags and axis angles from their shape rows; the Mahalanobis gate and distance gate, a
         # rectangle measured again with the track's own sizes (a side the detection "measured" too short, e.g. a
@@ -520,7 +526,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         bound, lim, lim2 = self._accel_limits()
         p = self._pose
         c, s = self._pose_cs
-        status, ii, jj, vetoed, nb, top, info, nrej, self._managed = associate_update(
+        status, vetoed, nb, top, applied, unused, nrej, self._managed = associate_update(
             self._F, self._Fi, self._Gi, self._rows(), dm.z, dm.R, *self._batch, self._upd_p, claimed, vrows, ms,
             self._RIDE, bound, lim, lim2, *self._mev_src, self._map is not None, float(p.x), float(p.y), c, s, t)
         if status:
@@ -529,10 +535,9 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
             tracks, add = self._tracks, self._merged.add
             for i in vetoed.tolist():
                 add(tracks[i].id)
-        if not ii.shape[0]:
-            return 0
-        self._updated_pairs(list(zip(ii.tolist(), jj.tolist())), dets, t, nb, top, info)
-        return nrej
+        if applied.shape[0] or nb or top:  # (no update ran, or none applied and nothing to count or grow: no-op)
+            self._updated_pairs(applied, dets, t, nb, top)
+        return nrej, unused.tolist()
 
     def _birth(self, det: Detection, t: float, j: int) -> None:
         """A new tentative track from detection ``det`` (index ``j`` of this scan's detections)."""

@@ -57,50 +57,48 @@ class TrackUpdate:
             return True, float(lim), (0.999 * lim) ** 2
         return False, 0.0, 0.0
 
-    def _updated_pairs(self, pairs: list[tuple[int, int]], dets: list[Detection], t: float, nb: int, top: int,
-                       info: np.ndarray) -> None:
-        """After ``update_pairs`` (``Tracker._associate_update``'s call) ran on ``pairs`` at the scan's stamp ``t``
-        (s): its count ``nb`` of bounded rows into the stats, the riding window grown when its longest row ``top``
-        filled it, then the per-track bookkeeping (:meth:`_update_tracks`) from its ``info`` rows."""
+    def _updated_pairs(self, applied: np.ndarray, dets: list[Detection], t: float, nb: int, top: int) -> None:
+        """After ``update_pairs`` (``Tracker._associate_update``'s call) ran at the scan's stamp ``t`` (s): its count
+        ``nb`` of bounded rows into the stats, the riding window grown when its longest row ``top`` filled it, then
+        the per-track bookkeeping (:meth:`_update_tracks`) of the pairs whose update applied (``applied``: the
+        kernel's rows, ``kernels_assign.applied_pairs``)."""
         if nb:
             self.stats.accel_bounded += nb
         if top >= self._RIDE.shape[1]:  # (the next push could overflow a full window)
             self._grow_ride()
-        self._update_tracks(pairs, dets, t, info.tolist())
+        if applied.shape[0]:
+            self._update_tracks(applied.tolist(), dets, t)
 
-    def _update_tracks(self, pairs: list[tuple[int, int]], dets: list[ScanDetection], t: float,
-                       info: list[list[int]]) -> None:
-        """The bookkeeping update of the tracks of ``pairs`` (track index, detection index) whose Kalman and shape
-        results are already in their rows (k.x, k.P, k.g, k.gi) where applied; ``info``: per pair [applied: 0 no,
-        1 yes, 2 yes and the track is re-acquired (it had missed scans before this update), the detection's first
-        point in the batch, its point count, 1 if it is a circle of a person's radius] (``update_pairs``' rows, one
-        conversion per scan: the detection's own properties (ScanDetection) would read them one by one); the scan's
-        constants are read once (one loop over the pairs: the update of one track is a few µs of Python). The riding
-        and map-evidence windows are pushed before, for all pairs in the same kernel call, and a re-acquired track's
+    def _update_tracks(self, applied: list[list[int]], dets: list[ScanDetection], t: float) -> None:
+        """The bookkeeping update of the tracks whose Kalman and shape results are already in their rows (k.x, k.P,
+        k.g, k.gi); ``applied``: per pair whose update applied, in the pairs' order, [track index, detection index,
+        1 (or 2: the track is re-acquired, it had missed scans before this update), the detection's first point in
+        the batch, its point count, 1 if it is a circle of a person's radius] (``kernels_assign.applied_pairs``' rows
+        of ``update_pairs``' ``info``, one conversion per scan: the pairs that did not apply are left out there, and
+        the detections' own properties (ScanDetection) would read these values one by one); the scan's constants are
+        read once (one loop over the pairs: the update of one track is a few µs of Python). The riding and
+        map-evidence windows are pushed before, for all pairs in the same kernel call, and a re-acquired track's
         restarted there to that push's entries; so are the counters (hits, misses, last hit, M of N: columns of the
         counter table, pass cnt36).
 
-        Per pair, in this order: the track's id into the updated set and the detection into the used one; the
-        free-space entry (for a re-acquired track its window, speed count and probation restarted first) made of the
-        stored points as they were before this update; the flags and the beams; then, with a free-space memory, the
-        detection's points stored (the entries older than its max age skipped, the list started anew every
-        ``_PAST_COMPACT`` of them; a re-acquired track's on a new list). The loop is written for the common case (an
-        applied update of a tracked object, the free-space memory on): the re-acquired and the no-memory cases are
-        the branches (docs/speed.md, pass trk71)."""
+        Per pair, in this order: the track's id into the updated set (the detections taken: the kernel's unused list,
+        pass trk138); the free-space entry (for a re-acquired track its window, speed count and probation restarted
+        first) made of the stored points as they were before this update; the flags and the beams; then, with a
+        free-space memory, the detection's points stored (the entries older than its max age skipped, the list
+        started anew every ``_PAST_COMPACT`` of them; a re-acquired track's on a new list). The loop is written for
+        the common case (an applied update of a tracked object, the free-space memory on): the re-acquired and the
+        no-memory cases are the branches (docs/speed.md, pass trk71)."""
         nsus = self.config.tracker.sustain_updates
         fm = self._free
         ref = self._cur_ref if fm is not None else None  # (the vacated-space test's reference: this scan)
         max_age = fm.max_age if fm is not None else 0.0
         tracks = self._tracks
-        upd, used = self._upd_sets
-        upd_add, used_add = upd.add, used.add
+        upd_add = self._updated.add
         # (row di of the batch, read by the kernel for info, is detection di's row, copied by the leg merge)
-        for (ti, di), (ok, start, npt, circle_person) in zip(pairs, info):
-            if not ok:
-                continue
-            k, det = tracks[ti], dets[di]
+        for ti, di, ok, start, npt, circle_person in applied:
+            k = tracks[ti]
+            det = dets[di]
             upd_add(k.id)
-            used_add(di)
             # (the detection's rows of its scan's beams and points: ScanDetection.beams / points, from the batch)
             arrays = det._s
             a0 = start - arrays.off
@@ -133,8 +131,8 @@ class TrackUpdate:
                 past = k.past
                 pa = np0 = 0
             past.append((t, arrays.pts, a0, npt))  # (_past_entry of a scan detection, inline)
-            np0 += 1
-            while pa < np0 and t - past[pa][0] > max_age:
+            # (np0 + 1 entries now: the guard pa ≤ np0)
+            while pa <= np0 and t - past[pa][0] > max_age:
                 pa += 1
             if pa >= _PAST_COMPACT:  # (a new list of the live entries: the old one stays with its snapshots)
                 k.past = past[pa:]
