@@ -1226,14 +1226,12 @@ class CompileCollectorPause:
     numba's typing and lowering keep many objects alive (types, IR, compiled libraries): even at the compile's
     thresholds (:func:`lean_compile_gc`) every young collection walks the new ones again and every older one all
     that survived, ≈ 1.3 s of CPU in the run process's cold compile, on its critical path (pass cmp142). With the
-    collector off nothing is walked. :meth:`resume` then moves every object into the permanent generation
+    collector off nothing is walked; the garbage in reference cycles waits. :meth:`resume` then makes one full
+    collection (that garbage freed), moves every object still alive into the permanent generation
     (``gc.freeze()``: numba's compiled kernels and types live as long as the process and are never walked again,
     neither by the scan loop's collections nor by the full ones a run's figures make, ``viz.figure.save_png``) and
     switches the collector on with the thresholds it had: the scan loop's collections then are those of a run
-    that never paused (:func:`dynslam2d.collector.scan_loop_gc`), over fewer objects. The garbage in reference
-    cycles made while the collector was off stays (frozen with the rest): in the README's first command ≈ 2 500
-    small objects, ≈ 0.35 MB and no array, against 0.4–0.8 s of CPU for the full collection that would free it
-    (docs/speed.md, pass cmp143).
+    that never paused (:func:`dynslam2d.collector.scan_loop_gc`), over fewer objects.
 
     Used as a run observer (:class:`dynslam2d.pipeline.RunObserver`): :meth:`on_scan` resumes after
     ``quiet_scans`` scans in a row in which this process neither compiled nor waited for the background compile
@@ -1261,13 +1259,15 @@ class CompileCollectorPause:
         return True
 
     def resume(self) -> None:
-        """Every object into the permanent generation, the collector on again (only after :meth:`pause`; once)."""
+        """One full collection, everything alive into the permanent generation, the collector on again (only after
+        :meth:`pause`; once)."""
         import gc
 
         if not self.paused:
             return
         self.paused = False
         self.resumed_after = self._scans
+        gc.collect()
         gc.freeze()
         gc.enable()
 
