@@ -110,7 +110,11 @@ WAIT = r"""
 import json, resource, sys, time
 """ + RUN_FIRST_COMMAND + r"""
 kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-print(json.dumps({"process_cpu": time.process_time(), "children_cpu": kids.ru_utime + kids.ru_stime}))
+import gc
+print(json.dumps({"process_cpu": time.process_time(), "children_cpu": kids.ru_utime + kids.ru_stime,
+                  "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                  "gc_on": gc.isenabled(), "gc_threshold": gc.get_threshold(), "gc_frozen": gc.get_freeze_count(),
+                  "gc_collections": [g["collections"] for g in gc.get_stats()]}))
 """
 
 
@@ -271,8 +275,10 @@ def wait(src: str) -> None:
     data = json.loads(res.stdout.strip().splitlines()[-1])
     summary = json.loads((out / "summary.json").read_text())
     print(f"cold wait {wall:.1f} s wall; kernel_compile_s {summary['kernel_compile_s']:.1f} s; run process CPU "
-          f"{data['process_cpu']:.1f} s, background compile CPU {data['children_cpu']:.1f} s; load average "
-          f"{os.getloadavg()[0]:.2f}; src {src}")
+          f"{data['process_cpu']:.1f} s, background compile CPU {data['children_cpu']:.1f} s; run peak RSS "
+          f"{data['peak_rss_mib']:.0f} MiB; collector after the run: on {data['gc_on']}, thresholds "
+          f"{tuple(data['gc_threshold'])}, frozen {data['gc_frozen']}, collections {data['gc_collections']}; "
+          f"load average {os.getloadavg()[0]:.2f}; src {src}")
 
 
 def cold_probe(src: str, probe: str) -> dict:

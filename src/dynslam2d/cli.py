@@ -664,9 +664,10 @@ def run(
     checkpointer = Checkpointer(folder.work, every_s=checkpoint_period, every_scans=checkpoint_scans,
                                 info={"input": source.meta.origin})
     old_term = _sigterm_as_interrupt()
+    pause = _compile_collector_pause(compiling)  # no cyclic collector while the kernels compile (jitcache.py)
     try:
         with contextlib.ExitStack() as stack:
-            observers: list[Any] = [collector, checkpointer]
+            observers: list[Any] = [collector, checkpointer, *([pause] if pause is not None else [])]
             observers += _run_observers(stack, cfg, folder.work, cleaner, animate=animate, frame_step=frame_step,
                                         write_bag=write_bag, bag_storage=bag_storage, map_period=map_period,
                                         viewer=viewer, rerun_save=rerun_save)
@@ -684,6 +685,8 @@ def run(
         raise
     finally:
         _restore_sigterm(old_term)
+        if pause is not None:
+            pause.resume()
         if background is not None:
             background.stop()
     if as_json:
@@ -1005,6 +1008,18 @@ def _cold_start(background: Any = None) -> tuple[bool, Any]:
 
         lean_compile_gc()  # fewer collections while numba compiles (about a sixth of the compile CPU)
     return cold, (background or start_background_compile()) if cold else None
+
+
+def _compile_collector_pause(cold: bool) -> Any:
+    """On a cold cache, Python's cyclic garbage collector switched off until the run's scans compile nothing any
+    more (:class:`dynslam2d.jitcache.CompileCollectorPause`, a run observer; ≈ 1 s less CPU in the run's compile);
+    None on a warm cache (or with the AOT-compiled kernels), where nothing changes."""
+    if not cold:
+        return None
+    from dynslam2d.jitcache import CompileCollectorPause
+
+    pause = CompileCollectorPause()
+    return pause if pause.pause() else None
 
 
 def _say_if_compiling(show: bool, cold: bool) -> None:

@@ -1214,6 +1214,77 @@ def lean_compile_gc() -> bool:
     return True
 
 
+#: Scans in a row that compiled nothing (and waited for no compile) after which a cold run's collector comes back
+#: (:class:`CompileCollectorPause`).
+COMPILE_QUIET_SCANS = 3
+
+
+class CompileCollectorPause:
+    """Python's cyclic garbage collector off in a cold command-line run while its kernels compile, back on once the
+    run's scans compile nothing any more (issue 13 item 2; docs/speed.md, pass cmp143).
+
+    numba's typing and lowering keep many objects alive (types, IR, compiled libraries): even at the compile's
+    thresholds (:func:`lean_compile_gc`) every young collection walks the new ones again and every older one all
+    that survived, ≈ 1.3 s of CPU in the run process's cold compile, on its critical path (pass cmp142). With the
+    collector off nothing is walked; the garbage in reference cycles waits. :meth:`resume` then makes one full
+    collection (that garbage freed), moves every object still alive into the permanent generation
+    (``gc.freeze()``: numba's compiled kernels and types live as long as the process and are never walked again,
+    neither by the scan loop's collections nor by the full ones a run's figures make, ``viz.figure.save_png``) and
+    switches the collector on with the thresholds it had: the scan loop's collections then are those of a run
+    that never paused (:func:`dynslam2d.collector.scan_loop_gc`), over fewer objects.
+
+    Used as a run observer (:class:`dynslam2d.pipeline.RunObserver`): :meth:`on_scan` resumes after
+    ``quiet_scans`` scans in a row in which this process neither compiled nor waited for the background compile
+    (:func:`compile_seconds` unchanged); :meth:`on_finish` at the latest, and the command line calls
+    :meth:`resume` again when the run ends or fails (it does nothing the second time). A kernel first needed
+    later (a loop closure's) compiles with the collector on, as before. Nothing a kernel computes changes."""
+
+    def __init__(self, quiet_scans: int = COMPILE_QUIET_SCANS) -> None:
+        self.quiet_scans = quiet_scans
+        self.paused = False
+        self.resumed_after: int | None = None  #: scans done when the collector came back (None: not yet)
+        self._compile_s = 0.0
+        self._quiet = 0
+        self._scans = 0
+
+    def pause(self) -> bool:
+        """Switch the collector off (when it is on). Returns whether it did."""
+        import gc
+
+        if self.paused or not gc.isenabled():
+            return False
+        self._compile_s = compile_seconds()
+        gc.disable()
+        self.paused = True
+        return True
+
+    def resume(self) -> None:
+        """One full collection, everything alive into the permanent generation, the collector on again (only after
+        :meth:`pause`; once)."""
+        import gc
+
+        if not self.paused:
+            return
+        self.paused = False
+        self.resumed_after = self._scans
+        gc.collect()
+        gc.freeze()
+        gc.enable()
+
+    def on_scan(self, scan: object, step: object, pipeline: object) -> None:
+        if not self.paused:
+            return
+        self._scans += 1
+        now = compile_seconds()
+        self._quiet = 0 if now != self._compile_s else self._quiet + 1
+        self._compile_s = now
+        if self._quiet >= self.quiet_scans:
+            self.resume()
+
+    def on_finish(self, result: object, pipeline: object) -> None:
+        self.resume()
+
+
 #: SciPy's BLAS extension module, which numba imports to check for BLAS (numba.np.arraymath).
 BLAS_MODULE = "scipy.linalg.cython_blas"
 
