@@ -409,14 +409,4 @@ def applied_pairs(ii: np.ndarray, jj: np.ndarray, info: np.ndarray, m: int) -> t
                 out[a, 2 + col] = info[r, col]
             taken[jj[r]] = True
             a += 1
-    nu = 0
-    for j in range(m):
-        if not taken[j]:
-            nu += 1
-    unused = np.empty(nu, dtype=np.int64)
-    u = 0
-    for j in range(m):
-        if not taken[j]:
-            unused[u] = j
-            u += 1
-    return out, unused
+    return out, np.flatnonzero(~taken).astype(np.int64)
