@@ -25,7 +25,9 @@ def thresholds():
         yield
     finally:
         gc.set_threshold(*saved)
-        if not enabled:
+        if enabled:  # (a test that switched it off must not leave the rest of the suite without a collector)
+            gc.enable()
+        else:
             gc.disable()
 
 

@@ -13,10 +13,15 @@ from dynslam2d import cli, jitcache
 
 @pytest.fixture
 def collector_restored():
-    """The test process's collector as it was (on, its thresholds, nothing frozen) after each test."""
-    threshold, frozen = gc.get_threshold(), gc.get_freeze_count()
-    yield
+    """The collector on at the start of each test (what a command-line run starts with, whatever an earlier test in
+    this process left), and as it was (on or off, its thresholds, nothing frozen) after it."""
+    threshold, frozen, enabled = gc.get_threshold(), gc.get_freeze_count(), gc.isenabled()
     gc.enable()
+    yield
+    if enabled:
+        gc.enable()
+    else:
+        gc.disable()
     gc.set_threshold(*threshold)
     if frozen == 0:
         gc.unfreeze()
