@@ -19,7 +19,6 @@ import importlib.util
 import shutil
 import statistics
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -28,12 +27,13 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
+from scratch import scratch_dir  # noqa: E402
 
 
 def _load(src: Path, rel: str, name: str):  # type: ignore[no-untyped-def]
     """The other checkout's module ``rel`` under the name ``name``, from a copy in a folder of its own (numba's
     cache of its kernels goes there: in the checkout's own cache they would name a module it does not have)."""
-    copy = Path(tempfile.mkdtemp(prefix="bench_cleanup_scan_")) / f"{name}.py"
+    copy = Path(scratch_dir("bench_cleanup_scan_")) / f"{name}.py"
     shutil.copyfile(src / rel, copy)
     spec = importlib.util.spec_from_file_location(name, copy)
     mod = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]

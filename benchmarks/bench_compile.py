@@ -37,9 +37,10 @@ import json
 import os
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
+
+from scratch import scratch_dir
 
 #: Probe code: the README's first command in this interpreter (``sys.argv[1]``: the results folder).
 RUN_FIRST_COMMAND = r"""
@@ -244,10 +245,10 @@ def split(src: str, top: int) -> None:
 
 def trace(src: str) -> None:
     """One cold run as ``wait`` starts it, with both processes' compile and cache-load timeline."""
-    folder = Path(tempfile.mkdtemp(prefix="bench-compile-"))
+    folder = Path(scratch_dir("bench-compile-"))
     log = folder / "trace.jsonl"
     t0 = time.time()
-    env = dict(os.environ, PYTHONPATH=src, NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-cold-"),
+    env = dict(os.environ, PYTHONPATH=src, NUMBA_CACHE_DIR=scratch_dir("numba-cold-"),
                TRACE_FILE=str(log), TRACE_WORKER=TRACE_WORKER)
     res = subprocess.run([sys.executable, "-c", TRACE_RUN, str(folder / "run")], env=env, capture_output=True,
                          text=True)
@@ -265,8 +266,8 @@ def trace(src: str) -> None:
 
 def wait(src: str) -> None:
     """One cold run of the README's first command as a user starts it: wall time and CPU."""
-    env = dict(os.environ, PYTHONPATH=src, NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-cold-"))
-    out = Path(tempfile.mkdtemp(prefix="bench-compile-")) / "run"
+    env = dict(os.environ, PYTHONPATH=src, NUMBA_CACHE_DIR=scratch_dir("numba-cold-"))
+    out = Path(scratch_dir("bench-compile-")) / "run"
     t0 = time.perf_counter()
     res = subprocess.run([sys.executable, "-c", WAIT, str(out)], env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
@@ -284,9 +285,9 @@ def wait(src: str) -> None:
 def cold_probe(src: str, probe: str) -> dict:
     """Run ``probe`` (Python code; argv[1] an output folder) on the checkout ``src`` with an empty numba cache and
     no background compile, in a fresh process; its last stdout line parsed as JSON."""
-    env = dict(os.environ, PYTHONPATH=src, NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-cold-"),
+    env = dict(os.environ, PYTHONPATH=src, NUMBA_CACHE_DIR=scratch_dir("numba-cold-"),
                DYNSLAM2D_COMPILE_WORKER="0")
-    out = tempfile.mkdtemp(prefix="bench-compile-") + "/run"
+    out = scratch_dir("bench-compile-") + "/run"
     res = subprocess.run([sys.executable, "-c", probe, out], env=env, capture_output=True, text=True)
     if res.returncode != 0:
         raise SystemExit(res.stderr[-2000:])

@@ -22,11 +22,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import tempfile
 import time
 
 import numpy as np
 from scenes import ten_movers
+from scratch import scratch_dir
 
 
 def _stats(ms: list[float]) -> str:
@@ -40,7 +40,7 @@ def main() -> None:
     ap.add_argument("--cold", action="store_true")
     args = ap.parse_args()
     if args.cold:
-        os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="numba-cold-")
+        os.environ["NUMBA_CACHE_DIR"] = scratch_dir("numba-cold-")
 
     from dynslam2d.detect import DetectConfig, Tracker, fit_clusters, search_angles, segment_scan
     from dynslam2d.detect.shapes import CRITERIA

@@ -26,7 +26,8 @@ import gc
 import os
 import resource
 import sys
-import tempfile
+
+from scratch import keep_requested, scratch_dir
 
 PAGE = os.sysconf("SC_PAGE_SIZE")
 MARKS: list[tuple[str, float, float]] = []
@@ -180,7 +181,7 @@ def run(args: list[str]) -> None:
 
         setattr(F, name, tagged)
     _wrapped(F, "write_figures", "figures: start", "figures: end")
-    out = tempfile.mkdtemp(prefix="bench-mem-figure-")
+    out = scratch_dir("bench-mem-figure-")
     sys.argv = ["dynslam2d", "run", args[0], "--out", out + "/run", "-q", *args[1:]]
     try:
         dynslam2d.cli.main()
@@ -189,7 +190,7 @@ def run(args: list[str]) -> None:
     report()
     # (clear_refs resets ru_maxrss too: the run's peak is the largest "peak since last")
     print(f"{'ru_maxrss since the last mark':<44} {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:7.1f} MiB")
-    print(f"outputs in {out}/run")
+    print(f"outputs in {out}/run" + ("" if keep_requested() else " (removed at exit: BENCH_KEEP_SCRATCH=1 keeps them)"))
 
 
 def fresh() -> None:

@@ -28,6 +28,8 @@ import sys
 import tempfile
 import time
 
+from scratch import scratch_dir
+
 _PAGE = os.sysconf("SC_PAGE_SIZE")
 
 
@@ -141,7 +143,7 @@ def main() -> None:
     log.install()
     from dynslam2d.cli import main as cli_main
 
-    out = tempfile.mkdtemp(prefix="bench_mem_imports_")
+    out = scratch_dir("bench_mem_imports_")
     argv = ["dynslam2d", "run", args.input, "--out", out, "-q", "--force"]
     if args.topic:
         argv += ["--topic", args.topic]

@@ -28,10 +28,10 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import tempfile
 import time
 
 import numpy as np
+from scratch import scratch_dir
 
 PAGE = os.sysconf("SC_PAGE_SIZE")
 TILES = ((32, 32), (64, 16), (16, 64))  # (columns, rows) of cells per tile: 1024 cells, one page of 4-byte cells
@@ -163,7 +163,7 @@ def main() -> None:
     P.Pipeline.process = process
     P._release_unexported = at_end
     t0 = time.perf_counter()
-    out = tempfile.mkdtemp(prefix="bench-mem-tiles-")
+    out = scratch_dir("bench-mem-tiles-")
     sys.argv = ["dynslam2d", "run", args.input, "--out", out + "/run", "-q", *args.extra]
     try:
         dynslam2d.cli.main()

@@ -20,14 +20,13 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import shutil
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from scratch import scratch_dir
 
 ROOM = (-5.0, 5.0, -3.0, 3.0)  # x0, x1, y0, y1 of the walls, m
 BEAMS = 180
@@ -88,7 +87,7 @@ def main() -> None:
                     help="recordings (or sim:<scenario>) to measure instead of generated logs")
     ap.add_argument("extra", nargs="*", help="extra options for 'dynslam2d run' (after --)")
     args = ap.parse_args()
-    work = Path(tempfile.mkdtemp(prefix="dynslam2d-bench-memory-"))
+    work = Path(scratch_dir("dynslam2d-bench-memory-", keep=args.keep))  # removed at exit unless --keep
     rows = []
     try:
         if args.inputs:
@@ -107,8 +106,8 @@ def main() -> None:
         if len(rows) >= 2:
             print(f"peak RSS ratio {rows[-1][0]} / {rows[0][0]} scans: {rows[-1][2] / rows[0][2]:.2f}")
     finally:
-        if not args.keep:
-            shutil.rmtree(work, ignore_errors=True)
+        if args.keep:
+            print(f"logs and results kept in {work}")
 
 
 if __name__ == "__main__":

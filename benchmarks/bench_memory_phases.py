@@ -16,9 +16,10 @@ import importlib
 import os
 import resource
 import sys
-import tempfile
 import threading
 import time
+
+from scratch import keep_requested, scratch_dir
 
 PAGE = os.sysconf("SC_PAGE_SIZE")
 
@@ -128,7 +129,7 @@ def main() -> None:
     wrap(phases, "dynslam2d.results", "tracks_csv", "results: tracks.csv", None)
     wrap(phases, "dynslam2d.viz.figures", "plot_map", "figures: map.png", "figures")
     wrap(phases, "dynslam2d.viz.figures", "plot_tracks", "figures: tracks.png", "figures")
-    out = tempfile.mkdtemp(prefix="bench-memory-phases-")
+    out = scratch_dir("bench-memory-phases-")
     sys.argv = ["dynslam2d", "run", sys.argv[1], "--out", out + "/run", "-q", *sys.argv[2:]]
     try:
         dynslam2d.cli.main()
@@ -140,7 +141,7 @@ def main() -> None:
     print(f"{'process ru_maxrss':<28} {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:7.1f} MiB")
     if "run loop" in phases.hwm_left:  # (exact: the imports' and the loop's peak, the loop's in practice)
         print(f"{'run loop (VmHWM at its end)':<28} {phases.hwm_left['run loop']:7.1f} MiB")
-    print(f"outputs in {out}/run")
+    print(f"outputs in {out}/run" + ("" if keep_requested() else " (removed at exit: BENCH_KEEP_SCRATCH=1 keeps them)"))
 
 
 if __name__ == "__main__":

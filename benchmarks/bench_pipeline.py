@@ -31,11 +31,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
-import tempfile
 import time
 
 import numpy as np
 from scenes import ten_movers
+from scratch import scratch_dir
 
 STAGES = ("match", "track", "filter", "map_update", "loops", "total")
 
@@ -135,7 +135,7 @@ def main() -> None:
     ap.add_argument("--cold", action="store_true")
     args = ap.parse_args()
     if args.cold:
-        os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="numba-cold-")
+        os.environ["NUMBA_CACHE_DIR"] = scratch_dir("numba-cold-")
     for name in args.scenes:
         t0 = time.perf_counter()
         scans = _scans(name, args.duration)

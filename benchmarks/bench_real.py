@@ -40,10 +40,11 @@ import os
 import shlex
 import subprocess
 import sys
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from scratch import scratch_dir
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -207,7 +208,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data", help="the shared data folder")
     ap.add_argument("--out", type=Path, default=None,
-                    help="folder for the run folders (default: a new temporary one; earlier runs in it are replaced)")
+                    help="folder for the run folders (default: a new temporary one, removed at exit; earlier runs in "
+                         "a given one are replaced)")
     ap.add_argument("--table", type=Path, default=None, help="also write the markdown table + commands here")
     ap.add_argument("--filter", default="box", choices=("none", "fixed", "adaptive", "box", "default"))
     ap.add_argument("--config", type=Path, default=None, help="YAML configuration passed to every run")
@@ -215,7 +217,7 @@ def main() -> None:
     ap.add_argument("--cpu", type=int, default=None, help="pin every command to this core (taskset -c)")
     args = ap.parse_args()
     if args.out is None:
-        args.out = Path(tempfile.mkdtemp(prefix="dynslam2d-bench-real-"))
+        args.out = Path(scratch_dir("dynslam2d-bench-real-"))
     args.data, args.out = args.data.resolve(), args.out.resolve()
     args.out.mkdir(parents=True, exist_ok=True)
     sys.path.insert(0, str(REPO / "src"))

@@ -45,12 +45,12 @@ import argparse
 import json
 import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 from bench_pipeline import scan_loop_gc, warm_up  # the same throw-away pipeline over the first scans; run's collector
+from scratch import scratch_dir
 
 STAGES = ("match", "track", "filter", "map_update", "loops", "total")
 REPO = Path(__file__).resolve().parents[1]
@@ -199,7 +199,7 @@ def main() -> None:
 
         pipeline_module.time = types.SimpleNamespace(perf_counter=time.thread_time)
     if args.cold:
-        os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="numba-cold-")
+        os.environ["NUMBA_CACHE_DIR"] = scratch_dir("numba-cold-")
     names = [n for n in INPUTS if args.only is None or any(o in n for o in args.only)]
     results = []
     for name in names:

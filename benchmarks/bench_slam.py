@@ -23,11 +23,11 @@ import datetime
 import os
 import shlex
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from scratch import scratch_dir
 
 CSAIL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mit-csail" / "mit-csail.clf"
 
@@ -98,7 +98,7 @@ def main() -> None:
                     help="also print docs/slam.md's Speed table rows, the command line and the load")
     args = ap.parse_args()
     if args.cold:
-        os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="bench_slam_numba_")
+        os.environ["NUMBA_CACHE_DIR"] = scratch_dir("bench_slam_numba_")
 
     # first call: numba compile (or cache load) of every kernel
     t0 = time.perf_counter()

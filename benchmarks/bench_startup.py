@@ -27,8 +27,9 @@ import resource
 import statistics
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
+
+from scratch import scratch_dir
 
 PROBE = r"""
 import json, sys, time, resource
@@ -76,8 +77,8 @@ print(json.dumps({"import": imp, "first_scan": first[0], "end": end,
 def one(src: str, cold: bool) -> dict[str, object]:
     env = dict(os.environ, PYTHONPATH=src)
     if cold:
-        env["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="numba-cold-")
-    out = tempfile.mkdtemp(prefix="startup-out-")
+        env["NUMBA_CACHE_DIR"] = scratch_dir("numba-cold-")
+    out = scratch_dir("startup-out-")
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     res = subprocess.run([sys.executable, "-c", PROBE, out + "/run"], env=env, capture_output=True, text=True)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)

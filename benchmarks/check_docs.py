@@ -30,7 +30,6 @@ import os
 import re
 import subprocess
 import sys
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +39,9 @@ import yaml
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
+sys.path.insert(0, str(HERE))  # (imported by the tests from its file: the shared scratch module beside it)
+from scratch import scratch_dir  # noqa: E402
+
 REGISTRY = HERE / "doc_figures.yaml"
 NUMBER = re.compile(r"-?\d+(?:\.\d+)?")
 
@@ -150,7 +152,7 @@ def run_commands(commands: list[str], repo: Path = REPO, keep: Path | None = Non
     key = (str(repo), *commands)
     if key in _RUNS:
         return _RUNS[key]
-    root = Path(tempfile.mkdtemp(prefix="check-docs-", dir=keep))
+    root = Path(scratch_dir("check-docs-", keep=keep is not None, dir=keep))  # removed at exit unless --keep
     work = scratch_folder(root)
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(repo / "src"), *filter(None, [env.get("PYTHONPATH")])])
@@ -215,6 +217,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"   {'ok' if r.ok else 'MISMATCH'} in {r.seconds:.0f} s", flush=True)
         failed += not r.ok
     print(f"{len(chosen) - failed} of {len(chosen)} entries reproduce their documented figures")
+    if args.keep:
+        print(f"scratch folders kept in {args.keep}")
     return 1 if failed else 0
 
 

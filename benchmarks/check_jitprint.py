@@ -29,10 +29,11 @@ import json
 import os
 import re
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
+
+from scratch import scratch_dir
 
 STR, REF = "_StrCaching__cached_str", "_StringReferenceCaching__cached_refstr"
 
@@ -236,7 +237,7 @@ def main() -> None:
     ap.add_argument("--numba-meminfos", action="store_true",
                     help="numba's own get_meminfos (jitprint.lean_meminfos not installed)")
     args = ap.parse_args()
-    work = tempfile.mkdtemp(prefix="check_jitprint-")
+    work = scratch_dir("check_jitprint-")
     os.environ["NUMBA_CACHE_DIR"] = str(Path(work, "numba"))
     os.environ["DYNSLAM2D_COMPILE_WORKER"] = "0"
     from dynslam2d import jitcache, jitprint

@@ -32,11 +32,12 @@ import gc
 import json
 import os
 import sys
-import tempfile
 import time
 import warnings
 from pathlib import Path
 from typing import Any
+
+from scratch import scratch_dir
 
 
 def dump(out: dict[Any, Any], given: dict[Any, Any], caught: list[Any]) -> list[Any]:
@@ -274,7 +275,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out-dir", help="where to write the dumps of differing results")
     args = ap.parse_args()
-    work = tempfile.mkdtemp(prefix="check_jitssa-")
+    work = scratch_dir("check_jitssa-")
     os.environ["NUMBA_CACHE_DIR"] = str(Path(work, "numba"))
     os.environ["DYNSLAM2D_COMPILE_WORKER"] = "0"
     from dynslam2d import jitcache

@@ -19,10 +19,10 @@ import json
 import os
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 from bench_compile import RUN_FIRST_COMMAND  # (benchmarks/ is on sys.path when this script runs)
+from scratch import scratch_dir
 
 PROBE = r"""
 import json, sys, time
@@ -104,9 +104,9 @@ def main() -> None:
     src = Path(__file__).resolve().parents[1] / "src"
     ap.add_argument("--out", type=Path, default=src / "dynslam2d" / "jitmanifest.py")
     args = ap.parse_args()
-    env = dict(os.environ, PYTHONPATH=str(src), NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-record-"),
+    env = dict(os.environ, PYTHONPATH=str(src), NUMBA_CACHE_DIR=scratch_dir("numba-record-"),
                DYNSLAM2D_COMPILE_WORKER="0")
-    out = tempfile.mkdtemp(prefix="record-kernels-") + "/run"
+    out = scratch_dir("record-kernels-") + "/run"
     timed, held = (_last_json(code, out, env) for code in (PROBE, WARM))
     took = {(name, sig): s for name, sig, s in timed}
     kernels = [k for k in took if k in {tuple(h) for h in held}]
