@@ -272,3 +272,25 @@ def test_mover_pack_makes_int64_beams_of_any_integer_beams() -> None:
     packed, beams, mids = reps.mover_pack(reps.moving_index())
     assert beams.dtype == np.int64 and beams.tolist() == [4, 5, 700, 2]
     assert packed.dtype == np.int64 and packed.tolist() == [0, 2, 3, 3, 4, 6, 2, 4, 4] and mids == [3, 4, 6]
+
+
+def test_a_run_builds_no_track_object(monkeypatch) -> None:
+    """Pass cln147: the per-scan path (filter, erasure ledger, the run's records) reads the reports' columns only,
+    so no tracker work is done lazily inside the filter stage's timing: ``pipeline.run`` over a scene whose movers
+    enter M, stop and leave (filter and ledger at work) builds no ``Track`` of a live report."""
+    built: list[int] = []
+    build_many = TrackReports._build_many
+
+    def counted(self, idx):
+        built.append(len(idx))
+        return build_many(self, idx)
+
+    monkeypatch.setattr(TrackReports, "_build_many", counted)
+    moving = [0]
+
+    def observe(n: int, step) -> None:
+        moving[0] += bool(step.removed.any())
+
+    pl.run(open_source("sim:stop-and-go", seed=2, duration=20.0), progress=observe)
+    assert moving[0] > 20, moving  # (the filter removed beams on many scans)
+    assert sum(built) == 0, built
