@@ -1,6 +1,7 @@
 """Pass trk145: the scan's Kalman prediction (``cv_predict``) runs inside the association's kernel
 (``kernels_assign.associate_update`` with ``predict``) when nothing reads the state rows between the two, and in
-``Tracker._associate_update`` itself on a scan without an association (no detection): the tracks' states,
+``Tracker._associate_update`` itself on a scan without an association (no detection), and in ``_predict`` on the
+tracker's first prediction (so that the runs that record the kernels called from Python find it): the tracks' states,
 covariances and reports are those of a tracker that predicts in ``_predict`` as before, on every scan."""
 
 from __future__ import annotations
@@ -30,14 +31,27 @@ def test_prediction_in_the_association_kernel_is_the_former_prediction() -> None
     sim = simulate("crowd", duration=6.0, seed=4)
     poses = [Pose2D.from_array(p) for p in sim.ground_truth.poses_in("first")]
     new, ref = Tracker(DetectConfig()), _PredictFirst(DetectConfig())
-    seen = {"in_kernel": 0, "without_association": 0, "scans": 0}
-    former = tracker_mod.associate_update
+    seen = {"in_kernel": 0, "without_association": 0, "scans": 0, "from_python": 0}
+    former, former_cv = tracker_mod.associate_update, tracker_mod.cv_predict
+    in_new = [False]
 
     def counted(*a):
         seen["in_kernel"] += bool(a[-1])
         return former(*a)
 
-    tracker_mod.associate_update = counted
+    def cv(*a):
+        seen["from_python"] += in_new[0]
+        return former_cv(*a)
+
+    def new_update(*a):
+        in_new[0] = True
+        try:
+            return Tracker.update(new, *a)
+        finally:
+            in_new[0] = False
+
+    new.update = new_update
+    tracker_mod.associate_update, tracker_mod.cv_predict = counted, cv
     try:
         for i, (scan, pose) in enumerate(zip(sim.scans, poses)):
             if i % 9 == 8:  # (no valid beam: no detection, the live tracks predicted without an association)
@@ -53,5 +67,8 @@ def test_prediction_in_the_association_kernel_is_the_former_prediction() -> None
                 [(r.id, r.state, r.velocity.tobytes(), r.covariance.tobytes(), r.m_reason) for r in want]
             seen["scans"] += 1
     finally:
-        tracker_mod.associate_update = former
+        tracker_mod.associate_update, tracker_mod.cv_predict = former, former_cv
+    # (cv_predict called from Python by the tracker's first prediction, then on the scans without an association: the
+    # runs that record the kernels called from Python find it)
     assert seen["in_kernel"] > 50 and seen["without_association"] > 5, seen
+    assert 1 + seen["without_association"] <= seen["from_python"] < seen["scans"] // 4, seen

@@ -203,6 +203,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         fq[0] = np.eye(4)
         self._FQ = fq
         self._predict_in_kernel = False  # (this scan's cv_predict left to the association's kernel: _predict)
+        self._cv_called = False  # (cv_predict called from Python once: only then is the prediction left to it)
         self._FQ_of = (math.nan, math.nan)  # (the dt (s) and accel_noise _FQ holds the entries of; NaN: none yet)
         self._free_rows: list[int] = []  # rows of deleted tracks, reused first
         self._order: np.ndarray | None = None  # the rows of self._tracks in their order (None: to be built)
@@ -438,11 +439,15 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
             # numpy's products bit for bit, the rows written in the kernel (the tracks' x / P are views of them).
             # Nothing reads the state rows between here and the association (the detection step does not; only the
             # aspect prior and the stationary rows below do): the association's kernel runs cv_predict first, one
-            # dispatch less a scan (_associate_update; without an association it is called there; pass trk145)
-            if not still and self.config.tracker.aspect_prior is None:
+            # dispatch less a scan (_associate_update; without an association it is called there; pass trk145).
+            # The tracker's first such prediction calls it from Python all the same: the runs that record the
+            # kernels called from Python (jitmanifest, the AOT module's build) then find it, which the rare paths
+            # alone (no detection, a stationary prediction, the aspect prior) would not guarantee
+            if not still and self.config.tracker.aspect_prior is None and self._cv_called:
                 self._predict_in_kernel = True
                 return
             cv_predict(self._X, self._P, order, F, Q)
+            self._cv_called = True
             for i, (x, p) in still:
                 self._X[order[i]], self._P[order[i]] = x, p
         else:  # (one track: numpy's matrix-vector product, whose sums the kernel does not reproduce)
