@@ -183,7 +183,8 @@ def test_associate_update_is_the_two_former_calls_in_pipeline_runs() -> None:
     bounded). The former calls get the predicted rows as the tracker stacked them before pass trk129 (the arrays
     ``cv_predict`` returned in this scan, with the stationary predictions written into them; ``X.take(rows)`` where
     it did not run), the fused kernel gathers them from the state rows itself."""
-    seen = {"calls": 0, "pairs": 0, "unused": 0, "bounded": 0, "use_map": 0, "predicted": 0, "still": 0}
+    seen = {"calls": 0, "pairs": 0, "unused": 0, "bounded": 0, "use_map": 0, "predicted": 0, "still": 0,
+            "in_kernel": 0}
     stacked: list = []
     former_predict, former_cv = tracker_mod.Tracker._predict, tracker_mod.cv_predict
 
@@ -209,14 +210,25 @@ def test_associate_update_is_the_two_former_calls_in_pipeline_runs() -> None:
         a = list(a)
         tight = list(a)
         tight[21], tight[22], tight[23] = True, a[22] / 30.0, (0.999 * a[22] / 30.0) ** 2
-        if stacked:
+        fcase = {}
+        if a[36]:  # (the prediction left to the fused kernel, pass trk145: the former calls ran it first)
+            Fp = a[0].copy()
+            X, P = ku.row_tables.py_func(Fp, a[1], a[2].shape[0])[:2]
+            Xs, Ps = former_cv(X, P, a[3], a[35][0], a[35][1])
+            fcase = {0: Fp, 36: False}
+            seen["predicted"] += 1
+            seen["in_kernel"] += 1
+        elif stacked:
             Xs, Ps = stacked[0]
             seen["predicted"] += 1
         else:
             X, P = ku.row_tables.py_func(a[0], a[1], a[2].shape[0])[:2]
             Xs, Ps = X.take(a[3], axis=0), P.take(a[3], axis=0)
         for case in (a, tight):
-            got, want = _outcome(ka.associate_update, case), _outcome(_former_pair_calls(Xs, Ps), case)
+            former = list(case)
+            for i, v in fcase.items():  # (the former calls on the rows the prediction wrote)
+                former[i] = v
+            got, want = _outcome(ka.associate_update, case), _outcome(_former_pair_calls(Xs, Ps), former)
             assert got == want
             seen["bounded"] += want[0][2]  # (update_pairs' bounded rows)
         seen["pairs"] += len(got[0][4]) // 48  # (the applied pairs' rows: six int64)
@@ -233,7 +245,7 @@ def test_associate_update_is_the_two_former_calls_in_pipeline_runs() -> None:
         tracker_mod.associate_update, tracker_mod.cv_predict, tracker_mod.Tracker._predict = \
             saved, former_cv, former_predict
     assert seen["calls"] > 100 and seen["pairs"] > 500 and seen["bounded"] > 20 and seen["unused"] > 20, seen
-    assert 20 < seen["use_map"] < seen["calls"] and seen["predicted"] > 100, seen
+    assert 20 < seen["use_map"] < seen["calls"] and seen["predicted"] > 100 and seen["in_kernel"] > 100, seen
 
 
 def _run_two_scenes() -> None:

@@ -36,7 +36,7 @@ def test_prediction_matrices_and_body_mask_are_those_of_each_scan() -> None:
     def predict(self, dt: float) -> None:
         former_predict(self, dt)
         if self._tracks and dt > 0.0:
-            F, Q = self._FQ
+            F, Q = self._FQ  # (one (2, 4, 4) array: F, then Q; pass trk145)
             want_F, want_Q = _cv_matrices(dt, self.config.tracker.accel_noise)
             assert F.tobytes() == want_F.tobytes() and Q.tobytes() == want_Q.tobytes()
             seen["predicted"] += 1

@@ -18,6 +18,7 @@ import sys
 
 import numpy as np
 
+from dynslam2d.detect.kernels import cv_predict
 from dynslam2d.detect.kernels_update import (
     UP_BIG,
     UP_MERGE_JUMP,
@@ -338,7 +339,7 @@ def associate_update(F: np.ndarray, Fi: np.ndarray, Gi: np.ndarray, rows: np.nda
                      q: np.ndarray, claimed: np.ndarray, vrows: np.ndarray, ms: np.ndarray, RIDE: np.ndarray,
                      bound: bool, lim: float, lim2: float, mfr: np.ndarray, kept: np.ndarray, first: np.ndarray,
                      second: np.ndarray, mnpts: np.ndarray, use_map: bool, lx: float, ly: float, c: float, s: float,
-                     t: float) -> tuple:
+                     t: float, FQ: np.ndarray, predict: bool) -> tuple:
     """``Tracker._associate_update`` in one call: :func:`associate_scan` (its arguments by the same names), then,
     when it found pairs and its status is ``LSAP_OK``, :func:`dynslam2d.detect.kernels_update.update_pairs` on them
     (the pairs' track indices ``ii`` as its ``sel``, their detection indices ``jj`` as its ``dis``, the association's
@@ -364,10 +365,20 @@ def associate_update(F: np.ndarray, Fi: np.ndarray, Gi: np.ndarray, rows: np.nda
     Then, with status ``LSAP_OK``, :func:`dynslam2d.detect.kernels_update.manage_scan` on the same ``rows`` at ``t``
     (``TrackManage._manage``'s counter tests, σ, speeds and bits of the live tracks: it reads only the state, counter
     and window rows, which nothing in Python writes between the update and the management; pass trk117): returned
-    last as ``man`` (its four arrays), or empty arrays when the association failed (the caller raises)."""
+    last as ``man`` (its four arrays), or empty arrays when the association failed (the caller raises).
+
+    With ``predict``, first the scan's Kalman prediction of the live rows, ``Tracker._predict``'s
+    :func:`~dynslam2d.detect.kernels.cv_predict` call (F = ``FQ[0]``, Q = ``FQ[1]``, (4, 4) each), which the tracker
+    leaves to this call when nothing reads the rows between the two (no aspect prior, no stationary prediction):
+    the same function on the same rows, so the same floats, one kernel dispatch a scan less (its arguments' unboxing
+    in situ, where the dispatcher's per-signature code is not in the instruction cache, costs several times its warm
+    price: docs/speed.md, pass trk145); its returned rows are ``Xs`` / ``Ps``."""
     X, P, G, CL, MEV, CI, WN = row_tables(F, Fi, Gi.shape[0])
-    Xs = X[rows]
-    Ps = P[rows]
+    if predict:
+        Xs, Ps = cv_predict(X, P, rows, FQ[0], FQ[1])
+    else:
+        Xs = X[rows]
+        Ps = P[rows]
     status, ii, jj, missed, vetoed = associate_scan(G, Gi, rows, CI, Xs, Ps, Z, R, kind, theta, lohi, rel, centroid,
                                                     circle, px, py, start, npts, q, claimed, vrows, ms, MEV, WN,
                                                     q[UP_S_STOP], q[UP_MERGE_JUMP], q[UP_S_MAX], q[UP_BIG])

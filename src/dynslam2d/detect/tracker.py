@@ -198,7 +198,12 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         self._rows_used = 0  # rows 0 … _rows_used − 1 have been handed out
         # the prediction's F and Q (_cv_fill writes this step's entries into them; read only by the kernel and the
         # rare paths of _predict, never kept beyond the scan)
-        self._FQ: tuple[np.ndarray, np.ndarray] = (np.eye(4), np.zeros((4, 4)))
+        # (one (2, 4, 4) array, F then Q: one argument of the association's kernel, which runs the prediction)
+        fq = np.zeros((2, 4, 4))
+        fq[0] = np.eye(4)
+        self._FQ = fq
+        self._predict_in_kernel = False  # (this scan's cv_predict left to the association's kernel: _predict)
+        self._cv_called = False  # (cv_predict called from Python once: only then is the prediction left to it)
         self._FQ_of = (math.nan, math.nan)  # (the dt (s) and accel_noise _FQ holds the entries of; NaN: none yet)
         self._free_rows: list[int] = []  # rows of deleted tracks, reused first
         self._order: np.ndarray | None = None  # the rows of self._tracks in their order (None: to be built)
@@ -406,9 +411,11 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         return d / dt > tc.max_pose_speed or r / dt > tc.max_pose_rate
 
     def _predict(self, dt: float) -> None:
+        self._predict_in_kernel = False
         if not self._tracks or dt <= 0.0:
             return
-        F, Q = self._FQ  # (the tracker's own two arrays, their dt entries written for this step)
+        FQ = self._FQ  # (the tracker's own (2, 4, 4) array, F and Q, their dt entries written for this step)
+        F, Q = FQ[0], FQ[1]
         q = self.config.tracker.accel_noise
         dt0, q0 = self._FQ_of
         if dt != dt0 or q != q0:  # (the same step as the last scan's, as in a simulated scene: the entries are there)
@@ -429,8 +436,18 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         # (the predicted rows are read from the state arrays by the association's kernel: its stacked copies are not
         # kept; pass trk129)
         if order.shape[0] >= 2:
-            # numpy's products bit for bit, the rows written in the kernel (the tracks' x / P are views of them)
+            # numpy's products bit for bit, the rows written in the kernel (the tracks' x / P are views of them).
+            # Nothing reads the state rows between here and the association (the detection step does not; only the
+            # aspect prior and the stationary rows below do): the association's kernel runs cv_predict first, one
+            # dispatch less a scan (_associate_update; without an association it is called there; pass trk145).
+            # The tracker's first such prediction calls it from Python all the same: the runs that record the
+            # kernels called from Python (jitmanifest, the AOT module's build) then find it, which the rare paths
+            # alone (no detection, a stationary prediction, the aspect prior) would not guarantee
+            if not still and self.config.tracker.aspect_prior is None and self._cv_called:
+                self._predict_in_kernel = True
+                return
             cv_predict(self._X, self._P, order, F, Q)
+            self._cv_called = True
             for i, (x, p) in still:
                 self._X[order[i]], self._P[order[i]] = x, p
         else:  # (one track: numpy's matrix-vector product, whose sums the kernel does not reproduce)
@@ -479,6 +496,10 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         Both kernels run in one call (``kernels_assign.associate_update``, pass trk108)."""
         self._managed = None  # (the management kernel's outputs when this call ran it: _manage reads them)
         if not self._tracks or not dets:
+            if self._predict_in_kernel:  # (_predict left it to the association's kernel: no association to run)
+                self._predict_in_kernel = False
+                FQ = self._FQ
+                cv_predict(self._X, self._P, self._rows(), FQ[0], FQ[1])
             return 0, list(range(len(dets)))
         # One kernel call (kernels_assign.associate_scan, docs/speed.md pass trk75): the gates (association_gates: the
         # tracks' sizes, flags and axis angles from their shape rows; the Mahalanobis gate and distance gate, a
@@ -528,7 +549,9 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
         c, s = self._pose_cs
         status, vetoed, nb, top, applied, unused, nrej, self._managed = associate_update(
             self._F, self._Fi, self._Gi, self._rows(), dm.z, dm.R, *self._batch, self._upd_p, claimed, vrows, ms,
-            self._RIDE, bound, lim, lim2, *self._mev_src, self._map is not None, float(p.x), float(p.y), c, s, t)
+            self._RIDE, bound, lim, lim2, *self._mev_src, self._map is not None, float(p.x), float(p.y), c, s, t,
+            self._FQ, self._predict_in_kernel)
+        self._predict_in_kernel = False
         if status:
             raise ValueError(LSAP_MESSAGES[status])  # (SciPy's error for such a cost matrix)
         if vetoed.shape[0]:
