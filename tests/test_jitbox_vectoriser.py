@@ -102,3 +102,35 @@ def test_listed_kernels_exist_as_measured() -> None:
         kernel = getattr(importlib.import_module(module), qualname)
         now = jitbox.source_hash(kernel.py_func)
         assert now == digest, f"{name} edited since measured (its source's hash now {now!r}; see this test's doc)"
+
+
+#: Compiles ``associate_update`` for its manifest signature (an empty numba cache, the command line's compile
+#: settings) and prints how many vector loops its optimised code holds, as listed (argv[1] "1") and not ("0").
+ASSOCIATE = r'''
+import sys
+import dynslam2d.jitcache as jc
+for name in ("plain_numba_errors", "load_blas_alone", "lean_numba_compile", "lean_compile_gc"):
+    getattr(jc, name)()
+from dynslam2d import jitbox
+from dynslam2d.jitmanifest import KERNELS
+from dynslam2d.jitwarm import _dispatcher, parse_signature
+NAME = "dynslam2d.detect.kernels_assign.associate_update"
+if sys.argv[1] == "0":
+    del jitbox.LOOPS_NOT_VECTORISED[NAME]
+kernel = _dispatcher(NAME)
+kernel.compile(parse_signature(dict(KERNELS)[NAME]))
+print(kernel.overloads[kernel.signatures[0]].library.get_llvm_str().count("vector.body:"))
+'''
+
+
+def test_associate_update_compiles_without_vector_loops(tmp_path: Path) -> None:
+    """``associate_update`` (pass cmp144) is listed, and listing it takes the vector loops out of its code (numba's
+    pipeline vectorises 14 of its loops, with the association gates' and the pair updates' code it links)."""
+    counts = []
+    for listed in ("1", "0"):
+        env = {"PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / listed), "PATH": "/usr/bin:/bin",
+               "DYNSLAM2D_COMPILE_WORKER": "0"}
+        done = subprocess.run([sys.executable, "-c", ASSOCIATE, listed], env=env, capture_output=True, text=True,
+                              timeout=600, check=True)
+        counts.append(int(done.stdout.strip().splitlines()[-1]))
+    assert counts[0] == 0 and counts[1] > 0
