@@ -654,26 +654,29 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, sx, sy, sth, it_coarse, it_fi
     return True, cost, summ, n_in, free, n_sup, k_sup, dg
 
 
-#: level geometry key → (L, 4) float64 array of match_pyramid's ``geo`` (see _level_geometry); a few maps
-#: (the front end's, the warm-up's, the loop closer's submaps) share it, each geometry changing only when its map grows
+#: the levels' :attr:`~dynslam2d.slam.grid.GridLevel.geometry_stamp` s → (L, 4) float64 array of match_pyramid's
+#: ``geo`` (see _level_geometry); a few maps (the front end's, the warm-up's, the loop closer's submaps) share it, each
+#: level's stamp changing only when the level grows or is released
 _GEO: dict[tuple, np.ndarray] = {}
 _GEO_MAX = 32
 
 
 def _level_geometry(levels: list[GridLevel]) -> np.ndarray:
-    """(L, 4) float64 (cell side m, i0, j0, 1.0 if empty) of ``levels``, shared between calls with the same values
-    (not to be written to; the kernel only reads it)."""
-    if len(levels) == 3:  # (the default map: one flat key, no per-level tuples)
+    """(L, 4) float64 (cell side m, i0, j0, 1.0 if empty) of ``levels``, shared between calls with the same levels'
+    geometry stamps (not to be written to; the kernel only reads it). A stamp is unique to one level's
+    (resolution, i0, j0, empty) (:class:`~dynslam2d.slam.grid.GridLevel`), so the key of stamps stands for the
+    values the array holds: one small-integer tuple instead of the twelve values read and hashed on every call."""
+    if len(levels) == 3:  # (the default map: one flat key)
         a, b, c = levels
-        key: tuple = (a.resolution, a.i0, a.j0, a.logodds.size == 0, b.resolution, b.i0, b.j0, b.logodds.size == 0,
-                      c.resolution, c.i0, c.j0, c.logodds.size == 0)
+        key: tuple = (a.geometry_stamp, b.geometry_stamp, c.geometry_stamp)
     else:
-        key = tuple([(lv.resolution, lv.i0, lv.j0, lv.logodds.size == 0) for lv in levels])
+        key = tuple([lv.geometry_stamp for lv in levels])
     geo = _GEO.get(key)
     if geo is None:
         if len(_GEO) >= _GEO_MAX:
             _GEO.clear()
-        geo = _GEO[key] = np.array(key, dtype=np.float64).reshape(len(levels), 4)
+        geo = _GEO[key] = np.array([(lv.resolution, lv.i0, lv.j0, lv.logodds.size == 0) for lv in levels],
+                                   dtype=np.float64).reshape(len(levels), 4)
     return geo
 
 
