@@ -571,6 +571,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, sx, sy, sth, it_coarse, it_fi
     last0 = False  # the last iterations ran on level 0 (unswapped) ending at (lx, ly, lth)
     fl = min(1, n_lv - 1)  # the free fraction's level
     xy_fl = np.empty((2, 0))  # its points as rows once its iterations made them (else made below)
+    xy_0 = xy_fl  # level 0's points as rows once its iterations made them (the evaluation's below; else made there)
     lx = ly = lth = 0.0
     l_raw = l_summ = 0.0
     l_in = 0
@@ -597,6 +598,8 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, sx, sy, sth, it_coarse, it_fi
         xy = _scaled_rows(pts_m, res)  # (the level's points as rows, made once per level)
         if k == fl:
             xy_fl = xy  # (the free fraction's points below: the same divisions)
+        if k == 0:
+            xy_0 = xy
         prob = prob0 if k == 0 else (prob1 if k == 1 else prob2)
         # (only the finest level's H at its result is read, by the evaluation below)
         x, y, th, _, raw, summ, n_in = _match_core(prob, xy, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
@@ -644,10 +647,12 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, sx, sy, sth, it_coarse, it_fi
     else:
         g = _stack_array(np.float64, 1, 3)[0]
         g[:] = 0.0
-        # (accumulate's pass on level 0's rows made in one go; np.bool_, not literals: _match_core's signature of
-        # _sums)
+        # (accumulate's pass on level 0's rows, those its iterations made; np.bool_, not literals: _match_core's
+        # signature of _sums)
         yes = np.bool_(True)
-        cost, summ, n_in = _sums(prob0, _scaled_rows(pts_m, res), m0, m1, m2, np.bool_(False), yes, yes, H_out, g)
+        if xy_0.shape[1] != pts_m.shape[0]:  # (level 0 ran no iterations: pts_m / res as rows, made here)
+            xy_0 = _scaled_rows(pts_m, res)
+        cost, summ, n_in = _sums(prob0, xy_0, m0, m1, m2, np.bool_(False), yes, yes, H_out, g)
     dg = _NO_DEGENERACY
     if deg_thresh == deg_thresh:  # (not NaN) the processor's degeneracy analysis of this H, in the same call
         dg = _degeneracy_kernel(H_out, res, pts_m.shape[0], sumsq, deg_thresh, two)
@@ -811,8 +816,9 @@ def match_fit_at(levels: list[GridLevel], pts_m: np.ndarray, sx: float, sy: floa
     )
     if not fitted:
         return out, None, None, None
-    return (out, LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in), None if no_deg else dg),
-            float(free), None if support_thresh is None else (int(n_sup), k_sup * BIN_ANGLE))
+    # (the kernel returns Python floats and ints: no conversion)
+    return (out, LevelFit(H, cost, summ / pts_m.shape[0], n_in, None if no_deg else dg),
+            free, None if support_thresh is None else (n_sup, k_sup * BIN_ANGLE))
 
 
 def _match_levels(levels: list[GridLevel], pts_m: np.ndarray, start_world: np.ndarray, iterations_coarse: int,
