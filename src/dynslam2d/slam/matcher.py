@@ -1037,18 +1037,53 @@ def _interp_value(flat, w, h, px, py):  # pragma: no cover - numba
 def _fraction_below_rows(prob, xy, x, y, th, thresh):  # pragma: no cover - numba
     """:func:`fraction_below` of the points ``xy`` (2, n) (rows x and y, cells: :func:`_scaled_rows` of the
     laser-frame points, the division ``fraction_below``'s caller makes) at map pose (x, y, θ): the same count of
-    inside points below ``thresh`` over n."""
+    inside points below ``thresh`` over n.
+
+    In :func:`_sums`' blocks (pass mat146; one scalar loop with a branch a point before): per block of ``_BLOCK``
+    points a branch-free loop (vectorised) gives each point's cell, fractions and in-bounds flag with
+    :func:`_interp_value`'s operations, a scalar loop reads the four cells, and a branch-free loop counts the inside
+    points whose value is below ``thresh`` (an integer count: its order does not matter)."""
     c = math.cos(th)
     s = math.sin(th)
     h, w = prob.shape
     flat = np.ascontiguousarray(prob).reshape(-1)  # (a view of the level's C-contiguous cache)
-    n = 0
+    xmax = w - 2
+    ymax = h - 2
     npt = xy.shape[1]
-    for i in range(npt):
-        sx = xy[0, i]
-        sy = xy[1, i]
-        if _interp_value(flat, w, h, c * sx - s * sy + x, s * sx + c * sy + y) < thresh:  # (NaN: not inside)
-            n += 1
+    px = xy[0]
+    py = xy[1]
+    uw = np.uint64(w)
+    fb = _stack_array(np.float64, 3, _BLOCK)
+    qb = _stack_array(np.float32, 4, _BLOCK)
+    kb = _stack_array(np.uint64, 1, _BLOCK)[0]
+    n = 0
+    if w < 2 or h < 2:  # (no point can be inside)
+        return 0.0
+    for b0 in range(0, npt, _BLOCK):
+        m = min(_BLOCK, npt - b0)
+        for j in range(m):
+            sx = px[np.uint64(b0 + j)]  # (unsigned: no negative-index select, so the loop vectorises)
+            sy = py[np.uint64(b0 + j)]
+            qx = c * sx - s * sy + x
+            qy = s * sx + c * sy + y
+            inb = (qx >= 0.0) & (qy >= 0.0) & (qx <= xmax) & (qy <= ymax)  # (also rejects NaN)
+            qx = qx if inb else 0.0
+            qy = qy if inb else 0.0
+            x0 = int(qx)
+            y0 = int(qy)
+            fb[0, j] = qx - x0
+            fb[1, j] = qy - y0
+            kb[j] = np.uint64(y0 * w + x0)
+            fb[2, j] = 1.0 if inb else 0.0
+        for j in range(m):
+            k = kb[j]
+            qb[0, j], qb[1, j] = cell_prob_pair(flat, k)
+            qb[2, j], qb[3, j] = cell_prob_pair(flat, k + uw)
+        for j in range(m):
+            fx = fb[0, j]
+            fy = fb[1, j]
+            mv = (1.0 - fy) * ((1.0 - fx) * qb[0, j] + fx * qb[1, j]) + fy * ((1.0 - fx) * qb[2, j] + fx * qb[3, j])
+            n += 1 if (fb[2, j] != 0.0) & (mv < thresh) else 0
     return n / max(npt, 1)
 
 
