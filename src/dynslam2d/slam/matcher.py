@@ -600,7 +600,7 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, sx, sy, sth, it_coarse, it_fi
         prob = prob0 if k == 0 else (prob1 if k == 1 else prob2)
         # (no level's H, Σ M or n_inside at its result is read: level 0's come from the evaluation below)
         x, y, th, _, _, _, _ = _match_core(prob, xy, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
-                                           pp, lam_ps[k], Hk, False, res, i0, j0)
+                                           pp, lam_ps[k], Hk, np.bool_(False), res, i0, j0)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
             pose[0] = np.nan
             pose[1] = np.nan
