@@ -12,8 +12,9 @@ mean over all scans.
 
 ``--func`` takes ``module.Class.method`` or ``module.function`` (a module function is replaced in its own module
 only: callers that imported it by name keep the original). Inputs: the names of ``bench_digest.py`` or a built-in
-scene (``sim:NAME``). The pipeline is warmed on the first 60 scans first (a throw-away one), and the scan loop runs
-with ``pipeline.run``'s collector setting, as ``bench_pipeline_ab.py``'s workers do.
+scene (``sim:NAME``), or ``ten-movers`` (:func:`scenes.input_scans`). The pipeline is warmed on the first 60 scans
+first (a throw-away one), and the scan loop runs with ``pipeline.run``'s collector setting, as
+``bench_pipeline_ab.py``'s workers do.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_digest import INPUTS  # noqa: E402
 from bench_pipeline import scan_loop_gc  # noqa: E402
+from scenes import input_scans  # noqa: E402 - an input's scans (bench_digest's, a built-in scene or ten-movers)
 
 WARMUP = 60
 
@@ -61,7 +63,6 @@ def main() -> None:
 
     import numpy as np
 
-    from dynslam2d.inputs import open_source
     from dynslam2d.pipeline import Pipeline
 
     owner, name, namespace = _target(args.func)
@@ -88,8 +89,7 @@ def main() -> None:
     exec(compile(tree, f"<{args.func}>", "exec"), ns)  # noqa: S102 - the function's own source, with marks
     setattr(owner, name, ns[name])
 
-    rel, topic = INPUTS.get(args.input, (args.input, None))
-    scans = list(open_source(rel if rel.startswith("sim:") else str(args.data / rel), topic))
+    scans = input_scans(args.data, args.input)
     warm = Pipeline()
     for s in scans[:WARMUP]:
         warm.process(s)

@@ -20,6 +20,7 @@ import mmap
 import sys
 import weakref
 from functools import cache
+from itertools import count
 from typing import Protocol
 
 import numpy as np
@@ -83,6 +84,10 @@ def encode_probs(p: np.ndarray) -> np.ndarray:
 def decode_probs(words: np.ndarray) -> np.ndarray:
     """The float32 probabilities of probability cache words ``words`` (uint32; a new array, same shape)."""
     return (np.asarray(words, dtype=np.uint32) ^ np.uint32(PROB_HALF_BITS)).view(np.float32)
+
+
+#: the source of :attr:`GridLevel.geometry_stamp`: every value is taken once, by one level's geometry
+_GEOMETRY_STAMPS = count(1)
 
 
 def _zeroed(shape: tuple[int, int], dtype: type) -> np.ndarray:
@@ -202,6 +207,10 @@ class GridLevel:
             −1: a scan's indices are ≥ 1, so every comparison with them reads the same; 0 lets a large level's
             array be zeroed memory whose pages no ray reached are never touched, docs/speed.md pass mem43).
         i0, j0: absolute cell index of array column 0 / row 0.
+        geometry_stamp: a number, unique among all levels and all their states, taken anew whenever ``resolution``,
+            ``i0``, ``j0`` or the emptiness of ``logodds`` may have changed (made, released, grown; these are written
+            only here): two equal stamps mean the same level with the same (resolution, i0, j0, empty), so a
+            matcher can key what it derives from them on the stamps alone (``matcher._level_geometry``).
         occ_bits: (H, ⌈W / 64⌉) uint64 bitmap of the long-occupied cells (bit ``col & 63`` of word ``[row, col >> 6]``)
             for the threshold ``occ_bits_thr`` (NaN and a (0, 0) array: not kept; :meth:`keep_long_occupied`).
             Invariant: every cell whose stored float32 log-odds, compared as float64, is ≥ ``occ_bits_thr`` has its
@@ -228,6 +237,7 @@ class GridLevel:
         self.j0 = 0
         self.update_counter = 0  # hector's currUpdateIndex (grows by 3 per scan)
         self.n_grows = 0
+        self.geometry_stamp = next(_GEOMETRY_STAMPS)
 
     # ---- geometry -------------------------------------------------------------------
     @property
@@ -280,6 +290,7 @@ class GridLevel:
                 self._maps.pop(name, None)
         if not names or "logodds" in names:
             self.occ_bits = _NO_BITS if self.occ_bits_thr != self.occ_bits_thr else self._bits_of(None)
+            self.geometry_stamp = next(_GEOMETRY_STAMPS)  # (now empty)
 
     # ---- long-occupied bitmap ------------------------------------------------------------
     def keep_long_occupied(self, thr: float) -> None:
@@ -416,6 +427,7 @@ class GridLevel:
             self.occ_bits = self._bits_of(rows)
         self.i0, self.j0 = ni0, nj0
         self.n_grows += 1
+        self.geometry_stamp = next(_GEOMETRY_STAMPS)
         for v in followers:
             v.follow(self)
 

@@ -552,8 +552,9 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, sx, sy, sth, it_coarse, it_fi
     Writes the world pose into ``pose`` (3,) and returns (fitted, cost, Σ M, n_inside,
     free, support count, support bins). With ``want_fit`` and a finite result on a
     non-empty finest level, ``fitted`` is True and H (in ``H_out``), cost, Σ M and n_inside are :func:`evaluate`'s
-    at the returned pose on level 0 (unswapped weights): the last iteration's sums when that iteration ran on
-    level 0, unswapped, at exactly the same map pose, else one :func:`accumulate` pass; ``free`` is
+    at the returned pose on level 0 (unswapped weights), from one :func:`accumulate` pass there (the iterations sum
+    neither Σ M nor n_inside: their last pose is that pose, bit for bit, in only 8–11 % of the calls; pass mat146);
+    ``free`` is
     :func:`free_fraction` below ``free_thresh`` on level min(1, L − 1) at the returned pose with θ wrapped once more
     (as ``Pose2D(x, y, wrap_angle(θ))``); and, unless ``support_thresh`` is NaN, the support count and bins are
     :func:`support_at`'s (count already scaled by the stride; bins, not rad) above ``support_thresh`` on level 0 at
@@ -568,12 +569,9 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, sx, sy, sth, it_coarse, it_fi
     Hk[:] = 0.0
     mp = _stack_array(np.float64, 1, 3)[0]
     pp = _stack_array(np.float64, 1, 3)[0]
-    last0 = False  # the last iterations ran on level 0 (unswapped) ending at (lx, ly, lth)
     fl = min(1, n_lv - 1)  # the free fraction's level
     xy_fl = np.empty((2, 0))  # its points as rows once its iterations made them (else made below)
-    lx = ly = lth = 0.0
-    l_raw = l_summ = 0.0
-    l_in = 0
+    xy_0 = xy_fl  # level 0's points as rows once its iterations made them (the evaluation's below; else made there)
     for k in range(n_lv - 1, -1, -1):
         if geo[k, 3] != 0.0:
             continue
@@ -597,11 +595,12 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, sx, sy, sth, it_coarse, it_fi
         xy = _scaled_rows(pts_m, res)  # (the level's points as rows, made once per level)
         if k == fl:
             xy_fl = xy  # (the free fraction's points below: the same divisions)
+        if k == 0:
+            xy_0 = xy
         prob = prob0 if k == 0 else (prob1 if k == 1 else prob2)
-        # (only the finest level's H at its result is read, by the evaluation below)
-        x, y, th, _, raw, summ, n_in = _match_core(prob, xy, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
-                                                   max_trans, pp, lam_ps[k], Hk, want_fit and k == 0 and not swapped,
-                                                   res, i0, j0)
+        # (no level's H, Σ M or n_inside at its result is read: level 0's come from the evaluation below)
+        x, y, th, _, _, _, _ = _match_core(prob, xy, mp, n_iter, swapped, use_lm, lam0, lam_max, max_rot, max_trans,
+                                           pp, lam_ps[k], Hk, np.bool_(False), res, i0, j0)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
             pose[0] = np.nan
             pose[1] = np.nan
@@ -610,10 +609,6 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, sx, sy, sth, it_coarse, it_fi
         pose[0] = (x + i0) * res
         pose[1] = (y + j0) * res
         pose[2] = (th + math.pi) % (2.0 * math.pi) - math.pi  # wrap after each level (§2.5)
-        last0 = k == 0 and not swapped
-        if k == 0:
-            lx, ly, lth = x, y, th
-            l_raw, l_summ, l_in = raw, summ, n_in
     if not want_fit or geo[0, 3] != 0.0:
         return False, 0.0, 0.0, 0, 0.0, 0, 0, _NO_DEGENERACY
     free = 0.0
@@ -636,44 +631,43 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, sx, sy, sth, it_coarse, it_fi
         n_sup, k_sup = _support_kernel(prob0, pts_m, stride, 1.0 / res, m0, m1, wth, support_thresh,
                                        np.int64(_N_BINS))  # (an int64, not a literal: the Python call's signature)
         n_sup *= stride
-    if last0 and _same_float(m0, lx) and _same_float(m1, ly) and _same_float(m2, lth):
-        for a in range(3):
-            for b in range(3):
-                H_out[a, b] = Hk[a, b]
-        cost, summ, n_in = l_raw, l_summ, l_in
-    else:
-        g = _stack_array(np.float64, 1, 3)[0]
-        g[:] = 0.0
-        # (accumulate's pass on level 0's rows made in one go; np.bool_, not literals: _match_core's signature of
-        # _sums)
-        yes = np.bool_(True)
-        cost, summ, n_in = _sums(prob0, _scaled_rows(pts_m, res), m0, m1, m2, np.bool_(False), yes, yes, H_out, g)
+    g = _stack_array(np.float64, 1, 3)[0]
+    g[:] = 0.0
+    # (accumulate's pass on level 0's rows, those its iterations made; np.bool_, not literals: _match_core's
+    # signature of _sums)
+    yes = np.bool_(True)
+    if xy_0.shape[1] != pts_m.shape[0]:  # (level 0 ran no iterations: pts_m / res as rows, made here)
+        xy_0 = _scaled_rows(pts_m, res)
+    cost, summ, n_in = _sums(prob0, xy_0, m0, m1, m2, np.bool_(False), yes, yes, H_out, g)
     dg = _NO_DEGENERACY
     if deg_thresh == deg_thresh:  # (not NaN) the processor's degeneracy analysis of this H, in the same call
         dg = _degeneracy_kernel(H_out, res, pts_m.shape[0], sumsq, deg_thresh, two)
     return True, cost, summ, n_in, free, n_sup, k_sup, dg
 
 
-#: level geometry key → (L, 4) float64 array of match_pyramid's ``geo`` (see _level_geometry); a few maps
-#: (the front end's, the warm-up's, the loop closer's submaps) share it, each geometry changing only when its map grows
+#: the levels' :attr:`~dynslam2d.slam.grid.GridLevel.geometry_stamp` s → (L, 4) float64 array of match_pyramid's
+#: ``geo`` (see _level_geometry); a few maps (the front end's, the warm-up's, the loop closer's submaps) share it, each
+#: level's stamp changing only when the level grows or is released
 _GEO: dict[tuple, np.ndarray] = {}
 _GEO_MAX = 32
 
 
 def _level_geometry(levels: list[GridLevel]) -> np.ndarray:
-    """(L, 4) float64 (cell side m, i0, j0, 1.0 if empty) of ``levels``, shared between calls with the same values
-    (not to be written to; the kernel only reads it)."""
-    if len(levels) == 3:  # (the default map: one flat key, no per-level tuples)
+    """(L, 4) float64 (cell side m, i0, j0, 1.0 if empty) of ``levels``, shared between calls with the same levels'
+    geometry stamps (not to be written to; the kernel only reads it). A stamp is unique to one level's
+    (resolution, i0, j0, empty) (:class:`~dynslam2d.slam.grid.GridLevel`), so the key of stamps stands for the
+    values the array holds: one small-integer tuple instead of the twelve values read and hashed on every call."""
+    if len(levels) == 3:  # (the default map: one flat key)
         a, b, c = levels
-        key: tuple = (a.resolution, a.i0, a.j0, a.logodds.size == 0, b.resolution, b.i0, b.j0, b.logodds.size == 0,
-                      c.resolution, c.i0, c.j0, c.logodds.size == 0)
+        key: tuple = (a.geometry_stamp, b.geometry_stamp, c.geometry_stamp)
     else:
-        key = tuple([(lv.resolution, lv.i0, lv.j0, lv.logodds.size == 0) for lv in levels])
+        key = tuple([lv.geometry_stamp for lv in levels])
     geo = _GEO.get(key)
     if geo is None:
         if len(_GEO) >= _GEO_MAX:
             _GEO.clear()
-        geo = _GEO[key] = np.array(key, dtype=np.float64).reshape(len(levels), 4)
+        geo = _GEO[key] = np.array([(lv.resolution, lv.i0, lv.j0, lv.logodds.size == 0) for lv in levels],
+                                   dtype=np.float64).reshape(len(levels), 4)
     return geo
 
 
@@ -796,11 +790,16 @@ def match_fit_at(levels: list[GridLevel], pts_m: np.ndarray, sx: float, sy: floa
     else:
         lam_ps, px, py, pth, use_prior = _ZERO_PRIOR_VIEWS[n_lv], sx, sy, sth, False
     p0 = levels[0].prob
+    p1 = levels[1].prob if n_lv > 1 else p0
+    p2 = levels[2].prob if n_lv > 2 else p0
     H = np.empty((3, 3))
     out = np.empty(3)  # (filled by the kernel: a new array is cheaper made here than returned from numba)
     no_deg = degeneracy_threshold is None or sumsq is None
-    fitted, cost, summ, n_in, free, n_sup, k_sup, dg = match_pyramid(
-        p0, levels[1].prob if n_lv > 1 else p0, levels[2].prob if n_lv > 2 else p0, _level_geometry(levels), pts_m,
+    last = _PYRAMID_LAST
+    call = last[3] if last[0] is p0 and last[1] is p1 and last[2] is p2 and pts_m.ndim == 2 else \
+        _pyramid_callable(p0, p1, p2, pts_m)
+    fitted, cost, summ, n_in, free, n_sup, k_sup, dg = call(
+        p0, p1, p2, _level_geometry(levels), pts_m,
         sx, sy, sth, iterations_coarse, iterations_finest, swapped, use_lm, lam0, lam_max, max_rot, max_trans_cells,
         use_prior, px, py, pth, lam_ps, want_fit, free_thresh, H, out,
         math.nan if support_thresh is None else support_thresh, math.nan if no_deg else degeneracy_threshold,
@@ -808,8 +807,69 @@ def match_fit_at(levels: list[GridLevel], pts_m: np.ndarray, sx: float, sy: floa
     )
     if not fitted:
         return out, None, None, None
-    return (out, LevelFit(H, float(cost), float(summ) / pts_m.shape[0], int(n_in), None if no_deg else dg),
-            float(free), None if support_thresh is None else (int(n_sup), k_sup * BIN_ANGLE))
+    # (the kernel returns Python floats and ints: no conversion)
+    return (out, LevelFit(H, cost, summ / pts_m.shape[0], n_in, None if no_deg else dg),
+            free, None if support_thresh is None else (n_sup, k_sup * BIN_ANGLE))
+
+
+#: match_pyramid's callable for the caches of its usual types (uint32, 2-D, C order, writeable) and points of two
+#: dimensions: its compiled entry point once known (:func:`_resolving_pyramid`), else a call that finds it
+_PYRAMID_STD: list = [None]
+#: the last (level 0, 1, 2 caches, callable) of :func:`match_fit_at` (:func:`_pyramid_callable`)
+_PYRAMID_LAST: list = [None, None, None, None]
+_U32 = np.dtype(np.uint32)
+
+
+def _usual_cache(p: np.ndarray) -> bool:
+    """``p`` is a probability cache of the type :data:`_PYRAMID_STD`'s entry point was compiled for."""
+    if type(p) is not np.ndarray or p.dtype is not _U32 or p.ndim != 2:
+        return False
+    flags = p.flags
+    return flags.c_contiguous and flags.writeable and flags.aligned
+
+
+def _pyramid_callable(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, pts_m: np.ndarray):  # noqa: ANN202
+    """The callable of :func:`match_pyramid` for these caches (levels 0–2) and points, kept for the next call with the
+    same three arrays: its compiled entry point when every cache is of the usual type and ``pts_m`` (float64, C
+    order: the caller's test) has two dimensions, else numba's dispatcher. The entry point skips the dispatcher's
+    type resolution of the 29 arguments (≈ 0.7 µs a call, pass mat146); the types it trusts are the caches' (tested
+    here, and an array's dtype, dimensions and layout never change), the points' and those of the arrays and numbers
+    :func:`match_fit_at` makes itself. An array does not change its type, so the same objects need no new test."""
+    usual = pts_m.ndim == 2 and _usual_cache(p0) and _usual_cache(p1) and _usual_cache(p2)
+    call = (_PYRAMID_STD[0] or _resolving_pyramid) if usual else match_pyramid
+    _PYRAMID_LAST[:] = (p0, p1, p2, call)
+    return call
+
+
+#: the Python types of :func:`match_pyramid`'s arguments as :func:`match_fit_at` passes them: a = ndarray, f = float,
+#: i = int, b = bool (the signature :data:`_PYRAMID_STD` is taken for)
+_PYRAMID_KINDS = "aaaaafffiibbffffbfffabfaaffff"
+_KIND = {np.ndarray: "a", float: "f", int: "i", bool: "b"}
+
+
+def _resolving_pyramid(*args):  # noqa: ANN002, ANN202
+    """:func:`match_pyramid` through numba's dispatcher (which compiles or loads it); then, if the arguments are of
+    the usual Python types (:data:`_PYRAMID_KINDS`), its entry point for their numba types made :data:`_PYRAMID_STD`
+    (the dispatcher itself with the AOT kernels: no numba overloads). A number of another type later (an int where
+    the entry takes a float64, a NumPy scalar) is converted by the entry point's unboxing to the same value the
+    dispatcher's own specialisation would compute with."""
+    got = match_pyramid(*args)
+    if "".join([_KIND.get(type(a), "?") for a in args]) != _PYRAMID_KINDS:
+        return got
+    overloads = getattr(match_pyramid, "overloads", None)
+    entry = match_pyramid
+    if overloads is not None:
+        cres = overloads.get(tuple(match_pyramid.typeof_pyval(a) for a in args))
+        candidate = getattr(cres, "entry_point", None)
+        if type(candidate) is _BUILTIN:  # (the machine code's wrapper, not a stand-in kept for linking)
+            entry = candidate
+    _PYRAMID_STD[0] = entry
+    if _PYRAMID_LAST[3] is _resolving_pyramid:
+        _PYRAMID_LAST[3] = entry
+    return got
+
+
+_BUILTIN = type(len)
 
 
 def _match_levels(levels: list[GridLevel], pts_m: np.ndarray, start_world: np.ndarray, iterations_coarse: int,
@@ -977,18 +1037,53 @@ def _interp_value(flat, w, h, px, py):  # pragma: no cover - numba
 def _fraction_below_rows(prob, xy, x, y, th, thresh):  # pragma: no cover - numba
     """:func:`fraction_below` of the points ``xy`` (2, n) (rows x and y, cells: :func:`_scaled_rows` of the
     laser-frame points, the division ``fraction_below``'s caller makes) at map pose (x, y, θ): the same count of
-    inside points below ``thresh`` over n."""
+    inside points below ``thresh`` over n.
+
+    In :func:`_sums`' blocks (pass mat146; one scalar loop with a branch a point before): per block of ``_BLOCK``
+    points a branch-free loop (vectorised) gives each point's cell, fractions and in-bounds flag with
+    :func:`_interp_value`'s operations, a scalar loop reads the four cells, and a branch-free loop counts the inside
+    points whose value is below ``thresh`` (an integer count: its order does not matter)."""
     c = math.cos(th)
     s = math.sin(th)
     h, w = prob.shape
     flat = np.ascontiguousarray(prob).reshape(-1)  # (a view of the level's C-contiguous cache)
-    n = 0
+    xmax = w - 2
+    ymax = h - 2
     npt = xy.shape[1]
-    for i in range(npt):
-        sx = xy[0, i]
-        sy = xy[1, i]
-        if _interp_value(flat, w, h, c * sx - s * sy + x, s * sx + c * sy + y) < thresh:  # (NaN: not inside)
-            n += 1
+    px = xy[0]
+    py = xy[1]
+    uw = np.uint64(w)
+    fb = _stack_array(np.float64, 3, _BLOCK)
+    qb = _stack_array(np.float32, 4, _BLOCK)
+    kb = _stack_array(np.uint64, 1, _BLOCK)[0]
+    n = 0
+    if w < 2 or h < 2:  # (no point can be inside)
+        return 0.0
+    for b0 in range(0, npt, _BLOCK):
+        m = min(_BLOCK, npt - b0)
+        for j in range(m):
+            sx = px[np.uint64(b0 + j)]  # (unsigned: no negative-index select, so the loop vectorises)
+            sy = py[np.uint64(b0 + j)]
+            qx = c * sx - s * sy + x
+            qy = s * sx + c * sy + y
+            inb = (qx >= 0.0) & (qy >= 0.0) & (qx <= xmax) & (qy <= ymax)  # (also rejects NaN)
+            qx = qx if inb else 0.0
+            qy = qy if inb else 0.0
+            x0 = int(qx)
+            y0 = int(qy)
+            fb[0, j] = qx - x0
+            fb[1, j] = qy - y0
+            kb[j] = np.uint64(y0 * w + x0)
+            fb[2, j] = 1.0 if inb else 0.0
+        for j in range(m):
+            k = kb[j]
+            qb[0, j], qb[1, j] = cell_prob_pair(flat, k)
+            qb[2, j], qb[3, j] = cell_prob_pair(flat, k + uw)
+        for j in range(m):
+            fx = fb[0, j]
+            fy = fb[1, j]
+            mv = (1.0 - fy) * ((1.0 - fx) * qb[0, j] + fx * qb[1, j]) + fy * ((1.0 - fx) * qb[2, j] + fx * qb[3, j])
+            n += 1 if (fb[2, j] != 0.0) & (mv < thresh) else 0
     return n / max(npt, 1)
 
 
