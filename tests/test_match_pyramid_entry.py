@@ -39,7 +39,7 @@ def test_usual_caches_take_the_entry_point_and_others_the_dispatcher_with_the_sa
     starts = [(0.3, -0.4, 0.2), (0.42, -0.31, 0.27), (0.2, -0.5, 0.1)]
     want = [_fit(levels, pts, slam, s) for s in starts]
     last = mt._PYRAMID_LAST
-    assert last[0] is levels[0].prob and last[1] is levels[1].prob and last[2] is levels[2].prob
+    assert last[0]() is levels[0].prob and last[1]() is levels[1].prob and last[2]() is levels[2].prob
     assert type(last[3]) is type(len) and last[3] is mt._PYRAMID_STD[0]  # the compiled entry point, remembered
     assert [_fit(levels, pts, slam, s) for s in starts] == want  # (through the entry point: the same results)
     # caches of other layouts / types (the same probabilities): the dispatcher, the same results; read as C-order
@@ -52,7 +52,7 @@ def test_usual_caches_take_the_entry_point_and_others_the_dispatcher_with_the_sa
         assert got == want
         usual = all(o.prob.flags.c_contiguous for o in other)
         assert (mt._PYRAMID_LAST[3] is mt._PYRAMID_STD[0]) == usual
-        assert mt._PYRAMID_LAST[0] is other[0].prob
+        assert mt._PYRAMID_LAST[0]() is other[0].prob
     ro = [_Levels(lv, lv.prob.copy()) for lv in levels]
     for o in ro:
         o.prob.flags.writeable = False
@@ -80,3 +80,23 @@ def test_the_evaluation_sums_at_the_result_without_the_iterations_keeping_them()
         ev = mt.evaluate(levels[0], pts, np.frombuffer(pb))
         assert (cost, score, n_in) == (ev.cost, ev.score, ev.n_inside)
         assert score > 0.3 and n_in > 0.9 * pts.shape[0]
+
+
+def test_the_remembered_caches_do_not_keep_a_dropped_map_alive() -> None:
+    """The last caches are remembered weakly: a map's probability caches (a loop closure's submap, a grown level's
+    old arrays) are freed as soon as nothing else holds them, not kept until the next match (≈ 3 MiB more at MIT
+    CSAIL's memory peak with strong references, session 47)."""
+    import gc
+    import weakref
+
+    slam, pts = paper_room_slam_points()
+    copies = [_Levels(lv, lv.prob.copy()) for lv in slam.map.levels]
+    probe = weakref.ref(copies[0].prob)
+    want = _fit(slam.map.levels, pts, slam, (0.3, -0.4, 0.2))
+    assert _fit(copies, pts, slam, (0.3, -0.4, 0.2)) == want
+    assert mt._PYRAMID_LAST[0]() is copies[0].prob
+    del copies
+    gc.collect()
+    assert probe() is None  # (freed although it was the last cache matched)
+    assert mt._PYRAMID_LAST[0]() is None
+    assert _fit(slam.map.levels, pts, slam, (0.3, -0.4, 0.2)) == want  # (a dead reference: the caches tested again)
