@@ -146,6 +146,7 @@ LOOPS_NOT_VECTORISED = {
     "dynslam2d.detect.shapes.fit_cluster_rows": "4df79f952e43f675",
     "dynslam2d.detect.segment.detect_scan": "5813f765c424848a",
     "dynslam2d.detect.kernels_assign.associate_update": "8bb27e16e01cd920",
+    "dynslam2d.slam.raycast.integrate_levels": "007bbf5a2f274cfe",
 }
 
 
