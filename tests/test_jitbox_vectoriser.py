@@ -104,9 +104,10 @@ def test_listed_kernels_exist_as_measured() -> None:
         assert now == digest, f"{name} edited since measured (its source's hash now {now!r}; see this test's doc)"
 
 
-#: Compiles ``associate_update`` for its manifest signature (an empty numba cache, the command line's compile
-#: settings) and prints how many vector loops its optimised code holds, as listed (argv[1] "1") and not ("0").
-ASSOCIATE = r'''
+#: Compiles the kernel argv[2] (``module.qualname``) for its manifest signature (an empty numba cache, the command
+#: line's compile settings) and prints how many vector loops its optimised code holds, as listed (argv[1] "1") and
+#: not ("0").
+LISTED_PROBE = r'''
 import sys
 import dynslam2d.jitcache as jc
 for name in ("plain_numba_errors", "load_blas_alone", "lean_numba_compile", "lean_compile_gc"):
@@ -114,7 +115,7 @@ for name in ("plain_numba_errors", "load_blas_alone", "lean_numba_compile", "lea
 from dynslam2d import jitbox
 from dynslam2d.jitmanifest import KERNELS
 from dynslam2d.jitwarm import _dispatcher, parse_signature
-NAME = "dynslam2d.detect.kernels_assign.associate_update"
+NAME = sys.argv[2]
 if sys.argv[1] == "0":
     del jitbox.LOOPS_NOT_VECTORISED[NAME]
 kernel = _dispatcher(NAME)
@@ -123,14 +124,27 @@ print(kernel.overloads[kernel.signatures[0]].library.get_llvm_str().count("vecto
 '''
 
 
-def test_associate_update_compiles_without_vector_loops(tmp_path: Path) -> None:
-    """``associate_update`` (pass cmp144) is listed, and listing it takes the vector loops out of its code (numba's
-    pipeline vectorises 14 of its loops, with the association gates' and the pair updates' code it links)."""
+def _vector_loops(name: str, tmp_path: Path) -> list[int]:
+    """Vector loops in the optimised code of the kernel ``name`` compiled as listed, then with its entry removed."""
     counts = []
     for listed in ("1", "0"):
         env = {"PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path / listed), "PATH": "/usr/bin:/bin",
                "DYNSLAM2D_COMPILE_WORKER": "0"}
-        done = subprocess.run([sys.executable, "-c", ASSOCIATE, listed], env=env, capture_output=True, text=True,
-                              timeout=600, check=True)
+        done = subprocess.run([sys.executable, "-c", LISTED_PROBE, listed, name], env=env, capture_output=True,
+                              text=True, timeout=600, check=True)
         counts.append(int(done.stdout.strip().splitlines()[-1]))
-    assert counts[0] == 0 and counts[1] > 0
+    return counts
+
+
+def test_associate_update_compiles_without_vector_loops(tmp_path: Path) -> None:
+    """``associate_update`` (pass cmp144) is listed, and listing it takes the vector loops out of its code (numba's
+    pipeline vectorises 14 of its loops, with the association gates' and the pair updates' code it links)."""
+    listed, plain = _vector_loops("dynslam2d.detect.kernels_assign.associate_update", tmp_path)
+    assert listed == 0 and plain > 0
+
+
+def test_integrate_levels_compiles_without_vector_loops(tmp_path: Path) -> None:
+    """The map update's ``integrate_levels`` (pass cmp148) is listed: its optimised code holds no vector loop (numba's
+    pipeline vectorises some of its loops, with the ray kernel's code it links)."""
+    listed, plain = _vector_loops("dynslam2d.slam.raycast.integrate_levels", tmp_path)
+    assert listed == 0 and plain > 0
