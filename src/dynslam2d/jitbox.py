@@ -136,9 +136,10 @@ def box_arrays_from_env() -> bool:
 #: that those two keep theirs. Not ``association_gates``, ``update_pairs`` (the track stage's median ×1.02–1.03 without
 #: it) nor the body filter's ``_drop_body`` (+10–25 µs a sim:paper scan), nor the matcher's and the loop closer's
 #: kernels, whose loops need it (pass cmp50; the map update's below since pass cmp148), nor kernels whose optimised
-#: code holds no vector loop (listing them changes nothing). The vectoriser keeps the order of floating-point operations without ``fastmath``, so
-#: the numbers are the same either way. ``associate_update`` (pass cmp144: its 14 vector loops, the pairs' gathers and
-#: the gates' rows over a few tracks, ≈ 7 % of its machine code), whose big callees LLVM keeps out of line already.
+#: code holds no vector loop (listing them changes nothing). The vectoriser keeps the order of floating-point
+#: operations without ``fastmath``, so the numbers are the same either way. ``associate_update`` (pass cmp144: its 14
+#: vector loops, the pairs' gathers and the gates' rows over a few tracks, ≈ 7 % of its machine code), whose big
+#: callees LLVM keeps out of line already.
 #: The map update's ``integrate_levels`` (pass cmp148: its 2 vector loops, with the ray kernel it links; ≈ 0.05–0.08 s
 #: of LLVM CPU, the map update per scan unchanged). Not the loop closer's correlative search (``_search_table``,
 #: ``branch_and_bound``, ``_search_cells``: MIT CSAIL's front-end search ×1.12–1.27 without it, pass cmp148), nor
