@@ -11,7 +11,16 @@ import pytest
 
 from dynslam2d.slam.grid import encode_probs
 from dynslam2d.slam.interp import interp_value_grad
-from dynslam2d.slam.matcher import _N_BINS, _fraction_below_rows, _scaled_rows, _support_kernel, fraction_below
+from dynslam2d.slam.matcher import (
+    _N_BINS,
+    _bearing_bin,
+    _bearing_pos,
+    _bin_at,
+    _scaled_rows,
+    _sums,
+    _support_kernel,
+    fraction_below,
+)
 
 
 def _cache(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
@@ -30,6 +39,16 @@ def _points(rng: np.random.Generator, n: int, reach: float) -> np.ndarray:
     pts[rng.uniform(size=n) < 0.03] = np.nan
     pts[rng.uniform(size=n) < 0.01] = 0.0
     return pts
+
+
+def _fraction_below_rows(prob: np.ndarray, xy: np.ndarray, x: float, y: float, th: float, thresh: float) -> float:
+    """match_pyramid's free fraction: ``_sums``' count mode (pass mat148: not ``full``, ``stats``, the threshold in
+    g[0]) over n points; H and g untouched."""
+    H = np.full((3, 3), 7.0)
+    g = np.array([thresh, 7.0, 7.0])
+    _, summ, n = _sums(prob, xy, x, y, th, np.bool_(False), np.bool_(False), np.bool_(True), H, g)
+    assert summ == 0.0 and np.all(H == 7.0) and g.tolist() == [thresh, 7.0, 7.0]
+    return n / max(xy.shape[1], 1)
 
 
 def _reference_support(prob: np.ndarray, pts: np.ndarray, stride: int, inv_res: float, x: float, y: float,
@@ -81,3 +100,20 @@ def test_points_on_the_last_interpolable_cells_are_inside() -> None:
         assert tuple(int(v) for v in got) == _reference_support(prob, grid, 1, 1.0, 0.0, 0.0, 0.0, thresh)
         assert _fraction_below_rows(prob, _scaled_rows(grid, 1.0), 0.0, 0.0, 0.0, thresh) == fraction_below(
             prob, grid / 1.0, 0.0, 0.0, 0.0, thresh)
+
+
+def test_branch_free_bearing_position_gives_the_bearing_bin() -> None:
+    """The support's bearing bins (pass mat148: ``_bin_at`` of the branch-free ``_bearing_pos``) are
+    ``_bearing_bin``'s on random points and on the axes, the diagonals (|x| = |y|), signed zeros, the origin and bin
+    edges, for the support's 72 bins and others."""
+    rng = np.random.default_rng(5)
+    pts = [tuple(p) for p in rng.normal(size=(3000, 2)) * rng.choice([1e-3, 1.0, 30.0], size=(3000, 1))]
+    for v in (0.0, -0.0, 1.0, -1.0, 2.5, -7.0):
+        for u in (0.0, -0.0, 1.0, -1.0, 2.5, -7.0):
+            pts.append((v, u))
+    for k in range(72):  # points on the bin edges (atan2 = −π + k·5°)
+        a = -math.pi + k * 2.0 * math.pi / 72
+        pts.append((math.cos(a), math.sin(a)))
+    for nb in (72, 64, 7):
+        for x, y in pts:
+            assert _bin_at(_bearing_pos(x, y, nb), x, y, nb) == _bearing_bin(x, y, nb), (x, y, nb)

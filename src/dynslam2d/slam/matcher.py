@@ -91,7 +91,12 @@ def _split_xy(pts):  # pragma: no cover - numba
 def _sums(prob, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cover - numba
     """:func:`accumulate`'s pass over the points ``xy`` (2, n) (rows x and y, cells); without ``full`` only the cost
     (H, g untouched; Σ M and n_inside returned as 0); with ``full`` but without ``stats``, the cost, H and g (Σ M and
-    n_inside returned as 0: two sums fewer a point, pass map38).
+    n_inside returned as 0: two sums fewer a point, pass map38). Without ``full`` but with ``stats``, the count mode:
+    (unspecified, 0.0, the number of inside points whose M is below ``g[0]``; H, g untouched) —
+    :func:`fraction_below`'s count (an integer: its order does not matter) from the cost-only pass's loops, each
+    point's M kept for it in the terms' second row, without the cost's sum (pass mat148: one copy of the cell loops,
+    not a second kernel body; the threshold read from ``g``, not a new argument held in a register through the other
+    modes' loops, where it made LLVM spill the twelve sums to the stack).
 
     The same float64 (and float32: the cells' differences) operations per point as
     :func:`~dynslam2d.slam.interp.interp_value_grad` and the same sums in point order, so the same bits as the
@@ -164,6 +169,14 @@ def _sums(prob, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cover -
                     + fy * ((1.0 - fx) * qb[2, j] + fx * qb[3, j])
                 r = 1.0 - mv
                 tb[0, j] = r * r if fb[2, j] != 0.0 else 1.0
+                tb[1, j] = mv
+            if stats:  # (the count mode: the inside points whose M is below g[0])
+                below = g[0]
+                nb = 0
+                for j in range(m):
+                    nb += 1 if (fb[2, j] != 0.0) & (tb[1, j] < below) else 0
+                n_in += nb
+                continue
             for j in range(m):
                 cost += tb[0, j]
             continue
@@ -414,7 +427,7 @@ def _match_core(prob, xy, pose, n_iter, swapped, use_lm, lam0, lam_max, max_rot,
             # iterations needs them only when the caller keeps this pose's H
             ends = it == n_iter - 1 or (nt < _CONVERGED_CELLS and abs(d[2]) < _CONVERGED_RAD)
             full = not ends or (keep and _round_trips(nx, ny, nth, res, i0, j0))
-            new_raw, new_summ, new_in = _sums(prob, xy, nx, ny, nth, swapped, full, keep, H2, g2)
+            new_raw, new_summ, new_in = _sums(prob, xy, nx, ny, nth, swapped, full, full and keep, H2, g2)
             new_cost = new_raw
             if use_prior:
                 new_cost += _prior_cost(nx, ny, nth, prior, lam_p)
@@ -613,14 +626,22 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, sx, sy, sth, it_coarse, it_fi
     if not want_fit or geo[0, 3] != 0.0:
         return False, 0.0, 0.0, 0, 0.0, 0, 0, _NO_DEGENERACY
     free = 0.0
+    g = _stack_array(np.float64, 1, 3)[0]
+    g[:] = 0.0
+    # (np.bool_, not literals: _match_core's signature of _sums)
+    yes = np.bool_(True)
+    no = np.bool_(False)
     wth = (pose[2] + math.pi) % (2.0 * math.pi) - math.pi  # (the wrapped θ of Pose2D(x, y, wrap_angle(θ)))
     if geo[fl, 3] == 0.0:
         res = geo[fl, 0]
         if xy_fl.shape[1] != pts_m.shape[0]:  # (its level ran no iterations: pts_m / res as rows, made here)
             xy_fl = _scaled_rows(pts_m, res)
-        # (fraction_below of pts_m / res: the same values from the rows the level's iterations divided)
-        free = _fraction_below_rows(prob1 if fl == 1 else prob0, xy_fl, pose[0] / res - geo[fl, 1],
-                                    pose[1] / res - geo[fl, 2], wth, free_thresh)
+        # (fraction_below of pts_m / res: the same values from the rows the level's iterations divided; _sums' count
+        # mode, H and g untouched)
+        g[0] = free_thresh
+        _, _, n_free = _sums(prob1 if fl == 1 else prob0, xy_fl, pose[0] / res - geo[fl, 1],
+                             pose[1] / res - geo[fl, 2], wth, no, no, yes, Hk, g)
+        free = n_free / max(pts_m.shape[0], 1)
     res = geo[0, 0]
     m0 = pose[0] / res - geo[0, 1]
     m1 = pose[1] / res - geo[0, 2]
@@ -632,14 +653,10 @@ def match_pyramid(prob0, prob1, prob2, geo, pts_m, sx, sy, sth, it_coarse, it_fi
         n_sup, k_sup = _support_kernel(prob0, pts_m, stride, 1.0 / res, m0, m1, wth, support_thresh,
                                        np.int64(_N_BINS))  # (an int64, not a literal: the Python call's signature)
         n_sup *= stride
-    g = _stack_array(np.float64, 1, 3)[0]
-    g[:] = 0.0
-    # (accumulate's pass on level 0's rows, those its iterations made; np.bool_, not literals: _match_core's
-    # signature of _sums)
-    yes = np.bool_(True)
+    # (accumulate's pass on level 0's rows, those its iterations made)
     if xy_0.shape[1] != pts_m.shape[0]:  # (level 0 ran no iterations: pts_m / res as rows, made here)
         xy_0 = _scaled_rows(pts_m, res)
-    cost, summ, n_in = _sums(prob0, xy_0, m0, m1, m2, np.bool_(False), yes, yes, H_out, g)
+    cost, summ, n_in = _sums(prob0, xy_0, m0, m1, m2, no, yes, yes, H_out, g)
     dg = _NO_DEGENERACY
     if deg_thresh == deg_thresh:  # (not NaN) the processor's degeneracy analysis of this H, in the same call
         dg = _degeneracy_kernel(H_out, res, pts_m.shape[0], sumsq, deg_thresh, two)
@@ -978,6 +995,41 @@ _ATAN_C9 = 0.0208351
 _BIN_EDGE_MARGIN = 1e-3
 
 
+@njit(cache=True, inline="always")
+def _bearing_pos(x, y, nb):  # pragma: no cover - numba
+    """``(atan2(y, x) + π) / 2π · nb``, the bearing of (x, y) in bins, with the angle from a polynomial (|error| ≤
+    1.15e-5 rad); NaN at the origin. Branch-free (selects; the one division's divisor is never zero), so that a
+    loop of it vectorises (pass mat148: numba's Python error model tests a division's divisor for zero, which LLVM
+    drops only when it can see the divisor is not zero). :func:`_bearing_bin`'s polynomial and operations;
+    ``_bearing_bin`` keeps its own body: written with this and :func:`_bin_at` inlined, jitcache's lazy callee
+    (``CALLEE_OPTIMISED_ONCE``) left dynamic globals in its unoptimised module and numba no longer cached it."""
+    ax = abs(x)
+    ay = abs(y)
+    ge = ax >= ay
+    lo = ay if ge else ax
+    hi = ax if ge else ay  # (z = ay / ax when ax ≥ ay, else ax / ay: the same division)
+    z = lo / (hi if hi > 0.0 else 1.0)
+    z2 = z * z
+    a = z * (_ATAN_C1 + z2 * (_ATAN_C3 + z2 * (_ATAN_C5 + z2 * (_ATAN_C7 + z2 * _ATAN_C9))))
+    a = 0.5 * math.pi - a if ay > ax else a
+    a = math.pi - a if x < 0.0 else a
+    a = -a if y < 0.0 else a
+    t = (a + math.pi) / (2.0 * math.pi) * nb
+    return t if hi > 0.0 else math.nan
+
+
+@njit(cache=True, inline="always")
+def _bin_at(t, x, y, nb):  # pragma: no cover - numba
+    """The bearing bin of (x, y) from its :func:`_bearing_pos` ``t``: ``floor(t)`` away from a bin edge, else (within
+    ``_BIN_EDGE_MARGIN`` of one, or ``t`` NaN) ``int(floor((atan2(y, x) + π) / 2π · nb)) % nb``."""
+    f = t - math.floor(t)
+    if f >= _BIN_EDGE_MARGIN and f <= 1.0 - _BIN_EDGE_MARGIN:
+        # (a is in [−π, π], so t in [0, nb] and, away from a bin edge, floor(t) in [0, nb − 1]: ``% nb`` would
+        # leave it as it is — without it, no integer division a point)
+        return int(math.floor(t))
+    return int(math.floor((math.atan2(y, x) + math.pi) / (2.0 * math.pi) * nb)) % nb
+
+
 @njit(cache=True)
 def _bearing_bin(x, y, nb):  # pragma: no cover - numba
     """``int(floor((atan2(y, x) + π) / 2π · nb)) % nb``, the bearing bin of (x, y) — the same integer: the
@@ -1024,54 +1076,41 @@ def _spread_kernel(pts, use, nb):  # pragma: no cover - numba
 
 
 @njit(cache=True, inline="always")
-def _interp_value(flat, w, h, px, py):  # pragma: no cover - numba
-    """:func:`~dynslam2d.slam.interp.interp_value_grad`'s value M at map point (``px``, ``py``) of a probability
-    cache of (h, w) words given as ``flat``, its C-order view, with the same operations; NaN where it is not inside (its
-    ``inside`` False, a NaN point included), so that ``M > t`` and ``M < t`` are ``inside and M > t`` and ``inside
-    and M < t`` (an inside M is finite: a blend of four probabilities)."""
-    if not (px >= 0.0 and py >= 0.0 and px <= w - 2 and py <= h - 2):  # also rejects NaN
-        return math.nan
-    x0 = int(px)
-    y0 = int(py)
-    fx = px - x0
-    fy = py - y0
-    k = y0 * w + x0
-    p00, p10 = cell_prob_pair(flat, k)  # (each row's two cells from one 8-byte load)
-    p01, p11 = cell_prob_pair(flat, k + w)
-    return (1.0 - fy) * ((1.0 - fx) * p00 + fx * p10) + fy * ((1.0 - fx) * p01 + fx * p11)
+def _support_kernel(prob, pts_m, stride, inv_res, x, y, th, thresh, nb):  # pragma: no cover - numba
+    """Over every ``stride``-th laser-frame point (m): count those whose interpolated probability at
+    map pose (x cells, y cells, θ) exceeds ``thresh``; return (count, bearing bins they occupy).
 
-
-@njit(cache=True, inline="always")
-def _fraction_below_rows(prob, xy, x, y, th, thresh):  # pragma: no cover - numba
-    """:func:`fraction_below` of the points ``xy`` (2, n) (rows x and y, cells: :func:`_scaled_rows` of the
-    laser-frame points, the division ``fraction_below``'s caller makes) at map pose (x, y, θ): the same count of
-    inside points below ``thresh`` over n.
-
-    In :func:`_sums`' blocks (pass mat146; one scalar loop with a branch a point before): per block of ``_BLOCK``
-    points a branch-free loop (vectorised) gives each point's cell, fractions and in-bounds flag with
-    :func:`_interp_value`'s operations, a scalar loop reads the four cells, and a branch-free loop counts the inside
-    points whose value is below ``thresh`` (an integer count: its order does not matter)."""
+    In :func:`_sums`' blocks (pass mat148; one scalar loop with two branches a point before): per block of
+    ``_BLOCK`` points a branch-free loop (vectorised) gives each point's cell, fractions, in-bounds flag (the
+    operations of :func:`~dynslam2d.slam.interp.interp_value_grad`'s value and inside test) and bearing position
+    (:func:`_bearing_pos`), a scalar loop reads the four cells, and a last loop counts the inside points above
+    ``thresh`` and marks their bins (:func:`_bin_at`)."""
     c = math.cos(th)
     s = math.sin(th)
+    seen = np.empty(nb, dtype=np.bool_)
+    seen[:] = False
+    n = 0
+    k = 0
     h, w = prob.shape
+    if w < 2 or h < 2:  # (no point can be inside)
+        return n, k
     flat = np.ascontiguousarray(prob).reshape(-1)  # (a view of the level's C-contiguous cache)
     xmax = w - 2
     ymax = h - 2
-    npt = xy.shape[1]
-    px = xy[0]
-    py = xy[1]
     uw = np.uint64(w)
-    fb = _stack_array(np.float64, 3, _BLOCK)
+    npt = (pts_m.shape[0] + stride - 1) // stride  # (the points of range(0, n, stride))
+    fb = _stack_array(np.float64, 4, _BLOCK)
     qb = _stack_array(np.float32, 4, _BLOCK)
     kb = _stack_array(np.uint64, 1, _BLOCK)[0]
-    n = 0
-    if w < 2 or h < 2:  # (no point can be inside)
-        return 0.0
+    ust = np.uint64(stride)
     for b0 in range(0, npt, _BLOCK):
         m = min(_BLOCK, npt - b0)
         for j in range(m):
-            sx = px[np.uint64(b0 + j)]  # (unsigned: no negative-index select, so the loop vectorises)
-            sy = py[np.uint64(b0 + j)]
+            ui = np.uint64(b0 + j) * ust  # (unsigned: no negative-index select, so the loop vectorises)
+            ex = pts_m[ui, 0]
+            ey = pts_m[ui, 1]
+            sx = ex * inv_res
+            sy = ey * inv_res
             qx = c * sx - s * sy + x
             qy = s * sx + c * sy + y
             inb = (qx >= 0.0) & (qy >= 0.0) & (qx <= xmax) & (qy <= ymax)  # (also rejects NaN)
@@ -1083,40 +1122,22 @@ def _fraction_below_rows(prob, xy, x, y, th, thresh):  # pragma: no cover - numb
             fb[1, j] = qy - y0
             kb[j] = np.uint64(y0 * w + x0)
             fb[2, j] = 1.0 if inb else 0.0
+            fb[3, j] = _bearing_pos(ex, ey, nb)
         for j in range(m):
-            k = kb[j]
-            qb[0, j], qb[1, j] = cell_prob_pair(flat, k)
-            qb[2, j], qb[3, j] = cell_prob_pair(flat, k + uw)
+            kk = kb[j]
+            qb[0, j], qb[1, j] = cell_prob_pair(flat, kk)  # (each row's two cells from one 8-byte load)
+            qb[2, j], qb[3, j] = cell_prob_pair(flat, kk + uw)
         for j in range(m):
             fx = fb[0, j]
             fy = fb[1, j]
             mv = (1.0 - fy) * ((1.0 - fx) * qb[0, j] + fx * qb[1, j]) + fy * ((1.0 - fx) * qb[2, j] + fx * qb[3, j])
-            n += 1 if (fb[2, j] != 0.0) & (mv < thresh) else 0
-    return n / max(npt, 1)
-
-
-@njit(cache=True, inline="always")
-def _support_kernel(prob, pts_m, stride, inv_res, x, y, th, thresh, nb):  # pragma: no cover - numba
-    """Over every ``stride``-th laser-frame point (m): count those whose interpolated probability at
-    map pose (x cells, y cells, θ) exceeds ``thresh``; return (count, bearing bins they occupy)."""
-    c = math.cos(th)
-    s = math.sin(th)
-    seen = np.empty(nb, dtype=np.bool_)
-    seen[:] = False
-    n = 0
-    k = 0
-    h, w = prob.shape
-    flat = np.ascontiguousarray(prob).reshape(-1)  # (a view of the level's C-contiguous cache)
-    for i in range(0, pts_m.shape[0], stride):
-        sx = pts_m[i, 0] * inv_res
-        sy = pts_m[i, 1] * inv_res
-        # (interp_value_grad's value and inside test, inline on the flat cache: the same operations)
-        if _interp_value(flat, w, h, c * sx - s * sy + x, s * sx + c * sy + y) > thresh:
-            n += 1
-            b = _bearing_bin(pts_m[i, 0], pts_m[i, 1], nb)
-            if not seen[b]:
-                seen[b] = True
-                k += 1
+            if fb[2, j] != 0.0 and mv > thresh:
+                n += 1
+                i = (b0 + j) * stride
+                b = _bin_at(fb[3, j], pts_m[i, 0], pts_m[i, 1], nb)
+                if not seen[b]:
+                    seen[b] = True
+                    k += 1
     return n, k
 
 
