@@ -87,6 +87,23 @@ def _split_xy(pts):  # pragma: no cover - numba
     return xy
 
 
+@njit(cache=True, inline="always")
+def _cell_of(sx, sy, c, s, x, y, xmax, ymax, w):  # pragma: no cover - numba
+    """The point (``sx``, ``sy``) (cells, laser frame) at map pose (x, y cells, θ with cos ``c``, sin ``s``): its
+    fractions (fx, fy) in its cell, the cell's key ``y0 · w + x0`` in a (h, w) cache's flat view and its in-bounds
+    flag (1.0 / 0.0; 0 ≤ x ≤ ``xmax``, 0 ≤ y ≤ ``ymax``, NaN rejected), with
+    :func:`~dynslam2d.slam.interp.interp_value_grad`'s operations; an outside point reads cell (0, 0). Branch-free
+    (selects), for the blocks' vectorised first loops of :func:`_sums` and :func:`_support_kernel`."""
+    qx = c * sx - s * sy + x
+    qy = s * sx + c * sy + y
+    inb = (qx >= 0.0) & (qy >= 0.0) & (qx <= xmax) & (qy <= ymax)  # (also rejects NaN)
+    qx = qx if inb else 0.0
+    qy = qy if inb else 0.0
+    x0 = int(qx)
+    y0 = int(qy)
+    return qx - x0, qy - y0, np.uint64(y0 * w + x0), 1.0 if inb else 0.0
+
+
 @njit(cache=True)
 def _sums(prob, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cover - numba
     """:func:`accumulate`'s pass over the points ``xy`` (2, n) (rows x and y, cells); without ``full`` only the cost
@@ -143,17 +160,7 @@ def _sums(prob, xy, x, y, th, swapped, full, stats, H, g):  # pragma: no cover -
         for j in range(m):
             sx = px[np.uint64(b0 + j)]  # (unsigned: no negative-index select, so the loop vectorises)
             sy = py[np.uint64(b0 + j)]
-            qx = c * sx - s * sy + x
-            qy = s * sx + c * sy + y
-            inb = (qx >= 0.0) & (qy >= 0.0) & (qx <= xmax) & (qy <= ymax)  # (also rejects NaN)
-            qx = qx if inb else 0.0
-            qy = qy if inb else 0.0
-            x0 = int(qx)
-            y0 = int(qy)
-            fb[0, j] = qx - x0
-            fb[1, j] = qy - y0
-            kb[j] = np.uint64(y0 * w + x0)
-            fb[2, j] = 1.0 if inb else 0.0
+            fb[0, j], fb[1, j], kb[j], fb[2, j] = _cell_of(sx, sy, c, s, x, y, xmax, ymax, w)
             fb[3, j] = -s * sx - c * sy
             fb[4, j] = c * sx - s * sy
         for j in range(m):
@@ -1111,17 +1118,7 @@ def _support_kernel(prob, pts_m, stride, inv_res, x, y, th, thresh, nb):  # prag
             ey = pts_m[ui, 1]
             sx = ex * inv_res
             sy = ey * inv_res
-            qx = c * sx - s * sy + x
-            qy = s * sx + c * sy + y
-            inb = (qx >= 0.0) & (qy >= 0.0) & (qx <= xmax) & (qy <= ymax)  # (also rejects NaN)
-            qx = qx if inb else 0.0
-            qy = qy if inb else 0.0
-            x0 = int(qx)
-            y0 = int(qy)
-            fb[0, j] = qx - x0
-            fb[1, j] = qy - y0
-            kb[j] = np.uint64(y0 * w + x0)
-            fb[2, j] = 1.0 if inb else 0.0
+            fb[0, j], fb[1, j], kb[j], fb[2, j] = _cell_of(sx, sy, c, s, x, y, xmax, ymax, w)
             fb[3, j] = _bearing_pos(ex, ey, nb)
         for j in range(m):
             kk = kb[j]
