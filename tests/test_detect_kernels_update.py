@@ -290,7 +290,7 @@ def test_report_rows_is_report_boxes_with_the_python_speed_test() -> None:
     CI = rng.integers(0, 1000, (n + 5, ku.N_C)).astype(np.int64)
     got = report_rows(G, Gi, X, P, CI, rows, slow)
     ints = np.stack([Gi[:, GI_KIND].take(rows).astype(np.int64)] + [CI[:, c].take(rows) for c in (
-        ku.C_STATE, ku.C_HITS, ku.C_MISSES)])
+        ku.C_STATE, ku.C_HITS, ku.C_MISSES, ku.C_BS, ku.C_BN)])
     want = (boxes, X.take(rows, axis=0), P.take(rows, axis=0), ints)
     for a, b in zip(got, want):
         assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
@@ -499,13 +499,17 @@ def _update_pairs_separate(G, Gi, X, P, Xs, Ps, sel, trows, dis, missed, kind, t
     return nb, top, np.array(info, dtype=np.int64).reshape(n, 4), ok.tolist().count(False)
 
 
-def _counters_python(CI: np.ndarray, CL: np.ndarray, trows, applied, t: float, window: int) -> None:
+def _counters_python(CI: np.ndarray, CL: np.ndarray, trows, applied, t: float, window: int, info=None) -> None:
     """The counter lines of ``Tracker._update_tracks``' loop over the pairs before pass cnt36 (``k.hits += 1``,
     ``k.last_hit = t``, the M-of-N counts within the first ``window``, ``k.misses = 0`` of a re-acquired track) on the
-    rows ``trows`` of the tracks whose update ``applied``, and the updated flag the management step reads."""
+    rows ``trows`` of the tracks whose update ``applied``, and the updated flag the management step reads; with the
+    pairs' ``info`` rows, the beams' segment its slice ``beams[a0:a0 + npt]`` takes (pass rep149)."""
     from dynslam2d.detect import kernels_update as ku
 
-    for k, a in zip(trows, applied):
+    for r, (k, a) in enumerate(zip(trows, applied)):
+        if a and info is not None:
+            CI[k, ku.C_BS] = info[r, 1]
+            CI[k, ku.C_BN] = info[r, 2]
         if a:
             CI[k, ku.C_HITS] += 1
             CL[k] = t
@@ -521,7 +525,8 @@ def _update_pairs_reference(c: list) -> tuple:
     from dynslam2d.detect import kernels_update as ku
 
     got = _update_pairs_separate(*_old_args(c))
-    _counters_python(c[22], c[23], c[7][c[6]].tolist(), got[2][:, 0].tolist(), c[39], int(c[20][ku.UP_WINDOW]))
+    _counters_python(c[22], c[23], c[7][c[6]].tolist(), got[2][:, 0].tolist(), c[39], int(c[20][ku.UP_WINDOW]),
+                     got[2])
     return got
 
 

@@ -78,9 +78,9 @@ def test_mover_exclusions_count_the_removed_beams_and_give_the_longest_python_si
         cfg = Config().filter.model_copy(update=mode)
         for idx in ([2], [4], [0, 6], [1, 2, 3, 4, 5, 6, 7, 8], [2, 4]):
             k = len(idx)
-            packed = np.array(idx + [100 + i for i in idx] + [0] * k, dtype=np.int64)
+            packed = np.array(idx + [100 + i for i in idx] + [0] * (2 * k) + [0], dtype=np.int64)
             kept, ids, removed, removed_by, count, side = mover_exclusions(
-                cfg, scan, pose, boxes, states, packed, np.zeros(0, dtype=np.int64))
+                cfg, scan, pose, boxes, states, packed, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
             assert count == int(np.count_nonzero(removed)) and type(count) is int
             want = _python_side(kept)
             assert side == want or (side == -math.inf and want == -math.inf), (mode, idx)

@@ -24,7 +24,7 @@ from dynslam2d.detect.kernels_update import report_rows
 from dynslam2d.detect.layout import KIND_NAMES
 from dynslam2d.detect.trackreport import TrackReport, TrackReports
 from dynslam2d.detect.tracktable import STATE_NAMES
-from dynslam2d.filter import filter_scan_ids
+from dynslam2d.filter import filter_scan_ids, mover_beams
 from dynslam2d.inputs import open_source
 from dynslam2d.records import TrackRows
 from dynslam2d.slam import erasure
@@ -39,7 +39,7 @@ def _eager(tracker, t: float, updated: set[int]) -> list[Track]:
     slow = 0.5 * tracker.config.tracker.v_min
     boxes, Xo, P, ints = report_rows(tracker._G, tracker._Gi, tracker._X, tracker._P, tracker._CI, tracker._rows(),
                                      slow)
-    kinds, states, hits, misses = ints.tolist()
+    kinds, states, hits, misses = ints.tolist()[:4]
     out = []
     cols = boxes.T.tolist()
     for i, k in enumerate(tracks):
@@ -48,6 +48,15 @@ def _eager(tracker, t: float, updated: set[int]) -> list[Track]:
                          P[i].copy(), t - k.born, hits[i], misses[i], KIND_NAMES[kinds[i]], k.in_m, k.reason,
                          beams.copy(), len(beams), k.remembered and k.in_m))
     return out
+
+
+def _mover_segments(packed: np.ndarray, beams: np.ndarray, more: np.ndarray) -> list[np.ndarray]:
+    """Each mover's beams of ``TrackReports.mover_pack``'s result, place by place as ``filter._grow_boxes`` reads
+    them (place ``q``: ``beams[q]`` below the split point ``n0``, else ``more[q − n0]``)."""
+    k = (packed.shape[0] - 1) // 4
+    n0 = int(packed[4 * k])
+    return [np.array([beams[q] if q < n0 else more[q - n0] for q in range(s, s + c)], dtype=np.int64)
+            for s, c in zip(packed[2 * k:3 * k].tolist(), packed[3 * k:4 * k].tolist())]
 
 
 def _same(a: Track, b: Track) -> None:
@@ -72,7 +81,7 @@ def _columns_are_the_objects(lazy: TrackReports) -> None:
     stamps = [lazy.stamp_of(i) for i in range(n)]
     wb = lazy.with_beams()
     idx = lazy.moving_index()
-    packed, beams, mids = lazy.mover_pack(idx)
+    packed, beams, more, mids = lazy.mover_pack(idx)
     sights = [lazy.sight(i) for i in range(n)]
     tr_a, tr_b = TrackRows(), TrackRows()
     recs = pl._track_records(1.5, lazy, tr_a)
@@ -90,8 +99,15 @@ def _columns_are_the_objects(lazy: TrackReports) -> None:
     moving = [objs[i] for i in idx]
     rows, want_ids, own, ends = pl._track_rows(moving)
     k = len(idx)
-    assert packed.dtype == np.int64 and packed.tolist() == idx + want_ids.tolist() + ends and mids == want_ids.tolist()
-    assert beams.tobytes() == (np.concatenate(own) if own else np.zeros(0, dtype=np.int64)).tobytes()
+    assert packed.dtype == np.int64 and packed.shape == (4 * k + 1,) and mids == want_ids.tolist()
+    assert packed[:2 * k].tolist() == idx + want_ids.tolist()
+    assert beams.dtype == np.int64 and more.dtype == np.int64
+    # (each mover's beams, read from their places as the filter's kernel reads them, are its object's, in order)
+    assert [b.tobytes() for b in _mover_segments(packed, beams, more)] == \
+        [np.asarray(t.beams, dtype=np.int64).tobytes() if t.beams is not None else b"" for t in moving]
+    assert mover_beams(packed, beams, more).tobytes() == \
+        (np.concatenate(own) if own else np.zeros(0, dtype=np.int64)).astype(np.int64).tobytes()
+    assert [e - s for s, e in zip([0, *ends], ends)] == packed[3 * k:4 * k].tolist()
     boxes, X = lazy.arrays
     assert np.concatenate((boxes[idx], X[idx, 2:]), axis=1).reshape(k, 7).tobytes() == rows.tobytes()
 
@@ -179,8 +195,8 @@ def test_mover_exclusions_equal_the_object_path(mode: str, monkeypatch) -> None:
         packs.append((self, list(idx)))
         return orig_pack(self, idx)
 
-    def exclusions(config, scan, pose, boxes, states, packed, beams):
-        got = orig_ex(config, scan, pose, boxes, states, packed, beams)
+    def exclusions(config, scan, pose, boxes, states, packed, beams, more):
+        got = orig_ex(config, scan, pose, boxes, states, packed, beams, more)
         reps, idx = packs.pop()
         moving = [reps[i] for i in idx]
         keep: list = []
@@ -269,9 +285,11 @@ def test_mover_pack_makes_int64_beams_of_any_integer_beams() -> None:
     objs = [track(3, True, np.array([4, 5], dtype=np.int32)), track(9, False, np.array([1], dtype=np.int64)),
             track(4, True, np.array([700, 2], dtype=np.int16)), track(6, True, np.zeros(0, dtype=np.int64))]
     reps = TrackReports.of_tracks(objs)
-    packed, beams, mids = reps.mover_pack(reps.moving_index())
-    assert beams.dtype == np.int64 and beams.tolist() == [4, 5, 700, 2]
-    assert packed.dtype == np.int64 and packed.tolist() == [0, 2, 3, 3, 4, 6, 2, 4, 4] and mids == [3, 4, 6]
+    packed, beams, more, mids = reps.mover_pack(reps.moving_index())
+    assert beams.dtype == np.int64 and beams.tolist() == [4, 5, 700, 2] and more.shape == (0,)
+    # (indices, ids, first places, counts, split point: the objects' beams are concatenated, pass rep149)
+    assert packed.dtype == np.int64 and packed.tolist() == [0, 2, 3, 3, 4, 6, 0, 2, 4, 2, 2, 0, 4]
+    assert mids == [3, 4, 6]
 
 
 def test_a_run_builds_no_track_object(monkeypatch) -> None:

@@ -179,10 +179,12 @@ def _exclusion_kernel(
 @njit(cache=True, inline="always")
 def _grow_boxes(
     ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, pc: float, ps: float, px: float, py: float,
-    beams: np.ndarray, ends: np.ndarray, boxes: np.ndarray,
+    beams: np.ndarray, more: np.ndarray, n0: int, starts: np.ndarray, counts: np.ndarray, boxes: np.ndarray,
 ) -> None:
     """Grow each box of ``boxes`` ((k, ≥ 5) rows [p_x, p_y, θ, l, w, …], map frame, m and rad; in place) to
-    enclose the finite returns of its beams ``beams[ends[j-1]:ends[j]]`` of the scan at the pose (``pc``, ``ps``
+    enclose the finite returns of its beams, places ``starts[j]`` … ``starts[j] + counts[j] − 1`` (place ``q``: the
+    beam ``beams[q]`` if ``q < n0``, else ``more[q − n0]``: the detections' beams and the merged persons', pass
+    rep149), of the scan at the pose (``pc``, ``ps``
     = cos, sin of its heading; ``px``, ``py`` its position, m): the paper's exclusion box is the rectangle fitted
     to the object's cluster in this scan (§2.2, Eq. 2), which encloses it by construction; the union keeps the
     tracked extent where part of the object is hidden. A box without a finite return stays as it is.
@@ -190,9 +192,9 @@ def _grow_boxes(
     The floating-point operations are those of the per-track numpy version (points as :meth:`Scan.points` and
     :meth:`Pose2D.transform_points`; extents ``min(-l/2, min u)`` … with Python's ``min``/``max`` on a NaN).
     """
-    lo = 0
     for j in range(boxes.shape[0]):
-        hi = ends[j]
+        lo = starts[j]
+        hi = lo + counts[j]
         bx = boxes[j, 0]
         by = boxes[j, 1]
         c = math.cos(boxes[j, 2])
@@ -205,7 +207,7 @@ def _grow_boxes(
         unan = False
         vnan = False
         for q in range(lo, hi):
-            b = beams[q]
+            b = beams[q] if q < n0 else more[q - n0]
             r = ranges[b]
             if not np.isfinite(r):
                 continue
@@ -226,7 +228,6 @@ def _grow_boxes(
             else:
                 vmin = min(vmin, v)
                 vmax = max(vmax, v)
-        lo = hi
         if n_ok == 0:
             continue
         if unan:  # numpy's min / max of an array with a NaN is NaN
@@ -258,8 +259,16 @@ def observed_boxes_kernel(
     beams: np.ndarray, ends: np.ndarray, boxes: np.ndarray,
 ) -> None:
     """:func:`_grow_boxes` as a kernel of its own (the pipeline's per-scan path inlines the body in
-    :func:`_movers_kernel` instead: one compile of it, not two)."""
-    _grow_boxes(ranges, cos_a, sin_a, pc, ps, px, py, beams, ends, boxes)
+    :func:`_movers_kernel` instead: one compile of it, not two): box ``j``'s beams ``beams[ends[j-1]:ends[j]]``."""
+    k = ends.shape[0]
+    starts = np.empty(k, dtype=np.int64)
+    counts = np.empty(k, dtype=np.int64)
+    lo = 0
+    for j in range(k):
+        starts[j] = lo
+        counts[j] = ends[j] - lo
+        lo = ends[j]
+    _grow_boxes(ranges, cos_a, sin_a, pc, ps, px, py, beams, beams, beams.shape[0], starts, counts, boxes)
 
 
 @njit(cache=True, inline="always")
@@ -465,18 +474,20 @@ def _rows_exclusion_kernel(
 def _movers_kernel(
     ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, valid: np.ndarray,
     pc: float, ps: float, px: float, py: float, boxes: np.ndarray, X: np.ndarray, packed: np.ndarray,
-    beams: np.ndarray, dt: float, gather: bool, exclude: bool, square: bool, margin: float, cap: float,
+    beams: np.ndarray, more: np.ndarray, dt: float, gather: bool, exclude: bool, square: bool, margin: float,
+    cap: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, float]:
     """The movers' exclusion rows and, with ``exclude``, the beams they remove, in one call (:func:`mover_exclusions`);
     without ``gather``, the exclusion of given rows (:func:`filter_scan_ids`' default mode).
 
-    With ``gather``: ``packed`` holds k report indices, their k ids and the k running counts of their beams
-    ``beams``; ``boxes`` (n, 5) and ``X`` (n, 4) are the reports' boxes and states (velocity in columns 2, 3).
+    With ``gather``: ``packed`` holds k report indices, their k ids, the k first places and k counts of their beams
+    and a split point ``n0`` (``TrackReports.mover_pack``: place ``q`` is the beam ``beams[q]`` if ``q < n0``, else
+    ``more[q − n0]``); ``boxes`` (n, 5) and ``X`` (n, 4) are the reports' boxes and states (velocity in columns 2, 3).
     Returns the (k, 7) rows [p_x, p_y, θ, l, w, v_x, v_y] of the movers' boxes and velocities, the same rows with
     each box grown to its beams' points (:func:`_grow_boxes`), and with ``exclude`` (mode ``box`` without a speed
     margin) the removed / removed_by of :func:`_rows_exclusion` over the grown rows at ``dt`` (else two empty
     arrays). Without ``gather``: ``boxes`` are (k, 7) rows and ``packed`` their k ids; the rows are returned
-    twice, as they are, with their exclusion at ``dt`` (``X`` and ``beams`` unread). Last, two numbers the
+    twice, as they are, with their exclusion at ``dt`` (``X``, ``beams`` and ``more`` unread). Last, two numbers the
     pipeline would otherwise compute in Python (pass neg112): the count of removed beams (0 without ``exclude``) and,
     with ``gather``, the largest of the movers' longer sides as Python's ``max(l, w)`` gives them (``w if w > l else
     l``, m, of the rows as reported; a NaN side skipped as ``> lim`` skips it; −inf without a row or ``gather``), so
@@ -486,7 +497,7 @@ def _movers_kernel(
     calling another kernel links and optimises the callee's code a second time: ≈ +0.8 s of cold compile CPU,
     docs/speed.md, pass trk97). The same floating-point operations as the kernels called one after the other."""
     if gather:
-        k = packed.shape[0] // 3
+        k = packed.shape[0] // 4
         kept = np.empty((k, 7))
         for j in range(k):
             i = packed[j]
@@ -494,9 +505,9 @@ def _movers_kernel(
                 kept[j, a] = boxes[i, a]
             kept[j, 5] = X[i, 2]
             kept[j, 6] = X[i, 3]
-        grown = kept.copy()
-        if beams.shape[0]:  # (a mover without beams keeps its box)
-            _grow_boxes(ranges, cos_a, sin_a, pc, ps, px, py, beams, packed[2 * k:], grown)
+        grown = kept.copy()  # (a mover without beams keeps its box)
+        _grow_boxes(ranges, cos_a, sin_a, pc, ps, px, py, beams, more, packed[4 * k], packed[2 * k:3 * k],
+                    packed[3 * k:4 * k], grown)
         ids = packed[k:2 * k]
     else:
         kept = boxes
@@ -767,7 +778,7 @@ def filter_scan_ids(
         out = _movers_kernel(scan.ranges, cos_a, sin_a, scan.valid_view(), math.cos(pose.theta),
                              math.sin(pose.theta), float(pose.x), float(pose.y),
                              np.ascontiguousarray(boxes, dtype=np.float64), _NO_STATES,
-                             np.ascontiguousarray(ids, dtype=np.int64), _NO_BEAMS, float(dt), False, True,
+                             np.ascontiguousarray(ids, dtype=np.int64), _NO_BEAMS, _NO_BEAMS, float(dt), False, True,
                              config.default_shape == "square", float(config.margin), cap)
         return out[2], out[3]
     removed = np.zeros(n, dtype=bool)
@@ -791,6 +802,7 @@ def mover_exclusions(
     states: np.ndarray,
     packed: np.ndarray,
     beams: np.ndarray,
+    more: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, float]:
     """The exclusion of the objects of M read from the tracker's report columns, without a ``Track`` object.
 
@@ -799,8 +811,9 @@ def mover_exclusions(
         scan: the scan; ``pose`` its laser pose in the map frame.
         boxes: (n, 5) rows [p_x, p_y, θ, l, w] of the reports' boxes; ``states`` (n, 4) [x, y, v_x, v_y] (map frame,
             m, rad, m/s): ``TrackReports.arrays``.
-        packed: int64, the k movers' report indices, their ids and the running count of their beams after each
-            (``TrackReports.mover_pack``); ``beams``: their beams, concatenated (int64).
+        packed: int64, the k movers' report indices, their ids, the first places and counts of their beams and a split
+            point ``n0`` (``TrackReports.mover_pack``); ``beams``, ``more``: place ``q`` is the beam ``beams[q]`` if
+            ``q < n0``, else ``more[q − n0]`` (int64).
 
     Returns:
         ``(kept, ids, removed, removed_by, count, side)``: (k, 7) rows [p_x, p_y, θ, l, w, v_x, v_y] of the movers'
@@ -810,19 +823,29 @@ def mover_exclusions(
         margin); the number of removed beams; the largest longer side of the kept rows, m, as Python's ``max(l, w)``
         (NaN sides skipped, −inf for no row): some mover's ``max(l, w) > lim`` exactly when ``side > lim``.
     """
-    k = packed.shape[0] // 3
+    k = packed.shape[0] // 4
     ids = packed[k:2 * k]
     cos_a, sin_a = scan.trig()
     one = config.mode == "box" and config.speed_margin_time == 0.0  # (filter_active: k > 0 movers, mode box)
     cap = math.inf if config.max_half_extent is None else float(config.max_half_extent)
     kept, grown, removed, removed_by, count, side = _movers_kernel(
         scan.ranges, cos_a, sin_a, scan.valid_view(), math.cos(pose.theta), math.sin(pose.theta), float(pose.x),
-        float(pose.y), boxes, states, packed, beams, 0.0, True, one and k > 0, config.default_shape == "square",
+        float(pose.y), boxes, states, packed, beams, more, 0.0, True, one and k > 0, config.default_shape == "square",
         float(config.margin), cap)
     if not (one and k > 0):
         removed, removed_by = filter_scan_ids(config, scan, pose, grown, ids, 0.0)
         count = int(np.count_nonzero(removed))
     return kept, ids, removed, removed_by, count, side
+
+
+def mover_beams(packed: np.ndarray, beams: np.ndarray, more: np.ndarray) -> np.ndarray:
+    """The movers' beams of :func:`mover_exclusions`' ``packed`` / ``beams`` / ``more`` in the movers' order, one
+    int64 array (for ``filter.spare_structure``, which reads them as a set)."""
+    k = packed.shape[0] // 4
+    n0 = int(packed[4 * k])
+    both = np.concatenate((beams[:n0], more)) if more.shape[0] else beams  # (place q of the movers' beams)
+    parts = [both[s:s + c] for s, c in zip(packed[2 * k:3 * k].tolist(), packed[3 * k:4 * k].tolist()) if c]
+    return np.concatenate(parts, dtype=np.int64) if parts else _NO_BEAMS
 
 
 __all__ = [
@@ -835,5 +858,6 @@ __all__ = [
     "filter_scan_points",
     "half_extents",
     "half_sides",
+    "mover_beams",
     "mover_exclusions",
 ]

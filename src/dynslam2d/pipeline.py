@@ -33,7 +33,7 @@ from dynslam2d.detect.body import BodyFilter
 from dynslam2d.detect.mapevidence import MapView, map_evidence
 from dynslam2d.detect.tracker import Tracker
 from dynslam2d.detect.trackreport import TrackReports
-from dynslam2d.filter import filter_active, filter_scan_ids, mover_exclusions, observed_boxes_kernel
+from dynslam2d.filter import filter_active, filter_scan_ids, mover_beams, mover_exclusions, observed_boxes_kernel
 from dynslam2d.gridmap import GridMap
 from dynslam2d.jitcache import compile_seconds
 from dynslam2d.memtrim import release_free_memory
@@ -301,20 +301,22 @@ class Pipeline:
             any_removed = False
         else:
             # (the movers' boxes and velocities as rows, grown to their beams' points and their exclusion, one kernel)
-            packed, own, moving = tracks.mover_pack(moving)  # (moving: now the movers' ids)
+            # (their beams read by the kernel from the scan's detection arrays: pass rep149)
+            packed, beams, more, moving = tracks.mover_pack(moving)  # (moving: now the movers' ids)
             # (with the count of removed beams and the movers' longest side, from the kernel: pass neg112)
             mrows, mids, removed, removed_by, count, side = mover_exclusions(fc, scan, res.pose, *tracks.arrays,
-                                                                             packed, own)
+                                                                             packed, beams, more)
             any_removed = count > 0
             if any_removed and fc.mode == "box":
                 if fc.spare_structure:
-                    self._spare_structure(scan, res.pose, own, removed, removed_by)
+                    self._spare_structure(scan, res.pose, mover_beams(packed, beams, more), removed, removed_by)
                     any_removed = bool(_count_nonzero(removed))
                 elif fc.spare_structure_vehicles:
                     lim = self.config.detect.segment.max_extent  # (read once, not per track)
                     big = _vehicle_ids(moving, mrows, lim) if side > lim else None  # (no vehicle: no list)
                     if big:
-                        self._spare_structure(scan, res.pose, own, removed, removed_by, np.array(big))
+                        self._spare_structure(scan, res.pose, mover_beams(packed, beams, more), removed, removed_by,
+                                              np.array(big))
                         any_removed = bool(_count_nonzero(removed))
         t3 = time.perf_counter()
         # 5. map update with the filtered scan only.

@@ -432,7 +432,12 @@ C_MISSES = 2  # consecutive scans without detection
 C_HIST_N = 3  # updates (hits and misses) among its first confirm_window scans (the M-of-N rule's count)
 C_HIST_HITS = 4  # hits among them
 C_UPD = 5  # 1: updated in this scan (written by update_pairs, read and cleared by manage_counters)
-N_C = 6
+# the track's beams in this scan as a segment of the scan's detection points (pass rep149): the first point (its index
+# in the batch's points, the persons' after the others) and the count, written by update_pairs with the update; −1 in
+# C_BN where the beams are not that one segment (a birth's, a revival's new row, a fragment's host: Tracker.update)
+C_BS = 6
+C_BN = 7
+N_C = 8
 
 
 @njit(cache=True, inline="always")
@@ -599,6 +604,8 @@ def update_pairs(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, Xs
                 CI[k, C_HIST_N] += 1
                 CI[k, C_HIST_HITS] += 1
             CI[k, C_UPD] = 1
+            CI[k, C_BS] = start[j]  # (its beams: Tracker._update_tracks' slice of this detection's, pass rep149)
+            CI[k, C_BN] = npts[j]
         nrej += 0 if ok[r] else 1
         info[r, 1] = start[j]
         info[r, 2] = npts[j]
@@ -612,8 +619,9 @@ def report_rows(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, CI:
                 slow: float) -> tuple:
     """Everything ``Tracker._report`` reads from the state rows ``rows`` of the reported tracks, in one call:
     (boxes (n, 5) centre x, y, heading, length, width (m, rad, map frame), states (n, 4) ``X[rows]``, covariances
-    (n, 4, 4) ``P[rows]``, (4, n) int64: the kind codes and, from the counter table ``CI``, the state codes, hits and
-    misses (pass cnt36)). The boxes: ``kernels.report_boxes``' arithmetic, a track moving
+    (n, 4, 4) ``P[rows]``, (6, n) int64: the kind codes and, from the counter table ``CI``, the state codes, hits and
+    misses (pass cnt36), the beam segments' first points and counts (``C_BS``, ``C_BN``, pass rep149)). The boxes:
+    ``kernels.report_boxes``' arithmetic, a track moving
     when its speed — Python's ``math.hypot`` bit for bit (:func:`py_hypot`) — is above ``slow`` (m/s); so no speed
     is left undecided for a second call as ``report_boxes`` (libm's hypot) leaves the ones within 1e-12 of the
     limit (docs/speed.md, pass trk24). A moving box is headed along its velocity (the axis nearest it, its sides
@@ -623,7 +631,7 @@ def report_rows(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, CI:
     out = np.empty((n, 5))
     Xo = np.empty((n, 4))
     Po = np.empty((n, 4, 4))
-    ints = np.empty((4, n), dtype=np.int64)
+    ints = np.empty((6, n), dtype=np.int64)
     for i in range(n):
         k = rows[i]
         for a in range(4):
@@ -635,6 +643,8 @@ def report_rows(G: np.ndarray, Gi: np.ndarray, X: np.ndarray, P: np.ndarray, CI:
         ints[1, i] = CI[k, C_STATE]
         ints[2, i] = CI[k, C_HITS]
         ints[3, i] = CI[k, C_MISSES]
+        ints[4, i] = CI[k, C_BS]
+        ints[5, i] = CI[k, C_BN]
         box_row(out, i, X, G, k, kd == K_CIRCLE, py_hypot(X[k, 2], X[k, 3]) > slow)
     return out, Xo, Po, ints
 

@@ -63,6 +63,7 @@ from dynslam2d.detect.kernels import (
 )
 from dynslam2d.detect.kernels_assign import LSAP_MESSAGES, associate_update
 from dynslam2d.detect.kernels_update import (
+    C_BN,
     birth_rows,
     fragment_hosts_rows,
     update_params,
@@ -347,6 +348,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
             for di, host in zip(unused, hosts):
                 if host is not None:  # a piece of an object already updated: its beams belong to it
                     host.beams = np.concatenate((host.beams, dets[di].beams))
+                    host.ci[C_BN] = -1  # (its beams: no longer one segment of the batch's, pass rep149)
                     st.merged_fragments += 1
                 else:
                     born.append(di)
@@ -358,6 +360,7 @@ class Tracker(TrackDetect, TrackUpdate, TrackManage, TrackReport, TrackRows):
                 host = self._host_of_fragment(det, updated)
                 if host is not None:
                     host.beams = np.concatenate((host.beams, det.beams))
+                    host.ci[C_BN] = -1
                     st.merged_fragments += 1
                     continue
                 self._birth(det, t, di)

@@ -65,18 +65,21 @@ class TrackReports(Sequence):
     sequence of ``Track`` (its objects kept) for the same readers."""
 
     __slots__ = ("_t", "_boxes", "_Xo", "_P", "_kinds", "_states", "_hits", "_misses", "_cols", "_updated", "_n",
-                 "_built", "_extra", "_no_beams", "_snames")
+                 "_built", "_extra", "_no_beams", "_snames", "_bs", "_bn", "_dets")
 
     def __init__(self, t: float | None, boxes: np.ndarray, Xo: np.ndarray, P: np.ndarray, ints: list[list[int]],
-                 cols: tuple[tuple, ...], updated: set[int] | frozenset[int]) -> None:
+                 cols: tuple[tuple, ...], updated: set[int] | frozenset[int], dets: list | None = None) -> None:
         """``t``: the scan's stamp, s (None: every report is given built, :meth:`of_tracks`); ``boxes`` (n, 5)
         [p_x, p_y, θ, l, w] (m, rad), ``Xo`` (n, 4) states [x, y, v_x, v_y] (m, m/s), ``P`` (n, 4, 4) covariances,
-        map frame: ``report_rows``' arrays, not written afterwards; ``ints``: its kinds, states, hits, misses as
-        lists; ``cols``: :data:`_SNAP`'s six fields of the live tracks as six tuples (ids, births, in M, reasons,
-        remembered, beams); ``updated``: ids of the tracks updated in this scan (their beams are reported)."""
+        map frame: ``report_rows``' arrays, not written afterwards; ``ints``: its kinds, states, hits, misses, beam
+        segments' first points and counts (−1: not a segment) as lists; ``dets``: this scan's detections (their
+        arrays hold the segments' beams), None for none; ``cols``: :data:`_SNAP`'s six fields of the live tracks as
+        six tuples (ids, births, in M, reasons, remembered, beams); ``updated``: ids of the tracks updated in this
+        scan (their beams are reported)."""
         self._t = t
         self._boxes, self._Xo, self._P = boxes, Xo, P
-        self._kinds, self._states, self._hits, self._misses = ints
+        self._kinds, self._states, self._hits, self._misses, self._bs, self._bn = ints
+        self._dets = dets
         self._cols = cols
         self._updated = updated
         self._n = n = len(cols[0])
@@ -109,7 +112,8 @@ class TrackReports(Sequence):
         beams = tuple(t.beams if t.beams is not None else _NO_BEAMS for t in objs)
         cols = (tuple(t.id for t in objs), (None,) * n, tuple(bool(t.in_m) for t in objs),
                 tuple(t.m_reason for t in objs), tuple(bool(t.remembered) for t in objs), beams)
-        out = cls(None, boxes, Xo, _NO_P, [[0] * n, states, [0] * n, [0] * n], cols, frozenset(cols[0]))
+        out = cls(None, boxes, Xo, _NO_P, [[0] * n, states, [0] * n, [0] * n, [0] * n, [-1] * n], cols,
+                  frozenset(cols[0]))
         out._built = objs
         out._snames = tuple(snames)
         return out
@@ -239,27 +243,65 @@ class TrackReports(Sequence):
         """The indices of the reports in M (live tracks only), in order."""
         return list(compress(range(self._n), self._cols[2]))
 
-    def mover_pack(self, idx: list[int]) -> tuple[np.ndarray, np.ndarray, list[int]]:
-        """For the live reports ``idx``: one int64 array of their indices, ids and the running count of their
-        beams after each (a report without beams, or not updated in this scan, adds none), 3 × len(idx) values;
-        their beams concatenated (int64); their ids. What ``filter.mover_exclusions`` takes."""
-        ids, bms = self._cols[0], self._cols[5]
+    def mover_pack(self, idx: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
+        """For the live reports ``idx``: one int64 array of their k indices, k ids, the k first places and k counts of
+        their beams in ``beams`` (a report without beams, or not updated in this scan, has none) and last a split
+        point ``n0``; ``beams`` and ``more``: place ``q`` holds ``beams[q]`` where ``q < n0``, else ``more[q − n0]``;
+        their ids. What ``filter.mover_exclusions`` takes.
+
+        A track updated by a detection holds that detection's beams, one segment of the scan's detection points
+        (``report_rows``' columns from the counter table, written by the update's kernel; pass rep149): the beams are
+        those of the detection arrays, the scan's clusters' (``beams``) and, after ``n0`` points, the merged persons'
+        (``more``) — no array made. Where a mover's are not one segment (a birth, a revival, a fragment's host: count
+        −1) its beams are concatenated instead (``more`` empty)."""
+        ids = self._cols[0]
         upd = self._updated
         mids = [ids[i] for i in idx]
+        bs, bn = self._bs, self._bn
+        starts = []
+        counts = []
+        for i, tid in zip(idx, mids):
+            if tid in upd:
+                c = bn[i]
+                if c < 0:
+                    return self._mover_pack_copy(idx, mids)
+                starts.append(bs[i])
+                counts.append(c)
+            else:
+                starts.append(0)
+                counts.append(0)
+        dets = self._dets
+        if not dets:  # (no detection in this scan: no mover has beams)
+            return np.array(idx + mids + starts + counts + [0], dtype=np.int64), _NO_BEAMS, _NO_BEAMS, mids
+        a, b = dets[0]._s, dets[-1]._s  # (the scan's clusters' arrays; the persons' last when a pair merged)
+        if b.off:
+            beams = _NO_BEAMS if a.off else a.beams
+            return np.array(idx + mids + starts + counts + [b.off], dtype=np.int64), beams, b.beams, mids
+        beams = a.beams
+        return np.array(idx + mids + starts + counts + [beams.shape[0]], dtype=np.int64), beams, _NO_BEAMS, mids
+
+    def _mover_pack_copy(self, idx: list[int], mids: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                           list[int]]:
+        """:meth:`mover_pack` with the movers' beams concatenated (int64), each mover's a segment of them."""
+        bms = self._cols[5]
+        upd = self._updated
         blist = []
-        ends = []
+        starts = []
+        counts = []
         total = 0
         for i, tid in zip(idx, mids):
+            starts.append(total)
+            nb = 0
             if tid in upd:
                 b = bms[i]
                 nb = len(b)
                 if nb:
                     blist.append(b)
                     total += nb
-            ends.append(total)
+            counts.append(nb)
         # (the int64 concatenation in one call: no astype after it, pass mov133)
         beams = np.concatenate(blist, dtype=np.int64) if blist else _NO_BEAMS
-        return np.array(idx + mids + ends, dtype=np.int64), beams, mids
+        return np.array(idx + mids + starts + counts + [total], dtype=np.int64), beams, _NO_BEAMS, mids
 
     def _build_many(self, idx: list[int]) -> list[Track]:
         """The ``Track`` of each live report ``idx`` (built once, then the same object), in one loop with its reads
@@ -379,7 +421,7 @@ class TrackReport:
     def _report(self, t: float, updated: set[int]) -> TrackReports:
         tracks = self._tracks
         if not tracks:
-            return TrackReports(t, _NO_BOXES, _NO_X, _NO_P, [[], [], [], []], _NO_COLS, updated)
+            return TrackReports(t, _NO_BOXES, _NO_X, _NO_P, [[], [], [], [], [], []], _NO_COLS, updated)
         slow = 0.5 * self.config.tracker.v_min
         # (speed: the boxes of all tracks, their states, covariances and kinds from their rows in one kernel call —
         # the moving test on Python's math.hypot bit for bit —; every report's velocity / covariance a row of the
@@ -389,7 +431,8 @@ class TrackReport:
         boxes, Xo, P, ints = report_rows(self._G, self._Gi, self._X, self._P, self._CI, self._rows(), slow)
         # the reports kept as these arrays and each live track's Python fields as of this scan; a Track built when
         # read, the pipeline's movers never (TrackReports; docs/speed.md, passes trk70, trk90)
-        return TrackReports(t, boxes, Xo, P, ints.tolist(), tuple(zip(*map(_SNAP, tracks))), updated)
+        return TrackReports(t, boxes, Xo, P, ints.tolist(), tuple(zip(*map(_SNAP, tracks))), updated,
+                            self.last_detections)
 
     def _dormant_reports(self, t: float) -> list[Track]:
         """Reports of the dormant tracks (at rest, not in M; beams only where seen in this scan)."""

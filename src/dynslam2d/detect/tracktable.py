@@ -27,6 +27,8 @@ from dynslam2d.detect.kernels import (
     N_GI,
 )
 from dynslam2d.detect.kernels_update import (
+    C_BN,
+    C_BS,
     C_HIST_HITS,
     C_HIST_N,
     C_HITS,
@@ -80,10 +82,11 @@ COASTING = "coasting"
 STATE_NAMES = (TENTATIVE, CONFIRMED, COASTING)
 STATE_CODES = {TENTATIVE: ST_TENTATIVE, CONFIRMED: ST_CONFIRMED, COASTING: ST_COASTING}
 assert tuple(STATE_CODES[n] for n in STATE_NAMES) == (0, 1, 2)
-assert (C_STATE, C_HITS, C_MISSES, C_HIST_N, C_HIST_HITS, C_UPD, N_C) == (0, 1, 2, 3, 4, 5, 6)
-# a new track's counter row (_new_track): tentative, one hit, no miss, M of N 1 / 1, not flagged updated (an array:
-# ≈ 0.3 µs less to write into its row than a tuple)
-_CI_BIRTH = np.array((ST_TENTATIVE, 1, 0, 1, 1, 0), dtype=np.int64)
+assert (C_STATE, C_HITS, C_MISSES, C_HIST_N, C_HIST_HITS, C_UPD, C_BS, C_BN, N_C) == (0, 1, 2, 3, 4, 5, 6, 7, 8)
+# a new track's counter row (_new_track): tentative, one hit, no miss, M of N 1 / 1, not flagged updated, its beams
+# not a segment of the batch's (C_BN −1: the reports' movers take them from the track, pass rep149) (an array: ≈ 0.3 µs
+# less to write into its row than a tuple)
+_CI_BIRTH = np.array((ST_TENTATIVE, 1, 0, 1, 1, 0, 0, -1), dtype=np.int64)
 _NO_BEAMS = np.zeros(0, dtype=np.int64)  # the beams of a track without detection (shared, never written)
 _NO_IDX = np.zeros(0, dtype=np.int64)  # no leg merge in this scan (Tracker._mev_src; shared, never written)
 _NO_STATE = np.zeros(0)  # placeholder x / P of a _Track before _add_row gives it its row
@@ -464,7 +467,9 @@ class TrackRows:
         """A row of the state arrays for a new live track: a deleted track's (the last freed first), else the next
         unused one, the arrays (and the windows') doubled when full with the live tracks' views re-pointed."""
         if self._free_rows:
-            return self._free_rows.pop()
+            row = self._free_rows.pop()
+            self._CI[row, C_BN] = -1  # (a new track's beams: not the old one's segment, pass rep149)
+            return row
         row = self._rows_used
         self._rows_used += 1
         if row == self._Gi.shape[0]:
@@ -478,6 +483,7 @@ class TrackRows:
             for a, b in zip(old, (self._X, self._P, self._G, self._CL, self._MEV, self._CI, self._WN)):
                 b[:row] = a[:row]
             self._repoint()
+        self._CI[row, C_BN] = -1
         return row
 
     def _add_row(self, k: _Track, x, P: np.ndarray | None) -> None:
@@ -492,6 +498,7 @@ class TrackRows:
         self._G[row] = k.g
         self._Gi[row] = k.gi
         self._CI[row] = k.ci
+        self._CI[row, C_BN] = -1  # (a revived track's beams are its detection's: not a segment of the batch's)
         self._CL[row] = k.cl[0]
         k.row = row
         k.x = self._X[row]
