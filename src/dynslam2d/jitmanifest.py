@@ -101,7 +101,8 @@ KERNELS: tuple[tuple[str, str], ...] = (
     ('dynslam2d.filter._movers_kernel',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), float64, float64, float64, float64, Array(float64, 2, 'C'), Array(float64, 2, 'C'), "
-     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), float64, bool, bool, bool, float64, float64,)"),
+     "Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), float64, bool, bool, bool, "
+     'float64, float64,)'),
     ('dynslam2d.slam.cleanup._add_scan',
      "(Array(float64, 1, 'C'), Array(float64, 1, 'C', True), Array(float64, 1, 'C', True), Array(bool, 1, "
      "'C'), Array(bool, 1, 'C'), float64, float64, float64, float64, float64, float64, float64, float64, "
