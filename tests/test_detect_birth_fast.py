@@ -25,7 +25,7 @@ def test_new_track_sets_every_field_as_the_dataclass_does() -> None:
     # (the counters: tentative, one hit, no miss, M of N 1 / 1, not flagged updated; the last hit at the birth's stamp;
     # rows of the tracker's counter table once _add_row gives the track its row, pass cnt36)
     ref = _Track(id=a["tid"], x=_NO_STATE, P=_NO_STATE, born=a["t"], birth_xy=a["birth_xy"], g=a["g"], gi=a["gi"],
-                 ci=np.array([0, 1, 0, 1, 1, 0]), cl=(a["t"],), beams=a["beams"], free=a["free"], past=a["past"])
+                 ci=np.array([0, 1, 0, 1, 1, 0, 0, -1]), cl=(a["t"],), beams=a["beams"], free=a["free"], past=a["past"])
     assert type(fast) is _Track
     names = [f.name for f in dataclasses.fields(_Track)]
     assert len(names) == len(_Track.__slots__) and len(names) >= 29  # (person: a property, pass trk71)

@@ -468,8 +468,16 @@ class TrackRows:
         unused one, the arrays (and the windows') doubled when full with the live tracks' views re-pointed."""
         if self._free_rows:
             row = self._free_rows.pop()
-            self._CI[row, C_BN] = -1  # (a new track's beams: not the old one's segment, pass rep149)
-            return row
+        else:
+            row = self._grow_row()
+        # (a new track's beams: not a segment of the batch's, and not the deleted track's; pass rep149)
+        self._CI[row, C_BS] = 0
+        self._CI[row, C_BN] = -1
+        return row
+
+    def _grow_row(self) -> int:
+        """The next unused row of the state arrays, the arrays (and the windows') doubled when full with the live
+        tracks' views re-pointed."""
         row = self._rows_used
         self._rows_used += 1
         if row == self._Gi.shape[0]:
@@ -483,7 +491,6 @@ class TrackRows:
             for a, b in zip(old, (self._X, self._P, self._G, self._CL, self._MEV, self._CI, self._WN)):
                 b[:row] = a[:row]
             self._repoint()
-        self._CI[row, C_BN] = -1
         return row
 
     def _add_row(self, k: _Track, x, P: np.ndarray | None) -> None:
@@ -498,7 +505,8 @@ class TrackRows:
         self._G[row] = k.g
         self._Gi[row] = k.gi
         self._CI[row] = k.ci
-        self._CI[row, C_BN] = -1  # (a revived track's beams are its detection's: not a segment of the batch's)
+        self._CI[row, C_BS] = 0  # (a revived track's beams are its detection's: not a segment of the batch's)
+        self._CI[row, C_BN] = -1
         self._CL[row] = k.cl[0]
         k.row = row
         k.x = self._X[row]
