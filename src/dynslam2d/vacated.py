@@ -285,19 +285,21 @@ def vacated_scan_kernel(ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray
     ox = px / res
     oy = py / res
     n_seen = -1
+    w_a = work[:c]  # (each slice once: a slice is ≈ 180 LLVM instructions to compile; pass cmp149)
+    w_b = work[c:2 * c]
     if bits.shape[0] == logodds.shape[0] and bits.shape[1] == (logodds.shape[1] + 63) >> 6 and \
             bits_thr <= params[_OCC]:
         n_seen = seen_through_inverse(logodds, i0, j0, ox, oy, cx, cy, clear, params[_CORE], params[_OCC],
-                                      params[_DEPTH], bits, ang0, inc, th, work[:c], work[c:2 * c],
-                                      work[2 * c + 2 * g:], fwork, _INV_CELL)
+                                      params[_DEPTH], bits, ang0, inc, th, w_a, w_b, work[2 * c + 2 * g:], fwork,
+                                      _INV_CELL)
     rows, cols, sizes, nc = vacated_core(
         logodds, i0, j0, ox, oy, cx, cy, clear, params[_CORE], params[_OCC], params[_DEPTH],
         params[_NEAR], np.float32(params[_OCC32]), max_side, int(params[_MIN_CELLS]), res, params[_MIN_EXTENT],
-        params[_MIN_SHARE], work[:c], work[c:2 * c], work[2 * c:2 * c + g], work[2 * c + g:2 * c + 2 * g], window,
+        params[_MIN_SHARE], w_a, w_b, work[2 * c:2 * c + g], work[2 * c + g:2 * c + 2 * g], window,
         n_seen)
     k = sizes.shape[0]
     if k == 0:
-        return nc, 0, work[:0]
+        return nc, 0, w_a[:0]
     total = rows.shape[0]
     out = np.empty(2 * total + k, dtype=np.int64)
     for q in range(total):  # (loops: a slice assignment compiles numba's shape-mismatch message, ≈ 17 helpers)
