@@ -510,10 +510,10 @@ def _add_scan(ranges, cos_a, sin_a, valid_in, removed, px, py, th, res, margin_m
         some = some or v
     if not some:
         return mask, n_tiles, _NO_BEAM, 0, 0, 0, 0
-    rem = np.zeros(n, dtype=np.bool_)
-    if removed.shape[0] == n:
-        for i in range(n):
-            rem[i] = removed[i]
+    rem = np.empty(n, dtype=np.bool_)  # (not np.zeros: its implementation and zero fill are two more compiles)
+    given = removed.shape[0] == n
+    for i in range(n):
+        rem[i] = removed[i] if given else False
     ex, ey, cx, cy, kept, clear, imin, jmin, imax, jmax = _geometry_bounds_inline(
         ranges, cos_a, sin_a, valid, rem, px, py, th, res, margin_m, grazing_cells, min_sin)
     if h == 0 or imin < i0 or jmin < j0 or imax >= i0 + w or jmax >= j0 + h:

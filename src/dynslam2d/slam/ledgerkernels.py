@@ -363,7 +363,8 @@ _UI3 = types.UniTuple(types.int32[:, ::1], FUSED_LEVELS)
 _IT3 = types.UniTuple(types.int64, FUSED_LEVELS)
 
 
-# (the two parts of record_cells are inlined into it: as functions of their own they cost ≈ 0.7–1 s more cold compile)
+# (record_cells' first part is inlined into it, its second part written in it: as functions of their own the two
+# parts cost ≈ 0.7–1 s more cold compile)
 @njit(cache=True, inline="always")
 def _track_points(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px, py, rs):  # pragma: no cover
     """:func:`beam_owners`, the tracks' distinct ids in ascending order and :func:`scan_cells` in one call: (packed
@@ -395,47 +396,6 @@ def _track_points(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin, rmax, c,
     packed, params, valid, counts = scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, py,
                                                rs)
     return packed, params, valid, counts, uids, ends
-
-
-@njit(cache=True, inline="always")
-def _read_levels(u, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, valid, beams, ends, want_kb
-                ):  # pragma: no cover - numba
-    """:func:`unpack_cells` of the sorted packed values ``u`` and the read of its cells on the first
-    ``min(n_lv, 3)`` levels (``logodds``, ``uidx``: the levels' arrays, padded; ``i0``, ``j0``: their offsets), in one
-    call: (track ids, cell keys, (m, 2) cells, log-odds before (float64), update index before (int64; 0 and 0
-    outside a level's array and on levels ≥ 3, which the caller reads), level bounds (L + 1,), per track ``t`` of
-    ``ids`` whether any kept beam of it is left (``counts`` of its id's rank in ``uids`` > 0), and, with
-    ``want_kb``, :func:`kept_beams` of ``valid``, ``beams``, ``ends`` (else empty))."""
-    out_ids, keys, cells, bounds = unpack_cells(u, params, uids, n_lv)
-    m = out_ids.shape[0]
-    lo = np.empty(m)
-    ui = np.empty(m, dtype=np.int64)
-    for t in range(m):
-        lo[t] = 0.0
-        ui[t] = 0
-    for k in range(min(n_lv, FUSED_LEVELS)):
-        a = logodds[k]
-        b = uidx[k]
-        h, w = a.shape
-        ci0 = i0[k]
-        cj0 = j0[k]
-        for t in range(bounds[k], bounds[k + 1]):
-            col = cells[t, 0] - ci0
-            row = cells[t, 1] - cj0
-            if col >= 0 and row >= 0 and col < w and row < h:
-                lo[t] = a[row, col]
-                ui[t] = b[row, col]
-    n_t = ids.shape[0]
-    n_u = uids.shape[0]
-    present = np.empty(n_t, dtype=np.bool_)
-    for t in range(n_t):
-        present[t] = counts[_lower_bound(uids, n_u, ids[t])] > 0
-    if want_kb:
-        kb, kb_b = kept_beams(valid, beams, ends)
-    else:
-        kb = np.empty(0, dtype=np.int32)
-        kb_b = np.empty(0, dtype=np.int64)
-    return out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b
 
 
 @njit(cache=True, inline="always")
@@ -532,8 +492,10 @@ def record_cells(beams, idl, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px,
         n_u += v != packed[n_u - 1]
     u = packed[:n_u]
     _radix_sort(u)
-    out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b = _read_levels(
-        u, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, valid, beams, ends, want_kb)
+    # the cells (:func:`unpack_cells`) into the block, and their update index and log-odds before read on the first
+    # min(L, 3) levels straight into its rows 4 and 5 (0 outside a level's array and on levels >= 3; written here,
+    # not through arrays of their own copied in: less code to compile, pass cmp149)
+    out_ids, keys, cells, bounds = unpack_cells(u, params, uids, n_lv)
     m = out_ids.shape[0]
     blk = np.empty((6, m), dtype=np.int64)
     for t in range(m):
@@ -541,14 +503,32 @@ def record_cells(beams, idl, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px,
         blk[1, t] = keys[t]
         blk[2, t] = cells[t, 0]
         blk[3, t] = cells[t, 1]
-        blk[4, t] = ui[t]
-        blk[5, t] = float_bits(lo[t])  # (lo's float64 bits, as lo.view(np.int64) without numba's view helper)
+        blk[4, t] = 0
+        blk[5, t] = 0  # (the bits of 0.0)
+    for k in range(min(n_lv, FUSED_LEVELS)):
+        a = logodds[k]
+        b = uidx[k]
+        h, w = a.shape
+        ci0 = i0[k]
+        cj0 = j0[k]
+        for t in range(bounds[k], bounds[k + 1]):
+            col = cells[t, 0] - ci0
+            row = cells[t, 1] - cj0
+            if col >= 0 and row >= 0 and col < w and row < h:
+                blk[4, t] = b[row, col]
+                blk[5, t] = float_bits(np.float64(a[row, col]))  # (as lo.view(np.int64), without numba's view helper)
+    if want_kb:
+        kb, kb_b = kept_beams(valid, beams, ends)
+    else:
+        kb = np.empty(0, dtype=np.int32)
+        kb_b = np.empty(0, dtype=np.int64)
     n_kb = kb_b.shape[0]
+    n_r = uids.shape[0]
     small = np.empty(n_lv + 1 + n_t + n_kb, dtype=np.int64)
     for k in range(n_lv + 1):
         small[k] = bounds[k]
-    for t in range(n_t):
-        small[n_lv + 1 + t] = 1 if present[t] else 0
+    for t in range(n_t):  # (whether a kept beam of track t is left: the count of its id's rank)
+        small[n_lv + 1 + t] = 1 if counts[_lower_bound(uids, n_r, ids[t])] > 0 else 0
     for t in range(n_kb):
         small[n_lv + 1 + n_t + t] = kb_b[t]
     return PACKED, blk, small, kb
