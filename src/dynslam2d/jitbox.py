@@ -148,7 +148,7 @@ def box_arrays_from_env() -> bool:
 LOOPS_NOT_VECTORISED = {
     "dynslam2d.detect.kernels.detect_rows": "9e8f98ec441beb51",
     "dynslam2d.detect.kernels_assign.assign_groups": "231f863e608ec456",
-    "dynslam2d.slam.ledgerkernels.record_cells": "a06d27988772373c",
+    "dynslam2d.slam.ledgerkernels.record_cells": "c8c25345ff44f334",
     "dynslam2d.detect.shapes.fit_cluster_rows": "4df79f952e43f675",
     "dynslam2d.detect.segment.detect_scan": "5813f765c424848a",
     "dynslam2d.detect.kernels_assign.associate_update": "8bb27e16e01cd920",

@@ -143,13 +143,13 @@ def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: f
         fw[2 * nb] = m
         fw[2 * nb + 1] = 0.0
     # (3) every beam's walk as the walk sets it up: axis, slope, walked major range [alo, ahi], reach²
-    xm = iw[2 * capc:2 * capc + nb]
-    alo = iw[2 * capc + nb:2 * capc + 2 * nb]
-    ahi = iw[2 * capc + 2 * nb:2 * capc + 3 * nb]
-    sl = fw[:nb]
-    rr2 = fw[nb:2 * nb]
+    # (xm, alo, ahi: iw from ``ixm``, ``ixm + nb``, ``ixm + 2 nb``; sl, rr2: fw from 0 and nb, indexed there rather
+    # than as five slices, each ≈ 180 LLVM instructions to compile; pass cmp149)
+    ixm = 2 * capc
+    ilo = ixm + nb
+    ihi = ilo + nb
     for k in range(nb):
-        rr2[k] = -1.0  # (no walk: the distance test below fails for it)
+        fw[nb + k] = -1.0  # (no walk: the distance test below fails for it)
     for k in range(1, nb - 1):
         if not (clear[k] and clear[k - 1] and clear[k + 1]):
             continue
@@ -184,11 +184,11 @@ def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: f
             lo, hi = start - cnt + 1, start
         if cnt <= 0:
             continue
-        xm[k] = 1 if x_major else 0
-        sl[k] = slope
-        alo[k] = lo
-        ahi[k] = hi
-        rr2[k] = reach * reach
+        iw[ixm + k] = 1 if x_major else 0
+        fw[k] = slope
+        iw[ilo + k] = lo
+        iw[ihi + k] = hi
+        fw[nb + k] = reach * reach
     # (4) each cell against the beams that can pass it
     cap = out_r.shape[0]
     n = 0
@@ -234,15 +234,15 @@ def seen_through_inverse(logodds: np.ndarray, i0: int, j0: int, ox: float, oy: f
                 k_hi = min(int(math.ceil(kk + hw)), nb - 2)
             for k in range(k_lo, k_hi + 1):
                 # (the walk's last test first: (a − m0)² + (ib − n0)² is this sum in either axis order)
-                if not d2 <= rr2[k]:
+                if not d2 <= fw[nb + k]:
                     continue
-                if xm[k]:
+                if iw[ixm + k]:
                     a, ibc, m0, n0 = x, y, ox, oy
                 else:
                     a, ibc, m0, n0 = y, x, oy, ox
-                if a < alo[k] or a > ahi[k]:
+                if a < iw[ilo + k] or a > iw[ihi + k]:
                     continue
-                b = n0 + sl[k] * (a - m0)
+                b = n0 + fw[k] * (a - m0)
                 ib = int(math.floor(b + 0.5))
                 if ib != ibc or abs(b - ib) > core:
                     continue
@@ -285,19 +285,21 @@ def vacated_scan_kernel(ranges: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray
     ox = px / res
     oy = py / res
     n_seen = -1
+    w_a = work[:c]  # (each slice once: a slice is ≈ 180 LLVM instructions to compile; pass cmp149)
+    w_b = work[c:2 * c]
     if bits.shape[0] == logodds.shape[0] and bits.shape[1] == (logodds.shape[1] + 63) >> 6 and \
             bits_thr <= params[_OCC]:
         n_seen = seen_through_inverse(logodds, i0, j0, ox, oy, cx, cy, clear, params[_CORE], params[_OCC],
-                                      params[_DEPTH], bits, ang0, inc, th, work[:c], work[c:2 * c],
-                                      work[2 * c + 2 * g:], fwork, _INV_CELL)
+                                      params[_DEPTH], bits, ang0, inc, th, w_a, w_b, work[2 * c + 2 * g:], fwork,
+                                      _INV_CELL)
     rows, cols, sizes, nc = vacated_core(
         logodds, i0, j0, ox, oy, cx, cy, clear, params[_CORE], params[_OCC], params[_DEPTH],
         params[_NEAR], np.float32(params[_OCC32]), max_side, int(params[_MIN_CELLS]), res, params[_MIN_EXTENT],
-        params[_MIN_SHARE], work[:c], work[c:2 * c], work[2 * c:2 * c + g], work[2 * c + g:2 * c + 2 * g], window,
+        params[_MIN_SHARE], w_a, w_b, work[2 * c:2 * c + g], work[2 * c + g:2 * c + 2 * g], window,
         n_seen)
     k = sizes.shape[0]
     if k == 0:
-        return nc, 0, work[:0]
+        return nc, 0, w_a[:0]
     total = rows.shape[0]
     out = np.empty(2 * total + k, dtype=np.int64)
     for q in range(total):  # (loops: a slice assignment compiles numba's shape-mismatch message, ≈ 17 helpers)

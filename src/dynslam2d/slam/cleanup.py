@@ -257,7 +257,8 @@ def _count_beams_inline(table, pool, n_tiles, ti0, tj0, scan_id, ox, oy, ex, ey,
     if not resume:
         if mask.shape[0] < need + 8:  # (one word past the box's rows: the byte the steps without a mark go to)
             mask = np.empty(need + 8, dtype=np.uint8)
-            mask[:] = 0
+            for i in range(need + 8):
+                mask[i] = 0
         idx = np.empty(max(x1 - x0, y1 - y0) + 1, dtype=np.int64)  # (a ray's steps inside the box: at most this)
         for k in range(cx.shape[0]):
             if clear[k]:
@@ -383,14 +384,13 @@ def _scan_geometry(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin
     sides and reads as grazing, which only makes the margin larger. Margin =
     max(margin_m, grazing_cells·res / max(sin α, min_sin))."""
     n = ranges.shape[0]
+    # (every element written by the loops: no ``a[:] = 0`` fills, each ≈ 300 LLVM instructions of numba's slice
+    # assignment to type, lower and optimise; pass cmp149)
     lx = np.empty(n)
-    lx[:] = 0.0
     ly = np.empty(n)
-    ly[:] = 0.0
     for i in range(n):
-        if valid[i]:
-            lx[i] = ranges[i] * cos_a[i]
-            ly[i] = ranges[i] * sin_a[i]
+        lx[i] = ranges[i] * cos_a[i] if valid[i] else 0.0
+        ly[i] = ranges[i] * sin_a[i] if valid[i] else 0.0
     ca = math.cos(th)
     sa = math.sin(th)
     ex = np.empty(n)
@@ -398,9 +398,7 @@ def _scan_geometry(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin
     cx = np.empty(n)
     cy = np.empty(n)
     kept = np.empty(n, dtype=np.bool_)
-    kept[:] = False
     clear = np.empty(n, dtype=np.bool_)
-    clear[:] = False
     ox = px / res
     oy = py / res
     for i in range(n):
@@ -408,6 +406,8 @@ def _scan_geometry(ranges, cos_a, sin_a, valid, removed, px, py, th, res, margin
         ey[i] = oy
         cx[i] = ox
         cy[i] = oy
+        kept[i] = False
+        clear[i] = False
         if not valid[i]:
             continue
         ax = lx[i]
@@ -510,10 +510,10 @@ def _add_scan(ranges, cos_a, sin_a, valid_in, removed, px, py, th, res, margin_m
         some = some or v
     if not some:
         return mask, n_tiles, _NO_BEAM, 0, 0, 0, 0
-    rem = np.zeros(n, dtype=np.bool_)
-    if removed.shape[0] == n:
-        for i in range(n):
-            rem[i] = removed[i]
+    rem = np.empty(n, dtype=np.bool_)  # (not np.zeros: its implementation and zero fill are two more compiles)
+    given = removed.shape[0] == n
+    for i in range(n):
+        rem[i] = removed[i] if given else False
     ex, ey, cx, cy, kept, clear, imin, jmin, imax, jmax = _geometry_bounds_inline(
         ranges, cos_a, sin_a, valid, rem, px, py, th, res, margin_m, grazing_cells, min_sin)
     if h == 0 or imin < i0 or jmin < j0 or imax >= i0 + w or jmax >= j0 + h:

@@ -337,7 +337,8 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
     # merged cell lists, built at a rotation's first split: entries rlo[k]:rhi[k] of cell / count (−1: none); a
     # rotation split once paid for its list too since the table reads are unsigned (docs/speed.md, pass loop20)
     rlo = np.empty(nrot, dtype=np.int64)
-    rlo[:] = -1
+    for k in range(nrot):  # (element loops, not ``a[:] = v``: ≈ half its LLVM instructions to compile; pass cmp149)
+        rlo[k] = -1
     rhi = np.empty(nrot, dtype=np.int64)
     cell = np.empty(nrot * n if merge else 0, dtype=np.int64)
     count = np.empty(nrot * n if merge else 0)
@@ -347,7 +348,8 @@ def branch_and_bound(tab, ww, qx, qy, merge, w, dth, wt_cell2, wr, excl, floor,
     mask = cap - 1
     key = np.empty(cap, dtype=np.int64)
     owner = np.empty(cap, dtype=np.int64)  # the rotation whose cell a hash slot holds (−1: none yet)
-    owner[:] = -1
+    for i in range(cap):
+        owner[i] = -1
     slot = np.empty(cap, dtype=np.int64)
     m = 0
     top = tab[hmax]

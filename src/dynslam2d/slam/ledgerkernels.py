@@ -68,7 +68,8 @@ def beam_owners(n, beams, ends, ids):  # pragma: no cover - numba
     to the later one, as numpy's ``owner[beams_t] = ids[t]`` track after track; negative beams count from the end
     as numpy's indices do."""
     owner = np.empty(n, dtype=np.int64)
-    owner[:] = -1
+    for b in range(n):  # (element loops, not ``a[:] = v``: ≈ half its LLVM instructions to compile; pass cmp149)
+        owner[b] = -1
     for t in range(ids.shape[0]):
         tid = ids[t]
         for e in range(ends[t], ends[t + 1]):
@@ -126,7 +127,8 @@ def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, 
     n_tr = uids.shape[0]
     valid = np.empty(n, dtype=np.bool_)
     counts = np.empty(n_tr, dtype=np.int64)
-    counts[:] = 0
+    for t in range(n_tr):
+        counts[t] = 0
     m = 0
     for b in range(n):
         rb = r[b]
@@ -137,7 +139,6 @@ def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, 
     xs = np.empty(m)
     ys = np.empty(m)
     rank = np.empty(m, dtype=np.int64)
-    rank[:] = 0
     p = 0
     n_own = 0
     for b in range(n):
@@ -147,6 +148,7 @@ def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, 
         ly = r[b] * sin_a[b]
         xs[p] = c * lx - s * ly + px
         ys[p] = s * lx + c * ly + py
+        rank[p] = 0
         o = owner[b]
         if o >= 0:
             lo = _lower_bound(uids, n_tr, o)
@@ -155,7 +157,6 @@ def scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, 
             n_own += 1
         p += 1
     empty = np.empty(0, dtype=np.int64)
-    empty[:] = 0
     if n_own == 0:
         return empty, empty, valid, counts
     # every point's (level, owner, cell) as one int64 (owner 0 = no track, else 1 + rank)
@@ -232,7 +233,8 @@ def unpack_cells(u, params, uids, n_lv):  # pragma: no cover - numba
     keys = np.empty(n, dtype=np.int64)
     cells = np.empty((n, 2), dtype=np.int64)
     bounds = np.empty(n_lv + 1, dtype=np.int64)
-    bounds[:] = 0
+    for k in range(n_lv + 1):
+        bounds[k] = 0
     lvl = 0
     own = 0
     base = 0  # lvl · block + own · wij: the group's smallest value
@@ -272,7 +274,7 @@ def unpack_cells(u, params, uids, n_lv):  # pragma: no cover - numba
         m += 1
     for k in range(n_lv):
         bounds[k + 1] += bounds[k]
-    return ids[:m].copy(), keys[:m].copy(), cells[:m].copy(), bounds
+    return ids[:m], keys[:m], cells[:m], bounds  # (views: a copy each is ≈ 110 more instructions to compile)
 
 
 @njit(cache=True)
@@ -361,7 +363,8 @@ _UI3 = types.UniTuple(types.int32[:, ::1], FUSED_LEVELS)
 _IT3 = types.UniTuple(types.int64, FUSED_LEVELS)
 
 
-# (the two parts of record_cells are inlined into it: as functions of their own they cost ≈ 0.7–1 s more cold compile)
+# (record_cells' first part is inlined into it, its second part written in it: as functions of their own the two
+# parts cost ≈ 0.7–1 s more cold compile)
 @njit(cache=True, inline="always")
 def _track_points(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px, py, rs):  # pragma: no cover
     """:func:`beam_owners`, the tracks' distinct ids in ascending order and :func:`scan_cells` in one call: (packed
@@ -389,52 +392,10 @@ def _track_points(beams, lens, ids, r, cos_a, sin_a, vm, removed, rmin, rmax, c,
             u[q] = u[q - 1]
         u[p] = v
         m += 1
-    uids = u[:m].copy()
+    uids = u[:m]
     packed, params, valid, counts = scan_cells(r, cos_a, sin_a, vm, removed, owner, uids, rmin, rmax, c, s, px, py,
                                                rs)
     return packed, params, valid, counts, uids, ends
-
-
-@njit(cache=True, inline="always")
-def _read_levels(u, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, valid, beams, ends, want_kb
-                ):  # pragma: no cover - numba
-    """:func:`unpack_cells` of the sorted packed values ``u`` and the read of its cells on the first
-    ``min(n_lv, 3)`` levels (``logodds``, ``uidx``: the levels' arrays, padded; ``i0``, ``j0``: their offsets), in one
-    call: (track ids, cell keys, (m, 2) cells, log-odds before (float64), update index before (int64; 0 and 0
-    outside a level's array and on levels ≥ 3, which the caller reads), level bounds (L + 1,), per track ``t`` of
-    ``ids`` whether any kept beam of it is left (``counts`` of its id's rank in ``uids`` > 0), and, with
-    ``want_kb``, :func:`kept_beams` of ``valid``, ``beams``, ``ends`` (else empty))."""
-    out_ids, keys, cells, bounds = unpack_cells(u, params, uids, n_lv)
-    m = out_ids.shape[0]
-    lo = np.empty(m)
-    lo[:] = 0.0
-    ui = np.empty(m, dtype=np.int64)
-    ui[:] = 0
-    for k in range(min(n_lv, FUSED_LEVELS)):
-        a = logodds[k]
-        b = uidx[k]
-        h, w = a.shape
-        ci0 = i0[k]
-        cj0 = j0[k]
-        for t in range(bounds[k], bounds[k + 1]):
-            col = cells[t, 0] - ci0
-            row = cells[t, 1] - cj0
-            if col >= 0 and row >= 0 and col < w and row < h:
-                lo[t] = a[row, col]
-                ui[t] = b[row, col]
-    n_t = ids.shape[0]
-    n_u = uids.shape[0]
-    present = np.empty(n_t, dtype=np.bool_)
-    for t in range(n_t):
-        present[t] = counts[_lower_bound(uids, n_u, ids[t])] > 0
-    if want_kb:
-        kb, kb_b = kept_beams(valid, beams, ends)
-    else:
-        kb = np.empty(0, dtype=np.int32)
-        kb[:] = 0
-        kb_b = np.empty(0, dtype=np.int64)
-        kb_b[:] = 0
-    return out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b
 
 
 @njit(cache=True, inline="always")
@@ -504,7 +465,7 @@ def record_cells(beams, idl, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px,
     beam of it is left (T,: 0 / 1) and, with ``want_kb``, the kept beams' per-track bounds (T + 1,); with
     ``want_kb`` the kept beams (:func:`kept_beams`), else empty)."""
     n_t = idl.shape[0] // 2
-    ids = idl[:n_t].copy()
+    ids = idl[:n_t]  # (read only: no copy)
     packed, params, valid, counts, uids, ends = _track_points(beams, idl[n_t:], ids, r, cos_a, sin_a, vm, removed,
                                                               rmin, rmax, c, s, px, py, rs)
     n_lv = rs.shape[0]
@@ -531,8 +492,10 @@ def record_cells(beams, idl, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px,
         n_u += v != packed[n_u - 1]
     u = packed[:n_u]
     _radix_sort(u)
-    out_ids, keys, cells, lo, ui, bounds, present, kb, kb_b = _read_levels(
-        u, params, uids, n_lv, logodds, uidx, i0, j0, counts, ids, valid, beams, ends, want_kb)
+    # the cells (:func:`unpack_cells`) into the block, and their update index and log-odds before read on the first
+    # min(L, 3) levels straight into its rows 4 and 5 (0 outside a level's array and on levels >= 3; written here,
+    # not through arrays of their own copied in: less code to compile, pass cmp149)
+    out_ids, keys, cells, bounds = unpack_cells(u, params, uids, n_lv)
     m = out_ids.shape[0]
     blk = np.empty((6, m), dtype=np.int64)
     for t in range(m):
@@ -540,14 +503,32 @@ def record_cells(beams, idl, r, cos_a, sin_a, vm, removed, rmin, rmax, c, s, px,
         blk[1, t] = keys[t]
         blk[2, t] = cells[t, 0]
         blk[3, t] = cells[t, 1]
-        blk[4, t] = ui[t]
-        blk[5, t] = float_bits(lo[t])  # (lo's float64 bits, as lo.view(np.int64) without numba's view helper)
+        blk[4, t] = 0
+        blk[5, t] = 0  # (the bits of 0.0)
+    for k in range(min(n_lv, FUSED_LEVELS)):
+        a = logodds[k]
+        b = uidx[k]
+        h, w = a.shape
+        ci0 = i0[k]
+        cj0 = j0[k]
+        for t in range(bounds[k], bounds[k + 1]):
+            col = cells[t, 0] - ci0
+            row = cells[t, 1] - cj0
+            if col >= 0 and row >= 0 and col < w and row < h:
+                blk[4, t] = b[row, col]
+                blk[5, t] = float_bits(np.float64(a[row, col]))  # (as lo.view(np.int64), without numba's view helper)
+    if want_kb:
+        kb, kb_b = kept_beams(valid, beams, ends)
+    else:
+        kb = np.empty(0, dtype=np.int32)
+        kb_b = np.empty(0, dtype=np.int64)
     n_kb = kb_b.shape[0]
+    n_r = uids.shape[0]
     small = np.empty(n_lv + 1 + n_t + n_kb, dtype=np.int64)
     for k in range(n_lv + 1):
         small[k] = bounds[k]
-    for t in range(n_t):
-        small[n_lv + 1 + t] = 1 if present[t] else 0
+    for t in range(n_t):  # (whether a kept beam of track t is left: the count of its id's rank)
+        small[n_lv + 1 + t] = 1 if counts[_lower_bound(uids, n_r, ids[t])] > 0 else 0
     for t in range(n_kb):
         small[n_lv + 1 + n_t + t] = kb_b[t]
     return PACKED, blk, small, kb
@@ -619,7 +600,8 @@ def level_rows(logodds, uidx, i0, j0, n_lv, blk, small):  # pragma: no cover - n
     t_id = np.empty(g, dtype=np.int64)
     t_bnd = np.empty(g + 1, dtype=np.int64)
     t_lv = np.empty(g, dtype=np.int64)
-    t_lv[:] = 0
+    for q in range(g):
+        t_lv[q] = 0
     pos = lg[:n_lv].copy()
     n_t = 0
     j = 0
