@@ -70,7 +70,9 @@ def _reports(rng: np.random.Generator, t: float, n: int, snames: tuple[str, ...]
     """Reports of ``n`` live tracks as ``Tracker._report`` makes them (random columns)."""
     boxes, xo = rng.normal(size=(n, 5)), rng.normal(size=(n, 4))
     nst = 3 if snames is None else len(snames)
-    ints = [[0] * n, [int(rng.integers(0, nst)) for _ in range(n)], [1] * n, [0] * n]
+    # (kinds, states, hits, misses, the beam segments' first points and counts: −1, not a segment, as report_rows
+    # gives a newborn track's)
+    ints = [[0] * n, [int(rng.integers(0, nst)) for _ in range(n)], [1] * n, [0] * n, [0] * n, [-1] * n]
     in_m = tuple(bool(rng.random() < 0.5) for _ in range(n))
     cols = (tuple(int(rng.integers(1, 999)) for _ in range(n)), (0.0,) * n, in_m, ("",) * n,
             tuple(bool(rng.random() < 0.5) for _ in range(n)), (np.zeros(0, dtype=np.int64),) * n)
